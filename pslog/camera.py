@@ -1,0 +1,265 @@
+"""One calibrated camera: intrinsics, plumb_bob distortion, pose and shutter timing.
+
+Conventions (OpenCV): ``x_cam = R @ x_world + t``; pixel ``u`` right, ``v`` down; camera
+``z`` forward. Distortion is plumb_bob ``[k1, k2, p1, p2, k3]``. SI units: metres, seconds.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import RigError
+
+_UNDISTORT_ITERATIONS = 20
+
+
+def _as_array(value, shape: tuple[int, ...], name: str, camera: str) -> np.ndarray:
+    try:
+        array = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise RigError(f"camera {camera!r}: {name} is not numeric: {value!r}") from None
+    if array.shape != shape:
+        raise RigError(f"camera {camera!r}: {name} must have shape {shape}, got {array.shape}")
+    if not np.all(np.isfinite(array)):
+        raise RigError(f"camera {camera!r}: {name} has non-finite values")
+    array.setflags(write=False)
+    return array
+
+
+@dataclass(frozen=True, eq=False)
+class Camera:
+    """A pinhole camera with plumb_bob distortion and a shutter schedule.
+
+    Parameters
+    ----------
+    name : str
+        Unique name within a rig (``cam1``).
+    width, height : int
+        Image size in pixels.
+    K : array, shape (3, 3)
+        Intrinsic matrix, upper triangular, positive focal lengths.
+    dist : array, shape (5,)
+        Distortion ``[k1, k2, p1, p2, k3]``.
+    R : array, shape (3, 3)
+        Rotation world -> camera (``cam_from_world``).
+    t : array, shape (3,)
+        Translation world -> camera, metres.
+    fps : float
+        Frame rate, frames per second.
+    offset : float
+        Nominal shutter offset within the frame period, seconds: frame ``k`` is captured at
+        ``offset + k / fps`` on the session clock.
+    """
+
+    name: str
+    width: int
+    height: int
+    K: np.ndarray
+    dist: np.ndarray = field(default_factory=lambda: np.zeros(5))
+    R: np.ndarray = field(default_factory=lambda: np.eye(3))
+    t: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    fps: float = 30.0
+    offset: float = 0.0
+
+    def __post_init__(self) -> None:
+        name = self.name
+        if not isinstance(name, str) or not name:
+            raise RigError(f"camera name must be a non-empty string, got {name!r}")
+        for key in ("width", "height"):
+            value = getattr(self, key)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value <= 0:
+                raise RigError(f"camera {name!r}: {key} must be a positive integer, got {value!r}")
+            object.__setattr__(self, key, int(value))
+        K = _as_array(self.K, (3, 3), "K", name)
+        if K[1, 0] != 0 or K[2, 0] != 0 or K[2, 1] != 0 or K[2, 2] != 1:
+            raise RigError(f"camera {name!r}: K must be upper triangular with K[2,2] = 1")
+        if K[0, 0] <= 0 or K[1, 1] <= 0:
+            raise RigError(f"camera {name!r}: K focal lengths must be positive, got "
+                           f"fx={K[0, 0]}, fy={K[1, 1]}")
+        R = _as_array(self.R, (3, 3), "R", name)
+        if not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or abs(np.linalg.det(R) - 1) > 1e-6:
+            raise RigError(f"camera {name!r}: R is not a rotation matrix (to 1e-6)")
+        object.__setattr__(self, "K", K)
+        object.__setattr__(self, "R", R)
+        object.__setattr__(self, "dist", _as_array(self.dist, (5,), "dist", name))
+        object.__setattr__(self, "t", _as_array(self.t, (3,), "t", name))
+        for key in ("fps", "offset"):
+            value = getattr(self, key)
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.floating)):
+                raise RigError(f"camera {name!r}: {key} must be a number, got {value!r}")
+            if not np.isfinite(value):
+                raise RigError(f"camera {name!r}: {key} must be finite, got {value!r}")
+            object.__setattr__(self, key, float(value))
+        if self.fps <= 0:
+            raise RigError(f"camera {name!r}: fps must be > 0, got {self.fps}")
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Camera):
+            return NotImplemented
+        return (
+            (self.name, self.width, self.height, self.fps, self.offset)
+            == (other.name, other.width, other.height, other.fps, other.offset)
+            and all(np.array_equal(getattr(self, k), getattr(other, k)) for k in "K dist R t".split())
+        )
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def replace(self, **changes) -> Camera:
+        """A copy with some fields changed (validated again)."""
+        values = {k: getattr(self, k) for k in
+                  ("name", "width", "height", "K", "dist", "R", "t", "fps", "offset")}
+        values.update(changes)
+        return Camera(**values)
+
+    # ---- pose -------------------------------------------------------------------------
+    @property
+    def center_world(self) -> np.ndarray:
+        """Camera centre (focal point) in world coordinates, shape (3,), metres: ``-Rᵀ t``."""
+        return -self.R.T @ self.t
+
+    @property
+    def world_from_cam(self) -> np.ndarray:
+        """Homogeneous transform camera -> world, shape (4, 4)."""
+        T = np.eye(4)
+        T[:3, :3] = self.R.T
+        T[:3, 3] = self.center_world
+        return T
+
+    @property
+    def P(self) -> np.ndarray:
+        """Projection matrix ``K [R | t]`` of the undistorted camera, shape (3, 4)."""
+        return self.K @ np.hstack([self.R, self.t[:, None]])
+
+    @property
+    def frame_period(self) -> float:
+        """Seconds between two frames."""
+        return 1.0 / self.fps
+
+    # ---- projection -------------------------------------------------------------------
+    def project(self, points_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Project world points to (distorted) pixels.
+
+        Parameters
+        ----------
+        points_world : array, shape (n, 3), metres
+
+        Returns
+        -------
+        uv : array, shape (n, 2), pixels; NaN where the point is not in front of the camera
+        in_front : array, shape (n,), bool; False for points at or behind the camera plane
+        """
+        points_world = _check_points(points_world, 3, "points_world")
+        points_cam = points_world @ self.R.T + self.t
+        z = points_cam[:, 2]
+        in_front = z > 1e-12
+        with np.errstate(divide="ignore", invalid="ignore"):
+            xy = points_cam[:, :2] / np.where(in_front, z, np.nan)[:, None]
+        uv = self.pixels_from_normalized(self.distort_normalized(xy))
+        return uv, in_front
+
+    def distort_normalized(self, xy: np.ndarray) -> np.ndarray:
+        """Apply plumb_bob distortion to ideal normalized coordinates, shape (n, 2) -> (n, 2)."""
+        k1, k2, p1, p2, k3 = self.dist
+        x, y = xy[:, 0], xy[:, 1]
+        r2 = x * x + y * y
+        radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
+        yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+        return np.stack([xd, yd], axis=1)
+
+    def pixels_from_normalized(self, xy: np.ndarray) -> np.ndarray:
+        """Normalized image coordinates (n, 2) -> pixels (n, 2) through K (skew included)."""
+        K = self.K
+        u = K[0, 0] * xy[:, 0] + K[0, 1] * xy[:, 1] + K[0, 2]
+        v = K[1, 1] * xy[:, 1] + K[1, 2]
+        return np.stack([u, v], axis=1)
+
+    def normalized_from_pixels(self, uv: np.ndarray) -> np.ndarray:
+        """Pixels (n, 2) -> normalized (still distorted) coordinates (n, 2) through K⁻¹."""
+        K = self.K
+        y = (uv[:, 1] - K[1, 2]) / K[1, 1]
+        x = (uv[:, 0] - K[0, 2] - K[0, 1] * y) / K[0, 0]
+        return np.stack([x, y], axis=1)
+
+    def undistort_normalized(self, uv: np.ndarray) -> np.ndarray:
+        """Distorted pixels (n, 2) -> ideal normalized coordinates (n, 2).
+
+        Inverts :meth:`distort_normalized` by Newton's method with the analytic Jacobian,
+        vectorized; converges to machine precision for the distortions of real lenses.
+        """
+        uv = _check_points(uv, 2, "uv")
+        xy_d = self.normalized_from_pixels(uv)
+        if not np.any(self.dist):
+            return xy_d
+        k1, k2, p1, p2, k3 = self.dist
+        xy = xy_d.copy()
+        for _ in range(_UNDISTORT_ITERATIONS):
+            x, y = xy[:, 0], xy[:, 1]
+            r2 = x * x + y * y
+            radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+            d_radial = k1 + r2 * (2 * k2 + 3 * k3 * r2)  # d radial / d r2
+            residual = self.distort_normalized(xy) - xy_d
+            # Jacobian of distort_normalized, per point
+            j00 = radial + 2 * x * x * d_radial + 2 * p1 * y + 6 * p2 * x
+            j01 = 2 * x * y * d_radial + 2 * p1 * x + 2 * p2 * y
+            j10 = 2 * x * y * d_radial + 2 * p1 * x + 2 * p2 * y
+            j11 = radial + 2 * y * y * d_radial + 6 * p1 * y + 2 * p2 * x
+            det = j00 * j11 - j01 * j10
+            dx = (j11 * residual[:, 0] - j01 * residual[:, 1]) / det
+            dy = (-j10 * residual[:, 0] + j00 * residual[:, 1]) / det
+            xy[:, 0] -= dx
+            xy[:, 1] -= dy
+            if np.nanmax(np.abs(residual), initial=0.0) < 1e-15:
+                break
+        return xy
+
+    def undistort(self, uv: np.ndarray) -> np.ndarray:
+        """Distorted pixels (n, 2) -> ideal (distortion-free) pixels (n, 2) with the same K."""
+        return self.pixels_from_normalized(self.undistort_normalized(uv))
+
+    def rays(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Viewing rays of (distorted) pixels.
+
+        Returns
+        -------
+        origin_world : array, shape (3,), the camera centre, metres (the paper's ``T``)
+        directions_world : array, shape (n, 3), unit vectors (the paper's ``r``)
+        """
+        xy = self.undistort_normalized(uv)
+        rays_cam = np.hstack([xy, np.ones((len(xy), 1))])
+        directions_world = rays_cam @ self.R  # Rᵀ applied to each row
+        directions_world /= np.linalg.norm(directions_world, axis=1, keepdims=True)
+        return self.center_world, directions_world
+
+    def in_image(self, uv: np.ndarray, margin: float = 0.0) -> np.ndarray:
+        """Mask (n,) of pixels inside ``[-0.5 + margin, size - 0.5 - margin)``; NaN is outside."""
+        u, v = uv[:, 0], uv[:, 1]
+        with np.errstate(invalid="ignore"):
+            return ((u >= -0.5 + margin) & (u < self.width - 0.5 - margin)
+                    & (v >= -0.5 + margin) & (v < self.height - 0.5 - margin))
+
+
+def _check_points(points, dim: int, name: str) -> np.ndarray:
+    points = np.asarray(points, dtype=np.float64)
+    if points.ndim == 1 and points.shape == (dim,):
+        points = points[None, :]
+    if points.ndim != 2 or points.shape[1] != dim:
+        raise ValueError(f"{name} must have shape (n, {dim}), got {points.shape}")
+    return points
+
+
+def look_at(eye_world, target_world, up_world=(0.0, 0.0, 1.0)) -> tuple[np.ndarray, np.ndarray]:
+    """Rotation ``R`` and translation ``t`` (world -> camera) of a camera at ``eye_world``
+    looking at ``target_world``, with image ``v`` pointing away from ``up_world``."""
+    eye = np.asarray(eye_world, dtype=np.float64)
+    forward = np.asarray(target_world, dtype=np.float64) - eye
+    forward /= np.linalg.norm(forward)
+    right = np.cross(forward, np.asarray(up_world, dtype=np.float64))
+    if np.linalg.norm(right) < 1e-9:  # looking straight along "up": pick any right vector
+        right = np.cross(forward, [0.0, 1.0, 0.0])
+    right /= np.linalg.norm(right)
+    down = np.cross(forward, right)
+    R = np.stack([right, down, forward])  # rows: camera x, y, z axes in world
+    return R, -R @ eye

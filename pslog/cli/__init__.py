@@ -1,0 +1,92 @@
+"""The ``pslog`` command line: a thin, lazily loaded dispatcher.
+
+Each command lives in its own module ``pslog.cli.<module>`` exposing
+``add_arguments(parser)`` and ``run(args) -> int``; only the chosen command's module is
+imported, so ``pslog --help`` stays fast. Every :class:`~pslog.errors.PslogError` becomes a
+one-line ``pslog: error: ...`` on stderr and exit code 1.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+#: command -> (module under pslog.cli, one-line help). Order is the order of ``--help``.
+COMMANDS: dict[str, tuple[str, str]] = {
+    "demo": ("demo", "record a synthetic throw, fuse it with every method, show accuracy"),
+    "simulate": ("simulate", "simulate a session of a rig watching a moving ball"),
+    "record": ("record", "record a session from cameras, video files or a synthetic rig"),
+    "import": ("import_csv", "build a session from a CSV of detections"),
+    "export": ("export", "write a session's detections or fused tracks as CSV"),
+    "info": ("info", "summarise a session: cameras, rates, shutter offsets, detections"),
+    "calibrate": ("calibrate", "calibrate a camera from 3D-2D points or a chessboard"),
+    "fuse": ("fuse", "fuse a session's detections into 3D tracks"),
+    "eval": ("evaluate", "accuracy of fused tracks against ground truth"),
+    "paper": ("paper", "reproduce the paper's Tables 1 and 2"),
+    "redetect": ("redetect", "re-run ball detection over a session's recorded frames"),
+    "recover": ("recover", "salvage the complete records of a damaged session"),
+    "view": ("view", "browse a session and its fused tracks in rerun"),
+}
+
+
+def _available() -> dict[str, tuple[str, str]]:
+    from importlib.util import find_spec
+
+    return {name: spec for name, spec in COMMANDS.items()
+            if find_spec(f"pslog.cli.{spec[0]}") is not None}
+
+
+def _top_parser(commands: dict[str, tuple[str, str]]) -> argparse.ArgumentParser:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        pslog_version = version("pslog")
+    except PackageNotFoundError:
+        pslog_version = "unknown"
+    width = max((len(n) for n in commands), default=0)
+    lines = [f"  {name:<{width}}  {text}" for name, (_, text) in commands.items()]
+    parser = argparse.ArgumentParser(
+        prog="pslog",
+        description="Pseudo-stereo 3D ball tracking from cameras with offset shutters.",
+        epilog="commands:\n" + "\n".join(lines) + "\n\nRun 'pslog COMMAND --help' for details.",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        usage="pslog [-h] [--version] COMMAND ...",
+    )
+    parser.add_argument("--version", action="version", version=f"pslog {pslog_version}")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    commands = _available()
+    if not argv or argv[0] not in commands:
+        parser = _top_parser(commands)
+        if argv and not argv[0].startswith("-"):
+            parser.error(f"unknown command {argv[0]!r} (choose from {', '.join(commands)})")
+        parser.parse_args(argv)  # --help / --version exit here
+        parser.print_help()
+        return 2
+    name = argv[0]
+    module_name, text = commands[name]
+    module = importlib.import_module(f"pslog.cli.{module_name}")
+    parser = argparse.ArgumentParser(prog=f"pslog {name}", description=text)
+    module.add_arguments(parser)
+    args = parser.parse_args(argv[1:])
+
+    from pslog.errors import PslogError
+
+    try:
+        return int(module.run(args) or 0)
+    except PslogError as exc:
+        print(f"pslog {name}: error: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print(f"pslog {name}: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,5 @@
+import sys
+
+from pslog.cli import main
+
+sys.exit(main())

@@ -1,0 +1,55 @@
+"""Argument helpers shared by the CLI commands (no heavy imports at module level)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from pslog.errors import InputError, OutputExistsError
+
+
+def add_force(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--force", action="store_true", help="overwrite existing output files")
+
+
+def add_rig(parser: argparse.ArgumentParser, required: bool = True, help_extra: str = "") -> None:
+    parser.add_argument(
+        "--rig", required=required, metavar="RIG",
+        help="built-in rig name (paper3, paper2) or rig TOML file" + help_extra)
+
+
+def check_output(path: str | Path, force: bool) -> Path:
+    """Refuse to overwrite ``path`` unless ``force``; the parent folder must exist."""
+    path = Path(path)
+    if path.exists() and not force:
+        raise OutputExistsError(f"{path} exists; use --force to overwrite it")
+    if not path.parent.exists():
+        raise InputError(f"output folder does not exist: {path.parent}")
+    return path
+
+
+def positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not value > 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}")
+    return value
+
+
+def nonnegative_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not value >= 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"must be a number >= 0, got {text!r}")
+    return value
+
+
+def fraction(text: str) -> float:
+    value = nonnegative_float(text)
+    if value >= 1:
+        raise argparse.ArgumentTypeError(f"must be in [0, 1), got {text!r}")
+    return value

@@ -1,0 +1,177 @@
+"""Multi-view geometry on batches: epipolar lines, rays, triangulation.
+
+Everything here is vectorized over the leading axis and free of per-point Python loops.
+The pseudo-stereo method of Fujiyoshi et al. (``../shared/paper``) uses, in order:
+
+- :func:`epipolar_lines` and :func:`closest_points_on_lines` — section 2.2, step 2: snap the
+  interpolated point to the epipolar line of the observed one;
+- :func:`triangulate_two_rays` — step 3: the 3D point as the "crossing point" of two viewing
+  rays (midpoint of their common perpendicular);
+- :func:`closest_points_on_rays` — eq. (4): the nearest point on a viewing ray (eq. (3)).
+
+Image points given to :func:`fundamental_matrix`-based functions are *undistorted* pixels
+(see :meth:`pslog.camera.Camera.undistort`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .camera import Camera
+
+_PARALLEL_EPS = 1e-12
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def fundamental_matrix(cam_a: Camera, cam_b: Camera) -> np.ndarray:
+    """Fundamental matrix ``F`` (3, 3) with ``x_bᵀ F x_a = 0`` for undistorted pixels.
+
+    Built from the relative pose: ``F = K_b⁻ᵀ [t_ba]ₓ R_ba K_a⁻¹`` where
+    ``x_b = R_ba x_a + t_ba`` maps camera-a coordinates to camera-b coordinates.
+    Scaled to unit Frobenius norm.
+    """
+    R_ba = cam_b.R @ cam_a.R.T
+    t_ba = cam_b.t - R_ba @ cam_a.t
+    E = _skew(t_ba) @ R_ba
+    F = np.linalg.inv(cam_b.K).T @ E @ np.linalg.inv(cam_a.K)
+    return F / np.linalg.norm(F)
+
+
+def epipolar_lines(F: np.ndarray, uv_a: np.ndarray) -> np.ndarray:
+    """Epipolar lines in image b of undistorted pixels ``uv_a`` (n, 2) of image a.
+
+    Returns
+    -------
+    lines : array, shape (n, 3)
+        ``(a, b, c)`` with ``a u + b v + c = 0`` and ``a² + b² = 1``, so that
+        ``lines @ [u, v, 1]`` is a signed distance in pixels.
+    """
+    uv_a = np.asarray(uv_a, dtype=np.float64)
+    homogeneous = np.hstack([uv_a, np.ones((len(uv_a), 1))])
+    lines = homogeneous @ F.T
+    return lines / np.linalg.norm(lines[:, :2], axis=1, keepdims=True)
+
+
+def closest_points_on_lines(lines: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Orthogonal projection of 2D points onto 2D lines (the paper's section 2.2, step 2).
+
+    Parameters
+    ----------
+    lines : array, shape (n, 3), normalized ``a² + b² = 1`` (as from :func:`epipolar_lines`)
+    uv : array, shape (n, 2), pixels
+
+    Returns
+    -------
+    uv_on_line : array, shape (n, 2), pixels
+    distance : array, shape (n,), unsigned distance from ``uv`` to its line, pixels
+    """
+    uv = np.asarray(uv, dtype=np.float64)
+    normal = lines[:, :2]
+    signed = np.einsum("ij,ij->i", normal, uv) + lines[:, 2]
+    return uv - signed[:, None] * normal, np.abs(signed)
+
+
+def triangulate_two_rays(
+    origin_a: np.ndarray, dir_a: np.ndarray, origin_b: np.ndarray, dir_b: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Crossing point of two 3D lines: the midpoint of their common perpendicular.
+
+    The paper's section 2.2, step 3. Rays are ``origin + k * dir``; ``dir`` need not be unit.
+
+    Parameters
+    ----------
+    origin_a, origin_b : array, shape (n, 3) or (3,), metres
+    dir_a, dir_b : array, shape (n, 3)
+
+    Returns
+    -------
+    points : array, shape (n, 3), metres; NaN where the rays are parallel
+    miss : array, shape (n,), length of the common perpendicular (ray-to-ray distance), metres
+    """
+    dir_a = np.atleast_2d(np.asarray(dir_a, dtype=np.float64))
+    dir_b = np.atleast_2d(np.asarray(dir_b, dtype=np.float64))
+    w0 = np.asarray(origin_a, dtype=np.float64) - np.asarray(origin_b, dtype=np.float64)
+    w0 = np.broadcast_to(w0, dir_a.shape)
+    a = np.einsum("ij,ij->i", dir_a, dir_a)
+    b = np.einsum("ij,ij->i", dir_a, dir_b)
+    c = np.einsum("ij,ij->i", dir_b, dir_b)
+    d = np.einsum("ij,ij->i", dir_a, w0)
+    e = np.einsum("ij,ij->i", dir_b, w0)
+    denom = a * c - b * b
+    parallel = denom <= _PARALLEL_EPS * a * c
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = np.where(parallel, np.nan, (b * e - c * d) / denom)
+        k = np.where(parallel, np.nan, (a * e - b * d) / denom)
+    point_a = origin_a + s[:, None] * dir_a
+    point_b = origin_b + k[:, None] * dir_b
+    return 0.5 * (point_a + point_b), np.linalg.norm(point_a - point_b, axis=1)
+
+
+def triangulate_rays(
+    origins: np.ndarray, directions: np.ndarray, valid: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Least-squares intersection of N rays per point (minimises summed squared distances).
+
+    Parameters
+    ----------
+    origins : array, shape (n, m, 3), metres — m rays for each of n points
+    directions : array, shape (n, m, 3)
+    valid : array, shape (n, m), bool, optional — rays to use (default all)
+
+    Returns
+    -------
+    points : array, shape (n, 3); NaN where fewer than two non-parallel rays are valid
+    rms_miss : array, shape (n,), RMS distance from the point to its rays, metres
+    n_rays : array, shape (n,), int, rays used
+    """
+    origins = np.asarray(origins, dtype=np.float64)
+    directions = np.asarray(directions, dtype=np.float64)
+    if valid is None:
+        valid = np.ones(directions.shape[:2], dtype=bool)
+    valid = valid & np.all(np.isfinite(directions), axis=2) & np.all(np.isfinite(origins), axis=2)
+    unit = directions / np.linalg.norm(directions, axis=2, keepdims=True)
+    unit = np.where(valid[..., None], unit, 0.0)
+    origins0 = np.where(valid[..., None], origins, 0.0)
+    # sum_j (I - d_j d_jᵀ) p = sum_j (I - d_j d_jᵀ) o_j
+    projector = np.eye(3) - unit[..., :, None] * unit[..., None, :]  # (n, m, 3, 3)
+    projector = projector * valid[..., None, None]
+    A = projector.sum(axis=1)
+    rhs = np.einsum("nmij,nmj->ni", projector, origins0)
+    n_rays = valid.sum(axis=1)
+    det = np.linalg.det(A)
+    ok = (n_rays >= 2) & (np.abs(det) > 1e-12)
+    points = np.full((len(A), 3), np.nan)
+    if np.any(ok):
+        points[ok] = np.linalg.solve(A[ok], rhs[ok][..., None])[..., 0]
+    offsets = points[:, None, :] - origins0
+    perp = offsets - np.einsum("nmi,nmi->nm", offsets, unit)[..., None] * unit
+    sq = np.where(valid, np.einsum("nmi,nmi->nm", perp, perp), 0.0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rms_miss = np.sqrt(sq.sum(axis=1) / n_rays)
+    return points, rms_miss, n_rays
+
+
+def closest_points_on_rays(
+    origins: np.ndarray, directions: np.ndarray, points: np.ndarray
+) -> np.ndarray:
+    """Nearest point on each ray to each point, eq. (4) of the paper.
+
+    ``P' = ((P̂ - T) · r / |r|²) r + T`` for the ray ``l = k r + T`` of eq. (3).
+
+    Parameters
+    ----------
+    origins : array, shape (n, 3) or (3,), the ray origins ``T``, metres
+    directions : array, shape (n, 3), the ray directions ``r`` (any length)
+    points : array, shape (n, 3), the predicted points ``P̂``, metres
+
+    Returns
+    -------
+    array, shape (n, 3), metres
+    """
+    directions = np.asarray(directions, dtype=np.float64)
+    offsets = np.asarray(points, dtype=np.float64) - origins
+    k = np.einsum("ij,ij->i", offsets, directions) / np.einsum("ij,ij->i", directions, directions)
+    return k[:, None] * directions + origins

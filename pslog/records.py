@@ -1,0 +1,283 @@
+"""Columnar records that flow between pslog's layers: detections, observations, tracks, truth.
+
+All times are integer nanoseconds on the session's common clock; positions are world metres
+(z up); pixels are as detected (distorted) unless a name says ``undistorted``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import InputError
+
+NS = 1_000_000_000  # nanoseconds per second
+
+#: Per-point quality columns a fusion method may fill (NaN where not applicable).
+QUALITY_FIELDS = {
+    "ray_miss_m": "distance between the two rays crossed for this point, metres",
+    "snap_px": "distance the interpolated point moved to reach the epipolar line, pixels",
+    "ray_shift_m": "distance the prediction moved onto the newest viewing ray (eq. 4), metres",
+}
+
+
+def _frozen(array, dtype, shape_tail: tuple[int, ...], name: str) -> np.ndarray:
+    array = np.ascontiguousarray(array, dtype=dtype)
+    if array.shape[1:] != shape_tail:
+        raise InputError(f"{name} must have shape (n, {', '.join(map(str, shape_tail))}) "
+                         f"got {array.shape}" if shape_tail else
+                         f"{name} must be one-dimensional, got shape {array.shape}")
+    array.setflags(write=False)
+    return array
+
+
+@dataclass(frozen=True, eq=False)
+class Observations:
+    """One ball observation per row, sorted by ``(time_ns, camera)``; the input of fusion.
+
+    Attributes
+    ----------
+    time_ns : (n,) int64, capture time
+    camera : (n,) int32, camera index in the rig
+    uv : (n, 2) float64, pixels as detected (distorted)
+    frame_index : (n,) int64, the camera's frame counter
+    """
+
+    time_ns: np.ndarray
+    camera: np.ndarray
+    uv: np.ndarray
+    frame_index: np.ndarray
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "time_ns", _frozen(self.time_ns, np.int64, (), "time_ns"))
+        object.__setattr__(self, "camera", _frozen(self.camera, np.int32, (), "camera"))
+        object.__setattr__(self, "uv", _frozen(self.uv, np.float64, (2,), "uv"))
+        object.__setattr__(self, "frame_index",
+                           _frozen(self.frame_index, np.int64, (), "frame_index"))
+        n = len(self.time_ns)
+        if not (len(self.camera) == len(self.uv) == len(self.frame_index) == n):
+            raise InputError("observation columns differ in length")
+        if n > 1:
+            order_ok = (np.diff(self.time_ns) > 0) | (
+                (np.diff(self.time_ns) == 0) & (np.diff(self.camera) > 0))
+            if not np.all(order_ok):
+                raise InputError("observations must be sorted by (time, camera) without repeats")
+
+    def __len__(self) -> int:
+        return len(self.time_ns)
+
+    @classmethod
+    def from_unsorted(cls, time_ns, camera, uv, frame_index=None) -> Observations:
+        """Sort rows by (time, camera)."""
+        time_ns = np.asarray(time_ns, dtype=np.int64)
+        camera = np.asarray(camera, dtype=np.int32)
+        order = np.lexsort((camera, time_ns))
+        if frame_index is None:
+            frame_index = np.zeros(len(time_ns), dtype=np.int64)
+        return cls(time_ns[order], camera[order], np.asarray(uv, dtype=np.float64)[order],
+                   np.asarray(frame_index, dtype=np.int64)[order])
+
+    def select(self, mask_or_index) -> Observations:
+        return Observations(self.time_ns[mask_or_index], self.camera[mask_or_index],
+                            self.uv[mask_or_index], self.frame_index[mask_or_index])
+
+
+@dataclass(frozen=True, eq=False)
+class Detections:
+    """A session's per-frame detection results, columnar.
+
+    Every captured frame has a row, with or without candidates; frames are sorted by
+    ``(time_ns, camera)``. Candidates are grouped by frame, best (highest score) first.
+
+    Attributes
+    ----------
+    camera_names : tuple of str, the rig's camera order
+    frame_time_ns : (F,) int64, capture time of each frame
+    frame_camera : (F,) int32, camera index
+    frame_index : (F,) int64, the camera's frame counter
+    cand_frame : (C,) int64, row of the candidate's frame in the frame arrays (non-decreasing)
+    cand_uv : (C, 2) float64, pixels as detected (distorted)
+    cand_radius : (C,) float64, apparent radius in pixels (NaN when unknown)
+    cand_score : (C,) float64, detector confidence in [0, 1] (1 when unknown)
+    """
+
+    camera_names: tuple[str, ...]
+    frame_time_ns: np.ndarray
+    frame_camera: np.ndarray
+    frame_index: np.ndarray
+    cand_frame: np.ndarray
+    cand_uv: np.ndarray
+    cand_radius: np.ndarray
+    cand_score: np.ndarray
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "camera_names", tuple(self.camera_names))
+        for name, dtype, tail in (
+            ("frame_time_ns", np.int64, ()), ("frame_camera", np.int32, ()),
+            ("frame_index", np.int64, ()), ("cand_frame", np.int64, ()),
+            ("cand_uv", np.float64, (2,)), ("cand_radius", np.float64, ()),
+            ("cand_score", np.float64, ()),
+        ):
+            object.__setattr__(self, name, _frozen(getattr(self, name), dtype, tail, name))
+        n_frames, n_cand = len(self.frame_time_ns), len(self.cand_frame)
+        if not (len(self.frame_camera) == len(self.frame_index) == n_frames):
+            raise InputError("frame columns differ in length")
+        if not (len(self.cand_uv) == len(self.cand_radius) == len(self.cand_score) == n_cand):
+            raise InputError("candidate columns differ in length")
+        if n_cand and (np.any(np.diff(self.cand_frame) < 0) or self.cand_frame[0] < 0
+                       or self.cand_frame[-1] >= n_frames):
+            raise InputError("cand_frame must be non-decreasing rows of the frame arrays")
+        if n_frames and (self.frame_camera.min() < 0
+                         or self.frame_camera.max() >= len(self.camera_names)):
+            raise InputError("frame_camera out of range of camera_names")
+
+    @property
+    def n_frames(self) -> int:
+        return len(self.frame_time_ns)
+
+    @property
+    def n_candidates(self) -> int:
+        return len(self.cand_frame)
+
+    def candidates_per_frame(self) -> np.ndarray:
+        """(F,) int, number of candidates of each frame."""
+        return np.bincount(self.cand_frame, minlength=self.n_frames)
+
+    def best(self) -> Observations:
+        """The first (best) candidate of every frame that has one, as fusion input."""
+        if self.n_candidates == 0:
+            return Observations(np.zeros(0, np.int64), np.zeros(0, np.int32),
+                                np.zeros((0, 2)), np.zeros(0, np.int64))
+        first = np.ones(self.n_candidates, dtype=bool)
+        first[1:] = self.cand_frame[1:] != self.cand_frame[:-1]
+        rows = self.cand_frame[first]
+        return Observations(self.frame_time_ns[rows], self.frame_camera[rows],
+                            self.cand_uv[first], self.frame_index[rows])
+
+    @classmethod
+    def from_frames(
+        cls,
+        camera_names: Sequence[str],
+        frame_time_ns,
+        frame_camera,
+        frame_index,
+        cand_frame,
+        cand_uv,
+        cand_radius=None,
+        cand_score=None,
+    ) -> Detections:
+        """Build from unsorted frames; candidates refer to rows of the *given* frame order
+        and are reordered by frame, then by descending score."""
+        frame_time_ns = np.asarray(frame_time_ns, dtype=np.int64)
+        frame_camera = np.asarray(frame_camera, dtype=np.int32)
+        frame_index = np.asarray(frame_index, dtype=np.int64)
+        cand_frame = np.asarray(cand_frame, dtype=np.int64)
+        n_cand = len(cand_frame)
+        cand_uv = np.asarray(cand_uv, dtype=np.float64).reshape(n_cand, 2)
+        cand_radius = (np.full(n_cand, np.nan) if cand_radius is None
+                       else np.asarray(cand_radius, dtype=np.float64))
+        cand_score = (np.ones(n_cand) if cand_score is None
+                      else np.asarray(cand_score, dtype=np.float64))
+        order = np.lexsort((frame_camera, frame_time_ns))
+        new_row = np.empty_like(order)
+        new_row[order] = np.arange(len(order))
+        cand_frame = new_row[cand_frame] if n_cand else cand_frame
+        cand_order = np.lexsort((-cand_score, cand_frame))
+        return cls(tuple(camera_names), frame_time_ns[order], frame_camera[order],
+                   frame_index[order], cand_frame[cand_order], cand_uv[cand_order],
+                   cand_radius[cand_order], cand_score[cand_order])
+
+    @classmethod
+    def from_observations(cls, camera_names: Sequence[str], obs: Observations,
+                          score=None) -> Detections:
+        """One frame with one candidate per observation (no empty frames)."""
+        n = len(obs)
+        return cls.from_frames(camera_names, obs.time_ns, obs.camera, obs.frame_index,
+                               np.arange(n), obs.uv, None, score)
+
+
+@dataclass(frozen=True, eq=False)
+class Track:
+    """A fused 3D trajectory: one point per output event, sorted by time.
+
+    Attributes
+    ----------
+    method : str, fusion method name (``typeA``)
+    time_ns : (n,) int64, the instant the point describes (a shutter time)
+    position_world : (n, 3) float64, metres
+    camera : (n,) int32, index of the camera whose shutter produced the point
+    quality : mapping of name -> (n,) float64, per-point quality (see ``QUALITY_FIELDS``),
+        NaN where not applicable
+    """
+
+    method: str
+    time_ns: np.ndarray
+    position_world: np.ndarray
+    camera: np.ndarray
+    quality: Mapping[str, np.ndarray] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "time_ns", _frozen(self.time_ns, np.int64, (), "time_ns"))
+        object.__setattr__(self, "position_world",
+                           _frozen(self.position_world, np.float64, (3,), "position_world"))
+        object.__setattr__(self, "camera", _frozen(self.camera, np.int32, (), "camera"))
+        n = len(self.time_ns)
+        quality = {k: _frozen(v, np.float64, (), k) for k, v in dict(self.quality).items()}
+        if len(self.position_world) != n or len(self.camera) != n or any(
+                len(v) != n for v in quality.values()):
+            raise InputError(f"track {self.method!r}: columns differ in length")
+        object.__setattr__(self, "quality", quality)
+
+    def __len__(self) -> int:
+        return len(self.time_ns)
+
+    def select(self, mask_or_index) -> Track:
+        return Track(self.method, self.time_ns[mask_or_index],
+                     self.position_world[mask_or_index], self.camera[mask_or_index],
+                     {k: v[mask_or_index] for k, v in self.quality.items()})
+
+
+@dataclass(frozen=True, eq=False)
+class Truth:
+    """Ground-truth ball positions of a simulated session.
+
+    Attributes
+    ----------
+    time_ns : (n,) int64, strictly increasing
+    position_world : (n, 3) float64, metres
+    """
+
+    time_ns: np.ndarray
+    position_world: np.ndarray
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "time_ns", _frozen(self.time_ns, np.int64, (), "time_ns"))
+        object.__setattr__(self, "position_world",
+                           _frozen(self.position_world, np.float64, (3,), "position_world"))
+        if len(self.position_world) != len(self.time_ns):
+            raise InputError("truth columns differ in length")
+        if len(self.time_ns) > 1 and np.any(np.diff(self.time_ns) <= 0):
+            raise InputError("truth times must be strictly increasing")
+
+    def __len__(self) -> int:
+        return len(self.time_ns)
+
+    def at(self, time_ns: np.ndarray) -> np.ndarray:
+        """Truth at ``time_ns`` (m,), linearly interpolated, shape (m, 3); NaN outside the
+        sampled span. Exact at sampled times (the simulator samples every capture time)."""
+        time_ns = np.asarray(time_ns, dtype=np.int64)
+        out = np.full((len(time_ns), 3), np.nan)
+        if len(self.time_ns) == 0:
+            return out
+        inside = (time_ns >= self.time_ns[0]) & (time_ns <= self.time_ns[-1])
+        t = time_ns[inside]
+        hi = np.clip(np.searchsorted(self.time_ns, t, side="left"), 0, len(self.time_ns) - 1)
+        lo = np.maximum(hi - 1, 0)
+        t_lo, t_hi = self.time_ns[lo], self.time_ns[hi]
+        span = (t_hi - t_lo).astype(np.float64)
+        w = np.where(span > 0, (t - t_lo) / np.where(span > 0, span, 1.0), 1.0)
+        out[inside] = ((1 - w)[:, None] * self.position_world[lo]
+                       + w[:, None] * self.position_world[hi])
+        return out

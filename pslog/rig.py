@@ -1,0 +1,264 @@
+"""Rigs: the cameras of a session plus their shutter timing, stored as TOML.
+
+File shape (other keys are rejected)::
+
+    name = "lab"                 # optional
+    [[camera]]
+    name = "cam1"                # unique; order in the file is the camera order
+    width = 640
+    height = 480
+    K = [[600.0, 0.0, 320.0], [0.0, 600.0, 240.0], [0.0, 0.0, 1.0]]
+    dist = [0.0, 0.0, 0.0, 0.0, 0.0]   # optional, default zeros
+    R = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]  # world -> camera rotation
+    t = [0.0, 0.0, 0.0]          # world -> camera translation, metres
+    fps = 30.0
+    offset = 0.0                 # nominal shutter offset within the frame period, seconds
+
+Built-in rigs (``paper3``, ``paper2``) and shutter presets (``sync``, ``typeA``, ``typeB``)
+are described in :func:`builtin_rig` and :func:`apply_timing`.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .camera import Camera, look_at
+from .errors import RigError
+
+TIMING_PRESETS = ("sync", "typeA", "typeB")
+BUILTIN_RIGS = ("paper3", "paper2")
+
+_TOP_KEYS = {"name", "camera"}
+_CAMERA_KEYS = {"name", "width", "height", "K", "dist", "R", "t", "fps", "offset"}
+_CAMERA_REQUIRED = _CAMERA_KEYS - {"dist"}
+
+
+@dataclass(frozen=True)
+class Rig:
+    """An ordered set of uniquely named cameras.
+
+    Attributes
+    ----------
+    cameras : tuple of Camera, in file order (camera index = position here)
+    name : str, may be empty
+    """
+
+    cameras: tuple[Camera, ...]
+    name: str = ""
+
+    def __post_init__(self) -> None:
+        cameras = tuple(self.cameras)
+        if not cameras:
+            raise RigError("a rig needs at least one camera")
+        names = [c.name for c in cameras]
+        duplicates = sorted({n for n in names if names.count(n) > 1})
+        if duplicates:
+            raise RigError(f"camera names must be unique, repeated: {', '.join(duplicates)}")
+        object.__setattr__(self, "cameras", cameras)
+
+    def __len__(self) -> int:
+        return len(self.cameras)
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(c.name for c in self.cameras)
+
+    def index(self, name: str) -> int:
+        """Camera index of ``name``; :class:`RigError` naming it when unknown."""
+        try:
+            return self.names.index(name)
+        except ValueError:
+            raise RigError(f"unknown camera {name!r} (rig has {', '.join(self.names)})") from None
+
+    def camera(self, name: str) -> Camera:
+        return self.cameras[self.index(name)]
+
+    def with_camera(self, camera: Camera) -> Rig:
+        """A rig with ``camera`` replacing the one of the same name, or appended."""
+        cameras = list(self.cameras)
+        if camera.name in self.names:
+            cameras[self.index(camera.name)] = camera
+        else:
+            cameras.append(camera)
+        return Rig(tuple(cameras), self.name)
+
+    def subset(self, names: Sequence[str]) -> Rig:
+        return Rig(tuple(self.camera(n) for n in names), self.name)
+
+    # ---- TOML -------------------------------------------------------------------------
+    def to_toml(self) -> str:
+        """TOML text in the documented shape; floats use ``repr`` so loading is exact."""
+        lines = []
+        if self.name:
+            lines.append(f"name = {_toml_str(self.name)}")
+        for cam in self.cameras:
+            lines += [
+                "",
+                "[[camera]]",
+                f"name = {_toml_str(cam.name)}",
+                f"width = {cam.width}",
+                f"height = {cam.height}",
+                f"K = {_toml_matrix(cam.K)}",
+                f"dist = {_toml_vector(cam.dist)}",
+                f"R = {_toml_matrix(cam.R)}",
+                f"t = {_toml_vector(cam.t)}",
+                f"fps = {_toml_float(cam.fps)}",
+                f"offset = {_toml_float(cam.offset)}",
+            ]
+        return "\n".join(lines).lstrip("\n") + "\n"
+
+    @classmethod
+    def from_toml(cls, text: str, source: str = "rig") -> Rig:
+        """Parse and validate rig TOML; errors name ``source``, the camera and the key."""
+        try:
+            data = tomllib.loads(text)
+        except tomllib.TOMLDecodeError as exc:
+            raise RigError(f"{source}: malformed TOML: {exc}") from None
+        return cls.from_dict(data, source)
+
+    @classmethod
+    def from_dict(cls, data: dict, source: str = "rig") -> Rig:
+        unknown = sorted(set(data) - _TOP_KEYS)
+        if unknown:
+            raise RigError(f"{source}: unknown key(s) {', '.join(unknown)} "
+                           f"(allowed: name, [[camera]])")
+        name = data.get("name", "")
+        if not isinstance(name, str):
+            raise RigError(f"{source}: name must be a string, got {name!r}")
+        tables = data.get("camera")
+        if not isinstance(tables, list) or not tables:
+            raise RigError(f"{source}: no [[camera]] tables")
+        cameras = []
+        for i, table in enumerate(tables):
+            if not isinstance(table, dict):
+                raise RigError(f"{source}: camera #{i + 1} is not a table")
+            label = table.get("name", f"#{i + 1}")
+            unknown = sorted(set(table) - _CAMERA_KEYS)
+            if unknown:
+                raise RigError(f"{source}: camera {label!r}: unknown key(s) {', '.join(unknown)}")
+            missing = sorted(_CAMERA_REQUIRED - set(table))
+            if missing:
+                raise RigError(f"{source}: camera {label!r}: missing key(s) {', '.join(missing)}")
+            try:
+                cameras.append(Camera(**table))
+            except RigError as exc:
+                raise RigError(f"{source}: {exc}") from None
+        try:
+            return cls(tuple(cameras), name)
+        except RigError as exc:
+            raise RigError(f"{source}: {exc}") from None
+
+
+def load_rig(path: str | Path) -> Rig:
+    """Load a rig TOML file."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise RigError(f"rig file not found: {path}") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise RigError(f"cannot read rig file {path}: {exc}") from None
+    return Rig.from_toml(text, source=str(path))
+
+
+def save_rig(rig: Rig, path: str | Path) -> None:
+    """Write ``rig`` as TOML (atomically: a temporary file renamed over ``path``)."""
+    path = Path(path)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(rig.to_toml(), encoding="utf-8")
+    tmp.replace(path)
+
+
+def resolve_rig(name_or_path: str | Path) -> Rig:
+    """A built-in rig by name (``paper3``, ``paper2``) or a rig TOML file."""
+    if str(name_or_path) in BUILTIN_RIGS:
+        return builtin_rig(str(name_or_path))
+    path = Path(name_or_path)
+    if not path.exists():
+        raise RigError(f"no rig {str(name_or_path)!r}: not a file and not a built-in rig "
+                       f"({', '.join(BUILTIN_RIGS)})")
+    return load_rig(path)
+
+
+# ---- built-in rigs and shutter presets ------------------------------------------------
+
+#: The simulated volume of the paper's section 3.1: x 0..3 m, y 0..2 m, z 0..2 m.
+PAPER_VOLUME = ((0.0, 3.0), (0.0, 2.0), (0.0, 2.0))
+
+# The paper mounts its cameras 3.0 m high and gives nothing else. We place them around the
+# 3.0 x 2.0 m area so that each sees the whole 3 x 2 x 2 m volume: cam1 beyond the x = 0 end,
+# cam2 beside the long y = 0 side, cam3 beyond the x = 3 end, all looking at the volume's
+# centre (1.5, 1.0, 1.0) with a 640 x 480 image and f = 400 px (77° horizontal field).
+_PAPER_EYES = {
+    "cam1": (-1.5, 1.0, 3.0),
+    "cam2": (1.5, -2.0, 3.0),
+    "cam3": (4.5, 1.0, 3.0),
+}
+_PAPER_TARGET = (1.5, 1.0, 1.0)
+_PAPER_K = ((400.0, 0.0, 319.5), (0.0, 400.0, 239.5), (0.0, 0.0, 1.0))
+
+
+def builtin_rig(name: str) -> Rig:
+    """The rigs of the paper's simulation.
+
+    ``paper3``: three 640 x 480, 30 fps cameras 3.0 m above the ground (see ``_PAPER_EYES``),
+    offsets zero (apply a timing preset). ``paper2``: its cameras ``cam1`` and ``cam2``.
+    """
+    if name not in BUILTIN_RIGS:
+        raise RigError(f"unknown built-in rig {name!r} (have {', '.join(BUILTIN_RIGS)})")
+    cameras = []
+    for cam_name, eye in _PAPER_EYES.items():
+        R, t = look_at(eye, _PAPER_TARGET)
+        cameras.append(Camera(cam_name, 640, 480, np.array(_PAPER_K), np.zeros(5), R, t,
+                              fps=30.0, offset=0.0))
+    if name == "paper2":
+        cameras = cameras[:2]
+    return Rig(tuple(cameras), name)
+
+
+def apply_timing(rig: Rig, preset: str) -> Rig:
+    """The rig with its shutter offsets set by a preset.
+
+    - ``sync``: every offset 0 (ordinary synchronised stereo, the paper's Figure 1(a)).
+    - ``typeA``: camera ``i`` (0-based) at ``i / (n * fps_i)``: n cameras spread evenly over
+      one frame period (Figure 1(b); 1/90 s apart for three 30 fps cameras).
+    - ``typeB``: first and last camera at 0, the others at half a period (Figure 1(c)).
+    """
+    n = len(rig)
+    if preset == "sync":
+        offsets = [0.0] * n
+    elif preset == "typeA":
+        offsets = [i / (n * cam.fps) for i, cam in enumerate(rig.cameras)]
+    elif preset == "typeB":
+        if n < 3:
+            raise RigError(f"timing typeB needs at least 3 cameras, rig has {n}")
+        offsets = [0.0 if i in (0, n - 1) else 0.5 / cam.fps for i, cam in enumerate(rig.cameras)]
+    else:
+        raise RigError(f"unknown timing {preset!r} (have {', '.join(TIMING_PRESETS)})")
+    return Rig(tuple(c.replace(offset=o) for c, o in zip(rig.cameras, offsets, strict=True)),
+               rig.name)
+
+
+def _toml_str(value: str) -> str:
+    return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def _toml_float(value: float) -> str:
+    if not math.isfinite(value):
+        raise RigError(f"cannot write non-finite value {value!r} to TOML")
+    text = repr(float(value))
+    return text if ("." in text or "e" in text or "inf" in text) else text + ".0"
+
+
+def _toml_vector(values) -> str:
+    return "[" + ", ".join(_toml_float(v) for v in np.asarray(values).ravel()) + "]"
+
+
+def _toml_matrix(matrix) -> str:
+    return "[" + ", ".join(_toml_vector(row) for row in np.asarray(matrix)) + "]"
