@@ -101,7 +101,8 @@ class Camera:
         return (
             (self.name, self.width, self.height, self.fps, self.offset)
             == (other.name, other.width, other.height, other.fps, other.offset)
-            and all(np.array_equal(getattr(self, k), getattr(other, k)) for k in "K dist R t".split())
+            and all(np.array_equal(getattr(self, k), getattr(other, k))
+                    for k in ("K", "dist", "R", "t"))
         )
 
     __hash__ = None  # type: ignore[assignment]

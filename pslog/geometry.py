@@ -43,6 +43,9 @@ def fundamental_matrix(cam_a: Camera, cam_b: Camera) -> np.ndarray:
 def epipolar_lines(F: np.ndarray, uv_a: np.ndarray) -> np.ndarray:
     """Epipolar lines in image b of undistorted pixels ``uv_a`` (n, 2) of image a.
 
+    ``F`` is one fundamental matrix (3, 3) for all points, or one per point (n, 3, 3)
+    (``x_bᵀ F x_a = 0``, as from :func:`fundamental_matrix`).
+
     Returns
     -------
     lines : array, shape (n, 3)
@@ -51,8 +54,10 @@ def epipolar_lines(F: np.ndarray, uv_a: np.ndarray) -> np.ndarray:
     """
     uv_a = np.asarray(uv_a, dtype=np.float64)
     homogeneous = np.hstack([uv_a, np.ones((len(uv_a), 1))])
-    lines = homogeneous @ F.T
-    return lines / np.linalg.norm(lines[:, :2], axis=1, keepdims=True)
+    F = np.asarray(F, dtype=np.float64)
+    lines = homogeneous @ F.T if F.ndim == 2 else np.einsum("nij,nj->ni", F, homogeneous)
+    with np.errstate(invalid="ignore", divide="ignore"):  # a zero F (same camera) gives NaN
+        return lines / np.linalg.norm(lines[:, :2], axis=1, keepdims=True)
 
 
 def closest_points_on_lines(lines: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -132,8 +137,9 @@ def triangulate_rays(
     if valid is None:
         valid = np.ones(directions.shape[:2], dtype=bool)
     valid = valid & np.all(np.isfinite(directions), axis=2) & np.all(np.isfinite(origins), axis=2)
-    unit = directions / np.linalg.norm(directions, axis=2, keepdims=True)
-    unit = np.where(valid[..., None], unit, 0.0)
+    norms = np.linalg.norm(directions, axis=2, keepdims=True)
+    valid = valid & (norms[..., 0] > 0)
+    unit = np.where(valid[..., None], directions / np.where(norms > 0, norms, 1.0), 0.0)
     origins0 = np.where(valid[..., None], origins, 0.0)
     # sum_j (I - d_j d_jᵀ) p = sum_j (I - d_j d_jᵀ) o_j
     projector = np.eye(3) - unit[..., :, None] * unit[..., None, :]  # (n, m, 3, 3)

@@ -1,0 +1,653 @@
+"""Camera calibration: from 3D-2D point correspondences (the paper's Tsai-style set-up) or
+from a chessboard (OpenCV's usual intrinsics procedure).
+
+Points (``calibrate_from_points``)
+    A normalized DLT of the 3x4 projection matrix gives a pinhole start (K, R, t), which
+    ``cv2.calibrateCamera`` (one non-planar view, ``CALIB_USE_INTRINSIC_GUESS``) refines
+    together with the distortion by Levenberg-Marquardt. Skew is dropped (OpenCV's model has
+    none). How many distortion terms are estimated depends on the number of points
+    (:data:`DISTORTION_MODELS`, ``"auto"``): one view of a few dozen points constrains the
+    radial terms well but the tangential terms and k3 only weakly (they trade off against the
+    principal point and k1/k2), so those stay zero unless there are plenty of points.
+    With known intrinsics (``K``/``dist`` given) only the pose is solved (``cv2.solvePnP``),
+    and coplanar points are fine.
+
+Chessboard (``calibrate_chessboard``)
+    ``findChessboardCorners`` + ``cornerSubPix`` per image, then ``calibrateCamera`` with
+    OpenCV's default 5-term model. A chessboard does not give the camera's pose in the world;
+    the caller keeps a known pose or uses identity.
+
+Conventions: OpenCV (``x_cam = R @ x_world + t``, plumb_bob ``[k1, k2, p1, p2, k3]``),
+metres and pixels.
+"""
+
+from __future__ import annotations
+
+import csv
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from .camera import Camera
+from .errors import InputError
+
+#: Distortion models for :func:`calibrate_from_points`: which of ``[k1, k2, p1, p2, k3]`` are
+#: estimated (the others stay zero).
+DISTORTION_MODELS = {
+    "none": (),
+    "k1": ("k1",),
+    "k1k2": ("k1", "k2"),
+    "k1k2k3": ("k1", "k2", "k3"),
+    "full": ("k1", "k2", "p1", "p2", "k3"),
+}
+#: ``"auto"``: ``none`` below 10 points (6 points give 12 equations for the 10 pinhole + pose
+#: unknowns; adding distortion would fit the noise), ``k1k2`` up to 99, ``full`` from 100.
+AUTO_K1K2_MIN_POINTS = 10
+AUTO_FULL_MIN_POINTS = 100
+
+MIN_POINTS = 6
+MIN_POINTS_POSE = 4
+#: Points whose spread off their best-fit plane (smallest / largest singular value of the
+#: centred points) is below this count as coplanar: the DLT needs real depth.
+COPLANAR_RATIO = 1e-3
+#: Same for collinear (second / largest) when only the pose is solved.
+COLLINEAR_RATIO = 1e-3
+MIN_CHESSBOARD_VIEWS = 3
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".webp")
+
+_POINT_COLUMNS = ("x", "y", "z", "u", "v")
+_LM_CRITERIA = (cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 200, 1e-15)
+_DIST_FLAGS = {"k1": cv2.CALIB_FIX_K1, "k2": cv2.CALIB_FIX_K2, "k3": cv2.CALIB_FIX_K3}
+
+
+@dataclass(frozen=True, eq=False)
+class CalibrationResult:
+    """Outcome of :func:`calibrate_from_points`.
+
+    Attributes
+    ----------
+    camera : Camera
+        The calibrated camera (pose in the world of the points).
+    rms_px : float
+        Root mean square reprojection error, pixels.
+    residuals_px : (n,) float64
+        Reprojection error of each point, pixels, in input order.
+    model : str
+        Distortion model estimated (a key of :data:`DISTORTION_MODELS`), or ``"fixed"``
+        when the intrinsics were given and only the pose was solved.
+    """
+
+    camera: Camera
+    rms_px: float
+    residuals_px: np.ndarray
+    model: str
+
+    @property
+    def fixed_intrinsics(self) -> bool:
+        return self.model == "fixed"
+
+    def worst(self, count: int = 5) -> np.ndarray:
+        """Indices (into the input points) of the ``count`` largest residuals, worst first."""
+        return np.argsort(-self.residuals_px, kind="stable")[:count]
+
+
+@dataclass(frozen=True, eq=False)
+class ChessboardResult:
+    """Outcome of :func:`calibrate_chessboard`.
+
+    Attributes
+    ----------
+    camera : Camera
+        Intrinsics and image size from the board; pose as passed in (identity by default).
+    rms_px : float
+        RMS reprojection error over all corners of the used views, pixels.
+    used, rejected : tuple of int
+        Indices of the input images in which the board was / was not found.
+    view_rms_px : (len(used),) float64
+        RMS reprojection error per used view, pixels.
+    """
+
+    camera: Camera
+    rms_px: float
+    used: tuple[int, ...]
+    rejected: tuple[int, ...]
+    view_rms_px: np.ndarray
+
+
+# ---- point correspondences -------------------------------------------------------------------
+
+def read_points_csv(path: str | Path, *, with_lines: bool = False):
+    """Read 3D-2D correspondences from a CSV with header ``x,y,z,u,v``.
+
+    Columns may come in any order; other columns (labels) are ignored; blank lines are
+    skipped.
+
+    Parameters
+    ----------
+    path : str or Path
+    with_lines : bool
+        Also return the file line number of each point.
+
+    Returns
+    -------
+    points_world : (n, 3) float64 metres
+    uv : (n, 2) float64 pixels (as detected, i.e. distorted)
+    lines : (n,) int64, only with ``with_lines``: 1-based line of each point in the file
+
+    Raises
+    ------
+    InputError
+        Missing file, missing column, wrong number of fields or a non-numeric / non-finite
+        value (the message names the line).
+    """
+    path = Path(path)
+    try:
+        with path.open(newline="", encoding="utf-8-sig") as f:
+            rows = list(csv.reader(f))
+    except FileNotFoundError:
+        raise InputError(f"points file not found: {path}") from None
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise InputError(f"cannot read points file {path}: {exc}") from None
+    numbered = [(i + 1, row) for i, row in enumerate(rows) if any(c.strip() for c in row)]
+    if not numbered:
+        raise InputError(f"{path}: empty file (expected header x,y,z,u,v)")
+    header_line, header = numbered[0]
+    header = [c.strip().lower() for c in header]
+    missing = [c for c in _POINT_COLUMNS if c not in header]
+    if missing:
+        raise InputError(f"{path}:{header_line}: missing column(s) {','.join(missing)} "
+                         f"(header must contain x,y,z,u,v; got {','.join(header)})")
+    columns = [header.index(c) for c in _POINT_COLUMNS]
+    values = np.empty((len(numbered) - 1, 5))
+    lines = np.empty(len(numbered) - 1, dtype=np.int64)
+    for k, (line, row) in enumerate(numbered[1:]):
+        if len(row) != len(header):
+            raise InputError(f"{path}:{line}: expected {len(header)} fields, got {len(row)}")
+        for j, col in enumerate(columns):
+            text = row[col].strip()
+            try:
+                value = float(text)
+            except ValueError:
+                raise InputError(f"{path}:{line}: {_POINT_COLUMNS[j]} is not a number: "
+                                 f"{text!r}") from None
+            if not np.isfinite(value):
+                raise InputError(f"{path}:{line}: {_POINT_COLUMNS[j]} is not finite: {text!r}")
+            values[k, j] = value
+        lines[k] = line
+    points_world, uv = np.ascontiguousarray(values[:, :3]), np.ascontiguousarray(values[:, 3:])
+    return (points_world, uv, lines) if with_lines else (points_world, uv)
+
+
+def calibrate_from_points(
+    points_world: np.ndarray,
+    uv: np.ndarray,
+    width: int,
+    height: int,
+    *,
+    name: str = "cam",
+    fps: float = 30.0,
+    offset: float = 0.0,
+    K: np.ndarray | None = None,
+    dist: np.ndarray | None = None,
+    model: str = "auto",
+) -> CalibrationResult:
+    """Calibrate one camera from world points and their pixels.
+
+    Parameters
+    ----------
+    points_world : (n, 3) float64 metres
+        At least 6 non-coplanar points, or at least 4 non-collinear points when ``K`` is
+        given.
+    uv : (n, 2) float64 pixels
+        Their (distorted) image positions.
+    width, height : int
+        Image size, pixels.
+    name, fps, offset
+        Copied into the returned camera.
+    K : (3, 3) float64, optional
+        Known intrinsics: solve the pose only (``cv2.solvePnP``), keeping ``K`` and ``dist``.
+    dist : (5,) float64, optional
+        Known distortion ``[k1, k2, p1, p2, k3]`` (zeros if omitted), used only with ``K``.
+    model : str
+        Distortion terms to estimate: ``"auto"`` or a key of :data:`DISTORTION_MODELS`.
+
+    Returns
+    -------
+    CalibrationResult
+
+    Raises
+    ------
+    InputError
+        Too few, coplanar (without ``K``), collinear or non-finite points, points behind the
+        camera, or an estimation that fails.
+    """
+    points_world, uv = _check_correspondences(points_world, uv)
+    n = len(points_world)
+    if K is not None:
+        return _solve_pose(points_world, uv, width, height, name, fps, offset, K, dist)
+    if dist is not None:
+        raise InputError("dist given without K: known distortion needs known intrinsics")
+    if n < MIN_POINTS:
+        raise InputError(f"need at least {MIN_POINTS} points to calibrate, got {n} "
+                         f"(4 suffice with known intrinsics)")
+    singular = _spread(points_world)
+    if singular[2] <= COPLANAR_RATIO * singular[0]:
+        raise InputError(f"the {n} points are coplanar (off-plane spread "
+                         f"{singular[2] / singular[0]:.1e} of their extent); full calibration "
+                         f"needs points at different depths, or known intrinsics "
+                         f"(--fix-intrinsics)")
+    if model == "auto":
+        model = ("none" if n < AUTO_K1K2_MIN_POINTS
+                 else "k1k2" if n < AUTO_FULL_MIN_POINTS else "full")
+    if model not in DISTORTION_MODELS:
+        raise InputError(f"unknown distortion model {model!r} "
+                         f"(choose from auto, {', '.join(DISTORTION_MODELS)})")
+    n_unknowns = 10 + len(DISTORTION_MODELS[model])
+    if 2 * n < n_unknowns:
+        raise InputError(f"distortion model {model!r} has {n_unknowns} unknowns; "
+                         f"{n} points give only {2 * n} equations")
+
+    P = dlt_projection_matrix(points_world, uv)
+    K0, R0, t0 = decompose_projection_matrix(P)
+    _check_in_front(points_world, R0, t0, "the DLT solution")
+    K0[0, 1] = 0.0  # OpenCV's model has no skew; the DLT's small skew is noise
+
+    flags = cv2.CALIB_USE_INTRINSIC_GUESS
+    estimated = DISTORTION_MODELS[model]
+    for term, flag in _DIST_FLAGS.items():
+        if term not in estimated:
+            flags |= flag
+    if "p1" not in estimated:
+        flags |= cv2.CALIB_ZERO_TANGENT_DIST
+    try:
+        _, K1, dist1, rvecs, tvecs = cv2.calibrateCamera(
+            [points_world.astype(np.float32)], [uv.astype(np.float32)], (int(width), int(height)),
+            K0, np.zeros(5), flags=flags, criteria=_LM_CRITERIA)
+    except cv2.error as exc:
+        raise InputError(f"calibration did not converge: {_cv_message(exc)}") from None
+    # calibrateCamera works in float32 for the points; polish in float64 so that noise-free
+    # data is recovered to the last digits.
+    K1, dist1, R1, t1 = _refine_float64(points_world, uv, K1, dist1.ravel()[:5],
+                                        rvecs[0], tvecs[0], estimated)
+    if not (np.all(np.isfinite(K1)) and np.all(np.isfinite(dist1)) and K1[0, 0] > 0
+            and K1[1, 1] > 0):
+        raise InputError("calibration diverged (check that each u,v belongs to its x,y,z)")
+    _check_in_front(points_world, R1, t1, "the refined solution")
+    camera = _make_camera(name, width, height, K1, dist1, R1, t1, fps, offset)
+    return _result(camera, points_world, uv, model)
+
+
+def dlt_projection_matrix(points_world: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Normalized (Hartley) DLT estimate of the projection matrix.
+
+    Parameters
+    ----------
+    points_world : (n, 3) float64 metres, n >= 6, not coplanar
+    uv : (n, 2) float64 pixels
+
+    Returns
+    -------
+    P : (3, 4) float64 with ``uv ~ P @ [x, y, z, 1]``, scaled to ``||P[2, :3]|| = 1``; its
+    overall sign is arbitrary.
+    """
+    # Normalizing both point sets (centroid at 0, mean distance sqrt(dim)) makes the linear
+    # system well conditioned; without it, pixels (~100s) and metres (~1) differ by orders of
+    # magnitude and the SVD solution is noticeably worse.
+    T_world = _normalizing_transform(points_world)
+    T_image = _normalizing_transform(uv)
+    X = _homogeneous(points_world) @ T_world.T
+    x = _homogeneous(uv) @ T_image.T
+    n = len(X)
+    A = np.zeros((2 * n, 12))
+    A[0::2, 0:4] = X
+    A[0::2, 8:12] = -x[:, 0:1] * X
+    A[1::2, 4:8] = X
+    A[1::2, 8:12] = -x[:, 1:2] * X
+    P_normalized = np.linalg.svd(A)[2][-1].reshape(3, 4)
+    P = np.linalg.inv(T_image) @ P_normalized @ T_world
+    return P / np.linalg.norm(P[2, :3])
+
+
+def decompose_projection_matrix(P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Split ``P = s K [R | t]`` by RQ decomposition.
+
+    Parameters
+    ----------
+    P : (3, 4) float64, any scale and sign
+
+    Returns
+    -------
+    K : (3, 3) float64, upper triangular, positive diagonal, ``K[2, 2] = 1``
+    R : (3, 3) float64 rotation world -> camera (det +1)
+    t : (3,) float64 translation world -> camera, metres
+    """
+    P = np.asarray(P, dtype=np.float64)
+    # The sign of P is arbitrary; with det(M) > 0, K (positive diagonal) and R (det +1) follow.
+    if np.linalg.det(P[:, :3]) < 0:
+        P = -P
+    M = P[:, :3]
+    # RQ of M from QR of its row- and column-reversed transpose.
+    flip = np.eye(3)[::-1]
+    Q, U = np.linalg.qr((flip @ M).T)
+    K = flip @ U.T @ flip
+    R = flip @ Q.T
+    signs = np.diag(np.sign(np.diag(K)))
+    K, R = K @ signs, signs @ R
+    t = np.linalg.solve(K, P[:, 3])  # P = K [R | t] holds at P's own scale
+    K = K / K[2, 2]
+    K[1, 0] = K[2, 0] = K[2, 1] = 0.0
+    K[2, 2] = 1.0
+    return K, R, t
+
+
+# ---- chessboard -------------------------------------------------------------------------------
+
+def parse_pattern(text: str) -> tuple[int, int]:
+    """``"9x6"`` -> ``(9, 6)``: inner corners per row and per column, each >= 2."""
+    parts = str(text).lower().replace("×", "x").split("x")
+    try:
+        cols, rows = (int(p) for p in parts)
+    except ValueError:
+        raise InputError(f"bad chessboard pattern {text!r}: expected COLSxROWS of inner "
+                         f"corners, e.g. 9x6") from None
+    if cols < 2 or rows < 2:
+        raise InputError(f"bad chessboard pattern {text!r}: need at least 2x2 inner corners")
+    return cols, rows
+
+
+def read_calibration_images(path: str | Path, *, max_frames: int = 60
+                            ) -> tuple[list[np.ndarray], list[str]]:
+    """Load calibration images from a folder of images or a video file.
+
+    Parameters
+    ----------
+    path : str or Path
+        A folder (every image file in it, sorted by name) or a video file.
+    max_frames : int
+        From a video, at most this many frames, evenly spaced over its length (neighbouring
+        frames show nearly the same view and only slow the calibration down).
+
+    Returns
+    -------
+    images : list of (height, width) uint8 grayscale arrays
+    labels : list of str, the file name or ``frame N`` of each image
+
+    Raises
+    ------
+    InputError
+        Missing path, unreadable image, a video that cannot be opened, or no images.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise InputError(f"calibration images not found: {path}")
+    if path.is_dir():
+        files = sorted(p for p in path.iterdir()
+                       if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES)
+        if not files:
+            raise InputError(f"no image files ({', '.join(IMAGE_SUFFIXES)}) in folder {path}")
+        images = []
+        for file in files:
+            image = cv2.imread(str(file), cv2.IMREAD_GRAYSCALE)
+            if image is None:
+                raise InputError(f"cannot read image {file}")
+            images.append(image)
+        return images, [f.name for f in files]
+    return _read_video_frames(path, max_frames)
+
+
+def calibrate_chessboard(
+    images: Sequence[np.ndarray],
+    pattern: tuple[int, int] = (9, 6),
+    square: float = 0.025,
+    *,
+    name: str = "cam",
+    fps: float = 30.0,
+    offset: float = 0.0,
+    R: np.ndarray | None = None,
+    t: np.ndarray | None = None,
+) -> ChessboardResult:
+    """Intrinsics from views of a chessboard (OpenCV's standard procedure).
+
+    Parameters
+    ----------
+    images : sequence of (height, width) uint8 grayscale or (height, width, 3) BGR arrays,
+        all the same size
+    pattern : (cols, rows)
+        Inner corners per row and per column (a board of 10 x 7 squares is ``(9, 6)``).
+    square : float
+        Side of a square, metres (scales only the per-view board poses, which are discarded).
+    name, fps, offset
+        Copied into the camera.
+    R, t : optional
+        Pose to give the camera (world -> camera); identity and zero if omitted.
+
+    Returns
+    -------
+    ChessboardResult
+
+    Raises
+    ------
+    InputError
+        No images, images of different sizes, or the board found in fewer than
+        :data:`MIN_CHESSBOARD_VIEWS` images.
+    """
+    if not images:
+        raise InputError("no calibration images")
+    cols, rows = pattern
+    grays = [_gray(im) for im in images]
+    size = grays[0].shape
+    for i, gray in enumerate(grays):
+        if gray.shape != size:
+            raise InputError(f"image {i} is {gray.shape[1]}x{gray.shape[0]}, the first is "
+                             f"{size[1]}x{size[0]}; all images must have the same size")
+    height, width = size
+    board = np.zeros((cols * rows, 3), np.float32)
+    board[:, :2] = np.mgrid[0:cols, 0:rows].T.reshape(-1, 2) * square
+
+    find_flags = (cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
+                  | cv2.CALIB_CB_FAST_CHECK)
+    subpix_criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 1e-3)
+    corners, used, rejected = [], [], []
+    for i, gray in enumerate(grays):
+        found, found_corners = cv2.findChessboardCorners(gray, (cols, rows), flags=find_flags)
+        if not found:
+            rejected.append(i)
+            continue
+        corners.append(cv2.cornerSubPix(gray, found_corners, (11, 11), (-1, -1),
+                                        subpix_criteria))
+        used.append(i)
+    if not used:
+        raise InputError(f"no {cols}x{rows} chessboard found in any of the {len(grays)} "
+                         f"images (pattern counts inner corners)")
+    if len(used) < MIN_CHESSBOARD_VIEWS:
+        raise InputError(f"{cols}x{rows} chessboard found in only {len(used)} of "
+                         f"{len(grays)} images; need at least {MIN_CHESSBOARD_VIEWS} views")
+    try:
+        rms, K, dist, rvecs, tvecs = cv2.calibrateCamera(
+            [board] * len(used), corners, (width, height), None, None)
+    except cv2.error as exc:
+        raise InputError(f"chessboard calibration failed: {_cv_message(exc)}") from None
+    view_rms = np.empty(len(used))
+    for k, (rvec, tvec, found_corners) in enumerate(zip(rvecs, tvecs, corners, strict=True)):
+        projected = cv2.projectPoints(board, rvec, tvec, K, dist)[0].reshape(-1, 2)
+        view_rms[k] = np.sqrt(np.mean(np.sum((projected - found_corners.reshape(-1, 2)) ** 2,
+                                             axis=1)))
+    camera = _make_camera(name, width, height, K, dist.ravel()[:5],
+                          np.eye(3) if R is None else R, np.zeros(3) if t is None else t,
+                          fps, offset)
+    return ChessboardResult(camera, float(rms), tuple(used), tuple(rejected), view_rms)
+
+
+# ---- helpers ----------------------------------------------------------------------------------
+
+def _check_correspondences(points_world, uv) -> tuple[np.ndarray, np.ndarray]:
+    # contiguous copies: OpenCV rejects strided views (e.g. columns sliced from a table)
+    points_world = np.ascontiguousarray(points_world, dtype=np.float64)
+    uv = np.ascontiguousarray(uv, dtype=np.float64)
+    if points_world.ndim != 2 or points_world.shape[1] != 3:
+        raise InputError(f"points_world must have shape (n, 3), got {points_world.shape}")
+    if uv.shape != (len(points_world), 2):
+        raise InputError(f"uv must have shape ({len(points_world)}, 2), got {uv.shape}")
+    if not (np.all(np.isfinite(points_world)) and np.all(np.isfinite(uv))):
+        raise InputError("points contain non-finite values")
+    return points_world, uv
+
+
+def _spread(points: np.ndarray) -> np.ndarray:
+    """Singular values (3,) of the centred points, largest first."""
+    return np.linalg.svd(points - points.mean(axis=0), compute_uv=False)
+
+
+def _solve_pose(points_world, uv, width, height, name, fps, offset, K, dist
+                ) -> CalibrationResult:
+    n = len(points_world)
+    if n < MIN_POINTS_POSE:
+        raise InputError(f"need at least {MIN_POINTS_POSE} points to solve a pose, got {n}")
+    singular = _spread(points_world)
+    if singular[1] <= COLLINEAR_RATIO * singular[0]:
+        raise InputError(f"the {n} points are collinear; a pose needs points spanning a plane")
+    K = np.asarray(K, dtype=np.float64)
+    dist = np.zeros(5) if dist is None else np.asarray(dist, dtype=np.float64)
+    # SQPnP finds the global optimum for planar and non-planar sets alike (n >= 3); LM then
+    # polishes the reprojection error.
+    try:
+        ok, rvec, tvec = cv2.solvePnP(points_world, uv, K, dist, flags=cv2.SOLVEPNP_SQPNP)
+        if not ok:
+            raise InputError("solvePnP found no pose for these points")
+        rvec, tvec = cv2.solvePnPRefineLM(points_world, uv, K, dist, rvec, tvec,
+                                          criteria=_LM_CRITERIA)
+    except cv2.error as exc:
+        raise InputError(f"pose estimation failed: {_cv_message(exc)}") from None
+    R = cv2.Rodrigues(rvec)[0]
+    t = tvec.ravel()
+    _check_in_front(points_world, R, t, "the pose")
+    camera = _make_camera(name, width, height, K, dist, R, t, fps, offset)
+    return _result(camera, points_world, uv, "fixed")
+
+
+def _refine_float64(points_world, uv, K, dist, rvec, tvec, estimated, iterations: int = 20):
+    """Gauss-Newton polish of calibrateCamera's solution in float64.
+
+    Unknowns: fx, fy, cx, cy, the estimated distortion terms, rvec, tvec. Jacobians come from
+    ``cv2.projectPoints``; the step is accepted only if it lowers the squared error, so this
+    can never make the fit worse.
+    """
+    dist_index = [("k1", "k2", "p1", "p2", "k3").index(term) for term in estimated]
+    K = np.array(K, dtype=np.float64)
+    dist = np.array(dist, dtype=np.float64)
+    rvec = np.array(rvec, dtype=np.float64).reshape(3, 1)
+    tvec = np.array(tvec, dtype=np.float64).reshape(3, 1)
+    target = uv.ravel()
+
+    def residual(K, dist, rvec, tvec):
+        projected, jac = cv2.projectPoints(points_world, rvec, tvec, K, dist)
+        return projected.ravel() - target, jac
+
+    r, jac = residual(K, dist, rvec, tvec)
+    cost = r @ r
+    for _ in range(iterations):
+        # projectPoints' Jacobian columns: rvec(3) tvec(3) fx fy cx cy dist(5..)
+        J = np.hstack([jac[:, 6:10], jac[:, [10 + i for i in dist_index]], jac[:, 0:6]])
+        step = np.linalg.lstsq(J, -r, rcond=None)[0]
+        K_new = K.copy()
+        K_new[0, 0] += step[0]
+        K_new[1, 1] += step[1]
+        K_new[0, 2] += step[2]
+        K_new[1, 2] += step[3]
+        dist_new = dist.copy()
+        dist_new[dist_index] += step[4:4 + len(dist_index)]
+        rvec_new = rvec + step[-6:-3, None]
+        tvec_new = tvec + step[-3:, None]
+        r_new, jac_new = residual(K_new, dist_new, rvec_new, tvec_new)
+        cost_new = r_new @ r_new
+        if not cost_new < cost:
+            break
+        K, dist, rvec, tvec, r, jac = K_new, dist_new, rvec_new, tvec_new, r_new, jac_new
+        converged = cost - cost_new <= 1e-14 * max(cost, 1e-300)
+        cost = cost_new
+        if converged:
+            break
+    return K, dist, cv2.Rodrigues(rvec)[0], tvec.ravel()
+
+
+def _check_in_front(points_world, R, t, what: str) -> None:
+    depth = points_world @ R[2] + t[2]
+    behind = int(np.count_nonzero(depth <= 0))
+    if behind:
+        raise InputError(f"{what} puts {behind} of {len(depth)} points behind the camera "
+                         f"(check that each u,v belongs to its x,y,z)")
+
+
+def _make_camera(name, width, height, K, dist, R, t, fps, offset) -> Camera:
+    K = np.array(K, dtype=np.float64)
+    K[1, 0] = K[2, 0] = K[2, 1] = 0.0
+    K[2, 2] = 1.0
+    return Camera(name, int(width), int(height), K, np.asarray(dist, dtype=np.float64), R,
+                  np.asarray(t, dtype=np.float64).ravel(), fps=fps, offset=offset)
+
+
+def _result(camera: Camera, points_world, uv, model: str) -> CalibrationResult:
+    projected, _ = camera.project(points_world)
+    residuals = np.linalg.norm(projected - uv, axis=1)
+    residuals.setflags(write=False)
+    return CalibrationResult(camera, float(np.sqrt(np.mean(residuals ** 2))), residuals, model)
+
+
+def _normalizing_transform(points: np.ndarray) -> np.ndarray:
+    """Similarity (dim+1, dim+1) moving the centroid to 0 and the mean distance to sqrt(dim)."""
+    dim = points.shape[1]
+    centroid = points.mean(axis=0)
+    mean_distance = np.mean(np.linalg.norm(points - centroid, axis=1))
+    scale = np.sqrt(dim) / mean_distance
+    T = np.eye(dim + 1)
+    T[:dim, :dim] *= scale
+    T[:dim, dim] = -scale * centroid
+    return T
+
+
+def _homogeneous(points: np.ndarray) -> np.ndarray:
+    return np.hstack([points, np.ones((len(points), 1))])
+
+
+def _gray(image: np.ndarray) -> np.ndarray:
+    image = np.asarray(image)
+    if image.ndim == 3:
+        image = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+    if image.dtype != np.uint8:
+        raise InputError(f"calibration images must be 8-bit, got {image.dtype}")
+    return image
+
+
+def _read_video_frames(path: Path, max_frames: int) -> tuple[list[np.ndarray], list[str]]:
+    capture = cv2.VideoCapture(str(path))
+    try:
+        if not capture.isOpened():
+            raise InputError(f"{path} is neither a folder of images nor a readable video")
+        count = int(capture.get(cv2.CAP_PROP_FRAME_COUNT))
+        wanted = None
+        if count > max_frames:
+            wanted = set(np.linspace(0, count - 1, max_frames).round().astype(int).tolist())
+        # Read sequentially (seeking is unreliable in many codecs) and keep the wanted frames.
+        images, labels, index = [], [], 0
+        while True:
+            ok, frame = capture.read()
+            if not ok:
+                break
+            if wanted is None or index in wanted:
+                images.append(cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY))
+                labels.append(f"frame {index}")
+            index += 1
+    finally:
+        capture.release()
+    if not images:
+        raise InputError(f"no frames could be read from video {path}")
+    return images, labels
+
+
+def _cv_message(exc: cv2.error) -> str:
+    text = str(exc).strip().splitlines()
+    return text[-1] if text else "OpenCV error"

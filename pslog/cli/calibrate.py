@@ -1,0 +1,195 @@
+"""``pslog calibrate``: calibrate one camera and add or replace it in a rig TOML file.
+
+Two sources:
+
+- ``--points points.csv`` (header ``x,y,z,u,v``, metres and pixels): intrinsics, distortion
+  and pose from 3D-2D correspondences (at least 6 non-coplanar points), or, with
+  ``--fix-intrinsics``, the pose only with the rig's K and distortion (at least 4 points,
+  coplanar allowed).
+- ``--chessboard 9x6 --images DIR_OR_VIDEO``: intrinsics from chessboard views. A chessboard
+  does not locate the camera in the world, so the camera keeps its pose from the rig (or gets
+  identity R and zero t if new); solve the pose afterwards with ``--points ... --fix-intrinsics``.
+
+The rig file is created if missing; other cameras, their order and the rig's name are kept.
+Replacing a camera that is already in the rig needs ``--force`` (its old calibration would be
+lost), except with ``--fix-intrinsics``, whose purpose is to update that camera's pose.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from pslog.cli._common import add_force, nonnegative_float, positive_float
+
+_WORST_SHOWN = 5
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.epilog = ("examples:\n"
+                     "  pslog calibrate --points pts.csv --name cam1 --width 640 --height 480 "
+                     "--rig rig.toml\n"
+                     "  pslog calibrate --chessboard 9x6 --square 0.025 --images shots/ "
+                     "--name cam1 --rig rig.toml\n"
+                     "  pslog calibrate --points floor.csv --fix-intrinsics --name cam1 "
+                     "--rig rig.toml")
+    parser.formatter_class = argparse.RawDescriptionHelpFormatter
+    source = parser.add_mutually_exclusive_group(required=True)
+    source.add_argument("--points", metavar="CSV",
+                        help="3D-2D correspondences, header x,y,z,u,v (metres, pixels)")
+    source.add_argument("--chessboard", metavar="COLSxROWS",
+                        help="chessboard inner corners per row x per column, e.g. 9x6")
+    parser.add_argument("--name", required=True, help="camera name in the rig")
+    parser.add_argument("--rig", required=True, metavar="RIG.toml",
+                        help="rig file to add the camera to (created if missing)")
+    parser.add_argument("--width", type=int, help="image width, pixels (required for a new "
+                        "camera with --points; checked against the images with --chessboard)")
+    parser.add_argument("--height", type=int, help="image height, pixels")
+    parser.add_argument("--fps", type=positive_float,
+                        help="frame rate (default: the rig's value for this camera, else 30)")
+    parser.add_argument("--offset", type=nonnegative_float,
+                        help="shutter offset within the frame period, seconds "
+                             "(default: the rig's value, else 0)")
+    parser.add_argument("--fix-intrinsics", action="store_true",
+                        help="with --points: keep the rig's K and distortion for this camera "
+                             "and solve the pose only (coplanar points allowed)")
+    parser.add_argument("--model", default="auto",
+                        choices=("auto", "none", "k1", "k1k2", "k1k2k3", "full"),
+                        help="with --points: distortion terms to estimate (auto: none below "
+                             "10 points, k1,k2 below 100, all five from 100)")
+    parser.add_argument("--square", type=positive_float, default=0.025,
+                        help="chessboard square side, metres (default 0.025)")
+    parser.add_argument("--images", metavar="DIR_OR_VIDEO",
+                        help="with --chessboard: folder of images or a video file")
+    parser.add_argument("--max-frames", type=int, default=60,
+                        help="from a video, use at most this many evenly spaced frames "
+                             "(default 60)")
+    add_force(parser)
+
+
+def run(args: argparse.Namespace) -> int:
+    from pslog.errors import InputError, OutputExistsError
+    from pslog.rig import BUILTIN_RIGS, Rig, load_rig, save_rig
+
+    rig_path = Path(args.rig)
+    if not rig_path.exists() and str(args.rig) in BUILTIN_RIGS:
+        raise InputError(f"--rig {args.rig}: calibrate writes a rig file; give a path such as "
+                         f"rig.toml (built-in rigs cannot be changed)")
+    if not rig_path.parent.exists():
+        raise InputError(f"rig folder does not exist: {rig_path.parent}")
+    rig = load_rig(rig_path) if rig_path.exists() else None
+    existing = rig.camera(args.name) if rig is not None and args.name in rig.names else None
+
+    if args.fix_intrinsics and args.chessboard:
+        raise InputError("--fix-intrinsics goes with --points (a chessboard gives intrinsics)")
+    if args.chessboard and not args.images:
+        raise InputError("--chessboard needs --images DIR_OR_VIDEO")
+    if args.images and not args.chessboard:
+        raise InputError("--images goes with --chessboard")
+    if existing is not None and not args.fix_intrinsics and not args.force:
+        raise OutputExistsError(f"camera {args.name!r} is already in {rig_path}; use --force "
+                                f"to replace its calibration")
+    for key in ("width", "height", "max_frames"):
+        value = getattr(args, key)
+        if value is not None and value <= 0:
+            raise InputError(f"--{key.replace('_', '-')} must be a positive integer, got {value}")
+    fps = args.fps if args.fps is not None else (existing.fps if existing else 30.0)
+    offset = args.offset if args.offset is not None else (existing.offset if existing else 0.0)
+
+    if args.chessboard:
+        camera = _run_chessboard(args, existing, fps, offset)
+    else:
+        camera = _run_points(args, existing, rig_path, fps, offset)
+
+    new_rig = (Rig((camera,), rig_path.stem) if rig is None else rig.with_camera(camera))
+    save_rig(new_rig, rig_path)
+    action = "replaced" if existing is not None else "added"
+    print(f"{action} camera {camera.name!r} (camera {new_rig.index(camera.name) + 1} of "
+          f"{len(new_rig)}) in {rig_path}")
+    return 0
+
+
+def _run_points(args, existing, rig_path: Path, fps: float, offset: float):
+    import numpy as np
+
+    from pslog.calibration import calibrate_from_points, read_points_csv
+    from pslog.errors import InputError
+
+    points_world, uv, lines = read_points_csv(args.points, with_lines=True)
+    if args.fix_intrinsics:
+        if existing is None:
+            where = f"not in {rig_path}" if rig_path.exists() else f"{rig_path} does not exist"
+            raise InputError(f"--fix-intrinsics needs camera {args.name!r} in the rig ({where}); "
+                             f"calibrate it first")
+        for key in ("width", "height"):
+            value = getattr(args, key)
+            if value is not None and value != getattr(existing, key):
+                raise InputError(f"--{key} {value} differs from camera {args.name!r}'s "
+                                 f"{getattr(existing, key)} in the rig (its K is for that size)")
+        width, height, K, dist = existing.width, existing.height, existing.K, existing.dist
+    else:
+        width = args.width if args.width is not None else (existing.width if existing else None)
+        height = (args.height if args.height is not None
+                  else (existing.height if existing else None))
+        if width is None or height is None:
+            raise InputError("--width and --height are required for a new camera")
+        K = dist = None
+    result = calibrate_from_points(points_world, uv, width, height, name=args.name, fps=fps,
+                                   offset=offset, K=K, dist=dist, model=args.model)
+    camera = result.camera
+    n = len(points_world)
+    what = ("pose only, K and distortion kept from the rig" if result.fixed_intrinsics
+            else f"distortion model {result.model}")
+    print(f"{camera.name}: calibrated from {n} points in {args.points} ({what})")
+    print(f"  reprojection RMS {result.rms_px:.3f} px, max {result.residuals_px.max():.3f} px")
+    _print_intrinsics(camera)
+    centre = camera.center_world
+    print(f"  camera centre (world): [{centre[0]:.4f}, {centre[1]:.4f}, {centre[2]:.4f}] m")
+    worst = result.worst(min(_WORST_SHOWN, n))
+    print("  worst points: " + ", ".join(
+        f"#{i} (line {lines[i]}) {result.residuals_px[i]:.3f} px" for i in worst))
+    if np.any(~camera.in_image(uv)):
+        print(f"  note: {int(np.count_nonzero(~camera.in_image(uv)))} points lie outside the "
+              f"{width}x{height} image; check --width/--height")
+    return camera
+
+
+def _run_chessboard(args, existing, fps: float, offset: float):
+    from pslog.calibration import calibrate_chessboard, parse_pattern, read_calibration_images
+    from pslog.errors import InputError
+
+    pattern = parse_pattern(args.chessboard)
+    images, labels = read_calibration_images(args.images, max_frames=args.max_frames)
+    height, width = images[0].shape[:2]
+    for key, value in (("width", width), ("height", height)):
+        given = getattr(args, key)
+        if given is not None and given != value:
+            raise InputError(f"--{key} {given} differs from the images' {value}")
+    pose = {"R": existing.R, "t": existing.t} if existing is not None else {}
+    result = calibrate_chessboard(images, pattern, args.square, name=args.name, fps=fps,
+                                  offset=offset, **pose)
+    camera = result.camera
+    print(f"{camera.name}: calibrated from a {pattern[0]}x{pattern[1]} chessboard in "
+          f"{args.images} ({width}x{height})")
+    print(f"  images: {len(result.used)} used, {len(result.rejected)} rejected "
+          f"(board not found) of {len(images)}")
+    if result.rejected:
+        shown = [labels[i] for i in result.rejected[:10]]
+        more = f", ... ({len(result.rejected) - 10} more)" if len(result.rejected) > 10 else ""
+        print(f"  rejected: {', '.join(shown)}{more}")
+    print(f"  reprojection RMS {result.rms_px:.3f} px")
+    worst = sorted(zip(result.view_rms_px, result.used, strict=True), reverse=True)[:3]
+    print("  worst views: " + ", ".join(f"{labels[i]} {rms:.3f} px" for rms, i in worst))
+    _print_intrinsics(camera)
+    if existing is not None:
+        print("  pose: kept from the rig (a chessboard does not locate the camera)")
+    else:
+        print("  pose: unknown from a chessboard; set to identity R, zero t. Solve it with "
+              "--points CSV --fix-intrinsics")
+    return camera
+
+
+def _print_intrinsics(camera) -> None:
+    K, d = camera.K, camera.dist
+    print(f"  K: fx {K[0, 0]:.2f}  fy {K[1, 1]:.2f}  cx {K[0, 2]:.2f}  cy {K[1, 2]:.2f} px")
+    print(f"  dist: k1 {d[0]:.5f}  k2 {d[1]:.5f}  p1 {d[2]:.5f}  p2 {d[3]:.5f}  k3 {d[4]:.5f}")

@@ -1,0 +1,38 @@
+"""pslog eval: accuracy of a session's fused tracks against its ground truth."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("session", help="fused session MCAP (from pslog fuse)")
+    parser.add_argument("--method", action="append", dest="methods", metavar="METHOD",
+                        help="only these methods (repeatable; default all tracks)")
+    parser.add_argument("--json", action="store_true", help="print JSON for scripts")
+
+
+def run(args: argparse.Namespace) -> int:
+    import json
+
+    from pslog.errors import InputError
+    from pslog.evaluation import evaluate, format_accuracy_table
+    from pslog.log import read_session
+
+    session = read_session(args.session)
+    if session.truth is None or len(session.truth) == 0:
+        raise InputError(f"{args.session} has no ground truth (only simulated or synthetic "
+                         f"sessions have one)")
+    if not session.tracks:
+        raise InputError(f"{args.session} has no fused tracks; run 'pslog fuse' first")
+    methods = args.methods or list(session.tracks)
+    missing = [m for m in methods if m not in session.tracks]
+    if missing:
+        raise InputError(f"no track for method(s) {', '.join(missing)} in {args.session} "
+                         f"(have {', '.join(session.tracks)})")
+    rows = [evaluate(session.tracks[m], session.truth) for m in methods]
+    if args.json:
+        print(json.dumps([r.as_dict() for r in rows], indent=2))
+    else:
+        print(format_accuracy_table(rows))
+    return 0

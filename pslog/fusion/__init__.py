@@ -1,0 +1,134 @@
+"""Fusion: per-camera detections in, 3D tracks with per-point quality out.
+
+Methods (names as on the command line), each from the paper (``../shared/paper``):
+
+========  ============================================================  ===================
+name      what                                                          paper
+========  ============================================================  ===================
+sync      N-view triangulation of simultaneous detections               Table 1 "synchronized"
+nearest   each detection with the latest of the other cameras           Table 1 "unsynchronized"
+typeA     pseudo stereo, a point at every detection                     section 2.2, eqs. 1-4
+typeB     stereo at common instants + ray-constrained prediction        section 2.3
+linear    typeB without the ray constraint                              Table 1 "linear prediction"
+========  ============================================================  ===================
+
+:func:`fuse` is the batch entry point; every method is causal (a point at time ``t`` uses
+no detection later than ``t``), so :class:`~pslog.fusion.stream.StreamFuser` gives the same
+points incrementally.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from ..errors import FusionError
+from ..records import Detections, Observations, Track
+from ..rig import Rig
+from ._prepare import Prepared, default_max_gap_s, prepare
+from .prediction import fuse_predicted
+from .pseudo import PseudoStereoPoints, TypeAConstruction, fuse_type_a, pseudo_stereo_points
+from .stereo import fuse_nearest, fuse_sync
+
+METHODS: dict[str, str] = {
+    "sync": "ordinary stereo of simultaneous detections (paper: synchronized)",
+    "nearest": "latest detection of the other cameras, as if simultaneous (paper: unsynchronized)",
+    "typeA": "pseudo stereo at every detection (paper section 2.2, eqs. 1-4)",
+    "typeB": "stereo at common instants + ray-constrained prediction (paper section 2.3)",
+    "linear": "stereo at common instants + linear prediction (paper: linear prediction)",
+}
+
+
+@dataclass(frozen=True)
+class FusionOptions:
+    """Settings shared by the methods.
+
+    Attributes
+    ----------
+    tolerance_s : float, detections this close in time count as simultaneous (sync, typeB,
+        linear), seconds
+    max_gap_s : float or None, longest time span a method may bridge (brackets, predictions,
+        pairing); None: 3.5 frame periods of the slowest camera
+    """
+
+    tolerance_s: float = 1e-3
+    max_gap_s: float | None = None
+
+    def __post_init__(self) -> None:
+        if not self.tolerance_s >= 0:
+            raise FusionError(f"tolerance must be >= 0 seconds, got {self.tolerance_s!r}")
+        if self.max_gap_s is not None and not self.max_gap_s > 0:
+            raise FusionError(f"max gap must be > 0 seconds, got {self.max_gap_s!r}")
+
+
+def check_method(method: str) -> str:
+    if method not in METHODS:
+        raise FusionError(f"unknown fusion method {method!r} (have {', '.join(METHODS)})")
+    return method
+
+
+def fuse(
+    observations: Observations | Detections, rig: Rig, method: str,
+    options: FusionOptions | None = None, *, prepared: Prepared | None = None,
+) -> Track:
+    """Fuse one session's detections into a 3D track.
+
+    Parameters
+    ----------
+    observations : Observations, or Detections (their best candidate per frame is used)
+    rig : Rig, whose camera order the observations' camera indices refer to
+    method : one of :data:`METHODS`
+    options : FusionOptions
+    prepared : the result of :func:`prepare` for these observations, to share between methods
+
+    Returns
+    -------
+    Track, sorted by time, without NaN points
+    """
+    check_method(method)
+    options = options or FusionOptions()
+    if isinstance(observations, Detections):
+        observations = observations.best()
+    if len(rig) < 2:
+        raise FusionError(f"fusion needs at least two cameras; rig has {len(rig)}")
+    prep = prepared if prepared is not None else prepare(observations, rig)
+    max_gap_s = options.max_gap_s or default_max_gap_s(rig)
+    if method == "sync":
+        return fuse_sync(prep, options.tolerance_s)
+    if method == "nearest":
+        return fuse_nearest(prep, max_gap_s)
+    if method == "typeA":
+        return fuse_type_a(prep, max_gap_s)[0]
+    return fuse_predicted(prep, method, options.tolerance_s, max_gap_s)
+
+
+def fuse_all(
+    observations: Observations | Detections, rig: Rig, methods: Sequence[str],
+    options: FusionOptions | None = None,
+) -> dict[str, Track]:
+    """Several methods over one session, sharing the undistortion and rays."""
+    for method in methods:
+        check_method(method)
+    if isinstance(observations, Detections):
+        observations = observations.best()
+    if len(rig) < 2:
+        raise FusionError(f"fusion needs at least two cameras; rig has {len(rig)}")
+    prep = prepare(observations, rig)
+    return {m: fuse(observations, rig, m, options, prepared=prep) for m in methods}
+
+
+def explain_type_a(
+    observations: Observations | Detections, rig: Rig, options: FusionOptions | None = None
+) -> TypeAConstruction:
+    """The paper's Figure 2 construction behind every type-A point (see TypeAConstruction)."""
+    options = options or FusionOptions()
+    if isinstance(observations, Detections):
+        observations = observations.best()
+    prep = prepare(observations, rig)
+    return fuse_type_a(prep, options.max_gap_s or default_max_gap_s(rig))[1]
+
+
+__all__ = [
+    "METHODS", "FusionOptions", "Prepared", "PseudoStereoPoints", "TypeAConstruction",
+    "check_method", "explain_type_a", "fuse", "fuse_all", "prepare", "pseudo_stereo_points",
+]

@@ -1,0 +1,95 @@
+"""Ordinary stereo: the paper's "synchronized" and "unsynchronized" rows of Table 1."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import FusionError
+from ..geometry import triangulate_rays
+from ..records import NS, Track
+from ._prepare import Prepared, latest_row_at_or_before
+
+
+def sync_groups(prep: Prepared, tolerance_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Group observations whose capture times chain within ``tolerance_s``.
+
+    Returns
+    -------
+    group : (n,) int64, group id of each observation (groups in time order)
+    n_cameras : (n_groups,) int64, distinct cameras in each group
+    """
+    time_ns = prep.obs.time_ns
+    tol_ns = round(tolerance_s * NS)
+    starts = np.ones(len(time_ns), dtype=bool)
+    starts[1:] = np.diff(time_ns) > tol_ns
+    group = np.cumsum(starts) - 1
+    n_groups = int(group[-1]) + 1 if len(group) else 0
+    seen = np.zeros((n_groups, len(prep.centers)), dtype=bool)
+    seen[group, prep.obs.camera] = True
+    return group, seen.sum(axis=1)
+
+
+def triangulate_groups(prep: Prepared, group: np.ndarray, n_groups: int):
+    """N-view least-squares point of each group (one ray per camera; a camera seen twice in a
+    group keeps its latest ray). Returns points (g, 3), rms miss (g,), time_ns (g,) of the
+    group's latest observation, camera (g,) of that observation."""
+    n_cams = len(prep.centers)
+    origins = np.zeros((n_groups, n_cams, 3))
+    dirs = np.zeros((n_groups, n_cams, 3))
+    valid = np.zeros((n_groups, n_cams), dtype=bool)
+    cam = prep.obs.camera
+    origins[group, cam] = prep.ray_origin
+    dirs[group, cam] = prep.ray_dir
+    valid[group, cam] = True
+    points, rms_miss, _ = triangulate_rays(origins, dirs, valid)
+    last = np.r_[np.flatnonzero(np.diff(group)), len(group) - 1]  # last row of each group
+    return points, rms_miss, prep.obs.time_ns[last], prep.obs.camera[last]
+
+
+def fuse_sync(prep: Prepared, tolerance_s: float = 1e-3) -> Track:
+    """``sync``: N-view triangulation of detections captured within ``tolerance_s``.
+
+    One point per instant at which at least two cameras saw the ball.
+    """
+    if len(prep.obs) == 0:
+        return _empty("sync")
+    group, n_cameras = sync_groups(prep, tolerance_s)
+    points, rms_miss, time_ns, camera = triangulate_groups(prep, group, len(n_cameras))
+    keep = (n_cameras >= 2) & np.all(np.isfinite(points), axis=1)
+    if not np.any(n_cameras >= 2):
+        raise FusionError(
+            f"method sync needs simultaneous shutters, but no two cameras captured within "
+            f"{tolerance_s * 1e3:g} ms of each other; use typeA, or a rig with sync timing")
+    return Track("sync", time_ns[keep], points[keep], camera[keep],
+                 {"ray_miss_m": rms_miss[keep]})
+
+
+def fuse_nearest(prep: Prepared, max_gap_s: float) -> Track:
+    """``nearest``: each detection triangulated with the latest detection of every other camera
+    as if they were simultaneous (the paper's "unsynchronized" baseline)."""
+    n, n_cams = len(prep.obs), len(prep.centers)
+    time_ns, camera = prep.obs.time_ns, prep.obs.camera
+    origins = np.zeros((n, n_cams, 3))
+    dirs = np.zeros((n, n_cams, 3))
+    valid = np.zeros((n, n_cams), dtype=bool)
+    max_gap_ns = int(max_gap_s * NS)
+    events = np.arange(n)
+    for d in range(n_cams):  # loop over cameras, vectorized over events
+        rows = latest_row_at_or_before(prep, d, events)
+        ok = (rows >= 0) & (camera != d)
+        ok &= time_ns - prep.obs.time_ns[np.maximum(rows, 0)] <= max_gap_ns
+        origins[ok, d] = prep.ray_origin[rows[ok]]
+        dirs[ok, d] = prep.ray_dir[rows[ok]]
+        valid[ok, d] = True
+    others = valid.sum(axis=1)
+    origins[events, camera] = prep.ray_origin
+    dirs[events, camera] = prep.ray_dir
+    valid[events, camera] = True
+    points, rms_miss, _ = triangulate_rays(origins, dirs, valid)
+    keep = (others >= 1) & np.all(np.isfinite(points), axis=1)
+    return Track("nearest", time_ns[keep], points[keep], camera[keep],
+                 {"ray_miss_m": rms_miss[keep]})
+
+
+def _empty(method: str) -> Track:
+    return Track(method, np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0, np.int32), {})

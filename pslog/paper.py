@@ -1,0 +1,117 @@
+"""The paper's experiments, reproduced in simulation: Table 1 and Table 2.
+
+Our camera placement (:func:`pslog.rig.builtin_rig`) and the open motion parameters
+(:mod:`pslog.motion`) are our choices, documented in ``docs/paper.md``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from .evaluation import evaluate
+from .fusion import fuse_all
+from .motion import get_motion
+from .rig import apply_timing, builtin_rig
+from .simulate import SimulationOptions, simulate
+
+#: Table 1 of the paper, average absolute 3D error in millimetres.
+PAPER_TABLE1 = {
+    # (cameras, method, timing): (paper's label, paper's fps, straight, spiral, non-uniform)
+    (2, "nearest", "typeA"): ("unsynchronized", 60, 23.2, 21.4, 16.2),
+    (2, "sync", "sync"): ("synchronized", 60, 0.03, 0.14, 0.12),
+    (2, "typeA", "typeA"): ("type A", 60, 1.1, 2.2, 1.8),
+    (3, "typeA", "typeA"): ("type A", 90, 1.1, 2.0, 1.7),
+    (3, "typeB", "typeB"): ("type B", 60, 0.2, 0.5, 1.5),
+    (3, "linear", "typeB"): ("linear prediction", 60, 0.2, 1.4, 4.4),
+}
+TABLE1_MOTIONS = ("straight", "spiral", "fall")
+
+#: Table 2 of the paper: mean [mm] and variance [mm²] of z on the turntable (real cameras).
+PAPER_TABLE2 = {"typeA": (664.5, 2143.7), "typeB": (662.3, 112.0)}
+TURNTABLE_HEIGHT_MM = 660.0
+
+#: Default detection noise for Table 2, pixels (standard deviation per axis); see docs/paper.md.
+TABLE2_NOISE_PX = 1.0
+TABLE2_DURATION_S = 10.0
+
+
+@dataclass(frozen=True)
+class Table1Row:
+    cameras: int
+    method: str
+    timing: str
+    paper_label: str
+    paper_fps: int
+    fps: float  # our measured output rate
+    error_mm: dict[str, float]  # motion -> our mean error
+    paper_mm: dict[str, float]  # motion -> the paper's mean error
+
+
+def table1(noise_px: float = 0.0, seed: int = 0) -> list[Table1Row]:
+    """Mean 3D error of each of the paper's Table 1 rows on its three motions."""
+    rows = []
+    for (n_cams, method, timing), (label, paper_fps, *paper) in PAPER_TABLE1.items():
+        rig = apply_timing(builtin_rig("paper3" if n_cams == 3 else "paper2"), timing)
+        errors, rates = {}, []
+        for motion_name in TABLE1_MOTIONS:
+            detections, truth = simulate(rig, get_motion(motion_name), None,
+                                         SimulationOptions(noise_px=noise_px, seed=seed))
+            accuracy = evaluate(fuse_all(detections, rig, [method])[method], truth)
+            errors[motion_name] = accuracy.mean_mm
+            rates.append(accuracy.rate_hz)
+        rows.append(Table1Row(n_cams, method, timing, label, paper_fps, float(np.mean(rates)),
+                              errors, dict(zip(TABLE1_MOTIONS, paper, strict=True))))
+    return rows
+
+
+@dataclass(frozen=True)
+class Table2Row:
+    method: str
+    mean_z_mm: float
+    var_z_mm2: float
+    n_points: int
+    paper_mean_z_mm: float
+    paper_var_z_mm2: float
+
+
+def table2(noise_px: float = TABLE2_NOISE_PX, seed: int = 0,
+           duration: float = TABLE2_DURATION_S) -> list[Table2Row]:
+    """Mean and variance of z on the turntable with type A and type B timing (three cameras)."""
+    rows = []
+    for method in ("typeA", "typeB"):
+        rig = apply_timing(builtin_rig("paper3"), method)
+        detections, _ = simulate(rig, get_motion("turntable"), duration,
+                                 SimulationOptions(noise_px=noise_px, seed=seed))
+        z_mm = fuse_all(detections, rig, [method])[method].position_world[:, 2] * 1e3
+        rows.append(Table2Row(method, float(z_mm.mean()), float(z_mm.var()), len(z_mm),
+                              *PAPER_TABLE2[method]))
+    return rows
+
+
+def format_table1(rows: list[Table1Row]) -> str:
+    head = (f"{'cams':>4} {'method':<8} {'timing':<6} {'fps':>5} {'(paper)':>7}  "
+            + "  ".join(f"{m + ' mm':>11} {'(paper)':>7}" for m in TABLE1_MOTIONS))
+    lines = ["Table 1: mean absolute 3D error [mm], ours beside the paper's", head,
+             "-" * len(head)]
+    for r in rows:
+        cells = "  ".join(f"{r.error_mm[m]:>11.3f} {r.paper_mm[m]:>7.2f}" for m in TABLE1_MOTIONS)
+        lines.append(f"{r.cameras:>4} {r.method:<8} {r.timing:<6} {r.fps:>5.1f} "
+                     f"{r.paper_fps:>7}  {cells}")
+    return "\n".join(lines)
+
+
+def format_table2(rows: list[Table2Row], noise_px: float) -> str:
+    head = (f"{'method':<7} {'points':>6} {'mean z mm':>10} {'(paper)':>8} "
+            f"{'var z mm²':>10} {'(paper)':>8}")
+    lines = [f"Table 2: turntable at z = {TURNTABLE_HEIGHT_MM:.0f} mm, detection noise "
+             f"{noise_px:g} px; ours beside the paper's (real cameras)", head, "-" * len(head)]
+    for r in rows:
+        lines.append(f"{r.method:<7} {r.n_points:>6} {r.mean_z_mm:>10.1f} "
+                     f"{r.paper_mean_z_mm:>8.1f} {r.var_z_mm2:>10.1f} {r.paper_var_z_mm2:>8.1f}")
+    return "\n".join(lines)
+
+
+def as_json(rows) -> list[dict]:
+    return [asdict(r) for r in rows]

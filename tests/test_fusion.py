@@ -1,0 +1,305 @@
+"""Fusion methods: the paper's equations against hand-computed cases, and their properties."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+
+from pslog import (
+    NS,
+    Camera,
+    FusionError,
+    Observations,
+    Rig,
+    SimulationOptions,
+    apply_timing,
+    builtin_rig,
+    get_motion,
+    simulate,
+)
+from pslog.evaluation import evaluate
+from pslog.fusion import METHODS, explain_type_a, fuse, fuse_all, prepare, pseudo_stereo_points
+from pslog.fusion.stream import StreamFuser
+from pslog.motion import Motion
+
+F_PX, CX, CY, BASELINE = 500.0, 320.0, 240.0, 0.5
+K = np.array([[F_PX, 0.0, CX], [0.0, F_PX, CY], [0.0, 0.0, 1.0]])
+
+
+def rectified_rig(offsets=(0.0, 1 / 60), fps=(30.0, 30.0)) -> Rig:
+    """Two cameras with identity rotation, the second 0.5 m along +x: a rectified pair whose
+    epipolar lines are image rows and whose depth is ``f b / disparity``."""
+    cam0 = Camera("left", 640, 480, K, np.zeros(5), np.eye(3), np.zeros(3), fps[0], offsets[0])
+    # camera centre at (0.5, 0, 0): t = -R C
+    cam1 = Camera("right", 640, 480, K, np.zeros(5), np.eye(3), np.array([-BASELINE, 0, 0]),
+                  fps[1], offsets[1])
+    return Rig((cam0, cam1), "rectified")
+
+
+def observations(rows) -> Observations:
+    """rows: (time in ms, camera, u, v)."""
+    rows = np.array(rows, dtype=np.float64)
+    return Observations.from_unsorted(np.round(rows[:, 0] * 1e6).astype(np.int64),
+                                      rows[:, 1].astype(np.int32), rows[:, 2:4])
+
+
+def fronto_parallel(t: np.ndarray) -> np.ndarray:
+    """Constant depth z = 5 m, constant velocity: its image moves linearly, so eq. (1)'s
+    interpolation is exact and type A must recover the motion exactly."""
+    return np.stack([-0.4 + 2.0 * t, 0.1 - 0.5 * t, np.full_like(t, 5.0)], axis=1)
+
+
+# ---- eq. (1), step 2, step 3: hand-computed ---------------------------------------------
+
+def test_eq1_interpolation_uses_the_papers_deltas():
+    # camera 0 ("camera 1" of the paper) at t-3 = 0 ms and t = 30 ms; camera 1 at t-2 = 10 ms
+    rig = rectified_rig()
+    obs = observations([(0, 0, 100.0, 200.0), (10, 1, 90.0, 215.0), (30, 0, 130.0, 260.0)])
+    prep = prepare(obs, rig)
+    p = pseudo_stereo_points(prep, np.array([1]), np.array([2]), max_gap_ns=NS)
+    d12, d23_31 = 10.0, 20.0  # δ12 and δ23 + δ31 in ms
+    u = (d12 * 130.0 + d23_31 * 100.0) / (d12 + d23_31)  # eq. (1)
+    v = (d12 * 260.0 + d23_31 * 200.0) / (d12 + d23_31)
+    assert_allclose(p.uv_interpolated, [[u, v]], atol=1e-12)
+    assert_allclose(p.uv_interpolated, [[110.0, 220.0]], atol=1e-12)
+    assert p.partner[0] == 0 and p.valid[0]
+
+
+def test_step2_snaps_to_the_epipolar_row_and_step3_is_stereo_depth():
+    # rectified pair: the epipolar line of (u1, v1) in the other image is the row v = v1
+    rig = rectified_rig()
+    obs = observations([(0, 0, 100.0, 200.0), (10, 1, 90.0, 215.0), (30, 0, 130.0, 260.0)])
+    p = pseudo_stereo_points(prepare(obs, rig), np.array([1]), np.array([2]), max_gap_ns=NS)
+    assert_allclose(p.uv_snapped, [[110.0, 215.0]], atol=1e-9)  # step 2: same u, row 215
+    assert_allclose(p.snap_px, [5.0], atol=1e-9)
+    # step 3: depth Z = f b / (u_left - u_right), X and Y from the left camera
+    disparity = 110.0 - 90.0
+    Z = F_PX * BASELINE / disparity
+    X, Y = (110.0 - CX) * Z / F_PX, (215.0 - CY) * Z / F_PX
+    assert_allclose(p.points_world, [[X, Y, Z]], atol=1e-9)
+    assert_allclose(p.miss_m, [0.0], atol=1e-9)  # snapped rays cross
+
+
+def test_eq2_and_eq4_on_a_hand_made_construction():
+    # fronto-parallel motion: every step is exact, so P_{t-1}, P_{t-2}, P̂_t and P'_t equal the
+    # true positions; check eq. (2) with the actual (unequal) intervals, and eq. (4)
+    rig = rectified_rig(offsets=(0.0, 0.007))  # right camera 7 ms after left: unequal δ's
+    motion = Motion("fp", 0.3, fronto_parallel)
+    detections, truth = simulate(rig, motion)
+    obs = detections.best()
+    construction = explain_type_a(obs, rig)
+    assert len(construction.event_row) > 10
+    p1, p2 = construction.past
+    t = obs.time_ns / NS
+    e, j1, j2 = construction.event_row, p1.row, p2.row
+    assert_allclose(p1.points_world, fronto_parallel(t[j1]), atol=1e-9)
+    assert_allclose(p2.points_world, fronto_parallel(t[j2]), atol=1e-9)
+    # eq. (2): P̂ = P_{t-1} + (t - t_{t-1}) / (t_{t-1} - t_{t-2}) (P_{t-1} - P_{t-2})
+    ratio = (t[e] - t[j1]) / (t[j1] - t[j2])
+    other = 1000 / 30 - 7  # ms from the right camera's shutter to the next left one
+    assert set(np.round(ratio, 6)) == {round(7 / other, 6), round(other / 7, 6)}
+    expected = p1.points_world + ratio[:, None] * (p1.points_world - p2.points_world)
+    assert_allclose(construction.predicted_world, expected, atol=1e-12)
+    # eq. (4): P' lies on the newest viewing ray, at the foot of the perpendicular from P̂
+    origin, direction = rig.cameras[0].center_world, None
+    for cam_index, cam in enumerate(rig.cameras):
+        rows = obs.camera[e] == cam_index
+        origin, direction = cam.rays(obs.uv[e[rows]])
+        offset = construction.points_world[rows] - origin
+        assert_allclose(np.linalg.norm(np.cross(offset, direction), axis=1), 0.0, atol=1e-12)
+        foot = construction.predicted_world[rows] - construction.points_world[rows]
+        assert_allclose(np.einsum("ij,ij->i", foot, direction), 0.0, atol=1e-12)
+    assert_allclose(construction.points_world, truth.at(obs.time_ns[e]), atol=1e-9)
+
+
+def test_static_ball_hand_computed_and_first_point_needs_a_bracket():
+    # the left camera sees the ball at its principal point (ray along +z), the right camera
+    # 60 px to the left: a static ball at depth Z = f b / 60 px on the left optical axis
+    rig = rectified_rig()
+    obs = observations([(0, 0, 320.0, 240.0), (10, 1, 260.0, 240.0), (20, 0, 320.0, 240.0),
+                        (30, 1, 260.0, 240.0), (40, 0, 320.0, 240.0)])
+    track = fuse(obs, rig, "typeA")
+    Z = F_PX * BASELINE / 60.0
+    assert_allclose(track.position_world, np.tile([0.0, 0.0, Z], (len(track), 1)), atol=1e-12)
+    # at 20 ms, P_{t-2} (left, 0 ms) has no right-camera detection before it to interpolate
+    # from, so the first point is at 30 ms
+    assert_array_equal(track.time_ns, np.array([30, 40]) * 1_000_000)
+    assert_array_equal(track.camera, [1, 0])
+
+
+# ---- the paper's type A as a whole -----------------------------------------------------
+
+def test_type_a_is_causal_and_emits_a_point_per_detection():
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    detections, _truth = simulate(rig, get_motion("throw"))
+    obs = detections.best()
+    track = fuse(obs, rig, "typeA")
+    assert len(track) == len(obs) - 3  # all but the first three detections
+    assert_array_equal(track.time_ns, obs.time_ns[3:])
+    assert_allclose(np.diff(track.time_ns) / NS, 1 / 90, atol=1e-8)  # 90 Hz from 30 fps
+    cut = len(obs) // 2
+    prefix = fuse(obs.select(slice(0, cut)), rig, "typeA")
+    assert_array_equal(prefix.position_world, track.position_world[: len(prefix)])
+
+
+@pytest.mark.parametrize("method", list(METHODS))
+def test_every_method_is_causal(method):
+    timing = "typeB" if method in ("sync", "typeB", "linear") else "typeA"
+    rig = apply_timing(builtin_rig("paper3"), timing)
+    detections, _ = simulate(rig, get_motion("spiral"), options=SimulationOptions(
+        noise_px=0.3, miss_rate=0.1, seed=1))
+    obs = detections.best()
+    full = fuse(obs, rig, method)
+    for cut in (20, 41, 77):
+        prefix = fuse(obs.select(slice(0, cut)), rig, method)
+        settled = prefix.time_ns < obs.time_ns[cut - 1] - 1_000_000  # beyond the tolerance
+        n = int(settled.sum())
+        assert n > 0
+        assert_array_equal(prefix.time_ns[:n], full.time_ns[:n])
+        assert_array_equal(prefix.position_world[:n], full.position_world[:n])
+
+
+def test_straight_line_type_a_and_type_b_well_under_a_millimetre():
+    for timing, method in (("typeA", "typeA"), ("typeB", "typeB"), ("typeB", "linear")):
+        rig = apply_timing(builtin_rig("paper3"), timing)
+        detections, truth = simulate(rig, get_motion("straight"))
+        accuracy = evaluate(fuse(detections, rig, method), truth)
+        assert accuracy.max_mm < 0.5, (method, accuracy)
+
+
+def test_the_papers_ordering_holds():
+    from pslog.paper import table1
+
+    rows = {(r.cameras, r.method): r.error_mm for r in table1()}
+    others = [key for key in rows if key != (2, "nearest")]
+    mean_ratio = np.mean([rows[(2, "nearest")][m] / rows[(2, "typeA")][m]
+                          for m in ("straight", "spiral", "fall")])
+    assert mean_ratio > 10  # an order of magnitude worse (the paper: 21x, 9.7x, 9x)
+    for motion in ("straight", "spiral", "fall"):
+        nearest = rows[(2, "nearest")][motion]
+        assert all(nearest > 8 * rows[key][motion] for key in others)
+        assert rows[(2, "sync")][motion] < 1e-6  # noise-free stereo is exact
+        assert rows[(2, "typeA")][motion] < 5.0 and rows[(3, "typeA")][motion] < 5.0
+        assert rows[(3, "typeB")][motion] <= rows[(3, "linear")][motion]
+    assert rows[(3, "typeB")]["spiral"] < 0.8 * rows[(3, "linear")]["spiral"]
+
+
+# ---- any rig, any timing ----------------------------------------------------------------
+
+def four_camera_rig(offsets) -> Rig:
+    from pslog import look_at
+
+    base = builtin_rig("paper3")
+    R, t = look_at((1.5, 3.5, 3.0), (1.5, 1.0, 1.0))
+    cam4 = base.cameras[0].replace(name="cam4", R=R, t=t)
+    cams = (*base.cameras, cam4)
+    return Rig(tuple(c.replace(offset=o) for c, o in zip(cams, offsets, strict=True)), "four")
+
+
+@pytest.mark.parametrize("offsets", [(0.0, 0.004, 0.013, 0.025), (0.0, 0.011, 0.017)])
+def test_type_a_with_irregular_offsets(offsets):
+    rig = (four_camera_rig(offsets) if len(offsets) == 4 else
+           Rig(tuple(c.replace(offset=o) for c, o in zip(builtin_rig("paper3").cameras,
+                                                         offsets, strict=True))))
+    detections, truth = simulate(rig, get_motion("straight"))
+    track = fuse(detections, rig, "typeA")
+    accuracy = evaluate(track, truth)
+    assert accuracy.rate_hz == pytest.approx(30 * len(offsets), rel=0.02)
+    assert accuracy.max_mm < 1.0
+    spiral, truth = simulate(rig, get_motion("spiral"))
+    assert evaluate(fuse(spiral, rig, "typeA"), truth).mean_mm < 5.0
+
+
+def test_two_cameras_type_a_at_60_hz_and_mixed_frame_rates():
+    rig = apply_timing(builtin_rig("paper2"), "typeA")
+    detections, truth = simulate(rig, get_motion("fall"))
+    accuracy = evaluate(fuse(detections, rig, "typeA"), truth)
+    assert accuracy.rate_hz == pytest.approx(60.0, rel=1e-3) and accuracy.mean_mm < 3.0
+    mixed = Rig((rig.cameras[0], rig.cameras[1].replace(fps=60.0, offset=0.005)))
+    detections, truth = simulate(mixed, get_motion("fall"))
+    accuracy = evaluate(fuse(detections, mixed, "typeA"), truth)
+    assert accuracy.rate_hz == pytest.approx(90.0, rel=0.02) and accuracy.mean_mm < 3.0
+
+
+def test_dropped_frames_missed_detections_and_jitter():
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    options = SimulationOptions(drop_rate=0.1, miss_rate=0.1, jitter_s=0.002, seed=4)
+    detections, truth = simulate(rig, get_motion("throw"), options=options)
+    obs = detections.best()
+    for method, bound_mm in (("typeA", 5.0), ("nearest", 80.0)):
+        track = fuse(obs, rig, method)
+        assert np.all(np.isfinite(track.position_world))
+        assert 0.7 * len(obs) < len(track) <= len(obs)
+        assert evaluate(track, truth).mean_mm < bound_mm
+
+
+def test_gaps_longer_than_max_gap_are_not_bridged():
+    rig = apply_timing(builtin_rig("paper2"), "typeA")
+    detections, _ = simulate(rig, get_motion("straight"))
+    obs = detections.best()
+    gap = (obs.time_ns > 0.3 * NS) & (obs.time_ns < 0.6 * NS)
+    track = fuse(obs.select(~gap), rig, "typeA")
+    after = track.time_ns[track.time_ns >= 0.6 * NS]
+    first_after = obs.time_ns[~gap][obs.time_ns[~gap] >= 0.6 * NS]
+    assert after[0] == first_after[3]  # resumes after three fresh detections
+
+
+def test_methods_that_cannot_run_say_so():
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    detections, _ = simulate(rig, get_motion("straight"))
+    for method in ("sync", "typeB", "linear"):
+        with pytest.raises(FusionError, match="within 1 ms"):
+            fuse(detections, rig, method)
+    with pytest.raises(FusionError, match="unknown fusion method 'typeC'"):
+        fuse(detections, rig, "typeC")
+    with pytest.raises(FusionError, match="at least two cameras"):
+        fuse(detections, rig.subset(["cam1"]), "typeA")
+
+
+def test_sync_quality_and_type_a_quality_fields():
+    rig = apply_timing(builtin_rig("paper3"), "sync")
+    detections, _ = simulate(rig, get_motion("spiral"), options=SimulationOptions(noise_px=1.0))
+    sync = fuse(detections, rig, "sync")
+    assert np.all(sync.quality["ray_miss_m"] > 0) and np.all(sync.quality["ray_miss_m"] < 0.05)
+    rig = apply_timing(rig, "typeA")
+    detections, _ = simulate(rig, get_motion("spiral"), options=SimulationOptions(noise_px=1.0))
+    track = fuse(detections, rig, "typeA")
+    assert np.all(track.quality["snap_px"] > 0) and np.median(track.quality["snap_px"]) < 3
+    assert np.all(np.isfinite(track.quality["ray_shift_m"]))
+
+
+# ---- streaming ---------------------------------------------------------------------------
+
+@pytest.mark.parametrize("timing,method", [("typeA", "typeA"), ("typeA", "nearest"),
+                                           ("typeB", "typeB"), ("typeB", "linear"),
+                                           ("sync", "sync")])
+def test_stream_fuser_equals_batch(timing, method):
+    rig = apply_timing(builtin_rig("paper3"), timing)
+    detections, _ = simulate(rig, get_motion("throw"), options=SimulationOptions(
+        noise_px=0.5, miss_rate=0.1, seed=2))
+    obs = detections.best()
+    batch = fuse(obs, rig, method)
+    fuser = StreamFuser(rig, method)
+    parts = [fuser.push(obs.time_ns[i], obs.camera[i], obs.uv[i]) for i in range(len(obs))]
+    parts.append(fuser.flush())
+    assert_array_equal(np.concatenate([p.time_ns for p in parts]), batch.time_ns)
+    assert_allclose(np.concatenate([p.position_world for p in parts]), batch.position_world,
+                    rtol=0, atol=1e-12)
+    if method == "typeA":  # its point comes out with the detection that makes it
+        assert all(len(p) <= 1 for p in parts[:-1]) and len(parts[-1]) == 0
+
+
+def test_stream_fuser_rejects_out_of_order_detections():
+    fuser = StreamFuser(apply_timing(builtin_rig("paper2"), "typeA"), "typeA")
+    fuser.push(1000, 0, (300.0, 200.0))
+    with pytest.raises(FusionError, match="order"):
+        fuser.push(999, 1, (300.0, 200.0))
+
+
+def test_fuse_all_shares_preparation_and_matches_fuse():
+    rig = apply_timing(builtin_rig("paper3"), "typeB")
+    detections, _ = simulate(rig, get_motion("fall"))
+    tracks = fuse_all(detections, rig, ["typeA", "typeB", "linear"])
+    for method, track in tracks.items():
+        assert_array_equal(track.position_world, fuse(detections, rig, method).position_world)
