@@ -87,7 +87,7 @@ class Camera:
         object.__setattr__(self, "t", _as_array(self.t, (3,), "t", name))
         for key in ("fps", "offset"):
             value = getattr(self, key)
-            if isinstance(value, bool) or not isinstance(value, (int, float, np.floating)):
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.number)):
                 raise RigError(f"camera {name!r}: {key} must be a number, got {value!r}")
             if not np.isfinite(value):
                 raise RigError(f"camera {name!r}: {key} must be finite, got {value!r}")
@@ -188,7 +188,8 @@ class Camera:
         """Distorted pixels (n, 2) -> ideal normalized coordinates (n, 2).
 
         Inverts :meth:`distort_normalized` by Newton's method with the analytic Jacobian,
-        vectorized; converges to machine precision for the distortions of real lenses.
+        vectorized; converges to machine precision for the distortions of real lenses. Rows
+        the distortion model cannot produce (beyond its fold-over radius) come back NaN.
         """
         uv = _check_points(uv, 2, "uv")
         xy_d = self.normalized_from_pixels(uv)
@@ -214,6 +215,10 @@ class Camera:
             xy[:, 1] -= dy
             if np.nanmax(np.abs(residual), initial=0.0) < 1e-15:
                 break
+        # past the radius where the lens model folds over, no ideal point maps to the pixel:
+        # say so with NaN rather than return a wrong ray
+        folded = np.any(np.abs(self.distort_normalized(xy) - xy_d) > 1e-9, axis=1)
+        xy[folded] = np.nan
         return xy
 
     def undistort(self, uv: np.ndarray) -> np.ndarray:

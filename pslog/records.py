@@ -180,6 +180,11 @@ class Detections:
                        else np.asarray(cand_radius, dtype=np.float64))
         cand_score = (np.ones(n_cand) if cand_score is None
                       else np.asarray(cand_score, dtype=np.float64))
+        if not (len(frame_camera) == len(frame_index) == len(frame_time_ns)):
+            raise InputError("frame columns differ in length")
+        # checked before remapping: a negative row would silently wrap to another frame
+        if n_cand and (cand_frame.min() < 0 or cand_frame.max() >= len(frame_time_ns)):
+            raise InputError("cand_frame must be rows of the frame arrays")
         order = np.lexsort((frame_camera, frame_time_ns))
         new_row = np.empty_like(order)
         new_row[order] = np.arange(len(order))

@@ -246,7 +246,12 @@ def apply_timing(rig: Rig, preset: str) -> Rig:
 
 
 def _toml_str(value: str) -> str:
-    return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    escaped = value.replace("\\", "\\\\").replace('"', '\\"')
+    # TOML basic strings forbid raw control characters other than tab (a name with a
+    # newline would otherwise be saved as a file that cannot be loaded back)
+    escaped = "".join(f"\\u{ord(ch):04X}" if (ord(ch) < 0x20 and ch != "\t") or ch == "\x7f"
+                      else ch for ch in escaped)
+    return '"' + escaped + '"'
 
 
 def _toml_float(value: float) -> str:

@@ -1,0 +1,69 @@
+"""Fusion throughput: fused points per second for every method, on one core.
+
+Target (issue 3): typeA >= 200,000 points/s. The baseline, measured in the same run, is the
+work every method shares (undistortion and viewing rays of every detection, ``prepare``), so
+the ratio says how much the method itself costs on top of it.
+
+    python benchmarks/bench_fusion.py [--minutes 10] [--repeat 3]
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")  # one core, before numpy loads
+
+import argparse  # noqa: E402
+import time  # noqa: E402
+
+from pslog import SimulationOptions, apply_timing, builtin_rig, get_motion, simulate  # noqa: E402
+from pslog.fusion import fuse, prepare  # noqa: E402
+
+TARGET_TYPEA = 200_000
+
+
+def best_of(repeat: int, fn) -> tuple[float, object]:
+    best, result = float("inf"), None
+    for _ in range(repeat):
+        start = time.perf_counter()
+        result = fn()
+        best = min(best, time.perf_counter() - start)
+    return best, result
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--minutes", type=float, default=10.0, help="session length")
+    parser.add_argument("--repeat", type=int, default=3)
+    args = parser.parse_args()
+    duration = args.minutes * 60
+    print(f"fusion benchmark: {args.minutes:g}-minute session, 3 cameras at 30 fps, "
+          f"0.5 px noise, best of {args.repeat}")
+    worst_ok = True
+    for timing, methods in (("typeA", ("typeA", "nearest")),
+                            ("typeB", ("typeB", "linear", "sync"))):
+        rig = apply_timing(builtin_rig("paper3"), timing)
+        detections, _ = simulate(rig, get_motion("turntable"), duration,
+                                 SimulationOptions(noise_px=0.5, seed=0))
+        obs = detections.best()
+        base_s, _ = best_of(args.repeat, lambda obs=obs, rig=rig: prepare(obs, rig))
+        print(f"\n{timing} timing, {len(obs):,} detections")
+        print(f"  {'baseline (prepare)':<20} {base_s * 1e3:9.1f} ms  "
+              f"{len(obs) / base_s:>12,.0f} detections/s")
+        for method in methods:
+            seconds, track = best_of(args.repeat,
+                                     lambda m=method, obs=obs, rig=rig: fuse(obs, rig, m))
+            rate = len(track) / seconds
+            note = ""
+            if method == "typeA":
+                ok = rate >= TARGET_TYPEA
+                worst_ok &= ok
+                note = f"  target {TARGET_TYPEA:,}/s: {'met' if ok else 'MISSED'}"
+            print(f"  {method:<20} {seconds * 1e3:9.1f} ms  {rate:>12,.0f} points/s  "
+                  f"{seconds / base_s:5.1f}x baseline{note}")
+    return 0 if worst_ok else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,41 @@
+#!/usr/bin/env bash
+# One entry point for a fresh machine with Python >= 3.11:
+#   bash run.sh demo   set up .venv, then record, fuse and evaluate a synthetic throw (pslog demo)
+#   bash run.sh test   set up .venv, then run ruff and the whole test suite
+# Anything after the first word is passed on (to `pslog demo` or to pytest).
+set -euo pipefail
+cd "$(dirname "$0")"
+
+PYTHON=${PYTHON:-python3}
+VENV=${PSLOG_VENV:-.venv}
+
+setup() {
+    if [ ! -x "$VENV/bin/python" ]; then
+        "$PYTHON" -c 'import sys; sys.exit(0 if sys.version_info >= (3, 11) else "pslog needs Python >= 3.11, found " + sys.version.split()[0])'
+        "$PYTHON" -m venv "$VENV"
+    fi
+    # reinstall only when the project's dependencies changed
+    if [ ! -f "$VENV/.pslog-installed" ] || [ pyproject.toml -nt "$VENV/.pslog-installed" ]; then
+        "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check --upgrade pip
+        "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check -e ".[test]"
+        touch "$VENV/.pslog-installed"
+    fi
+}
+
+case "${1:-}" in
+    demo)
+        shift
+        setup
+        exec "$VENV/bin/pslog" demo "$@"
+        ;;
+    test)
+        shift
+        setup
+        "$VENV/bin/ruff" check pslog recorders viewers tests benchmarks tools samples
+        exec "$VENV/bin/python" -m pytest "$@"
+        ;;
+    *)
+        echo "usage: bash run.sh demo|test [args...]" >&2
+        exit 2
+        ;;
+esac

@@ -1,0 +1,233 @@
+"""Tests of pslog.simulate: shutter schedules and simulated detections."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+
+from pslog.camera import Camera, look_at
+from pslog.errors import InputError, PslogError
+from pslog.motion import Motion, get_motion
+from pslog.records import NS
+from pslog.rig import Rig, apply_timing, builtin_rig
+from pslog.simulate import SimulationOptions, capture_times, simulate
+
+
+def _paper3(timing: str = "typeA") -> Rig:
+    return apply_timing(builtin_rig("paper3"), timing)
+
+
+def _best_by_frame(det):
+    """(F, 2) pixels of each frame's best candidate, NaN where it has none."""
+    uv = np.full((det.n_frames, 2), np.nan)
+    first = np.ones(det.n_candidates, dtype=bool)
+    first[1:] = det.cand_frame[1:] != det.cand_frame[:-1]
+    uv[det.cand_frame[first]] = det.cand_uv[first]
+    return uv
+
+
+def _projections(rig: Rig, camera: np.ndarray, positions: np.ndarray):
+    """Noise-free pixels (n, 2) of ``positions`` in the camera of each row; visibility."""
+    uv = np.full((len(camera), 2), np.nan)
+    visible = np.zeros(len(camera), dtype=bool)
+    for i, cam in enumerate(rig.cameras):
+        rows = camera == i
+        uv_cam, in_front = cam.project(positions[rows])
+        uv[rows] = uv_cam
+        visible[rows] = in_front & cam.in_image(uv_cam)
+    return uv, visible
+
+
+# ---- capture_times ------------------------------------------------------------------------
+
+def test_capture_times_follow_offset_plus_k_over_fps():
+    cams = builtin_rig("paper3").cameras
+    rig = Rig((cams[0].replace(fps=30.0, offset=0.004), cams[1].replace(fps=25.0, offset=0.0),
+               cams[2].replace(fps=60.0, offset=0.01)))
+    time_s, camera, frame_index = capture_times(rig, 1.0)
+    assert time_s.dtype == np.float64 and camera.dtype == np.int32
+    assert frame_index.dtype == np.int64
+    for i, cam in enumerate(rig.cameras):
+        rows = camera == i
+        k = frame_index[rows]
+        assert_array_equal(k, np.arange(len(k)))  # every frame, from 0
+        assert_allclose(time_s[rows], cam.offset + k / cam.fps, rtol=0, atol=1e-12)
+        assert time_s[rows][-1] < 1.0 <= time_s[rows][-1] + 1 / cam.fps
+    assert [np.sum(camera == i) for i in range(3)] == [30, 25, 60]
+    # sorted by (time, camera)
+    assert np.all((np.diff(time_s) > 0) | ((np.diff(time_s) == 0) & (np.diff(camera) > 0)))
+
+
+def test_capture_times_type_a_paper3_gives_135_frames_in_1_5_s():
+    time_s, camera, _ = capture_times(_paper3("typeA"), 1.5)
+    assert len(time_s) == 135  # the paper's 135 points
+    assert_array_equal(camera, np.tile([0, 1, 2], 45))  # round robin
+    assert_allclose(np.diff(time_s), 1 / 90, rtol=0, atol=1e-12)  # 90 fps overall
+
+
+def test_capture_times_sync_and_type_b():
+    time_s, camera, _ = capture_times(_paper3("sync"), 0.1)
+    assert_allclose(time_s, np.repeat([0.0, 1 / 30, 2 / 30], 3), rtol=0, atol=1e-15)
+    assert_array_equal(camera, np.tile([0, 1, 2], 3))
+    time_s, camera, _ = capture_times(_paper3("typeB"), 0.1)
+    assert_allclose(time_s, [0, 0, 1 / 60, 1 / 30, 1 / 30, 1 / 20, 2 / 30, 2 / 30, 5 / 60],
+                    rtol=0, atol=1e-15)
+    assert_array_equal(camera, [0, 2, 1, 0, 2, 1, 0, 2, 1])
+
+
+def test_capture_times_offset_beyond_one_period_wraps():
+    cam = builtin_rig("paper2").cameras[0]
+    time_s, _, _ = capture_times(Rig((cam.replace(offset=1 / 30 + 0.01),)), 0.2)
+    assert_allclose(time_s[0], 0.01, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("duration", [0.0, -1.0, np.nan, np.inf])
+def test_capture_times_rejects_bad_duration(duration):
+    with pytest.raises(InputError, match="duration"):
+        capture_times(_paper3(), duration)
+
+
+# ---- simulate -----------------------------------------------------------------------------
+
+@pytest.mark.parametrize("timing", ["sync", "typeA", "typeB"])
+@pytest.mark.parametrize("motion_name", ["straight", "spiral", "fall", "turntable", "throw"])
+def test_noise_free_detections_are_projections_of_truth(timing, motion_name):
+    rig = _paper3(timing)
+    motion = get_motion(motion_name)
+    det, truth = simulate(rig, motion)
+    time_s, camera, frame_index = capture_times(rig, motion.duration)
+    # every scheduled frame is recorded, in order
+    assert det.n_frames == len(time_s)
+    assert_array_equal(det.frame_time_ns, np.round(time_s * NS).astype(np.int64))
+    assert_array_equal(det.frame_camera, camera)
+    assert_array_equal(det.frame_index, frame_index)
+    assert det.camera_names == rig.names
+    # truth is the motion at every capture instant
+    assert_array_equal(truth.time_ns, np.unique(det.frame_time_ns))
+    assert_allclose(truth.position_world, motion.position(truth.time_ns / NS), rtol=0, atol=0)
+    # candidates are the projections of the truth at each frame's time
+    positions = truth.at(det.frame_time_ns)
+    expected, visible = _projections(rig, det.frame_camera, positions)
+    assert_array_equal(det.candidates_per_frame(), visible.astype(int))
+    assert_allclose(_best_by_frame(det)[visible], expected[visible], rtol=0, atol=1e-9)
+    assert visible.mean() > 0.9  # the paper's motions stay in view (almost) all the time
+
+
+def test_noise_std_close_to_requested():
+    rig = _paper3()
+    motion = get_motion("turntable")
+    clean, _ = simulate(rig, motion, duration=10.0)
+    noisy, _ = simulate(rig, motion, duration=10.0, options=SimulationOptions(noise_px=0.7,
+                                                                               seed=3))
+    assert_array_equal(noisy.cand_frame, clean.cand_frame)  # same frames detected
+    error = noisy.cand_uv - clean.cand_uv
+    assert len(error) == 900
+    assert np.std(error, axis=0) == pytest.approx([0.7, 0.7], rel=0.08)
+    assert np.abs(np.mean(error, axis=0)).max() < 0.1
+    # reproducible with a seed, different with another
+    again, _ = simulate(rig, motion, duration=10.0, options=SimulationOptions(noise_px=0.7,
+                                                                               seed=3))
+    assert_array_equal(again.cand_uv, noisy.cand_uv)
+    other, _ = simulate(rig, motion, duration=10.0, options=SimulationOptions(noise_px=0.7,
+                                                                               seed=4))
+    assert not np.array_equal(other.cand_uv, noisy.cand_uv)
+
+
+def test_drop_and_miss_rates():
+    rig = _paper3()
+    motion = get_motion("turntable")
+    n_scheduled = len(capture_times(rig, 20.0)[0])
+    assert n_scheduled == 1800
+    det, truth = simulate(rig, motion, duration=20.0,
+                          options=SimulationOptions(drop_rate=0.2, miss_rate=0.1, seed=1))
+    kept = det.n_frames / n_scheduled
+    assert kept == pytest.approx(0.8, abs=0.04)
+    detected = det.n_candidates / det.n_frames  # the turntable is always in view
+    assert detected == pytest.approx(0.9, abs=0.03)
+    # dropped frames leave gaps in the frame counter; the recorded ones keep their index
+    for i in range(3):
+        k = det.frame_index[det.frame_camera == i]
+        assert np.all(np.diff(k) >= 1) and np.any(np.diff(k) > 1)
+    # truth only at recorded frames
+    assert_array_equal(truth.time_ns, np.unique(det.frame_time_ns))
+    # the surviving detections are still exact projections
+    expected, _ = _projections(rig, det.frame_camera, truth.at(det.frame_time_ns))
+    assert_allclose(det.cand_uv, expected[det.cand_frame], rtol=0, atol=1e-9)
+
+
+def test_jitter_changes_times_and_truth_follows_them():
+    rig = _paper3()
+    motion = get_motion("spiral")
+    nominal, _ = simulate(rig, motion)
+    det, truth = simulate(rig, motion, options=SimulationOptions(jitter_s=0.5e-3, seed=2))
+    assert det.n_frames == nominal.n_frames
+    deviation = (np.sort(det.frame_time_ns) - nominal.frame_time_ns) / NS
+    assert np.std(deviation) == pytest.approx(0.5e-3, rel=0.25)
+    assert np.abs(deviation).max() < 5e-3
+    # truth at the jittered times, and the detections match the truth at those times
+    assert_array_equal(truth.time_ns, np.unique(det.frame_time_ns))
+    assert_allclose(truth.position_world, motion.position(truth.time_ns / NS), rtol=0, atol=0)
+    expected, visible = _projections(rig, det.frame_camera, truth.at(det.frame_time_ns))
+    assert_allclose(_best_by_frame(det)[visible], expected[visible], rtol=0, atol=1e-9)
+    # frames still sorted by (time, camera)
+    assert np.all(np.diff(det.frame_time_ns) >= 0)
+
+
+def _single_camera_rig() -> Rig:
+    R, t = look_at((0.0, -3.0, 1.0), (0.0, 0.0, 1.0))
+    K = np.array([[300.0, 0.0, 159.5], [0.0, 300.0, 119.5], [0.0, 0.0, 1.0]])
+    return Rig((Camera("side", 320, 240, K, np.zeros(5), R, t, fps=100.0),))
+
+
+def test_frames_with_ball_outside_image_or_behind_have_no_candidate():
+    # the ball moves along x through the view (x = 0 in the middle) and then behind the camera
+    def position(t):
+        x = np.where(t < 1.0, -4.0 + 8.0 * t, 0.0)
+        y = np.where(t < 1.0, 0.0, -3.0 - 2.0 * (t - 1.0))  # behind the camera after 1 s
+        return np.stack([x, y, np.full_like(t, 1.0)], axis=1)
+
+    rig = _single_camera_rig()
+    det, truth = simulate(rig, Motion("pass", 1.5, position),
+                          options=SimulationOptions(noise_px=0.3, seed=0))
+    assert det.n_frames == 150
+    positions = truth.at(det.frame_time_ns)
+    cam = rig.cameras[0]
+    uv, in_front = cam.project(positions)
+    visible = in_front & cam.in_image(uv)
+    has_candidate = det.candidates_per_frame() == 1
+    assert_array_equal(has_candidate, visible)
+    assert 20 < visible.sum() < 60  # it really does leave the image on both sides...
+    t = det.frame_time_ns / NS
+    assert not np.any(has_candidate[t > 1.0])  # ...and nothing is seen from behind
+    # the frames without a candidate are still recorded, as the format requires
+    assert np.sum(~has_candidate) == 150 - visible.sum()
+
+
+def test_default_duration_is_the_motion_duration():
+    motion = get_motion("fall")
+    det, _ = simulate(_paper3(), motion)
+    assert det.frame_time_ns.max() < motion.duration * NS
+    det_short, _ = simulate(_paper3(), motion, duration=0.2)
+    assert det_short.frame_time_ns.max() < 0.2 * NS and det_short.n_frames == 18
+
+
+@pytest.mark.parametrize("kwargs, name", [
+    ({"noise_px": -1.0}, "noise_px"),
+    ({"noise_px": np.nan}, "noise_px"),
+    ({"jitter_s": -1e-3}, "jitter_s"),
+    ({"jitter_s": np.inf}, "jitter_s"),
+    ({"drop_rate": 1.0}, "drop_rate"),
+    ({"drop_rate": -0.1}, "drop_rate"),
+    ({"miss_rate": 1.5}, "miss_rate"),
+    ({"miss_rate": np.nan}, "miss_rate"),
+])
+def test_simulation_options_validation(kwargs, name):
+    with pytest.raises(InputError, match=name) as info:
+        SimulationOptions(**kwargs)
+    assert isinstance(info.value, PslogError)
+
+
+def test_simulate_rejects_bad_duration():
+    with pytest.raises(InputError, match="duration"):
+        simulate(_paper3(), get_motion("straight"), duration=-1.0)
