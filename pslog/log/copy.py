@@ -1,0 +1,76 @@
+"""Derive a session from another: stream-copy it, images kept as stored (never decoded),
+optionally replacing the detections (re-detection) and adding or replacing fused tracks."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+from ..errors import InputError
+from ..records import Detections, Track
+from . import _mcapio as io
+from . import _schemas as S
+from .reader import _Finished
+from .writer import SessionWriter
+
+
+def copy_session(src, dst, *, detections: Detections | None = None, tracks: Sequence[Track] = (),
+                 replace_tracks: bool = True, force: bool = False) -> None:
+    """Write ``dst`` as a copy of session ``src``.
+
+    Parameters
+    ----------
+    detections : if given, replaces every detection message of ``src`` (camera names must
+        be the rig's)
+    tracks : fused tracks to add
+    replace_tracks : drop every track of ``src`` (True) or only those whose method is in
+        ``tracks`` (False)
+    force : overwrite ``dst``
+
+    Calibration, poses, images, truth, events, metadata and any foreign topics are copied.
+    """
+    src_path = Path(src)
+    dst = Path(dst)
+    if dst.exists() and src_path.exists() and dst.resolve() == src_path.resolve():
+        raise InputError(f"output {dst} is the input session; write to another file")
+    with _Finished(src_path) as f:
+        meta, rig = f.meta, f.rig
+        first_static = f.collect([S.calibration_topic(rig.names[0])])
+        start_ns = min((t for t, _s, _d in next(iter(first_static.values()), [])), default=0)
+    if detections is not None and tuple(detections.camera_names) != rig.names:
+        raise InputError(f"detections are for cameras {', '.join(detections.camera_names)}, "
+                         f"session has {', '.join(rig.names)}")
+    new_methods = {t.method for t in tracks}
+    user_meta = {k: v for k, v in meta.items() if k not in S.RESERVED_KEYS}
+    user_meta["derived_from"] = src_path.name
+
+    with SessionWriter(dst, rig, force=force, timing=meta.get("timing", "custom"),
+                       source=meta.get("source", ""), metadata=user_meta,
+                       start_ns=start_ns) as w:
+        scan = io.Scan()
+        static = {S.calibration_topic(n) for n in rig.names} | {
+            S.transform_topic(n) for n in rig.names}
+
+        def copy(cid: int, t: int, seq: int, data: bytes) -> None:
+            channel = scan.channels[cid]
+            topic = channel.topic
+            if topic in static:
+                return  # written by the new writer from the rig
+            camera_topic = S.parse_camera_topic(topic)
+            if camera_topic and camera_topic[1] == "image":
+                w._add_image_raw(topic, t, data, seq)
+                return
+            if camera_topic and camera_topic[1] == "detections" and detections is not None:
+                return
+            parts = topic.split("/")
+            if len(parts) >= 3 and parts[1] == "tracks" and (
+                    replace_tracks or parts[2] in new_methods):
+                return
+            schema = scan.schemas.get(channel.schema_id)
+            w._add_foreign(topic, schema, channel, t, data, seq)
+
+        io.scan_file(src_path, copy, scan=scan)
+        if detections is not None:
+            w.add_detections(detections)
+        for track in tracks:
+            w.add_track(track)

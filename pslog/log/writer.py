@@ -1,0 +1,430 @@
+"""Write a pslog session MCAP (format: docs/log-format.md).
+
+Crash safety: small messages (detections, truth, tracks, events) are buffered and written as
+their own chunks at least every ``flush_interval_s``; images go straight into the chunk in
+progress, which is closed at the same moments. So a killed process loses at most the last
+interval, and detection chunks never contain image bytes, which lets the reader skip every
+image chunk without decompressing it.
+"""
+
+from __future__ import annotations
+
+import functools
+import threading
+import time
+from collections.abc import Mapping
+from datetime import UTC, datetime
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError, LogFormatError, OutputExistsError
+from ..records import Detections, Track, Truth
+from ..rig import Rig
+from . import _schemas as S
+
+#: Messages buffered before they are written even if the flush interval has not passed.
+_MAX_PENDING = 20_000
+#: Apparent diameter of the sphere drawn per fused track point in Foxglove, metres.
+_TRACK_SPHERE_M = 0.043
+#: How long each fused track point stays visible in Foxglove's 3D panel (a short trail).
+_TRACK_LIFETIME_NS = 500_000_000
+_LOG_LEVELS = {"debug": 1, "info": 2, "warning": 3, "error": 4, "fatal": 5}
+_METHOD_COLORS = ((0.9, 0.3, 0.1), (0.1, 0.6, 0.9), (0.2, 0.8, 0.3), (0.8, 0.2, 0.8),
+                  (0.9, 0.8, 0.1))
+
+
+def _locked(method):
+    """Serialise a public method with the background flusher."""
+    @functools.wraps(method)
+    def wrapper(self, *args, **kwargs):
+        with self._lock:
+            return method(self, *args, **kwargs)
+    return wrapper
+
+
+def _creator() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return f"pslog {version('pslog')}"
+    except PackageNotFoundError:
+        return "pslog"
+
+
+class SessionWriter:
+    """Write one session MCAP; use as a context manager.
+
+    Parameters
+    ----------
+    path : output file; refused if it exists unless ``force``
+    rig : the session's cameras; camera indices below refer to ``rig.cameras``
+    timing : shutter preset name (``sync``, ``typeA``, ``typeB``) or ``custom``
+    source : free text: what produced the session (``simulate motion=spiral ...``)
+    metadata : extra string key/values for the session metadata record
+    flush_interval_s : longest time, seconds, that written data stays in memory
+    start_ns : session clock time (ns) stamped on the static calibration and pose messages
+    """
+
+    def __init__(self, path, rig: Rig, *, force: bool = False, timing: str = "custom",
+                 source: str = "", metadata: Mapping[str, str] | None = None,
+                 flush_interval_s: float = 1.0, start_ns: int = 0) -> None:
+        from mcap.writer import CompressionType, Writer
+
+        self.path = Path(path)
+        if self.path.exists() and not force:
+            raise OutputExistsError(f"{self.path} exists; use --force to overwrite it")
+        if not self.path.parent.is_dir():
+            raise InputError(f"output folder does not exist: {self.path.parent}")
+        extra = {str(k): str(v) for k, v in dict(metadata or {}).items()}
+        clash = sorted(set(extra) & set(S.RESERVED_KEYS))
+        if clash:
+            raise InputError(f"metadata key(s) reserved by pslog: {', '.join(clash)}")
+        self.rig = rig
+        self._names = rig.names
+        self._flush_interval = float(flush_interval_s)
+        self._file = open(self.path, "wb")  # closed in close()
+        self._mcap = Writer(self._file, compression=CompressionType.ZSTD)
+        self._mcap.start(profile="", library=_creator())
+        self._schema_ids: dict[str, int] = {}
+        self._channels: dict[str, int] = {}
+        self._pending: list[tuple[int, int, bytes, int]] = []  # channel, time, data, sequence
+        self._images_in_chunk = 0
+        self._track_methods: list[str] = []
+        self._closed = False
+        self._lock = threading.RLock()
+        self._stop = threading.Event()
+        self._flusher: threading.Thread | None = None
+        self._flush_error: BaseException | None = None
+        self._last_flush = time.monotonic()
+        self.counts: dict[str, int] = {}
+
+        # metadata first and flushed at once, so even a file killed seconds later is a session
+        record = {
+            "format": S.FORMAT_NAME,
+            "format_version": S.FORMAT_VERSION,
+            "rig_toml": rig.to_toml(),
+            "timing": str(timing),
+            "source": str(source),
+            "creator": _creator(),
+            "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
+            "camera_names": ",".join(self._names),
+            **extra,
+        }
+        try:
+            self._mcap.add_metadata(S.SESSION_METADATA, record)
+            self._write_static(int(start_ns))
+        except BaseException:
+            self._file.close()
+            raise
+        if self._flush_interval > 0:
+            # flush on a timer too, so data is on disk within the interval even when the
+            # caller stops adding messages (a stalled camera) and is then killed
+            self._flusher = threading.Thread(target=self._flush_loop, daemon=True,
+                                             name=f"pslog-flush-{self.path.name}")
+            self._flusher.start()
+
+    def _flush_loop(self) -> None:
+        # poll often and flush a poll period early, so nothing stays buffered longer than
+        # the interval
+        poll = min(self._flush_interval / 4, 0.05)
+        while not self._stop.wait(poll):
+            with self._lock:
+                if self._closed:
+                    return
+                try:
+                    if time.monotonic() - self._last_flush >= self._flush_interval - poll:
+                        self.flush()
+                except BaseException as exc:  # e.g. disk full: reported by the next call
+                    self._flush_error = exc
+                    return
+
+    # ---- channels ---------------------------------------------------------------------
+    def _channel(self, topic: str, message_class) -> int:
+        channel = self._channels.get(topic)
+        if channel is None:
+            name = message_class.DESCRIPTOR.full_name
+            schema = self._schema_ids.get(name)
+            if schema is None:
+                schema = self._mcap.register_schema(
+                    name=name, encoding=S.PROTOBUF, data=S.file_descriptor_set(message_class))
+                self._schema_ids[name] = schema
+            channel = self._mcap.register_channel(topic=topic, message_encoding=S.PROTOBUF,
+                                                  schema_id=schema)
+            self._channels[topic] = channel
+        return channel
+
+    def _write_static(self, time_ns: int) -> None:
+        """Per camera: foxglove.CameraCalibration and foxglove.FrameTransform world -> camera."""
+        for cam in self.rig.cameras:
+            calib = S.CameraCalibration(
+                frame_id=cam.name, width=cam.width, height=cam.height,
+                distortion_model="plumb_bob", D=[float(d) for d in cam.dist],
+                K=[float(k) for k in cam.K.ravel()],
+                R=[float(r) for r in np.eye(3).ravel()],
+                P=[float(p) for p in np.hstack([cam.K, np.zeros((3, 1))]).ravel()])
+            S.set_timestamp(calib.timestamp, time_ns)
+            world_from_cam = cam.world_from_cam
+            q = S.quaternion_xyzw(world_from_cam[:3, :3])
+            pose = S.FrameTransform(parent_frame_id=S.WORLD_FRAME, child_frame_id=cam.name)
+            S.set_timestamp(pose.timestamp, time_ns)
+            pose.translation.x, pose.translation.y, pose.translation.z = (
+                float(x) for x in world_from_cam[:3, 3])
+            pose.rotation.x, pose.rotation.y, pose.rotation.z, pose.rotation.w = (
+                float(x) for x in q)
+            for topic, msg in ((S.calibration_topic(cam.name), calib),
+                               (S.transform_topic(cam.name), pose)):
+                self._queue(self._channel(topic, type(msg)), time_ns, msg.SerializeToString())
+            # register the per-camera data channels up front: they land in the first chunk
+            self._channel(S.detections_topic(cam.name), S.DetectionFrame)
+        self.flush()
+
+    def _queue(self, channel: int, time_ns: int, data: bytes, sequence: int = 0) -> None:
+        if time_ns < 0:
+            raise InputError(_negative_time(time_ns))
+        self._pending.append((channel, int(time_ns), data, int(sequence)))
+        if len(self._pending) >= _MAX_PENDING:
+            self._drain()
+        self._maybe_flush()
+
+    def _drain(self) -> None:
+        """Write buffered small messages as chunk(s) of their own."""
+        if not self._pending:
+            return
+        if self._images_in_chunk:
+            self._mcap.flush()  # closes the image chunk in progress
+            self._images_in_chunk = 0
+        add = self._mcap.add_message
+        for channel, time_ns, data, sequence in self._pending:
+            add(channel, time_ns, data, time_ns, sequence)
+        self._pending.clear()
+        self._mcap.flush()
+
+    def _maybe_flush(self) -> None:
+        if time.monotonic() - self._last_flush >= self._flush_interval:
+            self.flush()
+
+    def _camera_name(self, camera: int) -> str:
+        if not 0 <= int(camera) < len(self._names):
+            raise InputError(f"camera index {camera} out of range (rig has {len(self._names)})")
+        return self._names[int(camera)]
+
+    def _check_open(self) -> None:
+        if self._closed:
+            raise LogFormatError(f"{self.path}: writer is closed")
+        if self._flush_error is not None:
+            raise LogFormatError(f"{self.path}: writing failed: {self._flush_error}")
+
+    # ---- public -----------------------------------------------------------------------
+    @_locked
+    def add_frame(self, camera: int, frame_index: int, time_ns: int, uv=None, radius=None,
+                  score=None, image: bytes | None = None, image_format: str = "jpeg") -> None:
+        """One captured frame: its detection message (also with no candidate) and optionally
+        its encoded image.
+
+        Parameters
+        ----------
+        uv : (k, 2) float64 pixels, k >= 0; radius : (k,) pixels (NaN unknown);
+        score : (k,) in [0, 1] (default 1)
+        """
+        self._check_open()
+        name = self._camera_name(camera)
+        uv = np.zeros((0, 2)) if uv is None else np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+        k = len(uv)
+        radius = np.full(k, np.nan) if radius is None else np.asarray(radius, np.float64)
+        score = np.ones(k) if score is None else np.asarray(score, np.float64)
+        if radius.shape != (k,) or score.shape != (k,):
+            raise InputError(f"camera {name}: uv, radius and score differ in length")
+        msg = S.DetectionFrame(time_ns=int(time_ns), camera=name, frame_index=int(frame_index),
+                               u=uv[:, 0].tolist(), v=uv[:, 1].tolist(),
+                               radius=radius.tolist(), score=score.tolist())
+        self._queue(self._channel(S.detections_topic(name), S.DetectionFrame), time_ns,
+                    msg.SerializeToString(), frame_index)
+        self._count(S.detections_topic(name))
+        if image is not None:
+            self.add_image(camera, frame_index, time_ns, image, image_format)
+
+    @_locked
+    def add_detections(self, detections: Detections) -> None:
+        """Every frame of ``detections`` (camera names must match the rig)."""
+        self._check_open()
+        if tuple(detections.camera_names) != self._names:
+            raise InputError(f"detections are for cameras {', '.join(detections.camera_names)}, "
+                             f"rig has {', '.join(self._names)}")
+        if detections.n_frames and detections.frame_time_ns[0] < 0:
+            raise InputError(_negative_time(int(detections.frame_time_ns[0])))
+        # split candidate arrays per frame once (vectorised) instead of masking per frame
+        bounds = np.searchsorted(detections.cand_frame, np.arange(detections.n_frames + 1))
+        u = detections.cand_uv[:, 0].tolist()
+        v = detections.cand_uv[:, 1].tolist()
+        radius = detections.cand_radius.tolist()
+        score = detections.cand_score.tolist()
+        channels = [self._channel(S.detections_topic(n), S.DetectionFrame) for n in self._names]
+        make = S.DetectionFrame
+        for row, (t, cam, idx) in enumerate(zip(detections.frame_time_ns.tolist(),
+                                                 detections.frame_camera.tolist(),
+                                                 detections.frame_index.tolist(), strict=True)):
+            a, b = bounds[row], bounds[row + 1]
+            msg = make(time_ns=t, camera=self._names[cam], frame_index=idx, u=u[a:b],
+                       v=v[a:b], radius=radius[a:b], score=score[a:b])
+            self._queue(channels[cam], t, msg.SerializeToString(), idx)
+        for i, name in enumerate(self._names):
+            self._count(S.detections_topic(name),
+                        int(np.count_nonzero(detections.frame_camera == i)))
+
+    @_locked
+    def add_image(self, camera: int, frame_index: int, time_ns: int, data: bytes,
+                  format: str = "jpeg") -> None:
+        """An encoded frame (bytes stored as given) as foxglove.CompressedImage."""
+        self._check_open()
+        name = self._camera_name(camera)
+        msg = S.CompressedImage(frame_id=name, data=bytes(data), format=format)
+        S.set_timestamp(msg.timestamp, time_ns)
+        self._add_image_raw(S.image_topic(name), int(time_ns), msg.SerializeToString(),
+                            int(frame_index))
+
+    @_locked
+    def _add_image_raw(self, topic: str, time_ns: int, data: bytes, sequence: int) -> None:
+        if time_ns < 0:
+            raise InputError(_negative_time(time_ns))
+        channel = self._channel(topic, S.CompressedImage)
+        self._mcap.add_message(channel, time_ns, data, time_ns, sequence)
+        self._images_in_chunk += 1
+        self._count(topic)
+        self._maybe_flush()
+
+    @_locked
+    def _add_foreign(self, topic: str, schema, channel, time_ns: int, data: bytes,
+                     sequence: int) -> None:
+        """Copy a message of any channel (``_mcapio.SchemaRec``/``ChannelRec``) as is."""
+        cid = self._channels.get(topic)
+        if cid is None:
+            sid = 0
+            if schema is not None:
+                # our own schemas are shared; anything else is registered once per content
+                key = (schema.name if schema.name in S.SCHEMAS
+                       else f"{schema.encoding}:{schema.name}:{hash(schema.data)}")
+                sid = self._schema_ids.get(key, 0)
+                if not sid:
+                    sid = self._schema_ids[key] = self._mcap.register_schema(
+                        schema.name, schema.encoding, schema.data)
+            cid = self._mcap.register_channel(topic, channel.encoding, sid, channel.metadata)
+            self._channels[topic] = cid
+        self._queue(cid, time_ns, data, sequence)
+        self._count(topic)
+
+    @_locked
+    def add_truth(self, truth: Truth) -> None:
+        """Ground-truth positions (world metres), one ``pslog.TruthPoint`` per sample."""
+        self._check_open()
+        if len(truth) and truth.time_ns[0] < 0:
+            raise InputError(_negative_time(int(truth.time_ns[0])))
+        channel = self._channel(S.TRUTH_TOPIC, S.TruthPoint)
+        make = S.TruthPoint
+        for t, (x, y, z) in zip(truth.time_ns.tolist(), truth.position_world.tolist(),
+                                strict=True):
+            self._queue(channel, t, make(time_ns=t, x=x, y=y, z=z).SerializeToString())
+        self._count(S.TRUTH_TOPIC, len(truth))
+
+    @_locked
+    def add_track(self, track: Track) -> None:
+        """A fused track: ``pslog.TrackPoint`` per point on ``/tracks/<method>`` and a
+        Foxglove-viewable ``foxglove.SceneUpdate`` sphere per point on its ``/scene`` topic."""
+        self._check_open()
+        method = track.method
+        if not method or "/" in method:
+            raise InputError(f"track method must be a non-empty name without '/', got {method!r}")
+        if method not in self._track_methods:
+            self._track_methods.append(method)
+        color = _METHOD_COLORS[self._track_methods.index(method) % len(_METHOD_COLORS)]
+        channel = self._channel(S.track_topic(method), S.TrackPoint)
+        scene_channel = self._channel(S.track_scene_topic(method), S.SceneUpdate)
+        n = len(track)
+        nan = [float("nan")] * n
+        fixed = {k: (track.quality[k].tolist() if k in track.quality else nan)
+                 for k in S.TRACK_FIXED_QUALITY}
+        extra = {k: v.tolist() for k, v in track.quality.items()
+                 if k not in S.TRACK_FIXED_QUALITY}
+        if n and track.time_ns.min() < 0:
+            raise InputError(_negative_time(int(track.time_ns.min())))
+        if n and not 0 <= track.camera.min() <= track.camera.max() < len(self._names):
+            raise InputError(f"track {method!r}: camera index out of range of the rig")
+        cameras = self._names
+        for i, (t, (x, y, z), cam) in enumerate(zip(
+                track.time_ns.tolist(), track.position_world.tolist(), track.camera.tolist(),
+                strict=True)):
+            msg = S.TrackPoint(time_ns=t, method=method, x=x, y=y, z=z, camera=cameras[cam],
+                               **{k: fixed[k][i] for k in S.TRACK_FIXED_QUALITY})
+            for k, values in extra.items():
+                msg.quality[k] = values[i]
+            self._queue(channel, t, msg.SerializeToString())
+            self._queue(scene_channel, t, _scene_point(method, i, t, (x, y, z), color))
+        self._count(S.track_topic(method), n)
+        self._count(S.track_scene_topic(method), n)
+
+    @_locked
+    def add_event(self, time_ns: int, text: str, camera: int | None = None,
+                  level: str = "info") -> None:
+        """A note in the log (``foxglove.Log`` on ``/events``), e.g. a camera that stopped."""
+        self._check_open()
+        if level not in _LOG_LEVELS:
+            raise InputError(f"unknown event level {level!r} (have {', '.join(_LOG_LEVELS)})")
+        msg = S.Log(level=_LOG_LEVELS[level], message=str(text),
+                    name="pslog" if camera is None else self._camera_name(camera))
+        S.set_timestamp(msg.timestamp, time_ns)
+        self._queue(self._channel(S.EVENTS_TOPIC, S.Log), time_ns, msg.SerializeToString())
+        self._count(S.EVENTS_TOPIC)
+
+    @_locked
+    def flush(self) -> None:
+        """Write everything buffered to the file now."""
+        self._drain()
+        if self._images_in_chunk:
+            self._mcap.flush()
+            self._images_in_chunk = 0
+        self._last_flush = time.monotonic()
+
+    def close(self) -> None:
+        """Flush and finish the file (summary, indexes, footer). Idempotent."""
+        self._stop.set()
+        if self._flusher is not None and self._flusher is not threading.current_thread():
+            self._flusher.join()
+        with self._lock:
+            if self._closed:
+                return
+            try:
+                self._drain()
+                self._mcap.finish()
+            finally:
+                self._closed = True
+                self._file.close()
+
+    def _count(self, topic: str, n: int = 1) -> None:
+        self.counts[topic] = self.counts.get(topic, 0) + n
+
+    def __enter__(self) -> SessionWriter:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        # finish the file even on an exception: whatever was written stays readable
+        self.close()
+
+
+def _negative_time(time_ns: int) -> str:
+    # MCAP log times are unsigned: the session clock must start at or after 0
+    return f"time {time_ns} ns is before the session clock's zero; log times must be >= 0"
+
+
+def _scene_point(method: str, i: int, time_ns: int, xyz, color) -> bytes:
+    update = S.SceneUpdate()
+    entity = update.entities.add(frame_id=S.WORLD_FRAME, id=f"{method}/{i}")
+    S.set_timestamp(entity.timestamp, time_ns)
+    entity.lifetime.seconds, entity.lifetime.nanos = divmod(_TRACK_LIFETIME_NS, 1_000_000_000)
+    sphere = entity.spheres.add()
+    sphere.pose.position.x, sphere.pose.position.y, sphere.pose.position.z = xyz
+    sphere.pose.orientation.w = 1.0
+    sphere.size.x = sphere.size.y = sphere.size.z = _TRACK_SPHERE_M
+    sphere.color.r, sphere.color.g, sphere.color.b = color
+    sphere.color.a = 1.0
+    return update.SerializeToString()
+

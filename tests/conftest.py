@@ -1,0 +1,67 @@
+"""Shared test fixtures: rigs, small JPEGs, simulated sessions and a CLI runner."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pslog.records import Detections, Truth
+from pslog.rig import Rig, apply_timing, builtin_rig
+
+
+def make_jpeg(value: int = 128, width: int = 64, height: int = 48) -> bytes:
+    """A small real JPEG (a gradient plus ``value``) encoded with OpenCV."""
+    import cv2
+
+    ramp = np.linspace(0, 100, width, dtype=np.float64)[None, :, None]
+    image = np.clip(value + ramp + np.zeros((height, width, 3)), 0, 255).astype(np.uint8)
+    ok, data = cv2.imencode(".jpg", image)
+    assert ok
+    return data.tobytes()
+
+
+@pytest.fixture
+def rig3() -> Rig:
+    """The paper's three-camera rig with type-A shutter offsets (1/90 s apart)."""
+    return apply_timing(builtin_rig("paper3"), "typeA")
+
+
+@dataclass
+class SimSession:
+    path: Path
+    rig: Rig
+    detections: Detections
+    truth: Truth
+
+
+@pytest.fixture
+def sim_session(tmp_path, rig3) -> SimSession:
+    """A simulated spiral session (3 cameras, 1.2 s, 0.3 px noise, some misses and drops)
+    written with detections and truth, no images."""
+    from pslog.log import SessionWriter
+    from pslog.motion import get_motion
+    from pslog.simulate import SimulationOptions, simulate
+
+    options = SimulationOptions(noise_px=0.3, miss_rate=0.1, drop_rate=0.05, seed=3)
+    detections, truth = simulate(rig3, get_motion("spiral"), options=options)
+    path = tmp_path / "sim.mcap"
+    with SessionWriter(path, rig3, timing="typeA", source="test") as writer:
+        writer.add_detections(detections)
+        writer.add_truth(truth)
+    return SimSession(path, rig3, detections, truth)
+
+
+@pytest.fixture
+def cli(capsys):
+    """Run ``pslog ARGS...`` in-process; returns (exit code, stdout, stderr)."""
+    from pslog.cli import main
+
+    def run(*args) -> tuple[int, str, str]:
+        code = main([str(a) for a in args])
+        captured = capsys.readouterr()
+        return code, captured.out, captured.err
+
+    return run

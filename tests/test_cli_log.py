@@ -1,0 +1,268 @@
+"""Tests of the session-log commands: simulate, import, export, info, recover, bad input."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+
+from pslog.log import SessionWriter, copy_session, read_session
+from pslog.records import NS, Track
+from pslog.rig import builtin_rig, save_rig
+
+
+# ---- simulate ---------------------------------------------------------------------------------
+def test_simulate_writes_detections_truth_rig_and_metadata(tmp_path, cli):
+    out = tmp_path / "session.mcap"
+    code, stdout, stderr = cli("simulate", "--rig", "paper3", "--timing", "typeA", "--motion",
+                               "spiral", "--duration", "1.2", "--noise-px", "0.0", "--seed", "0",
+                               "-o", out)
+    assert code == 0, stderr
+    assert len(stdout.strip().splitlines()) == 1 and "108 frames" in stdout
+    s = read_session(out)
+    assert s.timing == "typeA" and s.rig.names == ("cam1", "cam2", "cam3")
+    assert_allclose([c.offset for c in s.rig.cameras], [0, 1 / 90, 2 / 90])
+    assert s.detections.n_frames == 108 and s.truth is not None and len(s.truth) == 108
+    assert s.metadata["simulate.motion"] == "spiral" and s.metadata["simulate.seed"] == "0"
+    # noise-free: every candidate is the exact projection of the truth
+    det = s.detections
+    obs = det.best()
+    for i, cam in enumerate(s.rig.cameras):
+        rows = obs.camera == i
+        uv, _ = cam.project(s.truth.at(obs.time_ns[rows]))
+        assert_allclose(obs.uv[rows], uv, atol=1e-9)
+
+    code, _, stderr = cli("simulate", "--rig", "paper3", "-o", out)
+    assert code == 1 and "exists" in stderr and "--force" in stderr
+
+
+def test_simulate_with_rig_timing_and_imperfections(tmp_path, cli):
+    rig_path = tmp_path / "rig.toml"
+    rig = builtin_rig("paper2")
+    rig = type(rig)(tuple(c.replace(offset=0.005 * i) for i, c in enumerate(rig.cameras)), "r")
+    save_rig(rig, rig_path)
+    out = tmp_path / "s.mcap"
+    code, _, stderr = cli("simulate", "--rig", rig_path, "--timing", "rig", "--motion",
+                               "throw", "--jitter", "0.0005", "--drop-rate", "0.1",
+                               "--miss-rate", "0.2", "--noise-px", "0.5", "--seed", "4",
+                               "-o", out)
+    assert code == 0, stderr
+    s = read_session(out)
+    assert s.timing == "custom" and s.rig.to_toml() == rig.to_toml()
+    assert (s.detections.frame_time_ns >= 0).all()
+    assert 0 < s.detections.n_candidates < s.detections.n_frames < 2 * 46
+
+
+# ---- info ----------------------------------------------------------------------------------
+def test_info_text_and_json(sim_session, cli):
+    code, stdout, stderr = cli("info", sim_session.path)
+    assert code == 0, stderr
+    for text in ("cam1", "cam3", "/truth", "timing typeA", "11.111 ms", "22.222 ms"):
+        assert text in stdout
+    code, stdout, _ = cli("info", sim_session.path, "--json")
+    info = json.loads(stdout)
+    assert info["frames"] == sim_session.detections.n_frames
+    assert info["topics"]["/camera/cam2/detections"] == int(
+        np.count_nonzero(sim_session.detections.frame_camera == 1))
+    assert info["truth"] is True and info["tracks"] == {}
+
+
+def test_info_on_truncated_file_points_to_recover(sim_session, tmp_path, cli):
+    data = sim_session.path.read_bytes()
+    broken = tmp_path / "broken.mcap"
+    broken.write_bytes(data[: len(data) // 2])
+    code, stdout, stderr = cli("info", broken)
+    assert code == 1
+    assert "TRUNCATED" in stdout and "pslog recover" in stderr
+    assert stderr.count("\n") == 1 and "Traceback" not in stderr
+
+
+# ---- recover -----------------------------------------------------------------------------------
+def test_recover_command(sim_session, tmp_path, cli):
+    data = sim_session.path.read_bytes()
+    broken = tmp_path / "broken.mcap"
+    broken.write_bytes(data[: int(len(data) * 0.7)])
+    fixed = tmp_path / "fixed.mcap"
+    code, stdout, stderr = cli("recover", broken, "-o", fixed)
+    assert code == 0, stderr
+    assert "recovered" in stdout
+    s = read_session(fixed)
+    assert s.detections.n_frames > 0 and s.rig.names == sim_session.rig.names
+    code, _, stderr = cli("recover", broken, "-o", fixed)
+    assert code == 1 and "exists" in stderr
+
+
+# ---- import / export ---------------------------------------------------------------------------
+_CSV = """camera,time,u,v,frame,score
+cam2,0.011111111,100.5,200.25,0,0.5
+cam1,0.000000000,10.0,20.0,0,1.0
+cam2,0.011111111,101.5,201.25,0,0.75
+cam3,0.022222222,0.1,0.2,0,1.0
+cam1,1700000000.123456789,1e-05,479.99999999999994,51,0.3333333333333333
+"""
+
+
+def _rows(text: str) -> set[tuple]:
+    lines = text.strip().splitlines()
+    return {tuple(line.split(",")) for line in lines[1:]}, lines[0]
+
+
+def test_import_export_round_trip_every_row(tmp_path, cli):
+    det_csv = tmp_path / "det.csv"
+    det_csv.write_text(_CSV)
+    out = tmp_path / "s.mcap"
+    code, stdout, stderr = cli("import", "--rig", "paper3", "--detections", det_csv, "-o", out)
+    assert "5 detections in 4 frames" in stdout
+    assert code == 0, stderr
+    s = read_session(out)
+    assert s.detections.n_frames == 4 and s.detections.n_candidates == 5
+    assert s.detections.frame_time_ns[-1] == 1_700_000_000_123_456_789  # exact, no float
+    back = tmp_path / "back.csv"
+    code, _, stderr = cli("export", out, "--detections", back)
+    assert code == 0, stderr
+    rows_in, header_in = _rows(_CSV)
+    rows_out, header_out = _rows(back.read_text())
+    assert header_out == header_in
+    # floats compare by value (repr may spell them differently), everything else exactly
+    parse = lambda rows: {(c, t, float(u), float(v), f, float(s)) for c, t, u, v, f, s in rows}  # noqa: E731
+    assert parse(rows_out) == parse(rows_in)
+    # and a second round trip is byte-identical
+    again = tmp_path / "again.mcap"
+    assert cli("import", "--rig", "paper3", "--detections", back, "-o", again)[0] == 0
+    back2 = tmp_path / "back2.csv"
+    assert cli("export", again, "--detections", back2)[0] == 0
+    assert back2.read_text() == back.read_text()
+
+
+def test_import_without_frame_column_numbers_frames_in_time_order(tmp_path, cli):
+    det_csv = tmp_path / "det.csv"
+    det_csv.write_text("time,camera,v,u\n0.2,cam1,5,6\n0.1,cam1,3,4\n0.1,cam1,3.5,4.5\n"
+                       "0.15,cam2,1,2\n\n")
+    out = tmp_path / "s.mcap"
+    code, _, stderr = cli("import", "--rig", "paper2", "--detections", det_csv, "-o", out)
+    assert code == 0, stderr
+    d = read_session(out).detections
+    assert_array_equal(d.frame_time_ns, [100_000_000, 150_000_000, 200_000_000])
+    assert_array_equal(d.frame_camera, [0, 1, 0])
+    assert_array_equal(d.frame_index, [0, 0, 1])
+    assert_array_equal(d.candidates_per_frame(), [2, 1, 1])
+    assert_array_equal(d.cand_uv[-1], [6.0, 5.0])
+
+
+def test_export_sim_session_round_trips_through_import(sim_session, tmp_path, cli):
+    csv_path = tmp_path / "d.csv"
+    assert cli("export", sim_session.path, "--detections", csv_path)[0] == 0
+    save_rig(sim_session.rig, tmp_path / "rig.toml")
+    out = tmp_path / "i.mcap"
+    code, _, stderr = cli("import", "--rig", tmp_path / "rig.toml", "--detections", csv_path,
+                          "-o", out)
+    assert code == 0, stderr
+    a, b = sim_session.detections, read_session(out).detections
+    has = a.candidates_per_frame() > 0  # frames without candidates have no CSV row
+    assert_array_equal(b.frame_time_ns, a.frame_time_ns[has])
+    assert_array_equal(b.frame_index, a.frame_index[has])
+    assert_array_equal(b.cand_uv, a.cand_uv)
+
+
+def test_export_tracks_csv(sim_session, tmp_path, cli):
+    truth = sim_session.truth
+    track = Track("typeA", truth.time_ns, truth.position_world,
+                  np.arange(len(truth), dtype=np.int32) % 3,
+                  {"ray_miss_m": np.full(len(truth), 0.001)})
+    fused = tmp_path / "fused.mcap"
+    copy_session(sim_session.path, fused, tracks=[track])
+    out = tmp_path / "tracks.csv"
+    code, _, stderr = cli("export", fused, "--csv", out)
+    assert code == 0, stderr
+    lines = out.read_text().splitlines()
+    assert lines[0] == "time,x,y,z,camera,method,ray_miss_m"
+    table = np.array([[float(x) for x in ln.split(",")[:4]] for ln in lines[1:]])
+    assert_allclose(table[:, 0], truth.time_ns / NS, atol=1e-12)
+    assert_array_equal(table[:, 1:], truth.position_world)
+    assert lines[2].split(",")[4:6] == ["cam2", "typeA"]
+
+    code, _, stderr = cli("export", sim_session.path, "--csv", tmp_path / "none.csv")
+    assert code == 1 and "no fused tracks" in stderr
+    assert not (tmp_path / "none.csv").exists()
+
+
+# ---- bad input: one line, exit 1, no traceback ---------------------------------------------
+@pytest.fixture
+def bad_files(tmp_path, sim_session):
+    from mcap.writer import Writer
+
+    (tmp_path / "notes.txt").write_text("not an mcap\n")
+    with open(tmp_path / "foreign.mcap", "wb") as f:
+        w = Writer(f)
+        w.start()
+        w.finish()
+    (tmp_path / "bad.toml").write_text("[[camera]\nname = 'x'\n")
+    (tmp_path / "ok.csv").write_text("camera,time,u,v\ncam1,0.1,1,2\n")
+    (tmp_path / "badrow.csv").write_text("camera,time,u,v\ncam1,0.1,1,2\ncam1,0.2,abc,2\n")
+    (tmp_path / "short.csv").write_text("camera,time,u,v\ncam1,0.1,1,2\n\ncam1,0.2,1\n")
+    (tmp_path / "badhead.csv").write_text("cam,time,u,v\ncam1,0.1,1,2\n")
+    (tmp_path / "unknown.csv").write_text("camera,time,u,v\ncam1,0.1,1,2\ncam9,0.2,1,2\n")
+    (tmp_path / "exists.mcap").write_text("keep")
+    return tmp_path
+
+
+@pytest.mark.parametrize("args, message", [
+    (["info", "{d}/missing.mcap"], "no such file"),
+    (["info", "{d}/notes.txt"], "not an MCAP"),
+    (["info", "{d}/foreign.mcap"], "not a pslog session"),
+    (["export", "{d}/foreign.mcap", "--detections", "{d}/x.csv"], "not a pslog session"),
+    (["export", "{d}/missing.mcap", "--detections", "{d}/x.csv"], "no such file"),
+    (["export", "{d}/sim.mcap"], "nothing to export"),
+    (["recover", "{d}/notes.txt", "-o", "{d}/x.mcap"], "not an MCAP"),
+    (["recover", "{d}/foreign.mcap", "-o", "{d}/x.mcap"], "not a pslog session"),
+    (["import", "--rig", "{d}/bad.toml", "--detections", "{d}/ok.csv", "-o", "{d}/x.mcap"],
+     "malformed TOML"),
+    (["import", "--rig", "{d}/nope.toml", "--detections", "{d}/ok.csv", "-o", "{d}/x.mcap"],
+     "nope.toml"),
+    (["simulate", "--rig", "{d}/bad.toml", "-o", "{d}/x.mcap"], "malformed TOML"),
+    (["import", "--rig", "paper3", "--detections", "{d}/badrow.csv", "-o", "{d}/x.mcap"],
+     "line 3: bad u value 'abc'"),
+    (["import", "--rig", "paper3", "--detections", "{d}/short.csv", "-o", "{d}/x.mcap"],
+     "line 4: expected 4 fields"),
+    (["import", "--rig", "paper3", "--detections", "{d}/badhead.csv", "-o", "{d}/x.mcap"],
+     "line 1: bad header"),
+    (["import", "--rig", "paper3", "--detections", "{d}/unknown.csv", "-o", "{d}/x.mcap"],
+     "line 3: unknown camera 'cam9'"),
+    (["import", "--rig", "paper3", "--detections", "{d}/missing.csv", "-o", "{d}/x.mcap"],
+     "no such file"),
+    (["import", "--rig", "paper3", "--detections", "{d}/ok.csv", "-o", "{d}/exists.mcap"],
+     "exists"),
+    (["simulate", "--rig", "paper3", "-o", "{d}/exists.mcap"], "exists"),
+    (["export", "{d}/sim.mcap", "--detections", "{d}/exists.mcap"], "exists"),
+    (["recover", "{d}/sim.mcap", "-o", "{d}/exists.mcap"], "exists"),
+])
+def test_bad_input_is_one_line_and_exit_1(bad_files, cli, args, message):
+    code, _, stderr = cli(*[a.format(d=bad_files) for a in args])
+    assert code == 1
+    assert message in stderr
+    assert stderr.startswith(f"pslog {args[0]}: error: ")
+    assert stderr.count("\n") == 1 and "Traceback" not in stderr
+    assert (bad_files / "exists.mcap").read_text() == "keep"
+    assert not (bad_files / "x.mcap").exists()
+
+
+def test_cli_subprocess_error_has_no_traceback(tmp_path):
+    text = tmp_path / "t.mcap"
+    text.write_text("hello")
+    result = subprocess.run([sys.executable, "-m", "pslog.cli", "info", str(text)],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 1
+    assert result.stderr.strip() == f"pslog info: error: not an MCAP file: {text}"
+
+
+def test_writer_used_by_other_commands_keeps_session_readable(tmp_path, rig3):
+    # a writer left by an exception inside `with` still finishes the file
+    path = tmp_path / "e.mcap"
+    with pytest.raises(RuntimeError), SessionWriter(path, rig3) as w:
+        w.add_frame(0, 0, 5, uv=[[1.0, 2.0]])
+        raise RuntimeError("boom")
+    assert read_session(path).detections.n_frames == 1

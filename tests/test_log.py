@@ -1,0 +1,432 @@
+"""Tests of pslog.log: the session MCAP written, read back, copied, damaged and recovered."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import make_jpeg
+from numpy.testing import assert_allclose, assert_array_equal
+
+from pslog.cli.simulate import drop_before_zero
+from pslog.errors import InputError, LogFormatError, OutputExistsError
+from pslog.log import (
+    SessionWriter,
+    copy_session,
+    iter_images,
+    read_session,
+    recover_session,
+    session_info,
+)
+from pslog.log import _schemas as S
+from pslog.records import NS, Detections, Track, Truth
+
+DET_FIELDS = ("frame_time_ns", "frame_camera", "frame_index", "cand_frame", "cand_uv",
+              "cand_radius", "cand_score")
+
+
+def assert_same_detections(a: Detections, b: Detections) -> None:
+    assert a.camera_names == b.camera_names
+    for name in DET_FIELDS:
+        assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+
+
+def _detections(rig) -> Detections:
+    """Hand-made frames: empty frames, several candidates, radius and score values."""
+    return Detections.from_frames(
+        rig.names,
+        frame_time_ns=[0, 11_111_111, 22_222_222, 33_333_333, 44_444_444, 55_555_555],
+        frame_camera=[0, 1, 2, 0, 1, 2],
+        frame_index=[0, 0, 0, 1, 1, 7],
+        cand_frame=[0, 0, 2, 3, 5],
+        cand_uv=[[1.5, 2.25], [300.125, 1e-7], [639.0, 479.0], [-3.5, 2.0], [1.0 / 3, 2.0 / 3]],
+        cand_radius=[4.0, np.nan, 2.5, 3.0, 6.0],
+        cand_score=[0.25, 0.75, 1.0, 0.5, 0.0])
+
+
+def _track(method: str, n: int = 20, quality=("snap_px", "extra_px")) -> Track:
+    t = np.arange(n, dtype=np.int64) * 11_111_111
+    pos = np.column_stack([np.linspace(0, 1, n), np.full(n, 0.5), np.linspace(2, 0, n)])
+    q = {k: np.arange(n) * 0.1 + i for i, k in enumerate(quality)}
+    if "snap_px" in q:
+        q["snap_px"][::3] = np.nan
+    return Track(method, t, pos, np.arange(n, dtype=np.int32) % 3, q)
+
+
+# ---- round trips -------------------------------------------------------------------------
+def test_round_trip_everything(tmp_path, rig3):
+    path = tmp_path / "s.mcap"
+    det = _detections(rig3)
+    truth = Truth(np.array([0, 5, 9]), np.array([[0.0, 1, 2], [3, 4, 5], [6, 7, 8.5]]))
+    jpeg = make_jpeg(10)
+    with SessionWriter(path, rig3, timing="typeA", source="unit test",
+                       metadata={"operator": "ana"}) as w:
+        w.add_detections(det)
+        w.add_truth(truth)
+        w.add_track(_track("typeA"))
+        w.add_track(_track("stereo", 7, quality=()))
+        w.add_event(44_444_444, "camera cam2 stopped delivering frames", camera=1,
+                    level="warning")
+        w.add_event(3, "timestamps from host monotonic clock")
+        w.add_image(1, 0, 11_111_111, jpeg)
+    s = read_session(path)
+    assert_same_detections(s.detections, det)
+    assert_array_equal(s.truth.time_ns, truth.time_ns)
+    assert_array_equal(s.truth.position_world, truth.position_world)
+    assert s.rig.to_toml() == rig3.to_toml()
+    assert s.timing == "typeA"
+    assert s.metadata["operator"] == "ana"
+    assert s.metadata["source"] == "unit test"
+    assert s.metadata["format_version"] == S.FORMAT_VERSION
+    assert s.events == [(3, "timestamps from host monotonic clock"),
+                        (44_444_444, "camera cam2 stopped delivering frames")]
+    assert s.n_images == 1
+    assert sorted(s.tracks) == ["stereo", "typeA"]
+    want = _track("typeA")
+    got = s.tracks["typeA"]
+    assert_array_equal(got.time_ns, want.time_ns)
+    assert_array_equal(got.position_world, want.position_world)
+    assert_array_equal(got.camera, want.camera)
+    assert sorted(got.quality) == ["extra_px", "snap_px"]  # all-NaN fixed fields left out
+    for key in want.quality:
+        assert_array_equal(got.quality[key], want.quality[key])
+    assert s.tracks["stereo"].quality == {}
+
+
+def test_add_frame_streaming_equals_bulk(tmp_path, sim_session):
+    det = sim_session.detections
+    path = tmp_path / "stream.mcap"
+    counts = det.candidates_per_frame()
+    starts = np.concatenate([[0], np.cumsum(counts)])
+    with SessionWriter(path, sim_session.rig, flush_interval_s=0.0) as w:
+        for row in range(det.n_frames):
+            a, b = starts[row], starts[row + 1]
+            w.add_frame(int(det.frame_camera[row]), int(det.frame_index[row]),
+                        int(det.frame_time_ns[row]), det.cand_uv[a:b], det.cand_radius[a:b],
+                        det.cand_score[a:b])
+    assert_same_detections(read_session(path).detections, det)
+    assert_same_detections(read_session(sim_session.path).detections, det)
+
+
+def test_images_stored_raw_and_filtered(tmp_path, rig3):
+    path = tmp_path / "img.mcap"
+    frames = {}
+    with SessionWriter(path, rig3) as w:
+        for k in range(4):
+            for cam in range(3):
+                t = k * 33_333_333 + cam * 11_111_111
+                frames[(cam, k)] = (t, make_jpeg(20 * k + cam))
+                w.add_frame(cam, k, t, uv=[[10.0 + k, 20.0]], image=frames[(cam, k)][1])
+    images = list(iter_images(path))
+    assert len(images) == 12
+    assert [i.time_ns for i in images] == sorted(i.time_ns for i in images)
+    for image in images:
+        t, data = frames[(image.camera, image.frame_index)]
+        assert (image.time_ns, image.data, image.format) == (t, data, "jpeg")
+    some = list(iter_images(path, cameras=[2], start_ns=33_333_333, end_ns=99_999_999))
+    assert [(i.camera, i.frame_index) for i in some] == [(2, 1), (2, 2)]
+    s = read_session(path)
+    assert s.n_images == 12 and s.detections.n_frames == 12
+
+
+def test_foxglove_calibration_and_pose(tmp_path, rig3):
+    from mcap.reader import make_reader
+
+    path = tmp_path / "s.mcap"
+    with SessionWriter(path, rig3):
+        pass
+    seen = set()
+    with open(path, "rb") as f:
+        for schema, channel, message in make_reader(f).iter_messages():
+            assert channel.message_encoding == "protobuf" and schema.encoding == "protobuf"
+            name, kind = S.parse_camera_topic(channel.topic)
+            cam = rig3.camera(name)
+            if kind == "calibration":
+                m = S.CameraCalibration.FromString(message.data)
+                assert schema.name == "foxglove.CameraCalibration"
+                assert (m.frame_id, m.width, m.height, m.distortion_model) == (
+                    name, 640, 480, "plumb_bob")
+                assert_array_equal(np.reshape(m.K, (3, 3)), cam.K)
+                assert_array_equal(np.reshape(m.P, (3, 4))[:, :3], cam.K)
+                assert_array_equal(m.D, cam.dist)
+            elif kind == "transform":
+                m = S.FrameTransform.FromString(message.data)
+                assert (m.parent_frame_id, m.child_frame_id) == ("world", name)
+                t = m.translation
+                assert_allclose([t.x, t.y, t.z], cam.center_world, atol=1e-12)
+                q = m.rotation
+                world_from_cam = S.rotation_from_quaternion([q.x, q.y, q.z, q.w])
+                assert_allclose(world_from_cam, cam.R.T, atol=1e-12)
+            seen.add((name, kind))
+    assert seen == {(n, k) for n in rig3.names for k in ("calibration", "transform")}
+
+
+def test_quaternion_round_trip_for_every_branch():
+    rng = np.random.default_rng(0)
+    mats = [np.eye(3), np.diag([1.0, -1, -1]), np.diag([-1.0, 1, -1]), np.diag([-1.0, -1, 1])]
+    for _ in range(50):
+        q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+        mats.append(q * np.sign(np.linalg.det(q)))
+    for m in mats:
+        assert_allclose(S.rotation_from_quaternion(S.quaternion_xyzw(m)), m, atol=1e-12)
+
+
+def test_rerun_converts_pinholes_transforms_and_images(tmp_path, rig3):
+    exe = shutil.which("rerun") or shutil.which("rerun", path=str(Path(sys.executable).parent))
+    if exe is None:
+        pytest.skip("rerun binary not installed")
+    path = tmp_path / "img.mcap"
+    with SessionWriter(path, rig3) as w:
+        for cam in range(3):
+            w.add_frame(cam, 0, cam * 11_111_111, uv=[[5.0, 6.0]], image=make_jpeg(50))
+    rrd = tmp_path / "x.rrd"
+    env = {**os.environ, "RERUN_ANALYTICS": "0"}
+    subprocess.run([exe, "mcap", "convert", str(path), "-o", str(rrd)], check=True,
+                   capture_output=True, env=env, timeout=60)
+    printed = subprocess.run([exe, "rrd", "print", str(rrd)], check=True, capture_output=True,
+                             text=True, env=env, timeout=60).stdout
+    for name in rig3.names:
+        lines = printed.splitlines()
+        assert any(f"/camera/{name}/calibration" in ln and "Pinhole:image_from_camera" in ln
+                   for ln in lines), name
+        assert any(f"/camera/{name}/transform" in ln and "Transform3D:translation" in ln
+                   for ln in lines), name
+        assert any(f"/camera/{name}/image" in ln and "EncodedImage:blob" in ln
+                   for ln in lines), name
+
+
+# ---- refusals -----------------------------------------------------------------------------
+def test_existing_output_refused_without_force(sim_session):
+    before = sim_session.path.read_bytes()
+    with pytest.raises(OutputExistsError, match="exists"):
+        SessionWriter(sim_session.path, sim_session.rig)
+    assert sim_session.path.read_bytes() == before
+    with SessionWriter(sim_session.path, sim_session.rig, force=True):
+        pass
+    assert read_session(sim_session.path).detections.n_frames == 0
+
+
+def test_reserved_metadata_and_bad_values(tmp_path, rig3):
+    with pytest.raises(InputError, match="reserved"):
+        SessionWriter(tmp_path / "a.mcap", rig3, metadata={"rig_toml": "x"})
+    with SessionWriter(tmp_path / "b.mcap", rig3) as w:
+        with pytest.raises(InputError, match="out of range"):
+            w.add_frame(3, 0, 0)
+        with pytest.raises(InputError, match="level"):
+            w.add_event(0, "x", level="loud")
+
+
+def test_missing_text_and_foreign_files(tmp_path):
+    with pytest.raises(LogFormatError, match="no such file"):
+        read_session(tmp_path / "nope.mcap")
+    text = tmp_path / "notes.mcap"
+    text.write_text("hello\n")
+    for fn in (read_session, session_info):
+        with pytest.raises(LogFormatError, match="not an MCAP"):
+            fn(text)
+    from mcap.writer import Writer
+
+    foreign = tmp_path / "foreign.mcap"
+    with open(foreign, "wb") as f:
+        w = Writer(f)
+        w.start()
+        w.add_metadata("other", {"a": "b"})
+        w.finish()
+    for fn in (read_session, session_info):
+        with pytest.raises(LogFormatError, match="not a pslog session"):
+            fn(foreign)
+    with pytest.raises(LogFormatError, match="not a pslog session"):
+        recover_session(foreign, tmp_path / "out.mcap")
+
+
+def test_newer_major_version_refused(tmp_path, rig3):
+    from mcap.writer import Writer
+
+    path = tmp_path / "v2.mcap"
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start()
+        w.add_metadata(S.SESSION_METADATA, {"format": S.FORMAT_NAME, "format_version": "2.0",
+                                             "rig_toml": rig3.to_toml()})
+        w.finish()
+    with pytest.raises(LogFormatError, match="newer"):
+        read_session(path)
+
+
+# ---- damage and recovery --------------------------------------------------------------------
+def _many_chunks(tmp_path, rig3) -> tuple[Path, Detections]:
+    """A session with images, flushed after every message: many small chunks."""
+    path = tmp_path / "full.mcap"
+    times, cams, idx = [], [], []
+    with SessionWriter(path, rig3, flush_interval_s=0.0) as w:
+        for k in range(10):
+            for cam in range(3):
+                t = k * 33_333_333 + cam * 11_111_111
+                w.add_frame(cam, k, t, uv=[[float(k), float(cam)]], image=make_jpeg(k))
+                times.append(t), cams.append(cam), idx.append(k)
+    det = Detections.from_frames(rig3.names, times, cams, idx, np.arange(30),
+                                 np.column_stack([np.repeat(np.arange(10.0), 3),
+                                                  np.tile(np.arange(3.0), 10)]))
+    return path, det
+
+
+@pytest.mark.parametrize("fraction", [0.1, 0.35, 0.6, 0.9, 0.999])
+def test_truncated_file_reported_and_recovered(tmp_path, rig3, fraction):
+    full, det = _many_chunks(tmp_path, rig3)
+    data = full.read_bytes()
+    broken = tmp_path / "broken.mcap"
+    broken.write_bytes(data[:int(len(data) * fraction)])
+
+    with pytest.raises(LogFormatError, match=r"truncated.*pslog recover"):
+        read_session(broken)
+    info = session_info(broken)
+    assert info["truncated"] is True and "pslog recover" in info["hint"]
+
+    fixed = tmp_path / "fixed.mcap"
+    report = recover_session(broken, fixed)
+    assert report["was_complete"] is False
+    assert report["discarded_bytes"] == len(broken.read_bytes()) - report["kept_bytes"] >= 0
+    got = read_session(fixed)  # a proper finished file
+    n = got.detections.n_frames
+    assert report["detection_frames"] == n
+    # what comes back is exactly the first n frames, in writing order
+    assert_array_equal(got.detections.frame_time_ns, det.frame_time_ns[:n])
+    assert_array_equal(got.detections.cand_uv, det.cand_uv[:n])
+    assert got.n_images <= n + 1
+    if n:
+        assert report["last_time_ns"] >= det.frame_time_ns[n - 1]
+    assert got.rig.to_toml() == rig3.to_toml()
+    if fraction > 0.9:
+        assert n >= 29  # only the tail is lost
+
+
+def test_recover_refuses_output_and_copies_complete_files(tmp_path, sim_session):
+    out = tmp_path / "out.mcap"
+    out.write_text("keep me")
+    with pytest.raises(OutputExistsError):
+        recover_session(sim_session.path, out)
+    assert out.read_text() == "keep me"
+    report = recover_session(sim_session.path, out, force=True)
+    assert report["was_complete"] is True and report["discarded_bytes"] == 0
+    assert_same_detections(read_session(out).detections, sim_session.detections)
+
+
+_KILLED_WRITER = textwrap.dedent("""
+    import sys, time
+    from pslog.log import SessionWriter
+    from pslog.rig import apply_timing, builtin_rig
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    w = SessionWriter(sys.argv[1], rig, flush_interval_s=0.1)
+    for i in range(100000):
+        w.add_frame(i % 3, i // 3, i * 11_111_111, uv=[[float(i), 1.0]])
+        print(i, flush=True)
+        time.sleep(0.002)
+""")
+
+
+def test_sigkill_mid_recording_loses_at_most_the_last_interval(tmp_path):
+    path = tmp_path / "killed.mcap"
+    proc = subprocess.Popen([sys.executable, "-c", _KILLED_WRITER, str(path)],
+                            stdout=subprocess.PIPE, text=True)
+    last = -1
+    try:
+        for line in proc.stdout:
+            last = int(line)
+            if last >= 300:
+                break
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(timeout=10)
+        proc.stdout.close()
+    assert last >= 300
+    with pytest.raises(LogFormatError, match="truncated"):
+        read_session(path)
+    report = recover_session(path, tmp_path / "fixed.mcap")
+    det = read_session(tmp_path / "fixed.mcap").detections
+    n = det.n_frames
+    # 0.1 s flush interval at >= 2 ms per frame: at most ~50 frames unflushed; allow slack
+    assert n >= last - 150  # (the child may be ahead of what we read: no upper bound)
+    assert_array_equal(det.frame_time_ns, np.arange(n) * 11_111_111)
+    assert_array_equal(det.cand_uv[:, 0], np.arange(n))
+    assert report["last_time_ns"] == (n - 1) * 11_111_111
+
+
+def test_timer_flushes_while_the_caller_is_idle(tmp_path, rig3):
+    import time
+
+    path = tmp_path / "idle.mcap"
+    with SessionWriter(path, rig3, flush_interval_s=0.1) as w:
+        w.add_frame(0, 0, 5, uv=[[1.0, 2.0]])
+        time.sleep(0.4)  # no further calls: the background flusher must write the frame
+        info = session_info(path)  # the unfinished file reads as truncated
+        assert info["truncated"] is True
+        assert info["topics"]["/camera/cam1/detections"] == 1
+    assert session_info(path)["truncated"] is False
+
+
+# ---- copies -----------------------------------------------------------------------------------
+def test_copy_session_replaces_detections_and_tracks(tmp_path, rig3):
+    src = tmp_path / "src.mcap"
+    with SessionWriter(src, rig3, timing="typeB", metadata={"k": "v"}) as w:
+        for cam in range(3):
+            w.add_frame(cam, 0, cam * 1000, uv=[[1.0, 2.0]], image=make_jpeg(cam))
+        w.add_track(_track("old"))
+        w.add_track(_track("keep"))
+        w.add_event(5, "note")
+        w._add_foreign("/other/raw", None,
+                       type("C", (), {"encoding": "json", "metadata": {}})(), 7, b'{"a":1}', 0)
+    new_det = Detections.from_frames(rig3.names, [0, 1000, 2000], [0, 1, 2], [0, 0, 0],
+                                     [1], [[9.0, 9.5]])
+    dst = tmp_path / "dst.mcap"
+    copy_session(src, dst, detections=new_det, tracks=[_track("old", 5)], replace_tracks=False)
+    s = read_session(dst)
+    assert_same_detections(s.detections, new_det)
+    assert sorted(s.tracks) == ["keep", "old"] and len(s.tracks["old"]) == 5
+    assert s.timing == "typeB" and s.metadata["k"] == "v"
+    assert s.metadata["derived_from"] == "src.mcap"
+    assert s.events == [(5, "note")]
+    assert [i.data for i in iter_images(dst)] == [i.data for i in iter_images(src)]
+    assert session_info(dst)["topics"]["/other/raw"] == 1
+
+    dst2 = tmp_path / "dst2.mcap"
+    copy_session(dst, dst2, tracks=[_track("new", 3)])  # replace_tracks=True drops the others
+    assert sorted(read_session(dst2).tracks) == ["new"]
+    with pytest.raises(OutputExistsError):
+        copy_session(src, dst)
+    with pytest.raises(InputError, match="input session"):
+        copy_session(src, src, force=True)
+
+
+# ---- info -------------------------------------------------------------------------------------
+def test_info_measures_rates_and_offsets_despite_drops_and_jitter(tmp_path, rig3):
+    from pslog.motion import get_motion
+    from pslog.simulate import SimulationOptions, simulate
+
+    options = SimulationOptions(jitter_s=2e-4, drop_rate=0.2, miss_rate=0.3, seed=5)
+    det, truth = simulate(rig3, get_motion("turntable"), 4.0, options)
+    with pytest.raises(InputError, match="before the session clock"):
+        with SessionWriter(tmp_path / "neg.mcap", rig3) as w:
+            w.add_detections(det)  # jitter put the first frame before t = 0
+    det, truth, n_early = drop_before_zero(det, truth)
+    assert n_early == 1
+    path = tmp_path / "j.mcap"
+    with SessionWriter(path, rig3, timing="typeA") as w:
+        w.add_detections(det)
+        w.add_truth(truth)
+    info = session_info(path)
+    assert info["truncated"] is False and info["truth"] is True and info["tracks"] == {}
+    assert info["frames"] == det.n_frames
+    for cam, row in zip(rig3.cameras, info["cameras"], strict=True):
+        assert abs(row["fps_measured"] - 30.0) < 0.05
+        assert abs(row["offset_measured_s"] - (cam.offset - rig3.cameras[0].offset)) < 3e-4
+        assert 0.5 < row["detection_rate"] < 0.9
+    assert info["topics"]["/truth"] == len(truth)
+    assert abs(info["duration_s"] - 4.0) < 0.05
+    assert info["start_s"] is not None and info["duration_s"] * NS > 0
