@@ -1,0 +1,110 @@
+"""The fusion commands on real files: fuse -> export --csv -> eval, and pslog paper."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import numpy as np
+from numpy.testing import assert_allclose, assert_array_equal
+
+from pslog.evaluation import evaluate
+from pslog.fusion import fuse_all
+from pslog.log import read_session
+from pslog.records import NS
+
+
+def test_fuse_export_eval_round_trip(tmp_path, sim_session, cli):
+    fused = tmp_path / "fused.mcap"
+    code, out, err = cli("fuse", sim_session.path, "--method", "typeA", "--method", "nearest",
+                         "-o", fused)
+    assert code == 0, err
+    assert "typeA" in out and "nearest" in out
+
+    session = read_session(fused)
+    assert set(session.tracks) == {"typeA", "nearest"}
+    expected = fuse_all(sim_session.detections, sim_session.rig, ["typeA", "nearest"])
+    for method, track in expected.items():
+        got = session.tracks[method]
+        assert_array_equal(got.time_ns, track.time_ns)
+        assert_allclose(got.position_world, track.position_world, rtol=0, atol=0)
+        assert_array_equal(got.camera, track.camera)
+        assert_allclose(got.quality["snap_px" if method == "typeA" else "ray_miss_m"],
+                        track.quality["snap_px" if method == "typeA" else "ray_miss_m"])
+    # the copy keeps the session: detections and truth unchanged
+    assert_array_equal(session.detections.cand_uv, sim_session.detections.cand_uv)
+    assert_array_equal(session.truth.position_world, sim_session.truth.position_world)
+
+    out_csv = tmp_path / "tracks.csv"
+    code, _, err = cli("export", fused, "--csv", out_csv)
+    assert code == 0, err
+    with open(out_csv, newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert list(rows[0])[:6] == ["time", "x", "y", "z", "camera", "method"]
+    type_a = [r for r in rows if r["method"] == "typeA"]
+    track = expected["typeA"]
+    assert len(type_a) == len(track)
+    # seconds on the session clock, as `pslog import` reads them; metres
+    assert_allclose([float(r["time"]) for r in type_a], track.time_ns / NS, atol=1e-9)
+    assert_allclose([[float(r[k]) for k in "xyz"] for r in type_a], track.position_world,
+                    rtol=0, atol=1e-15)
+    assert {r["camera"] for r in type_a} == set(sim_session.rig.names)
+
+    code, out, err = cli("eval", fused, "--json")
+    assert code == 0, err
+    report = {r["method"]: r for r in json.loads(out)}
+    for method, track in expected.items():
+        accuracy = evaluate(track, sim_session.truth)
+        assert report[method]["mean_mm"] == accuracy.mean_mm
+        assert report[method]["rate_hz"] == accuracy.rate_hz
+    assert report["nearest"]["mean_mm"] > 3 * report["typeA"]["mean_mm"]
+    code, out, _ = cli("eval", fused)
+    assert code == 0 and "mean mm" in out and "typeA" in out
+
+
+def test_fuse_defaults_to_every_applicable_method(tmp_path, sim_session, cli):
+    code, out, err = cli("fuse", sim_session.path, "-o", tmp_path / "all.mcap")
+    assert code == 0, err
+    assert "skipping sync" in out and "skipping typeB" in out
+    assert set(read_session(tmp_path / "all.mcap").tracks) == {"typeA", "nearest"}
+
+
+def test_fuse_refuses_impossible_methods_and_existing_output(tmp_path, sim_session, cli):
+    code, _, err = cli("fuse", sim_session.path, "--method", "sync", "-o", tmp_path / "x.mcap")
+    assert code == 1 and "needs simultaneous shutters" in err and "Traceback" not in err
+    assert not (tmp_path / "x.mcap").exists()
+    code, _, err = cli("fuse", sim_session.path, "--method", "typeC", "-o", tmp_path / "x.mcap")
+    assert code == 1 and "unknown fusion method 'typeC'" in err
+    existing = tmp_path / "exists.mcap"
+    existing.write_bytes(b"keep me")
+    code, _, err = cli("fuse", sim_session.path, "--method", "typeA", "-o", existing)
+    assert code == 1 and "--force" in err
+    assert existing.read_bytes() == b"keep me"
+    code, _, err = cli("fuse", sim_session.path, "--method", "typeA", "-o", existing, "--force")
+    assert code == 0 and "typeA" in read_session(existing).tracks
+
+
+def test_eval_needs_truth_and_tracks(tmp_path, sim_session, cli):
+    code, _, err = cli("eval", sim_session.path)
+    assert code == 1 and "no fused tracks" in err
+    code, _, err = cli("eval", tmp_path / "missing.mcap")
+    assert code == 1 and "missing.mcap" in err
+
+
+def test_paper_tables(cli):
+    code, out, _ = cli("paper", "table1", "--json")
+    assert code == 0
+    rows = json.loads(out)["rows"]
+    assert len(rows) == 6
+    by_key = {(r["cameras"], r["method"]): r for r in rows}
+    assert abs(by_key[(3, "typeA")]["fps"] - 90.0) < 1e-6
+    assert by_key[(2, "sync")]["error_mm"]["spiral"] < 1e-6
+    assert by_key[(3, "typeA")]["paper_mm"]["straight"] == 1.1
+    code, out, _ = cli("paper", "table1")
+    assert code == 0 and "unsynchronized" not in out and "nearest" in out
+    code, out, _ = cli("paper", "table2", "--json", "--noise-px", "0.5")
+    assert code == 0
+    table2 = {r["method"]: r for r in json.loads(out)["rows"]}
+    assert table2["typeB"]["var_z_mm2"] < table2["typeA"]["var_z_mm2"]
+    assert abs(table2["typeA"]["mean_z_mm"] - 660.0) < 5.0
+    assert np.isclose(table2["typeB"]["paper_var_z_mm2"], 112.0)
