@@ -23,7 +23,7 @@ def main() -> None:
     from pslog.log import SessionWriter, read_session
     from pslog.motion import get_motion
     from pslog.rig import apply_timing, builtin_rig
-    from pslog.simulate import SimulationOptions, simulate
+    from pslog.simulation import SimulationOptions, simulate
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--minutes", type=float, default=10.0)

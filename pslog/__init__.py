@@ -2,26 +2,64 @@
 
 The core library (this package) holds geometry, rigs, records, the session log format,
 simulation, fusion and evaluation; it never imports ``recorders`` or ``viewers``.
+
+The public names below are re-exported lazily (PEP 562), so that ``import pslog.cli`` — and
+with it ``pslog --help`` — does not load numpy.
 """
 
-from .camera import Camera, look_at
-from .errors import (
-    FusionError,
-    InputError,
-    LogFormatError,
-    OutputExistsError,
-    PslogError,
-    RigError,
-)
-from .motion import MOTIONS, Motion, get_motion
-from .records import NS, QUALITY_FIELDS, Detections, Observations, Track, Truth
-from .rig import BUILTIN_RIGS, TIMING_PRESETS, Rig, apply_timing, builtin_rig, load_rig, resolve_rig, save_rig
-from .simulate import SimulationOptions, capture_times, simulate
+from __future__ import annotations
 
-__all__ = [
-    "BUILTIN_RIGS", "MOTIONS", "NS", "QUALITY_FIELDS", "TIMING_PRESETS", "Camera", "Detections",
-    "FusionError", "InputError", "LogFormatError", "Motion", "Observations", "OutputExistsError",
-    "PslogError", "Rig", "RigError", "SimulationOptions", "Track", "Truth", "apply_timing",
-    "builtin_rig", "capture_times", "get_motion", "load_rig", "look_at", "resolve_rig",
-    "save_rig", "simulate",
-]
+import importlib
+from typing import TYPE_CHECKING
+
+_EXPORTS = {
+    "camera": ("Camera", "look_at"),
+    "errors": ("FusionError", "InputError", "LogFormatError", "OutputExistsError", "PslogError",
+               "RigError"),
+    "motion": ("MOTIONS", "Motion", "get_motion"),
+    "records": ("NS", "QUALITY_FIELDS", "Detections", "Observations", "Track", "Truth"),
+    "rig": ("BUILTIN_RIGS", "TIMING_PRESETS", "Rig", "apply_timing", "builtin_rig", "load_rig",
+            "resolve_rig", "save_rig"),
+    "simulation": ("SimulationOptions", "capture_times", "simulate"),
+}
+_MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
+__all__ = sorted(_MODULE_OF)
+
+
+def __getattr__(name: str):
+    module = _MODULE_OF.get(name)
+    if module is None:
+        raise AttributeError(f"module 'pslog' has no attribute {name!r}")
+    loaded = importlib.import_module(f".{module}", __name__)
+    for exported in _EXPORTS[module]:  # bind the module's names together, once
+        globals()[exported] = getattr(loaded, exported)
+    return globals()[name]
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
+
+
+if TYPE_CHECKING:  # for type checkers and IDEs
+    from .camera import Camera, look_at
+    from .errors import (
+        FusionError,
+        InputError,
+        LogFormatError,
+        OutputExistsError,
+        PslogError,
+        RigError,
+    )
+    from .motion import MOTIONS, Motion, get_motion
+    from .records import NS, QUALITY_FIELDS, Detections, Observations, Track, Truth
+    from .rig import (
+        BUILTIN_RIGS,
+        TIMING_PRESETS,
+        Rig,
+        apply_timing,
+        builtin_rig,
+        load_rig,
+        resolve_rig,
+        save_rig,
+    )
+    from .simulation import SimulationOptions, capture_times, simulate

@@ -14,7 +14,7 @@ from .evaluation import evaluate
 from .fusion import fuse_all
 from .motion import get_motion
 from .rig import apply_timing, builtin_rig
-from .simulate import SimulationOptions, simulate
+from .simulation import SimulationOptions, simulate
 
 #: Table 1 of the paper, average absolute 3D error in millimetres.
 PAPER_TABLE1 = {

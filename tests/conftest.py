@@ -43,7 +43,7 @@ def sim_session(tmp_path, rig3) -> SimSession:
     written with detections and truth, no images."""
     from pslog.log import SessionWriter
     from pslog.motion import get_motion
-    from pslog.simulate import SimulationOptions, simulate
+    from pslog.simulation import SimulationOptions, simulate
 
     options = SimulationOptions(noise_px=0.3, miss_rate=0.1, drop_rate=0.05, seed=3)
     detections, truth = simulate(rig3, get_motion("spiral"), options=options)

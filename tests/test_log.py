@@ -407,7 +407,7 @@ def test_copy_session_replaces_detections_and_tracks(tmp_path, rig3):
 # ---- info -------------------------------------------------------------------------------------
 def test_info_measures_rates_and_offsets_despite_drops_and_jitter(tmp_path, rig3):
     from pslog.motion import get_motion
-    from pslog.simulate import SimulationOptions, simulate
+    from pslog.simulation import SimulationOptions, simulate
 
     options = SimulationOptions(jitter_s=2e-4, drop_rate=0.2, miss_rate=0.3, seed=5)
     det, truth = simulate(rig3, get_motion("turntable"), 4.0, options)

@@ -39,7 +39,7 @@ def run(args: argparse.Namespace) -> int:
     from pslog.motion import get_motion
     from pslog.records import NS
     from pslog.rig import apply_timing, resolve_rig
-    from pslog.simulate import SimulationOptions, simulate
+    from pslog.simulation import SimulationOptions, simulate
 
     output = check_output(args.output, args.force)
     rig = resolve_rig(args.rig)

@@ -1,4 +1,4 @@
-"""Tests of pslog.simulate: shutter schedules and simulated detections."""
+"""Tests of pslog.simulation: shutter schedules and simulated detections."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from pslog.errors import InputError, PslogError
 from pslog.motion import Motion, get_motion
 from pslog.records import NS
 from pslog.rig import Rig, apply_timing, builtin_rig
-from pslog.simulate import SimulationOptions, capture_times, simulate
+from pslog.simulation import SimulationOptions, capture_times, simulate
 
 
 def _paper3(timing: str = "typeA") -> Rig:
