@@ -28,24 +28,22 @@ def check_output(path: str | Path, force: bool) -> Path:
     return path
 
 
-def positive_float(text: str) -> float:
+def _float_arg(text: str, ok, requirement: str) -> float:
     try:
         value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not value > 0 or value == float("inf"):
-        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}")
+    if not ok(value) or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"must be {requirement}, got {text!r}")
     return value
+
+
+def positive_float(text: str) -> float:
+    return _float_arg(text, lambda v: v > 0, "a positive number")
 
 
 def nonnegative_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not value >= 0 or value == float("inf"):
-        raise argparse.ArgumentTypeError(f"must be a number >= 0, got {text!r}")
-    return value
+    return _float_arg(text, lambda v: v >= 0, "a number >= 0")
 
 
 def fraction(text: str) -> float:

@@ -12,11 +12,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import FusionError
 from ..geometry import closest_points_on_rays
 from ..records import NS, Track
 from ._prepare import Prepared
-from .stereo import sync_groups, triangulate_groups
+from .stereo import stereo_at_common_instants
 
 
 def fuse_predicted(prep: Prepared, method: str, tolerance_s: float, max_gap_s: float) -> Track:
@@ -26,17 +25,9 @@ def fuse_predicted(prep: Prepared, method: str, tolerance_s: float, max_gap_s: f
     obs = prep.obs
     if len(obs) == 0:
         return Track(method, np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0, np.int32))
-    group, n_cameras = sync_groups(prep, tolerance_s)
-    points, rms_miss, stereo_ns, stereo_cam = triangulate_groups(prep, group, len(n_cameras))
-    stereo = (n_cameras >= 2) & np.all(np.isfinite(points), axis=1)
-    if not np.any(n_cameras >= 2):
-        raise FusionError(
-            f"method {method} needs two cameras with a common shutter instant (typeB timing), "
-            f"but no two cameras captured within {tolerance_s * 1e3:g} ms of each other")
-    points, rms_miss, stereo_ns, stereo_cam = (
-        points[stereo], rms_miss[stereo], stereo_ns[stereo], stereo_cam[stereo])
-
-    single = np.flatnonzero(n_cameras[group] == 1)  # detections with no simultaneous partner
+    stereo, alone = stereo_at_common_instants(prep, tolerance_s, method)
+    points, stereo_ns = stereo.position_world, stereo.time_ns
+    single = np.flatnonzero(alone)  # detections with no simultaneous partner
     t_single = obs.time_ns[single]
     k1 = np.searchsorted(stereo_ns, t_single, side="left") - 1  # latest stereo point before
     k2 = k1 - 1
@@ -58,7 +49,7 @@ def fuse_predicted(prep: Prepared, method: str, tolerance_s: float, max_gap_s: f
     nan_s, nan_m = np.full(len(single), np.nan), np.full(len(stereo_ns), np.nan)
     return Track(
         method, time_ns[order], np.concatenate([points, single_points])[order],
-        np.concatenate([stereo_cam, obs.camera[single]])[order],
-        {"ray_miss_m": np.concatenate([rms_miss, nan_s])[order],
+        np.concatenate([stereo.camera, obs.camera[single]])[order],
+        {"ray_miss_m": np.concatenate([stereo.quality["ray_miss_m"], nan_s])[order],
          "ray_shift_m": np.concatenate([nan_m, shift])[order]},
     )

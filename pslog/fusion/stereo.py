@@ -46,6 +46,29 @@ def triangulate_groups(prep: Prepared, group: np.ndarray, n_groups: int):
     return points, rms_miss, prep.obs.time_ns[last], prep.obs.camera[last]
 
 
+def stereo_at_common_instants(
+    prep: Prepared, tolerance_s: float, method: str
+) -> tuple[Track, np.ndarray]:
+    """N-view points of every instant at which at least two cameras saw the ball.
+
+    Returns
+    -------
+    track : Track named ``method``, one point per such instant, with ``ray_miss_m``
+    alone : (n,) bool, the detections that had no simultaneous partner
+    """
+    group, n_cameras = sync_groups(prep, tolerance_s)
+    if not np.any(n_cameras >= 2):
+        raise FusionError(
+            f"method {method} needs cameras with a common shutter instant (sync or typeB "
+            f"timing), but no two cameras captured within {tolerance_s * 1e3:g} ms of each "
+            f"other")
+    points, rms_miss, time_ns, camera = triangulate_groups(prep, group, len(n_cameras))
+    keep = (n_cameras >= 2) & np.all(np.isfinite(points), axis=1)
+    track = Track(method, time_ns[keep], points[keep], camera[keep],
+                  {"ray_miss_m": rms_miss[keep]})
+    return track, n_cameras[group] == 1
+
+
 def fuse_sync(prep: Prepared, tolerance_s: float = 1e-3) -> Track:
     """``sync``: N-view triangulation of detections captured within ``tolerance_s``.
 
@@ -53,15 +76,7 @@ def fuse_sync(prep: Prepared, tolerance_s: float = 1e-3) -> Track:
     """
     if len(prep.obs) == 0:
         return _empty("sync")
-    group, n_cameras = sync_groups(prep, tolerance_s)
-    points, rms_miss, time_ns, camera = triangulate_groups(prep, group, len(n_cameras))
-    keep = (n_cameras >= 2) & np.all(np.isfinite(points), axis=1)
-    if not np.any(n_cameras >= 2):
-        raise FusionError(
-            f"method sync needs simultaneous shutters, but no two cameras captured within "
-            f"{tolerance_s * 1e3:g} ms of each other; use typeA, or a rig with sync timing")
-    return Track("sync", time_ns[keep], points[keep], camera[keep],
-                 {"ray_miss_m": rms_miss[keep]})
+    return stereo_at_common_instants(prep, tolerance_s, "sync")[0]
 
 
 def fuse_nearest(prep: Prepared, max_gap_s: float) -> Track:
