@@ -26,7 +26,8 @@ For the newest event ``t`` (camera ``c``, time ``t_t``):
 3. *Eqs. (3)-(4)*: the output ``P'_t`` is the point of the newest viewing ray
    ``l = k r + T`` nearest to ``P̂_t``.
 
-Everything is vectorized over events; the only Python loops run over cameras.
+Everything is vectorized over events; the only Python loops run over cameras and over
+how many instants back a past point is looked for (at most ``2 * n_cameras``).
 """
 
 from __future__ import annotations
