@@ -3,7 +3,7 @@ optionally replacing the detections (re-detection) and adding or replacing fused
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 from ..errors import InputError
@@ -15,7 +15,8 @@ from .writer import SessionWriter
 
 
 def copy_session(src, dst, *, detections: Detections | None = None, tracks: Sequence[Track] = (),
-                 replace_tracks: bool = True, force: bool = False) -> None:
+                 replace_tracks: bool = True, metadata: Mapping[str, str] | None = None,
+                 force: bool = False) -> None:
     """Write ``dst`` as a copy of session ``src``.
 
     Parameters
@@ -25,6 +26,7 @@ def copy_session(src, dst, *, detections: Detections | None = None, tracks: Sequ
     tracks : fused tracks to add
     replace_tracks : drop every track of ``src`` (True) or only those whose method is in
         ``tracks`` (False)
+    metadata : user metadata to add or replace (e.g. the new detector settings)
     force : overwrite ``dst``
 
     Calibration, poses, images, truth, events, metadata and any foreign topics are copied.
@@ -43,6 +45,7 @@ def copy_session(src, dst, *, detections: Detections | None = None, tracks: Sequ
     new_methods = {t.method for t in tracks}
     user_meta = {k: v for k, v in meta.items() if k not in S.RESERVED_KEYS}
     user_meta["derived_from"] = src_path.name
+    user_meta.update(metadata or {})
 
     with SessionWriter(dst, rig, force=force, timing=meta.get("timing", "custom"),
                        source=meta.get("source", ""), metadata=user_meta,

@@ -1,0 +1,198 @@
+"""``pslog record``: record a session from cameras, video files or a rendered synthetic rig."""
+
+from __future__ import annotations
+
+import argparse
+import re
+
+from pslog.cli._common import add_force, add_rig, check_output, nonnegative_float, positive_float
+from pslog.errors import InputError
+
+DESCRIPTION = """\
+Record a session: every camera of the rig is captured in its own process (capture, ball
+detection, JPEG encoding) and one writer stores the frames, the detections, the calibration
+and the timing into an MCAP session. A status line on stderr shows per camera the frames,
+the frame rate, the frames with a ball and the drops; a summary follows at the end.
+Ctrl-C or SIGTERM finishes the file cleanly (a killed recorder loses at most the last
+second; see 'pslog recover').
+
+Sources (one --source per camera of the rig, NAME a camera name of the rig):
+  NAME=0, NAME=/dev/video2   a live camera (device index or V4L2 path); capture times from
+                             the driver's buffer timestamps when usable, else the host's
+                             monotonic clock at grab (the log says which)
+  NAME=clip.mp4[@OFFSET]     a video file; capture times are the container's timestamps plus
+                             OFFSET seconds (default 0), so files from separate cameras form
+                             one session; --offset NAME=SECONDS does the same
+Video files are read as fast as they decode; live cameras in real time. A camera that
+fails to open or stops delivering is reported and logged; the others keep recording (exit
+code 0 if any camera recorded frames, 1 if none did).
+
+--synthetic renders what each camera sees of a ball (shaded sphere, motion blur over the
+exposure, lens distortion, sensor noise, a lined green field) following --motion under the
+rig's shutter schedule, in real time unless --fast, and stores the ground truth too.
+
+Ball detection: pixels inside an HSV box (OpenCV scales: hue 0..179, saturation and value
+0..255; a hue minimum above the maximum wraps around red), connected components, sub-pixel
+centroids; up to --max-candidates per frame, best first.
+"""
+
+EXAMPLES = """\
+examples:
+  pslog record --rig rig.toml --source cam1=0 --source cam2=/dev/video2 -o match.mcap
+  pslog record --rig rig.toml --source cam1=a.mp4 --source cam2=b.mp4@0.0167 -o s.mcap
+  pslog record --synthetic --rig paper3 --timing typeA --motion throw -o throw.mcap --fast
+"""
+
+_SOURCE = re.compile(r"^([^=]+)=(.+)$")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.description = DESCRIPTION
+    parser.epilog = EXAMPLES
+    parser.formatter_class = argparse.RawDescriptionHelpFormatter
+    add_rig(parser)
+    parser.add_argument("-o", "--output", required=True, metavar="SESSION.mcap",
+                        help="session file to write")
+    parser.add_argument("--source", action="append", default=[], metavar="NAME=SPEC",
+                        help="camera NAME records from SPEC: a device index, /dev/videoN, or "
+                             "a video file with an optional @OFFSET in seconds (repeat per "
+                             "camera)")
+    parser.add_argument("--offset", action="append", default=[], metavar="NAME=SECONDS",
+                        help="start offset of camera NAME's video file on the session clock")
+    parser.add_argument("--synthetic", action="store_true",
+                        help="render the rig's cameras instead of reading sources")
+    parser.add_argument("--timing", choices=("sync", "typeA", "typeB"),
+                        help="set the rig's shutter offsets from a preset (default: the "
+                             "rig's own offsets)")
+    parser.add_argument("--motion", default="throw",
+                        help="synthetic ball motion: straight, spiral, fall, turntable, throw "
+                             "(default throw)")
+    parser.add_argument("--fast", action="store_true",
+                        help="synthetic: render as fast as possible instead of in real time")
+    parser.add_argument("--duration", type=positive_float, metavar="S",
+                        help="stop after S seconds of session time (synthetic default: the "
+                             "motion's duration; otherwise until the sources end or Ctrl-C)")
+    parser.add_argument("--noise", type=nonnegative_float, default=2.0, metavar="SIGMA",
+                        help="synthetic sensor noise, standard deviation in 8-bit levels "
+                             "(default 2)")
+    parser.add_argument("--ball-radius", type=positive_float, default=0.0215, metavar="M",
+                        help="synthetic ball radius in metres (default 0.0215, a golf ball)")
+    parser.add_argument("--exposure", type=nonnegative_float, default=0.004, metavar="S",
+                        help="synthetic exposure time in seconds, for motion blur "
+                             "(default 0.004; 0 for none)")
+    parser.add_argument("--seed", type=int, default=0, help="synthetic random seed")
+    parser.add_argument("--no-frames", action="store_true",
+                        help="store detections only, not the JPEG frames")
+    parser.add_argument("--jpeg-quality", type=int, default=90, metavar="Q",
+                        help="JPEG quality of stored frames, 1..100 (default 90)")
+    add_detector_arguments(parser)
+    add_force(parser)
+
+
+def add_detector_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--hsv`` and ``--max-candidates`` (shared with ``pslog redetect``)."""
+    from recorders.detect import HsvRange
+
+    parser.add_argument("--hsv", metavar="H1,H2,S1,S2,V1,V2",
+                        help="ball colour as an HSV box hmin,hmax,smin,smax,vmin,vmax "
+                             f"(default {HsvRange().text()}, an orange ball)")
+    parser.add_argument("--max-candidates", type=int, default=5, metavar="K",
+                        help="ball candidates kept per frame, best first (default 5)")
+
+
+def parse_hsv(text: str | None):
+    from recorders.detect import HsvRange
+
+    return HsvRange() if text is None else HsvRange.parse(text)
+
+
+def run(args: argparse.Namespace) -> int:
+    from pslog.rig import apply_timing, resolve_rig
+
+    output = check_output(args.output, args.force)
+    rig = resolve_rig(args.rig)
+    if args.timing:
+        rig = apply_timing(rig, args.timing)
+    hsv = parse_hsv(args.hsv)
+    if args.max_candidates < 1:
+        raise InputError(f"--max-candidates must be >= 1, got {args.max_candidates}")
+    if args.synthetic:
+        if args.source or args.offset:
+            raise InputError("--synthetic renders every camera; do not give --source/--offset")
+        from recorders.synthetic import record_synthetic
+
+        summary = record_synthetic(
+            rig, args.motion, output, duration=args.duration, fast=args.fast,
+            frames=not args.no_frames, jpeg_quality=args.jpeg_quality, seed=args.seed,
+            force=args.force, timing=args.timing, hsv=hsv, max_candidates=args.max_candidates,
+            ball_radius=args.ball_radius, exposure_s=args.exposure, noise_sigma=args.noise)
+    else:
+        if not args.source:
+            raise InputError("give a --source NAME=SPEC for every camera of the rig, "
+                             "or --synthetic")
+        if args.fast:
+            raise InputError("--fast applies to --synthetic only (video files are always "
+                             "read as fast as they decode)")
+        from recorders.record import record
+
+        specs = parse_sources(rig, args.source, args.offset)
+        summary = record(rig, specs, output, duration_s=args.duration,
+                         frames=not args.no_frames, jpeg_quality=args.jpeg_quality, hsv=hsv,
+                         max_candidates=args.max_candidates, force=args.force,
+                         timing=args.timing, source="record " + " ".join(args.source))
+    if summary.n_frames == 0:
+        raise InputError(f"no camera delivered a frame; {output} holds only the calibration")
+    return 0
+
+
+def parse_sources(rig, sources: list[str], offsets: list[str]) -> dict:
+    """``NAME=SPEC`` strings (and ``NAME=SECONDS`` offsets) -> camera name -> source spec."""
+    from pathlib import Path
+
+    from recorders.sources import DeviceSpec, FileSpec
+
+    offset_of: dict[str, float] = {}
+    for text in offsets:
+        match = _SOURCE.match(text)
+        if not match:
+            raise InputError(f"--offset must be NAME=SECONDS, got {text!r}")
+        name, value = match.group(1).strip(), match.group(2).strip()
+        rig.index(name)
+        offset_of[name] = _seconds(value, text)
+    specs: dict = {}
+    for text in sources:
+        match = _SOURCE.match(text)
+        if not match:
+            raise InputError(f"--source must be NAME=SPEC, got {text!r}")
+        name, spec = match.group(1).strip(), match.group(2).strip()
+        cam = rig.camera(name)  # RigError naming an unknown camera
+        if name in specs:
+            raise InputError(f"camera {name!r} has two --source options")
+        if re.fullmatch(r"\d+", spec):
+            specs[name] = DeviceSpec(int(spec), cam.width, cam.height, cam.fps)
+        elif spec.startswith("/dev/"):
+            specs[name] = DeviceSpec(spec, cam.width, cam.height, cam.fps)
+        else:
+            path, offset = spec, offset_of.get(name, 0.0)
+            head, sep, tail = spec.rpartition("@")
+            if sep and not Path(spec).exists():
+                if name in offset_of:
+                    raise InputError(f"camera {name!r}: offset given both with @ and --offset")
+                path, offset = head, _seconds(tail, text)
+            if not Path(path).is_file():
+                raise InputError(f"camera {name!r}: video file not found: {path}")
+            specs[name] = FileSpec(path, cam.width, cam.height, offset)
+    for name in offset_of:
+        if not isinstance(specs.get(name), FileSpec):
+            raise InputError(f"--offset {name}=...: camera {name!r} has no video file source")
+    return specs
+
+
+def _seconds(value: str, text: str) -> float:
+    try:
+        seconds = float(value)
+    except ValueError:
+        raise InputError(f"offset is not a number of seconds in {text!r}") from None
+    if seconds != seconds or abs(seconds) == float("inf"):
+        raise InputError(f"offset must be finite in {text!r}")
+    return seconds

@@ -1,0 +1,44 @@
+"""``pslog redetect``: re-run ball detection over a session's recorded frames."""
+
+from __future__ import annotations
+
+import argparse
+
+from pslog.cli._common import add_force, check_output
+
+DESCRIPTION = """\
+Re-run ball detection over the JPEG frames stored in a session, with new settings, and
+write a new session: frames, calibration, poses, truth, events, fused tracks and metadata
+are copied as stored; only the detections change. The result fuses like any session.
+Frames recorded without an image (--no-frames) cannot be re-detected.
+"""
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from pslog.cli.record import add_detector_arguments
+
+    parser.description = DESCRIPTION
+    parser.formatter_class = argparse.RawDescriptionHelpFormatter
+    parser.add_argument("session", help="recorded session (MCAP) with frames")
+    parser.add_argument("-o", "--output", required=True, metavar="SESSION.mcap",
+                        help="new session file")
+    add_detector_arguments(parser)
+    parser.add_argument("--workers", type=int, default=None, metavar="N",
+                        help="processes decoding and detecting (default: all cores for "
+                             "large sessions)")
+    add_force(parser)
+
+
+def run(args: argparse.Namespace) -> int:
+    from pslog.cli.record import parse_hsv
+    from pslog.errors import InputError
+    from recorders.redetect import redetect_session
+
+    output = check_output(args.output, args.force)
+    if args.max_candidates < 1:
+        raise InputError(f"--max-candidates must be >= 1, got {args.max_candidates}")
+    summary = redetect_session(args.session, output, parse_hsv(args.hsv),
+                               max_candidates=args.max_candidates, force=args.force,
+                               workers=args.workers)
+    print(summary.text())
+    return 0

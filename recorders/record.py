@@ -1,0 +1,529 @@
+"""Record a session: one process per camera (capture, detect, JPEG-encode), one writer.
+
+As in the paper's system, each camera has its own process that captures and analyses its
+frames and sends the results, with the capture time, to the parent, which owns the only
+:class:`pslog.log.SessionWriter`. The parent shows a live status line, watches for cameras
+that fail or stall (logging the gap as an event while the others keep recording) and finishes
+the file cleanly on Ctrl-C or SIGTERM; the writer flushes at least once a second, so SIGKILL
+loses at most the last second (``pslog recover`` salvages the rest).
+
+Worker -> parent messages (tuples, first item the kind):
+``ready(cam, clock, live)``, ``failed(cam, text)``, ``frame(cam, index, time_ns, uv, radius,
+score, jpeg)``, ``event(cam, time_ns, text)``, ``stopped(cam, text)``, ``done(cam, text)``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import multiprocessing as mp
+import os
+import queue as queue_module
+import signal
+import sys
+import threading
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO, Literal
+
+import numpy as np
+
+from pslog.errors import InputError, OutputExistsError, PslogError, RigError
+from pslog.records import NS, Truth
+from pslog.rig import TIMING_PRESETS, Rig, apply_timing
+
+from .detect import BallDetector, HsvRange
+from .status import CameraStatus, StatusBoard
+
+_QUEUE_PER_CAMERA = 32  # frame messages in flight per camera (about 3 MB of JPEG)
+_OPEN_TIMEOUT_S = 60.0  # longest wait for every camera to open (spawning included)
+_STOP_TIMEOUT_S = 10.0  # longest wait for cameras to finish after a stop request
+_TTY_REFRESH_S = 0.25
+_LOG_REFRESH_S = 5.0  # status line period when stderr is not a terminal
+
+
+@dataclass(frozen=True)
+class WorkerOptions:
+    """What every camera process does with its frames."""
+
+    hsv: HsvRange = field(default_factory=HsvRange)
+    max_candidates: int = 5
+    frames: bool = True
+    jpeg_quality: int = 90
+    duration_ns: int | None = None
+
+
+@dataclass(frozen=True)
+class RecordSummary:
+    """The outcome of a recording.
+
+    Attributes
+    ----------
+    output : the session file
+    cameras : per-camera counters (frames, detections, drops, state, message)
+    wall_s : wall-clock duration of the recording, seconds
+    interrupted : True when stopped by Ctrl-C / SIGTERM
+    events : (time_ns, text) logged as session events
+    """
+
+    output: Path
+    cameras: tuple[CameraStatus, ...]
+    wall_s: float
+    interrupted: bool
+    events: tuple[tuple[int, str], ...]
+    text: str
+
+    @property
+    def n_frames(self) -> int:
+        return sum(c.frames for c in self.cameras)
+
+    @property
+    def n_detections(self) -> int:
+        return sum(c.detections for c in self.cameras)
+
+    @property
+    def failed(self) -> tuple[str, ...]:
+        """Names of cameras that failed to open or stopped delivering."""
+        return tuple(c.name for c in self.cameras if c.state == "failed")
+
+
+def timing_label(rig: Rig) -> str:
+    """The shutter preset whose offsets the rig has (``sync``, ``typeA``, ``typeB``), else
+    ``custom``."""
+    offsets = np.array([c.offset for c in rig.cameras])
+    for preset in TIMING_PRESETS:
+        try:
+            ref = np.array([c.offset for c in apply_timing(rig, preset).cameras])
+        except RigError:
+            continue
+        if np.allclose(offsets, ref, atol=1e-9):
+            return preset
+    return "custom"
+
+
+def record(
+    rig: Rig,
+    sources: Mapping[str, object],
+    output: str | Path,
+    *,
+    duration_s: float | None = None,
+    frames: bool = True,
+    jpeg_quality: int = 90,
+    hsv: HsvRange | None = None,
+    max_candidates: int = 5,
+    force: bool = False,
+    timing: str | None = None,
+    source: str = "",
+    metadata: Mapping[str, str] | None = None,
+    truth: Truth | None = None,
+    status: IO[str] | Literal["stderr"] | None = "stderr",
+) -> RecordSummary:
+    """Record every camera of ``rig`` from its source into the session ``output``.
+
+    Parameters
+    ----------
+    rig : the session's cameras (calibration and shutter offsets)
+    sources : camera name -> source spec (:mod:`recorders.sources`); exactly the rig's cameras
+    output : MCAP file to write; refused if it exists unless ``force``
+    duration_s : stop each camera at this session time, seconds (None: until the sources end
+        or Ctrl-C)
+    frames : store the JPEG frames (False: detections only)
+    jpeg_quality : 1..100
+    hsv, max_candidates : ball detection settings (:class:`recorders.detect.BallDetector`)
+    timing : shutter preset name for the metadata (default: inferred from the rig's offsets)
+    source, metadata : free text and string key/values stored in the session metadata
+    truth : ground truth to store (synthetic sessions)
+    status : stream for the live status line, messages and summary (default: the current
+        ``sys.stderr``; None: silent)
+
+    Returns
+    -------
+    RecordSummary
+    """
+    from pslog.log import SessionWriter
+
+    if isinstance(status, str):
+        status = sys.stderr
+    names = list(sources)
+    unknown = [n for n in names if n not in rig.names]
+    if unknown:
+        raise RigError(f"source for unknown camera {unknown[0]!r} "
+                       f"(rig has {', '.join(rig.names)})")
+    missing = [n for n in rig.names if n not in sources]
+    if missing:
+        raise InputError(f"no source for camera(s) {', '.join(missing)} of the rig "
+                         f"(give --source NAME=... for every camera)")
+    if not 1 <= int(jpeg_quality) <= 100:
+        raise InputError(f"JPEG quality must be in 1..100, got {jpeg_quality!r}")
+    if duration_s is not None and not (np.isfinite(duration_s) and duration_s > 0):
+        raise InputError(f"duration must be > 0 seconds, got {duration_s!r}")
+    output = Path(output)
+    if output.exists() and not force:
+        raise OutputExistsError(f"{output} exists; use --force to overwrite it")
+    options = WorkerOptions(hsv=hsv or HsvRange(), max_candidates=int(max_candidates),
+                            frames=bool(frames), jpeg_quality=int(jpeg_quality),
+                            duration_ns=None if duration_s is None else int(duration_s * NS))
+    meta = {"detector_hsv": options.hsv.text(),
+            "detector_max_candidates": str(options.max_candidates),
+            "jpeg_quality": str(options.jpeg_quality) if frames else "none"}
+    for name in rig.names:
+        meta[f"source_{name}"] = sources[name].describe()
+    meta.update({str(k): str(v) for k, v in dict(metadata or {}).items()})
+    with SessionWriter(output, rig, force=force, timing=timing or timing_label(rig),
+                       source=source or "record", metadata=meta) as writer:
+        if truth is not None:
+            writer.add_truth(truth)
+        session = _Session(rig, sources, options, writer, status)
+        return session.run()
+
+
+class _Session:
+    """The parent side of one recording."""
+
+    def __init__(self, rig: Rig, sources: Mapping[str, object], options: WorkerOptions,
+                 writer, status: IO[str] | None) -> None:
+        self.rig = rig
+        self.specs = [sources[name] for name in rig.names]
+        self.options = options
+        self.writer = writer
+        self.status = status
+        self.tty = bool(status is not None and getattr(status, "isatty", lambda: False)())
+        self.board = StatusBoard([CameraStatus(c.name, s.describe())
+                                  for c, s in zip(rig.cameras, self.specs, strict=True)])
+        self.events: list[tuple[int, str]] = []
+        self.live = [False] * len(rig)
+        self.last_arrival = [0.0] * len(rig)
+        self.stop_reason = ""
+        self._line_shown = False
+
+    # ---- output -------------------------------------------------------------------------
+    def _say(self, text: str) -> None:
+        if self.status is None:
+            return
+        if self._line_shown and self.tty:
+            self.status.write("\r\033[K")
+            self._line_shown = False
+        self.status.write(text + "\n")
+        self.status.flush()
+
+    def _show_line(self) -> None:
+        if self.status is None:
+            return
+        if self.tty:
+            self.status.write("\r\033[K" + self.board.line())
+            self._line_shown = True
+        else:
+            self.status.write(self.board.line() + "\n")
+        self.status.flush()
+
+    def _event(self, time_ns: int, text: str, camera: int | None, level: str = "info") -> None:
+        self.writer.add_event(int(time_ns), text, camera=camera, level=level)
+        self.events.append((int(time_ns), text))
+
+    # ---- main loop ------------------------------------------------------------------------
+    def run(self) -> RecordSummary:
+        # spawn, not fork: a forked child hangs in OpenCV once the parent has used OpenCV's
+        # thread pool (and the parent holds an open writer). As with any spawning code, a
+        # script calling this must guard its top level with ``if __name__ == "__main__"``.
+        ctx = mp.get_context("spawn")
+        n = len(self.specs)
+        q = ctx.Queue(maxsize=_QUEUE_PER_CAMERA * n)
+        start, stop = ctx.Event(), ctx.Event()
+        t0 = ctx.Value("q", 0, lock=False)
+        procs = [ctx.Process(target=camera_main, name=f"pslog-{cam.name}",
+                             args=(i, self.specs[i], self.options, q, start, stop, t0,
+                                   os.getpid()), daemon=True)
+                 for i, cam in enumerate(self.rig.cameras)]
+        interrupted = threading.Event()
+        restore = _install_signal_handlers(interrupted)
+        wall0 = time.monotonic()
+        try:
+            for p in procs:
+                p.start()
+            self._wait_ready(q, procs, interrupted)
+            t0.value = time.monotonic_ns()
+            start.set()
+            self._loop(q, procs, stop, interrupted, t0.value)
+        finally:
+            stop.set()
+            start.set()
+            restore()
+            self._finish(q, procs)
+        if self._line_shown and self.tty and self.status is not None:
+            self.status.write("\r\033[K")
+        summary_text = self.board.summary()
+        if self.status is not None:
+            head = "recording interrupted" if interrupted.is_set() else "recorded"
+            self.status.write(f"{head}: {self.writer.path}\n{summary_text}\n")
+            self.status.flush()
+        return RecordSummary(Path(self.writer.path), tuple(self.board.cameras),
+                             time.monotonic() - wall0, interrupted.is_set(),
+                             tuple(self.events), summary_text)
+
+    def _wait_ready(self, q, procs, interrupted: threading.Event) -> None:
+        """Until every camera has opened or failed."""
+        cams = self.board.cameras
+        deadline = time.monotonic() + _OPEN_TIMEOUT_S
+        while any(c.state == "opening" for c in cams) and not interrupted.is_set():
+            if time.monotonic() > deadline:
+                for i, c in enumerate(cams):
+                    if c.state == "opening":
+                        self._fail(i, 0, f"{c.source} did not open within {_OPEN_TIMEOUT_S:g} s")
+                return
+            try:
+                msg = q.get(timeout=0.1)
+            except queue_module.Empty:
+                self._check_alive(procs, 0)
+                continue
+            self._handle(msg, 0)
+
+    def _loop(self, q, procs, stop, interrupted: threading.Event, t0_ns: int) -> None:
+        cams = self.board.cameras
+        last_line = 0.0
+        refresh = _TTY_REFRESH_S if self.tty else _LOG_REFRESH_S
+        duration_ns = self.options.duration_ns
+        stop_wall: float | None = None
+        while True:
+            active = [i for i, c in enumerate(cams) if c.state in ("recording", "stalled")]
+            if not active:
+                break
+            if interrupted.is_set() and not stop.is_set():
+                self._say("stopping: finishing the session file ...")
+                self.stop_reason = "stopped by user"
+                stop.set()
+            try:
+                msg = q.get(timeout=0.05)
+            except queue_module.Empty:
+                msg = None
+            now_ns = time.monotonic_ns() - t0_ns
+            if msg is not None:
+                self._handle(msg, now_ns)
+                for _ in range(64):  # drain what is already there before housekeeping
+                    try:
+                        self._handle(q.get_nowait(), now_ns)
+                    except queue_module.Empty:
+                        break
+            self._check_stalls()
+            self._check_alive(procs, now_ns)
+            if (duration_ns is not None and any(self.live) and not stop.is_set()
+                    and now_ns > duration_ns + 2 * NS):
+                # a stalled live camera never reaches the duration by itself
+                self.stop_reason = "duration reached"
+                stop.set()
+            if stop.is_set():
+                stop_wall = stop_wall or time.monotonic()
+                if time.monotonic() - stop_wall > _STOP_TIMEOUT_S:
+                    for i in active:
+                        self._fail(i, now_ns, "did not stop in time")
+                    break
+            wall = time.monotonic()
+            if self.status is not None and wall - last_line >= refresh:
+                self._show_line()
+                last_line = wall
+
+    def _handle(self, msg: tuple, now_ns: int) -> None:
+        kind, cam = msg[0], msg[1]
+        c = self.board.cameras[cam]
+        if kind == "frame":
+            _, _, index, time_ns, uv, radius, score, jpeg = msg
+            self.writer.add_frame(cam, index, time_ns, uv, radius, score, image=jpeg)
+            period_ns = NS / self.rig.cameras[cam].fps
+            if c.last_ns is not None and time_ns - c.last_ns > 1.5 * period_ns:
+                c.drops += round((time_ns - c.last_ns) / period_ns) - 1
+            if c.state == "stalled":
+                gap = (time.monotonic() - self.last_arrival[cam])
+                self._event(time_ns, f"camera {c.name} delivering again after {gap:.1f} s",
+                            cam)
+                self._say(f"{c.name}: delivering frames again after {gap:.1f} s")
+                c.state = "recording"
+            c.add_frame(time_ns, len(uv) > 0, time.monotonic())
+            self.last_arrival[cam] = time.monotonic()
+        elif kind == "ready":
+            _, _, clock, live = msg
+            c.state, c.clock = "recording", clock
+            self.live[cam] = bool(live)
+            self.last_arrival[cam] = time.monotonic()
+        elif kind == "event":
+            _, _, time_ns, text = msg
+            if text.startswith("timestamps:"):
+                c.clock = text.split(":", 1)[1].strip()
+            self._event(time_ns, f"camera {c.name} {text}", cam)
+        elif kind in ("failed", "stopped"):
+            self._fail(cam, c.last_ns + 1 if c.last_ns is not None else max(now_ns, 0), msg[2])
+        elif kind == "done":
+            c.state, c.message = "done", msg[2]
+
+    def _fail(self, cam: int, time_ns: int, text: str) -> None:
+        c = self.board.cameras[cam]
+        if c.state in ("failed", "done"):
+            return
+        c.state, c.message = "failed", text
+        self._event(time_ns, f"camera {c.name} failed: {text}", cam, level="error")
+        others = any(o.state in ("opening", "recording", "stalled")
+                     for o in self.board.cameras if o is not c)
+        self._say(f"error: {c.name}: {text}" + ("; the other cameras keep recording"
+                                                 if others else ""))
+
+    def _check_stalls(self) -> None:
+        now = time.monotonic()
+        for i, c in enumerate(self.board.cameras):
+            if c.state != "recording" or not self.live[i]:
+                continue
+            limit = max(1.0, 10.0 / self.rig.cameras[i].fps)
+            if now - self.last_arrival[i] > limit:
+                c.state = "stalled"
+                at = (c.last_ns if c.last_ns is not None else 0) + int(
+                    NS / self.rig.cameras[i].fps)
+                self._event(at, f"camera {c.name} stopped delivering frames", i,
+                            level="warning")
+                self._say(f"warning: {c.name}: no frame for {now - self.last_arrival[i]:.1f} s")
+
+    def _check_alive(self, procs, now_ns: int) -> None:
+        for i, (p, c) in enumerate(zip(procs, self.board.cameras, strict=True)):
+            if c.state in ("opening", "recording", "stalled") and not p.is_alive():
+                # give its last messages a moment to arrive before declaring it dead
+                if p.exitcode is not None and time.monotonic() - getattr(
+                        p, "_pslog_seen_dead", time.monotonic()) > 1.0:
+                    self._fail(i, c.last_ns + 1 if c.last_ns is not None else max(now_ns, 0),
+                               f"camera process died (exit code {p.exitcode})")
+                elif not hasattr(p, "_pslog_seen_dead"):
+                    p._pslog_seen_dead = time.monotonic()
+
+    def _finish(self, q, procs) -> None:
+        """Collect the last messages and reap the camera processes."""
+        deadline = time.monotonic() + _STOP_TIMEOUT_S
+        cams = self.board.cameras
+        while time.monotonic() < deadline and any(p.is_alive() for p in procs):
+            try:
+                self._handle(q.get(timeout=0.05), 0)
+            except queue_module.Empty:
+                pass
+            except PslogError:
+                break  # writer closed or broken: only reap
+        with contextlib.suppress(Exception):
+            while True:
+                self._handle(q.get_nowait(), 0)
+        for p in procs:
+            p.join(timeout=1.0)
+            if p.is_alive():
+                p.terminate()
+                p.join(timeout=1.0)
+        for i, c in enumerate(cams):
+            if c.state in ("opening", "recording", "stalled"):
+                c.state = "done" if self.stop_reason else c.state
+                if c.state != "done":
+                    self._fail(i, (c.last_ns or 0) + 1, "ended without reporting")
+                else:
+                    c.message = c.message or self.stop_reason
+        q.close()
+
+
+def jpeg_params(quality: int) -> list[int]:
+    """``cv2.imencode`` parameters of stored frames: the quality and full-resolution colour
+    (4:4:4). The default 4:2:0 halves the colour resolution, which smears a ball a few
+    pixels across into the background: on the paper3 rig's 2..3 px balls a quarter of the
+    stored frames then lose their detection and centroids are twice as noisy."""
+    import cv2
+
+    return [cv2.IMWRITE_JPEG_QUALITY, int(quality),
+            cv2.IMWRITE_JPEG_SAMPLING_FACTOR, cv2.IMWRITE_JPEG_SAMPLING_FACTOR_444]
+
+
+def _install_signal_handlers(flag: threading.Event):
+    """SIGINT and SIGTERM set ``flag`` (the loop then finishes the file); returns a function
+    restoring the previous handlers. A no-op outside the main thread."""
+    if threading.current_thread() is not threading.main_thread():
+        return lambda: None
+    previous = {}
+
+    def handler(signum, frame):
+        flag.set()
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        previous[sig] = signal.signal(sig, handler)
+
+    def restore() -> None:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+
+    return restore
+
+
+# ---- the camera process -------------------------------------------------------------------
+def camera_main(cam: int, spec, options: WorkerOptions, q, start, stop, t0,
+                parent_pid: int) -> None:
+    """Body of one camera process: open, wait for the start, then capture -> detect ->
+    encode -> send until the source ends, the duration is reached or the parent says stop."""
+    import cv2
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the parent, which stops us
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    cv2.setNumThreads(1)  # one process per camera already uses the cores
+    with contextlib.suppress(AttributeError):  # our own message says what failed
+        cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
+    from .sources import SourceError
+
+    def parent_gone() -> bool:
+        return os.getppid() != parent_pid
+
+    def send(msg, block: bool = True) -> bool:
+        while True:
+            try:
+                q.put(msg, timeout=0.5) if block else q.put_nowait(msg)
+                return True
+            except queue_module.Full:
+                if not block:
+                    return False
+                if parent_gone() or (stop.is_set() and msg[0] == "frame"):
+                    return False
+
+    try:
+        source = spec.open()
+    except Exception as exc:  # any failure to open is reported, not raised
+        text = str(exc) if isinstance(exc, PslogError) else f"{spec.describe()}: {exc!r}"
+        send(("failed", cam, text))
+        return
+    send(("ready", cam, source.clock, source.live))
+    while not start.wait(0.2):
+        if parent_gone():
+            q.cancel_join_thread()
+            return
+    if stop.is_set():
+        send(("done", cam, "stopped before the start"))
+        return
+    source.set_start(t0.value)
+    detector = BallDetector(options.hsv, options.max_candidates)
+    params = jpeg_params(options.jpeg_quality)
+    clock = ""
+    reason = "stopped by user"
+    try:
+        while not stop.is_set():
+            try:
+                item = source.read()
+            except SourceError as exc:
+                send(("stopped", cam, str(exc)))
+                return
+            if item is None:
+                reason = "end of source"
+                break
+            index, time_ns, frame = item
+            if options.duration_ns is not None and time_ns >= options.duration_ns:
+                reason = "duration reached"
+                break
+            if source.clock != clock:
+                clock = source.clock
+                send(("event", cam, time_ns, f"timestamps: {clock}"))
+            found = detector.detect(frame)
+            jpeg = None
+            if options.frames:
+                ok, buf = cv2.imencode(".jpg", frame, params)
+                jpeg = buf.tobytes() if ok else None
+            msg = ("frame", cam, index, time_ns, found.uv, found.radius, found.score, jpeg)
+            send(msg, block=not source.live)  # a live source cannot wait: drop instead
+            if parent_gone():
+                q.cancel_join_thread()
+                return
+        send(("done", cam, reason))
+    finally:
+        source.close()

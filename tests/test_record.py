@@ -1,0 +1,283 @@
+"""Recording sessions: synthetic rigs, video files, failing sources, signals, SIGKILL."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+
+from pslog.cli import main
+from pslog.log import read_session, recover_session
+from pslog.records import NS
+from pslog.rig import apply_timing, builtin_rig, save_rig
+from recorders import record_synthetic
+from recorders.sources import synthetic_times
+
+ORANGE_BGR = (20, 110, 255)
+
+
+def _best_errors(session) -> np.ndarray:
+    """Pixel distance of every frame's best candidate to the truth's projection."""
+    obs = session.detections.best()
+    errors = np.empty(len(obs))
+    for i, cam in enumerate(session.rig.cameras):
+        rows = obs.camera == i
+        uv, _ = cam.project(session.truth.at(obs.time_ns[rows]))
+        errors[rows] = np.linalg.norm(obs.uv[rows] - uv, axis=1)
+    return errors
+
+
+def test_record_synthetic_library(tmp_path):
+    rig = builtin_rig("paper3")
+    out = tmp_path / "s.mcap"
+    summary = record_synthetic(rig, "throw", out, timing="typeA", duration=0.4, status=None)
+    session = read_session(out)
+    typea = apply_timing(rig, "typeA")
+    assert session.rig == typea and session.timing == "typeA"
+    det = session.detections
+    for i, cam in enumerate(typea.cameras):
+        rows = det.frame_camera == i
+        assert_array_equal(det.frame_time_ns[rows], synthetic_times(cam, 0.4))
+        assert_array_equal(det.frame_index[rows], np.arange(rows.sum()))
+    assert summary.n_frames == det.n_frames == session.n_images == 36
+    assert np.all(det.candidates_per_frame() >= 1)
+    assert_array_equal(session.truth.time_ns, np.unique(det.frame_time_ns))
+    errors = _best_errors(session)
+    assert np.sqrt(np.mean(errors**2)) < 0.4 and errors.max() < 1.0
+    assert session.metadata["synthetic_motion"] == "throw"
+    assert session.metadata["detector_hsv"] == "4,22,120,255,70,255"
+    with pytest.raises(Exception, match="exists"):
+        record_synthetic(rig, "throw", out, duration=0.1, status=None)
+
+
+def test_cli_synthetic_without_frames(tmp_path, capsys):
+    out = tmp_path / "s.mcap"
+    rc = main(["record", "--synthetic", "--rig", "paper2", "--timing", "sync", "--motion",
+               "spiral", "--duration", "0.3", "--fast", "--no-frames", "-o", str(out)])
+    assert rc == 0
+    assert "cam2" in capsys.readouterr().err
+    session = read_session(out)
+    assert session.n_images == 0 and session.timing == "sync"
+    assert session.detections.n_frames == 18
+    assert _best_errors(session).max() < 1.0
+
+
+def _write_clip(path: Path, centers: np.ndarray, fps: float = 30.0) -> None:
+    """An MJPG video of an orange disc (radius 6 px) at ``centers`` (n, 2) over grey-green."""
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), fps, (640, 480))
+    assert writer.isOpened()
+    for u, v in centers:
+        frame = np.full((480, 640, 3), (60, 120, 70), np.uint8)
+        cv2.circle(frame, (round(u * 16), round(v * 16)), 6 * 16, ORANGE_BGR, -1,
+                   lineType=cv2.LINE_8, shift=4)
+        writer.write(frame)
+    writer.release()
+
+
+@pytest.fixture
+def two_camera_rig(tmp_path) -> Path:
+    path = tmp_path / "rig.toml"
+    save_rig(builtin_rig("paper2"), path)
+    return path
+
+
+def test_record_video_files_with_offsets(tmp_path, two_camera_rig):
+    n = 20
+    k = np.arange(n)
+    centers1 = np.stack([100 + 10.3 * k, 200 + 3.1 * k], axis=1)
+    centers2 = np.stack([500 - 7.7 * k, 100 + 8.9 * k], axis=1)
+    _write_clip(tmp_path / "a.avi", centers1)
+    _write_clip(tmp_path / "b.avi", centers2)
+    out = tmp_path / "s.mcap"
+    rc = main(["record", "--rig", str(two_camera_rig), "--source", f"cam1={tmp_path}/a.avi@0.25",
+               "--source", f"cam2={tmp_path}/b.avi", "--offset", "cam2=0.0167", "-o", str(out)])
+    assert rc == 0
+    session = read_session(out)
+    det = session.detections
+    assert session.n_images == det.n_frames == 2 * n
+    for cam, offset, centers in ((0, 0.25, centers1), (1, 0.0167, centers2)):
+        rows = np.flatnonzero(det.frame_camera == cam)
+        assert_array_equal(det.frame_index[rows], k)
+        expected_ns = np.round((offset + k / 30.0) * NS).astype(np.int64)
+        assert np.abs(det.frame_time_ns[rows] - expected_ns).max() <= 1000  # 1 µs
+        best = det.best()
+        mine = best.camera == cam
+        # cv2.circle rasterises to whole pixels; MJPG blurs the edge a little
+        assert_allclose(best.uv[mine], centers, atol=0.5)
+    assert any("container timestamps" in text for _t, text in session.events)
+
+
+@pytest.mark.parametrize("bad", ["garbage.avi", "/dev/video63"])
+def test_source_that_fails_to_open(tmp_path, two_camera_rig, capsys, bad):
+    _write_clip(tmp_path / "a.avi", np.tile([[320.0, 240.0]], (10, 1)))
+    (tmp_path / "garbage.avi").write_text("not a video")
+    spec = str(tmp_path / bad) if not bad.startswith("/") else bad
+    out = tmp_path / "s.mcap"
+    rc = main(["record", "--rig", str(two_camera_rig), "--source", f"cam1={tmp_path}/a.avi",
+               "--source", f"cam2={spec}", "-o", str(out)])
+    err = capsys.readouterr().err
+    assert rc == 0  # the other camera recorded
+    assert "cam2" in err and "cannot open" in err
+    session = read_session(out)
+    assert_array_equal(np.bincount(session.detections.frame_camera, minlength=2), [10, 0])
+    assert any("cam2 failed" in text and "cannot open" in text for _t, text in session.events)
+
+
+def test_record_errors(tmp_path, two_camera_rig, capsys):
+    _write_clip(tmp_path / "a.avi", np.tile([[320.0, 240.0]], (3, 1)))
+    clip = f"cam1={tmp_path}/a.avi"
+    out = str(tmp_path / "s.mcap")
+    rig = str(two_camera_rig)
+    cases = [
+        (["--source", clip], "no source for camera(s) cam2"),
+        (["--source", clip, "--source", "cam2=0", "--source", "cam9=1"], "cam9"),
+        (["--source", clip, "--source", f"cam2={tmp_path}/missing.mp4"], "missing.mp4"),
+        (["--source", clip, "--source", "cam2=0", "--hsv", "1,2,3"], "--hsv"),
+        (["--source", clip, "--source", "cam2=0", "--offset", "cam2=0.1"], "no video file"),
+        (["--synthetic", "--source", clip], "--synthetic"),
+        (["--synthetic", "--motion", "loop"], "unknown motion"),
+    ]
+    for extra, message in cases:
+        assert main(["record", "--rig", rig, "-o", out, *extra]) == 1
+        err = capsys.readouterr().err
+        assert message in err and "Traceback" not in err, (extra, err)
+        assert not Path(out).exists()
+    Path(out).write_bytes(b"keep me")
+    assert main(["record", "--rig", rig, "-o", out, "--source", clip, "--source",
+                 "cam2=0"]) == 1
+    assert "--force" in capsys.readouterr().err
+    assert Path(out).read_bytes() == b"keep me"
+
+
+def _start_realtime(out: Path) -> subprocess.Popen:
+    """A real-time synthetic recording (3 cameras) in its own process group."""
+    return subprocess.Popen(
+        [sys.executable, "-m", "pslog.cli", "record", "--synthetic", "--rig", "paper3",
+         "--timing", "typeA", "--motion", "turntable", "--duration", "60", "-o", str(out)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+
+
+def _wait_for_frames(proc: subprocess.Popen, out: Path, seconds: float) -> None:
+    """Until ``out`` has grown past its header and ``seconds`` of recording have passed."""
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:
+        assert proc.poll() is None, proc.communicate()
+        if out.exists() and out.stat().st_size > 200_000:
+            break
+        time.sleep(0.1)
+    time.sleep(seconds)
+
+
+def test_sigterm_finishes_the_file(tmp_path):
+    out = tmp_path / "s.mcap"
+    proc = _start_realtime(out)
+    _wait_for_frames(proc, out, 1.5)
+    proc.send_signal(signal.SIGTERM)
+    _stdout, err = proc.communicate(timeout=30)
+    assert proc.returncode == 0, err
+    assert "recording interrupted" in err
+    session = read_session(out)  # a finished file: no recovery needed
+    det = session.detections
+    assert det.n_frames >= 90  # at least a second of 3 x 30 fps
+    assert session.n_images == det.n_frames
+    span = (det.frame_time_ns.max() - det.frame_time_ns.min()) / NS
+    assert det.n_frames >= 0.8 * 90 * span  # real time, few drops
+    assert _best_errors(session).max() < 1.0
+
+
+def test_sigkill_then_recover(tmp_path):
+    out = tmp_path / "killed.mcap"
+    proc = _start_realtime(out)
+    _wait_for_frames(proc, out, 2.5)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.communicate(timeout=10)
+    # the orphaned camera processes notice and exit on their own
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline:
+        try:
+            os.killpg(proc.pid, 0)
+        except ProcessLookupError:
+            break
+        time.sleep(0.1)
+    else:
+        os.killpg(proc.pid, signal.SIGKILL)
+        pytest.fail("camera processes survived their parent")
+    fixed = tmp_path / "fixed.mcap"
+    report = recover_session(out, fixed)
+    assert report
+    session = read_session(fixed)
+    det = session.detections
+    # at most the last second is lost: a couple of seconds at 90 frames/s remain
+    assert det.n_frames >= 90
+    assert session.truth is not None and session.rig == apply_timing(builtin_rig("paper3"),
+                                                                     "typeA")
+    images = session.n_images
+    assert abs(images - det.n_frames) <= 3 * 30
+
+
+class _StallingSource:
+    """A live 30 fps camera that pauses after 10 frames, resumes for 10 frames, then dies."""
+
+    clock = "test clock"
+    live = True
+
+    def __init__(self) -> None:
+        self.k = 0
+        self.t0 = time.monotonic_ns()
+
+    def set_start(self, t0_ns: int) -> None:
+        self.t0 = t0_ns
+
+    def read(self):
+        from recorders.sources import SourceError
+
+        if self.k == 20:
+            raise SourceError("test camera unplugged")
+        pause = 1.6 if self.k >= 10 else 0.0
+        due = self.t0 + int((self.k / 30 + pause) * NS)
+        time.sleep(max(due - time.monotonic_ns(), 0) / NS)
+        frame = np.full((480, 640, 3), (60, 120, 70), np.uint8)
+        cv2.circle(frame, (300 + self.k, 200), 6, ORANGE_BGR, -1)
+        self.k += 1
+        return self.k - 1, time.monotonic_ns() - self.t0, frame
+
+    def close(self) -> None:
+        pass
+
+
+class StallingSpec:
+    def describe(self) -> str:
+        return "stalling test camera"
+
+    def open(self):
+        return _StallingSource()
+
+
+def test_camera_that_stalls_and_dies_is_logged_while_others_record(tmp_path):
+    from recorders.record import record
+    from recorders.sources import FileSpec
+
+    _write_clip(tmp_path / "a.avi", np.tile([[320.0, 240.0]], (30, 1)))
+    rig = builtin_rig("paper2")
+    out = tmp_path / "s.mcap"
+    summary = record(rig, {"cam1": FileSpec(str(tmp_path / "a.avi"), 640, 480),
+                           "cam2": StallingSpec()}, out, status=None)
+    assert summary.failed == ("cam2",)
+    cam1, cam2 = summary.cameras
+    assert cam1.frames == 30 and cam1.state == "done"
+    assert cam2.frames == 20 and "unplugged" in cam2.message
+    assert cam2.drops >= 40  # the 1.6 s gap at 30 fps
+    texts = [text for _t, text in read_session(out).events]
+    assert any("cam2 stopped delivering frames" in t for t in texts)
+    assert any("cam2 delivering again" in t for t in texts)
+    assert any("cam2 failed: test camera unplugged" in t for t in texts)
+    det = read_session(out).detections
+    assert_array_equal(np.bincount(det.frame_camera), [30, 20])

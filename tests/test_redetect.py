@@ -1,0 +1,90 @@
+"""Offline re-detection over a session's stored frames (samples/throw.mcap)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+from numpy.testing import assert_array_equal
+
+from pslog.cli import main
+from pslog.errors import InputError
+from pslog.log import SessionWriter, iter_images, read_session
+from pslog.rig import builtin_rig
+from recorders import HsvRange, redetect_session
+
+SAMPLE = Path(__file__).resolve().parents[1] / "samples" / "throw.mcap"
+BLUE = HsvRange(100, 130, 120, 255, 70, 255)
+
+
+def _raw_messages(path: Path) -> dict[str, list[tuple[int, bytes]]]:
+    out: dict[str, list[tuple[int, bytes]]] = {}
+    with open(path, "rb") as f:
+        for _schema, channel, message in make_reader(f).iter_messages(log_time_order=True):
+            out.setdefault(channel.topic, []).append((message.log_time, message.data))
+    return out
+
+
+def test_sample_is_a_small_recorded_throw():
+    assert SAMPLE.stat().st_size <= 5_000_000
+    session = read_session(SAMPLE)
+    assert session.rig.names == ("cam1", "cam2", "cam3") and session.timing == "typeA"
+    assert session.n_images == session.detections.n_frames == 135
+    assert session.truth is not None and session.metadata["synthetic_motion"] == "throw"
+
+
+def test_same_settings_reproduce_the_detections(tmp_path):
+    out = tmp_path / "same.mcap"
+    summary = redetect_session(SAMPLE, out)
+    assert summary.images == 135 and summary.kept == 0 and summary.after == summary.before
+    old, new = read_session(SAMPLE).detections, read_session(out).detections
+    assert_array_equal(new.frame_time_ns, old.frame_time_ns)
+    assert_array_equal(new.frame_index, old.frame_index)
+    # detected again on the stored JPEGs instead of the raw renders: nearly the same
+    shift = np.linalg.norm(new.best().uv - old.best().uv, axis=1)
+    assert np.sqrt(np.mean(shift**2)) < 0.3 and shift.max() < 0.75
+
+
+def test_new_thresholds_change_detections_and_nothing_else(tmp_path):
+    out = tmp_path / "blue.mcap"
+    rc = main(["redetect", str(SAMPLE), "-o", str(out), "--hsv", BLUE.text()])
+    assert rc == 0
+    old, new = read_session(SAMPLE), read_session(out)
+    assert old.detections.n_candidates == 135 and new.detections.n_candidates == 0
+    assert_array_equal(new.detections.frame_time_ns, old.detections.frame_time_ns)
+    assert_array_equal(new.detections.frame_camera, old.detections.frame_camera)
+    assert new.rig == old.rig and new.timing == old.timing
+    # the metadata records the new detector settings, and nothing else changes
+    assert new.metadata["detector_hsv"] == BLUE.text() != old.metadata["detector_hsv"]
+    ignore = ("derived_from", "created_utc", "detector_hsv")
+    assert {k: v for k, v in new.metadata.items() if k not in ignore} \
+        == {k: v for k, v in old.metadata.items() if k not in ignore}
+    # frames, calibration, poses, truth and events: byte-identical messages
+    raw_old, raw_new = _raw_messages(SAMPLE), _raw_messages(out)
+    assert set(raw_old) == set(raw_new)
+    for topic in raw_old:
+        if topic.endswith("/detections"):
+            assert raw_new[topic] != raw_old[topic]
+        else:
+            assert raw_new[topic] == raw_old[topic], topic
+    images_old = [(i.camera, i.frame_index, i.time_ns, i.data) for i in iter_images(SAMPLE)]
+    images_new = [(i.camera, i.frame_index, i.time_ns, i.data) for i in iter_images(out)]
+    assert images_new == images_old
+
+
+def test_refusals(tmp_path, capsys):
+    out = tmp_path / "x.mcap"
+    out.write_bytes(b"keep")
+    assert main(["redetect", str(SAMPLE), "-o", str(out)]) == 1
+    assert "--force" in capsys.readouterr().err and out.read_bytes() == b"keep"
+    assert main(["redetect", str(tmp_path / "none.mcap"), "-o", str(tmp_path / "y.mcap")]) == 1
+    assert "none.mcap" in capsys.readouterr().err
+    assert main(["redetect", str(SAMPLE), "-o", str(tmp_path / "y.mcap"), "--hsv", "1,2"]) == 1
+    assert "--hsv" in capsys.readouterr().err
+    bare = tmp_path / "bare.mcap"  # detections only, no frames
+    with SessionWriter(bare, builtin_rig("paper2")) as w:
+        w.add_frame(0, 0, 0, np.array([[1.0, 2.0]]))
+    with pytest.raises(InputError, match="no stored frames"):
+        redetect_session(bare, tmp_path / "z.mcap")
