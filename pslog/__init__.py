@@ -23,7 +23,15 @@ _EXPORTS = {
     "simulation": ("SimulationOptions", "capture_times", "simulate"),
 }
 _MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
-__all__ = sorted(_MODULE_OF)
+__all__ = [  # noqa: RUF022 (grouped by module, as _EXPORTS)
+    "Camera", "look_at",
+    "FusionError", "InputError", "LogFormatError", "OutputExistsError", "PslogError", "RigError",
+    "MOTIONS", "Motion", "get_motion",
+    "NS", "QUALITY_FIELDS", "Detections", "Observations", "Track", "Truth",
+    "BUILTIN_RIGS", "TIMING_PRESETS", "Rig", "apply_timing", "builtin_rig", "load_rig",
+    "resolve_rig", "save_rig",
+    "SimulationOptions", "capture_times", "simulate",
+]
 
 
 def __getattr__(name: str):
