@@ -30,13 +30,6 @@ COMMANDS: dict[str, tuple[str, str]] = {
 }
 
 
-def _available() -> dict[str, tuple[str, str]]:
-    from importlib.util import find_spec
-
-    return {name: spec for name, spec in COMMANDS.items()
-            if find_spec(f"pslog.cli.{spec[0]}") is not None}
-
-
 def _top_parser(commands: dict[str, tuple[str, str]]) -> argparse.ArgumentParser:
     from importlib.metadata import PackageNotFoundError, version
 
@@ -59,7 +52,7 @@ def _top_parser(commands: dict[str, tuple[str, str]]) -> argparse.ArgumentParser
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    commands = _available()
+    commands = COMMANDS
     if not argv or argv[0] not in commands:
         parser = _top_parser(commands)
         if argv and not argv[0].startswith("-"):

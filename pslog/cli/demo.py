@@ -66,12 +66,15 @@ def run(args: argparse.Namespace) -> int:
 
     session = read_session(session_path)
     print(f"2/4 fusing {len(session.detections.best())} detections with every method")
-    tracks = {}
+    tracks, skipped = {}, []
     for method in METHODS:
         try:
             tracks.update(fuse_all(session.detections, session.rig, [method]))
-        except FusionError as exc:
-            print(f"    {method}: not applicable here ({exc})")
+        except FusionError:
+            skipped.append(method)
+    if skipped:
+        print(f"    {', '.join(skipped)}: need cameras with a common shutter instant (sync or "
+              f"typeB timing), not type A; the paper's table below has them")
     copy_session(session_path, fused_path, tracks=list(tracks.values()), force=args.force)
 
     print(f"3/4 accuracy against ground truth ({fused_path}):\n")
@@ -85,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
     from viewers import save_rrd
 
     rrd_path = folder / "demo.rrd"
-    save_rrd([fused_path], rrd_path)
+    save_rrd([fused_path], rrd_path, force=args.force)
     print(f"\n4/4 saved the rerun recording {rrd_path}; open it with\n"
           f"      rerun {rrd_path}\n"
           f"    or in a browser:  pslog view {fused_path} --serve")

@@ -1,0 +1,98 @@
+"""pslog view: browse a session and its fused 3D tracks in rerun.
+
+Without ``--save``/``--serve``/``--connect``/``--stdout`` the native viewer is spawned, which
+needs a display; on a machine without one this says so and suggests ``--save`` or ``--serve``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+from ._common import add_force, check_output, nonnegative_float
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("sessions", nargs="+", metavar="SESSION",
+                        help="session MCAP, then optionally fused copies of it (pslog fuse "
+                             "output) whose tracks are shown too")
+    parser.add_argument("--methods", metavar="M1,M2",
+                        help="tracks to show, comma-separated; a fusion method no file holds is "
+                             "fused on the fly (default: every stored track, else typeA)")
+    parser.add_argument("--frames", default="all", metavar="all|none|every:N",
+                        help="recorded images to include (default all; every:N keeps frames "
+                             "whose index is a multiple of N)")
+    parser.add_argument("--start", type=nonnegative_float, metavar="S",
+                        help="start, seconds after the session's first frame")
+    parser.add_argument("--end", type=nonnegative_float, metavar="S",
+                        help="end, seconds after the session's first frame")
+    parser.add_argument("--web-port", type=int, default=9090,
+                        help="port of the web viewer with --serve (default 9090)")
+    parser.add_argument("--grpc-port", type=int, default=9876,
+                        help="port of the data server with --serve (default 9876)")
+    add_force(parser)
+    import rerun as rr  # rerun's standard flags: --save, --serve, --connect, --url, ...
+
+    rr.script_add_args(parser)
+
+
+def has_display() -> bool:
+    """Whether a native viewer window can open (on Linux: an X11 or Wayland display)."""
+    if sys.platform.startswith("linux"):
+        return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+    return True
+
+
+def run(args: argparse.Namespace) -> int:
+    from viewers import FramesChoice, load_view_data, log_view, new_stream
+
+    frames = FramesChoice.parse(args.frames)
+    to_file_or_server = args.save or args.serve or args.connect or args.stdout
+    if not to_file_or_server and (args.headless or not has_display()):
+        why = "--headless given" if args.headless else "no display (DISPLAY/WAYLAND_DISPLAY unset)"
+        print(f"pslog view: {why}, so no viewer window can open; use --save out.rrd (then "
+              f"'rerun out.rrd' where there is a display) or --serve to browse from a web "
+              f"browser", file=sys.stderr)
+        return 1
+    if args.save:
+        check_output(args.save, args.force)
+    # read and fuse before any sink starts, so errors come out before a viewer does
+    data = load_view_data(args.sessions, methods=args.methods, start=args.start, end=args.end)
+    out = sys.stderr if args.stdout else sys.stdout
+    for note in data.notes:
+        print(note, file=out)
+
+    import rerun as rr
+
+    rec = new_stream()
+    if args.stdout:
+        rec.stdout()
+    elif args.serve:
+        uri = rec.serve_grpc(grpc_port=args.grpc_port)
+        rr.serve_web_viewer(web_port=args.web_port, open_browser=has_display(), connect_to=uri)
+    elif args.connect:
+        rec.connect_grpc(args.url)
+    elif args.save:
+        rec.save(args.save)
+    else:
+        rec.spawn()
+    counts = log_view(rec, data, frames)
+    rec.flush()
+    print("logged " + ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in counts.items() if v),
+          file=out)
+    if args.save:
+        rec.disconnect()  # writes the file's footer
+        print(f"wrote {args.save}; open it with: rerun {args.save}", file=out)
+    if args.serve:
+        from urllib.parse import quote
+
+        print(f"serving the web viewer at http://localhost:{args.web_port}/?url={quote(uri)} "
+              f"(Ctrl-C to stop)", file=out, flush=True)
+        try:
+            rr.script_teardown(args)  # sleeps until Ctrl-C
+        except KeyboardInterrupt:
+            pass
+        finally:
+            rec.disconnect()
+    return 0

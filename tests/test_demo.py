@@ -1,0 +1,30 @@
+"""pslog demo: the README's main job, end to end on real files."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+from pslog.evaluation import evaluate
+from pslog.log import read_session
+
+
+def test_demo_records_fuses_evaluates_and_saves_a_recording(tmp_path):
+    out = tmp_path / "demo"
+    result = subprocess.run([sys.executable, "-m", "pslog.cli", "demo", "--out", str(out)],
+                            capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr
+    assert "Table 1" in result.stdout and "typeA" in result.stdout
+    assert f"rerun {out / 'demo.rrd'}" in result.stdout
+    session = read_session(out / "fused.mcap")
+    assert session.n_images == 135 and set(session.tracks) == {"typeA", "nearest"}
+    type_a = evaluate(session.tracks["typeA"], session.truth)
+    nearest = evaluate(session.tracks["nearest"], session.truth)
+    assert abs(type_a.rate_hz - 90.0) < 0.5 and type_a.mean_mm < 10.0
+    assert nearest.mean_mm > 3 * type_a.mean_mm
+    assert (out / "demo.rrd").stat().st_size > 1_000_000
+    # a second run into the same folder refuses to overwrite, with one line
+    again = subprocess.run([sys.executable, "-m", "pslog.cli", "demo", "--out", str(out)],
+                           capture_output=True, text=True, timeout=300)
+    assert again.returncode == 1 and "--force" in again.stderr
+    assert "Traceback" not in again.stderr

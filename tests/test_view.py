@@ -1,0 +1,300 @@
+"""The rerun viewer: a real session MCAP (with JPEG frames) becomes a .rrd that rerun verifies;
+read back, it holds the expected entities, rows, timelines, images and geometry."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pyarrow as pa
+import pytest
+from rerun.chunk import RrdReader
+
+from pslog.cli import main as pslog_main
+from pslog.errors import InputError, OutputExistsError
+from pslog.fusion import explain_type_a, fuse_all
+from pslog.log import SessionWriter, copy_session, read_session
+from pslog.motion import get_motion
+from pslog.records import NS
+from pslog.rig import apply_timing, builtin_rig
+from pslog.simulation import SimulationOptions, simulate
+from viewers import FramesChoice, build_recording, load_view_data, save_rrd
+from viewers._columns import PIXEL_CENTER, line_polylines
+
+RERUN = Path(sys.executable).with_name("rerun")
+DURATION_S = 1.0
+
+
+def _rig():
+    """The paper's rig with a distorting lens on cam2, so polylines are really bent."""
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    return rig.with_camera(rig.camera("cam2").replace(dist=[-0.12, 0.03, 0.001, -0.001, 0.0]))
+
+
+def _jpeg(camera: int, frame: int) -> bytes:
+    image = np.full((48, 64, 3), (40 * camera, 100, 3 * frame % 255), np.uint8)
+    ok, data = cv2.imencode(".jpg", image)
+    assert ok
+    return data.tobytes()
+
+
+@pytest.fixture(scope="module")
+def session(tmp_path_factory) -> Path:
+    rig = _rig()
+    det, truth = simulate(rig, get_motion("throw"), DURATION_S,
+                          SimulationOptions(noise_px=0.3, miss_rate=0.1, seed=3))
+    path = tmp_path_factory.mktemp("view") / "session.mcap"
+    offsets = np.concatenate([[0], np.cumsum(det.candidates_per_frame())])
+    with SessionWriter(path, rig, timing="typeA") as writer:
+        for i in range(det.n_frames):
+            rows = slice(offsets[i], offsets[i + 1])
+            uv = det.cand_uv[rows]
+            if i % 7 == 3 and len(uv):  # a rejected second candidate now and then
+                uv = np.vstack([uv, uv + 40.0])
+            cam, frame = int(det.frame_camera[i]), int(det.frame_index[i])
+            writer.add_frame(cam, frame, int(det.frame_time_ns[i]), uv=uv,
+                             score=np.linspace(1.0, 0.5, len(uv)), image=_jpeg(cam, frame))
+        writer.add_truth(truth)
+        writer.add_event(int(det.frame_time_ns[5]), "a note")
+    return path
+
+
+def _chunks(rrd: Path) -> dict[str, list[pa.RecordBatch]]:
+    """Temporal chunks' record batches by entity path."""
+    out: dict[str, list[pa.RecordBatch]] = {}
+    for chunk in RrdReader(rrd).stream():
+        if not chunk.is_static:
+            out.setdefault(chunk.entity_path, []).append(chunk.to_record_batch())
+    return out
+
+
+def _column(batches: list[pa.RecordBatch], name: str) -> list:
+    return [v for b in batches for v in b.column(name).to_pylist()]
+
+
+def _times(batches: list[pa.RecordBatch]) -> np.ndarray:
+    return np.concatenate([b.column("capture_time").cast(pa.int64()).to_numpy()
+                           for b in batches])
+
+
+def _verify(rrd: Path) -> None:
+    result = subprocess.run([str(RERUN), "rrd", "verify", str(rrd)], capture_output=True,
+                            text=True, timeout=120)
+    assert result.returncode == 0, result.stdout + result.stderr
+
+
+@pytest.fixture(scope="module")
+def rrd(session, tmp_path_factory) -> tuple[Path, dict]:
+    path = tmp_path_factory.mktemp("rrd") / "view.rrd"
+    counts = save_rrd([session], path)
+    return path, counts
+
+
+def test_rrd_verifies_and_holds_every_entity(session, rrd):
+    path, counts = rrd
+    _verify(path)
+    s = read_session(session)
+    chunks = _chunks(path)
+    names = s.rig.names
+    expected = {"/world/tracks/typeA", "/world/tracks/typeA/trail", "/world/truth",
+                "/world/truth/trail", "/world/typeA/past", "/world/typeA/predicted",
+                "/world/typeA/prediction", "/world/typeA/correction", "/plots/error_mm/typeA",
+                "/plots/snap_px/typeA", "/plots/ray_shift_mm/typeA", "/events"}
+    for c in names:
+        image = f"/world/cameras/{c}/image"
+        expected |= {image, f"{image}/detections", f"{image}/rejected", f"/world/rays/{c}",
+                     f"/plots/detection_rate/{c}"}
+        expected |= {f"{image}/typeA/{k}" for k in
+                     ("interpolated", "snapped", "bracket", "snap", "epipolar")}
+        expected |= {f"{image}/epipolar/{d}" for d in names if d != c}
+    assert expected <= set(chunks), sorted(expected - set(chunks))
+    # typeA's rays cross exactly after the snap: its ray miss (~1e-15 m) is not plotted
+    assert "/plots/ray_miss_mm/typeA" not in chunks
+    static = {c.entity_path for c in RrdReader(path).stream() if c.is_static}
+    assert {"/world", "/world/cameras/cam1", "/legend"} <= static
+    assert RrdReader(path).blueprints(), "the default blueprint is in the file"
+
+    det, obs = s.detections, s.detections.best()
+    track = fuse_all(obs, s.rig, ["typeA"])["typeA"]
+    for i, c in enumerate(names):
+        frames = det.frame_camera == i
+        image = f"/world/cameras/{c}/image"
+        # every frame has a detections row (empty when nothing was detected) and an image
+        assert sum(b.num_rows for b in chunks[f"{image}/detections"]) == frames.sum()
+        assert sum(b.num_rows for b in chunks[image]) == frames.sum()
+        points = _column(chunks[f"{image}/detections"], "Points2D:positions")
+        assert sum(len(p) for p in points) == np.sum(obs.camera == i)
+        rejected = _column(chunks[f"{image}/rejected"], "Points2D:positions")
+        assert sum(len(p) for p in rejected) == np.sum(
+            (det.candidates_per_frame() > 1) & frames)
+        assert sum(b.num_rows for b in chunks[f"/world/rays/{c}"]) == np.sum(obs.camera == i)
+    assert sum(b.num_rows for b in chunks["/world/tracks/typeA"]) == len(track)
+    assert counts["track_points"] == len(track)
+    assert counts["images"] == s.n_images == det.n_frames
+
+    # timeline range: first to last frame, on the session clock
+    all_times = np.concatenate([_times(b) for b in chunks.values()])
+    assert all_times.min() == det.frame_time_ns.min()
+    assert all_times.max() == det.frame_time_ns.max()
+    frame_col = np.concatenate([b.column("frame").to_numpy() for b in chunks["/world/rays/cam1"]])
+    np.testing.assert_array_equal(frame_col, obs.frame_index[obs.camera == 0])
+
+
+def test_images_are_passed_through_unchanged(session, rrd):
+    chunks = _chunks(rrd[0])
+    image = chunks["/world/cameras/cam3/image"]
+    blobs = _column(image, "EncodedImage:blob")
+    frames = np.concatenate([b.column("frame").to_numpy() for b in image])
+    assert bytes(blobs[0][0]) == _jpeg(2, int(frames[0]))
+    assert _column(image, "EncodedImage:media_type")[0] == ["image/jpeg"]
+
+
+def test_rays_end_at_the_type_a_points(session, rrd):
+    s = read_session(session)
+    track = fuse_all(s.detections, s.rig, ["typeA"])["typeA"]
+    chunks = _chunks(rrd[0])
+    cam = s.rig.cameras[0]
+    rays = chunks["/world/rays/cam1"]
+    strips = np.array([s[0] for s in _column(rays, "LineStrips3D:strips")])  # (n, 2, 3)
+    np.testing.assert_allclose(strips[:, 0], np.broadcast_to(cam.center_world, (len(strips), 3)),
+                               atol=1e-5)
+    times = _times(rays)
+    mine = track.camera == 0
+    at = np.searchsorted(times, track.time_ns[mine])
+    np.testing.assert_allclose(strips[at, 1], track.position_world[mine], atol=1e-5)
+
+
+def _distance_to_polyline(point: np.ndarray, strip: np.ndarray) -> float:
+    a, b = strip[:-1], strip[1:]
+    ab = b - a
+    k = np.clip(np.einsum("ij,ij->i", point - a, ab) / np.einsum("ij,ij->i", ab, ab), 0, 1)
+    return float(np.min(np.linalg.norm(a + k[:, None] * ab - point, axis=1)))
+
+
+def test_figure2_snapped_points_lie_on_the_drawn_epipolar_lines(session, rrd):
+    s = read_session(session)
+    construction = explain_type_a(s.detections, s.rig)
+    chunks = _chunks(rrd[0])
+    base = "/world/cameras/cam2/image/typeA"  # the distorting camera
+    snapped = _column(chunks[f"{base}/snapped"], "Points2D:positions")
+    lines = _column(chunks[f"{base}/epipolar"], "LineStrips2D:strips")
+    interpolated = _column(chunks[f"{base}/interpolated"], "Points2D:positions")
+    assert len(snapped) == len(construction.event_row)
+    checked = 0
+    for points, strips in zip(snapped, lines, strict=True):
+        assert len(strips) == len(points)
+        for p, strip in zip(points, strips, strict=True):
+            assert _distance_to_polyline(np.array(p), np.array(strip)) < 0.5
+            checked += 1
+    assert checked > 10
+    assert sum(len(p) for p in interpolated) == checked
+
+
+def test_epipolar_polyline_passes_through_the_projection_under_distortion():
+    rig = _rig()
+    cam_a, cam_b = rig.camera("cam1"), rig.camera("cam2")
+    from pslog.geometry import epipolar_lines, fundamental_matrix
+
+    points_world = np.array([[0.3, 0.5, 0.4], [-0.6, 1.2, 0.1], [0.9, -0.4, 1.0]])
+    uv_a, _ = cam_a.project(points_world)
+    uv_b, _ = cam_b.project(points_world)  # distorted pixels in cam2
+    lines = epipolar_lines(fundamental_matrix(cam_a, cam_b), cam_a.undistort(uv_a))
+    strips, visible = line_polylines(cam_b, lines)
+    assert visible.all() and strips.shape[1] > 2
+    for strip, uv in zip(strips, uv_b, strict=True):
+        assert _distance_to_polyline(uv + PIXEL_CENTER, strip.astype(np.float64)) < 0.3
+
+
+def test_window_frames_and_buffered_recording(session, tmp_path):
+    s = read_session(session)
+    first = int(s.detections.frame_time_ns.min())
+    out = tmp_path / "part.rrd"
+    rec = build_recording(session, frames="every:3", start=0.25, end=0.75)
+    rec.save(out)  # the stream buffered everything until this sink was set
+    rec.flush()
+    rec.disconnect()
+    _verify(out)
+    chunks = _chunks(out)
+    times = np.concatenate([_times(b) for b in chunks.values()])
+    assert times.min() >= first + 0.25 * NS and times.max() < first + 0.75 * NS
+    images = chunks["/world/cameras/cam1/image"]
+    frames = np.concatenate([b.column("frame").to_numpy() for b in images])
+    det = s.detections
+    want = ((det.frame_camera == 0) & (det.frame_index % 3 == 0)
+            & (det.frame_time_ns >= first + 0.25 * NS) & (det.frame_time_ns < first + 0.75 * NS))
+    np.testing.assert_array_equal(np.sort(frames), np.sort(det.frame_index[want]))
+
+
+def test_fused_copies_add_tracks_and_rename_duplicates(session, tmp_path):
+    s = read_session(session)
+    tracks = fuse_all(s.detections, s.rig, ["typeA", "nearest"])
+    fused = tmp_path / "fused.mcap"
+    copy_session(session, fused, tracks=list(tracks.values()))
+    data = load_view_data([session, fused])
+    assert sorted(data.tracks) == ["nearest", "typeA"] and not data.notes
+    only_a = tmp_path / "only_a.mcap"
+    copy_session(session, only_a, tracks=[tracks["typeA"]])
+    data = load_view_data([fused, only_a], methods="typeA_only_a,nearest,typeA")
+    assert list(data.tracks) == ["typeA_only_a", "nearest", "typeA"]
+    assert not any("on the fly" in n for n in data.notes)
+    data = load_view_data([only_a], methods="typeA,nearest")
+    assert any("fused on the fly: nearest" in n for n in data.notes)
+    with pytest.raises(InputError, match="unknown method 'smooth'"):
+        load_view_data([session], methods="smooth")
+    with pytest.raises(InputError, match="start"):
+        load_view_data([session], start=0.5, end=0.2)
+    with pytest.raises(OutputExistsError):
+        save_rrd([session], fused)
+
+
+@pytest.mark.parametrize("text,every", [("all", 1), ("none", 0), ("every:4", 4)])
+def test_frames_choice(text, every):
+    assert FramesChoice.parse(text).every == every
+
+
+@pytest.mark.parametrize("text", ["every:0", "every:x", "some", ""])
+def test_frames_choice_rejects(text):
+    with pytest.raises(InputError, match="frames must be"):
+        FramesChoice.parse(text)
+
+
+def _pslog(args: list[str], env: dict | None = None) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "pslog.cli", *args], capture_output=True,
+                          text=True, env=env, timeout=120)
+
+
+def test_cli_save(session, tmp_path, capsys):
+    out = tmp_path / "cli.rrd"
+    assert pslog_main(["view", str(session), "--save", str(out), "--frames", "none",
+                       "--methods", "typeA,nearest"]) == 0
+    text = capsys.readouterr().out
+    assert "fused on the fly: typeA, nearest" in text and f"wrote {out}" in text
+    _verify(out)
+    chunks = _chunks(out)
+    assert "/world/tracks/nearest" in chunks and "/world/cameras/cam1/image" not in chunks
+    assert "/plots/ray_miss_mm/nearest" in chunks and "/plots/ray_miss_mm/typeA" in chunks
+    assert pslog_main(["view", str(session), "--save", str(out)]) == 1
+    assert "exists; use --force" in capsys.readouterr().err
+    assert pslog_main(["view", str(session), "--save", str(out), "--force"]) == 0
+
+
+def test_cli_without_display_explains(session, tmp_path):
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    result = _pslog(["view", str(session)], env=env)
+    assert result.returncode == 1
+    assert "no display" in result.stderr and "--save" in result.stderr
+    assert "--serve" in result.stderr and "Traceback" not in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+
+
+def test_cli_bad_values(session, tmp_path, capsys):
+    out = str(tmp_path / "x.rrd")
+    assert pslog_main(["view", str(session), "--frames", "every:0", "--save", out]) == 1
+    assert "frames must be 'all', 'none' or 'every:N'" in capsys.readouterr().err
+    assert pslog_main(["view", str(tmp_path / "missing.mcap"), "--save", out]) == 1
+    assert "error:" in capsys.readouterr().err
+    assert not Path(out).exists()

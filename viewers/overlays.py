@@ -1,0 +1,145 @@
+"""Image-space overlays on each camera's image: detections, epipolar lines, and the
+paper's Figure 2 construction behind each type-A point (plus its 3D counterpart, eqs. 2-4).
+
+Pixels are drawn where they are on the recorded (distorted) image: undistorted geometry
+(epipolar lines, the interpolated and snapped points) is re-distorted first.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import rerun as rr
+
+from pslog.geometry import epipolar_lines, fundamental_matrix
+from pslog.motion import BALL_RADIUS
+
+from . import _columns as C
+from .data import ViewData
+
+
+def log_detections(rec, data: ViewData, clock: C.Clock) -> int:
+    det = data.session.detections
+    if det.n_frames == 0:
+        return 0
+    counts = det.candidates_per_frame()
+    offsets = np.concatenate([[0], np.cumsum(counts)])
+    is_best = np.arange(det.n_candidates) == offsets[det.cand_frame]
+    frame_in = data.in_window(det.frame_time_ns)
+    n = 0
+    for c, name in enumerate(det.camera_names):
+        frames = np.flatnonzero(frame_in & (det.frame_camera == c))
+        if len(frames) == 0:
+            continue
+        keep = frame_in[det.cand_frame] & (det.frame_camera[det.cand_frame] == c)
+        t, f = det.frame_time_ns[frames], det.frame_index[frames]
+        best = keep & is_best
+        # every frame gets a row, an empty one when nothing was detected (clears the point)
+        n += C.send(rec, f"{C.image_path(name)}/detections", clock, t, f,
+                    rr.Points2D.columns(positions=C.image_space(det.cand_uv[best]))
+                    .partition(np.minimum(counts[frames], 1)))
+        rejected = keep & ~is_best
+        C.send(rec, f"{C.image_path(name)}/rejected", clock, t, f,
+               rr.Points2D.columns(positions=C.image_space(det.cand_uv[rejected]))
+               .partition(np.maximum(counts[frames] - 1, 0)))
+    return n
+
+
+def _fundamentals(rig) -> np.ndarray:
+    """(n, n, 3, 3): F[a, b] maps undistorted pixels of camera a to lines in camera b."""
+    n = len(rig)
+    F = np.full((n, n, 3, 3), np.nan)
+    for a in range(n):
+        for b in range(n):
+            if a != b:
+                F[a, b] = fundamental_matrix(rig.cameras[a], rig.cameras[b])
+    return F
+
+
+def log_epipolar(rec, data: ViewData, clock: C.Clock, uv_undistorted: np.ndarray) -> int:
+    rig, obs = data.session.rig, data.observations
+    F = _fundamentals(rig)
+    inside = data.in_window(obs.time_ns)
+    n = 0
+    for d, src in enumerate(rig.cameras):
+        rows = np.flatnonzero(inside & (obs.camera == d))
+        if len(rows) == 0:
+            continue
+        for c, cam in enumerate(rig.cameras):
+            if c == d:
+                continue
+            lines = epipolar_lines(F[d, c], uv_undistorted[rows])
+            strips, visible = C.line_polylines(cam, lines)
+            n += C.send(rec, f"{C.image_path(cam.name)}/epipolar/{src.name}", clock,
+                        obs.time_ns[rows], obs.frame_index[rows],
+                        rr.LineStrips2D.columns(strips=strips).partition(visible.astype(np.int64)))
+    return n
+
+
+def log_construction(rec, data: ViewData, clock: C.Clock, uv_undistorted: np.ndarray) -> int:
+    """The paper's Figure 2 on the partner images and eqs. 2-4 in 3D, per type-A point."""
+    con, rig, obs = data.construction, data.session.rig, data.observations
+    if con is None or len(con.event_row) == 0:
+        return 0
+    events = np.flatnonzero(data.in_window(obs.time_ns[con.event_row]))
+    if len(events) == 0:
+        return 0
+    event_row = con.event_row[events]
+    t, f = obs.time_ns[event_row], obs.frame_index[event_row]
+    past = [{k: getattr(p, k)[events] for k in ("row", "partner", "prev_row", "next_row",
+                                                  "uv_interpolated", "uv_snapped",
+                                                  "points_world")} for p in con.past]
+    stack = {k: np.stack([past[0][k], past[1][k]], axis=1) for k in past[0]}  # (k, 2, ...)
+    F = _fundamentals(rig)
+    labels = np.array(["P(t-1)", "P(t-2)"])
+    yellow, magenta = (255, 230, 0), (255, 0, 255)
+    for c, cam in enumerate(rig.cameras):
+        mine = stack["partner"] == c  # (k, 2): constructions drawn on this camera's image
+        lengths = C.lengths_of(mine)
+        which = np.nonzero(mine)[1]  # 0: P(t-1), 1: P(t-2)
+        interp = C.distort_pixels(cam, stack["uv_interpolated"][mine])
+        snapped = C.distort_pixels(cam, stack["uv_snapped"][mine])
+        prev_uv, next_uv = obs.uv[stack["prev_row"][mine]], obs.uv[stack["next_row"][mine]]
+        base = f"{C.image_path(cam.name)}/typeA"
+        C.send(rec, f"{base}/interpolated", clock, t, f, rr.Points2D.columns(
+            positions=C.image_space(interp), labels=labels[which], colors=[yellow] * len(which),
+            radii=np.full(len(which), -4.0)).partition(lengths))
+        C.send(rec, f"{base}/snapped", clock, t, f, rr.Points2D.columns(
+            positions=C.image_space(snapped), colors=[magenta] * len(which),
+            radii=np.full(len(which), -4.0)).partition(lengths))
+        bracket = np.stack([prev_uv, interp, next_uv], axis=1).reshape(-1, 2)
+        C.send(rec, f"{base}/bracket", clock, t, f, rr.LineStrips2D.columns(
+            strips=C.image_space(bracket).reshape(-1, 3, 2), colors=[yellow] * len(which),
+            radii=np.full(len(which), -1.0)).partition(lengths))
+        snap = np.stack([interp, snapped], axis=1).reshape(-1, 2)
+        C.send(rec, f"{base}/snap", clock, t, f, rr.LineStrips2D.columns(
+            strips=C.image_space(snap).reshape(-1, 2, 2), colors=[magenta] * len(which),
+            radii=np.full(len(which), -1.5)).partition(lengths))
+        # the epipolar line of the observed point, which the interpolated point snaps to
+        observed = stack["row"][mine]
+        lines = epipolar_lines(F[obs.camera[observed], c], uv_undistorted[observed])
+        strips, visible = C.line_polylines(cam, lines)
+        shown = np.zeros(mine.shape, dtype=bool)
+        shown[mine] = visible
+        C.send(rec, f"{base}/epipolar", clock, t, f, rr.LineStrips2D.columns(
+            strips=strips, colors=[magenta] * int(visible.sum()),
+            radii=np.full(int(visible.sum()), -1.0)).partition(C.lengths_of(shown)))
+
+    # 3D: the two pseudo-stereo points, the linear prediction (eq. 2) and eq. 4's correction
+    p_world = stack["points_world"]  # (k, 2, 3): P(t-1), P(t-2)
+    predicted = con.predicted_world[events]
+    final = con.points_world[events]
+    C.send(rec, "world/typeA/past", clock, t, f, rr.Points3D.columns(
+        positions=p_world.reshape(-1, 3), labels=np.tile(labels, len(events)),
+        colors=[yellow] * (2 * len(events)),
+        radii=np.full(2 * len(events), 0.4 * BALL_RADIUS)).partition(np.full(len(events), 2)))
+    C.send(rec, "world/typeA/predicted", clock, t, f, rr.Points3D.columns(
+        positions=predicted, labels=["P^(t)"] * len(events), colors=[magenta] * len(events),
+        radii=np.full(len(events), 0.4 * BALL_RADIUS)))
+    extrapolation = np.stack([p_world[:, 1], p_world[:, 0], predicted], axis=1)
+    correction = np.stack([predicted, final], axis=1)
+    C.send(rec, "world/typeA/prediction", clock, t, f, rr.LineStrips3D.columns(
+        strips=extrapolation, colors=[yellow] * len(events),
+        radii=np.full(len(events), -1.0)))
+    C.send(rec, "world/typeA/correction", clock, t, f, rr.LineStrips3D.columns(
+        strips=correction, colors=[magenta] * len(events), radii=np.full(len(events), -1.5)))
+    return len(events)

@@ -1,0 +1,393 @@
+"""What the rerun recording of a session holds, logged column by column.
+
+Entity paths mirror the transform tree (world z up, metres):
+
+==========================================  =============================================
+``world``                                   ViewCoordinates RIGHT_HAND_Z_UP (static)
+``world/cameras/<cam>``                     Transform3D camera -> world (static)
+``world/cameras/<cam>/image``               Pinhole (static), EncodedImage per frame
+``.../image/detections``, ``/rejected``     best and other candidates, Points2D per frame
+``.../image/epipolar/<other>``              epipolar line of ``<other>``'s latest detection
+``.../image/typeA/...``                     Figure 2: bracket, interpolated, snap, snapped,
+                                            epipolar line of the observed point
+``world/rays/<cam>``                        each detection's viewing ray, LineStrips3D
+``world/tracks/<method>`` (``/trail``)      fused points and trail segments
+``world/truth`` (``/trail``)                ground truth, when the session has it
+``world/typeA/...``                         P_{t-1}, P_{t-2}, prediction (eq. 2), eq. 4
+``plots/error_mm/<method>``                 distance to truth, mm
+``plots/<quality>/<method>``                snap_px, ray_miss_mm, ray_shift_mm
+``plots/detection_rate/<cam>``              % of frames with a detection, last second
+``events``, ``legend``                      session notes (TextLog), colour legend
+==========================================  =============================================
+
+Timelines: ``capture_time`` (the session clock, integer ns) and ``frame`` (frame index).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import rerun as rr
+
+from pslog.errors import OutputExistsError
+from pslog.log import iter_images
+from pslog.motion import BALL_RADIUS
+from pslog.records import NS, Track
+
+from . import _columns as C
+from ._columns import camera_path, image_path
+from .blueprint import build_blueprint, default_eye, quality_plots
+from .data import UNBOUNDED_NS, FramesChoice, ViewData, load_view_data
+from .overlays import log_construction, log_detections, log_epipolar
+
+APPLICATION_ID = "pslog"
+_MEDIA_TYPES = {"jpeg": "image/jpeg", "jpg": "image/jpeg", "png": "image/png"}
+_IMAGE_BATCH_BYTES = 32 << 20  # send images in batches of about this many bytes
+_RAY_FALLBACK_M = 5.0  # rays that do not reach the floor are drawn this long
+_TRAIL_GAP_S = 0.1  # no trail segment across a gap longer than this
+_RATE_WINDOW_S = 1.0  # detection rate over the last second
+
+
+def build_recording(session_paths: str | Path | Sequence[str | Path], *,
+                    methods: str | Sequence[str] | None = None, frames: str = "all",
+                    start: float | None = None, end: float | None = None,
+                    recording: rr.RecordingStream | None = None) -> rr.RecordingStream:
+    """A rerun recording of a session, its fused tracks and the type-A construction.
+
+    Parameters
+    ----------
+    session_paths : the session MCAP, then optionally fused copies (see
+        :func:`viewers.data.load_view_data`)
+    methods : tracks to show (None: every stored track, else ``typeA`` fused on the fly)
+    frames : ``all``, ``none`` or ``every:N`` — which recorded images to include
+    start, end : seconds from the session's first frame
+    recording : a stream to log into (with its sink already set, so data streams out);
+        None: a new stream that buffers in memory until a sink is set (``rec.save(path)``,
+        ``rec.spawn()``, ...)
+
+    Returns
+    -------
+    The RecordingStream, with the default blueprint sent.
+    """
+    choice = FramesChoice.parse(frames)
+    data = load_view_data(session_paths, methods=methods, start=start, end=end)
+    rec = recording if recording is not None else new_stream()
+    log_view(rec, data, choice)
+    return rec
+
+
+def save_rrd(session_paths: str | Path | Sequence[str | Path], path: str | Path, *,
+             force: bool = False, **options) -> dict[str, int]:
+    """Write the recording of :func:`build_recording` (same ``options``) to the .rrd ``path``.
+
+    Refuses an existing ``path`` unless ``force`` (OutputExistsError). Returns the row
+    counts per kind (``detections``, ``images``, ``track_points``, ...).
+    """
+    path = Path(path)
+    if path.exists() and not force:
+        raise OutputExistsError(f"{path} exists; use --force to overwrite it")
+    choice = FramesChoice.parse(options.pop("frames", "all"))
+    data = load_view_data(session_paths, **options)
+    rec = new_stream()
+    rec.save(path)  # stream to the file while logging: images never pile up in memory
+    try:
+        counts = log_view(rec, data, choice)
+    finally:
+        rec.flush()
+        rec.disconnect()  # finalizes the file (footer)
+    return counts
+
+
+def new_stream() -> rr.RecordingStream:
+    """A fresh, non-global recording stream (a new recording id each time)."""
+    return rr.RecordingStream(APPLICATION_ID)
+
+
+def log_view(rec: rr.RecordingStream, data: ViewData, frames: FramesChoice) -> dict[str, int]:
+    """Log everything of ``data`` into ``rec`` and send the default blueprint.
+
+    Returns row counts per kind, for reports.
+    """
+    session = data.session
+    rig = session.rig
+    obs = data.observations
+    first = int(obs.time_ns.min()) if len(obs) else (
+        int(session.detections.frame_time_ns.min()) if session.detections.n_frames else 0)
+    clock = C.Clock(first)
+    counts: dict[str, int] = {}
+    colors = C.method_colors(list(data.tracks))
+    quality = quality_plots(data.tracks)
+    scene = (session.truth.position_world if session.truth is not None and len(session.truth)
+             else np.concatenate([t.position_world for t in data.tracks.values()] or
+                                 [np.zeros((0, 3))]))
+    rec.send_blueprint(build_blueprint(
+        rig.names, list(data.tracks), quality=quality,
+        has_truth=session.truth is not None and len(session.truth) > 0,
+        eye=default_eye(np.array([c.center_world for c in rig.cameras]), scene)))
+    rec.send_recording_name(session.path.stem)
+    _log_static(rec, data, colors, quality)
+
+    uv_undistorted = np.empty_like(obs.uv)
+    for c, cam in enumerate(rig.cameras):
+        rows = obs.camera == c
+        uv_undistorted[rows] = cam.undistort(obs.uv[rows])
+    counts["detections"] = log_detections(rec, data, clock)
+    counts["rays"] = _log_rays(rec, data, clock)
+    counts["epipolar_lines"] = log_epipolar(rec, data, clock, uv_undistorted)
+    counts["track_points"] = _log_tracks(rec, data, clock, colors)
+    counts["truth_points"] = _log_truth(rec, data, clock)
+    counts["typeA_constructions"] = log_construction(rec, data, clock, uv_undistorted)
+    counts["plot_points"] = _log_plots(rec, data, clock, quality)
+    counts["events"] = _log_events(rec, data, clock)
+    counts["images"] = _log_images(rec, data, clock, frames)
+    return counts
+
+
+# ---- static --------------------------------------------------------------------------------
+def _log_static(rec, data: ViewData, colors, quality) -> None:
+    rig = data.session.rig
+    rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+    for c, cam in enumerate(rig.cameras):
+        world_from_cam = cam.world_from_cam
+        rec.log(camera_path(cam.name), rr.Transform3D(
+            translation=world_from_cam[:3, 3], mat3x3=world_from_cam[:3, :3]), static=True)
+        K = cam.K.copy()
+        K[:2, 2] += C.PIXEL_CENTER
+        # rerun's Pinhole camera frame RDF (x right, y down, z forward) is OpenCV's convention
+        rec.log(image_path(cam.name), rr.Pinhole(
+            image_from_camera=K, resolution=[cam.width, cam.height],
+            camera_xyz=rr.ViewCoordinates.RDF, image_plane_distance=0.3,
+            color=C.camera_color(c)), static=True)
+        rec.log(f"{image_path(cam.name)}/detections", rr.Points2D.from_fields(
+            colors=[C.camera_color(c)], radii=[-4.0]), static=True)
+        rec.log(f"{image_path(cam.name)}/rejected", rr.Points2D.from_fields(
+            colors=[C.REJECTED_COLOR], radii=[-3.0]), static=True)
+        rec.log(f"world/rays/{cam.name}", rr.LineStrips3D.from_fields(
+            colors=[C.camera_color(c)], radii=[-0.75]), static=True)
+        for d, other in enumerate(rig.cameras):
+            if d != c:
+                rec.log(f"{image_path(cam.name)}/epipolar/{other.name}",
+                        rr.LineStrips2D.from_fields(colors=[C.camera_color(d)], radii=[-1.0]),
+                        static=True)
+    ball = BALL_RADIUS
+    for method, color in colors.items():
+        rec.log(f"world/tracks/{method}", rr.Points3D.from_fields(
+            colors=[color], radii=[ball]), static=True)
+        rec.log(f"world/tracks/{method}/trail", rr.LineStrips3D.from_fields(
+            colors=[color], radii=[-2.5]), static=True)
+        rec.log(f"plots/error_mm/{method}", rr.SeriesLines(colors=[color], names=[method]),
+                static=True)
+        for plot in quality:
+            rec.log(f"plots/{plot}/{method}", rr.SeriesLines(colors=[color], names=[method]),
+                    static=True)
+    rec.log("world/truth", rr.Points3D.from_fields(colors=[C.TRUTH_COLOR], radii=[0.3 * ball]),
+            static=True)
+    rec.log("world/truth/trail", rr.LineStrips3D.from_fields(colors=[C.TRUTH_COLOR],
+                                                             radii=[-0.75]), static=True)
+    for c, name in enumerate(rig.names):
+        rec.log(f"plots/detection_rate/{name}",
+                rr.SeriesLines(colors=[C.camera_color(c)], names=[name]), static=True)
+    rec.log("legend", rr.TextDocument(_legend(data, colors), media_type="text/markdown"),
+            static=True)
+
+
+def _legend(data: ViewData, colors) -> str:
+    tracks = [f"{m} {C.COLOR_NAMES.get(c, str(c))}" for m, c in colors.items()]
+    if data.session.truth is not None:
+        tracks.append("truth white")
+    names = {(255, 90, 90): "red", (80, 210, 120): "green", (90, 150, 255): "blue",
+             (255, 200, 60): "amber", (200, 110, 255): "purple", (60, 220, 220): "cyan"}
+    cameras = [f"{n} {names[C.camera_color(c)]}" for c, n in enumerate(data.session.rig.names)]
+    lines = [f"**Tracks**: {', '.join(tracks)}", "",
+             f"**Cameras** (rays, detections, epipolar lines): {', '.join(cameras)}; "
+             "grey: rejected candidates"]
+    if data.construction is not None:
+        lines += ["", "**Figure 2** (typeA, drawn on the partner camera's image): yellow, the "
+                  "partner's two detections around the instant and the interpolated point "
+                  "(eq. 1); magenta, the snap onto the epipolar line (step 2). In 3D: "
+                  "P(t-1), P(t-2), the prediction P^ (eq. 2) and its move onto the ray (eq. 4)."]
+    return "\n".join(lines)
+
+
+# ---- 3D: rays, tracks, truth ---------------------------------------------------------------
+def _frames_at(data: ViewData, time_ns: np.ndarray) -> np.ndarray:
+    """Frame index of the latest detection at or before each time (for rows that are not a
+    detection of their own, so that they also appear on the ``frame`` timeline)."""
+    obs = data.observations
+    if len(obs) == 0:
+        return np.zeros(len(time_ns), dtype=np.int64)
+    i = np.clip(np.searchsorted(obs.time_ns, time_ns, side="right") - 1, 0, len(obs) - 1)
+    return obs.frame_index[i]
+
+
+def _match_observations(data: ViewData, track: Track) -> np.ndarray:
+    """(len(track),) observation row of each point's (time, camera), -1 when none."""
+    obs = data.observations
+    out = np.full(len(track), -1, dtype=np.int64)
+    if len(obs) == 0:
+        return out
+    first = np.searchsorted(obs.time_ns, track.time_ns, side="left")
+    for k in range(len(data.session.rig)):  # rows with equal times differ by camera
+        i = np.minimum(first + k, len(obs) - 1)
+        hit = (out < 0) & (obs.time_ns[i] == track.time_ns) & (obs.camera[i] == track.camera)
+        out[hit] = i[hit]
+    return out
+
+
+def _log_rays(rec, data: ViewData, clock: C.Clock) -> int:
+    """Each detection's ray from the camera centre to the fused point (the first shown
+    track with a point at that detection, ``typeA`` preferred) or else to the floor."""
+    rig, obs = data.session.rig, data.observations
+    end_world = np.full((len(obs), 3), np.nan)
+    order = sorted(data.tracks, key=lambda m: m != "typeA")
+    origin = np.empty((len(obs), 3))
+    direction = np.empty((len(obs), 3))
+    for c, cam in enumerate(rig.cameras):
+        rows = obs.camera == c
+        origin[rows], direction[rows] = cam.rays(obs.uv[rows])
+    for method in order:
+        track = data.tracks[method]
+        match = _match_observations(data, track)
+        fill = (match >= 0) & np.isnan(end_world[np.maximum(match, 0), 0])
+        rows = match[fill]
+        k = np.einsum("ij,ij->i", track.position_world[fill] - origin[rows], direction[rows])
+        end_world[rows] = origin[rows] + k[:, None] * direction[rows]
+    todo = np.isnan(end_world[:, 0])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        k_floor = -origin[:, 2] / direction[:, 2]
+    k_floor = np.where(np.isfinite(k_floor) & (k_floor > 0), k_floor, _RAY_FALLBACK_M)
+    end_world[todo] = origin[todo] + k_floor[todo, None] * direction[todo]
+    inside = data.in_window(obs.time_ns)
+    n = 0
+    for c, cam in enumerate(rig.cameras):
+        rows = np.flatnonzero(inside & (obs.camera == c))
+        strips = np.stack([origin[rows], end_world[rows]], axis=1).astype(np.float32)
+        ok = np.all(np.isfinite(strips), axis=(1, 2))  # a pixel beyond the lens model: no ray
+        n += C.send(rec, f"world/rays/{cam.name}", clock, obs.time_ns[rows],
+                    obs.frame_index[rows],
+                    rr.LineStrips3D.columns(strips=strips[ok]).partition(ok.astype(np.int64)))
+    return n
+
+
+def _trail_lengths(time_ns: np.ndarray) -> np.ndarray:
+    """Partition lengths of the segments (previous point -> this point): 0 for the first
+    point and after gaps."""
+    lengths = np.zeros(len(time_ns), dtype=np.int64)
+    lengths[1:] = np.diff(time_ns) <= _TRAIL_GAP_S * NS
+    return lengths
+
+
+def _log_points_and_trail(rec, path: str, clock: C.Clock, time_ns, frames, points) -> int:
+    n = C.send(rec, path, clock, time_ns, frames, rr.Points3D.columns(positions=points))
+    if n:
+        lengths = _trail_lengths(time_ns)
+        segments = np.stack([points[:-1], points[1:]], axis=1)[lengths[1:] > 0]
+        C.send(rec, f"{path}/trail", clock, time_ns, frames,
+               rr.LineStrips3D.columns(strips=segments.astype(np.float32)).partition(lengths))
+    return n
+
+
+def _log_tracks(rec, data: ViewData, clock: C.Clock, colors) -> int:
+    n = 0
+    for method, track in data.tracks.items():
+        keep = data.in_window(track.time_ns) & np.all(np.isfinite(track.position_world), axis=1)
+        track = track.select(keep)
+        match = _match_observations(data, track)
+        frames = np.where(match >= 0, data.observations.frame_index[np.maximum(match, 0)],
+                          _frames_at(data, track.time_ns))
+        n += _log_points_and_trail(rec, f"world/tracks/{method}", clock, track.time_ns, frames,
+                                   track.position_world)
+    return n
+
+
+def _log_truth(rec, data: ViewData, clock: C.Clock) -> int:
+    truth = data.session.truth
+    if truth is None:
+        return 0
+    keep = data.in_window(truth.time_ns)
+    t = truth.time_ns[keep]
+    return _log_points_and_trail(rec, "world/truth", clock, t, _frames_at(data, t),
+                                 truth.position_world[keep])
+
+
+# ---- time series ---------------------------------------------------------------------------
+def _log_plots(rec, data: ViewData, clock: C.Clock, quality: dict[str, tuple[str, float]]) -> int:
+    n = 0
+    truth = data.session.truth
+    for method, track in data.tracks.items():
+        track = track.select(data.in_window(track.time_ns))
+        frames = _frames_at(data, track.time_ns)
+        series = {}
+        if truth is not None:
+            series["error_mm"] = 1e3 * np.linalg.norm(
+                track.position_world - truth.at(track.time_ns), axis=1)
+        for plot, (key, scale) in quality.items():
+            if key in track.quality:
+                series[plot] = scale * track.quality[key]
+        for plot, values in series.items():
+            ok = np.isfinite(values)
+            n += C.send(rec, f"plots/{plot}/{method}", clock, track.time_ns[ok], frames[ok],
+                        rr.Scalars.columns(scalars=values[ok]))
+    det = data.session.detections
+    detected = det.candidates_per_frame() > 0
+    inside = data.in_window(det.frame_time_ns)
+    for c, cam in enumerate(data.session.rig.cameras):
+        rows = np.flatnonzero(det.frame_camera == c)
+        window = max(1, round(_RATE_WINDOW_S * cam.fps))
+        hits = np.concatenate([[0], np.cumsum(detected[rows])])
+        i = np.arange(1, len(rows) + 1)
+        lo = np.maximum(i - window, 0)
+        rate = 100.0 * (hits[i] - hits[lo]) / (i - lo)
+        sel = inside[rows]
+        n += C.send(rec, f"plots/detection_rate/{cam.name}", clock, det.frame_time_ns[rows][sel],
+                    det.frame_index[rows][sel], rr.Scalars.columns(scalars=rate[sel]))
+    return n
+
+
+def _log_events(rec, data: ViewData, clock: C.Clock) -> int:
+    events = [(t, text) for t, text in data.session.events
+              if data.in_window(np.array([t]))[0]]
+    if not events:
+        return 0
+    t = np.array([e[0] for e in events], dtype=np.int64)
+    return C.send(rec, "events", clock, t, _frames_at(data, t),
+                  rr.TextLog.columns(text=[e[1] for e in events]))
+
+
+# ---- images --------------------------------------------------------------------------------
+def _log_images(rec, data: ViewData, clock: C.Clock, frames: FramesChoice) -> int:
+    """Recorded frames passed through encoded (never decoded), streamed in batches."""
+    if frames.every == 0 or data.session.n_images == 0:
+        return 0
+    lo, hi = data.window_ns
+    names = data.session.rig.names
+    pending: dict[int, list] = {}
+    size = 0
+    n = 0
+
+    def flush() -> int:
+        sent = 0
+        for cam, items in pending.items():
+            t = np.array([i.time_ns for i in items], dtype=np.int64)
+            f = np.array([i.frame_index for i in items], dtype=np.int64)
+            sent += C.send(rec, image_path(names[cam]), clock, t, f, rr.EncodedImage.columns(
+                blob=[i.data for i in items],
+                media_type=[_MEDIA_TYPES[i.format.lower()] for i in items]))
+        pending.clear()
+        return sent
+
+    start_ns = None if lo <= -UNBOUNDED_NS else lo
+    end_ns = None if hi >= UNBOUNDED_NS else hi
+    for image in iter_images(data.paths[0], start_ns=start_ns, end_ns=end_ns):
+        if image.frame_index % frames.every or image.format.lower() not in _MEDIA_TYPES:
+            continue
+        if not lo <= image.time_ns < hi:
+            continue
+        pending.setdefault(image.camera, []).append(image)
+        size += len(image.data)
+        if size > _IMAGE_BATCH_BYTES:
+            n += flush()
+            size = 0
+    return n + flush()
