@@ -225,6 +225,13 @@ class Camera:
         """Distorted pixels (n, 2) -> ideal (distortion-free) pixels (n, 2) with the same K."""
         return self.pixels_from_normalized(self.undistort_normalized(uv))
 
+    def distort(self, uv_undistorted: np.ndarray) -> np.ndarray:
+        """Ideal (undistorted) pixels (n, 2) -> distorted pixels (n, 2): where they fall on
+        the recorded image. The inverse of :meth:`undistort`."""
+        uv_undistorted = _check_points(uv_undistorted, 2, "uv_undistorted")
+        return self.pixels_from_normalized(
+            self.distort_normalized(self.normalized_from_pixels(uv_undistorted)))
+
     def rays(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Viewing rays of (distorted) pixels.
 

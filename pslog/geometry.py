@@ -15,6 +15,8 @@ Image points given to :func:`fundamental_matrix`-based functions are *undistorte
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from .camera import Camera
@@ -38,6 +40,18 @@ def fundamental_matrix(cam_a: Camera, cam_b: Camera) -> np.ndarray:
     E = _skew(t_ba) @ R_ba
     F = np.linalg.inv(cam_b.K).T @ E @ np.linalg.inv(cam_a.K)
     return F / np.linalg.norm(F)
+
+
+def fundamental_matrices(cameras: Sequence[Camera]) -> np.ndarray:
+    """``F[a, b]`` (m, m, 3, 3) for every ordered pair of ``cameras``, as
+    :func:`fundamental_matrix` (``x_bᵀ F[a, b] x_a = 0``); zeros on the diagonal."""
+    m = len(cameras)
+    F = np.zeros((m, m, 3, 3))
+    for a in range(m):
+        for b in range(m):
+            if a != b:
+                F[a, b] = fundamental_matrix(cameras[a], cameras[b])
+    return F
 
 
 def epipolar_lines(F: np.ndarray, uv_a: np.ndarray) -> np.ndarray:

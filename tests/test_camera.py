@@ -356,3 +356,14 @@ def test_undistort_beyond_the_fold_over_radius_is_nan_not_wrong():
     assert np.all(np.isfinite(xy[1:]))
     _, directions = cam.rays(uv)
     assert np.all(np.isnan(directions[0])) and np.all(np.isfinite(directions[1:]))
+
+
+def test_distort_inverts_undistort_in_pixels():
+    K = np.array([[500.0, 0.0, 320.0], [0.0, 510.0, 240.0], [0.0, 0.0, 1.0]])
+    cam = Camera("lens", 640, 480, K, np.array([-0.2, 0.05, 1e-3, -5e-4, 0.0]))
+    uv = np.stack(np.meshgrid(np.linspace(20, 620, 7), np.linspace(20, 460, 5)), -1).reshape(-1, 2)
+    np.testing.assert_allclose(cam.distort(cam.undistort(uv)), uv, atol=1e-9)
+    # hand-computed: the principal point stays; k1 alone maps x = 0.2 to 0.2 (1 - 0.2 * 0.2²)
+    plain = Camera("k1", 640, 480, K, np.array([-0.2, 0.0, 0.0, 0.0, 0.0]))
+    np.testing.assert_allclose(plain.distort([[320.0, 240.0], [420.0, 240.0]]),
+                               [[320.0, 240.0], [320.0 + 500.0 * 0.2 * (1 - 0.2 * 0.04), 240.0]])

@@ -99,16 +99,6 @@ def image_space(uv: np.ndarray) -> np.ndarray:
     return (np.asarray(uv, dtype=np.float64) + PIXEL_CENTER).astype(np.float32)
 
 
-def distort_pixels(cam: Camera, uv_undistorted: np.ndarray) -> np.ndarray:
-    """Undistorted pixels (n, 2) -> distorted pixels (n, 2), where they fall on the recorded
-    image: K⁻¹, then the lens distortion, then K."""
-    uv_undistorted = np.asarray(uv_undistorted, dtype=np.float64).reshape(-1, 2)
-    if not np.any(cam.dist):
-        return uv_undistorted
-    return cam.pixels_from_normalized(
-        cam.distort_normalized(cam.normalized_from_pixels(uv_undistorted)))
-
-
 def undistorted_bounds(cam: Camera) -> tuple[float, float, float, float]:
     """Bounding box ``(u_min, v_min, u_max, v_max)`` of the image border in undistorted
     pixels: epipolar lines are clipped to it before being sampled and re-distorted."""
@@ -170,7 +160,7 @@ def line_polylines(cam: Camera, lines: np.ndarray, samples: int = 24
     t = np.linspace(0.0, 1.0, s)
     k = k_lo[visible, None] + (k_hi - k_lo)[visible, None] * t[None, :]  # (m, s)
     points = foot[visible, None, :] + k[:, :, None] * direction[visible, None, :]
-    distorted = distort_pixels(cam, points.reshape(-1, 2)).reshape(-1, s, 2)
+    distorted = cam.distort(points.reshape(-1, 2)).reshape(-1, s, 2)
     return image_space(distorted.reshape(-1, 2)).reshape(-1, s, 2), visible
 
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import rerun as rr
 
-from pslog.geometry import epipolar_lines, fundamental_matrix
+from pslog.geometry import epipolar_lines, fundamental_matrices
 from pslog.motion import BALL_RADIUS
 
 from . import _columns as C
@@ -44,20 +44,9 @@ def log_detections(rec, data: ViewData, clock: C.Clock) -> int:
     return n
 
 
-def _fundamentals(rig) -> np.ndarray:
-    """(n, n, 3, 3): F[a, b] maps undistorted pixels of camera a to lines in camera b."""
-    n = len(rig)
-    F = np.full((n, n, 3, 3), np.nan)
-    for a in range(n):
-        for b in range(n):
-            if a != b:
-                F[a, b] = fundamental_matrix(rig.cameras[a], rig.cameras[b])
-    return F
-
-
 def log_epipolar(rec, data: ViewData, clock: C.Clock, uv_undistorted: np.ndarray) -> int:
     rig, obs = data.session.rig, data.observations
-    F = _fundamentals(rig)
+    F = fundamental_matrices(rig.cameras)
     inside = data.in_window(obs.time_ns)
     n = 0
     for d, src in enumerate(rig.cameras):
@@ -89,15 +78,15 @@ def log_construction(rec, data: ViewData, clock: C.Clock, uv_undistorted: np.nda
                                                   "uv_interpolated", "uv_snapped",
                                                   "points_world")} for p in con.past]
     stack = {k: np.stack([past[0][k], past[1][k]], axis=1) for k in past[0]}  # (k, 2, ...)
-    F = _fundamentals(rig)
+    F = fundamental_matrices(rig.cameras)
     labels = np.array(["P(t-1)", "P(t-2)"])
     yellow, magenta = (255, 230, 0), (255, 0, 255)
     for c, cam in enumerate(rig.cameras):
         mine = stack["partner"] == c  # (k, 2): constructions drawn on this camera's image
         lengths = C.lengths_of(mine)
         which = np.nonzero(mine)[1]  # 0: P(t-1), 1: P(t-2)
-        interp = C.distort_pixels(cam, stack["uv_interpolated"][mine])
-        snapped = C.distort_pixels(cam, stack["uv_snapped"][mine])
+        interp = cam.distort(stack["uv_interpolated"][mine])
+        snapped = cam.distort(stack["uv_snapped"][mine])
         prev_uv, next_uv = obs.uv[stack["prev_row"][mine]], obs.uv[stack["next_row"][mine]]
         base = f"{C.image_path(cam.name)}/typeA"
         C.send(rec, f"{base}/interpolated", clock, t, f, rr.Points2D.columns(

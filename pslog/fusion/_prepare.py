@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import FusionError
-from ..geometry import fundamental_matrix
+from ..geometry import fundamental_matrices
 from ..records import NS, Observations
 from ..rig import Rig
 
@@ -47,21 +47,11 @@ class Prepared:
         return dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
 
 
-def fundamental_matrices(rig: Rig) -> np.ndarray:
-    """``F[a, b]`` (m, m, 3, 3) for every ordered pair of cameras (zeros on the diagonal)."""
-    n_cams = len(rig)
-    F = np.zeros((n_cams, n_cams, 3, 3))
-    for a in range(n_cams):
-        for b in range(n_cams):
-            if a != b:
-                F[a, b] = fundamental_matrix(rig.cameras[a], rig.cameras[b])
-    return F
-
-
 def prepare(obs: Observations, rig: Rig, F: np.ndarray | None = None) -> Prepared:
     """Undistort every observation and compute its viewing ray (one vectorized pass per camera).
 
-    ``F`` may pass :func:`fundamental_matrices` of ``rig`` computed earlier."""
+    ``F`` may pass :func:`pslog.geometry.fundamental_matrices` of ``rig.cameras`` computed
+    earlier."""
     n_cams = len(rig)
     if len(obs) and (obs.camera.min() < 0 or obs.camera.max() >= n_cams):
         raise FusionError(f"observation camera index {int(obs.camera.max())} is not in the "
@@ -77,7 +67,7 @@ def prepare(obs: Observations, rig: Rig, F: np.ndarray | None = None) -> Prepare
             ray_dir[rows] = cam.rays(obs.uv[rows])[1]
     centers = np.array([c.center_world for c in rig.cameras])
     if F is None:
-        F = fundamental_matrices(rig)
+        F = fundamental_matrices(rig.cameras)
     t = (obs.time_ns - (obs.time_ns[0] if len(obs) else 0)) / NS
     return Prepared(
         obs=obs, t=t.astype(np.float64), uv_undistorted=uv_und,

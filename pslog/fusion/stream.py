@@ -15,10 +15,11 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import FusionError
+from ..geometry import fundamental_matrices
 from ..records import NS, Observations, Track
 from ..rig import Rig
 from . import FusionOptions, check_method, fuse
-from ._prepare import default_max_gap_s, fundamental_matrices, prepare
+from ._prepare import default_max_gap_s, prepare
 
 _IMMEDIATE = ("typeA", "nearest")
 
@@ -48,7 +49,7 @@ class StreamFuser:
         # history a new point may reach back to: two bridged gaps plus two tolerances
         self._history_ns = int((2 * self._max_gap_s + 2 * self.options.tolerance_s) * NS) + 1
         self._settle_ns = 0 if method in _IMMEDIATE else int(self.options.tolerance_s * NS)
-        self._F = fundamental_matrices(rig)
+        self._F = fundamental_matrices(rig.cameras)
         self._time = np.zeros(0, np.int64)
         self._camera = np.zeros(0, np.int32)
         self._uv = np.zeros((0, 2))
