@@ -8,7 +8,9 @@ For the newest event ``t`` (camera ``c``, time ``t_t``):
    - *step 1, eq. (1)*: a partner camera's 2D track is interpolated linearly to the event's
      capture time, between the partner's two detections that bracket it,
      ``u = (δ_a u_next + δ_b u_prev) / (δ_a + δ_b)`` with ``δ_a = t_j - t_prev`` and
-     ``δ_b = t_next - t_j`` (the paper's ``δ12`` and ``δ23 + δ31`` for three cameras);
+     ``δ_b = t_next - t_j`` (the paper's ``δ12`` and ``δ23 + δ31`` for three cameras), in
+     undistorted pixels (the paper models no lens distortion; in ideal pixels the image of a
+     motion parallel to the image plane at constant speed is linear, so eq. (1) is exact);
    - *step 2*: the interpolated point is snapped to the nearest point of the epipolar line of
      the observed point in the partner's image;
    - *step 3*: the 3D point is the crossing point of the two viewing rays.
