@@ -1,21 +1,14 @@
-"""Camera calibration: from 3D-2D point correspondences (the paper's Tsai-style set-up) or
-from a chessboard (OpenCV's usual intrinsics procedure).
+"""Camera calibration from 3D-2D point correspondences (the paper's Tsai-style set-up).
 
-Points (``calibrate_from_points``)
-    A normalized DLT of the 3x4 projection matrix gives a pinhole start (K, R, t), which
-    ``cv2.calibrateCamera`` (one non-planar view, ``CALIB_USE_INTRINSIC_GUESS``) refines
-    together with the distortion by Levenberg-Marquardt. Skew is dropped (OpenCV's model has
-    none). How many distortion terms are estimated depends on the number of points
-    (:data:`DISTORTION_MODELS`, ``"auto"``): one view of a few dozen points constrains the
-    radial terms well but the tangential terms and k3 only weakly (they trade off against the
-    principal point and k1/k2), so those stay zero unless there are plenty of points.
-    With known intrinsics (``K``/``dist`` given) only the pose is solved (``cv2.solvePnP``),
-    and coplanar points are fine.
-
-Chessboard (``calibrate_chessboard``)
-    ``findChessboardCorners`` + ``cornerSubPix`` per image, then ``calibrateCamera`` with
-    OpenCV's default 5-term model. A chessboard does not give the camera's pose in the world;
-    the caller keeps a known pose or uses identity.
+A normalized DLT of the 3x4 projection matrix gives a pinhole start (K, R, t), which
+``cv2.calibrateCamera`` (one non-planar view, ``CALIB_USE_INTRINSIC_GUESS``) refines
+together with the distortion by Levenberg-Marquardt. Skew is dropped (OpenCV's model has
+none). How many distortion terms are estimated depends on the number of points
+(:data:`DISTORTION_MODELS`, ``"auto"``): one view of a few dozen points constrains the
+radial terms well but the tangential terms and k3 only weakly (they trade off against the
+principal point and k1/k2), so those stay zero unless there are plenty of points.
+With known intrinsics (``K``/``dist`` given) only the pose is solved (``cv2.solvePnP``),
+and coplanar points are fine.
 
 Conventions: OpenCV (``x_cam = R @ x_world + t``, plumb_bob ``[k1, k2, p1, p2, k3]``),
 metres and pixels.
@@ -24,98 +17,29 @@ metres and pixels.
 from __future__ import annotations
 
 import csv
-from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
 import numpy as np
 
-from .camera import Camera
-from .errors import InputError
-
-#: Distortion models for :func:`calibrate_from_points`: which of ``[k1, k2, p1, p2, k3]`` are
-#: estimated (the others stay zero).
-DISTORTION_MODELS = {
-    "none": (),
-    "k1": ("k1",),
-    "k1k2": ("k1", "k2"),
-    "k1k2k3": ("k1", "k2", "k3"),
-    "full": ("k1", "k2", "p1", "p2", "k3"),
-}
-#: ``"auto"``: ``none`` below 10 points (6 points give 12 equations for the 10 pinhole + pose
-#: unknowns; adding distortion would fit the noise), ``k1k2`` up to 99, ``full`` from 100.
-AUTO_K1K2_MIN_POINTS = 10
-AUTO_FULL_MIN_POINTS = 100
-
-MIN_POINTS = 6
-MIN_POINTS_POSE = 4
-#: Points whose spread off their best-fit plane (smallest / largest singular value of the
-#: centred points) is below this count as coplanar: the DLT needs real depth.
-COPLANAR_RATIO = 1e-3
-#: Same for collinear (second / largest) when only the pose is solved.
-COLLINEAR_RATIO = 1e-3
-MIN_CHESSBOARD_VIEWS = 3
-
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".webp")
+from ..camera import Camera
+from ..errors import InputError
+from ._common import (
+    AUTO_FULL_MIN_POINTS,
+    AUTO_K1K2_MIN_POINTS,
+    COLLINEAR_RATIO,
+    COPLANAR_RATIO,
+    DISTORTION_MODELS,
+    MIN_POINTS,
+    MIN_POINTS_POSE,
+    CalibrationResult,
+    _cv_message,
+    _make_camera,
+)
 
 _POINT_COLUMNS = ("x", "y", "z", "u", "v")
 _LM_CRITERIA = (cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 200, 1e-15)
 _DIST_FLAGS = {"k1": cv2.CALIB_FIX_K1, "k2": cv2.CALIB_FIX_K2, "k3": cv2.CALIB_FIX_K3}
-
-
-@dataclass(frozen=True, eq=False)
-class CalibrationResult:
-    """Outcome of :func:`calibrate_from_points`.
-
-    Attributes
-    ----------
-    camera : Camera
-        The calibrated camera (pose in the world of the points).
-    rms_px : float
-        Root mean square reprojection error, pixels.
-    residuals_px : (n,) float64
-        Reprojection error of each point, pixels, in input order.
-    model : str
-        Distortion model estimated (a key of :data:`DISTORTION_MODELS`), or ``"fixed"``
-        when the intrinsics were given and only the pose was solved.
-    """
-
-    camera: Camera
-    rms_px: float
-    residuals_px: np.ndarray
-    model: str
-
-    @property
-    def fixed_intrinsics(self) -> bool:
-        return self.model == "fixed"
-
-    def worst(self, count: int = 5) -> np.ndarray:
-        """Indices (into the input points) of the ``count`` largest residuals, worst first."""
-        return np.argsort(-self.residuals_px, kind="stable")[:count]
-
-
-@dataclass(frozen=True, eq=False)
-class ChessboardResult:
-    """Outcome of :func:`calibrate_chessboard`.
-
-    Attributes
-    ----------
-    camera : Camera
-        Intrinsics and image size from the board; pose as passed in (identity by default).
-    rms_px : float
-        RMS reprojection error over all corners of the used views, pixels.
-    used, rejected : tuple of int
-        Indices of the input images in which the board was / was not found.
-    view_rms_px : (len(used),) float64
-        RMS reprojection error per used view, pixels.
-    """
-
-    camera: Camera
-    rms_px: float
-    used: tuple[int, ...]
-    rejected: tuple[int, ...]
-    view_rms_px: np.ndarray
 
 
 # ---- point correspondences -------------------------------------------------------------------
@@ -344,144 +268,6 @@ def decompose_projection_matrix(P: np.ndarray) -> tuple[np.ndarray, np.ndarray, 
     return K, R, t
 
 
-# ---- chessboard -------------------------------------------------------------------------------
-
-def parse_pattern(text: str) -> tuple[int, int]:
-    """``"9x6"`` -> ``(9, 6)``: inner corners per row and per column, each >= 2."""
-    parts = str(text).lower().replace("×", "x").split("x")
-    try:
-        cols, rows = (int(p) for p in parts)
-    except ValueError:
-        raise InputError(f"bad chessboard pattern {text!r}: expected COLSxROWS of inner "
-                         f"corners, e.g. 9x6") from None
-    if cols < 2 or rows < 2:
-        raise InputError(f"bad chessboard pattern {text!r}: need at least 2x2 inner corners")
-    return cols, rows
-
-
-def read_calibration_images(path: str | Path, *, max_frames: int = 60
-                            ) -> tuple[list[np.ndarray], list[str]]:
-    """Load calibration images from a folder of images or a video file.
-
-    Parameters
-    ----------
-    path : str or Path
-        A folder (every image file in it, sorted by name) or a video file.
-    max_frames : int
-        From a video, at most this many frames, evenly spaced over its length (neighbouring
-        frames show nearly the same view and only slow the calibration down).
-
-    Returns
-    -------
-    images : list of (height, width) uint8 grayscale arrays
-    labels : list of str, the file name or ``frame N`` of each image
-
-    Raises
-    ------
-    InputError
-        Missing path, unreadable image, a video that cannot be opened, or no images.
-    """
-    path = Path(path)
-    if not path.exists():
-        raise InputError(f"calibration images not found: {path}")
-    if path.is_dir():
-        files = sorted(p for p in path.iterdir()
-                       if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES)
-        if not files:
-            raise InputError(f"no image files ({', '.join(IMAGE_SUFFIXES)}) in folder {path}")
-        images = []
-        for file in files:
-            image = cv2.imread(str(file), cv2.IMREAD_GRAYSCALE)
-            if image is None:
-                raise InputError(f"cannot read image {file}")
-            images.append(image)
-        return images, [f.name for f in files]
-    return _read_video_frames(path, max_frames)
-
-
-def calibrate_chessboard(
-    images: Sequence[np.ndarray],
-    pattern: tuple[int, int] = (9, 6),
-    square: float = 0.025,
-    *,
-    name: str = "cam",
-    fps: float = 30.0,
-    offset: float = 0.0,
-    R: np.ndarray | None = None,
-    t: np.ndarray | None = None,
-) -> ChessboardResult:
-    """Intrinsics from views of a chessboard (OpenCV's standard procedure).
-
-    Parameters
-    ----------
-    images : sequence of (height, width) uint8 grayscale or (height, width, 3) BGR arrays,
-        all the same size
-    pattern : (cols, rows)
-        Inner corners per row and per column (a board of 10 x 7 squares is ``(9, 6)``).
-    square : float
-        Side of a square, metres (scales only the per-view board poses, which are discarded).
-    name, fps, offset
-        Copied into the camera.
-    R, t : optional
-        Pose to give the camera (world -> camera); identity and zero if omitted.
-
-    Returns
-    -------
-    ChessboardResult
-
-    Raises
-    ------
-    InputError
-        No images, images of different sizes, or the board found in fewer than
-        :data:`MIN_CHESSBOARD_VIEWS` images.
-    """
-    if not images:
-        raise InputError("no calibration images")
-    cols, rows = pattern
-    grays = [_gray(im) for im in images]
-    size = grays[0].shape
-    for i, gray in enumerate(grays):
-        if gray.shape != size:
-            raise InputError(f"image {i} is {gray.shape[1]}x{gray.shape[0]}, the first is "
-                             f"{size[1]}x{size[0]}; all images must have the same size")
-    height, width = size
-    board = np.zeros((cols * rows, 3), np.float32)
-    board[:, :2] = np.mgrid[0:cols, 0:rows].T.reshape(-1, 2) * square
-
-    find_flags = (cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
-                  | cv2.CALIB_CB_FAST_CHECK)
-    subpix_criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 1e-3)
-    corners, used, rejected = [], [], []
-    for i, gray in enumerate(grays):
-        found, found_corners = cv2.findChessboardCorners(gray, (cols, rows), flags=find_flags)
-        if not found:
-            rejected.append(i)
-            continue
-        corners.append(cv2.cornerSubPix(gray, found_corners, (11, 11), (-1, -1),
-                                        subpix_criteria))
-        used.append(i)
-    if not used:
-        raise InputError(f"no {cols}x{rows} chessboard found in any of the {len(grays)} "
-                         f"images (pattern counts inner corners)")
-    if len(used) < MIN_CHESSBOARD_VIEWS:
-        raise InputError(f"{cols}x{rows} chessboard found in only {len(used)} of "
-                         f"{len(grays)} images; need at least {MIN_CHESSBOARD_VIEWS} views")
-    try:
-        rms, K, dist, rvecs, tvecs = cv2.calibrateCamera(
-            [board] * len(used), corners, (width, height), None, None)
-    except cv2.error as exc:
-        raise InputError(f"chessboard calibration failed: {_cv_message(exc)}") from None
-    view_rms = np.empty(len(used))
-    for k, (rvec, tvec, found_corners) in enumerate(zip(rvecs, tvecs, corners, strict=True)):
-        projected = cv2.projectPoints(board, rvec, tvec, K, dist)[0].reshape(-1, 2)
-        view_rms[k] = np.sqrt(np.mean(np.sum((projected - found_corners.reshape(-1, 2)) ** 2,
-                                             axis=1)))
-    camera = _make_camera(name, width, height, K, dist.ravel()[:5],
-                          np.eye(3) if R is None else R, np.zeros(3) if t is None else t,
-                          fps, offset)
-    return ChessboardResult(camera, float(rms), tuple(used), tuple(rejected), view_rms)
-
-
 # ---- helpers ----------------------------------------------------------------------------------
 
 def _check_correspondences(points_world, uv) -> tuple[np.ndarray, np.ndarray]:
@@ -582,14 +368,6 @@ def _check_in_front(points_world, R, t, what: str) -> None:
                          f"(check that each u,v belongs to its x,y,z)")
 
 
-def _make_camera(name, width, height, K, dist, R, t, fps, offset) -> Camera:
-    K = np.array(K, dtype=np.float64)
-    K[1, 0] = K[2, 0] = K[2, 1] = 0.0
-    K[2, 2] = 1.0
-    return Camera(name, int(width), int(height), K, np.asarray(dist, dtype=np.float64), R,
-                  np.asarray(t, dtype=np.float64).ravel(), fps=fps, offset=offset)
-
-
 def _result(camera: Camera, points_world, uv, model: str) -> CalibrationResult:
     projected, _ = camera.project(points_world)
     residuals = np.linalg.norm(projected - uv, axis=1)
@@ -611,43 +389,3 @@ def _normalizing_transform(points: np.ndarray) -> np.ndarray:
 
 def _homogeneous(points: np.ndarray) -> np.ndarray:
     return np.hstack([points, np.ones((len(points), 1))])
-
-
-def _gray(image: np.ndarray) -> np.ndarray:
-    image = np.asarray(image)
-    if image.ndim == 3:
-        image = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
-    if image.dtype != np.uint8:
-        raise InputError(f"calibration images must be 8-bit, got {image.dtype}")
-    return image
-
-
-def _read_video_frames(path: Path, max_frames: int) -> tuple[list[np.ndarray], list[str]]:
-    capture = cv2.VideoCapture(str(path))
-    try:
-        if not capture.isOpened():
-            raise InputError(f"{path} is neither a folder of images nor a readable video")
-        count = int(capture.get(cv2.CAP_PROP_FRAME_COUNT))
-        wanted = None
-        if count > max_frames:
-            wanted = set(np.linspace(0, count - 1, max_frames).round().astype(int).tolist())
-        # Read sequentially (seeking is unreliable in many codecs) and keep the wanted frames.
-        images, labels, index = [], [], 0
-        while True:
-            ok, frame = capture.read()
-            if not ok:
-                break
-            if wanted is None or index in wanted:
-                images.append(cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY))
-                labels.append(f"frame {index}")
-            index += 1
-    finally:
-        capture.release()
-    if not images:
-        raise InputError(f"no frames could be read from video {path}")
-    return images, labels
-
-
-def _cv_message(exc: cv2.error) -> str:
-    text = str(exc).strip().splitlines()
-    return text[-1] if text else "OpenCV error"

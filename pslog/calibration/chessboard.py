@@ -1,0 +1,202 @@
+"""Camera intrinsics from a chessboard (OpenCV's usual procedure).
+
+``findChessboardCorners`` + ``cornerSubPix`` per image, then ``calibrateCamera`` with
+OpenCV's default 5-term model. A chessboard does not give the camera's pose in the world;
+the caller keeps a known pose or uses identity.
+
+Images come from a folder or a video file (:func:`read_calibration_images`).
+
+Conventions: OpenCV (``x_cam = R @ x_world + t``, plumb_bob ``[k1, k2, p1, p2, k3]``),
+metres and pixels.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from ..errors import InputError
+from ._common import (
+    IMAGE_SUFFIXES,
+    MIN_CHESSBOARD_VIEWS,
+    ChessboardResult,
+    _cv_message,
+    _make_camera,
+)
+
+# ---- chessboard -------------------------------------------------------------------------------
+
+def parse_pattern(text: str) -> tuple[int, int]:
+    """``"9x6"`` -> ``(9, 6)``: inner corners per row and per column, each >= 2."""
+    parts = str(text).lower().replace("×", "x").split("x")
+    try:
+        cols, rows = (int(p) for p in parts)
+    except ValueError:
+        raise InputError(f"bad chessboard pattern {text!r}: expected COLSxROWS of inner "
+                         f"corners, e.g. 9x6") from None
+    if cols < 2 or rows < 2:
+        raise InputError(f"bad chessboard pattern {text!r}: need at least 2x2 inner corners")
+    return cols, rows
+
+
+def read_calibration_images(path: str | Path, *, max_frames: int = 60
+                            ) -> tuple[list[np.ndarray], list[str]]:
+    """Load calibration images from a folder of images or a video file.
+
+    Parameters
+    ----------
+    path : str or Path
+        A folder (every image file in it, sorted by name) or a video file.
+    max_frames : int
+        From a video, at most this many frames, evenly spaced over its length (neighbouring
+        frames show nearly the same view and only slow the calibration down).
+
+    Returns
+    -------
+    images : list of (height, width) uint8 grayscale arrays
+    labels : list of str, the file name or ``frame N`` of each image
+
+    Raises
+    ------
+    InputError
+        Missing path, unreadable image, a video that cannot be opened, or no images.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise InputError(f"calibration images not found: {path}")
+    if path.is_dir():
+        files = sorted(p for p in path.iterdir()
+                       if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES)
+        if not files:
+            raise InputError(f"no image files ({', '.join(IMAGE_SUFFIXES)}) in folder {path}")
+        images = []
+        for file in files:
+            image = cv2.imread(str(file), cv2.IMREAD_GRAYSCALE)
+            if image is None:
+                raise InputError(f"cannot read image {file}")
+            images.append(image)
+        return images, [f.name for f in files]
+    return _read_video_frames(path, max_frames)
+
+
+def calibrate_chessboard(
+    images: Sequence[np.ndarray],
+    pattern: tuple[int, int] = (9, 6),
+    square: float = 0.025,
+    *,
+    name: str = "cam",
+    fps: float = 30.0,
+    offset: float = 0.0,
+    R: np.ndarray | None = None,
+    t: np.ndarray | None = None,
+) -> ChessboardResult:
+    """Intrinsics from views of a chessboard (OpenCV's standard procedure).
+
+    Parameters
+    ----------
+    images : sequence of (height, width) uint8 grayscale or (height, width, 3) BGR arrays,
+        all the same size
+    pattern : (cols, rows)
+        Inner corners per row and per column (a board of 10 x 7 squares is ``(9, 6)``).
+    square : float
+        Side of a square, metres (scales only the per-view board poses, which are discarded).
+    name, fps, offset
+        Copied into the camera.
+    R, t : optional
+        Pose to give the camera (world -> camera); identity and zero if omitted.
+
+    Returns
+    -------
+    ChessboardResult
+
+    Raises
+    ------
+    InputError
+        No images, images of different sizes, or the board found in fewer than
+        :data:`MIN_CHESSBOARD_VIEWS` images.
+    """
+    if not images:
+        raise InputError("no calibration images")
+    cols, rows = pattern
+    grays = [_gray(im) for im in images]
+    size = grays[0].shape
+    for i, gray in enumerate(grays):
+        if gray.shape != size:
+            raise InputError(f"image {i} is {gray.shape[1]}x{gray.shape[0]}, the first is "
+                             f"{size[1]}x{size[0]}; all images must have the same size")
+    height, width = size
+    board = np.zeros((cols * rows, 3), np.float32)
+    board[:, :2] = np.mgrid[0:cols, 0:rows].T.reshape(-1, 2) * square
+
+    find_flags = (cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
+                  | cv2.CALIB_CB_FAST_CHECK)
+    subpix_criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 1e-3)
+    corners, used, rejected = [], [], []
+    for i, gray in enumerate(grays):
+        found, found_corners = cv2.findChessboardCorners(gray, (cols, rows), flags=find_flags)
+        if not found:
+            rejected.append(i)
+            continue
+        corners.append(cv2.cornerSubPix(gray, found_corners, (11, 11), (-1, -1),
+                                        subpix_criteria))
+        used.append(i)
+    if not used:
+        raise InputError(f"no {cols}x{rows} chessboard found in any of the {len(grays)} "
+                         f"images (pattern counts inner corners)")
+    if len(used) < MIN_CHESSBOARD_VIEWS:
+        raise InputError(f"{cols}x{rows} chessboard found in only {len(used)} of "
+                         f"{len(grays)} images; need at least {MIN_CHESSBOARD_VIEWS} views")
+    try:
+        rms, K, dist, rvecs, tvecs = cv2.calibrateCamera(
+            [board] * len(used), corners, (width, height), None, None)
+    except cv2.error as exc:
+        raise InputError(f"chessboard calibration failed: {_cv_message(exc)}") from None
+    view_rms = np.empty(len(used))
+    for k, (rvec, tvec, found_corners) in enumerate(zip(rvecs, tvecs, corners, strict=True)):
+        projected = cv2.projectPoints(board, rvec, tvec, K, dist)[0].reshape(-1, 2)
+        view_rms[k] = np.sqrt(np.mean(np.sum((projected - found_corners.reshape(-1, 2)) ** 2,
+                                             axis=1)))
+    camera = _make_camera(name, width, height, K, dist.ravel()[:5],
+                          np.eye(3) if R is None else R, np.zeros(3) if t is None else t,
+                          fps, offset)
+    return ChessboardResult(camera, float(rms), tuple(used), tuple(rejected), view_rms)
+
+
+# ---- helpers ----------------------------------------------------------------------------------
+
+def _gray(image: np.ndarray) -> np.ndarray:
+    image = np.asarray(image)
+    if image.ndim == 3:
+        image = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+    if image.dtype != np.uint8:
+        raise InputError(f"calibration images must be 8-bit, got {image.dtype}")
+    return image
+
+
+def _read_video_frames(path: Path, max_frames: int) -> tuple[list[np.ndarray], list[str]]:
+    capture = cv2.VideoCapture(str(path))
+    try:
+        if not capture.isOpened():
+            raise InputError(f"{path} is neither a folder of images nor a readable video")
+        count = int(capture.get(cv2.CAP_PROP_FRAME_COUNT))
+        wanted = None
+        if count > max_frames:
+            wanted = set(np.linspace(0, count - 1, max_frames).round().astype(int).tolist())
+        # Read sequentially (seeking is unreliable in many codecs) and keep the wanted frames.
+        images, labels, index = [], [], 0
+        while True:
+            ok, frame = capture.read()
+            if not ok:
+                break
+            if wanted is None or index in wanted:
+                images.append(cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY))
+                labels.append(f"frame {index}")
+            index += 1
+    finally:
+        capture.release()
+    if not images:
+        raise InputError(f"no frames could be read from video {path}")
+    return images, labels
