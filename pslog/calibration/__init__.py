@@ -1,28 +1,15 @@
 """Camera calibration: from 3D-2D point correspondences (the paper's Tsai-style set-up) or
 from a chessboard (OpenCV's usual intrinsics procedure).
 
-Points (``calibrate_from_points``)
-    A normalized DLT of the 3x4 projection matrix gives a pinhole start (K, R, t), which
-    ``cv2.calibrateCamera`` (one non-planar view, ``CALIB_USE_INTRINSIC_GUESS``) refines
-    together with the distortion by Levenberg-Marquardt. Skew is dropped (OpenCV's model has
-    none). How many distortion terms are estimated depends on the number of points
-    (:data:`DISTORTION_MODELS`, ``"auto"``): one view of a few dozen points constrains the
-    radial terms well but the tangential terms and k3 only weakly (they trade off against the
-    principal point and k1/k2), so those stay zero unless there are plenty of points.
-    With known intrinsics (``K``/``dist`` given) only the pose is solved (``cv2.solvePnP``),
-    and coplanar points are fine.
-
-Chessboard (``calibrate_chessboard``)
-    ``findChessboardCorners`` + ``cornerSubPix`` per image, then ``calibrateCamera`` with
-    OpenCV's default 5-term model. A chessboard does not give the camera's pose in the world;
-    the caller keeps a known pose or uses identity.
+- :mod:`.points` — ``calibrate_from_points``: a normalized DLT start, refined with the
+  distortion by ``cv2.calibrateCamera``; with known intrinsics, the pose alone by
+  ``cv2.solvePnP``.
+- :mod:`.chessboard` — ``calibrate_chessboard``: intrinsics from images or a video of a
+  chessboard.
+- :mod:`._common` — constants and result types.
 
 Conventions: OpenCV (``x_cam = R @ x_world + t``, plumb_bob ``[k1, k2, p1, p2, k3]``),
-metres and pixels.
-
-The package splits into :mod:`.points` (3D-2D correspondences, DLT), :mod:`.chessboard`
-(chessboard images and videos) and :mod:`._common` (constants and result types); every
-public name is re-exported here.
+metres and pixels. Every public name is re-exported here.
 """
 
 from ._common import (
