@@ -109,3 +109,38 @@ def test_paper_tables(cli):
     assert table2["typeB"]["var_z_mm2"] < table2["typeA"]["var_z_mm2"]
     assert abs(table2["typeA"]["mean_z_mm"] - 660.0) < 5.0
     assert np.isclose(table2["typeB"]["paper_var_z_mm2"], 112.0)
+
+
+def test_fuse_with_a_corrected_rig(tmp_path, sim_session, cli):
+    """Re-fuse with corrected calibration, without re-recording: the session was recorded with
+    a camera 2 cm off its true place; the corrected rig brings the error back down."""
+    from pslog.log import SessionWriter
+    from pslog.rig import Rig, save_rig
+
+    true_rig = sim_session.rig
+    wrong = Rig(tuple(c.replace(t=c.t + np.array([0.02, 0.0, 0.0])) if c.name == "cam2" else c
+                      for c in true_rig.cameras), true_rig.name)
+    recorded = tmp_path / "miscalibrated.mcap"
+    with SessionWriter(recorded, wrong, timing="typeA") as writer:
+        writer.add_detections(sim_session.detections)
+        writer.add_truth(sim_session.truth)
+    corrected = tmp_path / "corrected.toml"
+    save_rig(true_rig, corrected)
+
+    assert cli("fuse", recorded, "--method", "typeA", "-o", tmp_path / "a.mcap")[0] == 0
+    code, _, err = cli("fuse", recorded, "--method", "typeA", "--rig", corrected,
+                       "-o", tmp_path / "b.mcap")
+    assert code == 0, err
+    before, after = read_session(tmp_path / "a.mcap"), read_session(tmp_path / "b.mcap")
+    assert after.rig == true_rig and before.rig == wrong
+    error_before = evaluate(before.tracks["typeA"], sim_session.truth).mean_mm
+    error_after = evaluate(after.tracks["typeA"], sim_session.truth).mean_mm
+    assert error_after < 0.5 * error_before
+    expected = fuse_all(sim_session.detections, true_rig, ["typeA"])["typeA"]
+    assert_array_equal(after.tracks["typeA"].position_world, expected.position_world)
+
+    other = tmp_path / "other.toml"
+    save_rig(true_rig.subset(["cam1", "cam2"]), other)
+    code, _, err = cli("fuse", recorded, "--rig", other, "-o", tmp_path / "c.mcap")
+    assert code == 1 and "names and order must match" in err
+    assert not (tmp_path / "c.mcap").exists()

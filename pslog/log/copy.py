@@ -8,6 +8,7 @@ from pathlib import Path
 
 from ..errors import InputError
 from ..records import Detections, Track
+from ..rig import Rig
 from . import _mcapio as io
 from . import _schemas as S
 from .reader import _Finished
@@ -16,7 +17,7 @@ from .writer import SessionWriter
 
 def copy_session(src, dst, *, detections: Detections | None = None, tracks: Sequence[Track] = (),
                  replace_tracks: bool = True, metadata: Mapping[str, str] | None = None,
-                 force: bool = False) -> None:
+                 rig: Rig | None = None, force: bool = False) -> None:
     """Write ``dst`` as a copy of session ``src``.
 
     Parameters
@@ -27,6 +28,7 @@ def copy_session(src, dst, *, detections: Detections | None = None, tracks: Sequ
     replace_tracks : drop every track of ``src`` (True) or only those whose method is in
         ``tracks`` (False)
     metadata : user metadata to add or replace (e.g. the new detector settings)
+    rig : a corrected rig (same camera names, same order) replacing the session's calibration
     force : overwrite ``dst``
 
     Calibration, poses, images, truth, events, metadata and any foreign topics are copied.
@@ -36,9 +38,14 @@ def copy_session(src, dst, *, detections: Detections | None = None, tracks: Sequ
     if dst.exists() and src_path.exists() and dst.resolve() == src_path.resolve():
         raise InputError(f"output {dst} is the input session; write to another file")
     with _Finished(src_path) as f:
-        meta, rig = f.meta, f.rig
-        first_static = f.collect([S.calibration_topic(rig.names[0])])
+        meta, old_rig = f.meta, f.rig
+        first_static = f.collect([S.calibration_topic(old_rig.names[0])])
         start_ns = min((t for t, _s, _d in next(iter(first_static.values()), [])), default=0)
+    if rig is None:
+        rig = old_rig
+    elif rig.names != old_rig.names:
+        raise InputError(f"rig cameras {', '.join(rig.names)} differ from the session's "
+                         f"{', '.join(old_rig.names)} (names and order must match)")
     if detections is not None and tuple(detections.camera_names) != rig.names:
         raise InputError(f"detections are for cameras {', '.join(detections.camera_names)}, "
                          f"session has {', '.join(rig.names)}")
