@@ -174,6 +174,36 @@ def triangulate_rays(
     return points, rms_miss, n_rays
 
 
+def ray_angles(directions: np.ndarray, valid: np.ndarray | None = None) -> np.ndarray:
+    """Largest angle between any two valid rays of each point, radians.
+
+    The conditioning of a triangulation: depth error grows like ``1 / sin(angle)``, so a
+    small angle flags a point that looks consistent (small miss) but is poorly determined.
+
+    Parameters
+    ----------
+    directions : (n, m, 3), ray directions (any length)
+    valid : (n, m) bool, optional
+
+    Returns
+    -------
+    (n,) float64 radians in [0, π/2] (rays are lines: their sense does not matter); NaN with
+    fewer than two valid rays
+    """
+    directions = np.asarray(directions, dtype=np.float64)
+    if valid is None:
+        valid = np.ones(directions.shape[:2], dtype=bool)
+    norms = np.linalg.norm(directions, axis=2, keepdims=True)
+    valid = valid & (norms[..., 0] > 0) & np.all(np.isfinite(directions), axis=2)
+    unit = np.where(valid[..., None], directions / np.where(norms > 0, norms, 1.0), 0.0)
+    cosines = np.abs(np.einsum("nai,nbi->nab", unit, unit))
+    pair = valid[:, :, None] & valid[:, None, :] & ~np.eye(valid.shape[1], dtype=bool)
+    smallest_cos = np.where(pair, cosines, np.inf).min(axis=(1, 2))
+    with np.errstate(invalid="ignore"):
+        return np.where(np.isfinite(smallest_cos), np.arccos(np.clip(smallest_cos, 0.0, 1.0)),
+                        np.nan)
+
+
 def closest_points_on_rays(
     origins: np.ndarray, directions: np.ndarray, points: np.ndarray
 ) -> np.ndarray:

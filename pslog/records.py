@@ -20,6 +20,8 @@ QUALITY_FIELDS = {
     "ray_miss_m": "distance between the two rays crossed for this point, metres",
     "snap_px": "distance the interpolated point moved to reach the epipolar line, pixels",
     "ray_shift_m": "distance the prediction moved onto the newest viewing ray (eq. 4), metres",
+    "ray_angle_deg": "angle between the crossed rays (the largest pair; for type A the smaller "
+                     "of its two past points), degrees: small means a poorly determined depth",
 }
 
 
@@ -29,8 +31,11 @@ def _frozen(array, dtype, shape_tail: tuple[int, ...], name: str) -> np.ndarray:
         raise InputError(f"{name} must have shape (n, {', '.join(map(str, shape_tail))}) "
                          f"got {array.shape}" if shape_tail else
                          f"{name} must be one-dimensional, got shape {array.shape}")
-    array.setflags(write=False)
-    return array
+    # a read-only view: the record cannot be changed through it, and the caller's own array
+    # keeps its flags
+    view = array.view()
+    view.setflags(write=False)
+    return view
 
 
 @dataclass(frozen=True, eq=False)

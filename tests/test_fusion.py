@@ -97,8 +97,10 @@ def test_eq2_and_eq4_on_a_hand_made_construction():
     assert_allclose(p2.points_world, fronto_parallel(t[j2]), atol=1e-9)
     # eq. (2): P̂ = P_{t-1} + (t - t_{t-1}) / (t_{t-1} - t_{t-2}) (P_{t-1} - P_{t-2})
     ratio = (t[e] - t[j1]) / (t[j1] - t[j2])
+    # 7 ms after a 26.3 ms interval; 26.3 ms after a 7 ms one would extrapolate 3.8x, more than
+    # MAX_EXTRAPOLATION, so P_{t-2} is then the frame before (a whole period earlier)
     other = 1000 / 30 - 7  # ms from the right camera's shutter to the next left one
-    assert set(np.round(ratio, 6)) == {round(7 / other, 6), round(other / 7, 6)}
+    assert set(np.round(ratio, 6)) == {round(7 / other, 6), round(other / (1000 / 30), 6)}
     expected = p1.points_world + ratio[:, None] * (p1.points_world - p2.points_world)
     assert_allclose(construction.predicted_world, expected, atol=1e-12)
     # eq. (4): P' lies on the newest viewing ray, at the foot of the perpendicular from P̂
@@ -138,9 +140,13 @@ def test_type_a_is_causal_and_emits_a_point_per_detection():
     assert len(track) == len(obs) - 3  # all but the first three detections
     assert_array_equal(track.time_ns, obs.time_ns[3:])
     assert_allclose(np.diff(track.time_ns) / NS, 1 / 90, atol=1e-8)  # 90 Hz from 30 fps
-    cut = len(obs) // 2
-    prefix = fuse(obs.select(slice(0, cut)), rig, "typeA")
-    assert_array_equal(prefix.position_world, track.position_world[: len(prefix)])
+    noisy, _ = simulate(rig, get_motion("throw"), options=SimulationOptions(
+        noise_px=0.5, miss_rate=0.15, jitter_s=0.001, seed=7))
+    noisy = noisy.best()
+    full = fuse(noisy, rig, "typeA")
+    for cut in range(4, len(noisy)):  # every prefix: later detections never change a point
+        prefix = fuse(noisy.select(slice(0, cut)), rig, "typeA")
+        assert_array_equal(prefix.position_world, full.position_world[: len(prefix)])
 
 
 @pytest.mark.parametrize("method", list(METHODS))
@@ -303,3 +309,107 @@ def test_fuse_all_shares_preparation_and_matches_fuse():
     tracks = fuse_all(detections, rig, ["typeA", "typeB", "linear"])
     for method, track in tracks.items():
         assert_array_equal(track.position_world, fuse(detections, rig, method).position_world)
+
+
+# ---- hand-made cases with three cameras and unequal offsets, and type B ---------------------
+
+def test_three_cameras_unequal_offsets_pin_eq1_weights_eq2_ratio_and_partner():
+    # shutters at 0, 7 and 20 ms: δ12 = 7 ms, δ23 = 13 ms, δ31 = 13.33 ms
+    offsets = (0.0, 0.007, 0.020)
+    rig = Rig(tuple(c.replace(offset=o) for c, o in zip(builtin_rig("paper3").cameras, offsets,
+                                                        strict=True)))
+    detections, _ = simulate(rig, get_motion("spiral"))
+    obs = detections.best()
+    construction = explain_type_a(obs, rig)
+    p1, p2 = construction.past
+    cam1 = obs.camera[construction.event_row] == 0  # events of camera 1, as in the paper
+    d12, d23, d31 = 7.0, 13.0, 1000 / 30 - 20.0
+    t_ms = obs.time_ns / 1e6
+    e = construction.event_row[cam1]
+    # the past points are camera 3 at t-1 and camera 2 at t-2, both paired with camera 1
+    assert_array_equal(obs.camera[p1.row[cam1]], 2)
+    assert_array_equal(obs.camera[p2.row[cam1]], 1)
+    assert_array_equal(p1.partner[cam1], 0)
+    assert_array_equal(p2.partner[cam1], 0)
+    assert_array_equal(p1.next_row[cam1], e)  # the bracket ends at the newest frame, t
+    # eq. (1): weight of u_t is δ12 / T for P_{t-2} and (δ12 + δ23) / T for P_{t-1}
+    T = d12 + d23 + d31
+    for p, weight in ((p2, d12 / T), (p1, (d12 + d23) / T)):
+        uv_prev = cam_undistort(rig, obs, p.prev_row[cam1])
+        uv_next = cam_undistort(rig, obs, p.next_row[cam1])
+        assert_allclose(p.uv_interpolated[cam1], (1 - weight) * uv_prev + weight * uv_next,
+                        atol=1e-9)
+        assert_allclose((t_ms[p.row[cam1]] - t_ms[p.prev_row[cam1]]) / T, weight, atol=1e-6)
+    # eq. (2): the ratio is δ31 / δ23 (the interval between t-2 and t-1), not the printed δ12
+    ratio = (t_ms[e] - t_ms[p1.row[cam1]]) / (t_ms[p1.row[cam1]] - t_ms[p2.row[cam1]])
+    assert_allclose(ratio, d31 / d23, atol=1e-6)
+    P1, P2 = p1.points_world[cam1], p2.points_world[cam1]
+    assert_allclose(construction.predicted_world[cam1], P1 + (d31 / d23) * (P1 - P2),
+                    atol=1e-9)
+
+
+def cam_undistort(rig, obs, rows):
+    return rig.cameras[int(obs.camera[rows[0]])].undistort(obs.uv[rows])
+
+
+def test_type_b_and_linear_hand_computed_on_the_fall():
+    # noise-free stereo at the common instants is exact, so each in-between detection at
+    # T1 + 1/60 s must give P̂ = P(T1) + 0.5 (P(T1) - P(T0)) (eq. (2)), and type B the foot of
+    # the perpendicular from P̂ on camera 2's ray through the true ball (eqs. (3)-(4))
+    rig = apply_timing(builtin_rig("paper3"), "typeB")
+    motion = get_motion("fall")
+    detections, _ = simulate(rig, motion)
+    linear = fuse(detections, rig, "linear")
+    type_b = fuse(detections, rig, "typeB")
+    single = np.flatnonzero(linear.camera == 1)  # camera 2 fires between the stereo pairs
+    assert len(single) > 10
+    period = 1 / 30
+    t = linear.time_ns[single] / NS
+    P0, P1 = motion.position(t - 1.5 * period), motion.position(t - 0.5 * period)
+    predicted = P1 + 0.5 * (P1 - P0)
+    assert_allclose(linear.position_world[single], predicted, atol=1e-9)
+    C = rig.cameras[1].center_world
+    r = motion.position(t) - C
+    foot = C + (np.einsum("ij,ij->i", predicted - C, r) / np.einsum("ij,ij->i", r, r))[:, None] * r
+    assert_allclose(type_b.position_world[single], foot, atol=1e-9)
+    stereo = np.flatnonzero(linear.camera != 1)
+    assert_allclose(linear.position_world[stereo], motion.position(linear.time_ns[stereo] / NS),
+                    atol=1e-9)
+
+
+def test_nan_rays_and_failed_stereo_never_give_nan_points_or_crash():
+    rig = apply_timing(builtin_rig("paper3"), "typeB")
+    detections, _ = simulate(rig, get_motion("spiral"))
+    obs = detections.best()
+    uv = obs.uv.copy()
+    uv[np.flatnonzero(obs.camera == 1)[5]] = np.nan  # one unusable in-between detection
+    broken = Observations(obs.time_ns, obs.camera, uv, obs.frame_index)
+    for method in METHODS:
+        track = fuse(broken, rig, method)
+        assert len(track) > 10 and np.all(np.isfinite(track.position_world)), method
+    uv[obs.camera == 2] = np.nan  # camera 3 never usable: no stereo point can be made
+    broken = Observations(obs.time_ns, obs.camera, uv, obs.frame_index)
+    for method in ("sync", "typeB", "linear"):
+        assert len(fuse(broken, rig, method)) == 0
+
+
+@pytest.mark.parametrize("offsets,jitter", [((0.0, 0.0165, 0.0167), 0.0),
+                                            ((0.0, 1 / 60, 0.0), 0.0003)])
+def test_type_a_with_nearly_coincident_shutters_stays_accurate(offsets, jitter):
+    # two shutters 0.2-0.3 ms apart would make eq. (2) extrapolate ~80x their interval
+    rig = Rig(tuple(c.replace(offset=o) for c, o in zip(builtin_rig("paper3").cameras, offsets,
+                                                        strict=True)))
+    detections, truth = simulate(rig, get_motion("spiral"),
+                                 options=SimulationOptions(jitter_s=jitter, seed=5))
+    accuracy = evaluate(fuse(detections, rig, "typeA"), truth)
+    assert accuracy.max_mm < 10.0 and accuracy.rate_hz > 80
+
+
+def test_ray_angle_flags_a_ball_near_the_baseline():
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    detections, _ = simulate(rig, get_motion("spiral"))
+    track = fuse(detections, rig, "typeA")
+    assert np.all(track.quality["ray_angle_deg"] > 10)  # the paper rig sees from far apart
+    sync_rig = apply_timing(rig, "sync")
+    detections, _ = simulate(sync_rig, get_motion("spiral"))
+    assert np.all(fuse(detections, sync_rig, "sync").quality["ray_angle_deg"] > 10)

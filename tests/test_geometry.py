@@ -353,3 +353,19 @@ def test_closest_point_on_camera_ray_recovers_point_on_ray():
     predicted = points + 0.05 * perpendicular / np.linalg.norm(perpendicular, axis=1)[:, None]
     assert_allclose(closest_points_on_rays(origin, directions, predicted), points,
                     rtol=0, atol=1e-9)
+
+
+def test_ray_angles_hand_computed():
+    from pslog.geometry import ray_angles
+
+    dirs = np.array([
+        [[1.0, 0, 0], [0, 2.0, 0], [0, 0, 0]],          # x and y: 90°, third ray invalid
+        [[1.0, 0, 0], [1.0, 1.0, 0], [3.0, 0, 0]],      # largest pair 45°
+        [[1.0, 0, 0], [-5.0, 0, 0], [0, 0, 0]],         # a line has no sense: 0°
+        [[0, 0, 1.0], [np.nan, 0, 0], [0, 0, 0]],       # one usable ray: undefined
+    ])
+    valid = np.array([[True, True, False], [True, True, True], [True, True, False],
+                      [True, True, True]])
+    np.testing.assert_allclose(np.degrees(ray_angles(dirs, valid))[:3], [90.0, 45.0, 0.0],
+                               atol=1e-12)
+    assert np.isnan(ray_angles(dirs, valid)[3])

@@ -207,3 +207,11 @@ def test_truth_single_sample_and_empty():
     empty = Truth(np.zeros(0, np.int64), np.zeros((0, 3)))
     assert np.all(np.isnan(empty.at([0, 1])))
     assert truth.at([]).shape == (0, 3)
+
+
+def test_records_are_read_only_without_freezing_the_callers_arrays():
+    uv = np.array([[1.0, 2.0], [3.0, 4.0]])
+    obs = Observations(np.array([0, 1]), np.array([0, 1]), uv, np.array([0, 0]))
+    uv[0, 0] = 5.0  # the caller may still write its own array
+    with pytest.raises(ValueError, match="read-only"):
+        obs.uv[0, 0] = 6.0

@@ -31,7 +31,8 @@ def fuse_predicted(prep: Prepared, method: str, tolerance_s: float, max_gap_s: f
     t_single = obs.time_ns[single]
     k1 = np.searchsorted(stereo_ns, t_single, side="left") - 1  # latest stereo point before
     k2 = k1 - 1
-    ok = (k2 >= 0) & (t_single - stereo_ns[np.maximum(k2, 0)] <= int(max_gap_s * NS))
+    ok = k2 >= 0  # also false for every detection when no stereo point could be made
+    ok[ok] = t_single[ok] - stereo_ns[k2[ok]] <= int(max_gap_s * NS)
     single, t_single, k1, k2 = single[ok], t_single[ok], k1[ok], k2[ok]
 
     # eq. (2) with the actual intervals
@@ -43,13 +44,15 @@ def fuse_predicted(prep: Prepared, method: str, tolerance_s: float, max_gap_s: f
         shift = np.linalg.norm(single_points - predicted, axis=1)
     else:
         single_points, shift = predicted, np.full(len(single), np.nan)
+    finite = np.all(np.isfinite(single_points), axis=1)  # a detection without a usable ray
+    single, t_single, single_points, shift = (
+        single[finite], t_single[finite], single_points[finite], shift[finite])
 
     time_ns = np.concatenate([stereo_ns, t_single])
     order = np.argsort(time_ns, kind="stable")
     nan_s, nan_m = np.full(len(single), np.nan), np.full(len(stereo_ns), np.nan)
+    quality = {k: np.concatenate([v, nan_s])[order] for k, v in stereo.quality.items()}
+    quality["ray_shift_m"] = np.concatenate([nan_m, shift])[order]
     return Track(
         method, time_ns[order], np.concatenate([points, single_points])[order],
-        np.concatenate([stereo.camera, obs.camera[single]])[order],
-        {"ray_miss_m": np.concatenate([stereo.quality["ray_miss_m"], nan_s])[order],
-         "ray_shift_m": np.concatenate([nan_m, shift])[order]},
-    )
+        np.concatenate([stereo.camera, obs.camera[single]])[order], quality)

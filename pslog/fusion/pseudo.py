@@ -22,9 +22,11 @@ For the newest event ``t`` (camera ``c``, time ``t_t``):
    newest frame), as in the paper.
 2. *Eq. (2)*, linear prediction: ``P̂_t = P_{t-1} + (P_{t-1} - P_{t-2}) δ_pred / δ_prev`` with
    ``δ_pred = t_t - t_{t-1}`` and ``δ_prev = t_{t-1} - t_{t-2}``, the actual capture intervals.
-   (The paper prints ``δ31 / δ12``; its ``δ_prev`` is the interval between ``t-2`` and
-   ``t-1``, which equals ``δ12`` for type A's evenly spaced shutters. We use the actual
-   interval so that unequal offsets and jitter are handled.)
+   (The paper prints ``δ31 / δ12``, but the interval between ``t-2`` and ``t-1`` is ``δ23``;
+   the printed form agrees with ours only for type A's evenly spaced shutters. We use the
+   actual intervals so that unequal offsets and jitter are handled.) ``P_{t-2}`` is chosen so
+   that ``δ_pred <= MAX_EXTRAPOLATION * δ_prev``: two nearly simultaneous past instants would
+   otherwise turn eq. (2) into an extrapolation that multiplies their errors many times.
 3. *Eqs. (3)-(4)*: the output ``P'_t`` is the point of the newest viewing ray
    ``l = k r + T`` nearest to ``P̂_t``.
 
@@ -49,6 +51,8 @@ from ._prepare import Prepared, bracket
 
 #: Brackets whose lengths differ by less than this are ties (shutter offsets are rounded to ns).
 _SPAN_TIE_NS = 1_000_000
+#: Eq. (2) extrapolates at most this many times the interval between its two past points.
+MAX_EXTRAPOLATION = 2.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -66,6 +70,7 @@ class PseudoStereoPoints:
     snap_px : (k,) float64, distance moved by the snap, pixels
     points_world : (k, 3) float64, step 3, metres
     miss_m : (k,) float64, distance between the two crossed rays (≈ 0 after the snap), metres
+    angle_rad : (k,) float64, angle between the two crossed rays, radians
     """
 
     row: np.ndarray
@@ -78,6 +83,7 @@ class PseudoStereoPoints:
     snap_px: np.ndarray
     points_world: np.ndarray
     miss_m: np.ndarray
+    angle_rad: np.ndarray
 
 
 def pseudo_stereo_points(
@@ -90,7 +96,7 @@ def pseudo_stereo_points(
     t_row = time_ns[rows]
     cam_row = obs.camera[rows]
     k = len(rows)
-    best_span = np.full(k, np.iinfo(np.int64).max)
+    best_span = np.full(k, 2**62)  # "none yet", far from int64 overflow in the tie test
     best_end = np.full(k, np.iinfo(np.int64).min)
     partner = np.full(k, -1, dtype=np.int64)
     prev_row = np.zeros(k, dtype=np.int64)
@@ -127,8 +133,11 @@ def pseudo_stereo_points(
     points, miss = triangulate_two_rays(prep.ray_origin[rows], prep.ray_dir[rows],
                                         prep.centers[partner_idx], dir_partner)
     valid &= np.all(np.isfinite(points), axis=1)
+    # both directions are unit vectors; a line has no sense, hence the absolute value
+    cos_angle = np.abs(np.einsum("ij,ij->i", prep.ray_dir[rows], dir_partner))
+    angle = np.arccos(np.minimum(cos_angle, 1.0))
     return PseudoStereoPoints(rows, valid, partner, prev_row, next_row, uv_interp, uv_snapped,
-                              snap_px, points, miss)
+                              snap_px, points, miss, angle)
 
 
 @dataclass(frozen=True, eq=False)
@@ -155,7 +164,8 @@ def fuse_type_a(prep: Prepared, max_gap_s: float) -> tuple[Track, TypeAConstruct
     The two earlier points are those of the two latest earlier instants that can be
     triangulated causally — for the paper's evenly offset cameras, always ``t-1`` and ``t-2``.
     When one cannot (a missed detection, or a partner camera with a slower frame rate whose
-    next frame is still to come), the next earlier instant takes its place, up to
+    next frame is still to come), or when ``t-2`` is too close to ``t-1`` for eq. (2)
+    (see ``MAX_EXTRAPOLATION``), the next earlier instant takes its place, up to
     ``2 * n_cameras`` instants back and within ``max_gap_s``.
     """
     obs = prep.obs
@@ -174,21 +184,27 @@ def fuse_type_a(prep: Prepared, max_gap_s: float) -> tuple[Track, TypeAConstruct
     # triangulate predecessors depth by depth, only for events still lacking two points
     first = np.full(n, -1, dtype=np.int64)  # depth of P_{t-1} (the later past point)
     second = np.full(n, -1, dtype=np.int64)  # depth of P_{t-2}
-    computed: list[tuple[np.ndarray, PseudoStereoPoints]] = []
+    t_first = np.zeros(n, dtype=np.int64)  # capture time of P_{t-1}
+    computed: list[tuple[int, np.ndarray, PseudoStereoPoints]] = []  # (depth, events, points)
     for k in range(depth):
-        need = np.flatnonzero((second < 0) & (predecessors[:, k] >= 0))
+        candidate = predecessors[:, k]
+        # as P_{t-2}, a candidate must leave eq. (2) a bounded extrapolation
+        spaced = (first < 0) | (time_ns - t_first <= MAX_EXTRAPOLATION * (
+            t_first - time_ns[np.maximum(candidate, 0)]))
+        need = np.flatnonzero((second < 0) & (candidate >= 0) & spaced)
         if len(need) == 0:
-            break
-        points_k = pseudo_stereo_points(prep, predecessors[need, k], need, max_gap_ns)
-        computed.append((need, points_k))
+            continue
+        points_k = pseudo_stereo_points(prep, candidate[need], need, max_gap_ns)
+        computed.append((k, need, points_k))
         good = need[points_k.valid]
         is_first = first[good] < 0
         first[good[is_first]] = k
+        t_first[good[is_first]] = time_ns[candidate[good[is_first]]]
         second[good[~is_first]] = k
 
     events = np.flatnonzero(second >= 0)
     if not computed:  # fewer than three instants: no point yet
-        computed.append((events, pseudo_stereo_points(prep, events, events, max_gap_ns)))
+        computed.append((0, events, pseudo_stereo_points(prep, events, events, max_gap_ns)))
     p1 = _gather(computed, events, first[events])
     p2 = _gather(computed, events, second[events])
     j1, j2 = p1.row, p2.row
@@ -204,6 +220,7 @@ def fuse_type_a(prep: Prepared, max_gap_s: float) -> tuple[Track, TypeAConstruct
         "snap_px": np.maximum(p1.snap_px, p2.snap_px),
         "ray_miss_m": np.maximum(p1.miss_m, p2.miss_m),
         "ray_shift_m": np.linalg.norm(points - predicted, axis=1),
+        "ray_angle_deg": np.degrees(np.minimum(p1.angle_rad, p2.angle_rad)),
     }
     track = Track("typeA", time_ns[events], points, obs.camera[events], quality).select(keep)
     construction = TypeAConstruction(
@@ -211,14 +228,14 @@ def fuse_type_a(prep: Prepared, max_gap_s: float) -> tuple[Track, TypeAConstruct
     return track, construction
 
 
-def _gather(computed: list[tuple[np.ndarray, PseudoStereoPoints]], events: np.ndarray,
+def _gather(computed: list[tuple[int, np.ndarray, PseudoStereoPoints]], events: np.ndarray,
             depth: np.ndarray) -> PseudoStereoPoints:
     """Rows of the per-depth results: for each event, the entry computed at its ``depth``."""
     fields = PseudoStereoPoints.__dataclass_fields__
-    template = computed[0][1]
+    template = computed[0][2]
     out = {f: np.zeros((len(events), *getattr(template, f).shape[1:]),
                        dtype=getattr(template, f).dtype) for f in fields}
-    for k, (rows_k, points_k) in enumerate(computed):
+    for k, rows_k, points_k in computed:
         mine = np.flatnonzero(depth == k)
         where = np.searchsorted(rows_k, events[mine])  # rows_k is sorted
         for f in fields:

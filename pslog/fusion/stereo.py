@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import FusionError
-from ..geometry import triangulate_rays
+from ..geometry import ray_angles, triangulate_rays
 from ..records import NS, Track
 from ._prepare import Prepared, latest_row_at_or_before
 
@@ -31,8 +31,9 @@ def sync_groups(prep: Prepared, tolerance_s: float) -> tuple[np.ndarray, np.ndar
 
 def triangulate_groups(prep: Prepared, group: np.ndarray, n_groups: int):
     """N-view least-squares point of each group (one ray per camera; a camera seen twice in a
-    group keeps its latest ray). Returns points (g, 3), rms miss (g,), time_ns (g,) of the
-    group's latest observation, camera (g,) of that observation."""
+    group keeps its latest ray). Returns points (g, 3), quality {name: (g,)} (``ray_miss_m``,
+    ``ray_angle_deg``), time_ns (g,) of the group's latest observation, camera (g,) of that
+    observation."""
     n_cams = len(prep.centers)
     origins = np.zeros((n_groups, n_cams, 3))
     dirs = np.zeros((n_groups, n_cams, 3))
@@ -43,7 +44,8 @@ def triangulate_groups(prep: Prepared, group: np.ndarray, n_groups: int):
     valid[group, cam] = True
     points, rms_miss, _ = triangulate_rays(origins, dirs, valid)
     last = np.r_[np.flatnonzero(np.diff(group)), len(group) - 1]  # last row of each group
-    return points, rms_miss, prep.obs.time_ns[last], prep.obs.camera[last]
+    quality = {"ray_miss_m": rms_miss, "ray_angle_deg": np.degrees(ray_angles(dirs, valid))}
+    return points, quality, prep.obs.time_ns[last], prep.obs.camera[last]
 
 
 def stereo_at_common_instants(
@@ -62,10 +64,10 @@ def stereo_at_common_instants(
             f"method {method} needs cameras with a common shutter instant (sync or typeB "
             f"timing), but no two cameras captured within {tolerance_s * 1e3:g} ms of each "
             f"other")
-    points, rms_miss, time_ns, camera = triangulate_groups(prep, group, len(n_cameras))
+    points, quality, time_ns, camera = triangulate_groups(prep, group, len(n_cameras))
     keep = (n_cameras >= 2) & np.all(np.isfinite(points), axis=1)
     track = Track(method, time_ns[keep], points[keep], camera[keep],
-                  {"ray_miss_m": rms_miss[keep]})
+                  {k: v[keep] for k, v in quality.items()})
     return track, n_cameras[group] == 1
 
 
@@ -102,8 +104,9 @@ def fuse_nearest(prep: Prepared, max_gap_s: float) -> Track:
     valid[events, camera] = True
     points, rms_miss, _ = triangulate_rays(origins, dirs, valid)
     keep = (others >= 1) & np.all(np.isfinite(points), axis=1)
+    angle = np.degrees(ray_angles(dirs, valid))
     return Track("nearest", time_ns[keep], points[keep], camera[keep],
-                 {"ray_miss_m": rms_miss[keep]})
+                 {"ray_miss_m": rms_miss[keep], "ray_angle_deg": angle[keep]})
 
 
 def _empty(method: str) -> Track:
