@@ -12,9 +12,11 @@ typeB     stereo at common instants + ray-constrained prediction        section 
 linear    typeB without the ray constraint                              Table 1 "linear prediction"
 ========  ============================================================  ===================
 
-:func:`fuse` is the batch entry point; every method is causal (a point at time ``t`` uses
-no detection later than ``t``), so :class:`~pslog.fusion.stream.StreamFuser` gives the same
-points incrementally.
+:func:`fuse` is the batch entry point. Every method is causal, so
+:class:`~pslog.fusion.stream.StreamFuser` gives the same points incrementally: a ``typeA`` or
+``nearest`` point uses no detection after its own in (time, camera) order; ``sync``, ``typeB``
+and ``linear`` group detections within the tolerance, so their point at ``t`` may also use
+detections up to ``t + tolerance``.
 """
 
 from __future__ import annotations
