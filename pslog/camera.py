@@ -94,6 +94,12 @@ class Camera:
             object.__setattr__(self, key, float(value))
         if self.fps <= 0:
             raise RigError(f"camera {name!r}: fps must be > 0, got {self.fps}")
+        # the offset is a phase: an offset of a period or more names the same shutter
+        # schedule as offset % period and would only make rigs compare unequal
+        if not 0.0 <= self.offset < self.frame_period:
+            raise RigError(f"camera {name!r}: offset {self.offset:g} s must be in "
+                           f"[0, {self.frame_period:.6g} s), the frame period at "
+                           f"{self.fps:g} fps")
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, Camera):

@@ -18,7 +18,7 @@ class Accuracy:
     ----------
     method : str
     n_points : int, points compared (those inside the truth's time span)
-    rate_hz : float, output rate: (points - 1) / (last time - first time)
+    rate_hz : float, output rate: (distinct instants - 1) / (last time - first time)
     mean_mm, median_mm, p95_mm, max_mm, rms_mm : float, Euclidean 3D error, millimetres
     """
 
@@ -41,10 +41,12 @@ def errors_m(track: Track, truth: Truth) -> np.ndarray:
 
 
 def output_rate_hz(time_ns: np.ndarray) -> float:
-    """Points per second over the span of ``time_ns``; 0 for fewer than two points."""
-    if len(time_ns) < 2 or time_ns[-1] == time_ns[0]:
+    """Distinct instants per second over the span of ``time_ns`` (sorted); 0 for fewer than
+    two. Points at the same instant (several cameras firing together) count once."""
+    instants = len(np.unique(time_ns))
+    if instants < 2:
         return 0.0
-    return (len(time_ns) - 1) / ((time_ns[-1] - time_ns[0]) / NS)
+    return (instants - 1) / ((time_ns[-1] - time_ns[0]) / NS)
 
 
 def evaluate(track: Track, truth: Truth) -> Accuracy:

@@ -17,6 +17,9 @@ from .motion import Motion
 from .records import NS, Detections, Truth
 from .rig import Rig
 
+#: Longest simulation, in frames of all cameras together (about 2 GB of detections).
+MAX_SIMULATED_FRAMES = 20_000_000
+
 
 @dataclass(frozen=True)
 class SimulationOptions:
@@ -59,11 +62,15 @@ def capture_times(rig: Rig, duration: float) -> tuple[np.ndarray, np.ndarray, np
     """
     if not np.isfinite(duration) or duration <= 0:
         raise InputError(f"duration must be > 0 seconds, got {duration!r}")
+    n_frames = duration * sum(cam.fps for cam in rig.cameras)
+    if n_frames > MAX_SIMULATED_FRAMES:
+        raise InputError(f"duration {duration:g} s gives {n_frames:.3g} frames; simulate at "
+                         f"most {MAX_SIMULATED_FRAMES:.0e} frames (a 90-minute match of three "
+                         f"30 fps cameras is 4.9e5)")
     times, cameras, indices = [], [], []
     for i, cam in enumerate(rig.cameras):
-        offset = cam.offset % cam.frame_period
-        k = np.arange(int(np.ceil((duration - offset) * cam.fps)) + 1)
-        t = offset + k / cam.fps
+        k = np.arange(int(np.ceil((duration - cam.offset) * cam.fps)) + 1)
+        t = cam.offset + k / cam.fps  # the offset is within [0, 1 / fps) (Camera checks)
         keep = t < duration
         times.append(t[keep])
         cameras.append(np.full(keep.sum(), i, dtype=np.int32))

@@ -29,7 +29,8 @@ from typing import IO, Literal
 
 import numpy as np
 
-from pslog.errors import InputError, OutputExistsError, PslogError, RigError
+from pslog.errors import InputError, PslogError, RigError
+from pslog.outputs import check_output_path
 from pslog.records import NS, Truth
 from pslog.rig import TIMING_PRESETS, Rig, apply_timing
 
@@ -158,9 +159,7 @@ def record(
         raise InputError(f"JPEG quality must be in 1..100, got {jpeg_quality!r}")
     if duration_s is not None and not (np.isfinite(duration_s) and duration_s > 0):
         raise InputError(f"duration must be > 0 seconds, got {duration_s!r}")
-    output = Path(output)
-    if output.exists() and not force:
-        raise OutputExistsError(f"{output} exists; use --force to overwrite it")
+    output = check_output_path(output, force)
     options = WorkerOptions(hsv=hsv or HsvRange(), max_candidates=int(max_candidates),
                             frames=bool(frames), jpeg_quality=int(jpeg_quality),
                             duration_ns=None if duration_s is None else int(duration_s * NS))
@@ -174,8 +173,10 @@ def record(
                        source=source or "record", metadata=meta) as writer:
         if truth is not None:
             writer.add_truth(truth)
-        session = _Session(rig, sources, options, writer, status)
-        return session.run()
+        summary = _Session(rig, sources, options, writer, status).run()
+        if summary.n_frames == 0:
+            writer.abort()  # no camera delivered: keep any session this would replace
+        return summary
 
 
 class _Session:

@@ -15,7 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from pslog.errors import InputError, OutputExistsError
+from pslog.errors import InputError
+from pslog.outputs import check_output_path
 from pslog.records import Detections
 
 from .detect import BallDetector, HsvRange
@@ -66,9 +67,7 @@ def redetect_session(src: str | Path, dst: str | Path, hsv: HsvRange | None = No
     """
     from pslog.log import copy_session, iter_images, read_session
 
-    dst = Path(dst)
-    if dst.exists() and not force:
-        raise OutputExistsError(f"{dst} exists; use --force to overwrite it")
+    dst = check_output_path(dst, force)
     session = read_session(src)
     if session.n_images == 0:
         raise InputError(f"{src} has no stored frames (recorded with --no-frames?); "

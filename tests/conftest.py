@@ -65,3 +65,29 @@ def cli(capsys):
         return code, captured.out, captured.err
 
     return run
+
+
+@pytest.fixture
+def truth_first_session(tmp_path, rig3) -> tuple[bytes, list[int]]:
+    """A synthetic-style session: truth for 1 s written up front, then two batches of 10
+    frames per camera with images; returns the file and the end offsets of its chunks
+    (in order: ..., truth, images 1, detections 1, images 2, detections 2)."""
+    from pslog.log import SessionWriter
+    from pslog.log import _mcapio as io
+    from pslog.records import Truth
+
+    path = tmp_path / "truth_first.mcap"
+    truth_t = np.arange(300, dtype=np.int64) * 3_333_333
+    # a huge flush interval: only the explicit flushes below write chunks
+    with SessionWriter(path, rig3, flush_interval_s=1e6) as w:
+        w.add_truth(Truth(truth_t, np.zeros((300, 3))))
+        w.flush()
+        for batch in (range(10), range(10, 20)):
+            for k in batch:
+                for cam in range(3):
+                    w.add_frame(cam, k, k * 33_333_333 + cam * 11_111_111, uv=[[1.0, 2.0]],
+                                image=make_jpeg(k))
+            w.flush()  # the image chunk in progress, then the buffered detections
+    data = path.read_bytes()
+    ends = [end for op, _, end in io.walk_records(data, len(io.MAGIC)) if op == io.OP_CHUNK]
+    return data, ends

@@ -319,6 +319,8 @@ def _rotation_z(angle: float) -> np.ndarray:
     ({"fps": np.inf}, "fps"),
     ({"fps": "30"}, "fps"),
     ({"offset": np.nan}, "offset"),
+    ({"offset": -1e-9}, "offset"),
+    ({"offset": 1 / 30}, "offset"),
     ({"width": 0}, "width"),
     ({"width": 640.0}, "width"),
     ({"height": -480}, "height"),
@@ -332,6 +334,19 @@ def test_invalid_camera_raises_rig_error_naming_camera_and_key(changes, key):
     assert "camX" in message and key in message
     assert "\n" not in message
     assert isinstance(info.value, PslogError)
+
+
+def test_offset_must_lie_within_one_frame_period():
+    # the offset is the shutter phase: a whole period or more is not a distinct schedule
+    with pytest.raises(RigError) as info:
+        Camera(**(_good_fields() | {"offset": 0.5}))
+    assert str(info.value) == ("camera 'camX': offset 0.5 s must be in [0, 0.0333333 s), "
+                               "the frame period at 30 fps")
+    with pytest.raises(RigError, match=r"offset 0\.01 s must be in \[0, 0\.00833333 s\)"):
+        Camera(**(_good_fields() | {"fps": 120.0, "offset": 0.01}))
+    last = np.nextafter(1 / 30, 0.0)
+    assert Camera(**(_good_fields() | {"offset": last})).offset == last
+    assert Camera(**(_good_fields() | {"offset": -0.0})).offset == 0.0
 
 
 def test_slightly_imperfect_rotation_is_accepted():

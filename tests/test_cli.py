@@ -45,12 +45,16 @@ def test_every_command_module_exists_and_has_help():
         assert f"pslog {name}" in result.stdout
 
 
-def test_unknown_command_and_bad_values_are_usage_errors():
+def test_unknown_command_and_bad_values_are_one_line_usage_errors():
     result = run("frobnicate")
     assert result.returncode == 2 and "unknown command 'frobnicate'" in result.stderr
-    result = run("simulate", "--rig", "paper3", "--duration", "-1", "-o", "x.mcap")
-    assert result.returncode == 2 and "--duration" in result.stderr
-    assert "Traceback" not in result.stderr
+    for args, name in ((("--duration", "-1"), "--duration"), (("--seed", "-5"), "--seed"),
+                       (("--noise-px", "nan"), "--noise-px")):
+        result = run("simulate", "--rig", "paper3", *args, "-o", "x.mcap")
+        assert result.returncode == 2 and name in result.stderr
+        assert result.stderr.count("\n") == 1 and "Traceback" not in result.stderr
+    result = run("simulate", "--rig", "paper3", "--duration", "1e9", "-o", "x.mcap")
+    assert result.returncode == 1 and "frames" in result.stderr
 
 
 def test_pslog_error_is_one_line_exit_1(tmp_path):

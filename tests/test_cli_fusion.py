@@ -8,6 +8,7 @@ import json
 import numpy as np
 from numpy.testing import assert_allclose, assert_array_equal
 
+from pslog import apply_timing, get_motion, simulate
 from pslog.evaluation import evaluate
 from pslog.fusion import fuse_all
 from pslog.log import read_session
@@ -65,8 +66,43 @@ def test_fuse_export_eval_round_trip(tmp_path, sim_session, cli):
 def test_fuse_defaults_to_every_applicable_method(tmp_path, sim_session, cli):
     code, out, err = cli("fuse", sim_session.path, "-o", tmp_path / "all.mcap")
     assert code == 0, err
-    assert "skipping sync" in out and "skipping typeB" in out
+    assert "not run on this timing: sync, typeB, linear" in out
     assert set(read_session(tmp_path / "all.mcap").tracks) == {"typeA", "nearest"}
+
+
+def test_default_methods_follow_the_timing(tmp_path, cli):
+    from pslog import builtin_rig
+    from pslog.fusion import default_methods
+
+    expected = {"sync": ["sync"], "typeA": ["nearest", "typeA"],
+                "typeB": ["sync", "nearest", "typeA", "typeB", "linear"]}
+    for timing, methods in expected.items():
+        rig = apply_timing(builtin_rig("paper3"), timing)
+        detections, _ = simulate(rig, get_motion("fall"))
+        assert default_methods(detections, rig) == methods, timing
+    # on sync timing, the rate counts instants, not the points several cameras give at one
+    path = tmp_path / "sync.mcap"
+    assert cli("simulate", "--rig", "paper3", "--timing", "sync", "-o", path)[0] == 0
+    code, _, err = cli("fuse", path, "--method", "typeA", "--method", "sync",
+                       "-o", tmp_path / "f.mcap")
+    assert code == 0, err
+    report = {r["method"]: r for r in json.loads(cli("eval", tmp_path / "f.mcap", "--json")[1])}
+    assert abs(report["sync"]["rate_hz"] - 30.0) < 0.1
+    assert abs(report["typeA"]["rate_hz"] - 30.0) < 0.1
+
+
+def test_fuse_without_detections_is_an_error(tmp_path, sim_session, cli):
+    from pslog.log import SessionWriter
+    from pslog.records import Detections
+
+    empty = tmp_path / "empty.mcap"
+    with SessionWriter(empty, sim_session.rig) as writer:
+        d = sim_session.detections
+        writer.add_detections(Detections.from_frames(
+            d.camera_names, d.frame_time_ns, d.frame_camera, d.frame_index, [], np.zeros((0, 2))))
+    code, _, err = cli("fuse", empty, "-o", tmp_path / "f.mcap")
+    assert code == 1 and "no detection to fuse" in err
+    assert not (tmp_path / "f.mcap").exists()
 
 
 def test_fuse_refuses_impossible_methods_and_existing_output(tmp_path, sim_session, cli):

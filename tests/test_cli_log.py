@@ -96,6 +96,30 @@ def test_recover_command(sim_session, tmp_path, cli):
     assert code == 1 and "exists" in stderr
 
 
+def test_recover_and_info_report_detections_images_and_truth_separately(tmp_path, cli,
+                                                                        truth_first_session):
+    data, chunk_ends = truth_first_session
+    broken = tmp_path / "broken.mcap"
+    broken.write_bytes(data[:chunk_ends[-2] + 20])  # inside the last detection chunk
+    code, stdout, _ = cli("info", broken)
+    assert code == 1
+    assert ("30 detection frames (to t = 0.322 s), 60 images (to t = 0.656 s), "
+            "300 truth points") in stdout
+    assert "0.997" not in stdout  # the end of the truth is not where the recording stopped
+    code, stdout, stderr = cli("recover", broken, "-o", tmp_path / "fixed.mcap")
+    assert code == 0, stderr
+    assert stdout.splitlines()[0] == (
+        f"recovered into {tmp_path / 'fixed.mcap'}: 30 detection frames (to t = 0.322 s), "
+        f"60 images (to t = 0.656 s), 300 truth points")
+
+    broken.write_bytes(data[:chunk_ends[-4] + 20])  # inside the first detection chunk
+    for command in ("info", "recover"):
+        args = (broken, "-o", tmp_path / "fixed2.mcap") if command == "recover" else (broken,)
+        code, stdout, _ = cli(command, *args)
+        assert "30 images (to t = 0.322 s), 300 truth points; no detection frame survived" \
+            in stdout
+
+
 # ---- import / export ---------------------------------------------------------------------------
 _CSV = """camera,time,u,v,frame,score
 cam2,0.011111111,100.5,200.25,0,0.5
@@ -153,6 +177,20 @@ def test_import_without_frame_column_numbers_frames_in_time_order(tmp_path, cli)
     assert_array_equal(d.cand_uv[-1], [6.0, 5.0])
 
 
+def test_import_candidates_of_one_frame_share_camera_time_and_frame(tmp_path, cli):
+    # several rows with the same camera and time are candidates of one frame, also with a
+    # frame column; the same frame index on another camera is another frame
+    det_csv = tmp_path / "det.csv"
+    det_csv.write_text("camera,time,u,v,frame,score\ncam1,0,1,2,0,1\ncam1,0,3,4,0,0.5\n"
+                       "cam2,0.0111,5,6,0,1\ncam1,0.0333,7,8,1,1\n")
+    out = tmp_path / "s.mcap"
+    code, _, stderr = cli("import", "--rig", "paper3", "--detections", det_csv, "-o", out)
+    assert code == 0, stderr
+    d = read_session(out).detections
+    assert_array_equal(d.frame_index, [0, 0, 1])
+    assert_array_equal(d.candidates_per_frame(), [2, 1, 1])
+
+
 def test_export_sim_session_round_trips_through_import(sim_session, tmp_path, cli):
     csv_path = tmp_path / "d.csv"
     assert cli("export", sim_session.path, "--detections", csv_path)[0] == 0
@@ -203,6 +241,16 @@ def bad_files(tmp_path, sim_session):
     (tmp_path / "bad.toml").write_text("[[camera]\nname = 'x'\n")
     (tmp_path / "ok.csv").write_text("camera,time,u,v\ncam1,0.1,1,2\n")
     (tmp_path / "badrow.csv").write_text("camera,time,u,v\ncam1,0.1,1,2\ncam1,0.2,abc,2\n")
+    (tmp_path / "nan.csv").write_text("camera,time,u,v\ncam1,0,1,2\ncam1,0,nan,100\n")
+    (tmp_path / "inf.csv").write_text("camera,time,u,v\ncam1,0,1,-inf\n")
+    (tmp_path / "badscore.csv").write_text("camera,time,u,v,score\ncam1,0,1,2,1.5\n")
+    (tmp_path / "badframe.csv").write_text("camera,time,u,v,frame\ncam1,0,1,2,0\n"
+                                           "cam1,0.1,1,2,1.0\n")
+    (tmp_path / "hugetime.csv").write_text("camera,time,u,v\ncam1,1e999999999,1,2\n")
+    head = "camera,time,u,v,frame,score\n"
+    (tmp_path / "twotimes.csv").write_text(head + "cam1,0,1,2,0,1\ncam2,0,1,2,0,1\n"
+                                           "cam1,0.0333,3,4,0,1\n")
+    (tmp_path / "twoframes.csv").write_text(head + "cam1,0,1,2,0,1\ncam1,0,3,4,1,1\n")
     (tmp_path / "short.csv").write_text("camera,time,u,v\ncam1,0.1,1,2\n\ncam1,0.2,1\n")
     (tmp_path / "badhead.csv").write_text("cam,time,u,v\ncam1,0.1,1,2\n")
     (tmp_path / "unknown.csv").write_text("camera,time,u,v\ncam1,0.1,1,2\ncam9,0.2,1,2\n")
@@ -226,6 +274,21 @@ def bad_files(tmp_path, sim_session):
     (["simulate", "--rig", "{d}/bad.toml", "-o", "{d}/x.mcap"], "malformed TOML"),
     (["import", "--rig", "paper3", "--detections", "{d}/badrow.csv", "-o", "{d}/x.mcap"],
      "line 3: bad u value 'abc'"),
+    (["import", "--rig", "paper3", "--detections", "{d}/nan.csv", "-o", "{d}/x.mcap"],
+     "nan.csv: line 3: bad u value 'nan': not a finite number"),
+    (["import", "--rig", "paper3", "--detections", "{d}/inf.csv", "-o", "{d}/x.mcap"],
+     "inf.csv: line 2: bad v value '-inf': not a finite number"),
+    (["import", "--rig", "paper3", "--detections", "{d}/badscore.csv", "-o", "{d}/x.mcap"],
+     "line 2: bad score value '1.5': not in [0, 1]"),
+    (["import", "--rig", "paper3", "--detections", "{d}/badframe.csv", "-o", "{d}/x.mcap"],
+     "line 3: bad frame value '1.0': not an integer"),
+    (["import", "--rig", "paper3", "--detections", "{d}/hugetime.csv", "-o", "{d}/x.mcap"],
+     "line 2: bad time value '1e999999999': out of the int64 nanosecond range"),
+    (["import", "--rig", "paper3", "--detections", "{d}/twotimes.csv", "-o", "{d}/x.mcap"],
+     "twotimes.csv: lines 2 and 4: camera cam1 frame 0 at two times (0.000000000 s and "
+     "0.033300000 s)"),
+    (["import", "--rig", "paper3", "--detections", "{d}/twoframes.csv", "-o", "{d}/x.mcap"],
+     "lines 2 and 3: rows of camera cam1 at time 0.000000000 disagree on frame (0 and 1)"),
     (["import", "--rig", "paper3", "--detections", "{d}/short.csv", "-o", "{d}/x.mcap"],
      "line 4: expected 4 fields"),
     (["import", "--rig", "paper3", "--detections", "{d}/badhead.csv", "-o", "{d}/x.mcap"],

@@ -26,6 +26,7 @@ from pslog.log import (
     session_info,
 )
 from pslog.log import _schemas as S
+from pslog.log.recover import describe_salvage
 from pslog.records import NS, Detections, Track, Truth
 
 DET_FIELDS = ("frame_time_ns", "frame_camera", "frame_index", "cand_frame", "cand_uv",
@@ -305,6 +306,35 @@ def test_truncated_file_reported_and_recovered(tmp_path, rig3, fraction):
     assert got.rig.to_toml() == rig3.to_toml()
     if fraction > 0.9:
         assert n >= 29  # only the tail is lost
+
+
+def test_recover_and_info_report_each_kind_up_to_where_it_survived(tmp_path,
+                                                                   truth_first_session):
+    data, ends = truth_first_session
+    # cut inside the last detection chunk: images of frame 19 survive, detections end at 9
+    broken = tmp_path / "cut.mcap"
+    broken.write_bytes(data[:ends[-2] + 20])
+    info = session_info(broken)
+    report = recover_session(broken, tmp_path / "fixed.mcap")
+    for summary in (info, report):
+        assert summary["detection_frames"] == 30 and summary["images"] == 60
+        assert summary["truth_points"] == 300
+        assert summary["last_detection_ns"] == 9 * 33_333_333 + 2 * 11_111_111
+        assert summary["last_image_ns"] == 19 * 33_333_333 + 2 * 11_111_111
+    assert report["last_time_ns"] == 299 * 3_333_333  # the truth: why per kind matters
+    assert describe_salvage(report) == ("30 detection frames (to t = 0.322 s), 60 images "
+                                        "(to t = 0.656 s), 300 truth points")
+    got = read_session(tmp_path / "fixed.mcap")
+    assert got.detections.n_frames == 30 and got.n_images == 60 and len(got.truth) == 300
+
+    # cut inside the first detection chunk: nothing but truth and images
+    broken.write_bytes(data[:ends[-4] + 20])
+    report = recover_session(broken, tmp_path / "fixed.mcap", force=True)
+    assert (report["detection_frames"], report["images"]) == (0, 30)
+    assert report["last_detection_ns"] is None
+    text = describe_salvage(report)
+    assert text.startswith("30 images (to t = 0.322 s), 300 truth points; no detection frame "
+                           "survived (")
 
 
 def test_recover_refuses_output_and_copies_complete_files(tmp_path, sim_session):

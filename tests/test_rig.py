@@ -59,8 +59,9 @@ def _random_camera(rng: np.random.Generator, name: str) -> Camera:
     dist[2] = 1e-17  # exponent notation
     t = rng.normal(0, 2, 3)
     t[0] = -0.0  # negative zero must survive
-    return Camera(name, 640, 480, K, dist, rotation, t, fps=rng.uniform(20, 120),
-                  offset=rng.uniform(0, 0.03))
+    fps = rng.uniform(20, 120)
+    return Camera(name, 640, 480, K, dist, rotation, t, fps=fps,
+                  offset=rng.uniform(0, 1) / fps)  # within the frame period
 
 
 def _assert_bit_identical(a: Rig, b: Rig) -> None:
@@ -160,6 +161,9 @@ def _replace_line(text: str, old: str, new: str, count: int = 1) -> str:
     (_replace_line(GOOD_TOML, "fps = 60", "fps = -60.0"), ["cam2", "fps"]),
     (_replace_line(GOOD_TOML, "fps = 60", 'fps = "60"'), ["cam2", "fps"]),
     (_replace_line(GOOD_TOML, "fps = 30.0", "fps = nan"), ["cam1", "fps"]),
+    (_replace_line(GOOD_TOML, "offset = 0.005", "offset = 0.02"),
+     ["cam2", "offset 0.02 s", "[0, 0.0166667 s)", "60 fps"]),
+    (_replace_line(GOOD_TOML, "offset = 0.005", "offset = -0.001"), ["cam2", "offset -0.001"]),
     (_replace_line(GOOD_TOML, "width = 1280", "width = 1280.0"), ["cam2", "width"]),
     (_replace_line(GOOD_TOML, "height = 480", "height = 0"), ["cam1", "height"]),
     (_replace_line(GOOD_TOML, 't = [0.5, -0.25, 3]', 't = [0.5, -0.25, inf]'), ["cam2", "t"]),

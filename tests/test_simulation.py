@@ -76,12 +76,6 @@ def test_capture_times_sync_and_type_b():
     assert_array_equal(camera, [0, 2, 1, 0, 2, 1, 0, 2, 1])
 
 
-def test_capture_times_offset_beyond_one_period_wraps():
-    cam = builtin_rig("paper2").cameras[0]
-    time_s, _, _ = capture_times(Rig((cam.replace(offset=1 / 30 + 0.01),)), 0.2)
-    assert_allclose(time_s[0], 0.01, rtol=0, atol=1e-12)
-
-
 @pytest.mark.parametrize("duration", [0.0, -1.0, np.nan, np.inf])
 def test_capture_times_rejects_bad_duration(duration):
     with pytest.raises(InputError, match="duration"):

@@ -157,4 +157,10 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
         raise InputError(f"start ({start} s) must be before end ({end} s)")
     window = (first + round(lo * NS) if start is not None else -UNBOUNDED_NS,
               first + round(hi * NS) if end is not None else UNBOUNDED_NS)
+    frame_times = session.detections.frame_time_ns
+    if (start is not None or end is not None) and not np.any(
+            (frame_times >= window[0]) & (frame_times < window[1])):
+        span = (frame_times.max() - first) / NS if len(frame_times) else 0.0
+        raise InputError(f"no frame between --start {start} s and --end {end} s; the session "
+                         f"spans 0 to {span:.3f} s")
     return ViewData(session, paths, observations, shown, construction, window, notes)

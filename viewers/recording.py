@@ -31,9 +31,9 @@ from pathlib import Path
 import numpy as np
 import rerun as rr
 
-from pslog.errors import OutputExistsError
 from pslog.log import iter_images
 from pslog.motion import BALL_RADIUS
+from pslog.outputs import check_output_path, partial_path
 from pslog.records import NS, Track
 
 from . import _columns as C
@@ -85,18 +85,21 @@ def save_rrd(session_paths: str | Path | Sequence[str | Path], path: str | Path,
     Refuses an existing ``path`` unless ``force`` (OutputExistsError). Returns the row
     counts per kind (``detections``, ``images``, ``track_points``, ...).
     """
-    path = Path(path)
-    if path.exists() and not force:
-        raise OutputExistsError(f"{path} exists; use --force to overwrite it")
+    path = check_output_path(path, force)
     choice = FramesChoice.parse(options.pop("frames", "all"))
     data = load_view_data(session_paths, **options)
     rec = new_stream()
-    rec.save(path)  # stream to the file while logging: images never pile up in memory
+    partial = partial_path(path)  # an existing .rrd is replaced only by a complete one
+    rec.save(partial)  # stream to the file while logging: images never pile up in memory
     try:
         counts = log_view(rec, data, choice)
-    finally:
-        rec.flush()
-        rec.disconnect()  # finalizes the file (footer)
+    except BaseException:
+        rec.disconnect()
+        partial.unlink(missing_ok=True)
+        raise
+    rec.flush()
+    rec.disconnect()  # finalizes the file (footer)
+    partial.replace(path)
     return counts
 
 

@@ -30,6 +30,13 @@ COMMANDS: dict[str, tuple[str, str]] = {
 }
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors: ``pslog CMD: error: ... (see pslog CMD --help)``."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+
+
 def _top_parser(commands: dict[str, tuple[str, str]]) -> argparse.ArgumentParser:
     from importlib.metadata import PackageNotFoundError, version
 
@@ -39,7 +46,7 @@ def _top_parser(commands: dict[str, tuple[str, str]]) -> argparse.ArgumentParser
         pslog_version = "unknown"
     width = max((len(n) for n in commands), default=0)
     lines = [f"  {name:<{width}}  {text}" for name, (_, text) in commands.items()]
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="pslog",
         description="Pseudo-stereo 3D ball tracking from cameras with offset shutters.",
         epilog="commands:\n" + "\n".join(lines) + "\n\nRun 'pslog COMMAND --help' for details.",
@@ -63,7 +70,7 @@ def main(argv: list[str] | None = None) -> int:
     name = argv[0]
     module_name, text = commands[name]
     module = importlib.import_module(f"pslog.cli.{module_name}")
-    parser = argparse.ArgumentParser(prog=f"pslog {name}", description=text)
+    parser = _Parser(prog=f"pslog {name}", description=text)
     module.add_arguments(parser)
     args = parser.parse_args(argv[1:])
 

@@ -5,8 +5,6 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from pslog.errors import InputError, OutputExistsError
-
 
 def add_force(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--force", action="store_true", help="overwrite existing output files")
@@ -19,13 +17,10 @@ def add_rig(parser: argparse.ArgumentParser, required: bool = True, help_extra: 
 
 
 def check_output(path: str | Path, force: bool) -> Path:
-    """Refuse to overwrite ``path`` unless ``force``; the parent folder must exist."""
-    path = Path(path)
-    if path.exists() and not force:
-        raise OutputExistsError(f"{path} exists; use --force to overwrite it")
-    if not path.parent.exists():
-        raise InputError(f"output folder does not exist: {path.parent}")
-    return path
+    """Refuse a folder, a missing parent folder, or an existing file unless ``force``."""
+    from pslog.outputs import check_output_path
+
+    return check_output_path(path, force)
 
 
 def _float_arg(text: str, ok, requirement: str) -> float:
@@ -44,6 +39,17 @@ def positive_float(text: str) -> float:
 
 def nonnegative_float(text: str) -> float:
     return _float_arg(text, lambda v: v >= 0, "a number >= 0")
+
+
+def seed(text: str) -> int:
+    """A random seed: a whole number >= 0 (numpy's generators take no negative seed)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {text!r}")
+    return value
 
 
 def fraction(text: str) -> float:

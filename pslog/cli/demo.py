@@ -27,7 +27,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _output_folder(out: str | None, force: bool) -> Path:
-    from pslog.errors import OutputExistsError
+    from pslog.errors import InputError, OutputExistsError
 
     if out is None:  # a fresh folder per run: nothing is ever overwritten
         base = Path("demo-output") / time.strftime("%Y-%m-%dT%H-%M-%S")
@@ -37,6 +37,8 @@ def _output_folder(out: str | None, force: bool) -> Path:
             folder = base.with_name(f"{base.name}-{n}")
     else:
         folder = Path(out)
+        if folder.exists() and not folder.is_dir():
+            raise InputError(f"--out {folder} is a file, not a folder")
         if folder.exists() and any(folder.iterdir()) and not force:
             raise OutputExistsError(f"{folder} is not empty; use --force to write into it")
     folder.mkdir(parents=True, exist_ok=True)
@@ -47,9 +49,8 @@ def run(args: argparse.Namespace) -> int:
     import sys
 
     from pslog import paper
-    from pslog.errors import FusionError
     from pslog.evaluation import evaluate, format_accuracy_table
-    from pslog.fusion import METHODS, fuse_all
+    from pslog.fusion import METHODS, default_methods, fuse_all
     from pslog.log import copy_session, read_session
     from pslog.rig import apply_timing, builtin_rig
 
@@ -66,15 +67,12 @@ def run(args: argparse.Namespace) -> int:
 
     session = read_session(session_path)
     print(f"2/4 fusing {len(session.detections.best())} detections with every method")
-    tracks, skipped = {}, []
-    for method in METHODS:
-        try:
-            tracks.update(fuse_all(session.detections, session.rig, [method]))
-        except FusionError:
-            skipped.append(method)
+    methods = default_methods(session.detections, session.rig)
+    skipped = [m for m in METHODS if m not in methods]
     if skipped:
         print(f"    {', '.join(skipped)}: need cameras with a common shutter instant (sync or "
               f"typeB timing), not type A; the paper's table below has them")
+    tracks = fuse_all(session.detections, session.rig, methods)
     copy_session(session_path, fused_path, tracks=list(tracks.values()), force=args.force)
 
     print(f"3/4 accuracy against ground truth ({fused_path}):\n")

@@ -12,7 +12,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--method", action="append", dest="methods", metavar="METHOD",
         help="fusion method: sync, nearest, typeA, typeB, linear (repeat for several; "
-             "default: every method the rig's timing allows)")
+             "default: every method the session's timing suits)")
     parser.add_argument("-o", "--output", required=True,
                         help="output MCAP: a copy of the session with one topic per track")
     parser.add_argument(
@@ -28,7 +28,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from pslog.errors import FusionError, RigError
-    from pslog.fusion import METHODS, FusionOptions, check_method, fuse_all
+    from pslog.fusion import METHODS, FusionOptions, check_method, default_methods, fuse_all
     from pslog.log import copy_session, read_session
     from pslog.rig import resolve_rig
 
@@ -44,18 +44,24 @@ def run(args: argparse.Namespace) -> int:
     options = FusionOptions(tolerance_s=args.tolerance_ms / 1e3,
                             max_gap_s=None if args.max_gap_ms is None else args.max_gap_ms / 1e3)
     observations = session.detections.best()
+    if len(observations) == 0:
+        raise FusionError(f"{args.session} has no detection to fuse")
     if args.methods:
         methods = [check_method(m) for m in dict.fromkeys(args.methods)]
-        tracks = fuse_all(observations, rig, methods, options)
-    else:  # every method that can run on this rig and timing
-        tracks = {}
-        for method in METHODS:
-            try:
-                tracks.update(fuse_all(observations, rig, [method], options))
-            except FusionError as exc:
-                print(f"skipping {method}: {exc}")
+    else:  # every method this timing suits
+        methods = default_methods(observations, rig, options)
+        skipped = [m for m in METHODS if m not in methods]
+        if skipped:
+            print(f"not run on this timing: {', '.join(skipped)} (name them with --method "
+                  f"to run them anyway)")
+    tracks = fuse_all(observations, rig, methods, options)
+    empty = [m for m, t in tracks.items() if len(t) == 0]
+    if empty:
+        print(f"no point from {', '.join(empty)}: too few detections close enough in time")
+        tracks = {m: t for m, t in tracks.items() if len(t)}
     if not tracks:
-        raise FusionError("no fusion method produced a track")
+        raise FusionError(f"no fusion method produced a point from the "
+                          f"{len(observations)} detections of {args.session}")
     copy_session(args.session, output, tracks=list(tracks.values()), force=args.force,
                  rig=None if args.rig is None else rig)
     for method, track in tracks.items():

@@ -48,10 +48,11 @@ def _ms(seconds: float) -> str:
 
 def _text(info: dict) -> list[str]:
     if info["truncated"]:
-        last = info["last_time_s"]
+        from pslog.log.recover import describe_salvage
+
         lines = [f"{info['path']}: TRUNCATED (the recording did not finish)",
-                 f"  complete data: {info['kept_bytes']} of {info['file_bytes']} bytes, "
-                 f"last message at t = {'-' if last is None else f'{last:.6f} s'}",
+                 f"  complete data: {info['kept_bytes']} of {info['file_bytes']} bytes: "
+                 f"{describe_salvage(info)}",
                  "  salvageable messages:"]
         lines += [f"    {t}: {n}" for t, n in info["topics"].items()]
         lines.append(f"  {info['hint']}")

@@ -5,7 +5,14 @@ from __future__ import annotations
 import argparse
 import re
 
-from pslog.cli._common import add_force, add_rig, check_output, nonnegative_float, positive_float
+from pslog.cli._common import (
+    add_force,
+    add_rig,
+    check_output,
+    nonnegative_float,
+    positive_float,
+    seed,
+)
 from pslog.errors import InputError
 
 DESCRIPTION = """\
@@ -80,7 +87,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--exposure", type=nonnegative_float, default=0.004, metavar="S",
                         help="synthetic exposure time in seconds, for motion blur "
                              "(default 0.004; 0 for none)")
-    parser.add_argument("--seed", type=int, default=0, help="synthetic random seed")
+    parser.add_argument("--seed", type=seed, default=0, help="synthetic random seed")
     parser.add_argument("--no-frames", action="store_true",
                         help="store detections only, not the JPEG frames")
     parser.add_argument("--jpeg-quality", type=int, default=90, metavar="Q",

@@ -15,11 +15,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from pslog.log import recover_session
-    from pslog.records import NS
+    from pslog.log.recover import describe_salvage
 
     check_output(args.output, args.force)
     report = recover_session(args.session, args.output, force=args.force)
-    last = report["last_time_ns"]
     if report["was_complete"]:
         print(f"{args.session} was complete; copied {report['messages']} messages to "
               f"{args.output}")
@@ -28,10 +27,11 @@ def run(args: argparse.Namespace) -> int:
         print(f"recovered all {report['messages']} messages (only the summary was damaged) "
               f"into {args.output}")
         return 0
-    print(f"recovered {report['messages']} messages ({report['detection_frames']} detection "
-          f"frames) up to t = {last / NS:.6f} s into {args.output}; discarded the last "
-          f"{report['discarded_bytes']} of {report['file_bytes']} bytes "
-          f"({report['stop_reason']})")
+    # per kind, not "up to the last message": truth is written up front and images reach
+    # the file before the detections of the same moment
+    print(f"recovered into {args.output}: {describe_salvage(report)}")
+    print(f"  discarded the last {report['discarded_bytes']} of {report['file_bytes']} bytes "
+          f"({report['stop_reason']}); messages kept per topic:")
     for topic, n in report["topics"].items():
-        print(f"  {topic}: {n}")
+        print(f"    {topic}: {n}")
     return 0

@@ -6,7 +6,15 @@ import argparse
 
 import numpy as np
 
-from ._common import add_force, add_rig, check_output, fraction, nonnegative_float, positive_float
+from ._common import (
+    add_force,
+    add_rig,
+    check_output,
+    fraction,
+    nonnegative_float,
+    positive_float,
+    seed,
+)
 
 _TIMINGS = ("sync", "typeA", "typeB", "rig")
 
@@ -29,7 +37,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="fraction of frames lost entirely")
     parser.add_argument("--miss-rate", type=fraction, default=0.0, metavar="F",
                         help="fraction of frames with no detection")
-    parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    parser.add_argument("--seed", type=seed, default=0, help="random seed (default 0)")
     parser.add_argument("-o", "--output", required=True, metavar="SESSION.mcap")
     add_force(parser)
 

@@ -24,13 +24,15 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import numpy as np
+
 from ..errors import FusionError
 from ..records import Detections, Observations, Track
 from ..rig import Rig
 from ._prepare import Prepared, default_max_gap_s, prepare
 from .prediction import fuse_predicted
 from .pseudo import PseudoStereoPoints, TypeAConstruction, fuse_type_a, pseudo_stereo_points
-from .stereo import fuse_nearest, fuse_sync
+from .stereo import fuse_nearest, fuse_sync, sync_groups
 
 METHODS: dict[str, str] = {
     "sync": "ordinary stereo of simultaneous detections (paper: synchronized)",
@@ -67,6 +69,25 @@ def check_method(method: str) -> str:
     if method not in METHODS:
         raise FusionError(f"unknown fusion method {method!r} (have {', '.join(METHODS)})")
     return method
+
+
+def default_methods(
+    observations: Observations | Detections, rig: Rig, options: FusionOptions | None = None,
+) -> list[str]:
+    """The methods worth running on these detections' timing, in :data:`METHODS` order.
+
+    Stereo (``sync``) needs instants that two cameras share; pseudo stereo and its baseline
+    (``typeA``, ``nearest``) need instants that only one camera has (with fully synchronised
+    shutters they would only repeat each instant); ``typeB`` and ``linear`` need both.
+    """
+    options = options or FusionOptions()
+    if isinstance(observations, Detections):
+        observations = observations.best()
+    _, n_cameras = sync_groups(observations, len(rig), options.tolerance_s)
+    shared, alone = bool(np.any(n_cameras >= 2)), bool(np.any(n_cameras == 1))
+    usable = {"sync": shared, "nearest": alone, "typeA": alone,
+              "typeB": shared and alone, "linear": shared and alone}
+    return [m for m in METHODS if usable[m]]
 
 
 def fuse(
@@ -132,5 +153,6 @@ def explain_type_a(
 
 __all__ = [
     "METHODS", "FusionOptions", "Prepared", "PseudoStereoPoints", "TypeAConstruction",
-    "check_method", "explain_type_a", "fuse", "fuse_all", "prepare", "pseudo_stereo_points",
+    "check_method", "default_methods", "explain_type_a", "fuse", "fuse_all", "prepare",
+    "pseudo_stereo_points",
 ]

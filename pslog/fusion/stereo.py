@@ -6,11 +6,12 @@ import numpy as np
 
 from ..errors import FusionError
 from ..geometry import ray_angles, triangulate_rays
-from ..records import NS, Track
+from ..records import NS, Observations, Track
 from ._prepare import Prepared, latest_row_at_or_before
 
 
-def sync_groups(prep: Prepared, tolerance_s: float) -> tuple[np.ndarray, np.ndarray]:
+def sync_groups(obs: Observations, n_cams: int, tolerance_s: float
+                ) -> tuple[np.ndarray, np.ndarray]:
     """Group observations whose capture times chain within ``tolerance_s``.
 
     Returns
@@ -18,14 +19,14 @@ def sync_groups(prep: Prepared, tolerance_s: float) -> tuple[np.ndarray, np.ndar
     group : (n,) int64, group id of each observation (groups in time order)
     n_cameras : (n_groups,) int64, distinct cameras in each group
     """
-    time_ns = prep.obs.time_ns
+    time_ns = obs.time_ns
     tol_ns = round(tolerance_s * NS)
     starts = np.ones(len(time_ns), dtype=bool)
     starts[1:] = np.diff(time_ns) > tol_ns
     group = np.cumsum(starts) - 1
     n_groups = int(group[-1]) + 1 if len(group) else 0
-    seen = np.zeros((n_groups, len(prep.centers)), dtype=bool)
-    seen[group, prep.obs.camera] = True
+    seen = np.zeros((n_groups, n_cams), dtype=bool)
+    seen[group, obs.camera] = True
     return group, seen.sum(axis=1)
 
 
@@ -58,7 +59,7 @@ def stereo_at_common_instants(
     track : Track named ``method``, one point per such instant, with ``ray_miss_m``
     alone : (n,) bool, the detections that had no simultaneous partner
     """
-    group, n_cameras = sync_groups(prep, tolerance_s)
+    group, n_cameras = sync_groups(prep.obs, len(prep.centers), tolerance_s)
     if not np.any(n_cameras >= 2):
         raise FusionError(
             f"method {method} needs cameras with a common shutter instant (sync or typeB "

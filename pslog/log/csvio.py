@@ -10,7 +10,8 @@ Detections CSV (import and export use exactly this format)::
   detected (distorted); ``frame``: the camera's frame index (optional); ``score``: detector
   confidence in [0, 1] (optional, default 1).
 - Rows may come in any order. Rows with the same camera and time are the candidates of one
-  frame (they must agree on ``frame``). Without a ``frame`` column, each camera's frames are
+  frame (they must agree on ``frame``); one camera's frame index cannot appear at two
+  different times. Without a ``frame`` column, each camera's frames are
   numbered 0, 1, 2, ... in time order.
 - Frames without any candidate cannot be expressed in this format (no row).
 
@@ -35,12 +36,64 @@ _REQUIRED = ("camera", "time", "u", "v")
 TRACK_COLUMNS = ("time", "x", "y", "z", "camera", "method")
 
 
+class _Invalid(ValueError):
+    """A parsed but invalid cell value; the message is the reason shown to the user."""
+
+
 def _time_ns(text: str) -> int:
     """Exact decimal seconds -> integer ns (half-even rounding below 1 ns)."""
-    value = Decimal(text.strip())
+    try:
+        value = Decimal(text)
+    except InvalidOperation:
+        raise ValueError(text) from None
     if not value.is_finite():
-        raise InvalidOperation
-    return int((value * NS).to_integral_value(rounding=ROUND_HALF_EVEN))
+        raise _Invalid("not a finite number")
+    # compare before scaling: a huge exponent would overflow the decimal context
+    if value.copy_abs() >= Decimal(2**63) / NS:  # copy_abs: exact, no context
+        raise _Invalid("out of the int64 nanosecond range")
+    ns = int((value * NS).to_integral_value(rounding=ROUND_HALF_EVEN))
+    if abs(ns) >= 2**63:
+        raise _Invalid("out of the int64 nanosecond range")
+    return ns
+
+
+def _finite(text: str) -> float:
+    value = float(text)
+    if not np.isfinite(value):
+        raise _Invalid("not a finite number")
+    return value
+
+
+def _frame_number(text: str) -> int:
+    value = int(text)
+    if value < 0:
+        raise _Invalid("frame indices are >= 0")
+    return value
+
+
+def _unit_score(text: str) -> float:
+    value = float(text)
+    if not 0.0 <= value <= 1.0:  # also rejects NaN
+        raise _Invalid("not in [0, 1]")
+    return value
+
+
+_PARSE = {"time": (_time_ns, "not a number of seconds"), "u": (_finite, "not a number"),
+          "v": (_finite, "not a number"), "frame": (_frame_number, "not an integer"),
+          "score": (_unit_score, "not a number")}
+
+
+def _cell(row: list[str], col: dict[str, int], key: str, path: Path, line: int):
+    """Parse the ``key`` cell of ``row``; InputError naming the line, column, value and why."""
+    parse, unparseable = _PARSE[key]
+    text = row[col[key]].strip()
+    try:
+        return parse(text)
+    except _Invalid as exc:
+        reason = str(exc)
+    except ValueError:
+        reason = unparseable
+    raise InputError(f"{path}: line {line}: bad {key} value {text!r}: {reason}")
 
 
 def format_time(time_ns: int) -> str:
@@ -64,7 +117,7 @@ def read_detections_csv(path, rig: Rig) -> Detections:
     except OSError as exc:
         raise InputError(f"cannot read {path}: {exc}") from None
     index = {name: i for i, name in enumerate(rig.names)}
-    cams, times, frames, uv, scores = [], [], [], [], []
+    cams, times, frames, uv, scores, lines = [], [], [], [], [], []
     with handle:
         reader = csv.reader(handle)
         try:
@@ -98,31 +151,14 @@ def read_detections_csv(path, rig: Rig) -> Detections:
                     raise InputError(f"{path}: line {line}: unknown camera {name!r} "
                                      f"(rig has {', '.join(rig.names)})")
                 cams.append(index[name])
-                key = "time"
-                try:
-                    times.append(_time_ns(row[col["time"]]))
-                    key = "u"
-                    u = float(row[col["u"]])
-                    key = "v"
-                    v = float(row[col["v"]])
-                    if not (np.isfinite(u) and np.isfinite(v)):
-                        raise ValueError
-                    uv.append((u, v))
-                    if has_frame:
-                        key = "frame"
-                        frame = int(row[col["frame"]].strip())
-                        if frame < 0:
-                            raise ValueError
-                        frames.append(frame)
-                    if has_score:
-                        key = "score"
-                        score = float(row[col["score"]])
-                        if not 0.0 <= score <= 1.0:
-                            raise ValueError
-                        scores.append(score)
-                except (ValueError, InvalidOperation):
-                    raise InputError(f"{path}: line {line}: bad {key} value "
-                                     f"{row[col[key]].strip()!r}") from None
+                lines.append(line)
+                times.append(_cell(row, col, "time", path, line))
+                uv.append((_cell(row, col, "u", path, line),
+                           _cell(row, col, "v", path, line)))
+                if has_frame:
+                    frames.append(_cell(row, col, "frame", path, line))
+                if has_score:
+                    scores.append(_cell(row, col, "score", path, line))
         except csv.Error as exc:
             raise InputError(f"{path}: line {line}: {exc}") from None
         except UnicodeDecodeError:
@@ -130,11 +166,16 @@ def read_detections_csv(path, rig: Rig) -> Detections:
     return _detections_from_rows(rig, np.asarray(cams, np.int32), np.asarray(times, np.int64),
                                  np.asarray(uv, np.float64).reshape(-1, 2),
                                  np.asarray(frames, np.int64) if has_frame else None,
-                                 np.asarray(scores, np.float64) if has_score else None, path)
+                                 np.asarray(scores, np.float64) if has_score else None, path,
+                                 np.asarray(lines, np.int64))
 
 
-def _detections_from_rows(rig: Rig, cams, times, uv, frames, scores, path) -> Detections:
-    """Group candidate rows into frames: one frame per distinct (camera, time)."""
+def _detections_from_rows(rig: Rig, cams, times, uv, frames, scores, path,
+                          lines) -> Detections:
+    """Group candidate rows into frames: one frame per distinct (camera, time).
+
+    ``lines`` (n,) int64 are the rows' line numbers in the file, for error messages.
+    """
     n = len(cams)
     if n == 0:
         raise InputError(f"{path}: no detection rows")
@@ -144,18 +185,47 @@ def _detections_from_rows(rig: Rig, cams, times, uv, frames, scores, path) -> De
     frame_camera = unique[:, 0].astype(np.int32)
     frame_time = unique[:, 1]
     if frames is not None:
-        frame_index = np.zeros(len(unique), np.int64)
-        frame_index[cand_frame] = frames
-        if np.any(frame_index[cand_frame] != frames):
-            bad = int(np.flatnonzero(frame_index[cand_frame] != frames)[0])
-            raise InputError(f"{path}: rows of camera {rig.names[cams[bad]]} at time "
-                             f"{format_time(times[bad])} disagree on frame")
+        # each frame takes the index of its first row (rows are in file order)
+        first_row = np.full(len(unique), n)
+        np.minimum.at(first_row, cand_frame, np.arange(n))
+        frame_index = frames[first_row]
+        disagree = np.flatnonzero(frame_index[cand_frame] != frames)
+        if len(disagree):
+            bad = int(disagree[0])
+            raise InputError(f"{path}: lines {lines[first_row[cand_frame[bad]]]} and "
+                             f"{lines[bad]}: rows of camera {rig.names[cams[bad]]} at time "
+                             f"{format_time(times[bad])} disagree on frame "
+                             f"({frame_index[cand_frame[bad]]} and {frames[bad]})")
+        _check_one_time_per_frame(rig, frame_camera, frame_index, frame_time, cand_frame,
+                                  lines, path)
     else:
         # np.unique sorts by (camera, time): rank within each camera is the frame number
         starts = np.searchsorted(frame_camera, frame_camera, side="left")
         frame_index = np.arange(len(unique)) - starts
     return Detections.from_frames(rig.names, frame_time, frame_camera, frame_index, cand_frame,
                                   uv, None, scores)
+
+
+def _check_one_time_per_frame(rig: Rig, frame_camera, frame_index, frame_time, cand_frame,
+                              lines, path) -> None:
+    """InputError if two frames (distinct camera and time) share camera and frame index.
+
+    Their first lines in the file are named; of several clashes the one completed earliest in
+    the file is reported.
+    """
+    first_line = np.full(len(frame_camera), np.iinfo(np.int64).max)
+    np.minimum.at(first_line, cand_frame, lines)
+    order = np.lexsort((first_line, frame_index, frame_camera))
+    same = ((frame_camera[order[1:]] == frame_camera[order[:-1]])
+            & (frame_index[order[1:]] == frame_index[order[:-1]]))
+    if not same.any():
+        return
+    clashes = np.flatnonzero(same)
+    k = int(clashes[np.argmin(first_line[order[clashes + 1]])])
+    a, b = order[k], order[k + 1]  # first_line[a] < first_line[b]
+    raise InputError(f"{path}: lines {first_line[a]} and {first_line[b]}: camera "
+                     f"{rig.names[frame_camera[a]]} frame {frame_index[a]} at two times "
+                     f"({format_time(frame_time[a])} s and {format_time(frame_time[b])} s)")
 
 
 def _open_output(path, force: bool):

@@ -75,7 +75,9 @@ def session_info(path) -> dict:
     ``topics`` (message counts), ``duration_s``, ``start_s``, ``end_s``, ``truth``,
     ``tracks`` (method -> points), ``events``, metadata fields and ``truncated: False``.
     On a truncated file: ``truncated: True``, what is salvageable (``topics``,
-    ``last_time_s``, ``kept_bytes``, ``file_bytes``) and ``hint`` (run ``pslog recover``).
+    ``last_time_s`` of any message, per kind the keys of
+    :func:`pslog.log.recover.salvage_summary`, ``kept_bytes``, ``file_bytes``) and ``hint``
+    (run ``pslog recover``).
     """
     path, size, complete = io.check_file(path)
     if not complete:
@@ -120,22 +122,26 @@ def session_info(path) -> dict:
 
 
 def _truncated_info(path, size: int) -> dict:
+    from .recover import salvage_summary
+
     topics: dict[int, int] = {}
-    last = [None]
+    last_ns: dict[int, int] = {}
 
     def count(cid: int, t: int, _seq: int, _data: bytes) -> None:
         topics[cid] = topics.get(cid, 0) + 1
-        last[0] = t if last[0] is None else max(last[0], t)
+        last_ns[cid] = max(last_ns.get(cid, t), t)
 
     scan = io.scan_file(path, count)
     io.session_metadata(scan.metadata, path)
-    named = {scan.channels[c].topic if c in scan.channels else f"channel {c}": n
-             for c, n in topics.items()}
+    name = {c: scan.channels[c].topic if c in scan.channels else f"channel {c}" for c in topics}
+    named = {name[c]: n for c, n in topics.items()}
+    last = max(last_ns.values(), default=None)
     return {
         "path": str(path),
         "truncated": True,
         "topics": dict(sorted(named.items())),
-        "last_time_s": None if last[0] is None else last[0] / NS,
+        "last_time_s": None if last is None else last / NS,
+        **salvage_summary(named, {name[c]: t for c, t in last_ns.items()}),
         "kept_bytes": scan.complete_bytes,
         "file_bytes": size,
         "stop_reason": scan.stop_reason,

@@ -5,8 +5,56 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..errors import InputError, LogFormatError, OutputExistsError
+from ..records import NS
 from . import _mcapio as io
 from . import _schemas as S
+
+
+def salvage_summary(counts: dict[str, int], last_ns: dict[str, int]) -> dict:
+    """What survived, per kind of record, from per-topic message counts and last log times.
+
+    Kinds are reported separately because they reach the file at different moments: images
+    go straight to disk, detections in chunks about once a second, and the ground truth of
+    a synthetic session all at the start, so "the last message" says little about how much
+    of the recording is usable.
+
+    Returns
+    -------
+    dict with ``detection_frames``, ``last_detection_ns`` (int ns or None), ``images``,
+    ``last_image_ns`` (int ns or None) and ``truth_points``.
+    """
+    def kind(topic: str) -> str | None:
+        parsed = S.parse_camera_topic(topic)
+        return parsed[1] if parsed else None
+
+    det = [t for t in counts if kind(t) == "detections"]
+    img = [t for t in counts if kind(t) == "image"]
+    return {
+        "detection_frames": sum(counts[t] for t in det),
+        "last_detection_ns": max((last_ns[t] for t in det), default=None),
+        "images": sum(counts[t] for t in img),
+        "last_image_ns": max((last_ns[t] for t in img), default=None),
+        "truth_points": counts.get(S.TRUTH_TOPIC, 0),
+    }
+
+
+def describe_salvage(summary: dict) -> str:
+    """One phrase for users from a :func:`salvage_summary` dict, e.g. ``172 detection frames
+    (to t = 2.190 s), 232 images (to t = 3.100 s), 300 truth points``; says so plainly when
+    no detection frame survived."""
+    parts = []
+    if summary["detection_frames"]:
+        parts.append(f"{summary['detection_frames']} detection frames "
+                     f"(to t = {summary['last_detection_ns'] / NS:.3f} s)")
+    if summary["images"]:
+        parts.append(f"{summary['images']} images (to t = {summary['last_image_ns'] / NS:.3f} s)")
+    if summary["truth_points"]:
+        parts.append(f"{summary['truth_points']} truth points")
+    text = ", ".join(parts) or "only the session set-up (rig, calibrations)"
+    if not summary["detection_frames"]:
+        text += ("; no detection frame survived (detections are written in chunks up to a "
+                 "second late, so a file cut within about a second of starting has none)")
+    return text
 
 
 def recover_session(src, dst, *, force: bool = False) -> dict:
@@ -19,11 +67,12 @@ def recover_session(src, dst, *, force: bool = False) -> dict:
     Returns
     -------
     dict with ``messages`` (total recovered), ``topics`` (topic -> count), ``first_time_ns``
-    and ``last_time_ns`` (log times of the recovered messages, None if none),
-    ``detection_frames``, ``file_bytes``, ``kept_bytes`` (data section parsed),
-    ``discarded_bytes`` (after the last complete data record, including a damaged summary),
-    ``data_complete`` (no data record was lost), ``was_complete`` (src was a finished file)
-    and ``stop_reason``.
+    and ``last_time_ns`` (log times of the recovered messages of any kind, None if none),
+    the keys of :func:`salvage_summary` (``detection_frames``, ``last_detection_ns``,
+    ``images``, ``last_image_ns``, ``truth_points``), ``file_bytes``, ``kept_bytes`` (data
+    section parsed), ``discarded_bytes`` (after the last complete data record, including a
+    damaged summary), ``data_complete`` (no data record was lost), ``was_complete`` (src
+    was a finished file) and ``stop_reason``.
     """
     src, size, complete = io.check_file(src)
     dst = Path(dst)
@@ -38,6 +87,7 @@ def recover_session(src, dst, *, force: bool = False) -> dict:
 
     tmp = dst.with_name(dst.name + ".partial")
     topics: dict[str, int] = {}
+    last_ns: dict[str, int] = {}  # per topic
     times = [None, None]  # first, last log time
     scan = io.Scan()
     schema_ids: dict[int, int] = {}
@@ -64,6 +114,7 @@ def recover_session(src, dst, *, force: bool = False) -> dict:
         writer.add_message(new, t, data, t, seq)
         topic = scan.channels[cid].topic
         topics[topic] = topics.get(topic, 0) + 1
+        last_ns[topic] = max(last_ns.get(topic, t), t)
         times[0] = t if times[0] is None else min(times[0], t)
         times[1] = t if times[1] is None else max(times[1], t)
 
@@ -91,8 +142,7 @@ def recover_session(src, dst, *, force: bool = False) -> dict:
         "topics": dict(sorted(topics.items())),
         "first_time_ns": times[0],
         "last_time_ns": times[1],
-        "detection_frames": sum(n for t, n in topics.items()
-                                if (p := S.parse_camera_topic(t)) and p[1] == "detections"),
+        **salvage_summary(topics, last_ns),
         "file_bytes": size,
         "kept_bytes": scan.complete_bytes,
         "data_complete": scan.finished,  # the data section was whole (only the summary lost)

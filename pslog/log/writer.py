@@ -14,11 +14,11 @@ import threading
 import time
 from collections.abc import Mapping
 from datetime import UTC, datetime
-from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError, LogFormatError, OutputExistsError
+from ..errors import InputError, LogFormatError
+from ..outputs import check_output_path, partial_path
 from ..records import Detections, Track, Truth
 from ..rig import Rig
 from . import _schemas as S
@@ -57,7 +57,11 @@ class SessionWriter:
 
     Parameters
     ----------
-    path : output file; refused if it exists unless ``force``
+    path : output file; refused if it exists unless ``force``. An existing file is replaced
+        only when the new one is complete: the writer writes ``<path>.partial`` and moves it
+        over ``path`` on a successful :meth:`close`. After :meth:`abort` the partial file is
+        deleted; after an exception inside ``with`` it is kept (finished, readable) beside the
+        untouched old session
     rig : the session's cameras; camera indices below refer to ``rig.cameras``
     timing : shutter preset name (``sync``, ``typeA``, ``typeB``) or ``custom``
     source : free text: what produced the session (``simulate motion=spiral ...``)
@@ -68,14 +72,15 @@ class SessionWriter:
 
     def __init__(self, path, rig: Rig, *, force: bool = False, timing: str = "custom",
                  source: str = "", metadata: Mapping[str, str] | None = None,
-                 flush_interval_s: float = 1.0, start_ns: int = 0) -> None:
+                 flush_interval_s: float = 0.5, start_ns: int = 0) -> None:
         from mcap.writer import CompressionType, Writer
 
-        self.path = Path(path)
-        if self.path.exists() and not force:
-            raise OutputExistsError(f"{self.path} exists; use --force to overwrite it")
-        if not self.path.parent.is_dir():
-            raise InputError(f"output folder does not exist: {self.path.parent}")
+        self.path = check_output_path(path, force)
+        # replacing a session: write beside it, move over it once complete
+        self._replacing = self.path.exists()
+        self._target = partial_path(self.path) if self._replacing else self.path
+        self._aborted = False  # abort(): nothing worth keeping was written
+        self._failed = False  # an exception: keep both the old session and <path>.partial
         extra = {str(k): str(v) for k, v in dict(metadata or {}).items()}
         clash = sorted(set(extra) & set(S.RESERVED_KEYS))
         if clash:
@@ -83,7 +88,7 @@ class SessionWriter:
         self.rig = rig
         self._names = rig.names
         self._flush_interval = float(flush_interval_s)
-        self._file = open(self.path, "wb")  # closed in close()
+        self._file = open(self._target, "wb")  # closed in close()
         self._mcap = Writer(self._file, compression=CompressionType.ZSTD)
         self._mcap.start(profile="", library=_creator())
         self._schema_ids: dict[str, int] = {}
@@ -398,6 +403,17 @@ class SessionWriter:
             finally:
                 self._closed = True
                 self._file.close()
+            if self._replacing and not self._failed:
+                if self._aborted:
+                    self._target.unlink(missing_ok=True)  # the old session stays
+                else:
+                    self._target.replace(self.path)
+
+    def abort(self) -> None:
+        """Close without replacing an existing session (a new file is still finished, so
+        whatever was written stays readable)."""
+        self._aborted = True
+        self.close()
 
     def _count(self, topic: str, n: int = 1) -> None:
         self.counts[topic] = self.counts.get(topic, 0) + n
@@ -405,8 +421,11 @@ class SessionWriter:
     def __enter__(self) -> SessionWriter:
         return self
 
-    def __exit__(self, *exc) -> None:
-        # finish the file even on an exception: whatever was written stays readable
+    def __exit__(self, exc_type, exc, tb) -> None:
+        # finish the file even on an exception: whatever was written stays readable; but an
+        # existing session is only replaced by a run that completed
+        if exc_type is not None:
+            self._failed = True
         self.close()
 
 
