@@ -8,7 +8,10 @@ previous output as it was.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
+from typing import IO
 
 from .errors import InputError, OutputExistsError
 
@@ -34,3 +37,18 @@ def check_output_path(path: str | Path, force: bool) -> Path:
 def partial_path(path: Path) -> Path:
     """Where to write a file that will replace ``path`` once complete."""
     return path.with_name(path.name + ".partial")
+
+
+@contextmanager
+def replacing_text_file(path: str | Path, force: bool) -> Iterator[IO[str]]:
+    """Open a text file to write in place of ``path``: it becomes ``path`` only when the
+    ``with`` block completes; on an error the old file (if any) stays and nothing is left."""
+    path = check_output_path(path, force)
+    partial = partial_path(path)
+    try:
+        with open(partial, "w", newline="", encoding="utf-8") as f:
+            yield f
+    except BaseException:
+        partial.unlink(missing_ok=True)
+        raise
+    partial.replace(path)

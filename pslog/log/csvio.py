@@ -27,7 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError, OutputExistsError
+from ..errors import InputError
+from ..outputs import replacing_text_file
 from ..records import NS, Detections
 from ..rig import Rig
 
@@ -228,15 +229,6 @@ def _check_one_time_per_frame(rig: Rig, frame_camera, frame_index, frame_time, c
                      f"({format_time(frame_time[a])} s and {format_time(frame_time[b])} s)")
 
 
-def _open_output(path, force: bool):
-    path = Path(path)
-    if path.exists() and not force:
-        raise OutputExistsError(f"{path} exists; use --force to overwrite it")
-    if not path.parent.is_dir():
-        raise InputError(f"output folder does not exist: {path.parent}")
-    return open(path, "w", newline="", encoding="utf-8")
-
-
 def write_detections_csv(detections: Detections, path, *, force: bool = False) -> int:
     """Write every candidate as a row (``camera,time,u,v,frame,score``) in time order;
     returns the number of rows."""
@@ -247,7 +239,7 @@ def write_detections_csv(detections: Detections, path, *, force: bool = False) -
     u = detections.cand_uv[:, 0].tolist()
     v = detections.cand_uv[:, 1].tolist()
     score = detections.cand_score.tolist()
-    with _open_output(path, force) as f:
+    with replacing_text_file(path, force) as f:
         f.write(",".join(DETECTION_COLUMNS) + "\n")
         f.writelines(f"{c},{format_time(t)},{a!r},{b!r},{k},{s!r}\n"
                      for c, t, a, b, k, s in zip(names, times, u, v, frames, score, strict=True))
@@ -265,7 +257,7 @@ def export_tracks_csv(session, path, *, force: bool = False) -> int:
     quality = sorted({k for t in tracks.values() for k in t.quality})
     names = session.rig.names
     count = 0
-    with _open_output(path, force) as f:
+    with replacing_text_file(path, force) as f:
         f.write(",".join((*TRACK_COLUMNS, *quality)) + "\n")
         for method in sorted(tracks):
             track = tracks[method]

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..errors import InputError, LogFormatError, OutputExistsError
+from ..errors import InputError, LogFormatError
+from ..outputs import check_output_path, partial_path
 from ..records import NS
 from . import _mcapio as io
 from . import _schemas as S
@@ -78,14 +79,11 @@ def recover_session(src, dst, *, force: bool = False) -> dict:
     dst = Path(dst)
     if dst.exists() and dst.resolve() == src.resolve():
         raise InputError(f"output {dst} is the damaged input; choose another file")
-    if dst.exists() and not force:
-        raise OutputExistsError(f"{dst} exists; use --force to overwrite it")
-    if not dst.parent.is_dir():
-        raise InputError(f"output folder does not exist: {dst.parent}")
+    dst = check_output_path(dst, force)
 
     from mcap.writer import CompressionType, Writer
 
-    tmp = dst.with_name(dst.name + ".partial")
+    tmp = partial_path(dst)
     topics: dict[str, int] = {}
     last_ns: dict[str, int] = {}  # per topic
     times = [None, None]  # first, last log time
