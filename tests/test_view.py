@@ -19,7 +19,7 @@ from pslog.errors import InputError, OutputExistsError
 from pslog.fusion import explain_type_a, fuse_all
 from pslog.log import SessionWriter, copy_session, read_session
 from pslog.motion import get_motion
-from pslog.records import NS
+from pslog.records import NS, Detections
 from pslog.rig import apply_timing, builtin_rig
 from pslog.simulation import SimulationOptions, simulate
 from viewers import FramesChoice, build_recording, load_view_data, save_rrd
@@ -249,6 +249,20 @@ def test_fused_copies_add_tracks_and_rename_duplicates(session, tmp_path):
         load_view_data([session], start=0.5, end=0.2)
     with pytest.raises(OutputExistsError):
         save_rrd([session], fused)
+
+
+def test_tracks_of_another_session_are_flagged(session, tmp_path):
+    s = read_session(session)
+    other = tmp_path / "other.mcap"
+    shifted = s.detections.frame_time_ns + 1_000_000  # another recording of the same rig
+    moved = Detections(s.detections.camera_names, shifted, s.detections.frame_camera,
+                       s.detections.frame_index, s.detections.cand_frame,
+                       s.detections.cand_uv, s.detections.cand_radius, s.detections.cand_score)
+    with SessionWriter(other, s.rig) as writer:
+        writer.add_detections(moved)
+        writer.add_track(fuse_all(moved, s.rig, ["typeA"])["typeA"])
+    data = load_view_data([session, other])
+    assert any("may come from another session" in n for n in data.notes)
 
 
 @pytest.mark.parametrize("text,every", [("all", 1), ("none", 0), ("every:4", 4)])

@@ -122,6 +122,9 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
         if other.rig.names != session.rig.names:
             raise InputError(f"{path}: cameras {', '.join(other.rig.names)} differ from "
                              f"{paths[0]}'s ({', '.join(session.rig.names)})")
+        if not np.array_equal(other.detections.frame_time_ns, session.detections.frame_time_ns):
+            notes.append(f"{path}: its frames are not {paths[0]}'s, so its tracks may come "
+                         f"from another session")
         for name, track in other.tracks.items():
             if name in tracks:
                 new = f"{name}_{_safe_name(path.stem)}"
