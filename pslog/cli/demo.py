@@ -66,7 +66,8 @@ def run(args: argparse.Namespace) -> int:
                      fast=not args.realtime, frames=True, force=args.force, status=sys.stderr)
 
     session = read_session(session_path)
-    print(f"2/4 fusing {len(session.detections.best())} detections with every method")
+    print(f"2/4 fusing {len(session.detections.best())} detections with every method type-A "
+          f"timing suits")
     methods = default_methods(session.detections, session.rig)
     skipped = [m for m in METHODS if m not in methods]
     if skipped:
