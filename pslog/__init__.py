@@ -34,6 +34,16 @@ __all__ = [  # noqa: RUF022 (grouped by module, as _EXPORTS)
 ]
 
 
+def package_version() -> str | None:
+    """The installed pslog version, or None when running from an uninstalled source tree."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("pslog")
+    except PackageNotFoundError:
+        return None
+
+
 def __getattr__(name: str):
     module = _MODULE_OF.get(name)
     if module is None:

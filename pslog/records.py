@@ -150,13 +150,18 @@ class Detections:
         """(F,) int, number of candidates of each frame."""
         return np.bincount(self.cand_frame, minlength=self.n_frames)
 
+    def best_mask(self) -> np.ndarray:
+        """(C,) bool, True for the first (best) candidate of each frame."""
+        first = np.ones(self.n_candidates, dtype=bool)
+        first[1:] = self.cand_frame[1:] != self.cand_frame[:-1]
+        return first
+
     def best(self) -> Observations:
         """The first (best) candidate of every frame that has one, as fusion input."""
         if self.n_candidates == 0:
             return Observations(np.zeros(0, np.int64), np.zeros(0, np.int32),
                                 np.zeros((0, 2)), np.zeros(0, np.int64))
-        first = np.ones(self.n_candidates, dtype=bool)
-        first[1:] = self.cand_frame[1:] != self.cand_frame[:-1]
+        first = self.best_mask()
         rows = self.cand_frame[first]
         return Observations(self.frame_time_ns[rows], self.frame_camera[rows],
                             self.cand_uv[first], self.frame_index[rows])

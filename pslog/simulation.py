@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .camera import Camera
 from .errors import InputError
 from .motion import Motion
 from .records import NS, Detections, Truth
@@ -52,6 +53,15 @@ class SimulationOptions:
                 raise InputError(f"{name} must be in [0, 1), got {value!r}")
 
 
+def shutter_times(camera: Camera, duration: float) -> np.ndarray:
+    """Nominal shutter times (k,) float64 seconds of ``camera`` in ``[0, duration)``:
+    ``offset + k / fps`` for k = 0, 1, ... (the offset is within ``[0, 1 / fps)``, as
+    :class:`~pslog.camera.Camera` checks), so frame ``k`` is row ``k``."""
+    k = np.arange(int(np.ceil((duration - camera.offset) * camera.fps)) + 1)
+    t = camera.offset + k / camera.fps
+    return t[t < duration]
+
+
 def capture_times(rig: Rig, duration: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Nominal shutter times of every camera in ``[0, duration)``.
 
@@ -69,12 +79,10 @@ def capture_times(rig: Rig, duration: float) -> tuple[np.ndarray, np.ndarray, np
                          f"30 fps cameras is 4.9e5)")
     times, cameras, indices = [], [], []
     for i, cam in enumerate(rig.cameras):
-        k = np.arange(int(np.ceil((duration - cam.offset) * cam.fps)) + 1)
-        t = cam.offset + k / cam.fps  # the offset is within [0, 1 / fps) (Camera checks)
-        keep = t < duration
-        times.append(t[keep])
-        cameras.append(np.full(keep.sum(), i, dtype=np.int32))
-        indices.append(k[keep].astype(np.int64))
+        t = shutter_times(cam, duration)
+        times.append(t)
+        cameras.append(np.full(len(t), i, dtype=np.int32))
+        indices.append(np.arange(len(t), dtype=np.int64))
     time_s, camera, frame_index = (np.concatenate(x) for x in (times, cameras, indices))
     order = np.lexsort((camera, time_s))
     return time_s[order], camera[order], frame_index[order]

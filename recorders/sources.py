@@ -32,6 +32,7 @@ from pslog.camera import Camera
 from pslog.errors import PslogError
 from pslog.motion import Motion
 from pslog.records import NS
+from pslog.simulation import shutter_times
 
 from .render import CameraRenderer, RenderOptions
 
@@ -224,12 +225,9 @@ class SyntheticSpec:
 
 
 def synthetic_times(camera: Camera, duration_s: float) -> np.ndarray:
-    """Capture times (k,) int64 ns of ``camera`` in ``[0, duration_s)``: ``offset + k / fps``
-    (the offset taken modulo the frame period, as :func:`pslog.simulation.capture_times`)."""
-    offset = camera.offset % camera.frame_period
-    k = np.arange(int(np.ceil((duration_s - offset) * camera.fps)) + 1)
-    t = offset + k / camera.fps
-    return np.round(t[t < duration_s] * NS).astype(np.int64)
+    """Capture times (k,) int64 ns of ``camera`` in ``[0, duration_s)``: its shutter times
+    (:func:`pslog.simulation.shutter_times`) on the nanosecond clock."""
+    return np.round(shutter_times(camera, duration_s) * NS).astype(np.int64)
 
 
 class _SyntheticSource(FrameSource):

@@ -22,8 +22,7 @@ def log_detections(rec, data: ViewData, clock: C.Clock) -> int:
     if det.n_frames == 0:
         return 0
     counts = det.candidates_per_frame()
-    offsets = np.concatenate([[0], np.cumsum(counts)])
-    is_best = np.arange(det.n_candidates) == offsets[det.cand_frame]
+    is_best = det.best_mask()
     frame_in = data.in_window(det.frame_time_ns)
     n = 0
     for c, name in enumerate(det.camera_names):

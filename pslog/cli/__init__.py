@@ -38,12 +38,9 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _top_parser(commands: dict[str, tuple[str, str]]) -> argparse.ArgumentParser:
-    from importlib.metadata import PackageNotFoundError, version
+    from pslog import package_version
 
-    try:
-        pslog_version = version("pslog")
-    except PackageNotFoundError:
-        pslog_version = "unknown"
+    pslog_version = package_version() or "unknown"
     width = max((len(n) for n in commands), default=0)
     lines = [f"  {name:<{width}}  {text}" for name, (_, text) in commands.items()]
     parser = _Parser(

@@ -44,12 +44,10 @@ def _locked(method):
 
 
 def _creator() -> str:
-    from importlib.metadata import PackageNotFoundError, version
+    from .. import package_version
 
-    try:
-        return f"pslog {version('pslog')}"
-    except PackageNotFoundError:
-        return "pslog"
+    version = package_version()
+    return f"pslog {version}" if version else "pslog"
 
 
 class SessionWriter:
