@@ -1,0 +1,83 @@
+"""The three promises every fault case asserts (issue 8), shared by the fault-injection suite.
+
+1. one line on stderr and no traceback;
+2. the right exit code (1 for a fault, 2 for a malformed command line);
+3. no input changed and no partial output left behind.
+
+Commands run as a real process (``python -m pslog.cli``), so what a user sees on the terminal
+(uncaught tracebacks, warnings, output of child processes) is what the test sees.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+#: longest a faulty command may take before the suite calls it a hang, seconds
+HANG_S = 60.0
+
+
+@dataclass(frozen=True)
+class Run:
+    args: tuple[str, ...]
+    code: int
+    stdout: str
+    stderr: str
+
+
+def run_pslog(*args, cwd=None, timeout: float = HANG_S, env=None, preexec_fn=None,
+              stdin=subprocess.DEVNULL) -> Run:
+    """Run ``pslog ARGS...`` as a separate process; a hang fails the test."""
+    argv = [str(a) for a in args]
+    full_env = {**os.environ, **(env or {})}
+    full_env.pop("PYTHONWARNINGS", None)
+    try:
+        proc = subprocess.run([sys.executable, "-m", "pslog.cli", *argv], cwd=cwd, env=full_env,
+                              capture_output=True, text=True, timeout=timeout, stdin=stdin,
+                              preexec_fn=preexec_fn)
+    except subprocess.TimeoutExpired:
+        raise AssertionError(f"pslog {' '.join(argv)} hung for more than {timeout} s") from None
+    return Run(tuple(argv), proc.returncode, proc.stdout, proc.stderr)
+
+
+def assert_one_line_error(run: Run, code: int = 1, *, contains: str | tuple[str, ...] = ()) -> str:
+    """Promises 1 and 2: exit ``code``, exactly one non-empty line on stderr, no traceback or
+    Python warning anywhere; returns the line. ``contains``: text(s) the line must hold."""
+    where = f"pslog {' '.join(run.args)}"
+    lines = [line for line in run.stderr.splitlines() if line.strip()]
+    for stream in (run.stderr, run.stdout):
+        assert "Traceback" not in stream, f"{where}: traceback\n{stream}"
+        assert "Warning:" not in stream, f"{where}: Python warning\n{stream}"
+    assert run.code == code, f"{where}: exit {run.code}, wanted {code}\nstderr: {run.stderr}"
+    assert len(lines) == 1, f"{where}: {len(lines)} lines on stderr, wanted 1:\n{run.stderr}"
+    line = lines[0]
+    assert line.startswith("pslog"), f"{where}: error line does not name pslog: {line}"
+    for text in (contains,) if isinstance(contains, str) else contains:
+        assert text in line, f"{where}: {text!r} not in {line!r}"
+    return line
+
+
+def fingerprint(*paths) -> dict[str, tuple[int, str]]:
+    """``path -> (size, sha256)`` of files, or every file below a folder (for promise 3)."""
+    out: dict[str, tuple[int, str]] = {}
+    for path in map(Path, paths):
+        files = sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() else [path]
+        for f in files:
+            if f.exists():
+                data = f.read_bytes()
+                out[str(f)] = (len(data), hashlib.sha256(data).hexdigest())
+    return out
+
+
+def assert_untouched(before: dict[str, tuple[int, str]], *paths) -> None:
+    """Promise 3: the files fingerprinted in ``before`` are byte-identical and no file was
+    added (no partial output) below ``paths`` (the same paths given to :func:`fingerprint`)."""
+    after = fingerprint(*paths)
+    added = sorted(set(after) - set(before))
+    changed = sorted(p for p in before if after.get(p) != before[p])
+    assert not added, f"left behind: {added}"
+    assert not changed, f"changed or removed: {changed}"
