@@ -8,7 +8,8 @@ previous output as it was.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+import os
+from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import IO
@@ -16,15 +17,31 @@ from typing import IO
 from .errors import InputError, OutputExistsError
 
 
-def check_output_path(path: str | Path, force: bool) -> Path:
+def same_file(a: str | Path, b: str | Path) -> bool:
+    """True when ``a`` and ``b`` name one existing file, however spelled (``./``, ``..``,
+    symbolic links, hard links)."""
+    try:
+        return os.path.samefile(a, b)
+    except (OSError, ValueError):
+        return False
+
+
+def check_output_path(path: str | Path, force: bool, inputs: Iterable[str | Path] = ()) -> Path:
     """``path`` as a :class:`~pathlib.Path` if a file may be written there.
+
+    ``inputs`` are the files the command reads: an output that is one of them is refused,
+    ``force`` or not (an output never replaces an input).
 
     Raises
     ------
-    InputError : ``path`` is a folder, or its folder does not exist
+    InputError : ``path`` is a folder, its folder does not exist, or it is one of ``inputs``
     OutputExistsError : ``path`` exists and ``force`` is false
     """
     path = Path(path)
+    for source in inputs:
+        if same_file(path, source):
+            raise InputError(f"output {path} is the input {source}; choose another file "
+                             f"(an output never replaces an input)")
     if path.is_dir():
         raise InputError(f"{path} is a folder; give a file name")
     if path.exists() and not force:

@@ -3,6 +3,8 @@ new one (pslog/outputs.py, SessionWriter, save_rrd, record)."""
 
 from __future__ import annotations
 
+import os
+
 import pytest
 
 from pslog.errors import InputError, OutputExistsError
@@ -83,3 +85,17 @@ def test_view_window_past_the_end_is_an_error(tmp_path, sim_session, cli):
     code, _, err = cli("view", sim_session.path, "--save", tmp_path / "x.rrd", "--start", "100")
     assert code == 1 and "no frame between" in err
     assert not (tmp_path / "x.rrd").exists()
+
+
+def test_an_output_that_is_an_input_is_refused_in_every_spelling(tmp_path, monkeypatch):
+    src = tmp_path / "s.mcap"
+    src.write_bytes(b"session")
+    (tmp_path / "link.mcap").symlink_to(src)
+    os.link(src, tmp_path / "hard.mcap")
+    (tmp_path / "sub").mkdir()
+    monkeypatch.chdir(tmp_path)
+    for spelling in ("s.mcap", "./s.mcap", "sub/../s.mcap", str(src), "link.mcap", "hard.mcap"):
+        with pytest.raises(InputError, match="is the input"):
+            check_output_path(spelling, True, inputs=[src])
+    assert src.read_bytes() == b"session"
+    assert check_output_path("other.mcap", False, inputs=[src]).name == "other.mcap"

@@ -16,11 +16,12 @@ def add_rig(parser: argparse.ArgumentParser, required: bool = True, help_extra: 
         help="built-in rig name (paper3, paper2) or rig TOML file" + help_extra)
 
 
-def check_output(path: str | Path, force: bool) -> Path:
-    """Refuse a folder, a missing parent folder, or an existing file unless ``force``."""
+def check_output(path: str | Path, force: bool, inputs=()) -> Path:
+    """Refuse a folder, a missing parent folder, one of the ``inputs`` (always), or an
+    existing file unless ``force``."""
     from pslog.outputs import check_output_path
 
-    return check_output_path(path, force)
+    return check_output_path(path, force, inputs)
 
 
 def _float_arg(text: str, ok, requirement: str) -> float:
