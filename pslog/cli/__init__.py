@@ -21,6 +21,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "export": ("export", "write a session's detections or fused tracks as CSV"),
     "info": ("info", "summarise a session: cameras, rates, shutter offsets, detections"),
     "calibrate": ("calibrate", "calibrate a camera from 3D-2D points or a chessboard"),
+    "rig": ("rig", "list the built-in rigs, print a rig as TOML, check a rig file"),
     "fuse": ("fuse", "fuse a session's detections into 3D tracks"),
     "eval": ("evaluate", "accuracy of fused tracks against ground truth"),
     "paper": ("paper", "reproduce the paper's Tables 1 and 2"),
