@@ -8,21 +8,23 @@ from ._common import add_force, check_output, nonnegative_float, positive_float
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("session", help="session MCAP file")
+    parser.add_argument("session", metavar="SESSION.mcap", help="session file to fuse")
     parser.add_argument(
         "--method", action="append", dest="methods", metavar="METHOD",
         help="fusion method: sync, nearest, typeA, typeB, linear (repeat for several; "
              "default: every method the session's timing suits)")
-    parser.add_argument("-o", "--output", required=True,
-                        help="output MCAP: a copy of the session with one topic per track")
+    parser.add_argument("-o", "--output", required=True, metavar="FUSED.mcap",
+                        help="output session: a copy of the input with one topic per track")
     parser.add_argument(
-        "--rig", metavar="RIG",
-        help="fuse with this corrected rig (TOML file; same camera names and order) instead of "
-             "the recorded calibration; the output session carries it")
+        "--rig", metavar="RIG.toml",
+        help="fuse with this corrected rig (same camera names and order; start from 'pslog rig "
+             "show SESSION.mcap') instead of the recorded calibration; the output carries it")
     parser.add_argument("--tolerance-ms", type=nonnegative_float, default=1.0,
-                        help="detections this close count as simultaneous (default 1 ms)")
+                        metavar="MS", help="detections this close in time count as "
+                                           "simultaneous, milliseconds (default %(default)s)")
     parser.add_argument("--max-gap-ms", type=positive_float, default=None,
-                        help="longest span a method may bridge (default 3.5 frame periods)")
+                        metavar="MS", help="longest time span a method may bridge, "
+                                           "milliseconds (default: 3.5 frame periods)")
     add_force(parser)
 
 
@@ -48,6 +50,7 @@ def run(args: argparse.Namespace) -> int:
         raise FusionError(f"{args.session} has no detection to fuse")
     if args.methods:
         methods = [check_method(m) for m in dict.fromkeys(args.methods)]
+        _refuse_unsuited(methods, observations, rig, options, args.session)
     else:  # every method this timing suits
         methods = default_methods(observations, rig, options)
         skipped = [m for m in METHODS if m not in methods]
@@ -68,3 +71,22 @@ def run(args: argparse.Namespace) -> int:
         print(f"{method:<8} {len(track):>7d} points")
     print(f"wrote {output}")
     return 0
+
+
+def _refuse_unsuited(methods, observations, rig, options, session) -> None:
+    """Refuse, before fusing, a method that needs a shared shutter instant on a session that
+    has none, naming the timing it needs and the methods that suit this session."""
+    from pslog.errors import FusionError
+    from pslog.fusion import default_methods
+
+    suited = default_methods(observations, rig, options)
+    shared = "sync" in suited  # some instant seen by two cameras within the tolerance
+    unsuited = [m for m in methods if m in ("sync", "typeB", "linear") and not shared]
+    if unsuited:
+        what = (f"method {unsuited[0]} needs" if len(unsuited) == 1
+                else f"methods {', '.join(unsuited)} need")
+        raise FusionError(
+            f"{what} cameras with a common shutter instant (sync "
+            f"or typeB timing), but no two cameras of {session} captured within "
+            f"{options.tolerance_s * 1e3:g} ms of each other; methods that suit this session: "
+            f"{', '.join(suited)} (the default without --method)")
