@@ -13,7 +13,8 @@ def add_force(parser: argparse.ArgumentParser) -> None:
 def add_rig(parser: argparse.ArgumentParser, required: bool = True, help_extra: str = "") -> None:
     parser.add_argument(
         "--rig", required=required, metavar="RIG",
-        help="built-in rig name (paper3, paper2) or rig TOML file" + help_extra)
+        help="built-in rig name (paper3, paper2) or rig TOML file ('pslog rig show paper3 "
+             "> rig.toml' writes one to edit)" + help_extra)
 
 
 def check_output(path: str | Path, force: bool, inputs=()) -> Path:
@@ -58,3 +59,26 @@ def fraction(text: str) -> float:
     if value >= 1:
         raise argparse.ArgumentTypeError(f"must be in [0, 1), got {text!r}")
     return value
+
+
+def installed_command(name: str) -> str:
+    """How to start ``name`` (``rerun``, ``pslog``), installed beside this Python, from this
+    shell: the bare name when it is on PATH (e.g. the virtual environment is active), else
+    its path (``.venv/bin/rerun`` after ``bash run.sh demo``, which does not activate it)."""
+    import os
+    import shutil
+    import sys
+
+    ours = Path(sys.executable).parent / (name + (".exe" if os.name == "nt" else ""))
+    if not ours.exists():
+        return name
+    found = shutil.which(name)
+    if found is not None and os.path.samefile(found, ours):
+        return name
+    try:
+        path = os.path.relpath(ours)
+    except ValueError:  # another drive on Windows
+        return str(ours)
+    if path.startswith(os.pardir):
+        return str(ours)
+    return path if os.sep in path else os.path.join(os.curdir, path)

@@ -11,14 +11,15 @@ import argparse
 import time
 from pathlib import Path
 
-from ._common import positive_float
+from ._common import installed_command, positive_float
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default=None,
-                        help="output folder (default: a new demo-output/<date-time>/)")
+                        metavar="DIR", help="output folder (default: a new "
+                                            "demo-output/<date-time>/)")
     parser.add_argument("--duration", type=positive_float, default=1.5,
-                        help="seconds of throw to record (default 1.5)")
+                        metavar="S", help="seconds of throw to record (default %(default)s)")
     parser.add_argument("--realtime", action="store_true",
                         help="render at the cameras' real rate instead of as fast as possible")
     parser.add_argument("--no-view", action="store_true", help="do not build demo.rrd")
@@ -89,6 +90,6 @@ def run(args: argparse.Namespace) -> int:
     rrd_path = folder / "demo.rrd"
     save_rrd([fused_path], rrd_path, force=args.force)
     print(f"\n4/4 saved the rerun recording {rrd_path}; open it with\n"
-          f"      rerun {rrd_path}\n"
-          f"    or in a browser:  pslog view {fused_path} --serve")
+          f"      {installed_command('rerun')} {rrd_path}\n"
+          f"    or in a browser:  {installed_command('pslog')} view {fused_path} --serve")
     return 0

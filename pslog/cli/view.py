@@ -10,31 +10,34 @@ import argparse
 import os
 import sys
 
-from ._common import add_force, check_output, nonnegative_float
+from ._common import add_force, check_output, installed_command, nonnegative_float
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("sessions", nargs="+", metavar="SESSION",
+    parser.add_argument("sessions", nargs="+", metavar="SESSION.mcap",
                         help="session MCAP, then optionally fused copies of it (pslog fuse "
                              "output) whose tracks are shown too")
     parser.add_argument("--methods", metavar="M1,M2",
                         help="tracks to show, comma-separated; a fusion method no file holds is "
                              "fused on the fly (default: every stored track, else typeA)")
     parser.add_argument("--frames", default="all", metavar="all|none|every:N",
-                        help="recorded images to include (default all; every:N keeps frames "
-                             "whose index is a multiple of N)")
+                        help="recorded images to include (default %(default)s; every:N keeps "
+                             "frames whose index is a multiple of N)")
     parser.add_argument("--start", type=nonnegative_float, metavar="S",
                         help="start, seconds after the session's first frame")
     parser.add_argument("--end", type=nonnegative_float, metavar="S",
                         help="end, seconds after the session's first frame")
     parser.add_argument("--web-port", type=int, default=9090,
-                        help="port of the web viewer with --serve (default 9090)")
+                        metavar="PORT", help="port of the web viewer with --serve "
+                                             "(default %(default)s)")
     parser.add_argument("--grpc-port", type=int, default=9876,
-                        help="port of the data server with --serve (default 9876)")
+                        metavar="PORT", help="port of the data server with --serve "
+                                             "(default %(default)s)")
     add_force(parser)
     import rerun as rr  # rerun's standard flags: --save, --serve, --connect, --url, ...
 
     rr.script_add_args(parser)
+    _reword_rerun_flags(parser)
 
 
 def has_display() -> bool:
@@ -83,7 +86,8 @@ def run(args: argparse.Namespace) -> int:
           file=out)
     if args.save:
         rec.disconnect()  # writes the file's footer
-        print(f"wrote {args.save}; open it with: rerun {args.save}", file=out)
+        print(f"wrote {args.save}; open it with: {installed_command('rerun')} {args.save}",
+              file=out)
     if args.serve:
         from urllib.parse import quote
 
@@ -96,3 +100,20 @@ def run(args: argparse.Namespace) -> int:
         finally:
             rec.disconnect()
     return 0
+
+
+#: our wording of rerun's standard flags (same metavar and help style as the other options)
+_RERUN_FLAGS = {
+    "headless": (None, "do not open a viewer window"),
+    "connect": (None, "send to a rerun viewer already running (at --url)"),
+    "serve": (None, "serve a web viewer at http://localhost:PORT (--web-port) until Ctrl-C"),
+    "url": ("URL", "rerun viewer to send to with --connect (default: rerun's local viewer)"),
+    "save": ("OUT.rrd", "write a rerun recording to this file (open it with 'rerun OUT.rrd')"),
+    "stdout": (None, "write the recording to standard output, to pipe into 'rerun -'"),
+}
+
+
+def _reword_rerun_flags(parser: argparse.ArgumentParser) -> None:
+    for action in parser._actions:
+        if action.dest in _RERUN_FLAGS:
+            action.metavar, action.help = _RERUN_FLAGS[action.dest]
