@@ -71,3 +71,140 @@ def test_package_exports_resolve_lazily_to_the_right_objects():
     for name in pslog.__all__:
         assert getattr(pslog, name) is not None
     assert callable(pslog.simulate) and pslog.simulate.__module__ == "pslog.simulation"
+
+
+# ---- help texts: one convention for every command ------------------------------------------
+
+def _parsers():
+    """(prog, parser) of every command and sub-action, built as the dispatcher builds them."""
+    import argparse
+    import importlib
+
+    from pslog.cli import _Parser
+
+    for name, (module_name, text) in COMMANDS.items():
+        parser = _Parser(prog=f"pslog {name}", description=text)
+        importlib.import_module(f"pslog.cli.{module_name}").add_arguments(parser)
+        yield parser.prog, parser
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                yield from ((p.prog, p) for p in action.choices.values())
+
+
+def test_every_argument_has_help_a_stated_default_and_a_chosen_metavar():
+    import argparse
+    import re
+
+    file_metavar = re.compile(r"^[A-Z_]+\.(mcap|csv|toml|rrd)$")
+    problems = []
+    for prog, parser in _parsers():
+        for action in parser._actions:
+            if isinstance(action, argparse._HelpAction | argparse._SubParsersAction):
+                continue
+            label = f"{prog} {'/'.join(action.option_strings) or action.dest}"
+            if not action.help:
+                problems.append(f"{label}: no help text")
+                continue
+            if action.default not in (None, False, [], argparse.SUPPRESS) \
+                    and "default" not in action.help:
+                problems.append(f"{label}: default {action.default!r} not stated")
+            takes_value = action.nargs != 0
+            if takes_value and action.choices is None and action.metavar is None:
+                problems.append(f"{label}: no metavar (argparse would show "
+                                f"{action.dest.upper()})")
+            if action.dest in ("session", "sessions", "output", "save") \
+                    and not file_metavar.match(str(action.metavar)):
+                problems.append(f"{label}: file metavar {action.metavar!r} is not NAME.ext")
+    assert not problems, "\n".join(problems)
+
+
+def test_help_renders_stated_defaults_as_values():
+    result = run("fuse", "--help")
+    assert "(default 1.0)" in " ".join(result.stdout.split())
+    assert "SESSION.mcap" in result.stdout and "-o FUSED.mcap" in result.stdout
+    assert "%(default)" not in result.stdout
+
+
+# ---- pslog rig --------------------------------------------------------------------------------
+
+def test_rig_show_writes_a_rig_file_that_loads_back_exactly(tmp_path, cli):
+    from pslog.rig import apply_timing, builtin_rig, load_rig
+
+    code, out, _ = cli("rig", "show", "paper3", "--timing", "typeA")
+    assert code == 0
+    path = tmp_path / "rig.toml"
+    path.write_text(out)
+    assert load_rig(path) == apply_timing(builtin_rig("paper3"), "typeA")
+    code, out, _ = cli("rig", "show", "paper2")
+    assert code == 0 and out.count("[[camera]]") == 2 and "offset = 0.0" in out
+
+
+def test_rig_show_of_a_session_prints_its_recorded_rig(sim_session, cli):
+    from pslog.rig import Rig
+
+    code, out, _ = cli("rig", "show", sim_session.path)
+    assert code == 0 and Rig.from_toml(out) == sim_session.rig
+
+
+def test_rig_list_and_check(tmp_path, cli):
+    code, out, _ = cli("rig", "list")
+    assert code == 0 and out.startswith("paper3: 3 cameras") and "paper2: 2 cameras" in out
+    good = tmp_path / "rig.toml"
+    code, toml, _ = cli("rig", "show", "paper3")
+    good.write_text(toml)
+    code, out, _ = cli("rig", "check", good)
+    assert code == 0 and "a valid rig 'paper3' of 3 cameras" in out
+    assert "cam2: 640x480 px, 30 fps, offset 0.000 ms" in out
+    bad = tmp_path / "bad.toml"
+    bad.write_text(toml.replace("width = 640", "width = -640", 1))
+    result = run("rig", "check", str(bad))
+    assert result.returncode == 1 and result.stderr.count("\n") == 1
+    assert "bad.toml" in result.stderr and "Traceback" not in result.stderr
+    result = run("rig", "show", "nowhere")
+    assert result.returncode == 1 and "not a file and not a built-in rig" in result.stderr
+    result = run("rig")
+    assert result.returncode == 2 and "ACTION" in result.stderr
+
+
+# ---- messages that tell a newcomer what to do --------------------------------------------------
+
+def test_fuse_names_the_timing_a_method_needs_and_the_methods_that_suit(tmp_path, sim_session,
+                                                                        cli):
+    code, _, err = cli("fuse", sim_session.path, "--method", "typeA", "--method", "typeB",
+                       "-o", tmp_path / "f.mcap")
+    assert code == 1 and err.count("\n") == 1
+    assert "method typeB needs cameras with a common shutter instant (sync or typeB timing)" \
+        in err
+    assert "methods that suit this session: nearest, typeA" in err
+    assert not (tmp_path / "f.mcap").exists()
+    code, out, _ = cli("fuse", sim_session.path, "--method", "typeA", "--method", "nearest",
+                       "-o", tmp_path / "f.mcap")
+    assert code == 0 and "typeA" in out and "nearest" in out
+
+
+def test_redetect_on_a_session_without_frames_says_how_to_get_one(tmp_path, sim_session, cli):
+    code, _, err = cli("redetect", sim_session.path, "-o", tmp_path / "r.mcap")
+    assert code == 1 and err.count("\n") == 1
+    assert "has no stored frames" in err and "pslog record --synthetic" in err
+    assert "samples/throw.mcap" in err
+
+
+def test_installed_command_is_the_bare_name_only_when_on_path(monkeypatch, tmp_path):
+    import os
+    from pathlib import Path
+
+    from pslog.cli._common import installed_command
+
+    bin_dir = Path(sys.executable).parent
+    if not (bin_dir / "rerun").exists():
+        import pytest
+
+        pytest.skip("rerun is not installed beside this Python")
+    monkeypatch.setenv("PATH", f"{bin_dir}{os.pathsep}/usr/bin:/bin")
+    assert installed_command("rerun") == "rerun"
+    monkeypatch.setenv("PATH", "/usr/bin:/bin")
+    monkeypatch.chdir(bin_dir.parent.parent)
+    command = installed_command("rerun")
+    assert command != "rerun" and os.path.samefile(command, bin_dir / "rerun")
+    monkeypatch.chdir(tmp_path)
+    assert os.path.samefile(installed_command("rerun"), bin_dir / "rerun")

@@ -35,35 +35,41 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                      "--rig rig.toml")
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
     source = parser.add_mutually_exclusive_group(required=True)
-    source.add_argument("--points", metavar="CSV",
+    source.add_argument("--points", metavar="POINTS.csv",
                         help="3D-2D correspondences, header x,y,z,u,v (metres, pixels)")
     source.add_argument("--chessboard", metavar="COLSxROWS",
                         help="chessboard inner corners per row x per column, e.g. 9x6")
-    parser.add_argument("--name", required=True, help="camera name in the rig")
+    parser.add_argument("--name", required=True, metavar="NAME",
+                        help="camera name in the rig")
     parser.add_argument("--rig", required=True, metavar="RIG.toml",
                         help="rig file to add the camera to (created if missing)")
-    parser.add_argument("--width", type=int, help="image width, pixels (required for a new "
-                        "camera with --points; checked against the images with --chessboard)")
-    parser.add_argument("--height", type=int, help="image height, pixels")
+    parser.add_argument("--width", type=int, metavar="PX", help="image width, pixels "
+                        "(required for a new camera with --points; checked against the images "
+                        "with --chessboard)")
+    parser.add_argument("--height", type=int, metavar="PX", help="image height, pixels (as "
+                        "--width)")
     parser.add_argument("--fps", type=positive_float,
-                        help="frame rate (default: the rig's value for this camera, else 30)")
+                        metavar="FPS", help="frame rate, frames per second (default: the "
+                                            "rig's value for this camera, else 30)")
     parser.add_argument("--offset", type=nonnegative_float,
-                        help="shutter offset within the frame period, seconds "
+                        metavar="S", help="shutter offset within the frame period, seconds "
                              "(default: the rig's value, else 0)")
     parser.add_argument("--fix-intrinsics", action="store_true",
                         help="with --points: keep the rig's K and distortion for this camera "
                              "and solve the pose only (coplanar points allowed)")
     parser.add_argument("--model", default="auto",
                         choices=("auto", "none", "k1", "k1k2", "k1k2k3", "full"),
-                        help="with --points: distortion terms to estimate (auto: none below "
-                             "10 points, k1,k2 below 100, all five from 100)")
+                        help="with --points: distortion terms to estimate (default "
+                             "%(default)s: none below 10 points, k1,k2 below 100, all five from "
+                             "100)")
     parser.add_argument("--square", type=positive_float, default=0.025,
-                        help="chessboard square side, metres (default 0.025)")
+                        metavar="M", help="chessboard square side, metres "
+                                          "(default %(default)s)")
     parser.add_argument("--images", metavar="DIR_OR_VIDEO",
                         help="with --chessboard: folder of images or a video file")
     parser.add_argument("--max-frames", type=int, default=60,
-                        help="from a video, use at most this many evenly spaced frames "
-                             "(default 60)")
+                        metavar="N", help="from a video, use at most this many evenly "
+                                          "spaced frames (default %(default)s)")
     add_force(parser)
 
 

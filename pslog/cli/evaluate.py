@@ -6,9 +6,11 @@ import argparse
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("session", help="fused session MCAP (from pslog fuse)")
+    parser.add_argument("session", metavar="FUSED.mcap",
+                        help="fused session (from 'pslog fuse') with ground truth")
     parser.add_argument("--method", action="append", dest="methods", metavar="METHOD",
-                        help="only these methods (repeatable; default all tracks)")
+                        help="only this method's track (repeat for several; default: every "
+                             "track)")
     parser.add_argument("--json", action="store_true", help="print JSON for scripts")
 
 

@@ -8,7 +8,7 @@ from ._common import add_force, check_output
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("session", metavar="SESSION.mcap")
+    parser.add_argument("session", metavar="SESSION.mcap", help="session or fused session")
     parser.add_argument("--detections", metavar="DET.csv",
                         help="write every detection candidate, in the 'pslog import' format")
     parser.add_argument("--csv", metavar="TRACKS.csv",

@@ -10,13 +10,15 @@ from ._common import add_force, add_rig, check_output
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_rig(parser)
     parser.add_argument("--detections", required=True, metavar="DET.csv",
-                        help="header camera,time,u,v (optional frame,score); time in seconds "
+                        help="detections CSV, header camera,time,u,v (optional frame,score); "
+                             "time in seconds "
                              "on the common clock, pixels as detected; rows in any order")
     parser.add_argument("--timing", default="custom",
                         choices=("custom", "sync", "typeA", "typeB"),
                         help="label: the shutter preset the rig's offsets follow (the offsets "
-                             "themselves come from the rig; default custom)")
-    parser.add_argument("-o", "--output", required=True, metavar="SESSION.mcap")
+                             "themselves come from the rig; default %(default)s)")
+    parser.add_argument("-o", "--output", required=True, metavar="SESSION.mcap",
+                        help="session file to write")
     add_force(parser)
 
 

@@ -6,7 +6,7 @@ import argparse
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("session", metavar="SESSION.mcap")
+    parser.add_argument("session", metavar="SESSION.mcap", help="session file to summarise")
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")
 
 

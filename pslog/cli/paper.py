@@ -8,10 +8,13 @@ from ._common import nonnegative_float, seed
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("table", choices=["table1", "table2"], help="which table")
+    parser.add_argument("table", choices=["table1", "table2"],
+                        help="table1 (simulation) or table2 (turntable)")
     parser.add_argument("--noise-px", type=nonnegative_float, default=None,
-                        help="detection noise, pixels (default: 0 for table1, 1.0 for table2)")
-    parser.add_argument("--seed", type=seed, default=0, help="random seed (default 0)")
+                        metavar="PX", help="detection noise, pixels (default: 0 for table1, "
+                                           "1.0 for table2)")
+    parser.add_argument("--seed", type=seed, default=0, metavar="N",
+                        help="random seed (default %(default)s)")
     parser.add_argument("--json", action="store_true", help="print JSON for scripts")
 
 

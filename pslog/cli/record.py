@@ -65,15 +65,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "a video file with an optional @OFFSET in seconds (repeat per "
                              "camera)")
     parser.add_argument("--offset", action="append", default=[], metavar="NAME=SECONDS",
-                        help="start offset of camera NAME's video file on the session clock")
+                        help="start offset of camera NAME's video file on the session clock, "
+                             "seconds (repeat per camera; default 0)")
     parser.add_argument("--synthetic", action="store_true",
                         help="render the rig's cameras instead of reading sources")
     parser.add_argument("--timing", choices=("sync", "typeA", "typeB"),
                         help="set the rig's shutter offsets from a preset (default: the "
                              "rig's own offsets)")
     parser.add_argument("--motion", default="throw",
-                        help="synthetic ball motion: straight, spiral, fall, turntable, throw "
-                             "(default throw)")
+                        metavar="MOTION", help="synthetic ball motion: straight, spiral, "
+                                               "fall, turntable, throw (default %(default)s)")
     parser.add_argument("--fast", action="store_true",
                         help="synthetic: render as fast as possible instead of in real time")
     parser.add_argument("--duration", type=positive_float, metavar="S",
@@ -81,17 +82,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "motion's duration; otherwise until the sources end or Ctrl-C)")
     parser.add_argument("--noise", type=nonnegative_float, default=2.0, metavar="SIGMA",
                         help="synthetic sensor noise, standard deviation in 8-bit levels "
-                             "(default 2)")
+                             "(default %(default)s)")
     parser.add_argument("--ball-radius", type=positive_float, default=0.0215, metavar="M",
-                        help="synthetic ball radius in metres (default 0.0215, a golf ball)")
+                        help="synthetic ball radius in metres (default %(default)s, a golf "
+                             "ball)")
     parser.add_argument("--exposure", type=nonnegative_float, default=0.004, metavar="S",
                         help="synthetic exposure time in seconds, for motion blur "
-                             "(default 0.004; 0 for none)")
-    parser.add_argument("--seed", type=seed, default=0, help="synthetic random seed")
+                             "(default %(default)s; 0 for none)")
+    parser.add_argument("--seed", type=seed, default=0, metavar="N",
+                        help="synthetic random seed (default %(default)s)")
     parser.add_argument("--no-frames", action="store_true",
                         help="store detections only, not the JPEG frames")
     parser.add_argument("--jpeg-quality", type=int, default=90, metavar="Q",
-                        help="JPEG quality of stored frames, 1..100 (default 90)")
+                        help="JPEG quality of stored frames, 1..100 (default %(default)s)")
     add_detector_arguments(parser)
     add_force(parser)
 
@@ -104,7 +107,8 @@ def add_detector_arguments(parser: argparse.ArgumentParser) -> None:
                         help="ball colour as an HSV box hmin,hmax,smin,smax,vmin,vmax "
                              f"(default {HsvRange().text()}, an orange ball)")
     parser.add_argument("--max-candidates", type=int, default=5, metavar="K",
-                        help="ball candidates kept per frame, best first (default 5)")
+                        help="ball candidates kept per frame, best first "
+                             "(default %(default)s)")
 
 
 def parse_hsv(text: str | None):

@@ -8,8 +8,10 @@ from ._common import add_force, check_output
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("session", metavar="BROKEN.mcap")
-    parser.add_argument("-o", "--output", required=True, metavar="FIXED.mcap")
+    parser.add_argument("session", metavar="BROKEN.mcap",
+                        help="damaged session, e.g. from a killed recorder")
+    parser.add_argument("-o", "--output", required=True, metavar="FIXED.mcap",
+                        help="new session with every complete record of the damaged one")
     add_force(parser)
 
 

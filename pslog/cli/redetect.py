@@ -19,9 +19,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
     parser.description = DESCRIPTION
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
-    parser.add_argument("session", help="recorded session (MCAP) with frames")
+    parser.add_argument("session", metavar="SESSION.mcap",
+                        help="recorded session with frames")
     parser.add_argument("-o", "--output", required=True, metavar="SESSION.mcap",
-                        help="new session file")
+                        help="new session file to write")
     add_detector_arguments(parser)
     parser.add_argument("--workers", type=int, default=None, metavar="N",
                         help="processes decoding and detecting (default: all cores for "

@@ -24,21 +24,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
     add_rig(parser)
     parser.add_argument("--timing", choices=_TIMINGS, default="typeA",
-                        help="shutter preset, or 'rig' for the rig's own offsets (default typeA)")
+                        help="shutter preset, or 'rig' for the rig's own offsets "
+                             "(default %(default)s)")
     parser.add_argument("--motion", choices=list(MOTIONS), default="spiral",
-                        help="ball motion (default spiral)")
+                        help="ball motion (default %(default)s)")
     parser.add_argument("--duration", type=positive_float, default=None, metavar="S",
-                        help="seconds (default: the motion's natural duration)")
+                        help="seconds of motion (default: the motion's natural duration)")
     parser.add_argument("--noise-px", type=nonnegative_float, default=0.0, metavar="PX",
-                        help="Gaussian detection noise per pixel axis (default 0)")
+                        help="Gaussian detection noise per pixel axis, pixels "
+                             "(default %(default)s)")
     parser.add_argument("--jitter", type=nonnegative_float, default=0.0, metavar="S",
-                        help="standard deviation of shutter times around the schedule, seconds")
+                        help="standard deviation of shutter times around the schedule, "
+                             "seconds (default %(default)s)")
     parser.add_argument("--drop-rate", type=fraction, default=0.0, metavar="F",
-                        help="fraction of frames lost entirely")
+                        help="fraction of frames lost entirely (default %(default)s)")
     parser.add_argument("--miss-rate", type=fraction, default=0.0, metavar="F",
-                        help="fraction of frames with no detection")
-    parser.add_argument("--seed", type=seed, default=0, help="random seed (default 0)")
-    parser.add_argument("-o", "--output", required=True, metavar="SESSION.mcap")
+                        help="fraction of frames with no detection (default %(default)s)")
+    parser.add_argument("--seed", type=seed, default=0, metavar="N",
+                        help="random seed (default %(default)s)")
+    parser.add_argument("-o", "--output", required=True, metavar="SESSION.mcap",
+                        help="session file to write")
     add_force(parser)
 
 
