@@ -1,0 +1,150 @@
+"""The README's examples run as written, in order, on a fresh clone.
+
+Every line of a ```sh block in README.md is a command. They run one by one with bash in a
+temporary folder holding a copy of ``samples/`` (all a fresh clone has besides the code), with
+the ``pslog`` and ``rerun`` of this Python on PATH (as after ``. .venv/bin/activate``), and each
+must exit 0 without a traceback. A command that cannot run here (a camera, a display, a server
+that runs until Ctrl-C) carries a trailing comment starting ``# needs`` or ``# serves``; that set
+is listed below and must stay small. Full commands appear only in those blocks: an inline
+```pslog ...``` in the prose is a bare command name or repeats a block's command.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+README = ROOT / "README.md"
+
+#: commands the tests cannot run, each marked so in the README; keep this short
+NOT_RUN = {
+    "pslog record --rig rig.toml --source cam1=0 --source cam2=/dev/video2 "
+    "--source cam3=clip.mp4 -o match.mcap": "needs two cameras and a video file",
+    "rerun throw.rrd": "needs a display",
+    "pslog view fused.mcap --serve": "serves http://localhost:9090 until Ctrl-C",
+}
+#: commands of the set-up block, which this very suite runs inside of
+EXCLUDED = {
+    "bash run.sh demo": "sets up .venv and runs pslog demo (tests/test_demo.py)",
+    "bash run.sh test": "sets up .venv and runs this test suite",
+}
+_MARK = re.compile(r"\s+#\s*((?:needs|serves)\b.*)$")
+_COMMENT = re.compile(r"\s+#.*$")
+
+
+def fenced_blocks(text: str) -> list[tuple[str, str]]:
+    """(language, body) of every fenced code block, in order."""
+    return re.findall(r"^```(\w*)\n(.*?)^```", text, flags=re.S | re.M)
+
+
+def shell_lines(text: str) -> list[str]:
+    """Every command line of the ```sh blocks, in order, comments kept."""
+    lines = []
+    for language, body in fenced_blocks(text):
+        if language in ("sh", "bash", "shell", "console"):
+            lines += [ln.strip() for ln in body.splitlines()
+                      if ln.strip() and not ln.strip().startswith("#")]
+    return lines
+
+
+def split_examples(lines: list[str]) -> tuple[list[str], dict[str, str], list[str]]:
+    """(commands to run, marked command -> its reason, excluded commands)."""
+    runnable, marked, excluded = [], {}, []
+    for line in lines:
+        command = _COMMENT.sub("", line)
+        mark = _MARK.search(line)
+        if command in EXCLUDED:
+            excluded.append(command)
+        elif mark:
+            marked[command] = mark.group(1)
+        else:
+            runnable.append(command)
+    return runnable, marked, excluded
+
+
+def test_readme_blocks_are_labelled_and_the_not_run_set_is_small_and_listed():
+    text = README.read_text(encoding="utf-8")
+    languages = [language for language, _ in fenced_blocks(text)]
+    assert "" not in languages, "label every fenced block (sh, text, toml, ...)"
+    runnable, marked, excluded = split_examples(shell_lines(text))
+    assert marked == NOT_RUN
+    assert len(marked) <= 4 and len(runnable) >= 20
+    assert sorted(excluded) == sorted(EXCLUDED)
+    run_sh = (ROOT / "run.sh").read_text(encoding="utf-8")
+    assert "    demo)" in run_sh and "    test)" in run_sh
+
+
+def test_inline_commands_are_names_or_repeat_a_block_command():
+    text = README.read_text(encoding="utf-8")
+    commands = {_COMMENT.sub("", line) for line in shell_lines(text)}
+    prose = re.sub(r"^```.*?^```", "", text, flags=re.S | re.M)
+    for span in re.findall(r"`([^`\n]+)`", prose):
+        if span.startswith("pslog "):
+            assert len(span.split()) <= 2 or span in commands, span
+        if span.startswith("python ") and span.split()[1].endswith(".py"):
+            assert (ROOT / span.split()[1]).is_file(), span
+
+
+def test_readme_rig_toml_is_a_valid_rig():
+    from pslog.rig import Rig
+
+    blocks = [body for language, body in fenced_blocks(README.read_text(encoding="utf-8"))
+              if language == "toml"]
+    assert blocks
+    for body in blocks:
+        rig = Rig.from_toml(body, source="README.md")
+        assert rig.names == ("cam1",) and rig.name == "lab"
+
+
+def _tracked(paths: list[str]) -> set[str]:
+    result = subprocess.run(["git", "-C", str(ROOT), "ls-files", "--", *paths],
+                            capture_output=True, text=True, check=True)
+    return set(result.stdout.split())
+
+
+def test_readme_examples_run_in_order_and_their_outputs_are_git_ignored(tmp_path):
+    text = README.read_text(encoding="utf-8")
+    runnable, _, _ = split_examples(shell_lines(text))
+    shutil.copytree(ROOT / "samples", tmp_path / "samples",
+                    ignore=shutil.ignore_patterns("__pycache__"))
+    before = {p for p in tmp_path.rglob("*")}
+    bin_dir = Path(sys.executable).parent
+    if not (bin_dir / "pslog").exists():
+        pytest.skip(f"pslog is not installed beside {sys.executable}")
+    env = {**os.environ, "PATH": f"{bin_dir}{os.pathsep}{os.environ.get('PATH', '')}",
+           "PYTHONWARNINGS": "default"}
+    env.pop("DISPLAY", None)
+    env.pop("WAYLAND_DISPLAY", None)
+    for command in runnable:
+        result = subprocess.run(["bash", "-o", "pipefail", "-c", command], cwd=tmp_path,
+                                env=env, capture_output=True, text=True, timeout=180)
+        assert result.returncode == 0 and "Traceback" not in result.stderr, (
+            f"README example failed: {command}\nexit {result.returncode}\n"
+            f"stdout: {result.stdout[-2000:]}\nstderr: {result.stderr[-2000:]}")
+
+    # a fresh clone has what the examples read: the samples they name are in git
+    named = sorted({m for c in runnable for m in re.findall(r"samples/[\w./-]+", c)})
+    assert named
+    if shutil.which("git") is None or not (ROOT / ".git").exists():
+        pytest.skip("not a git checkout: cannot check what a clone holds and ignores")
+    assert _tracked(named) == set(named), "commit the sample files the README uses"
+
+    # what the examples write in the checkout is ignored by git, and the samples are not
+    outputs = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*")
+                     if p not in before and p.is_file())
+    assert len(outputs) >= 15, outputs
+    check = subprocess.run(["git", "-C", str(ROOT), "check-ignore", "--no-index", "--",
+                            *outputs], capture_output=True, text=True)
+    assert sorted(check.stdout.split()) == outputs, (
+        f"README outputs not git-ignored: {sorted(set(outputs) - set(check.stdout.split()))}")
+    samples = sorted(_tracked(["samples"]))
+    check = subprocess.run(["git", "-C", str(ROOT), "check-ignore", "--no-index", "--",
+                            *samples], capture_output=True, text=True)
+    assert check.stdout == "", f"tracked samples hidden by .gitignore: {check.stdout}"
