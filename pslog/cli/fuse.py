@@ -50,7 +50,6 @@ def run(args: argparse.Namespace) -> int:
         raise FusionError(f"{args.session} has no detection to fuse")
     if args.methods:
         methods = [check_method(m) for m in dict.fromkeys(args.methods)]
-        _refuse_unsuited(methods, observations, rig, options, args.session)
     else:  # every method this timing suits
         methods = default_methods(observations, rig, options)
         skipped = [m for m in METHODS if m not in methods]
@@ -71,22 +70,3 @@ def run(args: argparse.Namespace) -> int:
         print(f"{method:<8} {len(track):>7d} points")
     print(f"wrote {output}")
     return 0
-
-
-def _refuse_unsuited(methods, observations, rig, options, session) -> None:
-    """Refuse, before fusing, a method that needs a shared shutter instant on a session that
-    has none, naming the timing it needs and the methods that suit this session."""
-    from pslog.errors import FusionError
-    from pslog.fusion import default_methods
-
-    suited = default_methods(observations, rig, options)
-    shared = "sync" in suited  # some instant seen by two cameras within the tolerance
-    unsuited = [m for m in methods if m in ("sync", "typeB", "linear") and not shared]
-    if unsuited:
-        what = (f"method {unsuited[0]} needs" if len(unsuited) == 1
-                else f"methods {', '.join(unsuited)} need")
-        raise FusionError(
-            f"{what} cameras with a common shutter instant (sync "
-            f"or typeB timing), but no two cameras of {session} captured within "
-            f"{options.tolerance_s * 1e3:g} ms of each other; methods that suit this session: "
-            f"{', '.join(suited)} (the default without --method)")

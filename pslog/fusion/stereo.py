@@ -64,7 +64,7 @@ def stereo_at_common_instants(
         raise FusionError(
             f"method {method} needs cameras with a common shutter instant (sync or typeB "
             f"timing), but no two cameras captured within {tolerance_s * 1e3:g} ms of each "
-            f"other")
+            f"other; methods that suit this session: nearest, typeA")
     points, quality, time_ns, camera = triangulate_groups(prep, group, len(n_cameras))
     keep = (n_cameras >= 2) & np.all(np.isfinite(points), axis=1)
     track = Track(method, time_ns[keep], points[keep], camera[keep],
