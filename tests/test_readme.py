@@ -6,7 +6,7 @@ the ``pslog`` and ``rerun`` of this Python on PATH (as after ``. .venv/bin/activ
 must exit 0 without a traceback. A command that cannot run here (a camera, a display, a server
 that runs until Ctrl-C) carries a trailing comment starting ``# needs`` or ``# serves``; that set
 is listed below and must stay small. Full commands appear only in those blocks: an inline
-```pslog ...``` in the prose is a bare command name or repeats a block's command.
+`pslog ...` in the prose is a bare command name or repeats a block's command.
 """
 
 from __future__ import annotations
