@@ -38,7 +38,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "check", help="validate a rig TOML file and summarise its cameras",
         description="Load a rig TOML file as every command does and summarise it; exit 1 "
                     "with the reason if it is not a valid rig.")
-    check.add_argument("rig", metavar="RIG.toml", help="rig TOML file")
+    check.add_argument("rig", metavar="RIG.toml",
+                       help="rig TOML file (or a built-in rig name, or a session MCAP)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -52,10 +53,8 @@ def run(args: argparse.Namespace) -> int:
             rig = apply_timing(rig, args.timing)
         print(rig.to_toml(), end="")
         return 0
-    from pslog.rig import load_rig
-
     path = args.rig
-    rig = load_rig(path)
+    rig = load_any_rig(path)
     print(f"{path}: a valid rig{f' {rig.name!r}' if rig.name else ''} of {len(rig)} "
           f"camera{'s' if len(rig) != 1 else ''}")
     for line in describe_cameras(rig):
