@@ -38,8 +38,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "check", help="validate a rig TOML file and summarise its cameras",
         description="Load a rig TOML file as every command does and summarise it; exit 1 "
                     "with the reason if it is not a valid rig.")
-    check.add_argument("rig", metavar="RIG.toml",
-                       help="rig TOML file (or a built-in rig name, or a session MCAP)")
+    check.add_argument("rig", metavar="RIG",
+                       help="rig TOML file (or built-in rig name, or session MCAP)")
 
 
 def run(args: argparse.Namespace) -> int:
