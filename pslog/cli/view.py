@@ -10,7 +10,7 @@ import argparse
 import os
 import sys
 
-from ._common import add_force, check_output, nonnegative_float
+from ._common import add_force, check_output, declare_files, nonnegative_float
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -35,6 +35,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     import rerun as rr  # rerun's standard flags: --save, --serve, --connect, --url, ...
 
     rr.script_add_args(parser)
+    declare_files(parser, inputs=("sessions",), outputs=("save",))
 
 
 def has_display() -> bool:
