@@ -71,11 +71,11 @@ def check_output_path(path: str | Path, force: bool, inputs: Iterable[str | Path
     WriteError : the folder is not writable (read-only file system, permissions)
     PartialRecordingError : ``<path>.partial`` may hold an interrupted recording
     """
-    path = Path(path)
+    spelled, path = os.fspath(path), Path(path)  # name files as the user wrote them
     for source in inputs:
         if same_file(path, source):
-            raise InputError(f"output {path} is the input {source}; choose another file "
-                             f"(an output never replaces an input)")
+            raise InputError(f"output {spelled} is the input {os.fspath(source)}; choose "
+                             f"another file (an output never replaces an input)")
     if path.is_dir():
         raise InputError(f"{path} is a folder; give a file name")
     if path.exists() and not force:
@@ -86,9 +86,8 @@ def check_output_path(path: str | Path, force: bool, inputs: Iterable[str | Path
     # fail before any long computation rather than after it; access() reports a read-only
     # file system (EROFS) even to root
     if not os.access(folder, os.W_OK | os.X_OK):
-        reason = "read-only file system" if _read_only_fs(folder) else "permission denied"
-        raise WriteError(f"cannot write {path}: folder {folder} is not writable "
-                         f"({reason})")
+        reason = os.strerror(errno.EROFS if _read_only_fs(folder) else errno.EACCES)
+        raise WriteError(f"cannot write {path}: {reason} (folder {folder} is not writable)")
     clear_stale_partial(path, say=say)
     return path
 
@@ -107,11 +106,10 @@ def check_outputs(outputs: Iterable[str | Path], force: bool, inputs: Iterable[s
     inputs = [p for p in inputs if p is not None]
     checked: list[Path] = []
     for out in outputs:
-        path = Path(out)
         for other in checked:
-            if _same_name(path, other):
-                raise InputError(f"{other} is given as two outputs; give each its own file")
-        checked.append(check_output_path(path, force, inputs, say=say))
+            if _same_name(Path(out), other):
+                raise InputError(f"{out} is given as two outputs; give each its own file")
+        checked.append(check_output_path(out, force, inputs, say=say))
     return checked
 
 

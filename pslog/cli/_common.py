@@ -36,8 +36,8 @@ def declare_files(parser: argparse.ArgumentParser, *, inputs=(), outputs=(),
     inputs : argparse dests (``"session"``, ``"rig"``, ``"detections"``) or functions
         ``args -> paths`` (e.g. the video files inside ``--source NAME=FILE``)
     outputs : dests of files the command writes (``"output"``, ``"save"``, ``"csv"``)
-    updates : dests of files changed in place (``calibrate --rig``): only checked not to
-        be an input
+    updates : dests of files changed in place (``calibrate --rig``): checked as outputs,
+        except that they may exist without ``--force``
     """
     files = dict(parser.get_default(FILES_KEY) or {"inputs": (), "outputs": (), "updates": ()})
     for key, more in (("inputs", inputs), ("outputs", outputs), ("updates", updates)):
@@ -64,15 +64,12 @@ def declared_files(args: argparse.Namespace) -> tuple[list[str], list[str], list
 
 def check_declared_files(args: argparse.Namespace, say=None) -> None:
     """The output checks of :func:`declare_files` for a parsed command line."""
-    from pslog.errors import InputError
-    from pslog.outputs import check_outputs, same_file
+    from pslog.outputs import check_output_path, check_outputs
 
     inputs, outputs, updates = declared_files(args)
     check_outputs(outputs, bool(getattr(args, "force", False)), inputs, say=say)
-    for path in updates:
-        for source in inputs:
-            if same_file(path, source):
-                raise InputError(f"{path} is also the input {source}; choose another file")
+    for path in updates:  # may exist: changed in place, but never an input, and writable
+        check_output_path(path, True, inputs, say=say)
 
 
 def source_files(args: argparse.Namespace) -> list[str]:
