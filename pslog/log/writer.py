@@ -64,6 +64,14 @@ class SessionWriter:
         An existing file is replaced only when the new one is complete: the writer writes
         ``<path>.partial`` and moves it over ``path`` on a successful :meth:`close`. After
         :meth:`abort` the partial file is deleted.
+    rig : the session's cameras; camera indices below refer to ``rig.cameras``
+    timing : shutter preset name (``sync``, ``typeA``, ``typeB``) or ``custom``
+    source : free text: what produced the session (``simulate motion=spiral ...``)
+    metadata : extra string key/values for the session metadata record
+    flush_interval_s : longest time, seconds, that written data stays in memory
+    start_ns : session clock time (ns) stamped on the static calibration and pose messages
+    write_static : write the rig's calibration and pose messages (False: the caller copies
+        them, e.g. verbatim from the session it derives from)
     on_error : what becomes of the data written when the session fails (an exception inside
         ``with``, an OS fault such as a full disk):
 
@@ -75,14 +83,6 @@ class SessionWriter:
           session copies): always written as ``<path>.partial``, removed on any failure, so
           nothing half-written is ever left under ``path`` and an old ``path`` stays.
     inputs : files the session is made from; ``path`` may not be one of them
-    rig : the session's cameras; camera indices below refer to ``rig.cameras``
-    timing : shutter preset name (``sync``, ``typeA``, ``typeB``) or ``custom``
-    source : free text: what produced the session (``simulate motion=spiral ...``)
-    metadata : extra string key/values for the session metadata record
-    flush_interval_s : longest time, seconds, that written data stays in memory
-    start_ns : session clock time (ns) stamped on the static calibration and pose messages
-    write_static : write the rig's calibration and pose messages (False: the caller copies
-        them, e.g. verbatim from the session it derives from)
     """
 
     def __init__(self, path, rig: Rig, *, force: bool = False, timing: str = "custom",
@@ -440,6 +440,9 @@ class SessionWriter:
         if self._images_in_chunk:
             self._mcap.flush()
             self._images_in_chunk = 0
+        # hand the bytes to the OS too: a killed process loses nothing the OS has, and a
+        # full disk is met now rather than at close
+        self._file.flush()
         self._last_flush = time.monotonic()
 
     def close(self) -> None:
