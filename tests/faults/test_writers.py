@@ -272,6 +272,33 @@ def test_stale_partial_of_a_derived_output_is_removed_with_a_notice(inputs, tmp_
     assert sorted(p.name for p in tmp_path.iterdir()) == ["f.mcap"]
 
 
+def test_a_killed_force_run_leaves_a_partial_that_the_next_run_removes(inputs, tmp_path):
+    """A real SIGKILL in the middle of 'redetect --force' (the session copy under way)."""
+    import signal
+    import sys
+
+    out, partial = tmp_path / "r.mcap", tmp_path / "r.mcap.partial"
+    out.write_bytes(b"old output")
+    args = [sys.executable, "-m", "pslog.cli", "redetect", str(inputs / "s.mcap"),
+            "--workers", "1", "-o", str(out), "--force"]
+    proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 60
+        while not partial.exists() and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.001)
+        proc.send_signal(signal.SIGKILL)
+    finally:
+        proc.wait()
+    if proc.returncode != -signal.SIGKILL:
+        pytest.skip("redetect finished before it could be killed")
+    assert out.read_bytes() == b"old output" and partial.exists()
+    run = run_pslog("redetect", inputs / "s.mcap", "--workers", "1", "-o", out, "--force")
+    assert run.code == 0, run.stderr
+    assert f"removed {partial} left by an interrupted run" in run.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.mcap"]
+    assert out.read_bytes() != b"old output"
+
+
 def test_stale_partial_that_may_hold_a_recording_is_kept_and_named(inputs, tmp_path):
     out = tmp_path / "s.mcap"
     out.write_bytes(b"old session")
