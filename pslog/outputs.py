@@ -1,20 +1,46 @@
-"""Output files: never overwrite without ``force``, never leave a half-written replacement.
+"""Output files: never overwrite without ``force``, never replace an input, never leave a
+half-written replacement, and one-line errors for every operating-system fault.
 
-Every command that writes a file goes through :func:`check_output_path`; writers that may
-replace an existing file write a sibling ``<name>.partial`` first and move it over the old
-file only once it is complete (:func:`partial_path`), so a failed or killed run leaves the
-previous output as it was.
+Every command that writes a file goes through :func:`check_output_path`. Writers write a
+sibling ``<name>.partial`` first and move it over the output only once it is complete
+(:func:`partial_path`), so a failed or killed run leaves the previous output as it was.
+
+Partial files left by a killed run (the next run meets them):
+
+- a *derived* output (``simulate``, ``import``, ``fuse``, ``redetect``, ``recover``,
+  ``export``, ``view --save``) can be made again from its inputs, so its stale partial is
+  removed with a one-line notice (:func:`clear_stale_partial`);
+- a partial that may hold a *recording* (``record --force`` killed while replacing a
+  session: the only copy of what the cameras saw) is never deleted: writing over it is
+  refused, naming it and how to salvage it.
+
+:func:`partial_kind` tells them apart from the file itself (MCAP header and session metadata).
 """
 
 from __future__ import annotations
 
+import errno
 import os
-from collections.abc import Iterable, Iterator
+import struct
+import sys
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import IO
 
-from .errors import InputError, OutputExistsError
+from .errors import InputError, OutputExistsError, PslogError
+
+
+class WriteError(PslogError):
+    """The operating system refused a write (full disk, read-only file system, size limit,
+    permissions): ``cannot write <path>: <reason>``."""
+
+
+def write_error(path: str | Path, exc: OSError) -> WriteError:
+    """The one-line error for ``exc`` met while writing ``path`` (the output the user named,
+    not its ``.partial``)."""
+    reason = exc.strerror or str(exc) or type(exc).__name__
+    return WriteError(f"cannot write {path}: {reason}")
 
 
 def same_file(a: str | Path, b: str | Path) -> bool:
@@ -26,46 +52,220 @@ def same_file(a: str | Path, b: str | Path) -> bool:
         return False
 
 
-def check_output_path(path: str | Path, force: bool, inputs: Iterable[str | Path] = ()) -> Path:
+def _say_stderr(text: str) -> None:
+    print(f"pslog: {text}", file=sys.stderr)
+
+
+def check_output_path(path: str | Path, force: bool, inputs: Iterable[str | Path] = (), *,
+                      say: Callable[[str], None] | None = None) -> Path:
     """``path`` as a :class:`~pathlib.Path` if a file may be written there.
 
     ``inputs`` are the files the command reads: an output that is one of them is refused,
-    ``force`` or not (an output never replaces an input).
+    ``force`` or not (an output never replaces an input). A stale ``<path>.partial`` of a
+    derived output is removed (``say`` tells the user; default: a line on stderr).
 
     Raises
     ------
     InputError : ``path`` is a folder, its folder does not exist, or it is one of ``inputs``
     OutputExistsError : ``path`` exists and ``force`` is false
+    WriteError : the folder is not writable (read-only file system, permissions)
+    PartialRecordingError : ``<path>.partial`` may hold an interrupted recording
     """
-    path = Path(path)
+    spelled, path = os.fspath(path), Path(path)  # name files as the user wrote them
     for source in inputs:
         if same_file(path, source):
-            raise InputError(f"output {path} is the input {source}; choose another file "
-                             f"(an output never replaces an input)")
+            raise InputError(f"output {spelled} is the input {os.fspath(source)}; choose "
+                             f"another file (an output never replaces an input)")
     if path.is_dir():
         raise InputError(f"{path} is a folder; give a file name")
     if path.exists() and not force:
         raise OutputExistsError(f"{path} exists; use --force to overwrite it")
-    if not path.parent.is_dir():
-        raise InputError(f"output folder does not exist: {path.parent}")
+    folder = path.parent
+    if not folder.is_dir():
+        raise InputError(f"output folder does not exist: {folder}")
+    # fail before any long computation rather than after it; access() reports a read-only
+    # file system (EROFS) even to root
+    if not os.access(folder, os.W_OK | os.X_OK):
+        reason = os.strerror(errno.EROFS if _read_only_fs(folder) else errno.EACCES)
+        raise WriteError(f"cannot write {path}: {reason} (folder {folder} is not writable)")
+    clear_stale_partial(path, say=say)
     return path
+
+
+def _read_only_fs(folder: Path) -> bool:
+    try:
+        return bool(os.statvfs(folder).f_flag & os.ST_RDONLY)
+    except (OSError, AttributeError):
+        return False
+
+
+def check_outputs(outputs: Iterable[str | Path], force: bool, inputs: Iterable[str | Path] = (),
+                  *, say: Callable[[str], None] | None = None) -> list[Path]:
+    """:func:`check_output_path` for each of a command's ``outputs``, which must also be
+    distinct files (two options naming one file would write it twice)."""
+    inputs = [p for p in inputs if p is not None]
+    checked: list[Path] = []
+    for out in outputs:
+        for other in checked:
+            if _same_name(Path(out), other):
+                raise InputError(f"{out} is given as two outputs; give each its own file")
+        checked.append(check_output_path(out, force, inputs, say=say))
+    return checked
+
+
+def _same_name(a: Path, b: Path) -> bool:
+    return same_file(a, b) or os.path.realpath(a) == os.path.realpath(b)
 
 
 def partial_path(path: Path) -> Path:
     """Where to write a file that will replace ``path`` once complete."""
+    path = Path(path)
     return path.with_name(path.name + ".partial")
 
 
+class PartialRecordingError(PslogError):
+    """``<output>.partial`` may hold the only copy of an interrupted recording."""
+
+
+# ---- stale partial files --------------------------------------------------------------
+
+_MCAP_MAGIC = b"\x89MCAP0\r\n"
+_OP_HEADER, _OP_METADATA = 0x01, 0x0C
+#: session ``source`` texts of commands that derive a session from files that still exist
+DERIVED_SOURCES = ("pslog simulate", "pslog import")
+#: MCAP header ``library`` of writers that derive a file from another (pslog recover)
+DERIVED_LIBRARIES = ("pslog recover",)
+_PEEK = 1 << 20
+
+
+def partial_kind(path: str | Path) -> str:
+    """What a ``.partial`` file left by a killed run holds, from its first bytes.
+
+    Returns
+    -------
+    ``"empty"`` : nothing written yet (no complete record after the MCAP header)
+    ``"derived"`` : an output made from inputs that still exist: a CSV or .rrd export, or an
+        MCAP written by ``simulate``, ``import``, ``recover`` or a session copy (``fuse``,
+        ``redetect``: metadata ``derived_from``)
+    ``"recording"`` : anything else, e.g. a recording; it may be the only copy of its data
+    """
+    with open(path, "rb") as f:
+        head = f.read(_PEEK)
+    if len(head) < len(_MCAP_MAGIC):
+        return "empty" if _MCAP_MAGIC.startswith(head) or not head else "derived"
+    if not head.startswith(_MCAP_MAGIC):
+        return "derived"  # pslog records only MCAP sessions; this is a CSV or .rrd export
+    try:
+        pos = len(_MCAP_MAGIC)
+        op, length = struct.unpack_from("<BQ", head, pos)
+        if op != _OP_HEADER or pos + 9 + length > len(head):
+            return "recording"
+        _profile, at = _string(head, pos + 9)
+        library, _ = _string(head, at)
+        if library.startswith(DERIVED_LIBRARIES):
+            return "derived"
+        pos += 9 + length
+        if pos + 9 > len(head):
+            return "empty"
+        op, length = struct.unpack_from("<BQ", head, pos)
+        if pos + 9 + length > len(head):
+            return "empty"  # the first record after the header never completed
+        if op != _OP_METADATA:
+            return "recording"
+        _name, at = _string(head, pos + 9)
+        meta = _string_map(head, at)
+    except (struct.error, UnicodeDecodeError, ValueError):
+        return "recording"
+    if "derived_from" in meta or meta.get("source", "").startswith(DERIVED_SOURCES):
+        return "derived"
+    return "recording"
+
+
+def _string(buf: bytes, pos: int) -> tuple[str, int]:
+    (n,) = struct.unpack_from("<I", buf, pos)
+    if pos + 4 + n > len(buf):
+        raise ValueError("string past the end")
+    return buf[pos + 4:pos + 4 + n].decode("utf-8"), pos + 4 + n
+
+
+def _string_map(buf: bytes, pos: int) -> dict[str, str]:
+    (n,) = struct.unpack_from("<I", buf, pos)
+    end, pos, out = pos + 4 + n, pos + 4, {}
+    while pos < end:
+        key, pos = _string(buf, pos)
+        out[key], pos = _string(buf, pos)
+    return out
+
+
+def clear_stale_partial(path: str | Path, *, say: Callable[[str], None] | None = None) -> None:
+    """Deal with ``<path>.partial`` left by an interrupted run before writing ``path``.
+
+    A derived output's (or an empty) partial is removed and ``say`` is told; one that may
+    hold a recording is kept and :class:`PartialRecordingError` says what it is.
+    """
+    partial = partial_path(Path(path))
+    if not partial.is_file():
+        return
+    try:
+        kind = partial_kind(partial)
+    except OSError as exc:
+        raise PartialRecordingError(f"{partial} exists (left by an interrupted run) and "
+                                    f"cannot be read: {exc.strerror}; move it away") from None
+    if kind == "recording":
+        raise PartialRecordingError(
+            f"{partial} exists: left by an interrupted recording, it may hold the only copy "
+            f"of recorded data; salvage it with 'pslog recover {partial} -o SAVED.mcap' or "
+            f"move it away, then run again")
+    try:
+        partial.unlink()
+    except FileNotFoundError:
+        return
+    except OSError as exc:
+        raise write_error(partial, exc) from None
+    (say or _say_stderr)(f"removed {partial} left by an interrupted run")
+
+
+# ---- writing ---------------------------------------------------------------------------
+
 @contextmanager
-def replacing_text_file(path: str | Path, force: bool) -> Iterator[IO[str]]:
+def replacing_text_file(path: str | Path, force: bool,
+                        inputs: Iterable[str | Path] = ()) -> Iterator[IO[str]]:
     """Open a text file to write in place of ``path``: it becomes ``path`` only when the
-    ``with`` block completes; on an error the old file (if any) stays and nothing is left."""
-    path = check_output_path(path, force)
+    ``with`` block completes; on any error (WriteError for an OS fault) the old file (if
+    any) stays and nothing is left."""
+    path = check_output_path(path, force, inputs)
     partial = partial_path(path)
     try:
-        with open(partial, "w", newline="", encoding="utf-8") as f:
-            yield f
+        try:
+            with open(partial, "w", newline="", encoding="utf-8") as f:
+                yield f
+            partial.replace(path)
+        except OSError as exc:
+            raise write_error(path, exc) from None
     except BaseException:
         partial.unlink(missing_ok=True)
         raise
-    partial.replace(path)
+
+
+#: OS error numbers that mean "this write cannot succeed here"
+WRITE_ERRNOS = frozenset(e for e in (errno.ENOSPC, errno.EFBIG, errno.EROFS, errno.EACCES,
+                                     errno.EPERM, getattr(errno, "EDQUOT", None), errno.EIO)
+                         if e is not None)
+
+
+def describe_os_error(exc: OSError, outputs: Iterable[str | Path] = ()) -> str:
+    """One line for an OSError no writer translated: names the file (an output's
+    ``.partial`` by the output's name) or, for a write fault without a file name, the
+    command's outputs."""
+    reason = exc.strerror or str(exc) or type(exc).__name__
+    outputs = [Path(p) for p in outputs]
+    name = exc.filename
+    if name is not None:
+        name = os.fsdecode(name) if isinstance(name, bytes) else str(name)
+        for out in outputs:
+            if name in (str(out), str(partial_path(out))):
+                return f"cannot write {out}: {reason}"
+        return f"{name}: {reason}"
+    if exc.errno in WRITE_ERRNOS and outputs:
+        return f"cannot write {' or '.join(map(str, outputs))}: {reason}"
+    return reason

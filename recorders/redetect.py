@@ -67,7 +67,7 @@ def redetect_session(src: str | Path, dst: str | Path, hsv: HsvRange | None = No
     """
     from pslog.log import copy_session, iter_images, read_session
 
-    dst = check_output_path(dst, force)
+    dst = check_output_path(dst, force, inputs=[src])
     session = read_session(src)
     if session.n_images == 0:
         raise InputError(f"{src} has no stored frames, nothing to re-detect (sessions from "

@@ -430,7 +430,7 @@ def test_copy_session_replaces_detections_and_tracks(tmp_path, rig3):
     assert sorted(read_session(dst2).tracks) == ["new"]
     with pytest.raises(OutputExistsError):
         copy_session(src, dst)
-    with pytest.raises(InputError, match="input session"):
+    with pytest.raises(InputError, match="is the input"):
         copy_session(src, src, force=True)
 
 

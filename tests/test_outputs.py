@@ -99,3 +99,159 @@ def test_an_output_that_is_an_input_is_refused_in_every_spelling(tmp_path, monke
             check_output_path(spelling, True, inputs=[src])
     assert src.read_bytes() == b"session"
     assert check_output_path("other.mcap", False, inputs=[src]).name == "other.mcap"
+
+
+# ---- one output rule for every command (declare_files + the dispatcher) -----------------
+
+#: options that name a file a command writes
+_OUTPUT_OPTIONS = {"-o", "--output", "--save", "--csv"}
+
+
+def _parser(command):
+    import importlib
+
+    from pslog.cli import COMMANDS, _Parser
+
+    parser = _Parser(prog=f"pslog {command}")
+    importlib.import_module(f"pslog.cli.{COMMANDS[command][0]}").add_arguments(parser)
+    return parser
+
+
+@pytest.mark.parametrize("command", ["simulate", "record", "import", "export", "fuse",
+                                     "redetect", "recover", "view", "calibrate"])
+def test_every_writing_command_declares_its_files(command):
+    from pslog.cli._common import FILES_KEY
+
+    parser = _parser(command)
+    files = parser.get_default(FILES_KEY)
+    assert files, f"pslog {command} declares no files (declare_files in add_arguments)"
+    outputs = {a.dest for a in parser._actions if _OUTPUT_OPTIONS & set(a.option_strings)}
+    if command == "export":
+        outputs.add("detections")
+    assert outputs <= set(files["outputs"]) | set(files["updates"]), command
+    positional = {a.dest for a in parser._actions if not a.option_strings}
+    assert positional <= set(files["inputs"]), command
+    if any("--rig" in a.option_strings for a in parser._actions) and command != "calibrate":
+        assert "rig" in files["inputs"], command
+
+
+def test_a_new_command_gets_the_output_rule_for_free(tmp_path, monkeypatch, cli):
+    """A command that only declares its files, and then writes naively, cannot replace its
+    input or overwrite without --force: the dispatcher checks before run()."""
+    import sys
+    import types
+
+    from pslog import cli as cli_module
+    from pslog.cli._common import add_force, declare_files
+
+    module = types.ModuleType("pslog.cli._naive_copy")
+
+    def add_arguments(parser):
+        parser.add_argument("source")
+        parser.add_argument("-o", "--output", required=True)
+        add_force(parser)
+        declare_files(parser, inputs=("source",), outputs=("output",))
+
+    def run(args):
+        data = open(args.source, "rb").read()
+        with open(args.output, "wb") as f:  # truncates first: would destroy its input
+            f.write(data + b" copied")
+        return 0
+
+    module.add_arguments, module.run = add_arguments, run
+    monkeypatch.setitem(sys.modules, "pslog.cli._naive_copy", module)
+    monkeypatch.setitem(cli_module.COMMANDS, "naive", ("_naive_copy", "a naive copy"))
+    src = tmp_path / "in.txt"
+    src.write_bytes(b"precious")
+    (tmp_path / "alias.txt").symlink_to(src)
+    monkeypatch.chdir(tmp_path)
+    for spelling in ("in.txt", "./in.txt", "alias.txt", str(src)):
+        code, _, err = cli("naive", "in.txt", "-o", spelling, "--force")
+        assert code == 1 and "is the input" in err and err.count("\n") == 1, err
+    assert src.read_bytes() == b"precious"
+    (tmp_path / "out.txt").write_bytes(b"old")
+    code, _, err = cli("naive", "in.txt", "-o", "out.txt")
+    assert code == 1 and "--force" in err
+    assert cli("naive", "in.txt", "-o", "out.txt", "--force")[0] == 0
+    assert (tmp_path / "out.txt").read_bytes() == b"precious copied"
+
+
+def test_two_options_naming_one_output_are_refused(tmp_path, sim_session, cli):
+    out = tmp_path / "x.csv"
+    code, _, err = cli("export", sim_session.path, "--detections", out, "--csv",
+                       tmp_path / "sub" / ".." / "x.csv")
+    assert code == 1 and "two outputs" in err and not out.exists()
+
+
+# ---- derived writers leave nothing on failure; stale partials ---------------------------
+
+def test_discard_mode_writes_only_a_partial_and_removes_it_on_failure(tmp_path, sim_session):
+    path = tmp_path / "d.mcap"
+    partial = tmp_path / "d.mcap.partial"
+    with pytest.raises(RuntimeError), \
+            SessionWriter(path, sim_session.rig, on_error="discard") as w:
+        w.add_detections(sim_session.detections)
+        w.flush()
+        assert partial.exists() and not path.exists()  # never a half-written d.mcap
+        raise RuntimeError("fusion failed")
+    assert not path.exists() and not partial.exists()
+    path.write_bytes(b"old")
+    with pytest.raises(RuntimeError), SessionWriter(path, sim_session.rig, force=True,
+                                                    on_error="discard") as w:
+        raise RuntimeError("again")
+    assert path.read_bytes() == b"old" and not partial.exists()
+    with SessionWriter(path, sim_session.rig, force=True, on_error="discard") as w:
+        w.add_detections(sim_session.detections)
+    assert read_session(path).detections.n_frames == sim_session.detections.n_frames
+    assert not partial.exists()
+
+
+def test_partial_kind_tells_derived_outputs_from_recordings(tmp_path, sim_session, cli):
+    from pathlib import Path
+
+    from pslog.outputs import partial_kind
+
+    sample = Path(__file__).resolve().parents[1] / "samples" / "throw.mcap"
+    fused, sim, csv = tmp_path / "f.mcap", tmp_path / "s.mcap", tmp_path / "d.csv"
+    assert cli("fuse", sample, "--method", "typeA", "-o", fused)[0] == 0
+    assert cli("simulate", "--rig", "paper2", "-o", sim)[0] == 0
+    assert cli("export", sample, "--detections", csv)[0] == 0
+
+    def prefix(path, n):
+        out = tmp_path / f"{path.name}.{n}.partial"
+        out.write_bytes(path.read_bytes()[:n])
+        return out
+
+    assert partial_kind(prefix(sample, 0)) == "empty"
+    assert partial_kind(prefix(sample, 5)) == "empty"
+    assert partial_kind(prefix(sample, 30_000)) == "recording"  # record --synthetic
+    assert partial_kind(prefix(sim_session.path, 3_000)) == "recording"  # source "test"
+    assert partial_kind(prefix(fused, 30_000)) == "derived"
+    assert partial_kind(prefix(sim, 2_000)) == "derived"
+    assert partial_kind(prefix(csv, 100)) == "derived"
+
+
+def test_copy_session_rewrites_calibration_only_from_a_corrected_rig(tmp_path, sim_session):
+    import numpy as np
+    from mcap.reader import make_reader
+
+    from pslog.log import copy_session
+    from pslog.rig import Rig
+
+    def static(path):
+        with open(path, "rb") as f:
+            return {c.topic: m.data for _s, c, m in make_reader(f).iter_messages()
+                    if c.topic.endswith(("/calibration", "/transform"))}
+
+    same, moved = tmp_path / "same.mcap", tmp_path / "moved.mcap"
+    copy_session(sim_session.path, same)
+    assert static(same) == static(sim_session.path)  # byte-identical
+    rig = sim_session.rig
+    corrected = Rig(tuple(c.replace(t=c.t + np.array([0.02, 0.0, 0.0])) if c.name == "cam2"
+                          else c for c in rig.cameras), rig.name)
+    copy_session(sim_session.path, moved, rig=corrected)
+    old, new = static(sim_session.path), static(moved)
+    assert set(old) == set(new)
+    assert new["/camera/cam2/transform"] != old["/camera/cam2/transform"]
+    assert new["/camera/cam1/transform"] == old["/camera/cam1/transform"]
+    assert read_session(moved).rig == corrected

@@ -2,8 +2,14 @@
 
 Each command lives in its own module ``pslog.cli.<module>`` exposing
 ``add_arguments(parser)`` and ``run(args) -> int``; only the chosen command's module is
-imported, so ``pslog --help`` stays fast. Every :class:`~pslog.errors.PslogError` becomes a
-one-line ``pslog: error: ...`` on stderr and exit code 1.
+imported, so ``pslog --help`` stays fast. Every :class:`~pslog.errors.PslogError` and every
+unhandled OS fault (``OSError``) becomes a one-line ``pslog CMD: error: ...`` on stderr and
+exit code 1.
+
+Files: a command declares in ``add_arguments`` which options name its inputs and outputs
+(:func:`pslog.cli._common.declare_files`); before ``run`` every declared output is checked
+here, once for all commands: never an input in any spelling, not existing without
+``--force``, a writable folder, a stale ``.partial`` of an interrupted run dealt with.
 """
 
 from __future__ import annotations
@@ -73,8 +79,17 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv[1:])
 
     from pslog.errors import PslogError
+    from pslog.outputs import describe_os_error
+
+    from ._common import check_declared_files, declared_files
+
+    _ignore_file_size_signal()
+
+    def say(text: str) -> None:
+        print(f"pslog {name}: {text}", file=sys.stderr)
 
     try:
+        check_declared_files(args, say=say)
         return int(module.run(args) or 0)
     except PslogError as exc:
         print(f"pslog {name}: error: {exc}", file=sys.stderr)
@@ -84,6 +99,21 @@ def main(argv: list[str] | None = None) -> int:
         return 130
     except BrokenPipeError:
         return 1
+    except OSError as exc:  # an OS fault no writer translated: still one line
+        _inputs, outputs, updates = declared_files(args)
+        print(f"pslog {name}: error: {describe_os_error(exc, outputs + updates)}",
+              file=sys.stderr)
+        return 1
+
+
+def _ignore_file_size_signal() -> None:
+    """Ignore SIGXFSZ, so that a write beyond the file-size limit (``ulimit -f``) fails with
+    EFBIG, which the writers report in one line, instead of killing the process."""
+    import signal
+    import threading
+
+    if hasattr(signal, "SIGXFSZ") and threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
 
 
 if __name__ == "__main__":

@@ -17,6 +17,72 @@ def add_rig(parser: argparse.ArgumentParser, required: bool = True, help_extra: 
              "> rig.toml' writes one to edit)" + help_extra)
 
 
+#: argparse default holding a command's declared files (see :func:`declare_files`)
+FILES_KEY = "_pslog_files"
+
+
+def declare_files(parser: argparse.ArgumentParser, *, inputs=(), outputs=(),
+                  updates=()) -> None:
+    """Declare which options of a command name files it reads and writes.
+
+    The dispatcher (:func:`pslog.cli.main`) checks every declared output before ``run``:
+    never one of the inputs in any spelling (``./``, ``..``, symlink, hard link), ``--force``
+    or not; no existing file without ``--force``; no folder; a writable folder; distinct
+    outputs; a stale ``.partial`` of an interrupted run removed or named. A new command gets
+    all of this by declaring its files here. An OS fault while writing becomes one line
+    naming the output.
+
+    Parameters
+    ----------
+    inputs : argparse dests (``"session"``, ``"rig"``, ``"detections"``) or functions
+        ``args -> paths`` (e.g. the video files inside ``--source NAME=FILE``)
+    outputs : dests of files the command writes (``"output"``, ``"save"``, ``"csv"``)
+    updates : dests of files changed in place (``calibrate --rig``): checked as outputs,
+        except that they may exist without ``--force``
+    """
+    files = dict(parser.get_default(FILES_KEY) or {"inputs": (), "outputs": (), "updates": ()})
+    for key, more in (("inputs", inputs), ("outputs", outputs), ("updates", updates)):
+        files[key] = (*files[key], *more)
+    parser.set_defaults(**{FILES_KEY: files})
+
+
+def _paths(args: argparse.Namespace, entries) -> list[str]:
+    out: list[str] = []
+    for entry in entries:
+        value = entry(args) if callable(entry) else getattr(args, entry, None)
+        if value is None:
+            continue
+        values = [value] if isinstance(value, str | Path) else list(value)
+        out.extend(str(v) for v in values if v is not None and str(v) != "")
+    return out
+
+
+def declared_files(args: argparse.Namespace) -> tuple[list[str], list[str], list[str]]:
+    """(inputs, outputs, updates) paths given on this command line."""
+    files = getattr(args, FILES_KEY, None) or {}
+    return tuple(_paths(args, files.get(k, ())) for k in ("inputs", "outputs", "updates"))
+
+
+def check_declared_files(args: argparse.Namespace, say=None) -> None:
+    """The output checks of :func:`declare_files` for a parsed command line."""
+    from pslog.outputs import check_output_path, check_outputs
+
+    inputs, outputs, updates = declared_files(args)
+    check_outputs(outputs, bool(getattr(args, "force", False)), inputs, say=say)
+    for path in updates:  # may exist: changed in place, but never an input, and writable
+        check_output_path(path, True, inputs, say=say)
+
+
+def source_files(args: argparse.Namespace) -> list[str]:
+    """The files named by ``--source NAME=FILE[@OFFSET]`` options (inputs of ``record``)."""
+    out = []
+    for text in getattr(args, "source", None) or ():
+        spec = text.partition("=")[2].strip()
+        head, sep, _ = spec.rpartition("@")
+        out.append(head if sep and not Path(spec).exists() else spec)
+    return out
+
+
 def check_output(path: str | Path, force: bool, inputs=()) -> Path:
     """Refuse a folder, a missing parent folder, one of the ``inputs`` (always), or an
     existing file unless ``force``."""

@@ -20,7 +20,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from pslog.cli._common import add_force, nonnegative_float, positive_float
+from pslog.cli._common import add_force, declare_files, nonnegative_float, positive_float
 
 _WORST_SHOWN = 5
 
@@ -71,11 +71,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         metavar="N", help="from a video, use at most this many evenly "
                                           "spaced frames (default %(default)s)")
     add_force(parser)
+    # the rig file is updated in place by design; it may not be the points or images
+    declare_files(parser, inputs=("points", "images"), updates=("rig",))
 
 
 def run(args: argparse.Namespace) -> int:
     from pslog.errors import InputError, OutputExistsError
-    from pslog.rig import BUILTIN_RIGS, Rig, load_rig, save_rig
+    from pslog.outputs import replacing_text_file
+    from pslog.rig import BUILTIN_RIGS, Rig, load_rig
 
     rig_path = Path(args.rig)
     if not rig_path.exists() and str(args.rig) in BUILTIN_RIGS:
@@ -108,11 +111,17 @@ def run(args: argparse.Namespace) -> int:
         camera = _run_points(args, existing, rig_path, fps, offset)
 
     new_rig = (Rig((camera,), rig_path.stem) if rig is None else rig.with_camera(camera))
-    save_rig(new_rig, rig_path)
+    # the old rig is replaced only by a complete new one (full disk: it stays as it was)
+    with replacing_text_file(rig_path, force=True, inputs=_inputs(args)) as f:
+        f.write(new_rig.to_toml())
     action = "replaced" if existing is not None else "added"
     print(f"{action} camera {camera.name!r} (camera {new_rig.index(camera.name) + 1} of "
           f"{len(new_rig)}) in {rig_path}")
     return 0
+
+
+def _inputs(args) -> list[str]:
+    return [p for p in (args.points, args.images) if p]
 
 
 def _run_points(args, existing, rig_path: Path, fps: float, offset: float):

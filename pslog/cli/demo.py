@@ -27,7 +27,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="write into --out even if it holds files")
 
 
-def _output_folder(out: str | None, force: bool) -> Path:
+def _output_folder(out: str | None, force: bool) -> tuple[Path, bool]:
+    """The folder to write into and whether this run creates it."""
     from pslog.errors import InputError, OutputExistsError
 
     if out is None:  # a fresh folder per run: nothing is ever overwritten
@@ -42,11 +43,35 @@ def _output_folder(out: str | None, force: bool) -> Path:
             raise InputError(f"--out {folder} is a file, not a folder")
         if folder.exists() and any(folder.iterdir()) and not force:
             raise OutputExistsError(f"{folder} is not empty; use --force to write into it")
-    folder.mkdir(parents=True, exist_ok=True)
-    return folder
+    created = not folder.exists()
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"cannot create the output folder {folder}: {exc.strerror}") from None
+    return folder, created
 
 
 def run(args: argparse.Namespace) -> int:
+    folder, created = _output_folder(args.out, args.force)
+    before = set(folder.iterdir())
+    try:
+        return _run(args, folder)
+    except BaseException:
+        # a failed demo leaves nothing of its own (every file it writes can be made again);
+        # files that were in the folder before stay, and each writer replaces an old file
+        # only by a complete new one
+        for path in set(folder.iterdir()) - before:
+            if path.is_file() or path.is_symlink():
+                path.unlink(missing_ok=True)
+        if created:
+            try:
+                folder.rmdir()
+            except OSError:
+                pass  # not empty: something else wrote into it meanwhile
+        raise
+
+
+def _run(args: argparse.Namespace, folder: Path) -> int:
     import sys
 
     from pslog import paper
@@ -55,7 +80,6 @@ def run(args: argparse.Namespace) -> int:
     from pslog.log import copy_session, read_session
     from pslog.rig import apply_timing, builtin_rig
 
-    folder = _output_folder(args.out, args.force)
     session_path, fused_path = folder / "session.mcap", folder / "fused.mcap"
     rig = apply_timing(builtin_rig("paper3"), "typeA")
 
@@ -64,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"1/4 recording a {args.duration:g} s synthetic throw: 3 cameras at 30 fps, shutters "
           f"1/90 s apart (type A) -> {session_path}")
     record_synthetic(rig, "throw", session_path, duration=args.duration,
-                     fast=not args.realtime, frames=True, force=args.force, status=sys.stderr)
+                     fast=not args.realtime, frames=True, force=args.force, status=sys.stdout)
 
     session = read_session(session_path)
     print(f"2/4 fusing {len(session.detections.best())} detections with every method type-A "

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from ._common import add_force, check_output
+from ._common import add_force, declare_files
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -14,6 +14,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--csv", metavar="TRACKS.csv",
                         help="write the fused tracks: time,x,y,z,camera,method (+ quality)")
     add_force(parser)
+    declare_files(parser, inputs=("session",), outputs=("detections", "csv"))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -22,9 +23,8 @@ def run(args: argparse.Namespace) -> int:
 
     if not args.detections and not args.csv:
         raise InputError("nothing to export: give --detections DET.csv and/or --csv TRACKS.csv")
-    outputs = [p for p in (args.detections, args.csv) if p]
-    for path in outputs:  # refuse before reading anything
-        check_output(path, args.force)
+    # the outputs were checked before run() (declare_files): never the session, never
+    # existing without --force
     session = read_session(args.session)
     if args.csv and not session.tracks:
         raise InputError(f"{args.session} has no fused tracks to export (run 'pslog fuse')")
@@ -38,7 +38,7 @@ def run(args: argparse.Namespace) -> int:
 def _export_detections(session, path: str, force: bool) -> None:
     from pslog.log.csvio import write_detections_csv
 
-    n = write_detections_csv(session.detections, path, force=force)
+    n = write_detections_csv(session.detections, path, force=force, inputs=[session.path])
     print(f"wrote {path}: {n} detections")
 
 

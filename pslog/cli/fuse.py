@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from ._common import add_force, check_output, nonnegative_float, positive_float
+from ._common import add_force, check_output, declare_files, nonnegative_float, positive_float
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -26,6 +26,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         metavar="MS", help="longest time span a method may bridge, "
                                            "milliseconds (default: 3.5 frame periods)")
     add_force(parser)
+    declare_files(parser, inputs=("session", "rig"), outputs=("output",))
 
 
 def run(args: argparse.Namespace) -> int:

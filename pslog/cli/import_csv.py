@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from ._common import add_force, add_rig, check_output
+from ._common import add_force, add_rig, check_output, declare_files
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -20,6 +20,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("-o", "--output", required=True, metavar="SESSION.mcap",
                         help="session file to write")
     add_force(parser)
+    declare_files(parser, inputs=("rig", "detections"), outputs=("output",))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -31,7 +32,8 @@ def run(args: argparse.Namespace) -> int:
     rig = resolve_rig(args.rig)
     detections = read_detections_csv(args.detections, rig)
     with SessionWriter(output, rig, force=args.force, timing=args.timing,
-                       source=f"pslog import {args.detections}") as writer:
+                       source=f"pslog import {args.detections}", on_error="discard",
+                       inputs=[args.detections]) as writer:
         writer.add_detections(detections)
     print(f"wrote {output}: {detections.n_candidates} detections in {detections.n_frames} "
           f"frames of {len(rig)} cameras ({', '.join(rig.names)})")

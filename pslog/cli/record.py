@@ -9,9 +9,11 @@ from pslog.cli._common import (
     add_force,
     add_rig,
     check_output,
+    declare_files,
     nonnegative_float,
     positive_float,
     seed,
+    source_files,
 )
 from pslog.errors import InputError
 
@@ -97,6 +99,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="JPEG quality of stored frames, 1..100 (default %(default)s)")
     add_detector_arguments(parser)
     add_force(parser)
+    declare_files(parser, inputs=("rig", source_files), outputs=("output",))
 
 
 def add_detector_arguments(parser: argparse.ArgumentParser) -> None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from ._common import add_force, check_output
+from ._common import add_force, check_output, declare_files
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -13,14 +13,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("-o", "--output", required=True, metavar="FIXED.mcap",
                         help="new session with every complete record of the damaged one")
     add_force(parser)
+    declare_files(parser, inputs=("session",), outputs=("output",))
 
 
 def run(args: argparse.Namespace) -> int:
     from pslog.log import recover_session
     from pslog.log.recover import describe_salvage
+    from pslog.outputs import partial_path
 
-    check_output(args.output, args.force)
-    report = recover_session(args.session, args.output, force=args.force)
+    output = check_output(args.output, args.force, inputs=[args.session])
+    try:
+        report = recover_session(args.session, args.output, force=args.force)
+    except BaseException:
+        # nothing half-written stays, whatever stopped the salvage (e.g. a full disk met
+        # while the writer closes its file); the dispatcher removed any older partial
+        partial_path(output).unlink(missing_ok=True)
+        raise
     if report["was_complete"]:
         print(f"{args.session} was complete; copied {report['messages']} messages to "
               f"{args.output}")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from pslog.cli._common import add_force, check_output
+from pslog.cli._common import add_force, check_output, declare_files
 
 DESCRIPTION = """\
 Re-run ball detection over the JPEG frames stored in a session, with new settings, and
@@ -28,6 +28,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="processes decoding and detecting (default: all cores for "
                              "large sessions)")
     add_force(parser)
+    declare_files(parser, inputs=("session",), outputs=("output",))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -35,7 +36,7 @@ def run(args: argparse.Namespace) -> int:
     from pslog.errors import InputError
     from recorders.redetect import redetect_session
 
-    output = check_output(args.output, args.force)
+    output = check_output(args.output, args.force, inputs=[args.session])
     if args.max_candidates < 1:
         raise InputError(f"--max-candidates must be >= 1, got {args.max_candidates}")
     summary = redetect_session(args.session, output, parse_hsv(args.hsv),

@@ -10,6 +10,7 @@ from ._common import (
     add_force,
     add_rig,
     check_output,
+    declare_files,
     fraction,
     nonnegative_float,
     positive_float,
@@ -45,6 +46,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("-o", "--output", required=True, metavar="SESSION.mcap",
                         help="session file to write")
     add_force(parser)
+    declare_files(parser, inputs=("rig",), outputs=("output",))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -72,7 +74,8 @@ def run(args: argparse.Namespace) -> int:
                 "seed": str(args.seed)}
     source = "pslog simulate " + " ".join(f"{k}={v}" for k, v in settings.items())
     with SessionWriter(output, rig, force=args.force, timing=timing, source=source,
-                       metadata={f"simulate.{k}": v for k, v in settings.items()}) as writer:
+                       metadata={f"simulate.{k}": v for k, v in settings.items()},
+                       on_error="discard") as writer:
         writer.add_detections(detections)
         writer.add_truth(truth)
     span = (detections.frame_time_ns[-1] - detections.frame_time_ns[0]) / NS \

@@ -10,7 +10,7 @@ import argparse
 import os
 import sys
 
-from ._common import add_force, check_output, installed_command, nonnegative_float
+from ._common import add_force, check_output, declare_files, installed_command, nonnegative_float
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -38,6 +38,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
     rr.script_add_args(parser)
     _reword_rerun_flags(parser)
+    declare_files(parser, inputs=("sessions",), outputs=("save",))
 
 
 def has_display() -> bool:

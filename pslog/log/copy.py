@@ -7,6 +7,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 from ..errors import InputError
+from ..outputs import check_output_path
 from ..records import Detections, Track
 from ..rig import Rig
 from . import _mcapio as io
@@ -31,41 +32,60 @@ def copy_session(src, dst, *, detections: Detections | None = None, tracks: Sequ
     rig : a corrected rig (same camera names, same order) replacing the session's calibration
     force : overwrite ``dst``
 
-    Calibration, poses, images, truth, events, metadata and any foreign topics are copied.
+    Calibration, poses, images, truth, events, metadata and any foreign topics are copied
+    byte for byte (the calibration and poses are re-derived only from a given ``rig``).
+    ``dst`` may not be ``src`` in any spelling; it is written as ``<dst>.partial`` and
+    appears only when complete (on any failure nothing is left and an old ``dst`` stays).
     """
     src_path = Path(src)
-    dst = Path(dst)
-    if dst.exists() and src_path.exists() and dst.resolve() == src_path.resolve():
-        raise InputError(f"output {dst} is the input session; write to another file")
+    dst = check_output_path(dst, force, inputs=[src_path])
     with _Finished(src_path) as f:
         meta, old_rig = f.meta, f.rig
         first_static = f.collect([S.calibration_topic(old_rig.names[0])])
         start_ns = min((t for t, _s, _d in next(iter(first_static.values()), [])), default=0)
-    if rig is None:
-        rig = old_rig
-    elif rig.names != old_rig.names:
+    if rig is not None and rig.names != old_rig.names:
         raise InputError(f"rig cameras {', '.join(rig.names)} differ from the session's "
                          f"{', '.join(old_rig.names)} (names and order must match)")
-    if detections is not None and tuple(detections.camera_names) != rig.names:
+    if detections is not None and tuple(detections.camera_names) != old_rig.names:
         raise InputError(f"detections are for cameras {', '.join(detections.camera_names)}, "
-                         f"session has {', '.join(rig.names)}")
+                         f"session has {', '.join(old_rig.names)}")
     new_methods = {t.method for t in tracks}
     user_meta = {k: v for k, v in meta.items() if k not in S.RESERVED_KEYS}
     user_meta["derived_from"] = src_path.name
     user_meta.update(metadata or {})
 
+    new_rig = rig is not None
+    if rig is None:
+        rig = old_rig
     with SessionWriter(dst, rig, force=force, timing=meta.get("timing", "custom"),
                        source=meta.get("source", ""), metadata=user_meta,
-                       start_ns=start_ns) as w:
+                       start_ns=start_ns, on_error="discard", inputs=[src_path],
+                       write_static=new_rig) as w:
         scan = io.Scan()
-        static = {S.calibration_topic(n) for n in rig.names} | {
-            S.transform_topic(n) for n in rig.names}
+        # a corrected rig: its calibration and poses are written by the writer; otherwise
+        # the recorded messages are copied verbatim (re-deriving them from the parsed rig
+        # can differ in the last bit, e.g. the quaternion, across numpy/OpenCV versions)
+        static = ({S.calibration_topic(n) for n in rig.names}
+                  | {S.transform_topic(n) for n in rig.names}) if new_rig else set()
+
+        failure: list[BaseException] = []
 
         def copy(cid: int, t: int, seq: int, data: bytes) -> None:
+            # the scanner treats an exception of its callback as a corrupt record and stops
+            # quietly; remember ours (e.g. a full disk) and raise it after the scan
+            if failure:
+                return
+            try:
+                _copy(cid, t, seq, data)
+            except BaseException as exc:
+                failure.append(exc)
+                raise
+
+        def _copy(cid: int, t: int, seq: int, data: bytes) -> None:
             channel = scan.channels[cid]
             topic = channel.topic
             if topic in static:
-                return  # written by the new writer from the rig
+                return  # written by the new writer from the corrected rig
             camera_topic = S.parse_camera_topic(topic)
             if camera_topic and camera_topic[1] == "image":
                 w._add_image_raw(topic, t, data, seq)
@@ -80,6 +100,8 @@ def copy_session(src, dst, *, detections: Detections | None = None, tracks: Sequ
             w._add_foreign(topic, schema, channel, t, data, seq)
 
         io.scan_file(src_path, copy, scan=scan)
+        if failure:
+            raise failure[0]
         if detections is not None:
             w.add_detections(detections)
         for track in tracks:

@@ -229,9 +229,11 @@ def _check_one_time_per_frame(rig: Rig, frame_camera, frame_index, frame_time, c
                      f"({format_time(frame_time[a])} s and {format_time(frame_time[b])} s)")
 
 
-def write_detections_csv(detections: Detections, path, *, force: bool = False) -> int:
+def write_detections_csv(detections: Detections, path, *, force: bool = False,
+                         inputs=()) -> int:
     """Write every candidate as a row (``camera,time,u,v,frame,score``) in time order;
-    returns the number of rows."""
+    returns the number of rows. ``path`` may not be one of ``inputs`` (the files the
+    detections came from); it appears only when complete."""
     rows = detections.cand_frame
     names = np.asarray(detections.camera_names, dtype=object)[detections.frame_camera[rows]]
     times = detections.frame_time_ns[rows].tolist()
@@ -239,7 +241,7 @@ def write_detections_csv(detections: Detections, path, *, force: bool = False) -
     u = detections.cand_uv[:, 0].tolist()
     v = detections.cand_uv[:, 1].tolist()
     score = detections.cand_score.tolist()
-    with replacing_text_file(path, force) as f:
+    with replacing_text_file(path, force, inputs) as f:
         f.write(",".join(DETECTION_COLUMNS) + "\n")
         f.writelines(f"{c},{format_time(t)},{a!r},{b!r},{k},{s!r}\n"
                      for c, t, a, b, k, s in zip(names, times, u, v, frames, score, strict=True))
@@ -250,14 +252,15 @@ def export_tracks_csv(session, path, *, force: bool = False) -> int:
     """Write the fused tracks of ``session`` (a :class:`~pslog.log.Session`) as CSV:
     ``time,x,y,z,camera,method`` (seconds, world metres, camera name), then one column per
     quality field any track has (empty where a track lacks it). Rows sorted by method, time.
-    Returns the number of rows; InputError if the session has no tracks."""
+    Returns the number of rows; InputError if the session has no tracks. ``path`` may not
+    be the session's file; it appears only when complete."""
     tracks = session.tracks
     if not tracks:
         raise InputError(f"{session.path} has no fused tracks (run 'pslog fuse' first)")
     quality = sorted({k for t in tracks.values() for k in t.quality})
     names = session.rig.names
     count = 0
-    with replacing_text_file(path, force) as f:
+    with replacing_text_file(path, force, [session.path]) as f:
         f.write(",".join((*TRACK_COLUMNS, *quality)) + "\n")
         for method in sorted(tracks):
             track = tracks[method]

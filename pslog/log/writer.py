@@ -17,8 +17,8 @@ from datetime import UTC, datetime
 
 import numpy as np
 
-from ..errors import InputError, LogFormatError
-from ..outputs import check_output_path, partial_path
+from ..errors import InputError, LogFormatError, PslogError
+from ..outputs import WriteError, check_output_path, partial_path, write_error
 from ..records import Detections, Track, Truth
 from ..rig import Rig
 from . import _schemas as S
@@ -35,11 +35,16 @@ _METHOD_COLORS = ((0.9, 0.3, 0.1), (0.1, 0.6, 0.9), (0.2, 0.8, 0.3), (0.8, 0.2, 
 
 
 def _locked(method):
-    """Serialise a public method with the background flusher."""
+    """Serialise a public method with the background flusher; an OS fault while writing
+    (full disk, size limit, ...) becomes one :class:`~pslog.outputs.WriteError` naming the
+    output."""
     @functools.wraps(method)
     def wrapper(self, *args, **kwargs):
         with self._lock:
-            return method(self, *args, **kwargs)
+            try:
+                return method(self, *args, **kwargs)
+            except OSError as exc:
+                raise self._os_fault(exc) from None
     return wrapper
 
 
@@ -55,30 +60,50 @@ class SessionWriter:
 
     Parameters
     ----------
-    path : output file; refused if it exists unless ``force``. An existing file is replaced
-        only when the new one is complete: the writer writes ``<path>.partial`` and moves it
-        over ``path`` on a successful :meth:`close`. After :meth:`abort` the partial file is
-        deleted; after an exception inside ``with`` it is kept (finished, readable) beside the
-        untouched old session
+    path : output file; refused if it exists unless ``force`` or if it is one of ``inputs``.
+        An existing file is replaced only when the new one is complete: the writer writes
+        ``<path>.partial`` and moves it over ``path`` on a successful :meth:`close`. After
+        :meth:`abort` the partial file is deleted.
     rig : the session's cameras; camera indices below refer to ``rig.cameras``
     timing : shutter preset name (``sync``, ``typeA``, ``typeB``) or ``custom``
     source : free text: what produced the session (``simulate motion=spiral ...``)
     metadata : extra string key/values for the session metadata record
     flush_interval_s : longest time, seconds, that written data stays in memory
     start_ns : session clock time (ns) stamped on the static calibration and pose messages
+    write_static : write the rig's calibration and pose messages (False: the caller copies
+        them, e.g. verbatim from the session it derives from)
+    on_error : what becomes of the data written when the session fails (an exception inside
+        ``with``, an OS fault such as a full disk):
+
+        - ``"keep"`` (recordings, whose data exists nowhere else): a new file is written in
+          place and kept; a replacement is kept as ``<path>.partial`` beside the untouched
+          old session. Both are finished (readable) unless the failure was the OS refusing
+          a write, which leaves a truncated file for ``pslog recover``.
+        - ``"discard"`` (derived outputs, made again from their inputs: simulate, import,
+          session copies): always written as ``<path>.partial``, removed on any failure, so
+          nothing half-written is ever left under ``path`` and an old ``path`` stays.
+    inputs : files the session is made from; ``path`` may not be one of them
     """
 
     def __init__(self, path, rig: Rig, *, force: bool = False, timing: str = "custom",
                  source: str = "", metadata: Mapping[str, str] | None = None,
-                 flush_interval_s: float = 0.5, start_ns: int = 0) -> None:
+                 flush_interval_s: float = 0.5, start_ns: int = 0,
+                 on_error: str = "keep", inputs=(), write_static: bool = True) -> None:
         from mcap.writer import CompressionType, Writer
 
-        self.path = check_output_path(path, force)
-        # replacing a session: write beside it, move over it once complete
-        self._replacing = self.path.exists()
+        if on_error not in ("keep", "discard"):
+            raise ValueError(f"on_error must be 'keep' or 'discard', got {on_error!r}")
+        self.path = check_output_path(path, force, inputs)
+        self._discard = on_error == "discard"
+        # replacing a session (or writing a derived one): write beside it, move over it
+        # once complete
+        self._replacing = self._discard or self.path.exists()
         self._target = partial_path(self.path) if self._replacing else self.path
         self._aborted = False  # abort(): nothing worth keeping was written
         self._failed = False  # an exception: keep both the old session and <path>.partial
+        self._os_failed = False  # the OS refused a write: the MCAP stream cannot be finished
+        self._closed = True  # until the file is open
+        self._lock = threading.RLock()
         extra = {str(k): str(v) for k, v in dict(metadata or {}).items()}
         clash = sorted(set(extra) & set(S.RESERVED_KEYS))
         if clash:
@@ -86,16 +111,17 @@ class SessionWriter:
         self.rig = rig
         self._names = rig.names
         self._flush_interval = float(flush_interval_s)
-        self._file = open(self._target, "wb")  # closed in close()
+        try:
+            self._file = open(self._target, "wb")  # closed in close()
+        except OSError as exc:
+            raise write_error(self.path, exc) from None
+        self._closed = False
         self._mcap = Writer(self._file, compression=CompressionType.ZSTD)
-        self._mcap.start(profile="", library=_creator())
         self._schema_ids: dict[str, int] = {}
         self._channels: dict[str, int] = {}
         self._pending: list[tuple[int, int, bytes, int]] = []  # channel, time, data, sequence
         self._images_in_chunk = 0
         self._track_methods: list[str] = []
-        self._closed = False
-        self._lock = threading.RLock()
         self._stop = threading.Event()
         self._flusher: threading.Thread | None = None
         self._flush_error: BaseException | None = None
@@ -115,10 +141,21 @@ class SessionWriter:
             **extra,
         }
         try:
-            self._mcap.add_metadata(S.SESSION_METADATA, record)
-            self._write_static(int(start_ns))
+            with self._lock:
+                try:
+                    self._mcap.start(profile="", library=_creator())
+                    self._mcap.add_metadata(S.SESSION_METADATA, record)
+                    if write_static:
+                        self._write_static(int(start_ns))
+                    else:
+                        self._register_detection_channels()
+                    self.flush()
+                except OSError as exc:
+                    raise self._os_fault(exc) from None
         except BaseException:
-            self._file.close()
+            self._failed = True
+            self.close()  # never raises for a failed writer
+            self._target.unlink(missing_ok=True)  # nothing but the header was written
             raise
         if self._flush_interval > 0:
             # flush on a timer too, so data is on disk within the interval even when the
@@ -138,7 +175,7 @@ class SessionWriter:
                 try:
                     if time.monotonic() - self._last_flush >= self._flush_interval - poll:
                         self.flush()
-                except BaseException as exc:  # e.g. disk full: reported by the next call
+                except BaseException as exc:  # e.g. disk full: raised by the next call
                     self._flush_error = exc
                     return
 
@@ -178,9 +215,12 @@ class SessionWriter:
             for topic, msg in ((S.calibration_topic(cam.name), calib),
                                (S.transform_topic(cam.name), pose)):
                 self._queue(self._channel(topic, type(msg)), time_ns, msg.SerializeToString())
-            # register the per-camera data channels up front: they land in the first chunk
-            self._channel(S.detections_topic(cam.name), S.DetectionFrame)
-        self.flush()
+        self._register_detection_channels()
+
+    def _register_detection_channels(self) -> None:
+        # register the per-camera data channels up front: they land in the first chunk
+        for name in self._names:
+            self._channel(S.detections_topic(name), S.DetectionFrame)
 
     def _queue(self, channel: int, time_ns: int, data: bytes, sequence: int = 0) -> None:
         if time_ns < 0:
@@ -216,7 +256,22 @@ class SessionWriter:
         if self._closed:
             raise LogFormatError(f"{self.path}: writer is closed")
         if self._flush_error is not None:
-            raise LogFormatError(f"{self.path}: writing failed: {self._flush_error}")
+            raise self._flush_failure()
+
+    def _flush_failure(self) -> BaseException:
+        """The error the background flusher met, to raise in the caller's thread."""
+        exc = self._flush_error
+        if isinstance(exc, PslogError):
+            return exc
+        if isinstance(exc, OSError):
+            return self._os_fault(exc)
+        return LogFormatError(f"{self.path}: writing failed: {exc}")
+
+    def _os_fault(self, exc: OSError) -> WriteError:
+        """Note that the OS refused a write (the MCAP stream is now cut short) and return the
+        one-line error naming the output."""
+        self._os_failed = True
+        return write_error(self.path, exc)
 
     # ---- public -----------------------------------------------------------------------
     @_locked
@@ -385,31 +440,63 @@ class SessionWriter:
         if self._images_in_chunk:
             self._mcap.flush()
             self._images_in_chunk = 0
+        # hand the bytes to the OS too: a killed process loses nothing the OS has, and a
+        # full disk is met now rather than at close
+        self._file.flush()
         self._last_flush = time.monotonic()
 
     def close(self) -> None:
-        """Flush and finish the file (summary, indexes, footer). Idempotent."""
+        """Flush and finish the file (summary, indexes, footer), then put it in place.
+        Idempotent. Raises WriteError if the OS refused a write; a failed discard-mode
+        writer leaves nothing, a failed keep-mode writer keeps what it wrote."""
         self._stop.set()
-        if self._flusher is not None and self._flusher is not threading.current_thread():
-            self._flusher.join()
+        flusher = getattr(self, "_flusher", None)
+        if flusher is not None and flusher is not threading.current_thread():
+            flusher.join()
         with self._lock:
             if self._closed:
                 return
+            self._closed = True
+            error: BaseException | None = None
+            if self._flush_error is not None and not self._failed:
+                error = self._flush_failure()
+            elif self._flush_error is not None and isinstance(self._flush_error, OSError):
+                self._os_failed = True
+            # finish the stream unless it is thrown away or cut short by the OS (appending
+            # after a failed write would put records after a torn one)
+            finish = not self._os_failed and error is None and not (
+                self._discard and (self._failed or self._aborted))
             try:
-                self._drain()
-                self._mcap.finish()
-            finally:
-                self._closed = True
+                if finish:
+                    self._drain()
+                    self._mcap.finish()
+            except OSError as exc:
+                error = self._os_fault(exc)
+            except BaseException as exc:
+                error = exc
+            try:
                 self._file.close()
-            if self._replacing and not self._failed:
-                if self._aborted:
-                    self._target.unlink(missing_ok=True)  # the old session stays
-                else:
-                    self._target.replace(self.path)
+            except OSError as exc:  # flushing the last buffered bytes
+                if error is None and not self._failed:
+                    error = self._os_fault(exc)
+            failed = self._failed or error is not None
+            try:
+                if self._discard and (failed or self._aborted):
+                    self._target.unlink(missing_ok=True)
+                elif self._replacing and not failed:
+                    if self._aborted:
+                        self._target.unlink(missing_ok=True)  # the old session stays
+                    else:
+                        self._target.replace(self.path)
+            except OSError as exc:
+                if error is None and not self._failed:
+                    error = write_error(self.path, exc)
+            if error is not None and not self._failed:
+                raise error
 
     def abort(self) -> None:
-        """Close without replacing an existing session (a new file is still finished, so
-        whatever was written stays readable)."""
+        """Close without replacing an existing session (a new keep-mode file is still
+        finished, so whatever was written stays readable; a discard-mode one is removed)."""
         self._aborted = True
         self.close()
 

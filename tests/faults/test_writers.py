@@ -1,0 +1,345 @@
+"""Every writer under every operating-system fault, and with its output = its input in every
+spelling: one line on stderr, exit 1, no input changed, no partial output, the old output kept.
+
+Faults (we run as root, so permissions alone do not stop a write):
+
+- unwritable folder: a mode-555 folder, the command run without CAP_DAC_OVERRIDE;
+- read-only file system: a read-only bind mount;
+- full disk: a 64 KiB tmpfs filled to a few KiB (or nothing) free;
+- file-size limit: ``RLIMIT_FSIZE`` in the child (the CLI ignores SIGXFSZ, so writes fail
+  with EFBIG instead of killing it).
+
+The mount cases are skipped with the reason where mounting is not permitted; the others
+always run. Every mount is undone by a fixture finalizer, also when a test fails.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import resource
+import shutil
+import subprocess
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pslog.cli import main
+from pslog.rig import builtin_rig
+
+from .promises import Run, assert_one_line_error, assert_untouched, fingerprint, run_pslog
+
+SAMPLE = Path(__file__).resolve().parents[2] / "samples" / "throw.mcap"
+FULL_TMPFS = 64 * 1024
+
+
+# ---- inputs, shared by every case -------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def inputs():
+    folder = Path(tempfile.mkdtemp(prefix="pslog-faults-in-"))
+    try:
+        folder.chmod(0o755)
+        shutil.copyfile(SAMPLE, folder / "s.mcap")  # a recorded session with frames
+        (folder / "rig.toml").write_text(builtin_rig("paper3").to_toml(), encoding="utf-8")
+        assert main(["fuse", str(folder / "s.mcap"), "--method", "typeA",
+                     "-o", str(folder / "fused.mcap")]) == 0
+        assert main(["export", str(folder / "s.mcap"), "--detections",
+                     str(folder / "det.csv")]) == 0
+        _points_csv(folder / "pts.csv")
+        for f in folder.iterdir():
+            f.chmod(0o644)
+        yield folder
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def _points_csv(path: Path) -> None:
+    """Exact 3D-2D correspondences of paper3's cam1 (what 'calibrate --points' reads)."""
+    cam = builtin_rig("paper3").cameras[0]
+    points = np.random.default_rng(0).uniform([0, 0, 0], [3, 2, 2], (40, 3))
+    uv, _ = cam.project(points)
+    path.write_text("x,y,z,u,v\n" + "".join(
+        f"{x!r},{y!r},{z!r},{u!r},{v!r}\n" for (x, y, z), (u, v) in zip(
+            points.tolist(), uv.tolist(), strict=True)))
+
+
+# ---- the writers ------------------------------------------------------------------------
+
+#: writer -> (arguments; {i} the inputs folder, {o} the output folder), output (relative to
+#: {o}), bytes of an old output there (None: b"old output"), free bytes on the full disk,
+#: file-size limit in bytes. Every output is far larger than the free space and the limit.
+WRITERS = {
+    "simulate": (["simulate", "--rig", "{i}/rig.toml", "--duration", "2", "-o", "{o}/s.mcap"],
+                 "s.mcap", None, 4096, 2048),
+    "import": (["import", "--rig", "{i}/rig.toml", "--detections", "{i}/det.csv",
+                "-o", "{o}/i.mcap"], "i.mcap", None, 4096, 2048),
+    "export --detections": (["export", "{i}/s.mcap", "--detections", "{o}/d.csv"], "d.csv",
+                            None, 4096, 2048),
+    "export --csv": (["export", "{i}/fused.mcap", "--csv", "{o}/t.csv"], "t.csv", None, 4096,
+                     2048),
+    "fuse": (["fuse", "{i}/s.mcap", "--method", "typeA", "-o", "{o}/f.mcap"], "f.mcap", None,
+             4096, 2048),
+    "recover": (["recover", "{i}/s.mcap", "-o", "{o}/r.mcap"], "r.mcap", None, 4096, 2048),
+    "redetect": (["redetect", "{i}/s.mcap", "--workers", "1", "-o", "{o}/r.mcap"], "r.mcap",
+                 None, 4096, 2048),
+    # adds cam9 to an existing two-camera rig file, rewritten in place
+    "calibrate": (["calibrate", "--points", "{i}/pts.csv", "--name", "cam9", "--width", "640",
+                   "--height", "480", "--rig", "{o}/rig.toml"], "rig.toml",
+                  builtin_rig("paper2").to_toml().encode(), 0, 200),
+    # writes a folder of outputs; an old session in it with --force
+    "demo": (["demo", "--out", "{o}/demo", "--duration", "0.3", "--no-view"],
+             "demo/session.mcap", None, 4096, 2048),
+}
+
+
+def _args(writer: str, i: Path, o: Path) -> list[str]:
+    return [a.format(i=i, o=o) for a in WRITERS[writer][0]] + ["--force"]
+
+
+def _old_output(writer: str, out: Path) -> Path:
+    """Put an old output where ``writer`` writes (it must survive the failed run)."""
+    _, name, old, _, _ = WRITERS[writer]
+    path = out / name
+    path.parent.mkdir(exist_ok=True)
+    path.write_bytes(b"old output" if old is None else old)
+    return path
+
+
+# ---- faults -----------------------------------------------------------------------------
+
+def _mount(*args: str) -> None:
+    proc = subprocess.run(["mount", *args], capture_output=True, text=True)
+    if proc.returncode != 0:
+        pytest.skip(f"cannot mount here ({' '.join(args)}: {proc.stderr.strip()})")
+
+
+@pytest.fixture
+def mounts():
+    """Mount points to unmount at teardown, whatever happened."""
+    points: list[Path] = []
+    yield points
+    for point in reversed(points):
+        subprocess.run(["umount", "-l", str(point)], capture_output=True)
+
+
+def _fill(folder: Path, free: int) -> None:
+    """Fill the file system of ``folder`` until about ``free`` bytes are left."""
+    filler = folder / "filler"
+    with open(filler, "wb", buffering=0) as f, contextlib.suppress(OSError):
+        block = b"\0" * 4096
+        while True:
+            f.write(block)
+    if free:
+        os.truncate(filler, max(0, filler.stat().st_size - free))
+
+
+def _without_dac_override() -> None:
+    """In the child before exec: drop CAP_DAC_OVERRIDE from the bounding set, so that root
+    (after exec) is refused writes into a mode-555 folder like any user."""
+    import ctypes
+
+    libc = ctypes.CDLL(None, use_errno=True)
+    if libc.prctl(_PR_CAPBSET_DROP, _CAP_DAC_OVERRIDE, 0, 0, 0) != 0:
+        raise OSError(ctypes.get_errno(), "prctl(PR_CAPBSET_DROP, CAP_DAC_OVERRIDE)")
+
+
+_PR_CAPBSET_DROP, _CAP_DAC_OVERRIDE = 24, 1
+
+
+def _limit_file_size(limit: int):
+    def preexec() -> None:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+    return preexec
+
+
+FAULTS = {
+    "unwritable folder": "Permission denied",
+    "read-only file system": "Read-only file system",
+    "full disk": "No space left on device",
+    "file-size limit": "File too large",
+}
+
+
+@pytest.mark.parametrize("writer", list(WRITERS))
+@pytest.mark.parametrize("fault", list(FAULTS))
+def test_os_fault_is_one_line_and_leaves_nothing(fault, writer, inputs, mounts, tmp_path):
+    _, name, _, free, limit = WRITERS[writer]
+    preexec = None
+    if fault == "unwritable folder":
+        out = tmp_path / "locked"
+        out.mkdir()
+        old = _old_output(writer, out)
+        for folder in {out, old.parent}:
+            folder.chmod(0o555)  # root too, once CAP_DAC_OVERRIDE is dropped
+        preexec = _without_dac_override if os.geteuid() == 0 else None
+    elif fault == "read-only file system":
+        source, out = tmp_path / "source", tmp_path / "ro"
+        source.mkdir()
+        out.mkdir()
+        _old_output(writer, source)
+        _mount("--bind", "-o", "ro", str(source), str(out))
+        mounts.append(out)
+        # some kernels ignore ro on the first bind: remount to make sure
+        subprocess.run(["mount", "-o", "remount,bind,ro", str(out)], capture_output=True)
+    elif fault == "full disk":
+        out = tmp_path / "full"
+        out.mkdir()
+        _mount("-t", "tmpfs", "-o", f"size={FULL_TMPFS}", "tmpfs", str(out))
+        mounts.append(out)
+        _old_output(writer, out)
+        _fill(out, free)
+    else:
+        out = tmp_path / "limited"
+        out.mkdir()
+        _old_output(writer, out)
+        preexec = _limit_file_size(limit)
+    before = fingerprint(inputs, out)
+    started = time.monotonic()
+    run = run_pslog(*_args(writer, inputs, out), cwd=inputs, preexec_fn=preexec)
+    took = time.monotonic() - started
+    line = assert_one_line_error(run, 1, contains=FAULTS[fault])
+    assert str(out) in line, f"the error does not name the output: {line}"
+    assert_untouched(before, inputs, out)
+    assert took < 30, f"took {took:.0f} s to fail"
+    assert (out / name).exists()
+
+
+# ---- output = input, in every spelling --------------------------------------------------
+
+#: writer -> (arguments with {o} the output, the input file {o} is made to name)
+SAME = {
+    "simulate": (["simulate", "--rig", "rig.toml", "--duration", "0.3", "-o", "{o}"],
+                 "rig.toml"),
+    "import": (["import", "--rig", "rig.toml", "--detections", "det.csv", "-o", "{o}"],
+               "det.csv"),
+    "export --detections": (["export", "s.mcap", "--detections", "{o}"], "s.mcap"),
+    "export --csv": (["export", "fused.mcap", "--csv", "{o}"], "fused.mcap"),
+    "fuse": (["fuse", "s.mcap", "-o", "{o}"], "s.mcap"),
+    "fuse --rig": (["fuse", "s.mcap", "--rig", "rig.toml", "-o", "{o}"], "rig.toml"),
+    "recover": (["recover", "s.mcap", "-o", "{o}"], "s.mcap"),
+    "redetect": (["redetect", "s.mcap", "-o", "{o}"], "s.mcap"),
+    "calibrate": (["calibrate", "--points", "pts.csv", "--name", "cam9", "--width", "640",
+                   "--height", "480", "--rig", "{o}"], "pts.csv"),
+}
+SPELLINGS = ("./{x}", "sub/../{x}", "{abs}", "symlink", "hard link")
+
+
+@pytest.fixture(scope="module")
+def aliased(inputs):
+    """The inputs folder with a symbolic and a hard link to each input and a sub-folder."""
+    (inputs / "sub").mkdir(exist_ok=True)
+    for x in {x for _, x in SAME.values()}:
+        for kind, make in (("symlink", os.symlink), ("hard link", os.link)):
+            link = inputs / f"{kind.replace(' ', '-')}-{x}"
+            if not link.exists():
+                make(x if kind == "symlink" else inputs / x, link)
+    return inputs
+
+
+@pytest.mark.parametrize("spelling", SPELLINGS)
+@pytest.mark.parametrize("writer", list(SAME))
+def test_output_that_is_an_input_is_refused(writer, spelling, aliased, monkeypatch, capsys):
+    template, x = SAME[writer]
+    monkeypatch.chdir(aliased)
+    out = (f"{spelling.replace(' ', '-')}-{x}" if spelling in ("symlink", "hard link")
+           else spelling.format(x=x, abs=aliased / x))
+    args = [a.format(o=out) for a in template] + ["--force"]
+    before = fingerprint(aliased)
+    capsys.readouterr()
+    code = main(args)
+    captured = capsys.readouterr()
+    run = Run(tuple(args), code, captured.out, captured.err)
+    assert_one_line_error(run, 1, contains=("is the input", out))
+    assert_untouched(before, aliased)
+
+
+# ---- a run killed with --force leaves <file>.partial: the next run deals with it --------
+
+def test_stale_partial_of_a_derived_output_is_removed_with_a_notice(inputs, tmp_path):
+    out = tmp_path / "f.mcap"
+    # what a killed 'fuse' leaves: the first part of the file it was writing
+    stale = (inputs / "fused.mcap").read_bytes()[:50_000]
+    (tmp_path / "f.mcap.partial").write_bytes(stale)
+    run = run_pslog("fuse", inputs / "s.mcap", "--method", "typeA", "-o", out)
+    assert run.code == 0, run.stderr
+    assert run.stderr.strip() == (f"pslog fuse: removed {out}.partial left by an interrupted "
+                                  f"run")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["f.mcap"]
+
+
+def test_a_killed_force_run_leaves_a_partial_that_the_next_run_removes(inputs, tmp_path):
+    """A real SIGKILL in the middle of 'redetect --force' (the session copy under way)."""
+    import signal
+    import sys
+
+    out, partial = tmp_path / "r.mcap", tmp_path / "r.mcap.partial"
+    out.write_bytes(b"old output")
+    args = [sys.executable, "-m", "pslog.cli", "redetect", str(inputs / "s.mcap"),
+            "--workers", "1", "-o", str(out), "--force"]
+    proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 60
+        while not partial.exists() and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.001)
+        proc.send_signal(signal.SIGKILL)
+    finally:
+        proc.wait()
+    if proc.returncode != -signal.SIGKILL:
+        pytest.skip("redetect finished before it could be killed")
+    assert out.read_bytes() == b"old output" and partial.exists()
+    run = run_pslog("redetect", inputs / "s.mcap", "--workers", "1", "-o", out, "--force")
+    assert run.code == 0, run.stderr
+    assert f"removed {partial} left by an interrupted run" in run.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.mcap"]
+    assert out.read_bytes() != b"old output"
+
+
+def test_stale_partial_that_may_hold_a_recording_is_kept_and_named(inputs, tmp_path):
+    out = tmp_path / "s.mcap"
+    out.write_bytes(b"old session")
+    # what a killed 'record --force' leaves: the first part of a recording
+    recording = SAMPLE.read_bytes()[:200_000]
+    (tmp_path / "s.mcap.partial").write_bytes(recording)
+    before = fingerprint(tmp_path)
+    for args in (["fuse", inputs / "s.mcap", "-o", out, "--force"],
+                 ["simulate", "--rig", "paper3", "--duration", "0.3", "-o", out, "--force"]):
+        run = run_pslog(*args)
+        assert_one_line_error(run, 1, contains=(f"{out}.partial", "recording", "pslog recover"))
+        assert_untouched(before, tmp_path)
+
+
+# ---- the writer's background flush thread meets a full disk -----------------------------
+
+def test_background_flush_on_a_full_disk_is_one_error_in_the_callers_thread(tmp_path, mounts,
+                                                                           rig3):
+    from pslog.log import SessionWriter
+    from pslog.outputs import WriteError
+
+    out = tmp_path / "full"
+    out.mkdir()
+    _mount("-t", "tmpfs", "-o", f"size={FULL_TMPFS}", "tmpfs", str(out))
+    mounts.append(out)
+    path = out / "s.mcap"
+    thread_errors = []
+    old_hook = threading.excepthook
+    threading.excepthook = thread_errors.append
+    try:
+        with pytest.raises(WriteError, match=f"cannot write {path}: No space left on device"), \
+                SessionWriter(path, rig3, flush_interval_s=0.05, on_error="discard") as w:
+            image = os.urandom(8192)  # incompressible
+            deadline = time.monotonic() + 30
+            k = 0
+            while time.monotonic() < deadline:  # the flusher fails; the next call says so
+                w.add_frame(k % 3, k, k * 11_111_111, uv=[[1.0, 2.0]], image=image)
+                k += 1
+                time.sleep(0.001)
+            pytest.fail("no error after 30 s of writing to a full disk")
+    finally:
+        threading.excepthook = old_hook
+    assert thread_errors == []
+    assert list(out.iterdir()) == []
