@@ -14,6 +14,39 @@ from .errors import RigError
 
 _UNDISTORT_ITERATIONS = 20
 
+#: Largest image side accepted, pixels: beyond any camera sensor (the largest are ~16k).
+MAX_IMAGE_SIZE = 65536
+#: Highest frame rate accepted, frames per second (high-speed cameras reach ~1e5).
+MAX_FPS = 1e6
+_MAX_K = 1e7  # pixels: focal lengths and principal points
+_MAX_T_M = 1e6  # metres: a camera 1000 km from the world origin is a typo
+#: Characters a camera name may not hold: names are CSV cells (``,`` ``"``) and parts of MCAP
+#: topics ``/camera/<name>/...`` (``/``).
+_NAME_FORBIDDEN = ',"/'
+_NAME_MAX_LENGTH = 64
+
+
+def check_camera_name(name) -> str:
+    """``name`` if it is usable as a camera name, else :class:`RigError` saying why.
+
+    A name is a CSV cell and a part of MCAP topics: non-empty, at most 64 characters, no
+    control characters (newlines, tabs...), none of ``,`` ``"`` ``/``, no surrounding spaces.
+    """
+    if not isinstance(name, str) or not name:
+        raise RigError(f"camera name must be a non-empty string, got {name!r}")
+    why = None
+    if len(name) > _NAME_MAX_LENGTH:
+        why = f"longer than {_NAME_MAX_LENGTH} characters"
+    elif any(ord(ch) < 0x20 or 0x7F <= ord(ch) < 0xA0 for ch in name):
+        why = "holds a control character (newline, tab, ...)"
+    elif any(ch in _NAME_FORBIDDEN for ch in name):
+        why = "holds one of , \" / (names are CSV cells and parts of MCAP topics)"
+    elif name != name.strip():
+        why = "starts or ends with a space"
+    if why:
+        raise RigError(f"camera name {name!r} {why}")
+    return name
+
 
 def _as_array(value, shape: tuple[int, ...], name: str, camera: str) -> np.ndarray:
     try:
@@ -64,13 +97,14 @@ class Camera:
     offset: float = 0.0
 
     def __post_init__(self) -> None:
-        name = self.name
-        if not isinstance(name, str) or not name:
-            raise RigError(f"camera name must be a non-empty string, got {name!r}")
+        name = check_camera_name(self.name)
         for key in ("width", "height"):
             value = getattr(self, key)
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value <= 0:
                 raise RigError(f"camera {name!r}: {key} must be a positive integer, got {value!r}")
+            if value > MAX_IMAGE_SIZE:
+                raise RigError(f"camera {name!r}: {key} {value} pixels is beyond any camera "
+                               f"(at most {MAX_IMAGE_SIZE})")
             object.__setattr__(self, key, int(value))
         K = _as_array(self.K, (3, 3), "K", name)
         if K[1, 0] != 0 or K[2, 0] != 0 or K[2, 1] != 0 or K[2, 2] != 1:
@@ -78,6 +112,9 @@ class Camera:
         if K[0, 0] <= 0 or K[1, 1] <= 0:
             raise RigError(f"camera {name!r}: K focal lengths must be positive, got "
                            f"fx={K[0, 0]}, fy={K[1, 1]}")
+        if np.abs(K).max() > _MAX_K:
+            raise RigError(f"camera {name!r}: K has an entry of {np.abs(K).max():.3g} pixels, "
+                           f"beyond any lens (at most {_MAX_K:g})")
         R = _as_array(self.R, (3, 3), "R", name)
         if not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or abs(np.linalg.det(R) - 1) > 1e-6:
             raise RigError(f"camera {name!r}: R is not a rotation matrix (to 1e-6)")
@@ -85,6 +122,9 @@ class Camera:
         object.__setattr__(self, "R", R)
         object.__setattr__(self, "dist", _as_array(self.dist, (5,), "dist", name))
         object.__setattr__(self, "t", _as_array(self.t, (3,), "t", name))
+        if np.abs(self.t).max() > _MAX_T_M:
+            raise RigError(f"camera {name!r}: t has an entry of {np.abs(self.t).max():.3g} m "
+                           f"(at most {_MAX_T_M:g} m)")
         for key in ("fps", "offset"):
             value = getattr(self, key)
             if isinstance(value, bool) or not isinstance(value, (int, float, np.number)):
@@ -92,8 +132,8 @@ class Camera:
             if not np.isfinite(value):
                 raise RigError(f"camera {name!r}: {key} must be finite, got {value!r}")
             object.__setattr__(self, key, float(value))
-        if self.fps <= 0:
-            raise RigError(f"camera {name!r}: fps must be > 0, got {self.fps}")
+        if not 0 < self.fps <= MAX_FPS:
+            raise RigError(f"camera {name!r}: fps must be in (0, {MAX_FPS:g}], got {self.fps:g}")
         # the offset is a phase: an offset of a period or more names the same shutter
         # schedule as offset % period and would only make rigs compare unequal
         if not 0.0 <= self.offset < self.frame_period:

@@ -33,13 +33,16 @@ def fundamental_matrix(cam_a: Camera, cam_b: Camera) -> np.ndarray:
 
     Built from the relative pose: ``F = K_b⁻ᵀ [t_ba]ₓ R_ba K_a⁻¹`` where
     ``x_b = R_ba x_a + t_ba`` maps camera-a coordinates to camera-b coordinates.
-    Scaled to unit Frobenius norm.
+    Scaled to unit Frobenius norm; zero for two cameras at the same centre.
     """
     R_ba = cam_b.R @ cam_a.R.T
     t_ba = cam_b.t - R_ba @ cam_a.t
     E = _skew(t_ba) @ R_ba
     F = np.linalg.inv(cam_b.K).T @ E @ np.linalg.inv(cam_a.K)
-    return F / np.linalg.norm(F)
+    norm = np.linalg.norm(F)
+    # two cameras at one centre have no epipolar geometry: F is zero (and epipolar_lines
+    # NaN), not 0/0 (see pslog.rig.check_baselines, which refuses such rigs for fusion)
+    return F / norm if norm > 0 else F
 
 
 def fundamental_matrices(cameras: Sequence[Camera]) -> np.ndarray:

@@ -53,6 +53,38 @@ class SimulationOptions:
                 raise InputError(f"{name} must be in [0, 1), got {value!r}")
 
 
+def check_simulation(rig: Rig, options: SimulationOptions) -> None:
+    """:class:`InputError` if ``options`` make no sense for ``rig``: shutter jitter of half
+    a frame period or more (frames would swap places and merge with their neighbours), or
+    detection noise beyond the image's larger side (a detection would say nothing of where
+    the ball is)."""
+    fastest = max(rig.cameras, key=lambda c: c.fps)
+    if options.jitter_s >= 0.5 * fastest.frame_period:
+        raise InputError(
+            f"jitter {options.jitter_s:g} s must be below half a frame period "
+            f"({0.5 * fastest.frame_period:.6g} s at {fastest.fps:g} fps, camera "
+            f"{fastest.name}): more would swap frames of one camera")
+    largest = max(max(c.width, c.height) for c in rig.cameras)
+    if options.noise_px > largest:
+        raise InputError(f"noise {options.noise_px:g} px is beyond the image size ({largest} "
+                         f"px): detections would say nothing of the ball")
+
+
+def check_exposure(rig: Rig, exposure_s: float) -> float:
+    """``exposure_s`` if it is in ``[0, frame period)`` of every camera of ``rig``, else
+    :class:`InputError` saying why: a shutter cannot stay open into the next frame.
+
+    (For rendered sessions, ``pslog record --synthetic --exposure``.)
+    """
+    fastest = max(rig.cameras, key=lambda c: c.fps)
+    if not (np.isfinite(exposure_s) and 0 <= exposure_s < fastest.frame_period):
+        raise InputError(
+            f"exposure {exposure_s!r} s must be in [0, {fastest.frame_period:.6g}) s, shorter "
+            f"than the frame period at {fastest.fps:g} fps (camera {fastest.name}): a shutter "
+            f"cannot stay open into the next frame")
+    return exposure_s
+
+
 def shutter_times(camera: Camera, duration: float) -> np.ndarray:
     """Nominal shutter times (k,) float64 seconds of ``camera`` in ``[0, duration)``:
     ``offset + k / fps`` for k = 0, 1, ... (the offset is within ``[0, 1 / fps)``, as
@@ -98,6 +130,7 @@ def simulate(
     without a candidate. Truth is sampled at every capture time (exactly).
     """
     options = options or SimulationOptions()
+    check_simulation(rig, options)
     duration = motion.duration if duration is None else float(duration)
     rng = np.random.default_rng(options.seed)
     time_s, camera, frame_index = capture_times(rig, duration)

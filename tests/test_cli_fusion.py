@@ -6,6 +6,7 @@ import csv
 import json
 
 import numpy as np
+import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
 from pslog import apply_timing, get_motion, simulate
@@ -105,13 +106,16 @@ def test_fuse_without_detections_is_an_error(tmp_path, sim_session, cli):
     assert not (tmp_path / "f.mcap").exists()
 
 
-def test_fuse_refuses_impossible_methods_and_existing_output(tmp_path, sim_session, cli):
+def test_fuse_refuses_impossible_methods_and_existing_output(tmp_path, sim_session, cli,
+                                                            capsys):
     code, _, err = cli("fuse", sim_session.path, "--method", "sync", "-o", tmp_path / "x.mcap")
     assert code == 1 and "needs cameras with a common shutter instant" in err
     assert "Traceback" not in err
     assert not (tmp_path / "x.mcap").exists()
-    code, _, err = cli("fuse", sim_session.path, "--method", "typeC", "-o", tmp_path / "x.mcap")
-    assert code == 1 and "unknown fusion method 'typeC'" in err
+    with pytest.raises(SystemExit) as exit_info:  # a bad command-line value: argparse, exit 2
+        cli("fuse", sim_session.path, "--method", "typeC", "-o", tmp_path / "x.mcap")
+    assert exit_info.value.code == 2
+    assert "unknown fusion method 'typeC'" in capsys.readouterr().err
     existing = tmp_path / "exists.mcap"
     existing.write_bytes(b"keep me")
     code, _, err = cli("fuse", sim_session.path, "--method", "typeA", "-o", existing)

@@ -53,8 +53,77 @@ def seed(text: str) -> int:
     return value
 
 
+#: Largest simulated detection noise, pixels: beyond it a detection says nothing of the ball.
+MAX_NOISE_PX = 100.0
+
+
+def noise_px(text: str) -> float:
+    """Simulated detection noise: pixels in [0, 100]."""
+    value = nonnegative_float(text)
+    if value > MAX_NOISE_PX:
+        raise argparse.ArgumentTypeError(
+            f"must be at most {MAX_NOISE_PX:g} pixels (noise that large hides the ball's "
+            f"position entirely), got {text!r}")
+    return value
+
+
+def exposure_s(text: str) -> float:
+    """A synthetic exposure time: seconds in [0, 1) (the library checks it against the frame
+    period: :func:`pslog.simulation.check_exposure`)."""
+    value = nonnegative_float(text)
+    if value >= 1:
+        raise argparse.ArgumentTypeError(
+            f"must be below 1 second (an exposure is shorter than a frame), got {text!r}")
+    return value
+
+
 def fraction(text: str) -> float:
     value = nonnegative_float(text)
     if value >= 1:
         raise argparse.ArgumentTypeError(f"must be in [0, 1), got {text!r}")
     return value
+
+
+def usage_error(command: str, message: str) -> int:
+    """Report a command-line value that is bad only in the light of an input file (a
+    tolerance against the rig's frame rate, say) as argparse reports any other bad value:
+    one line on stderr; returns exit code 2."""
+    import sys
+
+    print(f"pslog {command}: error: {message} (see 'pslog {command} --help')", file=sys.stderr)
+    return 2
+
+
+def positive_int(text: str) -> int:
+    """A whole number >= 1."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {text!r}")
+    return value
+
+
+def int_in(low: int, high: int):
+    """argparse type: a whole number in ``[low, high]``."""
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+        if not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"must be in {low}..{high}, got {text!r}")
+        return value
+    parse.__name__ = "whole number"
+    return parse
+
+
+def fusion_method(text: str) -> str:
+    """A fusion method name (``pslog.fusion.METHODS``)."""
+    from pslog.fusion import METHODS
+
+    if text not in METHODS:
+        raise argparse.ArgumentTypeError(f"unknown fusion method {text!r} "
+                                         f"(have {', '.join(METHODS)})")
+    return text

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import argparse
 
-from ._common import nonnegative_float, seed
+from ._common import noise_px, seed
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("table", choices=["table1", "table2"], help="which table")
-    parser.add_argument("--noise-px", type=nonnegative_float, default=None,
+    parser.add_argument("--noise-px", type=noise_px, default=None,
                         help="detection noise, pixels (default: 0 for table1, 1.0 for table2)")
     parser.add_argument("--seed", type=seed, default=0, help="random seed (default 0)")
     parser.add_argument("--json", action="store_true", help="print JSON for scripts")

@@ -11,9 +11,11 @@ from ._common import (
     add_rig,
     check_output,
     fraction,
+    noise_px,
     nonnegative_float,
     positive_float,
     seed,
+    usage_error,
 )
 
 _TIMINGS = ("sync", "typeA", "typeB", "rig")
@@ -23,16 +25,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     from pslog.motion import MOTIONS
 
     add_rig(parser)
-    parser.add_argument("--timing", choices=_TIMINGS, default="typeA",
-                        help="shutter preset, or 'rig' for the rig's own offsets (default typeA)")
+    parser.add_argument("--timing", choices=_TIMINGS, default="rig",
+                        help="set the rig's shutter offsets from a preset (default: 'rig', the "
+                             "rig's own offsets; the built-in rigs' are all zero, i.e. sync)")
     parser.add_argument("--motion", choices=list(MOTIONS), default="spiral",
                         help="ball motion (default spiral)")
     parser.add_argument("--duration", type=positive_float, default=None, metavar="S",
                         help="seconds (default: the motion's natural duration)")
-    parser.add_argument("--noise-px", type=nonnegative_float, default=0.0, metavar="PX",
-                        help="Gaussian detection noise per pixel axis (default 0)")
+    parser.add_argument("--noise-px", type=noise_px, default=0.0, metavar="PX",
+                        help="Gaussian detection noise per pixel axis, at most 100 (default 0)")
     parser.add_argument("--jitter", type=nonnegative_float, default=0.0, metavar="S",
-                        help="standard deviation of shutter times around the schedule, seconds")
+                        help="standard deviation of shutter times around the schedule, seconds, "
+                             "below half a frame period (default 0)")
     parser.add_argument("--drop-rate", type=fraction, default=0.0, metavar="F",
                         help="fraction of frames lost entirely")
     parser.add_argument("--miss-rate", type=fraction, default=0.0, metavar="F",
@@ -43,21 +47,27 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from pslog.errors import InputError
     from pslog.log import SessionWriter
     from pslog.motion import get_motion
     from pslog.records import NS
-    from pslog.rig import apply_timing, resolve_rig
-    from pslog.simulation import SimulationOptions, simulate
+    from pslog.rig import apply_timing, resolve_rig, timing_label
+    from pslog.simulation import SimulationOptions, check_simulation, simulate
 
     output = check_output(args.output, args.force)
     rig = resolve_rig(args.rig)
-    timing = "custom" if args.timing == "rig" else args.timing
     if args.timing != "rig":
         rig = apply_timing(rig, args.timing)
+    timing = timing_label(rig)  # the label always says what the offsets are
     motion = get_motion(args.motion)
     options = SimulationOptions(noise_px=args.noise_px, jitter_s=args.jitter,
                                 drop_rate=args.drop_rate, miss_rate=args.miss_rate,
                                 seed=args.seed)
+    try:
+        check_simulation(rig, options)
+    except InputError as exc:  # a command-line value too large for this rig: exit 2
+        option = "--jitter" if "jitter" in str(exc) else "--noise-px"
+        return usage_error("simulate", f"argument {option}: {exc}")
     duration = motion.duration if args.duration is None else args.duration
     detections, truth = simulate(rig, motion, duration, options)
     detections, truth, n_early = drop_before_zero(detections, truth)

@@ -9,7 +9,7 @@ import numpy as np
 from ..errors import FusionError
 from ..geometry import fundamental_matrices
 from ..records import NS, Observations
-from ..rig import Rig
+from ..rig import Rig, check_baselines
 
 
 @dataclass(frozen=True, eq=False)
@@ -53,6 +53,7 @@ def prepare(obs: Observations, rig: Rig, F: np.ndarray | None = None) -> Prepare
     ``F`` may pass :func:`pslog.geometry.fundamental_matrices` of ``rig.cameras`` computed
     earlier."""
     n_cams = len(rig)
+    check_baselines(rig)
     if len(obs) and (obs.camera.min() < 0 or obs.camera.max() >= n_cams):
         raise FusionError(f"observation camera index {int(obs.camera.max())} is not in the "
                           f"{n_cams}-camera rig")
