@@ -329,3 +329,46 @@ def test_writer_used_by_other_commands_keeps_session_readable(tmp_path, rig3):
         w.add_frame(0, 0, 5, uv=[[1.0, 2.0]])
         raise RuntimeError("boom")
     assert read_session(path).detections.n_frames == 1
+
+
+# ---- timing labels agree with the offsets (issue 8) -----------------------------------------
+def test_import_timing_applies_the_preset_and_the_label_follows_the_offsets(tmp_path, cli):
+    det_csv = tmp_path / "det.csv"
+    det_csv.write_text("camera,time,u,v\ncam1,0.0,1,2\ncam2,0.0111,3,4\ncam3,0.0222,5,6\n")
+    typea = tmp_path / "a.mcap"
+    assert cli("import", "--rig", "paper3", "--detections", det_csv, "--timing", "typeA",
+               "-o", typea)[0] == 0
+    s = read_session(typea)
+    assert s.timing == "typeA"
+    assert_allclose([c.offset for c in s.rig.cameras], [0, 1 / 90, 2 / 90])
+    # no --timing: the rig's own offsets, labelled by what they are
+    plain = tmp_path / "p.mcap"
+    assert cli("import", "--rig", "paper3", "--detections", det_csv, "-o", plain)[0] == 0
+    assert read_session(plain).timing == "sync"
+    rig = builtin_rig("paper3")
+    rig = type(rig)(tuple(c.replace(offset=0.004 * i) for i, c in enumerate(rig.cameras)))
+    save_rig(rig, tmp_path / "rig.toml")
+    custom = tmp_path / "c.mcap"
+    assert cli("import", "--rig", tmp_path / "rig.toml", "--detections", det_csv,
+               "-o", custom)[0] == 0
+    s = read_session(custom)
+    assert s.timing == "custom" and s.rig == rig
+
+
+def test_simulate_without_timing_keeps_a_custom_rigs_offsets(tmp_path, cli):
+    rig = builtin_rig("paper3")
+    rig = type(rig)(tuple(c.replace(offset=0.004 * i) for i, c in enumerate(rig.cameras)))
+    save_rig(rig, tmp_path / "rig.toml")
+    out = tmp_path / "s.mcap"
+    code, stdout, stderr = cli("simulate", "--rig", tmp_path / "rig.toml", "--motion", "straight",
+                               "-o", out)
+    assert code == 0, stderr
+    s = read_session(out)
+    assert s.rig == rig and s.timing == "custom" and "timing custom" in stdout
+    # a preset named on the command line sets the offsets, and the label says so
+    out2 = tmp_path / "b.mcap"
+    assert cli("simulate", "--rig", tmp_path / "rig.toml", "--timing", "typeB", "--motion",
+               "straight", "-o", out2)[0] == 0
+    s = read_session(out2)
+    assert s.timing == "typeB"
+    assert_allclose([c.offset for c in s.rig.cameras], [0, 1 / 60, 0])
