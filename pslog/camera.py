@@ -243,28 +243,32 @@ class Camera:
             return xy_d
         k1, k2, p1, p2, k3 = self.dist
         xy = xy_d.copy()
-        for _ in range(_UNDISTORT_ITERATIONS):
-            x, y = xy[:, 0], xy[:, 1]
-            r2 = x * x + y * y
-            radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
-            d_radial = k1 + r2 * (2 * k2 + 3 * k3 * r2)  # d radial / d r2
-            residual = self.distort_normalized(xy) - xy_d
-            # Jacobian of distort_normalized, per point
-            j00 = radial + 2 * x * x * d_radial + 2 * p1 * y + 6 * p2 * x
-            j01 = 2 * x * y * d_radial + 2 * p1 * x + 2 * p2 * y
-            j10 = 2 * x * y * d_radial + 2 * p1 * x + 2 * p2 * y
-            j11 = radial + 2 * y * y * d_radial + 6 * p1 * y + 2 * p2 * x
-            det = j00 * j11 - j01 * j10
-            dx = (j11 * residual[:, 0] - j01 * residual[:, 1]) / det
-            dy = (-j10 * residual[:, 0] + j00 * residual[:, 1]) / det
-            xy[:, 0] -= dx
-            xy[:, 1] -= dy
-            if np.nanmax(np.abs(residual), initial=0.0) < 1e-15:
-                break
-        # past the radius where the lens model folds over, no ideal point maps to the pixel:
-        # say so with NaN rather than return a wrong ray
-        folded = np.any(np.abs(self.distort_normalized(xy) - xy_d) > 1e-9, axis=1)
-        xy[folded] = np.nan
+        # far outside the image the polynomial overflows and Newton's steps divide by a zero
+        # Jacobian: those rows end NaN below, which is the answer, so no warning is wanted
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            for _ in range(_UNDISTORT_ITERATIONS):
+                x, y = xy[:, 0], xy[:, 1]
+                r2 = x * x + y * y
+                radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+                d_radial = k1 + r2 * (2 * k2 + 3 * k3 * r2)  # d radial / d r2
+                residual = self.distort_normalized(xy) - xy_d
+                # Jacobian of distort_normalized, per point
+                j00 = radial + 2 * x * x * d_radial + 2 * p1 * y + 6 * p2 * x
+                j01 = 2 * x * y * d_radial + 2 * p1 * x + 2 * p2 * y
+                j10 = 2 * x * y * d_radial + 2 * p1 * x + 2 * p2 * y
+                j11 = radial + 2 * y * y * d_radial + 6 * p1 * y + 2 * p2 * x
+                det = j00 * j11 - j01 * j10
+                dx = (j11 * residual[:, 0] - j01 * residual[:, 1]) / det
+                dy = (-j10 * residual[:, 0] + j00 * residual[:, 1]) / det
+                xy[:, 0] -= dx
+                xy[:, 1] -= dy
+                if np.nanmax(np.abs(residual), initial=0.0) < 1e-15:
+                    break
+            # past the radius where the lens model folds over, no ideal point maps to the
+            # pixel: say so with NaN rather than return a wrong ray (a NaN or infinite
+            # residual counts as not converged)
+            converged = np.abs(self.distort_normalized(xy) - xy_d) <= 1e-9
+        xy[~np.all(converged, axis=1)] = np.nan
         return xy
 
     def undistort(self, uv: np.ndarray) -> np.ndarray:
@@ -288,6 +292,9 @@ class Camera:
         """
         xy = self.undistort_normalized(uv)
         rays_cam = np.hstack([xy, np.ones((len(xy), 1))])
+        # scale by the largest component first: the norm of a far-off pixel's ray
+        # (1e300 px) would overflow although its direction is well defined
+        rays_cam /= np.max(np.abs(rays_cam), axis=1, keepdims=True)
         directions_world = rays_cam @ self.R  # Rᵀ applied to each row
         directions_world /= np.linalg.norm(directions_world, axis=1, keepdims=True)
         return self.center_world, directions_world

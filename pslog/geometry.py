@@ -72,8 +72,13 @@ def epipolar_lines(F: np.ndarray, uv_a: np.ndarray) -> np.ndarray:
     uv_a = np.asarray(uv_a, dtype=np.float64)
     homogeneous = np.hstack([uv_a, np.ones((len(uv_a), 1))])
     F = np.asarray(F, dtype=np.float64)
-    lines = homogeneous @ F.T if F.ndim == 2 else np.einsum("nij,nj->ni", F, homogeneous)
-    with np.errstate(invalid="ignore", divide="ignore"):  # a zero F (same camera) gives NaN
+    # a pixel near the float range (1e300, from a damaged file) overflows to inf and its line
+    # comes out NaN, as does any line of a zero F (two cameras at one centre): NaN is the
+    # answer there, so these steps warn of nothing
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        lines = homogeneous @ F.T if F.ndim == 2 else np.einsum("nij,nj->ni", F, homogeneous)
+        # scale by the larger of a, b before the norm, which would overflow on its own
+        lines = lines / np.max(np.abs(lines[:, :2]), axis=1, keepdims=True)
         return lines / np.linalg.norm(lines[:, :2], axis=1, keepdims=True)
 
 

@@ -481,3 +481,24 @@ def test_cameras_at_one_centre_are_refused_for_fusion():
     detections, _ = simulate(rig, get_motion("straight"))
     with pytest.raises(PslogError, match="'cam1' and 'cam2' are at the same centre"):
         fuse(detections, same, "typeA")
+
+
+@pytest.mark.parametrize("timing", ["typeA", "typeB"])
+def test_pixels_far_off_the_image_are_no_detection_and_warn_of_nothing(timing):
+    import warnings
+
+    rig = apply_timing(builtin_rig("paper3"), timing)
+    obs = simulate(rig, get_motion("spiral"), 1.0)[0].best()
+    uv = obs.uv.copy()
+    uv[5:40:3, 0] = 1e300
+    uv[7:30:4, 1] = -1e308
+    damaged = Observations(obs.time_ns, obs.camera, uv, obs.frame_index)
+    methods = default_methods(obs, rig)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a RuntimeWarning fails the test
+        tracks = fuse_all(damaged, rig, methods)
+        explain_type_a(damaged, rig)
+    clean = fuse_all(obs, rig, methods)
+    for method in methods:
+        assert 0 < len(tracks[method]) < len(clean[method])
+        assert np.all(np.isfinite(tracks[method].position_world))
