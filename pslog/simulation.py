@@ -53,6 +53,19 @@ class SimulationOptions:
                 raise InputError(f"{name} must be in [0, 1), got {value!r}")
 
 
+def check_duration(rig: Rig, duration: float) -> float:
+    """``duration`` seconds if it is > 0 and gives at most :data:`MAX_SIMULATED_FRAMES`
+    frames of ``rig``'s cameras, else :class:`InputError` saying why."""
+    if not np.isfinite(duration) or duration <= 0:
+        raise InputError(f"duration must be > 0 seconds, got {duration!r}")
+    n_frames = duration * sum(cam.fps for cam in rig.cameras)
+    if n_frames > MAX_SIMULATED_FRAMES:
+        raise InputError(f"duration {duration:g} s gives {n_frames:.3g} frames; simulate at "
+                         f"most {MAX_SIMULATED_FRAMES:.0e} frames (a 90-minute match of three "
+                         f"30 fps cameras is 4.9e5)")
+    return duration
+
+
 def check_simulation(rig: Rig, options: SimulationOptions) -> None:
     """:class:`InputError` if ``options`` make no sense for ``rig``: shutter jitter of half
     a frame period or more (frames would swap places and merge with their neighbours), or
@@ -102,13 +115,7 @@ def capture_times(rig: Rig, duration: float) -> tuple[np.ndarray, np.ndarray, np
     time_s : (F,) float64 seconds, camera : (F,) int32, frame_index : (F,) int64 —
     sorted by (time, camera)
     """
-    if not np.isfinite(duration) or duration <= 0:
-        raise InputError(f"duration must be > 0 seconds, got {duration!r}")
-    n_frames = duration * sum(cam.fps for cam in rig.cameras)
-    if n_frames > MAX_SIMULATED_FRAMES:
-        raise InputError(f"duration {duration:g} s gives {n_frames:.3g} frames; simulate at "
-                         f"most {MAX_SIMULATED_FRAMES:.0e} frames (a 90-minute match of three "
-                         f"30 fps cameras is 4.9e5)")
+    check_duration(rig, duration)
     times, cameras, indices = [], [], []
     for i, cam in enumerate(rig.cameras):
         t = shutter_times(cam, duration)

@@ -67,6 +67,17 @@ def noise_px(text: str) -> float:
     return value
 
 
+def seconds_at_most(limit: float, why: str):
+    """argparse type: seconds in (0, limit]."""
+    def parse(text: str) -> float:
+        value = positive_float(text)
+        if value > limit:
+            raise argparse.ArgumentTypeError(f"must be at most {limit:g} s ({why}), got {text!r}")
+        return value
+    parse.__name__ = "seconds"
+    return parse
+
+
 def exposure_s(text: str) -> float:
     """A synthetic exposure time: seconds in [0, 1) (the library checks it against the frame
     period: :func:`pslog.simulation.check_exposure`)."""
@@ -127,3 +138,50 @@ def fusion_method(text: str) -> str:
         raise argparse.ArgumentTypeError(f"unknown fusion method {text!r} "
                                          f"(have {', '.join(METHODS)})")
     return text
+
+
+def checked_by(parse, what: str):
+    """argparse type: the text unchanged if ``parse(text)`` accepts it; the library's own
+    message (its :class:`~pslog.errors.PslogError`) as argparse's error otherwise, so that a
+    bad value on the command line is exit 2 like any other."""
+    from pslog.errors import PslogError
+
+    def check(text: str) -> str:
+        try:
+            parse(text)
+        except PslogError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+        return text
+    check.__name__ = what
+    return check
+
+
+def camera_name(text: str) -> str:
+    """A camera name usable in CSV and topics (:func:`pslog.camera.check_camera_name`)."""
+    from pslog.camera import check_camera_name
+
+    return checked_by(check_camera_name, "camera name")(text)
+
+
+def motion_name(text: str) -> str:
+    from pslog.motion import get_motion
+
+    return checked_by(get_motion, "motion")(text)
+
+
+def hsv_box(text: str) -> str:
+    """``H1,H2,S1,S2,V1,V2`` as :meth:`recorders.detect.HsvRange.parse` accepts it."""
+    from recorders.detect import HsvRange
+
+    return checked_by(HsvRange.parse, "HSV box")(text)
+
+
+def chessboard(text: str) -> str:
+    from pslog.calibration.chessboard import parse_pattern
+
+    return checked_by(parse_pattern, "chessboard pattern")(text)
+
+
+def port(text: str) -> int:
+    """A TCP port number, 1..65535."""
+    return int_in(1, 65535)(text)

@@ -26,6 +26,7 @@ _WORST_SHOWN = 5
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from pslog.cli._common import camera_name, chessboard, positive_int
     parser.epilog = ("examples:\n"
                      "  pslog calibrate --points pts.csv --name cam1 --width 640 --height 480 "
                      "--rig rig.toml\n"
@@ -37,14 +38,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     source = parser.add_mutually_exclusive_group(required=True)
     source.add_argument("--points", metavar="CSV",
                         help="3D-2D correspondences, header x,y,z,u,v (metres, pixels)")
-    source.add_argument("--chessboard", metavar="COLSxROWS",
+    source.add_argument("--chessboard", metavar="COLSxROWS", type=chessboard,
                         help="chessboard inner corners per row x per column, e.g. 9x6")
-    parser.add_argument("--name", required=True, help="camera name in the rig")
+    parser.add_argument("--name", required=True, type=camera_name,
+                        help="camera name in the rig")
     parser.add_argument("--rig", required=True, metavar="RIG.toml",
                         help="rig file to add the camera to (created if missing)")
-    parser.add_argument("--width", type=int, help="image width, pixels (required for a new "
-                        "camera with --points; checked against the images with --chessboard)")
-    parser.add_argument("--height", type=int, help="image height, pixels")
+    parser.add_argument("--width", type=positive_int,
+                        help="image width, pixels (required for a new camera with --points; "
+                             "checked against the images with --chessboard)")
+    parser.add_argument("--height", type=positive_int, help="image height, pixels")
     parser.add_argument("--fps", type=positive_float,
                         help="frame rate (default: the rig's value for this camera, else 30)")
     parser.add_argument("--offset", type=nonnegative_float,
@@ -61,7 +64,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="chessboard square side, metres (default 0.025)")
     parser.add_argument("--images", metavar="DIR_OR_VIDEO",
                         help="with --chessboard: folder of images or a video file")
-    parser.add_argument("--max-frames", type=int, default=60,
+    parser.add_argument("--max-frames", type=positive_int, default=60,
                         help="from a video, use at most this many evenly spaced frames "
                              "(default 60)")
     add_force(parser)

@@ -11,14 +11,15 @@ import argparse
 import time
 from pathlib import Path
 
-from ._common import positive_float
+from ._common import seconds_at_most
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default=None,
                         help="output folder (default: a new demo-output/<date-time>/)")
-    parser.add_argument("--duration", type=positive_float, default=1.5,
-                        help="seconds of throw to record (default 1.5)")
+    parser.add_argument("--duration", default=1.5,
+                        type=seconds_at_most(60.0, "the demo is one throw"),
+                        help="seconds of throw to record, at most 60 (default 1.5)")
     parser.add_argument("--realtime", action="store_true",
                         help="render at the cameras' real rate instead of as fast as possible")
     parser.add_argument("--no-view", action="store_true", help="do not build demo.rrd")

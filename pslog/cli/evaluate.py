@@ -6,8 +6,10 @@ import argparse
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from ._common import fusion_method
     parser.add_argument("session", help="fused session MCAP (from pslog fuse)")
     parser.add_argument("--method", action="append", dest="methods", metavar="METHOD",
+                        type=fusion_method,
                         help="only these methods (repeatable; default all tracks)")
     parser.add_argument("--json", action="store_true", help="print JSON for scripts")
 

@@ -9,8 +9,13 @@ from pslog.cli._common import (
     add_force,
     add_rig,
     check_output,
+    exposure_s,
+    hsv_box,
+    int_in,
+    motion_name,
     nonnegative_float,
     positive_float,
+    positive_int,
     seed,
 )
 from pslog.errors import InputError
@@ -71,7 +76,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--timing", choices=("sync", "typeA", "typeB"),
                         help="set the rig's shutter offsets from a preset (default: the "
                              "rig's own offsets)")
-    parser.add_argument("--motion", default="throw",
+    parser.add_argument("--motion", default="throw", type=motion_name,
                         help="synthetic ball motion: straight, spiral, fall, turntable, throw "
                              "(default throw)")
     parser.add_argument("--fast", action="store_true",
@@ -84,13 +89,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(default 2)")
     parser.add_argument("--ball-radius", type=positive_float, default=0.0215, metavar="M",
                         help="synthetic ball radius in metres (default 0.0215, a golf ball)")
-    parser.add_argument("--exposure", type=nonnegative_float, default=0.004, metavar="S",
+    parser.add_argument("--exposure", type=exposure_s, default=0.004, metavar="S",
                         help="synthetic exposure time in seconds, for motion blur "
                              "(default 0.004; 0 for none)")
     parser.add_argument("--seed", type=seed, default=0, help="synthetic random seed")
     parser.add_argument("--no-frames", action="store_true",
                         help="store detections only, not the JPEG frames")
-    parser.add_argument("--jpeg-quality", type=int, default=90, metavar="Q",
+    parser.add_argument("--jpeg-quality", type=int_in(1, 100), default=90, metavar="Q",
                         help="JPEG quality of stored frames, 1..100 (default 90)")
     add_detector_arguments(parser)
     add_force(parser)
@@ -100,10 +105,10 @@ def add_detector_arguments(parser: argparse.ArgumentParser) -> None:
     """``--hsv`` and ``--max-candidates`` (shared with ``pslog redetect``)."""
     from recorders.detect import HsvRange
 
-    parser.add_argument("--hsv", metavar="H1,H2,S1,S2,V1,V2",
+    parser.add_argument("--hsv", metavar="H1,H2,S1,S2,V1,V2", type=hsv_box,
                         help="ball colour as an HSV box hmin,hmax,smin,smax,vmin,vmax "
                              f"(default {HsvRange().text()}, an orange ball)")
-    parser.add_argument("--max-candidates", type=int, default=5, metavar="K",
+    parser.add_argument("--max-candidates", type=positive_int, default=5, metavar="K",
                         help="ball candidates kept per frame, best first (default 5)")
 
 

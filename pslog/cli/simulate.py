@@ -52,7 +52,12 @@ def run(args: argparse.Namespace) -> int:
     from pslog.motion import get_motion
     from pslog.records import NS
     from pslog.rig import apply_timing, resolve_rig, timing_label
-    from pslog.simulation import SimulationOptions, check_simulation, simulate
+    from pslog.simulation import (
+        SimulationOptions,
+        check_duration,
+        check_simulation,
+        simulate,
+    )
 
     output = check_output(args.output, args.force)
     rig = resolve_rig(args.rig)
@@ -69,6 +74,10 @@ def run(args: argparse.Namespace) -> int:
         option = "--jitter" if "jitter" in str(exc) else "--noise-px"
         return usage_error("simulate", f"argument {option}: {exc}")
     duration = motion.duration if args.duration is None else args.duration
+    try:
+        check_duration(rig, duration)
+    except InputError as exc:
+        return usage_error("simulate", f"argument --duration: {exc}")
     detections, truth = simulate(rig, motion, duration, options)
     detections, truth, n_early = drop_before_zero(detections, truth)
     settings = {"motion": motion.name, "duration_s": repr(float(duration)),

@@ -14,6 +14,7 @@ from ._common import add_force, check_output, nonnegative_float
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from ._common import port
     parser.add_argument("sessions", nargs="+", metavar="SESSION",
                         help="session MCAP, then optionally fused copies of it (pslog fuse "
                              "output) whose tracks are shown too")
@@ -27,9 +28,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="start, seconds after the session's first frame")
     parser.add_argument("--end", type=nonnegative_float, metavar="S",
                         help="end, seconds after the session's first frame")
-    parser.add_argument("--web-port", type=int, default=9090,
+    parser.add_argument("--web-port", type=port, default=9090,
                         help="port of the web viewer with --serve (default 9090)")
-    parser.add_argument("--grpc-port", type=int, default=9876,
+    parser.add_argument("--grpc-port", type=port, default=9876,
                         help="port of the data server with --serve (default 9876)")
     add_force(parser)
     import rerun as rr  # rerun's standard flags: --save, --serve, --connect, --url, ...
