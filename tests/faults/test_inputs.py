@@ -199,3 +199,9 @@ def test_record_exposure_longer_than_a_frame_is_refused_by_the_shared_validator(
     for bad in (0.034, 10.0, -1.0, float("nan")):
         with pytest.raises(InputError, match="shorter than the frame period"):
             check_exposure(rig, bad)
+
+
+def test_record_synthetic_exposure_beyond_the_frame_period_is_refused(work):
+    _refused(work, 1, ["record", "--synthetic", "--rig", "paper3", "--fast", "--duration",
+                       "0.1", "--exposure", "0.05", "-o", "x.mcap"],
+             contains=("exposure 0.05 s", "frame period"))
