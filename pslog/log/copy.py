@@ -8,7 +8,7 @@ from pathlib import Path
 
 from ..errors import InputError
 from ..records import Detections, Track
-from ..rig import Rig
+from ..rig import Rig, timing_label
 from . import _mcapio as io
 from . import _schemas as S
 from .reader import _Finished
@@ -54,7 +54,9 @@ def copy_session(src, dst, *, detections: Detections | None = None, tracks: Sequ
     user_meta["derived_from"] = src_path.name
     user_meta.update(metadata or {})
 
-    with SessionWriter(dst, rig, force=force, timing=meta.get("timing", "custom"),
+    # a corrected rig may have other shutter offsets: its label says what they are
+    timing = meta.get("timing", "custom") if rig is old_rig else timing_label(rig)
+    with SessionWriter(dst, rig, force=force, timing=timing,
                        source=meta.get("source", ""), metadata=user_meta,
                        start_ns=start_ns) as w:
         scan = io.Scan()
