@@ -204,6 +204,6 @@ def test_fuse_tolerance_of_a_third_of_a_period_is_a_usage_error(tmp_path, sim_se
     code, _, err = cli("fuse", sim_session.path, "--tolerance-ms", "12", "-o", tmp_path / "f.mcap")
     assert code == 2 and "argument --tolerance-ms" in err and "third of the frame period" in err
     assert not (tmp_path / "f.mcap").exists()
-    code, out, err = cli("fuse", sim_session.path, "--tolerance-ms", "11", "--method", "sync",
-                         "-o", tmp_path / "f.mcap")
+    code, _, err = cli("fuse", sim_session.path, "--tolerance-ms", "11", "--method", "sync",
+                       "-o", tmp_path / "f.mcap")
     assert code == 1 and "no two cameras captured within 11 ms" in err  # type A: no instants
