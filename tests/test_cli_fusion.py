@@ -199,8 +199,7 @@ def test_fuse_with_a_rig_of_other_offsets_relabels_the_timing(tmp_path, sim_sess
     assert read_session(tmp_path / "g.mcap").timing == "typeA"
 
 
-def test_fuse_tolerance_of_a_third_of_a_period_is_a_usage_error(tmp_path, sim_session, cli,
-                                                                capsys):
+def test_fuse_tolerance_of_a_third_of_a_period_is_a_usage_error(tmp_path, sim_session, cli):
     code, _, err = cli("fuse", sim_session.path, "--tolerance-ms", "12", "-o", tmp_path / "f.mcap")
     assert code == 2 and "argument --tolerance-ms" in err and "third of the frame period" in err
     assert not (tmp_path / "f.mcap").exists()
