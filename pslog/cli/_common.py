@@ -67,6 +67,18 @@ def noise_px(text: str) -> float:
     return value
 
 
+def number_at_most(limit: float, unit: str, why: str, positive: bool = False):
+    """argparse type: a number in [0, limit] (in (0, limit] if ``positive``)."""
+    def parse(text: str) -> float:
+        value = positive_float(text) if positive else nonnegative_float(text)
+        if value > limit:
+            raise argparse.ArgumentTypeError(f"must be at most {limit:g} {unit} ({why}), "
+                                             f"got {text!r}")
+        return value
+    parse.__name__ = "number"
+    return parse
+
+
 def seconds_at_most(limit: float, why: str):
     """argparse type: seconds in (0, limit]."""
     def parse(text: str) -> float:

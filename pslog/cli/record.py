@@ -13,7 +13,7 @@ from pslog.cli._common import (
     hsv_box,
     int_in,
     motion_name,
-    nonnegative_float,
+    number_at_most,
     positive_float,
     positive_int,
     seed,
@@ -84,10 +84,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--duration", type=positive_float, metavar="S",
                         help="stop after S seconds of session time (synthetic default: the "
                              "motion's duration; otherwise until the sources end or Ctrl-C)")
-    parser.add_argument("--noise", type=nonnegative_float, default=2.0, metavar="SIGMA",
+    parser.add_argument("--noise", default=2.0, metavar="SIGMA",
+                        type=number_at_most(255.0, "levels", "the whole 8-bit range"),
                         help="synthetic sensor noise, standard deviation in 8-bit levels "
                              "(default 2)")
-    parser.add_argument("--ball-radius", type=positive_float, default=0.0215, metavar="M",
+    parser.add_argument("--ball-radius", default=0.0215, metavar="M",
+                        type=number_at_most(1.0, "m", "a ball, not a wall", positive=True),
                         help="synthetic ball radius in metres (default 0.0215, a golf ball)")
     parser.add_argument("--exposure", type=exposure_s, default=0.004, metavar="S",
                         help="synthetic exposure time in seconds, for motion blur "

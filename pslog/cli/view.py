@@ -14,7 +14,9 @@ from ._common import add_force, check_output, nonnegative_float
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from ._common import port
+    from viewers.data import FramesChoice
+
+    from ._common import checked_by, port
     parser.add_argument("sessions", nargs="+", metavar="SESSION",
                         help="session MCAP, then optionally fused copies of it (pslog fuse "
                              "output) whose tracks are shown too")
@@ -22,6 +24,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="tracks to show, comma-separated; a fusion method no file holds is "
                              "fused on the fly (default: every stored track, else typeA)")
     parser.add_argument("--frames", default="all", metavar="all|none|every:N",
+                        type=checked_by(FramesChoice.parse, "frames"),
                         help="recorded images to include (default all; every:N keeps frames "
                              "whose index is a multiple of N)")
     parser.add_argument("--start", type=nonnegative_float, metavar="S",
