@@ -50,7 +50,8 @@ class FusionOptions:
     Attributes
     ----------
     tolerance_s : float, detections this close in time count as simultaneous (sync, typeB,
-        linear), seconds
+        linear), seconds; no group spans more, and the methods refuse a tolerance of a third
+        of the rig's shortest frame period or more (:func:`check_tolerance`)
     max_gap_s : float or None, longest time span a method may bridge (brackets, predictions,
         pairing); None: 3.5 frame periods of the slowest camera
     """
