@@ -112,6 +112,9 @@ class Camera:
         if K[0, 0] <= 0 or K[1, 1] <= 0:
             raise RigError(f"camera {name!r}: K focal lengths must be positive, got "
                            f"fx={K[0, 0]}, fy={K[1, 1]}")
+        if K[0, 0] < 1 or K[1, 1] < 1:  # K⁻¹ of a sub-pixel focal length overflows
+            raise RigError(f"camera {name!r}: K focal lengths must be at least 1 pixel, got "
+                           f"fx={K[0, 0]:g}, fy={K[1, 1]:g}")
         if np.abs(K).max() > _MAX_K:
             raise RigError(f"camera {name!r}: K has an entry of {np.abs(K).max():.3g} pixels, "
                            f"beyond any lens (at most {_MAX_K:g})")

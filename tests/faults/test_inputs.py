@@ -78,6 +78,7 @@ def _rig_with(work: Path, old: str, new: str, count: int = 1) -> str:
     ("width = 640", "width = 99999999999", "width 99999999999 pixels is beyond any camera"),
     ("height = 480", "height = 1000000", "beyond any camera"),
     ("fps = 30.0", "fps = 1e300", "fps must be in"),
+    ("K = [[400.0, 0.0,", "K = [[1e-300, 0.0,", "at least 1 pixel"),
     ('name = "cam2"', 'name = "cam,2"', "camera name 'cam,2' holds one of"),
     ('name = "cam2"', 'name = "say \\"two\\""', "camera name 'say \"two\"' holds one of"),
     ('name = "cam2"', 'name = "cam\\n2"', "control character"),
