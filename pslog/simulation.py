@@ -102,7 +102,11 @@ def shutter_times(camera: Camera, duration: float) -> np.ndarray:
     """Nominal shutter times (k,) float64 seconds of ``camera`` in ``[0, duration)``:
     ``offset + k / fps`` for k = 0, 1, ... (the offset is within ``[0, 1 / fps)``, as
     :class:`~pslog.camera.Camera` checks), so frame ``k`` is row ``k``."""
-    k = np.arange(int(np.ceil((duration - camera.offset) * camera.fps)) + 1)
+    n_frames = np.ceil((duration - camera.offset) * camera.fps)
+    if not n_frames <= MAX_SIMULATED_FRAMES:  # also NaN: no array of 224 GB attempted
+        raise InputError(f"duration {duration:g} s gives {n_frames:.3g} frames of camera "
+                         f"{camera.name}; simulate at most {MAX_SIMULATED_FRAMES:.0e} frames")
+    k = np.arange(max(int(n_frames), 0) + 1)
     t = camera.offset + k / camera.fps
     return t[t < duration]
 
