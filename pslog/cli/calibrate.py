@@ -26,7 +26,8 @@ _WORST_SHOWN = 5
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from pslog.cli._common import camera_name, chessboard, positive_int
+    from pslog.camera import MAX_FPS
+    from pslog.cli._common import camera_name, chessboard, number_at_most, positive_int
     parser.epilog = ("examples:\n"
                      "  pslog calibrate --points pts.csv --name cam1 --width 640 --height 480 "
                      "--rig rig.toml\n"
@@ -48,7 +49,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="image width, pixels (required for a new camera with --points; "
                              "checked against the images with --chessboard)")
     parser.add_argument("--height", type=positive_int, help="image height, pixels")
-    parser.add_argument("--fps", type=positive_float,
+    parser.add_argument("--fps", type=number_at_most(MAX_FPS, "fps", "beyond any camera",
+                                                     positive=True),
                         help="frame rate (default: the rig's value for this camera, else 30)")
     parser.add_argument("--offset", type=nonnegative_float,
                         help="shutter offset within the frame period, seconds "
