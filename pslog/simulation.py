@@ -67,20 +67,32 @@ def check_duration(rig: Rig, duration: float) -> float:
 
 
 def check_simulation(rig: Rig, options: SimulationOptions) -> None:
-    """:class:`InputError` if ``options`` make no sense for ``rig``: shutter jitter of half
-    a frame period or more (frames would swap places and merge with their neighbours), or
-    detection noise beyond the image's larger side (a detection would say nothing of where
-    the ball is)."""
+    """:class:`InputError` if ``options`` make no sense for ``rig`` (:func:`check_jitter`,
+    :func:`check_noise`)."""
+    check_jitter(rig, options.jitter_s)
+    check_noise(rig, options.noise_px)
+
+
+def check_jitter(rig: Rig, jitter_s: float) -> float:
+    """``jitter_s`` if below half the shortest frame period of ``rig``, else
+    :class:`InputError`: more would swap frames of one camera and merge neighbours."""
     fastest = max(rig.cameras, key=lambda c: c.fps)
-    if options.jitter_s >= 0.5 * fastest.frame_period:
+    if not jitter_s < 0.5 * fastest.frame_period:
         raise InputError(
-            f"jitter {options.jitter_s:g} s must be below half a frame period "
+            f"jitter {jitter_s:g} s must be below half a frame period "
             f"({0.5 * fastest.frame_period:.6g} s at {fastest.fps:g} fps, camera "
             f"{fastest.name}): more would swap frames of one camera")
+    return jitter_s
+
+
+def check_noise(rig: Rig, noise_px: float) -> float:
+    """``noise_px`` if at most the largest image side of ``rig``, else :class:`InputError`:
+    a detection would say nothing of where the ball is."""
     largest = max(max(c.width, c.height) for c in rig.cameras)
-    if options.noise_px > largest:
-        raise InputError(f"noise {options.noise_px:g} px is beyond the image size ({largest} "
-                         f"px): detections would say nothing of the ball")
+    if not noise_px <= largest:
+        raise InputError(f"noise {noise_px:g} px is beyond the image size ({largest} px): "
+                         f"detections would say nothing of the ball")
+    return noise_px
 
 
 def check_exposure(rig: Rig, exposure_s: float) -> float:

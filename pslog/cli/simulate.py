@@ -55,7 +55,8 @@ def run(args: argparse.Namespace) -> int:
     from pslog.simulation import (
         SimulationOptions,
         check_duration,
-        check_simulation,
+        check_jitter,
+        check_noise,
         simulate,
     )
 
@@ -68,16 +69,15 @@ def run(args: argparse.Namespace) -> int:
     options = SimulationOptions(noise_px=args.noise_px, jitter_s=args.jitter,
                                 drop_rate=args.drop_rate, miss_rate=args.miss_rate,
                                 seed=args.seed)
-    try:
-        check_simulation(rig, options)
-    except InputError as exc:  # a command-line value too large for this rig: exit 2
-        option = "--jitter" if "jitter" in str(exc) else "--noise-px"
-        return usage_error("simulate", f"argument {option}: {exc}")
     duration = motion.duration if args.duration is None else args.duration
-    try:
-        check_duration(rig, duration)
-    except InputError as exc:
-        return usage_error("simulate", f"argument --duration: {exc}")
+    # command-line values too large for this rig: exit 2, as argparse's own refusals
+    for option, check, value in (("--jitter", check_jitter, args.jitter),
+                                 ("--noise-px", check_noise, args.noise_px),
+                                 ("--duration", check_duration, duration)):
+        try:
+            check(rig, value)
+        except InputError as exc:
+            return usage_error("simulate", f"argument {option}: {exc}")
     detections, truth = simulate(rig, motion, duration, options)
     detections, truth, n_early = drop_before_zero(detections, truth)
     settings = {"motion": motion.name, "duration_s": repr(float(duration)),
