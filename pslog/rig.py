@@ -32,6 +32,8 @@ from .camera import Camera, look_at
 from .errors import RigError
 
 TIMING_PRESETS = ("sync", "typeA", "typeB")
+#: Most cameras a rig may have (fusion computes geometry for every pair).
+MAX_CAMERAS = 256
 BUILTIN_RIGS = ("paper3", "paper2")
 
 _TOP_KEYS = {"name", "camera"}
@@ -56,6 +58,8 @@ class Rig:
         cameras = tuple(self.cameras)
         if not cameras:
             raise RigError("a rig needs at least one camera")
+        if len(cameras) > MAX_CAMERAS:  # pairwise geometry grows with the square
+            raise RigError(f"a rig of {len(cameras)} cameras: at most {MAX_CAMERAS}")
         names = [c.name for c in cameras]
         duplicates = sorted({n for n in names if names.count(n) > 1})
         if duplicates:
@@ -278,14 +282,14 @@ def check_baselines(rig: Rig, source: str = "rig") -> Rig:
     checked where geometry is used, not on every rig.)
     """
     centres = np.array([c.center_world for c in rig.cameras])
-    for a in range(len(centres)):
-        for b in range(a + 1, len(centres)):
-            distance = float(np.linalg.norm(centres[a] - centres[b]))
-            if distance < MIN_BASELINE_M:
-                raise RigError(
-                    f"{source}: cameras {rig.names[a]!r} and {rig.names[b]!r} are at the same "
-                    f"centre ({distance * 1e3:.3g} mm apart): no stereo between them (no "
-                    f"epipolar line, rays that never cross at a point); calibrate their poses")
+    distance = np.linalg.norm(centres[:, None] - centres[None, :], axis=2)
+    distance[np.tril_indices(len(centres))] = np.inf  # each pair once, not a camera itself
+    a, b = np.unravel_index(np.argmin(distance), distance.shape)
+    if distance[a, b] < MIN_BASELINE_M:
+        raise RigError(
+            f"{source}: cameras {rig.names[a]!r} and {rig.names[b]!r} are at the same centre "
+            f"({distance[a, b] * 1e3:.3g} mm apart): no stereo between them (no epipolar "
+            f"line, rays that never cross at a point); calibrate their poses")
     return rig
 
 

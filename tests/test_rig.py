@@ -386,3 +386,12 @@ def test_timing_label_names_the_preset_the_offsets_are():
     assert timing_label(apply_timing(builtin_rig("paper2"), "typeA")) == "typeA"
     odd = rig.with_camera(rig.cameras[1].replace(offset=0.005))
     assert timing_label(odd) == "custom"
+
+
+def test_a_rig_of_thousands_of_cameras_is_refused():
+    cam = builtin_rig("paper3").cameras[0]
+    cameras = tuple(cam.replace(name=f"c{i}", t=cam.t + np.array([0.0, 0.0, 0.01 * i]))
+                    for i in range(257))
+    with pytest.raises(RigError, match="at most 256"):
+        Rig(cameras)
+    assert len(check_baselines(Rig(cameras[:256]))) == 256
