@@ -14,6 +14,39 @@ from .errors import RigError
 
 _UNDISTORT_ITERATIONS = 20
 
+#: Largest image side accepted, pixels: beyond any camera sensor (the largest are ~16k).
+MAX_IMAGE_SIZE = 65536
+#: Highest frame rate accepted, frames per second (high-speed cameras reach ~1e5).
+MAX_FPS = 1e6
+_MAX_K = 1e7  # pixels: focal lengths and principal points
+_MAX_T_M = 1e6  # metres: a camera 1000 km from the world origin is a typo
+#: Characters a camera name may not hold: names are CSV cells (``,`` ``"``) and parts of MCAP
+#: topics ``/camera/<name>/...`` (``/``).
+_NAME_FORBIDDEN = ',"/'
+_NAME_MAX_LENGTH = 64
+
+
+def check_camera_name(name) -> str:
+    """``name`` if it is usable as a camera name, else :class:`RigError` saying why.
+
+    A name is a CSV cell and a part of MCAP topics: non-empty, at most 64 characters, no
+    control characters (newlines, tabs...), none of ``,`` ``"`` ``/``, no surrounding spaces.
+    """
+    if not isinstance(name, str) or not name:
+        raise RigError(f"camera name must be a non-empty string, got {name!r}")
+    why = None
+    if len(name) > _NAME_MAX_LENGTH:
+        why = f"longer than {_NAME_MAX_LENGTH} characters"
+    elif any(ord(ch) < 0x20 or 0x7F <= ord(ch) < 0xA0 for ch in name):
+        why = "holds a control character (newline, tab, ...)"
+    elif any(ch in _NAME_FORBIDDEN for ch in name):
+        why = "holds one of , \" / (names are CSV cells and parts of MCAP topics)"
+    elif name != name.strip():
+        why = "starts or ends with a space"
+    if why:
+        raise RigError(f"camera name {name!r} {why}")
+    return name
+
 
 def _as_array(value, shape: tuple[int, ...], name: str, camera: str) -> np.ndarray:
     try:
@@ -64,13 +97,14 @@ class Camera:
     offset: float = 0.0
 
     def __post_init__(self) -> None:
-        name = self.name
-        if not isinstance(name, str) or not name:
-            raise RigError(f"camera name must be a non-empty string, got {name!r}")
+        name = check_camera_name(self.name)
         for key in ("width", "height"):
             value = getattr(self, key)
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value <= 0:
                 raise RigError(f"camera {name!r}: {key} must be a positive integer, got {value!r}")
+            if value > MAX_IMAGE_SIZE:
+                raise RigError(f"camera {name!r}: {key} {value} pixels is beyond any camera "
+                               f"(at most {MAX_IMAGE_SIZE})")
             object.__setattr__(self, key, int(value))
         K = _as_array(self.K, (3, 3), "K", name)
         if K[1, 0] != 0 or K[2, 0] != 0 or K[2, 1] != 0 or K[2, 2] != 1:
@@ -78,6 +112,12 @@ class Camera:
         if K[0, 0] <= 0 or K[1, 1] <= 0:
             raise RigError(f"camera {name!r}: K focal lengths must be positive, got "
                            f"fx={K[0, 0]}, fy={K[1, 1]}")
+        if K[0, 0] < 1 or K[1, 1] < 1:  # K⁻¹ of a sub-pixel focal length overflows
+            raise RigError(f"camera {name!r}: K focal lengths must be at least 1 pixel, got "
+                           f"fx={K[0, 0]:g}, fy={K[1, 1]:g}")
+        if np.abs(K).max() > _MAX_K:
+            raise RigError(f"camera {name!r}: K has an entry of {np.abs(K).max():.3g} pixels, "
+                           f"beyond any lens (at most {_MAX_K:g})")
         R = _as_array(self.R, (3, 3), "R", name)
         if not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or abs(np.linalg.det(R) - 1) > 1e-6:
             raise RigError(f"camera {name!r}: R is not a rotation matrix (to 1e-6)")
@@ -85,6 +125,9 @@ class Camera:
         object.__setattr__(self, "R", R)
         object.__setattr__(self, "dist", _as_array(self.dist, (5,), "dist", name))
         object.__setattr__(self, "t", _as_array(self.t, (3,), "t", name))
+        if np.abs(self.t).max() > _MAX_T_M:
+            raise RigError(f"camera {name!r}: t has an entry of {np.abs(self.t).max():.3g} m "
+                           f"(at most {_MAX_T_M:g} m)")
         for key in ("fps", "offset"):
             value = getattr(self, key)
             if isinstance(value, bool) or not isinstance(value, (int, float, np.number)):
@@ -92,8 +135,8 @@ class Camera:
             if not np.isfinite(value):
                 raise RigError(f"camera {name!r}: {key} must be finite, got {value!r}")
             object.__setattr__(self, key, float(value))
-        if self.fps <= 0:
-            raise RigError(f"camera {name!r}: fps must be > 0, got {self.fps}")
+        if not 0 < self.fps <= MAX_FPS:
+            raise RigError(f"camera {name!r}: fps must be in (0, {MAX_FPS:g}], got {self.fps:g}")
         # the offset is a phase: an offset of a period or more names the same shutter
         # schedule as offset % period and would only make rigs compare unequal
         if not 0.0 <= self.offset < self.frame_period:
@@ -203,28 +246,32 @@ class Camera:
             return xy_d
         k1, k2, p1, p2, k3 = self.dist
         xy = xy_d.copy()
-        for _ in range(_UNDISTORT_ITERATIONS):
-            x, y = xy[:, 0], xy[:, 1]
-            r2 = x * x + y * y
-            radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
-            d_radial = k1 + r2 * (2 * k2 + 3 * k3 * r2)  # d radial / d r2
-            residual = self.distort_normalized(xy) - xy_d
-            # Jacobian of distort_normalized, per point
-            j00 = radial + 2 * x * x * d_radial + 2 * p1 * y + 6 * p2 * x
-            j01 = 2 * x * y * d_radial + 2 * p1 * x + 2 * p2 * y
-            j10 = 2 * x * y * d_radial + 2 * p1 * x + 2 * p2 * y
-            j11 = radial + 2 * y * y * d_radial + 6 * p1 * y + 2 * p2 * x
-            det = j00 * j11 - j01 * j10
-            dx = (j11 * residual[:, 0] - j01 * residual[:, 1]) / det
-            dy = (-j10 * residual[:, 0] + j00 * residual[:, 1]) / det
-            xy[:, 0] -= dx
-            xy[:, 1] -= dy
-            if np.nanmax(np.abs(residual), initial=0.0) < 1e-15:
-                break
-        # past the radius where the lens model folds over, no ideal point maps to the pixel:
-        # say so with NaN rather than return a wrong ray
-        folded = np.any(np.abs(self.distort_normalized(xy) - xy_d) > 1e-9, axis=1)
-        xy[folded] = np.nan
+        # far outside the image the polynomial overflows and Newton's steps divide by a zero
+        # Jacobian: those rows end NaN below, which is the answer, so no warning is wanted
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            for _ in range(_UNDISTORT_ITERATIONS):
+                x, y = xy[:, 0], xy[:, 1]
+                r2 = x * x + y * y
+                radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+                d_radial = k1 + r2 * (2 * k2 + 3 * k3 * r2)  # d radial / d r2
+                residual = self.distort_normalized(xy) - xy_d
+                # Jacobian of distort_normalized, per point
+                j00 = radial + 2 * x * x * d_radial + 2 * p1 * y + 6 * p2 * x
+                j01 = 2 * x * y * d_radial + 2 * p1 * x + 2 * p2 * y
+                j10 = 2 * x * y * d_radial + 2 * p1 * x + 2 * p2 * y
+                j11 = radial + 2 * y * y * d_radial + 6 * p1 * y + 2 * p2 * x
+                det = j00 * j11 - j01 * j10
+                dx = (j11 * residual[:, 0] - j01 * residual[:, 1]) / det
+                dy = (-j10 * residual[:, 0] + j00 * residual[:, 1]) / det
+                xy[:, 0] -= dx
+                xy[:, 1] -= dy
+                if np.nanmax(np.abs(residual), initial=0.0) < 1e-15:
+                    break
+            # past the radius where the lens model folds over, no ideal point maps to the
+            # pixel: say so with NaN rather than return a wrong ray (a NaN or infinite
+            # residual counts as not converged)
+            converged = np.abs(self.distort_normalized(xy) - xy_d) <= 1e-9
+        xy[~np.all(converged, axis=1)] = np.nan
         return xy
 
     def undistort(self, uv: np.ndarray) -> np.ndarray:
@@ -248,6 +295,9 @@ class Camera:
         """
         xy = self.undistort_normalized(uv)
         rays_cam = np.hstack([xy, np.ones((len(xy), 1))])
+        # scale by the largest component first: the norm of a far-off pixel's ray
+        # (1e300 px) would overflow although its direction is well defined
+        rays_cam /= np.max(np.abs(rays_cam), axis=1, keepdims=True)
         directions_world = rays_cam @ self.R  # Rᵀ applied to each row
         directions_world /= np.linalg.norm(directions_world, axis=1, keepdims=True)
         return self.center_world, directions_world

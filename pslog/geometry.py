@@ -33,13 +33,16 @@ def fundamental_matrix(cam_a: Camera, cam_b: Camera) -> np.ndarray:
 
     Built from the relative pose: ``F = K_b⁻ᵀ [t_ba]ₓ R_ba K_a⁻¹`` where
     ``x_b = R_ba x_a + t_ba`` maps camera-a coordinates to camera-b coordinates.
-    Scaled to unit Frobenius norm.
+    Scaled to unit Frobenius norm; zero for two cameras at the same centre.
     """
     R_ba = cam_b.R @ cam_a.R.T
     t_ba = cam_b.t - R_ba @ cam_a.t
     E = _skew(t_ba) @ R_ba
     F = np.linalg.inv(cam_b.K).T @ E @ np.linalg.inv(cam_a.K)
-    return F / np.linalg.norm(F)
+    norm = np.linalg.norm(F)
+    # two cameras at one centre have no epipolar geometry: F is zero (and epipolar_lines
+    # NaN), not 0/0 (see pslog.rig.check_baselines, which refuses such rigs for fusion)
+    return F / norm if norm > 0 else F
 
 
 def fundamental_matrices(cameras: Sequence[Camera]) -> np.ndarray:
@@ -69,8 +72,13 @@ def epipolar_lines(F: np.ndarray, uv_a: np.ndarray) -> np.ndarray:
     uv_a = np.asarray(uv_a, dtype=np.float64)
     homogeneous = np.hstack([uv_a, np.ones((len(uv_a), 1))])
     F = np.asarray(F, dtype=np.float64)
-    lines = homogeneous @ F.T if F.ndim == 2 else np.einsum("nij,nj->ni", F, homogeneous)
-    with np.errstate(invalid="ignore", divide="ignore"):  # a zero F (same camera) gives NaN
+    # a pixel near the float range (1e300, from a damaged file) overflows to inf and its line
+    # comes out NaN, as does any line of a zero F (two cameras at one centre): NaN is the
+    # answer there, so these steps warn of nothing
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        lines = homogeneous @ F.T if F.ndim == 2 else np.einsum("nij,nj->ni", F, homogeneous)
+        # scale by the larger of a, b before the norm, which would overflow on its own
+        lines = lines / np.max(np.abs(lines[:, :2]), axis=1, keepdims=True)
         return lines / np.linalg.norm(lines[:, :2], axis=1, keepdims=True)
 
 

@@ -32,6 +32,8 @@ from .camera import Camera, look_at
 from .errors import RigError
 
 TIMING_PRESETS = ("sync", "typeA", "typeB")
+#: Most cameras a rig may have (fusion computes geometry for every pair).
+MAX_CAMERAS = 256
 BUILTIN_RIGS = ("paper3", "paper2")
 
 _TOP_KEYS = {"name", "camera"}
@@ -56,6 +58,8 @@ class Rig:
         cameras = tuple(self.cameras)
         if not cameras:
             raise RigError("a rig needs at least one camera")
+        if len(cameras) > MAX_CAMERAS:  # pairwise geometry grows with the square
+            raise RigError(f"a rig of {len(cameras)} cameras: at most {MAX_CAMERAS}")
         names = [c.name for c in cameras]
         duplicates = sorted({n for n in names if names.count(n) > 1})
         if duplicates:
@@ -159,7 +163,8 @@ def load_rig(path: str | Path) -> Rig:
     """Load a rig TOML file."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        # utf-8-sig: a byte-order mark (Windows editors) is accepted and dropped
+        text = path.read_text(encoding="utf-8-sig")
     except FileNotFoundError:
         raise RigError(f"rig file not found: {path}") from None
     except (OSError, UnicodeDecodeError) as exc:
@@ -243,6 +248,49 @@ def apply_timing(rig: Rig, preset: str) -> Rig:
         raise RigError(f"unknown timing {preset!r} (have {', '.join(TIMING_PRESETS)})")
     return Rig(tuple(c.replace(offset=o) for c, o in zip(rig.cameras, offsets, strict=True)),
                rig.name)
+
+
+def timing_label(rig: Rig) -> str:
+    """The name of the rig's shutter timing, from its offsets: the preset of
+    :func:`apply_timing` whose offsets these are (to 1 ns; ``sync`` first), else ``custom``.
+
+    A session's ``timing`` label is always this, so that it agrees with the offsets stored
+    with it.
+    """
+    offsets = np.array([c.offset for c in rig.cameras])
+    for preset in TIMING_PRESETS:
+        try:
+            reference = np.array([c.offset for c in apply_timing(rig, preset).cameras])
+        except RigError:  # typeB of fewer than three cameras
+            continue
+        if np.allclose(offsets, reference, rtol=0.0, atol=1e-9):
+            return preset
+    return "custom"
+
+
+#: Closest two camera centres may be, metres, for stereo geometry between them.
+MIN_BASELINE_M = 1e-3
+
+
+def check_baselines(rig: Rig, source: str = "rig") -> Rig:
+    """``rig`` if every two cameras are at least :data:`MIN_BASELINE_M` apart, else
+    :class:`RigError` naming ``source`` and the two cameras.
+
+    Two cameras at one centre have no epipolar geometry (their fundamental matrix is zero)
+    and their rays cross everywhere along the line of sight: no triangulation. (A rig being
+    calibrated may hold such cameras, e.g. chessboard intrinsics before any pose, so this is
+    checked where geometry is used, not on every rig.)
+    """
+    centres = np.array([c.center_world for c in rig.cameras])
+    distance = np.linalg.norm(centres[:, None] - centres[None, :], axis=2)
+    distance[np.tril_indices(len(centres))] = np.inf  # each pair once, not a camera itself
+    a, b = np.unravel_index(np.argmin(distance), distance.shape)
+    if distance[a, b] < MIN_BASELINE_M:
+        raise RigError(
+            f"{source}: cameras {rig.names[a]!r} and {rig.names[b]!r} are at the same centre "
+            f"({distance[a, b] * 1e3:.3g} mm apart): no stereo between them (no epipolar "
+            f"line, rays that never cross at a point); calibrate their poses")
+    return rig
 
 
 def _toml_str(value: str) -> str:

@@ -53,11 +53,72 @@ class SimulationOptions:
                 raise InputError(f"{name} must be in [0, 1), got {value!r}")
 
 
+def check_duration(rig: Rig, duration: float) -> float:
+    """``duration`` seconds if it is > 0 and gives at most :data:`MAX_SIMULATED_FRAMES`
+    frames of ``rig``'s cameras, else :class:`InputError` saying why."""
+    if not np.isfinite(duration) or duration <= 0:
+        raise InputError(f"duration must be > 0 seconds, got {duration!r}")
+    n_frames = duration * sum(cam.fps for cam in rig.cameras)
+    if n_frames > MAX_SIMULATED_FRAMES:
+        raise InputError(f"duration {duration:g} s gives {n_frames:.3g} frames; simulate at "
+                         f"most {MAX_SIMULATED_FRAMES:.0e} frames (a 90-minute match of three "
+                         f"30 fps cameras is 4.9e5)")
+    return duration
+
+
+def check_simulation(rig: Rig, options: SimulationOptions) -> None:
+    """:class:`InputError` if ``options`` make no sense for ``rig`` (:func:`check_jitter`,
+    :func:`check_noise`)."""
+    check_jitter(rig, options.jitter_s)
+    check_noise(rig, options.noise_px)
+
+
+def check_jitter(rig: Rig, jitter_s: float) -> float:
+    """``jitter_s`` if below half the shortest frame period of ``rig``, else
+    :class:`InputError`: more would swap frames of one camera and merge neighbours."""
+    fastest = max(rig.cameras, key=lambda c: c.fps)
+    if not jitter_s < 0.5 * fastest.frame_period:
+        raise InputError(
+            f"jitter {jitter_s:g} s must be below half a frame period "
+            f"({0.5 * fastest.frame_period:.6g} s at {fastest.fps:g} fps, camera "
+            f"{fastest.name}): more would swap frames of one camera")
+    return jitter_s
+
+
+def check_noise(rig: Rig, noise_px: float) -> float:
+    """``noise_px`` if at most the largest image side of ``rig``, else :class:`InputError`:
+    a detection would say nothing of where the ball is."""
+    largest = max(max(c.width, c.height) for c in rig.cameras)
+    if not noise_px <= largest:
+        raise InputError(f"noise {noise_px:g} px is beyond the image size ({largest} px): "
+                         f"detections would say nothing of the ball")
+    return noise_px
+
+
+def check_exposure(rig: Rig, exposure_s: float) -> float:
+    """``exposure_s`` if it is in ``[0, frame period)`` of every camera of ``rig``, else
+    :class:`InputError` saying why: a shutter cannot stay open into the next frame.
+
+    (For rendered sessions, ``pslog record --synthetic --exposure``.)
+    """
+    fastest = max(rig.cameras, key=lambda c: c.fps)
+    if not (np.isfinite(exposure_s) and 0 <= exposure_s < fastest.frame_period):
+        raise InputError(
+            f"exposure {exposure_s!r} s must be in [0, {fastest.frame_period:.6g}) s, shorter "
+            f"than the frame period at {fastest.fps:g} fps (camera {fastest.name}): a shutter "
+            f"cannot stay open into the next frame")
+    return exposure_s
+
+
 def shutter_times(camera: Camera, duration: float) -> np.ndarray:
     """Nominal shutter times (k,) float64 seconds of ``camera`` in ``[0, duration)``:
     ``offset + k / fps`` for k = 0, 1, ... (the offset is within ``[0, 1 / fps)``, as
     :class:`~pslog.camera.Camera` checks), so frame ``k`` is row ``k``."""
-    k = np.arange(int(np.ceil((duration - camera.offset) * camera.fps)) + 1)
+    n_frames = np.ceil((duration - camera.offset) * camera.fps)
+    if not n_frames <= MAX_SIMULATED_FRAMES:  # also NaN: no array of 224 GB attempted
+        raise InputError(f"duration {duration:g} s gives {n_frames:.3g} frames of camera "
+                         f"{camera.name}; simulate at most {MAX_SIMULATED_FRAMES:.0e} frames")
+    k = np.arange(max(int(n_frames), 0) + 1)
     t = camera.offset + k / camera.fps
     return t[t < duration]
 
@@ -70,13 +131,7 @@ def capture_times(rig: Rig, duration: float) -> tuple[np.ndarray, np.ndarray, np
     time_s : (F,) float64 seconds, camera : (F,) int32, frame_index : (F,) int64 —
     sorted by (time, camera)
     """
-    if not np.isfinite(duration) or duration <= 0:
-        raise InputError(f"duration must be > 0 seconds, got {duration!r}")
-    n_frames = duration * sum(cam.fps for cam in rig.cameras)
-    if n_frames > MAX_SIMULATED_FRAMES:
-        raise InputError(f"duration {duration:g} s gives {n_frames:.3g} frames; simulate at "
-                         f"most {MAX_SIMULATED_FRAMES:.0e} frames (a 90-minute match of three "
-                         f"30 fps cameras is 4.9e5)")
+    check_duration(rig, duration)
     times, cameras, indices = [], [], []
     for i, cam in enumerate(rig.cameras):
         t = shutter_times(cam, duration)
@@ -98,6 +153,7 @@ def simulate(
     without a candidate. Truth is sampled at every capture time (exactly).
     """
     options = options or SimulationOptions()
+    check_simulation(rig, options)
     duration = motion.duration if duration is None else float(duration)
     rng = np.random.default_rng(options.seed)
     time_s, camera, frame_index = capture_times(rig, duration)

@@ -32,7 +32,8 @@ import numpy as np
 from pslog.errors import InputError, PslogError, RigError
 from pslog.outputs import check_output_path
 from pslog.records import NS, Truth
-from pslog.rig import TIMING_PRESETS, Rig, apply_timing
+from pslog.rig import Rig
+from pslog.rig import timing_label as rig_timing_label
 
 from .detect import BallDetector, HsvRange
 from .status import CameraStatus, StatusBoard
@@ -90,17 +91,9 @@ class RecordSummary:
 
 
 def timing_label(rig: Rig) -> str:
-    """The shutter preset whose offsets the rig has (``sync``, ``typeA``, ``typeB``), else
-    ``custom``."""
-    offsets = np.array([c.offset for c in rig.cameras])
-    for preset in TIMING_PRESETS:
-        try:
-            ref = np.array([c.offset for c in apply_timing(rig, preset).cameras])
-        except RigError:
-            continue
-        if np.allclose(offsets, ref, atol=1e-9):
-            return preset
-    return "custom"
+    """The shutter preset whose offsets the rig has, else ``custom``: one definition for every
+    command, :func:`pslog.rig.timing_label`."""
+    return rig_timing_label(rig)
 
 
 def record(

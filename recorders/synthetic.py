@@ -11,6 +11,7 @@ from pslog.errors import InputError
 from pslog.motion import BALL_RADIUS, Motion, get_motion
 from pslog.records import NS, Truth
 from pslog.rig import TIMING_PRESETS, Rig, apply_timing
+from pslog.simulation import check_exposure
 
 from .detect import HsvRange
 from .record import RecordSummary, record, timing_label
@@ -75,6 +76,7 @@ def record_synthetic(
         raise InputError(f"duration must be > 0 seconds, got {duration!r}")
     options = render or RenderOptions(ball_radius=ball_radius, exposure_s=exposure_s,
                                       noise_sigma=noise_sigma, seed=seed)
+    check_exposure(rig, options.exposure_s)  # a shutter open into the next frame is absurd
     specs = {cam.name: SyntheticSpec(cam, i, motion, options, duration, realtime=not fast)
              for i, cam in enumerate(rig.cameras)}
     metadata = {

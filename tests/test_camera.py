@@ -382,3 +382,37 @@ def test_distort_inverts_undistort_in_pixels():
     plain = Camera("k1", 640, 480, K, np.array([-0.2, 0.0, 0.0, 0.0, 0.0]))
     np.testing.assert_allclose(plain.distort([[320.0, 240.0], [420.0, 240.0]]),
                                [[320.0, 240.0], [320.0 + 500.0 * 0.2 * (1 - 0.2 * 0.04), 240.0]])
+
+
+# ---- hostile values (issue 8) -------------------------------------------------------------
+@pytest.mark.parametrize("dist", [np.zeros(5), np.array([-0.3, 0.1, 0.001, -0.001, -0.02])])
+def test_far_off_pixels_give_a_direction_or_nan_and_never_a_warning(dist):
+    import warnings
+
+    from pslog.rig import builtin_rig
+
+    cam = builtin_rig("paper3").cameras[0].replace(dist=dist)
+    uv = np.array([[1e300, 2.0], [1e308, 1e308], [-1e308, 0.0], [1e154, 1.0], [1e6, 1e6],
+                   [np.nan, 1.0], [320.0, 240.0]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a RuntimeWarning fails the test
+        _, directions = cam.rays(uv)
+        undistorted = cam.undistort(uv)
+    finite = np.all(np.isfinite(directions), axis=1)
+    assert_allclose(np.linalg.norm(directions[finite], axis=1), 1.0)
+    assert finite[-1] and not finite[5]
+    if not np.any(dist):  # a pinhole ray of a far pixel lies along the image's x axis
+        assert_allclose(directions[0], cam.R[0], atol=1e-12)
+    else:  # beyond the lens model's fold-over: no ray, said with NaN
+        assert not finite[:5].any() and np.isnan(undistorted[:5]).all()
+
+
+@pytest.mark.parametrize("key,value,why", [
+    ("width", 99999999999, "beyond any camera"), ("height", 65537, "beyond any camera"),
+    ("fps", 1e7, "fps must be in"), ("name", "a,b", "one of ,"), ("name", "x\ny", "control"),
+])
+def test_absurd_camera_values_are_refused(key, value, why):
+    from pslog.rig import builtin_rig
+
+    with pytest.raises(RigError, match=why):
+        builtin_rig("paper3").cameras[0].replace(**{key: value})

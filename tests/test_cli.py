@@ -54,7 +54,7 @@ def test_unknown_command_and_bad_values_are_one_line_usage_errors():
         assert result.returncode == 2 and name in result.stderr
         assert result.stderr.count("\n") == 1 and "Traceback" not in result.stderr
     result = run("simulate", "--rig", "paper3", "--duration", "1e9", "-o", "x.mcap")
-    assert result.returncode == 1 and "frames" in result.stderr
+    assert result.returncode == 2 and "frames" in result.stderr
 
 
 def test_pslog_error_is_one_line_exit_1(tmp_path):

@@ -6,6 +6,7 @@ import csv
 import json
 
 import numpy as np
+import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
 from pslog import apply_timing, get_motion, simulate
@@ -105,13 +106,16 @@ def test_fuse_without_detections_is_an_error(tmp_path, sim_session, cli):
     assert not (tmp_path / "f.mcap").exists()
 
 
-def test_fuse_refuses_impossible_methods_and_existing_output(tmp_path, sim_session, cli):
+def test_fuse_refuses_impossible_methods_and_existing_output(tmp_path, sim_session, cli,
+                                                            capsys):
     code, _, err = cli("fuse", sim_session.path, "--method", "sync", "-o", tmp_path / "x.mcap")
     assert code == 1 and "needs cameras with a common shutter instant" in err
     assert "Traceback" not in err
     assert not (tmp_path / "x.mcap").exists()
-    code, _, err = cli("fuse", sim_session.path, "--method", "typeC", "-o", tmp_path / "x.mcap")
-    assert code == 1 and "unknown fusion method 'typeC'" in err
+    with pytest.raises(SystemExit) as exit_info:  # a bad command-line value: argparse, exit 2
+        cli("fuse", sim_session.path, "--method", "typeC", "-o", tmp_path / "x.mcap")
+    assert exit_info.value.code == 2
+    assert "unknown fusion method 'typeC'" in capsys.readouterr().err
     existing = tmp_path / "exists.mcap"
     existing.write_bytes(b"keep me")
     code, _, err = cli("fuse", sim_session.path, "--method", "typeA", "-o", existing)
@@ -180,3 +184,25 @@ def test_fuse_with_a_corrected_rig(tmp_path, sim_session, cli):
     code, _, err = cli("fuse", recorded, "--rig", other, "-o", tmp_path / "c.mcap")
     assert code == 1 and "names and order must match" in err
     assert not (tmp_path / "c.mcap").exists()
+
+
+def test_fuse_with_a_rig_of_other_offsets_relabels_the_timing(tmp_path, sim_session, cli):
+    from pslog.rig import apply_timing, save_rig
+
+    save_rig(apply_timing(sim_session.rig, "sync"), tmp_path / "sync.toml")
+    code, _, err = cli("fuse", sim_session.path, "--method", "nearest", "--rig",
+                       tmp_path / "sync.toml", "-o", tmp_path / "f.mcap")
+    assert code == 0, err
+    fused = read_session(tmp_path / "f.mcap")
+    assert fused.timing == "sync" and all(c.offset == 0 for c in fused.rig.cameras)
+    assert cli("fuse", sim_session.path, "--method", "nearest", "-o", tmp_path / "g.mcap")[0] == 0
+    assert read_session(tmp_path / "g.mcap").timing == "typeA"
+
+
+def test_fuse_tolerance_of_a_third_of_a_period_is_a_usage_error(tmp_path, sim_session, cli):
+    code, _, err = cli("fuse", sim_session.path, "--tolerance-ms", "12", "-o", tmp_path / "f.mcap")
+    assert code == 2 and "argument --tolerance-ms" in err and "third of the frame period" in err
+    assert not (tmp_path / "f.mcap").exists()
+    code, _, err = cli("fuse", sim_session.path, "--tolerance-ms", "11", "--method", "sync",
+                       "-o", tmp_path / "f.mcap")
+    assert code == 1 and "no two cameras captured within 11 ms" in err  # type A: no instants

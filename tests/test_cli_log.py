@@ -283,12 +283,12 @@ def bad_files(tmp_path, sim_session):
     (["import", "--rig", "paper3", "--detections", "{d}/badframe.csv", "-o", "{d}/x.mcap"],
      "line 3: bad frame value '1.0': not an integer"),
     (["import", "--rig", "paper3", "--detections", "{d}/hugetime.csv", "-o", "{d}/x.mcap"],
-     "line 2: bad time value '1e999999999': out of the int64 nanosecond range"),
+     "line 2: bad time value '1e999999999': beyond the session clock's range (0 to 9.22e+09 s)"),
     (["import", "--rig", "paper3", "--detections", "{d}/twotimes.csv", "-o", "{d}/x.mcap"],
      "twotimes.csv: lines 2 and 4: camera cam1 frame 0 at two times (0.000000000 s and "
      "0.033300000 s)"),
     (["import", "--rig", "paper3", "--detections", "{d}/twoframes.csv", "-o", "{d}/x.mcap"],
-     "lines 2 and 3: rows of camera cam1 at time 0.000000000 disagree on frame (0 and 1)"),
+     "lines 2 and 3: rows of camera cam1 at time 0.000000000 s disagree on frame (0 and 1)"),
     (["import", "--rig", "paper3", "--detections", "{d}/short.csv", "-o", "{d}/x.mcap"],
      "line 4: expected 4 fields"),
     (["import", "--rig", "paper3", "--detections", "{d}/badhead.csv", "-o", "{d}/x.mcap"],
@@ -329,3 +329,72 @@ def test_writer_used_by_other_commands_keeps_session_readable(tmp_path, rig3):
         w.add_frame(0, 0, 5, uv=[[1.0, 2.0]])
         raise RuntimeError("boom")
     assert read_session(path).detections.n_frames == 1
+
+
+# ---- timing labels agree with the offsets (issue 8) -----------------------------------------
+def test_import_timing_applies_the_preset_and_the_label_follows_the_offsets(tmp_path, cli):
+    det_csv = tmp_path / "det.csv"
+    det_csv.write_text("camera,time,u,v\ncam1,0.0,1,2\ncam2,0.0111,3,4\ncam3,0.0222,5,6\n")
+    typea = tmp_path / "a.mcap"
+    assert cli("import", "--rig", "paper3", "--detections", det_csv, "--timing", "typeA",
+               "-o", typea)[0] == 0
+    s = read_session(typea)
+    assert s.timing == "typeA"
+    assert_allclose([c.offset for c in s.rig.cameras], [0, 1 / 90, 2 / 90])
+    # no --timing: the rig's own offsets, labelled by what they are
+    plain = tmp_path / "p.mcap"
+    assert cli("import", "--rig", "paper3", "--detections", det_csv, "-o", plain)[0] == 0
+    assert read_session(plain).timing == "sync"
+    rig = builtin_rig("paper3")
+    rig = type(rig)(tuple(c.replace(offset=0.004 * i) for i, c in enumerate(rig.cameras)))
+    save_rig(rig, tmp_path / "rig.toml")
+    custom = tmp_path / "c.mcap"
+    assert cli("import", "--rig", tmp_path / "rig.toml", "--detections", det_csv,
+               "-o", custom)[0] == 0
+    s = read_session(custom)
+    assert s.timing == "custom" and s.rig == rig
+
+
+def test_simulate_without_timing_keeps_a_custom_rigs_offsets(tmp_path, cli):
+    rig = builtin_rig("paper3")
+    rig = type(rig)(tuple(c.replace(offset=0.004 * i) for i, c in enumerate(rig.cameras)))
+    save_rig(rig, tmp_path / "rig.toml")
+    out = tmp_path / "s.mcap"
+    code, stdout, stderr = cli("simulate", "--rig", tmp_path / "rig.toml", "--motion", "straight",
+                               "-o", out)
+    assert code == 0, stderr
+    s = read_session(out)
+    assert s.rig == rig and s.timing == "custom" and "timing custom" in stdout
+    # a preset named on the command line sets the offsets, and the label says so
+    out2 = tmp_path / "b.mcap"
+    assert cli("simulate", "--rig", tmp_path / "rig.toml", "--timing", "typeB", "--motion",
+               "straight", "-o", out2)[0] == 0
+    s = read_session(out2)
+    assert s.timing == "typeB"
+    assert_allclose([c.offset for c in s.rig.cameras], [0, 1 / 60, 0])
+
+
+def test_import_accepts_a_byte_order_mark_in_csv_and_rig(tmp_path, cli):
+    det_csv = tmp_path / "det.csv"  # as Excel's "CSV UTF-8" saves it
+    det_csv.write_bytes(b"\xef\xbb\xbfcamera,time,u,v\r\ncam1,0.0,1,2\r\ncam2,0.0111,3,4\r\n")
+    rig_path = tmp_path / "rig.toml"
+    rig_path.write_bytes(b"\xef\xbb\xbf" + builtin_rig("paper3").to_toml().encode())
+    out = tmp_path / "s.mcap"
+    code, _, stderr = cli("import", "--rig", rig_path, "--detections", det_csv, "-o", out)
+    assert code == 0, stderr
+    assert read_session(out).detections.n_candidates == 2
+
+
+@pytest.mark.parametrize("time,why", [
+    ("-1", "before the session clock's zero (times are seconds >= 0)"),
+    ("-0.000000001", "before the session clock's zero"),
+    ("nan", "not a finite number of seconds"), ("-inf", "not a finite number of seconds"),
+    ("1e30", "beyond the session clock's range (0 to 9.22e+09 s)"),
+])
+def test_import_time_errors_speak_seconds_and_name_file_and_line(tmp_path, cli, time, why):
+    det_csv = tmp_path / "det.csv"
+    det_csv.write_text(f"camera,time,u,v\ncam2,0.5,3,4\ncam1,{time},1,2\n")
+    code, _, stderr = cli("import", "--rig", "paper3", "--detections", det_csv,
+                          "-o", tmp_path / "s.mcap")
+    assert code == 1 and f"det.csv: line 3: bad time value '{time}': {why}" in stderr
+    assert " ns" not in stderr and not (tmp_path / "s.mcap").exists()

@@ -11,6 +11,7 @@ from pslog import (
     Camera,
     FusionError,
     Observations,
+    PslogError,
     Rig,
     SimulationOptions,
     apply_timing,
@@ -19,7 +20,17 @@ from pslog import (
     simulate,
 )
 from pslog.evaluation import evaluate
-from pslog.fusion import METHODS, explain_type_a, fuse, fuse_all, prepare, pseudo_stereo_points
+from pslog.fusion import (
+    METHODS,
+    FusionOptions,
+    check_tolerance,
+    default_methods,
+    explain_type_a,
+    fuse,
+    fuse_all,
+    prepare,
+    pseudo_stereo_points,
+)
 from pslog.fusion.stream import StreamFuser
 from pslog.motion import Motion
 
@@ -413,3 +424,81 @@ def test_ray_angle_flags_a_ball_near_the_baseline():
     sync_rig = apply_timing(rig, "sync")
     detections, _ = simulate(sync_rig, get_motion("spiral"))
     assert np.all(fuse(detections, sync_rig, "sync").quality["ray_angle_deg"] > 10)
+
+
+# ---- simultaneity never chains beyond the tolerance (issue 8) ----------------------------
+
+def test_groups_never_span_more_than_the_tolerance():
+    from pslog.fusion.stereo import sync_groups
+
+    # shutters 10 ms apart round-robin over three cameras: chaining neighbours within
+    # 10.5 ms would make the whole second one "simultaneous" group
+    n = 100
+    obs = Observations(np.arange(n, dtype=np.int64) * 10_000_000,
+                       (np.arange(n) % 3).astype(np.int32), np.zeros((n, 2)),
+                       np.arange(n, dtype=np.int64) // 3)
+    group, n_cameras = sync_groups(obs, 3, 0.0105)
+    assert len(n_cameras) == n // 2
+    for g in range(len(n_cameras)):
+        times = obs.time_ns[group == g]
+        assert times[-1] - times[0] <= 10_500_000
+    # runs already within the tolerance are untouched
+    group, n_cameras = sync_groups(obs, 3, 0.001)
+    assert_array_equal(group, np.arange(n))
+    assert_array_equal(n_cameras, np.ones(n))
+
+
+def test_jittered_type_a_with_a_wide_tolerance_is_not_one_instant():
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    detections, _ = simulate(rig, get_motion("spiral"), options=SimulationOptions(
+        jitter_s=0.0005, seed=3))
+    obs = detections.best()
+    from pslog.fusion.stereo import sync_groups
+
+    group, n_cameras = sync_groups(obs, 3, 0.011)  # just below 1/90 s
+    spans = [np.ptp(obs.time_ns[group == g]) for g in range(len(n_cameras))]
+    assert max(spans) <= 11_000_000 and len(n_cameras) > len(obs) / 2
+    assert len(fuse(obs, rig, "sync", FusionOptions(tolerance_s=0.011))) < len(obs) / 2
+
+
+@pytest.mark.parametrize("tolerance_s", [1 / 90, 0.012, 0.5])
+def test_a_tolerance_of_a_third_of_a_period_is_refused_saying_why(tolerance_s):
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    detections, _ = simulate(rig, get_motion("straight"))
+    options = FusionOptions(tolerance_s=tolerance_s)
+    for call in (lambda: fuse(detections, rig, "sync", options),
+                 lambda: fuse_all(detections, rig, ["typeA"], options),
+                 lambda: default_methods(detections, rig, options),
+                 lambda: StreamFuser(rig, "sync", options)):
+        with pytest.raises(FusionError, match="below a third of the frame period"):
+            call()
+    assert check_tolerance(rig, 0.011) == 0.011
+
+
+def test_cameras_at_one_centre_are_refused_for_fusion():
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    same = rig.with_camera(rig.cameras[1].replace(R=rig.cameras[0].R, t=rig.cameras[0].t))
+    detections, _ = simulate(rig, get_motion("straight"))
+    with pytest.raises(PslogError, match="'cam1' and 'cam2' are at the same centre"):
+        fuse(detections, same, "typeA")
+
+
+@pytest.mark.parametrize("timing", ["typeA", "typeB"])
+def test_pixels_far_off_the_image_are_no_detection_and_warn_of_nothing(timing):
+    import warnings
+
+    rig = apply_timing(builtin_rig("paper3"), timing)
+    obs = simulate(rig, get_motion("spiral"), 1.0)[0].best()
+    uv = obs.uv.copy()
+    uv[5:40:3, 0] = 1e300
+    uv[7:30:4, 1] = -1e308
+    damaged = Observations(obs.time_ns, obs.camera, uv, obs.frame_index)
+    methods = default_methods(obs, rig)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a RuntimeWarning fails the test
+        tracks = fuse_all(damaged, rig, methods)
+        explain_type_a(damaged, rig)
+    clean = fuse_all(obs, rig, methods)
+    for method in methods:
+        assert 0 < len(tracks[method]) < len(clean[method])
+        assert np.all(np.isfinite(tracks[method].position_world))

@@ -145,8 +145,13 @@ def test_record_errors(tmp_path, two_camera_rig, capsys):
         (["--synthetic", "--source", clip], "--synthetic"),
         (["--synthetic", "--motion", "loop"], "unknown motion"),
     ]
+    usage = ("--hsv", "unknown motion")  # bad values: argparse's exit 2
     for extra, message in cases:
-        assert main(["record", "--rig", rig, "-o", out, *extra]) == 1
+        try:
+            code = main(["record", "--rig", rig, "-o", out, *extra])
+        except SystemExit as exc:
+            code = exc.code
+        assert code == (2 if message in usage else 1), (extra, code)
         err = capsys.readouterr().err
         assert message in err and "Traceback" not in err, (extra, err)
         assert not Path(out).exists()

@@ -81,8 +81,9 @@ def test_refusals(tmp_path, capsys):
     assert "--force" in capsys.readouterr().err and out.read_bytes() == b"keep"
     assert main(["redetect", str(tmp_path / "none.mcap"), "-o", str(tmp_path / "y.mcap")]) == 1
     assert "none.mcap" in capsys.readouterr().err
-    assert main(["redetect", str(SAMPLE), "-o", str(tmp_path / "y.mcap"), "--hsv", "1,2"]) == 1
-    assert "--hsv" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exit_info:  # a bad command-line value: argparse, exit 2
+        main(["redetect", str(SAMPLE), "-o", str(tmp_path / "y.mcap"), "--hsv", "1,2"])
+    assert exit_info.value.code == 2 and "--hsv" in capsys.readouterr().err
     bare = tmp_path / "bare.mcap"  # detections only, no frames
     with SessionWriter(bare, builtin_rig("paper2")) as w:
         w.add_frame(0, 0, 0, np.array([[1.0, 2.0]]))

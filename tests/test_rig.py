@@ -16,11 +16,14 @@ from pslog.rig import (
     PAPER_VOLUME,
     TIMING_PRESETS,
     Rig,
+    _toml_str,
     apply_timing,
     builtin_rig,
+    check_baselines,
     load_rig,
     resolve_rig,
     save_rig,
+    timing_label,
 )
 
 GOOD_TOML = """\
@@ -119,10 +122,29 @@ def test_to_toml_is_the_documented_shape():
 @pytest.mark.parametrize("name", ["kamera-ü", 'quote " and \\ backslash', "tab\there",
                                   "new\nline", "bell\x07 del\x7f", "😀"])
 def test_round_trip_of_unusual_names(name):
-    cam = builtin_rig("paper2").cameras[0].replace(name=name)
-    rig = Rig((cam,), name)
+    rig = Rig(builtin_rig("paper2").cameras[:1], name)
     loaded = Rig.from_toml(rig.to_toml())
-    assert loaded.name == name and loaded.names == (name,)
+    assert loaded.name == name
+    if name in ("kamera-ü", "😀"):  # camera names may be any text a CSV cell and topic hold
+        cam = builtin_rig("paper2").cameras[0].replace(name=name)
+        assert Rig.from_toml(Rig((cam,)).to_toml()).names == (name,)
+
+
+@pytest.mark.parametrize("name,why", [
+    ("a,b", "one of ,"), ('say "hi"', "one of ,"), ("left/right", "one of ,"),
+    ("new\nline", "control character"), ("tab\there", "control character"),
+    ("bell\x07", "control character"), ("del\x7f", "control character"),
+    ("", "non-empty"), (" cam1", "space"), ("x" * 65, "longer than 64"),
+])
+def test_camera_names_that_break_csv_or_topics_are_refused_naming_file_and_camera(
+        tmp_path, name, why):
+    text = builtin_rig("paper2").to_toml().replace('name = "cam2"', f"name = {_toml_str(name)}")
+    path = tmp_path / "rig.toml"
+    path.write_text(text, encoding="utf-8")
+    with pytest.raises(RigError, match=why) as info:
+        load_rig(path)
+    assert str(path) in str(info.value)
+    assert "\n" not in str(info.value)  # one line, whatever the name holds
 
 
 def test_to_toml_rejects_non_finite():
@@ -322,3 +344,54 @@ def test_resolve_rig_unknown(tmp_path):
     assert "missing.toml" in str(info.value) and "paper3" in str(info.value)
     with pytest.raises(RigError, match="'paper9'"):
         resolve_rig("paper9")
+
+
+# ---- hostile values (issue 8) -------------------------------------------------------------
+
+@pytest.mark.parametrize("key,value,why", [
+    ("width", "99999999999", "beyond any camera"), ("height", "70000", "beyond any camera"),
+    ("fps", "1e300", "fps must be in"),
+    ("K", "[[1e300, 0.0, 320.0], [0.0, 600.0, 240.0], [0.0, 0.0, 1.0]]", "beyond any lens"),
+    ("t", "[1e300, 0.0, 0.0]", "at most"),
+])
+def test_absurd_sizes_are_refused_naming_file_and_camera(tmp_path, key, value, why):
+    lines = [f"{key} = {value}" if line.startswith(f"{key} = ") and i < 12 else line
+             for i, line in enumerate(GOOD_TOML.splitlines())]
+    path = tmp_path / "rig.toml"
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    with pytest.raises(RigError, match=why) as info:
+        load_rig(path)
+    assert str(path) in str(info.value) and "'cam1'" in str(info.value)
+
+
+def test_a_byte_order_mark_is_accepted(tmp_path):
+    path = tmp_path / "rig.toml"
+    path.write_bytes(b"\xef\xbb\xbf" + GOOD_TOML.encode())
+    assert load_rig(path) == Rig.from_toml(GOOD_TOML)
+
+
+def test_cameras_at_one_centre_are_refused_for_stereo_naming_both():
+    rig = builtin_rig("paper3")
+    same = rig.with_camera(rig.cameras[2].replace(R=rig.cameras[0].R, t=rig.cameras[0].t + 1e-5))
+    assert check_baselines(rig) is rig
+    with pytest.raises(RigError, match="'cam1' and 'cam3' are at the same centre") as info:
+        check_baselines(same, "lab.toml")
+    assert str(info.value).startswith("lab.toml: ")
+
+
+def test_timing_label_names_the_preset_the_offsets_are():
+    rig = builtin_rig("paper3")
+    for preset in TIMING_PRESETS:
+        assert timing_label(apply_timing(rig, preset)) == preset
+    assert timing_label(apply_timing(builtin_rig("paper2"), "typeA")) == "typeA"
+    odd = rig.with_camera(rig.cameras[1].replace(offset=0.005))
+    assert timing_label(odd) == "custom"
+
+
+def test_a_rig_of_thousands_of_cameras_is_refused():
+    cam = builtin_rig("paper3").cameras[0]
+    cameras = tuple(cam.replace(name=f"c{i}", t=cam.t + np.array([0.0, 0.0, 0.01 * i]))
+                    for i in range(257))
+    with pytest.raises(RigError, match="at most 256"):
+        Rig(cameras)
+    assert len(check_baselines(Rig(cameras[:256]))) == 256

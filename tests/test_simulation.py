@@ -225,3 +225,25 @@ def test_simulation_options_validation(kwargs, name):
 def test_simulate_rejects_bad_duration():
     with pytest.raises(InputError, match="duration"):
         simulate(_paper3(), get_motion("straight"), duration=-1.0)
+
+
+# ---- absurd values (issue 8) --------------------------------------------------------------
+def test_absurd_simulation_values_are_refused_saying_why():
+    from pslog.simulation import check_duration, check_exposure, check_simulation, shutter_times
+
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    motion = get_motion("straight")
+    for options, why in ((SimulationOptions(jitter_s=1 / 60), "below half a frame period"),
+                         (SimulationOptions(noise_px=1e6), "beyond the image size")):
+        with pytest.raises(InputError, match=why):
+            check_simulation(rig, options)
+        with pytest.raises(InputError, match=why):
+            simulate(rig, motion, options=options)
+    check_simulation(rig, SimulationOptions(jitter_s=0.008, noise_px=640))
+    with pytest.raises(InputError, match="frames"):
+        check_duration(rig, 1e9)
+    # the synthetic recorder's schedule: no 224 GB array attempted
+    with pytest.raises(InputError, match="3e\\+10 frames of camera cam1"):
+        shutter_times(rig.cameras[0], 1e9)
+    with pytest.raises(InputError, match="frame period"):
+        check_exposure(rig, 0.05)

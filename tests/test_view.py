@@ -307,7 +307,9 @@ def test_cli_without_display_explains(session, tmp_path):
 
 def test_cli_bad_values(session, tmp_path, capsys):
     out = str(tmp_path / "x.rrd")
-    assert pslog_main(["view", str(session), "--frames", "every:0", "--save", out]) == 1
+    with pytest.raises(SystemExit) as exit_info:  # a bad command-line value: argparse, exit 2
+        pslog_main(["view", str(session), "--frames", "every:0", "--save", out])
+    assert exit_info.value.code == 2
     assert "frames must be 'all', 'none' or 'every:N'" in capsys.readouterr().err
     assert pslog_main(["view", str(tmp_path / "missing.mcap"), "--save", out]) == 1
     assert "error:" in capsys.readouterr().err

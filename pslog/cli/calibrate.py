@@ -26,6 +26,8 @@ _WORST_SHOWN = 5
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from pslog.camera import MAX_FPS
+    from pslog.cli._common import camera_name, chessboard, number_at_most, positive_int
     parser.epilog = ("examples:\n"
                      "  pslog calibrate --points pts.csv --name cam1 --width 640 --height 480 "
                      "--rig rig.toml\n"
@@ -37,18 +39,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     source = parser.add_mutually_exclusive_group(required=True)
     source.add_argument("--points", metavar="POINTS.csv",
                         help="3D-2D correspondences, header x,y,z,u,v (metres, pixels)")
-    source.add_argument("--chessboard", metavar="COLSxROWS",
+    source.add_argument("--chessboard", metavar="COLSxROWS", type=chessboard,
                         help="chessboard inner corners per row x per column, e.g. 9x6")
-    parser.add_argument("--name", required=True, metavar="NAME",
+    parser.add_argument("--name", required=True, metavar="NAME", type=camera_name,
                         help="camera name in the rig")
     parser.add_argument("--rig", required=True, metavar="RIG.toml",
                         help="rig file to add the camera to (created if missing)")
-    parser.add_argument("--width", type=int, metavar="PX", help="image width, pixels "
+    parser.add_argument("--width", type=positive_int, metavar="PX", help="image width, pixels "
                         "(required for a new camera with --points; checked against the images "
                         "with --chessboard)")
-    parser.add_argument("--height", type=int, metavar="PX", help="image height, pixels (as "
-                        "--width)")
-    parser.add_argument("--fps", type=positive_float,
+    parser.add_argument("--height", type=positive_int, metavar="PX", help="image height, "
+                        "pixels (as --width)")
+    parser.add_argument("--fps", type=number_at_most(MAX_FPS, "fps", "beyond any camera",
+                                                     positive=True),
                         metavar="FPS", help="frame rate, frames per second (default: the "
                                             "rig's value for this camera, else 30)")
     parser.add_argument("--offset", type=nonnegative_float,
@@ -67,7 +70,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                           "(default %(default)s)")
     parser.add_argument("--images", metavar="DIR_OR_VIDEO",
                         help="with --chessboard: folder of images or a video file")
-    parser.add_argument("--max-frames", type=int, default=60,
+    parser.add_argument("--max-frames", type=positive_int, default=60,
                         metavar="N", help="from a video, use at most this many evenly "
                                           "spaced frames (default %(default)s)")
     add_force(parser)

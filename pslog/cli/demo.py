@@ -11,15 +11,16 @@ import argparse
 import time
 from pathlib import Path
 
-from ._common import installed_command, positive_float
+from ._common import installed_command, seconds_at_most
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default=None,
                         metavar="DIR", help="output folder (default: a new "
                                             "demo-output/<date-time>/)")
-    parser.add_argument("--duration", type=positive_float, default=1.5,
-                        metavar="S", help="seconds of throw to record (default %(default)s)")
+    parser.add_argument("--duration", default=1.5, metavar="S",
+                        type=seconds_at_most(60.0, "the demo is one throw"),
+                        help="seconds of throw to record, at most 60 (default %(default)s)")
     parser.add_argument("--realtime", action="store_true",
                         help="render at the cameras' real rate instead of as fast as possible")
     parser.add_argument("--no-view", action="store_true", help="do not build demo.rrd")

@@ -6,9 +6,12 @@ import argparse
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from ._common import fusion_method
+
     parser.add_argument("session", metavar="FUSED.mcap",
                         help="fused session (from 'pslog fuse') with ground truth")
     parser.add_argument("--method", action="append", dest="methods", metavar="METHOD",
+                        type=fusion_method,
                         help="only this method's track (repeat for several; default: every "
                              "track)")
     parser.add_argument("--json", action="store_true", help="print JSON for scripts")

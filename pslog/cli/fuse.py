@@ -4,13 +4,21 @@ from __future__ import annotations
 
 import argparse
 
-from ._common import add_force, check_output, declare_files, nonnegative_float, positive_float
+from ._common import (
+    add_force,
+    check_output,
+    declare_files,
+    fusion_method,
+    nonnegative_float,
+    positive_float,
+    usage_error,
+)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("session", metavar="SESSION.mcap", help="session file to fuse")
     parser.add_argument(
-        "--method", action="append", dest="methods", metavar="METHOD",
+        "--method", action="append", dest="methods", metavar="METHOD", type=fusion_method,
         help="fusion method: sync, nearest, typeA, typeB, linear (repeat for several; "
              "default: every method the session's timing suits)")
     parser.add_argument("-o", "--output", required=True, metavar="FUSED.mcap",
@@ -21,7 +29,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
              "show SESSION.mcap') instead of the recorded calibration; the output carries it")
     parser.add_argument("--tolerance-ms", type=nonnegative_float, default=1.0,
                         metavar="MS", help="detections this close in time count as "
-                                           "simultaneous, milliseconds (default %(default)s)")
+                                           "simultaneous, milliseconds, below a third of the "
+                                           "frame period (default %(default)s)")
     parser.add_argument("--max-gap-ms", type=positive_float, default=None,
                         metavar="MS", help="longest time span a method may bridge, "
                                            "milliseconds (default: 3.5 frame periods)")
@@ -31,9 +40,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from pslog.errors import FusionError, RigError
-    from pslog.fusion import METHODS, FusionOptions, check_method, default_methods, fuse_all
+    from pslog.fusion import (
+        METHODS,
+        FusionOptions,
+        check_method,
+        check_tolerance,
+        default_methods,
+        fuse_all,
+    )
     from pslog.log import copy_session, read_session
-    from pslog.rig import resolve_rig
+    from pslog.rig import check_baselines, resolve_rig
 
     output = check_output(args.output, args.force)
     session = read_session(args.session)
@@ -44,6 +60,11 @@ def run(args: argparse.Namespace) -> int:
             raise RigError(f"{args.rig}: cameras {', '.join(rig.names)} differ from the "
                            f"session's {', '.join(session.rig.names)} (names and order must "
                            f"match)")
+    check_baselines(rig, args.session if args.rig is None else args.rig)
+    try:
+        check_tolerance(rig, args.tolerance_ms / 1e3)
+    except FusionError as exc:
+        return usage_error("fuse", f"argument --tolerance-ms: {exc}")
     options = FusionOptions(tolerance_s=args.tolerance_ms / 1e3,
                             max_gap_s=None if args.max_gap_ms is None else args.max_gap_ms / 1e3)
     observations = session.detections.best()

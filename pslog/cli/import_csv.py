@@ -13,10 +13,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="detections CSV, header camera,time,u,v (optional frame,score); "
                              "time in seconds "
                              "on the common clock, pixels as detected; rows in any order")
-    parser.add_argument("--timing", default="custom",
-                        choices=("custom", "sync", "typeA", "typeB"),
-                        help="label: the shutter preset the rig's offsets follow (the offsets "
-                             "themselves come from the rig; default %(default)s)")
+    parser.add_argument("--timing", default="rig", choices=("sync", "typeA", "typeB", "rig"),
+                        help="set the rig's shutter offsets from a preset (default: 'rig', the "
+                             "rig's own offsets); the session's timing label names the preset "
+                             "the offsets match, else custom")
     parser.add_argument("-o", "--output", required=True, metavar="SESSION.mcap",
                         help="session file to write")
     add_force(parser)
@@ -26,12 +26,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from pslog.log import SessionWriter
     from pslog.log.csvio import read_detections_csv
-    from pslog.rig import resolve_rig
+    from pslog.rig import apply_timing, resolve_rig, timing_label
 
     output = check_output(args.output, args.force)
     rig = resolve_rig(args.rig)
+    if args.timing != "rig":
+        rig = apply_timing(rig, args.timing)
     detections = read_detections_csv(args.detections, rig)
-    with SessionWriter(output, rig, force=args.force, timing=args.timing,
+    with SessionWriter(output, rig, force=args.force, timing=timing_label(rig),
                        source=f"pslog import {args.detections}", on_error="discard",
                        inputs=[args.detections]) as writer:
         writer.add_detections(detections)

@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import argparse
 
-from ._common import nonnegative_float, seed
+from ._common import noise_px, seed
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("table", choices=["table1", "table2"],
                         help="table1 (simulation) or table2 (turntable)")
-    parser.add_argument("--noise-px", type=nonnegative_float, default=None,
+    parser.add_argument("--noise-px", type=noise_px, default=None,
                         metavar="PX", help="detection noise, pixels (default: 0 for table1, "
                                            "1.0 for table2)")
     parser.add_argument("--seed", type=seed, default=0, metavar="N",

@@ -10,8 +10,13 @@ from pslog.cli._common import (
     add_rig,
     check_output,
     declare_files,
-    nonnegative_float,
+    exposure_s,
+    hsv_box,
+    int_in,
+    motion_name,
+    number_at_most,
     positive_float,
+    positive_int,
     seed,
     source_files,
 )
@@ -74,7 +79,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--timing", choices=("sync", "typeA", "typeB"),
                         help="set the rig's shutter offsets from a preset (default: the "
                              "rig's own offsets)")
-    parser.add_argument("--motion", default="throw",
+    parser.add_argument("--motion", default="throw", type=motion_name,
                         metavar="MOTION", help="synthetic ball motion: straight, spiral, "
                                                "fall, turntable, throw (default %(default)s)")
     parser.add_argument("--fast", action="store_true",
@@ -82,20 +87,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--duration", type=positive_float, metavar="S",
                         help="stop after S seconds of session time (synthetic default: the "
                              "motion's duration; otherwise until the sources end or Ctrl-C)")
-    parser.add_argument("--noise", type=nonnegative_float, default=2.0, metavar="SIGMA",
+    parser.add_argument("--noise", default=2.0, metavar="SIGMA",
+                        type=number_at_most(255.0, "levels", "the whole 8-bit range"),
                         help="synthetic sensor noise, standard deviation in 8-bit levels "
                              "(default %(default)s)")
-    parser.add_argument("--ball-radius", type=positive_float, default=0.0215, metavar="M",
+    parser.add_argument("--ball-radius", default=0.0215, metavar="M",
+                        type=number_at_most(1.0, "m", "a ball, not a wall", positive=True),
                         help="synthetic ball radius in metres (default %(default)s, a golf "
                              "ball)")
-    parser.add_argument("--exposure", type=nonnegative_float, default=0.004, metavar="S",
+    parser.add_argument("--exposure", type=exposure_s, default=0.004, metavar="S",
                         help="synthetic exposure time in seconds, for motion blur "
                              "(default %(default)s; 0 for none)")
     parser.add_argument("--seed", type=seed, default=0, metavar="N",
                         help="synthetic random seed (default %(default)s)")
     parser.add_argument("--no-frames", action="store_true",
                         help="store detections only, not the JPEG frames")
-    parser.add_argument("--jpeg-quality", type=int, default=90, metavar="Q",
+    parser.add_argument("--jpeg-quality", type=int_in(1, 100), default=90, metavar="Q",
                         help="JPEG quality of stored frames, 1..100 (default %(default)s)")
     add_detector_arguments(parser)
     add_force(parser)
@@ -106,10 +113,10 @@ def add_detector_arguments(parser: argparse.ArgumentParser) -> None:
     """``--hsv`` and ``--max-candidates`` (shared with ``pslog redetect``)."""
     from recorders.detect import HsvRange
 
-    parser.add_argument("--hsv", metavar="H1,H2,S1,S2,V1,V2",
+    parser.add_argument("--hsv", metavar="H1,H2,S1,S2,V1,V2", type=hsv_box,
                         help="ball colour as an HSV box hmin,hmax,smin,smax,vmin,vmax "
                              f"(default {HsvRange().text()}, an orange ball)")
-    parser.add_argument("--max-candidates", type=int, default=5, metavar="K",
+    parser.add_argument("--max-candidates", type=positive_int, default=5, metavar="K",
                         help="ball candidates kept per frame, best first "
                              "(default %(default)s)")
 

@@ -15,6 +15,7 @@ Frames recorded without an image (--no-frames) cannot be re-detected.
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from pslog.cli._common import positive_int
     from pslog.cli.record import add_detector_arguments
 
     parser.description = DESCRIPTION
@@ -24,7 +25,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("-o", "--output", required=True, metavar="SESSION.mcap",
                         help="new session file to write")
     add_detector_arguments(parser)
-    parser.add_argument("--workers", type=int, default=None, metavar="N",
+    parser.add_argument("--workers", type=positive_int, default=None, metavar="N",
                         help="processes decoding and detecting (default: all cores for "
                              "large sessions)")
     add_force(parser)

@@ -12,9 +12,11 @@ from ._common import (
     check_output,
     declare_files,
     fraction,
+    noise_px,
     nonnegative_float,
     positive_float,
     seed,
+    usage_error,
 )
 
 _TIMINGS = ("sync", "typeA", "typeB", "rig")
@@ -24,19 +26,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     from pslog.motion import MOTIONS
 
     add_rig(parser)
-    parser.add_argument("--timing", choices=_TIMINGS, default="typeA",
-                        help="shutter preset, or 'rig' for the rig's own offsets "
-                             "(default %(default)s)")
+    parser.add_argument("--timing", choices=_TIMINGS, default="rig",
+                        help="set the rig's shutter offsets from a preset (default: 'rig', the "
+                             "rig's own offsets; the built-in rigs' are all zero, i.e. sync)")
     parser.add_argument("--motion", choices=list(MOTIONS), default="spiral",
                         help="ball motion (default %(default)s)")
     parser.add_argument("--duration", type=positive_float, default=None, metavar="S",
                         help="seconds of motion (default: the motion's natural duration)")
-    parser.add_argument("--noise-px", type=nonnegative_float, default=0.0, metavar="PX",
-                        help="Gaussian detection noise per pixel axis, pixels "
-                             "(default %(default)s)")
+    parser.add_argument("--noise-px", type=noise_px, default=0.0, metavar="PX",
+                        help="Gaussian detection noise per pixel axis, pixels, "
+                             "at most 100 (default %(default)s)")
     parser.add_argument("--jitter", type=nonnegative_float, default=0.0, metavar="S",
                         help="standard deviation of shutter times around the schedule, "
-                             "seconds (default %(default)s)")
+                             "seconds, below half a frame period (default %(default)s)")
     parser.add_argument("--drop-rate", type=fraction, default=0.0, metavar="F",
                         help="fraction of frames lost entirely (default %(default)s)")
     parser.add_argument("--miss-rate", type=fraction, default=0.0, metavar="F",
@@ -50,22 +52,37 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from pslog.errors import InputError
     from pslog.log import SessionWriter
     from pslog.motion import get_motion
     from pslog.records import NS
-    from pslog.rig import apply_timing, resolve_rig
-    from pslog.simulation import SimulationOptions, simulate
+    from pslog.rig import apply_timing, resolve_rig, timing_label
+    from pslog.simulation import (
+        SimulationOptions,
+        check_duration,
+        check_jitter,
+        check_noise,
+        simulate,
+    )
 
     output = check_output(args.output, args.force)
     rig = resolve_rig(args.rig)
-    timing = "custom" if args.timing == "rig" else args.timing
     if args.timing != "rig":
         rig = apply_timing(rig, args.timing)
+    timing = timing_label(rig)  # the label always says what the offsets are
     motion = get_motion(args.motion)
     options = SimulationOptions(noise_px=args.noise_px, jitter_s=args.jitter,
                                 drop_rate=args.drop_rate, miss_rate=args.miss_rate,
                                 seed=args.seed)
     duration = motion.duration if args.duration is None else args.duration
+    # command-line values too large for this rig: exit 2, as argparse's own refusals
+    for option, check, value in (("--jitter", check_jitter, args.jitter),
+                                 ("--noise-px", check_noise, args.noise_px),
+                                 ("--duration", check_duration, duration)):
+        try:
+            check(rig, value)
+        except InputError as exc:
+            return usage_error("simulate", f"argument {option}: {exc}")
     detections, truth = simulate(rig, motion, duration, options)
     detections, truth, n_early = drop_before_zero(detections, truth)
     settings = {"motion": motion.name, "duration_s": repr(float(duration)),

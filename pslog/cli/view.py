@@ -14,6 +14,9 @@ from ._common import add_force, check_output, declare_files, installed_command, 
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from viewers.data import FramesChoice
+
+    from ._common import checked_by, port
     parser.add_argument("sessions", nargs="+", metavar="SESSION.mcap",
                         help="session MCAP, then optionally fused copies of it (pslog fuse "
                              "output) whose tracks are shown too")
@@ -21,16 +24,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="tracks to show, comma-separated; a fusion method no file holds is "
                              "fused on the fly (default: every stored track, else typeA)")
     parser.add_argument("--frames", default="all", metavar="all|none|every:N",
+                        type=checked_by(FramesChoice.parse, "frames"),
                         help="recorded images to include (default %(default)s; every:N keeps "
                              "frames whose index is a multiple of N)")
     parser.add_argument("--start", type=nonnegative_float, metavar="S",
                         help="start, seconds after the session's first frame")
     parser.add_argument("--end", type=nonnegative_float, metavar="S",
                         help="end, seconds after the session's first frame")
-    parser.add_argument("--web-port", type=int, default=9090,
+    parser.add_argument("--web-port", type=port, default=9090,
                         metavar="PORT", help="port of the web viewer with --serve "
                                              "(default %(default)s)")
-    parser.add_argument("--grpc-port", type=int, default=9876,
+    parser.add_argument("--grpc-port", type=port, default=9876,
                         metavar="PORT", help="port of the data server with --serve "
                                              "(default %(default)s)")
     add_force(parser)

@@ -50,7 +50,8 @@ class FusionOptions:
     Attributes
     ----------
     tolerance_s : float, detections this close in time count as simultaneous (sync, typeB,
-        linear), seconds
+        linear), seconds; no group spans more, and the methods refuse a tolerance of a third
+        of the rig's shortest frame period or more (:func:`check_tolerance`)
     max_gap_s : float or None, longest time span a method may bridge (brackets, predictions,
         pairing); None: 3.5 frame periods of the slowest camera
     """
@@ -63,6 +64,25 @@ class FusionOptions:
             raise FusionError(f"tolerance must be >= 0 seconds, got {self.tolerance_s!r}")
         if self.max_gap_s is not None and not self.max_gap_s > 0:
             raise FusionError(f"max gap must be > 0 seconds, got {self.max_gap_s!r}")
+
+
+def check_tolerance(rig: Rig, tolerance_s: float) -> float:
+    """``tolerance_s`` if it is below a third of the shortest frame period of ``rig``, else
+    :class:`FusionError` saying why.
+
+    Detections within the tolerance count as one instant. Type-A shutters of three cameras
+    are a third of a period apart: a tolerance that wide would take distinct shutters for
+    simultaneous ones and triangulate a moving ball seen at different times.
+    """
+    fastest = max(rig.cameras, key=lambda c: c.fps)
+    limit = fastest.frame_period / 3
+    if not 0 <= tolerance_s < limit:
+        raise FusionError(
+            f"tolerance {tolerance_s * 1e3:g} ms must be below a third of the frame period "
+            f"({limit * 1e3:.4g} ms at {fastest.fps:g} fps, camera {fastest.name}): shutters "
+            f"that far apart are distinct instants (type-A shutters of three cameras are a "
+            f"third of a period apart), not simultaneous ones")
+    return tolerance_s
 
 
 def check_method(method: str) -> str:
@@ -83,6 +103,7 @@ def default_methods(
     options = options or FusionOptions()
     if isinstance(observations, Detections):
         observations = observations.best()
+    check_tolerance(rig, options.tolerance_s)
     _, n_cameras = sync_groups(observations, len(rig), options.tolerance_s)
     shared, alone = bool(np.any(n_cameras >= 2)), bool(np.any(n_cameras == 1))
     usable = {"sync": shared, "nearest": alone, "typeA": alone,
@@ -114,6 +135,7 @@ def fuse(
         observations = observations.best()
     if len(rig) < 2:
         raise FusionError(f"fusion needs at least two cameras; rig has {len(rig)}")
+    check_tolerance(rig, options.tolerance_s)
     prep = prepared if prepared is not None else prepare(observations, rig)
     max_gap_s = options.max_gap_s or default_max_gap_s(rig)
     if method == "sync":
@@ -136,6 +158,7 @@ def fuse_all(
         observations = observations.best()
     if len(rig) < 2:
         raise FusionError(f"fusion needs at least two cameras; rig has {len(rig)}")
+    check_tolerance(rig, (options or FusionOptions()).tolerance_s)
     prep = prepare(observations, rig)
     return {m: fuse(observations, rig, m, options, prepared=prep) for m in methods}
 
@@ -153,6 +176,6 @@ def explain_type_a(
 
 __all__ = [
     "METHODS", "FusionOptions", "Prepared", "PseudoStereoPoints", "TypeAConstruction",
-    "check_method", "default_methods", "explain_type_a", "fuse", "fuse_all", "prepare",
-    "pseudo_stereo_points",
+    "check_method", "check_tolerance", "default_methods", "explain_type_a", "fuse", "fuse_all",
+    "prepare", "pseudo_stereo_points",
 ]

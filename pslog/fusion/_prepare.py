@@ -9,7 +9,10 @@ import numpy as np
 from ..errors import FusionError
 from ..geometry import fundamental_matrices
 from ..records import NS, Observations
-from ..rig import Rig
+from ..rig import Rig, check_baselines
+
+#: Pixels farther than this many image sizes from the image are not detections.
+_FAR_IMAGES = 10
 
 
 @dataclass(frozen=True, eq=False)
@@ -53,6 +56,7 @@ def prepare(obs: Observations, rig: Rig, F: np.ndarray | None = None) -> Prepare
     ``F`` may pass :func:`pslog.geometry.fundamental_matrices` of ``rig.cameras`` computed
     earlier."""
     n_cams = len(rig)
+    check_baselines(rig)
     if len(obs) and (obs.camera.min() < 0 or obs.camera.max() >= n_cams):
         raise FusionError(f"observation camera index {int(obs.camera.max())} is not in the "
                           f"{n_cams}-camera rig")
@@ -65,6 +69,12 @@ def prepare(obs: Observations, rig: Rig, F: np.ndarray | None = None) -> Prepare
         if len(rows):
             uv_und[rows] = cam.undistort(obs.uv[rows])
             ray_dir[rows] = cam.rays(obs.uv[rows])[1]
+            # a pixel far outside the image (1e300 from a damaged file) is no detection: no
+            # ray, as for a pixel beyond the lens model's fold-over (and no overflow later)
+            far = rows[~np.all(np.abs(obs.uv[rows]) <= _FAR_IMAGES * max(cam.width,
+                                                                        cam.height), axis=1)]
+            uv_und[far] = np.nan
+            ray_dir[far] = np.nan
     centers = np.array([c.center_world for c in rig.cameras])
     if F is None:
         F = fundamental_matrices(rig.cameras)

@@ -12,7 +12,13 @@ from ._prepare import Prepared, latest_row_at_or_before
 
 def sync_groups(obs: Observations, n_cams: int, tolerance_s: float
                 ) -> tuple[np.ndarray, np.ndarray]:
-    """Group observations whose capture times chain within ``tolerance_s``.
+    """Group observations captured within ``tolerance_s`` of each other.
+
+    A group starts at the earliest observation not yet grouped and takes every later one up
+    to ``tolerance_s`` after it, so no group spans more than the tolerance. (Chaining
+    neighbours within the tolerance instead would let evenly spaced shutters a little closer
+    than the tolerance join one by one into a single "simultaneous" group of the whole
+    session.)
 
     Returns
     -------
@@ -21,8 +27,22 @@ def sync_groups(obs: Observations, n_cams: int, tolerance_s: float
     """
     time_ns = obs.time_ns
     tol_ns = round(tolerance_s * NS)
-    starts = np.ones(len(time_ns), dtype=bool)
-    starts[1:] = np.diff(time_ns) > tol_ns
+    n = len(time_ns)
+    starts = np.zeros(n, dtype=bool)
+    if n:
+        # runs separated by more than the tolerance are groups unless they span more than
+        # it (vectorized, the usual case); only those longer runs are split one by one
+        starts[0] = True
+        starts[1:] = np.diff(time_ns) > tol_ns
+        run_start = np.flatnonzero(starts)
+        run_end = np.r_[run_start[1:], n]  # exclusive
+        long = time_ns[run_end - 1] - time_ns[run_start] > tol_ns
+        for a, b in zip(run_start[long].tolist(), run_end[long].tolist(), strict=True):
+            times = time_ns[a:b]
+            i = 0
+            while i < b - a:
+                starts[a + i] = True
+                i = int(np.searchsorted(times, times[i] + tol_ns, side="right"))
     group = np.cumsum(starts) - 1
     n_groups = int(group[-1]) + 1 if len(group) else 0
     seen = np.zeros((n_groups, n_cams), dtype=bool)

@@ -18,7 +18,7 @@ from ..errors import FusionError
 from ..geometry import fundamental_matrices
 from ..records import NS, Observations, Track
 from ..rig import Rig
-from . import FusionOptions, check_method, fuse
+from . import FusionOptions, check_method, check_tolerance, fuse
 from ._prepare import default_max_gap_s, prepare
 
 _IMMEDIATE = ("typeA", "nearest")
@@ -45,6 +45,7 @@ class StreamFuser:
         self.rig = rig
         self.method = check_method(method)
         self.options = options or FusionOptions()
+        check_tolerance(rig, self.options.tolerance_s)
         self._max_gap_s = self.options.max_gap_s or default_max_gap_s(rig)
         # history a new point may reach back to: two bridged gaps plus two tolerances
         self._history_ns = int((2 * self._max_gap_s + 2 * self.options.tolerance_s) * NS) + 1

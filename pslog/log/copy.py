@@ -9,7 +9,7 @@ from pathlib import Path
 from ..errors import InputError
 from ..outputs import check_output_path
 from ..records import Detections, Track
-from ..rig import Rig
+from ..rig import Rig, timing_label
 from . import _mcapio as io
 from . import _schemas as S
 from .reader import _Finished
@@ -57,7 +57,9 @@ def copy_session(src, dst, *, detections: Detections | None = None, tracks: Sequ
     new_rig = rig is not None
     if rig is None:
         rig = old_rig
-    with SessionWriter(dst, rig, force=force, timing=meta.get("timing", "custom"),
+    # a corrected rig may have other shutter offsets: its label says what they are
+    timing = timing_label(rig) if new_rig else meta.get("timing", "custom")
+    with SessionWriter(dst, rig, force=force, timing=timing,
                        source=meta.get("source", ""), metadata=user_meta,
                        start_ns=start_ns, on_error="discard", inputs=[src_path],
                        write_static=new_rig) as w:

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..camera import MAX_IMAGE_SIZE
 from ..errors import InputError
 from ..outputs import replacing_text_file
 from ..records import NS, Detections
@@ -41,27 +42,39 @@ class _Invalid(ValueError):
     """A parsed but invalid cell value; the message is the reason shown to the user."""
 
 
+#: Latest time the session clock holds, seconds (int64 nanoseconds: about 292 years).
+_MAX_TIME_S = Decimal(2**63 - 1) / NS
+
+
 def _time_ns(text: str) -> int:
-    """Exact decimal seconds -> integer ns (half-even rounding below 1 ns)."""
+    """Exact decimal seconds >= 0 -> integer ns (half-even rounding below 1 ns)."""
     try:
         value = Decimal(text)
     except InvalidOperation:
         raise ValueError(text) from None
     if not value.is_finite():
-        raise _Invalid("not a finite number")
+        raise _Invalid("not a finite number of seconds")
     # compare before scaling: a huge exponent would overflow the decimal context
-    if value.copy_abs() >= Decimal(2**63) / NS:  # copy_abs: exact, no context
-        raise _Invalid("out of the int64 nanosecond range")
+    if value.copy_abs() > _MAX_TIME_S:  # copy_abs: exact, no context
+        raise _Invalid(f"beyond the session clock's range (0 to {float(_MAX_TIME_S):.3g} s)")
     ns = int((value * NS).to_integral_value(rounding=ROUND_HALF_EVEN))
-    if abs(ns) >= 2**63:
-        raise _Invalid("out of the int64 nanosecond range")
+    if ns < 0:
+        raise _Invalid("before the session clock's zero (times are seconds >= 0)")
+    if ns >= 2**63:
+        raise _Invalid(f"beyond the session clock's range (0 to {float(_MAX_TIME_S):.3g} s)")
     return ns
 
 
-def _finite(text: str) -> float:
+#: Largest pixel coordinate accepted, pixels: ten times the largest image side.
+_MAX_PIXEL = 10.0 * MAX_IMAGE_SIZE
+
+
+def _pixel(text: str) -> float:
     value = float(text)
     if not np.isfinite(value):
         raise _Invalid("not a finite number")
+    if abs(value) > _MAX_PIXEL:
+        raise _Invalid(f"beyond any image (at most {_MAX_PIXEL:g} pixels)")
     return value
 
 
@@ -79,8 +92,8 @@ def _unit_score(text: str) -> float:
     return value
 
 
-_PARSE = {"time": (_time_ns, "not a number of seconds"), "u": (_finite, "not a number"),
-          "v": (_finite, "not a number"), "frame": (_frame_number, "not an integer"),
+_PARSE = {"time": (_time_ns, "not a number of seconds"), "u": (_pixel, "not a number"),
+          "v": (_pixel, "not a number"), "frame": (_frame_number, "not an integer"),
           "score": (_unit_score, "not a number")}
 
 
@@ -112,7 +125,8 @@ def read_detections_csv(path, rig: Rig) -> Detections:
     """
     path = Path(path)
     try:
-        handle = open(path, newline="", encoding="utf-8")  # closed by the with below
+        # utf-8-sig: Excel's "CSV UTF-8" and Windows editors start with a byte-order mark
+        handle = open(path, newline="", encoding="utf-8-sig")  # closed by the with below
     except FileNotFoundError:
         raise InputError(f"no such file: {path}") from None
     except OSError as exc:
@@ -195,7 +209,7 @@ def _detections_from_rows(rig: Rig, cams, times, uv, frames, scores, path,
             bad = int(disagree[0])
             raise InputError(f"{path}: lines {lines[first_row[cand_frame[bad]]]} and "
                              f"{lines[bad]}: rows of camera {rig.names[cams[bad]]} at time "
-                             f"{format_time(times[bad])} disagree on frame "
+                             f"{format_time(times[bad])} s disagree on frame "
                              f"({frame_index[cand_frame[bad]]} and {frames[bad]})")
         _check_one_time_per_frame(rig, frame_camera, frame_index, frame_time, cand_frame,
                                   lines, path)

@@ -1,0 +1,213 @@
+"""Hostile values and files through the real CLI (issue 8): each case asserts the three
+promises of :mod:`tests.faults.promises` — one line on stderr and no traceback or warning, exit
+1 for bad file contents and 2 for a bad command-line value, and nothing changed or left.
+
+Files saved by Windows tools (a UTF-8 byte-order mark) are accepted instead.
+"""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+
+from pslog.rig import apply_timing, builtin_rig
+
+from .promises import assert_one_line_error, assert_untouched, fingerprint, run_pslog
+
+CSV_OK = "camera,time,u,v\ncam1,0.0,320,240\ncam2,0.0111,300,200\ncam3,0.0222,310,250\n"
+
+
+@pytest.fixture(scope="module")
+def inputs(tmp_path_factory) -> Path:
+    """A folder with a type-A session and a good rig; each test works on a copy."""
+    from pslog import get_motion, simulate
+    from pslog.log import SessionWriter
+    from pslog.rig import save_rig
+
+    folder = tmp_path_factory.mktemp("inputs")
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    detections, truth = simulate(rig, get_motion("spiral"), 1.0)
+    with SessionWriter(folder / "s.mcap", rig, timing="typeA") as writer:
+        writer.add_detections(detections)
+        writer.add_truth(truth)
+    save_rig(rig, folder / "rig.toml")
+    (folder / "det.csv").write_text(CSV_OK)
+    return folder
+
+
+@pytest.fixture
+def work(inputs, tmp_path) -> Path:
+    folder = tmp_path / "w"
+    shutil.copytree(inputs, folder)
+    return folder
+
+
+def _refused(work: Path, code: int, args, contains=()) -> str:
+    """Run ``pslog ARGS`` in ``work`` and assert the three promises; returns the error line."""
+    before = fingerprint(work)
+    line = assert_one_line_error(run_pslog(*args, cwd=work), code, contains=contains)
+    assert_untouched(before, work)
+    return line
+
+
+# ---- files saved by Windows tools are accepted ---------------------------------------------
+
+def test_a_byte_order_mark_in_csv_and_rig_is_accepted(work):
+    bom = b"\xef\xbb\xbf"
+    (work / "bom.csv").write_bytes(bom + CSV_OK.replace("\n", "\r\n").encode())
+    (work / "bom.toml").write_bytes(bom + (work / "rig.toml").read_bytes())
+    run = run_pslog("import", "--rig", "bom.toml", "--detections", "bom.csv", "-o", "i.mcap",
+                    cwd=work)
+    assert run.code == 0 and run.stderr == "", run.stderr
+    run = run_pslog("simulate", "--rig", "bom.toml", "-o", "sim.mcap", cwd=work)
+    assert run.code == 0 and "timing typeA" in run.stdout, run.stderr
+
+
+# ---- rig files: refused with the reason, naming file and camera (exit 1) ------------------
+
+def _rig_with(work: Path, old: str, new: str, count: int = 1) -> str:
+    text = (work / "rig.toml").read_text()
+    assert old in text
+    (work / "bad.toml").write_text(text.replace(old, new, count))
+    return "bad.toml"
+
+
+@pytest.mark.parametrize("old,new,why", [
+    ("width = 640", "width = 99999999999", "width 99999999999 pixels is beyond any camera"),
+    ("height = 480", "height = 1000000", "beyond any camera"),
+    ("fps = 30.0", "fps = 1e300", "fps must be in"),
+    ("K = [[400.0, 0.0,", "K = [[1e-300, 0.0,", "at least 1 pixel"),
+    ('name = "cam2"', 'name = "cam,2"', "camera name 'cam,2' holds one of"),
+    ('name = "cam2"', 'name = "say \\"two\\""', "camera name 'say \"two\"' holds one of"),
+    ('name = "cam2"', 'name = "cam\\n2"', "control character"),
+    ('name = "cam2"', 'name = "cam\\u00072"', "control character"),
+    ('name = "cam2"', 'name = ""', "non-empty"),
+    ('name = "cam2"', 'name = "cam/2"', "holds one of"),
+])
+def test_absurd_rig_values_are_refused(work, old, new, why):
+    rig = _rig_with(work, old, new)
+    for args in (["simulate", "--rig", rig, "-o", "x.mcap"],
+                 ["import", "--rig", rig, "--detections", "det.csv", "-o", "x.mcap"]):
+        _refused(work, 1, args, contains=("bad.toml", why))
+
+
+def test_cameras_at_one_centre_are_refused_for_fusion(work):
+    lines = (work / "rig.toml").read_text().split("\n")
+    cam1_t = next(line for line in lines if line.startswith("t = "))
+    cam1_r = next(line for line in lines if line.startswith("R = "))
+    text = "\n".join(lines)
+    # cam3 given cam1's pose
+    head, cam3 = text.rsplit("[[camera]]", 1)
+    cam3 = "\n".join(cam1_t if line.startswith("t = ") else cam1_r if line.startswith("R = ")
+                     else line for line in cam3.split("\n"))
+    (work / "same.toml").write_text(head + "[[camera]]" + cam3)
+    _refused(work, 1, ["fuse", "s.mcap", "--rig", "same.toml", "-o", "f.mcap"],
+             contains=("same.toml", "'cam1' and 'cam3' are at the same centre"))
+
+
+# ---- CSV cells: times speak seconds, every error names file and line (exit 1) -------------
+
+@pytest.mark.parametrize("cell,why", [
+    ("time=-1", "before the session clock's zero (times are seconds >= 0)"),
+    ("time=nan", "not a finite number of seconds"),
+    ("time=inf", "not a finite number of seconds"),
+    ("time=-inf", "not a finite number of seconds"),
+    ("time=1e30", "beyond the session clock's range (0 to 9.22e+09 s)"),
+    ("u=1e300", "beyond any image"),
+    ("v=-1e300", "beyond any image"),
+    ("u=nan", "not a finite number"),
+])
+def test_hostile_csv_cells_are_refused_naming_file_line_and_value(work, cell, why):
+    key, value = cell.split("=")
+    row = {"time": "0.5", "u": "1", "v": "2", key: value}
+    (work / "bad.csv").write_text(CSV_OK + f"cam1,{row['time']},{row['u']},{row['v']}\n")
+    line = _refused(work, 1, ["import", "--rig", "paper3", "--detections", "bad.csv", "-o",
+                              "x.mcap"],
+                    contains=(f"bad.csv: line 5: bad {key} value '{value}'", why))
+    assert " ns" not in line
+
+
+def test_a_session_with_far_off_pixels_fuses_without_a_warning(work):
+    from pslog.log import SessionWriter, read_session
+
+    session = read_session(work / "s.mcap")
+    detections = session.detections
+    uv = detections.cand_uv.copy()
+    uv[5:40:3, 0] = 1e300
+    uv[7:30:4, 1] = -1e308
+    damaged = type(detections).from_frames(
+        detections.camera_names, detections.frame_time_ns, detections.frame_camera,
+        detections.frame_index, detections.cand_frame, uv, detections.cand_radius,
+        detections.cand_score)
+    with SessionWriter(work / "far.mcap", session.rig, timing="typeA") as writer:
+        writer.add_detections(damaged)
+    run = run_pslog("fuse", "far.mcap", "-o", "f.mcap", cwd=work)
+    assert run.code == 0 and "Warning" not in run.stderr + run.stdout, run.stderr
+    run = run_pslog("eval", "f.mcap", cwd=work)
+    assert "Warning" not in run.stderr + run.stdout, run.stderr
+
+
+# ---- command-line values: argparse's exit 2, one line -------------------------------------
+
+@pytest.mark.parametrize("args,contains", [
+    (["fuse", "s.mcap", "-o", "f.mcap", "--tolerance-ms", "12"],
+     ("--tolerance-ms", "below a third of the frame period")),
+    (["fuse", "s.mcap", "-o", "f.mcap", "--tolerance-ms", "11.2"], "--tolerance-ms"),
+    (["fuse", "s.mcap", "-o", "f.mcap", "--tolerance-ms", "nan"], "--tolerance-ms"),
+    (["fuse", "s.mcap", "-o", "f.mcap", "--method", "typeC"], "unknown fusion method"),
+    (["eval", "s.mcap", "--method", "typeC"], "unknown fusion method"),
+    (["simulate", "--rig", "paper3", "-o", "x.mcap", "--jitter", "0.02"],
+     ("--jitter", "below half a frame period")),
+    (["simulate", "--rig", "paper3", "-o", "x.mcap", "--noise-px", "1e6"], "--noise-px"),
+    (["simulate", "--rig", "rig.toml", "-o", "x.mcap", "--duration", "1e9"], "--duration"),
+    (["simulate", "--rig", "paper3", "-o", "x.mcap", "--duration", "-1"], "--duration"),
+    (["simulate", "--rig", "paper3", "-o", "x.mcap", "--timing", "typeC"], "--timing"),
+    (["import", "--rig", "paper3", "--detections", "det.csv", "-o", "x.mcap", "--timing",
+      "custom"], "--timing"),
+    (["paper", "table1", "--noise-px", "1e6"], "--noise-px"),
+    (["record", "--rig", "paper3", "--synthetic", "-o", "x.mcap", "--exposure", "10"],
+     "--exposure"),
+    (["record", "--rig", "paper3", "--synthetic", "-o", "x.mcap", "--jpeg-quality", "0"],
+     "--jpeg-quality"),
+    (["record", "--rig", "paper3", "--synthetic", "-o", "x.mcap", "--max-candidates", "0"],
+     "--max-candidates"),
+    (["record", "--rig", "paper3", "--synthetic", "-o", "x.mcap", "--hsv", "1,2"], "--hsv"),
+    (["record", "--rig", "paper3", "--synthetic", "-o", "x.mcap", "--motion", "loop"],
+     "--motion"),
+    (["record", "--rig", "paper3", "--synthetic", "-o", "x.mcap", "--noise", "1e9"],
+     "--noise"),
+    (["record", "--rig", "paper3", "--synthetic", "-o", "x.mcap", "--ball-radius", "5"],
+     "--ball-radius"),
+    (["redetect", "s.mcap", "-o", "x.mcap", "--workers", "0"], "--workers"),
+    (["view", "s.mcap", "--frames", "every:0"], "--frames"),
+    (["view", "s.mcap", "--web-port", "99999"], "--web-port"),
+    (["calibrate", "--points", "p.csv", "--name", "a,b", "--rig", "r.toml"], "--name"),
+    (["calibrate", "--points", "p.csv", "--name", "cam1", "--width", "-5", "--rig", "r.toml"],
+     "--width"),
+    (["calibrate", "--chessboard", "1x9", "--images", ".", "--name", "cam1", "--rig",
+      "r.toml"], "--chessboard"),
+    (["demo", "--duration", "1e9", "--out", "demo"], "--duration"),
+])
+def test_bad_command_line_values_are_exit_2(work, args, contains):
+    _refused(work, 2, args, contains=contains)
+
+
+def test_record_exposure_longer_than_a_frame_is_refused_by_the_shared_validator():
+    # record --synthetic takes --exposure below 1 s on the command line; against the rig's
+    # frame period the check is pslog.simulation.check_exposure
+    from pslog.errors import InputError
+    from pslog.simulation import check_exposure
+
+    rig = builtin_rig("paper3")
+    assert check_exposure(rig, 0.004) == 0.004
+    for bad in (0.034, 10.0, -1.0, float("nan")):
+        with pytest.raises(InputError, match="shorter than the frame period"):
+            check_exposure(rig, bad)
+
+
+def test_record_synthetic_exposure_beyond_the_frame_period_is_refused(work):
+    _refused(work, 1, ["record", "--synthetic", "--rig", "paper3", "--fast", "--duration",
+                       "0.1", "--exposure", "0.05", "-o", "x.mcap"],
+             contains=("exposure 0.05 s", "frame period"))
