@@ -471,6 +471,13 @@ def _scan(buf, on_message, validate_crc: bool, scan: Scan) -> Scan:
             scan.stop_reason = f"file ends inside a record (opcode 0x{op:02x})"
             break
         if op not in (OP_DATA_END, OP_FOOTER) and record_plausible(buf, pos, n) is None:
+            if pos == len(MAGIC):
+                # a damaged Header record holds nothing we use (profile, library): go on at
+                # the next intact record (the session metadata)
+                nxt = _resync(buf, pos + 1, n, {}, _has_chunk(buf, n))
+                if nxt < n:
+                    pos = nxt
+                    continue
             scan.stop_reason = "no valid record here"
             break
         try:

@@ -7,6 +7,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 from ..errors import InputError
+from ..outputs import partial_path
 from ..records import Detections, Track
 from ..rig import Rig
 from . import _mcapio as io
@@ -54,6 +55,20 @@ def copy_session(src, dst, *, detections: Detections | None = None, tracks: Sequ
     user_meta["derived_from"] = src_path.name
     user_meta.update(metadata or {})
 
+    existed = dst.exists()
+    try:
+        _copy(src_path, dst, rig, meta, user_meta, start_ns, force, detections, tracks,
+              replace_tracks, new_methods)
+    except BaseException:
+        # a copy cut short (e.g. by a damaged chunk of the source) is no output: remove it
+        partial_path(dst).unlink(missing_ok=True)
+        if not existed:
+            dst.unlink(missing_ok=True)
+        raise
+
+
+def _copy(src_path, dst, rig, meta, user_meta, start_ns, force, detections, tracks,
+          replace_tracks, new_methods) -> None:
     with SessionWriter(dst, rig, force=force, timing=meta.get("timing", "custom"),
                        source=meta.get("source", ""), metadata=user_meta,
                        start_ns=start_ns) as w:
