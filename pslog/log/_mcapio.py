@@ -50,6 +50,9 @@ def check_file(path) -> tuple[Path, int, bool]:
     with open(path, "rb") as f:
         head = f.read(len(MAGIC))
         if head != MAGIC:
+            if _magic_damaged(path):
+                raise LogFormatError(f"{path}: the MCAP magic (bytes 0..7) is damaged; run "
+                                     f"'pslog recover {path} -o FIXED.mcap' to salvage the data")
             raise LogFormatError(f"not an MCAP file: {path}")
         complete = False
         if size >= 2 * len(MAGIC) + 9:
@@ -333,6 +336,17 @@ class Summary:
     channels: dict[int, ChannelRec] = field(default_factory=dict)
     chunks: list[ChunkIndexRec] = field(default_factory=list)
     channel_counts: dict[int, int] = field(default_factory=dict)
+
+
+def summary_span(buf) -> tuple[int, int]:
+    """Byte range of the summary section and footer as the footer states it (for messages)."""
+    n = len(buf)
+    foot = n - len(MAGIC) - 29
+    try:
+        (start,) = _unpack("<Q", buf, foot + 9)
+    except struct.error:
+        return 0, n
+    return (start if len(MAGIC) < start <= foot else max(foot, 0)), n
 
 
 def read_summary(buf) -> Summary | None:

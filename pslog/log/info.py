@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import LogFormatError
 from ..records import NS, Detections
 from . import _mcapio as io
 from . import _schemas as S
 
+_UNFINISHED = "the recording did not finish"
 #: a file modified this recently may still be being written by a recorder, seconds
 RECENT_S = 10.0
 
@@ -108,13 +110,13 @@ def session_info(path) -> dict:
     """
     path, size, complete = io.check_file(path)
     if not complete:
-        return _scanned_info(path, size, "the recording did not finish")
+        return _scanned_info(path, size, _UNFINISHED)
     from .reader import DamagedSummaryError, _Finished, _read
 
     try:
         f = _Finished(path)
     except DamagedSummaryError as exc:
-        return _scanned_info(path, size, f"the summary section is damaged ({exc.reason})")
+        return _scanned_info(path, size, exc.reason)
     with f:
         counts = dict(sorted(f.counts.items()))
         damaged = f.check_chunks()
@@ -169,12 +171,17 @@ def _scanned_info(path, size: int, problem: str) -> dict:
         last_ns[cid] = max(last_ns.get(cid, t), t)
 
     scan = io.salvage_file(path, count)
+    if scan.damaged and not any(name == S.SESSION_METADATA for name, _ in scan.metadata):
+        raise LogFormatError(f"{path}: {problem}, and its session metadata (rig, cameras) is "
+                             f"lost (damaged or cut at byte {scan.damaged[0].start}); nothing "
+                             f"can be recovered")
     io.session_metadata(scan.metadata, path)
     name = {c: scan.channels[c].topic if c in scan.channels else f"channel {c}" for c in topics}
     named = {name[c]: n for c, n in topics.items()}
     last = max(last_ns.values(), default=None)
     age = max(time.time() - path.stat().st_mtime, 0.0)
-    recording = age < RECENT_S or path.name.endswith(".partial")
+    # a finished file (closing magic written) is not being recorded, whatever its age
+    recording = (problem == _UNFINISHED and (age < RECENT_S or path.name.endswith(".partial")))
     damaged = [describe_damage(d, scan.channels) for d in scan.damaged]
     recover = f"run 'pslog recover {path} -o FIXED.mcap' to salvage the intact records"
     return {

@@ -86,8 +86,10 @@ class _Finished:
             # the summary's own CRC first: a damaged index would send reads astray
             with mmap.mmap(self.file.fileno(), 0, access=mmap.ACCESS_READ) as buf:
                 checked = io.read_summary(buf)
+                start, end = io.summary_span(buf)
             if checked is None:
-                raise LogFormatError("summary section or footer damaged")
+                raise LogFormatError(f"summary section or footer, bytes {start}..{end}, fails "
+                                     f"its checks")
             reader = SeekingReader(self.file)
             summary = reader.get_summary()
             metadata = [(m.name, m.metadata) for m in reader.iter_metadata()]
