@@ -586,12 +586,14 @@ def _salvage(buf, on_message, scan: Scan) -> None:
             elif op == OP_CHUNK and pos + 9 + 40 <= limit:
                 # a chunk whose length field reaches past the file: a cut, or a damaged length
                 nxt = _resync(buf, pos + 1, limit, indexed, chunked)
-                scan.damaged.append(_chunk_damage(buf, pos, nxt, "chunk cut short or its "
-                                                  "length damaged", indexed, limit))
+                reason = ("file ends inside this chunk" if _cut_at(buf, pos, nxt, limit)
+                          else "chunk header damaged")
+                scan.damaged.append(_chunk_damage(buf, pos, nxt, reason, indexed, limit))
             else:
                 nxt = _resync(buf, pos + 1, limit, indexed, chunked)
-                scan.damaged.append(Damage(pos, nxt, "no valid record" if nxt < limit or
-                                           pos + 9 <= limit else "file ends inside a record"))
+                reason = ("file ends inside a record" if _cut_at(buf, pos, nxt, limit)
+                          else "no valid record")
+                scan.damaged.append(Damage(pos, nxt, reason))
             pos = nxt
             continue
         if op in (OP_DATA_END, OP_FOOTER):
@@ -633,6 +635,14 @@ def _salvage(buf, on_message, scan: Scan) -> None:
             damage.counts = _trailing_index_counts(buf, damage.start, damage.end, limit)
     if scan.damaged and not scan.finished:
         scan.stop_reason = scan.damaged[-1].reason
+
+
+def _cut_at(buf, pos: int, nxt: int, limit: int) -> bool:
+    """Whether the unreadable part from ``pos`` is a record cut by the end of the file (its
+    length reaches past the end, and nothing intact follows)."""
+    if nxt < limit:
+        return False
+    return pos + 9 > limit or pos + 9 + _unpack("<Q", buf, pos + 1)[0] > limit
 
 
 def _trailing_index_counts(buf, start: int, end: int, limit: int) -> dict[int, int] | None:

@@ -192,8 +192,8 @@ def describe_damage(damage: io.Damage, channels: dict) -> dict:
 
 def damage_line(d: dict) -> str:
     """One line for users about a :func:`describe_damage` dict."""
-    what = "damaged chunk" if d["chunk"] else "unreadable bytes"
-    text = f"{what} at bytes {d['start']}..{d['end']}"
+    what = "damaged chunk at bytes" if d["chunk"] else "unreadable bytes"
+    text = f"{what} {d['start']}..{d['end']}"
     if d["start_ns"] is not None and d["end_ns"] is not None and d["end_ns"] >= d["start_ns"]:
         text += f", t = {d['start_ns'] / NS:.3f} .. {d['end_ns'] / NS:.3f} s"
     if d["messages"]:
