@@ -587,3 +587,26 @@ def test_readers_name_the_byte_offset_of_a_damaged_chunk(tmp_path, rig3):
     window = [(i.camera, i.time_ns) for i in iter_images(path, cameras=[1], start_ns=33_333_333,
                                                          end_ns=100_000_000)]
     assert window == [(1, 44_444_444), (1, 77_777_777)]
+
+
+def test_recover_without_summary_rescues_channels_of_a_damaged_chunk(tmp_path):
+    """The sample's first image chunk defines the image channels; with no summary to repeat
+    them and that chunk damaged, the channel records zstd kept verbatim in it are still read
+    (and pslog's schema regenerated), so later intact chunks keep their cam2 images; the
+    messages whose channel is really lost are counted, not silently dropped."""
+    from pslog.log import _mcapio as io
+
+    data = (Path(__file__).parents[1] / "samples" / "throw.mcap").read_bytes()
+    summary = io.read_summary(data)
+    first_images = summary.chunks[2]
+    damaged = bytearray(data[:summary.start])  # cut where the summary starts
+    damaged[first_images.offset + first_images.length // 2] ^= 0xFF
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(bytes(damaged))
+    report = recover_session(bad, tmp_path / "fixed.mcap")
+    assert [d["start"] for d in report["damaged"]] == [first_images.offset]
+    assert report["damaged"][0]["messages"]["/camera/cam2/image"] == 12
+    assert report["topics"]["/camera/cam2/image"] == 45 - 12
+    assert report["detection_frames"] == 135 and report["truth_points"] == 135
+    assert report["unknown_channel_messages"] > 0
+    assert read_session(tmp_path / "fixed.mcap").n_images == 33

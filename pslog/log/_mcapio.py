@@ -521,6 +521,7 @@ def _scan(buf, on_message, validate_crc: bool, scan: Scan) -> Scan:
 # between chunks, followed by a length below 2^40 (a damaged region's random bytes rarely
 # match; each match is then checked in full)
 _RESYNC = re.compile(rb"[\x03\x04\x06\x0c\x0f][\x00-\xff]{5}\x00\x00\x00")
+_DEFINITION = re.compile(rb"[\x03\x04][\x00-\xff]{5}\x00\x00\x00")
 _MESSAGE_INDEX = re.compile(rb"\x07[\x00-\xff]{5}\x00\x00\x00")
 _RESYNC_CHUNK = re.compile(rb"\x06[\x00-\xff]{5}\x00\x00\x00")
 
@@ -569,6 +570,12 @@ def _salvage(buf, on_message, scan: Scan) -> None:
         for k, v in summary.channels.items():
             scan.channels.setdefault(k, v)
     handle = _handler(scan, on_message)
+
+    def skip(damage: Damage) -> None:
+        scan.damaged.append(damage)
+        # channels a damaged part defined, searched for at once: the messages of later
+        # chunks on them are still to come
+        _rescue_definitions(buf, damage.start, damage.end, scan)
     # Message records outside chunks exist only in unchunked files; in a chunked file a
     # "message" met outside a chunk is the uncompressed literal of a damaged chunk's contents
     # (zstd stores JPEG bytes nearly verbatim), which may be cut by a block header
@@ -581,19 +588,19 @@ def _salvage(buf, on_message, scan: Scan) -> None:
             index = indexed.get(pos)
             if index is not None:  # the index knows where this chunk ends
                 nxt = pos + index.length
-                scan.damaged.append(_chunk_damage(buf, pos, nxt, "chunk header damaged",
+                skip(_chunk_damage(buf, pos, nxt, "chunk header damaged",
                                                   indexed, limit))
             elif op == OP_CHUNK and pos + 9 + 40 <= limit:
                 # a chunk whose length field reaches past the file: a cut, or a damaged length
                 nxt = _resync(buf, pos + 1, limit, indexed, chunked)
                 reason = ("file ends inside this chunk" if _cut_at(buf, pos, nxt, limit)
                           else "chunk header damaged")
-                scan.damaged.append(_chunk_damage(buf, pos, nxt, reason, indexed, limit))
+                skip(_chunk_damage(buf, pos, nxt, reason, indexed, limit))
             else:
                 nxt = _resync(buf, pos + 1, limit, indexed, chunked)
                 reason = ("file ends inside a record" if _cut_at(buf, pos, nxt, limit)
                           else "no valid record")
-                scan.damaged.append(Damage(pos, nxt, reason))
+                skip(Damage(pos, nxt, reason))
             pos = nxt
             continue
         if op in (OP_DATA_END, OP_FOOTER):
@@ -611,7 +618,7 @@ def _salvage(buf, on_message, scan: Scan) -> None:
                 handle(op, pos + 9, end, buf)
         except (LogFormatError, struct.error, UnicodeDecodeError) as exc:
             if op != OP_CHUNK:
-                scan.damaged.append(Damage(pos, end, f"opcode 0x{op:02x}: {exc}"))
+                skip(Damage(pos, end, f"opcode 0x{op:02x}: {exc}"))
                 pos = end
                 continue
             index = indexed.get(pos)
@@ -622,7 +629,7 @@ def _salvage(buf, on_message, scan: Scan) -> None:
             if index is None and end < limit and record_plausible(
                     buf, end, limit, messages=not chunked) is None:
                 end = _resync(buf, pos + 1, limit, indexed, chunked)
-            scan.damaged.append(_chunk_damage(buf, pos, end, str(exc), indexed, limit))
+            skip(_chunk_damage(buf, pos, end, str(exc), indexed, limit))
             pos = end
             continue
         pos = end
@@ -635,6 +642,30 @@ def _salvage(buf, on_message, scan: Scan) -> None:
             damage.counts = _trailing_index_counts(buf, damage.start, damage.end, limit)
     if scan.damaged and not scan.finished:
         scan.stop_reason = scan.damaged[-1].reason
+
+
+def _rescue_definitions(buf, start: int, end: int, scan: Scan) -> None:
+    """Schema and Channel records lying verbatim in a damaged part: zstd stores the start of
+    a chunk and incompressible bytes as literals, so the channels a damaged chunk defined
+    often survive there, and with them the messages of intact chunks on those channels.
+    A record must fill its length exactly and carry printable names; known ids are kept."""
+    pos = start
+    while (match := _DEFINITION.search(buf, pos, end)) is not None:
+        where = pos = match.start()
+        pos += 1
+        if record_plausible(buf, where, end) is None:
+            continue
+        try:
+            if buf[where] == OP_CHANNEL:
+                rec = parse_channel(buf, where + 9)
+                if rec.topic.isprintable() and rec.encoding.isprintable() and rec.topic:
+                    scan.channels.setdefault(rec.id, rec)
+            else:
+                rec = parse_schema(buf, where + 9)
+                if rec.name.isprintable() and rec.encoding.isprintable() and rec.name:
+                    scan.schemas.setdefault(rec.id, rec)
+        except (struct.error, UnicodeDecodeError):
+            continue
 
 
 def _cut_at(buf, pos: int, nxt: int, limit: int) -> bool:

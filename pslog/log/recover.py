@@ -4,9 +4,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..errors import InputError, LogFormatError
+from ..errors import InputError, LogFormatError, PslogError
 from ..outputs import check_output_path, partial_path
 from ..records import NS
+from ..rig import Rig
 from . import _mcapio as io
 from . import _schemas as S
 
@@ -109,7 +110,7 @@ def recover_session(src, dst, *, force: bool = False) -> dict:
                 unknown[0] += 1
                 return  # its channel record was lost with a damaged part
             if channel.schema_id and channel.schema_id not in schema_ids:
-                schema = scan.schemas.get(channel.schema_id)
+                schema = scan.schemas.get(channel.schema_id) or _pslog_schema(channel.topic)
                 if schema is None:
                     unknown[0] += 1
                     return
@@ -129,13 +130,18 @@ def recover_session(src, dst, *, force: bool = False) -> dict:
         io.salvage_file(src, copy, scan=scan, tolerate_magic=True)
         size = src.stat().st_size
         try:
-            io.session_metadata(scan.metadata, src)  # refuse to "recover" something not ours
+            meta = io.session_metadata(scan.metadata, src)  # refuse to "recover" what is not ours
         except LogFormatError:
             if scan.damaged and not scan.metadata:
                 raise LogFormatError(
                     f"{src}: the session metadata (rig, cameras) was in the damaged part at "
                     f"byte {scan.damaged[0].start}; nothing usable can be recovered") from None
             raise
+        try:  # records outside chunks have no CRC: a damaged rig shows only when parsed
+            Rig.from_toml(meta.get("rig_toml", ""), source="the rig")
+        except PslogError as exc:
+            raise LogFormatError(f"{src}: the session metadata (rig, cameras) is damaged "
+                                 f"({exc}); nothing usable can be recovered") from None
         for name, data in scan.metadata:
             writer.add_metadata(name, data)
         writer.finish()
@@ -172,6 +178,27 @@ def recover_session(src, dst, *, force: bool = False) -> dict:
                         "only the summary section was damaged; no data lost" if complete
                         else tail + ("; ..." if len(damaged) > 3 else "")),
     }
+
+
+def _pslog_schema(topic: str) -> io.SchemaRec | None:
+    """The schema of a pslog topic, for a channel whose schema record was lost with a damaged
+    part (pslog's schemas are fixed by the topic)."""
+    camera = S.parse_camera_topic(topic)
+    kind = camera[1] if camera else None
+    message = {"calibration": S.CameraCalibration, "transform": S.FrameTransform,
+               "image": S.CompressedImage, "detections": S.DetectionFrame}.get(kind)
+    if topic == S.TRUTH_TOPIC:
+        message = S.TruthPoint
+    elif topic == S.EVENTS_TOPIC:
+        message = S.Log
+    elif S.parse_track_topic(topic):
+        message = S.TrackPoint
+    elif topic.startswith("/tracks/") and topic.endswith("/scene"):
+        message = S.SceneUpdate
+    if message is None:
+        return None
+    return io.SchemaRec(0, message.DESCRIPTOR.full_name, S.PROTOBUF,
+                        S.file_descriptor_set(message))
 
 
 def describe_damage(damage: io.Damage, channels: dict) -> dict:
