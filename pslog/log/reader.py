@@ -4,6 +4,10 @@ unless asked (:func:`iter_images`).
 Speed: the summary's chunk index says which chunks hold which channels, so image chunks are
 never read; detection chunks are decompressed whole and their messages sliced out with
 ``struct`` (see ``_mcapio``) and decoded with the generated protobuf class directly.
+
+Damage: the summary is checked against its CRC before it is trusted, and every chunk read is
+checked (lengths, decompression, CRC, framing); a damaged one is a one-line LogFormatError
+naming the file, the byte offset and ``pslog recover`` (which keeps every intact chunk).
 """
 
 from __future__ import annotations
@@ -128,16 +132,18 @@ class _Finished:
     def read_chunk(self, index) -> bytes:
         """The checked, decompressed records of the chunk of a ChunkIndex; a one-line
         LogFormatError naming the byte offset (and ``pslog recover``) if it is damaged."""
-        offset = index.chunk_start_offset
-        self.file.seek(offset)
-        record = self.file.read(index.chunk_length)
         try:
-            if len(record) != index.chunk_length or record[0] != io.OP_CHUNK or \
-                    int.from_bytes(record[1:9], "little") != index.chunk_length - 9:
-                raise LogFormatError("chunk record does not match the summary's index")
-            return io.chunk_payload(record[9:])
+            return self._chunk(index)
         except LogFormatError as exc:
-            raise io.damaged_error(self.path, offset, str(exc)) from None
+            raise io.damaged_error(self.path, index.chunk_start_offset, str(exc)) from None
+
+    def _chunk(self, index) -> bytes:
+        self.file.seek(index.chunk_start_offset)
+        record = self.file.read(index.chunk_length)
+        if len(record) != index.chunk_length or record[0] != io.OP_CHUNK or \
+                int.from_bytes(record[1:9], "little") != index.chunk_length - 9:
+            raise LogFormatError("chunk record does not match the summary's index")
+        return io.chunk_payload(record[9:])
 
     def check_chunks(self) -> list[dict]:
         """Check every chunk (decompression, CRC, framing): one dict per damaged chunk with
@@ -146,7 +152,7 @@ class _Finished:
         damaged = []
         for index in sorted(self.summary.chunk_indexes, key=lambda c: c.chunk_start_offset):
             try:
-                self.read_chunk(index)
+                self._chunk(index)
             except LogFormatError as exc:
                 messages = {}
                 for cid, where in index.message_index_offsets.items():
@@ -157,7 +163,7 @@ class _Finished:
                 damaged.append({
                     "start": index.chunk_start_offset,
                     "end": index.chunk_start_offset + index.chunk_length,
-                    "reason": str(exc).split(" (", 1)[-1].rsplit("); run", 1)[0],
+                    "reason": str(exc),
                     "chunk": True, "start_ns": index.message_start_time,
                     "end_ns": index.message_end_time, "messages": dict(sorted(messages.items())),
                 })
