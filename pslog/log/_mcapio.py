@@ -61,7 +61,24 @@ def check_file(path) -> tuple[Path, int, bool]:
     return path, size, complete
 
 
+def tail_magic_damaged(path) -> bool:
+    """Whether a file ends with the closing MCAP magic but for one or two bytes: a finished
+    file damaged at its very end, not a recording cut short."""
+    path = Path(path)
+    size = path.stat().st_size
+    if size < 2 * len(MAGIC) + 29:
+        return False
+    with open(path, "rb") as f:
+        f.seek(size - len(MAGIC) - 29)
+        tail = f.read()
+    return (tail[0] == OP_FOOTER
+            and 0 < sum(a != b for a, b in zip(tail[-len(MAGIC):], MAGIC, strict=True)) <= 2)
+
+
 def truncated_error(path) -> LogFormatError:
+    if tail_magic_damaged(path):
+        return LogFormatError(f"{path}: its closing MCAP magic (the last 8 bytes) is damaged; "
+                              f"run 'pslog recover {path} -o FIXED.mcap' to salvage the data")
     return LogFormatError(f"{path} is truncated (the recording did not finish); "
                           f"run 'pslog recover {path} -o FIXED.mcap' to salvage it")
 

@@ -110,7 +110,8 @@ def session_info(path) -> dict:
     """
     path, size, complete = io.check_file(path)
     if not complete:
-        return _scanned_info(path, size, _UNFINISHED)
+        return _scanned_info(path, size, "its closing MCAP magic (the last 8 bytes) is damaged"
+                             if io.tail_magic_damaged(path) else _UNFINISHED)
     from .reader import DamagedSummaryError, _Finished, _read
 
     try:
