@@ -81,6 +81,42 @@ def test_info_on_truncated_file_points_to_recover(sim_session, tmp_path, cli):
     assert stderr.count("\n") == 1 and "Traceback" not in stderr
 
 
+def test_info_on_a_recent_truncated_file_says_it_may_still_be_recording(sim_session, tmp_path,
+                                                                        cli):
+    import os
+
+    data = sim_session.path.read_bytes()
+    live = tmp_path / "live.mcap"
+    live.write_bytes(data[: len(data) // 2])  # just written: as a recorder leaves it
+    code, stdout, stderr = cli("info", live)
+    assert code == 1 and "TRUNCATED or still being written" in stdout
+    assert "may still be recording" in stderr and "pslog recover" in stderr
+    old = os.stat(live).st_mtime - 600
+    os.utime(live, (old, old))
+    code, stdout, stderr = cli("info", live)
+    assert code == 1 and "may still" not in stdout + stderr
+    assert "did not finish" in stderr
+
+
+@pytest.mark.parametrize("timing", ["sync", "typeB"])
+def test_info_shows_signed_offsets_next_to_the_rigs(tmp_path, cli, timing):
+    """Jittered sync/typeB shutters: measured offsets near the rig's (never ~33.3 ms), the
+    rig's offsets as they are, the timing label beside them."""
+    out = tmp_path / "s.mcap"
+    code, _, stderr = cli("simulate", "--rig", "paper3", "--timing", timing, "--jitter", "0.0005",
+                          "--seed", "4", "-o", out)
+    assert code == 0, stderr
+    code, stdout, stderr = cli("info", out, "--json")
+    assert code == 0, stderr
+    info = json.loads(stdout)
+    nominal = {"sync": [0.0, 0.0, 0.0], "typeB": [0.0, 1 / 60, 0.0]}[timing]
+    for row, o in zip(info["cameras"], nominal, strict=True):
+        assert row["offset_nominal_s"] == pytest.approx(o, abs=1e-12)
+        assert abs(row["offset_measured_s"] - o) < 5e-4, row
+    code, stdout, _ = cli("info", out)
+    assert f"offset measured / rig ({timing})" in stdout and "33.3" not in stdout
+
+
 # ---- recover -----------------------------------------------------------------------------------
 def test_recover_command(sim_session, tmp_path, cli):
     data = sim_session.path.read_bytes()

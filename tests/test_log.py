@@ -460,3 +460,153 @@ def test_info_measures_rates_and_offsets_despite_drops_and_jitter(tmp_path, rig3
     assert info["topics"]["/truth"] == len(truth)
     assert abs(info["duration_s"] - 4.0) < 0.05
     assert info["start_s"] is not None and info["duration_s"] * NS > 0
+
+
+def _jittered(rig, jitter_s: float = 5e-4, seed: int = 2) -> Detections:
+    from pslog.motion import get_motion
+    from pslog.simulation import SimulationOptions, simulate
+
+    det, _truth = simulate(rig, get_motion("turntable"), 3.0,
+                           SimulationOptions(jitter_s=jitter_s, seed=seed))
+    return det
+
+
+def _shifted(det: Detections, shift_ns: int) -> Detections:
+    import dataclasses
+
+    return dataclasses.replace(det, frame_time_ns=det.frame_time_ns + shift_ns)
+
+
+@pytest.mark.parametrize("timing", ["sync", "typeA", "typeB"])
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_measured_offsets_are_signed_and_nearest_the_rigs(timing, seed):
+    """0.5 ms shutter jitter on sync/typeB: a camera a hair early reads about -0.1 ms, never
+    a frame period minus that (33.3 ms)."""
+    from pslog.log.info import timing_table
+    from pslog.rig import apply_timing, builtin_rig
+
+    rig = apply_timing(builtin_rig("paper3"), timing)
+    rows = timing_table(_jittered(rig, seed=seed), [c.offset for c in rig.cameras])
+    assert rows[0]["offset_measured_s"] == rig.cameras[0].offset  # the reference
+    for cam, row in zip(rig.cameras, rows, strict=True):
+        assert abs(row["offset_measured_s"] - cam.offset) < 4e-4, (cam.name, row)
+
+
+def test_measured_offsets_of_a_rig_whose_first_camera_is_not_at_zero(tmp_path):
+    """The nominal offsets are the rig's as they are (not made relative to camera 0 or
+    wrapped); the measured ones sit next to them."""
+    from pslog.rig import Rig, builtin_rig
+
+    base = builtin_rig("paper3")
+    offsets = [0.030, 0.005, 0.016]  # camera 0 late in the period, the others wrap past it
+    rig = Rig(tuple(c.replace(offset=o) for c, o in zip(base.cameras, offsets, strict=True)),
+              "late")
+    det = _jittered(rig, jitter_s=1e-4)
+    path = tmp_path / "late.mcap"
+    with SessionWriter(path, rig, timing="custom") as w:
+        w.add_detections(det)
+    info = session_info(path)
+    for o, row in zip(offsets, info["cameras"], strict=True):
+        assert row["offset_nominal_s"] == o
+        assert abs(row["offset_measured_s"] - o) < 2e-4, row
+    assert info["offset_reference"] == rig.names[0]
+
+
+def test_phase_measurement_keeps_full_precision_on_epoch_clocks():
+    """Times near 1.7e18 ns (Unix epoch) measure exactly as the same times near 0."""
+    from pslog.log.info import measure_timing, timing_table
+    from pslog.rig import apply_timing, builtin_rig
+
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    det = _jittered(rig, jitter_s=2e-4)
+    shift = 1_700_000_000_123_456_789
+    near_zero = timing_table(det, [c.offset for c in rig.cameras])
+    epoch = timing_table(_shifted(det, shift), [c.offset for c in rig.cameras])
+    for a, b in zip(near_zero, epoch, strict=True):
+        assert abs(a["offset_measured_s"] - b["offset_measured_s"]) < 1e-12
+        assert abs(a["fps_measured"] - b["fps_measured"]) < 1e-9
+    t = det.frame_time_ns[det.frame_camera == 1]
+    period, phase = measure_timing(t, ref_ns=int(t[0]))
+    period_e, phase_e = measure_timing(t + shift, ref_ns=int(t[0]) + shift)
+    assert (period_e, phase_e) == (period, phase)
+
+
+def test_info_on_a_file_being_written_says_it_may_still_be_recording(tmp_path, rig3):
+    with SessionWriter(tmp_path / "live.mcap", rig3, flush_interval_s=0.0) as w:
+        w.add_frame(0, 0, 5, uv=[[1.0, 2.0]])
+        w.flush()
+        live = session_info(tmp_path / "live.mcap")  # still open: no summary, no end magic
+        assert live["truncated"] and live["still_recording"]
+        assert "may still be recording" in live["hint"]
+    data = (tmp_path / "live.mcap").read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[:len(data) // 2])
+    old = os.stat(cut).st_mtime - 3600
+    os.utime(cut, (old, old))
+    info = session_info(cut)  # an hour old: a crash, not a recording in progress
+    assert info["truncated"] and not info["still_recording"]
+    assert "did not finish" in info["hint"] and "may still" not in info["hint"]
+    partial = tmp_path / "cut.mcap.partial"
+    shutil.copy(cut, partial)
+    os.utime(partial, (old, old))
+    assert session_info(partial)["still_recording"]  # a writer's .partial file
+
+
+def test_readers_name_the_byte_offset_of_a_damaged_chunk(tmp_path, rig3):
+    """read_session and iter_images check every chunk they read (CRC, decompression,
+    framing): a one-line LogFormatError naming the offset and pslog recover, never a zstd or
+    protobuf error."""
+    from pslog.log import _mcapio as io
+
+    path, _det = _many_chunks(tmp_path, rig3)
+    data = path.read_bytes()
+    chunks = [(body - 9, end) for op, body, end in io.walk_records(data, len(io.MAGIC))
+              if op == io.OP_CHUNK]
+    # find an image chunk and a detection chunk through the reader's own index
+    with open(path, "rb") as f:
+        from mcap.reader import SeekingReader
+
+        summary = SeekingReader(f).get_summary()
+    topic = {c.id: c.topic for c in summary.channels.values()}
+    kind = {c.chunk_start_offset: {topic[k].rsplit("/", 1)[-1]
+                                   for k in c.message_index_offsets}
+            for c in summary.chunk_indexes}
+    image = next(s for s, e in chunks if kind[s] == {"image"})
+    det = next(s for s, e in chunks if kind[s] == {"detections"})
+    for start, reader in ((image, lambda p: list(iter_images(p))), (det, read_session)):
+        end = dict(chunks)[start]
+        bad = tmp_path / f"bad{start}.mcap"
+        damaged = bytearray(data)
+        damaged[(start + end) // 2] ^= 0x10
+        bad.write_bytes(bytes(damaged))
+        with pytest.raises(LogFormatError, match=rf"byte {start} .*pslog recover"):
+            reader(bad)
+    # images still come in time order across chunks, and a time window selects
+    times = [i.time_ns for i in iter_images(path)]
+    assert times == sorted(times) and len(times) == 30
+    window = [(i.camera, i.time_ns) for i in iter_images(path, cameras=[1], start_ns=33_333_333,
+                                                         end_ns=100_000_000)]
+    assert window == [(1, 44_444_444), (1, 77_777_777)]
+
+
+def test_recover_without_summary_rescues_channels_of_a_damaged_chunk(tmp_path):
+    """The sample's first image chunk defines the image channels; with no summary to repeat
+    them and that chunk damaged, the channel records zstd kept verbatim in it are still read
+    (and pslog's schema regenerated), so later intact chunks keep their cam2 images; the
+    messages whose channel is really lost are counted, not silently dropped."""
+    from pslog.log import _mcapio as io
+
+    data = (Path(__file__).parents[1] / "samples" / "throw.mcap").read_bytes()
+    summary = io.read_summary(data)
+    first_images = summary.chunks[2]
+    damaged = bytearray(data[:summary.start])  # cut where the summary starts
+    damaged[first_images.offset + first_images.length // 2] ^= 0xFF
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(bytes(damaged))
+    report = recover_session(bad, tmp_path / "fixed.mcap")
+    assert [d["start"] for d in report["damaged"]] == [first_images.offset]
+    assert report["damaged"][0]["messages"]["/camera/cam2/image"] == 12
+    assert report["topics"]["/camera/cam2/image"] == 45 - 12
+    assert report["detection_frames"] == 135 and report["truth_points"] == 135
+    assert report["unknown_channel_messages"] > 0
+    assert read_session(tmp_path / "fixed.mcap").n_images == 33

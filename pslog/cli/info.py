@@ -21,9 +21,18 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(_jsonable(info), indent=2, allow_nan=False))
     else:
         print("\n".join(_text(info)))
+    recover = f"run 'pslog recover {args.session} -o FIXED.mcap'"
+    if info["truncated"] and info["still_recording"]:
+        raise LogFormatError(f"{args.session} is incomplete: it may still be recording "
+                             f"(modified {info['age_s']:.0f} s ago); if no recorder is "
+                             f"writing it, {recover} to salvage it")
     if info["truncated"]:
-        raise LogFormatError(f"{args.session} is truncated; run 'pslog recover "
-                             f"{args.session} -o FIXED.mcap' to salvage it")
+        raise LogFormatError(f"{args.session}: {info['problem']}; {recover} to salvage it")
+    if info["damaged"]:
+        n = len(info["damaged"])
+        raise LogFormatError(f"{args.session} has {n} damaged chunk{'s' if n > 1 else ''} "
+                             f"(first at byte {info['damaged'][0]['start']}); {recover} to "
+                             f"salvage every intact one")
     return 0
 
 
@@ -46,14 +55,25 @@ def _ms(seconds: float) -> str:
     return "-" if seconds != seconds else f"{seconds * 1e3:.3f} ms"
 
 
+def _damage(info: dict) -> list[str]:
+    from pslog.log.recover import damage_line
+
+    return [f"    {damage_line(d)}" for d in info["damaged"]]
+
+
 def _text(info: dict) -> list[str]:
     if info["truncated"]:
         from pslog.log.recover import describe_salvage
 
-        lines = [f"{info['path']}: TRUNCATED (the recording did not finish)",
-                 f"  complete data: {info['kept_bytes']} of {info['file_bytes']} bytes: "
-                 f"{describe_salvage(info)}",
-                 "  salvageable messages:"]
+        state = ("TRUNCATED or still being written" if info["still_recording"] else
+                 "TRUNCATED" if info["problem"].startswith("the recording") else "DAMAGED")
+        lines = [f"{info['path']}: {state} ({info['problem']})",
+                 f"  intact data: {info['kept_bytes']} of {info['file_bytes']} bytes: "
+                 f"{describe_salvage(info)}"]
+        if info["damaged"]:
+            lines.append(f"  unreadable ({len(info['damaged'])} part(s)):")
+            lines += _damage(info)
+        lines.append("  salvageable messages:")
         lines += [f"    {t}: {n}" for t, n in info["topics"].items()]
         lines.append(f"  {info['hint']}")
         return lines
@@ -67,7 +87,8 @@ def _text(info: dict) -> list[str]:
         + ("" if start is None else f" (t = {start:.6f} .. {info['end_s']:.6f} s)")
         + f", {info['frames']} frames, {info['candidates']} candidates, "
           f"{info['images']} images",
-        "  camera   frames  fps(meas/nom)    offset measured / nominal  detected  images",
+        f"  camera   frames  fps(meas/nom)   offset measured / rig ({info['timing']})"
+        f"  detected  images",
     ]
     for c in info["cameras"]:
         lines.append(
@@ -77,6 +98,13 @@ def _text(info: dict) -> list[str]:
     tracks = ", ".join(f"{m} ({n} points)" for m, n in info["tracks"].items()) or "none"
     lines.append(f"  truth: {'yes' if info['truth'] else 'no'}; tracks: {tracks}; "
                  f"events: {info['events']}")
+    lines.append(f"  (measured offsets are relative to {info['offset_reference']}, placed at its "
+                 f"rig offset)")
     lines.append("  messages per topic:")
     lines += [f"    {t}: {n}" for t, n in info["topics"].items()]
+    if info["damaged"]:
+        lines.append(f"  DAMAGED: {len(info['damaged'])} chunk(s) fail their checks; the "
+                     f"figures above leave them out:")
+        lines += _damage(info)
+        lines.append(f"  {info['hint']}")
     return lines

@@ -18,7 +18,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from pslog.log import recover_session
-    from pslog.log.recover import describe_salvage
+    from pslog.log.recover import damage_line, describe_salvage
     from pslog.outputs import partial_path
 
     output = check_output(args.output, args.force, inputs=[args.session])
@@ -40,8 +40,14 @@ def run(args: argparse.Namespace) -> int:
     # per kind, not "up to the last message": truth is written up front and images reach
     # the file before the detections of the same moment
     print(f"recovered into {args.output}: {describe_salvage(report)}")
-    print(f"  discarded the last {report['discarded_bytes']} of {report['file_bytes']} bytes "
-          f"({report['stop_reason']}); messages kept per topic:")
+    print(f"  skipped {len(report['damaged'])} damaged part(s), {report['discarded_bytes']} of "
+          f"{report['file_bytes']} bytes; every intact record before and after was kept:")
+    for d in report["damaged"]:
+        print(f"    {damage_line(d)}")
+    if report["unknown_channel_messages"]:
+        print(f"  {report['unknown_channel_messages']} intact messages were dropped: their "
+              f"channel was defined in a damaged part")
+    print("  messages kept per topic:")
     for topic, n in report["topics"].items():
         print(f"    {topic}: {n}")
     return 0

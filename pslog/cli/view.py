@@ -85,7 +85,15 @@ def run(args: argparse.Namespace) -> int:
         rec.save(args.save)
     else:
         rec.spawn()
-    counts = log_view(rec, data, frames)
+    try:
+        counts = log_view(rec, data, frames)
+    except BaseException:  # e.g. a damaged image chunk met while logging: no partial .rrd
+        if args.save:
+            from pathlib import Path
+
+            rec.disconnect()
+            Path(args.save).unlink(missing_ok=True)
+        raise
     rec.flush()
     print("logged " + ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in counts.items() if v),
           file=out)

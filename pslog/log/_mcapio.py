@@ -1,6 +1,8 @@
 """Low-level MCAP access shared by the reader, ``copy_session``, ``session_info`` and
-``recover_session``: file checks, a top-level record walk that stops cleanly at the first
-incomplete record, chunk decompression, and a fast message walk inside chunks.
+``recover_session``: file checks, chunk decompression with every check the format allows
+(lengths, decompression, CRC, framing), a strict top-level record walk for readers, a
+salvaging walk for recovery that skips damaged chunks and resynchronises after damaged record
+headers, the summary section, and a fast message walk inside chunks.
 
 The ``mcap`` package parses each record through several Python objects; for ~10^6 small
 messages that dominates reading time, so messages inside chunks are sliced out here with
@@ -10,6 +12,7 @@ messages that dominates reading time, so messages inside chunks are sliced out h
 from __future__ import annotations
 
 import mmap
+import re
 import struct
 import zlib
 from collections.abc import Iterator
@@ -23,8 +26,11 @@ MAGIC = b"\x89MCAP0\r\n"
 
 # opcodes of the MCAP spec
 OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL = 0x01, 0x02, 0x03, 0x04
-OP_MESSAGE, OP_CHUNK = 0x05, 0x06
-OP_METADATA, OP_DATA_END = 0x0C, 0x0F
+OP_MESSAGE, OP_CHUNK, OP_MESSAGE_INDEX, OP_CHUNK_INDEX = 0x05, 0x06, 0x07, 0x08
+OP_ATTACHMENT, OP_STATISTICS, OP_METADATA, OP_DATA_END = 0x09, 0x0B, 0x0C, 0x0F
+#: opcodes of the records a summary section holds, and the footer
+_SUMMARY_OPS = frozenset({OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_CHUNK_INDEX, 0x0A,
+                          OP_STATISTICS, 0x0D, 0x0E})
 
 _MESSAGE_HEAD = 22  # channel u16, sequence u32, log_time u64, publish_time u64
 _unpack = struct.unpack_from
@@ -44,6 +50,9 @@ def check_file(path) -> tuple[Path, int, bool]:
     with open(path, "rb") as f:
         head = f.read(len(MAGIC))
         if head != MAGIC:
+            if _magic_damaged(path):
+                raise LogFormatError(f"{path}: the MCAP magic (bytes 0..7) is damaged; run "
+                                     f"'pslog recover {path} -o FIXED.mcap' to salvage the data")
             raise LogFormatError(f"not an MCAP file: {path}")
         complete = False
         if size >= 2 * len(MAGIC) + 9:
@@ -52,7 +61,24 @@ def check_file(path) -> tuple[Path, int, bool]:
     return path, size, complete
 
 
+def tail_magic_damaged(path) -> bool:
+    """Whether a file ends with the closing MCAP magic but for one or two bytes: a finished
+    file damaged at its very end, not a recording cut short."""
+    path = Path(path)
+    size = path.stat().st_size
+    if size < 2 * len(MAGIC) + 29:
+        return False
+    with open(path, "rb") as f:
+        f.seek(size - len(MAGIC) - 29)
+        tail = f.read()
+    return (tail[0] == OP_FOOTER
+            and 0 < sum(a != b for a, b in zip(tail[-len(MAGIC):], MAGIC, strict=True)) <= 2)
+
+
 def truncated_error(path) -> LogFormatError:
+    if tail_magic_damaged(path):
+        return LogFormatError(f"{path}: its closing MCAP magic (the last 8 bytes) is damaged; "
+                              f"run 'pslog recover {path} -o FIXED.mcap' to salvage the data")
     return LogFormatError(f"{path} is truncated (the recording did not finish); "
                           f"run 'pslog recover {path} -o FIXED.mcap' to salvage it")
 
@@ -111,28 +137,172 @@ def parse_metadata(buf, pos: int) -> tuple[str, dict[str, str]]:
     return name, data
 
 
-def chunk_payload(body: bytes, validate_crc: bool = False) -> bytes:
-    """Decompressed records of a Chunk record body."""
-    _start, _end, size, crc, n = _unpack("<QQQII", body, 0)
-    compression = body[32:32 + n].decode("ascii")
-    pos = 32 + n
-    (length,) = _unpack("<Q", body, pos)
+# ---- validation ---------------------------------------------------------------------------
+#: the compressions a chunk may name (mcap.dev/spec: "", "zstd", "lz4")
+_COMPRESSIONS = ("", "zstd", "lz4")
+#: a chunk claiming more uncompressed bytes than this is damaged, not real (pslog writes
+#: chunks of about 1 MB; other writers rarely exceed a few tens of MB)
+_MAX_CHUNK_BYTES = 1 << 31
+
+# Field layouts of the records met in a data section (mcap.dev/spec), for a structural check
+# that a record's fields exactly fill its length: H u16, I u32, Q u64, s string (u32 length +
+# UTF-8), b bytes (u32 length), B bytes (u64 length), m string map (u32 byte length), r message
+# index entries (u32 byte length, 16 bytes each).
+_SHAPES = {
+    OP_HEADER: "ss",
+    OP_FOOTER: "QQI",
+    OP_SCHEMA: "Hssb",
+    OP_CHANNEL: "HHssm",
+    OP_MESSAGE_INDEX: "Hr",
+    OP_ATTACHMENT: "QQssBI",
+    OP_METADATA: "sm",
+    OP_DATA_END: "I",
+    OP_CHUNK: "QQQIsB",
+}
+_FIXED = {"H": 2, "I": 4, "Q": 8}
+
+
+def _fills(buf, pos: int, end: int, shape: str) -> bool:
+    """Whether fields of ``shape`` (see ``_SHAPES``) read from ``pos`` end exactly at ``end``."""
+    for kind in shape:
+        if kind in _FIXED:
+            pos += _FIXED[kind]
+        elif kind == "B":
+            if pos + 8 > end:
+                return False
+            pos += 8 + _unpack("<Q", buf, pos)[0]
+        else:
+            if pos + 4 > end:
+                return False
+            (n,) = _unpack("<I", buf, pos)
+            if pos + 4 + n > end:
+                return False
+            if kind == "s":
+                try:
+                    bytes(buf[pos + 4:pos + 4 + n]).decode("utf-8")
+                except UnicodeDecodeError:
+                    return False
+            elif kind == "m":
+                try:
+                    _string_map(buf, pos)
+                except (struct.error, UnicodeDecodeError):
+                    return False
+                # a map whose last entry runs past its length is damaged
+                if not _map_fits(buf, pos):
+                    return False
+            elif kind == "r" and n % 16:
+                return False
+            pos += 4 + n
+        if pos > end:
+            return False
+    return pos == end
+
+
+def _map_fits(buf, pos: int) -> bool:
+    (n,) = _unpack("<I", buf, pos)
+    end, pos = pos + 4 + n, pos + 4
+    while pos < end:
+        for _ in range(2):
+            if pos + 4 > end:
+                return False
+            pos += 4 + _unpack("<I", buf, pos)[0]
+    return pos == end
+
+
+def record_plausible(buf, pos: int, n: int, messages: bool = True) -> int | None:
+    """End offset of the record at ``pos`` if its header and fields are consistent (a record
+    that may appear in a data section, lying within ``buf[:n]``), else None. A chunk passes
+    on its header alone: :func:`chunk_payload` checks its contents. ``messages``: whether a
+    Message record may stand outside chunks (only in unchunked files)."""
+    if pos + 9 > n:
+        return None
+    op, length = _unpack("<BQ", buf, pos)
+    end = pos + 9 + length
+    if end > n:
+        return None
+    if op == OP_MESSAGE:
+        return end if messages and length >= _MESSAGE_HEAD else None
+    shape = _SHAPES.get(op)
+    if shape is None:
+        return None  # summary-only records, unknown opcodes: not in a data section
+    try:
+        if not _fills(buf, pos + 9, end, shape):
+            return None
+        if op == OP_CHUNK:
+            (clen,) = _unpack("<I", buf, pos + 9 + 28)
+            compression = bytes(buf[pos + 9 + 32:pos + 9 + 32 + clen])
+            (size,) = _unpack("<Q", buf, pos + 9 + 16)
+            if compression.decode("ascii") not in _COMPRESSIONS or size > _MAX_CHUNK_BYTES:
+                return None
+    except (struct.error, UnicodeDecodeError):
+        return None
+    return end
+
+
+def chunk_header(buf, body: int) -> tuple[int, int]:
+    """``(message_start_time, message_end_time)`` as a chunk's header states them."""
+    return _unpack("<QQ", buf, body)
+
+
+def chunk_payload(body: bytes, validate_crc: bool = True) -> bytes:
+    """Decompressed records of a Chunk record body, checked: header consistent with the body's
+    length, decompression, uncompressed size, CRC (when the writer stored one) and the
+    framing of the records inside. LogFormatError saying what is wrong otherwise."""
+    try:
+        _start, _end, size, crc, n = _unpack("<QQQII", body, 0)
+        compression = bytes(body[32:32 + n]).decode("ascii")
+        pos = 32 + n
+        (length,) = _unpack("<Q", body, pos)
+    except (struct.error, UnicodeDecodeError):
+        raise LogFormatError("chunk header is damaged") from None
     data = body[pos + 8:pos + 8 + length]
-    if len(data) != length:
-        raise LogFormatError("chunk is cut short")
-    if compression == "zstd":
-        import zstandard
+    if len(data) != length or pos + 8 + length != len(body):
+        raise LogFormatError("chunk lengths are inconsistent")
+    if size > _MAX_CHUNK_BYTES:
+        raise LogFormatError(f"chunk claims {size} uncompressed bytes")
+    try:
+        if compression == "zstd":
+            import zstandard
 
-        data = zstandard.ZstdDecompressor().decompress(data, max_output_size=size)
-    elif compression == "lz4":
-        import lz4.frame
+            # read at most one byte more than promised: a damaged stream cannot balloon
+            with zstandard.ZstdDecompressor().stream_reader(bytes(data)) as reader:
+                data = reader.read(size + 1)
+        elif compression == "lz4":
+            import lz4.frame
 
-        data = lz4.frame.decompress(data)
-    elif compression:
-        raise LogFormatError(f"unsupported chunk compression {compression!r}")
+            data = lz4.frame.decompress(bytes(data))
+        elif compression:
+            raise LogFormatError(f"unsupported chunk compression {compression!r}")
+    except LogFormatError:
+        raise
+    except Exception as exc:  # zstd/lz4 errors on damaged data: their types vary by version
+        raise LogFormatError(f"chunk does not decompress ({exc})") from None
+    if len(data) != size:
+        raise LogFormatError(f"chunk decompresses to {len(data)} bytes, header says {size}")
     if validate_crc and crc and zlib.crc32(data) != crc:
         raise LogFormatError("chunk CRC mismatch")
+    check_framing(data)
     return data
+
+
+def check_framing(records: bytes) -> None:
+    """LogFormatError unless ``records`` is a whole number of records (a chunk's contents)."""
+    pos, n = 0, len(records)
+    while pos < n:
+        if pos + 9 > n:
+            raise LogFormatError("chunk ends inside a record header")
+        op, length = _unpack("<BQ", records, pos)
+        pos += 9 + length
+        if op == OP_MESSAGE and length < _MESSAGE_HEAD:
+            raise LogFormatError("chunk holds a message record too short for its header")
+    if pos != n:
+        raise LogFormatError("chunk ends inside a record")
+
+
+def damaged_error(path, offset: int, reason: str) -> LogFormatError:
+    """The one line every reader gives on a damaged record."""
+    return LogFormatError(f"{path}: damaged data at byte {offset} ({reason}); run "
+                          f"'pslog recover {path} -o FIXED.mcap' to salvage the intact data")
 
 
 def walk_records(buf, start: int = 0) -> Iterator[tuple[int, int, int]]:
@@ -150,7 +320,8 @@ def walk_records(buf, start: int = 0) -> Iterator[tuple[int, int, int]]:
 
 def collect_messages(records: bytes, out: dict[int, list]) -> None:
     """Append ``(log_time, sequence, data)`` of each message in ``records`` whose channel is a
-    key of ``out`` to ``out[channel]``. Hot loop: kept minimal on purpose."""
+    key of ``out`` to ``out[channel]``. Hot loop: kept minimal on purpose (the framing was
+    checked by :func:`chunk_payload`)."""
     pos, n = 0, len(records)
     while pos < n:
         op, length = _unpack("<BQ", records, pos)
@@ -163,6 +334,114 @@ def collect_messages(records: bytes, out: dict[int, list]) -> None:
         pos = body + length
 
 
+# ---- summary ----------------------------------------------------------------------------------
+@dataclass
+class ChunkIndexRec:
+    start_ns: int
+    end_ns: int
+    offset: int        # of the chunk record
+    length: int        # of the chunk record, opcode and length field included
+    message_index_offsets: dict[int, int]
+
+
+@dataclass
+class Summary:
+    """The parts of a summary section recovery and the readers use."""
+
+    start: int  # offset of the summary section (just after DataEnd)
+    schemas: dict[int, SchemaRec] = field(default_factory=dict)
+    channels: dict[int, ChannelRec] = field(default_factory=dict)
+    chunks: list[ChunkIndexRec] = field(default_factory=list)
+    channel_counts: dict[int, int] = field(default_factory=dict)
+
+
+def summary_span(buf) -> tuple[int, int]:
+    """Byte range of the summary section and footer as the footer states it (for messages)."""
+    n = len(buf)
+    foot = n - len(MAGIC) - 29
+    try:
+        (start,) = _unpack("<Q", buf, foot + 9)
+    except struct.error:
+        return 0, n
+    return (start if len(MAGIC) < start <= foot else max(foot, 0)), n
+
+
+def read_summary(buf) -> Summary | None:
+    """The summary section of a finished file, or None when there is none or it is damaged
+    (footer inconsistent, CRC mismatch, a record that does not parse)."""
+    n = len(buf)
+    foot = n - len(MAGIC) - 29
+    if foot < len(MAGIC) or bytes(buf[n - len(MAGIC):]) != MAGIC:
+        return None
+    op, length, start, _offsets, crc = _unpack("<BQQQI", buf, foot)
+    if op != OP_FOOTER or length != 20 or not len(MAGIC) < start <= foot:
+        return None
+    if crc and zlib.crc32(buf[start:foot + 25]) != crc:
+        return None
+    summary = Summary(start)
+    try:
+        for sop, body, _end in walk_records(buf[start:foot]):
+            if sop == OP_SCHEMA:
+                rec = parse_schema(buf, start + body)
+                summary.schemas[rec.id] = rec
+            elif sop == OP_CHANNEL:
+                rec = parse_channel(buf, start + body)
+                summary.channels[rec.id] = rec
+            elif sop == OP_CHUNK_INDEX:
+                summary.chunks.append(_parse_chunk_index(buf, start + body))
+            elif sop == OP_STATISTICS:
+                (nmap,) = _unpack("<I", buf, start + body + 42)
+                pos = start + body + 46
+                for i in range(nmap // 10):
+                    cid, count = _unpack("<HQ", buf, pos + 10 * i)
+                    summary.channel_counts[cid] = count
+    except (struct.error, UnicodeDecodeError):
+        return None
+    for c in summary.chunks:
+        if not len(MAGIC) <= c.offset < c.offset + c.length <= start:
+            return None
+    summary.chunks.sort(key=lambda c: c.offset)
+    return summary
+
+
+def _parse_chunk_index(buf, pos: int) -> ChunkIndexRec:
+    start_ns, end_ns, offset, length, n = _unpack("<QQQQI", buf, pos)
+    pos += 36
+    offsets = {}
+    for i in range(n // 10):
+        cid, where = _unpack("<HQ", buf, pos + 10 * i)
+        offsets[cid] = where
+    return ChunkIndexRec(start_ns, end_ns, offset, length, offsets)
+
+
+def message_index_counts(buf, pos: int, n: int) -> tuple[dict[int, int], int]:
+    """Messages per channel listed by the MessageIndex records from ``pos`` on (those that
+    follow a chunk), and the offset after them."""
+    counts: dict[int, int] = {}
+    while True:
+        end = record_plausible(buf, pos, n)
+        if end is None or buf[pos] != OP_MESSAGE_INDEX:
+            return counts, pos
+        cid, size = _unpack("<HI", buf, pos + 9)
+        counts[cid] = counts.get(cid, 0) + size // 16
+        pos = end
+
+
+# ---- walking a data section ----------------------------------------------------------------
+@dataclass
+class Damage:
+    """A part of a data section that could not be read: a damaged chunk, or bytes that are no
+    record at all (up to the next record found)."""
+
+    start: int                      # byte offset
+    end: int                        # byte offset just past the damaged part
+    reason: str
+    chunk: bool = False             # a chunk record (its header at least looked right)
+    start_ns: int | None = None     # message time range, from the chunk's header or index
+    end_ns: int | None = None
+    counts: dict[int, int] | None = None  # messages per channel id, when the index says
+
+
 @dataclass
 class Scan:
     """What a sequential walk of a (possibly truncated) MCAP file found."""
@@ -173,23 +452,29 @@ class Scan:
     complete_bytes: int = len(MAGIC)  # offset just past the last complete data record
     finished: bool = False            # DataEnd or Footer reached
     stop_reason: str = ""
+    damaged: list[Damage] = field(default_factory=list)  # salvage walks only
+    summary: Summary | None = None    # salvage walks only: the intact summary, if any
 
 
 def scan_file(path, on_message=None, validate_crc: bool = True,
-              scan: Scan | None = None) -> Scan:
-    """Walk a file's data section record by record, stopping at the first incomplete or
-    corrupt record. ``on_message(channel_id, log_time, sequence, data)`` is called for every
-    message (inside chunks or not) of a complete record, in file order; it may look at
-    ``scan`` (pass your own) for the schemas and channels seen so far."""
+              scan: Scan | None = None, strict: bool = True) -> Scan:
+    """Walk a file's data section record by record. ``on_message(channel_id, log_time,
+    sequence, data)`` is called for every message (inside chunks or not) of a complete
+    record, in file order; it may look at ``scan`` (pass your own) for the schemas and
+    channels seen so far.
+
+    ``strict``: any damaged record or a data section without its end raises a one-line
+    LogFormatError naming the byte offset (what readers want). Otherwise the walk stops
+    quietly at the first incomplete or damaged record (``stop_reason`` says why)."""
     path, _size, _complete = check_file(path)
     with open(path, "rb") as f, mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as buf:
-        return _scan(buf, on_message, validate_crc, scan or Scan())
+        scan = _scan(buf, on_message, validate_crc, scan or Scan())
+    if strict and not scan.finished:
+        raise damaged_error(path, scan.complete_bytes, scan.stop_reason)
+    return scan
 
 
-def _scan(buf, on_message, validate_crc: bool, scan: Scan) -> Scan:
-    # buf is an mmap: files of many GB are walked without being read into memory at once
-    pos, n = len(MAGIC), len(buf)
-
+def _handler(scan: Scan, on_message):
     def handle(op: int, body: int, end: int, data) -> None:
         if op == OP_SCHEMA:
             rec = parse_schema(data, body)
@@ -200,7 +485,13 @@ def _scan(buf, on_message, validate_crc: bool, scan: Scan) -> Scan:
         elif op == OP_MESSAGE and on_message is not None:
             cid, seq, t = _unpack("<HIQ", data, body)
             on_message(cid, t, seq, bytes(data[body + _MESSAGE_HEAD:end]))
+    return handle
 
+
+def _scan(buf, on_message, validate_crc: bool, scan: Scan) -> Scan:
+    # buf is an mmap: files of many GB are walked without being read into memory at once
+    pos, n = len(MAGIC), len(buf)
+    handle = _handler(scan, on_message)
     while True:
         if pos + 9 > n:
             scan.stop_reason = "file ends inside a record header" if pos < n else "file ends"
@@ -209,6 +500,16 @@ def _scan(buf, on_message, validate_crc: bool, scan: Scan) -> Scan:
         body, end = pos + 9, pos + 9 + length
         if end > n:
             scan.stop_reason = f"file ends inside a record (opcode 0x{op:02x})"
+            break
+        if op not in (OP_DATA_END, OP_FOOTER) and record_plausible(buf, pos, n) is None:
+            if pos == len(MAGIC):
+                # a damaged Header record holds nothing we use (profile, library): go on at
+                # the next intact record (the session metadata)
+                nxt = _resync(buf, pos + 1, n, {}, _has_chunk(buf, n))
+                if nxt < n:
+                    pos = nxt
+                    continue
+            scan.stop_reason = "no valid record here"
             break
         try:
             if op == OP_CHUNK:
@@ -223,14 +524,254 @@ def _scan(buf, on_message, validate_crc: bool, scan: Scan) -> Scan:
                 break
             else:
                 handle(op, body, end, buf)
-        except Exception as exc:
-            # any failure to parse a complete record (bad CRC, zstd/lz4 errors, garbage
-            # lengths) means the data from here on cannot be trusted: stop, keep what we have
-            scan.stop_reason = f"corrupt record at byte {pos}: {exc}"
+        except (LogFormatError, struct.error, UnicodeDecodeError) as exc:
+            # the data from here on cannot be trusted: stop, keep what we have
+            scan.stop_reason = str(exc)
             break
         pos = end
         scan.complete_bytes = pos
     return scan
+
+
+# ---- salvage --------------------------------------------------------------------------------
+# where a resynchronising search may find a record again: a record opcode a data section holds
+# between chunks, followed by a length below 2^40 (a damaged region's random bytes rarely
+# match; each match is then checked in full)
+_RESYNC = re.compile(rb"[\x03\x04\x06\x0c\x0f][\x00-\xff]{5}\x00\x00\x00")
+_DEFINITION = re.compile(rb"[\x03\x04][\x00-\xff]{5}\x00\x00\x00")
+_MESSAGE_INDEX = re.compile(rb"\x07[\x00-\xff]{5}\x00\x00\x00")
+_RESYNC_CHUNK = re.compile(rb"\x06[\x00-\xff]{5}\x00\x00\x00")
+
+
+def salvage_file(path, on_message=None, scan: Scan | None = None,
+                 tolerate_magic: bool = False) -> Scan:
+    """Walk a damaged file's data section keeping every intact record: each chunk is checked
+    (header, decompression, CRC, framing) and skipped when damaged; after bytes that are no
+    record (a damaged length field, a cut) the walk picks up at the next intact record, found
+    through the summary's chunk index when the summary is intact, else by a forward search
+    for a record whose fields are consistent (and, for a chunk, whose contents check out).
+
+    Every skipped part is in ``scan.damaged``; channels and schemas whose records were lost
+    are taken from an intact summary. Streams (mmap): files larger than memory are fine.
+    ``tolerate_magic``: accept a file whose leading magic is damaged."""
+    path = Path(path)
+    try:
+        check_file(path)
+    except LogFormatError:
+        if not (tolerate_magic and path.is_file() and _magic_damaged(path)):
+            raise
+    scan = scan or Scan()
+    with open(path, "rb") as f, mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as buf:
+        _salvage(buf, on_message, scan)
+    return scan
+
+
+def _magic_damaged(path: Path) -> bool:
+    """A file that starts with the MCAP magic but for one or two bytes (a flipped bit)."""
+    with open(path, "rb") as f:
+        head = f.read(len(MAGIC) + 1)
+    return (len(head) == len(MAGIC) + 1 and head[-1] == OP_HEADER
+            and sum(a != b for a, b in zip(head, MAGIC, strict=False)) <= 2)
+
+
+def _salvage(buf, on_message, scan: Scan) -> None:
+    n = len(buf)
+    summary = scan.summary = read_summary(buf)
+    # the data section ends where the summary starts (DataEnd just before it)
+    limit = summary.start if summary is not None else n
+    indexed = {c.offset: c for c in summary.chunks} if summary is not None else {}
+    if summary is not None:
+        # channels first met in a damaged chunk are still known
+        for k, v in summary.schemas.items():
+            scan.schemas.setdefault(k, v)
+        for k, v in summary.channels.items():
+            scan.channels.setdefault(k, v)
+    handle = _handler(scan, on_message)
+
+    def skip(damage: Damage) -> None:
+        scan.damaged.append(damage)
+        # channels a damaged part defined, searched for at once: the messages of later
+        # chunks on them are still to come
+        _rescue_definitions(buf, damage.start, damage.end, scan)
+    # Message records outside chunks exist only in unchunked files; in a chunked file a
+    # "message" met outside a chunk is the uncompressed literal of a damaged chunk's contents
+    # (zstd stores JPEG bytes nearly verbatim), which may be cut by a block header
+    chunked = bool(indexed) or _has_chunk(buf, limit)
+    pos = len(MAGIC)
+    while pos < limit:
+        end = record_plausible(buf, pos, limit, messages=not chunked)
+        op = buf[pos]
+        if end is None:
+            index = indexed.get(pos)
+            if index is not None:  # the index knows where this chunk ends
+                nxt = pos + index.length
+                skip(_chunk_damage(buf, pos, nxt, "chunk header damaged",
+                                                  indexed, limit))
+            elif op == OP_CHUNK and pos + 9 + 40 <= limit:
+                # a chunk whose length field reaches past the file: a cut, or a damaged length
+                nxt = _resync(buf, pos + 1, limit, indexed, chunked)
+                reason = ("file ends inside this chunk" if _cut_at(buf, pos, nxt, limit)
+                          else "chunk header damaged")
+                skip(_chunk_damage(buf, pos, nxt, reason, indexed, limit))
+            else:
+                nxt = _resync(buf, pos + 1, limit, indexed, chunked)
+                reason = ("file ends inside a record" if _cut_at(buf, pos, nxt, limit)
+                          else "no valid record")
+                skip(Damage(pos, nxt, reason))
+            pos = nxt
+            continue
+        if op in (OP_DATA_END, OP_FOOTER):
+            scan.finished = True
+            scan.complete_bytes = end
+            break
+        try:
+            if op == OP_CHUNK:
+                records = chunk_payload(buf[pos + 9:end])
+                for cop, cbody, cend in walk_records(records):
+                    handle(cop, cbody, cend, records)
+            elif op == OP_METADATA:
+                scan.metadata.append(parse_metadata(buf, pos + 9))
+            else:
+                handle(op, pos + 9, end, buf)
+        except (LogFormatError, struct.error, UnicodeDecodeError) as exc:
+            if op != OP_CHUNK:
+                skip(Damage(pos, end, f"opcode 0x{op:02x}: {exc}"))
+                pos = end
+                continue
+            index = indexed.get(pos)
+            if index is not None and index.length != end - pos:
+                end = pos + index.length  # the length field itself was damaged
+            # a damaged length may still land inside the file: trust it only when a record
+            # follows, else search for the next record
+            if index is None and end < limit and record_plausible(
+                    buf, end, limit, messages=not chunked) is None:
+                end = _resync(buf, pos + 1, limit, indexed, chunked)
+            skip(_chunk_damage(buf, pos, end, str(exc), indexed, limit))
+            pos = end
+            continue
+        pos = end
+        scan.complete_bytes = pos
+    else:
+        # walked to the end without DataEnd: a cut file, or the summary's start
+        scan.finished = summary is not None
+    for damage in scan.damaged:
+        if damage.counts is None:
+            damage.counts = _trailing_index_counts(buf, damage.start, damage.end, limit)
+    if scan.damaged and not scan.finished:
+        scan.stop_reason = scan.damaged[-1].reason
+
+
+def _rescue_definitions(buf, start: int, end: int, scan: Scan) -> None:
+    """Schema and Channel records lying verbatim in a damaged part: zstd stores the start of
+    a chunk and incompressible bytes as literals, so the channels a damaged chunk defined
+    often survive there, and with them the messages of intact chunks on those channels.
+    A record must fill its length exactly and carry printable names; known ids are kept."""
+    pos = start
+    while (match := _DEFINITION.search(buf, pos, end)) is not None:
+        where = pos = match.start()
+        pos += 1
+        if record_plausible(buf, where, end) is None:
+            continue
+        try:
+            if buf[where] == OP_CHANNEL:
+                rec = parse_channel(buf, where + 9)
+                if rec.topic.isprintable() and rec.encoding.isprintable() and rec.topic:
+                    scan.channels.setdefault(rec.id, rec)
+            else:
+                rec = parse_schema(buf, where + 9)
+                if rec.name.isprintable() and rec.encoding.isprintable() and rec.name:
+                    scan.schemas.setdefault(rec.id, rec)
+        except (struct.error, UnicodeDecodeError):
+            continue
+
+
+def _cut_at(buf, pos: int, nxt: int, limit: int) -> bool:
+    """Whether the unreadable part from ``pos`` is a record cut by the end of the file (its
+    length reaches past the end, and nothing intact follows)."""
+    if nxt < limit:
+        return False
+    return pos + 9 > limit or pos + 9 + _unpack("<Q", buf, pos + 1)[0] > limit
+
+
+def _trailing_index_counts(buf, start: int, end: int, limit: int) -> dict[int, int] | None:
+    """Messages per channel of the MessageIndex records that end a damaged part exactly at
+    ``end`` (those of a chunk whose own length field was damaged), if any."""
+    pos = max(start, end - (1 << 16))
+    while (match := _MESSAGE_INDEX.search(buf, pos, end)) is not None:
+        counts, after = message_index_counts(buf, match.start(), limit)
+        if counts and after == end:
+            return counts
+        pos = match.start() + 1
+    return None
+
+
+def _has_chunk(buf, limit: int) -> bool:
+    pos = len(MAGIC)
+    while (match := _RESYNC_CHUNK.search(buf, pos, limit)) is not None:
+        if record_plausible(buf, match.start(), limit) is not None:
+            return True
+        pos = match.start() + 1
+    return False
+
+
+def _chunk_damage(buf, pos: int, end: int, reason: str, indexed: dict, limit: int) -> Damage:
+    index = indexed.get(pos)
+    damage = Damage(pos, end, reason, chunk=True)
+    if index is not None:
+        damage.start_ns, damage.end_ns = index.start_ns, index.end_ns
+        damage.counts = {}
+        for cid, where in index.message_index_offsets.items():
+            counts, _ = message_index_counts(buf, where, limit)
+            damage.counts[cid] = counts.get(cid, 0)
+        return damage
+    if pos + 9 + 16 <= limit:
+        damage.start_ns, damage.end_ns = chunk_header(buf, pos + 9)
+    # a chunk's MessageIndex records follow it: they say what it held
+    (length,) = _unpack("<Q", buf, pos + 1)
+    if pos + 9 + length <= end:
+        counts, _after = message_index_counts(buf, pos + 9 + length, limit)
+        damage.counts = counts or None
+    return damage
+
+
+def _resync(buf, pos: int, limit: int, indexed: dict, chunked: bool) -> int:
+    """Offset of the next intact record at or after ``pos`` (``limit`` if none): the next
+    intact chunk of the index, or an intact record found by searching before it."""
+    bound = next((o for o in sorted(indexed) if o >= pos and _intact_at(buf, o, limit, chunked)),
+                 limit)
+    while True:
+        match = _RESYNC.search(buf, pos, bound)
+        if match is None:
+            return bound
+        where = match.start()
+        if _intact_at(buf, where, limit, chunked):
+            return where
+        pos = where + 1
+
+
+def _intact_at(buf, pos: int, limit: int, chunked: bool, depth: int = 0) -> bool:
+    """Whether an intact record starts at ``pos``: a chunk whose contents check out, or a
+    record whose fields are consistent and that begins a chain of such records leading to an
+    intact chunk or the end of the data section (record-like bytes inside a damaged chunk's
+    compressed data break such a chain)."""
+    end = record_plausible(buf, pos, limit, messages=not chunked)
+    if end is None:
+        return False
+    op = buf[pos]
+    if op == OP_CHUNK:
+        try:
+            chunk_payload(buf[pos + 9:end])
+        except LogFormatError:
+            return False
+    elif op != OP_DATA_END and chunked:
+        if end == limit or depth > 64:
+            return True
+        return _intact_at(buf, end, limit, chunked, depth + 1)
+    elif op == OP_DATA_END:
+        # four bytes of CRC: too easily matched by chance; a summary record or the footer
+        # must follow
+        return end == limit or buf[end] in _SUMMARY_OPS
+    return True
 
 
 def session_metadata(records: list[tuple[str, dict[str, str]]], path) -> dict[str, str]:

@@ -4,27 +4,35 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import LogFormatError
 from ..records import NS, Detections
 from . import _mcapio as io
 from . import _schemas as S
-from .reader import read_session
+
+_UNFINISHED = "the recording did not finish"
+#: a file modified this recently may still be being written by a recorder, seconds
+RECENT_S = 10.0
 
 
-def measure_timing(time_ns: np.ndarray) -> tuple[float, float]:
+def measure_timing(time_ns: np.ndarray, ref_ns: int = 0) -> tuple[float, float]:
     """Frame period and shutter phase of one camera from its capture times.
 
     Robust to dropped frames and jitter: a first period is the median gap; each frame gets
     the frame number ``k`` implied by rounding gaps to whole periods; the period is then the
     least-squares slope of time over ``k`` and the phase the median of ``t - period * k``.
+    Full precision on any clock (e.g. Unix-epoch nanoseconds, ~1.7e18): all arithmetic is on
+    int64 differences, converted to float only once small.
 
     Parameters
     ----------
     time_ns : (n,) int64, sorted capture times, n >= 2
+    ref_ns : int, the time the phase is measured from (pass one reference for every camera
+        to compare phases)
 
     Returns
     -------
     period_s : float, seconds (NaN if fewer than 2 frames)
-    phase_s : float, seconds, time of frame k = 0 (relative to ``time_ns[0]``'s second)
+    phase_s : float, seconds, time of frame k = 0 relative to ``ref_ns``
     """
     t = np.asarray(time_ns, dtype=np.int64)
     if len(t) < 2:
@@ -36,19 +44,33 @@ def measure_timing(time_ns: np.ndarray) -> tuple[float, float]:
         return float("nan"), float("nan")
     k = np.concatenate([[0], np.cumsum(np.maximum(np.round(gaps / p0), 0))])
     period = float(np.polyfit(k, rel, 1)[0]) if k[-1] > 0 else float(p0)
-    phase = float(np.median(rel - period * k)) + t[0] / NS
+    phase = float(np.median(rel - period * k)) + int(t[0] - ref_ns) / NS
     return period, phase
 
 
-def timing_table(detections: Detections) -> list[dict]:
-    """Per camera: frames, measured fps, shutter offset relative to camera 0, detection rate.
+def timing_table(detections: Detections, nominal_offsets_s=None) -> list[dict]:
+    """Per camera: frames, measured fps, shutter offset, detection rate.
 
-    The offset of camera i is its phase minus camera 0's, wrapped into [0, period_i).
+    Only offsets between cameras can be measured: camera 0 is placed at its nominal offset
+    and camera i at the offset nearest its nominal one that matches the measured phase
+    difference (signed: a camera 0.1 ms early on a nominal offset of 0 reads -0.1 ms, not a
+    period minus 0.1 ms).
+
+    Parameters
+    ----------
+    detections : the session's detections
+    nominal_offsets_s : (n_cameras,) the rig's offsets, seconds; None: all 0 (the measured
+        offsets are then relative to camera 0, within half a period)
     """
+    names = detections.camera_names
+    nominal = (np.zeros(len(names)) if nominal_offsets_s is None
+               else np.asarray(nominal_offsets_s, dtype=np.float64))
+    times = detections.frame_time_ns
+    ref = int(times.min()) if len(times) else 0  # one reference: phases comparable
     rows, phases = [], []
-    for i, name in enumerate(detections.camera_names):
+    for i, name in enumerate(names):
         rows_i = detections.frame_camera == i
-        period, phase = measure_timing(detections.frame_time_ns[rows_i])
+        period, phase = measure_timing(detections.frame_time_ns[rows_i], ref)
         counts = detections.candidates_per_frame()[rows_i]
         n = int(rows_i.sum())
         rows.append({
@@ -60,10 +82,14 @@ def timing_table(detections: Detections) -> list[dict]:
         })
         phases.append((period, phase))
     period0, phase0 = phases[0] if phases else (float("nan"), float("nan"))
-    for row, (period, phase) in zip(rows, phases, strict=True):
+    for i, (row, (period, phase)) in enumerate(zip(rows, phases, strict=True)):
         p = period if np.isfinite(period) else period0
-        row["offset_measured_s"] = (float((phase - phase0) % p)
-                                    if np.isfinite(p) and np.isfinite(phase0) else float("nan"))
+        expected = nominal[i] - nominal[0]
+        if np.isfinite(p) and np.isfinite(phase0) and np.isfinite(phase):
+            miss = (phase - phase0) - expected
+            row["offset_measured_s"] = float(nominal[i] + miss - p * np.round(miss / p))
+        else:
+            row["offset_measured_s"] = float("nan")
     return rows
 
 
@@ -71,30 +97,38 @@ def session_info(path) -> dict:
     """Summary of a session file as a JSON-able dict.
 
     On a finished file: ``cameras`` (per camera: name, frames, fps nominal/measured, shutter
-    offset nominal/measured relative to the first camera, detection rate, images),
-    ``topics`` (message counts), ``duration_s``, ``start_s``, ``end_s``, ``truth``,
-    ``tracks`` (method -> points), ``events``, metadata fields and ``truncated: False``.
-    On a truncated file: ``truncated: True``, what is salvageable (``topics``,
-    ``last_time_s`` of any message, per kind the keys of
-    :func:`pslog.log.recover.salvage_summary`, ``kept_bytes``, ``file_bytes``) and ``hint``
-    (run ``pslog recover``).
+    offset as the rig states it and as measured (see :func:`timing_table`), detection rate,
+    images), ``topics`` (message counts), ``duration_s``, ``start_s``, ``end_s``, ``truth``,
+    ``tracks`` (method -> points), ``events``, metadata fields, ``truncated: False`` and
+    ``damaged`` (every chunk is checked: one dict per damaged chunk, see
+    :func:`pslog.log.recover.describe_damage`; the rest of the summary leaves them out).
+    On a truncated file, or one whose summary is damaged: ``truncated: True``, what is
+    salvageable (``topics``, ``last_time_s`` of any message, per kind the keys of
+    :func:`pslog.log.recover.salvage_summary`, ``kept_bytes``, ``file_bytes``, ``damaged``),
+    ``still_recording`` (modified within the last :data:`RECENT_S` seconds or named
+    ``*.partial``: a recorder may still be writing it), ``age_s`` and ``hint``.
     """
     path, size, complete = io.check_file(path)
     if not complete:
-        return _truncated_info(path, size)
-    from .reader import _Finished
+        return _scanned_info(path, size, "its closing MCAP magic (the last 8 bytes) is damaged"
+                             if io.tail_magic_damaged(path) else _UNFINISHED)
+    from .reader import DamagedSummaryError, _Finished, _read
 
-    with _Finished(path) as f:
+    try:
+        f = _Finished(path)
+    except DamagedSummaryError as exc:
+        return _scanned_info(path, size, exc.reason)
+    with f:
         counts = dict(sorted(f.counts.items()))
-    session = read_session(path)
+        damaged = f.check_chunks()
+        session = _read(f, frozenset(d["start"] for d in damaged))
     det = session.detections
     rig = session.rig
     times = det.frame_time_ns
-    cameras = timing_table(det)
-    offset0 = rig.cameras[0].offset
+    cameras = timing_table(det, [cam.offset for cam in rig.cameras])
     for row, cam in zip(cameras, rig.cameras, strict=True):
         row["fps_nominal"] = cam.fps
-        row["offset_nominal_s"] = (cam.offset - offset0) % cam.frame_period
+        row["offset_nominal_s"] = cam.offset  # as the rig states it
         row["images"] = counts.get(S.image_topic(cam.name), 0)
     meta = session.metadata
     return {
@@ -107,6 +141,7 @@ def session_info(path) -> dict:
         "created_utc": meta.get("created_utc", ""),
         "rig": rig.name,
         "cameras": cameras,
+        "offset_reference": rig.names[0],
         "topics": counts,
         "frames": det.n_frames,
         "candidates": det.n_candidates,
@@ -118,11 +153,16 @@ def session_info(path) -> dict:
         "tracks": {m: len(t) for m, t in session.tracks.items()},
         "events": len(session.events),
         "file_bytes": size,
+        "damaged": damaged,
+        "hint": (f"{len(damaged)} damaged chunk(s); run 'pslog recover {path} -o FIXED.mcap' "
+                 f"to salvage every intact one" if damaged else ""),
     }
 
 
-def _truncated_info(path, size: int) -> dict:
-    from .recover import salvage_summary
+def _scanned_info(path, size: int, problem: str) -> dict:
+    import time
+
+    from .recover import describe_damage, salvage_summary
 
     topics: dict[int, int] = {}
     last_ns: dict[int, int] = {}
@@ -131,20 +171,35 @@ def _truncated_info(path, size: int) -> dict:
         topics[cid] = topics.get(cid, 0) + 1
         last_ns[cid] = max(last_ns.get(cid, t), t)
 
-    scan = io.scan_file(path, count)
+    scan = io.salvage_file(path, count)
+    if scan.damaged and not any(name == S.SESSION_METADATA for name, _ in scan.metadata):
+        raise LogFormatError(f"{path}: {problem}, and its session metadata (rig, cameras) is "
+                             f"lost (damaged or cut at byte {scan.damaged[0].start}); nothing "
+                             f"can be recovered")
     io.session_metadata(scan.metadata, path)
     name = {c: scan.channels[c].topic if c in scan.channels else f"channel {c}" for c in topics}
     named = {name[c]: n for c, n in topics.items()}
     last = max(last_ns.values(), default=None)
+    age = max(time.time() - path.stat().st_mtime, 0.0)
+    # a finished file (closing magic written) is not being recorded, whatever its age
+    recording = (problem == _UNFINISHED and (age < RECENT_S or path.name.endswith(".partial")))
+    damaged = [describe_damage(d, scan.channels) for d in scan.damaged]
+    recover = f"run 'pslog recover {path} -o FIXED.mcap' to salvage the intact records"
     return {
         "path": str(path),
         "truncated": True,
+        "problem": problem,
         "topics": dict(sorted(named.items())),
         "last_time_s": None if last is None else last / NS,
         **salvage_summary(named, {name[c]: t for c, t in last_ns.items()}),
-        "kept_bytes": scan.complete_bytes,
+        "kept_bytes": size - sum(d["end"] - d["start"] for d in damaged),
         "file_bytes": size,
+        "damaged": damaged,
         "stop_reason": scan.stop_reason,
-        "hint": f"the recording did not finish; run 'pslog recover {path} -o FIXED.mcap' "
-                f"to salvage the complete records",
+        "still_recording": recording,
+        "age_s": age,
+        "hint": (f"it may still be recording (modified {age:.0f} s ago"
+                 + (", named *.partial" if path.name.endswith(".partial") else "")
+                 + f"): wait for the recorder to finish; if none is running, {recover}"
+                 if recording else f"{problem}; {recover}"),
     }

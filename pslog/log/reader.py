@@ -4,10 +4,16 @@ unless asked (:func:`iter_images`).
 Speed: the summary's chunk index says which chunks hold which channels, so image chunks are
 never read; detection chunks are decompressed whole and their messages sliced out with
 ``struct`` (see ``_mcapio``) and decoded with the generated protobuf class directly.
+
+Damage: the summary is checked against its CRC before it is trusted, and every chunk read is
+checked (lengths, decompression, CRC, framing); a damaged one is a one-line LogFormatError
+naming the file, the byte offset and ``pslog recover`` (which keeps every intact chunk).
 """
 
 from __future__ import annotations
 
+import heapq
+import mmap
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -60,6 +66,15 @@ class Image:
     data: bytes
 
 
+class DamagedSummaryError(LogFormatError):
+    """The summary section or footer of a finished file is damaged (the data may be whole)."""
+
+    def __init__(self, path, reason: str) -> None:
+        super().__init__(f"{path}: damaged MCAP summary ({reason}); run 'pslog recover {path} "
+                         f"-o FIXED.mcap' to salvage the data")
+        self.reason = reason
+
+
 class _Finished:
     """A finished session file opened for seeking: summary, metadata, rig."""
 
@@ -68,21 +83,25 @@ class _Finished:
         self.path = path
         if not complete:
             raise io.truncated_error(path)
-        from mcap.exceptions import McapError
         from mcap.reader import SeekingReader
 
         self.file = open(path, "rb")  # closed by close()
         try:
+            # the summary's own CRC first: a damaged index would send reads astray
+            with mmap.mmap(self.file.fileno(), 0, access=mmap.ACCESS_READ) as buf:
+                checked = io.read_summary(buf)
+                start, end = io.summary_span(buf)
+            if checked is None:
+                raise LogFormatError(f"summary section or footer, bytes {start}..{end}, fails "
+                                     f"its checks")
             reader = SeekingReader(self.file)
             summary = reader.get_summary()
             metadata = [(m.name, m.metadata) for m in reader.iter_metadata()]
-        except (McapError, ValueError, EOFError, UnicodeDecodeError) as exc:
+        except Exception as exc:
+            # whatever the mcap package raises on bytes it cannot parse (its exceptions,
+            # struct, unicode, EOF, index errors)
             self.file.close()
-            raise LogFormatError(f"{path}: damaged MCAP summary ({exc}); "
-                                 f"try 'pslog recover'") from None
-        except Exception:
-            self.file.close()
-            raise
+            raise DamagedSummaryError(path, str(exc) or type(exc).__name__) from None
         if summary is None:
             self.file.close()
             raise LogFormatError(f"{path}: MCAP has no summary section; try 'pslog recover'")
@@ -110,8 +129,50 @@ class _Finished:
     def __exit__(self, *exc) -> None:
         self.close()
 
-    def collect(self, topics: Sequence[str]) -> dict[str, list[tuple[int, int, bytes]]]:
-        """``topic -> [(log_time, sequence, data), ...]`` in file order for ``topics``."""
+    def read_chunk(self, index) -> bytes:
+        """The checked, decompressed records of the chunk of a ChunkIndex; a one-line
+        LogFormatError naming the byte offset (and ``pslog recover``) if it is damaged."""
+        try:
+            return self._chunk(index)
+        except LogFormatError as exc:
+            raise io.damaged_error(self.path, index.chunk_start_offset, str(exc)) from None
+
+    def _chunk(self, index) -> bytes:
+        self.file.seek(index.chunk_start_offset)
+        record = self.file.read(index.chunk_length)
+        if len(record) != index.chunk_length or record[0] != io.OP_CHUNK or \
+                int.from_bytes(record[1:9], "little") != index.chunk_length - 9:
+            raise LogFormatError("chunk record does not match the summary's index")
+        return io.chunk_payload(record[9:])
+
+    def check_chunks(self) -> list[dict]:
+        """Check every chunk (decompression, CRC, framing): one dict per damaged chunk with
+        ``start``, ``end``, ``reason``, ``start_ns``, ``end_ns`` and ``messages`` (topic ->
+        count from the index). Reads the whole file, image chunks included."""
+        damaged = []
+        for index in sorted(self.summary.chunk_indexes, key=lambda c: c.chunk_start_offset):
+            try:
+                self._chunk(index)
+            except LogFormatError as exc:
+                messages = {}
+                for cid, where in index.message_index_offsets.items():
+                    self.file.seek(where)
+                    head = self.file.read(15)
+                    n = int.from_bytes(head[11:15], "little") // 16 if len(head) == 15 else 0
+                    messages[self.topics.get(cid, f"channel {cid}")] = n
+                damaged.append({
+                    "start": index.chunk_start_offset,
+                    "end": index.chunk_start_offset + index.chunk_length,
+                    "reason": str(exc),
+                    "chunk": True, "start_ns": index.message_start_time,
+                    "end_ns": index.message_end_time, "messages": dict(sorted(messages.items())),
+                })
+        return damaged
+
+    def collect(self, topics: Sequence[str], skip: frozenset[int] = frozenset()
+                ) -> dict[str, list[tuple[int, int, bytes]]]:
+        """``topic -> [(log_time, sequence, data), ...]`` in file order for ``topics``;
+        ``skip``: offsets of chunks not to read (known to be damaged)."""
         wanted = {cid: [] for cid, topic in self.topics.items() if topic in set(topics)}
         if not wanted:
             return {}
@@ -120,9 +181,9 @@ class _Finished:
             for index in sorted(chunks, key=lambda c: c.chunk_start_offset):
                 if not wanted.keys() & index.message_index_offsets.keys():
                     continue  # e.g. an image chunk: never read
-                self.file.seek(index.chunk_start_offset + 9)
-                body = self.file.read(index.chunk_length - 9)
-                io.collect_messages(io.chunk_payload(body), wanted)
+                if index.chunk_start_offset in skip:
+                    continue
+                io.collect_messages(self.read_chunk(index), wanted)
         else:  # unchunked file written by another program: walk it all
             io.scan_file(self.path, lambda cid, t, seq, data: (
                 wanted[cid].append((t, seq, data)) if cid in wanted else None))
@@ -133,13 +194,22 @@ def read_session(path) -> Session:
     """Read a session MCAP without decoding images.
 
     Raises LogFormatError for a missing file, a non-MCAP, an MCAP that is not a pslog session,
-    and a truncated file (pointing to ``pslog recover``).
+    a truncated file and a damaged chunk among those read (naming its byte offset and
+    pointing to ``pslog recover``).
     """
     with _Finished(path) as f:
-        rig = f.rig
-        det_topics = [S.detections_topic(n) for n in rig.names]
-        track_topics = sorted(t for t in f.topics.values() if S.parse_track_topic(t))
-        found = f.collect([*det_topics, S.TRUTH_TOPIC, S.EVENTS_TOPIC, *track_topics])
+        return _read(f)
+
+
+def _read(f: _Finished, skip: frozenset[int] = frozenset()) -> Session:
+    """The session of an open file; ``skip``: offsets of damaged chunks to leave out."""
+    from google.protobuf.message import DecodeError
+
+    rig = f.rig
+    det_topics = [S.detections_topic(n) for n in rig.names]
+    track_topics = sorted(t for t in f.topics.values() if S.parse_track_topic(t))
+    found = f.collect([*det_topics, S.TRUTH_TOPIC, S.EVENTS_TOPIC, *track_topics], skip)
+    try:
         detections = decode_detections(rig.names, [found.get(t, []) for t in det_topics])
         truth = decode_truth(found[S.TRUTH_TOPIC]) if S.TRUTH_TOPIC in found else None
         tracks = {}
@@ -147,10 +217,14 @@ def read_session(path) -> Session:
             method = S.parse_track_topic(topic)
             tracks[method] = decode_track(method, rig.names, found.get(topic, []))
         events = decode_events(found.get(S.EVENTS_TOPIC, []))
-        n_images = sum(f.counts.get(S.image_topic(n), 0) for n in rig.names)
-        return Session(path=f.path, rig=rig, detections=detections, truth=truth, tracks=tracks,
-                       timing=f.meta.get("timing", "custom"), metadata=dict(f.meta),
-                       events=events, n_images=n_images)
+    except DecodeError as exc:
+        # only a chunk written without CRCs can get here with damaged bytes
+        raise LogFormatError(f"{f.path}: a message does not decode ({exc}); run 'pslog "
+                             f"recover {f.path} -o FIXED.mcap' to salvage the rest") from None
+    n_images = sum(f.counts.get(S.image_topic(n), 0) for n in rig.names)
+    return Session(path=f.path, rig=rig, detections=detections, truth=truth, tracks=tracks,
+                   timing=f.meta.get("timing", "custom"), metadata=dict(f.meta),
+                   events=events, n_images=n_images)
 
 
 def decode_detections(camera_names: Sequence[str],
@@ -255,9 +329,54 @@ def iter_images(path, cameras: Sequence[int] | None = None, start_ns: int | None
         topics = [t for t in camera_of if t in f.counts]
         if not topics:
             return
-        parse = S.CompressedImage.FromString
-        for _schema, channel, message in f.reader.iter_messages(
-                topics=topics, starting_at=start_ns, ending_before=end_ns, log_time_order=True):
-            m = parse(message.data)
-            yield Image(camera_of[channel.topic], message.sequence, message.log_time,
-                        m.format, m.data)
+        yield from _images(f, camera_of, topics, start_ns, end_ns)
+
+
+def _images(f: _Finished, camera_of: dict[str, int], topics: list[str],
+            start_ns: int | None, end_ns: int | None) -> Iterator[Image]:
+    """Images of ``topics`` in log-time order, reading one chunk at a time (each checked):
+    chunks in order of their first message time; a message is yielded once no chunk still to
+    be read can hold an earlier one."""
+    lo = -1 if start_ns is None else start_ns
+    hi = float("inf") if end_ns is None else end_ns
+    camera = {cid: camera_of[t] for cid, t in f.topics.items() if t in topics}
+    if not f.summary.chunk_indexes:  # an unchunked file written by another program
+        found = f.collect(topics)
+        merged = sorted((t, seq, camera_of[topic], data) for topic, msgs in found.items()
+                        for t, seq, data in msgs)
+        for t, seq, cam, data in merged:
+            if (start_ns is None or t >= start_ns) and (end_ns is None or t < end_ns):
+                m = parse_image(data, f.path)
+                yield Image(cam, seq, t, m.format, m.data)
+        return
+    chunks = sorted((c for c in f.summary.chunk_indexes
+                     if camera.keys() & c.message_index_offsets.keys()
+                     and c.message_end_time >= lo and c.message_start_time < hi),
+                    key=lambda c: (c.message_start_time, c.chunk_start_offset))
+    pending: list[tuple[int, int, int, int, bytes]] = []  # time, order, camera, seq, data
+    order = 0
+    for i in range(len(chunks) + 1):
+        horizon = chunks[i].message_start_time if i < len(chunks) else float("inf")
+        while pending and pending[0][0] < horizon:
+            t, _order, cam, seq, data = heapq.heappop(pending)
+            m = parse_image(data, f.path)
+            yield Image(cam, seq, t, m.format, m.data)
+        if i == len(chunks):
+            break
+        found = {cid: [] for cid in camera}
+        io.collect_messages(f.read_chunk(chunks[i]), found)
+        for cid, msgs in found.items():
+            for t, seq, data in msgs:
+                if lo <= t < hi:
+                    heapq.heappush(pending, (t, order, camera[cid], seq, data))
+                    order += 1
+
+
+def parse_image(data: bytes, path) -> S.CompressedImage:
+    from google.protobuf.message import DecodeError
+
+    try:
+        return S.CompressedImage.FromString(data)
+    except DecodeError as exc:  # only a chunk written without CRCs can get here damaged
+        raise LogFormatError(f"{path}: an image does not decode ({exc}); run 'pslog recover "
+                             f"{path} -o FIXED.mcap' to salvage the rest") from None

@@ -1,12 +1,13 @@
-"""Salvage the complete records of a damaged (truncated or partly corrupt) session MCAP."""
+"""Salvage every intact record of a damaged (truncated or partly corrupt) session MCAP."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from ..errors import InputError, LogFormatError
+from ..errors import InputError, LogFormatError, PslogError
 from ..outputs import check_output_path, partial_path
 from ..records import NS
+from ..rig import Rig
 from . import _mcapio as io
 from . import _schemas as S
 
@@ -59,10 +60,12 @@ def describe_salvage(summary: dict) -> str:
 
 
 def recover_session(src, dst, *, force: bool = False) -> dict:
-    """Copy every complete record of ``src`` into a finished, indexed MCAP ``dst``.
+    """Copy every intact record of ``src`` into a finished, indexed MCAP ``dst``.
 
-    The walk stops at the first incomplete or corrupt record (a writer killed mid-chunk
-    leaves at most its last flush interval there). Works on finished files too (a plain copy).
+    Each chunk is checked (header, decompression, CRC, framing of its records) and a damaged
+    one is skipped; every intact record before and after it is kept. After bytes that are no
+    record (a cut, a damaged length field) the walk picks up at the next intact record (see
+    :func:`pslog.log._mcapio.salvage_file`). Works on finished files too (a plain copy).
     Messages are streamed, so files larger than memory recover.
 
     Returns
@@ -70,14 +73,18 @@ def recover_session(src, dst, *, force: bool = False) -> dict:
     dict with ``messages`` (total recovered), ``topics`` (topic -> count), ``first_time_ns``
     and ``last_time_ns`` (log times of the recovered messages of any kind, None if none),
     the keys of :func:`salvage_summary` (``detection_frames``, ``last_detection_ns``,
-    ``images``, ``last_image_ns``, ``truth_points``), ``file_bytes``, ``kept_bytes`` (data
-    section parsed), ``discarded_bytes`` (after the last complete data record, including a
-    damaged summary), ``data_complete`` (no data record was lost), ``was_complete`` (src
-    was a finished file) and ``stop_reason``.
+    ``images``, ``last_image_ns``, ``truth_points``), ``file_bytes``, ``kept_bytes`` (bytes
+    of the data section read), ``discarded_bytes`` (the damaged parts), ``damaged`` (one
+    dict per skipped part, see :func:`describe_damage`), ``unknown_channel_messages``
+    (intact messages whose channel record was lost with a damaged part), ``data_complete``
+    (no data record was lost), ``was_complete`` (src was a finished, undamaged file) and
+    ``stop_reason``.
     """
-    src, size, complete = io.check_file(src)
+    src, size = Path(src), 0
+    if not src.is_file():
+        io.check_file(src)  # its one-line error
     dst = Path(dst)
-    if dst.exists() and dst.resolve() == src.resolve():
+    if dst.exists() and src.exists() and dst.resolve() == src.resolve():
         raise InputError(f"output {dst} is the damaged input; choose another file")
     dst = check_output_path(dst, force)
 
@@ -87,6 +94,7 @@ def recover_session(src, dst, *, force: bool = False) -> dict:
     topics: dict[str, int] = {}
     last_ns: dict[str, int] = {}  # per topic
     times = [None, None]  # first, last log time
+    unknown = [0]
     scan = io.Scan()
     schema_ids: dict[int, int] = {}
     channel_ids: dict[int, int] = {}
@@ -99,10 +107,12 @@ def recover_session(src, dst, *, force: bool = False) -> dict:
         if new is None:
             channel = scan.channels.get(cid)
             if channel is None:
-                return  # its channel record was lost with the damaged part
+                unknown[0] += 1
+                return  # its channel record was lost with a damaged part
             if channel.schema_id and channel.schema_id not in schema_ids:
-                schema = scan.schemas.get(channel.schema_id)
+                schema = scan.schemas.get(channel.schema_id) or _pslog_schema(channel.topic)
                 if schema is None:
+                    unknown[0] += 1
                     return
                 schema_ids[channel.schema_id] = writer.register_schema(
                     schema.name, schema.encoding, schema.data)
@@ -117,8 +127,21 @@ def recover_session(src, dst, *, force: bool = False) -> dict:
         times[1] = t if times[1] is None else max(times[1], t)
 
     try:
-        io.scan_file(src, copy, scan=scan)
-        io.session_metadata(scan.metadata, src)  # refuse to "recover" something not ours
+        io.salvage_file(src, copy, scan=scan, tolerate_magic=True)
+        size = src.stat().st_size
+        try:
+            meta = io.session_metadata(scan.metadata, src)  # refuse to "recover" what is not ours
+        except LogFormatError:
+            if scan.damaged and not scan.metadata:
+                raise LogFormatError(
+                    f"{src}: the session metadata (rig, cameras) was in the damaged part at "
+                    f"byte {scan.damaged[0].start}; nothing usable can be recovered") from None
+            raise
+        try:  # records outside chunks have no CRC: a damaged rig shows only when parsed
+            Rig.from_toml(meta.get("rig_toml", ""), source="the rig")
+        except PslogError as exc:
+            raise LogFormatError(f"{src}: the session metadata (rig, cameras) is damaged "
+                                 f"({exc}); nothing usable can be recovered") from None
         for name, data in scan.metadata:
             writer.add_metadata(name, data)
         writer.finish()
@@ -127,25 +150,81 @@ def recover_session(src, dst, *, force: bool = False) -> dict:
         f.close()
         tmp.unlink(missing_ok=True)
         raise
+    damaged = [describe_damage(d, scan.channels) for d in scan.damaged]
     if not topics:
         tmp.unlink(missing_ok=True)
-        raise LogFormatError(f"{src}: no complete message could be recovered "
-                             f"({scan.stop_reason or 'no messages'})")
+        reason = damaged[0]["reason"] if damaged else "no messages"
+        raise LogFormatError(f"{src}: no intact message could be recovered ({reason})")
     tmp.replace(dst)
+    discarded = sum(d["end"] - d["start"] for d in damaged)
+    complete = scan.finished and not damaged
+    tail = "; ".join(f"{d['reason']} at byte {d['start']}" for d in damaged[:3])
     return {
         "source": str(src),
         "output": str(dst),
-        "was_complete": complete and scan.finished,
+        "was_complete": complete and scan.summary is not None,
         "messages": sum(topics.values()),
         "topics": dict(sorted(topics.items())),
         "first_time_ns": times[0],
         "last_time_ns": times[1],
         **salvage_summary(topics, last_ns),
         "file_bytes": size,
-        "kept_bytes": scan.complete_bytes,
-        "data_complete": scan.finished,  # the data section was whole (only the summary lost)
-        "discarded_bytes": 0 if complete and scan.finished else size - scan.complete_bytes,
-        "stop_reason": ("" if complete and scan.finished else
-                        "only the summary section was damaged; no data lost" if scan.finished
-                        else scan.stop_reason),
+        "kept_bytes": size - discarded,
+        "data_complete": complete,  # the data section was whole (at most the summary lost)
+        "discarded_bytes": discarded,
+        "damaged": damaged,
+        "unknown_channel_messages": unknown[0],
+        "stop_reason": ("" if complete and scan.summary is not None else
+                        "only the summary section was damaged; no data lost" if complete
+                        else tail + ("; ..." if len(damaged) > 3 else "")),
     }
+
+
+def _pslog_schema(topic: str) -> io.SchemaRec | None:
+    """The schema of a pslog topic, for a channel whose schema record was lost with a damaged
+    part (pslog's schemas are fixed by the topic)."""
+    camera = S.parse_camera_topic(topic)
+    kind = camera[1] if camera else None
+    message = {"calibration": S.CameraCalibration, "transform": S.FrameTransform,
+               "image": S.CompressedImage, "detections": S.DetectionFrame}.get(kind)
+    if topic == S.TRUTH_TOPIC:
+        message = S.TruthPoint
+    elif topic == S.EVENTS_TOPIC:
+        message = S.Log
+    elif S.parse_track_topic(topic):
+        message = S.TrackPoint
+    elif topic.startswith("/tracks/") and topic.endswith("/scene"):
+        message = S.SceneUpdate
+    if message is None:
+        return None
+    return io.SchemaRec(0, message.DESCRIPTOR.full_name, S.PROTOBUF,
+                        S.file_descriptor_set(message))
+
+
+def describe_damage(damage: io.Damage, channels: dict) -> dict:
+    """A skipped part of a damaged file as a JSON-able dict: ``start``, ``end`` (byte
+    offsets), ``reason``, ``chunk`` (whether it is a chunk), ``start_ns``/``end_ns`` (message
+    times the chunk's header or index states, or None) and ``messages`` (topic -> count from
+    the chunk's message indexes, or None when unknown)."""
+    counts = None
+    if damage.counts is not None:
+        counts = {}
+        for cid, k in damage.counts.items():
+            topic = channels[cid].topic if cid in channels else f"channel {cid}"
+            counts[topic] = counts.get(topic, 0) + k
+    return {"start": damage.start, "end": damage.end, "reason": damage.reason,
+            "chunk": damage.chunk, "start_ns": damage.start_ns, "end_ns": damage.end_ns,
+            "messages": None if counts is None else dict(sorted(counts.items()))}
+
+
+def damage_line(d: dict) -> str:
+    """One line for users about a :func:`describe_damage` dict."""
+    what = "damaged chunk at bytes" if d["chunk"] else "unreadable bytes"
+    text = f"{what} {d['start']}..{d['end']}"
+    if d["start_ns"] is not None and d["end_ns"] is not None and d["end_ns"] >= d["start_ns"]:
+        text += f", t = {d['start_ns'] / NS:.3f} .. {d['end_ns'] / NS:.3f} s"
+    if d["messages"]:
+        text += ", " + ", ".join(f"{n} on {t}" for t, n in d["messages"].items())
+    elif d["chunk"]:
+        text += ", message count unknown"
+    return f"{text} ({d['reason']})"
