@@ -35,6 +35,12 @@ class RrdWriteError(PslogError):
     """A .rrd file could not be written (folder not writable, disk full, I/O error)."""
 
 
+def _remove(path: Path) -> None:
+    # a read-only file system refuses even to unlink a file that is not there
+    with contextlib.suppress(OSError):
+        path.unlink(missing_ok=True)
+
+
 def _reason(exc: BaseException) -> str:
     return exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
 
@@ -79,7 +85,7 @@ class _PipeToFile:
         self.error = self.error or exc
         with contextlib.suppress(OSError):
             self._out.close()
-        self.partial.unlink(missing_ok=True)
+        _remove(self.partial)
 
     def unblock(self) -> None:
         """Let the pump's ``open`` return when rerun never opened the pipe."""
@@ -120,14 +126,14 @@ def rrd_file(rec: rr.RecordingStream, path: str | Path, *, force: bool = False,
             rec.flush(timeout_sec=FLUSH_TIMEOUT_S)
             rec.disconnect()
         except BaseException:
-            partial.unlink(missing_ok=True)
+            _remove(partial)
             raise
         partial.replace(path)
         return
     try:
         pipe = _PipeToFile(partial, path)
     except OSError as exc:
-        partial.unlink(missing_ok=True)
+        _remove(partial)
         raise RrdWriteError(f"cannot write {path}: {_reason(exc)}") from None
     try:
         try:
@@ -150,7 +156,7 @@ def rrd_file(rec: rr.RecordingStream, path: str | Path, *, force: bool = False,
             raise RrdWriteError(f"cannot write {path}: {_reason(pipe.error)}")
         partial.replace(path)
     except BaseException:
-        partial.unlink(missing_ok=True)
+        _remove(partial)
         raise
     finally:
         pipe.cleanup()
