@@ -196,8 +196,14 @@ def _record(rig: Rig, sources: Mapping[str, object], output: Path, options: Work
     # with --force over an old session the writer writes <output>.partial, moved over the
     # old session only once complete
     target = partial_path(output) if existed else output
-    writer = SessionWriter(output, rig, force=force, timing=timing or timing_label(rig),
-                           source=source or "record", metadata=meta)
+    try:
+        writer = SessionWriter(output, rig, force=force, timing=timing or timing_label(rig),
+                               source=source or "record", metadata=meta)
+    except OSError as exc:  # an unwritable folder, a full disk: nothing recorded yet
+        with contextlib.suppress(OSError):
+            target.unlink(missing_ok=True)
+        raise RecordWriteError(f"cannot write {output}: {_reason(exc)}; nothing was "
+                               f"recorded") from None
     session = _Session(rig, sources, options, writer, status, stop_signal)
     try:
         if truth is not None:

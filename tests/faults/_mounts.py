@@ -42,10 +42,9 @@ def small_tmpfs(path: Path, size: str = "64k") -> Iterator[Path]:
 
 def fill(folder: Path) -> None:
     """Fill the file system of ``folder`` up to the last byte."""
-    with open(folder / "filler", "wb") as f, contextlib.suppress(OSError):
+    with contextlib.suppress(OSError), open(folder / "filler", "wb", buffering=0) as f:
         while True:
-            f.write(b"\0" * 4096)
-            f.flush()
+            f.write(b"\0" * 512)
 
 
 @contextlib.contextmanager

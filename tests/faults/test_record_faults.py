@@ -16,7 +16,7 @@ import pytest
 
 from pslog.log import read_session
 
-from ._mounts import small_tmpfs
+from ._mounts import fill, read_only, small_tmpfs
 from .promises import Run, assert_one_line_error, assert_untouched, fingerprint, run_pslog
 
 RECORD = ("record", "--synthetic", "--rig", "paper3", "--timing", "typeA", "--motion",
@@ -58,6 +58,22 @@ def test_disk_full_while_recording(tmp_path, old):
         recovered = run_pslog("recover", kept, "-o", fixed)
         assert recovered.code == 0, recovered.stderr
         assert read_session(fixed).n_images > 0
+
+
+def test_unwritable_folder_or_full_disk_before_the_start(tmp_path):
+    """Nothing can be written at all: one line before any camera starts, nothing left."""
+    with read_only(tmp_path / "ro") as folder:
+        before = fingerprint(folder)
+        run = run_pslog(*RECORD, "-o", folder / "s.mcap", timeout=30)
+        assert_one_line_error(run, 1, contains=(str(folder / "s.mcap"),
+                                                "Read-only file system", "nothing was recorded"))
+        assert_untouched(before, folder)
+    with small_tmpfs(tmp_path / "disk", "64k") as disk:
+        fill(disk)
+        before = fingerprint(disk)
+        run = run_pslog(*RECORD, "-o", disk / "s.mcap", timeout=30)
+        assert_one_line_error(run, 1, contains=(str(disk / "s.mcap"), "No space left"))
+        assert_untouched(before, disk)
 
 
 def _clip(path) -> None:
