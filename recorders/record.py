@@ -197,8 +197,10 @@ def _record(rig: Rig, sources: Mapping[str, object], output: Path, options: Work
     # old session only once complete
     target = partial_path(output) if existed else output
     try:
-        writer = SessionWriter(output, rig, force=force, timing=timing or timing_label(rig),
-                               source=source or "record", metadata=meta)
+        with signals_only_to_this_thread():  # the writer's flusher thread
+            writer = SessionWriter(output, rig, force=force,
+                                   timing=timing or timing_label(rig),
+                                   source=source or "record", metadata=meta)
     except OSError as exc:  # an unwritable folder, a full disk: nothing recorded yet
         with contextlib.suppress(OSError):
             target.unlink(missing_ok=True)
@@ -598,12 +600,29 @@ _STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
 @contextlib.contextmanager
+def signals_only_to_this_thread():
+    """Threads started inside the block never receive SIGINT or SIGTERM: they keep them
+    blocked, so the kernel delivers these signals to the main thread only. That matters
+    while camera processes are started (see :func:`_signals_ignored_by_children`): a signal
+    delivered then to another thread would meet the ignored disposition and be lost."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
+@contextlib.contextmanager
 def _signals_ignored_by_children():
     """Start camera processes with SIGINT and SIGTERM ignored, so that Ctrl-C (sent to the
     whole foreground process group) or SIGTERM to the group cannot interrupt a camera, even
     while it is still importing: the parent stops them. An ignored disposition is the only
     one that survives ``exec``; the signals are blocked meanwhile, so one arriving now waits
-    for the parent's own handler instead of being lost."""
+    for the parent's own handler instead of being lost (provided no other thread of the
+    parent accepts them: see :func:`signals_only_to_this_thread`)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return

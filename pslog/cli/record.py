@@ -20,8 +20,9 @@ Record a session: every camera of the rig is captured in its own process (captur
 detection, JPEG encoding) and one writer stores the frames, the detections, the calibration
 and the timing into an MCAP session. A status line on stderr shows per camera the frames,
 the frame rate, the frames with a ball and the drops; a summary follows at the end.
-Ctrl-C or SIGTERM finishes the file cleanly (a killed recorder loses at most the last
-second; see 'pslog recover').
+Ctrl-C or SIGTERM, at any moment, stops the cameras and finishes the file cleanly (a
+killed recorder loses at most the last second; see 'pslog recover'). If the disk fills up,
+the cameras are stopped and what was written is kept; the error says where.
 
 Sources (one --source per camera of the rig, NAME a camera name of the rig):
   NAME=0, NAME=/dev/video2   a live camera (device index or V4L2 path); capture times from
@@ -114,8 +115,10 @@ def parse_hsv(text: str | None):
     return HsvRange() if text is None else HsvRange.parse(text)
 
 
-#: SIGINT/SIGTERM received since ``pslog record`` started (installed by add_arguments)
+#: SIGINT/SIGTERM received since ``pslog record`` started (installed by add_arguments),
+#: and the handlers it replaced (restored when run() ends, for callers of main() in-process)
 _STOP = None
+_PREVIOUS: dict = {}
 
 
 def _stop_on_signals() -> None:
@@ -133,9 +136,16 @@ def _stop_on_signals() -> None:
     def note(signum, frame):
         early.append(signal.Signals(signum).name)
 
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, note)
-    from recorders.record import StopRequest
+    stops = {signal.SIGINT, signal.SIGTERM}
+    for sig in stops:
+        _PREVIOUS.setdefault(sig, signal.signal(sig, note))
+    # the threads the imports start (numpy's BLAS pool) keep these signals blocked, so they
+    # always reach this thread (see recorders.record.signals_only_to_this_thread)
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, stops)
+    try:
+        from recorders.record import StopRequest
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
     _STOP = StopRequest()
     _STOP.install()
@@ -144,9 +154,19 @@ def _stop_on_signals() -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import signal
+
+    try:
+        return _run(args, _STOP)
+    finally:
+        for sig, handler in _PREVIOUS.items():
+            signal.signal(sig, handler)
+        _PREVIOUS.clear()
+
+
+def _run(args: argparse.Namespace, stop) -> int:
     from pslog.rig import apply_timing, resolve_rig
 
-    stop = _STOP
     output = check_output(args.output, args.force)
     rig = resolve_rig(args.rig)
     if args.timing:
