@@ -29,6 +29,7 @@ from typing import IO, Literal
 
 import numpy as np
 
+from pslog import outputs as _outputs
 from pslog.errors import InputError, PslogError, RigError
 from pslog.outputs import check_output_path
 from pslog.records import NS, Truth
@@ -201,7 +202,7 @@ def _record(rig: Rig, sources: Mapping[str, object], output: Path, options: Work
             writer = SessionWriter(output, rig, force=force,
                                    timing=timing or timing_label(rig),
                                    source=source or "record", metadata=meta)
-    except OSError as exc:  # an unwritable folder, a full disk: nothing recorded yet
+    except _WRITE_ERRORS as exc:  # an unwritable folder, a full disk: nothing recorded yet
         with contextlib.suppress(OSError):
             target.unlink(missing_ok=True)
         raise RecordWriteError(f"cannot write {output}: {_reason(exc)}; nothing was "
@@ -239,7 +240,11 @@ def _record(rig: Rig, sources: Mapping[str, object], output: Path, options: Work
     return summary
 
 
-class RecordWriteError(PslogError):
+#: what a writer raises when the OS refuses a write (pslog.outputs.WriteError where it exists)
+_WRITE_ERRORS = (OSError, *((_outputs.WriteError,) if hasattr(_outputs, "WriteError") else ()))
+
+
+class RecordWriteError(getattr(_outputs, "WriteError", PslogError)):
     """The session file could not be written (disk full, file too large, I/O error)."""
 
 
@@ -637,7 +642,12 @@ def _signals_ignored_by_children():
 
 
 def _reason(exc: BaseException) -> str:
-    return exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+    """The operating system's reason (``No space left on device``) behind a write failure."""
+    if isinstance(exc, OSError) and exc.strerror:
+        return exc.strerror
+    text = str(exc)
+    # a writer's own one-line error reads "cannot write PATH: REASON"
+    return text.rsplit(": ", 1)[-1] if text.startswith("cannot write ") else text
 
 
 def _utc_now() -> str:

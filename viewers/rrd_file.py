@@ -22,6 +22,7 @@ from pathlib import Path
 
 import rerun as rr
 
+from pslog import outputs as _outputs
 from pslog.errors import PslogError
 from pslog.outputs import check_output_path, partial_path
 
@@ -31,7 +32,7 @@ FLUSH_TIMEOUT_S = 60.0
 _PIPE_READ = 1 << 20
 
 
-class RrdWriteError(PslogError):
+class RrdWriteError(getattr(_outputs, "WriteError", PslogError)):
     """A .rrd file could not be written (folder not writable, disk full, I/O error)."""
 
 

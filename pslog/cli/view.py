@@ -118,7 +118,8 @@ def run(args: argparse.Namespace) -> int:
     from viewers import FramesChoice, load_view_data, log_view, new_stream
     from viewers.rrd_file import rrd_file
 
-    frames = FramesChoice.parse(args.frames)
+    frames = (args.frames if isinstance(args.frames, FramesChoice)  # parsed by argparse
+              else FramesChoice.parse(args.frames))
     if args.url and not args.connect:
         print(f"pslog view: error: --url is where --connect sends the data; add --connect "
               f"(pslog view ... --connect --url {args.url}) (see 'pslog view --help')",
