@@ -17,6 +17,8 @@ CONNECT_TIMEOUT_S = 3.0
 #: longest wait for a live viewer to take the logged data, seconds (only a hang reaches it)
 SEND_TIMEOUT_S = 60.0
 _DEFAULT_GRPC_URL = "rerun+http://127.0.0.1:9876/proxy"
+#: the HTTP/2 client connection preface and an empty SETTINGS frame (RFC 9113, 3.4)
+_HTTP2_PREFACE = b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n" + bytes([0, 0, 0, 4, 0, 0, 0, 0, 0])
 
 
 def port(text: str) -> int:
@@ -89,6 +91,7 @@ def check_free_port(number: int, option: str) -> None:
 def check_viewer_reachable(url: str | None) -> str:
     """The gRPC URL of ``--connect`` if a viewer accepts connections there within
     :data:`CONNECT_TIMEOUT_S`; rerun itself would retry silently for ever."""
+    import errno
     import socket
     from urllib.parse import urlsplit
 
@@ -103,13 +106,30 @@ def check_viewer_reachable(url: str | None) -> str:
     if not host or not number:
         raise InputError(f"--url must look like {_DEFAULT_GRPC_URL}, got {url!r}")
     try:
-        with socket.create_connection((host, number), timeout=CONNECT_TIMEOUT_S):
-            pass
+        with socket.create_connection((host, number), timeout=CONNECT_TIMEOUT_S) as sock:
+            # a viewer speaks gRPC, i.e. HTTP/2: it answers the client preface with a
+            # SETTINGS frame. Anything else (another program on the port) would take the
+            # data and never let rerun finish, so the process would hang at exit.
+            sock.sendall(_HTTP2_PREFACE)
+            answer = b""
+            while len(answer) < 9:
+                more = sock.recv(9 - len(answer))
+                if not more:
+                    break
+                answer += more
     except OSError as exc:
         reason = "timed out" if isinstance(exc, TimeoutError) else (exc.strerror or str(exc))
+        nobody = {errno.ECONNREFUSED, errno.EHOSTUNREACH, errno.ENETUNREACH}
+        if isinstance(exc, TimeoutError) or exc.errno not in nobody:
+            raise InputError(f"the program at {url} does not answer as a rerun viewer "
+                             f"({reason} within {CONNECT_TIMEOUT_S:g} s); check --url"
+                             ) from None
         raise InputError(f"no rerun viewer at {url} ({reason}); start one with 'rerun' "
                          f"(it listens on port 9876), or use --save out.rrd or --serve"
                          ) from None
+    if len(answer) < 9 or answer[3] != 4:
+        raise InputError(f"the program at {url} does not answer as a rerun viewer (no gRPC "
+                         f"handshake); check --url")
     return url
 
 

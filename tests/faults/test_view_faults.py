@@ -142,6 +142,18 @@ def test_connect_with_no_viewer_running(tmp_path, session):
     assert_untouched(before, tmp_path)
 
 
+def test_connect_to_a_program_that_is_not_a_viewer(tmp_path, session):
+    """Something listens on the port but never answers: rerun would take the data and hang
+    at exit; pslog checks the gRPC handshake first."""
+    with _busy_loopback_port() as silent:
+        url = f"rerun+http://127.0.0.1:{silent.getsockname()[1]}/proxy"
+        before = fingerprint(tmp_path)
+        run = run_pslog("view", session, "--connect", "--url", url, "--frames", "none",
+                        env=HEADLESS, timeout=30)
+    assert_one_line_error(run, 1, contains=(url, "does not answer as a rerun viewer"))
+    assert_untouched(before, tmp_path)
+
+
 def test_url_without_connect_on_a_headless_machine(tmp_path, session):
     before = fingerprint(tmp_path)
     run = run_pslog("view", session, "--url", "rerun+http://127.0.0.1:9876/proxy",
