@@ -145,7 +145,13 @@ def run(args: argparse.Namespace) -> int:
               f"(pslog view ... --connect --url {args.url}) (see 'pslog view --help')",
               file=sys.stderr)
         return 2
-    to_file_or_server = args.save or args.serve or args.connect or args.stdout
+    sinks = [flag for flag, on in (("--save", args.save), ("--serve", args.serve),
+                                   ("--connect", args.connect), ("--stdout", args.stdout)) if on]
+    if len(sinks) > 1:
+        print(f"pslog view: error: choose one of --save, --serve, --connect and --stdout, "
+              f"not {' and '.join(sinks)} (see 'pslog view --help')", file=sys.stderr)
+        return 2
+    to_file_or_server = bool(sinks)
     if not to_file_or_server and (args.headless or not has_display()):
         why = "--headless given" if args.headless else "no display (DISPLAY/WAYLAND_DISPLAY unset)"
         print(f"pslog view: {why}, so no viewer window can open; use --save out.rrd (then "
@@ -180,7 +186,7 @@ def run(args: argparse.Namespace) -> int:
         print("logged " + ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in counts.items()
                                     if v), file=out)
 
-    if args.save and not (args.stdout or args.serve or args.connect):
+    if args.save:
         with rrd_file(rec, args.save, force=args.force, inputs=args.sessions) as path:
             counts = log_view(rec, data, frames)
         report(counts)

@@ -154,6 +154,14 @@ def test_connect_to_a_program_that_is_not_a_viewer(tmp_path, session):
     assert_untouched(before, tmp_path)
 
 
+def test_two_sinks_at_once(tmp_path, session):
+    before = fingerprint(tmp_path)
+    run = run_pslog("view", session, "--save", tmp_path / "out.rrd", "--serve", env=HEADLESS,
+                    timeout=20)
+    assert_one_line_error(run, 2, contains=("choose one of", "--save and --serve"))
+    assert_untouched(before, tmp_path)
+
+
 def test_url_without_connect_on_a_headless_machine(tmp_path, session):
     before = fingerprint(tmp_path)
     run = run_pslog("view", session, "--url", "rerun+http://127.0.0.1:9876/proxy",
