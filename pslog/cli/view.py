@@ -1,7 +1,11 @@
 """pslog view: browse a session and its fused 3D tracks in rerun.
 
-Without ``--save``/``--serve``/``--connect``/``--stdout`` the native viewer is spawned, which
-needs a display; on a machine without one this says so and suggests ``--save`` or ``--serve``.
+Without ``--save``/``--serve``/``--connect``/``--stdout`` (one at most) the native viewer is
+spawned, which needs a display; on a machine without one this says so and suggests ``--save``
+or ``--serve``. Everything rerun would otherwise report as a Rust log line, a traceback or a
+hang is checked first or caught and said in one line: ``--save`` writes through
+:func:`viewers.rrd_file.rrd_file` (full disk, read-only folder), ``--serve`` checks its ports,
+``--connect`` checks that a rerun viewer answers at ``--url`` within seconds.
 """
 
 from __future__ import annotations
