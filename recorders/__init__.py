@@ -11,10 +11,11 @@ Public entry points:
 """
 
 from .detect import BallDetector, Candidates, HsvRange
-from .record import RecordSummary
+from .record import RecordSummary, RecordWriteError, StopRequest
 from .redetect import redetect_session
 from .render import CameraRenderer, RenderOptions
 from .synthetic import record_synthetic
 
 __all__ = ["BallDetector", "CameraRenderer", "Candidates", "HsvRange", "RecordSummary",
-           "RenderOptions", "record_synthetic", "redetect_session"]
+           "RecordWriteError", "RenderOptions", "StopRequest", "record_synthetic",
+           "redetect_session"]

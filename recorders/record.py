@@ -29,6 +29,7 @@ from typing import IO, Literal
 
 import numpy as np
 
+from pslog import outputs as _outputs
 from pslog.errors import InputError, PslogError, RigError
 from pslog.outputs import check_output_path
 from pslog.records import NS, Truth
@@ -112,6 +113,7 @@ def record(
     metadata: Mapping[str, str] | None = None,
     truth: Truth | None = None,
     status: IO[str] | Literal["stderr"] | None = "stderr",
+    stop_request: StopRequest | None = None,
 ) -> RecordSummary:
     """Record every camera of ``rig`` from its source into the session ``output``.
 
@@ -130,13 +132,18 @@ def record(
     truth : ground truth to store (synthetic sessions)
     status : stream for the live status line, messages and summary (default: the current
         ``sys.stderr``; None: silent)
+    stop_request : set by SIGINT/SIGTERM (installed here if not yet); the recording stops
+        cleanly once it is set, also when set before it started
+
+    Raises
+    ------
+    RecordWriteError : the file could not be written (disk full, ...); the cameras were
+        stopped and what was written is kept, the message says where
 
     Returns
     -------
     RecordSummary
     """
-    from pslog.log import SessionWriter
-
     if isinstance(status, str):
         status = sys.stderr
     names = list(sources)
@@ -162,22 +169,124 @@ def record(
     for name in rig.names:
         meta[f"source_{name}"] = sources[name].describe()
     meta.update({str(k): str(v) for k, v in dict(metadata or {}).items()})
-    with SessionWriter(output, rig, force=force, timing=timing or timing_label(rig),
-                       source=source or "record", metadata=meta) as writer:
+    # Ctrl-C and SIGTERM only ask the recording to stop, from before the file is created to
+    # after it is finished, so a signal at any moment ends in a clean stop, never a traceback
+    stop_signal = stop_request or StopRequest()
+    restore = stop_signal.install()
+    try:
+        return _record(rig, sources, output, options, meta, timing=timing, source=source,
+                       truth=truth, force=force, status=status, stop_signal=stop_signal)
+    finally:
+        restore()
+
+
+def _record(rig: Rig, sources: Mapping[str, object], output: Path, options: WorkerOptions,
+            meta: dict[str, str], *, timing, source, truth, force, status,
+            stop_signal: StopRequest) -> RecordSummary:
+    from pslog.log import SessionWriter
+    from pslog.outputs import partial_path
+
+    existed = output.exists()
+    # with --force over an old session the writer writes <output>.partial, moved over the
+    # old session only once complete
+    target = partial_path(output) if existed else output
+    try:
+        with signals_only_to_this_thread():  # the writer's flusher thread
+            writer = SessionWriter(output, rig, force=force,
+                                   timing=timing or timing_label(rig),
+                                   source=source or "record", metadata=meta)
+    except _WRITE_ERRORS as exc:  # an unwritable folder, a full disk: nothing recorded yet
+        with contextlib.suppress(OSError):
+            target.unlink(missing_ok=True)
+        raise RecordWriteError(f"cannot write {output}: {_reason(exc)}; nothing was "
+                               f"recorded") from None
+    session = _Session(rig, sources, options, writer, status, stop_signal)
+    try:
         if truth is not None:
-            writer.add_truth(truth)
-        summary = _Session(rig, sources, options, writer, status).run()
-        if summary.n_frames == 0:
-            writer.abort()  # no camera delivered: keep any session this would replace
-        return summary
+            session.write(writer.add_truth, truth)
+        summary = session.run()
+    except BaseException as exc:
+        _close_failed(writer, exc)
+        raise
+    if session.write_error is None:
+        try:
+            if summary.n_frames == 0:
+                writer.abort()  # no camera delivered: keep any session this would replace
+            else:
+                writer.close()
+        except (OSError, PslogError) as exc:
+            session.write_error = _os_error(writer, exc)
+            _close_failed(writer, exc)
+    else:
+        _close_failed(writer, session.write_error)
+    if session.write_error is not None:
+        exc = session.write_error
+        reason = _reason(exc)
+        kept = (f"what was written before is in {target}, unfinished (salvage it with: "
+                f"pslog recover {target} -o fixed.mcap)" if target.exists() else
+                "nothing was kept")
+        if existed:
+            kept += f"; the old {output} is untouched"
+        raise RecordWriteError(f"cannot write {output}: {reason}; stopped the cameras; {kept}")
+    if summary.n_frames == 0 and summary.interrupted and not existed:
+        output.unlink(missing_ok=True)  # stopped before the first frame: nothing to keep
+    return summary
+
+
+#: what a writer raises when the OS refuses a write (pslog.outputs.WriteError where it exists)
+_WRITE_ERRORS = (OSError, *((_outputs.WriteError,) if hasattr(_outputs, "WriteError") else ()))
+
+
+class RecordWriteError(getattr(_outputs, "WriteError", PslogError)):
+    """The session file could not be written (disk full, file too large, I/O error)."""
+
+
+def _os_error(writer, exc: BaseException) -> BaseException:
+    """The OS error behind a writer failure (the background flusher reports it wrapped)."""
+    cause = getattr(writer, "_flush_error", None)
+    return cause if isinstance(cause, OSError) else exc
+
+
+def _close_failed(writer, exc: BaseException) -> None:
+    """Close ``writer`` after a failure: it keeps what it wrote (and any old session it was
+    to replace); a second error while closing (the disk is still full) is expected."""
+    with contextlib.suppress(OSError, PslogError):
+        writer.__exit__(type(exc), exc, exc.__traceback__)
+
+
+class StopRequest:
+    """A request to stop recording: which signal (SIGINT, SIGTERM) asked first, if any.
+
+    :meth:`install` makes SIGINT and SIGTERM set it instead of interrupting the process, so a
+    program can take over the signals before its slow imports and hand the request to
+    :func:`record` (``stop_request=``), which honours a stop that came in before it started.
+    """
+
+    def __init__(self) -> None:
+        self.event = threading.Event()
+        self.name = ""
+
+    def set(self, name: str) -> None:
+        self.name = self.name or name
+        self.event.set()
+
+    def is_set(self) -> bool:
+        return self.event.is_set()
+
+    def install(self):
+        """Route SIGINT and SIGTERM here; returns a function restoring the previous handlers
+        (a no-op outside the main thread)."""
+        return _install_signal_handlers(self)
 
 
 class _Session:
     """The parent side of one recording."""
 
     def __init__(self, rig: Rig, sources: Mapping[str, object], options: WorkerOptions,
-                 writer, status: IO[str] | None) -> None:
+                 writer, status: IO[str] | None, stop_signal: StopRequest | None = None) -> None:
         self.rig = rig
+        self.stop_signal = stop_signal or StopRequest()
+        self.write_error: BaseException | None = None  # the first failed write
         self.specs = [sources[name] for name in rig.names]
         self.options = options
         self.writer = writer
@@ -212,8 +321,22 @@ class _Session:
         self.status.flush()
 
     def _event(self, time_ns: int, text: str, camera: int | None, level: str = "info") -> None:
-        self.writer.add_event(int(time_ns), text, camera=camera, level=level)
+        self.write(self.writer.add_event, int(time_ns), text, camera=camera, level=level)
         self.events.append((int(time_ns), text))
+
+    def write(self, method, *args, **kwargs) -> bool:
+        """Call a writer method; after the first OS failure (disk full, file too large) stop
+        writing and remember it, so the recording ends cleanly and says what happened."""
+        if self.write_error is not None:
+            return False
+        try:
+            method(*args, **kwargs)
+        except InputError:
+            raise  # a wrong value, not a write fault
+        except (OSError, PslogError) as exc:
+            self.write_error = _os_error(self.writer, exc)
+            return False
+        return True
 
     # ---- main loop ------------------------------------------------------------------------
     def run(self) -> RecordSummary:
@@ -229,33 +352,44 @@ class _Session:
                              args=(i, self.specs[i], self.options, q, start, stop, t0,
                                    os.getpid()), daemon=True)
                  for i, cam in enumerate(self.rig.cameras)]
-        interrupted = threading.Event()
-        restore = _install_signal_handlers(interrupted)
+        interrupted = self.stop_signal
         wall0 = time.monotonic()
         try:
-            for p in procs:
-                p.start()
-            self._wait_ready(q, procs, interrupted)
+            if not interrupted.is_set():
+                with _signals_ignored_by_children():
+                    for p in procs:
+                        p.start()
+                self._wait_ready(q, procs, interrupted)
             t0.value = time.monotonic_ns()
             start.set()
+            if not interrupted.is_set():
+                # relates the session clock to the host's monotonic clock (and UTC)
+                self._event(0, f"recording started: session time 0 is host monotonic clock "
+                               f"{t0.value} ns, {_utc_now()}", None)
             self._loop(q, procs, stop, interrupted, t0.value)
         finally:
             stop.set()
             start.set()
-            restore()
+            if interrupted.is_set():
+                self.stop_reason = f"stopped by {interrupted.name}"
             self._finish(q, procs)
         if self._line_shown and self.tty and self.status is not None:
             self.status.write("\r\033[K")
         summary_text = self.board.summary()
         if self.status is not None:
-            head = "recording interrupted" if interrupted.is_set() else "recorded"
+            if self.write_error is not None:
+                head = "recording stopped, the file could not be written"
+            elif interrupted.is_set():
+                head = f"recording stopped by {interrupted.name}"
+            else:
+                head = "recorded"
             self.status.write(f"{head}: {self.writer.path}\n{summary_text}\n")
             self.status.flush()
         return RecordSummary(Path(self.writer.path), tuple(self.board.cameras),
                              time.monotonic() - wall0, interrupted.is_set(),
                              tuple(self.events), summary_text)
 
-    def _wait_ready(self, q, procs, interrupted: threading.Event) -> None:
+    def _wait_ready(self, q, procs, interrupted: StopRequest) -> None:
         """Until every camera has opened or failed."""
         cams = self.board.cameras
         deadline = time.monotonic() + _OPEN_TIMEOUT_S
@@ -272,7 +406,7 @@ class _Session:
                 continue
             self._handle(msg, 0)
 
-    def _loop(self, q, procs, stop, interrupted: threading.Event, t0_ns: int) -> None:
+    def _loop(self, q, procs, stop, interrupted: StopRequest, t0_ns: int) -> None:
         cams = self.board.cameras
         last_line = 0.0
         refresh = _TTY_REFRESH_S if self.tty else _LOG_REFRESH_S
@@ -283,8 +417,15 @@ class _Session:
             if not active:
                 break
             if interrupted.is_set() and not stop.is_set():
-                self._say("stopping: finishing the session file ...")
-                self.stop_reason = "stopped by user"
+                self._say(f"{interrupted.name}: stopping, finishing the session file ...")
+                self.stop_reason = f"stopped by {interrupted.name}"
+                stop.set()
+                self._event(max(time.monotonic_ns() - t0_ns, 0),
+                            f"recording {self.stop_reason}", None)
+            if self.write_error is not None and not stop.is_set():
+                self._say(f"writing {self.writer.path} failed "
+                          f"({_reason(self.write_error)}): stopping the cameras ...")
+                self.stop_reason = "stopped: the file could not be written"
                 stop.set()
             try:
                 msg = q.get(timeout=0.05)
@@ -298,7 +439,8 @@ class _Session:
                         self._handle(q.get_nowait(), now_ns)
                     except queue_module.Empty:
                         break
-            self._check_stalls()
+            if not stop.is_set():  # cameras that are finishing may pause
+                self._check_stalls()
             self._check_alive(procs, now_ns)
             if (duration_ns is not None and any(self.live) and not stop.is_set()
                     and now_ns > duration_ns + 2 * NS):
@@ -321,7 +463,9 @@ class _Session:
         c = self.board.cameras[cam]
         if kind == "frame":
             _, _, index, time_ns, uv, radius, score, jpeg = msg
-            self.writer.add_frame(cam, index, time_ns, uv, radius, score, image=jpeg)
+            if not self.write(self.writer.add_frame, cam, index, time_ns, uv, radius, score,
+                              image=jpeg):
+                return  # the file cannot be written: the frame is not recorded
             period_ns = NS / self.rig.cameras[cam].fps
             if c.last_ns is not None and time_ns - c.last_ns > 1.5 * period_ns:
                 c.drops += round((time_ns - c.last_ns) / period_ns) - 1
@@ -346,11 +490,14 @@ class _Session:
         elif kind in ("failed", "stopped"):
             self._fail(cam, c.last_ns + 1 if c.last_ns is not None else max(now_ns, 0), msg[2])
         elif kind == "done":
-            c.state, c.message = "done", msg[2]
+            # a camera told to stop by a signal or a write failure was stopped; one that
+            # reached its end or the duration is done
+            c.state = "stopped" if self.stop_reason.startswith("stopped") else "done"
+            c.message = self.stop_reason if c.state == "stopped" else msg[2]
 
     def _fail(self, cam: int, time_ns: int, text: str) -> None:
         c = self.board.cameras[cam]
-        if c.state in ("failed", "done"):
+        if c.state in ("failed", "done", "stopped"):
             return
         c.state, c.message = "failed", text
         self._event(time_ns, f"camera {c.name} failed: {text}", cam, level="error")
@@ -399,17 +546,20 @@ class _Session:
             while True:
                 self._handle(q.get_nowait(), 0)
         for p in procs:
+            if p.pid is None:
+                continue  # never started (stopped before the start)
             p.join(timeout=1.0)
             if p.is_alive():
-                p.terminate()
+                p.kill()  # cameras ignore SIGTERM (the parent stops them)
                 p.join(timeout=1.0)
         for i, c in enumerate(cams):
             if c.state in ("opening", "recording", "stalled"):
-                c.state = "done" if self.stop_reason else c.state
-                if c.state != "done":
-                    self._fail(i, (c.last_ns or 0) + 1, "ended without reporting")
+                if self.stop_reason.startswith("stopped"):
+                    c.state, c.message = "stopped", self.stop_reason
+                elif self.stop_reason:
+                    c.state, c.message = "done", c.message or self.stop_reason
                 else:
-                    c.message = c.message or self.stop_reason
+                    self._fail(i, (c.last_ns or 0) + 1, "ended without reporting")
         q.close()
 
 
@@ -424,7 +574,7 @@ def jpeg_params(quality: int) -> list[int]:
             cv2.IMWRITE_JPEG_SAMPLING_FACTOR, cv2.IMWRITE_JPEG_SAMPLING_FACTOR_444]
 
 
-def _install_signal_handlers(flag: threading.Event):
+def _install_signal_handlers(flag: StopRequest):
     """SIGINT and SIGTERM set ``flag`` (the loop then finishes the file); returns a function
     restoring the previous handlers. A no-op outside the main thread."""
     if threading.current_thread() is not threading.main_thread():
@@ -432,9 +582,9 @@ def _install_signal_handlers(flag: threading.Event):
     previous = {}
 
     def handler(signum, frame):
-        flag.set()
+        flag.set(signal.Signals(signum).name)
 
-    for sig in (signal.SIGINT, signal.SIGTERM):
+    for sig in _STOP_SIGNALS:
         previous[sig] = signal.signal(sig, handler)
 
     def restore() -> None:
@@ -444,6 +594,61 @@ def _install_signal_handlers(flag: threading.Event):
     return restore
 
 
+_STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+@contextlib.contextmanager
+def signals_only_to_this_thread():
+    """Threads started inside the block never receive SIGINT or SIGTERM: they keep them
+    blocked, so the kernel delivers these signals to the main thread only. That matters
+    while camera processes are started (see :func:`_signals_ignored_by_children`): a signal
+    delivered then to another thread would meet the ignored disposition and be lost."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
+@contextlib.contextmanager
+def _signals_ignored_by_children():
+    """Start camera processes with SIGINT and SIGTERM ignored, so that Ctrl-C (sent to the
+    whole foreground process group) or SIGTERM to the group cannot interrupt a camera, even
+    while it is still importing: the parent stops them. An ignored disposition is the only
+    one that survives ``exec``; the signals are blocked meanwhile, so one arriving now waits
+    for the parent's own handler instead of being lost (provided no other thread of the
+    parent accepts them: see :func:`signals_only_to_this_thread`)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)
+    previous = {sig: signal.signal(sig, signal.SIG_IGN) for sig in _STOP_SIGNALS}
+    try:
+        yield
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOP_SIGNALS)
+
+
+def _reason(exc: BaseException) -> str:
+    """The operating system's reason (``No space left on device``) behind a write failure."""
+    if isinstance(exc, OSError) and exc.strerror:
+        return exc.strerror
+    text = str(exc)
+    # a writer's own one-line error reads "cannot write PATH: REASON"
+    return text.rsplit(": ", 1)[-1] if text.startswith("cannot write ") else text
+
+
+def _utc_now() -> str:
+    from datetime import UTC, datetime
+
+    return datetime.now(UTC).isoformat(timespec="milliseconds")
+
+
 # ---- the camera process -------------------------------------------------------------------
 def camera_main(cam: int, spec, options: WorkerOptions, q, start, stop, t0,
                 parent_pid: int) -> None:
@@ -451,8 +656,11 @@ def camera_main(cam: int, spec, options: WorkerOptions, q, start, stop, t0,
     encode -> send until the source ends, the duration is reached or the parent says stop."""
     import cv2
 
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the parent, which stops us
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    # Ctrl-C and SIGTERM to the process group reach the parent too, which stops us (they
+    # were ignored from the start, see _signals_ignored_by_children; blocked only there)
+    for sig in _STOP_SIGNALS:
+        signal.signal(sig, signal.SIG_IGN)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOP_SIGNALS)
     cv2.setNumThreads(1)  # one process per camera already uses the cores
     with contextlib.suppress(AttributeError):  # our own message says what failed
         cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)

@@ -14,7 +14,7 @@ from pslog.rig import TIMING_PRESETS, Rig, apply_timing
 from pslog.simulation import check_exposure
 
 from .detect import HsvRange
-from .record import RecordSummary, record, timing_label
+from .record import RecordSummary, StopRequest, record, timing_label
 from .render import RenderOptions
 from .sources import SyntheticSpec, synthetic_times
 
@@ -44,6 +44,7 @@ def record_synthetic(
     noise_sigma: float = 2.0,
     render: RenderOptions | None = None,
     status: IO[str] | Literal["stderr"] | None = "stderr",
+    stop_request: StopRequest | None = None,
 ) -> RecordSummary:
     """Render what every camera of ``rig`` sees of a ball following ``motion`` and record it
     (detections, frames, ground truth) into the session ``output``.
@@ -59,7 +60,8 @@ def record_synthetic(
         keeps the rig's offsets (the metadata names the matching preset, else ``custom``)
     ball_radius, exposure_s, noise_sigma, seed : rendering (see :class:`RenderOptions`);
         ``render`` overrides them all when given
-    frames, jpeg_quality, hsv, max_candidates, force, status : as :func:`recorders.record`
+    frames, jpeg_quality, hsv, max_candidates, force, status, stop_request : as
+        :func:`recorders.record`
 
     Returns
     -------
@@ -90,4 +92,5 @@ def record_synthetic(
                   jpeg_quality=jpeg_quality, hsv=hsv, max_candidates=max_candidates,
                   force=force, timing=timing or timing_label(rig),
                   source=f"record --synthetic motion={motion.name}", metadata=metadata,
-                  truth=synthetic_truth(rig, motion, duration), status=status)
+                  truth=synthetic_truth(rig, motion, duration), status=status,
+                  stop_request=stop_request)

@@ -314,3 +314,49 @@ def test_cli_bad_values(session, tmp_path, capsys):
     assert pslog_main(["view", str(tmp_path / "missing.mcap"), "--save", out]) == 1
     assert "error:" in capsys.readouterr().err
     assert not Path(out).exists()
+
+
+def test_save_rrd_never_replaces_a_session(session, tmp_path):
+    link = tmp_path / "link.mcap"
+    link.symlink_to(session)
+    data = session.read_bytes()
+    for target in (session, link):
+        with pytest.raises(InputError, match="is the input"):
+            save_rrd([session], target, force=True)
+    assert session.read_bytes() == data
+
+
+def _free_loopback_port() -> int:
+    import socket
+
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+def test_cli_connect_sends_to_a_running_server(session):
+    """--connect still reaches a live rerun gRPC server (loopback), after its reachability
+    check."""
+    port = _free_loopback_port()
+    server = subprocess.Popen([str(RERUN), "--serve-grpc", "--bind", "127.0.0.1", "--port",
+                               str(port)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        import socket
+        import time
+
+        deadline = time.monotonic() + 30
+        while True:  # until the server listens
+            try:
+                socket.create_connection(("127.0.0.1", port), timeout=1).close()
+                break
+            except OSError:
+                assert time.monotonic() < deadline and server.poll() is None
+                time.sleep(0.1)
+        result = _pslog(["view", str(session), "--connect", "--url",
+                         f"rerun+http://127.0.0.1:{port}/proxy", "--frames", "none"])
+        assert result.returncode == 0, result.stderr
+        assert "logged" in result.stdout and result.stderr == ""
+    finally:
+        server.kill()
+        server.wait()
+

@@ -33,7 +33,7 @@ import rerun as rr
 
 from pslog.log import iter_images
 from pslog.motion import BALL_RADIUS
-from pslog.outputs import check_output_path, partial_path
+from pslog.outputs import check_output_path
 from pslog.records import NS, Track
 
 from . import _columns as C
@@ -41,6 +41,7 @@ from ._columns import camera_path, image_path
 from .blueprint import build_blueprint, default_eye, quality_plots
 from .data import UNBOUNDED_NS, FramesChoice, ViewData, load_view_data
 from .overlays import log_construction, log_detections, log_epipolar
+from .rrd_file import rrd_file
 
 APPLICATION_ID = "pslog"
 _MEDIA_TYPES = {"jpeg": "image/jpeg", "jpg": "image/jpeg", "png": "image/png"}
@@ -82,24 +83,20 @@ def save_rrd(session_paths: str | Path | Sequence[str | Path], path: str | Path,
              force: bool = False, **options) -> dict[str, int]:
     """Write the recording of :func:`build_recording` (same ``options``) to the .rrd ``path``.
 
-    Refuses an existing ``path`` unless ``force`` (OutputExistsError). Returns the row
-    counts per kind (``detections``, ``images``, ``track_points``, ...).
+    Refuses an existing ``path`` unless ``force`` (OutputExistsError) and, ``force`` or not,
+    a ``path`` that is one of the sessions (InputError). An old ``path`` is replaced only by a
+    complete new file; a failed write raises :class:`viewers.rrd_file.RrdWriteError` naming
+    the path and the reason. Returns the row counts per kind (``detections``, ``images``,
+    ``track_points``, ...).
     """
-    path = check_output_path(path, force)
+    paths = [session_paths] if isinstance(session_paths, str | Path) else list(session_paths)
+    check_output_path(path, force, inputs=paths)
     choice = FramesChoice.parse(options.pop("frames", "all"))
-    data = load_view_data(session_paths, **options)
+    data = load_view_data(paths, **options)
     rec = new_stream()
-    partial = partial_path(path)  # an existing .rrd is replaced only by a complete one
-    rec.save(partial)  # stream to the file while logging: images never pile up in memory
-    try:
+    # streamed to the file while logging: images never pile up in memory
+    with rrd_file(rec, path, force=force, inputs=paths):
         counts = log_view(rec, data, choice)
-    except BaseException:
-        rec.disconnect()
-        partial.unlink(missing_ok=True)
-        raise
-    rec.flush()
-    rec.disconnect()  # finalizes the file (footer)
-    partial.replace(path)
     return counts
 
 

@@ -27,8 +27,9 @@ Record a session: every camera of the rig is captured in its own process (captur
 detection, JPEG encoding) and one writer stores the frames, the detections, the calibration
 and the timing into an MCAP session. A status line on stderr shows per camera the frames,
 the frame rate, the frames with a ball and the drops; a summary follows at the end.
-Ctrl-C or SIGTERM finishes the file cleanly (a killed recorder loses at most the last
-second; see 'pslog recover').
+Ctrl-C or SIGTERM, at any moment, stops the cameras and finishes the file cleanly (a
+killed recorder loses at most the last second; see 'pslog recover'). If the disk fills up,
+the cameras are stopped and what was written is kept; the error says where.
 
 Sources (one --source per camera of the rig, NAME a camera name of the rig):
   NAME=0, NAME=/dev/video2   a live camera (device index or V4L2 path); capture times from
@@ -61,6 +62,7 @@ _SOURCE = re.compile(r"^([^=]+)=(.+)$")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    _stop_on_signals()
     parser.description = DESCRIPTION
     parser.epilog = EXAMPLES
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
@@ -127,7 +129,56 @@ def parse_hsv(text: str | None):
     return HsvRange() if text is None else HsvRange.parse(text)
 
 
+#: SIGINT/SIGTERM received since ``pslog record`` started (installed by add_arguments),
+#: and the handlers it replaced (restored when run() ends, for callers of main() in-process)
+_STOP = None
+_PREVIOUS: dict = {}
+
+
+def _stop_on_signals() -> None:
+    """From the start of ``pslog record``, SIGINT and SIGTERM only request a stop, which the
+    recorder honours (also one that came before it started) by finishing the file: no
+    KeyboardInterrupt traceback from an import, no silent death by SIGTERM."""
+    global _STOP
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return
+    early: list[str] = []  # signals during the imports below (OpenCV takes a while)
+
+    def note(signum, frame):
+        early.append(signal.Signals(signum).name)
+
+    stops = {signal.SIGINT, signal.SIGTERM}
+    for sig in stops:
+        _PREVIOUS.setdefault(sig, signal.signal(sig, note))
+    # the threads the imports start (numpy's BLAS pool) keep these signals blocked, so they
+    # always reach this thread (see recorders.record.signals_only_to_this_thread)
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, stops)
+    try:
+        from recorders.record import StopRequest
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+    _STOP = StopRequest()
+    _STOP.install()
+    if early:
+        _STOP.set(early[0])
+
+
 def run(args: argparse.Namespace) -> int:
+    import signal
+
+    try:
+        return _run(args, _STOP)
+    finally:
+        for sig, handler in _PREVIOUS.items():
+            signal.signal(sig, handler)
+        _PREVIOUS.clear()
+
+
+def _run(args: argparse.Namespace, stop) -> int:
     from pslog.rig import apply_timing, resolve_rig
 
     output = check_output(args.output, args.force)
@@ -146,7 +197,8 @@ def run(args: argparse.Namespace) -> int:
             rig, args.motion, output, duration=args.duration, fast=args.fast,
             frames=not args.no_frames, jpeg_quality=args.jpeg_quality, seed=args.seed,
             force=args.force, timing=args.timing, hsv=hsv, max_candidates=args.max_candidates,
-            ball_radius=args.ball_radius, exposure_s=args.exposure, noise_sigma=args.noise)
+            ball_radius=args.ball_radius, exposure_s=args.exposure, noise_sigma=args.noise,
+            stop_request=stop)
     else:
         if not args.source:
             raise InputError("give a --source NAME=SPEC for every camera of the rig, "
@@ -157,10 +209,16 @@ def run(args: argparse.Namespace) -> int:
         from recorders.record import record
 
         specs = parse_sources(rig, args.source, args.offset)
+        videos = [spec.path for spec in specs.values() if hasattr(spec, "offset_s")]
+        output = check_output(args.output, args.force, inputs=videos)
         summary = record(rig, specs, output, duration_s=args.duration,
                          frames=not args.no_frames, jpeg_quality=args.jpeg_quality, hsv=hsv,
                          max_candidates=args.max_candidates, force=args.force,
-                         timing=args.timing, source="record " + " ".join(args.source))
+                         timing=args.timing, source="record " + " ".join(args.source),
+                         stop_request=stop)
+    if summary.n_frames == 0 and summary.interrupted:
+        raise InputError(f"stopped before any camera delivered a frame; nothing was written "
+                         f"to {output}")
     if summary.n_frames == 0:
         raise InputError(f"no camera delivered a frame; {output} holds only the calibration")
     return 0
@@ -179,7 +237,7 @@ def parse_sources(rig, sources: list[str], offsets: list[str]) -> dict:
             raise InputError(f"--offset must be NAME=SECONDS, got {text!r}")
         name, value = match.group(1).strip(), match.group(2).strip()
         rig.index(name)
-        offset_of[name] = _seconds(value, text)
+        offset_of[name] = _seconds(value, text, name)
     specs: dict = {}
     for text in sources:
         match = _SOURCE.match(text)
@@ -199,7 +257,7 @@ def parse_sources(rig, sources: list[str], offsets: list[str]) -> dict:
             if sep and not Path(spec).exists():
                 if name in offset_of:
                     raise InputError(f"camera {name!r}: offset given both with @ and --offset")
-                path, offset = head, _seconds(tail, text)
+                path, offset = head, _seconds(tail, text, name)
             if not Path(path).is_file():
                 raise InputError(f"camera {name!r}: video file not found: {path}")
             specs[name] = FileSpec(path, cam.width, cam.height, offset)
@@ -209,11 +267,16 @@ def parse_sources(rig, sources: list[str], offsets: list[str]) -> dict:
     return specs
 
 
-def _seconds(value: str, text: str) -> float:
+def _seconds(value: str, text: str, camera: str) -> float:
     try:
         seconds = float(value)
     except ValueError:
-        raise InputError(f"offset is not a number of seconds in {text!r}") from None
+        raise InputError(f"camera {camera!r}: offset is not a number of seconds in "
+                         f"{text!r}") from None
     if seconds != seconds or abs(seconds) == float("inf"):
-        raise InputError(f"offset must be finite in {text!r}")
+        raise InputError(f"camera {camera!r}: offset must be finite in {text!r}")
+    if seconds < 0:
+        # a frame before the session clock's zero cannot be stored (MCAP times are unsigned)
+        raise InputError(f"camera {camera!r}: offset must be >= 0 seconds in {text!r}: the "
+                         f"session clock starts at 0 (delay the other cameras instead)")
     return seconds

@@ -1,0 +1,105 @@
+"""``pslog record`` under faults (issue 8): a disk that fills up while recording, bad sources.
+
+A full disk cannot take the file's end, so the promise there is: the cameras stop cleanly,
+what was written before stays (with ``--force``, the old session is untouched and the new
+one is kept as ``<file>.partial``), the error says where and how to salvage it, exit 1. The
+recorder's live status lines and summary come before that one error line on stderr.
+"""
+
+from __future__ import annotations
+
+import re
+
+import cv2
+import numpy as np
+import pytest
+
+from pslog.log import read_session
+
+from ._mounts import fill, read_only, small_tmpfs
+from .promises import Run, assert_one_line_error, assert_untouched, fingerprint, run_pslog
+
+RECORD = ("record", "--synthetic", "--rig", "paper3", "--timing", "typeA", "--motion",
+          "turntable", "--fast", "--duration", "20", "--jpeg-quality", "100")
+
+
+def _assert_error_last(run: Run, *contains: str) -> str:
+    """No traceback, exit 1, and the last stderr line is the only error line."""
+    for stream in (run.stderr, run.stdout):
+        assert "Traceback" not in stream, stream
+    assert run.code == 1, run.stderr
+    lines = [line for line in run.stderr.splitlines() if line.strip()]
+    errors = [line for line in lines if "error" in line.lower()]
+    assert errors == [lines[-1]], run.stderr
+    for text in contains:
+        assert text in lines[-1], lines[-1]
+    return lines[-1]
+
+
+@pytest.mark.parametrize("old", [False, True], ids=["new file", "--force over a session"])
+def test_disk_full_while_recording(tmp_path, old):
+    with small_tmpfs(tmp_path / "disk", "1500k") as disk:
+        out = disk / "s.mcap"
+        if old:
+            out.write_bytes(b"the old session")
+        before = fingerprint(out)
+        run = run_pslog(*RECORD, "-o", out, *(["--force"] if old else []))
+        line = _assert_error_last(run, str(out), "No space left on device",
+                                  "stopped the cameras", "pslog recover")
+        assert "recording stopped, the file could not be written" in run.stderr
+        assert "[failed]" not in run.stderr
+        kept = out.with_name("s.mcap.partial") if old else out
+        assert f"is in {kept}," in line
+        if old:
+            assert_untouched(before, out)
+            assert "the old" in line and "untouched" in line
+        assert kept.stat().st_size > 500_000  # the frames written before the disk filled
+        fixed = tmp_path / "fixed.mcap"
+        recovered = run_pslog("recover", kept, "-o", fixed)
+        assert recovered.code == 0, recovered.stderr
+        assert read_session(fixed).n_images > 0
+
+
+def test_unwritable_folder_or_full_disk_before_the_start(tmp_path):
+    """Nothing can be written at all: one line before any camera starts, nothing left."""
+    with read_only(tmp_path / "ro") as folder:
+        before = fingerprint(folder)
+        run = run_pslog(*RECORD, "-o", folder / "s.mcap", timeout=30)
+        assert_one_line_error(run, 1, contains=(str(folder / "s.mcap"),
+                                                "Read-only file system"))
+        assert_untouched(before, folder)
+    with small_tmpfs(tmp_path / "disk", "64k") as disk:
+        fill(disk)
+        before = fingerprint(disk)
+        run = run_pslog(*RECORD, "-o", disk / "s.mcap", timeout=30)
+        assert_one_line_error(run, 1, contains=(str(disk / "s.mcap"), "No space left"))
+        assert_untouched(before, disk)
+
+
+def _clip(path) -> None:
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 30, (640, 480))
+    for _ in range(3):
+        writer.write(np.full((480, 640, 3), 90, np.uint8))
+    writer.release()
+
+
+def test_negative_offset_is_refused_up_front(tmp_path):
+    _clip(tmp_path / "a.avi")
+    before = fingerprint(tmp_path)
+    run = run_pslog("record", "--rig", "paper2", "--source", "cam1=a.avi@-1", "--source",
+                    "cam2=a.avi", "-o", "s.mcap", cwd=tmp_path, timeout=20)
+    assert_one_line_error(run, 1, contains=("camera 'cam1'", ">= 0"))
+    assert_untouched(before, tmp_path)
+
+
+@pytest.mark.parametrize("spelling", ["a.avi", "./a.avi", "sub/../a.avi", "link.avi"])
+def test_video_source_that_is_the_output_is_refused(tmp_path, spelling):
+    _clip(tmp_path / "a.avi")
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "link.avi").symlink_to("a.avi")
+    before = fingerprint(tmp_path)
+    run = run_pslog("record", "--rig", "paper2", "--source", "cam1=a.avi", "--source",
+                    "cam2=a.avi", "-o", spelling, "--force", cwd=tmp_path, timeout=20)
+    line = assert_one_line_error(run, 1, contains="is the input")
+    assert re.search(r"never replaces an input", line)
+    assert_untouched(before, tmp_path)

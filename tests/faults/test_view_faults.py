@@ -1,0 +1,170 @@
+"""``pslog view`` under faults (issue 8): every case asserts the three promises.
+
+--save onto a session (any spelling), onto a full disk, into a read-only folder; --serve on
+a port out of range, in use or privileged; --connect with no viewer; --url without
+--connect. Servers and viewers are looked for on loopback addresses only.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import socket
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+
+from ._mounts import read_only, small_tmpfs
+from .promises import assert_one_line_error, assert_untouched, fingerprint, run_pslog
+
+SAMPLE = Path(__file__).resolve().parents[2] / "samples" / "throw.mcap"
+HEADLESS = {"DISPLAY": "", "WAYLAND_DISPLAY": ""}
+
+
+@pytest.fixture
+def session(tmp_path) -> Path:
+    path = tmp_path / "s.mcap"
+    shutil.copyfile(SAMPLE, path)
+    return path
+
+
+@pytest.mark.parametrize("spelling", ["same", "dot", "symlink", "hardlink"])
+def test_save_onto_the_session_is_refused(tmp_path, session, spelling):
+    """``view s.mcap --save s.mcap --force`` once replaced the session with a .rrd."""
+    target = {"same": session, "dot": tmp_path / "." / "s.mcap",
+              "symlink": tmp_path / "link.mcap", "hardlink": tmp_path / "hard.mcap"}[spelling]
+    if spelling == "symlink":
+        target.symlink_to(session)
+    elif spelling == "hardlink":
+        os.link(session, target)
+    before = fingerprint(tmp_path)
+    run = run_pslog("view", session, "--save", target, "--force", "--frames", "none")
+    assert_one_line_error(run, 1, contains=("is the input", "never replaces an input"))
+    assert_untouched(before, tmp_path)
+
+
+@pytest.mark.parametrize("old", [False, True], ids=["new", "replacing an old .rrd"])
+def test_save_onto_a_full_disk(tmp_path, session, old):
+    """rerun's own file sink hangs for ever in its flush here; now: one line, fast."""
+    with small_tmpfs(tmp_path / "disk", "64k") as disk:
+        out = disk / "out.rrd"
+        if old:
+            out.write_bytes(b"an old recording")
+        before = fingerprint(session, disk)
+        start = time.monotonic()
+        run = run_pslog("view", session, "--save", out, *(["--force"] if old else []),
+                        env=HEADLESS, timeout=30)
+        assert time.monotonic() - start < 30
+        assert_one_line_error(run, 1, contains=(str(out), "No space left on device"))
+        assert_untouched(before, session, disk)  # no partial .rrd; an old one kept
+
+
+def test_save_into_a_read_only_folder(tmp_path, session):
+    with read_only(tmp_path / "ro") as folder:
+        out = folder / "out.rrd"
+        before = fingerprint(session, folder)
+        run = run_pslog("view", session, "--save", out, "--frames", "none", env=HEADLESS)
+        assert_one_line_error(run, 1, contains=(str(out), "Read-only file system"))
+        assert_untouched(before, session, folder)
+
+
+@pytest.mark.parametrize("value", ["99999", "-1", "0", "http"])
+@pytest.mark.parametrize("option", ["--web-port", "--grpc-port"])
+def test_serve_port_out_of_range(tmp_path, session, option, value):
+    before = fingerprint(tmp_path)
+    run = run_pslog("view", session, "--serve", f"{option}={value}", timeout=20)
+    assert_one_line_error(run, 2, contains=option)
+    assert_untouched(before, tmp_path)
+
+
+def _busy_loopback_port():
+    """A socket listening on a free loopback port (close it when done)."""
+    sock = socket.socket()
+    sock.bind(("127.0.0.1", 0))
+    sock.listen()
+    return sock
+
+
+@pytest.mark.parametrize("option", ["--web-port", "--grpc-port"])
+def test_serve_port_in_use(tmp_path, session, option):
+    before = fingerprint(tmp_path)
+    with _busy_loopback_port() as busy:
+        number = busy.getsockname()[1]
+        run = run_pslog("view", session, "--serve", f"{option}={number}", "--frames", "none",
+                        env=HEADLESS, timeout=20)
+    assert_one_line_error(run, 1, contains=(f"port {number} is in use", option))
+    assert_untouched(before, tmp_path)
+
+
+def _without_bind_privilege() -> None:
+    """In the child before exec: drop CAP_NET_BIND_SERVICE from the capability bounding set,
+    so that even root then runs pslog like an ordinary user as far as ports go."""
+    import ctypes
+
+    libc = ctypes.CDLL(None, use_errno=True)
+    pr_capbset_drop, cap_net_bind_service = 24, 10
+    if libc.prctl(pr_capbset_drop, cap_net_bind_service, 0, 0, 0) != 0:
+        raise OSError(ctypes.get_errno(), "prctl(PR_CAPBSET_DROP) failed")
+
+
+def test_serve_privileged_port_when_not_root(tmp_path, session):
+    start = Path("/proc/sys/net/ipv4/ip_unprivileged_port_start")
+    if not start.exists() or int(start.read_text()) <= 80:
+        pytest.skip("this machine lets anyone listen on port 80")
+    preexec = None
+    if os.geteuid() == 0:
+        preexec = _without_bind_privilege
+        try:
+            run_pslog("--version", preexec_fn=preexec, timeout=20)
+        except (OSError, subprocess.SubprocessError) as exc:
+            pytest.skip(f"cannot drop the privilege to listen on port 80 here: {exc}")
+    before = fingerprint(tmp_path)
+    run = run_pslog("view", session, "--serve", "--web-port", "80", "--frames", "none",
+                    env=HEADLESS, preexec_fn=preexec, timeout=30)
+    assert_one_line_error(run, 1, contains=("port 80 is privileged", "--web-port"))
+    assert_untouched(before, tmp_path)
+
+
+def test_connect_with_no_viewer_running(tmp_path, session):
+    """rerun retries silently for ever; pslog gives up within seconds and says why."""
+    with socket.socket() as probe:  # a loopback port nobody listens on
+        probe.bind(("127.0.0.1", 0))
+        number = probe.getsockname()[1]
+    url = f"rerun+http://127.0.0.1:{number}/proxy"
+    before = fingerprint(tmp_path)
+    start = time.monotonic()
+    run = run_pslog("view", session, "--connect", "--url", url, "--frames", "none",
+                    env=HEADLESS, timeout=30)
+    assert time.monotonic() - start < 30
+    assert_one_line_error(run, 1, contains=("no rerun viewer at", url))
+    assert_untouched(before, tmp_path)
+
+
+def test_connect_to_a_program_that_is_not_a_viewer(tmp_path, session):
+    """Something listens on the port but never answers: rerun would take the data and hang
+    at exit; pslog checks the gRPC handshake first."""
+    with _busy_loopback_port() as silent:
+        url = f"rerun+http://127.0.0.1:{silent.getsockname()[1]}/proxy"
+        before = fingerprint(tmp_path)
+        run = run_pslog("view", session, "--connect", "--url", url, "--frames", "none",
+                        env=HEADLESS, timeout=30)
+    assert_one_line_error(run, 1, contains=(url, "does not answer as a rerun viewer"))
+    assert_untouched(before, tmp_path)
+
+
+def test_two_sinks_at_once(tmp_path, session):
+    before = fingerprint(tmp_path)
+    run = run_pslog("view", session, "--save", tmp_path / "out.rrd", "--serve", env=HEADLESS,
+                    timeout=20)
+    assert_one_line_error(run, 2, contains=("choose one of", "--save and --serve"))
+    assert_untouched(before, tmp_path)
+
+
+def test_url_without_connect_on_a_headless_machine(tmp_path, session):
+    before = fingerprint(tmp_path)
+    run = run_pslog("view", session, "--url", "rerun+http://127.0.0.1:9876/proxy",
+                    env=HEADLESS, timeout=20)
+    assert_one_line_error(run, 2, contains="add --connect")
+    assert_untouched(before, tmp_path)

@@ -1,0 +1,163 @@
+"""Write a rerun recording to a .rrd file safely: OS errors become one clear error, never a hang.
+
+rerun's own file sink (``RecordingStream.save``, rerun-sdk 0.41) writes from a background
+thread that reports a failed write (a full disk, an I/O error) only as a log line on stderr;
+the stream's flush then never completes and ``disconnect`` hangs for ever. So pslog gives
+rerun a named pipe instead of the file and copies the bytes to the file itself: rerun never
+sees a failing write, and pslog sees the ``OSError`` (with its path and reason), keeps
+draining the pipe so rerun finishes normally, deletes the partial file and raises one
+:class:`~pslog.errors.PslogError`. The file is written as ``<name>.partial`` and moved over
+``path`` only once complete, so an old .rrd stays until a new one is whole.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import tempfile
+import threading
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+
+import rerun as rr
+
+from pslog import outputs as _outputs
+from pslog.errors import PslogError
+from pslog.outputs import check_output_path, partial_path
+
+#: longest wait for rerun to hand over its last bytes after logging, seconds; only a hang
+#: (never seen with the pipe) reaches it: the data has streamed out while it was logged
+FLUSH_TIMEOUT_S = 60.0
+_PIPE_READ = 1 << 20
+
+
+class RrdWriteError(getattr(_outputs, "WriteError", PslogError)):
+    """A .rrd file could not be written (folder not writable, disk full, I/O error)."""
+
+
+def _remove(path: Path) -> None:
+    # a read-only file system refuses even to unlink a file that is not there
+    with contextlib.suppress(OSError):
+        path.unlink(missing_ok=True)
+
+
+def _reason(exc: BaseException) -> str:
+    return exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+
+
+class _PipeToFile:
+    """A named pipe that rerun writes to and a thread that copies it into ``partial``."""
+
+    def __init__(self, partial: Path, path: Path) -> None:
+        self.partial, self.path = partial, path
+        self.error: OSError | None = None
+        self._out = open(partial, "wb")  # closed by the pump at the end of the stream
+        try:
+            self._dir = tempfile.mkdtemp(prefix="pslog-rrd-")
+            self.fifo = os.path.join(self._dir, "stream.rrd")
+            os.mkfifo(self.fifo, 0o600)
+        except OSError:
+            self._out.close()
+            raise
+        self._thread = threading.Thread(target=self._pump, name="pslog-rrd-writer",
+                                        daemon=True)
+        self._thread.start()
+
+    def _pump(self) -> None:
+        try:
+            with open(self.fifo, "rb", buffering=0) as src:
+                while chunk := src.read(_PIPE_READ):
+                    if self.error is None:
+                        try:
+                            self._out.write(chunk)
+                        except OSError as exc:
+                            self._fail(exc)
+                    # after a failure keep draining, so that rerun never blocks
+            if self.error is None:
+                try:
+                    self._out.close()
+                except OSError as exc:
+                    self._fail(exc)
+        except OSError as exc:  # the pipe itself broke: stop, and say so
+            self._fail(exc)
+
+    def _fail(self, exc: OSError) -> None:
+        self.error = self.error or exc
+        with contextlib.suppress(OSError):
+            self._out.close()
+        _remove(self.partial)
+
+    def unblock(self) -> None:
+        """Let the pump's ``open`` return when rerun never opened the pipe."""
+        with contextlib.suppress(OSError):
+            fd = os.open(self.fifo, os.O_WRONLY | os.O_NONBLOCK)
+            os.close(fd)
+
+    def join(self, timeout: float) -> bool:
+        self._thread.join(timeout)
+        return not self._thread.is_alive()
+
+    def cleanup(self) -> None:
+        shutil.rmtree(self._dir, ignore_errors=True)
+
+
+@contextlib.contextmanager
+def rrd_file(rec: rr.RecordingStream, path: str | Path, *, force: bool = False,
+             inputs: Iterable[str | Path] = ()) -> Iterator[Path]:
+    """Stream ``rec`` to the .rrd ``path`` while the ``with`` block logs into it.
+
+    ``path`` is checked first (:func:`pslog.outputs.check_output_path`: an input is refused,
+    an existing file needs ``force``). On leaving the block the stream is flushed (at most
+    :data:`FLUSH_TIMEOUT_S`), disconnected (which writes the file's footer) and the complete
+    file moved over ``path``. On any error the partial file is removed and an old ``path``
+    kept.
+
+    Raises
+    ------
+    RrdWriteError : the file could not be written; the message names the path and the
+        operating system's reason
+    """
+    path = check_output_path(path, force, inputs)
+    partial = partial_path(path)
+    if not hasattr(os, "mkfifo"):  # no named pipes (Windows): rerun writes the file itself
+        rec.save(partial)
+        try:
+            yield path
+            rec.flush(timeout_sec=FLUSH_TIMEOUT_S)
+            rec.disconnect()
+        except BaseException:
+            _remove(partial)
+            raise
+        partial.replace(path)
+        return
+    try:
+        pipe = _PipeToFile(partial, path)
+    except OSError as exc:
+        _remove(partial)
+        raise RrdWriteError(f"cannot write {path}: {_reason(exc)}") from None
+    try:
+        try:
+            rec.save(pipe.fifo)
+        except BaseException:
+            pipe.unblock()
+            raise
+        try:
+            yield path
+        finally:
+            # end the stream in every case, so rerun's writer thread finishes
+            try:
+                rec.flush(timeout_sec=FLUSH_TIMEOUT_S)
+            except RuntimeError as exc:  # rerun's flush timeout
+                pipe.error = pipe.error or OSError(0, f"rerun did not finish writing ({exc})")
+            rec.disconnect()  # writes the footer and closes the pipe
+            if not pipe.join(FLUSH_TIMEOUT_S):
+                pipe.error = pipe.error or OSError(0, "rerun did not close its stream")
+        if pipe.error is not None:
+            raise RrdWriteError(f"cannot write {path}: {_reason(pipe.error)}")
+        partial.replace(path)
+    except BaseException:
+        _remove(partial)
+        raise
+    finally:
+        pipe.cleanup()
