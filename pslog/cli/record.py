@@ -19,6 +19,7 @@ from pslog.cli._common import (
     positive_int,
     seed,
     source_files,
+    usage_error,
 )
 from pslog.errors import InputError
 
@@ -186,11 +187,18 @@ def _run(args: argparse.Namespace, stop) -> int:
     if args.timing:
         rig = apply_timing(rig, args.timing)
     hsv = parse_hsv(args.hsv)
-    if args.max_candidates < 1:
-        raise InputError(f"--max-candidates must be >= 1, got {args.max_candidates}")
     if args.synthetic:
         if args.source or args.offset:
-            raise InputError("--synthetic renders every camera; do not give --source/--offset")
+            return usage_error("record", "--synthetic renders every camera; do not give "
+                                         "--source/--offset")
+        from pslog.simulation import check_duration, check_exposure
+
+        try:  # values that are bad for this rig: command-line errors like any other
+            check_exposure(rig, args.exposure)
+            if args.duration is not None:
+                check_duration(rig, args.duration)
+        except InputError as exc:
+            return usage_error("record", str(exc))
         from recorders.synthetic import record_synthetic
 
         summary = record_synthetic(
@@ -201,11 +209,11 @@ def _run(args: argparse.Namespace, stop) -> int:
             stop_request=stop)
     else:
         if not args.source:
-            raise InputError("give a --source NAME=SPEC for every camera of the rig, "
-                             "or --synthetic")
+            return usage_error("record", "give a --source NAME=SPEC for every camera of the "
+                                         "rig, or --synthetic")
         if args.fast:
-            raise InputError("--fast applies to --synthetic only (video files are always "
-                             "read as fast as they decode)")
+            return usage_error("record", "--fast applies to --synthetic only (video files are "
+                                         "always read as fast as they decode)")
         from recorders.record import record
 
         specs = parse_sources(rig, args.source, args.offset)

@@ -208,6 +208,16 @@ def test_record_exposure_longer_than_a_frame_is_refused_by_the_shared_validator(
 
 
 def test_record_synthetic_exposure_beyond_the_frame_period_is_refused(work):
-    _refused(work, 1, ["record", "--synthetic", "--rig", "paper3", "--fast", "--duration",
+    _refused(work, 2, ["record", "--synthetic", "--rig", "paper3", "--fast", "--duration",
                        "0.1", "--exposure", "0.05", "-o", "x.mcap"],
              contains=("exposure 0.05 s", "frame period"))
+
+
+@pytest.mark.parametrize("args,contains", [
+    (["--synthetic", "--duration", "1e9"], "frames"),
+    (["--synthetic", "--source", "cam1=0"], "--synthetic renders every camera"),
+    ([], "give a --source"),
+    (["--source", "cam1=0", "--fast"], "--fast applies to --synthetic only"),
+])
+def test_record_options_bad_for_the_rig_or_each_other_are_exit_2(work, args, contains):
+    _refused(work, 2, ["record", "--rig", "paper3", "-o", "x.mcap", *args], contains=contains)
