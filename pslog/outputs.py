@@ -33,14 +33,18 @@ from .errors import InputError, OutputExistsError, PslogError
 
 class WriteError(PslogError):
     """The operating system refused a write (full disk, read-only file system, size limit,
-    permissions): ``cannot write <path>: <reason>``."""
+    permissions): ``cannot write <path>: <reason>``; ``reason`` holds the OS's words alone."""
+
+    def __init__(self, message: str, reason: str = "") -> None:
+        super().__init__(message)
+        self.reason = reason or message
 
 
 def write_error(path: str | Path, exc: OSError) -> WriteError:
     """The one-line error for ``exc`` met while writing ``path`` (the output the user named,
     not its ``.partial``)."""
     reason = exc.strerror or str(exc) or type(exc).__name__
-    return WriteError(f"cannot write {path}: {reason}")
+    return WriteError(f"cannot write {path}: {reason}", reason)
 
 
 def same_file(a: str | Path, b: str | Path) -> bool:

@@ -29,12 +29,10 @@ from typing import IO, Literal
 
 import numpy as np
 
-from pslog import outputs as _outputs
 from pslog.errors import InputError, PslogError, RigError
-from pslog.outputs import check_output_path
+from pslog.outputs import WriteError, check_output_path
 from pslog.records import NS, Truth
-from pslog.rig import Rig
-from pslog.rig import timing_label as rig_timing_label
+from pslog.rig import Rig, timing_label
 
 from .detect import BallDetector, HsvRange
 from .status import CameraStatus, StatusBoard
@@ -89,12 +87,6 @@ class RecordSummary:
     def failed(self) -> tuple[str, ...]:
         """Names of cameras that failed to open or stopped delivering."""
         return tuple(c.name for c in self.cameras if c.state == "failed")
-
-
-def timing_label(rig: Rig) -> str:
-    """The shutter preset whose offsets the rig has, else ``custom``: one definition for every
-    command, :func:`pslog.rig.timing_label`."""
-    return rig_timing_label(rig)
 
 
 def record(
@@ -233,11 +225,11 @@ def _record(rig: Rig, sources: Mapping[str, object], output: Path, options: Work
     return summary
 
 
-#: what a writer raises when the OS refuses a write (pslog.outputs.WriteError where it exists)
-_WRITE_ERRORS = (OSError, *((_outputs.WriteError,) if hasattr(_outputs, "WriteError") else ()))
+#: what a writer raises when the OS refuses a write
+_WRITE_ERRORS = (OSError, WriteError)
 
 
-class RecordWriteError(getattr(_outputs, "WriteError", PslogError)):
+class RecordWriteError(WriteError):
     """The session file could not be written (disk full, file too large, I/O error)."""
 
 
@@ -638,9 +630,7 @@ def _reason(exc: BaseException) -> str:
     """The operating system's reason (``No space left on device``) behind a write failure."""
     if isinstance(exc, OSError) and exc.strerror:
         return exc.strerror
-    text = str(exc)
-    # a writer's own one-line error reads "cannot write PATH: REASON"
-    return text.rsplit(": ", 1)[-1] if text.startswith("cannot write ") else text
+    return exc.reason if isinstance(exc, WriteError) else str(exc)
 
 
 def _utc_now() -> str:

@@ -10,11 +10,11 @@ import numpy as np
 from pslog.errors import InputError
 from pslog.motion import BALL_RADIUS, Motion, get_motion
 from pslog.records import NS, Truth
-from pslog.rig import TIMING_PRESETS, Rig, apply_timing
+from pslog.rig import TIMING_PRESETS, Rig, apply_timing, timing_label
 from pslog.simulation import check_exposure
 
 from .detect import HsvRange
-from .record import RecordSummary, StopRequest, record, timing_label
+from .record import RecordSummary, StopRequest, record
 from .render import RenderOptions
 from .sources import SyntheticSpec, synthetic_times
 

@@ -141,7 +141,7 @@ def test_record_errors(tmp_path, two_camera_rig, capsys):
         (["--synthetic", "--source", clip], "--synthetic"),
         (["--synthetic", "--motion", "loop"], "unknown motion"),
     ]
-    usage = ("--hsv", "unknown motion")  # bad values: argparse's exit 2
+    usage = ("--hsv", "unknown motion", "--synthetic")  # bad values and clashes: exit 2
     for extra, message in cases:
         try:
             code = main(["record", "--rig", rig, "-o", out, *extra])
