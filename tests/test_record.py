@@ -216,3 +216,25 @@ def test_camera_that_stalls_and_dies_is_logged_while_others_record(tmp_path):
     assert any("cam2 failed: test camera unplugged" in t for t in texts)
     det = read_session(out).detections
     assert_array_equal(np.bincount(det.frame_camera), [30, 20])
+
+
+def test_record_says_when_the_measured_shutter_offsets_are_not_the_rigs(
+        tmp_path, two_camera_rig, capsys):
+    k = np.arange(12)
+    centers = np.stack([100 + 10.3 * k, 200 + 3.1 * k], axis=1)
+    _write_clip(tmp_path / "a.avi", centers)
+    _write_clip(tmp_path / "b.avi", centers)
+    sources = ["--source", f"cam1={tmp_path}/a.avi", "--source", f"cam2={tmp_path}/b.avi"]
+    # cam2's file starts 11.1 ms later: its shutter is 11.1 ms after cam1's, the rig says 0
+    rc = main(["record", "--rig", str(two_camera_rig), *sources, "--offset", "cam2=0.0111",
+               "-o", str(tmp_path / "late.mcap")])
+    assert rc == 0
+    notes = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("note:")]
+    assert len(notes) == 1, notes
+    assert "cam2 11.1 ms (rig 0.0 ms)" in notes[0] and "'sync'" in notes[0]
+    assert "cam1 " not in notes[0]
+    # a whole number of periods later is the same shutter phase: nothing to say
+    rc = main(["record", "--rig", str(two_camera_rig), *sources, "--offset", "cam2=0.0667",
+               "-o", str(tmp_path / "whole.mcap")])
+    assert rc == 0
+    assert "note:" not in capsys.readouterr().out

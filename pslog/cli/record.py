@@ -229,7 +229,26 @@ def _run(args: argparse.Namespace, stop) -> int:
                          f"to {output}")
     if summary.n_frames == 0:
         raise InputError(f"no camera delivered a frame; {output} holds only the calibration")
+    if not args.synthetic:
+        _note_offsets(output, rig)
     return 0
+
+
+def _note_offsets(output, rig) -> None:
+    """Say so when the recorded shutter phases are not the rig's offsets (the session's
+    timing label follows the rig's offsets, which the user may want to correct)."""
+    from pslog.log import read_session
+    from pslog.log.info import offset_disagreements
+    from pslog.rig import timing_label
+
+    off = offset_disagreements(read_session(output).detections, rig)
+    if off:
+        listed = ", ".join(f"{name} {measured * 1e3:.1f} ms (rig {nominal * 1e3:.1f} ms)"
+                           for name, measured, nominal in off)
+        print(f"note: measured shutter offsets differ from the rig's: {listed}; the session "
+              f"keeps the rig's offsets (timing '{timing_label(rig)}'); to fuse with the "
+              f"measured ones, 'pslog rig show {output} > fixed.toml', set the offsets and "
+              f"'pslog fuse {output} --rig fixed.toml'")
 
 
 def parse_sources(rig, sources: list[str], offsets: list[str]) -> dict:

@@ -93,6 +93,23 @@ def timing_table(detections: Detections, nominal_offsets_s=None) -> list[dict]:
     return rows
 
 
+#: a measured shutter offset this far from the rig's is worth telling the user, seconds
+OFFSET_NOTE_S = 2e-3
+
+
+def offset_disagreements(detections: Detections, rig) -> list[tuple[str, float, float]]:
+    """``(camera, measured_s, rig_s)`` for each camera whose measured shutter offset (see
+    :func:`timing_table`) is more than :data:`OFFSET_NOTE_S` from the rig's: e.g. video files
+    started at other moments (``--source cam2=b.mp4@0.011``) on a rig whose offsets say
+    ``sync``. The session keeps the rig's offsets; the user decides which are right."""
+    nominal = [cam.offset for cam in rig.cameras]
+    rows = timing_table(detections, nominal)
+    return [(row["name"], row["offset_measured_s"], offset)
+            for row, offset in zip(rows, nominal, strict=True)
+            if np.isfinite(row["offset_measured_s"])
+            and abs(row["offset_measured_s"] - offset) > OFFSET_NOTE_S]
+
+
 def session_info(path) -> dict:
     """Summary of a session file as a JSON-able dict.
 
