@@ -109,15 +109,21 @@ def nonnegative_float(text: str) -> float:
     return _float_arg(text, lambda v: v >= 0, "a number >= 0")
 
 
-def seed(text: str) -> int:
-    """A random seed: a whole number >= 0 (numpy's generators take no negative seed)."""
+def _int_arg(text: str, low: int, high: int | None = None) -> int:
     try:
         value = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {text!r}")
+    if high is None and value < low:
+        raise argparse.ArgumentTypeError(f"must be >= {low}, got {text!r}")
+    if high is not None and not low <= value <= high:
+        raise argparse.ArgumentTypeError(f"must be in {low}..{high}, got {text!r}")
     return value
+
+
+def seed(text: str) -> int:
+    """A random seed: a whole number >= 0 (numpy's generators take no negative seed)."""
+    return _int_arg(text, 0)
 
 
 #: Largest simulated detection noise, pixels: beyond it a detection says nothing of the ball.
@@ -209,25 +215,13 @@ def usage_error(command: str, message: str) -> int:
 
 def positive_int(text: str) -> int:
     """A whole number >= 1."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {text!r}")
-    return value
+    return _int_arg(text, 1)
 
 
 def int_in(low: int, high: int):
     """argparse type: a whole number in ``[low, high]``."""
     def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
-        if not low <= value <= high:
-            raise argparse.ArgumentTypeError(f"must be in {low}..{high}, got {text!r}")
-        return value
+        return _int_arg(text, low, high)
     parse.__name__ = "whole number"
     return parse
 
