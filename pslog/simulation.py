@@ -26,6 +26,9 @@ TRUTH_CLOCK_KEY = "truth_clock"
 #: Fixed-point iterations for the row a rolling shutter reads the ball at: each multiplies
 #: the error by readout * (ball's row speed) / height, well below 0.1 for any real motion.
 _ROW_ITERATIONS = 8
+#: Largest difference, pixels, between the row a rolling-shutter capture was timed for and
+#: the row the ball is then seen at (a converged fixed point is far closer).
+_ROW_TOLERANCE_PX = 1e-6
 
 #: Longest simulation, in frames of all cameras together (about 2 GB of detections).
 MAX_SIMULATED_FRAMES = 20_000_000
@@ -286,6 +289,11 @@ def simulate(
     positions = motion.position(time_ns / NS)
 
     uv = _project(rig, camera, positions)
+    if np.any(readout > 0):
+        # a ball crossing the image's edge during the readout has no consistent row (seen
+        # at a row whose time puts it outside): such a frame detects nothing
+        consistent = np.abs(uv[:, 1] - row) <= _ROW_TOLERANCE_PX
+        uv[~consistent] = np.nan
     if options.noise_px > 0:
         uv = uv + rng.normal(0.0, options.noise_px, uv.shape)
     detected = np.all(np.isfinite(uv), axis=1) & (rng.random(len(uv)) >= options.miss_rate)

@@ -13,7 +13,7 @@ from numpy.testing import assert_allclose, assert_array_equal
 
 from pslog.log import SessionWriter, copy_session, read_session
 from pslog.records import NS, Track
-from pslog.rig import builtin_rig, save_rig
+from pslog.rig import apply_timing, builtin_rig, save_rig
 
 
 # ---- simulate ---------------------------------------------------------------------------------
@@ -39,6 +39,63 @@ def test_simulate_writes_detections_truth_rig_and_metadata(tmp_path, cli):
 
     code, _, stderr = cli("simulate", "--rig", "paper3", "-o", out)
     assert code == 1 and "exists" in stderr and "--force" in stderr
+
+
+def test_simulate_clock_faults_keep_the_nominal_rig_and_store_the_truth(tmp_path, cli):
+    from pslog.simulation import read_truth_clock
+    from pslog.timing import observations
+
+    out = tmp_path / "f.mcap"
+    code, stdout, stderr = cli(
+        "simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "throw",
+        "--clock-offset", "cam2=3.5", "--clock-offset", "cam3=-1.25", "--drift", "cam3=40",
+        "--readout", "20", "--readout", "cam2=25", "--host-jitter", "0", "-o", out)
+    assert code == 0, stderr
+    assert "run 'pslog sync'" in stdout
+    s = read_session(out)
+    nominal = apply_timing(builtin_rig("paper3"), "typeA")
+    assert s.rig == nominal  # nominal clock: zeros
+    assert s.timing == "typeA"
+    truth_rig = read_truth_clock(s.rig, s.metadata)
+    got = [(c.clock_offset, c.clock_drift_ppm, c.readout) for c in truth_rig.cameras]
+    assert got == [(0.0, 0.0, 0.02), (0.0035, 0.0, 0.025), (-0.00125, 40.0, 0.02)]
+    assert json.loads(s.metadata["truth_clock"])["host_jitter_s"] == 0.0
+    # the true clock makes the detections land on the truth (noise-free), the nominal not
+    good = observations(s.detections, truth_rig)
+    near = np.abs(s.truth.time_ns[np.searchsorted(s.truth.time_ns, good.time_ns) - 1]
+                  - good.time_ns) <= 1
+    near |= np.isin(good.time_ns, s.truth.time_ns)
+    assert near.all()
+    assert not np.isin(s.detections.best().time_ns, s.truth.time_ns).all()
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--clock-offset", "cam1=2"], "argument --clock-offset: camera 'cam1' is the first of "
+                                   "the rig and defines the session clock"),
+    (["--drift", "cam1=10"], "argument --drift: camera 'cam1' is the first"),
+    (["--clock-offset", "cam7=2"], "argument --clock-offset: clock_offset for unknown camera "
+                                   "'cam7' (rig has cam1, cam2, cam3)"),
+    (["--clock-offset", "cam2"], "expected CAM=MS"),
+    (["--clock-offset", "cam2=nan"], "must be a finite number"),
+    (["--clock-offset", "=3"], "no camera name before '='"),
+    (["--drift", "cam2=2000"], "argument --drift: camera 'cam2': clock_drift_ppm 2000 is "
+                               "beyond"),
+    (["--readout", "40"], "argument --readout: camera 'cam1': readout 0.04 s must be in "
+                          "[0, 0.0333333 s)"),
+    (["--readout", "cam2=-1"], "argument --readout: camera 'cam2': readout -0.001 s"),
+    (["--host-jitter", "20"], "argument --host-jitter: host jitter 0.02 s must be below half "
+                              "a frame period"),
+    (["--host-jitter", "-1"], "argument --host-jitter: must be a number >= 0"),
+])
+def test_simulate_bad_fault_values_exit_2_in_one_line(tmp_path, cli, capsys, args, message):
+    out = tmp_path / "f.mcap"
+    try:
+        code, _, stderr = cli("simulate", "--rig", "paper3", *args, "-o", out)
+    except SystemExit as exc:  # refused by argparse itself: exit 2 too
+        code, stderr = exc.code, capsys.readouterr().err
+    assert code == 2, stderr
+    assert message in stderr and len(stderr.strip().splitlines()) == 1
+    assert not out.exists()
 
 
 def test_simulate_with_rig_timing_and_imperfections(tmp_path, cli):
@@ -119,6 +176,25 @@ def test_info_shows_signed_offsets_next_to_the_rigs(tmp_path, cli, timing):
 
 
 # ---- recover -----------------------------------------------------------------------------------
+def test_info_shows_the_clock_model_when_the_rig_has_one(sim_session, tmp_path, cli):
+    code, stdout, _ = cli("info", sim_session.path)
+    assert code == 0 and "clock model" not in stdout  # all zero: not shown
+    rig = sim_session.rig
+    synced = type(rig)((rig.cameras[0].replace(readout=0.012),
+                        rig.cameras[1].replace(clock_offset=-0.00325, clock_drift_ppm=12.5),
+                        rig.cameras[2]), rig.name)
+    out = tmp_path / "synced.mcap"
+    copy_session(sim_session.path, out, rig=synced)
+    code, stdout, _ = cli("info", out)
+    assert code == 0
+    assert "cam1     offset +0.0000 ms, drift +0.000 ppm, readout 12.0000 ms" in stdout
+    assert "cam2     offset -3.2500 ms, drift +12.500 ppm, readout 0.0000 ms" in stdout
+    code, stdout, _ = cli("info", out, "--json")
+    cams = json.loads(stdout)["cameras"]
+    assert [(c["clock_offset_s"], c["clock_drift_ppm"], c["readout_s"]) for c in cams] == [
+        (0.0, 0.0, 0.012), (-0.00325, 12.5, 0.0), (0.0, 0.0, 0.0)]
+
+
 def test_recover_command(sim_session, tmp_path, cli):
     data = sim_session.path.read_bytes()
     broken = tmp_path / "broken.mcap"
