@@ -32,6 +32,9 @@ from .errors import InputError
 from .records import NS, Detections, Observations
 from .rig import Rig
 
+#: ``pslog sync --regularize auto`` regularizes a camera's stamps when the robust jitter
+#: around the line (:attr:`Regularization.jitter_s`) is above this, seconds.
+REGULARIZE_AUTO_JITTER_S = 0.2e-3
 #: Times between frames beyond this multiple of the robust residual scale are outliers.
 _OUTLIER_SCALES = 5.0
 #: Smallest residual ever called an outlier, seconds: stamps rounded to a microsecond (or a
