@@ -77,8 +77,18 @@ def true_times_ns(logged_ns, v_px, height, clock_offset_s, drift_ppm, readout_s)
     logged, v, h, off, drift, readout = _broadcast(logged_ns, v_px, height, clock_offset_s,
                                                    drift_ppm, readout_s)
     logged = logged.astype(np.int64)
-    correction = off * NS + drift * 1e-6 * logged.astype(np.float64) + readout * NS * v / h
+    correction = off * NS + drift * 1e-6 * logged.astype(np.float64) + _readout_ns(readout, v, h)
     return logged + np.rint(correction).astype(np.int64)
+
+
+def _readout_ns(readout, v, h) -> np.ndarray:
+    """``readout * v / height`` in ns; 0 for a global shutter whatever ``v`` (even NaN)."""
+    with np.errstate(invalid="ignore"):
+        term = np.where(readout != 0, readout * NS * v / h, 0.0)
+    if not np.all(np.isfinite(term)):
+        raise InputError("a rolling-shutter time needs the detection's pixel row: got a "
+                         "non-finite row")
+    return term
 
 
 def true_times_s(logged_s, v_px, height, clock_offset_s, drift_ppm, readout_s) -> np.ndarray:
@@ -119,7 +129,7 @@ def logged_times_ns(true_ns, v_px, height, clock_offset_s, drift_ppm,
                                                  drift_ppm, readout_s)
     true = true.astype(np.int64)
     rate = 1.0 + drift * 1e-6
-    fixed = off * NS + readout * NS * v / h
+    fixed = off * NS + _readout_ns(readout, v, h)
     # logged - true, small: computed apart from the (possibly large) times themselves
     delta = -(fixed + drift * 1e-6 * true.astype(np.float64)) / rate
     logged = true + np.rint(delta).astype(np.int64)

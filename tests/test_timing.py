@@ -50,6 +50,12 @@ def test_every_term_counts(change):
     assert true_times_ns(**{**HAND, **change}) != 2_006_540_000
 
 
+def test_a_global_shutter_needs_no_row_and_a_rolling_one_refuses_a_missing_row():
+    assert true_times_ns(NS, np.nan, 480, 1e-3, 0.0, 0.0) == NS + 1_000_000
+    with pytest.raises(InputError, match="non-finite row"):
+        true_times_ns(NS, np.nan, 480, 1e-3, 0.0, 0.01)
+
+
 def test_model_broadcasts_per_observation_parameters():
     logged = np.array([0, NS, 2 * NS, 3 * NS], dtype=np.int64)
     offset = np.array([0.0, 1e-3, 0.0, -2e-3])
