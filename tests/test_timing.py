@@ -276,3 +276,33 @@ def test_fusion_of_a_faulted_session_is_repaired_by_the_true_clock_in_the_rig(tm
         errors[name] = evaluate(fused.tracks["typeA"], fused.truth).mean_mm
     assert errors["nominal"] > 2 * errors["clean"]
     assert errors["true"] < 1.25 * errors["clean"]
+
+
+def test_a_session_whose_rig_holds_the_clock_is_fused_and_viewed_on_true_times(tmp_path):
+    """The way 'pslog sync' writes its output (a copy with a new rig): fuse and the viewer
+    read the correction from the session's own rig."""
+    from pslog.cli import main
+    from pslog.log import copy_session, read_session
+    from pslog.simulation import read_truth_clock
+    from viewers.data import load_view_data
+
+    faulted, synced, fused = (tmp_path / n for n in ("f.mcap", "s.mcap", "fused.mcap"))
+    assert main(["simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "spiral",
+                 "--clock-offset", "cam3=5", "--readout", "cam2=25", "-o", str(faulted)]) == 0
+    session = read_session(faulted)
+    true_rig = read_truth_clock(session.rig, session.metadata)
+    copy_session(faulted, synced, rig=true_rig)
+    assert read_session(synced).rig == true_rig
+    view = load_view_data(synced, methods=["typeA"])
+    expected = observations(session.detections, true_rig)
+    assert_array_equal(view.observations.time_ns, expected.time_ns)
+    assert not np.array_equal(expected.time_ns, session.detections.best().time_ns)
+    assert main(["fuse", str(synced), "--method", "typeA", "-o", str(fused)]) == 0
+    out = read_session(fused)
+    track = out.tracks["typeA"]
+    assert np.isin(track.time_ns, expected.time_ns).all()  # points at the true times
+    nominal = tmp_path / "nominal.mcap"
+    assert main(["fuse", str(faulted), "--method", "typeA", "-o", str(nominal)]) == 0
+    from pslog.evaluation import evaluate
+    error = evaluate(track, out.truth).mean_mm
+    assert error < 0.5 * evaluate(read_session(nominal).tracks["typeA"], out.truth).mean_mm
