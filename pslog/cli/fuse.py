@@ -50,6 +50,7 @@ def run(args: argparse.Namespace) -> int:
     )
     from pslog.log import copy_session, read_session
     from pslog.rig import check_baselines, resolve_rig
+    from pslog.timing import observations as timed_observations
 
     output = check_output(args.output, args.force)
     session = read_session(args.session)
@@ -67,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
         return usage_error("fuse", f"argument --tolerance-ms: {exc}")
     options = FusionOptions(tolerance_s=args.tolerance_ms / 1e3,
                             max_gap_s=None if args.max_gap_ms is None else args.max_gap_ms / 1e3)
-    observations = session.detections.best()
+    observations = timed_observations(session.detections, rig)  # the rig's clock model
     if len(observations) == 0:
         raise FusionError(f"{args.session} has no detection to fuse")
     if args.methods:
