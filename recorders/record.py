@@ -22,7 +22,7 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Literal
@@ -30,7 +30,7 @@ from typing import IO, Literal
 import numpy as np
 
 from pslog.errors import InputError, PslogError, RigError
-from pslog.outputs import WriteError, check_output_path
+from pslog.outputs import WriteError, check_output_path, write_error
 from pslog.records import NS, Truth
 from pslog.rig import Rig, timing_label
 
@@ -124,8 +124,11 @@ def record(
     truth : ground truth to store (synthetic sessions)
     status : stream for the live status line, messages and summary (default: the current
         ``sys.stderr``; None: silent)
-    stop_request : set by SIGINT/SIGTERM (installed here if not yet); the recording stops
-        cleanly once it is set, also when set before it started
+    stop_request : the recording stops cleanly once this is set, also when it was set
+        before the call. A caller that routes SIGINT and SIGTERM to it
+        (:meth:`StopRequest.install`) before its own slow start-up passes it here; None:
+        SIGINT and SIGTERM are routed to a new one for the duration of the call (main thread
+        only)
 
     Raises
     ------
@@ -163,8 +166,11 @@ def record(
     meta.update({str(k): str(v) for k, v in dict(metadata or {}).items()})
     # Ctrl-C and SIGTERM only ask the recording to stop, from before the file is created to
     # after it is finished, so a signal at any moment ends in a clean stop, never a traceback
-    stop_signal = stop_request or StopRequest()
-    restore = stop_signal.install()
+    if stop_request is None:
+        stop_signal = StopRequest()
+        restore = stop_signal.install()
+    else:  # the caller routes the signals (and restores them)
+        stop_signal, restore = stop_request, _nothing
     try:
         return _record(rig, sources, output, options, meta, timing=timing, source=source,
                        truth=truth, force=force, status=status, stop_signal=stop_signal)
@@ -183,14 +189,12 @@ def _record(rig: Rig, sources: Mapping[str, object], output: Path, options: Work
     # old session only once complete
     target = partial_path(output) if existed else output
     try:
-        with signals_only_to_this_thread():  # the writer's flusher thread
-            writer = SessionWriter(output, rig, force=force,
-                                   timing=timing or timing_label(rig),
-                                   source=source or "record", metadata=meta)
+        writer = SessionWriter(output, rig, force=force, timing=timing or timing_label(rig),
+                               source=source or "record", metadata=meta)
     except _WRITE_ERRORS as exc:  # an unwritable folder, a full disk: nothing recorded yet
         with contextlib.suppress(OSError):
             target.unlink(missing_ok=True)
-        raise RecordWriteError(f"cannot write {output}: {_reason(exc)}; nothing was "
+        raise RecordWriteError(f"cannot write {output}: {_reason(exc, output)}; nothing was "
                                f"recorded") from None
     session = _Session(rig, sources, options, writer, status, stop_signal)
     try:
@@ -207,13 +211,12 @@ def _record(rig: Rig, sources: Mapping[str, object], output: Path, options: Work
             else:
                 writer.close()
         except (OSError, PslogError) as exc:
-            session.write_error = _os_error(writer, exc)
+            session.write_error = exc
             _close_failed(writer, exc)
     else:
         _close_failed(writer, session.write_error)
     if session.write_error is not None:
-        exc = session.write_error
-        reason = _reason(exc)
+        reason = _reason(session.write_error, output)
         kept = (f"what was written before is in {target}, unfinished (salvage it with: "
                 f"pslog recover {target} -o fixed.mcap)" if target.exists() else
                 "nothing was kept")
@@ -231,12 +234,6 @@ _WRITE_ERRORS = (OSError, WriteError)
 
 class RecordWriteError(WriteError):
     """The session file could not be written (disk full, file too large, I/O error)."""
-
-
-def _os_error(writer, exc: BaseException) -> BaseException:
-    """The OS error behind a writer failure (the background flusher reports it wrapped)."""
-    cause = getattr(writer, "_flush_error", None)
-    return cause if isinstance(cause, OSError) else exc
 
 
 def _close_failed(writer, exc: BaseException) -> None:
@@ -265,10 +262,22 @@ class StopRequest:
     def is_set(self) -> bool:
         return self.event.is_set()
 
-    def install(self):
+    def install(self) -> Callable[[], None]:
         """Route SIGINT and SIGTERM here; returns a function restoring the previous handlers
-        (a no-op outside the main thread)."""
-        return _install_signal_handlers(self)
+        (both a no-op outside the main thread, where Python allows no handler)."""
+        if threading.current_thread() is not threading.main_thread():
+            return _nothing
+
+        def handler(signum, frame):
+            self.set(signal.Signals(signum).name)
+
+        previous = {sig: signal.signal(sig, handler) for sig in _STOP_SIGNALS}
+
+        def restore() -> None:
+            for sig, old in previous.items():
+                signal.signal(sig, old)
+
+        return restore
 
 
 class _Session:
@@ -289,7 +298,10 @@ class _Session:
         self.events: list[tuple[int, str]] = []
         self.live = [False] * len(rig)
         self.last_arrival = [0.0] * len(rig)
+        # why the recording ended before the sources did; ``stopped``: the cameras were
+        # stopped (a signal, a write failure) rather than reaching an end or the duration
         self.stop_reason = ""
+        self.stopped = False
         self._line_shown = False
 
     # ---- output -------------------------------------------------------------------------
@@ -326,7 +338,7 @@ class _Session:
         except InputError:
             raise  # a wrong value, not a write fault
         except (OSError, PslogError) as exc:
-            self.write_error = _os_error(self.writer, exc)
+            self.write_error = exc  # the writer's WriteError holds the OS's reason
             return False
         return True
 
@@ -348,7 +360,7 @@ class _Session:
         wall0 = time.monotonic()
         try:
             if not interrupted.is_set():
-                with _signals_ignored_by_children():
+                with _stop_signals_blocked():
                     for p in procs:
                         p.start()
                 self._wait_ready(q, procs, interrupted)
@@ -363,7 +375,7 @@ class _Session:
             stop.set()
             start.set()
             if interrupted.is_set():
-                self.stop_reason = f"stopped by {interrupted.name}"
+                self.stop_reason, self.stopped = f"stopped by {interrupted.name}", True
             self._finish(q, procs)
         if self._line_shown and self.tty and self.status is not None:
             self.status.write("\r\033[K")
@@ -410,14 +422,16 @@ class _Session:
                 break
             if interrupted.is_set() and not stop.is_set():
                 self._say(f"{interrupted.name}: stopping, finishing the session file ...")
-                self.stop_reason = f"stopped by {interrupted.name}"
+                self.stop_reason, self.stopped = f"stopped by {interrupted.name}", True
                 stop.set()
                 self._event(max(time.monotonic_ns() - t0_ns, 0),
                             f"recording {self.stop_reason}", None)
             if self.write_error is not None and not stop.is_set():
                 self._say(f"writing {self.writer.path} failed "
-                          f"({_reason(self.write_error)}): stopping the cameras ...")
+                          f"({_reason(self.write_error, self.writer.path)}): stopping the "
+                          f"cameras ...")
                 self.stop_reason = "stopped: the file could not be written"
+                self.stopped = True
                 stop.set()
             try:
                 msg = q.get(timeout=0.05)
@@ -484,7 +498,7 @@ class _Session:
         elif kind == "done":
             # a camera told to stop by a signal or a write failure was stopped; one that
             # reached its end or the duration is done
-            c.state = "stopped" if self.stop_reason.startswith("stopped") else "done"
+            c.state = "stopped" if self.stopped else "done"
             c.message = self.stop_reason if c.state == "stopped" else msg[2]
 
     def _fail(self, cam: int, time_ns: int, text: str) -> None:
@@ -546,7 +560,7 @@ class _Session:
                 p.join(timeout=1.0)
         for i, c in enumerate(cams):
             if c.state in ("opening", "recording", "stalled"):
-                if self.stop_reason.startswith("stopped"):
+                if self.stopped:
                     c.state, c.message = "stopped", self.stop_reason
                 elif self.stop_reason:
                     c.state, c.message = "done", c.message or self.stop_reason
@@ -566,38 +580,21 @@ def jpeg_params(quality: int) -> list[int]:
             cv2.IMWRITE_JPEG_SAMPLING_FACTOR, cv2.IMWRITE_JPEG_SAMPLING_FACTOR_444]
 
 
-def _install_signal_handlers(flag: StopRequest):
-    """SIGINT and SIGTERM set ``flag`` (the loop then finishes the file); returns a function
-    restoring the previous handlers. A no-op outside the main thread."""
-    if threading.current_thread() is not threading.main_thread():
-        return lambda: None
-    previous = {}
-
-    def handler(signum, frame):
-        flag.set(signal.Signals(signum).name)
-
-    for sig in _STOP_SIGNALS:
-        previous[sig] = signal.signal(sig, handler)
-
-    def restore() -> None:
-        for sig, old in previous.items():
-            signal.signal(sig, old)
-
-    return restore
-
-
 _STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
+def _nothing() -> None:
+    pass
+
+
 @contextlib.contextmanager
-def signals_only_to_this_thread():
-    """Threads started inside the block never receive SIGINT or SIGTERM: they keep them
-    blocked, so the kernel delivers these signals to the main thread only. That matters
-    while camera processes are started (see :func:`_signals_ignored_by_children`): a signal
-    delivered then to another thread would meet the ignored disposition and be lost."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
+def _stop_signals_blocked():
+    """Start camera processes inside this block: SIGINT and SIGTERM are blocked in the
+    calling thread, and a child inherits that mask (through ``exec`` too). So Ctrl-C (sent to
+    the whole foreground process group) or SIGTERM to the group stays pending in a camera
+    that is still importing, until :func:`camera_main` ignores these signals (which discards
+    it there): the parent stops the cameras. The parent's handlers stay in place meanwhile:
+    its other threads take such a signal, or it waits for the end of the block, never lost."""
     old = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)
     try:
         yield
@@ -605,32 +602,11 @@ def signals_only_to_this_thread():
         signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
-@contextlib.contextmanager
-def _signals_ignored_by_children():
-    """Start camera processes with SIGINT and SIGTERM ignored, so that Ctrl-C (sent to the
-    whole foreground process group) or SIGTERM to the group cannot interrupt a camera, even
-    while it is still importing: the parent stops them. An ignored disposition is the only
-    one that survives ``exec``; the signals are blocked meanwhile, so one arriving now waits
-    for the parent's own handler instead of being lost (provided no other thread of the
-    parent accepts them: see :func:`signals_only_to_this_thread`)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)
-    previous = {sig: signal.signal(sig, signal.SIG_IGN) for sig in _STOP_SIGNALS}
-    try:
-        yield
-    finally:
-        for sig, old in previous.items():
-            signal.signal(sig, old)
-        signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOP_SIGNALS)
-
-
-def _reason(exc: BaseException) -> str:
+def _reason(exc: BaseException, path: str | Path) -> str:
     """The operating system's reason (``No space left on device``) behind a write failure."""
-    if isinstance(exc, OSError) and exc.strerror:
-        return exc.strerror
-    return exc.reason if isinstance(exc, WriteError) else str(exc)
+    if isinstance(exc, WriteError):
+        return exc.reason
+    return write_error(path, exc).reason if isinstance(exc, OSError) else str(exc)
 
 
 def _utc_now() -> str:
@@ -646,8 +622,9 @@ def camera_main(cam: int, spec, options: WorkerOptions, q, start, stop, t0,
     encode -> send until the source ends, the duration is reached or the parent says stop."""
     import cv2
 
-    # Ctrl-C and SIGTERM to the process group reach the parent too, which stops us (they
-    # were ignored from the start, see _signals_ignored_by_children; blocked only there)
+    # Ctrl-C and SIGTERM to the process group reach the parent too, which stops us. They
+    # were blocked from the start (see _stop_signals_blocked); ignoring them discards one
+    # that came meanwhile, then they can be unblocked
     for sig in _STOP_SIGNALS:
         signal.signal(sig, signal.SIG_IGN)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOP_SIGNALS)

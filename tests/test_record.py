@@ -229,7 +229,9 @@ def test_record_says_when_the_measured_shutter_offsets_are_not_the_rigs(
     rc = main(["record", "--rig", str(two_camera_rig), *sources, "--offset", "cam2=0.0111",
                "-o", str(tmp_path / "late.mcap")])
     assert rc == 0
-    notes = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("note:")]
+    captured = capsys.readouterr()
+    assert "note:" not in captured.out  # stdout stays for data; messages go to stderr
+    notes = [ln for ln in captured.err.splitlines() if ln.startswith("note:")]
     assert len(notes) == 1, notes
     assert "cam2 11.1 ms (rig 0.0 ms)" in notes[0] and "'sync'" in notes[0]
     assert "cam1 " not in notes[0]
@@ -237,4 +239,33 @@ def test_record_says_when_the_measured_shutter_offsets_are_not_the_rigs(
     rc = main(["record", "--rig", str(two_camera_rig), *sources, "--offset", "cam2=0.0667",
                "-o", str(tmp_path / "whole.mcap")])
     assert rc == 0
-    assert "note:" not in capsys.readouterr().out
+    assert "note:" not in str(capsys.readouterr())
+
+
+def test_offset_note_that_cannot_read_the_session_back_is_not_an_error(tmp_path, capsys):
+    """The note re-reads a complete recording; if that read fails, the recording stands."""
+    from pslog.cli.record import _note_offsets
+
+    broken = tmp_path / "gone.mcap"
+    broken.write_bytes(b"not an MCAP file")
+    _note_offsets(broken, builtin_rig("paper2"))  # no exception
+    err = capsys.readouterr().err
+    assert err.startswith("note: the recorded shutter offsets could not be compared"), err
+    assert str(broken) in err and len(err.splitlines()) == 1
+
+
+@pytest.mark.parametrize("argv", [["record", "--help"], ["record", "--no-such-option"],
+                                  ["record", "--rig", "paper3", "-o", "/no/such/dir/s.mcap",
+                                   "--synthetic"]])
+def test_record_leaves_the_signal_handlers_as_it_found_them(argv):
+    """Building the parser, an argparse error or a refused output must not take over
+    Ctrl-C/SIGTERM for the rest of the process (pytest then ignored Ctrl-C)."""
+    import signal
+
+    before = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        code = main(argv)
+    except SystemExit as exc:  # --help and argparse errors
+        code = exc.code
+    assert code in (0, 1, 2)
+    assert {sig: signal.getsignal(sig) for sig in before} == before

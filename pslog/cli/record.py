@@ -18,7 +18,6 @@ from pslog.cli._common import (
     positive_float,
     positive_int,
     seed,
-    source_files,
     usage_error,
 )
 from pslog.errors import InputError
@@ -63,7 +62,6 @@ _SOURCE = re.compile(r"^([^=]+)=(.+)$")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    _stop_on_signals()
     parser.description = DESCRIPTION
     parser.epilog = EXAMPLES
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
@@ -109,7 +107,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="JPEG quality of stored frames, 1..100 (default %(default)s)")
     add_detector_arguments(parser)
     add_force(parser)
-    declare_files(parser, inputs=("rig", source_files), outputs=("output",))
+    declare_files(parser, inputs=("rig", video_files), outputs=("output",))
 
 
 def add_detector_arguments(parser: argparse.ArgumentParser) -> None:
@@ -130,53 +128,19 @@ def parse_hsv(text: str | None):
     return HsvRange() if text is None else HsvRange.parse(text)
 
 
-#: SIGINT/SIGTERM received since ``pslog record`` started (installed by add_arguments),
-#: and the handlers it replaced (restored when run() ends, for callers of main() in-process)
-_STOP = None
-_PREVIOUS: dict = {}
-
-
-def _stop_on_signals() -> None:
-    """From the start of ``pslog record``, SIGINT and SIGTERM only request a stop, which the
-    recorder honours (also one that came before it started) by finishing the file: no
-    KeyboardInterrupt traceback from an import, no silent death by SIGTERM."""
-    global _STOP
-    import signal
-    import threading
-
-    if threading.current_thread() is not threading.main_thread():
-        return
-    early: list[str] = []  # signals during the imports below (OpenCV takes a while)
-
-    def note(signum, frame):
-        early.append(signal.Signals(signum).name)
-
-    stops = {signal.SIGINT, signal.SIGTERM}
-    for sig in stops:
-        _PREVIOUS.setdefault(sig, signal.signal(sig, note))
-    # the threads the imports start (numpy's BLAS pool) keep these signals blocked, so they
-    # always reach this thread (see recorders.record.signals_only_to_this_thread)
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, stops)
-    try:
-        from recorders.record import StopRequest
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
-
-    _STOP = StopRequest()
-    _STOP.install()
-    if early:
-        _STOP.set(early[0])
-
-
 def run(args: argparse.Namespace) -> int:
-    import signal
+    # from here on SIGINT and SIGTERM only request a stop, which the recorder honours (also
+    # one that came before it started) by finishing the file: no KeyboardInterrupt traceback
+    # from a slow import, no silent death by SIGTERM. Restored at the end, for callers of
+    # main() in-process.
+    from recorders.record import StopRequest
 
+    stop = StopRequest()
+    restore = stop.install()
     try:
-        return _run(args, _STOP)
+        return _run(args, stop)
     finally:
-        for sig, handler in _PREVIOUS.items():
-            signal.signal(sig, handler)
-        _PREVIOUS.clear()
+        restore()
 
 
 def _run(args: argparse.Namespace, stop) -> int:
@@ -215,9 +179,10 @@ def _run(args: argparse.Namespace, stop) -> int:
             return usage_error("record", "--fast applies to --synthetic only (video files are "
                                          "always read as fast as they decode)")
         from recorders.record import record
+        from recorders.sources import FileSpec
 
         specs = parse_sources(rig, args.source, args.offset)
-        videos = [spec.path for spec in specs.values() if hasattr(spec, "offset_s")]
+        videos = [spec.path for spec in specs.values() if isinstance(spec, FileSpec)]
         output = check_output(args.output, args.force, inputs=videos)
         summary = record(rig, specs, output, duration_s=args.duration,
                          frames=not args.no_frames, jpeg_quality=args.jpeg_quality, hsv=hsv,
@@ -235,20 +200,30 @@ def _run(args: argparse.Namespace, stop) -> int:
 
 
 def _note_offsets(output, rig) -> None:
-    """Say so when the recorded shutter phases are not the rig's offsets (the session's
-    timing label follows the rig's offsets, which the user may want to correct)."""
+    """Say so (on stderr, like the recorder's other messages) when the recorded shutter
+    phases are not the rig's offsets (the session's timing label follows the rig's offsets,
+    which the user may want to correct). The recording is already complete: a failure to
+    read it back here only costs the note."""
+    import sys
+
+    from pslog.errors import PslogError
     from pslog.log import read_session
     from pslog.log.info import offset_disagreements
     from pslog.rig import timing_label
 
-    off = offset_disagreements(read_session(output).detections, rig)
+    try:
+        off = offset_disagreements(read_session(output).detections, rig)
+    except PslogError as exc:
+        print(f"note: the recorded shutter offsets could not be compared with the rig's "
+              f"({exc}); the recording itself is complete", file=sys.stderr)
+        return
     if off:
         listed = ", ".join(f"{name} {measured * 1e3:.1f} ms (rig {nominal * 1e3:.1f} ms)"
                            for name, measured, nominal in off)
         print(f"note: measured shutter offsets differ from the rig's: {listed}; the session "
               f"keeps the rig's offsets (timing '{timing_label(rig)}'); to fuse with the "
               f"measured ones, 'pslog rig show {output} > fixed.toml', set the offsets and "
-              f"'pslog fuse {output} --rig fixed.toml'")
+              f"'pslog fuse {output} --rig fixed.toml'", file=sys.stderr)
 
 
 def parse_sources(rig, sources: list[str], offsets: list[str]) -> dict:
@@ -274,17 +249,16 @@ def parse_sources(rig, sources: list[str], offsets: list[str]) -> dict:
         cam = rig.camera(name)  # RigError naming an unknown camera
         if name in specs:
             raise InputError(f"camera {name!r} has two --source options")
-        if re.fullmatch(r"\d+", spec):
-            specs[name] = DeviceSpec(int(spec), cam.width, cam.height, cam.fps)
-        elif spec.startswith("/dev/"):
-            specs[name] = DeviceSpec(spec, cam.width, cam.height, cam.fps)
+        if _is_device(spec):  # a device index or a V4L2 path
+            device = spec if spec.startswith("/dev/") else int(spec)
+            specs[name] = DeviceSpec(device, cam.width, cam.height, cam.fps)
         else:
             path, offset = spec, offset_of.get(name, 0.0)
-            head, sep, tail = spec.rpartition("@")
-            if sep and not Path(spec).exists():
+            video, at = _video_and_offset(spec)
+            if at is not None:
                 if name in offset_of:
                     raise InputError(f"camera {name!r}: offset given both with @ and --offset")
-                path, offset = head, _seconds(tail, text, name)
+                path, offset = video, _seconds(at, text, name)
             if not Path(path).is_file():
                 raise InputError(f"camera {name!r}: video file not found: {path}")
             specs[name] = FileSpec(path, cam.width, cam.height, offset)
@@ -292,6 +266,31 @@ def parse_sources(rig, sources: list[str], offsets: list[str]) -> dict:
         if not isinstance(specs.get(name), FileSpec):
             raise InputError(f"--offset {name}=...: camera {name!r} has no video file source")
     return specs
+
+
+def _is_device(spec: str) -> bool:
+    return bool(re.fullmatch(r"[0-9]+", spec)) or spec.startswith("/dev/")
+
+
+def _video_and_offset(spec: str) -> tuple[str, str | None]:
+    """``FILE[@OFFSET]`` -> (FILE, OFFSET text or None); a file whose name holds an @ is
+    taken whole."""
+    from pathlib import Path
+
+    head, sep, tail = spec.rpartition("@")
+    return (head, tail) if sep and not Path(spec).exists() else (spec, None)
+
+
+def video_files(args: argparse.Namespace) -> list[str]:
+    """The video files named by ``--source NAME=FILE[@OFFSET]`` (inputs of ``record``, read
+    as :func:`parse_sources` reads them)."""
+    files = []
+    for text in getattr(args, "source", None) or ():
+        match = _SOURCE.match(text)
+        spec = match.group(2).strip() if match else ""
+        if spec and not _is_device(spec):
+            files.append(_video_and_offset(spec)[0])
+    return files
 
 
 def _seconds(value: str, text: str, camera: str) -> float:

@@ -12,6 +12,7 @@ detection in the file. ``pytest -s`` prints the figures.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import signal
@@ -60,14 +61,15 @@ class Recorder:
             time.sleep(0.01)
         raise AssertionError(f"no {text!r} on stderr within {timeout} s:\n{self.stderr}")
 
-    def wait_children(self, timeout: float = 30.0) -> None:
-        """Until the camera processes exist (spawned, still starting up)."""
+    def wait_camera_process(self, timeout: float = 30.0) -> None:
+        """Until a camera process exists (spawned, still starting up): not merely another
+        member of the group (multiprocessing's resource tracker comes first)."""
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
-            if len(_group_members(self.proc.pid)) > 1:
+            if any(_is_camera_process(pid) for pid in _group_members(self.proc.pid)):
                 return
             time.sleep(0.005)
-        raise AssertionError("camera processes did not start")
+        raise AssertionError(f"no camera process started:\n{self.stderr}")
 
     def finish(self, timeout: float = 60.0) -> int:
         try:
@@ -91,6 +93,33 @@ def _group_members(pgid: int) -> list[int]:
             if int(fields[2]) == pgid and fields[0] != "Z":
                 members.append(int(entry.name))
     return members
+
+
+def _is_camera_process(pid: int) -> bool:
+    """A process multiprocessing spawned to run a target (a camera), by its command line."""
+    try:
+        return b"spawn_main" in Path(f"/proc/{pid}/cmdline").read_bytes()
+    except OSError:
+        return False
+
+
+@pytest.fixture
+def start():
+    """``start(out)`` runs a recorder; on teardown, whatever is left of its process group
+    (a failed assertion before ``finish()``) is killed rather than left running 30 s."""
+    started: list[Recorder] = []
+
+    def run(out: Path) -> Recorder:
+        rec = _start(out)
+        started.append(rec)
+        return rec
+
+    yield run
+    for rec in started:
+        if rec.proc.poll() is None or _group_members(rec.proc.pid):
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(rec.proc.pid, signal.SIGKILL)
+            rec.proc.wait(timeout=10)
 
 
 def _start(out: Path) -> Recorder:
@@ -163,11 +192,11 @@ def _print_figures():
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
-def test_signal_to_the_group_while_cameras_start(tmp_path, sig):
+def test_signal_to_the_group_while_cameras_start(start, tmp_path, sig):
     """Ctrl-C (SIGINT to the foreground group) or SIGTERM to the group while the camera
     processes are still starting up: a clean stop, no file left, one line saying so."""
-    rec = _start(tmp_path / "s.mcap")
-    rec.wait_children()
+    rec = start(tmp_path / "s.mcap")
+    rec.wait_camera_process()
     _send(rec, sig, group=True)
     code = rec.finish()
     _assert_no_traceback(rec)
@@ -186,10 +215,10 @@ def test_signal_to_the_group_while_cameras_start(tmp_path, sig):
 
 @pytest.mark.parametrize(("sig", "after_s"), [(signal.SIGINT, 0.5), (signal.SIGTERM, 0.5),
                                               (signal.SIGINT, 2.0), (signal.SIGTERM, 2.0)])
-def test_signal_to_the_group_while_recording(tmp_path, sig, after_s):
+def test_signal_to_the_group_while_recording(start, tmp_path, sig, after_s):
     """In the first second and mid-run: the file is finished (readable without recovery)
     and holds everything up to the signal."""
-    rec = _start(tmp_path / "s.mcap")
+    rec = start(tmp_path / "s.mcap")
     started = rec.wait_line("] cam1:")  # the first status line: cameras recording
     time.sleep(max(started + after_s - time.monotonic(), 0))
     sent = _send(rec, sig, group=True)
@@ -199,10 +228,10 @@ def test_signal_to_the_group_while_recording(tmp_path, sig, after_s):
     assert -0.5 < lost <= MAX_LOST_S
 
 
-def test_second_signal_during_shutdown(tmp_path):
+def test_second_signal_during_shutdown(start, tmp_path):
     """Ctrl-C, then SIGTERM to the group while the file is being finished: still one clean
     stop (the second signal does not interrupt the first one's shutdown)."""
-    rec = _start(tmp_path / "s.mcap")
+    rec = start(tmp_path / "s.mcap")
     started = rec.wait_line("] cam1:")
     time.sleep(max(started + 1.0 - time.monotonic(), 0))
     sent = _send(rec, signal.SIGINT, group=True)
@@ -232,10 +261,10 @@ def _kill_then_recover(tmp_path, rec: Recorder, code: int, sent: int, case: str)
     assert 0 < lost <= MAX_LOST_S
 
 
-def test_sigkill_mid_run_then_recover(tmp_path):
+def test_sigkill_mid_run_then_recover(start, tmp_path):
     """SIGKILL to the recorder alone, mid-run: ``pslog recover`` salvages all but at most
     the last second."""
-    rec = _start(tmp_path / "s.mcap")
+    rec = start(tmp_path / "s.mcap")
     started = rec.wait_line("] cam1:")
     time.sleep(max(started + 2.0 - time.monotonic(), 0))
     sent = _send(rec, signal.SIGKILL, group=False)
@@ -243,9 +272,9 @@ def test_sigkill_mid_run_then_recover(tmp_path):
                        "SIGKILL to the recorder 2 s into the recording")
 
 
-def test_sigkill_during_shutdown_then_recover(tmp_path):
+def test_sigkill_during_shutdown_then_recover(start, tmp_path):
     """Ctrl-C, then SIGKILL to the whole group while the file is being finished."""
-    rec = _start(tmp_path / "s.mcap")
+    rec = start(tmp_path / "s.mcap")
     started = rec.wait_line("] cam1:")
     time.sleep(max(started + 1.0 - time.monotonic(), 0))
     sent = _send(rec, signal.SIGINT, group=True)
