@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import os
+import signal
 import subprocess
 import sys
+import time
 
 from pslog.evaluation import evaluate
 from pslog.log import read_session
@@ -28,3 +31,28 @@ def test_demo_records_fuses_evaluates_and_saves_a_recording(tmp_path):
                            capture_output=True, text=True, timeout=300)
     assert again.returncode == 1 and "--force" in again.stderr
     assert "Traceback" not in again.stderr
+
+
+def test_ctrl_c_during_the_recording_stops_the_demo(tmp_path):
+    """The recorder turns Ctrl-C into a clean stop of the recording; the demo must then stop
+    too (exit 130, saying so, nothing kept), not fuse and evaluate a shortened throw."""
+    out = tmp_path / "demo"
+    proc = subprocess.Popen([sys.executable, "-m", "pslog.cli", "demo", "--out", str(out),
+                             "--realtime", "--duration", "30", "--no-view"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            stdin=subprocess.DEVNULL, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 60
+        while not (out / "session.mcap").exists():  # the recording has begun
+            assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
+            time.sleep(0.02)
+        os.killpg(proc.pid, signal.SIGINT)  # what Ctrl-C in a terminal does
+        stdout, stderr = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert proc.returncode == 130, stderr
+    assert "Traceback" not in stderr and "interrupted" in stderr, stderr
+    assert "2/4" not in stdout, stdout
+    assert not out.exists()

@@ -52,24 +52,35 @@ def _output_folder(out: str | None, force: bool) -> tuple[Path, bool]:
     return folder, created
 
 
+#: exit code of an interrupted demo (as for Ctrl-C anywhere in pslog)
+INTERRUPTED = 130
+
+
 def run(args: argparse.Namespace) -> int:
     folder, created = _output_folder(args.out, args.force)
     before = set(folder.iterdir())
     try:
-        return _run(args, folder)
+        code = _run(args, folder)
     except BaseException:
-        # a failed demo leaves nothing of its own (every file it writes can be made again);
-        # files that were in the folder before stay, and each writer replaces an old file
-        # only by a complete new one
-        for path in set(folder.iterdir()) - before:
-            if path.is_file() or path.is_symlink():
-                path.unlink(missing_ok=True)
-        if created:
-            try:
-                folder.rmdir()
-            except OSError:
-                pass  # not empty: something else wrote into it meanwhile
+        _remove_new_files(folder, before, created)
         raise
+    if code == INTERRUPTED:
+        _remove_new_files(folder, before, created)
+    return code
+
+
+def _remove_new_files(folder: Path, before: set[Path], created: bool) -> None:
+    """A failed or interrupted demo leaves nothing of its own (every file it writes can be
+    made again); files that were in the folder before stay, and each writer replaces an old
+    file only by a complete new one."""
+    for path in set(folder.iterdir()) - before:
+        if path.is_file() or path.is_symlink():
+            path.unlink(missing_ok=True)
+    if created:
+        try:
+            folder.rmdir()
+        except OSError:
+            pass  # not empty: something else wrote into it meanwhile
 
 
 def _run(args: argparse.Namespace, folder: Path) -> int:
@@ -89,8 +100,15 @@ def _run(args: argparse.Namespace, folder: Path) -> int:
 
     print(f"1/4 recording a {args.duration:g} s synthetic throw: 3 cameras at 30 fps, shutters "
           f"1/90 s apart (type A) -> {session_path}")
-    record_synthetic(rig, "throw", session_path, duration=args.duration,
-                     fast=not args.realtime, frames=True, force=args.force, status=sys.stdout)
+    summary = record_synthetic(rig, "throw", session_path, duration=args.duration,
+                               fast=not args.realtime, frames=True, force=args.force,
+                               status=sys.stdout)
+    if summary.interrupted:
+        # the recorder turned Ctrl-C (or SIGTERM) into a clean stop of the recording; the
+        # user asked the demo to stop, not to go on with a shortened throw
+        print("pslog demo: interrupted during the recording; stopped (nothing kept)",
+              file=sys.stderr)
+        return INTERRUPTED
 
     session = read_session(session_path)
     n_obs = len(observations(session.detections, session.rig))
