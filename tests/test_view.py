@@ -3,9 +3,11 @@ read back, it holds the expected entities, rows, timelines, images and geometry.
 
 from __future__ import annotations
 
+import errno
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import cv2
@@ -360,3 +362,68 @@ def test_cli_connect_sends_to_a_running_server(session):
         server.kill()
         server.wait()
 
+
+
+def test_rrd_pipe_is_drained_after_a_read_error(tmp_path):
+    """If reading rerun's pipe fails, the pump keeps draining it: rerun (here a plain writer
+    of 8 MB, far more than a pipe holds) never blocks, so its flush and disconnect cannot
+    hang; the error is reported and the partial file removed."""
+    import threading
+
+    from viewers.rrd_file import _PipeToFile
+
+    partial, out = tmp_path / "out.rrd.partial", tmp_path / "out.rrd"
+    pipe = _PipeToFile(partial, out)
+    wrote = threading.Event()
+
+    def rerun_like_writer() -> None:
+        with open(pipe.fifo, "wb") as sink:
+            for _ in range(128):
+                sink.write(b"x" * 65536)
+        wrote.set()
+
+    writer = threading.Thread(target=rerun_like_writer, daemon=True)
+    writer.start()
+    try:
+        while pipe.reading is None:  # the pump has opened the pipe
+            assert writer.is_alive() or wrote.is_set()
+            time.sleep(0.001)
+        # a real OS error on the pump's next read (EBADF: the descriptor now names a file
+        # open for writing only), without closing the descriptor under the pump
+        broken = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(broken, pipe.reading)
+        os.close(broken)
+        assert wrote.wait(60), "the writer blocked: the pipe is no longer drained"
+        assert pipe.join(60)
+    finally:
+        pipe.cleanup()
+    assert pipe.error is not None and pipe.error.errno == errno.EBADF
+    assert not partial.exists() and not out.exists()
+
+
+def test_rrd_temporary_folder_is_removed_when_the_pipe_cannot_be_made(tmp_path, monkeypatch):
+    """mkfifo fails (here: the pipe's path is one byte too long, a real ENAMETOOLONG): one
+    RrdWriteError naming the output and the reason; no temporary folder left behind."""
+    import tempfile
+
+    import rerun as rr
+
+    from viewers.rrd_file import RrdWriteError, rrd_file
+
+    # a folder whose path leaves room for mkdtemp's "/pslog-rrd-XXXXXXXX" (19 characters)
+    # but not for the pipe's "/stream.rrd" inside it (PATH_MAX 4096 with the final NUL)
+    deep = tmp_path
+    while len(str(deep)) < 4095 - 19 - 200:
+        deep = deep / ("d" * 200)
+    deep = deep / ("d" * (4095 - 19 - len(str(deep)) - 1))
+    os.makedirs(deep)
+    assert len(str(deep)) + 19 + len("/stream.rrd") > 4095
+    monkeypatch.setattr(tempfile, "tempdir", str(deep))
+    out = tmp_path / "out.rrd"
+    with pytest.raises(RrdWriteError, match="File name too long") as caught:
+        with rrd_file(rr.RecordingStream("pslog-test"), out):
+            pass
+    assert str(caught.value).startswith(f"cannot write {out}: ")
+    assert caught.value.reason == "File name too long"
+    assert list(deep.iterdir()) == []
+    assert list(tmp_path.iterdir()) == [tmp_path / ("d" * 200)]  # no out.rrd(.partial)

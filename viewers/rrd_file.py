@@ -22,9 +22,7 @@ from pathlib import Path
 
 import rerun as rr
 
-from pslog import outputs as _outputs
-from pslog.errors import PslogError
-from pslog.outputs import check_output_path, partial_path
+from pslog.outputs import WriteError, check_output_path, partial_path, write_error
 
 #: longest wait for rerun to hand over its last bytes after logging, seconds; only a hang
 #: (never seen with the pipe) reaches it: the data has streamed out while it was logged
@@ -32,8 +30,13 @@ FLUSH_TIMEOUT_S = 60.0
 _PIPE_READ = 1 << 20
 
 
-class RrdWriteError(getattr(_outputs, "WriteError", PslogError)):
+class RrdWriteError(WriteError):
     """A .rrd file could not be written (folder not writable, disk full, I/O error)."""
+
+
+def _rrd_error(path: Path, exc: OSError) -> RrdWriteError:
+    error = write_error(path, exc)
+    return RrdWriteError(str(error), error.reason)
 
 
 def _remove(path: Path) -> None:
@@ -42,45 +45,66 @@ def _remove(path: Path) -> None:
         path.unlink(missing_ok=True)
 
 
-def _reason(exc: BaseException) -> str:
-    return exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
-
-
 class _PipeToFile:
-    """A named pipe that rerun writes to and a thread that copies it into ``partial``."""
+    """A named pipe that rerun writes to and a thread that copies it into ``partial``.
+
+    Whatever goes wrong on pslog's side (the file cannot be written, even reading the pipe
+    fails), the pipe is drained to its end: rerun must never block on it or meet a broken
+    pipe, which would make its flush and ``disconnect`` hang.
+    """
 
     def __init__(self, partial: Path, path: Path) -> None:
         self.partial, self.path = partial, path
         self.error: OSError | None = None
-        self._out = open(partial, "wb")  # closed by the pump at the end of the stream
+        self._dir = tempfile.mkdtemp(prefix="pslog-rrd-")
         try:
-            self._dir = tempfile.mkdtemp(prefix="pslog-rrd-")
             self.fifo = os.path.join(self._dir, "stream.rrd")
             os.mkfifo(self.fifo, 0o600)
+            # a second reader, held from the start: it drains the pipe if reading the first
+            # one fails, and lets unblock() open the pipe at any moment
+            self._spare = os.open(self.fifo, os.O_RDONLY | os.O_NONBLOCK)
         except OSError:
-            self._out.close()
+            self.cleanup()
             raise
+        try:
+            self._out = open(partial, "wb")  # closed by the pump at the end of the stream
+        except OSError:
+            os.close(self._spare)
+            self.cleanup()
+            raise
+        self.reading: int | None = None  # the descriptor the pump reads (for tests)
         self._thread = threading.Thread(target=self._pump, name="pslog-rrd-writer",
                                         daemon=True)
         self._thread.start()
 
     def _pump(self) -> None:
         try:
-            with open(self.fifo, "rb", buffering=0) as src:
-                while chunk := src.read(_PIPE_READ):
-                    if self.error is None:
-                        try:
-                            self._out.write(chunk)
-                        except OSError as exc:
-                            self._fail(exc)
-                    # after a failure keep draining, so that rerun never blocks
+            try:
+                with open(self.fifo, "rb", buffering=0) as src:
+                    self.reading = src.fileno()
+                    self._copy(src.fileno())
+            except OSError as exc:  # reading the pipe failed: the file is lost, drain
+                self._fail(exc)
+                os.set_blocking(self._spare, True)
+                with contextlib.suppress(OSError):  # nothing left to drain with
+                    while os.read(self._spare, _PIPE_READ):
+                        pass
+        finally:
+            os.close(self._spare)  # the last reader: only now could rerun meet EPIPE
+        if self.error is None:
+            try:
+                self._out.close()
+            except OSError as exc:
+                self._fail(exc)
+
+    def _copy(self, fd: int) -> None:
+        while chunk := os.read(fd, _PIPE_READ):
             if self.error is None:
                 try:
-                    self._out.close()
+                    self._out.write(chunk)
                 except OSError as exc:
                     self._fail(exc)
-        except OSError as exc:  # the pipe itself broke: stop, and say so
-            self._fail(exc)
+            # after a failure keep draining, so that rerun never blocks
 
     def _fail(self, exc: OSError) -> None:
         self.error = self.error or exc
@@ -135,7 +159,7 @@ def rrd_file(rec: rr.RecordingStream, path: str | Path, *, force: bool = False,
         pipe = _PipeToFile(partial, path)
     except OSError as exc:
         _remove(partial)
-        raise RrdWriteError(f"cannot write {path}: {_reason(exc)}") from None
+        raise _rrd_error(path, exc) from None
     try:
         try:
             rec.save(pipe.fifo)
@@ -154,7 +178,7 @@ def rrd_file(rec: rr.RecordingStream, path: str | Path, *, force: bool = False,
             if not pipe.join(FLUSH_TIMEOUT_S):
                 pipe.error = pipe.error or OSError(0, "rerun did not close its stream")
         if pipe.error is not None:
-            raise RrdWriteError(f"cannot write {path}: {_reason(pipe.error)}")
+            raise _rrd_error(path, pipe.error)
         partial.replace(path)
     except BaseException:
         _remove(partial)
