@@ -427,3 +427,19 @@ def test_rrd_temporary_folder_is_removed_when_the_pipe_cannot_be_made(tmp_path, 
     assert caught.value.reason == "File name too long"
     assert list(deep.iterdir()) == []
     assert list(tmp_path.iterdir()) == [tmp_path / ("d" * 200)]  # no out.rrd(.partial)
+
+
+def test_every_rerun_call_lives_in_viewers():
+    """Layering: no module of pslog/ (the CLI included) imports rerun; viewers/ holds the
+    sinks (viewers.sinks) as well as the files (viewers.rrd_file)."""
+    import ast
+
+    root = Path(__file__).resolve().parents[1] / "pslog"
+    offenders = []
+    for path in sorted(root.rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            names = ([a.name for a in node.names] if isinstance(node, ast.Import) else
+                     [node.module or ""] if isinstance(node, ast.ImportFrom) else [])
+            if any(n == "rerun" or n.startswith("rerun.") for n in names):
+                offenders.append(f"{path.relative_to(root.parent)}:{node.lineno}")
+    assert offenders == []

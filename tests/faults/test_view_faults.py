@@ -149,8 +149,9 @@ def test_connect_to_a_program_that_is_not_a_viewer(tmp_path, session):
         url = f"rerun+http://127.0.0.1:{silent.getsockname()[1]}/proxy"
         before = fingerprint(tmp_path)
         run = run_pslog("view", session, "--connect", "--url", url, "--frames", "none",
-                        env=HEADLESS, timeout=30)
-    assert_one_line_error(run, 1, contains=(url, "does not answer as a rerun viewer"))
+                        "--connect-timeout", "0.3", env=HEADLESS, timeout=30)
+    assert_one_line_error(run, 1, contains=(url, "does not answer as a rerun viewer",
+                                            "within 0.3 s"))
     assert_untouched(before, tmp_path)
 
 
