@@ -627,3 +627,16 @@ def test_an_error_of_the_message_callback_is_never_taken_for_damaged_input(walk,
     with pytest.raises(LogFormatError) as raised:
         getattr(io, walk)(sim_session.path, callback)
     assert raised.value is ours
+
+
+def test_a_bug_while_reading_the_summary_is_not_reported_as_damage(sim_session, monkeypatch):
+    """Only parse errors mean "damaged summary; run pslog recover": a programming error (here
+    a TypeError put into the summary check) surfaces as itself."""
+    from pslog.log import _mcapio as io
+
+    def broken(*_args):
+        raise TypeError("a bug")
+
+    monkeypatch.setattr(io, "summary_span", broken)
+    with pytest.raises(TypeError, match="a bug"):
+        read_session(sim_session.path)
