@@ -264,3 +264,21 @@ def test_copy_session_rewrites_calibration_only_from_a_corrected_rig(tmp_path, s
     assert new["/camera/cam2/transform"] != old["/camera/cam2/transform"]
     assert new["/camera/cam1/transform"] == old["/camera/cam1/transform"]
     assert read_session(moved).rig == corrected
+
+
+def test_save_rig_replaces_a_rig_file_like_every_other_output(tmp_path):
+    """save_rig goes through outputs.replacing: a one-line PslogError (never a raw OSError),
+    never over an input, nothing left beside the file."""
+    from pslog.errors import PslogError
+    from pslog.rig import builtin_rig, load_rig, save_rig
+
+    rig, path = builtin_rig("paper2"), tmp_path / "rig.toml"
+    with pytest.raises(PslogError, match="output folder does not exist"):
+        save_rig(rig, tmp_path / "nope" / "rig.toml")
+    path.write_text("old rig")
+    with pytest.raises(InputError, match="is the input"):
+        save_rig(rig, path, inputs=[path])
+    assert path.read_text() == "old rig"
+    save_rig(rig, path)
+    assert load_rig(path).names == rig.names
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rig.toml"]
