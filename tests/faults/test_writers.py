@@ -246,8 +246,9 @@ def test_recover_session_never_writes_over_its_input(inputs, tmp_path):
 
     src = tmp_path / "g.mcap.partial"
     shutil.copyfile(inputs / "s.mcap", src)
+    os.link(src, tmp_path / "hard.mcap")
     before = fingerprint(tmp_path)
-    for dst in (tmp_path / "g.mcap", src):
+    for dst in (tmp_path / "g.mcap", src, tmp_path / "hard.mcap"):
         with pytest.raises(InputError, match=r"which is an input|is the input"):
             recover_session(src, dst, force=True)
     assert_untouched(before, tmp_path)
