@@ -282,3 +282,21 @@ def test_save_rig_replaces_a_rig_file_like_every_other_output(tmp_path):
     save_rig(rig, path)
     assert load_rig(path).names == rig.names
     assert sorted(p.name for p in tmp_path.iterdir()) == ["rig.toml"]
+
+
+def test_a_partial_being_written_is_neither_cleared_nor_written_twice(tmp_path):
+    """The lock of open_locked (another process in tests/faults/test_writers.py; a second
+    open file here, which flock treats alike)."""
+    from pslog.outputs import PartialBusyError, clear_stale_partial, open_locked
+
+    partial = tmp_path / "d.csv.partial"
+    with open_locked(partial, "w") as f:
+        f.write("being written")
+        f.flush()
+        with pytest.raises(PartialBusyError, match=f"another pslog is writing {partial}"):
+            clear_stale_partial(tmp_path / "d.csv")
+        with pytest.raises(PartialBusyError):
+            open_locked(partial)
+        assert partial.read_text() == "being written"  # not emptied by the refused open
+    clear_stale_partial(tmp_path / "d.csv", say=lambda _text: None)  # stale now: removed
+    assert not partial.exists()
