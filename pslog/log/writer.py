@@ -91,6 +91,11 @@ class SessionWriter:
           session copies): always written as ``<path>.partial``, removed on any failure, so
           nothing half-written is ever left under ``path`` and an old ``path`` stays.
     inputs : files the session is made from; ``path`` may not be one of them
+
+    Attributes
+    ----------
+    target : the file actually being written (``<path>.partial`` or ``path``), held under
+        an exclusive lock (:func:`pslog.outputs.open_locked`) until closed
     """
 
     def __init__(self, path, rig: Rig, *, force: bool = False, timing: str = "custom",
