@@ -460,8 +460,9 @@ def scan_file(path, on_message=None, validate_crc: bool = True,
               scan: Scan | None = None, strict: bool = True) -> Scan:
     """Walk a file's data section record by record. ``on_message(channel_id, log_time,
     sequence, data)`` is called for every message (inside chunks or not) of a complete
-    record, in file order; it may look at ``scan`` (pass your own) for the schemas and
-    channels seen so far.
+    record, in file order, once that record (a whole chunk) is parsed; it may look at
+    ``scan`` (pass your own) for the schemas and channels seen so far. Its exceptions
+    propagate unchanged (never taken for damaged input).
 
     ``strict``: any damaged record or a data section without its end raises a one-line
     LogFormatError naming the byte offset (what readers want). Otherwise the walk stops
@@ -570,7 +571,9 @@ def salvage_file(path, on_message=None, scan: Scan | None = None,
     for a record whose fields are consistent (and, for a chunk, whose contents check out).
 
     Every skipped part is in ``scan.damaged``; channels and schemas whose records were lost
-    are taken from an intact summary. Streams (mmap): files larger than memory are fine.
+    are taken from an intact summary. ``on_message`` is called as in :func:`scan_file`, for
+    the messages of intact records only; its exceptions propagate unchanged. Streams
+    (mmap): files larger than memory are fine.
     ``tolerate_magic``: accept a file whose leading magic is damaged."""
     path = Path(path)
     try:
