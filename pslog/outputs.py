@@ -15,6 +15,9 @@ Partial files left by a killed run (the next run meets them):
   refused, naming it and how to salvage it.
 
 :func:`partial_kind` tells them apart from the file itself (MCAP header and session metadata).
+A partial that another pslog is writing right now is neither: every writer holds an exclusive
+``flock`` on its partial while it writes (:func:`open_locked`), and a locked partial is left
+alone. :func:`replacing` is the one way to write a replacement file.
 """
 
 from __future__ import annotations
@@ -24,11 +27,16 @@ import os
 import struct
 import sys
 from collections.abc import Callable, Iterable, Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from pathlib import Path
 from typing import IO
 
 from .errors import InputError, OutputExistsError, PslogError
+
+try:
+    import fcntl
+except ImportError:  # Windows
+    fcntl = None
 
 
 class WriteError(PslogError):
@@ -40,10 +48,19 @@ class WriteError(PslogError):
         self.reason = reason or message
 
 
-def write_error(path: str | Path, exc: OSError) -> WriteError:
+def os_reason(exc: BaseException) -> str:
+    """The operating system's words for ``exc`` alone (``No space left on device``), without
+    the file name and error number Python adds; any other exception's text or type name."""
+    if isinstance(exc, WriteError):
+        return exc.reason
+    strerror = exc.strerror if isinstance(exc, OSError) else None
+    return strerror or str(exc) or type(exc).__name__
+
+
+def write_error(path: str | Path, exc: BaseException) -> WriteError:
     """The one-line error for ``exc`` met while writing ``path`` (the output the user named,
     not its ``.partial``)."""
-    reason = exc.strerror or str(exc) or type(exc).__name__
+    reason = os_reason(exc)
     return WriteError(f"cannot write {path}: {reason}", reason)
 
 
@@ -70,16 +87,24 @@ def check_output_path(path: str | Path, force: bool, inputs: Iterable[str | Path
 
     Raises
     ------
-    InputError : ``path`` is a folder, its folder does not exist, or it is one of ``inputs``
+    InputError : ``path`` is a folder, its folder does not exist, or it or its ``.partial``
+        is one of ``inputs``
     OutputExistsError : ``path`` exists and ``force`` is false
     WriteError : the folder is not writable (read-only file system, permissions)
     PartialRecordingError : ``<path>.partial`` may hold an interrupted recording
+    PartialBusyError : another process is writing ``<path>.partial``
     """
+    inputs = [p for p in inputs if p is not None]
     spelled, path = os.fspath(path), Path(path)  # name files as the user wrote them
+    partial = partial_path(path)
     for source in inputs:
         if same_file(path, source):
             raise InputError(f"output {spelled} is the input {os.fspath(source)}; choose "
                              f"another file (an output never replaces an input)")
+        if same_file(partial, source):
+            # the partial is cleared before, and written over while, making the output
+            raise InputError(f"output {spelled} is written via {partial}, which is an input "
+                             f"({os.fspath(source)}); choose another name for the output")
     if path.is_dir():
         raise InputError(f"{path} is a folder; give a file name")
     if path.exists() and not force:
@@ -131,14 +156,19 @@ class PartialRecordingError(PslogError):
     """``<output>.partial`` may hold the only copy of an interrupted recording."""
 
 
+class PartialBusyError(PslogError):
+    """Another process is writing ``<output>.partial`` right now."""
+
+
 # ---- stale partial files --------------------------------------------------------------
 
 _MCAP_MAGIC = b"\x89MCAP0\r\n"
 _OP_HEADER, _OP_METADATA = 0x01, 0x0C
-#: session ``source`` texts of commands that derive a session from files that still exist
-DERIVED_SOURCES = ("pslog simulate", "pslog import")
-#: MCAP header ``library`` of writers that derive a file from another (pslog recover)
-DERIVED_LIBRARIES = ("pslog recover",)
+#: session metadata key (value ``"true"``) of an output made from inputs that still exist
+#: (written by :class:`~pslog.log.SessionWriter` with ``on_error="discard"``)
+DERIVED_KEY = "derived"
+#: MCAP header ``library`` of ``pslog recover`` (which copies its input's metadata as is)
+RECOVER_LIBRARY = "pslog recover"
 _PEEK = 1 << 20
 
 
@@ -148,9 +178,9 @@ def partial_kind(path: str | Path) -> str:
     Returns
     -------
     ``"empty"`` : nothing written yet (no complete record after the MCAP header)
-    ``"derived"`` : an output made from inputs that still exist: a CSV or .rrd export, or an
-        MCAP written by ``simulate``, ``import``, ``recover`` or a session copy (``fuse``,
-        ``redetect``: metadata ``derived_from``)
+    ``"derived"`` : an output made from inputs that still exist: a CSV or .rrd export, an
+        MCAP written by ``pslog recover`` or with the session metadata ``derived = "true"``
+        (``simulate``, ``import``, ``fuse``, ``redetect``)
     ``"recording"`` : anything else, e.g. a recording; it may be the only copy of its data
     """
     with open(path, "rb") as f:
@@ -166,7 +196,7 @@ def partial_kind(path: str | Path) -> str:
             return "recording"
         _profile, at = _string(head, pos + 9)
         library, _ = _string(head, at)
-        if library.startswith(DERIVED_LIBRARIES):
+        if library == RECOVER_LIBRARY:
             return "derived"
         pos += 9 + length
         if pos + 9 > len(head):
@@ -180,9 +210,7 @@ def partial_kind(path: str | Path) -> str:
         meta = _string_map(head, at)
     except (struct.error, UnicodeDecodeError, ValueError):
         return "recording"
-    if "derived_from" in meta or meta.get("source", "").startswith(DERIVED_SOURCES):
-        return "derived"
-    return "recording"
+    return "derived" if meta.get(DERIVED_KEY) == "true" else "recording"
 
 
 def _string(buf: bytes, pos: int) -> tuple[str, int]:
@@ -201,54 +229,132 @@ def _string_map(buf: bytes, pos: int) -> dict[str, str]:
     return out
 
 
+def _try_lock(fd: int) -> bool:
+    """Take the exclusive advisory lock of an open file without waiting; False if another
+    process holds it (a pslog writing that file now)."""
+    if fcntl is None:  # no flock (Windows): no concurrent-run protection
+        return True
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return False
+    except OSError:  # a file system without locks (ENOLCK, EOPNOTSUPP): write unprotected
+        return True
+    return True
+
+
+def _busy(partial: Path) -> PartialBusyError:
+    return PartialBusyError(f"another pslog is writing {partial}; wait for it to finish or "
+                            f"choose another output")
+
+
 def clear_stale_partial(path: str | Path, *, say: Callable[[str], None] | None = None) -> None:
     """Deal with ``<path>.partial`` left by an interrupted run before writing ``path``.
 
-    A derived output's (or an empty) partial is removed and ``say`` is told; one that may
-    hold a recording is kept and :class:`PartialRecordingError` says what it is.
+    A partial that a running pslog is writing (it holds the file's lock, see
+    :func:`open_locked`) is left alone: :class:`PartialBusyError`. A derived output's (or an
+    empty) partial is removed and ``say`` is told; one that may hold a recording is kept and
+    :class:`PartialRecordingError` says what it is.
     """
     partial = partial_path(Path(path))
     if not partial.is_file():
         return
     try:
-        kind = partial_kind(partial)
-    except OSError as exc:
-        raise PartialRecordingError(f"{partial} exists (left by an interrupted run) and "
-                                    f"cannot be read: {exc.strerror}; move it away") from None
-    if kind == "recording":
-        raise PartialRecordingError(
-            f"{partial} exists: left by an interrupted recording, it may hold the only copy "
-            f"of recorded data; salvage it with 'pslog recover {partial} -o SAVED.mcap' or "
-            f"move it away, then run again")
-    try:
-        partial.unlink()
+        f = open(partial, "rb")
     except FileNotFoundError:
         return
     except OSError as exc:
-        raise write_error(partial, exc) from None
+        raise PartialRecordingError(f"{partial} exists (left by an interrupted run) and "
+                                    f"cannot be read: {os_reason(exc)}; move it away") from None
+    with f:  # the lock is held until the partial is gone (or kept)
+        if not _try_lock(f.fileno()):
+            raise _busy(partial)
+        try:
+            kind = partial_kind(partial)
+        except OSError as exc:
+            raise PartialRecordingError(f"{partial} exists (left by an interrupted run) and "
+                                        f"cannot be read: {os_reason(exc)}; move it away"
+                                        ) from None
+        if kind == "recording":
+            raise PartialRecordingError(
+                f"{partial} exists: left by an interrupted recording, it may hold the only "
+                f"copy of recorded data; salvage it into a new file with 'pslog recover "
+                f"{partial} -o SAVED.mcap', or move it away, before writing {path}")
+        try:
+            partial.unlink()
+        except FileNotFoundError:
+            return
+        except OSError as exc:
+            raise write_error(partial, exc) from None
     (say or _say_stderr)(f"removed {partial} left by an interrupted run")
 
 
 # ---- writing ---------------------------------------------------------------------------
 
+def open_locked(path: str | Path, mode: str = "wb", **open_kwargs) -> IO:
+    """Open ``path`` to write from its start (created, emptied) holding an exclusive
+    ``flock`` for as long as it stays open: while a writer holds it, no other pslog run
+    takes the file for a stale partial (:func:`clear_stale_partial`) or writes it too.
+
+    The lock is taken before the file is emptied, so a file another run is writing is left
+    as it is. Every writer of a partial file opens it here (:func:`replacing`,
+    :class:`~pslog.log.SessionWriter`, the .rrd writer).
+
+    Raises
+    ------
+    PartialBusyError : another process holds the lock
+    OSError : the file cannot be created or opened
+    """
+    if "w" not in mode:
+        raise ValueError(f"open_locked writes: mode must contain 'w', got {mode!r}")
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | getattr(os, "O_CLOEXEC", 0), 0o666)
+    try:
+        if not _try_lock(fd):
+            raise _busy(Path(path))
+        os.ftruncate(fd, 0)
+        return os.fdopen(fd, mode, **open_kwargs)
+    except BaseException:
+        os.close(fd)
+        raise
+
+
 @contextmanager
-def replacing_text_file(path: str | Path, force: bool,
-                        inputs: Iterable[str | Path] = ()) -> Iterator[IO[str]]:
-    """Open a text file to write in place of ``path``: it becomes ``path`` only when the
-    ``with`` block completes; on any error (WriteError for an OS fault) the old file (if
-    any) stays and nothing is left."""
+def replacing(path: str | Path, mode: str = "w", *, force: bool = False,
+              inputs: Iterable[str | Path] = ()) -> Iterator[IO]:
+    """Open a file to write in place of ``path`` (text mode writes UTF-8 with no newline
+    translation): checked first (:func:`check_output_path`), written as ``<path>.partial``
+    under the writer's lock (:func:`open_locked`), moved over ``path`` only when the
+    ``with`` block completes. On any error the partial is removed, an old ``path`` stays,
+    and an OS fault is a :class:`WriteError` naming ``path``."""
     path = check_output_path(path, force, inputs)
     partial = partial_path(path)
+    text = {} if "b" in mode else {"newline": "", "encoding": "utf-8"}
+    try:
+        f = open_locked(partial, mode, **text)
+    except OSError as exc:
+        raise write_error(path, exc) from None
     try:
         try:
-            with open(partial, "w", newline="", encoding="utf-8") as f:
-                yield f
+            yield f
+            f.flush()
+            # moved, or removed below, while the lock is held: another run never sees a
+            # complete-looking partial that it could take for stale
             partial.replace(path)
         except OSError as exc:
+            if exc.filename is not None and os.fsdecode(exc.filename) not in (
+                    os.fspath(partial), os.fspath(path)):
+                raise  # about another file (an input): not ours to name
             raise write_error(path, exc) from None
     except BaseException:
-        partial.unlink(missing_ok=True)
+        with suppress(OSError):
+            partial.unlink()
+        with suppress(OSError):
+            f.close()
         raise
+    try:
+        f.close()
+    except OSError as exc:
+        raise write_error(path, exc) from None
 
 
 #: OS error numbers that mean "this write cannot succeed here"
@@ -261,7 +367,7 @@ def describe_os_error(exc: OSError, outputs: Iterable[str | Path] = ()) -> str:
     """One line for an OSError no writer translated: names the file (an output's
     ``.partial`` by the output's name) or, for a write fault without a file name, the
     command's outputs."""
-    reason = exc.strerror or str(exc) or type(exc).__name__
+    reason = os_reason(exc)
     outputs = [Path(p) for p in outputs]
     name = exc.filename
     if name is not None:

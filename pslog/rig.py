@@ -188,12 +188,14 @@ def load_rig(path: str | Path) -> Rig:
     return Rig.from_toml(text, source=str(path))
 
 
-def save_rig(rig: Rig, path: str | Path) -> None:
-    """Write ``rig`` as TOML (atomically: a temporary file renamed over ``path``)."""
-    path = Path(path)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(rig.to_toml(), encoding="utf-8")
-    tmp.replace(path)
+def save_rig(rig: Rig, path: str | Path, inputs=()) -> None:
+    """Write ``rig`` as TOML over ``path`` (an existing file is replaced only by the complete
+    new one: :func:`pslog.outputs.replacing`); ``path`` may not be one of ``inputs``.
+    An OS fault is a one-line :class:`~pslog.outputs.WriteError`."""
+    from .outputs import replacing
+
+    with replacing(path, force=True, inputs=inputs) as f:
+        f.write(rig.to_toml())
 
 
 def resolve_rig(name_or_path: str | Path) -> Rig:

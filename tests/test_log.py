@@ -610,3 +610,33 @@ def test_recover_without_summary_rescues_channels_of_a_damaged_chunk(tmp_path):
     assert report["detection_frames"] == 135 and report["truth_points"] == 135
     assert report["unknown_channel_messages"] > 0
     assert read_session(tmp_path / "fixed.mcap").n_images == 33
+
+
+@pytest.mark.parametrize("walk", ["scan_file", "salvage_file"])
+def test_an_error_of_the_message_callback_is_never_taken_for_damaged_input(walk, sim_session):
+    """A failure on the output side of a copy (the writer's own LogFormatError, a full disk)
+    propagates unchanged: the intact input is not reported as damaged, and a salvage does
+    not skip the chunk and go on."""
+    from pslog.log import _mcapio as io
+
+    ours = LogFormatError("the writer failed")
+
+    def callback(*_message) -> None:
+        raise ours
+
+    with pytest.raises(LogFormatError) as raised:
+        getattr(io, walk)(sim_session.path, callback)
+    assert raised.value is ours
+
+
+def test_a_bug_while_reading_the_summary_is_not_reported_as_damage(sim_session, monkeypatch):
+    """Only parse errors mean "damaged summary; run pslog recover": a programming error (here
+    a TypeError put into the summary check) surfaces as itself."""
+    from pslog.log import _mcapio as io
+
+    def broken(*_args):
+        raise TypeError("a bug")
+
+    monkeypatch.setattr(io, "summary_span", broken)
+    with pytest.raises(TypeError, match="a bug"):
+        read_session(sim_session.path)

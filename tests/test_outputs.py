@@ -3,10 +3,9 @@ new one (pslog/outputs.py, SessionWriter, save_rrd, record)."""
 
 from __future__ import annotations
 
-import os
-
 import pytest
 
+from pslog.cli import COMMANDS
 from pslog.errors import InputError, OutputExistsError
 from pslog.log import SessionWriter, read_session
 from pslog.outputs import check_output_path
@@ -87,18 +86,8 @@ def test_view_window_past_the_end_is_an_error(tmp_path, sim_session, cli):
     assert not (tmp_path / "x.rrd").exists()
 
 
-def test_an_output_that_is_an_input_is_refused_in_every_spelling(tmp_path, monkeypatch):
-    src = tmp_path / "s.mcap"
-    src.write_bytes(b"session")
-    (tmp_path / "link.mcap").symlink_to(src)
-    os.link(src, tmp_path / "hard.mcap")
-    (tmp_path / "sub").mkdir()
-    monkeypatch.chdir(tmp_path)
-    for spelling in ("s.mcap", "./s.mcap", "sub/../s.mcap", str(src), "link.mcap", "hard.mcap"):
-        with pytest.raises(InputError, match="is the input"):
-            check_output_path(spelling, True, inputs=[src])
-    assert src.read_bytes() == b"session"
-    assert check_output_path("other.mcap", False, inputs=[src]).name == "other.mcap"
+# an output that is an input, in every spelling (./, .., absolute, symlink, hard link): for
+# every writer in tests/faults/test_writers.py (test_output_that_is_an_input_is_refused)
 
 
 # ---- one output rule for every command (declare_files + the dispatcher) -----------------
@@ -117,13 +106,23 @@ def _parser(command):
     return parser
 
 
-@pytest.mark.parametrize("command", ["simulate", "record", "import", "export", "fuse",
-                                     "redetect", "recover", "view", "calibrate"])
+#: commands that write no file (they print)
+_WRITE_NOTHING = {"info", "rig", "eval", "paper"}
+#: commands that write files but check them themselves, and why
+_OWN_CHECKS = {"demo": "writes a fresh folder of its own outputs (--out)"}
+
+
+@pytest.mark.parametrize("command", list(COMMANDS))
 def test_every_writing_command_declares_its_files(command):
     from pslog.cli._common import FILES_KEY
 
     parser = _parser(command)
     files = parser.get_default(FILES_KEY)
+    if command in _WRITE_NOTHING or command in _OWN_CHECKS:
+        named = {o for a in parser._actions for o in a.option_strings}
+        assert command in _OWN_CHECKS or not named & _OUTPUT_OPTIONS, (
+            f"pslog {command} has an output option: declare it (declare_files)")
+        return
     assert files, f"pslog {command} declares no files (declare_files in add_arguments)"
     outputs = {a.dest for a in parser._actions if _OUTPUT_OPTIONS & set(a.option_strings)}
     if command == "export":
@@ -229,6 +228,16 @@ def test_partial_kind_tells_derived_outputs_from_recordings(tmp_path, sim_sessio
     assert partial_kind(prefix(fused, 30_000)) == "derived"
     assert partial_kind(prefix(sim, 2_000)) == "derived"
     assert partial_kind(prefix(csv, 100)) == "derived"
+    # the writer says which it is (metadata "derived"), whatever the free-text source says
+    keep, discard = tmp_path / "keep.mcap", tmp_path / "discard.mcap"
+    with SessionWriter(keep, sim_session.rig, source="pslog simulate, then edited") as w:
+        w.add_detections(sim_session.detections)
+    with SessionWriter(discard, sim_session.rig, source="my tool", on_error="discard") as w:
+        w.add_detections(sim_session.detections)
+    assert partial_kind(prefix(keep, 3_000)) == "recording"
+    assert partial_kind(prefix(discard, 3_000)) == "derived"
+    assert read_session(discard).metadata.get("derived") == "true"
+    assert "derived" not in read_session(keep).metadata
 
 
 def test_copy_session_rewrites_calibration_only_from_a_corrected_rig(tmp_path, sim_session):
@@ -255,3 +264,39 @@ def test_copy_session_rewrites_calibration_only_from_a_corrected_rig(tmp_path, s
     assert new["/camera/cam2/transform"] != old["/camera/cam2/transform"]
     assert new["/camera/cam1/transform"] == old["/camera/cam1/transform"]
     assert read_session(moved).rig == corrected
+
+
+def test_save_rig_replaces_a_rig_file_like_every_other_output(tmp_path):
+    """save_rig goes through outputs.replacing: a one-line PslogError (never a raw OSError),
+    never over an input, nothing left beside the file."""
+    from pslog.errors import PslogError
+    from pslog.rig import builtin_rig, load_rig, save_rig
+
+    rig, path = builtin_rig("paper2"), tmp_path / "rig.toml"
+    with pytest.raises(PslogError, match="output folder does not exist"):
+        save_rig(rig, tmp_path / "nope" / "rig.toml")
+    path.write_text("old rig")
+    with pytest.raises(InputError, match="is the input"):
+        save_rig(rig, path, inputs=[path])
+    assert path.read_text() == "old rig"
+    save_rig(rig, path)
+    assert load_rig(path).names == rig.names
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rig.toml"]
+
+
+def test_a_partial_being_written_is_neither_cleared_nor_written_twice(tmp_path):
+    """The lock of open_locked (another process in tests/faults/test_writers.py; a second
+    open file here, which flock treats alike)."""
+    from pslog.outputs import PartialBusyError, clear_stale_partial, open_locked
+
+    partial = tmp_path / "d.csv.partial"
+    with open_locked(partial, "w") as f:
+        f.write("being written")
+        f.flush()
+        with pytest.raises(PartialBusyError, match=f"another pslog is writing {partial}"):
+            clear_stale_partial(tmp_path / "d.csv")
+        with pytest.raises(PartialBusyError):
+            open_locked(partial)
+        assert partial.read_text() == "being written"  # not emptied by the refused open
+    clear_stale_partial(tmp_path / "d.csv", say=lambda _text: None)  # stale now: removed
+    assert not partial.exists()

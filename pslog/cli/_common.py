@@ -85,7 +85,9 @@ def source_files(args: argparse.Namespace) -> list[str]:
 
 def check_output(path: str | Path, force: bool, inputs=()) -> Path:
     """Refuse a folder, a missing parent folder, one of the ``inputs`` (always), or an
-    existing file unless ``force``."""
+    existing file unless ``force``. The dispatcher already checks every declared output
+    before ``run``; this is for a check again after a command has done slow work (``record``
+    and ``view`` use it)."""
     from pslog.outputs import check_output_path
 
     return check_output_path(path, force, inputs)

@@ -80,15 +80,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from pslog.errors import InputError, OutputExistsError
-    from pslog.outputs import replacing_text_file
-    from pslog.rig import BUILTIN_RIGS, Rig, load_rig
+    from pslog.rig import BUILTIN_RIGS, Rig, load_rig, save_rig
 
     rig_path = Path(args.rig)
     if not rig_path.exists() and str(args.rig) in BUILTIN_RIGS:
         raise InputError(f"--rig {args.rig}: calibrate writes a rig file; give a path such as "
                          f"rig.toml (built-in rigs cannot be changed)")
-    if not rig_path.parent.exists():
-        raise InputError(f"rig folder does not exist: {rig_path.parent}")
     rig = load_rig(rig_path) if rig_path.exists() else None
     existing = rig.camera(args.name) if rig is not None and args.name in rig.names else None
 
@@ -115,8 +112,7 @@ def run(args: argparse.Namespace) -> int:
 
     new_rig = (Rig((camera,), rig_path.stem) if rig is None else rig.with_camera(camera))
     # the old rig is replaced only by a complete new one (full disk: it stays as it was)
-    with replacing_text_file(rig_path, force=True, inputs=_inputs(args)) as f:
-        f.write(new_rig.to_toml())
+    save_rig(new_rig, rig_path, inputs=_inputs(args))
     action = "replaced" if existing is not None else "added"
     print(f"{action} camera {camera.name!r} (camera {new_rig.index(camera.name) + 1} of "
           f"{len(new_rig)}) in {rig_path}")

@@ -6,7 +6,6 @@ import argparse
 
 from ._common import (
     add_force,
-    check_output,
     declare_files,
     fusion_method,
     nonnegative_float,
@@ -52,7 +51,7 @@ def run(args: argparse.Namespace) -> int:
     from pslog.rig import check_baselines, resolve_rig
     from pslog.timing import observations as timed_observations
 
-    output = check_output(args.output, args.force)
+    output = args.output  # checked before run() (declare_files)
     session = read_session(args.session)
     rig = session.rig
     if args.rig is not None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from ._common import add_force, add_rig, check_output, declare_files
+from ._common import add_force, add_rig, declare_files
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -35,7 +35,7 @@ def run(args: argparse.Namespace) -> int:
     )
     from pslog.rig import apply_timing, resolve_rig, timing_label
 
-    output = check_output(args.output, args.force)
+    output = args.output  # checked before run() (declare_files)
     rig = resolve_rig(args.rig)
     if args.timing != "rig":
         rig = apply_timing(rig, args.timing)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from ._common import add_force, check_output, declare_files
+from ._common import add_force, declare_files
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -19,16 +19,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from pslog.log import recover_session
     from pslog.log.recover import damage_line, describe_salvage
-    from pslog.outputs import partial_path
 
-    output = check_output(args.output, args.force, inputs=[args.session])
-    try:
-        report = recover_session(args.session, args.output, force=args.force)
-    except BaseException:
-        # nothing half-written stays, whatever stopped the salvage (e.g. a full disk met
-        # while the writer closes its file); the dispatcher removed any older partial
-        partial_path(output).unlink(missing_ok=True)
-        raise
+    # the output was checked before run() (declare_files); on any failure
+    # recover_session leaves nothing half-written
+    report = recover_session(args.session, args.output, force=args.force)
     if report["was_complete"]:
         print(f"{args.session} was complete; copied {report['messages']} messages to "
               f"{args.output}")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from pslog.cli._common import add_force, check_output, declare_files
+from pslog.cli._common import add_force, declare_files
 
 DESCRIPTION = """\
 Re-run ball detection over the JPEG frames stored in a session, with new settings, and
@@ -34,13 +34,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from pslog.cli.record import parse_hsv
-    from pslog.errors import InputError
     from recorders.redetect import redetect_session
 
-    output = check_output(args.output, args.force, inputs=[args.session])
-    if args.max_candidates < 1:
-        raise InputError(f"--max-candidates must be >= 1, got {args.max_candidates}")
-    summary = redetect_session(args.session, output, parse_hsv(args.hsv),
+    # the output was checked before run() (declare_files); the library checks it again
+    summary = redetect_session(args.session, args.output, parse_hsv(args.hsv),
                                max_candidates=args.max_candidates, force=args.force,
                                workers=args.workers)
     print(summary.text())

@@ -9,7 +9,6 @@ import numpy as np
 from ._common import (
     add_force,
     add_rig,
-    check_output,
     declare_files,
     fraction,
     noise_px,
@@ -115,7 +114,7 @@ def run(args: argparse.Namespace) -> int:
         truth_clock,
     )
 
-    output = check_output(args.output, args.force)
+    output = args.output  # checked before run() (declare_files)
     rig = resolve_rig(args.rig)
     if args.timing != "rig":
         rig = apply_timing(rig, args.timing)

@@ -460,8 +460,9 @@ def scan_file(path, on_message=None, validate_crc: bool = True,
               scan: Scan | None = None, strict: bool = True) -> Scan:
     """Walk a file's data section record by record. ``on_message(channel_id, log_time,
     sequence, data)`` is called for every message (inside chunks or not) of a complete
-    record, in file order; it may look at ``scan`` (pass your own) for the schemas and
-    channels seen so far.
+    record, in file order, once that record (a whole chunk) is parsed; it may look at
+    ``scan`` (pass your own) for the schemas and channels seen so far. Its exceptions
+    propagate unchanged (never taken for damaged input).
 
     ``strict``: any damaged record or a data section without its end raises a one-line
     LogFormatError naming the byte offset (what readers want). Otherwise the walk stops
@@ -474,7 +475,11 @@ def scan_file(path, on_message=None, validate_crc: bool = True,
     return scan
 
 
-def _handler(scan: Scan, on_message):
+def _handler(scan: Scan, pending: list | None):
+    """Parse one record into ``scan``; a message goes to ``pending`` (when not None) as
+    ``(channel_id, log_time, sequence, data)``, for the caller to hand to its callback once
+    the record is parsed: outside the parse's ``try``, so that an exception of the callback
+    (a full disk while copying) is never taken for damaged input."""
     def handle(op: int, body: int, end: int, data) -> None:
         if op == OP_SCHEMA:
             rec = parse_schema(data, body)
@@ -482,16 +487,24 @@ def _handler(scan: Scan, on_message):
         elif op == OP_CHANNEL:
             rec = parse_channel(data, body)
             scan.channels[rec.id] = rec
-        elif op == OP_MESSAGE and on_message is not None:
+        elif op == OP_MESSAGE and pending is not None:
             cid, seq, t = _unpack("<HIQ", data, body)
-            on_message(cid, t, seq, bytes(data[body + _MESSAGE_HEAD:end]))
+            pending.append((cid, t, seq, bytes(data[body + _MESSAGE_HEAD:end])))
     return handle
+
+
+def _deliver(pending: list, on_message) -> None:
+    """Hand parsed messages to the caller's callback; its exceptions propagate unchanged."""
+    for message in pending:
+        on_message(*message)
+    pending.clear()
 
 
 def _scan(buf, on_message, validate_crc: bool, scan: Scan) -> Scan:
     # buf is an mmap: files of many GB are walked without being read into memory at once
     pos, n = len(MAGIC), len(buf)
-    handle = _handler(scan, on_message)
+    pending: list | None = [] if on_message is not None else None
+    handle = _handler(scan, pending)
     while True:
         if pos + 9 > n:
             scan.stop_reason = "file ends inside a record header" if pos < n else "file ends"
@@ -511,6 +524,7 @@ def _scan(buf, on_message, validate_crc: bool, scan: Scan) -> Scan:
                     continue
             scan.stop_reason = "no valid record here"
             break
+        damaged = False
         try:
             if op == OP_CHUNK:
                 records = chunk_payload(buf[body:end], validate_crc)
@@ -525,8 +539,13 @@ def _scan(buf, on_message, validate_crc: bool, scan: Scan) -> Scan:
             else:
                 handle(op, body, end, buf)
         except (LogFormatError, struct.error, UnicodeDecodeError) as exc:
-            # the data from here on cannot be trusted: stop, keep what we have
+            # the data from here on cannot be trusted: stop, keep what we have (the
+            # messages parsed before the damage too)
             scan.stop_reason = str(exc)
+            damaged = True
+        if pending:
+            _deliver(pending, on_message)
+        if damaged:
             break
         pos = end
         scan.complete_bytes = pos
@@ -552,7 +571,9 @@ def salvage_file(path, on_message=None, scan: Scan | None = None,
     for a record whose fields are consistent (and, for a chunk, whose contents check out).
 
     Every skipped part is in ``scan.damaged``; channels and schemas whose records were lost
-    are taken from an intact summary. Streams (mmap): files larger than memory are fine.
+    are taken from an intact summary. ``on_message`` is called as in :func:`scan_file`, for
+    the messages of intact records only; its exceptions propagate unchanged. Streams
+    (mmap): files larger than memory are fine.
     ``tolerate_magic``: accept a file whose leading magic is damaged."""
     path = Path(path)
     try:
@@ -586,7 +607,8 @@ def _salvage(buf, on_message, scan: Scan) -> None:
             scan.schemas.setdefault(k, v)
         for k, v in summary.channels.items():
             scan.channels.setdefault(k, v)
-    handle = _handler(scan, on_message)
+    pending: list | None = [] if on_message is not None else None
+    handle = _handler(scan, pending)
 
     def skip(damage: Damage) -> None:
         scan.damaged.append(damage)
@@ -634,6 +656,8 @@ def _salvage(buf, on_message, scan: Scan) -> None:
             else:
                 handle(op, pos + 9, end, buf)
         except (LogFormatError, struct.error, UnicodeDecodeError) as exc:
+            if pending:  # a damaged record's messages are not kept, even those before
+                pending.clear()  # the damage (the part is reported as skipped)
             if op != OP_CHUNK:
                 skip(Damage(pos, end, f"opcode 0x{op:02x}: {exc}"))
                 pos = end
@@ -649,6 +673,8 @@ def _salvage(buf, on_message, scan: Scan) -> None:
             skip(_chunk_damage(buf, pos, end, str(exc), indexed, limit))
             pos = end
             continue
+        if pending:
+            _deliver(pending, on_message)
         pos = end
         scan.complete_bytes = pos
     else:

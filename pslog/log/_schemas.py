@@ -26,8 +26,11 @@ FORMAT_VERSION = f"{FORMAT_MAJOR}.{FORMAT_MINOR}"
 #: Name of the MCAP Metadata record that marks a file as a pslog session.
 SESSION_METADATA = "pslog.session"
 #: Keys of that record written by pslog itself; user metadata may not use them.
+#: ``derived = "true"`` marks an output made from inputs that still exist (simulate, import,
+#: session copies): a partial of it left by a killed run may be removed
+#: (:data:`pslog.outputs.DERIVED_KEY`).
 RESERVED_KEYS = ("format", "format_version", "rig_toml", "timing", "source", "creator",
-                 "created_utc", "camera_names")
+                 "created_utc", "camera_names", "derived")
 
 PROTOBUF = "protobuf"
 WORLD_FRAME = "world"

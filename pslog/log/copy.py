@@ -38,7 +38,7 @@ def copy_session(src, dst, *, detections: Detections | None = None, tracks: Sequ
     appears only when complete (on any failure nothing is left and an old ``dst`` stays).
     """
     src_path = Path(src)
-    dst = check_output_path(dst, force, inputs=[src_path])
+    dst = check_output_path(dst, force, inputs=[src_path])  # before reading anything
     with _Finished(src_path) as f:
         meta, old_rig = f.meta, f.rig
         first_static = f.collect([S.calibration_topic(old_rig.names[0])])
@@ -70,20 +70,7 @@ def copy_session(src, dst, *, detections: Detections | None = None, tracks: Sequ
         static = ({S.calibration_topic(n) for n in rig.names}
                   | {S.transform_topic(n) for n in rig.names}) if new_rig else set()
 
-        failure: list[BaseException] = []
-
         def copy(cid: int, t: int, seq: int, data: bytes) -> None:
-            # the scanner treats an exception of its callback as a corrupt record and stops
-            # quietly; remember ours (e.g. a full disk) and raise it after the scan
-            if failure:
-                return
-            try:
-                _copy(cid, t, seq, data)
-            except BaseException as exc:
-                failure.append(exc)
-                raise
-
-        def _copy(cid: int, t: int, seq: int, data: bytes) -> None:
             channel = scan.channels[cid]
             topic = channel.topic
             if topic in static:
@@ -101,9 +88,7 @@ def copy_session(src, dst, *, detections: Detections | None = None, tracks: Sequ
             schema = scan.schemas.get(channel.schema_id)
             w._add_foreign(topic, schema, channel, t, data, seq)
 
-        io.scan_file(src_path, copy, scan=scan)
-        if failure:
-            raise failure[0]
+        io.scan_file(src_path, copy, scan=scan)  # copy's own errors propagate unchanged
         if detections is not None:
             w.add_detections(detections)
         for track in tracks:

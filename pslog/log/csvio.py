@@ -38,7 +38,7 @@ import numpy as np
 
 from ..camera import MAX_IMAGE_SIZE
 from ..errors import InputError
-from ..outputs import replacing_text_file
+from ..outputs import replacing
 from ..records import NS, Detections
 from ..rig import Rig
 
@@ -299,7 +299,7 @@ def write_detections_csv(detections: Detections, path, *, force: bool = False,
     u = detections.cand_uv[:, 0].tolist()
     v = detections.cand_uv[:, 1].tolist()
     score = detections.cand_score.tolist()
-    with replacing_text_file(path, force, inputs) as f:
+    with replacing(path, force=force, inputs=inputs) as f:
         f.write(",".join(DETECTION_COLUMNS) + "\n")
         f.writelines(f"{c},{format_time(t)},{a!r},{b!r},{k},{s!r}\n"
                      for c, t, a, b, k, s in zip(names, times, u, v, frames, score, strict=True))
@@ -320,7 +320,7 @@ def export_tracks_csv(session, path, *, force: bool = False) -> int:
     names = session.rig.names
     origin = session_clock_origin(session.metadata, session.path)
     count = 0
-    with replacing_text_file(path, force, [session.path]) as f:
+    with replacing(path, force=force, inputs=[session.path]) as f:
         f.write(",".join((*TRACK_COLUMNS, *quality)) + "\n")
         for method in sorted(tracks):
             track = tracks[method]

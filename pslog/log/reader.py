@@ -14,11 +14,13 @@ from __future__ import annotations
 
 import heapq
 import mmap
+import struct
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from mcap.exceptions import McapError
 
 from ..errors import LogFormatError
 from ..records import Detections, Track, Truth
@@ -66,6 +68,13 @@ class Image:
     data: bytes
 
 
+#: what reading a damaged summary raises: our own checks, the mcap package's errors and the
+#: low-level errors its parser lets through on bytes that are no record (short reads, bad
+#: lengths, bad UTF-8)
+_SUMMARY_PARSE_ERRORS = (LogFormatError, McapError, struct.error, UnicodeDecodeError, EOFError,
+                         IndexError, ValueError, KeyError)
+
+
 class DamagedSummaryError(LogFormatError):
     """The summary section or footer of a finished file is damaged (the data may be whole)."""
 
@@ -97,9 +106,9 @@ class _Finished:
             reader = SeekingReader(self.file)
             summary = reader.get_summary()
             metadata = [(m.name, m.metadata) for m in reader.iter_metadata()]
-        except Exception as exc:
-            # whatever the mcap package raises on bytes it cannot parse (its exceptions,
-            # struct, unicode, EOF, index errors)
+        except _SUMMARY_PARSE_ERRORS as exc:
+            # what our checks and the mcap package raise on bytes they cannot parse; any
+            # other exception is a bug, not damage, and propagates as it is
             self.file.close()
             raise DamagedSummaryError(path, str(exc) or type(exc).__name__) from None
         if summary is None:
@@ -146,27 +155,26 @@ class _Finished:
         return io.chunk_payload(record[9:])
 
     def check_chunks(self) -> list[dict]:
-        """Check every chunk (decompression, CRC, framing): one dict per damaged chunk with
-        ``start``, ``end``, ``reason``, ``start_ns``, ``end_ns`` and ``messages`` (topic ->
-        count from the index). Reads the whole file, image chunks included."""
+        """Check every chunk (decompression, CRC, framing): one dict per damaged chunk as
+        :func:`pslog.log.recover.describe_damage` makes it (byte range, reason, time range,
+        messages per topic from the chunk's message indexes). Reads the whole file, image
+        chunks included."""
+        from .recover import describe_damage
+
         damaged = []
-        for index in sorted(self.summary.chunk_indexes, key=lambda c: c.chunk_start_offset):
-            try:
-                self._chunk(index)
-            except LogFormatError as exc:
-                messages = {}
-                for cid, where in index.message_index_offsets.items():
-                    self.file.seek(where)
-                    head = self.file.read(15)
-                    n = int.from_bytes(head[11:15], "little") // 16 if len(head) == 15 else 0
-                    messages[self.topics.get(cid, f"channel {cid}")] = n
-                damaged.append({
-                    "start": index.chunk_start_offset,
-                    "end": index.chunk_start_offset + index.chunk_length,
-                    "reason": str(exc),
-                    "chunk": True, "start_ns": index.message_start_time,
-                    "end_ns": index.message_end_time, "messages": dict(sorted(messages.items())),
-                })
+        with mmap.mmap(self.file.fileno(), 0, access=mmap.ACCESS_READ) as buf:
+            for index in sorted(self.summary.chunk_indexes,
+                                key=lambda c: c.chunk_start_offset):
+                try:
+                    self._chunk(index)
+                except LogFormatError as exc:
+                    end = index.chunk_start_offset + index.chunk_length
+                    counts, _ = io.message_index_counts(
+                        buf, end, min(len(buf), end + index.message_index_length))
+                    damaged.append(describe_damage(io.Damage(
+                        index.chunk_start_offset, end, str(exc), chunk=True,
+                        start_ns=index.message_start_time, end_ns=index.message_end_time,
+                        counts=counts), self.summary.channels))
         return damaged
 
     def collect(self, topics: Sequence[str], skip: frozenset[int] = frozenset()

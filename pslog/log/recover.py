@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..errors import InputError, LogFormatError, PslogError
-from ..outputs import check_output_path, partial_path
+from ..errors import LogFormatError, PslogError
+from ..outputs import RECOVER_LIBRARY, replacing
 from ..records import NS
 from ..rig import Rig
 from . import _mcapio as io
@@ -83,14 +83,9 @@ def recover_session(src, dst, *, force: bool = False) -> dict:
     src, size = Path(src), 0
     if not src.is_file():
         io.check_file(src)  # its one-line error
-    dst = Path(dst)
-    if dst.exists() and src.exists() and dst.resolve() == src.resolve():
-        raise InputError(f"output {dst} is the damaged input; choose another file")
-    dst = check_output_path(dst, force)
 
     from mcap.writer import CompressionType, Writer
 
-    tmp = partial_path(dst)
     topics: dict[str, int] = {}
     last_ns: dict[str, int] = {}  # per topic
     times = [None, None]  # first, last log time
@@ -98,35 +93,38 @@ def recover_session(src, dst, *, force: bool = False) -> dict:
     scan = io.Scan()
     schema_ids: dict[int, int] = {}
     channel_ids: dict[int, int] = {}
-    f = open(tmp, "wb")  # closed below, also on error
-    writer = Writer(f, compression=CompressionType.ZSTD)
-    writer.start(profile="", library="pslog recover")
 
-    def copy(cid: int, t: int, seq: int, data: bytes) -> None:
-        new = channel_ids.get(cid)
-        if new is None:
-            channel = scan.channels.get(cid)
-            if channel is None:
-                unknown[0] += 1
-                return  # its channel record was lost with a damaged part
-            if channel.schema_id and channel.schema_id not in schema_ids:
-                schema = scan.schemas.get(channel.schema_id) or _pslog_schema(channel.topic)
-                if schema is None:
+    # dst is checked (never src in any spelling), written as <dst>.partial and moved over
+    # dst only when complete; removed on any failure
+    with replacing(dst, "wb", force=force, inputs=[src]) as f:
+        dst = Path(dst)
+        writer = Writer(f, compression=CompressionType.ZSTD)
+        writer.start(profile="", library=RECOVER_LIBRARY)
+
+        def copy(cid: int, t: int, seq: int, data: bytes) -> None:
+            new = channel_ids.get(cid)
+            if new is None:
+                channel = scan.channels.get(cid)
+                if channel is None:
                     unknown[0] += 1
-                    return
-                schema_ids[channel.schema_id] = writer.register_schema(
-                    schema.name, schema.encoding, schema.data)
-            new = channel_ids[cid] = writer.register_channel(
-                channel.topic, channel.encoding, schema_ids.get(channel.schema_id, 0),
-                channel.metadata)
-        writer.add_message(new, t, data, t, seq)
-        topic = scan.channels[cid].topic
-        topics[topic] = topics.get(topic, 0) + 1
-        last_ns[topic] = max(last_ns.get(topic, t), t)
-        times[0] = t if times[0] is None else min(times[0], t)
-        times[1] = t if times[1] is None else max(times[1], t)
+                    return  # its channel record was lost with a damaged part
+                if channel.schema_id and channel.schema_id not in schema_ids:
+                    schema = scan.schemas.get(channel.schema_id) or _pslog_schema(channel.topic)
+                    if schema is None:
+                        unknown[0] += 1
+                        return
+                    schema_ids[channel.schema_id] = writer.register_schema(
+                        schema.name, schema.encoding, schema.data)
+                new = channel_ids[cid] = writer.register_channel(
+                    channel.topic, channel.encoding, schema_ids.get(channel.schema_id, 0),
+                    channel.metadata)
+            writer.add_message(new, t, data, t, seq)
+            topic = scan.channels[cid].topic
+            topics[topic] = topics.get(topic, 0) + 1
+            last_ns[topic] = max(last_ns.get(topic, t), t)
+            times[0] = t if times[0] is None else min(times[0], t)
+            times[1] = t if times[1] is None else max(times[1], t)
 
-    try:
         io.salvage_file(src, copy, scan=scan, tolerate_magic=True)
         size = src.stat().st_size
         try:
@@ -142,20 +140,13 @@ def recover_session(src, dst, *, force: bool = False) -> dict:
         except PslogError as exc:
             raise LogFormatError(f"{src}: the session metadata (rig, cameras) is damaged "
                                  f"({exc}); nothing usable can be recovered") from None
+        if not topics:
+            reason = scan.damaged[0].reason if scan.damaged else "no messages"
+            raise LogFormatError(f"{src}: no intact message could be recovered ({reason})")
         for name, data in scan.metadata:
             writer.add_metadata(name, data)
         writer.finish()
-        f.close()
-    except BaseException:
-        f.close()
-        tmp.unlink(missing_ok=True)
-        raise
     damaged = [describe_damage(d, scan.channels) for d in scan.damaged]
-    if not topics:
-        tmp.unlink(missing_ok=True)
-        reason = damaged[0]["reason"] if damaged else "no messages"
-        raise LogFormatError(f"{src}: no intact message could be recovered ({reason})")
-    tmp.replace(dst)
     discarded = sum(d["end"] - d["start"] for d in damaged)
     complete = scan.finished and not damaged
     tail = "; ".join(f"{d['reason']} at byte {d['start']}" for d in damaged[:3])

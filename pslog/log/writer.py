@@ -9,6 +9,7 @@ image chunk without decompressing it.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import threading
 import time
@@ -18,7 +19,14 @@ from datetime import UTC, datetime
 import numpy as np
 
 from ..errors import InputError, LogFormatError, PslogError
-from ..outputs import WriteError, check_output_path, partial_path, write_error
+from ..outputs import (
+    DERIVED_KEY,
+    WriteError,
+    check_output_path,
+    open_locked,
+    partial_path,
+    write_error,
+)
 from ..records import Detections, Track, Truth
 from ..rig import Rig
 from . import _schemas as S
@@ -83,6 +91,11 @@ class SessionWriter:
           session copies): always written as ``<path>.partial``, removed on any failure, so
           nothing half-written is ever left under ``path`` and an old ``path`` stays.
     inputs : files the session is made from; ``path`` may not be one of them
+
+    Attributes
+    ----------
+    target : the file actually being written (``<path>.partial`` or ``path``), held under
+        an exclusive lock (:func:`pslog.outputs.open_locked`) until closed
     """
 
     def __init__(self, path, rig: Rig, *, force: bool = False, timing: str = "custom",
@@ -95,10 +108,10 @@ class SessionWriter:
             raise ValueError(f"on_error must be 'keep' or 'discard', got {on_error!r}")
         self.path = check_output_path(path, force, inputs)
         self._discard = on_error == "discard"
-        # replacing a session (or writing a derived one): write beside it, move over it
-        # once complete
-        self._replacing = self._discard or self.path.exists()
-        self._target = partial_path(self.path) if self._replacing else self.path
+        #: the file being written: ``<path>.partial`` when replacing a session or writing a
+        #: derived one (moved over ``path`` once complete), else ``path`` itself
+        self.target = (partial_path(self.path) if self._discard or self.path.exists()
+                       else self.path)
         self._aborted = False  # abort(): nothing worth keeping was written
         self._failed = False  # an exception: keep both the old session and <path>.partial
         self._os_failed = False  # the OS refused a write: the MCAP stream cannot be finished
@@ -112,7 +125,8 @@ class SessionWriter:
         self._names = rig.names
         self._flush_interval = float(flush_interval_s)
         try:
-            self._file = open(self._target, "wb")  # closed in close()
+            # locked while written: no other pslog run takes it for a stale partial
+            self._file = open_locked(self.target)  # closed in close()
         except OSError as exc:
             raise write_error(self.path, exc) from None
         self._closed = False
@@ -140,6 +154,8 @@ class SessionWriter:
             "camera_names": ",".join(self._names),
             **extra,
         }
+        if self._discard:  # made from inputs that still exist: a stale partial may go
+            record[DERIVED_KEY] = "true"
         try:
             with self._lock:
                 try:
@@ -154,8 +170,8 @@ class SessionWriter:
                     raise self._os_fault(exc) from None
         except BaseException:
             self._failed = True
+            self._discard = True  # nothing but the header was written: remove it
             self.close()  # never raises for a failed writer
-            self._target.unlink(missing_ok=True)  # nothing but the header was written
             raise
         if self._flush_interval > 0:
             # flush on a timer too, so data is on disk within the interval even when the
@@ -475,22 +491,26 @@ class SessionWriter:
             except BaseException as exc:
                 error = exc
             try:
-                self._file.close()
-            except OSError as exc:  # flushing the last buffered bytes
+                self._file.flush()  # the last buffered bytes, before the file is moved
+            except OSError as exc:
                 if error is None and not self._failed:
                     error = self._os_fault(exc)
             failed = self._failed or error is not None
+            # moved or removed while still open, i.e. locked: another run never takes a
+            # finished partial for a stale one
             try:
                 if self._discard and (failed or self._aborted):
-                    self._target.unlink(missing_ok=True)
-                elif self._replacing and not failed:
+                    self.target.unlink(missing_ok=True)
+                elif self.target != self.path and not failed:
                     if self._aborted:
-                        self._target.unlink(missing_ok=True)  # the old session stays
+                        self.target.unlink(missing_ok=True)  # the old session stays
                     else:
-                        self._target.replace(self.path)
+                        self.target.replace(self.path)
             except OSError as exc:
                 if error is None and not self._failed:
                     error = write_error(self.path, exc)
+            with contextlib.suppress(OSError):  # a failed flush above already said why
+                self._file.close()
             if error is not None and not self._failed:
                 raise error
 

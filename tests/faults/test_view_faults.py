@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from ._mounts import read_only, small_tmpfs
+from ._mounts import CAP_NET_BIND_SERVICE, drop_capability, read_only, small_tmpfs
 from .promises import assert_one_line_error, assert_untouched, fingerprint, run_pslog
 
 SAMPLE = Path(__file__).resolve().parents[2] / "samples" / "throw.mcap"
@@ -98,24 +98,13 @@ def test_serve_port_in_use(tmp_path, session, option):
     assert_untouched(before, tmp_path)
 
 
-def _without_bind_privilege() -> None:
-    """In the child before exec: drop CAP_NET_BIND_SERVICE from the capability bounding set,
-    so that even root then runs pslog like an ordinary user as far as ports go."""
-    import ctypes
-
-    libc = ctypes.CDLL(None, use_errno=True)
-    pr_capbset_drop, cap_net_bind_service = 24, 10
-    if libc.prctl(pr_capbset_drop, cap_net_bind_service, 0, 0, 0) != 0:
-        raise OSError(ctypes.get_errno(), "prctl(PR_CAPBSET_DROP) failed")
-
-
 def test_serve_privileged_port_when_not_root(tmp_path, session):
     start = Path("/proc/sys/net/ipv4/ip_unprivileged_port_start")
     if not start.exists() or int(start.read_text()) <= 80:
         pytest.skip("this machine lets anyone listen on port 80")
     preexec = None
     if os.geteuid() == 0:
-        preexec = _without_bind_privilege
+        preexec = drop_capability(CAP_NET_BIND_SERVICE)
         try:
             run_pslog("--version", preexec_fn=preexec, timeout=20)
         except (OSError, subprocess.SubprocessError) as exc:

@@ -31,6 +31,7 @@ import pytest
 from pslog.cli import main
 from pslog.rig import builtin_rig
 
+from ._mounts import CAP_DAC_OVERRIDE, drop_capability, fill, read_only, small_tmpfs
 from .promises import Run, assert_one_line_error, assert_untouched, fingerprint, run_pslog
 
 SAMPLE = Path(__file__).resolve().parents[2] / "samples" / "throw.mcap"
@@ -112,43 +113,12 @@ def _old_output(writer: str, out: Path) -> Path:
 
 # ---- faults -----------------------------------------------------------------------------
 
-def _mount(*args: str) -> None:
-    proc = subprocess.run(["mount", *args], capture_output=True, text=True)
-    if proc.returncode != 0:
-        pytest.skip(f"cannot mount here ({' '.join(args)}: {proc.stderr.strip()})")
-
-
 @pytest.fixture
 def mounts():
-    """Mount points to unmount at teardown, whatever happened."""
-    points: list[Path] = []
-    yield points
-    for point in reversed(points):
-        subprocess.run(["umount", "-l", str(point)], capture_output=True)
-
-
-def _fill(folder: Path, free: int) -> None:
-    """Fill the file system of ``folder`` until about ``free`` bytes are left."""
-    filler = folder / "filler"
-    with open(filler, "wb", buffering=0) as f, contextlib.suppress(OSError):
-        block = b"\0" * 4096
-        while True:
-            f.write(block)
-    if free:
-        os.truncate(filler, max(0, filler.stat().st_size - free))
-
-
-def _without_dac_override() -> None:
-    """In the child before exec: drop CAP_DAC_OVERRIDE from the bounding set, so that root
-    (after exec) is refused writes into a mode-555 folder like any user."""
-    import ctypes
-
-    libc = ctypes.CDLL(None, use_errno=True)
-    if libc.prctl(_PR_CAPBSET_DROP, _CAP_DAC_OVERRIDE, 0, 0, 0) != 0:
-        raise OSError(ctypes.get_errno(), "prctl(PR_CAPBSET_DROP, CAP_DAC_OVERRIDE)")
-
-
-_PR_CAPBSET_DROP, _CAP_DAC_OVERRIDE = 24, 1
+    """Mounts (:mod:`tests.faults._mounts` context managers) undone at teardown, whatever
+    happened."""
+    with contextlib.ExitStack() as stack:
+        yield stack
 
 
 def _limit_file_size(limit: int):
@@ -176,23 +146,16 @@ def test_os_fault_is_one_line_and_leaves_nothing(fault, writer, inputs, mounts, 
         old = _old_output(writer, out)
         for folder in {out, old.parent}:
             folder.chmod(0o555)  # root too, once CAP_DAC_OVERRIDE is dropped
-        preexec = _without_dac_override if os.geteuid() == 0 else None
+        preexec = drop_capability(CAP_DAC_OVERRIDE) if os.geteuid() == 0 else None
     elif fault == "read-only file system":
-        source, out = tmp_path / "source", tmp_path / "ro"
-        source.mkdir()
+        out = tmp_path / "ro"
         out.mkdir()
-        _old_output(writer, source)
-        _mount("--bind", "-o", "ro", str(source), str(out))
-        mounts.append(out)
-        # some kernels ignore ro on the first bind: remount to make sure
-        subprocess.run(["mount", "-o", "remount,bind,ro", str(out)], capture_output=True)
-    elif fault == "full disk":
-        out = tmp_path / "full"
-        out.mkdir()
-        _mount("-t", "tmpfs", "-o", f"size={FULL_TMPFS}", "tmpfs", str(out))
-        mounts.append(out)
         _old_output(writer, out)
-        _fill(out, free)
+        mounts.enter_context(read_only(out))
+    elif fault == "full disk":
+        out = mounts.enter_context(small_tmpfs(tmp_path / "full", f"{FULL_TMPFS}"))
+        _old_output(writer, out)
+        fill(out, free)
     else:
         out = tmp_path / "limited"
         out.mkdir()
@@ -258,6 +221,101 @@ def test_output_that_is_an_input_is_refused(writer, spelling, aliased, monkeypat
     assert_untouched(before, aliased)
 
 
+# ---- an input named like the output's partial ------------------------------------------
+
+@pytest.mark.parametrize("command", [
+    ["export", "{o}.partial", "--detections", "{o}"],  # a derived session's partial
+    ["recover", "{o}.partial", "-o", "{o}"],  # a recording's partial
+])
+def test_an_input_that_is_the_outputs_partial_is_refused(command, inputs, tmp_path):
+    """The partial is cleared before, and written over while, making the output: an input
+    with that name would be deleted before it is read."""
+    out = tmp_path / "g.mcap"
+    source = inputs / ("fused.mcap" if command[0] == "export" else "s.mcap")
+    shutil.copyfile(source, tmp_path / "g.mcap.partial")
+    before = fingerprint(tmp_path)
+    run = run_pslog(*[a.format(o=out) for a in command], "--force")
+    assert_one_line_error(run, 1, contains=(f"output {out} is written via {out}.partial, "
+                                            f"which is an input", "choose another name"))
+    assert_untouched(before, tmp_path)
+
+
+def test_recover_session_never_writes_over_its_input(inputs, tmp_path):
+    from pslog.errors import InputError
+    from pslog.log import recover_session
+
+    src = tmp_path / "g.mcap.partial"
+    shutil.copyfile(inputs / "s.mcap", src)
+    os.link(src, tmp_path / "hard.mcap")
+    before = fingerprint(tmp_path)
+    for dst in (tmp_path / "g.mcap", src, tmp_path / "hard.mcap"):
+        with pytest.raises(InputError, match=r"which is an input|is the input"):
+            recover_session(src, dst, force=True)
+    assert_untouched(before, tmp_path)
+
+
+# ---- two runs writing one output at once ------------------------------------------------
+
+#: a pslog writer that opens its output, says so, and finishes when told (stdin)
+_HOLDER = r"""
+import sys
+kind, path = sys.argv[1:]
+if kind == "session":
+    from pslog.log import SessionWriter
+    from pslog.rig import builtin_rig
+
+    with SessionWriter(path, builtin_rig("paper3"), force=True, on_error="discard",
+                       source="pslog simulate (a test)",
+                       flush_interval_s=0) as w:
+        w.add_frame(0, 0, 0, uv=[[1.0, 2.0]])
+        w.flush()
+        print("writing", flush=True)
+        sys.stdin.readline()
+else:
+    from pslog.outputs import replacing
+
+    with replacing(path, force=True) as f:
+        f.write("first run\n")
+        f.flush()
+        print("writing", flush=True)
+        sys.stdin.readline()
+print("done", flush=True)
+"""
+
+
+@pytest.mark.parametrize("kind", ["session", "text"])
+def test_a_second_run_leaves_the_partial_of_a_running_one_alone(kind, inputs, tmp_path):
+    """Two real processes: while the first writes <out>.partial, a second run of a command
+    writing <out> (--force) is refused and touches nothing; the first then completes."""
+    import sys
+
+    out = tmp_path / ("r.mcap" if kind == "session" else "d.csv")
+    second = (["simulate", "--rig", "paper3", "--duration", "0.3", "-o", out, "--force"]
+              if kind == "session" else
+              ["export", inputs / "s.mcap", "--detections", out, "--force"])
+    first = subprocess.Popen([sys.executable, "-c", _HOLDER, kind, str(out)],
+                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert first.stdout.readline().strip() == "writing"
+        before = fingerprint(tmp_path)
+        run = run_pslog(*second)
+        assert_one_line_error(run, 1, contains=f"another pslog is writing {out}.partial")
+        assert_untouched(before, tmp_path)
+        rest, _ = first.communicate("\n", timeout=60)
+    finally:
+        if first.poll() is None:
+            first.kill()
+            first.wait()
+    assert first.returncode == 0 and rest.strip() == "done"
+    assert sorted(p.name for p in tmp_path.iterdir()) == [out.name]
+    if kind == "session":
+        from pslog.log import read_session
+
+        assert read_session(out).detections.n_frames == 1
+    else:
+        assert out.read_text() == "first run\n"
+
+
 # ---- a run killed with --force leaves <file>.partial: the next run deals with it --------
 
 def test_stale_partial_of_a_derived_output_is_removed_with_a_notice(inputs, tmp_path):
@@ -317,28 +375,28 @@ def test_stale_partial_that_may_hold_a_recording_is_kept_and_named(inputs, tmp_p
 
 def test_background_flush_on_a_full_disk_is_one_error_in_the_callers_thread(tmp_path, mounts,
                                                                            rig3):
+    """The flusher thread meets the full disk while the caller is idle; the caller's next
+    call raises that error, even though the disk has room again by then (so the error can
+    only be the one the flusher met, not one of the call's own writes)."""
     from pslog.log import SessionWriter
     from pslog.outputs import WriteError
 
-    out = tmp_path / "full"
-    out.mkdir()
-    _mount("-t", "tmpfs", "-o", f"size={FULL_TMPFS}", "tmpfs", str(out))
-    mounts.append(out)
+    out = mounts.enter_context(small_tmpfs(tmp_path / "full", f"{FULL_TMPFS}"))
     path = out / "s.mcap"
     thread_errors = []
     old_hook = threading.excepthook
     threading.excepthook = thread_errors.append
     try:
         with pytest.raises(WriteError, match=f"cannot write {path}: No space left on device"), \
-                SessionWriter(path, rig3, flush_interval_s=0.05, on_error="discard") as w:
-            image = os.urandom(8192)  # incompressible
-            deadline = time.monotonic() + 30
-            k = 0
-            while time.monotonic() < deadline:  # the flusher fails; the next call says so
-                w.add_frame(k % 3, k, k * 11_111_111, uv=[[1.0, 2.0]], image=image)
-                k += 1
-                time.sleep(0.001)
-            pytest.fail("no error after 30 s of writing to a full disk")
+                SessionWriter(path, rig3, flush_interval_s=0.2, on_error="discard") as w:
+            fill(out)
+            image = os.urandom(8192)  # incompressible: needs pages the disk no longer has
+            for k in range(3):
+                w.add_frame(k, k, k * 11_111_111, uv=[[1.0, 2.0]], image=image)
+            time.sleep(1.0)  # past the interval, the writer left alone: the flusher's turn
+            (out / "filler").unlink()  # room again: the next call could write
+            w.add_frame(0, 3, 33_333_333, uv=[[1.0, 2.0]])
+            pytest.fail("the error the flusher met was not raised by the next call")
     finally:
         threading.excepthook = old_hook
     assert thread_errors == []
