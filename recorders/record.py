@@ -182,20 +182,17 @@ def _record(rig: Rig, sources: Mapping[str, object], output: Path, options: Work
             meta: dict[str, str], *, timing, source, truth, force, status,
             stop_signal: StopRequest) -> RecordSummary:
     from pslog.log import SessionWriter
-    from pslog.outputs import partial_path
 
-    existed = output.exists()
-    # with --force over an old session the writer writes <output>.partial, moved over the
-    # old session only once complete
-    target = partial_path(output) if existed else output
-    try:
+    try:  # a writer that fails to start removes what it began
         writer = SessionWriter(output, rig, force=force, timing=timing or timing_label(rig),
                                source=source or "record", metadata=meta)
     except _WRITE_ERRORS as exc:  # an unwritable folder, a full disk: nothing recorded yet
-        with contextlib.suppress(OSError):
-            target.unlink(missing_ok=True)
         raise RecordWriteError(f"cannot write {output}: {_reason(exc, output)}; nothing was "
                                f"recorded") from None
+    # with --force over an old session the writer writes <output>.partial, moved over the
+    # old session only once complete
+    target = writer.target
+    existed = target != output
     session = _Session(rig, sources, options, writer, status, stop_signal)
     try:
         if truth is not None:

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import rerun as rr
 
-from pslog.outputs import WriteError, check_output_path, partial_path, write_error
+from pslog.outputs import WriteError, check_output_path, open_locked, partial_path, write_error
 
 #: longest wait for rerun to hand over its last bytes after logging, seconds; only a hang
 #: (never seen with the pipe) reaches it: the data has streamed out while it was logged
@@ -67,8 +67,10 @@ class _PipeToFile:
             self.cleanup()
             raise
         try:
-            self._out = open(partial, "wb")  # closed by the pump at the end of the stream
-        except OSError:
+            # locked while open: no other pslog run takes it for a stale partial; closed
+            # only after it has been moved over ``path`` or removed (close())
+            self._out = open_locked(partial, "wb")
+        except BaseException:  # OSError, or PartialBusyError: another run writes it
             os.close(self._spare)
             self.cleanup()
             raise
@@ -93,7 +95,7 @@ class _PipeToFile:
             os.close(self._spare)  # the last reader: only now could rerun meet EPIPE
         if self.error is None:
             try:
-                self._out.close()
+                self._out.flush()
             except OSError as exc:
                 self._fail(exc)
 
@@ -108,9 +110,13 @@ class _PipeToFile:
 
     def _fail(self, exc: OSError) -> None:
         self.error = self.error or exc
+        _remove(self.partial)  # before the lock goes with close()
+        self.close()
+
+    def close(self) -> None:
+        """Close the partial file (releasing its lock)."""
         with contextlib.suppress(OSError):
             self._out.close()
-        _remove(self.partial)
 
     def unblock(self) -> None:
         """Let the pump's ``open`` return when rerun never opened the pipe."""
@@ -184,4 +190,5 @@ def rrd_file(rec: rr.RecordingStream, path: str | Path, *, force: bool = False,
         _remove(partial)
         raise
     finally:
+        pipe.close()
         pipe.cleanup()

@@ -73,15 +73,6 @@ def check_declared_files(args: argparse.Namespace, say=None) -> None:
         check_output_path(path, True, inputs, say=say)
 
 
-def source_files(args: argparse.Namespace) -> list[str]:
-    """The files named by ``--source NAME=FILE[@OFFSET]`` options (inputs of ``record``)."""
-    out = []
-    for text in getattr(args, "source", None) or ():
-        spec = text.partition("=")[2].strip()
-        head, sep, _ = spec.rpartition("@")
-        out.append(head if sep and not Path(spec).exists() else spec)
-    return out
-
 
 def check_output(path: str | Path, force: bool, inputs=()) -> Path:
     """Refuse a folder, a missing parent folder, one of the ``inputs`` (always), or an
