@@ -58,13 +58,12 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.optimize import minimize_scalar
 
 from ..errors import FusionError
 from ..motion import G
 from ..records import NS, Observations
 from ..rig import Rig
-from . import _normal
+from . import _breaks, _normal
 from .bspline import DEGREE, basis, clamped_knots, n_control
 from .projection import project_with_jacobian
 
@@ -127,7 +126,7 @@ class SmoothOptions:
 #: Cauchy kernel scale, in units of σ on the 2-D residual norm
 _CAUCHY = 3.0
 #: Half-width of the local window of the break test, in knot spans
-_WINDOW_SPANS = 6
+_WINDOW_SPANS = 5
 #: The first fit's prior is this much looser (σ_a times this)
 _LOOSE = 10.0
 #: Rounds of break detection (each finds the jumps the previous fit still hides)
@@ -426,21 +425,21 @@ class _Solver:
     def __init__(self, problem: _Problem, options: SmoothOptions):
         self.problem, self.options = problem, options
 
-    def cost(self, control: np.ndarray, sigma: float) -> tuple[float, np.ndarray]:
-        r, _ = self.problem.project(self.problem.positions(control))
+    def cost(self, control: np.ndarray, r: np.ndarray, sigma: float) -> float:
+        """The robust cost (1) + (2) of ``control`` whose residuals are ``r``."""
         s = np.sum(r * r, axis=1) / sigma**2
         c2 = _CAUCHY**2
         data = np.where(np.isfinite(s), c2 * np.log1p(s / c2), np.inf)
-        return float(np.sum(data) + _prior_cost(self.problem, control)), r
+        return float(np.sum(data) + _prior_cost(self.problem, control))
 
     def run(self, control: np.ndarray, sigma: float, iterations: int, dof: float = 1.0
             ) -> tuple[np.ndarray, float, np.ndarray, np.ndarray, np.ndarray]:
         """Returns control, σ, residuals (n, 2), weights (n,), Jacobians (n, 2, 3); σ is
         re-estimated at every iteration as ``dof`` · 1.4826 · median |residual|."""
         problem = self.problem
+        X = problem.positions(control)
+        r, J = problem.project(X)
         for _ in range(iterations):
-            X = problem.positions(control)
-            r, J = problem.project(X)
             sigma = self._scale(r, sigma, dof)
             s = np.sum(r * r, axis=1) / sigma**2
             w = 1 / (1 + s / _CAUCHY**2)  # Cauchy IRLS weight
@@ -450,19 +449,19 @@ class _Solver:
                                          3 * problem.m, problem.prior_ab.copy(),
                                          problem.prior_rhs.copy())
             new = _normal.solve(_normal.factor(ab), rhs).reshape(-1, 3)
-            before, _ = self.cost(control, sigma)
+            before = self.cost(control, r, sigma)
             step = 1.0
             for _ in range(6):  # step halving keeps the robust cost from rising
                 trial = control + step * (new - control)
-                after, _ = self.cost(trial, sigma)
-                if after <= before:
+                X_trial = problem.positions(trial)
+                r_trial, J_trial = problem.project(X_trial)
+                if self.cost(trial, r_trial, sigma) <= before:
                     break
                 step /= 2
-            control = trial
-            if np.max(np.abs(step * (new - control))) < 1e-9:
+            moved = float(np.max(np.abs(trial - control), initial=0.0))
+            control, X, r, J = trial, X_trial, r_trial, J_trial
+            if moved < 1e-7:  # 0.1 µm: converged
                 break
-        X = problem.positions(control)
-        r, J = problem.project(X)
         s = np.sum(r * r, axis=1) / sigma**2
         return control, sigma, r, 1 / (1 + s / _CAUCHY**2), J
 
@@ -529,7 +528,7 @@ def fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions | None = 
         X_old = problem.positions(control)
         problem.set_knots(knots, loose)
         control = _refit_control(problem, X_old)
-        iterations = 3
+        iterations = 2
     problem.set_knots(knots, options.prior)  # same knots: the control points stay valid
     control, sigma, r, w, J = _Solver(problem, options).run(control, sigma, options.iterations)
     if any(len(b) for b in breaks):  # each break's time again, at the final fit
@@ -543,10 +542,9 @@ def fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions | None = 
                                                                 options.iterations)
 
     # σ corrected for the degrees of freedom the fit absorbs, then the covariance there
-    band, dof = _information(problem, control, sigma, r, J)
-    for _ in range(2):
-        control, sigma, r, w, J = _Solver(problem, options).run(control, sigma, 2, dof)
-        band, dof = _information(problem, control, sigma, r, J)
+    _, dof = _information(problem, control, sigma, r, J)
+    control, sigma, r, w, J = _Solver(problem, options).run(control, sigma, 2, dof)
+    band, _ = _information(problem, control, sigma, r, J)
     trajectory = Trajectory(problem.t0_ns, problem.knots, problem.offset, control, band,
                             np.concatenate([np.asarray(b) for b in breaks]) if breaks
                             else np.zeros(0), sigma)
@@ -603,16 +601,19 @@ def _find_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
                  w: np.ndarray, J: np.ndarray, spacing: float, known: list[np.ndarray],
                  options: SmoothOptions) -> list[np.ndarray]:
     """Times of new velocity jumps in each piece (seconds since the first observation), none
-    within a knot spacing of a ``known`` one."""
+    within a knot spacing of a ``known`` one: the peaks of ``‖p'' - g‖`` above
+    ``break_accel``, each kept if a break near it gains more than ``break_threshold``."""
     g = np.asarray(options.prior.gravity)
     X = problem.positions(control)
     target = np.einsum("naj,nj->na", J, X) - r  # the linearised measurements
+    weight = w / sigma**2
     t_obs = problem.t[problem.rows]
     out = []
     row0 = 0
     for p, k in enumerate(problem.knots):
-        rows_here = slice(row0, row0 + len(problem.rows_of_piece[p]))
+        here = slice(row0, row0 + len(problem.rows_of_piece[p]))
         row0 += len(problem.rows_of_piece[p])
+        t = t_obs[here]
         lo, hi = k[:-1], k[1:]
         mids = ((lo + hi) / 2)[hi > lo]
         first, N = basis(k, mids, 2)
@@ -622,120 +623,72 @@ def _find_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
         peak = dev > options.break_accel
         peak[1:] &= dev[1:] >= dev[:-1]
         peak[:-1] &= dev[:-1] > dev[1:]
+        centers = mids[peak]
+        centers = centers[np.all(np.abs(centers[:, None] - known[p][None, :]) > spacing, axis=1)]
+        if len(t) < 8 or len(centers) == 0:
+            out.append(np.zeros(0))
+            continue
+        # the jump lies near the peak: search two detections beyond its neighbours, leaving
+        # four detections of the piece at either end (a segment without detections would
+        # have a free velocity)
+        j = np.searchsorted(t, centers)
+        a = np.maximum(t[np.clip(j - 3, 0, len(t) - 1)], t[3])
+        b = np.minimum(t[np.clip(j + 2, 0, len(t) - 1)], t[-4])
+        ok = a < b
+        centers, a, b = centers[ok], a[ok], b[ok]
+        limits = _neighbours(centers, known[p])
+        tau, gain = _breaks.scan(t, J[here], target[here], weight[here], centers,
+                                 np.stack([a, b], axis=1), limits, spacing,
+                                 _WINDOW_SPANS * spacing, options.prior)
         found: list[float] = []
-        for i in np.flatnonzero(peak)[np.argsort(-dev[peak])]:
-            tc = mids[i]
-            if any(abs(tc - f) < 1.5 * spacing for f in found):
-                continue
-            tau = _test_break(t_obs[rows_here], J[rows_here], target[rows_here],
-                              w[rows_here], sigma, tc, spacing, known[p], options)
-            if tau is not None and all(abs(tau - f) > spacing for f in [*found, *known[p]]):
-                found.append(tau)
+        for i in np.argsort(-gain):
+            if gain[i] <= options.break_threshold:
+                break
+            if all(abs(tau[i] - f) > 1.5 * spacing for f in found) and all(
+                    abs(tau[i] - f) > spacing for f in known[p]):
+                found.append(float(tau[i]))
         out.append(np.sort(np.array(found)))
     return out
+
+
+def _neighbours(centers: np.ndarray, known: np.ndarray) -> np.ndarray:
+    """(C, 2) the nearest known break below and above each centre (±inf if none)."""
+    known = np.sort(known)
+    j = np.searchsorted(known, centers)
+    below = np.where(j > 0, known[np.maximum(j - 1, 0)] if len(known) else 0.0, -np.inf)
+    above = np.where(j < len(known), known[np.minimum(j, len(known) - 1)]
+                     if len(known) else 0.0, np.inf)
+    return np.stack([below, above], axis=1)
 
 
 def _refine_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.ndarray,
                    w: np.ndarray, J: np.ndarray, spacing: float, breaks: list[np.ndarray],
                    options: SmoothOptions) -> list[np.ndarray]:
-    """Each break's time re-estimated on the problem linearised at the final fit, the other
-    breaks held (the first estimate was linearised at the loose fit)."""
+    """Each break's time re-estimated (within a knot spacing) on the problem linearised at
+    the final fit, the neighbouring breaks held (the first estimate was linearised at the
+    loose fit)."""
     X = problem.positions(control)
     target = np.einsum("naj,nj->na", J, X) - r
+    weight = w / sigma**2
     t_obs = problem.t[problem.rows]
     out = []
     row0 = 0
     for p, known in enumerate(breaks):
         here = slice(row0, row0 + len(problem.rows_of_piece[p]))
         row0 += len(problem.rows_of_piece[p])
+        t = t_obs[here]
+        if len(known) == 0:
+            out.append(known)
+            continue
+        a = np.maximum(known - spacing, t[3])
+        b = np.minimum(known + spacing, t[-4])
+        ok = a < b
+        limits = np.stack([np.r_[-np.inf, known[:-1]], np.r_[known[1:], np.inf]], axis=1)
+        tau, _ = _breaks.scan(t, J[here], target[here], weight[here], known[ok],
+                              np.stack([a[ok], b[ok]], axis=1), limits[ok], spacing,
+                              _WINDOW_SPANS * spacing, options.prior)
         new = known.copy()
-        for b in range(len(known)):
-            others = np.delete(new, b)
-            tau = _search_break(t_obs[here], J[here], target[here], w[here], sigma,
-                                new[b], spacing, others, options.prior,
-                                (new[b] - spacing, new[b] + spacing))
-            if tau is not None and all(abs(tau - o) > spacing for o in others):
-                new[b] = tau
-        out.append(np.sort(new))
+        new[ok] = tau
+        keep = np.r_[True, np.diff(np.sort(new)) > spacing]  # never two breaks in one span
+        out.append(np.sort(new)[keep])
     return out
-
-
-def _search_break(t: np.ndarray, J: np.ndarray, target: np.ndarray, w: np.ndarray,
-                  sigma: float, tc: float, spacing: float, known: np.ndarray,
-                  prior: MotionPrior, bounds: tuple[float, float]
-                  ) -> float | None:
-    """The time in ``bounds`` of a triple knot minimising the local linearised cost."""
-    half = _WINDOW_SPANS * spacing
-    sel = np.flatnonzero((t >= tc - half) & (t <= tc + half))
-    if len(sel) < 8:
-        return None
-    ts = t[sel]
-    lo, hi = ts[0], ts[-1] + 1e-9
-    a, b = max(bounds[0], t[3]), min(bounds[1], t[-4])
-    if not a < b:
-        return None
-    known = known[(known > lo) & (known < hi)]
-    res = minimize_scalar(
-        lambda tau: _local_cost(_knots_with_breaks(lo, hi, spacing, np.r_[known, tau]), ts,
-                                J[sel], target[sel], w[sel], sigma, prior),
-        bounds=(a, b), method="bounded", options={"xatol": 2e-6, "maxiter": 40})
-    return float(res.x)
-
-
-def _test_break(t: np.ndarray, J: np.ndarray, target: np.ndarray, w: np.ndarray,
-                sigma: float, tc: float, spacing: float, known: np.ndarray,
-                options: SmoothOptions) -> float | None:
-    """The time of a velocity jump near ``tc`` if a triple knot there lowers the local cost
-    by more than ``options.break_threshold``, else None (local problem linearised at the
-    current fit, under the motion prior, with the ``known`` breaks in both hypotheses)."""
-    half = _WINDOW_SPANS * spacing
-    sel = np.flatnonzero((t >= tc - half) & (t <= tc + half))
-    if len(sel) < 8:
-        return None
-    ts, Js, zs, ws = t[sel], J[sel], target[sel], w[sel]
-    lo, hi = ts[0], ts[-1] + 1e-9
-    before = np.flatnonzero(ts < tc)
-    after = np.flatnonzero(ts >= tc)
-    if len(before) < 3 or len(after) < 3:
-        return None
-    # the jump lies between the detections around the peak: search two detections each side,
-    # leaving at least 4 detections of the piece at either end (a trajectory segment with no
-    # detection would have a free velocity)
-    a = max(ts[before[max(len(before) - 3, 0)]], t[3])
-    b = min(ts[after[min(2, len(after) - 1)]], t[-4])
-    if not a < b:
-        return None
-
-    known = known[(known > lo) & (known < hi)]
-
-    def cost(tau: float | None) -> float:
-        knots = _knots_with_breaks(lo, hi, spacing, known if tau is None else np.r_[known, tau])
-        return _local_cost(knots, ts, Js, zs, ws, sigma, options.prior)
-
-    base = cost(None)
-    res = minimize_scalar(cost, bounds=(a, b), method="bounded",
-                          options={"xatol": 2e-6, "maxiter": 40})
-    if base - res.fun > options.break_threshold:
-        return float(res.x)
-    return None
-
-
-def _local_cost(knots: np.ndarray, t: np.ndarray, J: np.ndarray, target: np.ndarray,
-                w: np.ndarray, sigma: float, prior: MotionPrior) -> float:
-    """Minimum of the linearised cost (1) + (2) on one local knot vector (dense solve)."""
-    m = n_control(knots)
-    first, N = basis(knots, t, 0)
-    E = (N[:, 0][:, None, :, None] * J[:, :, None, :]).reshape(-1, 12)
-    start = np.repeat(3 * first, 2)
-    ww = np.repeat(w, 2) / sigma**2
-    ab, rhs = _normal.accumulate(start, E, target.reshape(-1), ww, 3 * m)
-    pab, prhs, pconst = _prior_normal([knots], np.zeros(1, np.int64), m, prior)
-    ab += pab
-    rhs += prhs
-    try:
-        x = _normal.solve(_normal.factor(ab), rhs)
-    except FusionError:
-        return 1e300  # a knot vector the data leave undetermined: never the minimum
-    # minimum of xᵀAx - 2 rhsᵀx + const is const - rhsᵀx
-    const = float(np.sum(ww * target.reshape(-1) ** 2)) + pconst
-    return const - float(rhs @ x)
