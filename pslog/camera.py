@@ -20,6 +20,12 @@ MAX_IMAGE_SIZE = 65536
 MAX_FPS = 1e6
 _MAX_K = 1e7  # pixels: focal lengths and principal points
 _MAX_T_M = 1e6  # metres: a camera 1000 km from the world origin is a typo
+#: Largest clock offset accepted, seconds (a day): cameras whose clocks differ by more are
+#: on different clocks altogether, which ``pslog import`` handles by a session clock origin.
+MAX_CLOCK_OFFSET_S = 86400.0
+#: Largest clock drift accepted, ppm: quartz oscillators are within ±100 ppm; 1000 ppm
+#: (1 ms per second) is beyond any working clock.
+MAX_CLOCK_DRIFT_PPM = 1000.0
 #: Characters a camera name may not hold: names are CSV cells (``,`` ``"``) and parts of MCAP
 #: topics ``/camera/<name>/...`` (``/``).
 _NAME_FORBIDDEN = ',"/'
@@ -84,6 +90,17 @@ class Camera:
     offset : float
         Nominal shutter offset within the frame period, seconds: frame ``k`` is captured at
         ``offset + k / fps`` on the session clock.
+    clock_offset : float
+        Offset of this camera's logged times from the session clock, seconds: see
+        :mod:`pslog.timing` (true time = logged + clock_offset + drift term + readout term).
+        0 for the first camera of a rig, whose clock is the session clock.
+    clock_drift_ppm : float
+        Rate error of this camera's clock, parts per million (true time gains
+        ``clock_drift_ppm * 1e-6`` s per logged second since the session start, 0).
+        0 for the first camera of a rig.
+    readout : float
+        Rolling-shutter readout, seconds from the top row to the bottom row (0: global
+        shutter); in ``[0, frame period)``. A frame's logged time refers to its top row.
     """
 
     name: str
@@ -95,6 +112,9 @@ class Camera:
     t: np.ndarray = field(default_factory=lambda: np.zeros(3))
     fps: float = 30.0
     offset: float = 0.0
+    clock_offset: float = 0.0
+    clock_drift_ppm: float = 0.0
+    readout: float = 0.0
 
     def __post_init__(self) -> None:
         name = check_camera_name(self.name)
@@ -128,13 +148,14 @@ class Camera:
         if np.abs(self.t).max() > _MAX_T_M:
             raise RigError(f"camera {name!r}: t has an entry of {np.abs(self.t).max():.3g} m "
                            f"(at most {_MAX_T_M:g} m)")
-        for key in ("fps", "offset"):
+        for key in ("fps", "offset", "clock_offset", "clock_drift_ppm", "readout"):
             value = getattr(self, key)
             if isinstance(value, bool) or not isinstance(value, (int, float, np.number)):
                 raise RigError(f"camera {name!r}: {key} must be a number, got {value!r}")
             if not np.isfinite(value):
                 raise RigError(f"camera {name!r}: {key} must be finite, got {value!r}")
-            object.__setattr__(self, key, float(value))
+            # clock keys + 0.0: -0.0 becomes 0.0 (so "written when non-zero" loses nothing)
+            object.__setattr__(self, key, float(value) + (0.0 if key != "offset" else -0.0))
         if not 0 < self.fps <= MAX_FPS:
             raise RigError(f"camera {name!r}: fps must be in (0, {MAX_FPS:g}], got {self.fps:g}")
         # the offset is a phase: an offset of a period or more names the same shutter
@@ -143,13 +164,27 @@ class Camera:
             raise RigError(f"camera {name!r}: offset {self.offset:g} s must be in "
                            f"[0, {self.frame_period:.6g} s), the frame period at "
                            f"{self.fps:g} fps")
+        if not abs(self.clock_offset) <= MAX_CLOCK_OFFSET_S:
+            raise RigError(f"camera {name!r}: clock_offset {self.clock_offset:g} s is beyond "
+                           f"±{MAX_CLOCK_OFFSET_S:g} s (a day): not one session clock")
+        if not abs(self.clock_drift_ppm) <= MAX_CLOCK_DRIFT_PPM:
+            raise RigError(f"camera {name!r}: clock_drift_ppm {self.clock_drift_ppm:g} is "
+                           f"beyond ±{MAX_CLOCK_DRIFT_PPM:g} ppm (quartz clocks are within "
+                           f"±100 ppm)")
+        # a readout of a whole frame period or more would overlap the next frame's rows
+        if not 0.0 <= self.readout < self.frame_period:
+            raise RigError(f"camera {name!r}: readout {self.readout:g} s must be in "
+                           f"[0, {self.frame_period:.6g} s), the frame period at "
+                           f"{self.fps:g} fps")
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, Camera):
             return NotImplemented
         return (
-            (self.name, self.width, self.height, self.fps, self.offset)
-            == (other.name, other.width, other.height, other.fps, other.offset)
+            (self.name, self.width, self.height, self.fps, self.offset, self.clock_offset,
+             self.clock_drift_ppm, self.readout)
+            == (other.name, other.width, other.height, other.fps, other.offset,
+                other.clock_offset, other.clock_drift_ppm, other.readout)
             and all(np.array_equal(getattr(self, k), getattr(other, k))
                     for k in ("K", "dist", "R", "t"))
         )
@@ -159,7 +194,8 @@ class Camera:
     def replace(self, **changes) -> Camera:
         """A copy with some fields changed (validated again)."""
         values = {k: getattr(self, k) for k in
-                  ("name", "width", "height", "K", "dist", "R", "t", "fps", "offset")}
+                  ("name", "width", "height", "K", "dist", "R", "t", "fps", "offset",
+                   "clock_offset", "clock_drift_ppm", "readout")}
         values.update(changes)
         return Camera(**values)
 
@@ -181,6 +217,11 @@ class Camera:
     def P(self) -> np.ndarray:
         """Projection matrix ``K [R | t]`` of the undistorted camera, shape (3, 4)."""
         return self.K @ np.hstack([self.R, self.t[:, None]])
+
+    @property
+    def has_clock_correction(self) -> bool:
+        """True if any of ``clock_offset``, ``clock_drift_ppm``, ``readout`` is non-zero."""
+        return bool(self.clock_offset or self.clock_drift_ppm or self.readout)
 
     @property
     def frame_period(self) -> float:

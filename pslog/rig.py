@@ -13,6 +13,13 @@ File shape (other keys are rejected)::
     t = [0.0, 0.0, 0.0]          # world -> camera translation, metres
     fps = 30.0
     offset = 0.0                 # nominal shutter offset within the frame period, seconds
+    clock_offset = 0.0           # optional, default 0: clock correction, seconds
+    clock_drift_ppm = 0.0        # optional, default 0: clock rate error, ppm
+    readout = 0.0                # optional, default 0: rolling-shutter readout, seconds
+
+The three clock keys are the timing model of :mod:`pslog.timing` (``pslog sync`` estimates
+them); they are written only when non-zero. The first camera defines the session clock: its
+``clock_offset`` and ``clock_drift_ppm`` must be 0 (its ``readout`` may be anything valid).
 
 Built-in rigs (``paper3``, ``paper2``) and shutter presets (``sync``, ``typeA``, ``typeB``)
 are described in :func:`builtin_rig` and :func:`apply_timing`.
@@ -37,8 +44,9 @@ MAX_CAMERAS = 256
 BUILTIN_RIGS = ("paper3", "paper2")
 
 _TOP_KEYS = {"name", "camera"}
-_CAMERA_KEYS = {"name", "width", "height", "K", "dist", "R", "t", "fps", "offset"}
-_CAMERA_REQUIRED = _CAMERA_KEYS - {"dist"}
+_CLOCK_KEYS = ("clock_offset", "clock_drift_ppm", "readout")
+_CAMERA_KEYS = {"name", "width", "height", "K", "dist", "R", "t", "fps", "offset", *_CLOCK_KEYS}
+_CAMERA_REQUIRED = _CAMERA_KEYS - {"dist", *_CLOCK_KEYS}
 
 
 @dataclass(frozen=True)
@@ -64,6 +72,12 @@ class Rig:
         duplicates = sorted({n for n in names if names.count(n) > 1})
         if duplicates:
             raise RigError(f"camera names must be unique, repeated: {', '.join(duplicates)}")
+        first = cameras[0]
+        if first.clock_offset or first.clock_drift_ppm:
+            raise RigError(
+                f"camera {first.name!r}: the first camera of a rig defines the session clock, "
+                f"so its clock_offset and clock_drift_ppm must be 0 (got "
+                f"{first.clock_offset:g} s and {first.clock_drift_ppm:g} ppm)")
         object.__setattr__(self, "cameras", cameras)
 
     def __len__(self) -> int:
@@ -115,6 +129,8 @@ class Rig:
                 f"fps = {_toml_float(cam.fps)}",
                 f"offset = {_toml_float(cam.offset)}",
             ]
+            lines += [f"{key} = {_toml_float(getattr(cam, key))}" for key in _CLOCK_KEYS
+                      if getattr(cam, key) != 0]
         return "\n".join(lines).lstrip("\n") + "\n"
 
     @classmethod

@@ -8,15 +8,27 @@ the ground truth sampled at every capture time.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import json
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from .camera import Camera
-from .errors import InputError
+from .errors import InputError, RigError
 from .motion import Motion
 from .records import NS, Detections, Truth
 from .rig import Rig
+from .timing import camera_parameters, logged_times_ns, true_times_ns, true_times_s
+
+#: Session metadata key of the clock faults a simulated session was made with (JSON).
+TRUTH_CLOCK_KEY = "truth_clock"
+#: Fixed-point iterations for the row a rolling shutter reads the ball at: each multiplies
+#: the error by readout * (ball's row speed) / height, well below 0.1 for any real motion.
+_ROW_ITERATIONS = 8
+#: Largest difference, pixels, between the row a rolling-shutter capture was timed for and
+#: the row the ball is then seen at (a converged fixed point is far closer).
+_ROW_TOLERANCE_PX = 1e-6
 
 #: Longest simulation, in frames of all cameras together (about 2 GB of detections).
 MAX_SIMULATED_FRAMES = 20_000_000
@@ -34,6 +46,15 @@ class SimulationOptions:
     drop_rate : float in [0, 1), fraction of frames lost entirely (no frame record)
     miss_rate : float in [0, 1), fraction of captured frames with no detection
     seed : int, random seed
+    clock_offset_s : mapping camera name -> seconds, the cameras' true clock offsets
+        (:mod:`pslog.timing`); the first camera's must be 0 (it defines the clock)
+    clock_drift_ppm : mapping camera name -> ppm, the cameras' true clock drifts (first: 0)
+    readout_s : mapping camera name -> seconds, the cameras' true rolling-shutter readouts
+    host_jitter_s : float, standard deviation of the logged stamps around the (faulted)
+        clock's times, seconds: host arrival jitter (frame indices stay exact)
+
+    The clock faults are the timing model's parameters (:func:`true_rig`): the simulator
+    captures at true times and logs through the model's exact inverse.
     """
 
     noise_px: float = 0.0
@@ -41,9 +62,16 @@ class SimulationOptions:
     drop_rate: float = 0.0
     miss_rate: float = 0.0
     seed: int = 0
+    clock_offset_s: Mapping[str, float] = field(default_factory=dict)
+    clock_drift_ppm: Mapping[str, float] = field(default_factory=dict)
+    readout_s: Mapping[str, float] = field(default_factory=dict)
+    host_jitter_s: float = 0.0
 
     def __post_init__(self) -> None:
-        for name in ("noise_px", "jitter_s"):
+        for name in ("clock_offset_s", "clock_drift_ppm", "readout_s"):
+            object.__setattr__(self, name, {str(k): float(v)
+                                            for k, v in dict(getattr(self, name)).items()})
+        for name in ("noise_px", "jitter_s", "host_jitter_s"):
             value = getattr(self, name)
             if not np.isfinite(value) or value < 0:
                 raise InputError(f"{name} must be finite and >= 0, got {value!r}")
@@ -68,18 +96,79 @@ def check_duration(rig: Rig, duration: float) -> float:
 
 def check_simulation(rig: Rig, options: SimulationOptions) -> None:
     """:class:`InputError` if ``options`` make no sense for ``rig`` (:func:`check_jitter`,
-    :func:`check_noise`)."""
+    :func:`check_noise`, :func:`true_rig`, host jitter as :func:`check_jitter`)."""
     check_jitter(rig, options.jitter_s)
+    check_jitter(rig, options.host_jitter_s, "host jitter")
     check_noise(rig, options.noise_px)
+    true_rig(rig, options)
 
 
-def check_jitter(rig: Rig, jitter_s: float) -> float:
+def true_rig(rig: Rig, options: SimulationOptions) -> Rig:
+    """``rig`` with the clock faults of ``options`` as its cameras' timing-model parameters
+    (``clock_offset``, ``clock_drift_ppm``, ``readout``): the rig a perfect ``pslog sync``
+    would recover.
+
+    Raises
+    ------
+    InputError naming the camera and the problem: an unknown camera, a value the rig
+    refuses (a readout of a frame period or more, a drift beyond 1000 ppm...), an offset or
+    drift on the first camera (it defines the session clock).
+    """
+    changes: dict[str, dict[str, float]] = {}
+    for key, values in (("clock_offset", options.clock_offset_s),
+                        ("clock_drift_ppm", options.clock_drift_ppm),
+                        ("readout", options.readout_s)):
+        for name, value in values.items():
+            if name not in rig.names:
+                raise InputError(f"{key} for unknown camera {name!r} "
+                                 f"(rig has {', '.join(rig.names)})")
+            changes.setdefault(name, {})[key] = value
+    first = rig.cameras[0].name
+    if changes.get(first, {}).get("clock_offset") or changes.get(first, {}).get(
+            "clock_drift_ppm"):
+        raise InputError(f"camera {first!r} is the first of the rig and defines the session "
+                         f"clock: its clock offset and drift are 0 by definition (fault the "
+                         f"other cameras)")
+    try:
+        return Rig(tuple(c.replace(**changes.get(c.name, {})) for c in rig.cameras), rig.name)
+    except RigError as exc:
+        raise InputError(str(exc)) from None
+
+
+def truth_clock(rig: Rig, options: SimulationOptions) -> str:
+    """The clock faults of a simulation as the JSON stored in the session metadata under
+    :data:`TRUTH_CLOCK_KEY`: ``{"cameras": {name: {"clock_offset": s, "clock_drift_ppm":
+    ppm, "readout": s}}, "host_jitter_s": s}``, every camera of the rig, floats exact."""
+    faulted = true_rig(rig, options)
+    return json.dumps({
+        "cameras": {c.name: {"clock_offset": c.clock_offset,
+                             "clock_drift_ppm": c.clock_drift_ppm, "readout": c.readout}
+                    for c in faulted.cameras},
+        "host_jitter_s": float(options.host_jitter_s)})
+
+
+def read_truth_clock(rig: Rig, metadata: Mapping[str, str]) -> Rig | None:
+    """The session rig with the true clock parameters of a simulated session (from
+    ``metadata[TRUTH_CLOCK_KEY]``), to score a ``pslog sync`` estimate; None if the session
+    holds none."""
+    text = metadata.get(TRUTH_CLOCK_KEY)
+    if text is None:
+        return None
+    try:
+        cameras = json.loads(text)["cameras"]
+        return Rig(tuple(c.replace(**{k: float(v) for k, v in cameras[c.name].items()})
+                         for c in rig.cameras), rig.name)
+    except (ValueError, KeyError, TypeError, AttributeError, RigError) as exc:
+        raise InputError(f"session metadata {TRUTH_CLOCK_KEY!r} is malformed: {exc}") from None
+
+
+def check_jitter(rig: Rig, jitter_s: float, what: str = "jitter") -> float:
     """``jitter_s`` if below half the shortest frame period of ``rig``, else
     :class:`InputError`: more would swap frames of one camera and merge neighbours."""
     fastest = max(rig.cameras, key=lambda c: c.fps)
     if not jitter_s < 0.5 * fastest.frame_period:
         raise InputError(
-            f"jitter {jitter_s:g} s must be below half a frame period "
+            f"{what} {jitter_s:g} s must be below half a frame period "
             f"({0.5 * fastest.frame_period:.6g} s at {fastest.fps:g} fps, camera "
             f"{fastest.name}): more would swap frames of one camera")
     return jitter_s
@@ -108,6 +197,18 @@ def check_exposure(rig: Rig, exposure_s: float) -> float:
             f"than the frame period at {fastest.fps:g} fps (camera {fastest.name}): a shutter "
             f"cannot stay open into the next frame")
     return exposure_s
+
+
+def _project(rig: Rig, camera: np.ndarray, positions: np.ndarray) -> np.ndarray:
+    """Pixels (n, 2) of ``positions`` (n, 3) in each row's camera; NaN where not visible."""
+    uv = np.full((len(positions), 2), np.nan)
+    for i, cam in enumerate(rig.cameras):  # loop over cameras, vectorized over frames
+        rows = camera == i
+        uv_cam, in_front = cam.project(positions[rows])
+        visible = in_front & cam.in_image(uv_cam)
+        uv_cam[~visible] = np.nan
+        uv[rows] = uv_cam
+    return uv
 
 
 def shutter_times(camera: Camera, duration: float) -> np.ndarray:
@@ -151,33 +252,58 @@ def simulate(
 
     A frame whose projection falls outside the image, or behind the camera, is recorded
     without a candidate. Truth is sampled at every capture time (exactly).
+
+    With clock faults (``options``' clock offsets, drifts, readouts): the shutters follow
+    ``rig``'s schedule on the true clock; each frame's top row is logged on its camera's
+    clock through :func:`pslog.timing.logged_times_ns`; the ball is captured at the true time
+    of the row it is seen at (:func:`pslog.timing.true_times_ns` of the logged time and that
+    row), where the motion is sampled and projected, and where the truth is sampled. So
+    ``true_times_ns(logged, v, ...)`` with the detection's noise-free row ``v`` and the true
+    parameters (:func:`true_rig`) is the truth's time. Host jitter is then added to the
+    logged stamps. The true clock is camera 1's: truth times are on the session clock.
     """
     options = options or SimulationOptions()
     check_simulation(rig, options)
+    clock = camera_parameters(true_rig(rig, options))
     duration = motion.duration if duration is None else float(duration)
     rng = np.random.default_rng(options.seed)
     time_s, camera, frame_index = capture_times(rig, duration)
     if options.jitter_s > 0:
         time_s = time_s + rng.normal(0.0, options.jitter_s, len(time_s))
-    time_ns = np.round(time_s * NS).astype(np.int64)
-    keep = rng.random(len(time_ns)) >= options.drop_rate
-    time_ns, camera, frame_index = time_ns[keep], camera[keep], frame_index[keep]
-    # jitter may reorder frames or make two captures coincide; Detections.from_frames sorts
+    top_ns = np.round(time_s * NS).astype(np.int64)  # true time of each frame's top row
+    keep = rng.random(len(top_ns)) >= options.drop_rate
+    top_ns, camera, frame_index = top_ns[keep], camera[keep], frame_index[keep]
+    h, off, drift, readout = (clock[k][camera] for k in
+                              ("height", "clock_offset", "clock_drift_ppm", "readout"))
+    # the camera's clock stamps the top row: logged through the model's exact inverse
+    logged_ns = logged_times_ns(top_ns, 0.0, h, off, drift, readout)
+    # with a rolling shutter the ball's row is read later, and where the ball is then
+    # depends on that time: a fixed point, a few iterations
+    row = np.zeros(len(top_ns))
+    if np.any(readout > 0):
+        for _ in range(_ROW_ITERATIONS):
+            t = true_times_s(logged_ns / NS, row, h, off, drift, readout)
+            v = _project(rig, camera, motion.position(t))[:, 1]
+            row = np.where(np.isfinite(v), v, 0.0)  # unseen: the top row's time
+    time_ns = true_times_ns(logged_ns, row, h, off, drift, readout)  # capture of the ball
     positions = motion.position(time_ns / NS)
 
-    uv = np.full((len(time_ns), 2), np.nan)
-    for i, cam in enumerate(rig.cameras):  # loop over cameras, vectorized over frames
-        rows = camera == i
-        uv_cam, in_front = cam.project(positions[rows])
-        visible = in_front & cam.in_image(uv_cam)
-        uv_cam[~visible] = np.nan
-        uv[rows] = uv_cam
+    uv = _project(rig, camera, positions)
+    if np.any(readout > 0):
+        # a ball crossing the image's edge during the readout has no consistent row (seen
+        # at a row whose time puts it outside): such a frame detects nothing
+        consistent = np.abs(uv[:, 1] - row) <= _ROW_TOLERANCE_PX
+        uv[~consistent] = np.nan
     if options.noise_px > 0:
         uv = uv + rng.normal(0.0, options.noise_px, uv.shape)
     detected = np.all(np.isfinite(uv), axis=1) & (rng.random(len(uv)) >= options.miss_rate)
+    if options.host_jitter_s > 0:  # the host stamps arrival; the shutter kept its time
+        logged_ns = logged_ns + np.rint(
+            rng.normal(0.0, options.host_jitter_s * NS, len(logged_ns))).astype(np.int64)
     cand_frame = np.flatnonzero(detected)
+    # jitter may reorder frames or make two captures coincide; Detections.from_frames sorts
     detections = Detections.from_frames(
-        rig.names, time_ns, camera, frame_index, cand_frame, uv[cand_frame],
+        rig.names, logged_ns, camera, frame_index, cand_frame, uv[cand_frame],
         cand_radius=np.full(len(cand_frame), np.nan), cand_score=np.ones(len(cand_frame)))
 
     truth_ns = np.unique(time_ns)

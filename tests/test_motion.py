@@ -7,7 +7,18 @@ import pytest
 from numpy.testing import assert_allclose
 
 from pslog.errors import InputError, PslogError
-from pslog.motion import BALL_RADIUS, MOTIONS, G, Motion, ballistic_with_bounces, get_motion
+from pslog.motion import (
+    BALL_RADIUS,
+    MOTIONS,
+    RALLY_AREA,
+    Ball,
+    G,
+    Motion,
+    Rally,
+    ballistic_with_bounces,
+    get_motion,
+    rally_motion,
+)
 
 DT = 1e-4  # finite-difference step, seconds
 
@@ -23,7 +34,7 @@ def _acceleration(motion: Motion, t: np.ndarray, h: float = 1e-3) -> np.ndarray:
 
 
 def test_registry():
-    assert set(MOTIONS) == {"straight", "spiral", "fall", "turntable", "throw"}
+    assert set(MOTIONS) == {"straight", "spiral", "fall", "turntable", "throw", "rally"}
     for name, motion in MOTIONS.items():
         assert get_motion(name) is motion and motion.name == name
         assert motion.duration > 0 and motion.description
@@ -140,3 +151,88 @@ def test_ballistic_before_start_extrapolates_and_unsorted_times():
     assert_allclose(positions[1], [-0.1, -0.2, 0.7], rtol=0, atol=1e-12)
     expected = np.array([[s, 2 * s, 1.0 + 3 * s - 0.5 * G * s * s] for s in (0.5, 0.0, 0.2)])
     assert_allclose(positions[[0, 2, 3]], expected, rtol=0, atol=1e-12)
+
+
+# ---- rally ---------------------------------------------------------------------------------
+
+def test_rally_stays_in_the_area_with_kicks_and_bounces():
+    motion = get_motion("rally")
+    assert motion.duration == 8.0
+    t = np.linspace(0.0, 30.0, 30001)  # longer than its natural duration: more kicks
+    p = motion.position(t)
+    (x0, x1), (y0, y1) = RALLY_AREA
+    assert np.all((p[:, 0] >= x0) & (p[:, 0] <= x1) & (p[:, 1] >= y0) & (p[:, 1] <= y1))
+    assert p[:, 2].min() >= BALL_RADIUS - 1e-12 and p[:, 2].max() < 2.0
+    rally = Rally(0)
+    rally.position(np.array([30.0]))
+    kicks, bounces = np.array(rally.kick_times), np.array(rally.bounce_times)
+    assert np.sum(kicks < 8.0) >= 5 and np.sum(kicks < 30.0) >= 20
+    assert len(bounces) > len(kicks)  # bounces between kicks too
+    # every event is at floor level
+    assert_allclose(rally.position(np.concatenate([kicks, bounces]))[:, 2], BALL_RADIUS,
+                    rtol=0, atol=1e-12)
+
+
+def _velocity_at(rally: Rally, t: float, side: int) -> np.ndarray:
+    h = 1e-7
+    a, b = rally.position(np.array([t + side * h, t + side * 2 * h]))
+    return side * (b - a) / h
+
+
+def test_rally_bounces_with_restitution_and_kicks_change_velocity():
+    rally = Rally(0)
+    rally.position(np.array([8.0]))
+    kicks = set(rally.kick_times)
+    bounce = next(b for b in rally.bounce_times if b not in kicks)
+    v_in, v_out = _velocity_at(rally, bounce, -1), _velocity_at(rally, bounce, +1)
+    assert v_in[2] < 0 and v_out[2] == pytest.approx(-0.7 * v_in[2], rel=1e-4)
+    assert_allclose(v_out[:2], 0.9 * v_in[:2], rtol=1e-4)
+    kick = rally.kick_times[1]
+    v_in, v_out = _velocity_at(rally, kick, -1), _velocity_at(rally, kick, +1)
+    assert np.linalg.norm(v_out - v_in) > 1.0  # a sudden change
+    assert v_out[2] > 0.5 * G * 0.35 - 1e-6  # a chip: up again, at least the shortest flight
+
+
+def test_rally_flies_under_gravity_and_quadratic_drag():
+    rally = Rally(0)
+    t = np.array([0.1, 0.2, 0.25])  # inside the first flight, between events
+    rally.position(np.array([1.0]))
+    assert t.max() + 1e-3 < rally.bounce_times[0]
+    h = 1e-3
+    v = (rally.position(t + h) - rally.position(t - h)) / (2 * h)
+    a = (rally.position(t + h) - 2 * rally.position(t) + rally.position(t - h)) / h**2
+    k = Ball().drag_per_metre
+    assert k == pytest.approx(1.2 * 0.45 * np.pi * 0.021335**2 / (2 * 0.04593), rel=1e-12)
+    expected = -k * np.linalg.norm(v, axis=1)[:, None] * v - np.array([0.0, 0.0, G])
+    assert_allclose(a, expected, rtol=0, atol=1e-3)
+    # drag matters: a drag-free ball with the same kicks flies farther
+    free = Rally(0, ball=Ball(drag_coefficient=0.0))
+    gap = np.linalg.norm(rally.position(np.array([0.5])) - free.position(np.array([0.5])))
+    assert gap > 2e-3
+
+
+def test_rally_integration_is_accurate_and_deterministic():
+    t = np.linspace(-0.1, 8.0, 3001)
+    a = get_motion("rally").position(t)
+    fine = Rally(0, step_s=2.5e-4).position(t)
+    assert np.abs(a - fine).max() < 1e-8  # metres: RK4 steps and Hermite interpolation
+    # asked piecewise, in any order: the same positions
+    other = Rally(0)
+    pieces = [other.position(t[i::3]) for i in (2, 0, 1)]
+    again = np.empty_like(a)
+    for i, piece in zip((2, 0, 1), pieces, strict=True):
+        again[i::3] = piece
+    assert np.array_equal(again, a)
+    assert not np.allclose(rally_motion(1).position(t), a)  # another seed, another rally
+    assert rally_motion(1).name == "rally-1"
+
+
+def test_rally_is_seen_by_every_paper3_camera():
+    from pslog.rig import apply_timing, builtin_rig
+    from pslog.simulation import simulate
+
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    det, _ = simulate(rig, get_motion("rally"), 20.0)
+    seen = det.candidates_per_frame() > 0
+    for i in range(len(rig)):
+        assert seen[det.frame_camera == i].mean() > 0.95

@@ -395,3 +395,67 @@ def test_a_rig_of_thousands_of_cameras_is_refused():
     with pytest.raises(RigError, match="at most 256"):
         Rig(cameras)
     assert len(check_baselines(Rig(cameras[:256]))) == 256
+
+
+# ---- clock keys (pslog.timing's model) ------------------------------------------------
+
+def test_clock_keys_round_trip_exactly(tmp_path):
+    rng = np.random.default_rng(4)
+    cams = [_random_camera(rng, n) for n in ("a", "b", "c")]
+    cams[0] = cams[0].replace(readout=rng.uniform(0, 1) / cams[0].fps)
+    cams[1] = cams[1].replace(clock_offset=-rng.uniform(0, 0.05),
+                              clock_drift_ppm=rng.normal(0, 30))
+    cams[2] = cams[2].replace(clock_offset=1e-17, readout=rng.uniform(0, 0.5) / cams[2].fps)
+    rig = Rig(tuple(cams), "clocks")
+    path = tmp_path / "rig.toml"
+    save_rig(rig, path)
+    loaded = load_rig(path)
+    _assert_bit_identical(rig, loaded)
+    for a, b in zip(rig.cameras, loaded.cameras, strict=True):
+        for key in ("clock_offset", "clock_drift_ppm", "readout"):
+            assert np.float64(getattr(a, key)).tobytes() == np.float64(getattr(b, key)).tobytes()
+    tables = tomllib.loads(path.read_text())["camera"]
+    # written only when non-zero
+    assert set(tables[0]) & {"clock_offset", "clock_drift_ppm", "readout"} == {"readout"}
+    assert {"clock_offset", "clock_drift_ppm"} <= set(tables[1]) and "readout" not in tables[1]
+    # a camera differing only in a clock key differs
+    assert rig.cameras[1] != rig.cameras[1].replace(clock_drift_ppm=0.0)
+
+
+def test_clock_keys_default_to_zero_and_plain_rigs_do_not_change():
+    rig = load_rig_text(GOOD_TOML)
+    for cam in rig.cameras:
+        assert (cam.clock_offset, cam.clock_drift_ppm, cam.readout) == (0.0, 0.0, 0.0)
+        assert not cam.has_clock_correction
+    assert "clock" not in builtin_rig("paper3").to_toml()
+    assert "readout" not in builtin_rig("paper3").to_toml()
+
+
+def load_rig_text(text: str) -> Rig:
+    return Rig.from_toml(text, source="x.toml")
+
+
+@pytest.mark.parametrize("key, value, message", [
+    ("clock_offset", "nan", "clock_offset must be finite"),
+    ("clock_offset", "1e6", "clock_offset 1e\\+06 s is beyond"),
+    ("clock_offset", '"3 ms"', "clock_offset must be a number"),
+    ("clock_drift_ppm", "-5000.0", "clock_drift_ppm -5000 is beyond"),
+    ("clock_drift_ppm", "inf", "clock_drift_ppm must be finite"),
+    ("readout", "-0.001", "readout -0.001 s must be in \\[0, 0.0166667 s\\)"),
+    ("readout", "0.02", "readout 0.02 s must be in \\[0, 0.0166667 s\\)"),
+])
+def test_clock_keys_are_validated_naming_file_and_camera(key, value, message):
+    text = GOOD_TOML + f"{key} = {value}\n"  # on cam2 (60 fps)
+    with pytest.raises(RigError, match=f"x.toml: camera 'cam2': {message}"):
+        load_rig_text(text)
+
+
+@pytest.mark.parametrize("key", ["clock_offset", "clock_drift_ppm"])
+def test_first_camera_clock_must_be_zero(key):
+    text = GOOD_TOML.replace('offset = 0.0\n', f'offset = 0.0\n{key} = 0.002\n', 1)
+    with pytest.raises(RigError, match=r"x.toml: camera 'cam1': the first camera of a rig "
+                                       r"defines the session clock"):
+        load_rig_text(text)
+    # its readout may be anything valid
+    text = GOOD_TOML.replace('offset = 0.0\n', 'offset = 0.0\nreadout = 0.03\n', 1)
+    assert load_rig_text(text).cameras[0].readout == 0.03

@@ -247,3 +247,105 @@ def test_absurd_simulation_values_are_refused_saying_why():
         shutter_times(rig.cameras[0], 1e9)
     with pytest.raises(InputError, match="frame period"):
         check_exposure(rig, 0.05)
+
+
+# ---- clock faults (pslog.timing's model) ----------------------------------------------------
+
+def _schedule_ns(rig: Rig, det) -> np.ndarray:
+    """Nominal (true) top-row time of each frame of ``det``, ns, from the rig's schedule."""
+    offset = np.array([c.offset for c in rig.cameras])[det.frame_camera]
+    fps = np.array([c.fps for c in rig.cameras])[det.frame_camera]
+    return np.round((offset + det.frame_index / fps) * NS).astype(np.int64)
+
+
+def _check_truth_is_the_model(rig: Rig, options: SimulationOptions, motion_name="spiral"):
+    """Noise-free: each detection's true time by the model (true parameters, detected row)
+    is a truth sample, and the truth there projects onto the detection."""
+    from pslog.simulation import true_rig
+    from pslog.timing import observations
+
+    motion = get_motion(motion_name)
+    det, truth = simulate(rig, motion, options=options)
+    obs = observations(det, true_rig(rig, options))
+    at = np.searchsorted(truth.time_ns, obs.time_ns)
+    nearest = np.minimum(np.abs(truth.time_ns[np.clip(at, 0, len(truth) - 1)] - obs.time_ns),
+                         np.abs(truth.time_ns[np.clip(at - 1, 0, len(truth) - 1)] - obs.time_ns))
+    assert nearest.max() <= 1  # ns: the model rounds its correction to the nanosecond
+    assert_allclose(truth.position_world, motion.position(truth.time_ns / NS), rtol=0, atol=0)
+    expected, visible = _projections(rig, obs.camera, motion.position(obs.time_ns / NS))
+    assert visible.all()
+    assert_allclose(obs.uv, expected, rtol=0, atol=1e-6)
+    assert len(obs) >= 0.9 * det.n_frames  # the ball is seen nearly always
+    return det, truth, obs
+
+
+def test_clock_offset_fault_logs_times_off_by_the_offset():
+    rig = _paper3()
+    options = SimulationOptions(clock_offset_s={"cam2": 3.5e-3, "cam3": -2.25e-3})
+    det, _, _ = _check_truth_is_the_model(rig, options)
+    # true = logged + offset: logged = schedule - offset, exactly (hand-computed)
+    shift = np.array([0, 3_500_000, -2_250_000])[det.frame_camera]
+    assert_array_equal(det.frame_time_ns, _schedule_ns(rig, det) - shift)
+
+
+def test_drift_fault_logs_times_on_the_drifting_clock():
+    rig = _paper3()
+    options = SimulationOptions(clock_drift_ppm={"cam3": 40.0})
+    det, _, _ = _check_truth_is_the_model(rig, options)
+    true = _schedule_ns(rig, det)
+    expected = np.where(det.frame_camera == 2, true / (1 + 40e-6), true)
+    assert np.abs(det.frame_time_ns - expected).max() <= 0.5 + 1e-6
+    assert (true - det.frame_time_ns)[det.frame_camera == 2].max() > 40e-6 * 1.1 * NS
+
+
+def test_readout_fault_captures_the_ball_at_its_row():
+    rig = _paper3()
+    options = SimulationOptions(readout_s={"cam1": 0.02, "cam2": 0.025, "cam3": 0.03})
+    det, _, obs = _check_truth_is_the_model(rig, options, "throw")
+    # the logged time is the top row's, on the schedule
+    assert_array_equal(det.frame_time_ns, _schedule_ns(rig, det))
+    # the ball's capture is later by readout * v / height (hand: 20 ms at the bottom row)
+    best = det.best()
+    delay = {(c, k): t for c, k, t in zip(obs.camera, obs.frame_index, obs.time_ns, strict=True)}
+    for c, k, t, v in zip(best.camera, best.frame_index, best.time_ns, best.uv[:, 1],
+                          strict=True):
+        assert abs(delay[(c, k)] - t - [0.02, 0.025, 0.03][c] * v / 480 * NS) <= 1
+    # and the ball moved: the fixed point mattered (a rolling shutter is not a delay of the
+    # top row's position)
+    nominal, _ = simulate(rig, get_motion("throw"))
+    assert np.abs(nominal.best().uv - best.uv).max() > 1.0
+
+
+def test_host_jitter_moves_only_the_stamps():
+    rig = _paper3()
+    clean, truth0 = simulate(rig, get_motion("spiral"), 3.0, SimulationOptions(seed=4))
+    det, truth = simulate(rig, get_motion("spiral"), 3.0,
+                          SimulationOptions(seed=4, host_jitter_s=1e-3))
+    assert_array_equal(truth.time_ns, truth0.time_ns)  # the shutters kept their times
+    a = np.lexsort((clean.frame_index, clean.frame_camera))
+    b = np.lexsort((det.frame_index, det.frame_camera))
+    assert_array_equal(det.frame_index[b], clean.frame_index[a])  # indices exact
+    dev = (det.frame_time_ns[b] - clean.frame_time_ns[a]) / NS
+    assert np.std(dev) == pytest.approx(1e-3, rel=0.15) and abs(np.mean(dev)) < 3e-4
+    assert_array_equal(_best_by_frame(det)[b], _best_by_frame(clean)[a])
+
+
+def test_every_fault_together_still_follows_the_model():
+    rig = _paper3()
+    options = SimulationOptions(clock_offset_s={"cam2": -4e-3}, clock_drift_ppm={"cam3": -25.0},
+                                readout_s={"cam1": 0.01, "cam3": 0.02})
+    _check_truth_is_the_model(rig, options, "throw")
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    (dict(clock_offset_s={"cam9": 1e-3}), "clock_offset for unknown camera 'cam9'"),
+    (dict(clock_offset_s={"cam1": 1e-3}), "'cam1' is the first of the rig and defines the "
+                                          "session clock"),
+    (dict(clock_drift_ppm={"cam1": 5.0}), "'cam1' is the first of the rig"),
+    (dict(clock_drift_ppm={"cam2": 5000.0}), "clock_drift_ppm 5000 is beyond"),
+    (dict(readout_s={"cam3": 0.04}), "readout 0.04 s must be in"),
+    (dict(host_jitter_s=0.02), "host jitter 0.02 s must be below half a frame period"),
+])
+def test_bad_faults_are_refused_naming_the_camera(kwargs, message):
+    with pytest.raises(InputError, match=message):
+        simulate(_paper3(), get_motion("spiral"), options=SimulationOptions(**kwargs))

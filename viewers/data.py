@@ -17,6 +17,7 @@ from pslog.errors import InputError
 from pslog.fusion import METHODS, TypeAConstruction, explain_type_a, fuse_all
 from pslog.log import Session, read_session
 from pslog.records import NS, Observations, Track
+from pslog.timing import observations as timed_observations
 
 #: The method fused on the fly when a session has no stored track (it shows the paper's
 #: Figure 2 construction).
@@ -132,7 +133,7 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
                 name = new
             tracks[name] = track
 
-    observations = session.detections.best()
+    observations = timed_observations(session.detections, session.rig)
     wanted = parse_methods(methods)
     if wanted is None:
         wanted = list(tracks) or ([DEFAULT_METHOD] if len(session.rig) >= 2

@@ -80,6 +80,7 @@ def _run(args: argparse.Namespace, folder: Path) -> int:
     from pslog.fusion import METHODS, default_methods, fuse_all
     from pslog.log import copy_session, read_session
     from pslog.rig import apply_timing, builtin_rig
+    from pslog.timing import observations
 
     session_path, fused_path = folder / "session.mcap", folder / "fused.mcap"
     rig = apply_timing(builtin_rig("paper3"), "typeA")
@@ -92,8 +93,8 @@ def _run(args: argparse.Namespace, folder: Path) -> int:
                      fast=not args.realtime, frames=True, force=args.force, status=sys.stdout)
 
     session = read_session(session_path)
-    print(f"2/4 fusing {len(session.detections.best())} detections with every method type-A "
-          f"timing suits")
+    n_obs = len(observations(session.detections, session.rig))
+    print(f"2/4 fusing {n_obs} detections with every method type-A timing suits")
     methods = default_methods(session.detections, session.rig)
     skipped = [m for m in METHODS if m not in methods]
     if skipped:

@@ -36,9 +36,10 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _export_detections(session, path: str, force: bool) -> None:
-    from pslog.log.csvio import write_detections_csv
+    from pslog.log.csvio import session_clock_origin, write_detections_csv
 
-    n = write_detections_csv(session.detections, path, force=force, inputs=[session.path])
+    n = write_detections_csv(session.detections, path, force=force, inputs=[session.path],
+                             origin_ns=session_clock_origin(session.metadata, session.path))
     print(f"wrote {path}: {n} detections")
 
 

@@ -56,6 +56,7 @@ def run(args: argparse.Namespace) -> int:
     )
     from pslog.log import copy_session, read_session
     from pslog.rig import check_baselines, resolve_rig
+    from pslog.timing import observations as timed_observations
 
     output = check_output(args.output, args.force)
     session = read_session(args.session)
@@ -76,7 +77,7 @@ def run(args: argparse.Namespace) -> int:
     options = FusionOptions(tolerance_s=args.tolerance_ms / 1e3,
                             max_gap_s=None if args.max_gap_ms is None else args.max_gap_ms / 1e3,
                             rate_hz=args.rate)
-    observations = session.detections.best()
+    observations = timed_observations(session.detections, rig)  # the rig's clock model
     if len(observations) == 0:
         raise FusionError(f"{args.session} has no detection to fuse")
     if args.methods:

@@ -11,8 +11,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_rig(parser)
     parser.add_argument("--detections", required=True, metavar="DET.csv",
                         help="detections CSV, header camera,time,u,v (optional frame,score); "
-                             "time in seconds "
-                             "on the common clock, pixels as detected; rows in any order")
+                             "time in seconds on any clock common to the cameras (negative or "
+                             "Unix-epoch too: the session records its origin and 'pslog "
+                             "export' gives the times back), pixels as detected; rows in any "
+                             "order")
     parser.add_argument("--timing", default="rig", choices=("sync", "typeA", "typeB", "rig"),
                         help="set the rig's shutter offsets from a preset (default: 'rig', the "
                              "rig's own offsets); the session's timing label names the preset "
@@ -25,18 +27,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from pslog.log import SessionWriter
-    from pslog.log.csvio import read_detections_csv
+    from pslog.log.csvio import (
+        CLOCK_ORIGIN_KEY,
+        format_time,
+        read_detections_csv,
+        session_clock,
+    )
     from pslog.rig import apply_timing, resolve_rig, timing_label
 
     output = check_output(args.output, args.force)
     rig = resolve_rig(args.rig)
     if args.timing != "rig":
         rig = apply_timing(rig, args.timing)
-    detections = read_detections_csv(args.detections, rig)
+    detections, origin_ns = session_clock(read_detections_csv(args.detections, rig))
+    metadata = {CLOCK_ORIGIN_KEY: str(origin_ns)} if origin_ns else {}
     with SessionWriter(output, rig, force=args.force, timing=timing_label(rig),
                        source=f"pslog import {args.detections}", on_error="discard",
-                       inputs=[args.detections]) as writer:
+                       inputs=[args.detections], metadata=metadata) as writer:
         writer.add_detections(detections)
     print(f"wrote {output}: {detections.n_candidates} detections in {detections.n_frames} "
-          f"frames of {len(rig)} cameras ({', '.join(rig.names)})")
+          f"frames of {len(rig)} cameras ({', '.join(rig.names)})"
+          + (f"; session clock origin {format_time(origin_ns)} s (the CSV's times = session "
+             f"times + origin)" if origin_ns else ""))
     return 0

@@ -95,6 +95,18 @@ def _text(info: dict) -> list[str]:
             f"  {c['name']:<8} {c['frames']:>6}  {c['fps_measured']:6.2f} / {c['fps_nominal']:<6g}"
             f"  {_ms(c['offset_measured_s']):>11} / {_ms(c['offset_nominal_s']):<11}"
             f"  {_pct(c['detection_rate']):>7}  {c['images']:>6}")
+    if info["clock_corrected"]:
+        lines.append("  clock model (true = logged + offset + drift * logged + readout * v / "
+                     "height; applied when fusing):")
+        for c in info["cameras"]:
+            lines.append(f"    {c['name']:<8} offset {c['clock_offset_s'] * 1e3:+.4f} ms, drift "
+                         f"{c['clock_drift_ppm']:+.3f} ppm, readout "
+                         f"{c['readout_s'] * 1e3:.4f} ms")
+    if info["clock_origin_ns"]:
+        from pslog.log.csvio import format_time
+
+        lines.append(f"  session clock origin {format_time(info['clock_origin_ns'])} s "
+                     f"(original times = session times + origin; 'pslog export' adds it)")
     tracks = ", ".join(f"{m} ({n} points)" for m, n in info["tracks"].items()) or "none"
     lines.append(f"  truth: {'yes' if info['truth'] else 'no'}; tracks: {tracks}; "
                  f"events: {info['events']}")

@@ -22,6 +22,34 @@ from ._common import (
 _TIMINGS = ("sync", "typeA", "typeB", "rig")
 
 
+def _finite(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if value != value or value in (float("inf"), float("-inf")):
+        raise argparse.ArgumentTypeError(f"must be a finite number, got {text!r}")
+    return value
+
+
+def _camera_value(unit: str, scale: float, all_cameras: bool = False):
+    """argparse type: ``CAM=VALUE`` (a camera name and a finite number in ``unit``) ->
+    ``(name, value * scale)``; with ``all_cameras`` a bare ``VALUE`` is ``(None, ...)``:
+    every camera."""
+    def parse(text: str):
+        name, sep, value = text.partition("=")
+        if not sep:
+            if all_cameras:
+                return None, _finite(text) * scale
+            raise argparse.ArgumentTypeError(f"expected CAM={unit.upper()} (a camera name, "
+                                             f"'=', a number of {unit}), got {text!r}")
+        if not name.strip():
+            raise argparse.ArgumentTypeError(f"no camera name before '=' in {text!r}")
+        return name.strip(), _finite(value) * scale
+    parse.__name__ = f"CAM={unit}"
+    return parse
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from pslog.motion import MOTIONS
 
@@ -43,6 +71,25 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="fraction of frames lost entirely (default %(default)s)")
     parser.add_argument("--miss-rate", type=fraction, default=0.0, metavar="F",
                         help="fraction of frames with no detection (default %(default)s)")
+    parser.add_argument("--clock-offset", type=_camera_value("ms", 1e-3), action="append",
+                        default=[], metavar="CAM=MS",
+                        help="fault: camera CAM's clock is off by MS milliseconds (true = "
+                             "logged + offset; not the first camera, which defines the clock); "
+                             "repeatable. The session's rig keeps the nominal 0: 'pslog sync' "
+                             "recovers it")
+    parser.add_argument("--drift", type=_camera_value("ppm", 1.0), action="append",
+                        default=[], metavar="CAM=PPM",
+                        help="fault: camera CAM's clock drifts by PPM parts per million (not "
+                             "the first camera); repeatable")
+    parser.add_argument("--readout", type=_camera_value("ms", 1e-3, all_cameras=True),
+                        action="append", default=[], metavar="[CAM=]MS",
+                        help="fault: rolling shutters reading top to bottom row in MS "
+                             "milliseconds (below a frame period); MS alone: every camera; "
+                             "repeatable")
+    parser.add_argument("--host-jitter", type=nonnegative_float, default=0.0, metavar="MS",
+                        help="fault: standard deviation of the logged stamps around the "
+                             "shutter times, milliseconds (host arrival jitter; frame "
+                             "indices stay exact), below half a frame period")
     parser.add_argument("--seed", type=seed, default=0, metavar="N",
                         help="random seed (default %(default)s)")
     parser.add_argument("-o", "--output", required=True, metavar="SESSION.mcap",
@@ -56,13 +103,16 @@ def run(args: argparse.Namespace) -> int:
     from pslog.log import SessionWriter
     from pslog.motion import get_motion
     from pslog.records import NS
-    from pslog.rig import apply_timing, resolve_rig, timing_label
+    from pslog.rig import Rig, apply_timing, resolve_rig, timing_label
     from pslog.simulation import (
+        TRUTH_CLOCK_KEY,
         SimulationOptions,
         check_duration,
         check_jitter,
         check_noise,
         simulate,
+        true_rig,
+        truth_clock,
     )
 
     output = check_output(args.output, args.force)
@@ -71,28 +121,58 @@ def run(args: argparse.Namespace) -> int:
         rig = apply_timing(rig, args.timing)
     timing = timing_label(rig)  # the label always says what the offsets are
     motion = get_motion(args.motion)
+    readout = {}
+    for name, value in args.readout:  # in order: a later value wins
+        readout.update({n: value for n in rig.names} if name is None else {name: value})
+    faults = {"clock_offset_s": dict(args.clock_offset), "clock_drift_ppm": dict(args.drift),
+              "readout_s": readout}
     options = SimulationOptions(noise_px=args.noise_px, jitter_s=args.jitter,
                                 drop_rate=args.drop_rate, miss_rate=args.miss_rate,
-                                seed=args.seed)
+                                seed=args.seed, host_jitter_s=args.host_jitter / 1e3, **faults)
     duration = motion.duration if args.duration is None else args.duration
     # command-line values too large for this rig: exit 2, as argparse's own refusals
-    for option, check, value in (("--jitter", check_jitter, args.jitter),
-                                 ("--noise-px", check_noise, args.noise_px),
-                                 ("--duration", check_duration, duration)):
+    for option, check, value in (
+            ("--jitter", check_jitter, args.jitter),
+            ("--host-jitter", lambda r, v: check_jitter(r, v, "host jitter"),
+             args.host_jitter / 1e3),
+            ("--noise-px", check_noise, args.noise_px),
+            ("--duration", check_duration, duration)):
         try:
             check(rig, value)
         except InputError as exc:
             return usage_error("simulate", f"argument {option}: {exc}")
+    for option, key in (("--clock-offset", "clock_offset_s"), ("--drift", "clock_drift_ppm"),
+                        ("--readout", "readout_s")):
+        try:
+            true_rig(rig, SimulationOptions(**{key: faults[key]}))
+        except InputError as exc:
+            return usage_error("simulate", f"argument {option}: {exc}")
+    try:
+        true_rig(rig, options)
+    except InputError as exc:
+        return usage_error("simulate", f"arguments --clock-offset/--drift/--readout: {exc}")
+    # the session's rig holds the nominal clock (zeros): the faults are for 'pslog sync'
+    # to find; their true values are kept in the metadata to score it
+    clock = truth_clock(rig, options)
     detections, truth = simulate(rig, motion, duration, options)
+    nominal = Rig(tuple(c.replace(clock_offset=0.0, clock_drift_ppm=0.0, readout=0.0)
+                        for c in rig.cameras), rig.name)
     detections, truth, n_early = drop_before_zero(detections, truth)
     settings = {"motion": motion.name, "duration_s": repr(float(duration)),
                 "noise_px": repr(args.noise_px), "jitter_s": repr(args.jitter),
                 "drop_rate": repr(args.drop_rate), "miss_rate": repr(args.miss_rate),
                 "seed": str(args.seed)}
+    faulted = {k: v for k, v in (
+        ("clock_offset_s", args.clock_offset), ("clock_drift_ppm", args.drift),
+        ("readout_s", args.readout), ("host_jitter_s", args.host_jitter / 1e3)) if v}
+    for key, value in faulted.items():
+        settings[key] = (repr(value) if key == "host_jitter_s" else
+                         ",".join(f"{'*' if n is None else n}={v!r}" for n, v in value))
     source = "pslog simulate " + " ".join(f"{k}={v}" for k, v in settings.items())
-    with SessionWriter(output, rig, force=args.force, timing=timing, source=source,
-                       metadata={f"simulate.{k}": v for k, v in settings.items()},
-                       on_error="discard") as writer:
+    metadata = {f"simulate.{k}": v for k, v in settings.items()}
+    metadata[TRUTH_CLOCK_KEY] = clock
+    with SessionWriter(output, nominal, force=args.force, timing=timing, source=source,
+                       metadata=metadata, on_error="discard") as writer:
         writer.add_detections(detections)
         writer.add_truth(truth)
     span = (detections.frame_time_ns[-1] - detections.frame_time_ns[0]) / NS \
@@ -100,12 +180,15 @@ def run(args: argparse.Namespace) -> int:
     print(f"wrote {output}: {len(rig)} cameras ({', '.join(rig.names)}), timing {timing}, "
           f"motion {motion.name}, {detections.n_frames} frames over {span:.3f} s, "
           f"{detections.n_candidates} detections, {len(truth)} truth points"
-          + (f" ({n_early} jittered frames before t = 0 dropped)" if n_early else ""))
+          + (f" ({n_early} frames logged before t = 0 dropped)" if n_early else "")
+          + (f"; clock faults ({', '.join(faulted)}) kept as {TRUTH_CLOCK_KEY!r} in the "
+             f"metadata, the rig holds the nominal clock: run 'pslog sync'" if faulted else ""))
     return 0
 
 
 def drop_before_zero(detections, truth):
-    """Remove frames (and truth samples) that jitter moved before the session clock's zero:
+    """Remove frames (and truth samples) that jitter or a clock fault moved before the
+    session clock's zero:
     the recording starts at t = 0 and MCAP log times cannot be negative.
 
     Returns (detections, truth, number of frames dropped).

@@ -32,6 +32,7 @@ import numpy as np
 from ..errors import FusionError
 from ..records import Detections, Observations, Track
 from ..rig import Rig
+from ..timing import observations as timed_observations
 from ._prepare import Prepared, default_max_gap_s, prepare
 from .prediction import fuse_predicted
 from .pseudo import PseudoStereoPoints, TypeAConstruction, fuse_type_a, pseudo_stereo_points
@@ -193,7 +194,7 @@ def default_methods(
     """
     options = options or FusionOptions()
     if isinstance(observations, Detections):
-        observations = observations.best()
+        observations = timed_observations(observations, rig)
     check_tolerance(rig, options.tolerance_s)
     _, n_cameras = sync_groups(observations, len(rig), options.tolerance_s)
     shared, alone = bool(np.any(n_cameras >= 2)), bool(np.any(n_cameras == 1))
@@ -208,7 +209,8 @@ def fuse(
 
     Parameters
     ----------
-    observations : Observations, or Detections (their best candidate per frame is used)
+    observations : Observations, or Detections (their best candidate per frame is used, at
+        its true time by the rig's timing model: :func:`pslog.timing.observations`)
     rig : Rig, whose camera order the observations' camera indices refer to
     method : one of :data:`METHODS`
     options : FusionOptions
@@ -221,7 +223,7 @@ def fuse(
     check_method(method)
     options = options or FusionOptions()
     if isinstance(observations, Detections):
-        observations = observations.best()
+        observations = timed_observations(observations, rig)
     if len(rig) < 2:
         raise FusionError(f"fusion needs at least two cameras; rig has {len(rig)}")
     check_tolerance(rig, options.tolerance_s)
@@ -238,7 +240,7 @@ def fuse_all(
     for method in methods:
         check_method(method)
     if isinstance(observations, Detections):
-        observations = observations.best()
+        observations = timed_observations(observations, rig)
     if len(rig) < 2:
         raise FusionError(f"fusion needs at least two cameras; rig has {len(rig)}")
     check_tolerance(rig, (options or FusionOptions()).tolerance_s)
@@ -252,7 +254,7 @@ def explain_type_a(
     """The paper's Figure 2 construction behind every type-A point (see TypeAConstruction)."""
     options = options or FusionOptions()
     if isinstance(observations, Detections):
-        observations = observations.best()
+        observations = timed_observations(observations, rig)
     prep = prepare(observations, rig)
     return fuse_type_a(prep, options.max_gap_s or default_max_gap_s(rig))[1]
 

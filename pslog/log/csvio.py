@@ -5,8 +5,9 @@ Detections CSV (import and export use exactly this format)::
     camera,time,u,v[,frame][,score]
     cam1,0.000000000,412.5,233.25,0,1.0
 
-- ``camera``: a camera name of the rig; ``time``: capture time in seconds on the session's
-  common clock (parsed exactly as a decimal, rounded to the nanosecond); ``u, v``: pixels as
+- ``camera``: a camera name of the rig; ``time``: capture time in seconds on any clock
+  common to the cameras (parsed exactly as a decimal, rounded to the nanosecond; negative and
+  Unix-epoch times included, see below); ``u, v``: pixels as
   detected (distorted); ``frame``: the camera's frame index (optional); ``score``: detector
   confidence in [0, 1] (optional, default 1).
 - Rows may come in any order. Rows with the same camera and time are the candidates of one
@@ -17,6 +18,14 @@ Detections CSV (import and export use exactly this format)::
 
 Export writes all six columns, times as exact decimals with 9 digits and pixels with
 ``repr`` precision, so import -> export -> import reproduces every value.
+
+Times from any clock: a session stores times >= 0 counted from a session start (MCAP log
+times are unsigned, and the timing model's drift term counts from it). CSV times all in
+``[0, 1e6 s)`` are stored as they are; otherwise (a negative time, e.g. a jittered first
+frame at -0.4 ms, or Unix-epoch times) the session clock's origin is the earliest time
+rounded down to a whole second, recorded in the session metadata as ``clock_origin_ns``
+(decimal integer nanoseconds, :func:`session_clock`), and export adds it back, so the
+original times come back to the nanosecond. Times are never converted through float64.
 """
 
 from __future__ import annotations
@@ -42,12 +51,18 @@ class _Invalid(ValueError):
     """A parsed but invalid cell value; the message is the reason shown to the user."""
 
 
-#: Latest time the session clock holds, seconds (int64 nanoseconds: about 292 years).
+#: Largest time accepted, seconds, either sign (int64 nanoseconds: about 292 years).
 _MAX_TIME_S = Decimal(2**63 - 1) / NS
+#: CSV times all within [0, this) seconds are stored as they are (session clock origin 0);
+#: others get an origin (:func:`session_clock`). 1e6 s is 11.6 days: beyond any recording
+#: counted from its start, far below Unix-epoch times (1.7e9 s).
+PLAIN_CLOCK_LIMIT_S = 1_000_000
+#: Session metadata key of the session clock's origin: decimal integer nanoseconds.
+CLOCK_ORIGIN_KEY = "clock_origin_ns"
 
 
 def _time_ns(text: str) -> int:
-    """Exact decimal seconds >= 0 -> integer ns (half-even rounding below 1 ns)."""
+    """Exact decimal seconds (any sign) -> integer ns (half-even rounding below 1 ns)."""
     try:
         value = Decimal(text)
     except InvalidOperation:
@@ -56,12 +71,11 @@ def _time_ns(text: str) -> int:
         raise _Invalid("not a finite number of seconds")
     # compare before scaling: a huge exponent would overflow the decimal context
     if value.copy_abs() > _MAX_TIME_S:  # copy_abs: exact, no context
-        raise _Invalid(f"beyond the session clock's range (0 to {float(_MAX_TIME_S):.3g} s)")
+        raise _Invalid(f"beyond the range of times (±{float(_MAX_TIME_S):.3g} s)")
+    # exact: the decimal context has 28 digits, an int64 of nanoseconds at most 19
     ns = int((value * NS).to_integral_value(rounding=ROUND_HALF_EVEN))
-    if ns < 0:
-        raise _Invalid("before the session clock's zero (times are seconds >= 0)")
-    if ns >= 2**63:
-        raise _Invalid(f"beyond the session clock's range (0 to {float(_MAX_TIME_S):.3g} s)")
+    if not -(2**63) < ns < 2**63:
+        raise _Invalid(f"beyond the range of times (±{float(_MAX_TIME_S):.3g} s)")
     return ns
 
 
@@ -117,8 +131,35 @@ def format_time(time_ns: int) -> str:
     return f"{sign}{seconds}.{ns:09d}"
 
 
+def session_clock(detections: Detections) -> tuple[Detections, int]:
+    """``detections`` on a session clock, and its origin: ``(shifted, origin_ns)`` with
+    ``shifted`` times = original - ``origin_ns``, all >= 0.
+
+    ``origin_ns`` is 0 when every time is already in ``[0, PLAIN_CLOCK_LIMIT_S)`` seconds
+    (the session keeps the times as given); otherwise the earliest time rounded down to a
+    whole second (so the session's times keep the original sub-second digits).
+    """
+    times = detections.frame_time_ns
+    if len(times) == 0:
+        return detections, 0
+    first, last = int(times.min()), int(times.max())
+    if first >= 0 and last < PLAIN_CLOCK_LIMIT_S * NS:
+        return detections, 0
+    origin = (first // NS) * NS  # floor, also for negative times
+    if last - origin >= 2**63:
+        raise InputError(f"times span {(last - first) / NS:.3g} s: a session holds at most "
+                         f"{float(_MAX_TIME_S):.3g} s")
+    shifted = Detections(detections.camera_names, detections.frame_time_ns - origin,
+                         detections.frame_camera, detections.frame_index, detections.cand_frame,
+                         detections.cand_uv, detections.cand_radius, detections.cand_score)
+    return shifted, origin
+
+
 def read_detections_csv(path, rig: Rig) -> Detections:
     """Parse a detections CSV (format in the module docstring) against ``rig``'s cameras.
+
+    Times are the CSV's own (int64 ns, any sign); :func:`session_clock` puts them on a
+    session clock for writing.
 
     Raises InputError naming the line (and column) of the first malformed row or unknown
     camera.
@@ -244,13 +285,16 @@ def _check_one_time_per_frame(rig: Rig, frame_camera, frame_index, frame_time, c
 
 
 def write_detections_csv(detections: Detections, path, *, force: bool = False,
-                         inputs=()) -> int:
+                         inputs=(), origin_ns: int = 0) -> int:
     """Write every candidate as a row (``camera,time,u,v,frame,score``) in time order;
-    returns the number of rows. ``path`` may not be one of ``inputs`` (the files the
-    detections came from); it appears only when complete."""
+    returns the number of rows. Times are written on the original clock: ``origin_ns`` (the
+    session's clock origin, :func:`session_clock`) is added back exactly. ``path`` may not
+    be one of ``inputs`` (the files the detections came from); it appears only when
+    complete."""
     rows = detections.cand_frame
     names = np.asarray(detections.camera_names, dtype=object)[detections.frame_camera[rows]]
-    times = detections.frame_time_ns[rows].tolist()
+    origin = int(origin_ns)
+    times = [t + origin for t in detections.frame_time_ns[rows].tolist()]  # Python ints
     frames = detections.frame_index[rows].tolist()
     u = detections.cand_uv[:, 0].tolist()
     v = detections.cand_uv[:, 1].tolist()
@@ -264,7 +308,8 @@ def write_detections_csv(detections: Detections, path, *, force: bool = False,
 
 def export_tracks_csv(session, path, *, force: bool = False) -> int:
     """Write the fused tracks of ``session`` (a :class:`~pslog.log.Session`) as CSV:
-    ``time,x,y,z,camera,method`` (seconds, world metres, camera name), then one column per
+    ``time,x,y,z,camera,method`` (seconds on the original clock, like the detections: the
+    session's clock origin added back; world metres, camera name), then one column per
     quality field any track has (empty where a track lacks it). Rows sorted by method, time.
     Returns the number of rows; InputError if the session has no tracks. ``path`` may not
     be the session's file; it appears only when complete."""
@@ -273,6 +318,7 @@ def export_tracks_csv(session, path, *, force: bool = False) -> int:
         raise InputError(f"{session.path} has no fused tracks (run 'pslog fuse' first)")
     quality = sorted({k for t in tracks.values() for k in t.quality})
     names = session.rig.names
+    origin = session_clock_origin(session.metadata, session.path)
     count = 0
     with replacing_text_file(path, force, [session.path]) as f:
         f.write(",".join((*TRACK_COLUMNS, *quality)) + "\n")
@@ -284,6 +330,26 @@ def export_tracks_csv(session, path, *, force: bool = False) -> int:
                     track.time_ns.tolist(), track.position_world.tolist(),
                     track.camera.tolist(), strict=True)):
                 extra = "".join("," + ("" if col[i] is None else repr(col[i])) for col in cols)
-                f.write(f"{format_time(t)},{x!r},{y!r},{z!r},{names[c]},{method}{extra}\n")
+                f.write(f"{format_time(t + origin)},{x!r},{y!r},{z!r},{names[c]},{method}{extra}\n")
             count += len(track)
     return count
+
+
+def session_clock_origin(metadata, path="session") -> int:
+    """The session clock's origin, integer ns, from a session's metadata
+    (:data:`CLOCK_ORIGIN_KEY`); 0 for sessions without one (all older sessions).
+    LogFormatError naming ``path`` if the value is not a decimal integer."""
+    from ..errors import LogFormatError
+
+    text = metadata.get(CLOCK_ORIGIN_KEY)
+    if text is None:
+        return 0
+    try:
+        origin = int(text.strip(), 10)
+    except (ValueError, AttributeError):
+        raise LogFormatError(f"{path}: session metadata {CLOCK_ORIGIN_KEY} {text!r} is not "
+                             f"an integer number of nanoseconds") from None
+    if not -(2**63) <= origin < 2**63:
+        raise LogFormatError(f"{path}: session metadata {CLOCK_ORIGIN_KEY} {text!r} is out "
+                             f"of range")
+    return origin

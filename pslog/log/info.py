@@ -98,7 +98,10 @@ def session_info(path) -> dict:
 
     On a finished file: ``cameras`` (per camera: name, frames, fps nominal/measured, shutter
     offset as the rig states it and as measured (see :func:`timing_table`), detection rate,
-    images), ``topics`` (message counts), ``duration_s``, ``start_s``, ``end_s``, ``truth``,
+    images, the timing model's ``clock_offset_s``, ``clock_drift_ppm``, ``readout_s``),
+    ``clock_corrected`` (any of those non-zero), ``clock_origin_ns`` (the session clock's
+    origin on the original clock, 0 if none), ``topics`` (message counts), ``duration_s``,
+    ``start_s``, ``end_s``, ``truth``,
     ``tracks`` (method -> points), ``events``, metadata fields, ``truncated: False`` and
     ``damaged`` (every chunk is checked: one dict per damaged chunk, see
     :func:`pslog.log.recover.describe_damage`; the rest of the summary leaves them out).
@@ -130,7 +133,12 @@ def session_info(path) -> dict:
         row["fps_nominal"] = cam.fps
         row["offset_nominal_s"] = cam.offset  # as the rig states it
         row["images"] = counts.get(S.image_topic(cam.name), 0)
+        # the timing model's parameters (pslog.timing), applied when fusing
+        row["clock_offset_s"] = cam.clock_offset
+        row["clock_drift_ppm"] = cam.clock_drift_ppm
+        row["readout_s"] = cam.readout
     meta = session.metadata
+    from .csvio import session_clock_origin
     return {
         "path": str(path),
         "truncated": False,
@@ -142,6 +150,8 @@ def session_info(path) -> dict:
         "rig": rig.name,
         "cameras": cameras,
         "offset_reference": rig.names[0],
+        "clock_corrected": any(cam.has_clock_correction for cam in rig.cameras),
+        "clock_origin_ns": session_clock_origin(meta, path),
         "topics": counts,
         "frames": det.n_frames,
         "candidates": det.n_candidates,

@@ -1,0 +1,303 @@
+"""The timing model: when a detection was really captured, from when it was logged.
+
+THE model (every part of pslog that corrects times uses the functions below)::
+
+    true time = logged + clock_offset_c + clock_drift_ppm_c * 1e-6 * (logged - session start)
+                + readout_c * v / height_c
+
+for a detection of camera ``c`` at distorted pixel row ``v`` (0 = top row), logged at time
+``logged`` on the session clock:
+
+- ``session start`` is 0 on the session clock (the session's times are counted from it), so
+  the drift term is ``clock_drift_ppm * 1e-6 * logged``.
+- The first camera of a rig defines the session clock: its ``clock_offset`` and
+  ``clock_drift_ppm`` are 0 (:class:`~pslog.rig.Rig` enforces it). ``readout`` (rolling
+  shutter, top row to bottom row, seconds; 0 = global shutter) is per camera, the first one
+  included. A frame's logged time refers to its top row.
+- The parameters are the rig's optional camera keys ``clock_offset`` (s),
+  ``clock_drift_ppm`` and ``readout`` (s). Recorded log times are never rewritten: readers
+  apply the correction (:func:`observations`), so a session can be re-synchronised at will.
+
+Host timestamps that jitter (a frame stamped when it reached the host) are a separate matter:
+:func:`regularize_times` replaces them by a robust straight-line fit against frame index.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import InputError
+from .records import NS, Detections, Observations
+from .rig import Rig
+
+#: ``pslog sync --regularize auto`` regularizes a camera's stamps when the robust jitter
+#: around the line (:attr:`Regularization.jitter_s`) is above this, seconds.
+REGULARIZE_AUTO_JITTER_S = 0.2e-3
+#: Times between frames beyond this multiple of the robust residual scale are outliers.
+_OUTLIER_SCALES = 5.0
+#: Smallest residual ever called an outlier, seconds: stamps rounded to a microsecond (or a
+#: perfectly regular clock, MAD 0) are not outliers for their rounding.
+_OUTLIER_FLOOR_S = 2e-6
+#: 1.4826 * MAD is the standard deviation of Gaussian residuals.
+_MAD_TO_STD = 1.4826
+
+
+def _broadcast(logged, v_px, height, clock_offset_s, drift_ppm, readout_s):
+    return np.broadcast_arrays(
+        np.asarray(logged), np.asarray(v_px, dtype=np.float64),
+        np.asarray(height, dtype=np.float64), np.asarray(clock_offset_s, dtype=np.float64),
+        np.asarray(drift_ppm, dtype=np.float64), np.asarray(readout_s, dtype=np.float64))
+
+
+def true_times_ns(logged_ns, v_px, height, clock_offset_s, drift_ppm, readout_s) -> np.ndarray:
+    """True capture times of detections from their logged times, by the timing model.
+
+    ``true = logged + clock_offset + drift_ppm * 1e-6 * logged + readout * v / height``
+    (module docstring; session start = 0 on the session clock).
+
+    Parameters
+    ----------
+    logged_ns : int array (n,), logged times on the session clock, nanoseconds
+    v_px : float array (n,), the detection's distorted pixel row (0 = top)
+    height : array (n,) or scalar, image height of the detection's camera, pixels
+    clock_offset_s : array (n,) or scalar, seconds
+    drift_ppm : array (n,) or scalar, parts per million
+    readout_s : array (n,) or scalar, rolling-shutter readout (top to bottom row), seconds
+
+    All arguments broadcast (per-observation camera parameters allowed).
+
+    Returns
+    -------
+    (n,) int64 nanoseconds: the logged time plus the correction rounded to the nearest
+    nanosecond (the correction is computed in float64 on its own, so large logged times
+    lose no precision).
+    """
+    logged, v, h, off, drift, readout = _broadcast(logged_ns, v_px, height, clock_offset_s,
+                                                   drift_ppm, readout_s)
+    logged = logged.astype(np.int64)
+    correction = off * NS + drift * 1e-6 * logged.astype(np.float64) + _readout_ns(readout, v, h)
+    return logged + np.rint(correction).astype(np.int64)
+
+
+def _readout_ns(readout, v, h) -> np.ndarray:
+    """``readout * v / height`` in ns; 0 for a global shutter whatever ``v`` (even NaN)."""
+    with np.errstate(invalid="ignore"):
+        term = np.where(readout != 0, readout * NS * v / h, 0.0)
+    if not np.all(np.isfinite(term)):
+        raise InputError("a rolling-shutter time needs the detection's pixel row: got a "
+                         "non-finite row")
+    return term
+
+
+def true_times_s(logged_s, v_px, height, clock_offset_s, drift_ppm, readout_s) -> np.ndarray:
+    """:func:`true_times_ns` in float seconds (for estimators), shapes as there.
+
+    ``true = logged + clock_offset + drift_ppm * 1e-6 * logged + readout * v / height``.
+    Derivatives (see :func:`clock_jacobian`): d/d clock_offset = 1,
+    d/d drift_ppm = 1e-6 * logged_s, d/d readout = v / height (seconds per second of
+    readout); d/d v = readout / height.
+    """
+    logged, v, h, off, drift, readout = _broadcast(logged_s, v_px, height, clock_offset_s,
+                                                   drift_ppm, readout_s)
+    logged = logged.astype(np.float64)
+    return logged + off + drift * 1e-6 * logged + readout * v / h
+
+
+def clock_jacobian(logged_s, v_px, height) -> np.ndarray:
+    """Derivatives of :func:`true_times_s` with respect to ``(clock_offset_s, drift_ppm,
+    readout_s)``, shape (n, 3): ``[1, 1e-6 * logged_s, v / height]`` per detection (the model
+    is linear in its parameters, so these do not depend on them)."""
+    logged, v, h = np.broadcast_arrays(np.asarray(logged_s, dtype=np.float64),
+                                       np.asarray(v_px, dtype=np.float64),
+                                       np.asarray(height, dtype=np.float64))
+    return np.stack([np.ones_like(logged), 1e-6 * logged, v / h], axis=-1)
+
+
+def logged_times_ns(true_ns, v_px, height, clock_offset_s, drift_ppm,
+                    readout_s) -> np.ndarray:
+    """The exact inverse of :func:`true_times_ns`: the logged times (int64 ns) whose true
+    times are ``true_ns`` (for the simulator), shapes as there.
+
+    ``logged = (true - clock_offset - readout * v / height) / (1 + drift_ppm * 1e-6)``,
+    then corrected so that ``true_times_ns(logged_times_ns(t, ...), ...) == t`` to the
+    nanosecond (off by at most 1 ns only where a positive drift makes the forward map step
+    over a nanosecond: ``1 + drift * 1e-6`` true ns per logged ns).
+    """
+    true, v, h, off, drift, readout = _broadcast(true_ns, v_px, height, clock_offset_s,
+                                                 drift_ppm, readout_s)
+    true = true.astype(np.int64)
+    rate = 1.0 + drift * 1e-6
+    fixed = off * NS + _readout_ns(readout, v, h)
+    # logged - true, small: computed apart from the (possibly large) times themselves
+    delta = -(fixed + drift * 1e-6 * true.astype(np.float64)) / rate
+    logged = true + np.rint(delta).astype(np.int64)
+    for _ in range(3):  # rounding may leave the forward map 1 ns off: step onto it
+        miss = true - true_times_ns(logged, v, h, off, drift, readout)
+        if not np.any(miss):
+            break
+        logged = logged + miss
+    return logged
+
+
+def camera_parameters(rig: Rig) -> dict[str, np.ndarray]:
+    """Per camera of ``rig`` (rig order): ``height`` (px), ``clock_offset`` (s),
+    ``clock_drift_ppm``, ``readout`` (s), each an array (n_cameras,) float64."""
+    return {key: np.array([float(getattr(c, key)) for c in rig.cameras])
+            for key in ("height", "clock_offset", "clock_drift_ppm", "readout")}
+
+
+def observations(detections: Detections, rig: Rig) -> Observations:
+    """The fusion input of a session: the best candidate of every frame (as
+    :meth:`~pslog.records.Detections.best`) at its true time by the rig's timing model.
+
+    Each observation's time is corrected by its camera's ``clock_offset``,
+    ``clock_drift_ppm`` and ``readout`` (:func:`true_times_ns`, ``v`` = the candidate's
+    pixel row), then the observations are sorted again by (time, camera). If two
+    observations of one camera land on the same nanosecond (possible only with parameters
+    no real camera has, e.g. rows far outside the image), the later frame (by frame index)
+    is moved on by 1 ns until every (time, camera) is unique: deterministic, and nothing
+    dropped. With every clock parameter 0 this is exactly ``detections.best()``.
+
+    Raises
+    ------
+    InputError if a correction is to be applied and the detections' cameras are not the
+    rig's (names and order).
+    """
+    best = detections.best()
+    # no correction: exactly .best(), whatever the rig (fusion checks the cameras itself)
+    if not any(c.has_clock_correction for c in rig.cameras) or len(best) == 0:
+        return best
+    if tuple(detections.camera_names) != rig.names:
+        raise InputError(f"detections of cameras {', '.join(detections.camera_names)} do not "
+                         f"match the rig's {', '.join(rig.names)} (names and order)")
+    p = camera_parameters(rig)
+    cam = best.camera
+    time_ns = true_times_ns(best.time_ns, best.uv[:, 1], p["height"][cam],
+                            p["clock_offset"][cam], p["clock_drift_ppm"][cam],
+                            p["readout"][cam])
+    frame_index, uv = best.frame_index, best.uv
+    while True:  # terminates: each pass moves the repeats strictly later
+        order = np.lexsort((frame_index, cam, time_ns))
+        time_ns, cam, frame_index, uv = time_ns[order], cam[order], frame_index[order], uv[order]
+        repeat = np.zeros(len(time_ns), dtype=bool)
+        repeat[1:] = (time_ns[1:] == time_ns[:-1]) & (cam[1:] == cam[:-1])
+        if not repeat.any():
+            return Observations(time_ns, cam, uv, frame_index)
+        time_ns = time_ns + repeat.astype(np.int64)
+
+
+@dataclass(frozen=True)
+class Regularization:
+    """What :func:`regularize_times` found for one camera.
+
+    Attributes
+    ----------
+    period_s : float, fitted seconds per frame index (NaN with fewer than 2 frames)
+    start_s : float, fitted time of the first frame (its frame index) on the input clock,
+        seconds (NaN with no frame)
+    jitter_s : float, robust standard deviation of the stamps around the line
+        (1.4826 * median absolute residual), seconds; NaN with fewer than 3 frames
+    n_frames : int, frames fitted
+    n_outliers : int, stamps further than ``5 * jitter`` (and 2 µs) from the line, left out
+        of the fit (their times are replaced like every other)
+    n_dropped : int, frame indices missing between the first and the last (dropped frames)
+    """
+
+    period_s: float
+    start_s: float
+    jitter_s: float
+    n_frames: int
+    n_outliers: int
+    n_dropped: int
+
+    def as_dict(self) -> dict:
+        return {k: getattr(self, k) for k in self.__dataclass_fields__}
+
+
+def regularize_times(logged_ns, frame_index) -> tuple[np.ndarray, Regularization]:
+    """Replace one camera's jittery host timestamps by a robust straight line of time
+    against frame index.
+
+    A camera's shutter runs on its own crystal: frame ``k`` is captured at
+    ``start + period * k`` (a clock drift is just a slightly different period); the host
+    stamps each frame when it arrives, with a delay that jitters by milliseconds. Frame
+    indices stay exact (a gap is a dropped frame). The line is fitted robustly: a first
+    period from the median of consecutive slopes, then least squares on the stamps within
+    ``5`` robust scales (and at least 2 µs) of the line, three times; stamps outside are
+    outliers (counted, and replaced by the line like the others).
+
+    Parameters
+    ----------
+    logged_ns : (n,) int64, one camera's logged times, nanoseconds (any order)
+    frame_index : (n,) int64, the frames' indices
+
+    Returns
+    -------
+    times_ns : (n,) int64, the fitted times, in the input order
+    report : :class:`Regularization`
+    """
+    t = np.asarray(logged_ns, dtype=np.int64)
+    k = np.asarray(frame_index, dtype=np.int64)
+    if t.shape != k.shape or t.ndim != 1:
+        raise InputError(f"logged times {t.shape} and frame indices {k.shape} must be "
+                         f"one-dimensional and of one length")
+    n = len(t)
+    nan = float("nan")
+    if n < 2:
+        return t.copy(), Regularization(nan, t[0] / NS if n else nan, nan, n, 0, 0)
+    if len(np.unique(k)) < 2:
+        raise InputError("regularizing times needs at least two distinct frame indices")
+    # small float numbers: relative to the first stamp and index (epoch ns keep precision)
+    t0, k0 = int(t.min()), int(k.min())
+    rel = (t - t0).astype(np.float64) / NS
+    kk = (k - k0).astype(np.float64)
+    order = np.argsort(kk, kind="stable")
+    dk, dt = np.diff(kk[order]), np.diff(rel[order])
+    step = dk > 0
+    period = float(np.median(dt[step] / dk[step]))
+    start = float(np.median(rel - period * kk))
+    inlier = np.ones(n, dtype=bool)
+    for _ in range(3):
+        resid = rel - (start + period * kk)
+        scale = _MAD_TO_STD * float(np.median(np.abs(resid - np.median(resid[inlier]))[inlier]))
+        inlier = np.abs(resid) <= max(_OUTLIER_SCALES * scale, _OUTLIER_FLOOR_S)
+        if np.count_nonzero(inlier) < 2 or len(np.unique(kk[inlier])) < 2:
+            inlier = np.ones(n, dtype=bool)
+            break
+        # least squares on the inliers, centred for conditioning
+        km, tm = kk[inlier].mean(), rel[inlier].mean()
+        dkm = kk[inlier] - km
+        period = float(np.dot(dkm, rel[inlier] - tm) / np.dot(dkm, dkm))
+        start = tm - period * km
+    resid = rel - (start + period * kk)
+    jitter = _MAD_TO_STD * float(np.median(np.abs(resid))) if n >= 3 else nan
+    inlier = np.abs(resid) <= max(_OUTLIER_SCALES * jitter if n >= 3 else 0.0,
+                                  _OUTLIER_FLOOR_S)
+    fitted = t0 + np.rint((start + period * kk) * NS).astype(np.int64)
+    n_dropped = int(k.max() - k.min() + 1 - len(np.unique(k)))
+    return fitted, Regularization(period, (t0 + start * NS) / NS, jitter, n,
+                                  int(np.count_nonzero(~inlier)), n_dropped)
+
+
+def regularize_detections(detections: Detections, cameras=None
+                          ) -> tuple[Detections, dict[str, Regularization]]:
+    """:func:`regularize_times` applied to each camera's frames (or only those named in
+    ``cameras``); returns the detections with the fitted frame times (candidates kept with
+    their frames) and each regularized camera's report by name."""
+    names = detections.camera_names
+    wanted = set(names if cameras is None else cameras)
+    time_ns = detections.frame_time_ns.copy()
+    reports = {}
+    for i, name in enumerate(names):
+        rows = np.flatnonzero(detections.frame_camera == i)
+        if name not in wanted or len(rows) == 0:
+            continue
+        time_ns[rows], reports[name] = regularize_times(time_ns[rows],
+                                                        detections.frame_index[rows])
+    out = Detections.from_frames(names, time_ns, detections.frame_camera,
+                                 detections.frame_index, detections.cand_frame,
+                                 detections.cand_uv, detections.cand_radius,
+                                 detections.cand_score)
+    return out, reports

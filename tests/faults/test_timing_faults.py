@@ -1,0 +1,84 @@
+"""Hostile timing values through the real CLI (issue 9): clock keys in rigs, clock faults of
+``pslog simulate``, times from any clock in ``pslog import`` / ``export``. Each case asserts
+the three promises of :mod:`tests.faults.promises`."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+
+from pslog.rig import apply_timing, builtin_rig
+
+from .promises import assert_one_line_error, assert_untouched, fingerprint, run_pslog
+
+
+@pytest.fixture(scope="module")
+def inputs(tmp_path_factory) -> Path:
+    """A folder with a type-A session, its rig and an old simulated output."""
+    from pslog import get_motion, simulate
+    from pslog.log import SessionWriter
+    from pslog.rig import save_rig
+
+    folder = tmp_path_factory.mktemp("inputs")
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    detections, truth = simulate(rig, get_motion("spiral"), 1.0)
+    with SessionWriter(folder / "s.mcap", rig, timing="typeA") as writer:
+        writer.add_detections(detections)
+        writer.add_truth(truth)
+    with SessionWriter(folder / "origin.mcap", rig, timing="typeA",
+                       metadata={"clock_origin_ns": "12 s"}) as writer:
+        writer.add_detections(detections)
+    save_rig(rig, folder / "rig.toml")
+    (folder / "old.mcap").write_bytes((folder / "s.mcap").read_bytes())
+    return folder
+
+
+@pytest.fixture
+def work(inputs, tmp_path) -> Path:
+    folder = tmp_path / "w"
+    shutil.copytree(inputs, folder)
+    return folder
+
+
+def _refused(work: Path, code: int, args, contains=()) -> str:
+    before = fingerprint(work)
+    line = assert_one_line_error(run_pslog(*args, cwd=work), code, contains=contains)
+    assert_untouched(before, work)
+    return line
+
+
+@pytest.mark.parametrize("fault, why", [
+    (("--clock-offset", "cam1=1"), ("--clock-offset", "'cam1'", "defines the session clock")),
+    (("--drift", "cam9=3"), ("--drift", "unknown camera 'cam9'")),
+    (("--drift", "cam2=inf"), ("--drift", "finite")),
+    (("--readout", "50"), ("--readout", "readout 0.05 s must be in")),
+    (("--host-jitter", "17"), ("--host-jitter", "below half a frame period")),
+])
+def test_bad_simulated_clock_faults_exit_2_and_replace_nothing(work, fault, why):
+    _refused(work, 2, ["simulate", "--rig", "paper3", *fault, "-o", "old.mcap", "--force"],
+             why)
+
+
+@pytest.mark.parametrize("line, why", [
+    ("clock_offset = 0.002", ("rig.toml", "camera 'cam1'", "defines the session clock")),
+    ("readout = 0.04", ("rig.toml", "camera 'cam1'", "readout 0.04 s must be in")),
+    ("clock_drift_ppm = nan", ("rig.toml", "camera 'cam1'", "clock_drift_ppm must be finite")),
+])
+def test_bad_clock_keys_in_a_rig_are_refused_naming_file_and_camera(work, line, why):
+    rig = (work / "rig.toml").read_text()
+    (work / "rig.toml").write_text(rig.replace("offset = 0.0\n", f"offset = 0.0\n{line}\n", 1))
+    _refused(work, 1, ["fuse", "s.mcap", "--rig", "rig.toml", "-o", "f.mcap"], why)
+
+
+def test_times_spanning_beyond_a_session_clock_are_refused(work):
+    (work / "wide.csv").write_text("camera,time,u,v\ncam1,-9000000000,1,2\n"
+                                   "cam2,9000000000,3,4\n")
+    _refused(work, 1, ["import", "--rig", "paper3", "--detections", "wide.csv", "-o", "w.mcap"],
+             ("times span", "a session holds at most"))
+
+
+def test_a_malformed_clock_origin_is_one_line(work):
+    _refused(work, 1, ["export", "origin.mcap", "--detections", "d.csv"],
+             ("origin.mcap", "clock_origin_ns '12 s' is not an integer"))
