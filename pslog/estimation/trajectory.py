@@ -55,7 +55,7 @@ than a few knot spans (a ball rolling to a stop) is smoothed rather than broken.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -146,6 +146,7 @@ class Trajectory:
     band : (m, 4, 3, 3) float64, band of the control points' covariance, m²
     breaks_s : (b,) float64, seconds since ``t0_ns``, the velocity jumps found
     noise_px : float, the estimated pixel noise σ
+    spacing_s : float, the uniform knot spacing, seconds
     """
 
     t0_ns: int
@@ -155,6 +156,7 @@ class Trajectory:
     band: np.ndarray
     breaks_s: np.ndarray
     noise_px: float
+    spacing_s: float = 0.0
 
     def piece_of(self, time_ns: np.ndarray) -> np.ndarray:
         """Index of the piece covering each time (n,), -1 outside every piece."""
@@ -202,6 +204,7 @@ class Fit:
     covariance : (n, 3, 3) float64, m², its marginal covariance
     residual_px : (n,) float64, reprojection residual of each observation, pixels
     weight : (n,) float64, final robust weight of each observation (0: rejected)
+    pieces : list of (n_p,) int64, the observation rows of each fitted piece
     """
 
     trajectory: Trajectory
@@ -210,6 +213,7 @@ class Fit:
     covariance: np.ndarray
     residual_px: np.ndarray
     weight: np.ndarray
+    pieces: list = field(default_factory=list)
 
 
 class _Problem:
@@ -229,15 +233,27 @@ class _Problem:
         sizes = np.array([n_control(k) for k in knots])
         self.offset = np.r_[0, np.cumsum(sizes)[:-1]].astype(np.int64)
         self.m = int(sizes.sum())
-        firsts, values = [], []
-        for p, rows in enumerate(self.rows_of_piece):
-            first, N = basis(knots[p], self.t[rows], 0)
-            firsts.append(first + self.offset[p])
-            values.append(N[:, 0])
-        self.first = np.concatenate(firsts)
-        self.N = np.concatenate(values)
+        self.set_times(self.t)
         self.prior_ab, self.prior_rhs, self.prior_const = _prior_normal(
             knots, self.offset, self.m, self.prior)
+
+    def set_times(self, t: np.ndarray) -> None:
+        """Observation times (n,) s since ``t0_ns`` (the clock estimator moves them); the
+        basis at each, its value ``N`` and first derivative ``N1`` (n_fit, 4)."""
+        self.t = t
+        firsts, values, slopes = [], [], []
+        for p, rows in enumerate(self.rows_of_piece):
+            first, N = basis(self.knots[p], t[rows], 1)
+            firsts.append(first + self.offset[p])
+            values.append(N[:, 0])
+            slopes.append(N[:, 1])
+        self.first = np.concatenate(firsts)
+        self.N = np.concatenate(values)
+        self.N1 = np.concatenate(slopes)
+
+    def velocities(self, control: np.ndarray) -> np.ndarray:
+        index = self.first[:, None] + np.arange(DEGREE + 1)
+        return np.einsum("na,nad->nd", self.N1, control[index])
 
     def positions(self, control: np.ndarray) -> np.ndarray:
         index = self.first[:, None] + np.arange(DEGREE + 1)
@@ -547,7 +563,7 @@ def fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions | None = 
     band, _ = _information(problem, control, sigma, r, J)
     trajectory = Trajectory(problem.t0_ns, problem.knots, problem.offset, control, band,
                             np.concatenate([np.asarray(b) for b in breaks]) if breaks
-                            else np.zeros(0), sigma)
+                            else np.zeros(0), sigma, spacing)
     position = np.full((n, 3), np.nan)
     covariance = np.full((n, 3, 3), np.nan)
     residual = np.full(n, np.nan)
@@ -558,7 +574,7 @@ def fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions | None = 
     weight[problem.rows] = w
     used = np.zeros(n, dtype=bool)
     used[problem.rows] = True
-    return Fit(trajectory, used, position, covariance, residual, weight)
+    return Fit(trajectory, used, position, covariance, residual, weight, pieces)
 
 
 def _refit_control(problem: _Problem, X: np.ndarray) -> np.ndarray:
