@@ -127,12 +127,25 @@ def estimate_clocks(obs: Observations, rig: Rig, estimate=("offset",),
 
     # rounds: the bounces are found (and their instants fixed) at the clocks of the round
     # before, then the clocks and the trajectory solved jointly, until the clocks settle
+    scale = _scale_of(unknowns)
+    previous_step = None
     for _ in range(_ROUNDS):
         before = theta
         problem, control, theta, sigma, r, w, S = _solve_joint(
             obs, rig, unknowns, theta, params, options)
-        if np.max(np.abs(theta - before) * _scale_of(unknowns), initial=0.0) < 2e-6:
+        step = (theta - before) * scale
+        if np.max(np.abs(step), initial=0.0) < 2e-6:
             break  # the clocks no longer move the breaks: converged
+        if previous_step is not None:
+            # the rounds converge geometrically along one direction (the breaks' instants
+            # and the clocks pull on each other): jump to the limit of the series (Aitken)
+            ratio = float(step @ previous_step) / max(float(previous_step @ previous_step),
+                                                      1e-30)
+            if 0.3 < ratio < 0.95:
+                theta = theta + (theta - before) * ratio / (1 - ratio)
+                previous_step = None
+                continue
+        previous_step = step
     cam = obs.camera[problem.rows]
     cov = np.linalg.inv(S) if len(unknowns) else np.zeros((0, 0))
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
