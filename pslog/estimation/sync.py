@@ -61,6 +61,9 @@ _KEY = {"offset": "clock_offset", "drift": "clock_drift_ppm", "readout": "readou
 MIN_DETECTIONS = 30
 #: The coarse scan fits at most this long a stretch of the session, seconds.
 _SCAN_WINDOW_S = 12.0
+#: A session longer than _N_WINDOWS · _WINDOW_S is synced on that many windows spread over it.
+_N_WINDOWS = 6
+_WINDOW_S = 15.0
 _ITERATIONS = 10
 _ROUNDS = 8
 
@@ -122,6 +125,7 @@ def estimate_clocks(obs: Observations, rig: Rig, estimate=("offset",),
     params = camera_parameters(rig)
     _check_coverage(obs, rig, options.max_gap_s)
 
+    obs = _windows(obs)
     if "offset" in estimate:
         theta = _scan_offsets(obs, rig, unknowns, theta, params, search_s, options)
 
@@ -230,6 +234,21 @@ def _solve_joint(obs, rig, unknowns, theta, params, options):
     control, theta, sigma, r, w, J, S, _ = _joint_step(
         problem, solver, obs, unknowns, theta, params, control, sigma, dt_dtheta, t0, dof)
     return problem, control, theta, sigma, r, w, S
+
+
+def _windows(obs: Observations) -> Observations:
+    """A long session's detections in ``_N_WINDOWS`` windows of ``_WINDOW_S`` spread evenly
+    over it (all of a shorter one): the clocks are global, so these determine them (the
+    windows' spread keeps the drift's lever arm) at a bounded cost."""
+    t = obs.time_ns / NS
+    span = t[-1] - t[0] if len(t) else 0.0
+    if span <= _N_WINDOWS * _WINDOW_S:
+        return obs
+    starts = t[0] + np.linspace(0.0, span - _WINDOW_S, _N_WINDOWS)
+    keep = np.zeros(len(t), dtype=bool)
+    for a in starts:
+        keep |= (t >= a) & (t < a + _WINDOW_S)
+    return obs.select(keep)
 
 
 def _times(obs: Observations, unknowns, theta, params) -> np.ndarray:

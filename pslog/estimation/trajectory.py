@@ -260,7 +260,11 @@ class _Problem:
         return np.einsum("na,nad->nd", self.N, control[index])
 
     def project(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Residuals (n, 2) pixels and ``∂uv/∂X`` (n, 2, 3) of the fitted observations."""
+        """Residuals (n, 2) pixels and ``∂uv/∂X`` (n, 2, 3) of the fitted observations.
+
+        A point at or behind its camera (a wild iterate) has no projection: its row is set to
+        0 with a zero Jacobian (it adds nothing to the normal equations) and flagged in
+        ``self.invalid``, which the cost charges as a gross outlier."""
         cams = self.obs.camera[self.rows]
         uv = np.empty((len(X), 2))
         J = np.empty((len(X), 2, 3))
@@ -268,7 +272,11 @@ class _Problem:
             sel = cams == i
             if np.any(sel):
                 uv[sel], J[sel] = project_with_jacobian(cam, X[sel])
-        return uv - self.obs.uv[self.rows], J
+        r = uv - self.obs.uv[self.rows]
+        self.invalid = ~(np.all(np.isfinite(r), axis=1) & np.all(np.isfinite(J), axis=(1, 2)))
+        r[self.invalid] = 0.0
+        J[self.invalid] = 0.0
+        return r, J
 
     def data_rows(self, J: np.ndarray, target: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -445,8 +453,10 @@ class _Solver:
         """The robust cost (1) + (2) of ``control`` whose residuals are ``r``."""
         s = np.sum(r * r, axis=1) / sigma**2
         c2 = _CAUCHY**2
-        data = np.where(np.isfinite(s), c2 * np.log1p(s / c2), np.inf)
-        return float(np.sum(data) + _prior_cost(self.problem, control))
+        data = c2 * np.log1p(s / c2)
+        # a point behind its camera costs as a detection 1000 σ off
+        penalty = np.count_nonzero(self.problem.invalid) * c2 * np.log1p(1e6 / c2)
+        return float(np.sum(data) + penalty + _prior_cost(self.problem, control))
 
     def run(self, control: np.ndarray, sigma: float, iterations: int, dof: float = 1.0
             ) -> tuple[np.ndarray, float, np.ndarray, np.ndarray, np.ndarray]:
@@ -645,11 +655,11 @@ def _find_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
             out.append(np.zeros(0))
             continue
         # the jump lies near the peak: search two detections beyond its neighbours, leaving
-        # four detections of the piece at either end (a segment without detections would
-        # have a free velocity)
+        # two detections of the piece at either end (four equations for the end segment's
+        # three velocity components; a segment without them would have a free velocity)
         j = np.searchsorted(t, centers)
-        a = np.maximum(t[np.clip(j - 3, 0, len(t) - 1)], t[3])
-        b = np.minimum(t[np.clip(j + 2, 0, len(t) - 1)], t[-4])
+        a = np.maximum(t[np.clip(j - 3, 0, len(t) - 1)], t[1])
+        b = np.minimum(t[np.clip(j + 2, 0, len(t) - 1)], t[-2])
         ok = a < b
         centers, a, b = centers[ok], a[ok], b[ok]
         limits = _neighbours(centers, known[p])
@@ -696,8 +706,8 @@ def _refine_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.n
         if len(known) == 0:
             out.append(known)
             continue
-        a = np.maximum(known - spacing, t[3])
-        b = np.minimum(known + spacing, t[-4])
+        a = np.maximum(known - spacing, t[1])
+        b = np.minimum(known + spacing, t[-2])
         ok = a < b
         limits = np.stack([np.r_[-np.inf, known[:-1]], np.r_[known[1:], np.inf]], axis=1)
         tau, _ = _breaks.scan(t, J[here], target[here], weight[here], known[ok],
