@@ -51,6 +51,15 @@ def factor(ab: np.ndarray) -> np.ndarray:
     try:
         return cholesky_banded(ab, lower=False)
     except np.linalg.LinAlgError:
+        pass
+    # a direction no detection reaches (a wild iterate put a short segment's only detection
+    # behind its camera): a Levenberg-Marquardt-like load on the diagonal keeps the step
+    # defined; the covariance then says that direction is unknown
+    loaded = ab.copy()
+    loaded[_U] += 1e-9 * np.max(np.abs(ab[_U]), initial=0.0) + 1e-12
+    try:
+        return cholesky_banded(loaded, lower=False)
+    except np.linalg.LinAlgError:
         raise FusionError("smooth: the detections leave the trajectory undetermined "
                           "(information matrix not positive definite)") from None
 

@@ -637,7 +637,9 @@ def _find_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
     out = []
     row0 = 0
     for p, k in enumerate(problem.knots):
-        here = slice(row0, row0 + len(problem.rows_of_piece[p]))
+        # the piece's rows in time order (the clock estimator moves the times)
+        here = row0 + np.argsort(t_obs[row0:row0 + len(problem.rows_of_piece[p])],
+                                 kind="stable")
         row0 += len(problem.rows_of_piece[p])
         t = t_obs[here]
         lo, hi = k[:-1], k[1:]
@@ -655,11 +657,11 @@ def _find_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
             out.append(np.zeros(0))
             continue
         # the jump lies near the peak: search two detections beyond its neighbours, leaving
-        # two detections of the piece at either end (four equations for the end segment's
-        # three velocity components; a segment without them would have a free velocity)
+        # detections of two cameras in the piece at either end (:func:`_end_limits`)
         j = np.searchsorted(t, centers)
-        a = np.maximum(t[np.clip(j - 3, 0, len(t) - 1)], t[1])
-        b = np.minimum(t[np.clip(j + 2, 0, len(t) - 1)], t[-2])
+        first_ok, last_ok = _end_limits(t, problem.obs.camera[problem.rows][here])
+        a = np.maximum(t[np.clip(j - 3, 0, len(t) - 1)], first_ok)
+        b = np.minimum(t[np.clip(j + 2, 0, len(t) - 1)], last_ok)
         ok = a < b
         centers, a, b = centers[ok], a[ok], b[ok]
         limits = _neighbours(centers, known[p])
@@ -675,6 +677,18 @@ def _find_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
                 found.append(float(tau[i]))
         out.append(np.sort(np.array(found)))
     return out
+
+
+def _end_limits(t: np.ndarray, camera: np.ndarray) -> tuple[float, float]:
+    """Earliest and latest instants a break may take in a piece: the segment it leaves at
+    either end must hold two detections of two cameras (its velocity is otherwise free along a
+    ray)."""
+    first_two = np.flatnonzero(camera != camera[0])
+    last_two = np.flatnonzero(camera != camera[-1])
+    lo = t[max(int(first_two[0]) if len(first_two) else len(t) - 1, 1)]
+    hi = t[min(int(last_two[-1]) if len(last_two) else 0, len(t) - 2)]
+    # a detection at the break's instant belongs to the segment after it
+    return float(lo) + 1e-6, float(hi)
 
 
 def _neighbours(centers: np.ndarray, known: np.ndarray) -> np.ndarray:
@@ -700,21 +714,24 @@ def _refine_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.n
     out = []
     row0 = 0
     for p, known in enumerate(breaks):
-        here = slice(row0, row0 + len(problem.rows_of_piece[p]))
+        # the piece's rows in time order (the clock estimator moves the times)
+        here = row0 + np.argsort(t_obs[row0:row0 + len(problem.rows_of_piece[p])],
+                                 kind="stable")
         row0 += len(problem.rows_of_piece[p])
         t = t_obs[here]
         if len(known) == 0:
             out.append(known)
             continue
-        a = np.maximum(known - spacing, t[1])
-        b = np.minimum(known + spacing, t[-2])
+        first_ok, last_ok = _end_limits(t, problem.obs.camera[problem.rows][here])
+        a = np.maximum(known - spacing, first_ok)
+        b = np.minimum(known + spacing, last_ok)
         ok = a < b
         limits = np.stack([np.r_[-np.inf, known[:-1]], np.r_[known[1:], np.inf]], axis=1)
         tau, _ = _breaks.scan(t, J[here], target[here], weight[here], known[ok],
                               np.stack([a[ok], b[ok]], axis=1), limits[ok], spacing,
                               _WINDOW_SPANS * spacing, options.prior)
-        new = known.copy()
-        new[ok] = tau
-        keep = np.r_[True, np.diff(np.sort(new)) > spacing]  # never two breaks in one span
-        out.append(np.sort(new)[keep])
+        # a break the moved detections no longer allow (too near a piece's end) is dropped
+        new = np.sort(tau)
+        keep = np.r_[True, np.diff(new) > spacing]  # never two breaks in one span
+        out.append(new[keep])
     return out
