@@ -153,3 +153,20 @@ def test_cli_refuses_bad_values_and_overwrites_only_with_force(tmp_path, cli, ca
             rig.names, detections.best().select(detections.best().camera == 0)))
     code, _, err = cli("sync", empty, "-o", tmp_path / "e.mcap")
     assert code == 1 and "has no detection" in err and len(err.strip().splitlines()) == 1
+
+
+def test_frames_regularized_before_the_session_start_are_left_out_of_the_copy():
+    from pslog.cli.sync import _from_session_start
+
+    rig = _rig(2)
+    motion, _ = rally(1.0, seed=95, speed=4.0)
+    detections, _ = simulate(rig, motion, 1.0)
+    shifted = Detections(detections.camera_names, detections.frame_time_ns - 20_000_000,
+                         detections.frame_camera, detections.frame_index,
+                         detections.cand_frame, detections.cand_uv, detections.cand_radius,
+                         detections.cand_score)
+    kept, early = _from_session_start(shifted)
+    assert early == int(np.count_nonzero(shifted.frame_time_ns < 0)) > 0
+    assert kept.frame_time_ns.min() >= 0 and kept.n_frames == shifted.n_frames - early
+    late = shifted.frame_time_ns[shifted.cand_frame] >= 0
+    assert_allclose(kept.cand_uv, shifted.cand_uv[late])

@@ -70,6 +70,10 @@ def run(args: argparse.Namespace) -> int:
             for name, rep in reports.items():
                 notes.append(f"{name}: host stamps regularized (jitter {rep.jitter_s * 1e3:.3f} "
                              f"ms, {rep.n_outliers} outliers, {rep.n_dropped} dropped frames)")
+            detections, early = _from_session_start(detections)
+            if early:
+                notes.append(f"{early} frame(s) regularized to before the session clock's "
+                             f"zero left out of the copy")
     obs = detections.best()
     if len(obs) == 0:
         raise FusionError(f"{args.session} has no detection: nothing to sync on")
@@ -90,6 +94,23 @@ def run(args: argparse.Namespace) -> int:
     print(f"residual {result.residual_px:.3f} px (pixel noise {result.noise_px:.3f} px); "
           f"wrote {args.output}")
     return 0
+
+
+def _from_session_start(detections):
+    """``detections`` without the frames whose (regularized) time is before 0, and how many
+    were left out: a session's log times start at its clock's zero."""
+    import numpy as np
+
+    keep = detections.frame_time_ns >= 0
+    if keep.all():
+        return detections, 0
+    new_row = np.cumsum(keep) - 1
+    cand = keep[detections.cand_frame]
+    out = detections.__class__.from_frames(
+        detections.camera_names, detections.frame_time_ns[keep], detections.frame_camera[keep],
+        detections.frame_index[keep], new_row[detections.cand_frame[cand]],
+        detections.cand_uv[cand], detections.cand_radius[cand], detections.cand_score[cand])
+    return out, int(np.count_nonzero(~keep))
 
 
 def _table(result, obs) -> str:
