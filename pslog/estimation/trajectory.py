@@ -5,9 +5,10 @@ Model
 The ball's position is a clamped cubic B-spline per *piece* of the session,
 ``p(t) = Σ_k N_k(t) c_k`` (:mod:`pslog.estimation.bspline`), with uniform knots
 ``knot_spacing`` apart. A piece ends where no camera saw the ball for longer than
-``max_gap_s``: nothing bridges such a gap and no point is output inside it. Inside a piece, a
-bounce or a kick is a knot of multiplicity 3 at its instant ``τ``: the position stays
-continuous, the velocity jumps (found automatically, below).
+``max_gap_s`` (a detection with no other camera's within a third of that is left out: one
+camera cannot triangulate): nothing bridges such a gap and no point is output inside it.
+Inside a piece, a bounce or a kick is a knot of multiplicity 3 at its instant ``τ``: the
+position stays continuous, the velocity jumps (found automatically, below).
 
 Why a B-spline: its local support makes every residual touch 4 consecutive control points, so
 the normal equations are banded and the solve is linear in the session's length (Furgale,
@@ -41,16 +42,27 @@ solution (``w_i`` the robust weights, ``P`` the prior's) is the inverse covarian
 its banded inverse (Takahashi recurrence, :mod:`pslog.estimation._normal`) gives, through the
 basis, the marginal covariance of ``p(t)`` at any ``t``.
 
-Bounces and kicks: after a fit without breaks, every span where ``‖p'' - g‖`` peaks above
-``break_accel`` is a candidate. Around each, the problem linearised at the current fit is
-solved on a local window with and without a triple knot, the knot's time minimising the cost
-(bounded scalar search between the neighbouring detections); the break is kept when it lowers
-the cost by more than ``break_threshold`` (in units of σ², a likelihood-ratio test). The whole
-session is then refitted with the kept breaks.
+Bounces and kicks: a first fit under a prior ten times looser (it follows a velocity jump
+closely, so σ is estimated right and each jump is a sharp peak); every span where
+``‖p'' - g‖`` peaks above ``break_accel`` is a candidate. Around each, the problem linearised
+at that fit is solved on a local window, under the prior (2), with and without a triple knot
+at trial instants (:mod:`pslog.estimation._breaks`: all candidates and instants in one batched
+solve, nested grid scans and a parabola between the neighbouring detections); the break is
+kept when it lowers the cost by more than ``break_threshold`` (in units of σ², a
+likelihood-ratio test). Rounds repeat until no new break; the fit under the real prior
+follows, then each break's instant is re-estimated at that fit and the session refitted.
+A break leaves detections of two cameras between it and a piece's end (a segment's velocity
+is otherwise free along a ray).
+
+Why knots every three detection intervals: 8 pixel coordinates per 3 unknowns keep the pixel
+noise estimable from the residuals, and a cubic spline with knots that close represents
+ballistic flight with drag far below a micrometre (error ~ h⁴·max‖p⁗‖/384).
 
 Limits: one camera cannot triangulate, so a piece seen by fewer than two cameras gives no
-point; the prior assumes ballistic flight between breaks; a velocity change spread over more
-than a few knot spans (a ball rolling to a stop) is smoothed rather than broken.
+point; the prior assumes ballistic flight between breaks (a rolling ball, with no gravity
+acceleration, is fitted with a small bias; air drag is absorbed by σ_a, not modelled); a
+velocity change spread over more than a few knot spans (a ball rolling to a stop) is smoothed
+rather than broken; pure numpy, several thousand detections per second.
 """
 
 from __future__ import annotations
