@@ -132,7 +132,7 @@ class SmoothOptions:
     min_noise_px: float = 0.005
     break_accel: float = 15.0
     break_threshold: float = 25.0
-    iterations: int = 6
+    iterations: int = 4
 
 
 #: Cauchy kernel scale, in units of σ on the 2-D residual norm
