@@ -29,6 +29,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "calibrate": ("calibrate", "calibrate a camera from 3D-2D points or a chessboard"),
     "rig": ("rig", "list the built-in rigs, print a rig as TOML, check a rig file"),
     "fuse": ("fuse", "fuse a session's detections into 3D tracks"),
+    "sync": ("sync", "estimate every camera's clock from the ball's detections"),
     "eval": ("evaluate", "accuracy of fused tracks against ground truth"),
     "paper": ("paper", "reproduce the paper's Tables 1 and 2"),
     "redetect": ("redetect", "re-run ball detection over a session's recorded frames"),

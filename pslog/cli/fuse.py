@@ -15,11 +15,14 @@ from ._common import (
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from pslog.fusion import METHODS
+
     parser.add_argument("session", metavar="SESSION.mcap", help="session file to fuse")
+    listing = "; ".join(f"{m.name}: {m.description}" for m in METHODS.values())
     parser.add_argument(
         "--method", action="append", dest="methods", metavar="METHOD", type=fusion_method,
-        help="fusion method: sync, nearest, typeA, typeB, linear (repeat for several; "
-             "default: every method the session's timing suits)")
+        help=f"fusion method, repeat for several (default: every method the session's timing "
+             f"suits) -- {listing}")
     parser.add_argument("-o", "--output", required=True, metavar="FUSED.mcap",
                         help="output session: a copy of the input with one topic per track")
     parser.add_argument(
@@ -33,6 +36,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-gap-ms", type=positive_float, default=None,
                         metavar="MS", help="longest time span a method may bridge, "
                                            "milliseconds (default: 3.5 frame periods)")
+    parser.add_argument("--rate", type=positive_float, default=None, metavar="HZ",
+                        help="smooth: points on a regular grid of this rate instead of at "
+                             "every detection time")
     add_force(parser)
     declare_files(parser, inputs=("session", "rig"), outputs=("output",))
 
@@ -65,8 +71,11 @@ def run(args: argparse.Namespace) -> int:
         check_tolerance(rig, args.tolerance_ms / 1e3)
     except FusionError as exc:
         return usage_error("fuse", f"argument --tolerance-ms: {exc}")
+    if args.rate is not None and args.rate > 1e6:
+        return usage_error("fuse", f"argument --rate: at most 1e6 Hz, got {args.rate:g}")
     options = FusionOptions(tolerance_s=args.tolerance_ms / 1e3,
-                            max_gap_s=None if args.max_gap_ms is None else args.max_gap_ms / 1e3)
+                            max_gap_s=None if args.max_gap_ms is None else args.max_gap_ms / 1e3,
+                            rate_hz=args.rate)
     observations = timed_observations(session.detections, rig)  # the rig's clock model
     if len(observations) == 0:
         raise FusionError(f"{args.session} has no detection to fuse")

@@ -10,19 +10,22 @@ nearest   each detection with the latest of the other cameras           Table 1 
 typeA     pseudo stereo, a point at every detection                     section 2.2, eqs. 1-4
 typeB     stereo at common instants + ray-constrained prediction        section 2.3
 linear    typeB without the ray constraint                              Table 1 "linear prediction"
+smooth    one continuous trajectory fitted to every ray (offline)       beyond the paper
 ========  ============================================================  ===================
 
-:func:`fuse` is the batch entry point. Every method is causal, so
-:class:`~pslog.fusion.stream.StreamFuser` gives the same points incrementally: a ``typeA`` or
-``nearest`` point uses no detection after its own in (time, camera) order; ``sync``, ``typeB``
-and ``linear`` group detections within the tolerance, so their point at ``t`` may also use
-detections up to ``t + tolerance``.
+:data:`METHODS` is the registry (one :class:`Method` entry per method); the CLI,
+:func:`default_methods`, the streaming fuser and the tests read it. :func:`fuse` is the batch
+entry point. Every causal method streams through :class:`~pslog.fusion.stream.StreamFuser`
+with the same points: a ``typeA`` or ``nearest`` point uses no detection after its own in
+(time, camera) order; ``sync``, ``typeB`` and ``linear`` group detections within the
+tolerance, so their point at ``t`` may also use detections up to ``t + tolerance``.
+``smooth`` (:mod:`pslog.fusion.smooth`) is offline: every point uses every detection.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -35,14 +38,6 @@ from .prediction import fuse_predicted
 from .pseudo import PseudoStereoPoints, TypeAConstruction, fuse_type_a, pseudo_stereo_points
 from .stereo import fuse_nearest, fuse_sync, sync_groups
 
-METHODS: dict[str, str] = {
-    "sync": "ordinary stereo of simultaneous detections (paper: synchronized)",
-    "nearest": "latest detection of the other cameras, as if simultaneous (paper: unsynchronized)",
-    "typeA": "pseudo stereo at every detection (paper section 2.2, eqs. 1-4)",
-    "typeB": "stereo at common instants + ray-constrained prediction (paper section 2.3)",
-    "linear": "stereo at common instants + linear prediction (paper: linear prediction)",
-}
-
 
 @dataclass(frozen=True)
 class FusionOptions:
@@ -54,17 +49,113 @@ class FusionOptions:
         linear), seconds; no group spans more, and the methods refuse a tolerance of a third
         of the rig's shortest frame period or more (:func:`check_tolerance`)
     max_gap_s : float or None, longest time span a method may bridge (brackets, predictions,
-        pairing); None: 3.5 frame periods of the slowest camera
+        pairing; for smooth, the longest time without a detection inside one trajectory
+        piece); None: 3.5 frame periods of the slowest camera
+    rate_hz : float or None, smooth only: output points on a regular grid of this rate
+        instead of at every detection time
     """
 
     tolerance_s: float = 1e-3
     max_gap_s: float | None = None
+    rate_hz: float | None = None
 
     def __post_init__(self) -> None:
         if not self.tolerance_s >= 0:
             raise FusionError(f"tolerance must be >= 0 seconds, got {self.tolerance_s!r}")
         if self.max_gap_s is not None and not self.max_gap_s > 0:
             raise FusionError(f"max gap must be > 0 seconds, got {self.max_gap_s!r}")
+        if self.rate_hz is not None and not 0 < self.rate_hz <= 1e6:
+            raise FusionError(f"rate must be in (0, 1e6] Hz, got {self.rate_hz!r}")
+
+
+@dataclass(frozen=True)
+class Method:
+    """One fusion method: a registry entry (adding a method is adding one).
+
+    Attributes
+    ----------
+    name : str, as on the command line
+    function : ``function(prepared, rig, options) -> Track``; ``options.max_gap_s`` is set
+    causal : bool, a point at ``t`` uses no detection after ``t`` (plus the tolerance when
+        ``waits_tolerance``): the method can stream (:class:`~pslog.fusion.stream.StreamFuser`);
+        False: offline only
+    waits_tolerance : bool, a point is settled only once the tolerance has passed (the methods
+        that group simultaneous detections)
+    needs : frozenset of ``"shared"`` (instants two cameras share) and ``"alone"`` (instants
+        only one camera has): the timings the method suits (empty: every timing)
+    description : one line
+    reference : where the method comes from
+    """
+
+    name: str
+    function: Callable[[Prepared, Rig, FusionOptions], Track]
+    causal: bool
+    waits_tolerance: bool
+    needs: frozenset[str]
+    description: str
+    reference: str
+
+    def suits(self, shared: bool, alone: bool) -> bool:
+        """True if a session with (or without) shared and lone instants suits the method."""
+        have = {"shared"} if shared else set()
+        if alone:
+            have.add("alone")
+        return self.needs <= have
+
+
+def _sync(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
+    return fuse_sync(prep, options.tolerance_s)
+
+
+def _nearest(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
+    return fuse_nearest(prep, options.max_gap_s)
+
+
+def _type_a(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
+    return fuse_type_a(prep, options.max_gap_s)[0]
+
+
+def _type_b(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
+    return fuse_predicted(prep, "typeB", options.tolerance_s, options.max_gap_s)
+
+
+def _linear(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
+    return fuse_predicted(prep, "linear", options.tolerance_s, options.max_gap_s)
+
+
+def _smooth(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
+    from .smooth import fuse_smooth  # scipy is imported only when smooth runs
+
+    return fuse_smooth(prep, rig, options)
+
+
+_PAPER = "Fujiyoshi et al., RoboCup 2004"
+#: The fusion methods by name, in the order tables list them.
+METHODS: dict[str, Method] = {m.name: m for m in (
+    Method("sync", _sync, True, True, frozenset({"shared"}),
+           "ordinary stereo of simultaneous detections (paper: synchronized)",
+           f"{_PAPER}, Table 1"),
+    Method("nearest", _nearest, True, False, frozenset({"alone"}),
+           "latest detection of the other cameras, as if simultaneous (paper: unsynchronized)",
+           f"{_PAPER}, Table 1"),
+    Method("typeA", _type_a, True, False, frozenset({"alone"}),
+           "pseudo stereo at every detection (paper section 2.2, eqs. 1-4)",
+           f"{_PAPER}, section 2.2"),
+    Method("typeB", _type_b, True, True, frozenset({"shared", "alone"}),
+           "stereo at common instants + ray-constrained prediction (paper section 2.3)",
+           f"{_PAPER}, section 2.3"),
+    Method("linear", _linear, True, True, frozenset({"shared", "alone"}),
+           "stereo at common instants + linear prediction (paper: linear prediction)",
+           f"{_PAPER}, Table 1"),
+    Method("smooth", _smooth, False, False, frozenset(),
+           "one continuous trajectory fitted to every detection's ray (offline)",
+           "continuous-time batch estimation: Furgale et al. 2013; Singer 1970 motion prior"),
+)}
+
+
+def causal_methods() -> list[str]:
+    """Names of the methods that can stream, in :data:`METHODS` order."""
+    return [name for name, m in METHODS.items() if m.causal]
 
 
 def check_tolerance(rig: Rig, tolerance_s: float) -> float:
@@ -107,9 +198,7 @@ def default_methods(
     check_tolerance(rig, options.tolerance_s)
     _, n_cameras = sync_groups(observations, len(rig), options.tolerance_s)
     shared, alone = bool(np.any(n_cameras >= 2)), bool(np.any(n_cameras == 1))
-    usable = {"sync": shared, "nearest": alone, "typeA": alone,
-              "typeB": shared and alone, "linear": shared and alone}
-    return [m for m in METHODS if usable[m]]
+    return [name for name, m in METHODS.items() if m.suits(shared, alone)]
 
 
 def fuse(
@@ -139,14 +228,8 @@ def fuse(
         raise FusionError(f"fusion needs at least two cameras; rig has {len(rig)}")
     check_tolerance(rig, options.tolerance_s)
     prep = prepared if prepared is not None else prepare(observations, rig)
-    max_gap_s = options.max_gap_s or default_max_gap_s(rig)
-    if method == "sync":
-        return fuse_sync(prep, options.tolerance_s)
-    if method == "nearest":
-        return fuse_nearest(prep, max_gap_s)
-    if method == "typeA":
-        return fuse_type_a(prep, max_gap_s)[0]
-    return fuse_predicted(prep, method, options.tolerance_s, max_gap_s)
+    resolved = replace(options, max_gap_s=options.max_gap_s or default_max_gap_s(rig))
+    return METHODS[method].function(prep, rig, resolved)
 
 
 def fuse_all(
@@ -177,7 +260,7 @@ def explain_type_a(
 
 
 __all__ = [
-    "METHODS", "FusionOptions", "Prepared", "PseudoStereoPoints", "TypeAConstruction",
-    "check_method", "check_tolerance", "default_methods", "explain_type_a", "fuse", "fuse_all",
-    "prepare", "pseudo_stereo_points",
+    "METHODS", "FusionOptions", "Method", "Prepared", "PseudoStereoPoints", "TypeAConstruction",
+    "causal_methods", "check_method", "check_tolerance", "default_methods", "explain_type_a",
+    "fuse", "fuse_all", "prepare", "pseudo_stereo_points",
 ]

@@ -18,10 +18,8 @@ from ..errors import FusionError
 from ..geometry import fundamental_matrices
 from ..records import NS, Observations, Track
 from ..rig import Rig
-from . import FusionOptions, check_method, check_tolerance, fuse
+from . import METHODS, FusionOptions, causal_methods, check_method, check_tolerance, fuse
 from ._prepare import default_max_gap_s, prepare
-
-_IMMEDIATE = ("typeA", "nearest")
 
 
 class StreamFuser:
@@ -30,7 +28,8 @@ class StreamFuser:
     Parameters
     ----------
     rig : Rig
-    method : a name of :data:`pslog.fusion.METHODS`
+    method : a name of a causal method of :data:`pslog.fusion.METHODS` (an offline one,
+        such as ``smooth``, is refused: each of its points uses every detection)
     options : FusionOptions
 
     Examples
@@ -44,12 +43,17 @@ class StreamFuser:
             raise FusionError(f"fusion needs at least two cameras; rig has {len(rig)}")
         self.rig = rig
         self.method = check_method(method)
+        if not METHODS[method].causal:
+            raise FusionError(f"method {method!r} is offline (each of its points uses every "
+                              f"detection) and cannot stream; streaming methods: "
+                              f"{', '.join(causal_methods())}")
+        self._immediate = not METHODS[method].waits_tolerance
         self.options = options or FusionOptions()
         check_tolerance(rig, self.options.tolerance_s)
         self._max_gap_s = self.options.max_gap_s or default_max_gap_s(rig)
         # history a new point may reach back to: two bridged gaps plus two tolerances
         self._history_ns = int((2 * self._max_gap_s + 2 * self.options.tolerance_s) * NS) + 1
-        self._settle_ns = 0 if method in _IMMEDIATE else int(self.options.tolerance_s * NS)
+        self._settle_ns = 0 if self._immediate else int(self.options.tolerance_s * NS)
         self._F = fundamental_matrices(rig.cameras)
         self._time = np.zeros(0, np.int64)
         self._camera = np.zeros(0, np.int32)
@@ -88,7 +92,7 @@ class StreamFuser:
             track = fuse(obs, self.rig, self.method, self.options,
                          prepared=prepare(obs, self.rig, self._F))
         except FusionError:
-            if not final and self.method not in _IMMEDIATE:
+            if not final and not self._immediate:
                 track = _empty(self.method)  # no common instant in the window yet
             else:
                 raise

@@ -1,0 +1,72 @@
+"""smooth throughput: detections per second fitted into one trajectory, on one core.
+
+Target (issue 9): smooth >= 50,000 detections/s. The baseline, measured in the same run on
+the same session, is ``typeA`` (the paper's method), so the ratio says what the continuous
+trajectory costs beyond it. The session is a rally (kicks, floor bounces, air drag) seen by
+three 30 fps cameras with 0.3 px noise, built by the tests' own rally generator.
+
+    python benchmarks/bench_smooth.py [--minutes 2] [--repeat 1]
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")  # one core, before numpy loads
+
+import argparse  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from _rally import rally  # noqa: E402
+
+from pslog import SimulationOptions, apply_timing, builtin_rig, simulate  # noqa: E402
+from pslog.evaluation import evaluate  # noqa: E402
+from pslog.fusion import fuse  # noqa: E402
+
+TARGET = 50_000
+
+
+def best_of(repeat: int, fn) -> tuple[float, object]:
+    best, result = float("inf"), None
+    for _ in range(repeat):
+        start = time.perf_counter()
+        result = fn()
+        best = min(best, time.perf_counter() - start)
+    return best, result
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--minutes", type=float, default=2.0, help="session length")
+    parser.add_argument("--repeat", type=int, default=1)
+    args = parser.parse_args()
+    duration = args.minutes * 60
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    motion, _ = rally(duration, seed=7, speed=4.0, kick_every_s=0.7)
+    detections, truth = simulate(rig, motion, duration, SimulationOptions(noise_px=0.3, seed=7))
+    obs = detections.best()
+    print(f"smooth benchmark: {args.minutes:g}-minute rally, 3 cameras at 30 fps, 0.3 px "
+          f"noise, {len(obs):,} detections, best of {args.repeat}")
+    base_s, type_a = best_of(args.repeat, lambda: fuse(obs, rig, "typeA"))
+    seconds, smooth = best_of(args.repeat, lambda: fuse(obs, rig, "smooth"))
+    rate = len(obs) / seconds
+    ok = rate >= TARGET
+    for name, s, track in (("typeA (baseline)", base_s, type_a), ("smooth", seconds, smooth)):
+        a = evaluate(track, truth)
+        print(f"  {name:<17} {s * 1e3:9.1f} ms  {len(obs) / s:>10,.0f} detections/s  "
+              f"mean {a.mean_mm:6.3f} mm  p95 {a.p95_mm:6.3f} mm  max {a.max_mm:7.3f} mm")
+    print(f"  smooth / typeA time: {seconds / base_s:.1f}x; target {TARGET:,} detections/s: "
+          f"{'met' if ok else 'MISSED'}")
+    print(f"  smooth points: {len(smooth):,}, median std "
+          f"{np.median(smooth.quality['std_m']) * 1e3:.2f} mm")
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,124 @@
+"""Cubic B-spline bases with derivatives, for trajectories ``p(t) = Σ_k N_k(t) c_k``.
+
+A knot vector is clamped at both ends (each end knot repeated ``DEGREE + 1`` times) and may
+hold interior knots of multiplicity 3: a cubic spline is then only C⁰ there — position
+continuous, velocity free to jump — which is how a bounce or a kick is represented.
+
+Every point ``t`` lies in one non-empty knot span ``[τ_j, τ_{j+1})`` and only the
+``DEGREE + 1`` consecutive functions ``N_{j-3} … N_j`` are non-zero there, so every residual
+of a trajectory touches 4 consecutive control points: the normal equations are banded.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+DEGREE = 3
+
+
+def clamped_knots(breaks: np.ndarray, multiplicity: np.ndarray | None = None) -> np.ndarray:
+    """Knot vector of a clamped cubic spline with the given strictly increasing breakpoints.
+
+    Parameters
+    ----------
+    breaks : (m,) float64, seconds, ``m >= 2``; the first and last are the spline's ends
+    multiplicity : (m - 2,) int, multiplicity of each interior breakpoint (1: C², 3: C⁰);
+        default 1
+
+    Returns
+    -------
+    knots : (m + 2·DEGREE + Σ(multiplicity - 1),) float64; the spline has
+    ``len(knots) - DEGREE - 1`` control points
+    """
+    breaks = np.asarray(breaks, dtype=np.float64)
+    inner = breaks[1:-1]
+    mult = np.ones(len(inner), dtype=np.int64) if multiplicity is None else np.asarray(
+        multiplicity, dtype=np.int64)
+    return np.concatenate([np.full(DEGREE + 1, breaks[0]), np.repeat(inner, mult),
+                           np.full(DEGREE + 1, breaks[-1])])
+
+
+def n_control(knots: np.ndarray) -> int:
+    """Number of control points of a cubic spline on ``knots``."""
+    return len(knots) - DEGREE - 1
+
+
+def span_index(knots: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Index ``j`` of the non-empty span ``[τ_j, τ_{j+1})`` holding each ``t`` (n,); the last
+    span is closed on the right. Points outside the knot range take the nearest end span."""
+    j = np.searchsorted(knots, t, side="right") - 1
+    return np.clip(j, DEGREE, n_control(knots) - 1)
+
+
+def basis(knots: np.ndarray, t: np.ndarray, n_derivatives: int = 2
+          ) -> tuple[np.ndarray, np.ndarray]:
+    """Values and derivatives of the non-zero cubic B-spline functions at each ``t``.
+
+    Piegl & Tiller, *The NURBS Book* (2nd ed. 1997), algorithm A2.3 (``DersBasisFuns``),
+    vectorized over points.
+
+    Parameters
+    ----------
+    knots : (K,) float64, a knot vector from :func:`clamped_knots`
+    t : (n,) float64, seconds
+    n_derivatives : int in 0..3
+
+    Returns
+    -------
+    first : (n,) int64, index of the first of the 4 non-zero functions (``j - 3``)
+    values : (n, n_derivatives + 1, 4) float64; ``values[i, d, a]`` is the d-th derivative
+        (per second^d) of ``N_{first[i] + a}`` at ``t[i]``
+    """
+    t = np.asarray(t, dtype=np.float64)
+    p, n = DEGREE, len(t)
+    j = span_index(knots, t)
+    ndu = np.zeros((n, p + 1, p + 1))
+    ndu[:, 0, 0] = 1.0
+    left = np.zeros((n, p + 1))
+    right = np.zeros((n, p + 1))
+    for r in range(1, p + 1):
+        left[:, r] = t - knots[j + 1 - r]
+        right[:, r] = knots[j + r] - t
+        saved = np.zeros(n)
+        for s in range(r):
+            ndu[:, r, s] = right[:, s + 1] + left[:, r - s]  # a knot difference, > 0
+            temp = ndu[:, s, r - 1] / ndu[:, r, s]
+            ndu[:, s, r] = saved + right[:, s + 1] * temp
+            saved = left[:, r - s] * temp
+        ndu[:, r, r] = saved
+    out = np.zeros((n, n_derivatives + 1, p + 1))
+    out[:, 0, :] = ndu[:, :, p]
+    a = np.zeros((n, 2, p + 1))
+    for r in range(p + 1):
+        s1, s2 = 0, 1
+        a[:] = 0.0
+        a[:, 0, 0] = 1.0
+        for k in range(1, n_derivatives + 1):
+            d = np.zeros(n)
+            rk, pk = r - k, p - k
+            if r >= k:
+                a[:, s2, 0] = a[:, s1, 0] / ndu[:, pk + 1, rk]
+                d = a[:, s2, 0] * ndu[:, rk, pk]
+            j1 = 1 if rk >= -1 else -rk
+            j2 = k - 1 if r - 1 <= pk else p - r
+            for jj in range(j1, j2 + 1):
+                a[:, s2, jj] = (a[:, s1, jj] - a[:, s1, jj - 1]) / ndu[:, pk + 1, rk + jj]
+                d = d + a[:, s2, jj] * ndu[:, rk + jj, pk]
+            if r <= pk:
+                a[:, s2, k] = -a[:, s1, k - 1] / ndu[:, pk + 1, r]
+                d = d + a[:, s2, k] * ndu[:, r, pk]
+            out[:, k, r] = d
+            s1, s2 = s2, s1
+    factor = 1.0
+    for k in range(1, n_derivatives + 1):
+        factor *= p - k + 1
+        out[:, k, :] *= factor
+    return j - p, out
+
+
+def evaluate(knots: np.ndarray, control: np.ndarray, t: np.ndarray, derivative: int = 0
+             ) -> np.ndarray:
+    """The spline (or its ``derivative``-th derivative) at ``t`` (n,): shape (n, 3)."""
+    first, values = basis(knots, t, derivative)
+    index = first[:, None] + np.arange(DEGREE + 1)
+    return np.einsum("na,nad->nd", values[:, derivative, :], control[index])

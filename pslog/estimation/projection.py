@@ -1,0 +1,63 @@
+"""A camera's projection to distorted pixels and its analytic Jacobian.
+
+The model is :class:`pslog.camera.Camera`'s (OpenCV pinhole + plumb_bob):
+
+    X_c = R X + t,   x = X_c / Z_c,   y = Y_c / Z_c,   r² = x² + y²
+    x_d = x·ρ + 2 p1 x y + p2 (r² + 2x²),   y_d = y·ρ + p1 (r² + 2y²) + 2 p2 x y,
+          ρ = 1 + k1 r² + k2 r⁴ + k3 r⁶
+    u = fx x_d + s y_d + cx,   v = fy y_d + cy
+
+and the Jacobian is the chain ``∂(u,v)/∂X = K₂ · ∂(x_d,y_d)/∂(x,y) · ∂(x,y)/∂X_c · R``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..camera import Camera
+
+
+def project_with_jacobian(camera: Camera, points_world: np.ndarray
+                          ) -> tuple[np.ndarray, np.ndarray]:
+    """Distorted pixels of world points and their derivative with respect to the points.
+
+    Parameters
+    ----------
+    camera : Camera
+    points_world : (n, 3) float64, metres
+
+    Returns
+    -------
+    uv : (n, 2) float64, pixels, equal to ``camera.project(points_world)[0]``; NaN for a
+        point at or behind the camera plane
+    jacobian : (n, 2, 3) float64, ``∂(u, v) / ∂(x, y, z)_world``, pixels per metre
+    """
+    points_cam = points_world @ camera.R.T + camera.t
+    z = points_cam[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv_z = np.where(z > 1e-12, 1.0 / z, np.nan)
+    x, y = points_cam[:, 0] * inv_z, points_cam[:, 1] * inv_z
+    k1, k2, p1, p2, k3 = camera.dist
+    r2 = x * x + y * y
+    radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    d_radial = k1 + r2 * (2 * k2 + 3 * k3 * r2)  # dρ / d(r²)
+    xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
+    yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+    K = camera.K
+    uv = np.stack([K[0, 0] * xd + K[0, 1] * yd + K[0, 2], K[1, 1] * yd + K[1, 2]], axis=1)
+
+    # ∂(x_d, y_d) / ∂(x, y): the distortion's Jacobian (as in Camera.undistort_normalized)
+    dist = np.empty((len(x), 2, 2))
+    dist[:, 0, 0] = radial + 2 * x * x * d_radial + 2 * p1 * y + 6 * p2 * x
+    dist[:, 0, 1] = 2 * x * y * d_radial + 2 * p1 * x + 2 * p2 * y
+    dist[:, 1, 0] = dist[:, 0, 1]
+    dist[:, 1, 1] = radial + 2 * y * y * d_radial + 6 * p1 * y + 2 * p2 * x
+    # ∂(x, y) / ∂X_c of the perspective division
+    persp = np.zeros((len(x), 2, 3))
+    persp[:, 0, 0] = inv_z
+    persp[:, 1, 1] = inv_z
+    persp[:, 0, 2] = -x * inv_z
+    persp[:, 1, 2] = -y * inv_z
+    K2 = K[:2, :2]
+    jacobian = np.einsum("ij,njk,nkl,lm->nim", K2, dist, persp, camera.R)
+    return uv, jacobian

@@ -1,0 +1,436 @@
+"""Every camera's clock from the ball itself: the trajectory and the clock parameters as one
+sparse least-squares problem.
+
+Model: the continuous-time trajectory of :mod:`pslog.estimation.trajectory` (its cost (1) +
+(2)), where a detection of camera ``c`` logged at ``ℓ`` on the session clock at pixel row
+``v`` was captured at, by the timing model (:mod:`pslog.timing`),
+
+    t = ℓ + clock_offset_c + clock_drift_ppm_c · 1e-6 · ℓ + readout_c · v / height_c
+
+and the clock parameters θ are unknowns next to the control points ``c`` — the way Kalibr
+estimates a camera–IMU time offset (Furgale, Rehder & Siegwart, IROS 2013). The reprojection
+residual ``r = π_c(p(t)) - z`` depends on θ only through ``t``, so its Jacobian column is
+
+    ∂r/∂θ_j = ∂π_c/∂X · p'(t) · ∂t/∂θ_j,    ∂t/∂θ = [1, 1e-6·ℓ, v/height]
+
+(:func:`pslog.timing.clock_jacobian`). Gauss–Newton steps solve the bordered system
+``[[A, B], [Bᵀ, C]]`` (``A`` banded: the trajectory; ``B``, ``C``: the few clock columns) by
+its Schur complement ``S = C - Bᵀ A⁻¹ B``; ``S⁻¹`` at the solution is the clocks' covariance
+(with σ the robust pixel-noise estimate, as for the trajectory). Camera 1 defines the session
+clock: its offset and drift are 0 and never estimated.
+
+Start: the rig's values, then a coarse scan of each camera's offset over ``±search`` against
+camera 1 alone (a two-camera trajectory per trial offset, on a window of the session), so a
+start several milliseconds wrong converges. Bounces and kicks are found by the trajectory fit
+at the scanned clocks and kept during the joint solve.
+
+Limits: offsets need the ball to move (a still ball looks the same at any time); a drift
+needs a long session; a readout needs the ball to move along the image's rows (vertical image
+motion) — each estimate's standard deviation says how well the data determined it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import FusionError
+from ..records import NS, Observations
+from ..rig import Rig
+from ..timing import camera_parameters, clock_jacobian, true_times_s
+from . import _normal
+from .trajectory import (
+    _CAUCHY,
+    MotionPrior,
+    SmoothOptions,
+    _information,
+    _initial_control,
+    _knots_with_breaks,
+    _Problem,
+    _refine_breaks,
+    _refit_control,
+    _Solver,
+    fit_trajectory,
+    split_pieces,
+)
+
+PARAMETERS = ("offset", "drift", "readout")
+_KEY = {"offset": "clock_offset", "drift": "clock_drift_ppm", "readout": "readout"}
+#: Fewest detections a camera needs (with camera 1's in the same stretches) to be synced.
+MIN_DETECTIONS = 30
+#: The coarse scan fits at most this long a stretch of the session, seconds.
+_SCAN_WINDOW_S = 12.0
+#: A session longer than _N_WINDOWS · _WINDOW_S is synced on that many windows spread over it.
+_N_WINDOWS = 6
+_WINDOW_S = 15.0
+_ITERATIONS = 10
+_ROUNDS = 8
+
+
+@dataclass(frozen=True)
+class ClockEstimate:
+    """One camera's clock parameters with their standard deviations.
+
+    Attributes
+    ----------
+    name : str
+    offset_s, offset_std_s : float, seconds
+    drift_ppm, drift_std_ppm : float, parts per million
+    readout_s, readout_std_s : float, seconds
+    residual_px : float, RMS reprojection residual of the camera's inlying detections
+    n_detections : int
+    """
+
+    name: str
+    offset_s: float
+    offset_std_s: float
+    drift_ppm: float
+    drift_std_ppm: float
+    readout_s: float
+    readout_std_s: float
+    residual_px: float
+    n_detections: int
+
+
+@dataclass(frozen=True)
+class SyncResult:
+    """:func:`estimate_clocks`' result: per camera in rig order, the rig holding the estimates,
+    the overall RMS residual (px) and the estimated pixel noise σ (px)."""
+
+    cameras: tuple[ClockEstimate, ...]
+    rig: Rig
+    residual_px: float
+    noise_px: float
+
+
+def estimate_clocks(obs: Observations, rig: Rig, estimate=("offset",),
+                    search_s: float | None = None, options: SmoothOptions | None = None
+                    ) -> SyncResult:
+    """Estimate the clock parameters named in ``estimate`` from detections at their logged
+    times (``obs``: best candidate per frame, logged times, sorted by (time, camera)).
+
+    Raises
+    ------
+    FusionError naming what is missing when the ball is seen too little or does not move.
+    """
+    options = options or SmoothOptions()
+    estimate = tuple(p for p in PARAMETERS if p in set(estimate))
+    if len(rig) < 2:
+        raise FusionError(f"sync needs at least two cameras (one camera cannot triangulate); "
+                          f"rig has {len(rig)}")
+    unknowns = [(c, p) for c in range(len(rig)) for p in estimate
+                if not (c == 0 and p in ("offset", "drift"))]
+    theta = np.array([float(getattr(rig.cameras[c], _KEY[p])) for c, p in unknowns])
+    params = camera_parameters(rig)
+    _check_coverage(obs, rig, options.max_gap_s)
+
+    obs = _windows(obs)
+    if "offset" in estimate:
+        theta = _scan_offsets(obs, rig, unknowns, theta, params, search_s, options)
+
+    # rounds: the bounces are found (and their instants fixed) at the clocks of the round
+    # before, then the clocks and the trajectory solved jointly, until the clocks settle
+    scale = _scale_of(unknowns)
+    previous_step = None
+    for _ in range(_ROUNDS):
+        before = theta
+        problem, control, theta, sigma, r, w, S = _solve_joint(
+            obs, rig, unknowns, theta, params, options)
+        step = (theta - before) * scale
+        if np.max(np.abs(step), initial=0.0) < 2e-6:
+            break  # the clocks no longer move the breaks: converged
+        if previous_step is not None:
+            # the rounds converge geometrically along one direction (the breaks' instants
+            # and the clocks pull on each other): jump to the limit of the series (Aitken)
+            ratio = float(step @ previous_step) / max(float(previous_step @ previous_step),
+                                                      1e-30)
+            if 0.3 < ratio < 0.95:
+                theta = theta + (theta - before) * ratio / (1 - ratio)
+                previous_step = None
+                continue
+        previous_step = step
+    cam = obs.camera[problem.rows]
+    cov = np.linalg.inv(S) if len(unknowns) else np.zeros((0, 0))
+    std = np.sqrt(np.maximum(np.diag(cov), 0.0))
+
+    norms = np.linalg.norm(r, axis=1)
+    inlier = w > 0.5
+    estimates, new_cams = [], []
+    for c, camera in enumerate(rig.cameras):
+        values = {p: float(getattr(camera, _KEY[p])) for p in PARAMETERS}
+        stds = dict.fromkeys(PARAMETERS, 0.0)
+        for j, (cj, p) in enumerate(unknowns):
+            if cj == c:
+                values[p], stds[p] = float(theta[j]), float(std[j])
+        mine = (cam == c) & inlier
+        estimates.append(ClockEstimate(
+            camera.name, values["offset"], stds["offset"], values["drift"], stds["drift"],
+            values["readout"], stds["readout"],
+            float(np.sqrt(np.mean(norms[mine] ** 2))) if mine.any() else float("nan"),
+            int(np.count_nonzero(cam == c))))
+        # a readout is physical only in [0, frame period): the rig takes the nearest such
+        readout = min(max(values["readout"], 0.0), np.nextafter(camera.frame_period, 0))
+        new_cams.append(camera.replace(clock_offset=values["offset"],
+                                       clock_drift_ppm=values["drift"], readout=readout))
+    _check_motion(problem, control, unknowns, std, rig)
+    return SyncResult(tuple(estimates), Rig(tuple(new_cams), rig.name),
+                      float(np.sqrt(np.mean(norms[inlier] ** 2))), float(sigma))
+
+
+def _solve_joint(obs, rig, unknowns, theta, params, options):
+    """The trajectory's pieces, knots and breaks at clocks ``theta``, then the joint robust
+    Gauss–Newton solve of control points and clocks."""
+    logged_s = obs.time_ns / NS
+    times = _times(obs, unknowns, theta, params)
+    t0 = float(times.min())
+    order = np.argsort(times, kind="stable")
+    ordered = _observations_at(obs, times, order)
+    fit = fit_trajectory(ordered, rig, options)
+    pieces = [order[p] for p in fit.pieces]  # rows of ``obs``
+    # a margin on each piece: the clocks move the times a little beyond the first fit's ends
+    margin = 0.02
+    spans, breaks = [], []
+    for k in fit.trajectory.knots:
+        inner = np.unique(k)
+        mult = np.array([np.count_nonzero(k == x) for x in inner[1:-1]])
+        breaks.append(inner[1:-1][mult >= 3])
+        spans.append((inner[0] - margin, inner[-1] + margin))
+    spacing = fit.trajectory.spacing_s
+    t_ref = (ordered.time_ns[0] / NS) - t0  # fit times are relative to the first ordered time
+    spans = [(a + t_ref, b + t_ref) for a, b in spans]
+    breaks = [b + t_ref for b in breaks]
+    knots = [_knots_with_breaks(a, b, spacing, br) for (a, b), br in zip(spans, breaks,
+                                                                         strict=True)]
+    problem = _Problem(obs, rig, pieces, knots, options.prior)
+    problem.set_times(times - t0)
+    control = _initial_control(problem, fit.trajectory.noise_px)
+    solver = _Solver(problem, options)
+    control, sigma, r, w, J = solver.run(control, fit.trajectory.noise_px, 3)
+
+    rows = problem.rows
+    cam = obs.camera[rows]
+    dt_dtheta = np.zeros((len(rows), len(unknowns)))
+    jac = clock_jacobian(logged_s[rows], obs.uv[rows, 1], params["height"][cam])
+    for j, (c, p) in enumerate(unknowns):
+        dt_dtheta[:, j] = np.where(cam == c, jac[:, PARAMETERS.index(p)], 0.0)
+    for _ in range(_ITERATIONS):
+        control, theta, sigma, r, w, J, S, moved = _joint_step(
+            problem, solver, obs, unknowns, theta, params, control, sigma, dt_dtheta, t0)
+        if any(len(b) for b in breaks):
+            # the bounces' instants follow the clocks (they are on the session clock, which
+            # the clocks map the detections onto)
+            breaks = _refine_breaks(problem, control, sigma, r, w, J, spacing, breaks,
+                                    options)
+            X_old = problem.positions(control)
+            problem.set_knots([_knots_with_breaks(a, b, spacing, br) for (a, b), br in
+                               zip(spans, breaks, strict=True)], options.prior)
+            control = _refit_control(problem, X_old)
+            control, sigma, r, w, J = solver.run(control, sigma, 1)
+        if moved < 1e-7:
+            break
+    # σ corrected for the degrees of freedom the fit absorbs; the covariance there
+    _, dof = _information(problem, control, sigma, r, J)
+    control, theta, sigma, r, w, J, S, _ = _joint_step(
+        problem, solver, obs, unknowns, theta, params, control, sigma, dt_dtheta, t0, dof)
+    return problem, control, theta, sigma, r, w, S
+
+
+def _windows(obs: Observations) -> Observations:
+    """A long session's detections in ``_N_WINDOWS`` windows of ``_WINDOW_S`` spread evenly
+    over it (all of a shorter one): the clocks are global, so these determine them (the
+    windows' spread keeps the drift's lever arm) at a bounded cost."""
+    t = obs.time_ns / NS
+    span = t[-1] - t[0] if len(t) else 0.0
+    if span <= _N_WINDOWS * _WINDOW_S:
+        return obs
+    starts = t[0] + np.linspace(0.0, span - _WINDOW_S, _N_WINDOWS)
+    keep = np.zeros(len(t), dtype=bool)
+    for a in starts:
+        keep |= (t >= a) & (t < a + _WINDOW_S)
+    return obs.select(keep)
+
+
+def _times(obs: Observations, unknowns, theta, params) -> np.ndarray:
+    """True capture times (s, session clock) of every observation by the timing model."""
+    p = {k: v.copy() for k, v in params.items()}
+    for (c, name), value in zip(unknowns, theta, strict=True):
+        p[_KEY[name]][c] = value
+    cam = obs.camera
+    return true_times_s(obs.time_ns / NS, obs.uv[:, 1], p["height"][cam],
+                        p["clock_offset"][cam], p["clock_drift_ppm"][cam], p["readout"][cam])
+
+
+def _observations_at(obs: Observations, times_s: np.ndarray, order: np.ndarray
+                     ) -> Observations:
+    time_ns = np.round(times_s[order] * NS).astype(np.int64)
+    cam = obs.camera[order]
+    # equal (time, camera) after rounding: one nanosecond apart, as the timing module does
+    for _ in range(3):
+        same = np.r_[False, (np.diff(time_ns) == 0) & (np.diff(cam) == 0)]
+        if not same.any():
+            break
+        time_ns = time_ns + same
+    resort = np.lexsort((cam, time_ns))
+    if not np.array_equal(resort, np.arange(len(resort))):
+        order[:] = order[resort]
+        time_ns, cam = time_ns[resort], cam[resort]
+    return Observations(time_ns, cam, obs.uv[order], obs.frame_index[order])
+
+
+def _joint_step(problem, solver, obs, unknowns, theta, params, control, sigma, dt_dtheta, t0,
+                dof: float = 1.0):
+    """One robust Gauss–Newton step on (control points, clocks) by the Schur complement; σ
+    is ``dof`` · 1.4826 · median |residual| at the step's start."""
+    q = len(unknowns)
+    times = _times(obs, unknowns, theta, params) - t0
+    problem.set_times(times)
+    X = problem.positions(control)
+    V = problem.velocities(control)
+    r, J = problem.project(X)
+    sigma = solver._scale(r, sigma, dof)
+    s = np.sum(r * r, axis=1) / sigma**2
+    w = 1 / (1 + s / _CAUCHY**2)
+    n = 3 * problem.m
+    start, E, _ = problem.data_rows(J, np.zeros_like(r))
+    ww = np.repeat(w, 2) / sigma**2
+    ab, rhs_c = _normal.accumulate(start, E, -r.reshape(-1), ww, n, problem.prior_ab.copy(),
+                                   np.zeros(n))
+    rhs_c -= _banded_matvec(problem.prior_ab, control.reshape(-1)) - problem.prior_rhs
+    # clock columns: ∂r/∂θ = J · p'(t) · ∂t/∂θ
+    JV = np.einsum("naj,nj->na", J, V)  # (n_obs, 2)
+    G = (JV[:, :, None] * dt_dtheta[:, None, :]).reshape(-1, q)  # (2 n_obs, q)
+    cols = (start[:, None] + np.arange(12)).ravel()
+    B = np.stack([np.bincount(cols, (ww[:, None] * E * G[:, j:j + 1]).ravel(), minlength=n)
+                  for j in range(q)], axis=1) if q else np.zeros((n, 0))
+    C = (G * ww[:, None]).T @ G
+    rhs_t = -(G * ww[:, None]).T @ r.reshape(-1)
+    U = _normal.factor(ab)
+    Y = _normal.solve(U, B) if q else np.zeros((n, 0))
+    S = C - B.T @ Y
+    z = _normal.solve(U, rhs_c)
+    d_theta = np.linalg.solve(S, rhs_t - B.T @ z) if q else np.zeros(0)
+    d_c = z - Y @ d_theta
+    before = solver.cost(control, r, sigma)
+    step = 1.0
+    for _ in range(6):  # step halving keeps the robust cost from rising
+        trial_c = control + step * d_c.reshape(-1, 3)
+        trial_t = theta + step * d_theta
+        problem.set_times(_times(obs, unknowns, trial_t, params) - t0)
+        r_trial, J_trial = problem.project(problem.positions(trial_c))
+        if solver.cost(trial_c, r_trial, sigma) <= before:
+            break
+        step /= 2
+    moved = max(float(np.max(np.abs(step * d_c), initial=0.0)),
+                float(np.max(np.abs(step * d_theta) * _scale_of(unknowns), initial=0.0)))
+    s = np.sum(r_trial * r_trial, axis=1) / sigma**2
+    return (trial_c, trial_t, sigma, r_trial, 1 / (1 + s / _CAUCHY**2), J_trial, S, moved)
+
+
+def _scale_of(unknowns) -> np.ndarray:
+    """Converts each clock step to a comparable size (metres-like: 1 ms ≈ 1 mm of motion)."""
+    return np.array([{"offset": 1.0, "drift": 1e-6, "readout": 1.0}[p] for _, p in unknowns])
+
+
+def _banded_matvec(ab: np.ndarray, x: np.ndarray) -> np.ndarray:
+    out = ab[-1] * x
+    for d in range(1, _normal.WIDTH):
+        out[:-d] += ab[-1 - d, d:] * x[d:]
+        out[d:] += ab[-1 - d, d:] * x[:-d]
+    return out
+
+
+def _scan_offsets(obs, rig, unknowns, theta, params, search_s, options) -> np.ndarray:
+    """Each camera's offset scanned over ``±search`` against camera 1 alone: the offset of
+    least robust cost of a two-camera trajectory, refined by a parabola."""
+    theta = theta.copy()
+    for j, (c, p) in enumerate(unknowns):
+        if p != "offset":
+            continue
+        period = 1 / rig.cameras[c].fps
+        half = search_s if search_s is not None else period / 2
+        pair = (obs.camera == 0) | (obs.camera == c)
+        rows = np.flatnonzero(pair)
+        t = obs.time_ns[rows] / NS
+        # the central stretch of the session: enough motion, a bounded cost
+        mid = np.median(t)
+        keep = rows[np.abs(t - mid) <= _SCAN_WINDOW_S / 2]
+        sub = obs.select(keep)
+        step = min(1e-3, half / 8)
+        grid = theta[j] + np.arange(-half, half + step / 2, step)
+        costs = np.array([_pair_cost(sub, rig, c, unknowns, theta, j, value, params, options)
+                          for value in grid])
+        k = int(np.nanargmin(costs))
+        best = grid[k]
+        if 0 < k < len(grid) - 1:
+            cm, c0, cp = costs[k - 1], costs[k], costs[k + 1]
+            curv = cm + cp - 2 * c0
+            if curv > 0:
+                best += 0.5 * (cm - cp) / curv * step
+        theta[j] = best
+    return theta
+
+
+def _pair_cost(sub, rig, c, unknowns, theta, j, value, params, options) -> float:
+    """Robust cost of a quick two-camera trajectory with camera ``c``'s offset at ``value``."""
+    trial = theta.copy()
+    trial[j] = value
+    times = _times(sub, unknowns, trial, params)
+    order = np.argsort(times, kind="stable")
+    ordered = _observations_at(sub, times, order)
+    pieces = split_pieces(ordered, np.ones(len(ordered), bool), options.max_gap_s)
+    if not pieces:
+        return np.nan
+    t = (ordered.time_ns - ordered.time_ns[0]) / NS
+    spacing = 3 * sum(t[p[-1]] - t[p[0]] for p in pieces) / max(
+        sum(len(p) - 1 for p in pieces), 1)
+    knots = [_knots_with_breaks(t[p[0]], t[p[-1]] + 1e-9, spacing, np.zeros(0))
+             for p in pieces]
+    loose = MotionPrior(options.prior.gravity, 10 * options.prior.sigma_accel,
+                        options.prior.tau_s)
+    problem = _Problem(ordered, rig, pieces, knots, loose)
+    solver = _Solver(problem, options)
+    try:
+        control = _initial_control(problem, 1.0)
+        control, _, r, _, _ = solver.run(control, 1.0, 3)
+    except FusionError:
+        return np.nan
+    return solver.cost(control, r, 1.0)  # a fixed σ: costs comparable across trials
+
+
+def _check_coverage(obs: Observations, rig: Rig, max_gap_s: float) -> None:
+    """A one-line :class:`FusionError` naming the camera that is seen too little with camera
+    1 to be synced."""
+    first = obs.time_ns[obs.camera == 0]
+    if len(first) < MIN_DETECTIONS:
+        raise FusionError(f"camera {rig.cameras[0].name} (the session clock) has "
+                          f"{len(first)} detections; sync needs at least {MIN_DETECTIONS}")
+    for c in range(1, len(rig)):
+        mine = obs.time_ns[obs.camera == c]
+        if len(mine) == 0:
+            raise FusionError(f"camera {rig.cameras[c].name} has no detection: its clock "
+                              f"cannot be estimated")
+        j = np.clip(np.searchsorted(first, mine), 1, len(first) - 1)
+        near = np.minimum(np.abs(first[j] - mine), np.abs(first[j - 1] - mine))
+        shared = int(np.count_nonzero(near <= max_gap_s * NS))
+        if shared < MIN_DETECTIONS:
+            raise FusionError(f"camera {rig.cameras[c].name} has {shared} detections within "
+                              f"{max_gap_s * 1e3:g} ms of one of camera {rig.cameras[0].name}"
+                              f"'s; sync needs at least {MIN_DETECTIONS} shared in time")
+
+
+def _check_motion(problem, control, unknowns, std, rig) -> None:
+    """A one-line :class:`FusionError` when the ball barely moves, or when an estimate is so
+    uncertain that the data did not determine it."""
+    speed = np.linalg.norm(problem.velocities(control), axis=1)
+    if np.median(speed) < 0.05:
+        raise FusionError(f"the ball barely moves (median speed {np.median(speed):.3f} m/s): "
+                          f"its track cannot tell the cameras' clocks apart")
+    for (c, p), s in zip(unknowns, std, strict=True):
+        limit = {"offset": 0.25 / rig.cameras[c].fps, "drift": 1000.0,
+                 "readout": 1 / rig.cameras[c].fps}[p]
+        if not s < limit:
+            raise FusionError(f"camera {rig.cameras[c].name}: the {p} is not determined by "
+                              f"the ball's motion (standard deviation {s:.3g}); "
+                              + ("a readout needs the ball to move up or down the image"
+                                 if p == "readout" else "the ball needs to move more"))

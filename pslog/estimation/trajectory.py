@@ -1,0 +1,749 @@
+"""A continuous-time ball trajectory fitted to every detection's viewing ray.
+
+Model
+-----
+The ball's position is a clamped cubic B-spline per *piece* of the session,
+``p(t) = Σ_k N_k(t) c_k`` (:mod:`pslog.estimation.bspline`), with uniform knots
+``knot_spacing`` apart. A piece ends where no camera saw the ball for longer than
+``max_gap_s`` (a detection with no other camera's within a third of that is left out: one
+camera cannot triangulate): nothing bridges such a gap and no point is output inside it.
+Inside a piece, a bounce or a kick is a knot of multiplicity 3 at its instant ``τ``: the
+position stays continuous, the velocity jumps (found automatically, below).
+
+Why a B-spline: its local support makes every residual touch 4 consecutive control points, so
+the normal equations are banded and the solve is linear in the session's length (Furgale,
+Rehder & Siegwart, *Unified temporal and spatial calibration for multi-sensor systems*, IROS
+2013, the estimator of Kalibr); a parabola and every cubic are represented exactly, and a
+triple knot represents a velocity jump exactly.
+
+The estimate minimises, over the control points ``c``,
+
+    Σ_i ρ(‖π_c(i)(p(t_i)) - z_i‖² / σ²)                               (1) reprojection
+  + ∫ ‖p''(t) - g‖² / q_a dt + ∫ ‖p'''(t)‖² / q_j dt                  (2) motion prior
+
+(1): ``π_c`` is camera ``c``'s projection to *distorted* pixels with its lens model
+(:mod:`pslog.estimation.projection`, analytic Jacobian), ``z_i`` the detection, ``σ`` the
+pixel noise (estimated: 1.4826 · median absolute residual, corrected for the degrees of freedom
+the fit uses), ``ρ(s) = c² log(1 + s / c²)`` the Cauchy kernel with ``c = 3`` (a detection
+3σ off counts half; a gross outlier barely counts), solved by iteratively reweighted
+Gauss–Newton.
+
+(2): the acceleration's deviation from gravity ``g = (0, 0, -9.8) m/s²`` — air drag, spin,
+model error — is a first-order Gauss–Markov (Ornstein–Uhlenbeck) process of standard deviation
+``σ_a`` and correlation time ``τ_a`` (the Singer model: R. A. Singer, *Estimating optimal
+tracking filter performance for manned maneuvering targets*, IEEE Trans. AES 6(4), 1970). Its
+spectral density ``2σ_a²τ_a / (1 + ω²τ_a²)`` makes the negative log prior of a path, up to
+end terms, the two integrals of (2) with ``q_a = 2σ_a²τ_a`` and ``q_j = 2σ_a²/τ_a``. Inside a
+knot span ``p''`` is linear and ``p'''`` constant, so a 2-point Gauss–Legendre rule and the
+midpoint integrate (2) exactly. Velocity jumps at triple knots are not penalised.
+
+Uncertainty: the Gauss–Newton information matrix ``H = Σ w_i J_iᵀJ_i / σ² + P`` at the
+solution (``w_i`` the robust weights, ``P`` the prior's) is the inverse covariance of ``c``;
+its banded inverse (Takahashi recurrence, :mod:`pslog.estimation._normal`) gives, through the
+basis, the marginal covariance of ``p(t)`` at any ``t``.
+
+Bounces and kicks: a first fit under a prior ten times looser (it follows a velocity jump
+closely, so σ is estimated right and each jump is a sharp peak); every span where
+``‖p'' - g‖`` peaks above ``break_accel`` is a candidate. Around each, the problem linearised
+at that fit is solved on a local window, under the prior (2), with and without a triple knot
+at trial instants (:mod:`pslog.estimation._breaks`: all candidates and instants in one batched
+solve, nested grid scans and a parabola between the neighbouring detections); the break is
+kept when it lowers the cost by more than ``break_threshold`` (in units of σ², a
+likelihood-ratio test). Rounds repeat until no new break; the fit under the real prior
+follows, then each break's instant is re-estimated at that fit and the session refitted.
+A break leaves detections of two cameras between it and a piece's end (a segment's velocity
+is otherwise free along a ray).
+
+Why knots every three detection intervals: 8 pixel coordinates per 3 unknowns keep the pixel
+noise estimable from the residuals, and a cubic spline with knots that close represents
+ballistic flight with drag far below a micrometre (error ~ h⁴·max‖p⁗‖/384).
+
+Limits: one camera cannot triangulate, so a piece seen by fewer than two cameras gives no
+point; the prior assumes ballistic flight between breaks (a rolling ball, with no gravity
+acceleration, is fitted with a small bias; air drag is absorbed by σ_a, not modelled); a
+velocity change spread over more than a few knot spans (a ball rolling to a stop) is smoothed
+rather than broken; pure numpy, several thousand detections per second.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from ..errors import FusionError
+from ..motion import G
+from ..records import NS, Observations
+from ..rig import Rig
+from . import _breaks, _normal
+from .bspline import DEGREE, basis, clamped_knots, n_control
+from .projection import project_with_jacobian
+
+
+@dataclass(frozen=True)
+class MotionPrior:
+    """The Singer model of the ball's acceleration between bounces (see module docstring).
+
+    Attributes
+    ----------
+    gravity : (3,) m/s², the mean acceleration
+    sigma_accel : float, m/s², standard deviation of the acceleration's deviation from
+        gravity (air drag of a fast ball is a few m/s²)
+    tau_s : float, seconds, its correlation time
+    """
+
+    gravity: tuple[float, float, float] = (0.0, 0.0, -G)
+    sigma_accel: float = 4.0
+    tau_s: float = 0.2
+
+    @property
+    def q_accel(self) -> float:
+        """Spectral density of the acceleration deviation, m²/s³: ``2σ_a²τ_a``."""
+        return 2 * self.sigma_accel**2 * self.tau_s
+
+    @property
+    def q_jerk(self) -> float:
+        """Weight of the jerk integral, m²/s⁵: ``2σ_a²/τ_a``."""
+        return 2 * self.sigma_accel**2 / self.tau_s
+
+
+@dataclass(frozen=True)
+class SmoothOptions:
+    """Settings of :func:`fit_trajectory`.
+
+    Attributes
+    ----------
+    prior : MotionPrior
+    max_gap_s : float, longest time without any detection inside one piece
+    knot_spacing_s : float or None, seconds between knots; None: three mean intervals
+        between detections (all cameras together): 8 pixel coordinates per 3 unknowns keep
+        the pixel noise estimable, and a cubic spline with knots that close represents
+        ballistic flight with drag to far below a micrometre (error ~ h⁴·max‖p⁗‖ / 384)
+    min_noise_px : float, floor of the estimated pixel noise (a noise-free session still
+        weighs the prior a little)
+    break_accel : float, m/s², ``‖p'' - g‖`` above which a span is tested for a break
+    break_threshold : float, cost decrease (units of σ²) that keeps a break
+    iterations : int, Gauss–Newton iterations per fit
+    """
+
+    prior: MotionPrior = MotionPrior()
+    max_gap_s: float = 0.12
+    knot_spacing_s: float | None = None
+    min_noise_px: float = 0.005
+    break_accel: float = 15.0
+    break_threshold: float = 25.0
+    iterations: int = 4
+
+
+#: Cauchy kernel scale, in units of σ on the 2-D residual norm
+_CAUCHY = 3.0
+#: Half-width of the local window of the break test, in knot spans
+_WINDOW_SPANS = 5
+#: The first fit's prior is this much looser (σ_a times this)
+_LOOSE = 10.0
+#: Rounds of break detection (each finds the jumps the previous fit still hides)
+_BREAK_ROUNDS = 3
+
+
+@dataclass(frozen=True, eq=False)
+class Trajectory:
+    """A fitted trajectory: pieces of cubic B-splines with triple knots at breaks.
+
+    Attributes
+    ----------
+    t0_ns : int, the time origin of the spline parameter (seconds since ``t0_ns``)
+    knots : list of (K_p,) float64 per piece, seconds since ``t0_ns``
+    offset : (n_pieces,) int64, first control point of each piece in ``control``
+    control : (m, 3) float64, control points, metres
+    band : (m, 4, 3, 3) float64, band of the control points' covariance, m²
+    breaks_s : (b,) float64, seconds since ``t0_ns``, the velocity jumps found
+    noise_px : float, the estimated pixel noise σ
+    spacing_s : float, the uniform knot spacing, seconds
+    """
+
+    t0_ns: int
+    knots: list[np.ndarray]
+    offset: np.ndarray
+    control: np.ndarray
+    band: np.ndarray
+    breaks_s: np.ndarray
+    noise_px: float
+    spacing_s: float = 0.0
+
+    def piece_of(self, time_ns: np.ndarray) -> np.ndarray:
+        """Index of the piece covering each time (n,), -1 outside every piece."""
+        t = (np.asarray(time_ns, dtype=np.int64) - self.t0_ns) / NS
+        starts = np.array([k[0] for k in self.knots])
+        ends = np.array([k[-1] for k in self.knots])
+        p = np.searchsorted(starts, t, side="right") - 1
+        inside = (p >= 0) & (t <= ends[np.maximum(p, 0)])
+        return np.where(inside, p, -1)
+
+    def evaluate(self, time_ns: np.ndarray, derivative: int = 0
+                 ) -> tuple[np.ndarray, np.ndarray]:
+        """Position (or derivative) and position covariance at times inside the pieces.
+
+        Returns
+        -------
+        value : (n, 3), metres (per second^derivative); NaN outside every piece
+        covariance : (n, 3, 3), m², the marginal covariance of the position; NaN outside
+        """
+        time_ns = np.asarray(time_ns, dtype=np.int64)
+        value = np.full((len(time_ns), 3), np.nan)
+        cov = np.full((len(time_ns), 3, 3), np.nan)
+        piece = self.piece_of(time_ns)
+        t = (time_ns - self.t0_ns) / NS
+        for p in np.unique(piece[piece >= 0]):
+            rows = np.flatnonzero(piece == p)
+            first, N = basis(self.knots[p], t[rows], derivative)
+            first = first + self.offset[p]
+            index = first[:, None] + np.arange(DEGREE + 1)
+            value[rows] = np.einsum("na,nad->nd", N[:, derivative], self.control[index])
+            cov[rows] = _normal.marginal(self.band, first, N[:, 0])
+        return value, cov
+
+
+@dataclass(frozen=True, eq=False)
+class Fit:
+    """:func:`fit_trajectory`'s result.
+
+    Attributes
+    ----------
+    trajectory : Trajectory
+    used : (n,) bool, observations inside a fitted piece (with a usable pixel)
+    position : (n, 3) float64, metres, the trajectory at each observation's time (NaN if not
+        ``used``)
+    covariance : (n, 3, 3) float64, m², its marginal covariance
+    residual_px : (n,) float64, reprojection residual of each observation, pixels
+    weight : (n,) float64, final robust weight of each observation (0: rejected)
+    pieces : list of (n_p,) int64, the observation rows of each fitted piece
+    """
+
+    trajectory: Trajectory
+    used: np.ndarray
+    position: np.ndarray
+    covariance: np.ndarray
+    residual_px: np.ndarray
+    weight: np.ndarray
+    pieces: list = field(default_factory=list)
+
+
+class _Problem:
+    """The observations, the pieces' knots and the design (basis values) that follow."""
+
+    def __init__(self, obs: Observations, rig: Rig, rows_of_piece: list[np.ndarray],
+                 knots: list[np.ndarray], prior: MotionPrior):
+        self.obs, self.rig, self.prior = obs, rig, prior
+        self.t0_ns = int(obs.time_ns[0])
+        self.t = (obs.time_ns - self.t0_ns) / NS
+        self.rows_of_piece = rows_of_piece
+        self.rows = np.concatenate(rows_of_piece)  # observation rows in the fit
+        self.set_knots(knots, prior)
+
+    def set_knots(self, knots: list[np.ndarray], prior: MotionPrior) -> None:
+        self.knots, self.prior = knots, prior
+        sizes = np.array([n_control(k) for k in knots])
+        self.offset = np.r_[0, np.cumsum(sizes)[:-1]].astype(np.int64)
+        self.m = int(sizes.sum())
+        self.set_times(self.t)
+        self.prior_ab, self.prior_rhs, self.prior_const = _prior_normal(
+            knots, self.offset, self.m, self.prior)
+
+    def set_times(self, t: np.ndarray) -> None:
+        """Observation times (n,) s since ``t0_ns`` (the clock estimator moves them); the
+        basis at each, its value ``N`` and first derivative ``N1`` (n_fit, 4)."""
+        self.t = t
+        firsts, values, slopes = [], [], []
+        for p, rows in enumerate(self.rows_of_piece):
+            first, N = basis(self.knots[p], t[rows], 1)
+            firsts.append(first + self.offset[p])
+            values.append(N[:, 0])
+            slopes.append(N[:, 1])
+        self.first = np.concatenate(firsts)
+        self.N = np.concatenate(values)
+        self.N1 = np.concatenate(slopes)
+
+    def velocities(self, control: np.ndarray) -> np.ndarray:
+        index = self.first[:, None] + np.arange(DEGREE + 1)
+        return np.einsum("na,nad->nd", self.N1, control[index])
+
+    def positions(self, control: np.ndarray) -> np.ndarray:
+        index = self.first[:, None] + np.arange(DEGREE + 1)
+        return np.einsum("na,nad->nd", self.N, control[index])
+
+    def project(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Residuals (n, 2) pixels and ``∂uv/∂X`` (n, 2, 3) of the fitted observations.
+
+        A point at or behind its camera (a wild iterate) has no projection: its row is set to
+        0 with a zero Jacobian (it adds nothing to the normal equations) and flagged in
+        ``self.invalid``, which the cost charges as a gross outlier."""
+        cams = self.obs.camera[self.rows]
+        uv = np.empty((len(X), 2))
+        J = np.empty((len(X), 2, 3))
+        for i, cam in enumerate(self.rig.cameras):
+            sel = cams == i
+            if np.any(sel):
+                uv[sel], J[sel] = project_with_jacobian(cam, X[sel])
+        r = uv - self.obs.uv[self.rows]
+        self.invalid = ~(np.all(np.isfinite(r), axis=1) & np.all(np.isfinite(J), axis=(1, 2)))
+        r[self.invalid] = 0.0
+        J[self.invalid] = 0.0
+        return r, J
+
+    def data_rows(self, J: np.ndarray, target: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Rows ``E c[start:start+12] - b`` of the linearised reprojection (2 per detection):
+        ``E[3a + d] = N_a ∂uv/∂X_d``."""
+        E = (self.N[:, None, :, None] * J[:, :, None, :]).reshape(-1, 12)
+        start = np.repeat(3 * self.first, 2)
+        return start, E, target.reshape(-1)
+
+
+def _prior_normal(knots: list[np.ndarray], offset: np.ndarray, m: int, prior: MotionPrior
+                  ) -> tuple[np.ndarray, np.ndarray, float]:
+    """Normal equations of the motion prior (2), integrated exactly per knot span."""
+    starts, E_rows, b_rows, w_rows = [], [], [], []
+    g = np.asarray(prior.gravity, dtype=np.float64)
+    gauss = np.array([-1.0, 1.0]) / np.sqrt(3.0)
+    const = 0.0
+    for p, k in enumerate(knots):
+        lo, hi = k[:-1], k[1:]
+        nonempty = hi > lo
+        lo, hi = lo[nonempty], hi[nonempty]
+        half, mid = (hi - lo) / 2, (hi + lo) / 2
+        for node in gauss:  # ∫ ‖p'' - g‖² / q_a over the span, 2-point Gauss (weights 1)
+            first, N = basis(k, mid + node * half, 2)
+            for d in range(3):
+                E = np.zeros((len(first), 12))
+                E[:, d::3] = N[:, 2]
+                starts.append(3 * (first + offset[p]))
+                E_rows.append(E)
+                b_rows.append(np.full(len(first), g[d]))
+                w_rows.append(half / prior.q_accel)
+        first, N = basis(k, mid, 3)  # ∫ ‖p'''‖² / q_j, constant over the span
+        for d in range(3):
+            E = np.zeros((len(first), 12))
+            E[:, d::3] = N[:, 3]
+            starts.append(3 * (first + offset[p]))
+            E_rows.append(E)
+            b_rows.append(np.zeros(len(first)))
+            w_rows.append(2 * half / prior.q_jerk)
+    start = np.concatenate(starts)
+    b, w = np.concatenate(b_rows), np.concatenate(w_rows)
+    ab, rhs = _normal.accumulate(start, np.concatenate(E_rows), b, w, 3 * m)
+    const = float(np.sum(w * b * b))
+    return ab, rhs, const
+
+
+def _prior_cost(problem: _Problem, c: np.ndarray) -> float:
+    """Value of (2) at ``c`` from the prior's normal equations: xᵀAx - 2 rhsᵀx + const."""
+    x = c.reshape(-1)
+    ab = problem.prior_ab
+    Ax = ab[-1] * x
+    for d in range(1, _normal.WIDTH):
+        Ax[:-d] += ab[-1 - d, d:] * x[d:]
+        Ax[d:] += ab[-1 - d, d:] * x[:-d]
+    return float(x @ Ax - 2 * problem.prior_rhs @ x + problem.prior_const)
+
+
+def split_pieces(obs: Observations, usable: np.ndarray, max_gap_s: float
+                 ) -> list[np.ndarray]:
+    """Rows of the usable observations in pieces that the model may bridge.
+
+    One camera cannot triangulate: a detection with no detection of another camera within
+    ``max_gap_s / 3`` of it is left out, and the rest is split where no detection came for
+    ``max_gap_s``. Pieces of fewer than 6 detections or seen by one camera are dropped.
+    """
+    rows = np.flatnonzero(usable)
+    if len(rows) == 0:
+        return []
+    time_ns, camera = obs.time_ns[rows], obs.camera[rows]
+    gap_ns = max_gap_s * NS
+    paired = np.zeros(len(rows), dtype=bool)
+    for c in np.unique(camera):
+        mine, others = camera == c, time_ns[camera != c]
+        if len(others) == 0:
+            continue
+        t = time_ns[mine]
+        after = np.searchsorted(others, t, side="left")
+        nearest = np.minimum(
+            np.abs(others[np.minimum(after, len(others) - 1)] - t),
+            np.abs(t - others[np.maximum(after - 1, 0)]))
+        # a piece's ends seen by one camera only: at most a third of the gap (a velocity
+        # jump there could not be seen)
+        paired[mine] = nearest <= gap_ns / 3
+    rows, time_ns = rows[paired], time_ns[paired]
+    gaps = np.flatnonzero(np.diff(time_ns) > gap_ns) + 1
+    return [piece for piece in np.split(rows, gaps)
+            if len(piece) >= 6 and len(np.unique(obs.camera[piece])) >= 2]
+
+
+def _uniform_breaks(t_lo: float, t_hi: float, spacing: float) -> np.ndarray:
+    n_spans = max(1, int(np.ceil((t_hi - t_lo) / spacing - 1e-9)))
+    return np.linspace(t_lo, t_hi, n_spans + 1)
+
+
+def _knots_with_breaks(t_lo: float, t_hi: float, spacing: float, breaks: np.ndarray
+                       ) -> np.ndarray:
+    """Uniform knots on ``[t_lo, t_hi]`` and a triple knot at every break (uniform knots
+    closer than a quarter spacing to a break are dropped)."""
+    grid = _uniform_breaks(t_lo, t_hi, spacing)
+    breaks = np.asarray(breaks, dtype=np.float64)
+    breaks = breaks[(breaks > t_lo + 1e-6) & (breaks < t_hi - 1e-6)]
+    if len(breaks):
+        near = np.min(np.abs(grid[1:-1, None] - breaks[None, :]), axis=1) < spacing / 4
+        grid = np.r_[grid[0], grid[1:-1][~near], grid[-1]]
+    points = np.r_[grid, breaks]
+    mult = np.r_[np.ones(len(grid), np.int64), np.full(len(breaks), 3)]
+    order = np.argsort(points, kind="stable")
+    points, mult = points[order], mult[order]
+    return clamped_knots(points, mult[1:-1])
+
+
+def _initial_control(problem: _Problem, sigma_px: float) -> np.ndarray:
+    """A first trajectory from the linear (DLT) form of the projection: undistorted normalised
+    ``(x, y)`` gives ``f (R₀ - x R₂)·X + f (t₀ - x t₂) = 0`` (and likewise for ``y``), scaled by
+    ``1/Z`` to approximate pixels; solved twice, the second time with the depths and robust
+    weights of the first."""
+    obs, rows = problem.obs, problem.rows
+    cams = obs.camera[rows]
+    xy = np.empty((len(rows), 2))
+    for i, cam in enumerate(problem.rig.cameras):
+        sel = cams == i
+        if np.any(sel):
+            xy[sel] = cam.undistort_normalized(obs.uv[rows[sel]])
+    R = np.array([c.R for c in problem.rig.cameras])[cams]
+    tt = np.array([c.t for c in problem.rig.cameras])[cams]
+    f = np.array([[c.K[0, 0], c.K[1, 1]] for c in problem.rig.cameras])[cams]
+    # row a of the linear form: (R_a - xy_a R_2)·X + (t_a - xy_a t_2)
+    A = R[:, :2, :] - xy[:, :, None] * R[:, 2:3, :]  # (n, 2, 3)
+    a0 = tt[:, :2] - xy * tt[:, 2:3]
+    depth = np.full((len(rows), 1), _scene_depth(problem.rig))
+    weight = np.ones(len(rows))
+    control = None
+    for _ in range(2):
+        scale = f / np.maximum(depth, 1e-3)
+        J = A * scale[:, :, None]
+        start, E, b = problem.data_rows(J, -(a0 * scale))
+        ab, rhs = _normal.accumulate(start, E, b, np.repeat(weight, 2) / sigma_px**2,
+                                     3 * problem.m, problem.prior_ab.copy(),
+                                     problem.prior_rhs.copy())
+        control = _normal.solve(_normal.factor(ab), rhs).reshape(-1, 3)
+        X = problem.positions(control)
+        depth = np.maximum(np.einsum("nj,nj->n", R[:, 2], X) + tt[:, 2], 1e-3)[:, None]
+        r = np.einsum("naj,nj->na", J, X) + a0 * scale
+        s = max(1.4826 * np.median(np.abs(r)), sigma_px)
+        weight = 1 / (1 + np.sum(r * r, axis=1) / (_CAUCHY * s) ** 2)
+    return control
+
+
+def _scene_depth(rig: Rig) -> float:
+    """Typical depth of the scene: distance from the cameras to the point nearest every
+    optical axis (1 m if the axes are parallel)."""
+    centers = np.array([c.center_world for c in rig.cameras])
+    axes = np.array([c.R[2] for c in rig.cameras])
+    M = np.zeros((3, 3))
+    v = np.zeros(3)
+    for c, a in zip(centers, axes, strict=True):
+        P = np.eye(3) - np.outer(a, a)
+        M += P
+        v += P @ c
+    if np.linalg.cond(M) > 1e8:
+        return 1.0
+    point = np.linalg.solve(M, v)
+    depth = float(np.median(np.einsum("nj,nj->n", axes, point - centers)))
+    return depth if depth > 0 else 1.0
+
+
+class _Solver:
+    """Iteratively reweighted Gauss–Newton on (1) + (2) for one set of knots."""
+
+    def __init__(self, problem: _Problem, options: SmoothOptions):
+        self.problem, self.options = problem, options
+
+    def cost(self, control: np.ndarray, r: np.ndarray, sigma: float) -> float:
+        """The robust cost (1) + (2) of ``control`` whose residuals are ``r``."""
+        s = np.sum(r * r, axis=1) / sigma**2
+        c2 = _CAUCHY**2
+        data = c2 * np.log1p(s / c2)
+        # a point behind its camera costs as a detection 1000 σ off
+        penalty = np.count_nonzero(self.problem.invalid) * c2 * np.log1p(1e6 / c2)
+        return float(np.sum(data) + penalty + _prior_cost(self.problem, control))
+
+    def run(self, control: np.ndarray, sigma: float, iterations: int, dof: float = 1.0
+            ) -> tuple[np.ndarray, float, np.ndarray, np.ndarray, np.ndarray]:
+        """Returns control, σ, residuals (n, 2), weights (n,), Jacobians (n, 2, 3); σ is
+        re-estimated at every iteration as ``dof`` · 1.4826 · median |residual|."""
+        problem = self.problem
+        X = problem.positions(control)
+        r, J = problem.project(X)
+        for _ in range(iterations):
+            sigma = self._scale(r, sigma, dof)
+            s = np.sum(r * r, axis=1) / sigma**2
+            w = 1 / (1 + s / _CAUCHY**2)  # Cauchy IRLS weight
+            target = np.einsum("naj,nj->na", J, X) - r  # linearised: J X_new ≈ J X - r
+            start, E, b = problem.data_rows(J, target)
+            ab, rhs = _normal.accumulate(start, E, b, np.repeat(w, 2) / sigma**2,
+                                         3 * problem.m, problem.prior_ab.copy(),
+                                         problem.prior_rhs.copy())
+            new = _normal.solve(_normal.factor(ab), rhs).reshape(-1, 3)
+            before = self.cost(control, r, sigma)
+            step = 1.0
+            for _ in range(6):  # step halving keeps the robust cost from rising
+                trial = control + step * (new - control)
+                X_trial = problem.positions(trial)
+                r_trial, J_trial = problem.project(X_trial)
+                if self.cost(trial, r_trial, sigma) <= before:
+                    break
+                step /= 2
+            moved = float(np.max(np.abs(trial - control), initial=0.0))
+            control, X, r, J = trial, X_trial, r_trial, J_trial
+            if moved < 1e-7:  # 0.1 µm: converged
+                break
+        s = np.sum(r * r, axis=1) / sigma**2
+        return control, sigma, r, 1 / (1 + s / _CAUCHY**2), J
+
+    def _scale(self, r: np.ndarray, sigma: float, dof: float) -> float:
+        finite = r[np.all(np.isfinite(r), axis=1)]
+        if len(finite) == 0:
+            return sigma
+        return max(dof * 1.4826 * float(np.median(np.abs(finite))), self.options.min_noise_px)
+
+
+def fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions | None = None) -> Fit:
+    """Fit one continuous trajectory to every observation's ray (module docstring).
+
+    Parameters
+    ----------
+    obs : Observations, sorted by (time, camera), times already corrected to true capture times
+    rig : Rig, with at least two cameras
+    options : SmoothOptions
+
+    Returns
+    -------
+    Fit; a :class:`FusionError` if no piece of the session is seen by two cameras
+    """
+    options = options or SmoothOptions()
+    if len(rig) < 2:
+        raise FusionError(f"smooth needs at least two cameras (one camera cannot triangulate); "
+                          f"rig has {len(rig)}")
+    n = len(obs)
+    usable = np.all(np.isfinite(obs.uv), axis=1)
+    for i, cam in enumerate(rig.cameras):  # a pixel far off the image is no detection
+        sel = obs.camera == i
+        usable[sel] &= np.all(np.abs(obs.uv[sel]) <= 10 * max(cam.width, cam.height), axis=1)
+    pieces = split_pieces(obs, usable, options.max_gap_s)
+    if not pieces:
+        raise FusionError("smooth: no stretch of the session is seen by two cameras (one "
+                          "camera cannot triangulate)")
+    t = (obs.time_ns - obs.time_ns[0]) / NS
+    spans = [(t[p[0]], t[p[-1]]) for p in pieces]
+    if options.knot_spacing_s is None:
+        total = sum(hi - lo for lo, hi in spans)
+        count = sum(len(p) - 1 for p in pieces)
+        spacing = 3 * total / max(count, 1)
+    else:
+        spacing = options.knot_spacing_s
+    spacing = max(spacing, 1e-4)
+    # fits under a loose prior follow the velocity jumps closely enough that the pixel noise
+    # is estimated right and each jump shows as a sharp acceleration peak: each round tests
+    # the peaks that the breaks found so far do not explain
+    loose = replace(options.prior, sigma_accel=_LOOSE * options.prior.sigma_accel)
+    breaks = [np.zeros(0) for _ in pieces]
+    knots = [_knots_with_breaks(lo, hi + 1e-9, spacing, b)
+             for (lo, hi), b in zip(spans, breaks, strict=True)]
+    problem = _Problem(obs, rig, pieces, knots, loose)
+    control = _initial_control(problem, 1.0)
+    sigma, iterations = 1.0, options.iterations
+    for _ in range(_BREAK_ROUNDS):
+        control, sigma, r, w, J = _Solver(problem, options).run(control, sigma, iterations)
+        found = _find_breaks(problem, control, sigma, r, w, J, spacing, breaks, options)
+        if not any(len(f) for f in found):
+            break
+        breaks = [np.sort(np.r_[b, f]) for b, f in zip(breaks, found, strict=True)]
+        knots = [_knots_with_breaks(lo, hi + 1e-9, spacing, b)
+                 for (lo, hi), b in zip(spans, breaks, strict=True)]
+        X_old = problem.positions(control)
+        problem.set_knots(knots, loose)
+        control = _refit_control(problem, X_old)
+        iterations = 2
+    problem.set_knots(knots, options.prior)  # same knots: the control points stay valid
+    control, sigma, r, w, J = _Solver(problem, options).run(control, sigma, options.iterations)
+    if any(len(b) for b in breaks):  # each break's time again, at the final fit
+        breaks = _refine_breaks(problem, control, sigma, r, w, J, spacing, breaks, options)
+        knots = [_knots_with_breaks(lo, hi + 1e-9, spacing, b)
+                 for (lo, hi), b in zip(spans, breaks, strict=True)]
+        X_old = problem.positions(control)
+        problem.set_knots(knots, options.prior)
+        control = _refit_control(problem, X_old)
+        control, sigma, r, w, J = _Solver(problem, options).run(control, sigma,
+                                                                options.iterations)
+
+    # σ corrected for the degrees of freedom the fit absorbs, then the covariance there
+    _, dof = _information(problem, control, sigma, r, J)
+    control, sigma, r, w, J = _Solver(problem, options).run(control, sigma, 2, dof)
+    band, _ = _information(problem, control, sigma, r, J)
+    trajectory = Trajectory(problem.t0_ns, problem.knots, problem.offset, control, band,
+                            np.concatenate([np.asarray(b) for b in breaks]) if breaks
+                            else np.zeros(0), sigma, spacing)
+    position = np.full((n, 3), np.nan)
+    covariance = np.full((n, 3, 3), np.nan)
+    residual = np.full(n, np.nan)
+    weight = np.zeros(n)
+    position[problem.rows] = problem.positions(control)
+    covariance[problem.rows] = _normal.marginal(band, problem.first, problem.N)
+    residual[problem.rows] = np.linalg.norm(r, axis=1)
+    weight[problem.rows] = w
+    used = np.zeros(n, dtype=bool)
+    used[problem.rows] = True
+    return Fit(trajectory, used, position, covariance, residual, weight, pieces)
+
+
+def _refit_control(problem: _Problem, X: np.ndarray) -> np.ndarray:
+    """Control points on new knots closest to positions ``X`` at the observations (with the
+    prior): the starting point after breaks are inserted."""
+    n = len(X)
+    J = np.broadcast_to(np.eye(3)[None, :2, :], (n, 2, 3)).copy()
+    # two coordinates per row pair: use x,y then z,x to cover all three
+    start, E, b = problem.data_rows(J, X[:, :2])
+    J2 = np.broadcast_to(np.eye(3)[None, [2, 0], :], (n, 2, 3)).copy()
+    start2, E2, b2 = problem.data_rows(J2, X[:, [2, 0]])
+    w = np.full(2 * n, 1e6)
+    ab, rhs = _normal.accumulate(start, E, b, w, 3 * problem.m, problem.prior_ab.copy(),
+                                 problem.prior_rhs.copy())
+    ab, rhs = _normal.accumulate(start2, E2, b2, w, 3 * problem.m, ab, rhs)
+    return _normal.solve(_normal.factor(ab), rhs).reshape(-1, 3)
+
+
+def _information(problem: _Problem, control: np.ndarray, sigma: float, r: np.ndarray,
+                 J: np.ndarray) -> tuple[np.ndarray, float]:
+    """The band of the control points' covariance ``H⁻¹`` at the solution, and the factor
+    ``sqrt(n_res / (n_res - p_eff))`` that corrects the median-based noise scale for the
+    fit's effective number of parameters ``p_eff = Σ w tr(J Σ_X Jᵀ) / σ²`` (the trace of the
+    hat matrix)."""
+    X = problem.positions(control)
+    s = np.sum(r * r, axis=1) / sigma**2
+    w = 1 / (1 + s / _CAUCHY**2)
+    target = np.einsum("naj,nj->na", J, X) - r
+    start, E, b = problem.data_rows(J, target)
+    ab, _ = _normal.accumulate(start, E, b, np.repeat(w, 2) / sigma**2, 3 * problem.m,
+                               problem.prior_ab.copy(), problem.prior_rhs.copy())
+    band = _normal.covariance_band(_normal.factor(ab))
+    cov_X = _normal.marginal(band, problem.first, problem.N)
+    p_eff = float(np.sum(w * np.einsum("naj,njk,nak->n", J, cov_X, J)) / sigma**2)
+    n_res = 2 * len(r)
+    return band, float(np.sqrt(n_res / max(n_res - p_eff, 1.0)))
+
+
+def _find_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.ndarray,
+                 w: np.ndarray, J: np.ndarray, spacing: float, known: list[np.ndarray],
+                 options: SmoothOptions) -> list[np.ndarray]:
+    """Times of new velocity jumps in each piece (seconds since the first observation), none
+    within a knot spacing of a ``known`` one: the peaks of ``‖p'' - g‖`` above
+    ``break_accel``, each kept if a break near it gains more than ``break_threshold``."""
+    g = np.asarray(options.prior.gravity)
+    X = problem.positions(control)
+    target = np.einsum("naj,nj->na", J, X) - r  # the linearised measurements
+    weight = w / sigma**2
+    t_obs = problem.t[problem.rows]
+    out = []
+    row0 = 0
+    for p, k in enumerate(problem.knots):
+        # the piece's rows in time order (the clock estimator moves the times)
+        here = row0 + np.argsort(t_obs[row0:row0 + len(problem.rows_of_piece[p])],
+                                 kind="stable")
+        row0 += len(problem.rows_of_piece[p])
+        t = t_obs[here]
+        lo, hi = k[:-1], k[1:]
+        mids = ((lo + hi) / 2)[hi > lo]
+        first, N = basis(k, mids, 2)
+        index = first[:, None] + np.arange(DEGREE + 1) + problem.offset[p]
+        accel = np.einsum("na,nad->nd", N[:, 2], control[index])
+        dev = np.linalg.norm(accel - g, axis=1)
+        peak = dev > options.break_accel
+        peak[1:] &= dev[1:] >= dev[:-1]
+        peak[:-1] &= dev[:-1] > dev[1:]
+        centers = mids[peak]
+        centers = centers[np.all(np.abs(centers[:, None] - known[p][None, :]) > spacing, axis=1)]
+        if len(t) < 8 or len(centers) == 0:
+            out.append(np.zeros(0))
+            continue
+        # the jump lies near the peak: search two detections beyond its neighbours, leaving
+        # detections of two cameras in the piece at either end (:func:`_end_limits`)
+        j = np.searchsorted(t, centers)
+        first_ok, last_ok = _end_limits(t, problem.obs.camera[problem.rows][here])
+        a = np.maximum(t[np.clip(j - 3, 0, len(t) - 1)], first_ok)
+        b = np.minimum(t[np.clip(j + 2, 0, len(t) - 1)], last_ok)
+        ok = a < b
+        centers, a, b = centers[ok], a[ok], b[ok]
+        limits = _neighbours(centers, known[p])
+        tau, gain = _breaks.scan(t, J[here], target[here], weight[here], centers,
+                                 np.stack([a, b], axis=1), limits, spacing,
+                                 _WINDOW_SPANS * spacing, options.prior)
+        found: list[float] = []
+        for i in np.argsort(-gain):
+            if gain[i] <= options.break_threshold:
+                break
+            if all(abs(tau[i] - f) > 1.5 * spacing for f in found) and all(
+                    abs(tau[i] - f) > spacing for f in known[p]):
+                found.append(float(tau[i]))
+        out.append(np.sort(np.array(found)))
+    return out
+
+
+def _end_limits(t: np.ndarray, camera: np.ndarray) -> tuple[float, float]:
+    """Earliest and latest instants a break may take in a piece: the segment it leaves at
+    either end must hold two detections of two cameras (its velocity is otherwise free along a
+    ray)."""
+    first_two = np.flatnonzero(camera != camera[0])
+    last_two = np.flatnonzero(camera != camera[-1])
+    lo = t[max(int(first_two[0]) if len(first_two) else len(t) - 1, 1)]
+    hi = t[min(int(last_two[-1]) if len(last_two) else 0, len(t) - 2)]
+    # a detection at the break's instant belongs to the segment after it
+    return float(lo) + 1e-6, float(hi)
+
+
+def _neighbours(centers: np.ndarray, known: np.ndarray) -> np.ndarray:
+    """(C, 2) the nearest known break below and above each centre (±inf if none)."""
+    known = np.sort(known)
+    j = np.searchsorted(known, centers)
+    below = np.where(j > 0, known[np.maximum(j - 1, 0)] if len(known) else 0.0, -np.inf)
+    above = np.where(j < len(known), known[np.minimum(j, len(known) - 1)]
+                     if len(known) else 0.0, np.inf)
+    return np.stack([below, above], axis=1)
+
+
+def _refine_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.ndarray,
+                   w: np.ndarray, J: np.ndarray, spacing: float, breaks: list[np.ndarray],
+                   options: SmoothOptions) -> list[np.ndarray]:
+    """Each break's time re-estimated (within a knot spacing) on the problem linearised at
+    the final fit, the neighbouring breaks held (the first estimate was linearised at the
+    loose fit)."""
+    X = problem.positions(control)
+    target = np.einsum("naj,nj->na", J, X) - r
+    weight = w / sigma**2
+    t_obs = problem.t[problem.rows]
+    out = []
+    row0 = 0
+    for p, known in enumerate(breaks):
+        # the piece's rows in time order (the clock estimator moves the times)
+        here = row0 + np.argsort(t_obs[row0:row0 + len(problem.rows_of_piece[p])],
+                                 kind="stable")
+        row0 += len(problem.rows_of_piece[p])
+        t = t_obs[here]
+        if len(known) == 0:
+            out.append(known)
+            continue
+        first_ok, last_ok = _end_limits(t, problem.obs.camera[problem.rows][here])
+        a = np.maximum(known - spacing, first_ok)
+        b = np.minimum(known + spacing, last_ok)
+        ok = a < b
+        limits = np.stack([np.r_[-np.inf, known[:-1]], np.r_[known[1:], np.inf]], axis=1)
+        tau, _ = _breaks.scan(t, J[here], target[here], weight[here], known[ok],
+                              np.stack([a[ok], b[ok]], axis=1), limits[ok], spacing,
+                              _WINDOW_SPANS * spacing, options.prior)
+        # a break the moved detections no longer allow (too near a piece's end) is dropped
+        new = np.sort(tau)
+        keep = np.r_[True, np.diff(new) > spacing]  # never two breaks in one span
+        out.append(new[keep])
+    return out

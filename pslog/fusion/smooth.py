@@ -1,0 +1,77 @@
+"""``smooth``: one continuous trajectory fitted to every detection's ray (offline).
+
+The estimator is :func:`pslog.estimation.fit_trajectory` (its docstring has the model); this
+module turns its fit into a :class:`~pslog.records.Track`: a point at every detection time
+that a fitted piece covers, or, with ``FusionOptions.rate_hz``, on a regular grid over the
+pieces (never inside a gap the model does not bridge). Per-point quality:
+
+- ``std_m``: position standard deviation, ``sqrt(trace Σ)`` (the RMS of the 3-D error the fit
+  expects), metres; the full 3 x 3 covariance is :attr:`Fit.covariance`;
+- ``std_x_m``, ``std_y_m``, ``std_z_m``: per axis, metres;
+- ``residual_px``: the detection's reprojection residual, pixels (NaN on grid points).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import FusionError
+from ..records import NS, Track
+from ..rig import Rig
+from ._prepare import Prepared
+
+
+def fuse_smooth(prep: Prepared, rig: Rig, options) -> Track:
+    """The ``smooth`` track of prepared observations (``options``: FusionOptions with
+    ``max_gap_s`` set). An empty track when no stretch is seen by two cameras."""
+    from ..estimation import SmoothOptions, fit_trajectory
+
+    obs = prep.obs
+    try:
+        fit = fit_trajectory(obs, rig, SmoothOptions(max_gap_s=options.max_gap_s))
+    except FusionError as exc:
+        if "two cameras" in str(exc):
+            return _empty()
+        raise
+    if options.rate_hz is None:
+        rows = np.flatnonzero(fit.used)
+        time_ns, camera = obs.time_ns[rows], obs.camera[rows]
+        position, cov, residual = fit.position[rows], fit.covariance[rows], fit.residual_px[rows]
+    else:
+        time_ns = _grid(fit, options.rate_hz)
+        position, cov = fit.trajectory.evaluate(time_ns)
+        residual = np.full(len(time_ns), np.nan)
+        # a grid point is attributed to the camera of the nearest detection
+        near = np.clip(np.searchsorted(obs.time_ns, time_ns), 0, len(obs) - 1)
+        before = np.maximum(near - 1, 0)
+        closer = np.abs(obs.time_ns[before] - time_ns) < np.abs(obs.time_ns[near] - time_ns)
+        camera = obs.camera[np.where(closer, before, near)]
+    keep = np.all(np.isfinite(position), axis=1)
+    time_ns, camera, position = time_ns[keep], camera[keep], position[keep]
+    cov, residual = cov[keep], residual[keep]
+    var = np.einsum("nii->ni", cov)
+    quality = {"std_m": np.sqrt(var.sum(axis=1)), "std_x_m": np.sqrt(var[:, 0]),
+               "std_y_m": np.sqrt(var[:, 1]), "std_z_m": np.sqrt(var[:, 2]),
+               "residual_px": residual}
+    return Track("smooth", time_ns, position, camera, quality)
+
+
+def _grid(fit, rate_hz: float) -> np.ndarray:
+    """Times (ns) of a regular grid at ``rate_hz`` (phase: the session's first detection)
+    inside the fitted pieces."""
+    tr = fit.trajectory
+    step = NS / rate_hz
+    times = []
+    for knots in tr.knots:
+        lo = tr.t0_ns + round(knots[0] * NS)
+        hi = tr.t0_ns + round(knots[-1] * NS)
+        k0 = np.ceil((lo - tr.t0_ns) / step)
+        k1 = np.floor((hi - tr.t0_ns) / step)
+        k = np.arange(k0, k1 + 1)
+        times.append(tr.t0_ns + np.round(k * step).astype(np.int64))
+    out = np.concatenate(times) if times else np.zeros(0, np.int64)
+    return out[(out >= tr.t0_ns)]
+
+
+def _empty() -> Track:
+    return Track("smooth", np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0, np.int32))

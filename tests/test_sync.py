@@ -1,0 +1,172 @@
+"""``pslog sync``: camera clocks estimated from the ball (pslog/estimation/sync.py)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from _rally import rally
+from numpy.testing import assert_allclose
+from test_estimation import _rig
+
+from pslog.errors import FusionError
+from pslog.estimation.sync import estimate_clocks
+from pslog.log import SessionWriter, read_session
+from pslog.motion import Motion
+from pslog.records import NS, Detections, Truth
+from pslog.rig import Rig
+from pslog.simulation import SimulationOptions, simulate, true_rig
+
+
+def _with_offsets(rig: Rig, offsets: dict[str, float]) -> Rig:
+    return Rig(tuple(c.replace(clock_offset=offsets.get(c.name, 0.0)) for c in rig.cameras))
+
+
+def test_hand_computed_offset_of_a_parabola_seen_by_two_cameras():
+    # camera 2's clock is 4.2 ms behind: its detection logged at ℓ was taken at ℓ + 4.2 ms.
+    # Noise-free, the only consistent offset is 4.2 ms exactly.
+    rig = _rig(2)
+    parabola = Motion("parabola", 2.0, lambda t: np.stack(
+        [0.4 + 1.2 * t, 0.6 + 0.4 * np.sin(3 * t), 1.0 + 3.0 * t - 4.9 * t * t + 0.2 * t**3],
+        axis=1))
+    opts = SimulationOptions(clock_offset_s={"c2": 4.2e-3})
+    detections, _ = simulate(rig, parabola, 1.2, opts)
+    result = estimate_clocks(detections.best(), rig, ("offset",), search_s=10e-3)
+    assert_allclose(result.cameras[1].offset_s, 4.2e-3, atol=2e-7)
+    assert result.cameras[0].offset_s == 0 and result.cameras[0].offset_std_s == 0
+    assert result.rig.cameras[1].clock_offset == result.cameras[1].offset_s
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_offsets_wrong_by_up_to_12_ms_converge_within_their_standard_deviation(seed):
+    rig = _rig(3, distortion=True)
+    motion, _ = rally(6.0, seed=50 + seed, speed=4.0, kick_every_s=0.7)
+    truth_offsets = {"c2": 1.7e-3 * seed, "c3": -2.3e-3}
+    opts = SimulationOptions(noise_px=0.3, seed=seed, clock_offset_s=truth_offsets)
+    detections, _ = simulate(rig, motion, 6.0, opts)
+    start = _with_offsets(rig, {"c2": truth_offsets["c2"] + 9e-3,
+                                "c3": truth_offsets["c3"] - 12e-3})
+    result = estimate_clocks(detections.best(), start, ("offset",), search_s=16e-3)
+    for est in result.cameras[1:]:
+        err = est.offset_s - truth_offsets[est.name]
+        assert abs(err) < 0.3e-3 and abs(err) < 4 * est.offset_std_s, (est, err)
+        assert 0 < est.offset_std_s < 0.5e-3
+    assert 0.2 < result.noise_px < 0.4
+
+
+@pytest.mark.parametrize("drag", [0.0, 0.015])
+def test_drift_and_readout_are_recovered_with_honest_uncertainties(drag):
+    """Without air drag every estimate is within 4σ; with drag (which the motion prior does
+    not model) the readouts stay within 1 ms but are biased by a few σ (a stated limit)."""
+    rig = _rig(3)
+    motion, _ = rally(30.0, seed=61, speed=4.0, kick_every_s=0.7, drag_per_m=drag)
+    faults = dict(clock_offset_s={"c2": 1e-3, "c3": -2e-3},
+                  clock_drift_ppm={"c2": 35.0, "c3": -25.0},
+                  readout_s={"c1": 12e-3, "c2": 18e-3, "c3": 8e-3})
+    truth_rig_ = true_rig(rig, SimulationOptions(**faults))
+    detections, _ = simulate(rig, motion, 30.0,
+                             SimulationOptions(noise_px=0.3, seed=61, **faults))
+    result = estimate_clocks(detections.best(), rig, ("offset", "drift", "readout"))
+    for est, cam in zip(result.cameras, truth_rig_.cameras, strict=True):
+        assert abs(est.readout_s - cam.readout) < 1e-3
+        if drag == 0:
+            assert abs(est.readout_s - cam.readout) < 4 * est.readout_std_s
+        if cam.name != "c1":
+            assert abs(est.drift_ppm - cam.clock_drift_ppm) < 4 * est.drift_std_ppm
+            assert abs(est.offset_s - cam.clock_offset) < 4 * est.offset_std_s
+            assert abs(est.offset_s - cam.clock_offset) < 0.3e-3
+
+
+def test_too_little_shared_motion_is_one_line_naming_what_is_missing():
+    rig = _rig(3)
+    motion, _ = rally(4.0, seed=71, speed=4.0)
+    detections, _ = simulate(rig, motion, 4.0)
+    obs = detections.best()
+    with pytest.raises(FusionError, match="camera c3 has no detection"):
+        estimate_clocks(obs.select(obs.camera != 2), rig)
+    few = obs.select((obs.camera != 1) | (obs.time_ns < obs.time_ns[0] + 0.2 * NS))
+    with pytest.raises(FusionError, match=r"camera c2 has .* shared in time"):
+        estimate_clocks(few, rig)
+    still = Motion("still", 3.0, lambda t: np.tile([1.5, 1.0, 0.8], (len(t), 1)))
+    detections, _ = simulate(rig, still, 3.0, SimulationOptions(noise_px=0.3))
+    with pytest.raises(FusionError, match="barely moves"):
+        estimate_clocks(detections.best(), rig)
+
+
+def test_cli_json_table_and_the_synced_copy(tmp_path, cli):
+    rig = _rig(3)
+    motion, _ = rally(5.0, seed=81, speed=4.0, kick_every_s=0.7)
+    opts = SimulationOptions(noise_px=0.3, seed=81, clock_offset_s={"c2": 3e-3, "c3": -4e-3},
+                             host_jitter_s=1.5e-3)
+    detections, truth = simulate(rig, motion, 5.0, opts)
+    # the session clock starts 20 ms before the first frame (jittered stamps stay >= 0)
+    detections = Detections(detections.camera_names, detections.frame_time_ns + 20_000_000,
+                            detections.frame_camera, detections.frame_index,
+                            detections.cand_frame, detections.cand_uv,
+                            detections.cand_radius, detections.cand_score)
+    truth = Truth(truth.time_ns + 20_000_000, truth.position_world)
+    path = tmp_path / "faulted.mcap"
+    with SessionWriter(path, rig, source="test") as writer:
+        writer.add_detections(detections)
+        writer.add_truth(truth)
+    out_path = tmp_path / "synced.mcap"
+    code, out, err = cli("sync", path, "-o", out_path, "--json")
+    assert code == 0, err
+    report = json.loads(out)  # exactly one JSON object
+    assert [c["name"] for c in report["cameras"]] == ["c1", "c2", "c3"]
+    keys = {"name", "offset_s", "offset_std_s", "drift_ppm", "drift_std_ppm", "readout_s",
+            "readout_std_s"}
+    assert all(set(c) == keys for c in report["cameras"])
+    c2, c3 = report["cameras"][1:]
+    assert abs(c2["offset_s"] - 3e-3) < 0.4e-3 and abs(c3["offset_s"] + 4e-3) < 0.4e-3
+    assert c2["drift_ppm"] == 0 and c2["drift_std_ppm"] == 0 and c2["readout_std_s"] == 0
+    assert report["residual_px"] < 1.0
+    synced = read_session(out_path)
+    assert synced.rig.cameras[1].clock_offset == c2["offset_s"]
+    # the host jitter was regularized away (auto): the copy holds the regularized stamps
+    assert not np.array_equal(synced.detections.frame_time_ns, detections.frame_time_ns)
+    code, out, err = cli("sync", path, "-o", out_path, "--force", "--regularize", "off")
+    assert code == 0, err
+    assert "offset ms" in out and "phase ms" in out and "ideal ms" in out
+    code, _, err = cli("sync", path, "-o", out_path, "--force")
+    assert code == 0, err
+
+
+def test_cli_refuses_bad_values_and_overwrites_only_with_force(tmp_path, cli, capsys):
+    rig = _rig(3)
+    motion, _ = rally(3.0, seed=91, speed=4.0)
+    detections, _ = simulate(rig, motion, 3.0)
+    path = tmp_path / "s.mcap"
+    with SessionWriter(path, rig, source="test") as writer:
+        writer.add_detections(detections)
+    with pytest.raises(SystemExit) as stop:
+        cli("sync", path, "-o", tmp_path / "o.mcap", "--estimate", "offset,speed")
+    assert stop.value.code == 2 and "offset, drift, readout" in capsys.readouterr().err
+    (tmp_path / "o.mcap").write_bytes(b"keep")
+    code, _, err = cli("sync", path, "-o", tmp_path / "o.mcap")
+    assert code == 1 and "--force" in err and len(err.strip().splitlines()) == 1
+    assert (tmp_path / "o.mcap").read_bytes() == b"keep"
+    empty = tmp_path / "empty.mcap"
+    with SessionWriter(empty, rig, source="test") as writer:
+        writer.add_detections(detections.__class__.from_observations(
+            rig.names, detections.best().select(detections.best().camera == 0)))
+    code, _, err = cli("sync", empty, "-o", tmp_path / "e.mcap")
+    assert code == 1 and "has no detection" in err and len(err.strip().splitlines()) == 1
+
+
+def test_frames_regularized_before_the_session_start_are_left_out_of_the_copy():
+    from pslog.cli.sync import _from_session_start
+
+    rig = _rig(2)
+    motion, _ = rally(1.0, seed=95, speed=4.0)
+    detections, _ = simulate(rig, motion, 1.0)
+    shifted = Detections(detections.camera_names, detections.frame_time_ns - 20_000_000,
+                         detections.frame_camera, detections.frame_index,
+                         detections.cand_frame, detections.cand_uv, detections.cand_radius,
+                         detections.cand_score)
+    kept, early = _from_session_start(shifted)
+    assert early == int(np.count_nonzero(shifted.frame_time_ns < 0)) > 0
+    assert kept.frame_time_ns.min() >= 0 and kept.n_frames == shifted.n_frames - early
+    late = shifted.frame_time_ns[shifted.cand_frame] >= 0
+    assert_allclose(kept.cand_uv, shifted.cand_uv[late])
