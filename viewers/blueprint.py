@@ -97,8 +97,9 @@ def build_blueprint(camera_names: Sequence[str], methods: Sequence[str], *, has_
     series = [rrb.TimeSeriesView(origin=f"/plots/{p}", name=_PLOT_TITLES.get(p, p))
               for p in plots]
     legend = rrb.TextDocumentView(origin="/legend", name="legend")
+    timing = rrb.TextDocumentView(origin="/timing", name="camera clocks")
     top = rrb.Horizontal(view3d, rrb.Vertical(*cameras), column_shares=[3, 1])
-    bottom = rrb.Horizontal(*series, legend)
+    bottom = rrb.Horizontal(*series, legend, timing)
     return rrb.Blueprint(
         rrb.Vertical(top, bottom, row_shares=[3, 1]),
         rrb.BlueprintPanel(state="collapsed"),
