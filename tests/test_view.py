@@ -347,6 +347,11 @@ def test_smooth_and_the_camera_clocks_after_sync(tmp_path, capsys):
         chunks = _chunks(rrd)
         assert "/world/tracks/smooth" in chunks and "/plots/error_mm/smooth" in chunks
         assert sum(b.num_rows for b in chunks["/world/tracks/smooth"]) == len(track)
+        # smooth's own quality: each point's position std and reprojection residual
+        std_mm = np.concatenate([np.array(_column(chunks["/plots/std_mm/smooth"],
+                                                  "Scalars:scalars")).ravel()])
+        np.testing.assert_allclose(np.sort(std_mm), np.sort(1e3 * track.quality["std_m"]))
+        assert sum(b.num_rows for b in chunks["/plots/residual_px/smooth"]) == len(track)
         assert "/world/tracks/typeA" not in chunks
         text = _static_text(rrd, "/timing")
         for cam in rig.cameras:  # the synced clock, camera by camera
