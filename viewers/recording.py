@@ -15,7 +15,8 @@ Entity paths mirror the transform tree (world z up, metres):
 ``world/truth`` (``/trail``)                ground truth, when the session has it
 ``world/typeA/...``                         P_{t-1}, P_{t-2}, prediction (eq. 2), eq. 4
 ``plots/error_mm/<method>``                 distance to truth, mm
-``plots/<quality>/<method>``                snap_px, ray_miss_mm, ray_shift_mm
+``plots/<quality>/<method>``                snap_px, ray_miss_mm, ray_shift_mm; std_mm,
+                                            residual_px (smooth)
 ``plots/detection_rate/<cam>``              % of frames with a detection, last second
 ``events``, ``legend``                      session notes (TextLog), colour legend
 ``timing``                                  each camera's clock model (TextDocument)
