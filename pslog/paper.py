@@ -27,6 +27,17 @@ PAPER_TABLE1 = {
     (3, "linear", "typeB"): ("linear prediction", 60, 0.2, 1.4, 4.4),
 }
 TABLE1_MOTIONS = ("straight", "spiral", "fall")
+#: ``--beyond``: methods of ours beside the paper's rows (no paper figure).
+BEYOND_TABLE1 = {
+    (2, "smooth", "typeA"): ("smooth (ours)", None, None, None, None),
+    (3, "smooth", "typeA"): ("smooth (ours)", None, None, None, None),
+}
+#: ``--beyond``'s faulted session: paper3 with type-A shutters watching the rally, cameras 2
+#: and 3 with clock offsets of a few ms that the session's rig does not know (no genlock).
+BEYOND_OFFSETS_S = {"cam2": 3.1e-3, "cam3": -4.4e-3}
+BEYOND_NOISE_PX = 0.3
+BEYOND_DURATION_S = 8.0
+BEYOND_TIMINGS = ("nominal", "synced", "true")
 
 #: Table 2 of the paper: mean [mm] and variance [mm²] of z on the turntable (real cameras).
 PAPER_TABLE2 = {"typeA": (664.5, 2143.7), "typeB": (662.3, 112.0)}
@@ -43,16 +54,18 @@ class Table1Row:
     method: str
     timing: str
     paper_label: str
-    paper_fps: int
+    paper_fps: int | None  # None: a method of ours, not in the paper
     fps: float  # our measured output rate
     error_mm: dict[str, float]  # motion -> our mean error
-    paper_mm: dict[str, float]  # motion -> the paper's mean error
+    paper_mm: dict[str, float | None]  # motion -> the paper's mean error (None: not in it)
 
 
-def table1(noise_px: float = 0.0, seed: int = 0) -> list[Table1Row]:
-    """Mean 3D error of each of the paper's Table 1 rows on its three motions."""
+def table1(noise_px: float = 0.0, seed: int = 0, beyond: bool = False) -> list[Table1Row]:
+    """Mean 3D error of each of the paper's Table 1 rows on its three motions; with
+    ``beyond``, ``smooth`` (ours, type-A shutters) on two and three cameras after them."""
     rows = []
-    for (n_cams, method, timing), (label, paper_fps, *paper) in PAPER_TABLE1.items():
+    entries = {**PAPER_TABLE1, **(BEYOND_TABLE1 if beyond else {})}
+    for (n_cams, method, timing), (label, paper_fps, *paper) in entries.items():
         rig = apply_timing(builtin_rig("paper3" if n_cams == 3 else "paper2"), timing)
         errors, rates = {}, []
         for motion_name in TABLE1_MOTIONS:
@@ -90,15 +103,88 @@ def table2(noise_px: float = TABLE2_NOISE_PX, seed: int = 0,
     return rows
 
 
+def _paper_cell(value, spec: str) -> str:
+    return f"{'—':>7}" if value is None else format(value, spec)
+
+
 def format_table1(rows: list[Table1Row]) -> str:
     head = (f"{'cams':>4} {'method':<8} {'timing':<6} {'fps':>5} {'(paper)':>7}  "
             + "  ".join(f"{m + ' mm':>11} {'(paper)':>7}" for m in TABLE1_MOTIONS))
     lines = ["Table 1: mean absolute 3D error [mm], ours beside the paper's", head,
              "-" * len(head)]
     for r in rows:
-        cells = "  ".join(f"{r.error_mm[m]:>11.3f} {r.paper_mm[m]:>7.2f}" for m in TABLE1_MOTIONS)
+        cells = "  ".join(f"{r.error_mm[m]:>11.3f} {_paper_cell(r.paper_mm[m], '>7.2f')}"
+                          for m in TABLE1_MOTIONS)
         lines.append(f"{r.cameras:>4} {r.method:<8} {r.timing:<6} {r.fps:>5.1f} "
-                     f"{r.paper_fps:>7}  {cells}")
+                     f"{_paper_cell(r.paper_fps, '>7')}  {cells}")
+    return "\n".join(lines)
+
+
+@dataclass(frozen=True)
+class BeyondRow:
+    """One method on ``--beyond``'s faulted session with one timing: ``nominal`` (the
+    session's rig, clocks unknown), ``synced`` (after ``pslog sync``), ``true`` (the
+    simulator's clocks). Errors in millimetres."""
+
+    method: str
+    timing: str
+    mean_mm: float
+    p95_mm: float
+    max_mm: float
+    n_points: int
+
+
+@dataclass(frozen=True)
+class BeyondClock:
+    """``pslog sync``'s offset estimate of one camera against the simulator's truth."""
+
+    camera: str
+    true_offset_ms: float
+    offset_ms: float
+    offset_std_ms: float
+
+
+def table_beyond(seed: int = 0, noise_px: float = BEYOND_NOISE_PX,
+                 duration: float = BEYOND_DURATION_S
+                 ) -> tuple[list[BeyondRow], list[BeyondClock]]:
+    """typeA and smooth on a session of cameras without genlock: paper3 (type-A shutters)
+    watching the rally, cameras 2 and 3 with clock offsets (:data:`BEYOND_OFFSETS_S`) the
+    session's rig does not know; with the nominal timing, after ``pslog sync`` (offsets
+    estimated from the detections, as the command does) and with the true timing."""
+    from .estimation.sync import estimate_clocks
+    from .simulation import true_rig
+
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    opts = SimulationOptions(noise_px=noise_px, seed=seed, clock_offset_s=BEYOND_OFFSETS_S)
+    detections, truth = simulate(rig, get_motion("rally"), duration, opts)
+    synced = estimate_clocks(detections.best(), rig, ("offset",))
+    rigs = {"nominal": rig, "synced": synced.rig, "true": true_rig(rig, opts)}
+    rows = []
+    for method in ("typeA", "smooth"):
+        for timing in BEYOND_TIMINGS:
+            acc = evaluate(fuse_all(detections, rigs[timing], [method])[method], truth)
+            rows.append(BeyondRow(method, timing, acc.mean_mm, acc.p95_mm, acc.max_mm,
+                                  acc.n_points))
+    clocks = [BeyondClock(est.name, BEYOND_OFFSETS_S.get(est.name, 0.0) * 1e3,
+                          est.offset_s * 1e3, est.offset_std_s * 1e3)
+              for est in synced.cameras[1:]]
+    return rows, clocks
+
+
+def format_beyond(rows: list[BeyondRow], clocks: list[BeyondClock],
+                  noise_px: float = BEYOND_NOISE_PX) -> str:
+    lines = [f"Beyond the paper: cameras without genlock (paper3, type-A shutters, rally "
+             f"{BEYOND_DURATION_S:g} s, {noise_px:g} px; clock offsets unknown to the rig)",
+             "sync: " + ", ".join(f"{c.camera} {c.offset_ms:.3f} ± {c.offset_std_ms:.3f} ms "
+                                  f"(true {c.true_offset_ms:.3f})" for c in clocks)]
+    head = (f"{'method':<7} " + "  ".join(f"{t + ' mean':>12} {'p95':>6} {'max':>6}"
+                                          for t in BEYOND_TIMINGS) + "   [mm]")
+    lines += [head, "-" * len(head)]
+    for method in ("typeA", "smooth"):
+        by = {r.timing: r for r in rows if r.method == method}
+        lines.append(f"{method:<7} " + "  ".join(
+            f"{by[t].mean_mm:>12.2f} {by[t].p95_mm:>6.2f} {by[t].max_mm:>6.1f}"
+            for t in BEYOND_TIMINGS))
     return "\n".join(lines)
 
 

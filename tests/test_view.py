@@ -443,3 +443,55 @@ def test_every_rerun_call_lives_in_viewers():
             if any(n == "rerun" or n.startswith("rerun.") for n in names):
                 offenders.append(f"{path.relative_to(root.parent)}:{node.lineno}")
     assert offenders == []
+
+
+def _static_text(rrd: Path, entity: str) -> str:
+    for chunk in RrdReader(rrd).stream():
+        if chunk.is_static and chunk.entity_path == entity:
+            return chunk.to_record_batch().column("TextDocument:text").to_pylist()[0][0]
+    raise AssertionError(f"no static {entity}")
+
+
+def test_smooth_and_the_camera_clocks_after_sync(tmp_path, capsys):
+    """A session of cameras without genlock: synced, fused with smooth, viewed. The smooth
+    track shows like any method (on the fly or from the fused copy) and the 'timing' panel
+    holds each camera's clock model (the synced rig) beside the simulator's truth."""
+    session, synced, fused = (tmp_path / n for n in ("s.mcap", "synced.mcap", "fused.mcap"))
+    assert pslog_main(["simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "rally",
+                       "--duration", "3", "--noise-px", "0.3", "--clock-offset", "cam2=3",
+                       "--clock-offset", "cam3=-2.5", "-o", str(session)]) == 0
+    assert pslog_main(["sync", str(session), "-o", str(synced)]) == 0
+    assert pslog_main(["fuse", str(synced), "--method", "smooth", "-o", str(fused)]) == 0
+    capsys.readouterr()
+    rig = read_session(synced).rig
+    track = read_session(fused).tracks["smooth"]
+
+    on_the_fly = tmp_path / "fly.rrd"
+    assert pslog_main(["view", str(synced), "--methods", "smooth", "--save", str(on_the_fly),
+                       "--frames", "none"]) == 0
+    stored = tmp_path / "stored.rrd"
+    assert pslog_main(["view", str(synced), str(fused), "--save", str(stored)]) == 0
+    for rrd in (on_the_fly, stored):
+        _verify(rrd)
+        chunks = _chunks(rrd)
+        assert "/world/tracks/smooth" in chunks and "/plots/error_mm/smooth" in chunks
+        assert sum(b.num_rows for b in chunks["/world/tracks/smooth"]) == len(track)
+        # smooth's own quality: each point's position std and reprojection residual
+        std_mm = np.concatenate([np.array(_column(chunks["/plots/std_mm/smooth"],
+                                                  "Scalars:scalars")).ravel()])
+        np.testing.assert_allclose(np.sort(std_mm), np.sort(1e3 * track.quality["std_m"]))
+        assert sum(b.num_rows for b in chunks["/plots/residual_px/smooth"]) == len(track)
+        assert "/world/tracks/typeA" not in chunks
+        text = _static_text(rrd, "/timing")
+        for cam in rig.cameras:  # the synced clock, camera by camera
+            assert f"| {cam.name} | 30 | {cam.offset * 1e3:.3f} | " \
+                   f"{cam.clock_offset * 1e3:.4f} |" in text
+        assert "| cam2 |" in text and "true offset ms" in text
+        assert " 3.0000 |" in text and " -2.5000 |" in text  # the truth, from the metadata
+        assert "No clock correction" not in text
+    assert 2.5e-3 < rig.camera("cam2").clock_offset < 3.5e-3  # sync did find the clock
+
+    plain = tmp_path / "plain.rrd"  # a genlocked session: logged times used as they are
+    assert pslog_main(["view", str(session), "--save", str(plain), "--frames", "none"]) == 0
+    text = _static_text(plain, "/timing")
+    assert "No clock correction" in text and "| cam3 | 30 | 22.222 | 0.0000 | 0.000 |" in text

@@ -24,12 +24,16 @@ QUALITY_PLOTS: dict[str, tuple[str, float]] = {
     "snap_px": ("snap_px", 1.0),
     "ray_miss_mm": ("ray_miss_m", 1e3),
     "ray_shift_mm": ("ray_shift_m", 1e3),
+    "std_mm": ("std_m", 1e3),  # smooth: the point's position standard deviation
+    "residual_px": ("residual_px", 1.0),  # smooth: the detection's reprojection residual
 }
 _PLOT_TITLES = {
     "error_mm": "error vs truth (mm)",
     "snap_px": "snap distance (px)",
     "ray_miss_mm": "ray miss (mm)",
     "ray_shift_mm": "shift onto ray, eq. 4 (mm)",
+    "std_mm": "position std (mm)",
+    "residual_px": "reprojection residual (px)",
     "detection_rate": "detection rate (%)",
 }
 # 2D overlays live in image space: kept out of the 3D view so it stays readable
@@ -97,8 +101,9 @@ def build_blueprint(camera_names: Sequence[str], methods: Sequence[str], *, has_
     series = [rrb.TimeSeriesView(origin=f"/plots/{p}", name=_PLOT_TITLES.get(p, p))
               for p in plots]
     legend = rrb.TextDocumentView(origin="/legend", name="legend")
+    timing = rrb.TextDocumentView(origin="/timing", name="camera clocks")
     top = rrb.Horizontal(view3d, rrb.Vertical(*cameras), column_shares=[3, 1])
-    bottom = rrb.Horizontal(*series, legend)
+    bottom = rrb.Horizontal(*series, legend, timing)
     return rrb.Blueprint(
         rrb.Vertical(top, bottom, row_shares=[3, 1]),
         rrb.BlueprintPanel(state="collapsed"),

@@ -15,9 +15,11 @@ Entity paths mirror the transform tree (world z up, metres):
 ``world/truth`` (``/trail``)                ground truth, when the session has it
 ``world/typeA/...``                         P_{t-1}, P_{t-2}, prediction (eq. 2), eq. 4
 ``plots/error_mm/<method>``                 distance to truth, mm
-``plots/<quality>/<method>``                snap_px, ray_miss_mm, ray_shift_mm
+``plots/<quality>/<method>``                snap_px, ray_miss_mm, ray_shift_mm; std_mm,
+                                            residual_px (smooth)
 ``plots/detection_rate/<cam>``              % of frames with a detection, last second
 ``events``, ``legend``                      session notes (TextLog), colour legend
+``timing``                                  each camera's clock model (TextDocument)
 ==========================================  =============================================
 
 Timelines: ``capture_time`` (the session clock, integer ns) and ``frame`` (frame index).
@@ -31,6 +33,7 @@ from pathlib import Path
 import numpy as np
 import rerun as rr
 
+from pslog.errors import PslogError
 from pslog.log import iter_images
 from pslog.motion import BALL_RADIUS
 from pslog.outputs import check_output_path
@@ -191,6 +194,43 @@ def _log_static(rec, data: ViewData, colors, quality) -> None:
                 rr.SeriesLines(colors=[C.camera_color(c)], names=[name]), static=True)
     rec.log("legend", rr.TextDocument(_legend(data, colors), media_type="text/markdown"),
             static=True)
+    rec.log("timing", rr.TextDocument(timing_text(data.session), media_type="text/markdown"),
+            static=True)
+
+
+def timing_text(session) -> str:
+    """Markdown: each camera's clock model as the session's rig holds it (the times every
+    track was fused on: ``pslog sync`` writes its estimates there) — frame rate, shutter
+    offset, clock offset, drift, readout — and, for a simulated session with clock faults,
+    the true values beside them. The estimates' standard deviations are printed by
+    ``pslog sync`` but not stored in the session, so they are not shown."""
+    from pslog.simulation import read_truth_clock
+
+    rig = session.rig
+    try:
+        truth = read_truth_clock(rig, session.metadata)
+    except PslogError:
+        truth = None
+    head = "| camera | fps | shutter ms | clock offset ms | drift ppm | readout ms |"
+    rule = "|---|---:|---:|---:|---:|---:|"
+    if truth is not None:
+        head += " true offset ms | true drift ppm | true readout ms |"
+        rule += "---:|---:|---:|"
+    lines = ["**Camera clocks** (true time = logged + offset + drift · 1e-6 · logged "
+             "+ readout · row / height)", "", head, rule]
+    for i, cam in enumerate(rig.cameras):
+        row = (f"| {cam.name} | {cam.fps:g} | {cam.offset * 1e3:.3f} | "
+               f"{cam.clock_offset * 1e3:.4f} | {cam.clock_drift_ppm:.3f} | "
+               f"{cam.readout * 1e3:.3f} |")
+        if truth is not None:
+            t = truth.cameras[i]
+            row += (f" {t.clock_offset * 1e3:.4f} | {t.clock_drift_ppm:.3f} | "
+                    f"{t.readout * 1e3:.3f} |")
+        lines.append(row)
+    if not any(c.has_clock_correction for c in rig.cameras):
+        lines += ["", "No clock correction in the rig: the logged times are used as they are "
+                      "(cameras genlocked, or not yet synced: `pslog sync`)."]
+    return "\n".join(lines)
 
 
 def _legend(data: ViewData, colors) -> str:

@@ -15,6 +15,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                            "1.0 for table2)")
     parser.add_argument("--seed", type=seed, default=0, metavar="N",
                         help="random seed (default %(default)s)")
+    parser.add_argument("--beyond", action="store_true",
+                        help="table1 only: add smooth (ours) beside the paper's methods, and "
+                             "a second table: typeA and smooth on a session whose cameras' "
+                             "clock offsets are unknown (no genlock), with the nominal timing, "
+                             "after 'pslog sync' and with the true timing")
     parser.add_argument("--json", action="store_true", help="print JSON for scripts")
 
 
@@ -23,17 +28,29 @@ def run(args: argparse.Namespace) -> int:
 
     from pslog import paper
 
+    from ._common import usage_error
+
+    beyond = None
+    if args.beyond and args.table != "table1":
+        return usage_error("paper", "argument --beyond: only with table1")
     if args.table == "table1":
         noise = 0.0 if args.noise_px is None else args.noise_px
-        rows = paper.table1(noise_px=noise, seed=args.seed)
+        rows = paper.table1(noise_px=noise, seed=args.seed, beyond=args.beyond)
         text = paper.format_table1(rows)
+        if args.beyond:
+            beyond = paper.table_beyond(seed=args.seed)
+            text += "\n\n" + paper.format_beyond(*beyond)
     else:
         noise = paper.TABLE2_NOISE_PX if args.noise_px is None else args.noise_px
         rows = paper.table2(noise_px=noise, seed=args.seed)
         text = paper.format_table2(rows, noise)
     if args.json:
-        print(json.dumps({"table": args.table, "noise_px": noise, "rows": paper.as_json(rows)},
-                         indent=2))
+        out = {"table": args.table, "noise_px": noise, "rows": paper.as_json(rows)}
+        if beyond is not None:
+            out["beyond"] = {"noise_px": paper.BEYOND_NOISE_PX,
+                             "rows": paper.as_json(beyond[0]),
+                             "sync": paper.as_json(beyond[1])}
+        print(json.dumps(out, indent=2))
     else:
         print(text)
     return 0
