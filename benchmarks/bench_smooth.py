@@ -17,28 +17,19 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import argparse  # noqa: E402
 import sys  # noqa: E402
-import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from _rally import rally  # noqa: E402
+from bench_fusion import best_of  # noqa: E402
 
 from pslog import SimulationOptions, apply_timing, builtin_rig, simulate  # noqa: E402
 from pslog.evaluation import evaluate  # noqa: E402
 from pslog.fusion import fuse  # noqa: E402
 
 TARGET = 50_000
-
-
-def best_of(repeat: int, fn) -> tuple[float, object]:
-    best, result = float("inf"), None
-    for _ in range(repeat):
-        start = time.perf_counter()
-        result = fn()
-        best = min(best, time.perf_counter() - start)
-    return best, result
 
 
 def main() -> int:
