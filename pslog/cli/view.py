@@ -75,14 +75,28 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from pslog.errors import PslogError
     from viewers import load_view_data, log_view, new_stream
+    from viewers.data import parse_methods
     from viewers.rrd_file import rrd_file, rrd_stdout
-    from viewers.sinks import has_display, open_sink
+    from viewers.sinks import check_url, has_display, open_sink
 
     if args.url and not args.connect:
         print(f"pslog view: error: --url is where --connect sends the data; add --connect "
               f"(pslog view ... --connect --url {args.url}) (see 'pslog view --help')",
               file=sys.stderr)
         return 2
+    # malformed values are command-line errors (exit 2), found before any file is read
+    if args.start is not None and args.end is not None and args.start >= args.end:
+        return usage_error("view", f"--start ({args.start:g} s) must be before --end "
+                                   f"({args.end:g} s)")
+    try:
+        parse_methods(args.methods)
+    except PslogError as exc:
+        return usage_error("view", f"argument --methods: {exc}")
+    if args.connect and args.url:
+        try:
+            check_url(args.url)
+        except PslogError as exc:
+            return usage_error("view", f"argument {exc}")
     sinks = [flag for flag, on in (("--save", args.save), ("--serve", args.serve),
                                    ("--connect", args.connect), ("--stdout", args.stdout)) if on]
     if len(sinks) > 1:

@@ -88,7 +88,44 @@ def test_negative_offset_is_refused_up_front(tmp_path):
     before = fingerprint(tmp_path)
     run = run_pslog("record", "--rig", "paper2", "--source", "cam1=a.avi@-1", "--source",
                     "cam2=a.avi", "-o", "s.mcap", cwd=tmp_path, timeout=20)
-    assert_one_line_error(run, 1, contains=("camera 'cam1'", ">= 0"))
+    assert_one_line_error(run, 2, contains=("camera 'cam1'", ">= 0"))
+    assert_untouched(before, tmp_path)
+
+
+def _in_process(*args) -> Run:
+    """``pslog ARGS`` through :func:`pslog.cli.main` in this process (faster than a
+    subprocess where nothing but the exit code and stderr is looked at)."""
+    import contextlib
+    import io
+
+    from pslog.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            code = main([str(a) for a in args])
+        except SystemExit as exc:  # argparse's own errors
+            code = exc.code
+    return Run(tuple(map(str, args)), code, out.getvalue(), err.getvalue())
+
+
+@pytest.mark.parametrize(("values", "contains"), [
+    (("--source", "cam1="), "--source must be NAME=SPEC"),
+    (("--source", "=0"), "--source must be NAME=SPEC"),
+    (("--source", "cam1=a.avi@-1", "--source", "cam2=a.avi"), ">= 0"),
+    (("--source", "cam1=a.avi@nan", "--source", "cam2=a.avi"), "finite"),
+    (("--source", "cam1=a.avi", "--source", "cam2=a.avi", "--offset", "cam1=nan"), "finite"),
+    (("--source", "cam1=a.avi", "--source", "cam2=a.avi", "--offset", "cam1=x"), "number"),
+    (("--synthetic", "--offset", "cam1=nan"), "--offset"),
+], ids=["empty spec", "empty name", "negative @", "nan @", "nan --offset", "text --offset",
+        "--offset with --synthetic"])
+def test_malformed_source_values_are_usage_errors(tmp_path, monkeypatch, values, contains):
+    """Exit 2 for a malformed command-line value, as argparse does (these gave 1)."""
+    _clip(tmp_path / "a.avi")
+    monkeypatch.chdir(tmp_path)
+    before = fingerprint(tmp_path)
+    run = _in_process("record", "--rig", "paper2", *values, "-o", "s.mcap")
+    assert_one_line_error(run, 2, contains=contains)
     assert_untouched(before, tmp_path)
 
 

@@ -220,3 +220,35 @@ def test_stdout_closed(fused):
                     preexec_fn=lambda: os.close(1))
     assert_one_line_error(run, 1, contains=("cannot write to standard output", "closed"))
     assert_untouched(before, fused.parent)
+
+
+@pytest.mark.parametrize(("values", "contains"), [
+    (("--start", "5", "--end", "1"), "--start"),
+    (("--start", "1", "--end", "1"), "--start"),
+    (("--methods", ""), "--methods"),
+    (("--methods", ",,,"), "--methods"),
+    (("--connect", "--url", "garbage"), "--url"),
+    (("--frames", "every:99999999999999999999999"), "--frames"),
+    (("--frames", "every:0"), "--frames"),
+], ids=["start after end", "start at end", "empty methods", "commas only", "garbage url",
+        "huge every", "every:0"])
+def test_malformed_values_are_usage_errors(tmp_path, session, values, contains):
+    """Exit 2, one line, before any file is read or written (these gave 1, or were
+    accepted)."""
+    import contextlib
+    import io
+
+    from pslog.cli import main
+
+    from .promises import Run
+
+    args = ("view", str(session), *values, "--save", str(tmp_path / "out.rrd"))
+    before = fingerprint(tmp_path)
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        try:
+            code = main(list(args))
+        except SystemExit as exc:  # argparse's own errors
+            code = exc.code
+    assert_one_line_error(Run(args, code, "", err.getvalue()), 2, contains=contains)
+    assert_untouched(before, tmp_path)
