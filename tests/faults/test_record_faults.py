@@ -8,6 +8,7 @@ recorder's live status lines and summary come before that one error line on stde
 
 from __future__ import annotations
 
+import contextlib
 import re
 
 import cv2
@@ -140,3 +141,27 @@ def test_video_source_that_is_the_output_is_refused(tmp_path, spelling):
     line = assert_one_line_error(run, 1, contains="is the input")
     assert re.search(r"never replaces an input", line)
     assert_untouched(before, tmp_path)
+
+
+@pytest.mark.parametrize("limit", ["tmpfs", "RLIMIT_FSIZE"])
+def test_demo_on_a_full_disk_says_nothing_was_kept(tmp_path, limit):
+    """The demo removes what it wrote when it fails; its error once still pointed at the
+    deleted session ("salvage it with: pslog recover d/session.mcap ...")."""
+    import resource
+
+    def small_files():
+        resource.setrlimit(resource.RLIMIT_FSIZE, (10 * 1024, resource.RLIM_INFINITY))
+
+    with contextlib.ExitStack() as stack:
+        if limit == "tmpfs":
+            disk = stack.enter_context(small_tmpfs(tmp_path / "disk", "64k"))
+            preexec = None
+        else:
+            disk, preexec = tmp_path, small_files
+        before = fingerprint(disk)
+        run = run_pslog("demo", "--out", "d", "--duration", "0.3", cwd=disk, timeout=120,
+                        preexec_fn=preexec)
+        line = assert_one_line_error(run, 1, contains=("session.mcap", "nothing was kept"))
+        assert "recover" not in line
+        assert not (disk / "d").exists()
+        assert_untouched(before, disk)
