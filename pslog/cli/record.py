@@ -29,7 +29,9 @@ and the timing into an MCAP session. A status line on stderr shows per camera th
 the frame rate, the frames with a ball and the drops; a summary follows at the end.
 Ctrl-C or SIGTERM, at any moment, stops the cameras and finishes the file cleanly (a
 killed recorder loses at most the last second; see 'pslog recover'). If the disk fills up,
-the cameras are stopped and what was written is kept; the error says where.
+the cameras are stopped and what was written is kept; the error says where. Detections are
+written before the images of the same frames, so a full disk costs images first: every
+frame whose image was kept has its detection too.
 
 Sources (one --source per camera of the rig, NAME a camera name of the rig):
   NAME=0, NAME=/dev/video2   a live camera (device index or V4L2 path); capture times from

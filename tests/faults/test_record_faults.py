@@ -58,7 +58,11 @@ def test_disk_full_while_recording(tmp_path, old):
         fixed = tmp_path / "fixed.mcap"
         recovered = run_pslog("recover", kept, "-o", fixed)
         assert recovered.code == 0, recovered.stderr
-        assert read_session(fixed).n_images > 0
+        session = read_session(fixed)
+        assert session.n_images > 0
+        # the detections wait in memory while the large images fill the disk; they are
+        # written before the images of their frames, so none of those is lost (0 once)
+        assert session.detections.n_frames >= session.n_images
 
 
 def test_unwritable_folder_or_full_disk_before_the_start(tmp_path):
