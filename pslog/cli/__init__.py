@@ -27,14 +27,14 @@ def _hold_sigint():
     the command's module or of the C extensions its ``add_arguments`` loads, it would be a
     traceback (or an ImportError). The interpreter's own start-up before this point cannot
     be covered. Any other importer keeps Python's handler."""
+    import _signal  # the C module, loaded at start-up; ``signal`` would build its enums first
     import os
-    import signal
 
     entry = os.path.basename(sys.argv[0]) if sys.argv else ""
     if (entry not in ("pslog", "pslog.exe", "-m")
-            or signal.getsignal(signal.SIGINT) is not signal.default_int_handler):
+            or _signal.getsignal(_signal.SIGINT) is not _signal.default_int_handler):
         return None
-    return signal.signal(signal.SIGINT, lambda signum, _frame: _EARLY_SIGINT.append(signum))
+    return _signal.signal(_signal.SIGINT, lambda signum, _frame: _EARLY_SIGINT.append(signum))
 
 
 _SIGINT_HELD = _hold_sigint()
