@@ -31,7 +31,8 @@ def _hold_sigint():
     import os
 
     entry = os.path.basename(sys.argv[0]) if sys.argv else ""
-    if (entry not in ("pslog", "pslog.exe", "-m")
+    run_as_module = entry == "-m" and "pslog.cli" in getattr(sys, "orig_argv", ())
+    if ((entry not in ("pslog", "pslog.exe") and not run_as_module)
             or _signal.getsignal(_signal.SIGINT) is not _signal.default_int_handler):
         return None
     return _signal.signal(_signal.SIGINT, lambda signum, _frame: _EARLY_SIGINT.append(signum))
