@@ -10,7 +10,10 @@ with it ``pslog --help`` — does not load numpy.
 from __future__ import annotations
 
 import importlib
-from typing import TYPE_CHECKING
+
+#: as ``typing.TYPE_CHECKING`` (type checkers take the name as true) without importing
+#: typing, which costs milliseconds before ``pslog`` can hold an early Ctrl-C (pslog.cli)
+TYPE_CHECKING = False
 
 _EXPORTS = {
     "camera": ("Camera", "look_at"),

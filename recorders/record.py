@@ -219,7 +219,8 @@ def _record(rig: Rig, sources: Mapping[str, object], output: Path, options: Work
                 "nothing was kept")
         if existed:
             kept += f"; the old {output} is untouched"
-        raise RecordWriteError(f"cannot write {output}: {reason}; stopped the cameras; {kept}")
+        raise RecordWriteError(f"cannot write {output}: {reason}; stopped the cameras; {kept}",
+                               reason)
     if summary.n_frames == 0 and summary.interrupted and not existed:
         output.unlink(missing_ok=True)  # stopped before the first frame: nothing to keep
     return summary

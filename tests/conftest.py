@@ -83,11 +83,16 @@ def truth_first_session(tmp_path, rig3) -> tuple[bytes, list[int]]:
         w.add_truth(Truth(truth_t, np.zeros((300, 3))))
         w.flush()
         for batch in (range(10), range(10, 20)):
+            # images flushed before their detections are added: the writer itself always
+            # writes detections first, this file has the other order to test recovery with
             for k in batch:
                 for cam in range(3):
-                    w.add_frame(cam, k, k * 33_333_333 + cam * 11_111_111, uv=[[1.0, 2.0]],
-                                image=make_jpeg(k))
-            w.flush()  # the image chunk in progress, then the buffered detections
+                    w.add_image(cam, k, k * 33_333_333 + cam * 11_111_111, make_jpeg(k))
+            w.flush()
+            for k in batch:
+                for cam in range(3):
+                    w.add_frame(cam, k, k * 33_333_333 + cam * 11_111_111, uv=[[1.0, 2.0]])
+            w.flush()
     data = path.read_bytes()
     ends = [end for op, _, end in io.walk_records(data, len(io.MAGIC)) if op == io.OP_CHUNK]
     return data, ends

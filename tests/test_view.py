@@ -3,6 +3,7 @@ read back, it holds the expected entities, rows, timelines, images and geometry.
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import os
 import subprocess
@@ -336,16 +337,20 @@ def _free_loopback_port() -> int:
         return sock.getsockname()[1]
 
 
-def test_cli_connect_sends_to_a_running_server(session):
-    """--connect still reaches a live rerun gRPC server (loopback), after its reachability
-    check."""
+@contextlib.contextmanager
+def _grpc_server():
+    """A rerun gRPC server on a free loopback port: yields ``(process, port)``.
+    ``.venv/bin/rerun`` is a Python wrapper that starts the real binary as its child: killing
+    the wrapper alone left the binary running for ever, so the server gets its own process
+    group and the whole group is killed on the way out (also when the test fails)."""
+    import signal
+    import socket
+
     port = _free_loopback_port()
     server = subprocess.Popen([str(RERUN), "--serve-grpc", "--bind", "127.0.0.1", "--port",
-                               str(port)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                               str(port)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                              start_new_session=True)
     try:
-        import socket
-        import time
-
         deadline = time.monotonic() + 30
         while True:  # until the server listens
             try:
@@ -354,14 +359,52 @@ def test_cli_connect_sends_to_a_running_server(session):
             except OSError:
                 assert time.monotonic() < deadline and server.poll() is None
                 time.sleep(0.1)
-        result = _pslog(["view", str(session), "--connect", "--url",
-                         f"rerun+http://127.0.0.1:{port}/proxy", "--frames", "none"])
-        assert result.returncode == 0, result.stderr
-        assert "logged" in result.stdout and result.stderr == ""
+        yield server, port
     finally:
-        server.kill()
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(server.pid, signal.SIGKILL)
         server.wait()
 
+
+def _group_members(group: int) -> list[int]:
+    """Live (not zombie) processes of process group ``group``, from /proc."""
+    members = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            with contextlib.suppress(OSError):
+                fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+                if int(fields[2]) == group and fields[0] != "Z":
+                    members.append(int(entry.name))
+    return members
+
+
+@pytest.fixture
+def grpc_server():
+    """The port of a rerun gRPC server that is ended with its whole process group."""
+    with _grpc_server() as (_server, port):
+        yield port
+
+
+def test_cli_connect_sends_to_a_running_server(session, grpc_server):
+    """--connect still reaches a live rerun gRPC server (loopback), after its reachability
+    check."""
+    result = _pslog(["view", str(session), "--connect", "--url",
+                     f"rerun+http://127.0.0.1:{grpc_server}/proxy", "--frames", "none"])
+    assert result.returncode == 0, result.stderr
+    assert "logged" in result.stdout and result.stderr == ""
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc")
+def test_grpc_server_leaves_no_process_behind():
+    """The server of the test above once outlived every test run (an orphaned
+    ``rerun --serve-grpc``): its binary, not only rerun's Python wrapper, must end."""
+    with _grpc_server() as (server, _port):
+        group = server.pid
+        assert len(_group_members(group)) >= 1
+    deadline = time.monotonic() + 10  # SIGKILL is delivered asynchronously
+    while _group_members(group) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert _group_members(group) == []
 
 
 def test_rrd_pipe_is_drained_after_a_read_error(tmp_path):

@@ -33,18 +33,23 @@ class FramesChoice:
 
     every: int
 
+    #: largest N of ``every:N``: far beyond any recording's frame count, small enough to be
+    #: an ordinary integer (``every:99999999999999999999999`` is a typo, not a choice)
+    MAX_EVERY = 1_000_000_000
+
     @classmethod
     def parse(cls, text: str) -> FramesChoice:
-        """``all``, ``none`` or ``every:N`` (N a positive integer)."""
+        """``all``, ``none`` or ``every:N`` (N a whole number, 1 <= N <= :data:`MAX_EVERY`)."""
         text = str(text).strip()
         if text == "all":
             return cls(1)
         if text == "none":
             return cls(0)
         match = re.fullmatch(r"every:(\d+)", text)
-        if match and int(match.group(1)) > 0:
+        if match and 0 < int(match.group(1)) <= cls.MAX_EVERY:
             return cls(int(match.group(1)))
-        raise InputError(f"frames must be 'all', 'none' or 'every:N' with N >= 1, got {text!r}")
+        raise InputError(f"frames must be 'all', 'none' or 'every:N' with 1 <= N <= "
+                         f"{cls.MAX_EVERY}, got {text!r}")
 
 
 @dataclass(frozen=True, eq=False)

@@ -15,6 +15,7 @@ from __future__ import annotations
 import contextlib
 import os
 import shutil
+import sys
 import tempfile
 import threading
 from collections.abc import Iterable, Iterator
@@ -45,17 +46,19 @@ def _remove(path: Path) -> None:
         path.unlink(missing_ok=True)
 
 
-class _PipeToFile:
-    """A named pipe that rerun writes to and a thread that copies it into ``partial``.
+class _Pump:
+    """A named pipe that rerun writes to and a thread that copies it to a destination.
 
-    Whatever goes wrong on pslog's side (the file cannot be written, even reading the pipe
-    fails), the pipe is drained to its end: rerun must never block on it or meet a broken
-    pipe, which would make its flush and ``disconnect`` hang.
+    Whatever goes wrong on pslog's side (the destination cannot be written, even reading the
+    pipe fails), the pipe is drained to its end: rerun must never block on it or meet a
+    broken pipe, which would make its flush and ``disconnect`` hang. Subclasses say where
+    the bytes go (:meth:`_write`) and what a failure undoes (:meth:`_fail`), then call
+    :meth:`_start`.
     """
 
-    def __init__(self, partial: Path, path: Path) -> None:
-        self.partial, self.path = partial, path
+    def __init__(self) -> None:
         self.error: OSError | None = None
+        self.reading: int | None = None  # the descriptor the pump reads (for tests)
         self._dir = tempfile.mkdtemp(prefix="pslog-rrd-")
         try:
             self.fifo = os.path.join(self._dir, "stream.rrd")
@@ -66,15 +69,8 @@ class _PipeToFile:
         except OSError:
             self.cleanup()
             raise
-        try:
-            # locked while open: no other pslog run takes it for a stale partial; closed
-            # only after it has been moved over ``path`` or removed (close())
-            self._out = open_locked(partial, "wb")
-        except BaseException:  # OSError, or PartialBusyError: another run writes it
-            os.close(self._spare)
-            self.cleanup()
-            raise
-        self.reading: int | None = None  # the descriptor the pump reads (for tests)
+
+    def _start(self) -> None:
         self._thread = threading.Thread(target=self._pump, name="pslog-rrd-writer",
                                         daemon=True)
         self._thread.start()
@@ -85,7 +81,7 @@ class _PipeToFile:
                 with open(self.fifo, "rb", buffering=0) as src:
                     self.reading = src.fileno()
                     self._copy(src.fileno())
-            except OSError as exc:  # reading the pipe failed: the file is lost, drain
+            except OSError as exc:  # reading the pipe failed: the output is lost, drain
                 self._fail(exc)
                 os.set_blocking(self._spare, True)
                 with contextlib.suppress(OSError):  # nothing left to drain with
@@ -95,7 +91,7 @@ class _PipeToFile:
             os.close(self._spare)  # the last reader: only now could rerun meet EPIPE
         if self.error is None:
             try:
-                self._out.flush()
+                self._flush()
             except OSError as exc:
                 self._fail(exc)
 
@@ -103,20 +99,22 @@ class _PipeToFile:
         while chunk := os.read(fd, _PIPE_READ):
             if self.error is None:
                 try:
-                    self._out.write(chunk)
+                    self._write(chunk)
                 except OSError as exc:
                     self._fail(exc)
             # after a failure keep draining, so that rerun never blocks
 
+    def _write(self, chunk: bytes) -> None:
+        raise NotImplementedError
+
+    def _flush(self) -> None:
+        pass
+
     def _fail(self, exc: OSError) -> None:
         self.error = self.error or exc
-        _remove(self.partial)  # before the lock goes with close()
-        self.close()
 
     def close(self) -> None:
-        """Close the partial file (releasing its lock)."""
-        with contextlib.suppress(OSError):
-            self._out.close()
+        """Release the destination."""
 
     def unblock(self) -> None:
         """Let the pump's ``open`` return when rerun never opened the pipe."""
@@ -130,6 +128,125 @@ class _PipeToFile:
 
     def cleanup(self) -> None:
         shutil.rmtree(self._dir, ignore_errors=True)
+
+
+class _PipeToFile(_Pump):
+    """A :class:`_Pump` into the file ``partial`` (locked while open), removed on failure."""
+
+    def __init__(self, partial: Path, path: Path) -> None:
+        super().__init__()
+        self.partial, self.path = partial, path
+        try:
+            # locked while open: no other pslog run takes it for a stale partial; closed
+            # only after it has been moved over ``path`` or removed (close())
+            self._out = open_locked(partial, "wb")
+        except BaseException:  # OSError, or PartialBusyError: another run writes it
+            os.close(self._spare)
+            self.cleanup()
+            raise
+        self._start()
+
+    def _write(self, chunk: bytes) -> None:
+        self._out.write(chunk)
+
+    def _flush(self) -> None:
+        self._out.flush()
+
+    def _fail(self, exc: OSError) -> None:
+        super()._fail(exc)
+        _remove(self.partial)  # before the lock goes with close()
+        self.close()
+
+    def close(self) -> None:
+        """Close the partial file (releasing its lock)."""
+        with contextlib.suppress(OSError):
+            self._out.close()
+
+
+class _PipeToFd(_Pump):
+    """A :class:`_Pump` into an open file descriptor (standard output): a reader that went
+    away (EPIPE), a full device (ENOSPC) or a closed descriptor (EBADF) stops the copy, never
+    rerun."""
+
+    def __init__(self, fd: int) -> None:
+        super().__init__()
+        self._fd = fd
+        self._start()
+
+    def _write(self, chunk: bytes) -> None:
+        view = memoryview(chunk)
+        while view:
+            view = view[os.write(self._fd, view):]
+
+
+def _finish(rec: rr.RecordingStream, pipe: _Pump) -> None:
+    """End ``rec``'s stream into ``pipe`` in every case, so rerun's writer thread finishes;
+    a stuck stream becomes ``pipe.error``."""
+    try:
+        rec.flush(timeout_sec=FLUSH_TIMEOUT_S)
+    except RuntimeError as exc:  # rerun's flush timeout
+        pipe.error = pipe.error or OSError(0, f"rerun did not finish writing ({exc})")
+    rec.disconnect()  # writes the footer and closes the pipe
+    if not pipe.join(FLUSH_TIMEOUT_S):
+        pipe.error = pipe.error or OSError(0, "rerun did not close its stream")
+
+
+class StdoutWriteError(WriteError):
+    """The recording could not be written to standard output (full device, closed)."""
+
+
+@contextlib.contextmanager
+def rrd_stdout(rec: rr.RecordingStream) -> Iterator[None]:
+    """Stream ``rec`` to standard output while the ``with`` block logs into it.
+
+    rerun's own ``stdout()`` sink meets a failing write (a reader that closed the pipe, a full
+    device, a closed descriptor) with colour-coded log lines and a flush that never ends; here
+    rerun writes into a named pipe and pslog copies it to standard output, so a failure is an
+    ``OSError`` pslog sees while rerun finishes normally.
+
+    Raises
+    ------
+    BrokenPipeError : the reader of standard output went away (the CLI exits 1 quietly, as
+        on any broken pipe)
+    StdoutWriteError : any other failed write; the message names standard output and the
+        operating system's reason
+    """
+    if sys.stdout is None:  # closed when Python started: descriptor 1 may be another file
+        raise StdoutWriteError("cannot write to standard output: it is closed",
+                               "Bad file descriptor")
+    try:
+        sys.stdout.flush()
+        fd = os.dup(sys.stdout.fileno())
+    except (OSError, ValueError) as exc:
+        reason = getattr(exc, "strerror", None) or str(exc)
+        raise StdoutWriteError(f"cannot write to standard output: {reason}", reason) from None
+    try:
+        try:
+            pipe = _PipeToFd(fd)
+        except OSError as exc:
+            reason = exc.strerror or str(exc)
+            raise StdoutWriteError(f"cannot write to standard output: {reason}",
+                                   reason) from None
+        try:
+            try:
+                rec.save(pipe.fifo)
+            except BaseException:
+                pipe.unblock()
+                raise
+            try:
+                yield
+            finally:
+                _finish(rec, pipe)
+            if isinstance(pipe.error, BrokenPipeError):
+                raise BrokenPipeError(pipe.error.errno, pipe.error.strerror)
+            if pipe.error is not None:
+                reason = pipe.error.strerror or str(pipe.error)
+                raise StdoutWriteError(f"cannot write to standard output: {reason}", reason)
+        finally:
+            pipe.cleanup()
+    finally:
+        with contextlib.suppress(OSError):
+            os.close(fd)
 
 
 @contextlib.contextmanager
@@ -175,14 +292,7 @@ def rrd_file(rec: rr.RecordingStream, path: str | Path, *, force: bool = False,
         try:
             yield path
         finally:
-            # end the stream in every case, so rerun's writer thread finishes
-            try:
-                rec.flush(timeout_sec=FLUSH_TIMEOUT_S)
-            except RuntimeError as exc:  # rerun's flush timeout
-                pipe.error = pipe.error or OSError(0, f"rerun did not finish writing ({exc})")
-            rec.disconnect()  # writes the footer and closes the pipe
-            if not pipe.join(FLUSH_TIMEOUT_S):
-                pipe.error = pipe.error or OSError(0, "rerun did not close its stream")
+            _finish(rec, pipe)
         if pipe.error is not None:
             raise _rrd_error(path, pipe.error)
         partial.replace(path)

@@ -88,11 +88,13 @@ def check_free_port(number: int, option: str) -> None:
                              f"{exc.strerror or exc}") from None
 
 
-def check_viewer_reachable(url: str | None, timeout_s: float = CONNECT_TIMEOUT_S) -> str:
-    """The gRPC URL to connect to (default :data:`DEFAULT_GRPC_URL`) if a rerun viewer
-    accepts connections there within ``timeout_s`` seconds; rerun itself would retry silently
-    for ever."""
-    url = url or DEFAULT_GRPC_URL
+def check_url(url: str) -> tuple[str, int]:
+    """``(host, port)`` of a gRPC viewer URL such as :data:`DEFAULT_GRPC_URL`.
+
+    Raises
+    ------
+    InputError : the URL has no host or port (a malformed command-line value)
+    """
     try:
         parts = urlsplit(url.removeprefix("rerun+"))
         host, number = parts.hostname, parts.port
@@ -100,6 +102,15 @@ def check_viewer_reachable(url: str | None, timeout_s: float = CONNECT_TIMEOUT_S
         host = number = None
     if not host or not number:
         raise InputError(f"--url must look like {DEFAULT_GRPC_URL}, got {url!r}")
+    return host, number
+
+
+def check_viewer_reachable(url: str | None, timeout_s: float = CONNECT_TIMEOUT_S) -> str:
+    """The gRPC URL to connect to (default :data:`DEFAULT_GRPC_URL`) if a rerun viewer
+    accepts connections there within ``timeout_s`` seconds; rerun itself would retry silently
+    for ever."""
+    url = url or DEFAULT_GRPC_URL
+    host, number = check_url(url)
     try:
         with socket.create_connection((host, number), timeout=timeout_s) as sock:
             # a viewer speaks gRPC, i.e. HTTP/2: it answers the client preface with a

@@ -14,9 +14,34 @@ here, once for all commands: never an input in any spelling, not existing withou
 
 from __future__ import annotations
 
-import argparse
-import importlib
 import sys
+
+#: SIGINTs that arrived while the ``pslog`` command was still loading (see _hold_sigint)
+_EARLY_SIGINT: list[int] = []
+
+
+def _hold_sigint():
+    """When this module is loaded as the ``pslog`` command (console script or ``python -m
+    pslog.cli``), note a Ctrl-C instead of raising KeyboardInterrupt until the command's
+    ``run`` starts (:func:`_release_sigint`): raised during the imports of this module, of
+    the command's module or of the C extensions its ``add_arguments`` loads, it would be a
+    traceback (or an ImportError). The interpreter's own start-up before this point cannot
+    be covered. Any other importer keeps Python's handler."""
+    import _signal  # the C module, loaded at start-up; ``signal`` would build its enums first
+    import os
+
+    entry = os.path.basename(sys.argv[0]) if sys.argv else ""
+    run_as_module = entry == "-m" and "pslog.cli" in getattr(sys, "orig_argv", ())
+    if ((entry not in ("pslog", "pslog.exe") and not run_as_module)
+            or _signal.getsignal(_signal.SIGINT) is not _signal.default_int_handler):
+        return None
+    return _signal.signal(_signal.SIGINT, lambda signum, _frame: _EARLY_SIGINT.append(signum))
+
+
+_SIGINT_HELD = _hold_sigint()
+
+import argparse  # noqa: E402 (after the handler: the imports are the window it covers)
+import importlib  # noqa: E402
 
 #: command -> (module under pslog.cli, one-line help). Order is the order of ``--help``.
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -70,6 +95,19 @@ def main(argv: list[str] | None = None) -> int:
         return 130
 
 
+def _release_sigint() -> None:
+    """Give SIGINT back to Python (see :func:`_hold_sigint`); a Ctrl-C that came while
+    loading is raised now, where the command's KeyboardInterrupt handler catches it."""
+    global _SIGINT_HELD
+    if _SIGINT_HELD is not None:
+        import signal
+
+        signal.signal(signal.SIGINT, _SIGINT_HELD)
+        _SIGINT_HELD = None
+        if _EARLY_SIGINT:
+            raise KeyboardInterrupt
+
+
 def _main(argv: list[str] | None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     commands = COMMANDS
@@ -98,6 +136,8 @@ def _main(argv: list[str] | None) -> int:
         print(f"pslog {name}: {text}", file=sys.stderr)
 
     try:
+        _release_sigint()  # only now: a KeyboardInterrupt in a C extension's import (numpy,
+        # cv2, while add_arguments loads them) surfaces as an ImportError traceback
         check_declared_files(args, say=say)
         return int(module.run(args) or 0)
     except PslogError as exc:

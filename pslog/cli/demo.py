@@ -57,10 +57,21 @@ INTERRUPTED = 130
 
 
 def run(args: argparse.Namespace) -> int:
+    from recorders.record import RecordWriteError
+
     folder, created = _output_folder(args.out, args.force)
     before = set(folder.iterdir())
     try:
         code = _run(args, folder)
+    except RecordWriteError as exc:
+        # the recorder's message points at the unfinished session to salvage, which the demo
+        # is about to remove: say what is true after the removal instead
+        _remove_new_files(folder, before, created)
+        session_path = folder / "session.mcap"
+        raise RecordWriteError(
+            f"cannot write {session_path}: {exc.reason}; stopped the cameras; the demo "
+            f"removed what it had written, so nothing was kept (the demo is reproducible: "
+            f"run it again where there is space)", exc.reason) from None
     except BaseException:
         _remove_new_files(folder, before, created)
         raise

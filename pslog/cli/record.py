@@ -29,7 +29,9 @@ and the timing into an MCAP session. A status line on stderr shows per camera th
 the frame rate, the frames with a ball and the drops; a summary follows at the end.
 Ctrl-C or SIGTERM, at any moment, stops the cameras and finishes the file cleanly (a
 killed recorder loses at most the last second; see 'pslog recover'). If the disk fills up,
-the cameras are stopped and what was written is kept; the error says where.
+the cameras are stopped and what was written is kept; the error says where. Detections are
+written before the images of the same frames, so a full disk costs images first: every
+frame whose image was kept has its detection too.
 
 Sources (one --source per camera of the rig, NAME a camera name of the rig):
   NAME=0, NAME=/dev/video2   a live camera (device index or V4L2 path); capture times from
@@ -59,6 +61,11 @@ examples:
 """
 
 _SOURCE = re.compile(r"^([^=]+)=(.+)$")
+
+
+class MalformedSource(InputError):
+    """A ``--source``/``--offset`` value that is malformed in itself (exit 2, as argparse
+    does), as opposed to one naming a camera or file that is not there (exit 1)."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -181,7 +188,10 @@ def _run(args: argparse.Namespace, stop) -> int:
         from recorders.record import record
         from recorders.sources import FileSpec
 
-        specs = parse_sources(rig, args.source, args.offset)
+        try:
+            specs = parse_sources(rig, args.source, args.offset)
+        except MalformedSource as exc:  # a malformed value: a command-line error (exit 2)
+            return usage_error("record", str(exc))
         videos = [spec.path for spec in specs.values() if isinstance(spec, FileSpec)]
         output = check_output(args.output, args.force, inputs=videos)
         summary = record(rig, specs, output, duration_s=args.duration,
@@ -235,20 +245,20 @@ def parse_sources(rig, sources: list[str], offsets: list[str]) -> dict:
     offset_of: dict[str, float] = {}
     for text in offsets:
         match = _SOURCE.match(text)
-        if not match:
-            raise InputError(f"--offset must be NAME=SECONDS, got {text!r}")
-        name, value = match.group(1).strip(), match.group(2).strip()
+        name, value = (match.group(1).strip(), match.group(2).strip()) if match else ("", "")
+        if not name or not value:
+            raise MalformedSource(f"--offset must be NAME=SECONDS, got {text!r}")
         rig.index(name)
         offset_of[name] = _seconds(value, text, name)
     specs: dict = {}
     for text in sources:
         match = _SOURCE.match(text)
-        if not match:
-            raise InputError(f"--source must be NAME=SPEC, got {text!r}")
-        name, spec = match.group(1).strip(), match.group(2).strip()
+        name, spec = (match.group(1).strip(), match.group(2).strip()) if match else ("", "")
+        if not name or not spec:
+            raise MalformedSource(f"--source must be NAME=SPEC, got {text!r}")
         cam = rig.camera(name)  # RigError naming an unknown camera
         if name in specs:
-            raise InputError(f"camera {name!r} has two --source options")
+            raise MalformedSource(f"camera {name!r} has two --source options")
         if _is_device(spec):  # a device index or a V4L2 path
             device = spec if spec.startswith("/dev/") else int(spec)
             specs[name] = DeviceSpec(device, cam.width, cam.height, cam.fps)
@@ -257,7 +267,7 @@ def parse_sources(rig, sources: list[str], offsets: list[str]) -> dict:
             video, at = _video_and_offset(spec)
             if at is not None:
                 if name in offset_of:
-                    raise InputError(f"camera {name!r}: offset given both with @ and --offset")
+                    raise MalformedSource(f"camera {name!r}: offset given both with @ and --offset")
                 path, offset = video, _seconds(at, text, name)
             if not Path(path).is_file():
                 raise InputError(f"camera {name!r}: video file not found: {path}")
@@ -297,12 +307,12 @@ def _seconds(value: str, text: str, camera: str) -> float:
     try:
         seconds = float(value)
     except ValueError:
-        raise InputError(f"camera {camera!r}: offset is not a number of seconds in "
+        raise MalformedSource(f"camera {camera!r}: offset is not a number of seconds in "
                          f"{text!r}") from None
     if seconds != seconds or abs(seconds) == float("inf"):
-        raise InputError(f"camera {camera!r}: offset must be finite in {text!r}")
+        raise MalformedSource(f"camera {camera!r}: offset must be finite in {text!r}")
     if seconds < 0:
         # a frame before the session clock's zero cannot be stored (MCAP times are unsigned)
-        raise InputError(f"camera {camera!r}: offset must be >= 0 seconds in {text!r}: the "
+        raise MalformedSource(f"camera {camera!r}: offset must be >= 0 seconds in {text!r}: the "
                          f"session clock starts at 0 (delay the other cameras instead)")
     return seconds

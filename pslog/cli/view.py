@@ -4,10 +4,11 @@ Without ``--save``/``--serve``/``--connect``/``--stdout`` (one at most) the nati
 spawned, which needs a display; on a machine without one this says so and suggests ``--save``
 or ``--serve``. Everything rerun would otherwise report as a Rust log line, a traceback or a
 hang is checked first or caught and said in one line: ``--save`` writes through
-:func:`viewers.rrd_file.rrd_file` (full disk, read-only folder), the live sinks go through
-:func:`viewers.sinks.open_sink` (``--serve`` checks its ports, ``--connect`` checks that a
-rerun viewer answers at ``--url`` within seconds). This module only parses and maps errors:
-every rerun call lives in :mod:`viewers`.
+:func:`viewers.rrd_file.rrd_file` (full disk, read-only folder), ``--stdout`` through
+:func:`viewers.rrd_file.rrd_stdout` (a reader that went away, a full or closed output), the
+live sinks go through :func:`viewers.sinks.open_sink` (``--serve`` checks its ports,
+``--connect`` checks that a rerun viewer answers at ``--url`` within seconds). This
+module only parses and maps errors: every rerun call lives in :mod:`viewers`.
 """
 
 from __future__ import annotations
@@ -72,15 +73,30 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from pslog.errors import PslogError
     from viewers import load_view_data, log_view, new_stream
-    from viewers.rrd_file import rrd_file
-    from viewers.sinks import has_display, open_sink
+    from viewers.data import parse_methods
+    from viewers.rrd_file import rrd_file, rrd_stdout
+    from viewers.sinks import check_url, has_display, open_sink
 
     if args.url and not args.connect:
         print(f"pslog view: error: --url is where --connect sends the data; add --connect "
               f"(pslog view ... --connect --url {args.url}) (see 'pslog view --help')",
               file=sys.stderr)
         return 2
+    # malformed values are command-line errors (exit 2), found before any file is read
+    if args.start is not None and args.end is not None and args.start >= args.end:
+        return usage_error("view", f"--start ({args.start:g} s) must be before --end "
+                                   f"({args.end:g} s)")
+    try:
+        parse_methods(args.methods)
+    except PslogError as exc:
+        return usage_error("view", f"argument --methods: {exc}")
+    if args.connect and args.url:
+        try:
+            check_url(args.url)
+        except PslogError as exc:
+            return usage_error("view", f"argument {exc}")
     sinks = [flag for flag, on in (("--save", args.save), ("--serve", args.serve),
                                    ("--connect", args.connect), ("--stdout", args.stdout)) if on]
     if len(sinks) > 1:
@@ -98,9 +114,11 @@ def run(args: argparse.Namespace) -> int:
     sink = None
     if args.save:
         check_output(args.save, args.force, inputs=args.sessions)
+    elif args.stdout:
+        if sys.stdout is None:  # closed when Python started (``>&-``): said before reading
+            raise PslogError("cannot write to standard output: it is closed")
     else:  # ports and viewer checked before the data is read: errors come out first
-        kind = ("stdout" if args.stdout else "serve" if args.serve else
-                "connect" if args.connect else "spawn")
+        kind = "serve" if args.serve else "connect" if args.connect else "spawn"
         sink = open_sink(kind, web_port=args.web_port, grpc_port=args.grpc_port,
                          url=args.url, connect_timeout_s=args.connect_timeout)
     # read and fuse before any sink starts, so errors come out before a viewer does
@@ -114,6 +132,11 @@ def run(args: argparse.Namespace) -> int:
         print("logged " + ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in counts.items()
                                     if v), file=out)
 
+    if args.stdout:  # through a pipe pslog copies: a failed write is one line, not a hang
+        with rrd_stdout(rec):
+            counts = log_view(rec, data, args.frames)
+        report(counts)
+        return 0
     if sink is None:
         with rrd_file(rec, args.save, force=args.force, inputs=args.sessions) as path:
             counts = log_view(rec, data, args.frames)

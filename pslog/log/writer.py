@@ -33,6 +33,8 @@ from . import _schemas as S
 
 #: Messages buffered before they are written even if the flush interval has not passed.
 _MAX_PENDING = 20_000
+#: Image bytes buffered before they are written as a chunk (mcap's own chunk size).
+_IMAGE_CHUNK_BYTES = 1 << 20
 #: Apparent diameter of the sphere drawn per fused track point in Foxglove, metres.
 _TRACK_SPHERE_M = 0.043
 #: How long each fused track point stays visible in Foxglove's 3D panel (a short trail).
@@ -134,7 +136,12 @@ class SessionWriter:
         self._schema_ids: dict[str, int] = {}
         self._channels: dict[str, int] = {}
         self._pending: list[tuple[int, int, bytes, int]] = []  # channel, time, data, sequence
-        self._images_in_chunk = 0
+        # images wait here, not in the MCAP writer's chunk, so that the small messages buffered
+        # meanwhile (the detections of those frames) are always written before them: when
+        # the disk fills up, it is a large image chunk that does not fit, and the detections
+        # of every frame whose image is in the file are in the file too (see flush())
+        self._images: list[tuple[int, int, bytes, int]] = []  # channel, time, data, sequence
+        self._image_bytes = 0
         self._track_methods: list[str] = []
         self._stop = threading.Event()
         self._flusher: threading.Thread | None = None
@@ -250,13 +257,23 @@ class SessionWriter:
         """Write buffered small messages as chunk(s) of their own."""
         if not self._pending:
             return
-        if self._images_in_chunk:
-            self._mcap.flush()  # closes the image chunk in progress
-            self._images_in_chunk = 0
         add = self._mcap.add_message
         for channel, time_ns, data, sequence in self._pending:
             add(channel, time_ns, data, time_ns, sequence)
         self._pending.clear()
+        self._mcap.flush()
+
+    def _write_images(self) -> None:
+        """Write the buffered images as chunk(s) of their own, after the small messages
+        buffered so far (their detections)."""
+        self._drain()
+        if not self._images:
+            return
+        add = self._mcap.add_message
+        for channel, time_ns, data, sequence in self._images:
+            add(channel, time_ns, data, time_ns, sequence)
+        self._images.clear()
+        self._image_bytes = 0
         self._mcap.flush()
 
     def _maybe_flush(self) -> None:
@@ -362,9 +379,11 @@ class SessionWriter:
         if time_ns < 0:
             raise InputError(_negative_time(time_ns))
         channel = self._channel(topic, S.CompressedImage)
-        self._mcap.add_message(channel, time_ns, data, time_ns, sequence)
-        self._images_in_chunk += 1
+        self._images.append((channel, time_ns, data, sequence))
+        self._image_bytes += len(data)
         self._count(topic)
+        if self._image_bytes >= _IMAGE_CHUNK_BYTES:
+            self._write_images()
         self._maybe_flush()
 
     @_locked
@@ -451,11 +470,11 @@ class SessionWriter:
 
     @_locked
     def flush(self) -> None:
-        """Write everything buffered to the file now."""
-        self._drain()
-        if self._images_in_chunk:
-            self._mcap.flush()
-            self._images_in_chunk = 0
+        """Write everything buffered to the file now: the small messages (detections,
+        events, truth, tracks) first, then the images. Images are much larger: on a disk
+        that fills up, the write that fails is nearly always an image chunk, and every
+        detection buffered until then is already written (``pslog recover`` keeps them)."""
+        self._write_images()
         # hand the bytes to the OS too: a killed process loses nothing the OS has, and a
         # full disk is met now rather than at close
         self._file.flush()
@@ -484,7 +503,7 @@ class SessionWriter:
                 self._discard and (self._failed or self._aborted))
             try:
                 if finish:
-                    self._drain()
+                    self._write_images()
                     self._mcap.finish()
             except OSError as exc:
                 error = self._os_fault(exc)

@@ -8,6 +8,7 @@ recorder's live status lines and summary come before that one error line on stde
 
 from __future__ import annotations
 
+import contextlib
 import re
 
 import cv2
@@ -57,7 +58,11 @@ def test_disk_full_while_recording(tmp_path, old):
         fixed = tmp_path / "fixed.mcap"
         recovered = run_pslog("recover", kept, "-o", fixed)
         assert recovered.code == 0, recovered.stderr
-        assert read_session(fixed).n_images > 0
+        session = read_session(fixed)
+        assert session.n_images > 0
+        # the detections wait in memory while the large images fill the disk; they are
+        # written before the images of their frames, so none of those is lost (0 once)
+        assert session.detections.n_frames >= session.n_images
 
 
 def test_unwritable_folder_or_full_disk_before_the_start(tmp_path):
@@ -88,7 +93,44 @@ def test_negative_offset_is_refused_up_front(tmp_path):
     before = fingerprint(tmp_path)
     run = run_pslog("record", "--rig", "paper2", "--source", "cam1=a.avi@-1", "--source",
                     "cam2=a.avi", "-o", "s.mcap", cwd=tmp_path, timeout=20)
-    assert_one_line_error(run, 1, contains=("camera 'cam1'", ">= 0"))
+    assert_one_line_error(run, 2, contains=("camera 'cam1'", ">= 0"))
+    assert_untouched(before, tmp_path)
+
+
+def _in_process(*args) -> Run:
+    """``pslog ARGS`` through :func:`pslog.cli.main` in this process (faster than a
+    subprocess where nothing but the exit code and stderr is looked at)."""
+    import contextlib
+    import io
+
+    from pslog.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            code = main([str(a) for a in args])
+        except SystemExit as exc:  # argparse's own errors
+            code = exc.code
+    return Run(tuple(map(str, args)), code, out.getvalue(), err.getvalue())
+
+
+@pytest.mark.parametrize(("values", "contains"), [
+    (("--source", "cam1="), "--source must be NAME=SPEC"),
+    (("--source", "=0"), "--source must be NAME=SPEC"),
+    (("--source", "cam1=a.avi@-1", "--source", "cam2=a.avi"), ">= 0"),
+    (("--source", "cam1=a.avi@nan", "--source", "cam2=a.avi"), "finite"),
+    (("--source", "cam1=a.avi", "--source", "cam2=a.avi", "--offset", "cam1=nan"), "finite"),
+    (("--source", "cam1=a.avi", "--source", "cam2=a.avi", "--offset", "cam1=x"), "number"),
+    (("--synthetic", "--offset", "cam1=nan"), "--offset"),
+], ids=["empty spec", "empty name", "negative @", "nan @", "nan --offset", "text --offset",
+        "--offset with --synthetic"])
+def test_malformed_source_values_are_usage_errors(tmp_path, monkeypatch, values, contains):
+    """Exit 2 for a malformed command-line value, as argparse does (these gave 1)."""
+    _clip(tmp_path / "a.avi")
+    monkeypatch.chdir(tmp_path)
+    before = fingerprint(tmp_path)
+    run = _in_process("record", "--rig", "paper2", *values, "-o", "s.mcap")
+    assert_one_line_error(run, 2, contains=contains)
     assert_untouched(before, tmp_path)
 
 
@@ -103,3 +145,27 @@ def test_video_source_that_is_the_output_is_refused(tmp_path, spelling):
     line = assert_one_line_error(run, 1, contains="is the input")
     assert re.search(r"never replaces an input", line)
     assert_untouched(before, tmp_path)
+
+
+@pytest.mark.parametrize("limit", ["tmpfs", "RLIMIT_FSIZE"])
+def test_demo_on_a_full_disk_says_nothing_was_kept(tmp_path, limit):
+    """The demo removes what it wrote when it fails; its error once still pointed at the
+    deleted session ("salvage it with: pslog recover d/session.mcap ...")."""
+    import resource
+
+    def small_files():
+        resource.setrlimit(resource.RLIMIT_FSIZE, (10 * 1024, resource.RLIM_INFINITY))
+
+    with contextlib.ExitStack() as stack:
+        if limit == "tmpfs":
+            disk = stack.enter_context(small_tmpfs(tmp_path / "disk", "64k"))
+            preexec = None
+        else:
+            disk, preexec = tmp_path, small_files
+        before = fingerprint(disk)
+        run = run_pslog("demo", "--out", "d", "--duration", "0.3", cwd=disk, timeout=120,
+                        preexec_fn=preexec)
+        line = assert_one_line_error(run, 1, contains=("session.mcap", "nothing was kept"))
+        assert "recover" not in line
+        assert not (disk / "d").exists()
+        assert_untouched(before, disk)

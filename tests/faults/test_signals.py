@@ -285,3 +285,38 @@ def test_sigkill_during_shutdown_then_recover(start, tmp_path):
         pytest.skip("the recorder finished before SIGKILL arrived")
     _kill_then_recover(tmp_path, rec, code, sent,
                        "SIGINT, then SIGKILL to the group during shutdown")
+
+
+#: a ``pslog`` console script whose Ctrl-C comes at the start of one import (an audit hook
+#: sends a real SIGINT to the process when the import named by argv[1] begins)
+_EARLY_CTRL_C = """
+import os, signal, sys
+module, sys.argv = sys.argv[1], ["pslog", *sys.argv[2:]]
+sent = []
+def hook(event, args):
+    if event == "import" and args[0] == module and not sent:
+        sent.append(1)
+        os.kill(os.getpid(), signal.SIGINT)
+sys.addaudithook(hook)
+from pslog.cli import main
+sys.exit(main())
+"""
+
+
+@pytest.mark.parametrize("module", ["argparse", "pslog.cli._common", "numpy"],
+                         ids=["loading pslog.cli", "loading the command", "loading numpy"])
+def test_ctrl_c_while_the_command_loads(tmp_path, module):
+    """Ctrl-C in the first hundredth of a second of ``pslog record`` (the tester's 0.05 s):
+    a KeyboardInterrupt traceback from the imports, or numpy's ImportError when it hit
+    numpy's C extension. Now: one line, exit 130, nothing written. Only the interpreter's
+    own start-up, before ``pslog.cli`` is imported, remains uncovered."""
+    from .promises import Run, assert_one_line_error
+
+    args = ("record", "--synthetic", "--rig", "paper3", "--fast", "--duration", "1", "-o",
+            str(tmp_path / "s.mcap"))
+    proc = subprocess.run([sys.executable, "-c", _EARLY_CTRL_C, module, *args],
+                          capture_output=True, text=True, timeout=60,
+                          stdin=subprocess.DEVNULL)
+    run = Run(args, proc.returncode, proc.stdout, proc.stderr)
+    assert_one_line_error(run, 130, contains="pslog record: interrupted")
+    assert list(tmp_path.iterdir()) == []

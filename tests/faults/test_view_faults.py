@@ -158,3 +158,97 @@ def test_url_without_connect_on_a_headless_machine(tmp_path, session):
                     env=HEADLESS, timeout=20)
     assert_one_line_error(run, 2, contains="add --connect")
     assert_untouched(before, tmp_path)
+
+
+@pytest.fixture(scope="module")
+def fused(tmp_path_factory) -> Path:
+    """A session with stored tracks, so that ``view`` fuses nothing on the fly and prints
+    no note: whatever comes out on stderr is the error alone."""
+    from pslog.cli import main
+
+    folder = tmp_path_factory.mktemp("fused")
+    shutil.copyfile(SAMPLE, folder / "s.mcap")
+    assert main(["fuse", str(folder / "s.mcap"), "-o", str(folder / "f.mcap")]) == 0
+    return folder / "f.mcap"
+
+
+def test_stdout_to_a_reader_that_closes_early(fused):
+    """``view s.mcap --stdout | head -c 100`` hung for ever with three rerun log messages;
+    now it stops quietly with 1 once the reader has gone, as the rest of the CLI does."""
+    import sys
+
+    before = fingerprint(fused.parent)
+    proc = subprocess.Popen([sys.executable, "-m", "pslog.cli", "view", str(fused), "--stdout"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            stdin=subprocess.DEVNULL, env={**os.environ, **HEADLESS})
+    try:
+        assert len(proc.stdout.read(100)) == 100
+        proc.stdout.close()  # the reader goes away, as head -c 100 does
+        code = proc.wait(timeout=60)
+        stderr = proc.stderr.read().decode()
+    finally:
+        proc.kill()
+        proc.wait()
+        proc.stderr.close()
+    assert code == 1, stderr
+    assert stderr == "", stderr
+    assert_untouched(before, fused.parent)
+
+
+@pytest.mark.skipif(not os.path.exists("/dev/full"), reason="no /dev/full")
+def test_stdout_onto_a_full_device(fused):
+    """``view s.mcap --stdout > /dev/full`` hung for ever; /dev/full is only ever the
+    child's standard output here, never an output path."""
+    before = fingerprint(fused.parent)
+    with open("/dev/full", "wb") as full:
+        proc = subprocess.run([os.sys.executable, "-m", "pslog.cli", "view", str(fused),
+                               "--stdout"], stdout=full, stderr=subprocess.PIPE, text=True,
+                              stdin=subprocess.DEVNULL, env={**os.environ, **HEADLESS},
+                              timeout=60)
+    from .promises import Run
+
+    run = Run(("view", str(fused), "--stdout"), proc.returncode, "", proc.stderr)
+    assert_one_line_error(run, 1, contains=("cannot write to standard output",
+                                            "No space left on device"))
+    assert_untouched(before, fused.parent)
+
+
+def test_stdout_closed(fused):
+    """``view s.mcap --stdout >&-`` hung for ever; now one line before any work."""
+    before = fingerprint(fused.parent)
+    run = run_pslog("view", fused, "--stdout", env=HEADLESS, timeout=60,
+                    preexec_fn=lambda: os.close(1))
+    assert_one_line_error(run, 1, contains=("cannot write to standard output", "closed"))
+    assert_untouched(before, fused.parent)
+
+
+@pytest.mark.parametrize(("values", "contains"), [
+    (("--start", "5", "--end", "1"), "--start"),
+    (("--start", "1", "--end", "1"), "--start"),
+    (("--methods", ""), "--methods"),
+    (("--methods", ",,,"), "--methods"),
+    (("--connect", "--url", "garbage"), "--url"),
+    (("--frames", "every:99999999999999999999999"), "--frames"),
+    (("--frames", "every:0"), "--frames"),
+], ids=["start after end", "start at end", "empty methods", "commas only", "garbage url",
+        "huge every", "every:0"])
+def test_malformed_values_are_usage_errors(tmp_path, session, values, contains):
+    """Exit 2, one line, before any file is read or written (these gave 1, or were
+    accepted)."""
+    import contextlib
+    import io
+
+    from pslog.cli import main
+
+    from .promises import Run
+
+    args = ("view", str(session), *values, "--save", str(tmp_path / "out.rrd"))
+    before = fingerprint(tmp_path)
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        try:
+            code = main(list(args))
+        except SystemExit as exc:  # argparse's own errors
+            code = exc.code
+    assert_one_line_error(Run(args, code, "", err.getvalue()), 2, contains=contains)
+    assert_untouched(before, tmp_path)
