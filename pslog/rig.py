@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from .camera import Camera, look_at
-from .errors import RigError
+from .errors import InputError, RigError
 
 TIMING_PRESETS = ("sync", "typeA", "typeB")
 #: Most cameras a rig may have (fusion computes geometry for every pair).
@@ -177,7 +177,14 @@ class Rig:
 
 def load_rig(path: str | Path) -> Rig:
     """Load a rig TOML file."""
+    from .inputs import MAX_RIG_BYTES, check_input_file
+
     path = Path(path)
+    try:
+        # a device or FIFO would be read for ever, a huge file whole into memory
+        check_input_file(path, "rig file", MAX_RIG_BYTES)
+    except InputError as exc:
+        raise RigError(str(exc)) from None
     try:
         # utf-8-sig: a byte-order mark (Windows editors) is accepted and dropped
         text = path.read_text(encoding="utf-8-sig")

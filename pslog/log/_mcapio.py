@@ -46,18 +46,23 @@ def check_file(path) -> tuple[Path, int, bool]:
         raise LogFormatError(f"no such file: {path}")
     if not path.is_file():
         raise LogFormatError(f"not a file: {path}")
-    size = path.stat().st_size
-    with open(path, "rb") as f:
-        head = f.read(len(MAGIC))
-        if head != MAGIC:
-            if _magic_damaged(path):
-                raise LogFormatError(f"{path}: the MCAP magic (bytes 0..7) is damaged; run "
-                                     f"'pslog recover {path} -o FIXED.mcap' to salvage the data")
-            raise LogFormatError(f"not an MCAP file: {path}")
-        complete = False
-        if size >= 2 * len(MAGIC) + 9:
-            f.seek(size - len(MAGIC))
-            complete = f.read() == MAGIC
+    tail = b""
+    try:
+        size = path.stat().st_size
+        with open(path, "rb") as f:
+            head = f.read(len(MAGIC))
+            if head == MAGIC and size >= 2 * len(MAGIC) + 9:
+                f.seek(size - len(MAGIC))
+                tail = f.read()
+    except OSError as exc:  # e.g. EIO from /proc/self/mem, EACCES: name the file
+        raise LogFormatError(f"cannot read {path}: {exc.strerror or exc}") from None
+    if head != MAGIC:
+        if _magic_damaged(path):
+            raise LogFormatError(f"{path}: the MCAP magic (bytes 0..7) is damaged; run "
+                                 f"'pslog recover {path} -o FIXED.mcap' to salvage the data")
+        raise LogFormatError(f"not an MCAP file: {path}")
+    # ``complete``: the closing magic written by a finished writer
+    complete = tail == MAGIC
     return path, size, complete
 
 
@@ -79,8 +84,36 @@ def truncated_error(path) -> LogFormatError:
     if tail_magic_damaged(path):
         return LogFormatError(f"{path}: its closing MCAP magic (the last 8 bytes) is damaged; "
                               f"run 'pslog recover {path} -o FIXED.mcap' to salvage the data")
+    recording = still_recording(path)
+    if recording is not None:
+        return LogFormatError(f"{path} is incomplete (truncated): it may still be recording "
+                              f"({recording}); if no recorder is writing it, run 'pslog "
+                              f"recover {path} -o FIXED.mcap' to salvage it")
     return LogFormatError(f"{path} is truncated (the recording did not finish); "
                           f"run 'pslog recover {path} -o FIXED.mcap' to salvage it")
+
+
+def still_recording(path) -> str | None:
+    """Why an unfinished ``path`` may be a recording in progress (``being written by another
+    pslog``, ``modified 3 s ago``, ``named *.partial``), or None: the same rule as ``pslog
+    info`` (:func:`pslog.log.info.session_info`)."""
+    import time
+
+    from ..outputs import locked_by_another
+    from .info import RECENT_S
+
+    path = Path(path)
+    if locked_by_another(path):
+        return "another pslog is writing it"
+    try:
+        age = max(time.time() - path.stat().st_mtime, 0.0)
+    except OSError:
+        return None
+    if age < RECENT_S:
+        return f"modified {age:.0f} s ago"
+    if path.name.endswith(".partial"):
+        return "named *.partial"
+    return None
 
 
 def _string(buf, pos: int) -> tuple[str, int]:

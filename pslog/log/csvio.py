@@ -38,6 +38,7 @@ import numpy as np
 
 from ..camera import MAX_IMAGE_SIZE
 from ..errors import InputError
+from ..inputs import check_input_file
 from ..outputs import replacing
 from ..records import NS, Detections
 from ..rig import Rig
@@ -165,6 +166,7 @@ def read_detections_csv(path, rig: Rig) -> Detections:
     camera.
     """
     path = Path(path)
+    check_input_file(path)  # a device or FIFO would be read for ever
     try:
         # utf-8-sig: Excel's "CSV UTF-8" and Windows editors start with a byte-order mark
         handle = open(path, newline="", encoding="utf-8-sig")  # closed by the with below
