@@ -44,6 +44,11 @@ METHODS: dict[str, str] = {
 }
 
 
+#: Longest time span a fusion method may be asked to bridge, seconds (an hour): a longer
+#: one bridges nothing more, and overflows integer nanoseconds for absurd values.
+MAX_GAP_S = 3600.0
+
+
 @dataclass(frozen=True)
 class FusionOptions:
     """Settings shared by the methods.
@@ -63,8 +68,9 @@ class FusionOptions:
     def __post_init__(self) -> None:
         if not self.tolerance_s >= 0:
             raise FusionError(f"tolerance must be >= 0 seconds, got {self.tolerance_s!r}")
-        if self.max_gap_s is not None and not self.max_gap_s > 0:
-            raise FusionError(f"max gap must be > 0 seconds, got {self.max_gap_s!r}")
+        if self.max_gap_s is not None and not 0 < self.max_gap_s <= MAX_GAP_S:
+            raise FusionError(f"max gap must be in (0, {MAX_GAP_S:g}] seconds, got "
+                              f"{self.max_gap_s!r}")
 
 
 def check_tolerance(rig: Rig, tolerance_s: float) -> float:

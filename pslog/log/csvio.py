@@ -93,10 +93,17 @@ def _pixel(text: str) -> float:
     return value
 
 
+#: Largest frame index accepted: a session stores it as the MCAP message sequence, a
+#: 32-bit count (4.3e9 frames are 4.5 years at 30 fps).
+MAX_FRAME_INDEX = 2**32 - 1
+
+
 def _frame_number(text: str) -> int:
     value = int(text)
     if value < 0:
         raise _Invalid("frame indices are >= 0")
+    if value > MAX_FRAME_INDEX:
+        raise _Invalid(f"beyond any frame counter (at most {MAX_FRAME_INDEX})")
     return value
 
 
