@@ -516,3 +516,41 @@ def test_a_closed_standard_output_is_no_traceback(inputs):
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 1
     assert err == "", err  # no traceback, no "Exception ignored" at the interpreter's exit
+
+
+def test_force_onto_a_session_being_recorded_is_refused(tmp_path):
+    """The tester's case with a real recording: 'pslog record' writes a new session in place
+    (no .partial); a 'simulate --force' onto it meanwhile is refused, and the recording
+    completes into the file the user named."""
+    import sys
+
+    from pslog.log import read_session
+    from pslog.outputs import locked_by_another
+
+    out = tmp_path / "w.mcap"
+    inode = None
+    rec = subprocess.Popen([sys.executable, "-m", "pslog.cli", "record", "--synthetic", "--rig",
+                            "paper3", "--timing", "typeA", "--duration", "4", "-o", str(out)],
+                           stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 60  # a hang guard, not a timing assertion
+        while not (out.exists() and locked_by_another(out)):
+            assert rec.poll() is None, f"record ended early: {rec.stderr.read()}"
+            assert time.monotonic() < deadline, "record never started writing"
+            time.sleep(0.05)
+        inode = out.stat().st_ino
+        run = run_pslog("simulate", "--rig", "paper3", "--duration", "0.3", "-o", out, "--force")
+        assert_one_line_error(run, 1, contains=(str(out), "being written by another pslog"))
+        # out grows as the cameras deliver: untouched means not replaced (same inode) and no
+        # partial of the refused run
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["w.mcap"]
+        _, err = rec.communicate(timeout=120)
+    finally:
+        if rec.poll() is None:
+            rec.kill()
+            rec.wait()
+    assert rec.returncode == 0, err
+    assert out.stat().st_ino == inode  # never replaced: the recorder's file is the output
+    session = read_session(out)  # the recording is in the file named, complete
+    assert session.detections.n_frames > 3 * 30 * 2
+    assert session.metadata["source"].startswith("record"), session.metadata["source"]
