@@ -413,7 +413,7 @@ def describe_os_error(exc: OSError, outputs: Iterable[str | Path] = (),
         return f"{name}: {reason}"
     if exc.errno in WRITE_ERRNOS and outputs:
         return f"cannot write {' or '.join(map(str, outputs))}: {reason}"
-    inputs = [str(p) for p in inputs]
+    inputs = [str(p) for p in inputs if os.path.exists(p)]  # not a built-in rig's name
     if inputs:  # a read fault without a file name: name what the command reads
         return f"cannot read {' or '.join(inputs)}: {reason}"
     return reason
