@@ -190,7 +190,9 @@ def load_rig(path: str | Path) -> Rig:
         text = path.read_text(encoding="utf-8-sig")
     except FileNotFoundError:
         raise RigError(f"rig file not found: {path}") from None
-    except (OSError, UnicodeDecodeError) as exc:
+    except OSError as exc:
+        raise RigError(f"cannot read rig file {path}: {exc.strerror or exc}") from None
+    except UnicodeDecodeError as exc:
         raise RigError(f"cannot read rig file {path}: {exc}") from None
     return Rig.from_toml(text, source=str(path))
 

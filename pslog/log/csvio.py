@@ -180,7 +180,7 @@ def read_detections_csv(path, rig: Rig) -> Detections:
     except FileNotFoundError:
         raise InputError(f"no such file: {path}") from None
     except OSError as exc:
-        raise InputError(f"cannot read {path}: {exc}") from None
+        raise InputError(f"cannot read {path}: {exc.strerror or exc}") from None
     index = {name: i for i, name in enumerate(rig.names)}
     cams, times, frames, uv, scores, lines = [], [], [], [], [], []
     with handle:
