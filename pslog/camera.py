@@ -18,6 +18,13 @@ _UNDISTORT_ITERATIONS = 20
 MAX_IMAGE_SIZE = 65536
 #: Highest frame rate accepted, frames per second (high-speed cameras reach ~1e5).
 MAX_FPS = 1e6
+#: Lowest frame rate accepted, frames per second: a frame every 10 s is a time-lapse, not a
+#: ball tracker (and a rate near 0 makes frame periods and gaps overflow integer ns).
+MIN_FPS = 0.1
+#: Largest magnitude of a distortion coefficient accepted. Real plumb_bob fits stay within
+#: a few units (k1 about -0.5..0.5 even for wide-angle lenses, k2 and k3 rarely beyond
+#: tens, p1 and p2 about 1e-3); a thousand is no lens, and would fold the whole image over.
+MAX_DIST = 1e3
 _MAX_K = 1e7  # pixels: focal lengths and principal points
 _MAX_T_M = 1e6  # metres: a camera 1000 km from the world origin is a typo
 #: Largest clock offset accepted, seconds (a day): cameras whose clocks differ by more are
@@ -144,6 +151,10 @@ class Camera:
         object.__setattr__(self, "K", K)
         object.__setattr__(self, "R", R)
         object.__setattr__(self, "dist", _as_array(self.dist, (5,), "dist", name))
+        if np.abs(self.dist).max() > MAX_DIST:
+            raise RigError(f"camera {name!r}: dist has an entry of "
+                           f"{np.abs(self.dist).max():.3g}: beyond any lens (distortion "
+                           f"coefficients are at most {MAX_DIST:g} in magnitude)")
         object.__setattr__(self, "t", _as_array(self.t, (3,), "t", name))
         if np.abs(self.t).max() > _MAX_T_M:
             raise RigError(f"camera {name!r}: t has an entry of {np.abs(self.t).max():.3g} m "
@@ -156,8 +167,9 @@ class Camera:
                 raise RigError(f"camera {name!r}: {key} must be finite, got {value!r}")
             # clock keys + 0.0: -0.0 becomes 0.0 (so "written when non-zero" loses nothing)
             object.__setattr__(self, key, float(value) + (0.0 if key != "offset" else -0.0))
-        if not 0 < self.fps <= MAX_FPS:
-            raise RigError(f"camera {name!r}: fps must be in (0, {MAX_FPS:g}], got {self.fps:g}")
+        if not MIN_FPS <= self.fps <= MAX_FPS:
+            raise RigError(f"camera {name!r}: fps must be in [{MIN_FPS:g}, {MAX_FPS:g}], got "
+                           f"{self.fps:g}")
         # the offset is a phase: an offset of a period or more names the same shutter
         # schedule as offset % period and would only make rigs compare unequal
         if not 0.0 <= self.offset < self.frame_period:

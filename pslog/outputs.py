@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import errno
 import os
+import stat
 import struct
 import sys
 from collections.abc import Callable, Iterable, Iterator
@@ -32,6 +33,7 @@ from pathlib import Path
 from typing import IO
 
 from .errors import InputError, OutputExistsError, PslogError
+from .inputs import file_kind
 
 try:
     import fcntl
@@ -105,10 +107,29 @@ def check_output_path(path: str | Path, force: bool, inputs: Iterable[str | Path
             # the partial is cleared before, and written over while, making the output
             raise InputError(f"output {spelled} is written via {partial}, which is an input "
                              f"({os.fspath(source)}); choose another name for the output")
-    if path.is_dir():
-        raise InputError(f"{path} is a folder; give a file name")
-    if path.exists() and not force:
-        raise OutputExistsError(f"{path} exists; use --force to overwrite it")
+    try:
+        st = os.lstat(path)
+    except (OSError, ValueError):
+        st = None  # missing (or unexaminable: the folder checks below say why)
+    if st is not None:
+        if stat.S_ISLNK(st.st_mode):
+            # written through, a link could replace a device or another session; replaced,
+            # the link would be lost: refused either way, --force or not
+            raise InputError(f"output {spelled} is a symbolic link (to "
+                             f"{os.readlink(path)}); give the file's real name or another "
+                             f"name")
+        if stat.S_ISDIR(st.st_mode):
+            raise InputError(f"{path} is a folder; give a file name")
+        if not stat.S_ISREG(st.st_mode):
+            # a device, FIFO or socket is never replaced by a regular file, --force or not
+            raise InputError(f"output {spelled} is {file_kind(st.st_mode)}, not a regular "
+                             f"file; pslog writes only regular files")
+        if not force:
+            raise OutputExistsError(f"{path} exists; use --force to overwrite it")
+        if locked_by_another(path):
+            raise PartialBusyError(f"{spelled} is being written by another pslog (a recording "
+                                   f"in progress?); wait for it to finish or choose another "
+                                   f"output")
     folder = path.parent
     if not folder.is_dir():
         raise InputError(f"output folder does not exist: {folder}")
@@ -119,6 +140,19 @@ def check_output_path(path: str | Path, force: bool, inputs: Iterable[str | Path
         raise WriteError(f"cannot write {path}: {reason} (folder {folder} is not writable)")
     clear_stale_partial(path, say=say)
     return path
+
+
+def locked_by_another(path: Path) -> bool:
+    """True if another process holds the writer's lock on ``path`` (:func:`open_locked`):
+    a session being recorded straight into ``path``."""
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_NONBLOCK", 0))
+    except OSError:
+        return False  # unreadable: the write itself will say why
+    try:
+        return not _try_lock(fd)
+    finally:
+        os.close(fd)  # releases the lock taken to test
 
 
 def _read_only_fs(folder: Path) -> bool:
@@ -363,7 +397,8 @@ WRITE_ERRNOS = frozenset(e for e in (errno.ENOSPC, errno.EFBIG, errno.EROFS, err
                          if e is not None)
 
 
-def describe_os_error(exc: OSError, outputs: Iterable[str | Path] = ()) -> str:
+def describe_os_error(exc: OSError, outputs: Iterable[str | Path] = (),
+                      inputs: Iterable[str | Path] = ()) -> str:
     """One line for an OSError no writer translated: names the file (an output's
     ``.partial`` by the output's name) or, for a write fault without a file name, the
     command's outputs."""
@@ -378,4 +413,7 @@ def describe_os_error(exc: OSError, outputs: Iterable[str | Path] = ()) -> str:
         return f"{name}: {reason}"
     if exc.errno in WRITE_ERRNOS and outputs:
         return f"cannot write {' or '.join(map(str, outputs))}: {reason}"
+    inputs = [str(p) for p in inputs if os.path.exists(p)]  # not a built-in rig's name
+    if inputs:  # a read fault without a file name: name what the command reads
+        return f"cannot read {' or '.join(inputs)}: {reason}"
     return reason

@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from .camera import Camera, look_at
-from .errors import RigError
+from .errors import InputError, RigError
 
 TIMING_PRESETS = ("sync", "typeA", "typeB")
 #: Most cameras a rig may have (fusion computes geometry for every pair).
@@ -177,13 +177,22 @@ class Rig:
 
 def load_rig(path: str | Path) -> Rig:
     """Load a rig TOML file."""
+    from .inputs import MAX_RIG_BYTES, check_input_file
+
     path = Path(path)
+    try:
+        # a device or FIFO would be read for ever, a huge file whole into memory
+        check_input_file(path, "rig file", MAX_RIG_BYTES)
+    except InputError as exc:
+        raise RigError(str(exc)) from None
     try:
         # utf-8-sig: a byte-order mark (Windows editors) is accepted and dropped
         text = path.read_text(encoding="utf-8-sig")
     except FileNotFoundError:
         raise RigError(f"rig file not found: {path}") from None
-    except (OSError, UnicodeDecodeError) as exc:
+    except OSError as exc:
+        raise RigError(f"cannot read rig file {path}: {exc.strerror or exc}") from None
+    except UnicodeDecodeError as exc:
         raise RigError(f"cannot read rig file {path}: {exc}") from None
     return Rig.from_toml(text, source=str(path))
 

@@ -82,10 +82,15 @@ class SimulationOptions:
 
 
 def check_duration(rig: Rig, duration: float) -> float:
-    """``duration`` seconds if it is > 0 and gives at most :data:`MAX_SIMULATED_FRAMES`
-    frames of ``rig``'s cameras, else :class:`InputError` saying why."""
+    """``duration`` seconds if it is at least a frame period and gives at most
+    :data:`MAX_SIMULATED_FRAMES` frames of ``rig``'s cameras, else :class:`InputError`
+    saying why."""
     if not np.isfinite(duration) or duration <= 0:
         raise InputError(f"duration must be > 0 seconds, got {duration!r}")
+    shortest = min(cam.frame_period for cam in rig.cameras)
+    if duration < shortest:
+        raise InputError(f"duration {duration:g} s is too short to hold a frame (a frame "
+                         f"period of this rig is {shortest:.4g} s)")
     n_frames = duration * sum(cam.fps for cam in rig.cameras)
     if n_frames > MAX_SIMULATED_FRAMES:
         raise InputError(f"duration {duration:g} s gives {n_frames:.3g} frames; simulate at "

@@ -23,6 +23,10 @@ from .detect import BallDetector, HsvRange
 
 _BATCH = 64  # images per task when several processes decode and detect
 _PARALLEL_FROM = 400  # images; below this one process is faster than starting a pool
+#: Most ball candidates kept per frame: beyond a handful they are noise, and each costs work.
+MAX_CANDIDATES = 100
+#: Most worker processes: more than the cores only adds memory and start-up time.
+MAX_WORKERS = 64
 
 
 @dataclass(frozen=True)
@@ -67,6 +71,10 @@ def redetect_session(src: str | Path, dst: str | Path, hsv: HsvRange | None = No
     """
     from pslog.log import copy_session, iter_images, read_session
 
+    if not 1 <= max_candidates <= MAX_CANDIDATES:
+        raise InputError(f"max_candidates must be in 1..{MAX_CANDIDATES}, got {max_candidates}")
+    if workers is not None and not 1 <= workers <= MAX_WORKERS:
+        raise InputError(f"workers must be in 1..{MAX_WORKERS}, got {workers}")
     dst = check_output_path(dst, force, inputs=[src])
     session = read_session(src)
     if session.n_images == 0:

@@ -300,3 +300,36 @@ def test_a_partial_being_written_is_neither_cleared_nor_written_twice(tmp_path):
         assert partial.read_text() == "being written"  # not emptied by the refused open
     clear_stale_partial(tmp_path / "d.csv", say=lambda _text: None)  # stale now: removed
     assert not partial.exists()
+
+
+def test_an_output_locked_by_a_writer_is_refused_even_with_force(tmp_path):
+    """flock is per open file: a writer's lock (open_locked) is seen from another open file
+    in this process just as from another process."""
+    from pslog.outputs import PartialBusyError, open_locked
+
+    out = tmp_path / "w.mcap"
+    with open_locked(out) as f:
+        f.write(b"recording")
+        f.flush()
+        with pytest.raises(PartialBusyError, match="being written by another pslog"):
+            check_output_path(out, force=True)
+    assert check_output_path(out, force=True) == out  # released: --force may replace it
+
+
+def test_outputs_and_inputs_that_are_not_regular_files(tmp_path):
+    import os
+
+    from pslog.inputs import check_input_file
+
+    os.mkfifo(tmp_path / "fifo")
+    (tmp_path / "link").symlink_to("missing")
+    with pytest.raises(InputError, match="is a named pipe, not a regular file"):
+        check_output_path(tmp_path / "fifo", force=True)
+    with pytest.raises(InputError, match="is a symbolic link"):
+        check_output_path(tmp_path / "link", force=True)  # even a dangling one
+    with pytest.raises(InputError, match=r"not a regular file: .*fifo \(a named pipe\)"):
+        check_input_file(tmp_path / "fifo")
+    (tmp_path / "big.toml").write_bytes(b"#" * 11)
+    with pytest.raises(InputError, match=r"rig file .*big\.toml is 11 bytes: too large"):
+        check_input_file(tmp_path / "big.toml", "rig file", max_bytes=10)
+    assert check_input_file(tmp_path / "big.toml", "rig file", max_bytes=11).name == "big.toml"

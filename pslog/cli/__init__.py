@@ -43,6 +43,8 @@ _SIGINT_HELD = _hold_sigint()
 import argparse  # noqa: E402 (after the handler: the imports are the window it covers)
 import importlib  # noqa: E402
 
+from pslog.errors import PslogError  # noqa: E402
+
 #: command -> (module under pslog.cli, one-line help). Order is the order of ``--help``.
 COMMANDS: dict[str, tuple[str, str]] = {
     "demo": ("demo", "record a synthetic throw, fuse it with every method, show accuracy"),
@@ -125,7 +127,12 @@ def _main(argv: list[str] | None) -> int:
     module.add_arguments(parser)
     args = parser.parse_args(argv[1:])
 
-    from pslog.errors import PslogError
+    from ._common import empty_file_option
+
+    empty = empty_file_option(parser, args)
+    if empty is not None:
+        parser.error(f"argument {empty}: empty file name")
+
     from pslog.outputs import describe_os_error
 
     from ._common import check_declared_files, declared_files
@@ -135,24 +142,88 @@ def _main(argv: list[str] | None) -> int:
     def say(text: str) -> None:
         print(f"pslog {name}: {text}", file=sys.stderr)
 
+    real_stdout = sys.stdout
+    sys.stdout = _GuardedStdout(real_stdout)
     try:
         _release_sigint()  # only now: a KeyboardInterrupt in a C extension's import (numpy,
         # cv2, while add_arguments loads them) surfaces as an ImportError traceback
         check_declared_files(args, say=say)
-        return int(module.run(args) or 0)
+        code = int(module.run(args) or 0)
+        sys.stdout.flush()  # a full or closed stdout fails here, not at the interpreter's exit
+        return code
     except PslogError as exc:
+        if isinstance(exc, StdoutError):
+            _drop_stdout(real_stdout)
         print(f"pslog {name}: error: {exc}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print(f"pslog {name}: interrupted", file=sys.stderr)
         return 130
-    except BrokenPipeError:
+    except BrokenPipeError:  # the reader went away (``| head``): nobody to tell
+        _drop_stdout(real_stdout)
         return 1
     except OSError as exc:  # an OS fault no writer translated: still one line
-        _inputs, outputs, updates = declared_files(args)
-        print(f"pslog {name}: error: {describe_os_error(exc, outputs + updates)}",
+        inputs, outputs, updates = declared_files(args)
+        print(f"pslog {name}: error: {describe_os_error(exc, outputs + updates, inputs)}",
               file=sys.stderr)
         return 1
+    finally:
+        sys.stdout = real_stdout
+
+
+class StdoutError(PslogError):
+    """Standard output refused a write (full disk, closed): not the fault of any file."""
+
+
+class _GuardedStdout:
+    """``sys.stdout`` whose OS faults say that standard output failed (:class:`StdoutError`),
+    so that a full ``> /dev/full`` never blames (or removes) a complete output file;
+    :class:`BrokenPipeError` passes as it is."""
+
+    def __init__(self, stream) -> None:
+        self._stream = stream
+
+    def _guard(self, call, *args):
+        try:
+            return call(*args)
+        except BrokenPipeError:
+            raise
+        except OSError as exc:
+            from pslog.outputs import os_reason
+
+            raise StdoutError(f"cannot write to standard output: {os_reason(exc)}") from None
+
+    def write(self, text: str) -> int:
+        return self._guard(self._stream.write, text)
+
+    def writelines(self, lines) -> None:
+        return self._guard(self._stream.writelines, lines)
+
+    def flush(self) -> None:
+        return self._guard(self._stream.flush)
+
+    def __getattr__(self, name: str):
+        return getattr(self._stream, name)
+
+
+def _drop_stdout(stream) -> None:
+    """After standard output failed: point it at the null device, so that the interpreter's
+    own flush at exit does not fail again with a second message (as Python's documentation
+    on SIGPIPE recommends)."""
+    import os
+
+    try:
+        fd = stream.fileno()
+    except (AttributeError, OSError, ValueError):  # not a real file (a test's capture)
+        return
+    if fd != 1:
+        return
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, fd)
+        os.close(devnull)
+    except OSError:
+        pass
 
 
 def _ignore_file_size_signal() -> None:

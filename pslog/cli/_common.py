@@ -46,6 +46,22 @@ def declare_files(parser: argparse.ArgumentParser, *, inputs=(), outputs=(),
     parser.set_defaults(**{FILES_KEY: files})
 
 
+def empty_file_option(parser: argparse.ArgumentParser, args: argparse.Namespace) -> str | None:
+    """The option (``-o/--output``, ``--rig``) given an empty file name on this command line,
+    if any: a malformed command line (exit 2), not a file fault."""
+    files = getattr(args, FILES_KEY, None) or {}
+    dests = {e for key in ("inputs", "outputs", "updates") for e in files.get(key, ())
+             if isinstance(e, str)}
+    for action in parser._actions:
+        if action.dest not in dests:
+            continue
+        value = getattr(args, action.dest, None)
+        values = [value] if isinstance(value, str | Path) else list(value or ())
+        if any(v is not None and str(v).strip() == "" for v in values):
+            return "/".join(action.option_strings) or action.metavar or action.dest
+    return None
+
+
 def _paths(args: argparse.Namespace, entries) -> list[str]:
     out: list[str] = []
     for entry in entries:
@@ -65,9 +81,15 @@ def declared_files(args: argparse.Namespace) -> tuple[list[str], list[str], list
 
 def check_declared_files(args: argparse.Namespace, say=None) -> None:
     """The output checks of :func:`declare_files` for a parsed command line."""
+    from pslog.errors import InputError
+    from pslog.inputs import special_file
     from pslog.outputs import check_output_path, check_outputs
 
     inputs, outputs, updates = declared_files(args)
+    for path in inputs:  # a device or FIFO would be read for ever (or block)
+        kind = special_file(path)
+        if kind is not None:
+            raise InputError(f"not a regular file: {path} ({kind})")
     check_outputs(outputs, bool(getattr(args, "force", False)), inputs, say=say)
     for path in updates:  # may exist: changed in place, but never an input, and writable
         check_output_path(path, True, inputs, say=say)

@@ -9,7 +9,7 @@ from ._common import (
     declare_files,
     fusion_method,
     nonnegative_float,
-    positive_float,
+    number_at_most,
     usage_error,
 )
 
@@ -33,10 +33,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         metavar="MS", help="detections this close in time count as "
                                            "simultaneous, milliseconds, below a third of the "
                                            "frame period (default %(default)s)")
-    parser.add_argument("--max-gap-ms", type=positive_float, default=None,
+    parser.add_argument("--max-gap-ms", default=None,
+                        type=number_at_most(3.6e6, "ms", "an hour", positive=True),
                         metavar="MS", help="longest time span a method may bridge, "
-                                           "milliseconds (default: 3.5 frame periods)")
-    parser.add_argument("--rate", type=positive_float, default=None, metavar="HZ",
+                                           "milliseconds, at most an hour (default: 3.5 frame "
+                                           "periods)")
+    parser.add_argument("--rate", type=number_at_most(1e6, "Hz", "a megahertz", positive=True),
+                        default=None, metavar="HZ",
                         help="smooth: points on a regular grid of this rate instead of at "
                              "every detection time")
     add_force(parser)

@@ -30,7 +30,8 @@ def run(args: argparse.Namespace) -> int:
         raise LogFormatError(f"{args.session}: {info['problem']}; {recover} to salvage it")
     if info["damaged"]:
         n = len(info["damaged"])
-        raise LogFormatError(f"{args.session} has {n} damaged chunk{'s' if n > 1 else ''} "
+        what = "chunk" if all(d["chunk"] for d in info["damaged"]) else "part"
+        raise LogFormatError(f"{args.session} has {n} damaged {what}{'s' if n > 1 else ''} "
                              f"(first at byte {info['damaged'][0]['start']}); {recover} to "
                              f"salvage every intact one")
     return 0
@@ -115,7 +116,8 @@ def _text(info: dict) -> list[str]:
     lines.append("  messages per topic:")
     lines += [f"    {t}: {n}" for t, n in info["topics"].items()]
     if info["damaged"]:
-        lines.append(f"  DAMAGED: {len(info['damaged'])} chunk(s) fail their checks; the "
+        what = "chunk(s)" if all(d["chunk"] for d in info["damaged"]) else "part(s)"
+        lines.append(f"  DAMAGED: {len(info['damaged'])} {what} fail their checks; the "
                      f"figures above leave them out:")
         lines += _damage(info)
         lines.append(f"  {info['hint']}")

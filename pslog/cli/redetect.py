@@ -15,7 +15,7 @@ Frames recorded without an image (--no-frames) cannot be re-detected.
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from pslog.cli._common import positive_int
+    from pslog.cli._common import int_in
     from pslog.cli.record import add_detector_arguments
 
     parser.description = DESCRIPTION
@@ -24,10 +24,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="recorded session with frames")
     parser.add_argument("-o", "--output", required=True, metavar="SESSION.mcap",
                         help="new session file to write")
+    from recorders.redetect import MAX_CANDIDATES, MAX_WORKERS
+
     add_detector_arguments(parser)
-    parser.add_argument("--workers", type=positive_int, default=None, metavar="N",
-                        help="processes decoding and detecting (default: all cores for "
-                             "large sessions)")
+    for action in parser._actions:  # shared with record; bounded here (exit 2 beyond)
+        if action.dest == "max_candidates":
+            action.type = int_in(1, MAX_CANDIDATES)
+    parser.add_argument("--workers", type=int_in(1, MAX_WORKERS), default=None, metavar="N",
+                        help=f"processes decoding and detecting, at most {MAX_WORKERS} "
+                             f"(default: all cores for large sessions)")
     add_force(parser)
     declare_files(parser, inputs=("session",), outputs=("output",))
 

@@ -38,6 +38,10 @@ from .prediction import fuse_predicted
 from .pseudo import PseudoStereoPoints, TypeAConstruction, fuse_type_a, pseudo_stereo_points
 from .stereo import fuse_nearest, fuse_sync, sync_groups
 
+#: Longest time span a fusion method may be asked to bridge, seconds (an hour): a longer
+#: one bridges nothing more, and overflows integer nanoseconds for absurd values.
+MAX_GAP_S = 3600.0
+
 
 @dataclass(frozen=True)
 class FusionOptions:
@@ -62,8 +66,9 @@ class FusionOptions:
     def __post_init__(self) -> None:
         if not self.tolerance_s >= 0:
             raise FusionError(f"tolerance must be >= 0 seconds, got {self.tolerance_s!r}")
-        if self.max_gap_s is not None and not self.max_gap_s > 0:
-            raise FusionError(f"max gap must be > 0 seconds, got {self.max_gap_s!r}")
+        if self.max_gap_s is not None and not 0 < self.max_gap_s <= MAX_GAP_S:
+            raise FusionError(f"max gap must be in (0, {MAX_GAP_S:g}] seconds, got "
+                              f"{self.max_gap_s!r}")
         if self.rate_hz is not None and not 0 < self.rate_hz <= 1e6:
             raise FusionError(f"rate must be in (0, 1e6] Hz, got {self.rate_hz!r}")
 

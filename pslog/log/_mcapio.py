@@ -12,6 +12,7 @@ messages that dominates reading time, so messages inside chunks are sliced out h
 from __future__ import annotations
 
 import mmap
+import os
 import re
 import struct
 import zlib
@@ -36,29 +37,85 @@ _MESSAGE_HEAD = 22  # channel u16, sequence u32, log_time u64, publish_time u64
 _unpack = struct.unpack_from
 
 
-def check_file(path) -> tuple[Path, int, bool]:
-    """``(path, size, complete)``; LogFormatError if missing or not an MCAP at all.
+def check_file(path, header: bool = True) -> tuple[Path, int, bool]:
+    """``(path, size, complete)``; LogFormatError if missing or not an MCAP at all, or (with
+    ``header``) if its Header record is damaged (:func:`header_damage`).
 
     ``complete`` means the file ends with the closing magic written by a finished writer.
+
+    A damaged Header record is refused by every reader although pslog uses nothing in it:
+    it is damage all the same (a record walk cannot pass a damaged length), and what
+    damaged it may have damaged more; ``pslog info`` reports it, ``pslog recover`` skips
+    it (docs/log-format.md).
     """
     path = Path(path)
     if not path.exists():
         raise LogFormatError(f"no such file: {path}")
     if not path.is_file():
         raise LogFormatError(f"not a file: {path}")
-    size = path.stat().st_size
-    with open(path, "rb") as f:
-        head = f.read(len(MAGIC))
-        if head != MAGIC:
-            if _magic_damaged(path):
-                raise LogFormatError(f"{path}: the MCAP magic (bytes 0..7) is damaged; run "
-                                     f"'pslog recover {path} -o FIXED.mcap' to salvage the data")
-            raise LogFormatError(f"not an MCAP file: {path}")
-        complete = False
-        if size >= 2 * len(MAGIC) + 9:
-            f.seek(size - len(MAGIC))
-            complete = f.read() == MAGIC
+    tail = b""
+    try:
+        size = path.stat().st_size
+        with open(path, "rb") as f:
+            head = f.read(len(MAGIC))
+            if head == MAGIC and size >= 2 * len(MAGIC) + 9:
+                f.seek(size - len(MAGIC))
+                tail = f.read()
+    except OSError as exc:  # e.g. EIO from /proc/self/mem, EACCES: name the file
+        raise LogFormatError(f"cannot read {path}: {exc.strerror or exc}") from None
+    if head != MAGIC:
+        if _magic_damaged(path):
+            raise LogFormatError(f"{path}: the MCAP magic (bytes 0..7) is damaged; run "
+                                 f"'pslog recover {path} -o FIXED.mcap' to salvage the data")
+        raise LogFormatError(f"not an MCAP file: {path}")
+    # ``complete``: the closing magic written by a finished writer
+    complete = tail == MAGIC
+    if header:
+        damage = header_damage(path)
+        if damage is not None:
+            start, end, reason = damage
+            raise LogFormatError(f"{path}: its MCAP Header record (bytes {start}..{end}) is "
+                                 f"damaged ({reason}); run 'pslog recover {path} -o "
+                                 f"FIXED.mcap' to salvage the data")
     return path, size, complete
+
+
+#: longest Header record examined, bytes (pslog's are tens of bytes: two short strings)
+_HEADER_MAX = 1 << 16
+#: opcodes a record may have (MCAP 0x01 Header .. 0x10 Summary Offset... 0x0F Data End)
+_KNOWN_OPS = frozenset(range(0x01, 0x10))
+
+
+def header_damage(path) -> tuple[int, int, str] | None:
+    """``(start, end, reason)`` if the Header record after the leading magic is damaged (its
+    opcode, its length, its two strings, or the record after it not a record), else None.
+    A file cut inside its header is truncated, not damaged: None."""
+    start = len(MAGIC)
+    with open(path, "rb") as f:
+        head = f.read(start + 9 + _HEADER_MAX + 1)
+        size = os.fstat(f.fileno()).st_size
+    if len(head) < start + 9:
+        return None
+    op, length = _unpack("<BQ", head, start)
+    end = start + 9 + length
+    if op != OP_HEADER:
+        return start, start + 1, f"opcode {op:#04x}, not a Header"
+    if end + 1 > size:
+        if size > start + 9 + _HEADER_MAX:
+            return start, start + 9, f"length {length} runs past the end of the file"
+        return None  # cut inside the header
+    if end + 1 > len(head):
+        return start, start + 9, f"length {length} is beyond any Header record"
+    try:
+        _profile, at = _string(head, start + 9)
+        _library, at = _string(head, at)
+    except (struct.error, UnicodeDecodeError):
+        return start, end, "its strings are unreadable"
+    if at != end:
+        return start, end, "its strings do not fill it"
+    if head[end] not in _KNOWN_OPS:
+        return start, end, f"no record follows it (opcode {head[end]:#04x})"
+    return None
 
 
 def tail_magic_damaged(path) -> bool:
@@ -79,8 +136,36 @@ def truncated_error(path) -> LogFormatError:
     if tail_magic_damaged(path):
         return LogFormatError(f"{path}: its closing MCAP magic (the last 8 bytes) is damaged; "
                               f"run 'pslog recover {path} -o FIXED.mcap' to salvage the data")
+    recording = still_recording(path)
+    if recording is not None:
+        return LogFormatError(f"{path} is incomplete (truncated): it may still be recording "
+                              f"({recording}); if no recorder is writing it, run 'pslog "
+                              f"recover {path} -o FIXED.mcap' to salvage it")
     return LogFormatError(f"{path} is truncated (the recording did not finish); "
                           f"run 'pslog recover {path} -o FIXED.mcap' to salvage it")
+
+
+def still_recording(path) -> str | None:
+    """Why an unfinished ``path`` may be a recording in progress (``being written by another
+    pslog``, ``modified 3 s ago``, ``named *.partial``), or None: the same rule as ``pslog
+    info`` (:func:`pslog.log.info.session_info`)."""
+    import time
+
+    from ..outputs import locked_by_another
+    from .info import RECENT_S
+
+    path = Path(path)
+    if locked_by_another(path):
+        return "another pslog is writing it"
+    try:
+        age = max(time.time() - path.stat().st_mtime, 0.0)
+    except OSError:
+        return None
+    if age < RECENT_S:
+        return f"modified {age:.0f} s ago"
+    if path.name.endswith(".partial"):
+        return "named *.partial"
+    return None
 
 
 def _string(buf, pos: int) -> tuple[str, int]:
@@ -577,7 +662,7 @@ def salvage_file(path, on_message=None, scan: Scan | None = None,
     ``tolerate_magic``: accept a file whose leading magic is damaged."""
     path = Path(path)
     try:
-        check_file(path)
+        check_file(path, header=False)  # a damaged Header record is skipped like any damage
     except LogFormatError:
         if not (tolerate_magic and path.is_file() and _magic_damaged(path)):
             raise

@@ -38,6 +38,7 @@ import numpy as np
 
 from ..camera import MAX_IMAGE_SIZE
 from ..errors import InputError
+from ..inputs import check_input_file
 from ..outputs import replacing
 from ..records import NS, Detections
 from ..rig import Rig
@@ -92,10 +93,17 @@ def _pixel(text: str) -> float:
     return value
 
 
+#: Largest frame index accepted: a session stores it as the MCAP message sequence, a
+#: 32-bit count (4.3e9 frames are 4.5 years at 30 fps).
+MAX_FRAME_INDEX = 2**32 - 1
+
+
 def _frame_number(text: str) -> int:
     value = int(text)
     if value < 0:
         raise _Invalid("frame indices are >= 0")
+    if value > MAX_FRAME_INDEX:
+        raise _Invalid(f"beyond any frame counter (at most {MAX_FRAME_INDEX})")
     return value
 
 
@@ -165,13 +173,14 @@ def read_detections_csv(path, rig: Rig) -> Detections:
     camera.
     """
     path = Path(path)
+    check_input_file(path)  # a device or FIFO would be read for ever
     try:
         # utf-8-sig: Excel's "CSV UTF-8" and Windows editors start with a byte-order mark
         handle = open(path, newline="", encoding="utf-8-sig")  # closed by the with below
     except FileNotFoundError:
         raise InputError(f"no such file: {path}") from None
     except OSError as exc:
-        raise InputError(f"cannot read {path}: {exc}") from None
+        raise InputError(f"cannot read {path}: {exc.strerror or exc}") from None
     index = {name: i for i, name in enumerate(rig.names)}
     cams, times, frames, uv, scores, lines = [], [], [], [], [], []
     with handle:

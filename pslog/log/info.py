@@ -128,20 +128,25 @@ def session_info(path) -> dict:
     ``still_recording`` (modified within the last :data:`RECENT_S` seconds or named
     ``*.partial``: a recorder may still be writing it), ``age_s`` and ``hint``.
     """
-    path, size, complete = io.check_file(path)
+    path, size, complete = io.check_file(path, header=False)  # reported, as other damage
     if not complete:
         return _scanned_info(path, size, "its closing MCAP magic (the last 8 bytes) is damaged"
                              if io.tail_magic_damaged(path) else _UNFINISHED)
     from .reader import DamagedSummaryError, _Finished, _read
 
     try:
-        f = _Finished(path)
+        f = _Finished(path, header=False)
     except DamagedSummaryError as exc:
         return _scanned_info(path, size, exc.reason)
     with f:
         counts = dict(sorted(f.counts.items()))
         damaged = f.check_chunks()
         session = _read(f, frozenset(d["start"] for d in damaged))
+    header = io.header_damage(path)
+    if header is not None:  # nothing pslog reads, but damage all the same: readers refuse it
+        start, end, reason = header
+        damaged.insert(0, {"start": start, "end": end, "reason": f"MCAP Header record: {reason}",
+                           "chunk": False, "start_ns": None, "end_ns": None, "messages": None})
     det = session.detections
     rig = session.rig
     times = det.frame_time_ns
@@ -181,8 +186,10 @@ def session_info(path) -> dict:
         "events": len(session.events),
         "file_bytes": size,
         "damaged": damaged,
-        "hint": (f"{len(damaged)} damaged chunk(s); run 'pslog recover {path} -o FIXED.mcap' "
-                 f"to salvage every intact one" if damaged else ""),
+        "hint": (f"{len(damaged)} damaged "
+                 f"{'chunk(s)' if all(d['chunk'] for d in damaged) else 'part(s)'}; run "
+                 f"'pslog recover {path} -o FIXED.mcap' to salvage every intact one"
+                 if damaged else ""),
     }
 
 

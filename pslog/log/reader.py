@@ -87,8 +87,9 @@ class DamagedSummaryError(LogFormatError):
 class _Finished:
     """A finished session file opened for seeking: summary, metadata, rig."""
 
-    def __init__(self, path) -> None:
-        path, self.size, complete = io.check_file(path)
+    def __init__(self, path, header: bool = True) -> None:
+        # header=False: a damaged Header record is let through (pslog info reports it)
+        path, self.size, complete = io.check_file(path, header)
         self.path = path
         if not complete:
             raise io.truncated_error(path)

@@ -78,6 +78,9 @@ def _rig_with(work: Path, old: str, new: str, count: int = 1) -> str:
     ("width = 640", "width = 99999999999", "width 99999999999 pixels is beyond any camera"),
     ("height = 480", "height = 1000000", "beyond any camera"),
     ("fps = 30.0", "fps = 1e300", "fps must be in"),
+    ("fps = 30.0", "fps = 1e-300", "fps must be in [0.1, "),
+    ("dist = [0.0, 0.0, 0.0, 0.0, 0.0]", "dist = [1e300, 0, 0, 0, 0]", "beyond any lens"),
+    ("dist = [0.0, 0.0, 0.0, 0.0, 0.0]", "dist = [0, 0, -2e3, 0, 0]", "beyond any lens"),
     ("K = [[400.0, 0.0,", "K = [[1e-300, 0.0,", "at least 1 pixel"),
     ('name = "cam2"', 'name = "cam,2"', "camera name 'cam,2' holds one of"),
     ('name = "cam2"', 'name = "say \\"two\\""', "camera name 'say \"two\"' holds one of"),
@@ -117,11 +120,15 @@ def test_cameras_at_one_centre_are_refused_for_fusion(work):
     ("u=1e300", "beyond any image"),
     ("v=-1e300", "beyond any image"),
     ("u=nan", "not a finite number"),
+    ("frame=9223372036854775808", "beyond any frame counter"),
+    ("frame=4294967296", "beyond any frame counter"),
 ])
 def test_hostile_csv_cells_are_refused_naming_file_line_and_value(work, cell, why):
     key, value = cell.split("=")
-    row = {"time": "0.5", "u": "1", "v": "2", key: value}
-    (work / "bad.csv").write_text(CSV_OK + f"cam1,{row['time']},{row['u']},{row['v']}\n")
+    row = {"time": "0.5", "u": "1", "v": "2", "frame": "1", key: value}
+    (work / "bad.csv").write_text("camera,time,u,v,frame\ncam1,0.0,320,240,0\n"
+                                  "cam2,0.0111,300,200,0\ncam3,0.0222,310,250,0\n"
+                                  f"cam1,{row['time']},{row['u']},{row['v']},{row['frame']}\n")
     line = _refused(work, 1, ["import", "--rig", "paper3", "--detections", "bad.csv", "-o",
                               "x.mcap"],
                     contains=(f"bad.csv: line 5: bad {key} value '{value}'", why))
@@ -188,6 +195,17 @@ def test_a_session_with_far_off_pixels_fuses_without_a_warning(work):
     (["calibrate", "--chessboard", "1x9", "--images", ".", "--name", "cam1", "--rig",
       "r.toml"], "--chessboard"),
     (["demo", "--duration", "1e9", "--out", "demo"], "--duration"),
+    # issue 8, second round: empty file names, absurd magnitudes
+    (["simulate", "--rig", "paper3", "-o", ""], ("-o/--output", "empty file name")),
+    (["simulate", "--rig", "", "-o", "x.mcap"], ("--rig", "empty file name")),
+    (["export", "s.mcap", "--detections", ""], ("--detections", "empty file name")),
+    (["fuse", "", "-o", "x.mcap"], ("SESSION.mcap", "empty file name")),
+    (["simulate", "--rig", "paper3", "-o", "x.mcap", "--duration", "1e-300"],
+     ("--duration", "too short to hold a frame")),
+    (["fuse", "s.mcap", "-o", "x.mcap", "--max-gap-ms", "1e308"], ("--max-gap-ms", "an hour")),
+    (["redetect", "s.mcap", "-o", "x.mcap", "--workers", "100000"], ("--workers", "1..64")),
+    (["redetect", "s.mcap", "-o", "x.mcap", "--max-candidates", "99999999999999999999"],
+     ("--max-candidates", "1..100")),
 ])
 def test_bad_command_line_values_are_exit_2(work, args, contains):
     _refused(work, 2, args, contains=contains)
@@ -220,3 +238,57 @@ def test_record_synthetic_exposure_beyond_the_frame_period_is_refused(work):
 ])
 def test_record_options_bad_for_the_rig_or_each_other_are_exit_2(work, args, contains):
     _refused(work, 2, ["record", "--rig", "paper3", "-o", "x.mcap", *args], contains=contains)
+
+
+# ---- special files as inputs: refused at once, never read for ever (exit 1) ---------------
+
+def _special(work: Path, kind: str) -> str:
+    """A special file of ``kind`` in ``work`` (made here: never a real /dev path)."""
+    import os
+    import stat
+
+    if kind == "named pipe":
+        os.mkfifo(work / "node")
+    else:
+        try:
+            os.mknod(work / "node", 0o666 | stat.S_IFCHR, os.makedev(1, 5))  # a zero device
+        except PermissionError:
+            pytest.skip("mknod needs root")
+    return "node"
+
+
+@pytest.mark.parametrize("kind", ["character device", "named pipe"])
+@pytest.mark.parametrize("args", [
+    ["simulate", "--rig", "{}", "-o", "x.mcap"],
+    ["rig", "check", "{}"],
+    ["import", "--rig", "paper3", "--detections", "{}", "-o", "x.mcap"],
+    ["import", "--rig", "{}", "--detections", "det.csv", "-o", "x.mcap"],
+    ["calibrate", "--points", "{}", "--name", "cam1", "--rig", "rig.toml"],
+    ["info", "{}"],
+    ["fuse", "{}", "-o", "x.mcap"],
+], ids=lambda a: " ".join(a[:2]) if isinstance(a, list) else a)
+def test_a_special_file_as_input_is_refused_without_reading_it(work, kind, args):
+    node = _special(work, kind)
+    args = [a.format(node) for a in args]
+    before = fingerprint(work)
+    run = run_pslog(*args, cwd=work, timeout=30)  # a hang fails here
+    assert_one_line_error(run, 1, contains=node)
+    assert kind in run.stderr or "not a file" in run.stderr, run.stderr
+    assert_untouched(before, work)
+
+
+def test_a_huge_rig_file_is_refused_without_parsing_it(work):
+    from pslog.inputs import MAX_RIG_BYTES
+
+    with open(work / "huge.toml", "wb") as f:
+        f.write((work / "rig.toml").read_bytes())
+        f.write(b"# padding\n" * (MAX_RIG_BYTES // 10 + 1))
+    _refused(work, 1, ["simulate", "--rig", "huge.toml", "-o", "x.mcap"],
+             contains=("huge.toml", "too large"))
+
+
+@pytest.mark.skipif(not Path("/proc/self/mem").exists(), reason="Linux /proc only")
+def test_an_os_fault_reading_an_input_names_the_path(work):
+    # reading /proc/self/mem at offset 0 fails with EIO
+    _refused(work, 1, ["info", "/proc/self/mem"], contains=("/proc/self/mem",
+                                                            "Input/output error"))

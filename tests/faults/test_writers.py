@@ -401,3 +401,156 @@ def test_background_flush_on_a_full_disk_is_one_error_in_the_callers_thread(tmp_
         threading.excepthook = old_hook
     assert thread_errors == []
     assert list(out.iterdir()) == []
+
+
+# ---- outputs that are not regular files: never replaced, --force or not -------------------
+
+def _make_node(path: Path, kind: str) -> None:
+    """A special file of ``kind`` at ``path`` (made here: never a real /dev path)."""
+    import socket
+    import stat
+
+    if kind == "character device":
+        try:
+            os.mknod(path, 0o666 | stat.S_IFCHR, os.makedev(1, 3))  # a null device
+        except PermissionError:
+            pytest.skip("mknod needs root")
+    elif kind == "named pipe":
+        os.mkfifo(path)
+    elif kind == "socket":
+        with socket.socket(socket.AF_UNIX) as s:
+            s.bind(str(path))
+    else:  # a symbolic link to a file
+        (path.parent / "target.mcap").write_bytes(b"old output")
+        path.symlink_to("target.mcap")
+
+
+@pytest.mark.parametrize("kind", ["character device", "named pipe", "socket", "symbolic link"])
+@pytest.mark.parametrize("writer", ["simulate", "export --detections"])
+def test_an_output_that_is_not_a_regular_file_is_refused_even_with_force(kind, writer, inputs,
+                                                                          tmp_path):
+    out = tmp_path / "o"
+    out.mkdir()
+    node = out / WRITERS[writer][1]
+    _make_node(node, kind)
+    before_mode = os.lstat(node).st_mode
+    before = fingerprint(out)
+    run = run_pslog(*_args(writer, inputs, out))
+    assert_one_line_error(run, 1, contains=(str(node), kind))
+    assert_untouched(before, out)
+    assert os.lstat(node).st_mode == before_mode  # still the same node, not a regular file
+    if kind == "symbolic link":
+        assert (out / "target.mcap").read_bytes() == b"old output"
+
+
+def test_an_output_being_recorded_into_is_refused_even_with_force(inputs, tmp_path):
+    """A real process records straight into a new file (it holds the writer's lock on the
+    file itself, not on a .partial): a --force run writing that file is refused, and the
+    recording completes into the file the user named."""
+    import sys
+
+    out = tmp_path / "w.mcap"
+    holder = _HOLDER.replace("force=True, on_error=\"discard\"", "on_error=\"keep\"")
+    assert holder != _HOLDER
+    first = subprocess.Popen([sys.executable, "-c", holder, "session", str(out)],
+                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert first.stdout.readline().strip() == "writing"
+        assert not (tmp_path / "w.mcap.partial").exists()  # written in place
+        before = fingerprint(tmp_path)
+        for args in (["simulate", "--rig", "paper3", "--duration", "0.3", "-o", out, "--force"],
+                     ["export", inputs / "s.mcap", "--detections", out, "--force"]):
+            run = run_pslog(*args)
+            assert_one_line_error(run, 1, contains=(f"{out} is being written by another pslog",
+                                                    "recording in progress"))
+            assert_untouched(before, tmp_path)
+        # a reader meeting the unfinished file says it may still be recording
+        run = run_pslog("fuse", out, "--method", "typeA", "-o", tmp_path / "f.mcap")
+        assert_one_line_error(run, 1, contains=("may still be recording",
+                                                "another pslog is writing it"))
+        assert_untouched(before, tmp_path)
+        rest, _ = first.communicate("\n", timeout=60)
+    finally:
+        if first.poll() is None:
+            first.kill()
+            first.wait()
+    assert first.returncode == 0 and rest.strip() == "done"
+    from pslog.log import read_session
+
+    assert read_session(out).detections.n_frames == 1
+
+
+# ---- standard output full or closed: never blamed on (or costing) a complete output ------
+
+def test_a_full_standard_output_is_named_and_the_complete_output_kept(inputs, tmp_path):
+    import stat
+    import sys
+
+    full = tmp_path / "full"
+    try:
+        os.mknod(full, 0o666 | stat.S_IFCHR, os.makedev(1, 7))  # our own /dev/full
+    except PermissionError:
+        pytest.skip("mknod needs root")
+    out = tmp_path / "o"
+    out.mkdir()
+    for args, made in ((["export", inputs / "s.mcap", "--detections", out / "d.csv"], "d.csv"),
+                       (["info", inputs / "s.mcap"], None)):
+        with open(full, "w") as stdout:
+            proc = subprocess.run([sys.executable, "-m", "pslog.cli", *map(str, args)],
+                                  stdout=stdout, stderr=subprocess.PIPE, text=True, timeout=60)
+        run = Run(tuple(map(str, args)), proc.returncode, "", proc.stderr)
+        assert_one_line_error(run, 1, contains="cannot write to standard output: No space "
+                                               "left on device")
+        if made:
+            text = (out / made).read_text()
+            assert text.count("\n") > 100 and text == (inputs / "det.csv").read_text()
+            assert made not in run.stderr
+
+
+def test_a_closed_standard_output_is_no_traceback(inputs):
+    import sys
+
+    proc = subprocess.Popen([sys.executable, "-m", "pslog.cli", "info", str(inputs / "s.mcap")],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc.stdout.close()  # the reader is gone before pslog writes a byte (``| head -c0``)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 1
+    assert err == "", err  # no traceback, no "Exception ignored" at the interpreter's exit
+
+
+def test_force_onto_a_session_being_recorded_is_refused(tmp_path):
+    """The tester's case with a real recording: 'pslog record' writes a new session in place
+    (no .partial); a 'simulate --force' onto it meanwhile is refused, and the recording
+    completes into the file the user named."""
+    import sys
+
+    from pslog.log import read_session
+    from pslog.outputs import locked_by_another
+
+    out = tmp_path / "w.mcap"
+    inode = None
+    rec = subprocess.Popen([sys.executable, "-m", "pslog.cli", "record", "--synthetic", "--rig",
+                            "paper3", "--timing", "typeA", "--duration", "4", "-o", str(out)],
+                           stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 60  # a hang guard, not a timing assertion
+        while not (out.exists() and locked_by_another(out)):
+            assert rec.poll() is None, f"record ended early: {rec.stderr.read()}"
+            assert time.monotonic() < deadline, "record never started writing"
+            time.sleep(0.05)
+        inode = out.stat().st_ino
+        run = run_pslog("simulate", "--rig", "paper3", "--duration", "0.3", "-o", out, "--force")
+        assert_one_line_error(run, 1, contains=(str(out), "being written by another pslog"))
+        # out grows as the cameras deliver: untouched means not replaced (same inode) and no
+        # partial of the refused run
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["w.mcap"]
+        _, err = rec.communicate(timeout=120)
+    finally:
+        if rec.poll() is None:
+            rec.kill()
+            rec.wait()
+    assert rec.returncode == 0, err
+    assert out.stat().st_ino == inode  # never replaced: the recorder's file is the output
+    session = read_session(out)  # the recording is in the file named, complete
+    assert session.detections.n_frames > 3 * 30 * 2
+    assert session.metadata["source"].startswith("record"), session.metadata["source"]

@@ -1,0 +1,76 @@
+"""Input files: one check for every file a command reads.
+
+A special file (a device such as ``/dev/zero``, a FIFO, a socket) given where a file is
+expected would be read for ever or block; a text input (a rig TOML, a CSV of points) far
+larger than any real one would be read whole into memory. :func:`check_input_file` refuses
+both with one line naming the path and what it is.
+"""
+
+from __future__ import annotations
+
+import os
+import stat
+from pathlib import Path
+
+from .errors import InputError
+
+#: Largest rig TOML read, bytes: a real rig is a few kilobytes (one table per camera).
+MAX_RIG_BYTES = 1 << 20
+
+
+def file_kind(mode: int) -> str:
+    """What a ``stat`` mode names, in words: ``a character device``, ``a FIFO`` ..."""
+    for test, words in ((stat.S_ISREG, "a regular file"), (stat.S_ISDIR, "a folder"),
+                        (stat.S_ISLNK, "a symbolic link"), (stat.S_ISCHR, "a character device"),
+                        (stat.S_ISBLK, "a block device"), (stat.S_ISFIFO, "a named pipe"),
+                        (stat.S_ISSOCK, "a socket")):
+        if test(mode):
+            return words
+    return "not a regular file"
+
+
+def special_file(path: str | Path) -> str | None:
+    """What ``path`` is (``a character device``) if it exists and is neither a regular file
+    nor a folder (links followed); None otherwise (a missing file is for the reader to report)."""
+    try:
+        mode = os.stat(path).st_mode
+    except (OSError, ValueError):
+        return None
+    if stat.S_ISREG(mode) or stat.S_ISDIR(mode):
+        return None
+    return file_kind(mode)
+
+
+def check_input_file(path: str | Path, what: str = "", max_bytes: int | None = None) -> Path:
+    """``path`` as a :class:`~pathlib.Path` if it is a regular file to read (links followed).
+
+    Parameters
+    ----------
+    what : what the file is for the message (``"rig file"``); empty: nothing
+    max_bytes : largest size accepted (text inputs read whole), None: any size
+
+    Raises
+    ------
+    InputError : ``path`` is missing, a folder, a device, FIFO or socket, larger than
+        ``max_bytes``, or cannot be examined
+    """
+    path = Path(path)
+    label = f"{what} " if what else ""
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        raise InputError(f"{label}not found: {path}" if what else f"no such file: {path}"
+                         ) from None
+    except (OSError, ValueError) as exc:
+        reason = getattr(exc, "strerror", None) or str(exc)
+        raise InputError(f"cannot read {label}{path}: {reason}") from None
+    if stat.S_ISDIR(st.st_mode):
+        raise InputError(f"cannot read {label}{path}: it is a folder")
+    if not stat.S_ISREG(st.st_mode):
+        kind = file_kind(st.st_mode)
+        raise InputError(f"{what} {path} is not a regular file ({kind})" if what
+                         else f"not a regular file: {path} ({kind})")
+    if max_bytes is not None and st.st_size > max_bytes:
+        raise InputError(f"{label}{path} is {st.st_size} bytes: too large to be one (at most "
+                         f"{max_bytes} bytes)")
+    return path
