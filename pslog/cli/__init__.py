@@ -142,14 +142,16 @@ def _main(argv: list[str] | None) -> int:
     def say(text: str) -> None:
         print(f"pslog {name}: {text}", file=sys.stderr)
 
-    real_stdout = sys.stdout
-    sys.stdout = _GuardedStdout(real_stdout)
+    real_stdout = sys.stdout  # None when started with standard output closed
+    if real_stdout is not None:
+        sys.stdout = _GuardedStdout(real_stdout)
     try:
         _release_sigint()  # only now: a KeyboardInterrupt in a C extension's import (numpy,
         # cv2, while add_arguments loads them) surfaces as an ImportError traceback
         check_declared_files(args, say=say)
         code = int(module.run(args) or 0)
-        sys.stdout.flush()  # a full or closed stdout fails here, not at the interpreter's exit
+        if sys.stdout is not None:  # a full stdout fails here, not at the interpreter's exit
+            sys.stdout.flush()
         return code
     except PslogError as exc:
         if isinstance(exc, StdoutError):
