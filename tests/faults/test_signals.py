@@ -258,7 +258,9 @@ def _kill_then_recover(tmp_path, rec: Recorder, code: int, sent: int, case: str)
     assert run.code == 0 and "Traceback" not in run.stderr, run.stderr
     lost = _lost_s(fixed, sent)
     _record_figure(case, lost)
-    assert 0 < lost <= MAX_LOST_S
+    # negative: detections past the signal were kept (after a SIGINT the cameras run on for
+    # a few frames while the recorder stops); what matters is that at most a second is lost
+    assert -0.5 < lost <= MAX_LOST_S
 
 
 def test_sigkill_mid_run_then_recover(start, tmp_path):
