@@ -81,3 +81,12 @@ def assert_untouched(before: dict[str, tuple[int, str]], *paths) -> None:
     changed = sorted(p for p in before if after.get(p) != before[p])
     assert not added, f"left behind: {added}"
     assert not changed, f"changed or removed: {changed}"
+
+
+def assert_refused(folder: Path, code: int, args, contains: str | tuple[str, ...] = ()) -> str:
+    """All three promises for ``pslog ARGS`` run in ``folder``: one line, exit ``code``,
+    nothing below ``folder`` changed or added; returns the error line."""
+    before = fingerprint(folder)
+    line = assert_one_line_error(run_pslog(*args, cwd=folder), code, contains=contains)
+    assert_untouched(before, folder)
+    return line

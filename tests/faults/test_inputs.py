@@ -7,14 +7,19 @@ Files saved by Windows tools (a UTF-8 byte-order mark) are accepted instead.
 
 from __future__ import annotations
 
-import shutil
 from pathlib import Path
 
 import pytest
 
 from pslog.rig import apply_timing, builtin_rig
 
-from .promises import assert_one_line_error, assert_untouched, fingerprint, run_pslog
+from .promises import (
+    assert_one_line_error,
+    assert_refused,
+    assert_untouched,
+    fingerprint,
+    run_pslog,
+)
 
 CSV_OK = "camera,time,u,v\ncam1,0.0,320,240\ncam2,0.0111,300,200\ncam3,0.0222,310,250\n"
 
@@ -37,19 +42,6 @@ def inputs(tmp_path_factory) -> Path:
     return folder
 
 
-@pytest.fixture
-def work(inputs, tmp_path) -> Path:
-    folder = tmp_path / "w"
-    shutil.copytree(inputs, folder)
-    return folder
-
-
-def _refused(work: Path, code: int, args, contains=()) -> str:
-    """Run ``pslog ARGS`` in ``work`` and assert the three promises; returns the error line."""
-    before = fingerprint(work)
-    line = assert_one_line_error(run_pslog(*args, cwd=work), code, contains=contains)
-    assert_untouched(before, work)
-    return line
 
 
 # ---- files saved by Windows tools are accepted ---------------------------------------------
@@ -93,7 +85,7 @@ def test_absurd_rig_values_are_refused(work, old, new, why):
     rig = _rig_with(work, old, new)
     for args in (["simulate", "--rig", rig, "-o", "x.mcap"],
                  ["import", "--rig", rig, "--detections", "det.csv", "-o", "x.mcap"]):
-        _refused(work, 1, args, contains=("bad.toml", why))
+        assert_refused(work, 1, args, contains=("bad.toml", why))
 
 
 def test_cameras_at_one_centre_are_refused_for_fusion(work):
@@ -106,8 +98,8 @@ def test_cameras_at_one_centre_are_refused_for_fusion(work):
     cam3 = "\n".join(cam1_t if line.startswith("t = ") else cam1_r if line.startswith("R = ")
                      else line for line in cam3.split("\n"))
     (work / "same.toml").write_text(head + "[[camera]]" + cam3)
-    _refused(work, 1, ["fuse", "s.mcap", "--rig", "same.toml", "-o", "f.mcap"],
-             contains=("same.toml", "'cam1' and 'cam3' are at the same centre"))
+    assert_refused(work, 1, ["fuse", "s.mcap", "--rig", "same.toml", "-o", "f.mcap"],
+                   contains=("same.toml", "'cam1' and 'cam3' are at the same centre"))
 
 
 # ---- CSV cells: times speak seconds, every error names file and line (exit 1) -------------
@@ -129,9 +121,9 @@ def test_hostile_csv_cells_are_refused_naming_file_line_and_value(work, cell, wh
     (work / "bad.csv").write_text("camera,time,u,v,frame\ncam1,0.0,320,240,0\n"
                                   "cam2,0.0111,300,200,0\ncam3,0.0222,310,250,0\n"
                                   f"cam1,{row['time']},{row['u']},{row['v']},{row['frame']}\n")
-    line = _refused(work, 1, ["import", "--rig", "paper3", "--detections", "bad.csv", "-o",
-                              "x.mcap"],
-                    contains=(f"bad.csv: line 5: bad {key} value '{value}'", why))
+    line = assert_refused(
+        work, 1, ["import", "--rig", "paper3", "--detections", "bad.csv", "-o", "x.mcap"],
+        contains=(f"bad.csv: line 5: bad {key} value '{value}'", why))
     assert " ns" not in line
 
 
@@ -208,7 +200,7 @@ def test_a_session_with_far_off_pixels_fuses_without_a_warning(work):
      ("--max-candidates", "1..100")),
 ])
 def test_bad_command_line_values_are_exit_2(work, args, contains):
-    _refused(work, 2, args, contains=contains)
+    assert_refused(work, 2, args, contains=contains)
 
 
 def test_record_exposure_longer_than_a_frame_is_refused_by_the_shared_validator():
@@ -225,9 +217,9 @@ def test_record_exposure_longer_than_a_frame_is_refused_by_the_shared_validator(
 
 
 def test_record_synthetic_exposure_beyond_the_frame_period_is_refused(work):
-    _refused(work, 2, ["record", "--synthetic", "--rig", "paper3", "--fast", "--duration",
-                       "0.1", "--exposure", "0.05", "-o", "x.mcap"],
-             contains=("exposure 0.05 s", "frame period"))
+    assert_refused(work, 2, ["record", "--synthetic", "--rig", "paper3", "--fast", "--duration",
+                             "0.1", "--exposure", "0.05", "-o", "x.mcap"],
+                   contains=("exposure 0.05 s", "frame period"))
 
 
 @pytest.mark.parametrize("args,contains", [
@@ -237,7 +229,7 @@ def test_record_synthetic_exposure_beyond_the_frame_period_is_refused(work):
     (["--source", "cam1=0", "--fast"], "--fast applies to --synthetic only"),
 ])
 def test_record_options_bad_for_the_rig_or_each_other_are_exit_2(work, args, contains):
-    _refused(work, 2, ["record", "--rig", "paper3", "-o", "x.mcap", *args], contains=contains)
+    assert_refused(work, 2, ["record", "--rig", "paper3", "-o", "x.mcap", *args], contains=contains)
 
 
 # ---- special files as inputs: refused at once, never read for ever (exit 1) ---------------
@@ -283,12 +275,12 @@ def test_a_huge_rig_file_is_refused_without_parsing_it(work):
     with open(work / "huge.toml", "wb") as f:
         f.write((work / "rig.toml").read_bytes())
         f.write(b"# padding\n" * (MAX_RIG_BYTES // 10 + 1))
-    _refused(work, 1, ["simulate", "--rig", "huge.toml", "-o", "x.mcap"],
-             contains=("huge.toml", "too large"))
+    assert_refused(work, 1, ["simulate", "--rig", "huge.toml", "-o", "x.mcap"],
+                   contains=("huge.toml", "too large"))
 
 
 @pytest.mark.skipif(not Path("/proc/self/mem").exists(), reason="Linux /proc only")
 def test_an_os_fault_reading_an_input_names_the_path(work):
     # reading /proc/self/mem at offset 0 fails with EIO
-    _refused(work, 1, ["info", "/proc/self/mem"], contains=("/proc/self/mem",
-                                                            "Input/output error"))
+    assert_refused(work, 1, ["info", "/proc/self/mem"],
+                   contains=("/proc/self/mem", "Input/output error"))

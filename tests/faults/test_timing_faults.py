@@ -4,14 +4,13 @@ the three promises of :mod:`tests.faults.promises`."""
 
 from __future__ import annotations
 
-import shutil
 from pathlib import Path
 
 import pytest
 
 from pslog.rig import apply_timing, builtin_rig
 
-from .promises import assert_one_line_error, assert_untouched, fingerprint, run_pslog
+from .promises import assert_refused
 
 
 @pytest.fixture(scope="module")
@@ -35,18 +34,6 @@ def inputs(tmp_path_factory) -> Path:
     return folder
 
 
-@pytest.fixture
-def work(inputs, tmp_path) -> Path:
-    folder = tmp_path / "w"
-    shutil.copytree(inputs, folder)
-    return folder
-
-
-def _refused(work: Path, code: int, args, contains=()) -> str:
-    before = fingerprint(work)
-    line = assert_one_line_error(run_pslog(*args, cwd=work), code, contains=contains)
-    assert_untouched(before, work)
-    return line
 
 
 @pytest.mark.parametrize("fault, why", [
@@ -57,8 +44,8 @@ def _refused(work: Path, code: int, args, contains=()) -> str:
     (("--host-jitter", "17"), ("--host-jitter", "below half a frame period")),
 ])
 def test_bad_simulated_clock_faults_exit_2_and_replace_nothing(work, fault, why):
-    _refused(work, 2, ["simulate", "--rig", "paper3", *fault, "-o", "old.mcap", "--force"],
-             why)
+    assert_refused(work, 2, ["simulate", "--rig", "paper3", *fault, "-o", "old.mcap", "--force"],
+                   why)
 
 
 @pytest.mark.parametrize("line, why", [
@@ -69,16 +56,17 @@ def test_bad_simulated_clock_faults_exit_2_and_replace_nothing(work, fault, why)
 def test_bad_clock_keys_in_a_rig_are_refused_naming_file_and_camera(work, line, why):
     rig = (work / "rig.toml").read_text()
     (work / "rig.toml").write_text(rig.replace("offset = 0.0\n", f"offset = 0.0\n{line}\n", 1))
-    _refused(work, 1, ["fuse", "s.mcap", "--rig", "rig.toml", "-o", "f.mcap"], why)
+    assert_refused(work, 1, ["fuse", "s.mcap", "--rig", "rig.toml", "-o", "f.mcap"], why)
 
 
 def test_times_spanning_beyond_a_session_clock_are_refused(work):
     (work / "wide.csv").write_text("camera,time,u,v\ncam1,-9000000000,1,2\n"
                                    "cam2,9000000000,3,4\n")
-    _refused(work, 1, ["import", "--rig", "paper3", "--detections", "wide.csv", "-o", "w.mcap"],
-             ("times span", "a session holds at most"))
+    assert_refused(work, 1,
+                   ["import", "--rig", "paper3", "--detections", "wide.csv", "-o", "w.mcap"],
+                   ("times span", "a session holds at most"))
 
 
 def test_a_malformed_clock_origin_is_one_line(work):
-    _refused(work, 1, ["export", "origin.mcap", "--detections", "d.csv"],
-             ("origin.mcap", "clock_origin_ns '12 s' is not an integer"))
+    assert_refused(work, 1, ["export", "origin.mcap", "--detections", "d.csv"],
+                   ("origin.mcap", "clock_origin_ns '12 s' is not an integer"))
