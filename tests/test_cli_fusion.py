@@ -206,3 +206,25 @@ def test_fuse_tolerance_of_a_third_of_a_period_is_a_usage_error(tmp_path, sim_se
     code, _, err = cli("fuse", sim_session.path, "--tolerance-ms", "11", "--method", "sync",
                        "-o", tmp_path / "f.mcap")
     assert code == 1 and "no two cameras captured within 11 ms" in err  # type A: no instants
+
+
+def test_points_before_the_session_clocks_zero_are_left_out_saying_so(tmp_path, cli):
+    """cam3's clock 12 ms behind camera 1's, its first frame logged at 12 ms; a rig that puts
+    it 12.5 ms behind (an estimate 0.5 ms off, as `sync` gives) moves that frame to -0.5 ms,
+    which a session cannot store. The fuse says so and writes the rest (it used to fail
+    after the work)."""
+    from pslog.rig import Rig, save_rig
+
+    session = tmp_path / "late.mcap"
+    code, _out, err = cli("simulate", "--rig", "paper3", "--motion", "rally", "--duration",
+                          "1", "--noise-px", "0.3", "--clock-offset", "cam3=-12", "-o", session)
+    assert code == 0, err
+    cams = read_session(session).rig.cameras
+    save_rig(Rig((*cams[:2], cams[2].replace(clock_offset=-0.0125))), tmp_path / "true.toml")
+    fused = tmp_path / "f.mcap"
+    code, out, err = cli("fuse", session, "--rig", tmp_path / "true.toml", "--method", "smooth",
+                         "-o", fused)
+    assert code == 0, err
+    assert "before the session clock's zero" in out and "smooth point" in out
+    track = read_session(fused).tracks["smooth"]
+    assert len(track) > 0 and track.time_ns.min() >= 0

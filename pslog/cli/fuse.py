@@ -47,6 +47,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from pslog.errors import FusionError, RigError
     from pslog.fusion import (
         METHODS,
@@ -74,8 +76,6 @@ def run(args: argparse.Namespace) -> int:
         check_tolerance(rig, args.tolerance_ms / 1e3)
     except FusionError as exc:
         return usage_error("fuse", f"argument --tolerance-ms: {exc}")
-    if args.rate is not None and args.rate > 1e6:
-        return usage_error("fuse", f"argument --rate: at most 1e6 Hz, got {args.rate:g}")
     options = FusionOptions(tolerance_s=args.tolerance_ms / 1e3,
                             max_gap_s=None if args.max_gap_ms is None else args.max_gap_ms / 1e3,
                             rate_hz=args.rate)
@@ -98,6 +98,13 @@ def run(args: argparse.Namespace) -> int:
     if not tracks:
         raise FusionError(f"no fusion method produced a point from the "
                           f"{len(observations)} detections of {args.session}")
+    # a camera whose clock runs behind camera 1's has true times before the session clock's
+    # zero, which a session cannot store: say so rather than fail after the work
+    early = {m: int(np.count_nonzero(t.time_ns < 0)) for m, t in tracks.items()}
+    if any(early.values()):
+        tracks = {m: t.select(t.time_ns >= 0) for m, t in tracks.items()}
+        print("left out, being before the session clock's zero after clock correction: "
+              + ", ".join(f"{n} {m} point{'s' if n > 1 else ''}" for m, n in early.items() if n))
     copy_session(args.session, output, tracks=list(tracks.values()), force=args.force,
                  rig=None if args.rig is None else rig)
     for method, track in tracks.items():
