@@ -23,7 +23,14 @@ from pathlib import Path
 
 import rerun as rr
 
-from pslog.outputs import WriteError, check_output_path, open_locked, partial_path, write_error
+from pslog.outputs import (
+    WriteError,
+    check_output_path,
+    open_locked,
+    os_reason,
+    partial_path,
+    write_error,
+)
 
 #: longest wait for rerun to hand over its last bytes after logging, seconds; only a hang
 #: (never seen with the pipe) reaches it: the data has streamed out while it was logged
@@ -191,8 +198,27 @@ def _finish(rec: rr.RecordingStream, pipe: _Pump) -> None:
         pipe.error = pipe.error or OSError(0, "rerun did not close its stream")
 
 
+@contextlib.contextmanager
+def _streamed(rec: rr.RecordingStream, pipe: _Pump) -> Iterator[None]:
+    """``rec`` saved into ``pipe``'s named pipe for the ``with`` block, its stream ended in
+    every case (:func:`_finish`)."""
+    try:
+        rec.save(pipe.fifo)
+    except BaseException:
+        pipe.unblock()
+        raise
+    try:
+        yield
+    finally:
+        _finish(rec, pipe)
+
+
 class StdoutWriteError(WriteError):
     """The recording could not be written to standard output (full device, closed)."""
+
+
+def _stdout_error(reason: str) -> StdoutWriteError:
+    return StdoutWriteError(f"cannot write to standard output: {reason}", reason)
 
 
 @contextlib.contextmanager
@@ -218,30 +244,19 @@ def rrd_stdout(rec: rr.RecordingStream) -> Iterator[None]:
         sys.stdout.flush()
         fd = os.dup(sys.stdout.fileno())
     except (OSError, ValueError) as exc:
-        reason = getattr(exc, "strerror", None) or str(exc)
-        raise StdoutWriteError(f"cannot write to standard output: {reason}", reason) from None
+        raise _stdout_error(os_reason(exc)) from None
     try:
         try:
             pipe = _PipeToFd(fd)
         except OSError as exc:
-            reason = exc.strerror or str(exc)
-            raise StdoutWriteError(f"cannot write to standard output: {reason}",
-                                   reason) from None
+            raise _stdout_error(os_reason(exc)) from None
         try:
-            try:
-                rec.save(pipe.fifo)
-            except BaseException:
-                pipe.unblock()
-                raise
-            try:
+            with _streamed(rec, pipe):
                 yield
-            finally:
-                _finish(rec, pipe)
             if isinstance(pipe.error, BrokenPipeError):
                 raise BrokenPipeError(pipe.error.errno, pipe.error.strerror)
             if pipe.error is not None:
-                reason = pipe.error.strerror or str(pipe.error)
-                raise StdoutWriteError(f"cannot write to standard output: {reason}", reason)
+                raise _stdout_error(os_reason(pipe.error))
         finally:
             pipe.cleanup()
     finally:
@@ -284,15 +299,8 @@ def rrd_file(rec: rr.RecordingStream, path: str | Path, *, force: bool = False,
         _remove(partial)
         raise _rrd_error(path, exc) from None
     try:
-        try:
-            rec.save(pipe.fifo)
-        except BaseException:
-            pipe.unblock()
-            raise
-        try:
+        with _streamed(rec, pipe):
             yield path
-        finally:
-            _finish(rec, pipe)
         if pipe.error is not None:
             raise _rrd_error(path, pipe.error)
         partial.replace(path)
