@@ -196,8 +196,6 @@ class PartialBusyError(PslogError):
 
 # ---- stale partial files --------------------------------------------------------------
 
-_MCAP_MAGIC = b"\x89MCAP0\r\n"
-_OP_HEADER, _OP_METADATA = 0x01, 0x0C
 #: session metadata key (value ``"true"``) of an output made from inputs that still exist
 #: (written by :class:`~pslog.log.SessionWriter` with ``on_error="discard"``)
 DERIVED_KEY = "derived"
@@ -217,19 +215,21 @@ def partial_kind(path: str | Path) -> str:
         (``simulate``, ``import``, ``fuse``, ``redetect``)
     ``"recording"`` : anything else, e.g. a recording; it may be the only copy of its data
     """
+    from .log import _mcapio as io  # the MCAP record layout, read where it is defined
+
     with open(path, "rb") as f:
         head = f.read(_PEEK)
-    if len(head) < len(_MCAP_MAGIC):
-        return "empty" if _MCAP_MAGIC.startswith(head) or not head else "derived"
-    if not head.startswith(_MCAP_MAGIC):
+    if len(head) < len(io.MAGIC):
+        return "empty" if io.MAGIC.startswith(head) or not head else "derived"
+    if not head.startswith(io.MAGIC):
         return "derived"  # pslog records only MCAP sessions; this is a CSV or .rrd export
     try:
-        pos = len(_MCAP_MAGIC)
+        pos = len(io.MAGIC)
         op, length = struct.unpack_from("<BQ", head, pos)
-        if op != _OP_HEADER or pos + 9 + length > len(head):
+        if op != io.OP_HEADER or pos + 9 + length > len(head):
             return "recording"
-        _profile, at = _string(head, pos + 9)
-        library, _ = _string(head, at)
+        _profile, at = io._string(head, pos + 9)
+        library, _ = io._string(head, at)
         if library == RECOVER_LIBRARY:
             return "derived"
         pos += 9 + length
@@ -238,29 +238,14 @@ def partial_kind(path: str | Path) -> str:
         op, length = struct.unpack_from("<BQ", head, pos)
         if pos + 9 + length > len(head):
             return "empty"  # the first record after the header never completed
-        if op != _OP_METADATA:
+        if op != io.OP_METADATA:
             return "recording"
-        _name, at = _string(head, pos + 9)
-        meta = _string_map(head, at)
+        _name, at = io._string(head, pos + 9)
+        meta, _ = io._string_map(head, at)
     except (struct.error, UnicodeDecodeError, ValueError):
         return "recording"
     return "derived" if meta.get(DERIVED_KEY) == "true" else "recording"
 
-
-def _string(buf: bytes, pos: int) -> tuple[str, int]:
-    (n,) = struct.unpack_from("<I", buf, pos)
-    if pos + 4 + n > len(buf):
-        raise ValueError("string past the end")
-    return buf[pos + 4:pos + 4 + n].decode("utf-8"), pos + 4 + n
-
-
-def _string_map(buf: bytes, pos: int) -> dict[str, str]:
-    (n,) = struct.unpack_from("<I", buf, pos)
-    end, pos, out = pos + 4 + n, pos + 4, {}
-    while pos < end:
-        key, pos = _string(buf, pos)
-        out[key], pos = _string(buf, pos)
-    return out
 
 
 def _try_lock(fd: int) -> bool:
