@@ -188,6 +188,46 @@ def observations(detections: Detections, rig: Rig) -> Observations:
         time_ns = time_ns + repeat.astype(np.int64)
 
 
+#: Session metadata key (docs/log-format.md) where ``pslog sync`` stores each estimate with
+#: its standard deviation: JSON ``{"cameras": {name: {"clock_offset": [value, std],
+#: "clock_drift_ppm": [value, std], "readout": [value, std]}}}`` (s, ppm, s).
+CLOCK_STD_KEY = "clock_std"
+CLOCK_KEYS = ("clock_offset", "clock_drift_ppm", "readout")
+
+
+def clock_std_json(rig: Rig, stds) -> str:
+    """The :data:`CLOCK_STD_KEY` value for ``rig`` (holding the estimates) and ``stds``, one
+    ``(offset_std_s, drift_std_ppm, readout_std_s)`` per camera in rig order."""
+    import json
+
+    return json.dumps({"cameras": {
+        cam.name: {key: [float(getattr(cam, key)), float(std)]
+                   for key, std in zip(CLOCK_KEYS, row, strict=True)}
+        for cam, row in zip(rig.cameras, stds, strict=True)}})
+
+
+def read_clock_std(rig: Rig, metadata) -> list[dict[str, float]] | None:
+    """Per camera of ``rig`` (rig order), the standard deviation of each clock parameter
+    stored under :data:`CLOCK_STD_KEY`, for the parameters whose stored value is still the
+    rig's (a rig changed since, e.g. ``pslog fuse --rig``, has no std for what changed).
+    None when the key is absent or malformed (it is informative only)."""
+    import json
+
+    text = metadata.get(CLOCK_STD_KEY)
+    if not text:
+        return None
+    try:
+        cams = json.loads(text)["cameras"]
+        out = []
+        for cam in rig.cameras:
+            stored = cams.get(cam.name, {})
+            out.append({key: float(stored[key][1]) for key in CLOCK_KEYS
+                        if key in stored and float(stored[key][0]) == getattr(cam, key)})
+        return out
+    except (ValueError, TypeError, KeyError, IndexError, AttributeError):
+        return None
+
+
 @dataclass(frozen=True)
 class Regularization:
     """What :func:`regularize_times` found for one camera.

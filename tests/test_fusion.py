@@ -34,6 +34,8 @@ from pslog.fusion import (
 )
 from pslog.fusion.stream import StreamFuser
 from pslog.motion import Motion
+from pslog.simulation import true_rig
+from pslog.timing import observations as corrected_observations
 
 F_PX, CX, CY, BASELINE = 500.0, 320.0, 240.0, 0.5
 K = np.array([[F_PX, 0.0, CX], [0.0, F_PX, CY], [0.0, 0.0, 1.0]])
@@ -306,6 +308,34 @@ def test_stream_fuser_equals_batch(timing, method):
                     rtol=0, atol=1e-12)
     if method == "typeA":  # its point comes out with the detection that makes it
         assert all(len(p) <= 1 for p in parts[:-1]) and len(parts[-1]) == 0
+
+
+@pytest.mark.parametrize("method", causal_methods())
+def test_stream_fuser_applies_the_rigs_clock_model_like_batch(method):
+    # offsets of several ms, drift and rolling shutters reorder the cameras' detections: the
+    # stream takes logged times and must give exactly the batch points on corrected times
+    # (the methods that group simultaneous shutters get faults within their 1 ms tolerance)
+    grouped = METHODS[method].waits_tolerance
+    base = apply_timing(builtin_rig("paper3"), "typeB" if grouped else "typeA")
+    a, b, c = base.names
+    scale = 0.04 if grouped else 1.0
+    faults = SimulationOptions(noise_px=0.3, miss_rate=0.1, seed=4,
+                               clock_offset_s={b: 0.0123 * scale, c: -0.0071 * scale},
+                               clock_drift_ppm={b: 40.0, c: -25.0},
+                               readout_s={a: 0.012 * scale, b: 0.02 * scale, c: 0.015 * scale})
+    rig = true_rig(base, faults)
+    detections, _ = simulate(base, get_motion("throw"), options=faults)
+    logged = detections.best()
+    batch = fuse(corrected_observations(detections, rig), rig, method)
+    assert len(batch) >= 20
+    fuser = StreamFuser(rig, method)
+    parts = [fuser.push(logged.time_ns[i], logged.camera[i], logged.uv[i],
+                        logged.frame_index[i]) for i in range(len(logged))]
+    parts.append(fuser.flush())
+    assert_array_equal(np.concatenate([p.time_ns for p in parts]), batch.time_ns)
+    assert_array_equal(np.concatenate([p.camera for p in parts]), batch.camera)
+    assert_allclose(np.concatenate([p.position_world for p in parts]), batch.position_world,
+                    rtol=0, atol=1e-12)
 
 
 def test_stream_fuser_rejects_out_of_order_detections():

@@ -512,6 +512,31 @@ def test_measured_offsets_of_a_rig_whose_first_camera_is_not_at_zero(tmp_path):
     assert info["offset_reference"] == rig.names[0]
 
 
+def test_measured_offsets_use_the_rigs_clock_model(tmp_path):
+    """A session whose rig holds its cameras' clock parameters (as after ``pslog sync``):
+    the offsets are measured on corrected times, so they agree with the rig's, though the
+    logged times are several ms off."""
+    from pslog.motion import get_motion
+    from pslog.rig import apply_timing, builtin_rig
+    from pslog.simulation import SimulationOptions, simulate, true_rig
+
+    base = apply_timing(builtin_rig("paper3"), "typeA")
+    a, b, c = base.names
+    faults = SimulationOptions(jitter_s=5e-5, seed=3, clock_offset_s={b: 0.0061, c: -0.0042},
+                               clock_drift_ppm={b: 30.0, c: -20.0},
+                               readout_s={a: 0.01, b: 0.02, c: 0.015})
+    det, _truth, _ = drop_before_zero(*simulate(base, get_motion("turntable"), 3.0, faults))
+    synced = true_rig(base, faults)
+    path = tmp_path / "synced.mcap"
+    with SessionWriter(path, synced, timing="typeA") as w:
+        w.add_detections(det)
+    info = session_info(path)
+    assert info["clock_corrected"]
+    for cam, row in zip(base.cameras, info["cameras"], strict=True):
+        assert row["offset_nominal_s"] == cam.offset
+        assert abs(row["offset_measured_s"] - cam.offset) < 2e-4, (cam.name, row)
+
+
 def test_phase_measurement_keeps_full_precision_on_epoch_clocks():
     """Times near 1.7e18 ns (Unix epoch) measure exactly as the same times near 0."""
     from pslog.log.info import measure_timing, timing_table

@@ -17,6 +17,7 @@ from pslog.motion import Motion
 from pslog.records import NS, Detections, Truth
 from pslog.rig import Rig
 from pslog.simulation import SimulationOptions, simulate, true_rig
+from pslog.timing import read_clock_std
 
 
 def _with_offsets(rig: Rig, offsets: dict[str, float]) -> Rig:
@@ -124,6 +125,21 @@ def test_cli_json_table_and_the_synced_copy(tmp_path, cli):
     assert report["residual_px"] < 1.0
     synced = read_session(out_path)
     assert synced.rig.cameras[1].clock_offset == c2["offset_s"]
+    # each estimate is stored with its standard deviation, as --json reports them
+    stored = json.loads(synced.metadata["clock_std"])["cameras"]
+    assert list(stored) == ["c1", "c2", "c3"]
+    for c, cam in zip(report["cameras"], synced.rig.cameras, strict=True):
+        assert stored[c["name"]] == {"clock_offset": [c["offset_s"], c["offset_std_s"]],
+                                     "clock_drift_ppm": [c["drift_ppm"], c["drift_std_ppm"]],
+                                     "readout": [c["readout_s"], c["readout_std_s"]]}
+        assert stored[c["name"]]["clock_offset"][0] == cam.clock_offset
+    assert read_clock_std(synced.rig, synced.metadata)[1] == {
+        "clock_offset": c2["offset_std_s"], "clock_drift_ppm": 0.0, "readout": 0.0}
+    assert c2["offset_std_s"] > 0
+    # a rig changed since (e.g. fuse --rig) keeps no σ for the value that changed
+    moved = Rig(tuple(c.replace(clock_offset=c.clock_offset + 1e-4) if c.name == "c2" else c
+                      for c in synced.rig.cameras))
+    assert "clock_offset" not in read_clock_std(moved, synced.metadata)[1]
     # the host jitter was regularized away (auto): the copy holds the regularized stamps
     assert not np.array_equal(synced.detections.frame_time_ns, detections.frame_time_ns)
     code, out, err = cli("sync", path, "-o", out_path, "--force", "--regularize", "off")

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import json
 import os
 import subprocess
 import sys
@@ -526,9 +527,12 @@ def test_smooth_and_the_camera_clocks_after_sync(tmp_path, capsys):
         assert sum(b.num_rows for b in chunks["/plots/residual_px/smooth"]) == len(track)
         assert "/world/tracks/typeA" not in chunks
         text = _static_text(rrd, "/timing")
-        for cam in rig.cameras:  # the synced clock, camera by camera
-            assert f"| {cam.name} | 30 | {cam.offset * 1e3:.3f} | " \
-                   f"{cam.clock_offset * 1e3:.4f} |" in text
+        stds = json.loads(read_session(synced).metadata["clock_std"])["cameras"]
+        for cam in rig.cameras:  # the synced clock, camera by camera, ± the stored σ
+            std = stds[cam.name]["clock_offset"][1]
+            cell = f"{cam.clock_offset * 1e3:.4f}" + (f" ± {std * 1e3:.4f}" if std else "")
+            assert f"| {cam.name} | 30 | {cam.offset * 1e3:.3f} | {cell} | 0.000 |" in text
+        assert text.count(" ± ") == 2  # cam2's and cam3's offsets (cam1 defines the clock)
         assert "| cam2 |" in text and "true offset ms" in text
         assert " 3.0000 |" in text and " -2.5000 |" in text  # the truth, from the metadata
         assert "No clock correction" not in text

@@ -202,11 +202,16 @@ def timing_text(session) -> str:
     """Markdown: each camera's clock model as the session's rig holds it (the times every
     track was fused on: ``pslog sync`` writes its estimates there) — frame rate, shutter
     offset, clock offset, drift, readout — and, for a simulated session with clock faults,
-    the true values beside them. The estimates' standard deviations are printed by
-    ``pslog sync`` but not stored in the session, so they are not shown."""
+    the true values beside them. The standard deviations ``pslog sync`` stored with its
+    estimates (metadata ``clock_std``) show as ``± σ`` beside the values they belong to."""
     from pslog.simulation import read_truth_clock
+    from pslog.timing import read_clock_std
 
     rig = session.rig
+    stds = read_clock_std(rig, session.metadata) or [{} for _ in rig.cameras]
+
+    def cell(value, std, fmt):  # "value" or "value ± σ" (σ 0: a parameter not estimated)
+        return fmt.format(value) + (" ± " + fmt.format(std) if std else "")
     try:
         truth = read_truth_clock(rig, session.metadata)
     except PslogError:
@@ -219,9 +224,11 @@ def timing_text(session) -> str:
     lines = ["**Camera clocks** (true time = logged + offset + drift · 1e-6 · logged "
              "+ readout · row / height)", "", head, rule]
     for i, cam in enumerate(rig.cameras):
+        std = stds[i]
         row = (f"| {cam.name} | {cam.fps:g} | {cam.offset * 1e3:.3f} | "
-               f"{cam.clock_offset * 1e3:.4f} | {cam.clock_drift_ppm:.3f} | "
-               f"{cam.readout * 1e3:.3f} |")
+               f"{cell(cam.clock_offset * 1e3, std.get('clock_offset', 0) * 1e3, '{:.4f}')} | "
+               f"{cell(cam.clock_drift_ppm, std.get('clock_drift_ppm', 0), '{:.3f}')} | "
+               f"{cell(cam.readout * 1e3, std.get('readout', 0) * 1e3, '{:.3f}')} |")
         if truth is not None:
             t = truth.cameras[i]
             row += (f" {t.clock_offset * 1e3:.4f} | {t.clock_drift_ppm:.3f} | "

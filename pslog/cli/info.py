@@ -112,7 +112,8 @@ def _text(info: dict) -> list[str]:
     lines.append(f"  truth: {'yes' if info['truth'] else 'no'}; tracks: {tracks}; "
                  f"events: {info['events']}")
     lines.append(f"  (measured offsets are relative to {info['offset_reference']}, placed at its "
-                 f"rig offset)")
+                 f"rig offset" + ("; measured on times the clock model corrects"
+                                  if info["clock_corrected"] else "") + ")")
     lines.append("  messages per topic:")
     lines += [f"    {t}: {n}" for t, n in info["topics"].items()]
     if info["damaged"]:

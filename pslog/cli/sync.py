@@ -48,7 +48,13 @@ def run(args: argparse.Namespace) -> int:
     from pslog.estimation.sync import estimate_clocks
     from pslog.log import copy_session, read_session
     from pslog.rig import check_baselines
-    from pslog.timing import REGULARIZE_AUTO_JITTER_S, regularize_detections, regularize_times
+    from pslog.timing import (
+        CLOCK_STD_KEY,
+        REGULARIZE_AUTO_JITTER_S,
+        clock_std_json,
+        regularize_detections,
+        regularize_times,
+    )
 
     session = read_session(args.session)
     rig = session.rig
@@ -79,8 +85,11 @@ def run(args: argparse.Namespace) -> int:
         raise FusionError(f"{args.session} has no detection: nothing to sync on")
     search_s = None if args.search_ms is None else args.search_ms / 1e3
     result = estimate_clocks(obs, rig, args.estimate, search_s)
+    # the standard deviations beside the estimates they belong to (the viewer shows them)
+    stds = [(c.offset_std_s, c.drift_std_ppm, c.readout_std_s) for c in result.cameras]
     copy_session(args.session, args.output, rig=result.rig, force=args.force,
-                 detections=detections if notes else None)
+                 detections=detections if notes else None,
+                 metadata={CLOCK_STD_KEY: clock_std_json(result.rig, stds)})
     if args.json:
         print(json.dumps({"cameras": [
             {"name": c.name, "offset_s": c.offset_s, "offset_std_s": c.offset_std_s,

@@ -8,6 +8,16 @@ session. A point is *settled*, and emitted, once nothing that could still arrive
   order, so its point is emitted as soon as it is pushed;
 - ``sync``, ``typeB`` and ``linear`` group detections within the tolerance, so a point at
   ``t`` is emitted once a detection later than ``t + tolerance`` arrives, or on :meth:`flush`.
+
+Pushed times are LOGGED times: each detection is corrected by its camera's clock parameters
+(``clock_offset``, ``clock_drift_ppm``, ``readout``) through :func:`pslog.timing.true_times_ns`,
+exactly as :func:`pslog.timing.observations` corrects a whole session, so the stream's points
+equal ``fuse(timing.observations(detections, rig), rig, method)``. Corrected times can reorder
+detections across cameras, so a corrected detection waits in a queue until it is *admitted*:
+until no detection still to come (pushed in logged order, at a row ``v >= 0``) can be corrected
+to an earlier time. Admission costs a latency of about the spread of the cameras' corrections
+(offsets, drift so far, and the pushed detection's readout term) plus the time to the next push;
+with no clock correction in the rig a detection is admitted when pushed (no extra latency).
 """
 
 from __future__ import annotations
@@ -18,6 +28,7 @@ from ..errors import FusionError
 from ..geometry import fundamental_matrices
 from ..records import NS, Observations, Track
 from ..rig import Rig
+from ..timing import camera_parameters, true_times_ns
 from . import METHODS, FusionOptions, causal_methods, check_method, check_tolerance, fuse
 from ._prepare import default_max_gap_s, prepare
 
@@ -60,10 +71,28 @@ class StreamFuser:
         self._uv = np.zeros((0, 2))
         self._frame = np.zeros(0, np.int64)
         self._emitted_until: tuple[int, int] = (np.iinfo(np.int64).min, -1)  # (time, camera)
+        # the clock model (pslog.timing), per camera in rig order
+        self._clock = camera_parameters(rig)
+        self._corrected = any(c.has_clock_correction for c in rig.cameras)
+        self._last_logged: tuple[int, int] = (np.iinfo(np.int64).min, -1)  # (time, camera)
+        # corrected detections not yet admitted to the window (unordered)
+        self._q_time = np.zeros(0, np.int64)
+        self._q_camera = np.zeros(0, np.int32)
+        self._q_uv = np.zeros((0, 2))
+        self._q_frame = np.zeros(0, np.int64)
 
     def push(self, time_ns, camera, uv, frame_index=None) -> Track:
-        """Add detections (arrays, or scalars for one) in (time, camera) order, no earlier than
-        any pushed before; returns the points that became settled (possibly none)."""
+        """Add detections (arrays, or scalars for one); returns the points that became settled
+        (possibly none).
+
+        Parameters
+        ----------
+        time_ns : int (n,), LOGGED times on the session clock, nanoseconds, in (time, camera)
+            order and later than any pushed before; corrected here by the rig's clock model
+        camera : int (n,), camera indices in rig order
+        uv : float (n, 2), distorted pixel coordinates (``v``, the row, times a rolling shutter)
+        frame_index : int (n,), optional
+        """
         time_ns = np.atleast_1d(np.asarray(time_ns, dtype=np.int64))
         camera = np.atleast_1d(np.asarray(camera, dtype=np.int32))
         uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
@@ -71,18 +100,58 @@ class StreamFuser:
                        else np.atleast_1d(np.asarray(frame_index, dtype=np.int64)))
         if len(time_ns) == 0:
             return self._settled(final=False)
-        if len(self._time) and (time_ns[0], camera[0]) <= (self._time[-1], self._camera[-1]):
+        keys = list(zip(time_ns.tolist(), camera.tolist(), strict=True))
+        if any(b <= a for a, b in zip([self._last_logged, *keys[:-1]], keys, strict=True)):
             raise FusionError("StreamFuser.push: detections must arrive in (time, camera) "
-                              f"order; got t={time_ns[0]} ns after t={self._time[-1]} ns")
-        self._time = np.concatenate([self._time, time_ns])
-        self._camera = np.concatenate([self._camera, camera])
-        self._uv = np.concatenate([self._uv, uv])
-        self._frame = np.concatenate([self._frame, frame_index])
+                              f"order of their logged times; got t={time_ns[0]} ns after "
+                              f"t={self._last_logged[0]} ns")
+        self._last_logged = keys[-1]
+        p = self._clock
+        true_ns = true_times_ns(time_ns, uv[:, 1], p["height"][camera],
+                                p["clock_offset"][camera], p["clock_drift_ppm"][camera],
+                                p["readout"][camera])
+        self._q_time = np.concatenate([self._q_time, true_ns])
+        self._q_camera = np.concatenate([self._q_camera, camera])
+        self._q_uv = np.concatenate([self._q_uv, uv])
+        self._q_frame = np.concatenate([self._q_frame, frame_index])
+        self._admit(final=False)
         return self._settled(final=False)
 
     def flush(self) -> Track:
         """Emit every remaining point (end of stream)."""
+        self._admit(final=True)
         return self._settled(final=True)
+
+    def _admit(self, final: bool) -> None:
+        """Move the queued detections that no later push can precede into the window."""
+        if self._corrected and not final:
+            # the earliest corrected time a detection still to come can have: logged no
+            # earlier than the last push, row >= 0 (the model is increasing in both)
+            p, last = self._clock, self._last_logged[0]
+            bound = int(np.min(true_times_ns(np.full(len(p["height"]), last), 0.0, p["height"],
+                                             p["clock_offset"], p["clock_drift_ppm"],
+                                             p["readout"])))
+            ready = self._q_time < bound
+        else:
+            ready = np.ones(len(self._q_time), dtype=bool)
+        if not ready.any():
+            return
+        order = np.flatnonzero(ready)[np.lexsort((self._q_frame[ready], self._q_camera[ready],
+                                                  self._q_time[ready]))]
+        time_ns, camera = self._q_time[order], self._q_camera[order]
+        behind = len(self._time) > 0 and bool(
+            (time_ns[0], camera[0]) <= (self._time[-1], self._camera[-1]))
+        if behind or np.any((time_ns[1:] == time_ns[:-1]) & (camera[1:] == camera[:-1])):
+            raise FusionError("StreamFuser.push: a corrected detection falls at or before one "
+                              "already fused (a row above the image with a rolling shutter, "
+                              "or two frames of a camera corrected to one nanosecond)")
+        self._time = np.concatenate([self._time, time_ns])
+        self._camera = np.concatenate([self._camera, camera])
+        self._uv = np.concatenate([self._uv, self._q_uv[order]])
+        self._frame = np.concatenate([self._frame, self._q_frame[order]])
+        keep = ~ready
+        self._q_time, self._q_camera = self._q_time[keep], self._q_camera[keep]
+        self._q_uv, self._q_frame = self._q_uv[keep], self._q_frame[keep]
 
     def _settled(self, final: bool) -> Track:
         if len(self._time) == 0:

@@ -48,7 +48,7 @@ def measure_timing(time_ns: np.ndarray, ref_ns: int = 0) -> tuple[float, float]:
     return period, phase
 
 
-def timing_table(detections: Detections, nominal_offsets_s=None) -> list[dict]:
+def timing_table(detections: Detections, nominal_offsets_s=None, rig=None) -> list[dict]:
     """Per camera: frames, measured fps, shutter offset, detection rate.
 
     Only offsets between cameras can be measured: camera 0 is placed at its nominal offset
@@ -61,16 +61,27 @@ def timing_table(detections: Detections, nominal_offsets_s=None) -> list[dict]:
     detections : the session's detections
     nominal_offsets_s : (n_cameras,) the rig's offsets, seconds; None: all 0 (the measured
         offsets are then relative to camera 0, within half a period)
+    rig : Rig or None; given, each frame's time is first corrected by the rig's clock model
+        (:func:`pslog.timing.true_times_ns` of the frame's top row, ``v`` = 0), so the phases
+        are measured on true times: after ``pslog sync`` they agree with the rig's offsets
     """
     names = detections.camera_names
     nominal = (np.zeros(len(names)) if nominal_offsets_s is None
                else np.asarray(nominal_offsets_s, dtype=np.float64))
     times = detections.frame_time_ns
+    if rig is not None and any(c.has_clock_correction for c in rig.cameras) and len(times):
+        from ..timing import camera_parameters, true_times_ns
+
+        p, cam = camera_parameters(rig), detections.frame_camera
+        # v = 0: a frame's logged time is its top row's; each camera's correction is
+        # increasing in time, so every camera's frames stay in order
+        times = true_times_ns(times, 0.0, p["height"][cam], p["clock_offset"][cam],
+                              p["clock_drift_ppm"][cam], p["readout"][cam])
     ref = int(times.min()) if len(times) else 0  # one reference: phases comparable
     rows, phases = [], []
     for i, name in enumerate(names):
         rows_i = detections.frame_camera == i
-        period, phase = measure_timing(detections.frame_time_ns[rows_i], ref)
+        period, phase = measure_timing(times[rows_i], ref)
         counts = detections.candidates_per_frame()[rows_i]
         n = int(rows_i.sum())
         rows.append({
@@ -101,9 +112,10 @@ def offset_disagreements(detections: Detections, rig) -> list[tuple[str, float, 
     """``(camera, measured_s, rig_s)`` for each camera whose measured shutter offset (see
     :func:`timing_table`) is more than :data:`OFFSET_NOTE_S` from the rig's: e.g. video files
     started at other moments (``--source cam2=b.mp4@0.011``) on a rig whose offsets say
-    ``sync``. The session keeps the rig's offsets; the user decides which are right."""
+    ``sync``. The session keeps the rig's offsets; the user decides which are right. Measured
+    on times corrected by the rig's clock model, as :func:`session_info`."""
     nominal = [cam.offset for cam in rig.cameras]
-    rows = timing_table(detections, nominal)
+    rows = timing_table(detections, nominal, rig)
     return [(row["name"], row["offset_measured_s"], offset)
             for row, offset in zip(rows, nominal, strict=True)
             if np.isfinite(row["offset_measured_s"])
@@ -114,7 +126,8 @@ def session_info(path) -> dict:
     """Summary of a session file as a JSON-able dict.
 
     On a finished file: ``cameras`` (per camera: name, frames, fps nominal/measured, shutter
-    offset as the rig states it and as measured (see :func:`timing_table`), detection rate,
+    offset as the rig states it and as measured on times corrected by the rig's clock model
+    (see :func:`timing_table`), detection rate,
     images, the timing model's ``clock_offset_s``, ``clock_drift_ppm``, ``readout_s``),
     ``clock_corrected`` (any of those non-zero), ``clock_origin_ns`` (the session clock's
     origin on the original clock, 0 if none), ``topics`` (message counts), ``duration_s``,
@@ -150,7 +163,8 @@ def session_info(path) -> dict:
     det = session.detections
     rig = session.rig
     times = det.frame_time_ns
-    cameras = timing_table(det, [cam.offset for cam in rig.cameras])
+    # measured on the times the rig's clock model corrects (as fusion sees them)
+    cameras = timing_table(det, [cam.offset for cam in rig.cameras], rig)
     for row, cam in zip(cameras, rig.cameras, strict=True):
         row["fps_nominal"] = cam.fps
         row["offset_nominal_s"] = cam.offset  # as the rig states it
