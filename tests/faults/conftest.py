@@ -15,3 +15,4 @@ def work(inputs, tmp_path) -> Path:
     folder = tmp_path / "w"
     shutil.copytree(inputs, folder)
     return folder
+

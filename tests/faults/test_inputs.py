@@ -11,8 +11,9 @@ from pathlib import Path
 
 import pytest
 
-from pslog.rig import apply_timing, builtin_rig
+from pslog.rig import builtin_rig
 
+from ._inputs import write_session_and_rig
 from .promises import (
     assert_one_line_error,
     assert_refused,
@@ -27,17 +28,8 @@ CSV_OK = "camera,time,u,v\ncam1,0.0,320,240\ncam2,0.0111,300,200\ncam3,0.0222,31
 @pytest.fixture(scope="module")
 def inputs(tmp_path_factory) -> Path:
     """A folder with a type-A session and a good rig; each test works on a copy."""
-    from pslog import get_motion, simulate
-    from pslog.log import SessionWriter
-    from pslog.rig import save_rig
-
     folder = tmp_path_factory.mktemp("inputs")
-    rig = apply_timing(builtin_rig("paper3"), "typeA")
-    detections, truth = simulate(rig, get_motion("spiral"), 1.0)
-    with SessionWriter(folder / "s.mcap", rig, timing="typeA") as writer:
-        writer.add_detections(detections)
-        writer.add_truth(truth)
-    save_rig(rig, folder / "rig.toml")
+    write_session_and_rig(folder)
     (folder / "det.csv").write_text(CSV_OK)
     return folder
 

@@ -8,32 +8,23 @@ from pathlib import Path
 
 import pytest
 
-from pslog.rig import apply_timing, builtin_rig
-
+from ._inputs import write_session_and_rig
 from .promises import assert_refused
 
 
 @pytest.fixture(scope="module")
 def inputs(tmp_path_factory) -> Path:
-    """A folder with a type-A session, its rig and an old simulated output."""
-    from pslog import get_motion, simulate
-    from pslog.log import SessionWriter
-    from pslog.rig import save_rig
+    """A folder with a type-A session, its rig, a session with a malformed clock origin and
+    an old simulated output."""
+    from pslog.log import SessionWriter, read_session
 
     folder = tmp_path_factory.mktemp("inputs")
-    rig = apply_timing(builtin_rig("paper3"), "typeA")
-    detections, truth = simulate(rig, get_motion("spiral"), 1.0)
-    with SessionWriter(folder / "s.mcap", rig, timing="typeA") as writer:
-        writer.add_detections(detections)
-        writer.add_truth(truth)
+    rig = write_session_and_rig(folder)
     with SessionWriter(folder / "origin.mcap", rig, timing="typeA",
                        metadata={"clock_origin_ns": "12 s"}) as writer:
-        writer.add_detections(detections)
-    save_rig(rig, folder / "rig.toml")
+        writer.add_detections(read_session(folder / "s.mcap").detections)
     (folder / "old.mcap").write_bytes((folder / "s.mcap").read_bytes())
     return folder
-
-
 
 
 @pytest.mark.parametrize("fault, why", [
