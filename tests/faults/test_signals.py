@@ -228,14 +228,21 @@ def test_signal_to_the_group_while_recording(start, tmp_path, sig, after_s):
     assert -0.5 < lost <= MAX_LOST_S
 
 
-def test_second_signal_during_shutdown(start, tmp_path):
-    """Ctrl-C, then SIGTERM to the group while the file is being finished: still one clean
-    stop (the second signal does not interrupt the first one's shutdown)."""
-    rec = start(tmp_path / "s.mcap")
+def _sigint_then_wait_for_shutdown(rec: Recorder) -> int:
+    """A Ctrl-C to the group a second into the recording; returns when the recorder says it
+    is stopping (the moment for a second signal), with the time the SIGINT was sent."""
     started = rec.wait_line("] cam1:")
     time.sleep(max(started + 1.0 - time.monotonic(), 0))
     sent = _send(rec, signal.SIGINT, group=True)
     rec.wait_line("stopping")
+    return sent
+
+
+def test_second_signal_during_shutdown(start, tmp_path):
+    """Ctrl-C, then SIGTERM to the group while the file is being finished: still one clean
+    stop (the second signal does not interrupt the first one's shutdown)."""
+    rec = start(tmp_path / "s.mcap")
+    sent = _sigint_then_wait_for_shutdown(rec)
     _send(rec, signal.SIGTERM, group=True)
     _assert_stopped(rec, rec.finish(), "SIGINT")
     lost = _lost_s(rec.out, sent)
@@ -277,10 +284,7 @@ def test_sigkill_mid_run_then_recover(start, tmp_path):
 def test_sigkill_during_shutdown_then_recover(start, tmp_path):
     """Ctrl-C, then SIGKILL to the whole group while the file is being finished."""
     rec = start(tmp_path / "s.mcap")
-    started = rec.wait_line("] cam1:")
-    time.sleep(max(started + 1.0 - time.monotonic(), 0))
-    sent = _send(rec, signal.SIGINT, group=True)
-    rec.wait_line("stopping")
+    sent = _sigint_then_wait_for_shutdown(rec)
     _send(rec, signal.SIGKILL, group=True)
     code = rec.finish()
     if code == 0:

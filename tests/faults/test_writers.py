@@ -283,30 +283,39 @@ print("done", flush=True)
 """
 
 
-@pytest.mark.parametrize("kind", ["session", "text"])
-def test_a_second_run_leaves_the_partial_of_a_running_one_alone(kind, inputs, tmp_path):
-    """Two real processes: while the first writes <out>.partial, a second run of a command
-    writing <out> (--force) is refused and touches nothing; the first then completes."""
+@contextlib.contextmanager
+def _writer_holding(script: str, kind: str, out: Path):
+    """A real process running ``script`` (a writer of ``out`` that pauses mid-write) for the
+    ``with`` block; afterwards it completes, and must complete cleanly."""
     import sys
 
-    out = tmp_path / ("r.mcap" if kind == "session" else "d.csv")
-    second = (["simulate", "--rig", "paper3", "--duration", "0.3", "-o", out, "--force"]
-              if kind == "session" else
-              ["export", inputs / "s.mcap", "--detections", out, "--force"])
-    first = subprocess.Popen([sys.executable, "-c", _HOLDER, kind, str(out)],
+    first = subprocess.Popen([sys.executable, "-c", script, kind, str(out)],
                              stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     try:
         assert first.stdout.readline().strip() == "writing"
-        before = fingerprint(tmp_path)
-        run = run_pslog(*second)
-        assert_one_line_error(run, 1, contains=f"another pslog is writing {out}.partial")
-        assert_untouched(before, tmp_path)
+        yield
         rest, _ = first.communicate("\n", timeout=60)
     finally:
         if first.poll() is None:
             first.kill()
             first.wait()
     assert first.returncode == 0 and rest.strip() == "done"
+
+
+@pytest.mark.parametrize("kind", ["session", "text"])
+def test_a_second_run_leaves_the_partial_of_a_running_one_alone(kind, inputs, tmp_path):
+    """Two real processes: while the first writes <out>.partial, a second run of a command
+    writing <out> (--force) is refused and touches nothing; the first then completes."""
+
+    out = tmp_path / ("r.mcap" if kind == "session" else "d.csv")
+    second = (["simulate", "--rig", "paper3", "--duration", "0.3", "-o", out, "--force"]
+              if kind == "session" else
+              ["export", inputs / "s.mcap", "--detections", out, "--force"])
+    with _writer_holding(_HOLDER, kind, out):
+        before = fingerprint(tmp_path)
+        run = run_pslog(*second)
+        assert_one_line_error(run, 1, contains=f"another pslog is writing {out}.partial")
+        assert_untouched(before, tmp_path)
     assert sorted(p.name for p in tmp_path.iterdir()) == [out.name]
     if kind == "session":
         from pslog.log import read_session
@@ -447,15 +456,11 @@ def test_an_output_being_recorded_into_is_refused_even_with_force(inputs, tmp_pa
     """A real process records straight into a new file (it holds the writer's lock on the
     file itself, not on a .partial): a --force run writing that file is refused, and the
     recording completes into the file the user named."""
-    import sys
 
     out = tmp_path / "w.mcap"
     holder = _HOLDER.replace("force=True, on_error=\"discard\"", "on_error=\"keep\"")
     assert holder != _HOLDER
-    first = subprocess.Popen([sys.executable, "-c", holder, "session", str(out)],
-                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
-    try:
-        assert first.stdout.readline().strip() == "writing"
+    with _writer_holding(holder, "session", out):
         assert not (tmp_path / "w.mcap.partial").exists()  # written in place
         before = fingerprint(tmp_path)
         for args in (["simulate", "--rig", "paper3", "--duration", "0.3", "-o", out, "--force"],
@@ -469,12 +474,6 @@ def test_an_output_being_recorded_into_is_refused_even_with_force(inputs, tmp_pa
         assert_one_line_error(run, 1, contains=("may still be recording",
                                                 "another pslog is writing it"))
         assert_untouched(before, tmp_path)
-        rest, _ = first.communicate("\n", timeout=60)
-    finally:
-        if first.poll() is None:
-            first.kill()
-            first.wait()
-    assert first.returncode == 0 and rest.strip() == "done"
     from pslog.log import read_session
 
     assert read_session(out).detections.n_frames == 1
