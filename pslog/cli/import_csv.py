@@ -8,6 +8,8 @@ from ._common import add_force, add_rig, declare_files
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from pslog.rig import TIMING_PRESETS
+
     add_rig(parser)
     parser.add_argument("--detections", required=True, metavar="DET.csv",
                         help="detections CSV, header camera,time,u,v (optional frame,score); "
@@ -15,7 +17,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "Unix-epoch too: the session records its origin and 'pslog "
                              "export' gives the times back), pixels as detected; rows in any "
                              "order")
-    parser.add_argument("--timing", default="rig", choices=("sync", "typeA", "typeB", "rig"),
+    parser.add_argument("--timing", default="rig", choices=(*TIMING_PRESETS, "rig"),
                         help="set the rig's shutter offsets from a preset (default: 'rig', the "
                              "rig's own offsets); the session's timing label names the preset "
                              "the offsets match, else custom")

@@ -69,6 +69,8 @@ class MalformedSource(InputError):
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from pslog.rig import TIMING_PRESETS
+
     parser.description = DESCRIPTION
     parser.epilog = EXAMPLES
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
@@ -84,7 +86,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "seconds (repeat per camera; default 0)")
     parser.add_argument("--synthetic", action="store_true",
                         help="render the rig's cameras instead of reading sources")
-    parser.add_argument("--timing", choices=("sync", "typeA", "typeB"),
+    parser.add_argument("--timing", choices=TIMING_PRESETS,
                         help="set the rig's shutter offsets from a preset (default: the "
                              "rig's own offsets)")
     parser.add_argument("--motion", default="throw", type=motion_name,

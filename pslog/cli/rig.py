@@ -20,6 +20,8 @@ examples:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from pslog.rig import TIMING_PRESETS
+
     parser.epilog = EXAMPLES
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
     actions = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
@@ -31,7 +33,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                     "calibration stored in a session MCAP file.")
     show.add_argument("rig", metavar="RIG",
                       help="built-in rig name (paper3, paper2), rig TOML file or session MCAP")
-    show.add_argument("--timing", choices=("sync", "typeA", "typeB"),
+    show.add_argument("--timing", choices=TIMING_PRESETS,
                       help="set the shutter offsets from a preset (default: the rig's own; "
                            "the built-in rigs have all offsets 0, i.e. sync)")
     check = actions.add_parser(

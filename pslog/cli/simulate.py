@@ -18,8 +18,6 @@ from ._common import (
     usage_error,
 )
 
-_TIMINGS = ("sync", "typeA", "typeB", "rig")
-
 
 def _finite(text: str) -> float:
     try:
@@ -51,9 +49,10 @@ def _camera_value(unit: str, scale: float, all_cameras: bool = False):
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from pslog.motion import MOTIONS
+    from pslog.rig import TIMING_PRESETS
 
     add_rig(parser)
-    parser.add_argument("--timing", choices=_TIMINGS, default="rig",
+    parser.add_argument("--timing", choices=(*TIMING_PRESETS, "rig"), default="rig",
                         help="set the rig's shutter offsets from a preset (default: 'rig', the "
                              "rig's own offsets; the built-in rigs' are all zero, i.e. sync)")
     parser.add_argument("--motion", choices=list(MOTIONS), default="spiral",
