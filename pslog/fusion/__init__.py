@@ -11,6 +11,7 @@ typeA     pseudo stereo, a point at every detection                     section 
 typeB     stereo at common instants + ray-constrained prediction        section 2.3
 linear    typeB without the ray constraint                              Table 1 "linear prediction"
 smooth    one continuous trajectory fitted to every ray (offline)       beyond the paper
+filter    causal extended Kalman filter, a point at every detection     beyond the paper
 ========  ============================================================  ===================
 
 :data:`METHODS` is the registry (one :class:`Method` entry per method); the CLI,
@@ -90,6 +91,10 @@ class Method:
         only one camera has): the timings the method suits (empty: every timing)
     description : one line
     reference : where the method comes from
+    streamer : ``streamer(rig, options)`` -> an object whose ``push(time_ns, camera, uv,
+        frame_index) -> Track`` takes each admitted detection once, in order (the method's
+        incremental form, which :class:`~pslog.fusion.stream.StreamFuser` then uses instead
+        of re-running ``function`` on a window); None: no such form
     """
 
     name: str
@@ -99,6 +104,7 @@ class Method:
     needs: frozenset[str]
     description: str
     reference: str
+    streamer: Callable | None = None
 
     def suits(self, shared: bool, alone: bool) -> bool:
         """True if a session with (or without) shared and lone instants suits the method."""
@@ -128,6 +134,18 @@ def _linear(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
     return fuse_predicted(prep, "linear", options.tolerance_s, options.max_gap_s)
 
 
+def _filter(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
+    from .filter import fuse_filter
+
+    return fuse_filter(prep.obs, rig, options.max_gap_s)
+
+
+def _filter_stream(rig: Rig, options: FusionOptions):
+    from .filter import FilterStream
+
+    return FilterStream(rig, options)
+
+
 def _smooth(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
     from .smooth import fuse_smooth  # scipy is imported only when smooth runs
 
@@ -155,6 +173,10 @@ METHODS: dict[str, Method] = {m.name: m for m in (
     Method("smooth", _smooth, False, False, frozenset(),
            "one continuous trajectory fitted to every detection's ray (offline)",
            "continuous-time batch estimation: Furgale et al. 2013; Singer 1970 motion prior"),
+    Method("filter", _filter, True, False, frozenset(),
+           "causal extended Kalman filter with bounce/kick gating, a point at every detection",
+           "Bar-Shalom, Li & Kirubarajan 2001 (EKF, NIS gate); docs/methods.md",
+           streamer=_filter_stream),
 )}
 
 

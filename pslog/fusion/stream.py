@@ -80,6 +80,10 @@ class StreamFuser:
         self._q_camera = np.zeros(0, np.int32)
         self._q_uv = np.zeros((0, 2))
         self._q_frame = np.zeros(0, np.int64)
+        # a method with an incremental form (filter) takes each admitted detection once
+        streamer = METHODS[method].streamer
+        self.incremental = streamer(rig, self.options) if streamer is not None else None
+        self._fed = 0  # rows of the window already given to it (the last one is kept)
 
     def push(self, time_ns, camera, uv, frame_index=None) -> Track:
         """Add detections (arrays, or scalars for one); returns the points that became settled
@@ -154,6 +158,14 @@ class StreamFuser:
         self._q_uv, self._q_frame = self._q_uv[keep], self._q_frame[keep]
 
     def _settled(self, final: bool) -> Track:
+        if self.incremental is not None:  # it keeps its own state: feed the new rows once
+            f = self._fed
+            out = self.incremental.push(self._time[f:], self._camera[f:], self._uv[f:],
+                                        self._frame[f:])
+            self._time, self._camera = self._time[-1:], self._camera[-1:]
+            self._uv, self._frame = self._uv[-1:], self._frame[-1:]
+            self._fed = len(self._time)
+            return out
         if len(self._time) == 0:
             return _empty(self.method)
         obs = Observations(self._time, self._camera, self._uv, self._frame)

@@ -1,0 +1,149 @@
+"""``filter``: accuracy against typeA and smooth, and per-detection latency when streamed.
+
+Targets (issue 10): ``filter`` never worse than ``typeA``; at 0.3 px at most half of
+``typeA``'s mean error; at most 50 µs median per detection in the streaming form. ``smooth``
+(offline, every point uses every detection) is the reference of what the detections allow.
+
+Sessions (rigs of this benchmark, not the tests'): rallies of the tests' own generator
+(``tests/_rally.py``: kicks, floor bounces, air drag) and the library's ``throw``, seen by
+cameras around a 3 x 2 m floor with type-A shutters: 3 cameras at 30 fps (two rallies, one
+throw), 2 and 4 cameras, 3 cameras at 60 fps, 3 cameras with lens distortion; noise 0, 0.3
+and 1 px.
+
+Latency: every detection of a 3-camera rally pushed one at a time, (a) into
+:class:`pslog.fusion.filter.BallFilter` (the filter's own streaming form, which live mode
+uses) and (b) through :class:`pslog.fusion.stream.StreamFuser` (clock correction, admission
+queue and a Track per push included); median and p99 per detection.
+
+    python benchmarks/bench_filter.py [--seconds 20] [--quick]
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")  # one core, before numpy loads
+
+import argparse  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from _rally import rally  # noqa: E402
+
+from pslog import Camera, Rig, SimulationOptions, get_motion, look_at, simulate  # noqa: E402
+from pslog.evaluation import evaluate  # noqa: E402
+from pslog.fusion import fuse  # noqa: E402
+from pslog.fusion.filter import BallFilter  # noqa: E402
+from pslog.fusion.stream import StreamFuser  # noqa: E402
+
+METHODS = ("typeA", "smooth", "filter")
+NOISES = (0.0, 0.3, 1.0)
+TARGET_US = 50.0
+
+
+def bench_rig(n: int = 3, fps: float = 30.0, distortion: bool = False) -> Rig:
+    """``n`` cameras around the 3 x 2 m floor, 2.4-3 m high, type-A shutters."""
+    dist = np.array([-0.25, 0.1, 5e-4, -4e-4, -0.02]) if distortion else np.zeros(5)
+    cams = []
+    for i in range(n):
+        angle = 2 * np.pi * i / n - 1.2
+        eye = (1.5 + 3.4 * np.cos(angle), 1.0 + 3.0 * np.sin(angle), 2.4 + 0.2 * i)
+        R, t = look_at(eye, (1.5, 1.0, 0.6))
+        K = [[520.0 + 15 * i, 0.0, 399.5], [0.0, 520.0 + 15 * i, 299.5], [0.0, 0.0, 1.0]]
+        cams.append(Camera(f"b{i + 1}", 800, 600, K, dist, R, t, fps, i / (n * fps)))
+    return Rig(tuple(cams), f"bench{n}")
+
+
+def sessions(seconds: float):
+    """(label, rig, motion, duration) of every accuracy session."""
+    fast, _ = rally(seconds, seed=3)
+    slow, _ = rally(seconds, seed=7, speed=4.0, kick_every_s=0.7)
+    throw = get_motion("throw")
+    return [
+        ("rally, 3 cams 30 fps", bench_rig(3), fast, seconds),
+        ("slow rally, 3 cams", bench_rig(3), slow, seconds),
+        ("throw, 3 cams", bench_rig(3), throw, throw.duration),
+        ("rally, 2 cams", bench_rig(2), fast, seconds),
+        ("rally, 4 cams", bench_rig(4), fast, seconds),
+        ("rally, 3 cams 60 fps", bench_rig(3, fps=60.0), fast, seconds),
+        ("rally, 3 cams distorted", bench_rig(3, distortion=True), fast, seconds),
+    ]
+
+
+def accuracy_table(seconds: float) -> bool:
+    print(f"accuracy: mean 3D error, mm (ratios to typeA); {seconds:g} s rallies")
+    print(f"  {'session':<25} {'noise':>5}  {'typeA':>7}  {'smooth':>7} {'(ratio)':>7}  "
+          f"{'filter':>7} {'(ratio)':>7}  {'filter std/err':>14}")
+    ok = True
+    for label, rig, motion, duration in sessions(seconds):
+        for noise in NOISES:
+            detections, truth = simulate(rig, motion, duration,
+                                         SimulationOptions(noise_px=noise, seed=11))
+            obs = detections.best()
+            means, tracks = {}, {}
+            for method in METHODS:
+                tracks[method] = fuse(obs, rig, method)
+                means[method] = evaluate(tracks[method], truth).mean_mm
+            ratio = means["filter"] / means["typeA"]
+            err = np.linalg.norm(tracks["filter"].position_world
+                                 - truth.at(tracks["filter"].time_ns), axis=1)
+            calib = np.nanmedian(tracks["filter"].quality["std_m"]) / np.nanmedian(err)
+            target = ratio <= (0.5 if noise == 0.3 else 1.0)
+            ok &= target
+            print(f"  {label:<25} {noise:5.1f}  {means['typeA']:7.3f}  {means['smooth']:7.3f} "
+                  f"{means['smooth'] / means['typeA']:7.2f}  {means['filter']:7.3f} "
+                  f"{ratio:7.2f}  {calib:14.2f}{'' if target else '  MISSED'}")
+    return ok
+
+
+def latency(seconds: float) -> bool:
+    rig = bench_rig(3)
+    motion, _ = rally(seconds, seed=3)
+    detections, _ = simulate(rig, motion, seconds, SimulationOptions(noise_px=0.3, seed=5))
+    obs = detections.best()
+    rows = list(zip(obs.time_ns.tolist(), obs.camera.tolist(), obs.uv.tolist(), strict=True))
+    clock = time.perf_counter_ns
+    ok = True
+    for label in ("BallFilter.push", "StreamFuser.push"):
+        spent = np.empty(len(rows))
+        if label == "BallFilter.push":
+            flt = BallFilter(rig)
+            for i, (t, c, (u, v)) in enumerate(rows):
+                start = clock()
+                flt.push(t, c, u, v)
+                spent[i] = clock() - start
+        else:
+            fuser = StreamFuser(rig, "filter")
+            for i, (t, c, uv) in enumerate(rows):
+                start = clock()
+                fuser.push(t, c, uv)
+                spent[i] = clock() - start
+        median, p99 = np.median(spent) / 1e3, np.percentile(spent, 99) / 1e3
+        met = median <= TARGET_US
+        if label == "BallFilter.push":
+            ok = met
+        print(f"  {label:<17} median {median:6.1f} µs  p99 {p99:7.1f} µs  "
+              f"({len(rows):,} detections){'' if met else '  above the 50 µs target'}")
+    return ok
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=20.0, help="rally length")
+    parser.add_argument("--quick", action="store_true", help="latency only")
+    args = parser.parse_args()
+    print("latency per detection, streamed one at a time (3 cameras, 0.3 px):")
+    fast = latency(max(args.seconds, 10.0))
+    accurate = True if args.quick else accuracy_table(args.seconds)
+    print(f"targets: latency {'met' if fast else 'MISSED'}; accuracy "
+          f"{'met' if accurate else 'MISSED'}")
+    return 0 if fast and accurate else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,626 @@
+"""``filter``: a causal extended Kalman filter, a point at every detection (for live use).
+
+Each detection updates the ball's state at its own (corrected, :mod:`pslog.timing`) capture
+time; the state can be predicted to any later instant (:meth:`BallFilter.predict`). The
+equations, exactly as implemented, are in ``docs/methods.md`` (section ``filter``); in short:
+
+- state ``x = (p, v)``: position (m) and velocity (m/s), world frame, with covariance ``P``
+  (6 x 6);
+- process model over ``Δt``: constant acceleration ``a = g - k ‖v‖ v`` (gravity and quadratic
+  air drag, ``k`` of a golf ball by default) for the mean; the covariance is propagated with
+  the drag-free transition ``F = [[I, Δt I], [0, I]]`` and continuous white-noise
+  acceleration of spectral density ``q`` (Bar-Shalom, Li & Kirubarajan, *Estimation with
+  Applications to Tracking and Navigation*, 2001, section 6.2.2): the drag's Jacobian term,
+  ``k ‖v‖ Δt``, is below 1e-3 at a rally's speeds and frame rates and is left to ``q``;
+- measurement: the detection's *distorted* pixel, ``z = π_c(p) + w``, ``w ~ N(0, σ² I)``,
+  through camera ``c``'s projection with its lens model; ``H = [∂π_c/∂p, 0]`` (2 x 6).
+  Pixels, not rays: the detector's noise is isotropic in the recorded image, no detection is
+  undistorted (no Newton iterations per detection), and the innovation is in pixels, where
+  a user judges it;
+- gating (Bar-Shalom et al., section 5.4): the normalised innovation squared
+  ``NIS = yᵀ S⁻¹ y`` is compared with the chi-square quantile of 2 degrees of freedom
+  (``gate``). A detection outside the gate is first tried as a bounce or a kick: a velocity
+  jump of standard deviation ``jump_speed`` at the previous update (position continuous),
+  i.e. ``P_vv += σ_j² I`` before the prediction; accepted if then inside the gate (``jump``
+  = 1). Otherwise it is rejected (``rejected`` = 1; the point is the prediction). After
+  ``max_rejects`` consecutive rejections, or a time without an accepted detection longer
+  than ``max_gap_s``, the track is lost;
+- (re)initialisation: from a short window of the latest detections (at least
+  ``init_detections`` of two cameras or more, within ``max_gap_s`` of each other): a
+  ballistic least-squares fit (gravity and drag) to their viewing rays, refined by
+  Gauss-Newton in distorted pixels; accepted when every detection reprojects inside the gate.
+
+Causality: the point of a detection uses only the detections up to it in (time, camera)
+order; batch (:func:`fuse_filter`) and streaming run the same per-detection code, so the
+streaming form (:class:`FilterStream`, used by :class:`~pslog.fusion.stream.StreamFuser`)
+gives exactly the batch points.
+
+Per-point quality (columns of the Track, NaN where not applicable):
+
+- ``std_m``: position standard deviation ``sqrt(trace P_pp)`` after the update, metres (as
+  ``smooth``); ``std_x_m``, ``std_y_m``, ``std_z_m`` per axis;
+- ``innovation_px``: distance of the detection from the predicted point's projection, pixels;
+- ``residual_px``: its distance from the updated point's projection, pixels;
+- ``nis``: the normalised innovation squared the gate tested (with the jump's covariance
+  when ``jump`` is 1);
+- ``gap_s``: time since the previous accepted detection, the span bridged by prediction;
+- ``jump``: 1 where a velocity jump (bounce, kick) was accepted, else 0;
+- ``rejected``: 1 where the detection failed the gate and the point is the prediction;
+- ``init``: 1 where the track was (re)initialised from the window at this detection.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import FusionError
+from ..motion import Ball, G
+from ..records import NS, Observations, Track
+from ..rig import Rig
+
+#: Quality columns of a ``filter`` track, in order (module docstring).
+FILTER_QUALITY = ("std_m", "std_x_m", "std_y_m", "std_z_m", "innovation_px", "residual_px",
+                  "nis", "gap_s", "jump", "rejected", "init")
+#: Pixels farther than this many image sizes from the image are not detections (as prepare).
+_FAR_IMAGES = 10
+#: A point closer than this to a camera's plane (metres) is not in front of it.
+_MIN_DEPTH_M = 1e-3
+_NAN = float("nan")
+#: A jump is looked for before this many accepted detections back (and at the newest one).
+_JUMP_LAG = 2
+
+
+@dataclass(frozen=True)
+class FilterOptions:
+    """Settings of the ``filter`` method.
+
+    Attributes
+    ----------
+    noise_px : float, standard deviation of a detection's pixel, per axis, pixels
+    accel_psd : float, spectral density ``q`` of the white-noise acceleration (drag error,
+        spin, model error), m²/s³
+    drag_per_m : float, ``k`` of the quadratic drag ``a = -k ‖v‖ v``, 1/m (a golf ball's)
+    gravity : (3,) m/s²
+    gate : float, chi-square gate on the normalised innovation (2 degrees of freedom;
+        13.8 is the 99.9 % quantile)
+    jump_speed : float, m/s, standard deviation of the velocity jump of a bounce or a kick
+    max_rejects : int, consecutive rejected detections after which the track is lost
+    init_detections : int, detections (of at least two cameras) a (re)initialisation fits
+    init_window : int, most detections kept for a (re)initialisation
+    max_gap_s : float or None, longest time without an accepted detection the track bridges;
+        None: :func:`pslog.fusion._prepare.default_max_gap_s` of the rig
+    """
+
+    noise_px: float = 0.5
+    adapt_rate: float = 0.02
+    min_noise_px: float = 0.05
+    max_noise_px: float = 5.0
+    accel_psd: float = 0.01
+    drag_per_m: float = Ball().drag_per_metre
+    gravity: tuple[float, float, float] = (0.0, 0.0, -G)
+    gate: float = 13.8
+    jump_speed: float = 6.0
+    max_rejects: int = 3
+    init_detections: int = 4
+    init_window: int = 8
+    max_gap_s: float | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("noise_px", "accel_psd", "gate", "jump_speed"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise FusionError(f"filter {name} must be finite and > 0, got {value!r}")
+        if not (math.isfinite(self.drag_per_m) and self.drag_per_m >= 0):
+            raise FusionError(f"filter drag_per_m must be finite and >= 0, got "
+                              f"{self.drag_per_m!r}")
+        if self.init_detections < 3 or self.init_window < self.init_detections:
+            raise FusionError("filter init_detections must be >= 3 and init_window >= it, got "
+                              f"{self.init_detections} and {self.init_window}")
+        if self.max_rejects < 1:
+            raise FusionError(f"filter max_rejects must be >= 1, got {self.max_rejects}")
+
+
+class _Cam:
+    """One camera's projection constants as plain floats (no numpy per detection)."""
+
+    __slots__ = ("camera", "cx", "cy", "distorted", "far", "fx", "fy", "k1", "k2", "k3",
+                 "p1", "p2", "r", "s", "t")
+
+    def __init__(self, camera) -> None:
+        self.camera = camera
+        self.r = [float(x) for x in np.asarray(camera.R).ravel()]
+        self.t = [float(x) for x in camera.t]
+        K = camera.K
+        self.fx, self.s, self.cx = float(K[0, 0]), float(K[0, 1]), float(K[0, 2])
+        self.fy, self.cy = float(K[1, 1]), float(K[1, 2])
+        self.k1, self.k2, self.p1, self.p2, self.k3 = (float(x) for x in camera.dist)
+        self.distorted = bool(np.any(camera.dist))
+        self.far = _FAR_IMAGES * max(camera.width, camera.height)
+
+    def project(self, px: float, py: float, pz: float):
+        """Distorted pixel ``(u, v)`` of a world point and ``∂(u, v)/∂p`` as two rows of 3;
+        None when the point is not in front of the camera."""
+        r = self.r
+        xc = r[0] * px + r[1] * py + r[2] * pz + self.t[0]
+        yc = r[3] * px + r[4] * py + r[5] * pz + self.t[1]
+        zc = r[6] * px + r[7] * py + r[8] * pz + self.t[2]
+        if not zc > _MIN_DEPTH_M:
+            return None
+        iz = 1.0 / zc
+        x, y = xc * iz, yc * iz
+        if self.distorted:
+            k1, k2, k3, p1, p2 = self.k1, self.k2, self.k3, self.p1, self.p2
+            r2 = x * x + y * y
+            radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+            dr = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)
+            xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
+            yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
+            d00 = radial + 2.0 * x * x * dr + 2.0 * p1 * y + 6.0 * p2 * x
+            d01 = 2.0 * x * y * dr + 2.0 * p1 * x + 2.0 * p2 * y
+            d11 = radial + 2.0 * y * y * dr + 6.0 * p1 * y + 2.0 * p2 * x
+            # A = K₂ · D (D symmetric: d10 = d01)
+            a00, a01 = self.fx * d00 + self.s * d01, self.fx * d01 + self.s * d11
+            a10, a11 = self.fy * d01, self.fy * d11
+        else:
+            xd, yd = x, y
+            a00, a01, a10, a11 = self.fx, self.s, 0.0, self.fy
+        u = self.fx * xd + self.s * yd + self.cx
+        v = self.fy * yd + self.cy
+        # M = A · ∂(x, y)/∂X_c, then H = M · R
+        m00, m01, m02 = a00 * iz, a01 * iz, -(a00 * x + a01 * y) * iz
+        m10, m11, m12 = a10 * iz, a11 * iz, -(a10 * x + a11 * y) * iz
+        h0 = (m00 * r[0] + m01 * r[3] + m02 * r[6], m00 * r[1] + m01 * r[4] + m02 * r[7],
+              m00 * r[2] + m01 * r[5] + m02 * r[8])
+        h1 = (m10 * r[0] + m11 * r[3] + m12 * r[6], m10 * r[1] + m11 * r[4] + m12 * r[7],
+              m10 * r[2] + m11 * r[5] + m12 * r[8])
+        return u, v, h0, h1
+
+
+class BallFilter:
+    """The ``filter`` method's state, updated one detection at a time (the streaming form).
+
+    Parameters
+    ----------
+    rig : Rig, whose camera order the detections' camera indices refer to
+    options : FilterOptions (``max_gap_s`` None: 3.5 frame periods of the slowest camera)
+
+    Detections are pushed with their TRUE (corrected) capture times, in (time, camera)
+    order (:class:`~pslog.fusion.stream.StreamFuser` corrects logged times first).
+
+    Examples
+    --------
+    >>> f = BallFilter(rig)                                        # doctest: +SKIP
+    >>> point = f.push(time_ns, camera, u, v)   # None, or (position, quality)  # doctest: +SKIP
+    >>> position, velocity, covariance = f.predict(now_ns)        # doctest: +SKIP
+    """
+
+    def __init__(self, rig: Rig, options: FilterOptions | None = None) -> None:
+        from ._prepare import default_max_gap_s
+
+        self.options = options = options or FilterOptions()
+        self._cams = [_Cam(c) for c in rig.cameras]
+        self._max_gap_ns = int((options.max_gap_s or default_max_gap_s(rig)) * NS)
+        self._var = options.noise_px ** 2
+        self._adapt = options.adapt_rate
+        self._var_min, self._var_max = options.min_noise_px ** 2, options.max_noise_px ** 2
+        self._q = options.accel_psd
+        self._jump_var = options.jump_speed ** 2
+        self._k = options.drag_per_m
+        self._g = tuple(float(x) for x in options.gravity)
+        self._gate = options.gate
+        self.time_ns: int | None = None  # time of the state; None: no track
+        self._x = [0.0] * 6
+        self._P = [0.0] * 36
+        self._last_ns = 0  # time of the last accepted detection
+        self._rejects = 0
+        self._cam_last = [-(2**62)] * len(rig)  # last accepted detection per camera
+        self._jump_ns, self._jump_camera = -(2**62), -1  # the latest jump accepted
+        self._window: list[tuple[int, int, float, float]] = []  # (time, camera, u, v)
+        # the latest accepted updates: (state time, x, P before; time, camera, u, v;
+        # NIS + ln det S), for the jump search
+        self._history: list[tuple] = []
+        self._rays: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
+
+    # ---- public state access -------------------------------------------------------------
+    def set_state(self, time_ns: int, position, velocity, covariance) -> None:
+        """Start a track from a given state (tests, or a state handed over)."""
+        self.time_ns = self._last_ns = int(time_ns)
+        self._x = [float(a) for a in (*position, *velocity)]
+        self._P = [float(a) for a in np.asarray(covariance, dtype=np.float64).ravel()]
+        self._rejects = 0
+        self._window = []
+        self._history = []
+        self._cam_last = [self._last_ns] * len(self._cam_last)
+
+    def state(self):
+        """``(time_ns, x (6,), P (6, 6))`` of the current track, or None without one."""
+        if self.time_ns is None:
+            return None
+        return self.time_ns, np.array(self._x), np.array(self._P).reshape(6, 6)
+
+    def predict(self, time_ns: int):
+        """The state predicted to ``time_ns`` (the process model; the state is unchanged).
+
+        Returns
+        -------
+        None without a track; else ``(position (3,), velocity (3,), covariance (6, 6))`` in
+        metres, m/s and their squares. An earlier time is retrodicted with the same model
+        (process noise of ``|Δt|``).
+        """
+        if self.time_ns is None:
+            return None
+        x, P = self._predicted(self._x, self._P, (int(time_ns) - self.time_ns) / NS)
+        return np.array(x[:3]), np.array(x[3:]), np.array(P).reshape(6, 6)
+
+    # ---- the filter ----------------------------------------------------------------------
+    def _predicted(self, x, P, dt):
+        """Mean and covariance after ``dt`` seconds (new lists)."""
+        px, py, pz, vx, vy, vz = x
+        k = self._k
+        speed = math.sqrt(vx * vx + vy * vy + vz * vz)
+        gx, gy, gz = self._g
+        ax, ay, az = gx - k * speed * vx, gy - k * speed * vy, gz - k * speed * vz
+        h = 0.5 * dt * dt
+        xn = [px + vx * dt + ax * h, py + vy * dt + ay * h, pz + vz * dt + az * h,
+              vx + ax * dt, vy + ay * dt, vz + az * dt]
+        adt = abs(dt)
+        q = self._q
+        q3, q2, q1 = q * adt ** 3 / 3.0, q * dt * adt / 2.0, q * adt
+        dt2 = dt * dt
+        Pn = P[:]
+        for i in range(3):
+            ri, vi = 6 * i, 6 * (i + 3)
+            for j in range(3):
+                # P_pp' = P_pp + dt (P_pv + P_vp) + dt² P_vv ; P_pv' = P_pv + dt P_vv
+                Pn[ri + j] = (P[ri + j] + dt * (P[ri + 3 + j] + P[vi + j])
+                              + dt2 * P[vi + 3 + j])
+                Pn[ri + 3 + j] = P[ri + 3 + j] + dt * P[vi + 3 + j]
+                Pn[vi + j] = P[vi + j] + dt * P[vi + 3 + j]
+            Pn[ri + i] += q3
+            Pn[ri + 3 + i] += q2
+            Pn[vi + i] += q2
+            Pn[vi + 3 + i] += q1
+        return xn, Pn
+
+    def _innovation(self, cam: _Cam, x, P, u, v):
+        """``(y0, y1, PHᵀ columns c0 c1, S⁻¹ entries i00 i01 i11, NIS, det S)``, or None
+        if ``x`` is behind the camera."""
+        proj = cam.project(x[0], x[1], x[2])
+        if proj is None:
+            return None
+        pu, pv, h0, h1 = proj
+        y0, y1 = u - pu, v - pv
+        a0, a1, a2 = h0
+        b0, b1, b2 = h1
+        # PHᵀ: column r is P[:, :3] · h_r (6 rows)
+        c0, c1 = [], []
+        for i in range(0, 36, 6):
+            p0, p1, p2 = P[i], P[i + 1], P[i + 2]
+            c0.append(p0 * a0 + p1 * a1 + p2 * a2)
+            c1.append(p0 * b0 + p1 * b1 + p2 * b2)
+        s00 = a0 * c0[0] + a1 * c0[1] + a2 * c0[2] + self._var
+        s01 = a0 * c1[0] + a1 * c1[1] + a2 * c1[2]
+        s11 = b0 * c1[0] + b1 * c1[1] + b2 * c1[2] + self._var
+        det = s00 * s11 - s01 * s01
+        i00, i01, i11 = s11 / det, -s01 / det, s00 / det
+        nis = y0 * (i00 * y0 + i01 * y1) + y1 * (i01 * y0 + i11 * y1)
+        return y0, y1, c0, c1, i00, i01, i11, nis, det
+
+    @staticmethod
+    def _updated(x, P, inn):
+        """Kalman update: ``x + K y``, ``P - K (PHᵀ)ᵀ`` with ``K = PHᵀ S⁻¹`` (new lists)."""
+        y0, y1, c0, c1, i00, i01, i11 = inn[:7]
+        k0 = [c0[i] * i00 + c1[i] * i01 for i in range(6)]
+        k1 = [c0[i] * i01 + c1[i] * i11 for i in range(6)]
+        xn = [x[i] + k0[i] * y0 + k1[i] * y1 for i in range(6)]
+        Pn = P[:]
+        for i in range(6):
+            ki0, ki1, row = k0[i], k1[i], 6 * i
+            for j in range(i, 6):
+                value = P[row + j] - (ki0 * c0[j] + ki1 * c1[j])
+                Pn[row + j] = value
+                Pn[6 * j + i] = value
+        return xn, Pn
+
+    def push(self, time_ns: int, camera: int, u: float, v: float):
+        """Fuse one detection (true capture time, camera index, distorted pixel).
+
+        Returns
+        -------
+        None when no point is made (no track yet, or an unusable pixel); else
+        ``(position (x, y, z), quality)`` with ``quality`` a tuple in the order of
+        :data:`FILTER_QUALITY`.
+        """
+        time_ns, camera = int(time_ns), int(camera)
+        cam = self._cams[camera]
+        u, v = float(u), float(v)
+        if not (abs(u) <= cam.far and abs(v) <= cam.far):  # also NaN: no detection
+            return None
+        if self.time_ns is not None and (
+                time_ns - self._last_ns > self._max_gap_ns
+                or time_ns - max(t for c, t in enumerate(self._cam_last) if c != camera)
+                > self._max_gap_ns
+                or (camera == self._jump_camera
+                    and max(t for c, t in enumerate(self._cam_last) if c != camera)
+                    < self._jump_ns)):
+            # nothing bridges so long a time, and one camera alone cannot hold the depth
+            # (no other camera's detection within the gap, or since a jump it alone saw):
+            # the track is lost
+            self.time_ns = None
+        if self.time_ns is None:
+            return self._initialise(time_ns, camera, u, v)
+        dt = (time_ns - self.time_ns) / NS
+        gap_s = (time_ns - self._last_ns) / NS
+        x, P = self._predicted(self._x, self._P, dt)
+        inn = self._innovation(cam, x, P, u, v)
+        jump = 0.0
+        if inn is not None and inn[7] <= self._gate:
+            xn, Pn = self._updated(x, P, inn)
+            history = self._history
+            history.append((self.time_ns, self._x, self._P, time_ns, camera, u, v,
+                            inn[7] + math.log(inn[8])))
+            if self._adapt:  # pixel noise by stochastic approximation of E[NIS] = 2
+                var = self._var * (1.0 + self._adapt * (0.5 * inn[7] - 1.0))
+                self._var = min(max(var, self._var_min), self._var_max)
+            if len(history) > _JUMP_LAG + 1:
+                del history[0]
+        else:
+            jumped = self._jump(time_ns, camera, u, v) if inn is not None else None
+            if jumped is None:  # rejected: the point is the prediction
+                return self._reject(time_ns, camera, u, v, x, P, inn, gap_s)
+            xn, Pn, inn = jumped
+            jump = 1.0
+            self._jump_ns, self._jump_camera = time_ns, camera
+        self._x, self._P, self.time_ns, self._last_ns = xn, Pn, time_ns, time_ns
+        self._rejects = 0
+        self._cam_last[camera] = time_ns
+        self._window.append((time_ns, camera, u, v))
+        del self._window[:-self.options.init_window]
+        proj = cam.project(xn[0], xn[1], xn[2])
+        residual = _NAN if proj is None else math.hypot(u - proj[0], v - proj[1])
+        return self._point(xn, Pn, math.hypot(inn[0], inn[1]), residual, inn[7], gap_s,
+                           jump, 0.0, 0.0)
+
+    def _jump(self, time_ns, camera, u, v):
+        """A bounce or a kick: a velocity jump (``P_vv += σ_j² I``, position continuous) at
+        the state before one of the last ``_JUMP_LAG + 1`` accepted detections (the first
+        detections after a small jump can pass the gate), those detections and this one
+        replayed; the lag whose replay passes every gate with the least
+        ``Σ NIS + ln det S`` over the same detections wins. Returns ``(x, P, innovation of
+        this detection)`` or None when no lag explains the detection."""
+        history = self._history
+        entries = [(self.time_ns, self._x, self._P)]  # state before the current detection
+        detections = [(time_ns, camera, u, v)]
+        best, best_score = None, math.inf
+        n = len(history)
+        for lag in range(min(n, _JUMP_LAG) + 1):
+            if lag:  # restart before the lag-th latest accepted detection
+                h = history[n - lag]
+                entries.append((h[0], h[1], h[2]))
+                detections.insert(0, h[3:7])
+            t0, x, P = entries[-1]
+            score = sum(h[7] for h in history[n - _JUMP_LAG: n - lag]) if n else 0.0
+            first = True
+            for t, c, du, dv in detections:
+                dt = (t - t0) / NS
+                x, P = self._predicted(x, P, dt)
+                if first:  # the jump Δv at an instant uniform in the interval: Δp = Δv s
+                    P, first = self._jumped(P, dt), False
+                inn = self._innovation(self._cams[c], x, P, du, dv)
+                if inn is None or not inn[7] <= self._gate:
+                    break
+                score += inn[7] + math.log(inn[8])
+                x, P = self._updated(x, P, inn)
+                t0 = t
+            else:
+                if score < best_score:
+                    best, best_score = (x, P, inn), score
+        if best is not None:
+            self._history = []  # a new segment: a later jump is not looked for before it
+        return best
+
+    def _jumped(self, P, dt):
+        """``P`` plus the covariance of a velocity jump ``Δv ~ N(0, σ_j² I)`` at an instant
+        uniform over the last ``dt``: ``Δp = Δv s``, ``E[s²] = dt²/3``, ``E[s] = dt/2``."""
+        P = P[:]
+        jv = self._jump_var
+        pp, pv = jv * dt * dt / 3.0, jv * dt / 2.0
+        for i in range(3):
+            P[7 * i] += pp
+            P[6 * i + 3 + i] += pv
+            P[6 * (i + 3) + i] += pv
+            P[7 * (i + 3)] += jv
+        return P
+
+    def _reject(self, time_ns, camera, u, v, x, P, inn, gap_s):
+        """The detection failed the gate: the point is the prediction ``x``; after
+        ``max_rejects`` in a row the track restarts from the window."""
+        self._rejects += 1
+        self._window.append((time_ns, camera, u, v))
+        del self._window[:-self.options.init_window]
+        nis = _NAN if inn is None else inn[7]
+        inn_px = _NAN if inn is None else math.hypot(inn[0], inn[1])
+        self._x, self._P, self.time_ns = x, P, time_ns
+        out = self._point(x, P, inn_px, inn_px, nis, gap_s, 0.0, 1.0, 0.0)
+        if self._rejects >= self.options.max_rejects:  # lost: restart from the window
+            self.time_ns = None
+            restart = self._try_window()
+            if restart is not None:
+                return restart
+        return out
+
+    @staticmethod
+    def _point(x, P, innovation, residual, nis, gap_s, jump, rejected, init):
+        vx, vy, vz = P[0], P[7], P[14]
+        return ((x[0], x[1], x[2]),
+                (math.sqrt(vx + vy + vz), math.sqrt(vx), math.sqrt(vy), math.sqrt(vz),
+                 innovation, residual, nis, gap_s, jump, rejected, init))
+
+    # ---- (re)initialisation from a window --------------------------------------------------
+    def _initialise(self, time_ns, camera, u, v):
+        window = self._window
+        if window and time_ns - window[-1][0] > self._max_gap_ns:
+            window.clear()
+        window.append((time_ns, camera, u, v))
+        del window[:-self.options.init_window]
+        return self._try_window()
+
+    def _try_window(self):
+        """Fit the window (newest last); on success start the track at its newest detection
+        and return its point, else drop the oldest detections that spoil it and return None."""
+        window = self._window
+        while window and window[-1][0] - window[0][0] > self._max_gap_ns:
+            del window[0]  # a fit spans at most the longest gap bridged
+        while len(window) >= self.options.init_detections:
+            if len({w[1] for w in window}) < 2:
+                return None
+            fit = self._fit(window)
+            if fit is not None:
+                x, P, residuals = fit
+                newest = window[-1]
+                self.set_state(newest[0], x[:3], x[3:], P)
+                for t, c, _, _ in window:
+                    self._cam_last[c] = t
+                return self._point(self._x, self._P, _NAN, residuals[-1], _NAN, _NAN,
+                                   0.0, 0.0, 1.0)
+            del window[0]  # a break or an outlier in the window: try without its oldest
+        return None
+
+    def _ray(self, time_ns: int, camera: int, u: float, v: float):
+        key = (time_ns, camera)
+        ray = self._rays.get(key)
+        if ray is None:
+            if len(self._rays) > 4 * self.options.init_window:
+                self._rays.clear()
+            # one pixel at a time, so the ray never depends on what else is undistorted
+            origin, direction = self._cams[camera].camera.rays(np.array([[u, v]]))
+            ray = self._rays[key] = (origin, direction[0])
+        return ray
+
+    def _fit(self, window):
+        """Ballistic fit of the window's detections at the newest one's time: ``(x (6,),
+        P (6x6 flat list), pixel residuals)``, or None when it is not trustworthy."""
+        t_ref = window[-1][0]
+        tau = np.array([(w[0] - t_ref) / NS for w in window])
+        g = np.array(self._g)
+        rays = [self._ray(*w) for w in window]
+        if any(not np.all(np.isfinite(d)) for _, d in rays):
+            return None
+        # linear start: the path p0 + v0 τ + (g + a_drag) τ²/2 on each ray (2 equations per
+        # ray: its offsets along two directions normal to it), weighted by 1/depth in a 2nd pass
+        accel = g
+        weights = np.ones(len(window))
+        theta = None
+        for _ in range(2):
+            rows, rhs = [], []
+            for (origin, d), ti, wi in zip(rays, tau, weights, strict=True):
+                e1 = np.cross(d, [1.0, 0.0, 0.0] if abs(d[0]) < 0.9 else [0.0, 1.0, 0.0])
+                e1 /= np.linalg.norm(e1)
+                e2 = np.cross(d, e1)
+                for e in (e1, e2):
+                    rows.append(wi * np.concatenate([e, ti * e]))
+                    rhs.append(wi * (e @ (origin - 0.5 * ti * ti * accel)))
+            A, b = np.array(rows), np.array(rhs)
+            if np.linalg.cond(A) > 1e10:
+                return None
+            theta = np.linalg.lstsq(A, b, rcond=None)[0]
+            depth = np.array([(theta[:3] + ti * theta[3:] - o) @ d
+                              for (o, d), ti in zip(rays, tau, strict=True)])
+            if not np.all(depth > _MIN_DEPTH_M):
+                return None
+            weights = 1.0 / depth
+            speed = np.linalg.norm(theta[3:])
+            accel = g - self._k * speed * theta[3:]
+        # Gauss-Newton in distorted pixels (the filter's measurement model)
+        for _ in range(3):
+            J, r = self._pixel_system(window, tau, theta, accel)
+            if J is None:
+                return None
+            step = np.linalg.lstsq(J, r, rcond=None)[0]
+            theta = theta + step
+        J, r = self._pixel_system(window, tau, theta, accel)
+        if J is None:
+            return None
+        residuals = np.hypot(r[0::2], r[1::2])
+        # every detection inside the gate, and the whole fit inside the chi-square quantile
+        # of its 2n - 6 degrees of freedom (a break inside the window shows in the sum)
+        if not (np.all(residuals ** 2 <= self._gate * self._var)
+                and float(r @ r) <= _chi2_quantile(len(r) - 6) * self._var):
+            return None
+        info = J.T @ J
+        try:
+            cov = self._var * np.linalg.inv(info)
+        except np.linalg.LinAlgError:
+            return None
+        if not np.all(np.isfinite(cov)) or np.linalg.cond(info) > 1e14:
+            return None
+        cov = 0.5 * (cov + cov.T)
+        return [float(a) for a in theta], [float(a) for a in cov.ravel()], residuals
+
+    def _pixel_system(self, window, tau, theta, accel):
+        rows, res = [], []
+        for (_, camera, u, v), ti in zip(window, tau, strict=True):
+            p = theta[:3] + ti * theta[3:] + 0.5 * ti * ti * accel
+            proj = self._cams[camera].project(float(p[0]), float(p[1]), float(p[2]))
+            if proj is None:
+                return None, None
+            pu, pv, h0, h1 = proj
+            for h, z, zhat in ((h0, u, pu), (h1, v, pv)):
+                rows.append([*h, *(ti * np.array(h))])
+                res.append(z - zhat)
+        return np.array(rows), np.array(res)
+
+
+def _chi2_quantile(dof: int, z: float = 3.09) -> float:
+    """The chi-square quantile of ``dof`` degrees of freedom at the normal quantile ``z``
+    (3.09: 99.9 %), by the Wilson-Hilferty approximation (within 2 % from 2 dof on)."""
+    if dof <= 0:
+        return math.inf
+    a = 2.0 / (9.0 * dof)
+    return dof * (1.0 - a + z * math.sqrt(a)) ** 3
+
+
+class FilterStream:
+    """The streaming form for :class:`~pslog.fusion.stream.StreamFuser`: detections (true
+    times, (time, camera) order) in, the Track of their points out; :attr:`filter` is the
+    :class:`BallFilter` (``predict`` to "now")."""
+
+    def __init__(self, rig: Rig, options) -> None:
+        self.filter = BallFilter(rig, FilterOptions(max_gap_s=options.max_gap_s))
+
+    def push(self, time_ns, camera, uv, frame_index=None) -> Track:
+        return _track(self.filter, time_ns, camera, uv)
+
+
+def _track(flt: BallFilter, time_ns, camera, uv) -> Track:
+    times, cams, points, quality = [], [], [], []
+    push = flt.push
+    for t, c, (u, v) in zip(np.asarray(time_ns).tolist(), np.asarray(camera).tolist(),
+                            np.asarray(uv, dtype=np.float64).reshape(-1, 2).tolist(),
+                            strict=True):
+        out = push(t, c, u, v)
+        if out is not None:
+            times.append(t)
+            cams.append(c)
+            points.append(out[0])
+            quality.append(out[1])
+    q = np.array(quality, dtype=np.float64).reshape(-1, len(FILTER_QUALITY))
+    return Track("filter", np.array(times, dtype=np.int64),
+                 np.array(points, dtype=np.float64).reshape(-1, 3),
+                 np.array(cams, dtype=np.int32),
+                 {name: q[:, i] for i, name in enumerate(FILTER_QUALITY)})
+
+
+def fuse_filter(obs: Observations, rig: Rig, max_gap_s: float | None = None,
+                options: FilterOptions | None = None) -> Track:
+    """The ``filter`` track of observations (true times, sorted by (time, camera)): the
+    same per-detection code as the streaming form, so the same points."""
+    options = options or FilterOptions()
+    if max_gap_s is not None and options.max_gap_s is None:
+        from dataclasses import replace
+
+        options = replace(options, max_gap_s=max_gap_s)
+    return _track(BallFilter(rig, options), obs.time_ns, obs.camera, obs.uv)
