@@ -17,8 +17,9 @@ filter    causal extended Kalman filter, a point at every detection     beyond t
 :data:`METHODS` is the registry (one :class:`Method` entry per method); the CLI,
 :func:`default_methods`, the streaming fuser and the tests read it. :func:`fuse` is the batch
 entry point. Every causal method streams through :class:`~pslog.fusion.stream.StreamFuser`
-with the same points: a ``typeA`` or ``nearest`` point uses no detection after its own in
-(time, camera) order; ``sync``, ``typeB`` and ``linear`` group detections within the
+with the same points: a ``typeA``, ``nearest`` or ``filter`` point uses no detection after its
+own in (time, camera) order (``filter`` streams through its own incremental form,
+:mod:`pslog.fusion.filter`); ``sync``, ``typeB`` and ``linear`` group detections within the
 tolerance, so their point at ``t`` may also use detections up to ``t + tolerance``.
 ``smooth`` (:mod:`pslog.fusion.smooth`) is offline: every point uses every detection.
 """
