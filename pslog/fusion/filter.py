@@ -12,6 +12,7 @@ equations, exactly as implemented, are in ``docs/methods.md`` (section ``filter`
   acceleration of spectral density ``q`` (Bar-Shalom, Li & Kirubarajan, *Estimation with
   Applications to Tracking and Navigation*, 2001, section 6.2.2): the drag's Jacobian term,
   ``k ‖v‖ Δt``, is below 1e-3 at a rally's speeds and frame rates and is left to ``q``;
+- the pixel noise ``σ`` adapts to the detector's (``E[NIS] = 2``);
 - measurement: the detection's *distorted* pixel, ``z = π_c(p) + w``, ``w ~ N(0, σ² I)``,
   through camera ``c``'s projection with its lens model; ``H = [∂π_c/∂p, 0]`` (2 x 6).
   Pixels, not rays: the detector's noise is isotropic in the recorded image, no detection is
@@ -20,11 +21,12 @@ equations, exactly as implemented, are in ``docs/methods.md`` (section ``filter`
 - gating (Bar-Shalom et al., section 5.4): the normalised innovation squared
   ``NIS = yᵀ S⁻¹ y`` is compared with the chi-square quantile of 2 degrees of freedom
   (``gate``). A detection outside the gate is first tried as a bounce or a kick: a velocity
-  jump of standard deviation ``jump_speed`` at the previous update (position continuous),
-  i.e. ``P_vv += σ_j² I`` before the prediction; accepted if then inside the gate (``jump``
-  = 1). Otherwise it is rejected (``rejected`` = 1; the point is the prediction). After
-  ``max_rejects`` consecutive rejections, or a time without an accepted detection longer
-  than ``max_gap_s``, the track is lost;
+  jump (standard deviation ``jump_speed``; a bounce's mostly along gravity, a kick's on
+  every axis) at an instant within the step, position continuous, placed before one of the
+  last three accepted detections (the most likely wins); accepted if then inside the gate
+  (``jump`` = 1). Otherwise it is rejected (``rejected`` = 1; the point is the
+  prediction). After ``max_rejects`` consecutive rejections, or a time without an accepted
+  detection longer than ``max_gap_s``, the track is lost;
 - (re)initialisation: from a short window of the latest detections (at least
   ``init_detections`` of two cameras or more, within ``max_gap_s`` of each other): a
   ballistic least-squares fit (gravity and drag) to their viewing rays, refined by
@@ -71,6 +73,8 @@ _MIN_DEPTH_M = 1e-3
 _NAN = float("nan")
 #: A jump is looked for before this many accepted detections back (and at the newest one).
 _JUMP_LAG = 2
+#: A bounce's velocity jump across the floor's normal, in variance relative to along it.
+_BOUNCE_SIDE = 0.05
 
 
 @dataclass(frozen=True)
@@ -85,8 +89,12 @@ class FilterOptions:
     drag_per_m : float, ``k`` of the quadratic drag ``a = -k ‖v‖ v``, 1/m (a golf ball's)
     gravity : (3,) m/s²
     gate : float, chi-square gate on the normalised innovation (2 degrees of freedom;
-        13.8 is the 99.9 % quantile)
+        18.4 is the 99.99 % quantile)
     jump_speed : float, m/s, standard deviation of the velocity jump of a bounce or a kick
+    bounce_shape : bool, also try a bounce's jump (variance ``σ_j²`` along gravity, 5 % of
+        it across) before a kick's (``σ_j²`` on every axis)
+    adapt_rate : float, step of the pixel noise's adaptation (0: ``noise_px`` fixed)
+    min_noise_px, max_noise_px : float, bounds of the adapted pixel noise
     max_rejects : int, consecutive rejected detections after which the track is lost
     init_detections : int, detections (of at least two cameras) a (re)initialisation fits
     init_window : int, most detections kept for a (re)initialisation
@@ -101,8 +109,9 @@ class FilterOptions:
     accel_psd: float = 0.01
     drag_per_m: float = Ball().drag_per_metre
     gravity: tuple[float, float, float] = (0.0, 0.0, -G)
-    gate: float = 13.8
+    gate: float = 18.4
     jump_speed: float = 6.0
+    bounce_shape: bool = True
     max_rejects: int = 3
     init_detections: int = 4
     init_window: int = 8
@@ -208,6 +217,12 @@ class BallFilter:
         self._var_min, self._var_max = options.min_noise_px ** 2, options.max_noise_px ** 2
         self._q = options.accel_psd
         self._jump_var = options.jump_speed ** 2
+        # a bounce (mostly vertical: the floor's normal) and a kick (any direction), in
+        # variance per axis relative to σ_j²
+        up = np.abs(np.asarray(options.gravity, dtype=np.float64))
+        up = up / up.max() if up.max() > 0 else np.ones(3)
+        self._jump_shapes = ([tuple(float(_BOUNCE_SIDE + (1 - _BOUNCE_SIDE) * a) for a in up)]
+                             if options.bounce_shape else []) + [(1.0, 1.0, 1.0)]
         self._k = options.drag_per_m
         self._g = tuple(float(x) for x in options.gravity)
         self._gate = options.gate
@@ -385,19 +400,20 @@ class BallFilter:
                            jump, 0.0, 0.0)
 
     def _jump(self, time_ns, camera, u, v):
-        """A bounce or a kick: a velocity jump (``P_vv += σ_j² I``, position continuous) at
-        the state before one of the last ``_JUMP_LAG + 1`` accepted detections (the first
-        detections after a small jump can pass the gate), those detections and this one
-        replayed; the lag whose replay passes every gate with the least
-        ``Σ NIS + ln det S`` over the same detections wins. Returns ``(x, P, innovation of
-        this detection)`` or None when no lag explains the detection."""
+        """A bounce or a kick: a velocity jump (a bounce's, mostly along gravity, then a
+        kick's, isotropic; position continuous) at the state before one of the last
+        ``_JUMP_LAG + 1`` accepted detections (the first detections after a small jump can
+        pass the gate), those detections and this one replayed; the (lag, shape) whose replay
+        passes every gate with the least ``Σ NIS + ln det S`` over the same detections wins.
+        Returns ``(x, P, innovation of this detection)`` or None when none explains it."""
         history = self._history
         entries = [(self.time_ns, self._x, self._P)]  # state before the current detection
         detections = [(time_ns, camera, u, v)]
         best, best_score = None, math.inf
         n = len(history)
-        for lag in range(min(n, _JUMP_LAG) + 1):
-            if lag:  # restart before the lag-th latest accepted detection
+        for lag, shape in ((lag, shape) for lag in range(min(n, _JUMP_LAG) + 1)
+                           for shape in self._jump_shapes):
+            if lag == len(entries):  # restart before the lag-th latest accepted detection
                 h = history[n - lag]
                 entries.append((h[0], h[1], h[2]))
                 detections.insert(0, h[3:7])
@@ -408,7 +424,7 @@ class BallFilter:
                 dt = (t - t0) / NS
                 x, P = self._predicted(x, P, dt)
                 if first:  # the jump Δv at an instant uniform in the interval: Δp = Δv s
-                    P, first = self._jumped(P, dt), False
+                    P, first = self._jumped(P, dt, shape), False
                 inn = self._innovation(self._cams[c], x, P, du, dv)
                 if inn is None or not inn[7] <= self._gate:
                     break
@@ -422,16 +438,16 @@ class BallFilter:
             self._history = []  # a new segment: a later jump is not looked for before it
         return best
 
-    def _jumped(self, P, dt):
-        """``P`` plus the covariance of a velocity jump ``Δv ~ N(0, σ_j² I)`` at an instant
-        uniform over the last ``dt``: ``Δp = Δv s``, ``E[s²] = dt²/3``, ``E[s] = dt/2``."""
+    def _jumped(self, P, dt, shape):
+        """``P`` plus the covariance of a velocity jump ``Δv ~ N(0, diag(shape) σ_j²)`` at an
+        instant uniform over the last ``dt``: ``Δp = Δv s``, ``E[s²] = dt²/3``,
+        ``E[s] = dt/2``."""
         P = P[:]
-        jv = self._jump_var
-        pp, pv = jv * dt * dt / 3.0, jv * dt / 2.0
         for i in range(3):
-            P[7 * i] += pp
-            P[6 * i + 3 + i] += pv
-            P[6 * (i + 3) + i] += pv
+            jv = self._jump_var * shape[i]
+            P[7 * i] += jv * dt * dt / 3.0
+            P[6 * i + 3 + i] += jv * dt / 2.0
+            P[6 * (i + 3) + i] += jv * dt / 2.0
             P[7 * (i + 3)] += jv
         return P
 
