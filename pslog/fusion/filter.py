@@ -485,8 +485,11 @@ class BallFilter:
         return self._try_window()
 
     def _try_window(self):
-        """Fit the window (newest last); on success start the track at its newest detection
-        and return its point, else drop the oldest detections that spoil it and return None."""
+        """Fit the window (newest last), dropping its oldest detection until a fit passes (a
+        break or an outlier inside it) or fewer than ``init_detections`` are left (at most
+        ``init_window - init_detections + 1`` fits per detection, and only while there is
+        no track); on success start the track at the newest detection and return its point,
+        else None."""
         window = self._window
         while window and window[-1][0] - window[0][0] > self._max_gap_ns:
             del window[0]  # a fit spans at most the longest gap bridged
@@ -496,13 +499,12 @@ class BallFilter:
             fit = self._fit(window)
             if fit is not None:
                 x, P, residuals = fit
-                newest = window[-1]
-                self.set_state(newest[0], x[:3], x[3:], P)
+                self.set_state(window[-1][0], x[:3], x[3:], P)
                 for t, c, _, _ in window:
                     self._cam_last[c] = t
-                return self._point(self._x, self._P, _NAN, residuals[-1], _NAN, _NAN,
+                return self._point(self._x, self._P, _NAN, float(residuals[-1]), _NAN, _NAN,
                                    0.0, 0.0, 1.0)
-            del window[0]  # a break or an outlier in the window: try without its oldest
+            del window[0]
         return None
 
     def _ray(self, time_ns: int, camera: int, u: float, v: float):
@@ -523,33 +525,32 @@ class BallFilter:
         tau = np.array([(w[0] - t_ref) / NS for w in window])
         g = np.array(self._g)
         rays = [self._ray(*w) for w in window]
-        if any(not np.all(np.isfinite(d)) for _, d in rays):
+        O = np.array([o for o, _ in rays])
+        D = np.array([d for _, d in rays])
+        if not np.all(np.isfinite(D)):
             return None
-        # linear start: the path p0 + v0 τ + (g + a_drag) τ²/2 on each ray (2 equations per
-        # ray: its offsets along two directions normal to it), weighted by 1/depth in a 2nd pass
+        # linear start: the path p0 + v0 τ + a τ²/2 on each ray (2 equations per ray: its
+        # offsets along two unit directions normal to it), weighted by 1/depth in a 2nd pass
+        helper = np.where((np.abs(D[:, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+        E1 = np.cross(D, helper)
+        E1 /= np.linalg.norm(E1, axis=1, keepdims=True)
+        E = np.concatenate([E1, np.cross(D, E1)])  # (2n, 3)
+        T = np.concatenate([tau, tau])
+        OO = np.concatenate([O, O])
         accel = g
-        weights = np.ones(len(window))
+        weights = np.ones(len(T))
         theta = None
         for _ in range(2):
-            rows, rhs = [], []
-            for (origin, d), ti, wi in zip(rays, tau, weights, strict=True):
-                e1 = np.cross(d, [1.0, 0.0, 0.0] if abs(d[0]) < 0.9 else [0.0, 1.0, 0.0])
-                e1 /= np.linalg.norm(e1)
-                e2 = np.cross(d, e1)
-                for e in (e1, e2):
-                    rows.append(wi * np.concatenate([e, ti * e]))
-                    rhs.append(wi * (e @ (origin - 0.5 * ti * ti * accel)))
-            A, b = np.array(rows), np.array(rhs)
-            if np.linalg.cond(A) > 1e10:
+            A = weights[:, None] * np.hstack([E, T[:, None] * E])
+            b = weights * np.einsum("ij,ij->i", E, OO - 0.5 * (T * T)[:, None] * accel)
+            theta, _, rank, sv = np.linalg.lstsq(A, b, rcond=None)
+            if rank < 6 or sv[-1] < 1e-10 * sv[0]:
                 return None
-            theta = np.linalg.lstsq(A, b, rcond=None)[0]
-            depth = np.array([(theta[:3] + ti * theta[3:] - o) @ d
-                              for (o, d), ti in zip(rays, tau, strict=True)])
+            depth = np.einsum("ij,ij->i", theta[:3] + tau[:, None] * theta[3:] - O, D)
             if not np.all(depth > _MIN_DEPTH_M):
                 return None
-            weights = 1.0 / depth
-            speed = np.linalg.norm(theta[3:])
-            accel = g - self._k * speed * theta[3:]
+            weights = np.concatenate([1.0 / depth, 1.0 / depth])
+            accel = g - self._k * np.linalg.norm(theta[3:]) * theta[3:]
         # Gauss-Newton in distorted pixels (the filter's measurement model)
         for _ in range(3):
             J, r = self._pixel_system(window, tau, theta, accel)
@@ -577,16 +578,20 @@ class BallFilter:
         return [float(a) for a in theta], [float(a) for a in cov.ravel()], residuals
 
     def _pixel_system(self, window, tau, theta, accel):
+        """Jacobian (2n, 6) and residuals (2n,) of the window's pixels at the path
+        ``theta``; (None, None) when a point is behind its camera."""
+        points = (theta[:3] + tau[:, None] * theta[3:]
+                  + 0.5 * (tau * tau)[:, None] * accel).tolist()
         rows, res = [], []
-        for (_, camera, u, v), ti in zip(window, tau, strict=True):
-            p = theta[:3] + ti * theta[3:] + 0.5 * ti * ti * accel
-            proj = self._cams[camera].project(float(p[0]), float(p[1]), float(p[2]))
+        for (_, camera, u, v), ti, p in zip(window, tau.tolist(), points, strict=True):
+            proj = self._cams[camera].project(p[0], p[1], p[2])
             if proj is None:
                 return None, None
             pu, pv, h0, h1 = proj
-            for h, z, zhat in ((h0, u, pu), (h1, v, pv)):
-                rows.append([*h, *(ti * np.array(h))])
-                res.append(z - zhat)
+            rows.append([h0[0], h0[1], h0[2], ti * h0[0], ti * h0[1], ti * h0[2]])
+            rows.append([h1[0], h1[1], h1[2], ti * h1[0], ti * h1[1], ti * h1[2]])
+            res.append(u - pu)
+            res.append(v - pv)
         return np.array(rows), np.array(res)
 
 
