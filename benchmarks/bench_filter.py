@@ -12,8 +12,9 @@ and 1 px.
 
 Latency: every detection of a 3-camera rally pushed one at a time, (a) into
 :class:`pslog.fusion.filter.BallFilter` (the filter's own streaming form, which live mode
-uses) and (b) through :class:`pslog.fusion.stream.StreamFuser` (clock correction, admission
-queue and a Track per push included); median and p99 per detection.
+uses) and (b) through :class:`pslog.fusion.stream.StreamFuser` (order check and a Track per
+push included); median and p99 per detection, in CPU time of this process (the target's
+measure: the machine may be shared) and in wall-clock time.
 
     python benchmarks/bench_filter.py [--seconds 20] [--quick]
 """
@@ -107,28 +108,28 @@ def latency(seconds: float) -> bool:
     detections, _ = simulate(rig, motion, seconds, SimulationOptions(noise_px=0.3, seed=5))
     obs = detections.best()
     rows = list(zip(obs.time_ns.tolist(), obs.camera.tolist(), obs.uv.tolist(), strict=True))
-    clock = time.perf_counter_ns
     ok = True
     for label in ("BallFilter.push", "StreamFuser.push"):
-        spent = np.empty(len(rows))
+        wall, cpu = np.empty(len(rows)), np.empty(len(rows))
         if label == "BallFilter.push":
             flt = BallFilter(rig)
-            for i, (t, c, (u, v)) in enumerate(rows):
-                start = clock()
-                flt.push(t, c, u, v)
-                spent[i] = clock() - start
+
+            def push(t, c, uv, flt=flt):
+                flt.push(t, c, uv[0], uv[1])
         else:
-            fuser = StreamFuser(rig, "filter")
-            for i, (t, c, uv) in enumerate(rows):
-                start = clock()
-                fuser.push(t, c, uv)
-                spent[i] = clock() - start
-        median, p99 = np.median(spent) / 1e3, np.percentile(spent, 99) / 1e3
+            push = StreamFuser(rig, "filter").push
+        for i, (t, c, uv) in enumerate(rows):
+            start, start_cpu = time.perf_counter_ns(), time.process_time_ns()
+            push(t, c, uv)
+            cpu[i] = time.process_time_ns() - start_cpu
+            wall[i] = time.perf_counter_ns() - start
+        median = np.median(cpu) / 1e3
         met = median <= TARGET_US
-        if label == "BallFilter.push":
-            ok = met
-        print(f"  {label:<17} median {median:6.1f} µs  p99 {p99:7.1f} µs  "
-              f"({len(rows):,} detections){'' if met else '  above the 50 µs target'}")
+        ok &= met
+        print(f"  {label:<17} CPU median {median:6.1f} µs  p99 {np.percentile(cpu, 99) / 1e3:7.1f}"
+              f" µs | wall median {np.median(wall) / 1e3:6.1f} µs  p99 "
+              f"{np.percentile(wall, 99) / 1e3:7.1f} µs  ({len(rows):,} detections)"
+              f"{'' if met else '  above the 50 µs target'}")
     return ok
 
 

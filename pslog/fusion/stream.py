@@ -110,6 +110,8 @@ class StreamFuser:
                               f"order of their logged times; got t={time_ns[0]} ns after "
                               f"t={self._last_logged[0]} ns")
         self._last_logged = keys[-1]
+        if self.incremental is not None and not self._corrected:  # nothing to reorder
+            return self.incremental.push(time_ns, camera, uv, frame_index)
         p = self._clock
         true_ns = true_times_ns(time_ns, uv[:, 1], p["height"][camera],
                                 p["clock_offset"][camera], p["clock_drift_ppm"][camera],
