@@ -49,7 +49,7 @@ TARGET_US = 50.0
 
 def bench_rig(n: int = 3, fps: float = 30.0, distortion: bool = False) -> Rig:
     """``n`` cameras around the 3 x 2 m floor, 2.4-3 m high, type-A shutters."""
-    dist = np.array([-0.25, 0.1, 5e-4, -4e-4, -0.02]) if distortion else np.zeros(5)
+    dist = np.array([-0.12, 0.03, 5e-4, -4e-4, 0.0]) if distortion else np.zeros(5)
     cams = []
     for i in range(n):
         angle = 2 * np.pi * i / n - 1.2
