@@ -372,32 +372,36 @@ class BallFilter:
         x, P = self._predicted(self._x, self._P, dt)
         inn = self._innovation(cam, x, P, u, v)
         jump = 0.0
-        if inn is not None and inn[7] <= self._gate:
+        accepted = inn is not None and inn[7] <= self._gate
+        if accepted:
             xn, Pn = self._updated(x, P, inn)
-            history = self._history
-            history.append((self.time_ns, self._x, self._P, time_ns, camera, u, v,
-                            inn[7] + math.log(inn[8])))
-            if self._adapt:  # pixel noise by stochastic approximation of E[NIS] = 2
-                var = self._var * (1.0 + self._adapt * (0.5 * inn[7] - 1.0))
-                self._var = min(max(var, self._var_min), self._var_max)
-            if len(history) > _JUMP_LAG + 1:
-                del history[0]
         else:
             jumped = self._jump(time_ns, camera, u, v) if inn is not None else None
             if jumped is None:  # rejected: the point is the prediction
                 return self._reject(time_ns, camera, u, v, x, P, inn, gap_s)
             xn, Pn, inn = jumped
             jump = 1.0
+        proj = cam.project(xn[0], xn[1], xn[2])
+        if proj is None:  # never a point behind the camera that made it
+            return self._reject(time_ns, camera, u, v, x, P, inn, gap_s)
+        if accepted:
+            history = self._history
+            history.append((self.time_ns, self._x, self._P, time_ns, camera, u, v,
+                            inn[7] + math.log(inn[8])))
+            if len(history) > _JUMP_LAG + 1:
+                del history[0]
+            if self._adapt:  # pixel noise by stochastic approximation of E[NIS] = 2
+                var = self._var * (1.0 + self._adapt * (0.5 * inn[7] - 1.0))
+                self._var = min(max(var, self._var_min), self._var_max)
+        else:
             self._jump_ns, self._jump_camera = time_ns, camera
         self._x, self._P, self.time_ns, self._last_ns = xn, Pn, time_ns, time_ns
         self._rejects = 0
         self._cam_last[camera] = time_ns
         self._window.append((time_ns, camera, u, v))
         del self._window[:-self.options.init_window]
-        proj = cam.project(xn[0], xn[1], xn[2])
-        residual = _NAN if proj is None else math.hypot(u - proj[0], v - proj[1])
-        return self._point(xn, Pn, math.hypot(inn[0], inn[1]), residual, inn[7], gap_s,
-                           jump, 0.0, 0.0)
+        return self._point(xn, Pn, math.hypot(inn[0], inn[1]),
+                           math.hypot(u - proj[0], v - proj[1]), inn[7], gap_s, jump, 0.0, 0.0)
 
     def _jump(self, time_ns, camera, u, v):
         """A bounce or a kick: a velocity jump (a bounce's, mostly along gravity, then a
