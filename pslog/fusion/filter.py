@@ -73,6 +73,9 @@ _MIN_DEPTH_M = 1e-3
 _NAN = float("nan")
 #: A jump is looked for before this many accepted detections back (and at the newest one).
 _JUMP_LAG = 2
+#: A track whose first detections after its start include a rejected one is dropped (no
+#: point from it) until this many were accepted.
+_CONFIRM = 2
 #: A bounce's velocity jump across the floor's normal, in variance relative to along it.
 _BOUNCE_SIDE = 0.05
 
@@ -98,6 +101,8 @@ class FilterOptions:
     max_rejects : int, consecutive rejected detections after which the track is lost
     init_detections : int, detections (of at least two cameras) a (re)initialisation fits
     init_window : int, most detections kept for a (re)initialisation
+    max_init_std_m : float, a (re)initialisation whose position standard deviation
+        ``sqrt(trace P_pp)`` exceeds this is refused (a degenerate geometry), metres
     max_gap_s : float or None, longest time without an accepted detection the track bridges;
         None: :func:`pslog.fusion._prepare.default_max_gap_s` of the rig
     """
@@ -115,6 +120,7 @@ class FilterOptions:
     max_rejects: int = 3
     init_detections: int = 4
     init_window: int = 8
+    max_init_std_m: float = 0.05
     max_gap_s: float | None = None
 
     def __post_init__(self) -> None:
@@ -231,6 +237,7 @@ class BallFilter:
         self._P = [0.0] * 36
         self._last_ns = 0  # time of the last accepted detection
         self._rejects = 0
+        self._confirmed = 0  # detections accepted since the track started
         self._cam_last = [-(2**62)] * len(rig)  # last accepted detection per camera
         self._jump_ns, self._jump_camera = -(2**62), -1  # the latest jump accepted
         self._window: list[tuple[int, int, float, float]] = []  # (time, camera, u, v)
@@ -246,6 +253,7 @@ class BallFilter:
         self._x = [float(a) for a in (*position, *velocity)]
         self._P = [float(a) for a in np.asarray(covariance, dtype=np.float64).ravel()]
         self._rejects = 0
+        self._confirmed = 0
         self._window = []
         self._history = []
         self._cam_last = [self._last_ns] * len(self._cam_last)
@@ -397,6 +405,7 @@ class BallFilter:
             self._jump_ns, self._jump_camera = time_ns, camera
         self._x, self._P, self.time_ns, self._last_ns = xn, Pn, time_ns, time_ns
         self._rejects = 0
+        self._confirmed += 1
         self._cam_last[camera] = time_ns
         self._window.append((time_ns, camera, u, v))
         del self._window[:-self.options.init_window]
@@ -461,6 +470,9 @@ class BallFilter:
         self._rejects += 1
         self._window.append((time_ns, camera, u, v))
         del self._window[:-self.options.init_window]
+        if self._confirmed < _CONFIRM:  # a start the next detections deny: no point from it
+            self.time_ns = None
+            return self._try_window()
         nis = _NAN if inn is None else inn[7]
         inn_px = _NAN if inn is None else math.hypot(inn[0], inn[1])
         self._x, self._P, self.time_ns = x, P, time_ns
@@ -576,8 +588,9 @@ class BallFilter:
             cov = self._var * np.linalg.inv(info)
         except np.linalg.LinAlgError:
             return None
-        if not np.all(np.isfinite(cov)) or np.linalg.cond(info) > 1e14:
-            return None
+        if (not np.all(np.isfinite(cov)) or np.linalg.cond(info) > 1e14
+                or np.trace(cov[:3, :3]) > self.options.max_init_std_m ** 2):
+            return None  # a degenerate geometry (rays nearly parallel): no trustworthy start
         cov = 0.5 * (cov + cov.T)
         return [float(a) for a in theta], [float(a) for a in cov.ravel()], residuals
 
