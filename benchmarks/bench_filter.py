@@ -5,7 +5,8 @@ Targets (issue 10): ``filter`` never worse than ``typeA``; at 0.3 px at most hal
 (offline, every point uses every detection) is the reference of what the detections allow.
 
 Sessions (rigs of this benchmark, not the tests'): rallies of the tests' own generator
-(``tests/_rally.py``: kicks, floor bounces, air drag) and the library's ``throw``, seen by
+(``tests/_rally.py``: kicks, floor bounces, air drag), the library's ``rally`` (chip kicks
+and floor bounces of a golf ball) and ``throw``, seen by
 cameras around a 3 x 2 m floor with type-A shutters: 3 cameras at 30 fps (two rallies, one
 throw), 2 and 4 cameras, 3 cameras at 60 fps, 3 cameras with lens distortion; noise 0, 0.3
 and 1 px.
@@ -68,6 +69,7 @@ def sessions(seconds: float):
     return [
         ("rally, 3 cams 30 fps", bench_rig(3), fast, seconds),
         ("slow rally, 3 cams", bench_rig(3), slow, seconds),
+        ("library rally, 3 cams", bench_rig(3), get_motion("rally"), seconds),
         ("throw, 3 cams", bench_rig(3), throw, throw.duration),
         ("rally, 2 cams", bench_rig(2), fast, seconds),
         ("rally, 4 cams", bench_rig(4), fast, seconds),

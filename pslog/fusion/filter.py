@@ -78,6 +78,9 @@ _JUMP_LAG = 2
 _CONFIRM = 2
 #: A bounce's velocity jump across the floor's normal, in variance relative to along it.
 _BOUNCE_SIDE = 0.05
+#: A floor bounce's velocity about its expected reflection: standard deviations along
+#: gravity and across, m/s.
+_REFLECT_ALONG, _REFLECT_SIDE = 1.0, 0.6
 
 
 @dataclass(frozen=True)
@@ -94,8 +97,12 @@ class FilterOptions:
     gate : float, chi-square gate on the normalised innovation (2 degrees of freedom;
         18.4 is the 99.99 % quantile)
     jump_speed : float, m/s, standard deviation of the velocity jump of a bounce or a kick
-    bounce_shape : bool, also try a bounce's jump (variance ``σ_j²`` along gravity, 5 % of
-        it across) before a kick's (``σ_j²`` on every axis)
+    bounce_shape : bool, also try a floor bounce (the velocity along gravity reflected) and
+        a jump mostly along gravity (variance ``σ_j²`` along, 5 % of it across) besides a
+        kick (``σ_j²`` on every axis)
+    restitution, bounce_friction : float, a floor bounce's expected reflection: the velocity
+        along gravity times ``-restitution``, the rest times ``1 - bounce_friction`` (a golf
+        ball on a floor)
     adapt_rate : float, step of the pixel noise's adaptation (0: ``noise_px`` fixed)
     min_noise_px, max_noise_px : float, bounds of the adapted pixel noise
     max_rejects : int, consecutive rejected detections after which the track is lost
@@ -117,6 +124,8 @@ class FilterOptions:
     gate: float = 18.4
     jump_speed: float = 6.0
     bounce_shape: bool = True
+    restitution: float = 0.7
+    bounce_friction: float = 0.1
     max_rejects: int = 3
     init_detections: int = 4
     init_window: int = 8
@@ -223,12 +232,21 @@ class BallFilter:
         self._var_min, self._var_max = options.min_noise_px ** 2, options.max_noise_px ** 2
         self._q = options.accel_psd
         self._jump_var = options.jump_speed ** 2
-        # a bounce (mostly vertical: the floor's normal) and a kick (any direction), in
-        # variance per axis relative to σ_j²
-        up = np.abs(np.asarray(options.gravity, dtype=np.float64))
-        up = up / up.max() if up.max() > 0 else np.ones(3)
-        self._jump_shapes = ([tuple(float(_BOUNCE_SIDE + (1 - _BOUNCE_SIDE) * a) for a in up)]
-                             if options.bounce_shape else []) + [(1.0, 1.0, 1.0)]
+        # the jump hypotheses (reflect, variance per axis): a floor bounce (the velocity
+        # along gravity reflected with the restitution, some of the rest lost), a jump
+        # mostly along gravity (a bounce off an unknown surface) and a kick (any direction)
+        g_axis = np.abs(np.asarray(options.gravity, dtype=np.float64))
+        g_axis = g_axis / g_axis.max() if g_axis.max() > 0 else np.ones(3)
+        jv = self._jump_var
+        self._jump_shapes = ([
+            (True, tuple(float(_REFLECT_SIDE ** 2 + (_REFLECT_ALONG ** 2 - _REFLECT_SIDE ** 2)
+                               * a) for a in g_axis)),
+            (False, tuple(float(jv * (_BOUNCE_SIDE + (1 - _BOUNCE_SIDE) * a))
+                          for a in g_axis))] if options.bounce_shape else []) + [
+            (False, (jv, jv, jv))]
+        norm = math.sqrt(sum(a * a for a in options.gravity)) or 1.0
+        self._down = tuple(float(a) / norm for a in options.gravity)
+        self._restitution, self._friction = options.restitution, options.bounce_friction
         self._k = options.drag_per_m
         self._g = tuple(float(x) for x in options.gravity)
         self._gate = options.gate
@@ -437,7 +455,10 @@ class BallFilter:
                 dt = (t - t0) / NS
                 x, P = self._predicted(x, P, dt)
                 if first:  # the jump Δv at an instant uniform in the interval: Δp = Δv s
-                    P, first = self._jumped(P, dt, shape), False
+                    jumped = self._jumped(x, P, dt, shape)
+                    if jumped is None:
+                        break
+                    (x, P), first = jumped, False
                 inn = self._innovation(self._cams[c], x, P, du, dv)
                 if inn is None or not inn[7] <= self._gate:
                     break
@@ -451,18 +472,33 @@ class BallFilter:
             self._history = []  # a new segment: a later jump is not looked for before it
         return best
 
-    def _jumped(self, P, dt, shape):
-        """``P`` plus the covariance of a velocity jump ``Δv ~ N(0, diag(shape) σ_j²)`` at an
-        instant uniform over the last ``dt``: ``Δp = Δv s``, ``E[s²] = dt²/3``,
-        ``E[s] = dt/2``."""
-        P = P[:]
+    def _jumped(self, x, P, dt, shape):
+        """``(x, P)`` after a velocity jump ``Δv ~ N(μ, diag(σ²))`` at an instant ``s``
+        uniform over the last ``dt`` (``Δp = Δv s``, ``E[s] = dt/2``, ``E[s²] = dt²/3``,
+        ``Var s = dt²/12``); ``shape = (reflect, σ²)``: ``μ = 0``, or for a floor bounce
+        ``μ = −(1 + e) v_d ĝ − f (v − v_d ĝ)`` with ``v_d = v·ĝ`` (``ĝ`` gravity's unit
+        vector; None when the ball is not falling: no floor bounce then)."""
+        reflect, var = shape
+        x, P = x[:], P[:]
+        if reflect:
+            down = self._down
+            vd = x[3] * down[0] + x[4] * down[1] + x[5] * down[2]
+            if not vd > 0:
+                return None
+            e, f = self._restitution, self._friction
+            mu = [-(1.0 + e) * vd * down[i] - f * (x[3 + i] - vd * down[i]) for i in range(3)]
+            for i in range(3):
+                x[3 + i] += mu[i]
+                x[i] += mu[i] * dt / 2.0
+                for j in range(3):  # the jump's unknown instant spreads its mean's shift
+                    P[6 * i + j] += mu[i] * mu[j] * dt * dt / 12.0
         for i in range(3):
-            jv = self._jump_var * shape[i]
+            jv = var[i]
             P[7 * i] += jv * dt * dt / 3.0
             P[6 * i + 3 + i] += jv * dt / 2.0
             P[6 * (i + 3) + i] += jv * dt / 2.0
             P[7 * (i + 3)] += jv
-        return P
+        return x, P
 
     def _reject(self, time_ns, camera, u, v, x, P, inn, gap_s):
         """The detection failed the gate: the point is the prediction ``x``; after
