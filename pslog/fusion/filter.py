@@ -21,9 +21,10 @@ equations, exactly as implemented, are in ``docs/methods.md`` (section ``filter`
 - gating (Bar-Shalom et al., section 5.4): the normalised innovation squared
   ``NIS = yᵀ S⁻¹ y`` is compared with the chi-square quantile of 2 degrees of freedom
   (``gate``). A detection outside the gate is first tried as a bounce or a kick: a velocity
-  jump (standard deviation ``jump_speed``; a bounce's mostly along gravity, a kick's on
-  every axis) at an instant within the step, position continuous, placed before one of the
-  last three accepted detections (the most likely wins); accepted if then inside the gate
+  jump at an instant within the step, position continuous (three hypotheses: a floor
+  bounce reflecting the velocity along gravity, a jump mostly along gravity, a kick of
+  standard deviation ``jump_speed`` on every axis), placed before one of the last three
+  accepted detections (the most likely pair wins); accepted if then inside the gate
   (``jump`` = 1). Otherwise it is rejected (``rejected`` = 1; the point is the
   prediction). After ``max_rejects`` consecutive rejections, or a time without an accepted
   detection longer than ``max_gap_s``, the track is lost;
