@@ -68,15 +68,17 @@ def test_fuse_defaults_to_every_applicable_method(tmp_path, sim_session, cli):
     code, out, err = cli("fuse", sim_session.path, "-o", tmp_path / "all.mcap")
     assert code == 0, err
     assert "not run on this timing: sync, typeB, linear" in out
-    assert set(read_session(tmp_path / "all.mcap").tracks) == {"typeA", "nearest", "smooth"}
+    assert set(read_session(tmp_path / "all.mcap").tracks) == {"typeA", "nearest", "smooth",
+                                                                "filter"}
 
 
 def test_default_methods_follow_the_timing(tmp_path, cli):
     from pslog import builtin_rig
     from pslog.fusion import default_methods
 
-    expected = {"sync": ["sync", "smooth"], "typeA": ["nearest", "typeA", "smooth"],
-                "typeB": ["sync", "nearest", "typeA", "typeB", "linear", "smooth"]}
+    expected = {"sync": ["sync", "smooth", "filter"],
+                "typeA": ["nearest", "typeA", "smooth", "filter"],
+                "typeB": ["sync", "nearest", "typeA", "typeB", "linear", "smooth", "filter"]}
     for timing, methods in expected.items():
         rig = apply_timing(builtin_rig("paper3"), timing)
         detections, _ = simulate(rig, get_motion("fall"))

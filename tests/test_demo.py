@@ -20,7 +20,8 @@ def test_demo_records_fuses_evaluates_and_saves_a_recording(tmp_path):
     assert "Table 1" in result.stdout and "typeA" in result.stdout
     assert f"rerun {out / 'demo.rrd'}" in result.stdout
     session = read_session(out / "fused.mcap")
-    assert session.n_images == 135 and set(session.tracks) == {"typeA", "nearest", "smooth"}
+    assert session.n_images == 135 and set(session.tracks) == {"typeA", "nearest", "smooth",
+                                                               "filter"}
     type_a = evaluate(session.tracks["typeA"], session.truth)
     nearest = evaluate(session.tracks["nearest"], session.truth)
     assert abs(type_a.rate_hz - 90.0) < 0.5 and type_a.mean_mm < 10.0
