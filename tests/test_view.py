@@ -116,8 +116,9 @@ def test_rrd_verifies_and_holds_every_entity(session, rrd):
                      ("interpolated", "snapped", "bracket", "snap", "epipolar")}
         expected |= {f"{image}/epipolar/{d}" for d in names if d != c}
     assert expected <= set(chunks), sorted(expected - set(chunks))
-    # typeA's rays cross exactly after the snap: its ray miss (~1e-15 m) is not plotted
-    assert "/plots/ray_miss_mm/typeA" not in chunks
+    # typeA's ray miss is measured before the epipolar snap (issue 10): it is informative
+    # and plotted (after the snap the rays would cross by construction, ~1e-15 m)
+    assert "/plots/ray_miss_mm/typeA" in chunks
     static = {c.entity_path for c in RrdReader(path).stream() if c.is_static}
     assert {"/world", "/world/cameras/cam1", "/legend"} <= static
     assert RrdReader(path).blueprints(), "the default blueprint is in the file"
