@@ -91,6 +91,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"not run on this timing: {', '.join(skipped)} (name them with --method "
                   f"to run them anyway)")
     tracks = fuse_all(observations, rig, methods, options)
+    dropped = {m: t.dropped for m, t in tracks.items()}  # geometrically invalid points
     empty = [m for m, t in tracks.items() if len(t) == 0]
     if empty:
         print(f"no point from {', '.join(empty)}: too few detections close enough in time")
@@ -108,6 +109,8 @@ def run(args: argparse.Namespace) -> int:
     copy_session(args.session, output, tracks=list(tracks.values()), force=args.force,
                  rig=None if args.rig is None else rig)
     for method, track in tracks.items():
-        print(f"{method:<8} {len(track):>7d} points")
+        why = ", ".join(f"{reason} {n}" for reason, n in dropped.get(method, {}).items())
+        print(f"{method:<8} {len(track):>7d} points"
+              + (f" (dropped as geometrically invalid: {why})" if why else ""))
     print(f"wrote {output}")
     return 0

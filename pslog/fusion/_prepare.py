@@ -165,12 +165,12 @@ def invalid_points(prep: Prepared, points: np.ndarray, used: np.ndarray) -> np.n
     -------
     (k,) int64, ``BEHIND`` if the point is at or behind the image plane of a camera that
     contributed to it; ``OUTSIDE_VIEW`` if it projects outside the view (image grown by
-    :data:`VIEW_MARGIN`) of such a camera; a non-finite point is ``BEHIND``
+    :data:`VIEW_MARGIN`) of such a camera; a non-finite point gets no flag (its caller
+    knows why it has none)
     """
     k, m = used.shape
     flags = np.zeros(k, dtype=np.int64)
     finite = np.all(np.isfinite(points), axis=1)
-    flags[~finite] |= BEHIND
     for c in range(m):
         rows = np.flatnonzero(used[:, c] & finite)
         if len(rows) == 0:

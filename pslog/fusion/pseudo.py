@@ -190,6 +190,7 @@ def pseudo_stereo_points(
     with np.errstate(invalid="ignore"):
         flags[np.all(np.isfinite(points), axis=1) & ~((s > 0) & (k > 0))] |= BEHIND
         flags[~(np.degrees(angle) >= MIN_RAY_ANGLE_DEG)] |= PARALLEL
+    flags[~valid] = 0  # no partner: no point, and nothing to say about its geometry
     valid &= np.all(np.isfinite(points), axis=1) & (flags == 0)
     return PseudoStereoPoints(rows, valid, partner, prev_row, next_row, uv_interp, uv_snapped,
                               snap_px, points, miss, angle, w, miss_unsnapped, residual_obs,
@@ -227,7 +228,8 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5
     point (behind a camera, outside a view, near-parallel rays) counts as not triangulated.
     An output point behind a camera that contributed to it (eq. (4)'s ``k <= 0``: the
     prediction behind the newest camera) or outside its view is dropped and counted in
-    ``Track.dropped``. ``noise_px``: the detections' pixel noise behind ``std_m``.
+    ``Track.dropped``; refused past points are counted there too (``past_<reason>``, each
+    detection once). ``noise_px``: the detections' pixel noise behind ``std_m``.
     """
     obs = prep.obs
     time_ns = obs.time_ns
@@ -329,7 +331,13 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5
     made = np.all(np.isfinite(points), axis=1)
     keep = made & (flags == 0)
     track = Track("typeA", time_ns[events], points, obs.camera[events], quality).select(keep)
-    track = with_dropped(track, count_invalid(flags[made]))
+    # past points refused as invalid (each detection once): the points they would have made
+    # are missing, or made from earlier instants
+    refused = np.zeros(n, dtype=np.int64)
+    for _, _, points_k in computed:
+        np.bitwise_or.at(refused, points_k.row, points_k.flags)
+    past = {f"past_{k}": v for k, v in count_invalid(refused).items()}
+    track = with_dropped(track, count_invalid(flags[made]), past)
     construction = TypeAConstruction(
         events[keep], (_select(p1, keep), _select(p2, keep)), predicted[keep], points[keep])
     return track, construction

@@ -165,8 +165,9 @@ def stereo_at_common_instants(
             f"other; methods that suit this session: nearest, typeA")
     points, quality, flags, time_ns, camera = triangulate_groups(
         prep, group, len(n_cameras), noise_px)
-    made = (n_cameras >= 2) & np.all(np.isfinite(points), axis=1)
-    keep = made & (flags == 0)
+    # made: two usable rays, so an invalid point (exactly parallel rays give none) is counted
+    made = (n_cameras >= 2) & (quality["n_detections"] >= 2)
+    keep = made & (flags == 0) & np.all(np.isfinite(points), axis=1)
     track = Track(method, time_ns[keep], points[keep], camera[keep],
                   {k: v[keep] for k, v in quality.items()})
     return track, n_cameras[group] == 1, count_invalid(flags[made])
@@ -201,8 +202,8 @@ def fuse_nearest(prep: Prepared, max_gap_s: float, noise_px: float = 0.5) -> Tra
     others = (rows >= 0).sum(axis=1)
     rows[events, camera] = events
     points, quality, flags, _ = nview_points(prep, rows, noise_px)
-    made = (others >= 1) & np.all(np.isfinite(points), axis=1)
-    keep = made & (flags == 0)
+    made = (others >= 1) & (quality["n_detections"] >= 2)
+    keep = made & (flags == 0) & np.all(np.isfinite(points), axis=1)
     track = Track("nearest", time_ns[keep], points[keep], camera[keep],
                   {k: v[keep] for k, v in quality.items()})
     return with_dropped(track, count_invalid(flags[made]))
