@@ -120,15 +120,13 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float):
     with np.errstate(invalid="ignore", all="ignore"):
         quality = {
             "ray_miss_m": rms_miss, "ray_angle_deg": angle,
-            "residual_max_px": np.where(n_used > 0, np.nanmax(
-                np.where(used, residual, -np.inf), axis=1), np.nan),
+            "residual_max_px": np.fmax.reduce(np.where(used, residual, np.nan), axis=1),
             "residual_mean_px": np.nansum(np.where(used, residual, 0.0), axis=1) / n_used,
             "camera_mask": camera_mask(used), "n_detections": n_used.astype(np.float64),
             "gap_s": np.where(n_used > 0, (t_max - t_min) / NS, np.nan),
             "span_s": np.where(n_used > 0, (t_max - t_min) / NS, np.nan),
             **covariance_columns(cov),
         }
-    quality["residual_max_px"][~np.isfinite(quality["residual_max_px"])] = np.nan
     return points, quality, flags, used
 
 
