@@ -329,7 +329,7 @@ def test_stream_fuser_applies_the_rigs_clock_model_like_batch(method):
     base = apply_timing(builtin_rig("paper3"), "typeB" if grouped else "typeA")
     a, b, c = base.names
     scale = 0.04 if grouped else 1.0
-    faults = SimulationOptions(noise_px=0.3, miss_rate=0.1, seed=4,
+    faults = SimulationOptions(noise_px=0.3, miss_rate=0.3, drop_rate=0.1, seed=4,
                                clock_offset_s={b: 0.0123 * scale, c: -0.0071 * scale},
                                clock_drift_ppm={b: 40.0, c: -25.0},
                                readout_s={a: 0.012 * scale, b: 0.02 * scale, c: 0.015 * scale})
@@ -337,15 +337,14 @@ def test_stream_fuser_applies_the_rigs_clock_model_like_batch(method):
     detections, _ = simulate(base, get_motion("throw"), options=faults)
     logged = detections.best()
     batch = fuse(corrected_observations(detections, rig), rig, method)
-    assert len(batch) >= 20
+    assert len(batch) >= 12
     fuser = StreamFuser(rig, method)
     parts = [fuser.push(logged.time_ns[i], logged.camera[i], logged.uv[i],
                         logged.frame_index[i]) for i in range(len(logged))]
     parts.append(fuser.flush())
     assert_array_equal(np.concatenate([p.time_ns for p in parts]), batch.time_ns)
     assert_array_equal(np.concatenate([p.camera for p in parts]), batch.camera)
-    assert_allclose(np.concatenate([p.position_world for p in parts]), batch.position_world,
-                    rtol=0, atol=1e-12)
+    assert_array_equal(np.concatenate([p.position_world for p in parts]), batch.position_world)
 
 
 def test_stream_fuser_rejects_out_of_order_detections():
