@@ -406,3 +406,22 @@ def test_the_default_max_gap_bridges_three_and_a_half_frames_not_more():
     assert at[frame == 12][0] in track.time_ns  # 2.5 periods after camera 2's frame 9
     assert at[frame == 14][0] not in track.time_ns  # 4.5 periods
     assert at[frame == 15][0] in track.time_ns  # camera 2's frame 14 is back
+
+
+def test_fuse_prints_the_invalid_points_it_dropped(tmp_path, cli):
+    from pslog.log import SessionWriter, read_session
+    from pslog.records import Detections
+
+    # a sync session of the rectified pair: one good instant, one behind both cameras
+    rig = rectified_rig()
+    obs = observations([(0, 0, 300.0, 240.0), (0, 1, 320.0, 240.0),
+                        (40, 0, 340.0, 240.0), (40, 1, 320.0, 240.0),
+                        (80, 0, 341.0, 240.0), (80, 1, 320.0, 240.0)])
+    obs = Observations(obs.time_ns + NS, obs.camera, obs.uv, obs.time_ns // 33_000_000)
+    session = tmp_path / "s.mcap"
+    with SessionWriter(session, rig) as writer:
+        writer.add_detections(Detections.from_observations(rig.names, obs))
+    code, out, err = cli("fuse", session, "--method", "sync", "-o", tmp_path / "f.mcap")
+    assert code == 0, err
+    assert "sync           2 points (dropped as geometrically invalid: behind_camera 1)" in out
+    assert len(read_session(tmp_path / "f.mcap").tracks["sync"]) == 2
