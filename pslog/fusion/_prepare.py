@@ -25,8 +25,11 @@ MIN_RAY_ANGLE_DEG = 1.0
 #: its larger side on every edge: type A and type B put a point at one camera's instant in
 #: the view of cameras that saw the ball up to a few frames earlier or later.
 VIEW_MARGIN = 0.25
-#: Pixel step of the numerical Jacobian of a fused point (first-order covariance), pixels.
+#: Pixel step of the numerical Jacobians (the snap's, and the reference ones), pixels.
 _JACOBIAN_STEP_PX = 1e-3
+#: Take the covariances' Jacobians by forward differences through each method's whole
+#: construction instead of analytically: slow, a reference the tests compare with.
+FINITE_DIFFERENCES = False
 
 
 @dataclass(frozen=True, eq=False)
@@ -63,6 +66,13 @@ class Prepared:
     cameras: tuple = ()
     uv_jacobian: np.ndarray | None = None
     view_box: np.ndarray | None = None
+
+    def pixel_jacobians(self, rows: np.ndarray) -> np.ndarray | None:
+        """:attr:`uv_jacobian` of observations ``rows`` (NaN, for a pixel no lens maps,
+        as 0), or None when no camera has lens distortion (the identity)."""
+        if not any(np.any(c.dist) for c in self.cameras):
+            return None
+        return np.nan_to_num(self.uv_jacobian[rows])
 
     def rays_from_undistorted(self, camera: np.ndarray, uv: np.ndarray) -> np.ndarray:
         """Unit world directions (n, 3) of undistorted pixels ``uv`` (n, 2) of ``camera`` (n,)."""
@@ -205,33 +215,115 @@ def reprojection_px(prep: Prepared, points: np.ndarray, camera: np.ndarray,
     return out
 
 
-def propagate(evaluate, uv: list[np.ndarray], rows: np.ndarray, jac: list[np.ndarray],
-              noise_px: float) -> np.ndarray:
-    """First-order covariance (k, 3, 3), m², of a point made from detections.
+def direction_jacobian(prep: Prepared, camera: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """d(unit viewing direction, world) / d(undistorted pixel) of ``camera`` (k,) at ``uv``
+    (k, 2): (k, 3, 2). With ``r = Rᵀ K⁻¹ (u, v, 1)`` and ``d = r / |r|``,
+    ``dd/duv = (I - d dᵀ) Rᵀ K⁻¹[:, :2] / |r|``."""
+    M = _rt_k_inv(prep)[camera]  # Rᵀ K⁻¹ (k, 3, 3)
+    r = M[:, :, 0] * uv[:, :1] + M[:, :, 1] * uv[:, 1:] + M[:, :, 2]
+    norm = np.sqrt(np.einsum("ni,ni->n", r, r))
+    d = r / norm[:, None]
+    M = M[:, :, :2] / norm[:, None, None]
+    return M - d[:, :, None] * (d[:, :, None] * M).sum(axis=1)[:, None, :]
 
-    ``evaluate(uv)`` maps the undistorted pixels of S slots (a list of (k, 2) arrays) to the
-    points (k, 3). Slot ``s`` holds detection ``rows[:, s]`` (-1: unused); a detection used
-    in several slots of a point (type A's newest frame ends a bracket) moves in all of them
-    at once. Each detection's recorded pixel has independent isotropic noise of standard
-    deviation ``noise_px`` per axis, mapped to undistorted pixels by ``jac[s]`` (k, 2, 2)
-    (:attr:`Prepared.uv_jacobian`); the point's Jacobian is taken by forward differences.
+
+def _rt_k_inv(prep: Prepared) -> np.ndarray:
+    """Rᵀ K⁻¹ of every camera (m, 3, 3)."""
+    return np.swapaxes(prep.R, 1, 2) @ prep.K_inv
+
+
+def _inverse_3x3(A: np.ndarray) -> np.ndarray:
+    """Inverses of (k, 3, 3) matrices by their adjugates (NaN where singular): far faster
+    than ``np.linalg.inv`` for many small ones."""
+    a, b, c = A[:, 0, 0], A[:, 0, 1], A[:, 0, 2]
+    d, e, f = A[:, 1, 0], A[:, 1, 1], A[:, 1, 2]
+    g, h, i = A[:, 2, 0], A[:, 2, 1], A[:, 2, 2]
+    co = np.stack([e * i - f * h, c * h - b * i, b * f - c * e,
+                   f * g - d * i, a * i - c * g, c * d - a * f,
+                   d * h - e * g, b * g - a * h, a * e - b * d], axis=1).reshape(-1, 3, 3)
+    det = a * co[:, 0, 0] + b * co[:, 1, 0] + c * co[:, 2, 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return co / np.where(np.abs(det) > 1e-12, det, np.nan)[:, None, None]
+
+
+def least_squares_pixel_jacobians(points: np.ndarray, origins: np.ndarray, dirs: np.ndarray,
+                                  used: np.ndarray, turns: list[np.ndarray]
+                                  ) -> list[np.ndarray]:
+    """d(point) / d(undistorted pixel of ray j) (k, 3, 2) for each of m rays of the
+    least-squares point (:func:`pslog.geometry.triangulate_rays`; for two rays the midpoint
+    of their common perpendicular), given each ray's ``turns[j]`` = d(unit direction) /
+    d(pixel) (k, 3, 2) (:func:`direction_jacobian`). From ``A p = b``, ``A = Σ (I - d dᵀ)``,
+    ``b = Σ (I - d dᵀ) o``: a turn ``δd`` of ray j moves the point by
+    ``-A⁻¹ ((dᵀw) δd + d (wᵀ δd))`` with ``w = o - p``. Zero for unused rays."""
+    m = used.shape[1]
+    d = np.where(used[..., None], dirs, 0.0)
+    A = np.eye(3) * used.sum(axis=1)[:, None, None] - np.einsum("nmi,nmj->nij", d, d)
+    A_inv = _inverse_3x3(A)
+    out = []
+    for j in range(m):
+        w = origins[:, j] - points
+        G = np.where(used[:, j, None, None], turns[j], 0.0)
+        inner = (np.einsum("ni,ni->n", d[:, j], w)[:, None, None] * G
+                 + d[:, j, :, None] * (w[:, :, None] * G).sum(axis=1)[:, None, :])
+        out.append(np.where(used[:, j, None, None], -(A_inv @ inner), 0.0))
+    return out
+
+
+def covariance(rows: np.ndarray, jacobians: list[np.ndarray], uv_jacobians: list[np.ndarray],
+               noise_px: float) -> np.ndarray:
+    """First-order covariance (k, 3, 3), m², of points made from detections.
+
+    Slot ``s`` holds detection ``rows[:, s]`` (-1: unused) and ``jacobians[s]`` (k, 3, 2) is
+    d(point) / d(its undistorted pixel) (zero where unused); a detection used in several
+    slots of a point (type A's newest frame ends a bracket) adds up its slots' Jacobians.
+    Each detection's recorded pixel has independent isotropic noise of ``noise_px`` per
+    axis, mapped to undistorted pixels by ``uv_jacobians[s]`` (k, 2, 2)
+    (:meth:`Prepared.pixel_jacobians`; None for the identity, a rig without lens distortion).
     """
-    base = evaluate(uv)
     k, n_slots = rows.shape
     cov = np.zeros((k, 3, 3))
+    merged = [J.copy() for J in jacobians]
+    taken = np.zeros(rows.shape, dtype=bool)  # a later slot merged into an earlier one
+    for s in range(n_slots):
+        for t in range(s + 1, n_slots):
+            same = (rows[:, t] == rows[:, s]) & (rows[:, s] >= 0) & ~taken[:, t] & ~taken[:, s]
+            if np.any(same):
+                merged[s][same] += merged[t][same]
+                taken[same, t] = True
+    for s in range(n_slots):
+        use = (rows[:, s] >= 0) & ~taken[:, s]
+        if not np.any(use):
+            continue
+        JL = merged[s]
+        if uv_jacobians[s] is not None:  # None: no lens, the identity
+            JL = JL @ uv_jacobians[s]
+        if not np.all(use):
+            JL = np.where(use[:, None, None], JL, 0.0)
+        cov += JL @ np.swapaxes(JL, 1, 2)
+    return cov * noise_px**2
+
+
+def finite_difference_jacobians(evaluate, uv: list[np.ndarray], rows: np.ndarray
+                                ) -> list[np.ndarray]:
+    """The Jacobians :func:`covariance` takes, by forward differences of ``evaluate(uv)``
+    (slots' undistorted pixels, a list of (k, 2), to points (k, 3)); a detection in several
+    slots moves in all of them at once, so its first slot gets the whole derivative."""
+    base = evaluate(uv)
+    k, n_slots = rows.shape
+    out = [np.zeros((k, 3, 2)) for _ in range(n_slots)]
     h = _JACOBIAN_STEP_PX
     for s in range(n_slots):
         first = (rows[:, s] >= 0) & ~np.any(rows[:, :s] == rows[:, s:s + 1], axis=1)
         if not np.any(first):
             continue
-        same = (rows == rows[:, s:s + 1]) & first[:, None]  # (k, S)
+        same = (rows == rows[:, s:s + 1]) & first[:, None]
         for axis in range(2):
-            step = h * np.where(first[:, None], jac[s][:, :, axis], 0.0)
+            step = np.zeros((k, 2))
+            step[:, axis] = h
             moved = [u + np.where(same[:, j:j + 1], step, 0.0) for j, u in enumerate(uv)]
             with np.errstate(invalid="ignore"):
-                d = np.where(first[:, None], (evaluate(moved) - base) / h, 0.0)
-            cov += d[:, :, None] * d[:, None, :]
-    return cov * noise_px**2
+                out[s][:, :, axis] = np.where(first[:, None], (evaluate(moved) - base) / h, 0.0)
+    return out
 
 
 def covariance_columns(cov: np.ndarray) -> dict[str, np.ndarray]:

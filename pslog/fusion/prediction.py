@@ -14,12 +14,15 @@ import numpy as np
 
 from ..geometry import closest_points_on_rays, ray_depths
 from ..records import NS, Track
+from . import _prepare
 from ._prepare import (
     BEHIND,
     Prepared,
+    covariance,
     covariance_columns,
+    direction_jacobian,
+    finite_difference_jacobians,
     invalid_points,
-    propagate,
     reprojection_px,
 )
 from .stereo import count_invalid, stereo_at_common_instants, with_dropped
@@ -73,14 +76,23 @@ def fuse_predicted(prep: Prepared, method: str, tolerance_s: float, max_gap_s: f
             depth = ray_depths(predicted, prep.ray_origin[single], prep.ray_dir[single])
         flags[~(depth > 0)] |= BEHIND
 
-        def evaluate(uv):
-            return closest_points_on_rays(prep.ray_origin[single],
-                                          prep.rays_from_undistorted(cam, uv[0]), predicted)
-
-        with np.errstate(invalid="ignore"):
-            cov_ray = propagate(evaluate, [prep.uv_undistorted[single]], single[:, None],
-                                [prep.uv_jacobian[single]], noise_px)
         d = prep.ray_dir[single]
+        with np.errstate(invalid="ignore"):
+            if _prepare.FINITE_DIFFERENCES:
+                def evaluate(uv):
+                    return closest_points_on_rays(
+                        prep.ray_origin[single], prep.rays_from_undistorted(cam, uv[0]),
+                        predicted)
+
+                jacobians = finite_difference_jacobians(
+                    evaluate, [prep.uv_undistorted[single]], single[:, None])
+            else:  # a turn δr of the unit ray moves the foot by ((rᵀq) I + r qᵀ) δr, q = P̂ - T
+                offset = predicted - prep.ray_origin[single]
+                turn = (np.einsum("ni,ni->n", d, offset)[:, None, None] * np.eye(3)
+                        + d[:, :, None] * offset[:, None, :])
+                jacobians = [turn @ direction_jacobian(prep, cam, prep.uv_undistorted[single])]
+            cov_ray = covariance(single[:, None], jacobians, [prep.pixel_jacobians(single)],
+                                 noise_px)
         onto = d[:, :, None] * d[:, None, :]  # the projection onto the ray, eq. (4)
         cov = onto @ cov_pred @ onto + cov_ray
     else:

@@ -48,6 +48,7 @@ from ..geometry import (
     ray_depths,
 )
 from ..records import NS, Track
+from . import _prepare
 from ._prepare import (
     BEHIND,
     MIN_RAY_ANGLE_DEG,
@@ -55,9 +56,12 @@ from ._prepare import (
     Prepared,
     bracket,
     camera_mask,
+    covariance,
     covariance_columns,
+    direction_jacobian,
+    finite_difference_jacobians,
     invalid_points,
-    propagate,
+    least_squares_pixel_jacobians,
     reprojection_px,
 )
 from .stereo import count_invalid, with_dropped
@@ -312,8 +316,27 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5
                                       point1 + ratio[:, None] * (point1 - point2))
 
     with np.errstate(invalid="ignore"):
-        cov = propagate(evaluate, [prep.uv_undistorted[slots[:, s]] for s in range(7)], slots,
-                        [prep.uv_jacobian[slots[:, s]] for s in range(7)], noise_px)
+        if _prepare.FINITE_DIFFERENCES:
+            jacobians = finite_difference_jacobians(
+                evaluate, [prep.uv_undistorted[slots[:, s]] for s in range(7)], slots)
+        else:
+            # eq. (4), P' = T + r rᵀ (P̂ - T) for a unit r: d P'/d P̂ = r rᵀ, and a turn δr of
+            # the newest ray moves P' by ((rᵀq) I + r qᵀ) δr with q = P̂ - T
+            r = prep.ray_dir[events]
+            q = predicted - prep.ray_origin[events]
+            onto = r[:, :, None] * r[:, None, :]
+            turn = (np.einsum("ni,ni->n", r, q)[:, None, None] * np.eye(3)
+                    + r[:, :, None] * q[:, None, :])
+            newest = turn @ direction_jacobian(prep, obs.camera[events],
+                                               prep.uv_undistorted[events])
+            # eq. (2): P̂ = (1 + ratio) P_{t-1} - ratio P_{t-2}
+            past1 = [((1 + ratio)[:, None, None] * onto) @ J
+                     for J in _pseudo_jacobians(prep, p1, obs.camera[j1])]
+            past2 = [(-ratio[:, None, None] * onto) @ J
+                     for J in _pseudo_jacobians(prep, p2, obs.camera[j2])]
+            jacobians = [newest, *past1, *past2]
+        cov = covariance(slots, jacobians, [prep.pixel_jacobians(slots[:, s]) for s in range(7)],
+                         noise_px)
         quality = {
             "snap_px": np.maximum(p1.snap_px, p2.snap_px),
             # measured before the snap: after it the rays cross by construction
@@ -341,6 +364,44 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5
     construction = TypeAConstruction(
         events[keep], (_select(p1, keep), _select(p2, keep)), predicted[keep], points[keep])
     return track, construction
+
+
+def _pseudo_jacobians(prep: Prepared, p: PseudoStereoPoints, cam_obs: np.ndarray
+                      ) -> list[np.ndarray]:
+    """d(P) / d(undistorted pixel) (k, 3, 2) of pseudo-stereo points ``p`` for their observed
+    detection and the partner's bracket (prev, next): steps 1-3 differentiated.
+
+    The point is the least-squares point of the observed ray and the snapped point's ray;
+    the snapped point moves with the interpolated one by ``I - n nᵀ`` (along the epipolar
+    line of normal ``n``) and with the observed pixel as it moves the line;
+    eq. (1) weighs the bracket by ``1 - w`` and ``w``."""
+    k = len(p.row)
+    uv_obs = prep.uv_undistorted[p.row]
+    partner = np.maximum(p.partner, 0)
+    dirs = np.stack([prep.rays_from_undistorted(cam_obs, uv_obs),
+                     prep.rays_from_undistorted(partner, p.uv_snapped)], axis=1)
+    origins = np.stack([prep.centers[cam_obs], prep.centers[partner]], axis=1)
+    J_observed, J_snapped = least_squares_pixel_jacobians(
+        p.points_world, origins, dirs, np.ones((k, 2), dtype=bool),
+        [direction_jacobian(prep, cam_obs, uv_obs), direction_jacobian(prep, partner,
+                                                                       p.uv_snapped)])
+    # the snap u_s = u_i - s n onto the line l = F (u_o, v_o, 1) = (a, l3), n = a / |a|,
+    # s = (a·u_i + l3) / |a|; a move of u_o changes l by F[:, :2] δ, which moves u_s by
+    # -n ((u_sᵀ da + dl3) / |a|) - s (I - n nᵀ) da / |a|
+    F = prep.F[cam_obs, partner]
+    line = F[:, :, 0] * uv_obs[:, :1] + F[:, :, 1] * uv_obs[:, 1:] + F[:, :, 2]
+    size = np.sqrt(line[:, 0] ** 2 + line[:, 1] ** 2)
+    normal = line[:, :2] / size[:, None]
+    signed = (np.einsum("ni,ni->n", line[:, :2], p.uv_interpolated) + line[:, 2]) / size
+    along = np.eye(2) - normal[:, :, None] * normal[:, None, :]
+    da = F[:, :2, :2] / size[:, None, None]  # (k, 2, 2): d a / d u_o, over |a|
+    dl3 = F[:, 2, :2] / size[:, None]
+    moved_line = (-normal[:, :, None] * ((p.uv_snapped[:, :, None] * da).sum(axis=1)
+                                          + dl3)[:, None, :]
+                  - signed[:, None, None] * (along @ da))
+    J_obs = J_observed + J_snapped @ moved_line
+    J_interp = J_snapped @ along
+    return [J_obs, (1 - p.weight)[:, None, None] * J_interp, p.weight[:, None, None] * J_interp]
 
 
 def _gather(computed: list[tuple[int, np.ndarray, PseudoStereoPoints]], events: np.ndarray,

@@ -7,6 +7,7 @@ import numpy as np
 from ..errors import FusionError
 from ..geometry import ray_angles, ray_depths, triangulate_rays
 from ..records import NS, Observations, Track
+from . import _prepare
 from ._prepare import (
     BEHIND,
     MIN_RAY_ANGLE_DEG,
@@ -14,10 +15,13 @@ from ._prepare import (
     PARALLEL,
     Prepared,
     camera_mask,
+    covariance,
     covariance_columns,
+    direction_jacobian,
+    finite_difference_jacobians,
     invalid_points,
     latest_row_at_or_before,
-    propagate,
+    least_squares_pixel_jacobians,
     reprojection_px,
 )
 
@@ -106,13 +110,20 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float):
         residual[:, c] = np.where(used[:, c], reprojection_px(prep, points, np.full(k, c), uv[c]),
                                   np.nan)
 
-    def evaluate(uvs):
-        with np.errstate(invalid="ignore"):
-            return triangulate_rays(origins, directions(uvs), used)[0]
-
     slot_rows = np.where(used, rows, -1)
-    cov = propagate(evaluate, uv, slot_rows,
-                    [prep.uv_jacobian[r[:, c]] for c in range(m)], noise_px)
+    if _prepare.FINITE_DIFFERENCES:
+        def evaluate(uvs):
+            with np.errstate(invalid="ignore"):
+                return triangulate_rays(origins, directions(uvs), used)[0]
+
+        jacobians = finite_difference_jacobians(evaluate, uv, slot_rows)
+    else:
+        with np.errstate(invalid="ignore"):
+            jacobians = least_squares_pixel_jacobians(
+                points, origins, dirs, used,
+                [direction_jacobian(prep, np.full(k, c), uv[c]) for c in range(m)])
+    cov = covariance(slot_rows, jacobians, [prep.pixel_jacobians(r[:, c]) for c in range(m)],
+                     noise_px)
     times = np.where(used, prep.obs.time_ns[r], 0)
     t_max = np.where(used, times, np.iinfo(np.int64).min).max(axis=1)
     t_min = np.where(used, times, np.iinfo(np.int64).max).min(axis=1)
