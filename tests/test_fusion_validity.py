@@ -243,6 +243,27 @@ def test_type_a_quality_columns_agree_with_its_construction():
     assert np.all(q["span_s"] >= q["gap_s"] - 1e-12)
 
 
+@pytest.mark.parametrize("method", causal_methods())
+def test_analytic_covariance_equals_differences_through_the_whole_construction(method,
+                                                                                 monkeypatch):
+    # the analytic Jacobians (least-squares point, viewing direction, snap, eqs. (2) and (4))
+    # against forward differences of each method's whole construction, under a strong lens
+    from pslog.fusion import _prepare
+
+    timing = "typeB" if "shared" in METHODS[method].needs else "typeA"
+    rig = distorted(apply_timing(builtin_rig("paper3"), timing))
+    detections, _ = simulate(rig, get_motion("throw"), options=SimulationOptions(
+        noise_px=0.5, miss_rate=0.2, seed=1))
+    analytic = fuse(detections, rig, method)
+    monkeypatch.setattr(_prepare, "FINITE_DIFFERENCES", True)
+    reference = fuse(detections, rig, method)
+    assert len(analytic) > 20
+    assert_array_equal(analytic.position_world, reference.position_world)
+    scale = reference.quality["std_m"] ** 2
+    for key in ("cov_xx_m2", "cov_yy_m2", "cov_zz_m2", "cov_xy_m2", "cov_xz_m2", "cov_yz_m2"):
+        assert np.all(np.abs(analytic.quality[key] - reference.quality[key]) < 1e-5 * scale), key
+
+
 @pytest.mark.parametrize("timing,method", [("sync", "sync"), ("typeA", "typeA"),
                                            ("typeB", "typeB"), ("typeB", "linear")])
 def test_covariance_is_calibrated_against_the_truth(timing, method):
