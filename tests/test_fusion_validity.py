@@ -38,6 +38,9 @@ F_PX, CX, CY, BASELINE = 500.0, 320.0, 240.0, 0.5
 K = np.array([[F_PX, 0.0, CX], [0.0, F_PX, CY], [0.0, 0.0, 1.0]])
 #: a strong barrel lens (17 % at the corners of the paper rig's 640 x 480 images)
 LENS = np.array([-0.25, 0.08, 0.001, -0.001, 0.0])
+#: the paper's methods and their baselines, whose points carry the quality columns of issue 10
+#: (``camera_mask``, ``residual_*_px``, ``gap_s``, ``std_m``, ``cov_*_m2``)
+PAPER_METHODS = [m for m in ("sync", "nearest", "typeA", "typeB", "linear") if m in METHODS]
 
 
 def rectified_rig(offsets=(0.0, 0.0)) -> Rig:
@@ -139,7 +142,7 @@ def test_points_outside_the_view_and_from_near_parallel_rays_are_dropped_and_cou
 
 # ---- geometric validity on dirty sessions --------------------------------------------------
 
-@pytest.mark.parametrize("method", causal_methods())
+@pytest.mark.parametrize("method", PAPER_METHODS)
 def test_no_output_point_is_behind_or_outside_a_camera_that_made_it(method):
     timing = "typeB" if "shared" in METHODS[method].needs else "typeA"
     dropped_any = False
@@ -243,7 +246,7 @@ def test_type_a_quality_columns_agree_with_its_construction():
     assert np.all(q["span_s"] >= q["gap_s"] - 1e-12)
 
 
-@pytest.mark.parametrize("method", causal_methods())
+@pytest.mark.parametrize("method", PAPER_METHODS)
 def test_analytic_covariance_equals_differences_through_the_whole_construction(method,
                                                                                  monkeypatch):
     # the analytic Jacobians (least-squares point, viewing direction, snap, eqs. (2) and (4))
