@@ -57,14 +57,15 @@ class FusionOptions:
         piece); None: 3.5 frame periods of the slowest camera
     rate_hz : float or None, smooth only: output points on a regular grid of this rate
         instead of at every detection time
-    noise_px : float, standard deviation of the detections' pixel noise per axis, pixels:
-        the first-order position covariance (``std_m``, ``cov_*_m2``) scales with it
+    noise_px : float or None, standard deviation of the detections' pixel noise per axis,
+        pixels: the first-order position covariance (``std_m``, ``cov_*_m2``) scales with
+        it; None: no covariance (for throughput: it is most of the methods' cost)
     """
 
     tolerance_s: float = 1e-3
     max_gap_s: float | None = None
     rate_hz: float | None = None
-    noise_px: float = 0.5
+    noise_px: float | None = 0.5
 
     def __post_init__(self) -> None:
         if not self.tolerance_s >= 0:
@@ -74,7 +75,7 @@ class FusionOptions:
                               f"{self.max_gap_s!r}")
         if self.rate_hz is not None and not 0 < self.rate_hz <= 1e6:
             raise FusionError(f"rate must be in (0, 1e6] Hz, got {self.rate_hz!r}")
-        if not 0 <= self.noise_px <= 1e3:
+        if self.noise_px is not None and not 0 <= self.noise_px <= 1e3:
             raise FusionError(f"pixel noise must be in [0, 1000] pixels, got {self.noise_px!r}")
 
 

@@ -62,9 +62,10 @@ def fuse_predicted(prep: Prepared, method: str, tolerance_s: float, max_gap_s: f
     cam = obs.camera[single]
     n_single = len(single)
     q = stereo.quality
-    cov_stereo = _covariance(q)
-    cov_pred = ((1 + ratio) ** 2)[:, None, None] * cov_stereo[k1] + (ratio**2)[:, None, None] \
-        * cov_stereo[k2]
+    if noise_px is not None:
+        cov_stereo = _covariance(q)
+        cov_pred = ((1 + ratio) ** 2)[:, None, None] * cov_stereo[k1] \
+            + (ratio**2)[:, None, None] * cov_stereo[k2]
     with np.errstate(invalid="ignore"):
         own = reprojection_px(prep, predicted, cam, prep.uv_undistorted[single])
     flags = np.zeros(n_single, dtype=np.int64)
@@ -76,27 +77,11 @@ def fuse_predicted(prep: Prepared, method: str, tolerance_s: float, max_gap_s: f
             depth = ray_depths(predicted, prep.ray_origin[single], prep.ray_dir[single])
         flags[~(depth > 0)] |= BEHIND
 
-        d = prep.ray_dir[single]
-        with np.errstate(invalid="ignore"):
-            if _prepare.FINITE_DIFFERENCES:
-                def evaluate(uv):
-                    return closest_points_on_rays(
-                        prep.ray_origin[single], prep.rays_from_undistorted(cam, uv[0]),
-                        predicted)
-
-                jacobians = finite_difference_jacobians(
-                    evaluate, [prep.uv_undistorted[single]], single[:, None])
-            else:  # a turn δr of the unit ray moves the foot by ((rᵀq) I + r qᵀ) δr, q = P̂ - T
-                offset = predicted - prep.ray_origin[single]
-                turn = (np.einsum("ni,ni->n", d, offset)[:, None, None] * np.eye(3)
-                        + d[:, :, None] * offset[:, None, :])
-                jacobians = [turn @ direction_jacobian(prep, cam, prep.uv_undistorted[single])]
-            cov_ray = covariance(single[:, None], jacobians, [prep.pixel_jacobians(single)],
-                                 noise_px)
-        onto = d[:, :, None] * d[:, None, :]  # the projection onto the ray, eq. (4)
-        cov = onto @ cov_pred @ onto + cov_ray
+        cov = None if noise_px is None else _type_b_covariance(
+            prep, single, cam, predicted, cov_pred, noise_px)
     else:
-        single_points, shift, cov = predicted, np.full(n_single, np.nan), cov_pred
+        single_points, shift = predicted, np.full(n_single, np.nan)
+        cov = None if noise_px is None else cov_pred
     mask_bits = (q["camera_mask"][k1].astype(np.int64) | q["camera_mask"][k2].astype(np.int64)
                  | (1 << cam.astype(np.int64)))
     used = (mask_bits[:, None] >> np.arange(len(prep.centers))) & 1 == 1
@@ -113,7 +98,7 @@ def fuse_predicted(prep: Prepared, method: str, tolerance_s: float, max_gap_s: f
             "camera_mask": mask_bits.astype(np.float64),
             "n_detections": n1 + n2 + 1,
             "gap_s": (t_single - stereo_ns[k2]) / NS,
-            **covariance_columns(cov),
+            **(covariance_columns(cov) if cov is not None else {}),
         }
         stereo_span = q["gap_s"]
     made = np.all(np.isfinite(single_points), axis=1)  # a detection without a usable ray
@@ -134,6 +119,31 @@ def fuse_predicted(prep: Prepared, method: str, tolerance_s: float, max_gap_s: f
         method, time_ns[order], np.concatenate([points, single_points])[order],
         np.concatenate([stereo.camera, obs.camera[single]])[order], quality)
     return with_dropped(track, dropped, count_invalid(flags[made]))
+
+
+def _type_b_covariance(prep: Prepared, single: np.ndarray, cam: np.ndarray,
+                       predicted: np.ndarray, cov_pred: np.ndarray, noise_px: float
+                       ) -> np.ndarray:
+    """Covariance (k, 3, 3) of type B's points: the prediction's projected onto the single
+    detection's ray (eq. (4)), plus the ray's own turn with its detection's noise."""
+    d = prep.ray_dir[single]
+    with np.errstate(invalid="ignore"):
+        if _prepare.FINITE_DIFFERENCES:
+            def evaluate(uv):
+                return closest_points_on_rays(
+                    prep.ray_origin[single], prep.rays_from_undistorted(cam, uv[0]), predicted)
+
+            jacobians = finite_difference_jacobians(
+                evaluate, [prep.uv_undistorted[single]], single[:, None])
+        else:  # a turn δr of the unit ray moves the foot by ((rᵀq) I + r qᵀ) δr, q = P̂ - T
+            offset = predicted - prep.ray_origin[single]
+            turn = (np.einsum("ni,ni->n", d, offset)[:, None, None] * np.eye(3)
+                    + d[:, :, None] * offset[:, None, :])
+            jacobians = [turn @ direction_jacobian(prep, cam, prep.uv_undistorted[single])]
+        cov_ray = covariance(single[:, None], jacobians, [prep.pixel_jacobians(single)],
+                             noise_px)
+    onto = d[:, :, None] * d[:, None, :]  # the projection onto the ray, eq. (4)
+    return onto @ cov_pred @ onto + cov_ray
 
 
 def _covariance(quality) -> np.ndarray:

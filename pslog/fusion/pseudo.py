@@ -316,7 +316,9 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5
                                       point1 + ratio[:, None] * (point1 - point2))
 
     with np.errstate(invalid="ignore"):
-        if _prepare.FINITE_DIFFERENCES:
+        if noise_px is None:
+            jacobians = None
+        elif _prepare.FINITE_DIFFERENCES:
             jacobians = finite_difference_jacobians(
                 evaluate, [prep.uv_undistorted[slots[:, s]] for s in range(7)], slots)
         else:
@@ -335,8 +337,8 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5
             past2 = [(-ratio[:, None, None] * onto) @ J
                      for J in _pseudo_jacobians(prep, p2, obs.camera[j2])]
             jacobians = [newest, *past1, *past2]
-        cov = covariance(slots, jacobians, [prep.pixel_jacobians(slots[:, s]) for s in range(7)],
-                         noise_px)
+        cov = None if jacobians is None else covariance(
+            slots, jacobians, [prep.pixel_jacobians(slots[:, s]) for s in range(7)], noise_px)
         quality = {
             "snap_px": np.maximum(p1.snap_px, p2.snap_px),
             # measured before the snap: after it the rays cross by construction
@@ -349,7 +351,7 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5
             "n_detections": distinct.sum(axis=1).astype(np.float64),
             "gap_s": np.maximum(np.maximum(span1, span2), (time_ns[events] - time_ns[j2]) / NS),
             "span_s": (time_ns[events] - t_slots.min(axis=1)) / NS,
-            **covariance_columns(cov),
+            **(covariance_columns(cov) if cov is not None else {}),
         }
     made = np.all(np.isfinite(points), axis=1)
     keep = made & (flags == 0)

@@ -72,7 +72,8 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float):
     Parameters
     ----------
     rows : (k, m) int64, the detection of camera c for point i at ``rows[i, c]`` (-1: none)
-    noise_px : float, standard deviation of the detections' pixel noise, pixels per axis
+    noise_px : float or None, standard deviation of the detections' pixel noise, pixels per
+        axis (None: no covariance columns)
 
     Returns
     -------
@@ -111,7 +112,9 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float):
                                   np.nan)
 
     slot_rows = np.where(used, rows, -1)
-    if _prepare.FINITE_DIFFERENCES:
+    if noise_px is None:
+        cov = None
+    elif _prepare.FINITE_DIFFERENCES:
         def evaluate(uvs):
             with np.errstate(invalid="ignore"):
                 return triangulate_rays(origins, directions(uvs), used)[0]
@@ -122,8 +125,9 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float):
             jacobians = least_squares_pixel_jacobians(
                 points, origins, dirs, used,
                 [direction_jacobian(prep, np.full(k, c), uv[c]) for c in range(m)])
-    cov = covariance(slot_rows, jacobians, [prep.pixel_jacobians(r[:, c]) for c in range(m)],
-                     noise_px)
+    if noise_px is not None:
+        cov = covariance(slot_rows, jacobians,
+                         [prep.pixel_jacobians(r[:, c]) for c in range(m)], noise_px)
     times = np.where(used, prep.obs.time_ns[r], 0)
     t_max = np.where(used, times, np.iinfo(np.int64).min).max(axis=1)
     t_min = np.where(used, times, np.iinfo(np.int64).max).min(axis=1)
@@ -136,7 +140,7 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float):
             "camera_mask": camera_mask(used), "n_detections": n_used.astype(np.float64),
             "gap_s": np.where(n_used > 0, (t_max - t_min) / NS, np.nan),
             "span_s": np.where(n_used > 0, (t_max - t_min) / NS, np.nan),
-            **covariance_columns(cov),
+            **(covariance_columns(cov) if cov is not None else {}),
         }
     return points, quality, flags, used
 
