@@ -449,3 +449,19 @@ def test_fuse_prints_the_invalid_points_it_dropped(tmp_path, cli):
     assert code == 0, err
     assert "sync           2 points (dropped as geometrically invalid: behind_camera 1)" in out
     assert len(read_session(tmp_path / "f.mcap").tracks["sync"]) == 2
+
+
+def test_without_a_pixel_noise_no_covariance_and_the_same_points():
+    from pslog import FusionError
+
+    rig = apply_timing(builtin_rig("paper3"), "typeB")
+    detections, _ = simulate(rig, get_motion("spiral"), options=SimulationOptions(noise_px=0.5))
+    for method in PAPER_METHODS:
+        full = fuse(detections, rig, method)
+        bare = fuse(detections, rig, method, FusionOptions(noise_px=None))
+        assert_array_equal(bare.position_world, full.position_world)
+        assert "std_m" in full.quality and "std_m" not in bare.quality
+        assert not any(k.startswith("cov_") for k in bare.quality)
+        assert_array_equal(bare.quality["residual_max_px"], full.quality["residual_max_px"])
+    with pytest.raises(FusionError, match="pixel noise"):
+        FusionOptions(noise_px=-1.0)
