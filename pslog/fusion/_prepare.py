@@ -224,7 +224,9 @@ def direction_jacobian(prep: Prepared, camera: np.ndarray, uv: np.ndarray) -> np
     norm = np.sqrt(np.einsum("ni,ni->n", r, r))
     d = r / norm[:, None]
     M = M[:, :, :2] / norm[:, None, None]
-    return M - d[:, :, None] * (d[:, :, None] * M).sum(axis=1)[:, None, :]
+    # (sums over an axis of length 3 written out: numpy's small-axis reductions are slow)
+    dM = d[:, 0, None] * M[:, 0] + d[:, 1, None] * M[:, 1] + d[:, 2, None] * M[:, 2]
+    return M - d[:, :, None] * dM[:, None, :]
 
 
 def _rt_k_inv(prep: Prepared) -> np.ndarray:
@@ -257,14 +259,17 @@ def least_squares_pixel_jacobians(points: np.ndarray, origins: np.ndarray, dirs:
     ``-A⁻¹ ((dᵀw) δd + d (wᵀ δd))`` with ``w = o - p``. Zero for unused rays."""
     m = used.shape[1]
     d = np.where(used[..., None], dirs, 0.0)
-    A = np.eye(3) * used.sum(axis=1)[:, None, None] - np.einsum("nmi,nmj->nij", d, d)
+    A = np.eye(3) * used.sum(axis=1)[:, None, None]
+    for j in range(m):
+        A -= d[:, j, :, None] * d[:, j, None, :]
     A_inv = _inverse_3x3(A)
     out = []
     for j in range(m):
         w = origins[:, j] - points
         G = np.where(used[:, j, None, None], turns[j], 0.0)
         inner = (np.einsum("ni,ni->n", d[:, j], w)[:, None, None] * G
-                 + d[:, j, :, None] * (w[:, :, None] * G).sum(axis=1)[:, None, :])
+                 + d[:, j, :, None] * (w[:, 0, None] * G[:, 0] + w[:, 1, None] * G[:, 1]
+                                       + w[:, 2, None] * G[:, 2])[:, None, :])
         out.append(np.where(used[:, j, None, None], -(A_inv @ inner), 0.0))
     return out
 

@@ -398,9 +398,8 @@ def _pseudo_jacobians(prep: Prepared, p: PseudoStereoPoints, cam_obs: np.ndarray
     along = np.eye(2) - normal[:, :, None] * normal[:, None, :]
     da = F[:, :2, :2] / size[:, None, None]  # (k, 2, 2): d a / d u_o, over |a|
     dl3 = F[:, 2, :2] / size[:, None]
-    moved_line = (-normal[:, :, None] * ((p.uv_snapped[:, :, None] * da).sum(axis=1)
-                                          + dl3)[:, None, :]
-                  - signed[:, None, None] * (along @ da))
+    shift = p.uv_snapped[:, 0, None] * da[:, 0] + p.uv_snapped[:, 1, None] * da[:, 1] + dl3
+    moved_line = -normal[:, :, None] * shift[:, None, :] - signed[:, None, None] * (along @ da)
     J_obs = J_observed + J_snapped @ moved_line
     J_interp = J_snapped @ along
     return [J_obs, (1 - p.weight)[:, None, None] * J_interp, p.weight[:, None, None] * J_interp]
