@@ -46,7 +46,7 @@ def fuse_predicted(prep: Prepared, method: str, tolerance_s: float, max_gap_s: f
     obs = prep.obs
     if len(obs) == 0:
         return Track(method, np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0, np.int32))
-    stereo, alone, dropped = stereo_at_common_instants(prep, tolerance_s, method, noise_px)
+    stereo, alone = stereo_at_common_instants(prep, tolerance_s, method, noise_px)
     points, stereo_ns = stereo.position_world, stereo.time_ns
     single = np.flatnonzero(alone)  # detections with no simultaneous partner
     t_single = obs.time_ns[single]
@@ -118,7 +118,7 @@ def fuse_predicted(prep: Prepared, method: str, tolerance_s: float, max_gap_s: f
     track = Track(
         method, time_ns[order], np.concatenate([points, single_points])[order],
         np.concatenate([stereo.camera, obs.camera[single]])[order], quality)
-    return with_dropped(track, dropped, count_invalid(flags[made]))
+    return with_dropped(track, stereo.dropped, count_invalid(flags[made]))
 
 
 def _type_b_covariance(prep: Prepared, single: np.ndarray, cam: np.ndarray,

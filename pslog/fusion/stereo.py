@@ -145,30 +145,33 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float):
     return points, quality, flags, used
 
 
-def triangulate_groups(prep: Prepared, group: np.ndarray, n_groups: int, noise_px: float):
+def triangulate_groups(prep: Prepared, group: np.ndarray, n_groups: int,
+                       noise_px: float | None = 0.5, with_flags: bool = False):
     """N-view least-squares point of each group (one ray per camera; a camera seen twice in a
     group keeps its latest ray). Returns points (g, 3), quality {name: (g,)}
-    (:func:`nview_points`), flags (g,) (:func:`nview_points`), time_ns (g,) of the group's
-    latest observation, camera (g,) of that observation."""
+    (:func:`nview_points`), time_ns (g,) of the group's latest observation, camera (g,) of
+    that observation, and with ``with_flags`` the validity flags (g,) of
+    :func:`nview_points`."""
     n_cams = len(prep.centers)
     rows = np.full((n_groups, n_cams), -1, dtype=np.int64)
     rows[group, prep.obs.camera] = np.arange(len(group))  # later rows win: the latest ray
     points, quality, flags, _ = nview_points(prep, rows, noise_px)
     last = np.r_[np.flatnonzero(np.diff(group)), len(group) - 1]  # last row of each group
-    return points, quality, flags, prep.obs.time_ns[last], prep.obs.camera[last]
+    out = points, quality, prep.obs.time_ns[last], prep.obs.camera[last]
+    return (*out, flags) if with_flags else out
 
 
 def stereo_at_common_instants(
-    prep: Prepared, tolerance_s: float, method: str, noise_px: float = 0.5
-) -> tuple[Track, np.ndarray, dict[str, int]]:
+    prep: Prepared, tolerance_s: float, method: str, noise_px: float | None = 0.5
+) -> tuple[Track, np.ndarray]:
     """N-view points of every instant at which at least two cameras saw the ball.
 
     Returns
     -------
     track : Track named ``method``, one valid point per such instant, with its quality
     alone : (n,) bool, the detections that had no simultaneous partner
-    dropped : {reason: count} of the instants whose point was geometrically invalid
-        (:func:`count_invalid`); their detections are not ``alone``
+        (``track.dropped``: the instants whose point was geometrically invalid, whose
+        detections are not ``alone`` either)
     """
     group, n_cameras = sync_groups(prep.obs, len(prep.centers), tolerance_s)
     if not np.any(n_cameras >= 2):
@@ -176,14 +179,14 @@ def stereo_at_common_instants(
             f"method {method} needs cameras with a common shutter instant (sync or typeB "
             f"timing), but no two cameras captured within {tolerance_s * 1e3:g} ms of each "
             f"other; methods that suit this session: nearest, typeA")
-    points, quality, flags, time_ns, camera = triangulate_groups(
-        prep, group, len(n_cameras), noise_px)
+    points, quality, time_ns, camera, flags = triangulate_groups(
+        prep, group, len(n_cameras), noise_px, with_flags=True)
     # made: two usable rays, so an invalid point (exactly parallel rays give none) is counted
     made = (n_cameras >= 2) & (quality["n_detections"] >= 2)
     keep = made & (flags == 0) & np.all(np.isfinite(points), axis=1)
     track = Track(method, time_ns[keep], points[keep], camera[keep],
                   {k: v[keep] for k, v in quality.items()})
-    return track, n_cameras[group] == 1, count_invalid(flags[made])
+    return with_dropped(track, count_invalid(flags[made])), n_cameras[group] == 1
 
 
 def fuse_sync(prep: Prepared, tolerance_s: float = 1e-3, noise_px: float = 0.5) -> Track:
@@ -194,8 +197,7 @@ def fuse_sync(prep: Prepared, tolerance_s: float = 1e-3, noise_px: float = 0.5) 
     """
     if len(prep.obs) == 0:
         return _empty("sync")
-    track, _, dropped = stereo_at_common_instants(prep, tolerance_s, "sync", noise_px)
-    return with_dropped(track, dropped)
+    return stereo_at_common_instants(prep, tolerance_s, "sync", noise_px)[0]
 
 
 def fuse_nearest(prep: Prepared, max_gap_s: float, noise_px: float = 0.5) -> Track:
