@@ -17,7 +17,9 @@ NS = 1_000_000_000  # nanoseconds per second
 
 #: Per-point quality columns a fusion method may fill (NaN where not applicable).
 QUALITY_FIELDS = {
-    "ray_miss_m": "distance between the two rays crossed for this point, metres",
+    "ray_miss_m": "distance between the rays crossed for this point, metres (N-view: RMS "
+                  "distance of the point to its rays; type A: the larger of its past points' "
+                  "ray distances BEFORE the epipolar snap, after which they would cross)",
     "snap_px": "distance the interpolated point moved to reach the epipolar line, pixels",
     "ray_shift_m": "distance the prediction moved onto the newest viewing ray (eq. 4), metres",
     "ray_angle_deg": "angle between the crossed rays (the largest pair; for type A the smaller "
