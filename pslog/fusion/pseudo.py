@@ -193,7 +193,7 @@ def pseudo_stereo_points(
     flags = invalid_points(prep, points, used)
     with np.errstate(invalid="ignore"):
         flags[np.all(np.isfinite(points), axis=1) & ~((s > 0) & (k > 0))] |= BEHIND
-        flags[~(np.degrees(angle) >= MIN_RAY_ANGLE_DEG)] |= PARALLEL
+        flags[np.degrees(angle) < MIN_RAY_ANGLE_DEG] |= PARALLEL  # (NaN: no ray, no flag)
     flags[~valid] = 0  # no partner: no point, and nothing to say about its geometry
     valid &= np.all(np.isfinite(points), axis=1) & (flags == 0)
     return PseudoStereoPoints(rows, valid, partner, prev_row, next_row, uv_interp, uv_snapped,

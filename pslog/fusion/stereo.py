@@ -105,7 +105,7 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float):
     with np.errstate(invalid="ignore"):
         depth = ray_depths(points, origins, dirs)  # the ray parameters: > 0 in front
         flags[np.any(used & ~(depth > 0), axis=1) & np.all(np.isfinite(points), axis=1)] |= BEHIND
-        flags[~(angle >= MIN_RAY_ANGLE_DEG)] |= PARALLEL
+        flags[angle < MIN_RAY_ANGLE_DEG] |= PARALLEL  # (NaN: fewer than two rays)
     residual = np.full((k, m), np.nan)
     for c in range(m):
         residual[:, c] = np.where(used[:, c], reprojection_px(prep, points, np.full(k, c), uv[c]),
