@@ -471,3 +471,14 @@ def test_without_a_pixel_noise_no_covariance_and_the_same_points():
         assert_array_equal(bare.quality["residual_max_px"], full.quality["residual_max_px"])
     with pytest.raises(FusionError, match="pixel noise"):
         FusionOptions(noise_px=-1.0)
+
+
+def test_detections_without_a_ray_are_no_invalid_points():
+    # a pixel no ray goes through (NaN) is a missing detection, not a near-parallel pair
+    rig = apply_timing(builtin_rig("paper3"), "typeB")
+    obs = simulate(rig, get_motion("spiral"))[0].best()
+    broken = Observations(obs.time_ns, obs.camera, np.full_like(obs.uv, np.nan),
+                          obs.frame_index)
+    for method in ("nearest", "typeA"):
+        track = fuse(broken, rig, method)
+        assert len(track) == 0 and track.dropped == {}, (method, track.dropped)
