@@ -231,7 +231,9 @@ def fuse(
 
     Returns
     -------
-    Track, sorted by time, without NaN points
+    Track, sorted by time, without NaN points; the paper's methods drop geometrically
+    invalid points (behind or out of view of a camera that made them, near-parallel rays)
+    and count them in ``Track.dropped`` (docs/paper.md)
     """
     check_method(method)
     options = options or FusionOptions()
