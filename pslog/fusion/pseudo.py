@@ -54,6 +54,7 @@ from ._prepare import (
     MIN_RAY_ANGLE_DEG,
     PARALLEL,
     Prepared,
+    _inverse_3x3,
     bracket,
     camera_mask,
     covariance,
@@ -61,7 +62,6 @@ from ._prepare import (
     direction_jacobian,
     finite_difference_jacobians,
     invalid_points,
-    least_squares_pixel_jacobians,
     reprojection_px,
 )
 from .stereo import count_invalid, with_dropped
@@ -94,6 +94,8 @@ class PseudoStereoPoints:
     residual_obs_px, residual_partner_px : (k,) float64, reprojection errors, in the recorded
         images, of the crossing of those unsnapped rays: against the observed detection and
         against the interpolated point, pixels
+    dir_obs, dir_partner : (k, 3) float64, unit directions of the observed and the snapped
+        point's rays
     flags : (k,) int64, why the point is geometrically invalid (0: valid; bits of
         :mod:`pslog.fusion._prepare`: behind a camera or a ray parameter ``s, k <= 0``,
         outside a view, rays within :data:`MIN_RAY_ANGLE_DEG` of parallel); an invalid
@@ -115,6 +117,8 @@ class PseudoStereoPoints:
     miss_unsnapped_m: np.ndarray
     residual_obs_px: np.ndarray
     residual_partner_px: np.ndarray
+    dir_obs: np.ndarray
+    dir_partner: np.ndarray
     flags: np.ndarray
 
 
@@ -198,7 +202,7 @@ def pseudo_stereo_points(
     valid &= np.all(np.isfinite(points), axis=1) & (flags == 0)
     return PseudoStereoPoints(rows, valid, partner, prev_row, next_row, uv_interp, uv_snapped,
                               snap_px, points, miss, angle, w, miss_unsnapped, residual_obs,
-                              residual_partner, flags)
+                              residual_partner, dir_obs, dir_partner, flags)
 
 
 @dataclass(frozen=True, eq=False)
@@ -373,20 +377,22 @@ def _pseudo_jacobians(prep: Prepared, p: PseudoStereoPoints, cam_obs: np.ndarray
     """d(P) / d(undistorted pixel) (k, 3, 2) of pseudo-stereo points ``p`` for their observed
     detection and the partner's bracket (prev, next): steps 1-3 differentiated.
 
-    The point is the least-squares point of the observed ray and the snapped point's ray;
-    the snapped point moves with the interpolated one by ``I - n nᵀ`` (along the epipolar
-    line of normal ``n``) and with the observed pixel as it moves the line;
-    eq. (1) weighs the bracket by ``1 - w`` and ``w``."""
-    k = len(p.row)
+    The point is the crossing of the observed ray and the snapped point's ray, which meet
+    (the snap puts the partner's point on the epipolar line): with ``P = T_j + s_j d_j`` on
+    both, a turn ``δd_j`` of ray j moves it by ``s_j A⁻¹ δd_j``, ``A = Σ (I - d dᵀ)`` (the
+    least-squares point's derivative, :func:`least_squares_pixel_jacobians`, with ``w = -s d``).
+    The snapped point moves with the interpolated one by ``I - n nᵀ`` (along the epipolar
+    line of normal ``n``) and with the observed pixel as it moves the line; eq. (1) weighs the
+    bracket by ``1 - w`` and ``w``."""
     uv_obs = prep.uv_undistorted[p.row]
     partner = np.maximum(p.partner, 0)
-    dirs = np.stack([prep.rays_from_undistorted(cam_obs, uv_obs),
-                     prep.rays_from_undistorted(partner, p.uv_snapped)], axis=1)
-    origins = np.stack([prep.centers[cam_obs], prep.centers[partner]], axis=1)
-    J_observed, J_snapped = least_squares_pixel_jacobians(
-        p.points_world, origins, dirs, np.ones((k, 2), dtype=bool),
-        [direction_jacobian(prep, cam_obs, uv_obs), direction_jacobian(prep, partner,
-                                                                       p.uv_snapped)])
+    d1, d2 = p.dir_obs, p.dir_partner
+    A = (2 * np.eye(3) - d1[:, :, None] * d1[:, None, :] - d2[:, :, None] * d2[:, None, :])
+    A_inv = _inverse_3x3(A)
+    s1 = np.einsum("ni,ni->n", p.points_world - prep.centers[cam_obs], d1)
+    s2 = np.einsum("ni,ni->n", p.points_world - prep.centers[partner], d2)
+    J_observed = s1[:, None, None] * (A_inv @ direction_jacobian(prep, cam_obs, uv_obs))
+    J_snapped = s2[:, None, None] * (A_inv @ direction_jacobian(prep, partner, p.uv_snapped))
     # the snap u_s = u_i - s n onto the line l = F (u_o, v_o, 1) = (a, l3), n = a / |a|,
     # s = (a·u_i + l3) / |a|; a move of u_o changes l by F[:, :2] δ, which moves u_s by
     # -n ((u_sᵀ da + dl3) / |a|) - s (I - n nᵀ) da / |a|
