@@ -304,7 +304,8 @@ def covariance(rows: np.ndarray, jacobians: list[np.ndarray], uv_jacobians: list
             JL = JL @ uv_jacobians[s]
         if not np.all(use):
             JL = np.where(use[:, None, None], JL, 0.0)
-        cov += JL @ np.swapaxes(JL, 1, 2)
+        # J Jᵀ of (k, 3, 2) matrices, its two outer products written out
+        cov += JL[:, :, None, 0] * JL[:, None, :, 0] + JL[:, :, None, 1] * JL[:, None, :, 1]
     return cov * noise_px**2
 
 

@@ -54,7 +54,6 @@ from ._prepare import (
     MIN_RAY_ANGLE_DEG,
     PARALLEL,
     Prepared,
-    _inverse_3x3,
     bracket,
     camera_mask,
     covariance,
@@ -330,16 +329,16 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5
             # the newest ray moves P' by ((rᵀq) I + r qᵀ) δr with q = P̂ - T
             r = prep.ray_dir[events]
             q = predicted - prep.ray_origin[events]
-            onto = r[:, :, None] * r[:, None, :]
-            turn = (np.einsum("ni,ni->n", r, q)[:, None, None] * np.eye(3)
-                    + r[:, :, None] * q[:, None, :])
-            newest = turn @ direction_jacobian(prep, obs.camera[events],
-                                               prep.uv_undistorted[events])
+            G = direction_jacobian(prep, obs.camera[events], prep.uv_undistorted[events])
+            newest = (np.einsum("ni,ni->n", r, q)[:, None, None] * G
+                      + r[:, :, None] * _dot3(q, G)[:, None, :])
+
+            def onto(scale, J):  # scale r rᵀ J, rank one: r (scale rᵀ J)
+                return r[:, :, None] * (scale[:, None] * _dot3(r, J))[:, None, :]
+
             # eq. (2): P̂ = (1 + ratio) P_{t-1} - ratio P_{t-2}
-            past1 = [((1 + ratio)[:, None, None] * onto) @ J
-                     for J in _pseudo_jacobians(prep, p1, obs.camera[j1])]
-            past2 = [(-ratio[:, None, None] * onto) @ J
-                     for J in _pseudo_jacobians(prep, p2, obs.camera[j2])]
+            past1 = [onto(1 + ratio, J) for J in _pseudo_jacobians(prep, p1, obs.camera[j1])]
+            past2 = [onto(-ratio, J) for J in _pseudo_jacobians(prep, p2, obs.camera[j2])]
             jacobians = [newest, *past1, *past2]
         cov = None if jacobians is None else covariance(
             slots, jacobians, [prep.pixel_jacobians(slots[:, s]) for s in range(7)], noise_px)
@@ -372,6 +371,11 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5
     return track, construction
 
 
+def _dot3(v: np.ndarray, J: np.ndarray) -> np.ndarray:
+    """``vᵀ J`` for (k, 3) vectors and (k, 3, 2) matrices: (k, 2)."""
+    return v[:, 0, None] * J[:, 0] + v[:, 1, None] * J[:, 1] + v[:, 2, None] * J[:, 2]
+
+
 def _pseudo_jacobians(prep: Prepared, p: PseudoStereoPoints, cam_obs: np.ndarray
                       ) -> list[np.ndarray]:
     """d(P) / d(undistorted pixel) (k, 3, 2) of pseudo-stereo points ``p`` for their observed
@@ -387,12 +391,20 @@ def _pseudo_jacobians(prep: Prepared, p: PseudoStereoPoints, cam_obs: np.ndarray
     uv_obs = prep.uv_undistorted[p.row]
     partner = np.maximum(p.partner, 0)
     d1, d2 = p.dir_obs, p.dir_partner
-    A = (2 * np.eye(3) - d1[:, :, None] * d1[:, None, :] - d2[:, :, None] * d2[:, None, :])
-    A_inv = _inverse_3x3(A)
+    cos = np.einsum("ni,ni->n", d1, d2)
+    scale = 0.5 / (1 - cos**2)
+
+    def a_inv(G):
+        """A⁻¹ G for A = 2 I - d1 d1ᵀ - d2 d2ᵀ (Woodbury: A⁻¹ = (I + D M⁻¹ Dᵀ) / 2 with
+        D = [d1 d2], M = [[1, -c], [-c, 1]], c = d1·d2)."""
+        a, b = _dot3(d1, G), _dot3(d2, G)
+        return (0.5 * G + d1[:, :, None] * (scale[:, None] * (a + cos[:, None] * b))[:, None, :]
+                + d2[:, :, None] * (scale[:, None] * (cos[:, None] * a + b))[:, None, :])
+
     s1 = np.einsum("ni,ni->n", p.points_world - prep.centers[cam_obs], d1)
     s2 = np.einsum("ni,ni->n", p.points_world - prep.centers[partner], d2)
-    J_observed = s1[:, None, None] * (A_inv @ direction_jacobian(prep, cam_obs, uv_obs))
-    J_snapped = s2[:, None, None] * (A_inv @ direction_jacobian(prep, partner, p.uv_snapped))
+    J_observed = s1[:, None, None] * a_inv(direction_jacobian(prep, cam_obs, uv_obs))
+    J_snapped = s2[:, None, None] * a_inv(direction_jacobian(prep, partner, p.uv_snapped))
     # the snap u_s = u_i - s n onto the line l = F (u_o, v_o, 1) = (a, l3), n = a / |a|,
     # s = (a·u_i + l3) / |a|; a move of u_o changes l by F[:, :2] δ, which moves u_s by
     # -n ((u_sᵀ da + dl3) / |a|) - s (I - n nᵀ) da / |a|
@@ -401,13 +413,16 @@ def _pseudo_jacobians(prep: Prepared, p: PseudoStereoPoints, cam_obs: np.ndarray
     size = np.sqrt(line[:, 0] ** 2 + line[:, 1] ** 2)
     normal = line[:, :2] / size[:, None]
     signed = (np.einsum("ni,ni->n", line[:, :2], p.uv_interpolated) + line[:, 2]) / size
-    along = np.eye(2) - normal[:, :, None] * normal[:, None, :]
     da = F[:, :2, :2] / size[:, None, None]  # (k, 2, 2): d a / d u_o, over |a|
     dl3 = F[:, 2, :2] / size[:, None]
     shift = p.uv_snapped[:, 0, None] * da[:, 0] + p.uv_snapped[:, 1, None] * da[:, 1] + dl3
-    moved_line = -normal[:, :, None] * shift[:, None, :] - signed[:, None, None] * (along @ da)
-    J_obs = J_observed + J_snapped @ moved_line
-    J_interp = J_snapped @ along
+    n_da = normal[:, 0, None] * da[:, 0] + normal[:, 1, None] * da[:, 1]  # nᵀ da
+    along_da = da - normal[:, :, None] * n_da[:, None, :]  # (I - n nᵀ) da
+    moved_line = -normal[:, :, None] * shift[:, None, :] - signed[:, None, None] * along_da
+    J_obs = J_observed + (J_snapped[:, :, 0, None] * moved_line[:, None, 0]
+                          + J_snapped[:, :, 1, None] * moved_line[:, None, 1])
+    J_n = J_snapped[:, :, 0] * normal[:, 0, None] + J_snapped[:, :, 1] * normal[:, 1, None]
+    J_interp = J_snapped - J_n[:, :, None] * normal[:, None, :]  # J (I - n nᵀ)
     return [J_obs, (1 - p.weight)[:, None, None] * J_interp, p.weight[:, None, None] * J_interp]
 
 
