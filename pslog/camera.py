@@ -299,6 +299,9 @@ class Camera:
             return xy_d
         k1, k2, p1, p2, k3 = self.dist
         xy = xy_d.copy()
+        # each row stops once it has converged, so its result does not depend on the other
+        # rows of the call (a streaming fuser undistorts in other batches than a batch run)
+        active = np.ones(len(xy), dtype=bool)
         # far outside the image the polynomial overflows and Newton's steps divide by a zero
         # Jacobian: those rows end NaN below, which is the answer, so no warning is wanted
         with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
@@ -316,9 +319,10 @@ class Camera:
                 det = j00 * j11 - j01 * j10
                 dx = (j11 * residual[:, 0] - j01 * residual[:, 1]) / det
                 dy = (-j10 * residual[:, 0] + j00 * residual[:, 1]) / det
-                xy[:, 0] -= dx
-                xy[:, 1] -= dy
-                if np.nanmax(np.abs(residual), initial=0.0) < 1e-15:
+                active &= ~(np.max(np.abs(residual), axis=1) < 1e-15)
+                xy[active, 0] -= dx[active]
+                xy[active, 1] -= dy[active]
+                if not np.any(active & np.all(np.isfinite(residual), axis=1)):
                     break
             # past the radius where the lens model folds over, no ideal point maps to the
             # pixel: say so with NaN rather than return a wrong ray (a NaN or infinite

@@ -1,4 +1,4 @@
-"""Accuracy of fused tracks against ground truth."""
+"""Accuracy of fused tracks against ground truth, and what their per-point quality says."""
 
 from __future__ import annotations
 
@@ -71,4 +71,122 @@ def format_accuracy_table(rows: list[Accuracy]) -> str:
     for a in rows:
         lines.append(f"{a.method:<9} {a.n_points:>7d} {a.rate_hz:>8.1f} {a.mean_mm:>9.3f} "
                      f"{a.median_mm:>10.3f} {a.p95_mm:>9.3f} {a.max_mm:>9.3f}")
+    return "\n".join(lines)
+
+
+#: P(χ²₃ <= 4): the share of 3-D Gaussian errors inside the covariance's 2σ ellipsoid
+#: (Mahalanobis distance 2); ``erf(√2) - √(8/π) e⁻²``.
+CHI2_3D_2SIGMA = 0.7385358700508894
+
+
+@dataclass(frozen=True)
+class QualitySummary:
+    """What one track's per-point quality columns say, and whether its uncertainty is honest.
+
+    Attributes
+    ----------
+    method : str
+    n_points : int, points inside the truth's span
+    residual_median_px, residual_p95_px : float, of each point's largest reprojection error
+        of a contributing detection (``residual_max_px``; smooth: ``residual_px``), pixels;
+        NaN if the track has none
+    gap_max_ms : float, largest time span a point bridged (``gap_s``), milliseconds
+    std_median_mm : float, median position standard deviation (``std_m``), millimetres
+    within_2sigma : float, share of points whose truth lies inside the 2σ ellipsoid of their
+        covariance: Mahalanobis ``d² = eᵀ Σ⁻¹ e <= 4`` with the full covariance
+        (``cov_*_m2``), or the diagonal one from ``std_x_m, std_y_m, std_z_m`` (smooth); NaN
+        without either. Honest, Gaussian errors give :data:`CHI2_3D_2SIGMA` (0.739)
+    nees : float, mean ``d² / 3`` (normalised estimation error squared): 1 when the covariance
+        is honest, above 1 when it is over-confident
+    """
+
+    method: str
+    n_points: int
+    residual_median_px: float
+    residual_p95_px: float
+    gap_max_ms: float
+    std_median_mm: float
+    within_2sigma: float
+    nees: float
+    expected_2sigma: float = CHI2_3D_2SIGMA
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+def covariances(track: Track) -> np.ndarray | None:
+    """(n, 3, 3) position covariances of ``track`` from its quality columns (full, or diagonal
+    from per-axis standard deviations), m²; None if it has neither."""
+    q = track.quality
+    n = len(track)
+    if all(f"cov_{a}_m2" in q for a in ("xx", "yy", "zz", "xy", "xz", "yz")):
+        cov = np.empty((n, 3, 3))
+        for name, (i, j) in (("xx", (0, 0)), ("yy", (1, 1)), ("zz", (2, 2)), ("xy", (0, 1)),
+                             ("xz", (0, 2)), ("yz", (1, 2))):
+            cov[:, i, j] = cov[:, j, i] = q[f"cov_{name}_m2"]
+        return cov
+    if all(f"std_{a}_m" in q for a in "xyz"):
+        cov = np.zeros((n, 3, 3))
+        for i, a in enumerate("xyz"):
+            cov[:, i, i] = q[f"std_{a}_m"] ** 2
+        return cov
+    return None
+
+
+def mahalanobis_sq(track: Track, truth: Truth) -> np.ndarray | None:
+    """``eᵀ Σ⁻¹ e`` of every point (n,) (NaN outside the truth's span; inf where the
+    covariance is singular or missing); None if the track has no covariance."""
+    cov = covariances(track)
+    if cov is None:
+        return None
+    err = track.position_world - truth.at(track.time_ns)
+    out = np.full(len(track), np.inf)
+    ok = np.all(np.isfinite(cov), axis=(1, 2)) & np.all(np.isfinite(err), axis=1)
+    if np.any(ok):
+        det = np.linalg.det(cov[ok])
+        good = det > 0
+        rows = np.flatnonzero(ok)[good]
+        sol = np.linalg.solve(cov[rows], err[rows][..., None])[..., 0]
+        out[rows] = np.einsum("ni,ni->n", err[rows], sol)
+    out[~np.all(np.isfinite(err), axis=1)] = np.nan
+    return out
+
+
+def summarise_quality(track: Track, truth: Truth) -> QualitySummary:
+    """:class:`QualitySummary` of ``track``'s points inside the truth's span."""
+    inside = np.isfinite(errors_m(track, truth))
+    q = {k: v[inside] for k, v in track.quality.items()}
+    nan = float("nan")
+
+    def stat(values, fn):
+        values = values[np.isfinite(values)] if values is not None else np.zeros(0)
+        return float(fn(values)) if len(values) else nan
+
+    residual = q.get("residual_max_px", q.get("residual_px"))
+    d2 = mahalanobis_sq(track, truth)
+    if d2 is not None:
+        d2 = d2[inside]
+    return QualitySummary(
+        method=track.method, n_points=int(inside.sum()),
+        residual_median_px=stat(residual, np.median),
+        residual_p95_px=stat(residual, lambda v: np.percentile(v, 95)),
+        gap_max_ms=stat(q.get("gap_s"), np.max) * 1e3,
+        std_median_mm=stat(q.get("std_m"), np.median) * 1e3,
+        within_2sigma=float(np.mean(d2 <= 4.0)) if d2 is not None and len(d2) else nan,
+        nees=float(np.mean(d2) / 3) if d2 is not None and len(d2) else nan,
+    )
+
+
+def format_quality_table(rows: list[QualitySummary]) -> str:
+    """A fixed-width table of quality summaries, one line per method."""
+    header = (f"{'method':<9} {'resid px':>9} {'p95 px':>8} {'gap ms':>7} {'std mm':>8} "
+              f"{'in 2σ':>6} {'NEES':>7}")
+    lines = [header, "-" * len(header)]
+    for r in rows:
+        lines.append(f"{r.method:<9} {r.residual_median_px:>9.3f} {r.residual_p95_px:>8.3f} "
+                     f"{r.gap_max_ms:>7.1f} {r.std_median_mm:>8.3f} "
+                     f"{r.within_2sigma * 100:>5.1f}% {r.nees:>7.2f}")
+    lines.append(f"resid: median of each point's largest reprojection error; in 2σ: share of "
+                 f"truth inside the covariance's 2σ ellipsoid ({CHI2_3D_2SIGMA * 100:.1f}% if "
+                 f"honest); NEES: mean d²/3 (1 if honest)")
     return "\n".join(lines)

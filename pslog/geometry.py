@@ -107,6 +107,8 @@ def triangulate_two_rays(
     """Crossing point of two 3D lines: the midpoint of their common perpendicular.
 
     The paper's section 2.2, step 3. Rays are ``origin + k * dir``; ``dir`` need not be unit.
+    The crossing of two *lines* may lie behind a camera; :func:`crossing_of_rays` also gives
+    the ray parameters to check that it does not.
 
     Parameters
     ----------
@@ -117,6 +119,26 @@ def triangulate_two_rays(
     -------
     points : array, shape (n, 3), metres; NaN where the rays are parallel
     miss : array, shape (n,), length of the common perpendicular (ray-to-ray distance), metres
+    """
+    points, miss, _, _ = crossing_of_rays(origin_a, dir_a, origin_b, dir_b)
+    return points, miss
+
+
+def crossing_of_rays(
+    origin_a: np.ndarray, dir_a: np.ndarray, origin_b: np.ndarray, dir_b: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`triangulate_two_rays` with the parameters of the common perpendicular's feet.
+
+    The feet are ``origin_a + s dir_a`` and ``origin_b + k dir_b``; a point in front of both
+    cameras has ``s > 0`` and ``k > 0`` (with ``dir`` pointing out of the camera). A
+    negative-disparity pair crosses *behind* the cameras, at negative ``s`` and ``k``, with
+    a miss as small as any good pair's: only the signs tell.
+
+    Returns
+    -------
+    points : (n, 3) metres, NaN where the rays are parallel
+    miss : (n,) metres
+    s, k : (n,) the ray parameters (units of ``|dir|``), NaN where parallel
     """
     dir_a = np.atleast_2d(np.asarray(dir_a, dtype=np.float64))
     dir_b = np.atleast_2d(np.asarray(dir_b, dtype=np.float64))
@@ -134,7 +156,29 @@ def triangulate_two_rays(
         k = np.where(parallel, np.nan, (a * e - b * d) / denom)
     point_a = origin_a + s[:, None] * dir_a
     point_b = origin_b + k[:, None] * dir_b
-    return 0.5 * (point_a + point_b), np.linalg.norm(point_a - point_b, axis=1)
+    return 0.5 * (point_a + point_b), np.linalg.norm(point_a - point_b, axis=1), s, k
+
+
+def ray_depths(points: np.ndarray, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    """Parameter along each ray of the foot of each point, in units of ``|direction|``:
+    ``(p - o) · d / |d|²``; positive in front of the camera.
+
+    Parameters
+    ----------
+    points : (n, 3), metres
+    origins : (n, m, 3) or (n, 3), metres
+    directions : (n, m, 3) or (n, 3)
+
+    Returns
+    -------
+    (n, m) or (n,) float64
+    """
+    points = np.asarray(points, dtype=np.float64)
+    directions = np.asarray(directions, dtype=np.float64)
+    offsets = (points[:, None, :] if directions.ndim == 3 else points) - origins
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return (np.einsum("...i,...i->...", offsets, directions)
+                / np.einsum("...i,...i->...", directions, directions))
 
 
 def triangulate_rays(

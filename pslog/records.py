@@ -17,11 +17,30 @@ NS = 1_000_000_000  # nanoseconds per second
 
 #: Per-point quality columns a fusion method may fill (NaN where not applicable).
 QUALITY_FIELDS = {
-    "ray_miss_m": "distance between the two rays crossed for this point, metres",
+    "ray_miss_m": "distance between the rays crossed for this point, metres (N-view: RMS "
+                  "distance of the point to its rays; type A: the larger of its past points' "
+                  "ray distances BEFORE the epipolar snap, after which they would cross)",
     "snap_px": "distance the interpolated point moved to reach the epipolar line, pixels",
     "ray_shift_m": "distance the prediction moved onto the newest viewing ray (eq. 4), metres",
     "ray_angle_deg": "angle between the crossed rays (the largest pair; for type A the smaller "
                      "of its two past points), degrees: small means a poorly determined depth",
+    "residual_max_px": "largest reprojection error of a contributing detection, pixels of the "
+                       "recorded image (type A/B: the past points' before the epipolar snap, "
+                       "and the newest detection's against the eq. (2) prediction)",
+    "residual_mean_px": "mean reprojection error of the contributing detections, pixels",
+    "camera_mask": "cameras whose detections made the point, bit c for camera c",
+    "n_detections": "number of distinct detections that made the point",
+    "gap_s": "largest time span bridged (interpolated, extrapolated or taken as "
+             "simultaneous), seconds",
+    "span_s": "the point's time minus the earliest capture time it uses, seconds",
+    "std_m": "position standard deviation, sqrt(trace of the covariance), metres (first order "
+             "from the detections' pixel noise; not the motion model's error)",
+    "std_x_m": "position standard deviation along x, metres (smooth)",
+    "std_y_m": "position standard deviation along y, metres (smooth)",
+    "std_z_m": "position standard deviation along z, metres (smooth)",
+    "residual_px": "the detection's reprojection residual, pixels (smooth)",
+    **{f"cov_{a}_m2": f"position covariance entry {a}, square metres"
+       for a in ("xx", "yy", "zz", "xy", "xz", "yz")},
 }
 
 
@@ -225,6 +244,9 @@ class Track:
     camera : (n,) int32, index of the camera whose shutter produced the point
     quality : mapping of name -> (n,) float64, per-point quality (see ``QUALITY_FIELDS``),
         NaN where not applicable
+    dropped : mapping of reason -> count of the points the method made but dropped as
+        geometrically invalid (``behind_camera``, ``outside_view``, ``parallel_rays``);
+        not kept by :meth:`select` (it describes the whole track)
     """
 
     method: str
@@ -232,6 +254,7 @@ class Track:
     position_world: np.ndarray
     camera: np.ndarray
     quality: Mapping[str, np.ndarray] = field(default_factory=dict)
+    dropped: Mapping[str, int] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "time_ns", _frozen(self.time_ns, np.int64, (), "time_ns"))
@@ -244,6 +267,8 @@ class Track:
                 len(v) != n for v in quality.values()):
             raise InputError(f"track {self.method!r}: columns differ in length")
         object.__setattr__(self, "quality", quality)
+        object.__setattr__(self, "dropped",
+                           {str(k): int(v) for k, v in dict(self.dropped).items()})
 
     def __len__(self) -> int:
         return len(self.time_ns)

@@ -39,6 +39,13 @@ from pslog.timing import observations as corrected_observations
 
 F_PX, CX, CY, BASELINE = 500.0, 320.0, 240.0, 0.5
 K = np.array([[F_PX, 0.0, CX], [0.0, F_PX, CY], [0.0, 0.0, 1.0]])
+#: a strong barrel lens (17 % at the corners of the paper rig's images): the equations that
+#: hold only on undistorted pixels (eq. (1), the snap) fail the tight bounds without it
+LENS = np.array([-0.25, 0.08, 0.001, -0.001, 0.0])
+
+
+def lens(rig: Rig) -> Rig:
+    return Rig(tuple(c.replace(dist=LENS) for c in rig.cameras), rig.name)
 
 
 def rectified_rig(offsets=(0.0, 1 / 60), fps=(30.0, 30.0)) -> Rig:
@@ -181,11 +188,14 @@ def test_every_causal_method_is_causal(method):
 
 
 def test_straight_line_type_a_and_type_b_well_under_a_millimetre():
-    for timing, method in (("typeA", "typeA"), ("typeB", "typeB"), ("typeB", "linear")):
-        rig = apply_timing(builtin_rig("paper3"), timing)
+    # type A: 0.23 mm (eq. (1) on a line whose image is not uniformly traversed); type B and
+    # linear: stereo and linear prediction are exact on a straight line at constant speed
+    for timing, method, bound in (("typeA", "typeA", 0.27), ("typeB", "typeB", 1e-6),
+                                  ("typeB", "linear", 1e-6)):
+        rig = lens(apply_timing(builtin_rig("paper3"), timing))
         detections, truth = simulate(rig, get_motion("straight"))
         accuracy = evaluate(fuse(detections, rig, method), truth)
-        assert accuracy.max_mm < 0.5, (method, accuracy)
+        assert accuracy.max_mm < bound, (method, accuracy)
 
 
 def test_the_papers_ordering_holds():
@@ -200,7 +210,7 @@ def test_the_papers_ordering_holds():
         nearest = rows[(2, "nearest")][motion]
         assert all(nearest > 8 * rows[key][motion] for key in others)
         assert rows[(2, "sync")][motion] < 1e-6  # noise-free stereo is exact
-        assert rows[(2, "typeA")][motion] < 5.0 and rows[(3, "typeA")][motion] < 5.0
+        assert rows[(2, "typeA")][motion] < 3.9 and rows[(3, "typeA")][motion] < 1.4
         assert rows[(3, "typeB")][motion] <= rows[(3, "linear")][motion]
     assert rows[(3, "typeB")]["spiral"] < 0.8 * rows[(3, "linear")]["spiral"]
 
@@ -217,37 +227,38 @@ def four_camera_rig(offsets) -> Rig:
     return Rig(tuple(c.replace(offset=o) for c, o in zip(cams, offsets, strict=True)), "four")
 
 
-@pytest.mark.parametrize("offsets", [(0.0, 0.004, 0.013, 0.025), (0.0, 0.011, 0.017)])
-def test_type_a_with_irregular_offsets(offsets):
-    rig = (four_camera_rig(offsets) if len(offsets) == 4 else
-           Rig(tuple(c.replace(offset=o) for c, o in zip(builtin_rig("paper3").cameras,
-                                                         offsets, strict=True))))
+@pytest.mark.parametrize("offsets,bounds", [((0.0, 0.004, 0.013, 0.025), (0.5, 1.35)),
+                                            ((0.0, 0.011, 0.017), (0.36, 1.55))])
+def test_type_a_with_irregular_offsets(offsets, bounds):
+    rig = lens(four_camera_rig(offsets) if len(offsets) == 4 else
+               Rig(tuple(c.replace(offset=o) for c, o in zip(builtin_rig("paper3").cameras,
+                                                             offsets, strict=True))))
     detections, truth = simulate(rig, get_motion("straight"))
     track = fuse(detections, rig, "typeA")
     accuracy = evaluate(track, truth)
     assert accuracy.rate_hz == pytest.approx(30 * len(offsets), rel=0.02)
-    assert accuracy.max_mm < 1.0
+    assert accuracy.max_mm < bounds[0]  # 0.43 and 0.31 mm
     spiral, truth = simulate(rig, get_motion("spiral"))
-    assert evaluate(fuse(spiral, rig, "typeA"), truth).mean_mm < 5.0
+    assert evaluate(fuse(spiral, rig, "typeA"), truth).mean_mm < bounds[1]  # 1.18, 1.36 mm
 
 
 def test_two_cameras_type_a_at_60_hz_and_mixed_frame_rates():
-    rig = apply_timing(builtin_rig("paper2"), "typeA")
+    rig = lens(apply_timing(builtin_rig("paper2"), "typeA"))
     detections, truth = simulate(rig, get_motion("fall"))
     accuracy = evaluate(fuse(detections, rig, "typeA"), truth)
-    assert accuracy.rate_hz == pytest.approx(60.0, rel=1e-3) and accuracy.mean_mm < 3.0
+    assert accuracy.rate_hz == pytest.approx(60.0, rel=1e-3) and accuracy.mean_mm < 1.75  # 1.51
     mixed = Rig((rig.cameras[0], rig.cameras[1].replace(fps=60.0, offset=0.005)))
     detections, truth = simulate(mixed, get_motion("fall"))
     accuracy = evaluate(fuse(detections, mixed, "typeA"), truth)
-    assert accuracy.rate_hz == pytest.approx(90.0, rel=0.02) and accuracy.mean_mm < 3.0
+    assert accuracy.rate_hz == pytest.approx(90.0, rel=0.02) and accuracy.mean_mm < 1.3  # 1.11
 
 
 def test_dropped_frames_missed_detections_and_jitter():
-    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    rig = lens(apply_timing(builtin_rig("paper3"), "typeA"))
     options = SimulationOptions(drop_rate=0.1, miss_rate=0.1, jitter_s=0.002, seed=4)
     detections, truth = simulate(rig, get_motion("throw"), options=options)
     obs = detections.best()
-    for method, bound_mm in (("typeA", 5.0), ("nearest", 80.0)):
+    for method, bound_mm in (("typeA", 2.5), ("nearest", 50.0)):  # 2.1 and 43.6 mm
         track = fuse(obs, rig, method)
         assert np.all(np.isfinite(track.position_world))
         assert 0.7 * len(obs) < len(track) <= len(obs)
@@ -295,7 +306,7 @@ def test_sync_quality_and_type_a_quality_fields():
                                            ("typeB", "typeB"), ("typeB", "linear"),
                                            ("sync", "sync")])
 def test_stream_fuser_equals_batch(timing, method):
-    rig = apply_timing(builtin_rig("paper3"), timing)
+    rig = lens(apply_timing(builtin_rig("paper3"), timing))
     detections, _ = simulate(rig, get_motion("throw"), options=SimulationOptions(
         noise_px=0.5, miss_rate=0.1, seed=2))
     obs = detections.best()
@@ -304,8 +315,7 @@ def test_stream_fuser_equals_batch(timing, method):
     parts = [fuser.push(obs.time_ns[i], obs.camera[i], obs.uv[i]) for i in range(len(obs))]
     parts.append(fuser.flush())
     assert_array_equal(np.concatenate([p.time_ns for p in parts]), batch.time_ns)
-    assert_allclose(np.concatenate([p.position_world for p in parts]), batch.position_world,
-                    rtol=0, atol=1e-12)
+    assert_array_equal(np.concatenate([p.position_world for p in parts]), batch.position_world)
     if method == "typeA":  # its point comes out with the detection that makes it
         assert all(len(p) <= 1 for p in parts[:-1]) and len(parts[-1]) == 0
 
@@ -319,7 +329,7 @@ def test_stream_fuser_applies_the_rigs_clock_model_like_batch(method):
     base = apply_timing(builtin_rig("paper3"), "typeB" if grouped else "typeA")
     a, b, c = base.names
     scale = 0.04 if grouped else 1.0
-    faults = SimulationOptions(noise_px=0.3, miss_rate=0.1, seed=4,
+    faults = SimulationOptions(noise_px=0.3, miss_rate=0.3, drop_rate=0.1, seed=4,
                                clock_offset_s={b: 0.0123 * scale, c: -0.0071 * scale},
                                clock_drift_ppm={b: 40.0, c: -25.0},
                                readout_s={a: 0.012 * scale, b: 0.02 * scale, c: 0.015 * scale})
@@ -327,15 +337,14 @@ def test_stream_fuser_applies_the_rigs_clock_model_like_batch(method):
     detections, _ = simulate(base, get_motion("throw"), options=faults)
     logged = detections.best()
     batch = fuse(corrected_observations(detections, rig), rig, method)
-    assert len(batch) >= 20
+    assert len(batch) >= 12
     fuser = StreamFuser(rig, method)
     parts = [fuser.push(logged.time_ns[i], logged.camera[i], logged.uv[i],
                         logged.frame_index[i]) for i in range(len(logged))]
     parts.append(fuser.flush())
     assert_array_equal(np.concatenate([p.time_ns for p in parts]), batch.time_ns)
     assert_array_equal(np.concatenate([p.camera for p in parts]), batch.camera)
-    assert_allclose(np.concatenate([p.position_world for p in parts]), batch.position_world,
-                    rtol=0, atol=1e-12)
+    assert_array_equal(np.concatenate([p.position_world for p in parts]), batch.position_world)
 
 
 def test_stream_fuser_rejects_out_of_order_detections():
@@ -358,8 +367,8 @@ def test_fuse_all_shares_preparation_and_matches_fuse():
 def test_three_cameras_unequal_offsets_pin_eq1_weights_eq2_ratio_and_partner():
     # shutters at 0, 7 and 20 ms: δ12 = 7 ms, δ23 = 13 ms, δ31 = 13.33 ms
     offsets = (0.0, 0.007, 0.020)
-    rig = Rig(tuple(c.replace(offset=o) for c, o in zip(builtin_rig("paper3").cameras, offsets,
-                                                        strict=True)))
+    rig = lens(Rig(tuple(c.replace(offset=o) for c, o in zip(builtin_rig("paper3").cameras,
+                                                             offsets, strict=True))))
     detections, _ = simulate(rig, get_motion("spiral"))
     obs = detections.best()
     construction = explain_type_a(obs, rig)
@@ -398,7 +407,7 @@ def test_type_b_and_linear_hand_computed_on_the_fall():
     # noise-free stereo at the common instants is exact, so each in-between detection at
     # T1 + 1/60 s must give P̂ = P(T1) + 0.5 (P(T1) - P(T0)) (eq. (2)), and type B the foot of
     # the perpendicular from P̂ on camera 2's ray through the true ball (eqs. (3)-(4))
-    rig = apply_timing(builtin_rig("paper3"), "typeB")
+    rig = lens(apply_timing(builtin_rig("paper3"), "typeB"))
     motion = get_motion("fall")
     detections, _ = simulate(rig, motion)
     linear = fuse(detections, rig, "linear")
@@ -435,16 +444,16 @@ def test_nan_rays_and_failed_stereo_never_give_nan_points_or_crash():
         assert len(fuse(broken, rig, method)) == 0
 
 
-@pytest.mark.parametrize("offsets,jitter", [((0.0, 0.0165, 0.0167), 0.0),
-                                            ((0.0, 1 / 60, 0.0), 0.0003)])
-def test_type_a_with_nearly_coincident_shutters_stays_accurate(offsets, jitter):
+@pytest.mark.parametrize("offsets,jitter,bound", [((0.0, 0.0165, 0.0167), 0.0, 4.4),
+                                                  ((0.0, 1 / 60, 0.0), 0.0003, 7.1)])
+def test_type_a_with_nearly_coincident_shutters_stays_accurate(offsets, jitter, bound):
     # two shutters 0.2-0.3 ms apart would make eq. (2) extrapolate ~80x their interval
-    rig = Rig(tuple(c.replace(offset=o) for c, o in zip(builtin_rig("paper3").cameras, offsets,
-                                                        strict=True)))
+    rig = lens(Rig(tuple(c.replace(offset=o) for c, o in zip(builtin_rig("paper3").cameras,
+                                                             offsets, strict=True))))
     detections, truth = simulate(rig, get_motion("spiral"),
                                  options=SimulationOptions(jitter_s=jitter, seed=5))
     accuracy = evaluate(fuse(detections, rig, "typeA"), truth)
-    assert accuracy.max_mm < 10.0 and accuracy.rate_hz > 80
+    assert accuracy.max_mm < bound and accuracy.rate_hz > 80  # 3.8 and 6.1 mm
 
 
 def test_ray_angle_flags_a_ball_near_the_baseline():

@@ -11,8 +11,10 @@ from pslog.camera import Camera, look_at
 from pslog.geometry import (
     closest_points_on_lines,
     closest_points_on_rays,
+    crossing_of_rays,
     epipolar_lines,
     fundamental_matrix,
+    ray_depths,
     triangulate_rays,
     triangulate_two_rays,
 )
@@ -192,6 +194,38 @@ def test_triangulate_two_skew_rays_midpoint_of_common_perpendicular():
                                         [[2.0, -4.0, 4.0]], [[0.0, 1.0, 0.0]])
     assert_allclose(points, [[2.0, 1.0, 3.0]], rtol=0, atol=1e-12)
     assert_allclose(miss, [2.0], rtol=0, atol=1e-12)
+
+
+def test_crossing_of_rays_gives_the_ray_parameters_whose_signs_say_in_front():
+    # the x-axis and the line through (0, 0, 1) along y: feet at (0, 0, 0) and (0, 0, 1),
+    # reached at s = -2 / 3 along (3, 0, 0) from (2, 0, 0) and k = 8 along (0, -0.5, 0) from
+    # (0, 4, 1)
+    points, miss, s, k = crossing_of_rays([2.0, 0.0, 0.0], [[3.0, 0.0, 0.0]],
+                                          [0.0, 4.0, 1.0], [[0.0, -0.5, 0.0]])
+    assert_allclose(points, [[0.0, 0.0, 0.5]], atol=1e-15)
+    assert_allclose(miss, [1.0], atol=1e-15)
+    assert_allclose(s, [-2 / 3], rtol=1e-15)
+    assert_allclose(k, [8.0], rtol=1e-15)
+    # a stereo pair looking along +z with crossed (negative-disparity) rays: the crossing is
+    # behind both, at s, k < 0, although the rays meet exactly
+    points, miss, s, k = crossing_of_rays([0.0, 0.0, 0.0], [[0.1, 0.0, 1.0]],
+                                          [1.0, 0.0, 0.0], [[-0.1, 0.0, 1.0]])
+    assert_allclose(points, [[0.5, 0.0, 5.0]], atol=1e-12)
+    assert s[0] == pytest.approx(5.0) and k[0] == pytest.approx(5.0) and miss[0] < 1e-12
+    points, miss, s, k = crossing_of_rays([0.0, 0.0, 0.0], [[-0.1, 0.0, 1.0]],
+                                          [1.0, 0.0, 0.0], [[0.1, 0.0, 1.0]])
+    assert_allclose(points, [[0.5, 0.0, -5.0]], atol=1e-12)
+    assert s[0] == pytest.approx(-5.0) and k[0] == pytest.approx(-5.0) and miss[0] < 1e-12
+    assert np.all(np.isnan(crossing_of_rays([0.0, 0, 0], [[1.0, 0, 0]], [0.0, 1, 0],
+                                            [[2.0, 0, 0]])[2]))
+
+
+def test_ray_depths_hand_computed():
+    points = np.array([[1.0, 2.0, 3.0], [0.0, 0.0, -2.0]])
+    origins = np.array([[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]], [[0.0, 0.0, 0.0], [0.0, 0, 1.0]]])
+    dirs = np.array([[[0.0, 0.0, 2.0], [0.0, 1.0, 0.0]], [[0.0, 0.0, 1.0], [0.0, 0.0, 1.0]]])
+    assert_allclose(ray_depths(points, origins, dirs), [[1.5, 2.0], [-2.0, -3.0]])
+    assert_allclose(ray_depths(points, origins[:, 0], dirs[:, 0]), [1.5, -2.0])
 
 
 def test_triangulate_two_rays_parallel_gives_nan():

@@ -116,8 +116,19 @@ def test_rrd_verifies_and_holds_every_entity(session, rrd):
                      ("interpolated", "snapped", "bracket", "snap", "epipolar")}
         expected |= {f"{image}/epipolar/{d}" for d in names if d != c}
     assert expected <= set(chunks), sorted(expected - set(chunks))
-    # typeA's rays cross exactly after the snap: its ray miss (~1e-15 m) is not plotted
-    assert "/plots/ray_miss_mm/typeA" not in chunks
+    # typeA's ray miss is measured before the epipolar snap (issue 10): it is informative
+    # and plotted (after the snap the rays would cross by construction, ~1e-15 m)
+    assert "/plots/ray_miss_mm/typeA" in chunks
+    # each point's uncertainty: a sphere of radius 2 std_m
+    sigma = chunks["/world/tracks/typeA/uncertainty"]
+    track = fuse_all(s.detections, s.rig, ["typeA"])["typeA"]
+    at = {int(t): r for t, r in zip(_times(sigma), _column(sigma, "Points3D:radii"),
+                                    strict=True)}
+    expected_radii = np.minimum(2 * track.quality["std_m"], 1.0)
+    shown = [i for i, t in enumerate(track.time_ns.tolist()) if t in at]
+    assert len(shown) > 10
+    np.testing.assert_allclose([at[int(track.time_ns[i])][0] for i in shown],
+                               expected_radii[shown], rtol=1e-6)
     static = {c.entity_path for c in RrdReader(path).stream() if c.is_static}
     assert {"/world", "/world/cameras/cam1", "/legend"} <= static
     assert RrdReader(path).blueprints(), "the default blueprint is in the file"

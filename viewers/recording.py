@@ -12,10 +12,11 @@ Entity paths mirror the transform tree (world z up, metres):
                                             epipolar line of the observed point
 ``world/rays/<cam>``                        each detection's viewing ray, LineStrips3D
 ``world/tracks/<method>`` (``/trail``)      fused points and trail segments
+``world/tracks/<method>/uncertainty``       a translucent sphere of radius 2 std_m per point
 ``world/truth`` (``/trail``)                ground truth, when the session has it
 ``world/typeA/...``                         P_{t-1}, P_{t-2}, prediction (eq. 2), eq. 4
 ``plots/error_mm/<method>``                 distance to truth, mm
-``plots/<quality>/<method>``                snap_px, ray_miss_mm, ray_shift_mm; std_mm,
+``plots/<quality>/<method>``                snap_px, ray_miss_mm, ray_shift_mm, std_mm;
                                             residual_px (smooth)
 ``plots/detection_rate/<cam>``              % of frames with a detection, last second
 ``events``, ``legend``                      session notes (TextLog), colour legend
@@ -180,6 +181,9 @@ def _log_static(rec, data: ViewData, colors, quality) -> None:
             colors=[color], radii=[ball]), static=True)
         rec.log(f"world/tracks/{method}/trail", rr.LineStrips3D.from_fields(
             colors=[color], radii=[-2.5]), static=True)
+        # each point's uncertainty: a translucent sphere of radius 2 std_m (issue 10)
+        rec.log(f"world/tracks/{method}/uncertainty", rr.Points3D.from_fields(
+            colors=[(*color, 48)]), static=True)
         rec.log(f"plots/error_mm/{method}", rr.SeriesLines(colors=[color], names=[method]),
                 static=True)
         for plot in quality:
@@ -346,6 +350,13 @@ def _log_tracks(rec, data: ViewData, clock: C.Clock, colors) -> int:
                           _frames_at(data, track.time_ns))
         n += _log_points_and_trail(rec, f"world/tracks/{method}", clock, track.time_ns, frames,
                                    track.position_world)
+        std = track.quality.get("std_m")
+        if std is not None:
+            shown = np.isfinite(std)  # 2σ, capped at 1 m so a wild one hides nothing
+            C.send(rec, f"world/tracks/{method}/uncertainty", clock, track.time_ns[shown],
+                   frames[shown], rr.Points3D.columns(
+                       positions=track.position_world[shown],
+                       radii=np.minimum(2 * std[shown], 1.0).astype(np.float32)))
     return n
 
 

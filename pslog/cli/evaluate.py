@@ -21,7 +21,12 @@ def run(args: argparse.Namespace) -> int:
     import json
 
     from pslog.errors import InputError
-    from pslog.evaluation import evaluate, format_accuracy_table
+    from pslog.evaluation import (
+        evaluate,
+        format_accuracy_table,
+        format_quality_table,
+        summarise_quality,
+    )
     from pslog.log import read_session
 
     session = read_session(args.session)
@@ -36,8 +41,15 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"no track for method(s) {', '.join(missing)} in {args.session} "
                          f"(have {', '.join(session.tracks)})")
     rows = [evaluate(session.tracks[m], session.truth) for m in methods]
+    quality = [summarise_quality(session.tracks[m], session.truth) for m in methods]
     if args.json:
-        print(json.dumps([r.as_dict() for r in rows], indent=2))
+        # NaN (a summary a track has no column for) is null: JSON has no NaN
+        print(json.dumps([{**r.as_dict(), "quality": {k: (None if isinstance(v, float)
+                                                          and v != v else v)
+                                                      for k, v in q.as_dict().items()}}
+                          for r, q in zip(rows, quality, strict=True)], indent=2))
     else:
         print(format_accuracy_table(rows))
+        print()
+        print(format_quality_table(quality))
     return 0

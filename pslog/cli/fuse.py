@@ -8,6 +8,7 @@ from ._common import (
     add_force,
     declare_files,
     fusion_method,
+    noise_px,
     nonnegative_float,
     number_at_most,
     usage_error,
@@ -42,6 +43,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         default=None, metavar="HZ",
                         help="smooth: points on a regular grid of this rate instead of at "
                              "every detection time")
+    parser.add_argument("--noise-px", type=noise_px, default=0.5, metavar="PX",
+                        help="the detections' pixel noise (standard deviation per axis) behind "
+                             "each point's std_m and covariance (default %(default)s)")
     add_force(parser)
     declare_files(parser, inputs=("session", "rig"), outputs=("output",))
 
@@ -78,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
         return usage_error("fuse", f"argument --tolerance-ms: {exc}")
     options = FusionOptions(tolerance_s=args.tolerance_ms / 1e3,
                             max_gap_s=None if args.max_gap_ms is None else args.max_gap_ms / 1e3,
-                            rate_hz=args.rate)
+                            rate_hz=args.rate, noise_px=args.noise_px)
     observations = timed_observations(session.detections, rig)  # the rig's clock model
     if len(observations) == 0:
         raise FusionError(f"{args.session} has no detection to fuse")
@@ -91,6 +95,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"not run on this timing: {', '.join(skipped)} (name them with --method "
                   f"to run them anyway)")
     tracks = fuse_all(observations, rig, methods, options)
+    dropped = {m: t.dropped for m, t in tracks.items()}  # geometrically invalid points
     empty = [m for m, t in tracks.items() if len(t) == 0]
     if empty:
         print(f"no point from {', '.join(empty)}: too few detections close enough in time")
@@ -108,6 +113,8 @@ def run(args: argparse.Namespace) -> int:
     copy_session(args.session, output, tracks=list(tracks.values()), force=args.force,
                  rig=None if args.rig is None else rig)
     for method, track in tracks.items():
-        print(f"{method:<8} {len(track):>7d} points")
+        why = ", ".join(f"{reason} {n}" for reason, n in dropped.get(method, {}).items())
+        print(f"{method:<8} {len(track):>7d} points"
+              + (f" (dropped as geometrically invalid: {why})" if why else ""))
     print(f"wrote {output}")
     return 0

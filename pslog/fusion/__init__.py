@@ -59,11 +59,15 @@ class FusionOptions:
         piece); None: 3.5 frame periods of the slowest camera
     rate_hz : float or None, smooth only: output points on a regular grid of this rate
         instead of at every detection time
+    noise_px : float or None, standard deviation of the detections' pixel noise per axis,
+        pixels: the first-order position covariance (``std_m``, ``cov_*_m2``) scales with
+        it; None: no covariance (for throughput: it is most of the methods' cost)
     """
 
     tolerance_s: float = 1e-3
     max_gap_s: float | None = None
     rate_hz: float | None = None
+    noise_px: float | None = 0.5
 
     def __post_init__(self) -> None:
         if not self.tolerance_s >= 0:
@@ -73,6 +77,8 @@ class FusionOptions:
                               f"{self.max_gap_s!r}")
         if self.rate_hz is not None and not 0 < self.rate_hz <= 1e6:
             raise FusionError(f"rate must be in (0, 1e6] Hz, got {self.rate_hz!r}")
+        if self.noise_px is not None and not 0 <= self.noise_px <= 1e3:
+            raise FusionError(f"pixel noise must be in [0, 1000] pixels, got {self.noise_px!r}")
 
 
 @dataclass(frozen=True)
@@ -116,23 +122,25 @@ class Method:
 
 
 def _sync(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
-    return fuse_sync(prep, options.tolerance_s)
+    return fuse_sync(prep, options.tolerance_s, options.noise_px)
 
 
 def _nearest(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
-    return fuse_nearest(prep, options.max_gap_s)
+    return fuse_nearest(prep, options.max_gap_s, options.noise_px)
 
 
 def _type_a(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
-    return fuse_type_a(prep, options.max_gap_s)[0]
+    return fuse_type_a(prep, options.max_gap_s, options.noise_px)[0]
 
 
 def _type_b(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
-    return fuse_predicted(prep, "typeB", options.tolerance_s, options.max_gap_s)
+    return fuse_predicted(prep, "typeB", options.tolerance_s, options.max_gap_s,
+                          options.noise_px)
 
 
 def _linear(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
-    return fuse_predicted(prep, "linear", options.tolerance_s, options.max_gap_s)
+    return fuse_predicted(prep, "linear", options.tolerance_s, options.max_gap_s,
+                          options.noise_px)
 
 
 def _filter(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
@@ -246,7 +254,9 @@ def fuse(
 
     Returns
     -------
-    Track, sorted by time, without NaN points
+    Track, sorted by time, without NaN points; the paper's methods drop geometrically
+    invalid points (behind or out of view of a camera that made them, near-parallel rays)
+    and count them in ``Track.dropped`` (docs/paper.md)
     """
     check_method(method)
     options = options or FusionOptions()
@@ -284,7 +294,7 @@ def explain_type_a(
     if isinstance(observations, Detections):
         observations = timed_observations(observations, rig)
     prep = prepare(observations, rig)
-    return fuse_type_a(prep, options.max_gap_s or default_max_gap_s(rig))[1]
+    return fuse_type_a(prep, options.max_gap_s or default_max_gap_s(rig), options.noise_px)[1]
 
 
 __all__ = [

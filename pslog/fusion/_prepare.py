@@ -14,6 +14,23 @@ from ..rig import Rig, check_baselines
 #: Pixels farther than this many image sizes from the image are not detections.
 _FAR_IMAGES = 10
 
+#: Geometric validity of a fused point (see :func:`invalid_points`): bits of the reason.
+BEHIND = 1          # behind a camera that contributed to it (or a ray parameter <= 0)
+OUTSIDE_VIEW = 2    # outside the field of view of a camera that saw it
+PARALLEL = 4        # its rays are nearly parallel: the depth is not determined
+#: Rays closer to parallel than this, degrees, determine no depth worth a point: the depth
+#: error grows like 1 / sin(angle), ~60x the lateral one at 1 degree.
+MIN_RAY_ANGLE_DEG = 1.0
+#: A contributing camera's view, for the validity check, is its image grown by this share of
+#: its larger side on every edge: type A and type B put a point at one camera's instant in
+#: the view of cameras that saw the ball up to a few frames earlier or later.
+VIEW_MARGIN = 0.25
+#: Pixel step of the numerical Jacobians (the snap's, and the reference ones), pixels.
+_JACOBIAN_STEP_PX = 1e-3
+#: Take the covariances' Jacobians by forward differences through each method's whole
+#: construction instead of analytically: slow, a reference the tests compare with.
+FINITE_DIFFERENCES = False
+
 
 @dataclass(frozen=True, eq=False)
 class Prepared:
@@ -29,6 +46,11 @@ class Prepared:
     centers : (m, 3) camera centres; K_inv, R : (m, 3, 3) per camera
     F : (m, m, 3, 3), ``F[a, b]`` with ``x_bᵀ F[a, b] x_a = 0`` (undistorted pixels)
     per_camera : list of (n_c,) int64 arrays, global rows of each camera's observations
+    cameras : tuple of Camera, the rig's, in rig order
+    uv_jacobian : (n, 2, 2) float64, d(undistorted pixel) / d(detected pixel) of each
+        observation: maps detection noise (isotropic in the recorded image) to ideal pixels
+    view_box : (m, 4) float64, ``(u_min, v_min, u_max, v_max)`` of each camera's view in
+        undistorted pixels, grown by :data:`VIEW_MARGIN`
     """
 
     obs: Observations
@@ -41,6 +63,16 @@ class Prepared:
     R: np.ndarray
     F: np.ndarray
     per_camera: list[np.ndarray]
+    cameras: tuple = ()
+    uv_jacobian: np.ndarray | None = None
+    view_box: np.ndarray | None = None
+
+    def pixel_jacobians(self, rows: np.ndarray) -> np.ndarray | None:
+        """:attr:`uv_jacobian` of observations ``rows`` (NaN, for a pixel no lens maps,
+        as 0), or None when no camera has lens distortion (the identity)."""
+        if not any(np.any(c.dist) for c in self.cameras):
+            return None
+        return np.nan_to_num(self.uv_jacobian[rows])
 
     def rays_from_undistorted(self, camera: np.ndarray, uv: np.ndarray) -> np.ndarray:
         """Unit world directions (n, 3) of undistorted pixels ``uv`` (n, 2) of ``camera`` (n,)."""
@@ -62,6 +94,7 @@ def prepare(obs: Observations, rig: Rig, F: np.ndarray | None = None) -> Prepare
                           f"{n_cams}-camera rig")
     uv_und = np.empty_like(obs.uv)
     ray_dir = np.empty((len(obs), 3))
+    jac = np.empty((len(obs), 2, 2))
     per_camera = []
     for i, cam in enumerate(rig.cameras):
         rows = np.flatnonzero(obs.camera == i)
@@ -75,6 +108,7 @@ def prepare(obs: Observations, rig: Rig, F: np.ndarray | None = None) -> Prepare
                                                                         cam.height), axis=1)]
             uv_und[far] = np.nan
             ray_dir[far] = np.nan
+            jac[rows] = _undistortion_jacobian(cam, uv_und[rows])
     centers = np.array([c.center_world for c in rig.cameras])
     if F is None:
         F = fundamental_matrices(rig.cameras)
@@ -84,7 +118,233 @@ def prepare(obs: Observations, rig: Rig, F: np.ndarray | None = None) -> Prepare
         ray_origin=centers[obs.camera] if len(obs) else np.zeros((0, 3)), ray_dir=ray_dir,
         centers=centers, K_inv=np.array([np.linalg.inv(c.K) for c in rig.cameras]),
         R=np.array([c.R for c in rig.cameras]), F=F, per_camera=per_camera,
+        cameras=tuple(rig.cameras), uv_jacobian=jac,
+        view_box=np.array([_view_box(c) for c in rig.cameras]),
     )
+
+
+def _undistortion_jacobian(cam, uv_und: np.ndarray) -> np.ndarray:
+    """(k, 2, 2) d(undistorted) / d(distorted) at undistorted pixels ``uv_und``: the inverse
+    of the closed-form distortion's Jacobian (central differences; row by row, so a
+    detection's value does not depend on which others are prepared with it)."""
+    k = len(uv_und)
+    if not np.any(cam.dist):
+        return np.broadcast_to(np.eye(2), (k, 2, 2)).copy()
+    h = 1e-3
+    forward = np.empty((k, 2, 2))
+    with np.errstate(invalid="ignore", over="ignore"):
+        for axis in range(2):
+            step = np.zeros(2)
+            step[axis] = h
+            forward[:, :, axis] = (cam.distort(uv_und + step)
+                                   - cam.distort(uv_und - step)) / (2 * h)
+        ok = np.all(np.isfinite(forward), axis=(1, 2))
+        out = np.full((k, 2, 2), np.nan)
+        if np.any(ok):
+            out[ok] = np.linalg.inv(forward[ok])
+    return out
+
+
+def _view_box(cam) -> np.ndarray:
+    """The camera's image, undistorted (its border's bounding box), grown by VIEW_MARGIN."""
+    w, h = cam.width, cam.height
+    s = np.linspace(0.0, 1.0, 33)
+    border = np.concatenate([
+        np.stack([s * w - 0.5, np.full_like(s, -0.5)], 1),
+        np.stack([s * w - 0.5, np.full_like(s, h - 0.5)], 1),
+        np.stack([np.full_like(s, -0.5), s * h - 0.5], 1),
+        np.stack([np.full_like(s, w - 0.5), s * h - 0.5], 1)])
+    ideal = cam.undistort(border)
+    ideal = ideal[np.all(np.isfinite(ideal), axis=1)]
+    if len(ideal) == 0:
+        ideal = border
+    grow = VIEW_MARGIN * max(w, h)
+    return np.array([ideal[:, 0].min() - grow, ideal[:, 1].min() - grow,
+                     ideal[:, 0].max() + grow, ideal[:, 1].max() + grow])
+
+
+def invalid_points(prep: Prepared, points: np.ndarray, used: np.ndarray) -> np.ndarray:
+    """Why each point is not a geometrically valid output, as bits (0: valid).
+
+    Parameters
+    ----------
+    points : (k, 3) world metres
+    used : (k, m) bool, the cameras whose detections made each point
+
+    Returns
+    -------
+    (k,) int64, ``BEHIND`` if the point is at or behind the image plane of a camera that
+    contributed to it; ``OUTSIDE_VIEW`` if it projects outside the view (image grown by
+    :data:`VIEW_MARGIN`) of such a camera; a non-finite point gets no flag (its caller
+    knows why it has none)
+    """
+    k, m = used.shape
+    flags = np.zeros(k, dtype=np.int64)
+    finite = np.all(np.isfinite(points), axis=1)
+    for c in range(m):
+        rows = np.flatnonzero(used[:, c] & finite)
+        if len(rows) == 0:
+            continue
+        cam = prep.cameras[c]
+        in_cam = points[rows] @ cam.R.T + cam.t
+        z = in_cam[:, 2]
+        behind = z <= 1e-9
+        flags[rows[behind]] |= BEHIND
+        with np.errstate(divide="ignore", invalid="ignore"):
+            uv = (in_cam[:, :2] / z[:, None]) @ cam.K[:2, :2].T + cam.K[:2, 2]
+        box = prep.view_box[c]
+        outside = ~behind & ~((uv[:, 0] >= box[0]) & (uv[:, 0] <= box[2])
+                              & (uv[:, 1] >= box[1]) & (uv[:, 1] <= box[3]))
+        flags[rows[outside]] |= OUTSIDE_VIEW
+    return flags
+
+
+def reprojection_px(prep: Prepared, points: np.ndarray, camera: np.ndarray,
+                    uv_undistorted: np.ndarray) -> np.ndarray:
+    """Distance, in the recorded (distorted) image of ``camera`` (k,), between the projection
+    of ``points`` (k, 3) and the image point ``uv_undistorted`` (k, 2), pixels (k,); NaN for
+    a point behind that camera or a missing image point."""
+    out = np.full(len(points), np.nan)
+    for c in np.unique(camera[camera >= 0]).tolist():
+        rows = np.flatnonzero(camera == c)
+        cam = prep.cameras[c]
+        with np.errstate(invalid="ignore", over="ignore"):
+            uv, in_front = cam.project(points[rows])
+            target = cam.distort(uv_undistorted[rows])
+            out[rows] = np.where(in_front, np.linalg.norm(uv - target, axis=1), np.nan)
+    return out
+
+
+def direction_jacobian(prep: Prepared, camera: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """d(unit viewing direction, world) / d(undistorted pixel) of ``camera`` (k,) at ``uv``
+    (k, 2): (k, 3, 2). With ``r = Rᵀ K⁻¹ (u, v, 1)`` and ``d = r / |r|``,
+    ``dd/duv = (I - d dᵀ) Rᵀ K⁻¹[:, :2] / |r|``."""
+    M = _rt_k_inv(prep)[camera]  # Rᵀ K⁻¹ (k, 3, 3)
+    r = M[:, :, 0] * uv[:, :1] + M[:, :, 1] * uv[:, 1:] + M[:, :, 2]
+    norm = np.sqrt(np.einsum("ni,ni->n", r, r))
+    d = r / norm[:, None]
+    M = M[:, :, :2] / norm[:, None, None]
+    # (sums over an axis of length 3 written out: numpy's small-axis reductions are slow)
+    dM = d[:, 0, None] * M[:, 0] + d[:, 1, None] * M[:, 1] + d[:, 2, None] * M[:, 2]
+    return M - d[:, :, None] * dM[:, None, :]
+
+
+def _rt_k_inv(prep: Prepared) -> np.ndarray:
+    """Rᵀ K⁻¹ of every camera (m, 3, 3)."""
+    return np.swapaxes(prep.R, 1, 2) @ prep.K_inv
+
+
+def _inverse_3x3(A: np.ndarray) -> np.ndarray:
+    """Inverses of (k, 3, 3) matrices by their adjugates (NaN where singular): far faster
+    than ``np.linalg.inv`` for many small ones."""
+    a, b, c = A[:, 0, 0], A[:, 0, 1], A[:, 0, 2]
+    d, e, f = A[:, 1, 0], A[:, 1, 1], A[:, 1, 2]
+    g, h, i = A[:, 2, 0], A[:, 2, 1], A[:, 2, 2]
+    co = np.stack([e * i - f * h, c * h - b * i, b * f - c * e,
+                   f * g - d * i, a * i - c * g, c * d - a * f,
+                   d * h - e * g, b * g - a * h, a * e - b * d], axis=1).reshape(-1, 3, 3)
+    det = a * co[:, 0, 0] + b * co[:, 1, 0] + c * co[:, 2, 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return co / np.where(np.abs(det) > 1e-12, det, np.nan)[:, None, None]
+
+
+def least_squares_pixel_jacobians(points: np.ndarray, origins: np.ndarray, dirs: np.ndarray,
+                                  used: np.ndarray, turns: list[np.ndarray]
+                                  ) -> list[np.ndarray]:
+    """d(point) / d(undistorted pixel of ray j) (k, 3, 2) for each of m rays of the
+    least-squares point (:func:`pslog.geometry.triangulate_rays`; for two rays the midpoint
+    of their common perpendicular), given each ray's ``turns[j]`` = d(unit direction) /
+    d(pixel) (k, 3, 2) (:func:`direction_jacobian`). From ``A p = b``, ``A = Σ (I - d dᵀ)``,
+    ``b = Σ (I - d dᵀ) o``: a turn ``δd`` of ray j moves the point by
+    ``-A⁻¹ ((dᵀw) δd + d (wᵀ δd))`` with ``w = o - p``. Zero for unused rays."""
+    m = used.shape[1]
+    d = np.where(used[..., None], dirs, 0.0)
+    A = np.eye(3) * used.sum(axis=1)[:, None, None]
+    for j in range(m):
+        A -= d[:, j, :, None] * d[:, j, None, :]
+    A_inv = _inverse_3x3(A)
+    out = []
+    for j in range(m):
+        w = origins[:, j] - points
+        G = np.where(used[:, j, None, None], turns[j], 0.0)
+        inner = (np.einsum("ni,ni->n", d[:, j], w)[:, None, None] * G
+                 + d[:, j, :, None] * (w[:, 0, None] * G[:, 0] + w[:, 1, None] * G[:, 1]
+                                       + w[:, 2, None] * G[:, 2])[:, None, :])
+        out.append(np.where(used[:, j, None, None], -(A_inv @ inner), 0.0))
+    return out
+
+
+def covariance(rows: np.ndarray, jacobians: list[np.ndarray], uv_jacobians: list[np.ndarray],
+               noise_px: float) -> np.ndarray:
+    """First-order covariance (k, 3, 3), m², of points made from detections.
+
+    Slot ``s`` holds detection ``rows[:, s]`` (-1: unused) and ``jacobians[s]`` (k, 3, 2) is
+    d(point) / d(its undistorted pixel) (zero where unused); a detection used in several
+    slots of a point (type A's newest frame ends a bracket) adds up its slots' Jacobians.
+    Each detection's recorded pixel has independent isotropic noise of ``noise_px`` per
+    axis, mapped to undistorted pixels by ``uv_jacobians[s]`` (k, 2, 2)
+    (:meth:`Prepared.pixel_jacobians`; None for the identity, a rig without lens distortion).
+    """
+    k, n_slots = rows.shape
+    cov = np.zeros((k, 3, 3))
+    merged = [J.copy() for J in jacobians]
+    taken = np.zeros(rows.shape, dtype=bool)  # a later slot merged into an earlier one
+    for s in range(n_slots):
+        for t in range(s + 1, n_slots):
+            same = (rows[:, t] == rows[:, s]) & (rows[:, s] >= 0) & ~taken[:, t] & ~taken[:, s]
+            if np.any(same):
+                merged[s][same] += merged[t][same]
+                taken[same, t] = True
+    for s in range(n_slots):
+        use = (rows[:, s] >= 0) & ~taken[:, s]
+        if not np.any(use):
+            continue
+        JL = merged[s]
+        if uv_jacobians[s] is not None:  # None: no lens, the identity
+            JL = JL @ uv_jacobians[s]
+        if not np.all(use):
+            JL = np.where(use[:, None, None], JL, 0.0)
+        # J Jᵀ of (k, 3, 2) matrices, its two outer products written out
+        cov += JL[:, :, None, 0] * JL[:, None, :, 0] + JL[:, :, None, 1] * JL[:, None, :, 1]
+    return cov * noise_px**2
+
+
+def finite_difference_jacobians(evaluate, uv: list[np.ndarray], rows: np.ndarray
+                                ) -> list[np.ndarray]:
+    """The Jacobians :func:`covariance` takes, by forward differences of ``evaluate(uv)``
+    (slots' undistorted pixels, a list of (k, 2), to points (k, 3)); a detection in several
+    slots moves in all of them at once, so its first slot gets the whole derivative."""
+    base = evaluate(uv)
+    k, n_slots = rows.shape
+    out = [np.zeros((k, 3, 2)) for _ in range(n_slots)]
+    h = _JACOBIAN_STEP_PX
+    for s in range(n_slots):
+        first = (rows[:, s] >= 0) & ~np.any(rows[:, :s] == rows[:, s:s + 1], axis=1)
+        if not np.any(first):
+            continue
+        same = (rows == rows[:, s:s + 1]) & first[:, None]
+        for axis in range(2):
+            step = np.zeros((k, 2))
+            step[:, axis] = h
+            moved = [u + np.where(same[:, j:j + 1], step, 0.0) for j, u in enumerate(uv)]
+            with np.errstate(invalid="ignore"):
+                out[s][:, :, axis] = np.where(first[:, None], (evaluate(moved) - base) / h, 0.0)
+    return out
+
+
+def covariance_columns(cov: np.ndarray) -> dict[str, np.ndarray]:
+    """Quality columns of covariances (k, 3, 3): ``std_m`` (sqrt of the trace: the RMS 3-D
+    error to expect) and the six distinct entries ``cov_xx_m2`` ... ``cov_yz_m2``."""
+    out = {"std_m": np.sqrt(np.einsum("kii->k", cov))}
+    for name, (i, j) in (("xx", (0, 0)), ("yy", (1, 1)), ("zz", (2, 2)), ("xy", (0, 1)),
+                         ("xz", (0, 2)), ("yz", (1, 2))):
+        out[f"cov_{name}_m2"] = cov[:, i, j].copy()
+    return out
+
+
+def camera_mask(used: np.ndarray) -> np.ndarray:
+    """(k,) float64 bitmask of the cameras used (bit c for camera c; exact up to 53)."""
+    return (used.astype(np.float64) * (2.0 ** np.arange(used.shape[1]))).sum(axis=1)
 
 
 def latest_row_at_or_before(prep: Prepared, camera: int, row: np.ndarray) -> np.ndarray:

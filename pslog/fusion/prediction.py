@@ -12,20 +12,41 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..geometry import closest_points_on_rays
+from ..geometry import closest_points_on_rays, ray_depths
 from ..records import NS, Track
-from ._prepare import Prepared
-from .stereo import stereo_at_common_instants
+from . import _prepare
+from ._prepare import (
+    BEHIND,
+    Prepared,
+    covariance,
+    covariance_columns,
+    direction_jacobian,
+    finite_difference_jacobians,
+    invalid_points,
+    reprojection_px,
+)
+from .stereo import count_invalid, stereo_at_common_instants, with_dropped
 
 
-def fuse_predicted(prep: Prepared, method: str, tolerance_s: float, max_gap_s: float) -> Track:
-    """``typeB`` (ray-constrained, eq. (4)) or ``linear`` (eq. (2) only)."""
+def fuse_predicted(prep: Prepared, method: str, tolerance_s: float, max_gap_s: float,
+                   noise_px: float = 0.5) -> Track:
+    """``typeB`` (ray-constrained, eq. (4)) or ``linear`` (eq. (2) only).
+
+    Geometrically invalid points are dropped and counted in ``Track.dropped``: stereo points
+    behind or outside a camera that saw them or from near-parallel rays (never used for a
+    prediction either), and predicted points behind or outside the view of a camera that
+    contributed (typeB: also a foot behind the single camera, eq. (4)'s ``k <= 0``).
+    Quality of a predicted point: ``residual_*_px`` over the stereo detections and the single
+    detection against the eq. (2) prediction; ``gap_s``: time from the older stereo point;
+    ``std_m`` / ``cov_*``: the stereo points' covariances through eq. (2) (and for typeB the
+    projection onto the ray plus the single detection's own noise).
+    """
     if method not in ("typeB", "linear"):
         raise ValueError(f"method must be typeB or linear, got {method!r}")
     obs = prep.obs
     if len(obs) == 0:
         return Track(method, np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0, np.int32))
-    stereo, alone = stereo_at_common_instants(prep, tolerance_s, method)
+    stereo, alone = stereo_at_common_instants(prep, tolerance_s, method, noise_px)
     points, stereo_ns = stereo.position_world, stereo.time_ns
     single = np.flatnonzero(alone)  # detections with no simultaneous partner
     t_single = obs.time_ns[single]
@@ -38,21 +59,98 @@ def fuse_predicted(prep: Prepared, method: str, tolerance_s: float, max_gap_s: f
     # eq. (2) with the actual intervals
     ratio = ((t_single - stereo_ns[k1]) / (stereo_ns[k1] - stereo_ns[k2])).astype(np.float64)
     predicted = points[k1] + ratio[:, None] * (points[k1] - points[k2])
+    cam = obs.camera[single]
+    n_single = len(single)
+    q = stereo.quality
+    if noise_px is not None:
+        cov_stereo = _covariance(q)
+        cov_pred = ((1 + ratio) ** 2)[:, None, None] * cov_stereo[k1] \
+            + (ratio**2)[:, None, None] * cov_stereo[k2]
+    with np.errstate(invalid="ignore"):
+        own = reprojection_px(prep, predicted, cam, prep.uv_undistorted[single])
+    flags = np.zeros(n_single, dtype=np.int64)
     if method == "typeB":  # eqs. (3)-(4)
         single_points = closest_points_on_rays(prep.ray_origin[single], prep.ray_dir[single],
                                                predicted)
         shift = np.linalg.norm(single_points - predicted, axis=1)
+        with np.errstate(invalid="ignore"):
+            depth = ray_depths(predicted, prep.ray_origin[single], prep.ray_dir[single])
+        flags[~(depth > 0)] |= BEHIND
+
+        cov = None if noise_px is None else _type_b_covariance(
+            prep, single, cam, predicted, cov_pred, noise_px)
     else:
-        single_points, shift = predicted, np.full(len(single), np.nan)
-    finite = np.all(np.isfinite(single_points), axis=1)  # a detection without a usable ray
+        single_points, shift = predicted, np.full(n_single, np.nan)
+        cov = None if noise_px is None else cov_pred
+    mask_bits = (q["camera_mask"][k1].astype(np.int64) | q["camera_mask"][k2].astype(np.int64)
+                 | (1 << cam.astype(np.int64)))
+    used = (mask_bits[:, None] >> np.arange(len(prep.centers))) & 1 == 1
+    flags |= invalid_points(prep, single_points, used)
+    n1, n2 = q["n_detections"][k1], q["n_detections"][k2]
+    with np.errstate(invalid="ignore"):
+        single_quality = {
+            "ray_miss_m": np.full(n_single, np.nan), "snap_px": np.full(n_single, np.nan),
+            "ray_angle_deg": np.minimum(q["ray_angle_deg"][k1], q["ray_angle_deg"][k2]),
+            "residual_max_px": np.fmax(np.fmax(q["residual_max_px"][k1],
+                                               q["residual_max_px"][k2]), own),
+            "residual_mean_px": (q["residual_mean_px"][k1] * n1 + q["residual_mean_px"][k2] * n2
+                                 + own) / (n1 + n2 + 1),
+            "camera_mask": mask_bits.astype(np.float64),
+            "n_detections": n1 + n2 + 1,
+            "gap_s": (t_single - stereo_ns[k2]) / NS,
+            **(covariance_columns(cov) if cov is not None else {}),
+        }
+        stereo_span = q["gap_s"]
+    made = np.all(np.isfinite(single_points), axis=1)  # a detection without a usable ray
+    keep = made & (flags == 0)
     single, t_single, single_points, shift = (
-        single[finite], t_single[finite], single_points[finite], shift[finite])
+        single[keep], t_single[keep], single_points[keep], shift[keep])
+    single_quality = {k: v[keep] for k, v in single_quality.items()}
+    single_quality["span_s"] = single_quality["gap_s"] + stereo_span[k2[keep]]
 
     time_ns = np.concatenate([stereo_ns, t_single])
     order = np.argsort(time_ns, kind="stable")
-    nan_s, nan_m = np.full(len(single), np.nan), np.full(len(stereo_ns), np.nan)
-    quality = {k: np.concatenate([v, nan_s])[order] for k, v in stereo.quality.items()}
+    nan_m = np.full(len(stereo_ns), np.nan)
+    nan_s = np.full(len(single), np.nan)
+    quality = {k: np.concatenate([q.get(k, nan_m), single_quality.get(k, nan_s)])[order]
+               for k in dict.fromkeys([*q, *single_quality])}
     quality["ray_shift_m"] = np.concatenate([nan_m, shift])[order]
-    return Track(
+    track = Track(
         method, time_ns[order], np.concatenate([points, single_points])[order],
         np.concatenate([stereo.camera, obs.camera[single]])[order], quality)
+    return with_dropped(track, stereo.dropped, count_invalid(flags[made]))
+
+
+def _type_b_covariance(prep: Prepared, single: np.ndarray, cam: np.ndarray,
+                       predicted: np.ndarray, cov_pred: np.ndarray, noise_px: float
+                       ) -> np.ndarray:
+    """Covariance (k, 3, 3) of type B's points: the prediction's projected onto the single
+    detection's ray (eq. (4)), plus the ray's own turn with its detection's noise."""
+    d = prep.ray_dir[single]
+    with np.errstate(invalid="ignore"):
+        if _prepare.FINITE_DIFFERENCES:
+            def evaluate(uv):
+                return closest_points_on_rays(
+                    prep.ray_origin[single], prep.rays_from_undistorted(cam, uv[0]), predicted)
+
+            jacobians = finite_difference_jacobians(
+                evaluate, [prep.uv_undistorted[single]], single[:, None])
+        else:  # a turn δr of the unit ray moves the foot by ((rᵀq) I + r qᵀ) δr, q = P̂ - T
+            offset = predicted - prep.ray_origin[single]
+            turn = (np.einsum("ni,ni->n", d, offset)[:, None, None] * np.eye(3)
+                    + d[:, :, None] * offset[:, None, :])
+            jacobians = [turn @ direction_jacobian(prep, cam, prep.uv_undistorted[single])]
+        cov_ray = covariance(single[:, None], jacobians, [prep.pixel_jacobians(single)],
+                             noise_px)
+    onto = d[:, :, None] * d[:, None, :]  # the projection onto the ray, eq. (4)
+    return onto @ cov_pred @ onto + cov_ray
+
+
+def _covariance(quality) -> np.ndarray:
+    """(n, 3, 3) covariances from the ``cov_*_m2`` columns."""
+    n = len(quality["cov_xx_m2"])
+    cov = np.empty((n, 3, 3))
+    for name, (i, j) in (("xx", (0, 0)), ("yy", (1, 1)), ("zz", (2, 2)), ("xy", (0, 1)),
+                         ("xz", (0, 2)), ("yz", (1, 2))):
+        cov[:, i, j] = cov[:, j, i] = quality[f"cov_{name}_m2"]
+    return cov

@@ -43,11 +43,27 @@ import numpy as np
 from ..geometry import (
     closest_points_on_lines,
     closest_points_on_rays,
+    crossing_of_rays,
     epipolar_lines,
-    triangulate_two_rays,
+    ray_depths,
 )
 from ..records import NS, Track
-from ._prepare import Prepared, bracket
+from . import _prepare
+from ._prepare import (
+    BEHIND,
+    MIN_RAY_ANGLE_DEG,
+    PARALLEL,
+    Prepared,
+    bracket,
+    camera_mask,
+    covariance,
+    covariance_columns,
+    direction_jacobian,
+    finite_difference_jacobians,
+    invalid_points,
+    reprojection_px,
+)
+from .stereo import count_invalid, with_dropped
 
 #: Brackets whose lengths differ by less than this are ties (shutter offsets are rounded to ns).
 _SPAN_TIE_NS = 1_000_000
@@ -71,6 +87,18 @@ class PseudoStereoPoints:
     points_world : (k, 3) float64, step 3, metres
     miss_m : (k,) float64, distance between the two crossed rays (≈ 0 after the snap), metres
     angle_rad : (k,) float64, angle between the two crossed rays, radians
+    weight : (k,) float64, eq. (1)'s weight of the bracket's later detection
+    miss_unsnapped_m : (k,) float64, distance between the observed ray and the ray of the
+        interpolated point BEFORE the snap: the disagreement the snap hides, metres
+    residual_obs_px, residual_partner_px : (k,) float64, reprojection errors, in the recorded
+        images, of the crossing of those unsnapped rays: against the observed detection and
+        against the interpolated point, pixels
+    dir_obs, dir_partner : (k, 3) float64, unit directions of the observed and the snapped
+        point's rays
+    flags : (k,) int64, why the point is geometrically invalid (0: valid; bits of
+        :mod:`pslog.fusion._prepare`: behind a camera or a ray parameter ``s, k <= 0``,
+        outside a view, rays within :data:`MIN_RAY_ANGLE_DEG` of parallel); an invalid
+        point is not ``valid``
     """
 
     row: np.ndarray
@@ -84,6 +112,33 @@ class PseudoStereoPoints:
     points_world: np.ndarray
     miss_m: np.ndarray
     angle_rad: np.ndarray
+    weight: np.ndarray
+    miss_unsnapped_m: np.ndarray
+    residual_obs_px: np.ndarray
+    residual_partner_px: np.ndarray
+    dir_obs: np.ndarray
+    dir_partner: np.ndarray
+    flags: np.ndarray
+
+
+def _pseudo_from_pixels(prep: Prepared, cam_obs: np.ndarray, partner: np.ndarray,
+                        uv_obs: np.ndarray, uv_prev: np.ndarray, uv_next: np.ndarray,
+                        weight: np.ndarray):
+    """Steps 1-3 from undistorted pixels (k, 2): the observed one and the partner's bracket.
+
+    Returns uv_interpolated, uv_snapped, snap_px, dir_obs, dir_partner, points, miss, s, k
+    (``s``, ``k``: the ray parameters of the crossing, > 0 in front of both cameras)."""
+    # eq. (1): linear interpolation of the partner's 2D track to the observation's time
+    uv_interp = (1.0 - weight)[:, None] * uv_prev + weight[:, None] * uv_next
+    # step 2: nearest point on the epipolar line of the observed point, in the partner image
+    lines = epipolar_lines(prep.F[cam_obs, partner], uv_obs)
+    uv_snapped, snap_px = closest_points_on_lines(lines, uv_interp)
+    # step 3: crossing point of the observed ray and the snapped point's ray
+    dir_obs = prep.rays_from_undistorted(cam_obs, uv_obs)
+    dir_partner = prep.rays_from_undistorted(partner, uv_snapped)
+    points, miss, s, k = crossing_of_rays(prep.centers[cam_obs], dir_obs,
+                                          prep.centers[partner], dir_partner)
+    return uv_interp, uv_snapped, snap_px, dir_obs, dir_partner, points, miss, s, k
 
 
 def pseudo_stereo_points(
@@ -95,12 +150,12 @@ def pseudo_stereo_points(
     time_ns = obs.time_ns
     t_row = time_ns[rows]
     cam_row = obs.camera[rows]
-    k = len(rows)
-    best_span = np.full(k, 2**62)  # "none yet", far from int64 overflow in the tie test
-    best_end = np.full(k, np.iinfo(np.int64).min)
-    partner = np.full(k, -1, dtype=np.int64)
-    prev_row = np.zeros(k, dtype=np.int64)
-    next_row = np.zeros(k, dtype=np.int64)
+    n_rows = len(rows)
+    best_span = np.full(n_rows, 2**62)  # "none yet", far from int64 overflow in the tie test
+    best_end = np.full(n_rows, np.iinfo(np.int64).min)
+    partner = np.full(n_rows, -1, dtype=np.int64)
+    prev_row = np.zeros(n_rows, dtype=np.int64)
+    next_row = np.zeros(n_rows, dtype=np.int64)
     for d in range(n_cams):  # loop over cameras, vectorized over rows
         prev, nxt = bracket(prep, d, t_row)
         ok = (prev >= 0) & (nxt >= 0) & (cam_row != d)
@@ -117,27 +172,36 @@ def pseudo_stereo_points(
     valid = partner >= 0
     partner_idx = np.maximum(partner, 0)
 
-    # eq. (1): linear interpolation of the partner's 2D track to the observation's time
-    t_prev, t_next = prep.t[prev_row], prep.t[next_row]
-    span_s = t_next - t_prev
-    w = np.where(span_s > 0, (prep.t[rows] - t_prev) / np.where(span_s > 0, span_s, 1.0), 0.0)
-    uv_interp = ((1.0 - w)[:, None] * prep.uv_undistorted[prev_row]
-                 + w[:, None] * prep.uv_undistorted[next_row])
-
-    # step 2: nearest point on the epipolar line of the observed point, in the partner image
-    lines = epipolar_lines(prep.F[cam_row, partner_idx], prep.uv_undistorted[rows])
-    uv_snapped, snap_px = closest_points_on_lines(lines, uv_interp)
-
-    # step 3: crossing point of the observed ray and the snapped point's ray
-    dir_partner = prep.rays_from_undistorted(partner_idx, uv_snapped)
-    points, miss = triangulate_two_rays(prep.ray_origin[rows], prep.ray_dir[rows],
-                                        prep.centers[partner_idx], dir_partner)
-    valid &= np.all(np.isfinite(points), axis=1)
-    # both directions are unit vectors; a line has no sense, hence the absolute value
-    cos_angle = np.abs(np.einsum("ij,ij->i", prep.ray_dir[rows], dir_partner))
-    angle = np.arccos(np.minimum(cos_angle, 1.0))
+    # eq. (1)'s weight from integer capture times: the same for any window of the session
+    span_ns = time_ns[next_row] - time_ns[prev_row]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        w = np.where(span_ns > 0, (t_row - time_ns[prev_row]) / np.where(span_ns > 0, span_ns, 1),
+                     0.0)
+    with np.errstate(invalid="ignore"):
+        uv_interp, uv_snapped, snap_px, dir_obs, dir_partner, points, miss, s, k = (
+            _pseudo_from_pixels(prep, cam_row, partner_idx, prep.uv_undistorted[rows],
+                                prep.uv_undistorted[prev_row], prep.uv_undistorted[next_row], w))
+        # both directions are unit vectors; a line has no sense, hence the absolute value
+        cos_angle = np.abs(np.einsum("ij,ij->i", dir_obs, dir_partner))
+        angle = np.arccos(np.minimum(cos_angle, 1.0))
+        # the disagreement before the snap: the interpolated point's ray against the observed
+        dir_interp = prep.rays_from_undistorted(partner_idx, uv_interp)
+        unsnapped, miss_unsnapped, _, _ = crossing_of_rays(
+            prep.centers[cam_row], dir_obs, prep.centers[partner_idx], dir_interp)
+    residual_obs = reprojection_px(prep, unsnapped, cam_row, prep.uv_undistorted[rows])
+    residual_partner = reprojection_px(prep, unsnapped, partner_idx, uv_interp)
+    used = np.zeros((n_rows, n_cams), dtype=bool)
+    used[np.arange(n_rows), cam_row] = True
+    used[np.arange(n_rows), partner_idx] = True
+    flags = invalid_points(prep, points, used)
+    with np.errstate(invalid="ignore"):
+        flags[np.all(np.isfinite(points), axis=1) & ~((s > 0) & (k > 0))] |= BEHIND
+        flags[np.degrees(angle) < MIN_RAY_ANGLE_DEG] |= PARALLEL  # (NaN: no ray, no flag)
+    flags[~valid] = 0  # no partner: no point, and nothing to say about its geometry
+    valid &= np.all(np.isfinite(points), axis=1) & (flags == 0)
     return PseudoStereoPoints(rows, valid, partner, prev_row, next_row, uv_interp, uv_snapped,
-                              snap_px, points, miss, angle)
+                              snap_px, points, miss, angle, w, miss_unsnapped, residual_obs,
+                              residual_partner, dir_obs, dir_partner, flags)
 
 
 @dataclass(frozen=True, eq=False)
@@ -158,7 +222,8 @@ class TypeAConstruction:
     points_world: np.ndarray
 
 
-def fuse_type_a(prep: Prepared, max_gap_s: float) -> tuple[Track, TypeAConstruction]:
+def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5
+                ) -> tuple[Track, TypeAConstruction]:
     """``typeA``: a point at every detection with two earlier pseudo-stereo points.
 
     The two earlier points are those of the two latest earlier instants that can be
@@ -166,7 +231,12 @@ def fuse_type_a(prep: Prepared, max_gap_s: float) -> tuple[Track, TypeAConstruct
     When one cannot (a missed detection, or a partner camera with a slower frame rate whose
     next frame is still to come), or when ``t-2`` is too close to ``t-1`` for eq. (2)
     (see ``MAX_EXTRAPOLATION``), the next earlier instant takes its place, up to
-    ``2 * n_cameras`` instants back and within ``max_gap_s``.
+    ``2 * n_cameras`` instants back and within ``max_gap_s``. A geometrically invalid past
+    point (behind a camera, outside a view, near-parallel rays) counts as not triangulated.
+    An output point behind a camera that contributed to it (eq. (4)'s ``k <= 0``: the
+    prediction behind the newest camera) or outside its view is dropped and counted in
+    ``Track.dropped``; refused past points are counted there too (``past_<reason>``, each
+    detection once). ``noise_px``: the detections' pixel noise behind ``std_m``.
     """
     obs = prep.obs
     time_ns = obs.time_ns
@@ -209,23 +279,151 @@ def fuse_type_a(prep: Prepared, max_gap_s: float) -> tuple[Track, TypeAConstruct
     p2 = _gather(computed, events, second[events])
     j1, j2 = p1.row, p2.row
 
-    # eq. (2): linear prediction with the actual capture intervals
-    ratio = (prep.t[events] - prep.t[j1]) / (prep.t[j1] - prep.t[j2])
+    # eq. (2): linear prediction with the actual capture intervals (integer nanoseconds:
+    # the same ratio whatever the window of the session)
+    ratio = (time_ns[events] - time_ns[j1]) / (time_ns[j1] - time_ns[j2])
     predicted = p1.points_world + ratio[:, None] * (p1.points_world - p2.points_world)
     # eqs. (3)-(4): nearest point on the newest viewing ray
     points = closest_points_on_rays(prep.ray_origin[events], prep.ray_dir[events], predicted)
 
-    keep = np.all(np.isfinite(points), axis=1)
-    quality = {
-        "snap_px": np.maximum(p1.snap_px, p2.snap_px),
-        "ray_miss_m": np.maximum(p1.miss_m, p2.miss_m),
-        "ray_shift_m": np.linalg.norm(points - predicted, axis=1),
-        "ray_angle_deg": np.degrees(np.minimum(p1.angle_rad, p2.angle_rad)),
-    }
+    # the detections behind each point: newest, P_{t-1}'s and P_{t-2}'s with their brackets
+    slots = np.stack([events, j1, p1.prev_row, p1.next_row, j2, p2.prev_row, p2.next_row], 1)
+    cams = obs.camera[slots]
+    k = len(events)
+    used = np.zeros((k, len(prep.centers)), dtype=bool)
+    for s in range(slots.shape[1]):
+        used[np.arange(k), cams[:, s]] = True
+    flags = invalid_points(prep, points, used)
+    with np.errstate(invalid="ignore"):
+        depth = ray_depths(predicted, prep.ray_origin[events], prep.ray_dir[events])
+    flags[~(depth > 0)] |= BEHIND  # eq. (4)'s k: the foot behind the newest camera
+    residual = np.stack([
+        p1.residual_obs_px, p1.residual_partner_px, p2.residual_obs_px, p2.residual_partner_px,
+        # the newest detection against the prediction, before eq. (4) moves it onto its ray
+        reprojection_px(prep, predicted, obs.camera[events], prep.uv_undistorted[events])], 1)
+    distinct = np.ones(slots.shape, dtype=bool)
+    for s in range(1, slots.shape[1]):
+        distinct[:, s] = ~np.any(slots[:, :s] == slots[:, s:s + 1], axis=1)
+    t_slots = time_ns[slots]
+    span1 = (time_ns[p1.next_row] - time_ns[p1.prev_row]) / NS
+    span2 = (time_ns[p2.next_row] - time_ns[p2.prev_row]) / NS
+
+    def evaluate(uv):
+        """P'_t from the undistorted pixels of the seven slots (for the covariance)."""
+        point1 = _pseudo_from_pixels(prep, obs.camera[j1], p1.partner, uv[1], uv[2], uv[3],
+                                     p1.weight)[5]
+        point2 = _pseudo_from_pixels(prep, obs.camera[j2], p2.partner, uv[4], uv[5], uv[6],
+                                     p2.weight)[5]
+        direction = prep.rays_from_undistorted(obs.camera[events], uv[0])
+        return closest_points_on_rays(prep.ray_origin[events], direction,
+                                      point1 + ratio[:, None] * (point1 - point2))
+
+    with np.errstate(invalid="ignore"):
+        if noise_px is None:
+            jacobians = None
+        elif _prepare.FINITE_DIFFERENCES:
+            jacobians = finite_difference_jacobians(
+                evaluate, [prep.uv_undistorted[slots[:, s]] for s in range(7)], slots)
+        else:
+            # eq. (4), P' = T + r rᵀ (P̂ - T) for a unit r: d P'/d P̂ = r rᵀ, and a turn δr of
+            # the newest ray moves P' by ((rᵀq) I + r qᵀ) δr with q = P̂ - T
+            r = prep.ray_dir[events]
+            q = predicted - prep.ray_origin[events]
+            G = direction_jacobian(prep, obs.camera[events], prep.uv_undistorted[events])
+            newest = (np.einsum("ni,ni->n", r, q)[:, None, None] * G
+                      + r[:, :, None] * _dot3(q, G)[:, None, :])
+
+            def onto(scale, J):  # scale r rᵀ J, rank one: r (scale rᵀ J)
+                return r[:, :, None] * (scale[:, None] * _dot3(r, J))[:, None, :]
+
+            # eq. (2): P̂ = (1 + ratio) P_{t-1} - ratio P_{t-2}
+            past1 = [onto(1 + ratio, J) for J in _pseudo_jacobians(prep, p1, obs.camera[j1])]
+            past2 = [onto(-ratio, J) for J in _pseudo_jacobians(prep, p2, obs.camera[j2])]
+            jacobians = [newest, *past1, *past2]
+        cov = None if jacobians is None else covariance(
+            slots, jacobians, [prep.pixel_jacobians(slots[:, s]) for s in range(7)], noise_px)
+        quality = {
+            "snap_px": np.maximum(p1.snap_px, p2.snap_px),
+            # measured before the snap: after it the rays cross by construction
+            "ray_miss_m": np.maximum(p1.miss_unsnapped_m, p2.miss_unsnapped_m),
+            "ray_shift_m": np.linalg.norm(points - predicted, axis=1),
+            "ray_angle_deg": np.degrees(np.minimum(p1.angle_rad, p2.angle_rad)),
+            "residual_max_px": np.max(residual, axis=1),
+            "residual_mean_px": np.mean(residual, axis=1),
+            "camera_mask": camera_mask(used),
+            "n_detections": distinct.sum(axis=1).astype(np.float64),
+            "gap_s": np.maximum(np.maximum(span1, span2), (time_ns[events] - time_ns[j2]) / NS),
+            "span_s": (time_ns[events] - t_slots.min(axis=1)) / NS,
+            **(covariance_columns(cov) if cov is not None else {}),
+        }
+    made = np.all(np.isfinite(points), axis=1)
+    keep = made & (flags == 0)
     track = Track("typeA", time_ns[events], points, obs.camera[events], quality).select(keep)
+    # past points refused as invalid (each detection once): the points they would have made
+    # are missing, or made from earlier instants
+    refused = np.zeros(n, dtype=np.int64)
+    for _, _, points_k in computed:
+        np.bitwise_or.at(refused, points_k.row, points_k.flags)
+    past = {f"past_{k}": v for k, v in count_invalid(refused).items()}
+    track = with_dropped(track, count_invalid(flags[made]), past)
     construction = TypeAConstruction(
         events[keep], (_select(p1, keep), _select(p2, keep)), predicted[keep], points[keep])
     return track, construction
+
+
+def _dot3(v: np.ndarray, J: np.ndarray) -> np.ndarray:
+    """``vᵀ J`` for (k, 3) vectors and (k, 3, 2) matrices: (k, 2)."""
+    return v[:, 0, None] * J[:, 0] + v[:, 1, None] * J[:, 1] + v[:, 2, None] * J[:, 2]
+
+
+def _pseudo_jacobians(prep: Prepared, p: PseudoStereoPoints, cam_obs: np.ndarray
+                      ) -> list[np.ndarray]:
+    """d(P) / d(undistorted pixel) (k, 3, 2) of pseudo-stereo points ``p`` for their observed
+    detection and the partner's bracket (prev, next): steps 1-3 differentiated.
+
+    The point is the crossing of the observed ray and the snapped point's ray, which meet
+    (the snap puts the partner's point on the epipolar line): with ``P = T_j + s_j d_j`` on
+    both, a turn ``δd_j`` of ray j moves it by ``s_j A⁻¹ δd_j``, ``A = Σ (I - d dᵀ)`` (the
+    least-squares point's derivative, :func:`least_squares_pixel_jacobians`, with ``w = -s d``).
+    The snapped point moves with the interpolated one by ``I - n nᵀ`` (along the epipolar
+    line of normal ``n``) and with the observed pixel as it moves the line; eq. (1) weighs the
+    bracket by ``1 - w`` and ``w``."""
+    uv_obs = prep.uv_undistorted[p.row]
+    partner = np.maximum(p.partner, 0)
+    d1, d2 = p.dir_obs, p.dir_partner
+    cos = np.einsum("ni,ni->n", d1, d2)
+    scale = 0.5 / (1 - cos**2)
+
+    def a_inv(G):
+        """A⁻¹ G for A = 2 I - d1 d1ᵀ - d2 d2ᵀ (Woodbury: A⁻¹ = (I + D M⁻¹ Dᵀ) / 2 with
+        D = [d1 d2], M = [[1, -c], [-c, 1]], c = d1·d2)."""
+        a, b = _dot3(d1, G), _dot3(d2, G)
+        return (0.5 * G + d1[:, :, None] * (scale[:, None] * (a + cos[:, None] * b))[:, None, :]
+                + d2[:, :, None] * (scale[:, None] * (cos[:, None] * a + b))[:, None, :])
+
+    s1 = np.einsum("ni,ni->n", p.points_world - prep.centers[cam_obs], d1)
+    s2 = np.einsum("ni,ni->n", p.points_world - prep.centers[partner], d2)
+    J_observed = s1[:, None, None] * a_inv(direction_jacobian(prep, cam_obs, uv_obs))
+    J_snapped = s2[:, None, None] * a_inv(direction_jacobian(prep, partner, p.uv_snapped))
+    # the snap u_s = u_i - s n onto the line l = F (u_o, v_o, 1) = (a, l3), n = a / |a|,
+    # s = (a·u_i + l3) / |a|; a move of u_o changes l by F[:, :2] δ, which moves u_s by
+    # -n ((u_sᵀ da + dl3) / |a|) - s (I - n nᵀ) da / |a|
+    F = prep.F[cam_obs, partner]
+    line = F[:, :, 0] * uv_obs[:, :1] + F[:, :, 1] * uv_obs[:, 1:] + F[:, :, 2]
+    size = np.sqrt(line[:, 0] ** 2 + line[:, 1] ** 2)
+    normal = line[:, :2] / size[:, None]
+    signed = (np.einsum("ni,ni->n", line[:, :2], p.uv_interpolated) + line[:, 2]) / size
+    da = F[:, :2, :2] / size[:, None, None]  # (k, 2, 2): d a / d u_o, over |a|
+    dl3 = F[:, 2, :2] / size[:, None]
+    shift = p.uv_snapped[:, 0, None] * da[:, 0] + p.uv_snapped[:, 1, None] * da[:, 1] + dl3
+    n_da = normal[:, 0, None] * da[:, 0] + normal[:, 1, None] * da[:, 1]  # nᵀ da
+    along_da = da - normal[:, :, None] * n_da[:, None, :]  # (I - n nᵀ) da
+    moved_line = -normal[:, :, None] * shift[:, None, :] - signed[:, None, None] * along_da
+    J_obs = J_observed + (J_snapped[:, :, 0, None] * moved_line[:, None, 0]
+                          + J_snapped[:, :, 1, None] * moved_line[:, None, 1])
+    J_n = J_snapped[:, :, 0] * normal[:, 0, None] + J_snapped[:, :, 1] * normal[:, 1, None]
+    J_interp = J_snapped - J_n[:, :, None] * normal[:, None, :]  # J (I - n nᵀ)
+    return [J_obs, (1 - p.weight)[:, None, None] * J_interp, p.weight[:, None, None] * J_interp]
 
 
 def _gather(computed: list[tuple[int, np.ndarray, PseudoStereoPoints]], events: np.ndarray,

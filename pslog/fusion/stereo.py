@@ -5,9 +5,25 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import FusionError
-from ..geometry import ray_angles, triangulate_rays
+from ..geometry import ray_angles, ray_depths, triangulate_rays
 from ..records import NS, Observations, Track
-from ._prepare import Prepared, latest_row_at_or_before
+from . import _prepare
+from ._prepare import (
+    BEHIND,
+    MIN_RAY_ANGLE_DEG,
+    OUTSIDE_VIEW,
+    PARALLEL,
+    Prepared,
+    camera_mask,
+    covariance,
+    covariance_columns,
+    direction_jacobian,
+    finite_difference_jacobians,
+    invalid_points,
+    latest_row_at_or_before,
+    least_squares_pixel_jacobians,
+    reprojection_px,
+)
 
 
 def sync_groups(obs: Observations, n_cams: int, tolerance_s: float
@@ -50,34 +66,112 @@ def sync_groups(obs: Observations, n_cams: int, tolerance_s: float
     return group, seen.sum(axis=1)
 
 
-def triangulate_groups(prep: Prepared, group: np.ndarray, n_groups: int):
+def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float):
+    """N-view least-squares point of each row of detections, with its quality and validity.
+
+    Parameters
+    ----------
+    rows : (k, m) int64, the detection of camera c for point i at ``rows[i, c]`` (-1: none)
+    noise_px : float or None, standard deviation of the detections' pixel noise, pixels per
+        axis (None: no covariance columns)
+
+    Returns
+    -------
+    points : (k, 3) metres (NaN where fewer than two usable rays)
+    quality : dict of (k,) columns (see :data:`pslog.records.QUALITY_FIELDS`): ``ray_miss_m``,
+        ``ray_angle_deg``, ``residual_max_px``, ``residual_mean_px``, ``camera_mask``,
+        ``n_detections``, ``gap_s`` (spread of the capture times taken as simultaneous; also
+        ``span_s``, the point being at the latest),
+        ``std_m`` and the covariance ``cov_*_m2``
+    flags : (k,) int64, why a point is invalid (:func:`invalid_points` bits, ``PARALLEL``
+        below :data:`MIN_RAY_ANGLE_DEG`; 0: valid)
+    used : (k, m) bool, the rays used
+    """
+    k, m = rows.shape
+    r = np.maximum(rows, 0)
+    uv = [prep.uv_undistorted[r[:, c]] for c in range(m)]
+    origins = np.broadcast_to(prep.centers, (k, m, 3))
+
+    def directions(uvs):
+        return np.stack([prep.rays_from_undistorted(np.full(k, c), uvs[c]) for c in range(m)],
+                        axis=1)
+
+    with np.errstate(invalid="ignore"):
+        dirs = directions(uv)
+    points, rms_miss, _ = triangulate_rays(origins, dirs, rows >= 0)
+    used = (rows >= 0) & np.all(np.isfinite(dirs), axis=2)
+    angle = np.degrees(ray_angles(dirs, used))
+    flags = invalid_points(prep, points, used)
+    with np.errstate(invalid="ignore"):
+        depth = ray_depths(points, origins, dirs)  # the ray parameters: > 0 in front
+        flags[np.any(used & ~(depth > 0), axis=1) & np.all(np.isfinite(points), axis=1)] |= BEHIND
+        flags[angle < MIN_RAY_ANGLE_DEG] |= PARALLEL  # (NaN: fewer than two rays)
+    residual = np.full((k, m), np.nan)
+    for c in range(m):
+        residual[:, c] = np.where(used[:, c], reprojection_px(prep, points, np.full(k, c), uv[c]),
+                                  np.nan)
+
+    slot_rows = np.where(used, rows, -1)
+    if noise_px is None:
+        cov = None
+    elif _prepare.FINITE_DIFFERENCES:
+        def evaluate(uvs):
+            with np.errstate(invalid="ignore"):
+                return triangulate_rays(origins, directions(uvs), used)[0]
+
+        jacobians = finite_difference_jacobians(evaluate, uv, slot_rows)
+    else:
+        with np.errstate(invalid="ignore"):
+            jacobians = least_squares_pixel_jacobians(
+                points, origins, dirs, used,
+                [direction_jacobian(prep, np.full(k, c), uv[c]) for c in range(m)])
+    if noise_px is not None:
+        cov = covariance(slot_rows, jacobians,
+                         [prep.pixel_jacobians(r[:, c]) for c in range(m)], noise_px)
+    times = np.where(used, prep.obs.time_ns[r], 0)
+    t_max = np.where(used, times, np.iinfo(np.int64).min).max(axis=1)
+    t_min = np.where(used, times, np.iinfo(np.int64).max).min(axis=1)
+    n_used = used.sum(axis=1)
+    with np.errstate(invalid="ignore", all="ignore"):
+        quality = {
+            "ray_miss_m": rms_miss, "ray_angle_deg": angle,
+            "residual_max_px": np.fmax.reduce(np.where(used, residual, np.nan), axis=1),
+            "residual_mean_px": np.nansum(np.where(used, residual, 0.0), axis=1) / n_used,
+            "camera_mask": camera_mask(used), "n_detections": n_used.astype(np.float64),
+            "gap_s": np.where(n_used > 0, (t_max - t_min) / NS, np.nan),
+            "span_s": np.where(n_used > 0, (t_max - t_min) / NS, np.nan),
+            **(covariance_columns(cov) if cov is not None else {}),
+        }
+    return points, quality, flags, used
+
+
+def triangulate_groups(prep: Prepared, group: np.ndarray, n_groups: int,
+                       noise_px: float | None = 0.5, with_flags: bool = False):
     """N-view least-squares point of each group (one ray per camera; a camera seen twice in a
-    group keeps its latest ray). Returns points (g, 3), quality {name: (g,)} (``ray_miss_m``,
-    ``ray_angle_deg``), time_ns (g,) of the group's latest observation, camera (g,) of that
-    observation."""
+    group keeps its latest ray). Returns points (g, 3), quality {name: (g,)}
+    (:func:`nview_points`), time_ns (g,) of the group's latest observation, camera (g,) of
+    that observation, and with ``with_flags`` the validity flags (g,) of
+    :func:`nview_points`."""
     n_cams = len(prep.centers)
-    origins = np.zeros((n_groups, n_cams, 3))
-    dirs = np.zeros((n_groups, n_cams, 3))
-    valid = np.zeros((n_groups, n_cams), dtype=bool)
-    cam = prep.obs.camera
-    origins[group, cam] = prep.ray_origin
-    dirs[group, cam] = prep.ray_dir
-    valid[group, cam] = True
-    points, rms_miss, _ = triangulate_rays(origins, dirs, valid)
+    rows = np.full((n_groups, n_cams), -1, dtype=np.int64)
+    rows[group, prep.obs.camera] = np.arange(len(group))  # later rows win: the latest ray
+    points, quality, flags, _ = nview_points(prep, rows, noise_px)
     last = np.r_[np.flatnonzero(np.diff(group)), len(group) - 1]  # last row of each group
-    quality = {"ray_miss_m": rms_miss, "ray_angle_deg": np.degrees(ray_angles(dirs, valid))}
-    return points, quality, prep.obs.time_ns[last], prep.obs.camera[last]
+    out = points, quality, prep.obs.time_ns[last], prep.obs.camera[last]
+    return (*out, flags) if with_flags else out
 
 
 def stereo_at_common_instants(
-    prep: Prepared, tolerance_s: float, method: str
+    prep: Prepared, tolerance_s: float, method: str, noise_px: float | None = 0.5
 ) -> tuple[Track, np.ndarray]:
     """N-view points of every instant at which at least two cameras saw the ball.
 
     Returns
     -------
-    track : Track named ``method``, one point per such instant, with ``ray_miss_m``
+    track : Track named ``method``, one valid point per such instant, with its quality
     alone : (n,) bool, the detections that had no simultaneous partner
+        (``track.dropped``: the instants whose point was geometrically invalid, whose
+        detections are not ``alone`` either)
     """
     group, n_cameras = sync_groups(prep.obs, len(prep.centers), tolerance_s)
     if not np.any(n_cameras >= 2):
@@ -85,49 +179,67 @@ def stereo_at_common_instants(
             f"method {method} needs cameras with a common shutter instant (sync or typeB "
             f"timing), but no two cameras captured within {tolerance_s * 1e3:g} ms of each "
             f"other; methods that suit this session: nearest, typeA")
-    points, quality, time_ns, camera = triangulate_groups(prep, group, len(n_cameras))
-    keep = (n_cameras >= 2) & np.all(np.isfinite(points), axis=1)
+    points, quality, time_ns, camera, flags = triangulate_groups(
+        prep, group, len(n_cameras), noise_px, with_flags=True)
+    # made: two usable rays, so an invalid point (exactly parallel rays give none) is counted
+    made = (n_cameras >= 2) & (quality["n_detections"] >= 2)
+    keep = made & (flags == 0) & np.all(np.isfinite(points), axis=1)
     track = Track(method, time_ns[keep], points[keep], camera[keep],
                   {k: v[keep] for k, v in quality.items()})
-    return track, n_cameras[group] == 1
+    return with_dropped(track, count_invalid(flags[made])), n_cameras[group] == 1
 
 
-def fuse_sync(prep: Prepared, tolerance_s: float = 1e-3) -> Track:
+def fuse_sync(prep: Prepared, tolerance_s: float = 1e-3, noise_px: float = 0.5) -> Track:
     """``sync``: N-view triangulation of detections captured within ``tolerance_s``.
 
-    One point per instant at which at least two cameras saw the ball.
+    One point per instant at which at least two cameras saw the ball, unless geometrically
+    invalid (dropped and counted in ``Track.dropped``).
     """
     if len(prep.obs) == 0:
         return _empty("sync")
-    return stereo_at_common_instants(prep, tolerance_s, "sync")[0]
+    return stereo_at_common_instants(prep, tolerance_s, "sync", noise_px)[0]
 
 
-def fuse_nearest(prep: Prepared, max_gap_s: float) -> Track:
+def fuse_nearest(prep: Prepared, max_gap_s: float, noise_px: float = 0.5) -> Track:
     """``nearest``: each detection triangulated with the latest detection of every other camera
-    as if they were simultaneous (the paper's "unsynchronized" baseline)."""
+    as if they were simultaneous (the paper's "unsynchronized" baseline). Geometrically
+    invalid points are dropped and counted in ``Track.dropped``."""
     n, n_cams = len(prep.obs), len(prep.centers)
     time_ns, camera = prep.obs.time_ns, prep.obs.camera
-    origins = np.zeros((n, n_cams, 3))
-    dirs = np.zeros((n, n_cams, 3))
-    valid = np.zeros((n, n_cams), dtype=bool)
+    rows = np.full((n, n_cams), -1, dtype=np.int64)
     max_gap_ns = int(max_gap_s * NS)
     events = np.arange(n)
     for d in range(n_cams):  # loop over cameras, vectorized over events
-        rows = latest_row_at_or_before(prep, d, events)
-        ok = (rows >= 0) & (camera != d)
-        ok &= time_ns - prep.obs.time_ns[np.maximum(rows, 0)] <= max_gap_ns
-        origins[ok, d] = prep.ray_origin[rows[ok]]
-        dirs[ok, d] = prep.ray_dir[rows[ok]]
-        valid[ok, d] = True
-    others = valid.sum(axis=1)
-    origins[events, camera] = prep.ray_origin
-    dirs[events, camera] = prep.ray_dir
-    valid[events, camera] = True
-    points, rms_miss, _ = triangulate_rays(origins, dirs, valid)
-    keep = (others >= 1) & np.all(np.isfinite(points), axis=1)
-    angle = np.degrees(ray_angles(dirs, valid))
-    return Track("nearest", time_ns[keep], points[keep], camera[keep],
-                 {"ray_miss_m": rms_miss[keep], "ray_angle_deg": angle[keep]})
+        latest = latest_row_at_or_before(prep, d, events)
+        ok = (latest >= 0) & (camera != d)
+        ok &= time_ns - prep.obs.time_ns[np.maximum(latest, 0)] <= max_gap_ns
+        rows[ok, d] = latest[ok]
+    others = (rows >= 0).sum(axis=1)
+    rows[events, camera] = events
+    points, quality, flags, _ = nview_points(prep, rows, noise_px)
+    made = (others >= 1) & (quality["n_detections"] >= 2)
+    keep = made & (flags == 0) & np.all(np.isfinite(points), axis=1)
+    track = Track("nearest", time_ns[keep], points[keep], camera[keep],
+                  {k: v[keep] for k, v in quality.items()})
+    return with_dropped(track, count_invalid(flags[made]))
+
+
+def count_invalid(flags: np.ndarray) -> dict[str, int]:
+    """{reason: number of points} of validity ``flags`` (a point may have several reasons)."""
+    return {name: int(np.count_nonzero(flags & bit))
+            for name, bit in (("behind_camera", BEHIND), ("outside_view", OUTSIDE_VIEW),
+                              ("parallel_rays", PARALLEL))
+            if np.any(flags & bit)}
+
+
+def with_dropped(track: Track, *counts: dict[str, int]) -> Track:
+    """``track`` carrying the summed counts of the invalid points dropped from it."""
+    total: dict[str, int] = {}
+    for c in counts:
+        for k, v in c.items():
+            total[k] = total.get(k, 0) + v
+    return Track(track.method, track.time_ns, track.position_world, track.camera,
+                 track.quality, dropped=total)
 
 
 def _empty(method: str) -> Track:

@@ -31,6 +31,7 @@ from ..rig import Rig
 from ..timing import camera_parameters, true_times_ns
 from . import METHODS, FusionOptions, causal_methods, check_method, check_tolerance, fuse
 from ._prepare import default_max_gap_s, prepare
+from .stereo import sync_groups
 
 
 class StreamFuser:
@@ -124,7 +125,8 @@ class StreamFuser:
         return self._settled(final=False)
 
     def flush(self) -> Track:
-        """Emit every remaining point (end of stream)."""
+        """Emit every remaining point (end of stream); never raises on a valid stream (an
+        end with no common instant left, for the methods that need one, emits nothing)."""
         self._admit(final=True)
         return self._settled(final=True)
 
@@ -171,14 +173,14 @@ class StreamFuser:
         if len(self._time) == 0:
             return _empty(self.method)
         obs = Observations(self._time, self._camera, self._uv, self._frame)
-        try:
+        if not self._immediate and not np.any(
+                sync_groups(obs, len(self.rig), self.options.tolerance_s)[1] >= 2):
+            # no common instant in the window (yet, or any more: a synchronised camera lost
+            # the ball): no point, which on a valid stream is no error, even at the end
+            track = _empty(self.method)
+        else:
             track = fuse(obs, self.rig, self.method, self.options,
                          prepared=prepare(obs, self.rig, self._F))
-        except FusionError:
-            if not final and not self._immediate:
-                track = _empty(self.method)  # no common instant in the window yet
-            else:
-                raise
         newest = int(self._time[-1])
         key_t, key_c = self._emitted_until
         new = (track.time_ns > key_t) | ((track.time_ns == key_t) & (track.camera > key_c))
