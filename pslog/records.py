@@ -35,10 +35,19 @@ QUALITY_FIELDS = {
     "span_s": "the point's time minus the earliest capture time it uses, seconds",
     "std_m": "position standard deviation, sqrt(trace of the covariance), metres (first order "
              "from the detections' pixel noise; not the motion model's error)",
-    "std_x_m": "position standard deviation along x, metres (smooth)",
-    "std_y_m": "position standard deviation along y, metres (smooth)",
-    "std_z_m": "position standard deviation along z, metres (smooth)",
-    "residual_px": "the detection's reprojection residual, pixels (smooth)",
+    "std_x_m": "position standard deviation along x, metres (smooth, filter)",
+    "std_y_m": "position standard deviation along y, metres (smooth, filter)",
+    "std_z_m": "position standard deviation along z, metres (smooth, filter)",
+    "residual_px": "the detection's reprojection residual, pixels (smooth; filter: after "
+                   "its update)",
+    "innovation_px": "distance of the detection from the predicted point's projection, "
+                     "pixels (filter, before its update)",
+    "nis": "normalised innovation squared the filter's gate tested (chi-square, 2 degrees of "
+           "freedom when the filter is right)",
+    "jump": "1 where the filter accepted a velocity jump (bounce, kick) at this detection",
+    "rejected": "1 where the detection failed the filter's gate and the point is the "
+                "prediction",
+    "init": "1 where the filter's track was (re)initialised at this detection",
     **{f"cov_{a}_m2": f"position covariance entry {a}, square metres"
        for a in ("xx", "yy", "zz", "xy", "xz", "yz")},
 }

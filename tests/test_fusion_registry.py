@@ -9,11 +9,12 @@ import numpy as np
 import pytest
 
 import pslog.fusion as fusion
+from pslog import SimulationOptions, apply_timing, get_motion, simulate
 from pslog.errors import FusionError
 from pslog.fusion import METHODS, Method, causal_methods, default_methods, fuse
 from pslog.fusion.stream import StreamFuser
 from pslog.log import read_session
-from pslog.records import Track
+from pslog.records import QUALITY_FIELDS, Track
 
 
 def test_every_entry_is_complete():
@@ -23,6 +24,18 @@ def test_every_entry_is_complete():
         assert method.needs <= {"shared", "alone"}
     assert METHODS["smooth"].causal is False and METHODS["smooth"].needs == frozenset()
     assert "smooth" not in causal_methods() and "typeA" in causal_methods()
+
+
+@pytest.mark.parametrize("method", list(METHODS))
+def test_every_quality_column_a_method_writes_is_described(method, rig3):
+    """A user reads what a column means in QUALITY_FIELDS (eval, export and the docs list it)."""
+    timing = "typeB" if "shared" in METHODS[method].needs else "typeA"
+    rig = apply_timing(rig3, timing)
+    detections, _ = simulate(rig, get_motion("throw"), 1.0,
+                             SimulationOptions(noise_px=0.3, seed=1))
+    track = fuse(detections, rig, method)
+    assert len(track) > 0
+    assert set(track.quality) <= set(QUALITY_FIELDS), set(track.quality) - set(QUALITY_FIELDS)
 
 
 def test_streaming_refuses_an_offline_method_with_the_reason(rig3):
