@@ -21,7 +21,12 @@ def run(args: argparse.Namespace) -> int:
     import json
 
     from pslog.errors import InputError
-    from pslog.evaluation import evaluate, format_accuracy_table
+    from pslog.evaluation import (
+        evaluate,
+        format_accuracy_table,
+        format_rejection_table,
+        rejection_counts,
+    )
     from pslog.log import read_session
 
     session = read_session(args.session)
@@ -36,8 +41,19 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"no track for method(s) {', '.join(missing)} in {args.session} "
                          f"(have {', '.join(session.tracks)})")
     rows = [evaluate(session.tracks[m], session.truth) for m in methods]
+    # the gating's rejections, against the ball labels of a simulated dirty session
+    gated = {m: rejection_counts(m, session.rejections[m], session.detections,
+                                 session.ball_truth)
+             for m in methods if m in session.rejections}
     if args.json:
-        print(json.dumps([r.as_dict() for r in rows], indent=2))
+        print(json.dumps([{**r.as_dict(), **({"gating": gated[r.method].as_dict()}
+                                             if r.method in gated else {})} for r in rows],
+                         indent=2))
     else:
         print(format_accuracy_table(rows))
+        if gated:
+            print()
+            print("gating (candidates rejected; correct: not the ball; ball lost: the ball "
+                  "rejected; false kept: not the ball yet kept)")
+            print(format_rejection_table(list(gated.values())))
     return 0

@@ -49,7 +49,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import FusionError
-from ..geometry import fundamental_matrices, triangulate_rays
+from ..geometry import epipolar_lines, fundamental_matrices, triangulate_rays
 from ..motion import G
 from ..records import NS, Detections, Observations
 from ..rig import Rig
@@ -235,6 +235,16 @@ def _candidates(detections: Detections, rig: Rig) -> _Candidates:
     return _Candidates(camera, time_ns, uv_und, ray_dir, frame)
 
 
+def epipolar_distance(F_ab: np.ndarray, uv_a: np.ndarray, uv_b: np.ndarray) -> np.ndarray:
+    """Distance, pixels (n,), of undistorted pixels ``uv_b`` (n, 2) of camera b from the
+    epipolar lines of ``uv_a`` (n, 2) of camera a (``F_ab``: ``x_bᵀ F_ab x_a = 0``, as
+    :func:`pslog.geometry.fundamental_matrix`): ``|l · [u_b, v_b, 1]|`` with
+    ``l = F_ab [u_a, v_a, 1]`` scaled to ``l_1² + l_2² = 1``. The gate's measure."""
+    lines = epipolar_lines(F_ab, np.asarray(uv_a, dtype=np.float64))
+    uv_b = np.asarray(uv_b, dtype=np.float64)
+    return np.abs(lines[:, 0] * uv_b[:, 0] + lines[:, 1] * uv_b[:, 1] + lines[:, 2])
+
+
 def _frame_table(c: _Candidates, n_cams: int):
     """Per camera: its frames with candidates, their times (the first, best candidate's
     corrected time) and a padded (frames, K) table of candidate rows (-1 padding)."""
@@ -277,16 +287,13 @@ def _support(c: _Candidates, rig: Rig, F: np.ndarray, tables, options: GatingOpt
         if len(rows) == 0:
             continue
         t = c.time_ns[rows]
-        homog = np.column_stack([c.uv_und[rows], np.ones(len(rows))])
         for b in range(m):
             if b == a:
                 continue
             times, table = tables[b]
             if len(times) == 0:
                 continue
-            lines = homog @ F[a, b].T
-            with np.errstate(invalid="ignore", divide="ignore"):
-                lines = lines / np.linalg.norm(lines[:, :2], axis=1, keepdims=True)
+            lines = epipolar_lines(F[a, b], c.uv_und[rows])
             if causal:
                 # b's frames a causal choice at t may use: (time, camera) order, or up to
                 # t + wait for the methods that wait for the tolerance
@@ -591,5 +598,15 @@ def fuse_detections(detections: Detections, rig: Rig, methods, options=None):
     return tracks, rejections
 
 
-__all__ = ["REASONS", "REASON_TEXT", "Gated", "GatingOptions", "Rejections", "fuse_detections",
-           "gate", "gate_for", "gating_key"]
+__all__ = [
+    "REASONS",
+    "REASON_TEXT",
+    "Gated",
+    "GatingOptions",
+    "Rejections",
+    "epipolar_distance",
+    "fuse_detections",
+    "gate",
+    "gate_for",
+    "gating_key",
+]

@@ -20,7 +20,7 @@ from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 #: Format identity, stored in the session metadata record.
 FORMAT_NAME = "pslog-session"
 FORMAT_MAJOR = 1  # readers refuse a higher major version
-FORMAT_MINOR = 1  # additions that older readers may ignore (1: ball truth, rejections)
+FORMAT_MINOR = 0  # additions that older readers may ignore
 FORMAT_VERSION = f"{FORMAT_MAJOR}.{FORMAT_MINOR}"
 
 #: Name of the MCAP Metadata record that marks a file as a pslog session.
