@@ -345,6 +345,23 @@ def _support(c: _Candidates, rig: Rig, F: np.ndarray, tables, options: GatingOpt
                 better = rk < best[idx]
                 best[idx[better]] = rk[better]
                 best_uv[idx[better]] = y.reshape(len(idx), -1, 2)[np.arange(len(idx)), k][better]
+            # a single nearby frame (the other camera missed the one before): its candidates
+            # as they are, allowing the image motion a ball can make since
+            single = ~near & (i1 >= 0)
+            single &= np.abs(t - times[np.maximum(i1, 0)]) <= max_gap_ns
+            idx = np.flatnonzero(single)
+            if len(idx):
+                near[idx] = True
+                r1 = table[i1[idx]]
+                y = c.uv_und[np.maximum(r1, 0)]
+                dt = np.abs(t[idx][:, None] - c.time_ns[np.maximum(r1, 0)]) / NS
+                tau = options.epipolar_px + vmax * dt
+                ln = lines[idx][:, None, :]
+                d = np.abs(ln[..., 0] * y[..., 0] + ln[..., 1] * y[..., 1] + ln[..., 2])
+                r = np.where((r1 >= 0) & np.isfinite(d), d / tau, np.inf)
+                k = np.argmin(r, axis=1)
+                best[idx] = r[np.arange(len(idx)), k]
+                best_uv[idx] = y[np.arange(len(idx)), k]
             ratio[rows[near], b] = best[near]
             carried[rows, b] = best_uv
     return ratio, carried
@@ -474,6 +491,7 @@ def gate(detections: Detections, rig: Rig, *, causal: bool = True, wait_s: float
     order = np.lexsort((c.camera[starts], c.time_ns[starts]))
     track = _Track(options)
     t_s = c.time_ns / NS
+    verified = False  # some candidate has passed a gate: from then on, none passes unjudged
     for f in order.tolist():
         lo, hi = int(starts[f]), int(ends[f])
         best_key, best_row = None, -1
@@ -510,7 +528,10 @@ def gate(detections: Detections, rig: Rig, *, causal: bool = True, wait_s: float
                         continue
                     track_cost = (miss / pred[1]) ** 2
                 elif not available[i]:
-                    unverified.append(i)  # no gate can judge it
+                    if verified:  # nothing can confirm it: no other camera near, no track
+                        reason[i] = EPIPOLAR
+                        continue
+                    unverified.append(i)  # the session's first frames: nothing to judge by
             key = (-int(n_support[i]), float(epi_cost[i]) + track_cost)
             if best_key is None or key < best_key:
                 best_key, best_row = key, i
@@ -530,6 +551,7 @@ def gate(detections: Detections, rig: Rig, *, causal: bool = True, wait_s: float
         for i in range(lo, hi):
             if i != best_row and reason[i] < 0:
                 reason[i] = OUTSCORED
+        verified |= best_row not in unverified
         if np.isfinite(points[best_row, 0]):
             track.add(float(t_s[best_row]), points[best_row])
     return _result(detections, rig, reason)
