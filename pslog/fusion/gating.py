@@ -269,7 +269,7 @@ def _frame_table(c: _Candidates, n_cams: int):
 
 
 def _support(c: _Candidates, rig: Rig, F: np.ndarray, tables, options: GatingOptions,
-             max_gap_ns: int, causal: bool, wait_ns: int):
+             max_gap_ns: int, causal: bool, wait_ns: int, only: np.ndarray | None = None):
     """Epipolar support of every candidate by every other camera.
 
     Returns
@@ -283,7 +283,7 @@ def _support(c: _Candidates, rig: Rig, F: np.ndarray, tables, options: GatingOpt
     carried = np.full((n, m, 2), np.nan)
     accel, vmax = options.accel_px_s2, options.max_image_speed_px_s
     for a in range(m):
-        rows = np.flatnonzero(c.camera == a)
+        rows = np.flatnonzero((c.camera == a) if only is None else (c.camera == a) & only)
         if len(rows) == 0:
             continue
         t = c.time_ns[rows]
@@ -445,6 +445,87 @@ class _Track:
         return coef[0], o.track_m + o.track_jump_m_s * dt
 
 
+class _Decider:
+    """The sequential part of the gate: each frame's choice, in (time, camera) order, with
+    the track and what the earlier choices taught (:func:`gate`; the stream keeps one)."""
+
+    def __init__(self, rig: Rig, options: GatingOptions) -> None:
+        self.rig, self.options = rig, options
+        self.track = _Track(options)
+        self.verified = False  # a candidate has passed a gate: from then on none passes unjudged
+
+    def run(self, c: _Candidates, frames, ratio, points, in_front, reason) -> None:
+        """Decide the frames ``[(lo, hi), ...]`` (candidate rows, in order): set ``reason``
+        of every rejected row."""
+        options, rig, track = self.options, self.rig, self.track
+        available = np.sum(np.isfinite(ratio), axis=1)
+        n_support = np.sum(ratio <= 1.0, axis=1)
+        with np.errstate(invalid="ignore"):
+            epi_cost = np.nansum(np.minimum(ratio, 2.0) ** 2, axis=1)
+        t_s = c.time_ns / NS
+        for lo, hi in frames:
+            best_key, best_row = None, -1
+            pred = None
+            unverified = []
+            for i in range(lo, hi):
+                if available[i] and n_support[i] == 0:
+                    reason[i] = EPIPOLAR
+                    continue
+                if not in_front[i]:
+                    reason[i] = MOTION
+                    continue
+                # consistent in three views: supported by two cameras, or by one and near the
+                # epipolar lines of every other (a kick or bounce between frames spoils the
+                # carried points for a frame or two, and the track with them)
+                strong = n_support[i] >= 2 or (available[i] >= 2 and np.all(
+                    ratio[i][np.isfinite(ratio[i])] <= options.loose_ratio))
+                track_cost = 0.0
+                if not strong:
+                    last = track.last()
+                    if last is not None and np.isfinite(points[i, 0]):
+                        dt = abs(t_s[i] - last[0])
+                        if dt <= options.track_window_s and np.linalg.norm(points[i] - last[1]) > (
+                                options.max_speed_m_s * dt + options.track_m):
+                            reason[i] = MOTION
+                            continue
+                    if pred is None:
+                        pred = track.predict(t_s[i]) or False
+                    if pred and np.isfinite(c.ray_dir[i, 0]):
+                        offset = pred[0] - rig.cameras[c.camera[i]].center_world
+                        miss = np.linalg.norm(np.cross(offset, c.ray_dir[i]))
+                        if miss > pred[1]:
+                            reason[i] = TRACK
+                            continue
+                        track_cost = (miss / pred[1]) ** 2
+                    elif not available[i]:
+                        if self.verified:  # nothing can confirm it: no other camera near, no track
+                            reason[i] = EPIPOLAR
+                            continue
+                        unverified.append(i)  # the session's first frames: nothing to judge by
+                key = (-int(n_support[i]), float(epi_cost[i]) + track_cost)
+                if best_key is None or key < best_key:
+                    best_key, best_row = key, i
+            if best_row < 0:
+                continue
+            if best_row in unverified and len(unverified) > 1:
+                # several candidates nothing can tell apart (no other camera near, no track):
+                # keeping one would be a guess
+                for i in unverified:
+                    reason[i] = EPIPOLAR
+                best_row = -1
+                for i in range(lo, hi):
+                    if reason[i] < 0 and i not in unverified:
+                        best_row = i
+                if best_row < 0:
+                    continue
+            for i in range(lo, hi):
+                if i != best_row and reason[i] < 0:
+                    reason[i] = OUTSCORED
+            self.verified |= best_row not in unverified
+            if np.isfinite(points[best_row, 0]):
+                track.add(float(t_s[best_row]), points[best_row])
+
+
 def gate(detections: Detections, rig: Rig, *, causal: bool = True, wait_s: float = 0.0,
          max_gap_s: float | None = None, options: GatingOptions | None = None) -> Gated:
     """Choose the ball among every frame's candidates (module docstring).
@@ -480,80 +561,12 @@ def gate(detections: Detections, rig: Rig, *, causal: bool = True, wait_s: float
     ratio, carried = _support(c, rig, F, tables, options, max_gap_ns, causal,
                               round(wait_s * NS))
     points, in_front = _points(c, rig, ratio, carried)
-    available = np.sum(np.isfinite(ratio), axis=1)
-    n_support = np.sum(ratio <= 1.0, axis=1)
-    with np.errstate(invalid="ignore"):
-        epi_cost = np.nansum(np.minimum(ratio, 2.0) ** 2, axis=1)
-
     # frames in (time, camera) order of their best candidate; candidates contiguous per frame
     starts = np.flatnonzero(np.r_[True, c.frame[1:] != c.frame[:-1]])
     ends = np.r_[starts[1:], n]
     order = np.lexsort((c.camera[starts], c.time_ns[starts]))
-    track = _Track(options)
-    t_s = c.time_ns / NS
-    verified = False  # some candidate has passed a gate: from then on, none passes unjudged
-    for f in order.tolist():
-        lo, hi = int(starts[f]), int(ends[f])
-        best_key, best_row = None, -1
-        pred = None
-        unverified = []
-        for i in range(lo, hi):
-            if available[i] and n_support[i] == 0:
-                reason[i] = EPIPOLAR
-                continue
-            if not in_front[i]:
-                reason[i] = MOTION
-                continue
-            # consistent in three views: supported by two cameras, or by one and near the
-            # epipolar lines of every other (a kick or bounce between frames spoils the
-            # carried points for a frame or two, and the track with them)
-            strong = n_support[i] >= 2 or (available[i] >= 2 and np.all(
-                ratio[i][np.isfinite(ratio[i])] <= options.loose_ratio))
-            track_cost = 0.0
-            if not strong:
-                last = track.last()
-                if last is not None and np.isfinite(points[i, 0]):
-                    dt = abs(t_s[i] - last[0])
-                    if dt <= options.track_window_s and np.linalg.norm(points[i] - last[1]) > (
-                            options.max_speed_m_s * dt + options.track_m):
-                        reason[i] = MOTION
-                        continue
-                if pred is None:
-                    pred = track.predict(t_s[i]) or False
-                if pred and np.isfinite(c.ray_dir[i, 0]):
-                    offset = pred[0] - rig.cameras[c.camera[i]].center_world
-                    miss = np.linalg.norm(np.cross(offset, c.ray_dir[i]))
-                    if miss > pred[1]:
-                        reason[i] = TRACK
-                        continue
-                    track_cost = (miss / pred[1]) ** 2
-                elif not available[i]:
-                    if verified:  # nothing can confirm it: no other camera near, no track
-                        reason[i] = EPIPOLAR
-                        continue
-                    unverified.append(i)  # the session's first frames: nothing to judge by
-            key = (-int(n_support[i]), float(epi_cost[i]) + track_cost)
-            if best_key is None or key < best_key:
-                best_key, best_row = key, i
-        if best_row < 0:
-            continue
-        if best_row in unverified and len(unverified) > 1:
-            # several candidates nothing can tell apart (no other camera near, no track):
-            # keeping one would be a guess
-            for i in unverified:
-                reason[i] = EPIPOLAR
-            best_row = -1
-            for i in range(lo, hi):
-                if reason[i] < 0 and i not in unverified:
-                    best_row = i
-            if best_row < 0:
-                continue
-        for i in range(lo, hi):
-            if i != best_row and reason[i] < 0:
-                reason[i] = OUTSCORED
-        verified |= best_row not in unverified
-        if np.isfinite(points[best_row, 0]):
-            track.add(float(t_s[best_row]), points[best_row])
+    _Decider(rig, options).run(c, [(int(starts[f]), int(ends[f])) for f in order.tolist()],
+                               ratio, points, in_front, reason)
     return _result(detections, rig, reason)
 
 
@@ -569,6 +582,130 @@ def _result(detections: Detections, rig: Rig, reason: np.ndarray) -> Gated:
                             detections.frame_index[rows], detections.cand_uv[rej],
                             detections.cand_score[rej], reason[rej])
     return Gated(timed_observations(kept, rig), rejections, chosen, reason)
+
+
+class StreamGate:
+    """The causal gate of :func:`gate` for a stream: frames pushed as they arrive, each
+    frame's candidates in one push, best first; each frame is decided once nothing still to
+    come can change its choice, and the chosen candidates come out in the pushed (logged)
+    order. The choices equal ``gate(detections, rig, causal=True, wait_s=...)`` on the whole
+    session (the same decision code, in the same order, with the same history).
+
+    Used by :class:`pslog.fusion.stream.StreamFuser` with ``candidates=True``.
+    """
+
+    def __init__(self, rig: Rig, wait_s: float = 0.0, max_gap_s: float | None = None,
+                 options: GatingOptions | None = None) -> None:
+        from ._prepare import default_max_gap_s
+
+        self.rig = rig
+        self.options = options or GatingOptions()
+        self.wait_ns = round(wait_s * NS)
+        self.max_gap_ns = round((max_gap_s or default_max_gap_s(rig)) * NS)
+        self.F = fundamental_matrices(rig.cameras)
+        self.clock = camera_parameters(rig)
+        self.corrected = any(cam.has_clock_correction for cam in rig.cameras)
+        spread = float(np.sum(np.abs(self.clock["clock_offset"])) + np.max(self.clock["readout"]))
+        self.history_ns = round((2 * (max_gap_s or default_max_gap_s(rig)) + wait_s
+                                 + 0.2 + 2 * spread) * NS)
+        self.decider = _Decider(rig, self.options)
+        # the window: one entry per frame, in pushed order:
+        # [logged time, camera, frame index, uv (k, 2), reason (k,) or None, released]
+        self.frames: list[list] = []
+        self.last: tuple[int, int] = (np.iinfo(np.int64).min, -1)
+        self.rejected: list[tuple] = []
+
+    def push(self, time_ns, camera, uv, frame_index=None):
+        """Add candidates (rows with equal ``(time, camera)`` are one frame's, best first;
+        LOGGED times, in (time, camera) order, later than any pushed before). Returns the
+        chosen candidates ready to fuse, ``(time_ns, camera, uv, frame_index)`` arrays in
+        logged order."""
+        time_ns = np.atleast_1d(np.asarray(time_ns, dtype=np.int64))
+        camera = np.atleast_1d(np.asarray(camera, dtype=np.int32))
+        uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+        frame_index = (np.zeros(len(time_ns), np.int64) if frame_index is None
+                       else np.atleast_1d(np.asarray(frame_index, dtype=np.int64)))
+        keys = list(zip(time_ns.tolist(), camera.tolist(), strict=True))
+        start = 0
+        for i in range(1, len(keys) + 1):
+            if i == len(keys) or keys[i] != keys[start]:
+                if keys[start] <= self.last:
+                    raise FusionError("candidates must arrive in (time, camera) order of "
+                                      "their logged times, each frame's in one push; got "
+                                      f"t={keys[start][0]} ns after t={self.last[0]} ns")
+                self.last = keys[start]
+                self.frames.append([keys[start][0], keys[start][1], int(frame_index[start]),
+                                    uv[start:i].copy(), None, False])
+                start = i
+        return self._step(final=False)
+
+    def flush(self):
+        """Decide and return every remaining frame (end of stream)."""
+        return self._step(final=True)
+
+    @property
+    def rejections(self) -> Rejections:
+        """Every candidate rejected so far."""
+        return Rejections.from_rows([(t, c, f, u, v, 1.0, REASONS[r])
+                                     for t, c, f, u, v, r in self.rejected])
+
+    def _step(self, final: bool):
+        frames = self.frames
+        if frames:
+            names = self.rig.names
+            counts = np.array([len(f[3]) for f in frames])
+            det = Detections(names, np.array([f[0] for f in frames], np.int64),
+                             np.array([f[1] for f in frames], np.int32),
+                             np.array([f[2] for f in frames], np.int64),
+                             np.repeat(np.arange(len(frames)), counts),
+                             np.concatenate([f[3] for f in frames]),
+                             np.full(int(counts.sum()), np.nan), np.ones(int(counts.sum())))
+            c = _candidates(det, self.rig)
+            first = np.r_[0, np.cumsum(counts)[:-1]]
+            key = c.time_ns[first]
+            todo = np.array([f[4] is None for f in frames])
+            if not final:
+                if self.corrected:
+                    p = self.clock
+                    bound = int(np.min(true_times_ns(
+                        np.full(len(self.rig), self.last[0]), 0.0, p["height"],
+                        p["clock_offset"], p["clock_drift_ppm"], p["readout"])))
+                    todo &= key + self.wait_ns < bound
+                elif self.wait_ns:
+                    todo &= key + self.wait_ns < self.last[0]
+            if todo.any():
+                rows = np.flatnonzero(todo)
+                rows = rows[np.lexsort((det.frame_camera[rows], key[rows]))]
+                only = todo[c.frame]
+                ratio, carried = _support(c, self.rig, self.F, _frame_table(c, len(self.rig)),
+                                          self.options, self.max_gap_ns, True, self.wait_ns,
+                                          only)
+                points, in_front = _points(c, self.rig, ratio, carried)
+                reason = np.full(len(c.frame), -1, dtype=np.int8)
+                self.decider.run(c, [(int(first[f]), int(first[f] + counts[f])) for f in rows],
+                                 ratio, points, in_front, reason)
+                for f in rows.tolist():
+                    frames[f][4] = reason[first[f]:first[f] + counts[f]]
+        out = []
+        for f in frames:  # release decided frames in pushed order
+            if f[4] is None:
+                break
+            if not f[5]:
+                f[5] = True
+                for k, r in enumerate(f[4].tolist()):
+                    if r < 0:
+                        out.append((f[0], f[1], f[3][k], f[2]))
+                    else:
+                        self.rejected.append((f[0], f[1], f[2], *f[3][k], r))
+        # keep the history a later choice can reach
+        while frames and frames[0][5] and frames[0][0] < self.last[0] - self.history_ns:
+            frames.pop(0)
+        if not out:
+            return (np.zeros(0, np.int64), np.zeros(0, np.int32), np.zeros((0, 2)),
+                    np.zeros(0, np.int64))
+        t, cam, uv, idx = zip(*out, strict=True)
+        return (np.array(t, np.int64), np.array(cam, np.int32), np.array(uv),
+                np.array(idx, np.int64))
 
 
 def gating_key(method: str, options) -> tuple[bool, float]:
@@ -626,6 +763,7 @@ __all__ = [
     "Gated",
     "GatingOptions",
     "Rejections",
+    "StreamGate",
     "epipolar_distance",
     "fuse_detections",
     "gate",
