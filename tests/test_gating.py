@@ -335,3 +335,33 @@ def test_stream_with_candidates_equals_batch_on_a_dirty_session(timing, method):
         np.testing.assert_allclose(got, expected.position_world, rtol=0, atol=1e-9)
     else:
         assert_array_equal(got, expected.position_world)
+
+
+def test_viewer_shows_the_stored_rejections(tmp_path):
+    from rerun.chunk import RrdReader
+
+    from viewers import save_rrd
+
+    session, fused, rrd = tmp_path / "d.mcap", tmp_path / "f.mcap", tmp_path / "v.rrd"
+    assert main(["simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "throw",
+                 "--noise-px", "0.3", "--spurious", "0.1", "--distractor", "cam2=1,1.5,0.2",
+                 "--seed", "4", "-o", str(session)]) == 0
+    assert main(["fuse", str(session), "--method", "typeA", "-o", str(fused)]) == 0
+    save_rrd([session, fused], rrd, methods="typeA", frames="none")
+    rejections = read_session(fused).rejections["typeA"]
+    assert len(rejections) > 20
+    points: dict[str, int] = {}
+    legend = ""
+    for chunk in RrdReader(rrd).stream():
+        batch = chunk.to_record_batch()
+        if chunk.entity_path == "/legend":
+            legend += str(batch.to_pylist())
+        for kind in ("rejected", "detections"):
+            if not chunk.is_static and chunk.entity_path.endswith(f"/image/{kind}"):
+                col = batch.column("Points2D:positions").to_pylist()
+                points[kind] = points.get(kind, 0) + sum(len(p or []) for p in col)
+    # grey points: exactly the stored rejections; the kept ones: every other candidate
+    assert points["rejected"] == len(rejections)
+    det = read_session(session).detections
+    assert points["detections"] == det.n_candidates - len(rejections)
+    assert f"{len(rejections)} candidates rejected" in legend

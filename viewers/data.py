@@ -157,13 +157,14 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
         have = sorted(set(tracks) | set(METHODS))
         raise InputError(f"unknown method {unknown[0]!r} (stored or fusable: {', '.join(have)})")
     if missing:
-        tracks.update(fuse_all(observations, session.rig, missing))
+        # as 'pslog fuse' does: each frame's ball chosen among its candidates (gating)
+        tracks.update(fuse_all(session.detections, session.rig, missing))
         notes.append(f"fused on the fly: {', '.join(missing)}")
     shown = {m: tracks[m] for m in wanted}
 
     construction = None
     if "typeA" in shown and len(session.rig) >= 2 and len(observations):
-        construction = explain_type_a(observations, session.rig)
+        construction = explain_type_a(session.detections, session.rig)
 
     first = int(session.detections.frame_time_ns.min()) if session.detections.n_frames else 0
     lo = -np.inf if start is None else float(start)

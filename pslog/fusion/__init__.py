@@ -276,8 +276,12 @@ def explain_type_a(
 ) -> TypeAConstruction:
     """The paper's Figure 2 construction behind every type-A point (see TypeAConstruction)."""
     options = options or FusionOptions()
-    if isinstance(observations, Detections):
-        observations = timed_observations(observations, rig)
+    if isinstance(observations, Detections):  # as fuse() chooses them for typeA
+        from .gating import gate_for
+
+        observations = (gate_for(observations, rig, "typeA", options).observations
+                        if options.gating and len(rig) >= 2
+                        else timed_observations(observations, rig))
     prep = prepare(observations, rig)
     return fuse_type_a(prep, options.max_gap_s or default_max_gap_s(rig))[1]
 
