@@ -87,6 +87,10 @@ class GatingOptions:
     max_speed_m_s : float, fastest ball, m/s
     loose_ratio : float, a candidate supported by one camera and within this many
         epipolar thresholds of every other camera is consistent in three views
+    static_s, static_m : float, a candidate whose 3D point stays within ``static_m``
+        metres of one of its camera's earlier candidates' in every frame of the last
+        ``static_s`` seconds is a static object, not a ball in play (a ball slower than
+        about 10 cm/s is not tracked)
     """
 
     epipolar_px: float = 8.0
@@ -98,10 +102,13 @@ class GatingOptions:
     track_points: int = 6
     max_speed_m_s: float = 15.0
     loose_ratio: float = 2.0
+    static_s: float = 0.25
+    static_m: float = 0.05
 
     def __post_init__(self) -> None:
         for name in ("epipolar_px", "accel_px_s2", "max_image_speed_px_s", "track_m",
-                     "track_jump_m_s", "track_window_s", "max_speed_m_s", "loose_ratio"):
+                     "track_jump_m_s", "track_window_s", "max_speed_m_s", "loose_ratio", "static_s",
+                     "static_m"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
                 raise FusionError(f"gating {name} must be a positive number, got {value!r}")
@@ -367,6 +374,45 @@ def _support(c: _Candidates, rig: Rig, F: np.ndarray, tables, options: GatingOpt
     return ratio, carried
 
 
+def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
+            points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Which candidates stood still in space: each one's 3D point (its ray crossed with its
+    support's) within ``static_m`` of a candidate's point in each of its camera's earlier
+    frames. (Still in one image is not enough: a ball moving along a camera's ray is.)
+    Causal: only earlier frames of the same camera.
+
+    Returns
+    -------
+    static : (C,) bool, still in three quarters of the frames of the last ``static_s`` (as
+        many frames as the camera's rate gives, within 1.5 ``static_s``): a static object
+        seen by several cameras (a second orange thing, a lamp), not a ball in play
+    stillness : (C,) float in [0, 1], the share of those frames, back from the newest,
+        it was still in (a candidate that has not moved yet is the less likely ball)
+    """
+    static = np.zeros(len(c.camera), dtype=bool)
+    stillness = np.zeros(len(c.camera))
+    for b, (times, table) in enumerate(tables):
+        lags = int(np.ceil(options.static_s * rig.cameras[b].fps))
+        run = np.zeros(table.shape)
+        p = points[np.maximum(table, 0)]  # (frames, K, 3)
+        for lag in range(1, min(lags, len(times) - 1) + 1):
+            prev = np.full(table.shape, -1)
+            prev[lag:] = table[:-lag]
+            # the lag frames must lie within 1.5 static_s: missed frames do not count
+            recent = np.zeros(len(times), dtype=bool)
+            recent[lag:] = times[lag:] - times[:-lag] <= 1.5 * options.static_s * NS
+            pp = points[np.maximum(prev, 0)]
+            with np.errstate(invalid="ignore"):
+                d = np.linalg.norm(p[:, :, None, :] - pp[:, None, :, :], axis=-1)
+            d = np.where((prev[:, None, :] >= 0) & np.isfinite(d), d, np.inf).min(axis=2)
+            run += recent[:, None] & (d <= options.static_m)
+        ok = table >= 0
+        stillness[table[ok]] = run[ok] / lags
+        # still in most of them: one frame whose point a coincidence spoiled does not count
+        static[table[ok & (run >= 0.75 * lags)]] = True
+    return static, stillness
+
+
 def _points(c: _Candidates, rig: Rig, ratio: np.ndarray, carried: np.ndarray):
     """Each candidate's 3D point: its ray and its supporting cameras' carried rays crossed
     (least squares); NaN without support. Also whether it lies in front of every camera
@@ -454,9 +500,12 @@ class _Decider:
         self.track = _Track(options)
         self.verified = False  # a candidate has passed a gate: from then on none passes unjudged
 
-    def run(self, c: _Candidates, frames, ratio, points, in_front, reason) -> None:
+    def run(self, c: _Candidates, frames, ratio, points, in_front, reason,
+            static=None) -> None:
         """Decide the frames ``[(lo, hi), ...]`` (candidate rows, in order): set ``reason``
-        of every rejected row."""
+        of every rejected row (``static``: :func:`_static`'s pair)."""
+        static, stillness = ((np.zeros(len(c.camera), dtype=bool), np.zeros(len(c.camera)))
+                             if static is None else static)
         options, rig, track = self.options, self.rig, self.track
         available = np.sum(np.isfinite(ratio), axis=1)
         n_support = np.sum(ratio <= 1.0, axis=1)
@@ -471,7 +520,7 @@ class _Decider:
                 if available[i] and n_support[i] == 0:
                     reason[i] = EPIPOLAR
                     continue
-                if not in_front[i]:
+                if not in_front[i] or static[i]:
                     reason[i] = MOTION
                     continue
                 # consistent in three views: supported by two cameras, or by one and near the
@@ -498,11 +547,11 @@ class _Decider:
                             continue
                         track_cost = (miss / pred[1]) ** 2
                     elif not available[i]:
-                        if self.verified:  # nothing can confirm it: no other camera near, no track
+                        if self.verified:  # nothing can confirm it: no other camera, no track
                             reason[i] = EPIPOLAR
                             continue
                         unverified.append(i)  # the session's first frames: nothing to judge by
-                key = (-int(n_support[i]), float(epi_cost[i]) + track_cost)
+                key = (-int(n_support[i]), float(epi_cost[i]) + track_cost + stillness[i])
                 if best_key is None or key < best_key:
                     best_key, best_row = key, i
             if best_row < 0:
@@ -566,7 +615,8 @@ def gate(detections: Detections, rig: Rig, *, causal: bool = True, wait_s: float
     ends = np.r_[starts[1:], n]
     order = np.lexsort((c.camera[starts], c.time_ns[starts]))
     _Decider(rig, options).run(c, [(int(starts[f]), int(ends[f])) for f in order.tolist()],
-                               ratio, points, in_front, reason)
+                               ratio, points, in_front, reason,
+                               _static(c, tables, rig, options, points))
     return _result(detections, rig, reason)
 
 
@@ -607,7 +657,7 @@ class StreamGate:
         self.corrected = any(cam.has_clock_correction for cam in rig.cameras)
         spread = float(np.sum(np.abs(self.clock["clock_offset"])) + np.max(self.clock["readout"]))
         self.history_ns = round((2 * (max_gap_s or default_max_gap_s(rig)) + wait_s
-                                 + 0.2 + 2 * spread) * NS)
+                                 + 1.5 * self.options.static_s + 0.2 + 2 * spread) * NS)
         self.decider = _Decider(rig, self.options)
         # the window: one entry per frame, in pushed order:
         # [logged time, camera, frame index, uv (k, 2), reason (k,) or None, released]
@@ -676,14 +726,16 @@ class StreamGate:
             if todo.any():
                 rows = np.flatnonzero(todo)
                 rows = rows[np.lexsort((det.frame_camera[rows], key[rows]))]
-                only = todo[c.frame]
-                ratio, carried = _support(c, self.rig, self.F, _frame_table(c, len(self.rig)),
-                                          self.options, self.max_gap_ns, True, self.wait_ns,
-                                          only)
+                todo[c.frame]
+                tables = _frame_table(c, len(self.rig))
+                # every candidate of the window: the static test needs earlier frames' points
+                ratio, carried = _support(c, self.rig, self.F, tables, self.options,
+                                          self.max_gap_ns, True, self.wait_ns)
                 points, in_front = _points(c, self.rig, ratio, carried)
                 reason = np.full(len(c.frame), -1, dtype=np.int8)
                 self.decider.run(c, [(int(first[f]), int(first[f] + counts[f])) for f in rows],
-                                 ratio, points, in_front, reason)
+                                 ratio, points, in_front, reason,
+                                 _static(c, tables, self.rig, self.options, points))
                 for f in rows.tolist():
                     frames[f][4] = reason[first[f]:first[f] + counts[f]]
         out = []
