@@ -660,7 +660,8 @@ class StreamGate:
                                  + 1.5 * self.options.static_s + 0.2 + 2 * spread) * NS)
         self.decider = _Decider(rig, self.options)
         # the window: one entry per frame, in pushed order:
-        # [logged time, camera, frame index, uv (k, 2), reason (k,) or None, released]
+        # [logged time, camera, frame index, uv (k, 2), reason (k,) or None, released,
+        #  then, once decided, its candidates' 3D points (k, 3)]
         self.frames: list[list] = []
         self.last: tuple[int, int] = (np.iinfo(np.int64).min, -1)
         self.rejected: list[tuple] = []
@@ -726,12 +727,18 @@ class StreamGate:
             if todo.any():
                 rows = np.flatnonzero(todo)
                 rows = rows[np.lexsort((det.frame_camera[rows], key[rows]))]
-                todo[c.frame]
+                only = todo[c.frame]
                 tables = _frame_table(c, len(self.rig))
-                # every candidate of the window: the static test needs earlier frames' points
                 ratio, carried = _support(c, self.rig, self.F, tables, self.options,
-                                          self.max_gap_ns, True, self.wait_ns)
+                                          self.max_gap_ns, True, self.wait_ns, only)
                 points, in_front = _points(c, self.rig, ratio, carried)
+                # the decided frames' points, as computed when they were decided (a point
+                # uses nothing after its time: the same as now), for the stillness test
+                for f in np.flatnonzero(~todo).tolist():
+                    if len(frames[f]) > 6:  # decided; the others are later than any to do
+                        points[first[f]:first[f] + counts[f]] = frames[f][6]
+                for f in rows.tolist():
+                    frames[f].append(points[first[f]:first[f] + counts[f]].copy())
                 reason = np.full(len(c.frame), -1, dtype=np.int8)
                 self.decider.run(c, [(int(first[f]), int(first[f] + counts[f])) for f in rows],
                                  ratio, points, in_front, reason,
