@@ -24,8 +24,10 @@ A candidate ``x`` of camera ``a`` at (corrected) time ``t`` is judged by three g
    ``x``'s viewing ray to the prediction ``p̂(t)`` must be at most ``track_m + Δv Δt``
    (``Δt``: time since the newest accepted point, ``Δv`` a kick's change of velocity).
 3. **Motion model**. The point ``x`` makes with its support must lie in front of every
-   camera that contributed, and be reachable from the last accepted point at a ball's
-   speed: ``|p - p_last| <= max_speed · Δt + track_m``.
+   camera that contributed, be reachable from the last accepted point at a ball's speed,
+   ``|p - p_last| <= max_speed · Δt + track_m``, and not stand still: a point within
+   ``static_m`` of its camera's earlier points over ``static_s`` is a static object (a second
+   orange thing seen by every camera passes every epipolar test; it does not move).
 
 A candidate is accepted when the epipolar gate accepts it (some other camera supports it; or
 no other camera has a frame near ``t``, so nothing can be checked) and the track and motion
