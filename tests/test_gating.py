@@ -319,17 +319,24 @@ def _push_frames(fuser, det):
     return out
 
 
-@pytest.mark.parametrize("timing, method", [("typeA", "nearest"), ("typeB", "typeB"),
-                                            ("sync", "sync"), ("typeA", "typeA")])
-def test_stream_with_candidates_equals_batch_on_a_dirty_session(timing, method):
+@pytest.mark.parametrize("timing, method, clocks", [
+    ("typeA", "nearest", False), ("typeB", "typeB", False), ("sync", "sync", False),
+    ("typeA", "typeA", False), ("typeA", "nearest", True), ("typeB", "typeB", True)])
+def test_stream_with_candidates_equals_batch_on_a_dirty_session(timing, method, clocks):
+    """Misses (30 %), drops (10 %), false candidates, a blind camera; with ``clocks`` also
+    clock offsets and rolling shutters (every candidate at its own corrected time)."""
     from pslog.fusion.gating import StreamGate, gating_key
     from pslog.fusion.stream import StreamFuser
+    from pslog.simulation import true_rig
 
     rig = apply_timing(builtin_rig("paper3"), timing)
+    faults = ({"clock_offset_s": {"cam2": 0.004, "cam3": -0.006},
+               "readout_s": dict.fromkeys(rig.names, 0.01)} if clocks else {})
     options = SimulationOptions(noise_px=0.3, seed=3, miss_rate=0.3, drop_rate=0.1,
                                 spurious_rate=0.1, distractors=(("cam2", DISTRACTOR),),
-                                blackouts=(("cam3", 1.0, 0.5),))
+                                blackouts=(("cam3", 1.0, 0.5),), **faults)
     det, _, _ = simulate_labelled(rig, get_motion("rally"), 4.0, options)
+    rig = true_rig(rig, options)  # the clock model the logged times need
     # the choices: exactly the batch gate's, rejections included
     wait = gating_key(method, FusionOptions())[1]
     batch = gate(det, rig, causal=True, wait_s=wait)
