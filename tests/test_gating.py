@@ -390,3 +390,26 @@ def test_viewer_shows_the_stored_rejections(tmp_path):
     det = read_session(session).detections
     assert points["detections"] == det.n_candidates - len(rejections)
     assert f"{len(rejections)} candidates rejected" in legend
+
+
+def test_a_malformed_rejection_record_is_one_line(tmp_path, capsys):
+    """A rejection with a reason pslog does not know (another writer, a newer pslog): the
+    readers refuse the file in one line naming the problem, exit 1."""
+    from pslog.log import SessionWriter
+    from pslog.log import _schemas as S
+
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    det, truth, _ = simulate_labelled(rig, get_motion("throw"), None, SimulationOptions())
+    path = tmp_path / "odd.mcap"
+    with SessionWriter(path, rig, timing="typeA") as w:
+        w.add_detections(det)
+        w.add_truth(truth)
+        w.add_track(fuse(det, rig, "typeA"))
+        msg = S.Rejection(time_ns=5, camera="cam1", frame_index=0, u=1.0, v=2.0, score=0.5,
+                          reason="guess")
+        w._queue(w._channel(S.rejections_topic("typeA"), S.Rejection), 5,
+                 msg.SerializeToString())
+    capsys.readouterr()
+    assert main(["eval", str(path)]) == 1
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "unknown rejection reason 'guess'" in err, err
