@@ -413,3 +413,4 @@ def test_a_malformed_rejection_record_is_one_line(tmp_path, capsys):
     assert main(["eval", str(path)]) == 1
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "unknown rejection reason 'guess'" in err, err
+    assert str(path) in err

@@ -237,9 +237,12 @@ def _read(f: _Finished, skip: frozenset[int] = frozenset()) -> Session:
         events = decode_events(found.get(S.EVENTS_TOPIC, []))
         ball_truth = (decode_detections(rig.names, [found.get(t, []) for t in ball_topics])
                       if any(t in found for t in ball_topics) else None)
-        rejections = {S.parse_rejections_topic(t): decode_rejections(rig.names,
-                                                                     found.get(t, []))
-                      for t in rejection_topics}
+        try:
+            rejections = {S.parse_rejections_topic(t): decode_rejections(rig.names,
+                                                                         found.get(t, []))
+                          for t in rejection_topics}
+        except LogFormatError as exc:
+            raise LogFormatError(f"{f.path}: {exc}") from None
     except DecodeError as exc:
         # only a chunk written without CRCs can get here with damaged bytes
         raise LogFormatError(f"{f.path}: a message does not decode ({exc}); run 'pslog "
