@@ -89,6 +89,9 @@ class GatingOptions:
     max_speed_m_s : float, fastest ball, m/s
     loose_ratio : float, a candidate supported by one camera and within this many
         epipolar thresholds of every other camera is consistent in three views
+    track_alone_m : float, a candidate no other camera confirms is still accepted when its
+        ray passes this close to the track's prediction, metres (another camera that does not
+        see the ball should not veto it)
     static_s, static_m : float, a candidate whose 3D point stays within ``static_m``
         metres of one of its camera's earlier candidates' in every frame of the last
         ``static_s`` seconds is a static object, not a ball in play (a ball slower than
@@ -106,11 +109,12 @@ class GatingOptions:
     loose_ratio: float = 2.0
     static_s: float = 0.25
     static_m: float = 0.05
+    track_alone_m: float = 0.03
 
     def __post_init__(self) -> None:
         for name in ("epipolar_px", "accel_px_s2", "max_image_speed_px_s", "track_m",
                      "track_jump_m_s", "track_window_s", "max_speed_m_s", "loose_ratio", "static_s",
-                     "static_m"):
+                     "static_m", "track_alone_m"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
                 raise FusionError(f"gating {name} must be a positive number, got {value!r}")
@@ -519,9 +523,19 @@ class _Decider:
             pred = None
             unverified = []
             for i in range(lo, hi):
+                track_accepts = False
                 if available[i] and n_support[i] == 0:
-                    reason[i] = EPIPOLAR
-                    continue
+                    # no other camera confirms it (they may just not see the ball): the track
+                    # gate alone may still accept it, if its ray passes close to the prediction
+                    if pred is None:
+                        pred = track.predict(t_s[i]) or False
+                    if pred and np.isfinite(c.ray_dir[i, 0]):
+                        offset = pred[0] - rig.cameras[c.camera[i]].center_world
+                        track_accepts = (np.linalg.norm(np.cross(offset, c.ray_dir[i]))
+                                         <= options.track_alone_m)
+                    if not track_accepts:
+                        reason[i] = EPIPOLAR
+                        continue
                 if not in_front[i] or static[i]:
                     reason[i] = MOTION
                     continue
