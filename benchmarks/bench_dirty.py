@@ -13,7 +13,7 @@ Sessions: the rig ``paper3`` (type-A shutters), motions ``throw`` and ``spiral``
 :mod:`pslog.motion` and rallies (kicks, bounces, air drag) of the tests' own generator
 (``tests/_rally.py``), several seeds; the faults' camera and times vary with the seed.
 
-    python benchmarks/bench_dirty.py [--seeds 3] [--duration 8] [--gating off]
+    python benchmarks/bench_dirty.py [--seeds 3] [--duration 8] [--noise-px 0.3] [--gating off]
 """
 
 from __future__ import annotations
@@ -78,11 +78,14 @@ def main() -> int:
     parser.add_argument("--seeds", type=int, default=3, help="rallies (default 3)")
     parser.add_argument("--duration", type=float, default=8.0, help="rally seconds")
     parser.add_argument("--gating", choices=("on", "off"), default="on")
+    parser.add_argument("--noise-px", type=float, default=0.3,
+                        help="detection noise, pixels (default 0.3, the targets')")
     args = parser.parse_args()
     rig = apply_timing(builtin_rig("paper3"), "typeA")
     methods = [m for m in ("typeA", "smooth", "filter", "nearest") if m in METHODS]
     options = FusionOptions(gating=args.gating == "on")
-    print(f"dirty-session benchmark: paper3 type A, 0.3 px noise; dirty = spurious blobs in "
+    print(f"dirty-session benchmark: paper3 type A, {args.noise_px:g} px noise; dirty = "
+          f"spurious blobs in "
           f"5 % of frames, a static object seen by one camera, one camera blind 0.5 s; "
           f"gating {args.gating}; errors in mm; '>5cm': points further than 5 cm")
     if "filter" not in METHODS:
@@ -97,8 +100,9 @@ def main() -> int:
     gate_lines = []
     for seed, (label, motion, duration) in enumerate(sessions(args.seeds, args.duration)):
         span = motion.duration if duration is None else duration
-        clean_opts = SimulationOptions(noise_px=0.3, seed=seed)
-        dirty_opts = SimulationOptions(noise_px=0.3, seed=seed, **faults(rig, seed, span))
+        clean_opts = SimulationOptions(noise_px=args.noise_px, seed=seed)
+        dirty_opts = SimulationOptions(noise_px=args.noise_px, seed=seed,
+                                       **faults(rig, seed, span))
         clean, truth, _ = simulate_labelled(rig, motion, duration, clean_opts)
         dirty, _, ball = simulate_labelled(rig, motion, duration, dirty_opts)
         clean_tracks, _ = fuse_detections(clean, rig, methods, options)

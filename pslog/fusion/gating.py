@@ -422,7 +422,8 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
 def _points(c: _Candidates, rig: Rig, ratio: np.ndarray, carried: np.ndarray):
     """Each candidate's 3D point: its ray and its supporting cameras' carried rays crossed
     (least squares); NaN without support. Also whether it lies in front of every camera
-    used."""
+    used, and the RMS distance of the point to those rays, metres (three or more rays that
+    do not meet: the supports are not one ball)."""
     n, m = ratio.shape
     centers = np.array([cam.center_world for cam in rig.cameras])
     K_inv = np.array([np.linalg.inv(cam.K) for cam in rig.cameras])
@@ -447,13 +448,14 @@ def _points(c: _Candidates, rig: Rig, ratio: np.ndarray, carried: np.ndarray):
     enough = valid.sum(axis=1) >= 2
     points = np.full((n, 3), np.nan)
     in_front = np.ones(n, dtype=bool)
+    miss = np.full(n, np.nan)
     if np.any(enough):
-        p, _, _ = triangulate_rays(origins[enough], dirs[enough], valid[enough])
+        p, miss[enough], _ = triangulate_rays(origins[enough], dirs[enough], valid[enough])
         points[enough] = p
         depth = np.einsum("nmi,nmi->nm", p[:, None, :] - origins[enough], dirs[enough])
         in_front[enough] = np.all((depth > 0) | ~valid[enough], axis=1) & np.all(
             np.isfinite(p), axis=1)
-    return points, in_front
+    return points, in_front, miss
 
 
 class _Track:
@@ -515,8 +517,10 @@ class _Decider:
         options, rig, track = self.options, self.rig, self.track
         available = np.sum(np.isfinite(ratio), axis=1)
         n_support = np.sum(ratio <= 1.0, axis=1)
+        # squared residuals of the supporting cameras, 1 for each other available one: a
+        # camera that does not see the ball says nothing, however near a false candidate
         with np.errstate(invalid="ignore"):
-            epi_cost = np.nansum(np.minimum(ratio, 2.0) ** 2, axis=1)
+            epi_cost = np.nansum(np.where(ratio <= 1.0, ratio**2, 1.0), axis=1)
         t_s = c.time_ns / NS
         for lo, hi in frames:
             best_key, best_row = None, -1
@@ -542,8 +546,11 @@ class _Decider:
                 # consistent in three views: supported by two cameras, or by one and near the
                 # epipolar lines of every other (a kick or bounce between frames spoils the
                 # carried points for a frame or two, and the track with them)
-                strong = n_support[i] >= 2 or (available[i] >= 2 and np.all(
-                    ratio[i][np.isfinite(ratio[i])] <= options.loose_ratio))
+                strong = n_support[i] >= 2
+                # near but not on the lines of the others: the track gate still applies, with
+                # twice the allowance
+                loose = not strong and available[i] >= 2 and np.all(
+                    ratio[i][np.isfinite(ratio[i])] <= options.loose_ratio)
                 track_cost = 0.0
                 if not strong:
                     last = track.last()
@@ -558,10 +565,10 @@ class _Decider:
                     if pred and np.isfinite(c.ray_dir[i, 0]):
                         offset = pred[0] - rig.cameras[c.camera[i]].center_world
                         miss = np.linalg.norm(np.cross(offset, c.ray_dir[i]))
-                        if miss > pred[1]:
+                        if miss > (2.0 if loose else 1.0) * pred[1]:
                             reason[i] = TRACK
                             continue
-                        track_cost = (miss / pred[1]) ** 2
+                        track_cost = min((miss / pred[1]) ** 2, 4.0)
                     elif not available[i]:
                         if self.verified:  # nothing can confirm it: no other camera, no track
                             reason[i] = EPIPOLAR
@@ -625,7 +632,7 @@ def gate(detections: Detections, rig: Rig, *, causal: bool = True, wait_s: float
     F = fundamental_matrices(rig.cameras)
     ratio, carried = _support(c, rig, F, tables, options, max_gap_ns, causal,
                               round(wait_s * NS))
-    points, in_front = _points(c, rig, ratio, carried)
+    points, in_front, _ = _points(c, rig, ratio, carried)
     # frames in (time, camera) order of their best candidate; candidates contiguous per frame
     starts = np.flatnonzero(np.r_[True, c.frame[1:] != c.frame[:-1]])
     ends = np.r_[starts[1:], n]
@@ -747,7 +754,7 @@ class StreamGate:
                 tables = _frame_table(c, len(self.rig))
                 ratio, carried = _support(c, self.rig, self.F, tables, self.options,
                                           self.max_gap_ns, True, self.wait_ns, only)
-                points, in_front = _points(c, self.rig, ratio, carried)
+                points, in_front, _ = _points(c, self.rig, ratio, carried)
                 # the decided frames' points, as computed when they were decided (a point
                 # uses nothing after its time: the same as now), for the stillness test
                 for f in np.flatnonzero(~todo).tolist():
