@@ -29,14 +29,16 @@ A candidate ``x`` of camera ``a`` at (corrected) time ``t`` is judged by three g
    ``static_m`` of its camera's earlier points over ``static_s`` is a static object (a second
    orange thing seen by every camera passes every epipolar test; it does not move).
 
-A candidate is accepted when the epipolar gate accepts it (some other camera supports it; or
-no other camera has a frame near ``t``, so nothing can be checked) and the track and motion
-gates do not object. A candidate supported by two or more other cameras is consistent in
-three views and is accepted whatever the track says (that is how the track follows kicks and
-bounces). Among a frame's accepted candidates the one with the most supporting cameras,
-then the smallest sum of squared normalised residuals ``Σ (d_b / τ_b)² + (d_T / τ_T)²``,
-is kept; the others are rejected as ``outscored``. The detector's score is not used: a
-distractor may outscore the ball.
+A candidate is accepted when the epipolar gate accepts it (some other camera supports it)
+and the track and motion gates do not object, or when the track gate alone accepts it
+firmly (its ray within ``track_alone_m`` of the prediction); one nothing can judge is kept
+only in the session's first frames. A candidate supported by two or more other cameras is
+consistent in three views and is accepted whatever the track says (that is how the track
+follows kicks and bounces). Among a frame's accepted candidates the one with the most
+supporting cameras, then the smallest cost (squared normalised residuals of the supporting
+cameras, 1 for each other available camera, the track's, the stillness) is kept; the others
+are rejected as ``outscored``. The detector's score is not used: a distractor may outscore
+the ball. docs/methods.md has the whole rule.
 
 Causality: :func:`gate` with ``causal=True`` decides a candidate at ``t`` from candidates at
 or before ``t`` in (time, camera) order (plus ``wait_s`` for the methods that wait for the
@@ -88,7 +90,7 @@ class GatingOptions:
     track_points : int, at most this many recent points fit the track (at least 3)
     max_speed_m_s : float, fastest ball, m/s
     loose_ratio : float, a candidate supported by one camera and within this many
-        epipolar thresholds of every other camera is consistent in three views
+        epipolar thresholds of every other camera gets twice the track allowance
     track_alone_m : float, a candidate no other camera confirms is still accepted when its
         ray passes this close to the track's prediction, metres (another camera that does not
         see the ball should not veto it)
@@ -543,12 +545,11 @@ class _Decider:
                 if not in_front[i] or static[i]:
                     reason[i] = MOTION
                     continue
-                # consistent in three views: supported by two cameras, or by one and near the
-                # epipolar lines of every other (a kick or bounce between frames spoils the
-                # carried points for a frame or two, and the track with them)
+                # consistent in three views: supported by two cameras (how the track follows
+                # kicks and bounces)
                 strong = n_support[i] >= 2
-                # near but not on the lines of the others: the track gate still applies, with
-                # twice the allowance
+                # supported by one and near the lines of every other (a kick or bounce spoils
+                # carried points for a frame or two): the track gate, at twice the allowance
                 loose = not strong and available[i] >= 2 and np.all(
                     ratio[i][np.isfinite(ratio[i])] <= options.loose_ratio)
                 track_cost = 0.0
