@@ -190,3 +190,85 @@ def format_quality_table(rows: list[QualitySummary]) -> str:
                  f"truth inside the covariance's 2σ ellipsoid ({CHI2_3D_2SIGMA * 100:.1f}% if "
                  f"honest); NEES: mean d²/3 (1 if honest)")
     return "\n".join(lines)
+
+
+@dataclass(frozen=True)
+class RejectionCounts:
+    """What the gating stage rejected for one track, against the truth's ball labels.
+
+    Attributes
+    ----------
+    method : str
+    candidates : int, candidates in the session
+    rejected : int, candidates rejected (:class:`pslog.fusion.gating.Rejections`)
+    rejected_detections : int, frames with candidates of which none was kept
+    by_reason : dict reason -> rejected candidates
+    correct : int or None, rejected candidates that are not the ball (None: no labels)
+    wrong : int or None, rejected candidates that are the ball
+    kept_false : int or None, kept candidates that are not the ball
+    false_candidates : int or None, candidates that are not the ball
+    """
+
+    method: str
+    candidates: int
+    rejected: int
+    rejected_detections: int
+    by_reason: dict
+    correct: int | None = None
+    wrong: int | None = None
+    kept_false: int | None = None
+    false_candidates: int | None = None
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+def _keys(camera, frame_index, uv) -> list[tuple]:
+    return list(zip(np.asarray(camera).tolist(), np.asarray(frame_index).tolist(),
+                    np.asarray(uv)[:, 0].tolist(), np.asarray(uv)[:, 1].tolist(), strict=True))
+
+
+def rejection_counts(method: str, rejections, detections, ball=None) -> RejectionCounts:
+    """Count ``rejections`` (:class:`pslog.fusion.gating.Rejections`) of ``detections``'
+    candidates and, with ``ball`` (the session's ball labels, a Detections of the ball's
+    candidates), how many were right. Candidates are matched by camera, frame index and
+    pixel."""
+    cand = _keys(detections.frame_camera[detections.cand_frame],
+                 detections.frame_index[detections.cand_frame], detections.cand_uv)
+    rejected_keys = set(_keys(rejections.camera, rejections.frame_index, rejections.uv))
+    rejected = np.array([k in rejected_keys for k in cand], dtype=bool)
+    had = detections.candidates_per_frame() > 0
+    kept_frame = np.zeros(detections.n_frames, dtype=bool)
+    kept_frame[detections.cand_frame[~rejected]] = True
+    counts = RejectionCounts(method, detections.n_candidates, len(rejections),
+                             int(np.count_nonzero(had & ~kept_frame)), rejections.counts())
+    if ball is None:
+        return counts
+    labels = set(_keys(ball.frame_camera[ball.cand_frame], ball.frame_index[ball.cand_frame],
+                       ball.cand_uv))
+    is_ball = np.array([k in labels for k in cand], dtype=bool)
+    return RejectionCounts(
+        method, counts.candidates, counts.rejected, counts.rejected_detections,
+        counts.by_reason, correct=int(np.count_nonzero(rejected & ~is_ball)),
+        wrong=int(np.count_nonzero(rejected & is_ball)),
+        kept_false=int(np.count_nonzero(~rejected & ~is_ball)),
+        false_candidates=int(np.count_nonzero(~is_ball)))
+
+
+def format_rejection_table(rows: list[RejectionCounts]) -> str:
+    """A fixed-width table of the gating's rejections, one line per method; the last three
+    columns only when the session labels the ball's candidates."""
+    labelled = any(r.correct is not None for r in rows)
+    header = f"{'method':<9} {'candidates':>10} {'rejected':>9} {'detections':>10}"
+    if labelled:
+        header += f" {'correct':>8} {'ball lost':>9} {'false kept':>10}"
+    header += "  by reason"
+    lines = [header, "-" * len(header)]
+    for r in rows:
+        line = f"{r.method:<9} {r.candidates:>10d} {r.rejected:>9d} {r.rejected_detections:>10d}"
+        if labelled:
+            line += (f" {r.correct:>8d} {r.wrong:>9d} {r.kept_false:>10d}"
+                     if r.correct is not None else f" {'-':>8} {'-':>9} {'-':>10}")
+        line += "  " + ", ".join(f"{k} {v}" for k, v in r.by_reason.items() if v)
+        lines.append(line)
+    return "\n".join(lines)

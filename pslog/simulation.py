@@ -52,9 +52,24 @@ class SimulationOptions:
     readout_s : mapping camera name -> seconds, the cameras' true rolling-shutter readouts
     host_jitter_s : float, standard deviation of the logged stamps around the (faulted)
         clock's times, seconds: host arrival jitter (frame indices stay exact)
+    spurious_rate : float in [0, 1), fraction of frames (of every camera) given one false
+        candidate ("a reflection, a shirt")
+    spurious_radius_px : float >= 0, where that false candidate is: 0, anywhere in the image
+        (uniform); > 0, within this many pixels of the ball's true pixel (uniform over the
+        annulus from a quarter of it to it), anywhere when the ball is not in view
+    distractors : sequence of ``(camera name or None, (x, y, z))``: a static second ball-like
+        object at a world point (metres), a candidate in every frame of the named camera
+        (None: of every camera whose view contains it)
+    blackouts : sequence of ``(camera name, start_s, duration_s)``: the camera misses the
+        ball (no ball candidate; false ones still appear) for captures in
+        ``[start, start + duration)`` seconds of true time
 
     The clock faults are the timing model's parameters (:func:`true_rig`): the simulator
-    captures at true times and logs through the model's exact inverse.
+    captures at true times and logs through the model's exact inverse. The candidate faults
+    draw from their own random stream (seeded by ``seed``), so a session with them has the
+    very same ball detections as the one without; with any candidate fault the ball's
+    candidates get realistic scores (uniform in [0.5, 1]; false ones [0.2, 0.9], a
+    distractor [0.6, 1]: it may outscore the ball), else every score is 1.
     """
 
     noise_px: float = 0.0
@@ -66,6 +81,10 @@ class SimulationOptions:
     clock_drift_ppm: Mapping[str, float] = field(default_factory=dict)
     readout_s: Mapping[str, float] = field(default_factory=dict)
     host_jitter_s: float = 0.0
+    spurious_rate: float = 0.0
+    spurious_radius_px: float = 0.0
+    distractors: tuple = ()
+    blackouts: tuple = ()
 
     def __post_init__(self) -> None:
         for name in ("clock_offset_s", "clock_drift_ppm", "readout_s"):
@@ -75,10 +94,37 @@ class SimulationOptions:
             value = getattr(self, name)
             if not np.isfinite(value) or value < 0:
                 raise InputError(f"{name} must be finite and >= 0, got {value!r}")
-        for name in ("drop_rate", "miss_rate"):
+        for name in ("drop_rate", "miss_rate", "spurious_rate"):
             value = getattr(self, name)
             if not (0.0 <= value < 1.0):
                 raise InputError(f"{name} must be in [0, 1), got {value!r}")
+        if not (np.isfinite(self.spurious_radius_px) and self.spurious_radius_px >= 0):
+            raise InputError(f"spurious radius must be finite and >= 0 pixels, got "
+                             f"{self.spurious_radius_px!r}")
+        distractors = []
+        for camera, point in self.distractors:
+            point = tuple(float(x) for x in point)
+            if len(point) != 3 or not all(np.isfinite(point)):
+                raise InputError(f"distractor point must be three finite coordinates (metres), "
+                                 f"got {point!r}")
+            distractors.append((None if camera is None else str(camera), point))
+        object.__setattr__(self, "distractors", tuple(distractors))
+        blackouts = []
+        for camera, start, duration in self.blackouts:
+            start, duration = float(start), float(duration)
+            if not (np.isfinite(start) and start >= 0):
+                raise InputError(f"blackout of camera {camera!r}: start must be >= 0 seconds, "
+                                 f"got {start!r}")
+            if not (np.isfinite(duration) and duration > 0):
+                raise InputError(f"blackout of camera {camera!r}: duration must be > 0 "
+                                 f"seconds, got {duration!r}")
+            blackouts.append((str(camera), start, duration))
+        object.__setattr__(self, "blackouts", tuple(blackouts))
+
+    @property
+    def dirty(self) -> bool:
+        """True when any candidate fault (spurious, distractor, blackout) is set."""
+        return bool(self.spurious_rate > 0 or self.distractors or self.blackouts)
 
 
 def check_duration(rig: Rig, duration: float) -> float:
@@ -106,6 +152,35 @@ def check_simulation(rig: Rig, options: SimulationOptions) -> None:
     check_jitter(rig, options.host_jitter_s, "host jitter")
     check_noise(rig, options.noise_px)
     true_rig(rig, options)
+    check_candidate_faults(rig, options)
+
+
+def check_candidate_faults(rig: Rig, options: SimulationOptions) -> None:
+    """:class:`InputError` naming the value if a distractor or blackout names a camera not
+    in ``rig``, or a distractor is in no named camera's view (it would never be seen)."""
+    for camera, point in options.distractors:
+        if camera is not None and camera not in rig.names:
+            raise InputError(f"distractor for unknown camera {camera!r} "
+                             f"(rig has {', '.join(rig.names)})")
+        seen = _distractor_cameras(rig, camera, point)
+        if not seen:
+            where = "the view of any camera" if camera is None else f"camera {camera}'s view"
+            raise InputError(f"distractor at {','.join(f'{x:g}' for x in point)} m is not in "
+                             f"{where} (in front of it and inside its image)")
+    for camera, _start, _duration in options.blackouts:
+        if camera not in rig.names:
+            raise InputError(f"blackout for unknown camera {camera!r} "
+                             f"(rig has {', '.join(rig.names)})")
+
+
+def _distractor_cameras(rig: Rig, camera: str | None, point) -> list[int]:
+    """Indices of the cameras that see a distractor at ``point``: ``camera`` (if it sees
+    it) or every camera whose view contains it."""
+    uv = _project(rig, np.arange(len(rig), dtype=np.int32),
+                  np.tile(np.asarray(point, dtype=np.float64), (len(rig), 1)))
+    visible = np.all(np.isfinite(uv), axis=1)
+    return [i for i, name in enumerate(rig.names)
+            if visible[i] and (camera is None or camera == name)]
 
 
 def true_rig(rig: Rig, options: SimulationOptions) -> Rig:
@@ -253,10 +328,21 @@ def simulate(
     rig: Rig, motion: Motion, duration: float | None = None,
     options: SimulationOptions | None = None,
 ) -> tuple[Detections, Truth]:
-    """Detections of ``motion`` by every camera of ``rig`` over ``[0, duration)`` seconds.
+    """Detections of ``motion`` by every camera of ``rig`` over ``[0, duration)`` seconds
+    (:func:`simulate_labelled` without the ball labels)."""
+    detections, truth, _ = simulate_labelled(rig, motion, duration, options)
+    return detections, truth
+
+
+def simulate_labelled(
+    rig: Rig, motion: Motion, duration: float | None = None,
+    options: SimulationOptions | None = None,
+) -> tuple[Detections, Truth, Detections]:
+    """Detections of ``motion`` by every camera of ``rig`` over ``[0, duration)`` seconds,
+    the truth, and which candidates are the ball.
 
     A frame whose projection falls outside the image, or behind the camera, is recorded
-    without a candidate. Truth is sampled at every capture time (exactly).
+    without a ball candidate. Truth is sampled at every capture time (exactly).
 
     With clock faults (``options``' clock offsets, drifts, readouts): the shutters follow
     ``rig``'s schedule on the true clock; each frame's top row is logged on its camera's
@@ -266,6 +352,16 @@ def simulate(
     ``true_times_ns(logged, v, ...)`` with the detection's noise-free row ``v`` and the true
     parameters (:func:`true_rig`) is the truth's time. Host jitter is then added to the
     logged stamps. The true clock is camera 1's: truth times are on the session clock.
+
+    With candidate faults (spurious blobs, distractors, blackouts: :class:`SimulationOptions`)
+    frames get false candidates beside (or instead of) the ball's.
+
+    Returns
+    -------
+    detections : Detections, every frame with all its candidates (best score first)
+    truth : Truth
+    ball : Detections, the same frames holding only the ball's candidate (none where the
+        ball was not detected): the label of every candidate (:func:`ball_mask`)
     """
     options = options or SimulationOptions()
     check_simulation(rig, options)
@@ -299,6 +395,7 @@ def simulate(
         # at a row whose time puts it outside): such a frame detects nothing
         consistent = np.abs(uv[:, 1] - row) <= _ROW_TOLERANCE_PX
         uv[~consistent] = np.nan
+    uv_true = uv
     if options.noise_px > 0:
         uv = uv + rng.normal(0.0, options.noise_px, uv.shape)
     detected = np.all(np.isfinite(uv), axis=1) & (rng.random(len(uv)) >= options.miss_rate)
@@ -306,10 +403,91 @@ def simulate(
         logged_ns = logged_ns + np.rint(
             rng.normal(0.0, options.host_jitter_s * NS, len(logged_ns))).astype(np.int64)
     cand_frame = np.flatnonzero(detected)
+    cand_uv = uv[cand_frame]
+    cand_score = np.ones(len(cand_frame))
+    is_ball = np.ones(len(cand_frame), dtype=bool)
+    if options.dirty:
+        cand_frame, cand_uv, cand_score, is_ball = _false_candidates(
+            rig, options, camera, time_ns, uv_true, cand_frame, cand_uv)
     # jitter may reorder frames or make two captures coincide; Detections.from_frames sorts
     detections = Detections.from_frames(
-        rig.names, logged_ns, camera, frame_index, cand_frame, uv[cand_frame],
-        cand_radius=np.full(len(cand_frame), np.nan), cand_score=np.ones(len(cand_frame)))
+        rig.names, logged_ns, camera, frame_index, cand_frame, cand_uv,
+        cand_radius=np.full(len(cand_frame), np.nan), cand_score=cand_score)
+    ball = Detections.from_frames(
+        rig.names, logged_ns, camera, frame_index, cand_frame[is_ball], cand_uv[is_ball],
+        cand_radius=np.full(int(is_ball.sum()), np.nan), cand_score=cand_score[is_ball])
 
     truth_ns = np.unique(time_ns)
-    return detections, Truth(truth_ns, motion.position(truth_ns / NS))
+    return detections, Truth(truth_ns, motion.position(truth_ns / NS)), ball
+
+
+#: Scores drawn for candidates of a dirty session: (low, high) of a uniform distribution.
+BALL_SCORE = (0.5, 1.0)
+SPURIOUS_SCORE = (0.2, 0.9)
+DISTRACTOR_SCORE = (0.6, 1.0)
+
+
+def _false_candidates(rig: Rig, options: SimulationOptions, camera, time_ns, uv_true,
+                      cand_frame, cand_uv):
+    """The ball's candidates (less the blacked-out ones) plus the false ones, with scores.
+
+    Drawn from a random stream of their own (``[seed, 1]``): the ball's detections stay
+    those of the clean session. Returns (cand_frame, cand_uv, cand_score, is_ball)."""
+    rng = np.random.default_rng([options.seed, 1])
+    n_frames = len(camera)
+    keep = np.ones(len(cand_frame), dtype=bool)
+    for name, start, duration in options.blackouts:
+        i = rig.names.index(name)
+        t = time_ns[cand_frame]
+        keep &= ~((camera[cand_frame] == i) & (t >= round(start * NS))
+                  & (t < round((start + duration) * NS)))
+    frames = [cand_frame[keep]]
+    uvs = [cand_uv[keep]]
+    scores = [rng.uniform(*BALL_SCORE, len(cand_frame))[keep]]
+    labels = [np.ones(int(keep.sum()), dtype=bool)]
+    for name, point in options.distractors:
+        seen = _distractor_cameras(rig, name, point)
+        rows = np.flatnonzero(np.isin(camera, seen))
+        uv = _project(rig, camera[rows], np.tile(np.asarray(point), (len(rows), 1)))
+        if options.noise_px > 0:
+            uv = uv + rng.normal(0.0, options.noise_px, uv.shape)
+        ok = np.all(np.isfinite(uv), axis=1)
+        frames.append(rows[ok])
+        uvs.append(uv[ok])
+        scores.append(rng.uniform(*DISTRACTOR_SCORE, int(ok.sum())))
+        labels.append(np.zeros(int(ok.sum()), dtype=bool))
+    if options.spurious_rate > 0:
+        rows = np.flatnonzero(rng.random(n_frames) < options.spurious_rate)
+        size = np.array([[c.width, c.height] for c in rig.cameras], dtype=np.float64)[
+            camera[rows]]
+        uv = rng.random((len(rows), 2)) * size  # anywhere in the image
+        radius = options.spurious_radius_px
+        if radius > 0:  # near the ball where it is in view: an annulus around it
+            r = radius * np.sqrt(rng.uniform(1 / 16, 1.0, len(rows)))
+            angle = rng.uniform(0, 2 * np.pi, len(rows))
+            near = uv_true[rows] + r[:, None] * np.column_stack([np.cos(angle),
+                                                                 np.sin(angle)])
+            inside = np.all(np.isfinite(near), axis=1) & np.all(near >= 0, axis=1) & np.all(
+                near < size, axis=1)
+            uv[inside] = near[inside]
+        frames.append(rows)
+        uvs.append(uv)
+        scores.append(rng.uniform(*SPURIOUS_SCORE, len(rows)))
+        labels.append(np.zeros(len(rows), dtype=bool))
+    return (np.concatenate(frames), np.concatenate(uvs), np.concatenate(scores),
+            np.concatenate(labels))
+
+
+def ball_mask(detections: Detections, ball: Detections) -> np.ndarray:
+    """(C,) bool: which candidates of ``detections`` are the ball, by the labels ``ball``
+    (:func:`simulate_labelled`; a session's ``ball_truth``): a candidate is the ball when
+    its camera, frame index and pixel equal a labelled one's."""
+    labelled = {(int(ball.frame_camera[f]), int(ball.frame_index[f]), float(u), float(v))
+                for f, (u, v) in zip(ball.cand_frame.tolist(), ball.cand_uv.tolist(),
+                                     strict=True)}
+    if not labelled:
+        return np.zeros(detections.n_candidates, dtype=bool)
+    cam = detections.frame_camera[detections.cand_frame].tolist()
+    idx = detections.frame_index[detections.cand_frame].tolist()
+    return np.array([(c, i, u, v) in labelled for c, i, (u, v) in zip(
+        cam, idx, detections.cand_uv.tolist(), strict=True)], dtype=bool)

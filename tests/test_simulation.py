@@ -349,3 +349,87 @@ def test_every_fault_together_still_follows_the_model():
 def test_bad_faults_are_refused_naming_the_camera(kwargs, message):
     with pytest.raises(InputError, match=message):
         simulate(_paper3(), get_motion("spiral"), options=SimulationOptions(**kwargs))
+
+
+# ---- candidate faults: spurious blobs, distractors, blackouts ------------------------------
+
+def test_dirty_session_keeps_the_clean_ball_and_labels_it():
+    from pslog.simulation import ball_mask, simulate_labelled
+
+    rig = _paper3()
+    motion = get_motion("throw")
+    clean, truth, _ = simulate_labelled(rig, motion, None, SimulationOptions(noise_px=0.5,
+                                                                           seed=2))
+    point = (1.0, 1.5, 0.2)
+    options = SimulationOptions(noise_px=0.5, seed=2, spurious_rate=0.3,
+                                distractors=(("cam2", point), (None, (1.5, 1.0, 0.0))),
+                                blackouts=(("cam3", 0.3, 0.2),))
+    dirty, truth2, ball = simulate_labelled(rig, motion, None, options)
+    assert_array_equal(truth.position_world, truth2.position_world)
+    assert_array_equal(dirty.frame_time_ns, clean.frame_time_ns)
+    is_ball = ball_mask(dirty, ball)
+    # the ball's candidates are the clean session's, less the blacked-out camera's
+    cam = dirty.frame_camera[dirty.cand_frame]
+    t = dirty.frame_time_ns[dirty.cand_frame]
+    blind = (cam == 2) & (t >= 0.3e9) & (t < 0.5e9)
+    assert not np.any(is_ball & blind)
+    clean_t = clean.frame_time_ns[clean.cand_frame]
+    clean_blind = (clean.frame_camera[clean.cand_frame] == 2) & (clean_t >= 0.3e9) & (
+        clean_t < 0.5e9)
+    assert clean_blind.sum() > 3
+    assert_array_equal(np.sort(dirty.cand_uv[is_ball], axis=0),
+                       np.sort(clean.cand_uv[~clean_blind], axis=0))
+    # the named distractor: a candidate in every cam2 frame, at its projection (noise only)
+    uv, _ = rig.cameras[1].project(np.array([point]))
+    near = np.linalg.norm(dirty.cand_uv - uv, axis=1) < 5 * 0.5
+    assert set(dirty.cand_frame[near & ~is_ball]) == set(np.flatnonzero(dirty.frame_camera == 1))
+    # the unnamed one: in every camera that sees it (all three here)
+    uv_all = np.array([c.project(np.array([[1.5, 1.0, 0.0]]))[0][0] for c in rig.cameras])
+    near_all = np.linalg.norm(dirty.cand_uv - uv_all[cam], axis=1) < 2.5
+    assert set(dirty.cand_frame[near_all & ~is_ball]) == set(range(dirty.n_frames))
+    # spurious blobs in about 30 % of frames: the false candidates beyond the distractors
+    spurious = (~is_ball).sum() - (dirty.frame_camera == 1).sum() - dirty.n_frames
+    assert 0.2 * dirty.n_frames < spurious < 0.4 * dirty.n_frames
+    # scores: ball in [0.5, 1], false ones within [0.2, 1]; best-first order kept
+    assert np.all((dirty.cand_score[is_ball] >= 0.5) & (dirty.cand_score[is_ball] <= 1))
+    assert np.all(dirty.cand_score[~is_ball] >= 0.2)
+    assert np.all(clean.cand_score == 1.0)
+
+
+def test_spurious_near_the_ball_stays_within_its_radius():
+    from pslog.simulation import ball_mask, simulate_labelled
+
+    rig = _paper3()
+    options = SimulationOptions(seed=1, spurious_rate=0.5, spurious_radius_px=20.0)
+    det, _, ball = simulate_labelled(rig, get_motion("spiral"), None, options)
+    is_ball = ball_mask(det, ball)
+    ball_uv = np.full((det.n_frames, 2), np.nan)
+    ball_uv[det.cand_frame[is_ball]] = det.cand_uv[is_ball]
+    offset = np.linalg.norm(det.cand_uv[~is_ball] - ball_uv[det.cand_frame[~is_ball]], axis=1)
+    assert len(offset) > 20
+    assert np.all((offset >= 5.0 - 1e-9) & (offset <= 20.0 + 1e-9))
+
+
+@pytest.mark.parametrize("options, message", [
+    ({"spurious_rate": 1.0}, "spurious_rate"),
+    ({"spurious_radius_px": -1.0}, "spurious radius"),
+    ({"distractors": (("cam1", (1.0, np.inf, 0.0)),)}, "three finite"),
+    ({"blackouts": (("cam1", -1.0, 1.0),)}, "start must be"),
+    ({"blackouts": (("cam1", 1.0, 0.0),)}, "duration must be"),
+])
+def test_candidate_fault_options_refuse_nonsense(options, message):
+    with pytest.raises(InputError, match=message):
+        SimulationOptions(**options)
+
+
+def test_candidate_faults_refuse_cameras_and_points_out_of_the_rig():
+    from pslog.simulation import check_candidate_faults
+
+    rig = _paper3()
+    with pytest.raises(InputError, match="unknown camera 'cam4'"):
+        check_candidate_faults(rig, SimulationOptions(blackouts=(("cam4", 0.0, 1.0),)))
+    with pytest.raises(InputError, match="not in camera cam1's view"):
+        check_candidate_faults(rig, SimulationOptions(distractors=(("cam1", (0, 0, 10)),)))
+    with pytest.raises(InputError, match="not in the view of any camera"):
+        simulate(rig, get_motion("spiral"), None,
+                 SimulationOptions(distractors=((None, (1.5, 1.0, 10.0)),)))

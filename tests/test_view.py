@@ -134,7 +134,7 @@ def test_rrd_verifies_and_holds_every_entity(session, rrd):
     assert RrdReader(path).blueprints(), "the default blueprint is in the file"
 
     det, obs = s.detections, s.detections.best()
-    track = fuse_all(obs, s.rig, ["typeA"])["typeA"]
+    track = fuse_all(det, s.rig, ["typeA"])["typeA"]  # fused as the viewer does (gating)
     for i, c in enumerate(names):
         frames = det.frame_camera == i
         image = f"/world/cameras/{c}/image"

@@ -65,6 +65,8 @@ class ViewData:
     construction : type-A construction behind the ``typeA`` track, or None
     window_ns : (lo, hi), int nanoseconds on the session clock; rows outside are left out
     notes : human-readable remarks (tracks fused on the fly, renamed duplicates)
+    rejections : display name -> :class:`pslog.fusion.gating.Rejections` stored beside a
+        shown track (``pslog fuse`` with gating), in display order
     """
 
     session: Session
@@ -74,6 +76,7 @@ class ViewData:
     construction: TypeAConstruction | None
     window_ns: tuple[int, int]
     notes: list[str] = field(default_factory=list)
+    rejections: dict = field(default_factory=dict)
 
     def in_window(self, time_ns: np.ndarray) -> np.ndarray:
         """Mask (n,) of times within the window."""
@@ -122,6 +125,7 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
         raise InputError("no session file given")
     session = read_session(paths[0])
     tracks: dict[str, Track] = dict(session.tracks)
+    rejections = dict(session.rejections)
     notes: list[str] = []
     for path in paths[1:]:
         other = read_session(path)
@@ -135,7 +139,11 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
             if name in tracks:
                 new = f"{name}_{_safe_name(path.stem)}"
                 notes.append(f"{path}: track {name!r} shown as {new!r}")
+                if name in other.rejections:
+                    rejections[new] = other.rejections[name]
                 name = new
+            elif name in other.rejections:
+                rejections[name] = other.rejections[name]
             tracks[name] = track
 
     observations = timed_observations(session.detections, session.rig)
@@ -149,13 +157,14 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
         have = sorted(set(tracks) | set(METHODS))
         raise InputError(f"unknown method {unknown[0]!r} (stored or fusable: {', '.join(have)})")
     if missing:
-        tracks.update(fuse_all(observations, session.rig, missing))
+        # as 'pslog fuse' does: each frame's ball chosen among its candidates (gating)
+        tracks.update(fuse_all(session.detections, session.rig, missing))
         notes.append(f"fused on the fly: {', '.join(missing)}")
     shown = {m: tracks[m] for m in wanted}
 
     construction = None
     if "typeA" in shown and len(session.rig) >= 2 and len(observations):
-        construction = explain_type_a(observations, session.rig)
+        construction = explain_type_a(session.detections, session.rig)
 
     first = int(session.detections.frame_time_ns.min()) if session.detections.n_frames else 0
     lo = -np.inf if start is None else float(start)
@@ -172,4 +181,5 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
         span = (frame_times.max() - first) / NS if len(frame_times) else 0.0
         raise InputError(f"no frame between --start {start} s and --end {end} s; the session "
                          f"spans 0 to {span:.3f} s")
-    return ViewData(session, paths, observations, shown, construction, window, notes)
+    return ViewData(session, paths, observations, shown, construction, window, notes,
+                    {m: rejections[m] for m in shown if m in rejections})

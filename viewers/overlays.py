@@ -23,6 +23,10 @@ def log_detections(rec, data: ViewData, clock: C.Clock) -> int:
         return 0
     counts = det.candidates_per_frame()
     is_best = det.best_mask()
+    rejected_mask = gated_rejections(data)
+    if rejected_mask is not None:  # the gating's choice, as stored with the shown track
+        is_best = ~rejected_mask
+        counts = np.bincount(det.cand_frame, minlength=det.n_frames)
     frame_in = data.in_window(det.frame_time_ns)
     n = 0
     for c, name in enumerate(det.camera_names):
@@ -32,15 +36,31 @@ def log_detections(rec, data: ViewData, clock: C.Clock) -> int:
         keep = frame_in[det.cand_frame] & (det.frame_camera[det.cand_frame] == c)
         t, f = det.frame_time_ns[frames], det.frame_index[frames]
         best = keep & is_best
+        kept = np.bincount(det.cand_frame[best], minlength=det.n_frames)[frames]
         # every frame gets a row, an empty one when nothing was detected (clears the point)
         n += C.send(rec, f"{C.image_path(name)}/detections", clock, t, f,
                     rr.Points2D.columns(positions=C.image_space(det.cand_uv[best]))
-                    .partition(np.minimum(counts[frames], 1)))
+                    .partition(kept))
         rejected = keep & ~is_best
         C.send(rec, f"{C.image_path(name)}/rejected", clock, t, f,
                rr.Points2D.columns(positions=C.image_space(det.cand_uv[rejected]))
-               .partition(np.maximum(counts[frames] - 1, 0)))
+               .partition(counts[frames] - kept))
     return n
+
+
+def gated_rejections(data: ViewData):
+    """(C,) bool over the session's candidates: rejected by the gating of the first shown
+    track stored with its rejections (``pslog fuse``); None when none is."""
+    if not data.rejections:
+        return None
+    rej = next(iter(data.rejections.values()))
+    det = data.session.detections
+    keys = set(zip(rej.camera.tolist(), rej.frame_index.tolist(), rej.uv[:, 0].tolist(),
+                   rej.uv[:, 1].tolist(), strict=True))
+    rows = det.cand_frame
+    return np.array([k in keys for k in zip(
+        det.frame_camera[rows].tolist(), det.frame_index[rows].tolist(),
+        det.cand_uv[:, 0].tolist(), det.cand_uv[:, 1].tolist(), strict=True)], dtype=bool)
 
 
 def log_epipolar(rec, data: ViewData, clock: C.Clock, uv_undistorted: np.ndarray) -> int:

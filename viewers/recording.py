@@ -254,6 +254,10 @@ def _legend(data: ViewData, colors) -> str:
     lines = [f"**Tracks**: {', '.join(tracks)}", "",
              f"**Cameras** (rays, detections, epipolar lines): {', '.join(cameras)}; "
              "grey: rejected candidates"]
+    for method, rej in list(data.rejections.items())[:1]:
+        reasons = ", ".join(f"{k} {v}" for k, v in rej.counts().items() if v) or "none"
+        lines += ["", f"**Gating** ({method}): {len(rej)} candidates rejected (grey points "
+                  f"in the images; {reasons})"]
     if data.construction is not None:
         lines += ["", "**Figure 2** (typeA, drawn on the partner camera's image): yellow, the "
                   "partner's two detections around the instant and the interpolated point "

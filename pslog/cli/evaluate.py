@@ -25,6 +25,8 @@ def run(args: argparse.Namespace) -> int:
         evaluate,
         format_accuracy_table,
         format_quality_table,
+        format_rejection_table,
+        rejection_counts,
         summarise_quality,
     )
     from pslog.log import read_session
@@ -42,14 +44,25 @@ def run(args: argparse.Namespace) -> int:
                          f"(have {', '.join(session.tracks)})")
     rows = [evaluate(session.tracks[m], session.truth) for m in methods]
     quality = [summarise_quality(session.tracks[m], session.truth) for m in methods]
+    # the gating's rejections, against the ball labels of a simulated dirty session
+    gated = {m: rejection_counts(m, session.rejections[m], session.detections,
+                                 session.ball_truth)
+             for m in methods if m in session.rejections}
     if args.json:
         # NaN (a summary a track has no column for) is null: JSON has no NaN
         print(json.dumps([{**r.as_dict(), "quality": {k: (None if isinstance(v, float)
                                                           and v != v else v)
-                                                      for k, v in q.as_dict().items()}}
+                                                      for k, v in q.as_dict().items()},
+                           **({"gating": gated[r.method].as_dict()}
+                              if r.method in gated else {})}
                           for r, q in zip(rows, quality, strict=True)], indent=2))
     else:
         print(format_accuracy_table(rows))
         print()
         print(format_quality_table(quality))
+        if gated:
+            print()
+            print("gating (candidates rejected; correct: not the ball; ball lost: the ball "
+                  "rejected; false kept: not the ball yet kept)")
+            print(format_rejection_table(list(gated.values())))
     return 0

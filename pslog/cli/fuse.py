@@ -46,6 +46,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--noise-px", type=noise_px, default=0.5, metavar="PX",
                         help="the detections' pixel noise (standard deviation per axis) behind "
                              "each point's std_m and covariance (default %(default)s)")
+    parser.add_argument("--gating", choices=("on", "off"), default="on",
+                        help="on: choose each frame's ball among its candidates by the "
+                             "epipolar, track and motion gates and record every rejected "
+                             "candidate in the output; off: take each frame's best-scored "
+                             "candidate (default %(default)s)")
     add_force(parser)
     declare_files(parser, inputs=("session", "rig"), outputs=("output",))
 
@@ -60,8 +65,8 @@ def run(args: argparse.Namespace) -> int:
         check_method,
         check_tolerance,
         default_methods,
-        fuse_all,
     )
+    from pslog.fusion.gating import fuse_detections
     from pslog.log import copy_session, read_session
     from pslog.rig import check_baselines, resolve_rig
     from pslog.timing import observations as timed_observations
@@ -82,7 +87,8 @@ def run(args: argparse.Namespace) -> int:
         return usage_error("fuse", f"argument --tolerance-ms: {exc}")
     options = FusionOptions(tolerance_s=args.tolerance_ms / 1e3,
                             max_gap_s=None if args.max_gap_ms is None else args.max_gap_ms / 1e3,
-                            rate_hz=args.rate, noise_px=args.noise_px)
+                            rate_hz=args.rate, noise_px=args.noise_px,
+                            gating=args.gating == "on")
     observations = timed_observations(session.detections, rig)  # the rig's clock model
     if len(observations) == 0:
         raise FusionError(f"{args.session} has no detection to fuse")
@@ -94,7 +100,7 @@ def run(args: argparse.Namespace) -> int:
         if skipped:
             print(f"not run on this timing: {', '.join(skipped)} (name them with --method "
                   f"to run them anyway)")
-    tracks = fuse_all(observations, rig, methods, options)
+    tracks, rejections = fuse_detections(session.detections, rig, methods, options)
     dropped = {m: t.dropped for m, t in tracks.items()}  # geometrically invalid points
     empty = [m for m, t in tracks.items() if len(t) == 0]
     if empty:
@@ -110,11 +116,14 @@ def run(args: argparse.Namespace) -> int:
         tracks = {m: t.select(t.time_ns >= 0) for m, t in tracks.items()}
         print("left out, being before the session clock's zero after clock correction: "
               + ", ".join(f"{n} {m} point{'s' if n > 1 else ''}" for m, n in early.items() if n))
+    rejections = {m: rejections[m] for m in tracks} if options.gating else {}
     copy_session(args.session, output, tracks=list(tracks.values()), force=args.force,
-                 rig=None if args.rig is None else rig)
+                 rig=None if args.rig is None else rig, rejections=rejections)
     for method, track in tracks.items():
         why = ", ".join(f"{reason} {n}" for reason, n in dropped.get(method, {}).items())
-        print(f"{method:<8} {len(track):>7d} points"
+        rejected = (f"  {len(rejections[method]):>6d} candidates rejected by gating"
+                    if options.gating else "")
+        print(f"{method:<8} {len(track):>7d} points{rejected}"
               + (f" (dropped as geometrically invalid: {why})" if why else ""))
     print(f"wrote {output}")
     return 0

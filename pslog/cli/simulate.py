@@ -47,6 +47,33 @@ def _camera_value(unit: str, scale: float, all_cameras: bool = False):
     return parse
 
 
+def _distractor(text: str):
+    """argparse type: ``[CAM=]X,Y,Z`` (metres) -> ``(camera name or None, (x, y, z))``."""
+    name, sep, point = text.rpartition("=")
+    if sep and not name.strip():
+        raise argparse.ArgumentTypeError(f"no camera name before '=' in {text!r}")
+    parts = point.split(",")
+    if len(parts) != 3:
+        raise argparse.ArgumentTypeError(f"expected [CAM=]X,Y,Z (a world point, metres), "
+                                         f"got {text!r}")
+    return (name.strip() if sep else None), tuple(_finite(p) for p in parts)
+
+
+def _blackout(text: str):
+    """argparse type: ``CAM=START:DURATION`` (seconds) -> ``(name, start, duration)``."""
+    name, sep, span = text.partition("=")
+    start, colon, duration = span.partition(":")
+    if not sep or not colon or not name.strip():
+        raise argparse.ArgumentTypeError(f"expected CAM=START:DURATION (a camera name, "
+                                         f"seconds from the start, seconds), got {text!r}")
+    start, duration = _finite(start), _finite(duration)
+    if start < 0:
+        raise argparse.ArgumentTypeError(f"start must be >= 0 seconds, got {text!r}")
+    if duration <= 0:
+        raise argparse.ArgumentTypeError(f"duration must be > 0 seconds, got {text!r}")
+    return name.strip(), start, duration
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from pslog.motion import MOTIONS
     from pslog.rig import TIMING_PRESETS
@@ -88,6 +115,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="fault: standard deviation of the logged stamps around the "
                              "shutter times, milliseconds (host arrival jitter; frame "
                              "indices stay exact), below half a frame period")
+    parser.add_argument("--spurious", type=fraction, default=0.0, metavar="F",
+                        help="fault: fraction of frames with one false candidate (a "
+                             "reflection, a shirt) besides the ball (default %(default)s)")
+    parser.add_argument("--spurious-radius", type=noise_px, default=0.0, metavar="PX",
+                        help="where the false candidates are: 0, anywhere in the image; else "
+                             "within PX pixels of the ball, at most 100 (default %(default)s)")
+    parser.add_argument("--distractor", type=_distractor, action="append", default=[],
+                        metavar="[CAM=]X,Y,Z",
+                        help="fault: a static second orange object at world point X,Y,Z "
+                             "(metres), a candidate in every frame of camera CAM, or without "
+                             "CAM of every camera whose view contains it; repeatable")
+    parser.add_argument("--blackout", type=_blackout, action="append", default=[],
+                        metavar="CAM=START:DURATION",
+                        help="fault: camera CAM misses the ball from START for DURATION "
+                             "seconds; repeatable")
     parser.add_argument("--seed", type=seed, default=0, metavar="N",
                         help="random seed (default %(default)s)")
     parser.add_argument("-o", "--output", required=True, metavar="SESSION.mcap",
@@ -105,10 +147,11 @@ def run(args: argparse.Namespace) -> int:
     from pslog.simulation import (
         TRUTH_CLOCK_KEY,
         SimulationOptions,
+        check_candidate_faults,
         check_duration,
         check_jitter,
         check_noise,
-        simulate,
+        simulate_labelled,
         true_rig,
         truth_clock,
     )
@@ -126,7 +169,11 @@ def run(args: argparse.Namespace) -> int:
               "readout_s": readout}
     options = SimulationOptions(noise_px=args.noise_px, jitter_s=args.jitter,
                                 drop_rate=args.drop_rate, miss_rate=args.miss_rate,
-                                seed=args.seed, host_jitter_s=args.host_jitter / 1e3, **faults)
+                                seed=args.seed, host_jitter_s=args.host_jitter / 1e3,
+                                spurious_rate=args.spurious,
+                                spurious_radius_px=args.spurious_radius,
+                                distractors=tuple(args.distractor),
+                                blackouts=tuple(args.blackout), **faults)
     duration = motion.duration if args.duration is None else args.duration
     # command-line values too large for this rig: exit 2, as argparse's own refusals
     for option, check, value in (
@@ -149,13 +196,19 @@ def run(args: argparse.Namespace) -> int:
         true_rig(rig, options)
     except InputError as exc:
         return usage_error("simulate", f"arguments --clock-offset/--drift/--readout: {exc}")
+    for option, key in (("--distractor", "distractors"), ("--blackout", "blackouts")):
+        try:
+            check_candidate_faults(rig, SimulationOptions(**{key: getattr(options, key)}))
+        except InputError as exc:
+            return usage_error("simulate", f"argument {option}: {exc}")
     # the session's rig holds the nominal clock (zeros): the faults are for 'pslog sync'
     # to find; their true values are kept in the metadata to score it
     clock = truth_clock(rig, options)
-    detections, truth = simulate(rig, motion, duration, options)
+    detections, truth, ball = simulate_labelled(rig, motion, duration, options)
     nominal = Rig(tuple(c.replace(clock_offset=0.0, clock_drift_ppm=0.0, readout=0.0)
                         for c in rig.cameras), rig.name)
     detections, truth, n_early = drop_before_zero(detections, truth)
+    ball, _, _ = drop_before_zero(ball, truth)
     settings = {"motion": motion.name, "duration_s": repr(float(duration)),
                 "noise_px": repr(args.noise_px), "jitter_s": repr(args.jitter),
                 "drop_rate": repr(args.drop_rate), "miss_rate": repr(args.miss_rate),
@@ -163,6 +216,18 @@ def run(args: argparse.Namespace) -> int:
     faulted = {k: v for k, v in (
         ("clock_offset_s", args.clock_offset), ("clock_drift_ppm", args.drift),
         ("readout_s", args.readout), ("host_jitter_s", args.host_jitter / 1e3)) if v}
+    candidate_faults = {k: v for k, v in (
+        ("spurious_rate", args.spurious), ("distractors", args.distractor),
+        ("blackouts", args.blackout)) if v}
+    if args.spurious:
+        settings["spurious_rate"] = repr(args.spurious)
+        settings["spurious_radius_px"] = repr(args.spurious_radius)
+    if args.distractor:
+        settings["distractors"] = ";".join(f"{'*' if n is None else n}="
+                                           + ",".join(repr(x) for x in p)
+                                           for n, p in args.distractor)
+    if args.blackout:
+        settings["blackouts"] = ";".join(f"{n}={s!r}:{d!r}" for n, s, d in args.blackout)
     for key, value in faulted.items():
         settings[key] = (repr(value) if key == "host_jitter_s" else
                          ",".join(f"{'*' if n is None else n}={v!r}" for n, v in value))
@@ -173,11 +238,15 @@ def run(args: argparse.Namespace) -> int:
                        metadata=metadata, on_error="discard") as writer:
         writer.add_detections(detections)
         writer.add_truth(truth)
+        if candidate_faults:  # which candidate is the ball: for 'pslog eval'
+            writer.add_ball_truth(ball)
     span = (detections.frame_time_ns[-1] - detections.frame_time_ns[0]) / NS \
         if detections.n_frames else 0.0
     print(f"wrote {output}: {len(rig)} cameras ({', '.join(rig.names)}), timing {timing}, "
           f"motion {motion.name}, {detections.n_frames} frames over {span:.3f} s, "
           f"{detections.n_candidates} detections, {len(truth)} truth points"
+          + (f" (of them {ball.n_candidates} of the ball; false candidates from "
+             f"{', '.join(candidate_faults)})" if candidate_faults else "")
           + (f" ({n_early} frames logged before t = 0 dropped)" if n_early else "")
           + (f"; clock faults ({', '.join(faulted)}) kept as {TRUTH_CLOCK_KEY!r} in the "
              f"metadata, the rig holds the nominal clock: run 'pslog sync'" if faulted else ""))

@@ -62,12 +62,15 @@ class FusionOptions:
     noise_px : float or None, standard deviation of the detections' pixel noise per axis,
         pixels: the first-order position covariance (``std_m``, ``cov_*_m2``) scales with
         it; None: no covariance (for throughput: it is most of the methods' cost)
+    gating : bool, fusing Detections: choose each frame's ball among its candidates by the
+        gates of :mod:`pslog.fusion.gating` (True), or take the best-scored one (False)
     """
 
     tolerance_s: float = 1e-3
     max_gap_s: float | None = None
     rate_hz: float | None = None
     noise_px: float | None = 0.5
+    gating: bool = True
 
     def __post_init__(self) -> None:
         if not self.tolerance_s >= 0:
@@ -245,8 +248,10 @@ def fuse(
 
     Parameters
     ----------
-    observations : Observations, or Detections (their best candidate per frame is used, at
-        its true time by the rig's timing model: :func:`pslog.timing.observations`)
+    observations : Observations, or Detections (each frame's ball is chosen among its
+        candidates by :func:`pslog.fusion.gating.gate` in the form the method needs, or with
+        ``options.gating`` False the best-scored one is used; at its true time by the rig's
+        timing model: :func:`pslog.timing.observations`)
     rig : Rig, whose camera order the observations' camera indices refer to
     method : one of :data:`METHODS`
     options : FusionOptions
@@ -261,7 +266,11 @@ def fuse(
     check_method(method)
     options = options or FusionOptions()
     if isinstance(observations, Detections):
-        observations = timed_observations(observations, rig)
+        from .gating import gate_for
+
+        observations = (gate_for(observations, rig, method, options).observations
+                        if options.gating and len(rig) >= 2
+                        else timed_observations(observations, rig))
     if len(rig) < 2:
         raise FusionError(f"fusion needs at least two cameras; rig has {len(rig)}")
     check_tolerance(rig, options.tolerance_s)
@@ -274,9 +283,18 @@ def fuse_all(
     observations: Observations | Detections, rig: Rig, methods: Sequence[str],
     options: FusionOptions | None = None,
 ) -> dict[str, Track]:
-    """Several methods over one session, sharing the undistortion and rays."""
+    """Several methods over one session, sharing the undistortion and rays (and, for
+    Detections, the gating: :func:`pslog.fusion.gating.fuse_detections`, which also returns
+    the rejections)."""
     for method in methods:
         check_method(method)
+    if isinstance(observations, Detections) and (options or FusionOptions()).gating:
+        from .gating import fuse_detections
+
+        if len(rig) < 2:
+            raise FusionError(f"fusion needs at least two cameras; rig has {len(rig)}")
+        check_tolerance(rig, (options or FusionOptions()).tolerance_s)
+        return fuse_detections(observations, rig, methods, options)[0]
     if isinstance(observations, Detections):
         observations = timed_observations(observations, rig)
     if len(rig) < 2:
@@ -291,8 +309,12 @@ def explain_type_a(
 ) -> TypeAConstruction:
     """The paper's Figure 2 construction behind every type-A point (see TypeAConstruction)."""
     options = options or FusionOptions()
-    if isinstance(observations, Detections):
-        observations = timed_observations(observations, rig)
+    if isinstance(observations, Detections):  # as fuse() chooses them for typeA
+        from .gating import gate_for
+
+        observations = (gate_for(observations, rig, "typeA", options).observations
+                        if options.gating and len(rig) >= 2
+                        else timed_observations(observations, rig))
     prep = prepare(observations, rig)
     return fuse_type_a(prep, options.max_gap_s or default_max_gap_s(rig), options.noise_px)[1]
 

@@ -50,7 +50,8 @@ class StreamFuser:
     >>> track = fuser.push(time_ns, camera, uv)                  # doctest: +SKIP
     """
 
-    def __init__(self, rig: Rig, method: str, options: FusionOptions | None = None) -> None:
+    def __init__(self, rig: Rig, method: str, options: FusionOptions | None = None, *,
+                 candidates: bool = False) -> None:
         if len(rig) < 2:
             raise FusionError(f"fusion needs at least two cameras; rig has {len(rig)}")
         self.rig = rig
@@ -85,6 +86,14 @@ class StreamFuser:
         streamer = METHODS[method].streamer
         self.incremental = streamer(rig, self.options) if streamer is not None else None
         self._fed = 0  # rows of the window already given to it (the last one is kept)
+        # candidates=True: rows with one (time, camera) are a frame's candidates, gated as
+        # fuse(Detections) gates them (pslog.fusion.gating.StreamGate), so the stream equals
+        # fuse(detections, rig, method) with gating on
+        self._gate = None
+        if candidates and self.options.gating:
+            from .gating import StreamGate, gating_key
+
+            self._gate = StreamGate(rig, gating_key(method, self.options)[1], self._max_gap_s)
 
     def push(self, time_ns, camera, uv, frame_index=None) -> Track:
         """Add detections (arrays, or scalars for one); returns the points that became settled
@@ -98,6 +107,8 @@ class StreamFuser:
         uv : float (n, 2), distorted pixel coordinates (``v``, the row, times a rolling shutter)
         frame_index : int (n,), optional
         """
+        if self._gate is not None:  # the chosen candidates, in logged order
+            time_ns, camera, uv, frame_index = self._gate.push(time_ns, camera, uv, frame_index)
         time_ns = np.atleast_1d(np.asarray(time_ns, dtype=np.int64))
         camera = np.atleast_1d(np.asarray(camera, dtype=np.int32))
         uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
@@ -127,6 +138,14 @@ class StreamFuser:
     def flush(self) -> Track:
         """Emit every remaining point (end of stream); never raises on a valid stream (an
         end with no common instant left, for the methods that need one, emits nothing)."""
+        if self._gate is not None:  # the frames the gate still held, then the rest
+            gate, self._gate = self._gate, None
+            early, rest = self.push(*gate.flush()), self.flush()
+            return rest if not len(early) else early if not len(rest) else Track(
+                rest.method, np.r_[early.time_ns, rest.time_ns],
+                np.vstack([early.position_world, rest.position_world]),
+                np.r_[early.camera, rest.camera],
+                {k: np.r_[early.quality[k], v] for k, v in rest.quality.items()})
         self._admit(final=True)
         return self._settled(final=True)
 

@@ -64,6 +64,32 @@ def track_scene_topic(method: str) -> str:
     return f"/tracks/{method}/scene"
 
 
+def ball_truth_topic(camera: str) -> str:
+    """Simulated sessions with false candidates: which candidate of each frame is the ball."""
+    return f"/truth/ball/{camera}"
+
+
+def rejections_topic(method: str) -> str:
+    """The candidates the gating stage rejected for ``method``'s track."""
+    return f"/tracks/{method}/rejections"
+
+
+def parse_ball_truth_topic(topic: str) -> str | None:
+    """``/truth/ball/<camera>`` -> camera, else None."""
+    parts = topic.split("/")
+    if len(parts) == 4 and parts[0] == "" and parts[1:3] == ["truth", "ball"]:
+        return parts[3]
+    return None
+
+
+def parse_rejections_topic(topic: str) -> str | None:
+    """``/tracks/<method>/rejections`` -> method, else None."""
+    parts = topic.split("/")
+    if len(parts) == 4 and parts[0] == "" and parts[1] == "tracks" and parts[3] == "rejections":
+        return parts[2]
+    return None
+
+
 TRUTH_TOPIC = "/truth"
 EVENTS_TOPIC = "/events"
 
@@ -129,6 +155,14 @@ def _build_file() -> descriptor_pb2.FileDescriptorProto:
     _field(entry, "value", 2, _F.TYPE_DOUBLE)
     _field(track, "quality", 10, _F.TYPE_MESSAGE, repeated=True,
            type_name=".pslog.TrackPoint.QualityEntry")
+    rejection = file.message_type.add(name="Rejection")
+    _field(rejection, "time_ns", 1, _F.TYPE_INT64)      # the frame's logged time, ns
+    _field(rejection, "camera", 2, _F.TYPE_STRING)      # camera name
+    _field(rejection, "frame_index", 3, _F.TYPE_INT64)  # the camera's frame counter
+    _field(rejection, "u", 4, _F.TYPE_DOUBLE)           # the candidate's pixel, as detected
+    _field(rejection, "v", 5, _F.TYPE_DOUBLE)
+    _field(rejection, "score", 6, _F.TYPE_DOUBLE)       # the detector's score
+    _field(rejection, "reason", 7, _F.TYPE_STRING)      # pslog.fusion.gating.REASONS
     return file
 
 
@@ -144,6 +178,7 @@ def _message_class(name: str):
 DetectionFrame = _message_class("pslog.DetectionFrame")
 TruthPoint = _message_class("pslog.TruthPoint")
 TrackPoint = _message_class("pslog.TrackPoint")
+Rejection = _message_class("pslog.Rejection")
 
 
 def file_descriptor_set(message_class) -> bytes:
@@ -166,7 +201,7 @@ def file_descriptor_set(message_class) -> bytes:
 #: Every message class the writer registers, by schema name.
 SCHEMAS = {cls.DESCRIPTOR.full_name: cls for cls in (
     CameraCalibration, FrameTransform, CompressedImage, Log, SceneUpdate,
-    DetectionFrame, TruthPoint, TrackPoint)}
+    DetectionFrame, TruthPoint, TrackPoint, Rejection)}
 
 
 # ---- small conversions ----------------------------------------------------------------

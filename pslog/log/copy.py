@@ -18,7 +18,8 @@ from .writer import SessionWriter
 
 def copy_session(src, dst, *, detections: Detections | None = None, tracks: Sequence[Track] = (),
                  replace_tracks: bool = True, metadata: Mapping[str, str] | None = None,
-                 rig: Rig | None = None, force: bool = False) -> None:
+                 rig: Rig | None = None, force: bool = False,
+                 rejections: Mapping | None = None) -> None:
     """Write ``dst`` as a copy of session ``src``.
 
     Parameters
@@ -31,6 +32,8 @@ def copy_session(src, dst, *, detections: Detections | None = None, tracks: Sequ
     metadata : user metadata to add or replace (e.g. the new detector settings)
     rig : a corrected rig (same camera names, same order) replacing the session's calibration
     force : overwrite ``dst``
+    rejections : method -> :class:`pslog.fusion.gating.Rejections`, the candidates the
+        gating stage rejected for that method's track (written beside it; replaced with it)
 
     Calibration, poses, images, truth, events, metadata and any foreign topics are copied
     byte for byte (the calibration and poses are re-derived only from a given ``rig``).
@@ -93,3 +96,5 @@ def copy_session(src, dst, *, detections: Detections | None = None, tracks: Sequ
             w.add_detections(detections)
         for track in tracks:
             w.add_track(track)
+        for method, rejected in (rejections or {}).items():
+            w.add_rejections(method, rejected)

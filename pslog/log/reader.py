@@ -16,7 +16,7 @@ import heapq
 import mmap
 import struct
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -44,6 +44,10 @@ class Session:
     metadata : the whole ``pslog.session`` metadata record (string key/values)
     events : (time_ns, text) notes, in time order
     n_images : number of stored frames (all cameras)
+    ball_truth : simulated sessions with false candidates: Detections holding only the ball's
+        candidate of each frame (:func:`pslog.simulation.ball_mask`), else None
+    rejections : method -> :class:`pslog.fusion.gating.Rejections`, the candidates the
+        gating stage rejected for that method's track (fused sessions)
     """
 
     path: Path
@@ -55,6 +59,8 @@ class Session:
     metadata: dict[str, str]
     events: list[tuple[int, str]]
     n_images: int
+    ball_truth: Detections | None = None
+    rejections: dict = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -217,7 +223,10 @@ def _read(f: _Finished, skip: frozenset[int] = frozenset()) -> Session:
     rig = f.rig
     det_topics = [S.detections_topic(n) for n in rig.names]
     track_topics = sorted(t for t in f.topics.values() if S.parse_track_topic(t))
-    found = f.collect([*det_topics, S.TRUTH_TOPIC, S.EVENTS_TOPIC, *track_topics], skip)
+    ball_topics = [S.ball_truth_topic(n) for n in rig.names]
+    rejection_topics = sorted(t for t in f.topics.values() if S.parse_rejections_topic(t))
+    found = f.collect([*det_topics, S.TRUTH_TOPIC, S.EVENTS_TOPIC, *track_topics,
+                       *ball_topics, *rejection_topics], skip)
     try:
         detections = decode_detections(rig.names, [found.get(t, []) for t in det_topics])
         truth = decode_truth(found[S.TRUTH_TOPIC]) if S.TRUTH_TOPIC in found else None
@@ -226,6 +235,14 @@ def _read(f: _Finished, skip: frozenset[int] = frozenset()) -> Session:
             method = S.parse_track_topic(topic)
             tracks[method] = decode_track(method, rig.names, found.get(topic, []))
         events = decode_events(found.get(S.EVENTS_TOPIC, []))
+        ball_truth = (decode_detections(rig.names, [found.get(t, []) for t in ball_topics])
+                      if any(t in found for t in ball_topics) else None)
+        try:
+            rejections = {S.parse_rejections_topic(t): decode_rejections(rig.names,
+                                                                         found.get(t, []))
+                          for t in rejection_topics}
+        except LogFormatError as exc:
+            raise LogFormatError(f"{f.path}: {exc}") from None
     except DecodeError as exc:
         # only a chunk written without CRCs can get here with damaged bytes
         raise LogFormatError(f"{f.path}: a message does not decode ({exc}); run 'pslog "
@@ -233,7 +250,8 @@ def _read(f: _Finished, skip: frozenset[int] = frozenset()) -> Session:
     n_images = sum(f.counts.get(S.image_topic(n), 0) for n in rig.names)
     return Session(path=f.path, rig=rig, detections=detections, truth=truth, tracks=tracks,
                    timing=f.meta.get("timing", "custom"), metadata=dict(f.meta),
-                   events=events, n_images=n_images)
+                   events=events, n_images=n_images, ball_truth=ball_truth,
+                   rejections=rejections)
 
 
 def decode_detections(camera_names: Sequence[str],
@@ -316,6 +334,25 @@ def decode_track(method: str, camera_names: Sequence[str],
     order = np.argsort(times, kind="stable")
     return Track(method, times[order], xyz[order], cams[order],
                  {k: v[order] for k, v in quality.items()})
+
+
+def decode_rejections(camera_names: Sequence[str], msgs: list[tuple[int, int, bytes]]):
+    """:class:`pslog.fusion.gating.Rejections` from ``pslog.Rejection`` messages."""
+    from ..fusion.gating import Rejections
+
+    parse = S.Rejection.FromString
+    index = {name: i for i, name in enumerate(camera_names)}
+    rows = []
+    for t, _seq, data in msgs:
+        m = parse(data)
+        if m.camera not in index:
+            raise LogFormatError(f"rejection of unknown camera {m.camera!r}")
+        rows.append((t, index[m.camera], m.frame_index, m.u, m.v, m.score, m.reason))
+    rows.sort(key=lambda r: (r[0], r[1]))
+    try:
+        return Rejections.from_rows(rows)
+    except ValueError as exc:
+        raise LogFormatError(f"a rejection record does not decode: {exc}") from None
 
 
 def decode_events(msgs: list[tuple[int, int, bytes]]) -> list[tuple[int, str]]:

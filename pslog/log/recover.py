@@ -180,6 +180,10 @@ def _pslog_schema(topic: str) -> io.SchemaRec | None:
                "image": S.CompressedImage, "detections": S.DetectionFrame}.get(kind)
     if topic == S.TRUTH_TOPIC:
         message = S.TruthPoint
+    elif S.parse_ball_truth_topic(topic):
+        message = S.DetectionFrame
+    elif S.parse_rejections_topic(topic):
+        message = S.Rejection
     elif topic == S.EVENTS_TOPIC:
         message = S.Log
     elif S.parse_track_topic(topic):

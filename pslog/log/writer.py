@@ -364,6 +364,53 @@ class SessionWriter:
                         int(np.count_nonzero(detections.frame_camera == i)))
 
     @_locked
+    def add_ball_truth(self, ball: Detections) -> None:
+        """Which candidate of each frame is the ball (a simulated session's labels:
+        :func:`pslog.simulation.simulate_labelled`): a ``pslog.DetectionFrame`` holding the
+        ball's candidate on ``/truth/ball/<cam>`` for every frame where the ball was
+        detected."""
+        self._check_open()
+        if tuple(ball.camera_names) != self._names:
+            raise InputError(f"ball labels are for cameras {', '.join(ball.camera_names)}, "
+                             f"rig has {', '.join(self._names)}")
+        channels = [self._channel(S.ball_truth_topic(n), S.DetectionFrame) for n in self._names]
+        for f, (u, v), r, s in zip(ball.cand_frame.tolist(), ball.cand_uv.tolist(),
+                                   ball.cand_radius.tolist(), ball.cand_score.tolist(),
+                                   strict=True):
+            t, cam = int(ball.frame_time_ns[f]), int(ball.frame_camera[f])
+            if t < 0:
+                raise InputError(_negative_time(t))
+            idx = int(ball.frame_index[f])
+            msg = S.DetectionFrame(time_ns=t, camera=self._names[cam], frame_index=idx,
+                                   u=[u], v=[v], radius=[r], score=[s])
+            self._queue(channels[cam], t, msg.SerializeToString(), idx)
+            self._count(S.ball_truth_topic(self._names[cam]))
+
+    @_locked
+    def add_rejections(self, method: str, rejections) -> None:
+        """The candidates the gating stage rejected for ``method``'s track
+        (:class:`pslog.fusion.gating.Rejections`), one ``pslog.Rejection`` each on
+        ``/tracks/<method>/rejections``."""
+        self._check_open()
+        if not method or "/" in method:
+            raise InputError(f"track method must be a non-empty name without '/', got {method!r}")
+        channel = self._channel(S.rejections_topic(method), S.Rejection)
+        names = self._names
+        if len(rejections) and not 0 <= rejections.camera.min() <= rejections.camera.max() \
+                < len(names):
+            raise InputError(f"rejections of {method!r}: camera index out of range of the rig")
+        for t, cam, idx, (u, v), score, reason in zip(
+                rejections.frame_time_ns.tolist(), rejections.camera.tolist(),
+                rejections.frame_index.tolist(), rejections.uv.tolist(),
+                rejections.score.tolist(), rejections.reason_names(), strict=True):
+            if t < 0:
+                raise InputError(_negative_time(t))
+            msg = S.Rejection(time_ns=t, camera=names[cam], frame_index=idx, u=u, v=v,
+                              score=score, reason=reason)
+            self._queue(channel, t, msg.SerializeToString(), idx)
+        self._count(S.rejections_topic(method), len(rejections))
+
+    @_locked
     def add_image(self, camera: int, frame_index: int, time_ns: int, data: bytes,
                   format: str = "jpeg") -> None:
         """An encoded frame (bytes stored as given) as foxglove.CompressedImage."""

@@ -1,0 +1,855 @@
+"""Gating: choose the ball among each frame's candidates, before any fusion method runs.
+
+Real detectors return more than the ball (a second orange object, a reflection, a shirt) and
+miss it at times. Every method fuses :class:`~pslog.records.Observations` (one per frame);
+this stage maps :class:`~pslog.records.Detections` (every candidate) to them, and records
+every candidate it rejects with the reason (:class:`Rejections`). It is method-agnostic: the
+registry's methods all fuse what it keeps (``pslog.fusion.fuse`` with ``gating=True``).
+
+A candidate ``x`` of camera ``a`` at (corrected) time ``t`` is judged by three gates
+(docs/methods.md, "Candidates and gating", has the equations and why these thresholds):
+
+1. **Epipolar** (geometry of the rig, undistorted pixels, time-aware). For every other
+   camera ``b``, its candidates of the frames nearest ``t`` are carried to ``t``: linearly
+   interpolated between the frame before and the frame after (eq. (1) of the paper), or, in
+   the causal form, extrapolated from the two latest frames at or before ``t``. Over every
+   pair of candidates (one per frame), the distance of the carried point to ``x``'s
+   epipolar line in ``b``, ``d_b = |l_b · [y(t), 1]|`` with ``l_b = F_ab x`` normalised, is
+   compared with ``τ_b = epipolar_px + ½ A |t - t_0| |t - t_1|`` (the error a linear
+   carry makes under an image acceleration of at most ``A``). ``b`` *supports* ``x`` when
+   its best pair has ``d_b <= τ_b``.
+2. **Track** (ray-to-track distance). The points accepted so far (each candidate's rays
+   crossed with its support's carried rays, least squares) over the last ``track_window_s``
+   are fitted with a ballistic model (constant velocity plus gravity); the distance of
+   ``x``'s viewing ray to the prediction ``p̂(t)`` must be at most ``track_m + Δv Δt``
+   (``Δt``: time since the newest accepted point, ``Δv`` a kick's change of velocity).
+3. **Motion model**. The point ``x`` makes with its support must lie in front of every
+   camera that contributed, be reachable from the last accepted point at a ball's speed,
+   ``|p - p_last| <= max_speed · Δt + track_m``, and not stand still: a point within
+   ``static_m`` of its camera's earlier points over ``static_s`` is a static object (a second
+   orange thing seen by every camera passes every epipolar test; it does not move).
+
+A candidate is accepted when the epipolar gate accepts it (some other camera supports it)
+and the track and motion gates do not object, or when the track gate alone accepts it
+firmly (its ray within ``track_alone_m`` of the prediction); one nothing can judge is kept
+only in the session's first frames. A candidate supported by two or more other cameras is
+consistent in three views and is accepted whatever the track says (that is how the track
+follows kicks and bounces). Among a frame's accepted candidates the one with the most
+supporting cameras, then the smallest cost (squared normalised residuals of the supporting
+cameras, 1 for each other available camera, the track's, the stillness) is kept; the others
+are rejected as ``outscored``. The detector's score is not used: a distractor may outscore
+the ball. docs/methods.md has the whole rule.
+
+Causality: :func:`gate` with ``causal=True`` decides a candidate at ``t`` from candidates at
+or before ``t`` in (time, camera) order (plus ``wait_s`` for the methods that wait for the
+tolerance) and from its own earlier decisions, so a causal method fed by it stays causal.
+``causal=False`` (offline methods) also interpolates with the frame after ``t``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import FusionError
+from ..geometry import epipolar_lines, fundamental_matrices, triangulate_rays
+from ..motion import G
+from ..records import NS, Detections, Observations
+from ..rig import Rig
+from ..timing import camera_parameters, true_times_ns
+from ..timing import observations as timed_observations
+
+#: Why a candidate was rejected (the ``reason`` codes of :class:`Rejections`).
+REASONS = ("epipolar", "track", "motion", "outscored")
+EPIPOLAR, TRACK, MOTION, OUTSCORED = range(4)
+REASON_TEXT = {
+    "epipolar": "no other camera's detections near that time lie near its epipolar line",
+    "track": "its viewing ray passes too far from the track of the recent accepted points",
+    "motion": "the point it makes is behind a camera or out of a ball's reach",
+    "outscored": "another candidate of its frame fitted the gates better",
+}
+
+
+@dataclass(frozen=True)
+class GatingOptions:
+    """Thresholds of the gates (docs/methods.md explains each value).
+
+    Attributes
+    ----------
+    epipolar_px : float, base epipolar distance accepted, pixels (detection noise of a few
+        tenths of a pixel in two images, lens model residuals, a bounce between frames)
+    accel_px_s2 : float, bound on the ball's image acceleration, pixels/s², for the error
+        of carrying a candidate linearly to another time
+    max_image_speed_px_s : float, pairs of candidates moving faster than this in an image
+        are not one ball, pixels/s
+    track_m : float, base ray-to-track distance accepted, metres
+    track_jump_m_s : float, unmodelled change of velocity (a kick, a bounce) the track
+        allowance grows with, per second since the newest accepted point, m/s
+    track_window_s : float, accepted points older than this do not predict the track, s
+    track_points : int, at most this many recent points fit the track (at least 3)
+    max_speed_m_s : float, fastest ball, m/s
+    loose_ratio : float, a candidate supported by one camera and within this many
+        epipolar thresholds of every other camera gets twice the track allowance
+    track_alone_m : float, a candidate no other camera confirms is still accepted when its
+        ray passes this close to the track's prediction, metres (another camera that does not
+        see the ball should not veto it)
+    static_s, static_m : float, a candidate whose 3D point stays within ``static_m``
+        metres of one of its camera's earlier candidates' in every frame of the last
+        ``static_s`` seconds is a static object, not a ball in play (a ball slower than
+        about 10 cm/s is not tracked)
+    """
+
+    epipolar_px: float = 8.0
+    accel_px_s2: float = 6000.0
+    max_image_speed_px_s: float = 1500.0
+    track_m: float = 0.08
+    track_jump_m_s: float = 6.0
+    track_window_s: float = 0.12
+    track_points: int = 6
+    max_speed_m_s: float = 15.0
+    loose_ratio: float = 2.0
+    static_s: float = 0.25
+    static_m: float = 0.05
+    track_alone_m: float = 0.03
+
+    def __post_init__(self) -> None:
+        for name in ("epipolar_px", "accel_px_s2", "max_image_speed_px_s", "track_m",
+                     "track_jump_m_s", "track_window_s", "max_speed_m_s", "loose_ratio", "static_s",
+                     "static_m", "track_alone_m"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise FusionError(f"gating {name} must be a positive number, got {value!r}")
+        if int(self.track_points) < 3:
+            raise FusionError(f"gating track_points must be >= 3, got {self.track_points!r}")
+
+
+@dataclass(frozen=True, eq=False)
+class Rejections:
+    """Every candidate the gating stage rejected, one row each, sorted by (time, camera).
+
+    Attributes
+    ----------
+    frame_time_ns : (R,) int64, the candidate's frame's LOGGED time (as in the session)
+    camera : (R,) int32, camera index in the rig
+    frame_index : (R,) int64, the camera's frame counter
+    uv : (R, 2) float64, the candidate's pixel, as detected (distorted)
+    score : (R,) float64, the detector's score
+    reason : (R,) int8, index into :data:`REASONS`
+    """
+
+    frame_time_ns: np.ndarray
+    camera: np.ndarray
+    frame_index: np.ndarray
+    uv: np.ndarray
+    score: np.ndarray
+    reason: np.ndarray
+
+    def __post_init__(self) -> None:
+        for name, dtype in (("frame_time_ns", np.int64), ("camera", np.int32),
+                            ("frame_index", np.int64), ("uv", np.float64),
+                            ("score", np.float64), ("reason", np.int8)):
+            value = np.ascontiguousarray(getattr(self, name), dtype=dtype)
+            value.setflags(write=False)
+            object.__setattr__(self, name, value)
+        n = len(self.frame_time_ns)
+        if self.uv.shape != (n, 2) or any(len(getattr(self, k)) != n for k in (
+                "camera", "frame_index", "score", "reason")):
+            raise ValueError("rejection columns differ in length")
+        if n and (self.reason.min() < 0 or self.reason.max() >= len(REASONS)):
+            raise ValueError("rejection reason out of range")
+
+    def __len__(self) -> int:
+        return len(self.frame_time_ns)
+
+    def reason_names(self) -> list[str]:
+        return [REASONS[r] for r in self.reason.tolist()]
+
+    def counts(self) -> dict[str, int]:
+        """Rejected candidates per reason (every reason, zeros included)."""
+        found = np.bincount(self.reason, minlength=len(REASONS))
+        return {name: int(found[i]) for i, name in enumerate(REASONS)}
+
+    @classmethod
+    def empty(cls) -> Rejections:
+        return cls(np.zeros(0, np.int64), np.zeros(0, np.int32), np.zeros(0, np.int64),
+                   np.zeros((0, 2)), np.zeros(0), np.zeros(0, np.int8))
+
+    @classmethod
+    def from_rows(cls, rows) -> Rejections:
+        """From ``(time_ns, camera, frame_index, u, v, score, reason name)`` tuples;
+        ValueError on an unknown reason."""
+        if not rows:
+            return cls.empty()
+        t, cam, idx, u, v, score, reason = zip(*rows, strict=True)
+        unknown = sorted(set(reason) - set(REASONS))
+        if unknown:
+            raise ValueError(f"unknown rejection reason {unknown[0]!r} (have "
+                             f"{', '.join(REASONS)})")
+        code = {name: i for i, name in enumerate(REASONS)}
+        return cls(np.array(t), np.array(cam), np.array(idx), np.column_stack([u, v]),
+                   np.array(score), np.array([code[r] for r in reason]))
+
+
+@dataclass(frozen=True, eq=False)
+class Gated:
+    """What :func:`gate` decided.
+
+    Attributes
+    ----------
+    observations : Observations, the chosen candidate of every frame that kept one, at its
+        corrected time (as :func:`pslog.timing.observations` makes them)
+    rejections : Rejections
+    chosen : (C,) bool over the detections' candidates, True for the kept ones
+    reason : (C,) int8, the rejection reason of each candidate (-1 for the kept ones)
+    """
+
+    observations: Observations
+    rejections: Rejections
+    chosen: np.ndarray
+    reason: np.ndarray
+
+    def rejected_frames(self, detections: Detections) -> int:
+        """Frames that had candidates and kept none (rejected detections)."""
+        had = detections.candidates_per_frame() > 0
+        kept = np.zeros(detections.n_frames, dtype=bool)
+        kept[detections.cand_frame[self.chosen]] = True
+        return int(np.count_nonzero(had & ~kept))
+
+
+@dataclass
+class _Candidates:
+    """Per-candidate geometry, columnar (C rows, the detections' candidate order)."""
+
+    camera: np.ndarray       # (C,) int32
+    time_ns: np.ndarray      # (C,) int64, corrected
+    uv_und: np.ndarray       # (C, 2) undistorted pixels
+    ray_dir: np.ndarray      # (C, 3) unit, world
+    frame: np.ndarray        # (C,) the candidate's frame row
+
+
+def _candidates(detections: Detections, rig: Rig) -> _Candidates:
+    if tuple(detections.camera_names) != rig.names:
+        raise FusionError(f"detections of cameras {', '.join(detections.camera_names)} do not "
+                          f"match the rig's {', '.join(rig.names)} (names and order)")
+    frame = detections.cand_frame
+    camera = detections.frame_camera[frame]
+    p = camera_parameters(rig)
+    time_ns = true_times_ns(detections.frame_time_ns[frame], detections.cand_uv[:, 1],
+                            p["height"][camera], p["clock_offset"][camera],
+                            p["clock_drift_ppm"][camera], p["readout"][camera])
+    uv_und = np.full((len(frame), 2), np.nan)
+    ray_dir = np.full((len(frame), 3), np.nan)
+    for i, cam in enumerate(rig.cameras):
+        rows = np.flatnonzero(camera == i)
+        if len(rows):
+            uv = detections.cand_uv[rows]
+            sane = np.all(np.abs(uv) <= 10 * max(cam.width, cam.height), axis=1)
+            uv_und[rows[sane]] = cam.undistort(uv[sane])
+            ray_dir[rows[sane]] = cam.rays(uv[sane])[1]
+    return _Candidates(camera, time_ns, uv_und, ray_dir, frame)
+
+
+def epipolar_distance(F_ab: np.ndarray, uv_a: np.ndarray, uv_b: np.ndarray) -> np.ndarray:
+    """Distance, pixels (n,), of undistorted pixels ``uv_b`` (n, 2) of camera b from the
+    epipolar lines of ``uv_a`` (n, 2) of camera a (``F_ab``: ``x_bᵀ F_ab x_a = 0``, as
+    :func:`pslog.geometry.fundamental_matrix`): ``|l · [u_b, v_b, 1]|`` with
+    ``l = F_ab [u_a, v_a, 1]`` scaled to ``l_1² + l_2² = 1``. The gate's measure."""
+    lines = epipolar_lines(F_ab, np.asarray(uv_a, dtype=np.float64))
+    uv_b = np.asarray(uv_b, dtype=np.float64)
+    return np.abs(lines[:, 0] * uv_b[:, 0] + lines[:, 1] * uv_b[:, 1] + lines[:, 2])
+
+
+def _frame_table(c: _Candidates, n_cams: int):
+    """Per camera: its frames with candidates, their times (the first, best candidate's
+    corrected time) and a padded (frames, K) table of candidate rows (-1 padding)."""
+    out = []
+    k_max = 1
+    if len(c.frame):
+        k_max = int(np.max(np.unique(c.frame, return_counts=True)[1]))
+    for i in range(n_cams):
+        rows = np.flatnonzero(c.camera == i)
+        frames, first, counts = np.unique(c.frame[rows], return_index=True, return_counts=True)
+        first_rows = rows[first]
+        times = c.time_ns[first_rows]
+        order = np.lexsort((frames, times))
+        frames, first_rows, counts, times = (frames[order], first_rows[order], counts[order],
+                                             times[order])
+        table = np.full((len(frames), k_max), -1, dtype=np.int64)
+        for k in range(k_max):
+            has = counts > k
+            table[has, k] = first_rows[has] + k  # candidates of a frame are contiguous
+        out.append((times, table))
+    return out
+
+
+def _support(c: _Candidates, rig: Rig, F: np.ndarray, tables, options: GatingOptions,
+             max_gap_ns: int, causal: bool, wait_ns: int, only: np.ndarray | None = None):
+    """Epipolar support of every candidate by every other camera.
+
+    Returns
+    -------
+    ratio : (C, m) float, best ``d_b / τ_b`` of camera b (NaN: b has no frame near; inf:
+        frames but no plausible pair)
+    carried : (C, m, 2) undistorted pixel of b's best pair carried to the candidate's time
+    """
+    n, m = len(c.camera), len(rig)
+    ratio = np.full((n, m), np.nan)
+    carried = np.full((n, m, 2), np.nan)
+    accel, vmax = options.accel_px_s2, options.max_image_speed_px_s
+    for a in range(m):
+        rows = np.flatnonzero((c.camera == a) if only is None else (c.camera == a) & only)
+        if len(rows) == 0:
+            continue
+        t = c.time_ns[rows]
+        for b in range(m):
+            if b == a:
+                continue
+            times, table = tables[b]
+            if len(times) == 0:
+                continue
+            lines = epipolar_lines(F[a, b], c.uv_und[rows])
+            if causal:
+                # b's frames a causal choice at t may use: (time, camera) order, or up to
+                # t + wait for the methods that wait for the tolerance
+                limit = t + wait_ns
+                side = "right" if (wait_ns > 0 or b < a) else "left"
+                last = np.searchsorted(times, limit, side=side) - 1
+                i1, i0 = last, last - 1
+                inext = np.full(len(rows), -1)
+            else:
+                last = np.searchsorted(times, t, side="right") - 1
+                i1, i0 = last, last - 1
+                inext = np.where(last + 1 < len(times), last + 1, -1)
+            best = np.full(len(rows), np.inf)
+            best_uv = np.full((len(rows), 2), np.nan)
+            near = np.zeros(len(rows), dtype=bool)
+            # interpolation between the frames around t, else extrapolation from the two
+            # latest at or before it
+            for extrapolate, (first, second) in enumerate(((i1, inext), (i0, i1))):
+                ok = (first >= 0) & (second >= 0)
+                ok &= np.abs(t - times[np.maximum(first, 0)]) <= max_gap_ns
+                ok &= np.abs(t - times[np.maximum(second, 0)]) <= max_gap_ns
+                if extrapolate:  # only where no interpolation was possible
+                    ok &= inext < 0
+                idx = np.flatnonzero(ok)
+                if len(idx) == 0:
+                    continue
+                near[idx] = True
+                r0 = table[first[idx]]  # (k, K)
+                r1 = table[second[idx]]
+                valid = (r0[:, :, None] >= 0) & (r1[:, None, :] >= 0)
+                y0 = c.uv_und[np.maximum(r0, 0)][:, :, None, :]
+                y1 = c.uv_und[np.maximum(r1, 0)][:, None, :, :]
+                t0 = c.time_ns[np.maximum(r0, 0)][:, :, None]
+                t1 = c.time_ns[np.maximum(r1, 0)][:, None, :]
+                span = (t1 - t0) / NS
+                tt = t[idx][:, None, None]
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    w = np.where(span != 0, (tt - t0) / NS / np.where(span != 0, span, 1), 0.0)
+                    y = y0 + w[..., None] * (y1 - y0)
+                    speed = np.linalg.norm(y1 - y0, axis=-1) / np.abs(span)
+                valid &= (span > 0) & (speed <= vmax)
+                tau = options.epipolar_px + 0.5 * accel * np.abs(tt - t0) / NS * np.abs(
+                    tt - t1) / NS
+                ln = lines[idx][:, None, None, :]
+                d = np.abs(ln[..., 0] * y[..., 0] + ln[..., 1] * y[..., 1] + ln[..., 2])
+                r = np.where(valid & np.isfinite(d), d / tau, np.inf).reshape(len(idx), -1)
+                k = np.argmin(r, axis=1)
+                rk = r[np.arange(len(idx)), k]
+                better = rk < best[idx]
+                best[idx[better]] = rk[better]
+                best_uv[idx[better]] = y.reshape(len(idx), -1, 2)[np.arange(len(idx)), k][better]
+            # a single nearby frame (the other camera missed the one before): its candidates
+            # as they are, allowing the image motion a ball can make since
+            single = ~near & (i1 >= 0)
+            single &= np.abs(t - times[np.maximum(i1, 0)]) <= max_gap_ns
+            idx = np.flatnonzero(single)
+            if len(idx):
+                near[idx] = True
+                r1 = table[i1[idx]]
+                y = c.uv_und[np.maximum(r1, 0)]
+                dt = np.abs(t[idx][:, None] - c.time_ns[np.maximum(r1, 0)]) / NS
+                tau = options.epipolar_px + vmax * dt
+                ln = lines[idx][:, None, :]
+                d = np.abs(ln[..., 0] * y[..., 0] + ln[..., 1] * y[..., 1] + ln[..., 2])
+                r = np.where((r1 >= 0) & np.isfinite(d), d / tau, np.inf)
+                k = np.argmin(r, axis=1)
+                best[idx] = r[np.arange(len(idx)), k]
+                best_uv[idx] = y[np.arange(len(idx)), k]
+            ratio[rows[near], b] = best[near]
+            carried[rows, b] = best_uv
+    return ratio, carried
+
+
+def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
+            points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Which candidates stood still in space: each one's 3D point (its ray crossed with its
+    support's) within ``static_m`` of a candidate's point in each of its camera's earlier
+    frames. (Still in one image is not enough: a ball moving along a camera's ray is.)
+    Causal: only earlier frames of the same camera.
+
+    Returns
+    -------
+    static : (C,) bool, still in three quarters of the frames of the last ``static_s`` (as
+        many frames as the camera's rate gives, within 1.5 ``static_s``): a static object
+        seen by several cameras (a second orange thing, a lamp), not a ball in play
+    stillness : (C,) float in [0, 1], the share of those frames, back from the newest,
+        it was still in (a candidate that has not moved yet is the less likely ball)
+    """
+    static = np.zeros(len(c.camera), dtype=bool)
+    stillness = np.zeros(len(c.camera))
+    for b, (times, table) in enumerate(tables):
+        lags = int(np.ceil(options.static_s * rig.cameras[b].fps))
+        run = np.zeros(table.shape)
+        p = points[np.maximum(table, 0)]  # (frames, K, 3)
+        for lag in range(1, min(lags, len(times) - 1) + 1):
+            prev = np.full(table.shape, -1)
+            prev[lag:] = table[:-lag]
+            # the lag frames must lie within 1.5 static_s: missed frames do not count
+            recent = np.zeros(len(times), dtype=bool)
+            recent[lag:] = times[lag:] - times[:-lag] <= 1.5 * options.static_s * NS
+            pp = points[np.maximum(prev, 0)]
+            with np.errstate(invalid="ignore"):
+                d = np.linalg.norm(p[:, :, None, :] - pp[:, None, :, :], axis=-1)
+            d = np.where((prev[:, None, :] >= 0) & np.isfinite(d), d, np.inf).min(axis=2)
+            run += recent[:, None] & (d <= options.static_m)
+        ok = table >= 0
+        stillness[table[ok]] = run[ok] / lags
+        # still in most of them: one frame whose point a coincidence spoiled does not count
+        static[table[ok & (run >= 0.75 * lags)]] = True
+    return static, stillness
+
+
+def _points(c: _Candidates, rig: Rig, ratio: np.ndarray, carried: np.ndarray):
+    """Each candidate's 3D point: its ray and its supporting cameras' carried rays crossed
+    (least squares); NaN without support. Also whether it lies in front of every camera
+    used, and the RMS distance of the point to those rays, metres (three or more rays that
+    do not meet: the supports are not one ball)."""
+    n, m = ratio.shape
+    centers = np.array([cam.center_world for cam in rig.cameras])
+    K_inv = np.array([np.linalg.inv(cam.K) for cam in rig.cameras])
+    R = np.array([cam.R for cam in rig.cameras])
+    origins = np.zeros((n, m + 1, 3))
+    dirs = np.zeros((n, m + 1, 3))
+    valid = np.zeros((n, m + 1), dtype=bool)
+    origins[:, 0] = centers[c.camera]
+    dirs[:, 0] = np.nan_to_num(c.ray_dir)
+    valid[:, 0] = np.all(np.isfinite(c.ray_dir), axis=1)
+    supported = ratio <= 1.0
+    for b in range(m):
+        rows = np.flatnonzero(supported[:, b])
+        if len(rows) == 0:
+            continue
+        homog = np.column_stack([carried[rows, b], np.ones(len(rows))])
+        d = (homog @ K_inv[b].T) @ R[b]  # Rᵀ K⁻¹ x, row-wise
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        origins[rows, b + 1] = centers[b]
+        dirs[rows, b + 1] = d
+        valid[rows, b + 1] = True
+    enough = valid.sum(axis=1) >= 2
+    points = np.full((n, 3), np.nan)
+    in_front = np.ones(n, dtype=bool)
+    miss = np.full(n, np.nan)
+    if np.any(enough):
+        p, miss[enough], _ = triangulate_rays(origins[enough], dirs[enough], valid[enough])
+        points[enough] = p
+        depth = np.einsum("nmi,nmi->nm", p[:, None, :] - origins[enough], dirs[enough])
+        in_front[enough] = np.all((depth > 0) | ~valid[enough], axis=1) & np.all(
+            np.isfinite(p), axis=1)
+    return points, in_front, miss
+
+
+class _Track:
+    """The recent accepted points and the ballistic prediction the track gate uses."""
+
+    def __init__(self, options: GatingOptions) -> None:
+        self.o = options
+        self.t: list[float] = []
+        self.p: list[np.ndarray] = []
+
+    def add(self, t_s: float, p: np.ndarray) -> None:
+        self.t.append(t_s)
+        self.p.append(p)
+        if len(self.t) > 4 * self.o.track_points:
+            del self.t[:-self.o.track_points], self.p[:-self.o.track_points]
+
+    def last(self):
+        return (self.t[-1], self.p[-1]) if self.t else None
+
+    def predict(self, t_s: float):
+        """(p̂, allowance) at ``t_s`` from the points before it, or None."""
+        o = self.o
+        k = len(self.t)
+        lo = k
+        while lo > 0 and k - lo < o.track_points and t_s - self.t[lo - 1] <= o.track_window_s:
+            lo -= 1
+        if k - lo < 3:
+            return None
+        ts = np.array(self.t[lo:]) - t_s
+        ps = np.array(self.p[lo:])
+        gravity = np.array([0.0, 0.0, -G])
+        # p(τ) = p0 + v τ + ½ g τ², τ = time - t: fit p0, v to the points less gravity
+        y = ps - 0.5 * ts[:, None] ** 2 * gravity
+        A = np.column_stack([np.ones(len(ts)), ts])
+        coef, *_ = np.linalg.lstsq(A, y, rcond=None)
+        rms = np.sqrt(np.mean(np.sum((A @ coef - y) ** 2, axis=1)))
+        if rms > 0.5 * o.track_m and len(ts) > 3:  # a bounce in the window: the newest only
+            A, y = A[-3:], y[-3:]
+            coef, *_ = np.linalg.lstsq(A, y, rcond=None)
+        dt = -ts[-1]
+        return coef[0], o.track_m + o.track_jump_m_s * dt
+
+
+class _Decider:
+    """The sequential part of the gate: each frame's choice, in (time, camera) order, with
+    the track and what the earlier choices taught (:func:`gate`; the stream keeps one)."""
+
+    def __init__(self, rig: Rig, options: GatingOptions) -> None:
+        self.rig, self.options = rig, options
+        self.track = _Track(options)
+        self.verified = False  # a candidate has passed a gate: from then on none passes unjudged
+
+    def run(self, c: _Candidates, frames, ratio, points, in_front, reason,
+            static=None) -> None:
+        """Decide the frames ``[(lo, hi), ...]`` (candidate rows, in order): set ``reason``
+        of every rejected row (``static``: :func:`_static`'s pair)."""
+        static, stillness = ((np.zeros(len(c.camera), dtype=bool), np.zeros(len(c.camera)))
+                             if static is None else static)
+        options, rig, track = self.options, self.rig, self.track
+        available = np.sum(np.isfinite(ratio), axis=1)
+        n_support = np.sum(ratio <= 1.0, axis=1)
+        # squared residuals of the supporting cameras, 1 for each other available one: a
+        # camera that does not see the ball says nothing, however near a false candidate
+        with np.errstate(invalid="ignore"):
+            epi_cost = np.nansum(np.where(ratio <= 1.0, ratio**2, 1.0), axis=1)
+        t_s = c.time_ns / NS
+        for lo, hi in frames:
+            best_key, best_row = None, -1
+            pred = None
+            unverified = []
+            for i in range(lo, hi):
+                track_accepts = False
+                if available[i] and n_support[i] == 0:
+                    # no other camera confirms it (they may just not see the ball): the track
+                    # gate alone may still accept it, if its ray passes close to the prediction
+                    if pred is None:
+                        pred = track.predict(t_s[i]) or False
+                    if pred and np.isfinite(c.ray_dir[i, 0]):
+                        offset = pred[0] - rig.cameras[c.camera[i]].center_world
+                        track_accepts = (np.linalg.norm(np.cross(offset, c.ray_dir[i]))
+                                         <= options.track_alone_m)
+                    if not track_accepts:
+                        reason[i] = EPIPOLAR
+                        continue
+                if not in_front[i] or static[i]:
+                    reason[i] = MOTION
+                    continue
+                # consistent in three views: supported by two cameras (how the track follows
+                # kicks and bounces)
+                strong = n_support[i] >= 2
+                # supported by one and near the lines of every other (a kick or bounce spoils
+                # carried points for a frame or two): the track gate, at twice the allowance
+                loose = not strong and available[i] >= 2 and np.all(
+                    ratio[i][np.isfinite(ratio[i])] <= options.loose_ratio)
+                track_cost = 0.0
+                if not strong:
+                    last = track.last()
+                    if last is not None and np.isfinite(points[i, 0]):
+                        dt = abs(t_s[i] - last[0])
+                        if dt <= options.track_window_s and np.linalg.norm(points[i] - last[1]) > (
+                                options.max_speed_m_s * dt + options.track_m):
+                            reason[i] = MOTION
+                            continue
+                    if pred is None:
+                        pred = track.predict(t_s[i]) or False
+                    if pred and np.isfinite(c.ray_dir[i, 0]):
+                        offset = pred[0] - rig.cameras[c.camera[i]].center_world
+                        miss = np.linalg.norm(np.cross(offset, c.ray_dir[i]))
+                        if miss > (2.0 if loose else 1.0) * pred[1]:
+                            reason[i] = TRACK
+                            continue
+                        track_cost = min((miss / pred[1]) ** 2, 4.0)
+                    elif not available[i]:
+                        if self.verified:  # nothing can confirm it: no other camera, no track
+                            reason[i] = EPIPOLAR
+                            continue
+                        unverified.append(i)  # the session's first frames: nothing to judge by
+                key = (-int(n_support[i]), float(epi_cost[i]) + track_cost + stillness[i])
+                if best_key is None or key < best_key:
+                    best_key, best_row = key, i
+            if best_row < 0:
+                continue
+            if best_row in unverified and len(unverified) > 1:
+                # several candidates nothing can tell apart (no other camera near, no track):
+                # keeping one would be a guess
+                for i in unverified:
+                    reason[i] = EPIPOLAR
+                best_row = -1
+                for i in range(lo, hi):
+                    if reason[i] < 0 and i not in unverified:
+                        best_row = i
+                if best_row < 0:
+                    continue
+            for i in range(lo, hi):
+                if i != best_row and reason[i] < 0:
+                    reason[i] = OUTSCORED
+            self.verified |= best_row not in unverified
+            if np.isfinite(points[best_row, 0]):
+                track.add(float(t_s[best_row]), points[best_row])
+
+
+def gate(detections: Detections, rig: Rig, *, causal: bool = True, wait_s: float = 0.0,
+         max_gap_s: float | None = None, options: GatingOptions | None = None) -> Gated:
+    """Choose the ball among every frame's candidates (module docstring).
+
+    Parameters
+    ----------
+    detections : Detections, every candidate (LOGGED times; corrected here by the rig's
+        clock model, each candidate at its own row)
+    rig : Rig, with the detections' cameras (names and order)
+    causal : True: a choice at t uses nothing after t (+ ``wait_s``); False: offline
+    wait_s : float, seconds a causal method waits for simultaneous detections (its
+        tolerance, for ``sync``, ``typeB``, ``linear``; 0 for the others)
+    max_gap_s : float, frames of other cameras further than this from t give no support
+        (default: 3.5 frame periods of the slowest camera)
+    options : GatingOptions
+
+    Returns
+    -------
+    Gated: the observations every method fuses and the record of every rejection.
+    """
+    from ._prepare import default_max_gap_s
+
+    options = options or GatingOptions()
+    max_gap_ns = round((max_gap_s or default_max_gap_s(rig)) * NS)
+    n_cams = len(rig)
+    c = _candidates(detections, rig)
+    n = len(c.camera)
+    reason = np.full(n, -1, dtype=np.int8)
+    if n == 0:
+        return _result(detections, rig, reason)
+    tables = _frame_table(c, n_cams)
+    F = fundamental_matrices(rig.cameras)
+    ratio, carried = _support(c, rig, F, tables, options, max_gap_ns, causal,
+                              round(wait_s * NS))
+    points, in_front, _ = _points(c, rig, ratio, carried)
+    # frames in (time, camera) order of their best candidate; candidates contiguous per frame
+    starts = np.flatnonzero(np.r_[True, c.frame[1:] != c.frame[:-1]])
+    ends = np.r_[starts[1:], n]
+    order = np.lexsort((c.camera[starts], c.time_ns[starts]))
+    _Decider(rig, options).run(c, [(int(starts[f]), int(ends[f])) for f in order.tolist()],
+                               ratio, points, in_front, reason,
+                               _static(c, tables, rig, options, points))
+    return _result(detections, rig, reason)
+
+
+def _result(detections: Detections, rig: Rig, reason: np.ndarray) -> Gated:
+    chosen = reason < 0
+    kept = Detections(detections.camera_names, detections.frame_time_ns,
+                      detections.frame_camera, detections.frame_index,
+                      detections.cand_frame[chosen], detections.cand_uv[chosen],
+                      detections.cand_radius[chosen], detections.cand_score[chosen])
+    rej = ~chosen
+    rows = detections.cand_frame[rej]
+    rejections = Rejections(detections.frame_time_ns[rows], detections.frame_camera[rows],
+                            detections.frame_index[rows], detections.cand_uv[rej],
+                            detections.cand_score[rej], reason[rej])
+    return Gated(timed_observations(kept, rig), rejections, chosen, reason)
+
+
+class StreamGate:
+    """The causal gate of :func:`gate` for a stream: frames pushed as they arrive, each
+    frame's candidates in one push, best first; each frame is decided once nothing still to
+    come can change its choice, and the chosen candidates come out in the pushed (logged)
+    order. The choices equal ``gate(detections, rig, causal=True, wait_s=...)`` on the whole
+    session (the same decision code, in the same order, with the same history).
+
+    Used by :class:`pslog.fusion.stream.StreamFuser` with ``candidates=True``.
+    """
+
+    def __init__(self, rig: Rig, wait_s: float = 0.0, max_gap_s: float | None = None,
+                 options: GatingOptions | None = None) -> None:
+        from ._prepare import default_max_gap_s
+
+        self.rig = rig
+        self.options = options or GatingOptions()
+        self.wait_ns = round(wait_s * NS)
+        self.max_gap_ns = round((max_gap_s or default_max_gap_s(rig)) * NS)
+        self.F = fundamental_matrices(rig.cameras)
+        self.clock = camera_parameters(rig)
+        self.corrected = any(cam.has_clock_correction for cam in rig.cameras)
+        spread = float(np.sum(np.abs(self.clock["clock_offset"])) + np.max(self.clock["readout"]))
+        self.history_ns = round((2 * (max_gap_s or default_max_gap_s(rig)) + wait_s
+                                 + 1.5 * self.options.static_s + 0.2 + 2 * spread) * NS)
+        self.decider = _Decider(rig, self.options)
+        # the window: one entry per frame, in pushed order:
+        # [logged time, camera, frame index, uv (k, 2), reason (k,) or None, released,
+        #  then, once decided, its candidates' 3D points (k, 3)]
+        self.frames: list[list] = []
+        self.last: tuple[int, int] = (np.iinfo(np.int64).min, -1)
+        self.rejected: list[tuple] = []
+
+    def push(self, time_ns, camera, uv, frame_index=None):
+        """Add candidates (rows with equal ``(time, camera)`` are one frame's, best first;
+        LOGGED times, in (time, camera) order, later than any pushed before). Returns the
+        chosen candidates ready to fuse, ``(time_ns, camera, uv, frame_index)`` arrays in
+        logged order."""
+        time_ns = np.atleast_1d(np.asarray(time_ns, dtype=np.int64))
+        camera = np.atleast_1d(np.asarray(camera, dtype=np.int32))
+        uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+        frame_index = (np.zeros(len(time_ns), np.int64) if frame_index is None
+                       else np.atleast_1d(np.asarray(frame_index, dtype=np.int64)))
+        keys = list(zip(time_ns.tolist(), camera.tolist(), strict=True))
+        start = 0
+        for i in range(1, len(keys) + 1):
+            if i == len(keys) or keys[i] != keys[start]:
+                if keys[start] <= self.last:
+                    raise FusionError("candidates must arrive in (time, camera) order of "
+                                      "their logged times, each frame's in one push; got "
+                                      f"t={keys[start][0]} ns after t={self.last[0]} ns")
+                self.last = keys[start]
+                self.frames.append([keys[start][0], keys[start][1], int(frame_index[start]),
+                                    uv[start:i].copy(), None, False])
+                start = i
+        return self._step(final=False)
+
+    def flush(self):
+        """Decide and return every remaining frame (end of stream)."""
+        return self._step(final=True)
+
+    @property
+    def rejections(self) -> Rejections:
+        """Every candidate rejected so far."""
+        return Rejections.from_rows([(t, c, f, u, v, 1.0, REASONS[r])
+                                     for t, c, f, u, v, r in self.rejected])
+
+    def _step(self, final: bool):
+        frames = self.frames
+        if frames:
+            names = self.rig.names
+            counts = np.array([len(f[3]) for f in frames])
+            det = Detections(names, np.array([f[0] for f in frames], np.int64),
+                             np.array([f[1] for f in frames], np.int32),
+                             np.array([f[2] for f in frames], np.int64),
+                             np.repeat(np.arange(len(frames)), counts),
+                             np.concatenate([f[3] for f in frames]),
+                             np.full(int(counts.sum()), np.nan), np.ones(int(counts.sum())))
+            c = _candidates(det, self.rig)
+            first = np.r_[0, np.cumsum(counts)[:-1]]
+            key = c.time_ns[first]
+            todo = np.array([f[4] is None for f in frames])
+            if not final:
+                if self.corrected:
+                    p = self.clock
+                    bound = int(np.min(true_times_ns(
+                        np.full(len(self.rig), self.last[0]), 0.0, p["height"],
+                        p["clock_offset"], p["clock_drift_ppm"], p["readout"])))
+                    todo &= key + self.wait_ns < bound
+                elif self.wait_ns:
+                    todo &= key + self.wait_ns < self.last[0]
+            if todo.any():
+                rows = np.flatnonzero(todo)
+                rows = rows[np.lexsort((det.frame_camera[rows], key[rows]))]
+                only = todo[c.frame]
+                tables = _frame_table(c, len(self.rig))
+                ratio, carried = _support(c, self.rig, self.F, tables, self.options,
+                                          self.max_gap_ns, True, self.wait_ns, only)
+                points, in_front, _ = _points(c, self.rig, ratio, carried)
+                # the decided frames' points, as computed when they were decided (a point
+                # uses nothing after its time: the same as now), for the stillness test
+                for f in np.flatnonzero(~todo).tolist():
+                    if len(frames[f]) > 6:  # decided; the others are later than any to do
+                        points[first[f]:first[f] + counts[f]] = frames[f][6]
+                for f in rows.tolist():
+                    frames[f].append(points[first[f]:first[f] + counts[f]].copy())
+                reason = np.full(len(c.frame), -1, dtype=np.int8)
+                self.decider.run(c, [(int(first[f]), int(first[f] + counts[f])) for f in rows],
+                                 ratio, points, in_front, reason,
+                                 _static(c, tables, self.rig, self.options, points))
+                for f in rows.tolist():
+                    frames[f][4] = reason[first[f]:first[f] + counts[f]]
+        out = []
+        for f in frames:  # release decided frames in pushed order
+            if f[4] is None:
+                break
+            if not f[5]:
+                f[5] = True
+                for k, r in enumerate(f[4].tolist()):
+                    if r < 0:
+                        out.append((f[0], f[1], f[3][k], f[2]))
+                    else:
+                        self.rejected.append((f[0], f[1], f[2], *f[3][k], r))
+        # keep the history a later choice can reach
+        while frames and frames[0][5] and frames[0][0] < self.last[0] - self.history_ns:
+            frames.pop(0)
+        if not out:
+            return (np.zeros(0, np.int64), np.zeros(0, np.int32), np.zeros((0, 2)),
+                    np.zeros(0, np.int64))
+        t, cam, uv, idx = zip(*out, strict=True)
+        return (np.array(t, np.int64), np.array(cam, np.int32), np.array(uv),
+                np.array(idx, np.int64))
+
+
+def gating_key(method: str, options) -> tuple[bool, float]:
+    """(causal, wait_s) of the gate ``method`` needs (``options``: FusionOptions): the
+    causal form for a causal method, waiting for the tolerance as the method does."""
+    from . import METHODS
+
+    m = METHODS[method]
+    return m.causal, (options.tolerance_s if m.causal and m.waits_tolerance else 0.0)
+
+
+def gate_for(detections: Detections, rig: Rig, method: str, options) -> Gated:
+    """:func:`gate` in the form ``method`` needs (``options``: FusionOptions with
+    ``max_gap_s`` set or None)."""
+    causal, wait_s = gating_key(method, options)
+    return gate(detections, rig, causal=causal, wait_s=wait_s, max_gap_s=options.max_gap_s)
+
+
+def fuse_detections(detections: Detections, rig: Rig, methods, options=None):
+    """Fuse every method of ``methods`` from all the candidates of ``detections``, gated
+    (:func:`gate`, in each method's form; once per form), or, with
+    ``options.gating`` False, from each frame's best-scored candidate.
+
+    Returns
+    -------
+    tracks : method -> Track
+    rejections : method -> Rejections (empty ones without gating)
+    """
+    from . import FusionOptions, check_method, fuse, prepare
+
+    options = options or FusionOptions()
+    for method in methods:
+        check_method(method)
+    if not options.gating:
+        obs = timed_observations(detections, rig)
+        prep = prepare(obs, rig) if len(rig) >= 2 else None
+        return ({m: fuse(obs, rig, m, options, prepared=prep) for m in methods},
+                {m: Rejections.empty() for m in methods})
+    shared: dict[tuple[bool, float], tuple[Gated, object]] = {}
+    tracks, rejections = {}, {}
+    for method in methods:
+        key = gating_key(method, options)
+        if key not in shared:
+            gated = gate_for(detections, rig, method, options)
+            shared[key] = gated, (prepare(gated.observations, rig) if len(rig) >= 2 else None)
+        gated, prep = shared[key]
+        tracks[method] = fuse(gated.observations, rig, method, options, prepared=prep)
+        rejections[method] = gated.rejections
+    return tracks, rejections
+
+
+__all__ = [
+    "REASONS",
+    "REASON_TEXT",
+    "Gated",
+    "GatingOptions",
+    "Rejections",
+    "StreamGate",
+    "epipolar_distance",
+    "fuse_detections",
+    "gate",
+    "gate_for",
+    "gating_key",
+]
