@@ -34,12 +34,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import sparse
 
 from ..errors import FusionError
 from ..records import NS, Observations
 from ..rig import Rig
 from ..timing import camera_parameters, clock_jacobian, true_times_s
 from . import _normal
+from .bspline import DEGREE, basis
 from .trajectory import (
     _CAUCHY,
     MotionPrior,
@@ -48,8 +50,6 @@ from .trajectory import (
     _initial_control,
     _knots_with_breaks,
     _Problem,
-    _refine_breaks,
-    _refit_control,
     _Solver,
     fit_trajectory,
     split_pieces,
@@ -151,7 +151,9 @@ def estimate_clocks(obs: Observations, rig: Rig, estimate=("offset",),
                 continue
         previous_step = step
     cam = obs.camera[problem.rows]
-    cov = np.linalg.inv(S) if len(unknowns) else np.zeros((0, 0))
+    q = len(unknowns)
+    # the clocks' covariance with the trajectory and the breaks' instants marginalised
+    cov = np.linalg.inv(S)[:q, :q] if q else np.zeros((0, 0))
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
 
     norms = np.linalg.norm(r, axis=1)
@@ -180,7 +182,11 @@ def estimate_clocks(obs: Observations, rig: Rig, estimate=("offset",),
 
 def _solve_joint(obs, rig, unknowns, theta, params, options):
     """The trajectory's pieces, knots and breaks at clocks ``theta``, then the joint robust
-    Gauss–Newton solve of control points and clocks."""
+    Gauss–Newton solve of control points, clocks and the breaks' instants.
+
+    Returns problem, control, theta, σ, residuals, weights and the information ``S`` of
+    (clocks, breaks) with the control points eliminated (Schur complement): the clocks'
+    covariance is the clocks' block of ``S⁻¹``, so the breaks' uncertainty is in it."""
     logged_s = obs.time_ns / NS
     times = _times(obs, unknowns, theta, params)
     t0 = float(times.min())
@@ -207,6 +213,7 @@ def _solve_joint(obs, rig, unknowns, theta, params, options):
     control = _initial_control(problem, fit.trajectory.noise_px)
     solver = _Solver(problem, options)
     control, sigma, r, w, J = solver.run(control, fit.trajectory.noise_px, 3)
+    moves = _BreakMoves(problem, spacing)
 
     rows = problem.rows
     cam = obs.camera[rows]
@@ -216,24 +223,76 @@ def _solve_joint(obs, rig, unknowns, theta, params, options):
         dt_dtheta[:, j] = np.where(cam == c, jac[:, PARAMETERS.index(p)], 0.0)
     for _ in range(_ITERATIONS):
         control, theta, sigma, r, w, J, S, moved = _joint_step(
-            problem, solver, obs, unknowns, theta, params, control, sigma, dt_dtheta, t0)
-        if any(len(b) for b in breaks):
-            # the bounces' instants follow the clocks (they are on the session clock, which
-            # the clocks map the detections onto)
-            breaks = _refine_breaks(problem, control, sigma, r, w, J, spacing, breaks,
-                                    options)
-            X_old = problem.positions(control)
-            problem.set_knots([_knots_with_breaks(a, b, spacing, br) for (a, b), br in
-                               zip(spans, breaks, strict=True)], options.prior)
-            control = _refit_control(problem, X_old)
-            control, sigma, r, w, J = solver.run(control, sigma, 1)
+            problem, solver, obs, unknowns, theta, params, control, sigma, dt_dtheta, t0,
+            moves)
         if moved < 1e-7:
             break
     # σ corrected for the degrees of freedom the fit absorbs; the covariance there
     _, dof = _information(problem, control, sigma, r, J)
     control, theta, sigma, r, w, J, S, _ = _joint_step(
-        problem, solver, obs, unknowns, theta, params, control, sigma, dt_dtheta, t0, dof)
+        problem, solver, obs, unknowns, theta, params, control, sigma, dt_dtheta, t0, moves,
+        dof)
     return problem, control, theta, sigma, r, w, S
+
+
+class _BreakMoves:
+    """The breaks (triple knots) of a problem's pieces as unknown instants: where each sits
+    in its piece's knot vector, how far it may move (not past a neighbouring knot), and the
+    reprojection Jacobian of each instant at fixed control points (by central differences of
+    the basis: the curve moves only within three knot spans of the break)."""
+
+    def __init__(self, problem: _Problem, spacing: float):
+        self.problem, self.spacing = problem, spacing
+        self.items = []  # (piece, index of the first of its three knots)
+        for p, k in enumerate(problem.knots):
+            inner = np.unique(k)[1:-1]
+            for x in inner:
+                idx = np.flatnonzero(k == x)
+                if len(idx) >= 3:
+                    self.items.append((p, int(idx[0])))
+        # each piece's rows, in the problem's row order (problem.rows is their concatenation)
+        sizes = [len(r) for r in problem.rows_of_piece]
+        self.row0 = np.r_[0, np.cumsum(sizes)].astype(np.int64)
+
+    def __len__(self) -> int:
+        return len(self.items)
+
+    def values(self) -> np.ndarray:
+        return np.array([self.problem.knots[p][i] for p, i in self.items])
+
+    def moved_knots(self, taus: np.ndarray) -> list[np.ndarray]:
+        """The pieces' knot vectors with the breaks at ``taus``, each kept a tenth of a knot
+        spacing inside its neighbouring knots."""
+        knots = [k.copy() for k in self.problem.knots]
+        for (p, i), tau in zip(self.items, taus, strict=True):
+            k = knots[p]
+            lo, hi = k[i - 1] + 0.1 * self.spacing, k[i + 3] - 0.1 * self.spacing
+            k[i:i + 3] = min(max(tau, lo), hi) if lo < hi else k[i]
+        return knots
+
+    def columns(self, control: np.ndarray, J: np.ndarray):
+        """Per break: the rows (indices into ``problem.rows``) its instant moves and
+        ``∂r/∂τ`` there (n_rows, 2)."""
+        problem = self.problem
+        out = []
+        h = 1e-6
+        for p, i in self.items:
+            k = problem.knots[p]
+            lo, hi = k[max(i - 4, 0)], k[min(i + 6, len(k) - 1)]
+            local = np.arange(self.row0[p], self.row0[p + 1])
+            t = problem.t[problem.rows[local]]
+            local = local[(t >= lo) & (t <= hi)]
+            t = problem.t[problem.rows[local]]
+            X = []
+            for sign in (1.0, -1.0):
+                kk = k.copy()
+                kk[i:i + 3] += sign * h
+                first, N = basis(kk, t, 0)
+                index = first[:, None] + np.arange(DEGREE + 1) + problem.offset[p]
+                X.append(np.einsum("na,nad->nd", N[:, 0], control[index]))
+            dX = (X[0] - X[1]) / (2 * h)
+            out.append((local, np.einsum("naj,nj->na", J[local], dX)))
+        return out
 
 
 def _windows(obs: Observations) -> Observations:
@@ -279,10 +338,12 @@ def _observations_at(obs: Observations, times_s: np.ndarray, order: np.ndarray
 
 
 def _joint_step(problem, solver, obs, unknowns, theta, params, control, sigma, dt_dtheta, t0,
-                dof: float = 1.0):
-    """One robust Gauss–Newton step on (control points, clocks) by the Schur complement; σ
-    is ``dof`` · 1.4826 · median |residual| at the step's start."""
-    q = len(unknowns)
+                moves, dof: float = 1.0):
+    """One robust Gauss–Newton step on (control points, clocks, break instants) by the Schur
+    complement of the banded control-point block; σ is ``dof`` · 1.4826 · median |residual|
+    at the step's start. Returns the information ``S`` of (clocks, breaks)."""
+    q, nb = len(unknowns), len(moves)
+    Q = q + nb
     times = _times(obs, unknowns, theta, params) - t0
     problem.set_times(times)
     X = problem.positions(control)
@@ -292,37 +353,71 @@ def _joint_step(problem, solver, obs, unknowns, theta, params, control, sigma, d
     s = np.sum(r * r, axis=1) / sigma**2
     w = 1 / (1 + s / _CAUCHY**2)
     n = 3 * problem.m
+    n_obs = len(r)
     start, E, _ = problem.data_rows(J, np.zeros_like(r))
     ww = np.repeat(w, 2) / sigma**2
     ab, rhs_c = _normal.accumulate(start, E, -r.reshape(-1), ww, n, problem.prior_ab.copy(),
                                    np.zeros(n))
     rhs_c -= _banded_matvec(problem.prior_ab, control.reshape(-1)) - problem.prior_rhs
-    # clock columns: ∂r/∂θ = J · p'(t) · ∂t/∂θ
+    # bordered columns, sparse: clocks ∂r/∂θ = J · p'(t) · ∂t/∂θ (a camera's rows), breaks
+    # ∂r/∂τ (the rows within three knot spans)
     JV = np.einsum("naj,nj->na", J, V)  # (n_obs, 2)
-    G = (JV[:, :, None] * dt_dtheta[:, None, :]).reshape(-1, q)  # (2 n_obs, q)
-    cols = (start[:, None] + np.arange(12)).ravel()
-    B = np.stack([np.bincount(cols, (ww[:, None] * E * G[:, j:j + 1]).ravel(), minlength=n)
-                  for j in range(q)], axis=1) if q else np.zeros((n, 0))
-    C = (G * ww[:, None]).T @ G
-    rhs_t = -(G * ww[:, None]).T @ r.reshape(-1)
+    g_rows, g_cols, g_vals = [], [], []
+    for j in range(q):
+        mine = np.flatnonzero(dt_dtheta[:, j])
+        g_rows.append(mine)
+        g_cols.append(np.full(len(mine), j))
+        g_vals.append(JV[mine] * dt_dtheta[mine, j:j + 1])
+    taus = moves.values()
+    for b, (local, dr) in enumerate(moves.columns(control, J)):
+        g_rows.append(local)
+        g_cols.append(np.full(len(local), q + b))
+        g_vals.append(dr)
+    rows_ = np.concatenate(g_rows) if g_rows else np.zeros(0, np.int64)
+    cols_ = np.concatenate(g_cols) if g_cols else np.zeros(0, np.int64)
+    vals_ = np.concatenate(g_vals) if g_vals else np.zeros((0, 2))
+    G = sparse.csr_matrix((vals_.reshape(-1), (np.c_[2 * rows_, 2 * rows_ + 1].reshape(-1),
+                                               np.repeat(cols_, 2))), shape=(2 * n_obs, Q))
+    D = sparse.csr_matrix((E.reshape(-1), ((np.arange(2 * n_obs)[:, None]
+                                            + np.zeros(12, np.int64)).reshape(-1),
+                                           (start[:, None] + np.arange(12)).reshape(-1))),
+                          shape=(2 * n_obs, n))
+    WG = G.multiply(ww[:, None]).tocsr()
+    B = (D.T @ WG).toarray()
+    C = (G.T @ WG).toarray()
+    rhs_t = -(WG.T @ r.reshape(-1))
     U = _normal.factor(ab)
-    Y = _normal.solve(U, B) if q else np.zeros((n, 0))
+    Y = _normal.solve(U, B) if Q else np.zeros((n, 0))
     S = C - B.T @ Y
     z = _normal.solve(U, rhs_c)
-    d_theta = np.linalg.solve(S, rhs_t - B.T @ z) if q else np.zeros(0)
-    d_c = z - Y @ d_theta
+    if Q:
+        # a break no detection pins (its neighbourhood seen by one camera) has no information:
+        # a tiny load keeps the solve defined without moving it
+        S_solve = S + np.diag(np.r_[np.zeros(q), np.full(nb, 1e-9 * max(np.max(np.abs(
+            np.diag(S))), 1.0))])
+        d_all = np.linalg.solve(S_solve, rhs_t - B.T @ z)
+    else:
+        d_all = np.zeros(0)
+    d_theta, d_tau = d_all[:q], d_all[q:]
+    d_c = z - Y @ d_all
     before = solver.cost(control, r, sigma)
+    knots0 = problem.knots
     step = 1.0
     for _ in range(6):  # step halving keeps the robust cost from rising
         trial_c = control + step * d_c.reshape(-1, 3)
         trial_t = theta + step * d_theta
+        if nb:
+            problem.set_knots(moves.moved_knots(taus + step * d_tau), problem.prior)
         problem.set_times(_times(obs, unknowns, trial_t, params) - t0)
         r_trial, J_trial = problem.project(problem.positions(trial_c))
         if solver.cost(trial_c, r_trial, sigma) <= before:
             break
+        if nb:
+            problem.set_knots(knots0, problem.prior)
         step /= 2
     moved = max(float(np.max(np.abs(step * d_c), initial=0.0)),
-                float(np.max(np.abs(step * d_theta) * _scale_of(unknowns), initial=0.0)))
+                float(np.max(np.abs(step * d_theta) * _scale_of(unknowns), initial=0.0)),
+                float(np.max(np.abs(step * d_tau), initial=0.0)))
     s = np.sum(r_trial * r_trial, axis=1) / sigma**2
     return (trial_c, trial_t, sigma, r_trial, 1 / (1 + s / _CAUCHY**2), J_trial, S, moved)
 
