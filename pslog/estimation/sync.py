@@ -39,7 +39,7 @@ from scipy import sparse
 from ..errors import FusionError
 from ..records import NS, Observations
 from ..rig import Rig
-from ..timing import camera_parameters, clock_jacobian, true_times_s
+from ..timing import camera_parameters
 from . import _normal
 from .bspline import DEGREE, basis
 from .trajectory import (
@@ -121,11 +121,13 @@ def estimate_clocks(obs: Observations, rig: Rig, estimate=("offset",),
                           f"rig has {len(rig)}")
     unknowns = [(c, p) for c in range(len(rig)) for p in estimate
                 if not (c == 0 and p in ("offset", "drift"))]
-    theta = np.array([float(getattr(rig.cameras[c], _KEY[p])) for c, p in unknowns])
-    params = camera_parameters(rig)
     _check_coverage(obs, rig, options.max_gap_s)
 
     obs = _windows(obs)
+    logged = obs.time_ns / NS
+    params = _Clocks(rig, unknowns, 0.5 * float(logged.min() + logged.max()))
+    theta = params.to_internal(np.array([float(getattr(rig.cameras[c], _KEY[p]))
+                                         for c, p in unknowns]))
     if "offset" in estimate:
         theta = _scan_offsets(obs, rig, unknowns, theta, params, search_s, options)
 
@@ -152,8 +154,11 @@ def estimate_clocks(obs: Observations, rig: Rig, estimate=("offset",),
         previous_step = step
     cam = obs.camera[problem.rows]
     q = len(unknowns)
-    # the clocks' covariance with the trajectory and the breaks' instants marginalised
-    cov = np.linalg.inv(S)[:q, :q] if q else np.zeros((0, 0))
+    # the clocks' covariance with the trajectory and the breaks' instants marginalised, in
+    # the rig's parametrisation
+    T = params.to_external_matrix()
+    cov = T @ np.linalg.inv(S)[:q, :q] @ T.T if q else np.zeros((0, 0))
+    theta = params.to_external(theta)
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
 
     norms = np.linalg.norm(r, axis=1)
@@ -188,7 +193,7 @@ def _solve_joint(obs, rig, unknowns, theta, params, options):
     (clocks, breaks) with the control points eliminated (Schur complement): the clocks'
     covariance is the clocks' block of ``S⁻¹``, so the breaks' uncertainty is in it."""
     logged_s = obs.time_ns / NS
-    times = _times(obs, unknowns, theta, params)
+    times = params.times(obs, theta)
     t0 = float(times.min())
     order = np.argsort(times, kind="stable")
     ordered = _observations_at(obs, times, order)
@@ -218,7 +223,7 @@ def _solve_joint(obs, rig, unknowns, theta, params, options):
     rows = problem.rows
     cam = obs.camera[rows]
     dt_dtheta = np.zeros((len(rows), len(unknowns)))
-    jac = clock_jacobian(logged_s[rows], obs.uv[rows, 1], params["height"][cam])
+    jac = params.jacobian(logged_s[rows], obs.uv[rows, 1], cam)
     for j, (c, p) in enumerate(unknowns):
         dt_dtheta[:, j] = np.where(cam == c, jac[:, PARAMETERS.index(p)], 0.0)
     for _ in range(_ITERATIONS):
@@ -295,6 +300,73 @@ class _BreakMoves:
         return out
 
 
+class _Clocks:
+    """The clock parameters as the estimator sees them: each camera's time
+
+        τ = ℓ + o'_c + d_c · 1e-6 · (ℓ - ℓ_m) + r_c · (v / height_c - 1/2)
+
+    i.e. the readout referred to the image's centre row and the drift to the middle ``ℓ_m``
+    of the logged times, on a clock ``r_1 / 2`` behind the session clock (a common shift of
+    every time is absorbed by the trajectory, so this is the same model). With the rig's
+    parametrisation (:mod:`pslog.timing`) a readout moves a camera's mean time by half of
+    itself and a drift its mean time by ``d · ℓ_m``: offsets, readouts and drifts are then
+    strongly correlated and Gauss–Newton crawls along their valley; here they are nearly
+    independent. ``o'_c = o_c + d_c · 1e-6 · ℓ_m + (r_c - r_1) / 2`` (camera 1's ``o'`` is 0)."""
+
+    def __init__(self, rig: Rig, unknowns, l_mid: float):
+        p = camera_parameters(rig)
+        self.height = p["height"]
+        self.unknowns, self.l_mid = list(unknowns), l_mid
+        self.base = self._internal(np.stack([p["clock_offset"], p["clock_drift_ppm"],
+                                             p["readout"]], axis=1))
+        self.index = [(c, PARAMETERS.index(name)) for c, name in self.unknowns]
+
+    def _internal(self, ext: np.ndarray) -> np.ndarray:
+        o, d, r = ext.T
+        return np.stack([o + d * 1e-6 * self.l_mid + (r - r[0]) / 2, d, r], axis=1)
+
+    def _external(self, inn: np.ndarray) -> np.ndarray:
+        o, d, r = inn.T
+        return np.stack([o - d * 1e-6 * self.l_mid - (r - r[0]) / 2, d, r], axis=1)
+
+    def _full(self, theta: np.ndarray) -> np.ndarray:
+        inn = self.base.copy()
+        for (c, k), value in zip(self.index, theta, strict=True):
+            inn[c, k] = value
+        return inn
+
+    def to_internal(self, theta_ext: np.ndarray) -> np.ndarray:
+        ext = self._external(self.base)
+        for (c, k), value in zip(self.index, theta_ext, strict=True):
+            ext[c, k] = value
+        inn = self._internal(ext)
+        return np.array([inn[c, k] for c, k in self.index])
+
+    def to_external(self, theta: np.ndarray) -> np.ndarray:
+        ext = self._external(self._full(theta))
+        return np.array([ext[c, k] for c, k in self.index])
+
+    def to_external_matrix(self) -> np.ndarray:
+        """``∂θ_rig / ∂θ`` (the map is affine)."""
+        q = len(self.index)
+        zero = self.to_external(np.zeros(q))
+        return np.stack([self.to_external(np.eye(q)[j]) - zero for j in range(q)], axis=1) \
+            if q else np.zeros((0, 0))
+
+    def times(self, obs: Observations, theta: np.ndarray) -> np.ndarray:
+        """Capture times τ (s) of every observation on the estimator's clock."""
+        inn = self._full(theta)
+        cam = obs.camera
+        logged = obs.time_ns / NS
+        return (logged + inn[cam, 0] + inn[cam, 1] * 1e-6 * (logged - self.l_mid)
+                + inn[cam, 2] * (obs.uv[:, 1] / self.height[cam] - 0.5))
+
+    def jacobian(self, logged_s: np.ndarray, v: np.ndarray, cam: np.ndarray) -> np.ndarray:
+        """``∂τ/∂(o', d, r)`` (n, 3)."""
+        return np.stack([np.ones_like(logged_s), 1e-6 * (logged_s - self.l_mid),
+                         v / self.height[cam] - 0.5], axis=1)
+
+
 def _windows(obs: Observations) -> Observations:
     """A long session's detections in ``_N_WINDOWS`` windows of ``_WINDOW_S`` spread evenly
     over it (all of a shorter one): the clocks are global, so these determine them (the
@@ -308,16 +380,6 @@ def _windows(obs: Observations) -> Observations:
     for a in starts:
         keep |= (t >= a) & (t < a + _WINDOW_S)
     return obs.select(keep)
-
-
-def _times(obs: Observations, unknowns, theta, params) -> np.ndarray:
-    """True capture times (s, session clock) of every observation by the timing model."""
-    p = {k: v.copy() for k, v in params.items()}
-    for (c, name), value in zip(unknowns, theta, strict=True):
-        p[_KEY[name]][c] = value
-    cam = obs.camera
-    return true_times_s(obs.time_ns / NS, obs.uv[:, 1], p["height"][cam],
-                        p["clock_offset"][cam], p["clock_drift_ppm"][cam], p["readout"][cam])
 
 
 def _observations_at(obs: Observations, times_s: np.ndarray, order: np.ndarray
@@ -344,7 +406,7 @@ def _joint_step(problem, solver, obs, unknowns, theta, params, control, sigma, d
     at the step's start. Returns the information ``S`` of (clocks, breaks)."""
     q, nb = len(unknowns), len(moves)
     Q = q + nb
-    times = _times(obs, unknowns, theta, params) - t0
+    times = params.times(obs, theta) - t0
     problem.set_times(times)
     X = problem.positions(control)
     V = problem.velocities(control)
@@ -408,7 +470,7 @@ def _joint_step(problem, solver, obs, unknowns, theta, params, control, sigma, d
         trial_t = theta + step * d_theta
         if nb:
             problem.set_knots(moves.moved_knots(taus + step * d_tau), problem.prior)
-        problem.set_times(_times(obs, unknowns, trial_t, params) - t0)
+        problem.set_times(params.times(obs, trial_t) - t0)
         r_trial, J_trial = problem.project(problem.positions(trial_c))
         if solver.cost(trial_c, r_trial, sigma) <= before:
             break
@@ -470,7 +532,7 @@ def _pair_cost(sub, rig, c, unknowns, theta, j, value, params, options) -> float
     """Robust cost of a quick two-camera trajectory with camera ``c``'s offset at ``value``."""
     trial = theta.copy()
     trial[j] = value
-    times = _times(sub, unknowns, trial, params)
+    times = params.times(sub, trial)
     order = np.argsort(times, kind="stable")
     ordered = _observations_at(sub, times, order)
     pieces = split_pieces(ordered, np.ones(len(ordered), bool), options.max_gap_s)
