@@ -165,7 +165,7 @@ def _regularize_auto(detections):
         _, rep = regularize_times(detections.frame_time_ns[rows], detections.frame_index[rows])
         if rep.jitter_s > REGULARIZE_AUTO_JITTER_S:
             wanted.append(name)
-    return regularize_detections(detections, wanted)[0] if wanted else detections
+    return regularize_detections(detections, wanted) if wanted else (detections, {})
 
 
 def _accuracy(detections, rig, truth):
@@ -202,8 +202,8 @@ def run_case(case: Case, seed: int) -> Run:
     errors["nominal"] = _accuracy(detections, nominal, truth)
     t = time.perf_counter()
     try:
-        regular = _regularize_auto(detections)
-        result = estimate_clocks(regular.best(), nominal, case.estimate)
+        regular, reports = _regularize_auto(detections)
+        result = estimate_clocks(regular.best(), nominal, case.estimate, regularized=reports)
     except PslogError as exc:
         return Run(case, seed, errors, [], time.perf_counter() - t, smooth_rate,
                    failure=str(exc))

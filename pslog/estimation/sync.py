@@ -105,10 +105,15 @@ class SyncResult:
 
 
 def estimate_clocks(obs: Observations, rig: Rig, estimate=("offset",),
-                    search_s: float | None = None, options: SmoothOptions | None = None
-                    ) -> SyncResult:
+                    search_s: float | None = None, options: SmoothOptions | None = None,
+                    regularized=None) -> SyncResult:
     """Estimate the clock parameters named in ``estimate`` from detections at their logged
     times (``obs``: best candidate per frame, logged times, sorted by (time, camera)).
+
+    ``regularized``: camera name -> :class:`pslog.timing.Regularization` of the cameras
+    whose stamps ``obs`` holds regularized; each line's uncertainty (its start and period)
+    moves that camera's times together, so it is added to the standard deviations (camera
+    1's line moves the session clock, hence every other camera's offset and drift).
 
     Raises
     ------
@@ -137,8 +142,8 @@ def estimate_clocks(obs: Observations, rig: Rig, estimate=("offset",),
     previous_step = None
     for _ in range(_ROUNDS):
         before = theta
-        problem, control, theta, sigma, r, w, S = _solve_joint(
-            obs, rig, unknowns, theta, params, options)
+        problem, control, theta, sigma, r, w, S, n_t = _solve_joint(
+            obs, rig, unknowns, theta, params, options, regularized)
         step = (theta - before) * scale
         if np.max(np.abs(step), initial=0.0) < 2e-6:
             break  # the clocks no longer move the breaks: converged
@@ -157,7 +162,15 @@ def estimate_clocks(obs: Observations, rig: Rig, estimate=("offset",),
     # the clocks' covariance with the trajectory and the breaks' instants marginalised, in
     # the rig's parametrisation
     T = params.to_external_matrix()
-    cov = T @ np.linalg.inv(S)[:q, :q] @ T.T if q else np.zeros((0, 0))
+    if q:
+        cov_t = np.linalg.inv(S[:n_t, :n_t])
+        cov = cov_t
+        if len(S) > n_t:  # the regularized lines' errors, which the estimate does not see
+            K = cov_t @ S[:n_t, n_t:]
+            cov = cov_t + K @ _nuisance_covariance(rig, regularized) @ K.T
+        cov = T @ cov[:q, :q] @ T.T
+    else:
+        cov = np.zeros((0, 0))
     theta = params.to_external(theta)
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
 
@@ -185,7 +198,7 @@ def estimate_clocks(obs: Observations, rig: Rig, estimate=("offset",),
                       float(np.sqrt(np.mean(norms[inlier] ** 2))), float(sigma))
 
 
-def _solve_joint(obs, rig, unknowns, theta, params, options):
+def _solve_joint(obs, rig, unknowns, theta, params, options, regularized=None):
     """The trajectory's pieces, knots and breaks at clocks ``theta``, then the joint robust
     Gauss–Newton solve of control points, clocks and the breaks' instants.
 
@@ -232,12 +245,34 @@ def _solve_joint(obs, rig, unknowns, theta, params, options):
             moves)
         if moved < 1e-7:
             break
+    # each regularized camera's line error, δstart + δperiod · (k - k0), as two more columns
+    # (not estimated: they only widen the covariance)
+    extra = np.zeros((len(rows), 0))
+    for c, camera in enumerate(rig.cameras):
+        rep = (regularized or {}).get(camera.name)
+        if rep is not None:
+            k = (obs.frame_index[rows] - rep.first_index).astype(np.float64)
+            extra = np.c_[extra, (cam == c) * 1.0, np.where(cam == c, k, 0.0)]
     # σ corrected for the degrees of freedom the fit absorbs; the covariance there
     _, dof = _information(problem, control, sigma, r, J)
     control, theta, sigma, r, w, J, S, _ = _joint_step(
-        problem, solver, obs, unknowns, theta, params, control, sigma, dt_dtheta, t0, moves,
-        dof)
-    return problem, control, theta, sigma, r, w, S
+        problem, solver, obs, unknowns, theta, params, control, sigma,
+        np.c_[dt_dtheta, extra], t0, moves, dof, n_extra=extra.shape[1])
+    return problem, control, theta, sigma, r, w, S, len(unknowns) + len(moves)
+
+
+def _nuisance_covariance(rig, regularized) -> np.ndarray:
+    """Block-diagonal covariance of the regularized lines' (start, period), rig order."""
+    blocks = []
+    for camera in rig.cameras:
+        rep = (regularized or {}).get(camera.name)
+        if rep is not None:
+            a, b, c = (x if np.isfinite(x) else 0.0 for x in rep.covariance)
+            blocks.append(np.array([[a, b], [b, c]]))
+    out = np.zeros((2 * len(blocks), 2 * len(blocks)))
+    for i, block in enumerate(blocks):
+        out[2 * i:2 * i + 2, 2 * i:2 * i + 2] = block
+    return out
 
 
 class _BreakMoves:
@@ -400,12 +435,14 @@ def _observations_at(obs: Observations, times_s: np.ndarray, order: np.ndarray
 
 
 def _joint_step(problem, solver, obs, unknowns, theta, params, control, sigma, dt_dtheta, t0,
-                moves, dof: float = 1.0):
+                moves, dof: float = 1.0, n_extra: int = 0):
     """One robust Gauss–Newton step on (control points, clocks, break instants) by the Schur
     complement of the banded control-point block; σ is ``dof`` · 1.4826 · median |residual|
-    at the step's start. Returns the information ``S`` of (clocks, breaks)."""
+    at the step's start. Returns the information ``S`` of (clocks, breaks, extra), the
+    ``n_extra`` last columns of ``dt_dtheta`` being extra time perturbations that are not
+    estimated (their information with the others widens the covariance)."""
     q, nb = len(unknowns), len(moves)
-    Q = q + nb
+    Q = q + nb + n_extra
     times = params.times(obs, theta) - t0
     problem.set_times(times)
     X = problem.positions(control)
@@ -425,10 +462,10 @@ def _joint_step(problem, solver, obs, unknowns, theta, params, control, sigma, d
     # ∂r/∂τ (the rows within three knot spans)
     JV = np.einsum("naj,nj->na", J, V)  # (n_obs, 2)
     g_rows, g_cols, g_vals = [], [], []
-    for j in range(q):
+    for j in range(q + n_extra):
         mine = np.flatnonzero(dt_dtheta[:, j])
         g_rows.append(mine)
-        g_cols.append(np.full(len(mine), j))
+        g_cols.append(np.full(len(mine), j if j < q else j + nb))
         g_vals.append(JV[mine] * dt_dtheta[mine, j:j + 1])
     taus = moves.values()
     for b, (local, dr) in enumerate(moves.columns(control, J)):
@@ -452,16 +489,17 @@ def _joint_step(problem, solver, obs, unknowns, theta, params, control, sigma, d
     Y = _normal.solve(U, B) if Q else np.zeros((n, 0))
     S = C - B.T @ Y
     z = _normal.solve(U, rhs_c)
-    if Q:
+    Qs = q + nb  # the estimated ones
+    if Qs:
         # a break no detection pins (its neighbourhood seen by one camera) has no information:
         # a tiny load keeps the solve defined without moving it
-        S_solve = S + np.diag(np.r_[np.zeros(q), np.full(nb, 1e-9 * max(np.max(np.abs(
-            np.diag(S))), 1.0))])
-        d_all = np.linalg.solve(S_solve, rhs_t - B.T @ z)
+        S_solve = S[:Qs, :Qs] + np.diag(np.r_[np.zeros(q), np.full(nb, 1e-9 * max(np.max(
+            np.abs(np.diag(S))), 1.0))])
+        d_all = np.linalg.solve(S_solve, rhs_t[:Qs] - B[:, :Qs].T @ z)
     else:
         d_all = np.zeros(0)
     d_theta, d_tau = d_all[:q], d_all[q:]
-    d_c = z - Y @ d_all
+    d_c = z - Y[:, :Qs] @ d_all
     before = solver.cost(control, r, sigma)
     knots0 = problem.knots
     step = 1.0
