@@ -50,6 +50,8 @@ from .trajectory import (
     _initial_control,
     _knots_with_breaks,
     _Problem,
+    _refine_breaks,
+    _refit_control,
     _Solver,
     fit_trajectory,
     split_pieces,
@@ -65,6 +67,7 @@ _SCAN_WINDOW_S = 12.0
 _N_WINDOWS = 6
 _WINDOW_S = 15.0
 _ITERATIONS = 10
+_DEBUG = False
 _ROUNDS = 8
 
 
@@ -231,8 +234,6 @@ def _solve_joint(obs, rig, unknowns, theta, params, options, regularized=None):
     control = _initial_control(problem, fit.trajectory.noise_px)
     solver = _Solver(problem, options)
     control, sigma, r, w, J = solver.run(control, fit.trajectory.noise_px, 3)
-    moves = _BreakMoves(problem, spacing)
-
     rows = problem.rows
     cam = obs.camera[rows]
     dt_dtheta = np.zeros((len(rows), len(unknowns)))
@@ -242,9 +243,20 @@ def _solve_joint(obs, rig, unknowns, theta, params, options, regularized=None):
     for _ in range(_ITERATIONS):
         control, theta, sigma, r, w, J, S, moved = _joint_step(
             problem, solver, obs, unknowns, theta, params, control, sigma, dt_dtheta, t0,
-            moves)
+            _BreakMoves(problem, spacing, ()))
+        if any(len(b) for b in breaks):
+            # the bounces' instants follow the clocks (they are on the session clock, which
+            # the clocks map the detections onto)
+            breaks = _refine_breaks(problem, control, sigma, r, w, J, spacing, breaks,
+                                    options)
+            X_old = problem.positions(control)
+            problem.set_knots([_knots_with_breaks(a, b, spacing, br) for (a, b), br in
+                               zip(spans, breaks, strict=True)], options.prior)
+            control = _refit_control(problem, X_old)
+            control, sigma, r, w, J = solver.run(control, sigma, 1)
         if moved < 1e-7:
             break
+    moves = _BreakMoves(problem, spacing)
     # each regularized camera's line error, δstart + δperiod · (k - k0), as two more columns
     # (not estimated: they only widen the covariance)
     extra = np.zeros((len(rows), 0))
@@ -257,7 +269,7 @@ def _solve_joint(obs, rig, unknowns, theta, params, options, regularized=None):
     _, dof = _information(problem, control, sigma, r, J)
     control, theta, sigma, r, w, J, S, _ = _joint_step(
         problem, solver, obs, unknowns, theta, params, control, sigma,
-        np.c_[dt_dtheta, extra], t0, moves, dof, n_extra=extra.shape[1])
+        np.c_[dt_dtheta, extra], t0, moves, dof, n_extra=extra.shape[1], step_breaks=False)
     return problem, control, theta, sigma, r, w, S, len(unknowns) + len(moves)
 
 
@@ -281,10 +293,10 @@ class _BreakMoves:
     reprojection Jacobian of each instant at fixed control points (by central differences of
     the basis: the curve moves only within three knot spans of the break)."""
 
-    def __init__(self, problem: _Problem, spacing: float):
+    def __init__(self, problem: _Problem, spacing: float, items=None):
         self.problem, self.spacing = problem, spacing
-        self.items = []  # (piece, index of the first of its three knots)
-        for p, k in enumerate(problem.knots):
+        self.items = [] if items is None else list(items)  # (piece, first of its 3 knots)
+        for p, k in enumerate(problem.knots if items is None else ()):
             inner = np.unique(k)[1:-1]
             for x in inner:
                 idx = np.flatnonzero(k == x)
@@ -300,14 +312,22 @@ class _BreakMoves:
     def values(self) -> np.ndarray:
         return np.array([self.problem.knots[p][i] for p, i in self.items])
 
+    def clamp(self, taus: np.ndarray, steps: np.ndarray) -> np.ndarray:
+        """``taus + steps`` with each step at most a quarter knot spacing and each break kept
+        a tenth of a knot spacing inside its neighbouring knots."""
+        out = taus + np.clip(steps, -0.25 * self.spacing, 0.25 * self.spacing)
+        for j, (p, i) in enumerate(self.items):
+            k = self.problem.knots[p]
+            lo, hi = k[i - 1] + 0.1 * self.spacing, k[i + 3] - 0.1 * self.spacing
+            out[j] = min(max(out[j], lo), hi) if lo < hi else k[i]
+        return out
+
     def moved_knots(self, taus: np.ndarray) -> list[np.ndarray]:
-        """The pieces' knot vectors with the breaks at ``taus``, each kept a tenth of a knot
-        spacing inside its neighbouring knots."""
+        """The pieces' knot vectors with the breaks at ``taus`` (within :meth:`clamp`'s
+        bounds)."""
         knots = [k.copy() for k in self.problem.knots]
         for (p, i), tau in zip(self.items, taus, strict=True):
-            k = knots[p]
-            lo, hi = k[i - 1] + 0.1 * self.spacing, k[i + 3] - 0.1 * self.spacing
-            k[i:i + 3] = min(max(tau, lo), hi) if lo < hi else k[i]
+            knots[p][i:i + 3] = tau
         return knots
 
     def columns(self, control: np.ndarray, J: np.ndarray):
@@ -435,7 +455,7 @@ def _observations_at(obs: Observations, times_s: np.ndarray, order: np.ndarray
 
 
 def _joint_step(problem, solver, obs, unknowns, theta, params, control, sigma, dt_dtheta, t0,
-                moves, dof: float = 1.0, n_extra: int = 0):
+                moves, dof: float = 1.0, n_extra: int = 0, step_breaks: bool = True):
     """One robust Gauss–Newton step on (control points, clocks, break instants) by the Schur
     complement of the banded control-point block; σ is ``dof`` · 1.4826 · median |residual|
     at the step's start. Returns the information ``S`` of (clocks, breaks, extra), the
@@ -489,35 +509,52 @@ def _joint_step(problem, solver, obs, unknowns, theta, params, control, sigma, d
     Y = _normal.solve(U, B) if Q else np.zeros((n, 0))
     S = C - B.T @ Y
     z = _normal.solve(U, rhs_c)
-    Qs = q + nb  # the estimated ones
+    Qs = q + nb if step_breaks else q  # the ones this step moves
     if Qs:
         # a break no detection pins (its neighbourhood seen by one camera) has no information:
         # a tiny load keeps the solve defined without moving it
-        S_solve = S[:Qs, :Qs] + np.diag(np.r_[np.zeros(q), np.full(nb, 1e-9 * max(np.max(
+        S_solve = S[:Qs, :Qs] + np.diag(np.r_[np.zeros(q), np.full(Qs - q, 1e-9 * max(np.max(
             np.abs(np.diag(S))), 1.0))])
         d_all = np.linalg.solve(S_solve, rhs_t[:Qs] - B[:, :Qs].T @ z)
     else:
         d_all = np.zeros(0)
-    d_theta, d_tau = d_all[:q], d_all[q:]
+    if nb and step_breaks:
+        # the breaks stay between their neighbouring knots: a step clamped there, and the
+        # control points' step the one that goes with the clamped step (z - Y d is the best
+        # control step given the others)
+        d_all[q:] = moves.clamp(taus, d_all[q:]) - taus
+    d_theta = d_all[:q]
+    d_tau = d_all[q:] if step_breaks else np.zeros(nb)
     d_c = z - Y[:, :Qs] @ d_all
     before = solver.cost(control, r, sigma)
     knots0 = problem.knots
-    step = 1.0
+    step, accepted = 1.0, False
     for _ in range(6):  # step halving keeps the robust cost from rising
         trial_c = control + step * d_c.reshape(-1, 3)
         trial_t = theta + step * d_theta
-        if nb:
+        if nb and step_breaks:
             problem.set_knots(moves.moved_knots(taus + step * d_tau), problem.prior)
         problem.set_times(params.times(obs, trial_t) - t0)
         r_trial, J_trial = problem.project(problem.positions(trial_c))
         if solver.cost(trial_c, r_trial, sigma) <= before:
+            accepted = True
             break
-        if nb:
-            problem.set_knots(knots0, problem.prior)
         step /= 2
+    if not accepted:  # no descent along this direction: stay (the caller stops)
+        step = 0.0
+        trial_c, trial_t = control, theta
+        if nb and step_breaks:
+            problem.set_knots(knots0, problem.prior)
+        problem.set_times(times)
+        r_trial, J_trial = r, J
+    moved_tau = np.abs(moves.values() - taus) if nb else np.zeros(0)
     moved = max(float(np.max(np.abs(step * d_c), initial=0.0)),
                 float(np.max(np.abs(step * d_theta) * _scale_of(unknowns), initial=0.0)),
-                float(np.max(np.abs(step * d_tau), initial=0.0)))
+                float(np.max(moved_tau, initial=0.0)))
+    if _DEBUG:
+        print(f"   step {step:.3g} control {np.max(np.abs(step * d_c)):.3g} theta "
+              f"{np.max(np.abs(step * d_theta), initial=0):.3g} tau "
+              f"{np.max(moved_tau, initial=0):.3g} d_tau {np.max(np.abs(d_tau), initial=0):.3g}")
     s = np.sum(r_trial * r_trial, axis=1) / sigma**2
     return (trial_c, trial_t, sigma, r_trial, 1 / (1 + s / _CAUCHY**2), J_trial, S, moved)
 
