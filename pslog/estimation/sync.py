@@ -63,7 +63,9 @@ _KEY = {"offset": "clock_offset", "drift": "clock_drift_ppm", "readout": "readou
 MIN_DETECTIONS = 30
 #: The coarse scan fits at most this long a stretch of the session, seconds.
 _SCAN_WINDOW_S = 12.0
-#: A session longer than _N_WINDOWS · _WINDOW_S is synced on that many windows spread over it.
+#: A session longer than _ALL_UP_TO_S is synced on _N_WINDOWS windows of _WINDOW_S spread
+#: over it (a bounded cost; the spread keeps the drift's lever arm).
+_ALL_UP_TO_S = 150.0
 _N_WINDOWS = 6
 _WINDOW_S = 15.0
 _ITERATIONS = 10
@@ -440,7 +442,7 @@ def _windows(obs: Observations) -> Observations:
     windows' spread keeps the drift's lever arm) at a bounded cost."""
     t = obs.time_ns / NS
     span = t[-1] - t[0] if len(t) else 0.0
-    if span <= _N_WINDOWS * _WINDOW_S:
+    if span <= _ALL_UP_TO_S:
         return obs
     starts = t[0] + np.linspace(0.0, span - _WINDOW_S, _N_WINDOWS)
     keep = np.zeros(len(t), dtype=bool)
