@@ -3,30 +3,40 @@ sparse least-squares problem.
 
 Model: the continuous-time trajectory of :mod:`pslog.estimation.trajectory` (its cost (1) +
 (2)), where a detection of camera ``c`` logged at ``ℓ`` on the session clock at pixel row
-``v`` was captured at, by the timing model (:mod:`pslog.timing`),
+``v`` was captured, by the timing model (:mod:`pslog.timing`), at
+``t = ℓ + clock_offset_c + clock_drift_ppm_c · 1e-6 · ℓ + readout_c · v / height_c``.
+The estimator works in an equivalent parametrisation (:class:`_Clocks`)
 
-    t = ℓ + clock_offset_c + clock_drift_ppm_c · 1e-6 · ℓ + readout_c · v / height_c
+    τ = ℓ + o'_c + d_c · 1e-6 · (ℓ - ℓ_m) + r_c · (v / height_c - 1/2),   τ = t - r_1 / 2
 
-and the clock parameters θ are unknowns next to the control points ``c`` — the way Kalibr
-estimates a camera–IMU time offset (Furgale, Rehder & Siegwart, IROS 2013). The reprojection
-residual ``r = π_c(p(t)) - z`` depends on θ only through ``t``, so its Jacobian column is
+(readout referred to the image's centre row, drift to the middle of the logged times; a
+common shift of every time is absorbed by the trajectory), which keeps offsets, readouts and
+drifts nearly uncorrelated, and maps the estimates and their covariance back exactly. The
+clock parameters θ are unknowns next to the control points ``c`` — the way Kalibr estimates a
+camera–IMU time offset (Furgale, Rehder & Siegwart, IROS 2013). The reprojection residual
+``r = π_c(p(τ)) - z`` depends on θ only through ``τ``, so its Jacobian column is
 
-    ∂r/∂θ_j = ∂π_c/∂X · p'(t) · ∂t/∂θ_j,    ∂t/∂θ = [1, 1e-6·ℓ, v/height]
+    ∂r/∂θ_j = ∂π_c/∂X · p'(τ) · ∂τ/∂θ_j,    ∂τ/∂(o', d, r) = [1, 1e-6·(ℓ - ℓ_m), v/h - 1/2]
 
-(:func:`pslog.timing.clock_jacobian`). Gauss–Newton steps solve the bordered system
-``[[A, B], [Bᵀ, C]]`` (``A`` banded: the trajectory; ``B``, ``C``: the few clock columns) by
-its Schur complement ``S = C - Bᵀ A⁻¹ B``; ``S⁻¹`` at the solution is the clocks' covariance
-(with σ the robust pixel-noise estimate, as for the trajectory). Camera 1 defines the session
-clock: its offset and drift are 0 and never estimated.
+Gauss–Newton steps solve the bordered system ``[[A, B], [Bᵀ, C]]`` (``A`` banded: the
+trajectory; ``B``, ``C``: the few clock columns, sparse) by its Schur complement
+``S = C - Bᵀ A⁻¹ B``. The bounces' instants are re-estimated between steps at the current
+clocks; in the final step they are extra columns ``∂r/∂τ_b`` (central differences of the
+basis), so the clocks' covariance — the clocks' block of ``S⁻¹`` over (clocks, breaks) — has
+both the trajectory and the breaks' instants marginalised. Its pixel noise is the
+dof-corrected RMS of the inlying residuals. Regularized host stamps (``regularized``): each
+line's (start, period) errors are two more columns, not estimated; their effect ``K`` on the
+clocks adds ``K Σ_line Kᵀ``. Camera 1 defines the session clock: its offset and drift are 0
+and never estimated.
 
 Start: the rig's values, then a coarse scan of each camera's offset over ``±search`` against
 camera 1 alone (a two-camera trajectory per trial offset, on a window of the session), so a
-start several milliseconds wrong converges. Bounces and kicks are found by the trajectory fit
-at the scanned clocks and kept during the joint solve.
+start several milliseconds wrong converges.
 
 Limits: offsets need the ball to move (a still ball looks the same at any time); a drift
 needs a long session; a readout needs the ball to move along the image's rows (vertical image
-motion) — each estimate's standard deviation says how well the data determined it.
+motion) — each estimate's standard deviation says how well the data determined it
+(docs/timing.md: the Cramér–Rao bounds).
 """
 
 from __future__ import annotations
