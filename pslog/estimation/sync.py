@@ -79,7 +79,6 @@ _ALL_UP_TO_S = 150.0
 _N_WINDOWS = 6
 _WINDOW_S = 15.0
 _ITERATIONS = 10
-_DEBUG = False
 _ROUNDS = 8
 
 
@@ -254,8 +253,7 @@ def _solve_joint(obs, rig, unknowns, theta, params, options, regularized=None):
         dt_dtheta[:, j] = np.where(cam == c, jac[:, PARAMETERS.index(p)], 0.0)
     for _ in range(_ITERATIONS):
         control, theta, sigma, r, w, J, S, moved = _joint_step(
-            problem, solver, obs, unknowns, theta, params, control, sigma, dt_dtheta, t0,
-            _BreakMoves(problem, spacing, ()))
+            problem, solver, obs, unknowns, theta, params, control, sigma, dt_dtheta, t0)
         if any(len(b) for b in breaks):
             # the bounces' instants follow the clocks (they are on the session clock, which
             # the clocks map the detections onto)
@@ -268,7 +266,7 @@ def _solve_joint(obs, rig, unknowns, theta, params, options, regularized=None):
             control, sigma, r, w, J = solver.run(control, sigma, 1)
         if moved < 1e-7:
             break
-    moves = _BreakMoves(problem, spacing)
+    break_cols = _BreakColumns(problem, spacing)
     # each regularized camera's line error, δstart + δperiod · (k - k0), as two more columns
     # (not estimated: they only widen the covariance)
     extra = np.zeros((len(rows), 0))
@@ -281,7 +279,7 @@ def _solve_joint(obs, rig, unknowns, theta, params, options, regularized=None):
     _, dof = _information(problem, control, sigma, r, J)
     control, theta, sigma, r, w, J, S, _ = _joint_step(
         problem, solver, obs, unknowns, theta, params, control, sigma,
-        np.c_[dt_dtheta, extra], t0, moves, dof, n_extra=extra.shape[1], step_breaks=False)
+        np.c_[dt_dtheta, extra], t0, dof, break_cols, n_extra=extra.shape[1])
     # the covariance's pixel noise: the RMS of the inlying residuals corrected for the degrees
     # of freedom the fit absorbs (the median-based σ that weighs the solve is robust but
     # noisy: ±8 % on an 8 s session, which the standard deviations would inherit)
@@ -294,7 +292,7 @@ def _solve_joint(obs, rig, unknowns, theta, params, options, regularized=None):
                         options.min_noise_px)
         S = S * (sigma / sigma_cov) ** 2
         sigma = sigma_cov
-    return problem, control, theta, sigma, r, w, S, len(unknowns) + len(moves)
+    return problem, control, theta, sigma, r, w, S, len(unknowns) + len(break_cols)
 
 
 def _nuisance_covariance(rig, regularized) -> np.ndarray:
@@ -311,16 +309,18 @@ def _nuisance_covariance(rig, regularized) -> np.ndarray:
     return out
 
 
-class _BreakMoves:
-    """The breaks (triple knots) of a problem's pieces as unknown instants: where each sits
-    in its piece's knot vector, how far it may move (not past a neighbouring knot), and the
-    reprojection Jacobian of each instant at fixed control points (by central differences of
-    the basis: the curve moves only within three knot spans of the break)."""
+class _BreakColumns:
+    """The breaks (triple knots) of a problem's pieces as parameters of the covariance: where
+    each sits in its piece's knot vector, and the reprojection Jacobian of its instant at
+    fixed control points (central differences of the basis: the curve moves only within
+    three knot spans of the break). The instants themselves are estimated by
+    :func:`pslog.estimation.trajectory._refine_breaks` between the joint steps (a joint step
+    on them would need the motion prior's dependence on them, which moves the knot spans)."""
 
-    def __init__(self, problem: _Problem, spacing: float, items=None):
+    def __init__(self, problem: _Problem, spacing: float):
         self.problem, self.spacing = problem, spacing
-        self.items = [] if items is None else list(items)  # (piece, first of its 3 knots)
-        for p, k in enumerate(problem.knots if items is None else ()):
+        self.items = []  # (piece, index of the first of its three knots)
+        for p, k in enumerate(problem.knots):
             inner = np.unique(k)[1:-1]
             for x in inner:
                 idx = np.flatnonzero(k == x)
@@ -332,27 +332,6 @@ class _BreakMoves:
 
     def __len__(self) -> int:
         return len(self.items)
-
-    def values(self) -> np.ndarray:
-        return np.array([self.problem.knots[p][i] for p, i in self.items])
-
-    def clamp(self, taus: np.ndarray, steps: np.ndarray) -> np.ndarray:
-        """``taus + steps`` with each step at most a quarter knot spacing and each break kept
-        a tenth of a knot spacing inside its neighbouring knots."""
-        out = taus + np.clip(steps, -0.25 * self.spacing, 0.25 * self.spacing)
-        for j, (p, i) in enumerate(self.items):
-            k = self.problem.knots[p]
-            lo, hi = k[i - 1] + 0.1 * self.spacing, k[i + 3] - 0.1 * self.spacing
-            out[j] = min(max(out[j], lo), hi) if lo < hi else k[i]
-        return out
-
-    def moved_knots(self, taus: np.ndarray) -> list[np.ndarray]:
-        """The pieces' knot vectors with the breaks at ``taus`` (within :meth:`clamp`'s
-        bounds)."""
-        knots = [k.copy() for k in self.problem.knots]
-        for (p, i), tau in zip(self.items, taus, strict=True):
-            knots[p][i:i + 3] = tau
-        return knots
 
     def columns(self, control: np.ndarray, J: np.ndarray):
         """Per break: the rows (indices into ``problem.rows``) its instant moves and
@@ -479,13 +458,14 @@ def _observations_at(obs: Observations, times_s: np.ndarray, order: np.ndarray
 
 
 def _joint_step(problem, solver, obs, unknowns, theta, params, control, sigma, dt_dtheta, t0,
-                moves, dof: float = 1.0, n_extra: int = 0, step_breaks: bool = True):
-    """One robust Gauss–Newton step on (control points, clocks, break instants) by the Schur
-    complement of the banded control-point block; σ is ``dof`` · 1.4826 · median |residual|
-    at the step's start. Returns the information ``S`` of (clocks, breaks, extra), the
-    ``n_extra`` last columns of ``dt_dtheta`` being extra time perturbations that are not
-    estimated (their information with the others widens the covariance)."""
-    q, nb = len(unknowns), len(moves)
+                dof: float = 1.0, breaks: _BreakColumns | None = None, n_extra: int = 0):
+    """One robust Gauss–Newton step on (control points, clocks) by the Schur complement of
+    the banded control-point block; σ is ``dof`` · 1.4826 · median |residual| at the step's
+    start. Returns the information ``S`` of (clocks, breaks, extra): the breaks' instants
+    (``breaks``) and the ``n_extra`` last columns of ``dt_dtheta`` (time perturbations) are
+    not stepped, only kept in ``S`` (their information with the clocks widens the clocks'
+    covariance)."""
+    q, nb = len(unknowns), (len(breaks) if breaks is not None else 0)
     Q = q + nb + n_extra
     times = params.times(obs, theta) - t0
     problem.set_times(times)
@@ -511,8 +491,7 @@ def _joint_step(problem, solver, obs, unknowns, theta, params, control, sigma, d
         g_rows.append(mine)
         g_cols.append(np.full(len(mine), j if j < q else j + nb))
         g_vals.append(JV[mine] * dt_dtheta[mine, j:j + 1])
-    taus = moves.values()
-    for b, (local, dr) in enumerate(moves.columns(control, J)):
+    for b, (local, dr) in enumerate(breaks.columns(control, J) if nb else ()):
         g_rows.append(local)
         g_cols.append(np.full(len(local), q + b))
         g_vals.append(dr)
@@ -533,31 +512,13 @@ def _joint_step(problem, solver, obs, unknowns, theta, params, control, sigma, d
     Y = _normal.solve(U, B) if Q else np.zeros((n, 0))
     S = C - B.T @ Y
     z = _normal.solve(U, rhs_c)
-    Qs = q + nb if step_breaks else q  # the ones this step moves
-    if Qs:
-        # a break no detection pins (its neighbourhood seen by one camera) has no information:
-        # a tiny load keeps the solve defined without moving it
-        S_solve = S[:Qs, :Qs] + np.diag(np.r_[np.zeros(q), np.full(Qs - q, 1e-9 * max(np.max(
-            np.abs(np.diag(S))), 1.0))])
-        d_all = np.linalg.solve(S_solve, rhs_t[:Qs] - B[:, :Qs].T @ z)
-    else:
-        d_all = np.zeros(0)
-    if nb and step_breaks:
-        # the breaks stay between their neighbouring knots: a step clamped there, and the
-        # control points' step the one that goes with the clamped step (z - Y d is the best
-        # control step given the others)
-        d_all[q:] = moves.clamp(taus, d_all[q:]) - taus
-    d_theta = d_all[:q]
-    d_tau = d_all[q:] if step_breaks else np.zeros(nb)
-    d_c = z - Y[:, :Qs] @ d_all
+    d_theta = np.linalg.solve(S[:q, :q], rhs_t[:q] - B[:, :q].T @ z) if q else np.zeros(0)
+    d_c = z - Y[:, :q] @ d_theta
     before = solver.cost(control, r, sigma)
-    knots0 = problem.knots
     step, accepted = 1.0, False
     for _ in range(6):  # step halving keeps the robust cost from rising
         trial_c = control + step * d_c.reshape(-1, 3)
         trial_t = theta + step * d_theta
-        if nb and step_breaks:
-            problem.set_knots(moves.moved_knots(taus + step * d_tau), problem.prior)
         problem.set_times(params.times(obs, trial_t) - t0)
         r_trial, J_trial = problem.project(problem.positions(trial_c))
         if solver.cost(trial_c, r_trial, sigma) <= before:
@@ -567,18 +528,10 @@ def _joint_step(problem, solver, obs, unknowns, theta, params, control, sigma, d
     if not accepted:  # no descent along this direction: stay (the caller stops)
         step = 0.0
         trial_c, trial_t = control, theta
-        if nb and step_breaks:
-            problem.set_knots(knots0, problem.prior)
         problem.set_times(times)
         r_trial, J_trial = r, J
-    moved_tau = np.abs(moves.values() - taus) if nb else np.zeros(0)
     moved = max(float(np.max(np.abs(step * d_c), initial=0.0)),
-                float(np.max(np.abs(step * d_theta) * _scale_of(unknowns), initial=0.0)),
-                float(np.max(moved_tau, initial=0.0)))
-    if _DEBUG:
-        print(f"   step {step:.3g} control {np.max(np.abs(step * d_c)):.3g} theta "
-              f"{np.max(np.abs(step * d_theta), initial=0):.3g} tau "
-              f"{np.max(moved_tau, initial=0):.3g} d_tau {np.max(np.abs(d_tau), initial=0):.3g}")
+                float(np.max(np.abs(step * d_theta) * _scale_of(unknowns), initial=0.0)))
     s = np.sum(r_trial * r_trial, axis=1) / sigma**2
     return (trial_c, trial_t, sigma, r_trial, 1 / (1 + s / _CAUCHY**2), J_trial, S, moved)
 
