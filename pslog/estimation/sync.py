@@ -161,6 +161,10 @@ def estimate_clocks(obs: Observations, rig: Rig, estimate=("offset",),
         step = (theta - before) * scale
         if np.max(np.abs(step), initial=0.0) < 2e-6:
             break  # the clocks no longer move the breaks: converged
+        std_now = np.sqrt(np.maximum(np.diag(np.linalg.inv(S[:n_t, :n_t]))[:len(unknowns)],
+                                     0.0))
+        if np.all(np.abs(theta - before) < 0.05 * std_now):
+            break  # further rounds would move the clocks by a negligible part of their σ
         if previous_step is not None:
             # the rounds converge geometrically along one direction (the breaks' instants
             # and the clocks pull on each other): jump to the limit of the series (Aitken)
