@@ -144,7 +144,7 @@ class Run:
     case: Case
     seed: int
     errors: dict  # (timing, method) -> Accuracy or None
-    clocks: list  # (camera, parameter, error, sigma, unit)
+    clocks: list  # (camera, parameter, error, sigma, unit, bound)
     sync_s: float
     smooth_rate: float  # detections per second of the smooth fit at true timing
     failure: str = ""
@@ -165,7 +165,34 @@ def _regularize_auto(detections):
         _, rep = regularize_times(detections.frame_time_ns[rows], detections.frame_index[rows])
         if rep.jitter_s > REGULARIZE_AUTO_JITTER_S:
             wanted.append(name)
-    return regularize_detections(detections, wanted)[0] if wanted else detections
+    return regularize_detections(detections, wanted) if wanted else (detections, {})
+
+
+def offset_bounds(detections, rig, motion, noise_px) -> dict:
+    """Cramér–Rao bound of each camera's offset (ms) with the ball's trajectory KNOWN (the
+    true motion) and every other clock parameter known: ``σ² = noise² / Σ ‖J·p'‖²`` over the
+    camera's detections. No estimator that must also fit the trajectory reaches it; it says
+    how much timing information the detections hold at all."""
+    from pslog.estimation.projection import project_with_jacobian
+    from pslog.records import NS
+    from pslog.timing import observations
+
+    if noise_px <= 0:
+        return {}
+    obs = observations(detections, rig)
+    t = obs.time_ns / NS
+    out = {}
+    for c, cam in enumerate(rig.cameras):
+        sel = obs.camera == c
+        if c == 0 or not sel.any():
+            continue
+        h = 1e-5
+        X = motion.position(t[sel])
+        V = (motion.position(t[sel] + h) - motion.position(t[sel] - h)) / (2 * h)
+        _, J = project_with_jacobian(cam, X)
+        info = np.sum(np.einsum("naj,nj->na", J, V) ** 2)
+        out[cam.name] = noise_px / np.sqrt(info) * 1e3 if info > 0 else np.inf
+    return out
 
 
 def _accuracy(detections, rig, truth):
@@ -202,13 +229,14 @@ def run_case(case: Case, seed: int) -> Run:
     errors["nominal"] = _accuracy(detections, nominal, truth)
     t = time.perf_counter()
     try:
-        regular = _regularize_auto(detections)
-        result = estimate_clocks(regular.best(), nominal, case.estimate)
+        regular, reports = _regularize_auto(detections)
+        result = estimate_clocks(regular.best(), nominal, case.estimate, regularized=reports)
     except PslogError as exc:
         return Run(case, seed, errors, [], time.perf_counter() - t, smooth_rate,
                    failure=str(exc))
     sync_s = time.perf_counter() - t
     errors["synced"] = _accuracy(regular, result.rig, truth)
+    bounds = offset_bounds(exact, truth_rig, motion, case.noise_px)
     clocks = []
     for i, est in enumerate(result.cameras):
         true_cam = truth_rig.cameras[i]
@@ -217,13 +245,13 @@ def run_case(case: Case, seed: int) -> Run:
                 continue
             if p == "offset":
                 clocks.append((names[i], p, (est.offset_s - true_cam.clock_offset) * 1e3,
-                               est.offset_std_s * 1e3, "ms"))
+                               est.offset_std_s * 1e3, "ms", bounds.get(names[i], np.nan)))
             elif p == "drift":
                 clocks.append((names[i], p, est.drift_ppm - true_cam.clock_drift_ppm,
-                               est.drift_std_ppm, "ppm"))
+                               est.drift_std_ppm, "ppm", np.nan))
             else:
                 clocks.append((names[i], p, (est.readout_s - true_cam.readout) * 1e3,
-                               est.readout_std_s * 1e3, "ms"))
+                               est.readout_std_s * 1e3, "ms", np.nan))
     return Run(case, seed, errors, clocks, sync_s, smooth_rate)
 
 
@@ -254,13 +282,16 @@ def accuracy_table(runs: list[Run]) -> str:
 
 def clock_table(runs: list[Run]) -> str:
     head = (f"{'case':<22} {'seed':>4} {'camera':<6} {'param':<8} {'error':>10} {'σ':>9} "
-            f"{'|err|/σ':>8}")
-    lines = ["sync estimates against the truth (reported σ)", head, "-" * len(head)]
+            f"{'|err|/σ':>8} {'bound':>7}")
+    lines = ["sync estimates against the truth (reported σ; bound: the offset's Cramér–Rao "
+             "σ with the trajectory known, a floor no estimator reaches)", head,
+             "-" * len(head)]
     for r in runs:
-        for cam, p, err, sigma, unit in r.clocks:
+        for cam, p, err, sigma, unit, bound in r.clocks:
             ratio = abs(err) / sigma if sigma > 0 else float("inf")
             lines.append(f"{r.case.name:<22} {r.seed:>4} {cam:<6} {p:<8} {err:>+7.4f} {unit:<3}"
-                         f"{sigma:>6.4f}    {ratio:>6.2f}")
+                         f"{sigma:>6.4f}    {ratio:>6.2f} "
+                         + (f"{bound:>7.4f}" if np.isfinite(bound) else f"{'':>7}"))
         if r.clocks:
             lines.append(f"{r.case.name:<22} {r.seed:>4} (sync took {r.sync_s:.1f} s)")
     return "\n".join(lines)
@@ -274,14 +305,31 @@ def targets(runs: list[Run]) -> str:
     lines = ["issue 9 targets"]
 
     def clock_errs(pred_case, param):
-        return [(r, abs(e), s) for r in runs if pred_case(r.case)
-                for _, p, e, s, _ in r.clocks if p == param]
+        return [(r, abs(e), s, b) for r in runs if pred_case(r.case)
+                for _, p, e, s, _, b in r.clocks if p == param]
 
     def line(ok, text):
         lines.append(f"  {_verdict(ok)}  {text}")
 
     def worst(items):
-        return max((e for _, e, _ in items), default=None)
+        return max((e for _, e, _, _ in items), default=None)
+
+    def stats(items, unit):
+        """worst |error| with its σ, the σ range, |error|/σ median/max, the bound range"""
+        if not items:
+            return
+        e = np.array([x[1] for x in items])
+        sg = np.array([x[2] for x in items])
+        b = np.array([x[3] for x in items])
+        z = e / np.where(sg > 0, sg, np.nan)
+        k = int(np.argmax(e))
+        text = (f"         n={len(e)}: worst |err| {e[k]:.4f} {unit} (σ {sg[k]:.4f}), σ "
+                f"{sg.min():.4f}..{sg.max():.4f}, |err|/σ median {np.nanmedian(z):.2f} "
+                f"max {np.nanmax(z):.2f}, >4σ: {int(np.count_nonzero(z > 4))}")
+        if np.isfinite(b).any():
+            text += (f"; known-trajectory bound σ {np.nanmin(b):.4f}..{np.nanmax(b):.4f} "
+                     f"{unit}")
+        lines.append(text)
 
     def failures(pred):
         return [r for r in runs if pred(r.case) and r.failure]
@@ -295,30 +343,47 @@ def targets(runs: list[Run]) -> str:
              f"offsets within 0.15 ms (8 s, 3 cameras, 0.3 px, start wrong by up to 12 ms): "
              f"worst {w:.4f} ms over {len(clock_errs(sel, 'offset'))} estimates"
              + (f", {len(failures(sel))} sync failures" if failures(sel) else ""))
+        stats(clock_errs(sel, "offset"), "ms")
     # 2 minutes, 4 cameras with drift
     sel = lambda c: c.name == "drift 2 min own4"  # noqa: E731
     w = worst(clock_errs(sel, "offset"))
     if w is not None:
         line(w <= 0.1, f"offsets within 0.1 ms (2 min, 4 cameras, drift): worst {w:.4f} ms")
+        stats(clock_errs(sel, "offset"), "ms")
+    sel = lambda c: "drift" in c.estimate  # noqa: E731
     w = worst(clock_errs(sel, "drift"))
     if w is not None:
-        line(w <= 1.0, f"drift within 1 ppm (2 min, 4 cameras): worst {w:.3f} ppm")
+        line(w <= 1.0, f"drift within 1 ppm (2-minute sessions): worst {w:.3f} ppm")
+        stats(clock_errs(sel, "drift"), "ppm")
     # readout
     sel = lambda c: c.name.startswith("readout")  # noqa: E731
     w = worst(clock_errs(sel, "readout"))
     if w is not None:
         line(w <= 1.0, f"readout within 1 ms (8 s rallies, readouts 15-26 ms): worst {w:.3f} ms")
+        stats(clock_errs(sel, "readout"), "ms")
     w = worst(clock_errs(sel, "offset"))
     if w is not None:
         line(w <= 0.3, f"offsets with readouts within 0.3 ms: worst {w:.4f} ms")
+        stats(clock_errs(sel, "offset"), "ms")
+    sel = lambda c: c.name.startswith("combined")  # noqa: E731
+    for param, unit in (("offset", "ms"), ("drift", "ppm"), ("readout", "ms")):
+        items = clock_errs(sel, param)
+        if items:
+            lines.append(f"  info  combined faults, {param}:")
+            stats(items, unit)
+    sel = lambda c: c.host_jitter_ms > 0 and not c.name.startswith("combined")  # noqa: E731
+    if clock_errs(sel, "offset"):
+        lines.append("  info  host jitter (regularized stamps), offset:")
+        stats(clock_errs(sel, "offset"), "ms")
     # honest sigma
-    all_clocks = [(r, abs(e), s) for r in runs for _, _, e, s, _ in r.clocks]
+    all_clocks = [(r, abs(e), s) for r in runs for _, _, e, s, _, _ in r.clocks]
     if all_clocks:
         ratios = np.array([e / s if s > 0 else np.inf for _, e, s in all_clocks])
         n_out = int(np.count_nonzero(ratios > 4))
         line(n_out == 0, f"every error within 4 σ: {len(ratios) - n_out}/{len(ratios)} "
                          f"estimates, max |err|/σ {ratios.max():.2f}, median "
-                         f"{np.median(ratios):.2f}")
+                         f"{np.median(ratios):.2f}, RMS {np.sqrt(np.mean(ratios**2)):.2f} "
+                         f"(1 for honest Gaussian σ)")
     # after sync within 1.25x of true timing
     for m in METHODS:
         ratios = [(r, r.errors["synced"][m].mean_mm / r.errors["true"][m].mean_mm)

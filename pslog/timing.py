@@ -243,6 +243,12 @@ class Regularization:
     n_outliers : int, stamps further than ``5 * jitter`` (and 2 µs) from the line, left out
         of the fit (their times are replaced like every other)
     n_dropped : int, frame indices missing between the first and the last (dropped frames)
+    first_index : int, the frame index ``start_s`` refers to
+    covariance : (var start s², cov start·period s², var period s²), the line's least-squares
+        covariance with ``jitter_s`` as the stamps' noise: a fitted time ``start + period ·
+        (k - first_index)`` is off by ``δstart + δperiod · (k - first_index)``, which
+        :func:`pslog.estimation.sync.estimate_clocks` carries into the clocks' standard
+        deviations (NaN with fewer than 3 frames)
     """
 
     period_s: float
@@ -251,6 +257,8 @@ class Regularization:
     n_frames: int
     n_outliers: int
     n_dropped: int
+    first_index: int = 0
+    covariance: tuple[float, float, float] = (float("nan"),) * 3
 
     def as_dict(self) -> dict:
         return {k: getattr(self, k) for k in self.__dataclass_fields__}
@@ -317,8 +325,15 @@ def regularize_times(logged_ns, frame_index) -> tuple[np.ndarray, Regularization
                                   _OUTLIER_FLOOR_S)
     fitted = t0 + np.rint((start + period * kk) * NS).astype(np.int64)
     n_dropped = int(k.max() - k.min() + 1 - len(np.unique(k)))
+    # the line's covariance: jitter² (XᵀX)⁻¹ on the inliers, X = [1, k - k0]
+    covariance = (nan,) * 3
+    if n >= 3 and len(np.unique(kk[inlier])) >= 2:
+        x = kk[inlier]
+        XtX = np.array([[len(x), x.sum()], [x.sum(), x @ x]])
+        cov = jitter**2 * np.linalg.inv(XtX)
+        covariance = (float(cov[0, 0]), float(cov[0, 1]), float(cov[1, 1]))
     return fitted, Regularization(period, (t0 + start * NS) / NS, jitter, n,
-                                  int(np.count_nonzero(~inlier)), n_dropped)
+                                  int(np.count_nonzero(~inlier)), n_dropped, k0, covariance)
 
 
 def regularize_detections(detections: Detections, cameras=None

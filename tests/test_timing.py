@@ -212,6 +212,22 @@ def test_regularize_recovers_the_line_and_counts_outliers_and_drops():
     assert report.n_frames == len(k)
 
 
+def test_regularize_reports_the_lines_covariance_hand_computed():
+    # six frames 7..12 whose stamps sit off the line start + period·(k - 7) by
+    # [1, 0, -1, -1, 0, 1]·100 µs: those residuals are orthogonal to [1, k] (and the median
+    # slope is the period), so the fitted line is that line, the median |residual| 100 µs
+    # (jitter 148.26 µs), and with X = [1, k - 7]: (XᵀX)⁻¹ = [[55, -15], [-15, 6]] / 105
+    k = np.arange(7, 13, dtype=np.int64)
+    line = 2 * NS + (k - 7) * 33_333_333
+    fitted, report = regularize_times(line + np.array([1, 0, -1, -1, 0, 1]) * 100_000, k)
+    assert np.abs(fitted - line).max() <= 1
+    jitter = 1.4826 * 100e-6
+    assert report.jitter_s == pytest.approx(jitter, rel=1e-6)
+    assert report.first_index == 7 and report.n_outliers == 0
+    assert report.covariance == pytest.approx(
+        (55 / 105 * jitter**2, -15 / 105 * jitter**2, 6 / 105 * jitter**2), rel=1e-6)
+
+
 def test_regularize_exact_stamps_are_kept_and_report_no_jitter():
     k = np.arange(100, dtype=np.int64) + 7
     stamps = 5 * NS + k * 33_333_333

@@ -61,6 +61,7 @@ def run(args: argparse.Namespace) -> int:
     check_baselines(rig, args.session)
     detections = session.detections
     notes = []
+    reports = {}
     if args.regularize != "off":
         wanted = []
         for i, cam in enumerate(rig.cameras):
@@ -84,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
     if len(obs) == 0:
         raise FusionError(f"{args.session} has no detection: nothing to sync on")
     search_s = None if args.search_ms is None else args.search_ms / 1e3
-    result = estimate_clocks(obs, rig, args.estimate, search_s)
+    result = estimate_clocks(obs, rig, args.estimate, search_s, regularized=reports)
     # the standard deviations beside the estimates they belong to (the viewer shows them)
     stds = [(c.offset_std_s, c.drift_std_ppm, c.readout_std_s) for c in result.cameras]
     copy_session(args.session, args.output, rig=result.rig, force=args.force,

@@ -3,30 +3,40 @@ sparse least-squares problem.
 
 Model: the continuous-time trajectory of :mod:`pslog.estimation.trajectory` (its cost (1) +
 (2)), where a detection of camera ``c`` logged at ``ℓ`` on the session clock at pixel row
-``v`` was captured at, by the timing model (:mod:`pslog.timing`),
+``v`` was captured, by the timing model (:mod:`pslog.timing`), at
+``t = ℓ + clock_offset_c + clock_drift_ppm_c · 1e-6 · ℓ + readout_c · v / height_c``.
+The estimator works in an equivalent parametrisation (:class:`_Clocks`)
 
-    t = ℓ + clock_offset_c + clock_drift_ppm_c · 1e-6 · ℓ + readout_c · v / height_c
+    τ = ℓ + o'_c + d_c · 1e-6 · (ℓ - ℓ_m) + r_c · (v / height_c - 1/2),   τ = t - r_1 / 2
 
-and the clock parameters θ are unknowns next to the control points ``c`` — the way Kalibr
-estimates a camera–IMU time offset (Furgale, Rehder & Siegwart, IROS 2013). The reprojection
-residual ``r = π_c(p(t)) - z`` depends on θ only through ``t``, so its Jacobian column is
+(readout referred to the image's centre row, drift to the middle of the logged times; a
+common shift of every time is absorbed by the trajectory), which keeps offsets, readouts and
+drifts nearly uncorrelated, and maps the estimates and their covariance back exactly. The
+clock parameters θ are unknowns next to the control points ``c`` — the way Kalibr estimates a
+camera–IMU time offset (Furgale, Rehder & Siegwart, IROS 2013). The reprojection residual
+``r = π_c(p(τ)) - z`` depends on θ only through ``τ``, so its Jacobian column is
 
-    ∂r/∂θ_j = ∂π_c/∂X · p'(t) · ∂t/∂θ_j,    ∂t/∂θ = [1, 1e-6·ℓ, v/height]
+    ∂r/∂θ_j = ∂π_c/∂X · p'(τ) · ∂τ/∂θ_j,    ∂τ/∂(o', d, r) = [1, 1e-6·(ℓ - ℓ_m), v/h - 1/2]
 
-(:func:`pslog.timing.clock_jacobian`). Gauss–Newton steps solve the bordered system
-``[[A, B], [Bᵀ, C]]`` (``A`` banded: the trajectory; ``B``, ``C``: the few clock columns) by
-its Schur complement ``S = C - Bᵀ A⁻¹ B``; ``S⁻¹`` at the solution is the clocks' covariance
-(with σ the robust pixel-noise estimate, as for the trajectory). Camera 1 defines the session
-clock: its offset and drift are 0 and never estimated.
+Gauss–Newton steps solve the bordered system ``[[A, B], [Bᵀ, C]]`` (``A`` banded: the
+trajectory; ``B``, ``C``: the few clock columns, sparse) by its Schur complement
+``S = C - Bᵀ A⁻¹ B``. The bounces' instants are re-estimated between steps at the current
+clocks; in the final step they are extra columns ``∂r/∂τ_b`` (central differences of the
+basis), so the clocks' covariance — the clocks' block of ``S⁻¹`` over (clocks, breaks) — has
+both the trajectory and the breaks' instants marginalised. Its pixel noise is the
+dof-corrected RMS of the inlying residuals. Regularized host stamps (``regularized``): each
+line's (start, period) errors are two more columns, not estimated; their effect ``K`` on the
+clocks adds ``K Σ_line Kᵀ``. Camera 1 defines the session clock: its offset and drift are 0
+and never estimated.
 
 Start: the rig's values, then a coarse scan of each camera's offset over ``±search`` against
 camera 1 alone (a two-camera trajectory per trial offset, on a window of the session), so a
-start several milliseconds wrong converges. Bounces and kicks are found by the trajectory fit
-at the scanned clocks and kept during the joint solve.
+start several milliseconds wrong converges.
 
 Limits: offsets need the ball to move (a still ball looks the same at any time); a drift
 needs a long session; a readout needs the ball to move along the image's rows (vertical image
-motion) — each estimate's standard deviation says how well the data determined it.
+motion) — each estimate's standard deviation says how well the data determined it
+(docs/timing.md: the Cramér–Rao bounds).
 """
 
 from __future__ import annotations
@@ -34,12 +44,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import sparse
 
 from ..errors import FusionError
 from ..records import NS, Observations
 from ..rig import Rig
-from ..timing import camera_parameters, clock_jacobian, true_times_s
+from ..timing import camera_parameters
 from . import _normal
+from .bspline import DEGREE, basis
 from .trajectory import (
     _CAUCHY,
     MotionPrior,
@@ -61,7 +73,9 @@ _KEY = {"offset": "clock_offset", "drift": "clock_drift_ppm", "readout": "readou
 MIN_DETECTIONS = 30
 #: The coarse scan fits at most this long a stretch of the session, seconds.
 _SCAN_WINDOW_S = 12.0
-#: A session longer than _N_WINDOWS · _WINDOW_S is synced on that many windows spread over it.
+#: A session longer than _ALL_UP_TO_S is synced on _N_WINDOWS windows of _WINDOW_S spread
+#: over it (a bounded cost; the spread keeps the drift's lever arm).
+_ALL_UP_TO_S = 150.0
 _N_WINDOWS = 6
 _WINDOW_S = 15.0
 _ITERATIONS = 10
@@ -105,10 +119,15 @@ class SyncResult:
 
 
 def estimate_clocks(obs: Observations, rig: Rig, estimate=("offset",),
-                    search_s: float | None = None, options: SmoothOptions | None = None
-                    ) -> SyncResult:
+                    search_s: float | None = None, options: SmoothOptions | None = None,
+                    regularized=None) -> SyncResult:
     """Estimate the clock parameters named in ``estimate`` from detections at their logged
     times (``obs``: best candidate per frame, logged times, sorted by (time, camera)).
+
+    ``regularized``: camera name -> :class:`pslog.timing.Regularization` of the cameras
+    whose stamps ``obs`` holds regularized; each line's uncertainty (its start and period)
+    moves that camera's times together, so it is added to the standard deviations (camera
+    1's line moves the session clock, hence every other camera's offset and drift).
 
     Raises
     ------
@@ -121,11 +140,13 @@ def estimate_clocks(obs: Observations, rig: Rig, estimate=("offset",),
                           f"rig has {len(rig)}")
     unknowns = [(c, p) for c in range(len(rig)) for p in estimate
                 if not (c == 0 and p in ("offset", "drift"))]
-    theta = np.array([float(getattr(rig.cameras[c], _KEY[p])) for c, p in unknowns])
-    params = camera_parameters(rig)
     _check_coverage(obs, rig, options.max_gap_s)
 
     obs = _windows(obs)
+    logged = obs.time_ns / NS
+    params = _Clocks(rig, unknowns, 0.5 * float(logged.min() + logged.max()))
+    theta = params.to_internal(np.array([float(getattr(rig.cameras[c], _KEY[p]))
+                                         for c, p in unknowns]))
     if "offset" in estimate:
         theta = _scan_offsets(obs, rig, unknowns, theta, params, search_s, options)
 
@@ -135,11 +156,15 @@ def estimate_clocks(obs: Observations, rig: Rig, estimate=("offset",),
     previous_step = None
     for _ in range(_ROUNDS):
         before = theta
-        problem, control, theta, sigma, r, w, S = _solve_joint(
-            obs, rig, unknowns, theta, params, options)
+        problem, control, theta, sigma, r, w, S, n_t = _solve_joint(
+            obs, rig, unknowns, theta, params, options, regularized)
         step = (theta - before) * scale
         if np.max(np.abs(step), initial=0.0) < 2e-6:
             break  # the clocks no longer move the breaks: converged
+        std_now = np.sqrt(np.maximum(np.diag(np.linalg.inv(S[:n_t, :n_t]))[:len(unknowns)],
+                                     0.0))
+        if np.all(np.abs(theta - before) < 0.05 * std_now):
+            break  # further rounds would move the clocks by a negligible part of their σ
         if previous_step is not None:
             # the rounds converge geometrically along one direction (the breaks' instants
             # and the clocks pull on each other): jump to the limit of the series (Aitken)
@@ -151,7 +176,20 @@ def estimate_clocks(obs: Observations, rig: Rig, estimate=("offset",),
                 continue
         previous_step = step
     cam = obs.camera[problem.rows]
-    cov = np.linalg.inv(S) if len(unknowns) else np.zeros((0, 0))
+    q = len(unknowns)
+    # the clocks' covariance with the trajectory and the breaks' instants marginalised, in
+    # the rig's parametrisation
+    T = params.to_external_matrix()
+    if q:
+        cov_t = np.linalg.inv(S[:n_t, :n_t])
+        cov = cov_t
+        if len(S) > n_t:  # the regularized lines' errors, which the estimate does not see
+            K = cov_t @ S[:n_t, n_t:]
+            cov = cov_t + K @ _nuisance_covariance(rig, regularized) @ K.T
+        cov = T @ cov[:q, :q] @ T.T
+    else:
+        cov = np.zeros((0, 0))
+    theta = params.to_external(theta)
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
 
     norms = np.linalg.norm(r, axis=1)
@@ -178,11 +216,15 @@ def estimate_clocks(obs: Observations, rig: Rig, estimate=("offset",),
                       float(np.sqrt(np.mean(norms[inlier] ** 2))), float(sigma))
 
 
-def _solve_joint(obs, rig, unknowns, theta, params, options):
+def _solve_joint(obs, rig, unknowns, theta, params, options, regularized=None):
     """The trajectory's pieces, knots and breaks at clocks ``theta``, then the joint robust
-    Gauss–Newton solve of control points and clocks."""
+    Gauss–Newton solve of control points, clocks and the breaks' instants.
+
+    Returns problem, control, theta, σ, residuals, weights and the information ``S`` of
+    (clocks, breaks) with the control points eliminated (Schur complement): the clocks'
+    covariance is the clocks' block of ``S⁻¹``, so the breaks' uncertainty is in it."""
     logged_s = obs.time_ns / NS
-    times = _times(obs, unknowns, theta, params)
+    times = params.times(obs, theta)
     t0 = float(times.min())
     order = np.argsort(times, kind="stable")
     ordered = _observations_at(obs, times, order)
@@ -207,11 +249,10 @@ def _solve_joint(obs, rig, unknowns, theta, params, options):
     control = _initial_control(problem, fit.trajectory.noise_px)
     solver = _Solver(problem, options)
     control, sigma, r, w, J = solver.run(control, fit.trajectory.noise_px, 3)
-
     rows = problem.rows
     cam = obs.camera[rows]
     dt_dtheta = np.zeros((len(rows), len(unknowns)))
-    jac = clock_jacobian(logged_s[rows], obs.uv[rows, 1], params["height"][cam])
+    jac = params.jacobian(logged_s[rows], obs.uv[rows, 1], cam)
     for j, (c, p) in enumerate(unknowns):
         dt_dtheta[:, j] = np.where(cam == c, jac[:, PARAMETERS.index(p)], 0.0)
     for _ in range(_ITERATIONS):
@@ -229,11 +270,163 @@ def _solve_joint(obs, rig, unknowns, theta, params, options):
             control, sigma, r, w, J = solver.run(control, sigma, 1)
         if moved < 1e-7:
             break
+    break_cols = _BreakColumns(problem, spacing)
+    # each regularized camera's line error, δstart + δperiod · (k - k0), as two more columns
+    # (not estimated: they only widen the covariance)
+    extra = np.zeros((len(rows), 0))
+    for c, camera in enumerate(rig.cameras):
+        rep = (regularized or {}).get(camera.name)
+        if rep is not None:
+            k = (obs.frame_index[rows] - rep.first_index).astype(np.float64)
+            extra = np.c_[extra, (cam == c) * 1.0, np.where(cam == c, k, 0.0)]
     # σ corrected for the degrees of freedom the fit absorbs; the covariance there
     _, dof = _information(problem, control, sigma, r, J)
     control, theta, sigma, r, w, J, S, _ = _joint_step(
-        problem, solver, obs, unknowns, theta, params, control, sigma, dt_dtheta, t0, dof)
-    return problem, control, theta, sigma, r, w, S
+        problem, solver, obs, unknowns, theta, params, control, sigma,
+        np.c_[dt_dtheta, extra], t0, dof, break_cols, n_extra=extra.shape[1])
+    # the covariance's pixel noise: the RMS of the inlying residuals corrected for the degrees
+    # of freedom the fit absorbs (the median-based σ that weighs the solve is robust but
+    # noisy: ±8 % on an 8 s session, which the standard deviations would inherit)
+    s2 = np.sum(r * r, axis=1) / sigma**2
+    inlier = s2 < 2 * _CAUCHY**2
+    p_eff = 2 * len(r) * (1 - 1 / dof**2)
+    if np.count_nonzero(inlier) * 2 > p_eff + 10:
+        sigma_cov = max(float(np.sqrt(np.sum(r[inlier] ** 2)
+                                      / (2 * np.count_nonzero(inlier) - p_eff))),
+                        options.min_noise_px)
+        S = S * (sigma / sigma_cov) ** 2
+        sigma = sigma_cov
+    return problem, control, theta, sigma, r, w, S, len(unknowns) + len(break_cols)
+
+
+def _nuisance_covariance(rig, regularized) -> np.ndarray:
+    """Block-diagonal covariance of the regularized lines' (start, period), rig order."""
+    blocks = []
+    for camera in rig.cameras:
+        rep = (regularized or {}).get(camera.name)
+        if rep is not None:
+            a, b, c = (x if np.isfinite(x) else 0.0 for x in rep.covariance)
+            blocks.append(np.array([[a, b], [b, c]]))
+    out = np.zeros((2 * len(blocks), 2 * len(blocks)))
+    for i, block in enumerate(blocks):
+        out[2 * i:2 * i + 2, 2 * i:2 * i + 2] = block
+    return out
+
+
+class _BreakColumns:
+    """The breaks (triple knots) of a problem's pieces as parameters of the covariance: where
+    each sits in its piece's knot vector, and the reprojection Jacobian of its instant at
+    fixed control points (central differences of the basis: the curve moves only within
+    three knot spans of the break). The instants themselves are estimated by
+    :func:`pslog.estimation.trajectory._refine_breaks` between the joint steps (a joint step
+    on them would need the motion prior's dependence on them, which moves the knot spans)."""
+
+    def __init__(self, problem: _Problem, spacing: float):
+        self.problem, self.spacing = problem, spacing
+        self.items = []  # (piece, index of the first of its three knots)
+        for p, k in enumerate(problem.knots):
+            inner = np.unique(k)[1:-1]
+            for x in inner:
+                idx = np.flatnonzero(k == x)
+                if len(idx) >= 3:
+                    self.items.append((p, int(idx[0])))
+        # each piece's rows, in the problem's row order (problem.rows is their concatenation)
+        sizes = [len(r) for r in problem.rows_of_piece]
+        self.row0 = np.r_[0, np.cumsum(sizes)].astype(np.int64)
+
+    def __len__(self) -> int:
+        return len(self.items)
+
+    def columns(self, control: np.ndarray, J: np.ndarray):
+        """Per break: the rows (indices into ``problem.rows``) its instant moves and
+        ``∂r/∂τ`` there (n_rows, 2)."""
+        problem = self.problem
+        out = []
+        h = 1e-6
+        for p, i in self.items:
+            k = problem.knots[p]
+            lo, hi = k[max(i - 4, 0)], k[min(i + 6, len(k) - 1)]
+            local = np.arange(self.row0[p], self.row0[p + 1])
+            t = problem.t[problem.rows[local]]
+            local = local[(t >= lo) & (t <= hi)]
+            t = problem.t[problem.rows[local]]
+            X = []
+            for sign in (1.0, -1.0):
+                kk = k.copy()
+                kk[i:i + 3] += sign * h
+                first, N = basis(kk, t, 0)
+                index = first[:, None] + np.arange(DEGREE + 1) + problem.offset[p]
+                X.append(np.einsum("na,nad->nd", N[:, 0], control[index]))
+            dX = (X[0] - X[1]) / (2 * h)
+            out.append((local, np.einsum("naj,nj->na", J[local], dX)))
+        return out
+
+
+class _Clocks:
+    """The clock parameters as the estimator sees them: each camera's time
+
+        τ = ℓ + o'_c + d_c · 1e-6 · (ℓ - ℓ_m) + r_c · (v / height_c - 1/2)
+
+    i.e. the readout referred to the image's centre row and the drift to the middle ``ℓ_m``
+    of the logged times, on a clock ``r_1 / 2`` behind the session clock (a common shift of
+    every time is absorbed by the trajectory, so this is the same model). With the rig's
+    parametrisation (:mod:`pslog.timing`) a readout moves a camera's mean time by half of
+    itself and a drift its mean time by ``d · ℓ_m``: offsets, readouts and drifts are then
+    strongly correlated and Gauss–Newton crawls along their valley; here they are nearly
+    independent. ``o'_c = o_c + d_c · 1e-6 · ℓ_m + (r_c - r_1) / 2`` (camera 1's ``o'`` is 0)."""
+
+    def __init__(self, rig: Rig, unknowns, l_mid: float):
+        p = camera_parameters(rig)
+        self.height = p["height"]
+        self.unknowns, self.l_mid = list(unknowns), l_mid
+        self.base = self._internal(np.stack([p["clock_offset"], p["clock_drift_ppm"],
+                                             p["readout"]], axis=1))
+        self.index = [(c, PARAMETERS.index(name)) for c, name in self.unknowns]
+
+    def _internal(self, ext: np.ndarray) -> np.ndarray:
+        o, d, r = ext.T
+        return np.stack([o + d * 1e-6 * self.l_mid + (r - r[0]) / 2, d, r], axis=1)
+
+    def _external(self, inn: np.ndarray) -> np.ndarray:
+        o, d, r = inn.T
+        return np.stack([o - d * 1e-6 * self.l_mid - (r - r[0]) / 2, d, r], axis=1)
+
+    def _full(self, theta: np.ndarray) -> np.ndarray:
+        inn = self.base.copy()
+        for (c, k), value in zip(self.index, theta, strict=True):
+            inn[c, k] = value
+        return inn
+
+    def to_internal(self, theta_ext: np.ndarray) -> np.ndarray:
+        ext = self._external(self.base)
+        for (c, k), value in zip(self.index, theta_ext, strict=True):
+            ext[c, k] = value
+        inn = self._internal(ext)
+        return np.array([inn[c, k] for c, k in self.index])
+
+    def to_external(self, theta: np.ndarray) -> np.ndarray:
+        ext = self._external(self._full(theta))
+        return np.array([ext[c, k] for c, k in self.index])
+
+    def to_external_matrix(self) -> np.ndarray:
+        """``∂θ_rig / ∂θ`` (the map is affine)."""
+        q = len(self.index)
+        zero = self.to_external(np.zeros(q))
+        return np.stack([self.to_external(np.eye(q)[j]) - zero for j in range(q)], axis=1) \
+            if q else np.zeros((0, 0))
+
+    def times(self, obs: Observations, theta: np.ndarray) -> np.ndarray:
+        """Capture times τ (s) of every observation on the estimator's clock."""
+        inn = self._full(theta)
+        cam = obs.camera
+        logged = obs.time_ns / NS
+        return (logged + inn[cam, 0] + inn[cam, 1] * 1e-6 * (logged - self.l_mid)
+                + inn[cam, 2] * (obs.uv[:, 1] / self.height[cam] - 0.5))
+
+    def jacobian(self, logged_s: np.ndarray, v: np.ndarray, cam: np.ndarray) -> np.ndarray:
+        """``∂τ/∂(o', d, r)`` (n, 3)."""
+        return np.stack([np.ones_like(logged_s), 1e-6 * (logged_s - self.l_mid),
+                         v / self.height[cam] - 0.5], axis=1)
 
 
 def _windows(obs: Observations) -> Observations:
@@ -242,23 +435,13 @@ def _windows(obs: Observations) -> Observations:
     windows' spread keeps the drift's lever arm) at a bounded cost."""
     t = obs.time_ns / NS
     span = t[-1] - t[0] if len(t) else 0.0
-    if span <= _N_WINDOWS * _WINDOW_S:
+    if span <= _ALL_UP_TO_S:
         return obs
     starts = t[0] + np.linspace(0.0, span - _WINDOW_S, _N_WINDOWS)
     keep = np.zeros(len(t), dtype=bool)
     for a in starts:
         keep |= (t >= a) & (t < a + _WINDOW_S)
     return obs.select(keep)
-
-
-def _times(obs: Observations, unknowns, theta, params) -> np.ndarray:
-    """True capture times (s, session clock) of every observation by the timing model."""
-    p = {k: v.copy() for k, v in params.items()}
-    for (c, name), value in zip(unknowns, theta, strict=True):
-        p[_KEY[name]][c] = value
-    cam = obs.camera
-    return true_times_s(obs.time_ns / NS, obs.uv[:, 1], p["height"][cam],
-                        p["clock_offset"][cam], p["clock_drift_ppm"][cam], p["readout"][cam])
 
 
 def _observations_at(obs: Observations, times_s: np.ndarray, order: np.ndarray
@@ -279,11 +462,16 @@ def _observations_at(obs: Observations, times_s: np.ndarray, order: np.ndarray
 
 
 def _joint_step(problem, solver, obs, unknowns, theta, params, control, sigma, dt_dtheta, t0,
-                dof: float = 1.0):
-    """One robust Gauss–Newton step on (control points, clocks) by the Schur complement; σ
-    is ``dof`` · 1.4826 · median |residual| at the step's start."""
-    q = len(unknowns)
-    times = _times(obs, unknowns, theta, params) - t0
+                dof: float = 1.0, breaks: _BreakColumns | None = None, n_extra: int = 0):
+    """One robust Gauss–Newton step on (control points, clocks) by the Schur complement of
+    the banded control-point block; σ is ``dof`` · 1.4826 · median |residual| at the step's
+    start. Returns the information ``S`` of (clocks, breaks, extra): the breaks' instants
+    (``breaks``) and the ``n_extra`` last columns of ``dt_dtheta`` (time perturbations) are
+    not stepped, only kept in ``S`` (their information with the clocks widens the clocks'
+    covariance)."""
+    q, nb = len(unknowns), (len(breaks) if breaks is not None else 0)
+    Q = q + nb + n_extra
+    times = params.times(obs, theta) - t0
     problem.set_times(times)
     X = problem.positions(control)
     V = problem.velocities(control)
@@ -292,35 +480,60 @@ def _joint_step(problem, solver, obs, unknowns, theta, params, control, sigma, d
     s = np.sum(r * r, axis=1) / sigma**2
     w = 1 / (1 + s / _CAUCHY**2)
     n = 3 * problem.m
+    n_obs = len(r)
     start, E, _ = problem.data_rows(J, np.zeros_like(r))
     ww = np.repeat(w, 2) / sigma**2
     ab, rhs_c = _normal.accumulate(start, E, -r.reshape(-1), ww, n, problem.prior_ab.copy(),
                                    np.zeros(n))
     rhs_c -= _banded_matvec(problem.prior_ab, control.reshape(-1)) - problem.prior_rhs
-    # clock columns: ∂r/∂θ = J · p'(t) · ∂t/∂θ
+    # bordered columns, sparse: clocks ∂r/∂θ = J · p'(t) · ∂t/∂θ (a camera's rows), breaks
+    # ∂r/∂τ (the rows within three knot spans)
     JV = np.einsum("naj,nj->na", J, V)  # (n_obs, 2)
-    G = (JV[:, :, None] * dt_dtheta[:, None, :]).reshape(-1, q)  # (2 n_obs, q)
-    cols = (start[:, None] + np.arange(12)).ravel()
-    B = np.stack([np.bincount(cols, (ww[:, None] * E * G[:, j:j + 1]).ravel(), minlength=n)
-                  for j in range(q)], axis=1) if q else np.zeros((n, 0))
-    C = (G * ww[:, None]).T @ G
-    rhs_t = -(G * ww[:, None]).T @ r.reshape(-1)
+    g_rows, g_cols, g_vals = [], [], []
+    for j in range(q + n_extra):
+        mine = np.flatnonzero(dt_dtheta[:, j])
+        g_rows.append(mine)
+        g_cols.append(np.full(len(mine), j if j < q else j + nb))
+        g_vals.append(JV[mine] * dt_dtheta[mine, j:j + 1])
+    for b, (local, dr) in enumerate(breaks.columns(control, J) if nb else ()):
+        g_rows.append(local)
+        g_cols.append(np.full(len(local), q + b))
+        g_vals.append(dr)
+    rows_ = np.concatenate(g_rows) if g_rows else np.zeros(0, np.int64)
+    cols_ = np.concatenate(g_cols) if g_cols else np.zeros(0, np.int64)
+    vals_ = np.concatenate(g_vals) if g_vals else np.zeros((0, 2))
+    G = sparse.csr_matrix((vals_.reshape(-1), (np.c_[2 * rows_, 2 * rows_ + 1].reshape(-1),
+                                               np.repeat(cols_, 2))), shape=(2 * n_obs, Q))
+    D = sparse.csr_matrix((E.reshape(-1), ((np.arange(2 * n_obs)[:, None]
+                                            + np.zeros(12, np.int64)).reshape(-1),
+                                           (start[:, None] + np.arange(12)).reshape(-1))),
+                          shape=(2 * n_obs, n))
+    WG = G.multiply(ww[:, None]).tocsr()
+    B = (D.T @ WG).toarray()
+    C = (G.T @ WG).toarray()
+    rhs_t = -(WG.T @ r.reshape(-1))
     U = _normal.factor(ab)
-    Y = _normal.solve(U, B) if q else np.zeros((n, 0))
+    Y = _normal.solve(U, B) if Q else np.zeros((n, 0))
     S = C - B.T @ Y
     z = _normal.solve(U, rhs_c)
-    d_theta = np.linalg.solve(S, rhs_t - B.T @ z) if q else np.zeros(0)
-    d_c = z - Y @ d_theta
+    d_theta = np.linalg.solve(S[:q, :q], rhs_t[:q] - B[:, :q].T @ z) if q else np.zeros(0)
+    d_c = z - Y[:, :q] @ d_theta
     before = solver.cost(control, r, sigma)
-    step = 1.0
+    step, accepted = 1.0, False
     for _ in range(6):  # step halving keeps the robust cost from rising
         trial_c = control + step * d_c.reshape(-1, 3)
         trial_t = theta + step * d_theta
-        problem.set_times(_times(obs, unknowns, trial_t, params) - t0)
+        problem.set_times(params.times(obs, trial_t) - t0)
         r_trial, J_trial = problem.project(problem.positions(trial_c))
         if solver.cost(trial_c, r_trial, sigma) <= before:
+            accepted = True
             break
         step /= 2
+    if not accepted:  # no descent along this direction: stay (the caller stops)
+        step = 0.0
+        trial_c, trial_t = control, theta
+        problem.set_times(times)
+        r_trial, J_trial = r, J
     moved = max(float(np.max(np.abs(step * d_c), initial=0.0)),
                 float(np.max(np.abs(step * d_theta) * _scale_of(unknowns), initial=0.0)))
     s = np.sum(r_trial * r_trial, axis=1) / sigma**2
@@ -375,7 +588,7 @@ def _pair_cost(sub, rig, c, unknowns, theta, j, value, params, options) -> float
     """Robust cost of a quick two-camera trajectory with camera ``c``'s offset at ``value``."""
     trial = theta.copy()
     trial[j] = value
-    times = _times(sub, unknowns, trial, params)
+    times = params.times(sub, trial)
     order = np.argsort(times, kind="stable")
     ordered = _observations_at(sub, times, order)
     pieces = split_pieces(ordered, np.ones(len(ordered), bool), options.max_gap_s)
