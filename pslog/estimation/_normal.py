@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.linalg import cho_solve_banded, cholesky_banded
+from scipy.sparse import csr_matrix
 
 from ..errors import FusionError
 
@@ -44,6 +45,87 @@ def accumulate(start: np.ndarray, E: np.ndarray, b: np.ndarray, w: np.ndarray, n
     return ab, rhs
 
 
+_PAIRS = [(a, b) for a in range(4) for b in range(a, 4)]  # control-point pairs, b >= a
+_PA = np.array([a for a, _ in _PAIRS])
+_PB = np.array([b for _, b in _PAIRS])
+_SYM = np.array([0, 1, 2, 1, 3, 4, 2, 4, 5])  # 3 x 3 symmetric from its upper triangle
+_UPPER9 = np.array([0, 1, 2, 4, 5, 8])  # the upper triangle of a flattened 3 x 3
+
+
+def accumulate_points(first: np.ndarray, N: np.ndarray, M: np.ndarray, v: np.ndarray, m: int,
+                      ab: np.ndarray | None = None, rhs: np.ndarray | None = None
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """Add the terms of points ``p_i = Σ_a N[i, a] c[first_i + a]`` to normal equations.
+
+    Each term is a quadratic form ``p_iᵀ M_i p_i - 2 v_iᵀ p_i`` of a point on the spline
+    (a detection: ``M = w JᵀJ``, ``v = w Jᵀ z``; the prior: ``M = w I``, ``v = w g``); its
+    contribution to the normal matrix is the 12 x 12 block ``(N_i N_iᵀ) ⊗ M_i`` at control
+    points ``first_i .. first_i + 3``, and ``N_i ⊗ v_i`` to the right-hand side. The blocks are
+    summed per ``first`` (a sort and one ``reduceat``) and written into the band once — the
+    same sums :func:`accumulate` forms row by row.
+
+    Parameters
+    ----------
+    first : (r,) int64, first control point of each term
+    N : (r, 4) float64, basis values
+    M : (r, 3, 3) float64, symmetric
+    v : (r, 3) float64
+    m : int, number of control points (``3m`` unknowns)
+    ab, rhs : as :func:`accumulate`
+
+    Returns
+    -------
+    ab, rhs
+    """
+    n = 3 * m
+    ab = np.zeros((WIDTH, n)) if ab is None else ab
+    rhs = np.zeros(n) if rhs is None else rhs
+    r = len(first)
+    if r == 0:
+        return ab, rhs
+    first = np.asarray(first, dtype=np.int64)
+    if np.any(first[1:] < first[:-1]):
+        order = np.argsort(first, kind="stable")
+        first, N, M, v = first[order], N[order], M[order], v[order]
+    starts = np.flatnonzero(np.r_[True, first[1:] != first[:-1]])
+    group = first[starts]
+    # sums per first: a sparse (groups x terms) matrix of ones times the per-term products
+    G = csr_matrix((np.ones(r), np.arange(r), np.r_[starts, r]), shape=(len(starts), r))
+    upper = np.take(M.reshape(r, 9), _UPPER9, axis=1)  # (r, 6)
+    NN = np.take(N, _PA, axis=1) * np.take(N, _PB, axis=1)  # (r, 10)
+    sums = G @ (NN[:, :, None] * upper[:, None, :]).reshape(r, 60)
+    sums = np.take(sums.reshape(-1, 10, 6), _SYM, axis=2).reshape(-1, 10, 3, 3)
+    vs = G @ (N[:, :, None] * v[:, None, :]).reshape(r, 12)
+    # per first p, then the block band: blocks[p, k] = Σ_{p, p+k}, the sum over the terms
+    # of every first p - a of their pair (a, a + k)
+    per_first = np.zeros((m + 3, 10, 3, 3))
+    per_first[group] = sums
+    blocks = np.zeros((m + 3, 4, 3, 3))
+    for i, (a, b) in enumerate(_PAIRS):
+        blocks[a:, b - a] += per_first[:m + 3 - a, i]
+    _blocks_to_band(blocks[:m], ab)
+    per_first = np.zeros((m + 3, 4, 3))
+    per_first[group] = vs.reshape(-1, 4, 3)
+    rv = np.zeros((m + 3, 3))
+    for a in range(4):
+        rv[a:] += per_first[:m + 3 - a, a]
+    rhs += rv[:m].reshape(-1)
+    return ab, rhs
+
+
+def _blocks_to_band(blocks: np.ndarray, ab: np.ndarray) -> None:
+    """Add a block band (m, 4, 3, 3) (``blocks[p, k] = A_{p, p+k}``) to upper banded storage."""
+    m = len(blocks)
+    for k in range(4):
+        for d in range(3):
+            for e in range(3):
+                off = 3 * k + e - d  # column minus row
+                if off < 0:
+                    continue
+                # rows 3p + d, columns 3(p + k) + e for p + k < m
+                ab[_U - off, 3 * k + e::3][:m - k] += blocks[:m - k, k, d, e]
+
+
 def factor(ab: np.ndarray) -> np.ndarray:
     """Upper banded Cholesky factor ``U`` (``A = Uᵀ U``) of an information matrix; a
     :class:`FusionError` if it is not positive definite (a trajectory the detections and the
@@ -78,10 +160,88 @@ def covariance_band(U: np.ndarray) -> np.ndarray:
     unknowns. (The same recurrence grouped by 3 x 3 blocks is algebraically identical but
     numerically unstable on these spline problems: errors grew ~6x per control point.)
 
+    The recurrence is run as what it is, an affine map of the 12 x 12 window
+    ``W_r = Σ[r:r+12, r:r+12]``: ``W_r = T_r W_{r+1} T_rᵀ + e₀e₀ᵀ / U_rr²`` with ``T_r`` the
+    shift whose first row is ``-U[r, r+1:r+12] / U_rr`` (:func:`_takahashi_step`, the scalar
+    recurrence above, per unknown). The unknowns are cut into chunks; each chunk's composed
+    map (the product of its ``T_r``, and its accumulated noise term) is formed for all chunks
+    at once, the windows at the chunk boundaries follow in one short sequential pass, and then
+    every chunk runs the per-unknown recurrence from its boundary window, all chunks at once.
+
     Returns
     -------
     band : (m, 4, 3, 3), ``band[i, k] = Σ_{i, i+k}`` (zero beyond the last control point)
     """
+    n = U.shape[1]
+    m = n // 3
+    L = max(WIDTH, int(np.sqrt(n)) // 2)  # unknowns per chunk
+    C = -(-n // L)
+    # padded to whole chunks by unknowns of unit variance coupled to nothing (Σ rows of the
+    # real unknowns are unchanged: no real row of U reaches them)
+    diag = np.ones(C * L)
+    diag[:n] = U[_U]
+    right = np.zeros((C * L, _U))
+    for d in range(1, WIDTH):
+        right[: n - d, d - 1] = U[_U - d, d:]
+    a = (right / diag[:, None]).reshape(C, L, _U)  # -first row of T_r, per chunk
+    q = (1.0 / diag**2).reshape(C, L)
+    # each chunk's map: W_start = Phi W_end Phiᵀ + Q
+    phi = np.broadcast_to(np.eye(WIDTH), (C, WIDTH, WIDTH)).copy()
+    Q = np.zeros((C, WIDTH, WIDTH))
+    for j in range(L - 1, -1, -1):
+        phi = _shift_left(a[:, j], phi)
+        Q = _takahashi_step(a[:, j], q[:, j], Q)
+    # the windows where each chunk ends (where the next begins), from the last
+    ends = np.zeros((C, WIDTH, WIDTH))
+    window = np.zeros((WIDTH, WIDTH))
+    for c in range(C - 1, -1, -1):
+        ends[c] = window
+        window = phi[c] @ window @ phi[c].T + Q[c]
+    rows = np.empty((C, L, WIDTH))  # rows[c, j, k] = Σ_{r, r+k} for r = cL + j
+    window = ends
+    for j in range(L - 1, -1, -1):
+        window = _takahashi_step(a[:, j], q[:, j], window)
+        rows[:, j] = window[:, 0]
+    rows = rows.reshape(C * L, WIDTH)[:n]
+    rows = np.concatenate([rows, np.zeros((WIDTH, WIDTH))])
+    # block (i, i+k), entry (a, b) = Σ_{3i+a, 3i+3k+b} = rows[3i+a, 3k+b-a] (b >= a if k = 0)
+    band = np.zeros((m, 4, 3, 3))
+    base = 3 * np.arange(m)
+    for k in range(4):
+        for a_ in range(3):
+            for b in range(3):
+                j = 3 * k + b - a_
+                if j >= 0:
+                    band[:, k, a_, b] = rows[base + a_, j]
+                else:  # below the diagonal of a diagonal block: symmetry
+                    band[:, k, a_, b] = rows[base + b, -j]
+    return band
+
+
+def _shift_left(a: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """``T X`` for (C,) shifts ``T`` (first row ``[-a, 0]``, then the identity shifted down),
+    a (C, 11), X (C, 12, k)."""
+    out = np.empty_like(X)
+    out[:, 0] = -np.einsum("ck,ckj->cj", a, X[:, :_U])
+    out[:, 1:] = X[:, :_U]
+    return out
+
+
+def _takahashi_step(a: np.ndarray, q: np.ndarray, W: np.ndarray) -> np.ndarray:
+    """``T W Tᵀ + q e₀e₀ᵀ``: one unknown of the Takahashi recurrence, for (C,) windows
+    (a (C, 11) = ``U[r, r+1:r+12] / U_rr``, q (C,) = ``1 / U_rr²``, W (C, 12, 12))."""
+    s_next = W[:, :_U, :_U]
+    row = -np.einsum("ck,ckj->cj", a, s_next)  # Σ_{r, r+1..r+11}
+    out = np.empty_like(W)
+    out[:, 0, 0] = q - np.einsum("ck,ck->c", a, row)
+    out[:, 0, 1:] = row
+    out[:, 1:, 0] = row
+    out[:, 1:, 1:] = s_next
+    return out
+
+
+def covariance_band_sequential(U: np.ndarray) -> np.ndarray:
+    """:func:`covariance_band` one unknown at a time (the reference the tests compare with)."""
     n = U.shape[1]
     m = n // 3
     # upper rows of U: row r, columns r+1..r+11 (zero beyond n)

@@ -47,17 +47,20 @@ def project_with_jacobian(camera: Camera, points_world: np.ndarray
     uv = np.stack([K[0, 0] * xd + K[0, 1] * yd + K[0, 2], K[1, 1] * yd + K[1, 2]], axis=1)
 
     # ∂(x_d, y_d) / ∂(x, y): the distortion's Jacobian (as in Camera.undistort_normalized)
-    dist = np.empty((len(x), 2, 2))
-    dist[:, 0, 0] = radial + 2 * x * x * d_radial + 2 * p1 * y + 6 * p2 * x
-    dist[:, 0, 1] = 2 * x * y * d_radial + 2 * p1 * x + 2 * p2 * y
-    dist[:, 1, 0] = dist[:, 0, 1]
-    dist[:, 1, 1] = radial + 2 * y * y * d_radial + 6 * p1 * y + 2 * p2 * x
-    # ∂(x, y) / ∂X_c of the perspective division
-    persp = np.zeros((len(x), 2, 3))
-    persp[:, 0, 0] = inv_z
-    persp[:, 1, 1] = inv_z
-    persp[:, 0, 2] = -x * inv_z
-    persp[:, 1, 2] = -y * inv_z
-    K2 = K[:2, :2]
-    jacobian = np.einsum("ij,njk,nkl,lm->nim", K2, dist, persp, camera.R)
+    d00 = radial + 2 * x * x * d_radial + 2 * p1 * y + 6 * p2 * x
+    d01 = 2 * x * y * d_radial + 2 * p1 * x + 2 * p2 * y
+    d11 = radial + 2 * y * y * d_radial + 6 * p1 * y + 2 * p2 * x
+    # ∂(x, y) / ∂X: the perspective division's rows times R, (R₀ - x R₂) / Z and
+    # (R₁ - y R₂) / Z
+    R = camera.R
+    px = inv_z[:, None] * (R[0] - x[:, None] * R[2])
+    py = inv_z[:, None] * (R[1] - y[:, None] * R[2])
+    # K₂ · ∂(x_d, y_d)/∂(x, y), then times the rows above
+    a00 = K[0, 0] * d00 + K[0, 1] * d01
+    a01 = K[0, 0] * d01 + K[0, 1] * d11
+    a10 = K[1, 1] * d01
+    a11 = K[1, 1] * d11
+    jacobian = np.empty((len(x), 2, 3))
+    jacobian[:, 0] = a00[:, None] * px + a01[:, None] * py
+    jacobian[:, 1] = a10[:, None] * px + a11[:, None] * py
     return uv, jacobian

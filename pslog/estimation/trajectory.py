@@ -290,6 +290,17 @@ class _Problem:
         J[self.invalid] = 0.0
         return r, J
 
+    def normal(self, J: np.ndarray, target: np.ndarray, w: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
+        """Normal equations of the prior plus ``Σ_i w_i ‖J_i p(t_i) - target_i‖²``
+        (:func:`_normal.accumulate_points`; the same sums as :meth:`data_rows` fed to
+        :func:`_normal.accumulate`). J (n, 2, 3), target (n, 2), w (n,)."""
+        wJ = w[:, None, None] * J
+        M = np.swapaxes(wJ, 1, 2) @ J
+        v = np.einsum("nai,na->ni", wJ, target)
+        return _normal.accumulate_points(self.first, self.N, M, v, self.m,
+                                         self.prior_ab.copy(), self.prior_rhs.copy())
+
     def data_rows(self, J: np.ndarray, target: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Rows ``E c[start:start+12] - b`` of the linearised reprojection (2 per detection):
@@ -302,37 +313,59 @@ class _Problem:
 def _prior_normal(knots: list[np.ndarray], offset: np.ndarray, m: int, prior: MotionPrior
                   ) -> tuple[np.ndarray, np.ndarray, float]:
     """Normal equations of the motion prior (2), integrated exactly per knot span."""
-    starts, E_rows, b_rows, w_rows = [], [], [], []
+    key = (m, offset.tobytes(), tuple(np.asarray(k, dtype=np.float64).tobytes() for k in knots))
+    parts = _PRIOR_CACHE.pop(key, None)
+    if parts is None:
+        parts = _prior_parts(knots, offset, m)
+    _PRIOR_CACHE[key] = parts  # most recent last
+    while len(_PRIOR_CACHE) > 4:
+        del _PRIOR_CACHE[next(iter(_PRIOR_CACHE))]
+    ab_accel, ab_jerk, pull, length = parts
     g = np.asarray(prior.gravity, dtype=np.float64)
-    gauss = np.array([-1.0, 1.0]) / np.sqrt(3.0)
-    const = 0.0
+    ab = ab_accel / prior.q_accel + ab_jerk / prior.q_jerk
+    rhs = (pull[:, None] * g).reshape(-1) / prior.q_accel
+    return ab, rhs, float(length * (g @ g) / prior.q_accel)
+
+
+#: the prior's parts per knot pattern (:func:`_prior_parts`), the few most recent
+_PRIOR_CACHE: dict = {}
+
+
+def _prior_parts(knots: list[np.ndarray], offset: np.ndarray, m: int
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """The prior's normal equations for ``q_a = q_j = 1`` and ``g`` one: the banded matrices
+    of ``∫ ‖p''‖²`` and of ``∫ ‖p'''‖²``, ``∫ N_k''`` per control point (the rhs is that times
+    ``g / q_a``) and the total length (the constant is that times ``‖g‖² / q_a``)."""
+    firsts, accel, jerk, weights, lengths = [], [], [], [], 0.0
+    node = 1 / np.sqrt(3.0)  # 2-point Gauss-Legendre, weights 1
     for p, k in enumerate(knots):
         lo, hi = k[:-1], k[1:]
         nonempty = hi > lo
         lo, hi = lo[nonempty], hi[nonempty]
         half, mid = (hi - lo) / 2, (hi + lo) / 2
-        for node in gauss:  # ∫ ‖p'' - g‖² / q_a over the span, 2-point Gauss (weights 1)
-            first, N = basis(k, mid + node * half, 2)
-            for d in range(3):
-                E = np.zeros((len(first), 12))
-                E[:, d::3] = N[:, 2]
-                starts.append(3 * (first + offset[p]))
-                E_rows.append(E)
-                b_rows.append(np.full(len(first), g[d]))
-                w_rows.append(half / prior.q_accel)
-        first, N = basis(k, mid, 3)  # ∫ ‖p'''‖² / q_j, constant over the span
-        for d in range(3):
-            E = np.zeros((len(first), 12))
-            E[:, d::3] = N[:, 3]
-            starts.append(3 * (first + offset[p]))
-            E_rows.append(E)
-            b_rows.append(np.zeros(len(first)))
-            w_rows.append(2 * half / prior.q_jerk)
-    start = np.concatenate(starts)
-    b, w = np.concatenate(b_rows), np.concatenate(w_rows)
-    ab, rhs = _normal.accumulate(start, np.concatenate(E_rows), b, w, 3 * m)
-    const = float(np.sum(w * b * b))
-    return ab, rhs, const
+        # ∫ ‖p''‖² over the span at its two Gauss nodes; ∫ ‖p'''‖², constant over the
+        # span, at its midpoint
+        first, N = basis(k, np.concatenate([mid - node * half, mid + node * half, mid]), 3)
+        s = len(mid)
+        firsts.append((first[:2 * s] + offset[p], first[2 * s:] + offset[p]))
+        accel.append(N[:2 * s, 2])
+        jerk.append(N[2 * s:, 3])
+        weights.append((np.r_[half, half], 2 * half))
+        lengths += float(np.sum(2 * half))
+    eye = np.eye(3)
+    wa = np.concatenate([w for w, _ in weights])
+    wj = np.concatenate([w for _, w in weights])
+    fa = np.concatenate([f for f, _ in firsts])
+    fj = np.concatenate([f for _, f in firsts])
+    Na = np.concatenate(accel)
+    ab_accel, _ = _normal.accumulate_points(fa, Na, wa[:, None, None] * eye, np.zeros((len(fa), 3)),
+                                            m)
+    ab_jerk, _ = _normal.accumulate_points(fj, np.concatenate(jerk), wj[:, None, None] * eye,
+                                           np.zeros((len(fj), 3)), m)
+    pull = np.zeros(m + 3)
+    for a in range(4):
+        np.add.at(pull, fa + a, wa * Na[:, a])
+    return ab_accel, ab_jerk, pull[:m], lengths
 
 
 def _prior_cost(problem: _Problem, c: np.ndarray) -> float:
@@ -424,10 +457,7 @@ def _initial_control(problem: _Problem, sigma_px: float) -> np.ndarray:
     for _ in range(2):
         scale = f / np.maximum(depth, 1e-3)
         J = A * scale[:, :, None]
-        start, E, b = problem.data_rows(J, -(a0 * scale))
-        ab, rhs = _normal.accumulate(start, E, b, np.repeat(weight, 2) / sigma_px**2,
-                                     3 * problem.m, problem.prior_ab.copy(),
-                                     problem.prior_rhs.copy())
+        ab, rhs = problem.normal(J, -(a0 * scale), weight / sigma_px**2)
         control = _normal.solve(_normal.factor(ab), rhs).reshape(-1, 3)
         X = problem.positions(control)
         depth = np.maximum(np.einsum("nj,nj->n", R[:, 2], X) + tt[:, 2], 1e-3)[:, None]
@@ -482,10 +512,7 @@ class _Solver:
             s = np.sum(r * r, axis=1) / sigma**2
             w = 1 / (1 + s / _CAUCHY**2)  # Cauchy IRLS weight
             target = np.einsum("naj,nj->na", J, X) - r  # linearised: J X_new ≈ J X - r
-            start, E, b = problem.data_rows(J, target)
-            ab, rhs = _normal.accumulate(start, E, b, np.repeat(w, 2) / sigma**2,
-                                         3 * problem.m, problem.prior_ab.copy(),
-                                         problem.prior_rhs.copy())
+            ab, rhs = problem.normal(J, target, w / sigma**2)
             new = _normal.solve(_normal.factor(ab), rhs).reshape(-1, 3)
             before = self.cost(control, r, sigma)
             step = 1.0
@@ -602,16 +629,11 @@ def fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions | None = 
 def _refit_control(problem: _Problem, X: np.ndarray) -> np.ndarray:
     """Control points on new knots closest to positions ``X`` at the observations (with the
     prior): the starting point after breaks are inserted."""
-    n = len(X)
-    J = np.broadcast_to(np.eye(3)[None, :2, :], (n, 2, 3)).copy()
-    # two coordinates per row pair: use x,y then z,x to cover all three
-    start, E, b = problem.data_rows(J, X[:, :2])
-    J2 = np.broadcast_to(np.eye(3)[None, [2, 0], :], (n, 2, 3)).copy()
-    start2, E2, b2 = problem.data_rows(J2, X[:, [2, 0]])
-    w = np.full(2 * n, 1e6)
-    ab, rhs = _normal.accumulate(start, E, b, w, 3 * problem.m, problem.prior_ab.copy(),
-                                 problem.prior_rhs.copy())
-    ab, rhs = _normal.accumulate(start2, E2, b2, w, 3 * problem.m, ab, rhs)
+    # each position's x, y, z at weight 1e6 (x twice: the rows pair (x, y) and (z, x))
+    M = np.broadcast_to(np.diag([2e6, 1e6, 1e6]), (len(X), 3, 3))
+    ab, rhs = _normal.accumulate_points(problem.first, problem.N, M, X * [2e6, 1e6, 1e6],
+                                        problem.m, problem.prior_ab.copy(),
+                                        problem.prior_rhs.copy())
     return _normal.solve(_normal.factor(ab), rhs).reshape(-1, 3)
 
 
@@ -625,9 +647,7 @@ def _information(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
     s = np.sum(r * r, axis=1) / sigma**2
     w = 1 / (1 + s / _CAUCHY**2)
     target = np.einsum("naj,nj->na", J, X) - r
-    start, E, b = problem.data_rows(J, target)
-    ab, _ = _normal.accumulate(start, E, b, np.repeat(w, 2) / sigma**2, 3 * problem.m,
-                               problem.prior_ab.copy(), problem.prior_rhs.copy())
+    ab, _ = problem.normal(J, target, w / sigma**2)
     band = _normal.covariance_band(_normal.factor(ab))
     cov_X = _normal.marginal(band, problem.first, problem.N)
     p_eff = float(np.sum(w * np.einsum("naj,njk,nak->n", J, cov_X, J)) / sigma**2)
@@ -646,7 +666,7 @@ def _find_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
     target = np.einsum("naj,nj->na", J, X) - r  # the linearised measurements
     weight = w / sigma**2
     t_obs = problem.t[problem.rows]
-    out = []
+    jobs = []
     row0 = 0
     for p, k in enumerate(problem.knots):
         # the piece's rows in time order (the clock estimator moves the times)
@@ -666,7 +686,6 @@ def _find_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
         centers = mids[peak]
         centers = centers[np.all(np.abs(centers[:, None] - known[p][None, :]) > spacing, axis=1)]
         if len(t) < 8 or len(centers) == 0:
-            out.append(np.zeros(0))
             continue
         # the jump lies near the peak: search two detections beyond its neighbours, leaving
         # detections of two cameras in the piece at either end (:func:`_end_limits`)
@@ -676,10 +695,13 @@ def _find_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
         b = np.minimum(t[np.clip(j + 2, 0, len(t) - 1)], last_ok)
         ok = a < b
         centers, a, b = centers[ok], a[ok], b[ok]
-        limits = _neighbours(centers, known[p])
-        tau, gain = _breaks.scan(t, J[here], target[here], weight[here], centers,
-                                 np.stack([a, b], axis=1), limits, spacing,
-                                 _WINDOW_SPANS * spacing, options.prior)
+        if len(centers) == 0:
+            continue
+        jobs.append((p, here, centers, np.stack([a, b], axis=1),
+                     _neighbours(centers, known[p])))
+    results = _scan_pieces(jobs, t_obs, J, target, weight, spacing, options)
+    out = [np.zeros(0) for _ in problem.knots]
+    for (p, *_), (tau, gain) in zip(jobs, results, strict=True):
         found: list[float] = []
         for i in np.argsort(-gain):
             if gain[i] <= options.break_threshold:
@@ -687,8 +709,36 @@ def _find_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
             if all(abs(tau[i] - f) > 1.5 * spacing for f in found) and all(
                     abs(tau[i] - f) > spacing for f in known[p]):
                 found.append(float(tau[i]))
-        out.append(np.sort(np.array(found)))
+        out[p] = np.sort(np.array(found))
     return out
+
+
+def _scan_pieces(jobs: list, t_obs: np.ndarray, J: np.ndarray, target: np.ndarray,
+                 weight: np.ndarray, spacing: float, options: SmoothOptions) -> list:
+    """:func:`_breaks.scan` of every piece's candidates in one batched call.
+
+    jobs : list of (piece, rows in time order, centres (C,), bounds (C, 2), limits (C, 2));
+    each window is also cut at its piece's first and last detection, so the pieces' rows
+    laid end to end (in time order: the pieces follow each other in time) serve as one.
+    Returns a (tau, gain) per job."""
+    if not jobs:
+        return []
+    rows = np.concatenate([here for _, here, *_ in jobs])
+    t = t_obs[rows]
+    if np.any(np.diff(t) < 0):  # moved times made pieces overlap: one piece at a time
+        return [_scan_pieces([job], t_obs, J, target, weight, spacing, options)[0]
+                for job in jobs] if len(jobs) > 1 else [_breaks.scan(
+                    t, J[rows], target[rows], weight[rows], jobs[0][2], jobs[0][3],
+                    jobs[0][4], spacing, _WINDOW_SPANS * spacing, options.prior)]
+    limits = np.concatenate([np.stack([np.maximum(lim[:, 0], t_obs[here[0]]),
+                                       np.minimum(lim[:, 1], t_obs[here[-1]])], axis=1)
+                             for _, here, _, _, lim in jobs])
+    tau, gain = _breaks.scan(t, J[rows], target[rows], weight[rows],
+                             np.concatenate([c for _, _, c, _, _ in jobs]),
+                             np.concatenate([b for _, _, _, b, _ in jobs]), limits, spacing,
+                             _WINDOW_SPANS * spacing, options.prior)
+    cuts = np.cumsum([len(c) for _, _, c, _, _ in jobs])[:-1]
+    return list(zip(np.split(tau, cuts), np.split(gain, cuts), strict=True))
 
 
 def _end_limits(t: np.ndarray, camera: np.ndarray) -> tuple[float, float]:
@@ -723,7 +773,7 @@ def _refine_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.n
     target = np.einsum("naj,nj->na", J, X) - r
     weight = w / sigma**2
     t_obs = problem.t[problem.rows]
-    out = []
+    jobs = []
     row0 = 0
     for p, known in enumerate(breaks):
         # the piece's rows in time order (the clock estimator moves the times)
@@ -732,18 +782,19 @@ def _refine_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.n
         row0 += len(problem.rows_of_piece[p])
         t = t_obs[here]
         if len(known) == 0:
-            out.append(known)
             continue
         first_ok, last_ok = _end_limits(t, problem.obs.camera[problem.rows][here])
         a = np.maximum(known - spacing, first_ok)
         b = np.minimum(known + spacing, last_ok)
         ok = a < b
         limits = np.stack([np.r_[-np.inf, known[:-1]], np.r_[known[1:], np.inf]], axis=1)
-        tau, _ = _breaks.scan(t, J[here], target[here], weight[here], known[ok],
-                              np.stack([a[ok], b[ok]], axis=1), limits[ok], spacing,
-                              _WINDOW_SPANS * spacing, options.prior)
+        if np.any(ok):
+            jobs.append((p, here, known[ok], np.stack([a[ok], b[ok]], axis=1), limits[ok]))
+    results = _scan_pieces(jobs, t_obs, J, target, weight, spacing, options)
+    out = [np.zeros(0) for _ in breaks]
+    for (p, *_), (tau, _) in zip(jobs, results, strict=True):
         # a break the moved detections no longer allow (too near a piece's end) is dropped
         new = np.sort(tau)
         keep = np.r_[True, np.diff(new) > spacing]  # never two breaks in one span
-        out.append(new[keep])
+        out[p] = new[keep]
     return out
