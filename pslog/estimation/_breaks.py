@@ -132,44 +132,62 @@ class _Base:
         wJ = wi[..., None, None] * Ji
         self.M = np.einsum("bwai,bwaj->bwij", wJ, Ji)
         self.u = np.einsum("bwai,bwa->bwi", wJ, zi - np.einsum("bwaj,bwj->bwa", Ji, X0))
-        self.s = s  # detection times in spacings from the centre
+        self.s_sorted = np.where(inside, s, 1e6)  # times in spacings from the centre, sorted
         self.local, self.spacing = local, spacing
 
 
-def _one_spline(kn: np.ndarray, x: np.ndarray, derivatives: tuple[int, ...]) -> list:
-    """Derivatives (per unit of ``x``) of the cubic B-spline on the five knots ``kn`` (..., 5)
-    at ``x`` (..., P), one array (..., P) per order in ``derivatives`` (Cox–de Boor; a term
-    over an empty knot interval is 0)."""
-    kn = kn[..., None, :]
-    x = x[..., None]
-    diff = {}
+def _mul(p: list, q: list) -> list:
+    """Product of two polynomials given by power-basis coefficient lists."""
+    out = [0.0] * (len(p) + len(q) - 1)
+    for i, a in enumerate(p):
+        for k, b in enumerate(q):
+            out[i + k] = out[i + k] + a * b
+    return out
 
-    def inv(i, p):  # 1 / (k_{i+p} - k_i), 0 for an empty interval
-        if (i, p) not in diff:
-            den = kn[..., i + p] - kn[..., i]
-            diff[i, p] = np.where(den > 0, 1 / np.where(den > 0, den, 1.0), 0.0)
-        return diff[i, p]
 
-    memo = {}
+def _reflect(c: list) -> list:
+    """Coefficients of ``p(1 - x)`` from those of a cubic ``p(x)``."""
+    c0, c1, c2, c3 = c
+    return [c0 + c1 + c2 + c3, -c1 - 2 * c2 - 3 * c3, c2 + 3 * c3, -c3]
 
-    # N_{i,p} on knots i..i+p+1; its r-th derivative by
-    # N⁽ʳ⁾_{i,p} = p (N⁽ʳ⁻¹⁾_{i,p-1} / (k_{i+p} - k_i) - N⁽ʳ⁻¹⁾_{i+1,p-1} / (k_{i+p+1} - k_{i+1}))
-    def deriv(i, p, r):
-        if (i, p, r) in memo:
-            return memo[i, p, r]
-        if p == 0:
-            out = ((kn[..., i] <= x[..., 0]) & (x[..., 0] < kn[..., i + 1])).astype(float)
-            out = out if r == 0 else np.zeros_like(out)
-        elif r == 0:
-            out = ((x[..., 0] - kn[..., i]) * inv(i, p) * deriv(i, p - 1, 0)
-                   + (kn[..., i + p + 1] - x[..., 0]) * inv(i + 1, p) * deriv(i + 1, p - 1, 0))
-        else:
-            out = p * (deriv(i, p - 1, r - 1) * inv(i, p)
-                       - deriv(i + 1, p - 1, r - 1) * inv(i + 1, p))
-        memo[i, p, r] = out
-        return out
 
-    return [deriv(0, 3, r) for r in derivatives]
+def _horner(c: list, x: np.ndarray, derivative: int = 0) -> np.ndarray:
+    """A cubic's ``derivative``-th derivative at ``x`` (B, P); ``c`` four (B,) arrays."""
+    for _ in range(derivative):
+        c = [k * ck for k, ck in enumerate(c)][1:]
+    out = c[-1][:, None] * np.ones_like(x)
+    for ck in c[-2::-1]:
+        out = out * x + ck[:, None]
+    return out
+
+
+def _new_splines(a: np.ndarray) -> list:
+    """The three cubic B-splines a triple knot at ``τ = j + a`` adds (module docstring), on
+    knots ``(-1, 0, a, a, a)``, ``(0, a, a, a, 1)`` and ``(a, a, a, 1, 2)`` in spacings from
+    ``u_j``: per B-spline its two polynomial pieces as ``(lo, hi, coefficients)`` (``a`` (B,),
+    coefficients four (B,) arrays in the power basis). Cox–de Boor worked out by hand; the
+    third is the first's mirror image (``x → 1 - x``, ``a → 1 - a``)."""
+    one = np.ones_like(a)
+    zero = np.zeros_like(a)
+
+    def first(a):
+        up = [one, one]  # x + 1
+        down = [a, -one]  # a - x
+        x = [zero, one]
+        left = [c / (a + 1) ** 2 for c in _mul(_mul(up, up), up)]
+        right = [p / ((a + 1) ** 2 * a) + q / ((a + 1) * a**2) + r / a**3 for p, q, r in zip(
+            _mul(_mul(up, up), down), _mul(_mul(up, down), x), _mul(down, _mul(x, x)),
+            strict=True)]
+        return left, right
+
+    b = 1 - a
+    left1, right1 = first(a)
+    left3, right3 = first(b)
+    middle_left = [zero, zero, zero, a**-3]  # (x / a)³
+    middle_right = _reflect([zero, zero, zero, b**-3])  # ((1 - x) / b)³
+    return [[(-one, zero, left1), (zero, a, right1)],
+            [(zero, a, middle_left), (a, one, middle_right)],
+            [(a, one, _reflect(right3)), (one, 2 * one, _reflect(left3))]]
 
 
 def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, prior
@@ -181,10 +199,8 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
     B = len(tau)
     s = (tau - centre[which]) / h
     j = np.floor(s)
-    # the three new B-splines (B, 3, 5), in spacings from the centre
     jm, jp = j - 1, j + 1
-    kn = np.stack([np.stack([jm, j, s, s, s], 1), np.stack([j, s, s, s, jp], 1),
-                   np.stack([s, s, s, jp, jp + 1], 1)], axis=1)
+    pieces = _new_splines(s - j)  # in spacings from u_j
     q0 = (j + K - 1).astype(np.int64)  # the six base control points over spans j-1..j+1
 
     def spread(first, N):
@@ -195,18 +211,29 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
             np.put_along_axis(out, (pos + a)[..., None], N[..., a:a + 1], axis=2)
         return out
 
-    # data: detections of the window
-    xs = base.s[which]  # (B, W)
-    W = xs.shape[1]
-    f = _one_spline(kn, np.broadcast_to(xs[:, None, :], (B, 3, W)), (0,))[0]  # (B, 3, W)
-    old = spread(base.first[which], base.N[which])  # (B, W, 6)
-    M = base.M[which].reshape(B, W, 9)
+    # data: the window's detections on the three spans [j-1, j+2) the new B-splines live on
+    xs_all = base.s_sorted[which]  # (B, W), increasing, padding far beyond
+    lo_col = np.sum(xs_all < jm[:, None], axis=1)
+    hi_col = np.sum(xs_all < jp[:, None] + 1, axis=1)
+    W = max(int(np.max(hi_col - lo_col)), 1)
+    cols = np.minimum(lo_col[:, None] + np.arange(W), xs_all.shape[1] - 1)
+    inside = lo_col[:, None] + np.arange(W) < hi_col[:, None]
+    wsel = (which[:, None], cols)
+    xs = np.where(inside, base.s_sorted[wsel], 1e6)  # (B, W); far: every new B-spline is 0
+    x = xs - j[:, None]
+    f = np.zeros((B, 3, W))
+    for e, spline in enumerate(pieces):
+        for lo, hi, c in spline:
+            on = (x >= lo[:, None]) & (x < hi[:, None])
+            f[:, e] = np.where(on, _horner(c, x), f[:, e])
+    old = spread(base.first[wsel], base.N[wsel])  # (B, W, 6)
+    M = base.M[wsel].reshape(B, W, 9)
     # Σ_w (f fᵀ) ⊗ M_w and Σ_w (old fᵀ) ⊗ M_w as batched products, then (e, i, f, j) order
     ff = (f[:, :, None, :] * f[:, None, :, :]).reshape(B, 9, W)
     Hyy = (ff @ M).reshape(B, 3, 3, 3, 3).transpose(0, 1, 3, 2, 4).reshape(B, 9, 9)
     of = (np.swapaxes(old, 1, 2)[:, :, None, :] * f[:, None, :, :]).reshape(B, 18, W)
     Hxy = (of @ M).reshape(B, 6, 3, 3, 3).transpose(0, 1, 3, 2, 4).reshape(B, 18, 9)
-    g = f @ base.u[which]  # (B, 3, 3)
+    g = f @ base.u[wsel]  # (B, 3, 3)
 
     # prior: four sub-spans [j-1, j], [j, τ], [τ, j+1], [j+1, j+2]
     lo = np.stack([jm, j, s, jp], 1)
@@ -214,13 +241,30 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
     half, mid = (hi - lo) / 2, (hi + lo) / 2  # (B, 4), spacings
     nodes = np.concatenate([mid - _GAUSS * half, mid + _GAUSS * half, mid], axis=1)  # (B, 12)
     accel = np.r_[np.ones(8, bool), np.zeros(4, bool)]  # p'' at Gauss nodes, the jerk at mids
-    f2, f3 = _one_spline(kn, np.broadcast_to(nodes[:, None, :], (B, 3, 12)), (2, 3))
-    fn = np.where(accel, f2 / h**2, f3 / h**3)  # (B, 3, 12), per second^d
-    first, Nb = basis(local.knots, nodes.ravel(), 3)
-    Nb = Nb.reshape(B, 12, 4, 4)
-    Nd = np.where(accel[None, :, None], Nb[:, :, 2] / h**2, Nb[:, :, 3] / h**3)  # (B, 12, 4)
-    first = first.reshape(B, 12)
-    cp = base.x0[which[:, None, None], first[..., None] + np.arange(4)]  # (B, 12, 4, 3)
+    # each new B-spline is one polynomial piece on each of its two sub-spans
+    fn = np.zeros((B, 3, 12))
+    xn = nodes - j[:, None]
+    for e, spline in enumerate(pieces):
+        for k, (_, _, c) in enumerate(spline):
+            sub = np.array([0, 4, 8]) + e + k  # the sub-span's two Gauss nodes and midpoint
+            fn[:, e, sub[:2]] = _horner(c, xn[:, sub[:2]], 2) / h**2
+            fn[:, e, sub[2:]] = _horner(c, xn[:, sub[2:]], 3) / h**3
+    # the base's B-splines at the nodes: uniform ones (closed form), but near the clamped ends
+    span = np.floor(nodes)
+    u = nodes - span
+    first = (span + K).astype(np.int64)  # (B, 12)
+    N2 = np.stack([1 - u, 3 * u - 2, 1 - 3 * u, u], axis=-1)
+    N3 = np.broadcast_to(np.array([-1.0, 3.0, -3.0, 1.0]), N2.shape)
+    Nd = np.where(accel[None, :, None], N2 / h**2, N3 / h**3)  # (B, 12, 4), per second^d
+    clamped = (first < 3) | (first > 2 * K - 4)
+    if np.any(clamped):
+        f_c, N_c = basis(local.knots, nodes[clamped], 3)
+        first[clamped] = f_c
+        Nd[clamped] = np.where(accel[np.nonzero(clamped)[1]][:, None], N_c[:, 2] / h**2,
+                               N_c[:, 3] / h**3)
+    m = local.m
+    cp = np.take(base.x0.reshape(-1, 3), (which * m)[:, None, None] + first[..., None]
+                 + np.arange(4), axis=0)  # (B, 12, 4, 3)
     p0 = np.einsum("bka,bkad->bkd", Nd, cp)  # the base's p'' or jerk at each node
     p0[:, :8] -= np.asarray(prior.gravity, dtype=np.float64)  # deviation from gravity
     wq = h * np.concatenate([half / prior.q_accel, half / prior.q_accel,
@@ -235,8 +279,9 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
         X5[:, :, i, :, i] += pxy
     g -= fw @ p0
 
-    idx = 3 * q0[:, None] + np.arange(18)
-    cov = base.cov[which[:, None, None], idx[:, :, None], idx[:, None, :]]  # (B, 18, 18)
+    n = 3 * m
+    block = (np.arange(18)[:, None] * n + np.arange(18))[None]
+    cov = np.take(base.cov, (which * n * n + 3 * q0 * (n + 1))[:, None, None] + block)
     S = Hyy - np.swapaxes(Hxy, 1, 2) @ cov @ Hxy
     S = (S + np.swapaxes(S, 1, 2)) / 2
     g = g.reshape(B, 9)
