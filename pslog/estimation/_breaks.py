@@ -207,8 +207,8 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
         """(B, P, 4) basis values at control points first..first+3 onto q0..q0+5."""
         pos = np.clip(first - q0[:, None], 0, 2)
         out = np.zeros((*N.shape[:2], 6))
-        for a in range(4):
-            np.put_along_axis(out, (pos + a)[..., None], N[..., a:a + 1], axis=2)
+        flat = (6 * np.arange(pos.size).reshape(pos.shape) + pos)[..., None] + np.arange(4)
+        out.reshape(-1)[flat.reshape(-1)] = N.reshape(-1)
         return out
 
     # data: the window's detections on the three spans [j-1, j+2) the new B-splines live on
@@ -280,8 +280,10 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
     g -= fw @ p0
 
     n = 3 * m
-    block = (np.arange(18)[:, None] * n + np.arange(18))[None]
-    cov = np.take(base.cov, (which * n * n + 3 * q0 * (n + 1))[:, None, None] + block)
+    s0, s1, s2 = base.cov.strides  # the 18 x 18 diagonal blocks of each window, as a view
+    blocks = np.lib.stride_tricks.as_strided(base.cov, (len(base.cov), n - 17, 18, 18),
+                                             (s0, s1 + s2, s1, s2), writeable=False)
+    cov = blocks[which, 3 * q0]  # (B, 18, 18)
     S = Hyy - np.swapaxes(Hxy, 1, 2) @ cov @ Hxy
     S = (S + np.swapaxes(S, 1, 2)) / 2
     g = g.reshape(B, 9)

@@ -60,9 +60,8 @@ def accumulate_points(first: np.ndarray, N: np.ndarray, M: np.ndarray, v: np.nda
     Each term is a quadratic form ``p_iᵀ M_i p_i - 2 v_iᵀ p_i`` of a point on the spline
     (a detection: ``M = w JᵀJ``, ``v = w Jᵀ z``; the prior: ``M = w I``, ``v = w g``); its
     contribution to the normal matrix is the 12 x 12 block ``(N_i N_iᵀ) ⊗ M_i`` at control
-    points ``first_i .. first_i + 3``, and ``N_i ⊗ v_i`` to the right-hand side. The blocks are
-    summed per ``first`` (a sort and one ``reduceat``) and written into the band once — the
-    same sums :func:`accumulate` forms row by row.
+    points ``first_i .. first_i + 3``, and ``N_i ⊗ v_i`` to the right-hand side — the same
+    sums :func:`accumulate` forms row by row (:class:`Points` does it).
 
     Parameters
     ----------
@@ -77,40 +76,52 @@ def accumulate_points(first: np.ndarray, N: np.ndarray, M: np.ndarray, v: np.nda
     -------
     ab, rhs
     """
-    n = 3 * m
-    ab = np.zeros((WIDTH, n)) if ab is None else ab
-    rhs = np.zeros(n) if rhs is None else rhs
-    r = len(first)
-    if r == 0:
+    return Points(first, N, m).normal(M, v, ab, rhs)
+
+
+class Points:
+    """Points ``p_i = Σ_a N[i, a] c[first_i + a]`` on a spline of ``m`` control points, as
+    two sparse matrices built once: ``B`` (r x m, the basis: ``p = B c``) and ``G``
+    (4(m+3) x r), whose row ``4p + k`` holds ``N_ia N_i(a+k)`` for every term with
+    ``first_i + a = p``, so that ``G @ M`` sums every term's block ``(N_i N_iᵀ) ⊗ M_i`` into
+    the block band ``Σ_{p, p+k}`` in one sparse product.
+
+    Parameters
+    ----------
+    first : (r,) int64; N : (r, 4) float64; m : int
+    """
+
+    def __init__(self, first: np.ndarray, N: np.ndarray, m: int):
+        first = np.asarray(first, dtype=np.int64)
+        r = len(first)
+        self.m, self.r = m, r
+        cols = np.repeat(np.arange(r), 10)
+        rows = (4 * (first[:, None] + _PA) + (_PB - _PA)).ravel()
+        NN = (np.take(N, _PA, axis=1) * np.take(N, _PB, axis=1)).ravel()
+        self.G = csr_matrix((NN, (rows, cols)), shape=(4 * (m + 3), r))
+        rows = (first[:, None] + np.arange(4)).ravel()
+        self.B = csr_matrix((N.ravel(), rows, np.arange(0, 4 * r + 1, 4)), shape=(r, m))
+        self.BT = self.B.T.tocsr()
+
+    def positions(self, control: np.ndarray) -> np.ndarray:
+        """``Σ_a N_a c[first + a]`` (r, 3) for control points (m, 3)."""
+        return self.B @ control
+
+    def normal(self, M: np.ndarray, v: np.ndarray, ab: np.ndarray | None = None,
+               rhs: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Add ``Σ_i p_iᵀ M_i p_i - 2 v_iᵀ p_i`` (M (r, 3, 3) symmetric, v (r, 3)) to normal
+        equations (as :func:`accumulate`)."""
+        m, r = self.m, self.r
+        n = 3 * m
+        ab = np.zeros((WIDTH, n)) if ab is None else ab
+        rhs = np.zeros(n) if rhs is None else rhs
+        if r == 0:
+            return ab, rhs
+        upper = np.take(M.reshape(r, 9), _UPPER9, axis=1)  # (r, 6)
+        blocks = np.take(self.G @ upper, _SYM, axis=1).reshape(m + 3, 4, 3, 3)
+        _blocks_to_band(blocks[:m], ab)
+        rhs += (self.BT @ v).reshape(-1)
         return ab, rhs
-    first = np.asarray(first, dtype=np.int64)
-    if np.any(first[1:] < first[:-1]):
-        order = np.argsort(first, kind="stable")
-        first, N, M, v = first[order], N[order], M[order], v[order]
-    starts = np.flatnonzero(np.r_[True, first[1:] != first[:-1]])
-    group = first[starts]
-    # sums per first: a sparse (groups x terms) matrix of ones times the per-term products
-    G = csr_matrix((np.ones(r), np.arange(r), np.r_[starts, r]), shape=(len(starts), r))
-    upper = np.take(M.reshape(r, 9), _UPPER9, axis=1)  # (r, 6)
-    NN = np.take(N, _PA, axis=1) * np.take(N, _PB, axis=1)  # (r, 10)
-    sums = G @ (NN[:, :, None] * upper[:, None, :]).reshape(r, 60)
-    sums = np.take(sums.reshape(-1, 10, 6), _SYM, axis=2).reshape(-1, 10, 3, 3)
-    vs = G @ (N[:, :, None] * v[:, None, :]).reshape(r, 12)
-    # per first p, then the block band: blocks[p, k] = Σ_{p, p+k}, the sum over the terms
-    # of every first p - a of their pair (a, a + k)
-    per_first = np.zeros((m + 3, 10, 3, 3))
-    per_first[group] = sums
-    blocks = np.zeros((m + 3, 4, 3, 3))
-    for i, (a, b) in enumerate(_PAIRS):
-        blocks[a:, b - a] += per_first[:m + 3 - a, i]
-    _blocks_to_band(blocks[:m], ab)
-    per_first = np.zeros((m + 3, 4, 3))
-    per_first[group] = vs.reshape(-1, 4, 3)
-    rv = np.zeros((m + 3, 3))
-    for a in range(4):
-        rv[a:] += per_first[:m + 3 - a, a]
-    rhs += rv[:m].reshape(-1)
-    return ab, rhs
 
 
 def _blocks_to_band(blocks: np.ndarray, ab: np.ndarray) -> None:

@@ -238,6 +238,7 @@ class _Problem:
         self.t = (obs.time_ns - self.t0_ns) / NS
         self.rows_of_piece = rows_of_piece
         self.rows = np.concatenate(rows_of_piece)  # observation rows in the fit
+        self._camera_rows = None  # per camera, its rows among those (built on first use)
         self.set_knots(knots, prior)
 
     def set_knots(self, knots: list[np.ndarray], prior: MotionPrior) -> None:
@@ -262,14 +263,14 @@ class _Problem:
         self.first = np.concatenate(firsts)
         self.N = np.concatenate(values)
         self.N1 = np.concatenate(slopes)
+        self.points = _normal.Points(self.first, self.N, self.m)
 
     def velocities(self, control: np.ndarray) -> np.ndarray:
         index = self.first[:, None] + np.arange(DEGREE + 1)
         return np.einsum("na,nad->nd", self.N1, control[index])
 
     def positions(self, control: np.ndarray) -> np.ndarray:
-        index = self.first[:, None] + np.arange(DEGREE + 1)
-        return np.einsum("na,nad->nd", self.N, control[index])
+        return self.points.positions(control)
 
     def project(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Residuals (n, 2) pixels and ``∂uv/∂X`` (n, 2, 3) of the fitted observations.
@@ -277,17 +278,22 @@ class _Problem:
         A point at or behind its camera (a wild iterate) has no projection: its row is set to
         0 with a zero Jacobian (it adds nothing to the normal equations) and flagged in
         ``self.invalid``, which the cost charges as a gross outlier."""
-        cams = self.obs.camera[self.rows]
+        if self._camera_rows is None:
+            cams = self.obs.camera[self.rows]
+            self._camera_rows = [(cam, np.flatnonzero(cams == i))
+                                 for i, cam in enumerate(self.rig.cameras)]
+            self._camera_rows = [(cam, rows) for cam, rows in self._camera_rows if len(rows)]
+            self._uv = self.obs.uv[self.rows]
         uv = np.empty((len(X), 2))
         J = np.empty((len(X), 2, 3))
-        for i, cam in enumerate(self.rig.cameras):
-            sel = cams == i
-            if np.any(sel):
-                uv[sel], J[sel] = project_with_jacobian(cam, X[sel])
-        r = uv - self.obs.uv[self.rows]
-        self.invalid = ~(np.all(np.isfinite(r), axis=1) & np.all(np.isfinite(J), axis=(1, 2)))
-        r[self.invalid] = 0.0
-        J[self.invalid] = 0.0
+        for cam, rows in self._camera_rows:
+            uv[rows], J[rows] = project_with_jacobian(cam, X[rows])
+        r = uv - self._uv
+        finite = np.isfinite(r.sum(axis=1) + J.reshape(-1, 6).sum(axis=1))
+        self.invalid = ~finite
+        if not np.all(finite):
+            r[self.invalid] = 0.0
+            J[self.invalid] = 0.0
         return r, J
 
     def normal(self, J: np.ndarray, target: np.ndarray, w: np.ndarray
@@ -298,8 +304,7 @@ class _Problem:
         wJ = w[:, None, None] * J
         M = np.swapaxes(wJ, 1, 2) @ J
         v = np.einsum("nai,na->ni", wJ, target)
-        return _normal.accumulate_points(self.first, self.N, M, v, self.m,
-                                         self.prior_ab.copy(), self.prior_rhs.copy())
+        return self.points.normal(M, v, self.prior_ab.copy(), self.prior_rhs.copy())
 
     def data_rows(self, J: np.ndarray, target: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -631,9 +636,8 @@ def _refit_control(problem: _Problem, X: np.ndarray) -> np.ndarray:
     prior): the starting point after breaks are inserted."""
     # each position's x, y, z at weight 1e6 (x twice: the rows pair (x, y) and (z, x))
     M = np.broadcast_to(np.diag([2e6, 1e6, 1e6]), (len(X), 3, 3))
-    ab, rhs = _normal.accumulate_points(problem.first, problem.N, M, X * [2e6, 1e6, 1e6],
-                                        problem.m, problem.prior_ab.copy(),
-                                        problem.prior_rhs.copy())
+    ab, rhs = problem.points.normal(M, X * [2e6, 1e6, 1e6], problem.prior_ab.copy(),
+                                    problem.prior_rhs.copy())
     return _normal.solve(_normal.factor(ab), rhs).reshape(-1, 3)
 
 
