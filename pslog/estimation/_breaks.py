@@ -103,35 +103,37 @@ class _Base:
         first = first.reshape(B, W)
         N = N[:, 0].reshape(B, W, 4)
         wi = np.where(inside, w[index], 0.0)
-        n = 3 * local.m
-        # dense design (B, 2W, n): row (i, axis) has N_a ∂uv_axis/∂X_d at column 3(first+a)+d
-        D = np.zeros((B, W, 2, n))
+        m = local.m
+        n = 3 * m
         Ji = J[index]  # (B, W, 2, 3)
-        cols = 3 * first[..., None] + np.arange(12)  # (B, W, 12)
-        vals = (N[:, :, None, :, None] * Ji[:, :, :, None, :]).reshape(B, W, 2, 12)
-        b_idx = np.arange(B)[:, None, None, None]
-        w_idx = np.arange(W)[None, :, None, None]
-        a_idx = np.arange(2)[None, None, :, None]
-        D[b_idx, w_idx, a_idx, cols[:, :, None, :]] = vals
-        D = D.reshape(B, 2 * W, n)
         zi = z[index]
-        zw = zi.reshape(B, 2 * W)
-        ww = np.repeat(wi, 2, axis=1)
-        Dw = D * ww[..., None]
-        DwT = np.swapaxes(Dw, 1, 2)
-        H = DwT @ D + local.P  # batched BLAS
-        rhs = (DwT @ zw[..., None])[..., 0] + local.rhs
+        wJ = wi[..., None, None] * Ji
+        self.M = np.swapaxes(wJ, 2, 3) @ Ji  # (B, W, 3, 3): w JᵀJ
+        v = np.einsum("bwai,bwa->bwi", wJ, zi)  # w Jᵀ z
+        # the basis as a dense (B, W, m) matrix: H = Σ_w (b_w b_wᵀ) ⊗ M_w, one batched
+        # product per entry of M
+        basis_w = np.zeros((B, W, m))
+        flat = ((np.arange(B * W) * m).reshape(B, W) + first)[..., None] + np.arange(4)
+        basis_w.reshape(-1)[flat.reshape(-1)] = N.reshape(-1)
+        basis_t = np.swapaxes(basis_w, 1, 2)
+        H = local.P.copy() + np.zeros((B, 1, 1))
+        H5 = H.reshape(B, m, 3, m, 3)
+        for i in range(3):
+            for k in range(i, 3):
+                block = basis_t @ (self.M[..., i, k, None] * basis_w)  # (B, m, m)
+                H5[:, :, i, :, k] += block
+                if k != i:
+                    H5[:, :, k, :, i] += block
+        rhs = (basis_t @ v).reshape(B, n) + local.rhs
         H[:, np.arange(n), np.arange(n)] *= 1 + 1e-12  # keeps a degenerate window solvable
         self.cov = np.linalg.inv(H)
         x = np.einsum("bij,bj->bi", self.cov, rhs)
-        self.cost = np.sum(ww * zw * zw, axis=1) + local.const - np.einsum("bk,bk->b", rhs, x)
+        wz = wi * np.sum(zi * zi, axis=2)
+        self.cost = np.sum(wz, axis=1) + local.const - np.einsum("bk,bk->b", rhs, x)
         self.x0 = x.reshape(B, -1, 3)
         self.first, self.N = first, N
-        X0 = np.einsum("bwa,bwad->bwd", N, self.x0[np.arange(B)[:, None, None],
-                                                   first[..., None] + np.arange(4)])
-        wJ = wi[..., None, None] * Ji
-        self.M = np.einsum("bwai,bwaj->bwij", wJ, Ji)
-        self.u = np.einsum("bwai,bwa->bwi", wJ, zi - np.einsum("bwaj,bwj->bwa", Ji, X0))
+        X0 = basis_w @ self.x0  # (B, W, 3)
+        self.u = v - (self.M @ X0[..., None])[..., 0]  # w Jᵀ (z - J X₀)
         self.s_sorted = np.where(inside, s, 1e6)  # times in spacings from the centre, sorted
         self.local, self.spacing = local, spacing
 

@@ -109,15 +109,17 @@ class Points:
 
     def normal(self, M: np.ndarray, v: np.ndarray, ab: np.ndarray | None = None,
                rhs: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Add ``Σ_i p_iᵀ M_i p_i - 2 v_iᵀ p_i`` (M (r, 3, 3) symmetric, v (r, 3)) to normal
-        equations (as :func:`accumulate`)."""
+        """Add ``Σ_i p_iᵀ M_i p_i - 2 v_iᵀ p_i`` (M (r, 3, 3) symmetric, or its upper triangle
+        (r, 6) in the order 00, 01, 02, 11, 12, 22; v (r, 3)) to normal equations (as
+        :func:`accumulate`)."""
         m, r = self.m, self.r
         n = 3 * m
         ab = np.zeros((WIDTH, n)) if ab is None else ab
         rhs = np.zeros(n) if rhs is None else rhs
         if r == 0:
             return ab, rhs
-        upper = np.take(M.reshape(r, 9), _UPPER9, axis=1)  # (r, 6)
+        # the upper triangle (r, 6): given, or taken from the full matrices
+        upper = M if M.ndim == 2 else np.take(M.reshape(r, 9), _UPPER9, axis=1)
         blocks = np.take(self.G @ upper, _SYM, axis=1).reshape(m + 3, 4, 3, 3)
         _blocks_to_band(blocks[:m], ab)
         rhs += (self.BT @ v).reshape(-1)

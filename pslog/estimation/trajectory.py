@@ -76,7 +76,7 @@ from ..motion import G
 from ..records import NS, Observations
 from ..rig import Rig
 from . import _breaks, _normal
-from .bspline import DEGREE, basis, clamped_knots, n_control
+from .bspline import DEGREE, basis, basis_pieces, clamped_knots, n_control
 from .projection import project_with_jacobian
 
 
@@ -239,6 +239,8 @@ class _Problem:
         self.rows_of_piece = rows_of_piece
         self.rows = np.concatenate(rows_of_piece)  # observation rows in the fit
         self._camera_rows = None  # per camera, its rows among those (built on first use)
+        self._piece_of_row = np.repeat(np.arange(len(rows_of_piece)),
+                                       [len(r) for r in rows_of_piece])
         self.set_knots(knots, prior)
 
     def set_knots(self, knots: list[np.ndarray], prior: MotionPrior) -> None:
@@ -254,15 +256,9 @@ class _Problem:
         """Observation times (n,) s since ``t0_ns`` (the clock estimator moves them); the
         basis at each, its value ``N`` and first derivative ``N1`` (n_fit, 4)."""
         self.t = t
-        firsts, values, slopes = [], [], []
-        for p, rows in enumerate(self.rows_of_piece):
-            first, N = basis(self.knots[p], t[rows], 1)
-            firsts.append(first + self.offset[p])
-            values.append(N[:, 0])
-            slopes.append(N[:, 1])
-        self.first = np.concatenate(firsts)
-        self.N = np.concatenate(values)
-        self.N1 = np.concatenate(slopes)
+        self.first, N = basis_pieces(self.knots, self._piece_of_row, t[self.rows], 1)
+        self.N = np.ascontiguousarray(N[:, 0])
+        self.N1 = np.ascontiguousarray(N[:, 1])
         self.points = _normal.Points(self.first, self.N, self.m)
 
     def velocities(self, control: np.ndarray) -> np.ndarray:
@@ -301,9 +297,12 @@ class _Problem:
         """Normal equations of the prior plus ``Σ_i w_i ‖J_i p(t_i) - target_i‖²``
         (:func:`_normal.accumulate_points`; the same sums as :meth:`data_rows` fed to
         :func:`_normal.accumulate`). J (n, 2, 3), target (n, 2), w (n,)."""
-        wJ = w[:, None, None] * J
-        M = np.swapaxes(wJ, 1, 2) @ J
-        v = np.einsum("nai,na->ni", wJ, target)
+        a = J.reshape(-1, 6).T  # (6, n): rows ∂u/∂X, ∂u/∂Y, ∂u/∂Z, ∂v/∂X, ∂v/∂Y, ∂v/∂Z
+        M = np.empty((len(w), 6))  # upper triangle of w JᵀJ
+        for k, (i, j) in enumerate(((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))):
+            M[:, k] = w * (a[i] * a[j] + a[3 + i] * a[3 + j])
+        v = (w[:, None] * target)
+        v = a[:3].T * v[:, :1] + a[3:].T * v[:, 1:]
         return self.points.normal(M, v, self.prior_ab.copy(), self.prior_rhs.copy())
 
     def data_rows(self, J: np.ndarray, target: np.ndarray
