@@ -419,3 +419,18 @@ def test_the_basis_of_several_splines_at_once_equals_each_alone():
         sel = piece == i
         assert_array_equal(first[sel], f + offset[i])
         assert_allclose(values[sel], v, rtol=0, atol=1e-9)
+
+
+def test_the_stacked_projection_equals_each_camera_alone():
+    from pslog.estimation.projection import project_stacked, stack_cameras
+
+    rig = _rig(3, distortion=True)
+    rng = np.random.default_rng(12)
+    points = rng.uniform([0.3, 0.2, 0.1], [2.7, 1.8, 1.9], (90, 3))
+    index = rng.integers(0, 3, 90)
+    uv, J = project_stacked(stack_cameras(rig.cameras, index), points)
+    for i, cam in enumerate(rig.cameras):
+        sel = index == i
+        uv_i, J_i = project_with_jacobian(cam, points[sel])
+        assert_allclose(uv[sel], uv_i, rtol=1e-14, atol=1e-9)
+        assert_allclose(J[sel], J_i, rtol=1e-12, atol=1e-9)

@@ -77,7 +77,7 @@ from ..records import NS, Observations
 from ..rig import Rig
 from . import _breaks, _normal
 from .bspline import DEGREE, basis, basis_pieces, clamped_knots, n_control
-from .projection import project_with_jacobian
+from .projection import project_stacked, stack_cameras
 
 
 @dataclass(frozen=True)
@@ -238,7 +238,7 @@ class _Problem:
         self.t = (obs.time_ns - self.t0_ns) / NS
         self.rows_of_piece = rows_of_piece
         self.rows = np.concatenate(rows_of_piece)  # observation rows in the fit
-        self._camera_rows = None  # per camera, its rows among those (built on first use)
+        self._cameras = None  # each row's camera parameters (built on first use)
         self._piece_of_row = np.repeat(np.arange(len(rows_of_piece)),
                                        [len(r) for r in rows_of_piece])
         self.set_knots(knots, prior)
@@ -274,16 +274,10 @@ class _Problem:
         A point at or behind its camera (a wild iterate) has no projection: its row is set to
         0 with a zero Jacobian (it adds nothing to the normal equations) and flagged in
         ``self.invalid``, which the cost charges as a gross outlier."""
-        if self._camera_rows is None:
-            cams = self.obs.camera[self.rows]
-            self._camera_rows = [(cam, np.flatnonzero(cams == i))
-                                 for i, cam in enumerate(self.rig.cameras)]
-            self._camera_rows = [(cam, rows) for cam, rows in self._camera_rows if len(rows)]
+        if self._cameras is None:
+            self._cameras = stack_cameras(self.rig.cameras, self.obs.camera[self.rows])
             self._uv = self.obs.uv[self.rows]
-        uv = np.empty((len(X), 2))
-        J = np.empty((len(X), 2, 3))
-        for cam, rows in self._camera_rows:
-            uv[rows], J[rows] = project_with_jacobian(cam, X[rows])
+        uv, J = project_stacked(self._cameras, X)
         r = uv - self._uv
         finite = np.isfinite(r.sum(axis=1) + J.reshape(-1, 6).sum(axis=1))
         self.invalid = ~finite
