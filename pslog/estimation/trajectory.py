@@ -143,6 +143,11 @@ _WINDOW_SPANS = 5
 _LOOSE = 10.0
 #: Rounds of break detection (each finds the jumps the previous fit still hides)
 _BREAK_ROUNDS = 3
+#: Gauss–Newton iterations of the first loose fit (later rounds: 2) and of the fit under the
+#: real prior at which the breaks' instants are refined (the session is refitted in full
+#: after): more change the fits by micrometres, not the breaks found
+_LOOSE_ITERATIONS = 3
+_REFINE_ITERATIONS = 2
 
 
 @dataclass(frozen=True, eq=False)
@@ -579,7 +584,7 @@ def fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions | None = 
              for (lo, hi), b in zip(spans, breaks, strict=True)]
     problem = _Problem(obs, rig, pieces, knots, loose)
     control = _initial_control(problem, 1.0)
-    sigma, iterations = 1.0, options.iterations
+    sigma, iterations = 1.0, min(options.iterations, _LOOSE_ITERATIONS)
     for _ in range(_BREAK_ROUNDS):
         control, sigma, r, w, J = _Solver(problem, options).run(control, sigma, iterations)
         found = _find_breaks(problem, control, sigma, r, w, J, spacing, breaks, options)
@@ -593,8 +598,12 @@ def fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions | None = 
         control = _refit_control(problem, X_old)
         iterations = 2
     problem.set_knots(knots, options.prior)  # same knots: the control points stay valid
-    control, sigma, r, w, J = _Solver(problem, options).run(control, sigma, options.iterations)
-    if any(len(b) for b in breaks):  # each break's time again, at the final fit
+    refine = any(len(b) for b in breaks)
+    # with breaks, this fit is only where their instants are refined: the full fit follows
+    control, sigma, r, w, J = _Solver(problem, options).run(
+        control, sigma, min(options.iterations, _REFINE_ITERATIONS) if refine
+        else options.iterations)
+    if refine:  # each break's time again, at the fit under the real prior
         breaks = _refine_breaks(problem, control, sigma, r, w, J, spacing, breaks, options)
         knots = [_knots_with_breaks(lo, hi + 1e-9, spacing, b)
                  for (lo, hi), b in zip(spans, breaks, strict=True)]
