@@ -580,8 +580,20 @@ def fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions | None = 
     # the peaks that the breaks found so far do not explain
     loose = replace(options.prior, sigma_accel=_LOOSE * options.prior.sigma_accel)
     breaks = [np.zeros(0) for _ in pieces]
-    knots = [_knots_with_breaks(lo, hi + 1e-9, spacing, b)
-             for (lo, hi), b in zip(spans, breaks, strict=True)]
+    made: dict = {}
+
+    def piece_knots(breaks: list[np.ndarray]) -> list[np.ndarray]:
+        """Each piece's knots with its breaks (a piece whose breaks did not change keeps
+        its knot vector)."""
+        out = []
+        for i, ((lo, hi), b) in enumerate(zip(spans, breaks, strict=True)):
+            key = (i, np.asarray(b, dtype=np.float64).tobytes())
+            if key not in made:
+                made[key] = _knots_with_breaks(lo, hi + 1e-9, spacing, b)
+            out.append(made[key])
+        return out
+
+    knots = piece_knots(breaks)
     problem = _Problem(obs, rig, pieces, knots, loose)
     control = _initial_control(problem, 1.0)
     sigma, iterations = 1.0, min(options.iterations, _LOOSE_ITERATIONS)
@@ -591,8 +603,7 @@ def fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions | None = 
         if not any(len(f) for f in found):
             break
         breaks = [np.sort(np.r_[b, f]) for b, f in zip(breaks, found, strict=True)]
-        knots = [_knots_with_breaks(lo, hi + 1e-9, spacing, b)
-                 for (lo, hi), b in zip(spans, breaks, strict=True)]
+        knots = piece_knots(breaks)
         X_old = problem.positions(control)
         problem.set_knots(knots, loose)
         control = _refit_control(problem, X_old)
@@ -605,8 +616,7 @@ def fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions | None = 
         else options.iterations)
     if refine:  # each break's time again, at the fit under the real prior
         breaks = _refine_breaks(problem, control, sigma, r, w, J, spacing, breaks, options)
-        knots = [_knots_with_breaks(lo, hi + 1e-9, spacing, b)
-                 for (lo, hi), b in zip(spans, breaks, strict=True)]
+        knots = piece_knots(breaks)
         X_old = problem.positions(control)
         problem.set_knots(knots, options.prior)
         control = _refit_control(problem, X_old)
