@@ -427,8 +427,12 @@ def _knots_with_breaks(t_lo: float, t_hi: float, spacing: float, breaks: np.ndar
     breaks = np.asarray(breaks, dtype=np.float64)
     breaks = breaks[(breaks > t_lo + 1e-6) & (breaks < t_hi - 1e-6)]
     if len(breaks):
-        near = np.min(np.abs(grid[1:-1, None] - breaks[None, :]), axis=1) < spacing / 4
-        grid = np.r_[grid[0], grid[1:-1][~near], grid[-1]]
+        breaks = np.sort(breaks)
+        inner = grid[1:-1]
+        j = np.searchsorted(breaks, inner)  # the nearest break is j - 1 or j
+        nearest = np.minimum(np.abs(inner - breaks[np.maximum(j - 1, 0)]),
+                             np.abs(breaks[np.minimum(j, len(breaks) - 1)] - inner))
+        grid = np.r_[grid[0], inner[nearest >= spacing / 4], grid[-1]]
     points = np.r_[grid, breaks]
     mult = np.r_[np.ones(len(grid), np.int64), np.full(len(breaks), 3)]
     order = np.argsort(points, kind="stable")
