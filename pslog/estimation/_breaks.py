@@ -18,11 +18,14 @@ and its inverse information ``Σ = H⁻¹``, the least cost with the break is, e
 over those three spans, so only a 18 x 18 block of ``Σ`` is needed). The prior terms of
 ``H_yy``, ``H_xy`` and ``g`` are integrated exactly on the four sub-spans around ``τ`` (2-point
 Gauss for ``p''``, midpoint for ``p'''``, as everywhere). So a trial instant costs a 9 x 9
-solve, and every (candidate, τ) pair of a scan stage is one batched call. ``τ`` is found by
-three nested grid scans and a parabola through the best three costs; the gain of the break is
-``gᵀ S⁻¹ g``, the cost without it minus the cost with it (a likelihood ratio in units of σ²).
-A trial instant closer than ``h/1000`` to a uniform knot is moved that far from it (the
-B-spline on ``(u_{j-1}, u_j, τ, τ, τ)`` degenerates as ``τ → u_j``).
+solve, and every (candidate, τ) pair of a scan stage is one batched call. The B-spline on
+``(u_{j-1}, u_j, τ, τ, τ)`` degenerates as ``τ → u_j`` (and ``S`` with it), so every candidate
+has two bases, on knots ``t_c + k·h`` and ``t_c + h/2 + k·h``, and a trial instant is tested
+on the one whose knots are at least ``h/4`` from it (as the final knots keep no uniform knot
+within ``h/4`` of a break). ``τ`` is found by three nested grid scans and a parabola through
+the best three costs; the gain of the break is the cost of the base on ``t_c + k·h`` minus the
+least cost with it (a likelihood ratio in units of σ²), i.e. ``gᵀ S⁻¹ g`` plus the difference
+of the two bases' costs when the shifted one is used.
 """
 
 from __future__ import annotations

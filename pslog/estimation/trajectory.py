@@ -39,20 +39,24 @@ midpoint integrate (2) exactly. Velocity jumps at triple knots are not penalised
 
 Uncertainty: the Gauss–Newton information matrix ``H = Σ w_i J_iᵀJ_i / σ² + P`` at the
 solution (``w_i`` the robust weights, ``P`` the prior's) is the inverse covariance of ``c``;
-its banded inverse (Takahashi recurrence, :mod:`pslog.estimation._normal`) gives, through the
-basis, the marginal covariance of ``p(t)`` at any ``t``.
+its banded inverse (Takahashi recurrence, :func:`pslog.estimation._normal.covariance_band`)
+gives, through the basis, the marginal covariance of ``p(t)`` at any ``t``.
 
 Bounces and kicks: a first fit under a prior ten times looser (it follows a velocity jump
 closely, so σ is estimated right and each jump is a sharp peak); every span where
 ``‖p'' - g‖`` peaks above ``break_accel`` is a candidate. Around each, the problem linearised
-at that fit is solved on a local window, under the prior (2), with and without a triple knot
-at trial instants (:mod:`pslog.estimation._breaks`: all candidates and instants in one batched
-solve, nested grid scans and a parabola between the neighbouring detections); the break is
-kept when it lowers the cost by more than ``break_threshold`` (in units of σ², a
-likelihood-ratio test). Rounds repeat until no new break; the fit under the real prior
-follows, then each break's instant is re-estimated at that fit and the session refitted.
-A break leaves detections of two cameras between it and a piece's end (a segment's velocity
-is otherwise free along a ray).
+at that fit is solved on a local window under the prior (2), on uniform knots ``t_c + k·h``
+(the *base*, C² everywhere); a break at a trial instant ``τ`` inserts a triple knot at ``τ``
+into those knots, which adds exactly three B-splines to the base's, so the least cost with
+the break is the base's minus ``gᵀ S⁻¹ g``, a 9 x 9 Schur complement on the base's solution
+and inverse information (:mod:`pslog.estimation._breaks` has the equations; each trial instant
+is tested on knots at least ``h/4`` from it: a second base shifted by ``h/2``). All
+candidates and instants of a scan stage are one batched computation: three nested grid scans
+and a parabola between the neighbouring detections; the break is kept when it lowers the cost
+by more than ``break_threshold`` (in units of σ², a likelihood-ratio test). Rounds repeat
+until no new break; a fit under the real prior follows, then each break's instant is
+re-estimated at that fit and the session refitted. A break leaves detections of two cameras
+between it and a piece's end (a segment's velocity is otherwise free along a ray).
 
 Why knots every three detection intervals: 8 pixel coordinates per 3 unknowns keep the pixel
 noise estimable from the residuals, and a cubic spline with knots that close represents
@@ -62,7 +66,10 @@ Limits: one camera cannot triangulate, so a piece seen by fewer than two cameras
 point; the prior assumes ballistic flight between breaks (a rolling ball, with no gravity
 acceleration, is fitted with a small bias; air drag is absorbed by σ_a, not modelled); a
 velocity change spread over more than a few knot spans (a ball rolling to a stop) is smoothed
-rather than broken; pure numpy, several thousand detections per second.
+rather than broken. Pure numpy and scipy: the normal equations are summed per control point
+by sparse products built once per knot set (:class:`pslog.estimation._normal.Points`), the
+covariance band by a chunked Takahashi recurrence; ~35,000-45,000 detections per second on one
+core (``benchmarks/bench_smooth.py``).
 """
 
 from __future__ import annotations
@@ -686,24 +693,24 @@ def _find_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
     target = np.einsum("naj,nj->na", J, X) - r  # the linearised measurements
     weight = w / sigma**2
     t_obs = problem.t[problem.rows]
+    # ‖p'' - g‖ at every span's midpoint of every piece, in one pass
+    mids = [((k[:-1] + k[1:]) / 2)[k[1:] > k[:-1]] for k in problem.knots]
+    piece = np.repeat(np.arange(len(mids)), [len(x) for x in mids])
+    first, N = basis_pieces(problem.knots, piece, np.concatenate(mids), 2)
+    accel = np.einsum("na,nad->nd", N[:, 2], control[first[:, None] + np.arange(DEGREE + 1)])
+    devs = np.split(np.linalg.norm(accel - g, axis=1), np.cumsum([len(x) for x in mids])[:-1])
     jobs = []
     row0 = 0
-    for p, k in enumerate(problem.knots):
+    for p, dev in enumerate(devs):
         # the piece's rows in time order (the clock estimator moves the times)
         here = row0 + np.argsort(t_obs[row0:row0 + len(problem.rows_of_piece[p])],
                                  kind="stable")
         row0 += len(problem.rows_of_piece[p])
-        t = t_obs[here]
-        lo, hi = k[:-1], k[1:]
-        mids = ((lo + hi) / 2)[hi > lo]
-        first, N = basis(k, mids, 2)
-        index = first[:, None] + np.arange(DEGREE + 1) + problem.offset[p]
-        accel = np.einsum("na,nad->nd", N[:, 2], control[index])
-        dev = np.linalg.norm(accel - g, axis=1)
         peak = dev > options.break_accel
         peak[1:] &= dev[1:] >= dev[:-1]
         peak[:-1] &= dev[:-1] > dev[1:]
-        centers = mids[peak]
+        centers = mids[p][peak]
+        t = t_obs[here]
         centers = centers[np.all(np.abs(centers[:, None] - known[p][None, :]) > spacing, axis=1)]
         if len(t) < 8 or len(centers) == 0:
             continue
