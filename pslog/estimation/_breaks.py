@@ -71,28 +71,11 @@ def _local(K: int, spacing: float, prior, multiplicity: int) -> _Local:
     return _Local(K, spacing, prior, multiplicity)
 
 
-def local_costs(local: _Local, t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray,
-                index: np.ndarray, valid: np.ndarray, tau: np.ndarray, spacing: float
-                ) -> np.ndarray:
-    """Minimum of the local linearised cost for each window, knots centred at ``tau``.
-
-    Parameters
-    ----------
-    local : _Local
-    t, J, z, w : (n,), (n, 2, 3), (n, 2), (n,) the piece's detection times (s), Jacobians,
-        linearised targets and weights (already divided by σ²)
-    index : (B, W) int, detections of each window; valid : (B, W) bool (padding False)
-    tau : (B,) float, the centres (the middle knot)
-
-    Returns
-    -------
-    cost : (B,) float
-    """
-    return _Base(local, t, J, z, w, index, valid, tau, spacing).cost
-
-
 class _Base:
-    """The no-break local problems of a batch of windows: their minimum ``x0`` (B, m, 3),
+    """The no-break local problems of a batch of windows (``local``; ``t, J, z, w`` (n,),
+    (n, 2, 3), (n, 2), (n,) the detections' times (s), Jacobians, linearised targets and
+    weights already divided by σ²; ``index``, ``valid`` (B, W) each window's detections and
+    padding; ``centre`` (B,) s, the middle knot): their minimum ``x0`` (B, m, 3),
     inverse information ``cov`` (B, 3m, 3m), minimum cost, and per detection the basis
     (``first`` (B, W), ``N`` (B, W, 4)), ``M = w JᵀJ`` (B, W, 3, 3) and the weighted
     residual ``u = w Jᵀ (z - J X₀)`` (B, W, 3) at the minimum."""
@@ -306,7 +289,7 @@ def scan(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray, centers: np
 
     Parameters
     ----------
-    t, J, z, w : detections sorted by time (see :func:`local_costs`)
+    t, J, z, w : detections sorted by time (see :class:`_Base`)
     centers : (C,) s, candidate instants; the window is ``center ± half_width``, cut at
         ``limits`` (C, 2) (neighbouring breaks, whose other side is not modelled here, and the
         piece's ends)
