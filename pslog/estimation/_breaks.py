@@ -216,12 +216,13 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
             f[:, e] = np.where(on, _horner(c, x), f[:, e])
     old = spread(base.first[wsel], base.N[wsel])  # (B, W, 6)
     M = base.M[wsel].reshape(B, W, 9)
-    # Σ_w (f fᵀ) ⊗ M_w and Σ_w (old fᵀ) ⊗ M_w as batched products of f_w ⊗ M_w (B, W, 27),
-    # then in (e, i, f, j) order
-    fM = (np.swapaxes(f, 1, 2)[..., None] * M[:, :, None, :]).reshape(B, W, 27)
-    Hyy = (f @ fM).reshape(B, 3, 3, 3, 3).transpose(0, 1, 3, 2, 4).reshape(B, 9, 9)
-    Hxy = (np.swapaxes(old, 1, 2) @ fM).reshape(B, 6, 3, 3, 3).transpose(0, 1, 3, 2, 4)
-    Hxy = Hxy.reshape(B, 18, 9)
+    # Σ_w (f fᵀ) ⊗ M_w and Σ_w (old fᵀ) ⊗ M_w: one batched product of the 27 rows
+    # (f, old) ⊗ f with M, then in (e, i, f, j) order
+    rows = np.concatenate([f, np.swapaxes(old, 1, 2)], axis=1)  # (B, 9, W)
+    both = ((rows[:, :, None, :] * f[:, None, :, :]).reshape(B, 27, W) @ M).reshape(
+        B, 9, 3, 3, 3).transpose(0, 1, 3, 2, 4)
+    Hyy = both[:, :3].reshape(B, 9, 9)
+    Hxy = both[:, 3:].reshape(B, 18, 9)
     g = f @ base.u[wsel]  # (B, 3, 3)
 
     # prior: four sub-spans [j-1, j], [j, τ], [τ, j+1], [j+1, j+2]
