@@ -150,10 +150,12 @@ _WINDOW_SPANS = 5
 _LOOSE = 10.0
 #: Rounds of break detection (each finds the jumps the previous fit still hides)
 _BREAK_ROUNDS = 3
-#: Gauss–Newton iterations of the first loose fit (later rounds: 2) and of the fit under the
-#: real prior at which the breaks' instants are refined (the session is refitted in full
-#: after): more change the fits by micrometres, not the breaks found
+#: Gauss–Newton iterations of the first loose fit, of the next rounds' (from the previous
+#: fit, refitted to the new knots), and of the fit under the real prior at which the breaks'
+#: instants are refined (the session is refitted in full after): more change the fits by
+#: micrometres, not the breaks found
 _LOOSE_ITERATIONS = 3
+_NEXT_LOOSE_ITERATIONS = 1
 _REFINE_ITERATIONS = 2
 
 
@@ -618,7 +620,7 @@ def fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions | None = 
         X_old = problem.positions(control)
         problem.set_knots(knots, loose)
         control = _refit_control(problem, X_old)
-        iterations = 2
+        iterations = _NEXT_LOOSE_ITERATIONS
     problem.set_knots(knots, options.prior)  # same knots: the control points stay valid
     refine = any(len(b) for b in breaks)
     # with breaks, this fit is only where their instants are refined: the full fit follows
