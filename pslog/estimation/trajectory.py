@@ -258,11 +258,15 @@ class _Problem:
         self.set_knots(knots, prior)
 
     def set_knots(self, knots: list[np.ndarray], prior: MotionPrior) -> None:
+        # the same knot vectors (only the prior changes): the design stays as it is
+        same = (hasattr(self, "knots") and len(knots) == len(self.knots)
+                and all(a is b for a, b in zip(knots, self.knots, strict=True)))
         self.knots, self.prior = knots, prior
         sizes = np.array([n_control(k) for k in knots])
         self.offset = np.r_[0, np.cumsum(sizes)[:-1]].astype(np.int64)
         self.m = int(sizes.sum())
-        self.set_times(self.t)
+        if not same:
+            self.set_times(self.t)
         self.prior_ab, self.prior_rhs, self.prior_const = _prior_normal(
             knots, self.offset, self.m, self.prior)
 
