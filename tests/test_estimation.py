@@ -434,3 +434,27 @@ def test_the_stacked_projection_equals_each_camera_alone():
         uv_i, J_i = project_with_jacobian(cam, points[sel])
         assert_allclose(uv[sel], uv_i, rtol=1e-14, atol=1e-9)
         assert_allclose(J[sel], J_i, rtol=1e-12, atol=1e-9)
+
+
+def test_the_marginal_covariance_at_the_points_by_the_sparse_product_equals_the_sum():
+    from pslog.estimation import _normal
+
+    rng = np.random.default_rng(13)
+    m, r = 30, 200
+    first = rng.integers(0, m - 3, r)
+    N = rng.random((r, 4))
+    A = rng.normal(size=(3 * m, 3 * m))
+    cov = A @ A.T  # any symmetric matrix: its band, as covariance_band returns it
+    band = np.zeros((m, 4, 3, 3))
+    for i in range(m):
+        for k in range(4):
+            if i + k < m:
+                band[i, k] = cov[3 * i:3 * i + 3, 3 * (i + k):3 * (i + k) + 3]
+    ours = _normal.Points(first, N, m).marginal(band)
+    assert_allclose(ours, _normal.marginal(band, first, N), rtol=1e-12, atol=1e-12)
+    index = 3 * (first[:, None] + np.arange(4))[:, :, None] + np.arange(3)  # (r, 4, 3)
+    for i in range(0, r, 37):  # and the definition: Bᵀ Σ B with B the point's basis
+        B = np.zeros((3 * m, 3))
+        for a in range(4):
+            B[index[i, a], np.arange(3)] = N[i, a]
+        assert_allclose(ours[i], B.T @ cov @ B, rtol=1e-10)

@@ -107,6 +107,15 @@ class Points:
         """``Σ_a N_a c[first + a]`` (r, 3) for control points (m, 3)."""
         return self.B @ control
 
+    def marginal(self, band: np.ndarray) -> np.ndarray:
+        """:func:`marginal` at the points: ``Σ_ab N_a N_b Σ_{first+a, first+b}`` (r, 3, 3)
+        from the covariance band (m, 4, 3, 3), as ``Gᵀ`` times the band (the off-diagonal
+        blocks with their transposes: each pair (a, b), a < b, stands for both orders)."""
+        both = np.zeros((self.m + 3, 4, 3, 3))
+        both[:self.m] = band
+        both[:, 1:] += np.swapaxes(both[:, 1:], 2, 3)
+        return (self.G.T @ both.reshape(-1, 9)).reshape(-1, 3, 3)
+
     def normal(self, M: np.ndarray, v: np.ndarray, ab: np.ndarray | None = None,
                rhs: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Add ``Σ_i p_iᵀ M_i p_i - 2 v_iᵀ p_i`` (M (r, 3, 3) symmetric, or its upper triangle

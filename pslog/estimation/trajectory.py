@@ -652,7 +652,7 @@ def fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions | None = 
     residual = np.full(n, np.nan)
     weight = np.zeros(n)
     position[problem.rows] = problem.positions(control)
-    covariance[problem.rows] = _normal.marginal(band, problem.first, problem.N)
+    covariance[problem.rows] = problem.points.marginal(band)
     residual[problem.rows] = np.linalg.norm(r, axis=1)
     weight[problem.rows] = w
     used = np.zeros(n, dtype=bool)
@@ -682,7 +682,7 @@ def _information(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
     target = np.einsum("naj,nj->na", J, X) - r
     ab, _ = problem.normal(J, target, w / sigma**2)
     band = _normal.covariance_band(_normal.factor(ab))
-    cov_X = _normal.marginal(band, problem.first, problem.N)
+    cov_X = problem.points.marginal(band)
     p_eff = float(np.sum(w * np.einsum("naj,njk,nak->n", J, cov_X, J)) / sigma**2)
     n_res = 2 * len(r)
     return band, float(np.sqrt(n_res / max(n_res - p_eff, 1.0)))
