@@ -7,7 +7,7 @@ import itertools
 import numpy as np
 import pytest
 from _rally import rally
-from numpy.testing import assert_allclose
+from numpy.testing import assert_allclose, assert_array_equal
 from scipy.interpolate import BSpline
 
 from pslog import builtin_rig
@@ -270,3 +270,191 @@ def test_smooth_through_the_cli_with_a_rate(tmp_path, cli):
     assert evaluate(smooth, session.truth).mean_mm < evaluate(session.tracks["typeA"],
                                                               session.truth).mean_mm
     assert len(rig) == 3
+
+
+# ---- numeric kernels: each against its plain definition ------------------------------------
+def _dense(ab: np.ndarray) -> np.ndarray:
+    """The symmetric matrix of upper banded storage ``ab[11 + i - j, j] = A[i, j]``."""
+    n = ab.shape[1]
+    A = np.zeros((n, n))
+    for d in range(12):
+        i = np.arange(n - d)
+        A[i, i + d] = ab[11 - d, d:]
+        A[i + d, i] = ab[11 - d, d:]
+    return A
+
+
+def test_blocked_normal_equations_equal_the_row_by_row_sums():
+    from pslog.estimation import _normal
+
+    rng = np.random.default_rng(11)
+    m, r = 40, 300
+    first = rng.integers(0, m - 3, r)  # unsorted, repeated: the sums must not care
+    N = rng.random((r, 4))
+    J = rng.normal(size=(r, 2, 3)) * 300
+    w = rng.random(r) + 0.1
+    z = rng.normal(size=(r, 2)) * 20
+    E = (N[:, None, :, None] * J[:, :, None, :]).reshape(-1, 12)  # the rows of data_rows
+    ab0, rhs0 = _normal.accumulate(np.repeat(3 * first, 2), E, z.reshape(-1),
+                                   np.repeat(w, 2), 3 * m)
+    M = np.einsum("n,nai,naj->nij", w, J, J)
+    v = np.einsum("n,nai,na->ni", w, J, z)
+    ab1, rhs1 = _normal.accumulate_points(first, N, M, v, m)
+    assert_allclose(ab1, ab0, rtol=0, atol=1e-12 * np.abs(ab0).max())
+    assert_allclose(rhs1, rhs0, rtol=0, atol=1e-12 * np.abs(rhs0).max())
+    # the upper-triangle form and adding onto given equations
+    upper = M.reshape(r, 9)[:, [0, 1, 2, 4, 5, 8]]
+    ab2, rhs2 = _normal.Points(first, N, m).normal(upper, v, ab0.copy(), rhs0.copy())
+    assert_allclose(ab2, 2 * ab0, rtol=0, atol=1e-12 * np.abs(ab0).max())
+    assert_allclose(rhs2, 2 * rhs0, rtol=0, atol=1e-12 * np.abs(rhs0).max())
+    control = rng.normal(size=(m, 3))
+    positions = np.einsum("na,nad->nd", N, control[first[:, None] + np.arange(4)])
+    assert_allclose(_normal.Points(first, N, m).positions(control), positions, atol=1e-12)
+
+
+@pytest.mark.parametrize("m", [5, 37, 400])
+def test_the_chunked_covariance_band_is_the_band_of_the_dense_inverse(m):
+    from pslog.estimation import _normal
+
+    rng = np.random.default_rng(m)
+    r = 8 * m
+    first = rng.integers(0, m - 3, r)
+    J = rng.normal(size=(r, 2, 3))
+    ab, _ = _normal.accumulate_points(first, rng.random((r, 4)),
+                                      np.einsum("nai,naj->nij", J, J), np.zeros((r, 3)), m)
+    ab[11] += 1e-3
+    U = _normal.factor(ab)
+    band = _normal.covariance_band(U)
+    cov = np.linalg.inv(_dense(ab))
+    for k in range(4):
+        for i in range(m - k):
+            assert_allclose(band[i, k], cov[3 * i:3 * i + 3, 3 * (i + k):3 * (i + k) + 3],
+                            rtol=0, atol=1e-12 * np.abs(cov).max())
+    assert_allclose(band, _normal.covariance_band_sequential(U), rtol=0,
+                    atol=1e-13 * np.abs(cov).max())
+
+
+def test_the_three_new_b_splines_of_a_triple_knot_match_scipy():
+    from pslog.estimation import _breaks
+
+    a = np.array([0.25, 0.4, 0.5, 0.75])
+    pieces = _breaks._new_splines(a)
+    x = np.linspace(-1.0, 2.0, 601)[None, :].repeat(len(a), 0)
+    for e, knots in enumerate(([-1, 0, "a", "a", "a"], [0, "a", "a", "a", 1],
+                               ["a", "a", "a", 1, 2])):
+        for d in range(4):
+            ours = np.zeros_like(x)
+            for lo, hi, c in pieces[e]:
+                on = (x >= lo[:, None]) & (x < hi[:, None])
+                ours = np.where(on, _breaks._horner(c, x, d), ours)
+            for i, ai in enumerate(a):
+                kn = [ai if k == "a" else k for k in knots]
+                spline = BSpline.basis_element(kn, extrapolate=False)
+                ref = np.nan_to_num(spline(x[i], nu=d))
+                away = np.min(np.abs(x[i][:, None] - np.array(kn)[None]), axis=1) > 1e-9
+                assert_allclose(ours[i][away], ref[away], atol=1e-9 * max(1, abs(ref).max()))
+
+
+def test_the_break_gain_is_the_cost_decrease_of_the_dense_local_problem():
+    """gᵀ S⁻¹ g equals, to rounding, the base cost minus the least cost with a triple knot at
+    τ inserted into the base knots, both solved densely."""
+    from pslog.estimation import _breaks
+
+    rng = np.random.default_rng(4)
+    h, prior = 0.03, MotionPrior()
+    n = 80
+    t = np.sort(rng.uniform(-0.25, 0.25, n))
+    J = rng.normal(size=(n, 2, 3)) * 300
+    z = rng.normal(size=(n, 2)) * 50
+    w = rng.random(n) + 0.5
+    centre = np.array([0.004])
+    K = 7
+    local = _breaks._local(K, h, prior, 1)
+    index = np.flatnonzero(np.abs(t - centre[0]) < 5 * h)[None, :]
+    base = _breaks._Base(local, t, J, z, w, index, np.ones_like(index, bool), centre, h)
+
+    def dense_cost(knots):
+        m = n_control(knots)
+        ab, rhs, const = T._prior_normal([knots], np.zeros(1, np.int64), m, prior)
+        rows = index[0]
+        first, values = basis(knots, t[rows], 0)
+        D = np.zeros((len(rows), 2, 3 * m))
+        for k, (f, nb) in enumerate(zip(first, values[:, 0], strict=True)):
+            for a in range(4):
+                D[k, :, 3 * (f + a):3 * (f + a) + 3] += nb[a] * J[rows[k]]
+        D = D.reshape(-1, 3 * m)
+        ww, zz = np.repeat(w[rows], 2), z[rows].reshape(-1)
+        H = D.T @ (ww[:, None] * D) + _dense(ab)
+        b = D.T @ (ww * zz) + rhs
+        return ww @ (zz * zz) + const - b @ np.linalg.solve(H, b)
+
+    grid = centre[0] + h * np.arange(-K, K + 1)
+    plain = dense_cost(clamped_knots(grid))
+    assert_allclose(base.cost[0], plain, rtol=1e-10)
+    for frac in (0.25, 0.4, 0.61, 0.75):
+        for span in (-2, 0, 1):
+            tau = centre[0] + (span + frac) * h
+            gain = _breaks._gains(base, np.array([0]), np.array([tau]), centre, prior)[0]
+            points = np.sort(np.r_[grid, tau])
+            mult = np.ones(len(points) - 2, np.int64)
+            mult[np.searchsorted(points, tau) - 1] = 3
+            assert_allclose(gain, plain - dense_cost(clamped_knots(points, mult)),
+                            rtol=1e-7, atol=1e-6)
+
+
+def test_the_basis_of_several_splines_at_once_equals_each_alone():
+    from pslog.estimation.bspline import basis_pieces
+
+    knots = [T._knots_with_breaks(0.0, 0.5, 0.04, np.array([0.21])),
+             T._knots_with_breaks(0.9, 1.3, 0.05, np.zeros(0)),
+             T._knots_with_breaks(2.0, 2.2, 0.03, np.array([2.1]))]
+    rng = np.random.default_rng(9)
+    t = [np.r_[k[0], rng.uniform(k[0], k[-1], 50), k[-1], 0.21, 2.1][:52 + (i != 1)]
+         for i, k in enumerate(knots)]
+    piece = np.concatenate([np.full(len(x), i) for i, x in enumerate(t)])
+    first, values = basis_pieces(knots, piece, np.concatenate(t), 3)
+    offset = np.cumsum([0] + [n_control(k) for k in knots])
+    for i, k in enumerate(knots):
+        f, v = basis(k, t[i], 3)
+        sel = piece == i
+        assert_array_equal(first[sel], f + offset[i])
+        assert_allclose(values[sel], v, rtol=0, atol=1e-9)
+
+
+def test_the_stacked_projection_equals_each_camera_alone():
+    from pslog.estimation.projection import project_stacked, stack_cameras
+
+    rig = _rig(3, distortion=True)
+    rng = np.random.default_rng(12)
+    points = rng.uniform([0.3, 0.2, 0.1], [2.7, 1.8, 1.9], (90, 3))
+    index = rng.integers(0, 3, 90)
+    uv, J = project_stacked(stack_cameras(rig.cameras, index), points)
+    for i, cam in enumerate(rig.cameras):
+        sel = index == i
+        uv_i, J_i = project_with_jacobian(cam, points[sel])
+        assert_allclose(uv[sel], uv_i, rtol=1e-14, atol=1e-9)
+        assert_allclose(J[sel], J_i, rtol=1e-12, atol=1e-9)
+
+
+def test_the_marginal_covariance_at_the_points_by_the_sparse_product_equals_the_sum():
+    from pslog.estimation import _normal
+
+    rng = np.random.default_rng(13)
+    m, r = 30, 200
+    first = rng.integers(0, m - 3, r)
+    N = rng.random((r, 4))
+    A = rng.normal(size=(3 * m, 3 * m))
+    cov = A @ A.T  # any symmetric matrix: its band, as covariance_band returns it
+    band = np.zeros((m, 4, 3, 3))
+    for i in range(m):
+        for k in range(4):
+            if i + k < m:
+                band[i, k] = cov[3 * i:3 * i + 3, 3 * (i + k):3 * (i + k) + 3]
+    ours = _normal.Points(first, N, m).marginal(band)
+    assert_allclose(ours, _normal.marginal(band, first, N), rtol=1e-12, atol=1e-12)
+    index = 3 * (first[:, None] + np.arange(4))[:, :, None] + np.arange(3)  # (r, 4, 3)
+    for i in range(0, r, 37):  # and the definition: Bᵀ Σ B with B the point's basis
+        B = np.zeros((3 * m, 3))
+        for a in range(4):
+            B[index[i, a], np.arange(3)] = N[i, a]
+        assert_allclose(ours[i], B.T @ cov @ B, rtol=1e-10)

@@ -2,16 +2,35 @@
 
 For a candidate near ``t_c``, the reprojection problem linearised at the current fit
 (``J_i X ≈ z_i`` per detection, weights ``w_i / σ²``) is solved on a local window under the
-motion prior, once with a spline that is C² everywhere and once for each trial instant ``τ``
-with a triple knot (C⁰) at ``τ``. The local knots are ``τ + k·h`` for integers ``k`` — the
-trial instant is always a knot and the local problem has the same structure for every ``τ``
-(the prior's normal matrix is shift invariant and computed once) — so every (candidate, τ) pair
-is one small dense solve, and all of them run as one batched call. ``τ`` is found by three
-nested grid scans and a parabola through the best three costs; the gain of the break is the
-cost without it minus the cost with it (a likelihood ratio in units of σ²).
+motion prior: a spline that is C² everywhere on uniform knots ``t_c + k·h`` (the *base*, one
+small dense solve per candidate, all candidates in one batched call; the prior's normal matrix
+is shift invariant and computed once). A break at a trial instant ``τ`` in span
+``[u_j, u_{j+1})`` inserts a triple knot at ``τ`` into those knots; the spline space then is
+the base space plus the three cubic B-splines on knots ``(u_{j-1}, u_j, τ, τ, τ)``,
+``(u_j, τ, τ, τ, u_{j+1})`` and ``(τ, τ, τ, u_{j+1}, u_{j+2})`` (they live on three spans;
+none of their combinations is C² at ``τ``, so they add exactly the three new dimensions). With
+``y`` their coefficients (9 unknowns), ``x`` the base control points, the base minimum ``x₀``
+and its inverse information ``Σ = H⁻¹``, the least cost with the break is, exactly,
+
+    cost_with(τ) = cost_base - gᵀ S⁻¹ g,   S = H_yy - H_yx Σ H_xy,   g = -½ ∂cost/∂y at (x₀, 0)
+
+(the Schur complement of the base unknowns; ``H_xy`` touches only the six base control points
+over those three spans, so only a 18 x 18 block of ``Σ`` is needed). The prior terms of
+``H_yy``, ``H_xy`` and ``g`` are integrated exactly on the four sub-spans around ``τ`` (2-point
+Gauss for ``p''``, midpoint for ``p'''``, as everywhere). So a trial instant costs a 9 x 9
+solve, and every (candidate, τ) pair of a scan stage is one batched call. The B-spline on
+``(u_{j-1}, u_j, τ, τ, τ)`` degenerates as ``τ → u_j`` (and ``S`` with it), so every candidate
+has two bases, on knots ``t_c + k·h`` and ``t_c + h/2 + k·h``, and a trial instant is tested
+on the one whose knots are at least ``h/4`` from it (as the final knots keep no uniform knot
+within ``h/4`` of a break). ``τ`` is found by three nested grid scans and a parabola through
+the best three costs; the gain of the break is the cost of the base on ``t_c + k·h`` minus the
+least cost with it (a likelihood ratio in units of σ²), i.e. ``gᵀ S⁻¹ g`` plus the difference
+of the two bases' costs when the shifted one is used.
 """
 
 from __future__ import annotations
+
+from functools import lru_cache
 
 import numpy as np
 
@@ -19,7 +38,8 @@ from .bspline import basis, clamped_knots, n_control
 
 _GRID = 7  # trial instants per scan
 _STAGES = 3
-_BATCH = 400  # (candidate, τ) pairs per batched solve: bounds memory
+_BATCH = 2000  # (candidate, τ) pairs per batched solve: bounds memory
+_GAUSS = 1 / np.sqrt(3.0)
 
 
 class _Local:
@@ -46,59 +66,221 @@ class _Local:
         self.P, self.rhs, self.const = P, rhs, const
 
 
-def local_costs(local: _Local, t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray,
-                index: np.ndarray, valid: np.ndarray, tau: np.ndarray, spacing: float
-                ) -> np.ndarray:
-    """Minimum of the local linearised cost for each window and trial instant.
+@lru_cache(maxsize=16)
+def _local(K: int, spacing: float, prior, multiplicity: int) -> _Local:
+    return _Local(K, spacing, prior, multiplicity)
 
-    Parameters
-    ----------
-    local : _Local
-    t, J, z, w : (n,), (n, 2, 3), (n, 2), (n,) the piece's detection times (s), Jacobians,
-        linearised targets and weights (already divided by σ²)
-    index : (B, W) int, detections of each window; valid : (B, W) bool (padding False)
-    tau : (B,) float, the trial instants (the middle knot)
 
-    Returns
-    -------
-    cost : (B,) float
-    """
-    out = np.empty(len(tau))
-    for lo in range(0, len(tau), _BATCH):
-        sl = slice(lo, lo + _BATCH)
-        out[sl] = _costs(local, t, J, z, w, index[sl], valid[sl], tau[sl], spacing)
+class _Base:
+    """The no-break local problems of a batch of windows (``local``; ``t, J, z, w`` (n,),
+    (n, 2, 3), (n, 2), (n,) the detections' times (s), Jacobians, linearised targets and
+    weights already divided by σ²; ``index``, ``valid`` (B, W) each window's detections and
+    padding; ``centre`` (B,) s, the middle knot): their minimum ``x0`` (B, m, 3),
+    inverse information ``cov`` (B, 3m, 3m), minimum cost, and per detection the basis
+    (``first`` (B, W), ``N`` (B, W, 4)), ``M = w JᵀJ`` (B, W, 3, 3) and the weighted
+    residual ``u = w Jᵀ (z - J X₀)`` (B, W, 3) at the minimum."""
+
+    def __init__(self, local, t, J, z, w, index, valid, centre, spacing):
+        B, W = index.shape
+        s = (t[index] - centre[:, None]) / spacing
+        inside = valid & (np.abs(s) < local.K - 1e-9)
+        s = np.where(inside, s, 0.0)
+        first, N = basis(local.knots, s.ravel(), 0)
+        first = first.reshape(B, W)
+        N = N[:, 0].reshape(B, W, 4)
+        wi = np.where(inside, w[index], 0.0)
+        m = local.m
+        n = 3 * m
+        Ji = J[index]  # (B, W, 2, 3)
+        zi = z[index]
+        wJ = wi[..., None, None] * Ji
+        self.M = np.swapaxes(wJ, 2, 3) @ Ji  # (B, W, 3, 3): w JᵀJ
+        v = np.einsum("bwai,bwa->bwi", wJ, zi)  # w Jᵀ z
+        # the basis as a dense (B, W, m) matrix: H = Σ_w (b_w b_wᵀ) ⊗ M_w, one batched
+        # product per entry of M
+        basis_w = np.zeros((B, W, m))
+        flat = ((np.arange(B * W) * m).reshape(B, W) + first)[..., None] + np.arange(4)
+        basis_w.reshape(-1)[flat.reshape(-1)] = N.reshape(-1)
+        basis_t = np.swapaxes(basis_w, 1, 2)
+        H = local.P.copy() + np.zeros((B, 1, 1))
+        H5 = H.reshape(B, m, 3, m, 3)
+        for i in range(3):
+            for k in range(i, 3):
+                block = basis_t @ (self.M[..., i, k, None] * basis_w)  # (B, m, m)
+                H5[:, :, i, :, k] += block
+                if k != i:
+                    H5[:, :, k, :, i] += block
+        rhs = (basis_t @ v).reshape(B, n) + local.rhs
+        H[:, np.arange(n), np.arange(n)] *= 1 + 1e-12  # keeps a degenerate window solvable
+        self.cov = np.linalg.inv(H)
+        x = np.einsum("bij,bj->bi", self.cov, rhs)
+        wz = wi * np.sum(zi * zi, axis=2)
+        self.cost = np.sum(wz, axis=1) + local.const - np.einsum("bk,bk->b", rhs, x)
+        self.x0 = x.reshape(B, -1, 3)
+        self.first, self.N = first, N
+        X0 = basis_w @ self.x0  # (B, W, 3)
+        self.u = v - (self.M @ X0[..., None])[..., 0]  # w Jᵀ (z - J X₀)
+        self.s_sorted = np.where(inside, s, 1e6)  # times in spacings from the centre, sorted
+        self.local, self.spacing = local, spacing
+
+
+def _mul(p: list, q: list) -> list:
+    """Product of two polynomials given by power-basis coefficient lists."""
+    out = [0.0] * (len(p) + len(q) - 1)
+    for i, a in enumerate(p):
+        for k, b in enumerate(q):
+            out[i + k] = out[i + k] + a * b
     return out
 
 
-def _costs(local, t, J, z, w, index, valid, tau, spacing):
-    B, W = index.shape
-    s = (t[index] - tau[:, None]) / spacing
-    inside = valid & (np.abs(s) < local.K - 1e-9)
-    s = np.where(inside, s, 0.0)
-    first, N = basis(local.knots, s.ravel(), 0)
-    first = first.reshape(B, W)
-    N = N[:, 0].reshape(B, W, 4)
-    wi = np.where(inside, w[index], 0.0)
-    n = 3 * local.m
-    # dense design (B, 2W, n): row (i, axis) has N_a ∂uv_axis/∂X_d at column 3(first+a)+d
-    D = np.zeros((B, W, 2, n))
-    Ji = J[index]  # (B, W, 2, 3)
-    cols = 3 * first[..., None] + np.arange(12)  # (B, W, 12)
-    vals = (N[:, :, None, :, None] * Ji[:, :, :, None, :]).reshape(B, W, 2, 12)
-    b_idx = np.arange(B)[:, None, None, None]
-    w_idx = np.arange(W)[None, :, None, None]
-    a_idx = np.arange(2)[None, None, :, None]
-    D[b_idx, w_idx, a_idx, cols[:, :, None, :]] = vals
-    D = D.reshape(B, 2 * W, n)
-    zw = z[index].reshape(B, 2 * W)
-    ww = np.repeat(wi, 2, axis=1)
-    Dw = D * ww[..., None]
-    DwT = np.swapaxes(Dw, 1, 2)
-    H = DwT @ D + local.P  # batched BLAS
-    rhs = (DwT @ zw[..., None])[..., 0] + local.rhs
-    H[:, np.arange(n), np.arange(n)] *= 1 + 1e-12  # keeps a degenerate window solvable
-    x = np.linalg.solve(H, rhs[..., None])[..., 0]
-    return np.sum(ww * zw * zw, axis=1) + local.const - np.einsum("bk,bk->b", rhs, x)
+def _reflect(c: list) -> list:
+    """Coefficients of ``p(1 - x)`` from those of a cubic ``p(x)``."""
+    c0, c1, c2, c3 = c
+    return [c0 + c1 + c2 + c3, -c1 - 2 * c2 - 3 * c3, c2 + 3 * c3, -c3]
+
+
+def _horner(c: list, x: np.ndarray, derivative: int = 0) -> np.ndarray:
+    """A cubic's ``derivative``-th derivative at ``x`` (B, P); ``c`` four (B,) arrays."""
+    for _ in range(derivative):
+        c = [k * ck for k, ck in enumerate(c)][1:]
+    out = c[-1][:, None] * np.ones_like(x)
+    for ck in c[-2::-1]:
+        out = out * x + ck[:, None]
+    return out
+
+
+def _new_splines(a: np.ndarray) -> list:
+    """The three cubic B-splines a triple knot at ``τ = j + a`` adds (module docstring), on
+    knots ``(-1, 0, a, a, a)``, ``(0, a, a, a, 1)`` and ``(a, a, a, 1, 2)`` in spacings from
+    ``u_j``: per B-spline its two polynomial pieces as ``(lo, hi, coefficients)`` (``a`` (B,),
+    coefficients four (B,) arrays in the power basis). Cox–de Boor worked out by hand; the
+    third is the first's mirror image (``x → 1 - x``, ``a → 1 - a``)."""
+    one = np.ones_like(a)
+    zero = np.zeros_like(a)
+
+    def first(a):
+        up = [one, one]  # x + 1
+        down = [a, -one]  # a - x
+        x = [zero, one]
+        left = [c / (a + 1) ** 2 for c in _mul(_mul(up, up), up)]
+        right = [p / ((a + 1) ** 2 * a) + q / ((a + 1) * a**2) + r / a**3 for p, q, r in zip(
+            _mul(_mul(up, up), down), _mul(_mul(up, down), x), _mul(down, _mul(x, x)),
+            strict=True)]
+        return left, right
+
+    b = 1 - a
+    left1, right1 = first(a)
+    left3, right3 = first(b)
+    middle_left = [zero, zero, zero, a**-3]  # (x / a)³
+    middle_right = _reflect([zero, zero, zero, b**-3])  # ((1 - x) / b)³
+    return [[(-one, zero, left1), (zero, a, right1)],
+            [(zero, a, middle_left), (a, one, middle_right)],
+            [(a, one, _reflect(right3)), (one, 2 * one, _reflect(left3))]]
+
+
+def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, prior
+           ) -> np.ndarray:
+    """Cost decrease (B,) of a triple knot at ``tau`` (B,) in window ``which`` (B,) of
+    ``base``, whose uniform knots are ``centre + k·h`` (module docstring)."""
+    local, h = base.local, base.spacing
+    K = local.K
+    B = len(tau)
+    s = (tau - centre[which]) / h
+    j = np.floor(s)
+    jm, jp = j - 1, j + 1
+    pieces = _new_splines(s - j)  # in spacings from u_j
+    q0 = (j + K - 1).astype(np.int64)  # the six base control points over spans j-1..j+1
+
+    def spread(first, N):
+        """(B, P, 4) basis values at control points first..first+3 onto q0..q0+5."""
+        pos = np.clip(first - q0[:, None], 0, 2)
+        out = np.zeros((*N.shape[:2], 6))
+        flat = (6 * np.arange(pos.size).reshape(pos.shape) + pos)[..., None] + np.arange(4)
+        out.reshape(-1)[flat.reshape(-1)] = N.reshape(-1)
+        return out
+
+    # data: the window's detections on the three spans [j-1, j+2) the new B-splines live on
+    xs_all = base.s_sorted[which]  # (B, W), increasing, padding far beyond
+    lo_col = np.sum(xs_all < jm[:, None], axis=1)
+    hi_col = np.sum(xs_all < jp[:, None] + 1, axis=1)
+    W = max(int(np.max(hi_col - lo_col)), 1)
+    cols = np.minimum(lo_col[:, None] + np.arange(W), xs_all.shape[1] - 1)
+    inside = lo_col[:, None] + np.arange(W) < hi_col[:, None]
+    wsel = (which[:, None], cols)
+    xs = np.where(inside, base.s_sorted[wsel], 1e6)  # (B, W); far: every new B-spline is 0
+    x = xs - j[:, None]
+    f = np.zeros((B, 3, W))
+    for e, spline in enumerate(pieces):
+        for lo, hi, c in spline:
+            on = (x >= lo[:, None]) & (x < hi[:, None])
+            f[:, e] = np.where(on, _horner(c, x), f[:, e])
+    old = spread(base.first[wsel], base.N[wsel])  # (B, W, 6)
+    M = base.M[wsel].reshape(B, W, 9)
+    # Σ_w (f fᵀ) ⊗ M_w and Σ_w (old fᵀ) ⊗ M_w: one batched product of the 27 rows
+    # (f, old) ⊗ f with M, then in (e, i, f, j) order
+    rows = np.concatenate([f, np.swapaxes(old, 1, 2)], axis=1)  # (B, 9, W)
+    both = ((rows[:, :, None, :] * f[:, None, :, :]).reshape(B, 27, W) @ M).reshape(
+        B, 9, 3, 3, 3).transpose(0, 1, 3, 2, 4)
+    Hyy = both[:, :3].reshape(B, 9, 9)
+    Hxy = both[:, 3:].reshape(B, 18, 9)
+    g = f @ base.u[wsel]  # (B, 3, 3)
+
+    # prior: four sub-spans [j-1, j], [j, τ], [τ, j+1], [j+1, j+2]
+    lo = np.stack([jm, j, s, jp], 1)
+    hi = np.stack([j, s, jp, jp + 1], 1)
+    half, mid = (hi - lo) / 2, (hi + lo) / 2  # (B, 4), spacings
+    nodes = np.concatenate([mid - _GAUSS * half, mid + _GAUSS * half, mid], axis=1)  # (B, 12)
+    accel = np.r_[np.ones(8, bool), np.zeros(4, bool)]  # p'' at Gauss nodes, the jerk at mids
+    # each new B-spline is one polynomial piece on each of its two sub-spans
+    fn = np.zeros((B, 3, 12))
+    xn = nodes - j[:, None]
+    for e, spline in enumerate(pieces):
+        for k, (_, _, c) in enumerate(spline):
+            sub = np.array([0, 4, 8]) + e + k  # the sub-span's two Gauss nodes and midpoint
+            fn[:, e, sub[:2]] = _horner(c, xn[:, sub[:2]], 2) / h**2
+            fn[:, e, sub[2:]] = _horner(c, xn[:, sub[2:]], 3) / h**3
+    # the base's B-splines at the nodes: uniform ones (closed form), but near the clamped ends
+    span = np.floor(nodes)
+    u = nodes - span
+    first = (span + K).astype(np.int64)  # (B, 12)
+    N2 = np.stack([1 - u, 3 * u - 2, 1 - 3 * u, u], axis=-1)
+    N3 = np.broadcast_to(np.array([-1.0, 3.0, -3.0, 1.0]), N2.shape)
+    Nd = np.where(accel[None, :, None], N2 / h**2, N3 / h**3)  # (B, 12, 4), per second^d
+    clamped = (first < 3) | (first > 2 * K - 4)
+    if np.any(clamped):
+        f_c, N_c = basis(local.knots, nodes[clamped], 3)
+        first[clamped] = f_c
+        Nd[clamped] = np.where(accel[np.nonzero(clamped)[1]][:, None], N_c[:, 2] / h**2,
+                               N_c[:, 3] / h**3)
+    m = local.m
+    cp = np.take(base.x0.reshape(-1, 3), (which * m)[:, None, None] + first[..., None]
+                 + np.arange(4), axis=0)  # (B, 12, 4, 3)
+    p0 = np.einsum("bka,bkad->bkd", Nd, cp)  # the base's p'' or jerk at each node
+    p0[:, :8] -= np.asarray(prior.gravity, dtype=np.float64)  # deviation from gravity
+    wq = h * np.concatenate([half / prior.q_accel, half / prior.q_accel,
+                             2 * half / prior.q_jerk], axis=1)  # (B, 12)
+    fw = fn * wq[:, None, :]
+    pyy = fw @ np.swapaxes(fn, 1, 2)  # (B, 3, 3)
+    pxy = np.swapaxes(spread(first, Nd), 1, 2) @ np.swapaxes(fw, 1, 2)  # (B, 6, 3)
+    H5 = Hyy.reshape(B, 3, 3, 3, 3)
+    X5 = Hxy.reshape(B, 6, 3, 3, 3)
+    for i in range(3):  # ⊗ I₃
+        H5[:, :, i, :, i] += pyy
+        X5[:, :, i, :, i] += pxy
+    g -= fw @ p0
+
+    n = 3 * m
+    s0, s1, s2 = base.cov.strides  # the 18 x 18 diagonal blocks of each window, as a view
+    blocks = np.lib.stride_tricks.as_strided(base.cov, (len(base.cov), n - 17, 18, 18),
+                                             (s0, s1 + s2, s1, s2), writeable=False)
+    cov = blocks[which, 3 * q0]  # (B, 18, 18)
+    S = Hyy - np.swapaxes(Hxy, 1, 2) @ cov @ Hxy
+    S = (S + np.swapaxes(S, 1, 2)) / 2
+    g = g.reshape(B, 9)
+    load = 1e-12 * np.max(np.abs(np.diagonal(S, axis1=1, axis2=2)), axis=1) + 1e-300
+    S[:, np.arange(9), np.arange(9)] += load[:, None]
+    gain = np.einsum("bk,bk->b", g, np.linalg.solve(S, g[..., None])[..., 0])
+    return gain
 
 
 def scan(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray, centers: np.ndarray,
@@ -108,9 +290,10 @@ def scan(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray, centers: np
 
     Parameters
     ----------
-    t, J, z, w : one piece's detections (see :func:`local_costs`)
+    t, J, z, w : detections sorted by time (see :class:`_Base`)
     centers : (C,) s, candidate instants; the window is ``center ± half_width``, cut at
-        ``limits`` (C, 2) (neighbouring breaks, whose other side is not modelled here)
+        ``limits`` (C, 2) (neighbouring breaks, whose other side is not modelled here, and the
+        piece's ends)
     bounds : (C, 2) s, the interval searched for ``τ``
 
     Returns
@@ -124,40 +307,54 @@ def scan(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray, centers: np
     hi = np.minimum(centers + half_width, limits[:, 1])
     i0 = np.searchsorted(t, lo, side="left")
     i1 = np.searchsorted(t, hi, side="right")
-    Wmax = int(np.max(i1 - i0))
+    Wmax = max(int(np.max(i1 - i0)), 1)
     index = i0[:, None] + np.arange(Wmax)
     valid = index < i1[:, None]
     index = np.minimum(index, len(t) - 1)
-    reach = half_width + np.max(bounds[:, 1] - bounds[:, 0]) + spacing
+    # knots reach the window and two spans beyond any trial instant
+    reach = max(half_width, float(np.max(np.abs(bounds - centers[:, None]))) + 2.5 * spacing)
     K = int(np.ceil(reach / spacing)) + 1
-    plain = _Local(K, spacing, prior, 1)
-    broken = _Local(K, spacing, prior, 3)
-    base = local_costs(plain, t, J, z, w, index, valid, centers, spacing)
+    local = _local(K, spacing, prior, 1)
+    # two bases, knots at the centre + k·h and shifted by h/2 (windows C..2C-1): a trial
+    # instant is tested on the one whose knots are at least h/4 away from it
+    both = np.r_[centers, centers + spacing / 2]
+    base = _Base(local, t, J, z, w, np.r_[index, index], np.r_[valid, valid], both, spacing)
+    rows = np.arange(C)
+
+    def gains(which, tau):
+        """Cost of the centred base minus the least cost with a break at ``tau``."""
+        frac = (tau - centers[which]) / spacing
+        frac -= np.floor(frac)
+        on = which + C * ((frac < 0.25) | (frac > 0.75))
+        out = np.empty(len(tau))
+        for s in range(0, len(tau), _BATCH):
+            sl = slice(s, s + _BATCH)
+            out[sl] = (_gains(base, on[sl], tau[sl], both, prior) + base.cost[which[sl]]
+                       - base.cost[on[sl]])
+        return out
+
     a, b = bounds[:, 0].copy(), bounds[:, 1].copy()
     best_tau = (a + b) / 2
-    best = np.full(C, np.inf)
+    best = np.full(C, -np.inf)
     for _ in range(_STAGES):
         grid = a[:, None] + (b - a)[:, None] * np.linspace(0, 1, _GRID)[None, :]
-        costs = local_costs(broken, t, J, z, w, np.repeat(index, _GRID, axis=0),
-                            np.repeat(valid, _GRID, axis=0), grid.ravel(),
-                            spacing).reshape(C, _GRID)
-        k = np.argmin(costs, axis=1)
-        rows = np.arange(C)
-        better = costs[rows, k] < best
-        best = np.where(better, costs[rows, k], best)
+        gain = gains(np.repeat(rows, _GRID), grid.ravel()).reshape(C, _GRID)
+        k = np.argmax(gain, axis=1)
+        better = gain[rows, k] > best
+        best = np.where(better, gain[rows, k], best)
         best_tau = np.where(better, grid[rows, k], best_tau)
         step = (b - a) / (_GRID - 1)
         # a parabola through the best grid point and its neighbours
         km, kp = np.maximum(k - 1, 0), np.minimum(k + 1, _GRID - 1)
-        c0, cm, cp = costs[rows, k], costs[rows, km], costs[rows, kp]
+        c0, cm, cp = -gain[rows, k], -gain[rows, km], -gain[rows, kp]
         curv = cm + cp - 2 * c0
         inner = (k > 0) & (k < _GRID - 1) & (curv > 0)
         shift = np.where(inner, 0.5 * (cm - cp) / np.where(inner, curv, 1.0), 0.0)
         centre = grid[rows, k] + shift * step
         a = np.maximum(centre - step, bounds[:, 0])
         b = np.minimum(centre + step, bounds[:, 1])
-    final = local_costs(broken, t, J, z, w, index, valid, (a + b) / 2, spacing)
-    use = final < best
+    final = gains(rows, (a + b) / 2)
+    use = final > best
     best_tau = np.where(use, (a + b) / 2, best_tau)
     best = np.where(use, final, best)
-    return best_tau, base - best
+    return best_tau, best

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.linalg import cho_solve_banded, cholesky_banded
+from scipy.sparse import csr_matrix
 
 from ..errors import FusionError
 
@@ -44,6 +45,109 @@ def accumulate(start: np.ndarray, E: np.ndarray, b: np.ndarray, w: np.ndarray, n
     return ab, rhs
 
 
+_PAIRS = [(a, b) for a in range(4) for b in range(a, 4)]  # control-point pairs, b >= a
+_PA = np.array([a for a, _ in _PAIRS])
+_PB = np.array([b for _, b in _PAIRS])
+_SYM = np.array([0, 1, 2, 1, 3, 4, 2, 4, 5])  # 3 x 3 symmetric from its upper triangle
+_UPPER9 = np.array([0, 1, 2, 4, 5, 8])  # the upper triangle of a flattened 3 x 3
+
+
+def accumulate_points(first: np.ndarray, N: np.ndarray, M: np.ndarray, v: np.ndarray, m: int,
+                      ab: np.ndarray | None = None, rhs: np.ndarray | None = None
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """Add the terms of points ``p_i = Σ_a N[i, a] c[first_i + a]`` to normal equations.
+
+    Each term is a quadratic form ``p_iᵀ M_i p_i - 2 v_iᵀ p_i`` of a point on the spline
+    (a detection: ``M = w JᵀJ``, ``v = w Jᵀ z``; the prior: ``M = w I``, ``v = w g``); its
+    contribution to the normal matrix is the 12 x 12 block ``(N_i N_iᵀ) ⊗ M_i`` at control
+    points ``first_i .. first_i + 3``, and ``N_i ⊗ v_i`` to the right-hand side — the same
+    sums :func:`accumulate` forms row by row (:class:`Points` does it).
+
+    Parameters
+    ----------
+    first : (r,) int64, first control point of each term
+    N : (r, 4) float64, basis values
+    M : (r, 3, 3) float64, symmetric
+    v : (r, 3) float64
+    m : int, number of control points (``3m`` unknowns)
+    ab, rhs : as :func:`accumulate`
+
+    Returns
+    -------
+    ab, rhs
+    """
+    return Points(first, N, m).normal(M, v, ab, rhs)
+
+
+class Points:
+    """Points ``p_i = Σ_a N[i, a] c[first_i + a]`` on a spline of ``m`` control points, as
+    two sparse matrices built once: ``B`` (r x m, the basis: ``p = B c``) and ``G``
+    (4(m+3) x r), whose row ``4p + k`` holds ``N_ia N_i(a+k)`` for every term with
+    ``first_i + a = p``, so that ``G @ M`` sums every term's block ``(N_i N_iᵀ) ⊗ M_i`` into
+    the block band ``Σ_{p, p+k}`` in one sparse product.
+
+    Parameters
+    ----------
+    first : (r,) int64; N : (r, 4) float64; m : int
+    """
+
+    def __init__(self, first: np.ndarray, N: np.ndarray, m: int):
+        first = np.asarray(first, dtype=np.int64)
+        r = len(first)
+        self.m, self.r = m, r
+        cols = np.repeat(np.arange(r), 10)
+        rows = (4 * (first[:, None] + _PA) + (_PB - _PA)).ravel()
+        NN = (np.take(N, _PA, axis=1) * np.take(N, _PB, axis=1)).ravel()
+        self.G = csr_matrix((NN, (rows, cols)), shape=(4 * (m + 3), r))
+        rows = (first[:, None] + np.arange(4)).ravel()
+        self.B = csr_matrix((N.ravel(), rows, np.arange(0, 4 * r + 1, 4)), shape=(r, m))
+        self.BT = self.B.T.tocsr()
+
+    def positions(self, control: np.ndarray) -> np.ndarray:
+        """``Σ_a N_a c[first + a]`` (r, 3) for control points (m, 3)."""
+        return self.B @ control
+
+    def marginal(self, band: np.ndarray) -> np.ndarray:
+        """:func:`marginal` at the points: ``Σ_ab N_a N_b Σ_{first+a, first+b}`` (r, 3, 3)
+        from the covariance band (m, 4, 3, 3), as ``Gᵀ`` times the band (the off-diagonal
+        blocks with their transposes: each pair (a, b), a < b, stands for both orders)."""
+        both = np.zeros((self.m + 3, 4, 3, 3))
+        both[:self.m] = band
+        both[:, 1:] += np.swapaxes(both[:, 1:], 2, 3)
+        return (self.G.T @ both.reshape(-1, 9)).reshape(-1, 3, 3)
+
+    def normal(self, M: np.ndarray, v: np.ndarray, ab: np.ndarray | None = None,
+               rhs: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Add ``Σ_i p_iᵀ M_i p_i - 2 v_iᵀ p_i`` (M (r, 3, 3) symmetric, or its upper triangle
+        (r, 6) in the order 00, 01, 02, 11, 12, 22; v (r, 3)) to normal equations (as
+        :func:`accumulate`)."""
+        m, r = self.m, self.r
+        n = 3 * m
+        ab = np.zeros((WIDTH, n)) if ab is None else ab
+        rhs = np.zeros(n) if rhs is None else rhs
+        if r == 0:
+            return ab, rhs
+        # the upper triangle (r, 6): given, or taken from the full matrices
+        upper = M if M.ndim == 2 else np.take(M.reshape(r, 9), _UPPER9, axis=1)
+        blocks = np.take(self.G @ upper, _SYM, axis=1).reshape(m + 3, 4, 3, 3)
+        _blocks_to_band(blocks[:m], ab)
+        rhs += (self.BT @ v).reshape(-1)
+        return ab, rhs
+
+
+def _blocks_to_band(blocks: np.ndarray, ab: np.ndarray) -> None:
+    """Add a block band (m, 4, 3, 3) (``blocks[p, k] = A_{p, p+k}``) to upper banded storage."""
+    m = len(blocks)
+    for k in range(4):
+        for d in range(3):
+            for e in range(3):
+                off = 3 * k + e - d  # column minus row
+                if off < 0:
+                    continue
+                # rows 3p + d, columns 3(p + k) + e for p + k < m
+                ab[_U - off, 3 * k + e::3][:m - k] += blocks[:m - k, k, d, e]
+
+
 def factor(ab: np.ndarray) -> np.ndarray:
     """Upper banded Cholesky factor ``U`` (``A = Uᵀ U``) of an information matrix; a
     :class:`FusionError` if it is not positive definite (a trajectory the detections and the
@@ -78,10 +182,88 @@ def covariance_band(U: np.ndarray) -> np.ndarray:
     unknowns. (The same recurrence grouped by 3 x 3 blocks is algebraically identical but
     numerically unstable on these spline problems: errors grew ~6x per control point.)
 
+    The recurrence is run as what it is, an affine map of the 12 x 12 window
+    ``W_r = Σ[r:r+12, r:r+12]``: ``W_r = T_r W_{r+1} T_rᵀ + e₀e₀ᵀ / U_rr²`` with ``T_r`` the
+    shift whose first row is ``-U[r, r+1:r+12] / U_rr`` (:func:`_takahashi_step`, the scalar
+    recurrence above, per unknown). The unknowns are cut into chunks; each chunk's composed
+    map (the product of its ``T_r``, and its accumulated noise term) is formed for all chunks
+    at once, the windows at the chunk boundaries follow in one short sequential pass, and then
+    every chunk runs the per-unknown recurrence from its boundary window, all chunks at once.
+
     Returns
     -------
     band : (m, 4, 3, 3), ``band[i, k] = Σ_{i, i+k}`` (zero beyond the last control point)
     """
+    n = U.shape[1]
+    m = n // 3
+    L = max(WIDTH, int(np.sqrt(n)) // 2)  # unknowns per chunk
+    C = -(-n // L)
+    # padded to whole chunks by unknowns of unit variance coupled to nothing (Σ rows of the
+    # real unknowns are unchanged: no real row of U reaches them)
+    diag = np.ones(C * L)
+    diag[:n] = U[_U]
+    right = np.zeros((C * L, _U))
+    for d in range(1, WIDTH):
+        right[: n - d, d - 1] = U[_U - d, d:]
+    a = (right / diag[:, None]).reshape(C, L, _U)  # -first row of T_r, per chunk
+    q = (1.0 / diag**2).reshape(C, L)
+    # each chunk's map: W_start = Phi W_end Phiᵀ + Q
+    phi = np.broadcast_to(np.eye(WIDTH), (C, WIDTH, WIDTH)).copy()
+    Q = np.zeros((C, WIDTH, WIDTH))
+    for j in range(L - 1, -1, -1):
+        phi = _shift_left(a[:, j], phi)
+        Q = _takahashi_step(a[:, j], q[:, j], Q)
+    # the windows where each chunk ends (where the next begins), from the last
+    ends = np.zeros((C, WIDTH, WIDTH))
+    window = np.zeros((WIDTH, WIDTH))
+    for c in range(C - 1, -1, -1):
+        ends[c] = window
+        window = phi[c] @ window @ phi[c].T + Q[c]
+    rows = np.empty((C, L, WIDTH))  # rows[c, j, k] = Σ_{r, r+k} for r = cL + j
+    window = ends
+    for j in range(L - 1, -1, -1):
+        window = _takahashi_step(a[:, j], q[:, j], window)
+        rows[:, j] = window[:, 0]
+    rows = rows.reshape(C * L, WIDTH)[:n]
+    rows = np.concatenate([rows, np.zeros((WIDTH, WIDTH))])
+    # block (i, i+k), entry (a, b) = Σ_{3i+a, 3i+3k+b} = rows[3i+a, 3k+b-a] (b >= a if k = 0)
+    band = np.zeros((m, 4, 3, 3))
+    base = 3 * np.arange(m)
+    for k in range(4):
+        for a_ in range(3):
+            for b in range(3):
+                j = 3 * k + b - a_
+                if j >= 0:
+                    band[:, k, a_, b] = rows[base + a_, j]
+                else:  # below the diagonal of a diagonal block: symmetry
+                    band[:, k, a_, b] = rows[base + b, -j]
+    return band
+
+
+def _shift_left(a: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """``T X`` for (C,) shifts ``T`` (first row ``[-a, 0]``, then the identity shifted down),
+    a (C, 11), X (C, 12, k)."""
+    out = np.empty_like(X)
+    out[:, 0] = -np.einsum("ck,ckj->cj", a, X[:, :_U])
+    out[:, 1:] = X[:, :_U]
+    return out
+
+
+def _takahashi_step(a: np.ndarray, q: np.ndarray, W: np.ndarray) -> np.ndarray:
+    """``T W Tᵀ + q e₀e₀ᵀ``: one unknown of the Takahashi recurrence, for (C,) windows
+    (a (C, 11) = ``U[r, r+1:r+12] / U_rr``, q (C,) = ``1 / U_rr²``, W (C, 12, 12))."""
+    s_next = W[:, :_U, :_U]
+    row = -np.einsum("ck,ckj->cj", a, s_next)  # Σ_{r, r+1..r+11}
+    out = np.empty_like(W)
+    out[:, 0, 0] = q - np.einsum("ck,ck->c", a, row)
+    out[:, 0, 1:] = row
+    out[:, 1:, 0] = row
+    out[:, 1:, 1:] = s_next
+    return out
+
+
+def covariance_band_sequential(U: np.ndarray) -> np.ndarray:
+    """:func:`covariance_band` one unknown at a time (the reference the tests compare with)."""
     n = U.shape[1]
     m = n // 3
     # upper rows of U: row r, columns r+1..r+11 (zero beyond n)

@@ -70,8 +70,45 @@ def basis(knots: np.ndarray, t: np.ndarray, n_derivatives: int = 2
         (per second^d) of ``N_{first[i] + a}`` at ``t[i]``
     """
     t = np.asarray(t, dtype=np.float64)
-    p, n = DEGREE, len(t)
     j = span_index(knots, t)
+    return j - DEGREE, _basis_in_span(knots, j, t, n_derivatives)
+
+
+def basis_pieces(knots: list[np.ndarray], piece: np.ndarray, t: np.ndarray,
+                 n_derivatives: int = 2) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`basis` of several splines at once: point ``i`` on spline ``piece[i]``.
+
+    The knot vectors are laid end to end: a clamped vector's repeated end knots keep every
+    point's recurrence inside its own vector, so one pass serves all.
+
+    Returns
+    -------
+    first : (n,) int64, index of the first non-zero function, counted over the splines'
+        control points laid end to end
+    values : (n, n_derivatives + 1, 4) float64
+    """
+    t = np.asarray(t, dtype=np.float64)
+    lengths = np.array([len(k) for k in knots])
+    start = np.r_[0, np.cumsum(lengths)[:-1]]  # each vector's first knot
+    offset = np.r_[0, np.cumsum(lengths - DEGREE - 1)[:-1]]  # each spline's first control
+    cat = np.concatenate(knots)
+    lo = start[piece] + DEGREE
+    hi = start[piece] + lengths[piece] - DEGREE - 2  # the last non-empty span (n_control - 1)
+    # the span in the point's own vector: searchsorted on it alone (the vectors need not be
+    # sorted end to end)
+    j = np.empty(len(t), dtype=np.int64)
+    for p in np.unique(piece):
+        sel = piece == p
+        j[sel] = np.searchsorted(knots[p], t[sel], side="right") - 1 + start[p]
+    j = np.clip(j, lo, hi)
+    values = _basis_in_span(cat, j, t, n_derivatives)
+    return j - start[piece] - DEGREE + offset[piece], values
+
+
+def _basis_in_span(knots: np.ndarray, j: np.ndarray, t: np.ndarray, n_derivatives: int
+                   ) -> np.ndarray:
+    """The recurrence of :func:`basis` at points ``t`` in spans ``j`` of ``knots``."""
+    p, n = DEGREE, len(t)
     ndu = np.zeros((n, p + 1, p + 1))
     ndu[:, 0, 0] = 1.0
     left = np.zeros((n, p + 1))
@@ -113,7 +150,7 @@ def basis(knots: np.ndarray, t: np.ndarray, n_derivatives: int = 2
     for k in range(1, n_derivatives + 1):
         factor *= p - k + 1
         out[:, k, :] *= factor
-    return j - p, out
+    return out
 
 
 def evaluate(knots: np.ndarray, control: np.ndarray, t: np.ndarray, derivative: int = 0

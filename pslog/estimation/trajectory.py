@@ -39,20 +39,24 @@ midpoint integrate (2) exactly. Velocity jumps at triple knots are not penalised
 
 Uncertainty: the Gauss–Newton information matrix ``H = Σ w_i J_iᵀJ_i / σ² + P`` at the
 solution (``w_i`` the robust weights, ``P`` the prior's) is the inverse covariance of ``c``;
-its banded inverse (Takahashi recurrence, :mod:`pslog.estimation._normal`) gives, through the
-basis, the marginal covariance of ``p(t)`` at any ``t``.
+its banded inverse (Takahashi recurrence, :func:`pslog.estimation._normal.covariance_band`)
+gives, through the basis, the marginal covariance of ``p(t)`` at any ``t``.
 
 Bounces and kicks: a first fit under a prior ten times looser (it follows a velocity jump
 closely, so σ is estimated right and each jump is a sharp peak); every span where
 ``‖p'' - g‖`` peaks above ``break_accel`` is a candidate. Around each, the problem linearised
-at that fit is solved on a local window, under the prior (2), with and without a triple knot
-at trial instants (:mod:`pslog.estimation._breaks`: all candidates and instants in one batched
-solve, nested grid scans and a parabola between the neighbouring detections); the break is
-kept when it lowers the cost by more than ``break_threshold`` (in units of σ², a
-likelihood-ratio test). Rounds repeat until no new break; the fit under the real prior
-follows, then each break's instant is re-estimated at that fit and the session refitted.
-A break leaves detections of two cameras between it and a piece's end (a segment's velocity
-is otherwise free along a ray).
+at that fit is solved on a local window under the prior (2), on uniform knots ``t_c + k·h``
+(the *base*, C² everywhere); a break at a trial instant ``τ`` inserts a triple knot at ``τ``
+into those knots, which adds exactly three B-splines to the base's, so the least cost with
+the break is the base's minus ``gᵀ S⁻¹ g``, a 9 x 9 Schur complement on the base's solution
+and inverse information (:mod:`pslog.estimation._breaks` has the equations; each trial instant
+is tested on knots at least ``h/4`` from it: a second base shifted by ``h/2``). All
+candidates and instants of a scan stage are one batched computation: three nested grid scans
+and a parabola between the neighbouring detections; the break is kept when it lowers the cost
+by more than ``break_threshold`` (in units of σ², a likelihood-ratio test). Rounds repeat
+until no new break; a fit under the real prior follows, then each break's instant is
+re-estimated at that fit and the session refitted. A break leaves detections of two cameras
+between it and a piece's end (a segment's velocity is otherwise free along a ray).
 
 Why knots every three detection intervals: 8 pixel coordinates per 3 unknowns keep the pixel
 noise estimable from the residuals, and a cubic spline with knots that close represents
@@ -62,7 +66,10 @@ Limits: one camera cannot triangulate, so a piece seen by fewer than two cameras
 point; the prior assumes ballistic flight between breaks (a rolling ball, with no gravity
 acceleration, is fitted with a small bias; air drag is absorbed by σ_a, not modelled); a
 velocity change spread over more than a few knot spans (a ball rolling to a stop) is smoothed
-rather than broken; pure numpy, several thousand detections per second.
+rather than broken. Pure numpy and scipy: the normal equations are summed per control point
+by sparse products built once per knot set (:class:`pslog.estimation._normal.Points`), the
+covariance band by a chunked Takahashi recurrence; ~35,000-45,000 detections per second on one
+core (``benchmarks/bench_smooth.py``).
 """
 
 from __future__ import annotations
@@ -76,8 +83,8 @@ from ..motion import G
 from ..records import NS, Observations
 from ..rig import Rig
 from . import _breaks, _normal
-from .bspline import DEGREE, basis, clamped_knots, n_control
-from .projection import project_with_jacobian
+from .bspline import DEGREE, basis, basis_pieces, clamped_knots, n_control
+from .projection import project_stacked, stack_cameras
 
 
 @dataclass(frozen=True)
@@ -143,6 +150,13 @@ _WINDOW_SPANS = 5
 _LOOSE = 10.0
 #: Rounds of break detection (each finds the jumps the previous fit still hides)
 _BREAK_ROUNDS = 3
+#: Gauss–Newton iterations of the first loose fit, of the next rounds' (from the previous
+#: fit, refitted to the new knots), and of the fit under the real prior at which the breaks'
+#: instants are refined (the session is refitted in full after): more change the fits by
+#: micrometres, not the breaks found
+_LOOSE_ITERATIONS = 3
+_NEXT_LOOSE_ITERATIONS = 1
+_REFINE_ITERATIONS = 2
 
 
 @dataclass(frozen=True, eq=False)
@@ -238,14 +252,21 @@ class _Problem:
         self.t = (obs.time_ns - self.t0_ns) / NS
         self.rows_of_piece = rows_of_piece
         self.rows = np.concatenate(rows_of_piece)  # observation rows in the fit
+        self._cameras = None  # each row's camera parameters (built on first use)
+        self._piece_of_row = np.repeat(np.arange(len(rows_of_piece)),
+                                       [len(r) for r in rows_of_piece])
         self.set_knots(knots, prior)
 
     def set_knots(self, knots: list[np.ndarray], prior: MotionPrior) -> None:
+        # the same knot vectors (only the prior changes): the design stays as it is
+        same = (hasattr(self, "knots") and len(knots) == len(self.knots)
+                and all(a is b for a, b in zip(knots, self.knots, strict=True)))
         self.knots, self.prior = knots, prior
         sizes = np.array([n_control(k) for k in knots])
         self.offset = np.r_[0, np.cumsum(sizes)[:-1]].astype(np.int64)
         self.m = int(sizes.sum())
-        self.set_times(self.t)
+        if not same:
+            self.set_times(self.t)
         self.prior_ab, self.prior_rhs, self.prior_const = _prior_normal(
             knots, self.offset, self.m, self.prior)
 
@@ -253,23 +274,17 @@ class _Problem:
         """Observation times (n,) s since ``t0_ns`` (the clock estimator moves them); the
         basis at each, its value ``N`` and first derivative ``N1`` (n_fit, 4)."""
         self.t = t
-        firsts, values, slopes = [], [], []
-        for p, rows in enumerate(self.rows_of_piece):
-            first, N = basis(self.knots[p], t[rows], 1)
-            firsts.append(first + self.offset[p])
-            values.append(N[:, 0])
-            slopes.append(N[:, 1])
-        self.first = np.concatenate(firsts)
-        self.N = np.concatenate(values)
-        self.N1 = np.concatenate(slopes)
+        self.first, N = basis_pieces(self.knots, self._piece_of_row, t[self.rows], 1)
+        self.N = np.ascontiguousarray(N[:, 0])
+        self.N1 = np.ascontiguousarray(N[:, 1])
+        self.points = _normal.Points(self.first, self.N, self.m)
 
     def velocities(self, control: np.ndarray) -> np.ndarray:
         index = self.first[:, None] + np.arange(DEGREE + 1)
         return np.einsum("na,nad->nd", self.N1, control[index])
 
     def positions(self, control: np.ndarray) -> np.ndarray:
-        index = self.first[:, None] + np.arange(DEGREE + 1)
-        return np.einsum("na,nad->nd", self.N, control[index])
+        return self.points.positions(control)
 
     def project(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Residuals (n, 2) pixels and ``∂uv/∂X`` (n, 2, 3) of the fitted observations.
@@ -277,18 +292,30 @@ class _Problem:
         A point at or behind its camera (a wild iterate) has no projection: its row is set to
         0 with a zero Jacobian (it adds nothing to the normal equations) and flagged in
         ``self.invalid``, which the cost charges as a gross outlier."""
-        cams = self.obs.camera[self.rows]
-        uv = np.empty((len(X), 2))
-        J = np.empty((len(X), 2, 3))
-        for i, cam in enumerate(self.rig.cameras):
-            sel = cams == i
-            if np.any(sel):
-                uv[sel], J[sel] = project_with_jacobian(cam, X[sel])
-        r = uv - self.obs.uv[self.rows]
-        self.invalid = ~(np.all(np.isfinite(r), axis=1) & np.all(np.isfinite(J), axis=(1, 2)))
-        r[self.invalid] = 0.0
-        J[self.invalid] = 0.0
+        if self._cameras is None:
+            self._cameras = stack_cameras(self.rig.cameras, self.obs.camera[self.rows])
+            self._uv = self.obs.uv[self.rows]
+        uv, J = project_stacked(self._cameras, X)
+        r = uv - self._uv
+        finite = np.isfinite(r.sum(axis=1) + J.reshape(-1, 6).sum(axis=1))
+        self.invalid = ~finite
+        if not np.all(finite):
+            r[self.invalid] = 0.0
+            J[self.invalid] = 0.0
         return r, J
+
+    def normal(self, J: np.ndarray, target: np.ndarray, w: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
+        """Normal equations of the prior plus ``Σ_i w_i ‖J_i p(t_i) - target_i‖²``
+        (:func:`_normal.accumulate_points`; the same sums as :meth:`data_rows` fed to
+        :func:`_normal.accumulate`). J (n, 2, 3), target (n, 2), w (n,)."""
+        a = J.reshape(-1, 6).T  # (6, n): rows ∂u/∂X, ∂u/∂Y, ∂u/∂Z, ∂v/∂X, ∂v/∂Y, ∂v/∂Z
+        M = np.empty((len(w), 6))  # upper triangle of w JᵀJ
+        for k, (i, j) in enumerate(((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))):
+            M[:, k] = w * (a[i] * a[j] + a[3 + i] * a[3 + j])
+        v = (w[:, None] * target)
+        v = a[:3].T * v[:, :1] + a[3:].T * v[:, 1:]
+        return self.points.normal(M, v, self.prior_ab.copy(), self.prior_rhs.copy())
 
     def data_rows(self, J: np.ndarray, target: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -302,37 +329,59 @@ class _Problem:
 def _prior_normal(knots: list[np.ndarray], offset: np.ndarray, m: int, prior: MotionPrior
                   ) -> tuple[np.ndarray, np.ndarray, float]:
     """Normal equations of the motion prior (2), integrated exactly per knot span."""
-    starts, E_rows, b_rows, w_rows = [], [], [], []
+    key = (m, offset.tobytes(), tuple(np.asarray(k, dtype=np.float64).tobytes() for k in knots))
+    parts = _PRIOR_CACHE.pop(key, None)
+    if parts is None:
+        parts = _prior_parts(knots, offset, m)
+    _PRIOR_CACHE[key] = parts  # most recent last
+    while len(_PRIOR_CACHE) > 4:
+        del _PRIOR_CACHE[next(iter(_PRIOR_CACHE))]
+    ab_accel, ab_jerk, pull, length = parts
     g = np.asarray(prior.gravity, dtype=np.float64)
-    gauss = np.array([-1.0, 1.0]) / np.sqrt(3.0)
-    const = 0.0
+    ab = ab_accel / prior.q_accel + ab_jerk / prior.q_jerk
+    rhs = (pull[:, None] * g).reshape(-1) / prior.q_accel
+    return ab, rhs, float(length * (g @ g) / prior.q_accel)
+
+
+#: the prior's parts per knot pattern (:func:`_prior_parts`), the few most recent
+_PRIOR_CACHE: dict = {}
+
+
+def _prior_parts(knots: list[np.ndarray], offset: np.ndarray, m: int
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """The prior's normal equations for ``q_a = q_j = 1`` and ``g`` one: the banded matrices
+    of ``∫ ‖p''‖²`` and of ``∫ ‖p'''‖²``, ``∫ N_k''`` per control point (the rhs is that times
+    ``g / q_a``) and the total length (the constant is that times ``‖g‖² / q_a``)."""
+    firsts, accel, jerk, weights, lengths = [], [], [], [], 0.0
+    node = 1 / np.sqrt(3.0)  # 2-point Gauss-Legendre, weights 1
     for p, k in enumerate(knots):
         lo, hi = k[:-1], k[1:]
         nonempty = hi > lo
         lo, hi = lo[nonempty], hi[nonempty]
         half, mid = (hi - lo) / 2, (hi + lo) / 2
-        for node in gauss:  # ∫ ‖p'' - g‖² / q_a over the span, 2-point Gauss (weights 1)
-            first, N = basis(k, mid + node * half, 2)
-            for d in range(3):
-                E = np.zeros((len(first), 12))
-                E[:, d::3] = N[:, 2]
-                starts.append(3 * (first + offset[p]))
-                E_rows.append(E)
-                b_rows.append(np.full(len(first), g[d]))
-                w_rows.append(half / prior.q_accel)
-        first, N = basis(k, mid, 3)  # ∫ ‖p'''‖² / q_j, constant over the span
-        for d in range(3):
-            E = np.zeros((len(first), 12))
-            E[:, d::3] = N[:, 3]
-            starts.append(3 * (first + offset[p]))
-            E_rows.append(E)
-            b_rows.append(np.zeros(len(first)))
-            w_rows.append(2 * half / prior.q_jerk)
-    start = np.concatenate(starts)
-    b, w = np.concatenate(b_rows), np.concatenate(w_rows)
-    ab, rhs = _normal.accumulate(start, np.concatenate(E_rows), b, w, 3 * m)
-    const = float(np.sum(w * b * b))
-    return ab, rhs, const
+        # ∫ ‖p''‖² over the span at its two Gauss nodes; ∫ ‖p'''‖², constant over the
+        # span, at its midpoint
+        first, N = basis(k, np.concatenate([mid - node * half, mid + node * half, mid]), 3)
+        s = len(mid)
+        firsts.append((first[:2 * s] + offset[p], first[2 * s:] + offset[p]))
+        accel.append(N[:2 * s, 2])
+        jerk.append(N[2 * s:, 3])
+        weights.append((np.r_[half, half], 2 * half))
+        lengths += float(np.sum(2 * half))
+    eye = np.eye(3)
+    wa = np.concatenate([w for w, _ in weights])
+    wj = np.concatenate([w for _, w in weights])
+    fa = np.concatenate([f for f, _ in firsts])
+    fj = np.concatenate([f for _, f in firsts])
+    Na = np.concatenate(accel)
+    ab_accel, _ = _normal.accumulate_points(fa, Na, wa[:, None, None] * eye, np.zeros((len(fa), 3)),
+                                            m)
+    ab_jerk, _ = _normal.accumulate_points(fj, np.concatenate(jerk), wj[:, None, None] * eye,
+                                           np.zeros((len(fj), 3)), m)
+    pull = np.zeros(m + 3)
+    for a in range(4):
+        np.add.at(pull, fa + a, wa * Na[:, a])
+    return ab_accel, ab_jerk, pull[:m], lengths
 
 
 def _prior_cost(problem: _Problem, c: np.ndarray) -> float:
@@ -391,8 +440,12 @@ def _knots_with_breaks(t_lo: float, t_hi: float, spacing: float, breaks: np.ndar
     breaks = np.asarray(breaks, dtype=np.float64)
     breaks = breaks[(breaks > t_lo + 1e-6) & (breaks < t_hi - 1e-6)]
     if len(breaks):
-        near = np.min(np.abs(grid[1:-1, None] - breaks[None, :]), axis=1) < spacing / 4
-        grid = np.r_[grid[0], grid[1:-1][~near], grid[-1]]
+        breaks = np.sort(breaks)
+        inner = grid[1:-1]
+        j = np.searchsorted(breaks, inner)  # the nearest break is j - 1 or j
+        nearest = np.minimum(np.abs(inner - breaks[np.maximum(j - 1, 0)]),
+                             np.abs(breaks[np.minimum(j, len(breaks) - 1)] - inner))
+        grid = np.r_[grid[0], inner[nearest >= spacing / 4], grid[-1]]
     points = np.r_[grid, breaks]
     mult = np.r_[np.ones(len(grid), np.int64), np.full(len(breaks), 3)]
     order = np.argsort(points, kind="stable")
@@ -424,10 +477,7 @@ def _initial_control(problem: _Problem, sigma_px: float) -> np.ndarray:
     for _ in range(2):
         scale = f / np.maximum(depth, 1e-3)
         J = A * scale[:, :, None]
-        start, E, b = problem.data_rows(J, -(a0 * scale))
-        ab, rhs = _normal.accumulate(start, E, b, np.repeat(weight, 2) / sigma_px**2,
-                                     3 * problem.m, problem.prior_ab.copy(),
-                                     problem.prior_rhs.copy())
+        ab, rhs = problem.normal(J, -(a0 * scale), weight / sigma_px**2)
         control = _normal.solve(_normal.factor(ab), rhs).reshape(-1, 3)
         X = problem.positions(control)
         depth = np.maximum(np.einsum("nj,nj->n", R[:, 2], X) + tt[:, 2], 1e-3)[:, None]
@@ -482,10 +532,7 @@ class _Solver:
             s = np.sum(r * r, axis=1) / sigma**2
             w = 1 / (1 + s / _CAUCHY**2)  # Cauchy IRLS weight
             target = np.einsum("naj,nj->na", J, X) - r  # linearised: J X_new ≈ J X - r
-            start, E, b = problem.data_rows(J, target)
-            ab, rhs = _normal.accumulate(start, E, b, np.repeat(w, 2) / sigma**2,
-                                         3 * problem.m, problem.prior_ab.copy(),
-                                         problem.prior_rhs.copy())
+            ab, rhs = problem.normal(J, target, w / sigma**2)
             new = _normal.solve(_normal.factor(ab), rhs).reshape(-1, 3)
             before = self.cost(control, r, sigma)
             step = 1.0
@@ -550,29 +597,43 @@ def fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions | None = 
     # the peaks that the breaks found so far do not explain
     loose = replace(options.prior, sigma_accel=_LOOSE * options.prior.sigma_accel)
     breaks = [np.zeros(0) for _ in pieces]
-    knots = [_knots_with_breaks(lo, hi + 1e-9, spacing, b)
-             for (lo, hi), b in zip(spans, breaks, strict=True)]
+    made: dict = {}
+
+    def piece_knots(breaks: list[np.ndarray]) -> list[np.ndarray]:
+        """Each piece's knots with its breaks (a piece whose breaks did not change keeps
+        its knot vector)."""
+        out = []
+        for i, ((lo, hi), b) in enumerate(zip(spans, breaks, strict=True)):
+            key = (i, np.asarray(b, dtype=np.float64).tobytes())
+            if key not in made:
+                made[key] = _knots_with_breaks(lo, hi + 1e-9, spacing, b)
+            out.append(made[key])
+        return out
+
+    knots = piece_knots(breaks)
     problem = _Problem(obs, rig, pieces, knots, loose)
     control = _initial_control(problem, 1.0)
-    sigma, iterations = 1.0, options.iterations
+    sigma, iterations = 1.0, min(options.iterations, _LOOSE_ITERATIONS)
     for _ in range(_BREAK_ROUNDS):
         control, sigma, r, w, J = _Solver(problem, options).run(control, sigma, iterations)
         found = _find_breaks(problem, control, sigma, r, w, J, spacing, breaks, options)
         if not any(len(f) for f in found):
             break
         breaks = [np.sort(np.r_[b, f]) for b, f in zip(breaks, found, strict=True)]
-        knots = [_knots_with_breaks(lo, hi + 1e-9, spacing, b)
-                 for (lo, hi), b in zip(spans, breaks, strict=True)]
+        knots = piece_knots(breaks)
         X_old = problem.positions(control)
         problem.set_knots(knots, loose)
         control = _refit_control(problem, X_old)
-        iterations = 2
+        iterations = _NEXT_LOOSE_ITERATIONS
     problem.set_knots(knots, options.prior)  # same knots: the control points stay valid
-    control, sigma, r, w, J = _Solver(problem, options).run(control, sigma, options.iterations)
-    if any(len(b) for b in breaks):  # each break's time again, at the final fit
+    refine = any(len(b) for b in breaks)
+    # with breaks, this fit is only where their instants are refined: the full fit follows
+    control, sigma, r, w, J = _Solver(problem, options).run(
+        control, sigma, min(options.iterations, _REFINE_ITERATIONS) if refine
+        else options.iterations)
+    if refine:  # each break's time again, at the fit under the real prior
         breaks = _refine_breaks(problem, control, sigma, r, w, J, spacing, breaks, options)
-        knots = [_knots_with_breaks(lo, hi + 1e-9, spacing, b)
-                 for (lo, hi), b in zip(spans, breaks, strict=True)]
+        knots = piece_knots(breaks)
         X_old = problem.positions(control)
         problem.set_knots(knots, options.prior)
         control = _refit_control(problem, X_old)
@@ -591,7 +652,7 @@ def fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions | None = 
     residual = np.full(n, np.nan)
     weight = np.zeros(n)
     position[problem.rows] = problem.positions(control)
-    covariance[problem.rows] = _normal.marginal(band, problem.first, problem.N)
+    covariance[problem.rows] = problem.points.marginal(band)
     residual[problem.rows] = np.linalg.norm(r, axis=1)
     weight[problem.rows] = w
     used = np.zeros(n, dtype=bool)
@@ -602,16 +663,10 @@ def fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions | None = 
 def _refit_control(problem: _Problem, X: np.ndarray) -> np.ndarray:
     """Control points on new knots closest to positions ``X`` at the observations (with the
     prior): the starting point after breaks are inserted."""
-    n = len(X)
-    J = np.broadcast_to(np.eye(3)[None, :2, :], (n, 2, 3)).copy()
-    # two coordinates per row pair: use x,y then z,x to cover all three
-    start, E, b = problem.data_rows(J, X[:, :2])
-    J2 = np.broadcast_to(np.eye(3)[None, [2, 0], :], (n, 2, 3)).copy()
-    start2, E2, b2 = problem.data_rows(J2, X[:, [2, 0]])
-    w = np.full(2 * n, 1e6)
-    ab, rhs = _normal.accumulate(start, E, b, w, 3 * problem.m, problem.prior_ab.copy(),
-                                 problem.prior_rhs.copy())
-    ab, rhs = _normal.accumulate(start2, E2, b2, w, 3 * problem.m, ab, rhs)
+    # each position's x, y, z at weight 1e6 (x twice: the rows pair (x, y) and (z, x))
+    M = np.broadcast_to(np.diag([2e6, 1e6, 1e6]), (len(X), 3, 3))
+    ab, rhs = problem.points.normal(M, X * [2e6, 1e6, 1e6], problem.prior_ab.copy(),
+                                    problem.prior_rhs.copy())
     return _normal.solve(_normal.factor(ab), rhs).reshape(-1, 3)
 
 
@@ -625,11 +680,9 @@ def _information(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
     s = np.sum(r * r, axis=1) / sigma**2
     w = 1 / (1 + s / _CAUCHY**2)
     target = np.einsum("naj,nj->na", J, X) - r
-    start, E, b = problem.data_rows(J, target)
-    ab, _ = _normal.accumulate(start, E, b, np.repeat(w, 2) / sigma**2, 3 * problem.m,
-                               problem.prior_ab.copy(), problem.prior_rhs.copy())
+    ab, _ = problem.normal(J, target, w / sigma**2)
     band = _normal.covariance_band(_normal.factor(ab))
-    cov_X = _normal.marginal(band, problem.first, problem.N)
+    cov_X = problem.points.marginal(band)
     p_eff = float(np.sum(w * np.einsum("naj,njk,nak->n", J, cov_X, J)) / sigma**2)
     n_res = 2 * len(r)
     return band, float(np.sqrt(n_res / max(n_res - p_eff, 1.0)))
@@ -646,27 +699,26 @@ def _find_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
     target = np.einsum("naj,nj->na", J, X) - r  # the linearised measurements
     weight = w / sigma**2
     t_obs = problem.t[problem.rows]
-    out = []
+    # ‖p'' - g‖ at every span's midpoint of every piece, in one pass
+    mids = [((k[:-1] + k[1:]) / 2)[k[1:] > k[:-1]] for k in problem.knots]
+    piece = np.repeat(np.arange(len(mids)), [len(x) for x in mids])
+    first, N = basis_pieces(problem.knots, piece, np.concatenate(mids), 2)
+    accel = np.einsum("na,nad->nd", N[:, 2], control[first[:, None] + np.arange(DEGREE + 1)])
+    devs = np.split(np.linalg.norm(accel - g, axis=1), np.cumsum([len(x) for x in mids])[:-1])
+    jobs = []
     row0 = 0
-    for p, k in enumerate(problem.knots):
+    for p, dev in enumerate(devs):
         # the piece's rows in time order (the clock estimator moves the times)
         here = row0 + np.argsort(t_obs[row0:row0 + len(problem.rows_of_piece[p])],
                                  kind="stable")
         row0 += len(problem.rows_of_piece[p])
-        t = t_obs[here]
-        lo, hi = k[:-1], k[1:]
-        mids = ((lo + hi) / 2)[hi > lo]
-        first, N = basis(k, mids, 2)
-        index = first[:, None] + np.arange(DEGREE + 1) + problem.offset[p]
-        accel = np.einsum("na,nad->nd", N[:, 2], control[index])
-        dev = np.linalg.norm(accel - g, axis=1)
         peak = dev > options.break_accel
         peak[1:] &= dev[1:] >= dev[:-1]
         peak[:-1] &= dev[:-1] > dev[1:]
-        centers = mids[peak]
+        centers = mids[p][peak]
+        t = t_obs[here]
         centers = centers[np.all(np.abs(centers[:, None] - known[p][None, :]) > spacing, axis=1)]
         if len(t) < 8 or len(centers) == 0:
-            out.append(np.zeros(0))
             continue
         # the jump lies near the peak: search two detections beyond its neighbours, leaving
         # detections of two cameras in the piece at either end (:func:`_end_limits`)
@@ -676,10 +728,13 @@ def _find_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
         b = np.minimum(t[np.clip(j + 2, 0, len(t) - 1)], last_ok)
         ok = a < b
         centers, a, b = centers[ok], a[ok], b[ok]
-        limits = _neighbours(centers, known[p])
-        tau, gain = _breaks.scan(t, J[here], target[here], weight[here], centers,
-                                 np.stack([a, b], axis=1), limits, spacing,
-                                 _WINDOW_SPANS * spacing, options.prior)
+        if len(centers) == 0:
+            continue
+        jobs.append((p, here, centers, np.stack([a, b], axis=1),
+                     _neighbours(centers, known[p])))
+    results = _scan_pieces(jobs, t_obs, J, target, weight, spacing, options)
+    out = [np.zeros(0) for _ in problem.knots]
+    for (p, *_), (tau, gain) in zip(jobs, results, strict=True):
         found: list[float] = []
         for i in np.argsort(-gain):
             if gain[i] <= options.break_threshold:
@@ -687,8 +742,36 @@ def _find_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
             if all(abs(tau[i] - f) > 1.5 * spacing for f in found) and all(
                     abs(tau[i] - f) > spacing for f in known[p]):
                 found.append(float(tau[i]))
-        out.append(np.sort(np.array(found)))
+        out[p] = np.sort(np.array(found))
     return out
+
+
+def _scan_pieces(jobs: list, t_obs: np.ndarray, J: np.ndarray, target: np.ndarray,
+                 weight: np.ndarray, spacing: float, options: SmoothOptions) -> list:
+    """:func:`_breaks.scan` of every piece's candidates in one batched call.
+
+    jobs : list of (piece, rows in time order, centres (C,), bounds (C, 2), limits (C, 2));
+    each window is also cut at its piece's first and last detection, so the pieces' rows
+    laid end to end (in time order: the pieces follow each other in time) serve as one.
+    Returns a (tau, gain) per job."""
+    if not jobs:
+        return []
+    rows = np.concatenate([here for _, here, *_ in jobs])
+    t = t_obs[rows]
+    if np.any(np.diff(t) < 0):  # moved times made pieces overlap: one piece at a time
+        return [_scan_pieces([job], t_obs, J, target, weight, spacing, options)[0]
+                for job in jobs] if len(jobs) > 1 else [_breaks.scan(
+                    t, J[rows], target[rows], weight[rows], jobs[0][2], jobs[0][3],
+                    jobs[0][4], spacing, _WINDOW_SPANS * spacing, options.prior)]
+    limits = np.concatenate([np.stack([np.maximum(lim[:, 0], t_obs[here[0]]),
+                                       np.minimum(lim[:, 1], t_obs[here[-1]])], axis=1)
+                             for _, here, _, _, lim in jobs])
+    tau, gain = _breaks.scan(t, J[rows], target[rows], weight[rows],
+                             np.concatenate([c for _, _, c, _, _ in jobs]),
+                             np.concatenate([b for _, _, _, b, _ in jobs]), limits, spacing,
+                             _WINDOW_SPANS * spacing, options.prior)
+    cuts = np.cumsum([len(c) for _, _, c, _, _ in jobs])[:-1]
+    return list(zip(np.split(tau, cuts), np.split(gain, cuts), strict=True))
 
 
 def _end_limits(t: np.ndarray, camera: np.ndarray) -> tuple[float, float]:
@@ -723,7 +806,7 @@ def _refine_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.n
     target = np.einsum("naj,nj->na", J, X) - r
     weight = w / sigma**2
     t_obs = problem.t[problem.rows]
-    out = []
+    jobs = []
     row0 = 0
     for p, known in enumerate(breaks):
         # the piece's rows in time order (the clock estimator moves the times)
@@ -732,18 +815,19 @@ def _refine_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.n
         row0 += len(problem.rows_of_piece[p])
         t = t_obs[here]
         if len(known) == 0:
-            out.append(known)
             continue
         first_ok, last_ok = _end_limits(t, problem.obs.camera[problem.rows][here])
         a = np.maximum(known - spacing, first_ok)
         b = np.minimum(known + spacing, last_ok)
         ok = a < b
         limits = np.stack([np.r_[-np.inf, known[:-1]], np.r_[known[1:], np.inf]], axis=1)
-        tau, _ = _breaks.scan(t, J[here], target[here], weight[here], known[ok],
-                              np.stack([a[ok], b[ok]], axis=1), limits[ok], spacing,
-                              _WINDOW_SPANS * spacing, options.prior)
+        if np.any(ok):
+            jobs.append((p, here, known[ok], np.stack([a[ok], b[ok]], axis=1), limits[ok]))
+    results = _scan_pieces(jobs, t_obs, J, target, weight, spacing, options)
+    out = [np.zeros(0) for _ in breaks]
+    for (p, *_), (tau, _) in zip(jobs, results, strict=True):
         # a break the moved detections no longer allow (too near a piece's end) is dropped
         new = np.sort(tau)
         keep = np.r_[True, np.diff(new) > spacing]  # never two breaks in one span
-        out.append(new[keep])
+        out[p] = new[keep]
     return out
