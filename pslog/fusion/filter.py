@@ -82,6 +82,10 @@ _BOUNCE_SIDE = 0.05
 #: A floor bounce's velocity about its expected reflection: standard deviations along
 #: gravity and across, m/s.
 _REFLECT_ALONG, _REFLECT_SIDE = 1.0, 0.6
+#: The process noise's adaptation statistic is clipped to this (an outlier moves q little).
+_R_CLIP = 4.0
+#: Accepted updates (one at least from another camera) that confirm a jump.
+_CONFIRM_UPDATES = 2
 
 
 @dataclass(frozen=True)
@@ -131,7 +135,14 @@ class FilterOptions:
     init_detections: int = 4
     init_window: int = 8
     max_init_std_m: float = 0.05
+    max_init_speed_std: float = 1.0
+    confirm_nis: float = 9.21
+    withhold: bool = True
     max_gap_s: float | None = None
+    max_accel_psd: float = 100.0
+    accel_adapt_rate: float = 0.2
+    accel_adapt_target: float = 0.2
+    max_std_m: float | None = 0.03
 
     def __post_init__(self) -> None:
         for name in ("noise_px", "accel_psd", "gate", "jump_speed"):
@@ -231,7 +242,20 @@ class BallFilter:
         self._var = options.noise_px ** 2
         self._adapt = options.adapt_rate
         self._var_min, self._var_max = options.min_noise_px ** 2, options.max_noise_px ** 2
-        self._q = options.accel_psd
+        self._q = self._q_min = options.accel_psd
+        self._q_max = max(options.max_accel_psd, options.accel_psd)
+        self._q_rate, self._q_target = options.accel_adapt_rate, options.accel_adapt_target
+        # per camera: (time, innovation u, v) of its latest accepted update, for the
+        # process noise's adaptation (consecutive innovations of a lagging filter agree)
+        self._cam_inn: list = [None] * len(rig)
+        self._max_std = options.max_std_m
+        self._withhold = options.withhold
+        # camera of a jump (or a surprising update) not yet confirmed, else -1; the
+        # confirming updates since, and whether one came from another camera
+        self._pending, self._confirms, self._other = -1, 0, False
+        self._confirm_nis = options.confirm_nis
+        #: reason -> number of points withheld (``unconfirmed``, ``uncertain``)
+        self.dropped: dict[str, int] = {}
         self._jump_var = options.jump_speed ** 2
         # the jump hypotheses (reflect, variance per axis): a floor bounce (the velocity
         # along gravity reflected with the restitution, some of the rest lost), a jump
@@ -273,6 +297,7 @@ class BallFilter:
         self._P = [float(a) for a in np.asarray(covariance, dtype=np.float64).ravel()]
         self._rejects = 0
         self._confirmed = 0
+        self._pending = -1
         self._window = []
         self._history = []
         self._cam_last = [self._last_ns] * len(self._cam_last)
@@ -372,10 +397,26 @@ class BallFilter:
 
         Returns
         -------
-        None when no point is made (no track yet, or an unusable pixel); else
-        ``(position (x, y, z), quality)`` with ``quality`` a tuple in the order of
-        :data:`FILTER_QUALITY`.
+        None when no point is made (no track yet, an unusable pixel, or a point withheld:
+        counted in :attr:`dropped`); else ``(position (x, y, z), quality)`` with ``quality``
+        a tuple in the order of :data:`FILTER_QUALITY`.
         """
+        out = self._push(time_ns, camera, u, v)
+        if out is None or not self._withhold:
+            return out
+        # withhold what the filter cannot vouch for (the state is updated all the same):
+        # a velocity jump one camera alone has seen (its component along that camera's rays
+        # is a guess) until another camera's detection confirms it, and any point whose
+        # standard deviation exceeds the bound
+        reason = ("unconfirmed" if self._pending >= 0
+                  else "uncertain" if self._max_std is not None and out[1][0] > self._max_std
+                  else None)
+        if reason is None:
+            return out
+        self.dropped[reason] = self.dropped.get(reason, 0) + 1
+        return None
+
+    def _push(self, time_ns: int, camera: int, u: float, v: float):
         time_ns, camera = int(time_ns), int(camera)
         cam = self._cams[camera]
         u, v = float(u), float(v)
@@ -417,11 +458,28 @@ class BallFilter:
                             inn[7] + math.log(inn[8])))
             if len(history) > _JUMP_LAG + 1:
                 del history[0]
+            if self._q_rate:  # process noise: a consistent filter's innovations are white
+                prev = self._cam_inn[camera]
+                if prev is not None and time_ns - prev[0] <= self._max_gap_ns:
+                    r = (inn[0] * prev[1] + inn[1] * prev[2]) / self._var
+                    r = min(max(r, -_R_CLIP), _R_CLIP)
+                    q = self._q * math.exp(self._q_rate * (r - self._q_target))
+                    self._q = min(max(q, self._q_min), self._q_max)
+                self._cam_inn[camera] = (time_ns, inn[0], inn[1])
             if self._adapt:  # pixel noise by stochastic approximation of E[NIS] = 2
                 var = self._var * (1.0 + self._adapt * (0.5 * inn[7] - 1.0))
                 self._var = min(max(var, self._var_min), self._var_max)
+            if inn[7] > self._confirm_nis:  # a surprising update: confirmed like a jump
+                self._pending, self._confirms, self._other = camera, 0, False
+            elif self._pending >= 0:
+                self._confirms += 1
+                self._other |= camera != self._pending
+                if self._confirms >= _CONFIRM_UPDATES and self._other:
+                    self._pending = -1
         else:
             self._jump_ns, self._jump_camera = time_ns, camera
+            self._cam_inn = [None] * len(self._cam_inn)  # a new segment
+            self._pending, self._confirms, self._other = camera, 0, False
         self._x, self._P, self.time_ns, self._last_ns = xn, Pn, time_ns, time_ns
         self._rejects = 0
         self._confirmed += 1
@@ -626,7 +684,8 @@ class BallFilter:
         except np.linalg.LinAlgError:
             return None
         if (not np.all(np.isfinite(cov)) or np.linalg.cond(info) > 1e14
-                or np.trace(cov[:3, :3]) > self.options.max_init_std_m ** 2):
+                or np.trace(cov[:3, :3]) > self.options.max_init_std_m ** 2
+                or np.trace(cov[3:, 3:]) > self.options.max_init_speed_std ** 2):
             return None  # a degenerate geometry (rays nearly parallel): no trustworthy start
         cov = 0.5 * (cov + cov.T)
         return [float(a) for a in theta], [float(a) for a in cov.ravel()], residuals
@@ -672,6 +731,7 @@ class FilterStream:
 
 def _track(flt: BallFilter, time_ns, camera, uv) -> Track:
     times, cams, points, quality = [], [], [], []
+    before = dict(flt.dropped)
     push = flt.push
     for t, c, (u, v) in zip(np.asarray(time_ns).tolist(), np.asarray(camera).tolist(),
                             np.asarray(uv, dtype=np.float64).reshape(-1, 2).tolist(),
@@ -686,7 +746,9 @@ def _track(flt: BallFilter, time_ns, camera, uv) -> Track:
     return Track("filter", np.array(times, dtype=np.int64),
                  np.array(points, dtype=np.float64).reshape(-1, 3),
                  np.array(cams, dtype=np.int32),
-                 {name: q[:, i] for i, name in enumerate(FILTER_QUALITY)})
+                 {name: q[:, i] for i, name in enumerate(FILTER_QUALITY)},
+                 dropped={k: n - before.get(k, 0) for k, n in flt.dropped.items()
+                          if n > before.get(k, 0)})
 
 
 def fuse_filter(obs: Observations, rig: Rig, max_gap_s: float | None = None,
