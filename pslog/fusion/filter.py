@@ -12,7 +12,10 @@ equations, exactly as implemented, are in ``docs/methods.md`` (section ``filter`
   acceleration of spectral density ``q`` (Bar-Shalom, Li & Kirubarajan, *Estimation with
   Applications to Tracking and Navigation*, 2001, section 6.2.2): the drag's Jacobian term,
   ``k ‖v‖ Δt``, is below 1e-3 at a rally's speeds and frame rates and is left to ``q``;
-- the pixel noise ``σ`` adapts to the detector's (``E[NIS] = 2``);
+- the pixel noise ``σ`` adapts to the detector's (``E[NIS] = 2``); the process noise ``q``
+  adapts to the motion: a consistent filter's innovations are white, a lagging one's
+  consecutive innovations of a camera agree, so ``q`` grows with their product (a spiral, a
+  straight line without gravity, a turntable) and shrinks back to ``accel_psd`` on a flight;
 - measurement: the detection's *distorted* pixel, ``z = π_c(p) + w``, ``w ~ N(0, σ² I)``,
   through camera ``c``'s projection with its lens model; ``H = [∂π_c/∂p, 0]`` (2 x 6).
   Pixels, not rays: the detector's noise is isotropic in the recorded image, no detection is
@@ -32,6 +35,11 @@ equations, exactly as implemented, are in ``docs/methods.md`` (section ``filter`
   ``init_detections`` of two cameras or more, within ``max_gap_s`` of each other): a
   ballistic least-squares fit (gravity and drag) to their viewing rays, refined by
   Gauss-Newton in distorted pixels; accepted when every detection reprojects inside the gate.
+
+- withheld points (counted in ``Track.dropped`` by reason, the state updated all the same):
+  ``unconfirmed``, from a jump (or an update of NIS above ``confirm_nis``) until two more
+  accepted updates, one at least from another camera, confirm it (one camera's pixel does
+  not fix the new velocity along its rays); ``uncertain``, ``std_m`` above ``max_std_m``.
 
 Causality: the point of a detection uses only the detections up to it in (time, camera)
 order; batch (:func:`fuse_filter`) and streaming run the same per-detection code, so the
@@ -117,6 +125,19 @@ class FilterOptions:
         ``sqrt(trace P_pp)`` exceeds this is refused (a degenerate geometry), metres
     max_gap_s : float or None, longest time without an accepted detection the track bridges;
         None: :func:`pslog.fusion._prepare.default_max_gap_s` of the rig
+    max_accel_psd : float, upper bound of the adapted process noise ``q``, m²/s³ (its lower
+        bound is ``accel_psd``)
+    accel_adapt_rate : float, step ``η`` of ``q``'s adaptation (0: ``q`` fixed at
+        ``accel_psd``)
+    accel_adapt_target : float, the value ``r₀`` of the whiteness statistic ``q`` settles at
+    max_init_speed_std : float, a (re)initialisation whose velocity standard deviation
+        ``sqrt(trace P_vv)`` exceeds this is refused, m/s
+    confirm_nis : float, an accepted update whose NIS exceeds this (99 % quantile of χ²₂)
+        must be confirmed like a jump
+    max_std_m : float or None, a point whose ``std_m`` exceeds this is withheld, metres
+        (None: no bound)
+    withhold : bool, withhold unconfirmed and uncertain points (counted in
+        ``Track.dropped``); False: a point at every detection of a live track
     """
 
     noise_px: float = 0.5
