@@ -166,8 +166,8 @@ def test_two_cameras_at_60_fps_and_four_cameras():
         assert filt.mean_mm < 0.5 * type_a.mean_mm, (rig.name, filt, type_a)  # 0.39, 0.36
 
 
-@pytest.mark.parametrize("name, limit", [("spiral", 0.97), ("straight", 0.97),
-                                         ("turntable", 1.0)])
+@pytest.mark.parametrize("name, limit", [("spiral", 0.93), ("straight", 0.9),
+                                         ("turntable", 0.97)])
 def test_non_ballistic_motions_are_followed_never_worse_than_type_a(name, limit):
     # no gravity, or a centripetal acceleration of 11-14 m/s²: the ballistic model is wrong
     # and only the process noise's adaptation keeps the filter from lagging behind
@@ -175,7 +175,7 @@ def test_non_ballistic_motions_are_followed_never_worse_than_type_a(name, limit)
     obs, truth = session(rig, get_motion(name), noise_px=0.3, seed=1)
     type_a = evaluate(fuse(obs, rig, "typeA"), truth).mean_mm
     filt = evaluate(fuse(obs, rig, "filter"), truth).mean_mm
-    assert filt < limit * type_a, (filt, type_a)  # measured 0.93, 0.94, 0.98
+    assert filt < limit * type_a, (filt, type_a)  # measured 0.86, 0.81, 0.90
     # the mutation: the process noise held at accel_psd fails it (measured 1.58, 2.36, 1.93)
     fixed = evaluate(fuse_filter(obs, rig, options=FilterOptions(accel_adapt_rate=0.0)),
                      truth).mean_mm

@@ -161,8 +161,8 @@ class FilterOptions:
     withhold: bool = True
     max_gap_s: float | None = None
     max_accel_psd: float = 100.0
-    accel_adapt_rate: float = 0.2
-    accel_adapt_target: float = 0.2
+    accel_adapt_rate: float = 0.5
+    accel_adapt_target: float = 0.4
     max_std_m: float | None = 0.03
 
     def __post_init__(self) -> None:
@@ -482,7 +482,9 @@ class BallFilter:
             if self._q_rate:  # process noise: a consistent filter's innovations are white
                 prev = self._cam_inn[camera]
                 if prev is not None and time_ns - prev[0] <= self._max_gap_ns:
-                    r = (inn[0] * prev[1] + inn[1] * prev[2]) / self._var
+                    # yᵀ S⁻¹ y': zero mean for a consistent filter's (white) innovations
+                    r = (prev[1] * (inn[4] * inn[0] + inn[5] * inn[1])
+                         + prev[2] * (inn[5] * inn[0] + inn[6] * inn[1]))
                     r = min(max(r, -_R_CLIP), _R_CLIP)
                     q = self._q * math.exp(self._q_rate * (r - self._q_target))
                     self._q = min(max(q, self._q_min), self._q_max)
