@@ -1,4 +1,4 @@
-"""``filter``: a causal extended Kalman filter, a point at every detection (for live use).
+"""``filter``: a causal extended Kalman filter, a point at every detection it can vouch for.
 
 Each detection updates the ball's state at its own (corrected, :mod:`pslog.timing`) capture
 time; the state can be predicted to any later instant (:meth:`BallFilter.predict`). The
