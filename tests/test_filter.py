@@ -148,11 +148,14 @@ def test_rally_never_worse_than_type_a_and_half_of_it_at_a_third_of_a_pixel(nois
     rig = lab_rig(3)
     motion, _ = rally(6.0, seed=5, speed=5.0, kick_every_s=0.8)
     obs, truth = session(rig, motion, 6.0, noise_px=noise, seed=8)
-    filt = evaluate(fuse(obs, rig, "filter"), truth)
+    track = fuse(obs, rig, "filter")
+    filt = evaluate(track, truth)
     type_a = evaluate(fuse(obs, rig, "typeA"), truth)
     limit = {0.0: 0.6, 0.3: 0.55, 1.0: 0.55}[noise]  # measured 0.36, 0.48, 0.44
     assert filt.mean_mm < limit * type_a.mean_mm, (filt, type_a)
-    assert filt.n_points > 0.95 * type_a.n_points
+    # a point at every detection but those withheld (after a jump, until confirmed)
+    assert filt.n_points + sum(track.dropped.values()) > 0.95 * type_a.n_points
+    assert filt.n_points > 0.85 * type_a.n_points
 
 
 def test_two_cameras_at_60_fps_and_four_cameras():
@@ -163,13 +166,51 @@ def test_two_cameras_at_60_fps_and_four_cameras():
         assert filt.mean_mm < 0.5 * type_a.mean_mm, (rig.name, filt, type_a)  # 0.39, 0.36
 
 
+@pytest.mark.parametrize("name, limit", [("spiral", 0.93), ("straight", 0.9),
+                                         ("turntable", 0.97)])
+def test_non_ballistic_motions_are_followed_never_worse_than_type_a(name, limit):
+    # no gravity, or a centripetal acceleration of 11-14 m/s²: the ballistic model is wrong
+    # and only the process noise's adaptation keeps the filter from lagging behind
+    rig = lab_rig(3)
+    obs, truth = session(rig, get_motion(name), noise_px=0.3, seed=1)
+    type_a = evaluate(fuse(obs, rig, "typeA"), truth).mean_mm
+    filt = evaluate(fuse(obs, rig, "filter"), truth).mean_mm
+    assert filt < limit * type_a, (filt, type_a)  # measured 0.86, 0.81, 0.90
+    # the mutation: the process noise held at accel_psd fails it (measured 1.58, 2.36, 1.93)
+    fixed = evaluate(fuse_filter(obs, rig, options=FilterOptions(accel_adapt_rate=0.0)),
+                     truth).mean_mm
+    assert fixed > 1.3 * type_a, (fixed, type_a)
+
+
+@pytest.mark.parametrize("seed", [0, 2])
+def test_no_output_point_of_a_kicked_rally_is_further_than_5_cm(seed):
+    # the first detections after a kick fix the new velocity along their rays poorly: those
+    # points are withheld (counted in Track.dropped) until another camera confirms the jump
+    rig = lab_rig(3)
+    motion, _ = rally(8.0, seed=seed)
+    obs, truth = session(rig, motion, 8.0, noise_px=0.3, seed=seed)
+    track = fuse(obs, rig, "filter")
+    err = errors_m(track, truth)
+    assert np.all(np.isfinite(err)) and err.max() < 0.05, err.max()  # measured 15, 17 mm
+    assert 0 < track.dropped["unconfirmed"] < 0.1 * len(track)
+    assert set(track.dropped) <= {"unconfirmed", "uncertain"}
+    # the mutation: every point output (withhold off) has points 165 and 220 mm off
+    every = fuse_filter(obs, rig, options=FilterOptions(withhold=False))
+    assert errors_m(every, truth).max() > 0.05
+    assert len(every) == len(track) + sum(track.dropped.values())
+
+
 # ---- jumps, outliers, losses ----------------------------------------------------------------
 
 def test_a_bounce_is_a_jump_and_the_track_recovers_within_a_few_frames():
     rig = lab_rig(3)
     obs, truth = session(rig, get_motion("throw"), noise_px=0.3, seed=4)
-    track = fuse(obs, rig, "filter")
+    # every point, the unconfirmed ones after the jump too (withhold off)
+    track = fuse_filter(obs, rig, options=FilterOptions(withhold=False))
     err = errors_m(track, truth)
+    withheld = fuse(obs, rig, "filter")
+    assert withheld.dropped.get("unconfirmed", 0) >= 1
+    assert np.all(errors_m(withheld, truth) < 0.05)
     # the throw's first floor bounce: z at the ball's radius
     t = np.linspace(0, 1.5, 150001)
     z = get_motion("throw").position(t)[:, 2]
@@ -295,6 +336,11 @@ def test_streaming_equals_batch_exactly_with_misses_drops_and_outliers(clock):
     for name in FILTER_QUALITY:
         assert_array_equal(np.concatenate([p.quality[name] for p in parts]),
                            batch.quality[name])
+    dropped: dict[str, int] = {}  # the withheld points, counted in the part they fell in
+    for p in parts:
+        for k, n in p.dropped.items():
+            dropped[k] = dropped.get(k, 0) + n
+    assert dropped == batch.dropped and sum(dropped.values()) > 0
     if not clock:  # no correction: each point comes out with its own detection
         assert all(len(p) <= 1 for p in parts) and len(parts[-1]) == 0
 

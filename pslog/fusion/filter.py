@@ -1,4 +1,4 @@
-"""``filter``: a causal extended Kalman filter, a point at every detection (for live use).
+"""``filter``: a causal extended Kalman filter, a point at every detection it can vouch for.
 
 Each detection updates the ball's state at its own (corrected, :mod:`pslog.timing`) capture
 time; the state can be predicted to any later instant (:meth:`BallFilter.predict`). The
@@ -12,7 +12,10 @@ equations, exactly as implemented, are in ``docs/methods.md`` (section ``filter`
   acceleration of spectral density ``q`` (Bar-Shalom, Li & Kirubarajan, *Estimation with
   Applications to Tracking and Navigation*, 2001, section 6.2.2): the drag's Jacobian term,
   ``k ‖v‖ Δt``, is below 1e-3 at a rally's speeds and frame rates and is left to ``q``;
-- the pixel noise ``σ`` adapts to the detector's (``E[NIS] = 2``);
+- the pixel noise ``σ`` adapts to the detector's (``E[NIS] = 2``); the process noise ``q``
+  adapts to the motion: a consistent filter's innovations are white, a lagging one's
+  consecutive innovations of a camera agree, so ``q`` grows with their product (a spiral, a
+  straight line without gravity, a turntable) and shrinks back to ``accel_psd`` on a flight;
 - measurement: the detection's *distorted* pixel, ``z = π_c(p) + w``, ``w ~ N(0, σ² I)``,
   through camera ``c``'s projection with its lens model; ``H = [∂π_c/∂p, 0]`` (2 x 6).
   Pixels, not rays: the detector's noise is isotropic in the recorded image, no detection is
@@ -32,6 +35,11 @@ equations, exactly as implemented, are in ``docs/methods.md`` (section ``filter`
   ``init_detections`` of two cameras or more, within ``max_gap_s`` of each other): a
   ballistic least-squares fit (gravity and drag) to their viewing rays, refined by
   Gauss-Newton in distorted pixels; accepted when every detection reprojects inside the gate.
+
+- withheld points (counted in ``Track.dropped`` by reason, the state updated all the same):
+  ``unconfirmed``, from a jump (or an update of NIS above ``confirm_nis``) until two more
+  accepted updates, one at least from another camera, confirm it (one camera's pixel does
+  not fix the new velocity along its rays); ``uncertain``, ``std_m`` above ``max_std_m``.
 
 Causality: the point of a detection uses only the detections up to it in (time, camera)
 order; batch (:func:`fuse_filter`) and streaming run the same per-detection code, so the
@@ -82,6 +90,10 @@ _BOUNCE_SIDE = 0.05
 #: A floor bounce's velocity about its expected reflection: standard deviations along
 #: gravity and across, m/s.
 _REFLECT_ALONG, _REFLECT_SIDE = 1.0, 0.6
+#: The process noise's adaptation statistic is clipped to this (an outlier moves q little).
+_R_CLIP = 4.0
+#: Accepted updates (one at least from another camera) that confirm a jump.
+_CONFIRM_UPDATES = 2
 
 
 @dataclass(frozen=True)
@@ -113,6 +125,19 @@ class FilterOptions:
         ``sqrt(trace P_pp)`` exceeds this is refused (a degenerate geometry), metres
     max_gap_s : float or None, longest time without an accepted detection the track bridges;
         None: :func:`pslog.fusion._prepare.default_max_gap_s` of the rig
+    max_accel_psd : float, upper bound of the adapted process noise ``q``, m²/s³ (its lower
+        bound is ``accel_psd``)
+    accel_adapt_rate : float, step ``η`` of ``q``'s adaptation (0: ``q`` fixed at
+        ``accel_psd``)
+    accel_adapt_target : float, the value ``r₀`` of the whiteness statistic ``q`` settles at
+    max_init_speed_std : float, a (re)initialisation whose velocity standard deviation
+        ``sqrt(trace P_vv)`` exceeds this is refused, m/s
+    confirm_nis : float, an accepted update whose NIS exceeds this (99 % quantile of χ²₂)
+        must be confirmed like a jump
+    max_std_m : float or None, a point whose ``std_m`` exceeds this is withheld, metres
+        (None: no bound)
+    withhold : bool, withhold unconfirmed and uncertain points (counted in
+        ``Track.dropped``); False: a point at every detection of a live track
     """
 
     noise_px: float = 0.5
@@ -131,7 +156,14 @@ class FilterOptions:
     init_detections: int = 4
     init_window: int = 8
     max_init_std_m: float = 0.05
+    max_init_speed_std: float = 1.0
+    confirm_nis: float = 9.21
+    withhold: bool = True
     max_gap_s: float | None = None
+    max_accel_psd: float = 100.0
+    accel_adapt_rate: float = 0.5
+    accel_adapt_target: float = 0.4
+    max_std_m: float | None = 0.03
 
     def __post_init__(self) -> None:
         for name in ("noise_px", "accel_psd", "gate", "jump_speed"):
@@ -231,7 +263,20 @@ class BallFilter:
         self._var = options.noise_px ** 2
         self._adapt = options.adapt_rate
         self._var_min, self._var_max = options.min_noise_px ** 2, options.max_noise_px ** 2
-        self._q = options.accel_psd
+        self._q = self._q_min = options.accel_psd
+        self._q_max = max(options.max_accel_psd, options.accel_psd)
+        self._q_rate, self._q_target = options.accel_adapt_rate, options.accel_adapt_target
+        # per camera: (time, innovation u, v) of its latest accepted update, for the
+        # process noise's adaptation (consecutive innovations of a lagging filter agree)
+        self._cam_inn: list = [None] * len(rig)
+        self._max_std = options.max_std_m
+        self._withhold = options.withhold
+        # camera of a jump (or a surprising update) not yet confirmed, else -1; the
+        # confirming updates since, and whether one came from another camera
+        self._pending, self._confirms, self._other = -1, 0, False
+        self._confirm_nis = options.confirm_nis
+        #: reason -> number of points withheld (``unconfirmed``, ``uncertain``)
+        self.dropped: dict[str, int] = {}
         self._jump_var = options.jump_speed ** 2
         # the jump hypotheses (reflect, variance per axis): a floor bounce (the velocity
         # along gravity reflected with the restitution, some of the rest lost), a jump
@@ -273,6 +318,7 @@ class BallFilter:
         self._P = [float(a) for a in np.asarray(covariance, dtype=np.float64).ravel()]
         self._rejects = 0
         self._confirmed = 0
+        self._pending = -1
         self._window = []
         self._history = []
         self._cam_last = [self._last_ns] * len(self._cam_last)
@@ -372,10 +418,26 @@ class BallFilter:
 
         Returns
         -------
-        None when no point is made (no track yet, or an unusable pixel); else
-        ``(position (x, y, z), quality)`` with ``quality`` a tuple in the order of
-        :data:`FILTER_QUALITY`.
+        None when no point is made (no track yet, an unusable pixel, or a point withheld:
+        counted in :attr:`dropped`); else ``(position (x, y, z), quality)`` with ``quality``
+        a tuple in the order of :data:`FILTER_QUALITY`.
         """
+        out = self._push(time_ns, camera, u, v)
+        if out is None or not self._withhold:
+            return out
+        # withhold what the filter cannot vouch for (the state is updated all the same):
+        # a velocity jump one camera alone has seen (its component along that camera's rays
+        # is a guess) until another camera's detection confirms it, and any point whose
+        # standard deviation exceeds the bound
+        reason = ("unconfirmed" if self._pending >= 0
+                  else "uncertain" if self._max_std is not None and out[1][0] > self._max_std
+                  else None)
+        if reason is None:
+            return out
+        self.dropped[reason] = self.dropped.get(reason, 0) + 1
+        return None
+
+    def _push(self, time_ns: int, camera: int, u: float, v: float):
         time_ns, camera = int(time_ns), int(camera)
         cam = self._cams[camera]
         u, v = float(u), float(v)
@@ -417,11 +479,30 @@ class BallFilter:
                             inn[7] + math.log(inn[8])))
             if len(history) > _JUMP_LAG + 1:
                 del history[0]
+            if self._q_rate:  # process noise: a consistent filter's innovations are white
+                prev = self._cam_inn[camera]
+                if prev is not None and time_ns - prev[0] <= self._max_gap_ns:
+                    # yᵀ S⁻¹ y': zero mean for a consistent filter's (white) innovations
+                    r = (prev[1] * (inn[4] * inn[0] + inn[5] * inn[1])
+                         + prev[2] * (inn[5] * inn[0] + inn[6] * inn[1]))
+                    r = min(max(r, -_R_CLIP), _R_CLIP)
+                    q = self._q * math.exp(self._q_rate * (r - self._q_target))
+                    self._q = min(max(q, self._q_min), self._q_max)
+                self._cam_inn[camera] = (time_ns, inn[0], inn[1])
             if self._adapt:  # pixel noise by stochastic approximation of E[NIS] = 2
                 var = self._var * (1.0 + self._adapt * (0.5 * inn[7] - 1.0))
                 self._var = min(max(var, self._var_min), self._var_max)
+            if inn[7] > self._confirm_nis:  # a surprising update: confirmed like a jump
+                self._pending, self._confirms, self._other = camera, 0, False
+            elif self._pending >= 0:
+                self._confirms += 1
+                self._other |= camera != self._pending
+                if self._confirms >= _CONFIRM_UPDATES and self._other:
+                    self._pending = -1
         else:
             self._jump_ns, self._jump_camera = time_ns, camera
+            self._cam_inn = [None] * len(self._cam_inn)  # a new segment
+            self._pending, self._confirms, self._other = camera, 0, False
         self._x, self._P, self.time_ns, self._last_ns = xn, Pn, time_ns, time_ns
         self._rejects = 0
         self._confirmed += 1
@@ -626,7 +707,8 @@ class BallFilter:
         except np.linalg.LinAlgError:
             return None
         if (not np.all(np.isfinite(cov)) or np.linalg.cond(info) > 1e14
-                or np.trace(cov[:3, :3]) > self.options.max_init_std_m ** 2):
+                or np.trace(cov[:3, :3]) > self.options.max_init_std_m ** 2
+                or np.trace(cov[3:, 3:]) > self.options.max_init_speed_std ** 2):
             return None  # a degenerate geometry (rays nearly parallel): no trustworthy start
         cov = 0.5 * (cov + cov.T)
         return [float(a) for a in theta], [float(a) for a in cov.ravel()], residuals
@@ -672,6 +754,7 @@ class FilterStream:
 
 def _track(flt: BallFilter, time_ns, camera, uv) -> Track:
     times, cams, points, quality = [], [], [], []
+    before = dict(flt.dropped)
     push = flt.push
     for t, c, (u, v) in zip(np.asarray(time_ns).tolist(), np.asarray(camera).tolist(),
                             np.asarray(uv, dtype=np.float64).reshape(-1, 2).tolist(),
@@ -686,7 +769,9 @@ def _track(flt: BallFilter, time_ns, camera, uv) -> Track:
     return Track("filter", np.array(times, dtype=np.int64),
                  np.array(points, dtype=np.float64).reshape(-1, 3),
                  np.array(cams, dtype=np.int32),
-                 {name: q[:, i] for i, name in enumerate(FILTER_QUALITY)})
+                 {name: q[:, i] for i, name in enumerate(FILTER_QUALITY)},
+                 dropped={k: n - before.get(k, 0) for k, n in flt.dropped.items()
+                          if n > before.get(k, 0)})
 
 
 def fuse_filter(obs: Observations, rig: Rig, max_gap_s: float | None = None,
