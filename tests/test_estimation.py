@@ -458,3 +458,44 @@ def test_the_marginal_covariance_at_the_points_by_the_sparse_product_equals_the_
         for a in range(4):
             B[index[i, a], np.arange(3)] = N[i, a]
         assert_allclose(ours[i], B.T @ cov @ B, rtol=1e-10)
+
+
+def _edge_rig() -> Rig:
+    """Three 800 x 600 cameras with lens distortion whose views the ball leaves and re-enters:
+    a piece of the trajectory can start one detection before a kick."""
+    dist = np.array([-0.12, 0.03, 5e-4, -4e-4, 0.0])
+    cams = []
+    for i in range(3):
+        angle = 2 * np.pi * i / 3 - 1.2
+        eye = (1.5 + 3.4 * np.cos(angle), 1.0 + 3.0 * np.sin(angle), 2.4 + 0.2 * i)
+        R, t = look_at(eye, (1.5, 1.0, 0.6))
+        K = [[520.0 + 15 * i, 0.0, 399.5], [0.0, 520.0 + 15 * i, 299.5], [0.0, 0.0, 1.0]]
+        cams.append(Camera(f"e{i + 1}", 800, 600, K, dist, R, t, 30.0, i / 90))
+    return Rig(tuple(cams), "edge3")
+
+
+def test_an_end_segment_too_few_detections_hold_gives_no_point(monkeypatch):
+    # seed 3: a piece starts with one camera's detection just before a kick, the others after
+    # it; that lone detection's position along its ray is not determined by anything
+    rig = _edge_rig()
+    motion, _ = rally(15, seed=3)
+    detections, truth = simulate(rig, motion, 15, SimulationOptions(noise_px=0.0, seed=11))
+    obs = detections.best()
+    fit = fit_trajectory(obs, rig)
+    err = np.linalg.norm(fit.position - truth.at(obs.time_ns), axis=1)
+    assert 1 <= fit.withheld <= 3
+    assert np.nanmax(err) < 1e-3  # noise-free: every point given is right
+    withheld = obs.time_ns[~fit.used & np.isin(np.arange(len(obs)),
+                                               np.concatenate(fit.pieces))]
+    track = fuse(obs, rig, "smooth", FusionOptions(rate_hz=200.0))
+    # nor any grid point in the withheld segment (from its detection to the break)
+    breaks = fit.trajectory.t0_ns + np.round(fit.trajectory.breaks_s * NS).astype(np.int64)
+    for t in withheld:
+        nxt = breaks[breaks > t].min(initial=t + NS) if np.any(breaks > t) else t
+        prv = breaks[breaks <= t].max(initial=t - NS) if np.any(breaks <= t) else t
+        assert not np.any((track.time_ns > t - 20_000_000) & (track.time_ns < nxt)
+                          & (track.time_ns > prv)), t
+    assert fuse(obs, rig, "smooth").dropped == {"underdetermined_end": fit.withheld}
+    monkeypatch.setattr(T, "_END_DETECTIONS", 1)  # every end segment trusted: metres off
+    fit = fit_trajectory(obs, rig)
+    assert np.nanmax(np.linalg.norm(fit.position - truth.at(obs.time_ns), axis=1)) > 0.1

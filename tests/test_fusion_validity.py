@@ -456,7 +456,7 @@ def test_fuse_prints_the_invalid_points_it_dropped(tmp_path, cli):
     code, out, err = cli("fuse", session, "--method", "sync", "--gating", "off",
                          "-o", tmp_path / "f.mcap")
     assert code == 0, err
-    assert "sync           2 points (dropped as geometrically invalid: behind_camera 1)" in out
+    assert "sync           2 points (left out, untrustworthy: behind_camera 1)" in out
     assert len(read_session(tmp_path / "f.mcap").tracks["sync"]) == 2
 
 

@@ -101,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"not run on this timing: {', '.join(skipped)} (name them with --method "
                   f"to run them anyway)")
     tracks, rejections = fuse_detections(session.detections, rig, methods, options)
-    dropped = {m: t.dropped for m, t in tracks.items()}  # geometrically invalid points
+    dropped = {m: t.dropped for m, t in tracks.items()}  # invalid or untrustworthy points
     empty = [m for m, t in tracks.items() if len(t) == 0]
     if empty:
         print(f"no point from {', '.join(empty)}: too few detections close enough in time")
@@ -124,6 +124,6 @@ def run(args: argparse.Namespace) -> int:
         rejected = (f"  {len(rejections[method]):>6d} candidates rejected by gating"
                     if options.gating else "")
         print(f"{method:<8} {len(track):>7d} points{rejected}"
-              + (f" (dropped as geometrically invalid: {why})" if why else ""))
+              + (f" (left out, untrustworthy: {why})" if why else ""))
     print(f"wrote {output}")
     return 0

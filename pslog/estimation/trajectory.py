@@ -56,7 +56,10 @@ and a parabola between the neighbouring detections; the break is kept when it lo
 by more than ``break_threshold`` (in units of σ², a likelihood-ratio test). Rounds repeat
 until no new break; a fit under the real prior follows, then each break's instant is
 re-estimated at that fit and the session refitted. A break leaves detections of two cameras
-between it and a piece's end (a segment's velocity is otherwise free along a ray).
+between it and a piece's end (a segment's velocity is otherwise free along a ray), and an end
+segment that fewer than four detections of two cameras hold gives no point: its 6 unknowns
+(position, velocity) are not determined by 2–3 pixels, and the linearised covariance there
+would not say so (``Fit.withheld``; ``Track.dropped["underdetermined_end"]``).
 
 Why knots every three detection intervals: 8 pixel coordinates per 3 unknowns keep the pixel
 noise estimable from the residuals, and a cubic spline with knots that close represents
@@ -148,6 +151,9 @@ _CAUCHY = 3.0
 _WINDOW_SPANS = 5
 #: The first fit's prior is this much looser (σ_a times this)
 _LOOSE = 10.0
+#: Fewest detections (of at least two cameras) that make an end segment beyond a break
+#: trustworthy: 8 pixel coordinates for its 6 unknowns (:func:`_underdetermined_ends`)
+_END_DETECTIONS = 4
 #: Rounds of break detection (each finds the jumps the previous fit still hides)
 _BREAK_ROUNDS = 3
 #: Gauss–Newton iterations of the first loose fit, of the next rounds' (from the previous
@@ -173,6 +179,9 @@ class Trajectory:
     breaks_s : (b,) float64, seconds since ``t0_ns``, the velocity jumps found
     noise_px : float, the estimated pixel noise σ
     spacing_s : float, the uniform knot spacing, seconds
+    valid_s : (n_pieces, 2) float64 or None, seconds since ``t0_ns``: the part of each piece
+        the detections determine (an end segment beyond a break that too few detections
+        hold is left out, :func:`_underdetermined_ends`); None: every piece whole
     """
 
     t0_ns: int
@@ -183,6 +192,7 @@ class Trajectory:
     breaks_s: np.ndarray
     noise_px: float
     spacing_s: float = 0.0
+    valid_s: np.ndarray | None = None
 
     def piece_of(self, time_ns: np.ndarray) -> np.ndarray:
         """Index of the piece covering each time (n,), -1 outside every piece."""
@@ -191,6 +201,9 @@ class Trajectory:
         ends = np.array([k[-1] for k in self.knots])
         p = np.searchsorted(starts, t, side="right") - 1
         inside = (p >= 0) & (t <= ends[np.maximum(p, 0)])
+        if self.valid_s is not None:
+            span = self.valid_s[np.maximum(p, 0)]
+            inside &= (t >= span[:, 0]) & (t <= span[:, 1])
         return np.where(inside, p, -1)
 
     def evaluate(self, time_ns: np.ndarray, derivative: int = 0
@@ -231,6 +244,8 @@ class Fit:
     residual_px : (n,) float64, reprojection residual of each observation, pixels
     weight : (n,) float64, final robust weight of each observation (0: rejected)
     pieces : list of (n_p,) int64, the observation rows of each fitted piece
+    withheld : int, observations inside a piece left without a point: an end segment beyond
+        a break that fewer than ``_END_DETECTIONS`` detections of two cameras hold
     """
 
     trajectory: Trajectory
@@ -240,6 +255,7 @@ class Fit:
     residual_px: np.ndarray
     weight: np.ndarray
     pieces: list = field(default_factory=list)
+    withheld: int = 0
 
 
 class _Problem:
@@ -644,9 +660,10 @@ def fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions | None = 
     _, dof = _information(problem, control, sigma, r, J)
     control, sigma, r, w, J = _Solver(problem, options).run(control, sigma, 2, dof)
     band, _ = _information(problem, control, sigma, r, J)
+    out_rows, valid_s = _underdetermined_ends(problem, breaks)
     trajectory = Trajectory(problem.t0_ns, problem.knots, problem.offset, control, band,
                             np.concatenate([np.asarray(b) for b in breaks]) if breaks
-                            else np.zeros(0), sigma, spacing)
+                            else np.zeros(0), sigma, spacing, valid_s)
     position = np.full((n, 3), np.nan)
     covariance = np.full((n, 3, 3), np.nan)
     residual = np.full(n, np.nan)
@@ -657,7 +674,46 @@ def fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions | None = 
     weight[problem.rows] = w
     used = np.zeros(n, dtype=bool)
     used[problem.rows] = True
-    return Fit(trajectory, used, position, covariance, residual, weight, pieces)
+    used[out_rows] = False
+    position[out_rows] = np.nan
+    covariance[out_rows] = np.nan
+    return Fit(trajectory, used, position, covariance, residual, weight, pieces,
+               len(out_rows))
+
+
+def _underdetermined_ends(problem: _Problem, breaks: list[np.ndarray]
+                          ) -> tuple[np.ndarray, np.ndarray]:
+    """Observation rows of the end segments the detections do not determine, and the span
+    (n_pieces, 2) of each piece that they do (seconds since ``t0_ns``).
+
+    Between a piece's end and its nearest break the segment's position and velocity are 6
+    unknowns that only that segment's detections fix (the prior ties its acceleration, not
+    its velocity, to the rest): two pixels of two cameras leave a two-dimensional family of
+    paths, three fix it with nothing to spare, so one noisy pixel can move the end by metres
+    while the covariance, linearised at that fit, stays small. Such a segment (fewer than
+    ``_END_DETECTIONS`` detections, or one camera's) gives no point; its detections still
+    weigh in the fit (they pull nothing the rest determines)."""
+    out = []
+    valid = np.empty((len(problem.knots), 2))
+    cams = problem.obs.camera
+    for p, rows in enumerate(problem.rows_of_piece):
+        t = problem.t[rows]
+        lo, hi = float(t.min()), float(t.max())
+        b = np.sort(np.asarray(breaks[p], dtype=np.float64)) if len(breaks[p]) else None
+        if b is not None:
+            head = t < b[0]
+            if (np.count_nonzero(head) < _END_DETECTIONS
+                    or len(np.unique(cams[rows[head]])) < 2):
+                out.append(rows[head])
+                lo = float(b[0])
+            tail = t >= b[-1]
+            if (np.count_nonzero(tail) < _END_DETECTIONS
+                    or len(np.unique(cams[rows[tail]])) < 2):
+                out.append(rows[tail])
+                hi = float(np.nextafter(b[-1], -np.inf))
+        valid[p] = lo, hi
+    rows_out = np.unique(np.concatenate(out)) if out else np.zeros(0, np.int64)
+    return rows_out.astype(np.int64), valid
 
 
 def _refit_control(problem: _Problem, X: np.ndarray) -> np.ndarray:

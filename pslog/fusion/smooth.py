@@ -9,6 +9,10 @@ pieces (never inside a gap the model does not bridge). Per-point quality:
   expects), metres; the full 3 x 3 covariance is :attr:`Fit.covariance`;
 - ``std_x_m``, ``std_y_m``, ``std_z_m``: per axis, metres;
 - ``residual_px``: the detection's reprojection residual, pixels (NaN on grid points).
+
+A detection in an end segment of a piece beyond a bounce or kick that fewer than four
+detections of two cameras hold gets no point (its position along the rays is not determined):
+counted in ``Track.dropped["underdetermined_end"]``.
 """
 
 from __future__ import annotations
@@ -53,7 +57,9 @@ def fuse_smooth(prep: Prepared, rig: Rig, options) -> Track:
     quality = {"std_m": np.sqrt(var.sum(axis=1)), "std_x_m": np.sqrt(var[:, 0]),
                "std_y_m": np.sqrt(var[:, 1]), "std_z_m": np.sqrt(var[:, 2]),
                "residual_px": residual}
-    return Track("smooth", time_ns, position, camera, quality)
+    # detections in an end segment beyond a break that too few of them determine
+    dropped = {"underdetermined_end": fit.withheld} if fit.withheld else {}
+    return Track("smooth", time_ns, position, camera, quality, dropped=dropped)
 
 
 def _grid(fit, rate_hz: float) -> np.ndarray:
