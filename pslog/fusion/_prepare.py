@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -76,10 +77,57 @@ class Prepared:
 
     def rays_from_undistorted(self, camera: np.ndarray, uv: np.ndarray) -> np.ndarray:
         """Unit world directions (n, 3) of undistorted pixels ``uv`` (n, 2) of ``camera`` (n,)."""
-        homogeneous = np.hstack([uv, np.ones((len(uv), 1))])
-        rays_cam = np.einsum("nij,nj->ni", self.K_inv[camera], homogeneous)
-        dirs = np.einsum("nji,nj->ni", self.R[camera], rays_cam)  # Rᵀ @ ray
-        return dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
+        # C order, as callers' row-wise reductions (einsum) may sum differently otherwise
+        return np.ascontiguousarray(self.rays_t(camera, uv).T)
+
+    def rays_t(self, camera: np.ndarray, uv: np.ndarray) -> np.ndarray:
+        """:meth:`rays_from_undistorted` component-major: unit directions (3, n). (Columns of
+        length n, not rows of length 3: numpy is slow on short trailing axes.) ``K⁻¹`` then
+        ``Rᵀ``, in the order of the matrix products they replace: the same bits."""
+        Ki = np.take(self._cols("K_inv"), camera, axis=1)  # (9, n): Ki[3 i + j] = K⁻¹[i, j]
+        R = np.take(self._cols("R"), camera, axis=1)
+        u, v = uv[:, 0], uv[:, 1]
+        x = Ki[0] * u + Ki[1] * v + Ki[2]
+        y = Ki[3] * u + Ki[4] * v + Ki[5]
+        z = Ki[6] * u + Ki[7] * v + Ki[8]
+        d = R[0:3] * x  # Rᵀ (x, y, z): (Rᵀ)[i, j] = R[j, i] = R[3 j + i]
+        d += R[3:6] * y
+        d += R[6:9] * z
+        d /= np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+        return d
+
+    def _cols(self, name: str) -> np.ndarray:
+        """Per-camera (3, 3) matrices ``name`` as (9, m) columns (cached)."""
+        cache = self.__dict__.setdefault("_columns", {})
+        if name not in cache:
+            cache[name] = np.ascontiguousarray(getattr(self, name).reshape(-1, 9).T)
+        return cache[name]
+
+    @cached_property
+    def _rt_k_inv_cols(self) -> np.ndarray:
+        """Rᵀ K⁻¹ of every camera as (9, m) columns."""
+        return np.ascontiguousarray((np.swapaxes(self.R, 1, 2) @ self.K_inv).reshape(-1, 9).T)
+
+    @cached_property
+    def _uv_jacobian_cols(self) -> np.ndarray | None:
+        """:attr:`uv_jacobian` as (4, n) columns (NaN as 0), None without lens distortion."""
+        if not any(np.any(c.dist) for c in self.cameras):
+            return None
+        return np.ascontiguousarray(np.nan_to_num(self.uv_jacobian).reshape(-1, 4).T)
+
+    def pixel_jacobians_t(self, rows: np.ndarray) -> np.ndarray | None:
+        """:meth:`pixel_jacobians` component-major: (2, 2, k), or None (the identity)."""
+        cols = self._uv_jacobian_cols
+        return None if cols is None else np.take(cols, rows, axis=1).reshape(2, 2, -1)
+
+    @cached_property
+    def _f_cols(self) -> np.ndarray:
+        """:attr:`F` as (9, m * m) columns: ``F[a, b]`` is column ``a m + b``."""
+        return np.ascontiguousarray(self.F.reshape(-1, 9).T)
+
+    def fundamental_t(self, cam_a: np.ndarray, cam_b: np.ndarray) -> np.ndarray:
+        """``F[cam_a, cam_b]`` of (k,) camera pairs as (9, k) columns (entry ``3 i + j``)."""
+        return np.take(self._f_cols, cam_a * len(self.centers) + cam_b, axis=1)
 
 
 def prepare(obs: Observations, rig: Rig, F: np.ndarray | None = None) -> Prepared:
@@ -217,106 +265,159 @@ def reprojection_px(prep: Prepared, points: np.ndarray, camera: np.ndarray,
 
 def direction_jacobian(prep: Prepared, camera: np.ndarray, uv: np.ndarray) -> np.ndarray:
     """d(unit viewing direction, world) / d(undistorted pixel) of ``camera`` (k,) at ``uv``
-    (k, 2): (k, 3, 2). With ``r = Rᵀ K⁻¹ (u, v, 1)`` and ``d = r / |r|``,
-    ``dd/duv = (I - d dᵀ) Rᵀ K⁻¹[:, :2] / |r|``."""
-    M = _rt_k_inv(prep)[camera]  # Rᵀ K⁻¹ (k, 3, 3)
-    r = M[:, :, 0] * uv[:, :1] + M[:, :, 1] * uv[:, 1:] + M[:, :, 2]
-    norm = np.sqrt(np.einsum("ni,ni->n", r, r))
-    d = r / norm[:, None]
-    M = M[:, :, :2] / norm[:, None, None]
-    # (sums over an axis of length 3 written out: numpy's small-axis reductions are slow)
-    dM = d[:, 0, None] * M[:, 0] + d[:, 1, None] * M[:, 1] + d[:, 2, None] * M[:, 2]
-    return M - d[:, :, None] * dM[:, None, :]
+    (k, 2), component-major: (3, 2, k), entry ``[i, j]`` the (k,) column of d d_i / d uv_j.
+    With ``r = Rᵀ K⁻¹ (u, v, 1)`` and ``d = r / |r|``, ``dd/duv = (I - d dᵀ) Rᵀ K⁻¹[:, :2] / |r|``.
+    """
+    M = np.take(prep._rt_k_inv_cols, camera, axis=1)  # (9, k), M[3 i + j] = (Rᵀ K⁻¹)[i, j]
+    u, v = uv[:, 0], uv[:, 1]
+    r = M[0::3] * u
+    r += M[1::3] * v
+    r += M[2::3]
+    norm = np.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
+    d = r / norm
+    M = M.reshape(3, 3, -1)[:, :2] / norm  # (3, 2, k)
+    dM = d[0] * M[0]
+    dM += d[1] * M[1]
+    dM += d[2] * M[2]
+    M -= d[:, None] * dM
+    return M
 
 
-def _rt_k_inv(prep: Prepared) -> np.ndarray:
-    """Rᵀ K⁻¹ of every camera (m, 3, 3)."""
-    return np.swapaxes(prep.R, 1, 2) @ prep.K_inv
-
-
-def _inverse_3x3(A: np.ndarray) -> np.ndarray:
-    """Inverses of (k, 3, 3) matrices by their adjugates (NaN where singular): far faster
-    than ``np.linalg.inv`` for many small ones."""
-    a, b, c = A[:, 0, 0], A[:, 0, 1], A[:, 0, 2]
-    d, e, f = A[:, 1, 0], A[:, 1, 1], A[:, 1, 2]
-    g, h, i = A[:, 2, 0], A[:, 2, 1], A[:, 2, 2]
-    co = np.stack([e * i - f * h, c * h - b * i, b * f - c * e,
-                   f * g - d * i, a * i - c * g, c * d - a * f,
-                   d * h - e * g, b * g - a * h, a * e - b * d], axis=1).reshape(-1, 3, 3)
-    det = a * co[:, 0, 0] + b * co[:, 1, 0] + c * co[:, 2, 0]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return co / np.where(np.abs(det) > 1e-12, det, np.nan)[:, None, None]
+def dot_t(v: np.ndarray, J: np.ndarray) -> np.ndarray:
+    """``vᵀ J`` of component-major (3, k) vectors and (3, 2, k) matrices: (2, k)."""
+    out = v[0] * J[0]
+    out += v[1] * J[1]
+    out += v[2] * J[2]
+    return out
 
 
 def least_squares_pixel_jacobians(points: np.ndarray, origins: np.ndarray, dirs: np.ndarray,
                                   used: np.ndarray, turns: list[np.ndarray]
                                   ) -> list[np.ndarray]:
-    """d(point) / d(undistorted pixel of ray j) (k, 3, 2) for each of m rays of the
-    least-squares point (:func:`pslog.geometry.triangulate_rays`; for two rays the midpoint
-    of their common perpendicular), given each ray's ``turns[j]`` = d(unit direction) /
-    d(pixel) (k, 3, 2) (:func:`direction_jacobian`). From ``A p = b``, ``A = Σ (I - d dᵀ)``,
-    ``b = Σ (I - d dᵀ) o``: a turn ``δd`` of ray j moves the point by
-    ``-A⁻¹ ((dᵀw) δd + d (wᵀ δd))`` with ``w = o - p``. Zero for unused rays."""
+    """d(point) / d(undistorted pixel of ray j), component-major (3, 2, k), for each of m rays
+    of the least-squares point (:func:`pslog.geometry.triangulate_rays`; for two rays the
+    midpoint of their common perpendicular), given each ray's ``turns[j]`` = d(unit
+    direction) / d(pixel) (3, 2, k) (:func:`direction_jacobian`). From ``A p = b``,
+    ``A = Σ (I - d dᵀ)``, ``b = Σ (I - d dᵀ) o``: a turn ``δd`` of ray j moves the point by
+    ``-A⁻¹ ((dᵀw) δd + d (wᵀ δd))`` with ``w = o - p``. Zero for unused rays.
+
+    ``points`` (k, 3), ``origins`` and ``dirs`` (k, m, 3), ``used`` (k, m)."""
     m = used.shape[1]
-    d = np.where(used[..., None], dirs, 0.0)
-    A = np.eye(3) * used.sum(axis=1)[:, None, None]
-    for j in range(m):
-        A -= d[:, j, :, None] * d[:, j, None, :]
-    A_inv = _inverse_3x3(A)
+    d = [np.where(used[:, j], dirs[:, j].T, 0.0) for j in range(m)]  # (3, k) each
+    n_used = used.sum(axis=1).astype(np.float64)
+    # A's six distinct entries (symmetric), then its inverse by the adjugate
+    A = {}
+    for _, i, j in _SYM6:
+        A[i, j] = n_used.copy() if i == j else np.zeros(len(n_used))
+        for dj in d:
+            A[i, j] -= dj[i] * dj[j]
+    a, b, c = A[0, 0], A[0, 1], A[0, 2]
+    e, f, i_ = A[1, 1], A[1, 2], A[2, 2]
+    co = {(0, 0): e * i_ - f * f, (0, 1): c * f - b * i_, (0, 2): b * f - c * e,
+          (1, 1): a * i_ - c * c, (1, 2): c * b - a * f, (2, 2): a * e - b * b}
+    det = a * co[0, 0] + b * co[0, 1] + c * co[0, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        det = np.where(np.abs(det) > 1e-12, det, np.nan)
+    A_inv = np.empty((3, 3, len(n_used)))
+    for (i, j), v in co.items():
+        A_inv[i, j] = A_inv[j, i] = v / det
+    P = points.T
     out = []
     for j in range(m):
-        w = origins[:, j] - points
-        G = np.where(used[:, j, None, None], turns[j], 0.0)
-        inner = (np.einsum("ni,ni->n", d[:, j], w)[:, None, None] * G
-                 + d[:, j, :, None] * (w[:, 0, None] * G[:, 0] + w[:, 1, None] * G[:, 1]
-                                       + w[:, 2, None] * G[:, 2])[:, None, :])
-        out.append(np.where(used[:, j, None, None], -(A_inv @ inner), 0.0))
+        w = origins[:, j].T - P  # (3, k)
+        G = np.where(used[:, j], turns[j], 0.0)
+        dj = d[j]
+        inner = (dj[0] * w[0] + dj[1] * w[1] + dj[2] * w[2]) * G
+        inner += dj[:, None] * dot_t(w, G)
+        moved = -(A_inv[:, 0, None] * inner[0] + A_inv[:, 1, None] * inner[1]
+                  + A_inv[:, 2, None] * inner[2])
+        out.append(np.where(used[:, j], moved, 0.0))
     return out
 
 
-def covariance(rows: np.ndarray, jacobians: list[np.ndarray], uv_jacobians: list[np.ndarray],
-               noise_px: float) -> np.ndarray:
-    """First-order covariance (k, 3, 3), m², of points made from detections.
+#: The six distinct entries of a symmetric 3 x 3 matrix, (row, column), in the order of the
+#: ``cov_*_m2`` columns.
+_SYM6 = (("xx", 0, 0), ("yy", 1, 1), ("zz", 2, 2), ("xy", 0, 1), ("xz", 0, 2), ("yz", 1, 2))
 
-    Slot ``s`` holds detection ``rows[:, s]`` (-1: unused) and ``jacobians[s]`` (k, 3, 2) is
-    d(point) / d(its undistorted pixel) (zero where unused); a detection used in several
-    slots of a point (type A's newest frame ends a bracket) adds up its slots' Jacobians.
-    Each detection's recorded pixel has independent isotropic noise of ``noise_px`` per
-    axis, mapped to undistorted pixels by ``uv_jacobians[s]`` (k, 2, 2)
-    (:meth:`Prepared.pixel_jacobians`; None for the identity, a rig without lens distortion).
-    """
-    k, n_slots = rows.shape
-    cov = np.zeros((k, 3, 3))
-    merged = [J.copy() for J in jacobians]
+
+def merged_slots(rows: np.ndarray) -> tuple[list[tuple[int, int, np.ndarray]], np.ndarray]:
+    """Which slots of :func:`covariance` add up into which: ``(s, t, same)`` moves slot
+    ``t``'s Jacobian into slot ``s`` where ``same`` (k,) (the same detection, each into its
+    first slot), in order; also returns the (k, n_slots) mask of the slots merged away."""
+    n_slots = rows.shape[1]
+    merges = []
     taken = np.zeros(rows.shape, dtype=bool)  # a later slot merged into an earlier one
     for s in range(n_slots):
         for t in range(s + 1, n_slots):
             same = (rows[:, t] == rows[:, s]) & (rows[:, s] >= 0) & ~taken[:, t] & ~taken[:, s]
             if np.any(same):
-                merged[s][same] += merged[t][same]
+                merges.append((s, t, same))
                 taken[same, t] = True
-    for s in range(n_slots):
+    return merges, taken
+
+
+def times_pixel_jacobian(J: np.ndarray, L: np.ndarray | None) -> np.ndarray:
+    """``J L`` of component-major (..., 2, k) and (2, 2, k) matrices (L None: the identity)."""
+    if L is None:
+        return J
+    return J[..., 0, None, :] * L[0] + J[..., 1, None, :] * L[1]
+
+
+def covariance(rows: np.ndarray, jacobians: list[np.ndarray], uv_jacobians: list[np.ndarray],
+               noise_px: float) -> dict[str, np.ndarray]:
+    """First-order covariance of points made from detections, as the quality columns
+    ``std_m`` (sqrt of the trace: the RMS 3-D error to expect) and the six distinct entries
+    ``cov_xx_m2`` ... ``cov_yz_m2`` (k,), m².
+
+    Slot ``s`` holds detection ``rows[:, s]`` (-1: unused) and ``jacobians[s]``, component-
+    major (3, 2, k), is d(point) / d(its undistorted pixel) (zero where unused); a detection
+    used in several slots of a point (type A's newest frame ends a bracket) adds up its slots'
+    Jacobians. Each detection's recorded pixel has independent isotropic noise of ``noise_px``
+    per axis, mapped to undistorted pixels by ``uv_jacobians[s]`` (2, 2, k)
+    (:meth:`Prepared.pixel_jacobians_t`; None for the identity, a rig without lens distortion).
+    """
+    k = rows.shape[0]
+    merges, taken = merged_slots(rows)
+    merged = list(jacobians)
+    copied = set()
+    for s, t, same in merges:
+        if s not in copied:
+            merged[s] = merged[s].copy()
+            copied.add(s)
+        merged[s][:, :, same] += merged[t][:, :, same]
+    cov = np.zeros((6, k))
+    first = np.array([i for _, i, _ in _SYM6])
+    second = np.array([j for _, _, j in _SYM6])
+    for s in range(rows.shape[1]):
         use = (rows[:, s] >= 0) & ~taken[:, s]
         if not np.any(use):
             continue
-        JL = merged[s]
-        if uv_jacobians[s] is not None:  # None: no lens, the identity
-            JL = JL @ uv_jacobians[s]
+        JL = times_pixel_jacobian(merged[s], uv_jacobians[s])
         if not np.all(use):
-            JL = np.where(use[:, None, None], JL, 0.0)
-        # J Jᵀ of (k, 3, 2) matrices, its two outer products written out
-        cov += JL[:, :, None, 0] * JL[:, None, :, 0] + JL[:, :, None, 1] * JL[:, None, :, 1]
-    return cov * noise_px**2
+            JL = np.where(use, JL, 0.0)
+        # J Jᵀ's six distinct entries, its two outer products written out
+        cov += JL[first, 0] * JL[second, 0] + JL[first, 1] * JL[second, 1]
+    return covariance_columns(cov * noise_px**2)
+
+
+def covariance_columns(cov: np.ndarray) -> dict[str, np.ndarray]:
+    """Quality columns of covariances given by their six distinct entries (6, k) in the order
+    xx, yy, zz, xy, xz, yz: ``std_m`` (sqrt of the trace) and ``cov_xx_m2`` ... ``cov_yz_m2``."""
+    out = {"std_m": np.sqrt(cov[0] + cov[1] + cov[2])}
+    for i, (name, _, _) in enumerate(_SYM6):
+        out[f"cov_{name}_m2"] = cov[i]
+    return out
 
 
 def finite_difference_jacobians(evaluate, uv: list[np.ndarray], rows: np.ndarray
                                 ) -> list[np.ndarray]:
-    """The Jacobians :func:`covariance` takes, by forward differences of ``evaluate(uv)``
-    (slots' undistorted pixels, a list of (k, 2), to points (k, 3)); a detection in several
-    slots moves in all of them at once, so its first slot gets the whole derivative."""
+    """The Jacobians :func:`covariance` takes (component-major, (3, 2, k)), by forward
+    differences of ``evaluate(uv)`` (slots' undistorted pixels, a list of (k, 2), to points
+    (k, 3)); a detection in several slots moves in all of them at once, so its first slot gets
+    the whole derivative."""
     base = evaluate(uv)
     k, n_slots = rows.shape
-    out = [np.zeros((k, 3, 2)) for _ in range(n_slots)]
+    out = [np.zeros((3, 2, k)) for _ in range(n_slots)]
     h = _JACOBIAN_STEP_PX
     for s in range(n_slots):
         first = (rows[:, s] >= 0) & ~np.any(rows[:, :s] == rows[:, s:s + 1], axis=1)
@@ -328,17 +429,7 @@ def finite_difference_jacobians(evaluate, uv: list[np.ndarray], rows: np.ndarray
             step[:, axis] = h
             moved = [u + np.where(same[:, j:j + 1], step, 0.0) for j, u in enumerate(uv)]
             with np.errstate(invalid="ignore"):
-                out[s][:, :, axis] = np.where(first[:, None], (evaluate(moved) - base) / h, 0.0)
-    return out
-
-
-def covariance_columns(cov: np.ndarray) -> dict[str, np.ndarray]:
-    """Quality columns of covariances (k, 3, 3): ``std_m`` (sqrt of the trace: the RMS 3-D
-    error to expect) and the six distinct entries ``cov_xx_m2`` ... ``cov_yz_m2``."""
-    out = {"std_m": np.sqrt(np.einsum("kii->k", cov))}
-    for name, (i, j) in (("xx", (0, 0)), ("yy", (1, 1)), ("zz", (2, 2)), ("xy", (0, 1)),
-                         ("xz", (0, 2)), ("yz", (1, 2))):
-        out[f"cov_{name}_m2"] = cov[:, i, j].copy()
+                out[s][:, axis] = np.where(first[:, None], (evaluate(moved) - base) / h, 0.0).T
     return out
 
 

@@ -16,7 +16,6 @@ from ._prepare import (
     Prepared,
     camera_mask,
     covariance,
-    covariance_columns,
     direction_jacobian,
     finite_difference_jacobians,
     invalid_points,
@@ -127,7 +126,7 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float):
                 [direction_jacobian(prep, np.full(k, c), uv[c]) for c in range(m)])
     if noise_px is not None:
         cov = covariance(slot_rows, jacobians,
-                         [prep.pixel_jacobians(r[:, c]) for c in range(m)], noise_px)
+                         [prep.pixel_jacobians_t(r[:, c]) for c in range(m)], noise_px)
     times = np.where(used, prep.obs.time_ns[r], 0)
     t_max = np.where(used, times, np.iinfo(np.int64).min).max(axis=1)
     t_min = np.where(used, times, np.iinfo(np.int64).max).min(axis=1)
@@ -140,7 +139,7 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float):
             "camera_mask": camera_mask(used), "n_detections": n_used.astype(np.float64),
             "gap_s": np.where(n_used > 0, (t_max - t_min) / NS, np.nan),
             "span_s": np.where(n_used > 0, (t_max - t_min) / NS, np.nan),
-            **(covariance_columns(cov) if cov is not None else {}),
+            **(cov if cov is not None else {}),
         }
     return points, quality, flags, used
 
