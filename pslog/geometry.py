@@ -142,21 +142,44 @@ def crossing_of_rays(
     """
     dir_a = np.atleast_2d(np.asarray(dir_a, dtype=np.float64))
     dir_b = np.atleast_2d(np.asarray(dir_b, dtype=np.float64))
-    w0 = np.asarray(origin_a, dtype=np.float64) - np.asarray(origin_b, dtype=np.float64)
-    w0 = np.broadcast_to(w0, dir_a.shape)
-    a = np.einsum("ij,ij->i", dir_a, dir_a)
-    b = np.einsum("ij,ij->i", dir_a, dir_b)
-    c = np.einsum("ij,ij->i", dir_b, dir_b)
-    d = np.einsum("ij,ij->i", dir_a, w0)
-    e = np.einsum("ij,ij->i", dir_b, w0)
+    origin_a = np.asarray(origin_a, dtype=np.float64)
+    origin_b = np.asarray(origin_b, dtype=np.float64)
+    # on (n,) columns, not rows of 3 (numpy is slow on short axes); dot products summed in
+    # einsum's order, so that the bits are those of the row-wise form
+    xa, ya, za = dir_a[:, 0], dir_a[:, 1], dir_a[:, 2]
+    xb, yb, zb = dir_b[:, 0], dir_b[:, 1], dir_b[:, 2]
+    w0 = origin_a - origin_b
+    wx, wy, wz = w0[..., 0], w0[..., 1], w0[..., 2]
+    a = _dot(xa, ya, za, xa, ya, za)
+    b = _dot(xa, ya, za, xb, yb, zb)
+    c = _dot(xb, yb, zb, xb, yb, zb)
+    d = _dot(xa, ya, za, wx, wy, wz)
+    e = _dot(xb, yb, zb, wx, wy, wz)
     denom = a * c - b * b
     parallel = denom <= _PARALLEL_EPS * a * c
     with np.errstate(divide="ignore", invalid="ignore"):
         s = np.where(parallel, np.nan, (b * e - c * d) / denom)
         k = np.where(parallel, np.nan, (a * e - b * d) / denom)
-    point_a = origin_a + s[:, None] * dir_a
-    point_b = origin_b + k[:, None] * dir_b
-    return 0.5 * (point_a + point_b), np.linalg.norm(point_a - point_b, axis=1), s, k
+    points = np.empty((len(s), 3))
+    miss = np.zeros(len(s))
+    for i, (da, db) in enumerate(((xa, xb), (ya, yb), (za, zb))):
+        foot_a = origin_a[..., i] + s * da
+        foot_b = origin_b[..., i] + k * db
+        points[:, i] = 0.5 * (foot_a + foot_b)
+        foot_a -= foot_b
+        foot_a *= foot_a
+        miss += foot_a
+    return points, np.sqrt(miss, out=miss), s, k
+
+
+def _dot(x1, y1, z1, x2, y2, z2):
+    """Row-wise dot products of 3-vectors given by their (n,) components, summed in the
+    order of ``np.einsum("ij,ij->i", ...)`` (the first and last products first): the same
+    bits."""
+    out = x1 * x2
+    out += z1 * z2
+    out += y1 * y2
+    return out
 
 
 def ray_depths(points: np.ndarray, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
@@ -275,5 +298,6 @@ def closest_points_on_rays(
     """
     directions = np.asarray(directions, dtype=np.float64)
     offsets = np.asarray(points, dtype=np.float64) - origins
-    k = np.einsum("ij,ij->i", offsets, directions) / np.einsum("ij,ij->i", directions, directions)
+    x, y, z = directions[:, 0], directions[:, 1], directions[:, 2]
+    k = _dot(offsets[:, 0], offsets[:, 1], offsets[:, 2], x, y, z) / _dot(x, y, z, x, y, z)
     return k[:, None] * directions + origins

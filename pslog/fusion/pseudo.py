@@ -462,15 +462,29 @@ def _gather(computed: list[tuple[int, np.ndarray, PseudoStereoPoints]], events: 
     """Rows of the per-depth results: for each event, the entry computed at its ``depth``."""
     fields = PseudoStereoPoints.__dataclass_fields__
     template = computed[0][2]
-    out = {f: np.zeros((len(events), *getattr(template, f).shape[1:]),
-                       dtype=getattr(template, f).dtype) for f in fields}
+    out = {}
     for k, rows_k, points_k in computed:
-        mine = np.flatnonzero(depth == k)
+        mine = depth == k
+        n_mine = np.count_nonzero(mine)
+        if n_mine == 0:
+            continue
+        if n_mine == len(events):  # one depth for every event (the usual P_{t-1}): a take
+            where = np.searchsorted(rows_k, events)
+            return PseudoStereoPoints(**{f: getattr(points_k, f)[where] for f in fields})
+        if not out:
+            out = {f: np.zeros((len(events), *getattr(template, f).shape[1:]),
+                               dtype=getattr(template, f).dtype) for f in fields}
+        mine = np.flatnonzero(mine)
         where = np.searchsorted(rows_k, events[mine])  # rows_k is sorted
         for f in fields:
             out[f][mine] = getattr(points_k, f)[where]
+    if not out:
+        out = {f: np.zeros((len(events), *getattr(template, f).shape[1:]),
+                           dtype=getattr(template, f).dtype) for f in fields}
     return PseudoStereoPoints(**out)
 
 
 def _select(p: PseudoStereoPoints, keep: np.ndarray) -> PseudoStereoPoints:
+    if np.all(keep):  # (p is this call's own gather: nothing else holds its arrays)
+        return p
     return PseudoStereoPoints(*(getattr(p, f)[keep] for f in p.__dataclass_fields__))
