@@ -211,7 +211,16 @@ def _view_box(cam) -> np.ndarray:
                      ideal[:, 0].max() + grow, ideal[:, 1].max() + grow])
 
 
-def invalid_points(prep: Prepared, points: np.ndarray, used: np.ndarray) -> np.ndarray:
+def finite_rows(points: np.ndarray) -> np.ndarray:
+    """(k,) bool, rows of ``points`` (k, 3) all finite (``np.all(np.isfinite(.), axis=1)``)."""
+    out = np.isfinite(points[:, 0])
+    out &= np.isfinite(points[:, 1])
+    out &= np.isfinite(points[:, 2])
+    return out
+
+
+def invalid_points(prep: Prepared, points: np.ndarray, used: np.ndarray,
+                   finite: np.ndarray | None = None) -> np.ndarray:
     """Why each point is not a geometrically valid output, as bits (0: valid).
 
     Parameters
@@ -224,11 +233,11 @@ def invalid_points(prep: Prepared, points: np.ndarray, used: np.ndarray) -> np.n
     (k,) int64, ``BEHIND`` if the point is at or behind the image plane of a camera that
     contributed to it; ``OUTSIDE_VIEW`` if it projects outside the view (image grown by
     :data:`VIEW_MARGIN`) of such a camera; a non-finite point gets no flag (its caller
-    knows why it has none)
+    knows why it has none); ``finite``: :func:`finite_rows` of ``points``, if known
     """
     k, m = used.shape
     flags = np.zeros(k, dtype=np.int64)
-    finite = np.all(np.isfinite(points), axis=1)
+    finite = finite_rows(points) if finite is None else finite
     for c in range(m):
         rows = np.flatnonzero(used[:, c] & finite)
         if len(rows) == 0:
@@ -435,7 +444,10 @@ def finite_difference_jacobians(evaluate, uv: list[np.ndarray], rows: np.ndarray
 
 def camera_mask(used: np.ndarray) -> np.ndarray:
     """(k,) float64 bitmask of the cameras used (bit c for camera c; exact up to 53)."""
-    return (used.astype(np.float64) * (2.0 ** np.arange(used.shape[1]))).sum(axis=1)
+    out = np.zeros(used.shape[0])
+    for c in range(used.shape[1]):  # (sums of distinct powers of two: exact in any order)
+        out += used[:, c] * 2.0**c
+    return out
 
 
 def latest_row_at_or_before(prep: Prepared, camera: int, row: np.ndarray) -> np.ndarray:

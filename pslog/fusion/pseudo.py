@@ -41,6 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..geometry import (
+    _dot,
     closest_points_on_lines,
     closest_points_on_rays,
     crossing_of_rays,
@@ -61,6 +62,7 @@ from ._prepare import (
     direction_jacobian,
     dot_t,
     finite_difference_jacobians,
+    finite_rows,
     invalid_points,
     merged_slots,
     reprojection_px,
@@ -185,7 +187,8 @@ def pseudo_stereo_points(
             _pseudo_from_pixels(prep, cam_row, partner_idx, prep.uv_undistorted[rows],
                                 prep.uv_undistorted[prev_row], prep.uv_undistorted[next_row], w))
         # both directions are unit vectors; a line has no sense, hence the absolute value
-        cos_angle = np.abs(np.einsum("ij,ij->i", dir_obs, dir_partner))
+        cos_angle = np.abs(_dot(dir_obs[:, 0], dir_obs[:, 1], dir_obs[:, 2],
+                                dir_partner[:, 0], dir_partner[:, 1], dir_partner[:, 2]))
         angle = np.arccos(np.minimum(cos_angle, 1.0))
         # the disagreement before the snap: the interpolated point's ray against the observed
         dir_interp = prep.rays_from_undistorted(partner_idx, uv_interp)
@@ -196,12 +199,13 @@ def pseudo_stereo_points(
     used = np.zeros((n_rows, n_cams), dtype=bool)
     used[np.arange(n_rows), cam_row] = True
     used[np.arange(n_rows), partner_idx] = True
-    flags = invalid_points(prep, points, used)
+    finite = finite_rows(points)
+    flags = invalid_points(prep, points, used, finite)
     with np.errstate(invalid="ignore"):
-        flags[np.all(np.isfinite(points), axis=1) & ~((s > 0) & (k > 0))] |= BEHIND
+        flags[finite & ~((s > 0) & (k > 0))] |= BEHIND
         flags[np.degrees(angle) < MIN_RAY_ANGLE_DEG] |= PARALLEL  # (NaN: no ray, no flag)
     flags[~valid] = 0  # no partner: no point, and nothing to say about its geometry
-    valid &= np.all(np.isfinite(points), axis=1) & (flags == 0)
+    valid &= finite & (flags == 0)
     return PseudoStereoPoints(rows, valid, partner, prev_row, next_row, uv_interp, uv_snapped,
                               snap_px, points, miss, angle, w, miss_unsnapped, residual_obs,
                               residual_partner, dir_obs, dir_partner, flags)
@@ -290,24 +294,28 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5
     points = closest_points_on_rays(prep.ray_origin[events], prep.ray_dir[events], predicted)
 
     # the detections behind each point: newest, P_{t-1}'s and P_{t-2}'s with their brackets
-    slots = np.stack([events, j1, p1.prev_row, p1.next_row, j2, p2.prev_row, p2.next_row], 1)
-    cams = obs.camera[slots]
+    columns = [events, j1, p1.prev_row, p1.next_row, j2, p2.prev_row, p2.next_row]
+    slots = np.stack(columns, 1)
     k = len(events)
     used = np.zeros((k, len(prep.centers)), dtype=bool)
-    for s in range(slots.shape[1]):
-        used[np.arange(k), cams[:, s]] = True
+    every = np.arange(k)
+    for column in columns:
+        used[every, obs.camera[column]] = True
     flags = invalid_points(prep, points, used)
     with np.errstate(invalid="ignore"):
         depth = ray_depths(predicted, prep.ray_origin[events], prep.ray_dir[events])
     flags[~(depth > 0)] |= BEHIND  # eq. (4)'s k: the foot behind the newest camera
-    residual = np.stack([
+    residual = [
         p1.residual_obs_px, p1.residual_partner_px, p2.residual_obs_px, p2.residual_partner_px,
         # the newest detection against the prediction, before eq. (4) moves it onto its ray
-        reprojection_px(prep, predicted, obs.camera[events], prep.uv_undistorted[events])], 1)
-    distinct = np.ones(slots.shape, dtype=bool)
-    for s in range(1, slots.shape[1]):
-        distinct[:, s] = ~np.any(slots[:, :s] == slots[:, s:s + 1], axis=1)
-    t_slots = time_ns[slots]
+        reprojection_px(prep, predicted, obs.camera[events], prep.uv_undistorted[events])]
+    n_distinct = np.ones(k, dtype=np.int64)  # slots holding a detection no earlier slot holds
+    for s in range(1, len(columns)):
+        repeated = columns[0] == columns[s]
+        for t in range(1, s):
+            repeated |= columns[t] == columns[s]
+        n_distinct += ~repeated
+    t_earliest = np.minimum.reduce([time_ns[column] for column in columns])
     span1 = (time_ns[p1.next_row] - time_ns[p1.prev_row]) / NS
     span2 = (time_ns[p2.next_row] - time_ns[p2.prev_row]) / NS
 
@@ -336,17 +344,18 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5
             "snap_px": np.maximum(p1.snap_px, p2.snap_px),
             # measured before the snap: after it the rays cross by construction
             "ray_miss_m": np.maximum(p1.miss_unsnapped_m, p2.miss_unsnapped_m),
-            "ray_shift_m": np.linalg.norm(points - predicted, axis=1),
+            "ray_shift_m": _row_norms(points - predicted),
             "ray_angle_deg": np.degrees(np.minimum(p1.angle_rad, p2.angle_rad)),
-            "residual_max_px": np.max(residual, axis=1),
-            "residual_mean_px": np.mean(residual, axis=1),
+            # (folds over the five columns in the order of np.max and np.mean over rows)
+            "residual_max_px": np.maximum.reduce(residual),
+            "residual_mean_px": _sum_in_order(residual) / len(residual),
             "camera_mask": camera_mask(used),
-            "n_detections": distinct.sum(axis=1).astype(np.float64),
+            "n_detections": n_distinct.astype(np.float64),
             "gap_s": np.maximum(np.maximum(span1, span2), (time_ns[events] - time_ns[j2]) / NS),
-            "span_s": (time_ns[events] - t_slots.min(axis=1)) / NS,
+            "span_s": (time_ns[events] - t_earliest) / NS,
             **(cov if cov is not None else {}),
         }
-    made = np.all(np.isfinite(points), axis=1)
+    made = finite_rows(points)
     keep = made & (flags == 0)
     track = Track("typeA", time_ns[events], points, obs.camera[events], quality).select(keep)
     # past points refused as invalid (each detection once): the points they would have made
@@ -359,6 +368,24 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5
     construction = TypeAConstruction(
         events[keep], (_select(p1, keep), _select(p2, keep)), predicted[keep], points[keep])
     return track, construction
+
+
+def _row_norms(v: np.ndarray) -> np.ndarray:
+    """``np.linalg.norm(v, axis=1)`` of (k, 3) rows, on columns (the same bits)."""
+    x, y, z = v[:, 0], v[:, 1], v[:, 2]
+    out = x * x
+    out += y * y
+    out += z * z
+    return np.sqrt(out, out=out)
+
+
+def _sum_in_order(columns: list[np.ndarray]) -> np.ndarray:
+    """Sum of (k,) columns from the first on: numpy's order over a short row (the same bits
+    as ``np.sum(np.stack(columns, 1), axis=1)`` for fewer than 8 columns)."""
+    out = columns[0] + columns[1]
+    for c in columns[2:]:
+        out += c
+    return out
 
 
 def _type_a_covariance(prep: Prepared, events: np.ndarray, predicted: np.ndarray,
