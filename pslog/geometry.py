@@ -82,6 +82,30 @@ def epipolar_lines(F: np.ndarray, uv_a: np.ndarray) -> np.ndarray:
         return lines / np.linalg.norm(lines[:, :2], axis=1, keepdims=True)
 
 
+def epipolar_lines_cols(F: np.ndarray, uv_a: np.ndarray) -> np.ndarray:
+    """:func:`epipolar_lines` of one fundamental matrix per point given as (9, n) columns
+    (entry ``3 i + j`` of ``F[i, j]``), on columns (numpy is slow on short rows), with
+    the sums in the order of the row-wise form: the same bits. Returns lines (n, 3)."""
+    u, v = uv_a[:, 0], uv_a[:, 1]
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        a = F[0] * u + F[2]
+        a += F[1] * v
+        b = F[3] * u + F[5]
+        b += F[4] * v
+        c = F[6] * u + F[8]
+        c += F[7] * v
+        big = np.maximum(np.abs(a), np.abs(b))
+        a /= big
+        b /= big
+        c /= big
+        size = np.sqrt(a * a + b * b)
+        lines = np.empty((len(u), 3))
+        np.divide(a, size, out=lines[:, 0])
+        np.divide(b, size, out=lines[:, 1])
+        np.divide(c, size, out=lines[:, 2])
+    return lines
+
+
 def closest_points_on_lines(lines: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Orthogonal projection of 2D points onto 2D lines (the paper's section 2.2, step 2).
 

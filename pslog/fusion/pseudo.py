@@ -45,7 +45,7 @@ from ..geometry import (
     closest_points_on_lines,
     closest_points_on_rays,
     crossing_of_rays,
-    epipolar_lines,
+    epipolar_lines_cols,
     ray_depths,
 )
 from ..records import NS, Track
@@ -136,7 +136,7 @@ def _pseudo_from_pixels(prep: Prepared, cam_obs: np.ndarray, partner: np.ndarray
     # eq. (1): linear interpolation of the partner's 2D track to the observation's time
     uv_interp = (1.0 - weight)[:, None] * uv_prev + weight[:, None] * uv_next
     # step 2: nearest point on the epipolar line of the observed point, in the partner image
-    lines = epipolar_lines(prep.F[cam_obs, partner], uv_obs)
+    lines = epipolar_lines_cols(prep.fundamental_t(cam_obs, partner), uv_obs)
     uv_snapped, snap_px = closest_points_on_lines(lines, uv_interp)
     # step 3: crossing point of the observed ray and the snapped point's ray
     dir_obs = prep.rays_from_undistorted(cam_obs, uv_obs)
