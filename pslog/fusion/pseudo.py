@@ -249,22 +249,24 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5
     time_ns = obs.time_ns
     n, max_gap_ns = len(obs), int(max_gap_s * NS)
     depth = 2 * len(prep.centers)
-    # predecessors[:, k]: latest row of the k-th distinct instant before each event
-    predecessors = np.full((n, depth), -1, dtype=np.int64)
-    before = np.arange(n)
-    for k in range(depth):
-        before = np.searchsorted(time_ns, time_ns[np.maximum(before, 0)], side="left") - 1
-        before = np.where(predecessors[:, k - 1] < 0, -1, before) if k else before
-        reachable = (before >= 0) & (time_ns - time_ns[np.maximum(before, 0)] <= max_gap_ns)
-        predecessors[:, k] = np.where(reachable, before, -1)
-
     # triangulate predecessors depth by depth, only for events still lacking two points
     first = np.full(n, -1, dtype=np.int64)  # depth of P_{t-1} (the later past point)
     second = np.full(n, -1, dtype=np.int64)  # depth of P_{t-2}
     t_first = np.zeros(n, dtype=np.int64)  # capture time of P_{t-1}
     computed: list[tuple[int, np.ndarray, PseudoStereoPoints]] = []  # (depth, events, points)
+    # candidate: latest row of the k-th distinct instant before each event (-1: none within
+    # max_gap_s), followed depth by depth only for the events still lacking two points
+    before = np.arange(n)
+    candidate = np.full(n, -1, dtype=np.int64)
     for k in range(depth):
-        candidate = predecessors[:, k]
+        pending = np.flatnonzero(second < 0) if k else before.copy()
+        if len(pending) == 0:
+            break
+        b = np.searchsorted(time_ns, time_ns[np.maximum(before[pending], 0)], side="left") - 1
+        b = np.where(candidate[pending] < 0, -1, b) if k else b
+        reachable = (b >= 0) & (time_ns[pending] - time_ns[np.maximum(b, 0)] <= max_gap_ns)
+        before[pending] = b
+        candidate[pending] = np.where(reachable, b, -1)
         # as P_{t-2}, a candidate must leave eq. (2) a bounded extrapolation
         spaced = (first < 0) | (time_ns - t_first <= MAX_EXTRAPOLATION * (
             t_first - time_ns[np.maximum(candidate, 0)]))
