@@ -260,16 +260,46 @@ def reprojection_px(prep: Prepared, points: np.ndarray, camera: np.ndarray,
                     uv_undistorted: np.ndarray) -> np.ndarray:
     """Distance, in the recorded (distorted) image of ``camera`` (k,), between the projection
     of ``points`` (k, 3) and the image point ``uv_undistorted`` (k, 2), pixels (k,); NaN for
-    a point behind that camera or a missing image point."""
+    a point behind that camera or a missing image point.
+
+    :meth:`pslog.camera.Camera.project` and :meth:`~pslog.camera.Camera.distort` written out
+    on columns, operation for operation (the same bits, without their (n, 2) stacks)."""
     out = np.full(len(points), np.nan)
-    for c in np.unique(camera[camera >= 0]).tolist():
+    for c, cam in enumerate(prep.cameras):
         rows = np.flatnonzero(camera == c)
-        cam = prep.cameras[c]
-        with np.errstate(invalid="ignore", over="ignore"):
-            uv, in_front = cam.project(points[rows])
-            target = cam.distort(uv_undistorted[rows])
-            out[rows] = np.where(in_front, np.linalg.norm(uv - target, axis=1), np.nan)
+        if len(rows) == 0:
+            continue
+        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+            in_cam = points[rows] @ cam.R.T + cam.t
+            z = in_cam[:, 2]
+            in_front = z > 1e-12
+            z = np.where(in_front, z, np.nan)
+            u, v = _distorted_pixels(cam, in_cam[:, 0] / z, in_cam[:, 1] / z)
+            K = cam.K
+            uv = uv_undistorted[rows]
+            y = (uv[:, 1] - K[1, 2]) / K[1, 1]
+            x = (uv[:, 0] - K[0, 2] - K[0, 1] * y) / K[0, 0]
+            tu, tv = _distorted_pixels(cam, x, y)
+            u -= tu
+            v -= tv
+            u *= u
+            v *= v
+            u += v
+            out[rows] = np.where(in_front, np.sqrt(u, out=u), np.nan)
     return out
+
+
+def _distorted_pixels(cam, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pixels (u, v) of ideal normalized coordinates (x, y) through the lens: the
+    expressions of :meth:`pslog.camera.Camera.distort_normalized` and
+    :meth:`~pslog.camera.Camera.pixels_from_normalized`."""
+    k1, k2, p1, p2, k3 = cam.dist
+    r2 = x * x + y * y
+    radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
+    yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+    K = cam.K
+    return K[0, 0] * xd + K[0, 1] * yd + K[0, 2], K[1, 1] * yd + K[1, 2]
 
 
 def direction_jacobian(prep: Prepared, camera: np.ndarray, uv: np.ndarray) -> np.ndarray:
