@@ -249,6 +249,54 @@ def triangulate_rays(
     directions = np.asarray(directions, dtype=np.float64)
     if valid is None:
         valid = np.ones(directions.shape[:2], dtype=bool)
+    if directions.shape[1] >= 8:  # (numpy sums 8 or more terms pairwise)
+        return _triangulate_rays_rows(origins, directions, valid)
+    # on (n, m) component arrays, not (n, m, 3, 3) projectors (numpy is slow on short axes),
+    # every sum in the order of the array form it replaces (einsum's: first and last terms
+    # first; over rays: in order), so that the bits are the same
+    d = [directions[..., c] for c in range(3)]
+    o = [origins[..., c] for c in range(3)]
+    valid = valid & np.isfinite(d[0]) & np.isfinite(d[1]) & np.isfinite(d[2])
+    valid &= np.isfinite(o[0]) & np.isfinite(o[1]) & np.isfinite(o[2])
+    norms = d[0] * d[0]
+    norms += d[1] * d[1]
+    norms += d[2] * d[2]
+    np.sqrt(norms, out=norms)
+    valid &= norms > 0
+    scale = np.where(norms > 0, norms, 1.0)
+    unit = [np.where(valid, dc / scale, 0.0) for dc in d]
+    o = [np.where(valid, oc, 0.0) for oc in o]
+    # sum_j (I - d_j d_jᵀ) p = sum_j (I - d_j d_jᵀ) o_j
+    P = {}
+    for i in range(3):
+        for j in range(i, 3):
+            P[i, j] = P[j, i] = ((1.0 if i == j else 0.0) - unit[i] * unit[j]) * valid
+    n = valid.shape[0]
+    A = np.empty((n, 3, 3))
+    rhs = np.empty((n, 3))
+    for i in range(3):
+        for j in range(i, 3):
+            A[:, i, j] = _sum_rays(P[i, j])
+            if j != i:
+                A[:, j, i] = A[:, i, j]
+        rhs[:, i] = _sum_rays(_dot(P[i, 0], P[i, 1], P[i, 2], o[0], o[1], o[2]))
+    n_rays = valid.sum(axis=1)
+    det = np.linalg.det(A)
+    ok = (n_rays >= 2) & (np.abs(det) > 1e-12)
+    points = np.full((len(A), 3), np.nan)
+    if np.any(ok):
+        points[ok] = np.linalg.solve(A[ok], rhs[ok][..., None])[..., 0]
+    offsets = [points[:, c, None] - o[c] for c in range(3)]
+    along = _dot(offsets[0], offsets[1], offsets[2], unit[0], unit[1], unit[2])
+    perp = [offsets[c] - along * unit[c] for c in range(3)]
+    sq = np.where(valid, _dot(perp[0], perp[1], perp[2], perp[0], perp[1], perp[2]), 0.0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rms_miss = np.sqrt(_sum_rays(sq) / n_rays)
+    return points, rms_miss, n_rays
+
+
+def _triangulate_rays_rows(origins, directions, valid):
+    """:func:`triangulate_rays` on (n, m, 3, 3) projectors, for 8 rays or more."""
     valid = valid & np.all(np.isfinite(directions), axis=2) & np.all(np.isfinite(origins), axis=2)
     norms = np.linalg.norm(directions, axis=2, keepdims=True)
     valid = valid & (norms[..., 0] > 0)
@@ -273,6 +321,16 @@ def triangulate_rays(
     return points, rms_miss, n_rays
 
 
+def _sum_rays(x: np.ndarray) -> np.ndarray:
+    """``x.sum(axis=1)`` of an (n, m) array, rays added in order (numpy's order for m < 8)."""
+    if x.shape[1] >= 8:
+        return x.sum(axis=1)
+    out = x[:, 0].copy()
+    for j in range(1, x.shape[1]):
+        out += x[:, j]
+    return out
+
+
 def ray_angles(directions: np.ndarray, valid: np.ndarray | None = None) -> np.ndarray:
     """Largest angle between any two valid rays of each point, radians.
 
@@ -292,6 +350,32 @@ def ray_angles(directions: np.ndarray, valid: np.ndarray | None = None) -> np.nd
     directions = np.asarray(directions, dtype=np.float64)
     if valid is None:
         valid = np.ones(directions.shape[:2], dtype=bool)
+    if directions.shape[1] >= 8:  # (numpy sums 8 or more terms pairwise)
+        return _ray_angles_rows(directions, valid)
+    # on (n, m) component arrays (the same bits as the row-wise form: einsum's order)
+    d = [directions[..., c] for c in range(3)]
+    norms = d[0] * d[0]
+    norms += d[1] * d[1]
+    norms += d[2] * d[2]
+    np.sqrt(norms, out=norms)
+    valid = valid & (norms > 0) & np.isfinite(d[0]) & np.isfinite(d[1]) & np.isfinite(d[2])
+    scale = np.where(norms > 0, norms, 1.0)
+    unit = [np.where(valid, dc / scale, 0.0) for dc in d]
+    m = valid.shape[1]
+    smallest_cos = np.full(len(valid), np.inf)
+    for a in range(m):
+        for b in range(a + 1, m):
+            cos = np.abs(_dot(unit[0][:, a], unit[1][:, a], unit[2][:, a],
+                              unit[0][:, b], unit[1][:, b], unit[2][:, b]))
+            np.minimum(smallest_cos, np.where(valid[:, a] & valid[:, b], cos, np.inf),
+                       out=smallest_cos)
+    with np.errstate(invalid="ignore"):
+        return np.where(np.isfinite(smallest_cos), np.arccos(np.clip(smallest_cos, 0.0, 1.0)),
+                        np.nan)
+
+
+def _ray_angles_rows(directions, valid):
+    """:func:`ray_angles` on (n, m, m) cosines, for 8 rays or more."""
     norms = np.linalg.norm(directions, axis=2, keepdims=True)
     valid = valid & (norms[..., 0] > 0) & np.all(np.isfinite(directions), axis=2)
     unit = np.where(valid[..., None], directions / np.where(norms > 0, norms, 1.0), 0.0)
