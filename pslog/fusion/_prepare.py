@@ -265,28 +265,34 @@ def reprojection_px(prep: Prepared, points: np.ndarray, camera: np.ndarray,
     :meth:`pslog.camera.Camera.project` and :meth:`~pslog.camera.Camera.distort` written out
     on columns, operation for operation (the same bits, without their (n, 2) stacks)."""
     out = np.full(len(points), np.nan)
-    for c, cam in enumerate(prep.cameras):
+    for c in range(len(prep.cameras)):
         rows = np.flatnonzero(camera == c)
         if len(rows) == 0:
             continue
-        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
-            in_cam = points[rows] @ cam.R.T + cam.t
-            z = in_cam[:, 2]
-            in_front = z > 1e-12
-            z = np.where(in_front, z, np.nan)
-            u, v = _distorted_pixels(cam, in_cam[:, 0] / z, in_cam[:, 1] / z)
-            K = cam.K
-            uv = uv_undistorted[rows]
-            y = (uv[:, 1] - K[1, 2]) / K[1, 1]
-            x = (uv[:, 0] - K[0, 2] - K[0, 1] * y) / K[0, 0]
-            tu, tv = _distorted_pixels(cam, x, y)
-            u -= tu
-            v -= tv
-            u *= u
-            v *= v
-            u += v
-            out[rows] = np.where(in_front, np.sqrt(u, out=u), np.nan)
+        out[rows] = reprojection_one(prep, c, points[rows], uv_undistorted[rows])
     return out
+
+
+def reprojection_one(prep: Prepared, c: int, points: np.ndarray, uv_undistorted: np.ndarray
+                     ) -> np.ndarray:
+    """:func:`reprojection_px` of points (k, 3) and image points (k, 2) of one camera ``c``."""
+    cam = prep.cameras[c]
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+        in_cam = points @ cam.R.T + cam.t
+        z = in_cam[:, 2]
+        in_front = z > 1e-12
+        z = np.where(in_front, z, np.nan)
+        u, v = _distorted_pixels(cam, in_cam[:, 0] / z, in_cam[:, 1] / z)
+        K = cam.K
+        y = (uv_undistorted[:, 1] - K[1, 2]) / K[1, 1]
+        x = (uv_undistorted[:, 0] - K[0, 2] - K[0, 1] * y) / K[0, 0]
+        tu, tv = _distorted_pixels(cam, x, y)
+        u -= tu
+        v -= tv
+        u *= u
+        v *= v
+        u += v
+        return np.where(in_front, np.sqrt(u, out=u), np.nan)
 
 
 def _distorted_pixels(cam, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -342,7 +348,8 @@ def least_squares_pixel_jacobians(points: np.ndarray, origins: np.ndarray, dirs:
 
     ``points`` (k, 3), ``origins`` and ``dirs`` (k, m, 3), ``used`` (k, m)."""
     m = used.shape[1]
-    d = [np.where(used[:, j], dirs[:, j].T, 0.0) for j in range(m)]  # (3, k) each
+    # (k,) columns throughout: numpy is slow on short axes
+    d = [[np.where(used[:, j], dirs[:, j, i], 0.0) for i in range(3)] for j in range(m)]
     n_used = used.sum(axis=1).astype(np.float64)
     # A's six distinct entries (symmetric), then its inverse by the adjugate
     A = {}
@@ -356,21 +363,26 @@ def least_squares_pixel_jacobians(points: np.ndarray, origins: np.ndarray, dirs:
           (1, 1): a * i_ - c * c, (1, 2): c * b - a * f, (2, 2): a * e - b * b}
     det = a * co[0, 0] + b * co[0, 1] + c * co[0, 2]
     with np.errstate(divide="ignore", invalid="ignore"):
-        det = np.where(np.abs(det) > 1e-12, det, np.nan)
-    A_inv = np.empty((3, 3, len(n_used)))
+        inv_det = 1.0 / np.where(np.abs(det) > 1e-12, det, np.nan)
+    A_inv = {}
     for (i, j), v in co.items():
-        A_inv[i, j] = A_inv[j, i] = v / det
-    P = points.T
+        A_inv[i, j] = A_inv[j, i] = v * inv_det
+    P = [points[:, i] for i in range(3)]
     out = []
     for j in range(m):
-        w = origins[:, j].T - P  # (3, k)
+        w = [origins[:, j, i] - P[i] for i in range(3)]
         G = np.where(used[:, j], turns[j], 0.0)
         dj = d[j]
         inner = (dj[0] * w[0] + dj[1] * w[1] + dj[2] * w[2]) * G
-        inner += dj[:, None] * dot_t(w, G)
-        moved = -(A_inv[:, 0, None] * inner[0] + A_inv[:, 1, None] * inner[1]
-                  + A_inv[:, 2, None] * inner[2])
-        out.append(np.where(used[:, j], moved, 0.0))
+        inner += np.array(dj)[:, None] * dot_t(w, G)
+        moved = np.empty((3, 2, len(n_used)))
+        for i in range(3):
+            row = A_inv[i, 0] * inner[0]
+            row += A_inv[i, 1] * inner[1]
+            row += A_inv[i, 2] * inner[2]
+            np.negative(row, out=row)
+            moved[i] = np.where(used[:, j], row, 0.0)
+        out.append(moved)
     return out
 
 
