@@ -22,6 +22,9 @@ import numpy as np
 from .camera import Camera
 
 _PARALLEL_EPS = 1e-12
+#: Below this many points the row-wise forms (fewer, larger numpy calls) are the faster; the
+#: column forms give the same bits
+_FEW = 64
 
 
 def _skew(v: np.ndarray) -> np.ndarray:
@@ -249,8 +252,8 @@ def triangulate_rays(
     directions = np.asarray(directions, dtype=np.float64)
     if valid is None:
         valid = np.ones(directions.shape[:2], dtype=bool)
-    if directions.shape[1] >= 8:  # (numpy sums 8 or more terms pairwise)
-        return _triangulate_rays_rows(origins, directions, valid)
+    if directions.shape[1] >= 8 or len(directions) < _FEW:  # (numpy sums 8 or more terms
+        return _triangulate_rays_rows(origins, directions, valid)  # pairwise)
     # on (n, m) component arrays, not (n, m, 3, 3) projectors (numpy is slow on short axes),
     # every sum in the order of the array form it replaces (einsum's: first and last terms
     # first; over rays: in order), so that the bits are the same
@@ -350,7 +353,7 @@ def ray_angles(directions: np.ndarray, valid: np.ndarray | None = None) -> np.nd
     directions = np.asarray(directions, dtype=np.float64)
     if valid is None:
         valid = np.ones(directions.shape[:2], dtype=bool)
-    if directions.shape[1] >= 8:  # (numpy sums 8 or more terms pairwise)
+    if directions.shape[1] >= 8 or len(directions) < _FEW:
         return _ray_angles_rows(directions, valid)
     # on (n, m) component arrays (the same bits as the row-wise form: einsum's order)
     d = [directions[..., c] for c in range(3)]

@@ -193,8 +193,23 @@ def _undistortion_jacobian(cam, uv_und: np.ndarray) -> np.ndarray:
     return out
 
 
+#: :func:`_view_box` of the cameras met so far (a stream prepares its window at every push)
+_VIEW_BOXES: dict[tuple, np.ndarray] = {}
+
+
 def _view_box(cam) -> np.ndarray:
     """The camera's image, undistorted (its border's bounding box), grown by VIEW_MARGIN."""
+    key = (cam.width, cam.height, np.asarray(cam.K, np.float64).tobytes(),
+           np.asarray(cam.dist, np.float64).tobytes())
+    box = _VIEW_BOXES.get(key)
+    if box is None:
+        if len(_VIEW_BOXES) > 256:
+            _VIEW_BOXES.clear()
+        box = _VIEW_BOXES[key] = _compute_view_box(cam)
+    return box.copy()
+
+
+def _compute_view_box(cam) -> np.ndarray:
     w, h = cam.width, cam.height
     s = np.linspace(0.0, 1.0, 33)
     border = np.concatenate([
