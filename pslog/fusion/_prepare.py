@@ -316,6 +316,12 @@ def _distorted_pixels(cam, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np
     :meth:`~pslog.camera.Camera.pixels_from_normalized`."""
     k1, k2, p1, p2, k3 = cam.dist
     r2 = x * x + y * y
+    if not np.any(cam.dist) and np.all(np.isfinite(r2 + r2)):
+        # no lens: the model gives back (x, y) exactly (finite terms times zero coefficients
+        # add zeros), as long as nothing overflows (then it gives NaN, hence the full form)
+        xd, yd = x, y
+        K = cam.K
+        return K[0, 0] * xd + K[0, 1] * yd + K[0, 2], K[1, 1] * yd + K[1, 2]
     radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
     xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
     yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
