@@ -410,11 +410,12 @@ def _type_a_covariance(prep: Prepared, events: np.ndarray, predicted: np.ndarray
     g = [None, *(g * (1 + ratio) for g in _pseudo_jacobians(prep, p1, cam1, r)),
          *(g * -ratio for g in _pseudo_jacobians(prep, p2, cam2, r))]
     merges, taken = merged_slots(slots)
-    for s, t, same in merges:
+    for s, t, same in merges:  # (usually for every event: whole columns, no masked copies)
+        moved = g[t] if np.all(same) else np.where(same, g[t], 0.0)
         if s == 0:
-            newest[:, :, same] += r[:, None, same] * g[t][:, same]
+            newest += r[:, None] * moved
         else:
-            g[s][:, same] += g[t][:, same]
+            g[s] += moved
     along = np.zeros(len(events))  # Σ |g L|² of the past slots
     for s in range(1, slots.shape[1]):
         gl = times_pixel_jacobian(g[s], prep.pixel_jacobians_t(slots[:, s]))
