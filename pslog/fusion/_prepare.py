@@ -254,20 +254,25 @@ def invalid_points(prep: Prepared, points: np.ndarray, used: np.ndarray,
     flags = np.zeros(k, dtype=np.int64)
     finite = finite_rows(points) if finite is None else finite
     for c in range(m):
-        rows = np.flatnonzero(used[:, c] & finite)
-        if len(rows) == 0:
+        mine = used[:, c] & finite
+        n_mine = np.count_nonzero(mine)
+        if n_mine == 0:
             continue
+        rows = None if n_mine == k else np.flatnonzero(mine)  # (None: every point)
         cam = prep.cameras[c]
-        in_cam = points[rows] @ cam.R.T + cam.t
+        in_cam = (points if rows is None else points[rows]) @ cam.R.T + cam.t
         z = in_cam[:, 2]
         behind = z <= 1e-9
-        flags[rows[behind]] |= BEHIND
         with np.errstate(divide="ignore", invalid="ignore"):
             uv = (in_cam[:, :2] / z[:, None]) @ cam.K[:2, :2].T + cam.K[:2, 2]
         box = prep.view_box[c]
         outside = ~behind & ~((uv[:, 0] >= box[0]) & (uv[:, 0] <= box[2])
                               & (uv[:, 1] >= box[1]) & (uv[:, 1] <= box[3]))
-        flags[rows[outside]] |= OUTSIDE_VIEW
+        bits = behind * BEHIND | outside * OUTSIDE_VIEW
+        if rows is None:
+            flags |= bits
+        else:
+            flags[rows] |= bits
     return flags
 
 
