@@ -76,7 +76,8 @@ class Prepared:
         return np.nan_to_num(self.uv_jacobian[rows])
 
     def rays_from_undistorted(self, camera: np.ndarray, uv: np.ndarray) -> np.ndarray:
-        """Unit world directions (n, 3) of undistorted pixels ``uv`` (n, 2) of ``camera`` (n,)."""
+        """Unit world directions (n, 3) of undistorted pixels ``uv`` (n, 2) of ``camera`` (n,)
+        (or one camera for all, an int)."""
         # C order, as callers' row-wise reductions (einsum) may sum differently otherwise
         return np.ascontiguousarray(self.rays_t(camera, uv).T)
 
@@ -84,8 +85,8 @@ class Prepared:
         """:meth:`rays_from_undistorted` component-major: unit directions (3, n). (Columns of
         length n, not rows of length 3: numpy is slow on short trailing axes.) ``K⁻¹`` then
         ``Rᵀ``, in the order of the matrix products they replace: the same bits."""
-        Ki = np.take(self._cols("K_inv"), camera, axis=1)  # (9, n): Ki[3 i + j] = K⁻¹[i, j]
-        R = np.take(self._cols("R"), camera, axis=1)
+        Ki = _per_point(self._cols("K_inv"), camera)  # (9, n): Ki[3 i + j] = K⁻¹[i, j]
+        R = _per_point(self._cols("R"), camera)
         u, v = uv[:, 0], uv[:, 1]
         x = Ki[0] * u + Ki[1] * v + Ki[2]
         y = Ki[3] * u + Ki[4] * v + Ki[5]
@@ -128,6 +129,14 @@ class Prepared:
     def fundamental_t(self, cam_a: np.ndarray, cam_b: np.ndarray) -> np.ndarray:
         """``F[cam_a, cam_b]`` of (k,) camera pairs as (9, k) columns (entry ``3 i + j``)."""
         return np.take(self._f_cols, cam_a * len(self.centers) + cam_b, axis=1)
+
+
+def _per_point(columns: np.ndarray, camera) -> np.ndarray:
+    """Per-camera ``columns`` (c, m) of each point's ``camera`` (k,): (c, k); for one camera
+    given as an int, (c, 1), which broadcasts (the same values without k copies)."""
+    if np.ndim(camera) == 0:
+        return columns[:, int(camera), None]
+    return np.take(columns, camera, axis=1)
 
 
 def prepare(obs: Observations, rig: Rig, F: np.ndarray | None = None) -> Prepared:
@@ -335,11 +344,12 @@ def _distorted_pixels(cam, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np
 
 
 def direction_jacobian(prep: Prepared, camera: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """d(unit viewing direction, world) / d(undistorted pixel) of ``camera`` (k,) at ``uv``
-    (k, 2), component-major: (3, 2, k), entry ``[i, j]`` the (k,) column of d d_i / d uv_j.
+    """d(unit viewing direction, world) / d(undistorted pixel) of ``camera`` (k,; or one, an
+    int) at ``uv`` (k, 2), component-major: (3, 2, k), entry ``[i, j]`` the (k,) column of
+    d d_i / d uv_j.
     With ``r = Rᵀ K⁻¹ (u, v, 1)`` and ``d = r / |r|``, ``dd/duv = (I - d dᵀ) Rᵀ K⁻¹[:, :2] / |r|``.
     """
-    M = np.take(prep._rt_k_inv_cols, camera, axis=1)  # (9, k), M[3 i + j] = (Rᵀ K⁻¹)[i, j]
+    M = _per_point(prep._rt_k_inv_cols, camera)  # (9, k), M[3 i + j] = (Rᵀ K⁻¹)[i, j]
     u, v = uv[:, 0], uv[:, 1]
     r = M[0::3] * u
     r += M[1::3] * v

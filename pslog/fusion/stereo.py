@@ -93,8 +93,7 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float):
     origins = np.broadcast_to(prep.centers, (k, m, 3))
 
     def directions(uvs):
-        return np.stack([prep.rays_from_undistorted(np.full(k, c), uvs[c]) for c in range(m)],
-                        axis=1)
+        return np.stack([prep.rays_from_undistorted(c, uvs[c]) for c in range(m)], axis=1)
 
     with np.errstate(invalid="ignore"):
         dirs = directions(uv)
@@ -127,7 +126,7 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float):
         with np.errstate(invalid="ignore"):
             jacobians = least_squares_pixel_jacobians(
                 points, origins, dirs, used,
-                [direction_jacobian(prep, np.full(k, c), uv[c]) for c in range(m)])
+                [direction_jacobian(prep, c, uv[c]) for c in range(m)])
     if noise_px is not None:
         cov = covariance(slot_rows, jacobians,
                          [prep.pixel_jacobians_t(r[:, c]) for c in range(m)], noise_px)
