@@ -2,9 +2,11 @@
 
 Target (issue 3): typeA >= 200,000 points/s. The baseline, measured in the same run, is the
 work every method shares (undistortion and viewing rays of every detection, ``prepare``), so
-the ratio says how much the method itself costs on top of it.
+the ratio says how much the method itself costs on top of it. With ``--stream`` it also
+times :class:`pslog.fusion.stream.StreamFuser`, detections pushed one at a time (the live
+form: a trailing window re-fused at every push), in milliseconds per push.
 
-    python benchmarks/bench_fusion.py [--minutes 10] [--repeat 3]
+    python benchmarks/bench_fusion.py [--minutes 10] [--repeat 3] [--stream 10]
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ import time  # noqa: E402
 
 from pslog import SimulationOptions, apply_timing, builtin_rig, get_motion, simulate  # noqa: E402
 from pslog.fusion import fuse, prepare  # noqa: E402
+from pslog.fusion.stream import StreamFuser  # noqa: E402
 
 TARGET_TYPEA = 200_000
 
@@ -36,6 +39,8 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--minutes", type=float, default=10.0, help="session length")
     parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--stream", type=float, default=0.0, metavar="SECONDS",
+                        help="also time StreamFuser on a session this long (0: not)")
     args = parser.parse_args()
     duration = args.minutes * 60
     print(f"fusion benchmark: {args.minutes:g}-minute session, 3 cameras at 30 fps, "
@@ -62,7 +67,27 @@ def main() -> int:
                 note = f"  target {TARGET_TYPEA:,}/s: {'met' if ok else 'MISSED'}"
             print(f"  {method:<20} {seconds * 1e3:9.1f} ms  {rate:>12,.0f} points/s  "
                   f"{seconds / base_s:5.1f}x baseline{note}")
+    if args.stream > 0:
+        stream(args.stream, args.repeat)
     return 0 if worst_ok else 1
+
+
+def stream(seconds: float, repeat: int) -> None:
+    """Milliseconds per push of StreamFuser, every detection pushed alone."""
+    print(f"\nstreamed, one detection per push ({seconds:g}-second session, best of {repeat})")
+    for timing, methods in (("typeA", ("typeA", "nearest")),
+                            ("typeB", ("typeB", "linear", "sync"))):
+        rig = apply_timing(builtin_rig("paper3"), timing)
+        detections, _ = simulate(rig, get_motion("turntable"), seconds,
+                                 SimulationOptions(noise_px=0.5, seed=0))
+        obs = detections.best()
+        for method in methods:
+            def run(method=method, rig=rig, obs=obs):
+                fuser = StreamFuser(rig, method)
+                for i in range(len(obs)):
+                    fuser.push(obs.time_ns[i:i + 1], obs.camera[i:i + 1], obs.uv[i:i + 1])
+            push_s = best_of(repeat, run)[0] / len(obs)
+            print(f"  {method:<20} {push_s * 1e3:9.2f} ms per push ({timing} timing)")
 
 
 if __name__ == "__main__":

@@ -22,6 +22,9 @@ import numpy as np
 from .camera import Camera
 
 _PARALLEL_EPS = 1e-12
+#: Below this many points the row-wise forms (fewer, larger numpy calls) are the faster; the
+#: column forms give the same bits
+_FEW = 64
 
 
 def _skew(v: np.ndarray) -> np.ndarray:
@@ -80,6 +83,30 @@ def epipolar_lines(F: np.ndarray, uv_a: np.ndarray) -> np.ndarray:
         # scale by the larger of a, b before the norm, which would overflow on its own
         lines = lines / np.max(np.abs(lines[:, :2]), axis=1, keepdims=True)
         return lines / np.linalg.norm(lines[:, :2], axis=1, keepdims=True)
+
+
+def epipolar_lines_cols(F: np.ndarray, uv_a: np.ndarray) -> np.ndarray:
+    """:func:`epipolar_lines` of one fundamental matrix per point given as (9, n) columns
+    (entry ``3 i + j`` of ``F[i, j]``), on columns (numpy is slow on short rows), with
+    the sums in the order of the row-wise form: the same bits. Returns lines (n, 3)."""
+    u, v = uv_a[:, 0], uv_a[:, 1]
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        a = F[0] * u + F[2]
+        a += F[1] * v
+        b = F[3] * u + F[5]
+        b += F[4] * v
+        c = F[6] * u + F[8]
+        c += F[7] * v
+        big = np.maximum(np.abs(a), np.abs(b))
+        a /= big
+        b /= big
+        c /= big
+        size = np.sqrt(a * a + b * b)
+        lines = np.empty((len(u), 3))
+        np.divide(a, size, out=lines[:, 0])
+        np.divide(b, size, out=lines[:, 1])
+        np.divide(c, size, out=lines[:, 2])
+    return lines
 
 
 def closest_points_on_lines(lines: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -142,21 +169,44 @@ def crossing_of_rays(
     """
     dir_a = np.atleast_2d(np.asarray(dir_a, dtype=np.float64))
     dir_b = np.atleast_2d(np.asarray(dir_b, dtype=np.float64))
-    w0 = np.asarray(origin_a, dtype=np.float64) - np.asarray(origin_b, dtype=np.float64)
-    w0 = np.broadcast_to(w0, dir_a.shape)
-    a = np.einsum("ij,ij->i", dir_a, dir_a)
-    b = np.einsum("ij,ij->i", dir_a, dir_b)
-    c = np.einsum("ij,ij->i", dir_b, dir_b)
-    d = np.einsum("ij,ij->i", dir_a, w0)
-    e = np.einsum("ij,ij->i", dir_b, w0)
+    origin_a = np.asarray(origin_a, dtype=np.float64)
+    origin_b = np.asarray(origin_b, dtype=np.float64)
+    # on (n,) columns, not rows of 3 (numpy is slow on short axes); dot products summed in
+    # einsum's order, so that the bits are those of the row-wise form
+    xa, ya, za = dir_a[:, 0], dir_a[:, 1], dir_a[:, 2]
+    xb, yb, zb = dir_b[:, 0], dir_b[:, 1], dir_b[:, 2]
+    w0 = origin_a - origin_b
+    wx, wy, wz = w0[..., 0], w0[..., 1], w0[..., 2]
+    a = _dot(xa, ya, za, xa, ya, za)
+    b = _dot(xa, ya, za, xb, yb, zb)
+    c = _dot(xb, yb, zb, xb, yb, zb)
+    d = _dot(xa, ya, za, wx, wy, wz)
+    e = _dot(xb, yb, zb, wx, wy, wz)
     denom = a * c - b * b
     parallel = denom <= _PARALLEL_EPS * a * c
     with np.errstate(divide="ignore", invalid="ignore"):
         s = np.where(parallel, np.nan, (b * e - c * d) / denom)
         k = np.where(parallel, np.nan, (a * e - b * d) / denom)
-    point_a = origin_a + s[:, None] * dir_a
-    point_b = origin_b + k[:, None] * dir_b
-    return 0.5 * (point_a + point_b), np.linalg.norm(point_a - point_b, axis=1), s, k
+    points = np.empty((len(s), 3))
+    miss = np.zeros(len(s))
+    for i, (da, db) in enumerate(((xa, xb), (ya, yb), (za, zb))):
+        foot_a = origin_a[..., i] + s * da
+        foot_b = origin_b[..., i] + k * db
+        points[:, i] = 0.5 * (foot_a + foot_b)
+        foot_a -= foot_b
+        foot_a *= foot_a
+        miss += foot_a
+    return points, np.sqrt(miss, out=miss), s, k
+
+
+def _dot(x1, y1, z1, x2, y2, z2):
+    """Row-wise dot products of 3-vectors given by their (n,) components, summed in the
+    order of ``np.einsum("ij,ij->i", ...)`` (the first and last products first): the same
+    bits."""
+    out = x1 * x2
+    out += z1 * z2
+    out += y1 * y2
+    return out
 
 
 def ray_depths(points: np.ndarray, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
@@ -202,6 +252,54 @@ def triangulate_rays(
     directions = np.asarray(directions, dtype=np.float64)
     if valid is None:
         valid = np.ones(directions.shape[:2], dtype=bool)
+    if directions.shape[1] >= 8 or len(directions) < _FEW:  # (numpy sums 8 or more terms
+        return _triangulate_rays_rows(origins, directions, valid)  # pairwise)
+    # on (n, m) component arrays, not (n, m, 3, 3) projectors (numpy is slow on short axes),
+    # every sum in the order of the array form it replaces (einsum's: first and last terms
+    # first; over rays: in order), so that the bits are the same
+    d = [directions[..., c] for c in range(3)]
+    o = [origins[..., c] for c in range(3)]
+    valid = valid & np.isfinite(d[0]) & np.isfinite(d[1]) & np.isfinite(d[2])
+    valid &= np.isfinite(o[0]) & np.isfinite(o[1]) & np.isfinite(o[2])
+    norms = d[0] * d[0]
+    norms += d[1] * d[1]
+    norms += d[2] * d[2]
+    np.sqrt(norms, out=norms)
+    valid &= norms > 0
+    scale = np.where(norms > 0, norms, 1.0)
+    unit = [np.where(valid, dc / scale, 0.0) for dc in d]
+    o = [np.where(valid, oc, 0.0) for oc in o]
+    # sum_j (I - d_j d_jᵀ) p = sum_j (I - d_j d_jᵀ) o_j
+    P = {}
+    for i in range(3):
+        for j in range(i, 3):
+            P[i, j] = P[j, i] = ((1.0 if i == j else 0.0) - unit[i] * unit[j]) * valid
+    n = valid.shape[0]
+    A = np.empty((n, 3, 3))
+    rhs = np.empty((n, 3))
+    for i in range(3):
+        for j in range(i, 3):
+            A[:, i, j] = _sum_rays(P[i, j])
+            if j != i:
+                A[:, j, i] = A[:, i, j]
+        rhs[:, i] = _sum_rays(_dot(P[i, 0], P[i, 1], P[i, 2], o[0], o[1], o[2]))
+    n_rays = valid.sum(axis=1)
+    det = np.linalg.det(A)
+    ok = (n_rays >= 2) & (np.abs(det) > 1e-12)
+    points = np.full((len(A), 3), np.nan)
+    if np.any(ok):
+        points[ok] = np.linalg.solve(A[ok], rhs[ok][..., None])[..., 0]
+    offsets = [points[:, c, None] - o[c] for c in range(3)]
+    along = _dot(offsets[0], offsets[1], offsets[2], unit[0], unit[1], unit[2])
+    perp = [offsets[c] - along * unit[c] for c in range(3)]
+    sq = np.where(valid, _dot(perp[0], perp[1], perp[2], perp[0], perp[1], perp[2]), 0.0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rms_miss = np.sqrt(_sum_rays(sq) / n_rays)
+    return points, rms_miss, n_rays
+
+
+def _triangulate_rays_rows(origins, directions, valid):
+    """:func:`triangulate_rays` on (n, m, 3, 3) projectors, for 8 rays or more."""
     valid = valid & np.all(np.isfinite(directions), axis=2) & np.all(np.isfinite(origins), axis=2)
     norms = np.linalg.norm(directions, axis=2, keepdims=True)
     valid = valid & (norms[..., 0] > 0)
@@ -226,6 +324,16 @@ def triangulate_rays(
     return points, rms_miss, n_rays
 
 
+def _sum_rays(x: np.ndarray) -> np.ndarray:
+    """``x.sum(axis=1)`` of an (n, m) array, rays added in order (numpy's order for m < 8)."""
+    if x.shape[1] >= 8:
+        return x.sum(axis=1)
+    out = x[:, 0].copy()
+    for j in range(1, x.shape[1]):
+        out += x[:, j]
+    return out
+
+
 def ray_angles(directions: np.ndarray, valid: np.ndarray | None = None) -> np.ndarray:
     """Largest angle between any two valid rays of each point, radians.
 
@@ -245,6 +353,32 @@ def ray_angles(directions: np.ndarray, valid: np.ndarray | None = None) -> np.nd
     directions = np.asarray(directions, dtype=np.float64)
     if valid is None:
         valid = np.ones(directions.shape[:2], dtype=bool)
+    if directions.shape[1] >= 8 or len(directions) < _FEW:
+        return _ray_angles_rows(directions, valid)
+    # on (n, m) component arrays (the same bits as the row-wise form: einsum's order)
+    d = [directions[..., c] for c in range(3)]
+    norms = d[0] * d[0]
+    norms += d[1] * d[1]
+    norms += d[2] * d[2]
+    np.sqrt(norms, out=norms)
+    valid = valid & (norms > 0) & np.isfinite(d[0]) & np.isfinite(d[1]) & np.isfinite(d[2])
+    scale = np.where(norms > 0, norms, 1.0)
+    unit = [np.where(valid, dc / scale, 0.0) for dc in d]
+    m = valid.shape[1]
+    smallest_cos = np.full(len(valid), np.inf)
+    for a in range(m):
+        for b in range(a + 1, m):
+            cos = np.abs(_dot(unit[0][:, a], unit[1][:, a], unit[2][:, a],
+                              unit[0][:, b], unit[1][:, b], unit[2][:, b]))
+            np.minimum(smallest_cos, np.where(valid[:, a] & valid[:, b], cos, np.inf),
+                       out=smallest_cos)
+    with np.errstate(invalid="ignore"):
+        return np.where(np.isfinite(smallest_cos), np.arccos(np.clip(smallest_cos, 0.0, 1.0)),
+                        np.nan)
+
+
+def _ray_angles_rows(directions, valid):
+    """:func:`ray_angles` on (n, m, m) cosines, for 8 rays or more."""
     norms = np.linalg.norm(directions, axis=2, keepdims=True)
     valid = valid & (norms[..., 0] > 0) & np.all(np.isfinite(directions), axis=2)
     unit = np.where(valid[..., None], directions / np.where(norms > 0, norms, 1.0), 0.0)
@@ -275,5 +409,6 @@ def closest_points_on_rays(
     """
     directions = np.asarray(directions, dtype=np.float64)
     offsets = np.asarray(points, dtype=np.float64) - origins
-    k = np.einsum("ij,ij->i", offsets, directions) / np.einsum("ij,ij->i", directions, directions)
+    x, y, z = directions[:, 0], directions[:, 1], directions[:, 2]
+    k = _dot(offsets[:, 0], offsets[:, 1], offsets[:, 2], x, y, z) / _dot(x, y, z, x, y, z)
     return k[:, None] * directions + origins

@@ -485,3 +485,124 @@ def test_detections_without_a_ray_are_no_invalid_points():
     for method in ("nearest", "typeA"):
         track = fuse(broken, rig, method)
         assert len(track) == 0 and track.dropped == {}, (method, track.dropped)
+
+
+# ---- the column forms of the fast kernels give the bits of the row-wise forms they replace
+
+def _rows_triangulate(origins, directions, valid):
+    """triangulate_rays as first written: (n, m, 3, 3) projectors and einsum."""
+    valid = valid & np.all(np.isfinite(directions), axis=2) & np.all(np.isfinite(origins), axis=2)
+    norms = np.linalg.norm(directions, axis=2, keepdims=True)
+    valid = valid & (norms[..., 0] > 0)
+    unit = np.where(valid[..., None], directions / np.where(norms > 0, norms, 1.0), 0.0)
+    origins0 = np.where(valid[..., None], origins, 0.0)
+    projector = (np.eye(3) - unit[..., :, None] * unit[..., None, :]) * valid[..., None, None]
+    A = projector.sum(axis=1)
+    rhs = np.einsum("nmij,nmj->ni", projector, origins0)
+    n_rays = valid.sum(axis=1)
+    ok = (n_rays >= 2) & (np.abs(np.linalg.det(A)) > 1e-12)
+    points = np.full((len(A), 3), np.nan)
+    points[ok] = np.linalg.solve(A[ok], rhs[ok][..., None])[..., 0]
+    offsets = points[:, None, :] - origins0
+    perp = offsets - np.einsum("nmi,nmi->nm", offsets, unit)[..., None] * unit
+    sq = np.where(valid, np.einsum("nmi,nmi->nm", perp, perp), 0.0)
+    return points, np.sqrt(sq.sum(axis=1) / n_rays), n_rays
+
+
+@pytest.mark.parametrize("m", [2, 3, 4, 9])
+def test_column_geometry_equals_the_row_wise_forms_bit_for_bit(m):
+    from pslog.geometry import (
+        closest_points_on_rays,
+        epipolar_lines,
+        epipolar_lines_cols,
+        ray_angles,
+        triangulate_rays,
+    )
+
+    rng = np.random.default_rng(m)
+    n = 500  # (more than the few points that take the row-wise forms anyway)
+    origins = rng.normal(size=(n, m, 3)) * 3
+    directions = rng.normal(size=(n, m, 3)) * rng.uniform(0.5, 2, (n, m, 1))
+    directions[rng.random((n, m)) < 0.05] = np.nan
+    directions[rng.random((n, m)) < 0.03] = 0.0
+    valid = rng.random((n, m)) < 0.8
+    with np.errstate(all="ignore"):
+        for got, want in zip(triangulate_rays(origins, directions, valid),
+                             _rows_triangulate(origins, directions, valid), strict=True):
+            assert_array_equal(got, want)
+        unit = directions / np.linalg.norm(directions, axis=2, keepdims=True)
+        cos = np.abs(np.einsum("nai,nbi->nab", unit, unit))
+        ok = valid & np.all(np.isfinite(directions), axis=2) & np.any(directions != 0, axis=2)
+        pair = ok[:, :, None] & ok[:, None, :] & ~np.eye(m, dtype=bool)
+        smallest = np.where(pair, cos, np.inf).min(axis=(1, 2))
+        want = np.where(np.isfinite(smallest), np.arccos(np.clip(smallest, 0, 1)), np.nan)
+        assert_array_equal(ray_angles(directions, valid), want)
+        a, b = directions[:, 0], directions[:, 1]
+        oa, ob = origins[:, 0], origins[:, 1]
+        points, miss, s, k = crossing_of_rays(oa, a, ob, b)
+        w0 = oa - ob
+        aa, bb, cc = (np.einsum("ij,ij->i", x, y) for x, y in ((a, a), (a, b), (b, b)))
+        d, e = np.einsum("ij,ij->i", a, w0), np.einsum("ij,ij->i", b, w0)
+        denom = aa * cc - bb * bb
+        par = denom <= 1e-12 * aa * cc
+        s_want = np.where(par, np.nan, (bb * e - cc * d) / denom)
+        k_want = np.where(par, np.nan, (aa * e - bb * d) / denom)
+        foot_a, foot_b = oa + s_want[:, None] * a, ob + k_want[:, None] * b
+        assert_array_equal(s, s_want)
+        assert_array_equal(k, k_want)
+        assert_array_equal(points, 0.5 * (foot_a + foot_b))
+        assert_array_equal(miss, np.linalg.norm(foot_a - foot_b, axis=1))
+        target = w0 + oa
+        t = np.einsum("ij,ij->i", target - oa, a) / np.einsum("ij,ij->i", a, a)
+        assert_array_equal(closest_points_on_rays(oa, a, target), t[:, None] * a + oa)
+        F = rng.normal(size=(n, 3, 3))
+        uv = rng.uniform(0, 640, (n, 2))
+        assert_array_equal(epipolar_lines_cols(F.reshape(n, 9).T.copy(), uv),
+                           epipolar_lines(F, uv))
+
+
+def test_column_rays_and_reprojection_equal_the_camera_model_bit_for_bit():
+    from pslog.fusion._prepare import reprojection_px
+
+    rig, obs, _ = dirty_session("typeA", seed=3)
+    prep = prepare(obs, rig)
+    cam = prep.obs.camera
+    uv = prep.uv_undistorted
+    homogeneous = np.hstack([uv, np.ones((len(uv), 1))])
+    rays = np.einsum("nji,nj->ni", prep.R[cam],
+                     np.einsum("nij,nj->ni", prep.K_inv[cam], homogeneous))
+    with np.errstate(invalid="ignore"):
+        assert_array_equal(prep.rays_from_undistorted(cam, uv),
+                           rays / np.linalg.norm(rays, axis=1, keepdims=True))
+    rng = np.random.default_rng(0)
+    points = rng.normal([0, 0, 1], 2, (len(obs), 3))
+    got = reprojection_px(prep, points, cam, uv)
+    for c, camera in enumerate(rig.cameras):
+        rows = cam == c
+        with np.errstate(invalid="ignore", over="ignore"):
+            projected, in_front = camera.project(points[rows])
+            want = np.where(in_front, np.linalg.norm(projected - camera.distort(uv[rows]),
+                                                     axis=1), np.nan)
+        assert_array_equal(got[rows], want)
+
+
+def test_covariance_adds_a_detections_slots_and_maps_its_pixel_noise():
+    # the six-entry assembly against the plain sum over detections of (J L)(J L)ᵀ
+    from pslog.fusion._prepare import covariance
+
+    rng = np.random.default_rng(1)
+    k, n_slots = 40, 4
+    rows = rng.integers(-1, 3, (k, n_slots))  # repeats: one detection in several slots
+    J = [rng.normal(size=(3, 2, k)) for _ in range(n_slots)]
+    L = [rng.normal(size=(2, 2, k)) for _ in range(n_slots)]
+    got = covariance(rows, J, L, 0.5)
+    for p in range(k):
+        want = np.zeros((3, 3))
+        for det in set(rows[p][rows[p] >= 0].tolist()):
+            slots = np.flatnonzero(rows[p] == det)
+            JL = sum(J[s][:, :, p] for s in slots) @ L[slots[0]][:, :, p]
+            want += JL @ JL.T * 0.25
+        for name, (i, j) in (("xx", (0, 0)), ("yy", (1, 1)), ("zz", (2, 2)), ("xy", (0, 1)),
+                             ("xz", (0, 2)), ("yz", (1, 2))):
+            assert_allclose(got[f"cov_{name}_m2"][p], want[i, j], rtol=1e-12, atol=1e-15)
+        assert_allclose(got["std_m"][p], np.sqrt(np.trace(want)), rtol=1e-12)

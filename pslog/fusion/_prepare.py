@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -75,11 +76,67 @@ class Prepared:
         return np.nan_to_num(self.uv_jacobian[rows])
 
     def rays_from_undistorted(self, camera: np.ndarray, uv: np.ndarray) -> np.ndarray:
-        """Unit world directions (n, 3) of undistorted pixels ``uv`` (n, 2) of ``camera`` (n,)."""
-        homogeneous = np.hstack([uv, np.ones((len(uv), 1))])
-        rays_cam = np.einsum("nij,nj->ni", self.K_inv[camera], homogeneous)
-        dirs = np.einsum("nji,nj->ni", self.R[camera], rays_cam)  # Rᵀ @ ray
-        return dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
+        """Unit world directions (n, 3) of undistorted pixels ``uv`` (n, 2) of ``camera`` (n,)
+        (or one camera for all, an int)."""
+        # C order, as callers' row-wise reductions (einsum) may sum differently otherwise
+        return np.ascontiguousarray(self.rays_t(camera, uv).T)
+
+    def rays_t(self, camera: np.ndarray, uv: np.ndarray) -> np.ndarray:
+        """:meth:`rays_from_undistorted` component-major: unit directions (3, n). (Columns of
+        length n, not rows of length 3: numpy is slow on short trailing axes.) ``K⁻¹`` then
+        ``Rᵀ``, in the order of the matrix products they replace: the same bits."""
+        Ki = _per_point(self._cols("K_inv"), camera)  # (9, n): Ki[3 i + j] = K⁻¹[i, j]
+        R = _per_point(self._cols("R"), camera)
+        u, v = uv[:, 0], uv[:, 1]
+        x = Ki[0] * u + Ki[1] * v + Ki[2]
+        y = Ki[3] * u + Ki[4] * v + Ki[5]
+        z = Ki[6] * u + Ki[7] * v + Ki[8]
+        d = R[0:3] * x  # Rᵀ (x, y, z): (Rᵀ)[i, j] = R[j, i] = R[3 j + i]
+        d += R[3:6] * y
+        d += R[6:9] * z
+        d /= np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+        return d
+
+    def _cols(self, name: str) -> np.ndarray:
+        """Per-camera (3, 3) matrices ``name`` as (9, m) columns (cached)."""
+        cache = self.__dict__.setdefault("_columns", {})
+        if name not in cache:
+            cache[name] = np.ascontiguousarray(getattr(self, name).reshape(-1, 9).T)
+        return cache[name]
+
+    @cached_property
+    def _rt_k_inv_cols(self) -> np.ndarray:
+        """Rᵀ K⁻¹ of every camera as (9, m) columns."""
+        return np.ascontiguousarray((np.swapaxes(self.R, 1, 2) @ self.K_inv).reshape(-1, 9).T)
+
+    @cached_property
+    def _uv_jacobian_cols(self) -> np.ndarray | None:
+        """:attr:`uv_jacobian` as (4, n) columns (NaN as 0), None without lens distortion."""
+        if not any(np.any(c.dist) for c in self.cameras):
+            return None
+        return np.ascontiguousarray(np.nan_to_num(self.uv_jacobian).reshape(-1, 4).T)
+
+    def pixel_jacobians_t(self, rows: np.ndarray) -> np.ndarray | None:
+        """:meth:`pixel_jacobians` component-major: (2, 2, k), or None (the identity)."""
+        cols = self._uv_jacobian_cols
+        return None if cols is None else np.take(cols, rows, axis=1).reshape(2, 2, -1)
+
+    @cached_property
+    def _f_cols(self) -> np.ndarray:
+        """:attr:`F` as (9, m * m) columns: ``F[a, b]`` is column ``a m + b``."""
+        return np.ascontiguousarray(self.F.reshape(-1, 9).T)
+
+    def fundamental_t(self, cam_a: np.ndarray, cam_b: np.ndarray) -> np.ndarray:
+        """``F[cam_a, cam_b]`` of (k,) camera pairs as (9, k) columns (entry ``3 i + j``)."""
+        return np.take(self._f_cols, cam_a * len(self.centers) + cam_b, axis=1)
+
+
+def _per_point(columns: np.ndarray, camera) -> np.ndarray:
+    """Per-camera ``columns`` (c, m) of each point's ``camera`` (k,): (c, k); for one camera
+    given as an int, (c, 1), which broadcasts (the same values without k copies)."""
+    if np.ndim(camera) == 0:
+        return columns[:, int(camera), None]
+    return np.take(columns, camera, axis=1)
 
 
 def prepare(obs: Observations, rig: Rig, F: np.ndarray | None = None) -> Prepared:
@@ -145,8 +202,23 @@ def _undistortion_jacobian(cam, uv_und: np.ndarray) -> np.ndarray:
     return out
 
 
+#: :func:`_view_box` of the cameras met so far (a stream prepares its window at every push)
+_VIEW_BOXES: dict[tuple, np.ndarray] = {}
+
+
 def _view_box(cam) -> np.ndarray:
     """The camera's image, undistorted (its border's bounding box), grown by VIEW_MARGIN."""
+    key = (cam.width, cam.height, np.asarray(cam.K, np.float64).tobytes(),
+           np.asarray(cam.dist, np.float64).tobytes())
+    box = _VIEW_BOXES.get(key)
+    if box is None:
+        if len(_VIEW_BOXES) > 256:
+            _VIEW_BOXES.clear()
+        box = _VIEW_BOXES[key] = _compute_view_box(cam)
+    return box.copy()
+
+
+def _compute_view_box(cam) -> np.ndarray:
     w, h = cam.width, cam.height
     s = np.linspace(0.0, 1.0, 33)
     border = np.concatenate([
@@ -163,7 +235,16 @@ def _view_box(cam) -> np.ndarray:
                      ideal[:, 0].max() + grow, ideal[:, 1].max() + grow])
 
 
-def invalid_points(prep: Prepared, points: np.ndarray, used: np.ndarray) -> np.ndarray:
+def finite_rows(points: np.ndarray) -> np.ndarray:
+    """(k,) bool, rows of ``points`` (k, 3) all finite (``np.all(np.isfinite(.), axis=1)``)."""
+    out = np.isfinite(points[:, 0])
+    out &= np.isfinite(points[:, 1])
+    out &= np.isfinite(points[:, 2])
+    return out
+
+
+def invalid_points(prep: Prepared, points: np.ndarray, used: np.ndarray,
+                   finite: np.ndarray | None = None) -> np.ndarray:
     """Why each point is not a geometrically valid output, as bits (0: valid).
 
     Parameters
@@ -176,26 +257,31 @@ def invalid_points(prep: Prepared, points: np.ndarray, used: np.ndarray) -> np.n
     (k,) int64, ``BEHIND`` if the point is at or behind the image plane of a camera that
     contributed to it; ``OUTSIDE_VIEW`` if it projects outside the view (image grown by
     :data:`VIEW_MARGIN`) of such a camera; a non-finite point gets no flag (its caller
-    knows why it has none)
+    knows why it has none); ``finite``: :func:`finite_rows` of ``points``, if known
     """
     k, m = used.shape
     flags = np.zeros(k, dtype=np.int64)
-    finite = np.all(np.isfinite(points), axis=1)
+    finite = finite_rows(points) if finite is None else finite
     for c in range(m):
-        rows = np.flatnonzero(used[:, c] & finite)
-        if len(rows) == 0:
+        mine = used[:, c] & finite
+        n_mine = np.count_nonzero(mine)
+        if n_mine == 0:
             continue
+        rows = None if n_mine == k else np.flatnonzero(mine)  # (None: every point)
         cam = prep.cameras[c]
-        in_cam = points[rows] @ cam.R.T + cam.t
+        in_cam = (points if rows is None else points[rows]) @ cam.R.T + cam.t
         z = in_cam[:, 2]
         behind = z <= 1e-9
-        flags[rows[behind]] |= BEHIND
         with np.errstate(divide="ignore", invalid="ignore"):
             uv = (in_cam[:, :2] / z[:, None]) @ cam.K[:2, :2].T + cam.K[:2, 2]
         box = prep.view_box[c]
         outside = ~behind & ~((uv[:, 0] >= box[0]) & (uv[:, 0] <= box[2])
                               & (uv[:, 1] >= box[1]) & (uv[:, 1] <= box[3]))
-        flags[rows[outside]] |= OUTSIDE_VIEW
+        bits = behind * BEHIND | outside * OUTSIDE_VIEW
+        if rows is None:
+            flags |= bits
+        else:
+            flags[rows] |= bits
     return flags
 
 
@@ -203,120 +289,222 @@ def reprojection_px(prep: Prepared, points: np.ndarray, camera: np.ndarray,
                     uv_undistorted: np.ndarray) -> np.ndarray:
     """Distance, in the recorded (distorted) image of ``camera`` (k,), between the projection
     of ``points`` (k, 3) and the image point ``uv_undistorted`` (k, 2), pixels (k,); NaN for
-    a point behind that camera or a missing image point."""
+    a point behind that camera or a missing image point.
+
+    :meth:`pslog.camera.Camera.project` and :meth:`~pslog.camera.Camera.distort` written out
+    on columns, operation for operation (the same bits, without their (n, 2) stacks)."""
     out = np.full(len(points), np.nan)
-    for c in np.unique(camera[camera >= 0]).tolist():
+    for c in range(len(prep.cameras)):
         rows = np.flatnonzero(camera == c)
-        cam = prep.cameras[c]
-        with np.errstate(invalid="ignore", over="ignore"):
-            uv, in_front = cam.project(points[rows])
-            target = cam.distort(uv_undistorted[rows])
-            out[rows] = np.where(in_front, np.linalg.norm(uv - target, axis=1), np.nan)
+        if len(rows) == 0:
+            continue
+        out[rows] = reprojection_one(prep, c, points[rows], uv_undistorted[rows])
     return out
 
 
+def reprojection_one(prep: Prepared, c: int, points: np.ndarray, uv_undistorted: np.ndarray
+                     ) -> np.ndarray:
+    """:func:`reprojection_px` of points (k, 3) and image points (k, 2) of one camera ``c``."""
+    cam = prep.cameras[c]
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+        in_cam = points @ cam.R.T + cam.t
+        z = in_cam[:, 2]
+        in_front = z > 1e-12
+        z = np.where(in_front, z, np.nan)
+        u, v = _distorted_pixels(cam, in_cam[:, 0] / z, in_cam[:, 1] / z)
+        K = cam.K
+        y = (uv_undistorted[:, 1] - K[1, 2]) / K[1, 1]
+        x = (uv_undistorted[:, 0] - K[0, 2] - K[0, 1] * y) / K[0, 0]
+        tu, tv = _distorted_pixels(cam, x, y)
+        u -= tu
+        v -= tv
+        u *= u
+        v *= v
+        u += v
+        return np.where(in_front, np.sqrt(u, out=u), np.nan)
+
+
+def _distorted_pixels(cam, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pixels (u, v) of ideal normalized coordinates (x, y) through the lens: the
+    expressions of :meth:`pslog.camera.Camera.distort_normalized` and
+    :meth:`~pslog.camera.Camera.pixels_from_normalized`."""
+    k1, k2, p1, p2, k3 = cam.dist
+    r2 = x * x + y * y
+    if not np.any(cam.dist) and np.all(np.isfinite(r2 + r2)):
+        # no lens: the model gives back (x, y) exactly (finite terms times zero coefficients
+        # add zeros), as long as nothing overflows (then it gives NaN, hence the full form)
+        xd, yd = x, y
+        K = cam.K
+        return K[0, 0] * xd + K[0, 1] * yd + K[0, 2], K[1, 1] * yd + K[1, 2]
+    radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
+    yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+    K = cam.K
+    return K[0, 0] * xd + K[0, 1] * yd + K[0, 2], K[1, 1] * yd + K[1, 2]
+
+
 def direction_jacobian(prep: Prepared, camera: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """d(unit viewing direction, world) / d(undistorted pixel) of ``camera`` (k,) at ``uv``
-    (k, 2): (k, 3, 2). With ``r = Rᵀ K⁻¹ (u, v, 1)`` and ``d = r / |r|``,
-    ``dd/duv = (I - d dᵀ) Rᵀ K⁻¹[:, :2] / |r|``."""
-    M = _rt_k_inv(prep)[camera]  # Rᵀ K⁻¹ (k, 3, 3)
-    r = M[:, :, 0] * uv[:, :1] + M[:, :, 1] * uv[:, 1:] + M[:, :, 2]
-    norm = np.sqrt(np.einsum("ni,ni->n", r, r))
-    d = r / norm[:, None]
-    M = M[:, :, :2] / norm[:, None, None]
-    # (sums over an axis of length 3 written out: numpy's small-axis reductions are slow)
-    dM = d[:, 0, None] * M[:, 0] + d[:, 1, None] * M[:, 1] + d[:, 2, None] * M[:, 2]
-    return M - d[:, :, None] * dM[:, None, :]
+    """d(unit viewing direction, world) / d(undistorted pixel) of ``camera`` (k,; or one, an
+    int) at ``uv`` (k, 2), component-major: (3, 2, k), entry ``[i, j]`` the (k,) column of
+    d d_i / d uv_j.
+    With ``r = Rᵀ K⁻¹ (u, v, 1)`` and ``d = r / |r|``, ``dd/duv = (I - d dᵀ) Rᵀ K⁻¹[:, :2] / |r|``.
+    """
+    M = _per_point(prep._rt_k_inv_cols, camera)  # (9, k), M[3 i + j] = (Rᵀ K⁻¹)[i, j]
+    u, v = uv[:, 0], uv[:, 1]
+    r = M[0::3] * u
+    r += M[1::3] * v
+    r += M[2::3]
+    norm = np.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
+    d = r / norm
+    M = M.reshape(3, 3, -1)[:, :2] / norm  # (3, 2, k)
+    dM = d[0] * M[0]
+    dM += d[1] * M[1]
+    dM += d[2] * M[2]
+    M -= d[:, None] * dM
+    return M
 
 
-def _rt_k_inv(prep: Prepared) -> np.ndarray:
-    """Rᵀ K⁻¹ of every camera (m, 3, 3)."""
-    return np.swapaxes(prep.R, 1, 2) @ prep.K_inv
-
-
-def _inverse_3x3(A: np.ndarray) -> np.ndarray:
-    """Inverses of (k, 3, 3) matrices by their adjugates (NaN where singular): far faster
-    than ``np.linalg.inv`` for many small ones."""
-    a, b, c = A[:, 0, 0], A[:, 0, 1], A[:, 0, 2]
-    d, e, f = A[:, 1, 0], A[:, 1, 1], A[:, 1, 2]
-    g, h, i = A[:, 2, 0], A[:, 2, 1], A[:, 2, 2]
-    co = np.stack([e * i - f * h, c * h - b * i, b * f - c * e,
-                   f * g - d * i, a * i - c * g, c * d - a * f,
-                   d * h - e * g, b * g - a * h, a * e - b * d], axis=1).reshape(-1, 3, 3)
-    det = a * co[:, 0, 0] + b * co[:, 1, 0] + c * co[:, 2, 0]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return co / np.where(np.abs(det) > 1e-12, det, np.nan)[:, None, None]
+def dot_t(v: np.ndarray, J: np.ndarray) -> np.ndarray:
+    """``vᵀ J`` of component-major (3, k) vectors and (3, 2, k) matrices: (2, k)."""
+    out = v[0] * J[0]
+    out += v[1] * J[1]
+    out += v[2] * J[2]
+    return out
 
 
 def least_squares_pixel_jacobians(points: np.ndarray, origins: np.ndarray, dirs: np.ndarray,
                                   used: np.ndarray, turns: list[np.ndarray]
                                   ) -> list[np.ndarray]:
-    """d(point) / d(undistorted pixel of ray j) (k, 3, 2) for each of m rays of the
-    least-squares point (:func:`pslog.geometry.triangulate_rays`; for two rays the midpoint
-    of their common perpendicular), given each ray's ``turns[j]`` = d(unit direction) /
-    d(pixel) (k, 3, 2) (:func:`direction_jacobian`). From ``A p = b``, ``A = Σ (I - d dᵀ)``,
-    ``b = Σ (I - d dᵀ) o``: a turn ``δd`` of ray j moves the point by
-    ``-A⁻¹ ((dᵀw) δd + d (wᵀ δd))`` with ``w = o - p``. Zero for unused rays."""
+    """d(point) / d(undistorted pixel of ray j), component-major (3, 2, k), for each of m rays
+    of the least-squares point (:func:`pslog.geometry.triangulate_rays`; for two rays the
+    midpoint of their common perpendicular), given each ray's ``turns[j]`` = d(unit
+    direction) / d(pixel) (3, 2, k) (:func:`direction_jacobian`). From ``A p = b``,
+    ``A = Σ (I - d dᵀ)``, ``b = Σ (I - d dᵀ) o``: a turn ``δd`` of ray j moves the point by
+    ``-A⁻¹ ((dᵀw) δd + d (wᵀ δd))`` with ``w = o - p``. Zero for unused rays.
+
+    ``points`` (k, 3), ``origins`` and ``dirs`` (k, m, 3), ``used`` (k, m)."""
     m = used.shape[1]
-    d = np.where(used[..., None], dirs, 0.0)
-    A = np.eye(3) * used.sum(axis=1)[:, None, None]
-    for j in range(m):
-        A -= d[:, j, :, None] * d[:, j, None, :]
-    A_inv = _inverse_3x3(A)
+    # (k,) columns throughout: numpy is slow on short axes
+    d = [[np.where(used[:, j], dirs[:, j, i], 0.0) for i in range(3)] for j in range(m)]
+    n_used = used.sum(axis=1).astype(np.float64)
+    # A's six distinct entries (symmetric), then its inverse by the adjugate
+    A = {}
+    for _, i, j in _SYM6:
+        A[i, j] = n_used.copy() if i == j else np.zeros(len(n_used))
+        for dj in d:
+            A[i, j] -= dj[i] * dj[j]
+    a, b, c = A[0, 0], A[0, 1], A[0, 2]
+    e, f, i_ = A[1, 1], A[1, 2], A[2, 2]
+    co = {(0, 0): e * i_ - f * f, (0, 1): c * f - b * i_, (0, 2): b * f - c * e,
+          (1, 1): a * i_ - c * c, (1, 2): c * b - a * f, (2, 2): a * e - b * b}
+    det = a * co[0, 0] + b * co[0, 1] + c * co[0, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv_det = 1.0 / np.where(np.abs(det) > 1e-12, det, np.nan)
+    A_inv = {}
+    for (i, j), v in co.items():
+        A_inv[i, j] = A_inv[j, i] = v * inv_det
+    P = [points[:, i] for i in range(3)]
     out = []
     for j in range(m):
-        w = origins[:, j] - points
-        G = np.where(used[:, j, None, None], turns[j], 0.0)
-        inner = (np.einsum("ni,ni->n", d[:, j], w)[:, None, None] * G
-                 + d[:, j, :, None] * (w[:, 0, None] * G[:, 0] + w[:, 1, None] * G[:, 1]
-                                       + w[:, 2, None] * G[:, 2])[:, None, :])
-        out.append(np.where(used[:, j, None, None], -(A_inv @ inner), 0.0))
+        w = [origins[:, j, i] - P[i] for i in range(3)]
+        G = np.where(used[:, j], turns[j], 0.0)
+        dj = d[j]
+        inner = (dj[0] * w[0] + dj[1] * w[1] + dj[2] * w[2]) * G
+        inner += np.array(dj)[:, None] * dot_t(w, G)
+        moved = np.empty((3, 2, len(n_used)))
+        for i in range(3):
+            row = A_inv[i, 0] * inner[0]
+            row += A_inv[i, 1] * inner[1]
+            row += A_inv[i, 2] * inner[2]
+            np.negative(row, out=row)
+            moved[i] = np.where(used[:, j], row, 0.0)
+        out.append(moved)
     return out
 
 
-def covariance(rows: np.ndarray, jacobians: list[np.ndarray], uv_jacobians: list[np.ndarray],
-               noise_px: float) -> np.ndarray:
-    """First-order covariance (k, 3, 3), m², of points made from detections.
+#: The six distinct entries of a symmetric 3 x 3 matrix, (row, column), in the order of the
+#: ``cov_*_m2`` columns.
+_SYM6 = (("xx", 0, 0), ("yy", 1, 1), ("zz", 2, 2), ("xy", 0, 1), ("xz", 0, 2), ("yz", 1, 2))
 
-    Slot ``s`` holds detection ``rows[:, s]`` (-1: unused) and ``jacobians[s]`` (k, 3, 2) is
-    d(point) / d(its undistorted pixel) (zero where unused); a detection used in several
-    slots of a point (type A's newest frame ends a bracket) adds up its slots' Jacobians.
-    Each detection's recorded pixel has independent isotropic noise of ``noise_px`` per
-    axis, mapped to undistorted pixels by ``uv_jacobians[s]`` (k, 2, 2)
-    (:meth:`Prepared.pixel_jacobians`; None for the identity, a rig without lens distortion).
-    """
-    k, n_slots = rows.shape
-    cov = np.zeros((k, 3, 3))
-    merged = [J.copy() for J in jacobians]
+
+def merged_slots(rows: np.ndarray) -> tuple[list[tuple[int, int, np.ndarray]], np.ndarray]:
+    """Which slots of :func:`covariance` add up into which: ``(s, t, same)`` moves slot
+    ``t``'s Jacobian into slot ``s`` where ``same`` (k,) (the same detection, each into its
+    first slot), in order; also returns the (k, n_slots) mask of the slots merged away."""
+    n_slots = rows.shape[1]
+    merges = []
     taken = np.zeros(rows.shape, dtype=bool)  # a later slot merged into an earlier one
     for s in range(n_slots):
         for t in range(s + 1, n_slots):
             same = (rows[:, t] == rows[:, s]) & (rows[:, s] >= 0) & ~taken[:, t] & ~taken[:, s]
             if np.any(same):
-                merged[s][same] += merged[t][same]
+                merges.append((s, t, same))
                 taken[same, t] = True
-    for s in range(n_slots):
+    return merges, taken
+
+
+def times_pixel_jacobian(J: np.ndarray, L: np.ndarray | None) -> np.ndarray:
+    """``J L`` of component-major (..., 2, k) and (2, 2, k) matrices (L None: the identity)."""
+    if L is None:
+        return J
+    return J[..., 0, None, :] * L[0] + J[..., 1, None, :] * L[1]
+
+
+def covariance(rows: np.ndarray, jacobians: list[np.ndarray], uv_jacobians: list[np.ndarray],
+               noise_px: float) -> dict[str, np.ndarray]:
+    """First-order covariance of points made from detections, as the quality columns
+    ``std_m`` (sqrt of the trace: the RMS 3-D error to expect) and the six distinct entries
+    ``cov_xx_m2`` ... ``cov_yz_m2`` (k,), m².
+
+    Slot ``s`` holds detection ``rows[:, s]`` (-1: unused) and ``jacobians[s]``, component-
+    major (3, 2, k), is d(point) / d(its undistorted pixel) (zero where unused); a detection
+    used in several slots of a point (type A's newest frame ends a bracket) adds up its slots'
+    Jacobians. Each detection's recorded pixel has independent isotropic noise of ``noise_px``
+    per axis, mapped to undistorted pixels by ``uv_jacobians[s]`` (2, 2, k)
+    (:meth:`Prepared.pixel_jacobians_t`; None for the identity, a rig without lens distortion).
+    """
+    k = rows.shape[0]
+    merges, taken = merged_slots(rows)
+    merged = list(jacobians)
+    copied = set()
+    for s, t, same in merges:
+        if s not in copied:
+            merged[s] = merged[s].copy()
+            copied.add(s)
+        merged[s][:, :, same] += merged[t][:, :, same]
+    cov = np.zeros((6, k))
+    first = np.array([i for _, i, _ in _SYM6])
+    second = np.array([j for _, _, j in _SYM6])
+    for s in range(rows.shape[1]):
         use = (rows[:, s] >= 0) & ~taken[:, s]
         if not np.any(use):
             continue
-        JL = merged[s]
-        if uv_jacobians[s] is not None:  # None: no lens, the identity
-            JL = JL @ uv_jacobians[s]
+        JL = times_pixel_jacobian(merged[s], uv_jacobians[s])
         if not np.all(use):
-            JL = np.where(use[:, None, None], JL, 0.0)
-        # J Jᵀ of (k, 3, 2) matrices, its two outer products written out
-        cov += JL[:, :, None, 0] * JL[:, None, :, 0] + JL[:, :, None, 1] * JL[:, None, :, 1]
-    return cov * noise_px**2
+            JL = np.where(use, JL, 0.0)
+        # J Jᵀ's six distinct entries, its two outer products written out
+        cov += JL[first, 0] * JL[second, 0] + JL[first, 1] * JL[second, 1]
+    return covariance_columns(cov * noise_px**2)
+
+
+def covariance_columns(cov: np.ndarray) -> dict[str, np.ndarray]:
+    """Quality columns of covariances given by their six distinct entries (6, k) in the order
+    xx, yy, zz, xy, xz, yz: ``std_m`` (sqrt of the trace) and ``cov_xx_m2`` ... ``cov_yz_m2``."""
+    out = {"std_m": np.sqrt(cov[0] + cov[1] + cov[2])}
+    for i, (name, _, _) in enumerate(_SYM6):
+        out[f"cov_{name}_m2"] = cov[i]
+    return out
 
 
 def finite_difference_jacobians(evaluate, uv: list[np.ndarray], rows: np.ndarray
                                 ) -> list[np.ndarray]:
-    """The Jacobians :func:`covariance` takes, by forward differences of ``evaluate(uv)``
-    (slots' undistorted pixels, a list of (k, 2), to points (k, 3)); a detection in several
-    slots moves in all of them at once, so its first slot gets the whole derivative."""
+    """The Jacobians :func:`covariance` takes (component-major, (3, 2, k)), by forward
+    differences of ``evaluate(uv)`` (slots' undistorted pixels, a list of (k, 2), to points
+    (k, 3)); a detection in several slots moves in all of them at once, so its first slot gets
+    the whole derivative."""
     base = evaluate(uv)
     k, n_slots = rows.shape
-    out = [np.zeros((k, 3, 2)) for _ in range(n_slots)]
+    out = [np.zeros((3, 2, k)) for _ in range(n_slots)]
     h = _JACOBIAN_STEP_PX
     for s in range(n_slots):
         first = (rows[:, s] >= 0) & ~np.any(rows[:, :s] == rows[:, s:s + 1], axis=1)
@@ -328,23 +516,16 @@ def finite_difference_jacobians(evaluate, uv: list[np.ndarray], rows: np.ndarray
             step[:, axis] = h
             moved = [u + np.where(same[:, j:j + 1], step, 0.0) for j, u in enumerate(uv)]
             with np.errstate(invalid="ignore"):
-                out[s][:, :, axis] = np.where(first[:, None], (evaluate(moved) - base) / h, 0.0)
-    return out
-
-
-def covariance_columns(cov: np.ndarray) -> dict[str, np.ndarray]:
-    """Quality columns of covariances (k, 3, 3): ``std_m`` (sqrt of the trace: the RMS 3-D
-    error to expect) and the six distinct entries ``cov_xx_m2`` ... ``cov_yz_m2``."""
-    out = {"std_m": np.sqrt(np.einsum("kii->k", cov))}
-    for name, (i, j) in (("xx", (0, 0)), ("yy", (1, 1)), ("zz", (2, 2)), ("xy", (0, 1)),
-                         ("xz", (0, 2)), ("yz", (1, 2))):
-        out[f"cov_{name}_m2"] = cov[:, i, j].copy()
+                out[s][:, axis] = np.where(first[:, None], (evaluate(moved) - base) / h, 0.0).T
     return out
 
 
 def camera_mask(used: np.ndarray) -> np.ndarray:
     """(k,) float64 bitmask of the cameras used (bit c for camera c; exact up to 53)."""
-    return (used.astype(np.float64) * (2.0 ** np.arange(used.shape[1]))).sum(axis=1)
+    out = np.zeros(used.shape[0])
+    for c in range(used.shape[1]):  # (sums of distinct powers of two: exact in any order)
+        out += used[:, c] * 2.0**c
+    return out
 
 
 def latest_row_at_or_before(prep: Prepared, camera: int, row: np.ndarray) -> np.ndarray:

@@ -16,11 +16,13 @@ from ..geometry import closest_points_on_rays, ray_depths
 from ..records import NS, Track
 from . import _prepare
 from ._prepare import (
+    _SYM6,
     BEHIND,
     Prepared,
     covariance,
     covariance_columns,
     direction_jacobian,
+    dot_t,
     finite_difference_jacobians,
     invalid_points,
     reprojection_px,
@@ -62,10 +64,9 @@ def fuse_predicted(prep: Prepared, method: str, tolerance_s: float, max_gap_s: f
     cam = obs.camera[single]
     n_single = len(single)
     q = stereo.quality
-    if noise_px is not None:
-        cov_stereo = _covariance(q)
-        cov_pred = ((1 + ratio) ** 2)[:, None, None] * cov_stereo[k1] \
-            + (ratio**2)[:, None, None] * cov_stereo[k2]
+    if noise_px is not None:  # the six distinct entries (6, k) of the prediction's covariance
+        cov_stereo = np.array([q[f"cov_{name}_m2"] for name, _, _ in _SYM6])
+        cov_pred = (1 + ratio) ** 2 * cov_stereo[:, k1] + ratio**2 * cov_stereo[:, k2]
     with np.errstate(invalid="ignore"):
         own = reprojection_px(prep, predicted, cam, prep.uv_undistorted[single])
     flags = np.zeros(n_single, dtype=np.int64)
@@ -81,7 +82,7 @@ def fuse_predicted(prep: Prepared, method: str, tolerance_s: float, max_gap_s: f
             prep, single, cam, predicted, cov_pred, noise_px)
     else:
         single_points, shift = predicted, np.full(n_single, np.nan)
-        cov = None if noise_px is None else cov_pred
+        cov = None if noise_px is None else covariance_columns(cov_pred)
     mask_bits = (q["camera_mask"][k1].astype(np.int64) | q["camera_mask"][k2].astype(np.int64)
                  | (1 << cam.astype(np.int64)))
     used = (mask_bits[:, None] >> np.arange(len(prep.centers))) & 1 == 1
@@ -98,7 +99,7 @@ def fuse_predicted(prep: Prepared, method: str, tolerance_s: float, max_gap_s: f
             "camera_mask": mask_bits.astype(np.float64),
             "n_detections": n1 + n2 + 1,
             "gap_s": (t_single - stereo_ns[k2]) / NS,
-            **(covariance_columns(cov) if cov is not None else {}),
+            **(cov if cov is not None else {}),
         }
         stereo_span = q["gap_s"]
     made = np.all(np.isfinite(single_points), axis=1)  # a detection without a usable ray
@@ -123,10 +124,10 @@ def fuse_predicted(prep: Prepared, method: str, tolerance_s: float, max_gap_s: f
 
 def _type_b_covariance(prep: Prepared, single: np.ndarray, cam: np.ndarray,
                        predicted: np.ndarray, cov_pred: np.ndarray, noise_px: float
-                       ) -> np.ndarray:
-    """Covariance (k, 3, 3) of type B's points: the prediction's projected onto the single
-    detection's ray (eq. (4)), plus the ray's own turn with its detection's noise."""
-    d = prep.ray_dir[single]
+                       ) -> dict[str, np.ndarray]:
+    """Covariance columns of type B's points: the prediction's (six distinct entries (6, k))
+    projected onto the single detection's ray (eq. (4)), plus the ray's own turn with its
+    detection's noise."""
     with np.errstate(invalid="ignore"):
         if _prepare.FINITE_DIFFERENCES:
             def evaluate(uv):
@@ -136,21 +137,20 @@ def _type_b_covariance(prep: Prepared, single: np.ndarray, cam: np.ndarray,
             jacobians = finite_difference_jacobians(
                 evaluate, [prep.uv_undistorted[single]], single[:, None])
         else:  # a turn δr of the unit ray moves the foot by ((rᵀq) I + r qᵀ) δr, q = P̂ - T
-            offset = predicted - prep.ray_origin[single]
-            turn = (np.einsum("ni,ni->n", d, offset)[:, None, None] * np.eye(3)
-                    + d[:, :, None] * offset[:, None, :])
-            jacobians = [turn @ direction_jacobian(prep, cam, prep.uv_undistorted[single])]
-        cov_ray = covariance(single[:, None], jacobians, [prep.pixel_jacobians(single)],
-                             noise_px)
-    onto = d[:, :, None] * d[:, None, :]  # the projection onto the ray, eq. (4)
-    return onto @ cov_pred @ onto + cov_ray
-
-
-def _covariance(quality) -> np.ndarray:
-    """(n, 3, 3) covariances from the ``cov_*_m2`` columns."""
-    n = len(quality["cov_xx_m2"])
-    cov = np.empty((n, 3, 3))
-    for name, (i, j) in (("xx", (0, 0)), ("yy", (1, 1)), ("zz", (2, 2)), ("xy", (0, 1)),
-                         ("xz", (0, 2)), ("yz", (1, 2))):
-        cov[:, i, j] = cov[:, j, i] = quality[f"cov_{name}_m2"]
-    return cov
+            d = prep.ray_dir[single].T.copy()
+            offset = (predicted - prep.ray_origin[single]).T
+            G = direction_jacobian(prep, cam, prep.uv_undistorted[single])
+            turn = (d[0] * offset[0] + d[1] * offset[1] + d[2] * offset[2]) * G
+            turn += d[:, None] * dot_t(offset, G)
+            jacobians = [turn]
+        cov = covariance(single[:, None], jacobians, [prep.pixel_jacobians_t(single)],
+                         noise_px)
+    # the projection onto the ray, eq. (4): d dᵀ C d dᵀ = (dᵀ C d) d dᵀ
+    d = prep.ray_dir[single].T
+    along = np.zeros(len(single))
+    for e, (_, i, j) in enumerate(_SYM6):
+        along += (1.0 if i == j else 2.0) * d[i] * d[j] * cov_pred[e]
+    out = np.empty((6, len(single)))
+    for e, (name, i, j) in enumerate(_SYM6):
+        out[e] = along * d[i] * d[j] + cov[f"cov_{name}_m2"]
+    return covariance_columns(out)

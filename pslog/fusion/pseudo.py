@@ -41,10 +41,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..geometry import (
+    _dot,
     closest_points_on_lines,
     closest_points_on_rays,
     crossing_of_rays,
-    epipolar_lines,
+    epipolar_lines_cols,
     ray_depths,
 )
 from ..records import NS, Track
@@ -59,9 +60,13 @@ from ._prepare import (
     covariance,
     covariance_columns,
     direction_jacobian,
+    dot_t,
     finite_difference_jacobians,
+    finite_rows,
     invalid_points,
+    merged_slots,
     reprojection_px,
+    times_pixel_jacobian,
 )
 from .stereo import count_invalid, with_dropped
 
@@ -131,7 +136,7 @@ def _pseudo_from_pixels(prep: Prepared, cam_obs: np.ndarray, partner: np.ndarray
     # eq. (1): linear interpolation of the partner's 2D track to the observation's time
     uv_interp = (1.0 - weight)[:, None] * uv_prev + weight[:, None] * uv_next
     # step 2: nearest point on the epipolar line of the observed point, in the partner image
-    lines = epipolar_lines(prep.F[cam_obs, partner], uv_obs)
+    lines = epipolar_lines_cols(prep.fundamental_t(cam_obs, partner), uv_obs)
     uv_snapped, snap_px = closest_points_on_lines(lines, uv_interp)
     # step 3: crossing point of the observed ray and the snapped point's ray
     dir_obs = prep.rays_from_undistorted(cam_obs, uv_obs)
@@ -182,7 +187,8 @@ def pseudo_stereo_points(
             _pseudo_from_pixels(prep, cam_row, partner_idx, prep.uv_undistorted[rows],
                                 prep.uv_undistorted[prev_row], prep.uv_undistorted[next_row], w))
         # both directions are unit vectors; a line has no sense, hence the absolute value
-        cos_angle = np.abs(np.einsum("ij,ij->i", dir_obs, dir_partner))
+        cos_angle = np.abs(_dot(dir_obs[:, 0], dir_obs[:, 1], dir_obs[:, 2],
+                                dir_partner[:, 0], dir_partner[:, 1], dir_partner[:, 2]))
         angle = np.arccos(np.minimum(cos_angle, 1.0))
         # the disagreement before the snap: the interpolated point's ray against the observed
         dir_interp = prep.rays_from_undistorted(partner_idx, uv_interp)
@@ -193,12 +199,13 @@ def pseudo_stereo_points(
     used = np.zeros((n_rows, n_cams), dtype=bool)
     used[np.arange(n_rows), cam_row] = True
     used[np.arange(n_rows), partner_idx] = True
-    flags = invalid_points(prep, points, used)
+    finite = finite_rows(points)
+    flags = invalid_points(prep, points, used, finite)
     with np.errstate(invalid="ignore"):
-        flags[np.all(np.isfinite(points), axis=1) & ~((s > 0) & (k > 0))] |= BEHIND
+        flags[finite & ~((s > 0) & (k > 0))] |= BEHIND
         flags[np.degrees(angle) < MIN_RAY_ANGLE_DEG] |= PARALLEL  # (NaN: no ray, no flag)
     flags[~valid] = 0  # no partner: no point, and nothing to say about its geometry
-    valid &= np.all(np.isfinite(points), axis=1) & (flags == 0)
+    valid &= finite & (flags == 0)
     return PseudoStereoPoints(rows, valid, partner, prev_row, next_row, uv_interp, uv_snapped,
                               snap_px, points, miss, angle, w, miss_unsnapped, residual_obs,
                               residual_partner, dir_obs, dir_partner, flags)
@@ -242,22 +249,24 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5
     time_ns = obs.time_ns
     n, max_gap_ns = len(obs), int(max_gap_s * NS)
     depth = 2 * len(prep.centers)
-    # predecessors[:, k]: latest row of the k-th distinct instant before each event
-    predecessors = np.full((n, depth), -1, dtype=np.int64)
-    before = np.arange(n)
-    for k in range(depth):
-        before = np.searchsorted(time_ns, time_ns[np.maximum(before, 0)], side="left") - 1
-        before = np.where(predecessors[:, k - 1] < 0, -1, before) if k else before
-        reachable = (before >= 0) & (time_ns - time_ns[np.maximum(before, 0)] <= max_gap_ns)
-        predecessors[:, k] = np.where(reachable, before, -1)
-
     # triangulate predecessors depth by depth, only for events still lacking two points
     first = np.full(n, -1, dtype=np.int64)  # depth of P_{t-1} (the later past point)
     second = np.full(n, -1, dtype=np.int64)  # depth of P_{t-2}
     t_first = np.zeros(n, dtype=np.int64)  # capture time of P_{t-1}
     computed: list[tuple[int, np.ndarray, PseudoStereoPoints]] = []  # (depth, events, points)
+    # candidate: latest row of the k-th distinct instant before each event (-1: none within
+    # max_gap_s), followed depth by depth only for the events still lacking two points
+    before = np.arange(n)
+    candidate = np.full(n, -1, dtype=np.int64)
     for k in range(depth):
-        candidate = predecessors[:, k]
+        pending = np.flatnonzero(second < 0) if k else before.copy()
+        if len(pending) == 0:
+            break
+        b = np.searchsorted(time_ns, time_ns[np.maximum(before[pending], 0)], side="left") - 1
+        b = np.where(candidate[pending] < 0, -1, b) if k else b
+        reachable = (b >= 0) & (time_ns[pending] - time_ns[np.maximum(b, 0)] <= max_gap_ns)
+        before[pending] = b
+        candidate[pending] = np.where(reachable, b, -1)
         # as P_{t-2}, a candidate must leave eq. (2) a bounded extrapolation
         spaced = (first < 0) | (time_ns - t_first <= MAX_EXTRAPOLATION * (
             t_first - time_ns[np.maximum(candidate, 0)]))
@@ -287,24 +296,28 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5
     points = closest_points_on_rays(prep.ray_origin[events], prep.ray_dir[events], predicted)
 
     # the detections behind each point: newest, P_{t-1}'s and P_{t-2}'s with their brackets
-    slots = np.stack([events, j1, p1.prev_row, p1.next_row, j2, p2.prev_row, p2.next_row], 1)
-    cams = obs.camera[slots]
+    columns = [events, j1, p1.prev_row, p1.next_row, j2, p2.prev_row, p2.next_row]
+    slots = np.stack(columns, 1)
     k = len(events)
     used = np.zeros((k, len(prep.centers)), dtype=bool)
-    for s in range(slots.shape[1]):
-        used[np.arange(k), cams[:, s]] = True
+    every = np.arange(k)
+    for column in columns:
+        used[every, obs.camera[column]] = True
     flags = invalid_points(prep, points, used)
     with np.errstate(invalid="ignore"):
         depth = ray_depths(predicted, prep.ray_origin[events], prep.ray_dir[events])
     flags[~(depth > 0)] |= BEHIND  # eq. (4)'s k: the foot behind the newest camera
-    residual = np.stack([
+    residual = [
         p1.residual_obs_px, p1.residual_partner_px, p2.residual_obs_px, p2.residual_partner_px,
         # the newest detection against the prediction, before eq. (4) moves it onto its ray
-        reprojection_px(prep, predicted, obs.camera[events], prep.uv_undistorted[events])], 1)
-    distinct = np.ones(slots.shape, dtype=bool)
-    for s in range(1, slots.shape[1]):
-        distinct[:, s] = ~np.any(slots[:, :s] == slots[:, s:s + 1], axis=1)
-    t_slots = time_ns[slots]
+        reprojection_px(prep, predicted, obs.camera[events], prep.uv_undistorted[events])]
+    n_distinct = np.ones(k, dtype=np.int64)  # slots holding a detection no earlier slot holds
+    for s in range(1, len(columns)):
+        repeated = columns[0] == columns[s]
+        for t in range(1, s):
+            repeated |= columns[t] == columns[s]
+        n_distinct += ~repeated
+    t_earliest = np.minimum.reduce([time_ns[column] for column in columns])
     span1 = (time_ns[p1.next_row] - time_ns[p1.prev_row]) / NS
     span2 = (time_ns[p2.next_row] - time_ns[p2.prev_row]) / NS
 
@@ -320,43 +333,31 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5
 
     with np.errstate(invalid="ignore"):
         if noise_px is None:
-            jacobians = None
+            cov = None
         elif _prepare.FINITE_DIFFERENCES:
             jacobians = finite_difference_jacobians(
                 evaluate, [prep.uv_undistorted[slots[:, s]] for s in range(7)], slots)
+            cov = covariance(slots, jacobians,
+                             [prep.pixel_jacobians_t(slots[:, s]) for s in range(7)], noise_px)
         else:
-            # eq. (4), P' = T + r rᵀ (P̂ - T) for a unit r: d P'/d P̂ = r rᵀ, and a turn δr of
-            # the newest ray moves P' by ((rᵀq) I + r qᵀ) δr with q = P̂ - T
-            r = prep.ray_dir[events]
-            q = predicted - prep.ray_origin[events]
-            G = direction_jacobian(prep, obs.camera[events], prep.uv_undistorted[events])
-            newest = (np.einsum("ni,ni->n", r, q)[:, None, None] * G
-                      + r[:, :, None] * _dot3(q, G)[:, None, :])
-
-            def onto(scale, J):  # scale r rᵀ J, rank one: r (scale rᵀ J)
-                return r[:, :, None] * (scale[:, None] * _dot3(r, J))[:, None, :]
-
-            # eq. (2): P̂ = (1 + ratio) P_{t-1} - ratio P_{t-2}
-            past1 = [onto(1 + ratio, J) for J in _pseudo_jacobians(prep, p1, obs.camera[j1])]
-            past2 = [onto(-ratio, J) for J in _pseudo_jacobians(prep, p2, obs.camera[j2])]
-            jacobians = [newest, *past1, *past2]
-        cov = None if jacobians is None else covariance(
-            slots, jacobians, [prep.pixel_jacobians(slots[:, s]) for s in range(7)], noise_px)
+            cov = _type_a_covariance(prep, events, predicted, ratio, p1, p2, obs.camera[j1],
+                                     obs.camera[j2], slots, noise_px)
         quality = {
             "snap_px": np.maximum(p1.snap_px, p2.snap_px),
             # measured before the snap: after it the rays cross by construction
             "ray_miss_m": np.maximum(p1.miss_unsnapped_m, p2.miss_unsnapped_m),
-            "ray_shift_m": np.linalg.norm(points - predicted, axis=1),
+            "ray_shift_m": _row_norms(points - predicted),
             "ray_angle_deg": np.degrees(np.minimum(p1.angle_rad, p2.angle_rad)),
-            "residual_max_px": np.max(residual, axis=1),
-            "residual_mean_px": np.mean(residual, axis=1),
+            # (folds over the five columns in the order of np.max and np.mean over rows)
+            "residual_max_px": np.maximum.reduce(residual),
+            "residual_mean_px": _sum_in_order(residual) / len(residual),
             "camera_mask": camera_mask(used),
-            "n_detections": distinct.sum(axis=1).astype(np.float64),
+            "n_detections": n_distinct.astype(np.float64),
             "gap_s": np.maximum(np.maximum(span1, span2), (time_ns[events] - time_ns[j2]) / NS),
-            "span_s": (time_ns[events] - t_slots.min(axis=1)) / NS,
-            **(covariance_columns(cov) if cov is not None else {}),
+            "span_s": (time_ns[events] - t_earliest) / NS,
+            **(cov if cov is not None else {}),
         }
-    made = np.all(np.isfinite(points), axis=1)
+    made = finite_rows(points)
     keep = made & (flags == 0)
     track = Track("typeA", time_ns[events], points, obs.camera[events], quality).select(keep)
     # past points refused as invalid (each detection once): the points they would have made
@@ -371,15 +372,66 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5
     return track, construction
 
 
-def _dot3(v: np.ndarray, J: np.ndarray) -> np.ndarray:
-    """``vᵀ J`` for (k, 3) vectors and (k, 3, 2) matrices: (k, 2)."""
-    return v[:, 0, None] * J[:, 0] + v[:, 1, None] * J[:, 1] + v[:, 2, None] * J[:, 2]
+def _row_norms(v: np.ndarray) -> np.ndarray:
+    """``np.linalg.norm(v, axis=1)`` of (k, 3) rows, on columns (the same bits)."""
+    x, y, z = v[:, 0], v[:, 1], v[:, 2]
+    out = x * x
+    out += y * y
+    out += z * z
+    return np.sqrt(out, out=out)
 
 
-def _pseudo_jacobians(prep: Prepared, p: PseudoStereoPoints, cam_obs: np.ndarray
-                      ) -> list[np.ndarray]:
-    """d(P) / d(undistorted pixel) (k, 3, 2) of pseudo-stereo points ``p`` for their observed
-    detection and the partner's bracket (prev, next): steps 1-3 differentiated.
+def _sum_in_order(columns: list[np.ndarray]) -> np.ndarray:
+    """Sum of (k,) columns from the first on: numpy's order over a short row (the same bits
+    as ``np.sum(np.stack(columns, 1), axis=1)`` for fewer than 8 columns)."""
+    out = columns[0] + columns[1]
+    for c in columns[2:]:
+        out += c
+    return out
+
+
+def _type_a_covariance(prep: Prepared, events: np.ndarray, predicted: np.ndarray,
+                       ratio: np.ndarray, p1: PseudoStereoPoints, p2: PseudoStereoPoints,
+                       cam1: np.ndarray, cam2: np.ndarray, slots: np.ndarray, noise_px: float
+                       ) -> dict[str, np.ndarray]:
+    """:func:`covariance` of type A's points (its quality columns), with the analytic
+    Jacobians of eqs. (1)-(4), component-major.
+
+    Eq. (4), ``P' = T + r rᵀ (P̂ - T)`` for a unit r: ``d P'/d P̂ = r rᵀ``, so every past
+    slot's Jacobian is ``r gᵀ`` with ``g = (scale rᵀ J)`` (2, k), ``scale`` eq. (2)'s
+    ``1 + ratio`` or ``-ratio``; its share of the covariance is ``r rᵀ |g L|²``. A turn
+    ``δr`` of the newest ray moves P' by ``((rᵀq) I + r qᵀ) δr`` with ``q = P̂ - T``."""
+    r = prep.ray_dir[events].T.copy()  # (3, k)
+    q = (predicted - prep.ray_origin[events]).T
+    G = direction_jacobian(prep, prep.obs.camera[events], prep.uv_undistorted[events])
+    newest = (r[0] * q[0] + r[1] * q[1] + r[2] * q[2]) * G
+    newest += r[:, None] * dot_t(q, G)
+    # eq. (2): P̂ = (1 + ratio) P_{t-1} - ratio P_{t-2}
+    g = [None, *(g * (1 + ratio) for g in _pseudo_jacobians(prep, p1, cam1, r)),
+         *(g * -ratio for g in _pseudo_jacobians(prep, p2, cam2, r))]
+    merges, taken = merged_slots(slots)
+    for s, t, same in merges:  # (usually for every event: whole columns, no masked copies)
+        moved = g[t] if np.all(same) else np.where(same, g[t], 0.0)
+        if s == 0:
+            newest += r[:, None] * moved
+        else:
+            g[s] += moved
+    along = np.zeros(len(events))  # Σ |g L|² of the past slots
+    for s in range(1, slots.shape[1]):
+        gl = times_pixel_jacobian(g[s], prep.pixel_jacobians_t(slots[:, s]))
+        along += np.where(taken[:, s], 0.0, gl[0] * gl[0] + gl[1] * gl[1])
+    cov = np.empty((6, len(events)))
+    NL = times_pixel_jacobian(newest, prep.pixel_jacobians_t(slots[:, 0]))
+    for e, (_, i, j) in enumerate(_prepare._SYM6):
+        cov[e] = NL[i, 0] * NL[j, 0] + NL[i, 1] * NL[j, 1] + r[i] * r[j] * along
+    return covariance_columns(cov * noise_px**2)
+
+
+def _pseudo_jacobians(prep: Prepared, p: PseudoStereoPoints, cam_obs: np.ndarray,
+                      r: np.ndarray) -> list[np.ndarray]:
+    """``rᵀ d(P) / d(undistorted pixel)`` (2, k) of pseudo-stereo points ``p`` for their
+    observed detection and the partner's bracket (prev, next): steps 1-3 differentiated, seen
+    along directions ``r`` (3, k) (all eq. (4) keeps of them).
 
     The point is the crossing of the observed ray and the snapped point's ray, which meet
     (the snap puts the partner's point on the epipolar line): with ``P = T_j + s_j d_j`` on
@@ -390,40 +442,49 @@ def _pseudo_jacobians(prep: Prepared, p: PseudoStereoPoints, cam_obs: np.ndarray
     bracket by ``1 - w`` and ``w``."""
     uv_obs = prep.uv_undistorted[p.row]
     partner = np.maximum(p.partner, 0)
-    d1, d2 = p.dir_obs, p.dir_partner
-    cos = np.einsum("ni,ni->n", d1, d2)
+    d1, d2 = p.dir_obs.T.copy(), p.dir_partner.T.copy()
+    cos = d1[0] * d2[0] + d1[1] * d2[1] + d1[2] * d2[2]
     scale = 0.5 / (1 - cos**2)
+    r_d1 = (r[0] * d1[0] + r[1] * d1[1] + r[2] * d1[2]) * scale
+    r_d2 = (r[0] * d2[0] + r[1] * d2[1] + r[2] * d2[2]) * scale
 
-    def a_inv(G):
-        """A⁻¹ G for A = 2 I - d1 d1ᵀ - d2 d2ᵀ (Woodbury: A⁻¹ = (I + D M⁻¹ Dᵀ) / 2 with
-        D = [d1 d2], M = [[1, -c], [-c, 1]], c = d1·d2)."""
-        a, b = _dot3(d1, G), _dot3(d2, G)
-        return (0.5 * G + d1[:, :, None] * (scale[:, None] * (a + cos[:, None] * b))[:, None, :]
-                + d2[:, :, None] * (scale[:, None] * (cos[:, None] * a + b))[:, None, :])
+    def r_a_inv(G, size):
+        """size rᵀ A⁻¹ G for A = 2 I - d1 d1ᵀ - d2 d2ᵀ (Woodbury: A⁻¹ = (I + D M⁻¹ Dᵀ) / 2
+        with D = [d1 d2], M = [[1, -c], [-c, 1]], c = d1·d2)."""
+        a, b = dot_t(d1, G), dot_t(d2, G)
+        out = 0.5 * dot_t(r, G)
+        out += r_d1 * (a + cos * b)
+        out += r_d2 * (cos * a + b)
+        out *= size
+        return out
 
-    s1 = np.einsum("ni,ni->n", p.points_world - prep.centers[cam_obs], d1)
-    s2 = np.einsum("ni,ni->n", p.points_world - prep.centers[partner], d2)
-    J_observed = s1[:, None, None] * a_inv(direction_jacobian(prep, cam_obs, uv_obs))
-    J_snapped = s2[:, None, None] * a_inv(direction_jacobian(prep, partner, p.uv_snapped))
+    P = p.points_world.T
+    C1 = np.take(prep.centers.T, cam_obs, axis=1)
+    C2 = np.take(prep.centers.T, partner, axis=1)
+    s1 = (P[0] - C1[0]) * d1[0] + (P[1] - C1[1]) * d1[1] + (P[2] - C1[2]) * d1[2]
+    s2 = (P[0] - C2[0]) * d2[0] + (P[1] - C2[1]) * d2[1] + (P[2] - C2[2]) * d2[2]
+    J_obs = r_a_inv(direction_jacobian(prep, cam_obs, uv_obs), s1)
+    J_snapped = r_a_inv(direction_jacobian(prep, partner, p.uv_snapped), s2)
     # the snap u_s = u_i - s n onto the line l = F (u_o, v_o, 1) = (a, l3), n = a / |a|,
     # s = (a·u_i + l3) / |a|; a move of u_o changes l by F[:, :2] δ, which moves u_s by
     # -n ((u_sᵀ da + dl3) / |a|) - s (I - n nᵀ) da / |a|
-    F = prep.F[cam_obs, partner]
-    line = F[:, :, 0] * uv_obs[:, :1] + F[:, :, 1] * uv_obs[:, 1:] + F[:, :, 2]
-    size = np.sqrt(line[:, 0] ** 2 + line[:, 1] ** 2)
-    normal = line[:, :2] / size[:, None]
-    signed = (np.einsum("ni,ni->n", line[:, :2], p.uv_interpolated) + line[:, 2]) / size
-    da = F[:, :2, :2] / size[:, None, None]  # (k, 2, 2): d a / d u_o, over |a|
-    dl3 = F[:, 2, :2] / size[:, None]
-    shift = p.uv_snapped[:, 0, None] * da[:, 0] + p.uv_snapped[:, 1, None] * da[:, 1] + dl3
-    n_da = normal[:, 0, None] * da[:, 0] + normal[:, 1, None] * da[:, 1]  # nᵀ da
-    along_da = da - normal[:, :, None] * n_da[:, None, :]  # (I - n nᵀ) da
-    moved_line = -normal[:, :, None] * shift[:, None, :] - signed[:, None, None] * along_da
-    J_obs = J_observed + (J_snapped[:, :, 0, None] * moved_line[:, None, 0]
-                          + J_snapped[:, :, 1, None] * moved_line[:, None, 1])
-    J_n = J_snapped[:, :, 0] * normal[:, 0, None] + J_snapped[:, :, 1] * normal[:, 1, None]
-    J_interp = J_snapped - J_n[:, :, None] * normal[:, None, :]  # J (I - n nᵀ)
-    return [J_obs, (1 - p.weight)[:, None, None] * J_interp, p.weight[:, None, None] * J_interp]
+    F = prep.fundamental_t(cam_obs, partner)  # (9, k), F[3 i + j]
+    u, v = uv_obs[:, 0], uv_obs[:, 1]
+    line = F[0::3] * u + F[1::3] * v + F[2::3]  # (3, k)
+    size = np.sqrt(line[0] ** 2 + line[1] ** 2)
+    normal = line[:2] / size
+    ui = p.uv_interpolated
+    signed = (line[0] * ui[:, 0] + line[1] * ui[:, 1] + line[2]) / size
+    da = F.reshape(3, 3, -1)[:2, :2] / size  # (2, 2, k): d a / d u_o, over |a|
+    dl3 = F[6:8] / size
+    us = p.uv_snapped
+    shift = us[:, 0] * da[0] + us[:, 1] * da[1] + dl3
+    n_da = normal[0] * da[0] + normal[1] * da[1]  # nᵀ da
+    moved_line = -normal[:, None] * shift - signed * (da - normal[:, None] * n_da)
+    J_obs += J_snapped[0] * moved_line[0] + J_snapped[1] * moved_line[1]
+    J_n = J_snapped[0] * normal[0] + J_snapped[1] * normal[1]
+    J_interp = J_snapped - J_n * normal  # J (I - n nᵀ)
+    return [J_obs, (1 - p.weight) * J_interp, p.weight * J_interp]
 
 
 def _gather(computed: list[tuple[int, np.ndarray, PseudoStereoPoints]], events: np.ndarray,
@@ -431,15 +492,29 @@ def _gather(computed: list[tuple[int, np.ndarray, PseudoStereoPoints]], events: 
     """Rows of the per-depth results: for each event, the entry computed at its ``depth``."""
     fields = PseudoStereoPoints.__dataclass_fields__
     template = computed[0][2]
-    out = {f: np.zeros((len(events), *getattr(template, f).shape[1:]),
-                       dtype=getattr(template, f).dtype) for f in fields}
+    out = {}
     for k, rows_k, points_k in computed:
-        mine = np.flatnonzero(depth == k)
+        mine = depth == k
+        n_mine = np.count_nonzero(mine)
+        if n_mine == 0:
+            continue
+        if n_mine == len(events):  # one depth for every event (the usual P_{t-1}): a take
+            where = np.searchsorted(rows_k, events)
+            return PseudoStereoPoints(**{f: getattr(points_k, f)[where] for f in fields})
+        if not out:
+            out = {f: np.zeros((len(events), *getattr(template, f).shape[1:]),
+                               dtype=getattr(template, f).dtype) for f in fields}
+        mine = np.flatnonzero(mine)
         where = np.searchsorted(rows_k, events[mine])  # rows_k is sorted
         for f in fields:
             out[f][mine] = getattr(points_k, f)[where]
+    if not out:
+        out = {f: np.zeros((len(events), *getattr(template, f).shape[1:]),
+                           dtype=getattr(template, f).dtype) for f in fields}
     return PseudoStereoPoints(**out)
 
 
 def _select(p: PseudoStereoPoints, keep: np.ndarray) -> PseudoStereoPoints:
+    if np.all(keep):  # (p is this call's own gather: nothing else holds its arrays)
+        return p
     return PseudoStereoPoints(*(getattr(p, f)[keep] for f in p.__dataclass_fields__))

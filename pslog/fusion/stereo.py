@@ -16,13 +16,13 @@ from ._prepare import (
     Prepared,
     camera_mask,
     covariance,
-    covariance_columns,
     direction_jacobian,
     finite_difference_jacobians,
+    finite_rows,
     invalid_points,
     latest_row_at_or_before,
     least_squares_pixel_jacobians,
-    reprojection_px,
+    reprojection_one,
 )
 
 
@@ -93,23 +93,25 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float):
     origins = np.broadcast_to(prep.centers, (k, m, 3))
 
     def directions(uvs):
-        return np.stack([prep.rays_from_undistorted(np.full(k, c), uvs[c]) for c in range(m)],
-                        axis=1)
+        return np.stack([prep.rays_from_undistorted(c, uvs[c]) for c in range(m)], axis=1)
 
     with np.errstate(invalid="ignore"):
         dirs = directions(uv)
     points, rms_miss, _ = triangulate_rays(origins, dirs, rows >= 0)
-    used = (rows >= 0) & np.all(np.isfinite(dirs), axis=2)
+    used = (rows >= 0) & np.isfinite(dirs[..., 0]) & np.isfinite(dirs[..., 1]) \
+        & np.isfinite(dirs[..., 2])
     angle = np.degrees(ray_angles(dirs, used))
-    flags = invalid_points(prep, points, used)
+    finite = finite_rows(points)
+    flags = invalid_points(prep, points, used, finite)
     with np.errstate(invalid="ignore"):
         depth = ray_depths(points, origins, dirs)  # the ray parameters: > 0 in front
-        flags[np.any(used & ~(depth > 0), axis=1) & np.all(np.isfinite(points), axis=1)] |= BEHIND
+        behind = used[:, 0] & ~(depth[:, 0] > 0)
+        for c in range(1, m):
+            behind |= used[:, c] & ~(depth[:, c] > 0)
+        flags[behind & finite] |= BEHIND
         flags[angle < MIN_RAY_ANGLE_DEG] |= PARALLEL  # (NaN: fewer than two rays)
-    residual = np.full((k, m), np.nan)
-    for c in range(m):
-        residual[:, c] = np.where(used[:, c], reprojection_px(prep, points, np.full(k, c), uv[c]),
-                                  np.nan)
+    residual = [np.where(used[:, c], reprojection_one(prep, c, points, uv[c]), np.nan)
+                for c in range(m)]
 
     slot_rows = np.where(used, rows, -1)
     if noise_px is None:
@@ -124,23 +126,32 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float):
         with np.errstate(invalid="ignore"):
             jacobians = least_squares_pixel_jacobians(
                 points, origins, dirs, used,
-                [direction_jacobian(prep, np.full(k, c), uv[c]) for c in range(m)])
+                [direction_jacobian(prep, c, uv[c]) for c in range(m)])
     if noise_px is not None:
         cov = covariance(slot_rows, jacobians,
-                         [prep.pixel_jacobians(r[:, c]) for c in range(m)], noise_px)
-    times = np.where(used, prep.obs.time_ns[r], 0)
-    t_max = np.where(used, times, np.iinfo(np.int64).min).max(axis=1)
-    t_min = np.where(used, times, np.iinfo(np.int64).max).min(axis=1)
+                         [prep.pixel_jacobians_t(r[:, c]) for c in range(m)], noise_px)
+    # (k,) columns, each reduction over the m cameras in numpy's order (the same bits)
+    times = [prep.obs.time_ns[r[:, c]] for c in range(m)]
+    t_max = np.maximum.reduce([np.where(used[:, c], times[c], np.iinfo(np.int64).min)
+                               for c in range(m)])
+    t_min = np.minimum.reduce([np.where(used[:, c], times[c], np.iinfo(np.int64).max)
+                               for c in range(m)])
     n_used = used.sum(axis=1)
+    if m < 8:  # numpy sums fewer than 8 terms in order
+        residual_sum = np.where(used[:, 0] & ~np.isnan(residual[0]), residual[0], 0.0)
+        for c in range(1, m):
+            residual_sum += np.where(used[:, c] & ~np.isnan(residual[c]), residual[c], 0.0)
+    else:
+        residual_sum = np.nansum(np.where(used, np.stack(residual, 1), 0.0), axis=1)
     with np.errstate(invalid="ignore", all="ignore"):
         quality = {
             "ray_miss_m": rms_miss, "ray_angle_deg": angle,
-            "residual_max_px": np.fmax.reduce(np.where(used, residual, np.nan), axis=1),
-            "residual_mean_px": np.nansum(np.where(used, residual, 0.0), axis=1) / n_used,
+            "residual_max_px": np.fmax.reduce(residual),
+            "residual_mean_px": residual_sum / n_used,
             "camera_mask": camera_mask(used), "n_detections": n_used.astype(np.float64),
             "gap_s": np.where(n_used > 0, (t_max - t_min) / NS, np.nan),
             "span_s": np.where(n_used > 0, (t_max - t_min) / NS, np.nan),
-            **(covariance_columns(cov) if cov is not None else {}),
+            **(cov if cov is not None else {}),
         }
     return points, quality, flags, used
 
