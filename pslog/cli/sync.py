@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import argparse
 
-from ._common import add_force, declare_files, positive_float
+from ._common import add_force, declare_files, number_at_most
 
 
 def _estimate_list(text: str) -> tuple[str, ...]:
@@ -26,9 +26,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--estimate", type=_estimate_list, default=("offset",),
                         metavar="LIST", help="clock parameters to estimate: offset, drift, "
                                              "readout, comma-separated (default: offset)")
-    parser.add_argument("--search-ms", type=positive_float, default=None, metavar="MS",
-                        help="search each offset over +-MS around the rig's value (default: "
-                             "half a frame period)")
+    # the scan steps by 1 ms: a minute is 1.2e5 costs per camera, 1e308 ms no array at all
+    parser.add_argument("--search-ms", type=number_at_most(6e4, "ms", "a minute",
+                                                           positive=True),
+                        default=None, metavar="MS",
+                        help="search each offset over +-MS around the rig's value, at most "
+                             "a minute (default: half a frame period)")
     parser.add_argument("--regularize", choices=("auto", "on", "off"), default="auto",
                         help="replace jittery host timestamps by a robust line against frame "
                              "index first: on, off, or auto (when a camera's jitter is above "
