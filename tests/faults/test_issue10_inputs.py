@@ -92,3 +92,28 @@ def test_sync_refuses_a_search_span_beyond_a_minute(tmp_path, value):
     finite one scans at 1 ms steps for ever."""
     run = run_pslog("sync", tmp_path / "s.mcap", "-o", tmp_path / "y.mcap", "--search-ms", value)
     assert_one_line_error(run, 2, contains=("--search-ms", "a minute"))
+
+
+def test_eval_of_a_fused_session_without_truth_reports_what_needs_none(cli, tmp_path):
+    """An imported (real) session has no truth: eval refused it (exit 1); the quality and
+    gating tables need no truth, so it prints them and says why accuracy is missing."""
+    import json
+
+    rows = "camera,time,u,v\n" + "".join(
+        f"cam{c},{k / 30:.6f},{300 + 2 * k + c},{200 + k}\n" for k in range(30) for c in (1, 2, 3))
+    (tmp_path / "det.csv").write_text(rows)
+    session, fused = tmp_path / "s.mcap", tmp_path / "f.mcap"
+    code, _, err = cli("import", "--rig", "paper3", "--detections", tmp_path / "det.csv",
+                       "-o", session)
+    assert code == 0, err
+    code, _, err = cli("fuse", session, "-o", fused, "--method", "filter", "--method", "sync",
+                       "--noise-px", "0")
+    assert code == 0, err
+    code, out, err = cli("eval", fused)
+    assert code == 0, err
+    assert "no ground truth" in out and "resid px" in out and "gating" in out
+    code, out, err = cli("eval", fused, "--json")
+    assert code == 0, err
+    result = json.loads(out)
+    assert {r["method"] for r in result} <= {"filter", "sync"} and result
+    assert all(r["quality"]["nees"] is None for r in result)
