@@ -117,3 +117,26 @@ def test_eval_of_a_fused_session_without_truth_reports_what_needs_none(cli, tmp_
     result = json.loads(out)
     assert {r["method"] for r in result} <= {"filter", "sync"} and result
     assert all(r["quality"]["nees"] is None for r in result)
+
+
+def test_a_distractor_with_a_negative_first_coordinate_is_a_value(cli, tmp_path):
+    """'--distractor -0.3,0.2,0.1' was read as an unknown option ("expected one argument")."""
+    code, out, err = cli("simulate", *SHORT, "--distractor", "-0.3,0.2,0.1",
+                         "-o", tmp_path / "s.mcap")
+    assert code == 0, err
+    assert "distractors" in out
+
+
+def test_a_distractor_behind_the_camera_is_refused(tmp_path):
+    """A point one metre behind camera cam1 (along its optical axis): one line, exit 2."""
+    import numpy as np
+
+    from pslog.rig import builtin_rig
+
+    cam = builtin_rig("paper3").cameras[0]
+    rot, t = np.asarray(cam.R), np.asarray(cam.t)
+    behind = -rot.T @ t - rot[2]
+    point = ",".join(f"{x:.6f}" for x in behind)
+    run = run_pslog("simulate", *SHORT, "--distractor", f"cam1={point}", "-o", tmp_path / "s.mcap")
+    assert_one_line_error(run, 2, contains=("--distractor", "not in camera cam1's view"))
+    assert not list(tmp_path.iterdir())
