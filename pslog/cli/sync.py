@@ -88,7 +88,17 @@ def run(args: argparse.Namespace) -> int:
     if len(obs) == 0:
         raise FusionError(f"{args.session} has no detection: nothing to sync on")
     search_s = None if args.search_ms is None else args.search_ms / 1e3
-    result = estimate_clocks(obs, rig, args.estimate, search_s, regularized=reports)
+    try:
+        result = estimate_clocks(obs, rig, args.estimate, search_s, regularized=reports)
+    except FusionError as exc:
+        # sync takes each frame's best-scored candidate (no gating): with false candidates
+        # (a distractor) the failure is theirs, not the ball's motion's; say so
+        several = int((detections.candidates_per_frame() > 1).sum())
+        if not several:
+            raise
+        raise FusionError(f"{exc}; note: {several} of {detections.n_frames} frames hold "
+                          f"several candidates and sync takes each frame's best-scored, "
+                          f"which may be a false one (a reflection, a second ball)") from None
     # the standard deviations beside the estimates they belong to (the viewer shows them)
     stds = [(c.offset_std_s, c.drift_std_ppm, c.readout_std_s) for c in result.cameras]
     copy_session(args.session, args.output, rig=result.rig, force=args.force,

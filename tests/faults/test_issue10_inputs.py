@@ -140,3 +140,17 @@ def test_a_distractor_behind_the_camera_is_refused(tmp_path):
     run = run_pslog("simulate", *SHORT, "--distractor", f"cam1={point}", "-o", tmp_path / "s.mcap")
     assert_one_line_error(run, 2, contains=("--distractor", "not in camera cam1's view"))
     assert not list(tmp_path.iterdir())
+
+
+def test_sync_failing_on_a_session_with_a_distractor_says_candidates_may_be_why(cli, tmp_path):
+    """sync takes each frame's best-scored candidate: a distractor in every frame made it
+    blame the ball's motion alone ("the ball needs to move more")."""
+    session = tmp_path / "s.mcap"
+    code, _, err = cli("simulate", "--rig", "paper3", "--spurious", "0.5", "--distractor",
+                       "0,0,0", "-o", session)
+    assert code == 0, err
+    code, _, err = cli("sync", session, "-o", tmp_path / "y.mcap")
+    assert code == 1
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "several candidates" in lines[0], err
+    assert not (tmp_path / "y.mcap").exists()
