@@ -152,9 +152,11 @@ def mahalanobis_sq(track: Track, truth: Truth) -> np.ndarray | None:
     return out
 
 
-def summarise_quality(track: Track, truth: Truth) -> QualitySummary:
-    """:class:`QualitySummary` of ``track``'s points inside the truth's span."""
-    inside = np.isfinite(errors_m(track, truth))
+def summarise_quality(track: Track, truth: Truth | None) -> QualitySummary:
+    """:class:`QualitySummary` of ``track``'s points inside the truth's span; without truth
+    (a real session) of every point, ``within_2sigma`` and ``nees`` NaN."""
+    inside = (np.ones(len(track), dtype=bool) if truth is None
+              else np.isfinite(errors_m(track, truth)))
     q = {k: v[inside] for k, v in track.quality.items()}
     nan = float("nan")
 
@@ -163,7 +165,7 @@ def summarise_quality(track: Track, truth: Truth) -> QualitySummary:
         return float(fn(values)) if len(values) else nan
 
     residual = q.get("residual_max_px", q.get("residual_px"))
-    d2 = mahalanobis_sq(track, truth)
+    d2 = None if truth is None else mahalanobis_sq(track, truth)
     if d2 is not None:
         d2 = d2[inside]
     return QualitySummary(

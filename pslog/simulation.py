@@ -52,7 +52,7 @@ class SimulationOptions:
     readout_s : mapping camera name -> seconds, the cameras' true rolling-shutter readouts
     host_jitter_s : float, standard deviation of the logged stamps around the (faulted)
         clock's times, seconds: host arrival jitter (frame indices stay exact)
-    spurious_rate : float in [0, 1), fraction of frames (of every camera) given one false
+    spurious_rate : float in [0, 1], fraction of frames (of every camera) given one false
         candidate ("a reflection, a shirt")
     spurious_radius_px : float >= 0, where that false candidate is: 0, anywhere in the image
         (uniform); > 0, within this many pixels of the ball's true pixel (uniform over the
@@ -94,10 +94,13 @@ class SimulationOptions:
             value = getattr(self, name)
             if not np.isfinite(value) or value < 0:
                 raise InputError(f"{name} must be finite and >= 0, got {value!r}")
-        for name in ("drop_rate", "miss_rate", "spurious_rate"):
+        for name in ("drop_rate", "miss_rate"):
             value = getattr(self, name)
             if not (0.0 <= value < 1.0):
                 raise InputError(f"{name} must be in [0, 1), got {value!r}")
+        # 1 is a valid (if harsh) rate: a false candidate in every frame; the ball stays
+        if not (0.0 <= self.spurious_rate <= 1.0):
+            raise InputError(f"spurious_rate must be in [0, 1], got {self.spurious_rate!r}")
         if not (np.isfinite(self.spurious_radius_px) and self.spurious_radius_px >= 0):
             raise InputError(f"spurious radius must be finite and >= 0 pixels, got "
                              f"{self.spurious_radius_px!r}")
@@ -176,8 +179,11 @@ def check_candidate_faults(rig: Rig, options: SimulationOptions) -> None:
 def _distractor_cameras(rig: Rig, camera: str | None, point) -> list[int]:
     """Indices of the cameras that see a distractor at ``point``: ``camera`` (if it sees
     it) or every camera whose view contains it."""
-    uv = _project(rig, np.arange(len(rig), dtype=np.int32),
-                  np.tile(np.asarray(point, dtype=np.float64), (len(rig), 1)))
+    # a far-off point (1e300 m) overflows the distortion polynomial: NaN means not seen,
+    # not a RuntimeWarning on the user's terminal
+    with np.errstate(all="ignore"):
+        uv = _project(rig, np.arange(len(rig), dtype=np.int32),
+                      np.tile(np.asarray(point, dtype=np.float64), (len(rig), 1)))
     visible = np.all(np.isfinite(uv), axis=1)
     return [i for i, name in enumerate(rig.names)
             if visible[i] and (camera is None or camera == name)]
@@ -436,11 +442,15 @@ def _false_candidates(rig: Rig, options: SimulationOptions, camera, time_ns, uv_
     rng = np.random.default_rng([options.seed, 1])
     n_frames = len(camera)
     keep = np.ones(len(cand_frame), dtype=bool)
+    # a blackout may outlast any session (1e308 s): clip its end to the last frame so the
+    # nanosecond bounds stay integers (round(inf) raises)
+    last_ns = int(time_ns.max()) + 1 if len(time_ns) else 0
     for name, start, duration in options.blackouts:
         i = rig.names.index(name)
         t = time_ns[cand_frame]
-        keep &= ~((camera[cand_frame] == i) & (t >= round(start * NS))
-                  & (t < round((start + duration) * NS)))
+        begin_ns = round(min(start * NS, last_ns))
+        end_ns = round(min((start + duration) * NS, last_ns))
+        keep &= ~((camera[cand_frame] == i) & (t >= begin_ns) & (t < end_ns))
     frames = [cand_frame[keep]]
     uvs = [cand_uv[keep]]
     scores = [rng.uniform(*BALL_SCORE, len(cand_frame))[keep]]

@@ -272,7 +272,7 @@ def test_rejections_refuse_an_unknown_reason():
 
 
 @pytest.mark.parametrize("args, message", [
-    (["--spurious", "1"], "--spurious"),
+    (["--spurious", "1.01"], "--spurious"),
     (["--spurious-radius", "-3"], "--spurious-radius"),
     (["--distractor", "1,2"], "expected [CAM=]X,Y,Z"),
     (["--distractor", "cam1=1,2,nan"], "finite"),

@@ -411,7 +411,7 @@ def test_spurious_near_the_ball_stays_within_its_radius():
 
 
 @pytest.mark.parametrize("options, message", [
-    ({"spurious_rate": 1.0}, "spurious_rate"),
+    ({"spurious_rate": 1.01}, "spurious_rate"),
     ({"spurious_radius_px": -1.0}, "spurious radius"),
     ({"distractors": (("cam1", (1.0, np.inf, 0.0)),)}, "three finite"),
     ({"blackouts": (("cam1", -1.0, 1.0),)}, "start must be"),

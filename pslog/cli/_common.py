@@ -188,6 +188,14 @@ def exposure_s(text: str) -> float:
     return value
 
 
+def closed_fraction(text: str) -> float:
+    """A fraction in [0, 1] (1 is meaningful: every frame)."""
+    value = nonnegative_float(text)
+    if value > 1:
+        raise argparse.ArgumentTypeError(f"must be in [0, 1], got {text!r}")
+    return value
+
+
 def fraction(text: str) -> float:
     value = nonnegative_float(text)
     if value >= 1:

@@ -32,9 +32,9 @@ def run(args: argparse.Namespace) -> int:
     from pslog.log import read_session
 
     session = read_session(args.session)
-    if session.truth is None or len(session.truth) == 0:
-        raise InputError(f"{args.session} has no ground truth (only simulated or synthetic "
-                         f"sessions have one)")
+    # a real session has no truth: no accuracy, but the truth-free quality figures
+    # (reprojection residual, gaps, std) and the gating's counts still hold
+    truth = session.truth if session.truth is not None and len(session.truth) else None
     if not session.tracks:
         raise InputError(f"{args.session} has no fused tracks; run 'pslog fuse' first")
     methods = args.methods or list(session.tracks)
@@ -42,22 +42,27 @@ def run(args: argparse.Namespace) -> int:
     if missing:
         raise InputError(f"no track for method(s) {', '.join(missing)} in {args.session} "
                          f"(have {', '.join(session.tracks)})")
-    rows = [evaluate(session.tracks[m], session.truth) for m in methods]
-    quality = [summarise_quality(session.tracks[m], session.truth) for m in methods]
+    rows = [evaluate(session.tracks[m], truth) if truth is not None else None
+            for m in methods]
+    quality = [summarise_quality(session.tracks[m], truth) for m in methods]
     # the gating's rejections, against the ball labels of a simulated dirty session
     gated = {m: rejection_counts(m, session.rejections[m], session.detections,
                                  session.ball_truth)
              for m in methods if m in session.rejections}
     if args.json:
         # NaN (a summary a track has no column for) is null: JSON has no NaN
-        print(json.dumps([{**r.as_dict(), "quality": {k: (None if isinstance(v, float)
-                                                          and v != v else v)
-                                                      for k, v in q.as_dict().items()},
-                           **({"gating": gated[r.method].as_dict()}
-                              if r.method in gated else {})}
+        print(json.dumps([{**(r.as_dict() if r is not None else {"method": q.method}),
+                           "quality": {k: (None if isinstance(v, float) and v != v else v)
+                                       for k, v in q.as_dict().items()},
+                           **({"gating": gated[q.method].as_dict()}
+                              if q.method in gated else {})}
                           for r, q in zip(rows, quality, strict=True)], indent=2))
     else:
-        print(format_accuracy_table(rows))
+        if truth is None:
+            print(f"{args.session} has no ground truth (only simulated or synthetic sessions "
+                  f"have one): no accuracy; the quality figures without it")
+        else:
+            print(format_accuracy_table(rows))
         print()
         print(format_quality_table(quality))
         if gated:

@@ -92,6 +92,10 @@ def run(args: argparse.Namespace) -> int:
     observations = timed_observations(session.detections, rig)  # the rig's clock model
     if len(observations) == 0:
         raise FusionError(f"{args.session} has no detection to fuse")
+    seen = np.unique(observations.camera)
+    if len(seen) < 2:  # say why rather than "too few detections close enough in time"
+        raise FusionError(f"{args.session}: only camera {rig.names[int(seen[0])]} has "
+                          f"detections; fusing needs at least two cameras")
     if args.methods:
         methods = [check_method(m) for m in dict.fromkeys(args.methods)]
     else:  # every method this timing suits

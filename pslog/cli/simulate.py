@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import argparse
+import re
 
 import numpy as np
 
 from ._common import (
+    MAX_NOISE_PX,
     add_force,
     add_rig,
+    closed_fraction,
     declare_files,
     fraction,
     noise_px,
@@ -57,6 +60,15 @@ def _distractor(text: str):
         raise argparse.ArgumentTypeError(f"expected [CAM=]X,Y,Z (a world point, metres), "
                                          f"got {text!r}")
     return (name.strip() if sep else None), tuple(_finite(p) for p in parts)
+
+
+def _spurious_radius(text: str) -> float:
+    """argparse type: pixels in [0, 100] (not :func:`noise_px`: its message is about noise)."""
+    value = nonnegative_float(text)
+    if value > MAX_NOISE_PX:
+        raise argparse.ArgumentTypeError(f"must be at most {MAX_NOISE_PX:g} pixels from the "
+                                         f"ball, got {text!r}")
+    return value
 
 
 def _blackout(text: str):
@@ -115,12 +127,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="fault: standard deviation of the logged stamps around the "
                              "shutter times, milliseconds (host arrival jitter; frame "
                              "indices stay exact), below half a frame period")
-    parser.add_argument("--spurious", type=fraction, default=0.0, metavar="F",
+    parser.add_argument("--spurious", type=closed_fraction, default=0.0, metavar="F",
                         help="fault: fraction of frames with one false candidate (a "
                              "reflection, a shirt) besides the ball (default %(default)s)")
-    parser.add_argument("--spurious-radius", type=noise_px, default=0.0, metavar="PX",
+    parser.add_argument("--spurious-radius", type=_spurious_radius, default=0.0, metavar="PX",
                         help="where the false candidates are: 0, anywhere in the image; else "
                              "within PX pixels of the ball, at most 100 (default %(default)s)")
+    # '--distractor -2,1,0' (a negative X) is a value, not an option: argparse < 3.13 reads
+    # only '-2' or '-2.5' as negative numbers and said "expected one argument"; 3.13's rule
+    # (a '-' then a digit) is taken over here (this parser has no option like '-1')
+    parser._negative_number_matcher = re.compile(r"^-\.?\d")
     parser.add_argument("--distractor", type=_distractor, action="append", default=[],
                         metavar="[CAM=]X,Y,Z",
                         help="fault: a static second orange object at world point X,Y,Z "
@@ -217,7 +233,7 @@ def run(args: argparse.Namespace) -> int:
         ("clock_offset_s", args.clock_offset), ("clock_drift_ppm", args.drift),
         ("readout_s", args.readout), ("host_jitter_s", args.host_jitter / 1e3)) if v}
     candidate_faults = {k: v for k, v in (
-        ("spurious_rate", args.spurious), ("distractors", args.distractor),
+        ("spurious", args.spurious), ("distractors", args.distractor),
         ("blackouts", args.blackout)) if v}
     if args.spurious:
         settings["spurious_rate"] = repr(args.spurious)
@@ -244,9 +260,10 @@ def run(args: argparse.Namespace) -> int:
         if detections.n_frames else 0.0
     print(f"wrote {output}: {len(rig)} cameras ({', '.join(rig.names)}), timing {timing}, "
           f"motion {motion.name}, {detections.n_frames} frames over {span:.3f} s, "
-          f"{detections.n_candidates} detections, {len(truth)} truth points"
-          + (f" (of them {ball.n_candidates} of the ball; false candidates from "
+          f"{detections.n_candidates} detections"
+          + (f" ({ball.n_candidates} of the ball; candidate faults: "
              f"{', '.join(candidate_faults)})" if candidate_faults else "")
+          + f", {len(truth)} truth points"
           + (f" ({n_early} frames logged before t = 0 dropped)" if n_early else "")
           + (f"; clock faults ({', '.join(faulted)}) kept as {TRUTH_CLOCK_KEY!r} in the "
              f"metadata, the rig holds the nominal clock: run 'pslog sync'" if faulted else ""))

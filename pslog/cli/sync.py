@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import argparse
 
-from ._common import add_force, declare_files, positive_float
+from ._common import add_force, declare_files, number_at_most
 
 
 def _estimate_list(text: str) -> tuple[str, ...]:
@@ -26,9 +26,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--estimate", type=_estimate_list, default=("offset",),
                         metavar="LIST", help="clock parameters to estimate: offset, drift, "
                                              "readout, comma-separated (default: offset)")
-    parser.add_argument("--search-ms", type=positive_float, default=None, metavar="MS",
-                        help="search each offset over +-MS around the rig's value (default: "
-                             "half a frame period)")
+    # the scan steps by 1 ms: a minute is 1.2e5 costs per camera, 1e308 ms no array at all
+    parser.add_argument("--search-ms", type=number_at_most(6e4, "ms", "a minute",
+                                                           positive=True),
+                        default=None, metavar="MS",
+                        help="search each offset over +-MS around the rig's value, at most "
+                             "a minute (default: half a frame period)")
     parser.add_argument("--regularize", choices=("auto", "on", "off"), default="auto",
                         help="replace jittery host timestamps by a robust line against frame "
                              "index first: on, off, or auto (when a camera's jitter is above "
@@ -85,7 +88,17 @@ def run(args: argparse.Namespace) -> int:
     if len(obs) == 0:
         raise FusionError(f"{args.session} has no detection: nothing to sync on")
     search_s = None if args.search_ms is None else args.search_ms / 1e3
-    result = estimate_clocks(obs, rig, args.estimate, search_s, regularized=reports)
+    try:
+        result = estimate_clocks(obs, rig, args.estimate, search_s, regularized=reports)
+    except FusionError as exc:
+        # sync takes each frame's best-scored candidate (no gating): with false candidates
+        # (a distractor) the failure is theirs, not the ball's motion's; say so
+        several = int((detections.candidates_per_frame() > 1).sum())
+        if not several:
+            raise
+        raise FusionError(f"{exc}; note: {several} of {detections.n_frames} frames hold "
+                          f"several candidates and sync takes each frame's best-scored, "
+                          f"which may be a false one (a reflection, a second ball)") from None
     # the standard deviations beside the estimates they belong to (the viewer shows them)
     stds = [(c.offset_std_s, c.drift_std_ppm, c.readout_std_s) for c in result.cameras]
     copy_session(args.session, args.output, rig=result.rig, force=args.force,
