@@ -256,3 +256,27 @@ def test_a_regularized_line_widens_the_standard_deviations_by_its_own_covariance
         assert f.offset_std_s**2 == pytest.approx(b.offset_std_s**2 + V, rel=0.06)
         expected = b.offset_std_s**2 + (V if b.name == "c2" else 0.0)
         assert o.offset_std_s**2 == pytest.approx(expected, rel=0.06)
+
+
+def test_false_candidates_are_gated_before_the_clocks_are_estimated(tmp_path, cli):
+    # a static second orange object seen by every camera, often outscoring the ball, and
+    # spurious blobs: with each frame's best-scored candidate the estimator meets a still
+    # object in many frames and fails ("not determined by the ball's motion"); sync chooses
+    # the ball among the candidates as fuse does and estimates what the clean session gives
+    common = ("--rig", "paper3", "--timing", "typeA", "--motion", "rally", "--noise-px", "0.3",
+              "--clock-offset", "cam2=4", "--clock-offset", "cam3=-6")
+    paths = {"clean": tmp_path / "clean.mcap", "dirty": tmp_path / "dirty.mcap"}
+    assert cli("simulate", *common, "-o", paths["clean"])[0] == 0
+    assert cli("simulate", *common, "--spurious", "0.05", "--distractor", "1.0,1.5,0.2",
+               "-o", paths["dirty"])[0] == 0
+    reports = {}
+    for label, path in paths.items():
+        code, out, err = cli("sync", path, "-o", tmp_path / f"s-{label}.mcap", "--json")
+        assert code == 0, err
+        reports[label] = json.loads(out)["cameras"]
+    for clean, dirty, true in zip(reports["clean"][1:], reports["dirty"][1:], (4e-3, -6e-3),
+                                  strict=True):
+        assert abs(dirty["offset_s"] - true) < 4 * dirty["offset_std_s"]
+        assert abs(dirty["offset_s"] - clean["offset_s"]) < 2 * dirty["offset_std_s"]
+    code, out, _ = cli("sync", paths["dirty"], "-o", tmp_path / "s2.mcap")
+    assert code == 0 and "candidates rejected by gating" in out

@@ -84,21 +84,21 @@ def run(args: argparse.Namespace) -> int:
             if early:
                 notes.append(f"{early} frame(s) regularized to before the session clock's "
                              f"zero left out of the copy")
-    obs = detections.best()
+    obs, gated_note = _ball_candidates(detections, rig)
     if len(obs) == 0:
         raise FusionError(f"{args.session} has no detection: nothing to sync on")
     search_s = None if args.search_ms is None else args.search_ms / 1e3
     try:
         result = estimate_clocks(obs, rig, args.estimate, search_s, regularized=reports)
     except FusionError as exc:
-        # sync takes each frame's best-scored candidate (no gating): with false candidates
-        # (a distractor) the failure is theirs, not the ball's motion's; say so
+        # with false candidates (a distractor) the failure may be theirs, not the ball's
+        # motion's; say so
         several = int((detections.candidates_per_frame() > 1).sum())
         if not several:
             raise
         raise FusionError(f"{exc}; note: {several} of {detections.n_frames} frames hold "
-                          f"several candidates and sync takes each frame's best-scored, "
-                          f"which may be a false one (a reflection, a second ball)") from None
+                          f"several candidates and a false one the gating kept (a "
+                          f"reflection, a second ball) may be the cause") from None
     # the standard deviations beside the estimates they belong to (the viewer shows them)
     stds = [(c.offset_std_s, c.drift_std_ppm, c.readout_std_s) for c in result.cameras]
     copy_session(args.session, args.output, rig=result.rig, force=args.force,
@@ -111,12 +111,36 @@ def run(args: argparse.Namespace) -> int:
              "readout_s": c.readout_s, "readout_std_s": c.readout_std_s}
             for c in result.cameras], "residual_px": result.residual_px}))
         return 0
-    for note in notes:
+    for note in notes + ([gated_note] if gated_note else []):
         print(note)
     print(_table(result, obs))
     print(f"residual {result.residual_px:.3f} px (pixel noise {result.noise_px:.3f} px); "
           f"wrote {args.output}")
     return 0
+
+
+def _ball_candidates(detections, rig):
+    """Each frame's ball at its LOGGED time: the best-scored candidate when no frame holds
+    more than one, else the one the gating stage chooses (:func:`pslog.fusion.gating.gate`,
+    offline, at the rig's clocks: its epipolar gate allows for the ball's motion between
+    shutters, so clocks wrong by some milliseconds still pass the ball and stop a static
+    second object or a reflection), and a note saying how many candidates it rejected."""
+    import numpy as np
+
+    if not np.any(detections.candidates_per_frame() > 1) or len(rig) < 2:
+        return detections.best(), None
+    from pslog.fusion.gating import gate
+    from pslog.records import Detections
+
+    gated = gate(detections, rig, causal=False)
+    chosen = gated.chosen
+    kept = Detections(detections.camera_names, detections.frame_time_ns,
+                      detections.frame_camera, detections.frame_index,
+                      detections.cand_frame[chosen], detections.cand_uv[chosen],
+                      detections.cand_radius[chosen], detections.cand_score[chosen])
+    note = (f"{int((~chosen).sum())} of {len(chosen)} candidates rejected by gating (the "
+            f"ball chosen among each frame's candidates, as `pslog fuse` does)")
+    return kept.best(), note
 
 
 def _from_session_start(detections):
