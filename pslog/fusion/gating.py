@@ -497,7 +497,7 @@ class _Track:
         if rms > 0.5 * o.track_m and len(ts) > 3:  # a bounce in the window: the newest only
             A, y = A[-3:], y[-3:]
             coef, *_ = np.linalg.lstsq(A, y, rcond=None)
-        dt = -ts[-1]
+        dt = abs(ts[-1])  # the newest point may be later than t (a rolling shutter)
         return coef[0], o.track_m + o.track_jump_m_s * dt
 
 
