@@ -414,3 +414,47 @@ def test_a_malformed_rejection_record_is_one_line(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "unknown rejection reason 'guess'" in err, err
     assert str(path) in err
+
+
+def test_track_allowance_is_never_below_its_base_when_the_newest_point_is_later():
+    """With a rolling shutter the newest accepted point (a detection low in its image) can be
+    later than the candidate judged next (high in another camera's image): the prediction is
+    then an interpolation, and its allowance is ``track_m`` plus the kick term for the time
+    between them, never ``track_m`` minus it (that shrank it to 2 mm and turned negative)."""
+    from pslog.fusion.gating import _Track
+    from pslog.motion import G
+
+    options = GatingOptions()
+    track = _Track(options)
+    g = np.array([0.0, 0.0, -G])
+    for t in (0.0, 1 / 30, 2 / 30, 3 / 30):
+        track.add(t, np.array([1.0, 2.0, 1.0]) + t * np.array([3.0, 0.0, 2.0]) + 0.5 * t * t * g)
+    before = 3 / 30 - 0.013  # 13 ms before the newest point
+    position, allowance = track.predict(before)
+    expected = (np.array([1.0, 2.0, 1.0]) + before * np.array([3.0, 0.0, 2.0])
+                + 0.5 * before**2 * g)
+    assert np.linalg.norm(position - expected) < 1e-9
+    assert allowance == pytest.approx(options.track_m + options.track_jump_m_s * 0.013)
+    after = 3 / 30 + 0.013
+    assert track.predict(after)[1] == pytest.approx(allowance)
+
+
+def test_rays_that_do_not_meet_give_the_track_no_point():
+    """cam3 is blind from 1.0 s; just after, its two latest frames, carried 0.1 s forward,
+    still pass the epipolar test of cam2's ball (the carry's allowance grows with the time
+    carried), and with cam1's support the ball's three rays miss each other by 0.84 m: their
+    least-squares point, 1.2 m from the ball, used to enter the track, and the motion gate
+    then rejected the next five ball detections (unreachable from it). A point whose rays
+    miss by more than ``track_m`` is no position."""
+    from pslog.simulation import true_rig
+
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    options = SimulationOptions(noise_px=0.3, seed=1, spurious_rate=0.05,
+                                distractors=(("cam2", DISTRACTOR),),
+                                blackouts=(("cam3", 1.0, 0.5),),
+                                readout_s=dict.fromkeys(rig.names, 0.03))
+    det, _truth, ball = simulate_labelled(rig, get_motion("rally"), 4.0, options)
+    rig = true_rig(rig, options)
+    counts = rejection_counts("typeA", gate(det, rig, causal=True).rejections, det, ball)
+    assert counts.wrong == 0
+    assert counts.kept_false == 0

@@ -497,7 +497,7 @@ class _Track:
         if rms > 0.5 * o.track_m and len(ts) > 3:  # a bounce in the window: the newest only
             A, y = A[-3:], y[-3:]
             coef, *_ = np.linalg.lstsq(A, y, rcond=None)
-        dt = -ts[-1]
+        dt = abs(ts[-1])  # the newest point may be later than t (a rolling shutter)
         return coef[0], o.track_m + o.track_jump_m_s * dt
 
 
@@ -633,7 +633,8 @@ def gate(detections: Detections, rig: Rig, *, causal: bool = True, wait_s: float
     F = fundamental_matrices(rig.cameras)
     ratio, carried = _support(c, rig, F, tables, options, max_gap_ns, causal,
                               round(wait_s * NS))
-    points, in_front, _ = _points(c, rig, ratio, carried)
+    points, in_front, miss = _points(c, rig, ratio, carried)
+    points[miss > options.track_m] = np.nan  # rays that do not meet: no point to track
     # frames in (time, camera) order of their best candidate; candidates contiguous per frame
     starts = np.flatnonzero(np.r_[True, c.frame[1:] != c.frame[:-1]])
     ends = np.r_[starts[1:], n]
@@ -755,7 +756,8 @@ class StreamGate:
                 tables = _frame_table(c, len(self.rig))
                 ratio, carried = _support(c, self.rig, self.F, tables, self.options,
                                           self.max_gap_ns, True, self.wait_ns, only)
-                points, in_front, _ = _points(c, self.rig, ratio, carried)
+                points, in_front, miss = _points(c, self.rig, ratio, carried)
+                points[miss > self.options.track_m] = np.nan  # as gate()
                 # the decided frames' points, as computed when they were decided (a point
                 # uses nothing after its time: the same as now), for the stillness test
                 for f in np.flatnonzero(~todo).tolist():
