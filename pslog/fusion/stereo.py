@@ -165,7 +165,9 @@ def triangulate_groups(prep: Prepared, group: np.ndarray, n_groups: int,
     :func:`nview_points`."""
     n_cams = len(prep.centers)
     rows = np.full((n_groups, n_cams), -1, dtype=np.int64)
-    rows[group, prep.obs.camera] = np.arange(len(group))  # later rows win: the latest ray
+    # the latest ray of a camera seen twice: the largest row (a fancy assignment with repeated
+    # indices has no defined winner in numpy; a maximum has)
+    np.maximum.at(rows, (group, prep.obs.camera), np.arange(len(group)))
     points, quality, flags, _ = nview_points(prep, rows, noise_px)
     last = np.r_[np.flatnonzero(np.diff(group)), len(group) - 1]  # last row of each group
     out = points, quality, prep.obs.time_ns[last], prep.obs.camera[last]
