@@ -8,6 +8,7 @@ import json
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
+from test_fusion import BASELINE, CX, CY, F_PX, LENS, K  # one rectified rig and lens
 
 from pslog import (
     NS,
@@ -34,10 +35,6 @@ from pslog.fusion._prepare import default_max_gap_s
 from pslog.fusion.stream import StreamFuser
 from pslog.geometry import crossing_of_rays, triangulate_two_rays
 
-F_PX, CX, CY, BASELINE = 500.0, 320.0, 240.0, 0.5
-K = np.array([[F_PX, 0.0, CX], [0.0, F_PX, CY], [0.0, 0.0, 1.0]])
-#: a strong barrel lens (17 % at the corners of the paper rig's 640 x 480 images)
-LENS = np.array([-0.25, 0.08, 0.001, -0.001, 0.0])
 #: the paper's methods and their baselines, whose points carry the quality columns of issue 10
 #: (``camera_mask``, ``residual_*_px``, ``gap_s``, ``std_m``, ``cov_*_m2``)
 PAPER_METHODS = [m for m in ("sync", "nearest", "typeA", "typeB", "linear") if m in METHODS]
