@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -274,3 +275,26 @@ def format_rejection_table(rows: list[RejectionCounts]) -> str:
         line += "  " + ", ".join(f"{k} {v}" for k, v in r.by_reason.items() if v)
         lines.append(line)
     return "\n".join(lines)
+
+
+#: Session metadata key of the points each method left out, by reason (``pslog fuse`` writes
+#: ``Track.dropped`` of every track there as JSON: ``{method: {reason: count}}``).
+LEFT_OUT_KEY = "left_out_points"
+
+
+def left_out_counts(metadata: Mapping[str, str]) -> dict[str, dict[str, int]]:
+    """``{method: {reason: count}}`` of the points a fused session's methods left out
+    (invalid or untrustworthy: behind a camera, outside its view, near-parallel rays, an
+    underdetermined end, unconfirmed after a jump, ...); empty when not recorded or
+    unreadable (a session fused before the counts were kept)."""
+    import json
+
+    try:
+        value = json.loads(metadata.get(LEFT_OUT_KEY, "{}"))
+    except ValueError:
+        return {}
+    if not isinstance(value, dict):
+        return {}
+    return {str(m): {str(r): int(n) for r, n in reasons.items()
+                     if isinstance(n, (int, float)) and n == n}
+            for m, reasons in value.items() if isinstance(reasons, dict)}

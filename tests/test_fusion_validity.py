@@ -455,6 +455,12 @@ def test_fuse_prints_the_invalid_points_it_dropped(tmp_path, cli):
     assert code == 0, err
     assert "sync           2 points (left out, untrustworthy: behind_camera 1)" in out
     assert len(read_session(tmp_path / "f.mcap").tracks["sync"]) == 2
+    # the count is kept in the fused file: eval reports it (no truth here: quality only)
+    code, out, err = cli("eval", tmp_path / "f.mcap")
+    assert code == 0, err
+    assert "sync      behind_camera 1" in out
+    code, out, err = cli("eval", tmp_path / "f.mcap", "--json")
+    assert json.loads(out)[0]["left_out"] == {"behind_camera": 1}
 
 
 def test_without_a_pixel_noise_no_covariance_and_the_same_points():

@@ -26,6 +26,7 @@ def run(args: argparse.Namespace) -> int:
         format_accuracy_table,
         format_quality_table,
         format_rejection_table,
+        left_out_counts,
         rejection_counts,
         summarise_quality,
     )
@@ -49,13 +50,15 @@ def run(args: argparse.Namespace) -> int:
     gated = {m: rejection_counts(m, session.rejections[m], session.detections,
                                  session.ball_truth)
              for m in methods if m in session.rejections}
+    left_out = left_out_counts(session.metadata)  # points the methods did not vouch for
     if args.json:
         # NaN (a summary a track has no column for) is null: JSON has no NaN
         print(json.dumps([{**(r.as_dict() if r is not None else {"method": q.method}),
                            "quality": {k: (None if isinstance(v, float) and v != v else v)
                                        for k, v in q.as_dict().items()},
                            **({"gating": gated[q.method].as_dict()}
-                              if q.method in gated else {})}
+                              if q.method in gated else {}),
+                           "left_out": left_out.get(q.method, {})}
                           for r, q in zip(rows, quality, strict=True)], indent=2))
     else:
         if truth is None:
@@ -70,4 +73,10 @@ def run(args: argparse.Namespace) -> int:
             print("gating (candidates rejected; correct: not the ball; ball lost: the ball "
                   "rejected; false kept: not the ball yet kept)")
             print(format_rejection_table(list(gated.values())))
+        shown = [m for m in methods if left_out.get(m)]
+        if shown:
+            print()
+            print("points left out (invalid or untrustworthy), by reason:")
+            for m in shown:
+                print(f"{m:<9} " + ", ".join(f"{r} {n}" for r, n in left_out[m].items()))
     return 0

@@ -56,9 +56,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import json
+
     import numpy as np
 
     from pslog.errors import FusionError, RigError
+    from pslog.evaluation import LEFT_OUT_KEY
     from pslog.fusion import (
         METHODS,
         FusionOptions,
@@ -121,8 +124,12 @@ def run(args: argparse.Namespace) -> int:
         print("left out, being before the session clock's zero after clock correction: "
               + ", ".join(f"{n} {m} point{'s' if n > 1 else ''}" for m, n in early.items() if n))
     rejections = {m: rejections[m] for m in tracks} if options.gating else {}
+    # the points each method left out, by reason, for eval (always written: a re-fuse
+    # replaces the previous fuse's counts)
+    left_out = {m: dict(dropped[m]) for m in tracks if dropped.get(m)}
     copy_session(args.session, output, tracks=list(tracks.values()), force=args.force,
-                 rig=None if args.rig is None else rig, rejections=rejections)
+                 rig=None if args.rig is None else rig, rejections=rejections,
+                 metadata={LEFT_OUT_KEY: json.dumps(left_out, sort_keys=True)})
     for method, track in tracks.items():
         why = ", ".join(f"{reason} {n}" for reason, n in dropped.get(method, {}).items())
         rejected = (f"  {len(rejections[method]):>6d} candidates rejected by gating"
