@@ -95,7 +95,8 @@ class QualitySummary:
     std_median_mm : float, median position standard deviation (``std_m``), millimetres
     within_2sigma : float, share of points whose truth lies inside the 2σ ellipsoid of their
         covariance: Mahalanobis ``d² = eᵀ Σ⁻¹ e <= 4`` with the full covariance
-        (``cov_*_m2``), or the diagonal one from ``std_x_m, std_y_m, std_z_m`` (smooth); NaN
+        (``cov_*_m2``: every method but filter), or the diagonal one from ``std_x_m, std_y_m,
+        std_z_m`` (filter); NaN
         without either. Honest, Gaussian errors give :data:`CHI2_3D_2SIGMA` (0.739)
     nees : float, mean ``d² / 3`` (normalised estimation error squared): 1 when the covariance
         is honest, above 1 when it is over-confident

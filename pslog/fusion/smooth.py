@@ -7,7 +7,8 @@ pieces (never inside a gap the model does not bridge). Per-point quality:
 
 - ``std_m``: position standard deviation, ``sqrt(trace Σ)`` (the RMS of the 3-D error the fit
   expects), metres; the full 3 x 3 covariance is :attr:`Fit.covariance`;
-- ``std_x_m``, ``std_y_m``, ``std_z_m``: per axis, metres;
+- ``std_x_m``, ``std_y_m``, ``std_z_m``: per axis, metres; ``cov_xx_m2`` ... ``cov_yz_m2``:
+  the full 3 x 3 covariance (m²);
 - ``residual_px``: the detection's reprojection residual, pixels (NaN on grid points).
 
 A detection in an end segment of a piece beyond a bounce or kick that fewer than four
@@ -57,6 +58,10 @@ def fuse_smooth(prep: Prepared, rig: Rig, options) -> Track:
     quality = {"std_m": np.sqrt(var.sum(axis=1)), "std_x_m": np.sqrt(var[:, 0]),
                "std_y_m": np.sqrt(var[:, 1]), "std_z_m": np.sqrt(var[:, 2]),
                "residual_px": residual}
+    # the full covariance, as the paper's methods give it (eval's 2σ share and NEES use it)
+    for name, (i, j) in (("xx", (0, 0)), ("yy", (1, 1)), ("zz", (2, 2)), ("xy", (0, 1)),
+                         ("xz", (0, 2)), ("yz", (1, 2))):
+        quality[f"cov_{name}_m2"] = cov[:, i, j]
     # detections in an end segment beyond a break that too few of them determine
     dropped = {"underdetermined_end": fit.withheld} if fit.withheld else {}
     return Track("smooth", time_ns, position, camera, quality, dropped=dropped)
