@@ -282,6 +282,23 @@ def test_covariance_is_calibrated_against_the_truth(timing, method):
     assert 0.7 < np.mean(nees) < 1.4, nees
 
 
+def test_smooth_gives_its_full_covariance_and_it_is_calibrated():
+    # its own noise estimate, so no noise_px; the spline's covariance through the basis
+    rig = distorted(apply_timing(builtin_rig("paper3"), "typeA"))
+    inside = []
+    for seed in range(3):
+        detections, truth = simulate(rig, get_motion("spiral"), options=SimulationOptions(
+            noise_px=1.0, seed=seed))
+        track = fuse(detections, rig, "smooth")
+        q = track.quality
+        assert_allclose(q["cov_xx_m2"], q["std_x_m"] ** 2, rtol=1e-12)
+        assert_allclose(q["cov_zz_m2"] + q["cov_yy_m2"] + q["cov_xx_m2"], q["std_m"] ** 2,
+                        rtol=1e-12)
+        assert np.any(np.abs(q["cov_xy_m2"]) > 0.1 * q["std_x_m"] * q["std_y_m"])  # full
+        inside.append(summarise_quality(track, truth).within_2sigma)
+    assert abs(np.mean(inside) - CHI2_3D_2SIGMA) < 0.12, inside
+
+
 def test_quality_columns_survive_the_fused_mcap_and_eval_reports_them(tmp_path, cli):
     from pslog.log import read_session
 
@@ -305,7 +322,7 @@ def test_quality_columns_survive_the_fused_mcap_and_eval_reports_them(tmp_path, 
     for method in expected:
         assert 0.4 < report[method]["within_2sigma"] < 0.95, report[method]
         assert report[method]["residual_median_px"] > 0
-    assert report["smooth"]["within_2sigma"] > 0.4  # from its per-axis deviations
+    assert report["smooth"]["within_2sigma"] > 0.4  # from its full covariance
     code, out, _ = cli("eval", fused)
     assert code == 0 and "in 2σ" in out and "NEES" in out
     # the assumed pixel noise scales every standard deviation
