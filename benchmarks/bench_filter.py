@@ -7,8 +7,9 @@ Targets (issue 10): ``filter`` never worse than ``typeA``; at 0.3 px at most hal
 Sessions (rigs of this benchmark, not the tests'): rallies of the tests' own generator
 (``tests/_rally.py``: kicks, floor bounces, air drag), the library's ``rally`` (chip kicks
 and floor bounces of a golf ball), ``throw`` and the non-ballistic ``spiral``, ``straight``
-and ``turntable`` (no gravity, or a centripetal acceleration), seen by cameras around a
-3 x 2 m floor with type-A shutters: 3 cameras at 30 fps (two rallies, one throw, the three
+and ``turntable`` (no gravity, or a centripetal acceleration), and a ball rolling on the
+floor with rolling friction, kicked along it (``roll``, of ``tests/test_filter.py``), seen by
+cameras around a 3 x 2 m floor with type-A shutters: 3 cameras at 30 fps (two rallies, one throw, the three
 non-ballistic motions), 2 and 4 cameras, 3 cameras at 60 fps, 3 cameras with lens
 distortion; noise 0, 0.3 and 1 px.
 
@@ -39,6 +40,7 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from _rally import rally  # noqa: E402
+from test_filter import roll  # noqa: E402
 
 from pslog import Camera, Rig, SimulationOptions, get_motion, look_at, simulate  # noqa: E402
 from pslog.evaluation import evaluate  # noqa: E402
@@ -82,6 +84,7 @@ def sessions(seconds: float):
         ("spiral, 3 cams", bench_rig(3), get_motion("spiral"), None),
         ("straight, 3 cams", bench_rig(3), get_motion("straight"), None),
         ("turntable, 3 cams", bench_rig(3), get_motion("turntable"), None),
+        ("roll (floor, kicked), 3 cams", bench_rig(3), roll(seconds, seed=1), seconds),
     ]
 
 

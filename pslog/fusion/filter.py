@@ -12,6 +12,13 @@ equations, exactly as implemented, are in ``docs/methods.md`` (section ``filter`
   acceleration of spectral density ``q`` (Bar-Shalom, Li & Kirubarajan, *Estimation with
   Applications to Tracking and Navigation*, 2001, section 6.2.2): the drag's Jacobian term,
   ``k ‖v‖ Δt``, is below 1e-3 at a rally's speeds and frame rates and is left to ``q``;
+- two motion models mixed by an interacting multiple model (Blom & Bar-Shalom 1988;
+  Bar-Shalom et al. section 11.6): ballistic (the above) and *supported* (the same without
+  gravity: a ball rolling on the floor, carried, swung), switching at rate
+  ``model_switch_per_s``. Their covariances are equal (same ``F``, ``q``, ``H``), so the
+  filter carries one covariance, the mixture's mean, the ballistic model's probability ``μ``
+  and the difference ``e`` of the models' means; the models' likelihoods (equal ``S``)
+  differ only by their innovations, ``e`` accumulating gravity's effect over the updates;
 - the pixel noise ``σ`` adapts to the detector's (``E[NIS] = 2``); the process noise ``q``
   adapts to the motion: a consistent filter's innovations are white, a lagging one's
   consecutive innovations of a camera agree, so ``q`` grows with their product (a spiral, a
@@ -92,6 +99,11 @@ _BOUNCE_SIDE = 0.05
 _REFLECT_ALONG, _REFLECT_SIDE = 1.0, 0.6
 #: The process noise's adaptation statistic is clipped to this (an outlier moves q little).
 _R_CLIP = 4.0
+#: The ballistic model's probability at a track's start (its window is fitted ballistically).
+_INIT_BALLISTIC = 0.9
+#: Bound of one detection's log likelihood ratio between the models (an outlier moves μ little).
+_LOG_ODDS_CLIP = 4.0
+_ZERO6 = (0.0,) * 6
 #: Accepted updates (one at least from another camera) that confirm a jump.
 _CONFIRM_UPDATES = 2
 
@@ -130,6 +142,9 @@ class FilterOptions:
     accel_adapt_rate : float, step ``η`` of ``q``'s adaptation (0: ``q`` fixed at
         ``accel_psd``)
     accel_adapt_target : float, the value ``r₀`` of the whiteness statistic ``q`` settles at
+    model_switch_per_s : float, rate ``λ`` of switches between the ballistic model and the
+        supported one (no gravity: a ball rolling, carried, on a string), 1/s; the models
+        are mixed by an interacting multiple model (0: the ballistic model alone)
     max_init_speed_std : float, a (re)initialisation whose velocity standard deviation
         ``sqrt(trace P_vv)`` exceeds this is refused, m/s
     confirm_nis : float, an accepted update whose NIS exceeds this (99 % quantile of χ²₂)
@@ -162,6 +177,7 @@ class FilterOptions:
     max_gap_s: float | None = None
     max_accel_psd: float = 100.0
     accel_adapt_rate: float = 0.5
+    model_switch_per_s: float = 0.5
     accel_adapt_target: float = 0.4
     max_std_m: float | None = 0.03
 
@@ -170,6 +186,9 @@ class FilterOptions:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise FusionError(f"filter {name} must be finite and > 0, got {value!r}")
+        if not (math.isfinite(self.model_switch_per_s) and self.model_switch_per_s >= 0):
+            raise FusionError(f"filter model_switch_per_s must be finite and >= 0, got "
+                              f"{self.model_switch_per_s!r}")
         if not (math.isfinite(self.drag_per_m) and self.drag_per_m >= 0):
             raise FusionError(f"filter drag_per_m must be finite and >= 0, got "
                               f"{self.drag_per_m!r}")
@@ -296,6 +315,12 @@ class BallFilter:
         self._k = options.drag_per_m
         self._g = tuple(float(x) for x in options.gravity)
         self._gate = options.gate
+        # probability of the ballistic model (else "supported": no gravity, e.g. rolling)
+        self._switch = options.model_switch_per_s
+        # without switching the ballistic model alone (probability 1)
+        self._mu0 = _INIT_BALLISTIC if self._switch else 1.0
+        self._mu = self._mu0
+        self._e = _ZERO6  # ballistic model's mean minus the supported one's
         self.time_ns: int | None = None  # time of the state; None: no track
         self._x = [0.0] * 6
         self._P = [0.0] * 36
@@ -322,6 +347,7 @@ class BallFilter:
         self._window = []
         self._history = []
         self._cam_last = [self._last_ns] * len(self._cam_last)
+        self._mu, self._e = self._mu0, _ZERO6
 
     def state(self):
         """``(time_ns, x (6,), P (6, 6))`` of the current track, or None without one."""
@@ -340,16 +366,25 @@ class BallFilter:
         """
         if self.time_ns is None:
             return None
-        x, P = self._predicted(self._x, self._P, (int(time_ns) - self.time_ns) / NS)
+        dt = (int(time_ns) - self.time_ns) / NS
+        x, P = self._predicted(self._x, self._P, dt, self._prior(dt)[0])
         return np.array(x[:3]), np.array(x[3:]), np.array(P).reshape(6, 6)
 
     # ---- the filter ----------------------------------------------------------------------
-    def _predicted(self, x, P, dt):
-        """Mean and covariance after ``dt`` seconds (new lists)."""
+    def _prior(self, dt):
+        """Prior probability ``c`` of the ballistic model after ``dt`` seconds: the model
+        switches with probability ``p = min(λ |Δt|, 1/2)``, ``c = μ (1 - p) + (1 - μ) p``."""
+        p = min(self._switch * abs(dt), 0.5)
+        return self._mu * (1.0 - p) + (1.0 - self._mu) * p, p
+
+    def _predicted(self, x, P, dt, c=1.0):
+        """Mean and covariance after ``dt`` seconds (new lists), gravity weighted by the
+        ballistic model's probability ``c`` (the models' mixture's mean)."""
         px, py, pz, vx, vy, vz = x
         k = self._k
         speed = math.sqrt(vx * vx + vy * vy + vz * vz)
         gx, gy, gz = self._g
+        gx, gy, gz = c * gx, c * gy, c * gz
         ax, ay, az = gx - k * speed * vx, gy - k * speed * vy, gz - k * speed * vz
         h = 0.5 * dt * dt
         xn = [px + vx * dt + ax * h, py + vy * dt + ay * h, pz + vz * dt + az * h,
@@ -395,7 +430,7 @@ class BallFilter:
         det = s00 * s11 - s01 * s01
         i00, i01, i11 = s11 / det, -s01 / det, s00 / det
         nis = y0 * (i00 * y0 + i01 * y1) + y1 * (i01 * y0 + i11 * y1)
-        return y0, y1, c0, c1, i00, i01, i11, nis, det
+        return y0, y1, c0, c1, i00, i01, i11, nis, det, h0, h1
 
     @staticmethod
     def _updated(x, P, inn):
@@ -458,10 +493,17 @@ class BallFilter:
             return self._initialise(time_ns, camera, u, v)
         dt = (time_ns - self.time_ns) / NS
         gap_s = (time_ns - self._last_ns) / NS
-        x, P = self._predicted(self._x, self._P, dt)
+        c, p = self._prior(dt)
+        x, P = self._predicted(self._x, self._P, dt, c)
         inn = self._innovation(cam, x, P, u, v)
         jump = 0.0
-        accepted = inn is not None and inn[7] <= self._gate
+        mu, e = self._mu, self._e
+        prior_y = inn  # the mixture's innovation (the process noise's whiteness statistic)
+        if inn is not None and self._switch:
+            x, inn, mu, e, nis_min = self._mixed(x, inn, c, p, dt)
+            accepted = nis_min <= self._gate
+        else:
+            accepted = inn is not None and inn[7] <= self._gate
         if accepted:
             xn, Pn = self._updated(x, P, inn)
         else:
@@ -483,12 +525,13 @@ class BallFilter:
                 prev = self._cam_inn[camera]
                 if prev is not None and time_ns - prev[0] <= self._max_gap_ns:
                     # yᵀ S⁻¹ y': zero mean for a consistent filter's (white) innovations
-                    r = (prev[1] * (inn[4] * inn[0] + inn[5] * inn[1])
-                         + prev[2] * (inn[5] * inn[0] + inn[6] * inn[1]))
+                    y0, y1 = prior_y[0], prior_y[1]
+                    r = (prev[1] * (inn[4] * y0 + inn[5] * y1)
+                         + prev[2] * (inn[5] * y0 + inn[6] * y1))
                     r = min(max(r, -_R_CLIP), _R_CLIP)
                     q = self._q * math.exp(self._q_rate * (r - self._q_target))
                     self._q = min(max(q, self._q_min), self._q_max)
-                self._cam_inn[camera] = (time_ns, inn[0], inn[1])
+                self._cam_inn[camera] = (time_ns, prior_y[0], prior_y[1])
             if self._adapt:  # pixel noise by stochastic approximation of E[NIS] = 2
                 var = self._var * (1.0 + self._adapt * (0.5 * inn[7] - 1.0))
                 self._var = min(max(var, self._var_min), self._var_max)
@@ -503,6 +546,10 @@ class BallFilter:
             self._jump_ns, self._jump_camera = time_ns, camera
             self._cam_inn = [None] * len(self._cam_inn)  # a new segment
             self._pending, self._confirms, self._other = camera, 0, False
+        if accepted:
+            self._mu, self._e = mu, e
+        else:
+            self._e = _ZERO6  # a jump: a new segment, the models start together
         self._x, self._P, self.time_ns, self._last_ns = xn, Pn, time_ns, time_ns
         self._rejects = 0
         self._confirmed += 1
@@ -511,6 +558,43 @@ class BallFilter:
         del self._window[:-self.options.init_window]
         return self._point(xn, Pn, math.hypot(inn[0], inn[1]),
                            math.hypot(u - proj[0], v - proj[1]), inn[7], gap_s, jump, 0.0, 0.0)
+
+    def _mixed(self, x, inn, c, p, dt):
+        """The interacting multiple model step with a covariance the two models share.
+
+        ``x``, ``inn``: the mixture's prediction and innovation; ``c``: the ballistic model's
+        prior probability, ``p`` the switching probability. The models' means are ``m + (1 -
+        c) e`` and ``m - c e`` with ``e`` their difference: the mixing shrinks it by ``1 -
+        μ_s p / c - μ_b p / (1 - c)``, the prediction propagates it (``e_p += Δt e_v``) and
+        adds gravity's ``d = (g Δt²/2, g Δt)``; the models' innovations are the mixture's
+        minus ``H`` of their offsets (linearised), their likelihood ratio (equal ``S``)
+        ``exp((NIS_s - NIS_b) / 2)`` gives ``μ⁺``; the mixture is re-weighted with ``μ⁺``
+        (``x + (μ⁺ - c) e``) and ``e`` updated to ``(I - K H) e``.
+        Returns ``(x, innovation, μ⁺, e⁺, min(NIS_b, NIS_s))``."""
+        y0, y1, c0, c1, i00, i01, i11, _, det, h0, h1 = inn
+        mu = self._mu
+        e = self._e
+        shrink = 1.0 - (1.0 - mu) * p / c - mu * p / (1.0 - c) if 0.0 < c < 1.0 else 1.0
+        g = self._g
+        half = 0.5 * dt * dt
+        e = [shrink * (e[i] + dt * e[3 + i]) + half * g[i] for i in range(3)] + [
+            shrink * e[3 + i] + dt * g[i] for i in range(3)]
+        hd0 = h0[0] * e[0] + h0[1] * e[1] + h0[2] * e[2]
+        hd1 = h1[0] * e[0] + h1[1] * e[1] + h1[2] * e[2]
+        b0, b1 = y0 - (1.0 - c) * hd0, y1 - (1.0 - c) * hd1
+        s0, s1 = y0 + c * hd0, y1 + c * hd1
+        nis_b = b0 * (i00 * b0 + i01 * b1) + b1 * (i01 * b0 + i11 * b1)
+        nis_s = s0 * (i00 * s0 + i01 * s1) + s1 * (i01 * s0 + i11 * s1)
+        r = min(max(0.5 * (nis_b - nis_s), -_LOG_ODDS_CLIP), _LOG_ODDS_CLIP)
+        mu = c / (c + (1.0 - c) * math.exp(r))
+        delta = mu - c
+        xn = [x[i] + delta * e[i] for i in range(6)]
+        y0, y1 = y0 - delta * hd0, y1 - delta * hd1
+        nis = y0 * (i00 * y0 + i01 * y1) + y1 * (i01 * y0 + i11 * y1)
+        # (I - K H) e with K = PHᵀ S⁻¹
+        g0, g1 = i00 * hd0 + i01 * hd1, i01 * hd0 + i11 * hd1
+        e = [e[i] - c0[i] * g0 - c1[i] * g1 for i in range(6)]
+        return xn, (y0, y1, c0, c1, i00, i01, i11, nis, det, h0, h1), mu, e, min(nis_b, nis_s)
 
     def _jump(self, time_ns, camera, u, v):
         """A bounce or a kick: a velocity jump (a bounce's, mostly along gravity, then a
@@ -523,6 +607,7 @@ class BallFilter:
         entries = [(self.time_ns, self._x, self._P)]  # state before the current detection
         detections = [(time_ns, camera, u, v)]
         best, best_score = None, math.inf
+        c = self._mu  # the replay keeps the models' mixture of the current state
         n = len(history)
         for lag, shape in ((lag, shape) for lag in range(min(n, _JUMP_LAG) + 1)
                            for shape in self._jump_shapes):
@@ -535,7 +620,7 @@ class BallFilter:
             first = True
             for t, c, du, dv in detections:
                 dt = (t - t0) / NS
-                x, P = self._predicted(x, P, dt)
+                x, P = self._predicted(x, P, dt, c)
                 if first:  # the jump Δv at an instant uniform in the interval: Δp = Δv s
                     jumped = self._jumped(x, P, dt, shape)
                     if jumped is None:
