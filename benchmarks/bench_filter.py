@@ -9,8 +9,8 @@ Sessions (rigs of this benchmark, not the tests'): rallies of the tests' own gen
 and floor bounces of a golf ball), ``throw`` and the non-ballistic ``spiral``, ``straight``
 and ``turntable`` (no gravity, or a centripetal acceleration), and a ball rolling on the
 floor with rolling friction, kicked along it (``roll``, of ``tests/test_filter.py``), seen by
-cameras around a 3 x 2 m floor with type-A shutters: 3 cameras at 30 fps (two rallies, one throw, the three
-non-ballistic motions), 2 and 4 cameras, 3 cameras at 60 fps, 3 cameras with lens
+cameras around a 3 x 2 m floor with type-A shutters: 3 cameras at 30 fps (two rallies, one
+throw, the four non-ballistic motions), 2 and 4 cameras, 3 cameras at 60 fps, 3 cameras with lens
 distortion; noise 0, 0.3 and 1 px.
 
 Latency: every detection of a 3-camera rally pushed one at a time, (a) into
