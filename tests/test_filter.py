@@ -135,6 +135,60 @@ def test_one_predict_and_update_step_equals_the_hand_computation():
     assert q["gap_s"] == pytest.approx(dt)
 
 
+def test_one_step_of_the_two_models_equals_the_hand_computation():
+    # the interacting multiple model of docs/methods.md: ballistic and supported models with
+    # one covariance, the mixture's mean, μ and the models' difference e
+    rig = lab_rig(3)
+    cam = rig.cameras[2]
+    options = FilterOptions(noise_px=0.4, accel_psd=0.3, drag_per_m=0.02, adapt_rate=0.0,
+                            accel_adapt_rate=0.0, model_switch_per_s=3.0)
+    flt = BallFilter(rig, options)
+    rng = np.random.default_rng(4)
+    A = rng.normal(size=(6, 6))
+    P0 = A @ A.T * 1e-4 + np.diag([1e-5] * 3 + [1e-3] * 3)
+    p0, v0 = np.array([1.0, 1.1, 0.8]), np.array([-1.0, 0.6, 0.4])
+    t0, t1 = 2_000_000_000, 2_011_111_111
+    flt.set_state(t0, p0, v0, P0)  # μ = 0.9, e = 0
+
+    dt = (t1 - t0) / NS
+    g = np.array([0.0, 0.0, -G])
+    p = 3.0 * dt
+    c = 0.9 * (1 - p) + 0.1 * p
+    a = c * g - 0.02 * np.linalg.norm(v0) * v0
+    x_pred = np.concatenate([p0 + v0 * dt + 0.5 * a * dt**2, v0 + a * dt])
+    F = np.block([[np.eye(3), dt * np.eye(3)], [np.zeros((3, 3)), np.eye(3)]])
+    Q = 0.3 * np.block([[dt**3 / 3 * np.eye(3), dt**2 / 2 * np.eye(3)],
+                        [dt**2 / 2 * np.eye(3), dt * np.eye(3)]])
+    P_pred = F @ P0 @ F.T + Q
+    e = np.concatenate([0.5 * g * dt**2, g * dt])  # e = 0 before: gravity's step alone
+    # a detection of the supported model's prediction (no gravity), a little off
+    z = cam.project((x_pred[:3] - c * e[:3])[None] + [[0.001, -0.002, 0.001]])[0][0]
+    h, J = project_with_jacobian(cam, x_pred[:3][None])
+    H = np.hstack([J[0], np.zeros((2, 3))])
+    S = H @ P_pred @ H.T + 0.4**2 * np.eye(2)
+    K = P_pred @ H.T @ np.linalg.inv(S)
+    y = z - h[0]
+    hd = J[0] @ e[:3]
+    y_b, y_s = y - (1 - c) * hd, y + c * hd
+    nis_b, nis_s = y_b @ np.linalg.solve(S, y_b), y_s @ np.linalg.solve(S, y_s)
+    mu = c / (c + (1 - c) * np.exp(np.clip((nis_b - nis_s) / 2, -4, 4)))
+    y_mix = y - (mu - c) * hd
+    x_new = x_pred + (mu - c) * e + K @ y_mix
+    P_new = P_pred - K @ S @ K.T
+    e_new = e - K @ hd
+
+    assert_allclose(flt.predict(t1)[0], x_pred[:3], rtol=0, atol=1e-12)
+    _, quality = flt.push(t1, 2, *z)
+    _, x, P = flt.state()
+    assert_allclose(x, x_new, rtol=0, atol=1e-12)
+    assert_allclose(P, P_new, rtol=0, atol=1e-12)
+    assert flt._mu == pytest.approx(mu, rel=1e-9)
+    assert mu < c  # the detection favours the supported model
+    assert_allclose(flt._e, e_new, rtol=0, atol=1e-12)
+    q = dict(zip(FILTER_QUALITY, quality, strict=True))
+    assert q["nis"] == pytest.approx(y_mix @ np.linalg.solve(S, y_mix), rel=1e-9)
+
+
 def test_predict_leaves_the_state_alone_and_grows_the_uncertainty():
     rig = lab_rig(3)
     obs, _ = session(rig, get_motion("throw"), 0.5, noise_px=0.3, seed=2)
