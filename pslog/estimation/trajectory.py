@@ -163,6 +163,8 @@ _BREAK_ROUNDS = 3
 _LOOSE_ITERATIONS = 3
 _NEXT_LOOSE_ITERATIONS = 1
 _REFINE_ITERATIONS = 2
+#: Gauss–Newton iterations after σ is corrected for the fit's degrees of freedom
+_DOF_ITERATIONS = 2
 
 
 @dataclass(frozen=True, eq=False)
@@ -653,12 +655,15 @@ def fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions | None = 
         X_old = problem.positions(control)
         problem.set_knots(knots, options.prior)
         control = _refit_control(problem, X_old)
-        control, sigma, r, w, J = _Solver(problem, options).run(control, sigma,
-                                                                options.iterations)
+        # the dof-corrected run below continues these iterations: together they are the
+        # ``options.iterations`` of the full fit
+        control, sigma, r, w, J = _Solver(problem, options).run(
+            control, sigma, max(options.iterations - _DOF_ITERATIONS, 1))
 
     # σ corrected for the degrees of freedom the fit absorbs, then the covariance there
     _, dof = _information(problem, control, sigma, r, J)
-    control, sigma, r, w, J = _Solver(problem, options).run(control, sigma, 2, dof)
+    control, sigma, r, w, J = _Solver(problem, options).run(control, sigma,
+                                                            _DOF_ITERATIONS, dof)
     band, _ = _information(problem, control, sigma, r, J)
     out_rows, valid_s = _underdetermined_ends(problem, breaks)
     trajectory = Trajectory(problem.t0_ns, problem.knots, problem.offset, control, band,
