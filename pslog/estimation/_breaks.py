@@ -265,16 +265,15 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
         first[clamped] = f_c
         Nd[clamped] = np.where(accel[np.nonzero(clamped)[1]][:, None], N_c[:, 2] / h**2,
                                N_c[:, 3] / h**3)
-    m = local.m
-    cp = np.take(base.x0.reshape(-1, 3), (which * m)[:, None, None] + first[..., None]
-                 + np.arange(4), axis=0)  # (B, 12, 4, 3)
-    p0 = np.einsum("bka,bkad->bkd", Nd, cp)  # the base's p'' or jerk at each node
+    # the nodes' B-splines on the six base control points q0..q0+5 of the three spans
+    Nd6 = spread(first, Nd)  # (B, 12, 6)
+    p0 = Nd6 @ base.x0[which[:, None], q0[:, None] + np.arange(6)]  # p'' or jerk, (B, 12, 3)
     p0[:, :8] -= np.asarray(prior.gravity, dtype=np.float64)  # deviation from gravity
     wq = h * np.concatenate([half / prior.q_accel, half / prior.q_accel,
                              2 * half / prior.q_jerk], axis=1)  # (B, 12)
     fw = fn * wq[:, None, :]
     pyy = fw @ np.swapaxes(fn, 1, 2)  # (B, 3, 3)
-    pxy = np.swapaxes(spread(first, Nd), 1, 2) @ np.swapaxes(fw, 1, 2)  # (B, 6, 3)
+    pxy = np.swapaxes(Nd6, 1, 2) @ np.swapaxes(fw, 1, 2)  # (B, 6, 3)
     H5 = Hyy.reshape(B, 3, 3, 3, 3)
     X5 = Hxy.reshape(B, 6, 3, 3, 3)
     for i in range(3):  # ⊗ I₃
