@@ -130,7 +130,7 @@ class _Base:
         wz = wi * np.sum(zi * zi, axis=2)
         self.cost = np.sum(wz, axis=1) + local.const - np.einsum("bk,bk->b", rhs, x)
         self.x0 = x.reshape(B, -1, 3)
-        self.first, self.N = first, N
+        self.first, self.N, self.basis_w = first, N, basis_w
         X0 = basis_w @ self.x0  # (B, W, 3)
         self.u = v - (self.M @ X0[..., None])[..., 0]  # w Jᵀ (z - J X₀)
         self.s_sorted = np.where(inside, s, 1e6)  # times in spacings from the centre, sorted
@@ -227,7 +227,9 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
         for lo, hi, c in spline:
             on = (x >= lo[:, None]) & (x < hi[:, None])
             f[:, e] = np.where(on, _horner(c, x), f[:, e])
-    old = spread(base.first[wsel], base.N[wsel])  # (B, W, 6)
+    # the base's B-splines q0..q0+5 at those detections (a padding entry may lose some: its
+    # new B-splines are zero, so it adds nothing)
+    old = base.basis_w[which[:, None, None], cols[..., None], q0[:, None, None] + np.arange(6)]
     M = base.M[wsel].reshape(B, W, 9)
     # Σ_w (f fᵀ) ⊗ M_w and Σ_w (old fᵀ) ⊗ M_w: one batched product of the 27 rows
     # (f, old) ⊗ f with M, then in (e, i, f, j) order
