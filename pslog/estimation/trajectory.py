@@ -133,7 +133,9 @@ class SmoothOptions:
         weighs the prior a little)
     break_accel : float, m/s², ``‖p'' - g‖`` above which a span is tested for a break
     break_threshold : float, cost decrease (units of σ²) that keeps a break
-    iterations : int, Gauss–Newton iterations per fit
+    iterations : int, Gauss–Newton iterations per fit; the refit after the breaks'
+        refinement runs this many in all, its last two after σ is corrected for the fit's
+        degrees of freedom
     """
 
     prior: MotionPrior = MotionPrior()
