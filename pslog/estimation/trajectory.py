@@ -531,14 +531,18 @@ class _Solver:
     def __init__(self, problem: _Problem, options: SmoothOptions):
         self.problem, self.options = problem, options
 
-    def cost(self, control: np.ndarray, r: np.ndarray, sigma: float) -> float:
-        """The robust cost (1) + (2) of ``control`` whose residuals are ``r``."""
+    def cost(self, control: np.ndarray, r: np.ndarray, sigma: float,
+             prior: float | None = None) -> float:
+        """The robust cost (1) + (2) of ``control`` whose residuals are ``r`` (``prior``: its
+        prior cost (2), if already known)."""
         s = np.sum(r * r, axis=1) / sigma**2
         c2 = _CAUCHY**2
         data = c2 * np.log1p(s / c2)
         # a point behind its camera costs as a detection 1000 σ off
         penalty = np.count_nonzero(self.problem.invalid) * c2 * np.log1p(1e6 / c2)
-        return float(np.sum(data) + penalty + _prior_cost(self.problem, control))
+        if prior is None:
+            prior = _prior_cost(self.problem, control)
+        return float(np.sum(data) + penalty + prior)
 
     def run(self, control: np.ndarray, sigma: float, iterations: int, dof: float = 1.0
             ) -> tuple[np.ndarray, float, np.ndarray, np.ndarray, np.ndarray]:
@@ -547,6 +551,7 @@ class _Solver:
         problem = self.problem
         X = problem.positions(control)
         r, J = problem.project(X)
+        prior = None  # the prior cost (2) of ``control``: it does not depend on σ
         for _ in range(iterations):
             sigma = self._scale(r, sigma, dof)
             s = np.sum(r * r, axis=1) / sigma**2
@@ -554,17 +559,20 @@ class _Solver:
             target = np.einsum("naj,nj->na", J, X) - r  # linearised: J X_new ≈ J X - r
             ab, rhs = problem.normal(J, target, w / sigma**2)
             new = _normal.solve(_normal.factor(ab), rhs).reshape(-1, 3)
-            before = self.cost(control, r, sigma)
+            if prior is None:
+                prior = _prior_cost(problem, control)
+            before = self.cost(control, r, sigma, prior)
             step = 1.0
             for _ in range(6):  # step halving keeps the robust cost from rising
                 trial = control + step * (new - control)
                 X_trial = problem.positions(trial)
                 r_trial, J_trial = problem.project(X_trial)
-                if self.cost(trial, r_trial, sigma) <= before:
+                prior_trial = _prior_cost(problem, trial)
+                if self.cost(trial, r_trial, sigma, prior_trial) <= before:
                     break
                 step /= 2
             moved = float(np.max(np.abs(trial - control), initial=0.0))
-            control, X, r, J = trial, X_trial, r_trial, J_trial
+            control, X, r, J, prior = trial, X_trial, r_trial, J_trial, prior_trial
             if moved < 1e-7:  # 0.1 µm: converged
                 break
         s = np.sum(r * r, axis=1) / sigma**2
