@@ -75,12 +75,15 @@ class _Base:
     """The no-break local problems of a batch of windows (``local``; ``t, J, z, w`` (n,),
     (n, 2, 3), (n, 2), (n,) the detections' times (s), Jacobians, linearised targets and
     weights already divided by σ²; ``index``, ``valid`` (B, W) each window's detections and
-    padding; ``centre`` (B,) s, the middle knot): their minimum ``x0`` (B, m, 3),
-    inverse information ``cov`` (B, 3m, 3m), minimum cost, and per detection the basis
-    (``first`` (B, W), ``N`` (B, W, 4)), ``M = w JᵀJ`` (B, W, 3, 3) and the weighted
-    residual ``u = w Jᵀ (z - J X₀)`` (B, W, 3) at the minimum."""
+    padding; ``centre`` (B,) s, the middle knot; ``spans`` the lowest and highest span
+    ``j`` (in spacings from the centre) a trial instant may fall in): their minimum ``x0``
+    (B, m, 3), the columns ``col0..`` of the inverse information that the 18 x 18 blocks
+    of those spans' six control points read, ``cov`` (B, 3m, c), minimum cost, and per
+    detection the basis (``first`` (B, W), ``N`` (B, W, 4)), ``M = w JᵀJ`` (B, W, 3, 3) and
+    the weighted residual ``u = w Jᵀ (z - J X₀)`` (B, W, 3) at the minimum. Without
+    ``spans`` every column of the inverse is kept."""
 
-    def __init__(self, local, t, J, z, w, index, valid, centre, spacing):
+    def __init__(self, local, t, J, z, w, index, valid, centre, spacing, spans=None):
         B, W = index.shape
         s = (t[index] - centre[:, None]) / spacing
         inside = valid & (np.abs(s) < local.K - 1e-9)
@@ -112,12 +115,22 @@ class _Base:
                     H5[:, :, k, :, i] += block
         rhs = (basis_t @ v).reshape(B, n) + local.rhs
         H[:, np.arange(n), np.arange(n)] *= 1 + 1e-12  # keeps a degenerate window solvable
-        self.cov = np.linalg.inv(H)
-        x = np.einsum("bij,bj->bi", self.cov, rhs)
+        # only the inverse's columns the gains read (a solve for them and the minimum is
+        # cheaper than the whole inverse)
+        lo, hi = 0, n
+        if spans is not None:
+            lo = int(np.clip(3 * (spans[0] + local.K - 1), 0, n - 18))
+            hi = int(np.clip(3 * (spans[1] + local.K - 1) + 18, lo + 18, n))
+        unit = np.zeros((n, hi - lo + 1))
+        unit[np.arange(lo, hi), np.arange(hi - lo)] = 1.0
+        sol = np.linalg.solve(H, np.concatenate([np.broadcast_to(unit, (B, n, hi - lo + 1))[
+            ..., :-1], rhs[..., None]], axis=2))
+        self.cov, self.col0 = sol[..., :-1], lo
+        x = sol[..., -1]
         wz = wi * np.sum(zi * zi, axis=2)
         self.cost = np.sum(wz, axis=1) + local.const - np.einsum("bk,bk->b", rhs, x)
         self.x0 = x.reshape(B, -1, 3)
-        self.first, self.N = first, N
+        self.first, self.N, self.basis_w = first, N, basis_w
         X0 = basis_w @ self.x0  # (B, W, 3)
         self.u = v - (self.M @ X0[..., None])[..., 0]  # w Jᵀ (z - J X₀)
         self.s_sorted = np.where(inside, s, 1e6)  # times in spacings from the centre, sorted
@@ -214,7 +227,9 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
         for lo, hi, c in spline:
             on = (x >= lo[:, None]) & (x < hi[:, None])
             f[:, e] = np.where(on, _horner(c, x), f[:, e])
-    old = spread(base.first[wsel], base.N[wsel])  # (B, W, 6)
+    # the base's B-splines q0..q0+5 at those detections (a padding entry may lose some: its
+    # new B-splines are zero, so it adds nothing)
+    old = base.basis_w[which[:, None, None], cols[..., None], q0[:, None, None] + np.arange(6)]
     M = base.M[wsel].reshape(B, W, 9)
     # Σ_w (f fᵀ) ⊗ M_w and Σ_w (old fᵀ) ⊗ M_w: one batched product of the 27 rows
     # (f, old) ⊗ f with M, then in (e, i, f, j) order
@@ -252,16 +267,15 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
         first[clamped] = f_c
         Nd[clamped] = np.where(accel[np.nonzero(clamped)[1]][:, None], N_c[:, 2] / h**2,
                                N_c[:, 3] / h**3)
-    m = local.m
-    cp = np.take(base.x0.reshape(-1, 3), (which * m)[:, None, None] + first[..., None]
-                 + np.arange(4), axis=0)  # (B, 12, 4, 3)
-    p0 = np.einsum("bka,bkad->bkd", Nd, cp)  # the base's p'' or jerk at each node
+    # the nodes' B-splines on the six base control points q0..q0+5 of the three spans
+    Nd6 = spread(first, Nd)  # (B, 12, 6)
+    p0 = Nd6 @ base.x0[which[:, None], q0[:, None] + np.arange(6)]  # p'' or jerk, (B, 12, 3)
     p0[:, :8] -= np.asarray(prior.gravity, dtype=np.float64)  # deviation from gravity
     wq = h * np.concatenate([half / prior.q_accel, half / prior.q_accel,
                              2 * half / prior.q_jerk], axis=1)  # (B, 12)
     fw = fn * wq[:, None, :]
     pyy = fw @ np.swapaxes(fn, 1, 2)  # (B, 3, 3)
-    pxy = np.swapaxes(spread(first, Nd), 1, 2) @ np.swapaxes(fw, 1, 2)  # (B, 6, 3)
+    pxy = np.swapaxes(Nd6, 1, 2) @ np.swapaxes(fw, 1, 2)  # (B, 6, 3)
     H5 = Hyy.reshape(B, 3, 3, 3, 3)
     X5 = Hxy.reshape(B, 6, 3, 3, 3)
     for i in range(3):  # ⊗ I₃
@@ -269,11 +283,16 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
         X5[:, :, i, :, i] += pxy
     g -= fw @ p0
 
-    n = 3 * m
-    s0, s1, s2 = base.cov.strides  # the 18 x 18 diagonal blocks of each window, as a view
-    blocks = np.lib.stride_tricks.as_strided(base.cov, (len(base.cov), n - 17, 18, 18),
+    # the 18 x 18 diagonal blocks of each window's inverse, as a view of its columns
+    col0 = base.col0
+    cols = base.cov[:, col0:]
+    s0, s1, s2 = cols.strides
+    blocks = np.lib.stride_tricks.as_strided(cols, (len(cols), cols.shape[2] - 17, 18, 18),
                                              (s0, s1 + s2, s1, s2), writeable=False)
-    cov = blocks[which, 3 * q0]  # (B, 18, 18)
+    k = 3 * q0 - col0
+    if np.any((k < 0) | (k > cols.shape[2] - 18)):
+        raise AssertionError("trial instant outside the spans its base was solved for")
+    cov = blocks[which, k]  # (B, 18, 18)
     S = Hyy - np.swapaxes(Hxy, 1, 2) @ cov @ Hxy
     S = (S + np.swapaxes(S, 1, 2)) / 2
     g = g.reshape(B, 9)
@@ -318,7 +337,11 @@ def scan(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray, centers: np
     # two bases, knots at the centre + k·h and shifted by h/2 (windows C..2C-1): a trial
     # instant is tested on the one whose knots are at least h/4 away from it
     both = np.r_[centers, centers + spacing / 2]
-    base = _Base(local, t, J, z, w, np.r_[index, index], np.r_[valid, valid], both, spacing)
+    # the spans a trial instant may fall in, on either base (the shifted one h/2 later)
+    rel = (bounds - centers[:, None]) / spacing
+    spans = (int(np.floor(np.min(rel))) - 1, int(np.floor(np.max(rel))))
+    base = _Base(local, t, J, z, w, np.r_[index, index], np.r_[valid, valid], both, spacing,
+                 spans)
     rows = np.arange(C)
 
     def gains(which, tau):

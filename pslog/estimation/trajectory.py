@@ -133,7 +133,9 @@ class SmoothOptions:
         weighs the prior a little)
     break_accel : float, m/s², ``‖p'' - g‖`` above which a span is tested for a break
     break_threshold : float, cost decrease (units of σ²) that keeps a break
-    iterations : int, Gauss–Newton iterations per fit
+    iterations : int, Gauss–Newton iterations per fit; the refit after the breaks'
+        refinement runs this many in all, its last two after σ is corrected for the fit's
+        degrees of freedom
     """
 
     prior: MotionPrior = MotionPrior()
@@ -163,6 +165,8 @@ _BREAK_ROUNDS = 3
 _LOOSE_ITERATIONS = 3
 _NEXT_LOOSE_ITERATIONS = 1
 _REFINE_ITERATIONS = 2
+#: Gauss–Newton iterations after σ is corrected for the fit's degrees of freedom
+_DOF_ITERATIONS = 2
 
 
 @dataclass(frozen=True, eq=False)
@@ -527,14 +531,18 @@ class _Solver:
     def __init__(self, problem: _Problem, options: SmoothOptions):
         self.problem, self.options = problem, options
 
-    def cost(self, control: np.ndarray, r: np.ndarray, sigma: float) -> float:
-        """The robust cost (1) + (2) of ``control`` whose residuals are ``r``."""
+    def cost(self, control: np.ndarray, r: np.ndarray, sigma: float,
+             prior: float | None = None) -> float:
+        """The robust cost (1) + (2) of ``control`` whose residuals are ``r`` (``prior``: its
+        prior cost (2), if already known)."""
         s = np.sum(r * r, axis=1) / sigma**2
         c2 = _CAUCHY**2
         data = c2 * np.log1p(s / c2)
         # a point behind its camera costs as a detection 1000 σ off
         penalty = np.count_nonzero(self.problem.invalid) * c2 * np.log1p(1e6 / c2)
-        return float(np.sum(data) + penalty + _prior_cost(self.problem, control))
+        if prior is None:
+            prior = _prior_cost(self.problem, control)
+        return float(np.sum(data) + penalty + prior)
 
     def run(self, control: np.ndarray, sigma: float, iterations: int, dof: float = 1.0
             ) -> tuple[np.ndarray, float, np.ndarray, np.ndarray, np.ndarray]:
@@ -543,6 +551,7 @@ class _Solver:
         problem = self.problem
         X = problem.positions(control)
         r, J = problem.project(X)
+        prior = None  # the prior cost (2) of ``control``: it does not depend on σ
         for _ in range(iterations):
             sigma = self._scale(r, sigma, dof)
             s = np.sum(r * r, axis=1) / sigma**2
@@ -550,17 +559,20 @@ class _Solver:
             target = np.einsum("naj,nj->na", J, X) - r  # linearised: J X_new ≈ J X - r
             ab, rhs = problem.normal(J, target, w / sigma**2)
             new = _normal.solve(_normal.factor(ab), rhs).reshape(-1, 3)
-            before = self.cost(control, r, sigma)
+            if prior is None:
+                prior = _prior_cost(problem, control)
+            before = self.cost(control, r, sigma, prior)
             step = 1.0
             for _ in range(6):  # step halving keeps the robust cost from rising
                 trial = control + step * (new - control)
                 X_trial = problem.positions(trial)
                 r_trial, J_trial = problem.project(X_trial)
-                if self.cost(trial, r_trial, sigma) <= before:
+                prior_trial = _prior_cost(problem, trial)
+                if self.cost(trial, r_trial, sigma, prior_trial) <= before:
                     break
                 step /= 2
             moved = float(np.max(np.abs(trial - control), initial=0.0))
-            control, X, r, J = trial, X_trial, r_trial, J_trial
+            control, X, r, J, prior = trial, X_trial, r_trial, J_trial, prior_trial
             if moved < 1e-7:  # 0.1 µm: converged
                 break
         s = np.sum(r * r, axis=1) / sigma**2
@@ -653,12 +665,15 @@ def fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions | None = 
         X_old = problem.positions(control)
         problem.set_knots(knots, options.prior)
         control = _refit_control(problem, X_old)
-        control, sigma, r, w, J = _Solver(problem, options).run(control, sigma,
-                                                                options.iterations)
+        # the dof-corrected run below continues these iterations: together they are the
+        # ``options.iterations`` of the full fit
+        control, sigma, r, w, J = _Solver(problem, options).run(
+            control, sigma, max(options.iterations - _DOF_ITERATIONS, 1))
 
     # σ corrected for the degrees of freedom the fit absorbs, then the covariance there
     _, dof = _information(problem, control, sigma, r, J)
-    control, sigma, r, w, J = _Solver(problem, options).run(control, sigma, 2, dof)
+    control, sigma, r, w, J = _Solver(problem, options).run(control, sigma,
+                                                            _DOF_ITERATIONS, dof)
     band, _ = _information(problem, control, sigma, r, J)
     out_rows, valid_s = _underdetermined_ends(problem, breaks)
     trajectory = Trajectory(problem.t0_ns, problem.knots, problem.offset, control, band,
