@@ -226,18 +226,7 @@ def covariance_band(U: np.ndarray) -> np.ndarray:
         rows[:, j] = window[:, 0]
     rows = rows.reshape(C * L, WIDTH)[:n]
     rows = np.concatenate([rows, np.zeros((WIDTH, WIDTH))])
-    # block (i, i+k), entry (a, b) = Σ_{3i+a, 3i+3k+b} = rows[3i+a, 3k+b-a] (b >= a if k = 0)
-    band = np.zeros((m, 4, 3, 3))
-    base = 3 * np.arange(m)
-    for k in range(4):
-        for a_ in range(3):
-            for b in range(3):
-                j = 3 * k + b - a_
-                if j >= 0:
-                    band[:, k, a_, b] = rows[base + a_, j]
-                else:  # below the diagonal of a diagonal block: symmetry
-                    band[:, k, a_, b] = rows[base + b, -j]
-    return band
+    return _band_from_rows(rows, m)
 
 
 def _shift_left(a: np.ndarray, X: np.ndarray) -> np.ndarray:
@@ -283,7 +272,12 @@ def covariance_band_sequential(U: np.ndarray) -> np.ndarray:
         new[1:, 1:] = s_next
         window = new
         rows[r] = new[0]
-    # block (i, i+k), entry (a, b) = Σ_{3i+a, 3i+3k+b} = rows[3i+a, 3k+b-a] (b >= a if k = 0)
+    return _band_from_rows(rows, m)
+
+
+def _band_from_rows(rows: np.ndarray, m: int) -> np.ndarray:
+    """The (m, 4, 3, 3) block band from ``rows[r, j] = Σ_{r, r+j}`` (n + 12, 12): block
+    (i, i+k), entry (a, b) = Σ_{3i+a, 3i+3k+b} = rows[3i+a, 3k+b-a] (b >= a if k = 0)."""
     band = np.zeros((m, 4, 3, 3))
     base = 3 * np.arange(m)
     for k in range(4):
