@@ -284,11 +284,7 @@ def triangulate_rays(
                 A[:, j, i] = A[:, i, j]
         rhs[:, i] = _sum_rays(_dot(P[i, 0], P[i, 1], P[i, 2], o[0], o[1], o[2]))
     n_rays = valid.sum(axis=1)
-    det = np.linalg.det(A)
-    ok = (n_rays >= 2) & (np.abs(det) > 1e-12)
-    points = np.full((len(A), 3), np.nan)
-    if np.any(ok):
-        points[ok] = np.linalg.solve(A[ok], rhs[ok][..., None])[..., 0]
+    points = _solve_rays(A, rhs, n_rays)
     offsets = [points[:, c, None] - o[c] for c in range(3)]
     along = _dot(offsets[0], offsets[1], offsets[2], unit[0], unit[1], unit[2])
     perp = [offsets[c] - along * unit[c] for c in range(3)]
@@ -296,6 +292,17 @@ def triangulate_rays(
     with np.errstate(invalid="ignore", divide="ignore"):
         rms_miss = np.sqrt(_sum_rays(sq) / n_rays)
     return points, rms_miss, n_rays
+
+
+def _solve_rays(A: np.ndarray, rhs: np.ndarray, n_rays: np.ndarray) -> np.ndarray:
+    """Points (n, 3) solving ``A p = rhs`` (n, 3, 3) where two rays or more and ``A`` is not
+    singular (parallel rays); NaN elsewhere."""
+    det = np.linalg.det(A)
+    ok = (n_rays >= 2) & (np.abs(det) > 1e-12)
+    points = np.full((len(A), 3), np.nan)
+    if np.any(ok):
+        points[ok] = np.linalg.solve(A[ok], rhs[ok][..., None])[..., 0]
+    return points
 
 
 def _triangulate_rays_rows(origins, directions, valid):
@@ -311,11 +318,7 @@ def _triangulate_rays_rows(origins, directions, valid):
     A = projector.sum(axis=1)
     rhs = np.einsum("nmij,nmj->ni", projector, origins0)
     n_rays = valid.sum(axis=1)
-    det = np.linalg.det(A)
-    ok = (n_rays >= 2) & (np.abs(det) > 1e-12)
-    points = np.full((len(A), 3), np.nan)
-    if np.any(ok):
-        points[ok] = np.linalg.solve(A[ok], rhs[ok][..., None])[..., 0]
+    points = _solve_rays(A, rhs, n_rays)
     offsets = points[:, None, :] - origins0
     perp = offsets - np.einsum("nmi,nmi->nm", offsets, unit)[..., None] * unit
     sq = np.where(valid, np.einsum("nmi,nmi->nm", perp, perp), 0.0)
