@@ -1,4 +1,6 @@
-"""pslog eval: accuracy of a session's fused tracks against its ground truth."""
+"""pslog eval: accuracy of a session's fused tracks against its ground truth, and what their
+per-point quality, the gating's rejections and the points left out say (without ground truth:
+those alone)."""
 
 from __future__ import annotations
 
@@ -9,7 +11,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     from ._common import fusion_method
 
     parser.add_argument("session", metavar="FUSED.mcap",
-                        help="fused session (from 'pslog fuse') with ground truth")
+                        help="fused session (from 'pslog fuse'); with ground truth (simulated "
+                             "or synthetic sessions) the accuracy too, else the quality figures "
+                             "alone")
     parser.add_argument("--method", action="append", dest="methods", metavar="METHOD",
                         type=fusion_method,
                         help="only this method's track (repeat for several; default: every "
