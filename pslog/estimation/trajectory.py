@@ -54,7 +54,9 @@ is tested on knots at least ``h/4`` from it: a second base shifted by ``h/2``). 
 candidates and instants of a scan stage are one batched computation: three nested grid scans
 and a parabola between the neighbouring detections; the break is kept when it lowers the cost
 by more than ``break_threshold`` (in units of σ², a likelihood-ratio test). Rounds repeat
-until no new break; a fit under the real prior follows, then each break's instant is
+until no new break (a later round tests only the peaks within reach of the local problems of
+the breaks the round before added: further away the fit, and so the test, is unchanged); a
+fit under the real prior follows, then each break's instant is
 re-estimated at that fit and the session refitted. A break leaves detections of two cameras
 between it and a piece's end (a segment's velocity is otherwise free along a ray), and an end
 segment that fewer than four detections of two cameras hold gives no point: its 6 unknowns
@@ -642,9 +644,12 @@ def fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions | None = 
     problem = _Problem(obs, rig, pieces, knots, loose)
     control = _initial_control(problem, 1.0)
     sigma, iterations = 1.0, min(options.iterations, _LOOSE_ITERATIONS)
+    rounds, found = 0, None
     for _ in range(_BREAK_ROUNDS):
         control, sigma, r, w, J = _Solver(problem, options).run(control, sigma, iterations)
-        found = _find_breaks(problem, control, sigma, r, w, J, spacing, breaks, options)
+        found = _find_breaks(problem, control, sigma, r, w, J, spacing, breaks, options,
+                             near=found if rounds else None)
+        rounds += 1
         if not any(len(f) for f in found):
             break
         breaks = [np.sort(np.r_[b, f]) for b, f in zip(breaks, found, strict=True)]
@@ -761,9 +766,12 @@ def _information(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
 
 def _find_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.ndarray,
                  w: np.ndarray, J: np.ndarray, spacing: float, known: list[np.ndarray],
-                 options: SmoothOptions) -> list[np.ndarray]:
+                 options: SmoothOptions, near: list[np.ndarray] | None = None
+                 ) -> list[np.ndarray]:
     """Times of new velocity jumps in each piece (seconds since the first observation), none
-    within a knot spacing of a ``known`` one: the peaks of ``‖p'' - g‖`` above
+    within a knot spacing of a ``known`` one (and, with ``near``, the breaks the previous
+    round added, only peaks within reach of their local problems: a peak further away sees
+    the same local fit as in that round, which rejected it): the peaks of ``‖p'' - g‖`` above
     ``break_accel``, each kept if a break near it gains more than ``break_threshold``."""
     g = np.asarray(options.prior.gravity)
     X = problem.positions(control)
@@ -789,6 +797,10 @@ def _find_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
         centers = mids[p][peak]
         t = t_obs[here]
         centers = centers[np.all(np.abs(centers[:, None] - known[p][None, :]) > spacing, axis=1)]
+        if near is not None:  # after the first round: only peaks a new break's fit moved
+            reach = (_WINDOW_SPANS + 2) * spacing
+            centers = centers[np.any(np.abs(centers[:, None] - near[p][None, :]) <= reach,
+                                     axis=1)]
         if len(t) < 8 or len(centers) == 0:
             continue
         # the jump lies near the peak: search two detections beyond its neighbours, leaving
