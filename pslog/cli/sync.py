@@ -130,17 +130,11 @@ def _ball_candidates(detections, rig):
     if not np.any(detections.candidates_per_frame() > 1) or len(rig) < 2:
         return detections.best(), None
     from pslog.fusion.gating import gate
-    from pslog.records import Detections
 
     gated = gate(detections, rig, causal=False)
-    chosen = gated.chosen
-    kept = Detections(detections.camera_names, detections.frame_time_ns,
-                      detections.frame_camera, detections.frame_index,
-                      detections.cand_frame[chosen], detections.cand_uv[chosen],
-                      detections.cand_radius[chosen], detections.cand_score[chosen])
-    note = (f"{int((~chosen).sum())} of {len(chosen)} candidates rejected by gating (the "
-            f"ball chosen among each frame's candidates, as `pslog fuse` does)")
-    return kept.best(), note
+    note = (f"{len(gated.rejections)} of {len(gated.chosen)} candidates rejected by gating "
+            f"(the ball chosen among each frame's candidates, as `pslog fuse` does)")
+    return gated.kept(detections).best(), note
 
 
 def _from_session_start(detections):

@@ -209,6 +209,11 @@ class Gated:
     chosen: np.ndarray
     reason: np.ndarray
 
+    def kept(self, detections: Detections) -> Detections:
+        """``detections`` with only the chosen candidates (every frame kept, at its LOGGED
+        time; a frame whose candidates were all rejected holds none)."""
+        return _chosen_candidates(detections, self.chosen)
+
     def rejected_frames(self, detections: Detections) -> int:
         """Frames that had candidates and kept none (rejected detections)."""
         had = detections.candidates_per_frame() > 0
@@ -647,16 +652,21 @@ def gate(detections: Detections, rig: Rig, *, causal: bool = True, wait_s: float
 
 def _result(detections: Detections, rig: Rig, reason: np.ndarray) -> Gated:
     chosen = reason < 0
-    kept = Detections(detections.camera_names, detections.frame_time_ns,
-                      detections.frame_camera, detections.frame_index,
-                      detections.cand_frame[chosen], detections.cand_uv[chosen],
-                      detections.cand_radius[chosen], detections.cand_score[chosen])
     rej = ~chosen
     rows = detections.cand_frame[rej]
     rejections = Rejections(detections.frame_time_ns[rows], detections.frame_camera[rows],
                             detections.frame_index[rows], detections.cand_uv[rej],
                             detections.cand_score[rej], reason[rej])
-    return Gated(timed_observations(kept, rig), rejections, chosen, reason)
+    return Gated(timed_observations(_chosen_candidates(detections, chosen), rig), rejections,
+                 chosen, reason)
+
+
+def _chosen_candidates(detections: Detections, chosen: np.ndarray) -> Detections:
+    """``detections`` with the candidates ``chosen`` (C,) bool only, every frame kept."""
+    return Detections(detections.camera_names, detections.frame_time_ns,
+                      detections.frame_camera, detections.frame_index,
+                      detections.cand_frame[chosen], detections.cand_uv[chosen],
+                      detections.cand_radius[chosen], detections.cand_score[chosen])
 
 
 class StreamGate:
