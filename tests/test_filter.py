@@ -88,7 +88,7 @@ def test_one_predict_and_update_step_equals_the_hand_computation():
     rig = lab_rig(3)
     cam = rig.cameras[1]
     options = FilterOptions(noise_px=0.4, accel_psd=0.3, drag_per_m=0.02, adapt_rate=0.0,
-                            model_switch_per_s=0.0)  # the ballistic model alone
+                            model_switch_per_s=0.0, turn_switch_per_s=0.0)  # ballistic alone
     flt = BallFilter(rig, options)
     rng = np.random.default_rng(3)
     A = rng.normal(size=(6, 6))
@@ -141,7 +141,8 @@ def test_one_step_of_the_two_models_equals_the_hand_computation():
     rig = lab_rig(3)
     cam = rig.cameras[2]
     options = FilterOptions(noise_px=0.4, accel_psd=0.3, drag_per_m=0.02, adapt_rate=0.0,
-                            accel_adapt_rate=0.0, model_switch_per_s=3.0)
+                            accel_adapt_rate=0.0, model_switch_per_s=3.0,
+                            turn_switch_per_s=0.0)  # the turn model has its own test
     flt = BallFilter(rig, options)
     rng = np.random.default_rng(4)
     A = rng.normal(size=(6, 6))
@@ -262,21 +263,59 @@ def test_two_cameras_at_60_fps_and_four_cameras():
         assert filt.mean_mm < 0.5 * type_a.mean_mm, (rig.name, filt, type_a)  # 0.39, 0.36
 
 
-@pytest.mark.parametrize("name, limit", [("spiral", 1.0), ("straight", 0.5),
-                                         ("turntable", 0.95)])
+@pytest.mark.parametrize("name, limit", [("spiral", 0.5), ("straight", 0.5),
+                                         ("turntable", 0.55)])
 def test_non_ballistic_motions_are_followed_never_worse_than_type_a(name, limit):
     # no gravity, or a centripetal acceleration of 11-14 m/s²: the ballistic model is wrong;
-    # the supported model (no gravity) and the process noise's adaptation follow them
+    # the supported model (no gravity), the turn model and the process noise's adaptation
+    # follow them
     rig = lab_rig(3)
     obs, truth = session(rig, get_motion(name), noise_px=0.3, seed=1)
     type_a = evaluate(fuse(obs, rig, "typeA"), truth).mean_mm
     filt = evaluate(fuse(obs, rig, "filter"), truth).mean_mm
-    assert filt < limit * type_a, (filt, type_a)  # measured 0.98, 0.39, 0.90
+    assert filt < limit * type_a, (filt, type_a)  # measured 0.42, 0.40, 0.49
     # the mutation: the ballistic model alone with the process noise held at accel_psd
     # fails it (measured 1.58, 2.36, 1.93)
     fixed = evaluate(fuse_filter(obs, rig, options=FilterOptions(
-        accel_adapt_rate=0.0, model_switch_per_s=0.0)), truth).mean_mm
+        accel_adapt_rate=0.0, model_switch_per_s=0.0, turn_switch_per_s=0.0)), truth).mean_mm
     assert fixed > 1.3 * type_a, (fixed, type_a)
+
+
+@pytest.mark.parametrize("name", ["turntable", "spiral"])
+def test_turning_motions_through_a_distorting_lens_need_the_turn_model(name):
+    # a ball on a turntable (45 rpm, r = 0.5 m) and on a helix (3 m/s, r = 0.62 m), seen
+    # through lenses with radial and tangential distortion: the coordinated-turn model
+    # follows the centripetal acceleration the other two models lack
+    rig = lab_rig(3)
+    assert np.any(rig.cameras[0].dist)
+    obs, truth = session(rig, get_motion(name), noise_px=0.3, seed=2)
+    type_a = evaluate(fuse(obs, rig, "typeA"), truth).mean_mm
+    filt = evaluate(fuse(obs, rig, "filter"), truth).mean_mm
+    assert filt < 0.45 * type_a, (filt, type_a)  # measured 0.39, 0.38
+    # the mutation: without the turn model (the filter before it) the ratio is 0.81, 0.82
+    without = evaluate(fuse_filter(obs, rig, options=FilterOptions(turn_switch_per_s=0.0)),
+                       truth).mean_mm
+    assert without > 0.7 * type_a, (without, type_a)
+
+
+def test_the_turn_model_wins_on_a_circle_and_leaves_a_flight():
+    rig = lab_rig(3)
+
+    def probabilities(obs):
+        flt = BallFilter(rig)
+        nus = []
+        for t, c, uv in zip(obs.time_ns.tolist(), obs.camera.tolist(), obs.uv.tolist(),
+                            strict=True):
+            flt.push(t, c, uv[0], uv[1])
+            nus.append(flt._nu)
+        return np.array(nus), obs.time_ns / NS
+
+    nus, t = probabilities(session(rig, get_motion("turntable"), noise_px=0.3, seed=3)[0])
+    late = nus[t > 0.3]
+    assert np.median(late) > 0.95 and late.min() > 0.5, (np.median(late), late.min())
+    # a flight: the turn model joins at the track's start and leaves within a few updates
+    nus, t = probabilities(session(rig, get_motion("throw"), noise_px=0.3, seed=5)[0])
+    assert np.mean(nus > 0) < 0.1 and np.median(nus) == 0.0, (np.mean(nus > 0))
 
 
 def test_a_ball_rolling_on_the_floor_is_followed_by_the_supported_model():
@@ -288,8 +327,8 @@ def test_a_ball_rolling_on_the_floor_is_followed_by_the_supported_model():
     filt = evaluate(fuse(obs, rig, "filter"), truth).mean_mm
     assert filt < 0.6 * type_a, (filt, type_a)  # measured 0.43
     # the mutation: the ballistic model alone (the filter before the IMM) misses it
-    alone = evaluate(fuse_filter(obs, rig, options=FilterOptions(model_switch_per_s=0.0)),
-                     truth).mean_mm
+    alone = evaluate(fuse_filter(obs, rig, options=FilterOptions(
+        model_switch_per_s=0.0, turn_switch_per_s=0.0)), truth).mean_mm
     assert alone > 0.7 * type_a, (alone, type_a)  # measured 0.78
     flt = BallFilter(rig)
     mus = []

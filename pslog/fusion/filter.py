@@ -106,6 +106,13 @@ _LOG_ODDS_CLIP = 4.0
 _ZERO6 = (0.0,) * 6
 #: Accepted updates (one at least from another camera) that confirm a jump.
 _CONFIRM_UPDATES = 2
+#: The turn model's probability when it joins the model set, and below which it leaves it.
+_TURN_START, _TURN_OFF = 0.1, 0.03
+#: Accepted updates the turn model stays in the set after joining (its turn rate settles).
+_TURN_MIN_UPDATES = 12
+#: The turn model also leaves when its turn rate is within this many standard deviations
+#: of 0 (it is then the supported model).
+_TURN_SIGNIFICANT = 2.0
 
 
 @dataclass(frozen=True)
@@ -151,6 +158,13 @@ class FilterOptions:
         must be confirmed like a jump
     max_std_m : float or None, a point whose ``std_m`` exceeds this is withheld, metres
         (None: no bound)
+    turn_switch_per_s : float, rate of switches between the turn model (a coordinated turn
+        about the vertical: a ball swung, on a turntable, circling) and the other two, 1/s
+        (0: no turn model; also none when gravity is not along the world's z)
+    turn_on_psd : float, the turn model joins the model set when the adapted process noise
+        ``q`` reaches this (an acceleration the other models lack), m²/s³
+    turn_rate_psd : float, spectral density of the turn rate's random walk, rad²/s³
+    turn_rate_std : float, standard deviation of the turn rate when the model joins, rad/s
     withhold : bool, withhold unconfirmed and uncertain points (counted in
         ``Track.dropped``); False: a point at every detection of a live track
     """
@@ -180,6 +194,10 @@ class FilterOptions:
     model_switch_per_s: float = 0.5
     accel_adapt_target: float = 0.4
     max_std_m: float | None = 0.03
+    turn_switch_per_s: float = 0.5
+    turn_on_psd: float = 0.3
+    turn_rate_psd: float = 0.1
+    turn_rate_std: float = 6.0
 
     def __post_init__(self) -> None:
         for name in ("noise_px", "accel_psd", "gate", "jump_speed"):
@@ -189,6 +207,12 @@ class FilterOptions:
         if not (math.isfinite(self.model_switch_per_s) and self.model_switch_per_s >= 0):
             raise FusionError(f"filter model_switch_per_s must be finite and >= 0, got "
                               f"{self.model_switch_per_s!r}")
+        for name in ("turn_switch_per_s", "turn_rate_psd", "turn_rate_std"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise FusionError(f"filter {name} must be finite and >= 0, got {value!r}")
+        if not self.turn_on_psd > 0:
+            raise FusionError(f"filter turn_on_psd must be > 0, got {self.turn_on_psd!r}")
         if not (math.isfinite(self.drag_per_m) and self.drag_per_m >= 0):
             raise FusionError(f"filter drag_per_m must be finite and >= 0, got "
                               f"{self.drag_per_m!r}")
@@ -321,6 +345,17 @@ class BallFilter:
         self._mu0 = _INIT_BALLISTIC if self._switch else 1.0
         self._mu = self._mu0
         self._e = _ZERO6  # ballistic model's mean minus the supported one's
+        # the turn model (coordinated turn about z, turn rate ω in its state): its probability
+        # ν (0: not in the model set), mean (7,) and covariance (7 x 7 flat)
+        g = options.gravity
+        self._turn = bool(options.turn_switch_per_s) and g[0] == 0.0 and g[1] == 0.0
+        self._turn_switch = options.turn_switch_per_s
+        self._turn_on, self._turn_psd = options.turn_on_psd, options.turn_rate_psd
+        self._turn_var = options.turn_rate_std ** 2
+        self._nu = self._nu_post = 0.0
+        self._turn_age = 0  # accepted updates since the turn model joined
+        self._xt: list[float] = []
+        self._Pt: list[float] = []
         self.time_ns: int | None = None  # time of the state; None: no track
         self._x = [0.0] * 6
         self._P = [0.0] * 36
@@ -348,12 +383,15 @@ class BallFilter:
         self._history = []
         self._cam_last = [self._last_ns] * len(self._cam_last)
         self._mu, self._e = self._mu0, _ZERO6
+        self._nu = 0.0
 
     def state(self):
-        """``(time_ns, x (6,), P (6, 6))`` of the current track, or None without one."""
+        """``(time_ns, x (6,), P (6, 6))`` of the current track (the mixture of the motion
+        models), or None without one."""
         if self.time_ns is None:
             return None
-        return self.time_ns, np.array(self._x), np.array(self._P).reshape(6, 6)
+        x, P = self._combined(self._x, self._P, self._xt, self._Pt, self._nu)
+        return self.time_ns, np.array(x), np.array(P).reshape(6, 6)
 
     def predict(self, time_ns: int):
         """The state predicted to ``time_ns`` (the process model; the state is unchanged).
@@ -368,7 +406,38 @@ class BallFilter:
             return None
         dt = (int(time_ns) - self.time_ns) / NS
         x, P = self._predicted(self._x, self._P, dt, self._prior(dt)[0])
+        nu = self._nu
+        if nu:
+            p = min(self._turn_switch * abs(dt), 0.5)
+            nu = nu * (1.0 - p) + (1.0 - nu) * p
+            xt, Pt = self._turn_predicted(self._xt, self._Pt, dt)
+            x, P = self._combined(x, P, xt, Pt, nu)
         return np.array(x[:3]), np.array(x[3:]), np.array(P).reshape(6, 6)
+
+    @staticmethod
+    def _combined_point(x, P, xt, Pt, nu):
+        """The position (3) and its variances (x, y, z) of :meth:`_combined`."""
+        if not nu:
+            return x, (P[0], P[7], P[14])
+        d0, d1, d2 = xt[0] - x[0], xt[1] - x[1], xt[2] - x[2]
+        w, m = nu * (1.0 - nu), 1.0 - nu
+        return ((x[0] + nu * d0, x[1] + nu * d1, x[2] + nu * d2),
+                (m * P[0] + nu * Pt[0] + w * d0 * d0, m * P[7] + nu * Pt[8] + w * d1 * d1,
+                 m * P[14] + nu * Pt[16] + w * d2 * d2))
+
+    @staticmethod
+    def _combined(x, P, xt, Pt, nu):
+        """The mixture of the ballistic/supported pair ``(x, P)`` (6) and the turn model
+        ``(xt, Pt)`` (7) of probability ``nu``: mean and covariance (6, 6 x 6 flat) with
+        the spread of the means."""
+        if not nu:
+            return x, P
+        d = [xt[i] - x[i] for i in range(6)]
+        xc = [x[i] + nu * d[i] for i in range(6)]
+        w = nu * (1.0 - nu)
+        Pc = [(1.0 - nu) * P[6 * i + j] + nu * Pt[7 * i + j] + w * d[i] * d[j]
+              for i in range(6) for j in range(6)]
+        return xc, Pc
 
     # ---- the filter ----------------------------------------------------------------------
     def _prior(self, dt):
@@ -408,9 +477,9 @@ class BallFilter:
             Pn[vi + 3 + i] += q1
         return xn, Pn
 
-    def _innovation(self, cam: _Cam, x, P, u, v):
+    def _innovation(self, cam: _Cam, x, P, u, v, n=6):
         """``(y0, y1, PHᵀ columns c0 c1, S⁻¹ entries i00 i01 i11, NIS, det S)``, or None
-        if ``x`` is behind the camera."""
+        if ``x`` is behind the camera; ``n`` states (position first), ``P`` n x n flat."""
         proj = cam.project(x[0], x[1], x[2])
         if proj is None:
             return None
@@ -420,7 +489,7 @@ class BallFilter:
         b0, b1, b2 = h1
         # PHᵀ: column r is P[:, :3] · h_r (6 rows)
         c0, c1 = [], []
-        for i in range(0, 36, 6):
+        for i in range(0, n * n, n):
             p0, p1, p2 = P[i], P[i + 1], P[i + 2]
             c0.append(p0 * a0 + p1 * a1 + p2 * a2)
             c1.append(p0 * b0 + p1 * b1 + p2 * b2)
@@ -436,16 +505,64 @@ class BallFilter:
     def _updated(x, P, inn):
         """Kalman update: ``x + K y``, ``P - K (PHᵀ)ᵀ`` with ``K = PHᵀ S⁻¹`` (new lists)."""
         y0, y1, c0, c1, i00, i01, i11 = inn[:7]
-        k0 = [c0[i] * i00 + c1[i] * i01 for i in range(6)]
-        k1 = [c0[i] * i01 + c1[i] * i11 for i in range(6)]
-        xn = [x[i] + k0[i] * y0 + k1[i] * y1 for i in range(6)]
+        n = len(x)
+        k0 = [c0[i] * i00 + c1[i] * i01 for i in range(n)]
+        k1 = [c0[i] * i01 + c1[i] * i11 for i in range(n)]
+        xn = [x[i] + k0[i] * y0 + k1[i] * y1 for i in range(n)]
         Pn = P[:]
-        for i in range(6):
-            ki0, ki1, row = k0[i], k1[i], 6 * i
-            for j in range(i, 6):
+        for i in range(n):
+            ki0, ki1, row = k0[i], k1[i], n * i
+            for j in range(i, n):
                 value = P[row + j] - (ki0 * c0[j] + ki1 * c1[j])
                 Pn[row + j] = value
-                Pn[6 * j + i] = value
+                Pn[n * j + i] = value
+        return xn, Pn
+
+    def _turn_predicted(self, x, P, dt):
+        """The turn model's mean and covariance after ``dt`` seconds (new lists): a
+        coordinated turn at rate ``ω`` about z (the horizontal velocity rotates, speed
+        constant), constant vertical velocity, ``ω`` a random walk; ``P⁻ = F P Fᵀ + Q`` with
+        the Jacobian ``F`` (7 x 7) and the white-noise acceleration ``q`` (as the other
+        models) plus ``q_ω |Δt|`` on ``ω``."""
+        px, py, pz, vx, vy, vz, w = x
+        a = w * dt
+        s, c = math.sin(a), math.cos(a)
+        if abs(a) > 1e-3:
+            sw, cw = s / w, (1.0 - c) / w  # sin(ωΔt)/ω, (1 - cos(ωΔt))/ω
+            dsw, dcw = (dt * c - sw) / w, (dt * s - cw) / w  # their derivatives in ω
+        else:  # their series (ω → 0: a straight line)
+            a2 = a * a
+            sw = dt * (1.0 - a2 / 6.0 * (1.0 - a2 / 20.0))
+            cw = dt * a * (0.5 - a2 / 24.0)
+            dsw = dt * dt * a * (a2 / 30.0 - 1.0 / 3.0)
+            dcw = dt * dt * (0.5 - a2 / 8.0)
+        vxn, vyn = c * vx - s * vy, s * vx + c * vy
+        xn = [px + sw * vx - cw * vy, py + cw * vx + sw * vy, pz + vz * dt, vxn, vyn, vz, w]
+        fx, fy = dsw * vx - dcw * vy, dcw * vx + dsw * vy  # ∂p/∂ω
+        f3, f4 = -dt * vyn, dt * vxn  # ∂v/∂ω
+        # A = F P (rows of P combined by F's sparse rows), then A Fᵀ (A's columns likewise)
+        R0, R1, R2, R3, R4, R5, R6 = (P[k:k + 7] for k in range(0, 49, 7))
+        Pn = []
+        for a0, a1, a2, a3, a4, a5, a6 in (
+                [r0 + sw * r3 - cw * r4 + fx * r6
+                 for r0, r3, r4, r6 in zip(R0, R3, R4, R6, strict=True)],
+                [r1 + cw * r3 + sw * r4 + fy * r6
+                 for r1, r3, r4, r6 in zip(R1, R3, R4, R6, strict=True)],
+                [r2 + dt * r5 for r2, r5 in zip(R2, R5, strict=True)],
+                [c * r3 - s * r4 + f3 * r6 for r3, r4, r6 in zip(R3, R4, R6, strict=True)],
+                [s * r3 + c * r4 + f4 * r6 for r3, r4, r6 in zip(R3, R4, R6, strict=True)], R5, R6):
+            # row i of A: row i of A Fᵀ is F applied to it
+            Pn += (a0 + sw * a3 - cw * a4 + fx * a6, a1 + cw * a3 + sw * a4 + fy * a6,
+                   a2 + dt * a5, c * a3 - s * a4 + f3 * a6, s * a3 + c * a4 + f4 * a6, a5, a6)
+        adt = abs(dt)
+        q = self._q_min
+        q3, q2, q1 = q * adt ** 3 / 3.0, q * dt * adt / 2.0, q * adt
+        for i in range(3):
+            Pn[8 * i] += q3
+            Pn[8 * i + 3] += q2
+            Pn[8 * i + 21] += q2
+            Pn[8 * i + 24] += q1
+        Pn[48] += self._turn_psd * adt
         return xn, Pn
 
     def push(self, time_ns: int, camera: int, u: float, v: float):
@@ -494,26 +611,75 @@ class BallFilter:
         dt = (time_ns - self.time_ns) / NS
         gap_s = (time_ns - self._last_ns) / NS
         c, p = self._prior(dt)
-        x, P = self._predicted(self._x, self._P, dt, c)
+        xg, Pg = self._x, self._P
+        nu = self._nu
+        if not nu and self._turn and (self._q >= self._turn_on or not self._confirmed):
+            # an acceleration the pair lacks (q grew): the turn model joins at the pair's
+            # state, its turn rate unknown (0 ± turn_rate_std)
+            nu = _TURN_START
+            self._xt, self._Pt = self._turn_start(xg, Pg, 0.0, self._turn_var)
+            self._turn_age = 0
+        if nu:
+            nu, xg, Pg, xt, Pt = self._turn_mixed(nu, xg, Pg, dt)
+            xt, Pt = self._turn_predicted(xt, Pt, dt)
+        x, P = self._predicted(xg, Pg, dt, c)
         inn = self._innovation(cam, x, P, u, v)
         jump = 0.0
         mu, e = self._mu, self._e
-        prior_y = inn  # the mixture's innovation (the process noise's whiteness statistic)
-        if inn is not None and self._switch:
-            x, inn, mu, e, nis_min = self._mixed(x, inn, c, p, dt)
+        accepted = False
+        if inn is not None:
+            # the mixture's innovation (the process noise's whiteness statistic)
+            prior_y0, prior_y1 = inn[0], inn[1]
+            if self._switch:
+                x, inn, mu, e, nis_b, nis_s = self._mixed(x, inn, c, p, dt)
+                nis_min = min(nis_b, nis_s)
+            else:
+                nis_b = nis_s = nis_min = inn[7]
+            if nu:
+                inn_t = self._innovation(cam, xt, Pt, u, v, 7)
+                if inn_t is None:  # the turn model's point is behind the camera: it leaves
+                    nu = 0.0
+                else:
+                    nu, nis_t = self._turn_probability(nu, c, nis_b, nis_s, inn[8], inn_t)
+                    nis_min = min(nis_min, nis_t)
+                    prior_y0 += nu * (inn_t[0] - prior_y0)
+                    prior_y1 += nu * (inn_t[1] - prior_y1)
             accepted = nis_min <= self._gate
-        else:
-            accepted = inn is not None and inn[7] <= self._gate
+        nu_post = nu
         if accepted:
             xn, Pn = self._updated(x, P, inn)
+            nis = inn[7]
+            if nu:
+                nu_post = self._nu_post
+                xt, Pt = self._updated(xt, Pt, inn_t)
+                # the mixture's innovation and S⁻¹ (the models' weighted by ν⁺)
+                y0, y1 = inn[0] + nu_post * (inn_t[0] - inn[0]), inn[1] + nu_post * (
+                    inn_t[1] - inn[1])
+                i00, i01, i11 = (inn[4] + nu_post * (inn_t[4] - inn[4]),
+                                 inn[5] + nu_post * (inn_t[5] - inn[5]),
+                                 inn[6] + nu_post * (inn_t[6] - inn[6]))
+                nis = y0 * (i00 * y0 + i01 * y1) + y1 * (i01 * y0 + i11 * y1)
+                xo, pvar = self._combined_point(xn, Pn, xt, Pt, nu_post)
+            else:
+                xo, pvar = xn, (Pn[0], Pn[7], Pn[14])
         else:
+            self._nu = nu  # the turn model's state is its prediction (as the pair's)
+            if nu:
+                self._xt, self._Pt = xt, Pt
             jumped = self._jump(time_ns, camera, u, v) if inn is not None else None
             if jumped is None:  # rejected: the point is the prediction
                 return self._reject(time_ns, camera, u, v, x, P, inn, gap_s)
             xn, Pn, inn = jumped
+            xo, pvar, nis = xn, (Pn[0], Pn[7], Pn[14]), inn[7]
             jump = 1.0
-        proj = cam.project(xn[0], xn[1], xn[2])
+            if nu:  # the turn model restarts at the jump's state, keeping its turn rate
+                xt, Pt = self._turn_start(xn, Pn, xt[6], Pt[48])
+                nu_post = max(nu, _TURN_START)
+        proj = cam.project(xo[0], xo[1], xo[2])
         if proj is None:  # never a point behind the camera that made it
+            self._nu = nu
+            if nu:
+                self._xt, self._Pt = xt, Pt
             return self._reject(time_ns, camera, u, v, x, P, inn, gap_s)
         if accepted:
             history = self._history
@@ -525,23 +691,33 @@ class BallFilter:
                 prev = self._cam_inn[camera]
                 if prev is not None and time_ns - prev[0] <= self._max_gap_ns:
                     # yᵀ S⁻¹ y': zero mean for a consistent filter's (white) innovations
-                    y0, y1 = prior_y[0], prior_y[1]
+                    y0, y1 = prior_y0, prior_y1
                     r = (prev[1] * (inn[4] * y0 + inn[5] * y1)
                          + prev[2] * (inn[5] * y0 + inn[6] * y1))
                     r = min(max(r, -_R_CLIP), _R_CLIP)
                     q = self._q * math.exp(self._q_rate * (r - self._q_target))
                     self._q = min(max(q, self._q_min), self._q_max)
-                self._cam_inn[camera] = (time_ns, prior_y[0], prior_y[1])
+                self._cam_inn[camera] = (time_ns, prior_y0, prior_y1)
             if self._adapt:  # pixel noise by stochastic approximation of E[NIS] = 2
-                var = self._var * (1.0 + self._adapt * (0.5 * inn[7] - 1.0))
+                var = self._var * (1.0 + self._adapt * (0.5 * nis - 1.0))
                 self._var = min(max(var, self._var_min), self._var_max)
-            if inn[7] > self._confirm_nis:  # a surprising update: confirmed like a jump
+            if nis > self._confirm_nis:  # a surprising update: confirmed like a jump
                 self._pending, self._confirms, self._other = camera, 0, False
             elif self._pending >= 0:
                 self._confirms += 1
                 self._other |= camera != self._pending
                 if self._confirms >= _CONFIRM_UPDATES and self._other:
                     self._pending = -1
+            if nu_post:
+                # the model set adapts (variable-structure IMM): the turn model leaves when
+                # it is unlikely, or its turn rate is not told from 0 (the supported model),
+                # once its turn rate has settled and unless q says an acceleration is missing
+                self._turn_age += 1
+                w = xt[6]
+                if (self._turn_age >= _TURN_MIN_UPDATES and self._q < self._turn_on
+                        and (nu_post < _TURN_OFF
+                             or w * w < _TURN_SIGNIFICANT ** 2 * Pt[48])):
+                    nu_post = 0.0
         else:
             self._jump_ns, self._jump_camera = time_ns, camera
             self._cam_inn = [None] * len(self._cam_inn)  # a new segment
@@ -550,14 +726,73 @@ class BallFilter:
             self._mu, self._e = mu, e
         else:
             self._e = _ZERO6  # a jump: a new segment, the models start together
+        self._nu = nu_post
+        if nu_post:
+            self._xt, self._Pt = xt, Pt
         self._x, self._P, self.time_ns, self._last_ns = xn, Pn, time_ns, time_ns
         self._rejects = 0
         self._confirmed += 1
         self._cam_last[camera] = time_ns
         self._window.append((time_ns, camera, u, v))
         del self._window[:-self.options.init_window]
-        return self._point(xn, Pn, math.hypot(inn[0], inn[1]),
-                           math.hypot(u - proj[0], v - proj[1]), inn[7], gap_s, jump, 0.0, 0.0)
+        return self._point(xo, pvar, math.hypot(inn[0], inn[1]),
+                           math.hypot(u - proj[0], v - proj[1]), nis, gap_s, jump, 0.0, 0.0)
+
+    @staticmethod
+    def _turn_start(x, P, w, var):
+        """The turn model's state at the pair's ``(x, P)`` with turn rate ``w ± sqrt(var)``
+        (uncorrelated)."""
+        Pt = []
+        for i in range(0, 36, 6):
+            Pt += P[i:i + 6]
+            Pt.append(0.0)
+        return [*x, w], Pt + [0.0] * 6 + [var]
+
+    def _turn_mixed(self, nu, xg, Pg, dt):
+        """The interacting multiple model's mixing of the pair (ballistic/supported, mean
+        ``xg``, covariance ``Pg``) and the turn model (probability ``nu``) before a step of
+        ``dt``: the turn model is left with probability ``p = min(λ_t |Δt|, 1/2)``; each
+        model starts from the mixture of both weighted by where it came from, spread of the
+        means included (the pair's missing ω is the turn model's).
+        Returns ``(ν⁻, pair's x, P, turn model's x, P)``."""
+        pt = min(self._turn_switch * abs(dt), 0.5)
+        prior = nu * (1.0 - pt) + (1.0 - nu) * pt
+        wt = nu * pt / (1.0 - prior) if prior < 1.0 else 0.0  # turn's share of the pair's
+        wg = (1.0 - nu) * pt / prior  # the pair's share of the turn model's start
+        xt, Pt = self._xt, self._Pt
+        d = [xt[i] - xg[i] for i in range(6)]
+        x0 = [xg[i] + wt * d[i] for i in range(6)]
+        xt0 = [xt[i] - wg * d[i] for i in range(6)]
+        xt0.append(xt[6])
+        sg, st = wt * (1.0 - wt), wg * (1.0 - wg)
+        P0, Pt0 = [], []
+        keep = 1.0 - wg
+        for i in range(6):
+            rg, rt, di = Pg[6 * i: 6 * i + 6], Pt[7 * i: 7 * i + 6], d[i]
+            gd, td = sg * di, st * di
+            P0 += [a + wt * (b - a) + gd * dj for a, b, dj in zip(rg, rt, d, strict=True)]
+            Pt0 += [b + wg * (a - b) + td * dj for a, b, dj in zip(rg, rt, d, strict=True)]
+            # the pair's ω: the turn model's, uncorrelated with the pair's state (a
+            # covariance that stays positive semi-definite)
+            Pt0.append(keep * Pt[7 * i + 6])
+        Pt0 += [keep * a for a in Pt[42:48]]
+        Pt0.append(Pt[48])
+        return prior, x0, P0, xt0, Pt0
+
+    def _turn_probability(self, prior, c, nis_b, nis_s, det, inn_t):
+        """The turn model's probability after the detection (kept in ``_nu_post``) from the
+        models' likelihoods ``N(y; 0, S)``: the pair's is its models' mixture ``c N_b + (1 -
+        c) N_s`` (their common ``det S``); the log ratio is clipped as the pair's.
+        Returns ``(ν⁻, NIS_t)``, ``ν⁻`` the prior (the innovations' weight)."""
+        low = min(nis_b, nis_s)
+        log_pair = (-0.5 * low - 0.5 * math.log(det)
+                    + math.log(c * math.exp(0.5 * (low - nis_b))
+                               + (1.0 - c) * math.exp(0.5 * (low - nis_s))))
+        nis_t = inn_t[7]
+        r = -0.5 * nis_t - 0.5 * math.log(inn_t[8]) - log_pair
+        r = min(max(r, -_LOG_ODDS_CLIP), _LOG_ODDS_CLIP)
+        self._nu_post = prior / (prior + (1.0 - prior) * math.exp(-r))
+        return prior, nis_t
 
     def _mixed(self, x, inn, c, p, dt):
         """The interacting multiple model step with a covariance the two models share.
@@ -570,7 +805,7 @@ class BallFilter:
         minus ``H`` of their offsets (linearised), their likelihood ratio (equal ``S``)
         ``exp((NIS_s - NIS_b) / 2)`` gives ``μ⁺``; the mixture is re-weighted with ``μ⁺``
         (``x + (μ⁺ - c) e``) and ``e`` updated to ``(I - K H) e``.
-        Returns ``(x, innovation, μ⁺, e⁺, min(NIS_b, NIS_s))``."""
+        Returns ``(x, innovation, μ⁺, e⁺, NIS_b, NIS_s)``."""
         y0, y1, c0, c1, i00, i01, i11, _, det, h0, h1 = inn
         mu = self._mu
         e = self._e
@@ -594,7 +829,7 @@ class BallFilter:
         # (I - K H) e with K = PHᵀ S⁻¹
         g0, g1 = i00 * hd0 + i01 * hd1, i01 * hd0 + i11 * hd1
         e = [e[i] - c0[i] * g0 - c1[i] * g1 for i in range(6)]
-        return xn, (y0, y1, c0, c1, i00, i01, i11, nis, det, h0, h1), mu, e, min(nis_b, nis_s)
+        return xn, (y0, y1, c0, c1, i00, i01, i11, nis, det, h0, h1), mu, e, nis_b, nis_s
 
     def _jump(self, time_ns, camera, u, v):
         """A bounce or a kick: a velocity jump (a bounce's, mostly along gravity, then a
@@ -679,7 +914,8 @@ class BallFilter:
         nis = _NAN if inn is None else inn[7]
         inn_px = _NAN if inn is None else math.hypot(inn[0], inn[1])
         self._x, self._P, self.time_ns = x, P, time_ns
-        out = self._point(x, P, inn_px, inn_px, nis, gap_s, 0.0, 1.0, 0.0)
+        xo, var = self._combined_point(x, P, self._xt, self._Pt, self._nu)
+        out = self._point(xo, var, inn_px, inn_px, nis, gap_s, 0.0, 1.0, 0.0)
         if self._rejects >= self.options.max_rejects:  # lost: restart from the window
             self.time_ns = None
             restart = self._try_window()
@@ -688,8 +924,9 @@ class BallFilter:
         return out
 
     @staticmethod
-    def _point(x, P, innovation, residual, nis, gap_s, jump, rejected, init):
-        vx, vy, vz = P[0], P[7], P[14]
+    def _point(x, var, innovation, residual, nis, gap_s, jump, rejected, init):
+        """The point and its quality; ``var`` the position's variances (x, y, z)."""
+        vx, vy, vz = var
         return ((x[0], x[1], x[2]),
                 (math.sqrt(vx + vy + vz), math.sqrt(vx), math.sqrt(vy), math.sqrt(vz),
                  innovation, residual, nis, gap_s, jump, rejected, init))
@@ -721,7 +958,9 @@ class BallFilter:
                 self.set_state(window[-1][0], x[:3], x[3:], P)
                 for t, c, _, _ in window:
                     self._cam_last[c] = t
-                return self._point(self._x, self._P, _NAN, float(residuals[-1]), _NAN, _NAN,
+                P = self._P
+                return self._point(self._x, (P[0], P[7], P[14]), _NAN, float(residuals[-1]),
+                                   _NAN, _NAN,
                                    0.0, 0.0, 1.0)
             del window[0]
         return None
