@@ -405,8 +405,11 @@ class BallFilter:
         if self.time_ns is None:
             return None
         dt = (int(time_ns) - self.time_ns) / NS
-        x, P = self._predicted(self._x, self._P, dt, self._prior(dt)[0])
         nu = self._nu
+        if nu == 1.0:  # the turn model alone
+            x, P = self._turn_predicted(self._xt, self._Pt, dt)
+            return np.array(x[:3]), np.array(x[3:6]), np.array(_block6(P)).reshape(6, 6)
+        x, P = self._predicted(self._x, self._P, dt, self._prior(dt)[0])
         if nu:
             p = min(self._turn_switch * abs(dt), 0.5)
             nu = nu * (1.0 - p) + (1.0 - nu) * p
@@ -613,21 +616,35 @@ class BallFilter:
         c, p = self._prior(dt)
         xg, Pg = self._x, self._P
         nu = self._nu
-        if not nu and self._turn and (self._q >= self._turn_on or not self._confirmed):
-            # an acceleration the pair lacks (q grew): the turn model joins at the pair's
-            # state, its turn rate unknown (0 ± turn_rate_std)
+        if nu == 1.0 and self._q >= self._turn_on:
+            # an acceleration the turn model lacks (q grew): the pair rejoins at its state
+            nu = 1.0 - _TURN_START
+            self._mu, self._e = self._mu0, _ZERO6
+            self._turn_age = 0
+        elif not nu and self._turn and (self._q >= self._turn_on or not self._confirmed):
+            # at a track's start, or an acceleration the pair lacks (q grew): the turn model
+            # joins at the pair's state, its turn rate unknown (0 ± turn_rate_std)
             nu = _TURN_START
             self._xt, self._Pt = self._turn_start(xg, Pg, 0.0, self._turn_var)
             self._turn_age = 0
-        if nu:
-            nu, xg, Pg, xt, Pt = self._turn_mixed(nu, xg, Pg, dt)
-            xt, Pt = self._turn_predicted(xt, Pt, dt)
-        x, P = self._predicted(xg, Pg, dt, c)
-        inn = self._innovation(cam, x, P, u, v)
-        jump = 0.0
+        solo = nu == 1.0  # the turn model alone (the pair left the model set)
         mu, e = self._mu, self._e
+        jump = 0.0
         accepted = False
-        if inn is not None:
+        if solo:
+            xt, Pt = self._turn_predicted(self._xt, self._Pt, dt)
+            x, P = xt[:6], _block6(Pt)
+            inn = inn_t = self._innovation(cam, xt, Pt, u, v, 7)
+            if inn is not None:
+                prior_y0, prior_y1 = inn[0], inn[1]
+                accepted = inn[7] <= self._gate
+        else:
+            if nu:
+                nu, xg, Pg, xt, Pt = self._turn_mixed(nu, xg, Pg, dt)
+                xt, Pt = self._turn_predicted(xt, Pt, dt)
+            x, P = self._predicted(xg, Pg, dt, c)
+            inn = self._innovation(cam, x, P, u, v)
+        if inn is not None and not solo:
             # the mixture's innovation (the process noise's whiteness statistic)
             prior_y0, prior_y1 = inn[0], inn[1]
             if self._switch:
@@ -646,7 +663,11 @@ class BallFilter:
                     prior_y1 += nu * (inn_t[1] - prior_y1)
             accepted = nis_min <= self._gate
         nu_post = nu
-        if accepted:
+        if accepted and solo:
+            xt, Pt = self._updated(xt, Pt, inn)
+            xn, Pn, nis = xt[:6], _block6(Pt), inn[7]
+            xo, pvar = xt, (Pt[0], Pt[8], Pt[16])
+        elif accepted:
             xn, Pn = self._updated(x, P, inn)
             nis = inn[7]
             if nu:
@@ -672,9 +693,12 @@ class BallFilter:
             xn, Pn, inn = jumped
             xo, pvar, nis = xn, (Pn[0], Pn[7], Pn[14]), inn[7]
             jump = 1.0
-            if nu:  # the turn model restarts at the jump's state, keeping its turn rate
+            if nu:  # the turn model restarts at the jump's state, keeping its turn rate;
+                # the pair is back in the set (a new segment, its motion unknown)
                 xt, Pt = self._turn_start(xn, Pn, xt[6], Pt[48])
-                nu_post = max(nu, _TURN_START)
+                nu_post = min(max(nu, _TURN_START), 1.0 - _TURN_START)
+                if solo:
+                    self._mu = mu = self._mu0
         proj = cam.project(xo[0], xo[1], xo[2])
         if proj is None:  # never a point behind the camera that made it
             self._nu = nu
@@ -714,10 +738,13 @@ class BallFilter:
                 # once its turn rate has settled and unless q says an acceleration is missing
                 self._turn_age += 1
                 w = xt[6]
-                if (self._turn_age >= _TURN_MIN_UPDATES and self._q < self._turn_on
-                        and (nu_post < _TURN_OFF
-                             or w * w < _TURN_SIGNIFICANT ** 2 * Pt[48])):
-                    nu_post = 0.0
+                if self._turn_age >= _TURN_MIN_UPDATES and self._q < self._turn_on:
+                    if nu_post < _TURN_OFF or w * w < _TURN_SIGNIFICANT ** 2 * Pt[48]:
+                        nu_post = 0.0
+                    elif nu_post > 1.0 - _TURN_OFF and not solo:
+                        # the pair is unlikely: it leaves, the turn model goes on alone
+                        nu_post = 1.0
+                        xn, Pn = xt[:6], _block6(Pt)
         else:
             self._jump_ns, self._jump_camera = time_ns, camera
             self._cam_inn = [None] * len(self._cam_inn)  # a new segment
@@ -1053,6 +1080,11 @@ class BallFilter:
             res.append(u - pu)
             res.append(v - pv)
         return np.array(rows), np.array(res)
+
+
+def _block6(P):
+    """The position-velocity block (6 x 6 flat) of a 7 x 7 flat covariance."""
+    return P[0:6] + P[7:13] + P[14:20] + P[21:27] + P[28:34] + P[35:41]
 
 
 def _chi2_quantile(dof: int, z: float = 3.09) -> float:
