@@ -11,9 +11,11 @@ and ``turntable`` (no gravity, or a centripetal acceleration), and a ball rollin
 floor with rolling friction, kicked along it (``roll``, of ``tests/test_filter.py``), seen by
 cameras around a 3 x 2 m floor with type-A shutters: 3 cameras at 30 fps (two rallies, one
 throw, the four non-ballistic motions), 2 and 4 cameras, 3 cameras at 60 fps, 3 cameras with lens
-distortion; noise 0, 0.3 and 1 px.
+distortion; the turning motions (``spiral``, ``turntable``: the turn model) also on the built-in
+``paper3`` (type-A shutters), 4 cameras and 3 distorting cameras; noise 0, 0.3 and 1 px.
 
-Latency: every detection of a 3-camera rally pushed one at a time, (a) into
+Latency: every detection of a 3-camera rally, and of 10 s of ``turntable`` (where the turn
+model is at work, alone once the other two left the model set), pushed one at a time, (a) into
 :class:`pslog.fusion.filter.BallFilter` (the filter's own streaming form, which live mode
 uses) and (b) through :class:`pslog.fusion.stream.StreamFuser` (order check and a Track per
 push included); median and p99 per detection, in CPU time of this process (the target's
@@ -47,6 +49,7 @@ from pslog.evaluation import evaluate  # noqa: E402
 from pslog.fusion import fuse  # noqa: E402
 from pslog.fusion.filter import BallFilter  # noqa: E402
 from pslog.fusion.stream import StreamFuser  # noqa: E402
+from pslog.rig import apply_timing, builtin_rig  # noqa: E402
 
 METHODS = ("typeA", "smooth", "filter")
 NOISES = (0.0, 0.3, 1.0)
@@ -71,6 +74,7 @@ def sessions(seconds: float):
     fast, _ = rally(seconds, seed=3)
     slow, _ = rally(seconds, seed=7, speed=4.0, kick_every_s=0.7)
     throw = get_motion("throw")
+    paper3 = apply_timing(builtin_rig("paper3"), "typeA")
     return [
         ("rally, 3 cams 30 fps", bench_rig(3), fast, seconds),
         ("slow rally, 3 cams", bench_rig(3), slow, seconds),
@@ -85,6 +89,14 @@ def sessions(seconds: float):
         ("straight, 3 cams", bench_rig(3), get_motion("straight"), None),
         ("turntable, 3 cams", bench_rig(3), get_motion("turntable"), None),
         ("roll (kicked), 3 cams", bench_rig(3), roll(seconds, seed=1), seconds),
+        # turning (the turn model) on other rigs: the paper's, 4 cameras, lens distortion
+        ("spiral, paper3", paper3, get_motion("spiral"), None),
+        ("turntable, paper3", paper3, get_motion("turntable"), None),
+        ("spiral, 4 cams", bench_rig(4), get_motion("spiral"), None),
+        ("turntable, 4 cams", bench_rig(4), get_motion("turntable"), None),
+        ("spiral, 3 cams distorted", bench_rig(3, distortion=True), get_motion("spiral"), None),
+        ("turntable, 3 cams dist.", bench_rig(3, distortion=True), get_motion("turntable"),
+         None),
     ]
 
 
