@@ -19,6 +19,19 @@ equations, exactly as implemented, are in ``docs/methods.md`` (section ``filter`
   filter carries one covariance, the mixture's mean, the ballistic model's probability ``μ``
   and the difference ``e`` of the models' means; the models' likelihoods (equal ``S``)
   differ only by their innovations, ``e`` accumulating gravity's effect over the updates;
+- a third model, a *coordinated turn* about the vertical with the turn rate ``ω`` in its
+  state (7 states, its own covariance; Bar-Shalom et al. chapter 11; Li & Jilkov, "Survey
+  of maneuvering target tracking. Part I: Dynamic models", IEEE Trans. AES 39(4), 2003,
+  section 4): the horizontal velocity turns by ``ω Δt`` per step, speed kept, constant
+  vertical velocity, no gravity (a ball swung, on a turntable, circling), process noise
+  the adapted ``q`` plus ``turn_rate_psd`` on ``ω``. It is mixed with the pair (ballistic,
+  supported) by a second interacting multiple model (switching at ``turn_switch_per_s``)
+  in a *variable* model set (Li & Bar-Shalom, "Multiple-model estimation with variable
+  structure", IEEE Trans. AC 41(4), 1996): it joins at a track's start and when the adapted
+  ``q`` reaches ``turn_on_psd`` (an acceleration the pair lacks), leaves when unlikely or
+  its ``ω`` is within 2σ of 0; the pair leaves while the turn model alone explains the
+  motion and rejoins when ``q`` grows again or at a jump. So a flight pays for one model
+  set and a circle for the other, not both;
 - the pixel noise ``σ`` adapts to the detector's (``E[NIS] = 2``); the process noise ``q``
   adapts to the motion: a consistent filter's innovations are white, a lagging one's
   consecutive innovations of a camera agree, so ``q`` grows with their product (a spiral, a
@@ -558,7 +571,7 @@ class BallFilter:
             Pn += (a0 + sw * a3 - cw * a4 + fx * a6, a1 + cw * a3 + sw * a4 + fy * a6,
                    a2 + dt * a5, c * a3 - s * a4 + f3 * a6, s * a3 + c * a4 + f4 * a6, a5, a6)
         adt = abs(dt)
-        q = self._q_min
+        q = self._q
         q3, q2, q1 = q * adt ** 3 / 3.0, q * dt * adt / 2.0, q * adt
         for i in range(3):
             Pn[8 * i] += q3
