@@ -650,15 +650,17 @@ def _stream(rig, logged):
     return parts
 
 
-@pytest.mark.parametrize("clock", [False, True])
-def test_streaming_equals_batch_exactly_with_misses_drops_and_outliers(clock):
+@pytest.mark.parametrize("clock, turning", [(False, False), (True, False), (False, True),
+                                            (True, True)])
+def test_streaming_equals_batch_exactly_with_misses_drops_and_outliers(clock, turning):
+    # a rally, and a ball swung then released (the turn model alone, then the pair again)
     base = lab_rig(3)
     a, b, c = base.names
     faults = dict(clock_offset_s={b: 0.0123, c: -0.0071}, clock_drift_ppm={b: 40.0, c: -25.0},
                   readout_s={a: 0.012, b: 0.02, c: 0.015}) if clock else {}
     options = SimulationOptions(noise_px=0.5, miss_rate=0.3, drop_rate=0.1, seed=4, **faults)
-    motion, _ = rally(4.0, seed=4)
-    detections, _ = simulate(base, motion, 4.0, options)
+    motion, seconds = (swing(1.6), 2.0) if turning else (rally(4.0, seed=4)[0], 4.0)
+    detections, _ = simulate(base, motion, seconds, options)
     rig = true_rig(base, options)
     logged = detections.best()
     uv = logged.uv.copy()
@@ -666,11 +668,19 @@ def test_streaming_equals_batch_exactly_with_misses_drops_and_outliers(clock):
     spurious = rng.choice(len(uv), len(uv) // 20, replace=False)
     uv[spurious] = rng.uniform([0, 0], [800, 600], (len(spurious), 2))
     logged = Observations(logged.time_ns, logged.camera, uv, logged.frame_index)
-    batch = fuse(corrected_observations(
-        type(detections).from_observations(detections.camera_names, logged), rig), rig,
-        "filter")
+    corrected = corrected_observations(
+        type(detections).from_observations(detections.camera_names, logged), rig)
+    batch = fuse(corrected, rig, "filter")
     parts = _stream(rig, logged)
     assert len(batch) > 100 and np.sum(batch.quality["rejected"]) > 0
+    if turning:  # the turn model alone for a while, then the pair back after the release
+        flt = BallFilter(rig)
+        nus = []
+        for t, cam, (u, v) in zip(corrected.time_ns.tolist(), corrected.camera.tolist(),
+                                  corrected.uv.tolist(), strict=True):
+            flt.push(t, cam, u, v)
+            nus.append(flt._nu)
+        assert max(nus) == 1.0 and nus[-1] < 1.0
     assert_array_equal(np.concatenate([p.time_ns for p in parts]), batch.time_ns)
     assert_array_equal(np.concatenate([p.camera for p in parts]), batch.camera)
     assert_array_equal(np.concatenate([p.position_world for p in parts]), batch.position_world)
