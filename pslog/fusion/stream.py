@@ -140,12 +140,8 @@ class StreamFuser:
         end with no common instant left, for the methods that need one, emits nothing)."""
         if self._gate is not None:  # the frames the gate still held, then the rest
             gate, self._gate = self._gate, None
-            early, rest = self.push(*gate.flush()), self.flush()
-            return rest if not len(early) else early if not len(rest) else Track(
-                rest.method, np.r_[early.time_ns, rest.time_ns],
-                np.vstack([early.position_world, rest.position_world]),
-                np.r_[early.camera, rest.camera],
-                {k: np.r_[early.quality[k], v] for k, v in rest.quality.items()})
+            early = self.push(*gate.flush())
+            return Track.concat([early, self.flush()])  # every column and count of both
         self._admit(final=True)
         return self._settled(final=True)
 
