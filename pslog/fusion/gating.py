@@ -48,6 +48,9 @@ tolerance) and from its own earlier decisions, so a causal method fed by it stay
 
 from __future__ import annotations
 
+import math
+from bisect import bisect_left, bisect_right
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -248,11 +251,22 @@ def _candidates(detections: Detections, rig: Rig) -> _Candidates:
     for i, cam in enumerate(rig.cameras):
         rows = np.flatnonzero(camera == i)
         if len(rows):
-            uv = detections.cand_uv[rows]
-            sane = np.all(np.abs(uv) <= 10 * max(cam.width, cam.height), axis=1)
-            uv_und[rows[sane]] = cam.undistort(uv[sane])
-            ray_dir[rows[sane]] = cam.rays(uv[sane])[1]
+            uv_und[rows], ray_dir[rows] = _pixel_geometry(cam, detections.cand_uv[rows])
     return _Candidates(camera, time_ns, uv_und, ray_dir, frame)
+
+
+def _pixel_geometry(cam, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Undistorted pixels (n, 2) and unit world viewing rays (n, 3) of one camera's
+    distorted pixels ``uv`` (n, 2); NaN for a pixel far outside the image (a damaged file).
+    Row by row: the same bits for any subset of rows (the stream computes each frame's)."""
+    uv_und = np.full((len(uv), 2), np.nan)
+    ray_dir = np.full((len(uv), 3), np.nan)
+    sane = np.all(np.abs(uv) <= 10 * max(cam.width, cam.height), axis=1)
+    if sane.all():
+        return cam.undistort(uv), cam.rays(uv)[1]
+    uv_und[sane] = cam.undistort(uv[sane])
+    ray_dir[sane] = cam.rays(uv[sane])[1]
+    return uv_und, ray_dir
 
 
 def epipolar_distance(F_ab: np.ndarray, uv_a: np.ndarray, uv_b: np.ndarray) -> np.ndarray:
@@ -426,15 +440,21 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
     return static, stillness
 
 
-def _points(c: _Candidates, rig: Rig, ratio: np.ndarray, carried: np.ndarray):
+def _rig_constants(rig: Rig):
+    """(centres (m, 3), K⁻¹ (m, 3, 3), R (m, 3, 3)) of the rig's cameras, for :func:`_points`."""
+    return (np.array([cam.center_world for cam in rig.cameras]),
+            np.array([np.linalg.inv(cam.K) for cam in rig.cameras]),
+            np.array([cam.R for cam in rig.cameras]))
+
+
+def _points(c: _Candidates, rig: Rig, ratio: np.ndarray, carried: np.ndarray, constants=None):
     """Each candidate's 3D point: its ray and its supporting cameras' carried rays crossed
     (least squares); NaN without support. Also whether it lies in front of every camera
     used, and the RMS distance of the point to those rays, metres (three or more rays that
-    do not meet: the supports are not one ball)."""
+    do not meet: the supports are not one ball). Row by row (the same bits for any subset);
+    ``constants``: :func:`_rig_constants` of ``rig`` (computed when None)."""
     n, m = ratio.shape
-    centers = np.array([cam.center_world for cam in rig.cameras])
-    K_inv = np.array([np.linalg.inv(cam.K) for cam in rig.cameras])
-    R = np.array([cam.R for cam in rig.cameras])
+    centers, K_inv, R = constants or _rig_constants(rig)
     origins = np.zeros((n, m + 1, 3))
     dirs = np.zeros((n, m + 1, 3))
     valid = np.zeros((n, m + 1), dtype=bool)
@@ -669,12 +689,38 @@ def _chosen_candidates(detections: Detections, chosen: np.ndarray) -> Detections
                       detections.cand_radius[chosen], detections.cand_score[chosen])
 
 
+class _Frame:
+    """One frame pushed to a :class:`StreamGate`: its candidates (best first) and what the
+    gate computed of them once (corrected times, undistorted pixels, rays; once decided,
+    their 3D points and rejection reasons)."""
+
+    __slots__ = ("camera", "index", "key", "points", "ray_dir", "reason", "t", "time_ns", "uv",
+                 "uv_und")
+
+    def __init__(self, t: int, camera: int, index: int, uv: np.ndarray, time_ns: np.ndarray,
+                 uv_und: np.ndarray, ray_dir: np.ndarray) -> None:
+        self.t, self.camera, self.index, self.uv = t, camera, index, uv
+        self.time_ns = time_ns.tolist()  # corrected, per candidate (Python ints)
+        self.uv_und, self.ray_dir = uv_und, ray_dir
+        self.key = self.time_ns[0]  # the frame's time: its best candidate's (_frame_table)
+        self.reason: np.ndarray | None = None
+        self.points: list | None = None
+
+
 class StreamGate:
     """The causal gate of :func:`gate` for a stream: frames pushed as they arrive, each
     frame's candidates in one push, best first; each frame is decided once nothing still to
     come can change its choice, and the chosen candidates come out in the pushed (logged)
     order. The choices equal ``gate(detections, rig, causal=True, wait_s=...)`` on the whole
-    session (the same decision code, in the same order, with the same history).
+    session: the same arithmetic in the same order on the same history, bit for bit.
+
+    Incremental: a frame's geometry (corrected times, undistorted pixels, rays) is computed
+    once, when pushed; deciding it computes only its own candidates' epipolar support (the
+    two latest frames of each other camera, :func:`_support`'s causal rule written per
+    candidate), their 3D points, their stillness against the same camera's earlier frames'
+    stored points (:func:`_static`'s rule) and the sequential choice (:class:`_Decider`).
+    Each camera's frames are kept in (corrected time, push) order, as :func:`_frame_table`
+    orders them, for ``history`` seconds: a few hundred candidates.
 
     Used by :class:`pslog.fusion.stream.StreamFuser` with ``candidates=True``.
     """
@@ -691,13 +737,18 @@ class StreamGate:
         self.clock = camera_parameters(rig)
         self.corrected = any(cam.has_clock_correction for cam in rig.cameras)
         spread = float(np.sum(np.abs(self.clock["clock_offset"])) + np.max(self.clock["readout"]))
+        # frames older than this (logged) reach no later choice: neither as support (at
+        # most max_gap_s away) nor as a stillness reference (1.5 static_s)
         self.history_ns = round((2 * (max_gap_s or default_max_gap_s(rig)) + wait_s
                                  + 1.5 * self.options.static_s + 0.2 + 2 * spread) * NS)
         self.decider = _Decider(rig, self.options)
-        # the window: one entry per frame, in pushed order:
-        # [logged time, camera, frame index, uv (k, 2), reason (k,) or None, released,
-        #  then, once decided, its candidates' 3D points (k, 3)]
-        self.frames: list[list] = []
+        self.constants = _rig_constants(rig)
+        self.lags = [int(np.ceil(self.options.static_s * cam.fps)) for cam in rig.cameras]
+        # per camera: its frames in (corrected time, push) order and their times
+        self.keys: list[list[int]] = [[] for _ in rig.cameras]
+        self.by_camera: list[list[_Frame]] = [[] for _ in rig.cameras]
+        self.pending: list[_Frame] = []  # not decided yet, in pushed order
+        self.unreleased: deque[_Frame] = deque()  # not returned yet, in pushed order
         self.last: tuple[int, int] = (np.iinfo(np.int64).min, -1)
         self.rejected: list[tuple] = []
 
@@ -720,8 +771,8 @@ class StreamGate:
                                       "their logged times, each frame's in one push; got "
                                       f"t={keys[start][0]} ns after t={self.last[0]} ns")
                 self.last = keys[start]
-                self.frames.append([keys[start][0], keys[start][1], int(frame_index[start]),
-                                    uv[start:i].copy(), None, False])
+                self._add(keys[start][0], keys[start][1], int(frame_index[start]),
+                          uv[start:i].copy())
                 start = i
         return self._step(final=False)
 
@@ -735,72 +786,146 @@ class StreamGate:
         return Rejections.from_rows([(t, c, f, u, v, 1.0, REASONS[r])
                                      for t, c, f, u, v, r in self.rejected])
 
+    def _add(self, t: int, cam: int, index: int, uv: np.ndarray) -> None:
+        p = self.clock
+        # as _candidates: each candidate at its own row's corrected time
+        time_ns = true_times_ns(np.full(len(uv), t), uv[:, 1], p["height"][cam],
+                                p["clock_offset"][cam], p["clock_drift_ppm"][cam],
+                                p["readout"][cam])
+        frame = _Frame(t, cam, index, uv, time_ns, *_pixel_geometry(self.rig.cameras[cam], uv))
+        at = bisect_right(self.keys[cam], frame.key)  # after equal times: push order
+        self.keys[cam].insert(at, frame.key)
+        self.by_camera[cam].insert(at, frame)
+        self.pending.append(frame)
+        self.unreleased.append(frame)
+
     def _step(self, final: bool):
-        frames = self.frames
-        if frames:
-            names = self.rig.names
-            counts = np.array([len(f[3]) for f in frames])
-            det = Detections(names, np.array([f[0] for f in frames], np.int64),
-                             np.array([f[1] for f in frames], np.int32),
-                             np.array([f[2] for f in frames], np.int64),
-                             np.repeat(np.arange(len(frames)), counts),
-                             np.concatenate([f[3] for f in frames]),
-                             np.full(int(counts.sum()), np.nan), np.ones(int(counts.sum())))
-            c = _candidates(det, self.rig)
-            first = np.r_[0, np.cumsum(counts)[:-1]]
-            key = c.time_ns[first]
-            todo = np.array([f[4] is None for f in frames])
-            if not final:
+        if self.pending:
+            todo = self.pending
+            if not final:  # the frames nothing still to come can change (as gate() decides)
                 if self.corrected:
                     p = self.clock
                     bound = int(np.min(true_times_ns(
                         np.full(len(self.rig), self.last[0]), 0.0, p["height"],
                         p["clock_offset"], p["clock_drift_ppm"], p["readout"])))
-                    todo &= key + self.wait_ns < bound
+                    todo = [f for f in todo if f.key + self.wait_ns < bound]
                 elif self.wait_ns:
-                    todo &= key + self.wait_ns < self.last[0]
-            if todo.any():
-                rows = np.flatnonzero(todo)
-                rows = rows[np.lexsort((det.frame_camera[rows], key[rows]))]
-                only = todo[c.frame]
-                tables = _frame_table(c, len(self.rig))
-                ratio, carried = _support(c, self.rig, self.F, tables, self.options,
-                                          self.max_gap_ns, True, self.wait_ns, only)
-                points, in_front, miss = _points(c, self.rig, ratio, carried)
-                points[miss > self.options.track_m] = np.nan  # as gate()
-                # the decided frames' points, as computed when they were decided (a point
-                # uses nothing after its time: the same as now), for the stillness test
-                for f in np.flatnonzero(~todo).tolist():
-                    if len(frames[f]) > 6:  # decided; the others are later than any to do
-                        points[first[f]:first[f] + counts[f]] = frames[f][6]
-                for f in rows.tolist():
-                    frames[f].append(points[first[f]:first[f] + counts[f]].copy())
-                reason = np.full(len(c.frame), -1, dtype=np.int8)
-                self.decider.run(c, [(int(first[f]), int(first[f] + counts[f])) for f in rows],
-                                 ratio, points, in_front, reason,
-                                 _static(c, tables, self.rig, self.options, points))
-                for f in rows.tolist():
-                    frames[f][4] = reason[first[f]:first[f] + counts[f]]
+                    todo = [f for f in todo if f.key + self.wait_ns < self.last[0]]
+            if todo:
+                # gate()'s order: (time, camera), then push (frame) order
+                for f in sorted(todo, key=lambda f: (f.key, f.camera)):
+                    self._decide(f)
+                self.pending = [f for f in self.pending if f.reason is None]
         out = []
-        for f in frames:  # release decided frames in pushed order
-            if f[4] is None:
-                break
-            if not f[5]:
-                f[5] = True
-                for k, r in enumerate(f[4].tolist()):
-                    if r < 0:
-                        out.append((f[0], f[1], f[3][k], f[2]))
-                    else:
-                        self.rejected.append((f[0], f[1], f[2], *f[3][k], r))
+        while self.unreleased and self.unreleased[0].reason is not None:
+            f = self.unreleased.popleft()  # released in pushed order
+            for k, r in enumerate(f.reason.tolist()):
+                if r < 0:
+                    out.append((f.t, f.camera, f.uv[k], f.index))
+                else:
+                    self.rejected.append((f.t, f.camera, f.index, *f.uv[k].tolist(), r))
         # keep the history a later choice can reach
-        while frames and frames[0][5] and frames[0][0] < self.last[0] - self.history_ns:
-            frames.pop(0)
+        old = self.last[0] - self.history_ns
+        for keys, frames in zip(self.keys, self.by_camera, strict=True):
+            drop = 0
+            while drop < len(frames) and frames[drop].reason is not None and frames[drop].t < old:
+                drop += 1
+            if drop:
+                del keys[:drop], frames[:drop]
         if not out:
             return (np.zeros(0, np.int64), np.zeros(0, np.int32), np.zeros((0, 2)),
                     np.zeros(0, np.int64))
         t, cam, uv, idx = zip(*out, strict=True)
         return (np.array(t, np.int64), np.array(cam, np.int32), np.array(uv),
                 np.array(idx, np.int64))
+
+    def _decide(self, f: _Frame) -> None:
+        """Decide one frame: the steps of :func:`gate` on its candidates alone."""
+        o = self.options
+        k, a = len(f.uv), f.camera
+        ratio, carried = self._support(f)
+        c = _Candidates(np.full(k, a, np.int32), np.array(f.time_ns, np.int64), f.uv_und,
+                        f.ray_dir, np.zeros(k, np.int64))
+        points, in_front, miss = _points(c, self.rig, ratio, carried, self.constants)
+        points[miss > o.track_m] = np.nan  # as gate()
+        f.points = points.tolist()
+        # _static's rule on this frame: still against each of the camera's lags frames before
+        frames, at = self.by_camera[a], self.by_camera[a].index(f)
+        lags = self.lags[a]
+        run = np.zeros(k)
+        for lag in range(1, min(lags, at) + 1):
+            prev = frames[at - lag]
+            if not f.key - prev.key <= 1.5 * o.static_s * NS:  # (recent)
+                continue
+            for j, (x, y, z) in enumerate(f.points):
+                best = math.inf
+                for px, py, pz in prev.points:
+                    dx, dy, dz = x - px, y - py, z - pz
+                    d = math.sqrt(dx * dx + dy * dy + dz * dz)  # np.linalg.norm's order
+                    if d < best:  # NaN (no point) never is
+                        best = d
+                if best <= o.static_m:
+                    run[j] += 1.0
+        reason = np.full(k, -1, dtype=np.int8)
+        self.decider.run(c, [(0, k)], ratio, points, in_front, reason,
+                         (run >= 0.75 * lags, run / lags))
+        f.reason = reason
+
+    def _support(self, f: _Frame):
+        """:func:`_support` (causal) of one frame's candidates: from each other camera b,
+        its candidates of the two latest frames at or before ``t`` (+ wait) carried to ``t``
+        (linear extrapolation), else of the one latest frame, within ``max_gap_s``."""
+        o = self.options
+        k, m, a = len(f.uv), len(self.rig), f.camera
+        ratio = np.full((k, m), np.nan)
+        carried = np.full((k, m, 2), np.nan)
+        epi, vmax, gap = o.epipolar_px, o.max_image_speed_px_s, self.max_gap_ns
+        half_accel = 0.5 * o.accel_px_s2
+        for b in range(m):
+            keys = self.keys[b]
+            if b == a or not keys:
+                continue
+            frames = self.by_camera[b]
+            lines = epipolar_lines(self.F[a, b], f.uv_und).tolist()
+            search = bisect_right if (self.wait_ns > 0 or b < a) else bisect_left
+            for j, t in enumerate(f.time_ns):
+                last = search(keys, t + self.wait_ns) - 1
+                if last < 0:
+                    continue
+                l0, l1, l2 = lines[j]
+                f1 = frames[last]
+                if last >= 1 and abs(t - frames[last - 1].key) <= gap and abs(t - f1.key) <= gap:
+                    f0 = frames[last - 1]
+                    best, best_uv = math.inf, None
+                    und0, und1 = f0.uv_und.tolist(), f1.uv_und.tolist()
+                    for t0, (u0, v0) in zip(f0.time_ns, und0, strict=True):
+                        for t1, (u1, v1) in zip(f1.time_ns, und1, strict=True):
+                            span = (t1 - t0) / NS
+                            if not span > 0:
+                                continue
+                            w = (t - t0) / NS / span
+                            du, dv = u1 - u0, v1 - v0
+                            yu, yv = u0 + w * du, v0 + w * dv
+                            if not math.sqrt(du * du + dv * dv) / abs(span) <= vmax:
+                                continue
+                            tau = epi + half_accel * abs(t - t0) / NS * abs(t - t1) / NS
+                            d = abs(l0 * yu + l1 * yv + l2)
+                            if math.isfinite(d) and d / tau < best:  # argmin: the first
+                                best, best_uv = d / tau, (yu, yv)
+                    ratio[j, b] = best
+                    if best_uv is not None:
+                        carried[j, b] = best_uv
+                elif abs(t - f1.key) <= gap:  # a single nearby frame, as it is
+                    best, best_uv = math.inf, None
+                    for t1, (u1, v1) in zip(f1.time_ns, f1.uv_und.tolist(), strict=True):
+                        tau = epi + vmax * (abs(t - t1) / NS)
+                        d = abs(l0 * u1 + l1 * v1 + l2)
+                        r = d / tau if math.isfinite(d) else math.inf
+                        if best_uv is None or r < best:
+                            best, best_uv = r, (u1, v1)
+                    ratio[j, b] = best
+                    carried[j, b] = best_uv
+        return ratio, carried
 
 
 def gating_key(method: str, options) -> tuple[bool, float]:
