@@ -6,14 +6,15 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from _rally import rally
 from numpy.testing import assert_array_equal
 
 from pslog.errors import InputError
-from pslog.fusion import fuse
+from pslog.fusion import causal_methods, fuse
 from pslog.fusion.stream import StreamFuser
 from pslog.motion import get_motion
 from pslog.records import Track
-from pslog.rig import apply_timing, builtin_rig
+from pslog.rig import Rig, apply_timing, builtin_rig
 from pslog.simulation import SimulationOptions, simulate_labelled, true_rig
 
 
@@ -67,3 +68,42 @@ def test_flush_with_candidates_keeps_the_dropped_counts_of_the_frames_the_gate_h
     assert_array_equal(streamed.position_world, batch.position_world)
     for key, column in batch.quality.items():
         assert_array_equal(streamed.quality[key], column, err_msg=key)
+
+
+#: a strong barrel lens (as tests/test_fusion.py's): undistortion matters everywhere
+LENS = np.array([-0.25, 0.08, 0.001, -0.001, 0.0])
+DISTRACTOR = (1.0, 1.5, 0.2)  # on the floor, seen by every camera of paper3
+
+
+@pytest.mark.parametrize("method", causal_methods())
+@pytest.mark.parametrize("clocks", [False, True])
+def test_stream_with_candidates_equals_gated_batch_on_a_dirty_session_with_a_lens(method, clocks):
+    """Spurious blobs in 5 % of frames, a static distractor, a half-second blackout, 30 %
+    misses, 10 % drops, a strong lens (with ``clocks``: offsets and rolling shutters too):
+    streaming every frame's candidates gives ``fuse(detections, rig, method)`` (gating on),
+    every point, column and count, bit for bit."""
+    from pslog.fusion import METHODS
+
+    timing = "typeB" if "shared" in METHODS[method].needs else "typeA"
+    rig = apply_timing(builtin_rig("paper3"), timing)
+    rig = Rig(tuple(c.replace(dist=LENS) for c in rig.cameras), rig.name)
+    faults = ({"clock_offset_s": {"cam2": 0.004, "cam3": -0.006},
+               "readout_s": dict.fromkeys(rig.names, 0.01)} if clocks else {})
+    options = SimulationOptions(noise_px=0.3, seed=5, miss_rate=0.3, drop_rate=0.1,
+                                spurious_rate=0.05, distractors=(("cam2", DISTRACTOR),),
+                                blackouts=(("cam3", 1.0, 0.5),), **faults)
+    det, _, _ = simulate_labelled(rig, rally(3.0, seed=7, speed=4.0, kick_every_s=0.9)[0], 3.0,
+                                  options)
+    rig = true_rig(rig, options)
+    batch = fuse(det, rig, method)
+    assert len(batch) >= 8
+    fuser = StreamFuser(rig, method, candidates=True)
+    streamed = Track.concat([*push_frames(fuser, det), fuser.flush()])
+    assert_array_equal(streamed.time_ns, batch.time_ns)
+    assert_array_equal(streamed.camera, batch.camera)
+    assert_array_equal(streamed.position_world, batch.position_world)
+    assert streamed.quality.keys() == batch.quality.keys()
+    for key, column in batch.quality.items():
+        assert_array_equal(streamed.quality[key], column, err_msg=key)
+    if METHODS[method].streamer is not None:  # (the windowed methods count no drops yet)
+        assert streamed.dropped == batch.dropped
