@@ -56,7 +56,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import FusionError
-from ..geometry import epipolar_lines, fundamental_matrices, triangulate_rays
+from ..geometry import epipolar_lines, fundamental_matrices
 from ..motion import G
 from ..records import NS, Detections, Observations
 from ..rig import Rig
@@ -259,14 +259,20 @@ def _pixel_geometry(cam, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Undistorted pixels (n, 2) and unit world viewing rays (n, 3) of one camera's
     distorted pixels ``uv`` (n, 2); NaN for a pixel far outside the image (a damaged file).
     Row by row: the same bits for any subset of rows (the stream computes each frame's)."""
-    uv_und = np.full((len(uv), 2), np.nan)
-    ray_dir = np.full((len(uv), 3), np.nan)
     sane = np.all(np.abs(uv) <= 10 * max(cam.width, cam.height), axis=1)
-    if sane.all():
-        return cam.undistort(uv), cam.rays(uv)[1]
-    uv_und[sane] = cam.undistort(uv[sane])
-    ray_dir[sane] = cam.rays(uv[sane])[1]
-    return uv_und, ray_dir
+    if not sane.all():
+        uv_und = np.full((len(uv), 2), np.nan)
+        ray_dir = np.full((len(uv), 3), np.nan)
+        if sane.any():
+            uv_und[sane], ray_dir[sane] = _pixel_geometry(cam, uv[sane])
+        return uv_und, ray_dir
+    # Camera.undistort and Camera.rays, sharing the (iterative) undistortion
+    xy = cam.undistort_normalized(uv)
+    rays_cam = np.hstack([xy, np.ones((len(xy), 1))])
+    rays_cam /= np.max(np.abs(rays_cam), axis=1, keepdims=True)
+    ray_dir = rays_cam @ cam.R
+    ray_dir /= np.linalg.norm(ray_dir, axis=1, keepdims=True)
+    return cam.pixels_from_normalized(xy), ray_dir
 
 
 def epipolar_distance(F_ab: np.ndarray, uv_a: np.ndarray, uv_b: np.ndarray) -> np.ndarray:
@@ -441,48 +447,138 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
 
 
 def _rig_constants(rig: Rig):
-    """(centres (m, 3), K⁻¹ (m, 3, 3), R (m, 3, 3)) of the rig's cameras, for :func:`_points`."""
-    return (np.array([cam.center_world for cam in rig.cameras]),
-            np.array([np.linalg.inv(cam.K) for cam in rig.cameras]),
-            np.array([cam.R for cam in rig.cameras]))
+    """Per camera, as nested Python floats: centre (3,), K⁻¹ (3, 3), R (3, 3) (for
+    :func:`_points` and the stream's per-candidate form of it)."""
+    return ([cam.center_world.tolist() for cam in rig.cameras],
+            [np.linalg.inv(cam.K).tolist() for cam in rig.cameras],
+            [cam.R.tolist() for cam in rig.cameras])
+
+
+def _carried_ray(u, v, k_inv, r, sqrt):
+    """Unit world direction ``Rᵀ K⁻¹ [u, v, 1]`` of undistorted pixels (floats, or arrays
+    elementwise), every sum in index order, so that arrays and floats give the same bits
+    (``sqrt``: :func:`math.sqrt` or :func:`numpy.sqrt`)."""
+    cx = (k_inv[0][0] * u + k_inv[0][1] * v) + k_inv[0][2]
+    cy = (k_inv[1][0] * u + k_inv[1][1] * v) + k_inv[1][2]
+    cz = (k_inv[2][0] * u + k_inv[2][1] * v) + k_inv[2][2]
+    x = (cx * r[0][0] + cy * r[1][0]) + cz * r[2][0]
+    y = (cx * r[0][1] + cy * r[1][1]) + cz * r[2][1]
+    z = (cx * r[0][2] + cy * r[1][2]) + cz * r[2][2]
+    s = sqrt((x * x + y * y) + z * z)
+    return x / s, y / s, z / s
+
+
+def _normal_equations(rays):
+    """The least-squares crossing's normal equations ``Σ w (I - d dᵀ) p = Σ w (I - d dᵀ) o``
+    of rays ``(w, ox, oy, oz, dx, dy, dz)`` (w 1 for a ray used, 0 for none; floats, or
+    arrays elementwise: the same bits), solved by cofactors. Returns (p (3,), det)."""
+    a00 = a01 = a02 = a11 = a12 = a22 = b0 = b1 = b2 = 0.0
+    for w, ox, oy, oz, dx, dy, dz in rays:
+        p00, p11, p22 = (1.0 - dx * dx) * w, (1.0 - dy * dy) * w, (1.0 - dz * dz) * w
+        p01, p02, p12 = (0.0 - dx * dy) * w, (0.0 - dx * dz) * w, (0.0 - dy * dz) * w
+        a00, a01, a02 = a00 + p00, a01 + p01, a02 + p02
+        a11, a12, a22 = a11 + p11, a12 + p12, a22 + p22
+        b0 = b0 + ((p00 * ox + p01 * oy) + p02 * oz)
+        b1 = b1 + ((p01 * ox + p11 * oy) + p12 * oz)
+        b2 = b2 + ((p02 * ox + p12 * oy) + p22 * oz)
+    c00, c01, c02 = a11 * a22 - a12 * a12, a02 * a12 - a01 * a22, a01 * a12 - a02 * a11
+    c11, c12, c22 = a00 * a22 - a02 * a02, a01 * a02 - a00 * a12, a00 * a11 - a01 * a01
+    det = (a00 * c00 + a01 * c01) + a02 * c02
+    return ((c00 * b0 + c01 * b1) + c02 * b2, (c01 * b0 + c11 * b1) + c12 * b2,
+            (c02 * b0 + c12 * b1) + c22 * b2), det
+
+
+def _ray_offsets(p, rays):
+    """Per ray: the point's distance along it (its depth, > 0 in front) and squared distance
+    from it (floats or arrays: the same bits)."""
+    out = []
+    for _w, ox, oy, oz, dx, dy, dz in rays:
+        fx, fy, fz = p[0] - ox, p[1] - oy, p[2] - oz
+        along = (fx * dx + fy * dy) + fz * dz
+        qx, qy, qz = fx - along * dx, fy - along * dy, fz - along * dz
+        out.append((along, (qx * qx + qy * qy) + qz * qz))
+    return out
+
+
+#: A crossing whose normal equations' determinant is this small has parallel rays.
+_MIN_DET = 1e-12
 
 
 def _points(c: _Candidates, rig: Rig, ratio: np.ndarray, carried: np.ndarray, constants=None):
     """Each candidate's 3D point: its ray and its supporting cameras' carried rays crossed
     (least squares); NaN without support. Also whether it lies in front of every camera
     used, and the RMS distance of the point to those rays, metres (three or more rays that
-    do not meet: the supports are not one ball). Row by row (the same bits for any subset);
+    do not meet: the supports are not one ball). Elementwise, in the order of
+    :func:`_points_one`, which gives the stream the same bits one candidate at a time;
     ``constants``: :func:`_rig_constants` of ``rig`` (computed when None)."""
     n, m = ratio.shape
-    centers, K_inv, R = constants or _rig_constants(rig)
-    origins = np.zeros((n, m + 1, 3))
-    dirs = np.zeros((n, m + 1, 3))
-    valid = np.zeros((n, m + 1), dtype=bool)
-    origins[:, 0] = centers[c.camera]
-    dirs[:, 0] = np.nan_to_num(c.ray_dir)
-    valid[:, 0] = np.all(np.isfinite(c.ray_dir), axis=1)
+    centers, k_inv, rot = constants or _rig_constants(rig)
+    own = np.all(np.isfinite(c.ray_dir), axis=1)
+    d = np.where(own[:, None], c.ray_dir, 0.0)
+    o = np.where(own[:, None], np.array(centers)[c.camera], 0.0)
+    rays = [(own * 1.0, o[:, 0], o[:, 1], o[:, 2], d[:, 0], d[:, 1], d[:, 2])]
+    used = [own]
     supported = ratio <= 1.0
-    for b in range(m):
-        rows = np.flatnonzero(supported[:, b])
-        if len(rows) == 0:
-            continue
-        homog = np.column_stack([carried[rows, b], np.ones(len(rows))])
-        d = (homog @ K_inv[b].T) @ R[b]  # Rᵀ K⁻¹ x, row-wise
-        d /= np.linalg.norm(d, axis=1, keepdims=True)
-        origins[rows, b + 1] = centers[b]
-        dirs[rows, b + 1] = d
-        valid[rows, b + 1] = True
-    enough = valid.sum(axis=1) >= 2
-    points = np.full((n, 3), np.nan)
-    in_front = np.ones(n, dtype=bool)
-    miss = np.full(n, np.nan)
-    if np.any(enough):
-        p, miss[enough], _ = triangulate_rays(origins[enough], dirs[enough], valid[enough])
-        points[enough] = p
-        depth = np.einsum("nmi,nmi->nm", p[:, None, :] - origins[enough], dirs[enough])
-        in_front[enough] = np.all((depth > 0) | ~valid[enough], axis=1) & np.all(
-            np.isfinite(p), axis=1)
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        for b in range(m):
+            ok = supported[:, b]
+            if not ok.any():
+                continue
+            dx, dy, dz = _carried_ray(carried[:, b, 0], carried[:, b, 1], k_inv[b], rot[b],
+                                      np.sqrt)
+            ok = ok & np.isfinite(dx) & np.isfinite(dy) & np.isfinite(dz)
+            x, y, z = centers[b]
+            rays.append((ok * 1.0, np.where(ok, x, 0.0), np.where(ok, y, 0.0),
+                         np.where(ok, z, 0.0), np.where(ok, dx, 0.0), np.where(ok, dy, 0.0),
+                         np.where(ok, dz, 0.0)))
+            used.append(ok)
+        n_rays = np.sum(used, axis=0)
+        p, det = _normal_equations(rays)
+        enough = n_rays >= 2
+        solved = enough & (np.abs(det) > _MIN_DET)
+        points = np.full((n, 3), np.nan)
+        for i in range(3):
+            points[solved, i] = (p[i] / det)[solved]
+        front = solved.copy()
+        total = np.zeros(n)
+        for (along, sq), ok in zip(_ray_offsets(points.T, rays), used, strict=True):
+            front &= (along > 0) | ~ok
+            total = total + np.where(ok, sq, 0.0)
+        in_front = np.where(enough, front, True)  # no point: nothing behind a camera
+        miss = np.where(enough, np.sqrt(total / np.maximum(n_rays, 1)), np.nan)
     return points, in_front, miss
+
+
+def _points_one(camera: int, ray_dir, ratio_row, carried_row, constants):
+    """:func:`_points` of one candidate (``ray_dir`` (3,) floats; its ratio (m,) and
+    carried (m, 2) rows as lists): the same arithmetic on floats, the same bits.
+    Returns (point (3,) or None, in_front, miss or NaN)."""
+    centers, k_inv, rot = constants
+    rays = []
+    if all(math.isfinite(x) for x in ray_dir):
+        rays.append((1.0, *centers[camera], *ray_dir))
+    for b, r in enumerate(ratio_row):
+        if r <= 1.0:
+            dx, dy, dz = _carried_ray(*carried_row[b], k_inv[b], rot[b], _sqrt)
+            if math.isfinite(dx) and math.isfinite(dy) and math.isfinite(dz):
+                rays.append((1.0, *centers[b], dx, dy, dz))
+    if len(rays) < 2:
+        return None, True, math.nan
+    p, det = _normal_equations(rays)
+    if not abs(det) > _MIN_DET:
+        return None, False, math.nan
+    p = (p[0] / det, p[1] / det, p[2] / det)
+    total = 0.0
+    in_front = True
+    for along, sq in _ray_offsets(p, rays):
+        in_front = in_front and along > 0
+        total = total + sq
+    return p, in_front, math.sqrt(total / len(rays))
+
+
+def _sqrt(x: float) -> float:
+    """math.sqrt, NaN for a negative or NaN argument (as numpy's)."""
+    return math.sqrt(x) if x >= 0 else math.nan
 
 
 class _Track:
@@ -788,10 +884,11 @@ class StreamGate:
 
     def _add(self, t: int, cam: int, index: int, uv: np.ndarray) -> None:
         p = self.clock
-        # as _candidates: each candidate at its own row's corrected time
-        time_ns = true_times_ns(np.full(len(uv), t), uv[:, 1], p["height"][cam],
-                                p["clock_offset"][cam], p["clock_drift_ppm"][cam],
-                                p["readout"][cam])
+        # as _candidates: each candidate at its own row's corrected time (the logged one
+        # without a clock model: its correction is 0 for any row)
+        time_ns = np.full(len(uv), t) if not self.corrected else true_times_ns(
+            np.full(len(uv), t), uv[:, 1], p["height"][cam], p["clock_offset"][cam],
+            p["clock_drift_ppm"][cam], p["readout"][cam])
         frame = _Frame(t, cam, index, uv, time_ns, *_pixel_geometry(self.rig.cameras[cam], uv))
         at = bisect_right(self.keys[cam], frame.key)  # after equal times: push order
         self.keys[cam].insert(at, frame.key)
@@ -846,9 +943,14 @@ class StreamGate:
         ratio, carried = self._support(f)
         c = _Candidates(np.full(k, a, np.int32), np.array(f.time_ns, np.int64), f.uv_und,
                         f.ray_dir, np.zeros(k, np.int64))
-        points, in_front, miss = _points(c, self.rig, ratio, carried, self.constants)
-        points[miss > o.track_m] = np.nan  # as gate()
-        f.points = points.tolist()
+        f.points, front = [], []
+        for ray, r_row, c_row in zip(f.ray_dir.tolist(), ratio.tolist(), carried.tolist(),
+                                     strict=True):
+            p, ok, miss = _points_one(a, ray, r_row, c_row, self.constants)
+            f.points.append(p if p is not None and not miss > o.track_m  # as gate()
+                            else (math.nan, math.nan, math.nan))
+            front.append(ok)
+        points, in_front = np.array(f.points), np.array(front)
         # _static's rule on this frame: still against each of the camera's lags frames before
         frames, at = self.by_camera[a], self.by_camera[a].index(f)
         lags = self.lags[a]
