@@ -258,21 +258,48 @@ def _candidates(detections: Detections, rig: Rig) -> _Candidates:
 def _pixel_geometry(cam, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Undistorted pixels (n, 2) and unit world viewing rays (n, 3) of one camera's
     distorted pixels ``uv`` (n, 2); NaN for a pixel far outside the image (a damaged file).
-    Row by row: the same bits for any subset of rows (the stream computes each frame's)."""
+    Elementwise (:func:`_from_normalized`): the stream's floats give the same bits."""
+    uv_und = np.full((len(uv), 2), np.nan)
+    ray_dir = np.full((len(uv), 3), np.nan)
     sane = np.all(np.abs(uv) <= 10 * max(cam.width, cam.height), axis=1)
-    if not sane.all():
-        uv_und = np.full((len(uv), 2), np.nan)
-        ray_dir = np.full((len(uv), 3), np.nan)
-        if sane.any():
-            uv_und[sane], ray_dir[sane] = _pixel_geometry(cam, uv[sane])
-        return uv_und, ray_dir
-    # Camera.undistort and Camera.rays, sharing the (iterative) undistortion
-    xy = cam.undistort_normalized(uv)
-    rays_cam = np.hstack([xy, np.ones((len(xy), 1))])
-    rays_cam /= np.max(np.abs(rays_cam), axis=1, keepdims=True)
-    ray_dir = rays_cam @ cam.R
-    ray_dir /= np.linalg.norm(ray_dir, axis=1, keepdims=True)
-    return cam.pixels_from_normalized(xy), ray_dir
+    if sane.any():
+        xy = cam.undistort_normalized(uv[sane])
+        with np.errstate(invalid="ignore"):
+            u, v, *d = _from_normalized(xy[:, 0], xy[:, 1], cam.K.tolist(), cam.R.tolist(),
+                                        np.sqrt, np.maximum)
+        uv_und[sane] = np.column_stack([u, v])
+        ray_dir[sane] = np.column_stack(d)
+    return uv_und, ray_dir
+
+
+def _from_normalized(x, y, k, r, sqrt, maximum):
+    """Undistorted pixel ``(u, v)`` (through ``K``) and unit world viewing ray
+    ``(dx, dy, dz)`` (``Rᵀ [x, y, 1]``, scaled by its largest component first: a far-off
+    pixel's ray would overflow) of ideal normalized coordinates; floats, or arrays
+    elementwise, every sum in index order: the same bits (``k``, ``r``: nested lists;
+    ``sqrt``, ``maximum``: math's and max, or numpy's)."""
+    u = (k[0][0] * x + k[0][1] * y) + k[0][2]
+    v = k[1][1] * y + k[1][2]
+    s = maximum(maximum(abs(x), abs(y)), 1.0)
+    cx, cy, cz = x / s, y / s, 1.0 / s
+    dx = (cx * r[0][0] + cy * r[1][0]) + cz * r[2][0]
+    dy = (cx * r[0][1] + cy * r[1][1]) + cz * r[2][1]
+    dz = (cx * r[0][2] + cy * r[1][2]) + cz * r[2][2]
+    size = sqrt((dx * dx + dy * dy) + dz * dz)
+    return u, v, dx / size, dy / size, dz / size
+
+
+def _epipolar_line(f, u, v, sqrt, maximum):
+    """The epipolar line ``(a, b, c)``, ``a² + b² = 1``, of an undistorted pixel ``(u, v)``
+    (``f``: F_ab as nested lists) as :func:`pslog.geometry.epipolar_lines` defines it;
+    floats, or arrays elementwise, every sum in index order: the same bits."""
+    a = (f[0][0] * u + f[0][1] * v) + f[0][2]
+    b = (f[1][0] * u + f[1][1] * v) + f[1][2]
+    c = (f[2][0] * u + f[2][1] * v) + f[2][2]
+    big = maximum(abs(a), abs(b))  # (scaled first: the norm alone could overflow)
+    a, b, c = a / big, b / big, c / big
+    size = sqrt(a * a + b * b)
+    return a / size, b / size, c / size
 
 
 def epipolar_distance(F_ab: np.ndarray, uv_a: np.ndarray, uv_b: np.ndarray) -> np.ndarray:
@@ -333,7 +360,10 @@ def _support(c: _Candidates, rig: Rig, F: np.ndarray, tables, options: GatingOpt
             times, table = tables[b]
             if len(times) == 0:
                 continue
-            lines = epipolar_lines(F[a, b], c.uv_und[rows])
+            with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+                lines = np.column_stack(_epipolar_line(F[a, b].tolist(), c.uv_und[rows, 0],
+                                                       c.uv_und[rows, 1], np.sqrt,
+                                                       np.maximum))
             if causal:
                 # b's frames a causal choice at t may use: (time, camera) order, or up to
                 # t + wait for the methods that wait for the tolerance
@@ -576,6 +606,30 @@ def _points_one(camera: int, ray_dir, ratio_row, carried_row, constants):
     return p, in_front, math.sqrt(total / len(rays))
 
 
+def _line_of(f, u: float, v: float):
+    """:func:`_epipolar_line` on floats (NaN where the arrays' form gives NaN)."""
+    a = (f[0][0] * u + f[0][1] * v) + f[0][2]
+    b = (f[1][0] * u + f[1][1] * v) + f[1][2]
+    if not max(abs(a), abs(b)) > 0 or not math.isfinite(a) or not math.isfinite(b):
+        return math.nan, math.nan, math.nan
+    return _epipolar_line(f, u, v, _sqrt, max)
+
+
+def _ray_miss(p, center, ray) -> float:
+    """Distance, metres, of the point ``p`` (3,) from the ray through ``center`` (3,) along
+    the unit ``ray`` (3,): ``|(p - center) × ray|``, in floats."""
+    ox, oy, oz = float(p[0]) - center[0], float(p[1]) - center[1], float(p[2]) - center[2]
+    rx, ry, rz = ray
+    cx, cy, cz = oy * rz - oz * ry, oz * rx - ox * rz, ox * ry - oy * rx
+    return _sqrt((cx * cx + cy * cy) + cz * cz)
+
+
+def _distance(p, q) -> float:
+    """``|p - q|`` of two points (3,), metres, in floats."""
+    dx, dy, dz = float(p[0]) - float(q[0]), float(p[1]) - float(q[1]), float(p[2]) - float(q[2])
+    return _sqrt((dx * dx + dy * dy) + dz * dz)
+
+
 def _sqrt(x: float) -> float:
     """math.sqrt, NaN for a negative or NaN argument (as numpy's)."""
     return math.sqrt(x) if x >= 0 else math.nan
@@ -630,6 +684,7 @@ class _Decider:
         self.rig, self.options = rig, options
         self.track = _Track(options)
         self.verified = False  # a candidate has passed a gate: from then on none passes unjudged
+        self.centers = [cam.center_world.tolist() for cam in rig.cameras]
 
     def run(self, c: _Candidates, frames, ratio, points, in_front, reason,
             static=None) -> None:
@@ -637,7 +692,7 @@ class _Decider:
         of every rejected row (``static``: :func:`_static`'s pair)."""
         static, stillness = ((np.zeros(len(c.camera), dtype=bool), np.zeros(len(c.camera)))
                              if static is None else static)
-        options, rig, track = self.options, self.rig, self.track
+        options, track = self.options, self.track
         available = np.sum(np.isfinite(ratio), axis=1)
         n_support = np.sum(ratio <= 1.0, axis=1)
         # squared residuals of the supporting cameras, 1 for each other available one: a
@@ -645,6 +700,8 @@ class _Decider:
         with np.errstate(invalid="ignore"):
             epi_cost = np.nansum(np.where(ratio <= 1.0, ratio**2, 1.0), axis=1)
         t_s = c.time_ns / NS
+        centers = self.centers
+        rays = c.ray_dir.tolist()
         for lo, hi in frames:
             best_key, best_row = None, -1
             pred = None
@@ -657,8 +714,7 @@ class _Decider:
                     if pred is None:
                         pred = track.predict(t_s[i]) or False
                     if pred and np.isfinite(c.ray_dir[i, 0]):
-                        offset = pred[0] - rig.cameras[c.camera[i]].center_world
-                        track_accepts = (np.linalg.norm(np.cross(offset, c.ray_dir[i]))
+                        track_accepts = (_ray_miss(pred[0], centers[c.camera[i]], rays[i])
                                          <= options.track_alone_m)
                     if not track_accepts:
                         reason[i] = EPIPOLAR
@@ -678,15 +734,14 @@ class _Decider:
                     last = track.last()
                     if last is not None and np.isfinite(points[i, 0]):
                         dt = abs(t_s[i] - last[0])
-                        if dt <= options.track_window_s and np.linalg.norm(points[i] - last[1]) > (
+                        if dt <= options.track_window_s and _distance(points[i], last[1]) > (
                                 options.max_speed_m_s * dt + options.track_m):
                             reason[i] = MOTION
                             continue
                     if pred is None:
                         pred = track.predict(t_s[i]) or False
                     if pred and np.isfinite(c.ray_dir[i, 0]):
-                        offset = pred[0] - rig.cameras[c.camera[i]].center_world
-                        miss = np.linalg.norm(np.cross(offset, c.ray_dir[i]))
+                        miss = _ray_miss(pred[0], centers[c.camera[i]], rays[i])
                         if miss > (2.0 if loose else 1.0) * pred[1]:
                             reason[i] = TRACK
                             continue
@@ -839,6 +894,10 @@ class StreamGate:
                                  + 1.5 * self.options.static_s + 0.2 + 2 * spread) * NS)
         self.decider = _Decider(rig, self.options)
         self.constants = _rig_constants(rig)
+        self.camera_k = [cam.K.tolist() for cam in rig.cameras]
+        self.camera_r = [cam.R.tolist() for cam in rig.cameras]
+        self.distorted = [bool(np.any(cam.dist)) for cam in rig.cameras]
+        self.F_lists = self.F.tolist()
         self.lags = [int(np.ceil(self.options.static_s * cam.fps)) for cam in rig.cameras]
         # per camera: its frames in (corrected time, push) order and their times
         self.keys: list[list[int]] = [[] for _ in rig.cameras]
@@ -889,12 +948,37 @@ class StreamGate:
         time_ns = np.full(len(uv), t) if not self.corrected else true_times_ns(
             np.full(len(uv), t), uv[:, 1], p["height"][cam], p["clock_offset"][cam],
             p["clock_drift_ppm"][cam], p["readout"][cam])
-        frame = _Frame(t, cam, index, uv, time_ns, *_pixel_geometry(self.rig.cameras[cam], uv))
+        frame = _Frame(t, cam, index, uv, time_ns, *self._geometry(cam, uv))
         at = bisect_right(self.keys[cam], frame.key)  # after equal times: push order
         self.keys[cam].insert(at, frame.key)
         self.by_camera[cam].insert(at, frame)
         self.pending.append(frame)
         self.unreleased.append(frame)
+
+    def _geometry(self, cam: int, uv: np.ndarray):
+        """:func:`_pixel_geometry` of one frame's candidates, on floats (the same bits)."""
+        camera = self.rig.cameras[cam]
+        k, r = self.camera_k[cam], self.camera_r[cam]
+        limit = 10 * max(camera.width, camera.height)
+        rows = uv.tolist()
+        sane = [abs(u) <= limit and abs(v) <= limit for u, v in rows]
+        if self.distorted[cam]:  # the iterative undistortion, in numpy (row by row)
+            xy = iter(camera.undistort_normalized(uv[sane]).tolist() if any(sane) else [])
+        else:  # Camera.normalized_from_pixels
+            xy = iter([(((u - k[0][2]) - k[0][1] * ((v - k[1][2]) / k[1][1])) / k[0][0],
+                        (v - k[1][2]) / k[1][1]) for (u, v), ok in zip(rows, sane, strict=True)
+                       if ok])
+        und, rays = [], []
+        for ok in sane:
+            x, y = next(xy) if ok else (math.nan, math.nan)
+            if not (ok and math.isfinite(x) and math.isfinite(y)):  # (not undistorted)
+                und.append((math.nan, math.nan))
+                rays.append((math.nan, math.nan, math.nan))
+                continue
+            u, v, *d = _from_normalized(x, y, k, r, _sqrt, max)
+            und.append((u, v))
+            rays.append(tuple(d))
+        return np.array(und), np.array(rays)
 
     def _step(self, final: bool):
         if self.pending:
@@ -988,7 +1072,7 @@ class StreamGate:
             if b == a or not keys:
                 continue
             frames = self.by_camera[b]
-            lines = epipolar_lines(self.F[a, b], f.uv_und).tolist()
+            lines = [_line_of(self.F_lists[a][b], u, v) for u, v in f.uv_und.tolist()]
             search = bisect_right if (self.wait_ns > 0 or b < a) else bisect_left
             for j, t in enumerate(f.time_ns):
                 last = search(keys, t + self.wait_ns) - 1
