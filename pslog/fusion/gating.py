@@ -702,17 +702,19 @@ class _Decider:
         t_s = c.time_ns / NS
         centers = self.centers
         rays = c.ray_dir.tolist()
+        t_ns = c.time_ns.tolist()
         for lo, hi in frames:
             best_key, best_row = None, -1
-            pred = None
+            preds: dict[int, tuple | bool] = {}  # the track's prediction at each time
             unverified = []
             for i in range(lo, hi):
                 track_accepts = False
                 if available[i] and n_support[i] == 0:
                     # no other camera confirms it (they may just not see the ball): the track
                     # gate alone may still accept it, if its ray passes close to the prediction
-                    if pred is None:
-                        pred = track.predict(t_s[i]) or False
+                    pred = preds.get(t_ns[i])
+                    if pred is None:  # at the candidate's own time (a rolling shutter's row)
+                        pred = preds[t_ns[i]] = track.predict(t_s[i]) or False
                     if pred and np.isfinite(c.ray_dir[i, 0]):
                         track_accepts = (_ray_miss(pred[0], centers[c.camera[i]], rays[i])
                                          <= options.track_alone_m)
@@ -738,8 +740,9 @@ class _Decider:
                                 options.max_speed_m_s * dt + options.track_m):
                             reason[i] = MOTION
                             continue
-                    if pred is None:
-                        pred = track.predict(t_s[i]) or False
+                    pred = preds.get(t_ns[i])
+                    if pred is None:  # at the candidate's own time (a rolling shutter's row)
+                        pred = preds[t_ns[i]] = track.predict(t_s[i]) or False
                     if pred and np.isfinite(c.ray_dir[i, 0]):
                         miss = _ray_miss(pred[0], centers[c.camera[i]], rays[i])
                         if miss > (2.0 if loose else 1.0) * pred[1]:
