@@ -55,7 +55,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import FusionError
+from ..errors import FusionError, InputError
 from ..geometry import epipolar_lines, fundamental_matrices
 from ..motion import G
 from ..records import NS, Detections, Observations
@@ -630,6 +630,25 @@ def _distance(p, q) -> float:
     return _sqrt((dx * dx + dy * dy) + dz * dz)
 
 
+def _clock_model(rig: Rig) -> list[tuple[float, float, float, float]]:
+    """Per camera: (height, clock_offset, clock_drift_ppm, readout) as floats, for
+    :func:`_true_time_ns`."""
+    p = camera_parameters(rig)
+    return list(zip(*(p[k].tolist() for k in ("height", "clock_offset", "clock_drift_ppm",
+                                              "readout")), strict=True))
+
+
+def _true_time_ns(logged: int, v: float, clock) -> int:
+    """:func:`pslog.timing.true_times_ns` of one detection (``clock``: its camera's
+    :func:`_clock_model` entry), in floats in the same order: the same nanosecond."""
+    height, offset, drift, readout = clock
+    term = readout * NS * v / height if readout != 0 else 0.0
+    if not math.isfinite(term):
+        raise InputError("a rolling-shutter time needs the detection's pixel row: got a "
+                         "non-finite row")
+    return logged + round(offset * NS + drift * 1e-6 * float(logged) + term)
+
+
 def _sqrt(x: float) -> float:
     """math.sqrt, NaN for a negative or NaN argument (as numpy's)."""
     return math.sqrt(x) if x >= 0 else math.nan
@@ -851,10 +870,10 @@ class _Frame:
     __slots__ = ("camera", "index", "key", "points", "ray_dir", "reason", "t", "time_ns", "uv",
                  "uv_und")
 
-    def __init__(self, t: int, camera: int, index: int, uv: np.ndarray, time_ns: np.ndarray,
+    def __init__(self, t: int, camera: int, index: int, uv: np.ndarray, time_ns: list[int],
                  uv_und: np.ndarray, ray_dir: np.ndarray) -> None:
         self.t, self.camera, self.index, self.uv = t, camera, index, uv
-        self.time_ns = time_ns.tolist()  # corrected, per candidate (Python ints)
+        self.time_ns = time_ns  # corrected, per candidate
         self.uv_und, self.ray_dir = uv_und, ray_dir
         self.key = self.time_ns[0]  # the frame's time: its best candidate's (_frame_table)
         self.reason: np.ndarray | None = None
@@ -901,6 +920,7 @@ class StreamGate:
         self.camera_r = [cam.R.tolist() for cam in rig.cameras]
         self.distorted = [bool(np.any(cam.dist)) for cam in rig.cameras]
         self.F_lists = self.F.tolist()
+        self.clock_model = _clock_model(rig)
         self.lags = [int(np.ceil(self.options.static_s * cam.fps)) for cam in rig.cameras]
         # per camera: its frames in (corrected time, push) order and their times
         self.keys: list[list[int]] = [[] for _ in rig.cameras]
@@ -945,12 +965,11 @@ class StreamGate:
                                      for t, c, f, u, v, r in self.rejected])
 
     def _add(self, t: int, cam: int, index: int, uv: np.ndarray) -> None:
-        p = self.clock
         # as _candidates: each candidate at its own row's corrected time (the logged one
         # without a clock model: its correction is 0 for any row)
-        time_ns = np.full(len(uv), t) if not self.corrected else true_times_ns(
-            np.full(len(uv), t), uv[:, 1], p["height"][cam], p["clock_offset"][cam],
-            p["clock_drift_ppm"][cam], p["readout"][cam])
+        clock = self.clock_model[cam]
+        time_ns = ([t] * len(uv) if not self.corrected else
+                   [_true_time_ns(t, v, clock) for v in uv[:, 1].tolist()])
         frame = _Frame(t, cam, index, uv, time_ns, *self._geometry(cam, uv))
         at = bisect_right(self.keys[cam], frame.key)  # after equal times: push order
         self.keys[cam].insert(at, frame.key)
@@ -988,10 +1007,8 @@ class StreamGate:
             todo = self.pending
             if not final:  # the frames nothing still to come can change (as gate() decides)
                 if self.corrected:
-                    p = self.clock
-                    bound = int(np.min(true_times_ns(
-                        np.full(len(self.rig), self.last[0]), 0.0, p["height"],
-                        p["clock_offset"], p["clock_drift_ppm"], p["readout"])))
+                    bound = min(_true_time_ns(self.last[0], 0.0, clock)
+                                for clock in self.clock_model)
                     todo = [f for f in todo if f.key + self.wait_ns < bound]
                 elif self.wait_ns:
                     todo = [f for f in todo if f.key + self.wait_ns < self.last[0]]
