@@ -709,18 +709,23 @@ class _Decider:
             static=None) -> None:
         """Decide the frames ``[(lo, hi), ...]`` (candidate rows, in order): set ``reason``
         of every rejected row (``static``: :func:`_static`'s pair)."""
-        static, stillness = ((np.zeros(len(c.camera), dtype=bool), np.zeros(len(c.camera)))
-                             if static is None else static)
+        n = len(c.camera)
+        static, stillness = (([False] * n, [0.0] * n) if static is None else
+                             (np.asarray(static[0]).tolist(), np.asarray(static[1]).tolist()))
         options, track = self.options, self.track
-        available = np.sum(np.isfinite(ratio), axis=1)
-        n_support = np.sum(ratio <= 1.0, axis=1)
+        # per candidate, in floats (the loop is sequential; numpy is slow on scalars)
+        rows = ratio.tolist()
+        available = [sum(1 for r in row if math.isfinite(r)) for row in rows]
+        n_support = [sum(1 for r in row if r <= 1.0) for row in rows]
         # squared residuals of the supporting cameras, 1 for each other available one: a
         # camera that does not see the ball says nothing, however near a false candidate
-        with np.errstate(invalid="ignore"):
-            epi_cost = np.nansum(np.where(ratio <= 1.0, ratio**2, 1.0), axis=1)
-        t_s = c.time_ns / NS
+        # (summed in camera order)
+        epi_cost = [sum((r * r if r <= 1.0 else 1.0) for r in row) for row in rows]
+        t_s = (c.time_ns / NS).tolist()
         centers = self.centers
         rays = c.ray_dir.tolist()
+        pts = np.asarray(points).tolist()
+        front = np.asarray(in_front).tolist()
         t_ns = c.time_ns.tolist()
         for lo, hi in frames:
             best_key, best_row = None, -1
@@ -734,13 +739,13 @@ class _Decider:
                     pred = preds.get(t_ns[i])
                     if pred is None:  # at the candidate's own time (a rolling shutter's row)
                         pred = preds[t_ns[i]] = track.predict(t_s[i]) or False
-                    if pred and np.isfinite(c.ray_dir[i, 0]):
+                    if pred and math.isfinite(rays[i][0]):
                         track_accepts = (_ray_miss(pred[0], centers[c.camera[i]], rays[i])
                                          <= options.track_alone_m)
                     if not track_accepts:
                         reason[i] = EPIPOLAR
                         continue
-                if not in_front[i] or static[i]:
+                if not front[i] or static[i]:
                     reason[i] = MOTION
                     continue
                 # consistent in three views: supported by two cameras (how the track follows
@@ -748,21 +753,21 @@ class _Decider:
                 strong = n_support[i] >= 2
                 # supported by one and near the lines of every other (a kick or bounce spoils
                 # carried points for a frame or two): the track gate, at twice the allowance
-                loose = not strong and available[i] >= 2 and np.all(
-                    ratio[i][np.isfinite(ratio[i])] <= options.loose_ratio)
+                loose = not strong and available[i] >= 2 and all(
+                    r <= options.loose_ratio for r in rows[i] if math.isfinite(r))
                 track_cost = 0.0
                 if not strong:
                     last = track.last()
-                    if last is not None and np.isfinite(points[i, 0]):
+                    if last is not None and math.isfinite(pts[i][0]):
                         dt = abs(t_s[i] - last[0])
-                        if dt <= options.track_window_s and _distance(points[i], last[1]) > (
+                        if dt <= options.track_window_s and _distance(pts[i], last[1]) > (
                                 options.max_speed_m_s * dt + options.track_m):
                             reason[i] = MOTION
                             continue
                     pred = preds.get(t_ns[i])
                     if pred is None:  # at the candidate's own time (a rolling shutter's row)
                         pred = preds[t_ns[i]] = track.predict(t_s[i]) or False
-                    if pred and np.isfinite(c.ray_dir[i, 0]):
+                    if pred and math.isfinite(rays[i][0]):
                         miss = _ray_miss(pred[0], centers[c.camera[i]], rays[i])
                         if miss > (2.0 if loose else 1.0) * pred[1]:
                             reason[i] = TRACK
@@ -773,7 +778,7 @@ class _Decider:
                             reason[i] = EPIPOLAR
                             continue
                         unverified.append(i)  # the session's first frames: nothing to judge by
-                key = (-int(n_support[i]), float(epi_cost[i]) + track_cost + stillness[i])
+                key = (-n_support[i], epi_cost[i] + track_cost + stillness[i])
                 if best_key is None or key < best_key:
                     best_key, best_row = key, i
             if best_row < 0:
@@ -793,8 +798,8 @@ class _Decider:
                 if i != best_row and reason[i] < 0:
                     reason[i] = OUTSCORED
             self.verified |= best_row not in unverified
-            if np.isfinite(points[best_row, 0]):
-                track.add(float(t_s[best_row]), points[best_row])
+            if math.isfinite(pts[best_row][0]):
+                track.add(t_s[best_row], np.array(pts[best_row]))
 
 
 def gate(detections: Detections, rig: Rig, *, causal: bool = True, wait_s: float = 0.0,
