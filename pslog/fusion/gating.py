@@ -680,19 +680,38 @@ class _Track:
             lo -= 1
         if k - lo < 3:
             return None
-        ts = np.array(self.t[lo:]) - t_s
-        ps = np.array(self.p[lo:])
-        gravity = np.array([0.0, 0.0, -G])
-        # p(τ) = p0 + v τ + ½ g τ², τ = time - t: fit p0, v to the points less gravity
-        y = ps - 0.5 * ts[:, None] ** 2 * gravity
-        A = np.column_stack([np.ones(len(ts)), ts])
-        coef, *_ = np.linalg.lstsq(A, y, rcond=None)
-        rms = np.sqrt(np.mean(np.sum((A @ coef - y) ** 2, axis=1)))
+        ts = [t - t_s for t in self.t[lo:]]
+        # p(τ) = p0 + v τ + ½ g τ², τ = time - t, g = (0, 0, -G) (the world is z up; the
+        # filter's default gravity): fit p0, v to the points less gravity
+        ys = [(float(p[0]), float(p[1]), float(p[2]) + 0.5 * tau * tau * G)
+              for tau, p in zip(ts, self.p[lo:], strict=True)]
+        p0, rms = _line_fit(ts, ys)
         if rms > 0.5 * o.track_m and len(ts) > 3:  # a bounce in the window: the newest only
-            A, y = A[-3:], y[-3:]
-            coef, *_ = np.linalg.lstsq(A, y, rcond=None)
+            p0, _ = _line_fit(ts[-3:], ys[-3:])
         dt = abs(ts[-1])  # the newest point may be later than t (a rolling shutter)
-        return coef[0], o.track_m + o.track_jump_m_s * dt
+        return p0, o.track_m + o.track_jump_m_s * dt
+
+
+def _line_fit(ts: list[float], ys: list[tuple]) -> tuple[list[float], float]:
+    """Least-squares ``y ≈ p0 + v τ`` of points ``ys`` (3,) at ``ts`` (closed form, on
+    floats): ``p0`` (3,) and the RMS residual, metres. All at one time: their mean."""
+    n = len(ts)
+    s1 = sum(ts)
+    s2 = sum(t * t for t in ts)
+    det = n * s2 - s1 * s1
+    p0, v = [], []
+    for axis in range(3):
+        sy = sum(y[axis] for y in ys)
+        if not det > 1e-18:
+            p0.append(sy / n)
+            v.append(0.0)
+            continue
+        sty = sum(t * y[axis] for t, y in zip(ts, ys, strict=True))
+        p0.append((s2 * sy - s1 * sty) / det)
+        v.append((n * sty - s1 * sy) / det)
+    sq = sum((p0[a] + v[a] * t - y[a]) ** 2 for t, y in zip(ts, ys, strict=True)
+             for a in range(3))
+    return p0, math.sqrt(sq / n)
 
 
 class _Decider:
