@@ -1032,17 +1032,23 @@ class StreamGate:
 
     def _step(self, final: bool):
         if self.pending:
-            todo = self.pending
-            if not final:  # the frames nothing still to come can change (as gate() decides)
-                if self.corrected:
-                    bound = min(_true_time_ns(self.last[0], 0.0, clock)
-                                for clock in self.clock_model)
-                    todo = [f for f in todo if f.key + self.wait_ns < bound]
-                elif self.wait_ns:
-                    todo = [f for f in todo if f.key + self.wait_ns < self.last[0]]
+            # gate()'s order: (time, camera), then push (frame) order
+            todo = sorted(self.pending, key=lambda f: (f.key, f.camera))
+            if not final:
+                # the frames nothing still to come can change: every frame still to come is
+                # later than ``bound``, and a candidate at t uses frames up to t + wait, so a
+                # frame is ready once its LATEST candidate (a rolling shutter's lowest row)
+                # is; decided in order, up to the first not ready
+                bound = (min(_true_time_ns(self.last[0], 0.0, clock)
+                             for clock in self.clock_model) if self.corrected
+                         else self.last[0] if self.wait_ns else None)
+                if bound is not None:
+                    ready = 0
+                    while ready < len(todo) and max(todo[ready].time_ns) + self.wait_ns < bound:
+                        ready += 1
+                    todo = todo[:ready]
             if todo:
-                # gate()'s order: (time, camera), then push (frame) order
-                for f in sorted(todo, key=lambda f: (f.key, f.camera)):
+                for f in todo:
                     self._decide(f)
                 self.pending = [f for f in self.pending if f.reason is None]
         out = []
