@@ -287,6 +287,32 @@ class Track:
                      self.position_world[mask_or_index], self.camera[mask_or_index],
                      {k: v[mask_or_index] for k, v in self.quality.items()})
 
+    @classmethod
+    def concat(cls, parts: Sequence[Track]) -> Track:
+        """One method's consecutive tracks (the outputs of a stream) as one: every column
+        joined in order, ``dropped`` counts summed (empty parts' included), a quality column
+        missing from a part NaN there. InputError on parts of different methods."""
+        parts = list(parts)
+        if not parts:
+            raise InputError("no tracks to join")
+        method = parts[0].method
+        if any(p.method != method for p in parts):
+            raise InputError(f"cannot join tracks of methods {sorted({p.method for p in parts})}")
+        dropped: dict[str, int] = {}
+        for p in parts:
+            for k, n in p.dropped.items():
+                dropped[k] = dropped.get(k, 0) + n
+        full = [p for p in parts if len(p)]
+        keys = list(dict.fromkeys(k for p in full for k in p.quality))
+        quality = {k: np.concatenate([p.quality.get(k, np.full(len(p), np.nan)) for p in full])
+                   for k in keys}
+        if not full:
+            return cls(method, np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0, np.int32),
+                       dropped=dropped)
+        return cls(method, np.concatenate([p.time_ns for p in full]),
+                   np.concatenate([p.position_world for p in full]),
+                   np.concatenate([p.camera for p in full]), quality, dropped=dropped)
+
 
 @dataclass(frozen=True, eq=False)
 class Truth:

@@ -48,12 +48,15 @@ tolerance) and from its own earlier decisions, so a causal method fed by it stay
 
 from __future__ import annotations
 
+import math
+from bisect import bisect_left, bisect_right
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import FusionError
-from ..geometry import epipolar_lines, fundamental_matrices, triangulate_rays
+from ..errors import FusionError, InputError
+from ..geometry import epipolar_lines, fundamental_matrices
 from ..motion import G
 from ..records import NS, Detections, Observations
 from ..rig import Rig
@@ -248,11 +251,55 @@ def _candidates(detections: Detections, rig: Rig) -> _Candidates:
     for i, cam in enumerate(rig.cameras):
         rows = np.flatnonzero(camera == i)
         if len(rows):
-            uv = detections.cand_uv[rows]
-            sane = np.all(np.abs(uv) <= 10 * max(cam.width, cam.height), axis=1)
-            uv_und[rows[sane]] = cam.undistort(uv[sane])
-            ray_dir[rows[sane]] = cam.rays(uv[sane])[1]
+            uv_und[rows], ray_dir[rows] = _pixel_geometry(cam, detections.cand_uv[rows])
     return _Candidates(camera, time_ns, uv_und, ray_dir, frame)
+
+
+def _pixel_geometry(cam, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Undistorted pixels (n, 2) and unit world viewing rays (n, 3) of one camera's
+    distorted pixels ``uv`` (n, 2); NaN for a pixel far outside the image (a damaged file).
+    Elementwise (:func:`_from_normalized`): the stream's floats give the same bits."""
+    uv_und = np.full((len(uv), 2), np.nan)
+    ray_dir = np.full((len(uv), 3), np.nan)
+    sane = np.all(np.abs(uv) <= 10 * max(cam.width, cam.height), axis=1)
+    if sane.any():
+        xy = cam.undistort_normalized(uv[sane])
+        with np.errstate(invalid="ignore"):
+            u, v, *d = _from_normalized(xy[:, 0], xy[:, 1], cam.K.tolist(), cam.R.tolist(),
+                                        np.sqrt, np.maximum)
+        uv_und[sane] = np.column_stack([u, v])
+        ray_dir[sane] = np.column_stack(d)
+    return uv_und, ray_dir
+
+
+def _from_normalized(x, y, k, r, sqrt, maximum):
+    """Undistorted pixel ``(u, v)`` (through ``K``) and unit world viewing ray
+    ``(dx, dy, dz)`` (``Rᵀ [x, y, 1]``, scaled by its largest component first: a far-off
+    pixel's ray would overflow) of ideal normalized coordinates; floats, or arrays
+    elementwise, every sum in index order: the same bits (``k``, ``r``: nested lists;
+    ``sqrt``, ``maximum``: math's and max, or numpy's)."""
+    u = (k[0][0] * x + k[0][1] * y) + k[0][2]
+    v = k[1][1] * y + k[1][2]
+    s = maximum(maximum(abs(x), abs(y)), 1.0)
+    cx, cy, cz = x / s, y / s, 1.0 / s
+    dx = (cx * r[0][0] + cy * r[1][0]) + cz * r[2][0]
+    dy = (cx * r[0][1] + cy * r[1][1]) + cz * r[2][1]
+    dz = (cx * r[0][2] + cy * r[1][2]) + cz * r[2][2]
+    size = sqrt((dx * dx + dy * dy) + dz * dz)
+    return u, v, dx / size, dy / size, dz / size
+
+
+def _epipolar_line(f, u, v, sqrt, maximum):
+    """The epipolar line ``(a, b, c)``, ``a² + b² = 1``, of an undistorted pixel ``(u, v)``
+    (``f``: F_ab as nested lists) as :func:`pslog.geometry.epipolar_lines` defines it;
+    floats, or arrays elementwise, every sum in index order: the same bits."""
+    a = (f[0][0] * u + f[0][1] * v) + f[0][2]
+    b = (f[1][0] * u + f[1][1] * v) + f[1][2]
+    c = (f[2][0] * u + f[2][1] * v) + f[2][2]
+    big = maximum(abs(a), abs(b))  # (scaled first: the norm alone could overflow)
+    a, b, c = a / big, b / big, c / big
+    size = sqrt(a * a + b * b)
+    return a / size, b / size, c / size
 
 
 def epipolar_distance(F_ab: np.ndarray, uv_a: np.ndarray, uv_b: np.ndarray) -> np.ndarray:
@@ -313,7 +360,10 @@ def _support(c: _Candidates, rig: Rig, F: np.ndarray, tables, options: GatingOpt
             times, table = tables[b]
             if len(times) == 0:
                 continue
-            lines = epipolar_lines(F[a, b], c.uv_und[rows])
+            with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+                lines = np.column_stack(_epipolar_line(F[a, b].tolist(), c.uv_und[rows, 0],
+                                                       c.uv_und[rows, 1], np.sqrt,
+                                                       np.maximum))
             if causal:
                 # b's frames a causal choice at t may use: (time, camera) order, or up to
                 # t + wait for the methods that wait for the tolerance
@@ -426,43 +476,182 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
     return static, stillness
 
 
-def _points(c: _Candidates, rig: Rig, ratio: np.ndarray, carried: np.ndarray):
+def _rig_constants(rig: Rig):
+    """Per camera, as nested Python floats: centre (3,), K⁻¹ (3, 3), R (3, 3) (for
+    :func:`_points` and the stream's per-candidate form of it)."""
+    return ([cam.center_world.tolist() for cam in rig.cameras],
+            [np.linalg.inv(cam.K).tolist() for cam in rig.cameras],
+            [cam.R.tolist() for cam in rig.cameras])
+
+
+def _carried_ray(u, v, k_inv, r, sqrt):
+    """Unit world direction ``Rᵀ K⁻¹ [u, v, 1]`` of undistorted pixels (floats, or arrays
+    elementwise), every sum in index order, so that arrays and floats give the same bits
+    (``sqrt``: :func:`math.sqrt` or :func:`numpy.sqrt`)."""
+    cx = (k_inv[0][0] * u + k_inv[0][1] * v) + k_inv[0][2]
+    cy = (k_inv[1][0] * u + k_inv[1][1] * v) + k_inv[1][2]
+    cz = (k_inv[2][0] * u + k_inv[2][1] * v) + k_inv[2][2]
+    x = (cx * r[0][0] + cy * r[1][0]) + cz * r[2][0]
+    y = (cx * r[0][1] + cy * r[1][1]) + cz * r[2][1]
+    z = (cx * r[0][2] + cy * r[1][2]) + cz * r[2][2]
+    s = sqrt((x * x + y * y) + z * z)
+    return x / s, y / s, z / s
+
+
+def _normal_equations(rays):
+    """The least-squares crossing's normal equations ``Σ w (I - d dᵀ) p = Σ w (I - d dᵀ) o``
+    of rays ``(w, ox, oy, oz, dx, dy, dz)`` (w 1 for a ray used, 0 for none; floats, or
+    arrays elementwise: the same bits), solved by cofactors. Returns (p (3,), det)."""
+    a00 = a01 = a02 = a11 = a12 = a22 = b0 = b1 = b2 = 0.0
+    for w, ox, oy, oz, dx, dy, dz in rays:
+        p00, p11, p22 = (1.0 - dx * dx) * w, (1.0 - dy * dy) * w, (1.0 - dz * dz) * w
+        p01, p02, p12 = (0.0 - dx * dy) * w, (0.0 - dx * dz) * w, (0.0 - dy * dz) * w
+        a00, a01, a02 = a00 + p00, a01 + p01, a02 + p02
+        a11, a12, a22 = a11 + p11, a12 + p12, a22 + p22
+        b0 = b0 + ((p00 * ox + p01 * oy) + p02 * oz)
+        b1 = b1 + ((p01 * ox + p11 * oy) + p12 * oz)
+        b2 = b2 + ((p02 * ox + p12 * oy) + p22 * oz)
+    c00, c01, c02 = a11 * a22 - a12 * a12, a02 * a12 - a01 * a22, a01 * a12 - a02 * a11
+    c11, c12, c22 = a00 * a22 - a02 * a02, a01 * a02 - a00 * a12, a00 * a11 - a01 * a01
+    det = (a00 * c00 + a01 * c01) + a02 * c02
+    return ((c00 * b0 + c01 * b1) + c02 * b2, (c01 * b0 + c11 * b1) + c12 * b2,
+            (c02 * b0 + c12 * b1) + c22 * b2), det
+
+
+def _ray_offsets(p, rays):
+    """Per ray: the point's distance along it (its depth, > 0 in front) and squared distance
+    from it (floats or arrays: the same bits)."""
+    out = []
+    for _w, ox, oy, oz, dx, dy, dz in rays:
+        fx, fy, fz = p[0] - ox, p[1] - oy, p[2] - oz
+        along = (fx * dx + fy * dy) + fz * dz
+        qx, qy, qz = fx - along * dx, fy - along * dy, fz - along * dz
+        out.append((along, (qx * qx + qy * qy) + qz * qz))
+    return out
+
+
+#: A crossing whose normal equations' determinant is this small has parallel rays.
+_MIN_DET = 1e-12
+
+
+def _points(c: _Candidates, rig: Rig, ratio: np.ndarray, carried: np.ndarray, constants=None):
     """Each candidate's 3D point: its ray and its supporting cameras' carried rays crossed
     (least squares); NaN without support. Also whether it lies in front of every camera
     used, and the RMS distance of the point to those rays, metres (three or more rays that
-    do not meet: the supports are not one ball)."""
+    do not meet: the supports are not one ball). Elementwise, in the order of
+    :func:`_points_one`, which gives the stream the same bits one candidate at a time;
+    ``constants``: :func:`_rig_constants` of ``rig`` (computed when None)."""
     n, m = ratio.shape
-    centers = np.array([cam.center_world for cam in rig.cameras])
-    K_inv = np.array([np.linalg.inv(cam.K) for cam in rig.cameras])
-    R = np.array([cam.R for cam in rig.cameras])
-    origins = np.zeros((n, m + 1, 3))
-    dirs = np.zeros((n, m + 1, 3))
-    valid = np.zeros((n, m + 1), dtype=bool)
-    origins[:, 0] = centers[c.camera]
-    dirs[:, 0] = np.nan_to_num(c.ray_dir)
-    valid[:, 0] = np.all(np.isfinite(c.ray_dir), axis=1)
+    centers, k_inv, rot = constants or _rig_constants(rig)
+    own = np.all(np.isfinite(c.ray_dir), axis=1)
+    d = np.where(own[:, None], c.ray_dir, 0.0)
+    o = np.where(own[:, None], np.array(centers)[c.camera], 0.0)
+    rays = [(own * 1.0, o[:, 0], o[:, 1], o[:, 2], d[:, 0], d[:, 1], d[:, 2])]
+    used = [own]
     supported = ratio <= 1.0
-    for b in range(m):
-        rows = np.flatnonzero(supported[:, b])
-        if len(rows) == 0:
-            continue
-        homog = np.column_stack([carried[rows, b], np.ones(len(rows))])
-        d = (homog @ K_inv[b].T) @ R[b]  # Rᵀ K⁻¹ x, row-wise
-        d /= np.linalg.norm(d, axis=1, keepdims=True)
-        origins[rows, b + 1] = centers[b]
-        dirs[rows, b + 1] = d
-        valid[rows, b + 1] = True
-    enough = valid.sum(axis=1) >= 2
-    points = np.full((n, 3), np.nan)
-    in_front = np.ones(n, dtype=bool)
-    miss = np.full(n, np.nan)
-    if np.any(enough):
-        p, miss[enough], _ = triangulate_rays(origins[enough], dirs[enough], valid[enough])
-        points[enough] = p
-        depth = np.einsum("nmi,nmi->nm", p[:, None, :] - origins[enough], dirs[enough])
-        in_front[enough] = np.all((depth > 0) | ~valid[enough], axis=1) & np.all(
-            np.isfinite(p), axis=1)
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        for b in range(m):
+            ok = supported[:, b]
+            if not ok.any():
+                continue
+            dx, dy, dz = _carried_ray(carried[:, b, 0], carried[:, b, 1], k_inv[b], rot[b],
+                                      np.sqrt)
+            ok = ok & np.isfinite(dx) & np.isfinite(dy) & np.isfinite(dz)
+            x, y, z = centers[b]
+            rays.append((ok * 1.0, np.where(ok, x, 0.0), np.where(ok, y, 0.0),
+                         np.where(ok, z, 0.0), np.where(ok, dx, 0.0), np.where(ok, dy, 0.0),
+                         np.where(ok, dz, 0.0)))
+            used.append(ok)
+        n_rays = np.sum(used, axis=0)
+        p, det = _normal_equations(rays)
+        enough = n_rays >= 2
+        solved = enough & (np.abs(det) > _MIN_DET)
+        points = np.full((n, 3), np.nan)
+        for i in range(3):
+            points[solved, i] = (p[i] / det)[solved]
+        front = solved.copy()
+        total = np.zeros(n)
+        for (along, sq), ok in zip(_ray_offsets(points.T, rays), used, strict=True):
+            front &= (along > 0) | ~ok
+            total = total + np.where(ok, sq, 0.0)
+        in_front = np.where(enough, front, True)  # no point: nothing behind a camera
+        miss = np.where(enough, np.sqrt(total / np.maximum(n_rays, 1)), np.nan)
     return points, in_front, miss
+
+
+def _points_one(camera: int, ray_dir, ratio_row, carried_row, constants):
+    """:func:`_points` of one candidate (``ray_dir`` (3,) floats; its ratio (m,) and
+    carried (m, 2) rows as lists): the same arithmetic on floats, the same bits.
+    Returns (point (3,) or None, in_front, miss or NaN)."""
+    centers, k_inv, rot = constants
+    rays = []
+    if all(math.isfinite(x) for x in ray_dir):
+        rays.append((1.0, *centers[camera], *ray_dir))
+    for b, r in enumerate(ratio_row):
+        if r <= 1.0:
+            dx, dy, dz = _carried_ray(*carried_row[b], k_inv[b], rot[b], _sqrt)
+            if math.isfinite(dx) and math.isfinite(dy) and math.isfinite(dz):
+                rays.append((1.0, *centers[b], dx, dy, dz))
+    if len(rays) < 2:
+        return None, True, math.nan
+    p, det = _normal_equations(rays)
+    if not abs(det) > _MIN_DET:
+        return None, False, math.nan
+    p = (p[0] / det, p[1] / det, p[2] / det)
+    total = 0.0
+    in_front = True
+    for along, sq in _ray_offsets(p, rays):
+        in_front = in_front and along > 0
+        total = total + sq
+    return p, in_front, math.sqrt(total / len(rays))
+
+
+def _line_of(f, u: float, v: float):
+    """:func:`_epipolar_line` on floats (NaN where the arrays' form gives NaN)."""
+    a = (f[0][0] * u + f[0][1] * v) + f[0][2]
+    b = (f[1][0] * u + f[1][1] * v) + f[1][2]
+    if not max(abs(a), abs(b)) > 0 or not math.isfinite(a) or not math.isfinite(b):
+        return math.nan, math.nan, math.nan
+    return _epipolar_line(f, u, v, _sqrt, max)
+
+
+def _ray_miss(p, center, ray) -> float:
+    """Distance, metres, of the point ``p`` (3,) from the ray through ``center`` (3,) along
+    the unit ``ray`` (3,): ``|(p - center) × ray|``, in floats."""
+    ox, oy, oz = float(p[0]) - center[0], float(p[1]) - center[1], float(p[2]) - center[2]
+    rx, ry, rz = ray
+    cx, cy, cz = oy * rz - oz * ry, oz * rx - ox * rz, ox * ry - oy * rx
+    return _sqrt((cx * cx + cy * cy) + cz * cz)
+
+
+def _distance(p, q) -> float:
+    """``|p - q|`` of two points (3,), metres, in floats."""
+    dx, dy, dz = float(p[0]) - float(q[0]), float(p[1]) - float(q[1]), float(p[2]) - float(q[2])
+    return _sqrt((dx * dx + dy * dy) + dz * dz)
+
+
+def _clock_model(rig: Rig) -> list[tuple[float, float, float, float]]:
+    """Per camera: (height, clock_offset, clock_drift_ppm, readout) as floats, for
+    :func:`_true_time_ns`."""
+    p = camera_parameters(rig)
+    return list(zip(*(p[k].tolist() for k in ("height", "clock_offset", "clock_drift_ppm",
+                                              "readout")), strict=True))
+
+
+def _true_time_ns(logged: int, v: float, clock) -> int:
+    """:func:`pslog.timing.true_times_ns` of one detection (``clock``: its camera's
+    :func:`_clock_model` entry), in floats in the same order: the same nanosecond."""
+    height, offset, drift, readout = clock
+    term = readout * NS * v / height if readout != 0 else 0.0
+    if not math.isfinite(term):
+        raise InputError("a rolling-shutter time needs the detection's pixel row: got a "
+                         "non-finite row")
+    return logged + round(offset * NS + drift * 1e-6 * float(logged) + term)
+
+
+def _sqrt(x: float) -> float:
+    """math.sqrt, NaN for a negative or NaN argument (as numpy's)."""
+    return math.sqrt(x) if x >= 0 else math.nan
 
 
 class _Track:
@@ -491,19 +680,38 @@ class _Track:
             lo -= 1
         if k - lo < 3:
             return None
-        ts = np.array(self.t[lo:]) - t_s
-        ps = np.array(self.p[lo:])
-        gravity = np.array([0.0, 0.0, -G])
-        # p(τ) = p0 + v τ + ½ g τ², τ = time - t: fit p0, v to the points less gravity
-        y = ps - 0.5 * ts[:, None] ** 2 * gravity
-        A = np.column_stack([np.ones(len(ts)), ts])
-        coef, *_ = np.linalg.lstsq(A, y, rcond=None)
-        rms = np.sqrt(np.mean(np.sum((A @ coef - y) ** 2, axis=1)))
+        ts = [t - t_s for t in self.t[lo:]]
+        # p(τ) = p0 + v τ + ½ g τ², τ = time - t, g = (0, 0, -G) (the world is z up; the
+        # filter's default gravity): fit p0, v to the points less gravity
+        ys = [(float(p[0]), float(p[1]), float(p[2]) + 0.5 * tau * tau * G)
+              for tau, p in zip(ts, self.p[lo:], strict=True)]
+        p0, rms = _line_fit(ts, ys)
         if rms > 0.5 * o.track_m and len(ts) > 3:  # a bounce in the window: the newest only
-            A, y = A[-3:], y[-3:]
-            coef, *_ = np.linalg.lstsq(A, y, rcond=None)
+            p0, _ = _line_fit(ts[-3:], ys[-3:])
         dt = abs(ts[-1])  # the newest point may be later than t (a rolling shutter)
-        return coef[0], o.track_m + o.track_jump_m_s * dt
+        return p0, o.track_m + o.track_jump_m_s * dt
+
+
+def _line_fit(ts: list[float], ys: list[tuple]) -> tuple[list[float], float]:
+    """Least-squares ``y ≈ p0 + v τ`` of points ``ys`` (3,) at ``ts`` (closed form, on
+    floats): ``p0`` (3,) and the RMS residual, metres. All at one time: their mean."""
+    n = len(ts)
+    s1 = sum(ts)
+    s2 = sum(t * t for t in ts)
+    det = n * s2 - s1 * s1
+    p0, v = [], []
+    for axis in range(3):
+        sy = sum(y[axis] for y in ys)
+        if not det > 1e-18:
+            p0.append(sy / n)
+            v.append(0.0)
+            continue
+        sty = sum(t * y[axis] for t, y in zip(ts, ys, strict=True))
+        p0.append((s2 * sy - s1 * sty) / det)
+        v.append((n * sty - s1 * sy) / det)
+    sq = sum((p0[a] + v[a] * t - y[a]) ** 2 for t, y in zip(ts, ys, strict=True)
+             for a in range(3))
+    return p0, math.sqrt(sq / n)
 
 
 class _Decider:
@@ -514,40 +722,49 @@ class _Decider:
         self.rig, self.options = rig, options
         self.track = _Track(options)
         self.verified = False  # a candidate has passed a gate: from then on none passes unjudged
+        self.centers = [cam.center_world.tolist() for cam in rig.cameras]
 
     def run(self, c: _Candidates, frames, ratio, points, in_front, reason,
             static=None) -> None:
         """Decide the frames ``[(lo, hi), ...]`` (candidate rows, in order): set ``reason``
         of every rejected row (``static``: :func:`_static`'s pair)."""
-        static, stillness = ((np.zeros(len(c.camera), dtype=bool), np.zeros(len(c.camera)))
-                             if static is None else static)
-        options, rig, track = self.options, self.rig, self.track
-        available = np.sum(np.isfinite(ratio), axis=1)
-        n_support = np.sum(ratio <= 1.0, axis=1)
+        n = len(c.camera)
+        static, stillness = (([False] * n, [0.0] * n) if static is None else
+                             (np.asarray(static[0]).tolist(), np.asarray(static[1]).tolist()))
+        options, track = self.options, self.track
+        # per candidate, in floats (the loop is sequential; numpy is slow on scalars)
+        rows = ratio.tolist()
+        available = [sum(1 for r in row if math.isfinite(r)) for row in rows]
+        n_support = [sum(1 for r in row if r <= 1.0) for row in rows]
         # squared residuals of the supporting cameras, 1 for each other available one: a
         # camera that does not see the ball says nothing, however near a false candidate
-        with np.errstate(invalid="ignore"):
-            epi_cost = np.nansum(np.where(ratio <= 1.0, ratio**2, 1.0), axis=1)
-        t_s = c.time_ns / NS
+        # (summed in camera order)
+        epi_cost = [sum((r * r if r <= 1.0 else 1.0) for r in row) for row in rows]
+        t_s = (c.time_ns / NS).tolist()
+        centers = self.centers
+        rays = c.ray_dir.tolist()
+        pts = np.asarray(points).tolist()
+        front = np.asarray(in_front).tolist()
+        t_ns = c.time_ns.tolist()
         for lo, hi in frames:
             best_key, best_row = None, -1
-            pred = None
+            preds: dict[int, tuple | bool] = {}  # the track's prediction at each time
             unverified = []
             for i in range(lo, hi):
                 track_accepts = False
                 if available[i] and n_support[i] == 0:
                     # no other camera confirms it (they may just not see the ball): the track
                     # gate alone may still accept it, if its ray passes close to the prediction
-                    if pred is None:
-                        pred = track.predict(t_s[i]) or False
-                    if pred and np.isfinite(c.ray_dir[i, 0]):
-                        offset = pred[0] - rig.cameras[c.camera[i]].center_world
-                        track_accepts = (np.linalg.norm(np.cross(offset, c.ray_dir[i]))
+                    pred = preds.get(t_ns[i])
+                    if pred is None:  # at the candidate's own time (a rolling shutter's row)
+                        pred = preds[t_ns[i]] = track.predict(t_s[i]) or False
+                    if pred and math.isfinite(rays[i][0]):
+                        track_accepts = (_ray_miss(pred[0], centers[c.camera[i]], rays[i])
                                          <= options.track_alone_m)
                     if not track_accepts:
                         reason[i] = EPIPOLAR
                         continue
-                if not in_front[i] or static[i]:
+                if not front[i] or static[i]:
                     reason[i] = MOTION
                     continue
                 # consistent in three views: supported by two cameras (how the track follows
@@ -555,22 +772,22 @@ class _Decider:
                 strong = n_support[i] >= 2
                 # supported by one and near the lines of every other (a kick or bounce spoils
                 # carried points for a frame or two): the track gate, at twice the allowance
-                loose = not strong and available[i] >= 2 and np.all(
-                    ratio[i][np.isfinite(ratio[i])] <= options.loose_ratio)
+                loose = not strong and available[i] >= 2 and all(
+                    r <= options.loose_ratio for r in rows[i] if math.isfinite(r))
                 track_cost = 0.0
                 if not strong:
                     last = track.last()
-                    if last is not None and np.isfinite(points[i, 0]):
+                    if last is not None and math.isfinite(pts[i][0]):
                         dt = abs(t_s[i] - last[0])
-                        if dt <= options.track_window_s and np.linalg.norm(points[i] - last[1]) > (
+                        if dt <= options.track_window_s and _distance(pts[i], last[1]) > (
                                 options.max_speed_m_s * dt + options.track_m):
                             reason[i] = MOTION
                             continue
-                    if pred is None:
-                        pred = track.predict(t_s[i]) or False
-                    if pred and np.isfinite(c.ray_dir[i, 0]):
-                        offset = pred[0] - rig.cameras[c.camera[i]].center_world
-                        miss = np.linalg.norm(np.cross(offset, c.ray_dir[i]))
+                    pred = preds.get(t_ns[i])
+                    if pred is None:  # at the candidate's own time (a rolling shutter's row)
+                        pred = preds[t_ns[i]] = track.predict(t_s[i]) or False
+                    if pred and math.isfinite(rays[i][0]):
+                        miss = _ray_miss(pred[0], centers[c.camera[i]], rays[i])
                         if miss > (2.0 if loose else 1.0) * pred[1]:
                             reason[i] = TRACK
                             continue
@@ -580,7 +797,7 @@ class _Decider:
                             reason[i] = EPIPOLAR
                             continue
                         unverified.append(i)  # the session's first frames: nothing to judge by
-                key = (-int(n_support[i]), float(epi_cost[i]) + track_cost + stillness[i])
+                key = (-n_support[i], epi_cost[i] + track_cost + stillness[i])
                 if best_key is None or key < best_key:
                     best_key, best_row = key, i
             if best_row < 0:
@@ -600,8 +817,8 @@ class _Decider:
                 if i != best_row and reason[i] < 0:
                     reason[i] = OUTSCORED
             self.verified |= best_row not in unverified
-            if np.isfinite(points[best_row, 0]):
-                track.add(float(t_s[best_row]), points[best_row])
+            if math.isfinite(pts[best_row][0]):
+                track.add(t_s[best_row], np.array(pts[best_row]))
 
 
 def gate(detections: Detections, rig: Rig, *, causal: bool = True, wait_s: float = 0.0,
@@ -669,12 +886,42 @@ def _chosen_candidates(detections: Detections, chosen: np.ndarray) -> Detections
                       detections.cand_radius[chosen], detections.cand_score[chosen])
 
 
+class _Frame:
+    """One frame pushed to a :class:`StreamGate`: its candidates (best first) and what the
+    gate computed of them once (corrected times, undistorted pixels, rays; once decided,
+    their 3D points and rejection reasons)."""
+
+    __slots__ = ("camera", "index", "key", "points", "ray_dir", "reason", "t", "time_ns", "uv",
+                 "uv_und")
+
+    def __init__(self, t: int, camera: int, index: int, uv: np.ndarray, time_ns: list[int],
+                 uv_und: np.ndarray, ray_dir: np.ndarray) -> None:
+        self.t, self.camera, self.index, self.uv = t, camera, index, uv
+        self.time_ns = time_ns  # corrected, per candidate
+        self.uv_und, self.ray_dir = uv_und, ray_dir
+        self.key = self.time_ns[0]  # the frame's time: its best candidate's (_frame_table)
+        self.reason: np.ndarray | None = None
+        self.points: list | None = None
+
+
 class StreamGate:
     """The causal gate of :func:`gate` for a stream: frames pushed as they arrive, each
     frame's candidates in one push, best first; each frame is decided once nothing still to
     come can change its choice, and the chosen candidates come out in the pushed (logged)
     order. The choices equal ``gate(detections, rig, causal=True, wait_s=...)`` on the whole
-    session (the same decision code, in the same order, with the same history).
+    session: the same arithmetic in the same order on the same history, bit for bit.
+
+    Incremental: a frame's geometry (corrected times, undistorted pixels, rays) is computed
+    once, when pushed; deciding it computes only its own candidates' epipolar support (the
+    two latest frames of each other camera, :func:`_support`'s causal rule written per
+    candidate), their 3D points (:func:`_points_one`), their stillness against the same
+    camera's earlier frames' stored points (:func:`_static`'s rule) and the sequential
+    choice (:class:`_Decider`). A frame's few candidates are computed on Python floats:
+    every batch step is elementwise in an order floats reproduce (no matrix product or
+    LAPACK call, whose bits depend on the array's size), so the bits are the batch's. Each
+    camera's frames are kept in (corrected time, push) order, as :func:`_frame_table` orders
+    them, for ``history`` seconds. Cost per push of a 3-camera 30 fps session with a few
+    candidates per frame: ~50-70 µs (``benchmarks/bench_stream.py``).
 
     Used by :class:`pslog.fusion.stream.StreamFuser` with ``candidates=True``.
     """
@@ -691,13 +938,23 @@ class StreamGate:
         self.clock = camera_parameters(rig)
         self.corrected = any(cam.has_clock_correction for cam in rig.cameras)
         spread = float(np.sum(np.abs(self.clock["clock_offset"])) + np.max(self.clock["readout"]))
+        # frames older than this (logged) reach no later choice: neither as support (at
+        # most max_gap_s away) nor as a stillness reference (1.5 static_s)
         self.history_ns = round((2 * (max_gap_s or default_max_gap_s(rig)) + wait_s
                                  + 1.5 * self.options.static_s + 0.2 + 2 * spread) * NS)
         self.decider = _Decider(rig, self.options)
-        # the window: one entry per frame, in pushed order:
-        # [logged time, camera, frame index, uv (k, 2), reason (k,) or None, released,
-        #  then, once decided, its candidates' 3D points (k, 3)]
-        self.frames: list[list] = []
+        self.constants = _rig_constants(rig)
+        self.camera_k = [cam.K.tolist() for cam in rig.cameras]
+        self.camera_r = [cam.R.tolist() for cam in rig.cameras]
+        self.distorted = [bool(np.any(cam.dist)) for cam in rig.cameras]
+        self.F_lists = self.F.tolist()
+        self.clock_model = _clock_model(rig)
+        self.lags = [int(np.ceil(self.options.static_s * cam.fps)) for cam in rig.cameras]
+        # per camera: its frames in (corrected time, push) order and their times
+        self.keys: list[list[int]] = [[] for _ in rig.cameras]
+        self.by_camera: list[list[_Frame]] = [[] for _ in rig.cameras]
+        self.pending: list[_Frame] = []  # not decided yet, in pushed order
+        self.unreleased: deque[_Frame] = deque()  # not returned yet, in pushed order
         self.last: tuple[int, int] = (np.iinfo(np.int64).min, -1)
         self.rejected: list[tuple] = []
 
@@ -720,8 +977,8 @@ class StreamGate:
                                       "their logged times, each frame's in one push; got "
                                       f"t={keys[start][0]} ns after t={self.last[0]} ns")
                 self.last = keys[start]
-                self.frames.append([keys[start][0], keys[start][1], int(frame_index[start]),
-                                    uv[start:i].copy(), None, False])
+                self._add(keys[start][0], keys[start][1], int(frame_index[start]),
+                          uv[start:i].copy())
                 start = i
         return self._step(final=False)
 
@@ -735,72 +992,180 @@ class StreamGate:
         return Rejections.from_rows([(t, c, f, u, v, 1.0, REASONS[r])
                                      for t, c, f, u, v, r in self.rejected])
 
+    def _add(self, t: int, cam: int, index: int, uv: np.ndarray) -> None:
+        # as _candidates: each candidate at its own row's corrected time (the logged one
+        # without a clock model: its correction is 0 for any row)
+        clock = self.clock_model[cam]
+        time_ns = ([t] * len(uv) if not self.corrected else
+                   [_true_time_ns(t, v, clock) for v in uv[:, 1].tolist()])
+        frame = _Frame(t, cam, index, uv, time_ns, *self._geometry(cam, uv))
+        at = bisect_right(self.keys[cam], frame.key)  # after equal times: push order
+        self.keys[cam].insert(at, frame.key)
+        self.by_camera[cam].insert(at, frame)
+        self.pending.append(frame)
+        self.unreleased.append(frame)
+
+    def _geometry(self, cam: int, uv: np.ndarray):
+        """:func:`_pixel_geometry` of one frame's candidates, on floats (the same bits)."""
+        camera = self.rig.cameras[cam]
+        k, r = self.camera_k[cam], self.camera_r[cam]
+        limit = 10 * max(camera.width, camera.height)
+        rows = uv.tolist()
+        sane = [abs(u) <= limit and abs(v) <= limit for u, v in rows]
+        if self.distorted[cam]:  # the iterative undistortion, in numpy (row by row)
+            xy = iter(camera.undistort_normalized(uv[sane]).tolist() if any(sane) else [])
+        else:  # Camera.normalized_from_pixels
+            xy = iter([(((u - k[0][2]) - k[0][1] * ((v - k[1][2]) / k[1][1])) / k[0][0],
+                        (v - k[1][2]) / k[1][1]) for (u, v), ok in zip(rows, sane, strict=True)
+                       if ok])
+        und, rays = [], []
+        for ok in sane:
+            x, y = next(xy) if ok else (math.nan, math.nan)
+            if not (ok and math.isfinite(x) and math.isfinite(y)):  # (not undistorted)
+                und.append((math.nan, math.nan))
+                rays.append((math.nan, math.nan, math.nan))
+                continue
+            u, v, *d = _from_normalized(x, y, k, r, _sqrt, max)
+            und.append((u, v))
+            rays.append(tuple(d))
+        return np.array(und), np.array(rays)
+
     def _step(self, final: bool):
-        frames = self.frames
-        if frames:
-            names = self.rig.names
-            counts = np.array([len(f[3]) for f in frames])
-            det = Detections(names, np.array([f[0] for f in frames], np.int64),
-                             np.array([f[1] for f in frames], np.int32),
-                             np.array([f[2] for f in frames], np.int64),
-                             np.repeat(np.arange(len(frames)), counts),
-                             np.concatenate([f[3] for f in frames]),
-                             np.full(int(counts.sum()), np.nan), np.ones(int(counts.sum())))
-            c = _candidates(det, self.rig)
-            first = np.r_[0, np.cumsum(counts)[:-1]]
-            key = c.time_ns[first]
-            todo = np.array([f[4] is None for f in frames])
+        if self.pending:
+            # gate()'s order: (time, camera), then push (frame) order
+            todo = sorted(self.pending, key=lambda f: (f.key, f.camera))
             if not final:
-                if self.corrected:
-                    p = self.clock
-                    bound = int(np.min(true_times_ns(
-                        np.full(len(self.rig), self.last[0]), 0.0, p["height"],
-                        p["clock_offset"], p["clock_drift_ppm"], p["readout"])))
-                    todo &= key + self.wait_ns < bound
-                elif self.wait_ns:
-                    todo &= key + self.wait_ns < self.last[0]
-            if todo.any():
-                rows = np.flatnonzero(todo)
-                rows = rows[np.lexsort((det.frame_camera[rows], key[rows]))]
-                only = todo[c.frame]
-                tables = _frame_table(c, len(self.rig))
-                ratio, carried = _support(c, self.rig, self.F, tables, self.options,
-                                          self.max_gap_ns, True, self.wait_ns, only)
-                points, in_front, miss = _points(c, self.rig, ratio, carried)
-                points[miss > self.options.track_m] = np.nan  # as gate()
-                # the decided frames' points, as computed when they were decided (a point
-                # uses nothing after its time: the same as now), for the stillness test
-                for f in np.flatnonzero(~todo).tolist():
-                    if len(frames[f]) > 6:  # decided; the others are later than any to do
-                        points[first[f]:first[f] + counts[f]] = frames[f][6]
-                for f in rows.tolist():
-                    frames[f].append(points[first[f]:first[f] + counts[f]].copy())
-                reason = np.full(len(c.frame), -1, dtype=np.int8)
-                self.decider.run(c, [(int(first[f]), int(first[f] + counts[f])) for f in rows],
-                                 ratio, points, in_front, reason,
-                                 _static(c, tables, self.rig, self.options, points))
-                for f in rows.tolist():
-                    frames[f][4] = reason[first[f]:first[f] + counts[f]]
+                # the frames nothing still to come can change: every frame still to come is
+                # later than ``bound``, and a candidate at t uses frames up to t + wait, so a
+                # frame is ready once its LATEST candidate (a rolling shutter's lowest row)
+                # is; decided in order, up to the first not ready
+                bound = (min(_true_time_ns(self.last[0], 0.0, clock)
+                             for clock in self.clock_model) if self.corrected
+                         else self.last[0] if self.wait_ns else None)
+                if bound is not None:
+                    ready = 0
+                    while ready < len(todo) and max(todo[ready].time_ns) + self.wait_ns < bound:
+                        ready += 1
+                    todo = todo[:ready]
+            if todo:
+                for f in todo:
+                    self._decide(f)
+                self.pending = [f for f in self.pending if f.reason is None]
         out = []
-        for f in frames:  # release decided frames in pushed order
-            if f[4] is None:
-                break
-            if not f[5]:
-                f[5] = True
-                for k, r in enumerate(f[4].tolist()):
-                    if r < 0:
-                        out.append((f[0], f[1], f[3][k], f[2]))
-                    else:
-                        self.rejected.append((f[0], f[1], f[2], *f[3][k], r))
+        while self.unreleased and self.unreleased[0].reason is not None:
+            f = self.unreleased.popleft()  # released in pushed order
+            for k, r in enumerate(f.reason.tolist()):
+                if r < 0:
+                    out.append((f.t, f.camera, f.uv[k], f.index))
+                else:
+                    self.rejected.append((f.t, f.camera, f.index, *f.uv[k].tolist(), r))
         # keep the history a later choice can reach
-        while frames and frames[0][5] and frames[0][0] < self.last[0] - self.history_ns:
-            frames.pop(0)
+        old = self.last[0] - self.history_ns
+        for keys, frames in zip(self.keys, self.by_camera, strict=True):
+            drop = 0
+            while drop < len(frames) and frames[drop].reason is not None and frames[drop].t < old:
+                drop += 1
+            if drop:
+                del keys[:drop], frames[:drop]
         if not out:
             return (np.zeros(0, np.int64), np.zeros(0, np.int32), np.zeros((0, 2)),
                     np.zeros(0, np.int64))
         t, cam, uv, idx = zip(*out, strict=True)
         return (np.array(t, np.int64), np.array(cam, np.int32), np.array(uv),
                 np.array(idx, np.int64))
+
+    def _decide(self, f: _Frame) -> None:
+        """Decide one frame: the steps of :func:`gate` on its candidates alone."""
+        o = self.options
+        k, a = len(f.uv), f.camera
+        ratio, carried = self._support(f)
+        c = _Candidates(np.full(k, a, np.int32), np.array(f.time_ns, np.int64), f.uv_und,
+                        f.ray_dir, np.zeros(k, np.int64))
+        f.points, front = [], []
+        for ray, r_row, c_row in zip(f.ray_dir.tolist(), ratio.tolist(), carried.tolist(),
+                                     strict=True):
+            p, ok, miss = _points_one(a, ray, r_row, c_row, self.constants)
+            f.points.append(p if p is not None and not miss > o.track_m  # as gate()
+                            else (math.nan, math.nan, math.nan))
+            front.append(ok)
+        points, in_front = np.array(f.points), np.array(front)
+        # _static's rule on this frame: still against each of the camera's lags frames before
+        frames, at = self.by_camera[a], self.by_camera[a].index(f)
+        lags = self.lags[a]
+        run = np.zeros(k)
+        for lag in range(1, min(lags, at) + 1):
+            prev = frames[at - lag]
+            if not f.key - prev.key <= 1.5 * o.static_s * NS:  # (recent)
+                continue
+            for j, (x, y, z) in enumerate(f.points):
+                best = math.inf
+                for px, py, pz in prev.points:
+                    dx, dy, dz = x - px, y - py, z - pz
+                    d = math.sqrt(dx * dx + dy * dy + dz * dz)  # np.linalg.norm's order
+                    if d < best:  # NaN (no point) never is
+                        best = d
+                if best <= o.static_m:
+                    run[j] += 1.0
+        reason = np.full(k, -1, dtype=np.int8)
+        self.decider.run(c, [(0, k)], ratio, points, in_front, reason,
+                         (run >= 0.75 * lags, run / lags))
+        f.reason = reason
+
+    def _support(self, f: _Frame):
+        """:func:`_support` (causal) of one frame's candidates: from each other camera b,
+        its candidates of the two latest frames at or before ``t`` (+ wait) carried to ``t``
+        (linear extrapolation), else of the one latest frame, within ``max_gap_s``."""
+        o = self.options
+        k, m, a = len(f.uv), len(self.rig), f.camera
+        ratio = np.full((k, m), np.nan)
+        carried = np.full((k, m, 2), np.nan)
+        epi, vmax, gap = o.epipolar_px, o.max_image_speed_px_s, self.max_gap_ns
+        half_accel = 0.5 * o.accel_px_s2
+        for b in range(m):
+            keys = self.keys[b]
+            if b == a or not keys:
+                continue
+            frames = self.by_camera[b]
+            lines = [_line_of(self.F_lists[a][b], u, v) for u, v in f.uv_und.tolist()]
+            search = bisect_right if (self.wait_ns > 0 or b < a) else bisect_left
+            for j, t in enumerate(f.time_ns):
+                last = search(keys, t + self.wait_ns) - 1
+                if last < 0:
+                    continue
+                l0, l1, l2 = lines[j]
+                f1 = frames[last]
+                if last >= 1 and abs(t - frames[last - 1].key) <= gap and abs(t - f1.key) <= gap:
+                    f0 = frames[last - 1]
+                    best, best_uv = math.inf, None
+                    und0, und1 = f0.uv_und.tolist(), f1.uv_und.tolist()
+                    for t0, (u0, v0) in zip(f0.time_ns, und0, strict=True):
+                        for t1, (u1, v1) in zip(f1.time_ns, und1, strict=True):
+                            span = (t1 - t0) / NS
+                            if not span > 0:
+                                continue
+                            w = (t - t0) / NS / span
+                            du, dv = u1 - u0, v1 - v0
+                            yu, yv = u0 + w * du, v0 + w * dv
+                            if not math.sqrt(du * du + dv * dv) / abs(span) <= vmax:
+                                continue
+                            tau = epi + half_accel * abs(t - t0) / NS * abs(t - t1) / NS
+                            d = abs(l0 * yu + l1 * yv + l2)
+                            if math.isfinite(d) and d / tau < best:  # argmin: the first
+                                best, best_uv = d / tau, (yu, yv)
+                    ratio[j, b] = best
+                    if best_uv is not None:
+                        carried[j, b] = best_uv
+                elif abs(t - f1.key) <= gap:  # a single nearby frame, as it is
+                    best, best_uv = math.inf, None
+                    for t1, (u1, v1) in zip(f1.time_ns, f1.uv_und.tolist(), strict=True):
+                        tau = epi + vmax * (abs(t - t1) / NS)
+                        d = abs(l0 * u1 + l1 * v1 + l2)
+                        r = d / tau if math.isfinite(d) else math.inf
+                        if best_uv is None or r < best:
+                            best, best_uv = r, (u1, v1)
+                    ratio[j, b] = best
+                    carried[j, b] = best_uv
+        return ratio, carried
 
 
 def gating_key(method: str, options) -> tuple[bool, float]:

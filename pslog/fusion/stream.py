@@ -28,9 +28,9 @@ from ..errors import FusionError
 from ..geometry import fundamental_matrices
 from ..records import NS, Observations, Track
 from ..rig import Rig
-from ..timing import camera_parameters, true_times_ns
 from . import METHODS, FusionOptions, causal_methods, check_method, check_tolerance, fuse
 from ._prepare import default_max_gap_s, prepare
+from .gating import _clock_model, _true_time_ns
 from .stereo import sync_groups
 
 
@@ -74,7 +74,7 @@ class StreamFuser:
         self._frame = np.zeros(0, np.int64)
         self._emitted_until: tuple[int, int] = (np.iinfo(np.int64).min, -1)  # (time, camera)
         # the clock model (pslog.timing), per camera in rig order
-        self._clock = camera_parameters(rig)
+        self._clock_model = _clock_model(rig)
         self._corrected = any(c.has_clock_correction for c in rig.cameras)
         self._last_logged: tuple[int, int] = (np.iinfo(np.int64).min, -1)  # (time, camera)
         # corrected detections not yet admitted to the window (unordered)
@@ -86,6 +86,10 @@ class StreamFuser:
         streamer = METHODS[method].streamer
         self.incremental = streamer(rig, self.options) if streamer is not None else None
         self._fed = 0  # rows of the window already given to it (the last one is kept)
+        # its answer to no new rows, made once (one empty Track, shared: Tracks are frozen)
+        self._nothing = (None if self.incremental is None else self.incremental.push(
+            np.zeros(0, np.int64), np.zeros(0, np.int32), np.zeros((0, 2)),
+            np.zeros(0, np.int64)))
         # candidates=True: rows with one (time, camera) are a frame's candidates, gated as
         # fuse(Detections) gates them (pslog.fusion.gating.StreamGate), so the stream equals
         # fuse(detections, rig, method) with gating on
@@ -124,10 +128,9 @@ class StreamFuser:
         self._last_logged = keys[-1]
         if self.incremental is not None and not self._corrected:  # nothing to reorder
             return self.incremental.push(time_ns, camera, uv, frame_index)
-        p = self._clock
-        true_ns = true_times_ns(time_ns, uv[:, 1], p["height"][camera],
-                                p["clock_offset"][camera], p["clock_drift_ppm"][camera],
-                                p["readout"][camera])
+        model = self._clock_model  # true_times_ns, row by row in floats (the same ns)
+        true_ns = np.array([_true_time_ns(t, v, model[c]) for t, v, c in zip(
+            time_ns.tolist(), uv[:, 1].tolist(), camera.tolist(), strict=True)], np.int64)
         self._q_time = np.concatenate([self._q_time, true_ns])
         self._q_camera = np.concatenate([self._q_camera, camera])
         self._q_uv = np.concatenate([self._q_uv, uv])
@@ -140,12 +143,8 @@ class StreamFuser:
         end with no common instant left, for the methods that need one, emits nothing)."""
         if self._gate is not None:  # the frames the gate still held, then the rest
             gate, self._gate = self._gate, None
-            early, rest = self.push(*gate.flush()), self.flush()
-            return rest if not len(early) else early if not len(rest) else Track(
-                rest.method, np.r_[early.time_ns, rest.time_ns],
-                np.vstack([early.position_world, rest.position_world]),
-                np.r_[early.camera, rest.camera],
-                {k: np.r_[early.quality[k], v] for k, v in rest.quality.items()})
+            early = self.push(*gate.flush())
+            return Track.concat([early, self.flush()])  # every column and count of both
         self._admit(final=True)
         return self._settled(final=True)
 
@@ -154,10 +153,8 @@ class StreamFuser:
         if self._corrected and not final:
             # the earliest corrected time a detection still to come can have: logged no
             # earlier than the last push, row >= 0 (the model is increasing in both)
-            p, last = self._clock, self._last_logged[0]
-            bound = int(np.min(true_times_ns(np.full(len(p["height"]), last), 0.0, p["height"],
-                                             p["clock_offset"], p["clock_drift_ppm"],
-                                             p["readout"])))
+            last = self._last_logged[0]
+            bound = min(_true_time_ns(last, 0.0, clock) for clock in self._clock_model)
             ready = self._q_time < bound
         else:
             ready = np.ones(len(self._q_time), dtype=bool)
@@ -183,6 +180,8 @@ class StreamFuser:
     def _settled(self, final: bool) -> Track:
         if self.incremental is not None:  # it keeps its own state: feed the new rows once
             f = self._fed
+            if f == len(self._time):  # nothing new (a frame the gate or the queue holds)
+                return self._nothing
             out = self.incremental.push(self._time[f:], self._camera[f:], self._uv[f:],
                                         self._frame[f:])
             self._time, self._camera = self._time[-1:], self._camera[-1:]

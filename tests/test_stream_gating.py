@@ -1,0 +1,151 @@
+"""StreamFuser with candidates (pslog.fusion.gating.StreamGate): the stream equals
+``fuse(detections, rig, method)`` with gating on, bit for bit, on dirty sessions, and its
+flush keeps every column and count of the points it joins."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from _rally import rally
+from numpy.testing import assert_array_equal
+
+from pslog.errors import InputError
+from pslog.fusion import causal_methods, fuse
+from pslog.fusion.gating import gate
+from pslog.fusion.stream import StreamFuser
+from pslog.motion import get_motion
+from pslog.records import Track
+from pslog.rig import Rig, apply_timing, builtin_rig
+from pslog.simulation import SimulationOptions, simulate_labelled, true_rig
+
+
+def push_frames(fuser, det):
+    """Every frame with candidates, one push per frame (its candidates best first)."""
+    out = []
+    starts = np.flatnonzero(np.r_[True, np.diff(det.cand_frame) != 0])
+    ends = np.r_[starts[1:], det.n_candidates]
+    for lo, hi in zip(starts.tolist(), ends.tolist(), strict=True):
+        f, n = int(det.cand_frame[lo]), hi - lo
+        out.append(fuser.push(np.full(n, det.frame_time_ns[f]), np.full(n, det.frame_camera[f]),
+                              det.cand_uv[lo:hi], np.full(n, det.frame_index[f])))
+    return out
+
+
+def test_track_concat_keeps_every_column_and_sums_the_dropped_counts():
+    a = Track("filter", [1, 2], np.ones((2, 3)), [0, 1], {"std_m": [0.1, 0.2]},
+              dropped={"unconfirmed": 2})
+    empty = Track("filter", np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0, np.int32),
+                  dropped={"unconfirmed": 1, "uncertain": 4})
+    b = Track("filter", [3], 2 * np.ones((1, 3)), [2], {"std_m": [0.3], "nis": [5.0]},
+              dropped={"uncertain": 1})
+    joined = Track.concat([a, empty, b])
+    assert_array_equal(joined.time_ns, [1, 2, 3])
+    assert_array_equal(joined.camera, [0, 1, 2])
+    assert_array_equal(joined.position_world, np.r_[np.ones((2, 3)), 2 * np.ones((1, 3))])
+    assert_array_equal(joined.quality["std_m"], [0.1, 0.2, 0.3])
+    assert_array_equal(joined.quality["nis"], [np.nan, np.nan, 5.0])
+    assert joined.dropped == {"unconfirmed": 3, "uncertain": 5}
+    assert Track.concat([empty]).dropped == empty.dropped and not len(Track.concat([empty]))
+    with pytest.raises(InputError, match="methods"):
+        Track.concat([a, Track("typeA", [4], np.ones((1, 3)), [0])])
+
+
+def test_flush_with_candidates_keeps_the_dropped_counts_of_the_frames_the_gate_held():
+    """Clock offsets of 0.3 s: the gate and the admission queue still hold many frames at the
+    end, so flush joins two parts; the withheld points of both are counted."""
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    options = SimulationOptions(noise_px=0.3, seed=2, miss_rate=0.3, spurious_rate=0.1,
+                                clock_offset_s={"cam2": 0.3, "cam3": -0.3},
+                                readout_s=dict.fromkeys(rig.names, 0.01))
+    det, _, _ = simulate_labelled(rig, get_motion("throw"), None, options)
+    rig = true_rig(rig, options)
+    fuser = StreamFuser(rig, "filter", candidates=True)
+    parts = [*push_frames(fuser, det), fuser.flush()]
+    batch = fuse(det, rig, "filter")
+    assert sum(batch.dropped.values()) >= 2
+    streamed = Track.concat(parts)
+    assert streamed.dropped == batch.dropped
+    assert_array_equal(streamed.time_ns, batch.time_ns)
+    assert_array_equal(streamed.position_world, batch.position_world)
+    for key, column in batch.quality.items():
+        assert_array_equal(streamed.quality[key], column, err_msg=key)
+
+
+#: a strong barrel lens (as tests/test_fusion.py's): undistortion matters everywhere
+LENS = np.array([-0.25, 0.08, 0.001, -0.001, 0.0])
+DISTRACTOR = (1.0, 1.5, 0.2)  # on the floor, seen by every camera of paper3
+
+
+@pytest.mark.parametrize("method", causal_methods())
+@pytest.mark.parametrize("clocks", [False, True])
+def test_stream_with_candidates_equals_gated_batch_on_a_dirty_session_with_a_lens(method, clocks):
+    """Spurious blobs in 5 % of frames, a static distractor, a half-second blackout, 30 %
+    misses, 10 % drops, a strong lens (with ``clocks``: offsets and rolling shutters too):
+    streaming every frame's candidates gives ``fuse(detections, rig, method)`` (gating on),
+    every point, column and count, bit for bit."""
+    from pslog.fusion import METHODS
+
+    timing = "typeB" if "shared" in METHODS[method].needs else "typeA"
+    rig = apply_timing(builtin_rig("paper3"), timing)
+    rig = Rig(tuple(c.replace(dist=LENS) for c in rig.cameras), rig.name)
+    faults = ({"clock_offset_s": {"cam2": 0.004, "cam3": -0.006},
+               "readout_s": dict.fromkeys(rig.names, 0.01)} if clocks else {})
+    options = SimulationOptions(noise_px=0.3, seed=5, miss_rate=0.3, drop_rate=0.1,
+                                spurious_rate=0.05, distractors=(("cam2", DISTRACTOR),),
+                                blackouts=(("cam3", 1.0, 0.5),), **faults)
+    det, _, _ = simulate_labelled(rig, rally(3.0, seed=7, speed=4.0, kick_every_s=0.9)[0], 3.0,
+                                  options)
+    rig = true_rig(rig, options)
+    batch = fuse(det, rig, method)
+    assert len(batch) >= 8
+    fuser = StreamFuser(rig, method, candidates=True)
+    streamed = Track.concat([*push_frames(fuser, det), fuser.flush()])
+    assert_array_equal(streamed.time_ns, batch.time_ns)
+    assert_array_equal(streamed.camera, batch.camera)
+    assert_array_equal(streamed.position_world, batch.position_world)
+    assert streamed.quality.keys() == batch.quality.keys()
+    for key, column in batch.quality.items():
+        assert_array_equal(streamed.quality[key], column, err_msg=key)
+    if METHODS[method].streamer is not None:  # (the windowed methods count no drops yet)
+        assert streamed.dropped == batch.dropped
+
+
+def test_stream_gate_waits_for_the_other_cameras_frames_a_low_candidate_reaches():
+    """30 ms rolling shutters; a false blob on the top row listed first in every frame whose
+    ball is low: the frame's time is the blob's, early, but the ball's candidate is ~25 ms
+    later and is supported by the frames up to ITS time — frames pushed after the blob's
+    time has passed. The stream decides the frame only once those are in: every frame's
+    epipolar support (ratio per candidate and camera) is exactly the batch's."""
+    from test_gating_timing import with_top_row_blobs
+
+    import pslog.fusion.gating as gating
+    from pslog.fusion._prepare import default_max_gap_s
+
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    options = SimulationOptions(noise_px=0.3, seed=2, readout_s=dict.fromkeys(rig.names, 0.03))
+    det, _, _ = simulate_labelled(rig, rally(4.0, seed=2, speed=9.0, kick_every_s=0.8)[0], 4.0,
+                                  options)
+    rig = true_rig(rig, options)
+    det = with_top_row_blobs(det, 300.0)
+    c = gating._candidates(det, rig)
+    batch, _ = gating._support(c, rig, gating.fundamental_matrices(rig.cameras),
+                               gating._frame_table(c, len(rig)), gating.GatingOptions(),
+                               round(default_max_gap_s(rig) * 1e9), True, 0)
+
+    class Recording(gating.StreamGate):
+        def _support(self, f):
+            ratio, carried = super()._support(f)
+            seen[f.t, f.camera] = ratio
+            return ratio, carried
+
+    seen: dict = {}
+    stream = Recording(rig)
+    push_frames(stream, det)
+    stream.flush()
+    starts = np.flatnonzero(np.r_[True, np.diff(det.cand_frame) != 0])
+    ends = np.r_[starts[1:], det.n_candidates]
+    for lo, hi in zip(starts.tolist(), ends.tolist(), strict=True):
+        f = det.cand_frame[lo]
+        assert_array_equal(seen[int(det.frame_time_ns[f]), int(det.frame_camera[f])],
+                           batch[lo:hi], err_msg=f"frame {f}")
+    assert_array_equal(stream.rejections.reason, gate(det, rig).rejections.reason)
