@@ -421,3 +421,62 @@ def test_sigint_stops_serve_cleanly_with_a_complete_session(tmp_path):
     assert session.detections.n_frames == det.n_frames == summary.counters["fused"]
     assert len(session.tracks["filter"]) == len(points) == summary.counters["points"] > 0
     assert not list(tmp_path.glob("*.partial"))
+
+
+def test_sample_live_client_receives_every_point():
+    """samples/live_client.py, run as a program, against a real fuser over real UDP: one
+    line per point, the same sequence, positions and cameras the fuser sent."""
+    import socket
+    import subprocess
+    import sys
+    import threading
+    from pathlib import Path
+
+    from pslog.live.server import serve
+    from pslog.live.sinks import UdpSink
+
+    client = Path(__file__).resolve().parents[1] / "samples" / "live_client.py"
+    assert len(client.read_text().splitlines()) < 40
+    rig, det = rally_session(0.5)
+    probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    probe.bind(("127.0.0.1", 0))
+    port = probe.getsockname()[1]
+    probe.close()
+    fuser = LiveFuser(rig, "filter", epoch_ns=EPOCH)
+    expected = _run(fuser, datagrams(det, rig))  # how many points the session makes
+    proc = subprocess.Popen([sys.executable, str(client), f"127.0.0.1:{port}",
+                             str(len(expected))], stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout.readline().startswith("listening on udp://127.0.0.1:")
+        ready, stop = threading.Event(), threading.Event()
+        sent: list = []
+
+        class Keep:
+            def emit(self, points):
+                sent.extend(points)
+
+            def close(self):
+                pass
+
+        thread = threading.Thread(target=serve, args=(rig, "udp://127.0.0.1:0",
+                                                      [UdpSink(("127.0.0.1", port)), Keep()]),
+                                  kwargs=dict(stop=stop, ready=ready, status_stream=None),
+                                  daemon=True)
+        thread.start()
+        assert ready.wait(30)
+        tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        for d in frames(det, rig, ready.epoch_ns):
+            tx.sendto(encode_detections(d), ready.address)
+        tx.close()
+        out, _ = proc.communicate(timeout=30)
+        stop.set()
+        thread.join(30)
+    finally:
+        proc.kill()
+    lines = out.splitlines()
+    assert proc.returncode == 0 and len(lines) == len(sent) == len(expected)
+    for i, (line, p) in enumerate(zip(lines, sent, strict=True)):
+        fields = line.split()
+        assert fields[0] == str(i + 1) and fields[1] == "filter" and fields[2] == p.camera
+        x, y, z = (float(fields[k].split("=")[1]) for k in (4, 5, 6))
+        np.testing.assert_allclose((x, y, z), p.position_world, atol=1e-4)
