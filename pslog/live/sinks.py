@@ -184,11 +184,12 @@ class RecordSink:
     ----------
     path : the session file; refused if it exists unless ``force``
     rig : the live rig (with its clock corrections: they travel with the session)
-    method : the live fusion method (the track's name)
+    method : the live fusion method (the track's name; also the metadata ``live_method``);
+        default: the fuser's (``start``)
     epoch_ns : the session clock's zero; default: the fuser's (``start``)
     """
 
-    def __init__(self, path, rig: Rig, method: str = "filter", *, force: bool = False,
+    def __init__(self, path, rig: Rig, method: str | None = None, *, force: bool = False,
                  epoch_ns: int | None = None, flush_interval_s: float = 0.5,
                  timing: str = "custom", source: str = "pslog live",
                  points_every_s: float = 0.25) -> None:
@@ -198,7 +199,7 @@ class RecordSink:
         self.method = method
         self.epoch_ns = epoch_ns
         self.writer = SessionWriter(path, rig, force=force, timing=timing, source=source,
-                                    metadata={"live_method": method},
+                                    metadata={"live_method": method} if method else None,
                                     flush_interval_s=flush_interval_s, on_error="keep")
         self.path = self.writer.path
         self._index = {name: i for i, name in enumerate(rig.names)}
@@ -209,7 +210,7 @@ class RecordSink:
         self.dropped_frames = 0
         self.points = 0
         self._announced = False
-        if epoch_ns is not None:
+        if epoch_ns is not None and method is not None:
             self._announce()
 
     def _announce(self) -> None:
@@ -223,6 +224,8 @@ class RecordSink:
     def start(self, fuser: LiveFuser) -> None:
         if self.epoch_ns is None:
             self.epoch_ns = fuser.epoch_ns
+        if self.method is None:
+            self.method = fuser.method
         self._announce()
 
     def _session(self, wall_ns: int) -> int:
@@ -276,7 +279,8 @@ class RecordSink:
         for p in points:
             keys.extend(k for k in p.quality if k not in keys)
         nan = math.nan
-        track = Track(self.method, np.array([p.session_ns for p in points], np.int64),
+        track = Track(self.method or points[0].method,
+                      np.array([p.session_ns for p in points], np.int64),
                       np.array([p.position_world for p in points]),
                       np.array([p.camera_index for p in points], np.int32),
                       {k: np.array([p.quality.get(k, nan) for p in points]) for k in keys})
