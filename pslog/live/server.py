@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import contextlib
 import gc
+import signal
 import socket
 import struct
 import sys
@@ -234,6 +235,17 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
 
     bufsize = max(MAX_DETECTION_BYTES + 1, 65536)  # larger ones are seen whole: oversize
     anc = socket.CMSG_SPACE(16) if timestamps else 0
+    # Ctrl-C ends the run between two datagrams (not inside one: each one received is
+    # fused): in the main thread with Python's own SIGINT handler, it sets ``stop`` instead
+    restore_sigint = None
+    if (threading.current_thread() is threading.main_thread()
+            and signal.getsignal(signal.SIGINT) is signal.default_int_handler):
+        def on_sigint(signum, frame) -> None:
+            nonlocal interrupted
+            interrupted = True
+            stop.set()
+
+        restore_sigint = signal.signal(signal.SIGINT, on_sigint)
     # everything loaded so far (modules, the rig, numpy) is moved out of the collector's
     # reach: a full collection then walks only what the run makes, not a pause of tens of ms
     gc.collect()
@@ -268,14 +280,21 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
                     f(text, counters)
             if deadline is not None and now >= deadline:
                 break
-        # what had arrived before the stop is fused too: nothing received is left unread
-        sock.setblocking(False)
-        while True:
-            try:
-                data, ancdata, _, _ = recv(bufsize, anc)
-            except (BlockingIOError, InterruptedError):
-                break
-            handle(data, ancdata, clock())
+    except KeyboardInterrupt:
+        interrupted = True
+    except BaseException as exc:  # closed below, raised after
+        error = exc
+    try:
+        # what had arrived before the stop (or Ctrl-C) is fused too: nothing received is
+        # left unread
+        if error is None:
+            sock.setblocking(False)
+            while True:
+                try:
+                    data, ancdata, _, _ = sock.recvmsg(bufsize, anc)
+                except (BlockingIOError, InterruptedError):
+                    break
+                handle(data, ancdata, clock())
     except KeyboardInterrupt:
         interrupted = True
     except BaseException as exc:  # closed below, raised after
@@ -292,6 +311,8 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
             if error is None and not isinstance(exc, KeyboardInterrupt):
                 error = exc
         gc.unfreeze()
+        if restore_sigint is not None:
+            signal.signal(signal.SIGINT, restore_sigint)
         end = clock()
         counters = fuser.counters()
         final = format_status(fuser, fuser.cameras(end), end, started)
