@@ -367,18 +367,29 @@ def _serve_session(rig, det, path, method, faults=True, interrupt=False):
     return summary, points, ready.epoch_ns
 
 
-@pytest.mark.parametrize("method", ["filter", "typeA"])
-def test_recorded_session_refused_offline_gives_the_live_points(tmp_path, method):
+CLOCK_FAULTS = dict(clock_offset_s={"cam2": 0.003, "cam3": -0.004},
+                    clock_drift_ppm={"cam3": 30.0}, readout_s={"cam2": 0.01})
+
+
+@pytest.mark.parametrize("method, clocks", [("filter", False), ("typeA", False),
+                                            ("filter", True)])
+def test_recorded_session_refused_offline_gives_the_live_points(tmp_path, method, clocks):
     """A real MCAP: `pslog fuse` of the session recorded live (RecordSink) gives exactly the
     points the robot received over UDP (within 1e-9 m, same times and cameras), although
     duplicates, a reordered and a late frame were dropped live: they are recorded apart, on
-    /live/dropped/<reason>/<camera>, with the fused frames alone on the detection topics."""
+    /live/dropped/<reason>/<camera>, with the fused frames alone on the detection topics.
+    With ``clocks`` the rig carries clock corrections (offsets, drift, a rolling shutter):
+    applied live, recorded with the rig, applied again offline."""
     from mcap.reader import make_reader
 
     from pslog.cli import main
     from pslog.log.reader import read_session
 
-    rig, det = rally_session(1.0)
+    if clocks:
+        rig, det = rally_session(1.0, **CLOCK_FAULTS)
+        rig = true_rig(rig, SimulationOptions(**CLOCK_FAULTS))
+    else:
+        rig, det = rally_session(1.0)
     path, fused = tmp_path / "live.mcap", tmp_path / "fused.mcap"
     summary, points, epoch = _serve_session(rig, det, path, method)
     c = summary.counters

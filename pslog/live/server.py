@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import PslogError
+from ..errors import InputError, PslogError
 from ..records import NS
 from ..rig import Rig
 from .fuser import CameraLiveState, LiveFuser
@@ -150,6 +150,10 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
     closed.
     """
     try:
+        if not status_every_s > 0:
+            raise InputError(f"status period must be > 0 seconds, got {status_every_s!r}")
+        if duration_s is not None and not duration_s >= 0:
+            raise InputError(f"duration must be >= 0 seconds, got {duration_s!r}")
         fuser = LiveFuser(rig, method, late_s=late_s, options=options, candidates=candidates,
                           epoch_ns=epoch_ns, silent_after_s=silent_after_s)
         if sock is None:

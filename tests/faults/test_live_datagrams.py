@@ -292,3 +292,21 @@ def test_full_disk_while_recording_is_one_line_error_after_the_points(tmp_path, 
         text = str(error)
         assert "\n" not in text and str(path) in text and "No space left" in text
         assert receiver.points  # the points made before the disk filled were sent
+
+
+@pytest.mark.parametrize("kwargs, says", [
+    (dict(method="smooth"), "offline"),
+    (dict(method="typeZ"), "unknown fusion method"),
+    (dict(status_every_s=0), "status period"),
+    (dict(duration_s=-1), "duration"),
+    (dict(silent_after_s=-2), "silent"),
+    (dict(late_s=float("nan")), "late"),
+])
+def test_bad_serve_settings_are_one_line_errors_leaving_no_file(tmp_path, session, kwargs,
+                                                                  says):
+    rig, _ = session
+    path = tmp_path / "live.mcap"
+    with pytest.raises(PslogError) as info:
+        serve(rig, "udp://127.0.0.1:0", [RecordSink(path, rig)], **kwargs)
+    assert "\n" not in str(info.value) and says in str(info.value)
+    assert list(tmp_path.iterdir()) == []
