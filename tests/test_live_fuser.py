@@ -118,9 +118,9 @@ def test_bad_datagrams_are_counted_and_change_nothing(session):
             data.append(raw)
             expect["duplicate"] += 1
         if i == 100:  # a frame 0.5 s older than the newest: late
-            old = clean[100 - 45]
+            old = clean[100 - 45]  # (with a candidate: a frame without one fuses nothing)
             data.append(encode_detections(DetectionDatagram(
-                old.camera, old.sequence, 99_999, old.t_capture_ns - 1, 0, old.uv)))
+                old.camera, old.sequence, 99_999, old.t_capture_ns - 1, 0, [[320.0, 240.0]])))
             expect["late"] += 1
             expect["lost"] += 0
         if i == 120:  # before the session clock's zero
@@ -338,7 +338,7 @@ def _serve_session(rig, det, path, method, faults=True, interrupt=False):
             if faults and i == 50:
                 old = clean[5]
                 tx.sendto(encode_detections(DetectionDatagram(
-                    old.camera, old.sequence, 77, old.t_capture_ns + 1, 0, old.uv)),
+                    old.camera, old.sequence, 77, old.t_capture_ns + 1, 0, [[320.0, 240.0]])),
                     ready.address)
             if i % 4 == 0:
                 time.sleep(0.002)
@@ -502,3 +502,22 @@ def test_without_gating_each_frame_fuses_its_best_candidate(session):
     points = _run(fuser, datagrams(det, rig))
     assert fuser.counters()["fusion_error"] == 0
     _assert_same(points, fuse(det, rig, "typeA", options))
+
+
+def test_frames_without_candidates_never_hold_the_order(session):
+    """A frame where nothing was seen fuses nothing: swapped with the next frame (another
+    camera's) it is still taken (its camera is alive), and the frame it overtook is fused,
+    not dropped as reordered: the points are those of the whole session."""
+    rig, det = session
+    clean = frames(det, rig)
+    empty = [i for i, d in enumerate(clean[:-1]) if len(d) == 0 and len(clean[i + 1])
+             and clean[i + 1].camera != d.camera]
+    assert len(empty) >= 3
+    order = list(range(len(clean)))
+    for i in empty:
+        order[i], order[i + 1] = order[i + 1], order[i]
+    fuser = LiveFuser(rig, "filter", epoch_ns=EPOCH)
+    points = _run(fuser, [encode_detections(clean[i]) for i in order])
+    c = fuser.counters()
+    assert c["reordered"] == c["late"] == 0 and c["fused"] == len(clean)
+    _assert_same(points, fuse(det, rig, "filter"))

@@ -290,9 +290,11 @@ class LiveFuser:
                 state._last_sequence = d.sequence
         if reason is not None:
             return self._drop(d, reason)
-        # accepted: in order, from now on the newest
+        # accepted: in order (a frame with candidates is from now on the newest)
         logged = d.t_capture_ns - self.epoch_ns
-        self._newest = (logged, cam)
+        k = len(d)
+        if k:
+            self._newest = (logged, cam)
         key = (d.sequence, d.t_capture_ns)
         state._seen.add(key)
         state._seen_order.append(key)
@@ -301,8 +303,8 @@ class LiveFuser:
         top = logged if not self._corrected else int(true_times_ns(
             logged, 0.0, self._clock_p["height"][cam], self._clock_p["clock_offset"][cam],
             self._clock_p["clock_drift_ppm"][cam], self._clock_p["readout"][cam]))
-        state._arrivals.append((top, int(arrival_ns)))
-        k = len(d)
+        if k:
+            state._arrivals.append((top, int(arrival_ns)))
         try:
             if k:
                 order = np.argsort(-d.score, kind="stable")  # best first, as a session stores
@@ -368,8 +370,10 @@ class LiveFuser:
         logged = d.t_capture_ns - self.epoch_ns
         if logged < 0:
             return "late"
-        if (logged, cam) <= self._newest:
+        if len(d) and (logged, cam) <= self._newest:
             return "late" if self._newest[0] - logged > self.late_ns else "reordered"
+        # a frame without candidates fuses nothing (offline fusion never sees it either):
+        # in any order it only says that its camera is alive
         return None
 
     def _drop(self, d: DetectionDatagram, reason: str, counted: bool = False) -> list:
