@@ -521,3 +521,57 @@ def test_frames_without_candidates_never_hold_the_order(session):
     c = fuser.counters()
     assert c["reordered"] == c["late"] == 0 and c["fused"] == len(clean)
     _assert_same(points, fuse(det, rig, "filter"))
+
+
+def _overtaken(clean):
+    """The frames in a send order where, every 11 frames, a frame with candidates is
+    overtaken by the next one (another camera's, with candidates); arrival times 1 ms after
+    the newest capture sent."""
+    order = list(range(len(clean)))
+    swaps = [i for i in range(5, len(clean) - 1, 11)
+             if len(clean[i]) and len(clean[i + 1]) and clean[i + 1].camera != clean[i].camera]
+    for i in swaps:
+        order[i], order[i + 1] = order[i + 1], order[i]
+    arrival, newest = [], 0
+    for i in order:
+        newest = max(newest, clean[i].t_capture_ns)
+        arrival.append(newest + 1_000_000)
+    return order, arrival, len(swaps)
+
+
+def test_hold_fuses_frames_that_overtook_one_another(session):
+    """hold_s > 0: a frame waits until the other cameras have sent one at least as recent,
+    so frames that overtook one another are all fused, in capture order: the points are
+    those of the whole session (without a hold the overtaken ones are dropped)."""
+    rig, det = session
+    clean = frames(det, rig)
+    order, arrival, n_swaps = _overtaken(clean)
+    data = [encode_detections(clean[i]) for i in order]
+    assert n_swaps >= 8
+    plain = LiveFuser(rig, "filter", epoch_ns=EPOCH)
+    _run(plain, data, arrival)
+    assert plain.counters()["reordered"] == n_swaps
+    held = LiveFuser(rig, "filter", epoch_ns=EPOCH, hold_s=0.05)
+    points = _run(held, data, arrival)
+    c = held.counters()
+    assert c["reordered"] == c["late"] == 0 and c["fused"] == len(clean)
+    _assert_same(points, fuse(det, rig, "filter"))
+
+
+def test_hold_does_not_wait_for_a_silent_camera(session):
+    """With a hold, a camera that went silent is not waited for: the others' frames are
+    fused as soon as the live cameras have caught up (poll releases them on time)."""
+    rig, det = session
+    clean = [d for d in frames(det, rig) if d.camera != "cam3"
+             or d.t_capture_ns - EPOCH < 0.3 * NS]
+    fuser = LiveFuser(rig, "typeA", epoch_ns=EPOCH, hold_s=0.2, silent_after_s=0.05)
+    waited = []
+    for d in clean:
+        for p in fuser.feed(encode_detections(d), d.t_capture_ns) + fuser.poll(d.t_capture_ns):
+            if p.t_capture_ns - EPOCH > 0.5 * NS:
+                waited.append(d.t_capture_ns - p.t_capture_ns)
+    fuser.flush()
+    # once cam3 is silent, a frame waits at most for the other live camera's next frame
+    # (1/90 or 2/90 s later with cam3's shutter gone), never for the 0.2 s hold
+    assert waited and max(waited) <= 0.0223 * NS
+    assert fuser.counters()["fused"] == len(clean)

@@ -311,3 +311,30 @@ def test_bad_serve_settings_are_one_line_errors_leaving_no_file(tmp_path, sessio
         serve(rig, "udp://127.0.0.1:0", [RecordSink(path, rig)], **kwargs)
     assert "\n" not in str(info.value) and says in str(info.value)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_with_a_hold_overtaken_frames_are_fused_over_real_udp(session):
+    """serve(hold_s=0.05): frames sent out of order (each 10th held back behind the next)
+    are all fused in capture order: nothing dropped, the robot's points are those of the
+    whole session."""
+    rig, det = session
+    with live(rig, hold_s=0.05) as (send, receiver, result):
+        frames = _frames(det, rig, result["epoch"])
+        held = None
+        for i, d in enumerate(frames):
+            if i % 10 == 5 and len(d):
+                held = d
+                continue
+            send(_good(d))
+            if held is not None:
+                send(_good(held))
+                held = None
+            time.sleep(0.0005)
+    c = result["summary"].counters
+    assert c["reordered"] == c["late"] == 0 and c["fused"] == det.n_frames
+    offline = fuse(det, rig, "filter")
+    got = receiver.points
+    assert len(got) == len(offline)
+    np.testing.assert_array_equal([p.t_capture_ns - result["epoch"] for p in got],
+                                  offline.time_ns)
+    assert np.abs(np.array([p.position for p in got]) - offline.position_world).max() <= 1e-9
