@@ -40,6 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import FusionError
 from ..geometry import (
     _dot,
     closest_points_on_lines,
@@ -48,7 +49,7 @@ from ..geometry import (
     epipolar_lines_cols,
     ray_depths,
 )
-from ..records import NS, Track
+from ..records import NS, Observations, Track
 from . import _prepare
 from ._prepare import (
     BEHIND,
@@ -229,7 +230,8 @@ class TypeAConstruction:
     points_world: np.ndarray
 
 
-def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5
+def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5,
+                events: np.ndarray | None = None, seen: np.ndarray | None = None
                 ) -> tuple[Track, TypeAConstruction]:
     """``typeA``: a point at every detection with two earlier pseudo-stereo points.
 
@@ -244,6 +246,12 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5
     prediction behind the newest camera) or outside its view is dropped and counted in
     ``Track.dropped``; refused past points are counted there too (``past_<reason>``, each
     detection once). ``noise_px``: the detections' pixel noise behind ``std_m``.
+
+    ``events`` (sorted global rows, optional): make only these rows' points (the others'
+    are neither made nor counted); each point is the same, bit for bit, as in a run over
+    every row (the arithmetic is elementwise), which :class:`TypeAStream` relies on.
+    ``seen`` (n,) int64, optional: the past refusals already counted per row, updated in
+    place; only refusals not in it are counted (a stream counts each detection once).
     """
     obs = prep.obs
     time_ns = obs.time_ns
@@ -258,8 +266,10 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5
     # max_gap_s), followed depth by depth only for the events still lacking two points
     before = np.arange(n)
     candidate = np.full(n, -1, dtype=np.int64)
+    targets = before.copy() if events is None else np.asarray(events, dtype=np.int64)
     for k in range(depth):
-        pending = np.flatnonzero(second < 0) if k else before.copy()
+        # (the other rows keep candidate -1, so only targets are ever needed)
+        pending = targets[second[targets] < 0] if k else targets.copy()
         if len(pending) == 0:
             break
         b = np.searchsorted(time_ns, time_ns[np.maximum(before[pending], 0)], side="left") - 1
@@ -365,6 +375,8 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5
     refused = np.zeros(n, dtype=np.int64)
     for _, _, points_k in computed:
         np.bitwise_or.at(refused, points_k.row, points_k.flags)
+    if seen is not None:  # count only the reasons not counted before (each detection once)
+        refused, seen[:] = refused & ~seen, seen | refused
     past = {f"past_{k}": v for k, v in count_invalid(refused).items()}
     track = with_dropped(track, count_invalid(flags[made]), past)
     construction = TypeAConstruction(
@@ -518,3 +530,103 @@ def _select(p: PseudoStereoPoints, keep: np.ndarray) -> PseudoStereoPoints:
     if np.all(keep):  # (p is this call's own gather: nothing else holds its arrays)
         return p
     return PseudoStereoPoints(*(getattr(p, f)[keep] for f in p.__dataclass_fields__))
+
+
+class TypeAStream:
+    """``typeA``'s incremental form (the registry's ``streamer``): each detection pushed, in
+    (time, camera) order, makes its point from the few recent rows it can reach.
+
+    A type-A point reaches back at most two bridged gaps (a past instant within
+    ``max_gap_s``, its partner's bracket within ``max_gap_s`` more), so only those rows are
+    kept, each undistorted once when it arrives (as :func:`~pslog.fusion._prepare.prepare`
+    does a session, per camera, row by row the same bits), and :func:`fuse_type_a` makes the
+    new rows' points only. Its arithmetic is elementwise, so every point, quality column and
+    covariance equals the batch run's bit for bit; ``Track.dropped`` counts each dropped point
+    and each refused past detection once, as the batch run does.
+
+    Parameters
+    ----------
+    rig : Rig
+    options : FusionOptions
+    """
+
+    def __init__(self, rig, options) -> None:
+        from ._prepare import default_max_gap_s, prepare
+
+        self.rig = rig
+        self._noise_px = options.noise_px
+        self._max_gap_s = options.max_gap_s or default_max_gap_s(rig)
+        # the history a new point can reach: two bridged gaps (and the stream's margin)
+        self._history_ns = int((2 * self._max_gap_s + 2 * options.tolerance_s) * NS) + 1
+        self._checked = False
+        empty = Observations(np.zeros(0, np.int64), np.zeros(0, np.int32), np.zeros((0, 2)),
+                             np.zeros(0, np.int64))
+        # the per-camera parts of prepare, made once; their column caches warmed and shared
+        self._template = template = prepare(empty, rig)
+        template._cols("K_inv"), template._cols("R")
+        self._shared = {"_columns": template.__dict__["_columns"], "_f_cols": template._f_cols}
+        self._time = np.zeros(0, np.int64)
+        self._camera = np.zeros(0, np.int32)
+        self._uv = np.zeros((0, 2))
+        self._frame = np.zeros(0, np.int64)
+        self._uv_und = np.zeros((0, 2))
+        self._ray_dir = np.zeros((0, 3))
+        self._jac = np.zeros((0, 2, 2))
+        self._seen = np.zeros(0, np.int64)  # past refusals already counted, per row
+        self._empty = fuse_type_a(template, self._max_gap_s, self._noise_px)[0]
+
+    def push(self, time_ns, camera, uv, frame_index) -> Track:
+        """Rows (n,) after every row pushed before; returns their points (possibly none)."""
+        from ._prepare import _FAR_IMAGES, _undistortion_jacobian
+
+        n_new = len(time_ns)
+        if n_new == 0:
+            return self._empty
+        rig = self.rig
+        if not self._checked:  # (prepare's check, at the first detection as before)
+            from ..rig import check_baselines
+
+            check_baselines(rig)
+            self._checked = True
+        camera = np.asarray(camera, dtype=np.int32)
+        if camera.min() < 0 or camera.max() >= len(rig):
+            raise FusionError(f"observation camera index {int(camera.max())} is not in the "
+                              f"{len(rig)}-camera rig")
+        uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+        # undistortion, rays and Jacobians of the new rows: prepare's per-camera pass
+        uv_und = np.empty_like(uv)
+        ray_dir = np.empty((n_new, 3))
+        jac = np.empty((n_new, 2, 2))
+        for i in np.unique(camera).tolist():
+            cam = rig.cameras[i]
+            rows = np.flatnonzero(camera == i)
+            uv_und[rows] = cam.undistort(uv[rows])
+            ray_dir[rows] = cam.rays(uv[rows])[1]
+            far = rows[~np.all(np.abs(uv[rows]) <= _FAR_IMAGES * max(cam.width, cam.height),
+                               axis=1)]
+            uv_und[far] = np.nan
+            ray_dir[far] = np.nan
+            jac[rows] = _undistortion_jacobian(cam, uv_und[rows])
+        # the window: the rows a new point can reach, then the new ones
+        time_ns = np.asarray(time_ns, dtype=np.int64)
+        cut = int(np.searchsorted(self._time, time_ns[-1] - self._history_ns, side="left"))
+        self._time = np.concatenate([self._time[cut:], time_ns])
+        self._camera = np.concatenate([self._camera[cut:], camera])
+        self._uv = np.concatenate([self._uv[cut:], uv])
+        self._frame = np.concatenate([self._frame[cut:], np.asarray(frame_index, np.int64)])
+        self._uv_und = np.concatenate([self._uv_und[cut:], uv_und])
+        self._ray_dir = np.concatenate([self._ray_dir[cut:], ray_dir])
+        self._jac = np.concatenate([self._jac[cut:], jac])
+        self._seen = np.concatenate([self._seen[cut:], np.zeros(n_new, np.int64)])
+        obs = Observations(self._time, self._camera, self._uv, self._frame)
+        t = self._template
+        n = len(obs)
+        prep = Prepared(
+            obs=obs, t=(self._time - self._time[0]) / NS, uv_undistorted=self._uv_und,
+            ray_origin=t.centers[self._camera], ray_dir=self._ray_dir, centers=t.centers,
+            K_inv=t.K_inv, R=t.R, F=t.F,
+            per_camera=[np.flatnonzero(self._camera == i) for i in range(len(rig))],
+            cameras=t.cameras, uv_jacobian=self._jac, view_box=t.view_box)
+        prep.__dict__.update(self._shared)
+        return fuse_type_a(prep, self._max_gap_s, self._noise_px,
+                           events=np.arange(n - n_new, n), seen=self._seen)[0]
