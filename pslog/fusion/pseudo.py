@@ -267,6 +267,7 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5,
     before = np.arange(n)
     candidate = np.full(n, -1, dtype=np.int64)
     targets = before.copy() if events is None else np.asarray(events, dtype=np.int64)
+    ahead = None  # depth 1's points made ahead with depth 0's: (events, points, offset)
     for k in range(depth):
         # (the other rows keep candidate -1, so only targets are ever needed)
         pending = targets[second[targets] < 0] if k else targets.copy()
@@ -281,9 +282,21 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5,
         spaced = (first < 0) | (time_ns - t_first <= MAX_EXTRAPOLATION * (
             t_first - time_ns[np.maximum(candidate, 0)]))
         need = np.flatnonzero((second < 0) & (candidate >= 0) & spaced)
-        if len(need) == 0:
-            continue
-        points_k = pseudo_stereo_points(prep, candidate[need], need, max_gap_ns)
+        if k == 0 and events is not None:
+            # a few events (a stream): depth 1's candidates too, in the same call (each row's
+            # point is its own, elementwise), for the usual P_{t-2} without a second call
+            b1 = np.searchsorted(time_ns, time_ns[np.maximum(b, 0)], side="left") - 1
+            b1 = np.where(candidate[pending] < 0, -1, b1)
+            ok1 = (b1 >= 0) & (time_ns[pending] - time_ns[np.maximum(b1, 0)] <= max_gap_ns)
+            ahead = (pending[ok1], b1[ok1])
+            both = pseudo_stereo_points(prep, np.concatenate([candidate[need], ahead[1]]),
+                                        np.concatenate([need, ahead[0]]), max_gap_ns)
+            points_k = _take(both, slice(0, len(need)))
+            ahead = (ahead[0], both, len(need))
+        elif k == 1 and ahead is not None:
+            points_k = _take(ahead[1], ahead[2] + np.searchsorted(ahead[0], need))
+        else:
+            points_k = pseudo_stereo_points(prep, candidate[need], need, max_gap_ns)
         computed.append((k, need, points_k))
         good = need[points_k.valid]
         is_first = first[good] < 0
@@ -524,6 +537,10 @@ def _gather(computed: list[tuple[int, np.ndarray, PseudoStereoPoints]], events: 
         out = {f: np.zeros((len(events), *getattr(template, f).shape[1:]),
                            dtype=getattr(template, f).dtype) for f in fields}
     return PseudoStereoPoints(**out)
+
+
+def _take(p: PseudoStereoPoints, index) -> PseudoStereoPoints:
+    return PseudoStereoPoints(*(getattr(p, f)[index] for f in p.__dataclass_fields__))
 
 
 def _select(p: PseudoStereoPoints, keep: np.ndarray) -> PseudoStereoPoints:
