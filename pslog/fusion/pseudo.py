@@ -626,7 +626,8 @@ class TypeAStream:
             jac[rows] = _undistortion_jacobian(cam, uv_und[rows])
         # the window: the rows a new point can reach, then the new ones
         time_ns = np.asarray(time_ns, dtype=np.int64)
-        cut = int(np.searchsorted(self._time, time_ns[-1] - self._history_ns, side="left"))
+        # (the history of the earliest new row: each new row's point is made)
+        cut = int(np.searchsorted(self._time, time_ns[0] - self._history_ns, side="left"))
         self._time = np.concatenate([self._time[cut:], time_ns])
         self._camera = np.concatenate([self._camera[cut:], camera])
         self._uv = np.concatenate([self._uv[cut:], uv])
