@@ -334,12 +334,16 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5,
         p1.residual_obs_px, p1.residual_partner_px, p2.residual_obs_px, p2.residual_partner_px,
         # the newest detection against the prediction, before eq. (4) moves it onto its ray
         reprojection_px(prep, predicted, obs.camera[events], prep.uv_undistorted[events])]
-    n_distinct = np.ones(k, dtype=np.int64)  # slots holding a detection no earlier slot holds
-    for s in range(1, len(columns)):
-        repeated = columns[0] == columns[s]
-        for t in range(1, s):
-            repeated |= columns[t] == columns[s]
-        n_distinct += ~repeated
+    # slots holding a detection no earlier slot holds
+    if k == 1:  # (a stream's one point: in Python, the same count)
+        n_distinct = np.array([len({int(c[0]) for c in columns})], dtype=np.int64)
+    else:
+        n_distinct = np.ones(k, dtype=np.int64)
+        for s in range(1, len(columns)):
+            repeated = columns[0] == columns[s]
+            for t in range(1, s):
+                repeated |= columns[t] == columns[s]
+            n_distinct += ~repeated
     t_earliest = np.minimum.reduce([time_ns[column] for column in columns])
     span1 = (time_ns[p1.next_row] - time_ns[p1.prev_row]) / NS
     span2 = (time_ns[p2.next_row] - time_ns[p2.prev_row]) / NS
@@ -382,7 +386,9 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5,
         }
     made = finite_rows(points)
     keep = made & (flags == 0)
-    track = Track("typeA", time_ns[events], points, obs.camera[events], quality).select(keep)
+    track = Track("typeA", time_ns[events], points, obs.camera[events], quality)
+    if not np.all(keep):  # (every point kept: the Track as it is)
+        track = track.select(keep)
     # past points refused as invalid (each detection once): the points they would have made
     # are missing, or made from earlier instants
     refused = np.zeros(n, dtype=np.int64)
@@ -434,7 +440,7 @@ def _type_a_covariance(prep: Prepared, events: np.ndarray, predicted: np.ndarray
     # eq. (2): P̂ = (1 + ratio) P_{t-1} - ratio P_{t-2}
     g = [None, *(g * (1 + ratio) for g in _pseudo_jacobians(prep, p1, cam1, r)),
          *(g * -ratio for g in _pseudo_jacobians(prep, p2, cam2, r))]
-    merges, taken = merged_slots(slots)
+    merges, taken = _merged_slots(slots)
     for s, t, same in merges:  # (usually for every event: whole columns, no masked copies)
         moved = g[t] if np.all(same) else np.where(same, g[t], 0.0)
         if s == 0:
@@ -510,6 +516,22 @@ def _pseudo_jacobians(prep: Prepared, p: PseudoStereoPoints, cam_obs: np.ndarray
     J_n = J_snapped[0] * normal[0] + J_snapped[1] * normal[1]
     J_interp = J_snapped - J_n * normal  # J (I - n nᵀ)
     return [J_obs, (1 - p.weight) * J_interp, p.weight * J_interp]
+
+
+def _merged_slots(rows: np.ndarray) -> tuple[list[tuple[int, int, np.ndarray]], np.ndarray]:
+    """:func:`~pslog.fusion._prepare.merged_slots`; for one point (a stream's), in Python
+    (the same merges and mask, without a hundred calls on arrays of one element)."""
+    if rows.shape[0] != 1:
+        return merged_slots(rows)
+    row = rows[0].tolist()
+    taken = [False] * len(row)
+    merges = []
+    for s in range(len(row)):
+        for t in range(s + 1, len(row)):
+            if row[t] == row[s] and row[s] >= 0 and not taken[t] and not taken[s]:
+                merges.append((s, t, np.ones(1, dtype=bool)))
+                taken[t] = True
+    return merges, np.array([taken])
 
 
 def _gather(computed: list[tuple[int, np.ndarray, PseudoStereoPoints]], events: np.ndarray,
