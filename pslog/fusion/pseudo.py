@@ -438,8 +438,14 @@ def _type_a_covariance(prep: Prepared, events: np.ndarray, predicted: np.ndarray
     newest = (r[0] * q[0] + r[1] * q[1] + r[2] * q[2]) * G
     newest += r[:, None] * dot_t(q, G)
     # eq. (2): P̂ = (1 + ratio) P_{t-1} - ratio P_{t-2}
-    g = [None, *(g * (1 + ratio) for g in _pseudo_jacobians(prep, p1, cam1, r)),
-         *(g * -ratio for g in _pseudo_jacobians(prep, p2, cam2, r))]
+    k = len(events)
+    if k <= 8:  # a few points (a stream's): both past points' Jacobians in one call
+        both = _pseudo_jacobians(prep, _stacked(p1, p2), np.concatenate([cam1, cam2]),
+                                 np.concatenate([r, r], axis=1))
+        J1, J2 = [J[..., :k] for J in both], [J[..., k:] for J in both]
+    else:
+        J1, J2 = _pseudo_jacobians(prep, p1, cam1, r), _pseudo_jacobians(prep, p2, cam2, r)
+    g = [None, *(g * (1 + ratio) for g in J1), *(g * -ratio for g in J2)]
     merges, taken = _merged_slots(slots)
     for s, t, same in merges:  # (usually for every event: whole columns, no masked copies)
         moved = g[t] if np.all(same) else np.where(same, g[t], 0.0)
@@ -561,6 +567,12 @@ def _gather(computed: list[tuple[int, np.ndarray, PseudoStereoPoints]], events: 
     return PseudoStereoPoints(**out)
 
 
+def _stacked(a: PseudoStereoPoints, b: PseudoStereoPoints) -> PseudoStereoPoints:
+    """The rows of ``a`` then those of ``b``."""
+    return PseudoStereoPoints(*(np.concatenate([getattr(a, f), getattr(b, f)])
+                                for f in a.__dataclass_fields__))
+
+
 def _take(p: PseudoStereoPoints, index) -> PseudoStereoPoints:
     return PseudoStereoPoints(*(getattr(p, f)[index] for f in p.__dataclass_fields__))
 
@@ -603,7 +615,8 @@ class TypeAStream:
         # the per-camera parts of prepare, made once; their column caches warmed and shared
         self._template = template = prepare(empty, rig)
         template._cols("K_inv"), template._cols("R")
-        self._shared = {"_columns": template.__dict__["_columns"], "_f_cols": template._f_cols}
+        self._shared = {"_columns": template.__dict__["_columns"], "_f_cols": template._f_cols,
+                        "_rt_k_inv_cols": template._rt_k_inv_cols}
         self._time = np.zeros(0, np.int64)
         self._camera = np.zeros(0, np.int32)
         self._uv = np.zeros((0, 2))
