@@ -7,9 +7,10 @@ tests' own generator (``tests/_rally.py``), 0.3 px noise, spurious blobs in 5 % 
 and a static second object seen by one camera (1-2 candidates per frame); ``clocks``: the
 same with clock offsets (4 and -6 ms) and 10 ms rolling shutters (every candidate at its own
 corrected time; the gate waits to decide a frame until nothing still to come can precede
-it). One push per frame, its candidates best first. Per push: CPU time of the process (the
-measure on a shared machine) and wall time, median and p99; the first 30 pushes (the track
-starting) are left out.
+it). One push per frame, its candidates best first (``, best``: the frame's best candidate
+only, through ``StreamFuser(rig, method)`` without candidates). Per push: CPU time of the
+process (the measure on a shared machine) and wall time, median and p99; the first 30 pushes
+(the track starting) are left out.
 
 Targets (issue 11, live mode): each point out within 1 ms at p99; the gate well under
 100 µs median per push for ``filter`` and ``typeA``.
