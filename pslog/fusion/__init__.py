@@ -136,6 +136,12 @@ def _type_a(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
     return fuse_type_a(prep, options.max_gap_s, options.noise_px)[0]
 
 
+def _type_a_stream(rig: Rig, options: FusionOptions):
+    from .pseudo import TypeAStream
+
+    return TypeAStream(rig, options)
+
+
 def _type_b(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
     return fuse_predicted(prep, "typeB", options.tolerance_s, options.max_gap_s,
                           options.noise_px)
@@ -175,7 +181,7 @@ METHODS: dict[str, Method] = {m.name: m for m in (
            f"{_PAPER}, Table 1"),
     Method("typeA", _type_a, True, False, frozenset({"alone"}),
            "pseudo stereo at every detection (paper section 2.2, eqs. 1-4)",
-           f"{_PAPER}, section 2.2"),
+           f"{_PAPER}, section 2.2", streamer=_type_a_stream),
     Method("typeB", _type_b, True, True, frozenset({"shared", "alone"}),
            "stereo at common instants + ray-constrained prediction (paper section 2.3)",
            f"{_PAPER}, section 2.3"),

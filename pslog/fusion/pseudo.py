@@ -40,6 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import FusionError
 from ..geometry import (
     _dot,
     closest_points_on_lines,
@@ -48,7 +49,7 @@ from ..geometry import (
     epipolar_lines_cols,
     ray_depths,
 )
-from ..records import NS, Track
+from ..records import NS, Observations, Track
 from . import _prepare
 from ._prepare import (
     BEHIND,
@@ -229,7 +230,8 @@ class TypeAConstruction:
     points_world: np.ndarray
 
 
-def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5
+def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5,
+                events: np.ndarray | None = None, seen: np.ndarray | None = None
                 ) -> tuple[Track, TypeAConstruction]:
     """``typeA``: a point at every detection with two earlier pseudo-stereo points.
 
@@ -244,6 +246,12 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5
     prediction behind the newest camera) or outside its view is dropped and counted in
     ``Track.dropped``; refused past points are counted there too (``past_<reason>``, each
     detection once). ``noise_px``: the detections' pixel noise behind ``std_m``.
+
+    ``events`` (sorted global rows, optional): make only these rows' points (the others'
+    are neither made nor counted); each point is the same, bit for bit, as in a run over
+    every row (the arithmetic is elementwise), which :class:`TypeAStream` relies on.
+    ``seen`` (n,) int64, optional: the past refusals already counted per row, updated in
+    place; only refusals not in it are counted (a stream counts each detection once).
     """
     obs = prep.obs
     time_ns = obs.time_ns
@@ -258,8 +266,11 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5
     # max_gap_s), followed depth by depth only for the events still lacking two points
     before = np.arange(n)
     candidate = np.full(n, -1, dtype=np.int64)
+    targets = before.copy() if events is None else np.asarray(events, dtype=np.int64)
+    ahead = None  # depth 1's points made ahead with depth 0's: (events, points, offset)
     for k in range(depth):
-        pending = np.flatnonzero(second < 0) if k else before.copy()
+        # (the other rows keep candidate -1, so only targets are ever needed)
+        pending = targets[second[targets] < 0] if k else targets.copy()
         if len(pending) == 0:
             break
         b = np.searchsorted(time_ns, time_ns[np.maximum(before[pending], 0)], side="left") - 1
@@ -271,9 +282,21 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5
         spaced = (first < 0) | (time_ns - t_first <= MAX_EXTRAPOLATION * (
             t_first - time_ns[np.maximum(candidate, 0)]))
         need = np.flatnonzero((second < 0) & (candidate >= 0) & spaced)
-        if len(need) == 0:
-            continue
-        points_k = pseudo_stereo_points(prep, candidate[need], need, max_gap_ns)
+        if k == 0 and events is not None:
+            # a few events (a stream): depth 1's candidates too, in the same call (each row's
+            # point is its own, elementwise), for the usual P_{t-2} without a second call
+            b1 = np.searchsorted(time_ns, time_ns[np.maximum(b, 0)], side="left") - 1
+            b1 = np.where(candidate[pending] < 0, -1, b1)
+            ok1 = (b1 >= 0) & (time_ns[pending] - time_ns[np.maximum(b1, 0)] <= max_gap_ns)
+            ahead = (pending[ok1], b1[ok1])
+            both = pseudo_stereo_points(prep, np.concatenate([candidate[need], ahead[1]]),
+                                        np.concatenate([need, ahead[0]]), max_gap_ns)
+            points_k = _take(both, slice(0, len(need)))
+            ahead = (ahead[0], both, len(need))
+        elif k == 1 and ahead is not None:
+            points_k = _take(ahead[1], ahead[2] + np.searchsorted(ahead[0], need))
+        else:
+            points_k = pseudo_stereo_points(prep, candidate[need], need, max_gap_ns)
         computed.append((k, need, points_k))
         good = need[points_k.valid]
         is_first = first[good] < 0
@@ -311,12 +334,16 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5
         p1.residual_obs_px, p1.residual_partner_px, p2.residual_obs_px, p2.residual_partner_px,
         # the newest detection against the prediction, before eq. (4) moves it onto its ray
         reprojection_px(prep, predicted, obs.camera[events], prep.uv_undistorted[events])]
-    n_distinct = np.ones(k, dtype=np.int64)  # slots holding a detection no earlier slot holds
-    for s in range(1, len(columns)):
-        repeated = columns[0] == columns[s]
-        for t in range(1, s):
-            repeated |= columns[t] == columns[s]
-        n_distinct += ~repeated
+    # slots holding a detection no earlier slot holds
+    if k == 1:  # (a stream's one point: in Python, the same count)
+        n_distinct = np.array([len({int(c[0]) for c in columns})], dtype=np.int64)
+    else:
+        n_distinct = np.ones(k, dtype=np.int64)
+        for s in range(1, len(columns)):
+            repeated = columns[0] == columns[s]
+            for t in range(1, s):
+                repeated |= columns[t] == columns[s]
+            n_distinct += ~repeated
     t_earliest = np.minimum.reduce([time_ns[column] for column in columns])
     span1 = (time_ns[p1.next_row] - time_ns[p1.prev_row]) / NS
     span2 = (time_ns[p2.next_row] - time_ns[p2.prev_row]) / NS
@@ -359,12 +386,16 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5
         }
     made = finite_rows(points)
     keep = made & (flags == 0)
-    track = Track("typeA", time_ns[events], points, obs.camera[events], quality).select(keep)
+    track = Track("typeA", time_ns[events], points, obs.camera[events], quality)
+    if not np.all(keep):  # (every point kept: the Track as it is)
+        track = track.select(keep)
     # past points refused as invalid (each detection once): the points they would have made
     # are missing, or made from earlier instants
     refused = np.zeros(n, dtype=np.int64)
     for _, _, points_k in computed:
         np.bitwise_or.at(refused, points_k.row, points_k.flags)
+    if seen is not None:  # count only the reasons not counted before (each detection once)
+        refused, seen[:] = refused & ~seen, seen | refused
     past = {f"past_{k}": v for k, v in count_invalid(refused).items()}
     track = with_dropped(track, count_invalid(flags[made]), past)
     construction = TypeAConstruction(
@@ -407,9 +438,15 @@ def _type_a_covariance(prep: Prepared, events: np.ndarray, predicted: np.ndarray
     newest = (r[0] * q[0] + r[1] * q[1] + r[2] * q[2]) * G
     newest += r[:, None] * dot_t(q, G)
     # eq. (2): P̂ = (1 + ratio) P_{t-1} - ratio P_{t-2}
-    g = [None, *(g * (1 + ratio) for g in _pseudo_jacobians(prep, p1, cam1, r)),
-         *(g * -ratio for g in _pseudo_jacobians(prep, p2, cam2, r))]
-    merges, taken = merged_slots(slots)
+    k = len(events)
+    if k <= 8:  # a few points (a stream's): both past points' Jacobians in one call
+        both = _pseudo_jacobians(prep, _stacked(p1, p2), np.concatenate([cam1, cam2]),
+                                 np.concatenate([r, r], axis=1))
+        J1, J2 = [J[..., :k] for J in both], [J[..., k:] for J in both]
+    else:
+        J1, J2 = _pseudo_jacobians(prep, p1, cam1, r), _pseudo_jacobians(prep, p2, cam2, r)
+    g = [None, *(g * (1 + ratio) for g in J1), *(g * -ratio for g in J2)]
+    merges, taken = _merged_slots(slots)
     for s, t, same in merges:  # (usually for every event: whole columns, no masked copies)
         moved = g[t] if np.all(same) else np.where(same, g[t], 0.0)
         if s == 0:
@@ -487,6 +524,22 @@ def _pseudo_jacobians(prep: Prepared, p: PseudoStereoPoints, cam_obs: np.ndarray
     return [J_obs, (1 - p.weight) * J_interp, p.weight * J_interp]
 
 
+def _merged_slots(rows: np.ndarray) -> tuple[list[tuple[int, int, np.ndarray]], np.ndarray]:
+    """:func:`~pslog.fusion._prepare.merged_slots`; for one point (a stream's), in Python
+    (the same merges and mask, without a hundred calls on arrays of one element)."""
+    if rows.shape[0] != 1:
+        return merged_slots(rows)
+    row = rows[0].tolist()
+    taken = [False] * len(row)
+    merges = []
+    for s in range(len(row)):
+        for t in range(s + 1, len(row)):
+            if row[t] == row[s] and row[s] >= 0 and not taken[t] and not taken[s]:
+                merges.append((s, t, np.ones(1, dtype=bool)))
+                taken[t] = True
+    return merges, np.array([taken])
+
+
 def _gather(computed: list[tuple[int, np.ndarray, PseudoStereoPoints]], events: np.ndarray,
             depth: np.ndarray) -> PseudoStereoPoints:
     """Rows of the per-depth results: for each event, the entry computed at its ``depth``."""
@@ -514,7 +567,119 @@ def _gather(computed: list[tuple[int, np.ndarray, PseudoStereoPoints]], events: 
     return PseudoStereoPoints(**out)
 
 
+def _stacked(a: PseudoStereoPoints, b: PseudoStereoPoints) -> PseudoStereoPoints:
+    """The rows of ``a`` then those of ``b``."""
+    return PseudoStereoPoints(*(np.concatenate([getattr(a, f), getattr(b, f)])
+                                for f in a.__dataclass_fields__))
+
+
+def _take(p: PseudoStereoPoints, index) -> PseudoStereoPoints:
+    return PseudoStereoPoints(*(getattr(p, f)[index] for f in p.__dataclass_fields__))
+
+
 def _select(p: PseudoStereoPoints, keep: np.ndarray) -> PseudoStereoPoints:
     if np.all(keep):  # (p is this call's own gather: nothing else holds its arrays)
         return p
     return PseudoStereoPoints(*(getattr(p, f)[keep] for f in p.__dataclass_fields__))
+
+
+class TypeAStream:
+    """``typeA``'s incremental form (the registry's ``streamer``): each detection pushed, in
+    (time, camera) order, makes its point from the few recent rows it can reach.
+
+    A type-A point reaches back at most two bridged gaps (a past instant within
+    ``max_gap_s``, its partner's bracket within ``max_gap_s`` more), so only those rows are
+    kept, each undistorted once when it arrives (as :func:`~pslog.fusion._prepare.prepare`
+    does a session, per camera, row by row the same bits), and :func:`fuse_type_a` makes the
+    new rows' points only. Its arithmetic is elementwise, so every point, quality column and
+    covariance equals the batch run's bit for bit; ``Track.dropped`` counts each dropped point
+    and each refused past detection once, as the batch run does.
+
+    Parameters
+    ----------
+    rig : Rig
+    options : FusionOptions
+    """
+
+    def __init__(self, rig, options) -> None:
+        from ._prepare import default_max_gap_s, prepare
+
+        self.rig = rig
+        self._noise_px = options.noise_px
+        self._max_gap_s = options.max_gap_s or default_max_gap_s(rig)
+        # the history a new point can reach: two bridged gaps (and the stream's margin)
+        self._history_ns = int((2 * self._max_gap_s + 2 * options.tolerance_s) * NS) + 1
+        self._checked = False
+        empty = Observations(np.zeros(0, np.int64), np.zeros(0, np.int32), np.zeros((0, 2)),
+                             np.zeros(0, np.int64))
+        # the per-camera parts of prepare, made once; their column caches warmed and shared
+        self._template = template = prepare(empty, rig)
+        template._cols("K_inv"), template._cols("R")
+        self._shared = {"_columns": template.__dict__["_columns"], "_f_cols": template._f_cols,
+                        "_rt_k_inv_cols": template._rt_k_inv_cols}
+        self._time = np.zeros(0, np.int64)
+        self._camera = np.zeros(0, np.int32)
+        self._uv = np.zeros((0, 2))
+        self._frame = np.zeros(0, np.int64)
+        self._uv_und = np.zeros((0, 2))
+        self._ray_dir = np.zeros((0, 3))
+        self._jac = np.zeros((0, 2, 2))
+        self._seen = np.zeros(0, np.int64)  # past refusals already counted, per row
+        self._empty = fuse_type_a(template, self._max_gap_s, self._noise_px)[0]
+
+    def push(self, time_ns, camera, uv, frame_index) -> Track:
+        """Rows (n,) after every row pushed before; returns their points (possibly none)."""
+        from ._prepare import _FAR_IMAGES, _undistortion_jacobian
+
+        n_new = len(time_ns)
+        if n_new == 0:
+            return self._empty
+        rig = self.rig
+        if not self._checked:  # (prepare's check, at the first detection as before)
+            from ..rig import check_baselines
+
+            check_baselines(rig)
+            self._checked = True
+        camera = np.asarray(camera, dtype=np.int32)
+        if camera.min() < 0 or camera.max() >= len(rig):
+            raise FusionError(f"observation camera index {int(camera.max())} is not in the "
+                              f"{len(rig)}-camera rig")
+        uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+        # undistortion, rays and Jacobians of the new rows: prepare's per-camera pass
+        uv_und = np.empty_like(uv)
+        ray_dir = np.empty((n_new, 3))
+        jac = np.empty((n_new, 2, 2))
+        for i in np.unique(camera).tolist():
+            cam = rig.cameras[i]
+            rows = np.flatnonzero(camera == i)
+            uv_und[rows] = cam.undistort(uv[rows])
+            ray_dir[rows] = cam.rays(uv[rows])[1]
+            far = rows[~np.all(np.abs(uv[rows]) <= _FAR_IMAGES * max(cam.width, cam.height),
+                               axis=1)]
+            uv_und[far] = np.nan
+            ray_dir[far] = np.nan
+            jac[rows] = _undistortion_jacobian(cam, uv_und[rows])
+        # the window: the rows a new point can reach, then the new ones
+        time_ns = np.asarray(time_ns, dtype=np.int64)
+        # (the history of the earliest new row: each new row's point is made)
+        cut = int(np.searchsorted(self._time, time_ns[0] - self._history_ns, side="left"))
+        self._time = np.concatenate([self._time[cut:], time_ns])
+        self._camera = np.concatenate([self._camera[cut:], camera])
+        self._uv = np.concatenate([self._uv[cut:], uv])
+        self._frame = np.concatenate([self._frame[cut:], np.asarray(frame_index, np.int64)])
+        self._uv_und = np.concatenate([self._uv_und[cut:], uv_und])
+        self._ray_dir = np.concatenate([self._ray_dir[cut:], ray_dir])
+        self._jac = np.concatenate([self._jac[cut:], jac])
+        self._seen = np.concatenate([self._seen[cut:], np.zeros(n_new, np.int64)])
+        obs = Observations(self._time, self._camera, self._uv, self._frame)
+        t = self._template
+        n = len(obs)
+        prep = Prepared(
+            obs=obs, t=(self._time - self._time[0]) / NS, uv_undistorted=self._uv_und,
+            ray_origin=t.centers[self._camera], ray_dir=self._ray_dir, centers=t.centers,
+            K_inv=t.K_inv, R=t.R, F=t.F,
+            per_camera=[np.flatnonzero(self._camera == i) for i in range(len(rig))],
+            cameras=t.cameras, uv_jacobian=self._jac, view_box=t.view_box)
+        prep.__dict__.update(self._shared)
+        return fuse_type_a(prep, self._max_gap_s, self._noise_px,
+                           events=np.arange(n - n_new, n), seen=self._seen)[0]

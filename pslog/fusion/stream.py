@@ -2,7 +2,9 @@
 
 Every method is causal, so running the batch kernel over a trailing window of recent
 detections gives, for each new detection, the same point as the batch run over the whole
-session. A point is *settled*, and emitted, once nothing that could still arrive can change it:
+session (a method with an incremental form, the registry's ``streamer``, ``filter`` and
+``typeA``, is instead fed each admitted detection once, with the same points). A point is
+*settled*, and emitted, once nothing that could still arrive can change it:
 
 - ``typeA`` and ``nearest`` use only detections at or before the new one in (time, camera)
   order, so its point is emitted as soon as it is pushed;

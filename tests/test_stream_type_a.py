@@ -1,0 +1,81 @@
+"""typeA's incremental streaming form (pslog.fusion.pseudo.TypeAStream): each pushed
+detection's point from the rows it can reach, bit for bit the batch's, its dropped counts
+included, whatever the pushes' sizes."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+from numpy.testing import assert_array_equal
+from test_fusion_validity import dirty_session, observations, rectified_rig
+
+from pslog.fusion import FusionOptions, fuse
+from pslog.fusion.pseudo import TypeAStream
+from pslog.fusion.stream import StreamFuser
+from pslog.records import Track
+
+
+def assert_same(parts, batch):
+    """Every column, quality column and dropped count of the joined stream is the batch's."""
+    joined = Track.concat(parts)
+    assert_array_equal(joined.time_ns, batch.time_ns)
+    assert_array_equal(joined.camera, batch.camera)
+    assert_array_equal(joined.position_world, batch.position_world)
+    assert set(joined.quality) == set(batch.quality)
+    for key, column in batch.quality.items():
+        assert_array_equal(joined.quality[key], column, err_msg=key)
+    assert joined.dropped == batch.dropped
+
+
+def test_type_a_streams_through_its_incremental_form():
+    rig = dirty_session("typeA", 0)[0]
+    assert isinstance(StreamFuser(rig, "typeA").incremental, TypeAStream)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize("noise_px", [0.5, None])
+def test_one_detection_per_push_equals_batch_with_its_drops(seed, noise_px):
+    rig, obs, _ = dirty_session("typeA", seed)
+    options = FusionOptions(noise_px=noise_px)
+    batch = fuse(obs, rig, "typeA", options)
+    assert len(batch) > 15
+    fuser = StreamFuser(rig, "typeA", options)
+    parts = [fuser.push(obs.time_ns[i], obs.camera[i], obs.uv[i], obs.frame_index[i])
+             for i in range(len(obs))]
+    assert all(len(p) <= 1 for p in parts)  # each point with the detection that makes it
+    parts.append(fuser.flush())
+    assert len(parts[-1]) == 0
+    assert_same(parts, batch)
+
+
+def test_pushes_of_several_detections_equal_batch():
+    # pushes of 1 to 7 rows of mixed cameras: each row's point from one kernel call
+    rig, obs, _ = dirty_session("typeA", 3)
+    batch = fuse(obs, rig, "typeA")
+    sizes = np.random.default_rng(0).integers(1, 8, len(obs))
+    edges = np.r_[0, np.cumsum(sizes)]
+    edges = [*edges[edges < len(obs)].tolist(), len(obs)]
+    fuser = StreamFuser(rig, "typeA")
+    parts = [fuser.push(obs.time_ns[a:b], obs.camera[a:b], obs.uv[a:b], obs.frame_index[a:b])
+             for a, b in itertools.pairwise(edges)]
+    parts.append(fuser.flush())
+    assert_same(parts, batch)
+
+
+def test_refused_past_points_are_counted_once_each_as_in_batch():
+    # a static ball first at a negative disparity (every pseudo-stereo pair crosses behind
+    # both cameras: refused, each detection once, though several points reach it), then at
+    # a positive one (points)
+    rig = rectified_rig(offsets=(0.0, 1 / 60))
+    rows = [(10 * i, i % 2, 320.0 if i % 2 == 0 else (380.0 if i < 10 else 260.0), 240.0)
+            for i in range(20)]
+    obs = observations(rows)
+    batch = fuse(obs, rig, "typeA")
+    assert batch.dropped.get("past_behind_camera", 0) >= 4 and len(batch) > 3, batch.dropped
+    fuser = StreamFuser(rig, "typeA")
+    parts = [fuser.push(obs.time_ns[i], obs.camera[i], obs.uv[i], obs.frame_index[i])
+             for i in range(len(obs))]
+    parts.append(fuser.flush())
+    assert_same(parts, batch)
