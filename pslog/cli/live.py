@@ -1,0 +1,284 @@
+"""``pslog live``: per-camera processes stream detections to a live fuser that emits a 3D
+point at every shutter (to UDP, JSON lines, the MCAP session, rerun, Foxglove)."""
+
+from __future__ import annotations
+
+import argparse
+import re
+
+from pslog.cli._common import (
+    add_force,
+    add_rig,
+    declare_files,
+    motion_name,
+    positive_float,
+    usage_error,
+)
+
+DESCRIPTION = """\
+Fuse live: every --source camera runs in its own process (capture, ball detection) and sends
+each frame's detections with its capture time as one UDP datagram to the fuser, which listens
+at --listen (so detections may also come from other processes or machines: the datagram
+format is in docs/live.md). The fuser runs a causal method and emits every 3D point as soon as
+the detection that makes it arrives: as point datagrams to --out, as JSON lines on stdout
+(--jsonl; status lines stay on stderr), into an MCAP session (--record), to a live rerun
+viewer (--view spawns one, --serve serves the web viewer) or to Foxglove (--foxglove, its
+WebSocket server).
+
+Without --source or --synthetic the fuser only listens. --synthetic renders every camera of
+the rig watching --motion in real time (frames paced by their capture times on the rig's
+shutter schedule, detected like camera frames). A video file source is sent at its frames'
+capture times too.
+
+A status line on stderr shows per camera whether it is live or silent. A camera process
+that dies is reported and restarted after a back-off (1 s, doubling up to 30 s); the other
+cameras keep fusing, and the camera is fused again once it sends. The run ends at
+--duration, when every source has ended, or on Ctrl-C / SIGTERM, which stops the camera
+processes and finishes the session file cleanly (exit code 0). A killed run leaves
+SESSION.mcap.partial, which 'pslog recover' salvages.
+"""
+
+EXAMPLES = """\
+examples:
+  pslog live --rig rig.toml --synthetic --motion rally --duration 5 --jsonl
+  pslog live --rig rig.toml --source cam1=0 --source cam2=1 --source cam3=2 \\
+      --out udp://127.0.0.1:10010 --record session.mcap
+  pslog live --rig rig.toml --listen udp://0.0.0.0:10006 --foxglove
+"""
+
+#: default UDP addresses (the fuser's listen address, where detections arrive)
+DEFAULT_LISTEN = "udp://127.0.0.1:10006"
+_ADDRESS = re.compile(r"^(?:udp://)?(?:\[(?P<v6>[^\]]+)\]|(?P<host>[^:/\[\]]+)):(?P<port>[0-9]+)$")
+#: seconds the fuser keeps listening once every camera process has ended, for the last
+#: datagrams still on their way
+_GRACE_S = 0.5
+
+
+def udp_address(text: str) -> tuple[str, int]:
+    """argparse type: ``udp://HOST:PORT`` (or ``HOST:PORT``; ``[::1]:PORT`` for IPv6) ->
+    (host, port)."""
+    match = _ADDRESS.match(text.strip())
+    if match is None:
+        raise argparse.ArgumentTypeError(f"not a UDP address udp://HOST:PORT: {text!r}")
+    host = match.group("v6") or match.group("host")
+    port = int(match.group("port"))
+    if not 1 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"port must be in 1..65535, got {text!r}")
+    return host, port
+
+
+def streaming_method(text: str) -> str:
+    """A fusion method that can run live (a causal one)."""
+    from pslog.fusion import METHODS, causal_methods
+
+    if text not in METHODS or not METHODS[text].causal:
+        raise argparse.ArgumentTypeError(
+            f"method {text!r} cannot run live (streaming methods: "
+            f"{', '.join(causal_methods())})")
+    return text
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from pslog.rig import TIMING_PRESETS
+
+    from ._common import port
+    from .record import add_detector_arguments
+
+    parser.description = DESCRIPTION
+    parser.epilog = EXAMPLES
+    parser.formatter_class = argparse.RawDescriptionHelpFormatter
+    add_rig(parser)
+    parser.add_argument("--source", action="append", default=[], metavar="NAME=SPEC",
+                        help="camera NAME sends from SPEC: a device index, /dev/videoN, or a "
+                             "video file with an optional @OFFSET in seconds (repeat per "
+                             "camera; cameras without one may send from elsewhere)")
+    parser.add_argument("--synthetic", action="store_true",
+                        help="render every camera of the rig in real time instead of "
+                             "reading sources")
+    parser.add_argument("--motion", default="rally", type=motion_name, metavar="MOTION",
+                        help="synthetic ball motion: straight, spiral, fall, turntable, "
+                             "throw, rally (default %(default)s)")
+    parser.add_argument("--timing", choices=TIMING_PRESETS,
+                        help="set the rig's shutter offsets from a preset (default: the "
+                             "rig's own offsets)")
+    parser.add_argument("--duration", type=positive_float, metavar="S",
+                        help="stop after S seconds (of session time once cameras run; "
+                             "synthetic default: the motion's duration; otherwise until "
+                             "the sources end or Ctrl-C)")
+    parser.add_argument("--method", default="filter", type=streaming_method, metavar="METHOD",
+                        help="causal fusion method: filter or typeA (or another streaming "
+                             "method; default %(default)s)")
+    parser.add_argument("--listen", default=DEFAULT_LISTEN, type=udp_address,
+                        metavar="udp://HOST:PORT",
+                        help="where the fuser receives detection datagrams (default "
+                             "%(default)s)")
+    parser.add_argument("--out", type=udp_address, metavar="udp://HOST:PORT",
+                        help="send every point as a datagram there (format: docs/live.md)")
+    parser.add_argument("--jsonl", action="store_true",
+                        help="print every point as one JSON object per line on stdout")
+    parser.add_argument("--record", metavar="SESSION.mcap",
+                        help="record the session (detections and the emitted points) there")
+    view = parser.add_mutually_exclusive_group()
+    view.add_argument("--view", action="store_true",
+                      help="show the points live in a rerun viewer (needs a display)")
+    view.add_argument("--serve", action="store_true",
+                      help="serve a live rerun web viewer (http://localhost:--web-port)")
+    view.add_argument("--foxglove", action="store_true",
+                      help="publish live to Foxglove through its WebSocket server")
+    parser.add_argument("--web-port", type=port, default=9090, metavar="PORT",
+                        help="web viewer port with --serve (default %(default)s)")
+    parser.add_argument("--grpc-port", type=port, default=9876, metavar="PORT",
+                        help="data server port with --serve (default %(default)s)")
+    parser.add_argument("--foxglove-port", type=port, default=8765, metavar="PORT",
+                        help="Foxglove WebSocket server port with --foxglove (default "
+                             "%(default)s)")
+    parser.add_argument("--status-every", type=positive_float, default=1.0, metavar="S",
+                        help="seconds between status lines on stderr (default %(default)s)")
+    add_detector_arguments(parser)
+    add_force(parser)
+    from .record import video_files
+
+    declare_files(parser, inputs=("rig", video_files), outputs=("record",))
+
+
+def run(args: argparse.Namespace) -> int:
+    # SIGINT and SIGTERM only request a stop from here on, which stops the camera processes,
+    # the fuser and the session file cleanly (also one that came before they started)
+    from recorders.record import StopRequest
+
+    stop = StopRequest()
+    restore = stop.install()
+    try:
+        return _run(args, stop)
+    finally:
+        restore()
+
+
+def _say(text: str) -> None:
+    import sys
+
+    print(f"pslog live: {text}", file=sys.stderr, flush=True)
+
+
+def _run(args: argparse.Namespace, stop) -> int:
+    import threading
+
+    from pslog.errors import InputError
+    from pslog.rig import apply_timing, resolve_rig
+
+    rig = resolve_rig(args.rig)
+    if args.timing:
+        rig = apply_timing(rig, args.timing)
+    if args.serve and args.web_port == args.grpc_port:
+        return usage_error("live", f"--web-port and --grpc-port must differ, both are "
+                                   f"{args.web_port}")
+    if len(rig) < 2:
+        return usage_error("live", f"live fusion needs at least two cameras; the rig has "
+                                   f"{len(rig)}")
+    specs = _camera_specs(args, rig)
+    if isinstance(specs, int):
+        return specs  # a usage error, already said
+    sender_address = _sender_address(args.listen)
+    sinks = _sinks(args, rig)
+    cameras = None
+    if specs:
+        from recorders.live import LiveCameras, SenderOptions
+        from recorders.record import parse_hsv
+
+        duration_ns = None if args.duration is None else int(args.duration * 1e9)
+        cameras = LiveCameras(specs, sender_address, SenderOptions(
+            hsv=parse_hsv(args.hsv), max_candidates=args.max_candidates,
+            duration_ns=duration_ns), say=_say)
+    ready = threading.Event()
+    watcher = None
+    if cameras is not None:
+        def finished() -> None:
+            # every source ended: give the last datagrams a moment, then stop the fuser
+            if not stop.event.wait(_GRACE_S):
+                stop.set("end of the sources")
+
+        watcher = threading.Thread(target=cameras.run, args=(stop.event, ready),
+                                   kwargs={"when_finished": finished},
+                                   name="pslog-live-cameras", daemon=True)
+        watcher.start()
+    from pslog.live.server import serve
+
+    try:
+        summary = serve(rig, args.listen, sinks, method=args.method,
+                        duration_s=args.duration if cameras is None else None,
+                        stop=stop.event, status_every_s=args.status_every, ready=ready)
+    finally:
+        stop.event.set()
+        if watcher is not None:
+            watcher.join()
+    if cameras is not None:
+        _say("camera processes:\n" + cameras.summary())
+        if not cameras.opened_any and not getattr(summary, "received", 1):
+            failed = "; ".join(f"{c.name}: {c.message}" for c in cameras.cameras)
+            raise InputError(f"no camera could be opened ({failed})")
+    return 0
+
+
+def _camera_specs(args: argparse.Namespace, rig):
+    """Camera name -> source spec of the camera processes to start ({} when the fuser only
+    listens); an exit code after a usage error."""
+    from pslog.errors import InputError
+
+    if args.synthetic:
+        if args.source:
+            return usage_error("live", "--synthetic renders every camera; do not give --source")
+        from pslog.motion import get_motion
+        from pslog.simulation import check_duration
+        from recorders.live import synthetic_specs
+
+        motion = get_motion(args.motion)
+        duration = motion.duration if args.duration is None else args.duration
+        try:
+            check_duration(rig, duration)
+        except InputError as exc:
+            return usage_error("live", str(exc))
+        return synthetic_specs(rig, motion, duration)
+    if not args.source:
+        return {}
+    from .record import MalformedSource, parse_sources
+
+    try:
+        return parse_sources(rig, args.source, [])
+    except MalformedSource as exc:
+        return usage_error("live", str(exc))
+
+
+def _sender_address(listen: tuple[str, int]) -> tuple[str, int]:
+    """Where the camera processes on this machine send to: the listen address, loopback
+    when the fuser listens on every interface."""
+    host, port = listen
+    if host in ("0.0.0.0", ""):
+        return "127.0.0.1", port
+    if host == "::":
+        return "::1", port
+    return host, port
+
+
+def _sinks(args: argparse.Namespace, rig) -> list:
+    """The fuser's outputs, in the order points reach them (the robot's UDP first)."""
+    import sys
+
+    from pslog.live.sinks import JsonlSink, RecordSink, UdpSink
+
+    sinks: list = []
+    if args.out is not None:
+        sinks.append(UdpSink(args.out))
+    if args.jsonl:
+        sinks.append(JsonlSink(sys.stdout))
+    if args.record:
+        sinks.append(RecordSink(args.record, rig, force=args.force))
+    if args.view or args.serve:
+        from viewers.live import RerunLiveSink
+
+        sinks.append(RerunLiveSink("spawn" if args.view else "serve", rig,
+                                   web_port=args.web_port, grpc_port=args.grpc_port))
+    if args.foxglove:
+        from viewers.live import FoxgloveSink
+
+        sinks.append(FoxgloveSink(rig, "127.0.0.1", args.foxglove_port))
+    return sinks
