@@ -272,13 +272,18 @@ def _sinks(args: argparse.Namespace, rig) -> list:
         sinks.append(JsonlSink(sys.stdout))
     if args.record:
         sinks.append(RecordSink(args.record, rig, force=args.force))
+    methods = (args.method,)
     if args.view or args.serve:
         from viewers.live import RerunLiveSink
 
-        sinks.append(RerunLiveSink("spawn" if args.view else "serve", rig,
-                                   web_port=args.web_port, grpc_port=args.grpc_port))
+        sink = RerunLiveSink("spawn" if args.view else "serve", rig, methods=methods,
+                             web_port=args.web_port, grpc_port=args.grpc_port)
+        sinks.append(sink)
+        if args.serve:
+            _say(f"rerun web viewer at {sink.address}")
     if args.foxglove:
         from viewers.live import FoxgloveSink
 
-        sinks.append(FoxgloveSink(rig, "127.0.0.1", args.foxglove_port))
+        sinks.append(FoxgloveSink(rig, "127.0.0.1", args.foxglove_port, methods=methods))
+        _say(f"Foxglove WebSocket server at ws://127.0.0.1:{args.foxglove_port}")
     return sinks
