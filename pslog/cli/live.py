@@ -162,8 +162,12 @@ def _say(text: str) -> None:
 
 def _run(args: argparse.Namespace, stop) -> int:
     import threading
+    import time
+
+    import numpy as np
 
     from pslog.errors import InputError
+    from pslog.live.server import bind_udp, serve
     from pslog.rig import apply_timing, resolve_rig
 
     rig = resolve_rig(args.rig)
@@ -178,44 +182,66 @@ def _run(args: argparse.Namespace, stop) -> int:
     specs = _camera_specs(args, rig)
     if isinstance(specs, int):
         return specs  # a usage error, already said
-    sender_address = _sender_address(args.listen)
-    sinks = _sinks(args, rig)
+    listen = _udp_text(args.listen)
     cameras = None
     if specs:
         from recorders.live import LiveCameras, SenderOptions
-        from recorders.record import parse_hsv
+
+        from .record import parse_hsv
 
         duration_ns = None if args.duration is None else int(args.duration * 1e9)
-        cameras = LiveCameras(specs, sender_address, SenderOptions(
+        cameras = LiveCameras(specs, _sender_address(args.listen), SenderOptions(
             hsv=parse_hsv(args.hsv), max_candidates=args.max_candidates,
             duration_ns=duration_ns), say=_say)
+    sock = bind_udp(listen)  # a busy port fails here, before any output is opened
+    try:
+        sinks, recording = _sinks(args, rig)
+    except BaseException:
+        sock.close()
+        raise
     ready = threading.Event()
+    epoch_ns = time.time_ns()  # the session clock's zero (wall clock), fuser and cameras
     watcher = None
     if cameras is not None:
         def finished() -> None:
             # every source ended: give the last datagrams a moment, then stop the fuser
             if not stop.event.wait(_GRACE_S):
-                stop.set("end of the sources")
+                stop.set("the end of the sources")
 
         watcher = threading.Thread(target=cameras.run, args=(stop.event, ready),
-                                   kwargs={"when_finished": finished},
+                                   kwargs={"when_finished": finished,
+                                           "epoch_ns": lambda: epoch_ns},
                                    name="pslog-live-cameras", daemon=True)
         watcher.start()
-    from pslog.live.server import serve
-
     try:
-        summary = serve(rig, args.listen, sinks, method=args.method,
+        summary = serve(rig, listen, sinks, method=args.method,
                         duration_s=args.duration if cameras is None else None,
-                        stop=stop.event, status_every_s=args.status_every, ready=ready)
+                        stop=stop.event, status_every_s=args.status_every, ready=ready,
+                        epoch_ns=epoch_ns, sock=sock)
     finally:
         stop.event.set()
         if watcher is not None:
             watcher.join()
     if cameras is not None:
         _say("camera processes:\n" + cameras.summary())
-        if not cameras.opened_any and not getattr(summary, "received", 1):
-            failed = "; ".join(f"{c.name}: {c.message}" for c in cameras.cameras)
-            raise InputError(f"no camera could be opened ({failed})")
+    lat = summary.latency_ns
+    if len(lat):
+        _say(f"{summary.counters.get('points', len(lat))} points; fusion latency (datagram "
+             f"arrival to point out) median {np.median(lat) / 1e3:.0f} us, p99 "
+             f"{np.percentile(lat, 99) / 1e3:.0f} us")
+    no_camera = cameras is not None and not cameras.opened_any
+    if recording is not None:
+        if recording.empty:
+            if not recording.existed:
+                recording.path.unlink(missing_ok=True)
+            if not no_camera:
+                _say(f"no detection arrived: nothing was recorded to {args.record}")
+        else:
+            _say(f"recorded {args.record}: {recording.frames} frames, {recording.points} "
+                 f"points")
+    if no_camera:
+        failed = "; ".join(f"{c.name}: {c.message}" for c in cameras.cameras)
+        raise InputError(f"no camera could be opened ({failed})")
     return 0
 
 
@@ -259,31 +285,78 @@ def _sender_address(listen: tuple[str, int]) -> tuple[str, int]:
     return host, port
 
 
-def _sinks(args: argparse.Namespace, rig) -> list:
-    """The fuser's outputs, in the order points reach them (the robot's UDP first)."""
+def _udp_text(address: tuple[str, int]) -> str:
+    host, port = address
+    return f"udp://[{host}]:{port}" if ":" in host else f"udp://{host}:{port}"
+
+
+def _sinks(args: argparse.Namespace, rig) -> tuple[list, object]:
+    """The fuser's outputs, in the order points reach them (the robot's UDP first), and the
+    recording among them (None without --record). Any that fails to open is one error line,
+    and the ones opened before it are closed again (a new session file removed)."""
     import sys
 
-    from pslog.live.sinks import JsonlSink, RecordSink, UdpSink
+    from pslog.live.sinks import JsonlSink, UdpSink
 
     sinks: list = []
-    if args.out is not None:
-        sinks.append(UdpSink(args.out))
-    if args.jsonl:
-        sinks.append(JsonlSink(sys.stdout))
-    if args.record:
-        sinks.append(RecordSink(args.record, rig, force=args.force))
-    methods = (args.method,)
-    if args.view or args.serve:
-        from viewers.live import RerunLiveSink
+    recording = None
+    try:
+        if args.out is not None:
+            sinks.append(UdpSink(_udp_text(args.out)))
+        if args.jsonl:
+            sinks.append(JsonlSink(sys.stdout))
+        if args.record:
+            recording = _recording(args, rig)
+            sinks.append(recording)
+        methods = (args.method,)
+        if args.view or args.serve:
+            from viewers.live import RerunLiveSink
 
-        sink = RerunLiveSink("spawn" if args.view else "serve", rig, methods=methods,
-                             web_port=args.web_port, grpc_port=args.grpc_port)
-        sinks.append(sink)
-        if args.serve:
-            _say(f"rerun web viewer at {sink.address}")
-    if args.foxglove:
-        from viewers.live import FoxgloveSink
+            sink = RerunLiveSink("spawn" if args.view else "serve", rig, methods=methods,
+                                 web_port=args.web_port, grpc_port=args.grpc_port)
+            sinks.append(sink)
+            if args.serve:
+                _say(f"rerun web viewer at {sink.address}")
+        if args.foxglove:
+            from viewers.live import FoxgloveSink
 
-        sinks.append(FoxgloveSink(rig, "127.0.0.1", args.foxglove_port, methods=methods))
-        _say(f"Foxglove WebSocket server at ws://127.0.0.1:{args.foxglove_port}")
-    return sinks
+            sinks.append(FoxgloveSink(rig, "127.0.0.1", args.foxglove_port, methods=methods))
+            _say(f"Foxglove WebSocket server at ws://127.0.0.1:{args.foxglove_port}")
+    except BaseException:
+        for sink in sinks:
+            if sink is recording:
+                recording.discard()
+            else:
+                sink.close()
+        raise
+    return sinks, recording
+
+
+def _recording(args: argparse.Namespace, rig):
+    """core's RecordSink that, when nothing at all was recorded, keeps an old session
+    (``--force``) instead of replacing it by an empty one (the command removes a new one)."""
+    from pathlib import Path
+
+    from pslog.live.sinks import RecordSink
+    from pslog.rig import timing_label
+
+    class Recording(RecordSink):
+        def close(self) -> None:
+            if self.frames == 0 and self.points == 0 and self.dropped_frames == 0:
+                self.empty = True
+                self.writer.abort()
+            else:
+                super().close()
+
+        def discard(self) -> None:
+            self.close()
+            if self.empty and not self.existed:
+                Path(self.path).unlink(missing_ok=True)
+
+    existed = Path(args.record).exists()
+    sink = Recording(args.record, rig, args.method, force=args.force,
+                     timing=timing_label(rig),
+                     source="live " + " ".join(["--synthetic"] if args.synthetic
+                                               else args.source))
+    sink.empty, sink.existed, sink.path = False, existed, Path(args.record)
+    return sink

@@ -1,0 +1,308 @@
+"""``pslog live`` as a user runs it: the real command in its own process, real camera
+processes rendering a synthetic rig in real time, real UDP datagrams to a test receiver,
+real signals, a real MCAP session read back."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+#: generous hang guard of one live run, seconds (no timing is asserted)
+HANG_S = 90.0
+
+
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class PointReceiver:
+    """A robot controller: receives the fuser's point datagrams on a free UDP port."""
+
+    def __init__(self) -> None:
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.settimeout(0.1)
+        self.port = self.sock.getsockname()[1]
+        self.data: list[bytes] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            try:
+                self.data.append(self.sock.recv(65536))
+            except TimeoutError:
+                pass
+
+    def close(self) -> list:
+        from pslog.live.protocol import decode_point
+
+        time.sleep(0.2)
+        self._stop.set()
+        self._thread.join()
+        self.sock.close()
+        return [decode_point(d) for d in self.data]
+
+
+class LiveRun:
+    """``pslog live ARGS`` as a real process; its stdout and stderr lines are collected as
+    they come, so a test can wait for a line and act (kill a camera, press Ctrl-C)."""
+
+    def __init__(self, *args, cwd: Path) -> None:
+        env = {**os.environ}
+        env.pop("PYTHONWARNINGS", None)
+        self.args = [str(a) for a in args]
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "pslog.cli", "live", *self.args], cwd=cwd, env=env,
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, stdin=subprocess.DEVNULL,
+            text=True)
+        self.out: list[str] = []
+        self.err: list[str] = []
+        self._changed = threading.Condition()
+        self._readers = [threading.Thread(target=self._read, args=(s, lines), daemon=True)
+                         for s, lines in ((self.proc.stdout, self.out),
+                                          (self.proc.stderr, self.err))]
+        for t in self._readers:
+            t.start()
+        self.started = time.monotonic()
+
+    def _read(self, stream, lines: list[str]) -> None:
+        for line in stream:
+            with self._changed:
+                lines.append(line.rstrip("\n"))
+                self._changed.notify_all()
+        with self._changed:
+            self._changed.notify_all()
+
+    def wait_for(self, check, what: str, timeout: float = HANG_S):
+        """Wait until ``check()`` returns something true (re-checked at every new line)."""
+        deadline = time.monotonic() + timeout
+        with self._changed:
+            while True:
+                found = check()
+                if found:
+                    return found
+                if self.proc.poll() is not None and not any(t.is_alive() for t in self._readers):
+                    raise AssertionError(f"pslog live ended (exit {self.proc.returncode}) "
+                                         f"before {what}\nstderr:\n" + "\n".join(self.err))
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    self.proc.kill()
+                    raise AssertionError(f"no {what} within {timeout} s\nstderr:\n"
+                                         + "\n".join(self.err))
+                self._changed.wait(min(left, 0.2))
+
+    def wait_err(self, pattern: str, timeout: float = HANG_S, start: int = 0) -> re.Match:
+        rx = re.compile(pattern)
+
+        def find():
+            for line in self.err[start:]:
+                m = rx.search(line)
+                if m:
+                    return m
+            return None
+        return self.wait_for(find, f"stderr line matching {pattern!r}", timeout)
+
+    def jsonl(self) -> list[dict]:
+        return [json.loads(line) for line in self.out if line.strip()]
+
+    def finish(self, timeout: float = HANG_S) -> int:
+        try:
+            code = self.proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            raise AssertionError(f"pslog live did not end within {timeout} s\nstderr:\n"
+                                 + "\n".join(self.err)) from None
+        for t in self._readers:
+            t.join(10)
+        stderr = "\n".join(self.err)
+        assert "Traceback" not in stderr and "Traceback" not in "\n".join(self.out), stderr
+        return code
+
+
+def camera_pids(run: LiveRun) -> dict[str, list[int]]:
+    """Every camera process the run said it started, by camera."""
+    pids: dict[str, list[int]] = {}
+    for line in run.err:
+        m = re.search(r"(\w+): camera process (\d+) started", line)
+        if m:
+            pids.setdefault(m.group(1), []).append(int(m.group(2)))
+    return pids
+
+
+def gone(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return True
+    try:  # a zombie of ours is gone too (the run's children are not ours)
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().split(")")[-1].split()[0] == "Z"
+    except OSError:
+        return True
+
+
+def sent_counts(run: LiveRun) -> dict[str, tuple[int, int]]:
+    """camera -> (frames sent, frames with the ball) from the run's summary."""
+    counts = {}
+    for line in run.err:
+        m = re.match(r"\s+(\w+): (\d+) frames sent, (\d+) with the ball", line)
+        if m:
+            counts[m.group(1)] = (int(m.group(2)), int(m.group(3)))
+    return counts
+
+
+# ---- one synthetic run with every output, checked by several tests ----------------------------
+@pytest.fixture(scope="module")
+def synthetic_run(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("live")
+    receiver = PointReceiver()
+    run = LiveRun("--rig", "paper3", "--timing", "typeA", "--synthetic", "--motion", "rally",
+                  "--duration", "2.5", "--method", "typeA",
+                  "--listen", f"udp://127.0.0.1:{free_udp_port()}",
+                  "--out", f"udp://127.0.0.1:{receiver.port}", "--jsonl",
+                  "--record", "session.mcap", "--status-every", "0.5", cwd=folder)
+    code = run.finish()
+    points = receiver.close()
+    return folder, run, code, points
+
+
+def session_epoch_ns(session) -> int:
+    """The session clock's zero on the wall clock, from the live session's first event."""
+    for _, text in session.events:
+        m = re.search(r"session time 0 is wall clock (\d+) ns", text)
+        if m:
+            return int(m.group(1))
+    raise AssertionError(f"no session clock event in {session.events[:3]}")
+
+
+def test_a_synthetic_live_run_emits_a_point_at_every_shutter(synthetic_run):
+    from pslog.log import read_session
+
+    folder, run, code, points = synthetic_run
+    assert code == 0, "\n".join(run.err)
+    session = read_session(folder / "session.mcap")
+    epoch = session_epoch_ns(session)
+    det = session.detections
+    names = det.camera_names
+    # every datagram the camera processes sent reached the fuser (loopback loses none)
+    sent = sent_counts(run)
+    assert sorted(sent) == ["cam1", "cam2", "cam3"] and all(n > 45 for n, _ in sent.values())
+    final = [line for line in run.err if line.startswith("live ")][-1]
+    assert f"datagrams {sum(n for n, _ in sent.values())} " in final, final
+    # the fused frames (the recorded ones; the few a sender delayed past a later camera's
+    # frame are recorded apart, as dropped) each made a point, from the moment the method has
+    # two earlier frames; one point per frame
+    got = [(p.camera, p.t_capture_ns - epoch) for p in points]
+    assert len(set(got)) == len(got), "a shutter got two points"
+    has_ball = np.isin(np.arange(len(det.frame_time_ns)), det.cand_frame)
+    expected = {(names[c], int(t)) for c, t, b in zip(det.frame_camera, det.frame_time_ns,
+                                                      has_ball, strict=True) if b}
+    assert has_ball.mean() > 0.9
+    assert set(got) <= expected
+    missing = sorted(expected - set(got), key=lambda k: k[1])
+    first = min(t for _, t in got)
+    assert all(t < first for _, t in missing) and len(missing) <= 3, missing
+    assert len(got) >= 0.9 * sum(n for n, _ in sent.values())
+
+
+def test_jsonl_lines_parse_and_are_the_udp_points(synthetic_run):
+    _, run, code, points = synthetic_run
+    assert code == 0
+    lines = run.jsonl()
+    assert len(lines) == len(points) > 0
+    for obj in lines:
+        assert {"t", "x", "y", "z", "camera", "method", "latency_s"} <= set(obj)
+        assert obj["method"] == "typeA" and obj["latency_s"] >= 0
+    by_camera: dict[str, list] = {}
+    for p in points:
+        by_camera.setdefault(p.camera, []).append(p)
+    for obj in lines:  # t is float seconds of the wall clock: equal to about a microsecond
+        p = min(by_camera[obj["camera"]], key=lambda p: abs(p.t_capture_ns / 1e9 - obj["t"]))
+        assert abs(p.t_capture_ns / 1e9 - obj["t"]) < 2e-6
+        assert np.allclose([obj["x"], obj["y"], obj["z"]], p.position, rtol=0, atol=1e-12)
+
+
+def test_status_lines_show_every_camera_live(synthetic_run):
+    _, run, _, _ = synthetic_run
+    status = [line for line in run.err if re.search(r"cam1 live.*cam2 live.*cam3 live", line)]
+    assert status, "\n".join(run.err)
+
+
+def test_the_recorded_session_re_fuses_to_the_live_points(synthetic_run):
+    from pslog.log import read_session
+
+    folder, _, code, points = synthetic_run
+    assert code == 0
+    info = subprocess.run([sys.executable, "-m", "pslog.cli", "info", "session.mcap"],
+                          cwd=folder, capture_output=True, text=True, timeout=60)
+    assert info.returncode == 0 and "truncated" not in info.stdout, info.stdout + info.stderr
+    assert "source: live --synthetic" in info.stdout
+    fuse = subprocess.run([sys.executable, "-m", "pslog.cli", "fuse", "session.mcap",
+                           "--method", "typeA", "-o", "fused.mcap"],
+                          cwd=folder, capture_output=True, text=True, timeout=60)
+    assert fuse.returncode == 0, fuse.stderr
+    session = read_session(folder / "session.mcap")
+    epoch = session_epoch_ns(session)
+    track = read_session(folder / "fused.mcap").tracks["typeA"]
+    names = session.rig.names
+    offline = {(names[c], int(t)): xyz for c, t, xyz in zip(
+        track.camera, track.time_ns, track.position_world, strict=True)}
+    assert len(offline) == len(points)
+    for p in points:
+        assert np.allclose(offline[(p.camera, p.t_capture_ns - epoch)], p.position, rtol=0,
+                           atol=1e-9), p
+
+
+# ---- a camera process killed mid-run and restarted ------------------------------------------
+def test_a_killed_camera_process_is_reported_restarted_and_fused_again(tmp_path):
+    run = LiveRun("--rig", "paper3", "--timing", "typeA", "--synthetic", "--motion", "rally",
+                  "--listen", f"udp://127.0.0.1:{free_udp_port()}",
+                  "--jsonl", "--status-every", "0.25", cwd=tmp_path)
+    try:
+        run.wait_err(r"session clock started: 3 camera processes")
+        victim = camera_pids(run)["cam2"][-1]
+        run.wait_for(lambda: sum('"cam2"' in line for line in run.out) >= 20,
+                     "points of cam2")
+        n_err = len(run.err)
+        os.kill(victim, signal.SIGKILL)
+        run.wait_err(rf"cam2: camera process {victim} died \(killed by SIGKILL\); restarting",
+                     start=n_err)
+        n_out = len(run.out)
+        # the status shows cam2 silent while the others keep fusing
+        run.wait_err(r"cam2[^,;]*silent", start=n_err)
+        run.wait_err(r"cam2: camera process \d+ running again", start=n_err)
+        run.wait_for(lambda: sum('"cam2"' in line for line in run.out[n_out:]) >= 10,
+                     "points of the restarted cam2")
+    finally:
+        run.proc.send_signal(signal.SIGINT)
+    code = run.finish()
+    assert code == 0, "\n".join(run.err)
+    pids = camera_pids(run)
+    assert len(pids["cam2"]) == 2 and len(pids["cam1"]) == len(pids["cam3"]) == 1
+    assert all(gone(pid) for cam in pids.values() for pid in cam)
+    points = run.jsonl()
+    cam2 = np.array([p["t"] for p in points if p["camera"] == "cam2"])
+    gap = int(np.argmax(np.diff(cam2)))
+    silent = (cam2[gap], cam2[gap + 1])
+    assert silent[1] - silent[0] > 0.5, "no silence of cam2 after the kill"
+    # the others kept fusing while cam2 was silent, and cam2 was fused again after it
+    others = [p["t"] for p in points if p["camera"] != "cam2" and
+              silent[0] < p["t"] < silent[1]]
+    assert len(others) > 0.5 * (silent[1] - silent[0]) * 60
+    assert len(cam2) - gap - 1 >= 10
