@@ -1,0 +1,131 @@
+"""``pslog live`` faults: bad command lines (exit 2, one line), faults (exit 1, one line,
+nothing written), signals (Ctrl-C / SIGTERM stop everything and leave a complete session;
+SIGKILL leaves an unfinished session that ``pslog recover`` salvages, and no orphan camera)."""
+
+from __future__ import annotations
+
+import signal
+import socket
+import subprocess
+import sys
+import time
+
+import pytest
+
+# the live-run helpers of the command's own tests (tests/ is on the path, as for _rally)
+from test_live_command import LiveRun, camera_pids, free_udp_port, gone
+
+from .promises import assert_one_line_error, assert_untouched, fingerprint, run_pslog
+
+
+def _listen() -> str:
+    return f"udp://127.0.0.1:{free_udp_port()}"
+
+
+@pytest.mark.parametrize("args, contains", [
+    (("--listen", "nowhere"), ("--listen", "not a UDP address")),
+    (("--listen", "udp://127.0.0.1:70000"), ("--listen", "1..65535")),
+    (("--out", "udp://127.0.0.1"), ("--out", "not a UDP address")),
+    (("--method", "smooth"), ("--method", "cannot run live")),
+    (("--duration", "-1"), ("--duration",)),
+    (("--synthetic", "--source", "cam1=0"), ("--synthetic",)),
+    (("--source", "cam1"), ("NAME=SPEC",)),
+    (("--synthetic", "--motion", "nope"), ("--motion", "nope")),
+    (("--view", "--foxglove"), ("--foxglove", "not allowed")),
+    (("--synthetic", "--duration", "1e9"), ("frames",)),
+    (("--serve", "--web-port", "9000", "--grpc-port", "9000"), ("must differ",)),
+])
+def test_malformed_command_lines_are_usage_errors(tmp_path, args, contains):
+    before = fingerprint(tmp_path)
+    run = run_pslog("live", "--rig", "paper3", "--listen", _listen(), *args, cwd=tmp_path)
+    assert_one_line_error(run, 2, contains=contains)
+    assert_untouched(before, tmp_path)
+
+
+def test_faults_before_the_start_are_one_line_and_write_nothing(tmp_path):
+    (tmp_path / "old.mcap").write_bytes(b"an old session")
+    before = fingerprint(tmp_path)
+    cases = [
+        (("--rig", "missing.toml"), "missing.toml"),
+        (("--rig", "paper3", "--source", "cam9=0"), "cam9"),
+        (("--rig", "paper3", "--source", "cam1=missing.mp4"), "missing.mp4"),
+        (("--rig", "paper3", "--synthetic", "--record", "old.mcap"), "old.mcap"),
+    ]
+    for args, contains in cases:
+        run = run_pslog("live", *args, "--listen", _listen(), cwd=tmp_path)
+        assert_one_line_error(run, 1, contains=contains)
+    assert_untouched(before, tmp_path)
+
+
+def test_a_busy_listen_port_is_one_line_naming_the_address(tmp_path):
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as busy:
+        busy.bind(("127.0.0.1", 0))
+        port = busy.getsockname()[1]
+        before = fingerprint(tmp_path)
+        run = run_pslog("live", "--rig", "paper3", "--synthetic", "--record", "s.mcap",
+                        "--listen", f"udp://127.0.0.1:{port}", cwd=tmp_path)
+    assert_one_line_error(run, 1, contains=f"127.0.0.1:{port}")
+    assert_untouched(before, tmp_path)
+
+
+def test_cameras_that_cannot_open_end_the_run_with_an_error(tmp_path):
+    run = run_pslog("live", "--rig", "paper3", "--source", "cam1=/dev/video97",
+                    "--source", "cam2=/dev/video98", "--listen", _listen(), cwd=tmp_path)
+    assert run.code == 1 and "Traceback" not in run.stderr, run.stderr
+    last = run.stderr.strip().splitlines()[-1]
+    assert last.startswith("pslog live: error: no camera could be opened"), run.stderr
+    assert "/dev/video97" in last and "/dev/video98" in last
+
+
+def _wait_for_points(run: LiveRun, count: int = 20) -> None:
+    run.wait_err(r"session clock started")
+    run.wait_for(lambda: len(run.out) >= count, f"{count} points")
+
+
+@pytest.mark.parametrize("sig, old", [(signal.SIGINT, False), (signal.SIGTERM, True)])
+def test_a_stop_signal_ends_every_process_and_leaves_a_complete_session(tmp_path, sig, old):
+    from pslog.log import read_session
+
+    force = ()
+    if old:  # --force over an old session: replaced only by the complete new one
+        (tmp_path / "s.mcap").write_bytes(b"an old session")
+        force = ("--force",)
+    run = LiveRun("--rig", "paper3", "--timing", "typeA", "--synthetic", "--motion", "rally",
+                  "--listen", _listen(), "--jsonl", "--record", "s.mcap", *force, cwd=tmp_path)
+    _wait_for_points(run)
+    if old:
+        assert (tmp_path / "s.mcap").read_bytes() == b"an old session"
+    run.proc.send_signal(sig)
+    code = run.finish()
+    assert code == 0, "\n".join(run.err)
+    pids = [pid for cam in camera_pids(run).values() for pid in cam]
+    assert len(pids) == 3 and all(gone(pid) for pid in pids)
+    assert not (tmp_path / "s.mcap.partial").exists()
+    info = subprocess.run([sys.executable, "-m", "pslog.cli", "info", "s.mcap"], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=60)
+    assert info.returncode == 0 and "truncated" not in info.stdout, info.stdout + info.stderr
+    session = read_session(tmp_path / "s.mcap")
+    assert len(session.detections.frame_time_ns) >= 20
+    # every point printed is in the session (the last ones too: written at the stop)
+    assert len(session.tracks["filter"].time_ns) == len(run.jsonl()) >= 20
+
+
+def test_sigkill_leaves_a_session_that_recover_salvages_and_no_camera(tmp_path):
+    from pslog.log import read_session
+
+    run = LiveRun("--rig", "paper3", "--timing", "typeA", "--synthetic", "--motion", "rally",
+                  "--listen", _listen(), "--jsonl", "--record", "s.mcap", cwd=tmp_path)
+    _wait_for_points(run, 60)
+    time.sleep(1.2)  # the session file is flushed at least twice a second
+    run.proc.kill()
+    run.finish()
+    pids = [pid for cam in camera_pids(run).values() for pid in cam]
+    deadline = time.monotonic() + 30
+    while not all(gone(pid) for pid in pids) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert all(gone(pid) for pid in pids), "a camera process outlived its killed parent"
+    recover = run_pslog("recover", "s.mcap", "-o", "fixed.mcap", cwd=tmp_path)
+    assert recover.code == 0, recover.stderr
+    fixed = read_session(tmp_path / "fixed.mcap")
+    assert len(fixed.detections.frame_time_ns) >= 30
+    assert len(fixed.tracks["filter"].time_ns) >= 30
