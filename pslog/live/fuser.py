@@ -249,6 +249,8 @@ class LiveFuser:
         self._filter = getattr(getattr(self.stream, "incremental", None), "filter", None)
         self._last_point: tuple[int, np.ndarray] | None = None  # (session ns, position)
         self._flushed = False
+        #: name of the camera of the latest valid datagram ("" before any)
+        self.last_camera = ""
 
     # ---- public ---------------------------------------------------------------------------
     def feed(self, data: bytes, arrival_ns: int) -> list[LivePoint]:
@@ -266,6 +268,7 @@ class LiveFuser:
             counts["unknown_camera"] += 1
             return []
         state = self._cams[cam]
+        self.last_camera = d.camera
         state.datagrams += 1
         state.last_arrival_ns = int(arrival_ns)
         state.silent = False

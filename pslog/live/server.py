@@ -122,10 +122,18 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
         ``status``), seconds
     silent_after_s : a camera without a datagram this long is reported silent, seconds
     ready : set once the socket is bound (start senders after it); its ``address``
-        attribute is set to the bound ``(host, port)`` first
+        attribute is set to the bound ``(host, port)`` first, its ``epoch_ns`` to the
+        session clock's zero (wall clock ns)
     late_s, options, candidates, epoch_ns : as :class:`~pslog.live.fuser.LiveFuser`
     status_stream : where status lines go (None: nowhere)
     sock : an already bound UDP socket to use instead of binding ``listen``
+
+    Raises
+    ------
+    PslogError (one line) when the address is malformed or cannot be bound (in use, not
+    local) or the method cannot stream; the sinks are then aborted (``abort``, else
+    ``close``): nothing was served, nothing is left behind. A sink's error (a full disk)
+    stops the run and is raised after every sink is closed.
 
     Returns
     -------
@@ -133,10 +141,17 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
     sink is closed, also on Ctrl-C or an error; the first sink error is raised after all are
     closed.
     """
-    fuser = LiveFuser(rig, method, late_s=late_s, options=options, candidates=candidates,
-                      epoch_ns=epoch_ns, silent_after_s=silent_after_s)
-    if sock is None:
-        sock = bind_udp(listen)
+    try:
+        fuser = LiveFuser(rig, method, late_s=late_s, options=options, candidates=candidates,
+                          epoch_ns=epoch_ns, silent_after_s=silent_after_s)
+        if sock is None:
+            sock = bind_udp(listen)
+    except BaseException:
+        # nothing was served: the sinks leave nothing behind (a new session file is removed)
+        for s in sinks:
+            with contextlib.suppress(Exception):
+                (getattr(s, "abort", None) or s.close)()
+        raise
     address = sock.getsockname()[:2]
     timestamps = sys.platform.startswith("linux")
     if timestamps:
@@ -191,17 +206,39 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
                 for ev in on_event:
                     ev(now, text)
 
+    def pass_on() -> None:
+        accepted, dropped = fuser.take()
+        for d in accepted:
+            for f in on_detections:
+                f(d)
+        for d, reason in dropped:
+            for f in on_dropped:
+                f(d, reason)
+
+    def handle(data: bytes, ancdata, now: int) -> None:
+        arrival = now
+        for level, kind, raw in ancdata:
+            if level == socket.SOL_SOCKET and kind == _SO_TIMESTAMPNS and len(raw) >= 16:
+                sec, nsec = struct.unpack_from("@qq", raw)
+                arrival = sec * NS + nsec
+        points = fuser.feed(data, arrival)
+        if points:  # the points first: recording and viewers after
+            hand_out(points)
+        if fuser.keep:
+            pass_on()
+
+    bufsize = max(MAX_DETECTION_BYTES + 1, 65536)  # larger ones are seen whole: oversize
+    anc = socket.CMSG_SPACE(16) if timestamps else 0
     try:
         for s in sinks:
             if hasattr(s, "start"):
                 s.start(fuser)
         if ready is not None:
             ready.address = address
+            ready.epoch_ns = fuser.epoch_ns
             ready.set()
         sock.settimeout(_POLL_S)
         recv = sock.recvmsg
-        bufsize = max(MAX_DETECTION_BYTES + 1, 65536)
-        anc = socket.CMSG_SPACE(16) if timestamps else 0
         while not stop.is_set():
             try:
                 data, ancdata, _, _ = recv(bufsize, anc)
@@ -209,23 +246,9 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
                 data = None
             now = clock()
             if data is not None:
-                arrival = now
-                for level, kind, raw in ancdata:
-                    if level == socket.SOL_SOCKET and kind == _SO_TIMESTAMPNS and len(raw) >= 16:
-                        sec, nsec = struct.unpack_from("@qq", raw)
-                        arrival = sec * NS + nsec
-                points = fuser.feed(data, arrival)
-                if points:
-                    hand_out(points)
-                if fuser.keep:
-                    accepted, dropped = fuser.take()
-                    for d in accepted:
-                        for f in on_detections:
-                            f(d)
-                    for d, reason in dropped:
-                        for f in on_dropped:
-                            f(d, reason)
-            if now >= next_status or (data is not None and any(was_silent.values())):
+                handle(data, ancdata, now)
+            # a camera silent or back: looked at between datagrams while one is silent
+            if data is None or now >= next_status or was_silent.get(fuser.last_camera, False):
                 events(now)
             if now >= next_status:
                 next_status = now + period
@@ -236,24 +259,29 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
                     f(text, counters)
             if deadline is not None and now >= deadline:
                 break
+        # what had arrived before the stop is fused too: nothing received is left unread
+        sock.setblocking(False)
+        while True:
+            try:
+                data, ancdata, _, _ = recv(bufsize, anc)
+            except (BlockingIOError, InterruptedError):
+                break
+            handle(data, ancdata, clock())
     except KeyboardInterrupt:
         interrupted = True
     except BaseException as exc:  # closed below, raised after
         error = exc
     finally:
         # the last points, then every sink closed whatever happened
-        with contextlib.suppress(BaseException):
+        try:
             points = fuser.flush()
             if points:
                 hand_out(points)
             if fuser.keep:
-                accepted, dropped = fuser.take()
-                for d in accepted:
-                    for f in on_detections:
-                        f(d)
-                for d, reason in dropped:
-                    for f in on_dropped:
-                        f(d, reason)
+                pass_on()
+        except BaseException as exc:
+            if error is None and not isinstance(exc, KeyboardInterrupt):
+                error = exc
         end = clock()
         counters = fuser.counters()
         final = format_status(fuser, fuser.cameras(end), end, started)

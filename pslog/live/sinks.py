@@ -294,3 +294,11 @@ class RecordSink:
             self._maybe_write_points(force=True)
         finally:
             self.writer.close()
+
+    def abort(self) -> None:
+        """Nothing was served (the fuser could not start): leave nothing behind — a new file
+        is removed, an existing one (``force``) stays as it was."""
+        in_place = self.writer.target == self.writer.path
+        self.writer.abort()
+        if in_place and not self.frames and not self.dropped_frames:
+            self.writer.path.unlink(missing_ok=True)
