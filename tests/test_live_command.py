@@ -22,12 +22,6 @@ import pytest
 HANG_S = 90.0
 
 
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 class PointReceiver:
     """A robot controller: receives the fuser's point datagrams on a free UDP port."""
 
@@ -174,7 +168,7 @@ def synthetic_run(tmp_path_factory):
     receiver = PointReceiver()
     run = LiveRun("--rig", "paper3", "--timing", "typeA", "--synthetic", "--motion", "rally",
                   "--duration", "2.5", "--method", "typeA",
-                  "--listen", f"udp://127.0.0.1:{free_udp_port()}",
+                  "--listen", "udp://127.0.0.1:0",
                   "--out", f"udp://127.0.0.1:{receiver.port}", "--jsonl",
                   "--record", "session.mcap", "--status-every", "0.5", cwd=folder)
     code = run.finish()
@@ -272,7 +266,7 @@ def test_the_recorded_session_re_fuses_to_the_live_points(synthetic_run):
 # ---- a camera process killed mid-run and restarted ------------------------------------------
 def test_a_killed_camera_process_is_reported_restarted_and_fused_again(tmp_path):
     run = LiveRun("--rig", "paper3", "--timing", "typeA", "--synthetic", "--motion", "rally",
-                  "--listen", f"udp://127.0.0.1:{free_udp_port()}",
+                  "--listen", "udp://127.0.0.1:0",
                   "--jsonl", "--status-every", "0.25", cwd=tmp_path)
     try:
         run.wait_err(r"session clock started: 3 camera processes")

@@ -54,7 +54,7 @@ _ADDRESS = re.compile(r"^(?:udp://)?(?:\[(?P<v6>[^\]]+)\]|(?P<host>[^:/\[\]]+)):
 _GRACE_S = 0.5
 
 
-def udp_address(text: str) -> tuple[str, int]:
+def udp_address(text: str, lowest_port: int = 1) -> tuple[str, int]:
     """argparse type: ``udp://HOST:PORT`` (or ``HOST:PORT``; ``[::1]:PORT`` for IPv6) ->
     (host, port)."""
     match = _ADDRESS.match(text.strip())
@@ -62,9 +62,14 @@ def udp_address(text: str) -> tuple[str, int]:
         raise argparse.ArgumentTypeError(f"not a UDP address udp://HOST:PORT: {text!r}")
     host = match.group("v6") or match.group("host")
     port = int(match.group("port"))
-    if not 1 <= port <= 65535:
-        raise argparse.ArgumentTypeError(f"port must be in 1..65535, got {text!r}")
+    if not lowest_port <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"port must be in {lowest_port}..65535, got {text!r}")
     return host, port
+
+
+def listen_address(text: str) -> tuple[str, int]:
+    """argparse type of ``--listen``: as :func:`udp_address`, port 0 for any free port."""
+    return udp_address(text, lowest_port=0)
 
 
 def streaming_method(text: str) -> str:
@@ -108,10 +113,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--method", default="filter", type=streaming_method, metavar="METHOD",
                         help="causal fusion method: filter or typeA (or another streaming "
                              "method; default %(default)s)")
-    parser.add_argument("--listen", default=DEFAULT_LISTEN, type=udp_address,
+    parser.add_argument("--listen", default=DEFAULT_LISTEN, type=listen_address,
                         metavar="udp://HOST:PORT",
-                        help="where the fuser receives detection datagrams (default "
-                             "%(default)s)")
+                        help="where the fuser receives detection datagrams; port 0 for any "
+                             "free one, said on stderr (default %(default)s)")
     parser.add_argument("--out", type=udp_address, metavar="udp://HOST:PORT",
                         help="send every point as a datagram there (format: docs/live.md)")
     parser.add_argument("--jsonl", action="store_true",
@@ -183,22 +188,28 @@ def _run(args: argparse.Namespace, stop) -> int:
     if isinstance(specs, int):
         return specs  # a usage error, already said
     listen = _udp_text(args.listen)
-    cameras = None
+    options = None
     if specs:
-        from recorders.live import LiveCameras, SenderOptions
+        from recorders.live import SenderOptions
 
         from .record import parse_hsv
 
-        duration_ns = None if args.duration is None else int(args.duration * 1e9)
-        cameras = LiveCameras(specs, _sender_address(args.listen), SenderOptions(
+        options = SenderOptions(
             hsv=parse_hsv(args.hsv), max_candidates=args.max_candidates,
-            duration_ns=duration_ns), say=_say)
+            duration_ns=None if args.duration is None else int(args.duration * 1e9))
     sock = bind_udp(listen)  # a busy port fails here, before any output is opened
     try:
         sinks, recording = _sinks(args, rig)
     except BaseException:
         sock.close()
         raise
+    bound = (args.listen[0], sock.getsockname()[1])  # the port chosen for port 0
+    _say(f"listening for detection datagrams on {_udp_text(bound)}")
+    cameras = None
+    if specs:
+        from recorders.live import LiveCameras
+
+        cameras = LiveCameras(specs, _sender_address(bound), options, say=_say)
     ready = threading.Event()
     epoch_ns = time.time_ns()  # the session clock's zero (wall clock), fuser and cameras
     watcher = None

@@ -13,18 +13,19 @@ import time
 import pytest
 
 # the live-run helpers of the command's own tests (tests/ is on the path, as for _rally)
-from test_live_command import LiveRun, camera_pids, free_udp_port, gone
+from test_live_command import LiveRun, camera_pids, gone
 
 from .promises import assert_one_line_error, assert_untouched, fingerprint, run_pslog
 
 
 def _listen() -> str:
-    return f"udp://127.0.0.1:{free_udp_port()}"
+    return "udp://127.0.0.1:0"
 
 
 @pytest.mark.parametrize("args, contains", [
     (("--listen", "nowhere"), ("--listen", "not a UDP address")),
-    (("--listen", "udp://127.0.0.1:70000"), ("--listen", "1..65535")),
+    (("--listen", "udp://127.0.0.1:70000"), ("--listen", "0..65535")),
+    (("--out", "udp://127.0.0.1:0"), ("--out", "1..65535")),
     (("--out", "udp://127.0.0.1"), ("--out", "not a UDP address")),
     (("--method", "smooth"), ("--method", "cannot run live")),
     (("--duration", "-1"), ("--duration",)),
