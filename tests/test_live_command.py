@@ -300,3 +300,30 @@ def test_a_killed_camera_process_is_reported_restarted_and_fused_again(tmp_path)
               silent[0] < p["t"] < silent[1]]
     assert len(others) > 0.5 * (silent[1] - silent[0]) * 60
     assert len(cam2) - gap - 1 >= 10
+
+
+# ---- no camera processes: detections from another process ------------------------------------
+def test_without_sources_the_fuser_fuses_datagrams_from_elsewhere(tmp_path):
+    from _live import frames, rally_session
+
+    from pslog.live.protocol import encode_detections
+
+    run = LiveRun("--rig", "paper3", "--timing", "typeA", "--listen", "udp://127.0.0.1:0",
+                  "--duration", "4", "--jsonl", "--status-every", "0.5", cwd=tmp_path)
+    port = int(run.wait_err(r"listening for detection datagrams on udp://127\.0\.0\.1:(\d+)")
+               .group(1))
+    assert "camera process" not in "\n".join(run.err)
+    rig, det = rally_session(1.0, spurious_rate=0.0, miss_rate=0.0)
+    epoch = time.time_ns()  # after the fuser's start: its session clock is running
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sender:
+        sender.sendto(b"GET / HTTP/1.1\r\n\r\n", ("127.0.0.1", port))  # a foreign datagram
+        for d in frames(det, rig, epoch):
+            sender.sendto(encode_detections(d), ("127.0.0.1", port))
+            time.sleep(0.0005)
+    code = run.finish()
+    assert code == 0, "\n".join(run.err)
+    points = run.jsonl()
+    assert len(points) >= 0.9 * det.n_frames, (len(points), det.n_frames)
+    assert {p["camera"] for p in points} == {"cam1", "cam2", "cam3"}
+    final = [line for line in run.err if line.startswith("live ")][-1]
+    assert f"datagrams {det.n_frames + 1} " in final and "foreign 1" in final, final
