@@ -43,6 +43,8 @@ import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from pslog.records import NS
 
 from .detect import HsvRange
@@ -471,12 +473,56 @@ class LiveCameras:
             self.stop()
 
 
+@dataclass(frozen=True)
+class LoggedClockPosition:
+    """The ball's position at a camera's LOGGED times, for a camera whose clock the rig
+    corrects (``clock_offset``, ``clock_drift_ppm``, ``readout``, :mod:`pslog.timing`).
+
+    A synthetic camera stamps frame ``k`` with its shutter time on the schedule (the logged
+    time); what it sees is the ball at the TRUE time the fuser computes from that stamp,
+    ``logged + clock_offset + drift * logged + readout * v / height``. The row ``v`` is the
+    ball's own row in this camera, found by one fixed-point step (the ball moves a fraction
+    of a pixel in that time). Picklable (module level), as camera processes need.
+
+    The drift term is taken from the cameras' session start, which is a whole number of
+    seconds ``k`` after the fuser's (:meth:`LiveCameras.start`): ``drift * k`` (50 ppm over
+    5 s: 0.25 ms) is not rendered.
+    """
+
+    position: Callable
+    camera: object
+
+    def __call__(self, t_logged: np.ndarray) -> np.ndarray:
+        from pslog.timing import true_times_s
+
+        cam = self.camera
+        t = np.asarray(t_logged, dtype=np.float64)
+        no_row = np.zeros_like(t)
+        first = true_times_s(t, no_row, cam.height, cam.clock_offset, cam.clock_drift_ppm,
+                             0.0)
+        if not cam.readout:
+            return self.position(first)
+        uv, _ = cam.project(np.atleast_2d(self.position(first)))
+        v = np.nan_to_num(np.clip(uv[:, 1], 0.0, cam.height), nan=0.0).reshape(t.shape)
+        return self.position(true_times_s(t, v, cam.height, cam.clock_offset,
+                                          cam.clock_drift_ppm, cam.readout))
+
+
 def synthetic_specs(rig, motion, duration_s: float, options=None) -> dict[str, object]:
     """Camera name -> a real-time rendering source of every camera of ``rig`` watching
-    ``motion`` (:class:`recorders.sources.SyntheticSpec`)."""
+    ``motion`` (:class:`recorders.sources.SyntheticSpec`); a camera whose clock the rig
+    corrects sees the ball at the true times of its stamps (:class:`LoggedClockPosition`),
+    so the fuser's corrections recover the motion."""
+    from dataclasses import replace
+
     from .render import RenderOptions
     from .sources import SyntheticSpec
 
     options = options or RenderOptions()
-    return {cam.name: SyntheticSpec(cam, i, motion, options, float(duration_s), realtime=True)
-            for i, cam in enumerate(rig.cameras)}
+    specs = {}
+    for i, cam in enumerate(rig.cameras):
+        seen = (replace(motion, position=LoggedClockPosition(motion.position, cam))
+                if cam.has_clock_correction else motion)
+        specs[cam.name] = SyntheticSpec(cam, i, seen, options, float(duration_s),
+                                        realtime=True)
+    return specs

@@ -327,3 +327,32 @@ def test_without_sources_the_fuser_fuses_datagrams_from_elsewhere(tmp_path):
     assert {p["camera"] for p in points} == {"cam1", "cam2", "cam3"}
     final = [line for line in run.err if line.startswith("live ")][-1]
     assert f"datagrams {det.n_frames + 1} " in final and "foreign 1" in final, final
+
+
+# ---- a rig with clock corrections (after 'pslog sync') -----------------------------------------
+def test_synthetic_cameras_with_clock_errors_are_fused_on_corrected_times(tmp_path):
+    """cam2's clock runs 4 ms late and its rolling shutter reads rows over 20 ms: the
+    synthetic camera sees the ball at the true times of its stamps, the fuser corrects them
+    (pslog.timing), and the points lie on the motion (uncorrected they would be ~17 mm off)."""
+    from dataclasses import replace
+
+    from pslog.log import read_session
+    from pslog.motion import get_motion
+    from pslog.rig import apply_timing, builtin_rig, save_rig
+
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    cam2 = replace(rig.cameras[1], clock_offset=0.004, readout=0.02)
+    save_rig(replace(rig, cameras=(rig.cameras[0], cam2, rig.cameras[2])),
+             tmp_path / "synced.toml")
+    run = LiveRun("--rig", "synced.toml", "--synthetic", "--motion", "rally", "--duration", "1.5",
+                  "--method", "typeA", "--listen", "udp://127.0.0.1:0", "--record", "s.mcap",
+                  cwd=tmp_path)
+    assert run.finish() == 0, "\n".join(run.err)
+    session = read_session(tmp_path / "s.mcap")
+    track = session.tracks["typeA"]
+    assert len(track.time_ns) > 80
+    # the cameras' session time 0 is a whole number of seconds after the fuser's
+    start_s = np.floor(session.detections.frame_time_ns.min() / 1e9)
+    truth = get_motion("rally").position(track.time_ns / 1e9 - start_s)
+    error_mm = np.linalg.norm(track.position_world - truth, axis=1) * 1e3
+    assert np.median(error_mm) < 6.0, np.median(error_mm)
