@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import collections
 import queue
+import socket
 import sys
 import threading
 from collections.abc import Sequence
@@ -586,6 +587,22 @@ class FoxgloveSink(_QueuedSink):
                 channel.close()
         finally:
             self.server.stop()
+            self._wait_stopped()
+
+    def _wait_stopped(self, timeout_s: float = 2.0) -> None:
+        """Return once the server's port is free again (the SDK stops it asynchronously), so
+        a new server may take it at once; at most ``timeout_s``."""
+        import time
+
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            with socket.socket() as probe:
+                probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+                try:
+                    probe.bind((self.host, self.port))
+                    return
+                except OSError:
+                    time.sleep(0.02)
 
 
 __all__ = ["CLOSE_TIMEOUT_S", "FOXGLOVE_PORT", "QUEUE_ITEMS", "FoxgloveSink",
