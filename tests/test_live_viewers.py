@@ -221,6 +221,49 @@ def test_rerun_serve_streams_points_and_detections_to_a_client(rig, stream, tmp_
     _check_rerun_content(out, rig, datagrams, points)
 
 
+def test_rerun_connect_sends_to_a_running_viewer(rig, stream, tmp_path):
+    """``connect``: the stream goes to a rerun gRPC server already running (here one that saves
+    what it receives); closing the sink delivers everything logged."""
+    datagrams, points = stream
+    port = _free_port()
+    out = tmp_path / "viewer.rrd"
+    viewer = subprocess.Popen([str(RERUN), "--bind", "127.0.0.1", "--port", str(port),
+                               "--save", str(out)], stdout=subprocess.DEVNULL,
+                              stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        deadline = time.monotonic() + HANG_S
+        while True:  # until the viewer listens
+            with contextlib.suppress(OSError):
+                socket.create_connection(("127.0.0.1", port), timeout=1).close()
+                break
+            assert time.monotonic() < deadline and viewer.poll() is None
+            time.sleep(0.1)
+        sink = RerunLiveSink("connect", rig, url=f"rerun+http://127.0.0.1:{port}/proxy")
+        for d in datagrams:
+            sink.detections(d)
+        sink.emit(points)  # one batch
+        sink.close()
+        assert sink.error is None and sink.counters()["points"] == len(points)
+        while _rows(out, "/world/tracks/filter") < len(points):
+            assert time.monotonic() < deadline, "the viewer never got every point"
+            time.sleep(0.2)
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(viewer.pid, signal.SIGKILL)
+        viewer.wait()
+    temporal, static = _chunks(out)
+    assert {f"/world/cameras/{c}/image" for c in rig.names} <= static
+    assert sum(b.num_rows for b in temporal["/world/cameras/cam3/image/detections"]) == len(
+        [d for d in datagrams if d.camera == "cam3"])
+
+
+def test_rerun_view_without_display_explains(rig, monkeypatch):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    with pytest.raises(InputError, match=r"no display .* use --serve"):
+        RerunLiveSink("spawn", rig)
+
+
 def test_rerun_serve_refuses_a_port_in_use(rig):
     with socket.socket() as busy:
         busy.bind(("0.0.0.0", 0))

@@ -56,7 +56,7 @@ from . import _columns as C
 from ._columns import camera_path, image_path
 from .blueprint import build_blueprint, default_eye
 from .recording import new_stream
-from .sinks import SEND_TIMEOUT_S, open_sink
+from .sinks import SEND_TIMEOUT_S, has_display, open_sink
 
 #: items (a batch of points, a detection datagram, a status line) that may wait for a viewer;
 #: beyond this the viewer is too slow and new items are dropped (counted)
@@ -268,6 +268,10 @@ class RerunLiveSink(_QueuedSink):
         self._clock: C.Clock | None = None
         self._legend = ""
         if recording is None:
+            if (kind or "spawn") == "spawn" and not has_display():
+                raise InputError("no display (DISPLAY/WAYLAND_DISPLAY unset), so no rerun "
+                                 "viewer window can open; use --serve to browse from a web "
+                                 "browser, or --foxglove")
             self.sink = open_sink(kind or "spawn", web_port=web_port, grpc_port=grpc_port,
                                   url=url)
             self.rec = new_stream()
