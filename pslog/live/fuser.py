@@ -1,0 +1,437 @@
+"""The live fuser: detection datagrams in (bytes), 3D points out, as each datagram arrives.
+
+Rules (docs/live.md, section *The fuser*):
+
+- Every datagram is decoded (:mod:`pslog.live.protocol`); one that is not a valid detection
+  datagram is counted under its reason (``truncated``, ``oversize``, ``foreign``,
+  ``version``, ``malformed``) and dropped. A datagram of a camera the rig does not have is
+  ``unknown_camera``; one whose pixel row lies outside the image of a rolling-shutter camera
+  (no such row was read out, and its clock correction would go backwards) is ``malformed``.
+- The session clock starts at ``epoch_ns`` (wall clock): a frame's LOGGED time
+  (:mod:`pslog.timing`) is ``t_capture_ns - epoch_ns``.
+- A datagram whose ``(camera, sequence, t_capture_ns)`` was seen before is a ``duplicate``
+  (a sender that restarts its sequence at 0 sends new capture times: not duplicates).
+- Frames go to :class:`pslog.fusion.stream.StreamFuser` in (logged time, camera) order, as
+  it requires, and at once (no waiting: no added latency). A frame at or before the newest
+  one pushed cannot be fused exactly any more (the methods' points are causal and already
+  emitted): it is dropped, counted ``reordered`` when it is at most ``late_s`` older than
+  the newest, ``late`` when older (or captured before the session started).
+- What is fused is exactly the accepted frames, in order: a session recording them (and
+  only them) on ``/detections/<camera>`` re-fuses offline to the same points
+  (:class:`~pslog.live.sinks.RecordSink` writes the dropped ones on ``/live/dropped/...``).
+- ``candidates=True`` fuses every candidate of a frame, the ball chosen by the gates of
+  :mod:`pslog.fusion.gating` (as ``pslog fuse``); False fuses each frame's best-scored
+  candidate alone (as ``pslog fuse --gating off``; faster).
+- A camera with no datagram for ``silent_after_s`` is *silent*; the others keep fusing, and
+  its next datagram makes it live again and is fused as any other.
+
+Every point comes out as a :class:`LivePoint` holding the state predicted to its emit time:
+the ``filter``'s own prediction (:meth:`pslog.fusion.filter.BallFilter.predict`); for the
+other methods a constant-velocity estimate from the method's last two points (velocity
+``(p1 - p0) / (t1 - t0)`` when they are at most ``max_gap_s`` apart, else NaN).
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+import time
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import FusionError
+from ..records import NS, Track
+from ..rig import Rig
+from ..timing import camera_parameters, true_times_ns
+from .protocol import (
+    FLAG_INIT,
+    FLAG_JUMP,
+    FLAG_PREDICTION,
+    REASONS,
+    DatagramError,
+    DetectionDatagram,
+    PointDatagram,
+    decode_detections,
+    encode_point,
+)
+
+#: The counters of :meth:`LiveFuser.counters`, in order.
+COUNTERS = ("received", "fused", "duplicate", "reordered", "late", *REASONS, "unknown_camera",
+            "fusion_error", "lost", "points")
+#: Sequences remembered per camera for the duplicate test.
+_SEEN = 4096
+#: Frames remembered per camera to find the arrival time behind a point.
+_ARRIVALS = 256
+_NAN3 = np.full(3, np.nan)
+_NAN33 = np.full((3, 3), np.nan)
+_COV_KEYS = ("cov_xx_m2", "cov_xy_m2", "cov_xz_m2", "cov_yy_m2", "cov_yz_m2", "cov_zz_m2")
+
+
+def _ro(a) -> np.ndarray:
+    a = np.array(a, dtype=np.float64)
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True, eq=False)
+class LivePoint:
+    """One fused point, as the fuser emits it.
+
+    Attributes
+    ----------
+    method : str
+    camera : str, the camera whose shutter made the point; camera_index : int (rig order)
+    t_capture_ns : int, the instant the point describes (true capture time), wall clock ns
+    t_emit_ns : int, when the fuser made it, wall clock ns
+    position_world : (3,) float64, metres
+    cov_world : (3, 3) float64, m² (NaN when the method has none)
+    residual_px : float, reprojection residual, pixels (NaN unknown)
+    camera_mask : int, bit c: camera c's detections made the point
+    predicted_position : (3,) metres, predicted_velocity : (3,) m/s, at ``t_emit_ns``
+    arrival_ns : int, wall clock arrival of the datagram of the point's detection
+    flags : int, :data:`~pslog.live.protocol.FLAG_PREDICTION` etc.
+    quality : dict name -> float, the method's quality columns
+        (:data:`pslog.records.QUALITY_FIELDS`)
+    epoch_ns : int, the session clock's zero (wall clock): the point's session time is
+        ``t_capture_ns - epoch_ns``
+    """
+
+    method: str
+    camera: str
+    camera_index: int
+    t_capture_ns: int
+    t_emit_ns: int
+    position_world: np.ndarray
+    cov_world: np.ndarray
+    residual_px: float
+    camera_mask: int
+    predicted_position: np.ndarray
+    predicted_velocity: np.ndarray
+    arrival_ns: int
+    flags: int = 0
+    quality: dict = field(default_factory=dict)
+    epoch_ns: int = 0
+
+    @property
+    def latency_s(self) -> float:
+        """Fusion latency: from the datagram's arrival to the point made, seconds."""
+        return (self.t_emit_ns - self.arrival_ns) / NS
+
+    @property
+    def session_ns(self) -> int:
+        """The point's time on the session clock (as recorded)."""
+        return self.t_capture_ns - self.epoch_ns
+
+    def to_datagram(self, sequence: int) -> bytes:
+        """The point datagram (:mod:`pslog.live.protocol`)."""
+        c = self.cov_world
+        return encode_point(PointDatagram(
+            sequence=sequence, camera_index=self.camera_index, camera=self.camera,
+            method=self.method, t_capture_ns=self.t_capture_ns, t_emit_ns=self.t_emit_ns,
+            t_arrival_ns=self.arrival_ns, position=self.position_world,
+            covariance=(c[0, 0], c[0, 1], c[0, 2], c[1, 1], c[1, 2], c[2, 2]),
+            residual_px=self.residual_px, camera_mask=self.camera_mask, flags=self.flags,
+            predicted_position=self.predicted_position,
+            predicted_velocity=self.predicted_velocity))
+
+    def to_json(self) -> dict:
+        """One JSON object (NaN as null): ``t`` capture time (s, wall clock), ``x, y, z`` (m),
+        ``camera``, ``method``, ``latency_s`` (arrival to made), ``std_m``, ``t_emit``,
+        ``residual_px``, ``camera_mask``, ``flags``, ``predicted`` ``[x, y, z]`` and
+        ``velocity`` ``[vx, vy, vz]`` at ``t_emit``."""
+        std = float(np.sqrt(np.trace(self.cov_world)))
+        x, y, z = (float(a) for a in self.position_world)
+        return {"t": self.t_capture_ns / NS, "x": x, "y": y, "z": z, "camera": self.camera,
+                "method": self.method, "latency_s": self.latency_s,
+                "std_m": _num(std), "t_emit": self.t_emit_ns / NS,
+                "residual_px": _num(self.residual_px), "camera_mask": self.camera_mask,
+                "flags": self.flags,
+                "predicted": [_num(a) for a in self.predicted_position],
+                "velocity": [_num(a) for a in self.predicted_velocity]}
+
+
+def _num(value) -> float | None:
+    value = float(value)
+    return value if math.isfinite(value) else None
+
+
+@dataclass
+class CameraLiveState:
+    """What the fuser knows of one camera.
+
+    Attributes
+    ----------
+    name : str; index : int (rig order)
+    datagrams : int, valid datagrams of this camera (fused or dropped)
+    frames : int, frames fused
+    points : int, points whose shutter was this camera's
+    lost : int, frames never received (gaps in the sequence)
+    last_arrival_ns : int or None, wall clock arrival of its latest datagram
+    last_capture_ns : int or None, capture time of its latest fused frame
+    silent : bool, no datagram for ``silent_after_s`` (set by :meth:`LiveFuser.cameras`)
+    """
+
+    name: str
+    index: int
+    datagrams: int = 0
+    frames: int = 0
+    points: int = 0
+    lost: int = 0
+    last_arrival_ns: int | None = None
+    last_capture_ns: int | None = None
+    silent: bool = True
+    _last_sequence: int | None = None
+    _seen: set = field(default_factory=set)
+    _seen_order: deque = field(default_factory=deque)
+    # (true time of the frame's top row, arrival ns) of the latest frames, for the points
+    _arrivals: deque = field(default_factory=lambda: deque(maxlen=_ARRIVALS))
+
+
+class LiveFuser:
+    """Fuse detection datagrams as they arrive (module docstring for the rules).
+
+    Parameters
+    ----------
+    rig : Rig, the cameras (their names are what the datagrams carry) and clock corrections
+    method : a causal fusion method (``filter``, ``typeA``, ``nearest``, ...)
+    late_s : float, a dropped out-of-order frame older than the newest fused one by more
+        than this is counted ``late``, else ``reordered``, seconds
+    options : FusionOptions
+    candidates : bool, fuse every candidate through the gates (True) or each frame's best
+        candidate (False)
+    epoch_ns : int, the session clock's zero, wall clock ns (default: now)
+    silent_after_s : float, a camera without a datagram this long is silent, seconds
+    clock : callable returning the wall clock in ns (``time.time_ns``), stamps ``t_emit_ns``
+    keep : bool, collect :attr:`accepted` and :attr:`dropped` (for a recorder to drain)
+
+    Attributes
+    ----------
+    accepted : list of DetectionDatagram, the fused frames not yet taken (with ``keep``)
+    dropped : list of (DetectionDatagram, reason), valid datagrams not fused (``duplicate``,
+        ``reordered``, ``late``, ``malformed``, ``fusion_error``), not yet taken
+    stream : the :class:`~pslog.fusion.stream.StreamFuser`
+    """
+
+    def __init__(self, rig: Rig, method: str = "filter", *, late_s: float = 0.1,
+                 options=None, candidates: bool = True, epoch_ns: int | None = None,
+                 silent_after_s: float = 1.0, clock=time.time_ns, keep: bool = True) -> None:
+        from ..fusion import FusionOptions, check_method
+        from ..fusion._prepare import default_max_gap_s
+        from ..fusion.stream import StreamFuser
+
+        check_method(method)
+        if not late_s >= 0:
+            raise FusionError(f"late bound must be >= 0 seconds, got {late_s!r}")
+        if not silent_after_s > 0:
+            raise FusionError(f"silent-after must be > 0 seconds, got {silent_after_s!r}")
+        self.rig = rig
+        self.method = method
+        self.options = options or FusionOptions()
+        self.candidates = bool(candidates)
+        self.stream = StreamFuser(rig, method, self.options, candidates=self.candidates)
+        self.clock = clock
+        self.epoch_ns = int(clock() if epoch_ns is None else epoch_ns)
+        self.late_ns = int(late_s * NS)
+        self.silent_after_ns = int(silent_after_s * NS)
+        self.keep = keep
+        self.accepted: list[DetectionDatagram] = []
+        self.dropped: list[tuple[DetectionDatagram, str]] = []
+        self._counts = dict.fromkeys(COUNTERS, 0)
+        self._index = {name: i for i, name in enumerate(rig.names)}
+        self._cams = [CameraLiveState(name, i) for i, name in enumerate(rig.names)]
+        self._newest = (np.iinfo(np.int64).min, -1)  # (logged ns, camera) of the newest fused
+        self._clock_p = camera_parameters(rig)
+        self._readout = self._clock_p["readout"] > 0
+        self._corrected = any(c.has_clock_correction for c in rig.cameras)
+        self._max_gap_ns = int((self.options.max_gap_s or default_max_gap_s(rig)) * NS)
+        self._filter = getattr(getattr(self.stream, "incremental", None), "filter", None)
+        self._last_point: tuple[int, np.ndarray] | None = None  # (session ns, position)
+        self._flushed = False
+        #: name of the camera of the latest valid datagram ("" before any)
+        self.last_camera = ""
+
+    # ---- public ---------------------------------------------------------------------------
+    def feed(self, data: bytes, arrival_ns: int) -> list[LivePoint]:
+        """One received datagram (``arrival_ns``: wall clock); returns the points it made
+        (possibly none). Never raises on bad bytes: they are counted (:meth:`counters`)."""
+        counts = self._counts
+        counts["received"] += 1
+        try:
+            d = decode_detections(data)
+        except DatagramError as exc:
+            counts[exc.reason] += 1
+            return []
+        cam = self._index.get(d.camera)
+        if cam is None:
+            counts["unknown_camera"] += 1
+            return []
+        state = self._cams[cam]
+        self.last_camera = d.camera
+        state.datagrams += 1
+        state.last_arrival_ns = int(arrival_ns)
+        state.silent = False
+        reason = self._check(d, cam, state)
+        if reason is not None:
+            return self._drop(d, reason)
+        # accepted: in order, from now on the newest
+        logged = d.t_capture_ns - self.epoch_ns
+        self._newest = (logged, cam)
+        if state._last_sequence is not None and d.sequence > state._last_sequence + 1:
+            gap = d.sequence - state._last_sequence - 1
+            state.lost += gap
+            counts["lost"] += gap
+        state._last_sequence = d.sequence
+        key = (d.sequence, d.t_capture_ns)
+        state._seen.add(key)
+        state._seen_order.append(key)
+        if len(state._seen_order) > _SEEN:
+            state._seen.discard(state._seen_order.popleft())
+        top = logged if not self._corrected else int(true_times_ns(
+            logged, 0.0, self._clock_p["height"][cam], self._clock_p["clock_offset"][cam],
+            self._clock_p["clock_drift_ppm"][cam], self._clock_p["readout"][cam]))
+        state._arrivals.append((top, int(arrival_ns)))
+        k = len(d)
+        try:
+            if k:
+                order = np.argsort(-d.score, kind="stable")  # best first, as a session stores
+                if not self.candidates:
+                    order = order[:1]
+                n = len(order)
+                track = self.stream.push(np.full(n, logged, np.int64), np.full(n, cam, np.int32),
+                                         d.uv[order], np.full(n, d.frame_index, np.int64))
+            else:
+                track = None
+        except FusionError:
+            # cannot happen on checked datagrams; never let it stop the fuser
+            counts["fusion_error"] += 1
+            return self._drop(d, "fusion_error", counted=True)
+        counts["fused"] += 1
+        state.frames += 1
+        state.last_capture_ns = d.t_capture_ns
+        if self.keep:
+            self.accepted.append(d)
+        return self._points(track) if track is not None and len(track) else []
+
+    def flush(self) -> list[LivePoint]:
+        """The points still held (methods that wait for the tolerance, clock corrections);
+        call once at the end of the stream."""
+        if self._flushed:
+            return []
+        self._flushed = True
+        try:
+            track = self.stream.flush()
+        except FusionError:
+            self._counts["fusion_error"] += 1
+            return []
+        return self._points(track) if len(track) else []
+
+    def counters(self) -> dict[str, int]:
+        """Datagrams ``received``; frames ``fused``; dropped by reason (``duplicate``,
+        ``reordered``, ``late``, ``truncated``, ``oversize``, ``foreign``, ``version``,
+        ``malformed``, ``unknown_camera``, ``fusion_error``); frames ``lost`` on the way
+        (sequence gaps); ``points`` emitted."""
+        return dict(self._counts)
+
+    def cameras(self, now_ns: int | None = None) -> list[CameraLiveState]:
+        """Each camera's state, ``silent`` updated to ``now_ns`` (wall clock; default now)."""
+        now = self.clock() if now_ns is None else int(now_ns)
+        for c in self._cams:
+            c.silent = c.last_arrival_ns is None or now - c.last_arrival_ns > self.silent_after_ns
+        return list(self._cams)
+
+    def take(self) -> tuple[list[DetectionDatagram], list[tuple[DetectionDatagram, str]]]:
+        """The accepted and dropped datagrams collected since the last call (emptied)."""
+        accepted, dropped = self.accepted, self.dropped
+        self.accepted, self.dropped = [], []
+        return accepted, dropped
+
+    # ---- internals ------------------------------------------------------------------------
+    def _check(self, d: DetectionDatagram, cam: int, state: CameraLiveState) -> str | None:
+        if (d.sequence, d.t_capture_ns) in state._seen:
+            return "duplicate"
+        if len(d) and self._readout[cam]:
+            v = d.uv[:, 1]
+            if not np.all((v >= 0) & (v <= self._clock_p["height"][cam])):
+                return "malformed"
+        logged = d.t_capture_ns - self.epoch_ns
+        if logged < 0:
+            return "late"
+        if (logged, cam) <= self._newest:
+            return "late" if self._newest[0] - logged > self.late_ns else "reordered"
+        return None
+
+    def _drop(self, d: DetectionDatagram, reason: str, counted: bool = False) -> list:
+        if not counted:
+            self._counts[reason] += 1
+        if self.keep:
+            self.dropped.append((d, reason))
+        return []
+
+    def _points(self, track: Track) -> list[LivePoint]:
+        now = int(self.clock())
+        n = len(track)
+        q = track.quality
+        names = self.rig.names
+        times = track.time_ns.tolist()
+        cams = track.camera.tolist()
+        positions = track.position_world
+        residual = q.get("residual_px", q.get("residual_max_px"))
+        mask = q.get("camera_mask")
+        has_cov = all(k in q for k in _COV_KEYS)
+        flt = self._filter
+        state = flt.state() if flt is not None else None
+        out = []
+        for i in range(n):
+            t, cam = times[i], cams[i]
+            p = positions[i]
+            if has_cov:
+                xx, xy, xz, yy, yz, zz = (float(q[k][i]) for k in _COV_KEYS)
+                cov = np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
+            elif state is not None and state[0] == t and i == n - 1:
+                cov = state[2][:3, :3].copy()  # the filter's own, after this update
+            elif "std_x_m" in q:
+                cov = np.diag([float(q[k][i]) ** 2 for k in ("std_x_m", "std_y_m", "std_z_m")])
+                cov[~np.eye(3, dtype=bool)] = np.nan  # off-diagonal terms not kept
+            else:
+                cov = _NAN33
+            flags = 0
+            if "rejected" in q and q["rejected"][i] == 1:
+                flags |= FLAG_PREDICTION
+            if "jump" in q and q["jump"][i] == 1:
+                flags |= FLAG_JUMP
+            if "init" in q and q["init"][i] == 1:
+                flags |= FLAG_INIT
+            pred_p, pred_v = self._predicted(t, p, now)
+            arrivals = self._cams[cam]._arrivals
+            j = bisect.bisect_right(arrivals, (t, np.iinfo(np.int64).max)) - 1
+            arrival = arrivals[j][1] if j >= 0 else now
+            out.append(LivePoint(
+                method=self.method, camera=names[cam], camera_index=cam,
+                t_capture_ns=t + self.epoch_ns, t_emit_ns=now, position_world=_ro(p),
+                cov_world=_ro(cov),
+                residual_px=float(residual[i]) if residual is not None else math.nan,
+                camera_mask=int(mask[i]) if mask is not None and math.isfinite(mask[i])
+                else 1 << cam,
+                predicted_position=_ro(pred_p), predicted_velocity=_ro(pred_v),
+                arrival_ns=arrival, flags=flags,
+                quality={k: float(v[i]) for k, v in q.items()}, epoch_ns=self.epoch_ns))
+            self._cams[cam].points += 1
+        self._counts["points"] += n
+        return out
+
+    def _predicted(self, t: int, p: np.ndarray, now: int):
+        """The state at ``now`` (wall clock): the filter's prediction, else constant velocity
+        from the last two points (NaN velocity without a recent previous point)."""
+        session_now = now - self.epoch_ns
+        if self._filter is not None:
+            pred = self._filter.predict(session_now)
+            if pred is not None:
+                return pred[0], pred[1]
+            return np.array(p, dtype=np.float64), _NAN3
+        last, self._last_point = self._last_point, (t, np.array(p, dtype=np.float64))
+        if last is None or not 0 < t - last[0] <= self._max_gap_ns:
+            return np.array(p, dtype=np.float64), _NAN3
+        v = (p - last[1]) / ((t - last[0]) / NS)
+        return p + v * ((session_now - t) / NS), v

@@ -1,0 +1,308 @@
+"""The live fuser's UDP loop: receive detection datagrams, fuse, hand each point out at once.
+
+:func:`serve` binds a UDP socket, feeds every datagram to a :class:`~pslog.live.fuser.
+LiveFuser` the moment it is received, gives the points it makes to every sink before doing
+anything else (no batching), then the accepted detections (recording, viewers), and writes a
+status line each ``status_every_s`` (per camera live or silent, datagrams, points, drops).
+
+Arrival times are the kernel's receive timestamps (``SO_TIMESTAMPNS``, wall clock) where the
+system gives them, so the latency a point reports includes any time its datagram waited in
+the socket's queue behind others; elsewhere the time ``recv`` returned.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import socket
+import struct
+import sys
+import threading
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import PslogError
+from ..records import NS
+from ..rig import Rig
+from .fuser import CameraLiveState, LiveFuser
+from .protocol import MAX_DETECTION_BYTES
+from .sinks import Sink, resolve_udp
+
+#: Linux: receive timestamps as a timespec (not exported by Python's socket module).
+_SO_TIMESTAMPNS = 35
+#: Receive buffer asked of the kernel: bursts of thousands of datagrams wait there, not lost.
+_RCVBUF = 8 << 20
+#: Longest wait for a datagram before looking at the clock (status, duration, stop), seconds.
+_POLL_S = 0.05
+#: Latencies kept for the summary (the latest ones).
+_KEEP_LATENCIES = 1 << 20
+
+
+@dataclass
+class LiveSummary:
+    """What a :func:`serve` run did.
+
+    Attributes
+    ----------
+    counters : the fuser's counters (:meth:`LiveFuser.counters`) at the end
+    cameras : each camera's state at the end
+    duration_s : seconds served
+    interrupted : True when Ctrl-C (KeyboardInterrupt) ended it
+    latency_ns : (n,) int64, each point's fusion latency (arrival to made), ns (at most the
+        last 2**20)
+    epoch_ns : the session clock's zero (wall clock)
+    address : the bound (host, port)
+    """
+
+    counters: dict
+    cameras: list
+    duration_s: float
+    interrupted: bool = False
+    latency_ns: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    epoch_ns: int = 0
+    address: tuple = ("", 0)
+
+
+def bind_udp(listen, *, what: str = "--listen address") -> socket.socket:
+    """A UDP socket bound to ``listen`` (``udp://HOST:PORT``); a PslogError naming the
+    address and the OS's reason when it cannot be bound (port in use, address not local)."""
+    family, sockaddr = resolve_udp(listen, what)
+    sock = socket.socket(family, socket.SOCK_DGRAM)
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, _RCVBUF)
+        sock.bind(sockaddr)
+    except OSError as exc:
+        sock.close()
+        raise PslogError(f"cannot listen on udp://{sockaddr[0]}:{sockaddr[1]}: "
+                         f"{exc.strerror or exc}") from None
+    return sock
+
+
+def format_status(fuser: LiveFuser, cameras: list[CameraLiveState], now_ns: int,
+                  started_ns: int) -> str:
+    """One status line: time served, per camera live/silent with frames fused, points, and
+    the non-zero drop counters."""
+    c = fuser.counters()
+    parts = [f"live {(now_ns - started_ns) / NS:6.1f} s"]
+    for cam in cameras:
+        if cam.last_arrival_ns is None:
+            parts.append(f"{cam.name} silent (never heard)")
+        elif cam.silent:
+            parts.append(f"{cam.name} SILENT {(now_ns - cam.last_arrival_ns) / NS:.1f} s")
+        else:
+            parts.append(f"{cam.name} live {cam.frames} fr")
+    parts.append(f"datagrams {c['received']} points {c['points']}")
+    drops = [f"{k} {c[k]}" for k in ("duplicate", "reordered", "late", "truncated", "oversize",
+                                     "foreign", "version", "malformed", "unknown_camera",
+                                     "fusion_error", "lost") if c[k]]
+    parts.append("drops: " + (", ".join(drops) if drops else "none"))
+    return " | ".join(parts)
+
+
+def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
+          duration_s: float | None = None, stop: threading.Event | None = None,
+          status_every_s: float = 1.0, silent_after_s: float = 1.0,
+          ready: threading.Event | None = None, late_s: float = 0.1, options=None,
+          candidates: bool = True, epoch_ns: int | None = None,
+          status_stream=sys.stderr, sock: socket.socket | None = None) -> LiveSummary:
+    """Run the live fuser on ``listen`` until ``stop`` is set, ``duration_s`` passes or
+    Ctrl-C.
+
+    Parameters
+    ----------
+    rig : Rig, the cameras the datagrams name, with their clock corrections
+    listen : ``udp://HOST:PORT`` (port 0: any free port; :attr:`LiveSummary.address`)
+    sinks : the outputs (:class:`~pslog.live.sinks.Sink`), each given every point at once
+    method : a causal fusion method (``filter``, ``typeA``, ...)
+    duration_s : stop after this many seconds (None: until ``stop`` or Ctrl-C)
+    stop : threading.Event ending the run when set (from another thread, a signal handler)
+    status_every_s : period of the status line (``status_stream``, and each sink's
+        ``status``), seconds
+    silent_after_s : a camera without a datagram this long is reported silent, seconds
+    ready : set once the socket is bound (start senders after it); its ``address``
+        attribute is set to the bound ``(host, port)`` first, its ``epoch_ns`` to the
+        session clock's zero (wall clock ns)
+    late_s, options, candidates, epoch_ns : as :class:`~pslog.live.fuser.LiveFuser`
+    status_stream : where status lines go (None: nowhere)
+    sock : an already bound UDP socket to use instead of binding ``listen``
+
+    Raises
+    ------
+    PslogError (one line) when the address is malformed or cannot be bound (in use, not
+    local) or the method cannot stream; the sinks are then aborted (``abort``, else
+    ``close``): nothing was served, nothing is left behind. A sink's error (a full disk)
+    stops the run and is raised after every sink is closed.
+
+    Returns
+    -------
+    LiveSummary. At the end the fuser is flushed (its last points go to the sinks) and every
+    sink is closed, also on Ctrl-C or an error; the first sink error is raised after all are
+    closed.
+    """
+    try:
+        fuser = LiveFuser(rig, method, late_s=late_s, options=options, candidates=candidates,
+                          epoch_ns=epoch_ns, silent_after_s=silent_after_s)
+        if sock is None:
+            sock = bind_udp(listen)
+    except BaseException:
+        # nothing was served: the sinks leave nothing behind (a new session file is removed)
+        for s in sinks:
+            with contextlib.suppress(Exception):
+                (getattr(s, "abort", None) or s.close)()
+        raise
+    address = sock.getsockname()[:2]
+    timestamps = sys.platform.startswith("linux")
+    if timestamps:
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, _SO_TIMESTAMPNS, 1)
+        except OSError:
+            timestamps = False
+    stop = stop or threading.Event()
+    emitters = [s.emit for s in sinks]
+    on_detections = [s.detections for s in sinks if hasattr(s, "detections")]
+    on_dropped = [s.dropped for s in sinks if hasattr(s, "dropped")]
+    on_status = [s.status for s in sinks if hasattr(s, "status")]
+    on_event = [s.event for s in sinks if hasattr(s, "event")]
+    fuser.keep = bool(on_detections or on_dropped)
+    latencies = np.zeros(_KEEP_LATENCIES, np.int64)
+    n_lat = 0
+    interrupted = False
+    clock = time.time_ns
+    started = clock()
+    deadline = None if duration_s is None else started + int(duration_s * NS)
+    period = int(status_every_s * NS)
+    next_status = started + period
+    was_silent = {c.name: True for c in fuser.cameras(started)}
+    heard: set[str] = set()
+    error: BaseException | None = None
+
+    def say(text: str) -> None:
+        if status_stream is not None:
+            with contextlib.suppress(OSError, ValueError):
+                print(text, file=status_stream, flush=True)
+
+    def hand_out(points) -> None:
+        nonlocal n_lat
+        for emit in emitters:
+            emit(points)
+        for p in points:
+            latencies[n_lat % _KEEP_LATENCIES] = p.t_emit_ns - p.arrival_ns
+            n_lat += 1
+
+    def events(now: int) -> None:
+        for cam in fuser.cameras(now):
+            if cam.silent != was_silent[cam.name]:
+                was_silent[cam.name] = cam.silent
+                if cam.silent:
+                    text = f"camera {cam.name} silent: no datagram for {silent_after_s:g} s"
+                elif cam.name in heard:
+                    text = f"camera {cam.name} live again"
+                else:
+                    text = f"camera {cam.name} live"
+                    heard.add(cam.name)
+                say(text)
+                for ev in on_event:
+                    ev(now, text)
+
+    def pass_on() -> None:
+        accepted, dropped = fuser.take()
+        for d in accepted:
+            for f in on_detections:
+                f(d)
+        for d, reason in dropped:
+            for f in on_dropped:
+                f(d, reason)
+
+    def handle(data: bytes, ancdata, now: int) -> None:
+        arrival = now
+        for level, kind, raw in ancdata:
+            if level == socket.SOL_SOCKET and kind == _SO_TIMESTAMPNS and len(raw) >= 16:
+                sec, nsec = struct.unpack_from("@qq", raw)
+                arrival = sec * NS + nsec
+        points = fuser.feed(data, arrival)
+        if points:  # the points first: recording and viewers after
+            hand_out(points)
+        if fuser.keep:
+            pass_on()
+
+    bufsize = max(MAX_DETECTION_BYTES + 1, 65536)  # larger ones are seen whole: oversize
+    anc = socket.CMSG_SPACE(16) if timestamps else 0
+    try:
+        for s in sinks:
+            if hasattr(s, "start"):
+                s.start(fuser)
+        if ready is not None:
+            ready.address = address
+            ready.epoch_ns = fuser.epoch_ns
+            ready.set()
+        sock.settimeout(_POLL_S)
+        recv = sock.recvmsg
+        while not stop.is_set():
+            try:
+                data, ancdata, _, _ = recv(bufsize, anc)
+            except TimeoutError:
+                data = None
+            now = clock()
+            if data is not None:
+                handle(data, ancdata, now)
+            # a camera silent or back: looked at between datagrams while one is silent
+            if data is None or now >= next_status or was_silent.get(fuser.last_camera, False):
+                events(now)
+            if now >= next_status:
+                next_status = now + period
+                text = format_status(fuser, fuser.cameras(now), now, started)
+                say(text)
+                counters = fuser.counters()
+                for f in on_status:
+                    f(text, counters)
+            if deadline is not None and now >= deadline:
+                break
+        # what had arrived before the stop is fused too: nothing received is left unread
+        sock.setblocking(False)
+        while True:
+            try:
+                data, ancdata, _, _ = recv(bufsize, anc)
+            except (BlockingIOError, InterruptedError):
+                break
+            handle(data, ancdata, clock())
+    except KeyboardInterrupt:
+        interrupted = True
+    except BaseException as exc:  # closed below, raised after
+        error = exc
+    finally:
+        # the last points, then every sink closed whatever happened
+        try:
+            points = fuser.flush()
+            if points:
+                hand_out(points)
+            if fuser.keep:
+                pass_on()
+        except BaseException as exc:
+            if error is None and not isinstance(exc, KeyboardInterrupt):
+                error = exc
+        end = clock()
+        counters = fuser.counters()
+        final = format_status(fuser, fuser.cameras(end), end, started)
+        for ev in on_event:
+            with contextlib.suppress(Exception):
+                ev(end, "live fuser stopped: " + ", ".join(f"{k} {v}"
+                                                         for k, v in counters.items()))
+        for s in sinks:
+            try:
+                s.close()
+            except BaseException as exc:
+                if error is None:
+                    error = exc
+        sock.close()
+    if error is not None:
+        if isinstance(error, KeyboardInterrupt):
+            interrupted = True
+        else:
+            raise error
+    say(final)
+    lat = latencies[:min(n_lat, _KEEP_LATENCIES)].copy()
+    return LiveSummary(counters=counters, cameras=fuser.cameras(end),
+                       duration_s=(end - started) / NS, interrupted=interrupted,
+                       latency_ns=lat, epoch_ns=fuser.epoch_ns, address=tuple(address))

@@ -1,0 +1,306 @@
+"""The live fuser alone, fed datagram bytes: its points equal the offline fusion of what it
+fused, every bad datagram is counted and dropped without changing a point, silent cameras."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from pslog.fusion import FusionOptions, fuse
+from pslog.live.fuser import COUNTERS, LiveFuser
+from pslog.live.protocol import (
+    FLAG_INIT,
+    DetectionDatagram,
+    decode_point,
+    encode_detections,
+)
+from pslog.records import NS
+from pslog.simulation import SimulationOptions, true_rig
+from tests._live import EPOCH, datagrams, frames, rally_session, subset
+
+
+class Clock:
+    """A wall clock the test sets (t_emit and the predictions become exact)."""
+
+    def __init__(self, t: int = EPOCH) -> None:
+        self.t = t
+
+    def __call__(self) -> int:
+        return self.t
+
+
+def _run(fuser: LiveFuser, data: list[bytes], arrival: list[int] | None = None):
+    points = []
+    for i, d in enumerate(data):
+        points += fuser.feed(d, EPOCH if arrival is None else arrival[i])
+    return points + fuser.flush()
+
+
+def _assert_same(points, track) -> None:
+    assert len(points) == len(track) > 0
+    np.testing.assert_array_equal([p.t_capture_ns - EPOCH for p in points], track.time_ns)
+    np.testing.assert_array_equal([p.camera_index for p in points], track.camera)
+    got = np.array([p.position_world for p in points])
+    assert np.abs(got - track.position_world).max() <= 1e-9
+
+
+@pytest.fixture(scope="module")
+def session():
+    return rally_session(1.5)
+
+
+@pytest.mark.parametrize("method", ["filter", "typeA"])
+@pytest.mark.parametrize("candidates", [True, False])
+def test_points_equal_offline_fusion(session, method, candidates):
+    """Fed a session's frames in order, the fuser emits the points `pslog fuse` makes of the
+    session (all candidates gated; or each frame's best with --gating off)."""
+    rig, det = session
+    fuser = LiveFuser(rig, method, candidates=candidates, epoch_ns=EPOCH)
+    points = _run(fuser, datagrams(det, rig))
+    _assert_same(points, fuse(det, rig, method, FusionOptions(gating=candidates)))
+    c = fuser.counters()
+    assert c["received"] == c["fused"] == det.n_frames and c["points"] == len(points)
+    assert sum(c[k] for k in COUNTERS if k not in ("received", "fused", "points")) == 0
+
+
+def test_clock_corrections_are_applied_live():
+    """The rig's clock_offset, drift and rolling-shutter readout correct the times live as
+    offline: points at the TRUE times, equal to fuse() with the same rig."""
+    opts = dict(clock_offset_s={"cam2": 0.004, "cam3": -0.006}, clock_drift_ppm={"cam2": 40.0},
+                readout_s={"cam1": 0.012, "cam3": 0.008})
+    rig, det = rally_session(1.2, **opts)
+    rig = true_rig(rig, SimulationOptions(**opts))
+    for method in ("filter", "typeA"):
+        points = _run(LiveFuser(rig, method, epoch_ns=EPOCH), datagrams(det, rig))
+        offline = fuse(det, rig, method)
+        _assert_same(points, offline)
+        # and not the uncorrected times
+        assert not np.array_equal(offline.time_ns, fuse(det, rig.__class__(
+            tuple(c.replace(clock_offset=0.0, clock_drift_ppm=0.0, readout=0.0)
+                  for c in rig.cameras), rig.name), method).time_ns)
+
+
+def _bad_variants(good: bytes, camera_count: int) -> dict[str, bytes]:
+    return {
+        "truncated": good[:50],
+        "oversize": good[:4] + good[4:5] + bytes(3000),
+        "foreign": b"\x00" * 40,
+        "version": good[:4] + b"\x09" + good[5:],
+        "malformed": good[:72] + np.float64(np.nan).tobytes() + good[80:]
+        if len(good) > 72 else good[:6] + b"\x05\x00" + good[8:],
+    }
+
+
+def test_bad_datagrams_are_counted_and_change_nothing(session):
+    """Interleaved with a session: a copy of every 7th datagram (duplicate), a frame sent
+    after a newer one (reordered), one 0.5 s old (late), a frame from before the session's
+    start, an unknown camera, and truncated / oversize / foreign / wrong-version / malformed
+    bytes. Each is counted under its reason, and the points are those of the clean stream
+    without the frames dropped."""
+    rig, det = session
+    clean = frames(det, rig)
+    data, kept = [], np.ones(len(clean), bool)
+    expect = dict.fromkeys(COUNTERS, 0)
+    for i, d in enumerate(clean):
+        raw = encode_detections(d)
+        if i == 40:  # hold this frame back: sent after the next one (reordered)
+            held = raw
+            kept[i] = False
+            continue
+        data.append(raw)
+        if i == 41:
+            data.append(held)
+            expect["reordered"] += 1
+        if i % 7 == 3:
+            data.append(raw)
+            expect["duplicate"] += 1
+        if i == 100:  # a frame 0.5 s older than the newest: late
+            old = clean[100 - 45]
+            data.append(encode_detections(DetectionDatagram(
+                old.camera, 10_000, 99_999, old.t_capture_ns - 1, 0, old.uv)))
+            expect["late"] += 1
+            expect["lost"] += 0
+        if i == 120:  # before the session clock's zero
+            data.append(encode_detections(DetectionDatagram(d.camera, 20_000, 1, EPOCH - 5, 0)))
+            expect["late"] += 1
+        if i == 60:
+            data.append(encode_detections(DetectionDatagram("cam9", 1, 1, d.t_capture_ns + 1, 0,
+                                                            d.uv)))
+            expect["unknown_camera"] += 1
+        if i % 25 == 5:
+            for reason, bad in _bad_variants(raw, len(rig)).items():
+                data.append(bad)
+                expect[reason] += 1
+    fuser = LiveFuser(rig, "filter", epoch_ns=EPOCH, late_s=0.1)
+    points = _run(fuser, data)
+    c = fuser.counters()
+    for reason in ("duplicate", "reordered", "late", "unknown_camera", "truncated", "oversize",
+                   "foreign", "version", "malformed"):
+        assert c[reason] == expect[reason] > 0, reason
+    assert c["fused"] == kept.sum() and c["received"] == len(data)
+    # the sequence gaps: the out-of-order frame 40 was never fused, and the late/early
+    # frames' huge sequence numbers are not fused either (they start no gap)
+    assert c["lost"] == 1
+    _assert_same(points, fuse(subset(det, kept), rig, "filter"))
+    # what was dropped is kept, with its reason, for a recorder
+    reasons = sorted(r for _, r in fuser.dropped)
+    assert reasons.count("duplicate") == expect["duplicate"]
+    assert reasons.count("late") == 2 and reasons.count("reordered") == 1
+    assert len(fuser.accepted) == kept.sum()
+
+
+def test_rolling_shutter_row_outside_the_image_is_malformed():
+    """A row that no rolling shutter read out would correct the time backwards: refused,
+    the fuser keeps going."""
+    rig, det = rally_session(0.6, readout_s={"cam1": 0.01})
+    rig = true_rig(rig, SimulationOptions(readout_s={"cam1": 0.01}))
+    clean = frames(det, rig)
+    fuser = LiveFuser(rig, "typeA", epoch_ns=EPOCH)
+    first = clean[0]
+    bad = DetectionDatagram(first.camera, 99, 0, first.t_capture_ns + 1, 0, [[100.0, -40.0]])
+    points = _run(fuser, [encode_detections(bad)] + [encode_detections(d) for d in clean])
+    assert fuser.counters()["malformed"] == 1
+    _assert_same(points, fuse(det, rig, "typeA"))
+
+
+def test_silent_camera_and_its_return(session):
+    """cam2 sends nothing for 0.4 s: the status says silent, the other cameras keep making
+    points, and when it is back its frames are fused again (equal to offline fusion of the
+    frames sent)."""
+    rig, det = session
+    clean = frames(det, rig)
+    t = det.frame_time_ns
+    gap = (det.frame_camera == 1) & (t > 0.5 * NS) & (t < 0.9 * NS)
+    clock = Clock()
+    fuser = LiveFuser(rig, "filter", epoch_ns=EPOCH, silent_after_s=0.2, clock=clock)
+    points, silent_seen, during = [], False, []
+    for d, skip in zip(clean, gap, strict=True):
+        clock.t = d.t_capture_ns
+        states = {c.name: c for c in fuser.cameras()}
+        if states["cam2"].silent and states["cam2"].frames:  # heard, then silent
+            silent_seen = True
+            assert not states["cam1"].silent and not states["cam3"].silent
+        if skip:
+            continue
+        new = fuser.feed(encode_detections(d), d.t_capture_ns)
+        if 0.75 * NS < d.t_capture_ns - EPOCH < 0.9 * NS:
+            during += new
+        points += new
+    points += fuser.flush()
+    assert silent_seen
+    assert during and {p.camera for p in during} <= {"cam1", "cam3"}
+    after = [p for p in points if p.t_capture_ns - EPOCH > 1.0 * NS]
+    assert "cam2" in {p.camera for p in after}
+    assert not {c.name: c for c in fuser.cameras()}["cam2"].silent
+    _assert_same(points, fuse(subset(det, ~gap), rig, "filter"))
+    # the frames it never sent show as a gap in its sequence
+    assert fuser.counters()["lost"] == gap.sum()
+
+
+def test_sequence_gaps_are_counted_lost(session):
+    rig, det = session
+    clean = frames(det, rig)
+    skip = {10, 11, 12, 50}
+    fuser = LiveFuser(rig, "typeA", epoch_ns=EPOCH)
+    _run(fuser, [encode_detections(d) for i, d in enumerate(clean) if i not in skip])
+    assert fuser.counters()["lost"] == 4
+    assert sum(c.lost for c in fuser.cameras()) == 4
+
+
+def test_restarted_sender_is_not_a_duplicate(session):
+    """A sender that restarts its sequence at 1 sends new capture times: fused, not dropped."""
+    rig, det = session
+    clean = frames(det, rig)
+    half = len(clean) // 2
+    renumbered = clean[:half] + [DetectionDatagram(d.camera, d.sequence - clean[half].sequence
+                                                   + 1, d.frame_index, d.t_capture_ns,
+                                                   d.t_sent_ns, d.uv, d.radius, d.score)
+                                 if d.camera == clean[half].camera else d
+                                 for d in clean[half:]]
+    fuser = LiveFuser(rig, "typeA", epoch_ns=EPOCH)
+    _run(fuser, [encode_detections(d) for d in renumbered])
+    c = fuser.counters()
+    assert c["duplicate"] == 0 and c["fused"] == len(clean)
+
+
+def test_predicted_state_and_point_outputs(session):
+    """filter: the state predicted to the emit time is the filter's own prediction;
+    typeA: constant velocity from its last two points. The datagram and JSON carry them."""
+    rig, det = session
+    clean = frames(det, rig)
+    clock = Clock()
+    fuser = LiveFuser(rig, "filter", epoch_ns=EPOCH, clock=clock)
+    flt = fuser.stream.incremental.filter
+    last = None
+    for d in clean:
+        clock.t = d.t_capture_ns + 3_000_000  # made 3 ms after capture
+        for p in fuser.feed(encode_detections(d), d.t_capture_ns + 1_000_000):
+            last = p
+            pos, vel, _ = flt.predict(clock.t - EPOCH)
+            np.testing.assert_array_equal(p.predicted_position, pos)
+            np.testing.assert_array_equal(p.predicted_velocity, vel)
+            assert p.t_emit_ns == clock.t and p.latency_s == pytest.approx(2e-3)
+            assert np.all(np.isfinite(p.cov_world)) and p.cov_world[0, 0] > 0
+    assert last is not None
+    # the velocity is the ball's (a few m/s), the prediction 3 ms ahead of the point
+    assert 0.5 < np.linalg.norm(last.predicted_velocity) < 30
+    ahead = last.predicted_position - last.position_world
+    assert np.linalg.norm(ahead) < 0.2
+    q = decode_point(last.to_datagram(7))
+    assert q.sequence == 7 and q.camera == last.camera and q.method == "filter"
+    assert q.position == tuple(last.position_world)
+    assert q.predicted_velocity == tuple(last.predicted_velocity)
+    assert q.covariance[0] == last.cov_world[0, 0] and q.covariance[1] == last.cov_world[0, 1]
+    assert (q.t_capture_ns, q.t_emit_ns, q.t_arrival_ns) == (
+        last.t_capture_ns, last.t_emit_ns, last.arrival_ns)
+    j = json.loads(json.dumps(last.to_json(), allow_nan=False))
+    assert j["t"] == pytest.approx(last.t_capture_ns / NS) and j["method"] == "filter"
+    assert (j["x"], j["y"], j["z"]) == tuple(last.position_world)
+    assert j["latency_s"] == pytest.approx(2e-3) and j["camera"] == last.camera
+
+    clock = Clock()
+    fuser = LiveFuser(rig, "typeA", epoch_ns=EPOCH, clock=clock)
+    previous = None
+    checked = 0
+    for d in clean:
+        clock.t = d.t_capture_ns + 2_000_000
+        for p in fuser.feed(encode_detections(d), d.t_capture_ns):
+            assert np.all(np.isnan(p.cov_world)) or np.all(np.isfinite(p.cov_world))
+            if previous is not None and 0 < p.t_capture_ns - previous.t_capture_ns < 0.1 * NS:
+                v = (p.position_world - previous.position_world) / (
+                    (p.t_capture_ns - previous.t_capture_ns) / NS)
+                np.testing.assert_allclose(p.predicted_velocity, v, rtol=1e-12)
+                np.testing.assert_allclose(p.predicted_position,
+                                           p.position_world + v * 2e-3, rtol=1e-12)
+                checked += 1
+            previous = p
+    assert checked > 50
+    first = LiveFuser(rig, "typeA", epoch_ns=EPOCH)
+    for d in clean:
+        out = first.feed(encode_detections(d), d.t_capture_ns)
+        if out:  # the first point has no previous one: no velocity
+            assert all(math.isnan(v) for v in out[0].predicted_velocity)
+            assert out[0].to_json()["velocity"] == [None, None, None]
+            break
+
+
+def test_flags_mark_a_track_start(session):
+    rig, det = session
+    fuser = LiveFuser(rig, "filter", epoch_ns=EPOCH)
+    points = _run(fuser, datagrams(det, rig))
+    assert points[0].flags & FLAG_INIT
+    assert any(p.flags == 0 for p in points)
+
+
+def test_bad_settings_are_one_line_errors(session):
+    from pslog.errors import PslogError
+
+    rig, _ = session
+    for kwargs in (dict(method="smooth"), dict(method="nope"), dict(late_s=-1),
+                   dict(silent_after_s=0)):
+        with pytest.raises(PslogError) as info:
+            LiveFuser(rig, **kwargs)
+        assert "\n" not in str(info.value)
