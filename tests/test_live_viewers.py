@@ -18,7 +18,6 @@ import sys
 import threading
 import time
 import warnings
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +28,7 @@ from mcap.reader import make_reader
 from rerun.chunk import RrdReader
 
 from pslog.errors import InputError
+from pslog.live.fuser import LivePoint
 from pslog.live.protocol import DetectionDatagram
 from pslog.log import SessionWriter
 from pslog.log import _schemas as S
@@ -42,24 +42,6 @@ from viewers.live import FoxgloveSink, RerunLiveSink, std_m
 RERUN = Path(sys.executable).with_name("rerun")
 T0 = 1_790_000_000 * NS  # a wall-clock session clock, as the live camera processes stamp
 HANG_S = 60.0  # generous guard against a hang, never a timing assertion
-
-
-@dataclass(frozen=True)
-class Point:
-    """The fields of :class:`pslog.live.LivePoint` that a viewer reads."""
-
-    method: str
-    camera: str
-    camera_index: int
-    t_capture_ns: int
-    t_emit_ns: int
-    position_world: np.ndarray
-    cov_world: np.ndarray
-    residual_px: float
-    camera_mask: int
-    predicted_position: np.ndarray
-    predicted_velocity: np.ndarray
-    arrival_ns: int
 
 
 @pytest.fixture(scope="module")
@@ -86,12 +68,13 @@ def stream(rig):
         if bounds[i + 1] > bounds[i]:
             p = truth.at(np.array([det.frame_time_ns[i]]))[0]
             sigma = 0.002 * (1 + i % 3)
-            points.append(Point(
+            points.append(LivePoint(
                 method="filter", camera=rig.names[cam], camera_index=cam, t_capture_ns=t,
                 t_emit_ns=t + 400_000, position_world=p, cov_world=np.eye(3) * sigma ** 2,
                 residual_px=0.1 * (i % 5), camera_mask=1 << cam,
                 predicted_position=p + np.array([0.001, 0.0, 0.0]),
-                predicted_velocity=np.array([1.0, 0.5, -0.2]), arrival_ns=t + 300_000))
+                predicted_velocity=np.array([1.0, 0.5, -0.2]), arrival_ns=t + 300_000,
+                quality={"std_m": np.sqrt(3) * sigma, "residual_px": 0.1 * (i % 5)}))
     return datagrams, points
 
 
@@ -332,6 +315,7 @@ def _recorded_channels(tmp_path, rig, datagrams, points) -> dict[str, tuple[str,
             "filter", np.array([p.t_capture_ns for p in points]),
             np.array([p.position_world for p in points]),
             np.array([p.camera_index for p in points])))
+        writer.add_event(points[0].t_capture_ns, "a live session has events")
     with path.open("rb") as f:
         summary = make_reader(f).get_summary()
     return {c.topic: (summary.schemas[c.schema_id].name, summary.schemas[c.schema_id].data)
@@ -429,8 +413,8 @@ def test_foxglove_publishes_the_recorded_topics_live(rig, stream, tmp_path):
     assert log_time == msg.time_ns == point.t_capture_ns
     assert (msg.x, msg.y, msg.z) == tuple(point.position_world)  # exact: float64 both ways
     assert (msg.method, msg.camera) == ("filter", point.camera)
-    assert msg.quality["std_m"] == std_m(point.cov_world)
-    assert msg.quality["residual_px"] == point.residual_px
+    assert dict(msg.quality) == point.quality  # the method's quality columns, as recorded
+    assert all(np.isnan(getattr(msg, k)) for k in S.TRACK_FIXED_QUALITY)
     sphere = got["/tracks/filter/scene"][0][1].entities[0].spheres[0]
     assert (sphere.pose.position.x, sphere.pose.position.y, sphere.pose.position.z) == tuple(
         point.position_world)

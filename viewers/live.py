@@ -46,6 +46,7 @@ import numpy as np
 import rerun as rr
 
 from pslog.errors import InputError
+from pslog.live.sinks import dropped_topic
 from pslog.log import _schemas as S
 from pslog.log.writer import TRACK_COLORS, camera_messages, scene_point
 from pslog.motion import BALL_RADIUS
@@ -108,10 +109,17 @@ class _QueuedSink:
         #: why the viewer stopped showing data (a one-line message), or None
         self.error: str | None = None
         self._closed = False
+        #: the session clock's zero on the wall clock (the fuser's, from :meth:`start`): the
+        #: viewers show session times, as the recorded session does; 0 until started
+        self.epoch_ns = 0
         self._thread = threading.Thread(target=self._run, daemon=True,
                                         name=f"pslog-live-{self.NAME}")
 
     # ---- the Sink interface (called from the fuser's thread) ----------------------------
+    def start(self, fuser) -> None:
+        """Take the fuser's session clock (its ``epoch_ns``) before the first datagram."""
+        self.epoch_ns = int(fuser.epoch_ns)
+
     def emit(self, points) -> None:
         """Queue ``points`` (a list of :class:`pslog.live.LivePoint`) for the viewer."""
         if points:
@@ -121,9 +129,17 @@ class _QueuedSink:
         """Queue one accepted detection datagram (:class:`pslog.live.DetectionDatagram`)."""
         self._offer(("detections", datagram), "dropped_detections", 1)
 
+    def dropped(self, datagram, reason: str) -> None:
+        """Queue a valid datagram the fuser did not fuse (``duplicate``, ``late``...)."""
+        self._offer(("dropped", datagram, str(reason)), "dropped_detections", 1)
+
     def status(self, text: str, counters: dict) -> None:
         """Queue the fuser's status line (dropped, not counted, when the queue is full)."""
         self._offer(("status", str(text), dict(counters)), None, 0)
+
+    def event(self, time_ns: int, text: str) -> None:
+        """Queue a change worth keeping (a camera silent or back), ``time_ns`` wall clock."""
+        self._offer(("event", int(time_ns), str(text)), None, 0)
 
     def close(self) -> None:
         """Log what is queued (at most :data:`CLOSE_TIMEOUT_S`), then end the viewer's stream.
@@ -181,6 +197,10 @@ class _QueuedSink:
                 elif item[0] == "detections":
                     if self._detections(item[1]):
                         self._counts["detections"] += 1
+                elif item[0] == "dropped":
+                    self._dropped(item[1], item[2])
+                elif item[0] == "event":
+                    self._event(item[1], item[2])
                 else:
                     self._status(item[1], item[2])
             except Exception as exc:
@@ -190,7 +210,7 @@ class _QueuedSink:
     def _count_dropped(self, item) -> None:
         if item is not None and item[0] == "points":
             self._counts["dropped_points"] += len(item[1])
-        elif item is not None and item[0] == "detections":
+        elif item is not None and item[0] in ("detections", "dropped"):
             self._counts["dropped_detections"] += 1
 
     def _fail(self, exc: BaseException) -> None:
@@ -208,7 +228,11 @@ class _QueuedSink:
     def _detections(self, d) -> bool:
         raise NotImplementedError
 
+    def _dropped(self, d, reason: str) -> None: ...
+
     def _status(self, text: str, counters: dict) -> None: ...
+
+    def _event(self, time_ns: int, text: str) -> None: ...
 
     def _finish(self) -> None: ...
 
@@ -358,6 +382,8 @@ class RerunLiveSink(_QueuedSink):
 
     # ---- per item ------------------------------------------------------------------------
     def _at(self, time_ns: int, frame: int | None) -> None:
+        """Set the timelines for a wall-clock time: ``capture_time`` is the session clock."""
+        time_ns = int(time_ns) - self.epoch_ns
         if self._clock is None:
             self._clock = C.Clock(int(time_ns))
         if self._clock.wall:
@@ -382,6 +408,8 @@ class RerunLiveSink(_QueuedSink):
             rec.log(f"{base}/trail", rr.LineStrips3D.from_fields(strips=[[last[1], position]]))
         self._last[method] = (t, position)
         std = std_m(p.cov_world)
+        if not np.isfinite(std):  # a method without covariance may still give its std
+            std = float((getattr(p, "quality", None) or {}).get("std_m", np.nan))
         if np.isfinite(std):  # 2σ, capped at 1 m so a wild one hides nothing
             rec.log(f"{base}/uncertainty", rr.Points3D.from_fields(
                 positions=[position], radii=[min(2.0 * std, 1.0)]))
@@ -426,6 +454,10 @@ class RerunLiveSink(_QueuedSink):
 
     def _status(self, text: str, counters: dict) -> None:
         self._show_legend(text)
+
+    def _event(self, time_ns: int, text: str) -> None:
+        self._at(time_ns, None)
+        self.rec.log("events", rr.TextLog(text))
 
     def _finish(self) -> None:
         try:
@@ -499,6 +531,7 @@ class FoxgloveSink(_QueuedSink):
                 self._channel(S.detections_topic(cam.name), S.DetectionFrame)
             for method in dict.fromkeys(methods):
                 self._track_channels(method)
+            self._channel(S.EVENTS_TOPIC, S.Log)
             self._publish_static()
         except BaseException:
             self.server.stop()
@@ -547,38 +580,63 @@ class FoxgloveSink(_QueuedSink):
         if time.monotonic() - self._last_static >= STATIC_EVERY_S:
             self._publish_static()
 
+    def _session(self, wall_ns: int) -> int:
+        """Session time of a wall-clock time, as the recorded session stamps it (MCAP and
+        WebSocket log times are unsigned: a time before the session's zero is put at 0)."""
+        t = max(int(wall_ns) - self.epoch_ns, 0)
+        self._latest_ns = max(self._latest_ns, t)
+        return t
+
     def _point(self, p) -> None:
         position = _finite(p.position_world)
         if position is None:
             return
         method = str(p.method)
         track, scene = self._track_channels(method)
-        t = int(p.t_capture_ns)
-        self._latest_ns = max(self._latest_ns, t)
+        t = self._session(p.t_capture_ns)
         x, y, z = (float(v) for v in position)
-        nan = float("nan")
+        # as SessionWriter.add_track: the fixed quality fields (NaN when the method has
+        # none), the method's other quality columns in the map
+        quality = dict(getattr(p, "quality", None) or {})
         msg = S.TrackPoint(time_ns=t, method=method, x=x, y=y, z=z, camera=str(p.camera),
-                           ray_miss_m=nan, snap_px=nan, ray_shift_m=nan)
-        msg.quality["std_m"] = std_m(p.cov_world)
-        msg.quality["residual_px"] = float(p.residual_px)
+                           **{k: float(quality.pop(k, float("nan")))
+                              for k in S.TRACK_FIXED_QUALITY})
+        for k, v in quality.items():
+            msg.quality[k] = float(v)
         track.log(msg.SerializeToString(), log_time=t)
         i = self._track_index[method]
         self._track_index[method] = i + 1
         color = TRACK_COLORS[self._track_methods.index(method) % len(TRACK_COLORS)]
         scene.log(scene_point(method, i, t, (x, y, z), color), log_time=t)
 
+    def _frame(self, topic: str, d, best_first: bool) -> None:
+        t = self._session(d.t_capture_ns)
+        uv = np.asarray(d.uv, dtype=np.float64).reshape(-1, 2)
+        radius = np.asarray(d.radius, np.float64)
+        score = np.asarray(d.score, np.float64)
+        if best_first:  # as the recording keeps a fused frame: best candidate first
+            order = np.argsort(-score, kind="stable")
+            uv, radius, score = uv[order], radius[order], score[order]
+        msg = S.DetectionFrame(time_ns=t, camera=d.camera, frame_index=int(d.frame_index),
+                               u=uv[:, 0].tolist(), v=uv[:, 1].tolist(),
+                               radius=radius.tolist(), score=score.tolist())
+        self._channel(topic, S.DetectionFrame).log(msg.SerializeToString(), log_time=t)
+
     def _detections(self, d) -> bool:
         if d.camera not in self._names:
             return False
-        t = int(d.t_capture_ns)
-        self._latest_ns = max(self._latest_ns, t)
-        uv = np.asarray(d.uv, dtype=np.float64).reshape(-1, 2)
-        msg = S.DetectionFrame(time_ns=t, camera=d.camera, frame_index=int(d.frame_index),
-                               u=uv[:, 0].tolist(), v=uv[:, 1].tolist(),
-                               radius=np.asarray(d.radius, np.float64).tolist(),
-                               score=np.asarray(d.score, np.float64).tolist())
-        self._channels[S.detections_topic(d.camera)].log(msg.SerializeToString(), log_time=t)
+        self._frame(S.detections_topic(d.camera), d, best_first=True)
         return True
+
+    def _dropped(self, d, reason: str) -> None:
+        if d.camera in self._names:
+            self._frame(dropped_topic(reason, d.camera), d, best_first=False)
+
+    def _event(self, time_ns: int, text: str) -> None:
+        t = self._session(time_ns)
+        msg = S.Log(level=2, message=text, name="pslog")  # info, as SessionWriter.add_event
+        S.set_timestamp(msg.timestamp, t)
+        self._channel(S.EVENTS_TOPIC, S.Log).log(msg.SerializeToString(), log_time=t)
 
     def _status(self, text: str, counters: dict) -> None:
         import foxglove
