@@ -446,3 +446,99 @@ def test_foxglove_close_is_idempotent_and_frees_the_port(rig):
     again.close()
     sink.emit([object()])  # after close: dropped and counted, no error
     assert sink.counters()["dropped_points"] == 1
+
+
+# ---- a live run ----------------------------------------------------------------------------
+def _file_messages(path: Path) -> dict[str, list[tuple[int, bytes]]]:
+    with path.open("rb") as f:
+        out: dict[str, list[tuple[int, bytes]]] = {}
+        for _schema, channel, message in make_reader(f).iter_messages(log_time_order=False):
+            out.setdefault(channel.topic, []).append((message.log_time, message.data))
+    return out
+
+
+def test_a_live_run_shows_in_foxglove_and_rerun_as_it_is_recorded(tmp_path):
+    """``serve`` with the recording, the Foxglove server and a rerun stream, detections sent
+    over real UDP: a Foxglove client subscribed before the run gets, byte for byte and with
+    the same log times, the messages the session file holds on the track and detection
+    topics; the rerun stream holds every point at its session time."""
+    import websockets
+
+    from pslog.live.fuser import LiveFuser
+    from pslog.live.protocol import encode_detections
+    from pslog.live.server import serve
+    from pslog.live.sinks import RecordSink
+    from tests._live import EPOCH, frames, rally_session
+
+    rig, det = rally_session(0.6)
+    # candidates worst first: the recording (and so Foxglove) keeps a fused frame best first
+    sent = [DetectionDatagram(d.camera, d.sequence, d.frame_index, d.t_capture_ns,
+                              d.t_sent_ns, d.uv[::-1], d.radius[::-1], d.score[::-1])
+            for d in frames(det, rig)]
+    assert any(len(d) > 1 and d.score[0] < d.score[-1] for d in sent)
+    # the points the fuser makes before its final flush (same datagrams, same order)
+    offline = LiveFuser(rig, "filter", epoch_ns=EPOCH)
+    n_points = sum(len(offline.feed(encode_detections(d), d.t_capture_ns)) for d in sent)
+    assert n_points > 20
+    session = tmp_path / "live.mcap"
+    rec = rr.RecordingStream("pslog")
+    rrd = tmp_path / "live.rrd"
+    rec.save(rrd)
+    sinks = [RecordSink(session, rig, "filter"), FoxgloveSink(rig, port=0),
+             RerunLiveSink(None, rig, recording=rec)]
+    stop, ready = threading.Event(), threading.Event()
+    server = threading.Thread(target=serve, args=(rig, "udp://127.0.0.1:0", sinks),
+                              kwargs=dict(stop=stop, ready=ready, epoch_ns=EPOCH,
+                                          status_stream=None))
+    topics = ["/camera/cam1/calibration", "/tracks/filter",
+              *(f"/camera/{c}/detections" for c in rig.names)]
+
+    async def client() -> dict[str, list]:
+        got: dict[str, list] = {}
+        async with websockets.connect(sinks[1].address, max_size=None,
+                                      subprotocols=["foxglove.sdk.v1"]) as ws:
+            fox = _FoxgloveClient(ws)
+            await fox.read_advertisements(topics)
+            await fox.subscribe(topics)
+            while "/camera/cam1/calibration" not in got:  # the subscriptions are active
+                topic, log_time, payload = await fox.next_message()
+                got.setdefault(topic, []).append((log_time, payload))
+            server.start()
+            assert ready.wait(HANG_S)
+            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as udp:
+                for d in sent:
+                    udp.sendto(encode_detections(d), ready.address)
+            frames_in = 0
+            while len(got.get("/tracks/filter", [])) < n_points or frames_in < len(sent):
+                topic, log_time, payload = await fox.next_message()
+                got.setdefault(topic, []).append((log_time, payload))
+                frames_in += topic.endswith("/detections")
+            stop.set()  # serve flushes, closes every sink: the Foxglove server stops
+            with contextlib.suppress(websockets.ConnectionClosed):
+                while True:
+                    topic, log_time, payload = await fox.next_message()
+                    got.setdefault(topic, []).append((log_time, payload))
+        return got
+
+    try:
+        got = asyncio.run(asyncio.wait_for(client(), HANG_S))
+    finally:
+        stop.set()
+        if server.is_alive() or server.ident is not None:
+            server.join(HANG_S)
+        for sink in sinks[1:]:
+            sink.close()
+    rec.disconnect()
+    recorded = _file_messages(session)
+    track = got["/tracks/filter"]
+    assert len(track) >= n_points
+    assert track == recorded["/tracks/filter"][:len(track)]
+    for cam in rig.names:
+        topic = f"/camera/{cam}/detections"
+        assert got[topic] == recorded[topic] and len(got[topic]) == sum(
+            d.camera == cam for d in sent)
+    temporal, _ = _chunks(rrd)
+    shown = _times(temporal["/world/tracks/filter"])
+    stored = [t for t, _ in recorded["/tracks/filter"]]
+    np.testing.assert_array_equal(shown, stored)  # session times, every point
+    assert sinks[2].counters()["dropped_points"] == 0
