@@ -2,11 +2,15 @@
 (:class:`RerunLiveSink`, ``--view`` / ``--serve``) and in Foxglove (:class:`FoxgloveSink`,
 ``--foxglove``).
 
-Both are sinks of :func:`pslog.live.server.serve` (``emit``, ``detections``, ``status``,
-``close``) and neither ever delays the fuser: each call only puts the item in a bounded queue
-(a few microseconds) and returns; one background thread per viewer does the logging. When a
-slow or absent viewer lets the queue fill up, new items are dropped and counted
-(:meth:`counters`: ``dropped_points``, ``dropped_detections``), never waited for.
+Both are sinks of :func:`pslog.live.server.serve` (``start``, ``emit``, ``detections``,
+``dropped``, ``status``, ``event``, ``close``) and neither ever delays the fuser: each call
+only puts the item in a bounded queue (about a microsecond) and returns; one background thread
+per viewer does the logging. When a slow or absent viewer lets the queue fill up, new items
+are dropped and counted (``counters()``: ``dropped_points``, ``dropped_detections``), never
+waited for. A viewer that fails (its window closed...) prints one warning line and is skipped
+from then on; the run goes on. Times are on the session clock (the wall clock minus the
+fuser's ``epoch_ns``, given by ``start``), as in the recorded session, so the live view and
+the later view of the recording line up.
 
 What the rerun view shows (the recorded view's entity paths, colours and layout, see
 :mod:`viewers.recording`; timeline ``capture_time``, the session clock, and ``frame``):
@@ -20,7 +24,8 @@ What the rerun view shows (the recorded view's entity paths, colours and layout,
   has a covariance (``.../uncertainty``), the state predicted to the emit time (``.../predicted``
   and its velocity arrow over 0.1 s), and time series of the position std (mm), the
   reprojection residual (px) and the fusion latency (ms, datagram arrival to point out);
-- the fuser's status line (cameras live / silent, counters) in the legend panel.
+- the fuser's status line (cameras live / silent, counters) in the legend panel, and its
+  events (a camera silent or back, the final counters) as a text log (``events``).
 
 Foxglove: ``pslog live ... --foxglove`` serves the Foxglove WebSocket protocol on
 ``ws://127.0.0.1:8765`` (``--foxglove-port`` / host as the command says). Open it in the
@@ -29,8 +34,12 @@ protobuf schemas are those of a recorded session file (docs/log-format.md), so a
 for a recording shows the live run too: ``/camera/<cam>/calibration`` and ``/transform``
 (re-sent every second, so a client that connects late still gets them),
 ``/camera/<cam>/detections`` (``pslog.DetectionFrame``), ``/tracks/<method>``
-(``pslog.TrackPoint``) and ``/tracks/<method>/scene`` (a ``foxglove.SceneUpdate`` sphere per
-point, for the 3D panel). The fuser's status line is a server status message.
+(``pslog.TrackPoint``, the method's quality columns as recorded) and
+``/tracks/<method>/scene`` (a ``foxglove.SceneUpdate`` sphere per point, for the 3D panel),
+``/events`` (``foxglove.Log``) and ``/live/dropped/<reason>/<cam>`` (frames the fuser did not
+fuse, as recorded). A fused frame's detections and a track point are byte for byte the
+messages the recording (``--record``) stores, with the same log times. The fuser's status line
+is a server status message (Foxglove's problems panel).
 """
 
 from __future__ import annotations
@@ -57,7 +66,7 @@ from . import _columns as C
 from ._columns import camera_path, image_path
 from .blueprint import build_blueprint, default_eye
 from .recording import new_stream
-from .sinks import SEND_TIMEOUT_S, has_display, open_sink
+from .sinks import has_display, open_sink
 
 #: items (a batch of points, a detection datagram, a status line) that may wait for a viewer;
 #: beyond this the viewer is too slow and new items are dropped (counted)
@@ -462,9 +471,9 @@ class RerunLiveSink(_QueuedSink):
     def _finish(self) -> None:
         try:
             if self.sink is not None:
-                self.sink.finish(self.rec, SEND_TIMEOUT_S)
+                self.sink.finish(self.rec, CLOSE_TIMEOUT_S)
             else:
-                self.rec.flush(timeout_sec=SEND_TIMEOUT_S)
+                self.rec.flush(timeout_sec=CLOSE_TIMEOUT_S)
         finally:
             if self.sink is not None:
                 self.rec.disconnect()
@@ -514,7 +523,8 @@ class FoxgloveSink(_QueuedSink):
             reason = str(exc).removeprefix("FoxgloveError: ")
             if "in use" in reason:
                 raise InputError(f"cannot serve Foxglove on {host}:{port}: the port is in use "
-                                 f"by another program; choose another port") from None
+                                 f"by another program; choose another with --foxglove-port"
+                                 ) from None
             raise InputError(f"cannot serve Foxglove on {host}:{port}: {reason}") from None
         #: the port the server listens on
         self.port = self.server.port
