@@ -86,7 +86,7 @@ def streaming_method(text: str) -> str:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from pslog.rig import TIMING_PRESETS
 
-    from ._common import port
+    from ._common import int_in, port
     from .record import add_detector_arguments
 
     parser.description = DESCRIPTION
@@ -134,9 +134,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="web viewer port with --serve (default %(default)s)")
     parser.add_argument("--grpc-port", type=port, default=9876, metavar="PORT",
                         help="data server port with --serve (default %(default)s)")
-    parser.add_argument("--foxglove-port", type=port, default=8765, metavar="PORT",
-                        help="Foxglove WebSocket server port with --foxglove (default "
-                             "%(default)s)")
+    parser.add_argument("--foxglove-port", type=int_in(0, 65535), default=8765,
+                        metavar="PORT",
+                        help="Foxglove WebSocket server port with --foxglove, 0 for any free "
+                             "one, said on stderr (default %(default)s)")
     parser.add_argument("--status-every", type=positive_float, default=1.0, metavar="S",
                         help="seconds between status lines on stderr (default %(default)s)")
     add_detector_arguments(parser)
@@ -331,8 +332,9 @@ def _sinks(args: argparse.Namespace, rig) -> tuple[list, object]:
         if args.foxglove:
             from viewers.live import FoxgloveSink
 
-            sinks.append(FoxgloveSink(rig, "127.0.0.1", args.foxglove_port, methods=methods))
-            _say(f"Foxglove WebSocket server at ws://127.0.0.1:{args.foxglove_port}")
+            sink = FoxgloveSink(rig, "127.0.0.1", args.foxglove_port, methods=methods)
+            sinks.append(sink)
+            _say(f"Foxglove WebSocket server at {sink.address}")
     except BaseException:
         for sink in sinks:
             if sink is recording:
