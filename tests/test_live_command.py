@@ -419,3 +419,37 @@ def test_serve_streams_the_live_run_to_a_rerun_web_viewer(tmp_path):
     finally:
         run.proc.send_signal(signal.SIGINT)
     assert run.finish() == 0, "\n".join(run.err)
+
+
+# ---- video files: sent at their frames' capture times ---------------------------------------
+def test_video_file_sources_are_sent_at_their_capture_times(tmp_path):
+    from test_record import _write_clip
+
+    from pslog.log import read_session
+    from pslog.rig import builtin_rig, save_rig
+
+    save_rig(builtin_rig("paper2"), tmp_path / "rig.toml")
+    n = 30
+    k = np.arange(n)
+    clips = {"cam1": np.stack([100 + 10.3 * k, 200 + 3.1 * k], axis=1),
+             "cam2": np.stack([500 - 7.7 * k, 100 + 8.9 * k], axis=1)}
+    for name, centers in clips.items():
+        _write_clip(tmp_path / f"{name}.avi", centers)
+    begun = time.monotonic()
+    run = LiveRun("--rig", "rig.toml", "--source", "cam1=cam1.avi",
+                  "--source", "cam2=cam2.avi@0.0167", "--listen", "udp://127.0.0.1:0",
+                  "--method", "typeA", "--record", "s.mcap", cwd=tmp_path)
+    assert run.finish() == 0, "\n".join(run.err)
+    assert time.monotonic() - begun > n / 30.0  # paced: not read as fast as they decode
+    assert sum("camera process ended (end of source)" in line for line in run.err) == 2
+    det = read_session(tmp_path / "s.mcap").detections
+    start_s = np.floor(det.frame_time_ns.min() / 1e9)  # a whole second after the fuser's
+    for cam, (name, centers) in enumerate(clips.items()):
+        rows = np.flatnonzero(det.frame_camera == cam)
+        assert len(rows) >= n - 3  # (a frame a loaded machine delivers late is dropped)
+        offset = 0.0167 if name == "cam2" else 0.0
+        expected = (start_s + offset + det.frame_index[rows] / 30.0) * 1e9
+        assert np.abs(det.frame_time_ns[rows] - expected).max() <= 1000  # 1 µs
+        best = det.best()
+        mine = best.camera == cam
+        np.testing.assert_allclose(best.uv[mine], centers[det.frame_index[rows]], atol=0.5)

@@ -34,8 +34,9 @@ A status line on stderr shows per camera whether it is live or silent. A camera 
 that dies is reported and restarted after a back-off (1 s, doubling up to 30 s); the other
 cameras keep fusing, and the camera is fused again once it sends. The run ends at
 --duration, when every source has ended, or on Ctrl-C / SIGTERM, which stops the camera
-processes and finishes the session file cleanly (exit code 0). A killed run leaves
-SESSION.mcap.partial, which 'pslog recover' salvages.
+processes and finishes the session file cleanly (exit code 0). The session file is flushed
+twice a second: a killed run leaves it unfinished, and 'pslog recover' salvages it. With
+--force an old session is replaced only by a complete new one, never by an empty one.
 """
 
 EXAMPLES = """\

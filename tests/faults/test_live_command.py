@@ -130,3 +130,23 @@ def test_sigkill_leaves_a_session_that_recover_salvages_and_no_camera(tmp_path):
     fixed = read_session(tmp_path / "fixed.mcap")
     assert len(fixed.detections.frame_time_ns) >= 30
     assert len(fixed.tracks["filter"].time_ns) >= 30
+
+
+def test_an_output_that_cannot_start_closes_the_others_and_leaves_nothing(tmp_path):
+    """--record opens first; a Foxglove port in use then fails: one line, and the session
+    file begun is removed (a viewer without a display alike, with --view)."""
+    before = fingerprint(tmp_path)
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        run = run_pslog("live", "--rig", "paper3", "--synthetic", "--record", "s.mcap",
+                        "--foxglove", "--foxglove-port", port, "--listen", _listen(),
+                        cwd=tmp_path)
+    assert_one_line_error(run, 1, contains=str(port))
+    assert_untouched(before, tmp_path)
+    run = run_pslog("live", "--rig", "paper3", "--synthetic", "--record", "s.mcap", "--view",
+                    "--listen", _listen(), cwd=tmp_path,
+                    env={"DISPLAY": "", "WAYLAND_DISPLAY": ""})
+    assert_one_line_error(run, 1, contains="display")
+    assert_untouched(before, tmp_path)
