@@ -116,8 +116,8 @@ def test_sigkill_leaves_a_session_that_recover_salvages_and_no_camera(tmp_path):
 
     run = LiveRun("--rig", "paper3", "--timing", "typeA", "--synthetic", "--motion", "rally",
                   "--listen", _listen(), "--jsonl", "--record", "s.mcap", cwd=tmp_path)
-    _wait_for_points(run, 60)
-    time.sleep(1.2)  # the session file is flushed at least twice a second
+    _wait_for_points(run, 30)
+    time.sleep(0.8)  # the session file is flushed at least twice a second
     run.proc.kill()
     run.finish()
     pids = [pid for cam in camera_pids(run).values() for pid in cam]
@@ -128,8 +128,8 @@ def test_sigkill_leaves_a_session_that_recover_salvages_and_no_camera(tmp_path):
     recover = run_pslog("recover", "s.mcap", "-o", "fixed.mcap", cwd=tmp_path)
     assert recover.code == 0, recover.stderr
     fixed = read_session(tmp_path / "fixed.mcap")
-    assert len(fixed.detections.frame_time_ns) >= 30
-    assert len(fixed.tracks["filter"].time_ns) >= 30
+    assert len(fixed.detections.frame_time_ns) >= 20
+    assert len(fixed.tracks["filter"].time_ns) >= 20
 
 
 def test_an_output_that_cannot_start_closes_the_others_and_leaves_nothing(tmp_path):
