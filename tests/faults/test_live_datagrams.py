@@ -44,9 +44,10 @@ class Receiver:
 
 
 @contextlib.contextmanager
-def live(rig, method="filter", **kwargs):
+def live(rig, method="filter", expect_error=False, **kwargs):
     """serve() in a thread on a free loopback port; yields (send, receiver, result) where
-    result["summary"] is the LiveSummary once the block has ended (stop set on exit)."""
+    result["summary"] is the LiveSummary once the block has ended (stop set on exit), or
+    result["error"] what it raised (only with ``expect_error``)."""
     receiver = Receiver()
     ready, stop = threading.Event(), threading.Event()
     status = io.StringIO()
@@ -79,7 +80,7 @@ def live(rig, method="filter", **kwargs):
         assert not thread.is_alive(), "serve did not stop"
         receiver.drain()
         receiver.sock.close()
-    assert "error" not in result, result.get("error")
+    assert expect_error or "error" not in result, result.get("error")
 
 
 def _frames(det, rig, epoch):
@@ -264,3 +265,30 @@ def test_nothing_listening_at_out_does_not_stop_the_fuser(session):
     assert result["summary"].counters["points"] > 0
     assert sink.sent + sink.errors == result["summary"].counters["points"]
     assert len(receiver.points) == result["summary"].counters["points"]
+
+
+def test_full_disk_while_recording_is_one_line_error_after_the_points(tmp_path, session):
+    """The disk fills up under the recording: serve stops with a one-line PslogError
+    naming the session file and the OS's reason, after closing every sink; the robot got
+    every point made until then (its UDP sink comes first), and no traceback of the
+    recording thread."""
+    from tests.faults._mounts import fill, small_tmpfs
+
+    rig, det = session
+    with small_tmpfs(tmp_path / "disk", "256k") as disk:
+        path = disk / "live.mcap"
+        record = RecordSink(path, rig, flush_interval_s=0.05)
+        fill(disk, free=6_000)
+        with live(rig, expect_error=True, sinks=[record]) as (send, receiver, result):
+            for second in range(30):  # the session again each second, until the disk is full
+                for d in _frames(det, rig, result["epoch"] + second * NS):
+                    send(_good(d))
+                    time.sleep(0.0003)
+                time.sleep(0.1)
+                if record._error is not None:
+                    break
+        error = result.get("error")
+        assert isinstance(error, PslogError), error
+        text = str(error)
+        assert "\n" not in text and str(path) in text and "No space left" in text
+        assert receiver.points  # the points made before the disk filled were sent
