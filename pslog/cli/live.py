@@ -245,8 +245,6 @@ def _run(args: argparse.Namespace, stop) -> int:
     no_camera = cameras is not None and not cameras.opened_any
     if recording is not None:
         if recording.empty:
-            if not recording.existed:
-                recording.path.unlink(missing_ok=True)
             if not no_camera:
                 _say(f"no detection arrived: nothing was recorded to {args.record}")
         else:
@@ -347,30 +345,24 @@ def _sinks(args: argparse.Namespace, rig) -> tuple[list, object]:
 
 
 def _recording(args: argparse.Namespace, rig):
-    """core's RecordSink that, when nothing at all was recorded, keeps an old session
-    (``--force``) instead of replacing it by an empty one (the command removes a new one)."""
-    from pathlib import Path
-
+    """core's RecordSink that, when nothing at all was recorded, leaves no session behind:
+    a new file is removed, an old one (``--force``) kept instead of replaced by an empty one."""
     from pslog.live.sinks import RecordSink
     from pslog.rig import timing_label
 
     class Recording(RecordSink):
+        empty = False
+
         def close(self) -> None:
-            if self.frames == 0 and self.points == 0 and self.dropped_frames == 0:
+            if self.frames == 0 and self.dropped_frames == 0:
                 self.empty = True
-                self.writer.abort()
+                self.abort()
             else:
                 super().close()
 
         def discard(self) -> None:
-            self.close()
-            if self.empty and not self.existed:
-                Path(self.path).unlink(missing_ok=True)
+            self.abort()
 
-    existed = Path(args.record).exists()
-    sink = Recording(args.record, rig, args.method, force=args.force,
-                     timing=timing_label(rig),
+    return Recording(args.record, rig, args.method, force=args.force, timing=timing_label(rig),
                      source="live " + " ".join(["--synthetic"] if args.synthetic
                                                else args.source))
-    sink.empty, sink.existed, sink.path = False, existed, Path(args.record)
-    return sink

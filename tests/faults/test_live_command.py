@@ -150,3 +150,14 @@ def test_an_output_that_cannot_start_closes_the_others_and_leaves_nothing(tmp_pa
                     env={"DISPLAY": "", "WAYLAND_DISPLAY": ""})
     assert_one_line_error(run, 1, contains="display")
     assert_untouched(before, tmp_path)
+
+
+def test_a_run_that_records_nothing_leaves_no_session_and_keeps_an_old_one(tmp_path):
+    (tmp_path / "old.mcap").write_bytes(b"an old session")
+    before = fingerprint(tmp_path)
+    for args in (("--record", "new.mcap"), ("--record", "old.mcap", "--force")):
+        run = run_pslog("live", "--rig", "paper3", "--listen", _listen(), "--duration", "0.5",
+                        *args, cwd=tmp_path)
+        assert run.code == 0 and "Traceback" not in run.stderr, run.stderr
+        assert f"nothing was recorded to {args[1]}" in run.stderr
+        assert_untouched(before, tmp_path)
