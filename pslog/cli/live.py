@@ -186,6 +186,15 @@ def _run(args: argparse.Namespace, stop) -> int:
     if len(rig) < 2:
         return usage_error("live", f"live fusion needs at least two cameras; the rig has "
                                    f"{len(rig)}")
+    from pslog.live.protocol import MAX_CANDIDATES, MAX_NAME_BYTES
+
+    if args.max_candidates > MAX_CANDIDATES:
+        return usage_error("live", f"--max-candidates must be at most {MAX_CANDIDATES} (what "
+                                   f"one detection datagram carries), got {args.max_candidates}")
+    long = [n for n in rig.names if len(n.encode("utf-8")) > MAX_NAME_BYTES]
+    if long:
+        raise InputError(f"camera name {long[0]!r} is longer than the {MAX_NAME_BYTES} bytes a "
+                         f"live datagram carries; rename it in the rig file")
     specs = _camera_specs(args, rig)
     if isinstance(specs, int):
         return specs  # a usage error, already said

@@ -9,6 +9,7 @@ import socket
 import subprocess
 import sys
 import time
+from dataclasses import replace
 
 import pytest
 
@@ -35,6 +36,7 @@ def _listen() -> str:
     (("--view", "--foxglove"), ("--foxglove", "not allowed")),
     (("--synthetic", "--duration", "1e9"), ("frames",)),
     (("--serve", "--web-port", "9000", "--grpc-port", "9000"), ("must differ",)),
+    (("--synthetic", "--max-candidates", "65"), ("--max-candidates", "64")),
 ])
 def test_malformed_command_lines_are_usage_errors(tmp_path, args, contains):
     before = fingerprint(tmp_path)
@@ -45,8 +47,15 @@ def test_malformed_command_lines_are_usage_errors(tmp_path, args, contains):
 
 def test_faults_before_the_start_are_one_line_and_write_nothing(tmp_path):
     (tmp_path / "old.mcap").write_bytes(b"an old session")
+    long_name = "camera-with-a-name-longer-than-32-bytes"
+    from pslog.rig import builtin_rig, save_rig
+
+    rig = builtin_rig("paper3")
+    save_rig(replace(rig, cameras=(replace(rig.cameras[0], name=long_name), *rig.cameras[1:])),
+             tmp_path / "long.toml")
     before = fingerprint(tmp_path)
     cases = [
+        (("--rig", "long.toml", "--synthetic", "--record", "s.mcap"), long_name),
         (("--rig", "missing.toml"), "missing.toml"),
         (("--rig", "paper3", "--source", "cam9=0"), "cam9"),
         (("--rig", "paper3", "--source", "cam1=missing.mp4"), "missing.mp4"),
