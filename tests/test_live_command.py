@@ -211,9 +211,13 @@ def test_a_synthetic_live_run_emits_a_point_at_every_shutter(synthetic_run):
     assert set(got) <= expected
     missing = sorted(expected - set(got), key=lambda k: k[1])
     first = min(t for _, t in got)
-    assert all(t < first for _, t in missing) and len(missing) <= 3, missing
-    # (how many frames a camera process delivers after a later camera's frame, dropped as
-    # reordered, depends on the machine's load: not asserted)
+    warm_up = [m for m in missing if m[1] < first]
+    assert len(warm_up) <= 3, warm_up
+    # a frame a loaded machine delivers after a later camera's frame is dropped (reordered or
+    # late; how many depends on the load), and the method may then lack what the next two or
+    # three points need (offline too: see the re-fusion test); with none dropped, none missing
+    dropped = sum(int(n) for n in re.findall(r"(?:reordered|late) (\d+)", final))
+    assert len(missing) - len(warm_up) <= 3 * dropped, (missing, final)
     assert len(got) > 20
 
 
@@ -268,6 +272,7 @@ def test_the_recorded_session_re_fuses_to_the_live_points(synthetic_run):
 # ---- a camera process killed mid-run and restarted ------------------------------------------
 def test_a_killed_camera_process_is_reported_restarted_and_fused_again(tmp_path):
     run = LiveRun("--rig", "paper3", "--timing", "typeA", "--synthetic", "--motion", "rally",
+                  "--duration", "60",  # stopped by the test; the rally goes on
                   "--listen", "udp://127.0.0.1:0",
                   "--jsonl", "--status-every", "0.25", cwd=tmp_path)
     try:
@@ -368,6 +373,7 @@ def test_foxglove_shows_the_live_points_to_a_websocket_client(tmp_path):
     from pslog.log import _schemas as S
 
     run = LiveRun("--rig", "paper3", "--timing", "typeA", "--synthetic", "--motion", "rally",
+                  "--duration", "60",  # stopped by the test; the rally goes on
                   "--listen", "udp://127.0.0.1:0", "--foxglove", "--foxglove-port", "0",
                   cwd=tmp_path)
     address = run.wait_err(r"Foxglove WebSocket server at (ws://\S+)").group(1)
@@ -408,6 +414,7 @@ def test_serve_streams_the_live_run_to_a_rerun_web_viewer(tmp_path):
 
     web, grpc = free_tcp_port(), free_tcp_port()
     run = LiveRun("--rig", "paper3", "--timing", "typeA", "--synthetic", "--motion", "rally",
+                  "--duration", "60",  # stopped by the test; the rally goes on
                   "--listen", "udp://127.0.0.1:0", "--serve", "--web-port", web,
                   "--grpc-port", grpc, "--jsonl", cwd=tmp_path)
     try:

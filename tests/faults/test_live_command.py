@@ -101,6 +101,7 @@ def test_a_stop_signal_ends_every_process_and_leaves_a_complete_session(tmp_path
         (tmp_path / "s.mcap").write_bytes(b"an old session")
         force = ("--force",)
     run = LiveRun("--rig", "paper3", "--timing", "typeA", "--synthetic", "--motion", "rally",
+                  "--duration", "60",  # stopped by the test; the rally goes on
                   "--listen", _listen(), "--jsonl", "--record", "s.mcap", *force, cwd=tmp_path)
     _wait_for_points(run)
     if old:
@@ -124,6 +125,7 @@ def test_sigkill_leaves_a_session_that_recover_salvages_and_no_camera(tmp_path):
     from pslog.log import read_session
 
     run = LiveRun("--rig", "paper3", "--timing", "typeA", "--synthetic", "--motion", "rally",
+                  "--duration", "60",  # stopped by the test; the rally goes on
                   "--listen", _listen(), "--jsonl", "--record", "s.mcap", cwd=tmp_path)
     _wait_for_points(run, 30)
     time.sleep(0.8)  # the session file is flushed at least twice a second
