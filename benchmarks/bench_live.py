@@ -20,7 +20,9 @@ and per way of using a frame's candidates: ``all`` (every candidate through the 
 ``StreamFuser(candidates=True)``, as ``pslog live`` runs) and ``best`` (the frame's
 best-scored candidate alone, ``candidates=False``).
 
-The machine may be shared: latencies are wall-clock and include whatever else runs.
+The machine may be shared: latencies are wall-clock and include whatever else runs; ``cpu``
+is the fuser thread's own CPU time per datagram that made a point, from received to handed
+to the sinks (``LiveSummary.cpu_ns``): what the fusion latency would be on an idle core.
 
     python benchmarks/bench_live.py [--seconds 60] [--quick] [--load 30,240]
         [--method filter,typeA] [--candidates all,best]
@@ -176,7 +178,10 @@ def run(rig, frames, method: str, candidates: bool) -> dict:
     n = left.n
     fusion = (left.left[:n] - left.arrival[:n]) / 1e6
     e2e = (left.left[:n] - left.capture[:n]) / 1e6
-    return dict(sent=sent, late_sends=late, received=c["received"], lost=sent - c["received"],
+    cpu = summary.cpu_ns / 1e6
+    return dict(cpu_med=float(np.median(cpu)) if len(cpu) else float("nan"),
+                cpu_p99=float(np.percentile(cpu, 99)) if len(cpu) else float("nan"),
+                sent=sent, late_sends=late, received=c["received"], lost=sent - c["received"],
                 seq_gaps=c["lost"], points=c["points"], robot=received_points,
                 drops=sum(c[k] for k in ("duplicate", "reordered", "late", "malformed",
                                          "fusion_error")),
@@ -201,7 +206,7 @@ def main() -> int:
           f"0 datagrams lost)")
     head = (f"{'load':>10} {'method':>6} {'cand':>4} {'sent':>6} {'lost':>4} {'points':>6} "
             f"{'robot':>6} {'drop':>4} | {'fusion med':>10} {'p99':>6} {'max':>6} "
-            f"{'target':>7} | {'e2e med':>7} {'p99':>6}")
+            f"{'target':>7} | {'e2e med':>7} {'p99':>6} | {'cpu med':>7} {'p99':>6}")
     print(head)
     print("-" * len(head))
     worst = 0
@@ -216,12 +221,15 @@ def main() -> int:
                       f"{r['lost']:4d} {r['points']:6d} {r['robot']:6d} {r['drops']:4d} | "
                       f"{r['fusion_med']:10.3f} {r['fusion_p99']:6.3f} {r['fusion_max']:6.1f} "
                       f"{'<= 1 ' + ('ok' if ok else 'NO'):>7} | {r['e2e_med']:7.3f} "
-                      f"{r['e2e_p99']:6.3f}", flush=True)
+                      f"{r['e2e_p99']:6.3f} | {r['cpu_med']:7.3f} {r['cpu_p99']:6.3f}",
+                      flush=True)
                 if r["late_sends"]:
                     print(f"{'':>10} (the sender was more than 1 ms late on "
                           f"{r['late_sends']} datagrams: the machine is busy)")
     print("lost: datagrams sent minus received by the fuser (target 0); robot: point "
-          "datagrams the receiver got; drop: frames the fuser refused to fuse (out of order)")
+          "datagrams the receiver got; drop: frames the fuser refused to fuse (out of order); "
+          "cpu: the fuser thread's CPU time per datagram that made a point (its latency on "
+          "an idle core)")
     return 1 if worst else 0
 
 

@@ -229,7 +229,9 @@ class LiveFuser:
         self.rig = rig
         self.method = method
         self.options = options or FusionOptions()
-        self.candidates = bool(candidates)
+        # without gating a frame's candidates cannot be told apart: its best one alone, as
+        # fuse() does with gating off
+        self.candidates = bool(candidates) and self.options.gating
         self.stream = StreamFuser(rig, method, self.options, candidates=self.candidates)
         self.clock = clock
         self.epoch_ns = int(clock() if epoch_ns is None else epoch_ns)
@@ -273,16 +275,24 @@ class LiveFuser:
         state.last_arrival_ns = int(arrival_ns)
         state.silent = False
         reason = self._check(d, cam, state)
+        if reason != "duplicate":
+            # frames lost on the way: gaps in the camera's sequence, whether or not the
+            # frame is fused (a frame that comes after a later one is no loss)
+            last = state._last_sequence
+            if last is not None and d.sequence > last + 1:
+                gap = d.sequence - last - 1
+                state.lost += gap
+                counts["lost"] += gap
+            elif last is not None and d.sequence < last and state.lost:
+                state.lost -= 1  # it came after all
+                counts["lost"] -= 1
+            if last is None or d.sequence > last:
+                state._last_sequence = d.sequence
         if reason is not None:
             return self._drop(d, reason)
         # accepted: in order, from now on the newest
         logged = d.t_capture_ns - self.epoch_ns
         self._newest = (logged, cam)
-        if state._last_sequence is not None and d.sequence > state._last_sequence + 1:
-            gap = d.sequence - state._last_sequence - 1
-            state.lost += gap
-            counts["lost"] += gap
-        state._last_sequence = d.sequence
         key = (d.sequence, d.t_capture_ns)
         state._seen.add(key)
         state._seen_order.append(key)

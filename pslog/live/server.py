@@ -54,6 +54,9 @@ class LiveSummary:
     interrupted : True when Ctrl-C (KeyboardInterrupt) ended it
     latency_ns : (n,) int64, each point's fusion latency (arrival to made), ns (at most the
         last 2**20)
+    cpu_ns : (m,) int64, per datagram that made points: the CPU time the fuser's thread
+        spent on it, from received to its points handed to every sink, ns (what the latency
+        would be on an idle core; at most the last 2**20)
     epoch_ns : the session clock's zero (wall clock)
     address : the bound (host, port)
     """
@@ -63,6 +66,7 @@ class LiveSummary:
     duration_s: float
     interrupted: bool = False
     latency_ns: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    cpu_ns: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     epoch_ns: int = 0
     address: tuple = ("", 0)
 
@@ -174,6 +178,9 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
     fuser.keep = bool(on_detections or on_dropped)
     latencies = np.zeros(_KEEP_LATENCIES, np.int64)
     n_lat = 0
+    cpu = np.zeros(_KEEP_LATENCIES, np.int64)
+    n_cpu = 0
+    thread_time = time.thread_time_ns
     interrupted = False
     clock = time.time_ns
     started = clock()
@@ -222,6 +229,8 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
                 f(d, reason)
 
     def handle(data: bytes, ancdata, now: int) -> None:
+        nonlocal n_cpu
+        cpu0 = thread_time()
         arrival = now
         for level, kind, raw in ancdata:
             if level == socket.SOL_SOCKET and kind == _SO_TIMESTAMPNS and len(raw) >= 16:
@@ -230,6 +239,8 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
         points = fuser.feed(data, arrival)
         if points:  # the points first: recording and viewers after
             hand_out(points)
+            cpu[n_cpu % _KEEP_LATENCIES] = thread_time() - cpu0
+            n_cpu += 1
         if fuser.keep:
             pass_on()
 
@@ -334,6 +345,8 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
             raise error
     say(final)
     lat = latencies[:min(n_lat, _KEEP_LATENCIES)].copy()
+    cpu_kept = cpu[:min(n_cpu, _KEEP_LATENCIES)].copy()
     return LiveSummary(counters=counters, cameras=fuser.cameras(end),
                        duration_s=(end - started) / NS, interrupted=interrupted,
-                       latency_ns=lat, epoch_ns=fuser.epoch_ns, address=tuple(address))
+                       latency_ns=lat, cpu_ns=cpu_kept, epoch_ns=fuser.epoch_ns,
+                       address=tuple(address))
