@@ -304,3 +304,179 @@ def test_bad_settings_are_one_line_errors(session):
         with pytest.raises(PslogError) as info:
             LiveFuser(rig, **kwargs)
         assert "\n" not in str(info.value)
+
+
+# ---- over real UDP, recorded: the session re-fused offline gives the live points ----------
+def _serve_session(rig, det, path, method, faults=True, interrupt=False):
+    """Send ``det``'s frames (with a duplicate, a reordered and a late frame when
+    ``faults``) over real UDP to serve() recording to ``path``; returns (summary, points
+    received by a robot's socket, epoch)."""
+    import os
+    import signal
+    import socket
+    import threading
+
+    from pslog.live.server import serve
+    from pslog.live.sinks import RecordSink, UdpSink
+
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    rx.bind(("127.0.0.1", 0))
+    rx.settimeout(0.3)
+    ready, stop = threading.Event(), threading.Event()
+
+    def send():
+        assert ready.wait(30)
+        tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        clean = frames(det, rig, ready.epoch_ns)
+        for i, d in enumerate(clean):
+            if faults and i == 30:
+                continue  # held back: sent after the next one
+            tx.sendto(encode_detections(d), ready.address)
+            if faults and i == 31:
+                tx.sendto(encode_detections(clean[30]), ready.address)  # reordered
+            if faults and i % 9 == 4:
+                tx.sendto(encode_detections(d), ready.address)  # duplicate
+            if faults and i == 50:
+                old = clean[5]
+                tx.sendto(encode_detections(DetectionDatagram(
+                    old.camera, 77, 77, old.t_capture_ns + 1, 0, old.uv)), ready.address)
+            if i % 4 == 0:
+                time.sleep(0.002)
+        tx.close()
+        time.sleep(0.1)
+        if interrupt:
+            os.kill(os.getpid(), signal.SIGINT)
+        else:
+            stop.set()
+
+    import time
+
+    sender = threading.Thread(target=send, daemon=True)
+    sender.start()
+    sinks = [UdpSink(rx.getsockname()), RecordSink(path, rig, method)]
+    summary = serve(rig, "udp://127.0.0.1:0", sinks, method=method, stop=stop, ready=ready,
+                    status_stream=None, duration_s=60)
+    sender.join(30)
+    points = []
+    try:
+        while True:
+            points.append(decode_point(rx.recv(4096)))
+    except TimeoutError:
+        pass
+    rx.close()
+    return summary, points, ready.epoch_ns
+
+
+@pytest.mark.parametrize("method", ["filter", "typeA"])
+def test_recorded_session_refused_offline_gives_the_live_points(tmp_path, method):
+    """A real MCAP: `pslog fuse` of the session recorded live (RecordSink) gives exactly the
+    points the robot received over UDP (within 1e-9 m, same times and cameras), although
+    duplicates, a reordered and a late frame were dropped live: they are recorded apart, on
+    /live/dropped/<reason>/<camera>, with the fused frames alone on the detection topics."""
+    from mcap.reader import make_reader
+
+    from pslog.cli import main
+    from pslog.log.reader import read_session
+
+    rig, det = rally_session(1.0)
+    path, fused = tmp_path / "live.mcap", tmp_path / "fused.mcap"
+    summary, points, epoch = _serve_session(rig, det, path, method)
+    c = summary.counters
+    assert c["duplicate"] > 0 and c["reordered"] == 1 and c["late"] == 1
+    assert len(points) == c["points"] > 50
+    assert main(["fuse", str(path), "--method", method, "-o", str(fused)]) == 0
+    offline = read_session(fused).tracks[method]
+    np.testing.assert_array_equal([p.t_capture_ns - epoch for p in points], offline.time_ns)
+    np.testing.assert_array_equal([p.camera_index for p in points], offline.camera)
+    assert np.abs(np.array([p.position for p in points]) - offline.position_world).max() <= 1e-9
+    # the recorded live track is the same points
+    live = read_session(path)
+    recorded = live.tracks[method]
+    np.testing.assert_array_equal(recorded.time_ns, offline.time_ns)
+    assert np.abs(recorded.position_world - offline.position_world).max() <= 1e-9
+    assert live.detections.n_frames == c["fused"]
+    assert live.metadata["live_method"] == method
+    assert any("session time 0 is wall clock" in text for _, text in live.events)
+    dropped = {}
+    with open(path, "rb") as f:
+        for _, channel, _ in make_reader(f).iter_messages():
+            if channel.topic.startswith("/live/dropped/"):
+                reason = channel.topic.split("/")[3]
+                dropped[reason] = dropped.get(reason, 0) + 1
+    assert dropped == {k: c[k] for k in ("duplicate", "reordered", "late")}
+    assert main(["info", str(path)]) == 0
+
+
+def test_sigint_stops_serve_cleanly_with_a_complete_session(tmp_path):
+    """Ctrl-C (a real SIGINT) while serving: the fuser stops, the sinks are closed, the
+    session is complete (readable, not a partial) and holds every point emitted."""
+    from pslog.log.reader import read_session
+
+    rig, det = rally_session(0.6)
+    path = tmp_path / "live.mcap"
+    summary, points, _ = _serve_session(rig, det, path, "filter", faults=False,
+                                        interrupt=True)
+    assert summary.interrupted
+    session = read_session(path)
+    assert session.detections.n_frames == det.n_frames == summary.counters["fused"]
+    assert len(session.tracks["filter"]) == len(points) == summary.counters["points"] > 0
+    assert not list(tmp_path.glob("*.partial"))
+
+
+def test_sample_live_client_receives_every_point():
+    """samples/live_client.py, run as a program, against a real fuser over real UDP: one
+    line per point, the same sequence, positions and cameras the fuser sent."""
+    import socket
+    import subprocess
+    import sys
+    import threading
+    from pathlib import Path
+
+    from pslog.live.server import serve
+    from pslog.live.sinks import UdpSink
+
+    client = Path(__file__).resolve().parents[1] / "samples" / "live_client.py"
+    assert len(client.read_text().splitlines()) < 40
+    rig, det = rally_session(0.5)
+    probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    probe.bind(("127.0.0.1", 0))
+    port = probe.getsockname()[1]
+    probe.close()
+    fuser = LiveFuser(rig, "filter", epoch_ns=EPOCH)
+    expected = _run(fuser, datagrams(det, rig))  # how many points the session makes
+    proc = subprocess.Popen([sys.executable, str(client), f"127.0.0.1:{port}",
+                             str(len(expected))], stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout.readline().startswith("listening on udp://127.0.0.1:")
+        ready, stop = threading.Event(), threading.Event()
+        sent: list = []
+
+        class Keep:
+            def emit(self, points):
+                sent.extend(points)
+
+            def close(self):
+                pass
+
+        thread = threading.Thread(target=serve, args=(rig, "udp://127.0.0.1:0",
+                                                      [UdpSink(("127.0.0.1", port)), Keep()]),
+                                  kwargs=dict(stop=stop, ready=ready, status_stream=None),
+                                  daemon=True)
+        thread.start()
+        assert ready.wait(30)
+        tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        for d in frames(det, rig, ready.epoch_ns):
+            tx.sendto(encode_detections(d), ready.address)
+        tx.close()
+        out, _ = proc.communicate(timeout=30)
+        stop.set()
+        thread.join(30)
+    finally:
+        proc.kill()
+    lines = out.splitlines()
+    assert proc.returncode == 0 and len(lines) == len(sent) == len(expected)
+    for i, (line, p) in enumerate(zip(lines, sent, strict=True)):
+        fields = line.split()
+        assert fields[0] == str(i + 1) and fields[1] == "filter" and fields[2] == p.camera
+        x, y, z = (float(fields[k].split("=")[1]) for k in (4, 5, 6))
+        np.testing.assert_allclose((x, y, z), p.position_world, atol=1e-4)

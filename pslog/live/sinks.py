@@ -8,8 +8,10 @@ from __future__ import annotations
 
 import json
 import math
+import queue
 import socket
 import sys
+import threading
 import time
 from datetime import UTC, datetime
 from typing import IO, Protocol, runtime_checkable
@@ -184,11 +186,12 @@ class RecordSink:
     ----------
     path : the session file; refused if it exists unless ``force``
     rig : the live rig (with its clock corrections: they travel with the session)
-    method : the live fusion method (the track's name)
+    method : the live fusion method (the track's name; also the metadata ``live_method``);
+        default: the fuser's (``start``)
     epoch_ns : the session clock's zero; default: the fuser's (``start``)
     """
 
-    def __init__(self, path, rig: Rig, method: str = "filter", *, force: bool = False,
+    def __init__(self, path, rig: Rig, method: str | None = None, *, force: bool = False,
                  epoch_ns: int | None = None, flush_interval_s: float = 0.5,
                  timing: str = "custom", source: str = "pslog live",
                  points_every_s: float = 0.25) -> None:
@@ -198,7 +201,7 @@ class RecordSink:
         self.method = method
         self.epoch_ns = epoch_ns
         self.writer = SessionWriter(path, rig, force=force, timing=timing, source=source,
-                                    metadata={"live_method": method},
+                                    metadata={"live_method": method} if method else None,
                                     flush_interval_s=flush_interval_s, on_error="keep")
         self.path = self.writer.path
         self._index = {name: i for i, name in enumerate(rig.names)}
@@ -209,8 +212,39 @@ class RecordSink:
         self.dropped_frames = 0
         self.points = 0
         self._announced = False
-        if epoch_ns is not None:
-            self._announce()
+        # the file is written by a thread of its own: a disk that stalls (or a flush of the
+        # writer holding its lock) never delays the fuser; a write error is raised by the
+        # next call (serve then stops and closes everything) and by close
+        self._jobs: queue.SimpleQueue = queue.SimpleQueue()
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._work, daemon=True,
+                                        name=f"pslog-live-record-{self.path.name}")
+        self._thread.start()
+        if epoch_ns is not None and method is not None:
+            self._put(self._announce)
+
+    # ---- the writing thread ---------------------------------------------------------------
+    def _work(self) -> None:
+        while True:
+            job = self._jobs.get()
+            if job is None:
+                return
+            if self._error is not None:
+                continue  # the file failed: what comes after is not written
+            try:
+                job[0](*job[1:])
+            except BaseException as exc:
+                self._error = exc
+
+    def _put(self, *job) -> None:
+        if self._error is not None:
+            raise self._error
+        self._jobs.put(job)
+
+    def _stop_thread(self) -> None:
+        if self._thread.is_alive():
+            self._jobs.put(None)
+            self._thread.join()
 
     def _announce(self) -> None:
         if self._announced:
@@ -220,30 +254,17 @@ class RecordSink:
         self.writer.add_event(0, f"live session: session time 0 is wall clock {self.epoch_ns} ns "
                                  f"({stamp}); method {self.method}")
 
-    def start(self, fuser: LiveFuser) -> None:
-        if self.epoch_ns is None:
-            self.epoch_ns = fuser.epoch_ns
-        self._announce()
-
-    def _session(self, wall_ns: int) -> int:
-        if self.epoch_ns is None:
-            raise PslogError("RecordSink: no session clock (call start(fuser) or give epoch_ns)")
-        return int(wall_ns) - self.epoch_ns
-
-    def detections(self, d: DetectionDatagram) -> None:
+    def _write_frame(self, d: DetectionDatagram) -> None:
         t = self._session(d.t_capture_ns)
         order = np.argsort(-d.score, kind="stable")  # best first, as the fuser took them
         self.writer.add_frame(self._index[d.camera], d.frame_index, t, d.uv[order],
                               d.radius[order], d.score[order])
-        self.frames += 1
         self._maybe_write_points()
 
-    def dropped(self, d: DetectionDatagram, reason: str) -> None:
+    def _write_dropped(self, d: DetectionDatagram, reason: str) -> None:
         from ..log import _schemas as S
 
-        t = self._session(d.t_capture_ns)
-        if t < 0:  # before the session's zero: MCAP has no negative times; keep it at 0
-            t = 0
+        t = max(self._session(d.t_capture_ns), 0)  # MCAP has no time before the zero
         w = self.writer
         msg = S.DetectionFrame(time_ns=t, camera=d.camera, frame_index=d.frame_index,
                                u=d.uv[:, 0].tolist(), v=d.uv[:, 1].tolist(),
@@ -255,9 +276,8 @@ class RecordSink:
             w._queue(w._channel(topic, S.DetectionFrame), t, msg.SerializeToString(),
                      d.frame_index)
             w._count(topic)
-        self.dropped_frames += 1
 
-    def emit(self, points: list[LivePoint]) -> None:
+    def _add_points(self, points: list[LivePoint]) -> None:
         self._points.extend(points)
         self._maybe_write_points()
 
@@ -276,28 +296,69 @@ class RecordSink:
         for p in points:
             keys.extend(k for k in p.quality if k not in keys)
         nan = math.nan
-        track = Track(self.method, np.array([p.session_ns for p in points], np.int64),
+        track = Track(self.method or points[0].method,
+                      np.array([p.session_ns for p in points], np.int64),
                       np.array([p.position_world for p in points]),
                       np.array([p.camera_index for p in points], np.int32),
                       {k: np.array([p.quality.get(k, nan) for p in points]) for k in keys})
         self.writer.add_track(track)
         self.points += len(points)
 
-    def status(self, text: str, counters: dict) -> None:
-        self._maybe_write_points()
-
-    def event(self, time_ns: int, text: str) -> None:
+    def _write_event(self, time_ns: int, text: str) -> None:
         self.writer.add_event(max(self._session(time_ns), 0), text)
 
+    def _session(self, wall_ns: int) -> int:
+        return int(wall_ns) - self.epoch_ns
+
+    # ---- the Sink interface (the fuser's thread) ------------------------------------------
+    def start(self, fuser: LiveFuser) -> None:
+        if self.epoch_ns is None:
+            self.epoch_ns = fuser.epoch_ns
+        if self.method is None:
+            self.method = fuser.method
+        self._put(self._announce)
+
+    def _started(self) -> None:
+        if self.epoch_ns is None:
+            raise PslogError("RecordSink: no session clock (call start(fuser) or give epoch_ns)")
+
+    def detections(self, d: DetectionDatagram) -> None:
+        self._started()
+        self._put(self._write_frame, d)
+        self.frames += 1
+
+    def dropped(self, d: DetectionDatagram, reason: str) -> None:
+        self._started()
+        self._put(self._write_dropped, d, reason)
+        self.dropped_frames += 1
+
+    def emit(self, points: list[LivePoint]) -> None:
+        self._put(self._add_points, list(points))
+
+    def status(self, text: str, counters: dict) -> None:
+        self._put(self._maybe_write_points)
+
+    def event(self, time_ns: int, text: str) -> None:
+        self._started()
+        self._put(self._write_event, time_ns, text)
+
     def close(self) -> None:
+        """Write what is queued, finish the file; raises the first write error."""
+        if self._error is None:
+            self._jobs.put((self._maybe_write_points, True))
+        self._stop_thread()
         try:
-            self._maybe_write_points(force=True)
-        finally:
             self.writer.close()
+        except BaseException as exc:
+            if self._error is None:
+                self._error = exc
+        if self._error is not None:
+            raise self._error
 
     def abort(self) -> None:
         """Nothing was served (the fuser could not start): leave nothing behind — a new file
         is removed, an existing one (``force``) stays as it was."""
+        self._stop_thread()
         in_place = self.writer.target == self.writer.path
         self.writer.abort()
         if in_place and not self.frames and not self.dropped_frames:

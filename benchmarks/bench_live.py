@@ -1,0 +1,229 @@
+"""Live fuser: datagrams lost and latency, detections replayed in real time over loopback UDP.
+
+Targets (issue 11), synthetic three-camera type-A rig, 60 s (``--quick``: 10 s):
+
+- no datagram lost on loopback at 3 x 30 fps, nor at a replayed 3 x 240 fps load;
+- fusion latency, from a detection datagram's arrival (the kernel's receive timestamp, so
+  time spent queued behind other datagrams counts) to its 3D point leaving the fuser (the
+  UDP sink's ``send`` returned): median and p99, p99 at most 1 ms;
+- end-to-end, from the frame's capture time to the point leaving: reported.
+
+Setup: the paper's rig (three 640 x 480 cameras, type-A shutters 1/(3 fps) apart) at 30 fps,
+and the same cameras at 240 fps; the library's ``rally`` (chip kicks, floor bounces, drag)
+for the whole duration, 0.3 px detection noise, 2 % missed frames and a false candidate on
+5 % of the frames (so the gates have something to do). A SENDER PROCESS replays every
+frame's detection datagram at its capture time on the wall clock (a detector taking no
+time: end-to-end = the datagram's trip + queueing + fusion); the fuser is
+:func:`pslog.live.server.serve` in this process with a :class:`~pslog.live.sinks.UdpSink`
+to a RECEIVER PROCESS (a robot) that counts the points. Per method (``filter``, ``typeA``)
+and per way of using a frame's candidates: ``all`` (every candidate through the gates,
+``StreamFuser(candidates=True)``, as ``pslog live`` runs) and ``best`` (the frame's
+best-scored candidate alone, ``candidates=False``).
+
+The machine may be shared: latencies are wall-clock and include whatever else runs.
+
+    python benchmarks/bench_live.py [--seconds 60] [--quick] [--load 30,240]
+        [--method filter,typeA] [--candidates all,best]
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")  # one core, before numpy loads
+
+import argparse  # noqa: E402
+import multiprocessing as mp  # noqa: E402
+import socket  # noqa: E402
+import struct  # noqa: E402
+import threading  # noqa: E402
+import time  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+from pslog.live.protocol import DetectionDatagram, encode_detections  # noqa: E402
+from pslog.live.server import serve  # noqa: E402
+from pslog.live.sinks import UdpSink  # noqa: E402
+from pslog.motion import rally_motion  # noqa: E402
+from pslog.rig import Rig, apply_timing, builtin_rig  # noqa: E402
+from pslog.simulation import SimulationOptions, simulate  # noqa: E402
+
+TARGET_P99_MS = 1.0
+NS = 1_000_000_000
+_T_OFFSET = 24  # t_capture_ns and t_sent_ns in the detection datagram (docs/live.md)
+
+
+def bench_rig(fps: float) -> Rig:
+    rig = builtin_rig("paper3")
+    rig = Rig(tuple(c.replace(fps=fps) for c in rig.cameras), rig.name)
+    return apply_timing(rig, "typeA")
+
+
+def session(fps: float, seconds: float):
+    """(rig, frames): frames as (session ns, datagram bytes with times relative to 0)."""
+    rig = bench_rig(fps)
+    det, _ = simulate(rig, rally_motion(seed=1, duration=seconds), seconds,
+                      SimulationOptions(noise_px=0.3, miss_rate=0.02, spurious_rate=0.05,
+                                        seed=2))
+    bounds = np.searchsorted(det.cand_frame, np.arange(det.n_frames + 1))
+    seq = [0] * len(rig)
+    out = []
+    for i in range(det.n_frames):
+        cam = int(det.frame_camera[i])
+        seq[cam] += 1
+        a, b = bounds[i], bounds[i + 1]
+        t = int(det.frame_time_ns[i])
+        out.append((t, encode_detections(DetectionDatagram(
+            rig.names[cam], seq[cam], int(det.frame_index[i]), 0, 0, det.cand_uv[a:b],
+            det.cand_radius[a:b], det.cand_score[a:b]))))
+    return rig, out
+
+
+def sender(address, frames, start_ns, conn) -> None:
+    """Send each datagram at its capture time (``start_ns`` + session time), stamped."""
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sent = late = 0
+    pack = struct.Struct("<qq").pack_into
+    for t, data in frames:
+        due = start_ns + t
+        wait = (due - time.time_ns()) / NS
+        if wait > 0.0005:
+            time.sleep(wait - 0.0003)
+        while time.time_ns() < due:
+            pass
+        buf = bytearray(data)
+        now = time.time_ns()
+        pack(buf, _T_OFFSET, due, now)
+        sock.sendto(buf, address)
+        sent += 1
+        late += now - due > 1_000_000
+    conn.send((sent, late))
+    sock.close()
+
+
+def receiver(sock: socket.socket, conn) -> None:
+    """Count point datagrams until told to stop (a datagram b"stop")."""
+    n = 0
+    while True:
+        data = sock.recv(4096)
+        if data == b"stop":
+            break
+        n += data[:4] == b"PSLP"
+    conn.send(n)
+
+
+class Left:
+    """The sink after the UDP one: when each point's datagram has been sent."""
+
+    def __init__(self, n: int) -> None:
+        self.left = np.zeros(n, np.int64)
+        self.arrival = np.zeros(n, np.int64)
+        self.capture = np.zeros(n, np.int64)
+        self.n = 0
+
+    def emit(self, points) -> None:
+        now = time.time_ns()
+        for p in points:
+            if self.n < len(self.left):
+                self.left[self.n], self.arrival[self.n] = now, p.arrival_ns
+                self.capture[self.n] = p.t_capture_ns
+                self.n += 1
+
+    def close(self) -> None:
+        pass
+
+
+def run(rig, frames, method: str, candidates: bool) -> dict:
+    ctx = mp.get_context("fork")
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    rx.bind(("127.0.0.1", 0))
+    rx.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 << 20)
+    r_parent, r_child = ctx.Pipe()
+    robot = ctx.Process(target=receiver, args=(rx, r_child), daemon=True)
+    robot.start()
+    ready, stop = threading.Event(), threading.Event()
+    left = Left(len(frames) * 2)
+    result: dict = {}
+
+    def fuse() -> None:
+        result["summary"] = serve(rig, "udp://127.0.0.1:0", [UdpSink(rx.getsockname()), left],
+                                  method=method, candidates=candidates, stop=stop,
+                                  ready=ready, status_stream=None, status_every_s=1.0)
+
+    fuser = threading.Thread(target=fuse)
+    fuser.start()
+    ready.wait(30)
+    s_parent, s_child = ctx.Pipe()
+    start = time.time_ns() + NS // 2
+    # the session's frames must not come before the fuser's clock zero
+    start = max(start, ready.epoch_ns + NS // 10)
+    send = ctx.Process(target=sender, args=(ready.address, frames, start, s_child),
+                       daemon=True)
+    send.start()
+    sent, late = s_parent.recv()
+    send.join()
+    time.sleep(0.3)  # the last datagrams are fused, then the stop
+    stop.set()
+    fuser.join()
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.sendto(b"stop", rx.getsockname())
+    received_points = r_parent.recv()
+    robot.join()
+    rx.close()
+    summary = result["summary"]
+    c = summary.counters
+    n = left.n
+    fusion = (left.left[:n] - left.arrival[:n]) / 1e6
+    e2e = (left.left[:n] - left.capture[:n]) / 1e6
+    return dict(sent=sent, late_sends=late, received=c["received"], lost=sent - c["received"],
+                seq_gaps=c["lost"], points=c["points"], robot=received_points,
+                drops=sum(c[k] for k in ("duplicate", "reordered", "late", "malformed",
+                                         "fusion_error")),
+                fusion_med=float(np.median(fusion)) if n else float("nan"),
+                fusion_p99=float(np.percentile(fusion, 99)) if n else float("nan"),
+                fusion_max=float(fusion.max()) if n else float("nan"),
+                e2e_med=float(np.median(e2e)) if n else float("nan"),
+                e2e_p99=float(np.percentile(e2e, 99)) if n else float("nan"))
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=60.0)
+    parser.add_argument("--quick", action="store_true", help="10 s per run")
+    parser.add_argument("--load", default="30,240", help="camera frame rates (fps)")
+    parser.add_argument("--method", default="filter,typeA")
+    parser.add_argument("--candidates", default="all,best")
+    args = parser.parse_args()
+    seconds = 10.0 if args.quick else args.seconds
+    print(f"live fuser, 3 type-A cameras, {seconds:g} s per run, sender and robot processes "
+          f"on loopback; latencies in ms (target: p99 fusion <= {TARGET_P99_MS:g} ms, "
+          f"0 datagrams lost)")
+    head = (f"{'load':>10} {'method':>6} {'cand':>4} {'sent':>6} {'lost':>4} {'points':>6} "
+            f"{'robot':>6} {'drop':>4} | {'fusion med':>10} {'p99':>6} {'max':>6} "
+            f"{'target':>7} | {'e2e med':>7} {'p99':>6}")
+    print(head)
+    print("-" * len(head))
+    worst = 0
+    for fps in (float(f) for f in args.load.split(",")):
+        rig, frames = session(fps, seconds)
+        for method in args.method.split(","):
+            for cand in args.candidates.split(","):
+                r = run(rig, frames, method, cand == "all")
+                ok = r["fusion_p99"] <= TARGET_P99_MS
+                worst |= r["lost"] > 0
+                print(f"{f'3 x {fps:g} fps':>10} {method:>6} {cand:>4} {r['sent']:6d} "
+                      f"{r['lost']:4d} {r['points']:6d} {r['robot']:6d} {r['drops']:4d} | "
+                      f"{r['fusion_med']:10.3f} {r['fusion_p99']:6.3f} {r['fusion_max']:6.1f} "
+                      f"{'<= 1 ' + ('ok' if ok else 'NO'):>7} | {r['e2e_med']:7.3f} "
+                      f"{r['e2e_p99']:6.3f}", flush=True)
+                if r["late_sends"]:
+                    print(f"{'':>10} (the sender was more than 1 ms late on "
+                          f"{r['late_sends']} datagrams: the machine is busy)")
+    print("lost: datagrams sent minus received by the fuser (target 0); robot: point "
+          "datagrams the receiver got; drop: frames the fuser refused to fuse (out of order)")
+    return 1 if worst else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
