@@ -306,6 +306,8 @@ class LiveCameras:
         self.t0_ns, self.t0_wall_ns = mono, wall
         self._t0.value, self._t0_wall.value = mono, wall
         self._start.set()
+        if stop_requested():
+            return self.t0_ns  # stopped before the clock started: nothing to say
         running = sum(c.state == "running" for c in self.cameras)
         host, port = self.address
         self.say(f"session clock started: {running} camera process"
@@ -400,6 +402,11 @@ class LiveCameras:
     @property
     def opened_any(self) -> bool:
         return any(c.opened for c in self.cameras)
+
+    @property
+    def all_failed(self) -> bool:
+        """Every camera failed to open its source (not: was stopped before it did)."""
+        return all(c.state == "failed" and not c.opened for c in self.cameras)
 
     def pids(self) -> dict[str, int | None]:
         return {c.name: c.pid for c in self.cameras

@@ -251,7 +251,7 @@ def _run(args: argparse.Namespace, stop) -> int:
         _say(f"{summary.counters.get('points', len(lat))} points; fusion latency (datagram "
              f"arrival to point out) median {np.median(lat) / 1e3:.0f} us, p99 "
              f"{np.percentile(lat, 99) / 1e3:.0f} us")
-    no_camera = cameras is not None and not cameras.opened_any
+    no_camera = cameras is not None and cameras.all_failed
     if recording is not None:
         if recording.empty:
             if not no_camera:

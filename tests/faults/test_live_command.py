@@ -172,3 +172,18 @@ def test_a_run_that_records_nothing_leaves_no_session_and_keeps_an_old_one(tmp_p
         assert run.code == 0 and "Traceback" not in run.stderr, run.stderr
         assert f"nothing was recorded to {args[1]}" in run.stderr
         assert_untouched(before, tmp_path)
+
+
+def test_a_stop_while_the_cameras_start_is_clean_and_records_nothing(tmp_path):
+    run = LiveRun("--rig", "paper3", "--timing", "typeA", "--synthetic", "--motion", "rally",
+                  "--listen", _listen(), "--record", "s.mcap", cwd=tmp_path)
+    run.wait_for(lambda: len(camera_pids(run)) == 3, "three camera processes")
+    run.proc.send_signal(signal.SIGINT)
+    code = run.finish()
+    err = "\n".join(run.err)
+    assert code == 0 and "error" not in err, err
+    assert "session clock started" not in err  # (a slow start would make this test moot)
+    assert "nothing was recorded to s.mcap" in err
+    assert not (tmp_path / "s.mcap").exists()
+    pids = [pid for cam in camera_pids(run).values() for pid in cam]
+    assert all(gone(pid) for pid in pids)
