@@ -53,6 +53,7 @@ from .record import _STOP_SIGNALS, _stop_signals_blocked
 #: exit codes of a camera process (anything else, e.g. -9, is a death)
 EXIT_DONE = 0  # the source ended or the duration was reached
 EXIT_FAILED = 3  # the source failed to open or stopped delivering
+EXIT_CRASHED = 4  # an unexpected error while capturing, detecting or sending
 _OPEN_TIMEOUT_S = 60.0  # longest wait for every camera to open before the clock starts
 _STOP_TIMEOUT_S = 5.0  # longest wait for a camera process to end once told to stop
 _BACKOFF_S = (1.0, 30.0)  # first and longest wait before restarting a dead camera
@@ -173,9 +174,14 @@ def sender_main(name: str, spec, options: SenderOptions, address: tuple[str, int
                 counters[_DETECTED] += 1
         if reason:
             tell("done", reason)
+    except Exception as exc:  # a bug or a bad frame: said in one line (the parent restarts
+        # the camera), never a traceback on the terminal
+        tell("failed", f"{spec.describe()}: {type(exc).__name__}: {exc}".splitlines()[0])
+        code = EXIT_CRASHED
     finally:
         sock.close()
-        source.close()
+        with contextlib.suppress(Exception):
+            source.close()
     sys.exit(code)
 
 
@@ -366,7 +372,7 @@ class LiveCameras:
             cam.state = "done"
             self.say(f"{cam.name}: camera process ended ({cam.message or 'end of source'})")
             return
-        if exitcode == EXIT_FAILED:
+        if exitcode in (EXIT_FAILED, EXIT_CRASHED):
             why = cam.message or "its source failed"
         elif exitcode is not None and exitcode < 0:
             try:

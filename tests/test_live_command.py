@@ -460,3 +460,58 @@ def test_video_file_sources_are_sent_at_their_capture_times(tmp_path):
         best = det.best()
         mine = best.camera == cam
         np.testing.assert_allclose(best.uv[mine], centers[det.frame_index[rows]], atol=0.5)
+
+
+# ---- the camera processes themselves (recorders.live) -----------------------------------------
+class CrashingSpec:
+    """A source whose third frame raises, as a bug would (module level: picklable)."""
+
+    def describe(self) -> str:
+        return "crashing test source"
+
+    def open(self):
+        return _CrashingSource()
+
+
+class _CrashingSource:
+    clock, live = "test", True
+
+    def __init__(self) -> None:
+        self.n = 0
+
+    def set_start(self, t0_ns: int) -> None:
+        pass
+
+    def read(self):
+        self.n += 1
+        if self.n == 3:
+            raise RuntimeError("boom")
+        time.sleep(0.03)
+        return self.n, self.n * 33_333_333, np.zeros((48, 64, 3), np.uint8)
+
+    def close(self) -> None:
+        pass
+
+
+def test_a_camera_process_that_crashes_is_one_line_and_is_restarted(capfd):
+    from recorders.live import LiveCameras
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as rx:
+        rx.bind(("127.0.0.1", 0))
+        said: list[str] = []
+        cameras = LiveCameras({"cam1": CrashingSpec()}, rx.getsockname(), say=said.append)
+        stop, ready = threading.Event(), threading.Event()
+        ready.set()
+        watcher = threading.Thread(target=cameras.run, args=(stop, ready), daemon=True)
+        watcher.start()
+        deadline = time.monotonic() + HANG_S
+        while not any("(restart 1)" in s for s in said) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        stop.set()
+        watcher.join(HANG_S)
+    assert not watcher.is_alive()
+    died = [s for s in said if "died" in s]
+    assert died and "RuntimeError: boom" in died[0] and "restarting in 1 s" in died[0], said
+    assert any("(restart 1)" in s for s in said), said
+    assert cameras.cameras[0].frames >= 2 and not cameras.pids()
+    assert "Traceback" not in capfd.readouterr().err
