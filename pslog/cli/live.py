@@ -248,9 +248,12 @@ def _run(args: argparse.Namespace, stop) -> int:
         _say("camera processes:\n" + cameras.summary())
     lat = summary.latency_ns
     if len(lat):
+        cpu = getattr(summary, "cpu_ns", np.zeros(0))
+        on_cpu = (f"; the fuser's CPU time per datagram median {np.median(cpu) / 1e3:.0f} us"
+                  if len(cpu) else "")
         _say(f"{summary.counters.get('points', len(lat))} points; fusion latency (datagram "
              f"arrival to point out) median {np.median(lat) / 1e3:.0f} us, p99 "
-             f"{np.percentile(lat, 99) / 1e3:.0f} us")
+             f"{np.percentile(lat, 99) / 1e3:.0f} us{on_cpu}")
     no_camera = cameras is not None and cameras.all_failed
     if recording is not None:
         if recording.empty:
