@@ -30,13 +30,16 @@ the rig watching --motion in real time (frames paced by their capture times on t
 shutter schedule, detected like camera frames). A video file source is sent at its frames'
 capture times too.
 
-A status line on stderr shows per camera whether it is live or silent. A camera process
-that dies is reported and restarted after a back-off (1 s, doubling up to 30 s); the other
-cameras keep fusing, and the camera is fused again once it sends. The run ends at
---duration, when every source has ended, or on Ctrl-C / SIGTERM, which stops the camera
-processes and finishes the session file cleanly (exit code 0). The session file is flushed
-twice a second: a killed run leaves it unfinished, and 'pslog recover' salvages it. With
---force an old session is replaced only by a complete new one, never by an empty one.
+A status line on stderr shows per camera whether it is live or silent; each camera process
+says its pid when it starts. A camera process that dies (crashes, is killed, its device
+stops delivering) is reported and restarted after a back-off (1 s, doubling up to 30 s); a
+source that cannot be opened at all is not retried, and if none can, the run ends with
+exit code 1. The other cameras keep fusing, and the camera is fused again once it sends.
+The run ends at --duration, when every source has ended, or on Ctrl-C / SIGTERM, which
+stops the camera processes and finishes the session file cleanly (exit code 0). The
+session file is flushed twice a second: a killed run leaves it unfinished, and 'pslog
+recover' salvages it. With --force an old session is replaced only by a complete new one,
+never by an empty one.
 """
 
 EXAMPLES = """\
