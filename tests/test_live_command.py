@@ -76,10 +76,13 @@ class LiveRun:
         self.started = time.monotonic()
 
     def _read(self, stream, lines: list[str]) -> None:
-        for line in stream:
-            with self._changed:
-                lines.append(line.rstrip("\n"))
-                self._changed.notify_all()
+        try:
+            for line in stream:
+                with self._changed:
+                    lines.append(line.rstrip("\n"))
+                    self._changed.notify_all()
+        except (ValueError, OSError):  # the test closed the stream (a reader going away)
+            pass
         with self._changed:
             self._changed.notify_all()
 

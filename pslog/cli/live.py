@@ -213,7 +213,7 @@ def _run(args: argparse.Namespace, stop) -> int:
             duration_ns=None if args.duration is None else int(args.duration * 1e9))
     sock = bind_udp(listen)  # a busy port fails here, before any output is opened
     try:
-        sinks, recording = _sinks(args, rig)
+        sinks, recording = _sinks(args, rig, stop)
     except BaseException:
         sock.close()
         raise
@@ -316,13 +316,11 @@ def _udp_text(address: tuple[str, int]) -> str:
     return f"udp://[{host}]:{port}" if ":" in host else f"udp://{host}:{port}"
 
 
-def _sinks(args: argparse.Namespace, rig) -> tuple[list, object]:
+def _sinks(args: argparse.Namespace, rig, stop) -> tuple[list, object]:
     """The fuser's outputs, in the order points reach them (the robot's UDP first), and the
     recording among them (None without --record). Any that fails to open is one error line,
     and the ones opened before it are closed again (a new session file removed)."""
-    import sys
-
-    from pslog.live.sinks import JsonlSink, UdpSink
+    from pslog.live.sinks import UdpSink
 
     sinks: list = []
     recording = None
@@ -330,7 +328,7 @@ def _sinks(args: argparse.Namespace, rig) -> tuple[list, object]:
         if args.out is not None:
             sinks.append(UdpSink(_udp_text(args.out)))
         if args.jsonl:
-            sinks.append(JsonlSink(sys.stdout))
+            sinks.append(_jsonl(args, stop))
         if args.record:
             recording = _recording(args, rig)
             sinks.append(recording)
@@ -357,6 +355,24 @@ def _sinks(args: argparse.Namespace, rig) -> tuple[list, object]:
                 sink.close()
         raise
     return sinks, recording
+
+
+def _jsonl(args: argparse.Namespace, stop):
+    """core's JsonlSink on stdout; when the reader goes away (``| head``) and stdout was the
+    only output, the run stops (nothing is left to do)."""
+    import sys
+
+    from pslog.live.sinks import JsonlSink
+
+    alone = not (args.out or args.record or args.view or args.serve or args.foxglove)
+
+    class Jsonl(JsonlSink):
+        def emit(self, points) -> None:
+            super().emit(points)
+            if self._broken and alone and not stop.is_set():
+                stop.set("standard output closed")
+
+    return Jsonl(sys.stdout)
 
 
 def _recording(args: argparse.Namespace, rig):

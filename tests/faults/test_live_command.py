@@ -187,3 +187,16 @@ def test_a_stop_while_the_cameras_start_is_clean_and_records_nothing(tmp_path):
     assert not (tmp_path / "s.mcap").exists()
     pids = [pid for cam in camera_pids(run).values() for pid in cam]
     assert all(gone(pid) for pid in pids)
+
+
+def test_a_reader_that_goes_away_ends_a_run_whose_only_output_it_was(tmp_path):
+    """``pslog live --jsonl | head -5``: once head exits, nothing is left to do: the run
+    ends (no traceback), its camera processes with it."""
+    run = LiveRun("--rig", "paper3", "--timing", "typeA", "--synthetic", "--motion", "rally",
+                  "--duration", "60", "--listen", _listen(), "--jsonl", cwd=tmp_path)
+    run.wait_for(lambda: len(run.out) >= 5, "5 points")
+    run.proc.stdout.close()  # (the reader thread sees the end of its stream too)
+    code = run.finish(timeout=30)  # a hang guard, far below the 60 s the run would last
+    assert code in (0, 1), "\n".join(run.err)
+    pids = [pid for cam in camera_pids(run).values() for pid in cam]
+    assert len(pids) == 3 and all(gone(pid) for pid in pids)
