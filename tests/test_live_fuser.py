@@ -118,9 +118,9 @@ def test_bad_datagrams_are_counted_and_change_nothing(session):
             data.append(raw)
             expect["duplicate"] += 1
         if i == 100:  # a frame 0.5 s older than the newest: late
-            old = clean[100 - 45]
+            old = clean[100 - 45]  # (with a candidate: a frame without one fuses nothing)
             data.append(encode_detections(DetectionDatagram(
-                old.camera, old.sequence, 99_999, old.t_capture_ns - 1, 0, old.uv)))
+                old.camera, old.sequence, 99_999, old.t_capture_ns - 1, 0, [[320.0, 240.0]])))
             expect["late"] += 1
             expect["lost"] += 0
         if i == 120:  # before the session clock's zero
@@ -338,7 +338,7 @@ def _serve_session(rig, det, path, method, faults=True, interrupt=False):
             if faults and i == 50:
                 old = clean[5]
                 tx.sendto(encode_detections(DetectionDatagram(
-                    old.camera, old.sequence, 77, old.t_capture_ns + 1, 0, old.uv)),
+                    old.camera, old.sequence, 77, old.t_capture_ns + 1, 0, [[320.0, 240.0]])),
                     ready.address)
             if i % 4 == 0:
                 time.sleep(0.002)
@@ -367,18 +367,29 @@ def _serve_session(rig, det, path, method, faults=True, interrupt=False):
     return summary, points, ready.epoch_ns
 
 
-@pytest.mark.parametrize("method", ["filter", "typeA"])
-def test_recorded_session_refused_offline_gives_the_live_points(tmp_path, method):
+CLOCK_FAULTS = dict(clock_offset_s={"cam2": 0.003, "cam3": -0.004},
+                    clock_drift_ppm={"cam3": 30.0}, readout_s={"cam2": 0.01})
+
+
+@pytest.mark.parametrize("method, clocks", [("filter", False), ("typeA", False),
+                                            ("filter", True)])
+def test_recorded_session_refused_offline_gives_the_live_points(tmp_path, method, clocks):
     """A real MCAP: `pslog fuse` of the session recorded live (RecordSink) gives exactly the
     points the robot received over UDP (within 1e-9 m, same times and cameras), although
     duplicates, a reordered and a late frame were dropped live: they are recorded apart, on
-    /live/dropped/<reason>/<camera>, with the fused frames alone on the detection topics."""
+    /live/dropped/<reason>/<camera>, with the fused frames alone on the detection topics.
+    With ``clocks`` the rig carries clock corrections (offsets, drift, a rolling shutter):
+    applied live, recorded with the rig, applied again offline."""
     from mcap.reader import make_reader
 
     from pslog.cli import main
     from pslog.log.reader import read_session
 
-    rig, det = rally_session(1.0)
+    if clocks:
+        rig, det = rally_session(1.0, **CLOCK_FAULTS)
+        rig = true_rig(rig, SimulationOptions(**CLOCK_FAULTS))
+    else:
+        rig, det = rally_session(1.0)
     path, fused = tmp_path / "live.mcap", tmp_path / "fused.mcap"
     summary, points, epoch = _serve_session(rig, det, path, method)
     c = summary.counters
@@ -491,3 +502,76 @@ def test_without_gating_each_frame_fuses_its_best_candidate(session):
     points = _run(fuser, datagrams(det, rig))
     assert fuser.counters()["fusion_error"] == 0
     _assert_same(points, fuse(det, rig, "typeA", options))
+
+
+def test_frames_without_candidates_never_hold_the_order(session):
+    """A frame where nothing was seen fuses nothing: swapped with the next frame (another
+    camera's) it is still taken (its camera is alive), and the frame it overtook is fused,
+    not dropped as reordered: the points are those of the whole session."""
+    rig, det = session
+    clean = frames(det, rig)
+    empty = [i for i, d in enumerate(clean[:-1]) if len(d) == 0 and len(clean[i + 1])
+             and clean[i + 1].camera != d.camera]
+    assert len(empty) >= 3
+    order = list(range(len(clean)))
+    for i in empty:
+        order[i], order[i + 1] = order[i + 1], order[i]
+    fuser = LiveFuser(rig, "filter", epoch_ns=EPOCH)
+    points = _run(fuser, [encode_detections(clean[i]) for i in order])
+    c = fuser.counters()
+    assert c["reordered"] == c["late"] == 0 and c["fused"] == len(clean)
+    _assert_same(points, fuse(det, rig, "filter"))
+
+
+def _overtaken(clean):
+    """The frames in a send order where, every 11 frames, a frame with candidates is
+    overtaken by the next one (another camera's, with candidates); arrival times 1 ms after
+    the newest capture sent."""
+    order = list(range(len(clean)))
+    swaps = [i for i in range(5, len(clean) - 1, 11)
+             if len(clean[i]) and len(clean[i + 1]) and clean[i + 1].camera != clean[i].camera]
+    for i in swaps:
+        order[i], order[i + 1] = order[i + 1], order[i]
+    arrival, newest = [], 0
+    for i in order:
+        newest = max(newest, clean[i].t_capture_ns)
+        arrival.append(newest + 1_000_000)
+    return order, arrival, len(swaps)
+
+
+def test_hold_fuses_frames_that_overtook_one_another(session):
+    """hold_s > 0: a frame waits until the other cameras have sent one at least as recent,
+    so frames that overtook one another are all fused, in capture order: the points are
+    those of the whole session (without a hold the overtaken ones are dropped)."""
+    rig, det = session
+    clean = frames(det, rig)
+    order, arrival, n_swaps = _overtaken(clean)
+    data = [encode_detections(clean[i]) for i in order]
+    assert n_swaps >= 8
+    plain = LiveFuser(rig, "filter", epoch_ns=EPOCH)
+    _run(plain, data, arrival)
+    assert plain.counters()["reordered"] == n_swaps
+    held = LiveFuser(rig, "filter", epoch_ns=EPOCH, hold_s=0.05)
+    points = _run(held, data, arrival)
+    c = held.counters()
+    assert c["reordered"] == c["late"] == 0 and c["fused"] == len(clean)
+    _assert_same(points, fuse(det, rig, "filter"))
+
+
+def test_hold_does_not_wait_for_a_silent_camera(session):
+    """With a hold, a camera that went silent is not waited for: the others' frames are
+    fused as soon as the live cameras have caught up (poll releases them on time)."""
+    rig, det = session
+    clean = [d for d in frames(det, rig) if d.camera != "cam3"
+             or d.t_capture_ns - EPOCH < 0.3 * NS]
+    fuser = LiveFuser(rig, "typeA", epoch_ns=EPOCH, hold_s=0.2, silent_after_s=0.05)
+    waited = []
+    for d in clean:
+        for p in fuser.feed(encode_detections(d), d.t_capture_ns) + fuser.poll(d.t_capture_ns):
+            if p.t_capture_ns - EPOCH > 0.5 * NS:
+                waited.append(d.t_capture_ns - p.t_capture_ns)
+    fuser.flush()
+    # once cam3 is silent, a frame waits at most for the other live camera's next frame
+    # (1/90 or 2/90 s later with cam3's shutter gone), never for the 0.2 s hold
+    assert waited and max(waited) <= 0.0223 * NS
+    assert fuser.counters()["fused"] == len(clean)

@@ -34,6 +34,7 @@ other methods a constant-velocity estimate from the method's last two points (ve
 from __future__ import annotations
 
 import bisect
+import heapq
 import math
 import time
 from collections import deque
@@ -183,6 +184,7 @@ class CameraLiveState:
     last_capture_ns: int | None = None
     silent: bool = True
     _last_sequence: int | None = None
+    _newest_logged: int | None = None  # newest logged time received (any frame)
     _seen: set = field(default_factory=set)
     _seen_order: deque = field(default_factory=deque)
     # (true time of the frame's top row, arrival ns) of the latest frames, for the points
@@ -205,6 +207,13 @@ class LiveFuser:
     silent_after_s : float, a camera without a datagram this long is silent, seconds
     clock : callable returning the wall clock in ns (``time.time_ns``), stamps ``t_emit_ns``
     keep : bool, collect :attr:`accepted` and :attr:`dropped` (for a recorder to drain)
+    hold_s : float, 0 (default): each frame is fused the moment it arrives. Above 0: a frame
+        with candidates waits until every other live camera has sent a frame at least as
+        recent (each camera sends in order, so nothing older can still come from it), at
+        most ``hold_s`` after its arrival, and frames are fused in capture order: frames
+        that overtake one another by up to ``hold_s`` are all fused instead of dropped as
+        ``reordered``, at the cost of that wait (:meth:`poll` releases frames whose wait
+        is over between datagrams)
 
     Attributes
     ----------
@@ -216,7 +225,8 @@ class LiveFuser:
 
     def __init__(self, rig: Rig, method: str = "filter", *, late_s: float = 0.1,
                  options=None, candidates: bool = True, epoch_ns: int | None = None,
-                 silent_after_s: float = 1.0, clock=time.time_ns, keep: bool = True) -> None:
+                 silent_after_s: float = 1.0, clock=time.time_ns, keep: bool = True,
+                 hold_s: float = 0.0) -> None:
         from ..fusion import FusionOptions, check_method
         from ..fusion._prepare import default_max_gap_s
         from ..fusion.stream import StreamFuser
@@ -226,6 +236,12 @@ class LiveFuser:
             raise FusionError(f"late bound must be >= 0 seconds, got {late_s!r}")
         if not silent_after_s > 0:
             raise FusionError(f"silent-after must be > 0 seconds, got {silent_after_s!r}")
+        if not 0 <= hold_s <= 10:
+            raise FusionError(f"hold must be in [0, 10] seconds, got {hold_s!r}")
+        self.hold_ns = int(hold_s * NS)
+        # frames waiting (hold_s > 0): heap of (logged ns, camera, order, datagram, arrival)
+        self._held: list = []
+        self._n_held = 0
         self.rig = rig
         self.method = method
         self.options = options or FusionOptions()
@@ -290,19 +306,59 @@ class LiveFuser:
                 state._last_sequence = d.sequence
         if reason is not None:
             return self._drop(d, reason)
-        # accepted: in order, from now on the newest
+        # accepted
         logged = d.t_capture_ns - self.epoch_ns
-        self._newest = (logged, cam)
+        if state._newest_logged is None or logged > state._newest_logged:
+            state._newest_logged = logged
         key = (d.sequence, d.t_capture_ns)
         state._seen.add(key)
         state._seen_order.append(key)
         if len(state._seen_order) > _SEEN:
             state._seen.discard(state._seen_order.popleft())
-        top = logged if not self._corrected else int(true_times_ns(
-            logged, 0.0, self._clock_p["height"][cam], self._clock_p["clock_offset"][cam],
-            self._clock_p["clock_drift_ppm"][cam], self._clock_p["readout"][cam]))
-        state._arrivals.append((top, int(arrival_ns)))
+        if not self.hold_ns:
+            return self._fuse(d, cam, logged, int(arrival_ns))
+        if len(d):
+            heapq.heappush(self._held, (logged, cam, self._n_held, d, int(arrival_ns)))
+            self._n_held += 1
+            return self._release(int(arrival_ns))
+        return self._fuse(d, cam, logged, int(arrival_ns)) + self._release(int(arrival_ns))
+
+    def poll(self, now_ns: int) -> list[LivePoint]:
+        """With ``hold_s``: fuse the held frames whose wait is over at ``now_ns`` (wall
+        clock); returns their points. Without: nothing to do."""
+        return self._release(int(now_ns)) if self._held else []
+
+    def _release(self, now: int, final: bool = False) -> list[LivePoint]:
+        """Fuse the held frames, oldest first, while the oldest one is complete (every
+        other live camera has sent a frame at least as recent) or has waited ``hold_s``."""
+        held, points = self._held, []
+        while held:
+            logged, cam, _, d, arrival = held[0]
+            if not final and now - arrival < self.hold_ns:
+                for c in self._cams:
+                    if c.index == cam or c.last_arrival_ns is None \
+                            or now - c.last_arrival_ns > self.silent_after_ns:
+                        continue  # a silent camera is not waited for
+                    if c._newest_logged is None or c._newest_logged < logged:
+                        return points
+            heapq.heappop(held)
+            if (logged, cam) <= self._newest:  # overtaken by a frame released on time out
+                late = self._newest[0] - logged > self.late_ns
+                self._drop(d, "late" if late else "reordered")
+                continue
+            points += self._fuse(d, cam, logged, arrival)
+        return points
+
+    def _fuse(self, d: DetectionDatagram, cam: int, logged: int, arrival_ns: int):
+        """Push one accepted frame into the stream; its points."""
+        counts, state = self._counts, self._cams[cam]
         k = len(d)
+        if k:  # from now on the newest: an older frame with candidates cannot be fused
+            self._newest = (logged, cam)
+            top = logged if not self._corrected else int(true_times_ns(
+                logged, 0.0, self._clock_p["height"][cam], self._clock_p["clock_offset"][cam],
+                self._clock_p["clock_drift_ppm"][cam], self._clock_p["readout"][cam]))
+            state._arrivals.append((top, arrival_ns))
         try:
             if k:
                 order = np.argsort(-d.score, kind="stable")  # best first, as a session stores
@@ -330,12 +386,13 @@ class LiveFuser:
         if self._flushed:
             return []
         self._flushed = True
+        points = self._release(0, final=True)
         try:
             track = self.stream.flush()
         except FusionError:
             self._counts["fusion_error"] += 1
-            return []
-        return self._points(track) if len(track) else []
+            return points
+        return points + (self._points(track) if len(track) else [])
 
     def counters(self) -> dict[str, int]:
         """Datagrams ``received``; frames ``fused``; dropped by reason (``duplicate``,
@@ -368,8 +425,10 @@ class LiveFuser:
         logged = d.t_capture_ns - self.epoch_ns
         if logged < 0:
             return "late"
-        if (logged, cam) <= self._newest:
+        if len(d) and (logged, cam) <= self._newest:
             return "late" if self._newest[0] - logged > self.late_ns else "reordered"
+        # a frame without candidates fuses nothing (offline fusion never sees it either):
+        # in any order it only says that its camera is alive
         return None
 
     def _drop(self, d: DetectionDatagram, reason: str, counted: bool = False) -> list:

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import PslogError
+from ..errors import InputError, PslogError
 from ..records import NS
 from ..rig import Rig
 from .fuser import CameraLiveState, LiveFuser
@@ -113,7 +113,8 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
           status_every_s: float = 1.0, silent_after_s: float = 1.0,
           ready: threading.Event | None = None, late_s: float = 0.1, options=None,
           candidates: bool = True, epoch_ns: int | None = None,
-          status_stream="stderr", sock: socket.socket | None = None) -> LiveSummary:
+          status_stream="stderr", sock: socket.socket | None = None,
+          hold_s: float = 0.0) -> LiveSummary:
     """Run the live fuser on ``listen`` until ``stop`` is set, ``duration_s`` passes or
     Ctrl-C.
 
@@ -131,7 +132,8 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
     ready : set once the socket is bound (start senders after it); its ``address``
         attribute is set to the bound ``(host, port)`` first, its ``epoch_ns`` to the
         session clock's zero (wall clock ns)
-    late_s, options, candidates, epoch_ns : as :class:`~pslog.live.fuser.LiveFuser`
+    late_s, options, candidates, epoch_ns, hold_s : as :class:`~pslog.live.fuser.LiveFuser`
+        (``hold_s`` > 0: frames wait for the other cameras' to be fused in capture order)
     status_stream : where status lines go: a text stream, ``"stderr"`` (``sys.stderr`` when
         called) or None (nowhere)
     sock : an already bound UDP socket to use instead of binding ``listen``
@@ -150,8 +152,12 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
     closed.
     """
     try:
+        if not status_every_s > 0:
+            raise InputError(f"status period must be > 0 seconds, got {status_every_s!r}")
+        if duration_s is not None and not duration_s >= 0:
+            raise InputError(f"duration must be >= 0 seconds, got {duration_s!r}")
         fuser = LiveFuser(rig, method, late_s=late_s, options=options, candidates=candidates,
-                          epoch_ns=epoch_ns, silent_after_s=silent_after_s)
+                          epoch_ns=epoch_ns, silent_after_s=silent_after_s, hold_s=hold_s)
         if sock is None:
             sock = bind_udp(listen)
     except BaseException:
@@ -269,7 +275,8 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
             ready.address = address
             ready.epoch_ns = fuser.epoch_ns
             ready.set()
-        sock.settimeout(_POLL_S)
+        # with a hold, look at the clock often enough to release frames about on time
+        sock.settimeout(min(_POLL_S, hold_s / 4) if fuser.hold_ns else _POLL_S)
         recv = sock.recvmsg
         while not stop.is_set():
             try:
@@ -279,6 +286,15 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
             now = clock()
             if data is not None:
                 handle(data, ancdata, now)
+            if fuser.hold_ns and data is None:
+                # nothing more in the socket: frames whose wait is over by the clock (while
+                # datagrams come, each one's arrival time releases them: a fuser running
+                # behind reads what is queued before it gives up waiting for it)
+                points = fuser.poll(clock())
+                if points:
+                    hand_out(points)
+                if fuser.keep:
+                    pass_on()
             # a camera silent or back: looked at between datagrams while one is silent
             if data is None or now >= next_status or was_silent.get(fuser.last_camera, False):
                 events(now)

@@ -117,7 +117,7 @@ FAULTS = {
     "duplicate": ("duplicate", lambda d, prev: _good(d)),
     "reordered": ("reordered", None),  # a frame held back, sent after the next one
     "late": ("late", lambda d, prev: _good(DetectionDatagram(
-        d.camera, 1, 1, d.t_capture_ns - NS // 2 - 7, 0, d.uv))),
+        d.camera, 1, 1, d.t_capture_ns - NS // 2 - 7, 0, [[320.0, 240.0]]))),
     "truncated": ("truncated", lambda d, prev: _good(d)[:60]),
     "cut-candidate": ("truncated", lambda d, prev: (_good(d) + bytes(32))[:-7]),
     "oversize": ("oversize", lambda d, prev: _good(d)[:8] + bytes(60_000)),
@@ -148,8 +148,9 @@ def test_bad_datagram_is_counted_dropped_and_fusion_goes_on(session, kind):
         expected = 0
         held = None
         for i, d in enumerate(frames):
-            if kind == "reordered" and i % 10 == 5:
-                held = d  # sent after the next frame: out of order
+            if kind == "reordered" and i % 10 == 5 and len(d):
+                held = d  # sent after the next frame: out of order (a frame without
+                # candidates would be taken in any order: it fuses nothing)
                 keep[i] = False
                 continue
             send(_good(d))
@@ -292,3 +293,48 @@ def test_full_disk_while_recording_is_one_line_error_after_the_points(tmp_path, 
         text = str(error)
         assert "\n" not in text and str(path) in text and "No space left" in text
         assert receiver.points  # the points made before the disk filled were sent
+
+
+@pytest.mark.parametrize("kwargs, says", [
+    (dict(method="smooth"), "offline"),
+    (dict(method="typeZ"), "unknown fusion method"),
+    (dict(status_every_s=0), "status period"),
+    (dict(duration_s=-1), "duration"),
+    (dict(silent_after_s=-2), "silent"),
+    (dict(late_s=float("nan")), "late"),
+])
+def test_bad_serve_settings_are_one_line_errors_leaving_no_file(tmp_path, session, kwargs,
+                                                                  says):
+    rig, _ = session
+    path = tmp_path / "live.mcap"
+    with pytest.raises(PslogError) as info:
+        serve(rig, "udp://127.0.0.1:0", [RecordSink(path, rig)], **kwargs)
+    assert "\n" not in str(info.value) and says in str(info.value)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_with_a_hold_overtaken_frames_are_fused_over_real_udp(session):
+    """serve(hold_s=0.05): frames sent out of order (each 10th held back behind the next)
+    are all fused in capture order: nothing dropped, the robot's points are those of the
+    whole session."""
+    rig, det = session
+    with live(rig, hold_s=0.05) as (send, receiver, result):
+        frames = _frames(det, rig, result["epoch"])
+        held = None
+        for i, d in enumerate(frames):
+            if i % 10 == 5 and len(d):
+                held = d
+                continue
+            send(_good(d))
+            if held is not None:
+                send(_good(held))
+                held = None
+            time.sleep(0.0005)
+    c = result["summary"].counters
+    assert c["reordered"] == c["late"] == 0 and c["fused"] == det.n_frames
+    offline = fuse(det, rig, "filter")
+    got = receiver.points
+    assert len(got) == len(offline)
+    np.testing.assert_array_equal([p.t_capture_ns - result["epoch"] for p in got],
+                                  offline.time_ns)
+    assert np.abs(np.array([p.position for p in got]) - offline.position_world).max() <= 1e-9
