@@ -11,6 +11,7 @@ from pslog.cli._common import (
     add_rig,
     declare_files,
     motion_name,
+    number_at_most,
     positive_float,
     usage_error,
 )
@@ -117,6 +118,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--method", default="filter", type=streaming_method, metavar="METHOD",
                         help="causal fusion method: filter or typeA (or another streaming "
                              "method; default %(default)s)")
+    parser.add_argument("--hold", type=number_at_most(10.0, "s", "a frame waits for the "
+                                                      "others, not for ever"),
+                        default=0.0, metavar="S",
+                        help="seconds a frame may wait for the other cameras' frames so that "
+                             "frames arriving out of order are all fused in capture order "
+                             "instead of dropped (default %(default)s: fused at once; try "
+                             "0.05 with shutters that fire together, sync or typeB)")
     parser.add_argument("--listen", default=DEFAULT_LISTEN, type=listen_address,
                         metavar="udp://HOST:PORT",
                         help="where the fuser receives detection datagrams; port 0 for any "
@@ -242,7 +250,7 @@ def _run(args: argparse.Namespace, stop) -> int:
         summary = serve(rig, listen, sinks, method=args.method,
                         duration_s=args.duration if cameras is None else None,
                         stop=stop.event, status_every_s=args.status_every, ready=ready,
-                        epoch_ns=epoch_ns, sock=sock)
+                        epoch_ns=epoch_ns, sock=sock, hold_s=args.hold)
     finally:
         stop.event.set()
         if watcher is not None:
