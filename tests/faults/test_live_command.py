@@ -37,6 +37,8 @@ def _listen() -> str:
     (("--synthetic", "--duration", "1e9"), ("frames",)),
     (("--serve", "--web-port", "9000", "--grpc-port", "9000"), ("must differ",)),
     (("--synthetic", "--max-candidates", "65"), ("--max-candidates", "64")),
+    (("--hold", "11"), ("--hold", "at most 10")),
+    (("--hold", "-0.1"), ("--hold",)),
 ])
 def test_malformed_command_lines_are_usage_errors(tmp_path, args, contains):
     before = fingerprint(tmp_path)
