@@ -29,6 +29,8 @@ NOT_RUN = {
     "--source cam3=clip.mp4 -o match.mcap": "needs two cameras and a video file",
     "rerun throw.rrd": "needs a display",
     "pslog view fused.mcap --serve": "serves http://localhost:9090 until Ctrl-C",
+    "pslog live --rig rig.toml --source cam1=0 --source cam2=1 --source cam3=2 "
+    "--out udp://127.0.0.1:10010 --record match-live.mcap": "needs three cameras",
 }
 #: commands of the set-up block, which this very suite runs inside of
 EXCLUDED = {

@@ -62,6 +62,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "redetect": ("redetect", "re-run ball detection over a session's recorded frames"),
     "recover": ("recover", "salvage the complete records of a damaged session"),
     "view": ("view", "browse a session and its fused tracks in rerun"),
+    "live": ("live", "fuse live: camera processes stream detections, points out at once"),
 }
 
 

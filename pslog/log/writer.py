@@ -40,8 +40,9 @@ _TRACK_SPHERE_M = 0.043
 #: How long each fused track point stays visible in Foxglove's 3D panel (a short trail).
 _TRACK_LIFETIME_NS = 500_000_000
 _LOG_LEVELS = {"debug": 1, "info": 2, "warning": 3, "error": 4, "fatal": 5}
-_METHOD_COLORS = ((0.9, 0.3, 0.1), (0.1, 0.6, 0.9), (0.2, 0.8, 0.3), (0.8, 0.2, 0.8),
-                  (0.9, 0.8, 0.1))
+#: RGB colour of each track method in Foxglove, by order of first appearance in the file
+TRACK_COLORS = ((0.9, 0.3, 0.1), (0.1, 0.6, 0.9), (0.2, 0.8, 0.3), (0.8, 0.2, 0.8),
+                (0.9, 0.8, 0.1))
 
 
 def _locked(method):
@@ -220,23 +221,7 @@ class SessionWriter:
     def _write_static(self, time_ns: int) -> None:
         """Per camera: foxglove.CameraCalibration and foxglove.FrameTransform world -> camera."""
         for cam in self.rig.cameras:
-            calib = S.CameraCalibration(
-                frame_id=cam.name, width=cam.width, height=cam.height,
-                distortion_model="plumb_bob", D=[float(d) for d in cam.dist],
-                K=[float(k) for k in cam.K.ravel()],
-                R=[float(r) for r in np.eye(3).ravel()],
-                P=[float(p) for p in np.hstack([cam.K, np.zeros((3, 1))]).ravel()])
-            S.set_timestamp(calib.timestamp, time_ns)
-            world_from_cam = cam.world_from_cam
-            q = S.quaternion_xyzw(world_from_cam[:3, :3])
-            pose = S.FrameTransform(parent_frame_id=S.WORLD_FRAME, child_frame_id=cam.name)
-            S.set_timestamp(pose.timestamp, time_ns)
-            pose.translation.x, pose.translation.y, pose.translation.z = (
-                float(x) for x in world_from_cam[:3, 3])
-            pose.rotation.x, pose.rotation.y, pose.rotation.z, pose.rotation.w = (
-                float(x) for x in q)
-            for topic, msg in ((S.calibration_topic(cam.name), calib),
-                               (S.transform_topic(cam.name), pose)):
+            for topic, msg in camera_messages(cam, time_ns):
                 self._queue(self._channel(topic, type(msg)), time_ns, msg.SerializeToString())
         self._register_detection_channels()
 
@@ -476,7 +461,7 @@ class SessionWriter:
             raise InputError(f"track method must be a non-empty name without '/', got {method!r}")
         if method not in self._track_methods:
             self._track_methods.append(method)
-        color = _METHOD_COLORS[self._track_methods.index(method) % len(_METHOD_COLORS)]
+        color = TRACK_COLORS[self._track_methods.index(method) % len(TRACK_COLORS)]
         channel = self._channel(S.track_topic(method), S.TrackPoint)
         scene_channel = self._channel(S.track_scene_topic(method), S.SceneUpdate)
         n = len(track)
@@ -498,7 +483,7 @@ class SessionWriter:
             for k, values in extra.items():
                 msg.quality[k] = values[i]
             self._queue(channel, t, msg.SerializeToString())
-            self._queue(scene_channel, t, _scene_point(method, i, t, (x, y, z), color))
+            self._queue(scene_channel, t, scene_point(method, i, t, (x, y, z), color))
         self._count(S.track_topic(method), n)
         self._count(S.track_scene_topic(method), n)
 
@@ -605,7 +590,28 @@ def _negative_time(time_ns: int) -> str:
     return f"time {time_ns} ns is before the session clock's zero; log times must be >= 0"
 
 
-def _scene_point(method: str, i: int, time_ns: int, xyz, color) -> bytes:
+def camera_messages(cam, time_ns: int) -> list:
+    """``(topic, message)`` of a camera's static messages: its foxglove.CameraCalibration and
+    its foxglove.FrameTransform world -> camera, stamped ``time_ns`` (also used live)."""
+    calib = S.CameraCalibration(
+        frame_id=cam.name, width=cam.width, height=cam.height,
+        distortion_model="plumb_bob", D=[float(d) for d in cam.dist],
+        K=[float(k) for k in cam.K.ravel()],
+        R=[float(r) for r in np.eye(3).ravel()],
+        P=[float(p) for p in np.hstack([cam.K, np.zeros((3, 1))]).ravel()])
+    S.set_timestamp(calib.timestamp, time_ns)
+    world_from_cam = cam.world_from_cam
+    q = S.quaternion_xyzw(world_from_cam[:3, :3])
+    pose = S.FrameTransform(parent_frame_id=S.WORLD_FRAME, child_frame_id=cam.name)
+    S.set_timestamp(pose.timestamp, time_ns)
+    pose.translation.x, pose.translation.y, pose.translation.z = (
+        float(x) for x in world_from_cam[:3, 3])
+    pose.rotation.x, pose.rotation.y, pose.rotation.z, pose.rotation.w = (float(x) for x in q)
+    return [(S.calibration_topic(cam.name), calib), (S.transform_topic(cam.name), pose)]
+
+
+def scene_point(method: str, i: int, time_ns: int, xyz, color) -> bytes:
+    """A serialized foxglove.SceneUpdate: the sphere of track point ``i`` (also used live)."""
     update = S.SceneUpdate()
     entity = update.entities.add(frame_id=S.WORLD_FRAME, id=f"{method}/{i}")
     S.set_timestamp(entity.timestamp, time_ns)
