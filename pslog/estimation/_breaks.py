@@ -231,13 +231,13 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
     # new B-splines are zero, so it adds nothing)
     old = base.basis_w[which[:, None, None], cols[..., None], q0[:, None, None] + np.arange(6)]
     M = base.M[wsel].reshape(B, W, 9)
-    # Σ_w (f fᵀ) ⊗ M_w and Σ_w (old fᵀ) ⊗ M_w: one batched product of the 27 rows
-    # (f, old) ⊗ f with M, then in (e, i, f, j) order
-    rows = np.concatenate([f, np.swapaxes(old, 1, 2)], axis=1)  # (B, 9, W)
-    both = ((rows[:, :, None, :] * f[:, None, :, :]).reshape(B, 27, W) @ M).reshape(
-        B, 9, 3, 3, 3).transpose(0, 1, 3, 2, 4)
-    Hyy = both[:, :3].reshape(B, 9, 9)
-    Hxy = both[:, 3:].reshape(B, 18, 9)
+    # Σ_w (f fᵀ) ⊗ M_w and Σ_w (old fᵀ) ⊗ M_w: a batched product of the 9 rows f ⊗ f and
+    # one of the 18 rows old ⊗ f with M, then in (e, i, f, j) order (two products rather
+    # than one of both: temporaries a third the size)
+    Hyy = ((f[:, :, None, :] * f[:, None, :, :]).reshape(B, 9, W) @ M).reshape(
+        B, 3, 3, 3, 3).transpose(0, 1, 3, 2, 4).reshape(B, 9, 9)
+    Hxy = ((np.swapaxes(old, 1, 2)[:, :, None, :] * f[:, None, :, :]).reshape(B, 18, W)
+           @ M).reshape(B, 6, 3, 3, 3).transpose(0, 1, 3, 2, 4).reshape(B, 18, 9)
     g = f @ base.u[wsel]  # (B, 3, 3)
 
     # prior: four sub-spans [j-1, j], [j, τ], [τ, j+1], [j+1, j+2]
