@@ -223,8 +223,9 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
     W = max(int(np.max(hi_col - lo_col)), 1)
     cols = np.minimum(lo_col[:, None] + np.arange(W), xs_all.shape[1] - 1)
     inside = lo_col[:, None] + np.arange(W) < hi_col[:, None]
-    wsel = (which[:, None], cols)
-    xs = np.where(inside, base.s_sorted[wsel], 1e6)  # (B, W); far: every new B-spline is 0
+    Wb = xs_all.shape[1]
+    row = which[:, None] * Wb + cols  # (B, W): the detections' flat rows in the windows
+    xs = np.where(inside, np.take(base.s_sorted, row), 1e6)  # (B, W); far: every new B-spline is 0
     x = xs - j[:, None]
     f = np.zeros((B, 3, W))
     for e, spline in enumerate(pieces):
@@ -233,8 +234,9 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
             f[:, e] = np.where(on, _horner(c, x), f[:, e])
     # the base's B-splines q0..q0+5 at those detections (a padding entry may lose some: its
     # new B-splines are zero, so it adds nothing)
-    old = base.basis_w[which[:, None, None], cols[..., None], q0[:, None, None] + np.arange(6)]
-    M = base.M[wsel].reshape(B, W, 9)
+    m = local.m
+    old = np.take(base.basis_w, (row * m + q0[:, None])[..., None] + np.arange(6))
+    M = np.take(base.M.reshape(-1, 9), row, axis=0)  # (B, W, 9)
     # Σ_w (f fᵀ) ⊗ M_w and Σ_w (old fᵀ) ⊗ M_w: a batched product of the 9 rows f ⊗ f and
     # one of the 18 rows old ⊗ f with M, then in (e, i, f, j) order (two products rather
     # than one of both: temporaries a third the size)
@@ -242,7 +244,7 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
         B, 3, 3, 3, 3).transpose(0, 1, 3, 2, 4).reshape(B, 9, 9)
     Hxy = ((np.swapaxes(old, 1, 2)[:, :, None, :] * f[:, None, :, :]).reshape(B, 18, W)
            @ M).reshape(B, 6, 3, 3, 3).transpose(0, 1, 3, 2, 4).reshape(B, 18, 9)
-    g = f @ base.u[wsel]  # (B, 3, 3)
+    g = f @ np.take(base.u.reshape(-1, 3), row, axis=0)  # (B, 3, 3)
 
     # prior: four sub-spans [j-1, j], [j, τ], [τ, j+1], [j+1, j+2]
     lo = np.stack([jm, j, s, jp], 1)
