@@ -275,7 +275,8 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
                                N_c[:, 3] / h**3)
     # the nodes' B-splines on the six base control points q0..q0+5 of the three spans
     Nd6 = spread(first, Nd)  # (B, 12, 6)
-    p0 = Nd6 @ base.x0[which[:, None], q0[:, None] + np.arange(6)]  # p'' or jerk, (B, 12, 3)
+    x0 = np.take(base.x0.reshape(-1, 3), (which * m + q0)[:, None] + np.arange(6), axis=0)
+    p0 = Nd6 @ x0  # p'' or jerk, (B, 12, 3)
     p0[:, :8] -= np.asarray(prior.gravity, dtype=np.float64)  # deviation from gravity
     wq = h * np.concatenate([half / prior.q_accel, half / prior.q_accel,
                              2 * half / prior.q_jerk], axis=1)  # (B, 12)
