@@ -73,8 +73,8 @@ acceleration, is fitted with a small bias; air drag is absorbed by σ_a, not mod
 velocity change spread over more than a few knot spans (a ball rolling to a stop) is smoothed
 rather than broken. Pure numpy and scipy: the normal equations are summed per control point
 by sparse products built once per knot set (:class:`pslog.estimation._normal.Points`), the
-covariance band by a chunked Takahashi recurrence; ~35,000-45,000 detections per second on one
-core (``benchmarks/bench_smooth.py``).
+covariance band by a chunked Takahashi recurrence; ~51,000 detections per second on one core
+(``benchmarks/bench_smooth.py``).
 """
 
 from __future__ import annotations
