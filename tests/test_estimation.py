@@ -421,6 +421,45 @@ def test_the_basis_of_several_splines_at_once_equals_each_alone():
         assert_allclose(values[sel], v, rtol=0, atol=1e-9)
 
 
+def test_the_basis_of_several_splines_is_the_same_in_any_point_order():
+    """Points of several splines interleaved (the clock estimator moves times) give, row for
+    row, what they give grouped by spline."""
+    from pslog.estimation.bspline import basis_pieces
+
+    knots = [T._knots_with_breaks(0.0, 0.5, 0.04, np.array([0.21])),
+             T._knots_with_breaks(0.9, 1.3, 0.05, np.zeros(0))]
+    rng = np.random.default_rng(3)
+    piece = np.repeat([0, 1], 40)
+    t = np.where(piece == 0, rng.uniform(0.0, 0.5, 80), rng.uniform(0.9, 1.3, 80))
+    grouped = basis_pieces(knots, piece, t, 2)
+    order = rng.permutation(80)
+    mixed = basis_pieces(knots, piece[order], t[order], 2)
+    assert np.any(np.diff(piece[order]) < 0)
+    assert_array_equal(mixed[0], grouped[0][order])
+    assert_array_equal(mixed[1], grouped[1][order])
+
+
+def test_a_run_starts_from_the_projection_it_remembers_only_for_that_design():
+    """The projection a run ends with is reused for the same control points on the same
+    design, and recomputed once the times (the design) change."""
+    rig = _rig(2)
+    det, _ = simulate(rig, get_motion("throw"), options=SimulationOptions(noise_px=0.3, seed=1))
+    obs = det.best()
+    t = (obs.time_ns - obs.time_ns[0]) / NS
+    rows = np.arange(len(obs))
+    knots = [T._knots_with_breaks(t[0], t[-1] + 1e-9, 0.04, np.zeros(0))]
+    problem = T._Problem(obs, rig, [rows], knots, MotionPrior())
+    control = T._initial_control(problem, 1.0)
+    control, _, r, _, J = T._Solver(problem, SmoothOptions()).run(control, 1.0, 2)
+    _, r2, J2 = problem.project_control(control)
+    assert r2 is r and J2 is J  # the remembered arrays
+    assert problem.project_control(control.copy())[1] is not r  # another array: projected
+    assert_array_equal(problem.project_control(control.copy())[1], r)
+    problem.set_times(t + 1e-3)
+    moved = problem.project_control(control)[1]
+    assert moved is not r and not np.array_equal(moved, r)
+
+
 def test_the_stacked_projection_equals_each_camera_alone():
     from pslog.estimation.projection import project_stacked, stack_cameras
 

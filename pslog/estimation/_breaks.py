@@ -40,6 +40,7 @@ _GRID = 7  # trial instants per scan
 _STAGES = 3
 _BATCH = 2000  # (candidate, τ) pairs per batched solve: bounds memory
 _GAUSS = 1 / np.sqrt(3.0)
+_ACCEL = np.arange(12) < 8  # of the 12 prior nodes: p'' at the Gauss nodes, the jerk at mids
 
 
 class _Local:
@@ -168,8 +169,9 @@ def _new_splines(a: np.ndarray) -> list:
     ``u_j``: per B-spline its two polynomial pieces as ``(lo, hi, coefficients)`` (``a`` (B,),
     coefficients four (B,) arrays in the power basis). Cox–de Boor worked out by hand; the
     third is the first's mirror image (``x → 1 - x``, ``a → 1 - a``)."""
-    one = np.ones_like(a)
-    zero = np.zeros_like(a)
+    both = np.stack([a, 1 - a])  # the first B-spline's ``a`` and the mirrored third's
+    one = np.ones_like(both)
+    zero = np.zeros_like(both)
 
     def first(a):
         up = [one, one]  # x + 1
@@ -181,11 +183,13 @@ def _new_splines(a: np.ndarray) -> list:
             strict=True)]
         return left, right
 
-    b = 1 - a
-    left1, right1 = first(a)
-    left3, right3 = first(b)
-    middle_left = [zero, zero, zero, a**-3]  # (x / a)³
-    middle_right = _reflect([zero, zero, zero, b**-3])  # ((1 - x) / b)³
+    left, right = first(both)  # both B-splines at once: row 0 for a, row 1 for b = 1 - a
+    left1, right1 = [c[0] for c in left], [c[0] for c in right]
+    left3, right3 = [c[1] for c in left], [c[1] for c in right]
+    cube = both**-3
+    one, zero = one[0], zero[0]
+    middle_left = [zero, zero, zero, cube[0]]  # (x / a)³
+    middle_right = _reflect([zero, zero, zero, cube[1]])  # ((1 - x) / b)³
     return [[(-one, zero, left1), (zero, a, right1)],
             [(zero, a, middle_left), (a, one, middle_right)],
             [(a, one, _reflect(right3)), (one, 2 * one, _reflect(left3))]]
@@ -219,8 +223,9 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
     W = max(int(np.max(hi_col - lo_col)), 1)
     cols = np.minimum(lo_col[:, None] + np.arange(W), xs_all.shape[1] - 1)
     inside = lo_col[:, None] + np.arange(W) < hi_col[:, None]
-    wsel = (which[:, None], cols)
-    xs = np.where(inside, base.s_sorted[wsel], 1e6)  # (B, W); far: every new B-spline is 0
+    Wb = xs_all.shape[1]
+    row = which[:, None] * Wb + cols  # (B, W): the detections' flat rows in the windows
+    xs = np.where(inside, np.take(base.s_sorted, row), 1e6)  # (B, W); far: every new B-spline is 0
     x = xs - j[:, None]
     f = np.zeros((B, 3, W))
     for e, spline in enumerate(pieces):
@@ -229,23 +234,23 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
             f[:, e] = np.where(on, _horner(c, x), f[:, e])
     # the base's B-splines q0..q0+5 at those detections (a padding entry may lose some: its
     # new B-splines are zero, so it adds nothing)
-    old = base.basis_w[which[:, None, None], cols[..., None], q0[:, None, None] + np.arange(6)]
-    M = base.M[wsel].reshape(B, W, 9)
-    # Σ_w (f fᵀ) ⊗ M_w and Σ_w (old fᵀ) ⊗ M_w: one batched product of the 27 rows
-    # (f, old) ⊗ f with M, then in (e, i, f, j) order
-    rows = np.concatenate([f, np.swapaxes(old, 1, 2)], axis=1)  # (B, 9, W)
-    both = ((rows[:, :, None, :] * f[:, None, :, :]).reshape(B, 27, W) @ M).reshape(
-        B, 9, 3, 3, 3).transpose(0, 1, 3, 2, 4)
-    Hyy = both[:, :3].reshape(B, 9, 9)
-    Hxy = both[:, 3:].reshape(B, 18, 9)
-    g = f @ base.u[wsel]  # (B, 3, 3)
+    m = local.m
+    old = np.take(base.basis_w, (row * m + q0[:, None])[..., None] + np.arange(6))
+    M = np.take(base.M.reshape(-1, 9), row, axis=0)  # (B, W, 9)
+    # Σ_w (f fᵀ) ⊗ M_w and Σ_w (old fᵀ) ⊗ M_w: a batched product of the 9 rows f ⊗ f and
+    # one of the 18 rows old ⊗ f with M, then in (e, i, f, j) order (two products rather
+    # than one of both: temporaries a third the size)
+    Hyy = ((f[:, :, None, :] * f[:, None, :, :]).reshape(B, 9, W) @ M).reshape(
+        B, 3, 3, 3, 3).transpose(0, 1, 3, 2, 4).reshape(B, 9, 9)
+    Hxy = ((np.swapaxes(old, 1, 2)[:, :, None, :] * f[:, None, :, :]).reshape(B, 18, W)
+           @ M).reshape(B, 6, 3, 3, 3).transpose(0, 1, 3, 2, 4).reshape(B, 18, 9)
+    g = f @ np.take(base.u.reshape(-1, 3), row, axis=0)  # (B, 3, 3)
 
     # prior: four sub-spans [j-1, j], [j, τ], [τ, j+1], [j+1, j+2]
     lo = np.stack([jm, j, s, jp], 1)
     hi = np.stack([j, s, jp, jp + 1], 1)
     half, mid = (hi - lo) / 2, (hi + lo) / 2  # (B, 4), spacings
     nodes = np.concatenate([mid - _GAUSS * half, mid + _GAUSS * half, mid], axis=1)  # (B, 12)
-    accel = np.r_[np.ones(8, bool), np.zeros(4, bool)]  # p'' at Gauss nodes, the jerk at mids
     # each new B-spline is one polynomial piece on each of its two sub-spans
     fn = np.zeros((B, 3, 12))
     xn = nodes - j[:, None]
@@ -258,18 +263,20 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
     span = np.floor(nodes)
     u = nodes - span
     first = (span + K).astype(np.int64)  # (B, 12)
-    N2 = np.stack([1 - u, 3 * u - 2, 1 - 3 * u, u], axis=-1)
-    N3 = np.broadcast_to(np.array([-1.0, 3.0, -3.0, 1.0]), N2.shape)
-    Nd = np.where(accel[None, :, None], N2 / h**2, N3 / h**3)  # (B, 12, 4), per second^d
+    Nd = np.empty((B, 12, 4))  # (B, 12, 4), per second^d
+    ua = u[:, :8]
+    Nd[:, :8] = np.stack([1 - ua, 3 * ua - 2, 1 - 3 * ua, ua], axis=-1) / h**2
+    Nd[:, 8:] = np.array([-1.0, 3.0, -3.0, 1.0]) / h**3
     clamped = (first < 3) | (first > 2 * K - 4)
     if np.any(clamped):
         f_c, N_c = basis(local.knots, nodes[clamped], 3)
         first[clamped] = f_c
-        Nd[clamped] = np.where(accel[np.nonzero(clamped)[1]][:, None], N_c[:, 2] / h**2,
+        Nd[clamped] = np.where(_ACCEL[np.nonzero(clamped)[1]][:, None], N_c[:, 2] / h**2,
                                N_c[:, 3] / h**3)
     # the nodes' B-splines on the six base control points q0..q0+5 of the three spans
     Nd6 = spread(first, Nd)  # (B, 12, 6)
-    p0 = Nd6 @ base.x0[which[:, None], q0[:, None] + np.arange(6)]  # p'' or jerk, (B, 12, 3)
+    x0 = np.take(base.x0.reshape(-1, 3), (which * m + q0)[:, None] + np.arange(6), axis=0)
+    p0 = Nd6 @ x0  # p'' or jerk, (B, 12, 3)
     p0[:, :8] -= np.asarray(prior.gravity, dtype=np.float64)  # deviation from gravity
     wq = h * np.concatenate([half / prior.q_accel, half / prior.q_accel,
                              2 * half / prior.q_jerk], axis=1)  # (B, 12)

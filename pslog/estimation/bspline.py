@@ -89,17 +89,23 @@ def basis_pieces(knots: list[np.ndarray], piece: np.ndarray, t: np.ndarray,
     """
     t = np.asarray(t, dtype=np.float64)
     lengths = np.array([len(k) for k in knots])
-    start = np.r_[0, np.cumsum(lengths)[:-1]]  # each vector's first knot
-    offset = np.r_[0, np.cumsum(lengths - DEGREE - 1)[:-1]]  # each spline's first control
+    start = np.zeros(len(knots), dtype=np.int64)  # each vector's first knot
+    np.cumsum(lengths[:-1], out=start[1:])
+    offset = np.zeros(len(knots), dtype=np.int64)  # each spline's first control point
+    np.cumsum(lengths[:-1] - DEGREE - 1, out=offset[1:])
     cat = np.concatenate(knots)
     lo = start[piece] + DEGREE
     hi = start[piece] + lengths[piece] - DEGREE - 2  # the last non-empty span (n_control - 1)
     # the span in the point's own vector: searchsorted on it alone (the vectors need not be
-    # sorted end to end)
+    # sorted end to end), the points grouped by piece (they usually are already)
     j = np.empty(len(t), dtype=np.int64)
-    for p in np.unique(piece):
-        sel = piece == p
-        j[sel] = np.searchsorted(knots[p], t[sel], side="right") - 1 + start[p]
+    order = None if np.all(piece[1:] >= piece[:-1]) else np.argsort(piece, kind="stable")
+    grouped = piece if order is None else piece[order]
+    bounds = np.searchsorted(grouped, np.arange(len(knots) + 1))
+    for p in np.flatnonzero(bounds[1:] > bounds[:-1]):
+        rows = slice(bounds[p], bounds[p + 1]) if order is None else order[
+            bounds[p]:bounds[p + 1]]
+        j[rows] = np.searchsorted(knots[p], t[rows], side="right") - 1 + start[p]
     j = np.clip(j, lo, hi)
     values = _basis_in_span(cat, j, t, n_derivatives)
     return j - start[piece] - DEGREE + offset[piece], values

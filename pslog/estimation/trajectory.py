@@ -73,12 +73,13 @@ acceleration, is fitted with a small bias; air drag is absorbed by σ_a, not mod
 velocity change spread over more than a few knot spans (a ball rolling to a stop) is smoothed
 rather than broken. Pure numpy and scipy: the normal equations are summed per control point
 by sparse products built once per knot set (:class:`pslog.estimation._normal.Points`), the
-covariance band by a chunked Takahashi recurrence; ~35,000-45,000 detections per second on one
-core (``benchmarks/bench_smooth.py``).
+covariance band by a chunked Takahashi recurrence; ~51,000 detections per second on one core
+(``benchmarks/bench_smooth.py``).
 """
 
 from __future__ import annotations
 
+import bisect
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -285,7 +286,8 @@ class _Problem:
                 and all(a is b for a, b in zip(knots, self.knots, strict=True)))
         self.knots, self.prior = knots, prior
         sizes = np.array([n_control(k) for k in knots])
-        self.offset = np.r_[0, np.cumsum(sizes)[:-1]].astype(np.int64)
+        self.offset = np.zeros(len(sizes), np.int64)
+        np.cumsum(sizes[:-1], out=self.offset[1:])
         self.m = int(sizes.sum())
         if not same:
             self.set_times(self.t)
@@ -296,6 +298,7 @@ class _Problem:
         """Observation times (n,) s since ``t0_ns`` (the clock estimator moves them); the
         basis at each, its value ``N`` and first derivative ``N1`` (n_fit, 4)."""
         self.t = t
+        self._last = None  # the design changes: no projection of it is known
         self.first, N = basis_pieces(self.knots, self._piece_of_row, t[self.rows], 1)
         self.N = np.ascontiguousarray(N[:, 0])
         self.N1 = np.ascontiguousarray(N[:, 1])
@@ -325,6 +328,24 @@ class _Problem:
             r[self.invalid] = 0.0
             J[self.invalid] = 0.0
         return r, J
+
+    def project_control(self, control: np.ndarray
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Positions (n, 3), residuals and Jacobians (:meth:`project`) of control points;
+        those of the last :meth:`remember`-ed control points when ``control`` is that array
+        (one run's end is often the next one's start: the same design, the same point)."""
+        if self._last is not None and self._last[0] is control:
+            _, X, r, J, self.invalid = self._last
+            return X, r, J
+        X = self.positions(control)
+        r, J = self.project(X)
+        return X, r, J
+
+    def remember(self, control: np.ndarray, X: np.ndarray, r: np.ndarray, J: np.ndarray
+                 ) -> None:
+        """Keep the projection of ``control`` (positions, residuals, Jacobians, invalid) on
+        this design for :meth:`project_control`."""
+        self._last = (control, X, r, J, self.invalid)
 
     def normal(self, J: np.ndarray, target: np.ndarray, w: np.ndarray
                ) -> tuple[np.ndarray, np.ndarray]:
@@ -467,9 +488,10 @@ def _knots_with_breaks(t_lo: float, t_hi: float, spacing: float, breaks: np.ndar
         j = np.searchsorted(breaks, inner)  # the nearest break is j - 1 or j
         nearest = np.minimum(np.abs(inner - breaks[np.maximum(j - 1, 0)]),
                              np.abs(breaks[np.minimum(j, len(breaks) - 1)] - inner))
-        grid = np.r_[grid[0], inner[nearest >= spacing / 4], grid[-1]]
-    points = np.r_[grid, breaks]
-    mult = np.r_[np.ones(len(grid), np.int64), np.full(len(breaks), 3)]
+        grid = np.concatenate([grid[:1], inner[nearest >= spacing / 4], grid[-1:]])
+    points = np.concatenate([grid, breaks])
+    mult = np.ones(len(points), np.int64)
+    mult[len(grid):] = 3
     order = np.argsort(points, kind="stable")
     points, mult = points[order], mult[order]
     return clamped_knots(points, mult[1:-1])
@@ -551,8 +573,7 @@ class _Solver:
         """Returns control, σ, residuals (n, 2), weights (n,), Jacobians (n, 2, 3); σ is
         re-estimated at every iteration as ``dof`` · 1.4826 · median |residual|."""
         problem = self.problem
-        X = problem.positions(control)
-        r, J = problem.project(X)
+        X, r, J = problem.project_control(control)
         prior = None  # the prior cost (2) of ``control``: it does not depend on σ
         for _ in range(iterations):
             sigma = self._scale(r, sigma, dof)
@@ -577,6 +598,7 @@ class _Solver:
             control, X, r, J, prior = trial, X_trial, r_trial, J_trial, prior_trial
             if moved < 1e-7:  # 0.1 µm: converged
                 break
+        problem.remember(control, X, r, J)
         s = np.sum(r * r, axis=1) / sigma**2
         return control, sigma, r, 1 / (1 + s / _CAUCHY**2), J
 
@@ -818,13 +840,17 @@ def _find_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
     results = _scan_pieces(jobs, t_obs, J, target, weight, spacing, options)
     out = [np.zeros(0) for _ in problem.knots]
     for (p, *_), (tau, gain) in zip(jobs, results, strict=True):
-        found: list[float] = []
+        # greedily by gain: a break more than a knot spacing from every known one and 1.5
+        # spacings from every one kept before (the nearest of those is a neighbour in time)
+        free = np.all(np.abs(tau[:, None] - known[p][None, :]) > spacing, axis=1)
+        found: list[float] = []  # in time order
         for i in np.argsort(-gain):
             if gain[i] <= options.break_threshold:
                 break
-            if all(abs(tau[i] - f) > 1.5 * spacing for f in found) and all(
-                    abs(tau[i] - f) > spacing for f in known[p]):
-                found.append(float(tau[i]))
+            k = bisect.bisect_left(found, tau[i])
+            if free[i] and (k == len(found) or abs(tau[i] - found[k]) > 1.5 * spacing) and (
+                    k == 0 or abs(tau[i] - found[k - 1]) > 1.5 * spacing):
+                found.insert(k, float(tau[i]))
         out[p] = np.sort(np.array(found))
     return out
 
