@@ -311,7 +311,9 @@ def decode_track(method: str, camera_names: Sequence[str],
     xyz = np.empty((n, 3))
     cams = np.empty(n, dtype=np.int32)
     fixed = {k: np.empty(n) for k in S.TRACK_FIXED_QUALITY}
-    extra: dict[str, np.ndarray] = {}
+    # map quality: (point, value) lists per key, made arrays once at the end (an array per
+    # key allocated at each point made reading quadratic in the track's length)
+    extra_rows: dict[str, tuple[list[int], list[float]]] = {}
     rows = []
     for i, (t, _seq, data) in enumerate(msgs):
         m = parse(data)
@@ -323,7 +325,15 @@ def decode_track(method: str, camera_names: Sequence[str],
             raise LogFormatError(f"track {method!r}: unknown camera {m.camera!r}") from None
         if m.quality:
             for key, value in m.quality.items():
-                extra.setdefault(key, np.full(n, np.nan))[i] = value
+                at = extra_rows.get(key)
+                if at is None:
+                    at = extra_rows[key] = ([], [])
+                at[0].append(i)
+                at[1].append(value)
+    extra: dict[str, np.ndarray] = {}
+    for key, (points, values) in extra_rows.items():
+        column = extra[key] = np.full(n, np.nan)
+        column[np.asarray(points, dtype=np.int64)] = values
     if n:
         table = np.asarray(rows, dtype=np.float64)
         xyz = table[:, :3]
