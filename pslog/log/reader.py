@@ -145,21 +145,22 @@ class _Finished:
     def __exit__(self, *exc) -> None:
         self.close()
 
-    def read_chunk(self, index) -> bytes:
+    def read_chunk(self, index, framing: bool = True) -> bytes:
         """The checked, decompressed records of the chunk of a ChunkIndex; a one-line
-        LogFormatError naming the byte offset (and ``pslog recover``) if it is damaged."""
+        LogFormatError naming the byte offset (and ``pslog recover``) if it is damaged.
+        ``framing=False``: the records' framing is left for the caller to check."""
         try:
-            return self._chunk(index)
+            return self._chunk(index, framing)
         except LogFormatError as exc:
             raise io.damaged_error(self.path, index.chunk_start_offset, str(exc)) from None
 
-    def _chunk(self, index) -> bytes:
+    def _chunk(self, index, framing: bool = True) -> bytes:
         self.file.seek(index.chunk_start_offset)
         record = self.file.read(index.chunk_length)
         if len(record) != index.chunk_length or record[0] != io.OP_CHUNK or \
                 int.from_bytes(record[1:9], "little") != index.chunk_length - 9:
             raise LogFormatError("chunk record does not match the summary's index")
-        return io.chunk_payload(record[9:])
+        return io.chunk_payload(record[9:], framing=framing)
 
     def check_chunks(self) -> list[dict]:
         """Check every chunk (decompression, CRC, framing): one dict per damaged chunk as
@@ -222,10 +223,15 @@ class _Finished:
             here = wanted & index.message_index_offsets.keys()
             if not here or index.chunk_start_offset in skip:
                 continue
-            records = self.read_chunk(index)
+            records = self.read_chunk(index, framing=False)
             try:
                 got = self._indexed(index, records, here)
             except (_Irregular, struct.error):
+                try:  # the framing the record walk needs, with its usual error
+                    io.check_framing(records)
+                except LogFormatError as exc:
+                    raise io.damaged_error(self.path, index.chunk_start_offset,
+                                           str(exc)) from None
                 found: dict[int, list] = {cid: [] for cid in here}
                 io.collect_messages(records, found)
                 got = {cid: _Batch.from_messages(m) for cid, m in found.items()}
@@ -245,6 +251,7 @@ class _Finished:
         raw = self.file.read(index.message_index_length)
         rec = np.frombuffer(records, dtype=np.uint8)
         n = len(rec)
+        _check_framing(rec, raw, index.message_index_offsets, chunk_end)
         out = {}
         for cid in channels:
             at = index.message_index_offsets[cid] - chunk_end
@@ -462,7 +469,7 @@ def _track_columnar(method: str, camera_names: Sequence[str], batch: _Batch) -> 
     for at, head, key in template:
         pos = maps + at
         raw = np.frombuffer(head, dtype=np.uint8)
-        if not np.all(buf[pos[:, None] + np.arange(len(raw))] == raw):
+        if not np.all(_windows(buf, len(raw))[pos] == raw):
             raise _Irregular("maps differ in keys")
         values[key.decode("utf-8")] = _doubles(buf, pos + len(raw))
     # key order as the per-message path gives it: protobuf's own order of the first point's
@@ -661,12 +668,11 @@ class _Batch:
 
     @classmethod
     def concatenate(cls, parts: Sequence[_Batch]) -> _Batch:
+        """One batch of ``parts`` (whose buffers need no padding) in order."""
         if not parts:
             return cls(np.zeros(_PAD, np.uint8), *(np.zeros(0, np.int64) for _ in range(4)))
-        if len(parts) == 1:
-            return parts[0]
         shifts = np.cumsum([0] + [len(p.buf) for p in parts[:-1]])
-        return cls(np.concatenate([p.buf for p in parts]),
+        return cls(np.concatenate([*(p.buf for p in parts), np.zeros(_PAD, np.uint8)]),
                    np.concatenate([p.start + s for p, s in zip(parts, shifts, strict=True)]),
                    np.concatenate([p.end + s for p, s in zip(parts, shifts, strict=True)]),
                    np.concatenate([p.time for p in parts]),
@@ -682,22 +688,72 @@ class _Batch:
 
 def _gather(records: np.ndarray, start: np.ndarray, end: np.ndarray) -> tuple[np.ndarray,
                                                                              np.ndarray]:
-    """The byte ranges ``records[start[i]:end[i]]`` back to back (with :data:`_PAD` zero
-    bytes after), and where each begins in it."""
+    """The byte ranges ``records[start[i]:end[i]]`` (sorted, disjoint) back to back (no
+    padding: see :meth:`_Batch.concatenate`), and where each begins in it."""
     lengths = end - start
     begin = np.cumsum(lengths) - lengths
-    total = int(lengths.sum())
-    out = np.zeros(total + _PAD, dtype=np.uint8)
-    if total:
-        index = np.arange(total, dtype=np.int64) + np.repeat(start - begin, lengths)
-        out[:total] = records[index]
-    return out, begin
+    # a byte mask of the ranges (+1 where one starts, -1 where it ends, summed up): one pass
+    # over the chunk instead of an index per byte
+    edge = np.zeros(len(records) + 1, dtype=np.int8)
+    edge[start] = 1
+    edge[end] -= 1
+    mask = np.cumsum(edge[:-1], dtype=np.int8).view(bool)
+    return records[mask], begin
+
+
+def _check_framing(rec: np.ndarray, raw: bytes, offsets: dict[int, int], chunk_end: int
+                   ) -> None:
+    """The framing check of :func:`pslog.log._mcapio.check_framing`, columnar: the message
+    records every MessageIndex of the chunk lists must follow one another exactly, and what
+    lies between them (schemas, channels: a few records) is walked as usual.
+    :class:`_Irregular` when anything does not add up (the caller then walks the whole chunk,
+    which raises the usual error if the framing is wrong)."""
+    n = len(rec)
+    starts = []
+    for at in offsets.values():
+        at -= chunk_end
+        if at < 0 or at + 15 > len(raw):
+            raise _Irregular("message index outside its range")
+        op, length, _channel, size = struct.unpack_from("<BQHI", raw, at)
+        if op != io.OP_MESSAGE_INDEX or size % 16 or length != 6 + size or \
+                at + 15 + size > len(raw):
+            raise _Irregular("message index record does not check out")
+        starts.append(np.frombuffer(raw, dtype="<u8", count=size // 8,
+                                    offset=at + 15)[1::2])
+    starts = np.sort(np.concatenate(starts)) if starts else np.zeros(0, np.uint64)
+    if len(starts) and (starts[-1] > n - 9 or np.any(np.diff(starts) == 0)):
+        raise _Irregular("message offsets out of range")
+    starts = starts.astype(np.int64)
+    length = _load(rec, starts + 1, 8)
+    if np.any(length > np.uint64(n)) or np.any(rec[starts] != io.OP_MESSAGE) or \
+            np.any(length < 22):
+        raise _Irregular("an indexed record is no message")
+    ends = starts + 9 + length.astype(np.int64)
+    # the gaps between consecutive messages (and before the first, after the last) hold
+    # whole records
+    gap_from = np.concatenate([[0], ends])
+    gap_to = np.concatenate([starts, [n]])
+    if np.any(gap_to < gap_from):
+        raise _Irregular("records overlap")
+    for a, b in zip(gap_from[gap_to > gap_from].tolist(), gap_to[gap_to > gap_from].tolist(),
+                    strict=True):
+        try:
+            io.check_framing(bytes(rec[a:b]))
+        except LogFormatError:
+            raise _Irregular("framing between messages") from None
+
+
+def _windows(buf: np.ndarray, width: int) -> np.ndarray:
+    """Read-only view of every ``width`` consecutive bytes of ``buf``: row ``i`` is
+    ``buf[i:i + width]`` (gathering rows copies ``width`` bytes per index, not an index per
+    byte)."""
+    return np.lib.stride_tricks.as_strided(buf, shape=(len(buf) - width + 1, width),
+                                           strides=(1, 1), writeable=False)
 
 
 def _load(buf: np.ndarray, pos: np.ndarray, width: int) -> np.ndarray:
     """Little-endian unsigned integers of ``width`` bytes at ``pos``, as uint64."""
-    index = pos[:, None] + np.arange(width)
-    raw = buf[index]
+    raw = _windows(buf, width)[pos]
     if width == 8:
         return raw.view("<u8")[:, 0]
     out = np.zeros(len(pos), dtype=np.uint64)
@@ -707,7 +763,7 @@ def _load(buf: np.ndarray, pos: np.ndarray, width: int) -> np.ndarray:
 
 
 def _doubles(buf: np.ndarray, pos: np.ndarray) -> np.ndarray:
-    return buf[pos[:, None] + np.arange(8)].view("<f8")[:, 0]
+    return _windows(buf, 8)[pos].view("<f8")[:, 0]
 
 
 def _varint(buf: np.ndarray, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -820,8 +876,10 @@ def _strings(buf: np.ndarray, ranges: np.ndarray, names: Sequence[str]) -> np.nd
     for i, name in enumerate(names):
         raw = np.frombuffer(name.encode(), dtype=np.uint8)
         sel = np.flatnonzero(ranges[:, 1] == len(raw))
+        if len(raw) > len(buf):
+            continue
         if len(raw) and len(sel):
-            same = np.all(buf[ranges[sel, 0][:, None] + np.arange(len(raw))] == raw, axis=1)
+            same = np.all(_windows(buf, len(raw))[ranges[sel, 0]] == raw, axis=1)
             sel = sel[same]
         out[sel] = i
     return out
