@@ -44,7 +44,11 @@ def errors_m(track: Track, truth: Truth) -> np.ndarray:
 def output_rate_hz(time_ns: np.ndarray) -> float:
     """Distinct instants per second over the span of ``time_ns`` (sorted); 0 for fewer than
     two. Points at the same instant (several cameras firing together) count once."""
-    instants = len(np.unique(time_ns))
+    time_ns = np.asarray(time_ns)
+    step = np.diff(time_ns)
+    # sorted (as tracks are): the distinct instants are where the time changes, no hashing
+    instants = (1 + int(np.count_nonzero(step)) if len(time_ns) and np.all(step >= 0)
+                else len(np.unique(time_ns)))
     if instants < 2:
         return 0.0
     return (instants - 1) / ((time_ns[-1] - time_ns[0]) / NS)

@@ -218,38 +218,58 @@ class _Finished:
         chunks = self.summary.chunk_indexes
         if not chunks:
             return {t: _Batch.from_messages(m) for t, m in self.collect(topics, skip).items()}
+        chosen = [c for c in sorted(chunks, key=lambda c: c.chunk_start_offset)
+                  if wanted & c.message_index_offsets.keys()
+                  and c.chunk_start_offset not in skip]  # e.g. image chunks: never read
+        # every chunk read is decompressed into one shared buffer, and each topic's messages
+        # are offsets into it: no copy per message, nor per topic
+        total = sum(c.uncompressed_size for c in chosen)
+        shared = np.zeros(total + _PAD, dtype=np.uint8)
+        at = 0
         parts: dict[int, list[_Batch]] = {cid: [] for cid in wanted}
-        for index in sorted(chunks, key=lambda c: c.chunk_start_offset):
+        for index in chosen:
             here = wanted & index.message_index_offsets.keys()
-            if not here or index.chunk_start_offset in skip:
-                continue
             records = self.read_chunk(index, framing=False)
+            size = len(records)
+            inside = at + size <= total  # else an index whose size is wrong: a copy of its own
+            rec = shared[at:at + size] if inside else np.zeros(size + _PAD, dtype=np.uint8)
+            rec[:size] = np.frombuffer(records, dtype=np.uint8)
+            del records
             try:
-                got = self._indexed(index, records, here)
+                got = self._indexed(index, rec[:size], here)
             except (_Irregular, struct.error):
+                raw = rec[:size].tobytes()
                 try:  # the framing the record walk needs, with its usual error
-                    io.check_framing(records)
+                    io.check_framing(raw)
                 except LogFormatError as exc:
                     raise io.damaged_error(self.path, index.chunk_start_offset,
                                            str(exc)) from None
                 found: dict[int, list] = {cid: [] for cid in here}
-                io.collect_messages(records, found)
+                io.collect_messages(raw, found)
                 got = {cid: _Batch.from_messages(m) for cid, m in found.items()}
+            else:
+                for batch in got.values():
+                    batch.buf = shared if inside else rec
+                    if inside:
+                        batch.start += at
+                        batch.end += at
+            if inside:
+                at += size
             for cid, batch in got.items():
                 parts[cid].append(batch)
-        out = {self.topics[cid]: _Batch.concatenate(parts[cid]) for cid in wanted}
+        out = {self.topics[cid]: _Batch.join(parts[cid], shared) for cid in wanted}
         if not skip and any(len(b) != self.counts.get(t, len(b)) for t, b in out.items()):
             # an index that left messages out: the record walk is the authority
             return {t: _Batch.from_messages(m) for t, m in self.collect(topics, skip).items()}
         return out
 
-    def _indexed(self, index, records: bytes, channels) -> dict[int, _Batch]:
-        """The messages of ``channels`` in a chunk's ``records``, found through its
-        MessageIndex records; :class:`_Irregular` when an index does not match the records."""
+    def _indexed(self, index, rec: np.ndarray, channels) -> dict[int, _Batch]:
+        """The messages of ``channels`` in a chunk's records ``rec`` (uint8), found through
+        its MessageIndex records, as offsets into ``rec``; :class:`_Irregular` when an index
+        does not match the records."""
         chunk_end = index.chunk_start_offset + index.chunk_length
         self.file.seek(chunk_end)
         raw = self.file.read(index.message_index_length)
-        rec = np.frombuffer(records, dtype=np.uint8)
         n = len(rec)
         _check_framing(rec, raw, index.message_index_offsets, chunk_end)
         out = {}
@@ -273,9 +293,8 @@ class _Finished:
                     or np.any(end > n) or np.any(_load(rec, offsets + 9, 2) != cid)
                     or np.any(_load(rec, offsets + 15, 8) != times)):
                 raise _Irregular("message index entry does not match its record")
-            buf, begin = _gather(rec, offsets + 31, end)
-            out[cid] = _Batch(buf, begin, begin + (end - offsets - 31),
-                              times.view(np.int64), _load(rec, offsets + 11, 4).view(np.int64))
+            out[cid] = _Batch(rec, offsets + 31, end, times.view(np.int64),
+                              _load(rec, offsets + 11, 4).view(np.int64))
         return out
 
 
@@ -678,10 +697,23 @@ class _Batch:
                    np.concatenate([p.time for p in parts]),
                    np.concatenate([p.seq for p in parts]))
 
+    @classmethod
+    def join(cls, parts: Sequence[_Batch], shared: np.ndarray) -> _Batch:
+        """One batch of ``parts``: offsets into ``shared`` when they all are, else (a chunk
+        walked record by record) a compact copy of each."""
+        if parts and all(p.buf is shared for p in parts):
+            return cls(shared, *(np.concatenate([getattr(p, k) for p in parts])
+                                 for k in ("start", "end", "time", "seq")))
+        compact = []
+        for p in parts:
+            buf, begin = _gather(p.buf, p.start, p.end)
+            compact.append(cls(buf, begin, begin + (p.end - p.start), p.time, p.seq))
+        return cls.concatenate(compact)
+
     def messages(self) -> list[tuple[int, int, bytes]]:
         """The per-message form ``[(log_time, sequence, data), ...]``."""
-        raw = self.buf.tobytes()
-        return [(t, s, raw[a:b]) for t, s, a, b in zip(
+        raw = memoryview(self.buf)  # not a copy of a shared buffer: each message's bytes
+        return [(t, s, bytes(raw[a:b])) for t, s, a, b in zip(
             self.time.tolist(), self.seq.tolist(), self.start.tolist(), self.end.tolist(),
             strict=True)]
 
@@ -694,10 +726,9 @@ def _gather(records: np.ndarray, start: np.ndarray, end: np.ndarray) -> tuple[np
     begin = np.cumsum(lengths) - lengths
     # a byte mask of the ranges (+1 where one starts, -1 where it ends, summed up): one pass
     # over the chunk instead of an index per byte
-    edge = np.zeros(len(records) + 1, dtype=np.int8)
-    edge[start] = 1
-    edge[end] -= 1
-    mask = np.cumsum(edge[:-1], dtype=np.int8).view(bool)
+    edge = (np.bincount(start, minlength=len(records) + 1)
+            - np.bincount(end, minlength=len(records) + 1))
+    mask = np.cumsum(edge[:-1]) > 0
     return records[mask], begin
 
 
