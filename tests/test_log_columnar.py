@@ -210,3 +210,25 @@ def test_rejection_counts_match_the_tuple_sets(fused):
         assert counts.rejected > 0
         assert (counts.correct, counts.wrong, counts.kept_false, counts.false_candidates) == \
             _counts_by_sets(rejections, session.detections, session.ball_truth)
+
+
+def test_track_quality_entries_are_protobufs_own_bytes(fused):
+    """The writer's columnar quality map bytes equal protobuf's serialization of each point
+    (same process: protobuf's map order is its own, per process), and a written track reads
+    back with every value bit for bit."""
+    from pslog.log.writer import _quality_entries
+
+    session = read_session(fused)
+    for track in session.tracks.values():
+        extra = {k: v.tolist() for k, v in track.quality.items()
+                 if k not in S.TRACK_FIXED_QUALITY}
+        entries = _quality_entries(extra, len(track))
+        assert entries is not None and len(entries) == len(track)
+        for i in range(len(track)):
+            msg = S.TrackPoint()
+            for k, values in extra.items():
+                msg.quality[k] = values[i]
+            assert msg.SerializeToString() == entries[i]
+    # keys of 117 bytes or more do not fit the one-byte entry length: the per-point way
+    assert _quality_entries({"k" * 120: [1.0]}, 1) is None
+    assert _quality_entries({}, 2) == [b"", b""]

@@ -490,14 +490,27 @@ class SessionWriter:
         if n and not 0 <= track.camera.min() <= track.camera.max() < len(self._names):
             raise InputError(f"track {method!r}: camera index out of range of the rig")
         cameras = self._names
+        # the quality map's bytes of every point at once (setting its keys one point at a
+        # time was most of the cost of writing a track); None: the per-point way
+        entries = _quality_entries(extra, n)
         for i, (t, (x, y, z), cam) in enumerate(zip(
                 track.time_ns.tolist(), track.position_world.tolist(), track.camera.tolist(),
                 strict=True)):
             msg = S.TrackPoint(time_ns=t, method=method, x=x, y=y, z=z, camera=cameras[cam],
                                **{k: fixed[k][i] for k in S.TRACK_FIXED_QUALITY})
-            for k, values in extra.items():
-                msg.quality[k] = values[i]
-            self._queue(channel, t, msg.SerializeToString())
+            if entries is not None:
+                data = msg.SerializeToString() + entries[i]
+                if i == 0:  # the same bytes as protobuf's own, checked on the first point
+                    for k, values in extra.items():
+                        msg.quality[k] = values[i]
+                    if msg.SerializeToString() != data:
+                        entries = None
+                        data = msg.SerializeToString()
+            else:
+                for k, values in extra.items():
+                    msg.quality[k] = values[i]
+                data = msg.SerializeToString()
+            self._queue(channel, t, data)
             self._queue(scene_channel, t, _scene_point(method, i, t, (x, y, z), color))
         self._count(S.track_topic(method), n)
         self._count(S.track_scene_topic(method), n)
@@ -598,6 +611,42 @@ class SessionWriter:
         if exc_type is not None:
             self._failed = True
         self.close()
+
+
+def _quality_entries(extra: dict[str, list[float]], n: int) -> list[bytes] | None:
+    """The serialized ``quality`` map entries (field 10, the last field of a TrackPoint) of
+    each of ``n`` points, ``extra``: key -> values per point, set in this order as
+    :meth:`SessionWriter.add_track` sets them. Every point has the same keys, set in the same
+    order, so protobuf writes its entries in one order, found by serializing one map; each
+    entry is ``0x52 len 0x0a klen key 0x11 <value, 8 bytes little endian>``. None when an
+    entry is not of that form (a key of 117 bytes or more)."""
+    if not extra or not n:
+        return [b""] * n
+    probe = S.TrackPoint()
+    for k in extra:
+        probe.quality[k] = 1.0
+    raw = probe.SerializeToString()  # the map alone: every other field is at its default
+    template, slots, at = bytearray(), {}, 0
+    while at < len(raw):
+        if at + 4 > len(raw):
+            return None
+        length, klen = raw[at + 1], raw[at + 3]
+        if (raw[at] != 0x52 or raw[at + 2] != 0x0A or length >= 0x80 or klen >= 0x80
+                or length != klen + 11 or raw[at + 4 + klen] != 0x11):
+            return None
+        key = raw[at + 4:at + 4 + klen].decode("utf-8")
+        slots[key] = len(template) + 5 + klen
+        template += raw[at:at + 2 + length]
+        at += 2 + length
+    if sorted(slots) != sorted(extra):
+        return None
+    width = len(template)
+    rows = np.tile(np.frombuffer(bytes(template), dtype=np.uint8), (n, 1))
+    for key, values in extra.items():
+        rows[:, slots[key]:slots[key] + 8] = (np.asarray(values, dtype="<f8")
+                                              .view(np.uint8).reshape(n, 8))
+    flat = rows.tobytes()
+    return [flat[i:i + width] for i in range(0, n * width, width)]
 
 
 def _negative_time(time_ns: int) -> str:
