@@ -2,8 +2,12 @@
 unless asked (:func:`iter_images`).
 
 Speed: the summary's chunk index says which chunks hold which channels, so image chunks are
-never read; detection chunks are decompressed whole and their messages sliced out with
-``struct`` (see ``_mcapio``) and decoded with the generated protobuf class directly.
+never read; the chunks read are decompressed into one buffer, each topic's messages located
+through the chunks' MessageIndex records (checked against the message records, the framing
+checked from them too) and pslog's own messages (detections, truth, tracks) decoded from the
+protobuf wire format with numpy, all messages of a topic at once: linear in the session's
+length, no Python object per message. Anything irregular (a damaged index, a valid protobuf
+encoding pslog does not write) falls back to the record walk and the protobuf classes.
 
 Damage: the summary is checked against its CRC before it is trusted, and every chunk read is
 checked (lengths, decompression, CRC, framing); a damaged one is a one-line LogFormatError
