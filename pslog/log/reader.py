@@ -459,6 +459,10 @@ def decode_track(method: str, camera_names: Sequence[str], msgs) -> Track:
         return _decode_track_messages(method, camera_names, batch.messages())
 
 
+#: points whose quality maps are read at a time (rows of a few hundred bytes each)
+_MAP_BLOCK = 1 << 15
+
+
 def _track_columnar(method: str, camera_names: Sequence[str], batch: _Batch) -> Track:
     n = len(batch)
     if n == 0:
@@ -488,13 +492,23 @@ def _track_columnar(method: str, camera_names: Sequence[str], batch: _Batch) -> 
     keys = [k for _a, _h, k in template]
     if len(set(keys)) != len(keys) or np.any(batch.end - maps != len(first)):
         raise _Irregular("maps differ in form")
-    values = {}
-    for at, head, key in template:
-        pos = maps + at
-        raw = np.frombuffer(head, dtype=np.uint8)
-        if not np.all(_windows(buf, len(raw))[pos] == raw):
-            raise _Irregular("maps differ in keys")
-        values[key.decode("utf-8")] = _doubles(buf, pos + len(raw))
+    # every point's map read as one row of bytes (a pass over the track's memory, not one
+    # per key), in blocks to bound the memory it takes
+    width = len(first)
+    slots = {key.decode("utf-8"): at + len(head) for at, head, key in template}
+    values = {k: np.empty(n) for k in slots}
+    if width:
+        fixed = np.ones(width, dtype=bool)  # the bytes every point shares: all but values
+        for at in slots.values():
+            fixed[at:at + 8] = False
+        expected = np.frombuffer(first, dtype=np.uint8)[fixed]
+        rows = _windows(buf, width)
+        for lo in range(0, n, _MAP_BLOCK):
+            block = rows[maps[lo:lo + _MAP_BLOCK]]
+            if not np.all(block[:, fixed] == expected):
+                raise _Irregular("maps differ in keys")
+            for key, at in slots.items():
+                values[key][lo:lo + _MAP_BLOCK] = block[:, at:at + 8].copy().view("<f8")[:, 0]
     # key order as the per-message path gives it: protobuf's own order of the first point's
     # map (all points have the same keys)
     first_keys = list(S.TrackPoint.FromString(buf[batch.start[0]:batch.end[0]].tobytes())
