@@ -483,7 +483,7 @@ class SessionWriter:
         nan = [float("nan")] * n
         fixed = {k: (track.quality[k].tolist() if k in track.quality else nan)
                  for k in S.TRACK_FIXED_QUALITY}
-        extra = {k: v.tolist() for k, v in track.quality.items()
+        extra = {k: np.asarray(v, dtype=np.float64) for k, v in track.quality.items()
                  if k not in S.TRACK_FIXED_QUALITY}
         if n and track.time_ns.min() < 0:
             raise InputError(_negative_time(int(track.time_ns.min())))
@@ -499,16 +499,16 @@ class SessionWriter:
             msg = S.TrackPoint(time_ns=t, method=method, x=x, y=y, z=z, camera=cameras[cam],
                                **{k: fixed[k][i] for k in S.TRACK_FIXED_QUALITY})
             if entries is not None:
-                data = msg.SerializeToString() + entries[i]
+                data = msg.SerializeToString() + next(entries)
                 if i == 0:  # the same bytes as protobuf's own, checked on the first point
                     for k, values in extra.items():
-                        msg.quality[k] = values[i]
+                        msg.quality[k] = float(values[i])
                     if msg.SerializeToString() != data:
                         entries = None
                         data = msg.SerializeToString()
             else:
                 for k, values in extra.items():
-                    msg.quality[k] = values[i]
+                    msg.quality[k] = float(values[i])
                 data = msg.SerializeToString()
             self._queue(channel, t, data)
             self._queue(scene_channel, t, _scene_point(method, i, t, (x, y, z), color))
@@ -613,15 +613,16 @@ class SessionWriter:
         self.close()
 
 
-def _quality_entries(extra: dict[str, list[float]], n: int) -> list[bytes] | None:
+def _quality_entries(extra: dict[str, np.ndarray], n: int, block: int = 1 << 15):
     """The serialized ``quality`` map entries (field 10, the last field of a TrackPoint) of
-    each of ``n`` points, ``extra``: key -> values per point, set in this order as
+    each of ``n`` points, one ``bytes`` per point from an iterator (made ``block`` points at a
+    time: little memory); ``extra``: key -> (n,) values, set in this order as
     :meth:`SessionWriter.add_track` sets them. Every point has the same keys, set in the same
     order, so protobuf writes its entries in one order, found by serializing one map; each
     entry is ``0x52 len 0x0a klen key 0x11 <value, 8 bytes little endian>``. None when an
     entry is not of that form (a key of 117 bytes or more)."""
     if not extra or not n:
-        return [b""] * n
+        return iter([b""] * n)
     probe = S.TrackPoint()
     for k in extra:
         probe.quality[k] = 1.0
@@ -640,13 +641,22 @@ def _quality_entries(extra: dict[str, list[float]], n: int) -> list[bytes] | Non
         at += 2 + length
     if sorted(slots) != sorted(extra):
         return None
+    return _entry_rows(np.frombuffer(bytes(template), dtype=np.uint8), slots, extra, n, block)
+
+
+def _entry_rows(template: np.ndarray, slots: dict[str, int], extra: dict[str, np.ndarray],
+                n: int, block: int):
     width = len(template)
-    rows = np.tile(np.frombuffer(bytes(template), dtype=np.uint8), (n, 1))
-    for key, values in extra.items():
-        rows[:, slots[key]:slots[key] + 8] = (np.asarray(values, dtype="<f8")
-                                              .view(np.uint8).reshape(n, 8))
-    flat = rows.tobytes()
-    return [flat[i:i + width] for i in range(0, n * width, width)]
+    for lo in range(0, n, block):
+        hi = min(lo + block, n)
+        rows = np.tile(template, (hi - lo, 1))
+        for key, values in extra.items():
+            rows[:, slots[key]:slots[key] + 8] = (np.asarray(values[lo:hi], dtype="<f8")
+                                                  .view(np.uint8).reshape(hi - lo, 8))
+        flat = rows.tobytes()
+        del rows
+        for at in range(0, len(flat), width):
+            yield flat[at:at + width]
 
 
 def _negative_time(time_ns: int) -> str:
