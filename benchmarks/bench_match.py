@@ -77,7 +77,14 @@ def run_peak(cmd: list[str], env: dict | None = None, timeout: float | None = No
         if proc.returncode != 0:
             raise SystemExit(f"{' '.join(cmd)} failed ({proc.returncode}):\n"
                              f"{err.read().decode()}")
+        global _CPU
+        _CPU = usage.ru_utime + usage.ru_stime
         return seconds, usage.ru_maxrss / 1024, out.read().decode(), True
+
+
+#: CPU seconds (user + system) of the last process :func:`run_peak` ran: on a shared machine
+#: the steadier figure of the two
+_CPU = float("nan")
 
 
 def _env(code: Path) -> dict:
@@ -120,14 +127,19 @@ def main() -> None:
 
     def row(stage: str, m: float, seconds: float, peak: float, extra: str = "",
             finished: bool = True) -> None:
+        cpu = _CPU if finished else float("nan")
         rows.append({"stage": stage, "minutes": m, "seconds": seconds if finished else None,
+                     "cpu_seconds": cpu if finished else None,
                      "seconds_per_minute": seconds / m if finished else None,
                      "peak_mb": peak, "note": extra, "finished": finished})
         shown = f"{seconds:8.2f}" if finished else f"> {seconds:6.0f}"
         per = f"{seconds / m:8.3f}" if finished else f"{'-':>8}"
-        print(f"{stage:<22} {m:>5g} {shown} {per} {peak:>8.0f}  {extra}", flush=True)
+        cpu_shown = f"{cpu:8.2f} {cpu / m:8.3f}" if finished else f"{'-':>8} {'-':>8}"
+        print(f"{stage:<22} {m:>5g} {shown} {per} {cpu_shown} {peak:>8.0f}  {extra}",
+              flush=True)
 
-    print(f"{'stage':<22} {'min':>5} {'seconds':>8} {'s/min':>8} {'peak MB':>8}  note")
+    print(f"{'stage':<22} {'min':>5} {'seconds':>8} {'s/min':>8} {'cpu s':>8} {'cpu/min':>8} "
+          f"{'peak MB':>8}  note")
     try:
         for m in minutes:
             session = work / f"s{m:g}.mcap"
@@ -166,10 +178,12 @@ def main() -> None:
         if tmp is not None:
             tmp.cleanup()
 
-    print("\nlinearity (seconds per minute, smallest to largest session) and targets:")
+    print("\nlinearity (CPU seconds per minute of session, smallest to largest; equal figures: "
+          "linear) and targets:")
     for stage in dict.fromkeys(r["stage"] for r in rows):
         per = [r for r in rows if r["stage"] == stage and r["finished"]]
-        figures = ", ".join(f"{r['minutes']:g} min {r['seconds_per_minute']:.3f}" for r in per)
+        figures = ", ".join(f"{r['minutes']:g} min {r['cpu_seconds'] / r['minutes']:.3f}"
+                            for r in per)
         target = TARGETS.get(stage, "")
         print(f"  {stage:<22} {figures}   target {target}" if target
               else f"  {stage:<22} {figures}")
