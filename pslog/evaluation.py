@@ -44,7 +44,11 @@ def errors_m(track: Track, truth: Truth) -> np.ndarray:
 def output_rate_hz(time_ns: np.ndarray) -> float:
     """Distinct instants per second over the span of ``time_ns`` (sorted); 0 for fewer than
     two. Points at the same instant (several cameras firing together) count once."""
-    instants = len(np.unique(time_ns))
+    time_ns = np.asarray(time_ns)
+    step = np.diff(time_ns)
+    # sorted (as tracks are): the distinct instants are where the time changes, no hashing
+    instants = (1 + int(np.count_nonzero(step)) if len(time_ns) and np.all(step >= 0)
+                else len(np.unique(time_ns)))
     if instants < 2:
         return 0.0
     return (instants - 1) / ((time_ns[-1] - time_ns[0]) / NS)
@@ -227,9 +231,34 @@ class RejectionCounts:
         return asdict(self)
 
 
-def _keys(camera, frame_index, uv) -> list[tuple]:
-    return list(zip(np.asarray(camera).tolist(), np.asarray(frame_index).tolist(),
-                    np.asarray(uv)[:, 0].tolist(), np.asarray(uv)[:, 1].tolist(), strict=True))
+def _keys(camera, frame_index, uv) -> np.ndarray:
+    """One fixed-width byte key per candidate (camera, frame index, pixel), comparable by
+    value: -0.0 is made 0.0 (equal as numbers); a NaN pixel gets a key of its own (a NaN
+    equals nothing)."""
+    n = len(camera)
+    table = np.zeros(n, dtype=[("camera", "<i8"), ("frame", "<i8"), ("u", "<f8"), ("v", "<f8"),
+                               ("nan", "<i8")])
+    uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+    table["camera"] = np.asarray(camera)
+    table["frame"] = np.asarray(frame_index)
+    table["u"] = uv[:, 0] + 0.0
+    table["v"] = uv[:, 1] + 0.0
+    nan = np.isnan(uv).any(axis=1)
+    table["nan"][nan] = -1 - np.arange(np.count_nonzero(nan))  # unique: never matched
+    return table.view(f"V{table.dtype.itemsize}")
+
+
+def _member(keys: np.ndarray, of: np.ndarray) -> np.ndarray:
+    """Whether each of ``keys`` is among ``of`` (both from :func:`_keys`): sorted search, linear
+    in the candidates (a Python set of tuples cost seconds on a match)."""
+    if len(of) == 0 or len(keys) == 0:
+        return np.zeros(len(keys), dtype=bool)
+    of = np.sort(of)
+    at = np.minimum(np.searchsorted(of, keys), len(of) - 1)
+    found = of[at] == keys
+    # a NaN key (last field non-zero) matches nothing, not even itself
+    nan = keys.view(np.uint8).reshape(len(keys), -1)[:, -8:].any(axis=1)
+    return found & ~nan
 
 
 def rejection_counts(method: str, rejections, detections, ball=None) -> RejectionCounts:
@@ -239,8 +268,7 @@ def rejection_counts(method: str, rejections, detections, ball=None) -> Rejectio
     pixel."""
     cand = _keys(detections.frame_camera[detections.cand_frame],
                  detections.frame_index[detections.cand_frame], detections.cand_uv)
-    rejected_keys = set(_keys(rejections.camera, rejections.frame_index, rejections.uv))
-    rejected = np.array([k in rejected_keys for k in cand], dtype=bool)
+    rejected = _member(cand, _keys(rejections.camera, rejections.frame_index, rejections.uv))
     had = detections.candidates_per_frame() > 0
     kept_frame = np.zeros(detections.n_frames, dtype=bool)
     kept_frame[detections.cand_frame[~rejected]] = True
@@ -248,9 +276,8 @@ def rejection_counts(method: str, rejections, detections, ball=None) -> Rejectio
                              int(np.count_nonzero(had & ~kept_frame)), rejections.counts())
     if ball is None:
         return counts
-    labels = set(_keys(ball.frame_camera[ball.cand_frame], ball.frame_index[ball.cand_frame],
-                       ball.cand_uv))
-    is_ball = np.array([k in labels for k in cand], dtype=bool)
+    is_ball = _member(cand, _keys(ball.frame_camera[ball.cand_frame],
+                                  ball.frame_index[ball.cand_frame], ball.cand_uv))
     return RejectionCounts(
         method, counts.candidates, counts.rejected, counts.rejected_detections,
         counts.by_reason, correct=int(np.count_nonzero(rejected & ~is_ball)),

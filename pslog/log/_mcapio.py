@@ -329,10 +329,11 @@ def chunk_header(buf, body: int) -> tuple[int, int]:
     return _unpack("<QQ", buf, body)
 
 
-def chunk_payload(body: bytes, validate_crc: bool = True) -> bytes:
+def chunk_payload(body: bytes, validate_crc: bool = True, framing: bool = True) -> bytes:
     """Decompressed records of a Chunk record body, checked: header consistent with the body's
     length, decompression, uncompressed size, CRC (when the writer stored one) and the
-    framing of the records inside. LogFormatError saying what is wrong otherwise."""
+    framing of the records inside (``framing=False``: the caller checks it, e.g. columnar
+    from the message indexes). LogFormatError saying what is wrong otherwise."""
     try:
         _start, _end, size, crc, n = _unpack("<QQQII", body, 0)
         compression = bytes(body[32:32 + n]).decode("ascii")
@@ -366,7 +367,8 @@ def chunk_payload(body: bytes, validate_crc: bool = True) -> bytes:
         raise LogFormatError(f"chunk decompresses to {len(data)} bytes, header says {size}")
     if validate_crc and crc and zlib.crc32(data) != crc:
         raise LogFormatError("chunk CRC mismatch")
-    check_framing(data)
+    if framing:
+        check_framing(data)
     return data
 
 

@@ -2,8 +2,12 @@
 unless asked (:func:`iter_images`).
 
 Speed: the summary's chunk index says which chunks hold which channels, so image chunks are
-never read; detection chunks are decompressed whole and their messages sliced out with
-``struct`` (see ``_mcapio``) and decoded with the generated protobuf class directly.
+never read; the chunks read are decompressed into one buffer, each topic's messages located
+through the chunks' MessageIndex records (checked against the message records, the framing
+checked from them too) and pslog's own messages (detections, truth, tracks) decoded from the
+protobuf wire format with numpy, all messages of a topic at once: linear in the session's
+length, no Python object per message. Anything irregular (a damaged index, a valid protobuf
+encoding pslog does not write) falls back to the record walk and the protobuf classes.
 
 Damage: the summary is checked against its CRC before it is trusted, and every chunk read is
 checked (lengths, decompression, CRC, framing); a damaged one is a one-line LogFormatError
@@ -145,21 +149,22 @@ class _Finished:
     def __exit__(self, *exc) -> None:
         self.close()
 
-    def read_chunk(self, index) -> bytes:
+    def read_chunk(self, index, framing: bool = True) -> bytes:
         """The checked, decompressed records of the chunk of a ChunkIndex; a one-line
-        LogFormatError naming the byte offset (and ``pslog recover``) if it is damaged."""
+        LogFormatError naming the byte offset (and ``pslog recover``) if it is damaged.
+        ``framing=False``: the records' framing is left for the caller to check."""
         try:
-            return self._chunk(index)
+            return self._chunk(index, framing)
         except LogFormatError as exc:
             raise io.damaged_error(self.path, index.chunk_start_offset, str(exc)) from None
 
-    def _chunk(self, index) -> bytes:
+    def _chunk(self, index, framing: bool = True) -> bytes:
         self.file.seek(index.chunk_start_offset)
         record = self.file.read(index.chunk_length)
         if len(record) != index.chunk_length or record[0] != io.OP_CHUNK or \
                 int.from_bytes(record[1:9], "little") != index.chunk_length - 9:
             raise LogFormatError("chunk record does not match the summary's index")
-        return io.chunk_payload(record[9:])
+        return io.chunk_payload(record[9:], framing=framing)
 
     def check_chunks(self) -> list[dict]:
         """Check every chunk (decompression, CRC, framing): one dict per damaged chunk as
@@ -204,6 +209,98 @@ class _Finished:
                 wanted[cid].append((t, seq, data)) if cid in wanted else None))
         return {self.topics[cid]: msgs for cid, msgs in wanted.items()}
 
+    def collect_batches(self, topics: Sequence[str], skip: frozenset[int] = frozenset()
+                        ) -> dict[str, _Batch]:
+        """As :meth:`collect`, each topic's messages as one :class:`_Batch`: found through
+        the chunks' MessageIndex records (each entry checked against the message record it
+        points at), without a Python object per message. A chunk whose index does not
+        check out is walked record by record; when a topic's message count then differs
+        from the summary's statistics, the whole file is read the per-message way."""
+        wanted = {cid for cid, topic in self.topics.items() if topic in set(topics)}
+        if not wanted:
+            return {}
+        chunks = self.summary.chunk_indexes
+        if not chunks:
+            return {t: _Batch.from_messages(m) for t, m in self.collect(topics, skip).items()}
+        chosen = [c for c in sorted(chunks, key=lambda c: c.chunk_start_offset)
+                  if wanted & c.message_index_offsets.keys()
+                  and c.chunk_start_offset not in skip]  # e.g. image chunks: never read
+        # every chunk read is decompressed into one shared buffer, and each topic's messages
+        # are offsets into it: no copy per message, nor per topic
+        total = sum(c.uncompressed_size for c in chosen)
+        shared = np.zeros(total + _PAD, dtype=np.uint8)
+        at = 0
+        parts: dict[int, list[_Batch]] = {cid: [] for cid in wanted}
+        for index in chosen:
+            here = wanted & index.message_index_offsets.keys()
+            records = self.read_chunk(index, framing=False)
+            size = len(records)
+            inside = at + size <= total  # else an index whose size is wrong: a copy of its own
+            rec = shared[at:at + size] if inside else np.zeros(size + _PAD, dtype=np.uint8)
+            rec[:size] = np.frombuffer(records, dtype=np.uint8)
+            del records
+            try:
+                got = self._indexed(index, rec[:size], here)
+            except (_Irregular, struct.error):
+                raw = rec[:size].tobytes()
+                try:  # the framing the record walk needs, with its usual error
+                    io.check_framing(raw)
+                except LogFormatError as exc:
+                    raise io.damaged_error(self.path, index.chunk_start_offset,
+                                           str(exc)) from None
+                found: dict[int, list] = {cid: [] for cid in here}
+                io.collect_messages(raw, found)
+                got = {cid: _Batch.from_messages(m) for cid, m in found.items()}
+            else:
+                for batch in got.values():
+                    batch.buf = shared if inside else rec
+                    if inside:
+                        batch.start += at
+                        batch.end += at
+            if inside:
+                at += size
+            for cid, batch in got.items():
+                parts[cid].append(batch)
+        out = {self.topics[cid]: _Batch.join(parts[cid], shared) for cid in wanted}
+        if not skip and any(len(b) != self.counts.get(t, len(b)) for t, b in out.items()):
+            # an index that left messages out: the record walk is the authority
+            return {t: _Batch.from_messages(m) for t, m in self.collect(topics, skip).items()}
+        return out
+
+    def _indexed(self, index, rec: np.ndarray, channels) -> dict[int, _Batch]:
+        """The messages of ``channels`` in a chunk's records ``rec`` (uint8), found through
+        its MessageIndex records, as offsets into ``rec``; :class:`_Irregular` when an index
+        does not match the records."""
+        chunk_end = index.chunk_start_offset + index.chunk_length
+        self.file.seek(chunk_end)
+        raw = self.file.read(index.message_index_length)
+        n = len(rec)
+        _check_framing(rec, raw, index.message_index_offsets, chunk_end)
+        out = {}
+        for cid in channels:
+            at = index.message_index_offsets[cid] - chunk_end
+            if at < 0 or at + 15 > len(raw):
+                raise _Irregular("message index outside its range")
+            op, length, channel, size = struct.unpack_from("<BQHI", raw, at)
+            if (op != io.OP_MESSAGE_INDEX or channel != cid or size % 16 or length != 6 + size
+                    or at + 15 + size > len(raw)):
+                raise _Irregular("message index record does not check out")
+            entries = np.frombuffer(raw, dtype="<u8", count=size // 8,
+                                    offset=at + 15).reshape(-1, 2)
+            order = np.argsort(entries[:, 1], kind="stable")  # file order
+            times, offsets = entries[order, 0], entries[order, 1]
+            if len(offsets) and (offsets[-1] > n - 31 or np.any(np.diff(offsets) == 0)):
+                raise _Irregular("message index offsets out of range")
+            offsets = offsets.astype(np.int64)
+            end = offsets + 9 + _load(rec, offsets + 1, 8).astype(np.int64)
+            if (np.any(rec[offsets] != io.OP_MESSAGE) or np.any(end < offsets + 31)
+                    or np.any(end > n) or np.any(_load(rec, offsets + 9, 2) != cid)
+                    or np.any(_load(rec, offsets + 15, 8) != times)):
+                raise _Irregular("message index entry does not match its record")
+            out[cid] = _Batch(rec, offsets + 31, end, times.view(np.int64),
+                              _load(rec, offsets + 11, 4).view(np.int64))
+        return out
+
 
 def read_session(path) -> Session:
     """Read a session MCAP without decoding images.
@@ -225,21 +322,22 @@ def _read(f: _Finished, skip: frozenset[int] = frozenset()) -> Session:
     track_topics = sorted(t for t in f.topics.values() if S.parse_track_topic(t))
     ball_topics = [S.ball_truth_topic(n) for n in rig.names]
     rejection_topics = sorted(t for t in f.topics.values() if S.parse_rejections_topic(t))
-    found = f.collect([*det_topics, S.TRUTH_TOPIC, S.EVENTS_TOPIC, *track_topics,
-                       *ball_topics, *rejection_topics], skip)
+    found = f.collect_batches([*det_topics, S.TRUTH_TOPIC, S.EVENTS_TOPIC, *track_topics,
+                               *ball_topics, *rejection_topics], skip)
+    none = _Batch.concatenate([])
     try:
-        detections = decode_detections(rig.names, [found.get(t, []) for t in det_topics])
+        detections = decode_detections(rig.names, [found.get(t, none) for t in det_topics])
         truth = decode_truth(found[S.TRUTH_TOPIC]) if S.TRUTH_TOPIC in found else None
         tracks = {}
         for topic in track_topics:
             method = S.parse_track_topic(topic)
-            tracks[method] = decode_track(method, rig.names, found.get(topic, []))
-        events = decode_events(found.get(S.EVENTS_TOPIC, []))
-        ball_truth = (decode_detections(rig.names, [found.get(t, []) for t in ball_topics])
+            tracks[method] = decode_track(method, rig.names, found.get(topic, none))
+        events = decode_events(found.get(S.EVENTS_TOPIC, none).messages())
+        ball_truth = (decode_detections(rig.names, [found.get(t, none) for t in ball_topics])
                       if any(t in found for t in ball_topics) else None)
         try:
-            rejections = {S.parse_rejections_topic(t): decode_rejections(rig.names,
-                                                                         found.get(t, []))
+            rejections = {S.parse_rejections_topic(t): decode_rejections(
+                rig.names, found.get(t, none).messages())
                           for t in rejection_topics}
         except LogFormatError as exc:
             raise LogFormatError(f"{f.path}: {exc}") from None
@@ -254,12 +352,47 @@ def _read(f: _Finished, skip: frozenset[int] = frozenset()) -> Session:
                    rejections=rejections)
 
 
-def decode_detections(camera_names: Sequence[str],
-                      per_camera: Sequence[list[tuple[int, int, bytes]]]) -> Detections:
-    """Detections from each camera's ``(log_time, sequence, data)`` DetectionFrame messages.
+def decode_detections(camera_names: Sequence[str], per_camera: Sequence) -> Detections:
+    """Detections from each camera's DetectionFrame messages (a :class:`_Batch`, or a list of
+    ``(log_time, sequence, data)``): decoded columnar, else (anything irregular) one by one."""
+    batches = [m if isinstance(m, _Batch) else _Batch.from_messages(m) for m in per_camera]
+    try:
+        return _detections_columnar(camera_names, batches)
+    except _Irregular:
+        return _decode_detections_messages(camera_names, [b.messages() for b in batches])
 
-    Hot path (one call per frame of a match): plain list appends, numpy at the end.
-    """
+
+def _detections_columnar(camera_names: Sequence[str], batches: Sequence[_Batch]) -> Detections:
+    times, cams, frames, counts, columns = [], [], [], [], []
+    for cam, batch in enumerate(batches):
+        fields, _ = _decode_fields(batch, {1: "varint", 2: "bytes", 3: "varint", 4: "packed",
+                                           5: "packed", 6: "packed", 7: "packed"})
+        times.append(batch.time)
+        cams.append(np.full(len(batch), cam, dtype=np.int32))
+        frames.append(fields[3][1].view(np.int64))
+        values = [_packed(batch.buf, fields[f][1]) for f in (4, 5, 6, 7)]
+        k = values[0][1]
+        if any(np.any(c != k) for _v, c in values[1:]):
+            raise _Irregular("candidate arrays of unequal length")
+        counts.append(k)
+        columns.append([v for v, _c in values])
+    counts = np.concatenate(counts) if counts else np.zeros(0, np.int64)
+    u, v, radius, score = ((np.concatenate([c[j] for c in columns]) if columns else np.zeros(0))
+                           for j in range(4))
+    n_cand = len(u)
+    return Detections.from_frames(
+        tuple(camera_names), np.concatenate(times) if times else np.zeros(0, np.int64),
+        np.concatenate(cams) if cams else np.zeros(0, np.int32),
+        np.concatenate(frames) if frames else np.zeros(0, np.int64),
+        np.repeat(np.arange(len(counts)), counts),
+        np.column_stack([u, v]) if n_cand else np.zeros((0, 2)),
+        radius.astype(np.float64), score.astype(np.float64))
+
+
+def _decode_detections_messages(camera_names: Sequence[str],
+                                per_camera: Sequence[list[tuple[int, int, bytes]]]
+                                ) -> Detections:
+    """Detections decoded one message at a time (the columnar decoder's fallback)."""
     parse = S.DetectionFrame.FromString
     times, cams, frames, counts = [], [], [], []
     u, v, radius, score = [], [], [], []
@@ -288,7 +421,22 @@ def decode_detections(camera_names: Sequence[str],
         np.asarray(radius, dtype=np.float64), np.asarray(score, dtype=np.float64))
 
 
-def decode_truth(msgs: list[tuple[int, int, bytes]]) -> Truth:
+def decode_truth(msgs) -> Truth:
+    """Truth from its TruthPoint messages (a :class:`_Batch` or ``(log_time, sequence,
+    data)`` list), sorted by time."""
+    batch = msgs if isinstance(msgs, _Batch) else _Batch.from_messages(msgs)
+    try:
+        fields, _ = _decode_fields(batch, {1: "varint", 2: "double", 3: "double",
+                                           4: "double"})
+    except _Irregular:
+        return _decode_truth_messages(batch.messages())
+    times = batch.time
+    order = np.argsort(times, kind="stable")
+    xyz = np.column_stack([fields[f][1] for f in (2, 3, 4)]).reshape(-1, 3)
+    return Truth(times[order], xyz[order])
+
+
+def _decode_truth_messages(msgs: list[tuple[int, int, bytes]]) -> Truth:
     parse = S.TruthPoint.FromString
     times, xyz = [], []
     for t, _seq, data in msgs:
@@ -300,10 +448,86 @@ def decode_truth(msgs: list[tuple[int, int, bytes]]) -> Truth:
     return Truth(times[order], np.asarray(xyz, dtype=np.float64).reshape(-1, 3)[order])
 
 
-def decode_track(method: str, camera_names: Sequence[str],
-                 msgs: list[tuple[int, int, bytes]]) -> Track:
-    """A Track from its TrackPoint messages. Fixed quality fields that are NaN at every
-    point are left out (the writer stores NaN for fields a track does not have)."""
+def decode_track(method: str, camera_names: Sequence[str], msgs) -> Track:
+    """A Track from its TrackPoint messages (a :class:`_Batch` or ``(log_time, sequence,
+    data)`` list). Fixed quality fields that are NaN at every point are left out (the writer
+    stores NaN for fields a track does not have)."""
+    batch = msgs if isinstance(msgs, _Batch) else _Batch.from_messages(msgs)
+    try:
+        return _track_columnar(method, camera_names, batch)
+    except _Irregular:
+        return _decode_track_messages(method, camera_names, batch.messages())
+
+
+#: points whose quality maps are read at a time (rows of a few hundred bytes each)
+_MAP_BLOCK = 1 << 15
+
+
+def _track_columnar(method: str, camera_names: Sequence[str], batch: _Batch) -> Track:
+    n = len(batch)
+    if n == 0:
+        raise _Irregular("empty")  # the per-message path makes the empty track
+    buf = batch.buf
+    fields, maps = _decode_fields(batch, {1: "varint", 2: "bytes", 3: "double", 4: "double",
+                                          5: "double", 6: "bytes", 7: "double", 8: "double",
+                                          9: "double"}, stop=10)
+    cams = _strings(buf, fields[6][1], camera_names)
+    if np.any(cams < 0):
+        raise _Irregular("unknown camera")  # the per-message path names it
+    # the quality map: every point of a pslog track has the same keys, which protobuf writes
+    # in the same order; the first point's entries are the template the others must match
+    # byte for byte but for the values (entry: 0x52 len 0x0a klen key 0x11 double)
+    first = buf[maps[0]:batch.end[0]].tobytes()
+    template, at = [], 0
+    while at < len(first):
+        if at + 4 > len(first):
+            raise _Irregular("map entry")
+        length, klen = first[at + 1], first[at + 3]
+        if (first[at] != 0x52 or length >= 0x80 or first[at + 2] != 0x0A or klen >= 0x80
+                or length != klen + 11 or at + 2 + length > len(first)
+                or first[at + 4 + klen] != 0x11):
+            raise _Irregular("map entry not in the usual form")
+        template.append((at, first[at:at + 5 + klen], first[at + 4:at + 4 + klen]))
+        at += 2 + length
+    keys = [k for _a, _h, k in template]
+    if len(set(keys)) != len(keys) or np.any(batch.end - maps != len(first)):
+        raise _Irregular("maps differ in form")
+    # every point's map read as one row of bytes (a pass over the track's memory, not one
+    # per key), in blocks to bound the memory it takes
+    width = len(first)
+    slots = {key.decode("utf-8"): at + len(head) for at, head, key in template}
+    values = {k: np.empty(n) for k in slots}
+    if width:
+        fixed = np.ones(width, dtype=bool)  # the bytes every point shares: all but values
+        for at in slots.values():
+            fixed[at:at + 8] = False
+        expected = np.frombuffer(first, dtype=np.uint8)[fixed]
+        rows = _windows(buf, width)
+        for lo in range(0, n, _MAP_BLOCK):
+            block = rows[maps[lo:lo + _MAP_BLOCK]]
+            if not np.all(block[:, fixed] == expected):
+                raise _Irregular("maps differ in keys")
+            for key, at in slots.items():
+                values[key][lo:lo + _MAP_BLOCK] = block[:, at:at + 8].copy().view("<f8")[:, 0]
+    # key order as the per-message path gives it: protobuf's own order of the first point's
+    # map (all points have the same keys)
+    first_keys = list(S.TrackPoint.FromString(buf[batch.start[0]:batch.end[0]].tobytes())
+                      .quality)
+    if sorted(first_keys) != sorted(values):
+        raise _Irregular("map keys")
+    times = batch.time
+    xyz = np.column_stack([fields[f][1] for f in (3, 4, 5)])
+    quality = {k: fields[f][1] for f, k in zip((7, 8, 9), S.TRACK_FIXED_QUALITY, strict=True)}
+    quality = {k: v for k, v in quality.items() if not np.all(np.isnan(v))}
+    quality.update({k: values[k] for k in first_keys})
+    order = np.argsort(times, kind="stable")
+    return Track(method, times[order], xyz[order], cams[order].astype(np.int32),
+                 {k: v[order] for k, v in quality.items()})
+
+
+def _decode_track_messages(method: str, camera_names: Sequence[str],
+                           msgs: list[tuple[int, int, bytes]]) -> Track:
+    """A Track decoded one message at a time (the columnar decoder's fallback)."""
     parse = S.TrackPoint.FromString
     index = {name: i for i, name in enumerate(camera_names)}
     n = len(msgs)
@@ -311,7 +535,9 @@ def decode_track(method: str, camera_names: Sequence[str],
     xyz = np.empty((n, 3))
     cams = np.empty(n, dtype=np.int32)
     fixed = {k: np.empty(n) for k in S.TRACK_FIXED_QUALITY}
-    extra: dict[str, np.ndarray] = {}
+    # map quality: (point, value) lists per key, made arrays once at the end (an array per
+    # key allocated at each point made reading quadratic in the track's length)
+    extra_rows: dict[str, tuple[list[int], list[float]]] = {}
     rows = []
     for i, (t, _seq, data) in enumerate(msgs):
         m = parse(data)
@@ -323,7 +549,15 @@ def decode_track(method: str, camera_names: Sequence[str],
             raise LogFormatError(f"track {method!r}: unknown camera {m.camera!r}") from None
         if m.quality:
             for key, value in m.quality.items():
-                extra.setdefault(key, np.full(n, np.nan))[i] = value
+                at = extra_rows.get(key)
+                if at is None:
+                    at = extra_rows[key] = ([], [])
+                at[0].append(i)
+                at[1].append(value)
+    extra: dict[str, np.ndarray] = {}
+    for key, (points, values) in extra_rows.items():
+        column = extra[key] = np.full(n, np.nan)
+        column[np.asarray(points, dtype=np.int64)] = values
     if n:
         table = np.asarray(rows, dtype=np.float64)
         xyz = table[:, :3]
@@ -426,3 +660,275 @@ def parse_image(data: bytes, path) -> S.CompressedImage:
     except DecodeError as exc:  # only a chunk written without CRCs can get here damaged
         raise LogFormatError(f"{path}: an image does not decode ({exc}); run 'pslog recover "
                              f"{path} -o FIXED.mcap' to salvage the rest") from None
+
+
+# ---- columnar fast path ---------------------------------------------------------------------
+# A match holds millions of small messages; decoding them one protobuf object at a time costs
+# microseconds each. Here the messages of a topic are gathered into one byte array (their
+# offsets from the chunks' MessageIndex records, checked against the records themselves) and
+# the protobuf wire format of pslog's own messages is decoded with numpy, all messages of a
+# topic at once. Anything irregular (a field of another wire type, a damaged index, keys of a
+# track's quality map in another order than its first point's) falls back to the per-message
+# path, which gives the same result (and the same errors) as before.
+
+class _Irregular(Exception):
+    """The columnar decoder meets something it does not handle: use the per-message path."""
+
+
+#: bytes after the last message of a batch, so that fixed-width loads never read past it
+_PAD = 16
+
+
+@dataclass
+class _Batch:
+    """Messages of one topic as columns: ``buf`` holds their data back to back (plus
+    :data:`_PAD` zero bytes), message ``i`` is ``buf[start[i]:end[i]]``, logged at
+    ``time[i]`` with sequence ``seq[i]``; in file order."""
+
+    buf: np.ndarray    # uint8
+    start: np.ndarray  # int64
+    end: np.ndarray    # int64
+    time: np.ndarray   # int64
+    seq: np.ndarray    # int64
+
+    def __len__(self) -> int:
+        return len(self.start)
+
+    @classmethod
+    def from_messages(cls, msgs: Sequence[tuple[int, int, bytes]]) -> _Batch:
+        lengths = np.fromiter((len(d) for _t, _s, d in msgs), dtype=np.int64, count=len(msgs))
+        end = np.cumsum(lengths)
+        buf = np.frombuffer(b"".join(d for _t, _s, d in msgs) + bytes(_PAD), dtype=np.uint8)
+        return cls(buf, end - lengths, end,
+                   np.fromiter((t for t, _s, _d in msgs), dtype=np.int64, count=len(msgs)),
+                   np.fromiter((s for _t, s, _d in msgs), dtype=np.int64, count=len(msgs)))
+
+    @classmethod
+    def concatenate(cls, parts: Sequence[_Batch]) -> _Batch:
+        """One batch of ``parts`` (whose buffers need no padding) in order."""
+        if not parts:
+            return cls(np.zeros(_PAD, np.uint8), *(np.zeros(0, np.int64) for _ in range(4)))
+        shifts = np.cumsum([0] + [len(p.buf) for p in parts[:-1]])
+        return cls(np.concatenate([*(p.buf for p in parts), np.zeros(_PAD, np.uint8)]),
+                   np.concatenate([p.start + s for p, s in zip(parts, shifts, strict=True)]),
+                   np.concatenate([p.end + s for p, s in zip(parts, shifts, strict=True)]),
+                   np.concatenate([p.time for p in parts]),
+                   np.concatenate([p.seq for p in parts]))
+
+    @classmethod
+    def join(cls, parts: Sequence[_Batch], shared: np.ndarray) -> _Batch:
+        """One batch of ``parts``: offsets into ``shared`` when they all are, else (a chunk
+        walked record by record) a compact copy of each."""
+        if parts and all(p.buf is shared for p in parts):
+            return cls(shared, *(np.concatenate([getattr(p, k) for p in parts])
+                                 for k in ("start", "end", "time", "seq")))
+        compact = []
+        for p in parts:
+            buf, begin = _gather(p.buf, p.start, p.end)
+            compact.append(cls(buf, begin, begin + (p.end - p.start), p.time, p.seq))
+        return cls.concatenate(compact)
+
+    def messages(self) -> list[tuple[int, int, bytes]]:
+        """The per-message form ``[(log_time, sequence, data), ...]``."""
+        raw = memoryview(self.buf)  # not a copy of a shared buffer: each message's bytes
+        return [(t, s, bytes(raw[a:b])) for t, s, a, b in zip(
+            self.time.tolist(), self.seq.tolist(), self.start.tolist(), self.end.tolist(),
+            strict=True)]
+
+
+def _gather(records: np.ndarray, start: np.ndarray, end: np.ndarray) -> tuple[np.ndarray,
+                                                                             np.ndarray]:
+    """The byte ranges ``records[start[i]:end[i]]`` (sorted, disjoint) back to back (no
+    padding: see :meth:`_Batch.concatenate`), and where each begins in it."""
+    lengths = end - start
+    begin = np.cumsum(lengths) - lengths
+    # a byte mask of the ranges (+1 where one starts, -1 where it ends, summed up): one pass
+    # over the chunk instead of an index per byte
+    edge = (np.bincount(start, minlength=len(records) + 1)
+            - np.bincount(end, minlength=len(records) + 1))
+    mask = np.cumsum(edge[:-1]) > 0
+    return records[mask], begin
+
+
+def _check_framing(rec: np.ndarray, raw: bytes, offsets: dict[int, int], chunk_end: int
+                   ) -> None:
+    """The framing check of :func:`pslog.log._mcapio.check_framing`, columnar: the message
+    records every MessageIndex of the chunk lists must follow one another exactly, and what
+    lies between them (schemas, channels: a few records) is walked as usual.
+    :class:`_Irregular` when anything does not add up (the caller then walks the whole chunk,
+    which raises the usual error if the framing is wrong)."""
+    n = len(rec)
+    starts = []
+    for at in offsets.values():
+        at -= chunk_end
+        if at < 0 or at + 15 > len(raw):
+            raise _Irregular("message index outside its range")
+        op, length, _channel, size = struct.unpack_from("<BQHI", raw, at)
+        if op != io.OP_MESSAGE_INDEX or size % 16 or length != 6 + size or \
+                at + 15 + size > len(raw):
+            raise _Irregular("message index record does not check out")
+        starts.append(np.frombuffer(raw, dtype="<u8", count=size // 8,
+                                    offset=at + 15)[1::2])
+    starts = np.sort(np.concatenate(starts)) if starts else np.zeros(0, np.uint64)
+    if len(starts) and (starts[-1] > n - 9 or np.any(np.diff(starts) == 0)):
+        raise _Irregular("message offsets out of range")
+    starts = starts.astype(np.int64)
+    length = _load(rec, starts + 1, 8)
+    if np.any(length > np.uint64(n)) or np.any(rec[starts] != io.OP_MESSAGE) or \
+            np.any(length < 22):
+        raise _Irregular("an indexed record is no message")
+    ends = starts + 9 + length.astype(np.int64)
+    # the gaps between consecutive messages (and before the first, after the last) hold
+    # whole records
+    gap_from = np.concatenate([[0], ends])
+    gap_to = np.concatenate([starts, [n]])
+    if np.any(gap_to < gap_from):
+        raise _Irregular("records overlap")
+    for a, b in zip(gap_from[gap_to > gap_from].tolist(), gap_to[gap_to > gap_from].tolist(),
+                    strict=True):
+        try:
+            io.check_framing(bytes(rec[a:b]))
+        except LogFormatError:
+            raise _Irregular("framing between messages") from None
+
+
+def _windows(buf: np.ndarray, width: int) -> np.ndarray:
+    """Read-only view of every ``width`` consecutive bytes of ``buf``: row ``i`` is
+    ``buf[i:i + width]`` (gathering rows copies ``width`` bytes per index, not an index per
+    byte)."""
+    return np.lib.stride_tricks.as_strided(buf, shape=(len(buf) - width + 1, width),
+                                           strides=(1, 1), writeable=False)
+
+
+def _load(buf: np.ndarray, pos: np.ndarray, width: int) -> np.ndarray:
+    """Little-endian unsigned integers of ``width`` bytes at ``pos``, as uint64."""
+    raw = _windows(buf, width)[pos]
+    if width == 8:
+        return raw.view("<u8")[:, 0]
+    out = np.zeros(len(pos), dtype=np.uint64)
+    for i in range(width):
+        out |= raw[:, i].astype(np.uint64) << np.uint64(8 * i)
+    return out
+
+
+def _doubles(buf: np.ndarray, pos: np.ndarray) -> np.ndarray:
+    return _windows(buf, 8)[pos].view("<f8")[:, 0]
+
+
+def _varint(buf: np.ndarray, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Protobuf varints at ``pos``: (values as uint64, position after each)."""
+    b = buf[pos]
+    if not np.any(b & 0x80):
+        return b.astype(np.uint64), pos + 1
+    value = np.zeros(len(pos), dtype=np.uint64)
+    length = np.zeros(len(pos), dtype=np.int64)
+    done = np.zeros(len(pos), dtype=bool)
+    for i in range(10):
+        b = buf[pos + i].astype(np.uint64)
+        live = ~done
+        value[live] |= (b[live] & np.uint64(0x7F)) << np.uint64(7 * i)
+        length[live] = i + 1
+        done |= b < 0x80
+        if done.all():
+            return value, pos + length
+    raise _Irregular("varint longer than 10 bytes")
+
+
+#: wire types of the field kinds the columnar decoder reads
+_WIRE = {"varint": 0, "double": 1, "bytes": 2, "packed": 2}
+
+
+def _decode_fields(batch: _Batch, spec: dict[int, str], stop: int | None = None
+                   ) -> tuple[dict[int, tuple[np.ndarray, np.ndarray]], np.ndarray]:
+    """Decode the top-level fields of every message of ``batch``: ``spec`` maps field numbers
+    to kinds (``varint``, ``double``, ``bytes``, ``packed`` doubles); each appears at most
+    once per message. Decoding a message stops at the first field ``stop`` (a map whose
+    entries end the message). Returns ``{field: (present, value)}`` (value: uint64 for
+    varint, float64 for double, (start, length) int64 pairs as a (n, 2) array for bytes and
+    packed) and where each message's ``stop`` field begins (its end if none)."""
+    buf, end = batch.buf, batch.end
+    n = len(batch)
+    pos = batch.start.copy()
+    present = {f: np.zeros(n, dtype=bool) for f in spec}
+    values = {}
+    for f, kind in spec.items():
+        if kind == "varint":
+            values[f] = np.zeros(n, dtype=np.uint64)
+        elif kind == "double":
+            values[f] = np.zeros(n)
+        else:
+            values[f] = np.zeros((n, 2), dtype=np.int64)
+    stop_at = end.copy()
+    live = np.flatnonzero(pos < end)
+    while len(live):
+        p = pos[live]
+        tag, p = _varint(buf, p)
+        field = (tag >> np.uint64(3)).astype(np.int64)
+        wire = (tag & np.uint64(7)).astype(np.int64)
+        nxt = np.full(len(p), -1, dtype=np.int64)
+        if stop is not None:
+            here = field == stop
+            if here.any():
+                stop_at[live[here]] = pos[live[here]]
+                nxt[here] = end[live[here]]
+        for f, kind in spec.items():
+            sel = field == f
+            if not sel.any():
+                continue
+            if np.any(wire[sel] != _WIRE[kind]):
+                raise _Irregular(f"field {f} of another wire type")
+            rows = live[sel]
+            if present[f][rows].any():
+                raise _Irregular(f"field {f} repeated")
+            present[f][rows] = True
+            ps = p[sel]
+            if kind == "varint":
+                v, after = _varint(buf, ps)
+                values[f][rows] = v
+            elif kind == "double":
+                values[f][rows] = _doubles(buf, ps)
+                after = ps + 8
+            else:
+                length, ps = _varint(buf, ps)
+                if np.any(length > np.uint64(1 << 31)):
+                    raise _Irregular("length out of range")
+                length = length.astype(np.int64)
+                if kind == "packed" and np.any(length % 8):
+                    raise _Irregular("packed doubles of a partial length")
+                values[f][rows, 0] = ps
+                values[f][rows, 1] = length
+                after = ps + length
+            nxt[sel] = after
+        if np.any(nxt < 0):
+            raise _Irregular("unexpected field")
+        if np.any(nxt > end[live]):
+            raise _Irregular("field runs past its message")
+        pos[live] = nxt
+        live = live[nxt < end[live]]
+    return {f: (present[f], values[f]) for f in spec}, stop_at
+
+
+def _packed(buf: np.ndarray, ranges: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Packed doubles of every message back to back, and their count per message."""
+    counts = ranges[:, 1] // 8
+    total = int(counts.sum())
+    if not total:
+        return np.zeros(0), counts
+    first = np.cumsum(counts) - counts
+    pos = np.repeat(ranges[:, 0] - 8 * first, counts) + 8 * np.arange(total, dtype=np.int64)
+    return _doubles(buf, pos), counts
+
+
+def _strings(buf: np.ndarray, ranges: np.ndarray, names: Sequence[str]) -> np.ndarray:
+    """Index in ``names`` of each string field ((start, length) rows); -1 for any other."""
+    out = np.full(len(ranges), -1, dtype=np.int64)
+    for i, name in enumerate(names):
+        raw = np.frombuffer(name.encode(), dtype=np.uint8)
+        sel = np.flatnonzero(ranges[:, 1] == len(raw))
+        if len(raw) > len(buf):
+            continue
+        if len(raw) and len(sel):
+            same = np.all(_windows(buf, len(raw))[ranges[sel, 0]] == raw, axis=1)
+            sel = sel[same]
+        out[sel] = i
+    return out

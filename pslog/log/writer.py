@@ -468,21 +468,34 @@ class SessionWriter:
         nan = [float("nan")] * n
         fixed = {k: (track.quality[k].tolist() if k in track.quality else nan)
                  for k in S.TRACK_FIXED_QUALITY}
-        extra = {k: v.tolist() for k, v in track.quality.items()
+        extra = {k: np.asarray(v, dtype=np.float64) for k, v in track.quality.items()
                  if k not in S.TRACK_FIXED_QUALITY}
         if n and track.time_ns.min() < 0:
             raise InputError(_negative_time(int(track.time_ns.min())))
         if n and not 0 <= track.camera.min() <= track.camera.max() < len(self._names):
             raise InputError(f"track {method!r}: camera index out of range of the rig")
         cameras = self._names
+        # the quality map's bytes of every point at once (setting its keys one point at a
+        # time was most of the cost of writing a track); None: the per-point way
+        entries = _quality_entries(extra, n)
         for i, (t, (x, y, z), cam) in enumerate(zip(
                 track.time_ns.tolist(), track.position_world.tolist(), track.camera.tolist(),
                 strict=True)):
             msg = S.TrackPoint(time_ns=t, method=method, x=x, y=y, z=z, camera=cameras[cam],
                                **{k: fixed[k][i] for k in S.TRACK_FIXED_QUALITY})
-            for k, values in extra.items():
-                msg.quality[k] = values[i]
-            self._queue(channel, t, msg.SerializeToString())
+            if entries is not None:
+                data = msg.SerializeToString() + next(entries)
+                if i == 0:  # the same bytes as protobuf's own, checked on the first point
+                    for k, values in extra.items():
+                        msg.quality[k] = float(values[i])
+                    if msg.SerializeToString() != data:
+                        entries = None
+                        data = msg.SerializeToString()
+            else:
+                for k, values in extra.items():
+                    msg.quality[k] = float(values[i])
+                data = msg.SerializeToString()
+            self._queue(channel, t, data)
             self._queue(scene_channel, t, scene_point(method, i, t, (x, y, z), color))
         self._count(S.track_topic(method), n)
         self._count(S.track_scene_topic(method), n)
@@ -583,6 +596,52 @@ class SessionWriter:
         if exc_type is not None:
             self._failed = True
         self.close()
+
+
+def _quality_entries(extra: dict[str, np.ndarray], n: int, block: int = 1 << 15):
+    """The serialized ``quality`` map entries (field 10, the last field of a TrackPoint) of
+    each of ``n`` points, one ``bytes`` per point from an iterator (made ``block`` points at a
+    time: little memory); ``extra``: key -> (n,) values, set in this order as
+    :meth:`SessionWriter.add_track` sets them. Every point has the same keys, set in the same
+    order, so protobuf writes its entries in one order, found by serializing one map; each
+    entry is ``0x52 len 0x0a klen key 0x11 <value, 8 bytes little endian>``. None when an
+    entry is not of that form (a key of 117 bytes or more)."""
+    if not extra or not n:
+        return iter([b""] * n)
+    probe = S.TrackPoint()
+    for k in extra:
+        probe.quality[k] = 1.0
+    raw = probe.SerializeToString()  # the map alone: every other field is at its default
+    template, slots, at = bytearray(), {}, 0
+    while at < len(raw):
+        if at + 4 > len(raw):
+            return None
+        length, klen = raw[at + 1], raw[at + 3]
+        if (raw[at] != 0x52 or raw[at + 2] != 0x0A or length >= 0x80 or klen >= 0x80
+                or length != klen + 11 or raw[at + 4 + klen] != 0x11):
+            return None
+        key = raw[at + 4:at + 4 + klen].decode("utf-8")
+        slots[key] = len(template) + 5 + klen
+        template += raw[at:at + 2 + length]
+        at += 2 + length
+    if sorted(slots) != sorted(extra):
+        return None
+    return _entry_rows(np.frombuffer(bytes(template), dtype=np.uint8), slots, extra, n, block)
+
+
+def _entry_rows(template: np.ndarray, slots: dict[str, int], extra: dict[str, np.ndarray],
+                n: int, block: int):
+    width = len(template)
+    for lo in range(0, n, block):
+        hi = min(lo + block, n)
+        rows = np.tile(template, (hi - lo, 1))
+        for key, values in extra.items():
+            rows[:, slots[key]:slots[key] + 8] = (np.asarray(values[lo:hi], dtype="<f8")
+                                                  .view(np.uint8).reshape(hi - lo, 8))
+        flat = rows.tobytes()
+        del rows
+        for at in range(0, len(flat), width):
+            yield flat[at:at + width]
 
 
 def _negative_time(time_ns: int) -> str:
