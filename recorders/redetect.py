@@ -27,7 +27,7 @@ from pslog.errors import InputError
 from pslog.outputs import check_output_path
 from pslog.records import Detections
 
-from .detect import BallDetector, HsvRange
+from .detect import BallDetector, HsvRange, _bgr_box
 
 _BATCH = 64  # images per task when several processes decode and detect
 _PARALLEL_FROM = 400  # images; below this one process is faster than starting a pool
@@ -129,6 +129,12 @@ def _detect_all(images, row_of: dict, hsv: HsvRange, max_candidates: int,
                 workers: int | None, n_images: int) -> Iterator[tuple[list, list]]:
     """Yield (rows, [(uv, radius, score), ...]) batches for every stored image with a frame
     record."""
+    import cv2
+
+    # one OpenCV thread in this process too, before any worker is forked: a worker inherits
+    # OpenCV's thread pool if this process had started one (a large conversion, e.g. by
+    # _bgr_box), without its threads, and hangs in its first call into OpenCV
+    cv2.setNumThreads(1)
     workers = workers or (os.cpu_count() or 1)
     batches = _batches(images, row_of)
     if workers <= 1 or n_images < _PARALLEL_FROM:
@@ -136,6 +142,7 @@ def _detect_all(images, row_of: dict, hsv: HsvRange, max_candidates: int,
         for rows, blobs in batches:
             yield rows, [_detect_blob(detector, b) for b in blobs]
         return
+    _bgr_box(hsv)  # computed once here and inherited by the forked workers
     with ProcessPoolExecutor(max_workers=workers) as pool:
         pending = []
         for rows, blobs in batches:
