@@ -1,12 +1,14 @@
 """Ball detection by colour: HSV thresholding, connected components, sub-pixel centroids.
 
 The paper's reference [5] finds the ball by fast colour thresholding; we do the same in two
-passes so that a 640 x 480 frame costs well under a millisecond on one core:
+passes so that a 1280 x 720 frame costs about a millisecond on one core:
 
-1. coarse: the frame subsampled by ``downscale`` (nearest neighbour), converted to HSV,
-   thresholded with :func:`cv2.inRange`, labelled with
-   :func:`cv2.connectedComponentsWithStats` after a 4 x 4 max-pooling (labelling costs per
-   pixel, even empty ones); the largest blobs become regions of interest;
+1. coarse: the frame subsampled by ``downscale`` (nearest neighbour), screened by a BGR box
+   that holds every colour of the HSV range (one :func:`cv2.inRange`), the few pixels that
+   pass converted to HSV and thresholded (the whole coarse frame when many pass), labelled
+   with :func:`cv2.connectedComponentsWithStats` after a 4 x 4 max-pooling (labelling costs
+   per pixel, even empty ones); the largest blobs become regions of interest. The screen
+   changes nothing but the cost: the pooled mask is the one of converting every pixel;
 2. fine: each region (padded so it surely contains the whole blob) is thresholded again at
    full resolution; its components give the candidates. The centroid is the mean of the
    mask's pixel centres (sub-pixel by averaging; OpenCV pixel centres are integers), the
@@ -27,6 +29,7 @@ minimum exceeds its maximum wraps around red (``170,10,...``).
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import cv2
@@ -37,6 +40,9 @@ from pslog.errors import InputError
 _PAD = 2  # full-resolution pixels added around a coarse blob's box
 _POOL = 4  # max-pooling factor of the coarse mask before labelling
 _SPECK_PX = 4.0  # area at which the size factor of the score is 1/2
+# screened pixels are converted one by one while fewer than 1/_SPARSE_FRACTION of the frame
+# pass the BGR box (gathering them costs about 8 times a whole-frame conversion per pixel)
+_SPARSE_FRACTION = 8
 
 
 @dataclass(frozen=True)
@@ -153,17 +159,9 @@ class BallDetector:
             coarse = cv2.resize(frame_bgr, (w // s, h // s), interpolation=cv2.INTER_NEAREST)
         else:
             coarse = frame_bgr
-        mask = self.hsv.mask(cv2.cvtColor(coarse, cv2.COLOR_BGR2HSV))
-        if not cv2.countNonZero(mask):
+        pooled = self._coarse_cells(coarse)
+        if pooled is None:
             return Candidates.empty()
-        # label a 4 x 4 max-pooled copy: labelling costs per pixel even where the mask is
-        # empty, and blobs closer than a pooled cell may share a box (the fine pass splits them)
-        ch, cw = mask.shape
-        ph, pw = -(-ch // _POOL), -(-cw // _POOL)
-        if (ph * _POOL, pw * _POOL) != (ch, cw):
-            mask = cv2.copyMakeBorder(mask, 0, ph * _POOL - ch, 0, pw * _POOL - cw,
-                                      cv2.BORDER_CONSTANT, value=0)
-        pooled = cv2.resize(mask, (pw, ph), interpolation=cv2.INTER_AREA)  # > 0 if any set
         _, _, stats, _ = cv2.connectedComponentsWithStats(pooled, connectivity=8)
         stats = stats[1:]
         # the largest blobs first; a few more than K since some may fade at full resolution
@@ -187,6 +185,46 @@ class BallDetector:
         return Candidates(uv=np.stack([u[best], v[best]], axis=1),
                           radius=np.sqrt(area[best] / np.pi), area=area[best],
                           roundness=roundness[best], score=score[best])
+
+    def _coarse_cells(self, coarse: np.ndarray) -> np.ndarray | None:
+        """The coarse mask max-pooled by ``_POOL`` (uint8, > 0 where a cell holds a pixel in
+        the HSV range), or None if no pixel is in range.
+
+        Converting every coarse pixel to HSV is most of the cost of a frame; most pixels of
+        a frame are far from the ball's colour. So a BGR box holding every colour of the HSV
+        range (:func:`_bgr_box`) screens the pixels first with one ``inRange``, and only the
+        few that pass are converted: the pooled mask is exactly the one of the whole frame
+        (a pixel outside the box is outside the range). When many pass (a scene full of
+        colours near the ball's) the whole coarse frame is converted as before.
+        """
+        ch, cw = coarse.shape[:2]
+        ph, pw = -(-ch // _POOL), -(-cw // _POOL)
+        lo, hi = _bgr_box(self.hsv)
+        if lo is None:
+            return None
+        screen = cv2.inRange(coarse, lo, hi)
+        n = cv2.countNonZero(screen)
+        if not n:
+            return None
+        if n <= ch * cw // _SPARSE_FRACTION:
+            xy = cv2.findNonZero(screen).reshape(-1, 2)
+            colours = coarse[xy[:, 1], xy[:, 0]]  # (n, 3) BGR
+            inside = self.hsv.mask(cv2.cvtColor(colours[None], cv2.COLOR_BGR2HSV))[0] > 0
+            if not inside.any():
+                return None
+            xy = xy[inside]
+            pooled = np.zeros((ph, pw), dtype=np.uint8)
+            pooled[xy[:, 1] // _POOL, xy[:, 0] // _POOL] = 255
+            return pooled
+        mask = self.hsv.mask(cv2.cvtColor(coarse, cv2.COLOR_BGR2HSV))
+        if not cv2.countNonZero(mask):
+            return None
+        # label a 4 x 4 max-pooled copy: labelling costs per pixel even where the mask is
+        # empty, and blobs closer than a pooled cell may share a box (the fine pass splits them)
+        if (ph * _POOL, pw * _POOL) != (ch, cw):
+            mask = cv2.copyMakeBorder(mask, 0, ph * _POOL - ch, 0, pw * _POOL - cw,
+                                      cv2.BORDER_CONSTANT, value=0)
+        return cv2.resize(mask, (pw, ph), interpolation=cv2.INTER_AREA)  # > 0 if any set
 
     def _fine(self, frame_bgr: np.ndarray, x0: int, y0: int, x1: int, y1: int) -> np.ndarray:
         """Components of the full-resolution mask in a box: rows (n, 5) of
@@ -212,6 +250,34 @@ class BallDetector:
             out[row] = (cu + x0, cv + y0, area, np.sqrt(max(minor, 0.0) / major),
                         area / ellipse_area)
         return out
+
+
+@functools.lru_cache(maxsize=16)
+def _bgr_box(hsv: HsvRange) -> tuple[tuple[int, int, int], tuple[int, int, int]] | \
+        tuple[None, None]:
+    """The smallest BGR box (lower, upper corner, inclusive) holding every colour that
+    OpenCV's BGR->HSV conversion puts inside ``hsv``; (None, None) if no colour is inside.
+
+    Found by converting all 2**24 colours once (about 40 ms, cached per range), so it is
+    exact for this OpenCV build, whatever its rounding.
+    """
+    gr = np.empty((256, 256, 3), dtype=np.uint8)
+    gr[..., 1] = np.arange(256, dtype=np.uint8)[:, None]
+    gr[..., 2] = np.arange(256, dtype=np.uint8)[None, :]
+    step = 16  # blue levels per conversion: 1 M pixels, 3 MB
+    image = np.tile(gr, (step, 1, 1))
+    seen = np.zeros((3, 256), dtype=bool)
+    for b0 in range(0, 256, step):
+        image[..., 0] = np.repeat(np.arange(b0, b0 + step, dtype=np.uint8), 256)[:, None]
+        inside = hsv.mask(cv2.cvtColor(image, cv2.COLOR_BGR2HSV)).reshape(step, 256, 256) > 0
+        seen[0, b0:b0 + step] |= inside.any(axis=(1, 2))
+        seen[1] |= inside.any(axis=(0, 2))
+        seen[2] |= inside.any(axis=(0, 1))
+    if not seen[0].any():
+        return None, None
+    lo = tuple(int(np.argmax(s)) for s in seen)
+    hi = tuple(int(255 - np.argmax(s[::-1])) for s in seen)
+    return lo, hi
 
 
 def _merge_boxes(x0: np.ndarray, y0: np.ndarray, x1: np.ndarray, y1: np.ndarray

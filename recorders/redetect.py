@@ -3,6 +3,14 @@
 The new session is a stream copy of the old one (frames, calibration, poses, truth, events,
 tracks and metadata kept as stored) with every frame's detections replaced, so it fuses like
 any session.
+
+Where the time goes (1280 x 720 JPEGs of quality 90, ``benchmarks/bench_redetect.py``): decoding
+a frame with ``cv2.imdecode`` costs about 3.4 ms of CPU, most of it entropy decoding
+that no reduced-size decode (``IMREAD_REDUCED_COLOR_2``: 2.7 ms) avoids; detection about
+0.8 ms; reading the session, handing the JPEGs to the workers and writing the new session
+about 1 ms more per frame in the main process. OpenCV cannot decode only a region of a JPEG,
+and the detector's fine pass needs the full-resolution pixels around the ball, so every frame
+is decoded whole: the decode alone bounds two cores to about 590 frames/s.
 """
 
 from __future__ import annotations
@@ -19,7 +27,7 @@ from pslog.errors import InputError
 from pslog.outputs import check_output_path
 from pslog.records import Detections
 
-from .detect import BallDetector, HsvRange
+from .detect import BallDetector, HsvRange, _bgr_box
 
 _BATCH = 64  # images per task when several processes decode and detect
 _PARALLEL_FROM = 400  # images; below this one process is faster than starting a pool
@@ -121,6 +129,12 @@ def _detect_all(images, row_of: dict, hsv: HsvRange, max_candidates: int,
                 workers: int | None, n_images: int) -> Iterator[tuple[list, list]]:
     """Yield (rows, [(uv, radius, score), ...]) batches for every stored image with a frame
     record."""
+    import cv2
+
+    # one OpenCV thread in this process too, before any worker is forked: a worker inherits
+    # OpenCV's thread pool if this process had started one (a large conversion, e.g. by
+    # _bgr_box), without its threads, and hangs in its first call into OpenCV
+    cv2.setNumThreads(1)
     workers = workers or (os.cpu_count() or 1)
     batches = _batches(images, row_of)
     if workers <= 1 or n_images < _PARALLEL_FROM:
@@ -128,6 +142,7 @@ def _detect_all(images, row_of: dict, hsv: HsvRange, max_candidates: int,
         for rows, blobs in batches:
             yield rows, [_detect_blob(detector, b) for b in blobs]
         return
+    _bgr_box(hsv)  # computed once here and inherited by the forked workers
     with ProcessPoolExecutor(max_workers=workers) as pool:
         pending = []
         for rows, blobs in batches:

@@ -9,6 +9,7 @@ from numpy.testing import assert_allclose, assert_array_equal
 
 from pslog.camera import Camera, look_at
 from pslog.errors import InputError
+from recorders import detect
 from recorders.detect import BallDetector, HsvRange
 from recorders.render import CameraRenderer, RenderOptions
 
@@ -125,3 +126,64 @@ def test_blurred_ball_is_centred_on_its_mid_exposure_position():
     uv, _ = cam.project(position(np.array([0.0])))
     assert len(found) == 1
     assert_allclose(found.uv[0], uv[0], atol=0.3)
+
+
+@pytest.mark.parametrize("hsv", [HsvRange(), HsvRange(170, 10, 120, 255, 70, 255),
+                                 HsvRange(100, 130, 40, 200, 20, 240)])
+def test_bgr_screen_box_holds_every_colour_of_the_range(hsv):
+    """The BGR box that screens coarse pixels before the HSV conversion must never drop a
+    colour inside the range (all 2**24 colours), and is the tightest such box."""
+    lo, hi = detect._bgr_box(hsv)
+    colours = np.empty((256, 256, 256, 3), dtype=np.uint8)  # (b, g, r)
+    colours[..., 0] = np.arange(256, dtype=np.uint8)[:, None, None]
+    colours[..., 1] = np.arange(256, dtype=np.uint8)[None, :, None]
+    colours[..., 2] = np.arange(256, dtype=np.uint8)[None, None, :]
+    image = colours.reshape(4096, 4096, 3)
+    inside = hsv.mask(cv2.cvtColor(image, cv2.COLOR_BGR2HSV)) > 0
+    screened = cv2.inRange(image, lo, hi) > 0
+    assert inside.any() and not np.any(inside & ~screened)
+    values = image[inside]
+    assert_array_equal(values.min(axis=0), lo)
+    assert_array_equal(values.max(axis=0), hi)
+
+
+def _busy_frames() -> list[np.ndarray]:
+    """Rendered frames with balls, specks and patches of random colours near the ball's."""
+    cam = Camera("wide", 1280, 720, np.array([[800.0, 0, 639.5], [0, 800.0, 359.5], [0, 0, 1]]),
+                 np.zeros(5), *look_at((1.5, -1.5, 2.5), (1.5, 1.0, 0.0)))
+    renderer = CameraRenderer(cam, RenderOptions(exposure_s=0.004, noise_sigma=2.0), 0)
+    rng = np.random.default_rng(5)
+    frames = []
+    for k in range(4):
+        frame = renderer.render_positions(np.array([[0.5 + 0.6 * k, 1.0, 0.1 + 0.2 * k]]), k)
+        patch = rng.integers(0, 256, (60 + 40 * k, 90, 3), dtype=np.uint8)
+        patch[..., 2] = np.maximum(patch[..., 2], 100)  # reddish: many pass the screen
+        frame[200:260 + 40 * k, 700:790] = patch
+        cv2.circle(frame, (100 + 200 * k, 600), 2 + 2 * k, ORANGE_BGR, -1)
+        frame[30 + k, 30:34] = ORANGE_BGR  # a speck
+        frames.append(frame)
+    return frames
+
+
+@pytest.mark.parametrize("downscale", [1, 2, 3])
+def test_screened_coarse_pass_equals_converting_every_pixel(monkeypatch, downscale):
+    """The coarse pass converts only the pixels the BGR box lets through while they are few,
+    else every pixel: both give the same candidates, in the same order, to the last bit."""
+    frames = [*_busy_frames(), _flat()]
+    detector = BallDetector(max_candidates=20, downscale=downscale)
+    monkeypatch.setattr(detect, "_SPARSE_FRACTION", 1)  # always screen pixel by pixel
+    screened = [detector.detect(f) for f in frames]
+    monkeypatch.setattr(detect, "_SPARSE_FRACTION", 10**9)  # always convert the whole frame
+    whole = [detector.detect(f) for f in frames]
+    assert sum(len(c) for c in whole) > 20
+    for a, b in zip(screened, whole, strict=True):
+        for name in ("uv", "radius", "area", "roundness", "score"):
+            assert_array_equal(getattr(a, name), getattr(b, name))
+
+
+def test_hsv_range_holding_no_colour_finds_nothing():
+    empty = HsvRange(0, 179, 255, 255, 0, 0)  # saturation 255 at value 0: no colour
+    assert detect._bgr_box(empty) == (None, None)
+    frame = _flat()
+    cv2.circle(frame, (100, 100), 8, ORANGE_BGR, -1)
+    assert len(BallDetector(empty).detect(frame)) == 0

@@ -89,3 +89,20 @@ def test_refusals(tmp_path, capsys):
         w.add_frame(0, 0, 0, np.array([[1.0, 2.0]]))
     with pytest.raises(InputError, match="no stored frames"):
         redetect_session(bare, tmp_path / "z.mcap")
+
+
+def test_worker_processes_give_the_same_session_as_one_process(tmp_path, monkeypatch):
+    """The process pool (used from a few hundred frames on) returns every frame's candidates
+    to the right frame: the same detections as detecting in this process."""
+    from recorders import redetect
+
+    one, pool = tmp_path / "one.mcap", tmp_path / "pool.mcap"
+    redetect_session(SAMPLE, one, workers=1)
+    monkeypatch.setattr(redetect, "_PARALLEL_FROM", 0)  # the sample has only 135 frames
+    monkeypatch.setattr(redetect, "_BATCH", 16)  # several batches in flight, out of order
+    redetect_session(SAMPLE, pool, workers=2)
+    a, b = read_session(one).detections, read_session(pool).detections
+    assert a.n_candidates >= 135
+    for name in ("frame_time_ns", "frame_camera", "frame_index", "cand_frame", "cand_uv",
+                 "cand_radius", "cand_score"):
+        assert_array_equal(getattr(b, name), getattr(a, name), err_msg=name)

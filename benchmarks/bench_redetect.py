@@ -1,0 +1,119 @@
+"""``pslog redetect`` speed: frames/s on two cores for 1280 x 720 JPEG frames.
+
+A synthetic session of the ``paper3`` poses with 1280 x 720 cameras (``bench_detect.hd_rig``,
+a rally, three cameras at 30 fps, JPEG quality 90 as ``pslog record`` stores them) is
+re-detected with ``workers=2``. Each run is a fresh Python process; the call to
+``redetect_session`` (reading, the process pool, decoding, detecting, writing the new session;
+not the interpreter's start-up) is timed by wall clock and by the CPU seconds of the process
+and its workers; ``2 x frames / CPU seconds`` is what two idle cores would do (the
+machine may be shared: the wall figure then says little, the CPU figure and the ratio in one
+run hold). ``--base DIR`` runs the same on another checkout (e.g. a ``git worktree`` of the base
+commit), interleaved round by round. The floor of any OpenCV re-detection is printed beside
+them: the same JPEGs only decoded by ``cv2.imdecode`` in two processes (read beforehand).
+
+Target (issue 12): >= 400 frames/s on two cores.
+Run: ``python benchmarks/bench_redetect.py [--seconds 6] [--rounds 2] [--quick] [--base DIR]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+_RUN = """
+import os, sys, time
+from recorders.redetect import redetect_session
+c0, t = os.times(), time.perf_counter()
+s = redetect_session(sys.argv[1], sys.argv[2], workers=2, force=True)
+wall = time.perf_counter() - t
+c = os.times()  # the workers have been joined: their CPU time is in children_*
+print(s.images, wall, sum(c[:4]) - sum(c0[:4]))
+"""
+
+_DECODE = """
+import os, sys, time
+from concurrent.futures import ProcessPoolExecutor
+import cv2, numpy as np
+from pslog.log import iter_images
+
+BLOBS = []
+
+def decode(part):
+    cv2.setNumThreads(1)
+    for b in BLOBS[part::2]:  # inherited from the parent by fork: nothing pickled
+        cv2.imdecode(np.frombuffer(b, np.uint8), cv2.IMREAD_COLOR)
+    return len(BLOBS[part::2])
+
+if __name__ == "__main__":
+    BLOBS.extend(i.data for i in iter_images(sys.argv[1]))
+    c0, t = os.times(), time.perf_counter()
+    with ProcessPoolExecutor(2) as pool:
+        n = sum(pool.map(decode, [0, 1]))
+    wall = time.perf_counter() - t
+    c = os.times()
+    print(n, wall, sum(c[:4]) - sum(c0[:4]))
+"""
+
+
+def _record(path: Path, seconds: float) -> None:
+    sys.path.insert(0, str(ROOT))
+    from benchmarks.bench_detect import hd_rig
+    from recorders.synthetic import record_synthetic
+
+    record_synthetic(hd_rig(), "rally", path, duration=seconds, timing="typeA",
+                     status=None, force=True)
+
+
+def _run(code: str, checkout: Path, *args: str) -> tuple[int, float, float]:
+    env = dict(os.environ, PYTHONPATH=str(checkout))
+    out = subprocess.run([sys.executable, "-c", code, *args], env=env, check=True,
+                         capture_output=True, text=True, cwd=checkout).stdout.split()
+    return int(out[0]), float(out[1]), float(out[2])
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=6.0, help="session length (3 x 30 fps)")
+    parser.add_argument("--rounds", type=int, default=2)
+    parser.add_argument("--base", help="another checkout run alongside")
+    parser.add_argument("--quick", action="store_true", help="a 4.5 s session, one round")
+    args = parser.parse_args()
+    if args.quick:
+        args.seconds, args.rounds = 4.5, 1
+    with tempfile.TemporaryDirectory() as tmp:
+        session = Path(tmp) / "hd.mcap"
+        _record(session, args.seconds)
+        runs = {"decode only (2 processes)": (_DECODE, ROOT)}
+        if args.base:
+            runs[f"redetect of {args.base}"] = (_RUN, Path(args.base).resolve())
+        runs["redetect (this checkout)"] = (_RUN, ROOT)
+        totals = {name: [0, 0.0, 0.0] for name in runs}
+        for _ in range(args.rounds):
+            for name, (code, checkout) in runs.items():
+                n, wall, cpu = _run(code, checkout, str(session), str(Path(tmp) / "out.mcap"))
+                totals[name][0] += n
+                totals[name][1] += wall
+                totals[name][2] += cpu
+        size = session.stat().st_size / 1e6
+        frames = totals["redetect (this checkout)"][0] // args.rounds
+        print(f"redetect, {frames} JPEG frames 1280x720 ({size:.0f} MB), workers=2, "
+              f"{args.rounds} round(s):")
+        ours = None
+        for name, (n, wall, cpu) in reversed(list(totals.items())):
+            per_wall, per_cpu2 = n / wall, 2 * n / cpu
+            ours = ours or (per_wall, per_cpu2)
+            print(f"  {name:<34} {per_wall:6.0f} frames/s wall  {per_cpu2:6.0f} frames/s on two "
+                  f"idle cores ({1e3 * cpu / n:.2f} CPU-ms/frame)   this checkout "
+                  f"{ours[0] / per_wall:.2f} x, {ours[1] / per_cpu2:.2f} x")
+        print(f"target: >= 400 frames/s on two cores: {'PASS' if ours[1] >= 400 else 'FAIL'} "
+              f"({ours[1]:.0f}, from CPU time)")
+
+
+if __name__ == "__main__":
+    main()
