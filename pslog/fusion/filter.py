@@ -56,7 +56,7 @@ equations, exactly as implemented, are in ``docs/methods.md`` (section ``filter`
   ballistic least-squares fit (gravity and drag) to their viewing rays, refined by
   Gauss-Newton in distorted pixels; accepted when every detection reprojects inside the gate.
   A window too short in time to pin the velocity (``init_window`` detections at 60 fps and
-  above) grows by the next detections until its fit passes (``init_span_s``);
+  above) grows by the next detections until its fit passes (``init_span_s``).
 
 - withheld points (counted in ``Track.dropped`` by reason, the state updated all the same):
   ``unconfirmed``, from a jump (or an update of NIS above ``confirm_nis``) until two more
@@ -1014,9 +1014,9 @@ class BallFilter:
         no track); a fit that fails on its velocity's uncertainty alone, of a window shorter
         than ``init_span_s``, ends the search and lets the window grow instead (a shorter
         window would pin the velocity still worse: at 60 fps and above ``init_window``
-        detections span too short a time; at 30 fps no such window has
-        ``init_detections`` of three cameras); on success start the track at the newest
-        detection and return its point, else None."""
+        detections span too short a time; at 30 fps ``init_detections`` of a 3-camera rig
+        span a frame period, 33 ms, so nothing grows there); on success start the track at
+        the newest detection and return its point, else None."""
         window = self._window
         while window and window[-1][0] - window[0][0] > self._init_span_ns:
             del window[0]  # a fit spans at most the longest gap bridged (or init_span_s)
