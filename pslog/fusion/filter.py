@@ -55,6 +55,8 @@ equations, exactly as implemented, are in ``docs/methods.md`` (section ``filter`
   ``init_detections`` of two cameras or more, within ``max_gap_s`` of each other): a
   ballistic least-squares fit (gravity and drag) to their viewing rays, refined by
   Gauss-Newton in distorted pixels; accepted when every detection reprojects inside the gate.
+  A window too short in time to pin the velocity (``init_window`` detections at 60 fps and
+  above) grows by the next detections until its fit passes (``init_span_s``).
 
 - withheld points (counted in ``Track.dropped`` by reason, the state updated all the same):
   ``unconfirmed``, from a jump (or an update of NIS above ``confirm_nis``) until two more
@@ -117,6 +119,8 @@ _INIT_BALLISTIC = 0.9
 #: Bound of one detection's log likelihood ratio between the models (an outlier moves μ little).
 _LOG_ODDS_CLIP = 4.0
 _ZERO6 = (0.0,) * 6
+#: What :meth:`BallFilter._fit` returns for a fit whose velocity alone is too uncertain.
+_SHORT = "short"
 #: Accepted updates (one at least from another camera) that confirm a jump.
 _CONFIRM_UPDATES = 2
 #: The turn model's probability when it joins the model set, and below which it leaves it.
@@ -152,7 +156,14 @@ class FilterOptions:
     min_noise_px, max_noise_px : float, bounds of the adapted pixel noise
     max_rejects : int, consecutive rejected detections after which the track is lost
     init_detections : int, detections (of at least two cameras) a (re)initialisation fits
-    init_window : int, most detections kept for a (re)initialisation
+    init_window : int, most detections kept for a (re)initialisation, unless a fit of a
+        window spanning less than ``init_span_s`` failed on its velocity alone
+        (``max_init_speed_std``: too short a window, as at 60 fps and above): the window
+        then grows by the next detections (up to ``init_max_window``) until a fit passes or
+        it spans ``init_span_s``
+    init_max_window : int, most detections of a grown (re)initialisation window
+    init_span_s : float, seconds: a window spanning less whose fit fails on its velocity
+        alone grows; a window spans at most this or ``max_gap_s``, the longer
     max_init_std_m : float, a (re)initialisation whose position standard deviation
         ``sqrt(trace P_pp)`` exceeds this is refused (a degenerate geometry), metres
     max_gap_s : float or None, longest time without an accepted detection the track bridges;
@@ -197,6 +208,8 @@ class FilterOptions:
     max_rejects: int = 3
     init_detections: int = 4
     init_window: int = 8
+    init_max_window: int = 64
+    init_span_s: float = 0.03
     max_init_std_m: float = 0.05
     max_init_speed_std: float = 1.0
     confirm_nis: float = 9.21
@@ -232,6 +245,12 @@ class FilterOptions:
         if self.init_detections < 3 or self.init_window < self.init_detections:
             raise FusionError("filter init_detections must be >= 3 and init_window >= it, got "
                               f"{self.init_detections} and {self.init_window}")
+        if self.init_max_window < self.init_window:
+            raise FusionError("filter init_max_window must be >= init_window, got "
+                              f"{self.init_max_window} and {self.init_window}")
+        if not (math.isfinite(self.init_span_s) and self.init_span_s > 0):
+            raise FusionError(f"filter init_span_s must be finite and > 0, got "
+                              f"{self.init_span_s!r}")
         if self.max_rejects < 1:
             raise FusionError(f"filter max_rejects must be >= 1, got {self.max_rejects}")
 
@@ -378,6 +397,13 @@ class BallFilter:
         self._cam_last = [-(2**62)] * len(rig)  # last accepted detection per camera
         self._jump_ns, self._jump_camera = -(2**62), -1  # the latest jump accepted
         self._window: list[tuple[int, int, float, float]] = []  # (time, camera, u, v)
+        # most detections the window keeps: init_window, more while its fits fail on their
+        # velocity alone (a short window at a high frame rate), up to init_max_window
+        self._init_cap = options.init_window
+        # a window shorter than this whose fit fails on its velocity alone grows; the
+        # longest time a window spans: the longest gap bridged, or a grown window's span
+        self._init_grow_ns = int(options.init_span_s * NS)
+        self._init_span_ns = max(self._max_gap_ns, self._init_grow_ns)
         # the latest accepted updates: (state time, x, P before; time, camera, u, v;
         # NIS + ln det S), for the jump search
         self._history: list[tuple] = []
@@ -393,6 +419,7 @@ class BallFilter:
         self._confirmed = 0
         self._pending = -1
         self._window = []
+        self._init_cap = self.options.init_window
         self._history = []
         self._cam_last = [self._last_ns] * len(self._cam_last)
         self._mu, self._e = self._mu0, _ZERO6
@@ -977,23 +1004,32 @@ class BallFilter:
         if window and time_ns - window[-1][0] > self._max_gap_ns:
             window.clear()
         window.append((time_ns, camera, u, v))
-        del window[:-self.options.init_window]
+        del window[:-self._init_cap]
         return self._try_window()
 
     def _try_window(self):
         """Fit the window (newest last), dropping its oldest detection until a fit passes (a
         break or an outlier inside it) or fewer than ``init_detections`` are left (at most
         ``init_window - init_detections + 1`` fits per detection, and only while there is
-        no track); on success start the track at the newest detection and return its point,
-        else None."""
+        no track); a fit that fails on its velocity's uncertainty alone, of a window shorter
+        than ``init_span_s``, ends the search and lets the window grow instead (a shorter
+        window would pin the velocity still worse: at 60 fps and above ``init_window``
+        detections span too short a time; at 30 fps ``init_detections`` of a 3-camera rig
+        span a frame period, 33 ms, so nothing grows there); on success start the track at
+        the newest detection and return its point, else None."""
         window = self._window
-        while window and window[-1][0] - window[0][0] > self._max_gap_ns:
-            del window[0]  # a fit spans at most the longest gap bridged
+        while window and window[-1][0] - window[0][0] > self._init_span_ns:
+            del window[0]  # a fit spans at most the longest gap bridged (or init_span_s)
         while len(window) >= self.options.init_detections:
             if len({w[1] for w in window}) < 2:
                 return None
             fit = self._fit(window)
-            if fit is not None:
+            if fit is _SHORT:
+                if window[-1][0] - window[0][0] < self._init_grow_ns:
+                    self._init_cap = min(max(self._init_cap, len(window) + 1),
+                                         self.options.init_max_window)
+                    return None
+            elif fit is not None:
                 x, P, residuals = fit
                 self.set_state(window[-1][0], x[:3], x[3:], P)
                 for t, c, _, _ in window:
@@ -1009,7 +1045,7 @@ class BallFilter:
         key = (time_ns, camera)
         ray = self._rays.get(key)
         if ray is None:
-            if len(self._rays) > 4 * self.options.init_window:
+            if len(self._rays) > 4 * self.options.init_max_window:
                 self._rays.clear()
             # one pixel at a time, so the ray never depends on what else is undistorted
             origin, direction = self._cams[camera].camera.rays(np.array([[u, v]]))
@@ -1018,7 +1054,8 @@ class BallFilter:
 
     def _fit(self, window):
         """Ballistic fit of the window's detections at the newest one's time: ``(x (6,),
-        P (6x6 flat list), pixel residuals)``, or None when it is not trustworthy."""
+        P (6x6 flat list), pixel residuals)``, or None when it is not trustworthy, or
+        ``_SHORT`` when it passes every test but the velocity's uncertainty."""
         t_ref = window[-1][0]
         tau = np.array([(w[0] - t_ref) / NS for w in window])
         g = np.array(self._g)
@@ -1071,9 +1108,10 @@ class BallFilter:
         except np.linalg.LinAlgError:
             return None
         if (not np.all(np.isfinite(cov)) or np.linalg.cond(info) > 1e14
-                or np.trace(cov[:3, :3]) > self.options.max_init_std_m ** 2
-                or np.trace(cov[3:, 3:]) > self.options.max_init_speed_std ** 2):
+                or np.trace(cov[:3, :3]) > self.options.max_init_std_m ** 2):
             return None  # a degenerate geometry (rays nearly parallel): no trustworthy start
+        if np.trace(cov[3:, 3:]) > self.options.max_init_speed_std ** 2:
+            return _SHORT  # too short a window (or mostly one camera's): more detections
         cov = 0.5 * (cov + cov.T)
         return [float(a) for a in theta], [float(a) for a in cov.ravel()], residuals
 
