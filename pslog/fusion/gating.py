@@ -32,9 +32,10 @@ A candidate ``x`` of camera ``a`` at (corrected) time ``t`` is judged by three g
 A candidate is accepted when the epipolar gate accepts it (some other camera supports it)
 and the track and motion gates do not object, or when the track gate alone accepts it
 firmly (its ray within ``track_alone_m`` of the prediction); one nothing can judge is kept
-only in the session's first frames. A candidate supported by two or more other cameras is
-consistent in three views and is accepted whatever the track says (that is how the track
-follows kicks and bounces). Among a frame's accepted candidates the one with the most
+only in the session's first frames. A candidate supported by two or more other cameras
+whose rays meet (a point within ``track_m`` of each) is consistent in three views and is
+accepted whatever the track says (that is how the track follows kicks and bounces); rays that
+miss count as one support. Among a frame's accepted candidates the one with the most
 supporting cameras, then the smallest cost (squared normalised residuals of the supporting
 cameras, 1 for each other available camera, the track's, the stillness) is kept; the others
 are rejected as ``outscored``. The detector's score is not used: a distractor may outscore
@@ -744,6 +745,12 @@ class _Decider:
         centers = self.centers
         rays = c.ray_dir.tolist()
         pts = np.asarray(points).tolist()
+        # two supporting cameras make three views only when the three rays meet (a point, not
+        # NaN: within track_m): lines alone can agree by chance, two false or carried-across-a-
+        # gap candidates near the epipolar lines of a random blob. Rays that miss count as one
+        # support (the track gate then judges).
+        n_support = [k if k < 2 or math.isfinite(p[0]) else 1
+                     for k, p in zip(n_support, pts, strict=True)]
         front = np.asarray(in_front).tolist()
         t_ns = c.time_ns.tolist()
         for lo, hi in frames:
