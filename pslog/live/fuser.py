@@ -53,9 +53,8 @@ from .protocol import (
     REASONS,
     DatagramError,
     DetectionDatagram,
-    PointDatagram,
     decode_detections,
-    encode_point,
+    pack_point,
 )
 
 #: The counters of :meth:`LiveFuser.counters`, in order.
@@ -127,30 +126,32 @@ class LivePoint:
 
     def to_datagram(self, sequence: int) -> bytes:
         """The point datagram (:mod:`pslog.live.protocol`)."""
-        c = self.cov_world
-        return encode_point(PointDatagram(
-            sequence=sequence, camera_index=self.camera_index, camera=self.camera,
-            method=self.method, t_capture_ns=self.t_capture_ns, t_emit_ns=self.t_emit_ns,
-            t_arrival_ns=self.arrival_ns, position=self.position_world,
-            covariance=(c[0, 0], c[0, 1], c[0, 2], c[1, 1], c[1, 2], c[2, 2]),
-            residual_px=self.residual_px, camera_mask=self.camera_mask, flags=self.flags,
-            predicted_position=self.predicted_position,
-            predicted_velocity=self.predicted_velocity))
+        # packed straight from the arrays (as encode_point(PointDatagram(...)) would: the
+        # same bytes, tests/test_live_protocol.py), once per point sent
+        c = self.cov_world.tolist()
+        return pack_point(sequence, self.camera_index, self.camera, self.method,
+                          self.t_capture_ns, self.t_emit_ns, self.arrival_ns,
+                          self.position_world.tolist(),
+                          (c[0][0], c[0][1], c[0][2], c[1][1], c[1][2], c[2][2]),
+                          self.residual_px, self.camera_mask, self.flags,
+                          self.predicted_position.tolist(), self.predicted_velocity.tolist())
 
     def to_json(self) -> dict:
         """One JSON object (NaN as null): ``t`` capture time (s, wall clock), ``x, y, z`` (m),
         ``camera``, ``method``, ``latency_s`` (arrival to made), ``std_m``, ``t_emit``,
         ``residual_px``, ``camera_mask``, ``flags``, ``predicted`` ``[x, y, z]`` and
         ``velocity`` ``[vx, vy, vz]`` at ``t_emit``."""
-        std = float(np.sqrt(np.trace(self.cov_world)))
-        x, y, z = (float(a) for a in self.position_world)
+        c = self.cov_world.tolist()  # Python floats: numpy's calls cost more on 3 x 3
+        trace = c[0][0] + c[1][1] + c[2][2]  # np.trace's order
+        std = math.sqrt(trace) if trace >= 0 else math.nan
+        x, y, z = self.position_world.tolist()
         return {"t": self.t_capture_ns / NS, "x": x, "y": y, "z": z, "camera": self.camera,
                 "method": self.method, "latency_s": self.latency_s,
                 "std_m": _num(std), "t_emit": self.t_emit_ns / NS,
                 "residual_px": _num(self.residual_px), "camera_mask": self.camera_mask,
                 "flags": self.flags,
-                "predicted": [_num(a) for a in self.predicted_position],
-                "velocity": [_num(a) for a in self.predicted_velocity]}
+                "predicted": [_num(a) for a in self.predicted_position.tolist()],
+                "velocity": [_num(a) for a in self.predicted_velocity.tolist()]}
 
 
 def _num(value) -> float | None:
