@@ -65,6 +65,7 @@ _SEEN = 4096
 #: Frames remembered per camera to find the arrival time behind a point.
 _ARRIVALS = 256
 _NAN3 = np.full(3, np.nan)
+_I64_MAX = int(np.iinfo(np.int64).max)
 _NAN33 = np.full((3, 3), np.nan)
 _COV_KEYS = ("cov_xx_m2", "cov_xy_m2", "cov_xz_m2", "cov_yy_m2", "cov_yz_m2", "cov_zz_m2")
 
@@ -258,7 +259,8 @@ class LiveFuser:
         self.accepted: list[DetectionDatagram] = []
         self.dropped: list[tuple[DetectionDatagram, str]] = []
         self._counts = dict.fromkeys(COUNTERS, 0)
-        self._index = {name: i for i, name in enumerate(rig.names)}
+        self._names = tuple(rig.names)
+        self._index = {name: i for i, name in enumerate(self._names)}
         self._cams = [CameraLiveState(name, i) for i, name in enumerate(rig.names)]
         self._newest = (np.iinfo(np.int64).min, -1)  # (logged ns, camera) of the newest fused
         self._clock_p = camera_parameters(rig)
@@ -362,12 +364,16 @@ class LiveFuser:
             state._arrivals.append((top, arrival_ns))
         try:
             if k:
-                order = np.argsort(-d.score, kind="stable")  # best first, as a session stores
-                if not self.candidates:
-                    order = order[:1]
-                n = len(order)
-                track = self.stream.push(np.full(n, logged, np.int64), np.full(n, cam, np.int32),
-                                         d.uv[order], np.full(n, d.frame_index, np.int64))
+                if k == 1:  # the usual frame: nothing to order (a copy: the stream's own)
+                    n, uv = 1, d.uv.copy()
+                else:  # best first, as a session stores
+                    order = np.argsort(-d.score, kind="stable")
+                    if not self.candidates:
+                        order = order[:1]
+                    n, uv = len(order), d.uv[order]
+                track = self.stream.push(np.array([logged] * n, np.int64),
+                                         np.array([cam] * n, np.int32), uv,
+                                         np.array([d.frame_index] * n, np.int64))
             else:
                 track = None
         except FusionError:
@@ -443,7 +449,7 @@ class LiveFuser:
         now = int(self.clock())
         n = len(track)
         q = track.quality
-        names = self.rig.names
+        names = self._names
         times = track.time_ns.tolist()
         cams = track.camera.tolist()
         positions = track.position_world
@@ -475,7 +481,7 @@ class LiveFuser:
                 flags |= FLAG_INIT
             pred_p, pred_v = self._predicted(t, p, now)
             arrivals = self._cams[cam]._arrivals
-            j = bisect.bisect_right(arrivals, (t, np.iinfo(np.int64).max)) - 1
+            j = bisect.bisect_right(arrivals, (t, _I64_MAX)) - 1
             arrival = arrivals[j][1] if j >= 0 else now
             out.append(LivePoint(
                 method=self.method, camera=names[cam], camera_index=cam,
