@@ -458,6 +458,9 @@ class LiveFuser:
         has_cov = all(k in q for k in _COV_KEYS)
         flt = self._filter
         state = flt.state() if flt is not None else None
+        # per track, not per point: the flag columns as Python lists (== 1 as numpy's)
+        flag_cols = [(q[k].tolist(), bit) for k, bit in (
+            ("rejected", FLAG_PREDICTION), ("jump", FLAG_JUMP), ("init", FLAG_INIT)) if k in q]
         out = []
         for i in range(n):
             t, cam = times[i], cams[i]
@@ -473,15 +476,17 @@ class LiveFuser:
             else:
                 cov = _NAN33
             flags = 0
-            if "rejected" in q and q["rejected"][i] == 1:
-                flags |= FLAG_PREDICTION
-            if "jump" in q and q["jump"][i] == 1:
-                flags |= FLAG_JUMP
-            if "init" in q and q["init"][i] == 1:
-                flags |= FLAG_INIT
+            for col, bit in flag_cols:
+                if col[i] == 1:
+                    flags |= bit
             pred_p, pred_v = self._predicted(t, p, now)
             arrivals = self._cams[cam]._arrivals
-            j = bisect.bisect_right(arrivals, (t, _I64_MAX)) - 1
+            # the latest frame of the camera at or before the point (sorted: in fused order);
+            # usually the frame just fused, its last one
+            if arrivals and arrivals[-1][0] <= t:
+                j = len(arrivals) - 1
+            else:
+                j = bisect.bisect_right(arrivals, (t, _I64_MAX)) - 1
             arrival = arrivals[j][1] if j >= 0 else now
             out.append(LivePoint(
                 method=self.method, camera=names[cam], camera_index=cam,
