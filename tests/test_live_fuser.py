@@ -15,12 +15,14 @@ from pslog.live.protocol import (
     FLAG_INIT,
     DetectionDatagram,
     PointDatagram,
+    decode_detections,
     decode_point,
     encode_detections,
     encode_point,
 )
 from pslog.records import NS
 from pslog.simulation import SimulationOptions, true_rig
+from pslog.timing import camera_parameters, true_times_ns
 from tests._live import EPOCH, datagrams, frames, rally_session, subset
 
 
@@ -75,10 +77,33 @@ def test_clock_corrections_are_applied_live():
                 readout_s={"cam1": 0.012, "cam3": 0.008})
     rig, det = rally_session(1.2, **opts)
     rig = true_rig(rig, SimulationOptions(**opts))
+    data = datagrams(det, rig)
+    arrival = [EPOCH + 1000 * (i + 1) for i in range(len(data))]
+    # each frame's top-row TRUE time (numpy's true_times_ns) and its datagram's arrival
+    cp = camera_parameters(rig)
+    tops: dict[int, list] = {c: [] for c in range(len(rig))}
+    logged = []
+    for b, a in zip(data, arrival, strict=True):
+        d = decode_detections(b)
+        c = rig.names.index(d.camera)
+        top = int(true_times_ns(d.t_capture_ns - EPOCH, 0.0, cp["height"][c],
+                                cp["clock_offset"][c], cp["clock_drift_ppm"][c],
+                                cp["readout"][c]))
+        logged.append((d.t_capture_ns - EPOCH, c, top))
+        if len(d):
+            tops[c].append((top, a))
     for method in ("filter", "typeA"):
-        points = _run(LiveFuser(rig, method, epoch_ns=EPOCH), datagrams(det, rig))
+        fuser = LiveFuser(rig, method, epoch_ns=EPOCH)
+        # the fuser's own top-row time (in floats): numpy's, to the nanosecond
+        assert [fuser._true_time_ns(t, 0.0, fuser._clock_model[c]) for t, c, _ in logged] \
+            == [top for _, _, top in logged]
+        points = _run(fuser, data, arrival)
         offline = fuse(det, rig, method)
         _assert_same(points, offline)
+        # each point's arrival: its camera's latest frame whose top row is at or before it
+        for p in points:
+            before = [a for top, a in tops[p.camera_index] if top <= p.t_capture_ns - EPOCH]
+            assert p.arrival_ns == (before[-1] if before else p.t_emit_ns)
         # and not the uncorrected times
         assert not np.array_equal(offline.time_ns, fuse(det, rig.__class__(
             tuple(c.replace(clock_offset=0.0, clock_drift_ppm=0.0, readout=0.0)

@@ -45,7 +45,7 @@ import numpy as np
 from ..errors import FusionError
 from ..records import NS, Track
 from ..rig import Rig
-from ..timing import camera_parameters, true_times_ns
+from ..timing import camera_parameters
 from .protocol import (
     FLAG_INIT,
     FLAG_JUMP,
@@ -231,6 +231,7 @@ class LiveFuser:
                  hold_s: float = 0.0) -> None:
         from ..fusion import FusionOptions, check_method
         from ..fusion._prepare import default_max_gap_s
+        from ..fusion.gating import _clock_model, _true_time_ns
         from ..fusion.stream import StreamFuser
 
         check_method(method)
@@ -264,7 +265,9 @@ class LiveFuser:
         self._cams = [CameraLiveState(name, i) for i, name in enumerate(rig.names)]
         self._newest = (np.iinfo(np.int64).min, -1)  # (logged ns, camera) of the newest fused
         self._clock_p = camera_parameters(rig)
-        self._readout = self._clock_p["readout"] > 0
+        self._readout = (self._clock_p["readout"] > 0).tolist()
+        self._clock_model = _clock_model(rig)  # per camera (height, offset, drift, readout)
+        self._true_time_ns = _true_time_ns  # timing.true_times_ns of one, in floats
         self._corrected = any(c.has_clock_correction for c in rig.cameras)
         self._max_gap_ns = int((self.options.max_gap_s or default_max_gap_s(rig)) * NS)
         self._filter = getattr(getattr(self.stream, "incremental", None), "filter", None)
@@ -358,9 +361,9 @@ class LiveFuser:
         k = len(d)
         if k:  # from now on the newest: an older frame with candidates cannot be fused
             self._newest = (logged, cam)
-            top = logged if not self._corrected else int(true_times_ns(
-                logged, 0.0, self._clock_p["height"][cam], self._clock_p["clock_offset"][cam],
-                self._clock_p["clock_drift_ppm"][cam], self._clock_p["readout"][cam]))
+            # true_times_ns of the top row, in floats (the same ns; numpy costs more for one)
+            top = logged if not self._corrected else self._true_time_ns(
+                logged, 0.0, self._clock_model[cam])
             state._arrivals.append((top, arrival_ns))
         try:
             if k:
@@ -426,8 +429,8 @@ class LiveFuser:
         if (d.sequence, d.t_capture_ns) in state._seen:
             return "duplicate"
         if len(d) and self._readout[cam]:
-            v = d.uv[:, 1]
-            if not np.all((v >= 0) & (v <= self._clock_p["height"][cam])):
+            h = self._clock_model[cam][0]
+            if not all(0 <= v <= h for v in d.uv[:, 1].tolist()):  # rows: finite (decoded)
                 return "malformed"
         logged = d.t_capture_ns - self.epoch_ns
         if logged < 0:
