@@ -25,7 +25,7 @@ is the fuser thread's own CPU time per datagram that made a point, from received
 to the sinks (``LiveSummary.cpu_ns``): what the fusion latency would be on an idle core.
 
     python benchmarks/bench_live.py [--seconds 60] [--quick] [--load 30,240]
-        [--method filter,typeA] [--candidates all,best] [--direct [GAP_MS]]
+        [--method filter,typeA] [--candidates all,best] [--record] [--direct [GAP_MS]]
 
 ``--direct``: no sender, no socket in: the same datagrams fed to ``LiveFuser.feed`` in a
 loop, each point's datagram sent by a ``UdpSink``, ``GAP_MS`` asleep between two datagrams
@@ -44,14 +44,16 @@ import argparse  # noqa: E402
 import multiprocessing as mp  # noqa: E402
 import socket  # noqa: E402
 import struct  # noqa: E402
+import tempfile  # noqa: E402
 import threading  # noqa: E402
 import time  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
 from pslog.live.protocol import DetectionDatagram, encode_detections  # noqa: E402
 from pslog.live.server import serve  # noqa: E402
-from pslog.live.sinks import UdpSink  # noqa: E402
+from pslog.live.sinks import RecordSink, UdpSink  # noqa: E402
 from pslog.motion import rally_motion  # noqa: E402
 from pslog.rig import Rig, apply_timing, builtin_rig  # noqa: E402
 from pslog.simulation import SimulationOptions, simulate  # noqa: E402
@@ -141,7 +143,7 @@ class Left:
         pass
 
 
-def run(rig, frames, method: str, candidates: bool) -> dict:
+def run(rig, frames, method: str, candidates: bool, record: bool = False) -> dict:
     ctx = mp.get_context("fork")
     rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     rx.bind(("127.0.0.1", 0))
@@ -154,10 +156,14 @@ def run(rig, frames, method: str, candidates: bool) -> dict:
     result: dict = {}
 
     def fuse() -> None:
-        result["summary"] = serve(rig, "udp://127.0.0.1:0", [UdpSink(rx.getsockname()), left],
+        sinks = [UdpSink(rx.getsockname()), left]
+        if record:  # the session recorded as pslog live --record does (its writer thread)
+            sinks.append(RecordSink(Path(tmp.name) / "live.mcap", rig))
+        result["summary"] = serve(rig, "udp://127.0.0.1:0", sinks,
                                   method=method, candidates=candidates, stop=stop,
                                   ready=ready, status_stream=None, status_every_s=1.0)
 
+    tmp = tempfile.TemporaryDirectory(prefix="bench-live-")
     fuser = threading.Thread(target=fuse)
     fuser.start()
     ready.wait(30)
@@ -178,6 +184,7 @@ def run(rig, frames, method: str, candidates: bool) -> dict:
     received_points = r_parent.recv()
     robot.join()
     rx.close()
+    tmp.cleanup()
     summary = result["summary"]
     c = summary.counters
     n = left.n
@@ -256,6 +263,8 @@ def main() -> int:
     parser.add_argument("--load", default="30,240", help="camera frame rates (fps)")
     parser.add_argument("--method", default="filter,typeA")
     parser.add_argument("--candidates", default="all,best")
+    parser.add_argument("--record", action="store_true",
+                        help="also record the session (RecordSink, as pslog live --record)")
     parser.add_argument("--direct", nargs="?", type=float, const=8.0, default=None,
                         metavar="GAP_MS", help="feed LiveFuser directly, GAP_MS apart")
     args = parser.parse_args()
@@ -286,7 +295,7 @@ def main() -> int:
         rig, frames = session(fps, seconds)
         for method in args.method.split(","):
             for cand in args.candidates.split(","):
-                r = run(rig, frames, method, cand == "all")
+                r = run(rig, frames, method, cand == "all", args.record)
                 ok = r["fusion_p99"] <= TARGET_P99_MS
                 worst |= r["lost"] > 0
                 print(f"{f'3 x {fps:g} fps':>10} {method:>6} {cand:>4} {r['sent']:6d} "
