@@ -25,7 +25,12 @@ is the fuser thread's own CPU time per datagram that made a point, from received
 to the sinks (``LiveSummary.cpu_ns``): what the fusion latency would be on an idle core.
 
     python benchmarks/bench_live.py [--seconds 60] [--quick] [--load 30,240]
-        [--method filter,typeA] [--candidates all,best]
+        [--method filter,typeA] [--candidates all,best] [--record] [--direct [GAP_MS]]
+
+``--direct``: no sender, no socket in: the same datagrams fed to ``LiveFuser.feed`` in a
+loop, each point's datagram sent by a ``UdpSink``, ``GAP_MS`` asleep between two datagrams
+(default 8; 0: back to back, warm caches). Reports the CPU per datagram that made a point
+and the part of it spent in the fusion (``StreamFuser.push`` and the filter's ``predict``).
 """
 
 from __future__ import annotations
@@ -39,14 +44,16 @@ import argparse  # noqa: E402
 import multiprocessing as mp  # noqa: E402
 import socket  # noqa: E402
 import struct  # noqa: E402
+import tempfile  # noqa: E402
 import threading  # noqa: E402
 import time  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
 from pslog.live.protocol import DetectionDatagram, encode_detections  # noqa: E402
 from pslog.live.server import serve  # noqa: E402
-from pslog.live.sinks import UdpSink  # noqa: E402
+from pslog.live.sinks import RecordSink, UdpSink  # noqa: E402
 from pslog.motion import rally_motion  # noqa: E402
 from pslog.rig import Rig, apply_timing, builtin_rig  # noqa: E402
 from pslog.simulation import SimulationOptions, simulate  # noqa: E402
@@ -136,7 +143,7 @@ class Left:
         pass
 
 
-def run(rig, frames, method: str, candidates: bool) -> dict:
+def run(rig, frames, method: str, candidates: bool, record: bool = False) -> dict:
     ctx = mp.get_context("fork")
     rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     rx.bind(("127.0.0.1", 0))
@@ -149,10 +156,14 @@ def run(rig, frames, method: str, candidates: bool) -> dict:
     result: dict = {}
 
     def fuse() -> None:
-        result["summary"] = serve(rig, "udp://127.0.0.1:0", [UdpSink(rx.getsockname()), left],
+        sinks = [UdpSink(rx.getsockname()), left]
+        if record:  # the session recorded as pslog live --record does (its writer thread)
+            sinks.append(RecordSink(Path(tmp.name) / "live.mcap", rig))
+        result["summary"] = serve(rig, "udp://127.0.0.1:0", sinks,
                                   method=method, candidates=candidates, stop=stop,
                                   ready=ready, status_stream=None, status_every_s=1.0)
 
+    tmp = tempfile.TemporaryDirectory(prefix="bench-live-")
     fuser = threading.Thread(target=fuse)
     fuser.start()
     ready.wait(30)
@@ -173,6 +184,7 @@ def run(rig, frames, method: str, candidates: bool) -> dict:
     received_points = r_parent.recv()
     robot.join()
     rx.close()
+    tmp.cleanup()
     summary = result["summary"]
     c = summary.counters
     n = left.n
@@ -192,6 +204,58 @@ def run(rig, frames, method: str, candidates: bool) -> dict:
                 e2e_p99=float(np.percentile(e2e, 99)) if n else float("nan"))
 
 
+def direct(rig, frames, method: str, candidates: bool, gap_s: float) -> dict:
+    """The fuser's loop without sockets in: (cpu med, p99, fusion mean), ms."""
+    from pslog.live.fuser import LiveFuser
+
+    epoch = time.time_ns()
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    rx.bind(("127.0.0.1", 0))
+    data = []
+    for t, d in frames:
+        buf = bytearray(d)
+        struct.pack_into("<qq", buf, _T_OFFSET, epoch + t, epoch + t)
+        data.append((epoch + t, bytes(buf)))
+    now = [epoch]
+    fuser = LiveFuser(rig, method, candidates=candidates, epoch_ns=epoch, keep=False,
+                      clock=lambda: now[0])
+    sink = UdpSink(rx.getsockname())
+    tt = time.thread_time_ns
+    fusion = [0]
+
+    def timed(f):
+        def run(*args):
+            c = tt()
+            out = f(*args)
+            fusion[0] += tt() - c
+            return out
+        return run
+
+    fuser.stream.push = timed(fuser.stream.push)
+    if fuser._filter is not None:
+        fuser._filter.predict = timed(fuser._filter.predict)
+    cpu = []
+    for t, b in data:
+        if gap_s:
+            time.sleep(gap_s)
+        now[0] = t + 200_000
+        c0 = tt()
+        points = fuser.feed(b, t + 100_000)
+        if points:
+            sink.emit(points)
+            cpu.append(tt() - c0)
+        while True:  # the receiver's queue emptied, not timed
+            try:
+                rx.recv(4096, socket.MSG_DONTWAIT)
+            except BlockingIOError:
+                break
+    sink.close()
+    rx.close()
+    cpu = np.array(cpu) / 1e6
+    return dict(cpu_med=float(np.median(cpu)), cpu_p99=float(np.percentile(cpu, 99)),
+                fusion=fusion[0] / 1e6 / len(cpu), n=len(cpu))
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=60.0)
@@ -199,8 +263,25 @@ def main() -> int:
     parser.add_argument("--load", default="30,240", help="camera frame rates (fps)")
     parser.add_argument("--method", default="filter,typeA")
     parser.add_argument("--candidates", default="all,best")
+    parser.add_argument("--record", action="store_true",
+                        help="also record the session (RecordSink, as pslog live --record)")
+    parser.add_argument("--direct", nargs="?", type=float, const=8.0, default=None,
+                        metavar="GAP_MS", help="feed LiveFuser directly, GAP_MS apart")
     args = parser.parse_args()
     seconds = 10.0 if args.quick else args.seconds
+    if args.direct is not None:
+        print(f"LiveFuser.feed + UdpSink, {seconds:g} s of datagrams, {args.direct:g} ms "
+              f"asleep between two; CPU per datagram that made a point, ms")
+        for fps in (float(f) for f in args.load.split(",")):
+            rig, frames = session(fps, seconds)
+            for method in args.method.split(","):
+                for cand in args.candidates.split(","):
+                    r = direct(rig, frames, method, cand == "all", args.direct / 1e3)
+                    print(f"{f'3 x {fps:g} fps':>10} {method:>6} {cand:>4} points-datagrams "
+                          f"{r['n']:6d} | cpu med {r['cpu_med']:.3f} p99 {r['cpu_p99']:.3f} "
+                          f"| of which fusion (push, predict) mean {r['fusion']:.3f}",
+                          flush=True)
+        return 0
     print(f"live fuser, 3 type-A cameras, {seconds:g} s per run, sender and robot processes "
           f"on loopback; latencies in ms (target: p99 fusion <= {TARGET_P99_MS:g} ms, "
           f"0 datagrams lost)")
@@ -214,7 +295,7 @@ def main() -> int:
         rig, frames = session(fps, seconds)
         for method in args.method.split(","):
             for cand in args.candidates.split(","):
-                r = run(rig, frames, method, cand == "all")
+                r = run(rig, frames, method, cand == "all", args.record)
                 ok = r["fusion_p99"] <= TARGET_P99_MS
                 worst |= r["lost"] > 0
                 print(f"{f'3 x {fps:g} fps':>10} {method:>6} {cand:>4} {r['sent']:6d} "

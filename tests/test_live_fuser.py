@@ -10,15 +10,19 @@ import numpy as np
 import pytest
 
 from pslog.fusion import FusionOptions, fuse
-from pslog.live.fuser import COUNTERS, LiveFuser
+from pslog.live.fuser import COUNTERS, LiveFuser, LivePoint
 from pslog.live.protocol import (
     FLAG_INIT,
     DetectionDatagram,
+    PointDatagram,
+    decode_detections,
     decode_point,
     encode_detections,
+    encode_point,
 )
 from pslog.records import NS
 from pslog.simulation import SimulationOptions, true_rig
+from pslog.timing import camera_parameters, true_times_ns
 from tests._live import EPOCH, datagrams, frames, rally_session, subset
 
 
@@ -73,10 +77,33 @@ def test_clock_corrections_are_applied_live():
                 readout_s={"cam1": 0.012, "cam3": 0.008})
     rig, det = rally_session(1.2, **opts)
     rig = true_rig(rig, SimulationOptions(**opts))
+    data = datagrams(det, rig)
+    arrival = [EPOCH + 1000 * (i + 1) for i in range(len(data))]
+    # each frame's top-row TRUE time (numpy's true_times_ns) and its datagram's arrival
+    cp = camera_parameters(rig)
+    tops: dict[int, list] = {c: [] for c in range(len(rig))}
+    logged = []
+    for b, a in zip(data, arrival, strict=True):
+        d = decode_detections(b)
+        c = rig.names.index(d.camera)
+        top = int(true_times_ns(d.t_capture_ns - EPOCH, 0.0, cp["height"][c],
+                                cp["clock_offset"][c], cp["clock_drift_ppm"][c],
+                                cp["readout"][c]))
+        logged.append((d.t_capture_ns - EPOCH, c, top))
+        if len(d):
+            tops[c].append((top, a))
     for method in ("filter", "typeA"):
-        points = _run(LiveFuser(rig, method, epoch_ns=EPOCH), datagrams(det, rig))
+        fuser = LiveFuser(rig, method, epoch_ns=EPOCH)
+        # the fuser's own top-row time (in floats): numpy's, to the nanosecond
+        assert [fuser._true_time_ns(t, 0.0, fuser._clock_model[c]) for t, c, _ in logged] \
+            == [top for _, _, top in logged]
+        points = _run(fuser, data, arrival)
         offline = fuse(det, rig, method)
         _assert_same(points, offline)
+        # each point's arrival: its camera's latest frame whose top row is at or before it
+        for p in points:
+            before = [a for top, a in tops[p.camera_index] if top <= p.t_capture_ns - EPOCH]
+            assert p.arrival_ns == (before[-1] if before else p.t_emit_ns)
         # and not the uncorrected times
         assert not np.array_equal(offline.time_ns, fuse(det, rig.__class__(
             tuple(c.replace(clock_offset=0.0, clock_drift_ppm=0.0, readout=0.0)
@@ -575,3 +602,36 @@ def test_hold_does_not_wait_for_a_silent_camera(session):
     # (1/90 or 2/90 s later with cam3's shutter gone), never for the 0.2 s hold
     assert waited and max(waited) <= 0.0223 * NS
     assert fuser.counters()["fused"] == len(clean)
+
+
+def test_point_wire_forms_equal_their_definitions(session):
+    """LivePoint.to_datagram packs straight from its arrays and to_json sums the trace in
+    Python (fast paths): the same bytes as encode_point(PointDatagram(...)) and the same JSON
+    as numpy's sqrt(trace), for real points and for NaN, zero and huge values."""
+    rig, det = session
+    live = _run(LiveFuser(rig, "filter", epoch_ns=EPOCH, clock=Clock(EPOCH + 2 * NS)),
+                datagrams(det, rig))
+    rng = np.random.default_rng(3)
+    odd = []
+    for cov in (np.full((3, 3), np.nan), np.zeros((3, 3)), np.diag([1e300, 1e300, 1e300]),
+                np.diag([-1e-30, 0.0, 0.0]), rng.normal(size=(3, 3))):
+        p = live[0]
+        odd.append(LivePoint(**{**p.__dict__, "cov_world": cov, "residual_px": math.nan,
+                                "predicted_velocity": np.array([np.nan, 1.0, -2.5e-300]),
+                                "position_world": rng.normal(size=3) * 1e3}))
+    for i, p in enumerate(live[:50] + odd):
+        c = p.cov_world
+        expected = encode_point(PointDatagram(
+            sequence=i + 1, camera_index=p.camera_index, camera=p.camera, method=p.method,
+            t_capture_ns=p.t_capture_ns, t_emit_ns=p.t_emit_ns, t_arrival_ns=p.arrival_ns,
+            position=p.position_world,
+            covariance=(c[0, 0], c[0, 1], c[0, 2], c[1, 1], c[1, 2], c[2, 2]),
+            residual_px=p.residual_px, camera_mask=p.camera_mask, flags=p.flags,
+            predicted_position=p.predicted_position, predicted_velocity=p.predicted_velocity))
+        assert p.to_datagram(i + 1) == expected
+        with np.errstate(invalid="ignore"):
+            std = float(np.sqrt(np.trace(c)))
+        got = p.to_json()
+        assert got["std_m"] == (std if math.isfinite(std) else None)
+        assert [got["x"], got["y"], got["z"]] == [float(a) for a in p.position_world]
+        assert json.dumps(got, allow_nan=False)

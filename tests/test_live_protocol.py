@@ -151,3 +151,18 @@ def test_bad_point_datagrams(data, reason):
     with pytest.raises(DatagramError) as info:
         decode_point(data)
     assert info.value.reason == reason
+
+
+@pytest.mark.parametrize("k", [0, 1, 3, MAX_CANDIDATES])
+def test_decoded_arrays_are_those_of_the_checked_constructor(k):
+    """decode_detections builds its DetectionDatagram without the constructor's checks (a
+    fast path): the same arrays, float64, C-contiguous and read-only, as the constructor's."""
+    e = decode_detections(encode_detections(_det(k)))
+    ref = DetectionDatagram(e.camera, e.sequence, e.frame_index, e.t_capture_ns, e.t_sent_ns,
+                            np.array(e.uv), np.array(e.radius), np.array(e.score))
+    for name, shape in (("uv", (k, 2)), ("radius", (k,)), ("score", (k,))):
+        a, b = getattr(e, name), getattr(ref, name)
+        assert a.shape == b.shape == shape and a.dtype == b.dtype == np.float64
+        assert a.flags.c_contiguous and not a.flags.writeable
+        np.testing.assert_array_equal(a, b)
+    assert e.__dict__.keys() == ref.__dict__.keys()

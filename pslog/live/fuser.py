@@ -45,7 +45,7 @@ import numpy as np
 from ..errors import FusionError
 from ..records import NS, Track
 from ..rig import Rig
-from ..timing import camera_parameters, true_times_ns
+from ..timing import camera_parameters
 from .protocol import (
     FLAG_INIT,
     FLAG_JUMP,
@@ -53,9 +53,8 @@ from .protocol import (
     REASONS,
     DatagramError,
     DetectionDatagram,
-    PointDatagram,
     decode_detections,
-    encode_point,
+    pack_point,
 )
 
 #: The counters of :meth:`LiveFuser.counters`, in order.
@@ -66,6 +65,7 @@ _SEEN = 4096
 #: Frames remembered per camera to find the arrival time behind a point.
 _ARRIVALS = 256
 _NAN3 = np.full(3, np.nan)
+_I64_MAX = int(np.iinfo(np.int64).max)
 _NAN33 = np.full((3, 3), np.nan)
 _COV_KEYS = ("cov_xx_m2", "cov_xy_m2", "cov_xz_m2", "cov_yy_m2", "cov_yz_m2", "cov_zz_m2")
 
@@ -127,30 +127,32 @@ class LivePoint:
 
     def to_datagram(self, sequence: int) -> bytes:
         """The point datagram (:mod:`pslog.live.protocol`)."""
-        c = self.cov_world
-        return encode_point(PointDatagram(
-            sequence=sequence, camera_index=self.camera_index, camera=self.camera,
-            method=self.method, t_capture_ns=self.t_capture_ns, t_emit_ns=self.t_emit_ns,
-            t_arrival_ns=self.arrival_ns, position=self.position_world,
-            covariance=(c[0, 0], c[0, 1], c[0, 2], c[1, 1], c[1, 2], c[2, 2]),
-            residual_px=self.residual_px, camera_mask=self.camera_mask, flags=self.flags,
-            predicted_position=self.predicted_position,
-            predicted_velocity=self.predicted_velocity))
+        # packed straight from the arrays (as encode_point(PointDatagram(...)) would: the
+        # same bytes, tests/test_live_protocol.py), once per point sent
+        c = self.cov_world.tolist()
+        return pack_point(sequence, self.camera_index, self.camera, self.method,
+                          self.t_capture_ns, self.t_emit_ns, self.arrival_ns,
+                          self.position_world.tolist(),
+                          (c[0][0], c[0][1], c[0][2], c[1][1], c[1][2], c[2][2]),
+                          self.residual_px, self.camera_mask, self.flags,
+                          self.predicted_position.tolist(), self.predicted_velocity.tolist())
 
     def to_json(self) -> dict:
         """One JSON object (NaN as null): ``t`` capture time (s, wall clock), ``x, y, z`` (m),
         ``camera``, ``method``, ``latency_s`` (arrival to made), ``std_m``, ``t_emit``,
         ``residual_px``, ``camera_mask``, ``flags``, ``predicted`` ``[x, y, z]`` and
         ``velocity`` ``[vx, vy, vz]`` at ``t_emit``."""
-        std = float(np.sqrt(np.trace(self.cov_world)))
-        x, y, z = (float(a) for a in self.position_world)
+        c = self.cov_world.tolist()  # Python floats: numpy's calls cost more on 3 x 3
+        trace = c[0][0] + c[1][1] + c[2][2]  # np.trace's order
+        std = math.sqrt(trace) if trace >= 0 else math.nan
+        x, y, z = self.position_world.tolist()
         return {"t": self.t_capture_ns / NS, "x": x, "y": y, "z": z, "camera": self.camera,
                 "method": self.method, "latency_s": self.latency_s,
                 "std_m": _num(std), "t_emit": self.t_emit_ns / NS,
                 "residual_px": _num(self.residual_px), "camera_mask": self.camera_mask,
                 "flags": self.flags,
-                "predicted": [_num(a) for a in self.predicted_position],
-                "velocity": [_num(a) for a in self.predicted_velocity]}
+                "predicted": [_num(a) for a in self.predicted_position.tolist()],
+                "velocity": [_num(a) for a in self.predicted_velocity.tolist()]}
 
 
 def _num(value) -> float | None:
@@ -229,6 +231,7 @@ class LiveFuser:
                  hold_s: float = 0.0) -> None:
         from ..fusion import FusionOptions, check_method
         from ..fusion._prepare import default_max_gap_s
+        from ..fusion.gating import _clock_model, _true_time_ns
         from ..fusion.stream import StreamFuser
 
         check_method(method)
@@ -257,11 +260,14 @@ class LiveFuser:
         self.accepted: list[DetectionDatagram] = []
         self.dropped: list[tuple[DetectionDatagram, str]] = []
         self._counts = dict.fromkeys(COUNTERS, 0)
-        self._index = {name: i for i, name in enumerate(rig.names)}
+        self._names = tuple(rig.names)
+        self._index = {name: i for i, name in enumerate(self._names)}
         self._cams = [CameraLiveState(name, i) for i, name in enumerate(rig.names)]
         self._newest = (np.iinfo(np.int64).min, -1)  # (logged ns, camera) of the newest fused
         self._clock_p = camera_parameters(rig)
-        self._readout = self._clock_p["readout"] > 0
+        self._readout = (self._clock_p["readout"] > 0).tolist()
+        self._clock_model = _clock_model(rig)  # per camera (height, offset, drift, readout)
+        self._true_time_ns = _true_time_ns  # timing.true_times_ns of one, in floats
         self._corrected = any(c.has_clock_correction for c in rig.cameras)
         self._max_gap_ns = int((self.options.max_gap_s or default_max_gap_s(rig)) * NS)
         self._filter = getattr(getattr(self.stream, "incremental", None), "filter", None)
@@ -355,18 +361,22 @@ class LiveFuser:
         k = len(d)
         if k:  # from now on the newest: an older frame with candidates cannot be fused
             self._newest = (logged, cam)
-            top = logged if not self._corrected else int(true_times_ns(
-                logged, 0.0, self._clock_p["height"][cam], self._clock_p["clock_offset"][cam],
-                self._clock_p["clock_drift_ppm"][cam], self._clock_p["readout"][cam]))
+            # true_times_ns of the top row, in floats (the same ns; numpy costs more for one)
+            top = logged if not self._corrected else self._true_time_ns(
+                logged, 0.0, self._clock_model[cam])
             state._arrivals.append((top, arrival_ns))
         try:
             if k:
-                order = np.argsort(-d.score, kind="stable")  # best first, as a session stores
-                if not self.candidates:
-                    order = order[:1]
-                n = len(order)
-                track = self.stream.push(np.full(n, logged, np.int64), np.full(n, cam, np.int32),
-                                         d.uv[order], np.full(n, d.frame_index, np.int64))
+                if k == 1:  # the usual frame: nothing to order (a copy: the stream's own)
+                    n, uv = 1, d.uv.copy()
+                else:  # best first, as a session stores
+                    order = np.argsort(-d.score, kind="stable")
+                    if not self.candidates:
+                        order = order[:1]
+                    n, uv = len(order), d.uv[order]
+                track = self.stream.push(np.array([logged] * n, np.int64),
+                                         np.array([cam] * n, np.int32), uv,
+                                         np.array([d.frame_index] * n, np.int64))
             else:
                 track = None
         except FusionError:
@@ -419,8 +429,8 @@ class LiveFuser:
         if (d.sequence, d.t_capture_ns) in state._seen:
             return "duplicate"
         if len(d) and self._readout[cam]:
-            v = d.uv[:, 1]
-            if not np.all((v >= 0) & (v <= self._clock_p["height"][cam])):
+            h = self._clock_model[cam][0]
+            if not all(0 <= v <= h for v in d.uv[:, 1].tolist()):  # rows: finite (decoded)
                 return "malformed"
         logged = d.t_capture_ns - self.epoch_ns
         if logged < 0:
@@ -442,7 +452,7 @@ class LiveFuser:
         now = int(self.clock())
         n = len(track)
         q = track.quality
-        names = self.rig.names
+        names = self._names
         times = track.time_ns.tolist()
         cams = track.camera.tolist()
         positions = track.position_world
@@ -451,6 +461,9 @@ class LiveFuser:
         has_cov = all(k in q for k in _COV_KEYS)
         flt = self._filter
         state = flt.state() if flt is not None else None
+        # per track, not per point: the flag columns as Python lists (== 1 as numpy's)
+        flag_cols = [(q[k].tolist(), bit) for k, bit in (
+            ("rejected", FLAG_PREDICTION), ("jump", FLAG_JUMP), ("init", FLAG_INIT)) if k in q]
         out = []
         for i in range(n):
             t, cam = times[i], cams[i]
@@ -466,15 +479,17 @@ class LiveFuser:
             else:
                 cov = _NAN33
             flags = 0
-            if "rejected" in q and q["rejected"][i] == 1:
-                flags |= FLAG_PREDICTION
-            if "jump" in q and q["jump"][i] == 1:
-                flags |= FLAG_JUMP
-            if "init" in q and q["init"][i] == 1:
-                flags |= FLAG_INIT
+            for col, bit in flag_cols:
+                if col[i] == 1:
+                    flags |= bit
             pred_p, pred_v = self._predicted(t, p, now)
             arrivals = self._cams[cam]._arrivals
-            j = bisect.bisect_right(arrivals, (t, np.iinfo(np.int64).max)) - 1
+            # the latest frame of the camera at or before the point (sorted: in fused order);
+            # usually the frame just fused, its last one
+            if arrivals and arrivals[-1][0] <= t:
+                j = len(arrivals) - 1
+            else:
+                j = bisect.bisect_right(arrivals, (t, _I64_MAX)) - 1
             arrival = arrivals[j][1] if j >= 0 else now
             out.append(LivePoint(
                 method=self.method, camera=names[cam], camera_index=cam,

@@ -71,6 +71,7 @@ from __future__ import annotations
 import math
 import struct
 from dataclasses import dataclass, field
+from math import isfinite
 
 import numpy as np
 
@@ -100,6 +101,7 @@ POINT_BYTES = _POINT.size  # 224
 #: Point flags (the ``flags`` field).
 FLAG_PREDICTION, FLAG_JUMP, FLAG_INIT = 1, 2, 4
 _NAN3 = (math.nan,) * 3
+_INF = (math.inf, -math.inf)
 
 
 class DatagramError(PslogError):
@@ -221,12 +223,22 @@ def decode_detections(data: bytes) -> DetectionDatagram:
         raise DatagramError("malformed", "detection datagram: camera name is not UTF-8") from None
     cand = np.frombuffer(data, dtype="<f8", count=4 * k,
                          offset=DETECTION_HEADER_BYTES).reshape(k, 4)
-    # radius may be NaN (unknown); pixels and scores must be numbers
-    if k and not (np.isfinite(cand[:, [0, 1, 3]]).all() and not np.isinf(cand[:, 2]).any()):
+    # radius may be NaN (unknown); pixels and scores must be numbers (in Python: a few
+    # candidates are checked faster than numpy's calls on tiny arrays cost)
+    if not all(isfinite(u) and isfinite(v) and isfinite(s) and r not in _INF
+               for u, v, r, s in cand.tolist()):
         raise DatagramError("malformed", f"detection datagram of camera {camera!r}: a NaN or "
                                          f"infinite pixel or score")
-    return DetectionDatagram(camera, seq, frame, t_cap, t_sent, cand[:, :2], cand[:, 2],
-                             cand[:, 3])
+    # the arrays as DetectionDatagram's own checks would make them (float64, C-contiguous,
+    # read-only copies), without them: this runs once per datagram in the live fuser
+    cols = cand.T.copy()  # (4, k): radius and score contiguous rows
+    cols.setflags(write=False)
+    uv = cand[:, :2].copy()
+    uv.setflags(write=False)
+    d = object.__new__(DetectionDatagram)
+    d.__dict__.update(camera=camera, sequence=seq, frame_index=frame, t_capture_ns=t_cap,
+                      t_sent_ns=t_sent, uv=uv, radius=cols[2], score=cols[3])
+    return d
 
 
 @dataclass(frozen=True, eq=False)
@@ -276,13 +288,40 @@ class PointDatagram:
 
 def encode_point(p: PointDatagram) -> bytes:
     """The point datagram of ``p`` (224 bytes)."""
-    camera = _name_bytes(p.camera, MAX_NAME_BYTES, "camera name")
-    method = _name_bytes(p.method, MAX_METHOD_BYTES, "method name")
-    return _POINT.pack(POINT_MAGIC, PROTOCOL_VERSION, int(p.camera_index), len(camera),
-                       len(method), int(p.sequence), int(p.t_capture_ns), int(p.t_emit_ns),
-                       int(p.t_arrival_ns), *p.position, *p.covariance, float(p.residual_px),
-                       int(p.camera_mask), int(p.flags), *p.predicted_position,
-                       *p.predicted_velocity, camera, method)
+    return pack_point(p.sequence, p.camera_index, p.camera, p.method, p.t_capture_ns,
+                      p.t_emit_ns, p.t_arrival_ns, p.position, p.covariance, p.residual_px,
+                      p.camera_mask, p.flags, p.predicted_position, p.predicted_velocity)
+
+
+#: (name, limit) -> its checked UTF-8 bytes: a fuser sends a handful of names, per point
+_NAMES: dict = {}
+
+
+def _name_bytes_cached(name: str, limit: int, what: str) -> bytes:
+    raw = _NAMES.get((name, limit))
+    if raw is None:
+        raw = _name_bytes(name, limit, what)
+        if len(_NAMES) > 1024:  # names from anywhere: bounded
+            _NAMES.clear()
+        _NAMES[(name, limit)] = raw
+    return raw
+
+
+def pack_point(sequence: int, camera_index: int, camera: str, method: str,
+               t_capture_ns: int, t_emit_ns: int, t_arrival_ns: int, position, covariance,
+               residual_px: float, camera_mask: int, flags: int, predicted_position,
+               predicted_velocity) -> bytes:
+    """The point datagram of these fields (as :class:`PointDatagram`'s, the float triples
+    and the covariance's 6 numbers as sequences of floats), without making a PointDatagram:
+    the live fuser sends one per point. Raises DatagramError (``malformed``) for a name that
+    does not fit."""
+    camera_b = _name_bytes_cached(camera, MAX_NAME_BYTES, "camera name")
+    method_b = _name_bytes_cached(method, MAX_METHOD_BYTES, "method name")
+    return _POINT.pack(POINT_MAGIC, PROTOCOL_VERSION, int(camera_index), len(camera_b),
+                       len(method_b), int(sequence), int(t_capture_ns), int(t_emit_ns),
+                       int(t_arrival_ns), *position, *covariance, float(residual_px),
+                       int(camera_mask), int(flags), *predicted_position,
+                       *predicted_velocity, camera_b, method_b)
 
 
 def decode_point(data: bytes) -> PointDatagram:

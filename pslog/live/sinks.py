@@ -135,14 +135,18 @@ class JsonlSink:
         self.lines = 0
         self.errors = 0
         self._broken = False
+        # json.dumps(obj, allow_nan=False), without making an encoder per call (dumps does
+        # for any non-default option)
+        self._encode = json.JSONEncoder(allow_nan=False).encode
 
     def emit(self, points: list[LivePoint]) -> None:
         if self._broken:
             self.errors += len(points)
             return
         try:
+            encode = self._encode
             for p in points:
-                self.stream.write(json.dumps(p.to_json(), allow_nan=False) + "\n")
+                self.stream.write(encode(p.to_json()) + "\n")
                 self.stream.flush()
                 self.lines += 1
         except (BrokenPipeError, ValueError, OSError):
