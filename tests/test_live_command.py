@@ -215,7 +215,10 @@ def test_a_synthetic_live_run_emits_a_point_at_every_shutter(synthetic_run):
     missing = sorted(expected - set(got), key=lambda k: k[1])
     first = min(t for _, t in got)
     warm_up = [m for m in missing if m[1] < first]
-    assert len(warm_up) <= 3, warm_up
+    # type A needs two earlier frames of other cameras: a start of a few frames (camera
+    # processes that start apart on a loaded machine each add theirs), a quarter second at most
+    start = min(t for _, t in expected)
+    assert first - start <= 0.25e9, (first - start, warm_up)
     # a frame a loaded machine delivers after a later camera's frame is dropped (reordered or
     # late; how many depends on the load), and the method may then lack what the next two or
     # three points need (offline too: see the re-fusion test); with none dropped, none missing
