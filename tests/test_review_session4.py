@@ -1,0 +1,172 @@
+"""Fresh-eyes review of session 4's changes: the columnar MCAP reader on files another tool
+wrote (other compressions, chunk sizes, protobuf fields in another order, no message index),
+and the filter's coordinated-turn model against its closed form."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+from mcap.writer import CompressionType, IndexType, Writer
+
+from pslog.cli import main
+from pslog.log import _schemas as S
+from pslog.log import read_session
+
+
+@pytest.fixture(scope="module")
+def fused(tmp_path_factory):
+    """A small dirty session fused with two methods (detections with false candidates,
+    truth, tracks with quality maps)."""
+    tmp = tmp_path_factory.mktemp("review4")
+    session, out = tmp / "dirty.mcap", tmp / "fused.mcap"
+    assert main(["simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "rally",
+                 "--duration", "1", "--noise-px", "0.5", "--spurious", "0.3",
+                 "--spurious-radius", "30", "--miss-rate", "0.1", "--seed", "5",
+                 "-o", str(session)]) == 0
+    assert main(["fuse", str(session), "--method", "filter", "-o", str(out)]) == 0
+    return out
+
+
+def _reversed_fields(schema_name: str, data: bytes) -> bytes:
+    """The same protobuf message, its fields written in reverse field-number order (a valid
+    encoding: a parser merges fields in any order)."""
+    cls = {"pslog.DetectionFrame": S.DetectionFrame, "pslog.TruthPoint": S.TruthPoint}.get(
+        schema_name)
+    if cls is None:
+        return data
+    msg = cls.FromString(data)
+    parts = []
+    for fd, _value in msg.ListFields():
+        one = cls()
+        one.MergeFrom(msg)
+        for other, _ in one.ListFields():
+            if other.number != fd.number:
+                one.ClearField(other.name)
+        parts.append(one.SerializeToString())
+    return b"".join(reversed(parts))
+
+
+def _rewrite(src, dst, compression, chunk_size, index_types=IndexType.ALL, reorder=True):
+    """Copy ``src`` with the mcap package's own Writer (another tool's file)."""
+    with open(src, "rb") as fin, open(dst, "wb") as fout:
+        reader = make_reader(fin)
+        w = Writer(fout, chunk_size=chunk_size, compression=compression,
+                   index_types=index_types)
+        w.start(profile="", library="another-tool")
+        summary = reader.get_summary()
+        schemas, channels = {}, {}
+        for sid, schema in summary.schemas.items():
+            schemas[sid] = w.register_schema(schema.name, schema.encoding, schema.data)
+        for cid, ch in summary.channels.items():
+            channels[cid] = w.register_channel(ch.topic, ch.message_encoding,
+                                               schemas[ch.schema_id], ch.metadata)
+        for schema, channel, message in reader.iter_messages(log_time_order=False):
+            data = _reversed_fields(schema.name, message.data) if reorder else message.data
+            w.add_message(channels[channel.id], message.log_time, data, message.publish_time,
+                          message.sequence)
+        for record in reader.iter_metadata():
+            w.add_metadata(record.name, record.metadata)
+        w.finish()
+
+
+def _assert_same_session(a, b):
+    for k in ("frame_time_ns", "frame_camera", "frame_index", "cand_frame", "cand_uv",
+              "cand_radius", "cand_score"):
+        assert np.asarray(getattr(a.detections, k)).tobytes() == \
+            np.asarray(getattr(b.detections, k)).tobytes(), k
+    assert a.truth.time_ns.tobytes() == b.truth.time_ns.tobytes()
+    assert a.truth.position_world.tobytes() == b.truth.position_world.tobytes()
+    assert list(a.tracks) == list(b.tracks)
+    for m in a.tracks:
+        assert a.tracks[m].position_world.tobytes() == b.tracks[m].position_world.tobytes()
+        assert list(a.tracks[m].quality) == list(b.tracks[m].quality)
+
+
+@pytest.mark.parametrize("compression,chunk_size", [
+    (CompressionType.NONE, 4096), (CompressionType.LZ4, 1 << 20),
+    (CompressionType.ZSTD, 777)])
+def test_a_file_another_tool_wrote_with_fields_in_another_order_reads_the_same(
+        fused, tmp_path, compression, chunk_size):
+    other = tmp_path / "other.mcap"
+    _rewrite(fused, other, compression, chunk_size)
+    _assert_same_session(read_session(other), read_session(fused))
+
+
+def test_a_file_without_message_indexes_reads_every_message(fused, tmp_path):
+    """Chunks without MessageIndex records (index_types without MESSAGE): the chunk index's
+    message_index_offsets are empty, yet the messages are in the chunks."""
+    other = tmp_path / "noindex.mcap"
+    _rewrite(fused, other, CompressionType.ZSTD, 1 << 16,
+             index_types=IndexType.CHUNK | IndexType.ATTACHMENT | IndexType.METADATA,
+             reorder=False)
+    got = read_session(other)
+    want = read_session(fused)
+    assert got.detections.n_frames == want.detections.n_frames > 0
+    _assert_same_session(got, want)
+
+
+# ---- the coordinated-turn model --------------------------------------------------------------
+
+
+def test_turn_prediction_is_the_closed_form_circle_and_its_jacobian_the_derivative():
+    """x(t) of a coordinated turn at rate ω about z is a circle; the covariance propagation
+    uses F = ∂f/∂x (checked by central differences of the mean, ω included)."""
+    from pslog.fusion import filter as FM
+
+    f = FM.BallFilter.__new__(FM.BallFilter)
+    f._q, f._turn_psd = 0.0, 0.0
+    x = [0.3, -0.2, 1.1, 2.0, 1.0, 0.5, 3.0]
+    dt = 0.37
+    P = list(np.eye(7).ravel())
+    xn, Pn = f._turn_predicted(x, P, dt)
+    w = x[6]
+    a = w * dt
+    want = [x[0] + (math.sin(a) * x[3] - (1 - math.cos(a)) * x[4]) / w,
+            x[1] + ((1 - math.cos(a)) * x[3] + math.sin(a) * x[4]) / w,
+            x[2] + x[5] * dt,
+            math.cos(a) * x[3] - math.sin(a) * x[4], math.sin(a) * x[3] + math.cos(a) * x[4],
+            x[5], w]
+    assert np.allclose(xn, want, rtol=0, atol=1e-12)
+    F = np.zeros((7, 7))
+    for j in range(7):
+        h = 1e-6
+        up, dn = list(x), list(x)
+        up[j] += h
+        dn[j] -= h
+        F[:, j] = (np.array(f._turn_predicted(up, P, dt)[0])
+                   - np.array(f._turn_predicted(dn, P, dt)[0])) / (2 * h)
+    assert np.allclose(np.array(Pn).reshape(7, 7), F @ F.T, atol=1e-6)
+    # near ω = 0 (the series branch) too
+    x0 = [*x[:6], 1e-5]
+    F0 = np.zeros((7, 7))
+    for j in range(7):
+        h = 1e-7
+        up, dn = list(x0), list(x0)
+        up[j] += h
+        dn[j] -= h
+        F0[:, j] = (np.array(f._turn_predicted(up, P, dt)[0])
+                    - np.array(f._turn_predicted(dn, P, dt)[0])) / (2 * h)
+    assert np.allclose(np.array(f._turn_predicted(x0, P, dt)[1]).reshape(7, 7), F0 @ F0.T,
+                       atol=1e-5)
+
+
+def test_images_of_a_file_without_message_indexes_are_found(tmp_path, rig3):
+    from conftest import make_jpeg
+
+    from pslog.log import SessionWriter, iter_images
+
+    session, other = tmp_path / "img.mcap", tmp_path / "noindex.mcap"
+    with SessionWriter(session, rig3) as w:
+        for k in range(3):
+            for cam in range(3):
+                w.add_frame(cam, k, k * 33_333_333 + cam * 11_111_111, uv=[[10.0 + k, 20.0]],
+                            image=make_jpeg(20 * k + cam))
+    want = [(i.camera, i.time_ns) for i in iter_images(session)]
+    _rewrite(session, other, CompressionType.LZ4, 1 << 16,
+             index_types=IndexType.CHUNK | IndexType.METADATA, reorder=False)
+    assert len(want) == 9
+    assert [(i.camera, i.time_ns) for i in iter_images(other)] == want
+    assert read_session(other).detections.n_frames == 9
