@@ -170,3 +170,24 @@ def test_images_of_a_file_without_message_indexes_are_found(tmp_path, rig3):
     assert len(want) == 9
     assert [(i.camera, i.time_ns) for i in iter_images(other)] == want
     assert read_session(other).detections.n_frames == 9
+
+
+def test_methods_doc_states_the_filters_turn_defaults():
+    """docs/methods.md quotes the turn model's thresholds; they must be the code's."""
+    import re
+    from pathlib import Path
+
+    from pslog.fusion.filter import FilterOptions
+
+    text = Path(__file__).resolve().parents[1].joinpath("docs", "methods.md").read_text()
+    o = FilterOptions()
+    quoted = {name: float(v) for name, v in re.findall(
+        r"`(turn_on_psd|turn_switch_per_s|turn_rate_psd|init_span_s|init_max_window)`? ?=\s*"
+        r"([0-9.]+)", text)}
+    quoted.update({name: float(v) for v, name in re.findall(
+        r"`?λ_t = ([0-9.]+) /s`? \(`(turn_switch_per_s)`", text)})
+    assert quoted.get("turn_on_psd") == o.turn_on_psd
+    for name, value in quoted.items():
+        want = getattr(o, name)
+        assert math.isclose(value, want) or (name == "init_span_s" and value == want * 1000), \
+            (name, value, want)
