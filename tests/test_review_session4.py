@@ -191,3 +191,35 @@ def test_methods_doc_states_the_filters_turn_defaults():
         want = getattr(o, name)
         assert math.isclose(value, want) or (name == "init_span_s" and value == want * 1000), \
             (name, value, want)
+
+
+def _moments(weights, means, covs):
+    mean = sum(w * m for w, m in zip(weights, means, strict=True))
+    cov = sum(w * (c + np.outer(m - mean, m - mean))
+              for w, m, c in zip(weights, means, covs, strict=True))
+    return mean, cov
+
+
+@pytest.mark.parametrize("nu,dt", [(0.1, 0.011), (0.7, 0.2), (0.95, 1.5)])
+def test_turn_mixing_keeps_the_mixtures_mean_and_covariance(nu, dt):
+    """IMM mixing only relabels the models: the whole mixture's first two moments (position
+    and velocity) are the same before and after (Bar-Shalom et al. 11.6.6)."""
+    from pslog.fusion import filter as FM
+
+    rng = np.random.default_rng(3)
+    f = FM.BallFilter.__new__(FM.BallFilter)
+    f._turn_switch = 0.5
+    A, B = rng.normal(size=(6, 6)), rng.normal(size=(7, 7))
+    Pg, Pt = A @ A.T + np.eye(6), B @ B.T + np.eye(7)
+    xg, xt = rng.normal(size=6), rng.normal(size=7)
+    f._xt, f._Pt = xt.tolist(), Pt.ravel().tolist()
+    prior, x0, P0, xt0, Pt0 = f._turn_mixed(nu, xg.tolist(), Pg.ravel().tolist(), dt)
+    p = min(0.5 * dt, 0.5)
+    assert math.isclose(prior, nu * (1 - p) + (1 - nu) * p)
+    before = _moments([1 - nu, nu], [xg, xt[:6]], [Pg, Pt[:6, :6]])
+    Pt0 = np.array(Pt0).reshape(7, 7)
+    after = _moments([1 - prior, prior], [np.array(x0), np.array(xt0[:6])],
+                     [np.array(P0).reshape(6, 6), Pt0[:6, :6]])
+    assert np.allclose(before[0], after[0], atol=1e-12)
+    assert np.allclose(before[1], after[1], atol=1e-10)
+    assert np.all(np.linalg.eigvalsh(Pt0) > 0)  # the turn model's covariance stays positive
