@@ -223,3 +223,66 @@ def test_turn_mixing_keeps_the_mixtures_mean_and_covariance(nu, dt):
     assert np.allclose(before[0], after[0], atol=1e-12)
     assert np.allclose(before[1], after[1], atol=1e-10)
     assert np.all(np.linalg.eigvalsh(Pt0) > 0)  # the turn model's covariance stays positive
+
+
+# ---- live: stopping while a sender floods the socket ------------------------------------------
+_FLOOD = r"""
+import socket, sys, time
+sys.path.insert(0, sys.argv[3])
+from _live import datagrams, rally_session
+rig, det = rally_session(1.0)
+data = datagrams(det, rig, int(sys.argv[2]))
+sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+end = time.monotonic() + 60
+i = 0
+while time.monotonic() < end:  # faster than any fuser: one datagram every few µs
+    try:
+        sock.sendto(data[i % len(data)], ("127.0.0.1", int(sys.argv[1])))
+    except OSError:
+        pass
+    i += 1
+"""
+
+
+def test_serve_stops_while_a_sender_floods_it(tmp_path):
+    """At the stop, serve fuses what had arrived, then returns: a sender still sending
+    (faster than the fuser) must not keep it draining the socket forever."""
+    import subprocess
+    import sys
+    import threading
+    import time
+    from pathlib import Path
+
+    from _live import EPOCH, rally_session
+
+    from pslog.live.server import serve
+
+    rig, _ = rally_session(0.1)
+    ready, stop = threading.Event(), threading.Event()
+    ready.address = None
+    result = {}
+
+    def run():
+        result["summary"] = serve(rig, "udp://127.0.0.1:0", [], stop=stop, ready=ready,
+                                  epoch_ns=EPOCH, status_stream=None)
+
+    server = threading.Thread(target=run, daemon=True)
+    server.start()
+    assert ready.wait(60)
+    script = tmp_path / "flood.py"
+    script.write_text(_FLOOD)
+    tests = str(Path(__file__).resolve().parent)
+    flood = subprocess.Popen([sys.executable, str(script), str(ready.address[1]), str(EPOCH),
+                              tests])
+    try:
+        time.sleep(5)  # the flood under way (its setup included)
+        assert flood.poll() is None
+        stop.set()
+        server.join(30)  # a generous hang guard: the flood lasts 60 s
+        assert not server.is_alive(), "serve kept draining a socket a sender kept filling"
+        assert result["summary"] is not None
+    finally:
+        flood.kill()
+        flood.wait()
+        stop.set()
+        server.join(60)
