@@ -108,6 +108,16 @@ def format_status(fuser: LiveFuser, cameras: list[CameraLiveState], now_ns: int,
     return " | ".join(parts)
 
 
+def _arrival(ancdata, default: int) -> int:
+    """A datagram's kernel arrival time (wall clock, ns) from its ancillary data, else
+    ``default``."""
+    for level, kind, raw in ancdata:
+        if level == socket.SOL_SOCKET and kind == _SO_TIMESTAMPNS and len(raw) >= 16:
+            sec, nsec = struct.unpack_from("@qq", raw)
+            return sec * NS + nsec
+    return default
+
+
 def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
           duration_s: float | None = None, stop: threading.Event | None = None,
           status_every_s: float = 1.0, silent_after_s: float = 1.0,
@@ -237,11 +247,7 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
     def handle(data: bytes, ancdata, now: int) -> None:
         nonlocal n_cpu
         cpu0 = thread_time()
-        arrival = now
-        for level, kind, raw in ancdata:
-            if level == socket.SOL_SOCKET and kind == _SO_TIMESTAMPNS and len(raw) >= 16:
-                sec, nsec = struct.unpack_from("@qq", raw)
-                arrival = sec * NS + nsec
+        arrival = _arrival(ancdata, now)
         points = fuser.feed(data, arrival)
         if points:  # the points first: recording and viewers after
             hand_out(points)
@@ -316,12 +322,21 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
         # left unread
         if error is None:
             sock.setblocking(False)
-            while True:
+            # only what arrived before the stop: a sender still sending faster than the
+            # fuser would otherwise keep it draining forever (at most a full receive
+            # buffer's worth where datagrams carry no arrival time)
+            stopped = clock()
+            left = sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF) // 32 + 1
+            while left > 0:
+                left -= 1
                 try:
                     data, ancdata, _, _ = sock.recvmsg(bufsize, anc)
                 except (BlockingIOError, InterruptedError):
                     break
-                handle(data, ancdata, clock())
+                now = clock()
+                if _arrival(ancdata, now) > stopped:
+                    break
+                handle(data, ancdata, now)
     except KeyboardInterrupt:
         interrupted = True
     except BaseException as exc:  # closed below, raised after

@@ -199,8 +199,10 @@ class _Finished:
         chunks = self.summary.chunk_indexes
         if chunks:
             for index in sorted(chunks, key=lambda c: c.chunk_start_offset):
-                if not wanted.keys() & index.message_index_offsets.keys():
-                    continue  # e.g. an image chunk: never read
+                if index.message_index_offsets and \
+                        not wanted.keys() & index.message_index_offsets.keys():
+                    continue  # e.g. an image chunk: never read (a chunk without message
+                    # indexes, as another writer may make it, can hold anything: read)
                 if index.chunk_start_offset in skip:
                     continue
                 io.collect_messages(self.read_chunk(index), wanted)
@@ -220,7 +222,8 @@ class _Finished:
         if not wanted:
             return {}
         chunks = self.summary.chunk_indexes
-        if not chunks:
+        if not chunks or not all(c.message_index_offsets for c in chunks):
+            # unchunked, or chunks without message indexes (another writer's): walk them
             return {t: _Batch.from_messages(m) for t, m in self.collect(topics, skip).items()}
         chosen = [c for c in sorted(chunks, key=lambda c: c.chunk_start_offset)
                   if wanted & c.message_index_offsets.keys()
@@ -630,7 +633,8 @@ def _images(f: _Finished, camera_of: dict[str, int], topics: list[str],
                 yield Image(cam, seq, t, m.format, m.data)
         return
     chunks = sorted((c for c in f.summary.chunk_indexes
-                     if camera.keys() & c.message_index_offsets.keys()
+                     if (camera.keys() & c.message_index_offsets.keys()
+                         or not c.message_index_offsets)  # (no index: may hold images)
                      and c.message_end_time >= lo and c.message_start_time < hi),
                     key=lambda c: (c.message_start_time, c.chunk_start_offset))
     pending: list[tuple[int, int, int, int, bytes]] = []  # time, order, camera, seq, data
