@@ -665,3 +665,22 @@ def test_a_bug_while_reading_the_summary_is_not_reported_as_damage(sim_session, 
     monkeypatch.setattr(io, "summary_span", broken)
     with pytest.raises(TypeError, match="a bug"):
         read_session(sim_session.path)
+
+
+def test_a_track_added_in_batches_keeps_distinct_scene_ids(tmp_path, rig3):
+    """A live recording adds its track a batch at a time: every point's Foxglove sphere keeps
+    its own entity id (ids restarting at 0 per batch replaced the earlier batch's markers)."""
+    from mcap.reader import make_reader
+
+    path = tmp_path / "batches.mcap"
+    with SessionWriter(path, rig3) as w:
+        for start in (0, 3):
+            t = np.arange(start, start + 3, dtype=np.int64) * 10_000_000 + 1
+            w.add_track(Track("filter", t, np.ones((3, 3)), np.zeros(3, np.int32)))
+    ids = []
+    with open(path, "rb") as f:
+        for _, _channel, message in make_reader(f).iter_messages(
+                topics=[S.track_scene_topic("filter")]):
+            update = S.SceneUpdate.FromString(message.data)
+            ids += [e.id for e in update.entities]
+    assert ids == [f"filter/{i}" for i in range(6)]

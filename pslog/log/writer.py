@@ -118,6 +118,10 @@ class SessionWriter:
         self._aborted = False  # abort(): nothing worth keeping was written
         self._failed = False  # an exception: keep both the old session and <path>.partial
         self._os_failed = False  # the OS refused a write: the MCAP stream cannot be finished
+        # scene entity ids of each method's points, running over every add_track call (a live
+        # recording adds a track a batch at a time; restarting at 0 would replace the
+        # previous batch's markers in Foxglove)
+        self._scene_ids: dict[str, int] = {}
         self._closed = True  # until the file is open
         self._lock = threading.RLock()
         extra = {str(k): str(v) for k, v in dict(metadata or {}).items()}
@@ -478,6 +482,7 @@ class SessionWriter:
         # the quality map's bytes of every point at once (setting its keys one point at a
         # time was most of the cost of writing a track); None: the per-point way
         entries = _quality_entries(extra, n)
+        first_id = self._scene_ids.get(method, 0)
         for i, (t, (x, y, z), cam) in enumerate(zip(
                 track.time_ns.tolist(), track.position_world.tolist(), track.camera.tolist(),
                 strict=True)):
@@ -496,7 +501,8 @@ class SessionWriter:
                     msg.quality[k] = float(values[i])
                 data = msg.SerializeToString()
             self._queue(channel, t, data)
-            self._queue(scene_channel, t, scene_point(method, i, t, (x, y, z), color))
+            self._queue(scene_channel, t, scene_point(method, first_id + i, t, (x, y, z), color))
+        self._scene_ids[method] = first_id + n
         self._count(S.track_topic(method), n)
         self._count(S.track_scene_topic(method), n)
 
