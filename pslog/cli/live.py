@@ -12,7 +12,6 @@ from pslog.cli._common import (
     declare_files,
     motion_name,
     number_at_most,
-    positive_float,
     usage_error,
 )
 
@@ -57,6 +56,9 @@ _ADDRESS = re.compile(r"^(?:udp://)?(?:\[(?P<v6>[^\]]+)\]|(?P<host>[^:/\[\]]+)):
 #: seconds the fuser keeps listening once every camera process has ended, for the last
 #: datagrams still on their way
 _GRACE_S = 0.5
+#: argparse type of a run's times: positive, and short enough to count in int64 nanoseconds
+#: of the wall clock (about 30 years; 1e300 s used to overflow in the fuser's loop)
+_LONGEST = number_at_most(1e9, "s", "about 30 years", positive=True)
 
 
 def udp_address(text: str, lowest_port: int = 1) -> tuple[str, int]:
@@ -111,7 +113,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--timing", choices=TIMING_PRESETS,
                         help="set the rig's shutter offsets from a preset (default: the "
                              "rig's own offsets)")
-    parser.add_argument("--duration", type=positive_float, metavar="S",
+    parser.add_argument("--duration", type=_LONGEST, metavar="S",
                         help="stop after S seconds (of session time once cameras run; "
                              "synthetic default: the motion's duration; otherwise until "
                              "the sources end or Ctrl-C)")
@@ -150,7 +152,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         metavar="PORT",
                         help="Foxglove WebSocket server port with --foxglove, 0 for any free "
                              "one, said on stderr (default %(default)s)")
-    parser.add_argument("--status-every", type=positive_float, default=1.0, metavar="S",
+    parser.add_argument("--status-every", type=_LONGEST, default=1.0, metavar="S",
                         help="seconds between status lines on stderr (default %(default)s)")
     add_detector_arguments(parser)
     add_force(parser)

@@ -16,6 +16,8 @@ from pslog.live.fuser import LiveFuser
 from pslog.live.protocol import _DET_HEADER, DetectionDatagram, encode_detections
 from tests._live import EPOCH, datagrams, frames, rally_session
 
+from .promises import assert_one_line_error, run_pslog
+
 
 @pytest.fixture(scope="module")
 def session():
@@ -72,3 +74,15 @@ def test_a_capture_time_in_the_far_future_does_not_make_every_later_frame_late(s
     after = _feed(fuser, honest[half:])
     assert fuser.counters()["future"] == 1
     assert len(after) >= expected > 0
+
+
+@pytest.mark.parametrize("args, contains", [
+    (("--duration", "1e300"), ("--duration", "at most")),
+    (("--duration", "1e300", "--source", "cam1=missing.mp4"), ("--duration", "at most")),
+    (("--status-every", "1e300"), ("--status-every", "at most")),
+])
+def test_absurdly_long_times_are_usage_errors(tmp_path, args, contains):
+    run = run_pslog("live", "--rig", "paper3", "--listen", "udp://127.0.0.1:0", *args,
+                    cwd=tmp_path)
+    assert_one_line_error(run, 2, contains=contains)
+    assert list(tmp_path.iterdir()) == []
