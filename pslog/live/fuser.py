@@ -302,6 +302,9 @@ class LiveFuser:
             # frames lost on the way: gaps in the camera's sequence, whether or not the
             # frame is fused (a frame that comes after a later one is no loss)
             last = state._last_sequence
+            if last is not None and d.sequence < last and state._newest_logged is not None \
+                    and d.t_capture_ns - self.epoch_ns > state._newest_logged:
+                last = None  # a lower sequence with a newer capture time: the sender restarted
             if last is not None and d.sequence > last + 1:
                 gap = d.sequence - last - 1
                 state.lost += gap

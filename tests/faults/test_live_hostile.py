@@ -86,3 +86,23 @@ def test_absurdly_long_times_are_usage_errors(tmp_path, args, contains):
                     cwd=tmp_path)
     assert_one_line_error(run, 2, contains=contains)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_sender_that_restarts_its_sequence_keeps_the_lost_count_true(session):
+    """docs/live.md allows a sender to restart its sequence (new capture times): frames lost
+    before the restart stay counted, and frames lost after it are counted too."""
+    from dataclasses import replace
+
+    rig, det = session
+    fr = frames(det, rig)
+    cam1 = [i for i, d in enumerate(fr) if d.camera == "cam1"]
+    mid = len(cam1) // 2
+    renumber = {i: n for n, i in enumerate(cam1[mid:], start=1)}  # restarts at 1
+    skip = {cam1[3], cam1[mid + 4], cam1[mid + 5]}  # one lost before, two after
+    fuser = LiveFuser(rig, "filter", epoch_ns=EPOCH)
+    for i, d in enumerate(fr):
+        if i not in skip:
+            d = replace(d, sequence=renumber[i]) if i in renumber else d
+            fuser.feed(encode_detections(d), d.t_capture_ns)
+    assert fuser.counters()["lost"] == 3
+    assert [c.lost for c in fuser.cameras()] == [3, 0, 0]
