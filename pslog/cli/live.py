@@ -181,6 +181,7 @@ def _say(text: str) -> None:
 
 
 def _run(args: argparse.Namespace, stop) -> int:
+    import sys
     import threading
     import time
 
@@ -190,6 +191,8 @@ def _run(args: argparse.Namespace, stop) -> int:
     from pslog.live.server import bind_udp, serve
     from pslog.rig import apply_timing, resolve_rig
 
+    if args.jsonl and sys.stdout is None:  # closed when Python started (``>&-``)
+        raise InputError("--jsonl cannot write to standard output: it is closed")
     rig = resolve_rig(args.rig)
     if args.timing:
         rig = apply_timing(rig, args.timing)

@@ -106,3 +106,12 @@ def test_a_sender_that_restarts_its_sequence_keeps_the_lost_count_true(session):
             fuser.feed(encode_detections(d), d.t_capture_ns)
     assert fuser.counters()["lost"] == 3
     assert [c.lost for c in fuser.cameras()] == [3, 0, 0]
+
+
+def test_jsonl_with_standard_output_closed_is_one_line_before_anything_starts(tmp_path):
+    """``pslog live --jsonl >&-``: said at once, no camera started, no session written."""
+    run = run_pslog("live", "--rig", "paper3", "--listen", "udp://127.0.0.1:0", "--synthetic",
+                    "--duration", "0.5", "--jsonl", "--record", tmp_path / "s.mcap",
+                    preexec_fn=lambda: os.close(1))
+    assert_one_line_error(run, 1, contains=("standard output", "closed"))
+    assert list(tmp_path.iterdir()) == []
