@@ -379,9 +379,25 @@ def _jsonl(args: argparse.Namespace, stop):
 
     alone = not (args.out or args.record or args.view or args.serve or args.foxglove)
 
+    import select
+
+    try:
+        fd = sys.stdout.fileno()
+    except (AttributeError, OSError, ValueError):  # not a real file (a test's capture)
+        fd = None
+
     class Jsonl(JsonlSink):
         def emit(self, points) -> None:
-            super().emit(points)
+            for point in points:
+                # a reader that stopped reading (a full pipe) would block the write for
+                # ever, and Ctrl-C with it: wait while the run goes on, give up once stopped
+                while fd is not None and not self._broken and \
+                        not select.select([], [fd], [], 0 if stop.is_set() else 0.1)[1]:
+                    if stop.is_set():
+                        self._broken = True
+                        _say("standard output is not being read: the last points were not "
+                             "printed")
+                super().emit([point])
             if self._broken and alone and not stop.is_set():
                 stop.set("standard output closed")
 

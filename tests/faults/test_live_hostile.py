@@ -115,3 +115,37 @@ def test_jsonl_with_standard_output_closed_is_one_line_before_anything_starts(tm
                     preexec_fn=lambda: os.close(1))
     assert_one_line_error(run, 1, contains=("standard output", "closed"))
     assert list(tmp_path.iterdir()) == []
+
+
+def test_sigint_stops_a_run_whose_jsonl_reader_stopped_reading(tmp_path):
+    """``pslog live --jsonl | stalled-reader``: the full pipe must not make Ctrl-C hang; the
+    run stops, exit 0, the session is complete."""
+    import fcntl
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from pslog.log import read_session
+
+    r, w = os.pipe()
+    fcntl.fcntl(w, 1031, 4096)  # F_SETPIPE_SZ: a one-page pipe, full after a few points
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "pslog.cli", "live", "--rig", "paper3", "--timing", "typeA",
+         "--synthetic", "--duration", "60", "--listen", "udp://127.0.0.1:0", "--jsonl",
+         "--record", "s.mcap"], cwd=tmp_path, stdout=w, stderr=subprocess.PIPE, text=True)
+    os.close(w)
+    try:
+        time.sleep(6)  # the pipe fills within a second of the first points
+        proc.send_signal(signal.SIGINT)
+        try:
+            _, err = proc.communicate(timeout=20)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.communicate()
+            raise AssertionError("Ctrl-C did not stop a run whose stdout was full") from None
+    finally:
+        os.close(r)
+    assert proc.returncode == 0, err
+    assert "Traceback" not in err
+    assert len(read_session(tmp_path / "s.mcap").tracks["filter"].time_ns) > 20
