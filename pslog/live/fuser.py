@@ -268,6 +268,7 @@ class LiveFuser:
         self._clock_p = camera_parameters(rig)
         self._readout = self._clock_p["readout"] > 0
         self._corrected = any(c.has_clock_correction for c in rig.cameras)
+        self._fps = [c.fps for c in rig.cameras]
         self._max_gap_ns = int((self.options.max_gap_s or default_max_gap_s(rig)) * NS)
         self._filter = getattr(getattr(self.stream, "incremental", None), "filter", None)
         self._last_point: tuple[int, np.ndarray] | None = None  # (session ns, position)
@@ -298,13 +299,17 @@ class LiveFuser:
         reason = self._check(d, cam, state)
         if reason is None and d.t_capture_ns - arrival_ns > self.future_ns:
             reason = "future"  # never the newest frame: it would make every other one late
-        if reason != "duplicate":
+        if reason not in ("duplicate", "future"):
             # frames lost on the way: gaps in the camera's sequence, whether or not the
             # frame is fused (a frame that comes after a later one is no loss)
             last = state._last_sequence
             if last is not None and d.sequence < last and state._newest_logged is not None \
                     and d.t_capture_ns - self.epoch_ns > state._newest_logged:
                 last = None  # a lower sequence with a newer capture time: the sender restarted
+            if last is not None and d.sequence > last + 1 and state._newest_logged is not None \
+                    and d.sequence - last - 1 > 10 + 10 * self._fps[cam] * max(
+                        0, d.t_capture_ns - self.epoch_ns - state._newest_logged) / NS:
+                last = None  # more frames than the time since could hold: renumbered, not lost
             if last is not None and d.sequence > last + 1:
                 gap = d.sequence - last - 1
                 state.lost += gap

@@ -149,3 +149,23 @@ def test_sigint_stops_a_run_whose_jsonl_reader_stopped_reading(tmp_path):
     assert proc.returncode == 0, err
     assert "Traceback" not in err
     assert len(read_session(tmp_path / "s.mcap").tracks["filter"].time_ns) > 20
+
+
+@pytest.mark.parametrize("sequence, future", [(2**64 - 1, False), (10**6, True)])
+def test_a_sequence_jump_no_camera_could_make_is_not_counted_lost(session, sequence, future):
+    """One datagram numbered 2**64 - 1 (or a forged future one) must not put 1.8e19 frames
+    'lost' on the status line for the rest of the run."""
+    from dataclasses import replace
+
+    rig, det = session
+    fr = frames(det, rig)
+    half = len(fr) // 2
+    fuser = LiveFuser(rig, "filter", epoch_ns=EPOCH)
+    for i, d in enumerate(fr):
+        if i == half:
+            d = replace(d, sequence=sequence,
+                        t_capture_ns=d.t_capture_ns + (86_400 * 10**9 if future else 0))
+            fuser.feed(encode_detections(d), fr[i].t_capture_ns)
+            continue
+        fuser.feed(encode_detections(d), d.t_capture_ns)
+    assert fuser.counters()["lost"] <= 1  # the honest frame replaced by the forged one
