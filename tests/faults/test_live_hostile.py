@@ -16,7 +16,7 @@ from pslog.live.fuser import LiveFuser
 from pslog.live.protocol import _DET_HEADER, DetectionDatagram, encode_detections
 from tests._live import EPOCH, datagrams, frames, rally_session
 
-from .promises import assert_one_line_error, run_pslog
+from .promises import assert_one_line_error, assert_untouched, fingerprint, run_pslog
 
 
 @pytest.fixture(scope="module")
@@ -169,3 +169,20 @@ def test_a_sequence_jump_no_camera_could_make_is_not_counted_lost(session, seque
             continue
         fuser.feed(encode_detections(d), d.t_capture_ns)
     assert fuser.counters()["lost"] <= 1  # the honest frame replaced by the forged one
+
+
+def test_an_absurd_video_offset_is_a_usage_error_naming_it(tmp_path):
+    """``--source cam1=clip.avi@1e300`` was an OverflowError repr from the camera process."""
+    import cv2
+
+    writer = cv2.VideoWriter(str(tmp_path / "clip.avi"), cv2.VideoWriter_fourcc(*"MJPG"), 30,
+                             (640, 480))
+    for _ in range(3):
+        writer.write(np.zeros((480, 640, 3), np.uint8))
+    writer.release()
+    before = fingerprint(tmp_path / "clip.avi")
+    run = run_pslog("live", "--rig", "paper3", "--listen", "udp://127.0.0.1:0", "--duration",
+                    "1", "--source", "cam1=clip.avi@1e300", "--record", "s.mcap", cwd=tmp_path)
+    assert_one_line_error(run, 2, contains=("offset", "1e300"))
+    assert_untouched(before, tmp_path / "clip.avi")
+    assert not (tmp_path / "s.mcap").exists()
