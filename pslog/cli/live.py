@@ -56,6 +56,8 @@ _ADDRESS = re.compile(r"^(?:udp://)?(?:\[(?P<v6>[^\]]+)\]|(?P<host>[^:/\[\]]+)):
 #: seconds the fuser keeps listening once every camera process has ended, for the last
 #: datagrams still on their way
 _GRACE_S = 0.5
+#: seconds a stopped run still waits for a --jsonl reader that is not reading (a full pipe)
+_STDOUT_GRACE_S = 2.0
 #: argparse type of a run's times: positive, and short enough to count in int64 nanoseconds
 #: of the wall clock (about 30 years; 1e300 s used to overflow in the fuser's loop)
 _LONGEST = number_at_most(1e9, "s", "about 30 years", positive=True)
@@ -380,6 +382,7 @@ def _jsonl(args: argparse.Namespace, stop):
     alone = not (args.out or args.record or args.view or args.serve or args.foxglove)
 
     import select
+    import time
 
     try:
         fd = sys.stdout.fileno()
@@ -387,13 +390,20 @@ def _jsonl(args: argparse.Namespace, stop):
         fd = None
 
     class Jsonl(JsonlSink):
+        give_up = None  # time.monotonic() after which a stopped run stops waiting
+
         def emit(self, points) -> None:
             for point in points:
                 # a reader that stopped reading (a full pipe) would block the write for
-                # ever, and Ctrl-C with it: wait while the run goes on, give up once stopped
+                # ever, and Ctrl-C with it: wait while the run goes on, and for a slow
+                # reader at most _STDOUT_GRACE_S more once the run is stopped
                 while fd is not None and not self._broken and \
-                        not select.select([], [fd], [], 0 if stop.is_set() else 0.1)[1]:
-                    if stop.is_set():
+                        not select.select([], [fd], [], 0.1)[1]:
+                    if not stop.is_set():
+                        continue
+                    if self.give_up is None:
+                        self.give_up = time.monotonic() + _STDOUT_GRACE_S
+                    elif time.monotonic() > self.give_up:
                         self._broken = True
                         _say("standard output is not being read: the last points were not "
                              "printed")
