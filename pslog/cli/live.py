@@ -12,7 +12,6 @@ from pslog.cli._common import (
     declare_files,
     motion_name,
     number_at_most,
-    positive_float,
     usage_error,
 )
 
@@ -57,6 +56,11 @@ _ADDRESS = re.compile(r"^(?:udp://)?(?:\[(?P<v6>[^\]]+)\]|(?P<host>[^:/\[\]]+)):
 #: seconds the fuser keeps listening once every camera process has ended, for the last
 #: datagrams still on their way
 _GRACE_S = 0.5
+#: seconds a stopped run still waits for a --jsonl reader that is not reading (a full pipe)
+_STDOUT_GRACE_S = 2.0
+#: argparse type of a run's times: positive, and short enough to count in int64 nanoseconds
+#: of the wall clock (about 30 years; 1e300 s used to overflow in the fuser's loop)
+_LONGEST = number_at_most(1e9, "s", "about 30 years", positive=True)
 
 
 def udp_address(text: str, lowest_port: int = 1) -> tuple[str, int]:
@@ -111,7 +115,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--timing", choices=TIMING_PRESETS,
                         help="set the rig's shutter offsets from a preset (default: the "
                              "rig's own offsets)")
-    parser.add_argument("--duration", type=positive_float, metavar="S",
+    parser.add_argument("--duration", type=_LONGEST, metavar="S",
                         help="stop after S seconds (of session time once cameras run; "
                              "synthetic default: the motion's duration; otherwise until "
                              "the sources end or Ctrl-C)")
@@ -150,7 +154,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         metavar="PORT",
                         help="Foxglove WebSocket server port with --foxglove, 0 for any free "
                              "one, said on stderr (default %(default)s)")
-    parser.add_argument("--status-every", type=positive_float, default=1.0, metavar="S",
+    parser.add_argument("--status-every", type=_LONGEST, default=1.0, metavar="S",
                         help="seconds between status lines on stderr (default %(default)s)")
     add_detector_arguments(parser)
     add_force(parser)
@@ -179,6 +183,7 @@ def _say(text: str) -> None:
 
 
 def _run(args: argparse.Namespace, stop) -> int:
+    import sys
     import threading
     import time
 
@@ -188,6 +193,8 @@ def _run(args: argparse.Namespace, stop) -> int:
     from pslog.live.server import bind_udp, serve
     from pslog.rig import apply_timing, resolve_rig
 
+    if args.jsonl and sys.stdout is None:  # closed when Python started (``>&-``)
+        raise InputError("--jsonl cannot write to standard output: it is closed")
     rig = resolve_rig(args.rig)
     if args.timing:
         rig = apply_timing(rig, args.timing)
@@ -374,9 +381,33 @@ def _jsonl(args: argparse.Namespace, stop):
 
     alone = not (args.out or args.record or args.view or args.serve or args.foxglove)
 
+    import select
+    import time
+
+    try:
+        fd = sys.stdout.fileno()
+    except (AttributeError, OSError, ValueError):  # not a real file (a test's capture)
+        fd = None
+
     class Jsonl(JsonlSink):
+        give_up = None  # time.monotonic() after which a stopped run stops waiting
+
         def emit(self, points) -> None:
-            super().emit(points)
+            for point in points:
+                # a reader that stopped reading (a full pipe) would block the write for
+                # ever, and Ctrl-C with it: wait while the run goes on, and for a slow
+                # reader at most _STDOUT_GRACE_S more once the run is stopped
+                while fd is not None and not self._broken and \
+                        not select.select([], [fd], [], 0.1)[1]:
+                    if not stop.is_set():
+                        continue
+                    if self.give_up is None:
+                        self.give_up = time.monotonic() + _STDOUT_GRACE_S
+                    elif time.monotonic() > self.give_up:
+                        self._broken = True
+                        _say("standard output is not being read: the last points were not "
+                             "printed")
+                super().emit([point])
             if self._broken and alone and not stop.is_set():
                 stop.set("standard output closed")
 

@@ -317,4 +317,7 @@ def _seconds(value: str, text: str, camera: str) -> float:
         # a frame before the session clock's zero cannot be stored (MCAP times are unsigned)
         raise MalformedSource(f"camera {camera!r}: offset must be >= 0 seconds in {text!r}: the "
                          f"session clock starts at 0 (delay the other cameras instead)")
+    if seconds > 1e9:  # int64 nanoseconds of the session clock hold about 292 years
+        raise MalformedSource(f"camera {camera!r}: offset must be at most 1e9 seconds (about "
+                              f"30 years) in {text!r}")
     return seconds

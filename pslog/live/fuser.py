@@ -15,7 +15,9 @@ Rules (docs/live.md, section *The fuser*):
   it requires, and at once (no waiting: no added latency). A frame at or before the newest
   one pushed cannot be fused exactly any more (the methods' points are causal and already
   emitted): it is dropped, counted ``reordered`` when it is at most ``late_s`` older than
-  the newest, ``late`` when older (or captured before the session started).
+  the newest, ``late`` when older (or captured before the session started). A frame
+  captured more than ``future_s`` after it arrived is ``future`` and dropped: a wrong clock
+  or a forged time would otherwise become the newest frame, and every honest one late.
 - What is fused is exactly the accepted frames, in order: a session recording them (and
   only them) on ``/detections/<camera>`` re-fuses offline to the same points
   (:class:`~pslog.live.sinks.RecordSink` writes the dropped ones on ``/live/dropped/...``).
@@ -58,8 +60,8 @@ from .protocol import (
 )
 
 #: The counters of :meth:`LiveFuser.counters`, in order.
-COUNTERS = ("received", "fused", "duplicate", "reordered", "late", *REASONS, "unknown_camera",
-            "fusion_error", "lost", "points")
+COUNTERS = ("received", "fused", "duplicate", "reordered", "late", "future", *REASONS,
+            "unknown_camera", "fusion_error", "lost", "points")
 #: Sequences remembered per camera for the duplicate test.
 _SEEN = 4096
 #: Frames remembered per camera to find the arrival time behind a point.
@@ -202,6 +204,8 @@ class LiveFuser:
     method : a causal fusion method (``filter``, ``typeA``, ``nearest``, ...)
     late_s : float, a dropped out-of-order frame older than the newest fused one by more
         than this is counted ``late``, else ``reordered``, seconds
+    future_s : float, a frame captured more than this after its arrival is dropped as
+        ``future`` (clocks disagree or the time is forged), seconds
     options : FusionOptions
     candidates : bool, fuse every candidate through the gates (True) or each frame's best
         candidate (False)
@@ -228,7 +232,7 @@ class LiveFuser:
     def __init__(self, rig: Rig, method: str = "filter", *, late_s: float = 0.1,
                  options=None, candidates: bool = True, epoch_ns: int | None = None,
                  silent_after_s: float = 1.0, clock=time.time_ns, keep: bool = True,
-                 hold_s: float = 0.0) -> None:
+                 hold_s: float = 0.0, future_s: float = 5.0) -> None:
         from ..fusion import FusionOptions, check_method
         from ..fusion._prepare import default_max_gap_s
         from ..fusion.gating import _clock_model, _true_time_ns
@@ -255,6 +259,7 @@ class LiveFuser:
         self.clock = clock
         self.epoch_ns = int(clock() if epoch_ns is None else epoch_ns)
         self.late_ns = int(late_s * NS)
+        self.future_ns = int(future_s * NS)
         self.silent_after_ns = int(silent_after_s * NS)
         self.keep = keep
         self.accepted: list[DetectionDatagram] = []
@@ -269,6 +274,7 @@ class LiveFuser:
         self._clock_model = _clock_model(rig)  # per camera (height, offset, drift, readout)
         self._true_time_ns = _true_time_ns  # timing.true_times_ns of one, in floats
         self._corrected = any(c.has_clock_correction for c in rig.cameras)
+        self._fps = [c.fps for c in rig.cameras]
         self._max_gap_ns = int((self.options.max_gap_s or default_max_gap_s(rig)) * NS)
         self._filter = getattr(getattr(self.stream, "incremental", None), "filter", None)
         self._last_point: tuple[int, np.ndarray] | None = None  # (session ns, position)
@@ -297,10 +303,19 @@ class LiveFuser:
         state.last_arrival_ns = int(arrival_ns)
         state.silent = False
         reason = self._check(d, cam, state)
-        if reason != "duplicate":
+        if reason is None and d.t_capture_ns - arrival_ns > self.future_ns:
+            reason = "future"  # never the newest frame: it would make every other one late
+        if reason not in ("duplicate", "future"):
             # frames lost on the way: gaps in the camera's sequence, whether or not the
             # frame is fused (a frame that comes after a later one is no loss)
             last = state._last_sequence
+            if last is not None and d.sequence < last and state._newest_logged is not None \
+                    and d.t_capture_ns - self.epoch_ns > state._newest_logged:
+                last = None  # a lower sequence with a newer capture time: the sender restarted
+            if last is not None and d.sequence > last + 1 and state._newest_logged is not None \
+                    and d.sequence - last - 1 > 10 + 10 * self._fps[cam] * max(
+                        0, d.t_capture_ns - self.epoch_ns - state._newest_logged) / NS:
+                last = None  # more frames than the time since could hold: renumbered, not lost
             if last is not None and d.sequence > last + 1:
                 gap = d.sequence - last - 1
                 state.lost += gap

@@ -101,9 +101,9 @@ def format_status(fuser: LiveFuser, cameras: list[CameraLiveState], now_ns: int,
                  f"SILENT {(now_ns - cam.last_arrival_ns) / NS:.1f} s")
         parts.append(f"{cam.name} {state} {cam.datagrams} dg {cam.points} pt")
     parts.append(f"datagrams {c['received']} points {c['points']}")
-    drops = [f"{k} {c[k]}" for k in ("duplicate", "reordered", "late", "truncated", "oversize",
-                                     "foreign", "version", "malformed", "unknown_camera",
-                                     "fusion_error", "lost") if c[k]]
+    drops = [f"{k} {c[k]}" for k in ("duplicate", "reordered", "late", "future", "truncated",
+                                     "oversize", "foreign", "version", "malformed",
+                                     "unknown_camera", "fusion_error", "lost") if c[k]]
     parts.append("drops: " + (", ".join(drops) if drops else "none"))
     return " | ".join(parts)
 
