@@ -63,9 +63,9 @@ from pslog.records import NS
 from pslog.rig import Rig
 
 from . import _columns as C
-from ._columns import camera_path, image_path
+from ._columns import image_path
 from .blueprint import build_blueprint, default_eye
-from .recording import new_stream
+from .recording import log_rig, new_stream
 from .sinks import has_display, open_sink
 
 #: items (a batch of points, a detection datagram, a status line) that may wait for a viewer;
@@ -332,22 +332,8 @@ class RerunLiveSink(_QueuedSink):
             rig.names, methods, has_truth=False, quality=LIVE_PLOTS,
             eye=default_eye(centers, target[None, :] if target is not None
                             else np.zeros((0, 3)))))
-        rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+        log_rig(rec, rig, rejected=False)
         for c, cam in enumerate(rig.cameras):
-            world_from_cam = cam.world_from_cam
-            rec.log(camera_path(cam.name), rr.Transform3D(
-                translation=world_from_cam[:3, 3], mat3x3=world_from_cam[:3, :3]), static=True)
-            K = cam.K.copy()
-            K[:2, 2] += C.PIXEL_CENTER
-            # rerun's pinhole frame RDF (x right, y down, z forward) is OpenCV's convention
-            rec.log(image_path(cam.name), rr.Pinhole(
-                image_from_camera=K, resolution=[cam.width, cam.height],
-                camera_xyz=rr.ViewCoordinates.RDF, image_plane_distance=0.3,
-                color=C.camera_color(c)), static=True)
-            rec.log(f"{image_path(cam.name)}/detections", rr.Points2D.from_fields(
-                colors=[C.camera_color(c)], radii=[-4.0]), static=True)
-            rec.log(f"world/rays/{cam.name}", rr.LineStrips3D.from_fields(
-                colors=[C.camera_color(c)], radii=[-0.75]), static=True)
             rec.log(f"plots/detection_rate/{cam.name}",
                     rr.SeriesLines(colors=[C.camera_color(c)], names=[cam.name]), static=True)
         for method in methods:

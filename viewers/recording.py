@@ -150,8 +150,10 @@ def log_view(rec: rr.RecordingStream, data: ViewData, frames: FramesChoice) -> d
 
 
 # ---- static --------------------------------------------------------------------------------
-def _log_static(rec, data: ViewData, colors, quality) -> None:
-    rig = data.session.rig
+def log_rig(rec, rig, *, rejected: bool = True) -> None:
+    """The rig's static entities, shared by the recorded and the live view: the world's
+    axes, each camera's pose and pinhole, and the styles of its detections (and rejected
+    candidates) and rays."""
     rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     for c, cam in enumerate(rig.cameras):
         world_from_cam = cam.world_from_cam
@@ -166,10 +168,17 @@ def _log_static(rec, data: ViewData, colors, quality) -> None:
             color=C.camera_color(c)), static=True)
         rec.log(f"{image_path(cam.name)}/detections", rr.Points2D.from_fields(
             colors=[C.camera_color(c)], radii=[-4.0]), static=True)
-        rec.log(f"{image_path(cam.name)}/rejected", rr.Points2D.from_fields(
-            colors=[C.REJECTED_COLOR], radii=[-3.0]), static=True)
+        if rejected:
+            rec.log(f"{image_path(cam.name)}/rejected", rr.Points2D.from_fields(
+                colors=[C.REJECTED_COLOR], radii=[-3.0]), static=True)
         rec.log(f"world/rays/{cam.name}", rr.LineStrips3D.from_fields(
             colors=[C.camera_color(c)], radii=[-0.75]), static=True)
+
+
+def _log_static(rec, data: ViewData, colors, quality) -> None:
+    rig = data.session.rig
+    log_rig(rec, rig)
+    for c, cam in enumerate(rig.cameras):
         for d, other in enumerate(rig.cameras):
             if d != c:
                 rec.log(f"{image_path(cam.name)}/epipolar/{other.name}",

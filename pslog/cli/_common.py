@@ -304,3 +304,19 @@ def chessboard(text: str) -> str:
 def port(text: str) -> int:
     """A TCP port number, 1..65535."""
     return int_in(1, 65535)(text)
+
+
+def run_stoppable(run, args: argparse.Namespace) -> int:
+    """``run(args, stop)`` with SIGINT and SIGTERM turned into a stop request for its whole
+    length (the recorders' :class:`~recorders.record.StopRequest`; also one that came before
+    the work started), restored at the end for callers of ``main()`` in-process: a command
+    that records finishes its file instead of dying with a KeyboardInterrupt traceback or
+    silently on SIGTERM."""
+    from recorders.record import StopRequest
+
+    stop = StopRequest()
+    restore = stop.install()
+    try:
+        return run(args, stop)
+    finally:
+        restore()

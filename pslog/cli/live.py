@@ -12,6 +12,7 @@ from pslog.cli._common import (
     declare_files,
     motion_name,
     number_at_most,
+    run_stoppable,
     usage_error,
 )
 
@@ -164,16 +165,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    # SIGINT and SIGTERM only request a stop from here on, which stops the camera processes,
-    # the fuser and the session file cleanly (also one that came before they started)
-    from recorders.record import StopRequest
-
-    stop = StopRequest()
-    restore = stop.install()
-    try:
-        return _run(args, stop)
-    finally:
-        restore()
+    # SIGINT and SIGTERM only request a stop from here on (finishing the work cleanly)
+    return run_stoppable(_run, args)
 
 
 def _say(text: str) -> None:

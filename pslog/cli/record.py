@@ -17,6 +17,7 @@ from pslog.cli._common import (
     number_at_most,
     positive_float,
     positive_int,
+    run_stoppable,
     seed,
     usage_error,
 )
@@ -138,18 +139,8 @@ def parse_hsv(text: str | None):
 
 
 def run(args: argparse.Namespace) -> int:
-    # from here on SIGINT and SIGTERM only request a stop, which the recorder honours (also
-    # one that came before it started) by finishing the file: no KeyboardInterrupt traceback
-    # from a slow import, no silent death by SIGTERM. Restored at the end, for callers of
-    # main() in-process.
-    from recorders.record import StopRequest
-
-    stop = StopRequest()
-    restore = stop.install()
-    try:
-        return _run(args, stop)
-    finally:
-        restore()
+    # SIGINT and SIGTERM only request a stop from here on (finishing the work cleanly)
+    return run_stoppable(_run, args)
 
 
 def _run(args: argparse.Namespace, stop) -> int:
