@@ -51,7 +51,7 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from pslog.live.protocol import DetectionDatagram, encode_detections  # noqa: E402
+from pslog.live.protocol import detection_datagrams, encode_detections  # noqa: E402
 from pslog.live.server import serve  # noqa: E402
 from pslog.live.sinks import RecordSink, UdpSink  # noqa: E402
 from pslog.motion import rally_motion  # noqa: E402
@@ -75,17 +75,8 @@ def session(fps: float, seconds: float):
     det, _ = simulate(rig, rally_motion(seed=1, duration=seconds), seconds,
                       SimulationOptions(noise_px=0.3, miss_rate=0.02, spurious_rate=0.05,
                                         seed=2))
-    bounds = np.searchsorted(det.cand_frame, np.arange(det.n_frames + 1))
-    seq = [0] * len(rig)
-    out = []
-    for i in range(det.n_frames):
-        cam = int(det.frame_camera[i])
-        seq[cam] += 1
-        a, b = bounds[i], bounds[i + 1]
-        t = int(det.frame_time_ns[i])
-        out.append((t, encode_detections(DetectionDatagram(
-            rig.names[cam], seq[cam], int(det.frame_index[i]), 0, 0, det.cand_uv[a:b],
-            det.cand_radius[a:b], det.cand_score[a:b]))))
+    # capture and send times are stamped by the sender (relative to 0 here)
+    out = [(d.t_capture_ns, encode_detections(d)) for d in detection_datagrams(det)]
     return rig, out
 
 

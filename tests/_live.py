@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pslog.live.protocol import DetectionDatagram, encode_detections
+from pslog.live.protocol import DetectionDatagram, detection_datagrams, encode_detections
 from pslog.motion import get_motion
 from pslog.records import Detections
 from pslog.rig import apply_timing, builtin_rig
@@ -26,19 +26,8 @@ def rally_session(duration: float = 1.5, rig=None, **options) -> tuple:
 
 def frames(det: Detections, rig, epoch: int = EPOCH) -> list[DetectionDatagram]:
     """Every frame as a DetectionDatagram (sequence per camera from 1; wall clock =
-    ``epoch`` + session time), in (time, camera) order."""
-    bounds = np.searchsorted(det.cand_frame, np.arange(det.n_frames + 1))
-    seq = [0] * len(rig)
-    out = []
-    for i in range(det.n_frames):
-        cam = int(det.frame_camera[i])
-        a, b = bounds[i], bounds[i + 1]
-        seq[cam] += 1
-        t = epoch + int(det.frame_time_ns[i])
-        out.append(DetectionDatagram(rig.names[cam], seq[cam], int(det.frame_index[i]), t,
-                                     t + 1_000_000, det.cand_uv[a:b], det.cand_radius[a:b],
-                                     det.cand_score[a:b]))
-    return out
+    ``epoch`` + session time, sent 1 ms later), in (time, camera) order."""
+    return detection_datagrams(det, epoch, 1_000_000)
 
 
 def datagrams(det: Detections, rig, epoch: int = EPOCH) -> list[bytes]:

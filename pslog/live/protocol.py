@@ -156,6 +156,39 @@ class DetectionDatagram:
         return len(self.uv)
 
 
+def detection_datagrams(detections, epoch_ns: int = 0,
+                        sent_delay_ns: int = 0) -> list[DetectionDatagram]:
+    """Every frame of a session's detections as the datagram its camera would have sent: to
+    replay a recorded or simulated session into a live fuser.
+
+    Parameters
+    ----------
+    detections : pslog.records.Detections, frames in (time, camera) order
+    epoch_ns : int, wall clock of the session's time 0, nanoseconds: ``t_capture_ns`` is
+        ``epoch_ns`` + the frame's logged time
+    sent_delay_ns : int, ``t_sent_ns - t_capture_ns``
+
+    Returns
+    -------
+    list of DetectionDatagram, one per frame (also the frames with no candidate), each
+    camera's sequence numbered from 1.
+    """
+    bounds = np.searchsorted(detections.cand_frame,
+                             np.arange(detections.n_frames + 1)).tolist()
+    names = detections.camera_names
+    seq = [0] * len(names)
+    out = []
+    for i, (cam, index, t) in enumerate(zip(detections.frame_camera.tolist(),
+                                            detections.frame_index.tolist(),
+                                            detections.frame_time_ns.tolist(), strict=True)):
+        seq[cam] += 1
+        a, b = bounds[i], bounds[i + 1]
+        out.append(DetectionDatagram(names[cam], seq[cam], index, epoch_ns + t,
+                                     epoch_ns + t + sent_delay_ns, detections.cand_uv[a:b],
+                                     detections.cand_radius[a:b], detections.cand_score[a:b]))
+    return out
+
+
 def _name_bytes(name: str, limit: int, what: str) -> bytes:
     raw = name.encode("utf-8")
     if not 0 < len(raw) <= limit:

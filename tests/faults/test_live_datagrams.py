@@ -16,7 +16,12 @@ import pytest
 
 from pslog.errors import PslogError
 from pslog.fusion import fuse
-from pslog.live.protocol import DetectionDatagram, decode_point, encode_detections
+from pslog.live.protocol import (
+    DetectionDatagram,
+    decode_point,
+    detection_datagrams,
+    encode_detections,
+)
 from pslog.live.server import serve
 from pslog.live.sinks import JsonlSink, RecordSink, UdpSink
 from pslog.records import NS
@@ -85,18 +90,7 @@ def live(rig, method="filter", expect_error=False, **kwargs):
 
 def _frames(det, rig, epoch):
     """The session's frames on the fuser's clock (``epoch`` + session time)."""
-    bounds = np.searchsorted(det.cand_frame, np.arange(det.n_frames + 1))
-    seq = [0] * len(rig)
-    out = []
-    for i in range(det.n_frames):
-        cam = int(det.frame_camera[i])
-        seq[cam] += 1
-        a, b = bounds[i], bounds[i + 1]
-        t = epoch + int(det.frame_time_ns[i])
-        out.append(DetectionDatagram(rig.names[cam], seq[cam], int(det.frame_index[i]), t,
-                                     t, det.cand_uv[a:b], det.cand_radius[a:b],
-                                     det.cand_score[a:b]))
-    return out
+    return detection_datagrams(det, epoch)
 
 
 @pytest.fixture(scope="module")
