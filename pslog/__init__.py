@@ -16,6 +16,7 @@ import importlib
 TYPE_CHECKING = False
 
 _EXPORTS = {
+    "api": ("FuseResult", "SyncOutcome", "evaluate", "fuse", "read_session", "sync"),
     "camera": ("Camera", "look_at"),
     "errors": ("FusionError", "InputError", "LogFormatError", "OutputExistsError", "PslogError",
                "RigError"),
@@ -27,6 +28,8 @@ _EXPORTS = {
 }
 _MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
 __all__ = [  # noqa: RUF022 (grouped by module, as _EXPORTS)
+    "__version__",
+    "FuseResult", "SyncOutcome", "evaluate", "fuse", "read_session", "sync",
     "Camera", "look_at",
     "FusionError", "InputError", "LogFormatError", "OutputExistsError", "PslogError", "RigError",
     "MOTIONS", "Motion", "get_motion",
@@ -47,7 +50,24 @@ def package_version() -> str | None:
         return None
 
 
+def _source_version() -> str:
+    """The version in the source tree's pyproject.toml (an uninstalled checkout)."""
+    import re
+    from pathlib import Path
+
+    try:
+        text = (Path(__file__).resolve().parent.parent / "pyproject.toml").read_text()
+    except OSError:
+        return "unknown"
+    found = re.search(r'^version\s*=\s*"([^"]+)"', text, re.MULTILINE)
+    return found.group(1) if found else "unknown"
+
+
 def __getattr__(name: str):
+    if name == "__version__":  # PEP 396's attribute, from the installed metadata
+        value = package_version() or _source_version()
+        globals()["__version__"] = value
+        return value
     module = _MODULE_OF.get(name)
     if module is None:
         raise AttributeError(f"module 'pslog' has no attribute {name!r}")
@@ -62,6 +82,9 @@ def __dir__() -> list[str]:
 
 
 if TYPE_CHECKING:  # for type checkers and IDEs
+    __version__: str
+
+    from .api import FuseResult, SyncOutcome, evaluate, fuse, read_session, sync
     from .camera import Camera, look_at
     from .errors import (
         FusionError,

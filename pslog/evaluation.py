@@ -61,7 +61,7 @@ def evaluate(track: Track, truth: Truth) -> Accuracy:
     if len(err) == 0:
         raise InputError(f"track {track.method!r} has no point inside the ground truth's span")
     return Accuracy(
-        method=track.method, n_points=len(err), rate_hz=output_rate_hz(track.time_ns),
+        method=track.method, n_points=len(err), rate_hz=float(output_rate_hz(track.time_ns)),
         mean_mm=float(err.mean()), median_mm=float(np.median(err)),
         p95_mm=float(np.percentile(err, 95)), max_mm=float(err.max()),
         rms_mm=float(np.sqrt(np.mean(err**2))),

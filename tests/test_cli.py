@@ -67,7 +67,7 @@ def test_pslog_error_is_one_line_exit_1(tmp_path):
 def test_package_exports_resolve_lazily_to_the_right_objects():
     import pslog
 
-    assert sorted(pslog.__all__) == sorted(pslog._MODULE_OF)
+    assert sorted(pslog.__all__) == sorted([*pslog._MODULE_OF, "__version__"])
     for name in pslog.__all__:
         assert getattr(pslog, name) is not None
     assert callable(pslog.simulate) and pslog.simulate.__module__ == "pslog.simulation"

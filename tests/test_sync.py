@@ -172,7 +172,7 @@ def test_cli_refuses_bad_values_and_overwrites_only_with_force(tmp_path, cli, ca
 
 
 def test_frames_regularized_before_the_session_start_are_left_out_of_the_copy():
-    from pslog.cli.sync import _from_session_start
+    from pslog.api import _from_session_start
 
     rig = _rig(2)
     motion, _ = rally(1.0, seed=95, speed=4.0)

@@ -45,64 +45,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import json
 
-    import numpy as np
-
-    from pslog.errors import FusionError
-    from pslog.estimation.sync import estimate_clocks
+    from pslog.api import sync
     from pslog.log import copy_session, read_session
-    from pslog.rig import check_baselines
-    from pslog.timing import (
-        CLOCK_STD_KEY,
-        REGULARIZE_AUTO_JITTER_S,
-        clock_std_json,
-        regularize_detections,
-        regularize_times,
-    )
+    from pslog.timing import CLOCK_STD_KEY, clock_std_json
 
     session = read_session(args.session)
-    rig = session.rig
-    check_baselines(rig, args.session)
-    detections = session.detections
-    notes = []
-    reports = {}
-    if args.regularize != "off":
-        wanted = []
-        for i, cam in enumerate(rig.cameras):
-            rows = np.flatnonzero(detections.frame_camera == i)
-            if len(np.unique(detections.frame_index[rows])) < 3:
-                continue
-            _, report = regularize_times(detections.frame_time_ns[rows],
-                                         detections.frame_index[rows])
-            if args.regularize == "on" or report.jitter_s > REGULARIZE_AUTO_JITTER_S:
-                wanted.append(cam.name)
-        if wanted:
-            detections, reports = regularize_detections(detections, wanted)
-            for name, rep in reports.items():
-                notes.append(f"{name}: host stamps regularized (jitter {rep.jitter_s * 1e3:.3f} "
-                             f"ms, {rep.n_outliers} outliers, {rep.n_dropped} dropped frames)")
-            detections, early = _from_session_start(detections)
-            if early:
-                notes.append(f"{early} frame(s) regularized to before the session clock's "
-                             f"zero left out of the copy")
-    obs, gated_note = _ball_candidates(detections, rig)
-    if len(obs) == 0:
-        raise FusionError(f"{args.session} has no detection: nothing to sync on")
-    search_s = None if args.search_ms is None else args.search_ms / 1e3
-    try:
-        result = estimate_clocks(obs, rig, args.estimate, search_s, regularized=reports)
-    except FusionError as exc:
-        # with false candidates (a distractor) the failure may be theirs, not the ball's
-        # motion's; say so
-        several = int((detections.candidates_per_frame() > 1).sum())
-        if not several:
-            raise
-        raise FusionError(f"{exc}; note: {several} of {detections.n_frames} frames hold "
-                          f"several candidates and a false one the gating kept (a "
-                          f"reflection, a second ball) may be the cause") from None
+    outcome = sync(session, args.estimate,
+                   search_s=None if args.search_ms is None else args.search_ms / 1e3,
+                   regularize=args.regularize)
+    result = outcome.result
     # the standard deviations beside the estimates they belong to (the viewer shows them)
     stds = [(c.offset_std_s, c.drift_std_ppm, c.readout_std_s) for c in result.cameras]
     copy_session(args.session, args.output, rig=result.rig, force=args.force,
-                 detections=detections if notes else None,
+                 detections=outcome.detections if outcome.regularized else None,
                  metadata={CLOCK_STD_KEY: clock_std_json(result.rig, stds)})
     if args.json:
         print(json.dumps({"cameras": [
@@ -111,47 +66,12 @@ def run(args: argparse.Namespace) -> int:
              "readout_s": c.readout_s, "readout_std_s": c.readout_std_s}
             for c in result.cameras], "residual_px": result.residual_px}))
         return 0
-    for note in notes + ([gated_note] if gated_note else []):
+    for note in outcome.notes:
         print(note)
-    print(_table(result, obs))
+    print(_table(result, outcome.observations))
     print(f"residual {result.residual_px:.3f} px (pixel noise {result.noise_px:.3f} px); "
           f"wrote {args.output}")
     return 0
-
-
-def _ball_candidates(detections, rig):
-    """Each frame's ball at its LOGGED time: the best-scored candidate when no frame holds
-    more than one, else the one the gating stage chooses (:func:`pslog.fusion.gating.gate`,
-    offline, at the rig's clocks: its epipolar gate allows for the ball's motion between
-    shutters, so clocks wrong by some milliseconds still pass the ball and stop a static
-    second object or a reflection), and a note saying how many candidates it rejected."""
-    import numpy as np
-
-    if not np.any(detections.candidates_per_frame() > 1) or len(rig) < 2:
-        return detections.best(), None
-    from pslog.fusion.gating import gate
-
-    gated = gate(detections, rig, causal=False)
-    note = (f"{len(gated.rejections)} of {len(gated.chosen)} candidates rejected by gating "
-            f"(the ball chosen among each frame's candidates, as `pslog fuse` does)")
-    return gated.kept(detections).best(), note
-
-
-def _from_session_start(detections):
-    """``detections`` without the frames whose (regularized) time is before 0, and how many
-    were left out: a session's log times start at its clock's zero."""
-    import numpy as np
-
-    keep = detections.frame_time_ns >= 0
-    if keep.all():
-        return detections, 0
-    new_row = np.cumsum(keep) - 1
-    cand = keep[detections.cand_frame]
-    out = detections.__class__.from_frames(
-        detections.camera_names, detections.frame_time_ns[keep], detections.frame_camera[keep],
-        detections.frame_index[keep], new_row[detections.cand_frame[cand]],
-        detections.cand_uv[cand], detections.cand_radius[cand], detections.cand_score[cand])
-    return out, int(np.count_nonzero(~keep))
 
 
 def _table(result, obs) -> str:

@@ -1,0 +1,308 @@
+"""pslog's Python API: a session in, clocks, tracks and accuracy out, in four typed calls.
+
+The command line is built on the same functions; a script that needs more reaches into the
+modules they name (:mod:`pslog.fusion`, :mod:`pslog.estimation.sync`, :mod:`pslog.evaluation`,
+:mod:`pslog.log`). A walk-through is in docs/python.md::
+
+    import pslog
+
+    session = pslog.read_session("throw.mcap")
+    clocks = pslog.sync(session, estimate=("offset", "drift"))
+    tracks = pslog.fuse(session, rig=clocks.rig)
+    for method, accuracy in pslog.evaluate(tracks, session.truth).items():
+        print(method, f"{accuracy.mean_mm:.2f} mm")
+
+Units are SI (metres, seconds; times as integer nanoseconds on the session's clock), as
+everywhere in pslog; only :class:`pslog.evaluation.Accuracy` reports millimetres, being a
+human-facing summary.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Literal
+
+import numpy as np
+
+from .errors import FusionError, InputError
+from .records import Detections, Observations, Track, Truth
+
+if TYPE_CHECKING:  # the heavy modules load when first called, not at `import pslog`
+    from .estimation.sync import SyncResult
+    from .evaluation import Accuracy
+    from .fusion import FusionOptions
+    from .fusion.gating import Rejections
+    from .log.reader import Session
+    from .rig import Rig
+
+__all__ = ["FuseResult", "SyncOutcome", "evaluate", "fuse", "read_session", "sync"]
+
+def read_session(path: str | os.PathLike[str]) -> Session:
+    """Read a session's MCAP file (its rig, detections, truth, fused tracks; never its images).
+
+    Parameters
+    ----------
+    path : the session's ``.mcap`` file
+
+    Returns
+    -------
+    :class:`pslog.log.reader.Session`
+
+    Raises
+    ------
+    pslog.errors.InputError, pslog.errors.LogFormatError : missing, unreadable or not a session
+    """
+    from .log import read_session as _read
+
+    return _read(path)
+
+
+def _session(session: Session | str | os.PathLike[str]) -> Session:
+    if isinstance(session, (str, os.PathLike)):
+        return read_session(session)
+    return session
+
+
+@dataclass(frozen=True)
+class FuseResult(Mapping[str, Track]):
+    """:func:`fuse`'s tracks by method name (a read-only mapping), with what gating rejected.
+
+    Attributes
+    ----------
+    tracks : method -> Track (points in metres, times in ns on the session clock)
+    rejections : method -> :class:`pslog.fusion.gating.Rejections` (empty without gating)
+    """
+
+    tracks: dict[str, Track]
+    rejections: dict[str, Rejections] = field(default_factory=dict)
+
+    def __getitem__(self, method: str) -> Track:
+        return self.tracks[method]
+
+    def __iter__(self):
+        return iter(self.tracks)
+
+    def __len__(self) -> int:
+        return len(self.tracks)
+
+
+def fuse(session: Session | str | os.PathLike[str] | Detections,
+         methods: str | Sequence[str] | None = None, *, rig: Rig | None = None,
+         options: FusionOptions | None = None) -> FuseResult:
+    """Fuse a session's detections into one 3D track per method, as ``pslog fuse`` does.
+
+    Parameters
+    ----------
+    session : a :class:`Session`, its path, or bare :class:`Detections` (then ``rig`` is
+        required)
+    methods : a method name, several, or a comma-separated list; default every method the
+        session's timing suits (:func:`pslog.fusion.default_methods`)
+    rig : a corrected rig (same camera names and order) instead of the session's; e.g.
+        ``pslog.sync(session).rig``
+    options : :class:`pslog.fusion.FusionOptions` (tolerance, max gap, noise, gating)
+
+    Returns
+    -------
+    FuseResult : method -> Track, and the gating's rejections
+
+    Raises
+    ------
+    pslog.errors.FusionError : unknown method, fewer than two cameras, no detection
+    pslog.errors.RigError : a rig whose cameras differ from the session's
+    """
+    from .fusion import FusionOptions, check_method, default_methods
+    from .fusion.gating import fuse_detections
+    from .rig import check_baselines
+
+    if isinstance(session, Detections):
+        if rig is None:
+            raise InputError("fuse(detections): give the rig the detections belong to")
+        detections, used = session, rig
+    else:
+        read = _session(session)
+        detections, used = read.detections, rig or read.rig
+        if rig is not None and rig.names != read.rig.names:
+            from .errors import RigError
+
+            raise RigError(f"rig cameras {', '.join(rig.names)} differ from the session's "
+                           f"{', '.join(read.rig.names)} (names and order must match)")
+    check_baselines(used, "rig")
+    options = options or FusionOptions()
+    if detections.n_frames == 0:
+        raise FusionError("the session has no detection to fuse")
+    if isinstance(methods, str):
+        methods = [m.strip() for m in methods.split(",") if m.strip()]
+    chosen = ([check_method(m) for m in dict.fromkeys(methods)] if methods
+              else default_methods(detections, used, options))
+    tracks, rejections = fuse_detections(detections, used, chosen, options)
+    return FuseResult(dict(tracks), dict(rejections))
+
+
+@dataclass(frozen=True)
+class SyncOutcome:
+    """:func:`sync`'s result.
+
+    Attributes
+    ----------
+    rig : the session's rig holding the estimated clocks (offset, drift, readout)
+    result : :class:`pslog.estimation.sync.SyncResult` (per camera estimates with their
+        standard deviations, RMS residual and pixel noise)
+    detections : the detections the estimate used, on the session clock: the session's own,
+        or with host timestamps regularized (``regularized`` not empty)
+    observations : each frame's ball among them (gated when frames hold several candidates),
+        at its logged time: what the estimator fitted
+    regularized : camera name -> :class:`pslog.timing.RegularizeReport`
+    notes : what was done that a user should know (regularized stamps, rejected candidates)
+    """
+
+    rig: Rig
+    result: SyncResult
+    detections: Detections
+    observations: Observations
+    regularized: dict = field(default_factory=dict)
+    notes: tuple[str, ...] = ()
+
+
+def sync(session: Session | str | os.PathLike[str],
+         estimate: Sequence[str] = ("offset",), *, search_s: float | None = None,
+         regularize: Literal["auto", "on", "off"] = "auto") -> SyncOutcome:
+    """Estimate every camera's clock from the ball's detections, as ``pslog sync`` does.
+
+    Jittery host timestamps are first replaced by a robust line against frame index
+    (``regularize``: ``auto`` when a camera's jitter exceeds
+    :data:`pslog.timing.REGULARIZE_AUTO_JITTER_S`); with several candidates per frame the
+    ball is chosen by the gating stage; then :func:`pslog.estimation.sync.estimate_clocks`
+    fits one smooth trajectory to every ray jointly with the clock parameters (docs/timing.md).
+
+    Parameters
+    ----------
+    session : a :class:`Session` or its path
+    estimate : clock parameters among ``offset``, ``drift``, ``readout``
+    search_s : scan each offset over ±search_s seconds around the rig's value (default half
+        a frame period)
+    regularize : ``auto``, ``on`` or ``off``
+
+    Raises
+    ------
+    pslog.errors.FusionError : no detection, or the estimate failed (with the likely cause)
+    """
+    from .estimation.sync import PARAMETERS, estimate_clocks
+    from .rig import check_baselines
+    from .timing import REGULARIZE_AUTO_JITTER_S, regularize_detections, regularize_times
+
+    read = _session(session)
+    bad = [p for p in estimate if p not in PARAMETERS]
+    if bad or not estimate:
+        raise InputError(f"estimate {list(estimate)!r}: name parameters among "
+                         f"{', '.join(PARAMETERS)}")
+    if regularize not in ("auto", "on", "off"):
+        raise InputError(f"regularize {regularize!r}: auto, on or off")
+    rig = read.rig
+    check_baselines(rig, str(read.path))
+    detections = read.detections
+    notes: list[str] = []
+    reports: dict = {}
+    if regularize != "off":
+        wanted = []
+        for i, cam in enumerate(rig.cameras):
+            rows = np.flatnonzero(detections.frame_camera == i)
+            if len(np.unique(detections.frame_index[rows])) < 3:
+                continue
+            _, report = regularize_times(detections.frame_time_ns[rows],
+                                         detections.frame_index[rows])
+            if regularize == "on" or report.jitter_s > REGULARIZE_AUTO_JITTER_S:
+                wanted.append(cam.name)
+        if wanted:
+            detections, reports = regularize_detections(detections, wanted)
+            for name, rep in reports.items():
+                notes.append(f"{name}: host stamps regularized (jitter {rep.jitter_s * 1e3:.3f} "
+                             f"ms, {rep.n_outliers} outliers, {rep.n_dropped} dropped frames)")
+            detections, early = _from_session_start(detections)
+            if early:
+                notes.append(f"{early} frame(s) regularized to before the session clock's "
+                             f"zero left out of the copy")
+    obs, gated_note = _ball_candidates(detections, rig)
+    if gated_note:
+        notes.append(gated_note)
+    if len(obs) == 0:
+        raise FusionError(f"{read.path} has no detection: nothing to sync on")
+    try:
+        result = estimate_clocks(obs, rig, tuple(estimate), search_s, regularized=reports)
+    except FusionError as exc:
+        # with false candidates (a distractor) the failure may be theirs, not the ball's
+        # motion's; say so
+        several = int((detections.candidates_per_frame() > 1).sum())
+        if not several:
+            raise
+        raise FusionError(f"{exc}; note: {several} of {detections.n_frames} frames hold "
+                          f"several candidates and a false one the gating kept (a "
+                          f"reflection, a second ball) may be the cause") from None
+    return SyncOutcome(result.rig, result, detections, obs, reports, tuple(notes))
+
+
+def _ball_candidates(detections: Detections, rig: Rig):
+    """Each frame's ball at its LOGGED time: the best-scored candidate when no frame holds
+    more than one, else the one the gating stage chooses (:func:`pslog.fusion.gating.gate`,
+    offline, at the rig's clocks: its epipolar gate allows for the ball's motion between
+    shutters, so clocks wrong by some milliseconds still pass the ball and stop a static
+    second object or a reflection), and a note saying how many candidates it rejected."""
+    if not np.any(detections.candidates_per_frame() > 1) or len(rig) < 2:
+        return detections.best(), None
+    from .fusion.gating import gate
+
+    gated = gate(detections, rig, causal=False)
+    note = (f"{len(gated.rejections)} of {len(gated.chosen)} candidates rejected by gating "
+            f"(the ball chosen among each frame's candidates, as `pslog fuse` does)")
+    return gated.kept(detections).best(), note
+
+
+def _from_session_start(detections: Detections) -> tuple[Detections, int]:
+    """``detections`` without the frames whose (regularized) time is before 0, and how many
+    were left out: a session's log times start at its clock's zero."""
+    keep = detections.frame_time_ns >= 0
+    if keep.all():
+        return detections, 0
+    new_row = np.cumsum(keep) - 1
+    cand = keep[detections.cand_frame]
+    out = detections.__class__.from_frames(
+        detections.camera_names, detections.frame_time_ns[keep], detections.frame_camera[keep],
+        detections.frame_index[keep], new_row[detections.cand_frame[cand]],
+        detections.cand_uv[cand], detections.cand_radius[cand], detections.cand_score[cand])
+    return out, int(np.count_nonzero(~keep))
+
+
+def evaluate(tracks: Track | Mapping[str, Track] | Session,
+             truth: Truth | None = None) -> dict[str, Accuracy]:
+    """Accuracy of fused tracks against the ground truth, as ``pslog eval`` prints it.
+
+    Parameters
+    ----------
+    tracks : one Track, method -> Track (e.g. :func:`fuse`'s result), or a fused Session
+        (its tracks, and its truth when ``truth`` is not given)
+    truth : the ground truth (simulated sessions carry one: ``session.truth``)
+
+    Returns
+    -------
+    method -> :class:`pslog.evaluation.Accuracy` (errors in millimetres, output rate in Hz)
+
+    Raises
+    ------
+    pslog.errors.InputError : no truth, no track, or a track with no point inside the truth's
+        time span
+    """
+    from .evaluation import evaluate as _evaluate
+    from .log.reader import Session
+
+    if isinstance(tracks, Session):
+        truth = truth if truth is not None else tracks.truth
+        tracks = tracks.tracks
+    if isinstance(tracks, Track):
+        tracks = {tracks.method: tracks}
+    if truth is None or len(truth) == 0:
+        raise InputError("evaluate: no ground truth (only simulated or synthetic sessions "
+                         "have one)")
+    if not tracks:
+        raise InputError("evaluate: no track to evaluate")
+    return {method: _evaluate(track, truth) for method, track in tracks.items()}
