@@ -58,7 +58,7 @@ def empty_file_option(parser: argparse.ArgumentParser, args: argparse.Namespace)
         value = getattr(args, action.dest, None)
         values = [value] if isinstance(value, str | Path) else list(value or ())
         if any(v is not None and str(v).strip() == "" for v in values):
-            return "/".join(action.option_strings) or action.metavar or action.dest
+            return "/".join(action.option_strings) or str(action.metavar or action.dest)
     return None
 
 
@@ -76,7 +76,8 @@ def _paths(args: argparse.Namespace, entries) -> list[str]:
 def declared_files(args: argparse.Namespace) -> tuple[list[str], list[str], list[str]]:
     """(inputs, outputs, updates) paths given on this command line."""
     files = getattr(args, FILES_KEY, None) or {}
-    return tuple(_paths(args, files.get(k, ())) for k in ("inputs", "outputs", "updates"))
+    return (_paths(args, files.get("inputs", ())), _paths(args, files.get("outputs", ())),
+            _paths(args, files.get("updates", ())))
 
 
 def check_declared_files(args: argparse.Namespace, say=None) -> None:

@@ -133,7 +133,9 @@ def _run(args: argparse.Namespace, folder: Path) -> int:
     copy_session(session_path, fused_path, tracks=list(tracks.values()), force=args.force)
 
     print(f"3/4 accuracy against ground truth ({fused_path}):\n")
-    print(format_accuracy_table([evaluate(t, session.truth) for t in tracks.values()]))
+    truth = session.truth
+    assert truth is not None  # the demo's session is simulated: it has its ground truth
+    print(format_accuracy_table([evaluate(t, truth) for t in tracks.values()]))
     print("\n    the same methods in the paper's simulation (pslog paper table1):\n")
     print(paper.format_table1(paper.table1()))
 

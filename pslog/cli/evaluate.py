@@ -69,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"{args.session} has no ground truth (only simulated or synthetic sessions "
                   f"have one): no accuracy; the quality figures without it")
         else:
-            print(format_accuracy_table(rows))
+            print(format_accuracy_table([r for r in rows if r is not None]))
         print()
         print(format_quality_table(quality))
         if gated:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import re
+from typing import Any
 
 from pslog.cli._common import (
     add_force,
@@ -273,7 +274,7 @@ def _run(args: argparse.Namespace, stop) -> int:
         else:
             _say(f"recorded {args.record}: {recording.frames} frames, {recording.points} "
                  f"points")
-    if no_camera:
+    if no_camera and cameras is not None:
         failed = "; ".join(f"{c.name}: {c.message}" for c in cameras.cameras)
         raise InputError(f"no camera could be opened ({failed})")
     return 0
@@ -324,14 +325,14 @@ def _udp_text(address: tuple[str, int]) -> str:
     return f"udp://[{host}]:{port}" if ":" in host else f"udp://{host}:{port}"
 
 
-def _sinks(args: argparse.Namespace, rig, stop) -> tuple[list, object]:
+def _sinks(args: argparse.Namespace, rig, stop) -> tuple[list, Any]:
     """The fuser's outputs, in the order points reach them (the robot's UDP first), and the
     recording among them (None without --record). Any that fails to open is one error line,
     and the ones opened before it are closed again (a new session file removed)."""
     from pslog.live.sinks import UdpSink
 
     sinks: list = []
-    recording = None
+    recording: Any = None  # a RecordSink subclass made in _recording
     try:
         if args.out is not None:
             sinks.append(UdpSink(_udp_text(args.out)))

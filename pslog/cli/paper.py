@@ -42,8 +42,7 @@ def run(args: argparse.Namespace) -> int:
             text += "\n\n" + paper.format_beyond(*beyond)
     else:
         noise = paper.TABLE2_NOISE_PX if args.noise_px is None else args.noise_px
-        rows = paper.table2(noise_px=noise, seed=args.seed)
-        text = paper.format_table2(rows, noise)
+        text = paper.format_table2(paper.table2(noise_px=noise, seed=args.seed), noise)
     if args.json:
         out = {"table": args.table, "noise_px": noise, "rows": paper.as_json(rows)}
         if beyond is not None:

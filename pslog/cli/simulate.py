@@ -74,11 +74,11 @@ def _spurious_radius(text: str) -> float:
 def _blackout(text: str):
     """argparse type: ``CAM=START:DURATION`` (seconds) -> ``(name, start, duration)``."""
     name, sep, span = text.partition("=")
-    start, colon, duration = span.partition(":")
+    start_text, colon, duration_text = span.partition(":")
     if not sep or not colon or not name.strip():
         raise argparse.ArgumentTypeError(f"expected CAM=START:DURATION (a camera name, "
                                          f"seconds from the start, seconds), got {text!r}")
-    start, duration = _finite(start), _finite(duration)
+    start, duration = _finite(start_text), _finite(duration_text)
     if start < 0:
         raise argparse.ArgumentTypeError(f"start must be >= 0 seconds, got {text!r}")
     if duration <= 0:
@@ -181,8 +181,8 @@ def run(args: argparse.Namespace) -> int:
     readout = {}
     for name, value in args.readout:  # in order: a later value wins
         readout.update({n: value for n in rig.names} if name is None else {name: value})
-    faults = {"clock_offset_s": dict(args.clock_offset), "clock_drift_ppm": dict(args.drift),
-              "readout_s": readout}
+    faults: dict[str, dict] = {"clock_offset_s": dict(args.clock_offset),
+                               "clock_drift_ppm": dict(args.drift), "readout_s": readout}
     options = SimulationOptions(noise_px=args.noise_px, jitter_s=args.jitter,
                                 drop_rate=args.drop_rate, miss_rate=args.miss_rate,
                                 seed=args.seed, host_jitter_s=args.host_jitter / 1e3,
@@ -205,7 +205,7 @@ def run(args: argparse.Namespace) -> int:
     for option, key in (("--clock-offset", "clock_offset_s"), ("--drift", "clock_drift_ppm"),
                         ("--readout", "readout_s")):
         try:
-            true_rig(rig, SimulationOptions(**{key: faults[key]}))
+            true_rig(rig, SimulationOptions(**{key: faults[key]}))  # type: ignore[arg-type]
         except InputError as exc:
             return usage_error("simulate", f"argument {option}: {exc}")
     try:

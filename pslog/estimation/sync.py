@@ -495,7 +495,8 @@ def _joint_step(problem, solver, obs, unknowns, theta, params, control, sigma, d
         g_rows.append(mine)
         g_cols.append(np.full(len(mine), j if j < q else j + nb))
         g_vals.append(JV[mine] * dt_dtheta[mine, j:j + 1])
-    for b, (local, dr) in enumerate(breaks.columns(control, J) if nb else ()):
+    columns = breaks.columns(control, J) if breaks is not None and nb else ()
+    for b, (local, dr) in enumerate(columns):
         g_rows.append(local)
         g_cols.append(np.full(len(local), q + b))
         g_vals.append(dr)

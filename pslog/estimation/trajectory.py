@@ -266,6 +266,7 @@ class Fit:
 
 
 class _Problem:
+    knots: list[np.ndarray]
     """The observations, the pieces' knots and the design (basis values) that follow."""
 
     def __init__(self, obs: Observations, rig: Rig, rows_of_piece: list[np.ndarray],
@@ -275,7 +276,8 @@ class _Problem:
         self.t = (obs.time_ns - self.t0_ns) / NS
         self.rows_of_piece = rows_of_piece
         self.rows = np.concatenate(rows_of_piece)  # observation rows in the fit
-        self._cameras = None  # each row's camera parameters (built on first use)
+        # each row's camera parameters (built on first use)
+        self._cameras: dict[str, np.ndarray] | None = None
         self._piece_of_row = np.repeat(np.arange(len(rows_of_piece)),
                                        [len(r) for r in rows_of_piece])
         self.set_knots(knots, prior)
@@ -298,7 +300,9 @@ class _Problem:
         """Observation times (n,) s since ``t0_ns`` (the clock estimator moves them); the
         basis at each, its value ``N`` and first derivative ``N1`` (n_fit, 4)."""
         self.t = t
-        self._last = None  # the design changes: no projection of it is known
+        # the design changes: no projection of it is known
+        self._last: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None \
+            = None
         self.first, N = basis_pieces(self.knots, self._piece_of_row, t[self.rows], 1)
         self.N = np.ascontiguousarray(N[:, 0])
         self.N1 = np.ascontiguousarray(N[:, 1])
@@ -517,7 +521,7 @@ def _initial_control(problem: _Problem, sigma_px: float) -> np.ndarray:
     a0 = tt[:, :2] - xy * tt[:, 2:3]
     depth = np.full((len(rows), 1), _scene_depth(problem.rig))
     weight = np.ones(len(rows))
-    control = None
+    control = np.empty((0, 3))  # set by the first of the two passes
     for _ in range(2):
         scale = f / np.maximum(depth, 1e-3)
         J = A * scale[:, :, None]

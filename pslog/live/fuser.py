@@ -352,7 +352,8 @@ class LiveFuser:
     def _release(self, now: int, final: bool = False) -> list[LivePoint]:
         """Fuse the held frames, oldest first, while the oldest one is complete (every
         other live camera has sent a frame at least as recent) or has waited ``hold_s``."""
-        held, points = self._held, []
+        held = self._held
+        points: list[LivePoint] = []
         while held:
             logged, cam, _, d, arrival = held[0]
             if not final and now - arrival < self.hold_ns:

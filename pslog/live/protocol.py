@@ -140,8 +140,9 @@ class DetectionDatagram:
     t_capture_ns: int
     t_sent_ns: int
     uv: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
-    radius: np.ndarray | None = None
-    score: np.ndarray | None = None
+    # None (unknown) becomes NaN radii and unit scores in __post_init__: always arrays after
+    radius: np.ndarray = None  # type: ignore[assignment]
+    score: np.ndarray = None  # type: ignore[assignment]
 
     def __post_init__(self) -> None:
         uv = _ro(self.uv, (-1, 2))

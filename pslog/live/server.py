@@ -278,8 +278,9 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
             if hasattr(s, "start"):
                 s.start(fuser)
         if ready is not None:
-            ready.address = address
-            ready.epoch_ns = fuser.epoch_ns
+            # the caller's Event carries where the server listens and its clock's zero
+            ready.address = address  # type: ignore[attr-defined]
+            ready.epoch_ns = fuser.epoch_ns  # type: ignore[attr-defined]
             ready.set()
         # with a hold, look at the clock often enough to release frames about on time
         sock.settimeout(min(_POLL_S, hold_s / 4) if fuser.hold_ns else _POLL_S)

@@ -251,7 +251,7 @@ class RecordSink:
             self._thread.join()
 
     def _announce(self) -> None:
-        if self._announced:
+        if self._announced or self.epoch_ns is None:
             return
         self._announced = True
         stamp = datetime.fromtimestamp(self.epoch_ns / 1e9, UTC).isoformat(timespec="microseconds")
@@ -312,7 +312,7 @@ class RecordSink:
         self.writer.add_event(max(self._session(time_ns), 0), text)
 
     def _session(self, wall_ns: int) -> int:
-        return int(wall_ns) - self.epoch_ns
+        return int(wall_ns) - (self.epoch_ns or 0)  # set by start(), before any frame
 
     # ---- the Sink interface (the fuser's thread) ------------------------------------------
     def start(self, fuser: LiveFuser) -> None:
