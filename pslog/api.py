@@ -112,6 +112,7 @@ def fuse(session: Session | str | os.PathLike[str] | Detections,
     pslog.errors.FusionError : unknown method, fewer than two cameras, no detection
     pslog.errors.RigError : a rig whose cameras differ from the session's
     """
+    from . import progress
     from .fusion import FusionOptions, check_method, default_methods
     from .fusion.gating import fuse_detections
     from .rig import check_baselines
@@ -136,6 +137,7 @@ def fuse(session: Session | str | os.PathLike[str] | Detections,
         methods = [m.strip() for m in methods.split(",") if m.strip()]
     chosen = ([check_method(m) for m in dict.fromkeys(methods)] if methods
               else default_methods(detections, used, options))
+    progress.step(f"fusing {', '.join(chosen)}")
     tracks, rejections = fuse_detections(detections, used, chosen, options)
     return FuseResult(dict(tracks), dict(rejections))
 
@@ -188,6 +190,7 @@ def sync(session: Session | str | os.PathLike[str],
     ------
     pslog.errors.FusionError : no detection, or the estimate failed (with the likely cause)
     """
+    from . import progress
     from .estimation.sync import PARAMETERS, estimate_clocks
     from .rig import check_baselines
     from .timing import REGULARIZE_AUTO_JITTER_S, regularize_detections, regularize_times
@@ -205,6 +208,7 @@ def sync(session: Session | str | os.PathLike[str],
     notes: list[str] = []
     reports: dict = {}
     if regularize != "off":
+        progress.step("checking host timestamps")
         wanted = []
         for i, cam in enumerate(rig.cameras):
             rows = np.flatnonzero(detections.frame_camera == i)
@@ -223,11 +227,13 @@ def sync(session: Session | str | os.PathLike[str],
             if early:
                 notes.append(f"{early} frame(s) regularized to before the session clock's "
                              f"zero left out of the copy")
+    progress.step("choosing the ball among candidates")
     obs, gated_note = _ball_candidates(detections, rig)
     if gated_note:
         notes.append(gated_note)
     if len(obs) == 0:
         raise FusionError(f"{read.path} has no detection: nothing to sync on")
+    progress.step(f"estimating {', '.join(estimate)} of {len(rig)} clocks")
     try:
         result = estimate_clocks(obs, rig, tuple(estimate), search_s, regularized=reports)
     except FusionError as exc:

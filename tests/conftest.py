@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -10,6 +11,10 @@ import pytest
 
 from pslog.records import Detections, Truth
 from pslog.rig import Rig, apply_timing, builtin_rig
+
+# a command that runs longer than the progress period (5 s, on a loaded machine) would add a
+# progress line to the standard error other tests read; tests/test_progress.py turns it on
+os.environ.setdefault("PSLOG_PROGRESS", "off")
 
 
 def make_jpeg(value: int = 128, width: int = 64, height: int = 48) -> bytes:

@@ -66,6 +66,12 @@ COMMANDS: dict[str, tuple[str, str]] = {
 }
 
 
+#: commands that can run for more than a second on a long session: they show progress on
+#: standard error (pslog.progress; record and live show their own status lines)
+PROGRESS_COMMANDS = frozenset({"simulate", "import", "export", "fuse", "sync", "eval", "paper",
+                               "redetect", "recover", "view", "batch"})
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse with one-line errors: ``pslog CMD: error: ... (see pslog CMD --help)``."""
 
@@ -150,7 +156,13 @@ def _main(argv: list[str] | None) -> int:
         _release_sigint()  # only now: a KeyboardInterrupt in a C extension's import (numpy,
         # cv2, while add_arguments loads them) surfaces as an ImportError traceback
         check_declared_files(args, say=say)
-        code = int(module.run(args) or 0)
+        if name in PROGRESS_COMMANDS:
+            from pslog.progress import command_progress
+
+            with command_progress(name):
+                code = int(module.run(args) or 0)
+        else:
+            code = int(module.run(args) or 0)
         if sys.stdout is not None:  # a full stdout fails here, not at the interpreter's exit
             sys.stdout.flush()
         return code

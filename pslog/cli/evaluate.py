@@ -36,7 +36,11 @@ def run(args: argparse.Namespace) -> int:
     )
     from pslog.log import read_session
 
+    from pslog import progress
+
+    progress.update(total=2, what="reading the session")
     session = read_session(args.session)
+    progress.step("evaluating")
     # a real session has no truth: no accuracy, but the truth-free quality figures
     # (reprojection residual, gaps, std) and the gating's counts still hold
     truth = session.truth if session.truth is not None and len(session.truth) else None

@@ -219,7 +219,10 @@ def run(args: argparse.Namespace) -> int:
             return usage_error("simulate", f"argument {option}: {exc}")
     # the session's rig holds the nominal clock (zeros): the faults are for 'pslog sync'
     # to find; their true values are kept in the metadata to score it
+    from pslog import progress
+
     clock = truth_clock(rig, options)
+    progress.update(total=2, what=f"simulating {duration:.1f} s of {motion.name}")
     detections, truth, ball = simulate_labelled(rig, motion, duration, options)
     nominal = Rig(tuple(c.replace(clock_offset=0.0, clock_drift_ppm=0.0, readout=0.0)
                         for c in rig.cameras), rig.name)
@@ -250,6 +253,7 @@ def run(args: argparse.Namespace) -> int:
     source = "pslog simulate " + " ".join(f"{k}={v}" for k, v in settings.items())
     metadata = {f"simulate.{k}": v for k, v in settings.items()}
     metadata[TRUTH_CLOCK_KEY] = clock
+    progress.step(f"writing {output}")
     with SessionWriter(output, nominal, force=args.force, timing=timing, source=source,
                        metadata=metadata, on_error="discard") as writer:
         writer.add_detections(detections)

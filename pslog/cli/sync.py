@@ -45,10 +45,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import json
 
+    from pslog import progress
     from pslog.api import sync
     from pslog.log import copy_session, read_session
     from pslog.timing import CLOCK_STD_KEY, clock_std_json
 
+    progress.update(total=5, what="reading the session")
     session = read_session(args.session)
     outcome = sync(session, args.estimate,
                    search_s=None if args.search_ms is None else args.search_ms / 1e3,
@@ -56,6 +58,7 @@ def run(args: argparse.Namespace) -> int:
     result = outcome.result
     # the standard deviations beside the estimates they belong to (the viewer shows them)
     stds = [(c.offset_std_s, c.drift_std_ppm, c.readout_std_s) for c in result.cameras]
+    progress.step(f"writing {args.output}")
     copy_session(args.session, args.output, rig=result.rig, force=args.force,
                  detections=outcome.detections if outcome.regularized else None,
                  metadata={CLOCK_STD_KEY: clock_std_json(result.rig, stds)})
