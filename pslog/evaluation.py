@@ -9,6 +9,7 @@ import numpy as np
 
 from .errors import InputError
 from .records import NS, Track, Truth
+from .tables import format_table
 
 
 @dataclass(frozen=True)
@@ -69,14 +70,11 @@ def evaluate(track: Track, truth: Truth) -> Accuracy:
 
 
 def format_accuracy_table(rows: list[Accuracy]) -> str:
-    """A fixed-width table of accuracies (millimetres, hertz), one line per method."""
-    header = (f"{'method':<9} {'points':>7} {'rate Hz':>8} {'mean mm':>9} {'median mm':>10} "
-              f"{'p95 mm':>9} {'max mm':>9}")
-    lines = [header, "-" * len(header)]
-    for a in rows:
-        lines.append(f"{a.method:<9} {a.n_points:>7d} {a.rate_hz:>8.1f} {a.mean_mm:>9.3f} "
-                     f"{a.median_mm:>10.3f} {a.p95_mm:>9.3f} {a.max_mm:>9.3f}")
-    return "\n".join(lines)
+    """A table of accuracies (millimetres, hertz), one line per method."""
+    return format_table(
+        ("method", "points", "rate Hz", "mean mm", "median mm", "p95 mm", "max mm"),
+        [(a.method, f"{a.n_points:d}", f"{a.rate_hz:.1f}", f"{a.mean_mm:.3f}",
+          f"{a.median_mm:.3f}", f"{a.p95_mm:.3f}", f"{a.max_mm:.3f}") for a in rows])
 
 
 #: P(χ²₃ <= 4): the share of 3-D Gaussian errors inside the covariance's 2σ ellipsoid
@@ -186,18 +184,15 @@ def summarise_quality(track: Track, truth: Truth | None) -> QualitySummary:
 
 
 def format_quality_table(rows: list[QualitySummary]) -> str:
-    """A fixed-width table of quality summaries, one line per method."""
-    header = (f"{'method':<9} {'resid px':>9} {'p95 px':>8} {'gap ms':>7} {'std mm':>8} "
-              f"{'in 2σ':>6} {'NEES':>7}")
-    lines = [header, "-" * len(header)]
-    for r in rows:
-        lines.append(f"{r.method:<9} {r.residual_median_px:>9.3f} {r.residual_p95_px:>8.3f} "
-                     f"{r.gap_max_ms:>7.1f} {r.std_median_mm:>8.3f} "
-                     f"{r.within_2sigma * 100:>5.1f}% {r.nees:>7.2f}")
-    lines.append(f"resid: median of each point's largest reprojection error; in 2σ: share of "
-                 f"truth inside the covariance's 2σ ellipsoid ({CHI2_3D_2SIGMA * 100:.1f}% if "
-                 f"honest); NEES: mean d²/3 (1 if honest)")
-    return "\n".join(lines)
+    """A table of quality summaries, one line per method, and what its columns mean."""
+    return format_table(
+        ("method", "resid px", "p95 px", "gap ms", "std mm", "in 2σ", "NEES"),
+        [(r.method, f"{r.residual_median_px:.3f}", f"{r.residual_p95_px:.3f}",
+          f"{r.gap_max_ms:.1f}", f"{r.std_median_mm:.3f}", f"{r.within_2sigma * 100:.1f}%",
+          f"{r.nees:.2f}") for r in rows],
+        note=f"resid: median of each point's largest reprojection error; in 2σ: share of "
+             f"truth inside the covariance's 2σ ellipsoid ({CHI2_3D_2SIGMA * 100:.1f}% if "
+             f"honest); NEES: mean d²/3 (1 if honest)")
 
 
 @dataclass(frozen=True)
@@ -287,22 +282,22 @@ def rejection_counts(method: str, rejections, detections, ball=None) -> Rejectio
 
 
 def format_rejection_table(rows: list[RejectionCounts]) -> str:
-    """A fixed-width table of the gating's rejections, one line per method; the last three
+    """A table of the gating's rejections, one line per method; the last three
     columns only when the session labels the ball's candidates."""
     labelled = any(r.correct is not None for r in rows)
-    header = f"{'method':<9} {'candidates':>10} {'rejected':>9} {'detections':>10}"
+    header = ["method", "candidates", "rejected", "detections"]
     if labelled:
-        header += f" {'correct':>8} {'ball lost':>9} {'false kept':>10}"
-    header += "  by reason"
-    lines = [header, "-" * len(header)]
+        header += ["correct", "ball lost", "false kept"]
+    header.append("by reason")
+    cells = []
     for r in rows:
-        line = f"{r.method:<9} {r.candidates:>10d} {r.rejected:>9d} {r.rejected_detections:>10d}"
+        row = [r.method, f"{r.candidates:d}", f"{r.rejected:d}", f"{r.rejected_detections:d}"]
         if labelled:
-            line += (f" {r.correct:>8d} {r.wrong:>9d} {r.kept_false:>10d}"
-                     if r.correct is not None else f" {'-':>8} {'-':>9} {'-':>10}")
-        line += "  " + ", ".join(f"{k} {v}" for k, v in r.by_reason.items() if v)
-        lines.append(line)
-    return "\n".join(lines)
+            row += ([f"{r.correct:d}", f"{r.wrong:d}", f"{r.kept_false:d}"]
+                    if r.correct is not None else ["-", "-", "-"])
+        row.append(", ".join(f"{k} {v}" for k, v in r.by_reason.items() if v))
+        cells.append(row)
+    return format_table(header, cells, left={0, len(header) - 1})
 
 
 #: Session metadata key of the points each method left out, by reason (``pslog fuse`` writes

@@ -15,6 +15,7 @@ from .fusion import fuse_all
 from .motion import get_motion
 from .rig import apply_timing, builtin_rig
 from .simulation import SimulationOptions, simulate
+from .tables import format_table
 
 #: Table 1 of the paper, average absolute 3D error in millimetres.
 PAPER_TABLE1 = {
@@ -104,20 +105,21 @@ def table2(noise_px: float = TABLE2_NOISE_PX, seed: int = 0,
 
 
 def _paper_cell(value, spec: str) -> str:
-    return f"{'—':>7}" if value is None else format(value, spec)
+    return "—" if value is None else format(value, spec)
 
 
 def format_table1(rows: list[Table1Row]) -> str:
-    head = (f"{'cams':>4} {'method':<8} {'timing':<6} {'fps':>5} {'(paper)':>7}  "
-            + "  ".join(f"{m + ' mm':>11} {'(paper)':>7}" for m in TABLE1_MOTIONS))
-    lines = ["Table 1: mean absolute 3D error [mm], ours beside the paper's", head,
-             "-" * len(head)]
+    header = ["cams", "method", "timing", "fps", "(paper)"]
+    for m in TABLE1_MOTIONS:
+        header += [f"{m} mm", "(paper)"]
+    cells = []
     for r in rows:
-        cells = "  ".join(f"{r.error_mm[m]:>11.3f} {_paper_cell(r.paper_mm[m], '>7.2f')}"
-                          for m in TABLE1_MOTIONS)
-        lines.append(f"{r.cameras:>4} {r.method:<8} {r.timing:<6} {r.fps:>5.1f} "
-                     f"{_paper_cell(r.paper_fps, '>7')}  {cells}")
-    return "\n".join(lines)
+        row = [f"{r.cameras}", r.method, r.timing, f"{r.fps:.1f}", _paper_cell(r.paper_fps, "")]
+        for m in TABLE1_MOTIONS:
+            row += [f"{r.error_mm[m]:.3f}", _paper_cell(r.paper_mm[m], ".2f")]
+        cells.append(row)
+    return format_table(header, cells, left={1, 2},
+                        title="Table 1: mean absolute 3D error [mm], ours beside the paper's")
 
 
 @dataclass(frozen=True)
@@ -177,26 +179,26 @@ def format_beyond(rows: list[BeyondRow], clocks: list[BeyondClock],
              f"{BEYOND_DURATION_S:g} s, {noise_px:g} px; clock offsets unknown to the rig)",
              "sync: " + ", ".join(f"{c.camera} {c.offset_ms:.3f} ± {c.offset_std_ms:.3f} ms "
                                   f"(true {c.true_offset_ms:.3f})" for c in clocks)]
-    head = (f"{'method':<7} " + "  ".join(f"{t + ' mean':>12} {'p95':>6} {'max':>6}"
-                                          for t in BEYOND_TIMINGS) + "   [mm]")
-    lines += [head, "-" * len(head)]
+    header = ["method"]
+    for t in BEYOND_TIMINGS:
+        header += [f"{t} mean mm", "p95 mm", "max mm"]
+    cells = []
     for method in ("typeA", "smooth"):
         by = {r.timing: r for r in rows if r.method == method}
-        lines.append(f"{method:<7} " + "  ".join(
-            f"{by[t].mean_mm:>12.2f} {by[t].p95_mm:>6.2f} {by[t].max_mm:>6.1f}"
-            for t in BEYOND_TIMINGS))
-    return "\n".join(lines)
+        row = [method]
+        for t in BEYOND_TIMINGS:
+            row += [f"{by[t].mean_mm:.2f}", f"{by[t].p95_mm:.2f}", f"{by[t].max_mm:.1f}"]
+        cells.append(row)
+    return "\n".join(lines) + "\n" + format_table(header, cells)
 
 
 def format_table2(rows: list[Table2Row], noise_px: float) -> str:
-    head = (f"{'method':<7} {'points':>6} {'mean z mm':>10} {'(paper)':>8} "
-            f"{'var z mm²':>10} {'(paper)':>8}")
-    lines = [f"Table 2: turntable at z = {TURNTABLE_HEIGHT_MM:.0f} mm, detection noise "
-             f"{noise_px:g} px; ours beside the paper's (real cameras)", head, "-" * len(head)]
-    for r in rows:
-        lines.append(f"{r.method:<7} {r.n_points:>6} {r.mean_z_mm:>10.1f} "
-                     f"{r.paper_mean_z_mm:>8.1f} {r.var_z_mm2:>10.1f} {r.paper_var_z_mm2:>8.1f}")
-    return "\n".join(lines)
+    return format_table(
+        ("method", "points", "mean z mm", "(paper)", "var z mm²", "(paper)"),
+        [(r.method, f"{r.n_points}", f"{r.mean_z_mm:.1f}", f"{r.paper_mean_z_mm:.1f}",
+          f"{r.var_z_mm2:.1f}", f"{r.paper_var_z_mm2:.1f}") for r in rows],
+        title=f"Table 2: turntable at z = {TURNTABLE_HEIGHT_MM:.0f} mm, detection noise "
+              f"{noise_px:g} px; ours beside the paper's (real cameras)")
 
 
 def as_json(rows) -> list[dict]:

@@ -24,6 +24,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import json
 
+    from pslog import progress
     from pslog.errors import InputError
     from pslog.evaluation import (
         evaluate,
@@ -35,8 +36,6 @@ def run(args: argparse.Namespace) -> int:
         summarise_quality,
     )
     from pslog.log import read_session
-
-    from pslog import progress
 
     progress.update(total=2, what="reading the session")
     session = read_session(args.session)

@@ -31,6 +31,7 @@ def run(args: argparse.Namespace) -> int:
     from ._common import usage_error
 
     beyond = None
+    rows: list  # Table1Row or Table2Row
     if args.beyond and args.table != "table1":
         return usage_error("paper", "argument --beyond: only with table1")
     if args.table == "table1":
@@ -42,7 +43,8 @@ def run(args: argparse.Namespace) -> int:
             text += "\n\n" + paper.format_beyond(*beyond)
     else:
         noise = paper.TABLE2_NOISE_PX if args.noise_px is None else args.noise_px
-        text = paper.format_table2(paper.table2(noise_px=noise, seed=args.seed), noise)
+        rows = paper.table2(noise_px=noise, seed=args.seed)
+        text = paper.format_table2(rows, noise)
     if args.json:
         out = {"table": args.table, "noise_px": noise, "rows": paper.as_json(rows)}
         if beyond is not None:

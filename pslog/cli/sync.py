@@ -83,14 +83,13 @@ def _table(result, obs) -> str:
     import numpy as np
 
     from pslog.records import NS
+    from pslog.tables import format_table
     from pslog.timing import camera_parameters, true_times_ns
 
     rig = result.rig
     p = camera_parameters(rig)
     n = len(rig)
-    header = (f"{'camera':<10} {'offset ms':>18} {'drift ppm':>16} {'readout ms':>16} "
-              f"{'resid px':>9} {'phase ms':>9} {'ideal ms':>9}")
-    lines = [header, "-" * len(header)]
+    cells = []
     phase0 = None
     for i, (cam, est) in enumerate(zip(rig.cameras, result.cameras, strict=True)):
         rows = obs.camera == i
@@ -102,9 +101,10 @@ def _table(result, obs) -> str:
             if len(top) else float("nan")
         phase0 = phase if phase0 is None else phase0
         rel = (phase - phase0) % period
-        lines.append(
-            f"{cam.name:<10} {est.offset_s * 1e3:>9.4f} ±{est.offset_std_s * 1e3:<7.4f}"
-            f"{est.drift_ppm:>8.3f} ±{est.drift_std_ppm:<7.3f}"
-            f"{est.readout_s * 1e3:>8.3f} ±{est.readout_std_s * 1e3:<7.3f}"
-            f"{est.residual_px:>9.3f} {rel * 1e3:>9.3f} {i * period / n * 1e3:>9.3f}")
-    return "\n".join(lines)
+        cells.append([cam.name, f"{est.offset_s * 1e3:.4f}", f"± {est.offset_std_s * 1e3:.4f}",
+                      f"{est.drift_ppm:.3f}", f"± {est.drift_std_ppm:.3f}",
+                      f"{est.readout_s * 1e3:.3f}", f"± {est.readout_std_s * 1e3:.3f}",
+                      f"{est.residual_px:.3f}", f"{rel * 1e3:.3f}",
+                      f"{i * period / n * 1e3:.3f}"])
+    return format_table(("camera", "offset ms", "σ", "drift ppm", "σ", "readout ms", "σ",
+                         "resid px", "phase ms", "ideal ms"), cells)
