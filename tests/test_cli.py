@@ -211,3 +211,29 @@ def test_installed_command_is_the_bare_name_only_when_on_path(monkeypatch, tmp_p
     assert command != "rerun" and os.path.samefile(command, bin_dir / "rerun")
     monkeypatch.chdir(tmp_path)
     assert os.path.samefile(installed_command("rerun"), bin_dir / "rerun")
+
+
+def test_every_command_chooses_methods_one_way():
+    """`--method` everywhere a command chooses fusion methods (never `--methods`), repeated or
+    as a comma-separated list, each method once in the order given."""
+    import argparse
+
+    choosing = 0
+    for prog, parser in _parsers():
+        options = {o for a in parser._actions for o in a.option_strings}
+        assert "--methods" not in options, prog
+        method = next((a for a in parser._actions if "--method" in a.option_strings), None)
+        if method is None or not isinstance(method.default, (list, type(None))) \
+                or method.dest != "methods":
+            continue
+        choosing += 1
+        positional = [a for a in parser._actions if not a.option_strings
+                      and not isinstance(a, argparse._SubParsersAction)]
+        required = [o for a in parser._actions if a.required and a.option_strings
+                    for o in (a.option_strings[0], "x.mcap")]
+        base = ["x.mcap"] * len(positional) + required
+        repeated = parser.parse_args([*base, "--method", "typeA", "--method", "smooth",
+                                      "--method", "typeA"])
+        listed = parser.parse_args([*base, "--method", "typeA,smooth"])
+        assert repeated.methods == listed.methods == ["typeA", "smooth"], prog
+    assert choosing >= 2

@@ -260,6 +260,32 @@ def fusion_method(text: str) -> str:
     return text
 
 
+def fusion_methods(text: str) -> list[str]:
+    """argparse type of ``--method``: one fusion method or a comma-separated list of them."""
+    names = [name.strip() for name in text.split(",")]
+    if not any(names) or not all(names):
+        raise argparse.ArgumentTypeError(f"{text!r}: name a fusion method, or several "
+                                         f"separated by commas")
+    return [fusion_method(name) for name in names]
+
+
+class _ExtendUnique(argparse.Action):
+    """Append the parsed list to the destination, each name once, in the order given."""
+
+    def __call__(self, parser, namespace, values, option_string=None) -> None:
+        names = list(getattr(namespace, self.dest, None) or [])
+        names += [name for name in values if name not in names]
+        setattr(namespace, self.dest, names)
+
+
+def add_method_option(parser: argparse.ArgumentParser, help: str) -> None:
+    """``--method METHOD`` of every command that chooses fusion methods: repeated or a
+    comma-separated list (``--method typeA --method smooth`` = ``--method typeA,smooth``),
+    into ``args.methods`` (None when not given)."""
+    parser.add_argument("--method", action=_ExtendUnique, dest="methods", metavar="METHOD",
+                        type=fusion_methods, default=None, help=help)
+
+
 def checked_by(parse, what: str):
     """argparse type: the text unchanged if ``parse(text)`` accepts it; the library's own
     message (its :class:`~pslog.errors.PslogError`) as argparse's error otherwise, so that a

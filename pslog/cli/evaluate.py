@@ -8,16 +8,14 @@ import argparse
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from ._common import fusion_method
+    from ._common import add_method_option
 
     parser.add_argument("session", metavar="FUSED.mcap",
                         help="fused session (from 'pslog fuse'); with ground truth (simulated "
                              "or synthetic sessions) the accuracy too, else the quality figures "
                              "alone")
-    parser.add_argument("--method", action="append", dest="methods", metavar="METHOD",
-                        type=fusion_method,
-                        help="only this method's track (repeat for several; default: every "
-                             "track)")
+    add_method_option(parser, "only this method's track (repeat, or a comma-separated list, "
+                              "for several; default: every track)")
     parser.add_argument("--json", action="store_true", help="print JSON for scripts")
 
 

@@ -6,8 +6,8 @@ import argparse
 
 from ._common import (
     add_force,
+    add_method_option,
     declare_files,
-    fusion_method,
     noise_px,
     nonnegative_float,
     number_at_most,
@@ -20,10 +20,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
     parser.add_argument("session", metavar="SESSION.mcap", help="session file to fuse")
     listing = "; ".join(f"{m.name}: {m.description}" for m in METHODS.values())
-    parser.add_argument(
-        "--method", action="append", dest="methods", metavar="METHOD", type=fusion_method,
-        help=f"fusion method, repeat for several (default: every method the session's timing "
-             f"suits) -- {listing}")
+    add_method_option(parser, f"fusion method, repeat or give a comma-separated list for "
+                              f"several (default: every method the session's timing suits) "
+                              f"-- {listing}")
     parser.add_argument("-o", "--output", required=True, metavar="FUSED.mcap",
                         help="output session: a copy of the input with one topic per track")
     parser.add_argument(
