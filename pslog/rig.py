@@ -111,26 +111,14 @@ class Rig:
 
     # ---- TOML -------------------------------------------------------------------------
     def to_toml(self) -> str:
-        """TOML text in the documented shape; floats use ``repr`` so loading is exact."""
+        """TOML text in the documented shape; floats are written as ``repr`` (shortest text
+        that reads back to the same double), so loading is bit-exact."""
         lines = []
         if self.name:
-            lines.append(f"name = {_toml_str(self.name)}")
+            lines.append(f"name = {_toml_value(self.name)}")
         for cam in self.cameras:
-            lines += [
-                "",
-                "[[camera]]",
-                f"name = {_toml_str(cam.name)}",
-                f"width = {cam.width}",
-                f"height = {cam.height}",
-                f"K = {_toml_matrix(cam.K)}",
-                f"dist = {_toml_vector(cam.dist)}",
-                f"R = {_toml_matrix(cam.R)}",
-                f"t = {_toml_vector(cam.t)}",
-                f"fps = {_toml_float(cam.fps)}",
-                f"offset = {_toml_float(cam.offset)}",
-            ]
-            lines += [f"{key} = {_toml_float(getattr(cam, key))}" for key in _CLOCK_KEYS
-                      if getattr(cam, key) != 0]
+            lines += ["", "[[camera]]"]
+            lines += [f"{key} = {_toml_value(value)}" for key, value in _camera_items(cam)]
         return "\n".join(lines).lstrip("\n") + "\n"
 
     @classmethod
@@ -320,25 +308,34 @@ def check_baselines(rig: Rig, source: str = "rig") -> Rig:
     return rig
 
 
-def _toml_str(value: str) -> str:
-    escaped = value.replace("\\", "\\\\").replace('"', '\\"')
-    # TOML basic strings forbid raw control characters other than tab (a name with a
-    # newline would otherwise be saved as a file that cannot be loaded back)
-    escaped = "".join(f"\\u{ord(ch):04X}" if (ord(ch) < 0x20 and ch != "\t") or ch == "\x7f"
-                      else ch for ch in escaped)
-    return '"' + escaped + '"'
+def _camera_items(cam: Camera) -> list[tuple[str, object]]:
+    """The TOML keys and values of ``cam``, in file order (clock keys only when non-zero)."""
+    items: list[tuple[str, object]] = [
+        ("name", cam.name), ("width", cam.width), ("height", cam.height), ("K", cam.K),
+        ("dist", cam.dist), ("R", cam.R), ("t", cam.t), ("fps", cam.fps),
+        ("offset", cam.offset)]
+    items += [(key, getattr(cam, key)) for key in _CLOCK_KEYS if getattr(cam, key) != 0]
+    return items
 
 
-def _toml_float(value: float) -> str:
-    if not math.isfinite(value):
-        raise RigError(f"cannot write non-finite value {value!r} to TOML")
-    text = repr(float(value))
-    return text if ("." in text or "e" in text or "inf" in text) else text + ".0"
+def _toml_value(value) -> str:
+    """One TOML value: scalars rendered by tomli-w, arrays laid out inline here.
 
+    tomli-w does the escaping of strings (control characters, quotes) and the formatting of
+    numbers (``repr`` of a float: the shortest text that reads back to the same double).
+    The arrays are joined here rather than by ``tomli_w.dumps`` of the whole document
+    because tomli-w writes every array one item per line: a 3 x 3 ``K`` would take 17
+    lines of a file people read and edit by hand, where ``[[fx, 0, cx], ...]`` takes one.
+    """
+    import tomli_w
 
-def _toml_vector(values) -> str:
-    return "[" + ", ".join(_toml_float(v) for v in np.asarray(values).ravel()) + "]"
-
-
-def _toml_matrix(matrix) -> str:
-    return "[" + ", ".join(_toml_vector(row) for row in np.asarray(matrix)) + "]"
+    if isinstance(value, np.ndarray | list | tuple):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    if isinstance(value, np.integer):
+        value = int(value)
+    elif isinstance(value, np.floating | float):
+        value = float(value)
+        if not math.isfinite(value):
+            raise RigError(f"cannot write non-finite value {value!r} to TOML")
+    # the one public entry point of tomli-w is a whole document: render {"v": value}
+    return tomli_w.dumps({"v": value}).removeprefix("v = ").removesuffix("\n")

@@ -16,7 +16,7 @@ from pslog.rig import (
     PAPER_VOLUME,
     TIMING_PRESETS,
     Rig,
-    _toml_str,
+    _toml_value,
     apply_timing,
     builtin_rig,
     check_baselines,
@@ -138,7 +138,7 @@ def test_round_trip_of_unusual_names(name):
 ])
 def test_camera_names_that_break_csv_or_topics_are_refused_naming_file_and_camera(
         tmp_path, name, why):
-    text = builtin_rig("paper2").to_toml().replace('name = "cam2"', f"name = {_toml_str(name)}")
+    text = builtin_rig("paper2").to_toml().replace('name = "cam2"', f"name = {_toml_value(name)}")
     path = tmp_path / "rig.toml"
     path.write_text(text, encoding="utf-8")
     with pytest.raises(RigError, match=why) as info:
