@@ -163,9 +163,18 @@ class Rig:
             raise RigError(f"{source}: {exc}") from None
 
 
-def load_rig(path: str | Path) -> Rig:
-    """Load a rig TOML file."""
+def load_rig(path: str | Path, fmt: str = "auto", options=None) -> Rig:
+    """Load a rig file: pslog's TOML, or a calibration of aniposelib, Pose2Sim or OpenCV
+    (format detected from the suffix and content, or ``fmt``; see
+    :mod:`pslog.interchange.rig_formats`, whose ``ImportOptions`` ``options`` are)."""
+    return load_rig_file(path, fmt, options).rig
+
+
+def load_rig_file(path: str | Path, fmt: str = "auto", options=None):
+    """:func:`load_rig`, returning the :class:`~pslog.interchange.rig_formats.RigFile`
+    (the rig, the file's format, its translation units, whether it gave the timing)."""
     from .inputs import MAX_RIG_BYTES, check_input_file
+    from .interchange.rig_formats import parse_rig_text
 
     path = Path(path)
     try:
@@ -182,7 +191,7 @@ def load_rig(path: str | Path) -> Rig:
         raise RigError(f"cannot read rig file {path}: {exc.strerror or exc}") from None
     except UnicodeDecodeError as exc:
         raise RigError(f"cannot read rig file {path}: {exc}") from None
-    return Rig.from_toml(text, source=str(path))
+    return parse_rig_text(text, path, fmt, options)
 
 
 def save_rig(rig: Rig, path: str | Path, inputs=()) -> None:
@@ -195,15 +204,34 @@ def save_rig(rig: Rig, path: str | Path, inputs=()) -> None:
         f.write(rig.to_toml())
 
 
-def resolve_rig(name_or_path: str | Path) -> Rig:
-    """A built-in rig by name (``paper3``, ``paper2``) or a rig TOML file."""
+def resolve_rig(name_or_path: str | Path, timing_from: Rig | None = None) -> Rig:
+    """A built-in rig by name (``paper3``, ``paper2``) or a rig file (pslog's TOML, or an
+    aniposelib / Pose2Sim / OpenCV calibration: :func:`load_rig`).
+
+    ``timing_from``: for a file that gives no timing (a foreign calibration has no frame
+    rate or shutter offset), the frame rate, offset and clock keys of the camera of the same
+    name in this rig (e.g. the session's, for ``pslog fuse --rig``) instead of 30 fps and 0.
+    """
     if str(name_or_path) in BUILTIN_RIGS:
         return builtin_rig(str(name_or_path))
     path = Path(name_or_path)
     if not path.exists():
         raise RigError(f"no rig {str(name_or_path)!r}: not a file and not a built-in rig "
                        f"({', '.join(BUILTIN_RIGS)})")
-    return load_rig(path)
+    loaded = load_rig_file(path)
+    if loaded.timed or timing_from is None:
+        return loaded.rig
+    cameras = []
+    for cam in loaded.rig.cameras:
+        if cam.name in timing_from.names:
+            source = timing_from.camera(cam.name)
+            cam = cam.replace(**{key: getattr(source, key) for key in (
+                "fps", "offset", *_CLOCK_KEYS)})
+        cameras.append(cam)
+    try:
+        return Rig(tuple(cameras), loaded.rig.name)
+    except RigError as exc:
+        raise RigError(f"{path}: {exc}") from None
 
 
 # ---- built-in rigs and shutter presets ------------------------------------------------

@@ -78,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
     session = read_session(args.session)
     rig = session.rig
     if args.rig is not None:
-        rig = resolve_rig(args.rig)
+        rig = resolve_rig(args.rig, timing_from=session.rig)  # a calibration has no timing
         if rig.names != session.rig.names:
             raise RigError(f"{args.rig}: cameras {', '.join(rig.names)} differ from the "
                            f"session's {', '.join(session.rig.names)} (names and order must "
