@@ -62,6 +62,9 @@ OPENCV_SUFFIXES = (".yml", ".yaml", ".xml", ".json")
 #: the camera keys pslog adds to foreign formats so that its rigs survive a round trip
 _TIMING_KEYS = ("fps", "offset", "clock_offset", "clock_drift_ppm", "readout")
 _DIST_NAMES = "k1, k2, p1, p2, k3"
+#: tables of an aniposelib / Pose2Sim calibration that are not cameras (Pose2Sim's reader
+#: skips the same ones)
+_NOT_CAMERAS = ("metadata", "capture_volume", "charuco", "checkerboard")
 
 
 @dataclass(frozen=True)
@@ -175,7 +178,10 @@ def parse_rig_text(text: str, path: str | Path, fmt: str = "auto",
                 data = tomllib.loads(text)
             except tomllib.TOMLDecodeError as exc:
                 raise RigError(f"{source}: malformed TOML: {exc}") from None
-        tables = _camera_tables(data)
+        # every table but the ones the two tools keep beside their cameras is a camera: a
+        # camera table without a matrix is an error, not a camera silently left out
+        tables = [(k, v) for k, v in data.items()
+                  if isinstance(v, dict) and k not in _NOT_CAMERAS]
         if not tables:
             raise RigError(f"{source}: no camera table (a [cam_N] table with name, size, "
                            f"matrix, distortions, rotation, translation): not an "
@@ -310,7 +316,7 @@ def _size(value, where: str) -> tuple[int, int]:
 def _toml_camera(section: str, table: dict, source: str, fmt: str) -> dict:
     """Camera keyword arguments from one aniposelib / Pose2Sim camera table."""
     where = f"{source}: [{section}]"
-    missing = [k for k in ("size", "matrix", "distortions", "rotation", "translation")
+    missing = [k for k in ("matrix", "size", "distortions", "rotation", "translation")
                if k not in table]
     if missing:
         raise RigError(f"{where}: missing key(s) {', '.join(missing)}")
