@@ -22,7 +22,9 @@ them); they are written only when non-zero. The first camera defines the session
 ``clock_offset`` and ``clock_drift_ppm`` must be 0 (its ``readout`` may be anything valid).
 
 Built-in rigs (``paper3``, ``paper2``) and shutter presets (``sync``, ``typeA``, ``typeB``)
-are described in :func:`builtin_rig` and :func:`apply_timing`.
+are described in :func:`builtin_rig` and :func:`apply_timing`. :func:`load_rig` also reads
+the calibrations of aniposelib, Pose2Sim and OpenCV (:mod:`pslog.interchange.rig_formats`,
+docs/interchange.md).
 """
 
 from __future__ import annotations
