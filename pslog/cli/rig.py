@@ -98,7 +98,8 @@ def _add_export(actions) -> None:
                      help="the format to write")
     exp.add_argument("--units", default="m", choices=tuple(UNITS),
                      help="unit of the translations written (default: m)")
-    exp.add_argument("-o", "--output", required=True, metavar="FILE", help="the file to write")
+    exp.add_argument("-o", "--output", required=True, metavar="CALIBRATION.toml",
+                     help="the file to write (opencv: named .yml, .yaml, .xml or .json)")
     add_force(exp)
     declare_files(exp, inputs=("rig",), outputs=("output",))
 
