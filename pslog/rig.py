@@ -22,7 +22,9 @@ them); they are written only when non-zero. The first camera defines the session
 ``clock_offset`` and ``clock_drift_ppm`` must be 0 (its ``readout`` may be anything valid).
 
 Built-in rigs (``paper3``, ``paper2``) and shutter presets (``sync``, ``typeA``, ``typeB``)
-are described in :func:`builtin_rig` and :func:`apply_timing`.
+are described in :func:`builtin_rig` and :func:`apply_timing`. :func:`load_rig` also reads
+the calibrations of aniposelib, Pose2Sim and OpenCV (:mod:`pslog.interchange.rig_formats`,
+docs/interchange.md).
 """
 
 from __future__ import annotations
@@ -111,26 +113,14 @@ class Rig:
 
     # ---- TOML -------------------------------------------------------------------------
     def to_toml(self) -> str:
-        """TOML text in the documented shape; floats use ``repr`` so loading is exact."""
+        """TOML text in the documented shape; floats are written as ``repr`` (shortest text
+        that reads back to the same double), so loading is bit-exact."""
         lines = []
         if self.name:
-            lines.append(f"name = {_toml_str(self.name)}")
+            lines.append(f"name = {_toml_value(self.name)}")
         for cam in self.cameras:
-            lines += [
-                "",
-                "[[camera]]",
-                f"name = {_toml_str(cam.name)}",
-                f"width = {cam.width}",
-                f"height = {cam.height}",
-                f"K = {_toml_matrix(cam.K)}",
-                f"dist = {_toml_vector(cam.dist)}",
-                f"R = {_toml_matrix(cam.R)}",
-                f"t = {_toml_vector(cam.t)}",
-                f"fps = {_toml_float(cam.fps)}",
-                f"offset = {_toml_float(cam.offset)}",
-            ]
-            lines += [f"{key} = {_toml_float(getattr(cam, key))}" for key in _CLOCK_KEYS
-                      if getattr(cam, key) != 0]
+            lines += ["", "[[camera]]"]
+            lines += [f"{key} = {_toml_value(value)}" for key, value in _camera_items(cam)]
         return "\n".join(lines).lstrip("\n") + "\n"
 
     @classmethod
@@ -175,9 +165,18 @@ class Rig:
             raise RigError(f"{source}: {exc}") from None
 
 
-def load_rig(path: str | Path) -> Rig:
-    """Load a rig TOML file."""
+def load_rig(path: str | Path, fmt: str = "auto", options=None) -> Rig:
+    """Load a rig file: pslog's TOML, or a calibration of aniposelib, Pose2Sim or OpenCV
+    (format detected from the suffix and content, or ``fmt``; see
+    :mod:`pslog.interchange.rig_formats`, whose ``ImportOptions`` ``options`` are)."""
+    return load_rig_file(path, fmt, options).rig
+
+
+def load_rig_file(path: str | Path, fmt: str = "auto", options=None):
+    """:func:`load_rig`, returning the :class:`~pslog.interchange.rig_formats.RigFile`
+    (the rig, the file's format, its translation units, whether it gave the timing)."""
     from .inputs import MAX_RIG_BYTES, check_input_file
+    from .interchange.rig_formats import parse_rig_text
 
     path = Path(path)
     try:
@@ -194,7 +193,7 @@ def load_rig(path: str | Path) -> Rig:
         raise RigError(f"cannot read rig file {path}: {exc.strerror or exc}") from None
     except UnicodeDecodeError as exc:
         raise RigError(f"cannot read rig file {path}: {exc}") from None
-    return Rig.from_toml(text, source=str(path))
+    return parse_rig_text(text, path, fmt, options)
 
 
 def save_rig(rig: Rig, path: str | Path, inputs=()) -> None:
@@ -207,15 +206,34 @@ def save_rig(rig: Rig, path: str | Path, inputs=()) -> None:
         f.write(rig.to_toml())
 
 
-def resolve_rig(name_or_path: str | Path) -> Rig:
-    """A built-in rig by name (``paper3``, ``paper2``) or a rig TOML file."""
+def resolve_rig(name_or_path: str | Path, timing_from: Rig | None = None) -> Rig:
+    """A built-in rig by name (``paper3``, ``paper2``) or a rig file (pslog's TOML, or an
+    aniposelib / Pose2Sim / OpenCV calibration: :func:`load_rig`).
+
+    ``timing_from``: for a file that gives no timing (a foreign calibration has no frame
+    rate or shutter offset), the frame rate, offset and clock keys of the camera of the same
+    name in this rig (e.g. the session's, for ``pslog fuse --rig``) instead of 30 fps and 0.
+    """
     if str(name_or_path) in BUILTIN_RIGS:
         return builtin_rig(str(name_or_path))
     path = Path(name_or_path)
     if not path.exists():
         raise RigError(f"no rig {str(name_or_path)!r}: not a file and not a built-in rig "
                        f"({', '.join(BUILTIN_RIGS)})")
-    return load_rig(path)
+    loaded = load_rig_file(path)
+    if loaded.timed or timing_from is None:
+        return loaded.rig
+    cameras = []
+    for cam in loaded.rig.cameras:
+        if cam.name in timing_from.names:
+            source = timing_from.camera(cam.name)
+            cam = cam.replace(**{key: getattr(source, key) for key in (
+                "fps", "offset", *_CLOCK_KEYS)})
+        cameras.append(cam)
+    try:
+        return Rig(tuple(cameras), loaded.rig.name)
+    except RigError as exc:
+        raise RigError(f"{path}: {exc}") from None
 
 
 # ---- built-in rigs and shutter presets ------------------------------------------------
@@ -320,25 +338,34 @@ def check_baselines(rig: Rig, source: str = "rig") -> Rig:
     return rig
 
 
-def _toml_str(value: str) -> str:
-    escaped = value.replace("\\", "\\\\").replace('"', '\\"')
-    # TOML basic strings forbid raw control characters other than tab (a name with a
-    # newline would otherwise be saved as a file that cannot be loaded back)
-    escaped = "".join(f"\\u{ord(ch):04X}" if (ord(ch) < 0x20 and ch != "\t") or ch == "\x7f"
-                      else ch for ch in escaped)
-    return '"' + escaped + '"'
+def _camera_items(cam: Camera) -> list[tuple[str, object]]:
+    """The TOML keys and values of ``cam``, in file order (clock keys only when non-zero)."""
+    items: list[tuple[str, object]] = [
+        ("name", cam.name), ("width", cam.width), ("height", cam.height), ("K", cam.K),
+        ("dist", cam.dist), ("R", cam.R), ("t", cam.t), ("fps", cam.fps),
+        ("offset", cam.offset)]
+    items += [(key, getattr(cam, key)) for key in _CLOCK_KEYS if getattr(cam, key) != 0]
+    return items
 
 
-def _toml_float(value: float) -> str:
-    if not math.isfinite(value):
-        raise RigError(f"cannot write non-finite value {value!r} to TOML")
-    text = repr(float(value))
-    return text if ("." in text or "e" in text or "inf" in text) else text + ".0"
+def _toml_value(value) -> str:
+    """One TOML value: scalars rendered by tomli-w, arrays laid out inline here.
 
+    tomli-w does the escaping of strings (control characters, quotes) and the formatting of
+    numbers (``repr`` of a float: the shortest text that reads back to the same double).
+    The arrays are joined here rather than by ``tomli_w.dumps`` of the whole document
+    because tomli-w writes every array one item per line: a 3 x 3 ``K`` would take 17
+    lines of a file people read and edit by hand, where ``[[fx, 0, cx], ...]`` takes one.
+    """
+    import tomli_w
 
-def _toml_vector(values) -> str:
-    return "[" + ", ".join(_toml_float(v) for v in np.asarray(values).ravel()) + "]"
-
-
-def _toml_matrix(matrix) -> str:
-    return "[" + ", ".join(_toml_vector(row) for row in np.asarray(matrix)) + "]"
+    if isinstance(value, np.ndarray | list | tuple):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    if isinstance(value, np.integer):
+        value = int(value)
+    elif isinstance(value, np.floating | float):
+        value = float(value)
+        if not math.isfinite(value):
+            raise RigError(f"cannot write non-finite value {value!r} to TOML")
+    # the one public entry point of tomli-w is a whole document: render {"v": value}
+    return tomli_w.dumps({"v": value}).removeprefix("v = ").removesuffix("\n")

@@ -16,7 +16,7 @@ from pslog.rig import (
     PAPER_VOLUME,
     TIMING_PRESETS,
     Rig,
-    _toml_str,
+    _toml_value,
     apply_timing,
     builtin_rig,
     check_baselines,
@@ -138,7 +138,7 @@ def test_round_trip_of_unusual_names(name):
 ])
 def test_camera_names_that_break_csv_or_topics_are_refused_naming_file_and_camera(
         tmp_path, name, why):
-    text = builtin_rig("paper2").to_toml().replace('name = "cam2"', f"name = {_toml_str(name)}")
+    text = builtin_rig("paper2").to_toml().replace('name = "cam2"', f"name = {_toml_value(name)}")
     path = tmp_path / "rig.toml"
     path.write_text(text, encoding="utf-8")
     with pytest.raises(RigError, match=why) as info:
@@ -459,3 +459,25 @@ def test_first_camera_clock_must_be_zero(key):
     # its readout may be anything valid
     text = GOOD_TOML.replace('offset = 0.0\n', 'offset = 0.0\nreadout = 0.03\n', 1)
     assert load_rig_text(text).cameras[0].readout == 0.03
+
+
+def test_toml_writer_round_trips_awkward_floats_bit_for_bit():
+    """The tomli-w rendered values: subnormals, -0.0, 17-digit values, huge and tiny
+    exponents come back as the same doubles (bytes compared, so -0.0 is not 0.0)."""
+    rng = np.random.default_rng(7)
+    cam = builtin_rig("paper2").cameras[0]
+    dist = np.array([5e-324, -0.0, 1e-300, 0.1 + 0.2, -999.9999999999999])
+    t = np.array([-0.0, 123456.78901234567, 2.0 ** -1074 * 3])
+    K = np.array([[1.0000000000000002, 2.5e-17, 319.49999999999994], [0.0, 9999999.999999998,
+                 rng.uniform(0, 480)], [0.0, 0.0, 1.0]])
+    fps = 29.97002997002997
+    awkward = cam.replace(dist=dist, t=t, K=K, fps=fps, offset=1 / fps - 1e-15,
+                          readout=np.nextafter(0.0, 1.0))
+    rig = Rig((awkward, cam.replace(name="cam2", clock_offset=-1e-9,
+                                    clock_drift_ppm=-0.0 + 3.3333333333333335)))
+    loaded = Rig.from_toml(rig.to_toml())
+    _assert_bit_identical(rig, loaded)
+    for a, b in zip(rig.cameras, loaded.cameras, strict=True):
+        for key in ("clock_offset", "clock_drift_ppm", "readout"):
+            assert np.float64(getattr(a, key)).tobytes() == np.float64(
+                getattr(b, key)).tobytes(), key

@@ -13,8 +13,9 @@ def add_force(parser: argparse.ArgumentParser) -> None:
 def add_rig(parser: argparse.ArgumentParser, required: bool = True, help_extra: str = "") -> None:
     parser.add_argument(
         "--rig", required=required, metavar="RIG",
-        help="built-in rig name (paper3, paper2) or rig TOML file ('pslog rig show paper3 "
-             "> rig.toml' writes one to edit)" + help_extra)
+        help="built-in rig name (paper3, paper2), rig TOML file ('pslog rig show paper3 "
+             "> rig.toml' writes one to edit) or anipose / Pose2Sim / OpenCV calibration"
+             + help_extra)
 
 
 #: argparse default holding a command's declared files (see :func:`declare_files`)

@@ -86,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
     if not rig_path.exists() and str(args.rig) in BUILTIN_RIGS:
         raise InputError(f"--rig {args.rig}: calibrate writes a rig file; give a path such as "
                          f"rig.toml (built-in rigs cannot be changed)")
-    rig = load_rig(rig_path) if rig_path.exists() else None
+    rig = load_rig(rig_path, "pslog") if rig_path.exists() else None  # rewritten as pslog's
     existing = rig.camera(args.name) if rig is not None and args.name in rig.names else None
 
     if args.fix_intrinsics and args.chessboard:

@@ -1,4 +1,5 @@
-"""``pslog export``: a session's detections (the import format) and/or fused tracks as CSV."""
+"""``pslog export``: a session's detections (the import format) and/or fused tracks as CSV,
+TUM trajectories (evo), JSON lines, Parquet or C3D (docs/interchange.md)."""
 
 from __future__ import annotations
 
@@ -6,30 +7,58 @@ import argparse
 
 from ._common import add_force, declare_files
 
+EXAMPLES = """\
+examples:
+  pslog export fused.mcap --csv tracks.csv
+  pslog export fused.mcap --tum traj/ && evo_ape tum traj/truth.tum traj/typeA.tum
+  pslog export fused.mcap --jsonl tracks.jsonl --parquet tracks.parquet --c3d tracks.c3d
+"""
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.epilog = EXAMPLES
+    parser.formatter_class = argparse.RawDescriptionHelpFormatter
     parser.add_argument("session", metavar="SESSION.mcap", help="session or fused session")
     parser.add_argument("--detections", metavar="DET.csv",
                         help="write every detection candidate, in the 'pslog import' format")
     parser.add_argument("--csv", metavar="TRACKS.csv",
                         help="write the fused tracks: time,x,y,z,camera,method (+ quality)")
+    parser.add_argument("--tum", metavar="DIR",
+                        help="write one TUM trajectory per method (DIR/<method>.tum) and the "
+                             "truth (DIR/truth.tum), for evo_traj / evo_ape: 'timestamp tx ty "
+                             "tz qx qy qz qw', session-clock seconds, metres, identity "
+                             "orientation")
+    parser.add_argument("--jsonl", metavar="TRACKS.jsonl",
+                        help="write the fused tracks as JSON lines: one object per point "
+                             "(method, time, position, camera, quality)")
+    parser.add_argument("--parquet", metavar="TRACKS.parquet",
+                        help="write the fused tracks as Parquet, one row per point (needs "
+                             "pyarrow: pip install 'pslog[parquet]')")
+    parser.add_argument("--c3d", metavar="TRACKS.c3d",
+                        help="write the fused tracks as C3D, one point per method and the "
+                             "truth, in millimetres (needs c3d: pip install 'pslog[c3d]')")
     add_force(parser)
-    declare_files(parser, inputs=("session",), outputs=("detections", "csv"))
+    declare_files(parser, inputs=("session",),
+                  outputs=("detections", "csv", "jsonl", "parquet", "c3d"))
 
 
 def run(args: argparse.Namespace) -> int:
     from pslog.errors import InputError
     from pslog.log import read_session
 
-    if not args.detections and not args.csv:
-        raise InputError("nothing to export: give --detections DET.csv and/or --csv TRACKS.csv")
-    # the outputs were checked before run() (declare_files): never the session, never
-    # existing without --force
+    track_options = (args.csv, args.tum, args.jsonl, args.parquet, args.c3d)
+    if not args.detections and not any(track_options):
+        raise InputError("nothing to export: give --detections DET.csv and/or the tracks as "
+                         "--csv, --tum, --jsonl, --parquet or --c3d")
+    # the file outputs were checked before run() (declare_files): never the session, never
+    # existing without --force; --tum's folder is checked by its writer, all files first
     session = read_session(args.session)
-    if args.csv and not session.tracks:
+    if any(track_options) and not session.tracks:
         raise InputError(f"{args.session} has no fused tracks to export (run 'pslog fuse')")
-    # one exporter per option: each writes its own file from the session
-    for path, export in ((args.detections, _export_detections), (args.csv, _export_tracks)):
+    # one exporter per option: each writes its own file(s) from the session
+    for path, export in ((args.detections, _export_detections), (args.csv, _export_tracks),
+                         (args.tum, _export_tum), (args.jsonl, _export_jsonl),
+                         (args.parquet, _export_parquet), (args.c3d, _export_c3d)):
         if path:
             export(session, path, args.force)
     return 0
@@ -48,3 +77,31 @@ def _export_tracks(session, path: str, force: bool) -> None:
 
     n = export_tracks_csv(session, path, force=force)
     print(f"wrote {path}: {n} track points ({', '.join(sorted(session.tracks))})")
+
+
+def _export_tum(session, path: str, force: bool) -> None:
+    from pslog.interchange.track_formats import write_tum
+
+    counts = write_tum(session, path, force=force)
+    print(f"wrote {path}: " + ", ".join(f"{name}.tum ({n} poses)"
+                                        for name, n in counts.items()))
+
+
+def _export_jsonl(session, path: str, force: bool) -> None:
+    from pslog.interchange.track_formats import write_jsonl
+
+    print(f"wrote {path}: {write_jsonl(session, path, force=force)} track points")
+
+
+def _export_parquet(session, path: str, force: bool) -> None:
+    from pslog.interchange.track_formats import write_parquet
+
+    print(f"wrote {path}: {write_parquet(session, path, force=force)} rows")
+
+
+def _export_c3d(session, path: str, force: bool) -> None:
+    from pslog.interchange.track_formats import write_c3d
+
+    frames, rate = write_c3d(session, path, force=force)
+    print(f"wrote {path}: {frames} frames at {rate:g} Hz, one point per method"
+          + (" and the truth" if session.truth is not None else "") + " (mm)")

@@ -1,4 +1,5 @@
-"""``pslog rig``: list the built-in rigs, print a rig as TOML, check a rig file.
+"""``pslog rig``: list the built-in rigs, print a rig as TOML, check a rig file, and convert
+calibrations of aniposelib / anipose, Pose2Sim and OpenCV to and from rig files.
 
 ``pslog rig show paper3 > rig.toml`` gives a rig file to start from (edit it, or let
 ``pslog calibrate`` replace its cameras); ``show`` also takes a rig TOML file (printed as
@@ -10,12 +11,18 @@ from __future__ import annotations
 
 import argparse
 
+from ._common import add_force, declare_files
+
 EXAMPLES = """\
 examples:
   pslog rig list
   pslog rig show paper3 --timing typeA > rig.toml
   pslog rig show samples/throw.mcap > corrected.toml
   pslog rig check rig.toml
+  pslog rig import calibration.toml --units mm --fps 120 -o rig.toml
+  pslog rig import cameras.yml --timing typeA -o rig.toml
+  pslog rig export rig.toml --format anipose -o calibration.toml
+  pslog rig export rig.toml --format opencv -o cameras.yml
 """
 
 
@@ -42,11 +49,93 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                     "with the reason if it is not a valid rig.")
     check.add_argument("rig", metavar="RIG",
                        help="rig TOML file (or built-in rig name, or session MCAP)")
+    _add_import(actions)
+    _add_export(actions)
+
+
+def _add_import(actions) -> None:
+    from pslog.interchange.rig_formats import DEFAULT_FPS, IMPORT_FORMATS, MM_SUSPECT_M, UNITS
+    from pslog.rig import TIMING_PRESETS
+
+    imp = actions.add_parser(
+        "import", help="convert an anipose / Pose2Sim / OpenCV calibration to a rig TOML",
+        description="Read a calibration of aniposelib / anipose (calibration.toml), Pose2Sim "
+                    "(Calib*.toml) or OpenCV FileStorage (.yml .yaml .xml .json) and write it "
+                    "as a pslog rig TOML. Those files have no frame rate or shutter offset: "
+                    "give them here (see docs/interchange.md).")
+    imp.add_argument("file", metavar="FILE", help="the calibration file")
+    imp.add_argument("--format", default="auto", choices=IMPORT_FORMATS,
+                     help="the file's format (default: auto, from its suffix and content)")
+    imp.add_argument("--units", choices=tuple(UNITS),
+                     help="unit of the file's translations (default: metres, refusing a file "
+                          f"whose cameras are a median of more than {MM_SUSPECT_M:g} m from "
+                          "the origin as one most likely in millimetres)")
+    imp.add_argument("--fps", type=_positive_float, metavar="FPS",
+                     help=f"frame rate of every camera (default: the file's if pslog wrote "
+                          f"it, else {DEFAULT_FPS:g})")
+    imp.add_argument("--offset", action="append", default=[], metavar="NAME=SECONDS",
+                     type=_name_value, help="shutter offset of camera NAME, seconds "
+                                            "(repeat per camera; default: the file's, else 0)")
+    imp.add_argument("--timing", choices=TIMING_PRESETS,
+                     help="set every shutter offset from a preset instead")
+    imp.add_argument("-o", "--output", required=True, metavar="RIG.toml",
+                     help="the rig TOML to write")
+    add_force(imp)
+    declare_files(imp, inputs=("file",), outputs=("output",))
+
+
+def _add_export(actions) -> None:
+    from pslog.interchange.rig_formats import EXPORT_FORMATS, UNITS
+
+    exp = actions.add_parser(
+        "export", help="write a rig as an anipose / Pose2Sim / OpenCV calibration",
+        description="Write a rig (built-in, rig file or session MCAP) as an aniposelib "
+                    "calibration.toml, a Pose2Sim Calib.toml or an OpenCV FileStorage file "
+                    "(YAML, XML or JSON by the suffix of -o).")
+    exp.add_argument("rig", metavar="RIG",
+                     help="built-in rig name, rig file (any format) or session MCAP")
+    exp.add_argument("--format", required=True, choices=EXPORT_FORMATS,
+                     help="the format to write")
+    exp.add_argument("--units", default="m", choices=tuple(UNITS),
+                     help="unit of the translations written (default: m)")
+    exp.add_argument("-o", "--output", required=True, metavar="CALIBRATION.toml",
+                     help="the file to write (opencv: named .yml, .yaml, .xml or .json)")
+    add_force(exp)
+    declare_files(exp, inputs=("rig",), outputs=("output",))
+
+
+def _positive_float(text: str) -> float:
+    import math
+
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not math.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}")
+    return value
+
+
+def _name_value(text: str) -> tuple[str, float]:
+    import math
+
+    name, sep, value = text.partition("=")
+    try:
+        number = float(value)
+    except ValueError:
+        number = math.nan
+    if not sep or not name or not math.isfinite(number):
+        raise argparse.ArgumentTypeError(f"expected NAME=SECONDS, got {text!r}")
+    return name, number
 
 
 def run(args: argparse.Namespace) -> int:
     if args.action == "list":
         return _list()
+    if args.action == "import":
+        return _import(args)
+    if args.action == "export":
+        return _export(args)
     if args.action == "show":
         rig = load_any_rig(args.rig)
         if args.timing:
@@ -58,7 +147,7 @@ def run(args: argparse.Namespace) -> int:
     path = args.rig
     rig = load_any_rig(path)
     print(f"{path}: a valid rig{f' {rig.name!r}' if rig.name else ''} of {len(rig)} "
-          f"camera{'s' if len(rig) != 1 else ''}")
+          f"camera{'s' if len(rig) != 1 else ''}{_described_format(path)}")
     for line in describe_cameras(rig):
         print("  " + line)
     return 0
@@ -75,6 +164,62 @@ def load_any_rig(name_or_path: str):
 
         return read_session(name_or_path).rig
     return resolve_rig(name_or_path)
+
+
+def _described_format(path: str) -> str:
+    """`` (anipose calibration, translations read as m, ...)`` for a foreign rig file."""
+    from pathlib import Path
+
+    from pslog.rig import BUILTIN_RIGS, load_rig_file
+
+    if path in BUILTIN_RIGS or Path(path).suffix.lower() == ".mcap":
+        return ""
+    loaded = load_rig_file(path)
+    if loaded.format == "pslog":
+        return ""
+    timing = "" if loaded.timed else "; no frame rate or offset in the file: 30 fps, 0 s"
+    return f" ({loaded.format} calibration, translations read as {loaded.units}{timing})"
+
+
+def _import(args: argparse.Namespace) -> int:
+    from pslog.errors import RigError
+    from pslog.interchange.rig_formats import ImportOptions
+    from pslog.outputs import replacing
+    from pslog.rig import apply_timing, load_rig_file
+
+    offsets = dict(args.offset)
+    if args.timing and offsets:
+        raise RigError("give --timing or --offset, not both")
+    loaded = load_rig_file(args.file, args.format,
+                           ImportOptions(units=args.units, fps=args.fps, offsets=offsets))
+    rig = apply_timing(loaded.rig, args.timing) if args.timing else loaded.rig
+    with replacing(args.output, force=args.force, inputs=[args.file]) as f:
+        f.write(rig.to_toml())
+    timed = loaded.timed or args.fps is not None
+    print(f"wrote {args.output}: {len(rig)} camera{'s' if len(rig) != 1 else ''} from the "
+          f"{loaded.format} calibration {args.file} (translations read as {loaded.units}"
+          + ("" if timed else "; no frame rate in the file: 30 fps, give --fps") + ")")
+    return 0
+
+
+def _export(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from pslog.errors import InputError
+    from pslog.interchange.rig_formats import OPENCV_SUFFIXES, rig_to_format
+    from pslog.outputs import replacing
+
+    suffix = Path(args.output).suffix.lower()
+    if args.format == "opencv" and suffix not in OPENCV_SUFFIXES:
+        raise InputError(f"-o {args.output}: an OpenCV FileStorage file is named "
+                         f"{', '.join(OPENCV_SUFFIXES)} (YAML, XML or JSON)")
+    rig = load_any_rig(args.rig)
+    text = rig_to_format(rig, args.format, args.units, suffix)
+    with replacing(args.output, force=args.force, inputs=[args.rig]) as f:
+        f.write(text)
+    print(f"wrote {args.output}: {len(rig)} camera{'s' if len(rig) != 1 else ''} as "
+          f"{args.format} (translations in {args.units})")
+    return 0
 
 
 def describe_cameras(rig) -> list[str]:

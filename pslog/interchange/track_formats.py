@@ -1,0 +1,266 @@
+"""A session's fused tracks (and ground truth) in the formats of other tools.
+
+- TUM trajectories (:func:`write_tum`), one file per method and ``truth.tum``: the format of
+  the TUM RGB-D benchmark that ``evo_traj`` / ``evo_ape`` read. Lines ``timestamp tx ty tz
+  qx qy qz qw``: seconds on the session clock, world metres, and the identity orientation
+  ``0 0 0 1`` (a ball has a position, no orientation: evaluate with evo's default
+  translation-only APE).
+- JSON lines (:func:`write_jsonl`): one object per point, for pandas (``read_json(...,
+  lines=True)``), jq and any language.
+- Parquet (:func:`write_parquet`, needs pyarrow: ``pip install 'pslog[parquet]'``): one row
+  per point, columnar.
+- C3D (:func:`write_c3d`, needs the ``c3d`` package: ``pip install 'pslog[c3d]'``): one
+  point per method (and ``truth``) on one uniform frame grid, in millimetres, for
+  biomechanics tools (Mokka, OpenSim, Visual3D, ezc3d, btk).
+
+Times: every format but C3D gives the exact integer nanoseconds of the session clock
+(``time_ns``; TUM and JSON's ``time`` in seconds with 9 decimals). Each writer writes
+``<file>.partial`` and renames it when complete (:func:`pslog.outputs.replacing`): an
+existing file is replaced only with ``force`` and only by a complete one.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ..outputs import check_output_path, replacing, write_error
+
+NS = 1_000_000_000
+#: the TUM file of the ground truth, beside one ``<method>.tum`` per method
+TRUTH_TUM = "truth.tum"
+#: C3D label of the ground truth's point
+TRUTH_LABEL = "truth"
+
+
+def _seconds(time_ns: int) -> str:
+    """Integer ns as exact decimal seconds, 9 digits (``12.000000001``)."""
+    sign = "-" if time_ns < 0 else ""
+    seconds, ns = divmod(abs(int(time_ns)), NS)
+    return f"{sign}{seconds}.{ns:09d}"
+
+
+def _tracks(session) -> dict:
+    if not session.tracks:
+        raise InputError(f"{session.path} has no fused tracks to export (run 'pslog fuse')")
+    return {m: session.tracks[m] for m in sorted(session.tracks)}
+
+
+# ---- TUM ----------------------------------------------------------------------------------
+
+def tum_files(session, folder: str | Path) -> dict[str, Path]:
+    """The files :func:`write_tum` writes: ``name -> path`` (methods, then ``truth``)."""
+    folder = Path(folder)
+    files = {method: folder / f"{method}.tum" for method in _tracks(session)}
+    if session.truth is not None and len(session.truth):
+        files["truth"] = folder / TRUTH_TUM
+    return files
+
+
+def write_tum(session, folder: str | Path, *, force: bool = False) -> dict[str, int]:
+    """Write every fused track, and the truth, as TUM trajectories in ``folder``.
+
+    ``folder`` is created if missing (its parent must exist). Every file is checked before
+    any is written: with one already there and no ``force``, nothing is written.
+
+    Returns
+    -------
+    dict : name (method or ``truth``) -> number of poses written
+    """
+    folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        raise InputError(f"--tum {folder}: a file, not a folder (TUM files are written into "
+                         f"a folder, one per method)")
+    files = tum_files(session, folder)
+    if not folder.exists():
+        if not folder.parent.is_dir():
+            raise InputError(f"--tum {folder}: folder {folder.parent} does not exist")
+        try:
+            folder.mkdir()
+        except OSError as exc:
+            raise write_error(folder, exc) from None
+    for path in files.values():  # all checked before any is written
+        check_output_path(path, force, [session.path])
+    counts = {}
+    for name, path in files.items():
+        if name == "truth":
+            times, positions = session.truth.time_ns, session.truth.position_world
+        else:
+            track = session.tracks[name]
+            times, positions = track.time_ns, track.position_world
+        counts[name] = _write_tum_file(path, times, positions, force, session.path)
+    return counts
+
+
+def _write_tum_file(path: Path, times: np.ndarray, positions: np.ndarray, force: bool,
+                    source) -> int:
+    with replacing(path, force=force, inputs=[source]) as f:
+        f.write("# timestamp tx ty tz qx qy qz qw (pslog: session clock s, world m, "
+                "identity orientation)\n")
+        for t, (x, y, z) in zip(times.tolist(), positions.tolist(), strict=True):
+            f.write(f"{_seconds(t)} {x!r} {y!r} {z!r} 0 0 0 1\n")
+    return len(times)
+
+
+# ---- JSON lines ---------------------------------------------------------------------------
+
+def _finite_or_none(value: float):
+    return value if math.isfinite(value) else None
+
+
+def write_jsonl(session, path: str | Path, *, force: bool = False) -> int:
+    """One JSON object per fused point, sorted by method then time::
+
+        {"method": "typeA", "time": "0.011111111", "time_ns": 11111111,
+         "position": [x, y, z], "camera": "cam2", "quality": {"ray_miss_m": 0.0004, ...}}
+
+    ``time``: exact decimal seconds on the session clock (a string: a JSON number would be a
+    double); ``position``: world metres; ``quality``: the track's per-point fields
+    (:data:`pslog.records.QUALITY_FIELDS`), ``null`` where not applicable. Returns the
+    number of lines."""
+    tracks = _tracks(session)
+    names = session.rig.names
+    count = 0
+    with replacing(path, force=force, inputs=[session.path]) as f:
+        for method, track in tracks.items():
+            quality = {k: v.tolist() for k, v in sorted(track.quality.items())}
+            for i, (t, p, c) in enumerate(zip(track.time_ns.tolist(),
+                                              track.position_world.tolist(),
+                                              track.camera.tolist(), strict=True)):
+                record = {"method": method, "time": _seconds(t), "time_ns": t, "position": p,
+                          "camera": names[c],
+                          "quality": {k: _finite_or_none(v[i]) for k, v in quality.items()}}
+                f.write(json.dumps(record, allow_nan=False) + "\n")
+            count += len(track)
+    return count
+
+
+# ---- Parquet ------------------------------------------------------------------------------
+
+def write_parquet(session, path: str | Path, *, force: bool = False) -> int:
+    """One row per fused point: ``method`` (string), ``time_ns`` (int64, session clock),
+    ``time_s`` (float64), ``x``, ``y``, ``z`` (float64, world metres), ``camera`` (string),
+    then one float64 column per quality field any track has (null where a track lacks it or
+    it is not applicable). Rows sorted by method, then time. Needs pyarrow."""
+    try:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+    except ImportError:
+        raise InputError("--parquet needs pyarrow, which is not installed: pip install "
+                         "'pslog[parquet]' (or pip install pyarrow)") from None
+    tracks = _tracks(session)
+    quality_names = sorted({k for t in tracks.values() for k in t.quality})
+    names = np.array(session.rig.names, dtype=object)
+    method = np.concatenate([np.full(len(t), m, dtype=object) for m, t in tracks.items()])
+    time_ns = np.concatenate([t.time_ns for t in tracks.values()])
+    position = np.concatenate([t.position_world for t in tracks.values()])
+    camera = np.concatenate([names[t.camera] for t in tracks.values()])
+    columns = {
+        "method": pa.array(method, pa.string()),
+        "time_ns": pa.array(time_ns, pa.int64()),
+        "time_s": pa.array(time_ns / 1e9, pa.float64()),
+        "x": pa.array(position[:, 0]), "y": pa.array(position[:, 1]),
+        "z": pa.array(position[:, 2]),
+        "camera": pa.array(camera, pa.string()),
+    }
+    for key in quality_names:
+        values = np.concatenate([t.quality.get(key, np.full(len(t), np.nan))
+                                 for t in tracks.values()])
+        columns[key] = pa.array(values, pa.float64(), mask=~np.isfinite(values))
+    table = pa.table(columns)
+    with replacing(path, "wb", force=force, inputs=[session.path]) as f:
+        pq.write_table(table, f)
+    return table.num_rows
+
+
+# ---- C3D ----------------------------------------------------------------------------------
+
+def c3d_grid(session) -> tuple[float, int, int]:
+    """The uniform frame grid of a session's C3D: ``(rate_hz, first_ns, n_frames)``.
+
+    Rate: the highest point rate of the methods (1 / the median interval between points of
+    the densest track), rounded to 1e-6 Hz; first frame at the earliest point; every point is
+    put on its nearest frame (at most half a frame period away; exact for points on a
+    regular shutter schedule such as type A's).
+    """
+    tracks = _tracks(session)
+    intervals = [float(np.median(np.diff(t.time_ns))) for t in tracks.values() if len(t) > 1]
+    intervals = [d for d in intervals if d > 0]
+    if not intervals:
+        raise InputError(f"{session.path}: C3D needs a track of at least two points at "
+                         f"different times to set its frame rate")
+    rate = round(NS / min(intervals), 6)
+    first = min(int(t.time_ns.min()) for t in tracks.values() if len(t))
+    last = max(int(t.time_ns.max()) for t in tracks.values() if len(t))
+    n_frames = round((last - first) * rate / NS) + 1
+    return rate, first, n_frames
+
+
+#: most frames a C3D file holds (its header's frame numbers are 16-bit in most readers)
+C3D_MAX_FRAMES = 65535
+
+
+def write_c3d(session, path: str | Path, *, force: bool = False) -> tuple[int, float]:
+    """Write one C3D point per method (labels are the method names) and ``truth`` (when the
+    session has one, interpolated at the frame times), on the grid of :func:`c3d_grid`.
+
+    Units: ``POINT:UNITS = "mm"`` with the coordinates in millimetres (pslog's metres times
+    1000), the unit biomechanics tools expect; floating-point storage, so nothing is lost to
+    a scale factor. A frame where a method has no point holds an invalid point (residual
+    -1); the residual of a valid point is the method's ``ray_miss_m`` in mm when it has one,
+    else 0. Where two points of a method fall on one frame the nearer in time is kept.
+
+    Returns
+    -------
+    (n_frames, rate_hz)
+    """
+    try:
+        import c3d
+    except ImportError:
+        raise InputError("--c3d needs the c3d package, which is not installed: pip install "
+                         "'pslog[c3d]' (or pip install c3d)") from None
+    tracks = _tracks(session)
+    rate, first, n_frames = c3d_grid(session)
+    if n_frames > C3D_MAX_FRAMES:
+        raise InputError(f"{session.path}: {n_frames} frames at {rate:g} Hz: beyond the "
+                         f"{C3D_MAX_FRAMES} frames a C3D file holds")
+    labels = list(tracks)
+    has_truth = session.truth is not None and len(session.truth) > 1
+    if has_truth:
+        labels.append(TRUTH_LABEL)
+    points = np.zeros((n_frames, len(labels), 5), dtype=np.float32)
+    points[:, :, 3] = -1.0  # invalid until a point is put there
+    frame_ns = first + np.round(np.arange(n_frames) * (NS / rate)).astype(np.int64)
+    for j, track in enumerate(tracks.values()):
+        frames = np.round((track.time_ns - first) * rate / NS).astype(np.int64)
+        miss = np.abs(track.time_ns - frame_ns[frames])
+        order = np.lexsort((miss, frames))  # per frame, the nearest point first
+        keep = order[np.r_[True, frames[order][1:] != frames[order][:-1]]]
+        residual = track.quality.get("ray_miss_m", np.zeros(len(track)))
+        residual = np.where(np.isfinite(residual), residual * 1000.0, 0.0)
+        points[frames[keep], j, :3] = track.position_world[keep] * 1000.0
+        points[frames[keep], j, 3] = residual[keep]
+        points[frames[keep], j, 4] = 0.0
+    if has_truth:
+        at = session.truth.at(frame_ns)
+        ok = np.all(np.isfinite(at), axis=1)
+        points[ok, -1, :3] = at[ok] * 1000.0
+        points[ok, -1, 3] = 0.0
+    writer = c3d.Writer(point_rate=float(rate), analog_rate=0.0, point_scale=-1.0,
+                        point_units="mm  ")
+    writer.set_point_labels(labels)
+    writer.set_start_frame(round(first * rate / NS) + 1)  # frame 1 at the clock's 0
+    writer.add_frames([(frame, np.zeros((0, 0), dtype=np.float32)) for frame in points])
+    with replacing(path, "wb", force=force, inputs=[session.path]) as f, \
+            warnings.catch_warnings():
+        # c3d warns "No analog data found in file." for a points-only file, which is what a
+        # tracker has: not a problem to show the user
+        warnings.simplefilter("ignore", UserWarning)
+        writer.write(f)
+    return n_frames, rate
+
