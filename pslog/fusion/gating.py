@@ -17,7 +17,8 @@ A candidate ``x`` of camera ``a`` at (corrected) time ``t`` is judged by three g
    epipolar line in ``b``, ``d_b = |l_b · [y(t), 1]|`` with ``l_b = F_ab x`` normalised, is
    compared with ``τ_b = epipolar_px + ½ A |t - t_0| |t - t_1|`` (the error a linear
    carry makes under an image acceleration of at most ``A``). ``b`` *supports* ``x`` when
-   its best pair has ``d_b <= τ_b``.
+   its best pair has ``d_b <= τ_b``. Of b's frames already decided, only the chosen candidate
+   (and any only outscored) is carried, never one a gate rejected (:func:`_support_one`).
 2. **Track** (ray-to-track distance). The points accepted so far (each candidate's rays
    crossed with its support's carried rays, least squares) over the last ``track_window_s``
    are fitted with a ballistic model (constant velocity plus gravity); the distance of
