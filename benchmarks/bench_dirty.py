@@ -110,6 +110,7 @@ def measure(rig: Rig, methods, runs, options: FusionOptions):
     """Errors per (method, noise, kind) pooled over the sessions, and per-session ratios."""
     errors: dict[tuple, list[np.ndarray]] = {}
     ratios: dict[tuple, list[float]] = {}
+    refused: dict[tuple, list[int]] = {}  # typeA's prediction_failed, points
     for seed, (_label, motion, duration) in enumerate(runs):
         span = motion.duration if duration is None else duration
         for noise in NOISES:
@@ -123,10 +124,13 @@ def measure(rig: Rig, methods, runs, options: FusionOptions):
                 for m in methods:
                     err = errors_m(tracks[m], truth)
                     errors.setdefault((m, noise, kind), []).append(err)
+                    count = refused.setdefault((m, noise, kind), [0, 0])
+                    count[0] += tracks[m].dropped.get("prediction_failed", 0)
+                    count[1] += len(tracks[m])
                     means[m, kind] = np.nanmean(err)
             for m in methods:
                 ratios.setdefault((m, noise), []).append(means[m, "outliers"] / means[m, "clean"])
-    return ({k: stats(np.concatenate(v)) for k, v in errors.items()}, ratios)
+    return ({k: stats(np.concatenate(v)) for k, v in errors.items()}, ratios, refused)
 
 
 def table(rig: Rig, methods, pooled, ratios) -> tuple[list[str], bool]:
@@ -179,13 +183,22 @@ def main() -> int:
     print("| " + " | ".join(head) + " |")
     print("|" + "---|" * len(head))
     ok = True
+    notes = []
     start = time.perf_counter()
     for rig in rigs():
-        pooled, ratios = measure(rig, methods, runs, options)
+        pooled, ratios, refused = measure(rig, methods, runs, options)
         rows, met = table(rig, methods, pooled, ratios)
         ok &= met
         print("\n".join(rows), flush=True)
+        notes.append(f"{rig.name}: typeA points refused as prediction_failed / kept, clean | "
+                     "outliers: " + ", ".join(
+                         f"{noise:g} px {refused['typeA', noise, 'clean'][0]}/"
+                         f"{refused['typeA', noise, 'clean'][1]} | "
+                         f"{refused['typeA', noise, 'outliers'][0]}/"
+                         f"{refused['typeA', noise, 'outliers'][1]}" for noise in NOISES))
     print()
+    if "typeA" in methods:
+        print("\n".join(notes))
     print(f"targets (at {TARGET_NOISE} px, worst session): {'met' if ok else 'MISSED'} "
           f"({time.perf_counter() - start:.0f} s)")
     return 0 if ok else 1

@@ -115,7 +115,8 @@ def test_stream_gate_waits_for_the_other_cameras_frames_a_low_candidate_reaches(
     ball is low: the frame's time is the blob's, early, but the ball's candidate is ~25 ms
     later and is supported by the frames up to ITS time — frames pushed after the blob's
     time has passed. The stream decides the frame only once those are in: every frame's
-    epipolar support (ratio per candidate and camera) is exactly the batch's."""
+    epipolar support (ratio per candidate and camera, from the decided frames' chosen
+    candidates) is exactly the batch's."""
     from test_gating_timing import with_top_row_blobs
 
     import pslog.fusion.gating as gating
@@ -128,15 +129,15 @@ def test_stream_gate_waits_for_the_other_cameras_frames_a_low_candidate_reaches(
     rig = true_rig(rig, options)
     det = with_top_row_blobs(det, 300.0)
     c = gating._candidates(det, rig)
-    batch, _ = gating._support(c, rig, gating.fundamental_matrices(rig.cameras),
-                               gating._frame_table(c, len(rig)), gating.GatingOptions(),
-                               round(default_max_gap_s(rig) * 1e9), True, 0)
+    reason = np.full(len(c.camera), -1, dtype=np.int8)
+    batch = gating._decided(c, rig, gating.GatingOptions(), True, 0,
+                            round(default_max_gap_s(rig) * 1e9), reason)
 
     class Recording(gating.StreamGate):
         def _support(self, f):
-            ratio, carried = super()._support(f)
-            seen[f.t, f.camera] = ratio
-            return ratio, carried
+            every, decided, differs = super()._support(f)
+            seen[f.t, f.camera] = decided[0]
+            return every, decided, differs
 
     seen: dict = {}
     stream = Recording(rig)

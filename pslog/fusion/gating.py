@@ -17,7 +17,8 @@ A candidate ``x`` of camera ``a`` at (corrected) time ``t`` is judged by three g
    epipolar line in ``b``, ``d_b = |l_b · [y(t), 1]|`` with ``l_b = F_ab x`` normalised, is
    compared with ``τ_b = epipolar_px + ½ A |t - t_0| |t - t_1|`` (the error a linear
    carry makes under an image acceleration of at most ``A``). ``b`` *supports* ``x`` when
-   its best pair has ``d_b <= τ_b``.
+   its best pair has ``d_b <= τ_b``. Of b's frames already decided, only the chosen candidate
+   (and any only outscored) is carried, never one a gate rejected (:func:`_support_one`).
 2. **Track** (ray-to-track distance). The points accepted so far (each candidate's rays
    crossed with its support's carried rays, least squares) over the last ``track_window_s``
    are fitted with a ballistic model (constant velocity plus gravity); the distance of
@@ -345,10 +346,15 @@ def _support(c: _Candidates, rig: Rig, F: np.ndarray, tables, options: GatingOpt
     ratio : (C, m) float, best ``d_b / τ_b`` of camera b (NaN: b has no frame near; inf:
         frames but no plausible pair)
     carried : (C, m, 2) undistorted pixel of b's best pair carried to the candidate's time
+    used : (C, m, 3) int, the positions in b's frame table of the frames the rule looked at
+        (the two latest at or before the candidate's time and the first after; -1: none):
+        this all-candidates support is the decided one (:func:`_support_one`) as long as
+        none of them has been decided with a rejected candidate
     """
     n, m = len(c.camera), len(rig)
     ratio = np.full((n, m), np.nan)
     carried = np.full((n, m, 2), np.nan)
+    used = np.full((n, m, 3), -1, dtype=np.int64)
     accel, vmax = options.accel_px_s2, options.max_image_speed_px_s
     for a in range(m):
         rows = np.flatnonzero((c.camera == a) if only is None else (c.camera == a) & only)
@@ -377,6 +383,7 @@ def _support(c: _Candidates, rig: Rig, F: np.ndarray, tables, options: GatingOpt
                 last = np.searchsorted(times, t, side="right") - 1
                 i1, i0 = last, last - 1
                 inext = np.where(last + 1 < len(times), last + 1, -1)
+            used[rows, b, 0], used[rows, b, 1], used[rows, b, 2] = i0, i1, inext
             best = np.full(len(rows), np.inf)
             best_uv = np.full((len(rows), 2), np.nan)
             near = np.zeros(len(rows), dtype=bool)
@@ -435,7 +442,78 @@ def _support(c: _Candidates, rig: Rig, F: np.ndarray, tables, options: GatingOpt
                 best_uv[idx] = y[np.arange(len(idx)), k]
             ratio[rows[near], b] = best[near]
             carried[rows, b] = best_uv
-    return ratio, carried
+    return ratio, carried, used
+
+
+def _support_one(t: int, line, keys: list[int], usable, search, wait_ns: int, causal: bool,
+                 gap_ns: int, options: GatingOptions):
+    """:func:`_support`'s rule for one candidate (at corrected time ``t``, its epipolar
+    ``line`` in camera b) and one other camera b, on floats, over the candidates of b's
+    frames as decided so far (:func:`_supporting`): a frame decided with a chosen candidate
+    supports with it (and any only outscored), not with those a gate rejected (a static
+    object, a blob: no evidence for a later choice; carried with the ball's track they made
+    a wrong point that entered the track); a frame not decided yet, or decided with none
+    chosen, with every candidate (that the gate found no ball in it says nothing about which
+    candidate is the ball; dropping them too made rejections self-sustaining: no support,
+    so nothing chosen, so no support).
+    The decisions are sequential, so this is computed when the candidate's frame is decided.
+
+    ``keys``: b's frame times in frame-table order; ``usable(j)``: the candidates of b's
+    frame ``j`` that may support, a list of (corrected time ns, undistorted u, v);
+    ``search``: ``bisect_right`` (b's frames at ``t`` + wait count) or ``bisect_left``.
+    Returns (ratio: NaN when b has no usable frame near ``t``, carried (u, v) or None).
+    """
+    epi, vmax = options.epipolar_px, options.max_image_speed_px_s
+    half_accel = 0.5 * options.accel_px_s2
+    l0, l1, l2 = line
+    last = search(keys, t + (wait_ns if causal else 0)) - 1
+    i1 = last
+    while i1 >= 0 and not usable(i1):
+        i1 -= 1
+    i0 = i1 - 1
+    while i0 >= 0 and not usable(i0):
+        i0 -= 1
+    inext = -1
+    if not causal:
+        inext = last + 1
+        while inext < len(keys) and not usable(inext):
+            inext += 1
+        if inext == len(keys):
+            inext = -1
+
+    def near(j):
+        return j >= 0 and abs(t - keys[j]) <= gap_ns
+
+    pair = (i1, inext) if inext >= 0 else (i0, i1)
+    if near(pair[0]) and near(pair[1]):
+        # carried linearly between the two frames (interpolated or extrapolated)
+        best, best_uv = math.inf, None
+        later = usable(pair[1])
+        for t0, u0, v0 in usable(pair[0]):
+            for t1, u1, v1 in later:
+                span = (t1 - t0) / NS
+                if not span > 0:
+                    continue
+                w = (t - t0) / NS / span
+                du, dv = u1 - u0, v1 - v0
+                yu, yv = u0 + w * du, v0 + w * dv
+                if not math.sqrt(du * du + dv * dv) / abs(span) <= vmax:
+                    continue
+                tau = epi + half_accel * abs(t - t0) / NS * abs(t - t1) / NS
+                d = abs(l0 * yu + l1 * yv + l2)
+                if math.isfinite(d) and d / tau < best:  # argmin: the first
+                    best, best_uv = d / tau, (yu, yv)
+        return best, best_uv
+    if near(i1):  # a single nearby frame (no pair near), its candidates as they are
+        best, best_uv = math.inf, None
+        for t1, u1, v1 in usable(i1):
+            tau = epi + vmax * (abs(t - t1) / NS)
+            d = abs(l0 * u1 + l1 * v1 + l2)
+            r = d / tau if math.isfinite(d) else math.inf
+            if best_uv is None or r < best:
+                best, best_uv = r, (u1, v1)
+        return best, best_uv
+    return math.nan, None
 
 
 def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
@@ -759,6 +837,9 @@ class _Decider:
             unverified = []
             for i in range(lo, hi):
                 track_accepts = False
+                if static[i]:  # a static object, whatever supports it (or no longer does)
+                    reason[i] = MOTION
+                    continue
                 if available[i] and n_support[i] == 0:
                     # no other camera confirms it (they may just not see the ball): the track
                     # gate alone may still accept it, if its ray passes close to the prediction
@@ -771,7 +852,7 @@ class _Decider:
                     if not track_accepts:
                         reason[i] = EPIPOLAR
                         continue
-                if not front[i] or static[i]:
+                if not front[i]:
                     reason[i] = MOTION
                     continue
                 # consistent in three views: supported by two cameras (how the track follows
@@ -852,26 +933,123 @@ def gate(detections: Detections, rig: Rig, *, causal: bool = True, wait_s: float
 
     options = options or GatingOptions()
     max_gap_ns = round((max_gap_s or default_max_gap_s(rig)) * NS)
-    n_cams = len(rig)
     c = _candidates(detections, rig)
     n = len(c.camera)
     reason = np.full(n, -1, dtype=np.int8)
     if n == 0:
         return _result(detections, rig, reason)
-    tables = _frame_table(c, n_cams)
+    _decided(c, rig, options, causal, round(wait_s * NS), max_gap_ns, reason)
+    return _result(detections, rig, reason)
+
+
+def _decided(c: _Candidates, rig: Rig, options: GatingOptions, causal: bool, wait_ns: int,
+             max_gap_ns: int, reason: np.ndarray) -> np.ndarray:
+    """:func:`gate`'s choice: sets ``reason`` (C,) of every rejected candidate; returns the
+    epipolar support ratio (C, m) each candidate was decided with."""
+    n = len(c.camera)
+    tables = _frame_table(c, len(rig))
     F = fundamental_matrices(rig.cameras)
-    ratio, carried = _support(c, rig, F, tables, options, max_gap_ns, causal,
-                              round(wait_s * NS))
-    points, in_front, miss = _points(c, rig, ratio, carried)
+    ratio, carried, used = _support(c, rig, F, tables, options, max_gap_ns, causal, wait_ns)
+    constants = _rig_constants(rig)
+    points, in_front, miss = _points(c, rig, ratio, carried, constants)
     points[miss > options.track_m] = np.nan  # rays that do not meet: no point to track
+    static, stillness = _static(c, tables, rig, options, points)
     # frames in (time, camera) order of their best candidate; candidates contiguous per frame
     starts = np.flatnonzero(np.r_[True, c.frame[1:] != c.frame[:-1]])
     ends = np.r_[starts[1:], n]
     order = np.lexsort((c.camera[starts], c.time_ns[starts]))
-    _Decider(rig, options).run(c, [(int(starts[f]), int(ends[f])) for f in order.tolist()],
-                               ratio, points, in_front, reason,
-                               _static(c, tables, rig, options, points))
-    return _result(detections, rig, reason)
+    _decide_in_order(c, rig, options, [(int(starts[f]), int(ends[f])) for f in order.tolist()],
+                     tables, F, (ratio, carried, used), (points, in_front),
+                     (static, stillness), reason, causal, wait_ns, max_gap_ns, constants)
+    return ratio
+
+
+def _decide_in_order(c: _Candidates, rig: Rig, options: GatingOptions, frames, tables, F,
+                     support, geometry, still, reason, causal: bool, wait_ns: int,
+                     max_gap_ns: int, constants) -> None:
+    """:class:`_Decider` over the frames ``[(lo, hi), ...]`` in order, each frame's support
+    as decided so far (:func:`_support_one`): the all-candidates support and points computed
+    in arrays (``support``: :func:`_support`'s; ``geometry``: points, in_front) hold while
+    no frame they used has been decided with a rejected candidate; a candidate whose support
+    used one is recomputed on floats (the stream gate's arithmetic, the same bits). The
+    stillness (``still``: :func:`_static`'s) stays the all-candidates one: whether an object
+    stands still is a fact of the scene, whichever candidates were chosen (a static object
+    the gate rejects must stay still to the test). Sets ``reason`` of every rejected row."""
+    ratio, carried, used = support
+    points, in_front = geometry
+    static, stillness = still
+    decider = _Decider(rig, options)
+    m = len(rig)
+    keys = [times.tolist() for times, _ in tables]
+    position = [dict(zip(table[:, 0].tolist(), range(len(table)), strict=True))
+                for _, table in tables]
+    t_ns, und = c.time_ns.tolist(), c.uv_und.tolist()
+    # per camera and frame: the candidates that may support ((t, u, v); all until decided
+    # with one chosen), and whether it was decided with one chosen and another rejected
+    usable = [[[(t_ns[r], *und[r]) for r in row if r >= 0] for row in table.tolist()]
+              for _, table in tables]
+    spoiled = [[False] * len(k) for k in keys]
+    used_rows = used.tolist()
+    F_lists = F.tolist()
+    for lo, hi in frames:
+        a = int(c.camera[lo])
+        at = position[a][lo]
+        redo = any(j >= 0 and spoiled[b][j] for i in range(lo, hi) for b in range(m) if b != a
+                   for j in used_rows[i][b])
+        if redo:
+            for i in range(lo, hi):
+                for b in range(m):
+                    if b == a or not keys[b]:
+                        continue
+                    search = bisect_right if (not causal or wait_ns > 0 or b < a) else bisect_left
+                    r, uv = _support_one(t_ns[i], _line_of(F_lists[a][b], *und[i]), keys[b],
+                                         usable[b].__getitem__, search, wait_ns, causal,
+                                         max_gap_ns, options)
+                    ratio[i, b] = r
+                    carried[i, b] = uv if uv is not None else (math.nan, math.nan)
+                p, ok, miss = _points_one(a, c.ray_dir[i].tolist(), ratio[i].tolist(),
+                                          carried[i].tolist(), constants)
+                points[i] = p if p is not None and not miss > options.track_m else math.nan
+                in_front[i] = ok
+        sl = slice(lo, hi)
+        decider.run(_Candidates(c.camera[sl], c.time_ns[sl], c.uv_und[sl], c.ray_dir[sl],
+                                c.frame[sl]), [(0, hi - lo)], ratio[sl], points[sl],
+                    in_front[sl], reason[sl], (static[sl], stillness[sl]))
+        kept = _supporting(reason[sl].tolist())
+        if kept is not None:
+            spoiled[a][at] = True
+            usable[a][at] = [(t_ns[i], *und[i]) for i, ok in zip(range(lo, hi), kept,
+                                                                 strict=True) if ok]
+
+
+def _supporting(reasons: list[int]) -> list[bool] | None:
+    """Which candidates of a decided frame (their ``reason`` codes, -1 chosen) may support
+    a later choice (:func:`_support_one`), or None when every one still may: with one
+    chosen, it and those only outscored (they passed every gate; the frame's choice among
+    them is no evidence against them), not those a gate rejected; with none chosen, all."""
+    if all(r < 0 or r == OUTSCORED for r in reasons) or not any(r < 0 for r in reasons):
+        return None
+    return [r < 0 or r == OUTSCORED for r in reasons]
+
+
+def _stillness_one(key: int, pts, earlier, lags: int, options: GatingOptions):
+    """:func:`_static`'s rule for one frame on floats (the same bits): ``pts`` its
+    candidates' points (k, 3) as lists, ``earlier`` (frame time ns, points) of its camera's
+    ``lags`` frames before it, newest first. Returns (static (k,) bool, stillness (k,))."""
+    run = np.zeros(len(pts))
+    for prev_key, prev_points in earlier:
+        if not key - prev_key <= 1.5 * options.static_s * NS:  # (recent)
+            continue
+        for j, (x, y, z) in enumerate(pts):
+            best = math.inf
+            for px, py, pz in prev_points:
+                dx, dy, dz = x - px, y - py, z - pz
+                d = math.sqrt(dx * dx + dy * dy + dz * dz)  # np.linalg.norm's order
+                if d < best:  # NaN (no point) never is
+                    best = d
+            if best <= options.static_m:
+                run[j] += 1.0
+    return run >= 0.75 * lags, run / lags
 
 
 def _result(detections: Detections, rig: Rig, reason: np.ndarray) -> Gated:
@@ -898,8 +1076,8 @@ class _Frame:
     gate computed of them once (corrected times, undistorted pixels, rays; once decided,
     their 3D points and rejection reasons)."""
 
-    __slots__ = ("camera", "index", "key", "points", "ray_dir", "reason", "t", "time_ns", "uv",
-                 "uv_und")
+    __slots__ = ("camera", "every", "index", "key", "points", "ray_dir", "reason", "support",
+                 "t", "time_ns", "uv", "uv_und")
 
     def __init__(self, t: int, camera: int, index: int, uv: np.ndarray, time_ns: list[int],
                  uv_und: np.ndarray, ray_dir: np.ndarray) -> None:
@@ -909,6 +1087,10 @@ class _Frame:
         self.key = self.time_ns[0]  # the frame's time: its best candidate's (_frame_table)
         self.reason: np.ndarray | None = None
         self.points: list | None = None
+        # the candidates that may support another camera's choice, (t, u, v): every one
+        # until the frame is decided, then the chosen one if any (:func:`_support_one`)
+        self.every = [(t, u, v) for t, (u, v) in zip(time_ns, uv_und.tolist(), strict=True)]
+        self.support = self.every
 
 
 class StreamGate:
@@ -1085,94 +1267,81 @@ class StreamGate:
         """Decide one frame: the steps of :func:`gate` on its candidates alone."""
         o = self.options
         k, a = len(f.uv), f.camera
-        ratio, carried = self._support(f)
+        every, decided, differs = self._support(f)
         c = _Candidates(np.full(k, a, np.int32), np.array(f.time_ns, np.int64), f.uv_und,
                         f.ray_dir, np.zeros(k, np.int64))
-        f.points, front = [], []
-        for ray, r_row, c_row in zip(f.ray_dir.tolist(), ratio.tolist(), carried.tolist(),
-                                     strict=True):
+        # the points of the all-candidates support (what the stillness compares, as
+        # gate()'s _static) and of the decided support (what the choice uses)
+        f.points, points, front = [], [], []
+        for j, (ray, r_row, c_row) in enumerate(zip(f.ray_dir.tolist(), every[0].tolist(),
+                                                    every[1].tolist(), strict=True)):
             p, ok, miss = _points_one(a, ray, r_row, c_row, self.constants)
             f.points.append(p if p is not None and not miss > o.track_m  # as gate()
                             else (math.nan, math.nan, math.nan))
+            if differs[j]:
+                p, ok, miss = _points_one(a, ray, decided[0][j].tolist(),
+                                          decided[1][j].tolist(), self.constants)
+                points.append(p if p is not None and not miss > o.track_m
+                              else (math.nan, math.nan, math.nan))
+            else:
+                points.append(f.points[-1])
             front.append(ok)
-        points, in_front = np.array(f.points), np.array(front)
+        ratio, points, in_front = decided[0], np.array(points), np.array(front)
         # _static's rule on this frame: still against each of the camera's lags frames before
         frames, at = self.by_camera[a], self.by_camera[a].index(f)
         lags = self.lags[a]
-        run = np.zeros(k)
-        for lag in range(1, min(lags, at) + 1):
-            prev = frames[at - lag]
-            if not f.key - prev.key <= 1.5 * o.static_s * NS:  # (recent)
-                continue
-            for j, (x, y, z) in enumerate(f.points):
-                best = math.inf
-                for px, py, pz in prev.points:
-                    dx, dy, dz = x - px, y - py, z - pz
-                    d = math.sqrt(dx * dx + dy * dy + dz * dz)  # np.linalg.norm's order
-                    if d < best:  # NaN (no point) never is
-                        best = d
-                if best <= o.static_m:
-                    run[j] += 1.0
+        still = _stillness_one(f.key, f.points, [(frames[at - lag].key, frames[at - lag].points)
+                                                 for lag in range(1, min(lags, at) + 1)],
+                               lags, o)
         reason = np.full(k, -1, dtype=np.int8)
-        self.decider.run(c, [(0, k)], ratio, points, in_front, reason,
-                         (run >= 0.75 * lags, run / lags))
+        self.decider.run(c, [(0, k)], ratio, points, in_front, reason, still)
         f.reason = reason
+        kept = _supporting(reason.tolist())
+        if kept is not None:
+            f.support = [s for s, ok in zip(f.support, kept, strict=True) if ok]
 
     def _support(self, f: _Frame):
-        """:func:`_support` (causal) of one frame's candidates: from each other camera b,
-        its candidates of the two latest frames at or before ``t`` (+ wait) carried to ``t``
-        (linear extrapolation), else of the one latest frame, within ``max_gap_s``."""
-        o = self.options
+        """:func:`_support_one` (causal) of one frame's candidates and each other camera b:
+        ``(ratio, carried)`` from every candidate of b's frames, and from its decided frames'
+        chosen candidates (every candidate of the others), (k, m) and (k, m, 2) each, and
+        which candidates' two supports were computed apart (k,) bool."""
         k, m, a = len(f.uv), len(self.rig), f.camera
         ratio = np.full((k, m), np.nan)
         carried = np.full((k, m, 2), np.nan)
-        epi, vmax, gap = o.epipolar_px, o.max_image_speed_px_s, self.max_gap_ns
-        half_accel = 0.5 * o.accel_px_s2
+        decided = [ratio.copy(), carried.copy()]
+        differs = [False] * k
         for b in range(m):
             keys = self.keys[b]
             if b == a or not keys:
                 continue
             frames = self.by_camera[b]
-            lines = [_line_of(self.F_lists[a][b], u, v) for u, v in f.uv_und.tolist()]
+
+            def every(j, frames=frames):
+                return frames[j].every
+
+            def usable(j, frames=frames):
+                return frames[j].support
+
             search = bisect_right if (self.wait_ns > 0 or b < a) else bisect_left
-            for j, t in enumerate(f.time_ns):
-                last = search(keys, t + self.wait_ns) - 1
-                if last < 0:
-                    continue
-                l0, l1, l2 = lines[j]
-                f1 = frames[last]
-                if last >= 1 and abs(t - frames[last - 1].key) <= gap and abs(t - f1.key) <= gap:
-                    f0 = frames[last - 1]
-                    best, best_uv = math.inf, None
-                    und0, und1 = f0.uv_und.tolist(), f1.uv_und.tolist()
-                    for t0, (u0, v0) in zip(f0.time_ns, und0, strict=True):
-                        for t1, (u1, v1) in zip(f1.time_ns, und1, strict=True):
-                            span = (t1 - t0) / NS
-                            if not span > 0:
-                                continue
-                            w = (t - t0) / NS / span
-                            du, dv = u1 - u0, v1 - v0
-                            yu, yv = u0 + w * du, v0 + w * dv
-                            if not math.sqrt(du * du + dv * dv) / abs(span) <= vmax:
-                                continue
-                            tau = epi + half_accel * abs(t - t0) / NS * abs(t - t1) / NS
-                            d = abs(l0 * yu + l1 * yv + l2)
-                            if math.isfinite(d) and d / tau < best:  # argmin: the first
-                                best, best_uv = d / tau, (yu, yv)
-                    ratio[j, b] = best
-                    if best_uv is not None:
-                        carried[j, b] = best_uv
-                elif abs(t - f1.key) <= gap:  # a single nearby frame, as it is
-                    best, best_uv = math.inf, None
-                    for t1, (u1, v1) in zip(f1.time_ns, f1.uv_und.tolist(), strict=True):
-                        tau = epi + vmax * (abs(t - t1) / NS)
-                        d = abs(l0 * u1 + l1 * v1 + l2)
-                        r = d / tau if math.isfinite(d) else math.inf
-                        if best_uv is None or r < best:
-                            best, best_uv = r, (u1, v1)
-                    ratio[j, b] = best
-                    carried[j, b] = best_uv
-        return ratio, carried
+            for j, (t, (u, v)) in enumerate(zip(f.time_ns, f.uv_und.tolist(), strict=True)):
+                line = _line_of(self.F_lists[a][b], u, v)
+                r, uv = _support_one(t, line, keys, every, search, self.wait_ns, True,
+                                     self.max_gap_ns, self.options)
+                ratio[j, b] = r
+                if uv is not None:
+                    carried[j, b] = uv
+                # the frames a choice at t may reach (within max_gap_s): decided with a
+                # rejected candidate, their chosen ones only
+                last = search(keys, t + self.wait_ns)
+                if any(frames[i].support is not frames[i].every for i in
+                       range(bisect_left(keys, t - self.max_gap_ns), last)):
+                    r, uv = _support_one(t, line, keys, usable, search, self.wait_ns, True,
+                                         self.max_gap_ns, self.options)
+                    differs[j] = True
+                decided[0][j, b] = r
+                if uv is not None:
+                    decided[1][j, b] = uv
+        return (ratio, carried), decided, differs
 
 
 def gating_key(method: str, options) -> tuple[bool, float]:
