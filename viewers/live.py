@@ -57,8 +57,9 @@ import rerun as rr
 from pslog.errors import InputError
 from pslog.live.sinks import dropped_topic
 from pslog.log import _schemas as S
-from pslog.log.writer import TRACK_COLORS, camera_messages, scene_point
+from pslog.log.writer import camera_messages, scene_point, track_color
 from pslog.motion import BALL_RADIUS
+from pslog.palette import color_name
 from pslog.records import NS
 from pslog.rig import Rig
 
@@ -366,7 +367,7 @@ class RerunLiveSink(_QueuedSink):
         return color
 
     def _show_legend(self, status: str) -> None:
-        tracks = ", ".join(f"{m} {C.COLOR_NAMES.get(c, str(c))}" for m, c in self._colors.items())
+        tracks = ", ".join(f"{m} {color_name(c)}" for m, c in self._colors.items())
         names = ("red", "green", "blue", "amber", "purple", "cyan")
         cameras = ", ".join(f"{n} {names[c % len(names)]}" for c, n in enumerate(self.rig.names))
         self.rec.log("legend", rr.TextDocument(
@@ -602,7 +603,7 @@ class FoxgloveSink(_QueuedSink):
         track.log(msg.SerializeToString(), log_time=t)
         i = self._track_index[method]
         self._track_index[method] = i + 1
-        color = TRACK_COLORS[self._track_methods.index(method) % len(TRACK_COLORS)]
+        color = track_color(method)
         scene.log(scene_point(method, i, t, (x, y, z), color), log_time=t)
 
     def _frame(self, topic: str, d, best_first: bool) -> None:
