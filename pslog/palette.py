@@ -40,7 +40,7 @@ EXTRA_METHOD_COLORS: tuple[RGB, ...] = ((0, 150, 150), (150, 90, 40), (255, 120,
                                         (90, 90, 170))
 #: Camera ``i`` of a rig has ``CAMERA_COLORS[i % 6]``.
 CAMERA_COLORS: tuple[RGB, ...] = ((120, 200, 235), (240, 165, 125), (165, 215, 120),
-                                  (200, 165, 235), (225, 205, 150), (130, 215, 195))
+                                  (200, 165, 235), (225, 205, 150), (250, 175, 190))
 #: Ground truth (3D points, trail, error plots' reference): mid grey, seen on both themes.
 TRUTH_COLOR: RGB = (128, 128, 128)
 #: Candidates the gating rejected, on the camera images.
@@ -59,7 +59,7 @@ COLOR_NAMES: dict[RGB, str] = {
     (130, 80, 230): "violet", (0, 150, 150): "teal", (150, 90, 40): "brown",
     (255, 120, 170): "pink", (90, 90, 170): "slate",
     (120, 200, 235): "light blue", (240, 165, 125): "peach", (165, 215, 120): "light green",
-    (200, 165, 235): "lilac", (225, 205, 150): "sand", (130, 215, 195): "mint",
+    (200, 165, 235): "lilac", (225, 205, 150): "sand", (250, 175, 190): "rose",
     (128, 128, 128): "grey", (195, 195, 195): "light grey", (0, 225, 225): "cyan",
     (255, 235, 0): "yellow",
 }
