@@ -115,9 +115,12 @@ def _trailing(fps_hint: float = 90.0) -> rrb.VisibleTimeRanges:
 
 def build_blueprint(camera_names: Sequence[str], methods: Sequence[str], *, has_truth: bool,
                     quality: Mapping[str, tuple[str, float]],
-                    eye: rrb.EyeControls3D | None = None) -> rrb.Blueprint:
+                    eye: rrb.EyeControls3D | None = None,
+                    recorded: bool = True) -> rrb.Blueprint:
     """The default blueprint for a session with these cameras, shown tracks and plots
-    (``quality`` from :func:`quality_plots`, ``eye`` from :func:`default_eye`)."""
+    (``quality`` from :func:`quality_plots`, ``eye`` from :func:`default_eye`).
+    ``recorded`` False (the live view): no ball crops and no summary panel, which only a
+    recorded session has (viewers/panels.py)."""
     trail = _trailing()
     trailing_paths = [f"world/rays/{c}" for c in camera_names]
     for m in methods:
@@ -134,7 +137,8 @@ def build_blueprint(camera_names: Sequence[str], methods: Sequence[str], *, has_
     # each camera: the full frame, and beside it the ball large (viewers/panels.py's crop)
     cameras = [rrb.Horizontal(rrb.Spatial2DView(origin=f"/world/cameras/{c}/image", name=c),
                               rrb.Spatial2DView(origin=f"/crops/{c}", name=f"{c} ball"),
-                              column_shares=[2, 1])
+                              column_shares=[2, 1]) if recorded
+               else rrb.Spatial2DView(origin=f"/world/cameras/{c}/image", name=c)
                for c in camera_names]
     plots = (["error_mm"] if has_truth and methods else []) + list(quality) + ["detection_rate"]
     # a rate lies in 0-100 %: a fixed axis shows a full rate as full, not as a line on a
@@ -144,16 +148,16 @@ def build_blueprint(camera_names: Sequence[str], methods: Sequence[str], *, has_
                                     axis_y=axes.get(p))
               for p in plots}
     legend = rrb.TextDocumentView(origin="/legend", name="legend")
-    summary = rrb.TextDocumentView(origin="/summary", name="camera clocks and accuracy")
-    top = rrb.Horizontal(view3d, rrb.Vertical(*cameras), column_shares=[3, 2])
+    summary = rrb.TextDocumentView(origin="/summary", name="summary: accuracy, colours, clocks")
+    top = rrb.Horizontal(view3d, rrb.Vertical(*cameras), column_shares=[3, 2 if recorded else 1])
     # at a glance: the error and the detection rate; the method's own quality plots share
     # one tabbed view (a row of six plots leaves each too narrow to read)
     first = [series.pop("error_mm")] if "error_mm" in series else []
     rate = series.pop("detection_rate")
     own = [rrb.Tabs(*series.values())] if series else []
     plots_row = [*first, *own, rate]
-    bottom = rrb.Horizontal(*plots_row, rrb.Tabs(summary, legend),
-                            column_shares=[1] * len(plots_row) + [2])
+    text = rrb.Tabs(summary, legend) if recorded else legend
+    bottom = rrb.Horizontal(*plots_row, text, column_shares=[1] * len(plots_row) + [2])
     return rrb.Blueprint(
         rrb.Vertical(top, bottom, row_shares=[3, 1]),
         rrb.BlueprintPanel(state="collapsed"),

@@ -332,7 +332,7 @@ class RerunLiveSink(_QueuedSink):
         rec.send_blueprint(build_blueprint(
             rig.names, methods, has_truth=False, quality=LIVE_PLOTS,
             eye=default_eye(centers, target[None, :] if target is not None
-                            else np.zeros((0, 3)))))
+                            else np.zeros((0, 3))), recorded=False))
         log_rig(rec, rig, rejected=False)
         for c, cam in enumerate(rig.cameras):
             rec.log(f"plots/detection_rate/{cam.name}",
@@ -356,7 +356,8 @@ class RerunLiveSink(_QueuedSink):
                 static=True)
         rec.log(f"{base}/uncertainty", rr.Points3D.from_fields(colors=[(*color, 48)]),
                 static=True)
-        light = tuple(int(0.5 * (x + 255)) for x in color)
+        # the method's colour, half transparent (a lighter tint would look like a camera's)
+        light = (*color, 128)
         rec.log(f"{base}/predicted", rr.Points3D.from_fields(
             colors=[light], radii=[0.6 * BALL_RADIUS]), static=True)
         rec.log(f"{base}/predicted/velocity", rr.Arrows3D.from_fields(
@@ -368,10 +369,10 @@ class RerunLiveSink(_QueuedSink):
 
     def _show_legend(self, status: str) -> None:
         tracks = ", ".join(f"{m} {color_name(c)}" for m, c in self._colors.items())
-        names = ("red", "green", "blue", "amber", "purple", "cyan")
-        cameras = ", ".join(f"{n} {names[c % len(names)]}" for c, n in enumerate(self.rig.names))
+        cameras = ", ".join(f"{n} {color_name(C.camera_color(c))}"
+                            for c, n in enumerate(self.rig.names))
         self.rec.log("legend", rr.TextDocument(
-            f"**Live** — {status}\n\n**Tracks**: {tracks or 'none yet'}; light: the state "
+            f"**Live** — {status}\n\n**Tracks**: {tracks or 'none yet'}; translucent: the state "
             f"predicted to the emit time, arrow: its velocity over {_VELOCITY_ARROW_S:g} s\n\n"
             f"**Cameras** (rays, detections): {cameras}", media_type="text/markdown"),
             static=True)

@@ -6,7 +6,7 @@ Entity paths::
     crops/<cam>              EncodedImage (JPEG), a CROP_PX x CROP_PX cut of the frame
                              centred on the frame's detection (the latest one before it when
                              the frame has none); shown large in its own 2D view
-    crops/<cam>/detection    the detection inside the crop, Points2D
+    crops/<cam>/detection    a box around the detection inside the crop, Boxes2D
     summary                  TextDocument (markdown): camera clocks and accuracy
 """
 
@@ -23,9 +23,12 @@ from pslog.log import Image
 from . import _columns as C
 from .data import ViewData
 
-#: Side of a crop in source pixels: about 8x zoom of a 640 px frame in a view as large as
-#: the frame's, so a ball a few pixels wide fills a good part of the crop.
-CROP_PX = 80
+#: Side of a crop in source pixels: beside a 640 px frame in a view half as wide, about
+#: 6x the frame's scale, so a ball a few pixels wide shows as a disc with its surroundings.
+CROP_PX = 56
+#: Half side of the box drawn around the detection in the crop, pixels: around the ball,
+#: not over it.
+_BOX_HALF_PX = 7.0
 #: Crops are cut from at most this many frames per camera (each needs the JPEG decoded,
 #: ~2 ms): beyond, from every k-th frame, so a long session's view is not held up by it.
 MAX_CROPS_PER_CAMERA = 6000
@@ -59,8 +62,8 @@ class CropLogger:
         self.every = max(1, -(-int(n_images) // MAX_CROPS_PER_CAMERA))
         self._pending: dict[int, list[tuple[int, int, bytes, np.ndarray]]] = {}
         for name in self.names:
-            rec.log(f"{crop_path(name)}/detection", rr.Points2D.from_fields(
-                colors=[(255, 255, 255)], radii=[-2.0]), static=True)
+            rec.log(f"{crop_path(name)}/detection", rr.Boxes2D.from_fields(
+                colors=[(255, 255, 255)], radii=[-1.0]), static=True)
 
     def add(self, image: Image) -> None:
         """Crop ``image`` around its frame's detection (or the camera's latest one)."""
@@ -89,8 +92,9 @@ class CropLogger:
             path = crop_path(self.names[cam])
             n += C.send(self.rec, path, self.clock, t, f, rr.EncodedImage.columns(
                 blob=[i[2] for i in items], media_type=["image/jpeg"] * len(items)))
-            C.send(self.rec, f"{path}/detection", self.clock, t, f, rr.Points2D.columns(
-                positions=C.image_space(np.array([i[3] for i in items]).reshape(-1, 2))))
+            centers = C.image_space(np.array([i[3] for i in items]).reshape(-1, 2))
+            C.send(self.rec, f"{path}/detection", self.clock, t, f, rr.Boxes2D.columns(
+                centers=centers, half_sizes=np.full_like(centers, _BOX_HALF_PX)))
         self._pending.clear()
         return n
 
@@ -136,11 +140,12 @@ def accuracy_text(data: ViewData) -> str:
     return "\n".join(lines)
 
 
-def summary_text(data: ViewData, timing: str) -> str:
-    """The summary panel: the accuracy, then the camera clocks (``timing``, markdown)."""
-    return f"{accuracy_text(data)}\n\n{timing}"
+def summary_text(data: ViewData, timing: str, legend: str = "") -> str:
+    """The summary panel (markdown): the accuracy, the colours (``legend``), then the camera
+    clocks (``timing``)."""
+    return "\n\n".join(p for p in (accuracy_text(data), legend, timing) if p)
 
 
-def log_summary(rec, data: ViewData, timing: str) -> None:
-    rec.log("summary", rr.TextDocument(summary_text(data, timing), media_type="text/markdown"),
-            static=True)
+def log_summary(rec, data: ViewData, timing: str, legend: str = "") -> None:
+    rec.log("summary", rr.TextDocument(summary_text(data, timing, legend),
+                                       media_type="text/markdown"), static=True)

@@ -175,9 +175,8 @@ def log_rig(rec, rig, *, rejected: bool = True) -> None:
         if rejected:
             rec.log(f"{image_path(cam.name)}/rejected", rr.Points2D.from_fields(
                 colors=[C.REJECTED_COLOR], radii=[-3.0]), static=True)
-        # half transparent: a trail of rays from three cameras must not hide the track
         rec.log(f"world/rays/{cam.name}", rr.LineStrips3D.from_fields(
-            colors=[(*C.camera_color(c), 128)], radii=[-0.75]), static=True)
+            colors=[C.camera_color(c)], radii=[-0.75]), static=True)
 
 
 def _log_static(rec, data: ViewData, colors, quality) -> None:
@@ -214,7 +213,8 @@ def _log_static(rec, data: ViewData, colors, quality) -> None:
             static=True)
     timing = timing_text(data.session)
     rec.log("timing", rr.TextDocument(timing, media_type="text/markdown"), static=True)
-    log_summary(rec, data, timing)  # the summary panel: clocks and accuracy
+    # the summary panel: accuracy, colours, clocks
+    log_summary(rec, data, timing, _legend(data, colors))
 
 
 def timing_text(session) -> str:
