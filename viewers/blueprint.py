@@ -61,6 +61,13 @@ EYE_ELEVATION_DEG = 25.0
 GRID_SPACING_M = 0.5
 
 
+#: Width / height of the 3D view the eye is framed for (the default layout's, rounded down:
+#: a wider view only adds margin left and right).
+EYE_ASPECT = 4 / 3
+#: Share of the view's half-height (and half-width) the framed box may fill.
+EYE_FILL = 0.9
+
+
 def default_eye(camera_centers_world: np.ndarray, scene_world: np.ndarray
                 ) -> rrb.EyeControls3D | None:
     """A 3D viewpoint framed on the trajectory and the floor under it.
@@ -69,21 +76,22 @@ def default_eye(camera_centers_world: np.ndarray, scene_world: np.ndarray
     or the tracks) and its shadow on the floor z = 0, from the side: square to the
     trajectory's main horizontal direction (its arc seen side-on), on the side of the
     cameras' mean position ``camera_centers_world`` (c, 3) so the view matches what the
-    cameras see, raised by :data:`EYE_ELEVATION_DEG`, at the distance where the box's
-    bounding sphere fills the view's height (:data:`EYE_FOV_Y_DEG`). The cameras are left
-    out of the framing: they stand metres away and would shrink the ball's path to a
+    cameras see, raised by :data:`EYE_ELEVATION_DEG`. Its distance is the smallest at which
+    the box's eight corners, in perspective (rerun's :data:`EYE_FOV_Y_DEG`, a view of
+    :data:`EYE_ASPECT`), lie within :data:`EYE_FILL` of the view's edges. The cameras are
+    left out of the framing: they stand metres away and would shrink the ball's path to a
     corner. None when there is nothing to frame.
     """
     scene = np.asarray(scene_world, dtype=np.float64).reshape(-1, 3)
     scene = scene[np.all(np.isfinite(scene), axis=1)]
     if len(scene) == 0:
         return None
-    floor = scene.copy()
-    floor[:, 2] = 0.0
-    box = np.concatenate([scene, floor])
-    lo, hi = box.min(axis=0), box.max(axis=0)
+    lo, hi = scene.min(axis=0), scene.max(axis=0)
+    lo[2] = min(lo[2], 0.0)  # down to the floor
+    # at least 1 m across, so a ball at rest is seen with its surroundings
+    pad = np.maximum(0.5 - 0.5 * (hi - lo), 0.0)
+    lo, hi = lo - pad * [1, 1, 0], hi + pad * [1, 1, 2]
     target = 0.5 * (lo + hi)
-    radius = max(0.5 * float(np.linalg.norm(hi - lo)), 0.5)
     # main horizontal direction of the path (principal axis), the eye square to it
     xy = scene[:, :2] - scene[:, :2].mean(axis=0)
     if len(scene) >= 2 and np.ptp(xy, axis=0).max() > 1e-6:
@@ -95,10 +103,27 @@ def default_eye(camera_centers_world: np.ndarray, scene_world: np.ndarray
     if len(centers) and float(np.dot(centers.mean(axis=0)[:2] - target[:2], side)) < 0:
         side = -side
     elevation = np.radians(EYE_ELEVATION_DEG)
-    # 0.7: the sphere is a loose bound of the box (seen from the side it spans less)
-    distance = 0.7 * radius / np.sin(0.5 * np.radians(EYE_FOV_Y_DEG))
-    direction = np.array([*(np.cos(elevation) * side), np.sin(elevation)])
-    return rrb.EyeControls3D(position=target + distance * direction, look_target=target,
+    back = np.array([*(np.cos(elevation) * side), np.sin(elevation)])  # target -> eye
+    right = np.cross(-back, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, -back)
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                        for z in (lo[2], hi[2])]) - target
+    ty = np.tan(0.5 * np.radians(EYE_FOV_Y_DEG)) * EYE_FILL
+    tx = ty * EYE_ASPECT
+
+    def fits(distance: float) -> bool:
+        depth = distance - corners @ back
+        return bool(np.all(depth > 0) and np.all(np.abs(corners @ right) <= tx * depth)
+                    and np.all(np.abs(corners @ up) <= ty * depth))
+
+    near, far = 0.0, 1.0
+    while not fits(far):
+        near, far = far, 2 * far
+    for _ in range(40):  # bisection to well under a millimetre
+        mid = 0.5 * (near + far)
+        near, far = (near, mid) if fits(mid) else (mid, far)
+    return rrb.EyeControls3D(position=target + far * back, look_target=target,
                              eye_up=(0.0, 0.0, 1.0))
 
 

@@ -127,9 +127,11 @@ def log_view(rec: rr.RecordingStream, data: ViewData, frames: FramesChoice) -> d
     counts: dict[str, int] = {}
     colors = C.method_colors(list(data.tracks))
     quality = quality_plots(data.tracks)
-    scene = (session.truth.position_world if session.truth is not None and len(session.truth)
-             else np.concatenate([t.position_world for t in data.tracks.values()] or
-                                 [np.zeros((0, 3))]))
+    # the eye frames what is shown: the truth (else the tracks) inside the time window
+    scene = (session.truth.position_world[data.in_window(session.truth.time_ns)]
+             if session.truth is not None and len(session.truth)
+             else np.concatenate([t.position_world[data.in_window(t.time_ns)]
+                                  for t in data.tracks.values()] or [np.zeros((0, 3))]))
     rec.send_blueprint(build_blueprint(
         rig.names, list(data.tracks), quality=quality,
         has_truth=session.truth is not None and len(session.truth) > 0,
