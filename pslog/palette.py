@@ -39,8 +39,9 @@ METHOD_COLORS: dict[str, RGB] = {
 EXTRA_METHOD_COLORS: tuple[RGB, ...] = ((0, 150, 150), (150, 90, 40), (255, 120, 170),
                                         (90, 90, 170))
 #: Camera ``i`` of a rig has ``CAMERA_COLORS[i % 6]``.
-CAMERA_COLORS: tuple[RGB, ...] = ((120, 200, 235), (240, 165, 125), (165, 215, 120),
-                                  (200, 165, 235), (225, 205, 150), (250, 175, 190))
+#: The first three stand out on a green field and apart from the construction's cyan.
+CAMERA_COLORS: tuple[RGB, ...] = ((200, 165, 235), (240, 165, 125), (225, 205, 150),
+                                  (250, 175, 190), (120, 200, 235), (165, 215, 120))
 #: Ground truth (3D points, trail, error plots' reference): mid grey, seen on both themes.
 TRUTH_COLOR: RGB = (128, 128, 128)
 #: Candidates the gating rejected, on the camera images.
