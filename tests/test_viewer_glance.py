@@ -264,6 +264,8 @@ def test_summary_panel_holds_accuracy_and_camera_clocks(fused):
                 f"{a.p95_mm:.1f} | {a.rms_mm:.1f} | {a.max_mm:.1f} |") in text
     for cam in s.rig.cameras:
         assert f"| {cam.name} | 30 | {cam.offset * 1e3:.3f} |" in text
+    # the clocks as the 'timing' document holds them (σ from pslog sync: tests/test_view.py)
+    assert _static(rrd)["/timing"]["TextDocument:text"][0] in text
     views = {v.get("ViewBlueprint:space_origin", [None])[0] for v in _blueprint(rrd).values()}
     assert "/summary" in views
 
@@ -307,3 +309,25 @@ def test_default_eye_frames_the_trajectory_and_its_floor(fused):
     assert np.abs(x).max() <= 1.0 and np.abs(y).max() <= 1.0  # all inside
     assert np.ptp(x) > 1.0 or np.ptp(y) > 1.0  # and large: over half the width or height
     assert pos[2] > target[2]  # from above
+
+
+def test_the_live_view_has_no_crop_or_summary_views(tmp_path):
+    """The live view shows neither crops nor the summary (a live run has no frames to cut
+    nor truth): its blueprint leaves those views out rather than showing them empty."""
+    import rerun as rr
+
+    from viewers.blueprint import build_blueprint
+
+    for recorded in (True, False):
+        path = tmp_path / f"bp-{recorded}.rrd"
+        rec = rr.RecordingStream("pslog-test")
+        rec.save(path)
+        rec.send_blueprint(build_blueprint(["cam1", "cam2"], ["typeA"], has_truth=False,
+                                           quality={}, recorded=recorded))
+        rec.flush()
+        rec.disconnect()
+        origins = {v.get("ViewBlueprint:space_origin", [None])[0]
+                   for v in _blueprint(path).values()}
+        assert ("/crops/cam1" in origins) is recorded
+        assert ("/summary" in origins) is recorded
+        assert "/legend" in origins and "/world/cameras/cam2/image" in origins

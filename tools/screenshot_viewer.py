@@ -7,8 +7,9 @@ over ``--remote-debugging-pipe`` (the DevTools protocol on file descriptors 3 an
 nothing beyond the standard library is needed.
 
 Run: ``python tools/screenshot_viewer.py [--session samples/throw.mcap]
-[--output docs/images/viewer.png] [--wait 60] [--time 0.9 [--time 1.3 ...]]
-[--theme light|dark]``
+[--output docs/images/viewer.png] [--wait 60] [--time 0.85 [--time 1.3 ...]]
+[--theme light|dark]`` (default: the README's three images, docs/images/viewer-0.3s.png,
+viewer-0.85s.png and viewer-1.3s.png)
 
 ``--time T`` picks the moment: the session is served up to T seconds and the viewer opens
 there (rerun opens at the latest time). With several ``--time``, one PNG per moment,
@@ -124,7 +125,8 @@ def main() -> int:
     parser.add_argument("--time", "--end", type=float, action="append", dest="times",
                         help="the moment to show, seconds from the session's start (the "
                              "session is served up to it; the viewer opens at the end); "
-                             "repeat for several images (default 0.9: mid-flight)")
+                             "repeat for several images (default: 0.3, 0.85 and 1.3 s, "
+                             "the sample throw rising, bouncing and after the bounce)")
     parser.add_argument("--theme", choices=("light", "dark"), default="light",
                         help="the viewer's colour theme (the page's prefers-color-scheme)")
     parser.add_argument("--web-port", type=int, default=9190)
@@ -136,7 +138,7 @@ def main() -> int:
         print("screenshot_viewer: chromium not found (apt-get install chromium)", file=sys.stderr)
         return 1
     width, height = (int(v) for v in args.size.split("x"))
-    times = args.times or [0.9]
+    times = args.times or [0.3, 0.85, 1.3]
     output = Path(args.output)
     failed = 0
     for t in times:
