@@ -356,8 +356,9 @@ class RerunLiveSink(_QueuedSink):
                 static=True)
         rec.log(f"{base}/uncertainty", rr.Points3D.from_fields(colors=[(*color, 48)]),
                 static=True)
-        # the method's colour, half transparent (a lighter tint would look like a camera's)
-        light = (*color, 128)
+        # the method's own colour, smaller (a lighter tint would look like a camera's colour,
+        # and translucency renders dark in the web viewer)
+        light = color
         rec.log(f"{base}/predicted", rr.Points3D.from_fields(
             colors=[light], radii=[0.6 * BALL_RADIUS]), static=True)
         rec.log(f"{base}/predicted/velocity", rr.Arrows3D.from_fields(
@@ -372,7 +373,7 @@ class RerunLiveSink(_QueuedSink):
         cameras = ", ".join(f"{n} {color_name(C.camera_color(c))}"
                             for c, n in enumerate(self.rig.names))
         self.rec.log("legend", rr.TextDocument(
-            f"**Live** — {status}\n\n**Tracks**: {tracks or 'none yet'}; translucent: the state "
+            f"**Live** — {status}\n\n**Tracks**: {tracks or 'none yet'}; small: the state "
             f"predicted to the emit time, arrow: its velocity over {_VELOCITY_ARROW_S:g} s\n\n"
             f"**Cameras** (rays, detections): {cameras}", media_type="text/markdown"),
             static=True)

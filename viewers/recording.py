@@ -266,6 +266,8 @@ def _legend(data: ViewData, colors) -> str:
     tracks = [f"{m} {name(c)}" for m, c in colors.items()]
     if data.session.truth is not None:
         tracks.append(f"truth {name(C.TRUTH_COLOR)}")
+    if any("std_m" in t.quality for t in data.tracks.values()):
+        tracks.append("the dim sphere around a point: 2 σ of its position")
     cameras = [f"{n} {name(C.camera_color(c))}" for c, n in enumerate(data.session.rig.names)]
     lines = [f"**Tracks**: {', '.join(tracks)}", "",
              f"**Cameras** (rays, detections, epipolar lines, detection rate): "
