@@ -238,6 +238,8 @@ def test_each_camera_has_a_crop_of_the_ball(tmp_path):
             assert crop.shape == (CROP_PX, CROP_PX)
             centre = crop[CROP_PX // 2 - 2:CROP_PX // 2 + 3, CROP_PX // 2 - 2:CROP_PX // 2 + 3]
             assert centre.mean() > 200 and np.median(crop) < 80  # the ball, in the middle
+        boxes = _temporal(rrd, f"/crops/{name}/detection", "Boxes2D:centers")
+        assert len(boxes) == len(blobs) and all(len(b) == 1 for b in boxes)
     origins = {v.get("ViewBlueprint:space_origin", [None])[0]
                for v in _blueprint(rrd).values()}
     assert {f"/crops/{n}" for n in rig.names} <= origins | {None}

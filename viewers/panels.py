@@ -6,8 +6,9 @@ Entity paths::
     crops/<cam>              EncodedImage (JPEG), a CROP_PX x CROP_PX cut of the frame
                              centred on the frame's detection (the latest one before it when
                              the frame has none); shown large in its own 2D view
-    crops/<cam>/detection    a box around the detection inside the crop, Boxes2D
-    summary                  TextDocument (markdown): camera clocks and accuracy
+    crops/<cam>/detection    a box around the frame's detection inside the crop, Boxes2D
+                             (none when the crop follows an earlier frame's detection)
+    summary                  TextDocument (markdown): accuracy, colours, camera clocks
 """
 
 from __future__ import annotations
@@ -29,8 +30,9 @@ CROP_PX = 56
 #: Half side of the box drawn around the detection in the crop, pixels: around the ball,
 #: not over it.
 _BOX_HALF_PX = 7.0
-#: Crops are cut from at most this many frames per camera (each needs the JPEG decoded,
-#: ~2 ms): beyond, from every k-th frame, so a long session's view is not held up by it.
+#: Crops are cut from at most this many frames per camera (each needs the JPEG decoded and
+#: a crop encoded, ~1.5 ms for 640 x 480): beyond, from every k-th frame, so a long
+#: session's view is not held up by it (6000 per camera: about 9 s per camera at most).
 MAX_CROPS_PER_CAMERA = 6000
 _JPEG_QUALITY = 90
 
@@ -60,7 +62,7 @@ class CropLogger:
                                            obs.uv, strict=True)}
         self._last: dict[int, np.ndarray] = {}
         self.every = max(1, -(-int(n_images) // MAX_CROPS_PER_CAMERA))
-        self._pending: dict[int, list[tuple[int, int, bytes, np.ndarray]]] = {}
+        self._pending: dict[int, list[tuple[int, int, bytes, np.ndarray, bool]]] = {}
         for name in self.names:
             rec.log(f"{crop_path(name)}/detection", rr.Boxes2D.from_fields(
                 colors=[(255, 255, 255)], radii=[-1.0]), static=True)
@@ -68,6 +70,7 @@ class CropLogger:
     def add(self, image: Image) -> None:
         """Crop ``image`` around its frame's detection (or the camera's latest one)."""
         uv = self._uv.get((image.camera, image.frame_index))
+        detected = uv is not None
         if uv is None:
             uv = self._last.get(image.camera)
         else:
@@ -81,7 +84,7 @@ class CropLogger:
         ok, jpeg = cv2.imencode(".jpg", crop, [cv2.IMWRITE_JPEG_QUALITY, _JPEG_QUALITY])
         if ok:
             self._pending.setdefault(image.camera, []).append(
-                (image.time_ns, image.frame_index, jpeg.tobytes(), inside))
+                (image.time_ns, image.frame_index, jpeg.tobytes(), inside, detected))
 
     def flush(self) -> int:
         """Send the pending crops; returns how many."""
@@ -92,9 +95,12 @@ class CropLogger:
             path = crop_path(self.names[cam])
             n += C.send(self.rec, path, self.clock, t, f, rr.EncodedImage.columns(
                 blob=[i[2] for i in items], media_type=["image/jpeg"] * len(items)))
-            centers = C.image_space(np.array([i[3] for i in items]).reshape(-1, 2))
+            # a box only where the frame has its own detection (an empty row clears it)
+            boxed = np.array([i[4] for i in items], dtype=bool)
+            centers = C.image_space(np.array([i[3] for i in items if i[4]]).reshape(-1, 2))
             C.send(self.rec, f"{path}/detection", self.clock, t, f, rr.Boxes2D.columns(
-                centers=centers, half_sizes=np.full_like(centers, _BOX_HALF_PX)))
+                centers=centers, half_sizes=np.full_like(centers, _BOX_HALF_PX))
+                .partition(boxed.astype(np.int64)))
         self._pending.clear()
         return n
 
