@@ -7,7 +7,14 @@ over ``--remote-debugging-pipe`` (the DevTools protocol on file descriptors 3 an
 nothing beyond the standard library is needed.
 
 Run: ``python tools/screenshot_viewer.py [--session samples/throw.mcap]
-[--output docs/images/viewer.png] [--wait 60] [--end 0.9]``
+[--output docs/images/viewer.png] [--wait 60] [--time 0.85 [--time 1.3 ...]]
+[--theme light|dark]`` (default: the README's three images, docs/images/viewer-0.3s.png,
+viewer-0.85s.png and viewer-1.3s.png)
+
+``--time T`` picks the moment: the session is served up to T seconds and the viewer opens
+there (rerun opens at the latest time). With several ``--time``, one PNG per moment,
+``<output stem>-<T>s.png``. ``--theme`` sets the page's ``prefers-color-scheme``, which the
+web viewer follows.
 """
 
 from __future__ import annotations
@@ -115,9 +122,13 @@ def main() -> int:
     parser.add_argument("--max-wait", type=float, default=180.0,
                         help="keep waiting up to this long while the page still looks empty")
     parser.add_argument("--size", default="1600x1000", help="window WIDTHxHEIGHT")
-    parser.add_argument("--end", type=float, default=0.9,
-                        help="show the session up to this second (the viewer opens at the "
-                             "end: mid-flight shows the throw best)")
+    parser.add_argument("--time", "--end", type=float, action="append", dest="times",
+                        help="the moment to show, seconds from the session's start (the "
+                             "session is served up to it; the viewer opens at the end); "
+                             "repeat for several images (default: 0.3, 0.85 and 1.3 s, "
+                             "the sample throw rising, bouncing and after the bounce)")
+    parser.add_argument("--theme", choices=("light", "dark"), default="light",
+                        help="the viewer's colour theme (the page's prefers-color-scheme)")
     parser.add_argument("--web-port", type=int, default=9190)
     parser.add_argument("--grpc-port", type=int, default=9977)
     args = parser.parse_args()
@@ -127,7 +138,21 @@ def main() -> int:
         print("screenshot_viewer: chromium not found (apt-get install chromium)", file=sys.stderr)
         return 1
     width, height = (int(v) for v in args.size.split("x"))
-    server = _serve(Path(args.session), args.web_port, args.grpc_port, args.end)
+    times = args.times or [0.3, 0.85, 1.3]
+    output = Path(args.output)
+    failed = 0
+    for t in times:
+        path = (output if len(times) == 1
+                else output.with_name(f"{output.stem}-{t:g}s{output.suffix}"))
+        failed += _capture(args, chromium, width, height, t, path)
+    return 1 if failed else 0
+
+
+def _capture(args, chromium: str, width: int, height: int, moment: float,
+             output: Path) -> int:
+    """Serve the session up to ``moment`` seconds, screenshot the viewer to ``output``;
+    returns 0, or 1 when the page never looked loaded."""
+    server = _serve(Path(args.session), args.web_port, args.grpc_port, moment)
     browser: _DevTools | None = None
     try:
         for line in server.stdout:  # wait until everything is logged and served
@@ -147,6 +172,8 @@ def main() -> int:
             browser.call("Emulation.setDeviceMetricsOverride", {
                 "width": width, "height": height, "deviceScaleFactor": 1, "mobile": False},
                 session)
+            browser.call("Emulation.setEmulatedMedia", {"features": [
+                {"name": "prefers-color-scheme", "value": args.theme}]}, session)
             browser.call("Page.navigate", {"url": url}, session)
             start = time.monotonic()
             time.sleep(args.wait)
@@ -160,7 +187,6 @@ def main() -> int:
                 time.sleep(10)
             browser.close()  # before the profile folder goes
             browser = None
-        output = Path(args.output)
         output.parent.mkdir(parents=True, exist_ok=True)
         output.write_bytes(png)
         print(f"wrote {output} ({len(png) / 1e3:.0f} kB, after {waited:.0f} s)")

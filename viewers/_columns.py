@@ -6,11 +6,10 @@ Everything here works on whole columns (numpy arrays); the recording is sent wit
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-
 import numpy as np
 import rerun as rr
 
+from pslog import palette
 from pslog.camera import Camera
 
 #: Name of the capture-time timeline (the session's common clock).
@@ -25,22 +24,12 @@ _EPOCH_CLOCK_NS = 100_000_000 * 1_000_000_000
 #: covers [0, width] x [0, height]); 2D points and the pinhole's principal point shift by this.
 PIXEL_CENTER = 0.5
 
-METHOD_COLORS: dict[str, tuple[int, int, int]] = {
-    "typeA": (255, 140, 0),  # orange
-    "typeB": (0, 170, 255),  # sky blue
-    "sync": (90, 220, 90),  # green
-    "nearest": (230, 70, 230),  # magenta
-    "linear": (255, 225, 40),  # yellow
-}
-_EXTRA_COLORS = [(255, 100, 100), (150, 120, 255), (60, 220, 200), (200, 200, 120)]
-CAMERA_COLORS = [(255, 90, 90), (80, 210, 120), (90, 150, 255), (255, 200, 60),
-                 (200, 110, 255), (60, 220, 220)]
-TRUTH_COLOR = (235, 235, 235)
-REJECTED_COLOR = (150, 150, 150)
-COLOR_NAMES = {(255, 140, 0): "orange", (0, 170, 255): "sky blue", (90, 220, 90): "green",
-               (230, 70, 230): "magenta", (255, 225, 40): "yellow", (255, 100, 100): "salmon",
-               (150, 120, 255): "violet", (60, 220, 200): "teal", (200, 200, 120): "khaki",
-               (235, 235, 235): "white"}
+# one palette for every viewer and the MCAP's Foxglove scene (pslog/palette.py)
+METHOD_COLORS = palette.METHOD_COLORS
+CAMERA_COLORS = palette.CAMERA_COLORS
+TRUTH_COLOR = palette.TRUTH_COLOR
+REJECTED_COLOR = palette.REJECTED_COLOR
+COLOR_NAMES = palette.COLOR_NAMES
 
 
 def camera_path(name: str) -> str:
@@ -51,14 +40,8 @@ def image_path(name: str) -> str:
     return f"world/cameras/{name}/image"
 
 
-def method_colors(methods: Sequence[str]) -> dict[str, tuple[int, int, int]]:
-    """A distinct RGB colour per method: fixed for the known methods, then a cycle."""
-    extra = iter(_EXTRA_COLORS * (1 + len(methods) // len(_EXTRA_COLORS)))
-    return {m: METHOD_COLORS.get(m) or next(extra) for m in methods}
-
-
-def camera_color(index: int) -> tuple[int, int, int]:
-    return CAMERA_COLORS[index % len(CAMERA_COLORS)]
+method_colors = palette.method_colors
+camera_color = palette.camera_color
 
 
 class Clock:

@@ -10,6 +10,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 
 import numpy as np
+import rerun as rr
 import rerun.blueprint as rrb
 
 from pslog.records import Track
@@ -34,7 +35,7 @@ _PLOT_TITLES = {
     "ray_shift_mm": "shift onto ray, eq. 4 (mm)",
     "std_mm": "position std (mm)",
     "residual_px": "reprojection residual (px)",
-    "detection_rate": "detection rate (%)",
+    "detection_rate": "detection rate (%, last 0.5 s)",
 }
 # 2D overlays live in image space: kept out of the 3D view so it stays readable
 _OVERLAYS = ("detections", "rejected", "epipolar", "typeA")
@@ -51,21 +52,79 @@ def quality_plots(tracks: Mapping[str, Track]) -> dict[str, tuple[str, float]]:
                    for t in tracks.values())}
 
 
+#: rerun's vertical field of view of the 3D eye (re_view_spatial's DEFAULT_FOV_Y), degrees.
+EYE_FOV_Y_DEG = 55.0
+#: Elevation of the default eye above the horizontal, degrees: high enough to see the
+#: floor under the trajectory, low enough to see the arc's height.
+EYE_ELEVATION_DEG = 25.0
+#: Spacing of the 3D view's floor grid, metres.
+GRID_SPACING_M = 0.5
+
+
+#: Width / height of the 3D view the eye is framed for (the default layout's, rounded down:
+#: a wider view only adds margin left and right).
+EYE_ASPECT = 4 / 3
+#: Share of the view's half-height (and half-width) the framed box may fill.
+EYE_FILL = 0.9
+
+
 def default_eye(camera_centers_world: np.ndarray, scene_world: np.ndarray
                 ) -> rrb.EyeControls3D | None:
-    """A 3D viewpoint that frames the scene: from outside the cameras, above and behind
-    their mean position, looking at the centre of ``scene_world`` (n, 3) metres."""
+    """A 3D viewpoint framed on the trajectory and the floor under it.
+
+    The eye looks at the centre of the box holding ``scene_world`` (n, 3) metres (the truth
+    or the tracks) and its shadow on the floor z = 0, from the side: square to the
+    trajectory's main horizontal direction (its arc seen side-on), on the side of the
+    cameras' mean position ``camera_centers_world`` (c, 3) so the view matches what the
+    cameras see, raised by :data:`EYE_ELEVATION_DEG`. Its distance is the smallest at which
+    the box's eight corners, in perspective (rerun's :data:`EYE_FOV_Y_DEG`, a view of
+    :data:`EYE_ASPECT`), lie within :data:`EYE_FILL` of the view's edges. The cameras are
+    left out of the framing: they stand metres away and would shrink the ball's path to a
+    corner. None when there is nothing to frame.
+    """
     scene = np.asarray(scene_world, dtype=np.float64).reshape(-1, 3)
     scene = scene[np.all(np.isfinite(scene), axis=1)]
-    if len(scene) == 0 or len(camera_centers_world) == 0:
+    if len(scene) == 0:
         return None
-    target = 0.5 * (scene.min(axis=0) + scene.max(axis=0))
-    centers = np.asarray(camera_centers_world, dtype=np.float64)
-    away = centers.mean(axis=0)[:2] - target[:2]
-    away = away / np.linalg.norm(away) if np.linalg.norm(away) > 1e-6 else np.array([0.0, -1.0])
-    reach = max(np.max(np.linalg.norm(centers[:, :2] - target[:2], axis=1)), 1.0)
-    position = target + np.array([*(1.3 * reach * away), 0.75 * reach])
-    return rrb.EyeControls3D(position=position, look_target=target, eye_up=(0.0, 0.0, 1.0))
+    lo, hi = scene.min(axis=0), scene.max(axis=0)
+    lo[2] = min(lo[2], 0.0)  # down to the floor
+    # at least 1 m across, so a ball at rest is seen with its surroundings
+    pad = np.maximum(0.5 - 0.5 * (hi - lo), 0.0)
+    lo, hi = lo - pad * [1, 1, 0], hi + pad * [1, 1, 2]
+    target = 0.5 * (lo + hi)
+    # main horizontal direction of the path (principal axis), the eye square to it
+    xy = scene[:, :2] - scene[:, :2].mean(axis=0)
+    if len(scene) >= 2 and np.ptp(xy, axis=0).max() > 1e-6:
+        main = np.linalg.svd(xy, full_matrices=False)[2][0]
+        side = np.array([-main[1], main[0]])
+    else:
+        side = np.array([0.0, -1.0])
+    centers = np.asarray(camera_centers_world, dtype=np.float64).reshape(-1, 3)
+    if len(centers) and float(np.dot(centers.mean(axis=0)[:2] - target[:2], side)) < 0:
+        side = -side
+    elevation = np.radians(EYE_ELEVATION_DEG)
+    back = np.array([*(np.cos(elevation) * side), np.sin(elevation)])  # target -> eye
+    right = np.cross(-back, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, -back)
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                        for z in (lo[2], hi[2])]) - target
+    ty = np.tan(0.5 * np.radians(EYE_FOV_Y_DEG)) * EYE_FILL
+    tx = ty * EYE_ASPECT
+
+    def fits(distance: float) -> bool:
+        depth = distance - corners @ back
+        return bool(np.all(depth > 0) and np.all(np.abs(corners @ right) <= tx * depth)
+                    and np.all(np.abs(corners @ up) <= ty * depth))
+
+    near, far = 0.0, 1.0
+    while not fits(far):
+        near, far = far, 2 * far
+    for _ in range(40):  # bisection to well under a millimetre
+        mid = 0.5 * (near + far)
+        near, far = (near, mid) if fits(mid) else (mid, far)
+    return rrb.EyeControls3D(position=target + far * back, look_target=target,
+                             eye_up=(0.0, 0.0, 1.0))
 
 
 def _trailing(fps_hint: float = 90.0) -> rrb.VisibleTimeRanges:
@@ -81,9 +140,12 @@ def _trailing(fps_hint: float = 90.0) -> rrb.VisibleTimeRanges:
 
 def build_blueprint(camera_names: Sequence[str], methods: Sequence[str], *, has_truth: bool,
                     quality: Mapping[str, tuple[str, float]],
-                    eye: rrb.EyeControls3D | None = None) -> rrb.Blueprint:
+                    eye: rrb.EyeControls3D | None = None,
+                    recorded: bool = True) -> rrb.Blueprint:
     """The default blueprint for a session with these cameras, shown tracks and plots
-    (``quality`` from :func:`quality_plots`, ``eye`` from :func:`default_eye`)."""
+    (``quality`` from :func:`quality_plots`, ``eye`` from :func:`default_eye`).
+    ``recorded`` False (the live view): no ball crops and no summary panel, which only a
+    recorded session has (viewers/panels.py)."""
     trail = _trailing()
     trailing_paths = [f"world/rays/{c}" for c in camera_names]
     for m in methods:
@@ -94,16 +156,33 @@ def build_blueprint(camera_names: Sequence[str], methods: Sequence[str], *, has_
                                   for c in camera_names for o in _OVERLAYS]
     view3d = rrb.Spatial3DView(origin="/world", name="3D (trail 0.5 s)", contents=contents,
                                overrides={p: trail for p in trailing_paths},
-                               eye_controls=eye)
-    cameras = [rrb.Spatial2DView(origin=f"/world/cameras/{c}/image", name=c)
+                               eye_controls=eye,
+                               line_grid=rrb.LineGrid3D(visible=True, spacing=GRID_SPACING_M,
+                                                        plane=rr.components.Plane3D.XY))
+    # each camera: the full frame, and beside it the ball large (viewers/panels.py's crop)
+    cameras = [rrb.Horizontal(rrb.Spatial2DView(origin=f"/world/cameras/{c}/image", name=c),
+                              rrb.Spatial2DView(origin=f"/crops/{c}", name=f"{c} ball"),
+                              column_shares=[2, 1]) if recorded
+               else rrb.Spatial2DView(origin=f"/world/cameras/{c}/image", name=c)
                for c in camera_names]
     plots = (["error_mm"] if has_truth and methods else []) + list(quality) + ["detection_rate"]
-    series = [rrb.TimeSeriesView(origin=f"/plots/{p}", name=_PLOT_TITLES.get(p, p))
-              for p in plots]
+    # a rate lies in 0-100 %: a fixed axis shows a full rate as full, not as a line on a
+    # 99-101 axis, and a drop at its true size
+    axes = {"detection_rate": rrb.ScalarAxis(range=(0.0, 105.0), zoom_lock=True)}
+    series = {p: rrb.TimeSeriesView(origin=f"/plots/{p}", name=_PLOT_TITLES.get(p, p),
+                                    axis_y=axes.get(p))
+              for p in plots}
     legend = rrb.TextDocumentView(origin="/legend", name="legend")
-    timing = rrb.TextDocumentView(origin="/timing", name="camera clocks")
-    top = rrb.Horizontal(view3d, rrb.Vertical(*cameras), column_shares=[3, 1])
-    bottom = rrb.Horizontal(*series, legend, timing)
+    summary = rrb.TextDocumentView(origin="/summary", name="summary: accuracy, colours, clocks")
+    top = rrb.Horizontal(view3d, rrb.Vertical(*cameras), column_shares=[3, 2 if recorded else 1])
+    # at a glance: the error and the detection rate; the method's own quality plots share
+    # one tabbed view (a row of six plots leaves each too narrow to read)
+    first = [series.pop("error_mm")] if "error_mm" in series else []
+    rate = series.pop("detection_rate")
+    own = [rrb.Tabs(*series.values())] if series else []
+    plots_row = [*first, *own, rate]
+    text = rrb.Tabs(summary, legend) if recorded else legend
+    bottom = rrb.Horizontal(*plots_row, text, column_shares=[1] * len(plots_row) + [2])
     return rrb.Blueprint(
         rrb.Vertical(top, bottom, row_shares=[3, 1]),
         rrb.BlueprintPanel(state="collapsed"),

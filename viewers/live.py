@@ -57,8 +57,9 @@ import rerun as rr
 from pslog.errors import InputError
 from pslog.live.sinks import dropped_topic
 from pslog.log import _schemas as S
-from pslog.log.writer import TRACK_COLORS, camera_messages, scene_point
+from pslog.log.writer import camera_messages, scene_point, track_color
 from pslog.motion import BALL_RADIUS
+from pslog.palette import color_name
 from pslog.records import NS
 from pslog.rig import Rig
 
@@ -331,7 +332,7 @@ class RerunLiveSink(_QueuedSink):
         rec.send_blueprint(build_blueprint(
             rig.names, methods, has_truth=False, quality=LIVE_PLOTS,
             eye=default_eye(centers, target[None, :] if target is not None
-                            else np.zeros((0, 3)))))
+                            else np.zeros((0, 3))), recorded=False))
         log_rig(rec, rig, rejected=False)
         for c, cam in enumerate(rig.cameras):
             rec.log(f"plots/detection_rate/{cam.name}",
@@ -355,7 +356,9 @@ class RerunLiveSink(_QueuedSink):
                 static=True)
         rec.log(f"{base}/uncertainty", rr.Points3D.from_fields(colors=[(*color, 48)]),
                 static=True)
-        light = tuple(int(0.5 * (x + 255)) for x in color)
+        # the method's own colour, smaller (a lighter tint would look like a camera's colour,
+        # and translucency renders dark in the web viewer)
+        light = color
         rec.log(f"{base}/predicted", rr.Points3D.from_fields(
             colors=[light], radii=[0.6 * BALL_RADIUS]), static=True)
         rec.log(f"{base}/predicted/velocity", rr.Arrows3D.from_fields(
@@ -366,11 +369,11 @@ class RerunLiveSink(_QueuedSink):
         return color
 
     def _show_legend(self, status: str) -> None:
-        tracks = ", ".join(f"{m} {C.COLOR_NAMES.get(c, str(c))}" for m, c in self._colors.items())
-        names = ("red", "green", "blue", "amber", "purple", "cyan")
-        cameras = ", ".join(f"{n} {names[c % len(names)]}" for c, n in enumerate(self.rig.names))
+        tracks = ", ".join(f"{m} {color_name(c)}" for m, c in self._colors.items())
+        cameras = ", ".join(f"{n} {color_name(C.camera_color(c))}"
+                            for c, n in enumerate(self.rig.names))
         self.rec.log("legend", rr.TextDocument(
-            f"**Live** — {status}\n\n**Tracks**: {tracks or 'none yet'}; light: the state "
+            f"**Live** — {status}\n\n**Tracks**: {tracks or 'none yet'}; small: the state "
             f"predicted to the emit time, arrow: its velocity over {_VELOCITY_ARROW_S:g} s\n\n"
             f"**Cameras** (rays, detections): {cameras}", media_type="text/markdown"),
             static=True)
@@ -602,7 +605,7 @@ class FoxgloveSink(_QueuedSink):
         track.log(msg.SerializeToString(), log_time=t)
         i = self._track_index[method]
         self._track_index[method] = i + 1
-        color = TRACK_COLORS[self._track_methods.index(method) % len(TRACK_COLORS)]
+        color = track_color(method)
         scene.log(scene_point(method, i, t, (x, y, z), color), log_time=t)
 
     def _frame(self, topic: str, d, best_first: bool) -> None:

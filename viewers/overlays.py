@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 import rerun as rr
 
+from pslog import palette
 from pslog.geometry import epipolar_lines, fundamental_matrices
 from pslog.motion import BALL_RADIUS
 
@@ -83,6 +84,16 @@ def log_epipolar(rec, data: ViewData, clock: C.Clock, uv_undistorted: np.ndarray
     return n
 
 
+def hide_construction_labels(rec, camera_names) -> None:
+    """The construction's labels (P(t-1), P(t-2), P^(t)) are stored but not drawn: the
+    points lie within a few millimetres (pixels) of each other and of the ball, so their
+    label boxes would overlap it and each other; they show on hover and in the selection."""
+    for path in ["world/typeA/past", "world/typeA/predicted",
+                 *(f"{C.image_path(c)}/typeA/interpolated" for c in camera_names)]:
+        archetype = rr.Points3D if path.startswith("world/typeA") else rr.Points2D
+        rec.log(path, archetype.from_fields(show_labels=False), static=True)
+
+
 def log_construction(rec, data: ViewData, clock: C.Clock, uv_undistorted: np.ndarray) -> int:
     """The paper's Figure 2 on the partner images and eqs. 2-4 in 3D, per type-A point."""
     con, rig, obs = data.construction, data.session.rig, data.observations
@@ -98,8 +109,11 @@ def log_construction(rec, data: ViewData, clock: C.Clock, uv_undistorted: np.nda
                                                   "points_world")} for p in con.past]
     stack = {k: np.stack([past[0][k], past[1][k]], axis=1) for k in past[0]}  # (k, 2, ...)
     F = fundamental_matrices(rig.cameras)
+    hide_construction_labels(rec, rig.names)
     labels = np.array(["P(t-1)", "P(t-2)"])
-    yellow, magenta = (255, 230, 0), (255, 0, 255)
+    # their own colours (pslog.palette), used by no method and no camera: the interpolation
+    # side (eq. 1, eq. 2) in cyan, the snap / correction side (step 2, eq. 4) in yellow
+    interp_color, snap_color = palette.CONSTRUCTION_COLOR, palette.SNAP_COLOR
     for c, cam in enumerate(rig.cameras):
         mine = stack["partner"] == c  # (k, 2): constructions drawn on this camera's image
         lengths = C.lengths_of(mine)
@@ -108,19 +122,22 @@ def log_construction(rec, data: ViewData, clock: C.Clock, uv_undistorted: np.nda
         snapped = cam.distort(stack["uv_snapped"][mine])
         prev_uv, next_uv = obs.uv[stack["prev_row"][mine]], obs.uv[stack["next_row"][mine]]
         base = f"{C.image_path(cam.name)}/typeA"
+        # labels kept for the selection panel, drawn only on hover/selection: several
+        # labels at nearly the same pixel would overlap in one box
         C.send(rec, f"{base}/interpolated", clock, t, f, rr.Points2D.columns(
-            positions=C.image_space(interp), labels=labels[which], colors=[yellow] * len(which),
+            positions=C.image_space(interp), labels=labels[which],
+            colors=[interp_color] * len(which),
             radii=np.full(len(which), -4.0)).partition(lengths))
         C.send(rec, f"{base}/snapped", clock, t, f, rr.Points2D.columns(
-            positions=C.image_space(snapped), colors=[magenta] * len(which),
+            positions=C.image_space(snapped), colors=[snap_color] * len(which),
             radii=np.full(len(which), -4.0)).partition(lengths))
         bracket = np.stack([prev_uv, interp, next_uv], axis=1).reshape(-1, 2)
         C.send(rec, f"{base}/bracket", clock, t, f, rr.LineStrips2D.columns(
-            strips=C.image_space(bracket).reshape(-1, 3, 2), colors=[yellow] * len(which),
+            strips=C.image_space(bracket).reshape(-1, 3, 2), colors=[interp_color] * len(which),
             radii=np.full(len(which), -1.0)).partition(lengths))
         snap = np.stack([interp, snapped], axis=1).reshape(-1, 2)
         C.send(rec, f"{base}/snap", clock, t, f, rr.LineStrips2D.columns(
-            strips=C.image_space(snap).reshape(-1, 2, 2), colors=[magenta] * len(which),
+            strips=C.image_space(snap).reshape(-1, 2, 2), colors=[snap_color] * len(which),
             radii=np.full(len(which), -1.5)).partition(lengths))
         # the epipolar line of the observed point, which the interpolated point snaps to
         observed = stack["row"][mine]
@@ -129,7 +146,7 @@ def log_construction(rec, data: ViewData, clock: C.Clock, uv_undistorted: np.nda
         shown = np.zeros(mine.shape, dtype=bool)
         shown[mine] = visible
         C.send(rec, f"{base}/epipolar", clock, t, f, rr.LineStrips2D.columns(
-            strips=strips, colors=[magenta] * int(visible.sum()),
+            strips=strips, colors=[snap_color] * int(visible.sum()),
             radii=np.full(int(visible.sum()), -1.0)).partition(C.lengths_of(shown)))
 
     # 3D: the two pseudo-stereo points, the linear prediction (eq. 2) and eq. 4's correction
@@ -138,16 +155,16 @@ def log_construction(rec, data: ViewData, clock: C.Clock, uv_undistorted: np.nda
     final = con.points_world[events]
     C.send(rec, "world/typeA/past", clock, t, f, rr.Points3D.columns(
         positions=p_world.reshape(-1, 3), labels=np.tile(labels, len(events)),
-        colors=[yellow] * (2 * len(events)),
+        colors=[interp_color] * (2 * len(events)),
         radii=np.full(2 * len(events), 0.4 * BALL_RADIUS)).partition(np.full(len(events), 2)))
     C.send(rec, "world/typeA/predicted", clock, t, f, rr.Points3D.columns(
-        positions=predicted, labels=["P^(t)"] * len(events), colors=[magenta] * len(events),
+        positions=predicted, labels=["P^(t)"] * len(events), colors=[interp_color] * len(events),
         radii=np.full(len(events), 0.4 * BALL_RADIUS)))
     extrapolation = np.stack([p_world[:, 1], p_world[:, 0], predicted], axis=1)
     correction = np.stack([predicted, final], axis=1)
     C.send(rec, "world/typeA/prediction", clock, t, f, rr.LineStrips3D.columns(
-        strips=extrapolation, colors=[yellow] * len(events),
+        strips=extrapolation, colors=[interp_color] * len(events),
         radii=np.full(len(events), -1.0)))
     C.send(rec, "world/typeA/correction", clock, t, f, rr.LineStrips3D.columns(
-        strips=correction, colors=[magenta] * len(events), radii=np.full(len(events), -1.5)))
+        strips=correction, colors=[snap_color] * len(events), radii=np.full(len(events), -1.5)))
     return len(events)

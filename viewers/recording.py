@@ -18,9 +18,11 @@ Entity paths mirror the transform tree (world z up, metres):
 ``plots/error_mm/<method>``                 distance to truth, mm
 ``plots/<quality>/<method>``                snap_px, ray_miss_mm, ray_shift_mm, std_mm;
                                             residual_px (smooth)
-``plots/detection_rate/<cam>``              % of frames with a detection, last second
+``plots/detection_rate/<cam>``              % of frames with a detection, last 0.5 s
 ``events``, ``legend``                      session notes (TextLog), colour legend
 ``timing``                                  each camera's clock model (TextDocument)
+``summary``                                 clocks and each method's accuracy (panels.py)
+``crops/<cam>`` (``/detection``)            the ball large: a crop around the detection
 ==========================================  =============================================
 
 Timelines: ``capture_time`` (the session clock, integer ns) and ``frame`` (frame index).
@@ -34,6 +36,7 @@ from pathlib import Path
 import numpy as np
 import rerun as rr
 
+from pslog import palette
 from pslog.errors import PslogError
 from pslog.log import iter_images
 from pslog.motion import BALL_RADIUS
@@ -45,6 +48,7 @@ from ._columns import camera_path, image_path
 from .blueprint import build_blueprint, default_eye, quality_plots
 from .data import UNBOUNDED_NS, FramesChoice, ViewData, load_view_data
 from .overlays import log_construction, log_detections, log_epipolar
+from .panels import CropLogger, log_summary
 from .rrd_file import rrd_file
 
 APPLICATION_ID = "pslog"
@@ -52,7 +56,7 @@ _MEDIA_TYPES = {"jpeg": "image/jpeg", "jpg": "image/jpeg", "png": "image/png"}
 _IMAGE_BATCH_BYTES = 32 << 20  # send images in batches of about this many bytes
 _RAY_FALLBACK_M = 5.0  # rays that do not reach the floor are drawn this long
 _TRAIL_GAP_S = 0.1  # no trail segment across a gap longer than this
-_RATE_WINDOW_S = 1.0  # detection rate over the last second
+_RATE_WINDOW_S = 0.5  # detection rate over the last half second
 
 
 def build_recording(session_paths: str | Path | Sequence[str | Path], *,
@@ -123,9 +127,11 @@ def log_view(rec: rr.RecordingStream, data: ViewData, frames: FramesChoice) -> d
     counts: dict[str, int] = {}
     colors = C.method_colors(list(data.tracks))
     quality = quality_plots(data.tracks)
-    scene = (session.truth.position_world if session.truth is not None and len(session.truth)
-             else np.concatenate([t.position_world for t in data.tracks.values()] or
-                                 [np.zeros((0, 3))]))
+    # the eye frames what is shown: the truth (else the tracks) inside the time window
+    scene = (session.truth.position_world[data.in_window(session.truth.time_ns)]
+             if session.truth is not None and len(session.truth)
+             else np.concatenate([t.position_world[data.in_window(t.time_ns)]
+                                  for t in data.tracks.values()] or [np.zeros((0, 3))]))
     rec.send_blueprint(build_blueprint(
         rig.names, list(data.tracks), quality=quality,
         has_truth=session.truth is not None and len(session.truth) > 0,
@@ -187,7 +193,7 @@ def _log_static(rec, data: ViewData, colors, quality) -> None:
     ball = BALL_RADIUS
     for method, color in colors.items():
         rec.log(f"world/tracks/{method}", rr.Points3D.from_fields(
-            colors=[color], radii=[ball]), static=True)
+            colors=[color], radii=[0.5 * ball]), static=True)  # gaps show the truth
         rec.log(f"world/tracks/{method}/trail", rr.LineStrips3D.from_fields(
             colors=[color], radii=[-2.5]), static=True)
         # each point's uncertainty: a translucent sphere of radius 2 std_m (issue 10)
@@ -198,17 +204,19 @@ def _log_static(rec, data: ViewData, colors, quality) -> None:
         for plot in quality:
             rec.log(f"plots/{plot}/{method}", rr.SeriesLines(colors=[color], names=[method]),
                     static=True)
-    rec.log("world/truth", rr.Points3D.from_fields(colors=[C.TRUTH_COLOR], radii=[0.3 * ball]),
+    rec.log("world/truth", rr.Points3D.from_fields(colors=[C.TRUTH_COLOR], radii=[0.35 * ball]),
             static=True)
     rec.log("world/truth/trail", rr.LineStrips3D.from_fields(colors=[C.TRUTH_COLOR],
-                                                             radii=[-0.75]), static=True)
+                                                             radii=[-2.0]), static=True)
     for c, name in enumerate(rig.names):
         rec.log(f"plots/detection_rate/{name}",
                 rr.SeriesLines(colors=[C.camera_color(c)], names=[name]), static=True)
     rec.log("legend", rr.TextDocument(_legend(data, colors), media_type="text/markdown"),
             static=True)
-    rec.log("timing", rr.TextDocument(timing_text(data.session), media_type="text/markdown"),
-            static=True)
+    timing = timing_text(data.session)
+    rec.log("timing", rr.TextDocument(timing, media_type="text/markdown"), static=True)
+    # the summary panel: accuracy, colours, clocks
+    log_summary(rec, data, timing, _legend(data, colors))
 
 
 def timing_text(session) -> str:
@@ -254,24 +262,28 @@ def timing_text(session) -> str:
 
 
 def _legend(data: ViewData, colors) -> str:
-    tracks = [f"{m} {C.COLOR_NAMES.get(c, str(c))}" for m, c in colors.items()]
+    name = palette.color_name
+    tracks = [f"{m} {name(c)}" for m, c in colors.items()]
     if data.session.truth is not None:
-        tracks.append("truth white")
-    names = {(255, 90, 90): "red", (80, 210, 120): "green", (90, 150, 255): "blue",
-             (255, 200, 60): "amber", (200, 110, 255): "purple", (60, 220, 220): "cyan"}
-    cameras = [f"{n} {names[C.camera_color(c)]}" for c, n in enumerate(data.session.rig.names)]
+        tracks.append(f"truth {name(C.TRUTH_COLOR)}")
+    if any("std_m" in t.quality for t in data.tracks.values()):
+        tracks.append("the dim sphere around a point: 2 σ of its position")
+    cameras = [f"{n} {name(C.camera_color(c))}" for c, n in enumerate(data.session.rig.names)]
     lines = [f"**Tracks**: {', '.join(tracks)}", "",
-             f"**Cameras** (rays, detections, epipolar lines): {', '.join(cameras)}; "
-             "grey: rejected candidates"]
+             f"**Cameras** (rays, detections, epipolar lines, detection rate): "
+             f"{', '.join(cameras)}; {name(C.REJECTED_COLOR)}: rejected candidates"]
     for method, rej in list(data.rejections.items())[:1]:
         reasons = ", ".join(f"{k} {v}" for k, v in rej.counts().items() if v) or "none"
         lines += ["", f"**Gating** ({method}): {len(rej)} candidates rejected (grey points "
                   f"in the images; {reasons})"]
     if data.construction is not None:
-        lines += ["", "**Figure 2** (typeA, drawn on the partner camera's image): yellow, the "
-                  "partner's two detections around the instant and the interpolated point "
-                  "(eq. 1); magenta, the snap onto the epipolar line (step 2). In 3D: "
-                  "P(t-1), P(t-2), the prediction P^ (eq. 2) and its move onto the ray (eq. 4)."]
+        lines += ["", f"**Figure 2** (typeA, drawn on the partner camera's image): "
+                  f"{name(palette.CONSTRUCTION_COLOR)}, the partner's two detections around "
+                  "the instant and the interpolated point (eq. 1); "
+                  f"{name(palette.SNAP_COLOR)}, the snap onto the epipolar line (step 2). "
+                  f"In 3D: {name(palette.CONSTRUCTION_COLOR)}, P(t-1), P(t-2) and the "
+                  f"prediction P^(t) (eq. 2); {name(palette.SNAP_COLOR)}, its move onto the "
+                  "ray (eq. 4). Hover a point for its label."]
     return "\n".join(lines)
 
 
@@ -437,6 +449,8 @@ def _log_images(rec, data: ViewData, clock: C.Clock, frames: FramesChoice) -> in
     pending: dict[int, list] = {}
     size = 0
     n = 0
+    # the ball large: a crop around the detection, beside each full frame (viewers/panels.py)
+    crops = CropLogger(rec, data, clock, _images_per_camera(data, frames))
 
     def flush() -> int:
         sent = 0
@@ -447,6 +461,7 @@ def _log_images(rec, data: ViewData, clock: C.Clock, frames: FramesChoice) -> in
                 blob=[i.data for i in items],
                 media_type=[_MEDIA_TYPES[i.format.lower()] for i in items]))
         pending.clear()
+        crops.flush()
         return sent
 
     start_ns = None if lo <= -UNBOUNDED_NS else lo
@@ -457,8 +472,17 @@ def _log_images(rec, data: ViewData, clock: C.Clock, frames: FramesChoice) -> in
         if not lo <= image.time_ns < hi:
             continue
         pending.setdefault(image.camera, []).append(image)
+        crops.add(image)
         size += len(image.data)
         if size > _IMAGE_BATCH_BYTES:
             n += flush()
             size = 0
     return n + flush()
+
+
+def _images_per_camera(data: ViewData, frames: FramesChoice) -> int:
+    """Most frames of one camera in the window (an upper bound on its images to show)."""
+    det = data.session.detections
+    inside = data.in_window(det.frame_time_ns)
+    counts = np.bincount(det.frame_camera[inside], minlength=len(data.session.rig))
+    return int(counts.max(initial=0)) // max(frames.every, 1)

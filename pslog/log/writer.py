@@ -27,6 +27,7 @@ from ..outputs import (
     partial_path,
     write_error,
 )
+from ..palette import method_color, unit_rgb
 from ..records import Detections, Track, Truth
 from ..rig import Rig
 from . import _schemas as S
@@ -40,9 +41,11 @@ _TRACK_SPHERE_M = 0.043
 #: How long each fused track point stays visible in Foxglove's 3D panel (a short trail).
 _TRACK_LIFETIME_NS = 500_000_000
 _LOG_LEVELS = {"debug": 1, "info": 2, "warning": 3, "error": 4, "fatal": 5}
-#: RGB colour of each track method in Foxglove, by order of first appearance in the file
-TRACK_COLORS = ((0.9, 0.3, 0.1), (0.1, 0.6, 0.9), (0.2, 0.8, 0.3), (0.8, 0.2, 0.8),
-                (0.9, 0.8, 0.1))
+
+
+def track_color(method: str) -> tuple[float, float, float]:
+    """Foxglove (r, g, b) in [0, 1] of a method's track: the viewers' colour (pslog.palette)."""
+    return unit_rgb(method_color(method))
 
 
 def _locked(method):
@@ -465,7 +468,7 @@ class SessionWriter:
             raise InputError(f"track method must be a non-empty name without '/', got {method!r}")
         if method not in self._track_methods:
             self._track_methods.append(method)
-        color = TRACK_COLORS[self._track_methods.index(method) % len(TRACK_COLORS)]
+        color = track_color(method)
         channel = self._channel(S.track_topic(method), S.TrackPoint)
         scene_channel = self._channel(S.track_scene_topic(method), S.SceneUpdate)
         n = len(track)
