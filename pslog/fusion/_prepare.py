@@ -97,6 +97,28 @@ class Prepared:
         d /= np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
         return d
 
+    @cached_property
+    def observed_rays(self) -> np.ndarray:
+        """:meth:`rays_from_undistorted` of every observation's own undistorted pixel (n, 3),
+        made once (type A needs each row's ray several times; elementwise, so a row of it
+        has the bits of a call on that row alone)."""
+        return self.rays_from_undistorted(self.obs.camera, self.uv_undistorted)
+
+    @cached_property
+    def observed_direction_jacobians(self) -> np.ndarray:
+        """:func:`direction_jacobian` of every observation at its own undistorted pixel,
+        (3, 2, n), made once (elementwise: a row's entries are those of a call on it alone)."""
+        return direction_jacobian(self, self.obs.camera, self.uv_undistorted)
+
+    def row_brackets(self, camera: int) -> tuple[np.ndarray, np.ndarray]:
+        """:func:`bracket` of ``camera`` at every observation's time, (n,) each, made once
+        per camera (type A brackets the same rows at several depths); a row of it is
+        :func:`bracket` at that row's time."""
+        cache = self.__dict__.setdefault("_row_brackets", {})
+        if camera not in cache:
+            cache[camera] = bracket(self, camera, self.obs.time_ns)
+        return cache[camera]
+
     def _cols(self, name: str) -> np.ndarray:
         """Per-camera (3, 3) matrices ``name`` as (9, m) columns (cached)."""
         cache = self.__dict__.setdefault("_columns", {})

@@ -56,7 +56,6 @@ from ._prepare import (
     MIN_RAY_ANGLE_DEG,
     PARALLEL,
     Prepared,
-    bracket,
     camera_mask,
     covariance,
     covariance_columns,
@@ -129,18 +128,20 @@ class PseudoStereoPoints:
 
 def _pseudo_from_pixels(prep: Prepared, cam_obs: np.ndarray, partner: np.ndarray,
                         uv_obs: np.ndarray, uv_prev: np.ndarray, uv_next: np.ndarray,
-                        weight: np.ndarray):
+                        weight: np.ndarray, dir_obs: np.ndarray | None = None):
     """Steps 1-3 from undistorted pixels (k, 2): the observed one and the partner's bracket.
 
     Returns uv_interpolated, uv_snapped, snap_px, dir_obs, dir_partner, points, miss, s, k
-    (``s``, ``k``: the ray parameters of the crossing, > 0 in front of both cameras)."""
+    (``s``, ``k``: the ray parameters of the crossing, > 0 in front of both cameras).
+    ``dir_obs`` (k, 3): the observed pixels' rays if already known (the same bits)."""
     # eq. (1): linear interpolation of the partner's 2D track to the observation's time
     uv_interp = (1.0 - weight)[:, None] * uv_prev + weight[:, None] * uv_next
     # step 2: nearest point on the epipolar line of the observed point, in the partner image
     lines = epipolar_lines_cols(prep.fundamental_t(cam_obs, partner), uv_obs)
     uv_snapped, snap_px = closest_points_on_lines(lines, uv_interp)
     # step 3: crossing point of the observed ray and the snapped point's ray
-    dir_obs = prep.rays_from_undistorted(cam_obs, uv_obs)
+    if dir_obs is None:
+        dir_obs = prep.rays_from_undistorted(cam_obs, uv_obs)
     dir_partner = prep.rays_from_undistorted(partner, uv_snapped)
     points, miss, s, k = crossing_of_rays(prep.centers[cam_obs], dir_obs,
                                           prep.centers[partner], dir_partner)
@@ -163,7 +164,8 @@ def pseudo_stereo_points(
     prev_row = np.zeros(n_rows, dtype=np.int64)
     next_row = np.zeros(n_rows, dtype=np.int64)
     for d in range(n_cams):  # loop over cameras, vectorized over rows
-        prev, nxt = bracket(prep, d, t_row)
+        prev, nxt = prep.row_brackets(d)
+        prev, nxt = prev[rows], nxt[rows]
         ok = (prev >= 0) & (nxt >= 0) & (cam_row != d)
         end = time_ns[np.maximum(nxt, 0)]
         span = end - time_ns[np.maximum(prev, 0)]
@@ -186,7 +188,8 @@ def pseudo_stereo_points(
     with np.errstate(invalid="ignore"):
         uv_interp, uv_snapped, snap_px, dir_obs, dir_partner, points, miss, s, k = (
             _pseudo_from_pixels(prep, cam_row, partner_idx, prep.uv_undistorted[rows],
-                                prep.uv_undistorted[prev_row], prep.uv_undistorted[next_row], w))
+                                prep.uv_undistorted[prev_row], prep.uv_undistorted[next_row], w,
+                                prep.observed_rays[rows]))
         # both directions are unit vectors; a line has no sense, hence the absolute value
         cos_angle = np.abs(_dot(dir_obs[:, 0], dir_obs[:, 1], dir_obs[:, 2],
                                 dir_partner[:, 0], dir_partner[:, 1], dir_partner[:, 2]))
@@ -434,7 +437,7 @@ def _type_a_covariance(prep: Prepared, events: np.ndarray, predicted: np.ndarray
     ``δr`` of the newest ray moves P' by ``((rᵀq) I + r qᵀ) δr`` with ``q = P̂ - T``."""
     r = prep.ray_dir[events].T.copy()  # (3, k)
     q = (predicted - prep.ray_origin[events]).T
-    G = direction_jacobian(prep, prep.obs.camera[events], prep.uv_undistorted[events])
+    G = np.take(prep.observed_direction_jacobians, events, axis=2)
     newest = (r[0] * q[0] + r[1] * q[1] + r[2] * q[2]) * G
     newest += r[:, None] * dot_t(q, G)
     # eq. (2): P̂ = (1 + ratio) P_{t-1} - ratio P_{t-2}
@@ -500,7 +503,7 @@ def _pseudo_jacobians(prep: Prepared, p: PseudoStereoPoints, cam_obs: np.ndarray
     C2 = np.take(prep.centers.T, partner, axis=1)
     s1 = (P[0] - C1[0]) * d1[0] + (P[1] - C1[1]) * d1[1] + (P[2] - C1[2]) * d1[2]
     s2 = (P[0] - C2[0]) * d2[0] + (P[1] - C2[1]) * d2[1] + (P[2] - C2[2]) * d2[2]
-    J_obs = r_a_inv(direction_jacobian(prep, cam_obs, uv_obs), s1)
+    J_obs = r_a_inv(np.take(prep.observed_direction_jacobians, p.row, axis=2), s1)
     J_snapped = r_a_inv(direction_jacobian(prep, partner, p.uv_snapped), s2)
     # the snap u_s = u_i - s n onto the line l = F (u_o, v_o, 1) = (a, l3), n = a / |a|,
     # s = (a·u_i + l3) / |a|; a move of u_o changes l by F[:, :2] δ, which moves u_s by
@@ -552,6 +555,8 @@ def _gather(computed: list[tuple[int, np.ndarray, PseudoStereoPoints]], events: 
         if n_mine == 0:
             continue
         if n_mine == len(events):  # one depth for every event (the usual P_{t-1}): a take
+            if len(rows_k) == len(events):  # (events ⊆ rows_k, both sorted: the same rows)
+                return points_k
             where = np.searchsorted(rows_k, events)
             return PseudoStereoPoints(**{f: getattr(points_k, f)[where] for f in fields})
         if not out:
