@@ -386,6 +386,29 @@ def direction_jacobian(prep: Prepared, camera: np.ndarray, uv: np.ndarray) -> np
     return M
 
 
+def direction_jacobian_along(prep: Prepared, camera: np.ndarray, uv: np.ndarray,
+                             v: np.ndarray) -> np.ndarray:
+    """``vᵀ`` :func:`direction_jacobian` for vectors ``v`` (3, k): (2, k), without the
+    (3, 2, k) Jacobian. With ``M = Rᵀ K⁻¹[:, :2]``, ``r = Rᵀ K⁻¹ (u, v, 1)``:
+    ``vᵀ (I - d dᵀ) M / |r| = (vᵀM - (vᵀr / |r|²) rᵀM) / |r|`` (equal to rounding)."""
+    M = _per_point(prep._rt_k_inv_cols, camera)  # (9, k), M[3 i + j] = (Rᵀ K⁻¹)[i, j]
+    u, w = uv[:, 0], uv[:, 1]
+    r = M[0::3] * u
+    r += M[1::3] * w
+    r += M[2::3]
+    norm2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
+    vM = v[0] * M[0:2]
+    vM += v[1] * M[3:5]
+    vM += v[2] * M[6:8]
+    rM = r[0] * M[0:2]
+    rM += r[1] * M[3:5]
+    rM += r[2] * M[6:8]
+    rM *= (v[0] * r[0] + v[1] * r[1] + v[2] * r[2]) / norm2
+    vM -= rM
+    vM /= np.sqrt(norm2)
+    return vM
+
+
 def dot_t(v: np.ndarray, J: np.ndarray) -> np.ndarray:
     """``vᵀ J`` of component-major (3, k) vectors and (3, 2, k) matrices: (2, k)."""
     out = v[0] * J[0]
@@ -455,13 +478,23 @@ def merged_slots(rows: np.ndarray) -> tuple[list[tuple[int, int, np.ndarray]], n
     first slot), in order; also returns the (k, n_slots) mask of the slots merged away."""
     n_slots = rows.shape[1]
     merges = []
-    taken = np.zeros(rows.shape, dtype=bool)  # a later slot merged into an earlier one
+    # on (k,) columns, not strided columns of (k, n_slots): numpy is slow on short axes
+    cols = [np.ascontiguousarray(rows[:, s]) for s in range(n_slots)]
+    free = [np.ones(len(rows), dtype=bool) for _ in range(n_slots)]  # not merged away
     for s in range(n_slots):
+        # (free[s] no longer changes: only later slots are merged away from here on)
+        open_s = free[s] & (cols[s] >= 0)
+        if not open_s.any():
+            continue
         for t in range(s + 1, n_slots):
-            same = (rows[:, t] == rows[:, s]) & (rows[:, s] >= 0) & ~taken[:, t] & ~taken[:, s]
-            if np.any(same):
+            same = cols[t] == cols[s]
+            same &= open_s
+            same &= free[t]
+            if same.any():
                 merges.append((s, t, same))
-                taken[same, t] = True
+                free[t] &= ~same
+    taken = np.stack(free, axis=1)  # a later slot merged into an earlier one
+    np.logical_not(taken, out=taken)
     return merges, taken
 
 

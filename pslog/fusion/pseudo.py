@@ -59,7 +59,7 @@ from ._prepare import (
     camera_mask,
     covariance,
     covariance_columns,
-    direction_jacobian,
+    direction_jacobian_along,
     dot_t,
     finite_difference_jacobians,
     finite_rows,
@@ -488,23 +488,23 @@ def _pseudo_jacobians(prep: Prepared, p: PseudoStereoPoints, cam_obs: np.ndarray
     r_d1 = (r[0] * d1[0] + r[1] * d1[1] + r[2] * d1[2]) * scale
     r_d2 = (r[0] * d2[0] + r[1] * d2[1] + r[2] * d2[2]) * scale
 
-    def r_a_inv(G, size):
-        """size rᵀ A⁻¹ G for A = 2 I - d1 d1ᵀ - d2 d2ᵀ (Woodbury: A⁻¹ = (I + D M⁻¹ Dᵀ) / 2
-        with D = [d1 d2], M = [[1, -c], [-c, 1]], c = d1·d2)."""
-        a, b = dot_t(d1, G), dot_t(d2, G)
-        out = 0.5 * dot_t(r, G)
-        out += r_d1 * (a + cos * b)
-        out += r_d2 * (cos * a + b)
-        out *= size
-        return out
+    # size rᵀ A⁻¹ G for A = 2 I - d1 d1ᵀ - d2 d2ᵀ (Woodbury: A⁻¹ = (I + D M⁻¹ Dᵀ) / 2
+    # with D = [d1 d2], M = [[1, -c], [-c, 1]], c = d1·d2) is size wᵀ G with the one vector
+    # w = A⁻¹ r = r / 2 + (r_d1 + c r_d2) d1 + (c r_d1 + r_d2) d2 (3, k), shared by both rays
+    w = 0.5 * r
+    w += (r_d1 + cos * r_d2) * d1
+    w += (cos * r_d1 + r_d2) * d2
+
 
     P = p.points_world.T
     C1 = np.take(prep.centers.T, cam_obs, axis=1)
     C2 = np.take(prep.centers.T, partner, axis=1)
     s1 = (P[0] - C1[0]) * d1[0] + (P[1] - C1[1]) * d1[1] + (P[2] - C1[2]) * d1[2]
     s2 = (P[0] - C2[0]) * d2[0] + (P[1] - C2[1]) * d2[1] + (P[2] - C2[2]) * d2[2]
-    J_obs = r_a_inv(np.take(prep.observed_direction_jacobians, p.row, axis=2), s1)
-    J_snapped = r_a_inv(direction_jacobian(prep, partner, p.uv_snapped), s2)
+    J_obs = dot_t(w, np.take(prep.observed_direction_jacobians, p.row, axis=2))
+    J_obs *= s1
+    J_snapped = direction_jacobian_along(prep, partner, p.uv_snapped, w)
+    J_snapped *= s2
     # the snap u_s = u_i - s n onto the line l = F (u_o, v_o, 1) = (a, l3), n = a / |a|,
     # s = (a·u_i + l3) / |a|; a move of u_o changes l by F[:, :2] δ, which moves u_s by
     # -n ((u_sᵀ da + dl3) / |a|) - s (I - n nᵀ) da / |a|
