@@ -110,6 +110,20 @@ class Prepared:
         (3, 2, n), made once (elementwise: a row's entries are those of a call on it alone)."""
         return direction_jacobian(self, self.obs.camera, self.uv_undistorted)
 
+    @cached_property
+    def previous_instant(self) -> np.ndarray:
+        """(n,) int64, the latest row of the instant before each row's (a strictly earlier
+        time; -1: none): ``searchsorted(time_ns, time_ns, "left") - 1``, in one pass over the
+        sorted times."""
+        time_ns = self.obs.time_ns
+        n = len(time_ns)
+        start = np.ones(n, dtype=bool)  # the first row of its instant
+        np.not_equal(time_ns[1:], time_ns[:-1], out=start[1:])
+        first = np.where(start, np.arange(n), 0)
+        np.maximum.accumulate(first, out=first)
+        first -= 1
+        return first
+
     def row_brackets(self, camera: int) -> tuple[np.ndarray, np.ndarray]:
         """:func:`bracket` of ``camera`` at every observation's time, (n,) each, made once
         per camera (type A brackets the same rows at several depths); a row of it is
@@ -291,7 +305,7 @@ def invalid_points(prep: Prepared, points: np.ndarray, used: np.ndarray,
             continue
         rows = None if n_mine == k else np.flatnonzero(mine)  # (None: every point)
         cam = prep.cameras[c]
-        in_cam = (points if rows is None else points[rows]) @ cam.R.T + cam.t
+        in_cam = (points if rows is None else np.take(points, rows, axis=0)) @ cam.R.T + cam.t
         z = in_cam[:, 2]
         behind = z <= 1e-9
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -320,7 +334,8 @@ def reprojection_px(prep: Prepared, points: np.ndarray, camera: np.ndarray,
         rows = np.flatnonzero(camera == c)
         if len(rows) == 0:
             continue
-        out[rows] = reprojection_one(prep, c, points[rows], uv_undistorted[rows])
+        out[rows] = reprojection_one(prep, c, np.take(points, rows, axis=0),
+                                     np.take(uv_undistorted, rows, axis=0))
     return out
 
 

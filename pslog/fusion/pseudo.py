@@ -155,8 +155,8 @@ def pseudo_stereo_points(
     global row ``not_after_row`` (k,) — steps 1-3 of the paper's section 2.2."""
     obs, n_cams = prep.obs, len(prep.centers)
     time_ns = obs.time_ns
-    t_row = time_ns[rows]
-    cam_row = obs.camera[rows]
+    t_row = np.take(time_ns, rows)
+    cam_row = np.take(obs.camera, rows)
     n_rows = len(rows)
     best_span = np.full(n_rows, 2**62)  # "none yet", far from int64 overflow in the tie test
     best_end = np.full(n_rows, np.iinfo(np.int64).min)
@@ -165,10 +165,10 @@ def pseudo_stereo_points(
     next_row = np.zeros(n_rows, dtype=np.int64)
     for d in range(n_cams):  # loop over cameras, vectorized over rows
         prev, nxt = prep.row_brackets(d)
-        prev, nxt = prev[rows], nxt[rows]
+        prev, nxt = np.take(prev, rows), np.take(nxt, rows)
         ok = (prev >= 0) & (nxt >= 0) & (cam_row != d)
-        end = time_ns[np.maximum(nxt, 0)]
-        span = end - time_ns[np.maximum(prev, 0)]
+        end = np.take(time_ns, np.maximum(nxt, 0))
+        span = end - np.take(time_ns, np.maximum(prev, 0))
         ok &= (nxt <= not_after_row) & (span <= max_gap_ns)
         better = ok & ((span < best_span - _SPAN_TIE_NS)
                        | ((span <= best_span + _SPAN_TIE_NS) & (end > best_end)))
@@ -181,15 +181,17 @@ def pseudo_stereo_points(
     partner_idx = np.maximum(partner, 0)
 
     # eq. (1)'s weight from integer capture times: the same for any window of the session
-    span_ns = time_ns[next_row] - time_ns[prev_row]
+    t_prev = np.take(time_ns, prev_row)
+    span_ns = np.take(time_ns, next_row) - t_prev
     with np.errstate(invalid="ignore", divide="ignore"):
-        w = np.where(span_ns > 0, (t_row - time_ns[prev_row]) / np.where(span_ns > 0, span_ns, 1),
-                     0.0)
+        w = np.where(span_ns > 0, (t_row - t_prev) / np.where(span_ns > 0, span_ns, 1), 0.0)
+    uv_row = np.take(prep.uv_undistorted, rows, axis=0)
     with np.errstate(invalid="ignore"):
         uv_interp, uv_snapped, snap_px, dir_obs, dir_partner, points, miss, s, k = (
-            _pseudo_from_pixels(prep, cam_row, partner_idx, prep.uv_undistorted[rows],
-                                prep.uv_undistorted[prev_row], prep.uv_undistorted[next_row], w,
-                                prep.observed_rays[rows]))
+            _pseudo_from_pixels(prep, cam_row, partner_idx, uv_row,
+                                np.take(prep.uv_undistorted, prev_row, axis=0),
+                                np.take(prep.uv_undistorted, next_row, axis=0), w,
+                                np.take(prep.observed_rays, rows, axis=0)))
         # both directions are unit vectors; a line has no sense, hence the absolute value
         cos_angle = np.abs(_dot(dir_obs[:, 0], dir_obs[:, 1], dir_obs[:, 2],
                                 dir_partner[:, 0], dir_partner[:, 1], dir_partner[:, 2]))
@@ -198,11 +200,12 @@ def pseudo_stereo_points(
         dir_interp = prep.rays_from_undistorted(partner_idx, uv_interp)
         unsnapped, miss_unsnapped, _, _ = crossing_of_rays(
             prep.centers[cam_row], dir_obs, prep.centers[partner_idx], dir_interp)
-    residual_obs = reprojection_px(prep, unsnapped, cam_row, prep.uv_undistorted[rows])
+    residual_obs = reprojection_px(prep, unsnapped, cam_row, uv_row)
     residual_partner = reprojection_px(prep, unsnapped, partner_idx, uv_interp)
-    used = np.zeros((n_rows, n_cams), dtype=bool)
-    used[np.arange(n_rows), cam_row] = True
-    used[np.arange(n_rows), partner_idx] = True
+    used = np.empty((n_rows, n_cams), dtype=bool, order="F")  # (contiguous columns)
+    for c in range(n_cams):
+        np.equal(cam_row, c, out=used[:, c])
+        used[:, c] |= partner_idx == c
     finite = finite_rows(points)
     flags = invalid_points(prep, points, used, finite)
     with np.errstate(invalid="ignore"):
@@ -276,7 +279,7 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5,
         pending = targets[second[targets] < 0] if k else targets.copy()
         if len(pending) == 0:
             break
-        b = np.searchsorted(time_ns, time_ns[np.maximum(before[pending], 0)], side="left") - 1
+        b = np.take(prep.previous_instant, np.maximum(before[pending], 0))
         b = np.where(candidate[pending] < 0, -1, b) if k else b
         reachable = (b >= 0) & (time_ns[pending] - time_ns[np.maximum(b, 0)] <= max_gap_ns)
         before[pending] = b
@@ -288,7 +291,7 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5,
         if k == 0 and events is not None:
             # a few events (a stream): depth 1's candidates too, in the same call (each row's
             # point is its own, elementwise), for the usual P_{t-2} without a second call
-            b1 = np.searchsorted(time_ns, time_ns[np.maximum(b, 0)], side="left") - 1
+            b1 = np.take(prep.previous_instant, np.maximum(b, 0))
             b1 = np.where(candidate[pending] < 0, -1, b1)
             ok1 = (b1 >= 0) & (time_ns[pending] - time_ns[np.maximum(b1, 0)] <= max_gap_ns)
             ahead = (pending[ok1], b1[ok1])
@@ -316,27 +319,33 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5,
 
     # eq. (2): linear prediction with the actual capture intervals (integer nanoseconds:
     # the same ratio whatever the window of the session)
-    ratio = (time_ns[events] - time_ns[j1]) / (time_ns[j1] - time_ns[j2])
-    predicted = p1.points_world + ratio[:, None] * (p1.points_world - p2.points_world)
-    # eqs. (3)-(4): nearest point on the newest viewing ray
-    points = closest_points_on_rays(prep.ray_origin[events], prep.ray_dir[events], predicted)
-
     # the detections behind each point: newest, P_{t-1}'s and P_{t-2}'s with their brackets
     columns = [events, j1, p1.prev_row, p1.next_row, j2, p2.prev_row, p2.next_row]
+    times = [np.take(time_ns, column) for column in columns]  # (each gathered once)
+    cams = [np.take(obs.camera, column) for column in columns]
+    t_event, t1, t2 = times[0], times[1], times[4]
+    origin = np.take(prep.ray_origin, events, axis=0)
+    direction = np.take(prep.ray_dir, events, axis=0)
+    ratio = (t_event - t1) / (t1 - t2)
+    predicted = p1.points_world + ratio[:, None] * (p1.points_world - p2.points_world)
+    # eqs. (3)-(4): nearest point on the newest viewing ray
+    points = closest_points_on_rays(origin, direction, predicted)
+
     slots = np.stack(columns, 1)
     k = len(events)
-    used = np.zeros((k, len(prep.centers)), dtype=bool)
-    every = np.arange(k)
-    for column in columns:
-        used[every, obs.camera[column]] = True
+    used = np.empty((k, len(prep.centers)), dtype=bool, order="F")  # (contiguous columns)
+    for c in range(len(prep.centers)):
+        np.equal(cams[0], c, out=used[:, c])
+        for cam in cams[1:]:
+            used[:, c] |= cam == c
     flags = invalid_points(prep, points, used)
     with np.errstate(invalid="ignore"):
-        depth = ray_depths(predicted, prep.ray_origin[events], prep.ray_dir[events])
+        depth = ray_depths(predicted, origin, direction)
     flags[~(depth > 0)] |= BEHIND  # eq. (4)'s k: the foot behind the newest camera
     residual = [
         p1.residual_obs_px, p1.residual_partner_px, p2.residual_obs_px, p2.residual_partner_px,
         # the newest detection against the prediction, before eq. (4) moves it onto its ray
-        reprojection_px(prep, predicted, obs.camera[events], prep.uv_undistorted[events])]
+        reprojection_px(prep, predicted, cams[0], np.take(prep.uv_undistorted, events, axis=0))]
     # slots holding a detection no earlier slot holds
     if k == 1:  # (a stream's one point: in Python, the same count)
         n_distinct = np.array([len({int(c[0]) for c in columns})], dtype=np.int64)
@@ -347,9 +356,9 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5,
             for t in range(1, s):
                 repeated |= columns[t] == columns[s]
             n_distinct += ~repeated
-    t_earliest = np.minimum.reduce([time_ns[column] for column in columns])
-    span1 = (time_ns[p1.next_row] - time_ns[p1.prev_row]) / NS
-    span2 = (time_ns[p2.next_row] - time_ns[p2.prev_row]) / NS
+    t_earliest = np.minimum.reduce(times)
+    span1 = (times[3] - times[2]) / NS
+    span2 = (times[6] - times[5]) / NS
 
     def evaluate(uv):
         """P'_t from the undistorted pixels of the seven slots (for the covariance)."""
@@ -357,8 +366,8 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5,
                                      p1.weight)[5]
         point2 = _pseudo_from_pixels(prep, obs.camera[j2], p2.partner, uv[4], uv[5], uv[6],
                                      p2.weight)[5]
-        direction = prep.rays_from_undistorted(obs.camera[events], uv[0])
-        return closest_points_on_rays(prep.ray_origin[events], direction,
+        newest = prep.rays_from_undistorted(obs.camera[events], uv[0])
+        return closest_points_on_rays(prep.ray_origin[events], newest,
                                       point1 + ratio[:, None] * (point1 - point2))
 
     with np.errstate(invalid="ignore"):
@@ -370,8 +379,8 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5,
             cov = covariance(slots, jacobians,
                              [prep.pixel_jacobians_t(slots[:, s]) for s in range(7)], noise_px)
         else:
-            cov = _type_a_covariance(prep, events, predicted, ratio, p1, p2, obs.camera[j1],
-                                     obs.camera[j2], slots, noise_px)
+            cov = _type_a_covariance(prep, events, predicted, ratio, p1, p2, cams[1], cams[4],
+                                     slots, noise_px, origin, direction)
         quality = {
             "snap_px": np.maximum(p1.snap_px, p2.snap_px),
             # measured before the snap: after it the rays cross by construction
@@ -383,13 +392,13 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5,
             "residual_mean_px": _sum_in_order(residual) / len(residual),
             "camera_mask": camera_mask(used),
             "n_detections": n_distinct.astype(np.float64),
-            "gap_s": np.maximum(np.maximum(span1, span2), (time_ns[events] - time_ns[j2]) / NS),
-            "span_s": (time_ns[events] - t_earliest) / NS,
+            "gap_s": np.maximum(np.maximum(span1, span2), (t_event - t2) / NS),
+            "span_s": (t_event - t_earliest) / NS,
             **(cov if cov is not None else {}),
         }
     made = finite_rows(points)
     keep = made & (flags == 0)
-    track = Track("typeA", time_ns[events], points, obs.camera[events], quality)
+    track = Track("typeA", t_event, points, cams[0], quality)
     if not np.all(keep):  # (every point kept: the Track as it is)
         track = track.select(keep)
     # past points refused as invalid (each detection once): the points they would have made
@@ -426,8 +435,8 @@ def _sum_in_order(columns: list[np.ndarray]) -> np.ndarray:
 
 def _type_a_covariance(prep: Prepared, events: np.ndarray, predicted: np.ndarray,
                        ratio: np.ndarray, p1: PseudoStereoPoints, p2: PseudoStereoPoints,
-                       cam1: np.ndarray, cam2: np.ndarray, slots: np.ndarray, noise_px: float
-                       ) -> dict[str, np.ndarray]:
+                       cam1: np.ndarray, cam2: np.ndarray, slots: np.ndarray, noise_px: float,
+                       origin: np.ndarray, direction: np.ndarray) -> dict[str, np.ndarray]:
     """:func:`covariance` of type A's points (its quality columns), with the analytic
     Jacobians of eqs. (1)-(4), component-major.
 
@@ -435,8 +444,8 @@ def _type_a_covariance(prep: Prepared, events: np.ndarray, predicted: np.ndarray
     slot's Jacobian is ``r gᵀ`` with ``g = (scale rᵀ J)`` (2, k), ``scale`` eq. (2)'s
     ``1 + ratio`` or ``-ratio``; its share of the covariance is ``r rᵀ |g L|²``. A turn
     ``δr`` of the newest ray moves P' by ``((rᵀq) I + r qᵀ) δr`` with ``q = P̂ - T``."""
-    r = prep.ray_dir[events].T.copy()  # (3, k)
-    q = (predicted - prep.ray_origin[events]).T
+    r = direction.T.copy()  # (3, k); origin, direction: the events' rays (k, 3)
+    q = (predicted - origin).T
     G = np.take(prep.observed_direction_jacobians, events, axis=2)
     newest = (r[0] * q[0] + r[1] * q[1] + r[2] * q[2]) * G
     newest += r[:, None] * dot_t(q, G)
