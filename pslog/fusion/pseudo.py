@@ -554,30 +554,31 @@ def _merged_slots(rows: np.ndarray) -> tuple[list[tuple[int, int, np.ndarray]], 
 
 def _gather(computed: list[tuple[int, np.ndarray, PseudoStereoPoints]], events: np.ndarray,
             depth: np.ndarray) -> PseudoStereoPoints:
-    """Rows of the per-depth results: for each event, the entry computed at its ``depth``."""
+    """Rows of the per-depth results: for each event, the entry computed at its ``depth``
+    (every event has one: ``depth >= 0``, and its row is in that depth's sorted rows)."""
     fields = PseudoStereoPoints.__dataclass_fields__
     template = computed[0][2]
-    out = {}
-    for k, rows_k, points_k in computed:
-        mine = depth == k
-        n_mine = np.count_nonzero(mine)
-        if n_mine == 0:
+    mine = [depth == k for k, _, _ in computed]
+    counts = [int(np.count_nonzero(m)) for m in mine]
+    if not computed or sum(counts) == 0:
+        return PseudoStereoPoints(**{f: np.zeros((len(events), *getattr(template, f).shape[1:]),
+                                                 dtype=getattr(template, f).dtype)
+                                     for f in fields})
+    # the depth of most events first, as a take of all of them (the others' rows of it are
+    # placeholders, each replaced below by its own depth's entry)
+    base = int(np.argmax(counts))
+    _, rows_b, points_b = computed[base]
+    if counts[base] == len(events) and len(rows_b) == len(events):  # (the same rows)
+        return points_b
+    where = np.minimum(np.searchsorted(rows_b, events), len(rows_b) - 1)
+    out = {f: np.take(getattr(points_b, f), where, axis=0) for f in fields}
+    for i, (_, rows_k, points_k) in enumerate(computed):
+        if i == base or counts[i] == 0:
             continue
-        if n_mine == len(events):  # one depth for every event (the usual P_{t-1}): a take
-            if len(rows_k) == len(events):  # (events ⊆ rows_k, both sorted: the same rows)
-                return points_k
-            where = np.searchsorted(rows_k, events)
-            return PseudoStereoPoints(**{f: getattr(points_k, f)[where] for f in fields})
-        if not out:
-            out = {f: np.zeros((len(events), *getattr(template, f).shape[1:]),
-                               dtype=getattr(template, f).dtype) for f in fields}
-        mine = np.flatnonzero(mine)
-        where = np.searchsorted(rows_k, events[mine])  # rows_k is sorted
+        at = np.flatnonzero(mine[i])
+        where = np.searchsorted(rows_k, events[at])  # rows_k is sorted
         for f in fields:
-            out[f][mine] = getattr(points_k, f)[where]
-    if not out:
-        out = {f: np.zeros((len(events), *getattr(template, f).shape[1:]),
-                           dtype=getattr(template, f).dtype) for f in fields}
+            out[f][at] = getattr(points_k, f)[where]
     return PseudoStereoPoints(**out)
 
 
