@@ -285,9 +285,12 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5,
         before[pending] = b
         candidate[pending] = np.where(reachable, b, -1)
         # as P_{t-2}, a candidate must leave eq. (2) a bounded extrapolation
-        spaced = (first < 0) | (time_ns - t_first <= MAX_EXTRAPOLATION * (
-            t_first - time_ns[np.maximum(candidate, 0)]))
-        need = np.flatnonzero((second < 0) & (candidate >= 0) & spaced)
+        # (only pending rows can be needed: the others have two points, or candidate -1)
+        c_pending = candidate[pending]
+        t_first_pending = t_first[pending]
+        spaced = (first[pending] < 0) | (time_ns[pending] - t_first_pending <= MAX_EXTRAPOLATION * (
+            t_first_pending - time_ns[np.maximum(c_pending, 0)]))
+        need = pending[(c_pending >= 0) & spaced]
         if k == 0 and events is not None:
             # a few events (a stream): depth 1's candidates too, in the same call (each row's
             # point is its own, elementwise), for the usual P_{t-2} without a second call
@@ -315,6 +318,12 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5,
         computed.append((0, events, pseudo_stereo_points(prep, events, events, max_gap_ns)))
     p1 = _gather(computed, events, first[events])
     p2 = _gather(computed, events, second[events])
+    # past points refused as invalid (each detection once): the points they would have made
+    # are missing, or made from earlier instants
+    refused = np.zeros(n, dtype=np.int64)
+    for _, _, points_k in computed:
+        np.bitwise_or.at(refused, points_k.row, points_k.flags)
+    del computed, points_k, ahead  # (only p1 and p2 from here on: their memory for what follows)
     j1, j2 = p1.row, p2.row
 
     # eq. (2): linear prediction with the actual capture intervals (integer nanoseconds:
@@ -401,11 +410,6 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5,
     track = Track("typeA", t_event, points, cams[0], quality)
     if not np.all(keep):  # (every point kept: the Track as it is)
         track = track.select(keep)
-    # past points refused as invalid (each detection once): the points they would have made
-    # are missing, or made from earlier instants
-    refused = np.zeros(n, dtype=np.int64)
-    for _, _, points_k in computed:
-        np.bitwise_or.at(refused, points_k.row, points_k.flags)
     if seen is not None:  # count only the reasons not counted before (each detection once)
         refused, seen[:] = refused & ~seen, seen | refused
     past = {f"past_{k}": v for k, v in count_invalid(refused).items()}
