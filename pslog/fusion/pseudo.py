@@ -453,6 +453,7 @@ def _type_a_covariance(prep: Prepared, events: np.ndarray, predicted: np.ndarray
     G = np.take(prep.observed_direction_jacobians, events, axis=2)
     newest = (r[0] * q[0] + r[1] * q[1] + r[2] * q[2]) * G
     newest += r[:, None] * dot_t(q, G)
+    del G
     # eq. (2): P̂ = (1 + ratio) P_{t-1} - ratio P_{t-2}
     k = len(events)
     if k <= 8:  # a few points (a stream's): both past points' Jacobians in one call
@@ -461,7 +462,14 @@ def _type_a_covariance(prep: Prepared, events: np.ndarray, predicted: np.ndarray
         J1, J2 = [J[..., :k] for J in both], [J[..., k:] for J in both]
     else:
         J1, J2 = _pseudo_jacobians(prep, p1, cam1, r), _pseudo_jacobians(prep, p2, cam2, r)
-    g = [None, *(g * (1 + ratio) for g in J1), *(g * -ratio for g in J2)]
+    # (scaled in place: J1 and J2 are this call's own, and a (2, k) copy each is memory)
+    scale1, scale2 = 1 + ratio, -ratio
+    for J in J1:
+        J *= scale1
+    for J in J2:
+        J *= scale2
+    g = [None, *J1, *J2]
+    del J1, J2
     merges, taken = _merged_slots(slots)
     for s, t, same in merges:  # (usually for every event: whole columns, no masked copies)
         moved = g[t] if np.all(same) else np.where(same, g[t], 0.0)
@@ -508,7 +516,6 @@ def _pseudo_jacobians(prep: Prepared, p: PseudoStereoPoints, cam_obs: np.ndarray
     w += (r_d1 + cos * r_d2) * d1
     w += (cos * r_d1 + r_d2) * d2
 
-
     P = p.points_world.T
     C1 = np.take(prep.centers.T, cam_obs, axis=1)
     C2 = np.take(prep.centers.T, partner, axis=1)
@@ -518,6 +525,7 @@ def _pseudo_jacobians(prep: Prepared, p: PseudoStereoPoints, cam_obs: np.ndarray
     J_obs *= s1
     J_snapped = direction_jacobian_along(prep, partner, p.uv_snapped, w)
     J_snapped *= s2
+    del C1, C2, d1, d2, w, s1, s2  # (k-long temporaries: the peak memory of a long session)
     # the snap u_s = u_i - s n onto the line l = F (u_o, v_o, 1) = (a, l3), n = a / |a|,
     # s = (a·u_i + l3) / |a|; a move of u_o changes l by F[:, :2] δ, which moves u_s by
     # -n ((u_sᵀ da + dl3) / |a|) - s (I - n nᵀ) da / |a|
@@ -530,6 +538,7 @@ def _pseudo_jacobians(prep: Prepared, p: PseudoStereoPoints, cam_obs: np.ndarray
     signed = (line[0] * ui[:, 0] + line[1] * ui[:, 1] + line[2]) / size
     da = F.reshape(3, 3, -1)[:2, :2] / size  # (2, 2, k): d a / d u_o, over |a|
     dl3 = F[6:8] / size
+    del F, line
     us = p.uv_snapped
     shift = us[:, 0] * da[0] + us[:, 1] * da[1] + dl3
     n_da = normal[0] * da[0] + normal[1] * da[1]  # nᵀ da
