@@ -97,6 +97,42 @@ class Prepared:
         d /= np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
         return d
 
+    @cached_property
+    def observed_rays(self) -> np.ndarray:
+        """:meth:`rays_from_undistorted` of every observation's own undistorted pixel (n, 3),
+        made once (type A needs each row's ray several times; elementwise, so a row of it
+        has the bits of a call on that row alone)."""
+        return self.rays_from_undistorted(self.obs.camera, self.uv_undistorted)
+
+    @cached_property
+    def observed_direction_jacobians(self) -> np.ndarray:
+        """:func:`direction_jacobian` of every observation at its own undistorted pixel,
+        (3, 2, n), made once (elementwise: a row's entries are those of a call on it alone)."""
+        return direction_jacobian(self, self.obs.camera, self.uv_undistorted)
+
+    @cached_property
+    def previous_instant(self) -> np.ndarray:
+        """(n,) int64, the latest row of the instant before each row's (a strictly earlier
+        time; -1: none): ``searchsorted(time_ns, time_ns, "left") - 1``, in one pass over the
+        sorted times."""
+        time_ns = self.obs.time_ns
+        n = len(time_ns)
+        start = np.ones(n, dtype=bool)  # the first row of its instant
+        np.not_equal(time_ns[1:], time_ns[:-1], out=start[1:])
+        first = np.where(start, np.arange(n), 0)
+        np.maximum.accumulate(first, out=first)
+        first -= 1
+        return first
+
+    def row_brackets(self, camera: int) -> tuple[np.ndarray, np.ndarray]:
+        """:func:`bracket` of ``camera`` at every observation's time, (n,) each, made once
+        per camera (type A brackets the same rows at several depths); a row of it is
+        :func:`bracket` at that row's time."""
+        cache = self.__dict__.setdefault("_row_brackets", {})
+        if camera not in cache:
+            cache[camera] = bracket(self, camera, self.obs.time_ns)
+        return cache[camera]
+
     def _cols(self, name: str) -> np.ndarray:
         """Per-camera (3, 3) matrices ``name`` as (9, m) columns (cached)."""
         cache = self.__dict__.setdefault("_columns", {})
@@ -269,7 +305,7 @@ def invalid_points(prep: Prepared, points: np.ndarray, used: np.ndarray,
             continue
         rows = None if n_mine == k else np.flatnonzero(mine)  # (None: every point)
         cam = prep.cameras[c]
-        in_cam = (points if rows is None else points[rows]) @ cam.R.T + cam.t
+        in_cam = (points if rows is None else np.take(points, rows, axis=0)) @ cam.R.T + cam.t
         z = in_cam[:, 2]
         behind = z <= 1e-9
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -298,7 +334,8 @@ def reprojection_px(prep: Prepared, points: np.ndarray, camera: np.ndarray,
         rows = np.flatnonzero(camera == c)
         if len(rows) == 0:
             continue
-        out[rows] = reprojection_one(prep, c, points[rows], uv_undistorted[rows])
+        out[rows] = reprojection_one(prep, c, np.take(points, rows, axis=0),
+                                     np.take(uv_undistorted, rows, axis=0))
     return out
 
 
@@ -362,6 +399,29 @@ def direction_jacobian(prep: Prepared, camera: np.ndarray, uv: np.ndarray) -> np
     dM += d[2] * M[2]
     M -= d[:, None] * dM
     return M
+
+
+def direction_jacobian_along(prep: Prepared, camera: np.ndarray, uv: np.ndarray,
+                             v: np.ndarray) -> np.ndarray:
+    """``vᵀ`` :func:`direction_jacobian` for vectors ``v`` (3, k): (2, k), without the
+    (3, 2, k) Jacobian. With ``M = Rᵀ K⁻¹[:, :2]``, ``r = Rᵀ K⁻¹ (u, v, 1)``:
+    ``vᵀ (I - d dᵀ) M / |r| = (vᵀM - (vᵀr / |r|²) rᵀM) / |r|`` (equal to rounding)."""
+    M = _per_point(prep._rt_k_inv_cols, camera)  # (9, k), M[3 i + j] = (Rᵀ K⁻¹)[i, j]
+    u, w = uv[:, 0], uv[:, 1]
+    r = M[0::3] * u
+    r += M[1::3] * w
+    r += M[2::3]
+    norm2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
+    vM = v[0] * M[0:2]
+    vM += v[1] * M[3:5]
+    vM += v[2] * M[6:8]
+    rM = r[0] * M[0:2]
+    rM += r[1] * M[3:5]
+    rM += r[2] * M[6:8]
+    rM *= (v[0] * r[0] + v[1] * r[1] + v[2] * r[2]) / norm2
+    vM -= rM
+    vM /= np.sqrt(norm2)
+    return vM
 
 
 def dot_t(v: np.ndarray, J: np.ndarray) -> np.ndarray:
@@ -433,13 +493,23 @@ def merged_slots(rows: np.ndarray) -> tuple[list[tuple[int, int, np.ndarray]], n
     first slot), in order; also returns the (k, n_slots) mask of the slots merged away."""
     n_slots = rows.shape[1]
     merges = []
-    taken = np.zeros(rows.shape, dtype=bool)  # a later slot merged into an earlier one
+    # on (k,) columns, not strided columns of (k, n_slots): numpy is slow on short axes
+    cols = [np.ascontiguousarray(rows[:, s]) for s in range(n_slots)]
+    free = [np.ones(len(rows), dtype=bool) for _ in range(n_slots)]  # not merged away
     for s in range(n_slots):
+        # (free[s] no longer changes: only later slots are merged away from here on)
+        open_s = free[s] & (cols[s] >= 0)
+        if not open_s.any():
+            continue
         for t in range(s + 1, n_slots):
-            same = (rows[:, t] == rows[:, s]) & (rows[:, s] >= 0) & ~taken[:, t] & ~taken[:, s]
-            if np.any(same):
+            same = cols[t] == cols[s]
+            same &= open_s
+            same &= free[t]
+            if same.any():
                 merges.append((s, t, same))
-                taken[same, t] = True
+                free[t] &= ~same
+    taken = np.stack(free, axis=1)  # a later slot merged into an earlier one
+    np.logical_not(taken, out=taken)
     return merges, taken
 
 

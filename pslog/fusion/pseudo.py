@@ -56,11 +56,10 @@ from ._prepare import (
     MIN_RAY_ANGLE_DEG,
     PARALLEL,
     Prepared,
-    bracket,
     camera_mask,
     covariance,
     covariance_columns,
-    direction_jacobian,
+    direction_jacobian_along,
     dot_t,
     finite_difference_jacobians,
     finite_rows,
@@ -130,18 +129,20 @@ class PseudoStereoPoints:
 
 def _pseudo_from_pixels(prep: Prepared, cam_obs: np.ndarray, partner: np.ndarray,
                         uv_obs: np.ndarray, uv_prev: np.ndarray, uv_next: np.ndarray,
-                        weight: np.ndarray):
+                        weight: np.ndarray, dir_obs: np.ndarray | None = None):
     """Steps 1-3 from undistorted pixels (k, 2): the observed one and the partner's bracket.
 
     Returns uv_interpolated, uv_snapped, snap_px, dir_obs, dir_partner, points, miss, s, k
-    (``s``, ``k``: the ray parameters of the crossing, > 0 in front of both cameras)."""
+    (``s``, ``k``: the ray parameters of the crossing, > 0 in front of both cameras).
+    ``dir_obs`` (k, 3): the observed pixels' rays if already known (the same bits)."""
     # eq. (1): linear interpolation of the partner's 2D track to the observation's time
     uv_interp = (1.0 - weight)[:, None] * uv_prev + weight[:, None] * uv_next
     # step 2: nearest point on the epipolar line of the observed point, in the partner image
     lines = epipolar_lines_cols(prep.fundamental_t(cam_obs, partner), uv_obs)
     uv_snapped, snap_px = closest_points_on_lines(lines, uv_interp)
     # step 3: crossing point of the observed ray and the snapped point's ray
-    dir_obs = prep.rays_from_undistorted(cam_obs, uv_obs)
+    if dir_obs is None:
+        dir_obs = prep.rays_from_undistorted(cam_obs, uv_obs)
     dir_partner = prep.rays_from_undistorted(partner, uv_snapped)
     points, miss, s, k = crossing_of_rays(prep.centers[cam_obs], dir_obs,
                                           prep.centers[partner], dir_partner)
@@ -155,8 +156,8 @@ def pseudo_stereo_points(
     global row ``not_after_row`` (k,) — steps 1-3 of the paper's section 2.2."""
     obs, n_cams = prep.obs, len(prep.centers)
     time_ns = obs.time_ns
-    t_row = time_ns[rows]
-    cam_row = obs.camera[rows]
+    t_row = np.take(time_ns, rows)
+    cam_row = np.take(obs.camera, rows)
     n_rows = len(rows)
     best_span = np.full(n_rows, 2**62)  # "none yet", far from int64 overflow in the tie test
     best_end = np.full(n_rows, np.iinfo(np.int64).min)
@@ -164,10 +165,11 @@ def pseudo_stereo_points(
     prev_row = np.zeros(n_rows, dtype=np.int64)
     next_row = np.zeros(n_rows, dtype=np.int64)
     for d in range(n_cams):  # loop over cameras, vectorized over rows
-        prev, nxt = bracket(prep, d, t_row)
+        prev, nxt = prep.row_brackets(d)
+        prev, nxt = np.take(prev, rows), np.take(nxt, rows)
         ok = (prev >= 0) & (nxt >= 0) & (cam_row != d)
-        end = time_ns[np.maximum(nxt, 0)]
-        span = end - time_ns[np.maximum(prev, 0)]
+        end = np.take(time_ns, np.maximum(nxt, 0))
+        span = end - np.take(time_ns, np.maximum(prev, 0))
         ok &= (nxt <= not_after_row) & (span <= max_gap_ns)
         better = ok & ((span < best_span - _SPAN_TIE_NS)
                        | ((span <= best_span + _SPAN_TIE_NS) & (end > best_end)))
@@ -180,14 +182,17 @@ def pseudo_stereo_points(
     partner_idx = np.maximum(partner, 0)
 
     # eq. (1)'s weight from integer capture times: the same for any window of the session
-    span_ns = time_ns[next_row] - time_ns[prev_row]
+    t_prev = np.take(time_ns, prev_row)
+    span_ns = np.take(time_ns, next_row) - t_prev
     with np.errstate(invalid="ignore", divide="ignore"):
-        w = np.where(span_ns > 0, (t_row - time_ns[prev_row]) / np.where(span_ns > 0, span_ns, 1),
-                     0.0)
+        w = np.where(span_ns > 0, (t_row - t_prev) / np.where(span_ns > 0, span_ns, 1), 0.0)
+    uv_row = np.take(prep.uv_undistorted, rows, axis=0)
     with np.errstate(invalid="ignore"):
         uv_interp, uv_snapped, snap_px, dir_obs, dir_partner, points, miss, s, k = (
-            _pseudo_from_pixels(prep, cam_row, partner_idx, prep.uv_undistorted[rows],
-                                prep.uv_undistorted[prev_row], prep.uv_undistorted[next_row], w))
+            _pseudo_from_pixels(prep, cam_row, partner_idx, uv_row,
+                                np.take(prep.uv_undistorted, prev_row, axis=0),
+                                np.take(prep.uv_undistorted, next_row, axis=0), w,
+                                np.take(prep.observed_rays, rows, axis=0)))
         # both directions are unit vectors; a line has no sense, hence the absolute value
         cos_angle = np.abs(_dot(dir_obs[:, 0], dir_obs[:, 1], dir_obs[:, 2],
                                 dir_partner[:, 0], dir_partner[:, 1], dir_partner[:, 2]))
@@ -196,11 +201,12 @@ def pseudo_stereo_points(
         dir_interp = prep.rays_from_undistorted(partner_idx, uv_interp)
         unsnapped, miss_unsnapped, _, _ = crossing_of_rays(
             prep.centers[cam_row], dir_obs, prep.centers[partner_idx], dir_interp)
-    residual_obs = reprojection_px(prep, unsnapped, cam_row, prep.uv_undistorted[rows])
+    residual_obs = reprojection_px(prep, unsnapped, cam_row, uv_row)
     residual_partner = reprojection_px(prep, unsnapped, partner_idx, uv_interp)
-    used = np.zeros((n_rows, n_cams), dtype=bool)
-    used[np.arange(n_rows), cam_row] = True
-    used[np.arange(n_rows), partner_idx] = True
+    used = np.empty((n_rows, n_cams), dtype=bool, order="F")  # (contiguous columns)
+    for c in range(n_cams):
+        np.equal(cam_row, c, out=used[:, c])
+        used[:, c] |= partner_idx == c
     finite = finite_rows(points)
     flags = invalid_points(prep, points, used, finite)
     with np.errstate(invalid="ignore"):
@@ -274,19 +280,22 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5,
         pending = targets[second[targets] < 0] if k else targets.copy()
         if len(pending) == 0:
             break
-        b = np.searchsorted(time_ns, time_ns[np.maximum(before[pending], 0)], side="left") - 1
+        b = np.take(prep.previous_instant, np.maximum(before[pending], 0))
         b = np.where(candidate[pending] < 0, -1, b) if k else b
         reachable = (b >= 0) & (time_ns[pending] - time_ns[np.maximum(b, 0)] <= max_gap_ns)
         before[pending] = b
         candidate[pending] = np.where(reachable, b, -1)
         # as P_{t-2}, a candidate must leave eq. (2) a bounded extrapolation
-        spaced = (first < 0) | (time_ns - t_first <= MAX_EXTRAPOLATION * (
-            t_first - time_ns[np.maximum(candidate, 0)]))
-        need = np.flatnonzero((second < 0) & (candidate >= 0) & spaced)
+        # (only pending rows can be needed: the others have two points, or candidate -1)
+        c_pending = candidate[pending]
+        t_first_pending = t_first[pending]
+        spaced = (first[pending] < 0) | (time_ns[pending] - t_first_pending <= MAX_EXTRAPOLATION * (
+            t_first_pending - time_ns[np.maximum(c_pending, 0)]))
+        need = pending[(c_pending >= 0) & spaced]
         if k == 0 and events is not None:
             # a few events (a stream): depth 1's candidates too, in the same call (each row's
             # point is its own, elementwise), for the usual P_{t-2} without a second call
-            b1 = np.searchsorted(time_ns, time_ns[np.maximum(b, 0)], side="left") - 1
+            b1 = np.take(prep.previous_instant, np.maximum(b, 0))
             b1 = np.where(candidate[pending] < 0, -1, b1)
             ok1 = (b1 >= 0) & (time_ns[pending] - time_ns[np.maximum(b1, 0)] <= max_gap_ns)
             ahead = (pending[ok1], b1[ok1])
@@ -310,31 +319,43 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5,
         computed.append((0, events, pseudo_stereo_points(prep, events, events, max_gap_ns)))
     p1 = _gather(computed, events, first[events])
     p2 = _gather(computed, events, second[events])
+    # past points refused as invalid (each detection once): the points they would have made
+    # are missing, or made from earlier instants
+    refused = np.zeros(n, dtype=np.int64)
+    for _, _, points_k in computed:
+        np.bitwise_or.at(refused, points_k.row, points_k.flags)
+    del computed, points_k, ahead  # (only p1 and p2 from here on: their memory for what follows)
     j1, j2 = p1.row, p2.row
 
     # eq. (2): linear prediction with the actual capture intervals (integer nanoseconds:
     # the same ratio whatever the window of the session)
-    ratio = (time_ns[events] - time_ns[j1]) / (time_ns[j1] - time_ns[j2])
-    predicted = p1.points_world + ratio[:, None] * (p1.points_world - p2.points_world)
-    # eqs. (3)-(4): nearest point on the newest viewing ray
-    points = closest_points_on_rays(prep.ray_origin[events], prep.ray_dir[events], predicted)
-
     # the detections behind each point: newest, P_{t-1}'s and P_{t-2}'s with their brackets
     columns = [events, j1, p1.prev_row, p1.next_row, j2, p2.prev_row, p2.next_row]
+    times = [np.take(time_ns, column) for column in columns]  # (each gathered once)
+    cams = [np.take(obs.camera, column) for column in columns]
+    t_event, t1, t2 = times[0], times[1], times[4]
+    origin = np.take(prep.ray_origin, events, axis=0)
+    direction = np.take(prep.ray_dir, events, axis=0)
+    ratio = (t_event - t1) / (t1 - t2)
+    predicted = p1.points_world + ratio[:, None] * (p1.points_world - p2.points_world)
+    # eqs. (3)-(4): nearest point on the newest viewing ray
+    points = closest_points_on_rays(origin, direction, predicted)
+
     slots = np.stack(columns, 1)
     k = len(events)
-    used = np.zeros((k, len(prep.centers)), dtype=bool)
-    every = np.arange(k)
-    for column in columns:
-        used[every, obs.camera[column]] = True
+    used = np.empty((k, len(prep.centers)), dtype=bool, order="F")  # (contiguous columns)
+    for c in range(len(prep.centers)):
+        np.equal(cams[0], c, out=used[:, c])
+        for cam in cams[1:]:
+            used[:, c] |= cam == c
     flags = invalid_points(prep, points, used)
     with np.errstate(invalid="ignore"):
-        depth = ray_depths(predicted, prep.ray_origin[events], prep.ray_dir[events])
+        depth = ray_depths(predicted, origin, direction)
     flags[~(depth > 0)] |= BEHIND  # eq. (4)'s k: the foot behind the newest camera
     residual = [
         p1.residual_obs_px, p1.residual_partner_px, p2.residual_obs_px, p2.residual_partner_px,
         # the newest detection against the prediction, before eq. (4) moves it onto its ray
-        reprojection_px(prep, predicted, obs.camera[events], prep.uv_undistorted[events])]
+        reprojection_px(prep, predicted, cams[0], np.take(prep.uv_undistorted, events, axis=0))]
     # slots holding a detection no earlier slot holds
     if k == 1:  # (a stream's one point: in Python, the same count)
         n_distinct = np.array([len({int(c[0]) for c in columns})], dtype=np.int64)
@@ -345,9 +366,9 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5,
             for t in range(1, s):
                 repeated |= columns[t] == columns[s]
             n_distinct += ~repeated
-    t_earliest = np.minimum.reduce([time_ns[column] for column in columns])
-    span1 = (time_ns[p1.next_row] - time_ns[p1.prev_row]) / NS
-    span2 = (time_ns[p2.next_row] - time_ns[p2.prev_row]) / NS
+    t_earliest = np.minimum.reduce(times)
+    span1 = (times[3] - times[2]) / NS
+    span2 = (times[6] - times[5]) / NS
 
     def evaluate(uv):
         """P'_t from the undistorted pixels of the seven slots (for the covariance)."""
@@ -355,8 +376,8 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5,
                                      p1.weight)[5]
         point2 = _pseudo_from_pixels(prep, obs.camera[j2], p2.partner, uv[4], uv[5], uv[6],
                                      p2.weight)[5]
-        direction = prep.rays_from_undistorted(obs.camera[events], uv[0])
-        return closest_points_on_rays(prep.ray_origin[events], direction,
+        newest = prep.rays_from_undistorted(obs.camera[events], uv[0])
+        return closest_points_on_rays(prep.ray_origin[events], newest,
                                       point1 + ratio[:, None] * (point1 - point2))
 
     with np.errstate(invalid="ignore"):
@@ -368,8 +389,8 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5,
             cov = covariance(slots, jacobians,
                              [prep.pixel_jacobians_t(slots[:, s]) for s in range(7)], noise_px)
         else:
-            cov = _type_a_covariance(prep, events, predicted, ratio, p1, p2, obs.camera[j1],
-                                     obs.camera[j2], slots, noise_px)
+            cov = _type_a_covariance(prep, events, predicted, ratio, p1, p2, cams[1], cams[4],
+                                     slots, noise_px, origin, direction)
         quality = {
             "snap_px": np.maximum(p1.snap_px, p2.snap_px),
             # measured before the snap: after it the rays cross by construction
@@ -381,8 +402,8 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5,
             "residual_mean_px": _sum_in_order(residual) / len(residual),
             "camera_mask": camera_mask(used),
             "n_detections": n_distinct.astype(np.float64),
-            "gap_s": np.maximum(np.maximum(span1, span2), (time_ns[events] - time_ns[j2]) / NS),
-            "span_s": (time_ns[events] - t_earliest) / NS,
+            "gap_s": np.maximum(np.maximum(span1, span2), (t_event - t2) / NS),
+            "span_s": (t_event - t_earliest) / NS,
             **(cov if cov is not None else {}),
         }
     made = finite_rows(points)
@@ -390,14 +411,9 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5,
     failed = made & (flags == 0) & failed_predictions(prep, events, j1, j2, predicted,
                                                       residual[4], noise_px)
     keep = made & (flags == 0) & ~failed
-    track = Track("typeA", time_ns[events], points, obs.camera[events], quality)
+    track = Track("typeA", t_event, points, cams[0], quality)
     if not np.all(keep):  # (every point kept: the Track as it is)
         track = track.select(keep)
-    # past points refused as invalid (each detection once): the points they would have made
-    # are missing, or made from earlier instants
-    refused = np.zeros(n, dtype=np.int64)
-    for _, _, points_k in computed:
-        np.bitwise_or.at(refused, points_k.row, points_k.flags)
     if seen is not None:  # count only the reasons not counted before (each detection once)
         refused, seen[:] = refused & ~seen, seen | refused
     past = {f"past_{k}": v for k, v in count_invalid(refused).items()}
@@ -427,8 +443,8 @@ def _sum_in_order(columns: list[np.ndarray]) -> np.ndarray:
 
 def _type_a_covariance(prep: Prepared, events: np.ndarray, predicted: np.ndarray,
                        ratio: np.ndarray, p1: PseudoStereoPoints, p2: PseudoStereoPoints,
-                       cam1: np.ndarray, cam2: np.ndarray, slots: np.ndarray, noise_px: float
-                       ) -> dict[str, np.ndarray]:
+                       cam1: np.ndarray, cam2: np.ndarray, slots: np.ndarray, noise_px: float,
+                       origin: np.ndarray, direction: np.ndarray) -> dict[str, np.ndarray]:
     """:func:`covariance` of type A's points (its quality columns), with the analytic
     Jacobians of eqs. (1)-(4), component-major.
 
@@ -436,11 +452,12 @@ def _type_a_covariance(prep: Prepared, events: np.ndarray, predicted: np.ndarray
     slot's Jacobian is ``r gᵀ`` with ``g = (scale rᵀ J)`` (2, k), ``scale`` eq. (2)'s
     ``1 + ratio`` or ``-ratio``; its share of the covariance is ``r rᵀ |g L|²``. A turn
     ``δr`` of the newest ray moves P' by ``((rᵀq) I + r qᵀ) δr`` with ``q = P̂ - T``."""
-    r = prep.ray_dir[events].T.copy()  # (3, k)
-    q = (predicted - prep.ray_origin[events]).T
-    G = direction_jacobian(prep, prep.obs.camera[events], prep.uv_undistorted[events])
+    r = direction.T.copy()  # (3, k); origin, direction: the events' rays (k, 3)
+    q = (predicted - origin).T
+    G = np.take(prep.observed_direction_jacobians, events, axis=2)
     newest = (r[0] * q[0] + r[1] * q[1] + r[2] * q[2]) * G
     newest += r[:, None] * dot_t(q, G)
+    del G
     # eq. (2): P̂ = (1 + ratio) P_{t-1} - ratio P_{t-2}
     k = len(events)
     if k <= 8:  # a few points (a stream's): both past points' Jacobians in one call
@@ -449,7 +466,14 @@ def _type_a_covariance(prep: Prepared, events: np.ndarray, predicted: np.ndarray
         J1, J2 = [J[..., :k] for J in both], [J[..., k:] for J in both]
     else:
         J1, J2 = _pseudo_jacobians(prep, p1, cam1, r), _pseudo_jacobians(prep, p2, cam2, r)
-    g = [None, *(g * (1 + ratio) for g in J1), *(g * -ratio for g in J2)]
+    # (scaled in place: J1 and J2 are this call's own, and a (2, k) copy each is memory)
+    scale1, scale2 = 1 + ratio, -ratio
+    for J in J1:
+        J *= scale1
+    for J in J2:
+        J *= scale2
+    g = [None, *J1, *J2]
+    del J1, J2
     merges, taken = _merged_slots(slots)
     for s, t, same in merges:  # (usually for every event: whole columns, no masked copies)
         moved = g[t] if np.all(same) else np.where(same, g[t], 0.0)
@@ -489,23 +513,23 @@ def _pseudo_jacobians(prep: Prepared, p: PseudoStereoPoints, cam_obs: np.ndarray
     r_d1 = (r[0] * d1[0] + r[1] * d1[1] + r[2] * d1[2]) * scale
     r_d2 = (r[0] * d2[0] + r[1] * d2[1] + r[2] * d2[2]) * scale
 
-    def r_a_inv(G, size):
-        """size rᵀ A⁻¹ G for A = 2 I - d1 d1ᵀ - d2 d2ᵀ (Woodbury: A⁻¹ = (I + D M⁻¹ Dᵀ) / 2
-        with D = [d1 d2], M = [[1, -c], [-c, 1]], c = d1·d2)."""
-        a, b = dot_t(d1, G), dot_t(d2, G)
-        out = 0.5 * dot_t(r, G)
-        out += r_d1 * (a + cos * b)
-        out += r_d2 * (cos * a + b)
-        out *= size
-        return out
+    # size rᵀ A⁻¹ G for A = 2 I - d1 d1ᵀ - d2 d2ᵀ (Woodbury: A⁻¹ = (I + D M⁻¹ Dᵀ) / 2
+    # with D = [d1 d2], M = [[1, -c], [-c, 1]], c = d1·d2) is size wᵀ G with the one vector
+    # w = A⁻¹ r = r / 2 + (r_d1 + c r_d2) d1 + (c r_d1 + r_d2) d2 (3, k), shared by both rays
+    w = 0.5 * r
+    w += (r_d1 + cos * r_d2) * d1
+    w += (cos * r_d1 + r_d2) * d2
 
     P = p.points_world.T
     C1 = np.take(prep.centers.T, cam_obs, axis=1)
     C2 = np.take(prep.centers.T, partner, axis=1)
     s1 = (P[0] - C1[0]) * d1[0] + (P[1] - C1[1]) * d1[1] + (P[2] - C1[2]) * d1[2]
     s2 = (P[0] - C2[0]) * d2[0] + (P[1] - C2[1]) * d2[1] + (P[2] - C2[2]) * d2[2]
-    J_obs = r_a_inv(direction_jacobian(prep, cam_obs, uv_obs), s1)
-    J_snapped = r_a_inv(direction_jacobian(prep, partner, p.uv_snapped), s2)
+    J_obs = dot_t(w, np.take(prep.observed_direction_jacobians, p.row, axis=2))
+    J_obs *= s1
+    J_snapped = direction_jacobian_along(prep, partner, p.uv_snapped, w)
+    J_snapped *= s2
+    del C1, C2, d1, d2, w, s1, s2  # (k-long temporaries: the peak memory of a long session)
     # the snap u_s = u_i - s n onto the line l = F (u_o, v_o, 1) = (a, l3), n = a / |a|,
     # s = (a·u_i + l3) / |a|; a move of u_o changes l by F[:, :2] δ, which moves u_s by
     # -n ((u_sᵀ da + dl3) / |a|) - s (I - n nᵀ) da / |a|
@@ -518,6 +542,7 @@ def _pseudo_jacobians(prep: Prepared, p: PseudoStereoPoints, cam_obs: np.ndarray
     signed = (line[0] * ui[:, 0] + line[1] * ui[:, 1] + line[2]) / size
     da = F.reshape(3, 3, -1)[:2, :2] / size  # (2, 2, k): d a / d u_o, over |a|
     dl3 = F[6:8] / size
+    del F, line
     us = p.uv_snapped
     shift = us[:, 0] * da[0] + us[:, 1] * da[1] + dl3
     n_da = normal[0] * da[0] + normal[1] * da[1]  # nᵀ da
@@ -546,28 +571,31 @@ def _merged_slots(rows: np.ndarray) -> tuple[list[tuple[int, int, np.ndarray]], 
 
 def _gather(computed: list[tuple[int, np.ndarray, PseudoStereoPoints]], events: np.ndarray,
             depth: np.ndarray) -> PseudoStereoPoints:
-    """Rows of the per-depth results: for each event, the entry computed at its ``depth``."""
+    """Rows of the per-depth results: for each event, the entry computed at its ``depth``
+    (every event has one: ``depth >= 0``, and its row is in that depth's sorted rows)."""
     fields = PseudoStereoPoints.__dataclass_fields__
     template = computed[0][2]
-    out = {}
-    for k, rows_k, points_k in computed:
-        mine = depth == k
-        n_mine = np.count_nonzero(mine)
-        if n_mine == 0:
+    mine = [depth == k for k, _, _ in computed]
+    counts = [int(np.count_nonzero(m)) for m in mine]
+    if not computed or sum(counts) == 0:
+        return PseudoStereoPoints(**{f: np.zeros((len(events), *getattr(template, f).shape[1:]),
+                                                 dtype=getattr(template, f).dtype)
+                                     for f in fields})
+    # the depth of most events first, as a take of all of them (the others' rows of it are
+    # placeholders, each replaced below by its own depth's entry)
+    base = int(np.argmax(counts))
+    _, rows_b, points_b = computed[base]
+    if counts[base] == len(events) and len(rows_b) == len(events):  # (the same rows)
+        return points_b
+    where = np.minimum(np.searchsorted(rows_b, events), len(rows_b) - 1)
+    out = {f: np.take(getattr(points_b, f), where, axis=0) for f in fields}
+    for i, (_, rows_k, points_k) in enumerate(computed):
+        if i == base or counts[i] == 0:
             continue
-        if n_mine == len(events):  # one depth for every event (the usual P_{t-1}): a take
-            where = np.searchsorted(rows_k, events)
-            return PseudoStereoPoints(**{f: getattr(points_k, f)[where] for f in fields})
-        if not out:
-            out = {f: np.zeros((len(events), *getattr(template, f).shape[1:]),
-                               dtype=getattr(template, f).dtype) for f in fields}
-        mine = np.flatnonzero(mine)
-        where = np.searchsorted(rows_k, events[mine])  # rows_k is sorted
+        at = np.flatnonzero(mine[i])
+        where = np.searchsorted(rows_k, events[at])  # rows_k is sorted
         for f in fields:
-            out[f][mine] = getattr(points_k, f)[where]
-    if not out:
-        out = {f: np.zeros((len(events), *getattr(template, f).shape[1:]),
-                           dtype=getattr(template, f).dtype) for f in fields}
+            out[f][at] = getattr(points_k, f)[where]
     return PseudoStereoPoints(**out)
 
 
