@@ -41,7 +41,9 @@ def main() -> int:
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--stream", type=float, default=0.0, metavar="SECONDS",
                         help="also time StreamFuser on a session this long (0: not)")
+    parser.add_argument("--json", default=None, help="write the rates as JSON")
     args = parser.parse_args()
+    rows = []
     duration = args.minutes * 60
     print(f"fusion benchmark: {args.minutes:g}-minute session, 3 cameras at 30 fps, "
           f"0.5 px noise, best of {args.repeat}")
@@ -65,10 +67,20 @@ def main() -> int:
                 ok = rate >= TARGET_TYPEA
                 worst_ok &= ok
                 note = f"  target {TARGET_TYPEA:,}/s: {'met' if ok else 'MISSED'}"
+            rows.append({"stage": f"fuse {method}", "figure": rate, "unit": "points/s",
+                         "target": f">= {TARGET_TYPEA:,}" if method == "typeA" else "",
+                         "ok": bool(rate >= TARGET_TYPEA) if method == "typeA" else None,
+                         "peer": None, "peer_figure": None, "better": "higher",
+                         "note": f"{args.minutes:g}-min session, best of {args.repeat}"})
             print(f"  {method:<20} {seconds * 1e3:9.1f} ms  {rate:>12,.0f} points/s  "
                   f"{seconds / base_s:5.1f}x baseline{note}")
     if args.stream > 0:
         stream(args.stream, args.repeat)
+    if args.json:
+        import json
+
+        with open(args.json, "w") as f:
+            json.dump({"rows": rows}, f)
     return 0 if worst_ok else 1
 
 
