@@ -130,7 +130,8 @@ def triangulation_rows(minutes: float, repeat: int) -> list[dict]:
     fns = [ours, cv2_peer]
     try:
         group = _aniposelib_group(rig)
-        group.triangulate(uv[:, :100], undistort=True, progress=False)  # numba compiles here
+        # jax compiles for each new shape: once here, outside the timings
+        group.triangulate(uv, undistort=True, progress=False)
 
         def anipose_peer() -> None:
             group.triangulate(uv, undistort=True, progress=False)

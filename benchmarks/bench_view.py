@@ -98,14 +98,20 @@ def main() -> int:
     if last != 90:
         used = " and ".join(f"{r['minutes']:g}" for r in mine[-2:])
         how = f" (extrapolated from {used} min)"
+    # a session under 10 minutes is mostly start-up: not held to the 90-minute target
+    judged = last >= 10
+    if not judged:
+        seconds, how = mine[-1]["seconds"], f" (at {last:g} min: not judged)"
     ok = seconds <= TARGET_S and (peak <= TARGET_MB or last != 90)
     print(f"target at 90 min: <= {TARGET_S:g} s and <= {TARGET_MB:.0f} MB: "
           f"{'PASS' if ok else 'FAIL'} ({seconds:.1f} s{how}, {peak:.0f} MB at {last:g} min)")
     if args.json is not None:
         args.json.write_text(json.dumps({"runs": rows, "rows": [{
-            "stage": "view --save", "figure": seconds, "unit": "s at 90 min",
-            "target": f"<= {TARGET_S:g} s, <= {TARGET_MB:.0f} MB",
-            "ok": ok, "peer": "--detail all (same run)", "peer_figure": at_90(full, "seconds"),
+            "stage": "view --save", "figure": seconds,
+            "unit": "s at 90 min" if judged else f"s at {last:g} min",
+            "target": f"<= {TARGET_S:g} s, <= {TARGET_MB:.0f} MB at 90 min",
+            "ok": ok if judged else None, "peer": "--detail all (same run)",
+            "peer_figure": at_90(full, "seconds") if judged else full[-1]["seconds"],
             "better": "lower",
             "note": f"peak {peak:.0f} MB at {last:g} min{how}; s/min "
                     + ", ".join(f"{r['minutes']:g}: {r['seconds'] / r['minutes']:.3f}"
