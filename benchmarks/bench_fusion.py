@@ -67,7 +67,7 @@ def main() -> int:
                 ok = rate >= TARGET_TYPEA
                 worst_ok &= ok
                 note = f"  target {TARGET_TYPEA:,}/s: {'met' if ok else 'MISSED'}"
-            rows.append({"stage": f"fuse {method}", "figure": rate, "unit": "points/s",
+            rows.append({"stage": f"fusion {method}", "figure": rate, "unit": "points/s",
                          "target": f">= {TARGET_TYPEA:,}" if method == "typeA" else "",
                          "ok": bool(rate >= TARGET_TYPEA) if method == "typeA" else None,
                          "peer": None, "peer_figure": None, "better": "higher",
