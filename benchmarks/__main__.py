@@ -112,7 +112,7 @@ def benches() -> list[Bench]:
     b = HERE
     return [
         Bench("match", b / "bench_match.py", ["--base", ""],
-              ["--base", "", "--minutes", "0.5", "1.5"],
+              ["--base", "", "--minutes", "1"],
               ["eval", "fuse typeA", "fuse default"], match_rows),
         Bench("peers", b / "bench_peers.py", [], ["--quick"],
               ["read detections", "typeA points/s"]),
@@ -128,7 +128,7 @@ def benches() -> list[Bench]:
                "--hd-frames", "9"], ["detection 640x480", "detection 1280x720"]),
         Bench("redetect", b / "bench_redetect.py", [], ["--seconds", "1", "--rounds", "1"],
               ["redetect 1280x720"]),
-        Bench("view", b / "bench_view.py", [], ["--minutes", "0.5", "1.5"], ["view --save"]),
+        Bench("view", b / "bench_view.py", [], ["--minutes", "1"], ["view --save"]),
         Bench("live", b / "bench_live.py", ["--seconds", "20"],
               ["--seconds", "2", "--load", "30", "--method", "typeA", "--candidates", "best"],
               ["live latency"]),
