@@ -102,7 +102,8 @@ def match_rows(data: dict) -> list[dict]:
                                                        if target_mb else "") + " at 90 min",
                      "ok": ok if judged else None, "peer": None, "peer_figure": None,
                      "better": "lower",
-                     "note": f"{how}; peak {peak:.0f} MB at {longest['minutes']:g} min; "
+                     "note": f"{how}; CPU {longest.get('cpu_seconds') or float('nan'):.1f} s "
+                             f"and peak {peak:.0f} MB at {longest['minutes']:g} min; "
                              f"s/min {per_min}"})
     return rows
 

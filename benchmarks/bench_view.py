@@ -113,7 +113,8 @@ def main() -> int:
             "ok": ok if judged else None, "peer": "--detail all (same run)",
             "peer_figure": at_90(full, "seconds") if judged else full[-1]["seconds"],
             "better": "lower",
-            "note": f"peak {peak:.0f} MB at {last:g} min{how}; s/min "
+            "note": f"CPU {mine[-1]['cpu_seconds']:.1f} s and peak {peak:.0f} MB at "
+                    f"{last:g} min{how}; s/min "
                     + ", ".join(f"{r['minutes']:g}: {r['seconds'] / r['minutes']:.3f}"
                                 for r in mine)}]}, indent=2))
     return 0 if ok else 1
