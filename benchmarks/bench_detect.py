@@ -27,7 +27,9 @@ Run: ``python benchmarks/bench_detect.py [--frames 400] [--quick] [--base DIR]``
 from __future__ import annotations
 
 import argparse
+import json
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -101,7 +103,8 @@ def contour_peer(hsv):
     return detect
 
 
-def speed_hd(n_frames: int, repeat: int, base: str | None) -> float:
+def speed_hd(n_frames: int, repeat: int, base: str | None) -> tuple[float, float]:
+    """(ours, contour peer): frames per CPU second of one core at 1280 x 720."""
     import cv2
 
     from pslog.motion import get_motion
@@ -143,10 +146,11 @@ def speed_hd(n_frames: int, repeat: int, base: str | None) -> float:
     if base:
         print("  candidates of both BallDetectors identical on every frame")
     print(f"  ball found in {100 * found:.0f} % of frames")
-    return float(ours[1])
+    return float(ours[1]), float(totals["peer HSV+inRange+findContours"][1] / repeat)
 
 
-def speed(n_frames: int, repeat: int) -> float:
+def speed(n_frames: int, repeat: int) -> tuple[float, float]:
+    """(ours, contour peer): frames per second of one core at 640 x 480."""
     import cv2
 
     from pslog.motion import get_motion
@@ -167,6 +171,7 @@ def speed(n_frames: int, repeat: int) -> float:
     r_inrange = _rate(lambda f: cv2.inRange(f, low, high), frames, repeat)
     r_one_pass = _rate(one_pass.detect, frames, repeat)
     r_ours = _rate(detector.detect, frames, repeat)
+    r_peer = _rate(contour_peer(detector.hsv), frames, repeat)
     found = np.mean([len(detector.detect(f)) > 0 for f in frames])
     print(f"speed, {len(frames)} rendered 640x480 frames x {repeat}, one core:")
     print(f"  baseline bare cv2.inRange (BGR)   {r_inrange:8.0f} frames/s")
@@ -174,7 +179,8 @@ def speed(n_frames: int, repeat: int) -> float:
     print(f"  BallDetector (coarse + fine)      {r_ours:8.0f} frames/s   "
           f"({r_ours / r_inrange:.2f} x inRange, {r_ours / r_one_pass:.2f} x one-pass); "
           f"ball found in {100 * found:.0f} % of frames")
-    return r_ours
+    print(f"  peer HSV+inRange+findContours     {r_peer:8.0f} frames/s")
+    return r_ours, r_peer
 
 
 def accuracy(n_frames: int) -> float:
@@ -227,12 +233,25 @@ def main() -> None:
                         help="1280x720 frames for the speed test")
     parser.add_argument("--base", help="another checkout whose BallDetector runs alongside")
     parser.add_argument("--quick", action="store_true", help="fewer frames (about 20 s)")
+    parser.add_argument("--json", type=Path, default=None, help="write the rows as JSON")
     args = parser.parse_args()
     if args.quick:
         args.frames, args.repeat, args.accuracy_frames, args.hd_frames = 90, 3, 30, 21
-    rate = speed(args.frames, args.repeat)
-    rate_hd = speed_hd(args.hd_frames, args.repeat, args.base)
+    rate, peer = speed(args.frames, args.repeat)
+    rate_hd, peer_hd = speed_hd(args.hd_frames, args.repeat, args.base)
     rms = accuracy(args.accuracy_frames)
+    if args.json is not None:
+        contour = "OpenCV HSV+inRange+findContours"
+        args.json.write_text(json.dumps({"rows": [
+            {"stage": "detection 640x480", "figure": rate, "unit": "frames/s",
+             "target": ">= 1,000 (1 core)", "ok": rate >= 1000, "peer": contour,
+             "peer_figure": peer, "better": "higher", "note": f"{args.frames} frames"},
+            {"stage": "detection 1280x720", "figure": rate_hd, "unit": "frames/CPU-s",
+             "target": ">= 800 (1 core)", "ok": rate_hd >= 800, "peer": contour,
+             "peer_figure": peer_hd, "better": "higher", "note": f"{args.hd_frames} frames"},
+            {"stage": "detection accuracy", "figure": rms, "unit": "px RMS",
+             "target": "< 0.25", "ok": rms < 0.25, "peer": None, "peer_figure": None,
+             "better": "lower", "note": "ball radius >= 5 px"}]}))
     print(f"targets: >= 1000 frames/s at 640x480: {'PASS' if rate >= 1000 else 'FAIL'} "
           f"({rate:.0f}); >= 800 frames/CPU-s at 1280x720: {'PASS' if rate_hd >= 800 else 'FAIL'} "
           f"({rate_hd:.0f}); < 0.25 px RMS: {'PASS' if rms < 0.25 else 'FAIL'} ({rms:.3f} px)")

@@ -129,6 +129,9 @@ def accuracy_table(seconds: float) -> bool:
     return ok
 
 
+_ROWS: list[dict] = []  # for --json
+
+
 def latency(seconds: float, motion=None, name: str = "rally") -> bool:
     rig = bench_rig(3)
     if motion is None:
@@ -155,6 +158,10 @@ def latency(seconds: float, motion=None, name: str = "rally") -> bool:
         median = np.median(cpu) / 1e3
         met = median <= TARGET_US
         ok &= met
+        _ROWS.append({"stage": f"filter {label} ({name})", "figure": median,
+                      "unit": "µs/det CPU", "target": f"<= {TARGET_US:g}", "ok": bool(met),
+                      "peer": None, "peer_figure": None, "better": "lower",
+                      "note": f"{len(rows):,} detections, median"})
         print(f"  {label:<17} CPU median {median:6.1f} µs  p99 {np.percentile(cpu, 99) / 1e3:7.1f}"
               f" µs | wall median {np.median(wall) / 1e3:6.1f} µs  p99 "
               f"{np.percentile(wall, 99) / 1e3:7.1f} µs  ({len(rows):,} detections)"
@@ -166,6 +173,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=20.0, help="rally length")
     parser.add_argument("--quick", action="store_true", help="latency only")
+    parser.add_argument("--json", default=None, help="write the latency rows as JSON")
     args = parser.parse_args()
     print("latency per detection, streamed one at a time (3 cameras, 0.3 px):")
     fast = latency(max(args.seconds, 10.0))
@@ -174,6 +182,11 @@ def main() -> int:
     accurate = True if args.quick else accuracy_table(args.seconds)
     print(f"targets: latency {'met' if fast else 'MISSED'}; accuracy "
           f"{'met' if accurate else 'MISSED'}")
+    if args.json:
+        import json
+
+        with open(args.json, "w") as f:
+            json.dump({"rows": _ROWS}, f)
     return 0 if fast and accurate else 1
 
 

@@ -258,7 +258,9 @@ def main() -> int:
                         help="also record the session (RecordSink, as pslog live --record)")
     parser.add_argument("--direct", nargs="?", type=float, const=8.0, default=None,
                         metavar="GAP_MS", help="feed LiveFuser directly, GAP_MS apart")
+    parser.add_argument("--json", default=None, help="write the rows as JSON")
     args = parser.parse_args()
+    json_rows = []
     seconds = 10.0 if args.quick else args.seconds
     if args.direct is not None:
         print(f"LiveFuser.feed + UdpSink, {seconds:g} s of datagrams, {args.direct:g} ms "
@@ -289,6 +291,12 @@ def main() -> int:
                 r = run(rig, frames, method, cand == "all", args.record)
                 ok = r["fusion_p99"] <= TARGET_P99_MS
                 worst |= r["lost"] > 0
+                json_rows.append({
+                    "stage": f"live latency 3x{fps:g} fps {method} {cand}",
+                    "figure": r["fusion_p99"], "unit": "ms p99", "target":
+                    f"<= {TARGET_P99_MS:g}, 0 lost", "ok": bool(ok and r["lost"] == 0),
+                    "peer": None, "peer_figure": None, "better": "lower",
+                    "note": f"e2e p99 {r['e2e_p99']:.3f} ms, {r['lost']} lost of {r['sent']}"})
                 print(f"{f'3 x {fps:g} fps':>10} {method:>6} {cand:>4} {r['sent']:6d} "
                       f"{r['lost']:4d} {r['points']:6d} {r['robot']:6d} {r['drops']:4d} | "
                       f"{r['fusion_med']:10.3f} {r['fusion_p99']:6.3f} {r['fusion_max']:6.1f} "
@@ -302,6 +310,11 @@ def main() -> int:
           "datagrams the receiver got; drop: frames the fuser refused to fuse (out of order); "
           "cpu: the fuser thread's CPU time per datagram that made a point (its latency on "
           "an idle core)")
+    if args.json:
+        import json
+
+        with open(args.json, "w") as f:
+            json.dump({"rows": json_rows}, f)
     return 1 if worst else 0
 
 

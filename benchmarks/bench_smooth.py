@@ -39,6 +39,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--minutes", type=float, default=2.0, help="session length")
     parser.add_argument("--repeat", type=int, default=1)
+    parser.add_argument("--json", default=None, help="write the rows as JSON")
     args = parser.parse_args()
     duration = args.minutes * 60
     rig = apply_timing(builtin_rig("paper3"), "typeA")
@@ -62,6 +63,15 @@ def main() -> int:
           f"{'met' if ok else 'MISSED'}")
     print(f"  smooth points: {len(smooth):,}, median std "
           f"{np.median(smooth.quality['std_m']) * 1e3:.2f} mm")
+    if args.json:
+        import json
+
+        with open(args.json, "w") as f:
+            json.dump({"rows": [{"stage": "smooth", "figure": rate, "unit": "det/s",
+                                 "target": f">= {TARGET:,}", "ok": ok, "peer": None,
+                                 "peer_figure": None, "better": "higher",
+                                 "note": f"{args.minutes:g}-min rally; typeA same run "
+                                         f"{len(obs) / base_s:,.0f} det/s"}]}, f)
     return 0 if ok else 1
 
 

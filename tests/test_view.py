@@ -553,3 +553,121 @@ def test_smooth_and_the_camera_clocks_after_sync(tmp_path, capsys):
     assert pslog_main(["view", str(session), "--save", str(plain), "--frames", "none"]) == 0
     text = _static_text(plain, "/timing")
     assert "No clock correction" in text and "| cam3 | 30 | 22.222 | 0.0000 | 0.000 |" in text
+
+
+# ---- long sessions: full detail in a range, thinned beyond it (issue 12) --------------------
+@pytest.fixture(scope="module")
+def long_session(tmp_path_factory) -> Path:
+    """12 s of a three-camera rally without images: long enough for a 3 s detail range."""
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    det, truth = simulate(rig, get_motion("turntable"), 12.0,
+                          SimulationOptions(noise_px=0.5, miss_rate=0.0, seed=2))
+    path = tmp_path_factory.mktemp("long") / "long.mcap"
+    with SessionWriter(path, rig, timing="typeA") as writer:
+        writer.add_detections(det)
+        writer.add_truth(truth)
+    return path
+
+
+def _series(chunks, entity: str, column: str | None = None):
+    """(times int64 ns, values) of a temporal entity, sorted by time."""
+    batches = chunks[entity]
+    t = _times(batches)
+    if column is None:
+        order = np.argsort(t, kind="stable")
+        return t[order], None
+    v = np.array([x[0] if isinstance(x, list) else x for x in _column(batches, column)])
+    order = np.argsort(t, kind="stable")
+    return t[order], v[order]
+
+
+def test_type_a_fused_on_the_fly_is_fuse_all_and_explain_type_a(long_session):
+    """One gating and one type-A pass give the same track and construction, bit for bit, as
+    fuse_all and explain_type_a each computing them."""
+    data = load_view_data(long_session)
+    s = read_session(long_session)
+    want = fuse_all(s.detections, s.rig, ["typeA"])["typeA"]
+    got = data.tracks["typeA"]
+    np.testing.assert_array_equal(got.time_ns, want.time_ns)
+    np.testing.assert_array_equal(got.position_world, want.position_world)
+    assert got.quality.keys() == want.quality.keys()
+    for key in want.quality:
+        np.testing.assert_array_equal(got.quality[key], want.quality[key])
+    con = explain_type_a(s.detections, s.rig)
+    np.testing.assert_array_equal(data.construction.event_row, con.event_row)
+    np.testing.assert_array_equal(data.construction.points_world, con.points_world)
+    np.testing.assert_array_equal(data.construction.predicted_world, con.predicted_world)
+
+
+def test_detail_range_keeps_every_frame_and_thins_beyond(long_session, tmp_path):
+    from viewers.data import DetailChoice
+
+    s = read_session(long_session)
+    det = s.detections
+    first = int(det.frame_time_ns.min())
+    full, thin = tmp_path / "full.rrd", tmp_path / "thin.rrd"
+    counts_full = save_rrd([long_session], full, detail="all")
+    counts_thin = save_rrd([long_session], thin, detail=DetailChoice.parse("3", every=5))
+    _verify(thin)
+    a, b = _chunks(full), _chunks(thin)
+    period = round(NS / 30.0)
+    bucket = 5 * period
+    detail_end = first + 3 * NS
+    # tracks, truth and detections are complete either way
+    for key in ("detections", "track_points", "truth_points"):
+        assert counts_thin[key] == counts_full[key] > 0
+    for entity in ("/world/tracks/typeA", "/world/truth", "/world/cameras/cam1/image/detections"):
+        np.testing.assert_array_equal(_series(a, entity)[0], _series(b, entity)[0])
+    # rays, epipolar lines, Figure 2: every frame inside 3 s, one frame in 5 beyond
+    for entity in ("/world/rays/cam1", "/world/cameras/cam2/image/epipolar/cam1",
+                   "/world/cameras/cam2/image/typeA/snapped", "/world/typeA/predicted"):
+        t_full, _ = _series(a, entity)
+        t_thin, _ = _series(b, entity)
+        inside = t_full < detail_end
+        np.testing.assert_array_equal(t_thin[t_thin < detail_end], t_full[inside])
+        beyond = t_full[~inside]
+        on_grid = beyond[(beyond - first) % bucket < period]
+        np.testing.assert_array_equal(t_thin[t_thin >= detail_end], on_grid)
+        assert 0 < len(on_grid) <= len(beyond) / 4
+    assert counts_thin["rays"] < counts_full["rays"]
+    # plots: every point inside, M4 beyond: each bucket's first, last, min and max survive
+    t_full, v_full = _series(a, "/plots/error_mm/typeA", "Scalars:scalars")
+    t_thin, v_thin = _series(b, "/plots/error_mm/typeA", "Scalars:scalars")
+    inside = t_full < detail_end
+    np.testing.assert_array_equal(t_thin[t_thin < detail_end], t_full[inside])
+    assert len(t_thin) < 0.5 * len(t_full)
+    k_full = (t_full[~inside] - first) // bucket
+    k_thin = (t_thin[t_thin >= detail_end] - first) // bucket
+    v_beyond = v_thin[t_thin >= detail_end]
+    for k in np.unique(k_full):
+        mine = v_full[~inside][k_full == k]
+        kept = v_beyond[k_thin == k]
+        assert kept.min() == mine.min() and kept.max() == mine.max()
+        assert kept[0] == mine[0] and kept[-1] == mine[-1]
+        assert len(kept) <= 4
+
+
+def test_cli_detail_range_and_bad_values(long_session, tmp_path, capsys):
+    s = read_session(long_session)
+    first = int(s.detections.frame_time_ns.min())
+    out = tmp_path / "range.rrd"
+    assert pslog_main(["view", str(long_session), "--detail", "4:6", "--thin-every", "20",
+                       "--save", str(out)]) == 0
+    t, _ = _series(_chunks(out), "/world/rays/cam3")
+    inside = (t >= first + 4 * NS) & (t < first + 6 * NS)
+    assert inside.sum() == 60  # every frame of cam3 in those 2 s at 30 fps
+    bucket, period = 20 * round(NS / 30.0), round(NS / 30.0)
+    assert np.all((t[~inside] - first) % bucket < period) and (~inside).sum() > 0
+    # --detail all keeps every frame
+    out_all = tmp_path / "all.rrd"
+    assert pslog_main(["view", str(long_session), "--detail", "all", "--thin-every", "20",
+                       "--save", str(out_all)]) == 0
+    assert len(_series(_chunks(out_all), "/world/rays/cam3")[0]) == 360
+    capsys.readouterr()
+    for bad in (["--detail", "5:2"], ["--detail", "soon"], ["--detail", "-1"],
+                ["--thin-every", "0"]):
+        code = pslog_main(["view", str(long_session), *bad, "--save", str(tmp_path / "x.rrd")])
+        assert code == 2, bad
+        err = capsys.readouterr().err
+        assert "--detail" in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "x.rrd").exists()

@@ -8,13 +8,21 @@ from __future__ import annotations
 
 import re
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from pslog.errors import InputError
-from pslog.fusion import METHODS, TypeAConstruction, explain_type_a, fuse_all
+from pslog.fusion import (
+    METHODS,
+    FusionOptions,
+    TypeAConstruction,
+    default_max_gap_s,
+    explain_type_a,
+    fuse_all,
+    prepare,
+)
 from pslog.log import Session, read_session
 from pslog.records import NS, Observations, Track
 from pslog.timing import observations as timed_observations
@@ -52,6 +60,67 @@ class FramesChoice:
                          f"{cls.MAX_EVERY}, got {text!r}")
 
 
+@dataclass(frozen=True)
+class DetailChoice:
+    """Where a recording holds every frame's overlays, and how thin it is elsewhere.
+
+    A long session (a 90-minute match: 486,000 detections) logged in full makes a .rrd of
+    half a gigabyte. Inside the detail range every frame keeps its ray, epipolar lines and
+    Figure 2 construction, and the plots every point; beyond it those overlays are kept for
+    one frame in ``every`` (of the slowest camera) and the plots are reduced to the first,
+    last, smallest and largest value of each ``every``-frame bucket (M4 aggregation, Jugel
+    et al., "M4: A Visualization-Oriented Time Series Data Aggregation", PVLDB 7(10), 2014:
+    the drawn line keeps its extremes). Detections, tracks, truth and images stay complete.
+
+    Attributes
+    ----------
+    start_s : seconds after the session's first frame; None: the shown range's start
+    length_s : seconds of full detail from ``start_s``; None: everything (``all``)
+    every : thinning factor beyond the range (>= 1)
+    """
+
+    start_s: float | None
+    length_s: float | None
+    every: int = 10
+
+    #: the default: the first ten minutes shown in full detail, the rest thinned tenfold —
+    #: a 10-minute session is unchanged, a 90-minute match stays light
+    DEFAULT = "600"
+    DEFAULT_EVERY = 10
+
+    @classmethod
+    def parse(cls, text: str, every: int = DEFAULT_EVERY) -> DetailChoice:
+        """``all`` (no thinning), ``S`` (the first S seconds shown) or ``A:B`` (seconds
+        after the session's first frame); ``every`` the thinning factor beyond it."""
+        text = str(text).strip()
+        if isinstance(every, bool) or not isinstance(every, int) or every < 1:
+            raise InputError(f"the thinning factor must be a whole number >= 1, got {every!r}")
+        if text == "all":
+            return cls(None, None, every)
+        try:
+            if ":" in text:
+                a, b = (float(x) for x in text.split(":"))
+                if np.isfinite(a) and np.isfinite(b) and 0 <= a < b:
+                    return cls(a, b - a, every)
+            else:
+                length = float(text)
+                if np.isfinite(length) and length >= 0:
+                    return cls(None, length, every)
+        except ValueError:
+            pass
+        raise InputError(f"detail must be 'all', seconds S >= 0 (the first S seconds shown) "
+                         f"or A:B with 0 <= A < B seconds, got {text!r}")
+
+    def range_ns(self, first_ns: int, window_ns: tuple[int, int]) -> tuple[int, int]:
+        """The full-detail range (lo, hi), int ns on the session clock, given the session's
+        first frame time and the shown window."""
+        if self.length_s is None:
+            return -UNBOUNDED_NS, UNBOUNDED_NS
+        lo = first_ns + round(self.start_s * NS) if self.start_s is not None else (
+            max(window_ns[0], first_ns))
+        return lo, lo + round(self.length_s * NS)
+
+
 @dataclass(frozen=True, eq=False)
 class ViewData:
     """Everything a recording is built from.
@@ -67,6 +136,10 @@ class ViewData:
     notes : human-readable remarks (tracks fused on the fly, renamed duplicates)
     rejections : display name -> :class:`pslog.fusion.gating.Rejections` stored beside a
         shown track (``pslog fuse`` with gating), in display order
+    detail_ns : (lo, hi), int ns: the full-detail range (see :class:`DetailChoice`)
+    every : thinning factor beyond ``detail_ns`` (1: none)
+    thin : True for the copy the per-frame overlays are drawn from (:meth:`thinned`): its
+        :meth:`in_window` also leaves out the thinned frames
     """
 
     session: Session
@@ -77,11 +150,54 @@ class ViewData:
     window_ns: tuple[int, int]
     notes: list[str] = field(default_factory=list)
     rejections: dict = field(default_factory=dict)
+    detail_ns: tuple[int, int] = (-UNBOUNDED_NS, UNBOUNDED_NS)
+    every: int = 1
+    thin: bool = False
+
+    @property
+    def first_ns(self) -> int:
+        """The session's first frame time, int ns (0 without frames)."""
+        t = self.session.detections.frame_time_ns
+        return int(t.min()) if len(t) else 0
+
+    @property
+    def bucket_ns(self) -> tuple[int, int]:
+        """``(bucket, period)`` int ns: beyond the detail range one frame period (of the
+        slowest camera) is kept in each bucket of ``every`` periods, so every camera keeps
+        one frame in ``every``."""
+        fps = min((c.fps for c in self.session.rig.cameras), default=30.0)
+        period = max(1, round(NS / fps))
+        return self.every * period, period
+
+    def in_detail(self, time_ns: np.ndarray) -> np.ndarray:
+        """Mask (n,) of times within the full-detail range."""
+        lo, hi = self.detail_ns
+        return (time_ns >= lo) & (time_ns < hi)
+
+    def on_grid(self, time_ns: np.ndarray) -> np.ndarray:
+        """Mask (n,) of the times kept beyond the detail range (one frame in ``every``)."""
+        bucket, period = self.bucket_ns
+        return (np.asarray(time_ns, dtype=np.int64) - self.first_ns) % bucket < period
 
     def in_window(self, time_ns: np.ndarray) -> np.ndarray:
-        """Mask (n,) of times within the window."""
+        """Mask (n,) of times within the window (and, for the :meth:`thinned` copy, within
+        the detail range or on the thinning grid)."""
         lo, hi = self.window_ns
-        return (time_ns >= lo) & (time_ns < hi)
+        mask = (time_ns >= lo) & (time_ns < hi)
+        if self.thin:
+            mask &= self.in_detail(time_ns) | self.on_grid(time_ns)
+        return mask
+
+    @property
+    def thinned_anywhere(self) -> bool:
+        """True when some shown time lies beyond the detail range (and ``every`` > 1)."""
+        return self.every > 1 and (self.window_ns[0] < self.detail_ns[0]
+                                   or self.window_ns[1] > self.detail_ns[1])
+
+    def thinned(self) -> ViewData:
+        """This view for the per-frame overlays (rays, epipolar lines, Figure 2): one frame
+        in ``every`` beyond the detail range; itself when nothing is thinned."""
+        return replace(self, thin=True) if self.thinned_anywhere else self
 
 
 def parse_methods(text: str | Sequence[str] | None) -> list[str] | None:
@@ -101,7 +217,7 @@ def _safe_name(text: str) -> str:
 
 def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
                    methods: str | Sequence[str] | None = None, start: float | None = None,
-                   end: float | None = None) -> ViewData:
+                   end: float | None = None, detail: str | DetailChoice = "all") -> ViewData:
     """Read the sessions and choose the tracks to show.
 
     Parameters
@@ -113,6 +229,9 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
         None: every stored track, or ``typeA`` fused on the fly when there is none
     start, end : seconds from the session's first frame; rows outside ``[start, end)`` are
         left out (fusion still sees every detection, so the first points keep their history)
+    detail : a :class:`DetailChoice` or its text (``all``, ``S`` or ``A:B``): where the
+        per-frame overlays and the plots keep every frame (default ``all``: everywhere;
+        ``pslog view`` defaults to :attr:`DetailChoice.DEFAULT`)
 
     Raises
     ------
@@ -156,14 +275,21 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
     if unknown:
         have = sorted(set(tracks) | set(METHODS))
         raise InputError(f"unknown method {unknown[0]!r} (stored or fusable: {', '.join(have)})")
+    construction = None
     if missing:
         # as 'pslog fuse' does: each frame's ball chosen among its candidates (gating)
-        tracks.update(fuse_all(session.detections, session.rig, missing))
+        if "typeA" in missing and len(session.rig) >= 2 and len(observations):
+            # one gating and one type-A pass give the track and its Figure 2 construction
+            # (what fuse_all and explain_type_a would each compute again, bit for bit)
+            tracks["typeA"], construction = _type_a_with_construction(session)
+        rest = [m for m in missing if m != "typeA" or "typeA" not in tracks]
+        if rest:
+            tracks.update(fuse_all(session.detections, session.rig, rest))
         notes.append(f"fused on the fly: {', '.join(missing)}")
     shown = {m: tracks[m] for m in wanted}
 
-    construction = None
-    if "typeA" in shown and len(session.rig) >= 2 and len(observations):
+    if (construction is None and "typeA" in shown and len(session.rig) >= 2
+            and len(observations)):
         construction = explain_type_a(session.detections, session.rig)
 
     first = int(session.detections.frame_time_ns.min()) if session.detections.n_frames else 0
@@ -181,5 +307,23 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
         span = (frame_times.max() - first) / NS if len(frame_times) else 0.0
         raise InputError(f"no frame between --start {start} s and --end {end} s; the session "
                          f"spans 0 to {span:.3f} s")
+    choice = detail if isinstance(detail, DetailChoice) else DetailChoice.parse(detail)
     return ViewData(session, paths, observations, shown, construction, window, notes,
-                    {m: rejections[m] for m in shown if m in rejections})
+                    {m: rejections[m] for m in shown if m in rejections},
+                    detail_ns=choice.range_ns(first, window), every=choice.every)
+
+
+def _type_a_with_construction(session: Session) -> tuple[Track, TypeAConstruction]:
+    """``typeA`` fused from the session's detections as :func:`pslog.fusion.fuse_all`
+    fuses it (gated, default options) and its construction as
+    :func:`pslog.fusion.explain_type_a` explains it, from one gating and one pass."""
+    from pslog.fusion import check_tolerance
+    from pslog.fusion.gating import gate_for
+    from pslog.fusion.pseudo import fuse_type_a
+
+    rig, options = session.rig, FusionOptions()
+    check_tolerance(rig, options.tolerance_s)
+    obs = (gate_for(session.detections, rig, "typeA", options).observations if options.gating
+           else timed_observations(session.detections, rig))
+    return fuse_type_a(prepare(obs, rig), options.max_gap_s or default_max_gap_s(rig),
+                       options.noise_px)

@@ -46,7 +46,7 @@ from pslog.records import NS, Track
 from . import _columns as C
 from ._columns import camera_path, image_path
 from .blueprint import build_blueprint, default_eye, quality_plots
-from .data import UNBOUNDED_NS, FramesChoice, ViewData, load_view_data
+from .data import UNBOUNDED_NS, DetailChoice, FramesChoice, ViewData, load_view_data
 from .overlays import log_construction, log_detections, log_epipolar
 from .panels import CropLogger, log_summary
 from .rrd_file import rrd_file
@@ -62,6 +62,7 @@ _RATE_WINDOW_S = 0.5  # detection rate over the last half second
 def build_recording(session_paths: str | Path | Sequence[str | Path], *,
                     methods: str | Sequence[str] | None = None, frames: str = "all",
                     start: float | None = None, end: float | None = None,
+                    detail: str | DetailChoice = DetailChoice.DEFAULT,
                     recording: rr.RecordingStream | None = None) -> rr.RecordingStream:
     """A rerun recording of a session, its fused tracks and the type-A construction.
 
@@ -72,6 +73,9 @@ def build_recording(session_paths: str | Path | Sequence[str | Path], *,
     methods : tracks to show (None: every stored track, else ``typeA`` fused on the fly)
     frames : ``all``, ``none`` or ``every:N`` — which recorded images to include
     start, end : seconds from the session's first frame
+    detail : where every frame's overlays and plot points are kept (:class:`DetailChoice`:
+        ``all``, ``S`` the first S seconds shown, ``A:B``); default the first 600 s, then
+        one frame in 10
     recording : a stream to log into (with its sink already set, so data streams out);
         None: a new stream that buffers in memory until a sink is set (``rec.save(path)``,
         ``rec.spawn()``, ...)
@@ -81,7 +85,7 @@ def build_recording(session_paths: str | Path | Sequence[str | Path], *,
     The RecordingStream, with the default blueprint sent.
     """
     choice = FramesChoice.parse(frames)
-    data = load_view_data(session_paths, methods=methods, start=start, end=end)
+    data = load_view_data(session_paths, methods=methods, start=start, end=end, detail=detail)
     rec = recording if recording is not None else new_stream()
     log_view(rec, data, choice)
     return rec
@@ -100,6 +104,7 @@ def save_rrd(session_paths: str | Path | Sequence[str | Path], path: str | Path,
     paths = [session_paths] if isinstance(session_paths, str | Path) else list(session_paths)
     check_output_path(path, force, inputs=paths)
     choice = FramesChoice.parse(options.pop("frames", "all"))
+    options.setdefault("detail", DetailChoice.DEFAULT)
     data = load_view_data(paths, **options)
     rec = new_stream()
     # streamed to the file while logging: images never pile up in memory
@@ -143,12 +148,14 @@ def log_view(rec: rr.RecordingStream, data: ViewData, frames: FramesChoice) -> d
     for c, cam in enumerate(rig.cameras):
         rows = obs.camera == c
         uv_undistorted[rows] = cam.undistort(obs.uv[rows])
+    # per-frame overlays beyond the detail range: one frame in data.every (DetailChoice)
+    thin = data.thinned()
     counts["detections"] = log_detections(rec, data, clock)
-    counts["rays"] = _log_rays(rec, data, clock)
-    counts["epipolar_lines"] = log_epipolar(rec, data, clock, uv_undistorted)
+    counts["rays"] = _log_rays(rec, thin, clock)
+    counts["epipolar_lines"] = log_epipolar(rec, thin, clock, uv_undistorted)
     counts["track_points"] = _log_tracks(rec, data, clock, colors)
     counts["truth_points"] = _log_truth(rec, data, clock)
-    counts["typeA_constructions"] = log_construction(rec, data, clock, uv_undistorted)
+    counts["typeA_constructions"] = log_construction(rec, thin, clock, uv_undistorted)
     counts["plot_points"] = _log_plots(rec, data, clock, quality)
     counts["events"] = _log_events(rec, data, clock)
     counts["images"] = _log_images(rec, data, clock, frames)
@@ -343,7 +350,8 @@ def _log_rays(rec, data: ViewData, clock: C.Clock) -> int:
         ok = np.all(np.isfinite(strips), axis=(1, 2))  # a pixel beyond the lens model: no ray
         n += C.send(rec, f"world/rays/{cam.name}", clock, obs.time_ns[rows],
                     obs.frame_index[rows],
-                    rr.LineStrips3D.columns(strips=strips[ok]).partition(ok.astype(np.int64)))
+                    rr.LineStrips3D.columns(strips=C.strips_array(strips[ok]))
+                    .partition(ok.astype(np.int64)))
     return n
 
 
@@ -361,7 +369,7 @@ def _log_points_and_trail(rec, path: str, clock: C.Clock, time_ns, frames, point
         lengths = _trail_lengths(time_ns)
         segments = np.stack([points[:-1], points[1:]], axis=1)[lengths[1:] > 0]
         C.send(rec, f"{path}/trail", clock, time_ns, frames,
-               rr.LineStrips3D.columns(strips=segments.astype(np.float32)).partition(lengths))
+               rr.LineStrips3D.columns(strips=C.strips_array(segments)).partition(lengths))
     return n
 
 
@@ -411,6 +419,7 @@ def _log_plots(rec, data: ViewData, clock: C.Clock, quality: dict[str, tuple[str
                 series[plot] = scale * track.quality[key]
         for plot, values in series.items():
             ok = np.isfinite(values)
+            ok[ok] = _m4_keep(data, track.time_ns[ok], values[ok])
             n += C.send(rec, f"plots/{plot}/{method}", clock, track.time_ns[ok], frames[ok],
                         rr.Scalars.columns(scalars=values[ok]))
     det = data.session.detections
@@ -424,9 +433,36 @@ def _log_plots(rec, data: ViewData, clock: C.Clock, quality: dict[str, tuple[str
         lo = np.maximum(i - window, 0)
         rate = 100.0 * (hits[i] - hits[lo]) / (i - lo)
         sel = inside[rows]
+        sel[sel] = _m4_keep(data, det.frame_time_ns[rows][sel], rate[sel])
         n += C.send(rec, f"plots/detection_rate/{cam.name}", clock, det.frame_time_ns[rows][sel],
                     det.frame_index[rows][sel], rr.Scalars.columns(scalars=rate[sel]))
     return n
+
+
+def _m4_keep(data: ViewData, time_ns: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """Mask (n,) of a plot's points to log: all of them inside the detail range; beyond it,
+    in each bucket of ``data.every`` frame periods, the first, last, smallest and largest
+    (M4: Jugel et al., PVLDB 7(10), 2014 — the line drawn keeps its extremes and ends).
+
+    ``time_ns`` (n,) int64 and ``values`` (n,) finite float of one series.
+    """
+    keep = np.ones(len(time_ns), dtype=bool)
+    if data.every <= 1 or len(time_ns) == 0 or not data.thinned_anywhere:
+        return keep
+    detail = data.in_detail(time_ns)
+    out = np.flatnonzero(~detail)
+    if len(out) == 0:
+        return keep
+    bucket_ns, _ = data.bucket_ns
+    b = (time_ns[out] - data.first_ns) // bucket_ns
+    keep = detail.copy()
+    for order in (np.lexsort((time_ns[out], b)), np.lexsort((values[out], b))):
+        sb = b[order]
+        starts = np.flatnonzero(np.r_[True, sb[1:] != sb[:-1]])
+        ends = np.r_[starts[1:], len(sb)] - 1
+        keep[out[order[starts]]] = True  # first in time / smallest
+        keep[out[order[ends]]] = True  # last in time / largest
+    return keep
 
 
 def _log_events(rec, data: ViewData, clock: C.Clock) -> int:

@@ -56,6 +56,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="start, seconds after the session's first frame")
     parser.add_argument("--end", type=nonnegative_float, metavar="S",
                         help="end, seconds after the session's first frame")
+    parser.add_argument("--detail", default="600", metavar="all|S|A:B",
+                        help="where every frame's rays, epipolar lines, Figure 2 overlays and "
+                             "plot points are kept: 'all', the first S seconds shown, or A:B "
+                             "seconds after the session's first frame; beyond it one frame in "
+                             "--thin-every (plots: first/last/min/max per bucket). Default "
+                             "%(default)s: a long match stays light; tracks, detections and "
+                             "images are always complete")
+    parser.add_argument("--thin-every", type=int, default=10, metavar="N",
+                        help="thinning factor beyond --detail (default %(default)s)")
     parser.add_argument("--web-port", type=port, default=9090,
                         metavar="PORT", help="port of the web viewer with --serve "
                                              "(default %(default)s)")
@@ -88,6 +97,12 @@ def run(args: argparse.Namespace) -> int:
     if args.start is not None and args.end is not None and args.start >= args.end:
         return usage_error("view", f"--start ({args.start:g} s) must be before --end "
                                    f"({args.end:g} s)")
+    from viewers.data import DetailChoice
+
+    try:
+        detail = DetailChoice.parse(args.detail, args.thin_every)
+    except PslogError as exc:
+        return usage_error("view", f"argument --detail/--thin-every: {exc}")
     try:
         parse_methods(args.methods)
     except PslogError as exc:
@@ -122,7 +137,8 @@ def run(args: argparse.Namespace) -> int:
         sink = open_sink(kind, web_port=args.web_port, grpc_port=args.grpc_port,
                          url=args.url, connect_timeout_s=args.connect_timeout)
     # read and fuse before any sink starts, so errors come out before a viewer does
-    data = load_view_data(args.sessions, methods=args.methods, start=args.start, end=args.end)
+    data = load_view_data(args.sessions, methods=args.methods, start=args.start, end=args.end,
+                          detail=detail)
     out = sys.stderr if args.stdout else sys.stdout
     for note in data.notes:
         print(note, file=out)
