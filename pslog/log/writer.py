@@ -29,6 +29,7 @@ from ..outputs import (
 )
 from ..records import Detections, Track, Truth
 from ..rig import Rig
+from . import _chunks
 from . import _schemas as S
 
 #: Messages buffered before they are written even if the flush interval has not passed.
@@ -138,6 +139,7 @@ class SessionWriter:
             raise write_error(self.path, exc) from None
         self._closed = False
         self._mcap = Writer(self._file, compression=CompressionType.ZSTD)
+        self._bulk = _chunks.supported(self._mcap)  # messages written in blocks (_chunks)
         self._schema_ids: dict[str, int] = {}
         self._channels: dict[str, int] = {}
         self._pending: list[tuple[int, int, bytes, int]] = []  # channel, time, data, sequence
@@ -246,11 +248,27 @@ class SessionWriter:
         """Write buffered small messages as chunk(s) of their own."""
         if not self._pending:
             return
-        add = self._mcap.add_message
-        for channel, time_ns, data, sequence in self._pending:
-            add(channel, time_ns, data, time_ns, sequence)
+        self._write_block(self._pending)
         self._pending.clear()
         self._mcap.flush()
+
+    def _write_block(self, messages: list[tuple[int, int, bytes, int]]) -> None:
+        """Write ``(channel, time, data, sequence)`` messages as chunk(s): all at once with
+        numpy (:mod:`._chunks`, the same bytes as the ``mcap`` writer's ``add_message`` one
+        by one, which cost most of the time of writing a long session), or one by one when
+        the installed ``mcap`` does not allow it or a field does not fit (its own error)."""
+        n = len(messages)
+        channel = np.fromiter((m[0] for m in messages), dtype=np.int64, count=n)
+        times = np.fromiter((m[1] for m in messages), dtype=np.int64, count=n)
+        sequence = np.fromiter((m[3] for m in messages), dtype=np.int64, count=n)
+        if self._bulk and _chunks.fits(sequence, times):
+            lengths = np.fromiter((len(m[2]) for m in messages), dtype=np.int64, count=n)
+            _chunks.write_messages(self._mcap, channel, times, sequence,
+                                   b"".join([m[2] for m in messages]), lengths)
+            return
+        add = self._mcap.add_message
+        for channel, time_ns, data, sequence in messages:
+            add(channel, time_ns, data, time_ns, sequence)
 
     def _write_images(self) -> None:
         """Write the buffered images as chunk(s) of their own, after the small messages
@@ -258,9 +276,7 @@ class SessionWriter:
         self._drain()
         if not self._images:
             return
-        add = self._mcap.add_message
-        for channel, time_ns, data, sequence in self._images:
-            add(channel, time_ns, data, time_ns, sequence)
+        self._write_block(self._images)
         self._images.clear()
         self._image_bytes = 0
         self._mcap.flush()
