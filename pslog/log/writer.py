@@ -29,7 +29,7 @@ from ..outputs import (
 )
 from ..records import Detections, Track, Truth
 from ..rig import Rig
-from . import _chunks
+from . import _chunks, table
 from . import _schemas as S
 
 #: Messages buffered before they are written even if the flush interval has not passed.
@@ -155,6 +155,12 @@ class SessionWriter:
         self._flush_error: BaseException | None = None
         self._last_flush = time.monotonic()
         self.counts: dict[str, int] = {}
+        # the messages of the topics that columnar tables stand for (detections, ball
+        # labels, truth), kept as written (channel id -> parts), made tables at close
+        self._table_rows: dict[int, tuple[str, int]] = {}  # channel -> (table, camera)
+        self._table_parts: dict[int, list] = {}
+        self._topic_of: dict[int, str] = {}
+        self._adopted: dict[str, bytes] = {}  # table -> a copied table's attachment data
 
         # metadata first and flushed at once, so even a file killed seconds later is a session
         record = {
@@ -222,7 +228,64 @@ class SessionWriter:
             channel = self._mcap.register_channel(topic=topic, message_encoding=S.PROTOBUF,
                                                   schema_id=schema)
             self._channels[topic] = channel
+            self._note_channel(topic, channel)
         return channel
+
+    def _note_channel(self, topic: str, channel: int) -> None:
+        """Keep the messages of ``channel`` if a columnar table stands for its topic."""
+        row = table.table_of(topic, self._names)
+        if row is not None:
+            self._table_rows[channel] = row
+            self._table_parts[channel] = []
+            self._topic_of[channel] = topic
+
+    def _keep_table_rows(self, channel: np.ndarray, times: np.ndarray, sequence: np.ndarray,
+                         data: bytes, lengths: np.ndarray) -> None:
+        """Keep the written messages of the tables' channels (their bytes, times and
+        sequence numbers) for :meth:`_write_tables`."""
+        from .reader import _Batch, _gather
+
+        here = set(np.unique(channel).tolist()) & self._table_parts.keys()
+        if not here:
+            return
+        ends = np.cumsum(lengths)
+        starts = ends - lengths
+        payload = np.frombuffer(data, dtype=np.uint8)
+        for cid in sorted(here):
+            sel = np.flatnonzero(channel == cid)
+            buf, begin = _gather(payload, starts[sel], ends[sel])
+            self._table_parts[cid].append(_Batch(buf, begin, begin + lengths[sel],
+                                                 times[sel], sequence[sel]))
+
+    def _adopt_table(self, name: str, data: bytes) -> None:
+        """A table read from the session being copied (checked): written as it is at close
+        when the messages its topics got here are exactly as many as it names (a copy of
+        every one of them), else made again from the messages."""
+        self._adopted[name] = data
+
+    def _write_tables(self) -> None:
+        """Write each table whose topics have a channel as an attachment (see
+        :mod:`pslog.log.table`), made from the messages written (:func:`table.build`), or a
+        copied one (:meth:`_adopt_table`) that names as many messages as were written."""
+        for name in table.TABLES:
+            channels = [cid for cid, (t, _cam) in self._table_rows.items() if t == name]
+            if not channels:
+                continue
+            per_topic = {self._topic_of[cid]: self._table_parts[cid] for cid in channels}
+            counts = {t: sum(len(b) for b in per_topic.get(t, []))
+                      for t in table.topics_of(name, self._names)}
+            data = self._adopted.get(name)
+            if data is not None:
+                try:
+                    copied, _ = table.decode(data, name, self._names)
+                except LogFormatError:
+                    copied = None
+                if copied != counts:
+                    data = None
+            if data is None:
+                data = table.build(name, self._names, per_topic)
+            if data is not None:
+                self._mcap.add_attachment(0, 0, name, table.MEDIA_TYPE, data)
 
     def _write_static(self, time_ns: int) -> None:
         """Per camera: foxglove.CameraCalibration and foxglove.FrameTransform world -> camera."""
@@ -261,14 +324,16 @@ class SessionWriter:
         channel = np.fromiter((m[0] for m in messages), dtype=np.int64, count=n)
         times = np.fromiter((m[1] for m in messages), dtype=np.int64, count=n)
         sequence = np.fromiter((m[3] for m in messages), dtype=np.int64, count=n)
+        lengths = np.fromiter((len(m[2]) for m in messages), dtype=np.int64, count=n)
+        data = b"".join([m[2] for m in messages])
         if self._bulk and _chunks.fits(sequence, times):
-            lengths = np.fromiter((len(m[2]) for m in messages), dtype=np.int64, count=n)
-            _chunks.write_messages(self._mcap, channel, times, sequence,
-                                   b"".join([m[2] for m in messages]), lengths)
-            return
-        add = self._mcap.add_message
-        for channel, time_ns, data, sequence in messages:
-            add(channel, time_ns, data, time_ns, sequence)
+            _chunks.write_messages(self._mcap, channel, times, sequence, data, lengths)
+        else:
+            add = self._mcap.add_message
+            for cid, time_ns, payload, seq in messages:
+                add(cid, time_ns, payload, time_ns, seq)
+        if self._table_parts:
+            self._keep_table_rows(channel, times, sequence, data, lengths)
 
     def _write_images(self) -> None:
         """Write the buffered images as chunk(s) of their own, after the small messages
@@ -455,6 +520,7 @@ class SessionWriter:
                         schema.name, schema.encoding, schema.data)
             cid = self._mcap.register_channel(topic, channel.encoding, sid, channel.metadata)
             self._channels[topic] = cid
+            self._note_channel(topic, cid)
         self._queue(cid, time_ns, data, sequence)
         self._count(topic)
 
@@ -571,6 +637,7 @@ class SessionWriter:
             try:
                 if finish:
                     self._write_images()
+                    self._write_tables()
                     self._mcap.finish()
             except OSError as exc:
                 error = self._os_fault(exc)
