@@ -320,18 +320,34 @@ class SessionWriter:
         numpy (:mod:`._chunks`, the same bytes as the ``mcap`` writer's ``add_message`` one
         by one, which cost most of the time of writing a long session), or one by one when
         the installed ``mcap`` does not allow it or a field does not fit (its own error)."""
-        n = len(messages)
-        channel = np.fromiter((m[0] for m in messages), dtype=np.int64, count=n)
-        times = np.fromiter((m[1] for m in messages), dtype=np.int64, count=n)
-        sequence = np.fromiter((m[3] for m in messages), dtype=np.int64, count=n)
-        lengths = np.fromiter((len(m[2]) for m in messages), dtype=np.int64, count=n)
-        data = b"".join([m[2] for m in messages])
+        if any(isinstance(m, _Block) for m in messages):
+            blocks, run = [], []
+            for m in [*messages, None]:
+                if isinstance(m, tuple):
+                    run.append(m)
+                    continue
+                if run:
+                    blocks.append(_Block.of(run))
+                    run = []
+                if m is not None:
+                    blocks.append(m)
+            channel, times, sequence, lengths = (np.concatenate([getattr(b, k) for b in blocks])
+                                                 for k in ("channel", "time", "seq", "length"))
+            data = b"".join(b.data for b in blocks)
+        else:
+            block = _Block.of(messages)
+            channel, times, sequence, lengths = block.channel, block.time, block.seq, \
+                block.length
+            data = block.data
         if self._bulk and _chunks.fits(sequence, times):
             _chunks.write_messages(self._mcap, channel, times, sequence, data, lengths)
         else:
             add = self._mcap.add_message
-            for cid, time_ns, payload, seq in messages:
-                add(cid, time_ns, payload, time_ns, seq)
+            ends = np.cumsum(lengths).tolist()
+            for cid, time_ns, seq, a, b in zip(channel.tolist(), times.tolist(),
+                                               sequence.tolist(), [0, *ends[:-1]], ends,
+                                               strict=True):
+                add(cid, time_ns, data[a:b], time_ns, seq)
         if self._table_parts:
             self._keep_table_rows(channel, times, sequence, data, lengths)
 
@@ -507,6 +523,35 @@ class SessionWriter:
     def _add_foreign(self, topic: str, schema, channel, time_ns: int, data: bytes,
                      sequence: int) -> None:
         """Copy a message of any channel (``_mcapio.SchemaRec``/``ChannelRec``) as is."""
+        cid = self._foreign_channel(topic, schema, channel)
+        self._queue(cid, time_ns, data, sequence)
+        self._count(topic)
+
+    @_locked
+    def _add_block(self, block: _Block, topics: dict[int, str], images: bool = False
+                   ) -> None:
+        """Copy messages at once, as they are: ``block``'s channels are this writer's
+        (:meth:`_foreign_channel`), ``topics`` their topics; ``images``: written after the
+        small messages, as :meth:`add_image` does. Sessions are copied a chunk at a time so."""
+        self._check_open()
+        if len(block.time) and block.time.min() < 0:
+            raise InputError(_negative_time(int(block.time.min())))
+        ids, counts = np.unique(block.channel, return_counts=True)
+        for cid, k in zip(ids.tolist(), counts.tolist(), strict=True):
+            self._count(topics[cid], k)
+        if images:
+            self._images.append(block)
+            self._image_bytes += len(block.data)
+            if self._image_bytes >= _IMAGE_CHUNK_BYTES:
+                self._write_images()
+        else:
+            self._pending.append(block)
+            self._drain()
+        self._maybe_flush()
+
+    def _foreign_channel(self, topic: str, schema, channel) -> int:
+        """This writer's channel of ``topic`` (registered from a copied file's records, a
+        ``_mcapio.SchemaRec`` or None and a ``_mcapio.ChannelRec``, if new)."""
         cid = self._channels.get(topic)
         if cid is None:
             sid = 0
@@ -521,8 +566,7 @@ class SessionWriter:
             cid = self._mcap.register_channel(topic, channel.encoding, sid, channel.metadata)
             self._channels[topic] = cid
             self._note_channel(topic, cid)
-        self._queue(cid, time_ns, data, sequence)
-        self._count(topic)
+        return cid
 
     @_locked
     def add_truth(self, truth: Truth) -> None:
@@ -685,6 +729,27 @@ class SessionWriter:
         if exc_type is not None:
             self._failed = True
         self.close()
+
+
+class _Block:
+    """Messages written at once: ``channel``, ``time`` (ns), ``seq`` and ``length`` (n,)
+    int64 columns, ``data`` their payloads back to back."""
+
+    __slots__ = ("channel", "data", "length", "seq", "time")
+
+    def __init__(self, channel, time, seq, length, data: bytes) -> None:
+        self.channel, self.time, self.seq, self.length, self.data = (
+            channel, time, seq, length, data)
+
+    @classmethod
+    def of(cls, messages: list[tuple[int, int, bytes, int]]) -> _Block:
+        """The block of ``(channel, time, data, sequence)`` tuples."""
+        n = len(messages)
+        return cls(np.fromiter((m[0] for m in messages), dtype=np.int64, count=n),
+                   np.fromiter((m[1] for m in messages), dtype=np.int64, count=n),
+                   np.fromiter((m[3] for m in messages), dtype=np.int64, count=n),
+                   np.fromiter((len(m[2]) for m in messages), dtype=np.int64, count=n),
+                   b"".join([m[2] for m in messages]))
 
 
 def _quality_entries(extra: dict[str, np.ndarray], n: int, block: int = 1 << 15):
