@@ -145,13 +145,16 @@ class _Finished:
         #: table name -> why its columnar table was not used (see :meth:`table`)
         self.table_problems: dict[str, str] = {}
 
+    #: whether :meth:`table` reads tables at all (benchmarks time the message path too)
+    use_tables = True
+
     def table(self, name: str):
         """The :class:`~pslog.records.Detections` (or :class:`~pslog.records.Truth`) of
         columnar table ``name`` (:mod:`pslog.log.table`) when the file has it and it agrees
         with the per-message topics it stands for; else None, with the reason in
         :attr:`table_problems` when a table is there but not used."""
         index = self.attachments.get(name)
-        if index is None:
+        if index is None or not self.use_tables:
             return None
         try:
             data = self._attachment(index)
