@@ -604,19 +604,50 @@ class SessionWriter:
             raise InputError(_negative_time(int(track.time_ns.min())))
         if n and not 0 <= track.camera.min() <= track.camera.max() < len(self._names):
             raise InputError(f"track {method!r}: camera index out of range of the rig")
+        first_id = self._scene_ids.get(method, 0)
+        # a block of points at a time, every message's bytes made with numpy (_encode) and
+        # written as one block: a Python object per point was most of the time of writing a
+        # fused match; each block is checked against protobuf on sample points, and any
+        # difference sends the rest of the track the per-point way
+        template = _quality_template(extra)
+        lo = 0
+        if template is not None and all(self._names):
+            while lo < n:
+                hi = min(lo + _TRACK_BLOCK, n)
+                block = _track_block(track, lo, hi, method, self._names, fixed, template,
+                                     first_id, color, channel, scene_channel)
+                if block is None:
+                    break
+                self._pending.append(block)
+                self._drain()
+                self._maybe_flush()
+                lo = hi
+        self._add_track_points(track, lo, n, method, fixed, extra, first_id, color, channel,
+                               scene_channel)
+        self._scene_ids[method] = first_id + n
+        self._count(S.track_topic(method), n)
+        self._count(S.track_scene_topic(method), n)
+
+    def _add_track_points(self, track: Track, lo: int, hi: int, method: str, fixed: dict,
+                          extra: dict, first_id: int, color, channel: int,
+                          scene_channel: int) -> None:
+        """Points ``lo:hi`` of a track, one protobuf message at a time."""
+        if lo >= hi:
+            return
         cameras = self._names
         # the quality map's bytes of every point at once (setting its keys one point at a
         # time was most of the cost of writing a track); None: the per-point way
-        entries = _quality_entries(extra, n)
-        first_id = self._scene_ids.get(method, 0)
-        for i, (t, (x, y, z), cam) in enumerate(zip(
-                track.time_ns.tolist(), track.position_world.tolist(), track.camera.tolist(),
-                strict=True)):
+        entries = _quality_entries({k: v[lo:hi] for k, v in extra.items()}, hi - lo)
+        fixed = {k: v[lo:hi] for k, v in fixed.items()}
+        for j, (t, (x, y, z), cam) in enumerate(zip(
+                track.time_ns[lo:hi].tolist(), track.position_world[lo:hi].tolist(),
+                track.camera[lo:hi].tolist(), strict=True)):
+            i = lo + j
             msg = S.TrackPoint(time_ns=t, method=method, x=x, y=y, z=z, camera=cameras[cam],
-                               **{k: fixed[k][i] for k in S.TRACK_FIXED_QUALITY})
+                               **{k: fixed[k][j] for k in S.TRACK_FIXED_QUALITY})
             if entries is not None:
                 data = msg.SerializeToString() + next(entries)
-                if i == 0:  # the same bytes as protobuf's own, checked on the first point
+                if j == 0:  # the same bytes as protobuf's own, checked on the first point
                     for k, values in extra.items():
                         msg.quality[k] = float(values[i])
                     if msg.SerializeToString() != data:
@@ -628,9 +659,6 @@ class SessionWriter:
                 data = msg.SerializeToString()
             self._queue(channel, t, data)
             self._queue(scene_channel, t, scene_point(method, first_id + i, t, (x, y, z), color))
-        self._scene_ids[method] = first_id + n
-        self._count(S.track_topic(method), n)
-        self._count(S.track_scene_topic(method), n)
 
     @_locked
     def add_event(self, time_ns: int, text: str, camera: int | None = None,
@@ -750,6 +778,105 @@ class _Block:
                    np.fromiter((m[3] for m in messages), dtype=np.int64, count=n),
                    np.fromiter((len(m[2]) for m in messages), dtype=np.int64, count=n),
                    b"".join([m[2] for m in messages]))
+
+
+#: track points encoded and written at a time (bounded memory: a few hundred bytes a point)
+_TRACK_BLOCK = 1 << 14
+#: points of each block checked against protobuf's own serialization
+_TRACK_CHECKS = 8
+
+
+def _quality_template(extra: dict[str, np.ndarray]):
+    """``(template, slots)`` of a TrackPoint's quality map entries (see
+    :func:`_quality_entries`): the bytes of one point's entries with each key's value at
+    ``slots[key]``; None when the map is not of the usual form."""
+    probe = S.TrackPoint()
+    for k in extra:
+        probe.quality[k] = 1.0
+    raw = probe.SerializeToString()
+    template, slots, at = bytearray(), {}, 0
+    while at < len(raw):
+        if at + 4 > len(raw):
+            return None
+        length, klen = raw[at + 1], raw[at + 3]
+        if (raw[at] != 0x52 or raw[at + 2] != 0x0A or length >= 0x80 or klen >= 0x80
+                or length != klen + 11 or raw[at + 4 + klen] != 0x11):
+            return None
+        slots[raw[at + 4:at + 4 + klen].decode("utf-8")] = len(template) + 5 + klen
+        template += raw[at:at + 2 + length]
+        at += 2 + length
+    if sorted(slots) != sorted(extra):
+        return None
+    return np.frombuffer(bytes(template), dtype=np.uint8), slots
+
+
+def _track_block(track: Track, lo: int, hi: int, method: str, cameras, fixed: dict,
+                 template, first_id: int, color, channel: int, scene_channel: int):
+    """Points ``lo:hi`` of a track as one :class:`_Block` of messages (TrackPoint, then its
+    SceneUpdate, per point, as :meth:`SessionWriter.add_track` queues them one by one),
+    encoded with :mod:`._encode`; None when sample points differ from protobuf's bytes."""
+    from . import _encode as E
+
+    n = hi - lo
+    t = track.time_ns[lo:hi].astype(np.int64)
+    xyz = np.asarray(track.position_world[lo:hi], dtype=np.float64)
+    cam = np.asarray(track.camera[lo:hi], dtype=np.int64)
+    tmpl, slots = template
+    extra = np.broadcast_to(tmpl, (n, len(tmpl))).copy()
+    for key, at in slots.items():
+        extra[:, at:at + 8] = np.ascontiguousarray(
+            track.quality[key][lo:hi], dtype="<f8").view(np.uint8).reshape(n, 8)
+    fixed_cols = [np.asarray(fixed[k][lo:hi], dtype=np.float64) if len(fixed[k]) == len(track)
+                  else np.full(n, np.nan) for k in S.TRACK_FIXED_QUALITY]
+    point = E.concat([
+        E.field_varint(1, t), E.field_message(2, E.const(n, method.encode())),
+        E.field_double(3, xyz[:, 0]), E.field_double(4, xyz[:, 1]),
+        E.field_double(5, xyz[:, 2]), E.field_strings(6, cam, list(cameras)),
+        *(E.field_double(7 + j, c) for j, c in enumerate(fixed_cols)),
+        (extra, np.full(n, len(tmpl), dtype=np.int64))])
+    sec, nanos = np.divmod(t, 1_000_000_000)
+    lifetime = E.rows(E.field_message(4, E.concat([
+        E.field_varint(1, np.array([_TRACK_LIFETIME_NS // 1_000_000_000])),
+        E.field_varint(2, np.array([_TRACK_LIFETIME_NS % 1_000_000_000]))])))[0]
+    orientation = E.rows(E.field_message(2, E.field_double(4, np.array([1.0]))))[0]
+    size = E.rows(E.field_message(2, E.concat([E.field_double(k, np.array([_TRACK_SPHERE_M]))
+                                                for k in (1, 2, 3)])))[0]
+    rgba = E.rows(E.field_message(3, E.concat([E.field_double(k + 1, np.array([float(v)]))
+                                                for k, v in enumerate((*color, 1.0))])))[0]
+    position = E.concat([E.field_double(k + 1, xyz[:, k]) for k in range(3)])
+    sphere = E.concat([E.field_message(1, E.concat([E.field_message(1, position),
+                                                    E.const(n, orientation)])),
+                       E.const(n, size), E.const(n, rgba)])
+    entity = E.concat([
+        E.field_message(1, E.concat([E.field_varint(1, sec), E.field_varint(2, nanos)])),
+        E.field_message(2, E.const(n, S.WORLD_FRAME.encode())),
+        E.field_message(3, E.concat([E.const(n, f"{method}/".encode()),
+                                     E.decimal(first_id + lo + np.arange(n))])),
+        E.const(n, lifetime), E.field_message(9, sphere)])
+    scene = E.field_message(2, entity)
+    data, lengths = E.rows(E.concat([point, scene]))
+    point_len = point[1]
+    # protobuf's own bytes of sample points, compared
+    ends = np.cumsum(lengths)
+    starts = ends - lengths
+    names = list(track.quality)
+    for j in sorted({0, n - 1, *np.linspace(0, n - 1, _TRACK_CHECKS).astype(int).tolist()}):
+        i = lo + j
+        x, y, z = xyz[j].tolist()
+        msg = S.TrackPoint(time_ns=int(t[j]), method=method, x=x, y=y, z=z,
+                           camera=cameras[int(cam[j])],
+                           **{k: float(c[j]) for k, c in zip(S.TRACK_FIXED_QUALITY, fixed_cols,
+                                                             strict=True)})
+        for k in names:
+            if k not in S.TRACK_FIXED_QUALITY:
+                msg.quality[k] = float(track.quality[k][i])
+        want = msg.SerializeToString() + scene_point(method, first_id + i, int(t[j]),
+                                                     (x, y, z), color)
+        if data[starts[j]:ends[j]] != want:
+            return None
+    return _Block(np.tile(np.array([channel, scene_channel], dtype=np.int64), n),
+                  np.repeat(t, 2), np.zeros(2 * n, dtype=np.int64),
+                  np.column_stack([point_len, lengths - point_len]).ravel(), data)
 
 
 def _quality_entries(extra: dict[str, np.ndarray], n: int, block: int = 1 << 15):
