@@ -96,8 +96,13 @@ def decimal(values: np.ndarray) -> Piece:
 
 
 def concat(pieces: list[Piece]) -> Piece:
-    """Each row's byte strings one after another."""
+    """Each row's byte strings one after another (rows of one length in every piece: a
+    plain stack of columns, see :func:`grouped`)."""
     n = len(pieces[0][1])
+    if n and all(lengths.min() == lengths.max() for _m, lengths in pieces):
+        parts = [np.asarray(m)[:, :int(lengths[0])] for m, lengths in pieces]
+        out = np.hstack(parts) if parts else np.zeros((n, 0), np.uint8)
+        return out, np.full(n, out.shape[1], dtype=np.int64)
     width = sum(m.shape[1] for m, _l in pieces)
     out = np.zeros((n, width), dtype=np.uint8)
     at = np.zeros(n, dtype=np.int64)
@@ -122,3 +127,40 @@ def rows(piece: Piece) -> tuple[bytes, np.ndarray]:
     matrix, lengths = piece
     valid = np.arange(matrix.shape[1])[None, :] < lengths[:, None]
     return np.asarray(matrix)[valid].tobytes(), lengths
+
+
+def grouped(key: np.ndarray, encode) -> tuple[bytes, np.ndarray]:
+    """``encode(rows)`` (rows: indices) -> a piece, run on the rows of each value of ``key``
+    (rows of one key must give byte strings of one length in every piece, so each run is a
+    stack of columns), the results put back in row order: (bytes back to back, lengths)."""
+    n = len(key)
+    groups, inverse = np.unique(key, return_inverse=True)
+    lengths = np.zeros(n, dtype=np.int64)
+    done = []
+    for g in range(len(groups)):
+        rows = np.flatnonzero(inverse == g)
+        matrix, lens = encode(rows)
+        lengths[rows] = lens
+        done.append((rows, np.asarray(matrix), lens))
+    starts = np.cumsum(lengths) - lengths
+    out = np.empty(int(lengths.sum()), dtype=np.uint8)
+    for rows, matrix, lens in done:
+        w = matrix.shape[1]
+        if not w:
+            continue
+        where = starts[rows][:, None] + np.arange(w)
+        if lens.min() == lens.max():  # (a key that did not fix every length: masked)
+            out[where[:, :int(lens[0])].ravel()] = matrix[:, :int(lens[0])].ravel()
+        else:
+            valid = np.arange(w)[None, :] < lens[:, None]
+            out[where[valid]] = matrix[valid]
+    return out.tobytes(), lengths
+
+
+def varint_size(values: np.ndarray) -> np.ndarray:
+    """Bytes of each value's varint (non-negative values)."""
+    v = np.asarray(values, dtype=np.uint64)
+    size = np.ones(len(v), dtype=np.int64)
+    for j in range(1, 10):
+        size += v >= np.uint64(1 << (7 * j))
+    return size
