@@ -430,24 +430,44 @@ class SessionWriter:
                              f"rig has {', '.join(self._names)}")
         if detections.n_frames and detections.frame_time_ns[0] < 0:
             raise InputError(_negative_time(int(detections.frame_time_ns[0])))
+        channels = [self._channel(S.detections_topic(n), S.DetectionFrame) for n in self._names]
+        self._add_frames(detections, channels)
+        for i, name in enumerate(self._names):
+            self._count(S.detections_topic(name),
+                        int(np.count_nonzero(detections.frame_camera == i)))
+
+    def _add_frames(self, detections: Detections, channels: list[int]) -> None:
+        """A DetectionFrame message per frame of ``detections`` on ``channels[camera]``:
+        blocks of frames encoded with numpy (:func:`_detections_block`), the per-frame
+        protobuf way for the rest when a block's sample frames differ from protobuf's."""
+        lo, n = 0, detections.n_frames
+        if all(self._names) and (n == 0 or detections.frame_index.min() >= 0):
+            while lo < n:
+                hi = min(lo + _FRAME_BLOCK, n)
+                block = _detections_block(detections, lo, hi, self._names, channels)
+                if block is None:
+                    break
+                self._pending.append(block)
+                self._drain()
+                self._maybe_flush()
+                lo = hi
+        if lo >= n:
+            return
         # split candidate arrays per frame once (vectorised) instead of masking per frame
         bounds = np.searchsorted(detections.cand_frame, np.arange(detections.n_frames + 1))
         u = detections.cand_uv[:, 0].tolist()
         v = detections.cand_uv[:, 1].tolist()
         radius = detections.cand_radius.tolist()
         score = detections.cand_score.tolist()
-        channels = [self._channel(S.detections_topic(n), S.DetectionFrame) for n in self._names]
         make = S.DetectionFrame
-        for row, (t, cam, idx) in enumerate(zip(detections.frame_time_ns.tolist(),
-                                                 detections.frame_camera.tolist(),
-                                                 detections.frame_index.tolist(), strict=True)):
+        for row, (t, cam, idx) in enumerate(zip(detections.frame_time_ns[lo:].tolist(),
+                                                 detections.frame_camera[lo:].tolist(),
+                                                 detections.frame_index[lo:].tolist(),
+                                                 strict=True), start=lo):
             a, b = bounds[row], bounds[row + 1]
             msg = make(time_ns=t, camera=self._names[cam], frame_index=idx, u=u[a:b],
                        v=v[a:b], radius=radius[a:b], score=score[a:b])
             self._queue(channels[cam], t, msg.SerializeToString(), idx)
-        for i, name in enumerate(self._names):
-            self._count(S.detections_topic(name),
-                        int(np.count_nonzero(detections.frame_camera == i)))
 
     @_locked
     def add_ball_truth(self, ball: Detections) -> None:
@@ -784,6 +804,56 @@ class _Block:
 _TRACK_BLOCK = 1 << 14
 #: points of each block checked against protobuf's own serialization
 _TRACK_CHECKS = 8
+
+
+#: frames encoded and written at a time
+_FRAME_BLOCK = 1 << 15
+
+
+def _detections_block(detections: Detections, lo: int, hi: int, names, channels):
+    """Frames ``lo:hi`` of ``detections`` as one :class:`_Block` of DetectionFrame messages
+    on ``channels[camera]`` (as :meth:`SessionWriter.add_detections` queued them one by one),
+    encoded with :mod:`._encode`; None when sample frames differ from protobuf's bytes."""
+    from . import _encode as E
+
+    make = S.DetectionFrame
+    n = hi - lo
+    t = detections.frame_time_ns[lo:hi].astype(np.int64)
+    cam = detections.frame_camera[lo:hi].astype(np.int64)
+    idx = detections.frame_index[lo:hi].astype(np.int64)
+    bounds = np.searchsorted(detections.cand_frame, np.arange(lo, hi + 1))
+    first, k = bounds[:-1], np.diff(bounds)
+    cols = [np.ascontiguousarray(detections.cand_uv[:, 0], dtype="<f8"),
+            np.ascontiguousarray(detections.cand_uv[:, 1], dtype="<f8"),
+            np.ascontiguousarray(detections.cand_radius, dtype="<f8"),
+            np.ascontiguousarray(detections.cand_score, dtype="<f8")]
+    name_len = np.array([len(c.encode()) for c in names], dtype=np.int64)
+
+    def encode(r):
+        m = len(r)
+        width = int(k[r].max()) if m else 0
+        pieces = [E.field_varint(1, t[r]), E.field_strings(2, cam[r], list(names)),
+                  E.field_varint(3, np.maximum(idx[r], 0))]
+        if width:
+            take = first[r][:, None] + np.arange(width)
+            for j, c in enumerate(cols):
+                raw = c[take].view(np.uint8).reshape(m, 8 * width)
+                pieces.append(E.field_message(4 + j, (raw, 8 * k[r])))
+        return E.concat(pieces)
+
+    key = (E.varint_size(t) * (t != 0) + 11 * (E.varint_size(idx) * (idx != 0)
+           + 11 * (name_len[cam] + 64 * k)))
+    data, lengths = E.grouped(key, encode)
+    ends = np.cumsum(lengths)
+    starts = ends - lengths
+    for j in sorted({0, n - 1, *np.linspace(0, n - 1, _TRACK_CHECKS).astype(int).tolist()}):
+        a, b = bounds[j], bounds[j + 1]
+        msg = make(time_ns=int(t[j]), camera=names[int(cam[j])], frame_index=int(idx[j]),
+                   u=cols[0][a:b].tolist(), v=cols[1][a:b].tolist(),
+                   radius=cols[2][a:b].tolist(), score=cols[3][a:b].tolist())
+        if data[starts[j]:ends[j]] != msg.SerializeToString():
+            return None
+    return _Block(np.asarray(channels, dtype=np.int64)[cam], t, idx, lengths, data)
 
 
 def _quality_template(extra: dict[str, np.ndarray]):
