@@ -46,7 +46,8 @@ COLUMNS = {
     BALL_TRUTH: _DETECTION_COLUMNS,
     TRUTH: {"time_ns": ("<i8", ()), "position_world": ("<f8", (3,))},
 }
-#: columns smaller than this are stored raw (a zstd frame would not pay off)
+#: columns smaller than this are stored raw (a zstd frame would not pay off); so are columns
+#: zstd shrinks by less than 10 %
 _COMPRESS_FROM = 4096
 
 
@@ -87,8 +88,12 @@ def encode(table: str, camera_names: Sequence[str], counts: Mapping[str, int],
     for name, (dtype, _shape) in COLUMNS[table].items():
         values = np.ascontiguousarray(columns[name], dtype=dtype)
         raw = values.tobytes()
-        codec = "zstd" if len(raw) >= _COMPRESS_FROM else "none"
-        stored = zstandard.compress(raw) if codec == "zstd" else raw
+        codec, stored = "none", raw
+        if len(raw) >= _COMPRESS_FROM:
+            packed = zstandard.compress(raw)
+            if len(packed) < 0.9 * len(raw):  # noisy doubles barely shrink: kept raw, read
+                codec, stored = "zstd", packed  # without a decompression pass
+
         described[name] = {"dtype": dtype, "shape": list(values.shape), "codec": codec,
                            "offset": at, "size": len(stored)}
         pad = -len(stored) % 8
