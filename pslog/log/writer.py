@@ -441,7 +441,7 @@ class SessionWriter:
         blocks of frames encoded with numpy (:func:`_detections_block`), the per-frame
         protobuf way for the rest when a block's sample frames differ from protobuf's."""
         lo, n = 0, detections.n_frames
-        if all(self._names) and (n == 0 or detections.frame_index.min() >= 0):
+        if all(self._names) and n >= _BLOCK_FROM and detections.frame_index.min() >= 0:
             while lo < n:
                 hi = min(lo + _FRAME_BLOCK, n)
                 block = _detections_block(detections, lo, hi, self._names, channels)
@@ -631,7 +631,7 @@ class SessionWriter:
         # difference sends the rest of the track the per-point way
         template = _quality_template(extra)
         lo = 0
-        if template is not None and all(self._names):
+        if template is not None and all(self._names) and n >= _BLOCK_FROM:
             while lo < n:
                 hi = min(lo + _TRACK_BLOCK, n)
                 block = _track_block(track, lo, hi, method, self._names, fixed, template,
@@ -808,6 +808,9 @@ _TRACK_CHECKS = 8
 
 #: frames encoded and written at a time
 _FRAME_BLOCK = 1 << 15
+#: fewer points or frames than this (a live batch) are encoded one by one: numpy's fixed
+#: cost per block would outweigh it
+_BLOCK_FROM = 256
 
 
 def _detections_block(detections: Detections, lo: int, hi: int, names, channels):
