@@ -1,7 +1,8 @@
 """Session log throughput: write and read a 10-minute, 3-camera session (54,000 frames).
 
 Prints messages per second for writing (SessionWriter.add_detections) and reading
-(read_session), and, as a baseline measured in the same run on the same file, a raw
+(read_session: from the columnar table, and from the per-frame messages as a file without
+tables reads), and, as a baseline measured in the same run on the same file, a raw
 ``mcap`` iteration over the detection messages without protobuf decoding.
 
 Run: ``python benchmarks/bench_log.py [--minutes 10]``
@@ -48,6 +49,15 @@ def main() -> None:
         t_read = time.perf_counter() - t0
         np.testing.assert_array_equal(session.detections.cand_uv, detections.cand_uv)
 
+        from pslog.log.reader import _Finished
+
+        _Finished.use_tables = False  # the per-frame messages, as an older file reads
+        t0 = time.perf_counter()
+        messages = read_session(path)
+        t_messages = time.perf_counter() - t0
+        _Finished.use_tables = True
+        np.testing.assert_array_equal(messages.detections.cand_uv, detections.cand_uv)
+
         t0 = time.perf_counter()
         with open(path, "rb") as f:
             topics = [f"/camera/{name}/detections" for name in rig.names]
@@ -59,8 +69,10 @@ def main() -> None:
     print(f"file: {size / 1e6:.1f} MB ({size / n:.0f} bytes/frame)")
     print(f"write  (SessionWriter.add_detections): {n / t_write:12,.0f} messages/s  "
           f"({t_write:.2f} s)")
-    print(f"read   (read_session, decoded):        {n / t_read:12,.0f} messages/s  "
+    print(f"read   (read_session, columnar table): {n / t_read:12,.0f} messages/s  "
           f"({t_read:.2f} s)")
+    print(f"read   (read_session, messages):       {n / t_messages:12,.0f} messages/s  "
+          f"({t_messages:.2f} s)")
     print(f"baseline (mcap iter_messages, raw):    {n / t_raw:12,.0f} messages/s  "
           f"({t_raw:.2f} s)")
     per_match = 90 * 60 * 90 / (n / t_read)

@@ -5,6 +5,9 @@ type-A rally (30 fps each: 486,000 detections at 90 minutes).
 Each stage runs as its own ``pslog`` process (imports included, as a user meets it); printed:
 seconds, seconds per minute of session (equal per-minute figures prove the stage linear),
 peak memory (the process's maximum resident set), and the issue-12 target beside them.
+Reading is timed three ways in the same run: ``read_session`` (the columnar tables), the
+same without tables (the per-frame messages, as a file of an older pslog reads) and the
+peer, the ``mcap`` package's ``iter_messages`` with protobuf decoding.
 ``pslog eval`` of the base commit (default ``0fce3cb``, before the linear reader) is timed in
 the same run on the same fused files (a git worktree of it in the work folder, removed at the
 end; ``--base-timeout`` caps its quadratic run), and its output compared with today's.
@@ -39,6 +42,26 @@ TARGETS = {
 _READ = ("import sys, time; from pslog.log import read_session; t = time.perf_counter(); "
          "s = read_session(sys.argv[1]); dt = time.perf_counter() - t; "
          "print(s.detections.n_candidates, dt)")
+#: the same without the columnar tables (as a file written before them reads): the messages
+_READ_MESSAGES = ("import sys, time; from pslog.log import read_session; "
+                  "from pslog.log.reader import _Finished; _Finished.use_tables = False; "
+                  "t = time.perf_counter(); s = read_session(sys.argv[1]); "
+                  "dt = time.perf_counter() - t; print(s.detections.n_candidates, dt)")
+#: the peer: the mcap package's reader and protobuf, every detection message decoded
+_READ_PEER = """
+import sys, time
+from mcap.reader import make_reader
+from pslog.log._schemas import DetectionFrame
+t = time.perf_counter()
+n = 0
+with open(sys.argv[1], "rb") as f:
+    reader = make_reader(f)
+    topics = [c.topic for c in reader.get_summary().channels.values()
+              if c.topic.endswith("/detections")]
+    for _s, _c, m in reader.iter_messages(topics=topics, log_time_order=False):
+        n += len(DetectionFrame.FromString(m.data).u)
+print(n, time.perf_counter() - t)
+"""
 
 
 def run(cmd: list[str]) -> None:
@@ -152,6 +175,11 @@ def main() -> None:
             n, dt = out.split()
             row("read detections", m, s, peak,
                 f"{int(n) / float(dt):,.0f} det/s in read_session ({float(dt):.2f} s)")
+            for stage, code in (("read (messages)", _READ_MESSAGES),
+                                ("read peer mcap+pb", _READ_PEER)):
+                s, peak, out, _ = run_peak([sys.executable, "-c", code, str(session)])
+                n, dt = out.split()
+                row(stage, m, s, peak, f"{int(n) / float(dt):,.0f} det/s ({float(dt):.2f} s)")
             s, peak, _, _ = run_peak(pslog("fuse", str(session), "--method", "typeA", "-o",
                                            str(fused_a), "--force"))
             row("fuse typeA", m, s, peak)

@@ -598,11 +598,21 @@ def test_readers_name_the_byte_offset_of_a_damaged_chunk(tmp_path, rig3):
             for c in summary.chunk_indexes}
     image = next(s for s, e in chunks if kind[s] == {"image"})
     det = next(s for s, e in chunks if kind[s] == {"detections"})
-    for start, reader in ((image, lambda p: list(iter_images(p))), (det, read_session)):
+    table = next(a for a in summary.attachment_indexes if a.name.endswith("/detections"))
+    for start, reader, table_too in ((image, lambda p: list(iter_images(p)), False),
+                                     (det, read_session, True)):
         end = dict(chunks)[start]
         bad = tmp_path / f"bad{start}.mcap"
         damaged = bytearray(data)
         damaged[(start + end) // 2] ^= 0x10
+        if table_too:
+            # the columnar table holds the detections too: read from it, the detection
+            # chunks are not read, and its data is whole (CRC-checked)
+            bad.write_bytes(bytes(damaged))
+            whole = read_session(path).detections
+            np.testing.assert_array_equal(reader(bad).detections.cand_uv, whole.cand_uv)
+            # with the table damaged as well, the messages are read: the chunk's offset
+            damaged[table.offset + table.length - 8] ^= 0x10
         bad.write_bytes(bytes(damaged))
         with pytest.raises(LogFormatError, match=rf"byte {start} .*pslog recover"):
             reader(bad)

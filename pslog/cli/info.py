@@ -116,6 +116,8 @@ def _text(info: dict) -> list[str]:
                                   if info["clock_corrected"] else "") + ")")
     lines.append("  messages per topic:")
     lines += [f"    {t}: {n}" for t, n in info["topics"].items()]
+    lines += [f"  columnar table {name} {state}; read from the per-frame messages instead"
+              for name, state in info.get("tables", {}).items() if state != "ok"]
     if info["damaged"]:
         what = "chunk(s)" if all(d["chunk"] for d in info["damaged"]) else "part(s)"
         lines.append(f"  DAMAGED: {len(info['damaged'])} {what} fail their checks; the "

@@ -3,17 +3,21 @@ optionally replacing the detections (re-detection) and adding or replacing fused
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
-from ..errors import InputError
+import numpy as np
+
+from ..errors import InputError, LogFormatError
 from ..outputs import check_output_path
 from ..records import Detections, Track
 from ..rig import Rig, timing_label
 from . import _mcapio as io
 from . import _schemas as S
-from .reader import _Finished
-from .writer import SessionWriter
+from . import table as tables
+from .reader import _PAD, _Batch, _Finished, _gather, _Irregular
+from .writer import SessionWriter, _Block
 
 
 def copy_session(src, dst, *, detections: Detections | None = None, tracks: Sequence[Track] = (),
@@ -91,10 +95,142 @@ def copy_session(src, dst, *, detections: Detections | None = None, tracks: Sequ
             schema = scan.schemas.get(channel.schema_id)
             w._add_foreign(topic, schema, channel, t, data, seq)
 
-        io.scan_file(src_path, copy, scan=scan)  # copy's own errors propagate unchanged
+        with _Finished(src_path) as f:
+            if detections is None:
+                w._adopt_table(tables.DETECTIONS, _table_data(f, tables.DETECTIONS))
+            w._adopt_table(tables.BALL_TRUTH, _table_data(f, tables.BALL_TRUTH))
+            w._adopt_table(tables.TRUTH, _table_data(f, tables.TRUTH))
+            fast = _copy_chunks(f, w, static, detections is not None, replace_tracks,
+                                new_methods)
+        if not fast:  # no summary index to go by: every record in turn
+            io.scan_file(src_path, copy, scan=scan)  # copy's own errors propagate unchanged
         if detections is not None:
             w.add_detections(detections)
         for track in tracks:
             w.add_track(track)
         for method, rejected in (rejections or {}).items():
             w.add_rejections(method, rejected)
+
+
+def _table_data(f: _Finished, name: str) -> bytes | None:
+    """The attachment data of ``f``'s table ``name`` when it is there and consistent."""
+    if f.table(name) is None:
+        return None
+    return f._attachment(f.attachments[name])
+
+
+def _copy_chunks(f: _Finished, w: SessionWriter, static: set[str], new_detections: bool,
+                 replace_tracks: bool, new_methods: set[str]) -> bool:
+    """Copy the messages of ``f`` a chunk at a time (each chunk checked as the reader checks
+    it, its messages found through its MessageIndex records and written as one block: no
+    Python object per message); False, before writing anything, when the summary does not
+    account for every message (messages outside chunks, chunks without indexes, no
+    statistics): then the caller walks the file record by record."""
+    import mmap
+
+    summary = f.summary
+    chunks = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
+    stats = summary.statistics
+    if not chunks or stats is None or not all(c.message_index_offsets for c in chunks):
+        return False
+    with mmap.mmap(f.file.fileno(), 0, access=mmap.ACCESS_READ) as buf:
+        indexed = 0
+        for c in chunks:
+            end = c.chunk_start_offset + c.chunk_length
+            counts, _ = io.message_index_counts(buf, end, min(len(buf),
+                                                              end + c.message_index_length))
+            indexed += sum(counts.values())
+    if indexed != stats.message_count:
+        return False
+    # what becomes of each channel: dropped (None), or its channel here and whether images
+    fate: dict[int, tuple[int, bool] | None] = {}
+    topics: dict[int, str] = {}
+    for cid, channel in summary.channels.items():
+        topic = channel.topic
+        camera_topic = S.parse_camera_topic(topic)
+        parts = topic.split("/")
+        if topic in static or (camera_topic and camera_topic[1] == "detections"
+                               and new_detections) or (
+                len(parts) >= 3 and parts[1] == "tracks"
+                and (replace_tracks or parts[2] in new_methods)):
+            fate[cid] = None
+            continue
+        schema = summary.schemas.get(channel.schema_id)
+        schema_rec = None if schema is None else io.SchemaRec(
+            schema.id, schema.name, schema.encoding, schema.data)
+        new = w._foreign_channel(topic, schema_rec, io.ChannelRec(
+            cid, channel.schema_id, topic, channel.message_encoding, dict(channel.metadata)))
+        fate[cid] = (new, bool(camera_topic and camera_topic[1] == "image"))
+        topics[new] = topic
+    for index in chunks:
+        here = [cid for cid in index.message_index_offsets if fate.get(cid) is not None]
+        if not here:
+            continue
+        records = f.read_chunk(index, framing=False)
+        rec = np.frombuffer(records, dtype=np.uint8)
+        try:
+            got = f._indexed(index, rec, index.message_index_offsets.keys())
+            batch = _merge(got, rec)
+        except (_Irregular, struct.error):
+            try:  # the framing the record walk needs, with its usual error
+                io.check_framing(records)
+            except LogFormatError as exc:
+                raise io.damaged_error(f.path, index.chunk_start_offset, str(exc)) from None
+            batch = _walk(records)
+        del records
+        for images in (False, True):
+            cids = np.array([c for c, v in fate.items() if v is not None and v[1] == images],
+                            dtype=np.int64)
+            sel = np.flatnonzero(np.isin(batch.channel, cids))
+            if not len(sel):
+                continue
+            payload, _ = _gather(batch.buf, batch.start[sel], batch.end[sel])
+            w._add_block(_Block(_remap(batch.channel[sel], fate), batch.time[sel], batch.seq[sel],
+                                batch.end[sel] - batch.start[sel], payload.tobytes()),
+                         topics, images=images)
+    return True
+
+
+class _Messages:
+    """A chunk's messages in file order: channel, log time, sequence and where each one's
+    data lies in ``buf`` (``start``/``end``), (n,) int64 columns."""
+
+    def __init__(self, buf, channel, time, seq, start, end) -> None:
+        self.buf, self.channel, self.time, self.seq, self.start, self.end = (
+            buf, channel, time, seq, start, end)
+
+
+def _merge(got: dict[int, _Batch], rec: np.ndarray) -> _Messages:
+    """The messages of every channel of a chunk (channel -> :class:`_Batch`, offsets into
+    ``rec``) in file order."""
+    if not got:
+        empty = np.zeros(0, np.int64)
+        return _Messages(rec, empty, empty, empty, empty, empty)
+    batches = list(got.values())
+    start = np.concatenate([b.start for b in batches])
+    order = np.argsort(start, kind="stable")
+    channel = np.concatenate([np.full(len(b), cid, np.int64) for cid, b in got.items()])
+    return _Messages(rec, channel[order], np.concatenate([b.time for b in batches])[order],
+                     np.concatenate([b.seq for b in batches])[order], start[order],
+                     np.concatenate([b.end for b in batches])[order])
+
+
+def _walk(records: bytes) -> _Messages:
+    """The messages of a chunk's records walked one by one (framing checked by the caller)."""
+    rows = []
+    for op, body, end in io.walk_records(records):
+        if op == io.OP_MESSAGE:
+            cid, seq, t = struct.unpack_from("<HIQ", records, body)
+            rows.append((cid, t, seq, body + io._MESSAGE_HEAD, end))
+    cols = np.array(rows, dtype=np.int64).reshape(-1, 5)
+    buf = np.frombuffer(records + bytes(_PAD), dtype=np.uint8)
+    return _Messages(buf, *(cols[:, i] for i in range(5)))
+
+
+def _remap(channel: np.ndarray, fate: dict) -> np.ndarray:
+    """This writer's channel of each source channel id (all kept)."""
+    lookup = np.zeros(max(fate) + 1, dtype=np.int64)
+    for cid, v in fate.items():
+        if v is not None:
+            lookup[cid] = v[0]
+    return lookup[channel]

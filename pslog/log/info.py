@@ -131,7 +131,8 @@ def session_info(path) -> dict:
     images, the timing model's ``clock_offset_s``, ``clock_drift_ppm``, ``readout_s``),
     ``clock_corrected`` (any of those non-zero), ``clock_origin_ns`` (the session clock's
     origin on the original clock, 0 if none), ``topics`` (message counts), ``duration_s``,
-    ``start_s``, ``end_s``, ``truth``,
+    ``start_s``, ``end_s``, ``truth``, ``tables`` (columnar table -> ``ok`` or
+    ``unusable: <reason>``, when the messages are read instead: :mod:`pslog.log.table`),
     ``tracks`` (method -> points), ``events``, metadata fields, ``truncated: False`` and
     ``damaged`` (every chunk is checked: one dict per damaged chunk, see
     :func:`pslog.log.recover.describe_damage`; the rest of the summary leaves them out).
@@ -155,6 +156,10 @@ def session_info(path) -> dict:
         counts = dict(sorted(f.counts.items()))
         damaged = f.check_chunks()
         session = _read(f, frozenset(d["start"] for d in damaged))
+        # each columnar table there: used, or why not (then the messages were read)
+        tables = {name: ("ok" if f.table(name) is not None else
+                         f"unusable: {f.table_problems.get(name, '?')}")
+                  for name in sorted(f.attachments) if name.startswith("pslog/table/")}
     header = io.header_damage(path)
     if header is not None:  # nothing pslog reads, but damage all the same: readers refuse it
         start, end, reason = header
@@ -199,6 +204,7 @@ def session_info(path) -> dict:
         "tracks": {m: len(t) for m, t in session.tracks.items()},
         "events": len(session.events),
         "file_bytes": size,
+        "tables": tables,
         "damaged": damaged,
         "hint": (f"{len(damaged)} damaged "
                  f"{'chunk(s)' if all(d['chunk'] for d in damaged) else 'part(s)'}; run "

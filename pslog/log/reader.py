@@ -19,6 +19,7 @@ from __future__ import annotations
 import heapq
 import mmap
 import struct
+import zlib
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -26,11 +27,12 @@ from pathlib import Path
 import numpy as np
 from mcap.exceptions import McapError
 
-from ..errors import LogFormatError
+from ..errors import InputError, LogFormatError
 from ..records import Detections, Track, Truth
 from ..rig import Rig
 from . import _mcapio as io
 from . import _schemas as S
+from . import table as tables
 
 
 @dataclass(frozen=True)
@@ -139,6 +141,59 @@ class _Finished:
         self.counts = ({} if stats is None else
                        {self.topics[c]: n for c, n in stats.channel_message_counts.items()
                         if c in self.topics})
+        self.attachments = {a.name: a for a in summary.attachment_indexes}
+        #: table name -> why its columnar table was not used (see :meth:`table`)
+        self.table_problems: dict[str, str] = {}
+
+    #: whether :meth:`table` reads tables at all (benchmarks time the message path too)
+    use_tables = True
+
+    def table(self, name: str):
+        """The :class:`~pslog.records.Detections` (or :class:`~pslog.records.Truth`) of
+        columnar table ``name`` (:mod:`pslog.log.table`) when the file has it and it agrees
+        with the per-message topics it stands for; else None, with the reason in
+        :attr:`table_problems` when a table is there but not used."""
+        index = self.attachments.get(name)
+        if index is None or not self.use_tables:
+            return None
+        try:
+            data = self._attachment(index)
+            counts, columns = tables.decode(data, name, self.rig.names)
+            topics = tables.topics_of(name, self.rig.names)
+            expected = {t: self.counts.get(t, 0) for t in topics}
+            if counts != expected:
+                raise LogFormatError(f"table names {sum(counts.values())} messages of "
+                                     f"{', '.join(counts) or 'no topic'}, the file has "
+                                     f"{sum(expected.values())}")
+            if name == tables.TRUTH:
+                return Truth(columns["time_ns"], columns["position_world"])
+            return Detections(tuple(self.rig.names), **columns)
+        except (LogFormatError, InputError, ValueError) as exc:
+            self.table_problems[name] = str(exc)
+            return None
+
+    def _attachment(self, index) -> bytes:
+        """The data of an attachment, its record and CRC checked (MCAP "Attachment")."""
+        self.file.seek(index.offset)
+        record = self.file.read(index.length)
+        if len(record) != index.length or len(record) < 9 + 8 + 8 + 4 + 4 + 8 + 4 or \
+                record[0] != io.OP_ATTACHMENT or \
+                int.from_bytes(record[1:9], "little") != len(record) - 9:
+            raise LogFormatError("attachment record does not match the summary's index")
+        try:
+            at = 25
+            at += 4 + int.from_bytes(record[at:at + 4], "little")  # name
+            at += 4 + int.from_bytes(record[at:at + 4], "little")  # media type
+            size = int.from_bytes(record[at:at + 8], "little")
+            at += 8
+        except IndexError:
+            raise LogFormatError("attachment record malformed") from None
+        if at + size + 4 != len(record):
+            raise LogFormatError("attachment record malformed")
+        crc = int.from_bytes(record[-4:], "little")
+        if crc and zlib.crc32(memoryview(record)[9:-4]) != crc:
+            raise LogFormatError("attachment fails its CRC")
+        return record[at:at + size]
 
     def close(self) -> None:
         self.file.close()
@@ -325,18 +380,31 @@ def _read(f: _Finished, skip: frozenset[int] = frozenset()) -> Session:
     track_topics = sorted(t for t in f.topics.values() if S.parse_track_topic(t))
     ball_topics = [S.ball_truth_topic(n) for n in rig.names]
     rejection_topics = sorted(t for t in f.topics.values() if S.parse_rejections_topic(t))
-    found = f.collect_batches([*det_topics, S.TRUTH_TOPIC, S.EVENTS_TOPIC, *track_topics,
-                               *ball_topics, *rejection_topics], skip)
+    # the columnar tables, when there and consistent (a file read around damaged chunks
+    # is read from what its messages still hold, as before)
+    table_det = None if skip else f.table(tables.DETECTIONS)
+    table_truth = (None if skip or S.TRUTH_TOPIC not in f.topics.values()
+                   else f.table(tables.TRUTH))
+    table_ball = (None if skip or not any(t in f.topics.values() for t in ball_topics)
+                  else f.table(tables.BALL_TRUTH))
+    wanted = [*([] if table_det is not None else det_topics),
+              *([] if table_truth is not None else [S.TRUTH_TOPIC]), S.EVENTS_TOPIC,
+              *track_topics, *([] if table_ball is not None else ball_topics),
+              *rejection_topics]
+    found = f.collect_batches(wanted, skip)
     none = _Batch.concatenate([])
     try:
-        detections = decode_detections(rig.names, [found.get(t, none) for t in det_topics])
-        truth = decode_truth(found[S.TRUTH_TOPIC]) if S.TRUTH_TOPIC in found else None
+        detections = (table_det if table_det is not None else
+                      decode_detections(rig.names, [found.get(t, none) for t in det_topics]))
+        truth = (table_truth if table_truth is not None else
+                 decode_truth(found[S.TRUTH_TOPIC]) if S.TRUTH_TOPIC in found else None)
         tracks = {}
         for topic in track_topics:
             method = S.parse_track_topic(topic)
             tracks[method] = decode_track(method, rig.names, found.get(topic, none))
         events = decode_events(found.get(S.EVENTS_TOPIC, none).messages())
-        ball_truth = (decode_detections(rig.names, [found.get(t, none) for t in ball_topics])
+        ball_truth = (table_ball if table_ball is not None else
+                      decode_detections(rig.names, [found.get(t, none) for t in ball_topics])
                       if any(t in found for t in ball_topics) else None)
         try:
             rejections = {S.parse_rejections_topic(t): decode_rejections(

@@ -10,6 +10,7 @@ from ..records import NS
 from ..rig import Rig
 from . import _mcapio as io
 from . import _schemas as S
+from . import table as tables
 
 
 def salvage_summary(counts: dict[str, int], last_ns: dict[str, int]) -> dict:
@@ -66,7 +67,8 @@ def recover_session(src, dst, *, force: bool = False) -> dict:
     one is skipped; every intact record before and after it is kept. After bytes that are no
     record (a cut, a damaged length field) the walk picks up at the next intact record (see
     :func:`pslog.log._mcapio.salvage_file`). Works on finished files too (a plain copy).
-    Messages are streamed, so files larger than memory recover.
+    Messages are streamed, so files larger than memory recover (only the detection and
+    truth messages are kept, to rebuild the columnar tables: :mod:`pslog.log.table`).
 
     Returns
     -------
@@ -93,6 +95,11 @@ def recover_session(src, dst, *, force: bool = False) -> dict:
     scan = io.Scan()
     schema_ids: dict[int, int] = {}
     channel_ids: dict[int, int] = {}
+    # the messages of the topics a columnar table stands for, by topic: (times, sequences,
+    # payloads), rebuilt into tables at the end (a salvaged file's own tables are dropped:
+    # they would name messages that were lost)
+    kept: dict[str, tuple[list, list, list]] = {}
+    table_topics = _TableTopics()
 
     # dst is checked (never src in any spelling), written as <dst>.partial and moved over
     # dst only when complete; removed on any failure
@@ -120,6 +127,13 @@ def recover_session(src, dst, *, force: bool = False) -> dict:
                     channel.metadata)
             writer.add_message(new, t, data, t, seq)
             topic = scan.channels[cid].topic
+            if topic in table_topics:  # kept to rebuild the columnar tables
+                rows = kept.get(topic)
+                if rows is None:
+                    rows = kept[topic] = ([], [], [])
+                rows[0].append(t)
+                rows[1].append(seq)
+                rows[2].append(data)
             topics[topic] = topics.get(topic, 0) + 1
             last_ns[topic] = max(last_ns.get(topic, t), t)
             times[0] = t if times[0] is None else min(times[0], t)
@@ -145,6 +159,7 @@ def recover_session(src, dst, *, force: bool = False) -> dict:
             raise LogFormatError(f"{src}: no intact message could be recovered ({reason})")
         for name, data in scan.metadata:
             writer.add_metadata(name, data)
+        _write_tables(writer, Rig.from_toml(meta["rig_toml"], source="the rig").names, kept)
         writer.finish()
     damaged = [describe_damage(d, scan.channels) for d in scan.damaged]
     discarded = sum(d["end"] - d["start"] for d in damaged)
@@ -223,3 +238,32 @@ def damage_line(d: dict) -> str:
     elif d["chunk"]:
         text += ", message count unknown"
     return f"{text} ({d['reason']})"
+
+
+class _TableTopics:
+    """``topic in`` this: the topic is one a columnar table may stand for (any camera name:
+    the rig is known only once the metadata is read)."""
+
+    def __contains__(self, topic: str) -> bool:
+        return (topic == S.TRUTH_TOPIC or topic.startswith("/truth/ball/")
+                or (topic.startswith("/camera/") and topic.endswith("/detections")))
+
+
+def _write_tables(writer, camera_names, kept: dict[str, tuple[list, list, list]]) -> None:
+    """Add the columnar tables (:mod:`pslog.log.table`) made from the recovered messages of
+    their topics, as :class:`pslog.log.SessionWriter` adds them at close."""
+    from .reader import _Batch
+
+    for name in tables.TABLES:
+        topics = tables.topics_of(name, camera_names)
+        if not any(t in kept for t in topics) and name != tables.DETECTIONS:
+            continue
+        per_topic = {}
+        for topic in topics:
+            if topic in kept:
+                times, seqs, datas = kept[topic]
+                per_topic[topic] = [_Batch.from_messages(list(zip(times, seqs, datas,
+                                                                  strict=True)))]
+        data = tables.build(name, camera_names, per_topic)
+        if data is not None:
+            writer.add_attachment(0, 0, name, tables.MEDIA_TYPE, data)

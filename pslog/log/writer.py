@@ -30,6 +30,7 @@ from ..outputs import (
 from ..palette import method_color, unit_rgb
 from ..records import Detections, Track, Truth
 from ..rig import Rig
+from . import _chunks, table
 from . import _schemas as S
 
 #: Messages buffered before they are written even if the flush interval has not passed.
@@ -141,6 +142,7 @@ class SessionWriter:
             raise write_error(self.path, exc) from None
         self._closed = False
         self._mcap = Writer(self._file, compression=CompressionType.ZSTD)
+        self._bulk = _chunks.supported(self._mcap)  # messages written in blocks (_chunks)
         self._schema_ids: dict[str, int] = {}
         self._channels: dict[str, int] = {}
         self._pending: list[tuple[int, int, bytes, int]] = []  # channel, time, data, sequence
@@ -156,6 +158,12 @@ class SessionWriter:
         self._flush_error: BaseException | None = None
         self._last_flush = time.monotonic()
         self.counts: dict[str, int] = {}
+        # the messages of the topics that columnar tables stand for (detections, ball
+        # labels, truth), kept as written (channel id -> parts), made tables at close
+        self._table_rows: dict[int, tuple[str, int]] = {}  # channel -> (table, camera)
+        self._table_parts: dict[int, list] = {}
+        self._topic_of: dict[int, str] = {}
+        self._adopted: dict[str, bytes] = {}  # table -> a copied table's attachment data
 
         # metadata first and flushed at once, so even a file killed seconds later is a session
         record = {
@@ -223,7 +231,64 @@ class SessionWriter:
             channel = self._mcap.register_channel(topic=topic, message_encoding=S.PROTOBUF,
                                                   schema_id=schema)
             self._channels[topic] = channel
+            self._note_channel(topic, channel)
         return channel
+
+    def _note_channel(self, topic: str, channel: int) -> None:
+        """Keep the messages of ``channel`` if a columnar table stands for its topic."""
+        row = table.table_of(topic, self._names)
+        if row is not None:
+            self._table_rows[channel] = row
+            self._table_parts[channel] = []
+            self._topic_of[channel] = topic
+
+    def _keep_table_rows(self, channel: np.ndarray, times: np.ndarray, sequence: np.ndarray,
+                         data: bytes, lengths: np.ndarray) -> None:
+        """Keep the written messages of the tables' channels (their bytes, times and
+        sequence numbers) for :meth:`_write_tables`."""
+        from .reader import _Batch, _gather
+
+        here = set(np.unique(channel).tolist()) & self._table_parts.keys()
+        if not here:
+            return
+        ends = np.cumsum(lengths)
+        starts = ends - lengths
+        payload = np.frombuffer(data, dtype=np.uint8)
+        for cid in sorted(here):
+            sel = np.flatnonzero(channel == cid)
+            buf, begin = _gather(payload, starts[sel], ends[sel])
+            self._table_parts[cid].append(_Batch(buf, begin, begin + lengths[sel],
+                                                 times[sel], sequence[sel]))
+
+    def _adopt_table(self, name: str, data: bytes) -> None:
+        """A table read from the session being copied (checked): written as it is at close
+        when the messages its topics got here are exactly as many as it names (a copy of
+        every one of them), else made again from the messages."""
+        self._adopted[name] = data
+
+    def _write_tables(self) -> None:
+        """Write each table whose topics have a channel as an attachment (see
+        :mod:`pslog.log.table`), made from the messages written (:func:`table.build`), or a
+        copied one (:meth:`_adopt_table`) that names as many messages as were written."""
+        for name in table.TABLES:
+            channels = [cid for cid, (t, _cam) in self._table_rows.items() if t == name]
+            if not channels:
+                continue
+            per_topic = {self._topic_of[cid]: self._table_parts[cid] for cid in channels}
+            counts = {t: sum(len(b) for b in per_topic.get(t, []))
+                      for t in table.topics_of(name, self._names)}
+            data = self._adopted.get(name)
+            if data is not None:
+                try:
+                    copied, _ = table.decode(data, name, self._names)
+                except LogFormatError:
+                    copied = None
+                if copied != counts:
+                    data = None
+            if data is None:
+                data = table.build(name, self._names, per_topic)
+            if data is not None:
+                self._mcap.add_attachment(0, 0, name, table.MEDIA_TYPE, data)
 
     def _write_static(self, time_ns: int) -> None:
         """Per camera: foxglove.CameraCalibration and foxglove.FrameTransform world -> camera."""
@@ -249,11 +314,45 @@ class SessionWriter:
         """Write buffered small messages as chunk(s) of their own."""
         if not self._pending:
             return
-        add = self._mcap.add_message
-        for channel, time_ns, data, sequence in self._pending:
-            add(channel, time_ns, data, time_ns, sequence)
+        self._write_block(self._pending)
         self._pending.clear()
         self._mcap.flush()
+
+    def _write_block(self, messages: list[tuple[int, int, bytes, int]]) -> None:
+        """Write ``(channel, time, data, sequence)`` messages as chunk(s): all at once with
+        numpy (:mod:`._chunks`, the same bytes as the ``mcap`` writer's ``add_message`` one
+        by one, which cost most of the time of writing a long session), or one by one when
+        the installed ``mcap`` does not allow it or a field does not fit (its own error)."""
+        if any(isinstance(m, _Block) for m in messages):
+            blocks, run = [], []
+            for m in [*messages, None]:
+                if isinstance(m, tuple):
+                    run.append(m)
+                    continue
+                if run:
+                    blocks.append(_Block.of(run))
+                    run = []
+                if m is not None:
+                    blocks.append(m)
+            channel, times, sequence, lengths = (np.concatenate([getattr(b, k) for b in blocks])
+                                                 for k in ("channel", "time", "seq", "length"))
+            data = b"".join(b.data for b in blocks)
+        else:
+            block = _Block.of(messages)
+            channel, times, sequence, lengths = block.channel, block.time, block.seq, \
+                block.length
+            data = block.data
+        if self._bulk and _chunks.fits(sequence, times):
+            _chunks.write_messages(self._mcap, channel, times, sequence, data, lengths)
+        else:
+            add = self._mcap.add_message
+            ends = np.cumsum(lengths).tolist()
+            for cid, time_ns, seq, a, b in zip(channel.tolist(), times.tolist(),
+                                               sequence.tolist(), [0, *ends[:-1]], ends,
+                                               strict=True):
+                add(cid, time_ns, data[a:b], time_ns, seq)
+        if self._table_parts:
+            self._keep_table_rows(channel, times, sequence, data, lengths)
 
     def _write_images(self) -> None:
         """Write the buffered images as chunk(s) of their own, after the small messages
@@ -261,9 +360,7 @@ class SessionWriter:
         self._drain()
         if not self._images:
             return
-        add = self._mcap.add_message
-        for channel, time_ns, data, sequence in self._images:
-            add(channel, time_ns, data, time_ns, sequence)
+        self._write_block(self._images)
         self._images.clear()
         self._image_bytes = 0
         self._mcap.flush()
@@ -336,24 +433,44 @@ class SessionWriter:
                              f"rig has {', '.join(self._names)}")
         if detections.n_frames and detections.frame_time_ns[0] < 0:
             raise InputError(_negative_time(int(detections.frame_time_ns[0])))
+        channels = [self._channel(S.detections_topic(n), S.DetectionFrame) for n in self._names]
+        self._add_frames(detections, channels)
+        for i, name in enumerate(self._names):
+            self._count(S.detections_topic(name),
+                        int(np.count_nonzero(detections.frame_camera == i)))
+
+    def _add_frames(self, detections: Detections, channels: list[int]) -> None:
+        """A DetectionFrame message per frame of ``detections`` on ``channels[camera]``:
+        blocks of frames encoded with numpy (:func:`_detections_block`), the per-frame
+        protobuf way for the rest when a block's sample frames differ from protobuf's."""
+        lo, n = 0, detections.n_frames
+        if all(self._names) and n >= _BLOCK_FROM and detections.frame_index.min() >= 0:
+            while lo < n:
+                hi = min(lo + _FRAME_BLOCK, n)
+                block = _detections_block(detections, lo, hi, self._names, channels)
+                if block is None:
+                    break
+                self._pending.append(block)
+                self._drain()
+                self._maybe_flush()
+                lo = hi
+        if lo >= n:
+            return
         # split candidate arrays per frame once (vectorised) instead of masking per frame
         bounds = np.searchsorted(detections.cand_frame, np.arange(detections.n_frames + 1))
         u = detections.cand_uv[:, 0].tolist()
         v = detections.cand_uv[:, 1].tolist()
         radius = detections.cand_radius.tolist()
         score = detections.cand_score.tolist()
-        channels = [self._channel(S.detections_topic(n), S.DetectionFrame) for n in self._names]
         make = S.DetectionFrame
-        for row, (t, cam, idx) in enumerate(zip(detections.frame_time_ns.tolist(),
-                                                 detections.frame_camera.tolist(),
-                                                 detections.frame_index.tolist(), strict=True)):
+        for row, (t, cam, idx) in enumerate(zip(detections.frame_time_ns[lo:].tolist(),
+                                                 detections.frame_camera[lo:].tolist(),
+                                                 detections.frame_index[lo:].tolist(),
+                                                 strict=True), start=lo):
             a, b = bounds[row], bounds[row + 1]
             msg = make(time_ns=t, camera=self._names[cam], frame_index=idx, u=u[a:b],
                        v=v[a:b], radius=radius[a:b], score=score[a:b])
             self._queue(channels[cam], t, msg.SerializeToString(), idx)
-        for i, name in enumerate(self._names):
-            self._count(S.detections_topic(name),
-                        int(np.count_nonzero(detections.frame_camera == i)))
 
     @_locked
     def add_ball_truth(self, ball: Detections) -> None:
@@ -429,6 +546,35 @@ class SessionWriter:
     def _add_foreign(self, topic: str, schema, channel, time_ns: int, data: bytes,
                      sequence: int) -> None:
         """Copy a message of any channel (``_mcapio.SchemaRec``/``ChannelRec``) as is."""
+        cid = self._foreign_channel(topic, schema, channel)
+        self._queue(cid, time_ns, data, sequence)
+        self._count(topic)
+
+    @_locked
+    def _add_block(self, block: _Block, topics: dict[int, str], images: bool = False
+                   ) -> None:
+        """Copy messages at once, as they are: ``block``'s channels are this writer's
+        (:meth:`_foreign_channel`), ``topics`` their topics; ``images``: written after the
+        small messages, as :meth:`add_image` does. Sessions are copied a chunk at a time so."""
+        self._check_open()
+        if len(block.time) and block.time.min() < 0:
+            raise InputError(_negative_time(int(block.time.min())))
+        ids, counts = np.unique(block.channel, return_counts=True)
+        for cid, k in zip(ids.tolist(), counts.tolist(), strict=True):
+            self._count(topics[cid], k)
+        if images:
+            self._images.append(block)
+            self._image_bytes += len(block.data)
+            if self._image_bytes >= _IMAGE_CHUNK_BYTES:
+                self._write_images()
+        else:
+            self._pending.append(block)
+            self._drain()
+        self._maybe_flush()
+
+    def _foreign_channel(self, topic: str, schema, channel) -> int:
+        """This writer's channel of ``topic`` (registered from a copied file's records, a
+        ``_mcapio.SchemaRec`` or None and a ``_mcapio.ChannelRec``, if new)."""
         cid = self._channels.get(topic)
         if cid is None:
             sid = 0
@@ -442,8 +588,8 @@ class SessionWriter:
                         schema.name, schema.encoding, schema.data)
             cid = self._mcap.register_channel(topic, channel.encoding, sid, channel.metadata)
             self._channels[topic] = cid
-        self._queue(cid, time_ns, data, sequence)
-        self._count(topic)
+            self._note_channel(topic, cid)
+        return cid
 
     @_locked
     def add_truth(self, truth: Truth) -> None:
@@ -481,19 +627,50 @@ class SessionWriter:
             raise InputError(_negative_time(int(track.time_ns.min())))
         if n and not 0 <= track.camera.min() <= track.camera.max() < len(self._names):
             raise InputError(f"track {method!r}: camera index out of range of the rig")
+        first_id = self._scene_ids.get(method, 0)
+        # a block of points at a time, every message's bytes made with numpy (_encode) and
+        # written as one block: a Python object per point was most of the time of writing a
+        # fused match; each block is checked against protobuf on sample points, and any
+        # difference sends the rest of the track the per-point way
+        template = _quality_template(extra)
+        lo = 0
+        if template is not None and all(self._names) and n >= _BLOCK_FROM:
+            while lo < n:
+                hi = min(lo + _TRACK_BLOCK, n)
+                block = _track_block(track, lo, hi, method, self._names, fixed, template,
+                                     first_id, color, channel, scene_channel)
+                if block is None:
+                    break
+                self._pending.append(block)
+                self._drain()
+                self._maybe_flush()
+                lo = hi
+        self._add_track_points(track, lo, n, method, fixed, extra, first_id, color, channel,
+                               scene_channel)
+        self._scene_ids[method] = first_id + n
+        self._count(S.track_topic(method), n)
+        self._count(S.track_scene_topic(method), n)
+
+    def _add_track_points(self, track: Track, lo: int, hi: int, method: str, fixed: dict,
+                          extra: dict, first_id: int, color, channel: int,
+                          scene_channel: int) -> None:
+        """Points ``lo:hi`` of a track, one protobuf message at a time."""
+        if lo >= hi:
+            return
         cameras = self._names
         # the quality map's bytes of every point at once (setting its keys one point at a
         # time was most of the cost of writing a track); None: the per-point way
-        entries = _quality_entries(extra, n)
-        first_id = self._scene_ids.get(method, 0)
-        for i, (t, (x, y, z), cam) in enumerate(zip(
-                track.time_ns.tolist(), track.position_world.tolist(), track.camera.tolist(),
-                strict=True)):
+        entries = _quality_entries({k: v[lo:hi] for k, v in extra.items()}, hi - lo)
+        fixed = {k: v[lo:hi] for k, v in fixed.items()}
+        for j, (t, (x, y, z), cam) in enumerate(zip(
+                track.time_ns[lo:hi].tolist(), track.position_world[lo:hi].tolist(),
+                track.camera[lo:hi].tolist(), strict=True)):
+            i = lo + j
             msg = S.TrackPoint(time_ns=t, method=method, x=x, y=y, z=z, camera=cameras[cam],
-                               **{k: fixed[k][i] for k in S.TRACK_FIXED_QUALITY})
+                               **{k: fixed[k][j] for k in S.TRACK_FIXED_QUALITY})
             if entries is not None:
                 data = msg.SerializeToString() + next(entries)
-                if i == 0:  # the same bytes as protobuf's own, checked on the first point
+                if j == 0:  # the same bytes as protobuf's own, checked on the first point
                     for k, values in extra.items():
                         msg.quality[k] = float(values[i])
                     if msg.SerializeToString() != data:
@@ -505,9 +682,6 @@ class SessionWriter:
                 data = msg.SerializeToString()
             self._queue(channel, t, data)
             self._queue(scene_channel, t, scene_point(method, first_id + i, t, (x, y, z), color))
-        self._scene_ids[method] = first_id + n
-        self._count(S.track_topic(method), n)
-        self._count(S.track_scene_topic(method), n)
 
     @_locked
     def add_event(self, time_ns: int, text: str, camera: int | None = None,
@@ -558,6 +732,7 @@ class SessionWriter:
             try:
                 if finish:
                     self._write_images()
+                    self._write_tables()
                     self._mcap.finish()
             except OSError as exc:
                 error = self._os_fault(exc)
@@ -605,6 +780,201 @@ class SessionWriter:
         if exc_type is not None:
             self._failed = True
         self.close()
+
+
+class _Block:
+    """Messages written at once: ``channel``, ``time`` (ns), ``seq`` and ``length`` (n,)
+    int64 columns, ``data`` their payloads back to back."""
+
+    __slots__ = ("channel", "data", "length", "seq", "time")
+
+    def __init__(self, channel, time, seq, length, data: bytes) -> None:
+        self.channel, self.time, self.seq, self.length, self.data = (
+            channel, time, seq, length, data)
+
+    @classmethod
+    def of(cls, messages: list[tuple[int, int, bytes, int]]) -> _Block:
+        """The block of ``(channel, time, data, sequence)`` tuples."""
+        n = len(messages)
+        return cls(np.fromiter((m[0] for m in messages), dtype=np.int64, count=n),
+                   np.fromiter((m[1] for m in messages), dtype=np.int64, count=n),
+                   np.fromiter((m[3] for m in messages), dtype=np.int64, count=n),
+                   np.fromiter((len(m[2]) for m in messages), dtype=np.int64, count=n),
+                   b"".join([m[2] for m in messages]))
+
+
+#: track points encoded and written at a time (bounded memory: a few hundred bytes a point)
+_TRACK_BLOCK = 1 << 14
+#: points of each block checked against protobuf's own serialization
+_TRACK_CHECKS = 8
+
+
+#: frames encoded and written at a time
+_FRAME_BLOCK = 1 << 15
+#: fewer points or frames than this (a live batch) are encoded one by one: numpy's fixed
+#: cost per block would outweigh it
+_BLOCK_FROM = 256
+
+
+def _detections_block(detections: Detections, lo: int, hi: int, names, channels):
+    """Frames ``lo:hi`` of ``detections`` as one :class:`_Block` of DetectionFrame messages
+    on ``channels[camera]`` (as :meth:`SessionWriter.add_detections` queued them one by one),
+    encoded with :mod:`._encode`; None when sample frames differ from protobuf's bytes."""
+    from . import _encode as E
+
+    make = S.DetectionFrame
+    n = hi - lo
+    t = detections.frame_time_ns[lo:hi].astype(np.int64)
+    cam = detections.frame_camera[lo:hi].astype(np.int64)
+    idx = detections.frame_index[lo:hi].astype(np.int64)
+    bounds = np.searchsorted(detections.cand_frame, np.arange(lo, hi + 1))
+    first, k = bounds[:-1], np.diff(bounds)
+    cols = [np.ascontiguousarray(detections.cand_uv[:, 0], dtype="<f8"),
+            np.ascontiguousarray(detections.cand_uv[:, 1], dtype="<f8"),
+            np.ascontiguousarray(detections.cand_radius, dtype="<f8"),
+            np.ascontiguousarray(detections.cand_score, dtype="<f8")]
+    name_len = np.array([len(c.encode()) for c in names], dtype=np.int64)
+
+    def encode(r):
+        m = len(r)
+        width = int(k[r].max()) if m else 0
+        pieces = [E.field_varint(1, t[r]), E.field_strings(2, cam[r], list(names)),
+                  E.field_varint(3, np.maximum(idx[r], 0))]
+        if width:
+            take = first[r][:, None] + np.arange(width)
+            for j, c in enumerate(cols):
+                raw = c[take].view(np.uint8).reshape(m, 8 * width)
+                pieces.append(E.field_message(4 + j, (raw, 8 * k[r])))
+        return E.concat(pieces)
+
+    key = (E.varint_size(t) * (t != 0) + 11 * (E.varint_size(idx) * (idx != 0)
+           + 11 * (name_len[cam] + 64 * k)))
+    data, lengths = E.grouped(key, encode)
+    ends = np.cumsum(lengths)
+    starts = ends - lengths
+    for j in sorted({0, n - 1, *np.linspace(0, n - 1, _TRACK_CHECKS).astype(int).tolist()}):
+        a, b = bounds[j], bounds[j + 1]
+        msg = make(time_ns=int(t[j]), camera=names[int(cam[j])], frame_index=int(idx[j]),
+                   u=cols[0][a:b].tolist(), v=cols[1][a:b].tolist(),
+                   radius=cols[2][a:b].tolist(), score=cols[3][a:b].tolist())
+        if data[starts[j]:ends[j]] != msg.SerializeToString():
+            return None
+    return _Block(np.asarray(channels, dtype=np.int64)[cam], t, idx, lengths, data)
+
+
+def _quality_template(extra: dict[str, np.ndarray]):
+    """``(template, slots)`` of a TrackPoint's quality map entries (see
+    :func:`_quality_entries`): the bytes of one point's entries with each key's value at
+    ``slots[key]``; None when the map is not of the usual form."""
+    probe = S.TrackPoint()
+    for k in extra:
+        probe.quality[k] = 1.0
+    raw = probe.SerializeToString()
+    template, slots, at = bytearray(), {}, 0
+    while at < len(raw):
+        if at + 4 > len(raw):
+            return None
+        length, klen = raw[at + 1], raw[at + 3]
+        if (raw[at] != 0x52 or raw[at + 2] != 0x0A or length >= 0x80 or klen >= 0x80
+                or length != klen + 11 or raw[at + 4 + klen] != 0x11):
+            return None
+        slots[raw[at + 4:at + 4 + klen].decode("utf-8")] = len(template) + 5 + klen
+        template += raw[at:at + 2 + length]
+        at += 2 + length
+    if sorted(slots) != sorted(extra):
+        return None
+    return np.frombuffer(bytes(template), dtype=np.uint8), slots
+
+
+def _track_block(track: Track, lo: int, hi: int, method: str, cameras, fixed: dict,
+                 template, first_id: int, color, channel: int, scene_channel: int):
+    """Points ``lo:hi`` of a track as one :class:`_Block` of messages (TrackPoint, then its
+    SceneUpdate, per point, as :meth:`SessionWriter.add_track` queues them one by one),
+    encoded with :mod:`._encode`; None when sample points differ from protobuf's bytes."""
+    from . import _encode as E
+
+    n = hi - lo
+    t = track.time_ns[lo:hi].astype(np.int64)
+    xyz = np.ascontiguousarray(track.position_world[lo:hi], dtype=np.float64)
+    cam = np.asarray(track.camera[lo:hi], dtype=np.int64)
+    tmpl, slots = template
+    extra = np.broadcast_to(tmpl, (n, len(tmpl))).copy()
+    for key, at in slots.items():
+        extra[:, at:at + 8] = np.ascontiguousarray(
+            track.quality[key][lo:hi], dtype="<f8").view(np.uint8).reshape(n, 8)
+    fixed_cols = [np.asarray(fixed[k][lo:hi], dtype=np.float64) if len(fixed[k]) == len(track)
+                  else np.full(n, np.nan) for k in S.TRACK_FIXED_QUALITY]
+    sec, nanos = np.divmod(t, 1_000_000_000)
+    ids = first_id + lo + np.arange(n)
+    lifetime = E.rows(E.field_message(4, E.concat([
+        E.field_varint(1, np.array([_TRACK_LIFETIME_NS // 1_000_000_000])),
+        E.field_varint(2, np.array([_TRACK_LIFETIME_NS % 1_000_000_000]))])))[0]
+    orientation = E.rows(E.field_message(2, E.field_double(4, np.array([1.0]))))[0]
+    size = E.rows(E.field_message(2, E.concat([E.field_double(k, np.array([_TRACK_SPHERE_M]))
+                                                for k in (1, 2, 3)])))[0]
+    rgba = E.rows(E.field_message(3, E.concat([E.field_double(k + 1, np.array([float(v)]))
+                                                for k, v in enumerate((*color, 1.0))])))[0]
+    name_len = np.array([len(c.encode()) for c in cameras], dtype=np.int64)
+
+    def encode(r: np.ndarray):
+        m = len(r)
+        point = E.concat([
+            E.field_varint(1, t[r]), E.field_message(2, E.const(m, method.encode())),
+            E.field_double(3, xyz[r, 0]), E.field_double(4, xyz[r, 1]),
+            E.field_double(5, xyz[r, 2]), E.field_strings(6, cam[r], list(cameras)),
+            *(E.field_double(7 + j, c[r]) for j, c in enumerate(fixed_cols)),
+            (extra[r], np.full(m, len(tmpl), dtype=np.int64))])
+        position = E.concat([E.field_double(k + 1, xyz[r, k]) for k in range(3)])
+        sphere = E.concat([E.field_message(1, E.concat([E.field_message(1, position),
+                                                        E.const(m, orientation)])),
+                           E.const(m, size), E.const(m, rgba)])
+        entity = E.concat([
+            E.field_message(1, E.concat([E.field_varint(1, sec[r]),
+                                         E.field_varint(2, nanos[r])])),
+            E.field_message(2, E.const(m, S.WORLD_FRAME.encode())),
+            E.field_message(3, E.concat([E.const(m, f"{method}/".encode()),
+                                         E.decimal(ids[r])])),
+            E.const(m, lifetime), E.field_message(9, sphere)])
+        return E.concat([point, E.field_message(2, entity)])
+
+    # rows of one layout (the same fields present, varints and ids of the same widths) are
+    # encoded together: stacks of fixed-width columns, no per-byte scatter but the last
+    bits = xyz.view(np.uint64) != 0
+    fixed_bits = np.column_stack([c.view(np.uint64) != 0 for c in fixed_cols])
+    key = (E.varint_size(t) * (t != 0)
+           + 11 * (E.varint_size(sec) * (sec != 0) + 11 * (E.varint_size(nanos) * (nanos != 0)
+           + 11 * (np.floor(np.log10(np.maximum(ids, 1))).astype(np.int64)
+           + 20 * (name_len[cam] + 64 * (bits @ np.array([1, 2, 4])
+           + 8 * (fixed_bits @ np.array([1, 2, 4]))))))))
+    data, lengths = E.grouped(key, encode)
+    # each TrackPoint's length: the point's fields as the encoder wrote them
+    method_len = len(method.encode())
+    point_len = (np.where(t != 0, 1 + E.varint_size(t), 0)
+                 + 1 + int(E.varint_size(np.array([method_len]))[0]) + method_len
+                 + 9 * bits.sum(axis=1) + 1 + E.varint_size(name_len[cam]) + name_len[cam]
+                 + 9 * fixed_bits.sum(axis=1) + len(tmpl))
+
+    # protobuf's own bytes of sample points, compared
+    ends = np.cumsum(lengths)
+    starts = ends - lengths
+    names = list(track.quality)
+    for j in sorted({0, n - 1, *np.linspace(0, n - 1, _TRACK_CHECKS).astype(int).tolist()}):
+        i = lo + j
+        x, y, z = xyz[j].tolist()
+        msg = S.TrackPoint(time_ns=int(t[j]), method=method, x=x, y=y, z=z,
+                           camera=cameras[int(cam[j])],
+                           **{k: float(c[j]) for k, c in zip(S.TRACK_FIXED_QUALITY, fixed_cols,
+                                                             strict=True)})
+        for k in names:
+            if k not in S.TRACK_FIXED_QUALITY:
+                msg.quality[k] = float(track.quality[k][i])
+        point = msg.SerializeToString()
+        want = point + scene_point(method, first_id + i, int(t[j]), (x, y, z), color)
+        if data[starts[j]:ends[j]] != want or point_len[j] != len(point):
+            return None
+    return _Block(np.tile(np.array([channel, scene_channel], dtype=np.int64), n),
+                  np.repeat(t, 2), np.zeros(2 * n, dtype=np.int64),
+                  np.column_stack([point_len, lengths - point_len]).ravel(), data)
 
 
 def _quality_entries(extra: dict[str, np.ndarray], n: int, block: int = 1 << 15):

@@ -1,0 +1,175 @@
+"""Write many MCAP messages at once: the chunks, message indexes and summary entries the
+``mcap`` package's :class:`mcap.writer.Writer` makes for the same messages added one by one
+with ``add_message`` (byte for byte: same chunk boundaries, same record order, same zstd
+frames), built with numpy instead of a dozen Python calls per message.
+
+The ``mcap`` writer keeps its summary state (chunk indexes, statistics, the channel and schema
+records waiting for the next chunk) in private attributes; this module reads and updates
+them. :func:`supported` says whether the installed ``mcap`` has them; when it does not, the
+caller adds messages one by one as before.
+"""
+
+from __future__ import annotations
+
+import zlib
+
+import numpy as np
+
+#: one message record's fixed part: opcode, record length, channel, sequence, log and
+#: publish time (MCAP spec, "Message" record), packed (31 bytes)
+_HEAD = np.dtype([("op", "u1"), ("length", "<u8"), ("channel", "<u2"), ("sequence", "<u4"),
+                  ("log_time", "<u8"), ("publish_time", "<u8")])
+_OP_MESSAGE, _OP_CHUNK, _OP_MESSAGE_INDEX = 0x05, 0x06, 0x07
+_U32 = 1 << 32
+
+
+def supported(writer) -> bool:
+    """Whether ``writer`` (an ``mcap.writer.Writer``) exposes the state this module needs and
+    compresses chunks with zstd (the only compression pslog writes)."""
+    from mcap.writer import CompressionType
+
+    names = ("_Writer__chunk_builder", "_Writer__chunk_indices", "_Writer__statistics",
+             "_Writer__stream", "_Writer__chunk_size", "_Writer__compression",
+             "_Writer__index_types", "_Writer__enable_crcs", "_Writer__enable_data_crcs",
+             "_Writer__flush")
+    return (all(hasattr(writer, n) for n in names)
+            and writer._Writer__chunk_builder is not None
+            and writer._Writer__compression == CompressionType.ZSTD)
+
+
+def fits(sequence: np.ndarray, log_time: np.ndarray) -> bool:
+    """Whether the fields fit the record's widths (else ``add_message`` raises its own error)."""
+    return bool(len(sequence) == 0 or (sequence.min() >= 0 and sequence.max() < _U32
+                                       and log_time.min() >= 0))
+
+
+def write_messages(writer, channel: np.ndarray, log_time: np.ndarray, sequence: np.ndarray,
+                   data: bytes, lengths: np.ndarray) -> None:
+    """Add ``n`` messages to ``writer`` in order and finish their chunk(s), as ``n`` calls of
+    ``add_message(channel[i], log_time[i], data_i, log_time[i], sequence[i])`` followed by
+    ``flush()`` would (the stream itself is not flushed).
+
+    Parameters
+    ----------
+    writer : ``mcap.writer.Writer`` for which :func:`supported` holds, with no message in its
+        chunk in progress (its pending schema and channel records open the first chunk)
+    channel : (n,) channel ids
+    log_time : (n,) int64 log time, ns, >= 0 (also the publish time)
+    sequence : (n,) sequence numbers in [0, 2**32)
+    data : the messages' payloads back to back
+    lengths : (n,) int64 byte length of each payload
+    """
+    import zstandard
+    from mcap.records import ChunkIndex
+    from mcap.writer import IndexType
+
+    n = len(channel)
+    if n == 0:
+        return
+    builder = writer._Writer__chunk_builder
+    if builder.num_messages:
+        writer._Writer__finalize_chunk()  # someone's single messages: their chunk first
+    prefix = builder.record_writer.end()  # schema/channel records registered since
+    builder.reset()
+    limit = writer._Writer__chunk_size
+    stats = writer._Writer__statistics
+    stream = writer._Writer__stream
+    data_crcs = writer._Writer__enable_data_crcs
+    index_messages = bool(writer._Writer__index_types & IndexType.MESSAGE)
+    crcs = writer._Writer__enable_crcs
+    writer._Writer__flush()  # whatever sits in the writer's own record buffer
+
+    lengths = np.asarray(lengths, dtype=np.int64)
+    log_time = np.asarray(log_time, dtype=np.int64)
+    channel = np.asarray(channel, dtype=np.int64)
+    sizes = lengths + _HEAD.itemsize
+    ends = np.cumsum(sizes)  # end of record i counted from the first record
+    data_ends = np.cumsum(lengths)
+    payload = np.frombuffer(data, dtype=np.uint8)
+    head = np.zeros(n, dtype=_HEAD)
+    head["op"] = _OP_MESSAGE
+    head["length"] = sizes - 9
+    head["channel"] = channel
+    head["sequence"] = sequence
+    head["log_time"] = log_time
+    head["publish_time"] = log_time
+    head_bytes = head.view(np.uint8).reshape(n, _HEAD.itemsize)
+
+    # statistics as add_message keeps them
+    if stats.message_count == 0:
+        stats.message_start_time = int(log_time.min())
+    else:
+        stats.message_start_time = min(int(log_time.min()), stats.message_start_time)
+    stats.message_end_time = max(int(log_time.max()), stats.message_end_time)
+    ids, first, counts = np.unique(channel, return_index=True, return_counts=True)
+    order = np.argsort(first, kind="stable")  # a new channel's key where add_message puts it
+    for cid, k in zip(ids[order].tolist(), counts[order].tolist(), strict=True):
+        stats.channel_message_counts[cid] += k
+    stats.message_count += n
+
+    s, base = 0, len(prefix)
+    while s < n:
+        # add_message closes the chunk after the first message that takes it past the limit
+        done_before = int(ends[s - 1]) if s else 0
+        e = int(np.searchsorted(ends, limit - base + done_before, side="right")) + 1
+        e = min(e, n)
+        rec_start = base + (ends[s:e] - sizes[s:e] - done_before)  # offsets in the chunk
+        total = base + int(ends[e - 1]) - done_before
+        body = np.empty(total, dtype=np.uint8)
+        body[:base] = np.frombuffer(prefix, dtype=np.uint8) if base else body[:0]
+        is_head = np.zeros(total, dtype=bool)
+        where = (rec_start[:, None] + np.arange(_HEAD.itemsize)).ravel()
+        is_head[where] = True
+        is_head[:base] = True
+        body[where] = head_bytes[s:e].ravel()
+        d0 = int(data_ends[s - 1]) if s else 0
+        body[~is_head] = payload[d0:int(data_ends[e - 1])]
+        raw = body.tobytes()
+        del body, is_head, where
+        compressed = zstandard.compress(raw)
+        times = log_time[s:e]
+        start_time, end_time = int(times.min()), int(times.max())
+        # the chunk record
+        record = b"".join([
+            bytes([_OP_CHUNK]),
+            (8 + 8 + 8 + 4 + 4 + 4 + 8 + len(compressed)).to_bytes(8, "little"),
+            start_time.to_bytes(8, "little"), end_time.to_bytes(8, "little"),
+            len(raw).to_bytes(8, "little"),
+            (zlib.crc32(raw) if crcs else 0).to_bytes(4, "little"),
+            (4).to_bytes(4, "little"), b"zstd",
+            len(compressed).to_bytes(8, "little"), compressed])
+        chunk_start = stream.tell()
+        stream.write(record)
+        index = ChunkIndex(message_start_time=start_time, message_end_time=end_time,
+                           chunk_start_offset=chunk_start, chunk_length=len(record),
+                           message_index_offsets={}, message_index_length=0,
+                           compression="zstd", compressed_size=len(compressed),
+                           uncompressed_size=len(raw))
+        # message indexes: one per channel, in order of each channel's first message
+        pieces = []
+        index_start = chunk_start + len(record)
+        if index_messages:
+            chans = channel[s:e]
+            uniq, first = np.unique(chans, return_index=True)
+            at = 0
+            for cid in uniq[np.argsort(first, kind="stable")].tolist():
+                sel = np.flatnonzero(chans == cid)
+                entries = np.empty((len(sel), 2), dtype="<u8")
+                entries[:, 0] = times[sel]
+                entries[:, 1] = rec_start[sel]
+                size = 16 * len(sel)
+                piece = b"".join([bytes([_OP_MESSAGE_INDEX]), (6 + size).to_bytes(8, "little"),
+                                  cid.to_bytes(2, "little"), size.to_bytes(4, "little"),
+                                  entries.tobytes()])
+                index.message_index_offsets[cid] = index_start + at
+                at += len(piece)
+                pieces.append(piece)
+        indexes = b"".join(pieces)
+        index.message_index_length = len(indexes)
+        stream.write(indexes)
+        if data_crcs:
+            writer._Writer__data_section_crc = zlib.crc32(
+                indexes, zlib.crc32(record, writer._Writer__data_section_crc))
+        writer._Writer__chunk_indices.append(index)
+        stats.chunk_count += 1
+        s, base = e, 0

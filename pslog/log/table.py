@@ -1,0 +1,205 @@
+"""Columnar tables of a session: its detections, ball labels and ground truth as little-endian
+numpy columns in MCAP attachments, written when the session closes (format:
+docs/log-format.md, "Columnar tables").
+
+A 90-minute match holds half a million detection messages; decoding them is most of the
+time of reading a session. The same data as a few arrays reads at memory speed. The per-frame
+messages stay in the file (streaming tools such as Foxglove read those); a table is only used
+when it agrees with them (the per-topic message counts it names equal the summary's
+statistics, its attachment CRC holds, its columns have the documented dtypes and shapes),
+else the reader decodes the messages, as it does for files written before tables existed.
+
+An attachment's data: a 4-byte little-endian header length ``H``, ``H`` bytes of UTF-8
+JSON (the header), zero bytes up to a multiple of 8, then each column's bytes at the
+``offset`` (from the end of that padding) the header gives, zstd-compressed or raw.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from ..errors import LogFormatError
+from . import _schemas as S
+
+#: the attachments' names (one attachment per table) and media type
+DETECTIONS = "pslog/table/detections"
+BALL_TRUTH = "pslog/table/ball_truth"
+TRUTH = "pslog/table/truth"
+TABLES = (DETECTIONS, BALL_TRUTH, TRUTH)
+MEDIA_TYPE = "application/vnd.pslog.table"
+#: ``format`` and ``version`` of the header: a reader refuses (falls back on) any other
+FORMAT = "pslog.table"
+VERSION = 1
+
+#: each table's columns: name -> (dtype, trailing shape); the leading dimension is the
+#: number of frames (``frame_*``), candidates (``cand_*``) or samples (truth)
+_DETECTION_COLUMNS = {
+    "frame_time_ns": ("<i8", ()), "frame_camera": ("<i4", ()), "frame_index": ("<i8", ()),
+    "cand_frame": ("<i8", ()), "cand_uv": ("<f8", (2,)), "cand_radius": ("<f8", ()),
+    "cand_score": ("<f8", ()),
+}
+COLUMNS = {
+    DETECTIONS: _DETECTION_COLUMNS,
+    BALL_TRUTH: _DETECTION_COLUMNS,
+    TRUTH: {"time_ns": ("<i8", ()), "position_world": ("<f8", (3,))},
+}
+#: columns smaller than this are stored raw (a zstd frame would not pay off); so are columns
+#: zstd shrinks by less than 10 %
+_COMPRESS_FROM = 4096
+
+
+def table_of(topic: str, camera_names: Sequence[str]) -> tuple[str, int] | None:
+    """``(table, camera index)`` whose rows a message of ``topic`` is (camera 0 for truth),
+    or None."""
+    if topic == S.TRUTH_TOPIC:
+        return TRUTH, 0
+    for i, name in enumerate(camera_names):
+        if topic == S.detections_topic(name):
+            return DETECTIONS, i
+        if topic == S.ball_truth_topic(name):
+            return BALL_TRUTH, i
+    return None
+
+
+def topics_of(table: str, camera_names: Sequence[str]) -> list[str]:
+    """The per-message topics a table stands for, in camera order."""
+    if table == TRUTH:
+        return [S.TRUTH_TOPIC]
+    make = S.detections_topic if table == DETECTIONS else S.ball_truth_topic
+    return [make(n) for n in camera_names]
+
+
+def encode(table: str, camera_names: Sequence[str], counts: Mapping[str, int],
+           columns: Mapping[str, np.ndarray]) -> bytes:
+    """The attachment data of ``table``.
+
+    Parameters
+    ----------
+    camera_names : the rig's cameras (``frame_camera`` indexes them)
+    counts : per-message topic -> number of messages the table stands for
+    columns : name -> array, every column of :data:`COLUMNS` ``[table]``
+    """
+    import zstandard
+
+    blobs, described, at = [], {}, 0
+    for name, (dtype, _shape) in COLUMNS[table].items():
+        values = np.ascontiguousarray(columns[name], dtype=dtype)
+        raw = values.tobytes()
+        codec, stored = "none", raw
+        if len(raw) >= _COMPRESS_FROM:
+            packed = zstandard.compress(raw)
+            if len(packed) < 0.9 * len(raw):  # noisy doubles barely shrink: kept raw, read
+                codec, stored = "zstd", packed  # without a decompression pass
+
+        described[name] = {"dtype": dtype, "shape": list(values.shape), "codec": codec,
+                           "offset": at, "size": len(stored)}
+        pad = -len(stored) % 8
+        blobs.append(stored + bytes(pad))
+        at += len(stored) + pad
+    header = json.dumps({"format": FORMAT, "version": VERSION, "table": table,
+                         "cameras": list(camera_names),
+                         "topics": {t: int(n) for t, n in counts.items()},
+                         "columns": described}, separators=(",", ":")).encode()
+    head = len(header).to_bytes(4, "little") + header
+    return head + bytes(-len(head) % 8) + b"".join(blobs)
+
+
+def decode(data: bytes, table: str, camera_names: Sequence[str]
+           ) -> tuple[dict[str, int], dict[str, np.ndarray]]:
+    """``(topic counts, columns)`` of a table's attachment data; LogFormatError naming what
+    does not check out (wrong format, version, table, cameras, a column's dtype, shape,
+    length or bytes)."""
+    import zstandard
+
+    if len(data) < 4:
+        raise LogFormatError("table shorter than its header")
+    size = int.from_bytes(data[:4], "little")
+    if 4 + size > len(data):
+        raise LogFormatError("table header runs past its data")
+    try:
+        header = json.loads(data[4:4 + size].decode("utf-8"))
+        if not isinstance(header, dict):
+            raise ValueError("not an object")
+    except (UnicodeDecodeError, ValueError) as exc:
+        raise LogFormatError(f"table header is no JSON object ({exc})") from None
+    if header.get("format") != FORMAT or header.get("version") != VERSION:
+        raise LogFormatError(f"table format {header.get('format')!r} version "
+                             f"{header.get('version')!r} (this pslog reads {FORMAT} "
+                             f"{VERSION})")
+    if header.get("table") != table or header.get("cameras") != list(camera_names):
+        raise LogFormatError("table names another table or other cameras")
+    counts = header.get("topics")
+    if not isinstance(counts, dict) or not all(
+            isinstance(n, int) and not isinstance(n, bool) and n >= 0
+            for n in counts.values()):
+        raise LogFormatError("table topic counts malformed")
+    described = header.get("columns")
+    if not isinstance(described, dict) or set(described) != set(COLUMNS[table]):
+        raise LogFormatError("table columns differ from the format's")
+    body = 4 + size + (-(4 + size) % 8)
+    out = {}
+    for name, (dtype, shape) in COLUMNS[table].items():
+        d = described[name]
+        try:
+            offset, stored, codec = int(d["offset"]), int(d["size"]), d["codec"]
+            dims = [int(x) for x in d["shape"]]
+            if d["dtype"] != dtype:
+                raise ValueError(f"dtype {d['dtype']}")
+        except (KeyError, TypeError, ValueError) as exc:
+            raise LogFormatError(f"table column {name} malformed ({exc})") from None
+        if dims[1:] != list(shape) or len(dims) != 1 + len(shape) or min(dims) < 0:
+            raise LogFormatError(f"table column {name} has shape {dims}")
+        if offset < 0 or stored < 0 or body + offset + stored > len(data):
+            raise LogFormatError(f"table column {name} runs past the data")
+        blob = data[body + offset:body + offset + stored]
+        expected = int(np.prod(dims)) * np.dtype(dtype).itemsize
+        if codec == "zstd":
+            try:
+                blob = zstandard.ZstdDecompressor().decompress(blob, max_output_size=expected)
+            except zstandard.ZstdError as exc:
+                raise LogFormatError(f"table column {name} does not decompress ({exc})"
+                                     ) from None
+        elif codec != "none":
+            raise LogFormatError(f"table column {name}: unknown codec {codec!r}")
+        if len(blob) != expected:
+            raise LogFormatError(f"table column {name} holds {len(blob)} bytes, not "
+                                 f"{expected}")
+        # a writable copy in native order, as the per-message decoder gives
+        out[name] = np.array(np.frombuffer(blob, dtype=dtype).reshape(dims),
+                             dtype=np.dtype(dtype).newbyteorder("="))
+    return counts, out
+
+
+def build(name: str, camera_names: Sequence[str], per_topic: Mapping[str, list]
+          ) -> bytes | None:
+    """The attachment data of table ``name`` made from its topics' messages, decoded as
+    :func:`pslog.log.reader.read_session` decodes them (so the table is what reading the
+    messages gives); None when a message does not decode (readers then decode the messages
+    and report it).
+
+    Parameters
+    ----------
+    per_topic : topic -> messages, each a list of ``pslog.log.reader._Batch`` parts in file
+        order (a topic absent: no message)
+    """
+    from google.protobuf.message import DecodeError
+
+    from ..errors import PslogError
+    from .reader import _Batch, decode_detections, decode_truth
+
+    topics = topics_of(name, camera_names)
+    batches = [_Batch.concatenate(per_topic.get(t, [])) for t in topics]
+    counts = {t: len(b) for t, b in zip(topics, batches, strict=True)}
+    try:
+        if name == TRUTH:
+            truth = decode_truth(batches[0])
+            columns = {"time_ns": truth.time_ns, "position_world": truth.position_world}
+        else:
+            d = decode_detections(camera_names, batches)
+            columns = {k: getattr(d, k) for k in COLUMNS[name]}
+    except (DecodeError, PslogError, ValueError):
+        return None
+    return encode(name, camera_names, counts, columns)
