@@ -177,7 +177,7 @@ def test_fuse_names_the_timing_a_method_needs_and_the_methods_that_suit(tmp_path
         in err
     assert "methods that suit this session: nearest, typeA" in err
     assert not (tmp_path / "f.mcap").exists()
-    code, _, err = cli("view", sim_session.path, "--methods", "linear", "--save",
+    code, _, err = cli("view", sim_session.path, "--method", "linear", "--save",
                        tmp_path / "v.rrd")
     assert code == 1 and "methods that suit this session: nearest, typeA" in err
     code, out, _ = cli("fuse", sim_session.path, "--method", "typeA", "--method", "nearest",

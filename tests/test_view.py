@@ -299,7 +299,7 @@ def _pslog(args: list[str], env: dict | None = None) -> subprocess.CompletedProc
 def test_cli_save(session, tmp_path, capsys):
     out = tmp_path / "cli.rrd"
     assert pslog_main(["view", str(session), "--save", str(out), "--frames", "none",
-                       "--methods", "typeA,nearest"]) == 0
+                       "--method", "typeA,nearest"]) == 0
     text = capsys.readouterr().out
     assert "fused on the fly: typeA, nearest" in text and f"wrote {out}" in text
     _verify(out)
@@ -522,7 +522,7 @@ def test_smooth_and_the_camera_clocks_after_sync(tmp_path, capsys):
     track = read_session(fused).tracks["smooth"]
 
     on_the_fly = tmp_path / "fly.rrd"
-    assert pslog_main(["view", str(synced), "--methods", "smooth", "--save", str(on_the_fly),
+    assert pslog_main(["view", str(synced), "--method", "smooth", "--save", str(on_the_fly),
                        "--frames", "none"]) == 0
     stored = tmp_path / "stored.rrd"
     assert pslog_main(["view", str(synced), str(fused), "--save", str(stored)]) == 0

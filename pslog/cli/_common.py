@@ -279,12 +279,24 @@ class _ExtendUnique(argparse.Action):
         setattr(namespace, self.dest, names)
 
 
-def add_method_option(parser: argparse.ArgumentParser, help: str) -> None:
+def track_names(text: str) -> list[str]:
+    """argparse type: one track name or a comma-separated list (any name a session may hold)."""
+    names = [name.strip() for name in text.split(",")]
+    if not any(names) or not all(names):
+        raise argparse.ArgumentTypeError(f"{text!r}: name a method, or several separated by "
+                                         f"commas")
+    return names
+
+
+def add_method_option(parser: argparse.ArgumentParser, help: str,
+                      known_only: bool = True) -> None:
     """``--method METHOD`` of every command that chooses fusion methods: repeated or a
     comma-separated list (``--method typeA --method smooth`` = ``--method typeA,smooth``),
-    into ``args.methods`` (None when not given)."""
+    into ``args.methods`` (None when not given). ``known_only``: only the registry's methods
+    (False: any track name, e.g. the tracks a viewed session holds)."""
     parser.add_argument("--method", action=_ExtendUnique, dest="methods", metavar="METHOD",
-                        type=fusion_methods, default=None, help=help)
+                        type=fusion_methods if known_only else track_names, default=None,
+                        help=help)
 
 
 def checked_by(parse, what: str):

@@ -18,6 +18,7 @@ import sys
 
 from ._common import (
     add_force,
+    add_method_option,
     check_output,
     declare_files,
     installed_command,
@@ -45,9 +46,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("sessions", nargs="+", metavar="SESSION.mcap",
                         help="session MCAP, then optionally fused copies of it (pslog fuse "
                              "output) whose tracks are shown too")
-    parser.add_argument("--methods", metavar="M1,M2",
-                        help="tracks to show, comma-separated; a fusion method no file holds is "
-                             "fused on the fly (default: every stored track, else typeA)")
+    add_method_option(parser, "tracks to show, repeat or give a comma-separated list; a "
+                              "fusion method no file holds is fused on the fly (default: every "
+                              "stored track, else typeA)", known_only=False)
     parser.add_argument("--frames", default="all", metavar="all|none|every:N",
                         type=_frames,
                         help="recorded images to include (default %(default)s; every:N keeps "
@@ -106,7 +107,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         parse_methods(args.methods)
     except PslogError as exc:
-        return usage_error("view", f"argument --methods: {exc}")
+        return usage_error("view", f"argument --method: {exc}")
     if args.connect and args.url:
         try:
             check_url(args.url)

@@ -225,8 +225,8 @@ def test_stdout_closed(fused):
 @pytest.mark.parametrize(("values", "contains"), [
     (("--start", "5", "--end", "1"), "--start"),
     (("--start", "1", "--end", "1"), "--start"),
-    (("--methods", ""), "--methods"),
-    (("--methods", ",,,"), "--methods"),
+    (("--method", ""), "--method"),
+    (("--method", ",,,"), "--method"),
     (("--connect", "--url", "garbage"), "--url"),
     (("--frames", "every:99999999999999999999999"), "--frames"),
     (("--frames", "every:0"), "--frames"),
