@@ -137,10 +137,13 @@ class Progress:
 
     # ---- updates ------------------------------------------------------------------------
     def update(self, completed: float | None = None, *, advance: float = 0.0,
-               what: str | None = None, total: float | None = None) -> None:
-        """Set ``completed`` (or add ``advance``), and optionally what is being done and the
-        total (once known). Cheap: call it as often as convenient."""
+               what: str | None = None, total: float | None = None,
+               unit: str | None = None) -> None:
+        """Set ``completed`` (or add ``advance``), and optionally what is being done, the
+        total (once known) and what is counted. Cheap: call it as often as convenient."""
         with self._lock:
+            if unit is not None:
+                self.unit = unit
             if completed is not None:
                 self.completed = float(completed)
             self.completed += advance
@@ -205,7 +208,16 @@ def step(what: str) -> None:
 
 
 def update(completed: float | None = None, *, advance: float = 0.0, what: str | None = None,
-           total: float | None = None) -> None:
+           total: float | None = None, unit: str | None = None) -> None:
     """Report to the running command's progress (see :meth:`Progress.update`)."""
     if _active is not None:
-        _active.update(completed, advance=advance, what=what, total=total)
+        _active.update(completed, advance=advance, what=what, total=total, unit=unit)
+
+
+def done() -> None:
+    """The running command's work is over (it now waits, e.g. serves a viewer until Ctrl-C):
+    stop showing progress."""
+    global _active
+    if _active is not None:
+        _active.close()
+        _active = None

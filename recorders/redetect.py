@@ -95,11 +95,15 @@ def redetect_session(src: str | Path, dst: str | Path, hsv: HsvRange | None = No
     row_of = {(int(c), int(i)): r for r, (c, i) in
               enumerate(zip(old.frame_camera, old.frame_index, strict=True))}
 
+    from pslog import progress
+
+    progress.update(0, total=session.n_images, unit="frames", what="detecting")
     rows, results = [], []
     for batch_rows, batch_results in _detect_all(iter_images(src), row_of, hsv,
                                                  max_candidates, workers, session.n_images):
         rows.extend(batch_rows)
         results.extend(batch_results)
+        progress.update(advance=len(batch_rows))
     redone = np.zeros(old.n_frames, dtype=bool)
     redone[rows] = True
 

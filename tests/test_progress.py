@@ -116,3 +116,19 @@ def test_a_terminal_gets_a_bar_that_is_gone_at_the_end(tmp_path):
     assert "pslog simulate" in text and "simulating 60.0 s of rally" in text
     assert "\x1b[" in text  # drawn with control sequences, not printed as lines
     assert f"wrote {out}" in text
+
+
+def test_fuse_names_each_method_as_it_runs(tmp_path):
+    raw = tmp_path / "raw.mcap"
+    assert run_pslog("simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "rally",
+                     "--duration", "20", "--seed", "4", "-o", raw).code == 0
+    run = run_pslog("fuse", raw, "-o", tmp_path / "f.mcap", "--method", "smooth,typeA",
+                    env={"PSLOG_PROGRESS": "lines", "PSLOG_PROGRESS_INTERVAL": "0.05"})
+    assert run.code == 0, run.stderr
+    steps = [line.split(", ")[1] for line in run.stderr.splitlines()
+             if line.startswith("pslog fuse: ") and "/4 steps" in line]
+    # in order, each once or more: smooth, then typeA (a sub-second step may fall between
+    # two lines)
+    assert "fusing smooth" in steps
+    assert steps == sorted(steps, key=["reading the session", "fusing smooth", "fusing typeA",
+                                       f"writing {tmp_path / 'f.mcap'}"].index)

@@ -60,6 +60,7 @@ def run(args: argparse.Namespace) -> int:
 
     import numpy as np
 
+    from pslog import progress
     from pslog.errors import FusionError, RigError
     from pslog.evaluation import LEFT_OUT_KEY
     from pslog.fusion import (
@@ -75,6 +76,7 @@ def run(args: argparse.Namespace) -> int:
     from pslog.timing import observations as timed_observations
 
     output = args.output  # checked before run() (declare_files)
+    progress.update(what="reading the session")
     session = read_session(args.session)
     rig = session.rig
     if args.rig is not None:
@@ -107,6 +109,7 @@ def run(args: argparse.Namespace) -> int:
         if skipped:
             print(f"not run on this timing: {', '.join(skipped)} (name them with --method "
                   f"to run them anyway)")
+    progress.update(total=len(methods) + 2)  # read, each method, write
     tracks, rejections = fuse_detections(session.detections, rig, methods, options)
     dropped = {m: t.dropped for m, t in tracks.items()}  # invalid or untrustworthy points
     empty = [m for m, t in tracks.items() if len(t) == 0]
@@ -127,6 +130,7 @@ def run(args: argparse.Namespace) -> int:
     # the points each method left out, by reason, for eval (always written: a re-fuse
     # replaces the previous fuse's counts)
     left_out = {m: dict(dropped[m]) for m in tracks if dropped.get(m)}
+    progress.step(f"writing {output}")
     copy_session(args.session, output, tracks=list(tracks.values()), force=args.force,
                  rig=None if args.rig is None else rig, rejections=rejections,
                  metadata={LEFT_OUT_KEY: json.dumps(left_out, sort_keys=True)})

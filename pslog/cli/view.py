@@ -137,13 +137,17 @@ def run(args: argparse.Namespace) -> int:
         kind = "serve" if args.serve else "connect" if args.connect else "spawn"
         sink = open_sink(kind, web_port=args.web_port, grpc_port=args.grpc_port,
                          url=args.url, connect_timeout_s=args.connect_timeout)
+    from pslog import progress
+
     # read and fuse before any sink starts, so errors come out before a viewer does
+    progress.update(total=2, what="reading the sessions (fusing what is not stored)")
     data = load_view_data(args.sessions, methods=args.methods, start=args.start, end=args.end,
                           detail=detail)
     out = sys.stderr if args.stdout else sys.stdout
     for note in data.notes:
         print(note, file=out)
     rec = new_stream()
+    progress.step("logging to rerun")
 
     def report(counts: dict[str, int]) -> None:
         print("logged " + ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in counts.items()
@@ -163,6 +167,7 @@ def run(args: argparse.Namespace) -> int:
     sink.start(rec)
     counts = log_view(rec, data, args.frames)
     sink.finish(rec)
+    progress.done()
     report(counts)
     if sink.kind == "serve":
         print(f"serving the web viewer at {sink.web_address} (Ctrl-C to stop)", file=out,

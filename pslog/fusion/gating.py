@@ -1370,6 +1370,7 @@ def fuse_detections(detections: Detections, rig: Rig, methods, options=None):
     tracks : method -> Track
     rejections : method -> Rejections (empty ones without gating)
     """
+    from .. import progress
     from . import FusionOptions, check_method, fuse, prepare
 
     options = options or FusionOptions()
@@ -1378,12 +1379,16 @@ def fuse_detections(detections: Detections, rig: Rig, methods, options=None):
     if not options.gating:
         obs = timed_observations(detections, rig)
         prep = prepare(obs, rig) if len(rig) >= 2 else None
-        return ({m: fuse(obs, rig, m, options, prepared=prep) for m in methods},
-                {m: Rejections.empty() for m in methods})
+        out = {}
+        for m in methods:
+            progress.step(f"fusing {m}")  # (a command's progress shows the method at work)
+            out[m] = fuse(obs, rig, m, options, prepared=prep)
+        return out, {m: Rejections.empty() for m in methods}
     shared: dict[tuple[bool, float], tuple[Gated, object]] = {}
     tracks, rejections = {}, {}
     for method in methods:
         key = gating_key(method, options)
+        progress.step(f"fusing {method}")
         if key not in shared:
             gated = gate_for(detections, rig, method, options)
             shared[key] = gated, (prepare(gated.observations, rig) if len(rig) >= 2 else None)
