@@ -213,7 +213,12 @@ def set_timestamp(stamp, time_ns: int) -> None:
 
 def quaternion_xyzw(rotation: np.ndarray) -> np.ndarray:
     """Unit quaternion (x, y, z, w), w >= 0, of a 3x3 rotation matrix (Shepperd's method,
-    stable for every rotation)."""
+    stable for every rotation).
+
+    Not scipy's ``Rotation.from_matrix(m).as_quat(canonical=True)``, which gives the same
+    quaternion (to 2.2e-16, tests/test_conversions.py): importing ``scipy.spatial`` costs
+    about 0.2 s, paid by every command that writes a session (``record`` and ``live`` at their
+    start) for one rotation per camera."""
     m = np.asarray(rotation, dtype=np.float64)
     trace = np.trace(m)
     diag = np.diag(m)
