@@ -88,14 +88,16 @@ def _text(info: dict) -> list[str]:
         + ("" if start is None else f" (t = {start:.6f} .. {info['end_s']:.6f} s)")
         + f", {info['frames']} frames, {info['candidates']} candidates, "
           f"{info['images']} images",
-        f"  camera   frames  fps(meas/nom)   offset measured / rig ({info['timing']})"
-        f"  detected  images",
     ]
-    for c in info["cameras"]:
-        lines.append(
-            f"  {c['name']:<8} {c['frames']:>6}  {c['fps_measured']:6.2f} / {c['fps_nominal']:<6g}"
-            f"  {_ms(c['offset_measured_s']):>11} / {_ms(c['offset_nominal_s']):<11}"
-            f"  {_pct(c['detection_rate']):>7}  {c['images']:>6}")
+    from pslog.tables import format_table
+
+    table = format_table(
+        ("camera", "frames", "fps measured", "nominal", "offset measured",
+         f"rig ({info['timing']})", "detected", "images"),
+        [(c["name"], f"{c['frames']}", f"{c['fps_measured']:.2f}", f"{c['fps_nominal']:g}",
+          _ms(c["offset_measured_s"]), _ms(c["offset_nominal_s"]),
+          _pct(c["detection_rate"]), f"{c['images']}") for c in info["cameras"]])
+    lines += ["  " + line for line in table.splitlines()]
     if info["clock_corrected"]:
         lines.append("  clock model (true = logged + offset + drift * logged + readout * v / "
                      "height; applied when fusing):")
