@@ -44,7 +44,7 @@ def test_track_blocks_are_protobufs_own_bytes(tmp_path, rig3, extra):
         for _s, c, m in make_reader(f).iter_messages(log_time_order=False):
             got.setdefault(c.topic, []).append((m.log_time, m.data))
     for k, (track, first_id) in enumerate(((tracks[0], 0), (tracks[1], 0), (tracks[1], 300))):
-        method, color = track.method, W.TRACK_COLORS[min(k, 1)]
+        method, color = track.method, W.track_color(track.method)
         points = got[S.track_topic(method)]
         scenes = got[S.track_scene_topic(method)]
         if method == "nearest":
@@ -75,7 +75,7 @@ def test_the_block_path_is_taken(rig3):
         template = W._quality_template({k: v for k, v in track.quality.items()
                                         if k not in S.TRACK_FIXED_QUALITY})
         block = W._track_block(track, 0, 500, "typeA", rig3.names, fixed, template, 0,
-                               W.TRACK_COLORS[0], 1, 2)
+                               W.track_color("typeA"), 1, 2)
         assert block is not None and len(block.time) == 1000
 
 
