@@ -103,11 +103,13 @@ def main() -> int:
         # the cluster's start-up and shut-down, and a batch of one against its commands
         import ray
 
+        temp = tempfile.mkdtemp(prefix="pslog-ray-")
         t = time.perf_counter()
         ray.init(num_cpus=1, include_dashboard=False, log_to_driver=False,
-                 logging_level="ERROR", _temp_dir=tempfile.mkdtemp(prefix="pslog-ray-"))
+                 logging_level="ERROR", _temp_dir=temp)
         ray.shutdown()
         startup = time.perf_counter() - t
+        shutil.rmtree(temp, ignore_errors=True)
         one = season / "match000.mcap"
         hand_one, _ = by_hand(one, work / "one-hand", steps)
         batch_one, _ = batch(str(one), work / "one", args.steps, 1)

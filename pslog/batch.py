@@ -476,11 +476,35 @@ def ray_cluster(workers: int | None, address: str | None):
         reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise PslogError(f"cannot start or join {where}: {reason}") from None
     try:
-        yield int(ray.cluster_resources().get("CPU", 1))
+        with _terminate_as_interrupt():
+            yield int(ray.cluster_resources().get("CPU", 1))
     finally:
         ray.shutdown()
         if temp is not None:
             shutil.rmtree(temp, ignore_errors=True)
+
+
+@contextlib.contextmanager
+def _terminate_as_interrupt():
+    """SIGTERM (a job scheduler's stop, ``kill``) handled as Ctrl-C while the batch runs, so
+    that the local cluster is shut down and removed rather than orphaned (the sessions done
+    keep their ``done.json`` for ``--resume``). Installed after ``ray.init``, which replaces
+    the handler with its own (a stack dump and abort)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(_signum, _frame):
+        raise KeyboardInterrupt
+
+    old = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, old)
 
 
 def run_batch(jobs: list[Job], settings: Settings, *, workers: int | None = None,

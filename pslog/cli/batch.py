@@ -110,9 +110,10 @@ def run(args: argparse.Namespace) -> int:
     if plan.done:
         print(f"pslog batch: {len(plan.done)} of {len(jobs)} sessions already complete "
               f"(--resume), {len(plan.run)} to run", file=sys.stderr)
-    rows = plan.done + (run_batch(plan.run, settings, workers=args.workers,
-                                  address=args.address, progress=progress)
-                        if plan.run else [])
+    rows = list(plan.done)
+    if plan.run:
+        rows += run_batch(plan.run, settings, workers=args.workers, address=args.address,
+                          progress=progress)
     written = write_summary(rows, outdir)
     failed = sorted((r for r in rows if r["status"] != "ok"), key=lambda r: r["session"])
     for row in sorted(rows, key=lambda r: r["session"]):
@@ -126,3 +127,4 @@ def run(args: argparse.Namespace) -> int:
         raise PslogError(f"{len(failed)} of {len(rows)} sessions failed (first: "
                          f"{first['session']}: {first['error']}); see {written[0]}")
     return 0
+
