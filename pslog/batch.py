@@ -306,10 +306,16 @@ def run_session(job: Job, settings: Settings) -> dict:
         try:
             _write_json(outdir / DONE_NAME, {"session": job.session, "settings": settings.key(),
                                              "steps": list(settings.steps),
-                                             "input": _input_stamp(job.path), "row": row})
+                                             "input": _input_stamp(job.path),
+                                             "row": _json_row(row)})
         except (OSError, PslogError, ValueError) as exc:
             row.update(status="failed", error=f"pslog batch: error: {exc}")
     return row
+
+
+def _json_row(row: dict) -> dict:
+    """``row`` for JSON: NaN (no value) as null, which the summary writes alike."""
+    return {k: None if isinstance(v, float) and math.isnan(v) else v for k, v in row.items()}
 
 
 def summary_row(session: str, info: dict | None, sync: dict | None, evaluation: list | None,

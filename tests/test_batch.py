@@ -50,11 +50,21 @@ def simulate(path: Path, seed: int, duration: float = 1.5) -> Path:
 
 @pytest.fixture(scope="module")
 def sessions(tmp_path_factory) -> Path:
-    """matches/day1/{a,b}.mcap, matches/day2/c.mcap and matches/day2/bad.mcap (cut short)."""
+    """matches/day1/{a,b}.mcap, matches/day2/c.mcap, matches/day2/real.mcap (c's
+    detections without ground truth) and matches/day2/bad.mcap (cut short)."""
     root = tmp_path_factory.mktemp("batch") / "matches"
     simulate(root / "day1" / "a.mcap", 1)
     simulate(root / "day1" / "b.mcap", 2)
     c = simulate(root / "day2" / "c.mcap", 3)
+    # a "real" session: the detections alone, no ground truth (export, then import)
+    code, rig_toml, err = pslog("rig", "show", c)
+    assert code == 0, err
+    (root.parent / "rig.toml").write_text(rig_toml)
+    code, _, err = pslog("export", c, "--detections", root.parent / "det.csv")
+    assert code == 0, err
+    code, _, err = pslog("import", "--rig", root.parent / "rig.toml", "--detections",
+                         root.parent / "det.csv", "-o", root / "day2" / "real.mcap")
+    assert code == 0, err
     bad = root / "day2" / "bad.mcap"
     bad.write_bytes(c.read_bytes()[:4000])
     hour_ago = time.time() - 3600  # not a recording still being written: a cut one
@@ -106,7 +116,7 @@ def by_hand(session: Path, folder: Path) -> tuple[dict, str]:
     assert code == 0, err
     row = {"status": "ok", "error": "", "cameras": "cam1 cam2 cam3",
            "duration_s": repr(info["duration_s"]), "frames": str(info["frames"]),
-           "detections": str(info["candidates"]), "truth": "True"}
+           "detections": str(info["candidates"]), "truth": str(info["truth"])}
     sync = json.loads(sync)
     for cam in sync["cameras"]:
         row[f"{cam['name']}_offset_ms"] = repr(cam["offset_s"] * 1e3)
@@ -114,8 +124,10 @@ def by_hand(session: Path, folder: Path) -> tuple[dict, str]:
     row["sync_residual_px"] = repr(sync["residual_px"])
     for m in json.loads(evaluation):
         row[f"{m['method']}_n_points"] = str(m["n_points"])
-        for key in ("rate_hz", "mean_mm", "median_mm", "p95_mm", "max_mm", "rms_mm"):
-            row[f"{m['method']}_{key}"] = repr(m[key])
+        row[f"{m['method']}_rate_hz"] = repr(m["rate_hz"])
+        for key in ("mean_mm", "median_mm", "p95_mm", "max_mm", "rms_mm"):
+            # errors against ground truth, where there is one
+            row[f"{m['method']}_{key}"] = repr(m[key]) if info["truth"] else ""
     return row, str(folder / "fused.mcap")
 
 
@@ -136,10 +148,14 @@ def test_summary_equals_the_commands_by_hand_and_the_bad_session_fails(cluster, 
     code, _, err = pslog("batch", f"{sessions}/**/*.mcap", "--do", "sync,fuse,eval",
                               *METHODS, "-o", out)
     assert code == 1  # one session failed
-    assert "1 of 4 sessions failed (first: day2/bad.mcap: pslog info: error:" in err
+    assert "1 of 5 sessions failed (first: day2/bad.mcap: pslog info: error:" in err
     assert "Traceback" not in err
     rows = {r["session"]: r for r in read_summary_csv(out / "summary.csv")}
-    assert list(rows) == ["day1/a.mcap", "day1/b.mcap", "day2/bad.mcap", "day2/c.mcap"]
+    assert list(rows) == ["day1/a.mcap", "day1/b.mcap", "day2/bad.mcap", "day2/c.mcap",
+                          "day2/real.mcap"]
+    assert rows["day2/real.mcap"]["truth"] == "False"
+    assert rows["day2/real.mcap"]["typeA_mean_mm"] == ""
+    assert float(rows["day2/real.mcap"]["typeA_rate_hz"]) > 80
     for name, row in rows.items():
         want, fused = by_hand(sessions / name, tmp_path / "hand" / name)
         got = {k: v for k, v in row.items() if v != "" or k in want}
