@@ -287,9 +287,11 @@ def run_session(job: Job, settings: Settings) -> dict:
             methods = [a for m in settings.methods for a in ("--method", m)]
             _command(["fuse", current, "-o", out["fuse"], "--force", *methods])
             current = out["fuse"]
-        if "eval" in settings.steps:
+        if "eval" in settings.steps or "fuse" in settings.steps:
+            # the summary's points and rates come from eval's figures, asked for or not
             evaluation = json.loads(_command(["eval", current, "--json"]))
-            _write_json(Path(out["eval"]), evaluation)
+            if "eval" in settings.steps:
+                _write_json(Path(out["eval"]), evaluation)
         if "view" in settings.steps:
             frames = ["--frames", settings.frames] if settings.frames else []
             _command(["view", current, "--save", out["view"], "--force", *frames])
@@ -519,9 +521,20 @@ def run_batch(jobs: list[Job], settings: Settings, *, workers: int | None = None
     """Run :func:`run_session` for every job as a Ray task (1 CPU each; retried up to
     :data:`MAX_RETRIES` times when its worker process dies); the summary rows, in the
     order the sessions finished. A task lost for good (its worker died every time) is a
-    failed row naming why."""
+    failed row naming why. A single session on the local machine runs in this process,
+    without a cluster (whose start-up would cost more than any gain)."""
     import ray
 
+    if len(jobs) == 1 and address is None and not ray.is_initialized():
+        # one session: nothing to spread, so no cluster to start (seconds saved); this
+        # process runs the task itself, and its death is the batch's (--resume redoes it)
+        row = run_session(jobs[0], settings)
+        if progress is not None:
+            progress.done, progress.failed = (1, 0) if row["status"] == "ok" else (0, 1)
+            progress.update(0, final=True)
+        if on_row is not None:
+            on_row(row)
+        return [row]
     with ray_cluster(workers, address) as slots:
         task = ray.remote(num_cpus=1, max_retries=MAX_RETRIES)(run_session)
         pending = {task.remote(job, settings): job for job in jobs}

@@ -282,3 +282,32 @@ def test_resume_after_a_batch_killed_halfway(tmp_path, short_tmpdir):
     assert again.returncode == 0, again.stderr
     assert "6 of 6 sessions already complete" in again.stderr
     assert read_summary_csv(out / "summary.csv") == rows
+
+
+def test_redetect_and_view_steps_on_a_recorded_session(cluster, tmp_path):
+    """--do redetect,fuse,eval,view on the sample recording (it has its frames): each step's
+    output is there and the re-detection equals ``pslog redetect`` by hand."""
+    import shutil
+
+    sample = Path(__file__).resolve().parents[1] / "samples" / "throw.mcap"
+    (tmp_path / "rec").mkdir()
+    shutil.copyfile(sample, tmp_path / "rec" / "throw.mcap")
+    out = tmp_path / "results"
+    code, _, err = pslog("batch", tmp_path / "rec" / "throw.mcap", "--do", "view,redetect,fuse",
+                         "--method", "typeA", "--frames", "none", "-o", out)
+    assert code == 0, err
+    folder = out / "throw"
+    assert sorted(p.name for p in folder.iterdir()) == [
+        "done.json", "fused.mcap", "redetected.mcap", "view.rrd"]
+    assert (folder / "view.rrd").stat().st_size > 0
+    code, _, err = pslog("redetect", tmp_path / "rec" / "throw.mcap", "-o",
+                         tmp_path / "hand.mcap", "--workers", "1")
+    assert code == 0, err
+    from pslog.log import read_session
+
+    hand, batch = read_session(tmp_path / "hand.mcap"), read_session(folder / "redetected.mcap")
+    np.testing.assert_array_equal(hand.detections.cand_uv, batch.detections.cand_uv)
+    assert list(read_session(folder / "fused.mcap").tracks) == ["typeA"]
+    row = read_summary_csv(out / "summary.csv")[0]
+    # no eval asked: no eval.json, but the summary has the points all the same
+    assert row["status"] == "ok" and int(row["typeA_n_points"]) > 0
