@@ -168,10 +168,10 @@ def plan_batch(jobs: list[Job], settings: Settings, outdir: str | Path, *, resum
                force: bool) -> Plan:
     """Which sessions to run. With ``resume``, a session whose marker says its outputs are
     complete, for this input (same size and modification time) and these settings, is not
-    run again. Without ``force``, an existing output of a session to run is refused
-    (:class:`~pslog.errors.OutputExistsError` naming the first), except under ``resume``
-    the outputs of a session that never completed (an interrupted batch's); so is a marker
-    made with other settings, and an existing summary."""
+    run again; the others are run, their leftovers (an interrupted batch's) replaced.
+    Without ``resume`` or ``force``, any existing output, marker or summary is refused
+    (:class:`~pslog.errors.OutputExistsError` naming the first); with ``resume`` but not
+    ``force``, a marker made with other settings is refused."""
     from pslog.errors import OutputExistsError
 
     plan = Plan()

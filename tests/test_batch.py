@@ -311,3 +311,22 @@ def test_redetect_and_view_steps_on_a_recorded_session(cluster, tmp_path):
     row = read_summary_csv(out / "summary.csv")[0]
     # no eval asked: no eval.json, but the summary has the points all the same
     assert row["status"] == "ok" and int(row["typeA_n_points"]) > 0
+
+
+def test_ray_is_imported_by_a_running_batch_alone():
+    """``pslog --help``, ``pslog batch --help`` and a batch refused before it starts never
+    load Ray (seconds of imports)."""
+    code = ("import sys, contextlib, io\n"
+            "from pslog.cli import main\n"
+            "for argv in (['--help'], ['batch', '--help'], ['batch', 'nothing/*.mcap',"
+            " '--do', 'fuse', '-o', 'out']):\n"
+            "    with contextlib.redirect_stdout(io.StringIO()), "
+            "contextlib.redirect_stderr(io.StringIO()):\n"
+            "        try:\n"
+            "            main(argv)\n"
+            "        except SystemExit:\n"
+            "            pass\n"
+            "print('ray' in sys.modules)\n")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=120)
+    assert run.stdout.strip() == "False", run.stderr
