@@ -449,6 +449,42 @@ class Progress:
             print(self.line(running), file=self.stream, flush=True)
 
 
+#: seconds to wait for a cluster's port to answer before saying it cannot be reached
+CONNECT_TIMEOUT_S = 5.0
+
+
+def parse_address(text: str) -> tuple[str, int] | None:
+    """``--address``: ``auto`` (None: Ray finds the cluster this node belongs to),
+    ``HOST:PORT`` or ``ray://HOST:PORT`` -> (host, port); :class:`InputError` otherwise."""
+    if text == "auto":
+        return None
+    rest = text.removeprefix("ray://")
+    host, _, port = rest.rpartition(":")
+    host = host.strip("[]")  # an IPv6 address in brackets
+    if not host or "/" in host or not port.isdigit() or not 1 <= int(port) <= 65535:
+        raise InputError(f"{text!r}: give HOST:PORT (a node of the cluster), "
+                         f"ray://HOST:PORT (Ray Client, default port 10001) or auto")
+    return host, int(port)
+
+
+def check_reachable(address: str, timeout_s: float = CONNECT_TIMEOUT_S) -> None:
+    """One line when nothing answers at ``address`` (Ray itself would retry for minutes,
+    printing a warning every few seconds)."""
+    import socket
+
+    from pslog.outputs import os_reason
+
+    where = parse_address(address)
+    if where is None:
+        return
+    try:
+        socket.create_connection(where, timeout=timeout_s).close()
+    except OSError as exc:
+        reason = "no answer" if isinstance(exc, TimeoutError) else os_reason(exc)
+        raise PslogError(f"cannot reach the Ray cluster at {address}: {reason} (is "
+                         f"'ray start --head' running there?)") from None
+
+
 @contextlib.contextmanager
 def ray_cluster(workers: int | None, address: str | None):
     """A Ray cluster to run on: the one this process already joined (tests), the one at

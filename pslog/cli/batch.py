@@ -46,6 +46,17 @@ def _frames(text: str) -> str:
     return text
 
 
+def _address(text: str) -> str:
+    from pslog.batch import parse_address
+    from pslog.errors import PslogError
+
+    try:
+        parse_address(text)
+    except PslogError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.description = DESCRIPTION
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
@@ -71,7 +82,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     where.add_argument("--workers", type=int_in(1, MAX_WORKERS), default=None, metavar="N",
                        help=f"local worker processes, at most {MAX_WORKERS} (default: the "
                             f"number of cores)")
-    where.add_argument("--address", metavar="ADDRESS",
+    where.add_argument("--address", metavar="ADDRESS", type=_address,
                        help="run on an existing Ray cluster: ray://HOST:10001 (Ray Client), "
                             "HOST:6379 or auto on a node of the cluster; the sessions and "
                             "OUTDIR must be on storage every node sees (docs/batch.md)")
@@ -87,11 +98,22 @@ def run(args: argparse.Namespace) -> int:
     import sys
     from pathlib import Path
 
-    from pslog.batch import Progress, Settings, find_sessions, plan_batch, run_batch, write_summary
+    from pslog.batch import (
+        Progress,
+        Settings,
+        find_sessions,
+        plan_batch,
+        run_batch,
+        write_summary,
+    )
     from pslog.outputs import write_error
 
     settings = Settings(steps=args.do, methods=tuple(dict.fromkeys(args.methods)),
                         estimate=tuple(args.estimate), frames=args.frames or "")
+    if args.address is not None:  # said at once, before any file is looked at
+        from pslog.batch import check_reachable
+
+        check_reachable(args.address)
     outdir = Path(args.output)
     if outdir.exists() and not outdir.is_dir():
         from pslog.errors import PslogError

@@ -60,8 +60,10 @@ def test_an_output_that_is_a_file(tmp_path, season):
     (["--do", "sync", "--estimate", "offsett"], "--estimate"),
     (["--do", "fuse", "--method", "typeC"], "unknown fusion method"),
     (["--do", "view", "--frames", "every:0"], "--frames"),
+    (["--do", "fuse", "--address", "head-node"], ("--address", "HOST:PORT")),
+    (["--do", "fuse", "--address", "ray://head:99999"], ("--address", "HOST:PORT")),
 ], ids=["step", "no-step", "workers-0", "workers-text", "workers-and-address", "estimate",
-        "method", "frames"])
+        "method", "frames", "address-no-port", "address-bad-port"])
 def test_a_malformed_command_line(tmp_path, season, args, contains):
     before = fingerprint(tmp_path)
     run = run_pslog("batch", f"{season}/**/*.mcap", *args, "-o", tmp_path / "out")
@@ -90,3 +92,19 @@ def test_resume_over_results_of_other_steps_is_refused(tmp_path, season):
     assert_one_line_error(run, 1, contains=(str(out / "day1" / "s" / "done.json"),
                                             "other settings", "--force"))
     assert_untouched(before, tmp_path)
+
+
+def test_a_cluster_that_does_not_answer(tmp_path, season):
+    """Ray itself would retry for minutes, a warning every few seconds."""
+    import socket
+
+    with socket.socket() as sock:  # a port nobody listens on: bound, never listening
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]
+        before = fingerprint(tmp_path)
+        run = run_pslog("batch", f"{season}/**/*.mcap", "--do", "fuse", "-o", tmp_path / "out",
+                        "--address", f"127.0.0.1:{port}", timeout=30)
+    assert_one_line_error(run, 1, contains=(f"cannot reach the Ray cluster at 127.0.0.1:{port}",
+                                            "Connection refused"))
+    assert_untouched(before, tmp_path)
+    assert not (tmp_path / "out").exists()
