@@ -46,6 +46,12 @@ def _frames(text: str) -> str:
     return text
 
 
+def _folder(text: str) -> str:
+    if not text.strip():  # "" would be the current folder
+        raise argparse.ArgumentTypeError("empty folder name")
+    return text
+
+
 def _address(text: str) -> str:
     from pslog.batch import parse_address
     from pslog.errors import PslogError
@@ -67,7 +73,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--do", required=True, type=_steps, metavar="STEPS",
                         help="steps, comma-separated, run in this order whatever the order "
                              "given: redetect, sync, fuse, eval, view (e.g. sync,fuse,eval)")
-    parser.add_argument("-o", "--output", required=True, metavar="OUTDIR",
+    parser.add_argument("-o", "--output", dest="outdir", required=True, metavar="OUTDIR",
+                        type=_folder,
                         help="folder of the results (created)")
     parser.add_argument("--method", action="append", dest="methods", metavar="METHOD",
                         type=fusion_method, default=[],
@@ -114,7 +121,7 @@ def run(args: argparse.Namespace) -> int:
         from pslog.batch import check_reachable
 
         check_reachable(args.address)
-    outdir = Path(args.output)
+    outdir = Path(args.outdir)
     if outdir.exists() and not outdir.is_dir():
         from pslog.errors import PslogError
 

@@ -108,3 +108,10 @@ def test_a_cluster_that_does_not_answer(tmp_path, season):
                                             "Connection refused"))
     assert_untouched(before, tmp_path)
     assert not (tmp_path / "out").exists()
+
+
+def test_an_empty_output_folder_name(tmp_path, season):
+    before = fingerprint(tmp_path)
+    run = run_pslog("batch", f"{season}/**/*.mcap", "--do", "fuse", "-o", "", cwd=tmp_path)
+    assert_one_line_error(run, 2, contains=("-o/--output", "empty folder name"))
+    assert_untouched(before, tmp_path)
