@@ -109,7 +109,9 @@ def _parser(command):
 #: commands that write no file (they print)
 _WRITE_NOTHING = {"info", "rig", "eval", "paper"}
 #: commands that write files but check them themselves, and why
-_OWN_CHECKS = {"demo": "writes a fresh folder of its own outputs (--out)"}
+_OWN_CHECKS = {"demo": "writes a fresh folder of its own outputs (--out)",
+               "batch": "writes a folder of results, every file checked before the batch "
+                        "starts (pslog.batch.plan_batch)"}
 
 
 @pytest.mark.parametrize("command", list(COMMANDS))

@@ -63,6 +63,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "recover": ("recover", "salvage the complete records of a damaged session"),
     "view": ("view", "browse a session and its fused tracks in rerun"),
     "live": ("live", "fuse live: camera processes stream detections, points out at once"),
+    "batch": ("batch", "re-sync, re-fuse, evaluate and render many sessions at once on Ray"),
 }
 
 

@@ -58,7 +58,10 @@ def run(args: argparse.Namespace) -> int:
     left_out = left_out_counts(session.metadata)  # points the methods did not vouch for
     if args.json:
         # NaN (a summary a track has no column for) is null: JSON has no NaN
-        print(json.dumps([{**(r.as_dict() if r is not None else {"method": q.method}),
+        # without truth: the points and output rate still (pslog batch's summary)
+        print(json.dumps([{**(r.as_dict() if r is not None else {
+                               "method": q.method, "n_points": q.n_points,
+                               "rate_hz": _rate(session.tracks[q.method])}),
                            "quality": {k: (None if isinstance(v, float) and v != v else v)
                                        for k, v in q.as_dict().items()},
                            **({"gating": gated[q.method].as_dict()}
@@ -85,3 +88,11 @@ def run(args: argparse.Namespace) -> int:
             for m in shown:
                 print(f"{m:<9} " + ", ".join(f"{r} {n}" for r, n in left_out[m].items()))
     return 0
+
+
+def _rate(track) -> float | None:
+    """A track's output rate, Hz (:func:`pslog.evaluation.output_rate_hz`), None if NaN."""
+    from pslog.evaluation import output_rate_hz
+
+    rate = output_rate_hz(track.time_ns)
+    return None if rate != rate else rate

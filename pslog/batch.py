@@ -1,0 +1,601 @@
+"""``pslog batch``: re-process many sessions at once, one Ray task per session.
+
+A season of matches is re-synced, re-fused, evaluated and rendered with the very commands a
+user would type for one session (``pslog info``, ``redetect``, ``sync``, ``fuse``, ``eval``,
+``view``), run in-process (:func:`pslog.cli.main`) inside one Ray task per session
+(:func:`run_session`). Tasks read and write files by path: nothing large goes through Ray's
+object store, so on a cluster the input and output folders must be on storage every node
+sees (docs/batch.md). The summary table is built from the commands' own outputs (``--json``
+of info, sync and eval), so it equals what running the commands by hand gives.
+
+Ray is imported only by :func:`run_batch` (``pslog --help`` and every other command never
+load it). Layout of the output folder, mirroring the input tree::
+
+    results/<relative path of the session without .mcap>/
+        redetected.mcap  synced.mcap  fused.mcap  eval.json  view.rrd   (the steps asked)
+        done.json        written last: the session is complete (for --resume)
+    results/summary.csv, results/summary.parquet
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import glob
+import hashlib
+import io
+import json
+import math
+import os
+import sys
+import time
+from collections.abc import Callable, Iterable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+from pslog.errors import InputError, PslogError
+
+#: every step, in the order a session goes through them
+STEPS = ("redetect", "sync", "fuse", "eval", "view")
+#: each step's output file in the session's result folder
+OUTPUT_NAMES = {"redetect": "redetected.mcap", "sync": "synced.mcap", "fuse": "fused.mcap",
+                "eval": "eval.json", "view": "view.rrd"}
+#: the marker written last: the session's outputs are complete (``--resume`` skips it)
+DONE_NAME = "done.json"
+SUMMARY_NAMES = ("summary.csv", "summary.parquet")
+#: the summary's leading columns; per-method, per-camera columns follow
+BASE_COLUMNS = ("session", "status", "error", "cameras", "duration_s", "frames", "detections",
+                "truth", "runtime_s")
+#: figures of ``pslog eval --json`` copied per method as ``<method>_<figure>``
+EVAL_FIGURES = ("n_points", "rate_hz", "mean_mm", "median_mm", "p95_mm", "max_mm", "rms_mm")
+#: figures of ``pslog sync --json`` copied per camera as ``<camera>_<figure>``, in ms/ppm
+SYNC_FIGURES = (("offset_s", "offset_ms", 1e3), ("offset_std_s", "offset_std_ms", 1e3),
+                ("drift_ppm", "drift_ppm", 1.0), ("drift_std_ppm", "drift_std_ppm", 1.0),
+                ("readout_s", "readout_ms", 1e3), ("readout_std_s", "readout_std_ms", 1e3))
+#: test hook: a path; the first task that finds no file there creates it and kills its own
+#: worker process (SIGKILL) after its first step, to prove that Ray retries the task
+KILL_ONCE_ENV = "PSLOG_BATCH_TEST_KILL_ONCE"
+#: seconds between progress lines when standard error is not a terminal
+PROGRESS_EVERY_S = 10.0
+#: Ray's retries of a task whose worker process died (an exception is never retried: the
+#: task turns every error into a failed row)
+MAX_RETRIES = 3
+
+
+class StepFailed(PslogError):
+    """A command of a session's pipeline failed; the message is its one-line error."""
+
+
+@dataclass(frozen=True)
+class Settings:
+    """What is done to every session: the steps (in :data:`STEPS` order) and the options
+    passed on to their commands."""
+
+    steps: tuple[str, ...]
+    methods: tuple[str, ...] = ()
+    estimate: tuple[str, ...] = ()
+    frames: str = ""
+
+    def key(self) -> str:
+        """A digest of the settings: outputs made with other settings are not resumed."""
+        return hashlib.sha256(json.dumps(asdict(self), sort_keys=True).encode()).hexdigest()[:16]
+
+
+@dataclass(frozen=True)
+class Job:
+    """One session: its file (absolute), its name in the summary (path relative to the
+    pattern's folder) and its result folder (absolute)."""
+
+    path: str
+    session: str
+    outdir: str
+
+
+@dataclass
+class Plan:
+    """The sessions to run and those already complete (their summary rows, from their
+    markers)."""
+
+    run: list[Job] = field(default_factory=list)
+    done: list[dict] = field(default_factory=list)
+
+
+def parse_steps(text: str) -> tuple[str, ...]:
+    """``sync,fuse,eval`` -> the steps in :data:`STEPS` order; :class:`InputError` for an
+    unknown or missing step."""
+    names = [s.strip() for s in text.split(",") if s.strip()]
+    bad = [s for s in names if s not in STEPS]
+    if not names or bad:
+        raise InputError(f"{text!r}: name steps among {', '.join(STEPS)} (comma-separated)"
+                         + (f"; unknown: {', '.join(bad)}" if bad else ""))
+    return tuple(s for s in STEPS if s in names)
+
+
+def _glob_root(pattern: str) -> Path:
+    """The folder part of ``pattern`` before its first wildcard (the root that the result
+    tree mirrors); a plain file's folder."""
+    parts = Path(pattern).parts
+    for i, part in enumerate(parts):
+        if glob.has_magic(part):
+            return Path(*parts[:i]) if i else Path(".")
+    return Path(pattern).parent
+
+
+def find_sessions(patterns: Iterable[str], outdir: str | Path) -> list[Job]:
+    """The session files matching ``patterns`` (``**`` spans folders), sorted, each with its
+    result folder below ``outdir`` mirroring its path below the pattern's root. Files inside
+    ``outdir`` (a previous batch's outputs) are left out. :class:`InputError` when a pattern
+    matches no file or two sessions would share a result folder."""
+    out = Path(outdir).resolve()
+    jobs: dict[str, Job] = {}
+    for pattern in patterns:
+        root = _glob_root(pattern).resolve()
+        found = sorted(p for p in glob.glob(pattern, recursive=True) if os.path.isfile(p))
+        found = [p for p in found if not Path(p).resolve().is_relative_to(out)]
+        if not found:
+            raise InputError(f"no session file matches {pattern!r}")
+        for p in found:
+            path = Path(p).resolve()
+            rel = path.relative_to(root) if path.is_relative_to(root) else Path(path.name)
+            name = rel.with_suffix("").as_posix() if rel.suffix == ".mcap" else rel.as_posix()
+            if name in jobs and jobs[name].path != str(path):
+                raise InputError(f"{jobs[name].path} and {path} would share the result folder "
+                                 f"{out / name}; give patterns that keep their names apart")
+            jobs[name] = Job(str(path), rel.as_posix(), str(out / name))
+    return sorted(jobs.values(), key=lambda j: j.session)
+
+
+def _input_stamp(path: str) -> dict:
+    st = os.stat(path)
+    return {"size": st.st_size, "mtime_ns": st.st_mtime_ns}
+
+
+def _outputs(job: Job, settings: Settings) -> list[Path]:
+    return [Path(job.outdir) / OUTPUT_NAMES[s] for s in settings.steps]
+
+
+def read_marker(job: Job) -> dict | None:
+    """The session's ``done.json``, or None if missing or unreadable (then not complete)."""
+    try:
+        with open(Path(job.outdir) / DONE_NAME, encoding="utf-8") as f:
+            marker = json.load(f)
+    except (OSError, ValueError):
+        return None
+    return marker if isinstance(marker, dict) else None
+
+
+def plan_batch(jobs: list[Job], settings: Settings, outdir: str | Path, *, resume: bool,
+               force: bool) -> Plan:
+    """Which sessions to run. With ``resume``, a session whose marker says its outputs are
+    complete, for this input (same size and modification time) and these settings, is not
+    run again; the others are run, their leftovers (an interrupted batch's) replaced.
+    Without ``resume`` or ``force``, any existing output, marker or summary is refused
+    (:class:`~pslog.errors.OutputExistsError` naming the first); with ``resume`` but not
+    ``force``, a marker made with other settings is refused."""
+    from pslog.errors import OutputExistsError
+
+    plan = Plan()
+    key = settings.key()
+    conflicts: list[str] = []
+    for job in jobs:
+        marker = read_marker(job) if resume else None
+        if marker is not None and marker.get("settings") != key and not force:
+            raise OutputExistsError(
+                f"{Path(job.outdir) / DONE_NAME} was made with other settings (steps "
+                f"{','.join(marker.get('steps', []))}); give --force to replace those results "
+                f"or another -o")
+        if (marker is not None and marker.get("settings") == key
+                and marker.get("input") == _input_stamp(job.path)
+                and all(p.is_file() for p in _outputs(job, settings))
+                and isinstance(marker.get("row"), dict)):
+            plan.done.append(marker["row"])
+            continue
+        plan.run.append(job)
+        if not force and not resume:
+            conflicts += [str(p) for p in [*_outputs(job, settings),
+                                           Path(job.outdir) / DONE_NAME] if p.exists()]
+    if not force and not resume:
+        conflicts += [str(Path(outdir) / n) for n in SUMMARY_NAMES if (Path(outdir) / n).exists()]
+    if conflicts:
+        more = f" (and {len(conflicts) - 1} more)" if len(conflicts) > 1 else ""
+        raise OutputExistsError(f"{conflicts[0]} exists{more}; give --force to replace, or "
+                                f"--resume to continue a stopped batch")
+    return plan
+
+
+# --------------------------------------------------------------------------- the task
+
+
+def _command(argv: list[str]) -> str:
+    """Run ``pslog ARGV`` in this process, as typed by a user; its standard output, or
+    :class:`StepFailed` with its one-line error."""
+    from pslog.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            code = main(argv)
+        except SystemExit as exc:  # argparse (a bad option value passed on): exit 2
+            code = exc.code if isinstance(exc.code, int) else 1
+    if code != 0:
+        lines = [line for line in err.getvalue().splitlines() if line.strip()]
+        raise StepFailed(lines[-1] if lines else f"pslog {argv[0]} exited with code {code}")
+    return out.getvalue()
+
+
+def _kill_once(marker: str) -> None:
+    """The test hook of :data:`KILL_ONCE_ENV`: the worker dies as by the OOM killer."""
+    import signal
+
+    try:
+        fd = os.open(marker, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+    except FileExistsError:
+        return
+    os.close(fd)
+    os.kill(os.getpid(), signal.SIGKILL)
+
+
+def _write_json(path: Path, value) -> None:
+    from pslog.outputs import replacing
+
+    with replacing(path, "w", force=True) as f:
+        f.write(json.dumps(value, indent=2, allow_nan=False) + "\n")
+
+
+def run_session(job: Job, settings: Settings) -> dict:
+    """Process one session with the commands a user would type; its summary row.
+
+    The task of :func:`run_batch`, a pure function of the session file and the settings to
+    the files below ``job.outdir``. Each command writes its output as ``.partial`` and
+    renames it when complete; ``done.json`` is removed first and written last, so an
+    interrupted session is never taken for a complete one. Every error becomes the row's
+    ``status`` ``failed`` and ``error`` (the command's one-line message); nothing raises.
+
+    Returns
+    -------
+    row : dict of the summary's columns (:func:`summary_row`)
+    """
+    start = time.perf_counter()
+    outdir = Path(job.outdir)
+    info = sync = evaluation = None
+    error = ""
+    kill = os.environ.get(KILL_ONCE_ENV)
+    try:
+        try:
+            outdir.mkdir(parents=True, exist_ok=True)
+            (outdir / DONE_NAME).unlink(missing_ok=True)
+        except OSError as exc:
+            from pslog.outputs import os_reason
+
+            raise StepFailed(f"pslog batch: error: cannot write {outdir}: "
+                             f"{os_reason(exc)}") from None
+        out = {s: str(outdir / OUTPUT_NAMES[s]) for s in settings.steps}
+        # outputs are the batch's own: the conflicts were checked before the batch started
+        info = json.loads(_command(["info", job.path, "--json"]))
+        current = job.path
+        if "redetect" in settings.steps:
+            _command(["redetect", current, "-o", out["redetect"], "--workers", "1", "--force"])
+            current = out["redetect"]
+        if "sync" in settings.steps:
+            estimate = ["--estimate", ",".join(settings.estimate)] if settings.estimate else []
+            sync = json.loads(_command(["sync", current, "-o", out["sync"], "--json", "--force",
+                                        *estimate]))
+            current = out["sync"]
+        if kill:
+            _kill_once(kill)
+        if "fuse" in settings.steps:
+            methods = [a for m in settings.methods for a in ("--method", m)]
+            _command(["fuse", current, "-o", out["fuse"], "--force", *methods])
+            current = out["fuse"]
+        if "eval" in settings.steps or "fuse" in settings.steps:
+            # the summary's points and rates come from eval's figures, asked for or not
+            evaluation = json.loads(_command(["eval", current, "--json"]))
+            if "eval" in settings.steps:
+                _write_json(Path(out["eval"]), evaluation)
+        if "view" in settings.steps:
+            frames = ["--frames", settings.frames] if settings.frames else []
+            _command(["view", current, "--save", out["view"], "--force", *frames])
+    except StepFailed as exc:
+        error = str(exc)
+    except Exception as exc:  # a bug: still one line in the summary, the batch goes on
+        error = f"pslog batch: error: {type(exc).__name__}: {exc}".splitlines()[0]
+    row = summary_row(job.session, info, sync, evaluation, error=error,
+                      runtime_s=time.perf_counter() - start, estimate=settings.estimate)
+    if error:
+        with contextlib.suppress(OSError):  # no empty folder for a session that made nothing
+            outdir.rmdir()
+    else:
+        try:
+            _write_json(outdir / DONE_NAME, {"session": job.session, "settings": settings.key(),
+                                             "steps": list(settings.steps),
+                                             "input": _input_stamp(job.path),
+                                             "row": _json_row(row)})
+        except (OSError, PslogError, ValueError) as exc:
+            row.update(status="failed", error=f"pslog batch: error: {exc}")
+    return row
+
+
+def _json_row(row: dict) -> dict:
+    """``row`` for JSON: NaN (no value) as null, which the summary writes alike."""
+    return {k: None if isinstance(v, float) and math.isnan(v) else v for k, v in row.items()}
+
+
+def summary_row(session: str, info: dict | None, sync: dict | None, evaluation: list | None,
+                *, error: str = "", runtime_s: float = math.nan,
+                estimate: Iterable[str] = ()) -> dict:
+    """One row of the summary from the JSON outputs of ``pslog info``, ``pslog sync`` and
+    ``pslog eval`` (each None when not run or failed before).
+
+    Columns: :data:`BASE_COLUMNS` (``duration_s`` in s, ``frames`` detected frames,
+    ``detections`` candidates, ``runtime_s`` wall-clock s of the whole task), then per
+    camera ``<camera>_offset_ms`` and ``_offset_std_ms`` (and the drift's and readout's when
+    ``estimate`` names them) of ``pslog sync``, then per
+    method ``<method>_n_points``, ``_rate_hz`` and the errors against ground truth in mm
+    (NaN without truth)."""
+    row: dict = {"session": session, "status": "failed" if error else "ok", "error": error,
+                 "cameras": "", "duration_s": math.nan, "frames": None, "detections": None,
+                 "truth": None, "runtime_s": runtime_s}
+    if info is not None:
+        row.update(cameras=" ".join(c["name"] for c in info.get("cameras", [])),
+                   duration_s=info.get("duration_s", math.nan), frames=info.get("frames"),
+                   detections=info.get("candidates"), truth=info.get("truth"))
+    wanted = {"offset", *estimate}
+    for cam in (sync or {}).get("cameras", []):
+        for key, column, scale in SYNC_FIGURES:
+            if key.split("_")[0] not in wanted:
+                continue
+            value = cam.get(key)
+            row[f"{cam['name']}_{column}"] = math.nan if value is None else value * scale
+    if sync is not None:
+        row["sync_residual_px"] = sync.get("residual_px", math.nan)
+    for method in evaluation or []:
+        for key in EVAL_FIGURES:
+            value = method.get(key, method.get("quality", {}).get(key))
+            row[f"{method['method']}_{key}"] = math.nan if value is None else value
+    return row
+
+
+# --------------------------------------------------------------------------- the summary
+
+
+def summary_columns(rows: list[dict]) -> list[str]:
+    """:data:`BASE_COLUMNS`, then every other column in order of first appearance."""
+    columns = list(BASE_COLUMNS)
+    for row in rows:
+        columns += [c for c in row if c not in columns]
+    return columns
+
+
+def _csv_value(value) -> str:
+    if value is None:
+        return ""
+    if isinstance(value, float):
+        return "" if math.isnan(value) else repr(value)  # repr: exact round trip
+    return str(value)
+
+
+def write_summary(rows: list[dict], outdir: str | Path) -> list[Path]:
+    """``summary.csv`` (always) and ``summary.parquet`` (with pyarrow, which rerun-sdk
+    brings) in ``outdir``, each written as ``.partial`` and renamed. Rows sorted by session;
+    a cell a session has no value for is empty (CSV) or null (Parquet). Returns the paths
+    written."""
+    from pslog.outputs import replacing
+
+    rows = sorted(rows, key=lambda r: r["session"])
+    columns = summary_columns(rows)
+    written = []
+    path = Path(outdir) / "summary.csv"
+    with replacing(path, "w", force=True) as f:
+        writer = csv.writer(f, lineterminator="\n")
+        writer.writerow(columns)
+        for row in rows:
+            writer.writerow([_csv_value(row.get(c)) for c in columns])
+    written.append(path)
+    try:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+    except ImportError:  # pragma: no cover - rerun-sdk depends on pyarrow
+        return written
+
+    def clean(value):
+        return None if isinstance(value, float) and math.isnan(value) else value
+
+    table = pa.table({c: [clean(r.get(c)) for r in rows] for c in columns})
+    path = Path(outdir) / "summary.parquet"
+    with replacing(path, "wb", force=True) as f:
+        pq.write_table(table, f)
+    written.append(path)
+    return written
+
+
+def read_summary_csv(path: str | Path) -> list[dict[str, str]]:
+    """The rows of a ``summary.csv`` as strings (empty cells as ``""``)."""
+    with open(path, newline="", encoding="utf-8") as f:
+        return list(csv.DictReader(f))
+
+
+# --------------------------------------------------------------------------- the driver
+
+
+class Progress:
+    """Sessions done / failed / running and the rate: one updating line on a terminal,
+    a line every :data:`PROGRESS_EVERY_S` otherwise (logs, CI)."""
+
+    def __init__(self, total: int, skipped: int, stream=None, every_s: float = PROGRESS_EVERY_S):
+        self.total, self.skipped = total, skipped
+        self.stream = stream if stream is not None else sys.stderr
+        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
+        self.every_s = every_s
+        self.start = time.monotonic()
+        self.last = -math.inf
+        self.done = self.failed = 0
+
+    def line(self, running: int) -> str:
+        elapsed = time.monotonic() - self.start
+        finished = self.done + self.failed
+        rate = finished / elapsed * 60 if elapsed > 0 else 0.0
+        skipped = f", {self.skipped} already complete" if self.skipped else ""
+        return (f"pslog batch: {finished}/{self.total} sessions ({self.done} done, "
+                f"{self.failed} failed, {running} running{skipped}), {rate:.1f} sessions/min, "
+                f"{elapsed:.0f} s")
+
+    def update(self, running: int, final: bool = False) -> None:
+        now = time.monotonic()
+        if self.tty:
+            self.stream.write("\r\x1b[K" + self.line(running) + ("\n" if final else ""))
+            self.stream.flush()
+        elif final or now - self.last >= self.every_s:
+            self.last = now
+            print(self.line(running), file=self.stream, flush=True)
+
+
+#: seconds to wait for a cluster's port to answer before saying it cannot be reached
+CONNECT_TIMEOUT_S = 5.0
+
+
+def parse_address(text: str) -> tuple[str, int] | None:
+    """``--address``: ``auto`` (None: Ray finds the cluster this node belongs to),
+    ``HOST:PORT`` or ``ray://HOST:PORT`` -> (host, port); :class:`InputError` otherwise."""
+    if text == "auto":
+        return None
+    rest = text.removeprefix("ray://")
+    host, _, port = rest.rpartition(":")
+    host = host.strip("[]")  # an IPv6 address in brackets
+    if not host or "/" in host or not port.isdigit() or not 1 <= int(port) <= 65535:
+        raise InputError(f"{text!r}: give HOST:PORT (a node of the cluster), "
+                         f"ray://HOST:PORT (Ray Client, default port 10001) or auto")
+    return host, int(port)
+
+
+def check_reachable(address: str, timeout_s: float = CONNECT_TIMEOUT_S) -> None:
+    """One line when nothing answers at ``address`` (Ray itself would retry for minutes,
+    printing a warning every few seconds)."""
+    import socket
+
+    from pslog.outputs import os_reason
+
+    where = parse_address(address)
+    if where is None:
+        return
+    try:
+        socket.create_connection(where, timeout=timeout_s).close()
+    except OSError as exc:
+        reason = "no answer" if isinstance(exc, TimeoutError) else os_reason(exc)
+        raise PslogError(f"cannot reach the Ray cluster at {address}: {reason} (is "
+                         f"'ray start --head' running there?)") from None
+
+
+@contextlib.contextmanager
+def ray_cluster(workers: int | None, address: str | None):
+    """A Ray cluster to run on: the one this process already joined (tests), the one at
+    ``address``, or a local one of ``workers`` CPUs (a temporary folder, no dashboard,
+    quiet logs), shut down and removed at the end. Yields the number of task slots."""
+    import logging
+    import shutil
+    import tempfile
+
+    try:
+        import ray
+    except ImportError:
+        raise PslogError("pslog batch needs Ray: pip install 'pslog[batch]' (or "
+                         "pip install ray)") from None
+    if ray.is_initialized():
+        yield int(ray.cluster_resources().get("CPU", 1))
+        return
+    temp = None
+    quiet = {"logging_level": logging.ERROR, "log_to_driver": False,
+             "include_dashboard": False}
+    try:
+        with contextlib.redirect_stdout(sys.stderr):  # never mix Ray's words into stdout
+            if address is not None:
+                ray.init(address=address, **quiet)
+            else:
+                # a short private folder: Ray's socket paths must fit in 107 bytes
+                temp = tempfile.mkdtemp(prefix="pslog-ray-")
+                ray.init(num_cpus=workers or os.cpu_count() or 1, _temp_dir=temp, **quiet)
+    except Exception as exc:
+        if temp is not None:
+            shutil.rmtree(temp, ignore_errors=True)
+        where = f"the Ray cluster at {address}" if address else "a local Ray cluster"
+        reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise PslogError(f"cannot start or join {where}: {reason}") from None
+    try:
+        with _terminate_as_interrupt():
+            yield int(ray.cluster_resources().get("CPU", 1))
+    finally:
+        ray.shutdown()
+        if temp is not None:
+            shutil.rmtree(temp, ignore_errors=True)
+
+
+@contextlib.contextmanager
+def _terminate_as_interrupt():
+    """SIGTERM (a job scheduler's stop, ``kill``) handled as Ctrl-C while the batch runs, so
+    that the local cluster is shut down and removed rather than orphaned (the sessions done
+    keep their ``done.json`` for ``--resume``). Installed after ``ray.init``, which replaces
+    the handler with its own (a stack dump and abort)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(_signum, _frame):
+        raise KeyboardInterrupt
+
+    old = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, old)
+
+
+def run_batch(jobs: list[Job], settings: Settings, *, workers: int | None = None,
+              address: str | None = None, progress: Progress | None = None,
+              on_row: Callable[[dict], None] | None = None) -> list[dict]:
+    """Run :func:`run_session` for every job as a Ray task (1 CPU each; retried up to
+    :data:`MAX_RETRIES` times when its worker process dies); the summary rows, in the
+    order the sessions finished. A task lost for good (its worker died every time) is a
+    failed row naming why. A single session on the local machine runs in this process,
+    without a cluster (whose start-up would cost more than any gain)."""
+    import ray
+
+    if len(jobs) == 1 and address is None and not ray.is_initialized():
+        # one session: nothing to spread, so no cluster to start (seconds saved); this
+        # process runs the task itself, and its death is the batch's (--resume redoes it)
+        row = run_session(jobs[0], settings)
+        if progress is not None:
+            progress.done, progress.failed = (1, 0) if row["status"] == "ok" else (0, 1)
+            progress.update(0, final=True)
+        if on_row is not None:
+            on_row(row)
+        return [row]
+    with ray_cluster(workers, address) as slots:
+        task = ray.remote(num_cpus=1, max_retries=MAX_RETRIES)(run_session)
+        pending = {task.remote(job, settings): job for job in jobs}
+        rows = []
+        while pending:
+            ready, _ = ray.wait(list(pending), num_returns=1, timeout=1.0)
+            for ref in ready:
+                job = pending.pop(ref)
+                try:
+                    row = ray.get(ref)
+                except Exception as exc:  # the worker died MAX_RETRIES + 1 times
+                    reason = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+                    row = summary_row(job.session, None, None, None,
+                                      error=f"pslog batch: error: the task failed "
+                                            f"({type(exc).__name__}: {reason})")
+                rows.append(row)
+                if progress is not None:
+                    if row["status"] == "ok":
+                        progress.done += 1
+                    else:
+                        progress.failed += 1
+                if on_row is not None:
+                    on_row(row)
+            if progress is not None:
+                progress.update(min(len(pending), slots))
+        if progress is not None:
+            progress.update(0, final=True)
+    return rows

@@ -1,0 +1,332 @@
+"""pslog batch (issue 14) on a real local Ray cluster and the real CLI: the summary equals
+the commands run by hand on each session, a corrupted session fails with its one-line error
+while the others finish, a worker process killed mid-task is retried with nothing lost, and
+a batch killed halfway resumes without redoing what it completed.
+
+One Ray cluster serves the in-process batches of this module (``pslog batch`` joins the
+cluster its process already joined); the resume test runs ``pslog batch`` as a real process
+(its own local cluster) so that it can be killed."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pslog.batch import KILL_ONCE_ENV, read_summary_csv
+from pslog.cli import main
+
+ray = pytest.importorskip("ray")
+
+METHODS = ("--method", "typeA", "--method", "nearest")
+
+
+def pslog(*argv) -> tuple[int, str, str]:
+    """``pslog ARGV`` in-process: (exit code, stdout, stderr)."""
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main([str(a) for a in argv])
+    return code, out.getvalue(), err.getvalue()
+
+
+def simulate(path: Path, seed: int, duration: float = 1.5) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    code, _, err = pslog("simulate", "--rig", "paper3", "--timing", "typeB", "--motion", "rally",
+                         "--duration", duration, "--noise-px", "0.3", "--clock-offset",
+                         f"cam2={seed}", "--seed", seed, "-o", path)
+    assert code == 0, err
+    return path
+
+
+@pytest.fixture(scope="module")
+def sessions(tmp_path_factory) -> Path:
+    """matches/day1/{a,b}.mcap, matches/day2/c.mcap, matches/day2/real.mcap (c's
+    detections without ground truth) and matches/day2/bad.mcap (cut short)."""
+    root = tmp_path_factory.mktemp("batch") / "matches"
+    simulate(root / "day1" / "a.mcap", 1)
+    simulate(root / "day1" / "b.mcap", 2)
+    c = simulate(root / "day2" / "c.mcap", 3)
+    # a "real" session: the detections alone, no ground truth (export, then import)
+    code, rig_toml, err = pslog("rig", "show", c)
+    assert code == 0, err
+    (root.parent / "rig.toml").write_text(rig_toml)
+    code, _, err = pslog("export", c, "--detections", root.parent / "det.csv")
+    assert code == 0, err
+    code, _, err = pslog("import", "--rig", root.parent / "rig.toml", "--detections",
+                         root.parent / "det.csv", "-o", root / "day2" / "real.mcap")
+    assert code == 0, err
+    bad = root / "day2" / "bad.mcap"
+    bad.write_bytes(c.read_bytes()[:4000])
+    hour_ago = time.time() - 3600  # not a recording still being written: a cut one
+    os.utime(bad, (hour_ago, hour_ago))
+    return root
+
+
+@pytest.fixture(scope="module")
+def cluster(tmp_path_factory):
+    """A local Ray cluster of 2 CPUs for the module. Its workers inherit the kill hook
+    (:data:`pslog.batch.KILL_ONCE_ENV`) disarmed: the hook's file exists; a test removes
+    it to have the next task kill its own worker once."""
+    import logging
+
+    folder = tmp_path_factory.mktemp("ray")
+    marker = folder / "killed"
+    marker.touch()
+    old = os.environ.get(KILL_ONCE_ENV)
+    os.environ[KILL_ONCE_ENV] = str(marker)
+    temp = f"/tmp/pslog-ray-test-{os.getpid()}"  # Ray's socket paths must stay short
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False,
+             logging_level=logging.ERROR, _temp_dir=temp)
+    try:
+        yield marker
+    finally:
+        ray.shutdown()
+        if old is None:
+            os.environ.pop(KILL_ONCE_ENV, None)
+        else:
+            os.environ[KILL_ONCE_ENV] = old
+        import shutil
+
+        shutil.rmtree(temp, ignore_errors=True)
+
+
+def by_hand(session: Path, folder: Path) -> tuple[dict, str]:
+    """The summary row of ``session`` built from the commands run by hand (info, sync,
+    fuse, eval), as strings as in summary.csv, without the runtime; and the fused file."""
+    folder.mkdir(parents=True)
+    code, info, err = pslog("info", session, "--json")
+    if code != 0:
+        return {"status": "failed", "error": err.strip()}, ""
+    info = json.loads(info)
+    code, sync, err = pslog("sync", session, "-o", folder / "synced.mcap", "--json")
+    assert code == 0, err
+    code, _, err = pslog("fuse", folder / "synced.mcap", "-o", folder / "fused.mcap", *METHODS)
+    assert code == 0, err
+    code, evaluation, err = pslog("eval", folder / "fused.mcap", "--json")
+    assert code == 0, err
+    row = {"status": "ok", "error": "", "cameras": "cam1 cam2 cam3",
+           "duration_s": repr(info["duration_s"]), "frames": str(info["frames"]),
+           "detections": str(info["candidates"]), "truth": str(info["truth"])}
+    sync = json.loads(sync)
+    for cam in sync["cameras"]:
+        row[f"{cam['name']}_offset_ms"] = repr(cam["offset_s"] * 1e3)
+        row[f"{cam['name']}_offset_std_ms"] = repr(cam["offset_std_s"] * 1e3)
+    row["sync_residual_px"] = repr(sync["residual_px"])
+    for m in json.loads(evaluation):
+        row[f"{m['method']}_n_points"] = str(m["n_points"])
+        row[f"{m['method']}_rate_hz"] = repr(m["rate_hz"])
+        for key in ("mean_mm", "median_mm", "p95_mm", "max_mm", "rms_mm"):
+            # errors against ground truth, where there is one
+            row[f"{m['method']}_{key}"] = repr(m[key]) if info["truth"] else ""
+    return row, str(folder / "fused.mcap")
+
+
+def same_tracks(a: str, b: str) -> None:
+    from pslog.log import read_session
+
+    sa, sb = read_session(a), read_session(b)
+    assert list(sa.tracks) == list(sb.tracks)
+    for m in sa.tracks:
+        np.testing.assert_array_equal(sa.tracks[m].time_ns, sb.tracks[m].time_ns)
+        np.testing.assert_array_equal(sa.tracks[m].position_world, sb.tracks[m].position_world)
+    assert [c.clock_offset for c in sa.rig.cameras] == [c.clock_offset for c in sb.rig.cameras]
+
+
+def test_summary_equals_the_commands_by_hand_and_the_bad_session_fails(cluster, sessions,
+                                                                      tmp_path):
+    out = tmp_path / "results"
+    code, _, err = pslog("batch", f"{sessions}/**/*.mcap", "--do", "sync,fuse,eval",
+                              *METHODS, "-o", out)
+    assert code == 1  # one session failed
+    assert "1 of 5 sessions failed (first: day2/bad.mcap: pslog info: error:" in err
+    assert "Traceback" not in err
+    rows = {r["session"]: r for r in read_summary_csv(out / "summary.csv")}
+    assert list(rows) == ["day1/a.mcap", "day1/b.mcap", "day2/bad.mcap", "day2/c.mcap",
+                          "day2/real.mcap"]
+    assert rows["day2/real.mcap"]["truth"] == "False"
+    assert rows["day2/real.mcap"]["typeA_mean_mm"] == ""
+    assert float(rows["day2/real.mcap"]["typeA_rate_hz"]) > 80
+    for name, row in rows.items():
+        want, fused = by_hand(sessions / name, tmp_path / "hand" / name)
+        got = {k: v for k, v in row.items() if v != "" or k in want}
+        assert float(got.pop("runtime_s")) > 0
+        got.pop("session")
+        assert got == want, name
+        if want["status"] == "ok":
+            folder = out / name.removesuffix(".mcap")
+            same_tracks(fused, str(folder / "fused.mcap"))
+            code, evaluation, _ = pslog("eval", fused, "--json")
+            assert json.loads((folder / "eval.json").read_text()) == json.loads(evaluation)
+            assert json.loads((folder / "done.json").read_text())["row"]["status"] == "ok"
+    bad = rows["day2/bad.mcap"]
+    assert "did not finish" in bad["error"] and "\n" not in bad["error"]
+    assert not (out / "day2" / "bad").exists()  # nothing half-made for the failed one
+    # the Parquet table holds the same rows
+    import pyarrow.parquet as pq
+
+    table = pq.read_table(out / "summary.parquet").to_pylist()
+    assert [r["session"] for r in table] == list(rows)
+    for r in table:
+        for key, value in r.items():
+            text = rows[r["session"]][key]
+            if isinstance(value, float):
+                assert value == float(text) or (math.isnan(value) and text == "")
+            elif value is None:
+                assert text == ""
+            else:
+                assert str(value) == text
+    # a second batch without --force or --resume refuses to replace anything
+    code, _, err = pslog("batch", f"{sessions}/**/*.mcap", "--do", "sync,fuse,eval",
+                         *METHODS, "-o", out)
+    assert code == 1 and "exists" in err and "--force" in err
+
+
+def test_a_worker_killed_mid_task_is_retried_and_nothing_is_lost(cluster, sessions, tmp_path):
+    cluster.unlink()  # arm the hook: the next task kills its own worker after its sync
+    out = tmp_path / "results"
+    code, _, err = pslog("batch", f"{sessions}/day1/*.mcap", "--do", "sync,fuse,eval",
+                         *METHODS, "-o", out)
+    assert cluster.exists(), "no worker was killed"
+    assert code == 0, err
+    rows = read_summary_csv(out / "summary.csv")
+    assert [(r["session"], r["status"]) for r in rows] == [("a.mcap", "ok"), ("b.mcap", "ok")]
+    for name in ("a", "b"):
+        want, fused = by_hand(sessions / "day1" / f"{name}.mcap", tmp_path / "hand" / name)
+        row = next(r for r in rows if r["session"] == f"{name}.mcap")
+        assert {k: row[k] for k in want} == want
+        same_tracks(fused, str(out / name / "fused.mcap"))
+        assert sorted(p.name for p in (out / name).iterdir()) == [
+            "done.json", "eval.json", "fused.mcap", "synced.mcap"]  # no .partial left
+
+
+def _stamps(folder: Path) -> dict[str, tuple[int, int]]:
+    return {str(p.relative_to(folder)): (p.stat().st_mtime_ns, p.stat().st_ino)
+            for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+@pytest.fixture
+def short_tmpdir():
+    """TMPDIR for a ``pslog batch`` process: its killed local cluster's folder goes there
+    (and is removed); short, for Ray's socket paths."""
+    import shutil
+    import tempfile
+
+    folder = tempfile.mkdtemp(prefix="pslog-t")
+    try:
+        yield folder
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def test_resume_after_a_batch_killed_halfway(tmp_path, short_tmpdir):
+    root = tmp_path / "season"
+    for i in range(6):
+        simulate(root / f"m{i}.mcap", 10 + i, duration=1.0)
+    out = tmp_path / "results"
+    argv = [sys.executable, "-m", "pslog.cli", "batch", str(root / "*.mcap"), "--do",
+            "sync,fuse,eval", *METHODS, "-o", str(out), "--workers", "1"]
+    # its own process group: the Ray processes it starts are found (and ended) by it below
+    env = {**os.environ, "TMPDIR": short_tmpdir}
+    proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            start_new_session=True, env=env)
+    deadline = time.monotonic() + 240  # a hang guard only
+    while len(list(out.glob("*/done.json"))) < 2:
+        assert proc.poll() is None, proc.stderr.read().decode()
+        assert time.monotonic() < deadline, "the batch made no progress"
+        time.sleep(0.02)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    proc.stderr.close()
+    # the local cluster's processes notice their driver's death only within a minute or so
+    # (a worker may even finish its session first): end them now, all at once, as a machine
+    # that loses power would, and wait until none is left
+    with contextlib.suppress(ProcessLookupError):
+        os.killpg(proc.pid, signal.SIGKILL)
+    while True:
+        try:
+            os.killpg(proc.pid, 0)
+        except ProcessLookupError:
+            break
+        assert time.monotonic() < deadline, "the killed batch's processes do not end"
+        time.sleep(0.05)
+    complete = sorted(p.parent.name for p in out.glob("*/done.json"))
+    assert 2 <= len(complete) < 6, "the batch was not killed halfway"
+    assert not (out / "summary.csv").exists()
+    before = {name: _stamps(out / name) for name in complete}
+    run = subprocess.run([*argv, "--resume"], capture_output=True, text=True, timeout=240,
+                         env=env)
+    assert run.returncode == 0, run.stderr
+    assert f"{len(complete)} of 6 sessions already complete (--resume)" in run.stderr
+    assert "Traceback" not in run.stderr
+    for name in complete:  # nothing redone that was complete
+        assert _stamps(out / name) == before[name], name
+    rows = read_summary_csv(out / "summary.csv")
+    assert [(r["session"], r["status"]) for r in rows] == [(f"m{i}.mcap", "ok")
+                                                            for i in range(6)]
+    for i in range(6):
+        assert sorted(p.name for p in (out / f"m{i}").iterdir()) == [
+            "done.json", "eval.json", "fused.mcap", "synced.mcap"]
+    # a finished batch resumed again does nothing but rewrite its summary
+    again = subprocess.run([*argv, "--resume"], capture_output=True, text=True, timeout=240,
+                           env=env)
+    assert again.returncode == 0, again.stderr
+    assert "6 of 6 sessions already complete" in again.stderr
+    assert read_summary_csv(out / "summary.csv") == rows
+
+
+def test_redetect_and_view_steps_on_a_recorded_session(cluster, tmp_path):
+    """--do redetect,fuse,eval,view on the sample recording (it has its frames): each step's
+    output is there and the re-detection equals ``pslog redetect`` by hand."""
+    import shutil
+
+    sample = Path(__file__).resolve().parents[1] / "samples" / "throw.mcap"
+    (tmp_path / "rec").mkdir()
+    shutil.copyfile(sample, tmp_path / "rec" / "throw.mcap")
+    out = tmp_path / "results"
+    code, _, err = pslog("batch", tmp_path / "rec" / "throw.mcap", "--do", "view,redetect,fuse",
+                         "--method", "typeA", "--frames", "none", "-o", out)
+    assert code == 0, err
+    folder = out / "throw"
+    assert sorted(p.name for p in folder.iterdir()) == [
+        "done.json", "fused.mcap", "redetected.mcap", "view.rrd"]
+    assert (folder / "view.rrd").stat().st_size > 0
+    code, _, err = pslog("redetect", tmp_path / "rec" / "throw.mcap", "-o",
+                         tmp_path / "hand.mcap", "--workers", "1")
+    assert code == 0, err
+    from pslog.log import read_session
+
+    hand, batch = read_session(tmp_path / "hand.mcap"), read_session(folder / "redetected.mcap")
+    np.testing.assert_array_equal(hand.detections.cand_uv, batch.detections.cand_uv)
+    assert list(read_session(folder / "fused.mcap").tracks) == ["typeA"]
+    row = read_summary_csv(out / "summary.csv")[0]
+    # no eval asked: no eval.json, but the summary has the points all the same
+    assert row["status"] == "ok" and int(row["typeA_n_points"]) > 0
+
+
+def test_ray_is_imported_by_a_running_batch_alone():
+    """``pslog --help``, ``pslog batch --help`` and a batch refused before it starts never
+    load Ray (seconds of imports)."""
+    code = ("import sys, contextlib, io\n"
+            "from pslog.cli import main\n"
+            "for argv in (['--help'], ['batch', '--help'], ['batch', 'nothing/*.mcap',"
+            " '--do', 'fuse', '-o', 'out']):\n"
+            "    with contextlib.redirect_stdout(io.StringIO()), "
+            "contextlib.redirect_stderr(io.StringIO()):\n"
+            "        try:\n"
+            "            main(argv)\n"
+            "        except SystemExit:\n"
+            "            pass\n"
+            "print('ray' in sys.modules)\n")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=120)
+    assert run.stdout.strip() == "False", run.stderr
