@@ -212,11 +212,19 @@ def _command(argv: list[str]) -> str:
     from pslog.cli import main
 
     out, err = io.StringIO(), io.StringIO()
+    # the batch shows its own progress (sessions done/failed/running): not each command's
+    shown = os.environ.get("PSLOG_PROGRESS")
+    os.environ["PSLOG_PROGRESS"] = "off"
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         try:
             code = main(argv)
         except SystemExit as exc:  # argparse (a bad option value passed on): exit 2
             code = exc.code if isinstance(exc.code, int) else 1
+        finally:
+            if shown is None:
+                os.environ.pop("PSLOG_PROGRESS", None)
+            else:
+                os.environ["PSLOG_PROGRESS"] = shown
     if code != 0:
         lines = [line for line in err.getvalue().splitlines() if line.strip()]
         raise StepFailed(lines[-1] if lines else f"pslog {argv[0]} exited with code {code}")

@@ -68,9 +68,9 @@ COMMANDS: dict[str, tuple[str, str]] = {
 
 
 #: commands that can run for more than a second on a long session: they show progress on
-#: standard error (pslog.progress; record and live show their own status lines)
+#: standard error (pslog.progress; record, live and batch show their own status lines)
 PROGRESS_COMMANDS = frozenset({"simulate", "import", "export", "fuse", "sync", "eval", "paper",
-                               "redetect", "recover", "view", "batch"})
+                               "redetect", "recover", "view"})
 
 
 class _Parser(argparse.ArgumentParser):
