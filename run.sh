@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # One entry point for a fresh machine with Python >= 3.11:
 #   bash run.sh demo   set up .venv, then record, fuse and evaluate a synthetic throw (pslog demo)
-#   bash run.sh test   set up .venv, then run ruff and the whole test suite
+#   bash run.sh test   set up .venv, then run ruff, mypy and the whole test suite
 # Anything after the first word is passed on (to `pslog demo` or to pytest).
 set -euo pipefail
 cd "$(dirname "$0")"
@@ -32,6 +32,7 @@ case "${1:-}" in
         shift
         setup
         "$VENV/bin/ruff" check pslog recorders viewers tests benchmarks tools samples
+        "$VENV/bin/mypy"  # pslog/, as configured in pyproject.toml [tool.mypy]
         exec "$VENV/bin/python" -m pytest "$@"
         ;;
     *)

@@ -38,7 +38,7 @@ from .inputs import file_kind
 try:
     import fcntl
 except ImportError:  # Windows
-    fcntl = None
+    fcntl = None  # type: ignore[assignment]  # the usual optional-module idiom
 
 
 class WriteError(PslogError):
@@ -388,17 +388,17 @@ def describe_os_error(exc: OSError, outputs: Iterable[str | Path] = (),
     ``.partial`` by the output's name) or, for a write fault without a file name, the
     command's outputs."""
     reason = os_reason(exc)
-    outputs = [Path(p) for p in outputs]
+    out_paths = [Path(p) for p in outputs]
     name = exc.filename
     if name is not None:
         name = os.fsdecode(name) if isinstance(name, bytes) else str(name)
-        for out in outputs:
+        for out in out_paths:
             if name in (str(out), str(partial_path(out))):
                 return f"cannot write {out}: {reason}"
         return f"{name}: {reason}"
-    if exc.errno in WRITE_ERRNOS and outputs:
-        return f"cannot write {' or '.join(map(str, outputs))}: {reason}"
-    inputs = [str(p) for p in inputs if os.path.exists(p)]  # not a built-in rig's name
-    if inputs:  # a read fault without a file name: name what the command reads
-        return f"cannot read {' or '.join(inputs)}: {reason}"
+    if exc.errno in WRITE_ERRNOS and out_paths:
+        return f"cannot write {' or '.join(map(str, out_paths))}: {reason}"
+    in_names = [str(p) for p in inputs if os.path.exists(p)]  # not a built-in rig's name
+    if in_names:  # a read fault without a file name: name what the command reads
+        return f"cannot read {' or '.join(in_names)}: {reason}"
     return reason

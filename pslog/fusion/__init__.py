@@ -28,6 +28,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
+from typing import cast
 
 import numpy as np
 
@@ -124,16 +125,21 @@ class Method:
         return self.needs <= have
 
 
+def _gap(options: FusionOptions) -> float:
+    """``options.max_gap_s`` as a method gets it: never None (:func:`fuse` resolves it)."""
+    return cast(float, options.max_gap_s)
+
+
 def _sync(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
     return fuse_sync(prep, options.tolerance_s, options.noise_px)
 
 
 def _nearest(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
-    return fuse_nearest(prep, options.max_gap_s, options.noise_px)
+    return fuse_nearest(prep, _gap(options), options.noise_px)
 
 
 def _type_a(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
-    return fuse_type_a(prep, options.max_gap_s, options.noise_px)[0]
+    return fuse_type_a(prep, _gap(options), options.noise_px)[0]
 
 
 def _type_a_stream(rig: Rig, options: FusionOptions):
@@ -143,13 +149,11 @@ def _type_a_stream(rig: Rig, options: FusionOptions):
 
 
 def _type_b(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
-    return fuse_predicted(prep, "typeB", options.tolerance_s, options.max_gap_s,
-                          options.noise_px)
+    return fuse_predicted(prep, "typeB", options.tolerance_s, _gap(options), options.noise_px)
 
 
 def _linear(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
-    return fuse_predicted(prep, "linear", options.tolerance_s, options.max_gap_s,
-                          options.noise_px)
+    return fuse_predicted(prep, "linear", options.tolerance_s, _gap(options), options.noise_px)
 
 
 def _filter(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:

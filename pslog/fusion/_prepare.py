@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
+from typing import cast
 
 import numpy as np
 
@@ -73,7 +75,8 @@ class Prepared:
         as 0), or None when no camera has lens distortion (the identity)."""
         if not any(np.any(c.dist) for c in self.cameras):
             return None
-        return np.nan_to_num(self.uv_jacobian[rows])
+        # (set by prepare() and every Prepared made; None only as the dataclass default)
+        return np.nan_to_num(cast(np.ndarray, self.uv_jacobian)[rows])
 
     def rays_from_undistorted(self, camera: np.ndarray, uv: np.ndarray) -> np.ndarray:
         """Unit world directions (n, 3) of undistorted pixels ``uv`` (n, 2) of ``camera`` (n,)
@@ -150,7 +153,8 @@ class Prepared:
         """:attr:`uv_jacobian` as (4, n) columns (NaN as 0), None without lens distortion."""
         if not any(np.any(c.dist) for c in self.cameras):
             return None
-        return np.ascontiguousarray(np.nan_to_num(self.uv_jacobian).reshape(-1, 4).T)
+        jac = cast(np.ndarray, self.uv_jacobian)  # (as in pixel_jacobians)
+        return np.ascontiguousarray(np.nan_to_num(jac).reshape(-1, 4).T)
 
     def pixel_jacobians_t(self, rows: np.ndarray) -> np.ndarray | None:
         """:meth:`pixel_jacobians` component-major: (2, 2, k), or None (the identity)."""
@@ -310,7 +314,7 @@ def invalid_points(prep: Prepared, points: np.ndarray, used: np.ndarray,
         behind = z <= 1e-9
         with np.errstate(divide="ignore", invalid="ignore"):
             uv = (in_cam[:, :2] / z[:, None]) @ cam.K[:2, :2].T + cam.K[:2, 2]
-        box = prep.view_box[c]
+        box = cast(np.ndarray, prep.view_box)[c]  # (set by prepare())
         outside = ~behind & ~((uv[:, 0] >= box[0]) & (uv[:, 0] <= box[2])
                               & (uv[:, 1] >= box[1]) & (uv[:, 1] <= box[3]))
         bits = behind * BEHIND | outside * OUTSIDE_VIEW
@@ -380,7 +384,8 @@ def _distorted_pixels(cam, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np
     return K[0, 0] * xd + K[0, 1] * yd + K[0, 2], K[1, 1] * yd + K[1, 2]
 
 
-def direction_jacobian(prep: Prepared, camera: np.ndarray, uv: np.ndarray) -> np.ndarray:
+def direction_jacobian(prep: Prepared, camera: np.ndarray | int, uv: np.ndarray
+                       ) -> np.ndarray:
     """d(unit viewing direction, world) / d(undistorted pixel) of ``camera`` (k,; or one, an
     int) at ``uv`` (k, 2), component-major: (3, 2, k), entry ``[i, j]`` the (k,) column of
     d d_i / d uv_j.
@@ -424,7 +429,7 @@ def direction_jacobian_along(prep: Prepared, camera: np.ndarray, uv: np.ndarray,
     return vM
 
 
-def dot_t(v: np.ndarray, J: np.ndarray) -> np.ndarray:
+def dot_t(v: np.ndarray | Sequence[np.ndarray], J: np.ndarray) -> np.ndarray:
     """``vᵀ J`` of component-major (3, k) vectors and (3, 2, k) matrices: (2, k)."""
     out = v[0] * J[0]
     out += v[1] * J[1]
@@ -520,7 +525,8 @@ def times_pixel_jacobian(J: np.ndarray, L: np.ndarray | None) -> np.ndarray:
     return J[..., 0, None, :] * L[0] + J[..., 1, None, :] * L[1]
 
 
-def covariance(rows: np.ndarray, jacobians: list[np.ndarray], uv_jacobians: list[np.ndarray],
+def covariance(rows: np.ndarray, jacobians: list[np.ndarray],
+               uv_jacobians: Sequence[np.ndarray | None],
                noise_px: float) -> dict[str, np.ndarray]:
     """First-order covariance of points made from detections, as the quality columns
     ``std_m`` (sqrt of the trace: the RMS 3-D error to expect) and the six distinct entries

@@ -54,6 +54,7 @@ import math
 from bisect import bisect_left, bisect_right
 from collections import deque
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Literal, cast
 
 import numpy as np
 
@@ -64,6 +65,9 @@ from ..records import NS, Detections, Observations
 from ..rig import Rig
 from ..timing import camera_parameters, true_times_ns
 from ..timing import observations as timed_observations
+
+if TYPE_CHECKING:
+    from ._prepare import Prepared
 
 #: Why a candidate was rejected (the ``reason`` codes of :class:`Rejections`).
 REASONS = ("epipolar", "track", "motion", "outscored")
@@ -375,7 +379,7 @@ def _support(c: _Candidates, rig: Rig, F: np.ndarray, tables, options: GatingOpt
                 # b's frames a causal choice at t may use: (time, camera) order, or up to
                 # t + wait for the methods that wait for the tolerance
                 limit = t + wait_ns
-                side = "right" if (wait_ns > 0 or b < a) else "left"
+                side: Literal["left", "right"] = "right" if (wait_ns > 0 or b < a) else "left"
                 last = np.searchsorted(times, limit, side=side) - 1
                 i1, i0 = last, last - 1
                 inext = np.full(len(rows), -1)
@@ -668,7 +672,8 @@ def _points_one(camera: int, ray_dir, ratio_row, carried_row, constants):
         rays.append((1.0, *centers[camera], *ray_dir))
     for b, r in enumerate(ratio_row):
         if r <= 1.0:
-            dx, dy, dz = _carried_ray(*carried_row[b], k_inv[b], rot[b], _sqrt)
+            u, v = carried_row[b]
+            dx, dy, dz = _carried_ray(u, v, k_inv[b], rot[b], _sqrt)
             if math.isfinite(dx) and math.isfinite(dy) and math.isfinite(dz):
                 rays.append((1.0, *centers[b], dx, dy, dz))
     if len(rays) < 2:
@@ -833,7 +838,8 @@ class _Decider:
         t_ns = c.time_ns.tolist()
         for lo, hi in frames:
             best_key, best_row = None, -1
-            preds: dict[int, tuple | bool] = {}  # the track's prediction at each time
+            # the track's prediction at each time (False: none)
+            preds: dict[int, tuple | Literal[False]] = {}
             unverified = []
             for i in range(lo, hi):
                 track_accepts = False
@@ -1243,7 +1249,7 @@ class StreamGate:
         out = []
         while self.unreleased and self.unreleased[0].reason is not None:
             f = self.unreleased.popleft()  # released in pushed order
-            for k, r in enumerate(f.reason.tolist()):
+            for k, r in enumerate(cast(np.ndarray, f.reason).tolist()):  # (not None: above)
                 if r < 0:
                     out.append((f.t, f.camera, f.uv[k], f.index))
                 else:
@@ -1272,7 +1278,7 @@ class StreamGate:
                         f.ray_dir, np.zeros(k, np.int64))
         # the points of the all-candidates support (what the stillness compares, as
         # gate()'s _static) and of the decided support (what the choice uses)
-        f.points, points, front = [], [], []
+        f.points, chosen, front = [], [], []
         for j, (ray, r_row, c_row) in enumerate(zip(f.ray_dir.tolist(), every[0].tolist(),
                                                     every[1].tolist(), strict=True)):
             p, ok, miss = _points_one(a, ray, r_row, c_row, self.constants)
@@ -1281,12 +1287,12 @@ class StreamGate:
             if differs[j]:
                 p, ok, miss = _points_one(a, ray, decided[0][j].tolist(),
                                           decided[1][j].tolist(), self.constants)
-                points.append(p if p is not None and not miss > o.track_m
+                chosen.append(p if p is not None and not miss > o.track_m
                               else (math.nan, math.nan, math.nan))
             else:
-                points.append(f.points[-1])
+                chosen.append(f.points[-1])
             front.append(ok)
-        ratio, points, in_front = decided[0], np.array(points), np.array(front)
+        ratio, points, in_front = decided[0], np.array(chosen), np.array(front)
         # _static's rule on this frame: still against each of the camera's lags frames before
         frames, at = self.by_camera[a], self.by_camera[a].index(f)
         lags = self.lags[a]
@@ -1384,7 +1390,7 @@ def fuse_detections(detections: Detections, rig: Rig, methods, options=None):
             progress.step(f"fusing {m}")  # (a command's progress shows the method at work)
             out[m] = fuse(obs, rig, m, options, prepared=prep)
         return out, {m: Rejections.empty() for m in methods}
-    shared: dict[tuple[bool, float], tuple[Gated, object]] = {}
+    shared: dict[tuple[bool, float], tuple[Gated, Prepared | None]] = {}
     tracks, rejections = {}, {}
     for method in methods:
         key = gating_key(method, options)

@@ -31,7 +31,7 @@ from .stereo import count_invalid, stereo_at_common_instants, with_dropped
 
 
 def fuse_predicted(prep: Prepared, method: str, tolerance_s: float, max_gap_s: float,
-                   noise_px: float = 0.5) -> Track:
+                   noise_px: float | None = 0.5) -> Track:
     """``typeB`` (ray-constrained, eq. (4)) or ``linear`` (eq. (2) only).
 
     Geometrically invalid points are dropped and counted in ``Track.dropped``: stereo points

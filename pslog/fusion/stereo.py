@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 
 from ..errors import FusionError
@@ -66,7 +68,7 @@ def sync_groups(obs: Observations, n_cams: int, tolerance_s: float
     return group, seen.sum(axis=1)
 
 
-def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float):
+def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | None):
     """N-view least-squares point of each row of detections, with its quality and validity.
 
     Parameters
@@ -202,7 +204,8 @@ def stereo_at_common_instants(
     return with_dropped(track, count_invalid(flags[made])), n_cameras[group] == 1
 
 
-def fuse_sync(prep: Prepared, tolerance_s: float = 1e-3, noise_px: float = 0.5) -> Track:
+def fuse_sync(prep: Prepared, tolerance_s: float = 1e-3, noise_px: float | None = 0.5
+              ) -> Track:
     """``sync``: N-view triangulation of detections captured within ``tolerance_s``.
 
     One point per instant at which at least two cameras saw the ball, unless geometrically
@@ -213,7 +216,7 @@ def fuse_sync(prep: Prepared, tolerance_s: float = 1e-3, noise_px: float = 0.5) 
     return stereo_at_common_instants(prep, tolerance_s, "sync", noise_px)[0]
 
 
-def fuse_nearest(prep: Prepared, max_gap_s: float, noise_px: float = 0.5) -> Track:
+def fuse_nearest(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5) -> Track:
     """``nearest``: each detection triangulated with the latest detection of every other camera
     as if they were simultaneous (the paper's "unsynchronized" baseline). Geometrically
     invalid points are dropped and counted in ``Track.dropped``."""
@@ -245,7 +248,7 @@ def count_invalid(flags: np.ndarray) -> dict[str, int]:
             if np.any(flags & bit)}
 
 
-def with_dropped(track: Track, *counts: dict[str, int]) -> Track:
+def with_dropped(track: Track, *counts: Mapping[str, int]) -> Track:
     """``track`` carrying the summed counts of the invalid points dropped from it."""
     total: dict[str, int] = {}
     for c in counts:

@@ -39,6 +39,7 @@ import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -98,7 +99,7 @@ class RigFile:
 
 # ---- detection ----------------------------------------------------------------------------
 
-def detect_format(text: str, path: str | Path) -> tuple[str, object]:
+def detect_format(text: str, path: str | Path) -> tuple[str, dict[str, Any] | None]:
     """The format of a rig file's ``text``: ``(format, parsed)``, ``parsed`` the TOML
     document (pslog, anipose, pose2sim) or None (opencv).
 

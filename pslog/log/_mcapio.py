@@ -474,11 +474,11 @@ def read_summary(buf) -> Summary | None:
     try:
         for sop, body, _end in walk_records(buf[start:foot]):
             if sop == OP_SCHEMA:
-                rec = parse_schema(buf, start + body)
-                summary.schemas[rec.id] = rec
+                schema = parse_schema(buf, start + body)
+                summary.schemas[schema.id] = schema
             elif sop == OP_CHANNEL:
-                rec = parse_channel(buf, start + body)
-                summary.channels[rec.id] = rec
+                channel = parse_channel(buf, start + body)
+                summary.channels[channel.id] = channel
             elif sop == OP_CHUNK_INDEX:
                 summary.chunks.append(_parse_chunk_index(buf, start + body))
             elif sop == OP_STATISTICS:
@@ -574,11 +574,11 @@ def _handler(scan: Scan, pending: list | None):
     (a full disk while copying) is never taken for damaged input."""
     def handle(op: int, body: int, end: int, data) -> None:
         if op == OP_SCHEMA:
-            rec = parse_schema(data, body)
-            scan.schemas[rec.id] = rec
+            schema = parse_schema(data, body)
+            scan.schemas[schema.id] = schema
         elif op == OP_CHANNEL:
-            rec = parse_channel(data, body)
-            scan.channels[rec.id] = rec
+            channel = parse_channel(data, body)
+            scan.channels[channel.id] = channel
         elif op == OP_MESSAGE and pending is not None:
             cid, seq, t = _unpack("<HIQ", data, body)
             pending.append((cid, t, seq, bytes(data[body + _MESSAGE_HEAD:end])))
@@ -695,10 +695,10 @@ def _salvage(buf, on_message, scan: Scan) -> None:
     indexed = {c.offset: c for c in summary.chunks} if summary is not None else {}
     if summary is not None:
         # channels first met in a damaged chunk are still known
-        for k, v in summary.schemas.items():
-            scan.schemas.setdefault(k, v)
-        for k, v in summary.channels.items():
-            scan.channels.setdefault(k, v)
+        for sid, schema in summary.schemas.items():
+            scan.schemas.setdefault(sid, schema)
+        for cid, channel in summary.channels.items():
+            scan.channels.setdefault(cid, channel)
     pending: list | None = [] if on_message is not None else None
     handle = _handler(scan, pending)
 
@@ -792,13 +792,14 @@ def _rescue_definitions(buf, start: int, end: int, scan: Scan) -> None:
             continue
         try:
             if buf[where] == OP_CHANNEL:
-                rec = parse_channel(buf, where + 9)
-                if rec.topic.isprintable() and rec.encoding.isprintable() and rec.topic:
-                    scan.channels.setdefault(rec.id, rec)
+                channel = parse_channel(buf, where + 9)
+                if (channel.topic.isprintable() and channel.encoding.isprintable()
+                        and channel.topic):
+                    scan.channels.setdefault(channel.id, channel)
             else:
-                rec = parse_schema(buf, where + 9)
-                if rec.name.isprintable() and rec.encoding.isprintable() and rec.name:
-                    scan.schemas.setdefault(rec.id, rec)
+                schema = parse_schema(buf, where + 9)
+                if schema.name.isprintable() and schema.encoding.isprintable() and schema.name:
+                    scan.schemas.setdefault(schema.id, schema)
         except (struct.error, UnicodeDecodeError):
             continue
 

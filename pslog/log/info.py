@@ -94,11 +94,11 @@ def timing_table(detections: Detections, nominal_offsets_s=None, rig=None) -> li
         phases.append((period, phase))
     period0, phase0 = phases[0] if phases else (float("nan"), float("nan"))
     for i, (row, (period, phase)) in enumerate(zip(rows, phases, strict=True)):
-        p = period if np.isfinite(period) else period0
+        used = period if np.isfinite(period) else period0
         expected = nominal[i] - nominal[0]
-        if np.isfinite(p) and np.isfinite(phase0) and np.isfinite(phase):
+        if np.isfinite(used) and np.isfinite(phase0) and np.isfinite(phase):
             miss = (phase - phase0) - expected
-            row["offset_measured_s"] = float(nominal[i] + miss - p * np.round(miss / p))
+            row["offset_measured_s"] = float(nominal[i] + miss - used * np.round(miss / used))
         else:
             row["offset_measured_s"] = float("nan")
     return rows

@@ -23,6 +23,7 @@ import zlib
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 from mcap.exceptions import McapError
@@ -248,7 +249,8 @@ class _Finished:
                 ) -> dict[str, list[tuple[int, int, bytes]]]:
         """``topic -> [(log_time, sequence, data), ...]`` in file order for ``topics``;
         ``skip``: offsets of chunks not to read (known to be damaged)."""
-        wanted = {cid: [] for cid, topic in self.topics.items() if topic in set(topics)}
+        wanted: dict[int, list[tuple[int, int, bytes]]] = {
+            cid: [] for cid, topic in self.topics.items() if topic in set(topics)}
         if not wanted:
             return {}
         chunks = self.summary.chunk_indexes
@@ -400,7 +402,7 @@ def _read(f: _Finished, skip: frozenset[int] = frozenset()) -> Session:
                  decode_truth(found[S.TRUTH_TOPIC]) if S.TRUTH_TOPIC in found else None)
         tracks = {}
         for topic in track_topics:
-            method = S.parse_track_topic(topic)
+            method = cast(str, S.parse_track_topic(topic))  # (a track topic)
             tracks[method] = decode_track(method, rig.names, found.get(topic, none))
         events = decode_events(found.get(S.EVENTS_TOPIC, none).messages())
         ball_truth = (table_ball if table_ball is not None else
@@ -434,7 +436,7 @@ def decode_detections(camera_names: Sequence[str], per_camera: Sequence) -> Dete
 
 
 def _detections_columnar(camera_names: Sequence[str], batches: Sequence[_Batch]) -> Detections:
-    times, cams, frames, counts, columns = [], [], [], [], []
+    times, cams, frames, count_parts, columns = [], [], [], [], []
     for cam, batch in enumerate(batches):
         fields, _ = _decode_fields(batch, {1: "varint", 2: "bytes", 3: "varint", 4: "packed",
                                            5: "packed", 6: "packed", 7: "packed"})
@@ -445,9 +447,9 @@ def _detections_columnar(camera_names: Sequence[str], batches: Sequence[_Batch])
         k = values[0][1]
         if any(np.any(c != k) for _v, c in values[1:]):
             raise _Irregular("candidate arrays of unequal length")
-        counts.append(k)
+        count_parts.append(k)
         columns.append([v for v, _c in values])
-    counts = np.concatenate(counts) if counts else np.zeros(0, np.int64)
+    counts = np.concatenate(count_parts) if count_parts else np.zeros(0, np.int64)
     u, v, radius, score = ((np.concatenate([c[j] for c in columns]) if columns else np.zeros(0))
                            for j in range(4))
     n_cand = len(u)
@@ -465,7 +467,7 @@ def _decode_detections_messages(camera_names: Sequence[str],
                                 ) -> Detections:
     """Detections decoded one message at a time (the columnar decoder's fallback)."""
     parse = S.DetectionFrame.FromString
-    times, cams, frames, counts = [], [], [], []
+    times, cams, frames, count_list = [], [], [], []
     u, v, radius, score = [], [], [], []
     for cam, msgs in enumerate(per_camera):
         cams.append(np.full(len(msgs), cam, dtype=np.int32))
@@ -474,13 +476,13 @@ def _decode_detections_messages(camera_names: Sequence[str],
             times.append(t)
             frames.append(m.frame_index)
             k = len(m.u)
-            counts.append(k)
+            count_list.append(k)
             if k:
                 u.extend(m.u)
                 v.extend(m.v)
                 radius.extend(m.radius)
                 score.extend(m.score)
-    counts = np.asarray(counts, dtype=np.int64)
+    counts = np.asarray(count_list, dtype=np.int64)
     n_cand = int(counts.sum())
     if not (len(u) == len(v) == len(radius) == len(score) == n_cand):
         raise LogFormatError("detection message with candidate arrays of unequal length")
@@ -509,12 +511,12 @@ def decode_truth(msgs) -> Truth:
 
 def _decode_truth_messages(msgs: list[tuple[int, int, bytes]]) -> Truth:
     parse = S.TruthPoint.FromString
-    times, xyz = [], []
+    time_list, xyz = [], []
     for t, _seq, data in msgs:
         m = parse(data)
-        times.append(t)
+        time_list.append(t)
         xyz.append((m.x, m.y, m.z))
-    times = np.asarray(times, dtype=np.int64)
+    times = np.asarray(time_list, dtype=np.int64)
     order = np.argsort(times, kind="stable")
     return Truth(times[order], np.asarray(xyz, dtype=np.float64).reshape(-1, 3)[order])
 
@@ -715,9 +717,9 @@ def _images(f: _Finished, camera_of: dict[str, int], topics: list[str],
             yield Image(cam, seq, t, m.format, m.data)
         if i == len(chunks):
             break
-        found = {cid: [] for cid in camera}
-        io.collect_messages(f.read_chunk(chunks[i]), found)
-        for cid, msgs in found.items():
+        by_channel: dict[int, list] = {cid: [] for cid in camera}
+        io.collect_messages(f.read_chunk(chunks[i]), by_channel)
+        for cid, msgs in by_channel.items():
             for t, seq, data in msgs:
                 if lo <= t < hi:
                     heapq.heappush(pending, (t, order, camera[cid], seq, data))
@@ -802,7 +804,9 @@ class _Batch:
 
     def messages(self) -> list[tuple[int, int, bytes]]:
         """The per-message form ``[(log_time, sequence, data), ...]``."""
-        raw = memoryview(self.buf)  # not a copy of a shared buffer: each message's bytes
+        # not a copy of a shared buffer: each message's bytes (ignore: numpy's stubs give
+        # ndarray the buffer protocol on Python >= 3.12 only)
+        raw = memoryview(self.buf)  # type: ignore[arg-type]
         return [(t, s, bytes(raw[a:b])) for t, s, a, b in zip(
             self.time.tolist(), self.seq.tolist(), self.start.tolist(), self.end.tolist(),
             strict=True)]
@@ -830,7 +834,7 @@ def _check_framing(rec: np.ndarray, raw: bytes, offsets: dict[int, int], chunk_e
     :class:`_Irregular` when anything does not add up (the caller then walks the whole chunk,
     which raises the usual error if the framing is wrong)."""
     n = len(rec)
-    starts = []
+    start_parts = []
     for at in offsets.values():
         at -= chunk_end
         if at < 0 or at + 15 > len(raw):
@@ -839,9 +843,9 @@ def _check_framing(rec: np.ndarray, raw: bytes, offsets: dict[int, int], chunk_e
         if op != io.OP_MESSAGE_INDEX or size % 16 or length != 6 + size or \
                 at + 15 + size > len(raw):
             raise _Irregular("message index record does not check out")
-        starts.append(np.frombuffer(raw, dtype="<u8", count=size // 8,
+        start_parts.append(np.frombuffer(raw, dtype="<u8", count=size // 8,
                                     offset=at + 15)[1::2])
-    starts = np.sort(np.concatenate(starts)) if starts else np.zeros(0, np.uint64)
+    starts = np.sort(np.concatenate(start_parts)) if start_parts else np.zeros(0, np.uint64)
     if len(starts) and (starts[-1] > n - 9 or np.any(np.diff(starts) == 0)):
         raise _Irregular("message offsets out of range")
     starts = starts.astype(np.int64)
@@ -922,7 +926,7 @@ def _decode_fields(batch: _Batch, spec: dict[int, str], stop: int | None = None
     n = len(batch)
     pos = batch.start.copy()
     present = {f: np.zeros(n, dtype=bool) for f in spec}
-    values = {}
+    values: dict[int, np.ndarray] = {}
     for f, kind in spec.items():
         if kind == "varint":
             values[f] = np.zeros(n, dtype=np.uint64)

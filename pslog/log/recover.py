@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 from ..errors import LogFormatError, PslogError
 from ..outputs import RECOVER_LIBRARY, replacing
@@ -90,7 +91,7 @@ def recover_session(src, dst, *, force: bool = False) -> dict:
 
     topics: dict[str, int] = {}
     last_ns: dict[str, int] = {}  # per topic
-    times = [None, None]  # first, last log time
+    times: list[int | None] = [None, None]  # first, last log time
     unknown = [0]
     scan = io.Scan()
     schema_ids: dict[int, int] = {}
@@ -191,8 +192,10 @@ def _pslog_schema(topic: str) -> io.SchemaRec | None:
     part (pslog's schemas are fixed by the topic)."""
     camera = S.parse_camera_topic(topic)
     kind = camera[1] if camera else None
-    message = {"calibration": S.CameraCalibration, "transform": S.FrameTransform,
-               "image": S.CompressedImage, "detections": S.DetectionFrame}.get(kind)
+    by_kind: dict[str | None, Any] = {
+        "calibration": S.CameraCalibration, "transform": S.FrameTransform,
+        "image": S.CompressedImage, "detections": S.DetectionFrame}
+    message = by_kind.get(kind)
     if topic == S.TRUTH_TOPIC:
         message = S.TruthPoint
     elif S.parse_ball_truth_topic(topic):
@@ -216,7 +219,7 @@ def describe_damage(damage: io.Damage, channels: dict) -> dict:
     offsets), ``reason``, ``chunk`` (whether it is a chunk), ``start_ns``/``end_ns`` (message
     times the chunk's header or index states, or None) and ``messages`` (topic -> count from
     the chunk's message indexes, or None when unknown)."""
-    counts = None
+    counts: dict[str, int] | None = None
     if damage.counts is not None:
         counts = {}
         for cid, k in damage.counts.items():

@@ -15,6 +15,7 @@ import threading
 import time
 from collections.abc import Mapping
 from datetime import UTC, datetime
+from typing import cast
 
 import numpy as np
 
@@ -145,12 +146,13 @@ class SessionWriter:
         self._bulk = _chunks.supported(self._mcap)  # messages written in blocks (_chunks)
         self._schema_ids: dict[str, int] = {}
         self._channels: dict[str, int] = {}
-        self._pending: list[tuple[int, int, bytes, int]] = []  # channel, time, data, sequence
+        # (channel, time, data, sequence) messages, or whole blocks of them (_add_block)
+        self._pending: list[tuple[int, int, bytes, int] | _Block] = []
         # images wait here, not in the MCAP writer's chunk, so that the small messages buffered
         # meanwhile (the detections of those frames) are always written before them: when
         # the disk fills up, it is a large image chunk that does not fit, and the detections
         # of every frame whose image is in the file are in the file too (see flush())
-        self._images: list[tuple[int, int, bytes, int]] = []  # channel, time, data, sequence
+        self._images: list[tuple[int, int, bytes, int] | _Block] = []  # as _pending
         self._image_bytes = 0
         self._track_methods: list[str] = []
         self._stop = threading.Event()
@@ -163,7 +165,8 @@ class SessionWriter:
         self._table_rows: dict[int, tuple[str, int]] = {}  # channel -> (table, camera)
         self._table_parts: dict[int, list] = {}
         self._topic_of: dict[int, str] = {}
-        self._adopted: dict[str, bytes] = {}  # table -> a copied table's attachment data
+        # table -> a copied table's attachment data (None: none to copy, made again)
+        self._adopted: dict[str, bytes | None] = {}
 
         # metadata first and flushed at once, so even a file killed seconds later is a session
         record = {
@@ -260,7 +263,7 @@ class SessionWriter:
             self._table_parts[cid].append(_Batch(buf, begin, begin + lengths[sel],
                                                  times[sel], sequence[sel]))
 
-    def _adopt_table(self, name: str, data: bytes) -> None:
+    def _adopt_table(self, name: str, data: bytes | None) -> None:
         """A table read from the session being copied (checked): written as it is at close
         when the messages its topics got here are exactly as many as it names (a copy of
         every one of them), else made again from the messages."""
@@ -318,7 +321,7 @@ class SessionWriter:
         self._pending.clear()
         self._mcap.flush()
 
-    def _write_block(self, messages: list[tuple[int, int, bytes, int]]) -> None:
+    def _write_block(self, messages: list[tuple[int, int, bytes, int] | _Block]) -> None:
         """Write ``(channel, time, data, sequence)`` messages as chunk(s): all at once with
         numpy (:mod:`._chunks`, the same bytes as the ``mcap`` writer's ``add_message`` one
         by one, which cost most of the time of writing a long session), or one by one when
@@ -338,7 +341,7 @@ class SessionWriter:
                                                  for k in ("channel", "time", "seq", "length"))
             data = b"".join(b.data for b in blocks)
         else:
-            block = _Block.of(messages)
+            block = _Block.of(cast("list[tuple[int, int, bytes, int]]", messages))
             channel, times, sequence, lengths = block.channel, block.time, block.seq, \
                 block.length
             data = block.data
@@ -690,7 +693,7 @@ class SessionWriter:
         self._check_open()
         if level not in _LOG_LEVELS:
             raise InputError(f"unknown event level {level!r} (have {', '.join(_LOG_LEVELS)})")
-        msg = S.Log(level=_LOG_LEVELS[level], message=str(text),
+        msg = S.Log(level=cast("S.Log.Level.ValueType", _LOG_LEVELS[level]), message=str(text),
                     name="pslog" if camera is None else self._camera_name(camera))
         S.set_timestamp(msg.timestamp, time_ns)
         self._queue(self._channel(S.EVENTS_TOPIC, S.Log), time_ns, msg.SerializeToString())
