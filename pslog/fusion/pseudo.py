@@ -237,7 +237,7 @@ class TypeAConstruction:
     points_world: np.ndarray
 
 
-def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5,
+def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
                 events: np.ndarray | None = None, seen: np.ndarray | None = None
                 ) -> tuple[Track, TypeAConstruction]:
     """``typeA``: a point at every detection with two earlier pseudo-stereo points.
@@ -274,7 +274,8 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5,
     before = np.arange(n)
     candidate = np.full(n, -1, dtype=np.int64)
     targets = before.copy() if events is None else np.asarray(events, dtype=np.int64)
-    ahead = None  # depth 1's points made ahead with depth 0's: (events, points, offset)
+    # depth 1's points made ahead with depth 0's: (events, points, offset)
+    ahead: tuple[np.ndarray, PseudoStereoPoints, int] | None = None
     for k in range(depth):
         # (the other rows keep candidate -1, so only targets are ever needed)
         pending = targets[second[targets] < 0] if k else targets.copy()
@@ -298,11 +299,12 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5,
             b1 = np.take(prep.previous_instant, np.maximum(b, 0))
             b1 = np.where(candidate[pending] < 0, -1, b1)
             ok1 = (b1 >= 0) & (time_ns[pending] - time_ns[np.maximum(b1, 0)] <= max_gap_ns)
-            ahead = (pending[ok1], b1[ok1])
-            both = pseudo_stereo_points(prep, np.concatenate([candidate[need], ahead[1]]),
-                                        np.concatenate([need, ahead[0]]), max_gap_ns)
+            ahead_rows, ahead_candidates = pending[ok1], b1[ok1]
+            both = pseudo_stereo_points(prep, np.concatenate([candidate[need],
+                                                              ahead_candidates]),
+                                        np.concatenate([need, ahead_rows]), max_gap_ns)
             points_k = _take(both, slice(0, len(need)))
-            ahead = (ahead[0], both, len(need))
+            ahead = (ahead_rows, both, len(need))
         elif k == 1 and ahead is not None:
             points_k = _take(ahead[1], ahead[2] + np.searchsorted(ahead[0], need))
         else:
@@ -350,8 +352,8 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float = 0.5,
             used[:, c] |= cam == c
     flags = invalid_points(prep, points, used)
     with np.errstate(invalid="ignore"):
-        depth = ray_depths(predicted, origin, direction)
-    flags[~(depth > 0)] |= BEHIND  # eq. (4)'s k: the foot behind the newest camera
+        foot_depth = ray_depths(predicted, origin, direction)
+    flags[~(foot_depth > 0)] |= BEHIND  # eq. (4)'s k: the foot behind the newest camera
     residual = [
         p1.residual_obs_px, p1.residual_partner_px, p2.residual_obs_px, p2.residual_partner_px,
         # the newest detection against the prediction, before eq. (4) moves it onto its ray
@@ -472,7 +474,8 @@ def _type_a_covariance(prep: Prepared, events: np.ndarray, predicted: np.ndarray
         J *= scale1
     for J in J2:
         J *= scale2
-    g = [None, *J1, *J2]
+    # slot 0 (the newest detection) goes to ``newest``, never into g
+    g: list[np.ndarray] = [np.empty(0), *J1, *J2]
     del J1, J2
     merges, taken = _merged_slots(slots)
     for s, t, same in merges:  # (usually for every event: whole columns, no masked copies)

@@ -24,6 +24,8 @@ with no clock correction in the rig a detection is admitted when pushed (no extr
 
 from __future__ import annotations
 
+from typing import cast
+
 import numpy as np
 
 from ..errors import FusionError
@@ -183,7 +185,7 @@ class StreamFuser:
         if self.incremental is not None:  # it keeps its own state: feed the new rows once
             f = self._fed
             if f == len(self._time):  # nothing new (a frame the gate or the queue holds)
-                return self._nothing
+                return cast(Track, self._nothing)  # set whenever incremental is
             out = self.incremental.push(self._time[f:], self._camera[f:], self._uv[f:],
                                         self._frame[f:])
             self._time, self._camera = self._time[-1:], self._camera[-1:]
