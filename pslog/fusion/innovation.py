@@ -101,26 +101,32 @@ def _previous_next(camera: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def _bends(prep, a, b, c, point, speed, sigma):
     """Whether a camera's 2D track bends at ``b`` more than ballistic motion and the
     detection noise allow (:func:`kinked_points`); rows ``a < b < c`` of one camera, (k,)
-    each; ``point`` (k, 3) world metres near the ball (for its depth), ``speed`` (k,) m/s."""
+    each; ``point`` (k, 3) world metres near the ball (for its depth), ``speed`` (k,) m/s.
+    Row by row on columns (the same bits whatever k: a stream decides as the batch does)."""
     time_ns, uv = prep.obs.time_ns, prep.uv_undistorted
     cam = prep.obs.camera[b]
+    cameras = prep.cameras
+    fx = np.array([c_.K[0, 0] for c_ in cameras])[cam]
+    fy = np.array([c_.K[1, 1] for c_ in cameras])[cam]
+    cx = np.array([c_.K[0, 2] for c_ in cameras])[cam]
+    cy = np.array([c_.K[1, 2] for c_ in cameras])[cam]
+    r2 = np.array([c_.R[2] for c_ in cameras])[cam]
+    tz = np.array([c_.t[2] for c_ in cameras])[cam]
     with np.errstate(invalid="ignore", divide="ignore"):
         dt1 = (time_ns[b] - time_ns[a]) / NS
         dt2 = (time_ns[c] - time_ns[b]) / NS
-        v1 = (uv[b] - uv[a]) / dt1[:, None]
-        v2 = (uv[c] - uv[b]) / dt2[:, None]
-        change = np.linalg.norm(v2 - v1, axis=1)
+        v1x, v1y = (uv[b, 0] - uv[a, 0]) / dt1, (uv[b, 1] - uv[a, 1]) / dt1
+        v2x, v2y = (uv[c, 0] - uv[b, 0]) / dt2, (uv[c, 1] - uv[b, 1]) / dt2
+        dx, dy = v2x - v1x, v2y - v1y
+        change = np.sqrt(dx * dx + dy * dy)
         sigma_change = sigma * np.sqrt(1.0 / dt1 ** 2 + (1.0 / dt1 + 1.0 / dt2) ** 2
                                        + 1.0 / dt2 ** 2)
-        K = np.array([c_.K for c_ in prep.cameras])[cam]
-        R = np.array([c_.R for c_ in prep.cameras])[cam]
-        t = np.array([c_.t for c_ in prep.cameras])[cam]
-        focal = np.maximum(K[:, 0, 0], K[:, 1, 1])
-        depth = np.einsum("ij,ij->i", R[:, 2], point) + t[:, 2]
-        off_axis = np.linalg.norm((uv[b] - K[:, :2, 2]) / focal[:, None], axis=1)
+        focal = np.maximum(fx, fy)
+        depth = r2[:, 0] * point[:, 0] + r2[:, 1] * point[:, 1] + r2[:, 2] * point[:, 2] + tz
+        ox, oy = (uv[b, 0] - cx) / focal, (uv[b, 1] - cy) / focal
         # d²u/dt² = f (a_xy - x a_z) / Z - 2 (Ż / Z) du/dt; |a| = g, |Ż| <= speed
-        pixel_speed = np.maximum(np.linalg.norm(v1, axis=1), np.linalg.norm(v2, axis=1))
-        acceleration = (focal * G * np.sqrt(1.0 + off_axis ** 2)
+        pixel_speed = np.maximum(np.sqrt(v1x * v1x + v1y * v1y), np.sqrt(v2x * v2x + v2y * v2y))
+        acceleration = (focal * G * np.sqrt(1.0 + ox * ox + oy * oy)
                         + 2.0 * speed * pixel_speed) / depth
         bound = KINK_SIGMAS * sigma_change + 0.5 * (dt1 + dt2) * acceleration
         return (dt1 > 0) & (dt2 > 0) & (depth > 0) & (change > bound)
@@ -178,38 +184,59 @@ def kinked_points(prep, events: np.ndarray, past: tuple, noise_px: float | None,
     before, after = _previous_next(prep.obs.camera)
     t_event = time_ns[events]
     with np.errstate(invalid="ignore", divide="ignore"):
-        speed = (np.linalg.norm(p1.points_world - p2.points_world, axis=1)
+        d = p1.points_world - p2.points_world
+        speed = (np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2])
                  / ((time_ns[p1.row] - time_ns[p2.row]) / NS))
 
+    triplets = []  # (a, b, c, point) of every triplet looked at, (k,) rows each
+
     def bend(a, b, c, point):
-        """(available, bent) of the triplets ``a, b, c`` (-1: none), (k,) bool each."""
-        available = ((a >= 0) & (b >= 0) & (c >= 0) & (c <= events)
-                     & (t_event - time_ns[np.maximum(a, 0)] <= 2 * max_gap_ns))
-        a, b, c = np.maximum(a, 0), np.maximum(b, 0), np.maximum(c, 0)
-        return available, available & _bends(prep, a, b, c, point, speed, sigma)
+        """Index of the triplets ``a, b, c`` (-1: none) among those looked at."""
+        triplets.append((a, b, c, point))
+        return len(triplets) - 1
 
     def earlier(rows):
         return np.where(rows >= 0, before[np.maximum(rows, 0)], -1)
 
-    kinked = np.zeros(len(events), dtype=bool)
+    parts = []
     for p in (p1, p2):
         prev, nxt = p.prev_row, p.next_row
         first = earlier(prev)
-        _, bent = bend(first, prev, nxt, p.points_world)
-        has_later, bent_later = bend(prev, nxt, np.where(nxt >= 0, after[np.maximum(nxt, 0)],
-                                                         -1), p.points_world)
-        _, bent_earlier = bend(earlier(first), first, prev, p.points_world)
+        parts.append((bend(first, prev, nxt, p.points_world),
+                      bend(prev, nxt, np.where(nxt >= 0, after[np.maximum(nxt, 0)], -1),
+                           p.points_world),
+                      bend(earlier(first), first, prev, p.points_world)))
+    b = before[events]
+    a = earlier(b)
+    newest = (bend(a, b, events, predicted), bend(earlier(a), a, b, predicted))
+    # every triplet in one pass (elementwise: the same bits as one by one)
+    k = len(events)
+    a_all, b_all, c_all = (np.concatenate([t[i] for t in triplets]) for i in range(3))
+    available = ((a_all >= 0) & (b_all >= 0) & (c_all >= 0)
+                 & (c_all <= np.tile(events, len(triplets)))
+                 & (np.tile(t_event, len(triplets)) - time_ns[np.maximum(a_all, 0)]
+                    <= 2 * max_gap_ns))
+    bent_all = available & _bends(prep, np.maximum(a_all, 0), np.maximum(b_all, 0),
+                                  np.maximum(c_all, 0),
+                                  np.concatenate([t[3] for t in triplets]),
+                                  np.tile(speed, len(triplets)), sigma)
+
+    def has(i):
+        return available[i * k:(i + 1) * k]
+
+    def bent(i):
+        return bent_all[i * k:(i + 1) * k]
+
+    kinked = np.zeros(k, dtype=bool)
+    for at, later, before_prev in parts:
         # a bend at prev: the change lies between prev and next if the triplet after bends
         # too, or (that one still to come) if the triplet before does not
-        kinked |= bent & np.where(has_later, bent_later, ~bent_earlier)
+        kinked |= bent(at) & np.where(has(later), bent(later), ~bent(before_prev))
     # the newest camera: its last triplet bends at b, the change between b and the newest
     # detection (or between a and b, if the triplet before bends too); refused when that
     # interval lies inside eq. (2)'s span, from P_{t-2} on (before it, the past points are
     # already on the new motion)
-    b = before[events]
-    a = earlier(b)
-    _, bent = bend(a, b, events, predicted)
-    _, bent_earlier = bend(earlier(a), a, b, predicted)
-    start = time_ns[np.where(bent_earlier, np.maximum(a, 0), np.maximum(b, 0))]
-    kinked |= bent & (start >= time_ns[p2.row])
+    last, before_last = newest
+    start = time_ns[np.where(bent(before_last), np.maximum(a, 0), np.maximum(b, 0))]
+    kinked |= bent(last) & (start >= time_ns[p2.row])
     return kinked
