@@ -22,6 +22,7 @@ outliers' mean over the clean mean (pooled; ``worst``: the largest per-session r
 the outliers add: a method whose clean session has some, at kicks, keeps them).
 
     python benchmarks/bench_dirty.py [--seeds 3] [--duration 8] [--gating off] [--quick]
+                                     [--methods typeA,smooth,filter]
 """
 
 from __future__ import annotations
@@ -110,7 +111,7 @@ def measure(rig: Rig, methods, runs, options: FusionOptions):
     """Errors per (method, noise, kind) pooled over the sessions, and per-session ratios."""
     errors: dict[tuple, list[np.ndarray]] = {}
     ratios: dict[tuple, list[float]] = {}
-    refused: dict[tuple, list[int]] = {}  # typeA's prediction_failed, points
+    refused: dict[tuple, list[int]] = {}  # typeA's prediction_failed, kink, points kept
     for seed, (_label, motion, duration) in enumerate(runs):
         span = motion.duration if duration is None else duration
         for noise in NOISES:
@@ -124,9 +125,10 @@ def measure(rig: Rig, methods, runs, options: FusionOptions):
                 for m in methods:
                     err = errors_m(tracks[m], truth)
                     errors.setdefault((m, noise, kind), []).append(err)
-                    count = refused.setdefault((m, noise, kind), [0, 0])
+                    count = refused.setdefault((m, noise, kind), [0, 0, 0])
                     count[0] += tracks[m].dropped.get("prediction_failed", 0)
-                    count[1] += len(tracks[m])
+                    count[1] += tracks[m].dropped.get("kink", 0)
+                    count[2] += len(tracks[m])
                     means[m, kind] = np.nanmean(err)
             for m in methods:
                 ratios.setdefault((m, noise), []).append(means[m, "outliers"] / means[m, "clean"])
@@ -161,13 +163,15 @@ def main() -> int:
     parser.add_argument("--seeds", type=int, default=3, help="rallies per rig (default 3)")
     parser.add_argument("--duration", type=float, default=8.0, help="rally seconds")
     parser.add_argument("--gating", choices=("on", "off"), default="on")
+    parser.add_argument("--methods", default="typeA,smooth,filter",
+                        help="comma-separated methods (default typeA,smooth,filter)")
     parser.add_argument("--quick", action="store_true",
                         help="one 4 s rally and the throw per rig (a minute or so)")
     parser.add_argument("--json", default=None, help="write the target rows as JSON")
     args = parser.parse_args()
     json_rows = []
     n_seeds, duration = (1, 4.0) if args.quick else (args.seeds, args.duration)
-    methods = [m for m in ("typeA", "smooth", "filter") if m in METHODS]
+    methods = [m for m in args.methods.split(",") if m in METHODS]
     options = FusionOptions(gating=args.gating == "on")
     runs = sessions(n_seeds, duration, args.quick)
     print(f"dirty-session accuracy, gating {args.gating}: {n_seeds} rallies of {duration:g} s, "
@@ -199,12 +203,13 @@ def main() -> int:
                               "peer_figure": None, "better": "lower",
                               "note": f"mean error with outliers / clean, {TARGET_NOISE} px"})
         print("\n".join(rows), flush=True)
-        notes.append(f"{rig.name}: typeA points refused as prediction_failed / kept, clean | "
-                     "outliers: " + ", ".join(
-                         f"{noise:g} px {refused['typeA', noise, 'clean'][0]}/"
-                         f"{refused['typeA', noise, 'clean'][1]} | "
-                         f"{refused['typeA', noise, 'outliers'][0]}/"
-                         f"{refused['typeA', noise, 'outliers'][1]}" for noise in NOISES))
+        if "typeA" not in methods:
+            continue
+        notes.append(f"{rig.name}: typeA points refused as prediction_failed / kink / kept, "
+                     "clean | outliers: " + ", ".join(
+                         f"{noise:g} px " + " | ".join(
+                             "/".join(str(x) for x in refused["typeA", noise, kind])
+                             for kind in ("clean", "outliers")) for noise in NOISES))
     print()
     if "typeA" in methods:
         print("\n".join(notes))

@@ -24,7 +24,8 @@ def test_demo_records_fuses_evaluates_and_saves_a_recording(tmp_path):
                                                                "filter"}
     type_a = evaluate(session.tracks["typeA"], session.truth)
     nearest = evaluate(session.tracks["nearest"], session.truth)
-    assert abs(type_a.rate_hz - 90.0) < 0.5 and type_a.mean_mm < 10.0
+    # (90 Hz but the points whose intervals hold the throw's bounce: refused as kink)
+    assert 86.5 < type_a.rate_hz <= 90.0 and type_a.mean_mm < 10.0
     assert nearest.mean_mm > 3 * type_a.mean_mm
     assert (out / "demo.rrd").stat().st_size > 1_000_000
     # a second run into the same folder refuses to overwrite, with one line

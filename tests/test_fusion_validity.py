@@ -385,7 +385,8 @@ def test_type_a_under_lens_distortion_is_accurate_to_a_tight_bound(motion, bound
     detections, truth = simulate(rig, get_motion(motion))
     accuracy = evaluate(fuse(detections, rig, "typeA"), truth)
     assert accuracy.mean_mm < bound_mm, accuracy
-    assert accuracy.rate_hz == pytest.approx(90, rel=0.02)
+    # (the throw's bounce: the kink test refuses the 3 points whose intervals hold it)
+    assert accuracy.rate_hz == pytest.approx(90, rel=0.04 if motion == "throw" else 0.02)
 
 
 def test_eq4_moves_an_off_ray_prediction_to_the_foot_on_the_newest_ray():
@@ -653,3 +654,38 @@ def test_type_a_refuses_a_prediction_the_newest_detection_contradicts(seed):
     track = fuse(clean, rig, "typeA")
     assert "prediction_failed" not in track.dropped
     assert np.nanmax(errors_m(track, truth)) < 0.05
+
+
+def test_type_a_refuses_a_point_whose_partner_interval_holds_a_kick():
+    """bench_dirty's paper3 rally 0 at 0.3 px with its faults (cam2 blind 2.1-2.6 s): at
+    2.42 s only cam1 and cam3 see the ball, a kick falls inside the partner's eq. (1)
+    interval, and the interpolated point lies off the ball along the epipolar line, where
+    neither the snap nor the innovation test sees it: the point came out 71 mm off. The
+    partner's own 2D track bends there far beyond what gravity and 5 sigma of the detection
+    noise allow (innovation.kinked_points): the point is refused and counted (``kink``), and
+    the faults add no point beyond 5 cm to those of the clean session (at kicks the kink
+    test cannot yet see causally)."""
+    import sys
+    from pathlib import Path
+
+    from pslog.evaluation import errors_m
+    from pslog.fusion.gating import fuse_detections
+    from pslog.simulation import simulate_labelled
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from bench_dirty import faults
+
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    motion = rally(8.0, seed=100, speed=4.0, kick_every_s=0.9)[0]
+    beyond, refused = {}, {}
+    for kind, extra in (("clean", {}), ("faults", faults(rig, 0, 8.0))):
+        det, truth, _ = simulate_labelled(rig, motion, 8.0,
+                                          SimulationOptions(noise_px=0.3, seed=0, **extra))
+        track = fuse_detections(det, rig, ["typeA"], FusionOptions())[0]["typeA"]
+        err = errors_m(track, truth)
+        beyond[kind] = set(track.time_ns[err > 0.05].tolist())
+        refused[kind] = (track.dropped.get("kink", 0), len(track))
+    assert [t for t in beyond["faults"] if abs(t / NS - 2.42) < 0.02] == []
+    assert beyond["faults"] <= beyond["clean"]
+    for kink, kept in refused.values():
+        assert 0 < kink < 0.07 * kept

@@ -480,7 +480,8 @@ def test_two_supports_whose_rays_do_not_meet_are_not_three_views():
     track = fuse(detections, rig, "typeA")
     err = errors_m(track, truth)
     during = (track.time_ns > 2.6e9) & (track.time_ns < 2.7e9)
-    assert during.sum() >= 5
+    # (the kick at 2.572 s: the kink test refuses 2.611 s, 64 mm off, and 2.622 s)
+    assert during.sum() >= 4
     assert np.nanmax(err[during]) < 0.25, np.nanmax(err[during])
 
 

@@ -150,3 +150,32 @@ def test_stream_gate_waits_for_the_other_cameras_frames_a_low_candidate_reaches(
         assert_array_equal(seen[int(det.frame_time_ns[f]), int(det.frame_camera[f])],
                            batch[lo:hi], err_msg=f"frame {f}")
     assert_array_equal(stream.rejections.reason, gate(det, rig).rejections.reason)
+
+
+@pytest.mark.parametrize("seed,drop_rate", [(0, 0.3), (2, 0.1)])
+def test_stream_gate_keeps_the_stillness_history_a_short_max_gap_still_needs(seed, drop_rate):
+    """A static object seen by two cameras (so it has a 3D point, and stands still) among the
+    ball's candidates, 10-30 % of the frames dropped, and ``max_gap_s`` 40 ms: the gate's
+    stillness looks back ``1.5 static_s`` (0.375 s) over a camera's last ``static_s · fps``
+    frames, more than the two bridged gaps; with frames missing, those frames reach back past
+    half the stream's history. The stream keeps them: every rejection and its reason, and
+    every chosen candidate, equal the batch gate's (``StreamGate`` with half its history
+    loses them and differs)."""
+    from pslog.fusion.gating import StreamGate
+
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    options = SimulationOptions(noise_px=0.3, seed=seed, miss_rate=0.3, drop_rate=drop_rate,
+                                spurious_rate=0.05,
+                                distractors=(("cam1", DISTRACTOR), ("cam2", DISTRACTOR)))
+    det, _, _ = simulate_labelled(rig, rally(3.0, seed=7, speed=4.0, kick_every_s=0.9)[0], 3.0,
+                                  options)
+    batch = gate(det, rig, causal=True, max_gap_s=0.04)
+    stream = StreamGate(rig, 0.0, 0.04)
+    chosen = [c for c in push_frames(stream, det) if len(c[0])]
+    chosen.append(stream.flush())
+    assert len(batch.rejections.reason) > 100
+    assert_array_equal(stream.rejections.reason, batch.rejections.reason)
+    assert_array_equal(stream.rejections.frame_time_ns, batch.rejections.frame_time_ns)
+    assert_array_equal(stream.rejections.uv, batch.rejections.uv)
+    assert_array_equal(np.concatenate([c[0] for c in chosen]), batch.observations.time_ns)
+    assert_array_equal(np.concatenate([c[2] for c in chosen]), batch.observations.uv)

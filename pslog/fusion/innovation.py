@@ -73,7 +73,170 @@ def failed_predictions(prep, events: np.ndarray, j1: np.ndarray, j2: np.ndarray,
         return innovation_px > INNOVATION_SIGMAS * sigma_r + model_px
 
 
-def failed_counts(failed: np.ndarray) -> dict[str, int]:
-    """``Track.dropped``'s count of the points :func:`failed_predictions` refused."""
+def failed_counts(failed: np.ndarray, kinked: np.ndarray | None = None) -> dict[str, int]:
+    """``Track.dropped``'s counts of the points :func:`failed_predictions` (and
+    :func:`kinked_points`) refused."""
     n = int(np.count_nonzero(failed))
-    return {"prediction_failed": n} if n else {}
+    m = 0 if kinked is None else int(np.count_nonzero(kinked))
+    return {**({"prediction_failed": n} if n else {}), **({"kink": m} if m else {})}
+
+
+#: Refuse a point whose partner's 2D track bends by more than this many standard deviations
+#: (plus the model bound) inside eq. (1)'s interval: the same probability as the prediction's.
+KINK_SIGMAS = 5.0
+
+
+def _previous_next(camera: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each row's previous and next row of the same camera (-1: none), (n,) int64 each."""
+    n = len(camera)
+    order = np.argsort(camera, kind="stable")  # rows by camera, in time order within each
+    same = camera[order][1:] == camera[order][:-1]
+    before = np.full(n, -1, dtype=np.int64)
+    after = np.full(n, -1, dtype=np.int64)
+    before[order[1:][same]] = order[:-1][same]
+    after[order[:-1][same]] = order[1:][same]
+    return before, after
+
+
+def _bends(prep, a, b, c, point, speed, sigma):
+    """Whether a camera's 2D track bends at ``b`` more than ballistic motion and the
+    detection noise allow (:func:`kinked_points`); rows ``a < b < c`` of one camera, (k,)
+    each; ``point`` (k, 3) world metres near the ball (for its depth), ``speed`` (k,) m/s.
+    Row by row on columns (the same bits whatever k: a stream decides as the batch does)."""
+    time_ns, uv = prep.obs.time_ns, prep.uv_undistorted
+    cam = prep.obs.camera[b]
+    cameras = prep.cameras
+    fx = np.array([c_.K[0, 0] for c_ in cameras])[cam]
+    fy = np.array([c_.K[1, 1] for c_ in cameras])[cam]
+    cx = np.array([c_.K[0, 2] for c_ in cameras])[cam]
+    cy = np.array([c_.K[1, 2] for c_ in cameras])[cam]
+    r2 = np.array([c_.R[2] for c_ in cameras])[cam]
+    tz = np.array([c_.t[2] for c_ in cameras])[cam]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        dt1 = (time_ns[b] - time_ns[a]) / NS
+        dt2 = (time_ns[c] - time_ns[b]) / NS
+        v1x, v1y = (uv[b, 0] - uv[a, 0]) / dt1, (uv[b, 1] - uv[a, 1]) / dt1
+        v2x, v2y = (uv[c, 0] - uv[b, 0]) / dt2, (uv[c, 1] - uv[b, 1]) / dt2
+        dx, dy = v2x - v1x, v2y - v1y
+        change = np.sqrt(dx * dx + dy * dy)
+        sigma_change = sigma * np.sqrt(1.0 / dt1 ** 2 + (1.0 / dt1 + 1.0 / dt2) ** 2
+                                       + 1.0 / dt2 ** 2)
+        focal = np.maximum(fx, fy)
+        depth = r2[:, 0] * point[:, 0] + r2[:, 1] * point[:, 1] + r2[:, 2] * point[:, 2] + tz
+        ox, oy = (uv[b, 0] - cx) / focal, (uv[b, 1] - cy) / focal
+        # d²u/dt² = f (a_xy - x a_z) / Z - 2 (Ż / Z) du/dt; |a| = g, |Ż| <= speed
+        pixel_speed = np.maximum(np.sqrt(v1x * v1x + v1y * v1y), np.sqrt(v2x * v2x + v2y * v2y))
+        acceleration = (focal * G * np.sqrt(1.0 + ox * ox + oy * oy)
+                        + 2.0 * speed * pixel_speed) / depth
+        bound = KINK_SIGMAS * sigma_change + 0.5 * (dt1 + dt2) * acceleration
+        return (dt1 > 0) & (dt2 > 0) & (depth > 0) & (change > bound)
+
+
+def kinked_points(prep, events: np.ndarray, past: tuple, noise_px: float | None,
+                  max_gap_ns: int) -> np.ndarray:
+    """Which type A points rest on an interval in which some camera saw the motion change.
+
+    Eq. (1) interpolates a partner camera's 2D track linearly between its detections
+    ``prev`` and ``next``; a kick or a bounce between them puts the interpolated point off
+    the ball's image *along the epipolar line*, where the snap cannot see it, and the point
+    at the wrong depth. In a camera's own 2D track a kick shows as a jump of the pixel
+    velocity: for three consecutive detections ``a, b, c`` of one camera (undistorted pixels
+    ``u``, capture intervals ``δ1 = t_b - t_a``, ``δ2 = t_c - t_b``) the change
+    ``Δv = (u_c - u_b) / δ2 - (u_b - u_a) / δ1`` has, under the model
+
+    - noise: ``σ_Δv = σ √(1/δ1² + (1/δ1 + 1/δ2)² + 1/δ2²)`` per axis (three independent
+      detections of noise ``σ`` per axis);
+    - model: ``|Δv| <= ½ (δ1 + δ2) max|ü|`` (exact for a constant ``ü``), and the image of a
+      ballistic ball (acceleration of norm ``g``, speed ``|V|``, depth ``Z``, normalised
+      image offset ``x``) has ``ü = f (a_xy - x a_z) / Z - 2 (Ż / Z) u̇``, so
+      ``|ü| <= (f g √(1 + |x|²) + 2 |V| |u̇|) / Z``.
+
+    A bend ``|Δv| > 5 σ_Δv + ½ (δ1 + δ2) |ü|max`` is a change of motion (probability under the
+    model ``exp(-25/2) ≈ 4e-6``, as for :func:`failed_predictions`). A point is refused when
+
+    - for either past point, the partner's triplet ``(before prev, prev, next)`` bends, and
+      the triplet ``(prev, next, after next)``, where it is already available (not after the
+      newest detection), bends too (a kink between ``prev`` and ``next`` bends both; one
+      before ``prev`` only the first);
+    - the newest camera's own triplet ending at the newest detection bends (a kink inside
+      eq. (2)'s prediction span that the innovation test cannot see along the newest ray).
+
+    Causality: only rows not after the newest detection, and within ``2 max_gap`` of it (the
+    rows :class:`~pslog.fusion.pseudo.TypeAStream` keeps), are used, so a stream decides as
+    the batch run does. ``|V|`` is the speed between the two past points, ``Z`` the depth of
+    the past point (of the prediction for the newest camera).
+
+    Parameters
+    ----------
+    prep : pslog.fusion._prepare.Prepared, the session's observations
+    events : (k,) int, rows of the newest detections
+    past : (P_{t-1}, P_{t-2}, predicted), two PseudoStereoPoints of k rows and (k, 3) metres
+    noise_px : float or None, the detections' noise per image axis, pixels (None: 0.5)
+    max_gap_ns : int, the largest bridged gap, nanoseconds
+
+    Returns
+    -------
+    (k,) bool, True where a bend is detected in an interval the point relies on
+    """
+    p1, p2, predicted = past
+    time_ns = prep.obs.time_ns
+    sigma = DEFAULT_NOISE_PX if noise_px is None else float(noise_px)
+    before, after = _previous_next(prep.obs.camera)
+    t_event = time_ns[events]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        d = p1.points_world - p2.points_world
+        speed = (np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2])
+                 / ((time_ns[p1.row] - time_ns[p2.row]) / NS))
+
+    triplets = []  # (a, b, c, point) of every triplet looked at, (k,) rows each
+
+    def bend(a, b, c, point):
+        """Index of the triplets ``a, b, c`` (-1: none) among those looked at."""
+        triplets.append((a, b, c, point))
+        return len(triplets) - 1
+
+    def earlier(rows):
+        return np.where(rows >= 0, before[np.maximum(rows, 0)], -1)
+
+    parts = []
+    for p in (p1, p2):
+        prev, nxt = p.prev_row, p.next_row
+        first = earlier(prev)
+        parts.append((bend(first, prev, nxt, p.points_world),
+                      bend(prev, nxt, np.where(nxt >= 0, after[np.maximum(nxt, 0)], -1),
+                           p.points_world),
+                      bend(earlier(first), first, prev, p.points_world)))
+    b = before[events]
+    a = earlier(b)
+    newest = (bend(a, b, events, predicted), bend(earlier(a), a, b, predicted))
+    # every triplet in one pass (elementwise: the same bits as one by one)
+    k = len(events)
+    a_all, b_all, c_all = (np.concatenate([t[i] for t in triplets]) for i in range(3))
+    available = ((a_all >= 0) & (b_all >= 0) & (c_all >= 0)
+                 & (c_all <= np.tile(events, len(triplets)))
+                 & (np.tile(t_event, len(triplets)) - time_ns[np.maximum(a_all, 0)]
+                    <= 2 * max_gap_ns))
+    bent_all = available & _bends(prep, np.maximum(a_all, 0), np.maximum(b_all, 0),
+                                  np.maximum(c_all, 0),
+                                  np.concatenate([t[3] for t in triplets]),
+                                  np.tile(speed, len(triplets)), sigma)
+
+    def has(i):
+        return available[i * k:(i + 1) * k]
+
+    def bent(i):
+        return bent_all[i * k:(i + 1) * k]
+
+    kinked = np.zeros(k, dtype=bool)
+    for at, later, before_prev in parts:
+        # a bend at prev: the change lies between prev and next if the triplet after bends
+        # too, or (that one still to come) if the triplet before does not
+        kinked |= bent(at) & np.where(has(later), bent(later), ~bent(before_prev))
+    # the newest camera: its last triplet bends at b, the change between b and the newest
+    # detection (or between a and b, if the triplet before bends too); refused when that
+    # interval lies inside eq. (2)'s span, from P_{t-2} on (before it, the past points are
+    # already on the new motion)
+    last, before_last = newest
+    start = time_ns[np.where(bent(before_last), np.maximum(a, 0), np.maximum(b, 0))]
+    kinked |= bent(last) & (start >= time_ns[p2.row])
+    return kinked

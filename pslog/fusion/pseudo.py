@@ -68,7 +68,7 @@ from ._prepare import (
     reprojection_px,
     times_pixel_jacobian,
 )
-from .innovation import failed_counts, failed_predictions
+from .innovation import failed_counts, failed_predictions, kinked_points
 from .stereo import count_invalid, with_dropped
 
 #: Brackets whose lengths differ by less than this are ties (shutter offsets are rounded to ns).
@@ -412,14 +412,17 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
     # the newest detection contradicts eq. (2)'s prediction: the motion changed (innovation.py)
     failed = made & (flags == 0) & failed_predictions(prep, events, j1, j2, predicted,
                                                       residual[4], noise_px)
-    keep = made & (flags == 0) & ~failed
+    # a camera saw the motion change inside eq. (1)'s or eq. (2)'s interval (innovation.py)
+    kinked = made & (flags == 0) & ~failed & kinked_points(prep, events, (p1, p2, predicted),
+                                                           noise_px, max_gap_ns)
+    keep = made & (flags == 0) & ~failed & ~kinked
     track = Track("typeA", t_event, points, cams[0], quality)
     if not np.all(keep):  # (every point kept: the Track as it is)
         track = track.select(keep)
     if seen is not None:  # count only the reasons not counted before (each detection once)
         refused, seen[:] = refused & ~seen, seen | refused
     past = {f"past_{k}": v for k, v in count_invalid(refused).items()}
-    track = with_dropped(track, count_invalid(flags[made]), past, failed_counts(failed))
+    track = with_dropped(track, count_invalid(flags[made]), past, failed_counts(failed, kinked))
     construction = TypeAConstruction(
         events[keep], (_select(p1, keep), _select(p2, keep)), predicted[keep], points[keep])
     return track, construction
