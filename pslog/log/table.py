@@ -29,6 +29,8 @@ DETECTIONS = "pslog/table/detections"
 BALL_TRUTH = "pslog/table/ball_truth"
 TRUTH = "pslog/table/truth"
 TABLES = (DETECTIONS, BALL_TRUTH, TRUTH)
+#: a fused track's table: this prefix and the method name (one table per track topic)
+TRACK_PREFIX = "pslog/table/track/"
 MEDIA_TYPE = "application/vnd.pslog.table"
 #: ``format`` and ``version`` of the header: a reader refuses (falls back on) any other
 FORMAT = "pslog.table"
@@ -46,16 +48,46 @@ COLUMNS = {
     BALL_TRUTH: _DETECTION_COLUMNS,
     TRUTH: {"time_ns": ("<i8", ()), "position_world": ("<f8", (3,))},
 }
+#: a track table's fixed columns (leading dimension: the track's points); each per-point
+#: quality column follows as ``quality/<name>``, ``<f8``, in the order of the Track's
+#: ``quality`` mapping (protobuf's map order of the first point, as the messages read)
+TRACK_COLUMNS = {"time_ns": ("<i8", ()), "position_world": ("<f8", (3,)),
+                 "camera": ("<i4", ())}
+QUALITY_PREFIX = "quality/"
 #: columns smaller than this are stored raw (a zstd frame would not pay off); so are columns
 #: zstd shrinks by less than 10 %
 _COMPRESS_FROM = 4096
 
 
+def track_table(method: str) -> str:
+    """The name of the table of track ``method``."""
+    return TRACK_PREFIX + method
+
+
+def track_method(table: str) -> str | None:
+    """The method whose track table ``table`` is, or None (not a track table)."""
+    if table.startswith(TRACK_PREFIX) and len(table) > len(TRACK_PREFIX):
+        return table[len(TRACK_PREFIX):]
+    return None
+
+
+def _columns_of(table: str, names: Sequence[str]) -> dict[str, tuple[str, tuple]]:
+    """``name -> (dtype, trailing shape)`` of ``table`` given its column ``names`` (a track
+    table's quality columns are the track's own; every other table's are fixed)."""
+    if track_method(table) is None:
+        return COLUMNS[table]
+    return {**TRACK_COLUMNS, **{n: ("<f8", ()) for n in names
+                                if n.startswith(QUALITY_PREFIX) and n not in TRACK_COLUMNS}}
+
+
 def table_of(topic: str, camera_names: Sequence[str]) -> tuple[str, int] | None:
-    """``(table, camera index)`` whose rows a message of ``topic`` is (camera 0 for truth),
-    or None."""
+    """``(table, camera index)`` whose rows a message of ``topic`` is (camera 0 for truth
+    and tracks), or None."""
     if topic == S.TRUTH_TOPIC:
         return TRUTH, 0
+    method = S.parse_track_topic(topic)
+    if method:
+        return track_table(method), 0
     for i, name in enumerate(camera_names):
         if topic == S.detections_topic(name):
             return DETECTIONS, i
@@ -68,6 +100,9 @@ def topics_of(table: str, camera_names: Sequence[str]) -> list[str]:
     """The per-message topics a table stands for, in camera order."""
     if table == TRUTH:
         return [S.TRUTH_TOPIC]
+    method = track_method(table)
+    if method is not None:
+        return [S.track_topic(method)]
     make = S.detections_topic if table == DETECTIONS else S.ball_truth_topic
     return [make(n) for n in camera_names]
 
@@ -80,12 +115,13 @@ def encode(table: str, camera_names: Sequence[str], counts: Mapping[str, int],
     ----------
     camera_names : the rig's cameras (``frame_camera`` indexes them)
     counts : per-message topic -> number of messages the table stands for
-    columns : name -> array, every column of :data:`COLUMNS` ``[table]``
+    columns : name -> array, every column of :data:`COLUMNS` ``[table]`` (a track table:
+        those of :data:`TRACK_COLUMNS` and any ``quality/<name>`` columns, kept in order)
     """
     import zstandard
 
     blobs, described, at = [], {}, 0
-    for name, (dtype, _shape) in COLUMNS[table].items():
+    for name, (dtype, _shape) in _columns_of(table, list(columns)).items():
         values = np.ascontiguousarray(columns[name], dtype=dtype)
         raw = values.tobytes()
         codec, stored = "none", raw
@@ -137,11 +173,14 @@ def decode(data: bytes, table: str, camera_names: Sequence[str]
             for n in counts.values()):
         raise LogFormatError("table topic counts malformed")
     described = header.get("columns")
-    if not isinstance(described, dict) or set(described) != set(COLUMNS[table]):
+    if not isinstance(described, dict):
+        raise LogFormatError("table columns malformed")
+    expected_columns = _columns_of(table, list(described))
+    if set(described) != set(expected_columns):
         raise LogFormatError("table columns differ from the format's")
     body = 4 + size + (-(4 + size) % 8)
     out = {}
-    for name, (dtype, shape) in COLUMNS[table].items():
+    for name, (dtype, shape) in expected_columns.items():
         d = described[name]
         try:
             offset, stored, codec = int(d["offset"]), int(d["size"]), d["codec"]
@@ -170,6 +209,8 @@ def decode(data: bytes, table: str, camera_names: Sequence[str]
         # a writable copy in native order, as the per-message decoder gives
         out[name] = np.array(np.frombuffer(blob, dtype=dtype).reshape(dims),
                              dtype=np.dtype(dtype).newbyteorder("="))
+    if track_method(table) is not None and len({len(v) for v in out.values()}) > 1:
+        raise LogFormatError("track table columns differ in length")
     return counts, out
 
 
@@ -188,18 +229,44 @@ def build(name: str, camera_names: Sequence[str], per_topic: Mapping[str, list]
     from google.protobuf.message import DecodeError
 
     from ..errors import PslogError
-    from .reader import _Batch, decode_detections, decode_truth
+    from .reader import _Batch, decode_detections, decode_track, decode_truth
 
     topics = topics_of(name, camera_names)
     batches = [_Batch.concatenate(per_topic.get(t, [])) for t in topics]
     counts = {t: len(b) for t, b in zip(topics, batches, strict=True)}
     try:
+        method = track_method(name)
         if name == TRUTH:
             truth = decode_truth(batches[0])
             columns = {"time_ns": truth.time_ns, "position_world": truth.position_world}
+        elif method is not None:
+            columns = track_columns(decode_track(method, camera_names, batches[0]))
         else:
             d = decode_detections(camera_names, batches)
             columns = {k: getattr(d, k) for k in COLUMNS[name]}
     except (DecodeError, PslogError, ValueError):
         return None
     return encode(name, camera_names, counts, columns)
+
+
+def track_columns(track) -> dict[str, np.ndarray]:
+    """The columns of a :class:`~pslog.records.Track`'s table (quality in its order)."""
+    return {"time_ns": track.time_ns, "position_world": track.position_world,
+            "camera": track.camera,
+            **{QUALITY_PREFIX + k: v for k, v in track.quality.items()}}
+
+
+def track_from_columns(method: str, columns: Mapping[str, np.ndarray]):
+    """The :class:`~pslog.records.Track` of a decoded track table's columns."""
+    from ..records import Track
+
+    n = len(QUALITY_PREFIX)
+    return Track(method, columns["time_ns"], columns["position_world"], columns["camera"],
+                 {k[n:]: v for k, v in columns.items() if k.startswith(QUALITY_PREFIX)})
+
+
+def names(topics) -> list[str]:
+    """Every table a file with these ``topics`` may hold: :data:`TABLES`, then one per
+    track topic (sorted)."""
+    return [*TABLES, *sorted(track_table(m) for t in topics
+                             if (m := S.parse_track_topic(t)))]

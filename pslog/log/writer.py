@@ -270,7 +270,7 @@ class SessionWriter:
         """Write each table whose topics have a channel as an attachment (see
         :mod:`pslog.log.table`), made from the messages written (:func:`table.build`), or a
         copied one (:meth:`_adopt_table`) that names as many messages as were written."""
-        for name in table.TABLES:
+        for name in table.names(self._topic_of.values()):  # fused tracks' tables too
             channels = [cid for cid, (t, _cam) in self._table_rows.items() if t == name]
             if not channels:
                 continue
