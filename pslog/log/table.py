@@ -1,6 +1,6 @@
-"""Columnar tables of a session: its detections, ball labels and ground truth as little-endian
-numpy columns in MCAP attachments, written when the session closes (format:
-docs/log-format.md, "Columnar tables").
+"""Columnar tables of a session: its detections, ball labels, ground truth and fused tracks
+(one table per method) as little-endian numpy columns in MCAP attachments, written when the
+session closes (format: docs/log-format.md, "Columnar tables").
 
 A 90-minute match holds half a million detection messages; decoding them is most of the
 time of reading a session. The same data as a few arrays reads at memory speed. The per-frame
