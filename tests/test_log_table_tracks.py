@@ -176,3 +176,47 @@ def test_a_bad_track_table_falls_back_to_the_messages(fused, tmp_path, case, cli
     code, out, err = cli("info", bad)
     assert code == 0 and err == ""
     assert f"columnar table {name} unusable" in out, out
+
+
+def test_a_writers_track_table_is_what_its_messages_say(tmp_path, rig3):
+    """SessionWriter makes a track's table from the Track objects it wrote (not copies of
+    their messages): the same as decoding the messages, also for awkward tracks - added
+    twice with other quality keys, unsorted times with ties, a fixed field NaN throughout,
+    NaN and -0.0 values, long enough for the writer's block path, and empty."""
+    from pslog.log import SessionWriter
+    from pslog.records import Track
+
+    rng = np.random.default_rng(4)
+
+    def track(method, n, quality_keys, tie=False):
+        t = rng.integers(0, 10**9, n).astype(np.int64)
+        if tie and n > 3:
+            t[1:4] = t[0]
+        xyz = rng.normal(size=(n, 3))
+        xyz[::5, 1] = -0.0
+        quality = {k: rng.random(n) for k in quality_keys}
+        for v in quality.values():
+            v[::7] = np.nan
+        if "ray_shift_m" in quality:
+            quality["ray_shift_m"][:] = np.nan  # NaN throughout: the messages leave it out
+        return Track(method, t, xyz, rng.integers(0, 3, n).astype(np.int32), quality)
+
+    path = tmp_path / "t.mcap"
+    with SessionWriter(path, rig3) as w:
+        w.add_track(track("a", 5000, ["ray_miss_m", "std_m", "ray_shift_m"], tie=True))
+        w.add_track(track("a", 40, ["snap_px", "n_detections"], tie=True))
+        w.add_track(track("b", 0, ["ray_miss_m"]))
+        w.add_track(track("c", 3, []))
+    plain = tmp_path / "plain.mcap"
+    _without_tables(path, plain)
+    a, b = read_session(path), read_session(plain)
+    assert set(a.tracks) == {"a", "b", "c"}
+    for method in a.tracks:
+        peer_read_table(path, f"pslog/table/track/{method}")  # there
+        _same_track(a.tracks[method], b.tracks[method])
+    assert "ray_shift_m" not in a.tracks["a"].quality and len(a.tracks["a"]) == 5040
+    from pslog.log.reader import _Finished
+
+    with _Finished(path) as f:
+        for method in a.tracks:
+            assert f.table(f"pslog/table/track/{method}") is not None, f.table_problems

@@ -270,3 +270,38 @@ def names(topics) -> list[str]:
     track topic (sorted)."""
     return [*TABLES, *sorted(track_table(m) for t in topics
                              if (m := S.parse_track_topic(t)))]
+
+
+def track_columns_of(tracks: Sequence) -> dict[str, np.ndarray]:
+    """The columns of the track table of the :class:`~pslog.records.Track` s a writer wrote
+    on one topic (in order), made without the messages: what reading those messages gives
+    (:func:`pslog.log.reader.decode_track`), so a writer needs not keep them.
+
+    Reading concatenates the points in file order and sorts them by time (stable); a fixed
+    ``TrackPoint`` field (:data:`pslog.log._schemas.TRACK_FIXED_QUALITY`) NaN at every point
+    is left out (the writer stores NaN for a field a track lacks); a map key is a column,
+    NaN at the points of a track without it. Empty: no quality column at all.
+    """
+    n = sum(len(t) for t in tracks)
+    times = np.concatenate([t.time_ns for t in tracks] or [np.zeros(0, np.int64)])
+    order = np.argsort(times, kind="stable")
+
+    def column(key: str) -> np.ndarray:
+        return np.concatenate([t.quality[key] if key in t.quality else np.full(len(t), np.nan)
+                               for t in tracks])[order]
+
+    quality = {}
+    if n:
+        for key in S.TRACK_FIXED_QUALITY:
+            values = column(key)
+            if not np.all(np.isnan(values)):
+                quality[key] = values
+        for key in dict.fromkeys(k for t in tracks for k in t.quality):
+            if key not in S.TRACK_FIXED_QUALITY:
+                quality[key] = column(key)
+    return {"time_ns": times[order],
+            "position_world": np.concatenate([t.position_world for t in tracks]
+                                             or [np.zeros((0, 3))])[order],
+            "camera": np.concatenate([t.camera for t in tracks]
+                                     or [np.zeros(0, np.int32)])[order].astype(np.int32),
+            **{QUALITY_PREFIX + k: v for k, v in quality.items()}}
