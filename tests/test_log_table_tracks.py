@@ -205,6 +205,7 @@ def test_a_writers_track_table_is_what_its_messages_say(tmp_path, rig3):
     with SessionWriter(path, rig3) as w:
         w.add_track(track("a", 5000, ["ray_miss_m", "std_m", "ray_shift_m"], tie=True))
         w.add_track(track("a", 40, ["snap_px", "n_detections"], tie=True))
+        w.add_track(track("a", 0, ["only_in_an_empty_track"]))
         w.add_track(track("b", 0, ["ray_miss_m"]))
         w.add_track(track("c", 3, []))
     plain = tmp_path / "plain.mcap"
@@ -215,6 +216,9 @@ def test_a_writers_track_table_is_what_its_messages_say(tmp_path, rig3):
         peer_read_table(path, f"pslog/table/track/{method}")  # there
         _same_track(a.tracks[method], b.tracks[method])
     assert "ray_shift_m" not in a.tracks["a"].quality and len(a.tracks["a"]) == 5040
+    assert "only_in_an_empty_track" not in a.tracks["a"].quality
+    for method in a.tracks:  # and in the messages' order of keys, too
+        assert list(a.tracks[method].quality) == list(b.tracks[method].quality)
     from pslog.log.reader import _Finished
 
     with _Finished(path) as f:

@@ -280,7 +280,8 @@ def track_columns_of(tracks: Sequence) -> dict[str, np.ndarray]:
     Reading concatenates the points in file order and sorts them by time (stable); a fixed
     ``TrackPoint`` field (:data:`pslog.log._schemas.TRACK_FIXED_QUALITY`) NaN at every point
     is left out (the writer stores NaN for a field a track lacks); a map key is a column,
-    NaN at the points of a track without it. Empty: no quality column at all.
+    NaN at the points of a track without it (an empty track has none), in the order the
+    messages give (:func:`_map_order`). Empty: no quality column at all.
     """
     n = sum(len(t) for t in tracks)
     times = np.concatenate([t.time_ns for t in tracks] or [np.zeros(0, np.int64)])
@@ -296,12 +297,24 @@ def track_columns_of(tracks: Sequence) -> dict[str, np.ndarray]:
             values = column(key)
             if not np.all(np.isnan(values)):
                 quality[key] = values
-        for key in dict.fromkeys(k for t in tracks for k in t.quality):
-            if key not in S.TRACK_FIXED_QUALITY:
-                quality[key] = column(key)
+        for key in dict.fromkeys(k for t in tracks for k in _map_order(t)):
+            quality[key] = column(key)
     return {"time_ns": times[order],
             "position_world": np.concatenate([t.position_world for t in tracks]
                                              or [np.zeros((0, 3))])[order],
             "camera": np.concatenate([t.camera for t in tracks]
                                      or [np.zeros(0, np.int32)])[order].astype(np.int32),
             **{QUALITY_PREFIX + k: v for k, v in quality.items()}}
+
+
+def _map_order(track) -> list[str]:
+    """The quality map keys of ``track``'s messages in the order reading them gives: that of
+    its first point's map as protobuf parses it back (the writer's map bytes are protobuf's
+    own, checked by the writer); none for an empty track (it has no message)."""
+    extra = [k for k in track.quality if k not in S.TRACK_FIXED_QUALITY]
+    if not extra or not len(track):
+        return []
+    msg = S.TrackPoint()
+    for key in extra:
+        msg.quality[key] = float(track.quality[key][0])
+    return list(S.TrackPoint.FromString(msg.SerializeToString()).quality)
