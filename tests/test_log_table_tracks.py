@@ -224,3 +224,23 @@ def test_a_writers_track_table_is_what_its_messages_say(tmp_path, rig3):
     with _Finished(path) as f:
         for method in a.tracks:
             assert f.table(f"pslog/table/track/{method}") is not None, f.table_problems
+
+
+def test_quality_key_order_is_the_messages_across_processes(sim_session, tmp_path):
+    """Protobuf iterates a parsed map in an order that varies between processes: a table
+    written by another process (fuse, then recover) gives read_session the quality keys in
+    the order the messages give in this one."""
+    from tests.faults.promises import run_pslog
+
+    fused, fixed = tmp_path / "fused.mcap", tmp_path / "fixed.mcap"
+    for args in (("fuse", sim_session.path, "--method", "filter,typeA", "-o", fused),
+                 ("recover", fused, "-o", fixed)):
+        run = run_pslog(*args)
+        assert run.code == 0, run.stderr
+    for path in (fused, fixed):
+        plain = tmp_path / f"plain-{path.name}"
+        _without_tables(path, plain)
+        a, b = read_session(path), read_session(plain)
+        for method in ("filter", "typeA"):
+            _same_track(a.tracks[method], b.tracks[method])
+            assert list(a.tracks[method].quality) == list(b.tracks[method].quality), method

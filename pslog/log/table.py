@@ -240,7 +240,17 @@ def build(name: str, camera_names: Sequence[str], per_topic: Mapping[str, list]
             truth = decode_truth(batches[0])
             columns = {"time_ns": truth.time_ns, "position_world": truth.position_world}
         elif method is not None:
-            columns = track_columns(decode_track(method, camera_names, batches[0]))
+            track = decode_track(method, camera_names, batches[0])
+            columns = track_columns(track)
+            if len(track):  # the map's keys in the first message's byte order (see
+                b = batches[0]  # track_from_columns), not this process's parse order
+                keys = _entry_keys(b.buf[b.start[0]:b.end[0]].tobytes())
+                extra = [QUALITY_PREFIX + k for k in track.quality
+                         if k not in S.TRACK_FIXED_QUALITY]
+                ordered = [QUALITY_PREFIX + k for k in keys]
+                if sorted(ordered) == sorted(extra):
+                    rest = [k for k in columns if k not in extra]
+                    columns = {k: columns[k] for k in rest + ordered}
         else:
             d = decode_detections(camera_names, batches)
             columns = {k: getattr(d, k) for k in COLUMNS[name]}
@@ -261,8 +271,16 @@ def track_from_columns(method: str, columns: Mapping[str, np.ndarray]):
     from ..records import Track
 
     n = len(QUALITY_PREFIX)
+    quality = {k[n:]: v for k, v in columns.items() if k.startswith(QUALITY_PREFIX)}
+    # the fixed fields first, then the map's keys as this process's protobuf orders them
+    # (as the per-message reader does; the table holds them in the writer's byte order)
+    fixed = [k for k in S.TRACK_FIXED_QUALITY if k in quality]
+    extra = [k for k in quality if k not in S.TRACK_FIXED_QUALITY]
+    order = fixed + quality_order(extra)
+    if sorted(order) == sorted(quality):
+        quality = {k: quality[k] for k in order}
     return Track(method, columns["time_ns"], columns["position_world"], columns["camera"],
-                 {k[n:]: v for k, v in columns.items() if k.startswith(QUALITY_PREFIX)})
+                 quality)
 
 
 def names(topics) -> list[str]:
@@ -308,13 +326,82 @@ def track_columns_of(tracks: Sequence) -> dict[str, np.ndarray]:
 
 
 def _map_order(track) -> list[str]:
-    """The quality map keys of ``track``'s messages in the order reading them gives: that of
-    its first point's map as protobuf parses it back (the writer's map bytes are protobuf's
-    own, checked by the writer); none for an empty track (it has no message)."""
+    """The quality map keys of ``track``'s messages in the order the writer serialises them
+    (the first point's map: the writer's map bytes are protobuf's own, checked by the
+    writer); none for an empty track (it has no message). The order a reader's protobuf
+    iterates a parsed map in varies between processes; :func:`quality_order` gives it from
+    this one."""
     extra = [k for k in track.quality if k not in S.TRACK_FIXED_QUALITY]
     if not extra or not len(track):
         return []
     msg = S.TrackPoint()
     for key in extra:
         msg.quality[key] = float(track.quality[key][0])
-    return list(S.TrackPoint.FromString(msg.SerializeToString()).quality)
+    return _entry_keys(msg.SerializeToString())
+
+
+def _entry_keys(data: bytes) -> list[str]:
+    """The keys of the quality map entries (field 10) of a serialised ``TrackPoint``, in
+    byte order (a malformed message: the keys found up to where it stops making sense)."""
+
+    def varint(at: int) -> tuple[int, int]:
+        value = shift = 0
+        while True:
+            b = data[at]
+            value |= (b & 0x7F) << shift
+            at, shift = at + 1, shift + 7
+            if b < 0x80:
+                return value, at
+
+    keys, at = [], 0
+    try:
+        while at < len(data):
+            tag, at = varint(at)
+            wire = tag & 7
+            if wire == 0:
+                _v, at = varint(at)
+            elif wire == 1:
+                at += 8
+            elif wire == 5:
+                at += 4
+            elif wire == 2:
+                length, at = varint(at)
+                body, at = data[at:at + length], at + length
+                if tag >> 3 == 10 and body[:1] == b"\x0a":  # map entry: its key first
+                    size, start, shift = 0, 1, 0
+                    while True:
+                        b = body[start]
+                        size |= (b & 0x7F) << shift
+                        start, shift = start + 1, shift + 7
+                        if b < 0x80:
+                            break
+                    keys.append(body[start:start + size].decode("utf-8"))
+            else:
+                break
+    except (IndexError, UnicodeDecodeError):
+        pass
+    return keys
+
+
+def quality_order(keys: Sequence[str]) -> list[str]:
+    """``keys`` (quality map keys in a message's byte order) in the order this process's
+    protobuf iterates the map parsed from such a message: the order the per-message reader
+    gives the Track's ``quality`` mapping."""
+    data = b"".join(_entry(k) for k in keys)
+    return list(S.TrackPoint.FromString(data).quality)
+
+
+def _entry(key: str) -> bytes:
+    raw = key.encode("utf-8")
+    body = _varint(len(raw)) + raw
+    entry = b"\x0a" + body + b"\x11" + bytes(8)
+    return b"\x52" + _varint(len(entry)) + entry
+
+
+def _varint(n: int) -> bytes:
+    out = bytearray()
+    while True:
+        b, n = n & 0x7F, n >> 7
+        out.append(b | (0x80 if n else 0))
+        if not n:
+            return bytes(out)
