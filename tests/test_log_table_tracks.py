@@ -217,8 +217,9 @@ def test_a_writers_track_table_is_what_its_messages_say(tmp_path, rig3):
         _same_track(a.tracks[method], b.tracks[method])
     assert "ray_shift_m" not in a.tracks["a"].quality and len(a.tracks["a"]) == 5040
     assert "only_in_an_empty_track" not in a.tracks["a"].quality
-    for method in a.tracks:  # and in the messages' order of keys, too
-        assert list(a.tracks[method].quality) == list(b.tracks[method].quality)
+    # (key order: a track added in parts with other keys is equal as a mapping only, see
+    # docs/log-format.md; one added whole keeps the messages' order, tested across processes
+    # below)
     from pslog.log.reader import _Finished
 
     with _Finished(path) as f:
