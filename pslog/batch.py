@@ -19,6 +19,8 @@ load it). Layout of the output folder, mirroring the input tree::
 
 from __future__ import annotations
 
+from typing import Any
+
 import contextlib
 import csv
 import glob
@@ -511,8 +513,8 @@ def ray_cluster(workers: int | None, address: str | None):
         yield int(ray.cluster_resources().get("CPU", 1))
         return
     temp = None
-    quiet = {"logging_level": logging.ERROR, "log_to_driver": False,
-             "include_dashboard": False}
+    quiet: dict[str, Any] = {"logging_level": logging.ERROR, "log_to_driver": False,
+                             "include_dashboard": False}
     try:
         with contextlib.redirect_stdout(sys.stderr):  # never mix Ray's words into stdout
             if address is not None:

@@ -43,7 +43,7 @@ def test_track_blocks_are_protobufs_own_bytes(tmp_path, rig3, extra):
     with open(path, "rb") as f:
         for _s, c, m in make_reader(f).iter_messages(log_time_order=False):
             got.setdefault(c.topic, []).append((m.log_time, m.data))
-    for k, (track, first_id) in enumerate(((tracks[0], 0), (tracks[1], 0), (tracks[1], 300))):
+    for track, first_id in ((tracks[0], 0), (tracks[1], 0), (tracks[1], 300)):
         method, color = track.method, W.track_color(track.method)
         points = got[S.track_topic(method)]
         scenes = got[S.track_scene_topic(method)]

@@ -100,6 +100,11 @@ def copy_session(src, dst, *, detections: Detections | None = None, tracks: Sequ
                 w._adopt_table(tables.DETECTIONS, _table_data(f, tables.DETECTIONS))
             w._adopt_table(tables.BALL_TRUTH, _table_data(f, tables.BALL_TRUTH))
             w._adopt_table(tables.TRUTH, _table_data(f, tables.TRUTH))
+            for topic in f.topics.values():  # the tracks copied as they are
+                method = S.parse_track_topic(topic)
+                if method and not replace_tracks and method not in new_methods:
+                    name = tables.track_table(method)
+                    w._adopt_table(name, _table_data(f, name))
             fast = _copy_chunks(f, w, static, detections is not None, replace_tracks,
                                 new_methods)
         if not fast:  # no summary index to go by: every record in turn

@@ -168,6 +168,9 @@ class _Finished:
                                      f"{sum(expected.values())}")
             if name == tables.TRUTH:
                 return Truth(columns["time_ns"], columns["position_world"])
+            method = tables.track_method(name)
+            if method is not None:
+                return tables.track_from_columns(method, columns)
             return Detections(tuple(self.rig.names), **columns)
         except (LogFormatError, InputError, ValueError) as exc:
             self.table_problems[name] = str(exc)
@@ -389,9 +392,13 @@ def _read(f: _Finished, skip: frozenset[int] = frozenset()) -> Session:
                    else f.table(tables.TRUTH))
     table_ball = (None if skip or not any(t in f.topics.values() for t in ball_topics)
                   else f.table(tables.BALL_TRUTH))
+    table_tracks = {} if skip else {
+        t: f.table(tables.track_table(cast(str, S.parse_track_topic(t)))) for t in track_topics}
+    table_tracks = {t: v for t, v in table_tracks.items() if v is not None}
     wanted = [*([] if table_det is not None else det_topics),
               *([] if table_truth is not None else [S.TRUTH_TOPIC]), S.EVENTS_TOPIC,
-              *track_topics, *([] if table_ball is not None else ball_topics),
+              *(t for t in track_topics if t not in table_tracks),
+              *([] if table_ball is not None else ball_topics),
               *rejection_topics]
     found = f.collect_batches(wanted, skip)
     none = _Batch.concatenate([])
@@ -403,7 +410,8 @@ def _read(f: _Finished, skip: frozenset[int] = frozenset()) -> Session:
         tracks = {}
         for topic in track_topics:
             method = cast(str, S.parse_track_topic(topic))  # (a track topic)
-            tracks[method] = decode_track(method, rig.names, found.get(topic, none))
+            tracks[method] = (table_tracks[topic] if topic in table_tracks else
+                              decode_track(method, rig.names, found.get(topic, none)))
         events = decode_events(found.get(S.EVENTS_TOPIC, none).messages())
         ball_truth = (table_ball if table_ball is not None else
                       decode_detections(rig.names, [found.get(t, none) for t in ball_topics])

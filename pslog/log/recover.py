@@ -68,8 +68,9 @@ def recover_session(src, dst, *, force: bool = False) -> dict:
     one is skipped; every intact record before and after it is kept. After bytes that are no
     record (a cut, a damaged length field) the walk picks up at the next intact record (see
     :func:`pslog.log._mcapio.salvage_file`). Works on finished files too (a plain copy).
-    Messages are streamed, so files larger than memory recover (only the detection and
-    truth messages are kept, to rebuild the columnar tables: :mod:`pslog.log.table`).
+    Messages are streamed, so files larger than memory recover (only the detection,
+    truth and track messages are kept, to rebuild the columnar tables:
+    :mod:`pslog.log.table`).
 
     Returns
     -------
@@ -249,7 +250,8 @@ class _TableTopics:
 
     def __contains__(self, topic: str) -> bool:
         return (topic == S.TRUTH_TOPIC or topic.startswith("/truth/ball/")
-                or (topic.startswith("/camera/") and topic.endswith("/detections")))
+                or (topic.startswith("/camera/") and topic.endswith("/detections"))
+                or S.parse_track_topic(topic) is not None)
 
 
 def _write_tables(writer, camera_names, kept: dict[str, tuple[list, list, list]]) -> None:
@@ -257,7 +259,7 @@ def _write_tables(writer, camera_names, kept: dict[str, tuple[list, list, list]]
     their topics, as :class:`pslog.log.SessionWriter` adds them at close."""
     from .reader import _Batch
 
-    for name in tables.TABLES:
+    for name in tables.names(kept):  # a track's table when any of its messages is left
         topics = tables.topics_of(name, camera_names)
         if not any(t in kept for t in topics) and name != tables.DETECTIONS:
             continue

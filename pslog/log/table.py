@@ -1,6 +1,6 @@
-"""Columnar tables of a session: its detections, ball labels and ground truth as little-endian
-numpy columns in MCAP attachments, written when the session closes (format:
-docs/log-format.md, "Columnar tables").
+"""Columnar tables of a session: its detections, ball labels, ground truth and fused tracks
+(one table per method) as little-endian numpy columns in MCAP attachments, written when the
+session closes (format: docs/log-format.md, "Columnar tables").
 
 A 90-minute match holds half a million detection messages; decoding them is most of the
 time of reading a session. The same data as a few arrays reads at memory speed. The per-frame
@@ -29,6 +29,8 @@ DETECTIONS = "pslog/table/detections"
 BALL_TRUTH = "pslog/table/ball_truth"
 TRUTH = "pslog/table/truth"
 TABLES = (DETECTIONS, BALL_TRUTH, TRUTH)
+#: a fused track's table: this prefix and the method name (one table per track topic)
+TRACK_PREFIX = "pslog/table/track/"
 MEDIA_TYPE = "application/vnd.pslog.table"
 #: ``format`` and ``version`` of the header: a reader refuses (falls back on) any other
 FORMAT = "pslog.table"
@@ -46,16 +48,46 @@ COLUMNS = {
     BALL_TRUTH: _DETECTION_COLUMNS,
     TRUTH: {"time_ns": ("<i8", ()), "position_world": ("<f8", (3,))},
 }
+#: a track table's fixed columns (leading dimension: the track's points); each per-point
+#: quality column follows as ``quality/<name>``, ``<f8``, in the order of the Track's
+#: ``quality`` mapping (protobuf's map order of the first point, as the messages read)
+TRACK_COLUMNS = {"time_ns": ("<i8", ()), "position_world": ("<f8", (3,)),
+                 "camera": ("<i4", ())}
+QUALITY_PREFIX = "quality/"
 #: columns smaller than this are stored raw (a zstd frame would not pay off); so are columns
 #: zstd shrinks by less than 10 %
 _COMPRESS_FROM = 4096
 
 
+def track_table(method: str) -> str:
+    """The name of the table of track ``method``."""
+    return TRACK_PREFIX + method
+
+
+def track_method(table: str) -> str | None:
+    """The method whose track table ``table`` is, or None (not a track table)."""
+    if table.startswith(TRACK_PREFIX) and len(table) > len(TRACK_PREFIX):
+        return table[len(TRACK_PREFIX):]
+    return None
+
+
+def _columns_of(table: str, names: Sequence[str]) -> dict[str, tuple[str, tuple]]:
+    """``name -> (dtype, trailing shape)`` of ``table`` given its column ``names`` (a track
+    table's quality columns are the track's own; every other table's are fixed)."""
+    if track_method(table) is None:
+        return COLUMNS[table]
+    return {**TRACK_COLUMNS, **{n: ("<f8", ()) for n in names
+                                if n.startswith(QUALITY_PREFIX) and n not in TRACK_COLUMNS}}
+
+
 def table_of(topic: str, camera_names: Sequence[str]) -> tuple[str, int] | None:
-    """``(table, camera index)`` whose rows a message of ``topic`` is (camera 0 for truth),
-    or None."""
+    """``(table, camera index)`` whose rows a message of ``topic`` is (camera 0 for truth
+    and tracks), or None."""
     if topic == S.TRUTH_TOPIC:
         return TRUTH, 0
+    method = S.parse_track_topic(topic)
+    if method:
+        return track_table(method), 0
     for i, name in enumerate(camera_names):
         if topic == S.detections_topic(name):
             return DETECTIONS, i
@@ -68,6 +100,9 @@ def topics_of(table: str, camera_names: Sequence[str]) -> list[str]:
     """The per-message topics a table stands for, in camera order."""
     if table == TRUTH:
         return [S.TRUTH_TOPIC]
+    method = track_method(table)
+    if method is not None:
+        return [S.track_topic(method)]
     make = S.detections_topic if table == DETECTIONS else S.ball_truth_topic
     return [make(n) for n in camera_names]
 
@@ -80,12 +115,13 @@ def encode(table: str, camera_names: Sequence[str], counts: Mapping[str, int],
     ----------
     camera_names : the rig's cameras (``frame_camera`` indexes them)
     counts : per-message topic -> number of messages the table stands for
-    columns : name -> array, every column of :data:`COLUMNS` ``[table]``
+    columns : name -> array, every column of :data:`COLUMNS` ``[table]`` (a track table:
+        those of :data:`TRACK_COLUMNS` and any ``quality/<name>`` columns, kept in order)
     """
     import zstandard
 
     blobs, described, at = [], {}, 0
-    for name, (dtype, _shape) in COLUMNS[table].items():
+    for name, (dtype, _shape) in _columns_of(table, list(columns)).items():
         values = np.ascontiguousarray(columns[name], dtype=dtype)
         raw = values.tobytes()
         codec, stored = "none", raw
@@ -137,11 +173,14 @@ def decode(data: bytes, table: str, camera_names: Sequence[str]
             for n in counts.values()):
         raise LogFormatError("table topic counts malformed")
     described = header.get("columns")
-    if not isinstance(described, dict) or set(described) != set(COLUMNS[table]):
+    if not isinstance(described, dict):
+        raise LogFormatError("table columns malformed")
+    expected_columns = _columns_of(table, list(described))
+    if set(described) != set(expected_columns):
         raise LogFormatError("table columns differ from the format's")
     body = 4 + size + (-(4 + size) % 8)
     out = {}
-    for name, (dtype, shape) in COLUMNS[table].items():
+    for name, (dtype, shape) in expected_columns.items():
         d = described[name]
         try:
             offset, stored, codec = int(d["offset"]), int(d["size"]), d["codec"]
@@ -170,6 +209,8 @@ def decode(data: bytes, table: str, camera_names: Sequence[str]
         # a writable copy in native order, as the per-message decoder gives
         out[name] = np.array(np.frombuffer(blob, dtype=dtype).reshape(dims),
                              dtype=np.dtype(dtype).newbyteorder("="))
+    if track_method(table) is not None and len({len(v) for v in out.values()}) > 1:
+        raise LogFormatError("track table columns differ in length")
     return counts, out
 
 
@@ -188,18 +229,179 @@ def build(name: str, camera_names: Sequence[str], per_topic: Mapping[str, list]
     from google.protobuf.message import DecodeError
 
     from ..errors import PslogError
-    from .reader import _Batch, decode_detections, decode_truth
+    from .reader import _Batch, decode_detections, decode_track, decode_truth
 
     topics = topics_of(name, camera_names)
     batches = [_Batch.concatenate(per_topic.get(t, [])) for t in topics]
     counts = {t: len(b) for t, b in zip(topics, batches, strict=True)}
     try:
+        method = track_method(name)
         if name == TRUTH:
             truth = decode_truth(batches[0])
             columns = {"time_ns": truth.time_ns, "position_world": truth.position_world}
+        elif method is not None:
+            track = decode_track(method, camera_names, batches[0])
+            columns = track_columns(track)
+            if len(track):  # the map's keys in the first message's byte order (see
+                b = batches[0]  # track_from_columns), not this process's parse order
+                keys = _entry_keys(b.buf[b.start[0]:b.end[0]].tobytes())
+                extra = [QUALITY_PREFIX + k for k in track.quality
+                         if k not in S.TRACK_FIXED_QUALITY]
+                ordered = [QUALITY_PREFIX + k for k in keys]
+                if sorted(ordered) == sorted(extra):
+                    rest = [k for k in columns if k not in extra]
+                    columns = {k: columns[k] for k in rest + ordered}
         else:
             d = decode_detections(camera_names, batches)
             columns = {k: getattr(d, k) for k in COLUMNS[name]}
     except (DecodeError, PslogError, ValueError):
         return None
     return encode(name, camera_names, counts, columns)
+
+
+def track_columns(track) -> dict[str, np.ndarray]:
+    """The columns of a :class:`~pslog.records.Track`'s table (quality in its order)."""
+    return {"time_ns": track.time_ns, "position_world": track.position_world,
+            "camera": track.camera,
+            **{QUALITY_PREFIX + k: v for k, v in track.quality.items()}}
+
+
+def track_from_columns(method: str, columns: Mapping[str, np.ndarray]):
+    """The :class:`~pslog.records.Track` of a decoded track table's columns."""
+    from ..records import Track
+
+    n = len(QUALITY_PREFIX)
+    quality = {k[n:]: v for k, v in columns.items() if k.startswith(QUALITY_PREFIX)}
+    # the fixed fields first, then the map's keys as this process's protobuf orders them
+    # (as the per-message reader does; the table holds them in the writer's byte order)
+    fixed = [k for k in S.TRACK_FIXED_QUALITY if k in quality]
+    extra = [k for k in quality if k not in S.TRACK_FIXED_QUALITY]
+    order = fixed + quality_order(extra)
+    if sorted(order) == sorted(quality):
+        quality = {k: quality[k] for k in order}
+    return Track(method, columns["time_ns"], columns["position_world"], columns["camera"],
+                 quality)
+
+
+def names(topics) -> list[str]:
+    """Every table a file with these ``topics`` may hold: :data:`TABLES`, then one per
+    track topic (sorted)."""
+    return [*TABLES, *sorted(track_table(m) for t in topics
+                             if (m := S.parse_track_topic(t)))]
+
+
+def track_columns_of(tracks: Sequence) -> dict[str, np.ndarray]:
+    """The columns of the track table of the :class:`~pslog.records.Track` s a writer wrote
+    on one topic (in order), made without the messages: what reading those messages gives
+    (:func:`pslog.log.reader.decode_track`), so a writer needs not keep them.
+
+    Reading concatenates the points in file order and sorts them by time (stable); a fixed
+    ``TrackPoint`` field (:data:`pslog.log._schemas.TRACK_FIXED_QUALITY`) NaN at every point
+    is left out (the writer stores NaN for a field a track lacks); a map key is a column,
+    NaN at the points of a track without it (an empty track has none), in the order the
+    messages give (:func:`_map_order`). Empty: no quality column at all.
+    """
+    n = sum(len(t) for t in tracks)
+    times = np.concatenate([t.time_ns for t in tracks] or [np.zeros(0, np.int64)])
+    order = np.argsort(times, kind="stable")
+
+    def column(key: str) -> np.ndarray:
+        return np.concatenate([t.quality[key] if key in t.quality else np.full(len(t), np.nan)
+                               for t in tracks])[order]
+
+    quality = {}
+    if n:
+        for key in S.TRACK_FIXED_QUALITY:
+            values = column(key)
+            if not np.all(np.isnan(values)):
+                quality[key] = values
+        for key in dict.fromkeys(k for t in tracks for k in _map_order(t)):
+            quality[key] = column(key)
+    return {"time_ns": times[order],
+            "position_world": np.concatenate([t.position_world for t in tracks]
+                                             or [np.zeros((0, 3))])[order],
+            "camera": np.concatenate([t.camera for t in tracks]
+                                     or [np.zeros(0, np.int32)])[order].astype(np.int32),
+            **{QUALITY_PREFIX + k: v for k, v in quality.items()}}
+
+
+def _map_order(track) -> list[str]:
+    """The quality map keys of ``track``'s messages in the order the writer serialises them
+    (the first point's map: the writer's map bytes are protobuf's own, checked by the
+    writer); none for an empty track (it has no message). The order a reader's protobuf
+    iterates a parsed map in varies between processes; :func:`quality_order` gives it from
+    this one."""
+    extra = [k for k in track.quality if k not in S.TRACK_FIXED_QUALITY]
+    if not extra or not len(track):
+        return []
+    msg = S.TrackPoint()
+    for key in extra:
+        msg.quality[key] = float(track.quality[key][0])
+    return _entry_keys(msg.SerializeToString())
+
+
+def _entry_keys(data: bytes) -> list[str]:
+    """The keys of the quality map entries (field 10) of a serialised ``TrackPoint``, in
+    byte order (a malformed message: the keys found up to where it stops making sense)."""
+
+    def varint(at: int) -> tuple[int, int]:
+        value = shift = 0
+        while True:
+            b = data[at]
+            value |= (b & 0x7F) << shift
+            at, shift = at + 1, shift + 7
+            if b < 0x80:
+                return value, at
+
+    keys, at = [], 0
+    try:
+        while at < len(data):
+            tag, at = varint(at)
+            wire = tag & 7
+            if wire == 0:
+                _v, at = varint(at)
+            elif wire == 1:
+                at += 8
+            elif wire == 5:
+                at += 4
+            elif wire == 2:
+                length, at = varint(at)
+                body, at = data[at:at + length], at + length
+                if tag >> 3 == 10 and body[:1] == b"\x0a":  # map entry: its key first
+                    size, start, shift = 0, 1, 0
+                    while True:
+                        b = body[start]
+                        size |= (b & 0x7F) << shift
+                        start, shift = start + 1, shift + 7
+                        if b < 0x80:
+                            break
+                    keys.append(body[start:start + size].decode("utf-8"))
+            else:
+                break
+    except (IndexError, UnicodeDecodeError):
+        pass
+    return keys
+
+
+def quality_order(keys: Sequence[str]) -> list[str]:
+    """``keys`` (quality map keys in a message's byte order) in the order this process's
+    protobuf iterates the map parsed from such a message: the order the per-message reader
+    gives the Track's ``quality`` mapping."""
+    data = b"".join(_entry(k) for k in keys)
+    return list(S.TrackPoint.FromString(data).quality)
+
+
+def _entry(key: str) -> bytes:
+    raw = key.encode("utf-8")
+    body = _varint(len(raw)) + raw
+    entry = b"\x0a" + body + b"\x11" + bytes(8)
+    return b"\x52" + _varint(len(entry)) + entry
+
+
+def _varint(n: int) -> bytes:
+    out = bytearray()
+    while True:
+        b, n = n & 0x7F, n >> 7
+        out.append(b | (0x80 if n else 0))
+        if not n:
+            return bytes(out)

@@ -167,6 +167,9 @@ class SessionWriter:
         self._topic_of: dict[int, str] = {}
         # table -> a copied table's attachment data (None: none to copy, made again)
         self._adopted: dict[str, bytes | None] = {}
+        # the tracks added on a track channel (its table is made from them at close, not from
+        # copies of its messages: those are most of a fused session's bytes)
+        self._tracks_of: dict[int, list[Track]] = {}
 
         # metadata first and flushed at once, so even a file killed seconds later is a session
         record = {
@@ -263,6 +266,15 @@ class SessionWriter:
             self._table_parts[cid].append(_Batch(buf, begin, begin + lengths[sel],
                                                  times[sel], sequence[sel]))
 
+    def _direct_track(self, channel: int, topic: str) -> list[Track] | None:
+        """The list that keeps the tracks added on ``channel`` (not their messages' bytes:
+        its table is made from them), or None when other messages were written on it (its
+        table is then made from the messages)."""
+        if channel in self._tracks_of or self.counts.get(topic, 0) == 0:
+            self._table_parts.pop(channel, None)  # its messages' bytes are not kept
+            return self._tracks_of.setdefault(channel, [])
+        return None
+
     def _adopt_table(self, name: str, data: bytes | None) -> None:
         """A table read from the session being copied (checked): written as it is at close
         when the messages its topics got here are exactly as many as it names (a copy of
@@ -273,13 +285,18 @@ class SessionWriter:
         """Write each table whose topics have a channel as an attachment (see
         :mod:`pslog.log.table`), made from the messages written (:func:`table.build`), or a
         copied one (:meth:`_adopt_table`) that names as many messages as were written."""
-        for name in table.TABLES:
+        for name in table.names(self._topic_of.values()):  # fused tracks' tables too
             channels = [cid for cid, (t, _cam) in self._table_rows.items() if t == name]
             if not channels:
                 continue
-            per_topic = {self._topic_of[cid]: self._table_parts[cid] for cid in channels}
+            direct = [self._tracks_of[cid] for cid in channels if cid in self._tracks_of]
+            per_topic = {self._topic_of[cid]: self._table_parts[cid] for cid in channels
+                         if cid in self._table_parts}
             counts = {t: sum(len(b) for b in per_topic.get(t, []))
                       for t in table.topics_of(name, self._names)}
+            if direct:  # a track channel fed by add_track only
+                counts = {t: sum(len(x) for x in direct[0])
+                          for t in table.topics_of(name, self._names)}
             data = self._adopted.get(name)
             if data is not None:
                 try:
@@ -288,7 +305,10 @@ class SessionWriter:
                     copied = None
                 if copied != counts:
                     data = None
-            if data is None:
+            if data is None and direct:
+                data = table.encode(name, self._names, counts,
+                                    table.track_columns_of(direct[0]))
+            elif data is None:
                 data = table.build(name, self._names, per_topic)
             if data is not None:
                 self._mcap.add_attachment(0, 0, name, table.MEDIA_TYPE, data)
@@ -630,6 +650,7 @@ class SessionWriter:
             raise InputError(_negative_time(int(track.time_ns.min())))
         if n and not 0 <= track.camera.min() <= track.camera.max() < len(self._names):
             raise InputError(f"track {method!r}: camera index out of range of the rig")
+        direct = self._direct_track(channel, S.track_topic(method))
         first_id = self._scene_ids.get(method, 0)
         # a block of points at a time, every message's bytes made with numpy (_encode) and
         # written as one block: a Python object per point was most of the time of writing a
@@ -651,6 +672,8 @@ class SessionWriter:
         self._add_track_points(track, lo, n, method, fixed, extra, first_id, color, channel,
                                scene_channel)
         self._scene_ids[method] = first_id + n
+        if direct is not None:
+            direct.append(track)
         self._count(S.track_topic(method), n)
         self._count(S.track_scene_topic(method), n)
 
