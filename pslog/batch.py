@@ -19,8 +19,6 @@ load it). Layout of the output folder, mirroring the input tree::
 
 from __future__ import annotations
 
-from typing import Any
-
 import contextlib
 import csv
 import glob
@@ -34,6 +32,7 @@ import time
 from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import Any
 
 from pslog.errors import InputError, PslogError
 
