@@ -5,7 +5,7 @@ the colours defined here, so a colour means the same thing everywhere.
 Plain 8-bit RGB tuples, no viewer import (the core never imports ``viewers``).
 
 Families, chosen apart in CIELAB (ΔE*76 ≥ 20 between any two of the families' members,
-checked by ``tests/test_viewer_palette.py``):
+checked by ``tests/test_viewer_glance.py``):
 
 - methods: saturated, mid-lightness colours (L* 45-70), visible on rerun's light and dark
   themes;

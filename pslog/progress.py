@@ -108,7 +108,8 @@ class Progress:
                 SpinnerColumn(), TextColumn(f"pslog {self.command}"),
                 TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                 TextColumn(self.unit), TimeElapsedColumn(), TimeRemainingColumn(),
-                console=Console(file=self.stream), transient=True,
+                # soft_wrap: a result line printed meanwhile keeps its own line breaks
+                console=Console(file=self.stream, soft_wrap=True), transient=True,
                 # a result printed meanwhile goes above the bar only when it shares the
                 # terminal; piped standard output is never taken over
                 redirect_stdout=bool(getattr(sys.stdout, "isatty", lambda: False)()),
