@@ -1013,25 +1013,10 @@ def _quality_entries(extra: dict[str, np.ndarray], n: int, block: int = 1 << 15)
     entry is not of that form (a key of 117 bytes or more)."""
     if not extra or not n:
         return iter([b""] * n)
-    probe = S.TrackPoint()
-    for k in extra:
-        probe.quality[k] = 1.0
-    raw = probe.SerializeToString()  # the map alone: every other field is at its default
-    template, slots, at = bytearray(), {}, 0
-    while at < len(raw):
-        if at + 4 > len(raw):
-            return None
-        length, klen = raw[at + 1], raw[at + 3]
-        if (raw[at] != 0x52 or raw[at + 2] != 0x0A or length >= 0x80 or klen >= 0x80
-                or length != klen + 11 or raw[at + 4 + klen] != 0x11):
-            return None
-        key = raw[at + 4:at + 4 + klen].decode("utf-8")
-        slots[key] = len(template) + 5 + klen
-        template += raw[at:at + 2 + length]
-        at += 2 + length
-    if sorted(slots) != sorted(extra):
+    found = _quality_template(extra)
+    if found is None:
         return None
-    return _entry_rows(np.frombuffer(bytes(template), dtype=np.uint8), slots, extra, n, block)
+    return _entry_rows(found[0], found[1], extra, n, block)
 
 
 def _entry_rows(template: np.ndarray, slots: dict[str, int], extra: dict[str, np.ndarray],
