@@ -133,3 +133,14 @@ def test_the_python_walk_through_runs_as_written(capsys, monkeypatch):
         exec(compile(block, "docs/python.md", "exec"), {})
     out = capsys.readouterr().out
     assert "offset" in out and "mean" in out and "'typeA'" in out
+
+
+def test_the_readmes_python_block_runs(capsys, monkeypatch):
+    import re
+
+    monkeypatch.chdir(ROOT)
+    blocks = re.findall(r"```python\n(.*?)```", (ROOT / "README.md").read_text(), re.DOTALL)
+    assert blocks
+    for block in blocks:
+        exec(compile(block, "README.md", "exec"), {})
+    assert "'typeA'" in capsys.readouterr().out
