@@ -18,7 +18,8 @@ A candidate ``x`` of camera ``a`` at (corrected) time ``t`` is judged by three g
    compared with ``τ_b = epipolar_px + ½ A |t - t_0| |t - t_1|`` (the error a linear
    carry makes under an image acceleration of at most ``A``). ``b`` *supports* ``x`` when
    its best pair has ``d_b <= τ_b``. Of b's frames already decided, only the chosen candidate
-   (and any only outscored) is carried, never one a gate rejected (:func:`_support_one`).
+   (and any only outscored) is carried, never one a gate rejected (:func:`_support_one`),
+   once the stillness test can judge the frame (:func:`_can_judge`).
 2. **Track** (ray-to-track distance). The points accepted so far (each candidate's rays
    crossed with its support's carried rays, least squares) over the last ``track_window_s``
    are fitted with a ballistic model (constant velocity plus gravity); the distance of
@@ -459,7 +460,8 @@ def _support_one(t: int, line, keys: list[int], usable, search, wait_ns: int, ca
     a wrong point that entered the track); a frame not decided yet, or decided with none
     chosen, with every candidate (that the gate found no ball in it says nothing about which
     candidate is the ball; dropping them too made rejections self-sustaining: no support,
-    so nothing chosen, so no support).
+    so nothing chosen, so no support); nor a frame the stillness test cannot judge yet
+    (:func:`_can_judge`: a static object may have been chosen and the ball rejected).
     The decisions are sequential, so this is computed when the candidate's frame is decided.
 
     ``keys``: b's frame times in frame-table order; ``usable(j)``: the candidates of b's
