@@ -18,7 +18,8 @@ A candidate ``x`` of camera ``a`` at (corrected) time ``t`` is judged by three g
    compared with ``τ_b = epipolar_px + ½ A |t - t_0| |t - t_1|`` (the error a linear
    carry makes under an image acceleration of at most ``A``). ``b`` *supports* ``x`` when
    its best pair has ``d_b <= τ_b``. Of b's frames already decided, only the chosen candidate
-   (and any only outscored) is carried, never one a gate rejected (:func:`_support_one`).
+   (and any only outscored) is carried, never one a gate rejected (:func:`_support_one`),
+   once the stillness test can judge the frame (:func:`_can_judge`).
 2. **Track** (ray-to-track distance). The points accepted so far (each candidate's rays
    crossed with its support's carried rays, least squares) over the last ``track_window_s``
    are fitted with a ballistic model (constant velocity plus gravity); the distance of
@@ -459,7 +460,8 @@ def _support_one(t: int, line, keys: list[int], usable, search, wait_ns: int, ca
     a wrong point that entered the track); a frame not decided yet, or decided with none
     chosen, with every candidate (that the gate found no ball in it says nothing about which
     candidate is the ball; dropping them too made rejections self-sustaining: no support,
-    so nothing chosen, so no support).
+    so nothing chosen, so no support); nor a frame the stillness test cannot judge yet
+    (:func:`_can_judge`: a static object may have been chosen and the ball rejected).
     The decisions are sequential, so this is computed when the candidate's frame is decided.
 
     ``keys``: b's frame times in frame-table order; ``usable(j)``: the candidates of b's
@@ -997,6 +999,7 @@ def _decide_in_order(c: _Candidates, rig: Rig, options: GatingOptions, frames, t
     spoiled = [[False] * len(k) for k in keys]
     used_rows = used.tolist()
     F_lists = F.tolist()
+    lags = [int(np.ceil(options.static_s * cam.fps)) for cam in rig.cameras]  # as _static
     for lo, hi in frames:
         a = int(c.camera[lo])
         at = position[a][lo]
@@ -1021,7 +1024,9 @@ def _decide_in_order(c: _Candidates, rig: Rig, options: GatingOptions, frames, t
         decider.run(_Candidates(c.camera[sl], c.time_ns[sl], c.uv_und[sl], c.ray_dir[sl],
                                 c.frame[sl]), [(0, hi - lo)], ratio[sl], points[sl],
                     in_front[sl], reason[sl], (static[sl], stillness[sl]))
-        kept = _supporting(reason[sl].tolist())
+        judged = _can_judge(keys[a][at], [keys[a][at - lag] for lag in
+                                          range(1, min(lags[a], at) + 1)], lags[a], options)
+        kept = _supporting(reason[sl].tolist()) if judged else None
         if kept is not None:
             spoiled[a][at] = True
             usable[a][at] = [(t_ns[i], *und[i]) for i, ok in zip(range(lo, hi), kept,
@@ -1036,6 +1041,19 @@ def _supporting(reasons: list[int]) -> list[bool] | None:
     if all(r < 0 or r == OUTSCORED for r in reasons) or not any(r < 0 for r in reasons):
         return None
     return [r < 0 or r == OUTSCORED for r in reasons]
+
+
+def _can_judge(key: int, earlier: list[int], lags: int, options: GatingOptions) -> bool:
+    """Whether the stillness test (:func:`_static`) can judge a frame's candidates: it calls a
+    candidate static when still in ``0.75 lags`` of its camera's ``lags`` frames before it
+    that lie within 1.5 ``static_s`` (``key``, ``earlier``: the frame's and those frames'
+    times ns). With fewer (a camera's first ``static_s``, or after a blackout) no candidate
+    can be static yet, so a static object seen by every camera passes every gate, may be
+    chosen and seed the track, and the gates then reject the ball: such a frame's
+    rejections are no evidence, and all its candidates keep supporting (:func:`_supporting`).
+    """
+    recent = sum(1 for k in earlier if key - k <= 1.5 * options.static_s * NS)
+    return recent >= 0.75 * lags
 
 
 def _stillness_one(key: int, pts, earlier, lags: int, options: GatingOptions):
@@ -1302,7 +1320,9 @@ class StreamGate:
         reason = np.full(k, -1, dtype=np.int8)
         self.decider.run(c, [(0, k)], ratio, points, in_front, reason, still)
         f.reason = reason
-        kept = _supporting(reason.tolist())
+        judged = _can_judge(f.key, [frames[at - lag].key for lag in range(1, min(lags, at) + 1)],
+                            lags, o)
+        kept = _supporting(reason.tolist()) if judged else None
         if kept is not None:
             f.support = [s for s, ok in zip(f.support, kept, strict=True) if ok]
 
