@@ -41,9 +41,98 @@ INNOVATION_SIGMAS = 5.0
 DEFAULT_NOISE_PX = 0.5
 
 
+#: Median of the norm of a 2D Gaussian of σ per axis, in σ: Rayleigh's median √(2 ln 2).
+RAYLEIGH_MEDIAN = float(np.sqrt(2.0 * np.log(2.0)))
+#: The estimate of the detection noise needs this many innovations before it is used; until
+#: then the tests' σ is at least DEFAULT_NOISE_PX.
+MIN_INNOVATIONS = 9
+
+
+def innovation_factors(events: np.ndarray, j1: np.ndarray, j2: np.ndarray,
+                       time_ns: np.ndarray) -> np.ndarray:
+    """``√(1 + (1 + ρ)² + ρ²)``: the innovation's noise in units of the detection noise σ
+    (module docstring), (k,) float, for the rows ``events`` and past points ``j1, j2``."""
+    delta_pred = (time_ns[events] - time_ns[j1]) / NS
+    delta_prev = (time_ns[j1] - time_ns[j2]) / NS
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rho = delta_pred / delta_prev
+        return np.sqrt(1.0 + (1.0 + rho) ** 2 + rho ** 2)
+
+
+class NoiseEstimate:
+    """The detection noise the session's own eq. (2) innovations imply, causally.
+
+    The tests of this module assume a detection noise ``σ``; the one the user states
+    (``noise_px``) is often too small (a detector's real noise is rarely measured), and a
+    too small ``σ`` refuses good points in numbers. Each made point's innovation ``r``
+    divided by its factor ``√(1 + (1 + ρ)² + ρ²)`` is, under the model, the norm of a 2D
+    Gaussian of ``σ`` per axis (plus the small extrapolation error, which can only raise the
+    estimate), whose median is ``σ √(2 ln 2)`` (Rayleigh). The point's tests use
+
+        ``σ_t = max(noise_px, median(r_i / factor_i over the points before t) / √(2 ln 2))``
+
+    (at least 0.5 px until ``MIN_INNOVATIONS`` points exist). The median of all earlier
+    points is robust: the kicks and bounces the tests are there for are few. The estimate
+    uses every made, valid point's innovation, refused or not, so it never depends on the
+    tests' own decisions; points in row order, one by one, so that
+    :class:`~pslog.fusion.pseudo.TypeAStream` (one instance across its pushes) gives each
+    point the same ``σ`` as the batch run, bit for bit. Two heaps: O(log n) per point.
+    """
+
+    def __init__(self) -> None:
+        import heapq
+
+        self._push, self._pop = heapq.heappush, heapq.heappop
+        self._low: list[float] = []  # max-heap (negated) of the lower half
+        self._high: list[float] = []  # min-heap of the upper half
+
+    @property
+    def count(self) -> int:
+        """How many innovations the estimate holds."""
+        return len(self._low) + len(self._high)
+
+    def median(self) -> float:
+        """The median of the normalised innovations so far, pixels (NaN: none)."""
+        if not self.count:
+            return float("nan")
+        if len(self._low) > len(self._high):
+            return -self._low[0]
+        return 0.5 * (-self._low[0] + self._high[0])
+
+    def _add(self, x: float) -> None:
+        if self._low and x > -self._low[0]:
+            self._push(self._high, x)
+        else:
+            self._push(self._low, -x)
+        if len(self._low) > len(self._high) + 1:
+            self._push(self._high, -self._pop(self._low))
+        elif len(self._high) > len(self._low):
+            self._push(self._low, -self._pop(self._high))
+
+    def sigmas(self, normalised: np.ndarray, noise_px: float | None) -> np.ndarray:
+        """Each point's ``σ_t`` (pixels, (k,) float), then its innovation added.
+
+        Parameters
+        ----------
+        normalised : (k,) float, ``r / factor`` of the points in row order, pixels (NaN: a
+            point not made, invalid, or not projectable; not added)
+        noise_px : float or None, the stated noise per image axis, pixels (None: 0.5)
+        """
+        floor = DEFAULT_NOISE_PX if noise_px is None else float(noise_px)
+        out = np.empty(len(normalised))
+        for i, x in enumerate(normalised.tolist()):
+            if self.count >= MIN_INNOVATIONS:
+                out[i] = max(floor, self.median() / RAYLEIGH_MEDIAN)
+            else:
+                out[i] = max(floor, DEFAULT_NOISE_PX)
+            if x == x:  # (finite: NaN is not)
+                self._add(x)
+        return out
+
+
 def failed_predictions(prep, events: np.ndarray, j1: np.ndarray, j2: np.ndarray,
                        predicted: np.ndarray, innovation_px: np.ndarray,
-                       noise_px: float | None) -> np.ndarray:
+                       noise_px: float | np.ndarray | None) -> np.ndarray:
     """Which type A points the newest detection contradicts (module docstring).
 
     Parameters
@@ -54,7 +143,8 @@ def failed_predictions(prep, events: np.ndarray, j1: np.ndarray, j2: np.ndarray,
     innovation_px : (k,) float, distance between the newest detection and the projection
         of ``P̂_t``, recorded-image pixels (NaN: not projectable; never refused here, the
         validity flags judge it)
-    noise_px : float or None, the detections' noise per image axis, pixels (None: 0.5)
+    noise_px : float, (k,) float or None, the detections' noise per image axis, pixels
+        (None: 0.5; an array: each point's, :meth:`NoiseEstimate.sigmas`)
 
     Returns
     -------
@@ -63,13 +153,19 @@ def failed_predictions(prep, events: np.ndarray, j1: np.ndarray, j2: np.ndarray,
     time_ns = prep.obs.time_ns
     delta_pred = (time_ns[events] - time_ns[j1]) / NS
     delta_prev = (time_ns[j1] - time_ns[j2]) / NS
-    focal = np.array([max(c.K[0, 0], c.K[1, 1]) for c in prep.cameras])[prep.obs.camera[events]]
-    sigma = DEFAULT_NOISE_PX if noise_px is None else float(noise_px)
+    cam = prep.obs.camera[events]
+    focal = np.array([max(c.K[0, 0], c.K[1, 1]) for c in prep.cameras])[cam]
+    axis = np.array([c.R[2] for c in prep.cameras])[cam]  # optical axes in the world
+    sigma = DEFAULT_NOISE_PX if noise_px is None else np.asarray(noise_px, dtype=np.float64)
     with np.errstate(invalid="ignore", divide="ignore"):
-        rho = delta_pred / delta_prev
-        sigma_r = sigma * np.sqrt(1.0 + (1.0 + rho) ** 2 + rho ** 2)
-        depth = np.linalg.norm(predicted - prep.ray_origin[events], axis=1)
-        model_px = 0.5 * G * delta_pred * (delta_pred + delta_prev) * focal / depth
+        sigma_r = sigma * innovation_factors(events, j1, j2, time_ns)
+        offset = predicted - prep.ray_origin[events]
+        depth = np.linalg.norm(offset, axis=1)
+        z = np.sum(offset * axis, axis=1)  # depth along the optical axis, D cos θ
+        # a motion e across the ray at distance D, θ off the optical axis, moves the image by
+        # f e / (D cos² θ) radially (u = f tan θ) and f e / (D cos θ) tangentially: the larger
+        # is f D / Z² pixels per metre (f / D on the axis only)
+        model_px = 0.5 * G * delta_pred * (delta_pred + delta_prev) * focal * depth / (z * z)
         return innovation_px > INNOVATION_SIGMAS * sigma_r + model_px
 
 
@@ -132,7 +228,7 @@ def _bends(prep, a, b, c, point, speed, sigma):
         return (dt1 > 0) & (dt2 > 0) & (depth > 0) & (change > bound)
 
 
-def kinked_points(prep, events: np.ndarray, past: tuple, noise_px: float | None,
+def kinked_points(prep, events: np.ndarray, past: tuple, noise_px: float | np.ndarray | None,
                   max_gap_ns: int) -> np.ndarray:
     """Which type A points rest on an interval in which some camera saw the motion change.
 
@@ -171,7 +267,8 @@ def kinked_points(prep, events: np.ndarray, past: tuple, noise_px: float | None,
     prep : pslog.fusion._prepare.Prepared, the session's observations
     events : (k,) int, rows of the newest detections
     past : (P_{t-1}, P_{t-2}, predicted), two PseudoStereoPoints of k rows and (k, 3) metres
-    noise_px : float or None, the detections' noise per image axis, pixels (None: 0.5)
+    noise_px : float, (k,) float or None, the detections' noise per image axis, pixels
+        (None: 0.5; an array: each point's, :meth:`NoiseEstimate.sigmas`)
     max_gap_ns : int, the largest bridged gap, nanoseconds
 
     Returns
@@ -180,7 +277,8 @@ def kinked_points(prep, events: np.ndarray, past: tuple, noise_px: float | None,
     """
     p1, p2, predicted = past
     time_ns = prep.obs.time_ns
-    sigma = DEFAULT_NOISE_PX if noise_px is None else float(noise_px)
+    sigma = np.broadcast_to(DEFAULT_NOISE_PX if noise_px is None
+                            else np.asarray(noise_px, dtype=np.float64), events.shape)
     before, after = _previous_next(prep.obs.camera)
     t_event = time_ns[events]
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -219,7 +317,8 @@ def kinked_points(prep, events: np.ndarray, past: tuple, noise_px: float | None,
     bent_all = available & _bends(prep, np.maximum(a_all, 0), np.maximum(b_all, 0),
                                   np.maximum(c_all, 0),
                                   np.concatenate([t[3] for t in triplets]),
-                                  np.tile(speed, len(triplets)), sigma)
+                                  np.tile(speed, len(triplets)),
+                                  np.tile(sigma, len(triplets)))
 
     def has(i):
         return available[i * k:(i + 1) * k]
