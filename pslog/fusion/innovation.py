@@ -16,7 +16,13 @@ the three instants, Gaussian detection noise ``σ`` per image axis) it is
 - model: eq. (2) extrapolates linearly; under a constant acceleration ``a`` its error is
   exactly ``½ a δ_pred (δ_pred + δ_prev)`` (the remainder of linear interpolation through
   ``t-2`` and ``t-1`` evaluated at ``t``), at most ``½ g δ_pred (δ_pred + δ_prev)`` for a
-  ball in flight, ``f / depth`` pixels per metre in the newest camera.
+  ball in flight; a motion across the ray at distance ``D``, ``θ`` off the optical axis,
+  moves the image by ``f / (D cos² θ)`` pixels per metre radially and ``f / (D cos θ)``
+  tangentially, so the bound takes ``f D / Z²`` (``Z = D cos θ``, depth along the axis).
+
+``σ`` is at least the stated noise and at least the noise the session's earlier innovations
+imply (:class:`NoiseEstimate`): a stated noise below the detector's real one would refuse
+good points in numbers.
 
 The point is refused when ``r > k σ_r + e_model`` with ``k = 5``: for a Gaussian 2D error
 ``P(|r| > k σ_r) = exp(-k² / 2) ≈ 4e-6``, so under the model (and the stated noise) a valid
@@ -37,7 +43,8 @@ from ..records import NS
 #: Refuse a prediction whose innovation exceeds this many standard deviations (plus the
 #: model bound): a Gaussian 2D innovation does with probability exp(-K²/2) ~ 4e-6.
 INNOVATION_SIGMAS = 5.0
-#: The detection noise assumed when the caller gives none (FusionOptions' default).
+#: The detection noise assumed when the caller gives none (FusionOptions' default), and the
+#: tests' least σ until NoiseEstimate holds MIN_INNOVATIONS innovations.
 DEFAULT_NOISE_PX = 0.5
 
 
