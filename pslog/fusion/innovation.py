@@ -44,15 +44,17 @@ from ..records import NS
 #: model bound): a Gaussian 2D innovation does with probability exp(-K²/2) ~ 4e-6.
 INNOVATION_SIGMAS = 5.0
 #: The detection noise assumed when the caller gives none (FusionOptions' default), and the
-#: tests' least σ until NoiseEstimate holds MIN_INNOVATIONS innovations.
+#: tests' least σ until NoiseEstimate holds NOISE_EVERY innovations.
 DEFAULT_NOISE_PX = 0.5
 
 
 #: Median of the norm of a 2D Gaussian of σ per axis, in σ: Rayleigh's median √(2 ln 2).
 RAYLEIGH_MEDIAN = float(np.sqrt(2.0 * np.log(2.0)))
-#: The estimate of the detection noise needs this many innovations before it is used; until
-#: then the tests' σ is at least DEFAULT_NOISE_PX.
-MIN_INNOVATIONS = 9
+#: The noise estimate: the median of the last NOISE_WINDOW innovations, renewed every
+#: NOISE_EVERY innovations (vectorised in a batch run, the same values in a stream); until
+#: NOISE_EVERY innovations exist, the tests' σ is at least DEFAULT_NOISE_PX.
+NOISE_WINDOW = 256
+NOISE_EVERY = 32
 
 
 def innovation_factors(events: np.ndarray, j1: np.ndarray, j2: np.ndarray,
@@ -74,66 +76,67 @@ class NoiseEstimate:
     too small ``σ`` refuses good points in numbers. Each made point's innovation ``r``
     divided by its factor ``√(1 + (1 + ρ)² + ρ²)`` is, under the model, the norm of a 2D
     Gaussian of ``σ`` per axis (plus the small extrapolation error, which can only raise the
-    estimate), whose median is ``σ √(2 ln 2)`` (Rayleigh). The point's tests use
+    estimate), whose median is ``σ √(2 ln 2)`` (Rayleigh). A point's tests use
 
-        ``σ_t = max(noise_px, median(r_i / factor_i over the points before t) / √(2 ln 2))``
+        ``σ_t = max(noise_px, median(r_i / factor_i) / √(2 ln 2))``
 
-    (at least 0.5 px until ``MIN_INNOVATIONS`` points exist). The median of all earlier
-    points is robust: the kicks and bounces the tests are there for are few. The estimate
-    uses every made, valid point's innovation, refused or not, so it never depends on the
-    tests' own decisions; points in row order, one by one, so that
-    :class:`~pslog.fusion.pseudo.TypeAStream` (one instance across its pushes) gives each
-    point the same ``σ`` as the batch run, bit for bit. Two heaps: O(log n) per point.
+    the median over the last ``NOISE_WINDOW`` (256) innovations before the latest multiple
+    of ``NOISE_EVERY`` (32) innovations made before the point (the middle element: a
+    selection, no arithmetic); at least 0.5 px before the first 32. A median is robust: the
+    kicks and bounces the tests are there for are a few percent of the points. The estimate
+    takes every made, valid point's innovation, refused or not (it never depends on the
+    tests' decisions), in row order, so :class:`~pslog.fusion.pseudo.TypeAStream` (one
+    instance across its pushes) gives each point the batch run's ``σ``, bit for bit.
     """
 
     def __init__(self) -> None:
-        import heapq
-
-        self._push, self._pop = heapq.heappush, heapq.heappop
-        self._low: list[float] = []  # max-heap (negated) of the lower half
-        self._high: list[float] = []  # min-heap of the upper half
+        self._count = 0  # innovations so far
+        # the last NOISE_WINDOW + NOISE_EVERY of them: every window still to be needed
+        self._tail = np.zeros(0)
 
     @property
     def count(self) -> int:
-        """How many innovations the estimate holds."""
-        return len(self._low) + len(self._high)
-
-    def median(self) -> float:
-        """The median of the normalised innovations so far, pixels (NaN: none)."""
-        if not self.count:
-            return float("nan")
-        if len(self._low) > len(self._high):
-            return -self._low[0]
-        return 0.5 * (-self._low[0] + self._high[0])
-
-    def _add(self, x: float) -> None:
-        if self._low and x > -self._low[0]:
-            self._push(self._high, x)
-        else:
-            self._push(self._low, -x)
-        if len(self._low) > len(self._high) + 1:
-            self._push(self._high, -self._pop(self._low))
-        elif len(self._high) > len(self._low):
-            self._push(self._low, -self._pop(self._high))
+        """How many innovations the estimate has taken."""
+        return self._count
 
     def sigmas(self, normalised: np.ndarray, noise_px: float | None) -> np.ndarray:
-        """Each point's ``σ_t`` (pixels, (k,) float), then its innovation added.
+        """Each point's ``σ_t`` (pixels, (k,) float), then its innovation taken.
 
         Parameters
         ----------
         normalised : (k,) float, ``r / factor`` of the points in row order, pixels (NaN: a
-            point not made, invalid, or not projectable; not added)
+            point not made, invalid, or not projectable; not taken)
         noise_px : float or None, the stated noise per image axis, pixels (None: 0.5)
         """
         floor = DEFAULT_NOISE_PX if noise_px is None else float(noise_px)
-        out = np.empty(len(normalised))
-        for i, x in enumerate(normalised.tolist()):
-            if self.count >= MIN_INNOVATIONS:
-                out[i] = max(floor, self.median() / RAYLEIGH_MEDIAN)
-            else:
-                out[i] = max(floor, DEFAULT_NOISE_PX)
-            if x == x:  # (finite: NaN is not)
-                self._add(x)
+        normalised = np.asarray(normalised, dtype=np.float64)
+        valid = ~np.isnan(normalised)
+        values = normalised[valid]
+        # innovations taken before each point, and the checkpoint (a multiple of EVERY) it uses
+        before = self._count + np.cumsum(valid) - valid
+        checkpoint = before // NOISE_EVERY * NOISE_EVERY
+        # the innovations kept and the new ones: global index g at combined[g - offset]
+        combined = np.concatenate([self._tail, values])
+        offset = self._count - len(self._tail)
+        out = np.full(len(normalised), max(floor, DEFAULT_NOISE_PX))
+        first, last = (int(checkpoint[0]), int(checkpoint[-1])) if len(normalised) else (0, 0)
+        marks = np.arange(max(first, NOISE_EVERY), last + 1, NOISE_EVERY, dtype=np.int64)
+        if len(marks):
+            medians = np.empty(len(marks))
+            full = marks >= NOISE_WINDOW  # a whole window: all at once
+            for i in np.flatnonzero(~full).tolist():  # (the session's first few only)
+                window = combined[:int(marks[i]) - offset]
+                medians[i] = np.partition(window, len(window) // 2)[len(window) // 2]
+            if np.any(full):
+                starts = marks[full] - NOISE_WINDOW - offset
+                windows = np.lib.stride_tricks.sliding_window_view(combined, NOISE_WINDOW)
+                half = NOISE_WINDOW // 2
+                medians[full] = np.partition(windows[starts], half, axis=1)[:, half]
+            use = checkpoint >= NOISE_EVERY
+            implied = medians[(checkpoint[use] - marks[0]) // NOISE_EVERY] / RAYLEIGH_MEDIAN
+            out[use] = np.maximum(floor, implied)
+        self._count += len(values)
+        self._tail = combined[-(NOISE_WINDOW + NOISE_EVERY):]
         return out
 
 
