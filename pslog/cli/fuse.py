@@ -45,7 +45,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "every detection time")
     parser.add_argument("--noise-px", type=noise_px, default=0.5, metavar="PX",
                         help="the detections' pixel noise (standard deviation per axis) behind "
-                             "each point's std_m and covariance (default %(default)s)")
+                             "each point's std_m and covariance, and the least noise typeA's "
+                             "prediction and kink tests assume (they use the larger of it and "
+                             "the noise the session's own innovations imply); `pslog sync` "
+                             "prints the estimated noise (default %(default)s)")
     parser.add_argument("--gating", choices=("on", "off"), default="on",
                         help="on: choose each frame's ball among its candidates by the "
                              "epipolar, track and motion gates and record every rejected "

@@ -62,7 +62,10 @@ class FusionOptions:
         instead of at every detection time
     noise_px : float or None, standard deviation of the detections' pixel noise per axis,
         pixels: the first-order position covariance (``std_m``, ``cov_*_m2``) scales with
-        it; None: no covariance (for throughput: it is most of the methods' cost)
+        it; None: no covariance (for throughput: it is most of the methods' cost). typeA's
+        prediction and kink tests (:mod:`pslog.fusion.innovation`) take it as the least
+        noise: they use the larger of it (0.5 px when None) and the noise the session's own
+        innovations imply (:class:`~pslog.fusion.innovation.NoiseEstimate`)
     gating : bool, fusing Detections: choose each frame's ball among its candidates by the
         gates of :mod:`pslog.fusion.gating` (True), or take the best-scored one (False)
     """

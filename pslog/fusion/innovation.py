@@ -16,7 +16,13 @@ the three instants, Gaussian detection noise ``σ`` per image axis) it is
 - model: eq. (2) extrapolates linearly; under a constant acceleration ``a`` its error is
   exactly ``½ a δ_pred (δ_pred + δ_prev)`` (the remainder of linear interpolation through
   ``t-2`` and ``t-1`` evaluated at ``t``), at most ``½ g δ_pred (δ_pred + δ_prev)`` for a
-  ball in flight, ``f / depth`` pixels per metre in the newest camera.
+  ball in flight; a motion across the ray at distance ``D``, ``θ`` off the optical axis,
+  moves the image by ``f / (D cos² θ)`` pixels per metre radially and ``f / (D cos θ)``
+  tangentially, so the bound takes ``f D / Z²`` (``Z = D cos θ``, depth along the axis).
+
+``σ`` is at least the stated noise and at least the noise the session's earlier innovations
+imply (:class:`NoiseEstimate`): a stated noise below the detector's real one would refuse
+good points in numbers.
 
 The point is refused when ``r > k σ_r + e_model`` with ``k = 5``: for a Gaussian 2D error
 ``P(|r| > k σ_r) = exp(-k² / 2) ≈ 4e-6``, so under the model (and the stated noise) a valid
@@ -37,13 +43,106 @@ from ..records import NS
 #: Refuse a prediction whose innovation exceeds this many standard deviations (plus the
 #: model bound): a Gaussian 2D innovation does with probability exp(-K²/2) ~ 4e-6.
 INNOVATION_SIGMAS = 5.0
-#: The detection noise assumed when the caller gives none (FusionOptions' default).
+#: The detection noise assumed when the caller gives none (FusionOptions' default), and the
+#: tests' least σ until NoiseEstimate holds NOISE_EVERY innovations.
 DEFAULT_NOISE_PX = 0.5
+
+
+#: Median of the norm of a 2D Gaussian of σ per axis, in σ: Rayleigh's median √(2 ln 2).
+RAYLEIGH_MEDIAN = float(np.sqrt(2.0 * np.log(2.0)))
+#: The noise estimate: the median of the last NOISE_WINDOW innovations, renewed every
+#: NOISE_EVERY innovations (vectorised in a batch run, the same values in a stream); until
+#: NOISE_EVERY innovations exist, the tests' σ is at least DEFAULT_NOISE_PX.
+NOISE_WINDOW = 256
+NOISE_EVERY = 32
+
+
+def innovation_factors(events: np.ndarray, j1: np.ndarray, j2: np.ndarray,
+                       time_ns: np.ndarray) -> np.ndarray:
+    """``√(1 + (1 + ρ)² + ρ²)``: the innovation's noise in units of the detection noise σ
+    (module docstring), (k,) float, for the rows ``events`` and past points ``j1, j2``."""
+    delta_pred = (time_ns[events] - time_ns[j1]) / NS
+    delta_prev = (time_ns[j1] - time_ns[j2]) / NS
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rho = delta_pred / delta_prev
+        return np.sqrt(1.0 + (1.0 + rho) ** 2 + rho ** 2)
+
+
+class NoiseEstimate:
+    """The detection noise the session's own eq. (2) innovations imply, causally.
+
+    The tests of this module assume a detection noise ``σ``; the one the user states
+    (``noise_px``) is often too small (a detector's real noise is rarely measured), and a
+    too small ``σ`` refuses good points in numbers. Each made point's innovation ``r``
+    divided by its factor ``√(1 + (1 + ρ)² + ρ²)`` is, under the model, the norm of a 2D
+    Gaussian of ``σ`` per axis (plus the small extrapolation error, which can only raise the
+    estimate), whose median is ``σ √(2 ln 2)`` (Rayleigh). A point's tests use
+
+        ``σ_t = max(noise_px, median(r_i / factor_i) / √(2 ln 2))``
+
+    the median over the last ``NOISE_WINDOW`` (256) innovations before the latest multiple
+    of ``NOISE_EVERY`` (32) innovations made before the point (the middle element: a
+    selection, no arithmetic); at least 0.5 px before the first 32. A median is robust: the
+    kicks and bounces the tests are there for are a few percent of the points. The estimate
+    takes every made, valid point's innovation, refused or not (it never depends on the
+    tests' decisions), in row order, so :class:`~pslog.fusion.pseudo.TypeAStream` (one
+    instance across its pushes) gives each point the batch run's ``σ``, bit for bit.
+    """
+
+    def __init__(self) -> None:
+        self._count = 0  # innovations so far
+        # the last NOISE_WINDOW + NOISE_EVERY of them: every window still to be needed
+        self._tail = np.zeros(0)
+
+    @property
+    def count(self) -> int:
+        """How many innovations the estimate has taken."""
+        return self._count
+
+    def sigmas(self, normalised: np.ndarray, noise_px: float | None) -> np.ndarray:
+        """Each point's ``σ_t`` (pixels, (k,) float), then its innovation taken.
+
+        Parameters
+        ----------
+        normalised : (k,) float, ``r / factor`` of the points in row order, pixels (NaN: a
+            point not made, invalid, or not projectable; not taken)
+        noise_px : float or None, the stated noise per image axis, pixels (None: 0.5)
+        """
+        floor = DEFAULT_NOISE_PX if noise_px is None else float(noise_px)
+        normalised = np.asarray(normalised, dtype=np.float64)
+        valid = ~np.isnan(normalised)
+        values = normalised[valid]
+        # innovations taken before each point, and the checkpoint (a multiple of EVERY) it uses
+        before = self._count + np.cumsum(valid) - valid
+        checkpoint = before // NOISE_EVERY * NOISE_EVERY
+        # the innovations kept and the new ones: global index g at combined[g - offset]
+        combined = np.concatenate([self._tail, values])
+        offset = self._count - len(self._tail)
+        out = np.full(len(normalised), max(floor, DEFAULT_NOISE_PX))
+        first, last = (int(checkpoint[0]), int(checkpoint[-1])) if len(normalised) else (0, 0)
+        marks = np.arange(max(first, NOISE_EVERY), last + 1, NOISE_EVERY, dtype=np.int64)
+        if len(marks):
+            medians = np.empty(len(marks))
+            full = marks >= NOISE_WINDOW  # a whole window: all at once
+            for i in np.flatnonzero(~full).tolist():  # (the session's first few only)
+                window = combined[:int(marks[i]) - offset]
+                medians[i] = np.partition(window, len(window) // 2)[len(window) // 2]
+            if np.any(full):
+                starts = marks[full] - NOISE_WINDOW - offset
+                windows = np.lib.stride_tricks.sliding_window_view(combined, NOISE_WINDOW)
+                half = NOISE_WINDOW // 2
+                medians[full] = np.partition(windows[starts], half, axis=1)[:, half]
+            use = checkpoint >= NOISE_EVERY
+            implied = medians[(checkpoint[use] - marks[0]) // NOISE_EVERY] / RAYLEIGH_MEDIAN
+            out[use] = np.maximum(floor, implied)
+        self._count += len(values)
+        self._tail = combined[-(NOISE_WINDOW + NOISE_EVERY):]
+        return out
 
 
 def failed_predictions(prep, events: np.ndarray, j1: np.ndarray, j2: np.ndarray,
                        predicted: np.ndarray, innovation_px: np.ndarray,
-                       noise_px: float | None) -> np.ndarray:
+                       noise_px: float | np.ndarray | None) -> np.ndarray:
     """Which type A points the newest detection contradicts (module docstring).
 
     Parameters
@@ -54,7 +153,8 @@ def failed_predictions(prep, events: np.ndarray, j1: np.ndarray, j2: np.ndarray,
     innovation_px : (k,) float, distance between the newest detection and the projection
         of ``P̂_t``, recorded-image pixels (NaN: not projectable; never refused here, the
         validity flags judge it)
-    noise_px : float or None, the detections' noise per image axis, pixels (None: 0.5)
+    noise_px : float, (k,) float or None, the detections' noise per image axis, pixels
+        (None: 0.5; an array: each point's, :meth:`NoiseEstimate.sigmas`)
 
     Returns
     -------
@@ -63,13 +163,19 @@ def failed_predictions(prep, events: np.ndarray, j1: np.ndarray, j2: np.ndarray,
     time_ns = prep.obs.time_ns
     delta_pred = (time_ns[events] - time_ns[j1]) / NS
     delta_prev = (time_ns[j1] - time_ns[j2]) / NS
-    focal = np.array([max(c.K[0, 0], c.K[1, 1]) for c in prep.cameras])[prep.obs.camera[events]]
-    sigma = DEFAULT_NOISE_PX if noise_px is None else float(noise_px)
+    cam = prep.obs.camera[events]
+    focal = np.array([max(c.K[0, 0], c.K[1, 1]) for c in prep.cameras])[cam]
+    axis = np.array([c.R[2] for c in prep.cameras])[cam]  # optical axes in the world
+    sigma = DEFAULT_NOISE_PX if noise_px is None else np.asarray(noise_px, dtype=np.float64)
     with np.errstate(invalid="ignore", divide="ignore"):
-        rho = delta_pred / delta_prev
-        sigma_r = sigma * np.sqrt(1.0 + (1.0 + rho) ** 2 + rho ** 2)
-        depth = np.linalg.norm(predicted - prep.ray_origin[events], axis=1)
-        model_px = 0.5 * G * delta_pred * (delta_pred + delta_prev) * focal / depth
+        sigma_r = sigma * innovation_factors(events, j1, j2, time_ns)
+        offset = predicted - prep.ray_origin[events]
+        depth = np.linalg.norm(offset, axis=1)
+        z = np.sum(offset * axis, axis=1)  # depth along the optical axis, D cos θ
+        # a motion e across the ray at distance D, θ off the optical axis, moves the image by
+        # f e / (D cos² θ) radially (u = f tan θ) and f e / (D cos θ) tangentially: the larger
+        # is f D / Z² pixels per metre (f / D on the axis only)
+        model_px = 0.5 * G * delta_pred * (delta_pred + delta_prev) * focal * depth / (z * z)
         return innovation_px > INNOVATION_SIGMAS * sigma_r + model_px
 
 
@@ -132,7 +238,7 @@ def _bends(prep, a, b, c, point, speed, sigma):
         return (dt1 > 0) & (dt2 > 0) & (depth > 0) & (change > bound)
 
 
-def kinked_points(prep, events: np.ndarray, past: tuple, noise_px: float | None,
+def kinked_points(prep, events: np.ndarray, past: tuple, noise_px: float | np.ndarray | None,
                   max_gap_ns: int) -> np.ndarray:
     """Which type A points rest on an interval in which some camera saw the motion change.
 
@@ -171,7 +277,8 @@ def kinked_points(prep, events: np.ndarray, past: tuple, noise_px: float | None,
     prep : pslog.fusion._prepare.Prepared, the session's observations
     events : (k,) int, rows of the newest detections
     past : (P_{t-1}, P_{t-2}, predicted), two PseudoStereoPoints of k rows and (k, 3) metres
-    noise_px : float or None, the detections' noise per image axis, pixels (None: 0.5)
+    noise_px : float, (k,) float or None, the detections' noise per image axis, pixels
+        (None: 0.5; an array: each point's, :meth:`NoiseEstimate.sigmas`)
     max_gap_ns : int, the largest bridged gap, nanoseconds
 
     Returns
@@ -180,7 +287,8 @@ def kinked_points(prep, events: np.ndarray, past: tuple, noise_px: float | None,
     """
     p1, p2, predicted = past
     time_ns = prep.obs.time_ns
-    sigma = DEFAULT_NOISE_PX if noise_px is None else float(noise_px)
+    sigma = np.broadcast_to(DEFAULT_NOISE_PX if noise_px is None
+                            else np.asarray(noise_px, dtype=np.float64), events.shape)
     before, after = _previous_next(prep.obs.camera)
     t_event = time_ns[events]
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -219,7 +327,8 @@ def kinked_points(prep, events: np.ndarray, past: tuple, noise_px: float | None,
     bent_all = available & _bends(prep, np.maximum(a_all, 0), np.maximum(b_all, 0),
                                   np.maximum(c_all, 0),
                                   np.concatenate([t[3] for t in triplets]),
-                                  np.tile(speed, len(triplets)), sigma)
+                                  np.tile(speed, len(triplets)),
+                                  np.tile(sigma, len(triplets)))
 
     def has(i):
         return available[i * k:(i + 1) * k]

@@ -68,7 +68,13 @@ from ._prepare import (
     reprojection_px,
     times_pixel_jacobian,
 )
-from .innovation import failed_counts, failed_predictions, kinked_points
+from .innovation import (
+    NoiseEstimate,
+    failed_counts,
+    failed_predictions,
+    innovation_factors,
+    kinked_points,
+)
 from .stereo import count_invalid, with_dropped
 
 #: Brackets whose lengths differ by less than this are ties (shutter offsets are rounded to ns).
@@ -238,8 +244,8 @@ class TypeAConstruction:
 
 
 def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
-                events: np.ndarray | None = None, seen: np.ndarray | None = None
-                ) -> tuple[Track, TypeAConstruction]:
+                events: np.ndarray | None = None, seen: np.ndarray | None = None,
+                noise: NoiseEstimate | None = None) -> tuple[Track, TypeAConstruction]:
     """``typeA``: a point at every detection with two earlier pseudo-stereo points.
 
     The two earlier points are those of the two latest earlier instants that can be
@@ -259,6 +265,8 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
     every row (the arithmetic is elementwise), which :class:`TypeAStream` relies on.
     ``seen`` (n,) int64, optional: the past refusals already counted per row, updated in
     place; only refusals not in it are counted (a stream counts each detection once).
+    ``noise``: the session's estimate of the detection noise for the tests of innovation.py,
+    updated in place (a stream keeps one across its pushes; None: a new one).
     """
     obs = prep.obs
     time_ns = obs.time_ns
@@ -409,12 +417,17 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
             **(cov if cov is not None else {}),
         }
     made = finite_rows(points)
+    # the tests' detection noise: at least what the earlier points' innovations imply
+    with np.errstate(invalid="ignore"):
+        normalised = np.where(made & (flags == 0), residual[4], np.nan) / innovation_factors(
+            events, j1, j2, time_ns)
+    sigma = (NoiseEstimate() if noise is None else noise).sigmas(normalised, noise_px)
     # the newest detection contradicts eq. (2)'s prediction: the motion changed (innovation.py)
     failed = made & (flags == 0) & failed_predictions(prep, events, j1, j2, predicted,
-                                                      residual[4], noise_px)
+                                                      residual[4], sigma)
     # a camera saw the motion change inside eq. (1)'s or eq. (2)'s interval (innovation.py)
     kinked = made & (flags == 0) & ~failed & kinked_points(prep, events, (p1, p2, predicted),
-                                                           noise_px, max_gap_ns)
+                                                           sigma, max_gap_ns)
     keep = made & (flags == 0) & ~failed & ~kinked
     track = Track("typeA", t_event, points, cams[0], quality)
     if not np.all(keep):  # (every point kept: the Track as it is)
@@ -663,7 +676,9 @@ class TypeAStream:
         self._ray_dir = np.zeros((0, 3))
         self._jac = np.zeros((0, 2, 2))
         self._seen = np.zeros(0, np.int64)  # past refusals already counted, per row
-        self._empty = fuse_type_a(template, self._max_gap_s, self._noise_px)[0]
+        self._noise = NoiseEstimate()  # the detection noise the innovations imply, so far
+        self._empty = fuse_type_a(template, self._max_gap_s, self._noise_px,
+                                  noise=NoiseEstimate())[0]
 
     def push(self, time_ns, camera, uv, frame_index) -> Track:
         """Rows (n,) after every row pushed before; returns their points (possibly none)."""
@@ -720,4 +735,5 @@ class TypeAStream:
             cameras=t.cameras, uv_jacobian=self._jac, view_box=t.view_box)
         prep.__dict__.update(self._shared)
         return fuse_type_a(prep, self._max_gap_s, self._noise_px,
-                           events=np.arange(n - n_new, n), seen=self._seen)[0]
+                           events=np.arange(n - n_new, n), seen=self._seen,
+                           noise=self._noise)[0]
