@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import argparse
 
-from ._common import add_force, fusion_method, int_in
+from ._common import add_force, add_method_option, int_in
 
 DESCRIPTION = """\
 Run the same steps on every session a pattern matches, one Ray task per session: on local
@@ -76,10 +76,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("-o", "--output", dest="outdir", required=True, metavar="OUTDIR",
                         type=_folder,
                         help="folder of the results (created)")
-    parser.add_argument("--method", action="append", dest="methods", metavar="METHOD",
-                        type=fusion_method, default=[],
-                        help="fuse: fusion method, repeat for several (default: every method "
-                             "each session's timing suits)")
+    add_method_option(parser, "fuse: fusion method, repeat or give a comma-separated list for "
+                              "several (default: every method each session's timing suits)")
     parser.add_argument("--estimate", type=_estimate, default=(), metavar="LIST",
                         help="sync: clock parameters to estimate: offset, drift, readout, "
                              "comma-separated (default: offset)")
@@ -115,7 +113,7 @@ def run(args: argparse.Namespace) -> int:
     )
     from pslog.outputs import write_error
 
-    settings = Settings(steps=args.do, methods=tuple(dict.fromkeys(args.methods)),
+    settings = Settings(steps=args.do, methods=tuple(dict.fromkeys(args.methods or ())),
                         estimate=tuple(args.estimate), frames=args.frames or "")
     if args.address is not None:  # said at once, before any file is looked at
         from pslog.batch import check_reachable
