@@ -320,7 +320,7 @@ def run_session(job: Job, settings: Settings) -> dict:
         except OSError as exc:
             from pslog.outputs import os_reason
 
-            raise StepFailed(f"pslog info: error: {job.path}: {os_reason(exc)}") from None
+            raise StepFailed(f"pslog batch: error: {job.path}: {os_reason(exc)}") from None
         try:
             outdir.mkdir(parents=True, exist_ok=True)
             # an earlier run's outputs go first (done.json first of all), so that a
