@@ -122,19 +122,61 @@ def _glob_root(pattern: str) -> Path:
     return Path(pattern).parent
 
 
-def find_sessions(patterns: Iterable[str], outdir: str | Path) -> list[Job]:
+def _holds_results(folder: Path, cache: dict[Path, bool]) -> bool:
+    """Whether ``folder`` holds a batch's results: a ``summary.csv`` whose header is
+    pslog's, or a ``done.json`` marker."""
+    if folder not in cache:
+        held = (folder / DONE_NAME).is_file()
+        if not held:
+            try:
+                with open(folder / "summary.csv", encoding="utf-8") as f:
+                    header = f.readline().rstrip("\r\n").split(",")
+                held = tuple(header[:len(BASE_COLUMNS)]) == BASE_COLUMNS
+            except (OSError, ValueError):
+                held = False
+        cache[folder] = held
+    return cache[folder]
+
+
+def _inside_results(path: Path, root: Path, cache: dict[Path, bool]) -> bool:
+    """Whether ``path`` lies in a folder (its own or one above it, up to the pattern's
+    root) that holds a batch's results: an earlier batch's outputs are not sessions."""
+    if _holds_results(path.parent, cache):
+        return True
+    for folder in path.parent.parents:
+        if not folder.is_relative_to(root) or folder == root.parent:
+            break
+        if _holds_results(folder, cache):
+            return True
+    return False
+
+
+def find_sessions(patterns: Iterable[str], outdir: str | Path,
+                  skipped: list[str] | None = None) -> list[Job]:
     """The session files matching ``patterns`` (``**`` spans folders), sorted, each with its
     result folder below ``outdir`` mirroring its path below the pattern's root. Files inside
-    ``outdir`` (a previous batch's outputs) are left out. :class:`InputError` when a pattern
-    matches no file or two sessions would share a result folder."""
+    ``outdir`` and inside any folder holding a batch's results (a ``summary.csv`` with
+    pslog's header, or a ``done.json`` beside the file) are left out; those of the latter are
+    appended to ``skipped``. :class:`InputError` when a pattern matches no file or two
+    sessions would share a result folder."""
     out = Path(outdir).resolve()
     jobs: dict[str, Job] = {}
+    cache: dict[Path, bool] = {}
     for pattern in patterns:
         root = _glob_root(pattern).resolve()
-        found = sorted(p for p in glob.glob(pattern, recursive=True) if os.path.isfile(p))
-        found = [p for p in found if not Path(p).resolve().is_relative_to(out)]
+        matched = sorted(p for p in glob.glob(pattern, recursive=True) if os.path.isfile(p))
+        found = [p for p in matched if not Path(p).resolve().is_relative_to(out)]
+        if matched and not found:
+            raise InputError(f"every match of {pattern!r} lies inside -o {outdir} (the "
+                             f"results folder); give -o outside the sessions' folder")
+        earlier = [p for p in found if _inside_results(Path(p).resolve(), root, cache)]
+        if skipped is not None:
+            skipped += [p for p in earlier if p not in skipped]
+        found = [p for p in found if p not in earlier]
         if not found:
-            raise InputError(f"no session file matches {pattern!r}")
+            raise InputError(f"no session file matches {pattern!r}"
+                             + (f" (every match lies inside an earlier batch's results, e.g. "
+                                f"{earlier[0]})" if earlier else ""))
         for p in found:
             path = Path(p).resolve()
             rel = path.relative_to(root) if path.is_relative_to(root) else Path(path.name)
@@ -269,10 +311,26 @@ def run_session(job: Job, settings: Settings) -> dict:
     info = sync = evaluation = None
     error = ""
     kill = os.environ.get(KILL_ONCE_ENV)
+    stamp = None
     try:
         try:
+            # the input as it is when the task starts: done.json records this, so a file
+            # replaced mid-run is not later taken as done with the old file's outputs
+            stamp = _input_stamp(job.path)
+        except OSError as exc:
+            from pslog.outputs import os_reason
+
+            raise StepFailed(f"pslog batch: error: {job.path}: {os_reason(exc)}") from None
+        try:
             outdir.mkdir(parents=True, exist_ok=True)
+            # an earlier run's outputs go first (done.json first of all), so that a
+            # session failing now leaves none of them beside its failed row; the steps
+            # are this batch's and those the earlier marker names (both the batch's own)
+            earlier = read_marker(job) or {}
             (outdir / DONE_NAME).unlink(missing_ok=True)
+            old = [s for s in earlier.get("steps", []) if s in OUTPUT_NAMES]
+            for step in dict.fromkeys([*settings.steps, *old]):
+                (outdir / OUTPUT_NAMES[step]).unlink(missing_ok=True)
         except OSError as exc:
             from pslog.outputs import os_reason
 
@@ -310,18 +368,41 @@ def run_session(job: Job, settings: Settings) -> dict:
         error = f"pslog batch: error: {type(exc).__name__}: {exc}".splitlines()[0]
     row = summary_row(job.session, info, sync, evaluation, error=error,
                       runtime_s=time.perf_counter() - start, estimate=settings.estimate)
+    if not error:
+        try:
+            changed = _input_stamp(job.path) != stamp
+        except OSError:
+            changed = True
+        if changed:
+            error = f"pslog batch: error: {job.path}: input changed during the run"
+            row.update(status="failed", error=error)
     if error:
-        with contextlib.suppress(OSError):  # no empty folder for a session that made nothing
-            outdir.rmdir()
+        _remove_empty(_result_folders(job))  # no empty folders left for it
     else:
         try:
             _write_json(outdir / DONE_NAME, {"session": job.session, "settings": settings.key(),
                                              "steps": list(settings.steps),
-                                             "input": _input_stamp(job.path),
-                                             "row": _json_row(row)})
+                                             "input": stamp, "row": _json_row(row)})
         except (OSError, PslogError, ValueError) as exc:
             row.update(status="failed", error=f"pslog batch: error: {exc}")
     return row
+
+
+def _result_folders(job: Job) -> list[Path]:
+    """The session's result folder and those above it, up to (not including) the results
+    folder: deepest first."""
+    outdir = Path(job.outdir)
+    depth = len(Path(job.session).parts)  # the result folder mirrors the session's path
+    return [outdir, *list(outdir.parents)[:depth - 1]]
+
+
+def _remove_empty(folders: Iterable[Path]) -> None:
+    """Remove ``folders`` (deepest first) while they are empty."""
+    for folder in folders:
+        try:
+            folder.rmdir()
+        except OSError:  # not empty (another session's results): the folders above too
+            return
 
 
 def _json_row(row: dict) -> dict:
@@ -430,10 +511,15 @@ class Progress:
     """Sessions done / failed / running and the rate: one updating line on a terminal,
     a line every :data:`PROGRESS_EVERY_S` otherwise (logs, CI)."""
 
-    def __init__(self, total: int, skipped: int, stream=None, every_s: float = PROGRESS_EVERY_S):
+    def __init__(self, total: int, skipped: int, stream=None, every_s: float = PROGRESS_EVERY_S,
+                 mode: str | None = None):
         self.total, self.skipped = total, skipped
         self.stream = stream if stream is not None else sys.stderr
-        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
+        # mode: bar, lines or off (pslog.progress.progress_mode); None: by the stream
+        if mode is None:
+            mode = "bar" if getattr(self.stream, "isatty", lambda: False)() else "lines"
+        self.mode = mode
+        self.tty = mode == "bar"
         self.every_s = every_s
         self.start = time.monotonic()
         self.last = -math.inf
@@ -448,7 +534,15 @@ class Progress:
                 f"{self.failed} failed, {running} running{skipped}), {rate:.1f} sessions/min, "
                 f"{elapsed:.0f} s")
 
+    def clear(self) -> None:
+        """Wipe the updating line (a bar) before another line is printed."""
+        if self.tty:
+            self.stream.write("\r\x1b[K")
+            self.stream.flush()
+
     def update(self, running: int, final: bool = False) -> None:
+        if self.mode == "off":
+            return
         now = time.monotonic()
         if self.tty:
             self.stream.write("\r\x1b[K" + self.line(running) + ("\n" if final else ""))
@@ -456,6 +550,61 @@ class Progress:
         elif final or now - self.last >= self.every_s:
             self.last = now
             print(self.line(running), file=self.stream, flush=True)
+
+
+#: the lock file that keeps a second batch out of a results folder in use
+LOCK_NAME = ".pslog-batch.lock"
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process: alive
+        return True
+    return True
+
+
+@contextlib.contextmanager
+def results_lock(outdir: str | Path):
+    """Hold ``outdir/.pslog-batch.lock`` (created exclusively, holding this process's id)
+    while a batch writes there: a second batch on the same folder fails with one line
+    naming the lock and its holder. A lock whose process is gone (a batch killed outright)
+    is taken over. Removed at the end."""
+    from pslog.outputs import write_error
+
+    path = Path(outdir) / LOCK_NAME
+    for _attempt in range(3):
+        try:
+            fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+        except FileExistsError:
+            try:
+                holder = int(path.read_text(encoding="utf-8").split()[0])
+            except (OSError, ValueError, IndexError):
+                holder = None  # being written right now, or garbage: look again
+                time.sleep(0.1)
+                if _attempt < 2:
+                    continue
+            if holder is not None and holder != os.getpid() and _pid_alive(holder):
+                raise PslogError(f"{path}: another pslog batch (pid {holder}) is writing to "
+                                 f"{outdir}; wait for it to end or give another -o") from None
+            with contextlib.suppress(FileNotFoundError):  # stale: its batch is gone
+                path.unlink()
+            continue
+        except OSError as exc:
+            raise write_error(path, exc) from None
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(f"{os.getpid()}\n")
+        break
+    else:
+        raise PslogError(f"{path}: cannot take the lock of {outdir} (another batch keeps "
+                         f"taking it); give another -o")
+    try:
+        yield path
+    finally:
+        with contextlib.suppress(OSError):
+            path.unlink()
 
 
 #: seconds to wait for a cluster's port to answer before saying it cannot be reached

@@ -99,20 +99,25 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import contextlib
     import os
     import sys
     from pathlib import Path
 
-    from pslog.batch import (
-        Progress,
-        Settings,
-        find_sessions,
-        plan_batch,
-        run_batch,
-        write_summary,
-    )
+    from pslog.batch import Settings, find_sessions, results_lock
+    from pslog.errors import PslogError
     from pslog.outputs import write_error
+    from pslog.progress import _interval_s, progress_mode
 
+    if args.estimate and "sync" not in args.do:
+        # the estimate is sync's: without a sync step it would be ignored silently
+        from ._common import usage_error
+
+        return usage_error("batch", "--estimate is sync's: add sync to --do, or drop "
+                                    "--estimate")
+    # bad PSLOG_PROGRESS / PSLOG_PROGRESS_INTERVAL: one line, before anything runs
+    mode = progress_mode(sys.stderr)
+    every_s = _interval_s()
     settings = Settings(steps=args.do, methods=tuple(dict.fromkeys(args.methods or ())),
                         estimate=tuple(args.estimate), frames=args.frames or "")
     if args.address is not None:  # said at once, before any file is looked at
@@ -121,10 +126,14 @@ def run(args: argparse.Namespace) -> int:
         check_reachable(args.address)
     outdir = Path(args.outdir)
     if outdir.exists() and not outdir.is_dir():
-        from pslog.errors import PslogError
-
         raise PslogError(f"-o {outdir}: not a folder")
-    jobs = find_sessions(args.patterns, outdir)
+    skipped: list[str] = []
+    jobs = find_sessions(args.patterns, outdir, skipped)
+    if skipped:
+        print(f"pslog batch: skipped {len(skipped)} file(s) inside earlier batch results "
+              f"(a folder with pslog's summary.csv or done.json), e.g. {skipped[0]}",
+              file=sys.stderr)
+    created = not outdir.exists()
     try:  # a folder the workers cannot write is said once here, not once per session
         outdir.mkdir(parents=True, exist_ok=True)
         probe = outdir / f".pslog-batch-{os.getpid()}.probe"
@@ -132,26 +141,46 @@ def run(args: argparse.Namespace) -> int:
         probe.unlink()
     except OSError as exc:
         raise write_error(outdir, exc) from None
+    try:
+        with results_lock(outdir):
+            return _run_locked(args, settings, jobs, outdir, mode, every_s)
+    finally:
+        if created:  # a batch that made nothing (refused, or no cluster) leaves no folder
+            with contextlib.suppress(OSError):  # not empty: results kept
+                outdir.rmdir()
+
+
+def _run_locked(args: argparse.Namespace, settings, jobs, outdir, mode: str,
+                every_s: float) -> int:
+    """The batch, with the results folder locked: plan, run, summary."""
+    import sys
+
+    from pslog.batch import Progress, plan_batch, run_batch, write_summary
+    from pslog.errors import PslogError
+
     plan = plan_batch(jobs, settings, outdir, resume=args.resume, force=args.force)
-    progress = Progress(len(jobs), len(plan.done))
+    progress = Progress(len(jobs), len(plan.done), every_s=every_s, mode=mode)
+
+    def show(row: dict) -> None:
+        """A session's line on standard output as soon as it is finished."""
+        progress.clear()
+        print(f"{row['status']:<6} {row['session']}" + (f": {row['error']}" if row["error"]
+                                                         else ""), flush=True)
+
     if plan.done:
         print(f"pslog batch: {len(plan.done)} of {len(jobs)} sessions already complete "
               f"(--resume), {len(plan.run)} to run", file=sys.stderr)
     rows = list(plan.done)
+    for row in sorted(plan.done, key=lambda r: r["session"]):
+        show(row)
     if plan.run:
         rows += run_batch(plan.run, settings, workers=args.workers, address=args.address,
-                          progress=progress)
+                          progress=progress, on_row=show)
     written = write_summary(rows, outdir)
     failed = sorted((r for r in rows if r["status"] != "ok"), key=lambda r: r["session"])
-    for row in sorted(rows, key=lambda r: r["session"]):
-        print(f"{row['status']:<6} {row['session']}" + (f": {row['error']}" if row["error"]
-                                                         else ""))
     print(f"wrote {', '.join(map(str, written))}")
     if failed:
-        from pslog.errors import PslogError
-
         first = failed[0]
         raise PslogError(f"{len(failed)} of {len(rows)} sessions failed (first: "
                          f"{first['session']}: {first['error']}); see {written[0]}")
     return 0
-

@@ -1,0 +1,212 @@
+"""pslog batch, review findings of 2026-11-30: earlier results are not sessions, a session
+failing now keeps none of its old outputs, an input replaced mid-run is not taken as done,
+one batch at a time per results folder, -o inside the pattern's folder, per-session lines
+as they finish and PSLOG_PROGRESS, no empty folders, --estimate without sync.
+
+Every batch here has one session, which runs in the test's process without a Ray cluster
+(fast); the lock and progress checks run ``pslog batch`` as a real process."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+import pslog.batch as batch
+from pslog.batch import DONE_NAME, LOCK_NAME, Job, Settings, find_sessions, read_summary_csv
+from pslog.cli import main
+from tests.faults.promises import assert_one_line_error, run_pslog
+
+pytest.importorskip("ray")
+
+SAMPLE = Path(__file__).resolve().parents[1] / "samples" / "throw.mcap"
+
+
+def pslog(*argv) -> tuple[int, str, str]:
+    """``pslog ARGV`` in-process: (exit code, stdout, stderr)."""
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main([str(a) for a in argv])
+    return code, out.getvalue(), err.getvalue()
+
+
+def session(path: Path) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    shutil.copyfile(SAMPLE, path)
+    return path
+
+
+def cut(path: Path) -> None:
+    """``path`` cut short (a corrupt session), dated an hour ago (not one being written)."""
+    path.write_bytes(SAMPLE.read_bytes()[:4000])
+    hour_ago = time.time() - 3600
+    os.utime(path, (hour_ago, hour_ago))
+
+
+def test_an_earlier_batchs_results_inside_the_tree_are_not_sessions(tmp_path):
+    dt = tmp_path / "dt"
+    session(dt / "d1" / "a.mcap")
+    code, _, err = pslog("batch", f"{dt}/**/*.mcap", "--do", "sync,fuse", "-o",
+                         dt / "results_v1")
+    assert code == 0, err
+    code, _, err = pslog("batch", f"{dt}/**/*.mcap", "--do", "fuse,eval", "-o",
+                           dt / "results_v2")
+    assert code == 0, err
+    rows = read_summary_csv(dt / "results_v2" / "summary.csv")
+    assert [r["session"] for r in rows] == ["d1/a.mcap"]
+    assert "skipped 2 file(s) inside earlier batch results" in err
+    assert sorted(p.name for p in (dt / "results_v2").iterdir()) == [
+        "d1", "summary.csv", "summary.parquet"]
+
+
+def test_a_file_beside_a_done_marker_or_below_a_summary_is_skipped(tmp_path):
+    session(tmp_path / "s" / "real.mcap")
+    session(tmp_path / "s" / "old" / "x" / "fused.mcap")
+    (tmp_path / "s" / "old" / "x" / DONE_NAME).write_text("{}")
+    session(tmp_path / "s" / "res" / "y" / "z" / "synced.mcap")
+    batch.write_summary([batch.summary_row("y/z.mcap", None, None, None)],
+                        tmp_path / "s" / "res")
+    # a summary.csv that is not pslog's does not hide the sessions below it
+    session(tmp_path / "s" / "other" / "b.mcap")
+    (tmp_path / "s" / "other" / "summary.csv").write_text("team,score\n")
+    skipped: list[str] = []
+    jobs = find_sessions([f"{tmp_path}/s/**/*.mcap"], tmp_path / "out", skipped)
+    assert [j.session for j in jobs] == ["other/b.mcap", "real.mcap"]
+    assert sorted(Path(p).name for p in skipped) == ["fused.mcap", "synced.mcap"]
+
+
+def test_output_inside_the_patterns_folder_is_named(tmp_path):
+    session(tmp_path / "res" / "a.mcap")
+    run = run_pslog("batch", f"{tmp_path}/res/*.mcap", "--do", "fuse", "-o", tmp_path / "res")
+    assert_one_line_error(run, 1, contains=("every match of", "lies inside -o"))
+
+
+def test_a_session_failing_on_force_keeps_none_of_its_old_outputs(tmp_path):
+    a = session(tmp_path / "s" / "d1" / "a.mcap")
+    out = tmp_path / "res"
+    code, _, err = pslog("batch", f"{tmp_path}/s/**/*.mcap", "--do", "sync,fuse,eval", "-o", out)
+    assert code == 0, err
+    assert (out / "d1" / "a" / "fused.mcap").is_file()
+    cut(a)
+    code, stdout, err = pslog("batch", f"{tmp_path}/s/**/*.mcap", "--do", "sync,fuse,eval",
+                              "-o", out, "--force")
+    assert code == 1
+    assert "failed d1/a.mcap" in stdout
+    # no old fused.mcap / eval.json beside the failed row, and no empty folders
+    assert not (out / "d1").exists()
+
+
+def test_an_input_replaced_during_the_run_fails_and_is_redone_on_resume(tmp_path, monkeypatch):
+    a = session(tmp_path / "s" / "a.mcap")
+    out = tmp_path / "res"
+    real = batch._command
+
+    def replace_after_sync(argv):
+        # the user replaces the session (another copy, another date) while it is fused
+        text = real(argv)
+        if argv[0] == "sync":
+            shutil.copyfile(SAMPLE, a.with_suffix(".new"))
+            os.utime(a.with_suffix(".new"), (time.time() - 7200, time.time() - 7200))
+            os.replace(a.with_suffix(".new"), a)
+        return text
+
+    monkeypatch.setattr(batch, "_command", replace_after_sync)
+    job = Job(str(a), "a.mcap", str(out / "a"))
+    row = batch.run_session(job, Settings(steps=("sync", "fuse")))
+    assert row["status"] == "failed"
+    assert "input changed during the run" in row["error"]
+    assert not (out / "a" / DONE_NAME).exists()
+    monkeypatch.setattr(batch, "_command", real)
+    # with the input as it is now, --resume runs it (no marker) and records the new input
+    row = batch.run_session(job, Settings(steps=("sync", "fuse")))
+    assert row["status"] == "ok", row["error"]
+    marker = json.loads((out / "a" / DONE_NAME).read_text())
+    assert marker["input"]["mtime_ns"] == a.stat().st_mtime_ns
+
+
+def test_a_second_batch_on_the_same_results_folder_fails_and_a_stale_lock_is_taken(tmp_path):
+    session(tmp_path / "s" / "a.mcap")
+    out = tmp_path / "res"
+    out.mkdir()
+    (out / LOCK_NAME).write_text(f"{os.getpid()}\n")  # a live batch (this test) holds it
+    run = run_pslog("batch", f"{tmp_path}/s/*.mcap", "--do", "fuse", "-o", out)
+    assert_one_line_error(run, 1, contains=(str(out / LOCK_NAME), f"pid {os.getpid()}"))
+    assert not (out / "a").exists()
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    (out / LOCK_NAME).write_text(f"{dead.pid}\n")  # a batch killed outright
+    run = run_pslog("batch", f"{tmp_path}/s/*.mcap", "--do", "fuse", "-o", out)
+    assert run.code == 0, run.stderr
+    assert not (out / LOCK_NAME).exists()  # released at the end
+
+
+def test_each_sessions_line_is_printed_when_it_finishes(tmp_path):
+    """The summary cannot be written (a folder in its way): the session's line is out
+    already."""
+    session(tmp_path / "s" / "a.mcap")
+    out = tmp_path / "res"
+    (out / "summary.csv").mkdir(parents=True)
+    code, stdout, err = pslog("batch", f"{tmp_path}/s/*.mcap", "--do", "fuse", "-o", out,
+                              "--force")
+    assert code == 1
+    assert stdout.splitlines()[0] == "ok     a.mcap", err
+
+
+@pytest.mark.parametrize(("env", "contains"), [
+    ({"PSLOG_PROGRESS": "loud"}, "PSLOG_PROGRESS='loud'"),
+    ({"PSLOG_PROGRESS_INTERVAL": "0"}, "PSLOG_PROGRESS_INTERVAL='0'"),
+])
+def test_bad_progress_settings_are_one_line(tmp_path, env, contains):
+    session(tmp_path / "s" / "a.mcap")
+    run = run_pslog("batch", f"{tmp_path}/s/*.mcap", "--do", "fuse", "-o", tmp_path / "res",
+                    env={**os.environ, **env})
+    assert_one_line_error(run, 1, contains=contains)
+    assert not (tmp_path / "res").exists()
+
+
+@pytest.mark.parametrize(("mode", "shown"), [("off", False), ("lines", True)])
+def test_pslog_progress_off_and_lines(tmp_path, mode, shown):
+    session(tmp_path / "s" / "a.mcap")
+    code, _, err = _with_env({"PSLOG_PROGRESS": mode}, "batch", f"{tmp_path}/s/*.mcap",
+                             "--do", "fuse", "-o", tmp_path / "res")
+    assert code == 0, err
+    assert ("sessions/min" in err) is shown, err
+
+
+def _with_env(env: dict, *argv) -> tuple[int, str, str]:
+    old = {k: os.environ.get(k) for k in env}
+    os.environ.update(env)
+    try:
+        return pslog(*argv)
+    finally:
+        for k, v in old.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
+def test_estimate_without_sync_is_refused(tmp_path):
+    session(tmp_path / "s" / "a.mcap")
+    run = run_pslog("batch", f"{tmp_path}/s/*.mcap", "--do", "fuse", "--estimate", "drift",
+                    "-o", tmp_path / "res")
+    assert_one_line_error(run, 2, contains="--estimate")
+    assert not (tmp_path / "res").exists()
+
+
+def test_a_failed_nested_session_leaves_no_empty_folders(tmp_path):
+    cut(session(tmp_path / "s" / "d1" / "d2" / "bad.mcap"))
+    session(tmp_path / "keep" / "x.mcap")
+    out = tmp_path / "res"
+    code, stdout, _ = pslog("batch", f"{tmp_path}/s/**/*.mcap", "--do", "fuse", "-o", out)
+    assert code == 1
+    assert "failed d1/d2/bad.mcap" in stdout
+    assert sorted(p.name for p in out.iterdir()) == ["summary.csv", "summary.parquet"]
