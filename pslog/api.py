@@ -20,7 +20,7 @@ human-facing summary.
 from __future__ import annotations
 
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Literal
 
@@ -81,15 +81,34 @@ class FuseResult(Mapping[str, Track]):
     def __getitem__(self, method: str) -> Track:
         return self.tracks[method]
 
-    def __iter__(self):
+    def __iter__(self) -> Iterator[str]:
         return iter(self.tracks)
 
     def __len__(self) -> int:
         return len(self.tracks)
 
 
+def _names(value: object, what: str) -> list[str] | None:
+    """A name list from a comma-separated string or a sequence of names (None: not given):
+    the same rule as the command line's ``--method`` / ``--estimate`` (an empty string or list,
+    an empty name, or anything but text, is an :class:`InputError` naming the value)."""
+    if value is None:
+        return None
+    if isinstance(value, str):
+        names = [name.strip() for name in value.split(",")]
+    elif isinstance(value, Sequence) and all(isinstance(v, str) for v in value):
+        names = [name.strip() for name in value]
+    else:
+        raise InputError(f"{what} {value!r}: give a name, a comma-separated string or a "
+                         f"list of names")
+    if not names or not all(names):
+        raise InputError(f"{what} {value!r}: name one, or several separated by commas")
+    return list(dict.fromkeys(names))
+
+
 def fuse(session: Session | str | os.PathLike[str] | Detections,
-         methods: str | Sequence[str] | None = None, *, rig: Rig | None = None,
+         methods: str | Sequence[str] | None = None, *,
+         rig: Rig | str | os.PathLike[str] | None = None,
          options: FusionOptions | None = None) -> FuseResult:
     """Fuse a session's detections into one 3D track per method, as ``pslog fuse`` does.
 
@@ -100,7 +119,9 @@ def fuse(session: Session | str | os.PathLike[str] | Detections,
     methods : a method name, several, or a comma-separated list; default every method the
         session's timing suits (:func:`pslog.fusion.default_methods`)
     rig : a corrected rig (same camera names and order) instead of the session's; e.g.
-        ``pslog.sync(session).rig``
+        ``pslog.sync(session).rig``; or, as ``pslog fuse --rig``, a built-in rig's name or a
+        rig file (pslog's TOML or an aniposelib / Pose2Sim / OpenCV calibration: a file
+        without frame rates and offsets takes the session's)
     options : :class:`pslog.fusion.FusionOptions` (tolerance, max gap, noise, gating)
 
     Returns
@@ -110,32 +131,38 @@ def fuse(session: Session | str | os.PathLike[str] | Detections,
     Raises
     ------
     pslog.errors.FusionError : unknown method, fewer than two cameras, no detection
-    pslog.errors.RigError : a rig whose cameras differ from the session's
+    pslog.errors.InputError : ``methods`` empty or not names
+    pslog.errors.RigError : a rig whose cameras differ from the session's, or a bad rig file
     """
     from . import progress
     from .fusion import FusionOptions, check_method, default_methods
     from .fusion.gating import fuse_detections
-    from .rig import check_baselines
+    from .rig import Rig, check_baselines, resolve_rig
 
+    names = _names(methods, "methods")
     if isinstance(session, Detections):
         if rig is None:
             raise InputError("fuse(detections): give the rig the detections belong to")
+        if isinstance(rig, (str, os.PathLike)):
+            rig = resolve_rig(os.fspath(rig))
         detections, used = session, rig
     else:
         read = _session(session)
+        if isinstance(rig, (str, os.PathLike)):
+            rig = resolve_rig(os.fspath(rig), timing_from=read.rig)  # a calibration has no timing
         detections, used = read.detections, rig or read.rig
         if rig is not None and rig.names != read.rig.names:
             from .errors import RigError
 
             raise RigError(f"rig cameras {', '.join(rig.names)} differ from the session's "
                            f"{', '.join(read.rig.names)} (names and order must match)")
+    if not isinstance(used, Rig):
+        raise InputError(f"rig {used!r}: give a Rig, a built-in rig's name or a rig file")
     check_baselines(used, "rig")
     options = options or FusionOptions()
     if detections.n_frames == 0:
         raise FusionError("the session has no detection to fuse")
-    if isinstance(methods, str):
-        methods = [m.strip() for m in methods.split(",") if m.strip()]
-    chosen = ([check_method(m) for m in dict.fromkeys(methods)] if methods
+    chosen = ([check_method(m) for m in names] if names is not None
               else default_methods(detections, used, options))
     progress.step(f"fusing {', '.join(chosen)}")
     tracks, rejections = fuse_detections(detections, used, chosen, options)
@@ -168,7 +195,7 @@ class SyncOutcome:
 
 
 def sync(session: Session | str | os.PathLike[str],
-         estimate: Sequence[str] = ("offset",), *, search_s: float | None = None,
+         estimate: str | Sequence[str] = ("offset",), *, search_s: float | None = None,
          regularize: Literal["auto", "on", "off"] = "auto") -> SyncOutcome:
     """Estimate every camera's clock from the ball's detections, as ``pslog sync`` does.
 
@@ -181,7 +208,8 @@ def sync(session: Session | str | os.PathLike[str],
     Parameters
     ----------
     session : a :class:`Session` or its path
-    estimate : clock parameters among ``offset``, ``drift``, ``readout``
+    estimate : clock parameters among ``offset``, ``drift``, ``readout``: a name, a
+        comma-separated string (``"offset,drift"``) or a sequence of names
     search_s : scan each offset over ±search_s seconds around the rig's value (default half
         a frame period)
     regularize : ``auto``, ``on`` or ``off``
@@ -195,11 +223,16 @@ def sync(session: Session | str | os.PathLike[str],
     from .rig import check_baselines
     from .timing import REGULARIZE_AUTO_JITTER_S, regularize_detections, regularize_times
 
+    try:
+        wanted_params = _names(estimate, "estimate")
+    except InputError as exc:
+        raise InputError(f"{exc} among {', '.join(PARAMETERS)}") from None
+    bad = [p for p in wanted_params or () if p not in PARAMETERS]
+    if bad or not wanted_params:
+        raise InputError(f"estimate {estimate!r}: name parameters among "
+                         f"{', '.join(PARAMETERS)} (not {', '.join(map(repr, bad))})")
+    estimate = wanted_params
     read = _session(session)
-    bad = [p for p in estimate if p not in PARAMETERS]
-    if bad or not estimate:
-        raise InputError(f"estimate {list(estimate)!r}: name parameters among "
-                         f"{', '.join(PARAMETERS)}")
     if regularize not in ("auto", "on", "off"):
         raise InputError(f"regularize {regularize!r}: auto, on or off")
     rig = read.rig
@@ -306,9 +339,18 @@ def evaluate(tracks: Track | Mapping[str, Track] | Session,
         tracks = tracks.tracks
     if isinstance(tracks, Track):
         tracks = {tracks.method: tracks}
+    if truth is not None and not isinstance(truth, Truth):
+        raise InputError(f"evaluate: truth {truth!r:.60}: give a Truth (e.g. session.truth)")
     if truth is None or len(truth) == 0:
         raise InputError("evaluate: no ground truth (only simulated or synthetic sessions "
                          "have one)")
+    if not isinstance(tracks, Mapping):
+        raise InputError(f"evaluate: tracks {tracks!r:.60}: give a Track, a mapping of "
+                         f"method -> Track or a Session")
     if not tracks:
         raise InputError("evaluate: no track to evaluate")
+    bad = {k: v for k, v in tracks.items() if not isinstance(v, Track)}
+    if bad:
+        key, value = next(iter(bad.items()))
+        raise InputError(f"evaluate: tracks[{key!r}] is {value!r:.60}, not a Track")
     return {method: _evaluate(track, truth) for method, track in tracks.items()}

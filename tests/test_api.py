@@ -5,6 +5,7 @@ the same accuracy figures."""
 from __future__ import annotations
 
 import json
+import re
 import tomllib
 from importlib.metadata import version
 from pathlib import Path
@@ -78,7 +79,8 @@ def test_sync_equals_the_sync_command(cli, tmp_path):
                          "offset,drift", "--json")
     assert code == 0, err
     by_command = json.loads(out)
-    outcome = pslog.sync(raw, ("offset", "drift"))
+    # a comma-separated string, as --estimate takes (tuples: the walk-through and below)
+    outcome = pslog.sync(raw, "offset,drift")
     assert outcome.regularized and any("regularized" in n for n in outcome.notes)
     assert abs(outcome.rig.cameras[1].clock_offset - 0.003) < 5e-4
     assert outcome.result.residual_px == by_command["residual_px"]
@@ -144,3 +146,48 @@ def test_the_readmes_python_block_runs(capsys, monkeypatch):
     for block in blocks:
         exec(compile(block, "README.md", "exec"), {})
     assert "'typeA'" in capsys.readouterr().out
+
+
+def test_fuse_takes_a_rig_file_as_the_fuse_command_does(sim_session, cli, tmp_path):
+    """rig= a path: resolve_rig(path, timing_from=the session's rig), as ``fuse --rig``."""
+    from pslog.interchange.rig_formats import rig_to_format
+
+    calib = tmp_path / "calibration.toml"
+    text = rig_to_format(sim_session.rig, "anipose", "m")
+    # a genuine anipose file has no timing keys: the session's are kept
+    calib.write_text(re.sub(r"(?m)^(fps|offset|clock_offset|clock_drift_ppm|readout) = .*\n",
+                            "", text), encoding="utf-8")
+    assert "offset" not in calib.read_text(encoding="utf-8")
+    out = tmp_path / "fused.mcap"
+    code, _, err = cli("fuse", sim_session.path, "--rig", calib, "--method", "typeA", "-o", out)
+    assert code == 0, err
+    by_command = pslog.read_session(out).tracks["typeA"]
+    for rig in (calib, str(calib)):
+        by_api = pslog.fuse(sim_session.path, "typeA", rig=rig)["typeA"]
+        assert_array_equal(by_api.time_ns, by_command.time_ns)
+        assert_array_equal(by_api.position_world, by_command.position_world)
+    with pytest.raises(RigError, match=r"no rig 'nowhere\.toml'"):
+        pslog.fuse(sim_session.path, "typeA", rig="nowhere.toml")
+
+
+@pytest.mark.parametrize("methods", ["", " , ", [], (), ["typeA", ""], 5, ["typeA", 5], b"x"])
+def test_fuse_refuses_empty_or_non_name_methods_naming_them(sim_session, methods):
+    with pytest.raises(InputError, match=r"methods .*" + re.escape(repr(methods)[:3])):
+        pslog.fuse(sim_session.path, methods)
+
+
+def test_sync_refuses_empty_or_non_name_estimates(sim_session):
+    for bad in ("", "offset,", "offset,skew", 5, ["offset", 5]):
+        with pytest.raises(InputError, match=r"estimate .*offset, drift, readout"):
+            pslog.sync(sim_session.path, bad)
+
+
+def test_evaluate_refuses_what_is_not_a_track_or_truth_naming_it(sim_session):
+    track = pslog.fuse(sim_session.path, "typeA")["typeA"]
+    with pytest.raises(InputError, match=r"tracks\['x'\] is 5, not a Track"):
+        pslog.evaluate({"x": 5}, sim_session.truth)
+    with pytest.raises(InputError, match=r"truth 'truth.csv': give a Truth"):
+        pslog.evaluate(track, "truth.csv")
+    with pytest.raises(InputError, match=r"tracks 5: give a Track"):
+        pslog.evaluate(5, sim_session.truth)
+    assert list(pslog.evaluate({"t": track}, sim_session.truth)) == ["t"]

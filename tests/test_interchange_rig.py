@@ -119,10 +119,14 @@ def test_translation_units_are_written_as_asked(tmp_path, fmt, name):
     m, mm = tmp_path / f"m{name}", tmp_path / f"mm{name}"
     m.write_text(rig_to_format(rig, fmt, "m", m.suffix), encoding="utf-8")
     mm.write_text(rig_to_format(rig, fmt, "mm", mm.suffix), encoding="utf-8")
-    # the same file read in the wrong unit is 1000 times off, so units are not ignored
-    as_m = load_rig(m, options=ImportOptions(units="m"))
-    as_mm_wrongly = load_rig(m, options=ImportOptions(units="mm"))
-    np.testing.assert_allclose(as_mm_wrongly.cameras[1].t * 1000, as_m.cameras[1].t)
+    # the same file read in the wrong unit would be 1000 times off (cameras ~3 mm from the
+    # origin): refused, naming the right unit, instead of silently shrinking the rig
+    with pytest.raises(RigError, match=r"look like metres.*--units m ") as info:
+        load_rig(m, options=ImportOptions(units="mm"))
+    assert str(m) in str(info.value) and "\n" not in str(info.value)
+    as_mm_file_in_m = load_rig(mm, options=ImportOptions(units="m"))  # m given: no check
+    np.testing.assert_allclose(as_mm_file_in_m.cameras[1].t,
+                               load_rig(m, options=ImportOptions(units="m")).cameras[1].t * 1000)
     np.testing.assert_allclose(load_rig(mm, options=ImportOptions(units="mm")).cameras[1].t,
                                rig.cameras[1].t, rtol=0, atol=1e-12)
 
@@ -358,6 +362,35 @@ def test_rig_import_and_export_commands(tmp_path, cli):
     assert code == 1 and ".yml" in err and not (tmp_path / "o.txt").exists()
 
 
+@pytest.mark.parametrize("fmt,name", [("anipose", "calibration.toml"), ("opencv", "c.yml")])
+def test_rig_import_refuses_a_metres_file_given_units_mm(tmp_path, cli, fmt, name):
+    """The mirror of the millimetre check: paper3 (cameras ~3 m from the origin) written in
+    metres and imported with --units mm would put its cameras ~3 mm from the origin."""
+    src = tmp_path / name
+    src.write_text(rig_to_format(builtin_rig("paper3"), fmt, "m", src.suffix), encoding="utf-8")
+    out = tmp_path / "rig.toml"
+    code, _, err = cli("rig", "import", src, "--units", "mm", "-o", out)
+    assert code == 1 and err.count("\n") == 1 and "Traceback" not in err
+    assert str(src) in err and "look like metres" in err and "--units m " in err
+    assert not out.exists()
+    code, _, _ = cli("rig", "import", src, "--units", "m", "-o", out)
+    assert code == 0 and load_rig(out).cameras[1].t == pytest.approx(
+        builtin_rig("paper3").cameras[1].t)
+
+
+def test_rig_import_refuses_units_for_a_pslog_rig_toml(tmp_path, cli):
+    src = tmp_path / "own.toml"
+    src.write_text(builtin_rig("paper3").to_toml(), encoding="utf-8")
+    out = tmp_path / "rig.toml"
+    for units in ("mm", "m"):
+        code, _, err = cli("rig", "import", src, "--units", units, "-o", out)
+        assert code == 1 and err.count("\n") == 1 and "Traceback" not in err
+        assert str(src) in err and "pslog rig TOML" in err and f"--units {units}" in err
+        assert not out.exists()
+    code, _, _ = cli("rig", "import", src, "-o", out)  # without --units: imported as it is
+    assert code == 0 and load_rig(out).names == builtin_rig("paper3").names
+
+
 def test_rig_check_names_a_foreign_format(tmp_path, cli):
     src = tmp_path / "Calib.toml"
     src.write_text(POSE2SIM, encoding="utf-8")
@@ -400,3 +433,22 @@ def test_foreign_calibration_is_accepted_by_rig_taking_commands(tmp_path, cli, s
                        "samples/cam1_points.csv", "--force")
     assert code == 1 and "pslog rig import" in err and toml.read_bytes() == before
     assert resolve_rig(toml).names == rig.names
+
+
+
+@pytest.mark.parametrize("fmt,name", [("anipose", "calibration.toml"), ("opencv", "c.yml")])
+def test_a_pslog_exported_calibration_keeps_its_timing_as_rig(tmp_path, fmt, name):
+    """What docs/interchange.md says: a file pslog exported carries its fps / offset keys,
+    and simulate, record, import and live (resolve_rig without a session) use them; so does
+    fuse --rig (timing_from is only for a file without them)."""
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    path = tmp_path / name
+    path.write_text(rig_to_format(rig, fmt, "m", path.suffix), encoding="utf-8")
+    session_rig = builtin_rig("paper3")  # offsets 0: would be taken if the file had none
+    for resolved in (resolve_rig(path), resolve_rig(path, timing_from=session_rig)):
+        assert [c.offset for c in resolved.cameras] == [c.offset for c in rig.cameras]
+        assert any(c.offset != 0 for c in resolved.cameras)
+    # a genuine foreign file (no timing keys): 30 fps and offset 0
+    bare = tmp_path / "Calib.toml"
+    bare.write_text(POSE2SIM, encoding="utf-8")
+    assert [(c.fps, c.offset) for c in resolve_rig(bare).cameras] == [(30.0, 0.0)] * 2

@@ -146,3 +146,46 @@ def test_nothing_to_export_and_session_without_tracks(tmp_path, cli, sim_session
     assert code == 1 and "no fused tracks" in err and not (tmp_path / "t.jsonl").exists()
     code, _, err = cli("export", sim_session.path, "--tum", tmp_path / "traj")
     assert code == 1 and not (tmp_path / "traj").exists()
+
+
+@pytest.mark.filterwarnings("ignore:No analog data found")
+def test_c3d_says_how_many_points_irregular_times_put_on_a_shared_frame(tmp_path, cli):
+    """Jittered shutters (2 ms): some points of a method fall on one frame; the nearer is
+    kept and the command says how many were left out, per method; the file holds exactly the
+    others, and the exact time of its first frame."""
+    c3d = pytest.importorskip("c3d")
+    from pslog.interchange.track_formats import c3d_grid
+
+    sim, fused_path, path = tmp_path / "j.mcap", tmp_path / "f.mcap", tmp_path / "t.c3d"
+    assert cli("simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "throw",
+               "--duration", "3", "--jitter", "0.002", "--seed", "1", "-o", sim)[0] == 0
+    assert cli("fuse", sim, "--method", "typeA", "--method", "nearest", "-o",
+               fused_path)[0] == 0
+    session = read_session(fused_path)
+    code, out, err = cli("export", fused_path, "--c3d", path)
+    assert code == 0, err
+    rate, first, _n = c3d_grid(session)
+    with open(path, "rb") as f:
+        reader = c3d.Reader(f)
+        labels = [s.strip() for s in reader.point_labels]
+        first_s = reader.get("PSLOG:FIRST_FRAME_S").string_value.strip()
+        frames = np.array([points for _, points, _ in reader.read_frames()])
+    assert Decimal(first_s) * 1_000_000_000 == first
+    said = {}
+    for part in out.split("(irregular times): ")[1].splitlines()[0].split(", "):
+        method, n, _of, total = part.split()
+        said[method] = int(n)
+        assert int(total) == len(session.tracks[method])
+    assert sum(said.values()) > 0
+    for j, method in enumerate(labels[:-1]):
+        track = session.tracks[method]
+        written = int(np.count_nonzero(frames[:, j, 3] != -1))
+        assert written == len(track) - said.get(method, 0)
+        frame = np.round((track.time_ns - first) * rate / 1e9).astype(int)
+        assert written == len(np.unique(frame))
+
+
+def test_c3d_of_regular_times_leaves_nothing_out(fused, tmp_path, cli):
+    pytest.importorskip("c3d")
+    code, out, err = cli("export", fused.path, "--c3d", tmp_path / "t.c3d")
+    assert code == 0 and "left out" not in out, err

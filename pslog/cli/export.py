@@ -102,6 +102,10 @@ def _export_parquet(session, path: str, force: bool) -> None:
 def _export_c3d(session, path: str, force: bool) -> None:
     from pslog.interchange.track_formats import write_c3d
 
-    frames, rate = write_c3d(session, path, force=force)
+    frames, rate, merged = write_c3d(session, path, force=force)
     print(f"wrote {path}: {frames} frames at {rate:g} Hz, one point per method"
           + (" and the truth" if session.truth is not None else "") + " (mm)")
+    lost = {m: n for m, n in merged.items() if n}
+    if lost:  # irregular times: two points on one frame, the nearer kept
+        print("  left out, sharing a frame with a nearer point (irregular times): "
+              + ", ".join(f"{m} {n} of {len(session.tracks[m])}" for m, n in lost.items()))

@@ -54,7 +54,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _add_import(actions) -> None:
-    from pslog.interchange.rig_formats import DEFAULT_FPS, IMPORT_FORMATS, MM_SUSPECT_M, UNITS
+    from pslog.interchange.rig_formats import (
+        DEFAULT_FPS,
+        IMPORT_FORMATS,
+        M_SUSPECT_M,
+        MM_SUSPECT_M,
+        UNITS,
+    )
     from pslog.rig import TIMING_PRESETS
 
     imp = actions.add_parser(
@@ -69,7 +75,10 @@ def _add_import(actions) -> None:
     imp.add_argument("--units", choices=tuple(UNITS),
                      help="unit of the file's translations (default: metres, refusing a file "
                           f"whose cameras are a median of more than {MM_SUSPECT_M:g} m from "
-                          "the origin as one most likely in millimetres)")
+                          "the origin as one most likely in millimetres; mm refuses a file "
+                          f"whose cameras are a median of less than {M_SUSPECT_M * 100:g} cm "
+                          "from the origin and from each other as one in metres; a pslog rig "
+                          "TOML is always in metres and takes no --units)")
     imp.add_argument("--fps", type=_positive_float, metavar="FPS",
                      help=f"frame rate of every camera (default: the file's if pslog wrote "
                           f"it, else {DEFAULT_FPS:g})")

@@ -30,7 +30,11 @@ aniposelib, Pose2Sim and OpenCV readers ignore, so a rig survives a round trip e
 Units: pslog is in metres. A translation is read as metres unless ``units="mm"`` is given.
 When the units were not given and the cameras' centres lie a median of more than
 :data:`MM_SUSPECT_M` from the world origin, the file is refused as one that is most likely in
-millimetres: a loud error naming ``--units``, never a silent guess either way.
+millimetres: a loud error naming ``--units``, never a silent guess either way. The mirror
+check: with ``units="mm"`` given, cameras whose centres lie a median of less than
+:data:`M_SUSPECT_M` both from the world origin and from each other are refused as a file in
+metres (3 m read as millimetres is 3 mm). ``units="m"`` given is never checked. A pslog rig
+TOML is always in metres: ``units`` given for one is refused.
 """
 
 from __future__ import annotations
@@ -56,6 +60,10 @@ UNITS = {"m": 1.0, "mm": 1e-3}
 #: when the units were not given: a median camera centre farther than this from the world
 #: origin, metres, means a file in millimetres read as metres (1478 mm is 1478 m), refused
 MM_SUSPECT_M = 100.0
+#: when ``units="mm"`` was given: camera centres a median of less than this both from the
+#: world origin and from each other, metres, mean a file in metres read as millimetres (a
+#: rig spanning 3 m becomes 3 mm); no ball-tracking rig has its cameras 2 cm apart
+M_SUSPECT_M = 0.02
 #: frame rate of a camera whose file has none and for which none was given, frames/s
 DEFAULT_FPS = 30.0
 #: suffixes of OpenCV FileStorage files (anything else is read as TOML first)
@@ -171,6 +179,11 @@ def parse_rig_text(text: str, path: str | Path, fmt: str = "auto",
         raise RigError(f"{source}: an OpenCV FileStorage file, not a pslog rig TOML (convert "
                        f"it with 'pslog rig import {source} -o rig.toml')")
     if detected == "pslog":
+        if options.units is not None:
+            # pslog's own rig TOML is in metres by definition: a unit given for it is a
+            # misunderstanding (or the wrong file), not something to apply or ignore silently
+            raise RigError(f"{source}: a pslog rig TOML, always in metres: --units "
+                           f"{options.units} does not apply to it (leave --units out)")
         rig = Rig.from_toml(text, source) if data is None else Rig.from_dict(data, source)
         return RigFile(_with_timing(rig, options, source), "pslog", "m", True)
     if detected in ("anipose", "pose2sim"):
@@ -224,6 +237,8 @@ def _assemble(entries: list[dict], name: str, fmt: str, options: ImportOptions,
         raise RigError(f"{source}: {exc}") from None
     if options.units is None:
         _check_not_millimetres(rig, source)
+    elif options.units == "mm":
+        _check_not_metres(rig, source)
     return RigFile(_with_timing(rig, options, source), fmt, units, timed)
 
 
@@ -235,6 +250,25 @@ def _check_not_millimetres(rig: Rig, source: str) -> None:
             f"{source}: its cameras are a median {median:.4g} m from the world origin read "
             f"as metres: its translations look like millimetres; convert it with 'pslog rig "
             f"import {source} --units mm -o rig.toml' (or --units m to keep metres)")
+
+
+def _check_not_metres(rig: Rig, source: str) -> None:
+    """Refuse a rig read as millimetres whose cameras are implausibly close together: the
+    median camera centre nearer than :data:`M_SUSPECT_M` to the world origin AND the median
+    distance between two cameras below it (one test alone would refuse a rig whose
+    origin is at a camera, or whose cameras sit on a sphere around it)."""
+    centres = np.array([c.center_world for c in rig.cameras])
+    from_origin = float(np.median(np.linalg.norm(centres, axis=1)))
+    if len(centres) > 1:
+        i, j = np.triu_indices(len(centres), k=1)
+        apart = float(np.median(np.linalg.norm(centres[i] - centres[j], axis=1)))
+    else:
+        apart = from_origin
+    if max(from_origin, apart) < M_SUSPECT_M:
+        raise RigError(
+            f"{source}: read as millimetres its cameras are a median {from_origin * 1e3:.4g} "
+            f"mm from the world origin and {apart * 1e3:.4g} mm apart: its translations look "
+            f"like metres; convert it with 'pslog rig import {source} --units m -o rig.toml'")
 
 
 def _with_timing(rig: Rig, options: ImportOptions, source: str) -> Rig:

@@ -184,19 +184,28 @@ def c3d_grid(session) -> tuple[float, int, int]:
     """The uniform frame grid of a session's C3D: ``(rate_hz, first_ns, n_frames)``.
 
     Rate: the highest point rate of the methods (1 / the median interval between points of
-    the densest track), rounded to 1e-6 Hz; first frame at the earliest point; every point is
-    put on its nearest frame (at most half a frame period away; exact for points on a
-    regular shutter schedule such as type A's).
+    the densest track), rounded to 1e-6 Hz. Phase: the circular mean of the densest track's
+    times modulo the frame period (Mardia & Jupp, *Directional Statistics*, 2000, sec. 2.2),
+    so that its points sit at the frames' centres: exact for points on a regular shutter
+    schedule such as type A's, and with jittered times (host stamps) the fewest points are
+    half a period from their frame, where two fall on one. First frame: the one of that
+    phase nearest the earliest point (at most half a period from it); every point is put on
+    its nearest frame.
     """
     tracks = _tracks(session)
-    intervals = [float(np.median(np.diff(t.time_ns))) for t in tracks.values() if len(t) > 1]
-    intervals = [d for d in intervals if d > 0]
-    if not intervals:
+    spans = [(float(np.median(np.diff(t.time_ns))), t) for t in tracks.values() if len(t) > 1]
+    spans = [(d, t) for d, t in spans if d > 0]
+    if not spans:
         raise InputError(f"{session.path}: C3D needs a track of at least two points at "
                          f"different times to set its frame rate")
-    rate = round(NS / min(intervals), 6)
-    first = min(int(t.time_ns.min()) for t in tracks.values() if len(t))
+    interval, densest = min(spans, key=lambda s: s[0])
+    rate = round(NS / interval, 6)
+    period = NS / rate
+    earliest = min(int(t.time_ns.min()) for t in tracks.values() if len(t))
     last = max(int(t.time_ns.max()) for t in tracks.values() if len(t))
+    angle = 2 * np.pi * ((densest.time_ns - earliest) % period) / period
+    phase = float(np.angle(np.mean(np.exp(1j * angle)))) / (2 * np.pi) * period
+    first = earliest + round(phase)  # |phase| <= period / 2: frame 0 is the earliest's
     n_frames = round((last - first) * rate / NS) + 1
     return rate, first, n_frames
 
@@ -205,7 +214,8 @@ def c3d_grid(session) -> tuple[float, int, int]:
 C3D_MAX_FRAMES = 65535
 
 
-def write_c3d(session, path: str | Path, *, force: bool = False) -> tuple[int, float]:
+def write_c3d(session, path: str | Path, *, force: bool = False
+              ) -> tuple[int, float, dict[str, int]]:
     """Write one C3D point per method (labels are the method names) and ``truth`` (when the
     session has one, interpolated at the frame times), on the grid of :func:`c3d_grid`.
 
@@ -213,11 +223,18 @@ def write_c3d(session, path: str | Path, *, force: bool = False) -> tuple[int, f
     1000), the unit biomechanics tools expect; floating-point storage, so nothing is lost to
     a scale factor. A frame where a method has no point holds an invalid point (residual
     -1); the residual of a valid point is the method's ``ray_miss_m`` in mm when it has one,
-    else 0. Where two points of a method fall on one frame the nearer in time is kept.
+    else 0. Where two points of a method fall on one frame (irregular times: jittered host
+    stamps, dropped and re-sent frames) the nearer in time is kept and the other left out;
+    how many is returned, for the command to say.
+
+    C3D numbers its frames with integers (``POINT:RATE`` and the header's first frame): the
+    first frame's time is ``(first_frame - 1) / rate`` on the session clock only to within
+    half a frame period; the exact time of frame 1 is stored as ``PSLOG:FIRST_FRAME_S``
+    (decimal seconds, a string: C3D has no 64-bit number).
 
     Returns
     -------
-    (n_frames, rate_hz)
+    (n_frames, rate_hz, {method: points left out, sharing a frame with a nearer one})
     """
     try:
         import c3d
@@ -236,11 +253,15 @@ def write_c3d(session, path: str | Path, *, force: bool = False) -> tuple[int, f
     points = np.zeros((n_frames, len(labels), 5), dtype=np.float32)
     points[:, :, 3] = -1.0  # invalid until a point is put there
     frame_ns = first + np.round(np.arange(n_frames) * (NS / rate)).astype(np.int64)
-    for j, track in enumerate(tracks.values()):
-        frames = np.round((track.time_ns - first) * rate / NS).astype(np.int64)
+    merged: dict[str, int] = {}
+    for j, (method, track) in enumerate(tracks.items()):
+        frames = np.clip(np.round((track.time_ns - first) * rate / NS).astype(np.int64), 0,
+                         n_frames - 1)
         miss = np.abs(track.time_ns - frame_ns[frames])
         order = np.lexsort((miss, frames))  # per frame, the nearest point first
-        keep = order[np.r_[True, frames[order][1:] != frames[order][:-1]]]
+        keep = order[np.r_[True, frames[order][1:] != frames[order][:-1]]] if len(
+            track) else order
+        merged[method] = len(track) - len(keep)
         residual = track.quality.get("ray_miss_m", np.zeros(len(track)))
         residual = np.where(np.isfinite(residual), residual * 1000.0, 0.0)
         points[frames[keep], j, :3] = track.position_world[keep] * 1000.0
@@ -255,6 +276,13 @@ def write_c3d(session, path: str | Path, *, force: bool = False) -> tuple[int, f
                         point_units="mm  ")
     writer.set_point_labels(labels)
     writer.set_start_frame(round(first * rate / NS) + 1)  # frame 1 at the clock's 0
+    # the integer start frame is within half a period of the grid's first time: the exact
+    # time, for a reader that needs it
+    group = writer.add_group(max((i for i, _g in writer.group_listed()), default=0) + 1,
+                             "PSLOG", "pslog's export")
+    text = _seconds(first)
+    group.add_str("FIRST_FRAME_S", "session-clock time of the first frame, seconds", text,
+                  len(text))
     writer.add_frames([(frame, np.zeros((0, 0), dtype=np.float32)) for frame in points])
     with replacing(path, "wb", force=force, inputs=[session.path]) as f, \
             warnings.catch_warnings():
@@ -262,5 +290,5 @@ def write_c3d(session, path: str | Path, *, force: bool = False) -> tuple[int, f
         # tracker has: not a problem to show the user
         warnings.simplefilter("ignore", UserWarning)
         writer.write(f)
-    return n_frames, rate
+    return n_frames, rate, merged
 

@@ -139,9 +139,12 @@ class _Finished:
         self.reader = reader
         self.topics = {c.id: c.topic for c in summary.channels.values()}
         stats = summary.statistics
-        self.counts = ({} if stats is None else
-                       {self.topics[c]: n for c, n in stats.channel_message_counts.items()
-                        if c in self.topics})
+        #: topic -> messages in the file, summed over every channel of the topic (pslog
+        #: writes one channel per topic; another tool may add a second one on it)
+        self.counts: dict[str, int] = {}
+        for c, n in ({} if stats is None else stats.channel_message_counts).items():
+            if c in self.topics:
+                self.counts[self.topics[c]] = self.counts.get(self.topics[c], 0) + n
         self.attachments = {a.name: a for a in summary.attachment_indexes}
         #: table name -> why its columnar table was not used (see :meth:`table`)
         self.table_problems: dict[str, str] = {}
@@ -166,6 +169,19 @@ class _Finished:
                 raise LogFormatError(f"table names {sum(counts.values())} messages of "
                                      f"{', '.join(counts) or 'no topic'}, the file has "
                                      f"{sum(expected.values())}")
+            # one row per message: a frame per detection message (per camera), a sample per
+            # truth message, a point per track message
+            rows = columns["frame_time_ns" if "frame_time_ns" in columns else "time_ns"]
+            per_topic = (np.bincount(columns["frame_camera"], minlength=len(topics))
+                         if "frame_camera" in columns and len(rows)
+                         and 0 <= columns["frame_camera"].min()
+                         and columns["frame_camera"].max() < len(topics)
+                         else None)
+            if len(rows) != sum(counts.values()) or (
+                    per_topic is not None
+                    and list(per_topic) != [counts.get(t, 0) for t in topics]):
+                raise LogFormatError(f"table holds {len(rows)} rows for "
+                                     f"{sum(counts.values())} messages")
             if name == tables.TRUTH:
                 return Truth(columns["time_ns"], columns["position_world"])
             method = tables.track_method(name)
@@ -269,7 +285,14 @@ class _Finished:
         else:  # unchunked file written by another program: walk it all
             io.scan_file(self.path, lambda cid, t, seq, data: (
                 wanted[cid].append((t, seq, data)) if cid in wanted else None))
-        return {self.topics[cid]: msgs for cid, msgs in wanted.items()}
+        out: dict[str, list[tuple[int, int, bytes]]] = {}
+        for cid, msgs in wanted.items():
+            topic = self.topics[cid]
+            if topic in out:  # a second channel on the topic: both, in log-time order
+                out[topic] = sorted(out[topic] + msgs, key=lambda m: m[0])
+            else:
+                out[topic] = msgs
+        return out
 
     def collect_batches(self, topics: Sequence[str], skip: frozenset[int] = frozenset()
                         ) -> dict[str, _Batch]:
@@ -282,7 +305,9 @@ class _Finished:
         if not wanted:
             return {}
         chunks = self.summary.chunk_indexes
-        if not chunks or not all(c.message_index_offsets for c in chunks):
+        shared_topic = len({self.topics[cid] for cid in wanted}) < len(wanted)
+        if not chunks or not all(c.message_index_offsets for c in chunks) or shared_topic:
+            # (two channels on one topic, as no pslog writer makes: merged per message)
             # unchunked, or chunks without message indexes (another writer's): walk them
             return {t: _Batch.from_messages(m) for t, m in self.collect(topics, skip).items()}
         chosen = [c for c in sorted(chunks, key=lambda c: c.chunk_start_offset)

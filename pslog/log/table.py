@@ -6,8 +6,11 @@ A 90-minute match holds half a million detection messages; decoding them is most
 time of reading a session. The same data as a few arrays reads at memory speed. The per-frame
 messages stay in the file (streaming tools such as Foxglove read those); a table is only used
 when it agrees with them (the per-topic message counts it names equal the summary's
-statistics, its attachment CRC holds, its columns have the documented dtypes and shapes),
-else the reader decodes the messages, as it does for files written before tables existed.
+statistics summed over each topic's channels, it holds one row per message counted, its
+attachment CRC holds, its columns have the documented dtypes and shapes), else the reader
+decodes the messages, as it does for files written before tables existed. Counts are all the
+summary tells about the messages: a tool that rewrites messages without changing their
+number must drop these attachments (docs/log-format.md; ``pslog recover`` rebuilds them).
 
 An attachment's data: a 4-byte little-endian header length ``H``, ``H`` bytes of UTF-8
 JSON (the header), zero bytes up to a multiple of 8, then each column's bytes at the
