@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import argparse
 
-from ._common import add_force, add_method_option, int_in
+from ._common import add_force, add_method_option, checked_by, int_in
 
 DESCRIPTION = """\
 Run the same steps on every session a pattern matches, one Ray task per session: on local
@@ -52,18 +52,9 @@ def _folder(text: str) -> str:
     return text
 
 
-def _address(text: str) -> str:
-    from pslog.batch import parse_address
-    from pslog.errors import PslogError
-
-    try:
-        parse_address(text)
-    except PslogError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-    return text
-
-
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from pslog.batch import parse_address  # (standard library only: no Ray here)
+
     parser.description = DESCRIPTION
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
     parser.add_argument("patterns", nargs="+", metavar="PATTERN",
@@ -87,7 +78,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     where.add_argument("--workers", type=int_in(1, MAX_WORKERS), default=None, metavar="N",
                        help=f"local worker processes, at most {MAX_WORKERS} (default: the "
                             f"number of cores)")
-    where.add_argument("--address", metavar="ADDRESS", type=_address,
+    where.add_argument("--address", metavar="ADDRESS", type=checked_by(parse_address, "address"),
                        help="run on an existing Ray cluster: ray://HOST:10001 (Ray Client), "
                             "HOST:6379 or auto on a node of the cluster; the sessions and "
                             "OUTDIR must be on storage every node sees (docs/batch.md)")

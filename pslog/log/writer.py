@@ -388,6 +388,21 @@ class SessionWriter:
         self._image_bytes = 0
         self._mcap.flush()
 
+    def _queue_blocks(self, n: int, step: int, make) -> int:
+        """Write rows ``[0, n)`` as blocks ``make(lo, hi)`` of ``step`` rows, until ``make``
+        gives None (a block that is not protobuf's bytes); the first row not written."""
+        lo = 0
+        while lo < n:
+            hi = min(lo + step, n)
+            block = make(lo, hi)
+            if block is None:
+                break
+            self._pending.append(block)
+            self._drain()
+            self._maybe_flush()
+            lo = hi
+        return lo
+
     def _maybe_flush(self) -> None:
         if time.monotonic() - self._last_flush >= self._flush_interval:
             self.flush()
@@ -468,15 +483,8 @@ class SessionWriter:
         protobuf way for the rest when a block's sample frames differ from protobuf's."""
         lo, n = 0, detections.n_frames
         if all(self._names) and n >= _BLOCK_FROM and detections.frame_index.min() >= 0:
-            while lo < n:
-                hi = min(lo + _FRAME_BLOCK, n)
-                block = _detections_block(detections, lo, hi, self._names, channels)
-                if block is None:
-                    break
-                self._pending.append(block)
-                self._drain()
-                self._maybe_flush()
-                lo = hi
+            lo = self._queue_blocks(n, _FRAME_BLOCK, lambda a, b: _detections_block(
+                detections, a, b, self._names, channels))
         if lo >= n:
             return
         # split candidate arrays per frame once (vectorised) instead of masking per frame
@@ -659,16 +667,9 @@ class SessionWriter:
         template = _quality_template(extra)
         lo = 0
         if template is not None and all(self._names) and n >= _BLOCK_FROM:
-            while lo < n:
-                hi = min(lo + _TRACK_BLOCK, n)
-                block = _track_block(track, lo, hi, method, self._names, fixed, template,
-                                     first_id, color, channel, scene_channel)
-                if block is None:
-                    break
-                self._pending.append(block)
-                self._drain()
-                self._maybe_flush()
-                lo = hi
+            lo = self._queue_blocks(n, _TRACK_BLOCK, lambda a, b: _track_block(
+                track, a, b, method, self._names, fixed, template, first_id, color, channel,
+                scene_channel))
         self._add_track_points(track, lo, n, method, fixed, extra, first_id, color, channel,
                                scene_channel)
         self._scene_ids[method] = first_id + n
