@@ -1,0 +1,31 @@
+"""One place where pslog compiles its sequential kernels with numba.
+
+Most of pslog is columnar numpy. A few loops cannot be vectorised: the causal filter updates
+its state one detection at a time (each update depends on the last), and some per-point kernels
+run hundreds of thousands of times on a 90-minute match. Those are written as plain Python
+functions over float64 arrays and scalars, decorated with :func:`kernel`, which compiles them
+with numba in nopython mode:
+
+- ``cache=True``: the machine code is written next to the module (``__pycache__``) or, where
+  that is read-only, to numba's per-user cache, so only the first run on a machine pays the
+  compile time;
+- ``nogil=True``: a kernel releases the GIL (live fusion beside a recorder thread);
+- ``error_model="numpy"``: a division by zero gives inf/nan as in numpy instead of raising;
+- no ``fastmath``: IEEE arithmetic is kept, so results do not depend on reassociation.
+
+The undecorated Python function stays available as ``kernel_fn.py_func`` (numba's attribute):
+tests run both and compare, and a mutation of the equation fails both.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Callable, TypeVar
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def kernel(fn: F) -> F:
+    """Compile ``fn`` with numba (nopython, cached, GIL released, numpy error model)."""
+    import numba  # imported here: `pslog --help` and the light commands never load LLVM
+
+    return numba.njit(cache=True, nogil=True, error_model="numpy")(fn)
