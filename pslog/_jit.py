@@ -20,7 +20,7 @@ tests run both and compare, and a mutation of the equation fails both.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any, TypeVar
+from typing import Any, TypeVar, cast
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -29,4 +29,4 @@ def kernel(fn: F) -> F:
     """Compile ``fn`` with numba (nopython, cached, GIL released, numpy error model)."""
     import numba  # imported here: `pslog --help` and the light commands never load LLVM
 
-    return numba.njit(cache=True, nogil=True, error_model="numpy")(fn)
+    return cast(F, numba.njit(cache=True, nogil=True, error_model="numpy")(fn))
