@@ -74,6 +74,32 @@ def as_csv(row: dict) -> dict:
     return {k: text(v) for k, v in row.items() if k != "runtime_s"}
 
 
+def differences(got: list[dict], want: list[dict]) -> list[str]:
+    """Every cell where ``got`` (a batch's summary.csv) differs from ``want`` (the commands
+    by hand), runtime aside: one line per cell naming the session, the column, both values
+    and, for numbers, the difference (absolute, and in units of the last place)."""
+    import math
+
+    lines = []
+    if [r.get("session") for r in got] != [r.get("session") for r in want]:
+        lines.append(f"sessions differ: {[r.get('session') for r in got]} vs "
+                     f"{[r.get('session') for r in want]}")
+    for g, w in zip(got, want, strict=False):
+        for column in dict.fromkeys([*w, *g]):
+            if column == "runtime_s" or g.get(column) == w.get(column):
+                continue
+            a, b = g.get(column), w.get(column)
+            how = ""
+            try:
+                x, y = float(a), float(b)
+                ulps = abs(x - y) / math.ulp(max(abs(x), abs(y))) if x != y else 0.0
+                how = f" (diff {x - y:+.3g}, {ulps:.0f} ulp)"
+            except (TypeError, ValueError):
+                pass
+            lines.append(f"  {w.get('session')}: {column}: batch {a!r}, by hand {b!r}{how}")
+    return lines
+
+
 def batch(pattern: str, out: Path, steps: str, workers: int) -> tuple[float, list[dict]]:
     seconds, _ = pslog("batch", pattern, "--do", steps, *METHODS, "-o", out,
                        "--workers", workers)
@@ -122,8 +148,14 @@ def main() -> int:
             want.append(as_csv(row))
         one_s, rows1 = batch(pattern, work / "w1", args.steps, 1)
         two_s, rows2 = batch(pattern, work / "w2", args.steps, 2)
-        exact = all([{k: v for k, v in r.items() if k != "runtime_s"} for r in rows] == want
-                    for rows in (rows1, rows2))
+        exact = True
+        for name, rows in (("--workers 1", rows1), ("--workers 2", rows2)):
+            diff = differences(rows, want)
+            exact = exact and not diff
+            if diff:
+                print(f"pslog batch {name}: {len(diff)} cell(s) differ from the commands by "
+                      f"hand:")
+                print("\n".join(diff))
         speedup = one_s / two_s
         n = args.sessions
         print(f"{'run':<44} {'seconds':>8} {'s/session':>10}")

@@ -515,9 +515,13 @@ def _joint_step(problem, solver, obs, unknowns, theta, params, control, sigma, d
     rhs_t = -(WG.T @ r.reshape(-1))
     U = _normal.factor(ab)
     Y = _normal.solve(U, B) if Q else np.zeros((n, 0))
-    S = C - B.T @ Y
+    # the sums over the n trajectory unknowns as einsum, not BLAS (B.T @ Y, B.T @ z): a
+    # threaded BLAS splits long sums by thread, so the last bits of the clocks would depend
+    # on the number of BLAS threads (OMP_NUM_THREADS, 1 in a pslog batch's Ray workers)
+    S = C - np.einsum("ki,kj->ij", B, Y)
     z = _normal.solve(U, rhs_c)
-    d_theta = np.linalg.solve(S[:q, :q], rhs_t[:q] - B[:, :q].T @ z) if q else np.zeros(0)
+    d_theta = (np.linalg.solve(S[:q, :q], rhs_t[:q] - np.einsum("ki,k->i", B[:, :q], z))
+               if q else np.zeros(0))
     d_c = z - Y[:, :q] @ d_theta
     before = solver.cost(control, r, sigma)
     step, accepted = 1.0, False

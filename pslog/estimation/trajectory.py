@@ -439,7 +439,9 @@ def _prior_cost(problem: _Problem, c: np.ndarray) -> float:
     for d in range(1, _normal.WIDTH):
         Ax[:-d] += ab[-1 - d, d:] * x[d:]
         Ax[d:] += ab[-1 - d, d:] * x[:-d]
-    return float(x @ Ax - 2 * problem.prior_rhs @ x + problem.prior_const)
+    # einsum, not a BLAS dot: the value must not depend on the number of BLAS threads
+    return float(np.einsum("i,i->", x, Ax) - 2 * np.einsum("i,i->", problem.prior_rhs, x)
+                 + problem.prior_const)
 
 
 def split_pieces(obs: Observations, usable: np.ndarray, max_gap_s: float
