@@ -635,6 +635,15 @@ def check_reachable(address: str, timeout_s: float = CONNECT_TIMEOUT_S) -> None:
     where = parse_address(address)
     if where is None:
         return
+    if address.startswith("ray://"):
+        import importlib.util
+
+        # Ray Client talks gRPC: without the ray[client] extra ray.init fails only after
+        # the connection, with a paragraph; say it at once, in one line
+        if importlib.util.find_spec("grpc") is None:
+            raise PslogError(f"--address {address}: Ray Client is not installed here (pip "
+                             f"install 'ray[client]'); or run pslog batch on a node of the "
+                             f"cluster with --address HOST:PORT (the head's GCS port) or auto")
     try:
         socket.create_connection(where, timeout=timeout_s).close()
     except OSError as exc:
@@ -663,10 +672,15 @@ def ray_cluster(workers: int | None, address: str | None):
     temp = None
     quiet: dict[str, Any] = {"logging_level": logging.ERROR, "log_to_driver": False,
                              "include_dashboard": False}
+    native = io.StringIO()  # what Ray's C++ core wrote while joining a cluster
     try:
         with contextlib.redirect_stdout(sys.stderr):  # never mix Ray's words into stdout
             if address is not None:
-                ray.init(address=address, **quiet)
+                # Ray's core logs each failed attempt to join (a wrong token: one warning a
+                # second for ~20 s) on the process's standard error: kept aside, the
+                # reason is then said in the one line below
+                with _native_stderr(native):
+                    ray.init(address=address, **quiet)
             else:
                 # a short private folder: Ray's socket paths must fit in 107 bytes
                 temp = tempfile.mkdtemp(prefix="pslog-ray-")
@@ -676,6 +690,10 @@ def ray_cluster(workers: int | None, address: str | None):
             shutil.rmtree(temp, ignore_errors=True)
         where = f"the Ray cluster at {address}" if address else "a local Ray cluster"
         reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        if "InvalidAuthToken" in native.getvalue() or "Unauthenticated" in native.getvalue():
+            reason = ("it uses token authentication and refused this machine's token (give "
+                      "the cluster's token as RAY_AUTH_TOKEN or in ~/.ray/auth_token: "
+                      "docs/batch.md)")
         raise PslogError(f"cannot start or join {where}: {reason}") from None
     try:
         with _terminate_as_interrupt():
@@ -684,6 +702,26 @@ def ray_cluster(workers: int | None, address: str | None):
         ray.shutdown()
         if temp is not None:
             shutil.rmtree(temp, ignore_errors=True)
+
+
+@contextlib.contextmanager
+def _native_stderr(into: io.StringIO):
+    """File descriptor 2 (where C and C++ code writes, not only ``sys.stderr``) goes to a
+    temporary file while the block runs; its text is then appended to ``into``."""
+    import tempfile
+
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as spool:
+        os.dup2(spool.fileno(), 2)
+        try:
+            yield
+        finally:
+            sys.stderr.flush()
+            os.dup2(saved, 2)
+            os.close(saved)
+            spool.seek(0)
+            into.write(spool.read().decode("utf-8", "replace"))
 
 
 @contextlib.contextmanager

@@ -79,9 +79,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                        help=f"local worker processes, at most {MAX_WORKERS} (default: the "
                             f"number of cores)")
     where.add_argument("--address", metavar="ADDRESS", type=checked_by(parse_address, "address"),
-                       help="run on an existing Ray cluster: ray://HOST:10001 (Ray Client), "
-                            "HOST:6379 or auto on a node of the cluster; the sessions and "
-                            "OUTDIR must be on storage every node sees (docs/batch.md)")
+                       help="run on an existing Ray cluster: HOST:PORT (the head's GCS port, "
+                            "ray start --head --port) or auto, on a node of the cluster; "
+                            "ray://HOST:10001 from elsewhere through Ray Client (needs pip "
+                            "install 'ray[client]'); the sessions and OUTDIR must be on "
+                            "storage every node sees (docs/batch.md)")
     parser.add_argument("--resume", action="store_true",
                         help="skip the sessions whose outputs a previous batch with the same "
                              "steps completed (and whose input has not changed since); redo "

@@ -115,3 +115,19 @@ def test_an_empty_output_folder_name(tmp_path, season):
     run = run_pslog("batch", f"{season}/**/*.mcap", "--do", "fuse", "-o", "", cwd=tmp_path)
     assert_one_line_error(run, 2, contains=("-o/--output", "empty folder name"))
     assert_untouched(before, tmp_path)
+
+
+def test_ray_client_without_its_extra(tmp_path, season):
+    """``ray://`` is Ray Client, which needs ``ray[client]`` (gRPC): said at once, in one
+    line, before anything is looked at (Ray would say it after connecting, in a paragraph)."""
+    import importlib.util
+
+    if importlib.util.find_spec("grpc") is not None:
+        pytest.skip("ray[client] is installed here")
+    before = fingerprint(tmp_path)
+    run = run_pslog("batch", f"{season}/**/*.mcap", "--do", "fuse", "-o", tmp_path / "out",
+                    "--address", "ray://127.0.0.1:10001")
+    assert_one_line_error(run, 1, contains=("--address ray://127.0.0.1:10001",
+                                            "Ray Client is not installed", "ray[client]"))
+    assert_untouched(before, tmp_path)
+    assert not (tmp_path / "out").exists()
