@@ -35,7 +35,7 @@ def _session(rig_name: str):
 
 @pytest.mark.parametrize("causal", [True, False])
 def test_a_one_camera_static_object_is_never_paired_with_the_ball(causal):
-    rig, det, truth, is_ball = _session("paper2")
+    rig, det, _truth, is_ball = _session("paper2")
     g = gate(det, rig, causal=causal)
     # (before: 3-4 of the object's candidates kept in cam1's blackout, points 1.8 m off)
     assert not np.any(g.chosen & ~is_ball)
