@@ -248,9 +248,9 @@ def more_table(rig: Rig, methods, figures) -> tuple[list[str], bool]:
         met = m not in TARGETS or (worst <= TARGETS[m] and f["added"] == 0)
         ok &= met
         rows.append(f"| {rig.name} | {m} | {clean:.3g} | {dirty:.3g} | {dirty / clean:.2f} | "
-                    f"{worst:.2f} ({where}) | {blackout / clean:.2f} | {f['clean5']} / "
-                    f"{f['added']} ({f['in_blackout']} in blackout, {f['after_kick']} after a "
-                    f"kick) |{'' if met else ' MISSED'}")
+                    f"{worst:.2f} ({where}) | {blackout / clean:.2f} | {f['clean5']} "
+                    f"({f['clean5_kick']} after a kick) / {f['added']} ({f['in_blackout']} in "
+                    f"blackout, {f['after_kick']} after a kick) |{'' if met else ' MISSED'}")
     return rows, ok
 
 
