@@ -455,19 +455,9 @@ def test_rays_that_do_not_meet_give_the_track_no_point():
                                 readout_s=dict.fromkeys(rig.names, 0.03))
     det, _truth, ball = simulate_labelled(rig, get_motion("rally"), 4.0, options)
     rig = true_rig(rig, options)
-    g = gate(det, rig, causal=True)
-    counts = rejection_counts("typeA", g.rejections, det, ball)
+    counts = rejection_counts("typeA", gate(det, rig, causal=True).rejections, det, ball)
+    assert counts.wrong == 0
     assert counts.kept_false == 0
-    # no run of the ball's detections rejected (the wrong point's doing); a few single ones
-    # while cam3 is blind: the ball bouncing towards cam1 nearly along its ray, its point
-    # resting on cam2 alone, is still across that ray (the one-camera stillness test,
-    # tests/test_gating_paired_static.py); cam2 keeps seeing it
-    is_ball = ball_mask(det, ball)
-    camera = det.frame_camera[det.cand_frame]
-    for cam in range(len(rig)):
-        lost = ~g.chosen[(camera == cam) & is_ball]  # the camera's ball detections in order
-        assert not np.any(lost[1:] & lost[:-1]), rig.names[cam]
-    assert counts.wrong <= 3
 
 
 def test_two_supports_whose_rays_do_not_meet_are_not_three_views():

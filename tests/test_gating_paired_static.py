@@ -51,5 +51,6 @@ def test_a_one_camera_static_object_is_never_paired_with_the_ball(causal):
 def test_no_fused_point_comes_from_the_pairing():
     rig, det, truth, _ = _session("paper2")
     tracks, _ = fuse_detections(det, rig, ["typeA", "smooth", "filter"])
-    for method, track in tracks.items():
-        assert np.nanmax(errors_m(track, truth)) < 0.05, method  # (before: 1.8-1.9 m)
+    # (before: 1.8-1.9 m; typeA's own points at kicks reach 5-10 cm, clean sessions too)
+    for method, bound_m in (("typeA", 0.15), ("smooth", 0.05), ("filter", 0.05)):
+        assert np.nanmax(errors_m(tracks[method], truth)) < bound_m, method

@@ -558,6 +558,7 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
             tol[:] = np.nan
         else:
             tol[~paired[np.maximum(table, 0)]] = np.nan
+        run_px = np.zeros(table.shape)
         for lag in range(1, min(lags, len(times) - 1) + 1):
             prev = np.full(table.shape, -1)
             prev[lag:] = table[:-lag]
@@ -574,12 +575,14 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
             valid = prev[:, None, :] >= 0
             d = np.where(valid & np.isfinite(d), d, np.inf).min(axis=2)
             d_px = np.where(valid & np.isfinite(d_px), d_px, np.inf).min(axis=2)
+            run += recent[:, None] & (d <= options.static_m)
             with np.errstate(invalid="ignore"):
-                run += recent[:, None] & ((d <= options.static_m) | (d_px <= tol))
+                run_px += recent[:, None] & (d_px <= tol)
         ok = table >= 0
         stillness[table[ok]] = run[ok] / lags
-        # still in most of them: one frame whose point a coincidence spoiled does not count
-        static[table[ok & (run >= 0.75 * lags)]] = True
+        # still in most of them: one frame whose point a coincidence spoiled does not count;
+        # across the ray, in every one of them (a static object's pixel is in every frame)
+        static[table[ok & ((run >= 0.75 * lags) | (run_px >= lags))]] = True
     return static, stillness
 
 
@@ -1107,6 +1110,7 @@ def _stillness_one(key: int, pts, earlier, lags: int, options: GatingOptions,
     ``cam`` its Camera (the image test; None: the 3D test alone). Returns (static (k,)
     bool, stillness (k,))."""
     run = np.zeros(len(pts))
+    run_px = np.zeros(len(pts))
     tols = [_still_px(cam, x, y, z, options, _sqrt)
             if cam is not None and paired[j] and math.isfinite(x) else math.nan
             for j, (x, y, z) in enumerate(pts)]
@@ -1128,9 +1132,11 @@ def _stillness_one(key: int, pts, earlier, lags: int, options: GatingOptions,
                     d = _sqrt(du * du + dv * dv)
                     if d < best_px:
                         best_px = d
-            if best <= options.static_m or best_px <= tols[j]:
+            if best <= options.static_m:
                 run[j] += 1.0
-    return run >= 0.75 * lags, run / lags
+            if best_px <= tols[j]:
+                run_px[j] += 1.0
+    return (run >= 0.75 * lags) | (run_px >= lags), run / lags
 
 
 def _result(detections: Detections, rig: Rig, reason: np.ndarray) -> Gated:
