@@ -523,11 +523,18 @@ def _support_one(t: int, line, keys: list[int], usable, search, wait_ns: int, ca
 
 
 def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
-            points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            points: np.ndarray, paired: np.ndarray | None = None
+            ) -> tuple[np.ndarray, np.ndarray]:
     """Which candidates stood still in space: each one's 3D point (its ray crossed with its
     support's) within ``static_m`` of a candidate's point in each of its camera's earlier
-    frames. (Still in one image is not enough: a ball moving along a camera's ray is.)
-    Causal: only earlier frames of the same camera.
+    frames; or, for a candidate whose point rests on one other camera (``paired``), its
+    pixel within ``static_m`` across its ray (:func:`_still_px`) of a candidate's pixel
+    there. (Still in one image is not enough in general: a ball moving along a camera's ray
+    is. But one other camera fixes the point's depth by a single epipolar constraint, which
+    a static object seen by this camera alone meets whenever the ball crosses its epipolar
+    line: its points then run along its ray, however still it is, and with no third camera
+    to deny them they make a track. Two or more supports whose rays meet fix the point in
+    3D, and the 3D test judges it.) Causal: only earlier frames of the same camera.
 
     Returns
     -------
@@ -543,6 +550,15 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
         lags = int(np.ceil(options.static_s * rig.cameras[b].fps))
         run = np.zeros(table.shape)
         p = points[np.maximum(table, 0)]  # (frames, K, 3)
+        y = c.uv_und[np.maximum(table, 0)]  # (frames, K, 2)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            tol = _still_px(rig.cameras[b], p[..., 0], p[..., 1], p[..., 2], options,
+                            np.sqrt)
+        if paired is None:
+            tol[:] = np.nan
+        else:
+            tol[~paired[np.maximum(table, 0)]] = np.nan
+        run_px = np.zeros(table.shape)
         for lag in range(1, min(lags, len(times) - 1) + 1):
             prev = np.full(table.shape, -1)
             prev[lag:] = table[:-lag]
@@ -550,15 +566,44 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
             recent = np.zeros(len(times), dtype=bool)
             recent[lag:] = times[lag:] - times[:-lag] <= 1.5 * options.static_s * NS
             pp = points[np.maximum(prev, 0)]
+            yy = c.uv_und[np.maximum(prev, 0)]
             with np.errstate(invalid="ignore"):
                 d = np.linalg.norm(p[:, :, None, :] - pp[:, None, :, :], axis=-1)
-            d = np.where((prev[:, None, :] >= 0) & np.isfinite(d), d, np.inf).min(axis=2)
+                du = y[:, :, None, 0] - yy[:, None, :, 0]
+                dv = y[:, :, None, 1] - yy[:, None, :, 1]
+                d_px = np.sqrt(du * du + dv * dv)
+            valid = prev[:, None, :] >= 0
+            d = np.where(valid & np.isfinite(d), d, np.inf).min(axis=2)
+            d_px = np.where(valid & np.isfinite(d_px), d_px, np.inf).min(axis=2)
             run += recent[:, None] & (d <= options.static_m)
+            with np.errstate(invalid="ignore"):
+                run_px += recent[:, None] & (d_px <= tol)
         ok = table >= 0
         stillness[table[ok]] = run[ok] / lags
-        # still in most of them: one frame whose point a coincidence spoiled does not count
-        static[table[ok & (run >= 0.75 * lags)]] = True
+        # still in most of them: one frame whose point a coincidence spoiled does not count;
+        # across the ray, in every one of them (a static object's pixel is in every frame)
+        static[table[ok & ((run >= 0.75 * lags) | (run_px >= lags))]] = True
     return static, stillness
+
+
+def _still_px(cam, x, y, z, options: GatingOptions, sqrt):
+    """The image distance, pixels, below which a candidate whose 3D point is ``(x, y, z)``
+    (floats, or arrays elementwise: the same bits) moved less than ``static_m`` across its
+    ray: ``min(f_x, f_y) static_m / D``, ``D`` the point's distance from the camera (a
+    motion ``e`` across the ray moves the undistorted image by at least ``f e / D``); NaN
+    without a point (nothing is still then)."""
+    cx, cy, cz = cam.center_world.tolist()
+    dx, dy, dz = x - cx, y - cy, z - cz
+    depth = sqrt((dx * dx + dy * dy) + dz * dz)
+    return min(float(cam.K[0, 0]), float(cam.K[1, 1])) * options.static_m / depth
+
+
+def _paired(ratio: np.ndarray) -> np.ndarray:
+    """(C,) bool: the candidates one other camera supports (its point's depth rests on a
+    single epipolar constraint; :func:`_static`'s image test), from their support ratio
+    (C, m)."""
+    with np.errstate(invalid="ignore"):
+        return np.count_nonzero(ratio <= 1.0, axis=1) == 1
 
 
 def _rig_constants(rig: Rig):
@@ -961,7 +1006,7 @@ def _decided(c: _Candidates, rig: Rig, options: GatingOptions, causal: bool, wai
     constants = _rig_constants(rig)
     points, in_front, miss = _points(c, rig, ratio, carried, constants)
     points[miss > options.track_m] = np.nan  # rays that do not meet: no point to track
-    static, stillness = _static(c, tables, rig, options, points)
+    static, stillness = _static(c, tables, rig, options, points, _paired(ratio))
     # frames in (time, camera) order of their best candidate; candidates contiguous per frame
     starts = np.flatnonzero(np.r_[True, c.frame[1:] != c.frame[:-1]])
     ends = np.r_[starts[1:], n]
@@ -1056,12 +1101,20 @@ def _can_judge(key: int, earlier: list[int], lags: int, options: GatingOptions) 
     return recent >= 0.75 * lags
 
 
-def _stillness_one(key: int, pts, earlier, lags: int, options: GatingOptions):
+def _stillness_one(key: int, pts, earlier, lags: int, options: GatingOptions,
+                   uvs=None, paired=None, cam=None):
     """:func:`_static`'s rule for one frame on floats (the same bits): ``pts`` its
-    candidates' points (k, 3) as lists, ``earlier`` (frame time ns, points) of its camera's
-    ``lags`` frames before it, newest first. Returns (static (k,) bool, stillness (k,))."""
+    candidates' points (k, 3) as lists, ``earlier`` (frame time ns, points, undistorted
+    pixels) of its camera's ``lags`` frames before it, newest first; ``uvs`` the frame's
+    undistorted pixels (k, 2), ``paired`` (k,) bool (its point rests on one other camera),
+    ``cam`` its Camera (the image test; None: the 3D test alone). Returns (static (k,)
+    bool, stillness (k,))."""
     run = np.zeros(len(pts))
-    for prev_key, prev_points in earlier:
+    run_px = np.zeros(len(pts))
+    tols = [_still_px(cam, x, y, z, options, _sqrt)
+            if cam is not None and paired[j] and math.isfinite(x) else math.nan
+            for j, (x, y, z) in enumerate(pts)]
+    for prev_key, prev_points, *prev_uvs in earlier:
         if not key - prev_key <= 1.5 * options.static_s * NS:  # (recent)
             continue
         for j, (x, y, z) in enumerate(pts):
@@ -1071,9 +1124,19 @@ def _stillness_one(key: int, pts, earlier, lags: int, options: GatingOptions):
                 d = math.sqrt(dx * dx + dy * dy + dz * dz)  # np.linalg.norm's order
                 if d < best:  # NaN (no point) never is
                     best = d
+            best_px = math.inf
+            if tols[j] == tols[j]:  # (an image test: not NaN)
+                u, v = uvs[j]
+                for pu, pv in prev_uvs[0]:
+                    du, dv = u - pu, v - pv
+                    d = _sqrt(du * du + dv * dv)
+                    if d < best_px:
+                        best_px = d
             if best <= options.static_m:
                 run[j] += 1.0
-    return run >= 0.75 * lags, run / lags
+            if best_px <= tols[j]:
+                run_px[j] += 1.0
+    return (run >= 0.75 * lags) | (run_px >= lags), run / lags
 
 
 def _result(detections: Detections, rig: Rig, reason: np.ndarray) -> Gated:
@@ -1314,9 +1377,12 @@ class StreamGate:
         # _static's rule on this frame: still against each of the camera's lags frames before
         frames, at = self.by_camera[a], self.by_camera[a].index(f)
         lags = self.lags[a]
-        still = _stillness_one(f.key, f.points, [(frames[at - lag].key, frames[at - lag].points)
-                                                 for lag in range(1, min(lags, at) + 1)],
-                               lags, o)
+        still = _stillness_one(f.key, f.points,
+                               [(frames[at - lag].key, frames[at - lag].points,
+                                 frames[at - lag].uv_und.tolist())
+                                for lag in range(1, min(lags, at) + 1)], lags, o,
+                               f.uv_und.tolist(), _paired(every[0]).tolist(),
+                               self.rig.cameras[a])
         reason = np.full(k, -1, dtype=np.int8)
         self.decider.run(c, [(0, k)], ratio, points, in_front, reason, still)
         f.reason = reason

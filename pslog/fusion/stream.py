@@ -68,8 +68,14 @@ class StreamFuser:
         self.options = options or FusionOptions()
         check_tolerance(rig, self.options.tolerance_s)
         self._max_gap_s = self.options.max_gap_s or default_max_gap_s(rig)
-        # history a new point may reach back to: two bridged gaps plus two tolerances
-        self._history_ns = int((2 * self._max_gap_s + 2 * self.options.tolerance_s) * NS) + 1
+        # the history a point still to emit reaches back to (the window methods; typeA and
+        # filter keep their own): every such point is at or after the newest row less the
+        # settling time (which _settled keeps on top), and uses, at most, ``nearest`` the
+        # other cameras' latest detections within max_gap_s, ``typeB`` and ``linear`` two
+        # stereo points within max_gap_s whose detections lie within the tolerance of them,
+        # ``sync`` one group within the tolerance: max_gap_s + tolerance, no more (more only
+        # costs time; less loses a bridged partner: stream-equals-batch tests at long gaps)
+        self._history_ns = int((self._max_gap_s + self.options.tolerance_s) * NS) + 1
         self._settle_ns = 0 if self._immediate else int(self.options.tolerance_s * NS)
         self._F = fundamental_matrices(rig.cameras)
         self._time = np.zeros(0, np.int64)

@@ -1,0 +1,43 @@
+"""The window StreamFuser keeps for the methods it re-fuses (``sync``, ``nearest``, ``typeB``,
+``linear``) is what a point still to emit can reach back to, ``max_gap_s + tolerance``
+(pslog/fusion/stream.py): the stream equals batch on sessions whose points do reach back
+that far, and a shorter window (half of it) would lose their partners."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from numpy.testing import assert_array_equal
+from test_fusion_validity import dirty_session, streamed
+
+from pslog import NS
+from pslog.fusion import METHODS, fuse
+from pslog.fusion._prepare import default_max_gap_s
+from pslog.fusion.stream import StreamFuser
+
+
+@pytest.mark.parametrize("method", ["nearest", "typeB", "linear", "sync"])
+def test_stream_keeps_exactly_the_history_its_points_reach_back_to(method):
+    timing = "typeB" if "shared" in METHODS[method].needs else "typeA"
+    reached = 0.0
+    for seed in (0, 1):
+        # 30 % misses, 10 % drops, jitter, 5 % outliers, a strong lens
+        rig, obs, _ = dirty_session(timing, seed)
+        fuser = StreamFuser(rig, method)
+        need = default_max_gap_s(rig) + fuser.options.tolerance_s
+        batch = fuse(obs, rig, method)
+        parts = streamed(rig, method, obs)
+        assert len(batch) > 15
+        for key in ("time_ns", "camera", "position_world"):
+            assert_array_equal(np.concatenate([getattr(p, key) for p in parts]),
+                               getattr(batch, key), err_msg=key)
+        for key, column in batch.quality.items():
+            assert_array_equal(np.concatenate([p.quality[key] for p in parts]), column,
+                               err_msg=key)
+        assert fuser._history_ns == int(need * NS) + 1  # derived, not a margin
+        # span_s: from the earliest detection a point used to its own time
+        reached = max(reached, float(np.nanmax(batch.quality["span_s"])) / need)
+    if method != "sync":  # (sync's points reach back one tolerance only)
+        # some point reaches back more than half the window: a window half as long (the
+        # mutation "history halved") loses its oldest detection and differs from batch
+        assert reached > 0.5, reached
