@@ -1054,9 +1054,10 @@ def _push(S, I, cams, O, N, t, cam, u, v, out):
             S[_SPT:_SPT + 49] = Pt
         found = False
         if inn_ok:
-            found, xn, Pn, inn = _jump(S, I, cams, O, t, cam, u, v)
+            found, xn, Pn, inn_j = _jump(S, I, cams, O, t, cam, u, v)
         if not found:  # rejected: the point is the prediction
             return _reject(S, I, cams, O, N, t, cam, u, v, x, P, inn_ok, inn, gap_s, out)
+        inn = inn_j
         xo0, xo1, xo2, v0, v1, v2, nis = xn[0], xn[1], xn[2], Pn[0], Pn[7], Pn[14], inn[5]
         jump = 1.0
         if nu:  # the turn model restarts at the jump's state, keeping its turn rate;
@@ -1639,12 +1640,14 @@ def _track(flt: BallFilter, time_ns, camera, uv) -> Track:
     rows, index = rows[:n_out], index[:n_out]
     q = np.empty((n_out, len(FILTER_QUALITY)))
     q[:, 0:4] = rows[:, 3:7]
-    hypot = math.hypot  # CPython's (numba's is libm's, not always the same last bit)
-    q[:, 4] = [hypot(a, b) for a, b in zip(rows[:, 7].tolist(), rows[:, 8].tolist(),
-                                           strict=True)]
+    # lengths by CPython's math.hypot, as the pure-Python filter took them (numba's hypot
+    # is libm's, which differs in the last bit now and then)
+    hypot = math.hypot
+    q[:, 4] = np.fromiter(map(hypot, rows[:, 7].tolist(), rows[:, 8].tolist()), np.float64,
+                          n_out)
+    q[:, 5] = np.fromiter(map(hypot, rows[:, 9].tolist(), rows[:, 10].tolist()), np.float64,
+                          n_out)
     init = rows[:, 15] == 1.0
-    q[:, 5] = [hypot(a, b) for a, b in zip(rows[:, 9].tolist(), rows[:, 10].tolist(),
-                                           strict=True)]
     q[init, 5] = rows[init, 9]  # a start's residual, as its fit gave it
     q[:, 6:] = rows[:, 11:16]
     return Track("filter", times[index], np.ascontiguousarray(rows[:, :3]),
