@@ -68,6 +68,17 @@ order; batch (:func:`fuse_filter`) and streaming run the same per-detection code
 streaming form (:class:`FilterStream`, used by :class:`~pslog.fusion.stream.StreamFuser`)
 gives exactly the batch points.
 
+Implementation: the per-detection step (prediction, innovation, update, the models' mixing,
+the gate, the jump search, the noise adaptations, withholding) is compiled with numba
+(:func:`pslog._jit.kernel`) over the state kept in two preallocated arrays (float64 and
+int64, layout below); :func:`fuse_filter` runs one compiled loop over every detection and
+:meth:`BallFilter.push` the same compiled step for one. Only the (re)initialisation's window
+fit (least squares on rays, then Gauss-Newton in pixels: numpy's LAPACK) runs in Python,
+while there is no track. Every equation keeps the pure-Python filter's order of operations
+(IEEE arithmetic, no fastmath, ``x ** 3.0`` through libm's ``pow`` as Python's ``**``, the
+pixel lengths by CPython's ``math.hypot``), so the points are bit for bit that filter's
+(``benchmarks/filter_equality.py``).
+
 Per-point quality (columns of the Track, NaN where not applicable):
 
 - ``std_m``: position standard deviation ``sqrt(trace P_pp)`` after the update, metres (as
