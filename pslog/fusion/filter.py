@@ -68,6 +68,17 @@ order; batch (:func:`fuse_filter`) and streaming run the same per-detection code
 streaming form (:class:`FilterStream`, used by :class:`~pslog.fusion.stream.StreamFuser`)
 gives exactly the batch points.
 
+Implementation: the per-detection step (prediction, innovation, update, the models' mixing,
+the gate, the jump search, the noise adaptations, withholding) is compiled with numba
+(:func:`pslog._jit.kernel`) over the state kept in two preallocated arrays (float64 and
+int64, layout below); :func:`fuse_filter` runs one compiled loop over every detection and
+:meth:`BallFilter.push` the same compiled step for one. Only the (re)initialisation's window
+fit (least squares on rays, then Gauss-Newton in pixels: numpy's LAPACK) runs in Python,
+while there is no track. Every equation keeps the pure-Python filter's order of operations
+(IEEE arithmetic, no fastmath, ``x ** 3.0`` through libm's ``pow`` as Python's ``**``, the
+pixel lengths by CPython's ``math.hypot``), so the points are bit for bit that filter's
+(``benchmarks/filter_equality.py``).
+
 Per-point quality (columns of the Track, NaN where not applicable):
 
 - ``std_m``: position standard deviation ``sqrt(trace P_pp)`` after the update, metres (as
@@ -89,6 +100,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._jit import kernel
 from ..errors import FusionError
 from ..motion import Ball, G
 from ..records import NS, Observations, Track
@@ -311,6 +323,921 @@ class _Cam:
         return u, v, h0, h1
 
 
+
+# ---- the compiled per-detection step (numba, pslog._jit.kernel) ------------------------------
+# The state lives in two preallocated arrays, so that the batch loop and the streaming form run
+# the same compiled code on the same memory: ``S`` (float64) and ``I`` (int64), laid out below.
+# Every equation is written in the same order of operations as the pure-Python filter it
+# replaced (IEEE arithmetic, no fastmath): the points are bit for bit those of that filter.
+
+#: ``S``: the pair's mean x (6) and covariance P (6 x 6), the turn model's mean (7) and
+#: covariance (7 x 7), the models' difference e (6), μ, ν, ν⁺, q, σ², the jump search's
+#: history (_HISTORY entries: x, P, u, v, score), per camera the latest innovation (y0, y1),
+#: then the window's pixels (u, v)
+_SX, _SP, _SXT, _SPT, _SE = 0, 6, 42, 49, 98
+_SMU, _SNU, _SNUPOST, _SQ, _SVAR = 104, 105, 106, 107, 108
+_HISTORY = _JUMP_LAG + 1
+_SHX = 109
+_SHP = _SHX + 6 * _HISTORY
+_SHUV = _SHP + 36 * _HISTORY
+_SHSC = _SHUV + 2 * _HISTORY
+_SCAM = _SHSC + _HISTORY  # then 2 per camera, then 2 per window slot
+#: ``I``: track flag, state time, last accepted time, rejections in a row, updates since the
+#: start, camera of a pending jump, its confirming updates, whether one came from another
+#: camera, the turn model's age, the latest jump's time and camera, history length, window
+#: length, window cap, withheld counts and which reason came first, the history's times and
+#: cameras, then per camera: last accepted time, latest innovation's time and flag; then the
+#: window's (time, camera)
+_IHAS, _ITIME, _ILAST, _IREJ, _ICONF, _IPEND, _ICONFS, _IOTHER, _IAGE = range(9)
+_IJUMPNS, _IJUMPCAM, _IHN, _IWN, _ICAP, _IDROPC, _IDROPU, _IDROPFIRST = range(9, 17)
+_IHT = 17  # _HISTORY x (state time, time, camera)
+_ICAM = _IHT + 3 * _HISTORY  # then 3 per camera, then 2 per window slot
+#: ``O`` (float64 options): k, g (3), gravity's unit vector (3), gate, adapt_rate, σ² bounds,
+#: q bounds, q's rate and target, max_std (inf: none), withhold, confirm_nis, λ, μ₀, turn
+#: model on, λ_t, turn_on_psd, turn_rate_psd, turn_rate_std², restitution, friction, number
+#: of jump shapes, then the shapes (reflect, 3 variances)
+_OK, _OG, _ODOWN, _OGATE, _OADAPT, _OVMIN, _OVMAX = 0, 1, 4, 7, 8, 9, 10
+_OQMIN, _OQMAX, _OQRATE, _OQTARGET, _OMAXSTD, _OWITHHOLD, _OCONFNIS = range(11, 18)
+_OSWITCH, _OMU0, _OTURN, _OTSWITCH, _OTON, _OTPSD, _OTVAR, _OREST, _OFRIC = range(18, 27)
+_ONSHAPES, _OSHAPES = 27, 28
+_OSIZE = _OSHAPES + 4 * 3
+#: ``N`` (int64 options): max gap, window span, init_window, init_detections, max_rejects,
+#: window capacity
+_NMAXGAP, _NSPAN, _NINITWIN, _NINITDET, _NMAXREJ, _NWCAP = range(6)
+#: ``cams`` (float64, one row per camera): R (9), t (3), fx, s, cx, fy, cy, k1, k2, k3, p1,
+#: p2, distorted, far
+_CAM_COLS = 24
+#: one output row: position (3), std_m (4), innovation (y0, y1), residual (u, v): their
+#: lengths are taken by ``math.hypot`` in Python, as the pure-Python filter did (numba's
+#: hypot is libm's, not CPython's correctly rounded one), nis, gap_s, jump, rejected, init
+_OUT_COLS = 16
+#: step results: no point; a point in ``out``; a window fit needed (Python), without or
+#: with a point in ``out`` for when it finds no start
+_NONE, _POINT, _FIT, _FIT_OR_POINT = 0, 1, 2, 3
+_INN_C0 = 13  # innovation array: y0 y1 i00 i01 i11 nis det h0 (3) h1 (3) c0 (n) c1 (n)
+
+
+@kernel
+def _pmin(a, b):
+    """Python's ``min(a, b)`` (``a`` unless ``b < a``; NaN as Python orders it)."""
+    return b if b < a else a
+
+
+@kernel
+def _pmax(a, b):
+    """Python's ``max(a, b)``."""
+    return b if b > a else a
+
+
+@kernel
+def _project(cams, ci, px, py, pz):
+    """Distorted pixel of a world point and ``∂(u, v)/∂p`` (two rows of 3) through camera
+    ``ci`` (``_Cam.project``); ``ok`` False when the point is not in front of it.
+    Returns ``(ok, u, v, h00, h01, h02, h10, h11, h12)``."""
+    r = cams[ci]
+    xc = r[0] * px + r[1] * py + r[2] * pz + r[9]
+    yc = r[3] * px + r[4] * py + r[5] * pz + r[10]
+    zc = r[6] * px + r[7] * py + r[8] * pz + r[11]
+    if not zc > _MIN_DEPTH_M:
+        return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    fx, s, cx, fy, cy = r[12], r[13], r[14], r[15], r[16]
+    iz = 1.0 / zc
+    x, y = xc * iz, yc * iz
+    if r[22] != 0.0:
+        k1, k2, k3, p1, p2 = r[17], r[18], r[19], r[20], r[21]
+        r2 = x * x + y * y
+        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        dr = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)
+        xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
+        yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
+        d00 = radial + 2.0 * x * x * dr + 2.0 * p1 * y + 6.0 * p2 * x
+        d01 = 2.0 * x * y * dr + 2.0 * p1 * x + 2.0 * p2 * y
+        d11 = radial + 2.0 * y * y * dr + 6.0 * p1 * y + 2.0 * p2 * x
+        # A = K₂ · D (D symmetric: d10 = d01)
+        a00, a01 = fx * d00 + s * d01, fx * d01 + s * d11
+        a10, a11 = fy * d01, fy * d11
+    else:
+        xd, yd = x, y
+        a00, a01, a10, a11 = fx, s, 0.0, fy
+    u = fx * xd + s * yd + cx
+    v = fy * yd + cy
+    # M = A · ∂(x, y)/∂X_c, then H = M · R
+    m00, m01, m02 = a00 * iz, a01 * iz, -(a00 * x + a01 * y) * iz
+    m10, m11, m12 = a10 * iz, a11 * iz, -(a10 * x + a11 * y) * iz
+    return (True, u, v,
+            m00 * r[0] + m01 * r[3] + m02 * r[6], m00 * r[1] + m01 * r[4] + m02 * r[7],
+            m00 * r[2] + m01 * r[5] + m02 * r[8],
+            m10 * r[0] + m11 * r[3] + m12 * r[6], m10 * r[1] + m11 * r[4] + m12 * r[7],
+            m10 * r[2] + m11 * r[5] + m12 * r[8])
+
+
+@kernel
+def _innovation(cams, ci, x, P, n, u, v, var):
+    """The innovation of pixel ``(u, v)`` of camera ``ci`` against the state ``(x, P)`` of
+    ``n`` states (position first, ``P`` n x n flat) with pixel variance ``var``: ``y = z -
+    π(p)``, ``PHᵀ`` (columns c0, c1), ``S = H P Hᵀ + σ² I``, ``S⁻¹``, ``NIS = yᵀ S⁻¹ y``.
+    Returns ``(ok, inn)``, ``inn`` = (y0, y1, i00, i01, i11, NIS, det S, h0 (3), h1 (3),
+    c0 (n), c1 (n)); ``ok`` False when ``x`` is behind the camera."""
+    ok, pu, pv, a0, a1, a2, b0, b1, b2 = _project(cams, ci, x[0], x[1], x[2])
+    inn = np.empty(_INN_C0 + 2 * n)
+    if not ok:
+        return False, inn
+    y0, y1 = u - pu, v - pv
+    # PHᵀ: column r is P[:, :3] · h_r (n rows)
+    for k in range(n):
+        i = k * n
+        p0, p1, p2 = P[i], P[i + 1], P[i + 2]
+        inn[_INN_C0 + k] = p0 * a0 + p1 * a1 + p2 * a2
+        inn[_INN_C0 + n + k] = p0 * b0 + p1 * b1 + p2 * b2
+    c0, c1 = _INN_C0, _INN_C0 + n
+    s00 = a0 * inn[c0] + a1 * inn[c0 + 1] + a2 * inn[c0 + 2] + var
+    s01 = a0 * inn[c1] + a1 * inn[c1 + 1] + a2 * inn[c1 + 2]
+    s11 = b0 * inn[c1] + b1 * inn[c1 + 1] + b2 * inn[c1 + 2] + var
+    det = s00 * s11 - s01 * s01
+    i00, i01, i11 = s11 / det, -s01 / det, s00 / det
+    inn[0], inn[1], inn[2], inn[3], inn[4] = y0, y1, i00, i01, i11
+    inn[5] = y0 * (i00 * y0 + i01 * y1) + y1 * (i01 * y0 + i11 * y1)
+    inn[6] = det
+    inn[7], inn[8], inn[9], inn[10], inn[11], inn[12] = a0, a1, a2, b0, b1, b2
+    return True, inn
+
+
+@kernel
+def _updated(x, P, inn):
+    """Kalman update: ``x + K y``, ``P - K (PHᵀ)ᵀ`` with ``K = PHᵀ S⁻¹`` (new arrays; ``n =
+    len(x)`` states, the innovation's)."""
+    n = x.shape[0]
+    y0, y1, i00, i01, i11 = inn[0], inn[1], inn[2], inn[3], inn[4]
+    c0, c1 = _INN_C0, _INN_C0 + n
+    k0 = np.empty(n)
+    k1 = np.empty(n)
+    xn = np.empty(n)
+    for i in range(n):
+        k0[i] = inn[c0 + i] * i00 + inn[c1 + i] * i01
+        k1[i] = inn[c0 + i] * i01 + inn[c1 + i] * i11
+        xn[i] = x[i] + k0[i] * y0 + k1[i] * y1
+    Pn = P.copy()
+    for i in range(n):
+        ki0, ki1, row = k0[i], k1[i], n * i
+        for j in range(i, n):
+            value = P[row + j] - (ki0 * inn[c0 + j] + ki1 * inn[c1 + j])
+            Pn[row + j] = value
+            Pn[n * j + i] = value
+    return xn, Pn
+
+
+@kernel
+def _predicted(x, P, dt, c, O, q):
+    """Mean and covariance after ``dt`` seconds (new arrays), gravity weighted by the
+    ballistic model's probability ``c`` (the models' mixture's mean); drag ``k``, white-noise
+    acceleration ``q`` (Bar-Shalom et al. 2001, 6.2.2)."""
+    px, py, pz, vx, vy, vz = x[0], x[1], x[2], x[3], x[4], x[5]
+    k = O[_OK]
+    speed = math.sqrt(vx * vx + vy * vy + vz * vz)
+    gx, gy, gz = c * O[_OG], c * O[_OG + 1], c * O[_OG + 2]
+    ax, ay, az = gx - k * speed * vx, gy - k * speed * vy, gz - k * speed * vz
+    h = 0.5 * dt * dt
+    xn = np.empty(6)
+    xn[0], xn[1], xn[2] = px + vx * dt + ax * h, py + vy * dt + ay * h, pz + vz * dt + az * h
+    xn[3], xn[4], xn[5] = vx + ax * dt, vy + ay * dt, vz + az * dt
+    adt = abs(dt)
+    q3, q2, q1 = q * adt ** 3.0 / 3.0, q * dt * adt / 2.0, q * adt  # 3.0: libm's pow
+    dt2 = dt * dt
+    Pn = P.copy()
+    for i in range(3):
+        ri, vi = 6 * i, 6 * (i + 3)
+        for j in range(3):
+            # P_pp' = P_pp + dt (P_pv + P_vp) + dt² P_vv ; P_pv' = P_pv + dt P_vv
+            Pn[ri + j] = (P[ri + j] + dt * (P[ri + 3 + j] + P[vi + j])
+                          + dt2 * P[vi + 3 + j])
+            Pn[ri + 3 + j] = P[ri + 3 + j] + dt * P[vi + 3 + j]
+            Pn[vi + j] = P[vi + j] + dt * P[vi + 3 + j]
+        Pn[ri + i] += q3
+        Pn[ri + 3 + i] += q2
+        Pn[vi + i] += q2
+        Pn[vi + 3 + i] += q1
+    return xn, Pn
+
+
+@kernel
+def _turn_predicted(x, P, dt, q, turn_psd):
+    """The turn model's mean and covariance after ``dt`` seconds (new arrays): a coordinated
+    turn at rate ``ω`` about z (the horizontal velocity rotates, speed constant), constant
+    vertical velocity, ``ω`` a random walk; ``P⁻ = F P Fᵀ + Q`` with the Jacobian ``F`` (7 x
+    7) and the white-noise acceleration ``q`` (as the other models) plus ``q_ω |Δt|`` on ``ω``
+    (Li & Jilkov 2003, section 4)."""
+    px, py, pz, vx, vy, vz, w = x[0], x[1], x[2], x[3], x[4], x[5], x[6]
+    a = w * dt
+    s, c = math.sin(a), math.cos(a)
+    if abs(a) > 1e-3:
+        sw, cw = s / w, (1.0 - c) / w  # sin(ωΔt)/ω, (1 - cos(ωΔt))/ω
+        dsw, dcw = (dt * c - sw) / w, (dt * s - cw) / w  # their derivatives in ω
+    else:  # their series (ω → 0: a straight line)
+        a2 = a * a
+        sw = dt * (1.0 - a2 / 6.0 * (1.0 - a2 / 20.0))
+        cw = dt * a * (0.5 - a2 / 24.0)
+        dsw = dt * dt * a * (a2 / 30.0 - 1.0 / 3.0)
+        dcw = dt * dt * (0.5 - a2 / 8.0)
+    vxn, vyn = c * vx - s * vy, s * vx + c * vy
+    xn = np.empty(7)
+    xn[0], xn[1], xn[2] = px + sw * vx - cw * vy, py + cw * vx + sw * vy, pz + vz * dt
+    xn[3], xn[4], xn[5], xn[6] = vxn, vyn, vz, w
+    fx, fy = dsw * vx - dcw * vy, dcw * vx + dsw * vy  # ∂p/∂ω
+    f3, f4 = -dt * vyn, dt * vxn  # ∂v/∂ω
+    # A = F P (rows of P combined by F's sparse rows), then A Fᵀ (A's rows likewise)
+    A = np.empty(49)
+    for j in range(7):
+        r0, r1, r2, r3, r4, r5, r6 = P[j], P[7 + j], P[14 + j], P[21 + j], P[28 + j], \
+            P[35 + j], P[42 + j]
+        A[j] = r0 + sw * r3 - cw * r4 + fx * r6
+        A[7 + j] = r1 + cw * r3 + sw * r4 + fy * r6
+        A[14 + j] = r2 + dt * r5
+        A[21 + j] = c * r3 - s * r4 + f3 * r6
+        A[28 + j] = s * r3 + c * r4 + f4 * r6
+        A[35 + j] = r5
+        A[42 + j] = r6
+    Pn = np.empty(49)
+    for i in range(7):
+        b = 7 * i
+        a0, a1, a2, a3, a4, a5, a6 = A[b], A[b + 1], A[b + 2], A[b + 3], A[b + 4], A[b + 5], \
+            A[b + 6]
+        Pn[b] = a0 + sw * a3 - cw * a4 + fx * a6
+        Pn[b + 1] = a1 + cw * a3 + sw * a4 + fy * a6
+        Pn[b + 2] = a2 + dt * a5
+        Pn[b + 3] = c * a3 - s * a4 + f3 * a6
+        Pn[b + 4] = s * a3 + c * a4 + f4 * a6
+        Pn[b + 5] = a5
+        Pn[b + 6] = a6
+    adt = abs(dt)
+    q3, q2, q1 = q * adt ** 3.0 / 3.0, q * dt * adt / 2.0, q * adt
+    for i in range(3):
+        Pn[8 * i] += q3
+        Pn[8 * i + 3] += q2
+        Pn[8 * i + 21] += q2
+        Pn[8 * i + 24] += q1
+    Pn[48] += turn_psd * adt
+    return xn, Pn
+
+
+@kernel
+def _block6(P):
+    """The position-velocity block (6 x 6 flat) of a 7 x 7 flat covariance (a new array)."""
+    out = np.empty(36)
+    for i in range(6):
+        for j in range(6):
+            out[6 * i + j] = P[7 * i + j]
+    return out
+
+
+@kernel
+def _turn_start(x, P, w, var):
+    """The turn model's state at the pair's ``(x, P)`` with turn rate ``w ± sqrt(var)``
+    (uncorrelated)."""
+    xt = np.zeros(7)
+    Pt = np.zeros(49)
+    for i in range(6):
+        xt[i] = x[i]
+        for j in range(6):
+            Pt[7 * i + j] = P[6 * i + j]
+    xt[6] = w
+    Pt[48] = var
+    return xt, Pt
+
+
+@kernel
+def _turn_mixed(nu, xg, Pg, xt, Pt, dt, turn_switch):
+    """The interacting multiple model's mixing of the pair (ballistic/supported, mean ``xg``,
+    covariance ``Pg``) and the turn model (``xt``, ``Pt``, probability ``nu``) before a step
+    of ``dt``: the turn model is left with probability ``p = min(λ_t |Δt|, 1/2)``; each model
+    starts from the mixture of both weighted by where it came from, spread of the means
+    included (the pair's missing ω is the turn model's) (Blom & Bar-Shalom 1988).
+    Returns ``(ν⁻, pair's x, P, turn model's x, P)``."""
+    pt = _pmin(turn_switch * abs(dt), 0.5)
+    prior = nu * (1.0 - pt) + (1.0 - nu) * pt
+    wt = nu * pt / (1.0 - prior) if prior < 1.0 else 0.0  # turn's share of the pair's
+    wg = (1.0 - nu) * pt / prior  # the pair's share of the turn model's start
+    d = np.empty(6)
+    x0 = np.empty(6)
+    xt0 = np.empty(7)
+    for i in range(6):
+        d[i] = xt[i] - xg[i]
+    for i in range(6):
+        x0[i] = xg[i] + wt * d[i]
+        xt0[i] = xt[i] - wg * d[i]
+    xt0[6] = xt[6]
+    sg, st = wt * (1.0 - wt), wg * (1.0 - wg)
+    P0 = np.empty(36)
+    Pt0 = np.empty(49)
+    keep = 1.0 - wg
+    for i in range(6):
+        di = d[i]
+        gd, td = sg * di, st * di
+        for j in range(6):
+            a, b = Pg[6 * i + j], Pt[7 * i + j]
+            P0[6 * i + j] = a + wt * (b - a) + gd * d[j]
+            Pt0[7 * i + j] = b + wg * (a - b) + td * d[j]
+        # the pair's ω: the turn model's, uncorrelated with the pair's state (a covariance
+        # that stays positive semi-definite)
+        Pt0[7 * i + 6] = keep * Pt[7 * i + 6]
+    for j in range(6):
+        Pt0[42 + j] = keep * Pt[42 + j]
+    Pt0[48] = Pt[48]
+    return prior, x0, P0, xt0, Pt0
+
+
+@kernel
+def _turn_probability(prior, c, nis_b, nis_s, det, nis_t, det_t):
+    """The turn model's probability ``ν⁺`` after the detection from the models' likelihoods
+    ``N(y; 0, S)``: the pair's is its models' mixture ``c N_b + (1 - c) N_s`` (their common
+    ``det S``); the log ratio is clipped as the pair's."""
+    low = _pmin(nis_b, nis_s)
+    log_pair = (-0.5 * low - 0.5 * math.log(det)
+                + math.log(c * math.exp(0.5 * (low - nis_b))
+                           + (1.0 - c) * math.exp(0.5 * (low - nis_s))))
+    r = -0.5 * nis_t - 0.5 * math.log(det_t) - log_pair
+    r = _pmin(_pmax(r, -_LOG_ODDS_CLIP), _LOG_ODDS_CLIP)
+    return prior / (prior + (1.0 - prior) * math.exp(-r))
+
+
+@kernel
+def _mixed(x, inn, c, p, dt, mu, e, O):
+    """The interacting multiple model step with a covariance the two models share.
+
+    ``x``, ``inn``: the mixture's prediction and innovation; ``c``: the ballistic model's
+    prior probability, ``p`` the switching probability. The models' means are ``m + (1 -
+    c) e`` and ``m - c e`` with ``e`` their difference: the mixing shrinks it by ``1 -
+    μ_s p / c - μ_b p / (1 - c)``, the prediction propagates it (``e_p += Δt e_v``) and
+    adds gravity's ``d = (g Δt²/2, g Δt)``; the models' innovations are the mixture's
+    minus ``H`` of their offsets (linearised), their likelihood ratio (equal ``S``)
+    ``exp((NIS_s - NIS_b) / 2)`` gives ``μ⁺``; the mixture is re-weighted with ``μ⁺``
+    (``x + (μ⁺ - c) e``) and ``e`` updated to ``(I - K H) e``.
+    Returns ``(x, innovation, μ⁺, e⁺, NIS_b, NIS_s)`` (new arrays)."""
+    y0, y1, i00, i01, i11 = inn[0], inn[1], inn[2], inn[3], inn[4]
+    shrink = 1.0 - (1.0 - mu) * p / c - mu * p / (1.0 - c) if 0.0 < c < 1.0 else 1.0
+    half = 0.5 * dt * dt
+    en = np.empty(6)
+    for i in range(3):
+        en[i] = shrink * (e[i] + dt * e[3 + i]) + half * O[_OG + i]
+    for i in range(3):
+        en[3 + i] = shrink * e[3 + i] + dt * O[_OG + i]
+    hd0 = inn[7] * en[0] + inn[8] * en[1] + inn[9] * en[2]
+    hd1 = inn[10] * en[0] + inn[11] * en[1] + inn[12] * en[2]
+    b0, b1 = y0 - (1.0 - c) * hd0, y1 - (1.0 - c) * hd1
+    s0, s1 = y0 + c * hd0, y1 + c * hd1
+    nis_b = b0 * (i00 * b0 + i01 * b1) + b1 * (i01 * b0 + i11 * b1)
+    nis_s = s0 * (i00 * s0 + i01 * s1) + s1 * (i01 * s0 + i11 * s1)
+    r = _pmin(_pmax(0.5 * (nis_b - nis_s), -_LOG_ODDS_CLIP), _LOG_ODDS_CLIP)
+    mu = c / (c + (1.0 - c) * math.exp(r))
+    delta = mu - c
+    xn = np.empty(6)
+    for i in range(6):
+        xn[i] = x[i] + delta * en[i]
+    y0, y1 = y0 - delta * hd0, y1 - delta * hd1
+    out = inn.copy()
+    out[0], out[1] = y0, y1
+    out[5] = y0 * (i00 * y0 + i01 * y1) + y1 * (i01 * y0 + i11 * y1)
+    # (I - K H) e with K = PHᵀ S⁻¹
+    g0, g1 = i00 * hd0 + i01 * hd1, i01 * hd0 + i11 * hd1
+    c0, c1 = _INN_C0, _INN_C0 + 6
+    for i in range(6):
+        en[i] = en[i] - inn[c0 + i] * g0 - inn[c1 + i] * g1
+    return xn, out, mu, en, nis_b, nis_s
+
+
+@kernel
+def _jumped(x, P, dt, O, shape):
+    """``(ok, x, P)`` after a velocity jump ``Δv ~ N(μ, diag(σ²))`` at an instant ``s``
+    uniform over the last ``dt`` (``Δp = Δv s``, ``E[s] = dt/2``, ``E[s²] = dt²/3``,
+    ``Var s = dt²/12``); shape ``shape`` of ``O``'s (reflect, σ² (3)): ``μ = 0``, or for a
+    floor bounce ``μ = −(1 + e) v_d ĝ − f (v − v_d ĝ)`` with ``v_d = v·ĝ`` (``ĝ`` gravity's
+    unit vector; ``ok`` False when the ball is not falling: no floor bounce then)."""
+    base = _OSHAPES + 4 * shape
+    x = x.copy()
+    P = P.copy()
+    if O[base] != 0.0:
+        d0, d1, d2 = O[_ODOWN], O[_ODOWN + 1], O[_ODOWN + 2]
+        vd = x[3] * d0 + x[4] * d1 + x[5] * d2
+        if not vd > 0:
+            return False, x, P
+        e, f = O[_OREST], O[_OFRIC]
+        mu = np.empty(3)
+        for i in range(3):
+            di = O[_ODOWN + i]
+            mu[i] = -(1.0 + e) * vd * di - f * (x[3 + i] - vd * di)
+        for i in range(3):
+            x[3 + i] += mu[i]
+            x[i] += mu[i] * dt / 2.0
+            for j in range(3):  # the jump's unknown instant spreads its mean's shift
+                P[6 * i + j] += mu[i] * mu[j] * dt * dt / 12.0
+    for i in range(3):
+        jv = O[base + 1 + i]
+        P[7 * i] += jv * dt * dt / 3.0
+        P[6 * i + 3 + i] += jv * dt / 2.0
+        P[6 * (i + 3) + i] += jv * dt / 2.0
+        P[7 * (i + 3)] += jv
+    return True, x, P
+
+
+@kernel
+def _jump(S, I, cams, O, t, cam, u, v):
+    """A bounce or a kick: a velocity jump (a bounce's, mostly along gravity, then a kick's,
+    isotropic; position continuous) at the state before one of the last ``_JUMP_LAG + 1``
+    accepted detections (the first detections after a small jump can pass the gate), those
+    detections and this one replayed; the (lag, shape) whose replay passes every gate with
+    the least ``Σ NIS + ln det S`` over the same detections wins.
+    Returns ``(ok, x, P, innovation of this detection)``; ``ok`` False when none explains
+    it. The replay's prediction weights gravity by the replayed detection's camera index,
+    exactly as the pure-Python filter did (its ``c`` was the loop's camera)."""
+    n = I[_IHN]
+    var = S[_SVAR]
+    best_x = np.empty(6)
+    best_P = np.empty(36)
+    best_inn = np.empty(_INN_C0 + 12)
+    found = False
+    best_score = math.inf
+    n_lags = min(n, _JUMP_LAG) + 1
+    start = max(n - _JUMP_LAG, 0)
+    for lag in range(n_lags):
+        for shape in range(int(O[_ONSHAPES])):
+            if lag == 0:  # the state before the current detection
+                t0 = I[_ITIME]
+                x = S[_SX:_SX + 6]
+                P = S[_SP:_SP + 36]
+            else:  # restart before the lag-th latest accepted detection
+                h = n - lag
+                t0 = I[_IHT + 3 * h]
+                x = S[_SHX + 6 * h:_SHX + 6 * h + 6]
+                P = S[_SHP + 36 * h:_SHP + 36 * h + 36]
+            score = 0.0
+            for k in range(start, n - lag):
+                score += S[_SHSC + k]
+            first = True
+            passed = True
+            inn = best_inn
+            for d in range(lag + 1):
+                if d < lag:  # the accepted detections since, oldest first
+                    h = n - lag + d
+                    td, cd = I[_IHT + 3 * h + 1], I[_IHT + 3 * h + 2]
+                    ud, vd = S[_SHUV + 2 * h], S[_SHUV + 2 * h + 1]
+                else:
+                    td, cd, ud, vd = t, cam, u, v
+                dt = (td - t0) / NS
+                x, P = _predicted(x, P, dt, float(cd), O, S[_SQ])
+                if first:  # the jump Δv at an instant uniform in the interval: Δp = Δv s
+                    ok, x, P = _jumped(x, P, dt, O, shape)
+                    if not ok:
+                        passed = False
+                        break
+                    first = False
+                ok, inn = _innovation(cams, cd, x, P, 6, ud, vd, var)
+                if not ok or not inn[5] <= O[_OGATE]:
+                    passed = False
+                    break
+                score += inn[5] + math.log(inn[6])
+                x, P = _updated(x, P, inn)
+                t0 = td
+            if passed and score < best_score:
+                best_x, best_P, best_inn, best_score, found = x, P, inn, score, True
+    if found:
+        I[_IHN] = 0  # a new segment: a later jump is not looked for before it
+    return found, best_x, best_P, best_inn
+
+
+@kernel
+def _combined_point(x, P, xt, Pt, nu):
+    """The position (3) and its variances (x, y, z) of the mixture of the pair ``(x, P)``
+    and the turn model ``(xt, Pt)`` of probability ``nu``."""
+    if not nu:
+        return x[0], x[1], x[2], P[0], P[7], P[14]
+    d0, d1, d2 = xt[0] - x[0], xt[1] - x[1], xt[2] - x[2]
+    w, m = nu * (1.0 - nu), 1.0 - nu
+    return (x[0] + nu * d0, x[1] + nu * d1, x[2] + nu * d2,
+            m * P[0] + nu * Pt[0] + w * d0 * d0, m * P[7] + nu * Pt[8] + w * d1 * d1,
+            m * P[14] + nu * Pt[16] + w * d2 * d2)
+
+
+@kernel
+def _combined(x, P, xt, Pt, nu):
+    """The mixture of the pair ``(x, P)`` (6) and the turn model ``(xt, Pt)`` (7) of
+    probability ``nu``: mean and covariance (6, 6 x 6 flat; new arrays) with the spread of
+    the means."""
+    if not nu:
+        return x.copy(), P.copy()
+    d = np.empty(6)
+    xc = np.empty(6)
+    for i in range(6):
+        d[i] = xt[i] - x[i]
+        xc[i] = x[i] + nu * d[i]
+    w = nu * (1.0 - nu)
+    Pc = np.empty(36)
+    for i in range(6):
+        for j in range(6):
+            Pc[6 * i + j] = (1.0 - nu) * P[6 * i + j] + nu * Pt[7 * i + j] + w * d[i] * d[j]
+    return xc, Pc
+
+
+@kernel
+def _point(out, px, py, pz, vx, vy, vz, y0, y1, r0, r1, nis, gap_s, jump, rejected, init):
+    """Write a point and its quality into ``out`` (``_OUT_COLS``)."""
+    out[0], out[1], out[2] = px, py, pz
+    out[3] = math.sqrt(vx + vy + vz)
+    out[4], out[5], out[6] = math.sqrt(vx), math.sqrt(vy), math.sqrt(vz)
+    out[7], out[8], out[9], out[10] = y0, y1, r0, r1
+    out[11], out[12], out[13], out[14], out[15] = nis, gap_s, jump, rejected, init
+
+
+@kernel
+def _window_append(I, S, N, ncam, t, cam, u, v, keep):
+    """Append a detection to the (re)initialisation window, keeping its ``keep`` latest."""
+    wt, wf = _ICAM + 3 * ncam, _SCAM + 2 * ncam
+    n = I[_IWN]
+    if n == N[_NWCAP]:  # full (never while keep < capacity): the oldest goes
+        for k in range(n - 1):
+            I[wt + 2 * k], I[wt + 2 * k + 1] = I[wt + 2 * k + 2], I[wt + 2 * k + 3]
+            S[wf + 2 * k], S[wf + 2 * k + 1] = S[wf + 2 * k + 2], S[wf + 2 * k + 3]
+        n -= 1
+    I[wt + 2 * n], I[wt + 2 * n + 1] = t, cam
+    S[wf + 2 * n], S[wf + 2 * n + 1] = u, v
+    n += 1
+    if n > keep:
+        drop = n - keep
+        for k in range(keep):
+            I[wt + 2 * k], I[wt + 2 * k + 1] = I[wt + 2 * (k + drop)], I[wt + 2 * (k + drop) + 1]
+            S[wf + 2 * k], S[wf + 2 * k + 1] = S[wf + 2 * (k + drop)], S[wf + 2 * (k + drop) + 1]
+        n = keep
+    I[_IWN] = n
+
+
+@kernel
+def _window_trim(I, S, N, ncam):
+    """Drop the window's detections older than its span (``_try_window``'s first loop);
+    True when a fit is then worth trying: at least ``init_detections`` of two cameras or
+    more (else ``_try_window`` returns None before any fit)."""
+    wt, wf = _ICAM + 3 * ncam, _SCAM + 2 * ncam
+    n = I[_IWN]
+    drop = 0
+    while drop < n and I[wt + 2 * (n - 1)] - I[wt + 2 * drop] > N[_NSPAN]:
+        drop += 1
+    if drop:
+        for k in range(n - drop):
+            I[wt + 2 * k], I[wt + 2 * k + 1] = I[wt + 2 * (k + drop)], I[wt + 2 * (k + drop) + 1]
+            S[wf + 2 * k], S[wf + 2 * k + 1] = S[wf + 2 * (k + drop)], S[wf + 2 * (k + drop) + 1]
+        n -= drop
+        I[_IWN] = n
+    if n < N[_NINITDET]:
+        return False
+    first = I[wt + 1]
+    for k in range(1, n):
+        if I[wt + 2 * k + 1] != first:
+            return True
+    return False
+
+
+@kernel
+def _withheld(I, O, std):
+    """Withhold what the filter cannot vouch for (the state is updated all the same): a
+    velocity jump one camera alone has seen (its component along that camera's rays is a
+    guess) until another camera's detection confirms it, and any point whose standard
+    deviation exceeds the bound; counted by reason. True when withheld."""
+    if O[_OWITHHOLD] == 0.0:
+        return False
+    if I[_IPEND] >= 0:
+        I[_IDROPC] += 1
+        if I[_IDROPFIRST] == 0:
+            I[_IDROPFIRST] = 1
+        return True
+    if std > O[_OMAXSTD]:
+        I[_IDROPU] += 1
+        if I[_IDROPFIRST] == 0:
+            I[_IDROPFIRST] = 2
+        return True
+    return False
+
+
+@kernel
+def _reject(S, I, cams, O, N, t, cam, u, v, x, P, inn_ok, inn, gap_s, out):
+    """The detection failed the gate: the point is the prediction ``x``; after
+    ``max_rejects`` in a row the track restarts from the window. Returns a step result."""
+    ncam = cams.shape[0]
+    I[_IREJ] += 1
+    _window_append(I, S, N, ncam, t, cam, u, v, N[_NINITWIN])
+    if I[_ICONF] < _CONFIRM:  # a start the next detections deny: no point from it
+        I[_IHAS] = 0
+        return _FIT if _window_trim(I, S, N, ncam) else _NONE
+    if inn_ok:
+        nis, y0, y1 = inn[5], inn[0], inn[1]
+    else:
+        nis = y0 = y1 = _NAN
+    S[_SX:_SX + 6] = x
+    S[_SP:_SP + 36] = P
+    I[_ITIME] = t
+    px, py, pz, vx, vy, vz = _combined_point(x, P, S[_SXT:_SXT + 7], S[_SPT:_SPT + 49],
+                                             S[_SNU])
+    _point(out, px, py, pz, vx, vy, vz, y0, y1, y0, y1, nis, gap_s, 0.0, 1.0, 0.0)
+    if I[_IREJ] >= N[_NMAXREJ]:  # lost: restart from the window
+        I[_IHAS] = 0
+        if _window_trim(I, S, N, ncam):
+            return _FIT_OR_POINT
+    return _POINT
+
+
+@kernel
+def _push(S, I, cams, O, N, t, cam, u, v, out):
+    """One detection (true time ``t`` ns, camera index, distorted pixel) into the state:
+    ``BallFilter._push`` of the pure-Python filter, statement for statement. Returns a step
+    result (``_NONE``, ``_POINT`` with the point in ``out``, ``_FIT``/``_FIT_OR_POINT``: the
+    window must be fitted in Python)."""
+    ncam = cams.shape[0]
+    far = cams[cam, 23]
+    if not (abs(u) <= far and abs(v) <= far):  # also NaN: no detection
+        return _NONE
+    clast = _ICAM
+    maxgap = N[_NMAXGAP]
+    if I[_IHAS]:
+        other = -(2 ** 62)  # the latest accepted detection of another camera
+        for k in range(ncam):
+            if k != cam and I[clast + k] > other:
+                other = I[clast + k]
+        if (t - I[_ILAST] > maxgap or t - other > maxgap
+                or (cam == I[_IJUMPCAM] and other < I[_IJUMPNS])):
+            # nothing bridges so long a time, and one camera alone cannot hold the depth
+            # (no other camera's detection within the gap, or since a jump it alone saw):
+            # the track is lost
+            I[_IHAS] = 0
+    if not I[_IHAS]:  # (re)initialisation from the window
+        wt = _ICAM + 3 * ncam
+        n = I[_IWN]
+        if n and t - I[wt + 2 * (n - 1)] > maxgap:
+            I[_IWN] = 0
+        _window_append(I, S, N, ncam, t, cam, u, v, I[_ICAP])
+        return _FIT if _window_trim(I, S, N, ncam) else _NONE
+    dt = (t - I[_ITIME]) / NS
+    gap_s = (t - I[_ILAST]) / NS
+    mu0 = S[_SMU]
+    p = _pmin(O[_OSWITCH] * abs(dt), 0.5)
+    c = mu0 * (1.0 - p) + (1.0 - mu0) * p
+    xg = S[_SX:_SX + 6]
+    Pg = S[_SP:_SP + 36]
+    nu = S[_SNU]
+    if nu == 1.0 and S[_SQ] >= O[_OTON]:
+        # an acceleration the turn model lacks (q grew): the pair rejoins at its state
+        nu = 1.0 - _TURN_START
+        S[_SMU] = O[_OMU0]
+        S[_SE:_SE + 6] = 0.0
+        I[_IAGE] = 0
+    elif not nu and O[_OTURN] != 0.0 and (S[_SQ] >= O[_OTON] or not I[_ICONF]):
+        # at a track's start, or an acceleration the pair lacks (q grew): the turn model
+        # joins at the pair's state, its turn rate unknown (0 ± turn_rate_std)
+        nu = _TURN_START
+        xs, Ps = _turn_start(xg, Pg, 0.0, O[_OTVAR])
+        S[_SXT:_SXT + 7] = xs
+        S[_SPT:_SPT + 49] = Ps
+        I[_IAGE] = 0
+    solo = nu == 1.0  # the turn model alone (the pair left the model set)
+    mu = S[_SMU]
+    e = S[_SE:_SE + 6].copy()
+    var, gate, q = S[_SVAR], O[_OGATE], S[_SQ]
+    jump = 0.0
+    accepted = False
+    xt = S[_SXT:_SXT + 7]
+    Pt = S[_SPT:_SPT + 49]
+    prior_y0 = prior_y1 = 0.0
+    inn_t = np.empty(0)
+    if solo:
+        xt, Pt = _turn_predicted(xt, Pt, dt, q, O[_OTPSD])
+        x, P = xt[:6], _block6(Pt)
+        inn_ok, inn = _innovation(cams, cam, xt, Pt, 7, u, v, var)
+        inn_t = inn
+        if inn_ok:
+            prior_y0, prior_y1 = inn[0], inn[1]
+            accepted = inn[5] <= gate
+    else:
+        if nu:
+            nu, xg, Pg, xt, Pt = _turn_mixed(nu, xg, Pg, xt, Pt, dt, O[_OTSWITCH])
+            xt, Pt = _turn_predicted(xt, Pt, dt, q, O[_OTPSD])
+        x, P = _predicted(xg, Pg, dt, c, O, q)
+        inn_ok, inn = _innovation(cams, cam, x, P, 6, u, v, var)
+    if inn_ok and not solo:
+        # the mixture's innovation (the process noise's whiteness statistic)
+        prior_y0, prior_y1 = inn[0], inn[1]
+        if O[_OSWITCH] != 0.0:
+            x, inn, mu, e, nis_b, nis_s = _mixed(x, inn, c, p, dt, S[_SMU], S[_SE:_SE + 6], O)
+            nis_min = _pmin(nis_b, nis_s)
+        else:
+            nis_b = nis_s = nis_min = inn[5]
+        if nu:
+            ok_t, inn_t = _innovation(cams, cam, xt, Pt, 7, u, v, var)
+            if not ok_t:  # the turn model's point is behind the camera: it leaves
+                nu = 0.0
+            else:
+                S[_SNUPOST] = _turn_probability(nu, c, nis_b, nis_s, inn[6], inn_t[5],
+                                                inn_t[6])
+                nis_min = _pmin(nis_min, inn_t[5])
+                prior_y0 += nu * (inn_t[0] - prior_y0)
+                prior_y1 += nu * (inn_t[1] - prior_y1)
+        accepted = nis_min <= gate
+    nu_post = nu
+    if accepted and solo:
+        xt, Pt = _updated(xt, Pt, inn)
+        xn, Pn, nis = xt[:6], _block6(Pt), inn[5]
+        xo0, xo1, xo2 = xt[0], xt[1], xt[2]
+        v0, v1, v2 = Pt[0], Pt[8], Pt[16]
+    elif accepted:
+        xn, Pn = _updated(x, P, inn)
+        nis = inn[5]
+        if nu:
+            nu_post = S[_SNUPOST]
+            xt, Pt = _updated(xt, Pt, inn_t)
+            # the mixture's innovation and S⁻¹ (the models' weighted by ν⁺)
+            y0 = inn[0] + nu_post * (inn_t[0] - inn[0])
+            y1 = inn[1] + nu_post * (inn_t[1] - inn[1])
+            i00 = inn[2] + nu_post * (inn_t[2] - inn[2])
+            i01 = inn[3] + nu_post * (inn_t[3] - inn[3])
+            i11 = inn[4] + nu_post * (inn_t[4] - inn[4])
+            nis = y0 * (i00 * y0 + i01 * y1) + y1 * (i01 * y0 + i11 * y1)
+            xo0, xo1, xo2, v0, v1, v2 = _combined_point(xn, Pn, xt, Pt, nu_post)
+        else:
+            xo0, xo1, xo2, v0, v1, v2 = xn[0], xn[1], xn[2], Pn[0], Pn[7], Pn[14]
+    else:
+        S[_SNU] = nu  # the turn model's state is its prediction (as the pair's)
+        if nu:
+            S[_SXT:_SXT + 7] = xt
+            S[_SPT:_SPT + 49] = Pt
+        found = False
+        if inn_ok:
+            found, xn, Pn, inn_j = _jump(S, I, cams, O, t, cam, u, v)
+        if not found:  # rejected: the point is the prediction
+            return _reject(S, I, cams, O, N, t, cam, u, v, x, P, inn_ok, inn, gap_s, out)
+        inn = inn_j
+        xo0, xo1, xo2, v0, v1, v2, nis = xn[0], xn[1], xn[2], Pn[0], Pn[7], Pn[14], inn[5]
+        jump = 1.0
+        if nu:  # the turn model restarts at the jump's state, keeping its turn rate;
+            # the pair is back in the set (a new segment, its motion unknown)
+            xt, Pt = _turn_start(xn, Pn, xt[6], Pt[48])
+            nu_post = _pmin(_pmax(nu, _TURN_START), 1.0 - _TURN_START)
+            if solo:
+                S[_SMU] = mu = O[_OMU0]
+    ok, pu, pv, _, _, _, _, _, _ = _project(cams, cam, xo0, xo1, xo2)
+    if not ok:  # never a point behind the camera that made it
+        S[_SNU] = nu
+        if nu:
+            S[_SXT:_SXT + 7] = xt
+            S[_SPT:_SPT + 49] = Pt
+        return _reject(S, I, cams, O, N, t, cam, u, v, x, P, inn_ok, inn, gap_s, out)
+    cinn_t, cinn_has = _ICAM + ncam, _ICAM + 2 * ncam
+    if accepted:
+        h = I[_IHN]
+        if h == _HISTORY:  # the oldest goes
+            for k in range(h - 1):
+                I[_IHT + 3 * k:_IHT + 3 * k + 3] = I[_IHT + 3 * k + 3:_IHT + 3 * k + 6]
+                S[_SHX + 6 * k:_SHX + 6 * k + 6] = S[_SHX + 6 * k + 6:_SHX + 6 * k + 12]
+                S[_SHP + 36 * k:_SHP + 36 * k + 36] = S[_SHP + 36 * k + 36:_SHP + 36 * k + 72]
+                S[_SHUV + 2 * k:_SHUV + 2 * k + 2] = S[_SHUV + 2 * k + 2:_SHUV + 2 * k + 4]
+                S[_SHSC + k] = S[_SHSC + k + 1]
+            h -= 1
+        I[_IHT + 3 * h], I[_IHT + 3 * h + 1], I[_IHT + 3 * h + 2] = I[_ITIME], t, cam
+        S[_SHX + 6 * h:_SHX + 6 * h + 6] = S[_SX:_SX + 6]
+        S[_SHP + 36 * h:_SHP + 36 * h + 36] = S[_SP:_SP + 36]
+        S[_SHUV + 2 * h], S[_SHUV + 2 * h + 1] = u, v
+        S[_SHSC + h] = inn[5] + math.log(inn[6])
+        I[_IHN] = h + 1
+        if O[_OQRATE] != 0.0:  # process noise: a consistent filter's innovations are white
+            if I[cinn_has + cam] and t - I[cinn_t + cam] <= maxgap:
+                # yᵀ S⁻¹ y': zero mean for a consistent filter's (white) innovations
+                y0, y1 = prior_y0, prior_y1
+                py0, py1 = S[_SCAM + 2 * cam], S[_SCAM + 2 * cam + 1]
+                r = py0 * (inn[2] * y0 + inn[3] * y1) + py1 * (inn[3] * y0 + inn[4] * y1)
+                r = _pmin(_pmax(r, -_R_CLIP), _R_CLIP)
+                qn = S[_SQ] * math.exp(O[_OQRATE] * (r - O[_OQTARGET]))
+                S[_SQ] = _pmin(_pmax(qn, O[_OQMIN]), O[_OQMAX])
+            I[cinn_has + cam] = 1
+            I[cinn_t + cam] = t
+            S[_SCAM + 2 * cam], S[_SCAM + 2 * cam + 1] = prior_y0, prior_y1
+        if O[_OADAPT] != 0.0:  # pixel noise by stochastic approximation of E[NIS] = 2
+            vn = S[_SVAR] * (1.0 + O[_OADAPT] * (0.5 * nis - 1.0))
+            S[_SVAR] = _pmin(_pmax(vn, O[_OVMIN]), O[_OVMAX])
+        if nis > O[_OCONFNIS]:  # a surprising update: confirmed like a jump
+            I[_IPEND], I[_ICONFS], I[_IOTHER] = cam, 0, 0
+        elif I[_IPEND] >= 0:
+            I[_ICONFS] += 1
+            if cam != I[_IPEND]:
+                I[_IOTHER] = 1
+            if I[_ICONFS] >= _CONFIRM_UPDATES and I[_IOTHER]:
+                I[_IPEND] = -1
+        if nu_post:
+            # the model set adapts (variable-structure IMM): the turn model leaves when it
+            # is unlikely, or its turn rate is not told from 0 (the supported model), once
+            # its turn rate has settled and unless q says an acceleration is missing
+            I[_IAGE] += 1
+            w = xt[6]
+            if I[_IAGE] >= _TURN_MIN_UPDATES and S[_SQ] < O[_OTON]:
+                if nu_post < _TURN_OFF or w * w < _TURN_SIGNIFICANT ** 2 * Pt[48]:
+                    nu_post = 0.0
+                elif nu_post > 1.0 - _TURN_OFF and not solo:
+                    # the pair is unlikely: it leaves, the turn model goes on alone
+                    nu_post = 1.0
+                    xn, Pn = xt[:6], _block6(Pt)
+    else:
+        I[_IJUMPNS], I[_IJUMPCAM] = t, cam
+        for k in range(ncam):  # a new segment
+            I[cinn_has + k] = 0
+        I[_IPEND], I[_ICONFS], I[_IOTHER] = cam, 0, 0
+    if accepted:
+        S[_SMU] = mu
+        S[_SE:_SE + 6] = e
+    else:
+        S[_SE:_SE + 6] = 0.0  # a jump: a new segment, the models start together
+    S[_SNU] = nu_post
+    if nu_post:
+        S[_SXT:_SXT + 7] = xt
+        S[_SPT:_SPT + 49] = Pt
+    S[_SX:_SX + 6] = xn
+    S[_SP:_SP + 36] = Pn
+    I[_ITIME] = I[_ILAST] = t
+    I[_IREJ] = 0
+    I[_ICONF] += 1
+    I[clast + cam] = t
+    _window_append(I, S, N, ncam, t, cam, u, v, N[_NINITWIN])
+    _point(out, xo0, xo1, xo2, v0, v1, v2, inn[0], inn[1], u - pu, v - pv, nis, gap_s, jump,
+           0.0, 0.0)
+    return _POINT
+
+
+@kernel
+def _step(S, I, cams, O, N, t, cam, u, v, out):
+    """:func:`_push`, then withhold the point (``_POINT`` becomes ``_NONE``) as
+    ``BallFilter.push`` does; ``_FIT``/``_FIT_OR_POINT`` are left to Python."""
+    status = _push(S, I, cams, O, N, t, cam, u, v, out)
+    if status == _POINT and _withheld(I, O, out[3]):
+        return _NONE
+    return status
+
+
+@kernel
+def _run(S, I, cams, O, N, times, cameras, uv, start, rows, index, n_out):
+    """The batch loop: detections ``start:`` into the state, the points into ``rows`` (one
+    row per point) and their detection's index into ``index``, from row ``n_out``.
+    Returns ``(next detection, rows filled, status)``: status ``_NONE`` at the end, else a
+    window fit is needed for detection ``next`` (Python), which continues after it."""
+    out = np.empty(_OUT_COLS)
+    for i in range(start, times.shape[0]):
+        status = _step(S, I, cams, O, N, times[i], cameras[i], uv[i, 0], uv[i, 1], out)
+        if status == _POINT:
+            rows[n_out] = out
+            index[n_out] = i
+            n_out += 1
+        elif status != _NONE:
+            rows[n_out] = out
+            return i, n_out, status
+    return times.shape[0], n_out, _NONE
+
+
+@kernel
+def _predict(S, I, O, t):
+    """The state predicted to ``t`` ns (``BallFilter.predict``): mean (6) and covariance
+    (6 x 6 flat) of the models' mixture, new arrays."""
+    dt = (t - I[_ITIME]) / NS
+    nu = S[_SNU]
+    q = S[_SQ]
+    if nu == 1.0:  # the turn model alone
+        xt, Pt = _turn_predicted(S[_SXT:_SXT + 7], S[_SPT:_SPT + 49], dt, q, O[_OTPSD])
+        return xt[:6].copy(), _block6(Pt)
+    mu = S[_SMU]
+    p = _pmin(O[_OSWITCH] * abs(dt), 0.5)
+    c = mu * (1.0 - p) + (1.0 - mu) * p
+    x, P = _predicted(S[_SX:_SX + 6], S[_SP:_SP + 36], dt, c, O, q)
+    if nu:
+        pt = _pmin(O[_OTSWITCH] * abs(dt), 0.5)
+        nu = nu * (1.0 - pt) + (1.0 - nu) * pt
+        xt, Pt = _turn_predicted(S[_SXT:_SXT + 7], S[_SPT:_SPT + 49], dt, q, O[_OTPSD])
+        x, P = _combined(x, P, xt, Pt, nu)
+    return x, P
+
+
+def _state_scalar(index: int, doc: str) -> property:
+    """A property of ``BallFilter`` reading and writing ``_S[index]``."""
+
+    def get(self):
+        return float(self._S[index])
+
+    def set_(self, value):
+        self._S[index] = value
+
+    return property(get, set_, doc=doc)
+
+
+def _state_vector(index: int, size: int, doc: str) -> property:
+    """A property of ``BallFilter`` reading (a list) and writing ``_S[index:index + size]``."""
+
+    def get(self):
+        return self._S[index:index + size].tolist()
+
+    def set_(self, value):
+        self._S[index:index + size] = value
+
+    return property(get, set_, doc=doc)
+
+
 class BallFilter:
     """The ``filter`` method's state, updated one detection at a time (the streaming form).
 
@@ -321,6 +1248,11 @@ class BallFilter:
 
     Detections are pushed with their TRUE (corrected) capture times, in (time, camera)
     order (:class:`~pslog.fusion.stream.StreamFuser` corrects logged times first).
+
+    The per-detection work (prediction, innovation, update, the models' mixing, the gate,
+    the jump search, withholding) is one compiled kernel (:func:`_push`, numba) over the
+    state arrays; the (re)initialisation's window fit (least squares, only while there is no
+    track) stays in Python (:meth:`_try_window`).
 
     Examples
     --------
@@ -334,24 +1266,17 @@ class BallFilter:
 
         self.options = options = options or FilterOptions()
         self._cams = [_Cam(c) for c in rig.cameras]
+        n_cams = len(rig)
+        cams = np.zeros((n_cams, _CAM_COLS))
+        for i, c in enumerate(self._cams):
+            cams[i] = [*c.r, *c.t, c.fx, c.s, c.cx, c.fy, c.cy, c.k1, c.k2, c.k3, c.p1, c.p2,
+                       float(c.distorted), float(c.far)]
+        self._cam_table = cams
         self._max_gap_ns = int((options.max_gap_s or default_max_gap_s(rig)) * NS)
-        self._var = options.noise_px ** 2
-        self._adapt = options.adapt_rate
         self._var_min, self._var_max = options.min_noise_px ** 2, options.max_noise_px ** 2
-        self._q = self._q_min = options.accel_psd
+        self._q_min = options.accel_psd
         self._q_max = max(options.max_accel_psd, options.accel_psd)
-        self._q_rate, self._q_target = options.accel_adapt_rate, options.accel_adapt_target
-        # per camera: (time, innovation u, v) of its latest accepted update, for the
-        # process noise's adaptation (consecutive innovations of a lagging filter agree)
-        self._cam_inn: list = [None] * len(rig)
         self._max_std = options.max_std_m
-        self._withhold = options.withhold
-        # camera of a jump (or a surprising update) not yet confirmed, else -1; the
-        # confirming updates since, and whether one came from another camera
-        self._pending, self._confirms, self._other = -1, 0, False
-        self._confirm_nis = options.confirm_nis
-        #: reason -> number of points withheld (``unconfirmed``, ``uncertain``)
-        self.dropped: dict[str, int] = {}
         self._jump_var = options.jump_speed ** 2
         # the jump hypotheses (reflect, variance per axis): a floor bounce (the velocity
         # along gravity reflected with the restitution, some of the rest lost), a jump
@@ -367,71 +1292,112 @@ class BallFilter:
             (False, (jv, jv, jv))]
         norm = math.sqrt(sum(a * a for a in options.gravity)) or 1.0
         self._down = tuple(float(a) / norm for a in options.gravity)
-        self._restitution, self._friction = options.restitution, options.bounce_friction
         self._k = options.drag_per_m
         self._g = tuple(float(x) for x in options.gravity)
         self._gate = options.gate
-        # probability of the ballistic model (else "supported": no gravity, e.g. rolling)
         self._switch = options.model_switch_per_s
         # without switching the ballistic model alone (probability 1)
         self._mu0 = _INIT_BALLISTIC if self._switch else 1.0
-        self._mu = self._mu0
-        self._e = _ZERO6  # ballistic model's mean minus the supported one's
-        # the turn model (coordinated turn about z, turn rate ω in its state): its probability
-        # ν (0: not in the model set), mean (7,) and covariance (7 x 7 flat)
+        # the turn model (coordinated turn about z, turn rate ω in its state)
         g = options.gravity
         self._turn = bool(options.turn_switch_per_s) and g[0] == 0.0 and g[1] == 0.0
         self._turn_switch = options.turn_switch_per_s
-        self._turn_on, self._turn_psd = options.turn_on_psd, options.turn_rate_psd
+        self._turn_psd = options.turn_rate_psd
         self._turn_var = options.turn_rate_std ** 2
-        self._nu = self._nu_post = 0.0
-        self._turn_age = 0  # accepted updates since the turn model joined
-        self._xt: list[float] = []
-        self._Pt: list[float] = []
-        self.time_ns: int | None = None  # time of the state; None: no track
-        self._x = [0.0] * 6
-        self._P = [0.0] * 36
-        self._last_ns = 0  # time of the last accepted detection
-        self._rejects = 0
-        self._confirmed = 0  # detections accepted since the track started
-        self._cam_last = [-(2**62)] * len(rig)  # last accepted detection per camera
-        self._jump_ns, self._jump_camera = -(2**62), -1  # the latest jump accepted
-        self._window: list[tuple[int, int, float, float]] = []  # (time, camera, u, v)
-        # most detections the window keeps: init_window, more while its fits fail on their
-        # velocity alone (a short window at a high frame rate), up to init_max_window
-        self._init_cap = options.init_window
         # a window shorter than this whose fit fails on its velocity alone grows; the
         # longest time a window spans: the longest gap bridged, or a grown window's span
         self._init_grow_ns = int(options.init_span_s * NS)
         self._init_span_ns = max(self._max_gap_ns, self._init_grow_ns)
-        # the latest accepted updates: (state time, x, P before; time, camera, u, v;
-        # NIS + ln det S), for the jump search
-        self._history: list[tuple] = []
+        capacity = max(options.init_window, options.init_max_window) + 1
+        O = np.zeros(_OSIZE)
+        O[_OK], O[_OG:_OG + 3], O[_ODOWN:_ODOWN + 3] = self._k, self._g, self._down
+        O[_OGATE], O[_OADAPT] = self._gate, options.adapt_rate
+        O[_OVMIN], O[_OVMAX], O[_OQMIN], O[_OQMAX] = (self._var_min, self._var_max,
+                                                      self._q_min, self._q_max)
+        O[_OQRATE], O[_OQTARGET] = options.accel_adapt_rate, options.accel_adapt_target
+        O[_OMAXSTD] = math.inf if self._max_std is None else self._max_std
+        O[_OWITHHOLD], O[_OCONFNIS] = float(options.withhold), options.confirm_nis
+        O[_OSWITCH], O[_OMU0], O[_OTURN] = self._switch, self._mu0, float(self._turn)
+        O[_OTSWITCH], O[_OTON], O[_OTPSD], O[_OTVAR] = (
+            self._turn_switch, options.turn_on_psd, self._turn_psd, self._turn_var)
+        O[_OREST], O[_OFRIC] = options.restitution, options.bounce_friction
+        O[_ONSHAPES] = len(self._jump_shapes)
+        for i, (reflect, var) in enumerate(self._jump_shapes):
+            O[_OSHAPES + 4 * i:_OSHAPES + 4 * i + 4] = (float(reflect), *var)
+        self._opts = O
+        self._nopts = np.array([self._max_gap_ns, self._init_span_ns, options.init_window,
+                                options.init_detections, options.max_rejects, capacity],
+                               dtype=np.int64)
+        # the state (layout: the _S* and _I* offsets)
+        self._S = np.zeros(_SCAM + 2 * n_cams + 2 * capacity)
+        self._I = np.zeros(_ICAM + 3 * n_cams + 2 * capacity, dtype=np.int64)
+        self._S[_SMU], self._S[_SQ] = self._mu0, options.accel_psd
+        self._S[_SVAR] = options.noise_px ** 2
+        self._I[_IPEND], self._I[_IJUMPNS], self._I[_IJUMPCAM] = -1, -(2**62), -1
+        self._I[_ICAP] = options.init_window
+        self._I[_ICAM:_ICAM + n_cams] = -(2**62)  # last accepted detection per camera
+        self._out = np.empty(_OUT_COLS)
         self._rays: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
+
+    # ---- the state, as the pure-Python filter named it (tests, inspection) ---------------
+    _mu = _state_scalar(_SMU, "probability of the ballistic model (else supported)")
+    _nu = _state_scalar(_SNU, "probability of the turn model (0: not in the model set)")
+    _q = _state_scalar(_SQ, "the adapted process noise's spectral density, m²/s³")
+    _var = _state_scalar(_SVAR, "the adapted pixel variance, px²")
+    _x = _state_vector(_SX, 6, "the pair's mean (position, velocity)")
+    _P = _state_vector(_SP, 36, "the pair's covariance (6 x 6 flat)")
+    _xt = _state_vector(_SXT, 7, "the turn model's mean (position, velocity, ω)")
+    _Pt = _state_vector(_SPT, 49, "the turn model's covariance (7 x 7 flat)")
+    _e = _state_vector(_SE, 6, "the ballistic model's mean minus the supported one's")
+
+    def __getattr__(self, name):
+        # a filter made by __new__ (tests of the turn model's pieces) gets its state arrays
+        # when first set
+        if name in ("_S", "_I"):
+            value = (np.zeros(_SCAM) if name == "_S"
+                     else np.zeros(_ICAM, dtype=np.int64))
+            object.__setattr__(self, name, value)
+            return value
+        raise AttributeError(name)
+
+    @property
+    def time_ns(self) -> int | None:
+        """Time of the state (ns); None without a track."""
+        return int(self._I[_ITIME]) if self._I[_IHAS] else None
+
+    @property
+    def dropped(self) -> dict[str, int]:
+        """Reason -> number of points withheld (``unconfirmed``, ``uncertain``)."""
+        counts = {"unconfirmed": int(self._I[_IDROPC]), "uncertain": int(self._I[_IDROPU])}
+        order = ("uncertain", "unconfirmed") if self._I[_IDROPFIRST] == 2 else tuple(counts)
+        return {k: counts[k] for k in order if counts[k]}
 
     # ---- public state access -------------------------------------------------------------
     def set_state(self, time_ns: int, position, velocity, covariance) -> None:
         """Start a track from a given state (tests, or a state handed over)."""
-        self.time_ns = self._last_ns = int(time_ns)
-        self._x = [float(a) for a in (*position, *velocity)]
-        self._P = [float(a) for a in np.asarray(covariance, dtype=np.float64).ravel()]
-        self._rejects = 0
-        self._confirmed = 0
-        self._pending = -1
-        self._window = []
-        self._init_cap = self.options.init_window
-        self._history = []
-        self._cam_last = [self._last_ns] * len(self._cam_last)
-        self._mu, self._e = self._mu0, _ZERO6
-        self._nu = 0.0
+        S, I = self._S, self._I
+        I[_IHAS] = 1
+        I[_ITIME] = I[_ILAST] = int(time_ns)
+        S[_SX:_SX + 6] = [float(a) for a in (*position, *velocity)]
+        S[_SP:_SP + 36] = np.asarray(covariance, dtype=np.float64).ravel()
+        I[_IREJ] = I[_ICONF] = 0
+        I[_IPEND] = -1
+        I[_IWN] = 0
+        I[_ICAP] = self.options.init_window
+        I[_IHN] = 0
+        I[_ICAM:_ICAM + len(self._cams)] = I[_ILAST]
+        S[_SMU], S[_SE:_SE + 6] = self._mu0, 0.0
+        S[_SNU] = 0.0
 
     def state(self):
         """``(time_ns, x (6,), P (6, 6))`` of the current track (the mixture of the motion
         models), or None without one."""
-        if self.time_ns is None:
+        if not self._I[_IHAS]:
             return None
-        x, P = self._combined(self._x, self._P, self._xt, self._Pt, self._nu)
-        return self.time_ns, np.array(x), np.array(P).reshape(6, 6)
+        S = self._S
+        x, P = _combined(S[_SX:_SX + 6], S[_SP:_SP + 36], S[_SXT:_SXT + 7],
+                         S[_SPT:_SPT + 49], S[_SNU])
+        return int(self._I[_ITIME]), x, P.reshape(6, 6)
 
     def predict(self, time_ns: int):
         """The state predicted to ``time_ns`` (the process model; the state is unchanged).
@@ -442,172 +1408,25 @@ class BallFilter:
         metres, m/s and their squares. An earlier time is retrodicted with the same model
         (process noise of ``|Δt|``).
         """
-        if self.time_ns is None:
+        if not self._I[_IHAS]:
             return None
-        dt = (int(time_ns) - self.time_ns) / NS
-        nu = self._nu
-        if nu == 1.0:  # the turn model alone
-            x, P = self._turn_predicted(self._xt, self._Pt, dt)
-            return np.array(x[:3]), np.array(x[3:6]), np.array(_block6(P)).reshape(6, 6)
-        x, P = self._predicted(self._x, self._P, dt, self._prior(dt)[0])
-        if nu:
-            p = min(self._turn_switch * abs(dt), 0.5)
-            nu = nu * (1.0 - p) + (1.0 - nu) * p
-            xt, Pt = self._turn_predicted(self._xt, self._Pt, dt)
-            x, P = self._combined(x, P, xt, Pt, nu)
-        return np.array(x[:3]), np.array(x[3:]), np.array(P).reshape(6, 6)
+        x, P = _predict(self._S, self._I, self._opts, int(time_ns))
+        return x[:3], x[3:], P.reshape(6, 6)
 
-    @staticmethod
-    def _combined_point(x, P, xt, Pt, nu):
-        """The position (3) and its variances (x, y, z) of :meth:`_combined`."""
-        if not nu:
-            return x, (P[0], P[7], P[14])
-        d0, d1, d2 = xt[0] - x[0], xt[1] - x[1], xt[2] - x[2]
-        w, m = nu * (1.0 - nu), 1.0 - nu
-        return ((x[0] + nu * d0, x[1] + nu * d1, x[2] + nu * d2),
-                (m * P[0] + nu * Pt[0] + w * d0 * d0, m * P[7] + nu * Pt[8] + w * d1 * d1,
-                 m * P[14] + nu * Pt[16] + w * d2 * d2))
+    # ---- pieces of the step, for tests (the compiled kernels on lists) ---------------------
+    def _turn_predicted(self, x, P, dt):
+        """The turn model's mean and covariance after ``dt`` (:func:`_turn_predicted`)."""
+        return _turn_predicted(np.asarray(x, dtype=np.float64),
+                               np.asarray(P, dtype=np.float64), float(dt), float(self._q),
+                               float(self._turn_psd))
 
-    @staticmethod
-    def _combined(x, P, xt, Pt, nu):
-        """The mixture of the ballistic/supported pair ``(x, P)`` (6) and the turn model
-        ``(xt, Pt)`` (7) of probability ``nu``: mean and covariance (6, 6 x 6 flat) with
-        the spread of the means."""
-        if not nu:
-            return x, P
-        d = [xt[i] - x[i] for i in range(6)]
-        xc = [x[i] + nu * d[i] for i in range(6)]
-        w = nu * (1.0 - nu)
-        Pc = [(1.0 - nu) * P[6 * i + j] + nu * Pt[7 * i + j] + w * d[i] * d[j]
-              for i in range(6) for j in range(6)]
-        return xc, Pc
+    def _turn_mixed(self, nu, xg, Pg, dt):
+        """The mixing of the pair and the turn model (:func:`_turn_mixed`)."""
+        return _turn_mixed(float(nu), np.asarray(xg, dtype=np.float64),
+                           np.asarray(Pg, dtype=np.float64), self._S[_SXT:_SXT + 7],
+                           self._S[_SPT:_SPT + 49], float(dt), float(self._turn_switch))
 
     # ---- the filter ----------------------------------------------------------------------
-    def _prior(self, dt):
-        """Prior probability ``c`` of the ballistic model after ``dt`` seconds: the model
-        switches with probability ``p = min(λ |Δt|, 1/2)``, ``c = μ (1 - p) + (1 - μ) p``."""
-        p = min(self._switch * abs(dt), 0.5)
-        return self._mu * (1.0 - p) + (1.0 - self._mu) * p, p
-
-    def _predicted(self, x, P, dt, c=1.0):
-        """Mean and covariance after ``dt`` seconds (new lists), gravity weighted by the
-        ballistic model's probability ``c`` (the models' mixture's mean)."""
-        px, py, pz, vx, vy, vz = x
-        k = self._k
-        speed = math.sqrt(vx * vx + vy * vy + vz * vz)
-        gx, gy, gz = self._g
-        gx, gy, gz = c * gx, c * gy, c * gz
-        ax, ay, az = gx - k * speed * vx, gy - k * speed * vy, gz - k * speed * vz
-        h = 0.5 * dt * dt
-        xn = [px + vx * dt + ax * h, py + vy * dt + ay * h, pz + vz * dt + az * h,
-              vx + ax * dt, vy + ay * dt, vz + az * dt]
-        adt = abs(dt)
-        q = self._q
-        q3, q2, q1 = q * adt ** 3 / 3.0, q * dt * adt / 2.0, q * adt
-        dt2 = dt * dt
-        Pn = P[:]
-        for i in range(3):
-            ri, vi = 6 * i, 6 * (i + 3)
-            for j in range(3):
-                # P_pp' = P_pp + dt (P_pv + P_vp) + dt² P_vv ; P_pv' = P_pv + dt P_vv
-                Pn[ri + j] = (P[ri + j] + dt * (P[ri + 3 + j] + P[vi + j])
-                              + dt2 * P[vi + 3 + j])
-                Pn[ri + 3 + j] = P[ri + 3 + j] + dt * P[vi + 3 + j]
-                Pn[vi + j] = P[vi + j] + dt * P[vi + 3 + j]
-            Pn[ri + i] += q3
-            Pn[ri + 3 + i] += q2
-            Pn[vi + i] += q2
-            Pn[vi + 3 + i] += q1
-        return xn, Pn
-
-    def _innovation(self, cam: _Cam, x, P, u, v, n=6):
-        """``(y0, y1, PHᵀ columns c0 c1, S⁻¹ entries i00 i01 i11, NIS, det S)``, or None
-        if ``x`` is behind the camera; ``n`` states (position first), ``P`` n x n flat."""
-        proj = cam.project(x[0], x[1], x[2])
-        if proj is None:
-            return None
-        pu, pv, h0, h1 = proj
-        y0, y1 = u - pu, v - pv
-        a0, a1, a2 = h0
-        b0, b1, b2 = h1
-        # PHᵀ: column r is P[:, :3] · h_r (6 rows)
-        c0, c1 = [], []
-        for i in range(0, n * n, n):
-            p0, p1, p2 = P[i], P[i + 1], P[i + 2]
-            c0.append(p0 * a0 + p1 * a1 + p2 * a2)
-            c1.append(p0 * b0 + p1 * b1 + p2 * b2)
-        s00 = a0 * c0[0] + a1 * c0[1] + a2 * c0[2] + self._var
-        s01 = a0 * c1[0] + a1 * c1[1] + a2 * c1[2]
-        s11 = b0 * c1[0] + b1 * c1[1] + b2 * c1[2] + self._var
-        det = s00 * s11 - s01 * s01
-        i00, i01, i11 = s11 / det, -s01 / det, s00 / det
-        nis = y0 * (i00 * y0 + i01 * y1) + y1 * (i01 * y0 + i11 * y1)
-        return y0, y1, c0, c1, i00, i01, i11, nis, det, h0, h1
-
-    @staticmethod
-    def _updated(x, P, inn):
-        """Kalman update: ``x + K y``, ``P - K (PHᵀ)ᵀ`` with ``K = PHᵀ S⁻¹`` (new lists)."""
-        y0, y1, c0, c1, i00, i01, i11 = inn[:7]
-        n = len(x)
-        k0 = [c0[i] * i00 + c1[i] * i01 for i in range(n)]
-        k1 = [c0[i] * i01 + c1[i] * i11 for i in range(n)]
-        xn = [x[i] + k0[i] * y0 + k1[i] * y1 for i in range(n)]
-        Pn = P[:]
-        for i in range(n):
-            ki0, ki1, row = k0[i], k1[i], n * i
-            for j in range(i, n):
-                value = P[row + j] - (ki0 * c0[j] + ki1 * c1[j])
-                Pn[row + j] = value
-                Pn[n * j + i] = value
-        return xn, Pn
-
-    def _turn_predicted(self, x, P, dt):
-        """The turn model's mean and covariance after ``dt`` seconds (new lists): a
-        coordinated turn at rate ``ω`` about z (the horizontal velocity rotates, speed
-        constant), constant vertical velocity, ``ω`` a random walk; ``P⁻ = F P Fᵀ + Q`` with
-        the Jacobian ``F`` (7 x 7) and the white-noise acceleration ``q`` (as the other
-        models) plus ``q_ω |Δt|`` on ``ω``."""
-        px, py, pz, vx, vy, vz, w = x
-        a = w * dt
-        s, c = math.sin(a), math.cos(a)
-        if abs(a) > 1e-3:
-            sw, cw = s / w, (1.0 - c) / w  # sin(ωΔt)/ω, (1 - cos(ωΔt))/ω
-            dsw, dcw = (dt * c - sw) / w, (dt * s - cw) / w  # their derivatives in ω
-        else:  # their series (ω → 0: a straight line)
-            a2 = a * a
-            sw = dt * (1.0 - a2 / 6.0 * (1.0 - a2 / 20.0))
-            cw = dt * a * (0.5 - a2 / 24.0)
-            dsw = dt * dt * a * (a2 / 30.0 - 1.0 / 3.0)
-            dcw = dt * dt * (0.5 - a2 / 8.0)
-        vxn, vyn = c * vx - s * vy, s * vx + c * vy
-        xn = [px + sw * vx - cw * vy, py + cw * vx + sw * vy, pz + vz * dt, vxn, vyn, vz, w]
-        fx, fy = dsw * vx - dcw * vy, dcw * vx + dsw * vy  # ∂p/∂ω
-        f3, f4 = -dt * vyn, dt * vxn  # ∂v/∂ω
-        # A = F P (rows of P combined by F's sparse rows), then A Fᵀ (A's columns likewise)
-        R0, R1, R2, R3, R4, R5, R6 = (P[k:k + 7] for k in range(0, 49, 7))
-        Pn = []
-        for a0, a1, a2, a3, a4, a5, a6 in (
-                [r0 + sw * r3 - cw * r4 + fx * r6
-                 for r0, r3, r4, r6 in zip(R0, R3, R4, R6, strict=True)],
-                [r1 + cw * r3 + sw * r4 + fy * r6
-                 for r1, r3, r4, r6 in zip(R1, R3, R4, R6, strict=True)],
-                [r2 + dt * r5 for r2, r5 in zip(R2, R5, strict=True)],
-                [c * r3 - s * r4 + f3 * r6 for r3, r4, r6 in zip(R3, R4, R6, strict=True)],
-                [s * r3 + c * r4 + f4 * r6 for r3, r4, r6 in zip(R3, R4, R6, strict=True)], R5, R6):
-            # row i of A: row i of A Fᵀ is F applied to it
-            Pn += (a0 + sw * a3 - cw * a4 + fx * a6, a1 + cw * a3 + sw * a4 + fy * a6,
-                   a2 + dt * a5, c * a3 - s * a4 + f3 * a6, s * a3 + c * a4 + f4 * a6, a5, a6)
-        adt = abs(dt)
-        q = self._q
-        q3, q2, q1 = q * adt ** 3 / 3.0, q * dt * adt / 2.0, q * adt
-        for i in range(3):
-            Pn[8 * i] += q3
-            Pn[8 * i + 3] += q2
-            Pn[8 * i + 21] += q2
-            Pn[8 * i + 24] += q1
-        Pn[48] += self._turn_psd * adt
-        return xn, Pn
-
     def push(self, time_ns: int, camera: int, u: float, v: float):
         """Fuse one detection (true capture time, camera index, distorted pixel).
 
@@ -617,397 +1436,46 @@ class BallFilter:
         counted in :attr:`dropped`); else ``(position (x, y, z), quality)`` with ``quality``
         a tuple in the order of :data:`FILTER_QUALITY`.
         """
-        out = self._push(time_ns, camera, u, v)
-        if out is None or not self._withhold:
-            return out
-        # withhold what the filter cannot vouch for (the state is updated all the same):
-        # a velocity jump one camera alone has seen (its component along that camera's rays
-        # is a guess) until another camera's detection confirms it, and any point whose
-        # standard deviation exceeds the bound
-        reason = ("unconfirmed" if self._pending >= 0
-                  else "uncertain" if self._max_std is not None and out[1][0] > self._max_std
-                  else None)
-        if reason is None:
-            return out
-        self.dropped[reason] = self.dropped.get(reason, 0) + 1
-        return None
-
-    def _push(self, time_ns: int, camera: int, u: float, v: float):
-        time_ns, camera = int(time_ns), int(camera)
-        cam = self._cams[camera]
-        u, v = float(u), float(v)
-        if not (abs(u) <= cam.far and abs(v) <= cam.far):  # also NaN: no detection
+        out = self._out
+        status = _step(self._S, self._I, self._cam_table, self._opts, self._nopts,
+                       int(time_ns), int(camera), float(u), float(v), out)
+        if status == _NONE:
             return None
-        if self.time_ns is not None and (
-                time_ns - self._last_ns > self._max_gap_ns
-                or time_ns - max(t for c, t in enumerate(self._cam_last) if c != camera)
-                > self._max_gap_ns
-                or (camera == self._jump_camera
-                    and max(t for c, t in enumerate(self._cam_last) if c != camera)
-                    < self._jump_ns)):
-            # nothing bridges so long a time, and one camera alone cannot hold the depth
-            # (no other camera's detection within the gap, or since a jump it alone saw):
-            # the track is lost
-            self.time_ns = None
-        if self.time_ns is None:
-            return self._initialise(time_ns, camera, u, v)
-        dt = (time_ns - self.time_ns) / NS
-        gap_s = (time_ns - self._last_ns) / NS
-        c, p = self._prior(dt)
-        xg, Pg = self._x, self._P
-        nu = self._nu
-        if nu == 1.0 and self._q >= self._turn_on:
-            # an acceleration the turn model lacks (q grew): the pair rejoins at its state
-            nu = 1.0 - _TURN_START
-            self._mu, self._e = self._mu0, _ZERO6
-            self._turn_age = 0
-        elif not nu and self._turn and (self._q >= self._turn_on or not self._confirmed):
-            # at a track's start, or an acceleration the pair lacks (q grew): the turn model
-            # joins at the pair's state, its turn rate unknown (0 ± turn_rate_std)
-            nu = _TURN_START
-            self._xt, self._Pt = self._turn_start(xg, Pg, 0.0, self._turn_var)
-            self._turn_age = 0
-        solo = nu == 1.0  # the turn model alone (the pair left the model set)
-        mu, e = self._mu, self._e
-        jump = 0.0
-        accepted = False
-        if solo:
-            xt, Pt = self._turn_predicted(self._xt, self._Pt, dt)
-            x, P = xt[:6], _block6(Pt)
-            inn = inn_t = self._innovation(cam, xt, Pt, u, v, 7)
-            if inn is not None:
-                prior_y0, prior_y1 = inn[0], inn[1]
-                accepted = inn[7] <= self._gate
-        else:
-            if nu:
-                nu, xg, Pg, xt, Pt = self._turn_mixed(nu, xg, Pg, dt)
-                xt, Pt = self._turn_predicted(xt, Pt, dt)
-            x, P = self._predicted(xg, Pg, dt, c)
-            inn = self._innovation(cam, x, P, u, v)
-        if inn is not None and not solo:
-            # the mixture's innovation (the process noise's whiteness statistic)
-            prior_y0, prior_y1 = inn[0], inn[1]
-            if self._switch:
-                x, inn, mu, e, nis_b, nis_s = self._mixed(x, inn, c, p, dt)
-                nis_min = min(nis_b, nis_s)
-            else:
-                nis_b = nis_s = nis_min = inn[7]
-            if nu:
-                inn_t = self._innovation(cam, xt, Pt, u, v, 7)
-                if inn_t is None:  # the turn model's point is behind the camera: it leaves
-                    nu = 0.0
-                else:
-                    nu, nis_t = self._turn_probability(nu, c, nis_b, nis_s, inn[8], inn_t)
-                    nis_min = min(nis_min, nis_t)
-                    prior_y0 += nu * (inn_t[0] - prior_y0)
-                    prior_y1 += nu * (inn_t[1] - prior_y1)
-            accepted = nis_min <= self._gate
-        nu_post = nu
-        if accepted and solo:
-            xt, Pt = self._updated(xt, Pt, inn)
-            xn, Pn, nis = xt[:6], _block6(Pt), inn[7]
-            xo, pvar = xt, (Pt[0], Pt[8], Pt[16])
-        elif accepted:
-            xn, Pn = self._updated(x, P, inn)
-            nis = inn[7]
-            if nu:
-                nu_post = self._nu_post
-                xt, Pt = self._updated(xt, Pt, inn_t)
-                # the mixture's innovation and S⁻¹ (the models' weighted by ν⁺)
-                y0, y1 = inn[0] + nu_post * (inn_t[0] - inn[0]), inn[1] + nu_post * (
-                    inn_t[1] - inn[1])
-                i00, i01, i11 = (inn[4] + nu_post * (inn_t[4] - inn[4]),
-                                 inn[5] + nu_post * (inn_t[5] - inn[5]),
-                                 inn[6] + nu_post * (inn_t[6] - inn[6]))
-                nis = y0 * (i00 * y0 + i01 * y1) + y1 * (i01 * y0 + i11 * y1)
-                xo, pvar = self._combined_point(xn, Pn, xt, Pt, nu_post)
-            else:
-                xo, pvar = xn, (Pn[0], Pn[7], Pn[14])
-        else:
-            self._nu = nu  # the turn model's state is its prediction (as the pair's)
-            if nu:
-                self._xt, self._Pt = xt, Pt
-            jumped = self._jump(time_ns, camera, u, v) if inn is not None else None
-            if jumped is None:  # rejected: the point is the prediction
-                return self._reject(time_ns, camera, u, v, x, P, inn, gap_s)
-            xn, Pn, inn = jumped
-            xo, pvar, nis = xn, (Pn[0], Pn[7], Pn[14]), inn[7]
-            jump = 1.0
-            if nu:  # the turn model restarts at the jump's state, keeping its turn rate;
-                # the pair is back in the set (a new segment, its motion unknown)
-                xt, Pt = self._turn_start(xn, Pn, xt[6], Pt[48])
-                nu_post = min(max(nu, _TURN_START), 1.0 - _TURN_START)
-                if solo:
-                    self._mu = mu = self._mu0
-        proj = cam.project(xo[0], xo[1], xo[2])
-        if proj is None:  # never a point behind the camera that made it
-            self._nu = nu
-            if nu:
-                self._xt, self._Pt = xt, Pt
-            return self._reject(time_ns, camera, u, v, x, P, inn, gap_s)
-        if accepted:
-            history = self._history
-            history.append((self.time_ns, self._x, self._P, time_ns, camera, u, v,
-                            inn[7] + math.log(inn[8])))
-            if len(history) > _JUMP_LAG + 1:
-                del history[0]
-            if self._q_rate:  # process noise: a consistent filter's innovations are white
-                prev = self._cam_inn[camera]
-                if prev is not None and time_ns - prev[0] <= self._max_gap_ns:
-                    # yᵀ S⁻¹ y': zero mean for a consistent filter's (white) innovations
-                    y0, y1 = prior_y0, prior_y1
-                    r = (prev[1] * (inn[4] * y0 + inn[5] * y1)
-                         + prev[2] * (inn[5] * y0 + inn[6] * y1))
-                    r = min(max(r, -_R_CLIP), _R_CLIP)
-                    q = self._q * math.exp(self._q_rate * (r - self._q_target))
-                    self._q = min(max(q, self._q_min), self._q_max)
-                self._cam_inn[camera] = (time_ns, prior_y0, prior_y1)
-            if self._adapt:  # pixel noise by stochastic approximation of E[NIS] = 2
-                var = self._var * (1.0 + self._adapt * (0.5 * nis - 1.0))
-                self._var = min(max(var, self._var_min), self._var_max)
-            if nis > self._confirm_nis:  # a surprising update: confirmed like a jump
-                self._pending, self._confirms, self._other = camera, 0, False
-            elif self._pending >= 0:
-                self._confirms += 1
-                self._other |= camera != self._pending
-                if self._confirms >= _CONFIRM_UPDATES and self._other:
-                    self._pending = -1
-            if nu_post:
-                # the model set adapts (variable-structure IMM): the turn model leaves when
-                # it is unlikely, or its turn rate is not told from 0 (the supported model),
-                # once its turn rate has settled and unless q says an acceleration is missing
-                self._turn_age += 1
-                w = xt[6]
-                if self._turn_age >= _TURN_MIN_UPDATES and self._q < self._turn_on:
-                    if nu_post < _TURN_OFF or w * w < _TURN_SIGNIFICANT ** 2 * Pt[48]:
-                        nu_post = 0.0
-                    elif nu_post > 1.0 - _TURN_OFF and not solo:
-                        # the pair is unlikely: it leaves, the turn model goes on alone
-                        nu_post = 1.0
-                        xn, Pn = xt[:6], _block6(Pt)
-        else:
-            self._jump_ns, self._jump_camera = time_ns, camera
-            self._cam_inn = [None] * len(self._cam_inn)  # a new segment
-            self._pending, self._confirms, self._other = camera, 0, False
-        if accepted:
-            self._mu, self._e = mu, e
-        else:
-            self._e = _ZERO6  # a jump: a new segment, the models start together
-        self._nu = nu_post
-        if nu_post:
-            self._xt, self._Pt = xt, Pt
-        self._x, self._P, self.time_ns, self._last_ns = xn, Pn, time_ns, time_ns
-        self._rejects = 0
-        self._confirmed += 1
-        self._cam_last[camera] = time_ns
-        self._window.append((time_ns, camera, u, v))
-        del self._window[:-self.options.init_window]
-        return self._point(xo, pvar, math.hypot(inn[0], inn[1]),
-                           math.hypot(u - proj[0], v - proj[1]), nis, gap_s, jump, 0.0, 0.0)
+        if status != _POINT and not self._fitted(status, out):
+            return None
+        o = out.tolist()
+        init = o[15] == 1.0
+        return ((o[0], o[1], o[2]),
+                (o[3], o[4], o[5], o[6], math.hypot(o[7], o[8]),
+                 o[9] if init else math.hypot(o[9], o[10]), o[11], o[12], o[13], o[14],
+                 o[15]))
 
-    @staticmethod
-    def _turn_start(x, P, w, var):
-        """The turn model's state at the pair's ``(x, P)`` with turn rate ``w ± sqrt(var)``
-        (uncorrelated)."""
-        Pt = []
-        for i in range(0, 36, 6):
-            Pt += P[i:i + 6]
-            Pt.append(0.0)
-        return [*x, w], Pt + [0.0] * 6 + [var]
-
-    def _turn_mixed(self, nu, xg, Pg, dt):
-        """The interacting multiple model's mixing of the pair (ballistic/supported, mean
-        ``xg``, covariance ``Pg``) and the turn model (probability ``nu``) before a step of
-        ``dt``: the turn model is left with probability ``p = min(λ_t |Δt|, 1/2)``; each
-        model starts from the mixture of both weighted by where it came from, spread of the
-        means included (the pair's missing ω is the turn model's).
-        Returns ``(ν⁻, pair's x, P, turn model's x, P)``."""
-        pt = min(self._turn_switch * abs(dt), 0.5)
-        prior = nu * (1.0 - pt) + (1.0 - nu) * pt
-        wt = nu * pt / (1.0 - prior) if prior < 1.0 else 0.0  # turn's share of the pair's
-        wg = (1.0 - nu) * pt / prior  # the pair's share of the turn model's start
-        xt, Pt = self._xt, self._Pt
-        d = [xt[i] - xg[i] for i in range(6)]
-        x0 = [xg[i] + wt * d[i] for i in range(6)]
-        xt0 = [xt[i] - wg * d[i] for i in range(6)]
-        xt0.append(xt[6])
-        sg, st = wt * (1.0 - wt), wg * (1.0 - wg)
-        P0, Pt0 = [], []
-        keep = 1.0 - wg
-        for i in range(6):
-            rg, rt, di = Pg[6 * i: 6 * i + 6], Pt[7 * i: 7 * i + 6], d[i]
-            gd, td = sg * di, st * di
-            P0 += [a + wt * (b - a) + gd * dj for a, b, dj in zip(rg, rt, d, strict=True)]
-            Pt0 += [b + wg * (a - b) + td * dj for a, b, dj in zip(rg, rt, d, strict=True)]
-            # the pair's ω: the turn model's, uncorrelated with the pair's state (a
-            # covariance that stays positive semi-definite)
-            Pt0.append(keep * Pt[7 * i + 6])
-        Pt0 += [keep * a for a in Pt[42:48]]
-        Pt0.append(Pt[48])
-        return prior, x0, P0, xt0, Pt0
-
-    def _turn_probability(self, prior, c, nis_b, nis_s, det, inn_t):
-        """The turn model's probability after the detection (kept in ``_nu_post``) from the
-        models' likelihoods ``N(y; 0, S)``: the pair's is its models' mixture ``c N_b + (1 -
-        c) N_s`` (their common ``det S``); the log ratio is clipped as the pair's.
-        Returns ``(ν⁻, NIS_t)``, ``ν⁻`` the prior (the innovations' weight)."""
-        low = min(nis_b, nis_s)
-        log_pair = (-0.5 * low - 0.5 * math.log(det)
-                    + math.log(c * math.exp(0.5 * (low - nis_b))
-                               + (1.0 - c) * math.exp(0.5 * (low - nis_s))))
-        nis_t = inn_t[7]
-        r = -0.5 * nis_t - 0.5 * math.log(inn_t[8]) - log_pair
-        r = min(max(r, -_LOG_ODDS_CLIP), _LOG_ODDS_CLIP)
-        self._nu_post = prior / (prior + (1.0 - prior) * math.exp(-r))
-        return prior, nis_t
-
-    def _mixed(self, x, inn, c, p, dt):
-        """The interacting multiple model step with a covariance the two models share.
-
-        ``x``, ``inn``: the mixture's prediction and innovation; ``c``: the ballistic model's
-        prior probability, ``p`` the switching probability. The models' means are ``m + (1 -
-        c) e`` and ``m - c e`` with ``e`` their difference: the mixing shrinks it by ``1 -
-        μ_s p / c - μ_b p / (1 - c)``, the prediction propagates it (``e_p += Δt e_v``) and
-        adds gravity's ``d = (g Δt²/2, g Δt)``; the models' innovations are the mixture's
-        minus ``H`` of their offsets (linearised), their likelihood ratio (equal ``S``)
-        ``exp((NIS_s - NIS_b) / 2)`` gives ``μ⁺``; the mixture is re-weighted with ``μ⁺``
-        (``x + (μ⁺ - c) e``) and ``e`` updated to ``(I - K H) e``.
-        Returns ``(x, innovation, μ⁺, e⁺, NIS_b, NIS_s)``."""
-        y0, y1, c0, c1, i00, i01, i11, _, det, h0, h1 = inn
-        mu = self._mu
-        e = self._e
-        shrink = 1.0 - (1.0 - mu) * p / c - mu * p / (1.0 - c) if 0.0 < c < 1.0 else 1.0
-        g = self._g
-        half = 0.5 * dt * dt
-        e = [shrink * (e[i] + dt * e[3 + i]) + half * g[i] for i in range(3)] + [
-            shrink * e[3 + i] + dt * g[i] for i in range(3)]
-        hd0 = h0[0] * e[0] + h0[1] * e[1] + h0[2] * e[2]
-        hd1 = h1[0] * e[0] + h1[1] * e[1] + h1[2] * e[2]
-        b0, b1 = y0 - (1.0 - c) * hd0, y1 - (1.0 - c) * hd1
-        s0, s1 = y0 + c * hd0, y1 + c * hd1
-        nis_b = b0 * (i00 * b0 + i01 * b1) + b1 * (i01 * b0 + i11 * b1)
-        nis_s = s0 * (i00 * s0 + i01 * s1) + s1 * (i01 * s0 + i11 * s1)
-        r = min(max(0.5 * (nis_b - nis_s), -_LOG_ODDS_CLIP), _LOG_ODDS_CLIP)
-        mu = c / (c + (1.0 - c) * math.exp(r))
-        delta = mu - c
-        xn = [x[i] + delta * e[i] for i in range(6)]
-        y0, y1 = y0 - delta * hd0, y1 - delta * hd1
-        nis = y0 * (i00 * y0 + i01 * y1) + y1 * (i01 * y0 + i11 * y1)
-        # (I - K H) e with K = PHᵀ S⁻¹
-        g0, g1 = i00 * hd0 + i01 * hd1, i01 * hd0 + i11 * hd1
-        e = [e[i] - c0[i] * g0 - c1[i] * g1 for i in range(6)]
-        return xn, (y0, y1, c0, c1, i00, i01, i11, nis, det, h0, h1), mu, e, nis_b, nis_s
-
-    def _jump(self, time_ns, camera, u, v):
-        """A bounce or a kick: a velocity jump (a bounce's, mostly along gravity, then a
-        kick's, isotropic; position continuous) at the state before one of the last
-        ``_JUMP_LAG + 1`` accepted detections (the first detections after a small jump can
-        pass the gate), those detections and this one replayed; the (lag, shape) whose replay
-        passes every gate with the least ``Σ NIS + ln det S`` over the same detections wins.
-        Returns ``(x, P, innovation of this detection)`` or None when none explains it."""
-        history = self._history
-        entries = [(self.time_ns, self._x, self._P)]  # state before the current detection
-        detections = [(time_ns, camera, u, v)]
-        best, best_score = None, math.inf
-        c = self._mu  # the replay keeps the models' mixture of the current state
-        n = len(history)
-        for lag, shape in ((lag, shape) for lag in range(min(n, _JUMP_LAG) + 1)
-                           for shape in self._jump_shapes):
-            if lag == len(entries):  # restart before the lag-th latest accepted detection
-                h = history[n - lag]
-                entries.append((h[0], h[1], h[2]))
-                detections.insert(0, h[3:7])
-            t0, x, P = entries[-1]
-            score = sum(h[7] for h in history[n - _JUMP_LAG: n - lag]) if n else 0.0
-            first = True
-            for t, c, du, dv in detections:
-                dt = (t - t0) / NS
-                x, P = self._predicted(x, P, dt, c)
-                if first:  # the jump Δv at an instant uniform in the interval: Δp = Δv s
-                    jumped = self._jumped(x, P, dt, shape)
-                    if jumped is None:
-                        break
-                    (x, P), first = jumped, False
-                inn = self._innovation(self._cams[c], x, P, du, dv)
-                if inn is None or not inn[7] <= self._gate:
-                    break
-                score += inn[7] + math.log(inn[8])
-                x, P = self._updated(x, P, inn)
-                t0 = t
-            else:
-                if score < best_score:
-                    best, best_score = (x, P, inn), score
-        if best is not None:
-            self._history = []  # a new segment: a later jump is not looked for before it
-        return best
-
-    def _jumped(self, x, P, dt, shape):
-        """``(x, P)`` after a velocity jump ``Δv ~ N(μ, diag(σ²))`` at an instant ``s``
-        uniform over the last ``dt`` (``Δp = Δv s``, ``E[s] = dt/2``, ``E[s²] = dt²/3``,
-        ``Var s = dt²/12``); ``shape = (reflect, σ²)``: ``μ = 0``, or for a floor bounce
-        ``μ = −(1 + e) v_d ĝ − f (v − v_d ĝ)`` with ``v_d = v·ĝ`` (``ĝ`` gravity's unit
-        vector; None when the ball is not falling: no floor bounce then)."""
-        reflect, var = shape
-        x, P = x[:], P[:]
-        if reflect:
-            down = self._down
-            vd = x[3] * down[0] + x[4] * down[1] + x[5] * down[2]
-            if not vd > 0:
-                return None
-            e, f = self._restitution, self._friction
-            mu = [-(1.0 + e) * vd * down[i] - f * (x[3 + i] - vd * down[i]) for i in range(3)]
-            for i in range(3):
-                x[3 + i] += mu[i]
-                x[i] += mu[i] * dt / 2.0
-                for j in range(3):  # the jump's unknown instant spreads its mean's shift
-                    P[6 * i + j] += mu[i] * mu[j] * dt * dt / 12.0
-        for i in range(3):
-            jv = var[i]
-            P[7 * i] += jv * dt * dt / 3.0
-            P[6 * i + 3 + i] += jv * dt / 2.0
-            P[6 * (i + 3) + i] += jv * dt / 2.0
-            P[7 * (i + 3)] += jv
-        return x, P
-
-    def _reject(self, time_ns, camera, u, v, x, P, inn, gap_s):
-        """The detection failed the gate: the point is the prediction ``x``; after
-        ``max_rejects`` in a row the track restarts from the window."""
-        self._rejects += 1
-        self._window.append((time_ns, camera, u, v))
-        del self._window[:-self.options.init_window]
-        if self._confirmed < _CONFIRM:  # a start the next detections deny: no point from it
-            self.time_ns = None
-            return self._try_window()
-        nis = _NAN if inn is None else inn[7]
-        inn_px = _NAN if inn is None else math.hypot(inn[0], inn[1])
-        self._x, self._P, self.time_ns = x, P, time_ns
-        xo, var = self._combined_point(x, P, self._xt, self._Pt, self._nu)
-        out = self._point(xo, var, inn_px, inn_px, nis, gap_s, 0.0, 1.0, 0.0)
-        if self._rejects >= self.options.max_rejects:  # lost: restart from the window
-            self.time_ns = None
-            restart = self._try_window()
-            if restart is not None:
-                return restart
-        return out
-
-    @staticmethod
-    def _point(x, var, innovation, residual, nis, gap_s, jump, rejected, init):
-        """The point and its quality; ``var`` the position's variances (x, y, z)."""
-        vx, vy, vz = var
-        return ((x[0], x[1], x[2]),
-                (math.sqrt(vx + vy + vz), math.sqrt(vx), math.sqrt(vy), math.sqrt(vz),
-                 innovation, residual, nis, gap_s, jump, rejected, init))
+    def _fitted(self, status: int, out: np.ndarray) -> bool:
+        """The rare path of a step (``_FIT``, ``_FIT_OR_POINT``): fit the window; the point
+        (a start, or the step's own point when no start) into ``out``, withheld as
+        :meth:`push` withholds. True when a point is in ``out``."""
+        if not self._try_window(out):
+            if status != _FIT_OR_POINT:
+                return False
+        return not _withheld(self._I, self._opts, out[3])
 
     # ---- (re)initialisation from a window --------------------------------------------------
-    def _initialise(self, time_ns, camera, u, v):
-        window = self._window
-        if window and time_ns - window[-1][0] > self._max_gap_ns:
-            window.clear()
-        window.append((time_ns, camera, u, v))
-        del window[:-self._init_cap]
-        return self._try_window()
+    def _window(self) -> list[tuple[int, int, float, float]]:
+        n_cams, n = len(self._cams), int(self._I[_IWN])
+        t = self._I[_ICAM + 3 * n_cams:].reshape(-1, 2)[:n].tolist()
+        f = self._S[_SCAM + 2 * n_cams:].reshape(-1, 2)[:n].tolist()
+        return [(a[0], a[1], b[0], b[1]) for a, b in zip(t, f, strict=True)]
 
-    def _try_window(self):
+    def _set_window(self, window) -> None:
+        n_cams, n = len(self._cams), len(window)
+        self._I[_IWN] = n
+        if n:
+            self._I[_ICAM + 3 * n_cams:_ICAM + 3 * n_cams + 2 * n] = [
+                a for w in window for a in w[:2]]
+            self._S[_SCAM + 2 * n_cams:_SCAM + 2 * n_cams + 2 * n] = [
+                a for w in window for a in w[2:]]
+
+    def _try_window(self, out: np.ndarray) -> bool:
         """Fit the window (newest last), dropping its oldest detection until a fit passes (a
         break or an outlier inside it) or fewer than ``init_detections`` are left (at most
         ``init_window - init_detections + 1`` fits per detection, and only while there is
@@ -1016,30 +1484,32 @@ class BallFilter:
         window would pin the velocity still worse: at 60 fps and above ``init_window``
         detections span too short a time; at 30 fps ``init_detections`` of a 3-camera rig
         span a frame period, 33 ms, so nothing grows there); on success start the track at
-        the newest detection and return its point, else None."""
-        window = self._window
-        while window and window[-1][0] - window[0][0] > self._init_span_ns:
-            del window[0]  # a fit spans at most the longest gap bridged (or init_span_s)
+        the newest detection, write its point into ``out`` and return True.
+
+        The kernel has already dropped the detections older than the window's span and
+        found at least ``init_detections`` of two cameras (:func:`_window_trim`)."""
+        window = self._window()
         while len(window) >= self.options.init_detections:
             if len({w[1] for w in window}) < 2:
-                return None
+                break
             fit = self._fit(window)
             if fit is _SHORT:
                 if window[-1][0] - window[0][0] < self._init_grow_ns:
-                    self._init_cap = min(max(self._init_cap, len(window) + 1),
+                    self._I[_ICAP] = min(max(int(self._I[_ICAP]), len(window) + 1),
                                          self.options.init_max_window)
-                    return None
+                    break
             elif fit is not None:
                 x, P, residuals = fit
                 self.set_state(window[-1][0], x[:3], x[3:], P)
                 for t, c, _, _ in window:
-                    self._cam_last[c] = t
-                P = self._P
-                return self._point(self._x, (P[0], P[7], P[14]), _NAN, float(residuals[-1]),
-                                   _NAN, _NAN,
-                                   0.0, 0.0, 1.0)
+                    self._I[_ICAM + c] = t
+                vx, vy, vz = P[0], P[7], P[14]
+                _point(out, x[0], x[1], x[2], vx, vy, vz, _NAN, _NAN,
+                       float(residuals[-1]), 0.0, _NAN, _NAN, 0.0, 0.0, 1.0)
+                return True
             del window[0]
-        return None
+        self._set_window(window)
+        return False
 
     def _ray(self, time_ns: int, camera: int, u: float, v: float):
         key = (time_ns, camera)
@@ -1133,9 +1603,6 @@ class BallFilter:
         return np.array(rows), np.array(res)
 
 
-def _block6(P):
-    """The position-velocity block (6 x 6 flat) of a 7 x 7 flat covariance."""
-    return P[0:6] + P[7:13] + P[14:20] + P[21:27] + P[28:34] + P[35:41]
 
 
 def _chi2_quantile(dof: int, z: float = 3.09) -> float:
@@ -1160,22 +1627,42 @@ class FilterStream:
 
 
 def _track(flt: BallFilter, time_ns, camera, uv) -> Track:
-    times, cams, points, quality = [], [], [], []
-    before = dict(flt.dropped)
-    push = flt.push
-    for t, c, (u, v) in zip(np.asarray(time_ns).tolist(), np.asarray(camera).tolist(),
-                            np.asarray(uv, dtype=np.float64).reshape(-1, 2).tolist(),
-                            strict=True):
-        out = push(t, c, u, v)
-        if out is not None:
-            times.append(t)
-            cams.append(c)
-            points.append(out[0])
-            quality.append(out[1])
-    q = np.array(quality, dtype=np.float64).reshape(-1, len(FILTER_QUALITY))
-    return Track("filter", np.array(times, dtype=np.int64),
-                 np.array(points, dtype=np.float64).reshape(-1, 3),
-                 np.array(cams, dtype=np.int32),
+    """The Track of the points of detections pushed into ``flt``: one compiled loop
+    (:func:`_run`) over them, back in Python only for a window fit."""
+    times = np.ascontiguousarray(time_ns, dtype=np.int64).reshape(-1)
+    cameras = np.ascontiguousarray(camera, dtype=np.int64).reshape(-1)
+    uv = np.ascontiguousarray(np.asarray(uv, dtype=np.float64).reshape(-1, 2))
+    if not len(times) == len(cameras) == len(uv):
+        raise ValueError("time_ns, camera and uv differ in length")
+    n = len(times)
+    before = flt.dropped
+    rows = np.empty((n, _OUT_COLS))
+    index = np.empty(n, dtype=np.int64)
+    i = n_out = 0
+    args = (flt._S, flt._I, flt._cam_table, flt._opts, flt._nopts, times, cameras, uv)
+    while i < n:
+        i, n_out, status = _run(*args, i, rows, index, n_out)
+        if status == _NONE:
+            break
+        if flt._fitted(status, rows[n_out]):  # the rare path: a window fit
+            index[n_out] = i
+            n_out += 1
+        i += 1
+    rows, index = rows[:n_out], index[:n_out]
+    q = np.empty((n_out, len(FILTER_QUALITY)))
+    q[:, 0:4] = rows[:, 3:7]
+    # lengths by CPython's math.hypot, as the pure-Python filter took them (numba's hypot
+    # is libm's, which differs in the last bit now and then)
+    hypot = math.hypot
+    q[:, 4] = np.fromiter(map(hypot, rows[:, 7].tolist(), rows[:, 8].tolist()), np.float64,
+                          n_out)
+    q[:, 5] = np.fromiter(map(hypot, rows[:, 9].tolist(), rows[:, 10].tolist()), np.float64,
+                          n_out)
+    init = rows[:, 15] == 1.0
+    q[init, 5] = rows[init, 9]  # a start's residual, as its fit gave it
+    q[:, 6:] = rows[:, 11:16]
+    return Track("filter", times[index], np.ascontiguousarray(rows[:, :3]),
+                 cameras[index].astype(np.int32),
                  {name: q[:, i] for i, name in enumerate(FILTER_QUALITY)},
                  dropped={k: n - before.get(k, 0) for k, n in flt.dropped.items()
                           if n > before.get(k, 0)})

@@ -1,0 +1,133 @@
+"""``filter``: the compiled filter's points against the pure-Python filter it replaced.
+
+The per-detection step of :mod:`pslog.fusion.filter` became numba kernels (issue 12); the
+algorithm did not change, so every output must be the same, bit for bit. The pure-Python
+filter of the base commit is kept beside this script (``benchmarks/_filter_base.py``, only
+its relative imports made absolute) and both run on the same observations of many
+sessions: rigs ``paper3`` and ``paper2`` (type-A shutters), the tests' ``lab`` rig (lens
+distortion) with 2 cameras at 60 fps, 3 at 30 and 240 fps and 4 cameras; motions a kicked
+rally, a throw (bounces), a turntable and a ball swung then released (the turn model), a ball
+rolling on the floor (the supported model); noise 0, 0.3 and 1 px; clean, with misses and
+dropped frames, and dirty (5 % spurious candidates and a static second object seen by one
+camera, gated by :func:`pslog.fusion.fuse` as a user's session is). Compared: times,
+cameras, positions, every quality column (NaN equal to NaN) and the withheld counts.
+
+    python benchmarks/filter_equality.py [--quick]
+
+Prints the number of sessions, points compared, and the largest difference per column
+(0 everywhere when equal); exit 1 on any difference.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent / "tests"))
+sys.path.insert(0, str(HERE))
+
+import _filter_base as base  # noqa: E402
+from _rally import rally  # noqa: E402
+from test_filter import lab_rig, roll, swing  # noqa: E402
+
+import pslog.fusion.filter as compiled  # noqa: E402
+from pslog import SimulationOptions, get_motion, simulate  # noqa: E402
+from pslog.fusion import fuse  # noqa: E402
+from pslog.rig import apply_timing, builtin_rig  # noqa: E402
+
+COLUMNS = ("time_ns", "camera", "position", *compiled.FILTER_QUALITY)
+
+
+def rigs(quick: bool):
+    paper3 = apply_timing(builtin_rig("paper3"), "typeA")
+    out = [("paper3", paper3), ("lab3 dist.", lab_rig(3))]
+    if not quick:
+        out += [("paper2", apply_timing(builtin_rig("paper2"), "typeA")),
+                ("lab2 60fps", lab_rig(2, fps=60.0)), ("lab4", lab_rig(4)),
+                ("lab3 240fps", lab_rig(3, fps=240.0))]
+    return out
+
+
+def motions(quick: bool):
+    seconds = 3.0 if quick else 6.0
+    out = [("rally", rally(seconds, seed=4)[0], seconds), ("turntable",
+                                                            get_motion("turntable"), 4.0)]
+    if not quick:
+        out += [("throw", get_motion("throw"), None), ("swing", swing(1.0), None),
+                ("roll", roll(seconds, seed=1), seconds)]
+    return out
+
+
+def fused(fuse_filter, observations, rig):
+    """The filter's track of ``observations`` (Detections are gated as ``fuse`` gates them)
+    with ``fuse_filter`` as the module's."""
+    saved = compiled.fuse_filter
+    compiled.fuse_filter = fuse_filter  # fuse() imports it from the module at each call
+    try:
+        return fuse(observations, rig, "filter")
+    finally:
+        compiled.fuse_filter = saved
+
+
+def compare(new, old, worst: dict) -> bool:
+    """Fold the differences of two tracks into ``worst``; True when identical."""
+    if len(new) != len(old):
+        worst["length"] = max(worst.get("length", 0), abs(len(new) - len(old)))
+        return False
+    same = new.dropped == old.dropped
+    pairs = [("time_ns", new.time_ns, old.time_ns), ("camera", new.camera, old.camera),
+             ("position", new.position_world, old.position_world)]
+    pairs += [(k, new.quality[k], old.quality[k]) for k in compiled.FILTER_QUALITY]
+    for name, a, b in pairs:
+        a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+        if not np.array_equal(a, b, equal_nan=True):
+            same = False
+            nan_mismatch = np.isnan(a) != np.isnan(b)
+            diff = np.abs(np.where(nan_mismatch, np.inf, a - b))
+            worst[name] = max(worst[name], float(np.nanmax(diff)))
+    return same
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="2 rigs, 2 motions")
+    args = parser.parse_args()
+    worst = dict.fromkeys(COLUMNS, 0.0)
+    n_sessions = n_points = n_differ = 0
+    t_new = t_old = 0.0
+    for rig_name, rig in rigs(args.quick):
+        distractor = ((rig.names[0], (1.0, 1.5, 0.2)),)
+        for motion_name, motion, seconds in motions(args.quick):
+            for noise in (0.0, 0.3, 1.0):
+                for fault, extra in (("clean", {}),
+                                     ("misses/drops", dict(miss_rate=0.2, drop_rate=0.1)),
+                                     ("dirty", dict(spurious_rate=0.05,
+                                                    distractors=distractor))):
+                    detections, _ = simulate(rig, motion, seconds, SimulationOptions(
+                        noise_px=noise, seed=n_sessions, **extra))
+                    data = detections if fault == "dirty" else detections.best()
+                    t0 = time.perf_counter()
+                    new = fused(compiled.fuse_filter, data, rig)
+                    t1 = time.perf_counter()
+                    old = fused(base.fuse_filter, data, rig)
+                    t_new += t1 - t0
+                    t_old += time.perf_counter() - t1
+                    n_sessions += 1
+                    n_points += len(old)
+                    if not compare(new, old, worst):
+                        n_differ += 1
+                        print(f"  DIFFERS: {rig_name}, {motion_name}, {noise} px, {fault}")
+    print(f"{n_sessions} sessions, {n_points:,} points: {n_differ} differ "
+          f"(compiled {t_new:.1f} s, pure Python {t_old:.1f} s, gating included)")
+    print("largest difference per column: " + ", ".join(
+        f"{k} {v:g}" for k, v in worst.items()))
+    return 1 if n_differ else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
