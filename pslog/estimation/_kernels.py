@@ -121,3 +121,82 @@ def window_normal(P: np.ndarray, prior_rhs: np.ndarray, first: np.ndarray, N: np
         for r in range(n):
             rb[r] += prior_rhs[r]
     return H, rhs
+
+
+# control-point pairs (a, b), b >= a, in the order of the rows 4(first + a) + (b - a) they
+# fill (:class:`pslog.estimation._normal.Points`): ascending, so that each sum below adds
+# its terms in the order the sparse products did
+_PA = np.array([0, 0, 0, 0, 1, 1, 1, 2, 2, 3])
+_PB = np.array([0, 1, 2, 3, 1, 2, 3, 2, 3, 3])
+#: 3 x 3 symmetric from its upper triangle (00, 01, 02, 11, 12, 22)
+_SYM = np.array([[0, 1, 2], [1, 3, 4], [2, 4, 5]])
+
+
+@kernel
+def points_positions(first: np.ndarray, N: np.ndarray, control: np.ndarray) -> np.ndarray:
+    """``p_i = Σ_a N[i, a] c[first_i + a]`` (r, 3) for control points (m, 3)."""
+    r = len(first)
+    out = np.zeros((r, 3))
+    for i in range(r):
+        f = first[i]
+        for d in range(3):
+            acc = 0.0
+            for a in range(4):
+                acc += N[i, a] * control[f + a, d]
+            out[i, d] = acc
+    return out
+
+
+@kernel
+def points_normal(first: np.ndarray, N: np.ndarray, upper: np.ndarray, v: np.ndarray, m: int,
+                  ab: np.ndarray, rhs: np.ndarray) -> None:
+    """Add ``Σ_i p_iᵀ M_i p_i - 2 v_iᵀ p_i`` to banded normal equations in place: each
+    term's block ``(N_i N_iᵀ) ⊗ M_i`` (``upper`` (r, 6) the upper triangle of ``M_i``)
+    summed per control-point pair over the terms in order, then added to ``ab`` (12, 3m)
+    (upper banded storage); ``N_i ⊗ v_i`` to ``rhs`` (3m,)."""
+    r = len(first)
+    blocks = np.zeros((m + 3, 4, 6))
+    rv = np.zeros((m, 3))
+    for i in range(r):
+        f = first[i]
+        for q in range(10):
+            a, b = _PA[q], _PB[q]
+            nn = N[i, a] * N[i, b]
+            for u in range(6):
+                blocks[f + a, b - a, u] += nn * upper[i, u]
+        for a in range(4):
+            for d in range(3):
+                rv[f + a, d] += N[i, a] * v[i, d]
+    for p in range(m):
+        for k in range(4):
+            if p + k >= m:
+                break
+            for d in range(3):
+                for e in range(3):
+                    off = 3 * k + e - d  # column minus row
+                    if off < 0:
+                        continue
+                    ab[11 - off, 3 * (p + k) + e] += blocks[p, k, _SYM[d, e]]
+        for d in range(3):
+            rhs[3 * p + d] += rv[p, d]
+
+
+@kernel
+def points_marginal(first: np.ndarray, N: np.ndarray, band: np.ndarray) -> np.ndarray:
+    """``Σ_ab N_a N_b Σ_{first+a, first+b}`` (r, 3, 3) from the covariance band (m, 4, 3, 3)
+    (an off-diagonal pair stands for both orders: its block plus its transpose)."""
+    r = len(first)
+    out = np.zeros((r, 3, 3))
+    for i in range(r):
+        f = first[i]
+        for q in range(10):
+            a, b = _PA[q], _PB[q]
+            nn = N[i, a] * N[i, b]
+            k = b - a
+            for d in range(3):
+                for e in range(3):
+                    s = band[f + a, k, d, e]
+                    if k > 0:
+                        s = s + band[f + a, k, e, d]
+                    out[i, d, e] += nn * s
+    return out

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.linalg import cho_solve_banded, cholesky_banded
-from scipy.sparse import csr_matrix
 
 from ..errors import FusionError
 
@@ -45,10 +44,6 @@ def accumulate(start: np.ndarray, E: np.ndarray, b: np.ndarray, w: np.ndarray, n
     return ab, rhs
 
 
-_PAIRS = [(a, b) for a in range(4) for b in range(a, 4)]  # control-point pairs, b >= a
-_PA = np.array([a for a, _ in _PAIRS])
-_PB = np.array([b for _, b in _PAIRS])
-_SYM = np.array([0, 1, 2, 1, 3, 4, 2, 4, 5])  # 3 x 3 symmetric from its upper triangle
 _UPPER9 = np.array([0, 1, 2, 4, 5, 8])  # the upper triangle of a flattened 3 x 3
 
 
@@ -80,11 +75,12 @@ def accumulate_points(first: np.ndarray, N: np.ndarray, M: np.ndarray, v: np.nda
 
 
 class Points:
-    """Points ``p_i = Σ_a N[i, a] c[first_i + a]`` on a spline of ``m`` control points, as
-    two sparse matrices built once: ``B`` (r x m, the basis: ``p = B c``) and ``G``
-    (4(m+3) x r), whose row ``4p + k`` holds ``N_ia N_i(a+k)`` for every term with
-    ``first_i + a = p``, so that ``G @ M`` sums every term's block ``(N_i N_iᵀ) ⊗ M_i`` into
-    the block band ``Σ_{p, p+k}`` in one sparse product.
+    """Points ``p_i = Σ_a N[i, a] c[first_i + a]`` on a spline of ``m`` control points: their
+    positions, the normal equations of quadratic forms of them, and their marginal
+    covariances, each one compiled pass over the points
+    (:mod:`pslog.estimation._kernels`: the sums a basis matrix ``B`` (r x m, ``p = B c``) and
+    a matrix ``G`` (4(m+3) x r, row ``4p + k`` holding ``N_ia N_i(a+k)`` for every term with
+    ``first_i + a = p``) form in sparse products, added in the same order).
 
     Parameters
     ----------
@@ -92,35 +88,32 @@ class Points:
     """
 
     def __init__(self, first: np.ndarray, N: np.ndarray, m: int):
-        first = np.asarray(first, dtype=np.int64)
-        r = len(first)
-        self.m, self.r = m, r
-        cols = np.repeat(np.arange(r), 10)
-        rows = (4 * (first[:, None] + _PA) + (_PB - _PA)).ravel()
-        NN = (np.take(N, _PA, axis=1) * np.take(N, _PB, axis=1)).ravel()
-        self.G = csr_matrix((NN, (rows, cols)), shape=(4 * (m + 3), r))
-        rows = (first[:, None] + np.arange(4)).ravel()
-        self.B = csr_matrix((N.ravel(), rows, np.arange(0, 4 * r + 1, 4)), shape=(r, m))
-        self.BT = self.B.T.tocsr()
+        self.first = np.ascontiguousarray(first, dtype=np.int64)
+        self.N = np.ascontiguousarray(N, dtype=np.float64)
+        self.m, self.r = m, len(self.first)
 
     def positions(self, control: np.ndarray) -> np.ndarray:
         """``Σ_a N_a c[first + a]`` (r, 3) for control points (m, 3)."""
-        return self.B @ control
+        from ._kernels import points_positions
+
+        return points_positions(self.first, self.N,
+                                np.ascontiguousarray(control, dtype=np.float64))
 
     def marginal(self, band: np.ndarray) -> np.ndarray:
         """:func:`marginal` at the points: ``Σ_ab N_a N_b Σ_{first+a, first+b}`` (r, 3, 3)
-        from the covariance band (m, 4, 3, 3), as ``Gᵀ`` times the band (the off-diagonal
-        blocks with their transposes: each pair (a, b), a < b, stands for both orders)."""
-        both = np.zeros((self.m + 3, 4, 3, 3))
-        both[:self.m] = band
-        both[:, 1:] += np.swapaxes(both[:, 1:], 2, 3)
-        return (self.G.T @ both.reshape(-1, 9)).reshape(-1, 3, 3)
+        from the covariance band (m, 4, 3, 3) (the off-diagonal blocks with their
+        transposes: each pair (a, b), a < b, stands for both orders)."""
+        from ._kernels import points_marginal
+
+        return points_marginal(self.first, self.N, np.ascontiguousarray(band))
 
     def normal(self, M: np.ndarray, v: np.ndarray, ab: np.ndarray | None = None,
                rhs: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Add ``Σ_i p_iᵀ M_i p_i - 2 v_iᵀ p_i`` (M (r, 3, 3) symmetric, or its upper triangle
         (r, 6) in the order 00, 01, 02, 11, 12, 22; v (r, 3)) to normal equations (as
         :func:`accumulate`)."""
+        from ._kernels import points_normal
+
         m, r = self.m, self.r
         n = 3 * m
         ab = np.zeros((WIDTH, n)) if ab is None else ab
@@ -129,23 +122,9 @@ class Points:
             return ab, rhs
         # the upper triangle (r, 6): given, or taken from the full matrices
         upper = M if M.ndim == 2 else np.take(M.reshape(r, 9), _UPPER9, axis=1)
-        blocks = np.take(self.G @ upper, _SYM, axis=1).reshape(m + 3, 4, 3, 3)
-        _blocks_to_band(blocks[:m], ab)
-        rhs += (self.BT @ v).reshape(-1)
+        points_normal(self.first, self.N, np.ascontiguousarray(upper, dtype=np.float64),
+                      np.ascontiguousarray(v, dtype=np.float64), m, ab, rhs)
         return ab, rhs
-
-
-def _blocks_to_band(blocks: np.ndarray, ab: np.ndarray) -> None:
-    """Add a block band (m, 4, 3, 3) (``blocks[p, k] = A_{p, p+k}``) to upper banded storage."""
-    m = len(blocks)
-    for k in range(4):
-        for d in range(3):
-            for e in range(3):
-                off = 3 * k + e - d  # column minus row
-                if off < 0:
-                    continue
-                # rows 3p + d, columns 3(p + k) + e for p + k < m
-                ab[_U - off, 3 * k + e::3][:m - k] += blocks[:m - k, k, d, e]
 
 
 def factor(ab: np.ndarray) -> np.ndarray:
