@@ -200,3 +200,70 @@ def points_marginal(first: np.ndarray, N: np.ndarray, band: np.ndarray) -> np.nd
                         s = s + band[f + a, k, e, d]
                     out[i, d, e] += nn * s
     return out
+
+
+@kernel
+def gains_data(s_sorted: np.ndarray, first: np.ndarray, N: np.ndarray, M: np.ndarray,
+               u: np.ndarray, which: np.ndarray, j: np.ndarray, q0: np.ndarray,
+               lo: np.ndarray, hi: np.ndarray, coef: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The data terms of the break test (:func:`pslog.estimation._breaks._gains`) of B
+    trial instants, each on window ``which[b]`` of a base: over the window's detections on
+    the three spans ``[j-1, j+2)`` (in spacings from the centre) the three new B-splines
+    ``f_e`` live on,
+
+    ``Hyy[3e+i, 3f+k] = Σ_w f_e f_f M_w[i, k]``, ``Hxy[3c+i, 3e+k] = Σ_w b_c f_e M_w[i, k]``
+    (``b_c`` the base's B-spline ``q0 + c``) and ``g[e, d] = Σ_w f_e u_w[d]``.
+
+    Parameters
+    ----------
+    s_sorted : (Bb, Wb) float64, each base window's detection times in spacings from its
+        centre, increasing (padding 1e6); first (Bb, Wb) int64, N (Bb, Wb, 4): their basis;
+        M (Bb, Wb, 3, 3): ``w JᵀJ``; u (Bb, Wb, 3): the weighted residual at the minimum
+    which, q0 : (B,) int64; j : (B,) float64, the trial instant's span
+    lo, hi : (B, 3, 2) float64, the two polynomial pieces of each new B-spline (spacings
+        from ``u_j``); coef : (B, 3, 2, 4), their power-basis coefficients
+
+    Returns
+    -------
+    Hyy : (B, 9, 9); Hxy : (B, 18, 9); g : (B, 3, 3)
+    """
+    B = len(which)
+    Wb = s_sorted.shape[1]
+    Hyy = np.zeros((B, 9, 9))
+    Hxy = np.zeros((B, 18, 9))
+    g = np.zeros((B, 3, 3))
+    f = np.zeros(3)
+    old = np.zeros(6)
+    for b in range(B):
+        wb = which[b]
+        jb = j[b]
+        lo_col = 0
+        hi_col = 0
+        for w in range(Wb):  # the same counts as the detections before each bound
+            if s_sorted[wb, w] < jb - 1:
+                lo_col += 1
+            if s_sorted[wb, w] < jb + 1 + 1:
+                hi_col += 1
+        for w in range(lo_col, hi_col):
+            x = s_sorted[wb, w] - jb
+            for e in range(3):
+                f[e] = 0.0
+                for k in range(2):
+                    if x >= lo[b, e, k] and x < hi[b, e, k]:
+                        c = coef[b, e, k]
+                        f[e] = ((c[3] * 1.0 * x + c[2]) * x + c[1]) * x + c[0]
+            for c6 in range(6):
+                a = q0[b] + c6 - first[wb, w]
+                old[c6] = N[wb, w, a] if 0 <= a <= 3 else 0.0
+            for e in range(3):
+                for i in range(3):
+                    g[b, e, i] += f[e] * u[wb, w, i]
+                for i in range(3):
+                    for k in range(3):
+                        mik = M[wb, w, i, k]
+                        for e2 in range(3):
+                            Hyy[b, 3 * e + i, 3 * e2 + k] += (f[e] * f[e2]) * mik
+                        for c6 in range(6):
+                            Hxy[b, 3 * c6 + i, 3 * e + k] += (old[c6] * f[e]) * mik
+    return Hyy, Hxy, g
