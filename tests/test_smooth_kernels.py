@@ -214,3 +214,29 @@ def test_nearest_distance_is_the_minimum_over_every_pair():
     assert_array_equal(T._nearest_distance(x, known), brute)
     assert_array_equal(T._nearest_distance(x, known[::-1]), brute)  # unsorted input
     assert np.all(np.isinf(T._nearest_distance(x, np.zeros(0))))
+
+
+def test_takahashi_kernel_is_its_python_original_and_the_dense_inverse():
+    rng = np.random.default_rng(11)
+    m, r = 30, 240
+    first = rng.integers(0, m - 3, r)
+    J = rng.normal(size=(r, 2, 3))
+    ab, _ = _normal.accumulate_points(first, rng.random((r, 4)),
+                                      np.einsum("nai,naj->nij", J, J), np.zeros((r, 3)), m)
+    ab[11] += 1e-3
+    U = _normal.factor(ab)
+    n = 3 * m
+    right = np.zeros((n, 11))
+    for d in range(1, 12):
+        right[: n - d, d - 1] = U[11 - d, d:]
+    rows = _kernels.takahashi_rows(np.ascontiguousarray(U[11]), right)
+    assert_array_equal(rows, _kernels.takahashi_rows.py_func(np.ascontiguousarray(U[11]),
+                                                             right))
+    dense = np.zeros((n, n))
+    for d in range(12):
+        i = np.arange(n - d)
+        dense[i, i + d] = dense[i + d, i] = ab[11 - d, d:]
+    cov = np.linalg.inv(dense)
+    for j in range(12):
+        i = np.arange(n - j)
+        assert_allclose(rows[i, j], cov[i, i + j], rtol=0, atol=1e-12 * np.abs(cov).max())

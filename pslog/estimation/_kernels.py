@@ -267,3 +267,32 @@ def gains_data(s_sorted: np.ndarray, first: np.ndarray, N: np.ndarray, M: np.nda
                         for c6 in range(6):
                             Hxy[b, 3 * c6 + i, 3 * e + k] += (old[c6] * f[e]) * mik
     return Hyy, Hxy, g
+
+
+@kernel
+def takahashi_rows(diag: np.ndarray, right: np.ndarray) -> np.ndarray:
+    """Rows ``rows[r, j] = Σ_{r, r+j}`` (n + 12, 12) of ``A⁻¹`` within the band, for
+    ``A = Uᵀ U`` with ``U`` upper banded: ``diag`` (n,) its diagonal, ``right`` (n, 11) row
+    ``r``'s entries ``U[r, r+1..r+11]``. The Takahashi, Fagan & Chen (1973) recurrence one
+    unknown at a time from the last (:func:`pslog.estimation._normal.covariance_band`):
+    ``Σ_rj = -Σ_k U_rk Σ_kj / U_rr`` (``j > r``), ``Σ_rr = 1/U_rr² - Σ_k U_rk Σ_kr / U_rr``."""
+    n = len(diag)
+    rows = np.zeros((n + 12, 12))
+    # the window of unknowns r+1..r+11 is read from the rows already computed (symmetric:
+    # Σ_{r+k, r+j} = rows[r+k, j-k] for k <= j, rows[r+j, k-j] otherwise)
+    for r in range(n - 1, -1, -1):
+        dr = diag[r]
+        for j in range(1, 12):
+            acc = 0.0
+            for k in range(1, 12):
+                if k <= j:
+                    s = rows[r + k, j - k]
+                else:
+                    s = rows[r + j, k - j]
+                acc += right[r, k - 1] * s
+            rows[r, j] = -acc / dr
+        acc = 0.0
+        for k in range(1, 12):
+            acc += right[r, k - 1] * rows[r, k]
+        rows[r, 0] = 1 / dr**2 - acc / dr
+    return rows

@@ -158,76 +158,22 @@ def covariance_band(U: np.ndarray) -> np.ndarray:
     time from the last: with ``Σ = U⁻¹ U⁻ᵀ`` and ``k`` over the band of row ``r``,
     ``Σ_rj = -Σ_k U_rk Σ_kj / U_rr`` (``j > r``) and ``Σ_rr = 1/U_rr² - Σ_k U_rk Σ_kr / U_rr``.
     Only entries inside the band are ever needed, so the cost is linear in the number of
-    unknowns. (The same recurrence grouped by 3 x 3 blocks is algebraically identical but
-    numerically unstable on these spline problems: errors grew ~6x per control point.)
-
-    The recurrence is run as what it is, an affine map of the 12 x 12 window
-    ``W_r = Σ[r:r+12, r:r+12]``: ``W_r = T_r W_{r+1} T_rᵀ + e₀e₀ᵀ / U_rr²`` with ``T_r`` the
-    shift whose first row is ``-U[r, r+1:r+12] / U_rr`` (:func:`_takahashi_step`, the scalar
-    recurrence above, per unknown). The unknowns are cut into chunks; each chunk's composed
-    map (the product of its ``T_r``, and its accumulated noise term) is formed for all chunks
-    at once, the windows at the chunk boundaries follow in one short sequential pass, and then
-    every chunk runs the per-unknown recurrence from its boundary window, all chunks at once.
+    unknowns: a compiled loop (:func:`pslog.estimation._kernels.takahashi_rows`). (The same
+    recurrence grouped by 3 x 3 blocks is algebraically identical but numerically unstable on
+    these spline problems: errors grew ~6x per control point.)
 
     Returns
     -------
     band : (m, 4, 3, 3), ``band[i, k] = Σ_{i, i+k}`` (zero beyond the last control point)
     """
+    from ._kernels import takahashi_rows
+
     n = U.shape[1]
-    m = n // 3
-    L = max(WIDTH, int(np.sqrt(n)) // 2)  # unknowns per chunk
-    C = -(-n // L)
-    # padded to whole chunks by unknowns of unit variance coupled to nothing (Σ rows of the
-    # real unknowns are unchanged: no real row of U reaches them)
-    diag = np.ones(C * L)
-    diag[:n] = U[_U]
-    right = np.zeros((C * L, _U))
+    right = np.zeros((n, _U))  # row r of U: columns r+1..r+11 (zero beyond n)
     for d in range(1, WIDTH):
         right[: n - d, d - 1] = U[_U - d, d:]
-    a = (right / diag[:, None]).reshape(C, L, _U)  # -first row of T_r, per chunk
-    q = (1.0 / diag**2).reshape(C, L)
-    # each chunk's map: W_start = Phi W_end Phiᵀ + Q
-    phi = np.broadcast_to(np.eye(WIDTH), (C, WIDTH, WIDTH)).copy()
-    Q = np.zeros((C, WIDTH, WIDTH))
-    for j in range(L - 1, -1, -1):
-        phi = _shift_left(a[:, j], phi)
-        Q = _takahashi_step(a[:, j], q[:, j], Q)
-    # the windows where each chunk ends (where the next begins), from the last
-    ends = np.zeros((C, WIDTH, WIDTH))
-    window = np.zeros((WIDTH, WIDTH))
-    for c in range(C - 1, -1, -1):
-        ends[c] = window
-        window = phi[c] @ window @ phi[c].T + Q[c]
-    rows = np.empty((C, L, WIDTH))  # rows[c, j, k] = Σ_{r, r+k} for r = cL + j
-    window = ends
-    for j in range(L - 1, -1, -1):
-        window = _takahashi_step(a[:, j], q[:, j], window)
-        rows[:, j] = window[:, 0]
-    rows = rows.reshape(C * L, WIDTH)[:n]
-    rows = np.concatenate([rows, np.zeros((WIDTH, WIDTH))])
-    return _band_from_rows(rows, m)
-
-
-def _shift_left(a: np.ndarray, X: np.ndarray) -> np.ndarray:
-    """``T X`` for (C,) shifts ``T`` (first row ``[-a, 0]``, then the identity shifted down),
-    a (C, 11), X (C, 12, k)."""
-    out = np.empty_like(X)
-    out[:, 0] = -np.einsum("ck,ckj->cj", a, X[:, :_U])
-    out[:, 1:] = X[:, :_U]
-    return out
-
-
-def _takahashi_step(a: np.ndarray, q: np.ndarray, W: np.ndarray) -> np.ndarray:
-    """``T W Tᵀ + q e₀e₀ᵀ``: one unknown of the Takahashi recurrence, for (C,) windows
-    (a (C, 11) = ``U[r, r+1:r+12] / U_rr``, q (C,) = ``1 / U_rr²``, W (C, 12, 12))."""
-    s_next = W[:, :_U, :_U]
-    row = -np.einsum("ck,ckj->cj", a, s_next)  # Σ_{r, r+1..r+11}
-    out = np.empty_like(W)
-    out[:, 0, 0] = q - np.einsum("ck,ck->c", a, row)
-    out[:, 0, 1:] = row
-    out[:, 1:, 0] = row
-    out[:, 1:, 1:] = s_next
-    return out
+    rows = takahashi_rows(np.ascontiguousarray(U[_U], dtype=np.float64), right)
+    return _band_from_rows(rows, n // 3)
 
 
 def covariance_band_sequential(U: np.ndarray) -> np.ndarray:

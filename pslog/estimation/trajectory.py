@@ -71,9 +71,11 @@ Limits: one camera cannot triangulate, so a piece seen by fewer than two cameras
 point; the prior assumes ballistic flight between breaks (a rolling ball, with no gravity
 acceleration, is fitted with a small bias; air drag is absorbed by σ_a, not modelled); a
 velocity change spread over more than a few knot spans (a ball rolling to a stop) is smoothed
-rather than broken. Pure numpy and scipy: the normal equations are summed per control point
-by sparse products built once per knot set (:class:`pslog.estimation._normal.Points`), the
-covariance band by a chunked Takahashi recurrence; ~51,000 detections per second on one core
+rather than broken. numpy and scipy, with compiled per-point loops
+(:mod:`pslog.estimation._kernels`, numba): the B-spline basis, the normal equations summed
+per control point (:class:`pslog.estimation._normal.Points`), the covariance band's Takahashi
+recurrence and the break test's local normal equations; the banded Cholesky factorisations
+are LAPACK's (scipy). ~50,000 detections per second on one core at 10 minutes
 (``benchmarks/bench_smooth.py``).
 """
 
