@@ -240,3 +240,33 @@ def test_takahashi_kernel_is_its_python_original_and_the_dense_inverse():
     for j in range(12):
         i = np.arange(n - j)
         assert_allclose(rows[i, j], cov[i, i + j], rtol=0, atol=1e-12 * np.abs(cov).max())
+
+
+def test_window_solve_is_the_dense_solve_and_refuses_a_non_positive_pivot():
+    local, t, J, z, w, index, valid, centre, h, _ = _window_case(4)
+    base = _breaks._Base(local, t, J, z, w, index, valid, centre, h)
+    B = len(index)
+    v = np.ascontiguousarray(np.einsum("bwai,bwa,bw->bwi", J[index], z[index],
+                                       np.where(base.s_sorted < 1e5, w[index], 0.0)))
+    H, rhs = _kernels.window_normal(local.P, local.rhs, base.first, base.N, base.M, v,
+                                    base.s_sorted < 1e5)
+    n = H.shape[1]
+    lo, hi = 9, 36
+    x, cov, ok = _kernels.window_solve(H, rhs, lo, hi)
+    assert ok.all()
+    inverse = np.linalg.inv(H)
+    assert_allclose(cov, inverse[:, :, lo:hi], rtol=1e-8, atol=1e-10 * np.abs(inverse).max())
+    ref = np.linalg.solve(H, rhs[..., None])[..., 0]
+    assert_allclose(x, ref, rtol=1e-8, atol=1e-10 * np.abs(ref).max())
+    for got, want in zip((x, cov, ok), _kernels.window_solve.py_func(H, rhs, lo, hi),
+                         strict=True):
+        assert_array_equal(got, want)
+    # the base solved its windows this way (its diagonal loaded by 1e-12): the dense minimum
+    loaded = H.copy()
+    loaded[:, np.arange(n), np.arange(n)] *= 1 + 1e-12
+    ref = np.linalg.solve(loaded, rhs[..., None])[..., 0]
+    assert_allclose(base.x0.reshape(B, -1), ref, rtol=1e-8, atol=1e-10 * np.abs(ref).max())
+    bad = H.copy()
+    bad[1, n // 2, n // 2] = -1.0  # not positive definite
+    _, _, ok = _kernels.window_solve(bad, rhs, lo, hi)
+    assert_array_equal(ok, [True, False, True])

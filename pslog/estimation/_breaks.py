@@ -114,12 +114,17 @@ class _Base:
         if spans is not None:
             lo = int(np.clip(3 * (spans[0] + local.K - 1), 0, n - 18))
             hi = int(np.clip(3 * (spans[1] + local.K - 1) + 18, lo + 18, n))
-        unit = np.zeros((n, hi - lo + 1))
-        unit[np.arange(lo, hi), np.arange(hi - lo)] = 1.0
-        sol = np.linalg.solve(H, np.concatenate([np.broadcast_to(unit, (B, n, hi - lo + 1))[
-            ..., :-1], rhs[..., None]], axis=2))
-        self.cov, self.col0 = sol[..., :-1], lo
-        x = sol[..., -1]
+        from ._kernels import window_solve
+
+        x, self.cov, ok = window_solve(H, rhs, lo, hi)
+        self.col0 = lo
+        if not np.all(ok):  # a pivot not positive (a degenerate window): LU there
+            bad = np.flatnonzero(~ok)
+            unit = np.zeros((n, hi - lo + 1))
+            unit[np.arange(lo, hi), np.arange(hi - lo)] = 1.0
+            sol = np.linalg.solve(H[bad], np.concatenate([np.broadcast_to(
+                unit, (len(bad), n, hi - lo + 1))[..., :-1], rhs[bad][..., None]], axis=2))
+            self.cov[bad], x[bad] = sol[..., :-1], sol[..., -1]
         wz = wi * np.sum(zi * zi, axis=2)
         self.cost = np.sum(wz, axis=1) + local.const - np.einsum("bk,bk->b", rhs, x)
         self.x0 = x.reshape(B, -1, 3)

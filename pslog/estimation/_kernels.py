@@ -296,3 +296,66 @@ def takahashi_rows(diag: np.ndarray, right: np.ndarray) -> np.ndarray:
             acc += right[r, k - 1] * rows[r, k]
         rows[r, 0] = 1 / dr**2 - acc / dr
     return rows
+
+
+@kernel
+def window_solve(H: np.ndarray, rhs: np.ndarray, lo: int, hi: int
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Solve a batch of the break test's local normal equations (B, n, n), symmetric
+    positive definite and banded (every term touches 4 consecutive control points: 11
+    super-diagonals): the minimum ``H⁻¹ rhs`` (B, n) and the columns ``lo..hi-1`` of ``H⁻¹``
+    (B, n, hi - lo), by a banded Cholesky factorisation ``H = L Lᵀ`` and substitutions that
+    start at each unit column's first non-zero (Golub & Van Loan, *Matrix Computations*,
+    4th ed., §4.3.5-4.3.6).
+
+    Returns
+    -------
+    x : (B, n); cov : (B, n, hi - lo); ok : (B,) bool, False where a pivot was not positive
+    (that window's outputs are not set: solve it otherwise)
+    """
+    B, n, _ = H.shape
+    bw = 11
+    x = np.zeros((B, n))
+    cov = np.zeros((B, n, hi - lo))
+    ok = np.ones(B, dtype=np.bool_)
+    L = np.zeros((n, n))
+    y = np.zeros(n)
+    for b in range(B):
+        Hb = H[b]
+        good = True
+        for j in range(n):
+            k0 = max(0, j - bw)
+            s = Hb[j, j]
+            for k in range(k0, j):
+                s -= L[j, k] * L[j, k]
+            if not s > 0.0:
+                good = False
+                break
+            d = np.sqrt(s)
+            L[j, j] = d
+            for i in range(j + 1, min(n, j + bw + 1)):
+                t = Hb[i, j]
+                for k in range(max(0, i - bw), j):
+                    t -= L[i, k] * L[j, k]
+                L[i, j] = t / d
+        if not good:
+            ok[b] = False
+            continue
+        for c in range(lo - 1, hi):  # lo - 1: the right-hand side; then the unit columns
+            start = 0 if c < lo else c
+            for i in range(start):
+                y[i] = 0.0
+            for i in range(start, n):
+                t = (rhs[b, i] if c < lo else (1.0 if i == c else 0.0))
+                for k in range(max(start, i - bw), i):
+                    t -= L[i, k] * y[k]
+                y[i] = t / L[i, i]
+            for i in range(n - 1, -1, -1):
+                t = y[i]
+                for k in range(i + 1, min(n, i + bw + 1)):
+                    t -= L[k, i] * (x[b, k] if c < lo else cov[b, k, c - lo])
+                if c < lo:
+                    x[b, i] = t / L[i, i]
+                else:
+                    cov[b, i, c - lo] = t / L[i, i]
+    return x, cov, ok
