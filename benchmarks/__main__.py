@@ -119,11 +119,11 @@ def benches() -> list[Bench]:
               ["read detections", "typeA points/s"]),
         Bench("fusion", b / "bench_fusion.py", [], ["--minutes", "0.5", "--repeat", "1"],
               ["fusion typeA"]),
+        # smooth and sync, each its own row, on the same session (bench_smooth.py)
         Bench("smooth", b / "bench_smooth.py", ["--repeat", "2"], ["--minutes", "0.25"],
-              ["smooth"]),
+              ["smooth", "sync"]),
         Bench("filter", b / "bench_filter.py", ["--quick"], ["--quick", "--seconds", "3"],
               ["filter"]),
-        Bench("sync", b / "bench_sync.py", [], ["--minutes", "0.25"], ["sync"]),
         Bench("detect", b / "bench_detect.py", [],
               ["--frames", "30", "--repeat", "1", "--accuracy-frames", "6",
                "--hd-frames", "9"], ["detection 640x480", "detection 1280x720"]),

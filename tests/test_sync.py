@@ -280,3 +280,27 @@ def test_false_candidates_are_gated_before_the_clocks_are_estimated(tmp_path, cl
         assert abs(dirty["offset_s"] - clean["offset_s"]) < 2 * dirty["offset_std_s"]
     code, out, _ = cli("sync", paths["dirty"], "-o", tmp_path / "s2.mcap")
     assert code == 0 and "candidates rejected by gating" in out
+
+
+def test_a_session_longer_than_its_windows_scans_offsets_in_a_stretch_it_holds():
+    """Beyond 150 s, sync keeps six 15-s windows spread over the session; with as many
+    detections before as after the middle, their median fell in the gap between the third and
+    fourth, the offset scan's 12-s stretch around it held no detection and every trial cost
+    was NaN (a ValueError traceback from ``pslog sync`` on any long even session)."""
+    from pslog import apply_timing, builtin_rig
+    from pslog.motion import get_motion
+
+    rig = apply_timing(builtin_rig("paper2"), "typeA")
+    motion = get_motion("rally")  # pslog simulate's: stays in view of the paper's cameras
+    opts = SimulationOptions(noise_px=0.3, seed=3, clock_offset_s={"cam2": 3e-3})
+    detections, _ = simulate(rig, motion, 160.0, opts)
+    obs = detections.best()
+    t = obs.time_ns / NS
+    from pslog.estimation.sync import _SCAN_WINDOW_S, _windows
+
+    windowed = _windows(obs).time_ns / NS
+    assert len(windowed) < len(t)  # windowed, and its median in a gap
+    assert not np.any(np.abs(windowed - np.median(windowed)) <= _SCAN_WINDOW_S / 2)
+    result = estimate_clocks(obs, rig, ("offset",))
+    est = result.cameras[1]
+    assert abs(est.offset_s - 3e-3) < max(4 * est.offset_std_s, 2e-5), est

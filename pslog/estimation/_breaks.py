@@ -100,21 +100,13 @@ class _Base:
         wJ = wi[..., None, None] * Ji
         self.M = np.swapaxes(wJ, 2, 3) @ Ji  # (B, W, 3, 3): w JᵀJ
         v = np.einsum("bwai,bwa->bwi", wJ, zi)  # w Jᵀ z
-        # the basis as a dense (B, W, m) matrix: H = Σ_w (b_w b_wᵀ) ⊗ M_w, one batched
-        # product per entry of M
-        basis_w = np.zeros((B, W, m))
-        flat = ((np.arange(B * W) * m).reshape(B, W) + first)[..., None] + np.arange(4)
-        basis_w.reshape(-1)[flat.reshape(-1)] = N.reshape(-1)
-        basis_t = np.swapaxes(basis_w, 1, 2)
-        H = local.P.copy() + np.zeros((B, 1, 1))
-        H5 = H.reshape(B, m, 3, m, 3)
-        for i in range(3):
-            for k in range(i, 3):
-                block = basis_t @ (self.M[..., i, k, None] * basis_w)  # (B, m, m)
-                H5[:, :, i, :, k] += block
-                if k != i:
-                    H5[:, :, k, :, i] += block
-        rhs = (basis_t @ v).reshape(B, n) + local.rhs
+        # H = P + Σ_w (b_w b_wᵀ) ⊗ M_w, each detection's 12 x 12 block where its four
+        # control points are (a compiled loop: the dense products of the basis matrix cost
+        # m / 4 times more)
+        from ._kernels import window_normal
+
+        H, rhs = window_normal(local.P, local.rhs, first, np.ascontiguousarray(N),
+                               np.ascontiguousarray(self.M), np.ascontiguousarray(v), inside)
         H[:, np.arange(n), np.arange(n)] *= 1 + 1e-12  # keeps a degenerate window solvable
         # only the inverse's columns the gains read (a solve for them and the minimum is
         # cheaper than the whole inverse)
@@ -122,17 +114,24 @@ class _Base:
         if spans is not None:
             lo = int(np.clip(3 * (spans[0] + local.K - 1), 0, n - 18))
             hi = int(np.clip(3 * (spans[1] + local.K - 1) + 18, lo + 18, n))
-        unit = np.zeros((n, hi - lo + 1))
-        unit[np.arange(lo, hi), np.arange(hi - lo)] = 1.0
-        sol = np.linalg.solve(H, np.concatenate([np.broadcast_to(unit, (B, n, hi - lo + 1))[
-            ..., :-1], rhs[..., None]], axis=2))
-        self.cov, self.col0 = sol[..., :-1], lo
-        x = sol[..., -1]
+        from ._kernels import window_solve
+
+        x, self.cov, ok = window_solve(H, rhs, lo, hi)
+        self.col0 = lo
+        if not np.all(ok):  # a pivot not positive (a degenerate window): LU there
+            bad = np.flatnonzero(~ok)
+            unit = np.zeros((n, hi - lo + 1))
+            unit[np.arange(lo, hi), np.arange(hi - lo)] = 1.0
+            sol = np.linalg.solve(H[bad], np.concatenate([np.broadcast_to(
+                unit, (len(bad), n, hi - lo + 1))[..., :-1], rhs[bad][..., None]], axis=2))
+            self.cov[bad], x[bad] = sol[..., :-1], sol[..., -1]
         wz = wi * np.sum(zi * zi, axis=2)
         self.cost = np.sum(wz, axis=1) + local.const - np.einsum("bk,bk->b", rhs, x)
         self.x0 = x.reshape(B, -1, 3)
-        self.first, self.N, self.basis_w = first, N, basis_w
-        X0 = basis_w @ self.x0  # (B, W, 3)
+        self.first, self.N = np.ascontiguousarray(first, dtype=np.int64), np.ascontiguousarray(N)
+        X0 = np.einsum("bwa,bwad->bwd", N, np.take_along_axis(
+            self.x0, (first[..., None] + np.arange(4)).reshape(B, -1)[..., None], axis=1
+        ).reshape(B, W, 4, 3))  # (B, W, 3)
         self.u = v - (self.M @ X0[..., None])[..., 0]  # w Jᵀ (z - J X₀)
         self.s_sorted = np.where(inside, s, 1e6)  # times in spacings from the centre, sorted
         self.local, self.spacing = local, spacing
@@ -216,35 +215,22 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
         out.reshape(-1)[flat.reshape(-1)] = N.reshape(-1)
         return out
 
-    # data: the window's detections on the three spans [j-1, j+2) the new B-splines live on
-    xs_all = base.s_sorted[which]  # (B, W), increasing, padding far beyond
-    lo_col = np.sum(xs_all < jm[:, None], axis=1)
-    hi_col = np.sum(xs_all < jp[:, None] + 1, axis=1)
-    W = max(int(np.max(hi_col - lo_col)), 1)
-    cols = np.minimum(lo_col[:, None] + np.arange(W), xs_all.shape[1] - 1)
-    inside = lo_col[:, None] + np.arange(W) < hi_col[:, None]
-    Wb = xs_all.shape[1]
-    row = which[:, None] * Wb + cols  # (B, W): the detections' flat rows in the windows
-    xs = np.where(inside, np.take(base.s_sorted, row), 1e6)  # (B, W); far: every new B-spline is 0
-    x = xs - j[:, None]
-    f = np.zeros((B, 3, W))
+    # data: the window's detections on the three spans [j-1, j+2) the new B-splines live on:
+    # Σ_w (f fᵀ) ⊗ M_w, Σ_w (old fᵀ) ⊗ M_w (old: the base's B-splines q0..q0+5) and Σ_w f uᵀ,
+    # one compiled pass over each window's detections
+    from ._kernels import gains_data
+
+    lo = np.empty((B, 3, 2))
+    hi = np.empty((B, 3, 2))
+    coef = np.empty((B, 3, 2, 4))
     for e, spline in enumerate(pieces):
-        for lo, hi, c in spline:
-            on = (x >= lo[:, None]) & (x < hi[:, None])
-            f[:, e] = np.where(on, _horner(c, x), f[:, e])
-    # the base's B-splines q0..q0+5 at those detections (a padding entry may lose some: its
-    # new B-splines are zero, so it adds nothing)
+        for k, (a, b, c) in enumerate(spline):
+            lo[:, e, k], hi[:, e, k] = a, b
+            for d in range(4):
+                coef[:, e, k, d] = c[d]
+    Hyy, Hxy, g = gains_data(base.s_sorted, base.first, base.N, base.M, base.u,
+                             np.ascontiguousarray(which, dtype=np.int64), j, q0, lo, hi, coef)
     m = local.m
-    old = np.take(base.basis_w, (row * m + q0[:, None])[..., None] + np.arange(6))
-    M = np.take(base.M.reshape(-1, 9), row, axis=0)  # (B, W, 9)
-    # Σ_w (f fᵀ) ⊗ M_w and Σ_w (old fᵀ) ⊗ M_w: a batched product of the 9 rows f ⊗ f and
-    # one of the 18 rows old ⊗ f with M, then in (e, i, f, j) order (two products rather
-    # than one of both: temporaries a third the size)
-    Hyy = ((f[:, :, None, :] * f[:, None, :, :]).reshape(B, 9, W) @ M).reshape(
-        B, 3, 3, 3, 3).transpose(0, 1, 3, 2, 4).reshape(B, 9, 9)
-    Hxy = ((np.swapaxes(old, 1, 2)[:, :, None, :] * f[:, None, :, :]).reshape(B, 18, W)
-           @ M).reshape(B, 6, 3, 3, 3).transpose(0, 1, 3, 2, 4).reshape(B, 18, 9)
-    g = f @ np.take(base.u.reshape(-1, 3), row, axis=0)  # (B, 3, 3)
 
     # prior: four sub-spans [j-1, j], [j, τ], [τ, j+1], [j+1, j+2]
     lo = np.stack([jm, j, s, jp], 1)

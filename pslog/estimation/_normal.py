@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.linalg import cho_solve_banded, cholesky_banded
-from scipy.sparse import csr_matrix
 
 from ..errors import FusionError
 
@@ -45,10 +44,6 @@ def accumulate(start: np.ndarray, E: np.ndarray, b: np.ndarray, w: np.ndarray, n
     return ab, rhs
 
 
-_PAIRS = [(a, b) for a in range(4) for b in range(a, 4)]  # control-point pairs, b >= a
-_PA = np.array([a for a, _ in _PAIRS])
-_PB = np.array([b for _, b in _PAIRS])
-_SYM = np.array([0, 1, 2, 1, 3, 4, 2, 4, 5])  # 3 x 3 symmetric from its upper triangle
 _UPPER9 = np.array([0, 1, 2, 4, 5, 8])  # the upper triangle of a flattened 3 x 3
 
 
@@ -80,11 +75,12 @@ def accumulate_points(first: np.ndarray, N: np.ndarray, M: np.ndarray, v: np.nda
 
 
 class Points:
-    """Points ``p_i = Σ_a N[i, a] c[first_i + a]`` on a spline of ``m`` control points, as
-    two sparse matrices built once: ``B`` (r x m, the basis: ``p = B c``) and ``G``
-    (4(m+3) x r), whose row ``4p + k`` holds ``N_ia N_i(a+k)`` for every term with
-    ``first_i + a = p``, so that ``G @ M`` sums every term's block ``(N_i N_iᵀ) ⊗ M_i`` into
-    the block band ``Σ_{p, p+k}`` in one sparse product.
+    """Points ``p_i = Σ_a N[i, a] c[first_i + a]`` on a spline of ``m`` control points: their
+    positions, the normal equations of quadratic forms of them, and their marginal
+    covariances, each one compiled pass over the points
+    (:mod:`pslog.estimation._kernels`: the sums a basis matrix ``B`` (r x m, ``p = B c``) and
+    a matrix ``G`` (4(m+3) x r, row ``4p + k`` holding ``N_ia N_i(a+k)`` for every term with
+    ``first_i + a = p``) form in sparse products, added in the same order).
 
     Parameters
     ----------
@@ -92,35 +88,32 @@ class Points:
     """
 
     def __init__(self, first: np.ndarray, N: np.ndarray, m: int):
-        first = np.asarray(first, dtype=np.int64)
-        r = len(first)
-        self.m, self.r = m, r
-        cols = np.repeat(np.arange(r), 10)
-        rows = (4 * (first[:, None] + _PA) + (_PB - _PA)).ravel()
-        NN = (np.take(N, _PA, axis=1) * np.take(N, _PB, axis=1)).ravel()
-        self.G = csr_matrix((NN, (rows, cols)), shape=(4 * (m + 3), r))
-        rows = (first[:, None] + np.arange(4)).ravel()
-        self.B = csr_matrix((N.ravel(), rows, np.arange(0, 4 * r + 1, 4)), shape=(r, m))
-        self.BT = self.B.T.tocsr()
+        self.first = np.ascontiguousarray(first, dtype=np.int64)
+        self.N = np.ascontiguousarray(N, dtype=np.float64)
+        self.m, self.r = m, len(self.first)
 
     def positions(self, control: np.ndarray) -> np.ndarray:
         """``Σ_a N_a c[first + a]`` (r, 3) for control points (m, 3)."""
-        return self.B @ control
+        from ._kernels import points_positions
+
+        return points_positions(self.first, self.N,
+                                np.ascontiguousarray(control, dtype=np.float64))
 
     def marginal(self, band: np.ndarray) -> np.ndarray:
         """:func:`marginal` at the points: ``Σ_ab N_a N_b Σ_{first+a, first+b}`` (r, 3, 3)
-        from the covariance band (m, 4, 3, 3), as ``Gᵀ`` times the band (the off-diagonal
-        blocks with their transposes: each pair (a, b), a < b, stands for both orders)."""
-        both = np.zeros((self.m + 3, 4, 3, 3))
-        both[:self.m] = band
-        both[:, 1:] += np.swapaxes(both[:, 1:], 2, 3)
-        return (self.G.T @ both.reshape(-1, 9)).reshape(-1, 3, 3)
+        from the covariance band (m, 4, 3, 3) (the off-diagonal blocks with their
+        transposes: each pair (a, b), a < b, stands for both orders)."""
+        from ._kernels import points_marginal
+
+        return points_marginal(self.first, self.N, np.ascontiguousarray(band))
 
     def normal(self, M: np.ndarray, v: np.ndarray, ab: np.ndarray | None = None,
                rhs: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Add ``Σ_i p_iᵀ M_i p_i - 2 v_iᵀ p_i`` (M (r, 3, 3) symmetric, or its upper triangle
         (r, 6) in the order 00, 01, 02, 11, 12, 22; v (r, 3)) to normal equations (as
         :func:`accumulate`)."""
+        from ._kernels import points_normal
+
         m, r = self.m, self.r
         n = 3 * m
         ab = np.zeros((WIDTH, n)) if ab is None else ab
@@ -129,23 +122,9 @@ class Points:
             return ab, rhs
         # the upper triangle (r, 6): given, or taken from the full matrices
         upper = M if M.ndim == 2 else np.take(M.reshape(r, 9), _UPPER9, axis=1)
-        blocks = np.take(self.G @ upper, _SYM, axis=1).reshape(m + 3, 4, 3, 3)
-        _blocks_to_band(blocks[:m], ab)
-        rhs += (self.BT @ v).reshape(-1)
+        points_normal(self.first, self.N, np.ascontiguousarray(upper, dtype=np.float64),
+                      np.ascontiguousarray(v, dtype=np.float64), m, ab, rhs)
         return ab, rhs
-
-
-def _blocks_to_band(blocks: np.ndarray, ab: np.ndarray) -> None:
-    """Add a block band (m, 4, 3, 3) (``blocks[p, k] = A_{p, p+k}``) to upper banded storage."""
-    m = len(blocks)
-    for k in range(4):
-        for d in range(3):
-            for e in range(3):
-                off = 3 * k + e - d  # column minus row
-                if off < 0:
-                    continue
-                # rows 3p + d, columns 3(p + k) + e for p + k < m
-                ab[_U - off, 3 * k + e::3][:m - k] += blocks[:m - k, k, d, e]
 
 
 def factor(ab: np.ndarray) -> np.ndarray:
@@ -179,76 +158,22 @@ def covariance_band(U: np.ndarray) -> np.ndarray:
     time from the last: with ``Σ = U⁻¹ U⁻ᵀ`` and ``k`` over the band of row ``r``,
     ``Σ_rj = -Σ_k U_rk Σ_kj / U_rr`` (``j > r``) and ``Σ_rr = 1/U_rr² - Σ_k U_rk Σ_kr / U_rr``.
     Only entries inside the band are ever needed, so the cost is linear in the number of
-    unknowns. (The same recurrence grouped by 3 x 3 blocks is algebraically identical but
-    numerically unstable on these spline problems: errors grew ~6x per control point.)
-
-    The recurrence is run as what it is, an affine map of the 12 x 12 window
-    ``W_r = Σ[r:r+12, r:r+12]``: ``W_r = T_r W_{r+1} T_rᵀ + e₀e₀ᵀ / U_rr²`` with ``T_r`` the
-    shift whose first row is ``-U[r, r+1:r+12] / U_rr`` (:func:`_takahashi_step`, the scalar
-    recurrence above, per unknown). The unknowns are cut into chunks; each chunk's composed
-    map (the product of its ``T_r``, and its accumulated noise term) is formed for all chunks
-    at once, the windows at the chunk boundaries follow in one short sequential pass, and then
-    every chunk runs the per-unknown recurrence from its boundary window, all chunks at once.
+    unknowns: a compiled loop (:func:`pslog.estimation._kernels.takahashi_rows`). (The same
+    recurrence grouped by 3 x 3 blocks is algebraically identical but numerically unstable on
+    these spline problems: errors grew ~6x per control point.)
 
     Returns
     -------
     band : (m, 4, 3, 3), ``band[i, k] = Σ_{i, i+k}`` (zero beyond the last control point)
     """
+    from ._kernels import takahashi_rows
+
     n = U.shape[1]
-    m = n // 3
-    L = max(WIDTH, int(np.sqrt(n)) // 2)  # unknowns per chunk
-    C = -(-n // L)
-    # padded to whole chunks by unknowns of unit variance coupled to nothing (Σ rows of the
-    # real unknowns are unchanged: no real row of U reaches them)
-    diag = np.ones(C * L)
-    diag[:n] = U[_U]
-    right = np.zeros((C * L, _U))
+    right = np.zeros((n, _U))  # row r of U: columns r+1..r+11 (zero beyond n)
     for d in range(1, WIDTH):
         right[: n - d, d - 1] = U[_U - d, d:]
-    a = (right / diag[:, None]).reshape(C, L, _U)  # -first row of T_r, per chunk
-    q = (1.0 / diag**2).reshape(C, L)
-    # each chunk's map: W_start = Phi W_end Phiᵀ + Q
-    phi = np.broadcast_to(np.eye(WIDTH), (C, WIDTH, WIDTH)).copy()
-    Q = np.zeros((C, WIDTH, WIDTH))
-    for j in range(L - 1, -1, -1):
-        phi = _shift_left(a[:, j], phi)
-        Q = _takahashi_step(a[:, j], q[:, j], Q)
-    # the windows where each chunk ends (where the next begins), from the last
-    ends = np.zeros((C, WIDTH, WIDTH))
-    window = np.zeros((WIDTH, WIDTH))
-    for c in range(C - 1, -1, -1):
-        ends[c] = window
-        window = phi[c] @ window @ phi[c].T + Q[c]
-    rows = np.empty((C, L, WIDTH))  # rows[c, j, k] = Σ_{r, r+k} for r = cL + j
-    window = ends
-    for j in range(L - 1, -1, -1):
-        window = _takahashi_step(a[:, j], q[:, j], window)
-        rows[:, j] = window[:, 0]
-    rows = rows.reshape(C * L, WIDTH)[:n]
-    rows = np.concatenate([rows, np.zeros((WIDTH, WIDTH))])
-    return _band_from_rows(rows, m)
-
-
-def _shift_left(a: np.ndarray, X: np.ndarray) -> np.ndarray:
-    """``T X`` for (C,) shifts ``T`` (first row ``[-a, 0]``, then the identity shifted down),
-    a (C, 11), X (C, 12, k)."""
-    out = np.empty_like(X)
-    out[:, 0] = -np.einsum("ck,ckj->cj", a, X[:, :_U])
-    out[:, 1:] = X[:, :_U]
-    return out
-
-
-def _takahashi_step(a: np.ndarray, q: np.ndarray, W: np.ndarray) -> np.ndarray:
-    """``T W Tᵀ + q e₀e₀ᵀ``: one unknown of the Takahashi recurrence, for (C,) windows
-    (a (C, 11) = ``U[r, r+1:r+12] / U_rr``, q (C,) = ``1 / U_rr²``, W (C, 12, 12))."""
-    s_next = W[:, :_U, :_U]
-    row = -np.einsum("ck,ckj->cj", a, s_next)  # Σ_{r, r+1..r+11}
-    out = np.empty_like(W)
-    out[:, 0, 0] = q - np.einsum("ck,ck->c", a, row)
-    out[:, 0, 1:] = row
-    out[:, 1:, 0] = row
-    out[:, 1:, 1:] = s_next
-    return out
+    rows = takahashi_rows(np.ascontiguousarray(U[_U], dtype=np.float64), right)
+    return _band_from_rows(rows, n // 3)
 
 
 def covariance_band_sequential(U: np.ndarray) -> np.ndarray:

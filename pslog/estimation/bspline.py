@@ -113,50 +113,13 @@ def basis_pieces(knots: list[np.ndarray], piece: np.ndarray, t: np.ndarray,
 
 def _basis_in_span(knots: np.ndarray, j: np.ndarray, t: np.ndarray, n_derivatives: int
                    ) -> np.ndarray:
-    """The recurrence of :func:`basis` at points ``t`` in spans ``j`` of ``knots``."""
-    p, n = DEGREE, len(t)
-    ndu = np.zeros((n, p + 1, p + 1))
-    ndu[:, 0, 0] = 1.0
-    left = np.zeros((n, p + 1))
-    right = np.zeros((n, p + 1))
-    for r in range(1, p + 1):
-        left[:, r] = t - knots[j + 1 - r]
-        right[:, r] = knots[j + r] - t
-        saved = np.zeros(n)
-        for s in range(r):
-            ndu[:, r, s] = right[:, s + 1] + left[:, r - s]  # a knot difference, > 0
-            temp = ndu[:, s, r - 1] / ndu[:, r, s]
-            ndu[:, s, r] = saved + right[:, s + 1] * temp
-            saved = left[:, r - s] * temp
-        ndu[:, r, r] = saved
-    out = np.zeros((n, n_derivatives + 1, p + 1))
-    out[:, 0, :] = ndu[:, :, p]
-    a = np.zeros((n, 2, p + 1))
-    for r in range(p + 1):
-        s1, s2 = 0, 1
-        a[:] = 0.0
-        a[:, 0, 0] = 1.0
-        for k in range(1, n_derivatives + 1):
-            d = np.zeros(n)
-            rk, pk = r - k, p - k
-            if r >= k:
-                a[:, s2, 0] = a[:, s1, 0] / ndu[:, pk + 1, rk]
-                d = a[:, s2, 0] * ndu[:, rk, pk]
-            j1 = 1 if rk >= -1 else -rk
-            j2 = k - 1 if r - 1 <= pk else p - r
-            for jj in range(j1, j2 + 1):
-                a[:, s2, jj] = (a[:, s1, jj] - a[:, s1, jj - 1]) / ndu[:, pk + 1, rk + jj]
-                d = d + a[:, s2, jj] * ndu[:, rk + jj, pk]
-            if r <= pk:
-                a[:, s2, k] = -a[:, s1, k - 1] / ndu[:, pk + 1, r]
-                d = d + a[:, s2, k] * ndu[:, r, pk]
-            out[:, k, r] = d
-            s1, s2 = s2, s1
-    factor = 1.0
-    for k in range(1, n_derivatives + 1):
-        factor *= p - k + 1
-        out[:, k, :] *= factor
-    return out
+    """The recurrence of :func:`basis` at points ``t`` in spans ``j`` of ``knots``: the
+    compiled per-point kernel :func:`pslog.estimation._kernels.basis_in_span`."""
+    from ._kernels import basis_in_span
+
+    return basis_in_span(np.ascontiguousarray(knots, dtype=np.float64),
+                         np.ascontiguousarray(j, dtype=np.int64),
+                         np.ascontiguousarray(t, dtype=np.float64), int(n_derivatives))
 
 
 def evaluate(knots: np.ndarray, control: np.ndarray, t: np.ndarray, derivative: int = 0

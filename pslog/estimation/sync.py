@@ -572,12 +572,22 @@ def _scan_offsets(obs, rig, unknowns, theta, params, search_s, options) -> np.nd
         t = obs.time_ns[rows] / NS
         # the central stretch of the session: enough motion, a bounded cost
         mid = np.median(t)
+        if len(t) and not np.any(np.abs(t - mid) <= _SCAN_WINDOW_S / 2):
+            # a long session's median falls between two of :func:`_windows`' stretches
+            # (the same number of detections either side): the stretch next to it, from the
+            # nearest detection on
+            near = t[np.argmin(np.abs(t - mid))]
+            mid = near + np.sign(near - mid) * _SCAN_WINDOW_S / 2
         keep = rows[np.abs(t - mid) <= _SCAN_WINDOW_S / 2]
         sub = obs.select(keep)
         step = min(1e-3, half / 8)
         grid = theta[j] + np.arange(-half, half + step / 2, step)
         costs = np.array([_pair_cost(sub, rig, c, unknowns, theta, j, value, params, options)
                           for value in grid])
+        if np.all(np.isnan(costs)):
+            raise FusionError(f"camera {rig.cameras[c].name}: no stretch of the session is "
+                              f"seen by it and camera {rig.cameras[0].name} together long "
+                              f"enough to scan its offset")
         k = int(np.nanargmin(costs))
         best = grid[k]
         if 0 < k < len(grid) - 1:

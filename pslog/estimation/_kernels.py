@@ -1,0 +1,361 @@
+"""The compiled per-point kernels of the trajectory estimator (:mod:`pslog._jit`).
+
+Each kernel is the loop its numpy caller ran over arrays of points, written once per point
+with the same floating-point operations in the same order, so it returns the same bits
+(no fastmath: no reassociation, no fused multiply-add). Imported by the estimator's functions
+when they run, never at import time (``pslog --help`` does not load numba).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .._jit import kernel
+
+_P = 3  # cubic
+
+
+@kernel
+def basis_in_span(knots: np.ndarray, j: np.ndarray, t: np.ndarray, n_derivatives: int
+                  ) -> np.ndarray:
+    """Values and derivatives (n, n_derivatives + 1, 4) of the four non-zero cubic B-splines
+    at points ``t`` (n,) in spans ``j`` (n,) of ``knots``: Piegl & Tiller, *The NURBS Book*
+    (2nd ed. 1997), algorithm A2.3 (``DersBasisFuns``), one point at a time
+    (:func:`pslog.estimation.bspline._basis_in_span`)."""
+    p = _P
+    n = len(t)
+    out = np.zeros((n, n_derivatives + 1, p + 1))
+    ndu = np.zeros((p + 1, p + 1))
+    left = np.zeros(p + 1)
+    right = np.zeros(p + 1)
+    a = np.zeros((2, p + 1))
+    for i in range(n):
+        ti = t[i]
+        ji = j[i]
+        ndu[:] = 0.0
+        ndu[0, 0] = 1.0
+        for r in range(1, p + 1):
+            left[r] = ti - knots[ji + 1 - r]
+            right[r] = knots[ji + r] - ti
+            saved = 0.0
+            for s in range(r):
+                ndu[r, s] = right[s + 1] + left[r - s]  # a knot difference, > 0
+                temp = ndu[s, r - 1] / ndu[r, s]
+                ndu[s, r] = saved + right[s + 1] * temp
+                saved = left[r - s] * temp
+            ndu[r, r] = saved
+        for r in range(p + 1):
+            out[i, 0, r] = ndu[r, p]
+        for r in range(p + 1):
+            s1, s2 = 0, 1
+            a[:] = 0.0
+            a[0, 0] = 1.0
+            for k in range(1, n_derivatives + 1):
+                d = 0.0
+                rk, pk = r - k, p - k
+                if r >= k:
+                    a[s2, 0] = a[s1, 0] / ndu[pk + 1, rk]
+                    d = a[s2, 0] * ndu[rk, pk]
+                j1 = 1 if rk >= -1 else -rk
+                j2 = k - 1 if r - 1 <= pk else p - r
+                for jj in range(j1, j2 + 1):
+                    a[s2, jj] = (a[s1, jj] - a[s1, jj - 1]) / ndu[pk + 1, rk + jj]
+                    d = d + a[s2, jj] * ndu[rk + jj, pk]
+                if r <= pk:
+                    a[s2, k] = -a[s1, k - 1] / ndu[pk + 1, r]
+                    d = d + a[s2, k] * ndu[r, pk]
+                out[i, k, r] = d
+                s1, s2 = s2, s1
+        factor = 1.0
+        for k in range(1, n_derivatives + 1):
+            factor *= p - k + 1
+            for r in range(p + 1):
+                out[i, k, r] *= factor
+    return out
+
+
+@kernel
+def window_normal(P: np.ndarray, prior_rhs: np.ndarray, first: np.ndarray, N: np.ndarray,
+                  M: np.ndarray, v: np.ndarray, inside: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Dense normal equations of a batch of local windows (:class:`pslog.estimation._breaks.
+    _Base`): ``H_b = P + Σ_w (N_w N_wᵀ) ⊗ M_w`` and ``rhs_b = prior_rhs + Σ_w N_w ⊗ v_w``, each
+    detection's 12 x 12 block added at control points ``first .. first + 3`` (the sums the
+    dense products of the basis matrix formed, one detection at a time, the prior first).
+
+    Parameters
+    ----------
+    P : (n, n) float64, the prior's normal matrix (n = 3m); prior_rhs : (n,)
+    first : (B, W) int64; N : (B, W, 4) float64, each detection's basis
+    M : (B, W, 3, 3) float64, ``w JᵀJ``; v : (B, W, 3), ``w Jᵀ z``
+    inside : (B, W) bool, the detections in each window (the rest add nothing)
+
+    Returns
+    -------
+    H : (B, n, n); rhs : (B, n)
+    """
+    B, W = first.shape
+    n = P.shape[0]
+    H = np.empty((B, n, n))
+    rhs = np.empty((B, n))
+    for b in range(B):
+        Hb = H[b]
+        Hb[:, :] = P
+        rb = rhs[b]
+        rb[:] = 0.0
+        for w in range(W):
+            if not inside[b, w]:
+                continue
+            f3 = 3 * first[b, w]
+            for a in range(4):
+                na = N[b, w, a]
+                for i in range(3):
+                    rb[f3 + 3 * a + i] += na * v[b, w, i]
+                for c in range(4):
+                    nc = N[b, w, c]
+                    for i in range(3):
+                        for k in range(3):
+                            # the upper triangle of M (w JᵀJ is symmetric only up to rounding)
+                            mik = M[b, w, i, k] if i <= k else M[b, w, k, i]
+                            Hb[f3 + 3 * a + i, f3 + 3 * c + k] += na * (mik * nc)
+        for r in range(n):
+            rb[r] += prior_rhs[r]
+    return H, rhs
+
+
+# control-point pairs (a, b), b >= a, in the order of the rows 4(first + a) + (b - a) they
+# fill (:class:`pslog.estimation._normal.Points`): ascending, so that each sum below adds
+# its terms in the order the sparse products did
+_PA = np.array([0, 0, 0, 0, 1, 1, 1, 2, 2, 3])
+_PB = np.array([0, 1, 2, 3, 1, 2, 3, 2, 3, 3])
+#: 3 x 3 symmetric from its upper triangle (00, 01, 02, 11, 12, 22)
+_SYM = np.array([[0, 1, 2], [1, 3, 4], [2, 4, 5]])
+
+
+@kernel
+def points_positions(first: np.ndarray, N: np.ndarray, control: np.ndarray) -> np.ndarray:
+    """``p_i = Σ_a N[i, a] c[first_i + a]`` (r, 3) for control points (m, 3)."""
+    r = len(first)
+    out = np.zeros((r, 3))
+    for i in range(r):
+        f = first[i]
+        for d in range(3):
+            acc = 0.0
+            for a in range(4):
+                acc += N[i, a] * control[f + a, d]
+            out[i, d] = acc
+    return out
+
+
+@kernel
+def points_normal(first: np.ndarray, N: np.ndarray, upper: np.ndarray, v: np.ndarray, m: int,
+                  ab: np.ndarray, rhs: np.ndarray) -> None:
+    """Add ``Σ_i p_iᵀ M_i p_i - 2 v_iᵀ p_i`` to banded normal equations in place: each
+    term's block ``(N_i N_iᵀ) ⊗ M_i`` (``upper`` (r, 6) the upper triangle of ``M_i``)
+    summed per control-point pair over the terms in order, then added to ``ab`` (12, 3m)
+    (upper banded storage); ``N_i ⊗ v_i`` to ``rhs`` (3m,)."""
+    r = len(first)
+    blocks = np.zeros((m + 3, 4, 6))
+    rv = np.zeros((m, 3))
+    for i in range(r):
+        f = first[i]
+        for q in range(10):
+            a, b = _PA[q], _PB[q]
+            nn = N[i, a] * N[i, b]
+            for u in range(6):
+                blocks[f + a, b - a, u] += nn * upper[i, u]
+        for a in range(4):
+            for d in range(3):
+                rv[f + a, d] += N[i, a] * v[i, d]
+    for p in range(m):
+        for k in range(4):
+            if p + k >= m:
+                break
+            for d in range(3):
+                for e in range(3):
+                    off = 3 * k + e - d  # column minus row
+                    if off < 0:
+                        continue
+                    ab[11 - off, 3 * (p + k) + e] += blocks[p, k, _SYM[d, e]]
+        for d in range(3):
+            rhs[3 * p + d] += rv[p, d]
+
+
+@kernel
+def points_marginal(first: np.ndarray, N: np.ndarray, band: np.ndarray) -> np.ndarray:
+    """``Σ_ab N_a N_b Σ_{first+a, first+b}`` (r, 3, 3) from the covariance band (m, 4, 3, 3)
+    (an off-diagonal pair stands for both orders: its block plus its transpose)."""
+    r = len(first)
+    out = np.zeros((r, 3, 3))
+    for i in range(r):
+        f = first[i]
+        for q in range(10):
+            a, b = _PA[q], _PB[q]
+            nn = N[i, a] * N[i, b]
+            k = b - a
+            for d in range(3):
+                for e in range(3):
+                    s = band[f + a, k, d, e]
+                    if k > 0:
+                        s = s + band[f + a, k, e, d]
+                    out[i, d, e] += nn * s
+    return out
+
+
+@kernel
+def gains_data(s_sorted: np.ndarray, first: np.ndarray, N: np.ndarray, M: np.ndarray,
+               u: np.ndarray, which: np.ndarray, j: np.ndarray, q0: np.ndarray,
+               lo: np.ndarray, hi: np.ndarray, coef: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The data terms of the break test (:func:`pslog.estimation._breaks._gains`) of B
+    trial instants, each on window ``which[b]`` of a base: over the window's detections on
+    the three spans ``[j-1, j+2)`` (in spacings from the centre) the three new B-splines
+    ``f_e`` live on,
+
+    ``Hyy[3e+i, 3f+k] = Σ_w f_e f_f M_w[i, k]``, ``Hxy[3c+i, 3e+k] = Σ_w b_c f_e M_w[i, k]``
+    (``b_c`` the base's B-spline ``q0 + c``) and ``g[e, d] = Σ_w f_e u_w[d]``.
+
+    Parameters
+    ----------
+    s_sorted : (Bb, Wb) float64, each base window's detection times in spacings from its
+        centre, increasing (padding 1e6); first (Bb, Wb) int64, N (Bb, Wb, 4): their basis;
+        M (Bb, Wb, 3, 3): ``w JᵀJ``; u (Bb, Wb, 3): the weighted residual at the minimum
+    which, q0 : (B,) int64; j : (B,) float64, the trial instant's span
+    lo, hi : (B, 3, 2) float64, the two polynomial pieces of each new B-spline (spacings
+        from ``u_j``); coef : (B, 3, 2, 4), their power-basis coefficients
+
+    Returns
+    -------
+    Hyy : (B, 9, 9); Hxy : (B, 18, 9); g : (B, 3, 3)
+    """
+    B = len(which)
+    Wb = s_sorted.shape[1]
+    Hyy = np.zeros((B, 9, 9))
+    Hxy = np.zeros((B, 18, 9))
+    g = np.zeros((B, 3, 3))
+    f = np.zeros(3)
+    old = np.zeros(6)
+    for b in range(B):
+        wb = which[b]
+        jb = j[b]
+        lo_col = 0
+        hi_col = 0
+        for w in range(Wb):  # the same counts as the detections before each bound
+            if s_sorted[wb, w] < jb - 1:
+                lo_col += 1
+            if s_sorted[wb, w] < jb + 1 + 1:
+                hi_col += 1
+        for w in range(lo_col, hi_col):
+            x = s_sorted[wb, w] - jb
+            for e in range(3):
+                f[e] = 0.0
+                for k in range(2):
+                    if x >= lo[b, e, k] and x < hi[b, e, k]:
+                        c = coef[b, e, k]
+                        f[e] = ((c[3] * 1.0 * x + c[2]) * x + c[1]) * x + c[0]
+            for c6 in range(6):
+                a = q0[b] + c6 - first[wb, w]
+                old[c6] = N[wb, w, a] if 0 <= a <= 3 else 0.0
+            for e in range(3):
+                for i in range(3):
+                    g[b, e, i] += f[e] * u[wb, w, i]
+                for i in range(3):
+                    for k in range(3):
+                        mik = M[wb, w, i, k]
+                        for e2 in range(3):
+                            Hyy[b, 3 * e + i, 3 * e2 + k] += (f[e] * f[e2]) * mik
+                        for c6 in range(6):
+                            Hxy[b, 3 * c6 + i, 3 * e + k] += (old[c6] * f[e]) * mik
+    return Hyy, Hxy, g
+
+
+@kernel
+def takahashi_rows(diag: np.ndarray, right: np.ndarray) -> np.ndarray:
+    """Rows ``rows[r, j] = Σ_{r, r+j}`` (n + 12, 12) of ``A⁻¹`` within the band, for
+    ``A = Uᵀ U`` with ``U`` upper banded: ``diag`` (n,) its diagonal, ``right`` (n, 11) row
+    ``r``'s entries ``U[r, r+1..r+11]``. The Takahashi, Fagan & Chen (1973) recurrence one
+    unknown at a time from the last (:func:`pslog.estimation._normal.covariance_band`):
+    ``Σ_rj = -Σ_k U_rk Σ_kj / U_rr`` (``j > r``), ``Σ_rr = 1/U_rr² - Σ_k U_rk Σ_kr / U_rr``."""
+    n = len(diag)
+    rows = np.zeros((n + 12, 12))
+    # the window of unknowns r+1..r+11 is read from the rows already computed (symmetric:
+    # Σ_{r+k, r+j} = rows[r+k, j-k] for k <= j, rows[r+j, k-j] otherwise)
+    for r in range(n - 1, -1, -1):
+        dr = diag[r]
+        for j in range(1, 12):
+            acc = 0.0
+            for k in range(1, 12):
+                if k <= j:
+                    s = rows[r + k, j - k]
+                else:
+                    s = rows[r + j, k - j]
+                acc += right[r, k - 1] * s
+            rows[r, j] = -acc / dr
+        acc = 0.0
+        for k in range(1, 12):
+            acc += right[r, k - 1] * rows[r, k]
+        rows[r, 0] = 1 / dr**2 - acc / dr
+    return rows
+
+
+@kernel
+def window_solve(H: np.ndarray, rhs: np.ndarray, lo: int, hi: int
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Solve a batch of the break test's local normal equations (B, n, n), symmetric
+    positive definite and banded (every term touches 4 consecutive control points: 11
+    super-diagonals): the minimum ``H⁻¹ rhs`` (B, n) and the columns ``lo..hi-1`` of ``H⁻¹``
+    (B, n, hi - lo), by a banded Cholesky factorisation ``H = L Lᵀ`` and substitutions that
+    start at each unit column's first non-zero (Golub & Van Loan, *Matrix Computations*,
+    4th ed., §4.3.5-4.3.6).
+
+    Returns
+    -------
+    x : (B, n); cov : (B, n, hi - lo); ok : (B,) bool, False where a pivot was not positive
+    (that window's outputs are not set: solve it otherwise)
+    """
+    B, n, _ = H.shape
+    bw = 11
+    x = np.zeros((B, n))
+    cov = np.zeros((B, n, hi - lo))
+    ok = np.ones(B, dtype=np.bool_)
+    L = np.zeros((n, n))
+    y = np.zeros(n)
+    for b in range(B):
+        Hb = H[b]
+        good = True
+        for j in range(n):
+            k0 = max(0, j - bw)
+            s = Hb[j, j]
+            for k in range(k0, j):
+                s -= L[j, k] * L[j, k]
+            if not s > 0.0:
+                good = False
+                break
+            d = np.sqrt(s)
+            L[j, j] = d
+            for i in range(j + 1, min(n, j + bw + 1)):
+                t = Hb[i, j]
+                for k in range(max(0, i - bw), j):
+                    t -= L[i, k] * L[j, k]
+                L[i, j] = t / d
+        if not good:
+            ok[b] = False
+            continue
+        for c in range(lo - 1, hi):  # lo - 1: the right-hand side; then the unit columns
+            start = 0 if c < lo else c
+            for i in range(start):
+                y[i] = 0.0
+            for i in range(start, n):
+                t = (rhs[b, i] if c < lo else (1.0 if i == c else 0.0))
+                for k in range(max(start, i - bw), i):
+                    t -= L[i, k] * y[k]
+                y[i] = t / L[i, i]
+            for i in range(n - 1, -1, -1):
+                t = y[i]
+                for k in range(i + 1, min(n, i + bw + 1)):
+                    t -= L[k, i] * (x[b, k] if c < lo else cov[b, k, c - lo])
+                if c < lo:
+                    x[b, i] = t / L[i, i]
+                else:
+                    cov[b, i, c - lo] = t / L[i, i]
+    return x, cov, ok

@@ -1,0 +1,272 @@
+"""The compiled kernels of the smooth trajectory estimator (pslog/estimation/_kernels.py):
+each against its pure-Python original (``kernel.py_func``) and against the numpy form it
+replaced (the dense or sparse products, written out here), bit for bit where the sums run in
+the same order."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+from scipy.interpolate import BSpline
+from scipy.sparse import csr_matrix
+
+from pslog.estimation import _breaks, _kernels, _normal
+from pslog.estimation import trajectory as T
+from pslog.estimation.bspline import basis, clamped_knots, n_control, span_index
+
+
+def _knots():
+    return clamped_knots(np.array([0.0, 0.1, 0.25, 0.3, 0.45, 0.6, 0.62, 0.8]),
+                         np.array([1, 3, 1, 1, 3, 1]))
+
+
+@pytest.mark.parametrize("nd", [0, 1, 2, 3])
+def test_basis_kernel_is_its_python_original_and_scipy(nd):
+    knots = _knots()
+    t = np.r_[np.linspace(0.0, 0.8, 301), 0.25, 0.6, 0.8]
+    j = span_index(knots, t)
+    compiled = _kernels.basis_in_span(knots, j, t, nd)
+    assert_array_equal(compiled, _kernels.basis_in_span.py_func(knots, j, t, nd))
+    control = np.random.default_rng(nd).normal(size=(n_control(knots), 3))
+    first, values = basis(knots, t, nd)
+    index = first[:, None] + np.arange(4)
+    for d in range(nd + 1):
+        ours = np.einsum("na,nad->nd", values[:, d], control[index])
+        ref = BSpline(knots, control, 3)(t, nu=d)
+        assert_allclose(ours, ref, rtol=1e-10, atol=1e-9 * np.abs(ref).max())
+
+
+def _sparse_points(first, N, m):
+    """The sparse matrices ``Points`` used before its compiled passes (the reference)."""
+    pairs = [(a, b) for a in range(4) for b in range(a, 4)]
+    PA, PB = np.array([a for a, _ in pairs]), np.array([b for _, b in pairs])
+    r = len(first)
+    G = csr_matrix(((np.take(N, PA, axis=1) * np.take(N, PB, axis=1)).ravel(),
+                    ((4 * (first[:, None] + PA) + (PB - PA)).ravel(), np.repeat(np.arange(r), 10))),
+                   shape=(4 * (m + 3), r))
+    B = csr_matrix((N.ravel(), (first[:, None] + np.arange(4)).ravel(),
+                    np.arange(0, 4 * r + 1, 4)), shape=(r, m))
+    return G, B
+
+
+def _points_case(seed=0, r=400, m=40):
+    rng = np.random.default_rng(seed)
+    first = np.sort(rng.integers(0, m - 3, r))
+    N = rng.random((r, 4))
+    A = rng.normal(size=(r, 3, 3))
+    M = A @ np.swapaxes(A, 1, 2)
+    v = rng.normal(size=(r, 3))
+    return first, N, M, v, m
+
+
+def test_points_passes_are_the_sparse_products_bit_for_bit():
+    first, N, M, v, m = _points_case()
+    G, B = _sparse_points(first, N, m)
+    points = _normal.Points(first, N, m)
+    control = np.random.default_rng(1).normal(size=(m, 3))
+    assert_array_equal(points.positions(control), B @ control)
+    # normal equations: G @ upper, expanded to 3 x 3 blocks and laid into the band
+    upper = np.take(M.reshape(-1, 9), [0, 1, 2, 4, 5, 8], axis=1)
+    blocks = np.take(G @ upper, [0, 1, 2, 1, 3, 4, 2, 4, 5], axis=1).reshape(m + 3, 4, 3, 3)
+    ab0 = np.random.default_rng(2).normal(size=(12, 3 * m))
+    rhs0 = np.random.default_rng(3).normal(size=3 * m)
+    ref_ab = ab0.copy()
+    for k in range(4):
+        for d in range(3):
+            for e in range(3):
+                off = 3 * k + e - d
+                if off >= 0:
+                    ref_ab[11 - off, 3 * k + e::3][:m - k] += blocks[:m - k, k, d, e]
+    ref_rhs = rhs0 + (B.T.tocsr() @ v).reshape(-1)
+    ab, rhs = points.normal(M, v, ab0.copy(), rhs0.copy())
+    assert_array_equal(ab, ref_ab)
+    assert_array_equal(rhs, ref_rhs)
+    # marginals: Gᵀ times the band with the off-diagonal blocks' transposes added
+    band = np.random.default_rng(4).normal(size=(m, 4, 3, 3))
+    both = np.zeros((m + 3, 4, 3, 3))
+    both[:m] = band
+    both[:, 1:] += np.swapaxes(both[:, 1:], 2, 3)
+    ref = (G.T @ both.reshape(-1, 9)).reshape(-1, 3, 3)
+    assert_array_equal(points.marginal(band), ref)
+    assert_allclose(points.marginal(band), _normal.marginal(band, first, N), rtol=1e-12,
+                    atol=1e-12)
+
+
+def test_points_kernels_are_their_python_originals():
+    first, N, M, v, m = _points_case(5, r=60, m=12)
+    upper = np.take(M.reshape(-1, 9), [0, 1, 2, 4, 5, 8], axis=1)
+    a1, r1 = np.zeros((12, 3 * m)), np.zeros(3 * m)
+    a2, r2 = np.zeros((12, 3 * m)), np.zeros(3 * m)
+    _kernels.points_normal(first, N, upper, v, m, a1, r1)
+    _kernels.points_normal.py_func(first, N, upper, v, m, a2, r2)
+    assert_array_equal(a1, a2)
+    assert_array_equal(r1, r2)
+    control = np.random.default_rng(6).normal(size=(m, 3))
+    assert_array_equal(_kernels.points_positions(first, N, control),
+                       _kernels.points_positions.py_func(first, N, control))
+    band = np.random.default_rng(7).normal(size=(m, 4, 3, 3))
+    assert_array_equal(_kernels.points_marginal(first, N, band),
+                       _kernels.points_marginal.py_func(first, N, band))
+
+
+def _window_case(seed=0):
+    """A batch of break-test windows as :func:`_breaks.scan` builds them."""
+    rng = np.random.default_rng(seed)
+    h = 0.011
+    t = np.sort(rng.uniform(0.0, 0.4, 90))
+    J = rng.normal(size=(90, 2, 3)) * 300
+    z = rng.normal(size=(90, 2))
+    w = rng.uniform(0.5, 4.0, 90)
+    centers = np.array([0.1, 0.2, 0.27])
+    from pslog.estimation.trajectory import MotionPrior
+
+    prior = MotionPrior()
+    K = 6
+    local = _breaks._local(K, h, prior, 1)
+    lo, hi = centers - 5 * h, centers + 5 * h
+    i0, i1 = np.searchsorted(t, lo), np.searchsorted(t, hi, side="right")
+    W = int(np.max(i1 - i0))
+    index = np.minimum(i0[:, None] + np.arange(W), len(t) - 1)
+    valid = i0[:, None] + np.arange(W) < i1[:, None]
+    return local, t, J, z, w, index, valid, centers, h, prior
+
+
+def test_window_normal_is_the_dense_basis_product():
+    local, t, J, z, w, index, valid, centre, h, _ = _window_case()
+    base = _breaks._Base(local, t, J, z, w, index, valid, centre, h)
+    B, W = index.shape
+    m = local.m
+    # the dense form it replaced: H = P + Bᵀ (M ⊗) B with the basis as a (B, W, m) matrix
+    basis_w = np.zeros((B, W, m))
+    for b in range(B):
+        for k in range(W):
+            basis_w[b, k, base.first[b, k]:base.first[b, k] + 4] = base.N[b, k]
+    inside = base.s_sorted < 1e5
+    Mi = np.where(inside[..., None, None], base.M, 0.0)
+    H = local.P + np.einsum("bwp,bwik,bwq->bpiqk", basis_w, Mi, basis_w).reshape(B, 3 * m, 3 * m)
+    v = np.einsum("bwai,bwa,bw->bwi", J[index], z[index], np.where(inside, w[index], 0.0))
+    rhs = np.einsum("bwp,bwi->bpi", basis_w, v).reshape(B, -1) + local.rhs
+    Hk, rk = _kernels.window_normal(local.P, local.rhs, base.first, base.N, base.M,
+                                    np.ascontiguousarray(v), inside)
+    assert_allclose(Hk, H, rtol=1e-12, atol=1e-9 * np.abs(H).max())
+    assert_allclose(rk, rhs, rtol=1e-12, atol=1e-9 * np.abs(rhs).max())
+    Hp, rp = _kernels.window_normal.py_func(local.P, local.rhs, base.first, base.N, base.M,
+                                            np.ascontiguousarray(v), inside)
+    assert_array_equal(Hk, Hp)
+    assert_array_equal(rk, rp)
+    # the base's minimum solves them: X0 = basis x0 at the detections
+    x = np.linalg.solve(H, rhs[..., None])[..., 0].reshape(B, -1, 3)
+    assert_allclose(base.x0, x, rtol=1e-6, atol=1e-9 * np.abs(x).max())
+
+
+def test_gains_data_is_the_sum_over_the_window_and_its_python_original():
+    local, t, J, z, w, index, valid, centre, h, _ = _window_case(3)
+    both = np.r_[centre, centre + h / 2]
+    base = _breaks._Base(local, t, J, z, w, np.r_[index, index], np.r_[valid, valid], both, h)
+    which = np.array([0, 1, 2, 3, 4, 5, 1])
+    tau = both[which] + np.array([0.3, -1.2, 0.7, 0.45, -0.2, 1.3, 0.05]) * h
+    s = (tau - both[which]) / h
+    j = np.floor(s)
+    q0 = (j + local.K - 1).astype(np.int64)
+    pieces = _breaks._new_splines(s - j)
+    lo, hi, coef = np.empty((7, 3, 2)), np.empty((7, 3, 2)), np.empty((7, 3, 2, 4))
+    for e, spline in enumerate(pieces):
+        for k, (a, b, c) in enumerate(spline):
+            lo[:, e, k], hi[:, e, k] = a, b
+            coef[:, e, k] = np.stack(c, axis=1)
+    args = (base.s_sorted, base.first, base.N, base.M, base.u, which, j, q0, lo, hi, coef)
+    Hyy, Hxy, g = _kernels.gains_data(*args)
+    for got, ref in zip((Hyy, Hxy, g), _kernels.gains_data.py_func(*args), strict=True):
+        assert_array_equal(got, ref)
+    # by hand: every detection of the window on spans j-1..j+1, the new B-splines by Horner
+    for b in range(7):
+        ref_yy, ref_xy, ref_g = np.zeros((9, 9)), np.zeros((18, 9)), np.zeros((3, 3))
+        for k in range(base.s_sorted.shape[1]):
+            x = base.s_sorted[which[b], k] - j[b]
+            if not -1 <= x < 2:
+                continue
+            f = np.zeros(3)
+            for e in range(3):
+                for p in range(2):
+                    if lo[b, e, p] <= x < hi[b, e, p]:
+                        f[e] = np.polyval(coef[b, e, p][::-1], x)
+            old = np.zeros(6)
+            for a in range(4):
+                c = base.first[which[b], k] + a - q0[b]
+                if 0 <= c < 6:
+                    old[c] = base.N[which[b], k, a]
+            Mw = base.M[which[b], k]
+            ref_yy += np.kron(np.outer(f, f), Mw)
+            ref_xy += np.kron(np.outer(old, f), Mw)
+            ref_g += np.outer(f, base.u[which[b], k])
+        assert np.abs(ref_yy).max() > 0
+        assert_allclose(Hyy[b], ref_yy, rtol=1e-10, atol=1e-10 * np.abs(ref_yy).max())
+        assert_allclose(Hxy[b], ref_xy, rtol=1e-10, atol=1e-10 * np.abs(ref_xy).max())
+        assert_allclose(g[b], ref_g, rtol=1e-10, atol=1e-10 * np.abs(ref_g).max())
+
+
+def test_nearest_distance_is_the_minimum_over_every_pair():
+    rng = np.random.default_rng(9)
+    x = rng.uniform(-1, 11, 500)
+    known = rng.uniform(0, 10, 37)
+    brute = np.min(np.abs(x[:, None] - known[None, :]), axis=1)
+    assert_array_equal(T._nearest_distance(x, known), brute)
+    assert_array_equal(T._nearest_distance(x, known[::-1]), brute)  # unsorted input
+    assert np.all(np.isinf(T._nearest_distance(x, np.zeros(0))))
+
+
+def test_takahashi_kernel_is_its_python_original_and_the_dense_inverse():
+    rng = np.random.default_rng(11)
+    m, r = 30, 240
+    first = rng.integers(0, m - 3, r)
+    J = rng.normal(size=(r, 2, 3))
+    ab, _ = _normal.accumulate_points(first, rng.random((r, 4)),
+                                      np.einsum("nai,naj->nij", J, J), np.zeros((r, 3)), m)
+    ab[11] += 1e-3
+    U = _normal.factor(ab)
+    n = 3 * m
+    right = np.zeros((n, 11))
+    for d in range(1, 12):
+        right[: n - d, d - 1] = U[11 - d, d:]
+    rows = _kernels.takahashi_rows(np.ascontiguousarray(U[11]), right)
+    assert_array_equal(rows, _kernels.takahashi_rows.py_func(np.ascontiguousarray(U[11]),
+                                                             right))
+    dense = np.zeros((n, n))
+    for d in range(12):
+        i = np.arange(n - d)
+        dense[i, i + d] = dense[i + d, i] = ab[11 - d, d:]
+    cov = np.linalg.inv(dense)
+    for j in range(12):
+        i = np.arange(n - j)
+        assert_allclose(rows[i, j], cov[i, i + j], rtol=0, atol=1e-12 * np.abs(cov).max())
+
+
+def test_window_solve_is_the_dense_solve_and_refuses_a_non_positive_pivot():
+    local, t, J, z, w, index, valid, centre, h, _ = _window_case(4)
+    base = _breaks._Base(local, t, J, z, w, index, valid, centre, h)
+    B = len(index)
+    v = np.ascontiguousarray(np.einsum("bwai,bwa,bw->bwi", J[index], z[index],
+                                       np.where(base.s_sorted < 1e5, w[index], 0.0)))
+    H, rhs = _kernels.window_normal(local.P, local.rhs, base.first, base.N, base.M, v,
+                                    base.s_sorted < 1e5)
+    n = H.shape[1]
+    lo, hi = 9, 36
+    x, cov, ok = _kernels.window_solve(H, rhs, lo, hi)
+    assert ok.all()
+    inverse = np.linalg.inv(H)
+    assert_allclose(cov, inverse[:, :, lo:hi], rtol=1e-8, atol=1e-10 * np.abs(inverse).max())
+    ref = np.linalg.solve(H, rhs[..., None])[..., 0]
+    assert_allclose(x, ref, rtol=1e-8, atol=1e-10 * np.abs(ref).max())
+    for got, want in zip((x, cov, ok), _kernels.window_solve.py_func(H, rhs, lo, hi),
+                         strict=True):
+        assert_array_equal(got, want)
+    # the base solved its windows this way (its diagonal loaded by 1e-12): the dense minimum
+    loaded = H.copy()
+    loaded[:, np.arange(n), np.arange(n)] *= 1 + 1e-12
+    ref = np.linalg.solve(loaded, rhs[..., None])[..., 0]
+    assert_allclose(base.x0.reshape(B, -1), ref, rtol=1e-8, atol=1e-10 * np.abs(ref).max())
+    bad = H.copy()
+    bad[1, n // 2, n // 2] = -1.0  # not positive definite
+    _, _, ok = _kernels.window_solve(bad, rhs, lo, hi)
+    assert_array_equal(ok, [True, False, True])
