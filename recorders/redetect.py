@@ -15,6 +15,8 @@ is decoded whole: the decode alone bounds two cores to about 590 frames/s.
 
 from __future__ import annotations
 
+import functools
+import itertools
 import os
 from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor
@@ -23,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pslog.errors import InputError
+from pslog.errors import InputError, PslogError
 from pslog.outputs import check_output_path
 from pslog.records import Detections
 
@@ -77,7 +79,7 @@ def redetect_session(src: str | Path, dst: str | Path, hsv: HsvRange | None = No
     force : overwrite ``dst``
     workers : processes decoding and detecting (default: all cores for large sessions)
     """
-    from pslog.log import copy_session, iter_images, read_session
+    from pslog.log import copy_session, read_session
 
     if not 1 <= max_candidates <= MAX_CANDIDATES:
         raise InputError(f"max_candidates must be in 1..{MAX_CANDIDATES}, got {max_candidates}")
@@ -99,7 +101,7 @@ def redetect_session(src: str | Path, dst: str | Path, hsv: HsvRange | None = No
 
     progress.update(0, total=session.n_images, unit="frames", what="detecting")
     rows, results = [], []
-    for batch_rows, batch_results in _detect_all(iter_images(src), row_of, hsv,
+    for batch_rows, batch_results in _detect_all(src, session.rig.names, row_of, hsv,
                                                  max_candidates, workers, session.n_images):
         rows.extend(batch_rows)
         results.extend(batch_results)
@@ -129,10 +131,10 @@ def redetect_session(src: str | Path, dst: str | Path, hsv: HsvRange | None = No
                            int(np.count_nonzero(new.candidates_per_frame())))
 
 
-def _detect_all(images, row_of: dict, hsv: HsvRange, max_candidates: int,
+def _detect_all(src, rig_names, row_of: dict, hsv: HsvRange, max_candidates: int,
                 workers: int | None, n_images: int) -> Iterator[tuple[list, list]]:
-    """Yield (rows, [(uv, radius, score), ...]) batches for every stored image with a frame
-    record."""
+    """Yield (rows, [(uv, radius, score), ...]) batches, in the images' time order, for every
+    stored image with a frame record."""
     import cv2
 
     # one OpenCV thread in this process too, before any worker is forked: a worker inherits
@@ -140,45 +142,115 @@ def _detect_all(images, row_of: dict, hsv: HsvRange, max_candidates: int,
     # _bgr_box), without its threads, and hangs in its first call into OpenCV
     cv2.setNumThreads(1)
     workers = workers or (os.cpu_count() or 1)
-    batches = _batches(images, row_of)
     if workers <= 1 or n_images < _PARALLEL_FROM:
         detector = BallDetector(hsv, max_candidates)
-        for rows, blobs in batches:
-            yield rows, [_detect_blob(detector, b) for b in blobs]
+        images = iter(_images(src, None, None))
+        while batch := list(itertools.islice(images, _BATCH)):
+            yield _rows(_detect_images(detector, batch), row_of)
         return
     _bgr_box(hsv)  # computed once here and inherited by the forked workers
-    with ProcessPoolExecutor(max_workers=workers) as pool:
-        pending = []
-        for rows, blobs in batches:
-            pending.append((rows, pool.submit(_detect_batch, blobs, hsv, max_candidates)))
-            if len(pending) > 2 * workers:  # bound the memory held in flight
-                r, fut = pending.pop(0)
-                yield r, fut.result()
-        for r, fut in pending:
-            yield r, fut.result()
+    # each task is a time window of whole chunks that a worker reads from the file itself:
+    # nothing but a few numbers per frame crosses between the processes
+    per_task = int(np.clip(n_images // (4 * workers), _BATCH // 2, 4 * _BATCH))
+    windows = _windows(src, rig_names, n_images, per_task)
+    from concurrent.futures.process import BrokenProcessPool
+
+    try:
+        with ProcessPoolExecutor(max_workers=workers) as pool:
+            pending = []
+            for lo, hi in windows:
+                pending.append(pool.submit(_detect_window, str(src), lo, hi, hsv,
+                                           max_candidates))
+                if len(pending) > 2 * workers:  # bound the results held in flight
+                    yield _rows(pending.pop(0).result(), row_of)
+            for fut in pending:
+                yield _rows(fut.result(), row_of)
+    except BrokenProcessPool:
+        raise PslogError(f"re-detecting {src}: a worker process died (killed, or out of "
+                         f"memory); try fewer --workers") from None
 
 
-def _batches(images, row_of: dict) -> Iterator[tuple[list, list]]:
-    rows, blobs = [], []
-    for image in images:
-        row = row_of.get((image.camera, image.frame_index))
-        if row is None:
-            continue  # an image without a frame record: nothing to attach it to
-        rows.append(row)
-        blobs.append(image.data)
-        if len(rows) == _BATCH:
-            yield rows, blobs
-            rows, blobs = [], []
-    if rows:
-        yield rows, blobs
+def _windows(src, rig_names, n_images: int, per_task: int) -> list[tuple[int | None,
+                                                                          int | None]]:
+    """Time windows ``[lo, hi)`` (ns; None: unbounded) covering the whole session, cut at
+    the first message times of the chunks holding images so that no chunk is read twice,
+    about ``per_task`` images each. A file whose summary cannot be read is one window (the
+    reader then reports what is wrong with it)."""
+    from mcap.reader import make_reader
+
+    topics = {f"/camera/{name}/image" for name in rig_names}
+    try:
+        with open(src, "rb") as f:
+            summary = make_reader(f).get_summary()
+        image_channels = {cid for cid, ch in summary.channels.items() if ch.topic in topics}
+        starts = sorted({c.message_start_time for c in summary.chunk_indexes
+                         if image_channels & c.message_index_offsets.keys()})
+    except Exception:  # any fault of the file: the reader names it
+        return [(None, None)]
+    if len(starts) < 2:
+        return [(None, None)]
+    step = max(1, round(per_task * len(starts) / max(n_images, 1)))  # chunks per window
+    cuts = starts[step::step]
+    return list(zip([None, *cuts], [*cuts, None], strict=True))
 
 
-def _detect_batch(blobs: list[bytes], hsv: HsvRange, max_candidates: int) -> list:
+def _images(src, lo: int | None, hi: int | None) -> Iterator:
+    from pslog.log import iter_images
+
+    return iter_images(src, start_ns=lo, end_ns=hi)
+
+
+def _detect_window(src: str, lo: int | None, hi: int | None, hsv: HsvRange,
+                   max_candidates: int) -> tuple[np.ndarray, np.ndarray, list]:
+    """In a worker: read the images of ``[lo, hi)`` from ``src``, decode and detect."""
     import cv2
 
     cv2.setNumThreads(1)
-    detector = BallDetector(hsv, max_candidates)
-    return [_detect_blob(detector, b) for b in blobs]
+    _keep_freed_memory()
+    return _detect_images(BallDetector(hsv, max_candidates), _images(src, lo, hi))
+
+
+@functools.cache
+def _keep_freed_memory() -> None:
+    """In a worker (glibc only): keep freed memory for reuse instead of returning it to the
+    system. Every frame allocates a few MB (the chunk read, the decoded image); by default
+    glibc maps such blocks afresh and unmaps them when freed, so each frame page-faults
+    its buffers in again: about 0.25 ms of system time per 1280 x 720 frame, 5 % of
+    the frame's cost (``benchmarks/bench_redetect.py``). Only the worker's memory use is
+    affected (at most its largest working set stays mapped)."""
+    import ctypes
+    import platform
+
+    if platform.system() != "Linux" or platform.libc_ver()[0] != "glibc":
+        return
+    try:
+        libc = ctypes.CDLL(None)
+        libc.mallopt(-3, 256 << 20)  # M_MMAP_THRESHOLD: blocks up to 256 MB from the heap
+        libc.mallopt(-1, 1 << 30)  # M_TRIM_THRESHOLD: don't give the heap's top back
+    except (OSError, AttributeError):
+        pass  # no mallopt: only slower
+
+
+def _detect_images(detector: BallDetector, images) -> tuple[np.ndarray, np.ndarray, list]:
+    """(camera (n,), frame index (n,), [(uv, radius, score)] * n) of ``images`` in order."""
+    cameras, indices, found = [], [], []
+    for image in images:
+        cameras.append(image.camera)
+        indices.append(image.frame_index)
+        found.append(_detect_blob(detector, image.data))
+    return np.array(cameras, dtype=np.int64), np.array(indices, dtype=np.int64), found
+
+
+def _rows(detected: tuple[np.ndarray, np.ndarray, list], row_of: dict) -> tuple[list, list]:
+    """The frame rows of detected images and their candidates; an image without a frame
+    record is dropped (nothing to attach it to)."""
+    rows, results = [], []
+    for camera, index, found in zip(*detected, strict=True):
+        row = row_of.get((int(camera), int(index)))
+        if row is not None:
+            rows.append(row)
+            results.append(found)
+    return rows, results
 
 
 def _detect_blob(detector: BallDetector, blob: bytes) -> tuple[np.ndarray, np.ndarray,
