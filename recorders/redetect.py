@@ -29,10 +29,13 @@ from pslog.errors import InputError, PslogError
 from pslog.outputs import check_output_path
 from pslog.records import Detections
 
-from .detect import BallDetector, HsvRange, _bgr_box
+from .detect import BallDetector, HsvRange
 
 _BATCH = 64  # images per task when several processes decode and detect
 _PARALLEL_FROM = 400  # images; below this one process is faster than starting a pool
+# images from which the detector's compiled screen is used: loading numba costs about 0.5 s
+# of CPU once, the screen saves about 0.35 ms per 1280 x 720 frame
+_COMPILED_FROM = 2000
 #: Most ball candidates kept per frame: beyond a handful they are noise, and each costs work.
 MAX_CANDIDATES = 100
 #: Most worker processes: more than the cores only adds memory and start-up time.
@@ -142,13 +145,15 @@ def _detect_all(src, rig_names, row_of: dict, hsv: HsvRange, max_candidates: int
     # _bgr_box), without its threads, and hangs in its first call into OpenCV
     cv2.setNumThreads(1)
     workers = workers or (os.cpu_count() or 1)
+    compiled = n_images >= _COMPILED_FROM
     if workers <= 1 or n_images < _PARALLEL_FROM:
-        detector = BallDetector(hsv, max_candidates)
+        detector = BallDetector(hsv, max_candidates, compiled=compiled)
         images = iter(_images(src, None, None))
         while batch := list(itertools.islice(images, _BATCH)):
             yield _rows(_detect_images(detector, batch), row_of)
         return
-    _bgr_box(hsv)  # computed once here and inherited by the forked workers
+    # the screen box and the compiled screen made here once, inherited by the forked workers
+    BallDetector(hsv, max_candidates, compiled=compiled).detect(np.zeros((16, 16, 3), np.uint8))
     # each task is a time window of whole chunks that a worker reads from the file itself:
     # nothing but a few numbers per frame crosses between the processes
     per_task = int(np.clip(n_images // (4 * workers), _BATCH // 2, 4 * _BATCH))
@@ -160,7 +165,7 @@ def _detect_all(src, rig_names, row_of: dict, hsv: HsvRange, max_candidates: int
             pending = []
             for lo, hi in windows:
                 pending.append(pool.submit(_detect_window, str(src), lo, hi, hsv,
-                                           max_candidates))
+                                           max_candidates, compiled))
                 if len(pending) > 2 * workers:  # bound the results held in flight
                     yield _rows(pending.pop(0).result(), row_of)
             for fut in pending:
@@ -201,13 +206,14 @@ def _images(src, lo: int | None, hi: int | None) -> Iterator:
 
 
 def _detect_window(src: str, lo: int | None, hi: int | None, hsv: HsvRange,
-                   max_candidates: int) -> tuple[np.ndarray, np.ndarray, list]:
+                   max_candidates: int, compiled: bool) -> tuple[np.ndarray, np.ndarray, list]:
     """In a worker: read the images of ``[lo, hi)`` from ``src``, decode and detect."""
     import cv2
 
     cv2.setNumThreads(1)
     _keep_freed_memory()
-    return _detect_images(BallDetector(hsv, max_candidates), _images(src, lo, hi))
+    return _detect_images(BallDetector(hsv, max_candidates, compiled=compiled),
+                          _images(src, lo, hi))
 
 
 @functools.cache
