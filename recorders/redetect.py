@@ -15,6 +15,7 @@ is decoded whole: the decode alone bounds two cores to about 590 frames/s.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import itertools
 import os
@@ -103,16 +104,34 @@ def redetect_session(src: str | Path, dst: str | Path, hsv: HsvRange | None = No
     from pslog import progress
 
     progress.update(0, total=session.n_images, unit="frames", what="detecting")
-    rows, results = [], []
-    for batch_rows, batch_results in _detect_all(src, session.rig.names, row_of, hsv,
-                                                 max_candidates, workers, session.n_images):
-        rows.extend(batch_rows)
-        results.extend(batch_results)
-        progress.update(advance=len(batch_rows))
+    done: dict[str, object] = {}
+
+    def detections() -> Detections:
+        """The new detections, once the rest of the session is copied (the workers detect
+        meanwhile)."""
+        rows, results = [], []
+        for batch_rows, batch_results in batches:
+            rows.extend(batch_rows)
+            results.extend(batch_results)
+            progress.update(advance=len(batch_rows))
+        done["redone"], done["new"] = _merged(old, rows, results)
+        return done["new"]
+
+    with _detecting(src, session.rig.names, row_of, hsv, max_candidates, workers,
+                    session.n_images) as batches:
+        copy_session(src, dst, detections=detections, metadata={"detector_hsv": hsv.text()},
+                     force=force)
+    redone, new = done["redone"], done["new"]
+    return RedetectSummary(dst, old.n_frames, int(redone.sum()), int((~redone).sum()),
+                           int(np.count_nonzero(old.candidates_per_frame())),
+                           int(np.count_nonzero(new.candidates_per_frame())))
+
+
+def _merged(old: Detections, rows: list, results: list) -> tuple[np.ndarray, Detections]:
+    """(re-detected (n_frames,) bool, the new detections): the new candidates of the
+    re-detected frames, the old ones of the others."""
     redone = np.zeros(old.n_frames, dtype=bool)
     redone[rows] = True
-
-    # candidates: the new ones for re-detected frames, the old ones for the others
     cand_frame, cand_uv, cand_radius, cand_score = [], [], [], []
     keep_old = ~redone[old.cand_frame]
     cand_frame.append(old.cand_frame[keep_old])
@@ -128,16 +147,16 @@ def redetect_session(src: str | Path, dst: str | Path, hsv: HsvRange | None = No
         old.camera_names, old.frame_time_ns, old.frame_camera, old.frame_index,
         np.concatenate(cand_frame), np.concatenate(cand_uv).reshape(-1, 2),
         np.concatenate(cand_radius), np.concatenate(cand_score))
-    copy_session(src, dst, detections=new, metadata={"detector_hsv": hsv.text()}, force=force)
-    return RedetectSummary(dst, old.n_frames, int(redone.sum()), int((~redone).sum()),
-                           int(np.count_nonzero(old.candidates_per_frame())),
-                           int(np.count_nonzero(new.candidates_per_frame())))
+    return redone, new
 
 
-def _detect_all(src, rig_names, row_of: dict, hsv: HsvRange, max_candidates: int,
-                workers: int | None, n_images: int) -> Iterator[tuple[list, list]]:
-    """Yield (rows, [(uv, radius, score), ...]) batches, in the images' time order, for every
-    stored image with a frame record."""
+@contextlib.contextmanager
+def _detecting(src, rig_names, row_of: dict, hsv: HsvRange, max_candidates: int,
+               workers: int | None, n_images: int) -> Iterator[Iterator[tuple[list, list]]]:
+    """Start re-detecting (worker processes start at once, on every window of the session);
+    give an iterator of (rows, [(uv, radius, score), ...]) batches, in the images' time
+    order, for every stored image with a frame record. On leaving, work not started is
+    cancelled."""
     import cv2
 
     # one OpenCV thread in this process too, before any worker is forked: a worker inherits
@@ -147,32 +166,33 @@ def _detect_all(src, rig_names, row_of: dict, hsv: HsvRange, max_candidates: int
     workers = workers or (os.cpu_count() or 1)
     compiled = n_images >= _COMPILED_FROM
     if workers <= 1 or n_images < _PARALLEL_FROM:
-        detector = BallDetector(hsv, max_candidates, compiled=compiled)
-        images = iter(_images(src, None, None))
-        while batch := list(itertools.islice(images, _BATCH)):
-            yield _rows(_detect_images(detector, batch), row_of)
+        yield _serial(src, row_of, BallDetector(hsv, max_candidates, compiled=compiled))
         return
     # the screen box and the compiled screen made here once, inherited by the forked workers
     BallDetector(hsv, max_candidates, compiled=compiled).detect(np.zeros((16, 16, 3), np.uint8))
     # each task is a time window of whole chunks that a worker reads from the file itself:
-    # nothing but a few numbers per frame crosses between the processes
+    # nothing but a few numbers per frame crosses between the processes, so every task is
+    # queued at once (the workers stay busy while this process copies the session)
     per_task = int(np.clip(n_images // (4 * workers), _BATCH // 2, 4 * _BATCH))
     windows = _windows(src, rig_names, n_images, per_task)
     from concurrent.futures.process import BrokenProcessPool
 
+    pool = ProcessPoolExecutor(max_workers=workers)
     try:
-        with ProcessPoolExecutor(max_workers=workers) as pool:
-            pending = []
-            for lo, hi in windows:
-                pending.append(pool.submit(_detect_window, str(src), lo, hi, hsv,
-                                           max_candidates, compiled))
-                if len(pending) > 2 * workers:  # bound the results held in flight
-                    yield _rows(pending.pop(0).result(), row_of)
-            for fut in pending:
-                yield _rows(fut.result(), row_of)
+        futures = [pool.submit(_detect_window, str(src), lo, hi, hsv, max_candidates, compiled)
+                   for lo, hi in windows]
+        yield (_rows(fut.result(), row_of) for fut in futures)
     except BrokenProcessPool:
         raise PslogError(f"re-detecting {src}: a worker process died (killed, or out of "
                          f"memory); try fewer --workers") from None
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _serial(src, row_of: dict, detector: BallDetector) -> Iterator[tuple[list, list]]:
+    images = iter(_images(src, None, None))
+    while batch := list(itertools.islice(images, _BATCH)):
+        yield _rows(_detect_images(detector, batch), row_of)
 
 
 def _windows(src, rig_names, n_images: int, per_task: int) -> list[tuple[int | None,
