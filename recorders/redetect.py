@@ -4,13 +4,26 @@ The new session is a stream copy of the old one (frames, calibration, poses, tru
 tracks and metadata kept as stored) with every frame's detections replaced, so it fuses like
 any session.
 
-Where the time goes (1280 x 720 JPEGs of quality 90, ``benchmarks/bench_redetect.py``): decoding
-a frame with ``cv2.imdecode`` costs about 3.4 ms of CPU, most of it entropy decoding
-that no reduced-size decode (``IMREAD_REDUCED_COLOR_2``: 2.7 ms) avoids; detection about
-0.8 ms; reading the session, handing the JPEGs to the workers and writing the new session
-about 1 ms more per frame in the main process. OpenCV cannot decode only a region of a JPEG,
-and the detector's fine pass needs the full-resolution pixels around the ball, so every frame
-is decoded whole: the decode alone bounds two cores to about 590 frames/s.
+Where the time goes (1280 x 720 JPEGs of quality 90, about 250 kB each with the renderer's
+sensor noise; ``benchmarks/bench_redetect.py``, CPU time per frame): ``cv2.imdecode`` 3.4 ms
+(libjpeg-turbo with SIMD; most of it entropy decoding, which no reduced-size decode avoids:
+``IMREAD_REDUCED_COLOR_8`` still costs 2.3 ms, and its pixels are not the full decode's, so
+the detector's candidates would change); detection 0.9 ms (0.55 ms with the compiled screen,
+used from :data:`_COMPILED_FROM` frames on, once numba's half second of loading is repaid);
+reading the frames from the file 0.3 ms; copying the session into the new file about 1 ms
+in the main process. So:
+
+- each worker reads its own time window of whole image chunks from the file (cut at the
+  chunks' first message times, so no chunk is read twice): no frame is pickled between
+  processes, and the main process never reads the images;
+- every window is queued at once and the main process copies the session meanwhile
+  (``copy_session`` takes the detections as a callable, called once the rest is copied):
+  all cores stay busy until the end;
+- the workers keep freed memory (:func:`_keep_freed_memory`): no page faults per frame.
+
+Every frame is still decoded whole and detected exactly as before (the tests compare the
+candidates to the last bit): the decode and detection alone bound two cores to about
+450 frames/s (500 compiled), before the session is read and written.
 """
 
 from __future__ import annotations
@@ -238,12 +251,13 @@ def _detect_window(src: str, lo: int | None, hi: int | None, hsv: HsvRange,
 
 @functools.cache
 def _keep_freed_memory() -> None:
-    """In a worker (glibc only): keep freed memory for reuse instead of returning it to the
-    system. Every frame allocates a few MB (the chunk read, the decoded image); by default
-    glibc maps such blocks afresh and unmaps them when freed, so each frame page-faults
-    its buffers in again: about 0.25 ms of system time per 1280 x 720 frame, 5 % of
-    the frame's cost (``benchmarks/bench_redetect.py``). Only the worker's memory use is
-    affected (at most its largest working set stays mapped)."""
+    """In a worker or the ``pslog redetect`` process (glibc only): keep freed memory for
+    reuse instead of returning it to the system. Every frame allocates a few MB (the chunk
+    read, the decoded image, the copied chunk); by default glibc maps such blocks afresh
+    and unmaps them when freed, so each frame page-faults its buffers in again: about
+    0.25 ms of system time per 1280 x 720 frame in a worker, 5 % of the frame's cost, and
+    as much again in the process copying the session (``benchmarks/bench_redetect.py``).
+    Only this process's memory use is affected (its largest working set stays mapped)."""
     import ctypes
     import platform
 
