@@ -307,13 +307,18 @@ def _nearest_is_stride(h: int, w: int, s: int) -> bool:
         return True
     if h // s < 1 or w // s < 1 or max(h, w) >= 1 << 16:
         return False
-    y, x = np.mgrid[0:h, 0:w]
-    code = np.stack([x & 255, x >> 8, y & 255, y >> 8], axis=-1).astype(np.uint8)
-    low, high = _coarse(code[..., :3].copy(), s), _coarse(code[..., 1:].copy(), s)
-    xs = low[..., 0].astype(np.int64) + (low[..., 1].astype(np.int64) << 8)
-    ys = high[..., 1].astype(np.int64) + (high[..., 2].astype(np.int64) << 8)
-    i, j = np.mgrid[0:h // s, 0:w // s]
-    return bool(np.array_equal(xs, j * s) and np.array_equal(ys, i * s))
+    x, y = np.arange(w, dtype=np.uint16), np.arange(h, dtype=np.uint16)[:, None]
+    cols = np.empty((h, w, 3), np.uint8)  # column, low and high byte; row's low byte
+    cols[..., 0], cols[..., 1], cols[..., 2] = x & 255, x >> 8, y & 255
+    rows = np.empty((h, w, 3), np.uint8)  # row, low and high byte; column's low byte
+    rows[..., 0], rows[..., 1], rows[..., 2] = y & 255, y >> 8, x & 255
+    a, b = _coarse(cols, s), _coarse(rows, s)
+    j = s * np.arange(w // s, dtype=np.uint16)
+    i = s * np.arange(h // s, dtype=np.uint16)[:, None]
+    return bool(np.array_equal(a[..., 0] | (a[..., 1].astype(np.uint16) << 8), j + 0 * i)
+                and np.array_equal(b[..., 0] | (b[..., 1].astype(np.uint16) << 8), i + 0 * j)
+                and np.array_equal(a[..., 2], (i & 255) + 0 * j)
+                and np.array_equal(b[..., 2], (j & 255) + 0 * i))
 
 
 def _compiled_screen():
