@@ -19,6 +19,11 @@ centroid of the sphere's true silhouette (rendered noise-free, 8 x 8 rays per pi
 shading) lies from the projection of the centre (a sphere off the optical axis images as an
 ellipse whose centroid is pushed outwards).
 
+Speeds are frames per CPU second of the timing thread (what one idle core does; the machine
+may be shared). ``BallDetector(compiled=True)`` (the numba screen ``pslog redetect`` uses from
+2000 frames on) is timed beside the default, after numba is loaded and the screen compiled,
+and checked to find the same candidates on every frame.
+
 Targets (issue 4): >= 1,000 frames/s at 640 x 480; < 0.25 px RMS for radius >= 5 px;
 (issue 12) >= 800 frames/s at 1280 x 720 on one core.
 Run: ``python benchmarks/bench_detect.py [--frames 400] [--quick] [--base DIR]``
@@ -35,13 +40,15 @@ import numpy as np
 
 
 def _rate(fn, frames, repeat: int) -> float:
+    """Frames per CPU second of this thread (what one idle core would do: the machine may
+    be shared)."""
     for f in frames[:10]:
         fn(f)
-    start = time.perf_counter()
+    start = time.thread_time()
     for _ in range(repeat):
         for f in frames:
             fn(f)
-    return repeat * len(frames) / (time.perf_counter() - start)
+    return repeat * len(frames) / (time.thread_time() - start)
 
 
 def _close_camera(dist):
@@ -103,8 +110,9 @@ def contour_peer(hsv):
     return detect
 
 
-def speed_hd(n_frames: int, repeat: int, base: str | None) -> tuple[float, float]:
-    """(ours, contour peer): frames per CPU second of one core at 1280 x 720."""
+def speed_hd(n_frames: int, repeat: int, base: str | None) -> tuple[float, float, float]:
+    """(ours, contour peer, ours with the compiled screen): frames per CPU second of one core
+    at 1280 x 720."""
     import cv2
 
     from pslog.motion import get_motion
@@ -129,6 +137,12 @@ def speed_hd(n_frames: int, repeat: int, base: str | None) -> tuple[float, float
             a, b = detector.detect(f), old.detect(f)
             assert all(np.array_equal(getattr(a, k), getattr(b, k))
                        for k in ("uv", "radius", "area", "roundness", "score")), "differ"
+    compiled = BallDetector(compiled=True)
+    for f in frames:
+        a, b = detector.detect(f), compiled.detect(f)
+        assert all(np.array_equal(getattr(a, k), getattr(b, k))
+                   for k in ("uv", "radius", "area", "roundness", "score")), "compiled differs"
+    rates["BallDetector(compiled=True)"] = compiled.detect
     rates["BallDetector (this checkout)"] = detector.detect
     # interleave the rounds so that a change of machine load hits every detector alike
     totals = {name: np.zeros(2) for name in rates}
@@ -143,14 +157,15 @@ def speed_hd(n_frames: int, repeat: int, base: str | None) -> tuple[float, float
         wall, cpu = total / repeat
         print(f"  {name:<34} {wall:8.0f} frames/s  {cpu:8.0f} frames/CPU-s   (this checkout "
               f"{ours[0] / wall:.2f} x, {ours[1] / cpu:.2f} x)")
-    if base:
-        print("  candidates of both BallDetectors identical on every frame")
+    print(f"  candidates of {'all' if base else 'both'} BallDetectors identical on every frame "
+          f"(compiled: numba loaded and the screen compiled before timing)")
     print(f"  ball found in {100 * found:.0f} % of frames")
-    return float(ours[1]), float(totals["peer HSV+inRange+findContours"][1] / repeat)
+    return (float(ours[1]), float(totals["peer HSV+inRange+findContours"][1] / repeat),
+            float(totals["BallDetector(compiled=True)"][1] / repeat))
 
 
 def speed(n_frames: int, repeat: int) -> tuple[float, float]:
-    """(ours, contour peer): frames per second of one core at 640 x 480."""
+    """(ours, contour peer): frames per CPU second of one core at 640 x 480."""
     import cv2
 
     from pslog.motion import get_motion
@@ -173,7 +188,8 @@ def speed(n_frames: int, repeat: int) -> tuple[float, float]:
     r_ours = _rate(detector.detect, frames, repeat)
     r_peer = _rate(contour_peer(detector.hsv), frames, repeat)
     found = np.mean([len(detector.detect(f)) > 0 for f in frames])
-    print(f"speed, {len(frames)} rendered 640x480 frames x {repeat}, one core:")
+    print(f"speed, {len(frames)} rendered 640x480 frames x {repeat}, one core (per CPU "
+          f"second of the thread):")
     print(f"  baseline bare cv2.inRange (BGR)   {r_inrange:8.0f} frames/s")
     print(f"  baseline one-pass detector        {r_one_pass:8.0f} frames/s")
     print(f"  BallDetector (coarse + fine)      {r_ours:8.0f} frames/s   "
@@ -238,23 +254,28 @@ def main() -> None:
     if args.quick:
         args.frames, args.repeat, args.accuracy_frames, args.hd_frames = 90, 3, 30, 21
     rate, peer = speed(args.frames, args.repeat)
-    rate_hd, peer_hd = speed_hd(args.hd_frames, args.repeat, args.base)
+    rate_hd, peer_hd, rate_jit = speed_hd(args.hd_frames, args.repeat, args.base)
     rms = accuracy(args.accuracy_frames)
     if args.json is not None:
         contour = "OpenCV HSV+inRange+findContours"
         args.json.write_text(json.dumps({"rows": [
-            {"stage": "detection 640x480", "figure": rate, "unit": "frames/s",
+            {"stage": "detection 640x480", "figure": rate, "unit": "frames/CPU-s",
              "target": ">= 1,000 (1 core)", "ok": rate >= 1000, "peer": contour,
              "peer_figure": peer, "better": "higher", "note": f"{args.frames} frames"},
             {"stage": "detection 1280x720", "figure": rate_hd, "unit": "frames/CPU-s",
              "target": ">= 800 (1 core)", "ok": rate_hd >= 800, "peer": contour,
              "peer_figure": peer_hd, "better": "higher", "note": f"{args.hd_frames} frames"},
+            {"stage": "detection 1280x720, compiled screen", "figure": rate_jit,
+             "unit": "frames/CPU-s", "target": ">= 800 (1 core)", "ok": rate_jit >= 800,
+             "peer": contour, "peer_figure": peer_hd, "better": "higher",
+             "note": "BallDetector(compiled=True), as redetect from 2000 frames"},
             {"stage": "detection accuracy", "figure": rms, "unit": "px RMS",
              "target": "< 0.25", "ok": rms < 0.25, "peer": None, "peer_figure": None,
              "better": "lower", "note": "ball radius >= 5 px"}]}))
     print(f"targets: >= 1000 frames/s at 640x480: {'PASS' if rate >= 1000 else 'FAIL'} "
           f"({rate:.0f}); >= 800 frames/CPU-s at 1280x720: {'PASS' if rate_hd >= 800 else 'FAIL'} "
-          f"({rate_hd:.0f}); < 0.25 px RMS: {'PASS' if rms < 0.25 else 'FAIL'} ({rms:.3f} px)")
+          f"({rate_hd:.0f}; compiled screen {rate_jit:.0f}); "
+          f"< 0.25 px RMS: {'PASS' if rms < 0.25 else 'FAIL'} ({rms:.3f} px)")
 
 
 if __name__ == "__main__":

@@ -135,10 +135,13 @@ class BallDetector:
     min_area : float, smallest blob kept, full-resolution pixels
     downscale : int, subsampling of the coarse pass (1: threshold the whole frame at full
         resolution; 2 finds balls of radius >= 1.5 px)
+    compiled : bool, screen the coarse pixels with one compiled loop (numba) instead of
+        OpenCV's subsampling, screen and gather: the same candidates, about 0.3 ms less per
+        1280 x 720 frame, but about 0.5 s to load numba per process; for long runs
     """
 
     def __init__(self, hsv: HsvRange | None = None, max_candidates: int = 5,
-                 min_area: float = 2.0, downscale: int = 2) -> None:
+                 min_area: float = 2.0, downscale: int = 2, compiled: bool = False) -> None:
         if max_candidates < 1:
             raise InputError(f"max_candidates must be >= 1, got {max_candidates!r}")
         if downscale < 1:
@@ -147,6 +150,9 @@ class BallDetector:
         self.max_candidates = int(max_candidates)
         self.min_area = float(min_area)
         self.downscale = int(downscale)
+        self.compiled = bool(compiled)
+        self._screen = _compiled_screen() if self.compiled else None
+        self._buffers: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
 
     def detect(self, frame_bgr: np.ndarray) -> Candidates:
         """Candidates of one frame (H, W, 3) uint8 BGR."""
@@ -155,11 +161,10 @@ class BallDetector:
                              f"{frame_bgr.dtype}")
         s = self.downscale
         h, w = frame_bgr.shape[:2]
-        if s > 1:
-            coarse = cv2.resize(frame_bgr, (w // s, h // s), interpolation=cv2.INTER_NEAREST)
+        if self._screen is not None and _nearest_is_stride(h, w, s):
+            pooled = self._coarse_cells_compiled(frame_bgr)
         else:
-            coarse = frame_bgr
-        pooled = self._coarse_cells(coarse)
+            pooled = self._coarse_cells(_coarse(frame_bgr, s))
         if pooled is None:
             return Candidates.empty()
         _, _, stats, _ = cv2.connectedComponentsWithStats(pooled, connectivity=8)
@@ -226,6 +231,38 @@ class BallDetector:
                                       cv2.BORDER_CONSTANT, value=0)
         return cv2.resize(mask, (pw, ph), interpolation=cv2.INTER_AREA)  # > 0 if any set
 
+    def _coarse_cells_compiled(self, frame_bgr: np.ndarray) -> np.ndarray | None:
+        """:meth:`_coarse_cells` of the subsampled frame, the subsampling, screen and
+        gather of the screened pixels done by one compiled loop over ``frame_bgr`` (where
+        OpenCV's nearest-neighbour subsampling picks every ``downscale``-th pixel, checked by
+        :func:`_nearest_is_stride`): the same pooled mask."""
+        s = self.downscale
+        h, w = frame_bgr.shape[:2]
+        ch, cw = h // s, w // s
+        lo, hi = _bgr_box(self.hsv)
+        if lo is None:
+            return None
+        buffers = self._buffers.get((ch, cw))
+        if buffers is None:
+            cap = max(ch * cw // _SPARSE_FRACTION, 1)
+            buffers = self._buffers[ch, cw] = (np.empty((cap, 2), np.int32),
+                                               np.empty((cap, 3), np.uint8))
+        xy, colours = buffers
+        n = self._screen(frame_bgr, s, ch, cw, np.array(lo, np.uint8), np.array(hi, np.uint8),
+                         xy, colours)
+        if not n:
+            return None
+        if n > min(ch * cw // _SPARSE_FRACTION, len(xy)):  # many pass: the whole frame
+            return self._coarse_cells(_coarse(frame_bgr, s))
+        xy = xy[:n]
+        inside = self.hsv.mask(cv2.cvtColor(colours[None, :n], cv2.COLOR_BGR2HSV))[0] > 0
+        if not inside.any():
+            return None
+        xy = xy[inside]
+        pooled = np.zeros((-(-ch // _POOL), -(-cw // _POOL)), dtype=np.uint8)
+        pooled[xy[:, 1] // _POOL, xy[:, 0] // _POOL] = 255
+        return pooled
+
     def _fine(self, frame_bgr: np.ndarray, x0: int, y0: int, x1: int, y1: int) -> np.ndarray:
         """Components of the full-resolution mask in a box: rows (n, 5) of
         u, v (frame pixels), area, roundness, fill."""
@@ -250,6 +287,45 @@ class BallDetector:
             out[row] = (cu + x0, cv + y0, area, np.sqrt(max(minor, 0.0) / major),
                         area / ellipse_area)
         return out
+
+
+def _coarse(frame_bgr: np.ndarray, s: int) -> np.ndarray:
+    """The frame subsampled by ``s`` (nearest neighbour), or itself for ``s = 1``."""
+    if s == 1:
+        return frame_bgr
+    h, w = frame_bgr.shape[:2]
+    return cv2.resize(frame_bgr, (w // s, h // s), interpolation=cv2.INTER_NEAREST)
+
+
+@functools.lru_cache(maxsize=64)
+def _nearest_is_stride(h: int, w: int, s: int) -> bool:
+    """Whether :func:`_coarse` of an (h, w, 3) uint8 frame takes exactly the pixels
+    ``(i * s, j * s)``: found by subsampling two frames of this size whose colours encode
+    each pixel's column and row, so the compiled screen samples the pixels this OpenCV
+    build samples (whatever its rounding or IPP path), or is not used."""
+    if s == 1:
+        return True
+    if h // s < 1 or w // s < 1 or max(h, w) >= 1 << 16:
+        return False
+    x, y = np.arange(w, dtype=np.uint16), np.arange(h, dtype=np.uint16)[:, None]
+    cols = np.empty((h, w, 3), np.uint8)  # column, low and high byte; row's low byte
+    cols[..., 0], cols[..., 1], cols[..., 2] = x & 255, x >> 8, y & 255
+    rows = np.empty((h, w, 3), np.uint8)  # row, low and high byte; column's low byte
+    rows[..., 0], rows[..., 1], rows[..., 2] = y & 255, y >> 8, x & 255
+    a, b = _coarse(cols, s), _coarse(rows, s)
+    j = s * np.arange(w // s, dtype=np.uint16)
+    i = s * np.arange(h // s, dtype=np.uint16)[:, None]
+    return bool(np.array_equal(a[..., 0] | (a[..., 1].astype(np.uint16) << 8), j + 0 * i)
+                and np.array_equal(b[..., 0] | (b[..., 1].astype(np.uint16) << 8), i + 0 * j)
+                and np.array_equal(a[..., 2], (i & 255) + 0 * j)
+                and np.array_equal(b[..., 2], (j & 255) + 0 * i))
+
+
+def _compiled_screen():
+    """The compiled screen (imports numba on first use)."""
+    from ._screen import screen_samples
+
+    return screen_samples
 
 
 @functools.lru_cache(maxsize=16)

@@ -4,17 +4,33 @@ The new session is a stream copy of the old one (frames, calibration, poses, tru
 tracks and metadata kept as stored) with every frame's detections replaced, so it fuses like
 any session.
 
-Where the time goes (1280 x 720 JPEGs of quality 90, ``benchmarks/bench_redetect.py``): decoding
-a frame with ``cv2.imdecode`` costs about 3.4 ms of CPU, most of it entropy decoding
-that no reduced-size decode (``IMREAD_REDUCED_COLOR_2``: 2.7 ms) avoids; detection about
-0.8 ms; reading the session, handing the JPEGs to the workers and writing the new session
-about 1 ms more per frame in the main process. OpenCV cannot decode only a region of a JPEG,
-and the detector's fine pass needs the full-resolution pixels around the ball, so every frame
-is decoded whole: the decode alone bounds two cores to about 590 frames/s.
+Where the time goes (1280 x 720 JPEGs of quality 90, about 250 kB each with the renderer's
+sensor noise; ``benchmarks/bench_redetect.py``, CPU time per frame): ``cv2.imdecode`` 3.4 ms
+(libjpeg-turbo with SIMD; most of it entropy decoding, which no reduced-size decode avoids:
+``IMREAD_REDUCED_COLOR_8`` still costs 2.3 ms, and its pixels are not the full decode's, so
+the detector's candidates would change); detection 0.9 ms (0.55 ms with the compiled screen,
+used from :data:`_COMPILED_FROM` frames on, once numba's half second of loading is repaid);
+reading the frames from the file 0.3 ms; copying the session into the new file about 1 ms
+in the main process. So:
+
+- each worker reads its own time window of whole image chunks from the file (cut at the
+  chunks' first message times, so no chunk is read twice): no frame is pickled between
+  processes, and the main process never reads the images;
+- every window is queued at once and the main process copies the session meanwhile
+  (``copy_session`` takes the detections as a callable, called once the rest is copied):
+  all cores stay busy until the end;
+- the workers keep freed memory (:func:`_keep_freed_memory`): no page faults per frame.
+
+Every frame is still decoded whole and detected exactly as before (the tests compare the
+candidates to the last bit): the decode and detection alone bound two cores to about
+450 frames/s (500 compiled), before the session is read and written.
 """
 
 from __future__ import annotations
 
+import contextlib
+import functools
+import itertools
 import os
 from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor
@@ -23,14 +39,17 @@ from pathlib import Path
 
 import numpy as np
 
-from pslog.errors import InputError
+from pslog.errors import InputError, PslogError
 from pslog.outputs import check_output_path
 from pslog.records import Detections
 
-from .detect import BallDetector, HsvRange, _bgr_box
+from .detect import BallDetector, HsvRange
 
 _BATCH = 64  # images per task when several processes decode and detect
 _PARALLEL_FROM = 400  # images; below this one process is faster than starting a pool
+# images from which the detector's compiled screen is used: loading numba costs about 0.5 s
+# of CPU once, the screen saves about 0.35 ms per 1280 x 720 frame
+_COMPILED_FROM = 2000
 #: Most ball candidates kept per frame: beyond a handful they are noise, and each costs work.
 MAX_CANDIDATES = 100
 #: Most worker processes: more than the cores only adds memory and start-up time.
@@ -77,7 +96,7 @@ def redetect_session(src: str | Path, dst: str | Path, hsv: HsvRange | None = No
     force : overwrite ``dst``
     workers : processes decoding and detecting (default: all cores for large sessions)
     """
-    from pslog.log import copy_session, iter_images, read_session
+    from pslog.log import copy_session, read_session
 
     if not 1 <= max_candidates <= MAX_CANDIDATES:
         raise InputError(f"max_candidates must be in 1..{MAX_CANDIDATES}, got {max_candidates}")
@@ -98,16 +117,34 @@ def redetect_session(src: str | Path, dst: str | Path, hsv: HsvRange | None = No
     from pslog import progress
 
     progress.update(0, total=session.n_images, unit="frames", what="detecting")
-    rows, results = [], []
-    for batch_rows, batch_results in _detect_all(iter_images(src), row_of, hsv,
-                                                 max_candidates, workers, session.n_images):
-        rows.extend(batch_rows)
-        results.extend(batch_results)
-        progress.update(advance=len(batch_rows))
+    done: dict[str, object] = {}
+
+    def detections() -> Detections:
+        """The new detections, once the rest of the session is copied (the workers detect
+        meanwhile)."""
+        rows, results = [], []
+        for batch_rows, batch_results in batches:
+            rows.extend(batch_rows)
+            results.extend(batch_results)
+            progress.update(advance=len(batch_rows))
+        done["redone"], done["new"] = _merged(old, rows, results)
+        return done["new"]
+
+    with _detecting(src, session.rig.names, row_of, hsv, max_candidates, workers,
+                    session.n_images) as batches:
+        copy_session(src, dst, detections=detections, metadata={"detector_hsv": hsv.text()},
+                     force=force)
+    redone, new = done["redone"], done["new"]
+    return RedetectSummary(dst, old.n_frames, int(redone.sum()), int((~redone).sum()),
+                           int(np.count_nonzero(old.candidates_per_frame())),
+                           int(np.count_nonzero(new.candidates_per_frame())))
+
+
+def _merged(old: Detections, rows: list, results: list) -> tuple[np.ndarray, Detections]:
+    """(re-detected (n_frames,) bool, the new detections): the new candidates of the
+    re-detected frames, the old ones of the others."""
     redone = np.zeros(old.n_frames, dtype=bool)
     redone[rows] = True
-
-    # candidates: the new ones for re-detected frames, the old ones for the others
     cand_frame, cand_uv, cand_radius, cand_score = [], [], [], []
     keep_old = ~redone[old.cand_frame]
     cand_frame.append(old.cand_frame[keep_old])
@@ -123,16 +160,16 @@ def redetect_session(src: str | Path, dst: str | Path, hsv: HsvRange | None = No
         old.camera_names, old.frame_time_ns, old.frame_camera, old.frame_index,
         np.concatenate(cand_frame), np.concatenate(cand_uv).reshape(-1, 2),
         np.concatenate(cand_radius), np.concatenate(cand_score))
-    copy_session(src, dst, detections=new, metadata={"detector_hsv": hsv.text()}, force=force)
-    return RedetectSummary(dst, old.n_frames, int(redone.sum()), int((~redone).sum()),
-                           int(np.count_nonzero(old.candidates_per_frame())),
-                           int(np.count_nonzero(new.candidates_per_frame())))
+    return redone, new
 
 
-def _detect_all(images, row_of: dict, hsv: HsvRange, max_candidates: int,
-                workers: int | None, n_images: int) -> Iterator[tuple[list, list]]:
-    """Yield (rows, [(uv, radius, score), ...]) batches for every stored image with a frame
-    record."""
+@contextlib.contextmanager
+def _detecting(src, rig_names, row_of: dict, hsv: HsvRange, max_candidates: int,
+               workers: int | None, n_images: int) -> Iterator[Iterator[tuple[list, list]]]:
+    """Start re-detecting (worker processes start at once, on every window of the session);
+    give an iterator of (rows, [(uv, radius, score), ...]) batches, in the images' time
+    order, for every stored image with a frame record. On leaving, work not started is
+    cancelled."""
     import cv2
 
     # one OpenCV thread in this process too, before any worker is forked: a worker inherits
@@ -140,45 +177,120 @@ def _detect_all(images, row_of: dict, hsv: HsvRange, max_candidates: int,
     # _bgr_box), without its threads, and hangs in its first call into OpenCV
     cv2.setNumThreads(1)
     workers = workers or (os.cpu_count() or 1)
-    batches = _batches(images, row_of)
+    compiled = n_images >= _COMPILED_FROM
     if workers <= 1 or n_images < _PARALLEL_FROM:
-        detector = BallDetector(hsv, max_candidates)
-        for rows, blobs in batches:
-            yield rows, [_detect_blob(detector, b) for b in blobs]
+        yield _serial(src, row_of, BallDetector(hsv, max_candidates, compiled=compiled))
         return
-    _bgr_box(hsv)  # computed once here and inherited by the forked workers
-    with ProcessPoolExecutor(max_workers=workers) as pool:
-        pending = []
-        for rows, blobs in batches:
-            pending.append((rows, pool.submit(_detect_batch, blobs, hsv, max_candidates)))
-            if len(pending) > 2 * workers:  # bound the memory held in flight
-                r, fut = pending.pop(0)
-                yield r, fut.result()
-        for r, fut in pending:
-            yield r, fut.result()
+    # the screen box and the compiled screen made here once, inherited by the forked workers
+    BallDetector(hsv, max_candidates, compiled=compiled).detect(np.zeros((16, 16, 3), np.uint8))
+    # each task is a time window of whole chunks that a worker reads from the file itself:
+    # nothing but a few numbers per frame crosses between the processes, so every task is
+    # queued at once (the workers stay busy while this process copies the session)
+    per_task = int(np.clip(n_images // (4 * workers), _BATCH // 2, 4 * _BATCH))
+    windows = _windows(src, rig_names, n_images, per_task)
+    from concurrent.futures.process import BrokenProcessPool
+
+    pool = ProcessPoolExecutor(max_workers=workers)
+    try:
+        futures = [pool.submit(_detect_window, str(src), lo, hi, hsv, max_candidates, compiled)
+                   for lo, hi in windows]
+        yield (_rows(fut.result(), row_of) for fut in futures)
+    except BrokenProcessPool:
+        raise PslogError(f"re-detecting {src}: a worker process died (killed, or out of "
+                         f"memory); try fewer --workers") from None
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
 
 
-def _batches(images, row_of: dict) -> Iterator[tuple[list, list]]:
-    rows, blobs = [], []
-    for image in images:
-        row = row_of.get((image.camera, image.frame_index))
-        if row is None:
-            continue  # an image without a frame record: nothing to attach it to
-        rows.append(row)
-        blobs.append(image.data)
-        if len(rows) == _BATCH:
-            yield rows, blobs
-            rows, blobs = [], []
-    if rows:
-        yield rows, blobs
+def _serial(src, row_of: dict, detector: BallDetector) -> Iterator[tuple[list, list]]:
+    images = iter(_images(src, None, None))
+    while batch := list(itertools.islice(images, _BATCH)):
+        yield _rows(_detect_images(detector, batch), row_of)
 
 
-def _detect_batch(blobs: list[bytes], hsv: HsvRange, max_candidates: int) -> list:
+def _windows(src, rig_names, n_images: int, per_task: int) -> list[tuple[int | None,
+                                                                          int | None]]:
+    """Time windows ``[lo, hi)`` (ns; None: unbounded) covering the whole session, cut at
+    the first message times of the chunks holding images so that no chunk is read twice,
+    about ``per_task`` images each. A file whose summary cannot be read is one window (the
+    reader then reports what is wrong with it)."""
+    from mcap.reader import make_reader
+
+    topics = {f"/camera/{name}/image" for name in rig_names}
+    try:
+        with open(src, "rb") as f:
+            summary = make_reader(f).get_summary()
+        image_channels = {cid for cid, ch in summary.channels.items() if ch.topic in topics}
+        starts = sorted({c.message_start_time for c in summary.chunk_indexes
+                         if image_channels & c.message_index_offsets.keys()})
+    except Exception:  # any fault of the file: the reader names it
+        return [(None, None)]
+    if len(starts) < 2:
+        return [(None, None)]
+    step = max(1, round(per_task * len(starts) / max(n_images, 1)))  # chunks per window
+    cuts = starts[step::step]
+    return list(zip([None, *cuts], [*cuts, None], strict=True))
+
+
+def _images(src, lo: int | None, hi: int | None) -> Iterator:
+    from pslog.log import iter_images
+
+    return iter_images(src, start_ns=lo, end_ns=hi)
+
+
+def _detect_window(src: str, lo: int | None, hi: int | None, hsv: HsvRange,
+                   max_candidates: int, compiled: bool) -> tuple[np.ndarray, np.ndarray, list]:
+    """In a worker: read the images of ``[lo, hi)`` from ``src``, decode and detect."""
     import cv2
 
     cv2.setNumThreads(1)
-    detector = BallDetector(hsv, max_candidates)
-    return [_detect_blob(detector, b) for b in blobs]
+    _keep_freed_memory()
+    return _detect_images(BallDetector(hsv, max_candidates, compiled=compiled),
+                          _images(src, lo, hi))
+
+
+@functools.cache
+def _keep_freed_memory() -> None:
+    """In a worker or the ``pslog redetect`` process (glibc only): keep freed memory for
+    reuse instead of returning it to the system. Every frame allocates a few MB (the chunk
+    read, the decoded image, the copied chunk); by default glibc maps such blocks afresh
+    and unmaps them when freed, so each frame page-faults its buffers in again: about
+    0.25 ms of system time per 1280 x 720 frame in a worker, 5 % of the frame's cost, and
+    as much again in the process copying the session (``benchmarks/bench_redetect.py``).
+    Only this process's memory use is affected (its largest working set stays mapped)."""
+    import ctypes
+    import platform
+
+    if platform.system() != "Linux" or platform.libc_ver()[0] != "glibc":
+        return
+    try:
+        libc = ctypes.CDLL(None)
+        libc.mallopt(-3, 256 << 20)  # M_MMAP_THRESHOLD: blocks up to 256 MB from the heap
+        libc.mallopt(-1, 1 << 30)  # M_TRIM_THRESHOLD: don't give the heap's top back
+    except (OSError, AttributeError):
+        pass  # no mallopt: only slower
+
+
+def _detect_images(detector: BallDetector, images) -> tuple[np.ndarray, np.ndarray, list]:
+    """(camera (n,), frame index (n,), [(uv, radius, score)] * n) of ``images`` in order."""
+    cameras, indices, found = [], [], []
+    for image in images:
+        cameras.append(image.camera)
+        indices.append(image.frame_index)
+        found.append(_detect_blob(detector, image.data))
+    return np.array(cameras, dtype=np.int64), np.array(indices, dtype=np.int64), found
+
+
+def _rows(detected: tuple[np.ndarray, np.ndarray, list], row_of: dict) -> tuple[list, list]:
+    """The frame rows of detected images and their candidates; an image without a frame
+    record is dropped (nothing to attach it to)."""
+    rows, results = [], []
+    for camera, index, found in zip(*detected, strict=True):
+        row = row_of.get((int(camera), int(index)))
+        if row is not None:
+            rows.append(row)
+            results.append(found)
+    return rows, results
 
 
 def _detect_blob(detector: BallDetector, blob: bytes) -> tuple[np.ndarray, np.ndarray,

@@ -187,3 +187,68 @@ def test_hsv_range_holding_no_colour_finds_nothing():
     frame = _flat()
     cv2.circle(frame, (100, 100), 8, ORANGE_BGR, -1)
     assert len(BallDetector(empty).detect(frame)) == 0
+
+
+def _odd_frames() -> list[np.ndarray]:
+    """Busy frames, cropped to odd sizes, as non-contiguous views and after a JPEG round trip
+    (the frames `pslog redetect` sees)."""
+    frames = _busy_frames()
+    jpeg = [cv2.imdecode(cv2.imencode(".jpg", f, [cv2.IMWRITE_JPEG_QUALITY, 90])[1],
+                         cv2.IMREAD_COLOR) for f in frames[:2]]
+    return [*frames, *jpeg, frames[0][:717, :1279], frames[1][3:, 5:], frames[2][:, ::-1],
+            frames[3][::-1][:101, :203], _flat((7, 9))]
+
+
+@pytest.mark.parametrize("downscale", [1, 2, 3, 4])
+@pytest.mark.parametrize("sparse", [8, 1, 10**9])
+def test_compiled_screen_gives_the_same_candidates(monkeypatch, downscale, sparse):
+    """``compiled=True`` (one numba loop subsampling, screening and gathering) finds the same
+    candidates as OpenCV's resize, inRange and findNonZero, to the last bit, in either
+    regime of the coarse pass (few pixels screened, or the whole frame converted) and where
+    OpenCV's subsampling is not a plain stride (downscale 3 of 1280 columns: the fallback)."""
+    monkeypatch.setattr(detect, "_SPARSE_FRACTION", sparse)
+    plain = BallDetector(max_candidates=20, downscale=downscale)
+    compiled = BallDetector(max_candidates=20, downscale=downscale, compiled=True)
+    total = 0
+    for frame in _odd_frames():
+        a, b = plain.detect(frame), compiled.detect(frame)
+        total += len(a)
+        for name in ("uv", "radius", "area", "roundness", "score"):
+            assert_array_equal(getattr(b, name), getattr(a, name), err_msg=name)
+            assert getattr(b, name).dtype == getattr(a, name).dtype
+    assert total > 40
+
+
+def test_screen_kernel_is_inrange_and_findnonzero_of_the_subsampled_frame():
+    """The kernel (compiled and pure Python) against OpenCV on frames whose colours sit on
+    and around the box's bounds; only the first ``m`` pixels stored, all counted."""
+    from recorders._screen import screen_samples
+
+    rng = np.random.default_rng(11)
+    lo, hi = np.array([10, 60, 120], np.uint8), np.array([40, 90, 200], np.uint8)
+    # each channel at, just inside and just outside its bounds
+    levels = np.stack([lo - 1, lo, lo + 1, hi - 1, hi, hi + 1]).astype(np.uint8)  # (6, 3)
+    for k in range(12):
+        h, w, s = int(rng.integers(5, 90)), int(rng.integers(5, 90)), 1 + k % 3
+        frame = levels[rng.integers(0, 6, (h, w, 3)), np.arange(3)]
+        coarse = frame[::s, ::s][:h // s, :w // s]
+        found = cv2.findNonZero(cv2.inRange(np.ascontiguousarray(coarse), lo, hi))
+        want = np.zeros((0, 2), np.int32) if found is None else found.reshape(-1, 2)
+        assert len(want) > 0
+        for fn in (screen_samples, screen_samples.py_func):
+            for cap in (len(want) + 3, max(len(want) // 2, 1)):
+                xy, bgr = np.full((cap, 2), -1, np.int32), np.zeros((cap, 3), np.uint8)
+                n = fn(frame, s, h // s, w // s, lo, hi, xy, bgr)
+                m = min(n, cap)
+                assert n == len(want)
+                assert_array_equal(xy[:m], want[:m])
+                assert_array_equal(bgr[:m], coarse[want[:m, 1], want[:m, 0]])
+
+
+@pytest.mark.parametrize(("h", "w", "s", "stride"), [(720, 1280, 2, True), (480, 640, 2, True),
+                                                     (721, 1281, 2, True), (7, 9, 1, True),
+                                                     (720, 1280, 3, False)])
+def test_nearest_subsampling_is_a_stride_where_opencv_says_so(h, w, s, stride):
+    """The compiled screen is used only where OpenCV's nearest-neighbour resize takes every
+    s-th pixel (1280 // 3 = 426 columns are spread over 1280: not a stride)."""
+    assert detect._nearest_is_stride(h, w, s) is stride

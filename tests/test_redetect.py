@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -106,3 +107,60 @@ def test_worker_processes_give_the_same_session_as_one_process(tmp_path, monkeyp
     for name in ("frame_time_ns", "frame_camera", "frame_index", "cand_frame", "cand_uv",
                  "cand_radius", "cand_score"):
         assert_array_equal(getattr(b, name), getattr(a, name), err_msg=name)
+
+
+def test_compiled_screen_and_small_windows_give_the_same_session(tmp_path, monkeypatch):
+    """Workers reading their own windows of a few chunks each, with the compiled screen (as
+    for sessions of thousands of frames), give exactly the detections of one plain process;
+    the windows cover the whole session, cut at image chunks."""
+    from recorders import redetect
+
+    one, pool = tmp_path / "one.mcap", tmp_path / "pool.mcap"
+    redetect_session(SAMPLE, one, workers=1)
+    monkeypatch.setattr(redetect, "_PARALLEL_FROM", 0)
+    monkeypatch.setattr(redetect, "_COMPILED_FROM", 0)
+    monkeypatch.setattr(redetect, "_BATCH", 2)  # windows of a couple of chunks
+    windows = redetect._windows(SAMPLE, ("cam1", "cam2", "cam3"), 135, 10)
+    assert len(windows) >= 4 and windows[0][0] is None and windows[-1][1] is None
+    cuts = [hi for _lo, hi in windows[:-1]]
+    assert cuts == [lo for lo, _hi in windows[1:]] and cuts == sorted(set(cuts))
+    redetect_session(SAMPLE, pool, workers=2)
+    a, b = read_session(one).detections, read_session(pool).detections
+    for name in ("frame_time_ns", "frame_camera", "frame_index", "cand_frame", "cand_uv",
+                 "cand_radius", "cand_score"):
+        assert_array_equal(getattr(b, name), getattr(a, name), err_msg=name)
+
+
+def _damaged_copy(tmp_path: Path) -> Path:
+    """The sample with 64 bytes zeroed in the middle of an image chunk."""
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(SAMPLE.read_bytes())
+    with open(bad, "rb") as f:
+        summary = make_reader(f).get_summary()
+    images = {cid for cid, c in summary.channels.items() if c.topic.endswith("/image")}
+    chunk = sorted((c for c in summary.chunk_indexes if images & c.message_index_offsets.keys()),
+                   key=lambda c: c.chunk_start_offset)[2]
+    with open(bad, "r+b") as f:
+        f.seek(chunk.chunk_start_offset + chunk.chunk_length // 2)
+        f.write(bytes(64))
+    return bad
+
+
+def _die(*_args):
+    os._exit(3)  # a worker killed (e.g. by the out-of-memory killer)
+
+
+@pytest.mark.parametrize("fault", ["damaged", "killed"])
+def test_a_fault_in_a_worker_is_one_line_and_writes_nothing(tmp_path, monkeypatch, capsys, fault):
+    from recorders import redetect
+
+    monkeypatch.setattr(redetect, "_PARALLEL_FROM", 0)
+    src = _damaged_copy(tmp_path) if fault == "damaged" else SAMPLE
+    if fault == "killed":
+        monkeypatch.setattr(redetect, "_detect_window", _die)
+    out = tmp_path / "out.mcap"
+    assert main(["redetect", str(src), "-o", str(out), "--workers", "2"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "Traceback" not in err
+    assert ("damaged data at byte" in err) if fault == "damaged" else ("worker" in err)
+    assert list(tmp_path.iterdir()) == ([src] if fault == "damaged" else [])

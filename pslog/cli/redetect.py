@@ -39,8 +39,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from pslog.cli.record import parse_hsv
-    from recorders.redetect import redetect_session
+    from recorders.redetect import _keep_freed_memory, redetect_session
 
+    _keep_freed_memory()  # this short-lived process too: no page faults per copied chunk
     # the output was checked before run() (declare_files); the library checks it again
     summary = redetect_session(args.session, args.output, parse_hsv(args.hsv),
                                max_candidates=args.max_candidates, force=args.force,

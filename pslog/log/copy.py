@@ -4,7 +4,7 @@ optionally replacing the detections (re-detection) and adding or replacing fused
 from __future__ import annotations
 
 import struct
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +20,8 @@ from .reader import _PAD, _Batch, _Finished, _gather, _Irregular
 from .writer import SessionWriter, _Block
 
 
-def copy_session(src, dst, *, detections: Detections | None = None, tracks: Sequence[Track] = (),
+def copy_session(src, dst, *, detections: Detections | Callable[[], Detections] | None = None,
+                 tracks: Sequence[Track] = (),
                  replace_tracks: bool = True, metadata: Mapping[str, str] | None = None,
                  rig: Rig | None = None, force: bool = False,
                  rejections: Mapping | None = None) -> None:
@@ -29,7 +30,8 @@ def copy_session(src, dst, *, detections: Detections | None = None, tracks: Sequ
     Parameters
     ----------
     detections : if given, replaces every detection message of ``src`` (camera names must
-        be the rig's)
+        be the rig's); a callable giving them is called once the rest is copied (so that
+        they can be computed meanwhile, e.g. by ``pslog redetect``'s workers)
     tracks : fused tracks to add
     replace_tracks : drop every track of ``src`` (True) or only those whose method is in
         ``tracks`` (False)
@@ -53,9 +55,8 @@ def copy_session(src, dst, *, detections: Detections | None = None, tracks: Sequ
     if rig is not None and rig.names != old_rig.names:
         raise InputError(f"rig cameras {', '.join(rig.names)} differ from the session's "
                          f"{', '.join(old_rig.names)} (names and order must match)")
-    if detections is not None and tuple(detections.camera_names) != old_rig.names:
-        raise InputError(f"detections are for cameras {', '.join(detections.camera_names)}, "
-                         f"session has {', '.join(old_rig.names)}")
+    if isinstance(detections, Detections):
+        _check_cameras(detections, old_rig.names)
     new_methods = {t.method for t in tracks}
     user_meta = {k: v for k, v in meta.items() if k not in S.RESERVED_KEYS}
     user_meta["derived_from"] = src_path.name
@@ -110,11 +111,20 @@ def copy_session(src, dst, *, detections: Detections | None = None, tracks: Sequ
         if not fast:  # no summary index to go by: every record in turn
             io.scan_file(src_path, copy, scan=scan)  # copy's own errors propagate unchanged
         if detections is not None:
+            if not isinstance(detections, Detections):
+                detections = detections()
+                _check_cameras(detections, old_rig.names)
             w.add_detections(detections)
         for track in tracks:
             w.add_track(track)
         for method, rejected in (rejections or {}).items():
             w.add_rejections(method, rejected)
+
+
+def _check_cameras(detections: Detections, names: tuple[str, ...]) -> None:
+    if tuple(detections.camera_names) != names:
+        raise InputError(f"detections are for cameras {', '.join(detections.camera_names)}, "
+                         f"session has {', '.join(names)}")
 
 
 def _table_data(f: _Finished, name: str) -> bytes | None:

@@ -851,6 +851,10 @@ def _gather(records: np.ndarray, start: np.ndarray, end: np.ndarray) -> tuple[np
     padding: see :meth:`_Batch.concatenate`), and where each begins in it."""
     lengths = end - start
     begin = np.cumsum(lengths) - lengths
+    if len(start) * 256 < len(records):  # a few large ranges (images): slices, no mask
+        return np.concatenate([records[a:b] for a, b in zip(start.tolist(), end.tolist(),
+                                                            strict=True)]
+                              or [records[:0]]), begin
     # a byte mask of the ranges (+1 where one starts, -1 where it ends, summed up): one pass
     # over the chunk instead of an index per byte
     edge = (np.bincount(start, minlength=len(records) + 1)
