@@ -920,7 +920,7 @@ class BallFilter:
             t0, x, P = entries[-1]
             score = sum(h[7] for h in history[n - _JUMP_LAG: n - lag]) if n else 0.0
             first = True
-            for t, c, du, dv in detections:
+            for t, cam_d, du, dv in detections:
                 dt = (t - t0) / NS
                 x, P = self._predicted(x, P, dt, c)
                 if first:  # the jump Δv at an instant uniform in the interval: Δp = Δv s
@@ -928,7 +928,7 @@ class BallFilter:
                     if jumped is None:
                         break
                     (x, P), first = jumped, False
-                inn = self._innovation(self._cams[c], x, P, du, dv)
+                inn = self._innovation(self._cams[cam_d], x, P, du, dv)
                 if inn is None or not inn[7] <= self._gate:
                     break
                 score += inn[7] + math.log(inn[8])

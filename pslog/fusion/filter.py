@@ -746,8 +746,8 @@ def _jump(S, I, cams, O, t, cam, u, v):
     detections and this one replayed; the (lag, shape) whose replay passes every gate with
     the least ``Σ NIS + ln det S`` over the same detections wins.
     Returns ``(ok, x, P, innovation of this detection)``; ``ok`` False when none explains
-    it. The replay's prediction weights gravity by the replayed detection's camera index,
-    exactly as the pure-Python filter did (its ``c`` was the loop's camera)."""
+    it. The replay's prediction weights gravity by the ballistic model's probability of
+    the current state (the models' mixture), as the step's own prediction does."""
     n = I[_IHN]
     var = S[_SVAR]
     best_x = np.empty(6)
@@ -782,7 +782,7 @@ def _jump(S, I, cams, O, t, cam, u, v):
                 else:
                     td, cd, ud, vd = t, cam, u, v
                 dt = (td - t0) / NS
-                x, P = _predicted(x, P, dt, float(cd), O, S[_SQ])
+                x, P = _predicted(x, P, dt, S[_SMU], O, S[_SQ])
                 if first:  # the jump Δv at an instant uniform in the interval: Δp = Δv s
                     ok, x, P = _jumped(x, P, dt, O, shape)
                     if not ok:
