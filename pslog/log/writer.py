@@ -917,7 +917,8 @@ def _track_block(track: Track, lo: int, hi: int, method: str, cameras, fixed: di
                  template, first_id: int, color, channel: int, scene_channel: int):
     """Points ``lo:hi`` of a track as one :class:`_Block` of messages (TrackPoint, then its
     SceneUpdate, per point, as :meth:`SessionWriter.add_track` queues them one by one),
-    encoded with :mod:`._encode`; None when sample points differ from protobuf's bytes."""
+    encoded by :func:`._wire.encode_track`; None when sample points differ from protobuf's
+    bytes."""
     from . import _encode as E
 
     n = hi - lo
@@ -931,8 +932,7 @@ def _track_block(track: Track, lo: int, hi: int, method: str, cameras, fixed: di
             track.quality[key][lo:hi], dtype="<f8").view(np.uint8).reshape(n, 8)
     fixed_cols = [np.asarray(fixed[k][lo:hi], dtype=np.float64) if len(fixed[k]) == len(track)
                   else np.full(n, np.nan) for k in S.TRACK_FIXED_QUALITY]
-    sec, nanos = np.divmod(t, 1_000_000_000)
-    ids = first_id + lo + np.arange(n)
+    ids = first_id + lo + np.arange(n, dtype=np.int64)
     lifetime = E.rows(E.field_message(4, E.concat([
         E.field_varint(1, np.array([_TRACK_LIFETIME_NS // 1_000_000_000])),
         E.field_varint(2, np.array([_TRACK_LIFETIME_NS % 1_000_000_000]))])))[0]
@@ -941,45 +941,27 @@ def _track_block(track: Track, lo: int, hi: int, method: str, cameras, fixed: di
                                                 for k in (1, 2, 3)])))[0]
     rgba = E.rows(E.field_message(3, E.concat([E.field_double(k + 1, np.array([float(v)]))
                                                 for k, v in enumerate((*color, 1.0))])))[0]
-    name_len = np.array([len(c.encode()) for c in cameras], dtype=np.int64)
 
-    def encode(r: np.ndarray):
-        m = len(r)
-        point = E.concat([
-            E.field_varint(1, t[r]), E.field_message(2, E.const(m, method.encode())),
-            E.field_double(3, xyz[r, 0]), E.field_double(4, xyz[r, 1]),
-            E.field_double(5, xyz[r, 2]), E.field_strings(6, cam[r], list(cameras)),
-            *(E.field_double(7 + j, c[r]) for j, c in enumerate(fixed_cols)),
-            (extra[r], np.full(m, len(tmpl), dtype=np.int64))])
-        position = E.concat([E.field_double(k + 1, xyz[r, k]) for k in range(3)])
-        sphere = E.concat([E.field_message(1, E.concat([E.field_message(1, position),
-                                                        E.const(m, orientation)])),
-                           E.const(m, size), E.const(m, rgba)])
-        entity = E.concat([
-            E.field_message(1, E.concat([E.field_varint(1, sec[r]),
-                                         E.field_varint(2, nanos[r])])),
-            E.field_message(2, E.const(m, S.WORLD_FRAME.encode())),
-            E.field_message(3, E.concat([E.const(m, f"{method}/".encode()),
-                                         E.decimal(ids[r])])),
-            E.const(m, lifetime), E.field_message(9, sphere)])
-        return E.concat([point, E.field_message(2, entity)])
+    # every point's two messages by one compiled loop (_wire; numpy's per-field calls over
+    # each layout group cost most of the time of writing a fused match)
+    from . import _wire
 
-    # rows of one layout (the same fields present, varints and ids of the same widths) are
-    # encoded together: stacks of fixed-width columns, no per-byte scatter but the last
-    bits = xyz.view(np.uint64) != 0
-    fixed_bits = np.column_stack([c.view(np.uint64) != 0 for c in fixed_cols])
-    key = (E.varint_size(t) * (t != 0)
-           + 11 * (E.varint_size(sec) * (sec != 0) + 11 * (E.varint_size(nanos) * (nanos != 0)
-           + 11 * (np.floor(np.log10(np.maximum(ids, 1))).astype(np.int64)
-           + 20 * (name_len[cam] + 64 * (bits @ np.array([1, 2, 4])
-           + 8 * (fixed_bits @ np.array([1, 2, 4]))))))))
-    data, lengths = E.grouped(key, encode)
-    # each TrackPoint's length: the point's fields as the encoder wrote them
-    method_len = len(method.encode())
-    point_len = (np.where(t != 0, 1 + E.varint_size(t), 0)
-                 + 1 + int(E.varint_size(np.array([method_len]))[0]) + method_len
-                 + 9 * bits.sum(axis=1) + 1 + E.varint_size(name_len[cam]) + name_len[cam]
-                 + 9 * fixed_bits.sum(axis=1) + len(tmpl))
+    bits = np.column_stack([xyz, *fixed_cols]).view(np.uint64)
+    names_b = [c.encode() for c in cameras]
+    name_start = np.cumsum([0, *(len(x) for x in names_b)]).astype(np.int64)
+    method_b = np.frombuffer(method.encode(), dtype=np.uint8)
+    consts = [np.frombuffer(x, dtype=np.uint8) for x in (S.WORLD_FRAME.encode(), lifetime,
+                                                         orientation, size, rgba)]
+    out = np.empty(_wire.bound(n, method.encode(), names_b, len(tmpl),
+                               sum(len(x) for x in consts)), dtype=np.uint8)
+    point_len = np.empty(n, dtype=np.int64)
+    lengths = np.empty(n, dtype=np.int64)
+    used = _wire.encode_track(t, np.ascontiguousarray(bits), cam,
+                              np.frombuffer(b"".join(names_b), dtype=np.uint8), name_start,
+                              method_b, extra, ids, *consts, out, point_len,
+                              lengths)
+    data = out[:used].tobytes()
+    del out
 
     # protobuf's own bytes of sample points, compared
     ends = np.cumsum(lengths)
