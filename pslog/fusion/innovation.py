@@ -324,11 +324,16 @@ def kinked_points(prep, events: np.ndarray, past: tuple, noise_px: float | np.nd
                  & (c_all <= np.tile(events, len(triplets)))
                  & (np.tile(t_event, len(triplets)) - time_ns[np.maximum(a_all, 0)]
                     <= 2 * max_gap_ns))
-    bent_all = available & _bends(prep, np.maximum(a_all, 0), np.maximum(b_all, 0),
-                                  np.maximum(c_all, 0),
-                                  np.concatenate([t[3] for t in triplets]),
-                                  np.tile(speed, len(triplets)),
-                                  np.tile(sigma, len(triplets)))
+    # in blocks of rows (elementwise: the same bits; all at once, the temporaries of a
+    # 90-minute match took over 1 GB)
+    bent_all = np.zeros(len(a_all), dtype=bool)
+    point_all = np.concatenate([t[3] for t in triplets])
+    speed_all, sigma_all = np.tile(speed, len(triplets)), np.tile(sigma, len(triplets))
+    for s in range(0, len(a_all), 1 << 16):
+        e = s + (1 << 16)
+        bent_all[s:e] = available[s:e] & _bends(
+            prep, np.maximum(a_all[s:e], 0), np.maximum(b_all[s:e], 0),
+            np.maximum(c_all[s:e], 0), point_all[s:e], speed_all[s:e], sigma_all[s:e])
 
     def has(i):
         return available[i * k:(i + 1) * k]
