@@ -177,3 +177,36 @@ def test_compiled_track_encoder_equals_its_python_and_protobuf(rig3):
         used = fn(*args, out, point_len, total_len)
         outs.append((out[:used].tobytes(), point_len.tolist(), total_len.tolist()))
     assert outs[0] == outs[1]
+
+
+def test_rejection_blocks_are_protobufs_own_bytes(tmp_path, rig3):
+    """add_rejections: every rejected candidate's pslog.Rejection as protobuf writes it
+    (time and frame index 0, -0.0, NaN score, every reason), by the block encoder."""
+    from pslog.fusion.gating import REASONS, Rejections
+
+    rng = np.random.default_rng(9)
+    n = W._FRAME_BLOCK + 777
+    t = np.sort(rng.integers(0, 10**12, n))
+    t[0] = 0
+    uv = rng.normal(size=(n, 2)) * 300
+    uv[::4, 1] = -0.0
+    uv[1::9, 0] = 0.0
+    score = np.where(rng.random(n) < .2, np.nan, rng.random(n))
+    rej = Rejections(t, rng.integers(0, 3, n).astype(np.int32),
+                     rng.integers(0, 10**7, n) * (np.arange(n) % 7 != 0), uv, score,
+                     rng.integers(0, len(REASONS), n).astype(np.int8))
+    assert W._rejections_block(rej, 0, 300, rig3.names, 5) is not None  # the block path
+    path = tmp_path / "r.mcap"
+    with SessionWriter(path, rig3) as w:
+        w.add_rejections("typeA", rej)
+    with open(path, "rb") as f:
+        got = [(m.log_time, m.sequence, m.data) for _s, c, m in
+               make_reader(f).iter_messages(log_time_order=False)
+               if c.topic == S.rejections_topic("typeA")]
+    assert len(got) == n
+    for i in range(n):
+        want = S.Rejection(time_ns=int(t[i]), camera=rig3.names[rej.camera[i]],
+                           frame_index=int(rej.frame_index[i]), u=float(uv[i, 0]),
+                           v=float(uv[i, 1]), score=float(score[i]),
+                           reason=REASONS[rej.reason[i]]).SerializeToString()
+        assert got[i] == (int(t[i]), int(rej.frame_index[i]), want), i

@@ -1545,8 +1545,9 @@ def fuse_detections(detections: Detections, rig: Rig, methods, options=None):
         return out, {m: Rejections.empty() for m in methods}
     shared: dict[tuple[bool, float], tuple[Gated, Prepared | None]] = {}
     tracks, rejections = {}, {}
-    for method in methods:
-        key = gating_key(method, options)
+    keys = [gating_key(method, options) for method in methods]
+    last_use = {key: i for i, key in enumerate(keys)}
+    for i, (method, key) in enumerate(zip(methods, keys, strict=True)):
         progress.step(f"fusing {method}")
         if key not in shared:
             gated = gate_for(detections, rig, method, options)
@@ -1554,6 +1555,8 @@ def fuse_detections(detections: Detections, rig: Rig, methods, options=None):
         gated, prep = shared[key]
         tracks[method] = fuse(gated.observations, rig, method, options, prepared=prep)
         rejections[method] = gated.rejections
+        if last_use[key] == i:  # no other method needs this gating: its arrays go
+            del shared[key], gated, prep
     return tracks, rejections
 
 

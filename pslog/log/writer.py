@@ -539,10 +539,15 @@ class SessionWriter:
         if len(rejections) and not 0 <= rejections.camera.min() <= rejections.camera.max() \
                 < len(names):
             raise InputError(f"rejections of {method!r}: camera index out of range of the rig")
+        n, lo = len(rejections), 0
+        if (all(names) and n >= _BLOCK_FROM and rejections.frame_time_ns.min() >= 0
+                and rejections.frame_index.min() >= 0):
+            lo = self._queue_blocks(n, _FRAME_BLOCK, lambda a, b: _rejections_block(
+                rejections, a, b, names, channel))
         for t, cam, idx, (u, v), score, reason in zip(
-                rejections.frame_time_ns.tolist(), rejections.camera.tolist(),
-                rejections.frame_index.tolist(), rejections.uv.tolist(),
-                rejections.score.tolist(), rejections.reason_names(), strict=True):
+                rejections.frame_time_ns[lo:].tolist(), rejections.camera[lo:].tolist(),
+                rejections.frame_index[lo:].tolist(), rejections.uv[lo:].tolist(),
+                rejections.score[lo:].tolist(), rejections.reason_names()[lo:], strict=True):
             if t < 0:
                 raise InputError(_negative_time(t))
             msg = S.Rejection(time_ns=t, camera=names[cam], frame_index=idx, u=u, v=v,
@@ -887,6 +892,35 @@ def _detections_block(detections: Detections, lo: int, hi: int, names, channels)
         if data[starts[j]:ends[j]] != msg.SerializeToString():
             return None
     return _Block(np.asarray(channels, dtype=np.int64)[cam], t, idx, lengths, data)
+
+
+def _rejections_block(rejections, lo: int, hi: int, names, channel: int):
+    """Rows ``lo:hi`` of :class:`pslog.fusion.gating.Rejections` as one :class:`_Block` of
+    ``pslog.Rejection`` messages (as :meth:`SessionWriter.add_rejections` queued them one by
+    one), encoded with :mod:`._encode`; None when sample rows differ from protobuf's bytes
+    (times and frame indices >= 0, camera names non-empty: checked by the caller)."""
+    from ..fusion.gating import REASONS
+    from . import _encode as E
+
+    n = hi - lo
+    t = rejections.frame_time_ns[lo:hi].astype(np.int64)
+    cam = rejections.camera[lo:hi].astype(np.int64)
+    idx = rejections.frame_index[lo:hi].astype(np.int64)
+    uv = np.ascontiguousarray(rejections.uv[lo:hi], dtype=np.float64)
+    score = np.ascontiguousarray(rejections.score[lo:hi], dtype=np.float64)
+    reason = rejections.reason[lo:hi].astype(np.int64)
+    data, lengths = E.rows(E.concat([
+        E.field_varint(1, t), E.field_strings(2, cam, list(names)), E.field_varint(3, idx),
+        E.field_double(4, uv[:, 0]), E.field_double(5, uv[:, 1]), E.field_double(6, score),
+        E.field_strings(7, reason, list(REASONS))]))
+    ends = np.cumsum(lengths)
+    for j in sorted({0, n - 1, *np.linspace(0, n - 1, _TRACK_CHECKS).astype(int).tolist()}):
+        want = S.Rejection(time_ns=int(t[j]), camera=names[int(cam[j])],
+                           frame_index=int(idx[j]), u=float(uv[j, 0]), v=float(uv[j, 1]),
+                           score=float(score[j]), reason=REASONS[int(reason[j])])
+        if data[ends[j] - lengths[j]:ends[j]] != want.SerializeToString():
+            return None
+    return _Block(np.full(n, channel, dtype=np.int64), t, idx, lengths, data)
 
 
 def _quality_template(extra: dict[str, np.ndarray]):
