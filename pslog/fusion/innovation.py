@@ -238,6 +238,21 @@ def _bends(prep, a, b, c, point, speed, sigma):
         return (dt1 > 0) & (dt2 > 0) & (depth > 0) & (change > bound)
 
 
+#: events whose kinks are tested at a time (bounded memory)
+_KINK_BLOCK = 1 << 16
+
+
+def _rows_of(p, lo: int, hi: int):
+    """Rows ``lo:hi`` of a PseudoStereoPoints (the fields :func:`kinked_points` reads), or
+    of a (k, 3) array."""
+    if isinstance(p, np.ndarray):
+        return p[lo:hi]
+    from types import SimpleNamespace
+
+    return SimpleNamespace(row=p.row[lo:hi], prev_row=p.prev_row[lo:hi],
+                           next_row=p.next_row[lo:hi], points_world=p.points_world[lo:hi])
+
+
 def kinked_points(prep, events: np.ndarray, past: tuple, noise_px: float | np.ndarray | None,
                   max_gap_ns: int) -> np.ndarray:
     """Which type A points rest on an interval in which some camera saw the motion change.
@@ -285,6 +300,14 @@ def kinked_points(prep, events: np.ndarray, past: tuple, noise_px: float | np.nd
     -------
     (k,) bool, True where a bend is detected in an interval the point relies on
     """
+    if len(events) > _KINK_BLOCK:
+        # in blocks of events (each point's test uses its own rows alone: the same bits);
+        # all at once, the temporaries of a 90-minute match took over 1 GB
+        return np.concatenate([kinked_points(
+            prep, events[s:s + _KINK_BLOCK], tuple(_rows_of(p, s, s + _KINK_BLOCK)
+                                                   for p in past),
+            noise_px if np.ndim(noise_px) == 0 else np.asarray(noise_px)[s:s + _KINK_BLOCK],
+            max_gap_ns) for s in range(0, len(events), _KINK_BLOCK)])
     p1, p2, predicted = past
     time_ns = prep.obs.time_ns
     sigma = np.broadcast_to(DEFAULT_NOISE_PX if noise_px is None
@@ -324,16 +347,11 @@ def kinked_points(prep, events: np.ndarray, past: tuple, noise_px: float | np.nd
                  & (c_all <= np.tile(events, len(triplets)))
                  & (np.tile(t_event, len(triplets)) - time_ns[np.maximum(a_all, 0)]
                     <= 2 * max_gap_ns))
-    # in blocks of rows (elementwise: the same bits; all at once, the temporaries of a
-    # 90-minute match took over 1 GB)
-    bent_all = np.zeros(len(a_all), dtype=bool)
-    point_all = np.concatenate([t[3] for t in triplets])
-    speed_all, sigma_all = np.tile(speed, len(triplets)), np.tile(sigma, len(triplets))
-    for s in range(0, len(a_all), 1 << 16):
-        e = s + (1 << 16)
-        bent_all[s:e] = available[s:e] & _bends(
-            prep, np.maximum(a_all[s:e], 0), np.maximum(b_all[s:e], 0),
-            np.maximum(c_all[s:e], 0), point_all[s:e], speed_all[s:e], sigma_all[s:e])
+    bent_all = available & _bends(prep, np.maximum(a_all, 0), np.maximum(b_all, 0),
+                                  np.maximum(c_all, 0),
+                                  np.concatenate([t[3] for t in triplets]),
+                                  np.tile(speed, len(triplets)),
+                                  np.tile(sigma, len(triplets)))
 
     def has(i):
         return available[i * k:(i + 1) * k]
