@@ -239,7 +239,7 @@ def _bends(prep, a, b, c, point, speed, sigma):
 
 
 #: events whose kinks are tested at a time (bounded memory)
-_KINK_BLOCK = 1 << 16
+_KINK_BLOCK = 1 << 14
 
 
 def _rows_of(p, lo: int, hi: int):
