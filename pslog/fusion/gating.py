@@ -825,6 +825,18 @@ class _Columns:
 
     __slots__ = ("available", "camera", "epi_cost", "front", "n_support", "pts", "rays",
                  "rows", "static", "stillness", "t_ns", "t_s")
+    available: list[int]
+    camera: list[int]
+    epi_cost: list[float]
+    front: list[bool]
+    n_support: list[int]
+    pts: list[list[float]]
+    rays: list[list[float]]
+    rows: list[list[float]]
+    static: list[bool]
+    stillness: list[float]
+    t_ns: list[int]
+    t_s: list[float]
 
     def __init__(self, **columns) -> None:
         for k, v in columns.items():

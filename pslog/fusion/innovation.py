@@ -306,7 +306,8 @@ def kinked_points(prep, events: np.ndarray, past: tuple, noise_px: float | np.nd
         return np.concatenate([kinked_points(
             prep, events[s:s + _KINK_BLOCK], tuple(_rows_of(p, s, s + _KINK_BLOCK)
                                                    for p in past),
-            noise_px if np.ndim(noise_px) == 0 else np.asarray(noise_px)[s:s + _KINK_BLOCK],
+            noise_px[s:s + _KINK_BLOCK] if isinstance(noise_px, np.ndarray) and noise_px.ndim
+            else noise_px,
             max_gap_ns) for s in range(0, len(events), _KINK_BLOCK)])
     p1, p2, predicted = past
     time_ns = prep.obs.time_ns

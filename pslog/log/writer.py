@@ -984,16 +984,17 @@ def _track_block(track: Track, lo: int, hi: int, method: str, cameras, fixed: di
     names_b = [c.encode() for c in cameras]
     name_start = np.cumsum([0, *(len(x) for x in names_b)]).astype(np.int64)
     method_b = np.frombuffer(method.encode(), dtype=np.uint8)
-    consts = [np.frombuffer(x, dtype=np.uint8) for x in (S.WORLD_FRAME.encode(), lifetime,
-                                                         orientation, size, rgba)]
+    world_a, lifetime_a, orientation_a, size_a, rgba_a = consts = [
+        np.frombuffer(x, dtype=np.uint8) for x in (S.WORLD_FRAME.encode(), lifetime,
+                                                   orientation, size, rgba)]
     out = np.empty(_wire.bound(n, method.encode(), names_b, len(tmpl),
                                sum(len(x) for x in consts)), dtype=np.uint8)
     point_len = np.empty(n, dtype=np.int64)
     lengths = np.empty(n, dtype=np.int64)
     used = _wire.encode_track(t, np.ascontiguousarray(bits), cam,
                               np.frombuffer(b"".join(names_b), dtype=np.uint8), name_start,
-                              method_b, extra, ids, *consts, out, point_len,
-                              lengths)
+                              method_b, extra, ids, world_a, lifetime_a, orientation_a, size_a,
+                              rgba_a, out, point_len, lengths)
     data = out[:used].tobytes()
     del out
 
