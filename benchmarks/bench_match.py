@@ -12,9 +12,15 @@ peer, the ``mcap`` package's ``iter_messages`` with protobuf decoding.
 the same run on the same fused files (a git worktree of it in the work folder, removed at the
 end; ``--base-timeout`` caps its quadratic run), and its output compared with today's.
 
+``fuse typeA steps`` splits ``pslog fuse --method typeA`` into its steps in one process (CPU
+seconds and the peak resident set after each: imports, read, gate, prepare, the typeA fusion,
+write); ``--fuse-base COMMIT`` times the fuse stages of that commit too, each right after
+today's (paired runs: on a shared machine the CPU seconds are the steadier figure).
+
 Run: ``python benchmarks/bench_match.py [--quick] [--minutes 1 10 45 90] [--dir DIR]
-[--json out.json]``. ``--quick``: 1 and 10 minutes. The sessions (hundreds of MB at 90
-minutes) live in a temporary folder unless ``--dir`` keeps them for the next run.
+[--fuse-base COMMIT] [--json out.json]``. ``--quick``: 1 and 10 minutes. The sessions
+(hundreds of MB at 90 minutes) live in a temporary folder unless ``--dir`` keeps them for
+the next run.
 """
 
 from __future__ import annotations
@@ -61,6 +67,41 @@ with open(sys.argv[1], "rb") as f:
     for _s, _c, m in reader.iter_messages(topics=topics, log_time_order=False):
         n += len(DetectionFrame.FromString(m.data).u)
 print(n, time.perf_counter() - t)
+"""
+
+
+#: ``pslog fuse --method typeA``'s steps in one process, as pslog.cli.fuse runs them: CPU
+#: seconds of each (imports, reading, gating, preparing, the fusion itself, writing the fused
+#: copy) and the peak resident set after each, printed as JSON: where the time goes
+_FUSE_PHASES = """
+import json, resource, sys, time
+t0 = time.process_time()
+out = {}
+def mark(what):
+    global t0
+    t = time.process_time()
+    out[what] = [round(t - t0, 3), resource.getrusage(resource.RUSAGE_SELF).ru_maxrss // 1024]
+    t0 = t
+from pslog.fusion import FusionOptions, fuse, prepare
+from pslog.fusion.gating import gate_for
+from pslog.log import copy_session, read_session
+mark("imports")
+s = read_session(sys.argv[1])
+rig, det = s.rig, s.detections
+del s
+mark("read")
+options = FusionOptions()
+gated = gate_for(det, rig, "typeA", options)
+mark("gate")
+prep = prepare(gated.observations, rig)
+mark("prepare")
+track = fuse(gated.observations, rig, "typeA", options, prepared=prep)
+del prep
+mark("typeA")
+copy_session(sys.argv[1], sys.argv[2], tracks=[track], force=True,
+             rejections={"typeA": gated.rejections})
+mark("write")
+print(json.dumps(out))
 """
 
 
@@ -129,6 +170,9 @@ def main() -> None:
                         help="commit whose eval is timed beside today's ('' to skip)")
     parser.add_argument("--base-timeout", type=float, default=300.0, metavar="S",
                         help="longest run of the base commit's eval, seconds")
+    parser.add_argument("--fuse-base", default="", metavar="COMMIT",
+                        help="also time the fuse stages of this commit, each right after "
+                             "today's (paired: the machine may be shared)")
     parser.add_argument("--json", type=Path, default=None, help="write the rows as JSON")
     args = parser.parse_args()
     minutes = args.minutes or ([1, 10] if args.quick else [1, 10, 45, 90])
@@ -146,6 +190,12 @@ def main() -> None:
         if not base_dir.exists():
             subprocess.run(["git", "worktree", "add", "--detach", "-f", str(base_dir),
                             args.base], cwd=ROOT, check=True, capture_output=True)
+    fuse_base_dir = None
+    if args.fuse_base:
+        fuse_base_dir = work / f"base-{args.fuse_base}"
+        if not fuse_base_dir.exists():
+            subprocess.run(["git", "worktree", "add", "--detach", "-f", str(fuse_base_dir),
+                            args.fuse_base], cwd=ROOT, check=True, capture_output=True)
     rows = []
 
     def row(stage: str, m: float, seconds: float, peak: float, extra: str = "",
@@ -180,11 +230,21 @@ def main() -> None:
                 s, peak, out, _ = run_peak([sys.executable, "-c", code, str(session)])
                 n, dt = out.split()
                 row(stage, m, s, peak, f"{int(n) / float(dt):,.0f} det/s ({float(dt):.2f} s)")
-            s, peak, _, _ = run_peak(pslog("fuse", str(session), "--method", "typeA", "-o",
-                                           str(fused_a), "--force"))
-            row("fuse typeA", m, s, peak)
-            s, peak, _, _ = run_peak(pslog("fuse", str(session), "-o", str(fused), "--force"))
-            row("fuse default", m, s, peak)
+            for label, env in (("", None), (f" @ {args.fuse_base}", fuse_base_dir)):
+                if label and env is None:
+                    continue
+                env = None if env is None else _env(env)
+                s, peak, _, _ = run_peak(pslog("fuse", str(session), "--method", "typeA",
+                                               "-o", str(fused_a), "--force"), env=env)
+                row("fuse typeA" + label, m, s, peak)
+                s, peak, _, _ = run_peak(pslog("fuse", str(session), "-o", str(fused),
+                                               "--force"), env=env)
+                row("fuse default" + label, m, s, peak)
+            s, peak, out, _ = run_peak([sys.executable, "-c", _FUSE_PHASES, str(session),
+                                        str(fused_a)])
+            steps = json.loads(out)
+            row("fuse typeA steps", m, s, peak, "cpu s (peak MB): " + ", ".join(
+                f"{k} {v[0]:.2f} ({v[1]})" for k, v in steps.items()))
             s, peak, new_out, _ = run_peak(pslog("eval", str(fused), "--json"))
             row("eval", m, s, peak)
             if base_dir is not None:
@@ -199,6 +259,10 @@ def main() -> None:
             if args.dir is None:
                 session.unlink(missing_ok=True)
     finally:
+        if fuse_base_dir is not None and fuse_base_dir.exists():
+            subprocess.run(["git", "worktree", "remove", "--force", str(fuse_base_dir)],
+                           cwd=ROOT, capture_output=True)
+            shutil.rmtree(fuse_base_dir, ignore_errors=True)
         if base_dir is not None and base_dir.exists():
             subprocess.run(["git", "worktree", "remove", "--force", str(base_dir)], cwd=ROOT,
                            capture_output=True)

@@ -1,5 +1,6 @@
 """SessionWriter.add_track writes, block by block, the very bytes protobuf gives each point's
-TrackPoint and SceneUpdate (pslog.log._encode), zeros, -0.0, NaN and long ids included."""
+TrackPoint and SceneUpdate (pslog.log._wire; detections: pslog.log._encode), zeros, -0.0,
+NaN and long ids included."""
 
 from __future__ import annotations
 
@@ -117,3 +118,95 @@ def test_detection_blocks_are_protobufs_own_bytes(tmp_path, rig3):
         row = got[S.detections_topic(name)][seen[name]]
         seen[name] += 1
         assert row == (int(det.frame_time_ns[i]), int(det.frame_index[i]), want), i
+
+
+def test_compiled_track_encoder_equals_its_python_and_protobuf(rig3):
+    """_wire.encode_track compiled and as plain Python (py_func) write the same bytes, and
+    they are protobuf's, over ids crossing decimal widths (9 -> 10 ... 99999 -> 100000),
+    times whose seconds or nanoseconds are 0, and a long, non-ASCII camera name."""
+    from pslog.log import _wire
+
+    rng = np.random.default_rng(11)
+    n = 40
+    base = _track(n, "typeA", True, rng)
+    t = base.time_ns.copy()
+    t[1], t[2] = 7, 3_000_000_000  # seconds 0; nanoseconds 0
+    track = Track("typeA", np.sort(t), base.position_world, base.camera, base.quality)
+    names = ("cam1", "é" * 90, "c")  # a name of 180 bytes: a two-byte length varint
+    fixed = {k: (track.quality[k].tolist() if k in track.quality else [float("nan")] * n)
+             for k in S.TRACK_FIXED_QUALITY}
+    template = W._quality_template({k: v for k, v in track.quality.items()
+                                    if k not in S.TRACK_FIXED_QUALITY})
+    color = W.track_color("typeA")
+    for first_id in (0, 99_990, 10**12 - 20):
+        block = W._track_block(track, 0, n, "typeA", names, fixed, template, first_id, color,
+                               1, 2)
+        assert block is not None
+        ends = np.cumsum(block.length)
+        for i in range(n):
+            x, y, z = track.position_world[i].tolist()
+            t = int(track.time_ns[i])
+            msg = S.TrackPoint(time_ns=t, method="typeA", x=x, y=y, z=z,
+                               camera=names[track.camera[i]],
+                               **{k: fixed[k][i] for k in S.TRACK_FIXED_QUALITY})
+            for key, values in track.quality.items():
+                if key not in S.TRACK_FIXED_QUALITY:
+                    msg.quality[key] = float(values[i])
+            point = block.data[ends[2 * i] - block.length[2 * i]:ends[2 * i]]
+            scene = block.data[ends[2 * i + 1] - block.length[2 * i + 1]:ends[2 * i + 1]]
+            assert point == msg.SerializeToString(), (first_id, i)
+            assert scene == W.scene_point("typeA", first_id + i, t, (x, y, z), color)
+
+    # the compiled kernel and its Python original, on the same arrays
+    from pslog.log._wire import encode_track
+
+    t = track.time_ns.astype(np.int64)
+    bits = np.column_stack([track.position_world, *(np.asarray(fixed[k])
+                                                    for k in S.TRACK_FIXED_QUALITY)])
+    bits = np.ascontiguousarray(bits).view(np.uint64)
+    extra = np.tile(template[0], (n, 1))
+    args = (t, bits, track.camera.astype(np.int64), np.frombuffer(b"c1cam2", np.uint8),
+            np.array([0, 2, 6, 6]), np.frombuffer(b"typeA", np.uint8), extra,
+            np.arange(n, dtype=np.int64) * 37, *(np.frombuffer(x, np.uint8) for x in
+                                                  (b"world", b"\x22\x02\x10\x05", b"\x12\x00",
+                                                   b"", b"\x1a\x00")))
+    outs = []
+    for fn in (encode_track, encode_track.py_func):
+        out = np.zeros(_wire.bound(n, b"typeA", [b"cam2"], extra.shape[1], 12), np.uint8)
+        point_len, total_len = np.zeros(n, np.int64), np.zeros(n, np.int64)
+        used = fn(*args, out, point_len, total_len)
+        outs.append((out[:used].tobytes(), point_len.tolist(), total_len.tolist()))
+    assert outs[0] == outs[1]
+
+
+def test_rejection_blocks_are_protobufs_own_bytes(tmp_path, rig3):
+    """add_rejections: every rejected candidate's pslog.Rejection as protobuf writes it
+    (time and frame index 0, -0.0, NaN score, every reason), by the block encoder."""
+    from pslog.fusion.gating import REASONS, Rejections
+
+    rng = np.random.default_rng(9)
+    n = W._FRAME_BLOCK + 777
+    t = np.sort(rng.integers(0, 10**12, n))
+    t[0] = 0
+    uv = rng.normal(size=(n, 2)) * 300
+    uv[::4, 1] = -0.0
+    uv[1::9, 0] = 0.0
+    score = np.where(rng.random(n) < .2, np.nan, rng.random(n))
+    rej = Rejections(t, rng.integers(0, 3, n).astype(np.int32),
+                     rng.integers(0, 10**7, n) * (np.arange(n) % 7 != 0), uv, score,
+                     rng.integers(0, len(REASONS), n).astype(np.int8))
+    assert W._rejections_block(rej, 0, 300, rig3.names, 5) is not None  # the block path
+    path = tmp_path / "r.mcap"
+    with SessionWriter(path, rig3) as w:
+        w.add_rejections("typeA", rej)
+    with open(path, "rb") as f:
+        got = [(m.log_time, m.sequence, m.data) for _s, c, m in
+               make_reader(f).iter_messages(log_time_order=False)
+               if c.topic == S.rejections_topic("typeA")]
+    assert len(got) == n
+    for i in range(n):
+        want = S.Rejection(time_ns=int(t[i]), camera=rig3.names[rej.camera[i]],
+                           frame_index=int(rej.frame_index[i]), u=float(uv[i, 0]),
+                           v=float(uv[i, 1]), score=float(score[i]),
+                           reason=REASONS[rej.reason[i]]).SerializeToString()
+        assert got[i] == (int(t[i]), int(rej.frame_index[i]), want), i

@@ -113,7 +113,11 @@ def run(args: argparse.Namespace) -> int:
             print(f"not run on this timing: {', '.join(skipped)} (name them with --method "
                   f"to run them anyway)")
     progress.update(total=len(methods) + 2)  # read, each method, write
-    tracks, rejections = fuse_detections(session.detections, rig, methods, options)
+    n_observations = len(observations)
+    detections = session.detections
+    del observations, session  # freed before fusing (a 90-minute match's columns)
+    tracks, rejections = fuse_detections(detections, rig, methods, options)
+    del detections  # the output is copied from the file itself
     dropped = {m: t.dropped for m, t in tracks.items()}  # invalid or untrustworthy points
     empty = [m for m, t in tracks.items() if len(t) == 0]
     if empty:
@@ -121,7 +125,7 @@ def run(args: argparse.Namespace) -> int:
         tracks = {m: t for m, t in tracks.items() if len(t)}
     if not tracks:
         raise FusionError(f"no fusion method produced a point from the "
-                          f"{len(observations)} detections of {args.session}")
+                          f"{n_observations} detections of {args.session}")
     # a camera whose clock runs behind camera 1's has true times before the session clock's
     # zero, which a session cannot store: say so rather than fail after the work
     early = {m: int(np.count_nonzero(t.time_ns < 0)) for m, t in tracks.items()}

@@ -799,6 +799,25 @@ class _Track:
         if len(self.t) > 4 * self.o.track_points:
             del self.t[:-self.o.track_points], self.p[:-self.o.track_points]
 
+    def extend(self, t_s: np.ndarray, p: np.ndarray) -> None:
+        """:meth:`add` of each point in turn (times ``t_s`` (k,) s, points ``p`` (k, 3)):
+        the same lists, without a Python step per point (only the newest survive)."""
+        k, keep_at_most = len(t_s), self.o.track_points
+        cap = 4 * keep_at_most
+        if k == 0:
+            return
+        size = len(self.t) + k
+        if size > cap:  # add() cut the lists to the newest track_points at cap + 1, and
+            # again every 3 track_points + 1 additions after
+            size = keep_at_most + (k - (cap + 1 - len(self.t))) % (3 * keep_at_most + 1)
+        if size <= k:
+            self.t = t_s[k - size:].tolist()
+            self.p = [np.array(q) for q in p[k - size:].tolist()]
+        else:
+            old = size - k
+            self.t = self.t[len(self.t) - old:] + t_s.tolist()
+            self.p = self.p[len(self.p) - old:] + [np.array(q) for q in p.tolist()]
+
     def last(self):
         return (self.t[-1], self.p[-1]) if self.t else None
 
@@ -845,6 +864,64 @@ def _line_fit(ts: list[float], ys: list[tuple]) -> tuple[list[float], float]:
     return p0, math.sqrt(sq / n)
 
 
+class _Columns:
+    """Per candidate, as Python floats (the decision loop is sequential; numpy is slow on
+    scalars), what :meth:`_Decider.decide` reads: made by :func:`_columns`."""
+
+    __slots__ = ("available", "camera", "epi_cost", "front", "n_support", "pts", "rays",
+                 "rows", "static", "stillness", "t_ns", "t_s")
+    available: list[int]
+    camera: list[int]
+    epi_cost: list[float]
+    front: list[bool]
+    n_support: list[int]
+    pts: list[list[float]]
+    rays: list[list[float]]
+    rows: list[list[float]]
+    static: list[bool]
+    stillness: list[float]
+    t_ns: list[int]
+    t_s: list[float]
+
+    def __init__(self, **columns) -> None:
+        for k, v in columns.items():
+            setattr(self, k, v)
+
+
+def _columns(c: _Candidates, ratio, points, in_front, static=None) -> _Columns:
+    """:class:`_Columns` of the candidates ``c``: their support ``ratio`` (n, m), ``points``
+    (n, 3), ``in_front`` (n,) and ``static`` (:func:`_static`'s pair, or None: none static).
+    Counted and summed with numpy in camera order, as the per-row Python sums did (the same
+    bits: a sum of three non-negative floats from 0)."""
+    n = len(c.camera)
+    static, stillness = (([False] * n, [0.0] * n) if static is None else
+                         (np.asarray(static[0]).tolist(), np.asarray(static[1]).tolist()))
+    ratio = np.asarray(ratio, dtype=np.float64).reshape(n, -1)
+    points = np.asarray(points, dtype=np.float64).reshape(n, 3)
+    with np.errstate(invalid="ignore"):
+        supports = ratio <= 1.0
+    supported = supports.sum(axis=1)
+    # squared residuals of the supporting cameras, 1 for each other available one: a
+    # camera that does not see the ball says nothing, however near a false candidate
+    # (summed in camera order)
+    with np.errstate(invalid="ignore", over="ignore"):
+        squared = np.where(supports, ratio * ratio, 1.0)
+    epi_cost = np.zeros(n)
+    for b in range(ratio.shape[1]):
+        epi_cost = epi_cost + squared[:, b]
+    # two supporting cameras make three views only when the three rays meet (a point, not
+    # NaN: within track_m): lines alone can agree by chance, two false or carried-across-a-
+    # gap candidates near the epipolar lines of a random blob. Rays that miss count as one
+    # support (the track gate then judges).
+    n_support = np.where((supported >= 2) & ~np.isfinite(points[:, 0]), 1, supported)
+    return _Columns(rows=ratio.tolist(), available=np.isfinite(ratio).sum(axis=1).tolist(),
+                    n_support=n_support.tolist(), epi_cost=epi_cost.tolist(),
+                    t_s=(c.time_ns / NS).tolist(), t_ns=c.time_ns.tolist(),
+                    rays=c.ray_dir.tolist(), pts=points.tolist(),
+                    front=np.asarray(in_front).tolist(), static=static, stillness=stillness,
+                    camera=np.asarray(c.camera).tolist())
+
+
 class _Decider:
     """The sequential part of the gate: each frame's choice, in (time, camera) order, with
     the track and what the earlier choices taught (:func:`gate`; the stream keeps one)."""
@@ -859,30 +936,16 @@ class _Decider:
             static=None) -> None:
         """Decide the frames ``[(lo, hi), ...]`` (candidate rows, in order): set ``reason``
         of every rejected row (``static``: :func:`_static`'s pair)."""
-        n = len(c.camera)
-        static, stillness = (([False] * n, [0.0] * n) if static is None else
-                             (np.asarray(static[0]).tolist(), np.asarray(static[1]).tolist()))
+        self.decide(frames, _columns(c, ratio, points, in_front, static), reason)
+
+    def decide(self, frames, cols: _Columns, reason) -> None:
+        """:meth:`run` on the candidates' :func:`_columns` (made once for many frames)."""
         options, track = self.options, self.track
-        # per candidate, in floats (the loop is sequential; numpy is slow on scalars)
-        rows = ratio.tolist()
-        available = [sum(1 for r in row if math.isfinite(r)) for row in rows]
-        n_support = [sum(1 for r in row if r <= 1.0) for row in rows]
-        # squared residuals of the supporting cameras, 1 for each other available one: a
-        # camera that does not see the ball says nothing, however near a false candidate
-        # (summed in camera order)
-        epi_cost = [sum((r * r if r <= 1.0 else 1.0) for r in row) for row in rows]
-        t_s = (c.time_ns / NS).tolist()
+        rows, available, n_support, epi_cost = (cols.rows, cols.available, cols.n_support,
+                                                cols.epi_cost)
+        t_s, t_ns, rays, pts, front = cols.t_s, cols.t_ns, cols.rays, cols.pts, cols.front
+        static, stillness, camera = cols.static, cols.stillness, cols.camera
         centers = self.centers
-        rays = c.ray_dir.tolist()
-        pts = np.asarray(points).tolist()
-        # two supporting cameras make three views only when the three rays meet (a point, not
-        # NaN: within track_m): lines alone can agree by chance, two false or carried-across-a-
-        # gap candidates near the epipolar lines of a random blob. Rays that miss count as one
-        # support (the track gate then judges).
-        n_support = [k if k < 2 or math.isfinite(p[0]) else 1
-                     for k, p in zip(n_support, pts, strict=True)]
-        front = np.asarray(in_front).tolist()
-        t_ns = c.time_ns.tolist()
         for lo, hi in frames:
             best_key, best_row = None, -1
             # the track's prediction at each time (False: none)
@@ -900,7 +963,7 @@ class _Decider:
                     if pred is None:  # at the candidate's own time (a rolling shutter's row)
                         pred = preds[t_ns[i]] = track.predict(t_s[i]) or False
                     if pred and math.isfinite(rays[i][0]):
-                        track_accepts = (_ray_miss(pred[0], centers[c.camera[i]], rays[i])
+                        track_accepts = (_ray_miss(pred[0], centers[camera[i]], rays[i])
                                          <= options.track_alone_m)
                     if not track_accepts:
                         reason[i] = EPIPOLAR
@@ -928,7 +991,7 @@ class _Decider:
                     if pred is None:  # at the candidate's own time (a rolling shutter's row)
                         pred = preds[t_ns[i]] = track.predict(t_s[i]) or False
                     if pred and math.isfinite(rays[i][0]):
-                        miss = _ray_miss(pred[0], centers[c.camera[i]], rays[i])
+                        miss = _ray_miss(pred[0], centers[camera[i]], rays[i])
                         if miss > (2.0 if loose else 1.0) * pred[1]:
                             reason[i] = TRACK
                             continue
@@ -1011,71 +1074,153 @@ def _decided(c: _Candidates, rig: Rig, options: GatingOptions, causal: bool, wai
     starts = np.flatnonzero(np.r_[True, c.frame[1:] != c.frame[:-1]])
     ends = np.r_[starts[1:], n]
     order = np.lexsort((c.camera[starts], c.time_ns[starts]))
-    _decide_in_order(c, rig, options, [(int(starts[f]), int(ends[f])) for f in order.tolist()],
-                     tables, F, (ratio, carried, used), (points, in_front),
-                     (static, stillness), reason, causal, wait_ns, max_gap_ns, constants)
+    _decide_in_order(c, rig, options, (starts, ends, order), tables, F,
+                     (ratio, carried, used), (points, in_front), (static, stillness), reason,
+                     causal, wait_ns, max_gap_ns, constants)
     return ratio
+
+
+#: frames decided by one :meth:`_Decider.decide` call at most (bounds the Python floats held)
+_DECIDE_BLOCK = 8192
 
 
 def _decide_in_order(c: _Candidates, rig: Rig, options: GatingOptions, frames, tables, F,
                      support, geometry, still, reason, causal: bool, wait_ns: int,
                      max_gap_ns: int, constants) -> None:
-    """:class:`_Decider` over the frames ``[(lo, hi), ...]`` in order, each frame's support
-    as decided so far (:func:`_support_one`): the all-candidates support and points computed
-    in arrays (``support``: :func:`_support`'s; ``geometry``: points, in_front) hold while
-    no frame they used has been decided with a rejected candidate; a candidate whose support
-    used one is recomputed on floats (the stream gate's arithmetic, the same bits). The
-    stillness (``still``: :func:`_static`'s) stays the all-candidates one: whether an object
-    stands still is a fact of the scene, whichever candidates were chosen (a static object
-    the gate rejects must stay still to the test). Sets ``reason`` of every rejected row."""
+    """:class:`_Decider` over the frames in order, each frame's support as decided so far
+    (:func:`_support_one`): the all-candidates support and points computed in arrays
+    (``support``: :func:`_support`'s; ``geometry``: points, in_front) hold while no frame
+    they used has been decided with a rejected candidate; a candidate whose support used one
+    is recomputed on floats (the stream gate's arithmetic, the same bits). The stillness
+    (``still``: :func:`_static`'s) stays the all-candidates one: whether an object stands
+    still is a fact of the scene, whichever candidates were chosen (a static object the gate
+    rejects must stay still to the test). Sets ``reason`` of every rejected row.
+
+    ``frames``: ``(starts, ends, order)``, each frame's candidate rows ``starts[f]:ends[f]``
+    (frames in row order) and the order to decide them in. Only a frame with several
+    candidates can be decided with one rejected (:func:`_supporting`), so only a frame whose
+    support used such a frame may need its support redone; the others are decided in blocks
+    (:meth:`_Decider.decide` over many frames), and a run of frames of one candidate that
+    two other cameras support with meeting rays, neither static nor behind a camera (each
+    one chosen, whatever the track says) only adds its points to the track.
+    """
     ratio, carried, used = support
     points, in_front = geometry
     static, stillness = still
+    starts, ends, order = frames
     decider = _Decider(rig, options)
     m = len(rig)
-    keys = [times.tolist() for times, _ in tables]
-    position = [dict(zip(table[:, 0].tolist(), range(len(table)), strict=True))
-                for _, table in tables]
-    t_ns, und = c.time_ns.tolist(), c.uv_und.tolist()
-    # per camera and frame: the candidates that may support ((t, u, v); all until decided
-    # with one chosen), and whether it was decided with one chosen and another rejected
-    usable = [[[(t_ns[r], *und[r]) for r in row if r >= 0] for row in table.tolist()]
-              for _, table in tables]
-    spoiled = [[False] * len(k) for k in keys]
-    used_rows = used.tolist()
+    # candidates whose all-candidates support used a frame with several candidates
+    several = [table[:, 1] >= 0 if table.shape[1] > 1 else np.zeros(len(table), dtype=bool)
+               for _, table in tables]
+    may_redo = np.zeros(len(c.camera), dtype=bool)
+    for b in range(m):
+        if several[b].any():
+            u = used[:, b, :]
+            may_redo |= np.any((u >= 0) & several[b][np.maximum(u, 0)], axis=1)
+    redo_frame = np.logical_or.reduceat(may_redo, starts)[order]
+    lo_all, hi_all = starts[order], ends[order]
+    single = (hi_all - lo_all) == 1
+    with np.errstate(invalid="ignore"):
+        strong = ((ratio <= 1.0).sum(axis=1) >= 2) & np.isfinite(points[:, 0])
+    first = lo_all
+    simple = single & ~redo_frame & strong[first] & ~static[first] & in_front[first]
+    special = ~single | redo_frame
+    # each frame's kind: 0 simple, 1 any other frame decided as it comes, 2 special
+    kind = np.where(simple, 0, np.where(special, 2, 1))
+    cuts = np.flatnonzero(np.r_[True, kind[1:] != kind[:-1], True])
+
+    # what the special frames need, made as they come
+    position = np.zeros(len(c.camera), dtype=np.int64)  # a frame's first row -> table row
+    for _, table in tables:
+        position[table[:, 0]] = np.arange(len(table))
+    keys_cache: dict[int, list[int]] = {}
+
+    def keys(b: int) -> list[int]:
+        if b not in keys_cache:
+            keys_cache[b] = tables[b][0].tolist()
+        return keys_cache[b]
+
+    # per camera: the candidates of a decided frame that may support (_supporting), where
+    # they are not all its candidates; and the frames so decided (spoiled)
+    kept_of: list[dict[int, list]] = [{} for _ in range(m)]
+    spoiled: list[set[int]] = [set() for _ in range(m)]
+
+    def usable_of(b: int):
+        table, kept = tables[b][1], kept_of[b]
+
+        def usable(j: int) -> list:
+            got = kept.get(j)
+            if got is None:
+                got = [(int(c.time_ns[r]), *c.uv_und[r].tolist()) for r in table[j].tolist()
+                       if r >= 0]
+            return got
+        return usable
+
     F_lists = F.tolist()
     lags = [int(np.ceil(options.static_s * cam.fps)) for cam in rig.cameras]  # as _static
-    for lo, hi in frames:
-        a = int(c.camera[lo])
-        at = position[a][lo]
-        redo = any(j >= 0 and spoiled[b][j] for i in range(lo, hi) for b in range(m) if b != a
-                   for j in used_rows[i][b])
-        if redo:
-            for i in range(lo, hi):
-                for b in range(m):
-                    if b == a or not keys[b]:
-                        continue
-                    search = bisect_right if (not causal or wait_ns > 0 or b < a) else bisect_left
-                    r, uv = _support_one(t_ns[i], _line_of(F_lists[a][b], *und[i]), keys[b],
-                                         usable[b].__getitem__, search, wait_ns, causal,
-                                         max_gap_ns, options)
-                    ratio[i, b] = r
-                    carried[i, b] = uv if uv is not None else (math.nan, math.nan)
-                p, ok, miss = _points_one(a, c.ray_dir[i].tolist(), ratio[i].tolist(),
-                                          carried[i].tolist(), constants)
-                points[i] = p if p is not None and not miss > options.track_m else math.nan
-                in_front[i] = ok
-        sl = slice(lo, hi)
-        decider.run(_Candidates(c.camera[sl], c.time_ns[sl], c.uv_und[sl], c.ray_dir[sl],
-                                c.frame[sl]), [(0, hi - lo)], ratio[sl], points[sl],
-                    in_front[sl], reason[sl], (static[sl], stillness[sl]))
-        judged = _can_judge(keys[a][at], [keys[a][at - lag] for lag in
-                                          range(1, min(lags[a], at) + 1)], lags[a], options)
-        kept = _supporting(reason[sl].tolist()) if judged else None
-        if kept is not None:
-            spoiled[a][at] = True
-            usable[a][at] = [(t_ns[i], *und[i]) for i, ok in zip(range(lo, hi), kept,
-                                                                 strict=True) if ok]
+
+    def decide_block(k0: int, k1: int) -> None:
+        """Frames k0:k1 of the order by one decide() call on their candidates' columns."""
+        lo, hi = lo_all[k0:k1], hi_all[k0:k1]
+        sizes = hi - lo
+        local_hi = np.cumsum(sizes)
+        local_lo = local_hi - sizes
+        rows = np.repeat(lo - local_lo, sizes) + np.arange(int(local_hi[-1]))
+        sub = _Candidates(c.camera[rows], c.time_ns[rows], c.uv_und[rows], c.ray_dir[rows],
+                          c.frame[rows])
+        cols = _columns(sub, ratio[rows], points[rows], in_front[rows],
+                        (static[rows], stillness[rows]))
+        local = reason[rows]
+        decider.decide(zip(local_lo.tolist(), local_hi.tolist(), strict=True), cols, local)
+        reason[rows] = local
+
+    for s, e in zip(cuts[:-1].tolist(), cuts[1:].tolist(), strict=True):
+        if kind[s] == 0:  # each one chosen: its point joins the track
+            rows = lo_all[s:e]
+            decider.verified = True
+            decider.track.extend(c.time_ns[rows] / NS, points[rows])
+            continue
+        if kind[s] == 1:
+            for k0 in range(s, e, _DECIDE_BLOCK):
+                decide_block(k0, min(k0 + _DECIDE_BLOCK, e))
+            continue
+        for k in range(s, e):
+            lo, hi = int(lo_all[k]), int(hi_all[k])
+            a = int(c.camera[lo])
+            redo = bool(redo_frame[k]) and any(
+                j >= 0 and j in spoiled[b] for row in used[lo:hi].tolist()
+                for b in range(m) if b != a for j in row[b])
+            if redo:
+                for i in range(lo, hi):
+                    t_i = int(c.time_ns[i])
+                    und_i = c.uv_und[i].tolist()
+                    for b in range(m):
+                        if b == a or not keys(b):
+                            continue
+                        search = (bisect_right if (not causal or wait_ns > 0 or b < a)
+                                  else bisect_left)
+                        r, uv = _support_one(t_i, _line_of(F_lists[a][b], *und_i), keys(b),
+                                             usable_of(b), search, wait_ns, causal,
+                                             max_gap_ns, options)
+                        ratio[i, b] = r
+                        carried[i, b] = uv if uv is not None else (math.nan, math.nan)
+                    p, ok, miss = _points_one(a, c.ray_dir[i].tolist(), ratio[i].tolist(),
+                                              carried[i].tolist(), constants)
+                    points[i] = p if p is not None and not miss > options.track_m else math.nan
+                    in_front[i] = ok
+            decide_block(k, k + 1)
+            if hi - lo < 2:
+                continue  # one candidate: every one may support (_supporting)
+            kept = _supporting(reason[lo:hi].tolist())
+            if kept is None:
+                continue
+            at = int(position[lo])
+            if _can_judge(keys(a)[at], [keys(a)[at - lag] for lag in
+                                        range(1, min(lags[a], at) + 1)], lags[a], options):
+                spoiled[a].add(at)
+                kept_of[a][at] = [(int(c.time_ns[i]), *c.uv_und[i].tolist())
+                                  for i, ok in zip(range(lo, hi), kept, strict=True) if ok]
 
 
 def _supporting(reasons: list[int]) -> list[bool] | None:
@@ -1478,8 +1623,9 @@ def fuse_detections(detections: Detections, rig: Rig, methods, options=None):
         return out, {m: Rejections.empty() for m in methods}
     shared: dict[tuple[bool, float], tuple[Gated, Prepared | None]] = {}
     tracks, rejections = {}, {}
-    for method in methods:
-        key = gating_key(method, options)
+    keys = [gating_key(method, options) for method in methods]
+    last_use = {key: i for i, key in enumerate(keys)}
+    for i, (method, key) in enumerate(zip(methods, keys, strict=True)):
         progress.step(f"fusing {method}")
         if key not in shared:
             gated = gate_for(detections, rig, method, options)
@@ -1487,6 +1633,8 @@ def fuse_detections(detections: Detections, rig: Rig, methods, options=None):
         gated, prep = shared[key]
         tracks[method] = fuse(gated.observations, rig, method, options, prepared=prep)
         rejections[method] = gated.rejections
+        if last_use[key] == i:  # no other method needs this gating: its arrays go
+            del shared[key], gated, prep
     return tracks, rejections
 
 

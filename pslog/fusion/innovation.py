@@ -238,6 +238,21 @@ def _bends(prep, a, b, c, point, speed, sigma):
         return (dt1 > 0) & (dt2 > 0) & (depth > 0) & (change > bound)
 
 
+#: events whose kinks are tested at a time (bounded memory)
+_KINK_BLOCK = 1 << 14
+
+
+def _rows_of(p, lo: int, hi: int):
+    """Rows ``lo:hi`` of a PseudoStereoPoints (the fields :func:`kinked_points` reads), or
+    of a (k, 3) array."""
+    if isinstance(p, np.ndarray):
+        return p[lo:hi]
+    from types import SimpleNamespace
+
+    return SimpleNamespace(row=p.row[lo:hi], prev_row=p.prev_row[lo:hi],
+                           next_row=p.next_row[lo:hi], points_world=p.points_world[lo:hi])
+
+
 def kinked_points(prep, events: np.ndarray, past: tuple, noise_px: float | np.ndarray | None,
                   max_gap_ns: int) -> np.ndarray:
     """Which type A points rest on an interval in which some camera saw the motion change.
@@ -285,6 +300,15 @@ def kinked_points(prep, events: np.ndarray, past: tuple, noise_px: float | np.nd
     -------
     (k,) bool, True where a bend is detected in an interval the point relies on
     """
+    if len(events) > _KINK_BLOCK:
+        # in blocks of events (each point's test uses its own rows alone: the same bits);
+        # all at once, the temporaries of a 90-minute match took over 1 GB
+        return np.concatenate([kinked_points(
+            prep, events[s:s + _KINK_BLOCK], tuple(_rows_of(p, s, s + _KINK_BLOCK)
+                                                   for p in past),
+            noise_px[s:s + _KINK_BLOCK] if isinstance(noise_px, np.ndarray) and noise_px.ndim
+            else noise_px,
+            max_gap_ns) for s in range(0, len(events), _KINK_BLOCK)])
     p1, p2, predicted = past
     time_ns = prep.obs.time_ns
     sigma = np.broadcast_to(DEFAULT_NOISE_PX if noise_px is None

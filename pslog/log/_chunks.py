@@ -59,7 +59,6 @@ def write_messages(writer, channel: np.ndarray, log_time: np.ndarray, sequence: 
     data : the messages' payloads back to back
     lengths : (n,) int64 byte length of each payload
     """
-    import zstandard
     from mcap.records import ChunkIndex
     from mcap.writer import IndexType
 
@@ -107,6 +106,9 @@ def write_messages(writer, channel: np.ndarray, log_time: np.ndarray, sequence: 
         stats.channel_message_counts[cid] += k
     stats.message_count += n
 
+    # the chunks' uncompressed records first, then compressed together (zstd releases the
+    # GIL: the chunks of a block are compressed on every core), then written in order
+    bodies = []
     s, base = 0, len(prefix)
     while s < n:
         # add_message closes the chunk after the first message that takes it past the limit
@@ -124,9 +126,11 @@ def write_messages(writer, channel: np.ndarray, log_time: np.ndarray, sequence: 
         body[where] = head_bytes[s:e].ravel()
         d0 = int(data_ends[s - 1]) if s else 0
         body[~is_head] = payload[d0:int(data_ends[e - 1])]
-        raw = body.tobytes()
+        bodies.append((s, e, rec_start, body.tobytes()))
         del body, is_head, where
-        compressed = zstandard.compress(raw)
+        s, base = e, 0
+    for (s, e, rec_start, raw), compressed in zip(bodies, _compress_all([b[3] for b in bodies]),
+                                                 strict=True):
         times = log_time[s:e]
         start_time, end_time = int(times.min()), int(times.max())
         # the chunk record
@@ -172,4 +176,26 @@ def write_messages(writer, channel: np.ndarray, log_time: np.ndarray, sequence: 
                 indexes, zlib.crc32(record, writer._Writer__data_section_crc))
         writer._Writer__chunk_indices.append(index)
         stats.chunk_count += 1
-        s, base = e, 0
+
+
+#: (process id, thread pool) compressing chunks; made again in a forked child (the
+#: parent's threads do not exist there)
+_POOL: tuple[int, object] | None = None
+
+
+def _compress_all(raws: list[bytes]) -> list[bytes]:
+    """``zstandard.compress`` of each (the ``mcap`` writer's own call: the same frames), on
+    a pool of threads when there are several."""
+    import os
+
+    import zstandard
+
+    if len(raws) < 2 or (os.cpu_count() or 1) < 2:
+        return [zstandard.compress(r) for r in raws]
+    global _POOL
+    if _POOL is None or _POOL[0] != os.getpid():
+        from concurrent.futures import ThreadPoolExecutor
+
+        _POOL = (os.getpid(), ThreadPoolExecutor(max_workers=min(4, os.cpu_count() or 1),
+                                                 thread_name_prefix="pslog-zstd"))
+    return list(_POOL[1].map(zstandard.compress, raws))  # type: ignore[attr-defined]

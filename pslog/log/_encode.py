@@ -1,7 +1,7 @@
 """Protobuf wire format for many messages at once, with numpy: the bytes protobuf's own
-``SerializeToString`` gives for pslog's track messages (``pslog.TrackPoint`` and the
-``foxglove.SceneUpdate`` sphere of each point), made for a block of points at a time instead
-of a Python object per point (which was most of the time of writing a fused 90-minute match).
+``SerializeToString`` gives for pslog's detection messages (``pslog.DetectionFrame``), made
+for a block of frames at a time instead of a Python object per frame. (Track points, many
+more fields per message, are written by the compiled loop of :mod:`._wire`.)
 
 A *piece* is a column of variable-length byte strings: ``(matrix, lengths)``, row ``i`` being
 ``matrix[i, :lengths[i]]``. Fields are pieces; a message is its fields' pieces concatenated
@@ -73,26 +73,6 @@ def field_strings(number: int, index: np.ndarray, strings: list[str]) -> Piece:
         table[k, :len(s)] = np.frombuffer(s, dtype=np.uint8)
     sizes = np.array([len(s) for s in encoded], dtype=np.int64)
     return field_message(number, (table[index], sizes[index]))
-
-
-def decimal(values: np.ndarray) -> Piece:
-    """The decimal digits of non-negative integers, as ``str(value)`` writes them."""
-    v = np.asarray(values, dtype=np.int64)
-    n = len(v)
-    digits = np.ones(n, dtype=np.int64)
-    bound = 10
-    while (v >= bound).any():
-        digits += v >= bound
-        bound *= 10
-    width = int(digits.max()) if n else 1
-    out = np.zeros((n, width), dtype=np.uint8)
-    rest = v.copy()
-    for j in range(width - 1, -1, -1):  # right-aligned, then shifted left per row
-        out[:, j] = ord("0") + rest % 10
-        rest //= 10
-    shift = width - digits
-    cols = (np.arange(width)[None, :] + shift[:, None]) % width
-    return np.take_along_axis(out, cols, axis=1), digits
 
 
 def concat(pieces: list[Piece]) -> Piece:

@@ -121,15 +121,20 @@ def encode(table: str, camera_names: Sequence[str], counts: Mapping[str, int],
     columns : name -> array, every column of :data:`COLUMNS` ``[table]`` (a track table:
         those of :data:`TRACK_COLUMNS` and any ``quality/<name>`` columns, kept in order)
     """
-    import zstandard
+    from ._chunks import _compress_all
 
     blobs, described, at = [], {}, 0
-    for name, (dtype, _shape) in _columns_of(table, list(columns)).items():
-        values = np.ascontiguousarray(columns[name], dtype=dtype)
-        raw = values.tobytes()
+    named = list(_columns_of(table, list(columns)).items())
+    values_of = [np.ascontiguousarray(columns[name], dtype=dtype) for name, (dtype, _s) in named]
+    raws = [v.tobytes() for v in values_of]
+    # every column large enough compressed at once (on the writer's thread pool)
+    big = [i for i, raw in enumerate(raws) if len(raw) >= _COMPRESS_FROM]
+    packed_of = dict(zip(big, _compress_all([raws[i] for i in big]), strict=True))
+    for i, ((name, (dtype, _s)), values, raw) in enumerate(zip(named, values_of, raws,
+                                                                strict=True)):
         codec, stored = "none", raw
-        if len(raw) >= _COMPRESS_FROM:
-            packed = zstandard.compress(raw)
+        if i in packed_of:
+            packed = packed_of[i]
             if len(packed) < 0.9 * len(raw):  # noisy doubles barely shrink: kept raw, read
                 codec, stored = "zstd", packed  # without a decompression pass
 

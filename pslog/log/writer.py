@@ -539,10 +539,15 @@ class SessionWriter:
         if len(rejections) and not 0 <= rejections.camera.min() <= rejections.camera.max() \
                 < len(names):
             raise InputError(f"rejections of {method!r}: camera index out of range of the rig")
+        n, lo = len(rejections), 0
+        if (all(names) and n >= _BLOCK_FROM and rejections.frame_time_ns.min() >= 0
+                and rejections.frame_index.min() >= 0):
+            lo = self._queue_blocks(n, _FRAME_BLOCK, lambda a, b: _rejections_block(
+                rejections, a, b, names, channel))
         for t, cam, idx, (u, v), score, reason in zip(
-                rejections.frame_time_ns.tolist(), rejections.camera.tolist(),
-                rejections.frame_index.tolist(), rejections.uv.tolist(),
-                rejections.score.tolist(), rejections.reason_names(), strict=True):
+                rejections.frame_time_ns[lo:].tolist(), rejections.camera[lo:].tolist(),
+                rejections.frame_index[lo:].tolist(), rejections.uv[lo:].tolist(),
+                rejections.score[lo:].tolist(), rejections.reason_names()[lo:], strict=True):
             if t < 0:
                 raise InputError(_negative_time(t))
             msg = S.Rejection(time_ns=t, camera=names[cam], frame_index=idx, u=u, v=v,
@@ -889,6 +894,35 @@ def _detections_block(detections: Detections, lo: int, hi: int, names, channels)
     return _Block(np.asarray(channels, dtype=np.int64)[cam], t, idx, lengths, data)
 
 
+def _rejections_block(rejections, lo: int, hi: int, names, channel: int):
+    """Rows ``lo:hi`` of :class:`pslog.fusion.gating.Rejections` as one :class:`_Block` of
+    ``pslog.Rejection`` messages (as :meth:`SessionWriter.add_rejections` queued them one by
+    one), encoded with :mod:`._encode`; None when sample rows differ from protobuf's bytes
+    (times and frame indices >= 0, camera names non-empty: checked by the caller)."""
+    from ..fusion.gating import REASONS
+    from . import _encode as E
+
+    n = hi - lo
+    t = rejections.frame_time_ns[lo:hi].astype(np.int64)
+    cam = rejections.camera[lo:hi].astype(np.int64)
+    idx = rejections.frame_index[lo:hi].astype(np.int64)
+    uv = np.ascontiguousarray(rejections.uv[lo:hi], dtype=np.float64)
+    score = np.ascontiguousarray(rejections.score[lo:hi], dtype=np.float64)
+    reason = rejections.reason[lo:hi].astype(np.int64)
+    data, lengths = E.rows(E.concat([
+        E.field_varint(1, t), E.field_strings(2, cam, list(names)), E.field_varint(3, idx),
+        E.field_double(4, uv[:, 0]), E.field_double(5, uv[:, 1]), E.field_double(6, score),
+        E.field_strings(7, reason, list(REASONS))]))
+    ends = np.cumsum(lengths)
+    for j in sorted({0, n - 1, *np.linspace(0, n - 1, _TRACK_CHECKS).astype(int).tolist()}):
+        want = S.Rejection(time_ns=int(t[j]), camera=names[int(cam[j])],
+                           frame_index=int(idx[j]), u=float(uv[j, 0]), v=float(uv[j, 1]),
+                           score=float(score[j]), reason=REASONS[int(reason[j])])
+        if data[ends[j] - lengths[j]:ends[j]] != want.SerializeToString():
+            return None
+    return _Block(np.full(n, channel, dtype=np.int64), t, idx, lengths, data)
+
+
 def _quality_template(extra: dict[str, np.ndarray]):
     """``(template, slots)`` of a TrackPoint's quality map entries (see
     :func:`_quality_entries`): the bytes of one point's entries with each key's value at
@@ -917,7 +951,8 @@ def _track_block(track: Track, lo: int, hi: int, method: str, cameras, fixed: di
                  template, first_id: int, color, channel: int, scene_channel: int):
     """Points ``lo:hi`` of a track as one :class:`_Block` of messages (TrackPoint, then its
     SceneUpdate, per point, as :meth:`SessionWriter.add_track` queues them one by one),
-    encoded with :mod:`._encode`; None when sample points differ from protobuf's bytes."""
+    encoded by :func:`._wire.encode_track`; None when sample points differ from protobuf's
+    bytes."""
     from . import _encode as E
 
     n = hi - lo
@@ -931,8 +966,7 @@ def _track_block(track: Track, lo: int, hi: int, method: str, cameras, fixed: di
             track.quality[key][lo:hi], dtype="<f8").view(np.uint8).reshape(n, 8)
     fixed_cols = [np.asarray(fixed[k][lo:hi], dtype=np.float64) if len(fixed[k]) == len(track)
                   else np.full(n, np.nan) for k in S.TRACK_FIXED_QUALITY]
-    sec, nanos = np.divmod(t, 1_000_000_000)
-    ids = first_id + lo + np.arange(n)
+    ids = first_id + lo + np.arange(n, dtype=np.int64)
     lifetime = E.rows(E.field_message(4, E.concat([
         E.field_varint(1, np.array([_TRACK_LIFETIME_NS // 1_000_000_000])),
         E.field_varint(2, np.array([_TRACK_LIFETIME_NS % 1_000_000_000]))])))[0]
@@ -941,45 +975,28 @@ def _track_block(track: Track, lo: int, hi: int, method: str, cameras, fixed: di
                                                 for k in (1, 2, 3)])))[0]
     rgba = E.rows(E.field_message(3, E.concat([E.field_double(k + 1, np.array([float(v)]))
                                                 for k, v in enumerate((*color, 1.0))])))[0]
-    name_len = np.array([len(c.encode()) for c in cameras], dtype=np.int64)
 
-    def encode(r: np.ndarray):
-        m = len(r)
-        point = E.concat([
-            E.field_varint(1, t[r]), E.field_message(2, E.const(m, method.encode())),
-            E.field_double(3, xyz[r, 0]), E.field_double(4, xyz[r, 1]),
-            E.field_double(5, xyz[r, 2]), E.field_strings(6, cam[r], list(cameras)),
-            *(E.field_double(7 + j, c[r]) for j, c in enumerate(fixed_cols)),
-            (extra[r], np.full(m, len(tmpl), dtype=np.int64))])
-        position = E.concat([E.field_double(k + 1, xyz[r, k]) for k in range(3)])
-        sphere = E.concat([E.field_message(1, E.concat([E.field_message(1, position),
-                                                        E.const(m, orientation)])),
-                           E.const(m, size), E.const(m, rgba)])
-        entity = E.concat([
-            E.field_message(1, E.concat([E.field_varint(1, sec[r]),
-                                         E.field_varint(2, nanos[r])])),
-            E.field_message(2, E.const(m, S.WORLD_FRAME.encode())),
-            E.field_message(3, E.concat([E.const(m, f"{method}/".encode()),
-                                         E.decimal(ids[r])])),
-            E.const(m, lifetime), E.field_message(9, sphere)])
-        return E.concat([point, E.field_message(2, entity)])
+    # every point's two messages by one compiled loop (_wire; numpy's per-field calls over
+    # each layout group cost most of the time of writing a fused match)
+    from . import _wire
 
-    # rows of one layout (the same fields present, varints and ids of the same widths) are
-    # encoded together: stacks of fixed-width columns, no per-byte scatter but the last
-    bits = xyz.view(np.uint64) != 0
-    fixed_bits = np.column_stack([c.view(np.uint64) != 0 for c in fixed_cols])
-    key = (E.varint_size(t) * (t != 0)
-           + 11 * (E.varint_size(sec) * (sec != 0) + 11 * (E.varint_size(nanos) * (nanos != 0)
-           + 11 * (np.floor(np.log10(np.maximum(ids, 1))).astype(np.int64)
-           + 20 * (name_len[cam] + 64 * (bits @ np.array([1, 2, 4])
-           + 8 * (fixed_bits @ np.array([1, 2, 4]))))))))
-    data, lengths = E.grouped(key, encode)
-    # each TrackPoint's length: the point's fields as the encoder wrote them
-    method_len = len(method.encode())
-    point_len = (np.where(t != 0, 1 + E.varint_size(t), 0)
-                 + 1 + int(E.varint_size(np.array([method_len]))[0]) + method_len
-                 + 9 * bits.sum(axis=1) + 1 + E.varint_size(name_len[cam]) + name_len[cam]
-                 + 9 * fixed_bits.sum(axis=1) + len(tmpl))
+    bits = np.column_stack([xyz, *fixed_cols]).view(np.uint64)
+    names_b = [c.encode() for c in cameras]
+    name_start = np.cumsum([0, *(len(x) for x in names_b)]).astype(np.int64)
+    method_b = np.frombuffer(method.encode(), dtype=np.uint8)
+    world_a, lifetime_a, orientation_a, size_a, rgba_a = consts = [
+        np.frombuffer(x, dtype=np.uint8) for x in (S.WORLD_FRAME.encode(), lifetime,
+                                                   orientation, size, rgba)]
+    out = np.empty(_wire.bound(n, method.encode(), names_b, len(tmpl),
+                               sum(len(x) for x in consts)), dtype=np.uint8)
+    point_len = np.empty(n, dtype=np.int64)
+    lengths = np.empty(n, dtype=np.int64)
+    used = _wire.encode_track(t, np.ascontiguousarray(bits), cam,
+                              np.frombuffer(b"".join(names_b), dtype=np.uint8), name_start,
+                              method_b, extra, ids, world_a, lifetime_a, orientation_a, size_a,
+                              rgba_a, out, point_len, lengths)
+    data = out[:used].tobytes()
+    del out
 
     # protobuf's own bytes of sample points, compared
     ends = np.cumsum(lengths)
