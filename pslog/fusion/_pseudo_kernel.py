@@ -1,0 +1,605 @@
+"""Type A's per-point kernels (the paper's section 2.2, eqs. (1)-(4)), compiled with numba.
+
+:mod:`pslog.fusion.pseudo` used to compute type A on (k,) columns with numpy, ~200 small
+array operations per batch; numpy's fixed cost per call dominated a stream's single point
+and much of a session's. These kernels loop over points instead, doing for each exactly the
+arithmetic of the former columns, in the same order (so the same bits, except for the
+3 x 3 products numpy did with ``@``, whose summation order BLAS may choose: those are
+written out here as ``p0 R[i, 0] + p1 R[i, 1] + p2 R[i, 2] + t_i``, and agree to the last
+bit or two).
+
+- :func:`pseudo_kernel`: steps 1-3 for past observations (the partner's bracket, eq. (1),
+  the epipolar snap, the crossing of the two rays with its ray parameters ``s, k > 0``, and
+  the quality of each: the rays' miss before the snap, ``snap_px``, the angle between the
+  rays, the reprojection errors, the validity flags);
+- :func:`event_kernel`: a type-A point from its two past points (eq. (2)'s linear
+  prediction, eqs. (3)-(4)'s projection onto the newest ray with ``k > 0``, the quality
+  columns and the closed-form covariance of :func:`pslog.fusion.pseudo._type_a_covariance`).
+
+Imported lazily (numba compiles on first use; ``pslog --help`` never loads it). Camera
+tables are per camera rows of 9 (a 3 x 3 matrix, row-major) or fewer values; see
+:func:`camera_tables`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .._jit import kernel
+
+#: geometry._PARALLEL_EPS: rays whose cross product is this small (relative) do not cross.
+_PARALLEL_EPS = 1e-12
+#: np.degrees' factor (numpy multiplies by 180 / pi, computed once in double precision).
+_DEGREES = 180.0 / np.pi
+#: "No bracket end yet" in the partner choice (np.iinfo(np.int64).min).
+_INT64_MIN = np.iinfo(np.int64).min
+
+
+@kernel
+def _max(x, y):
+    """np.maximum of two floats (NaN propagates, the first NaN returned)."""
+    if x != x:
+        return x
+    if y != y:
+        return y
+    return x if x >= y else y
+
+
+@kernel
+def _min(x, y):
+    """np.minimum of two floats (NaN propagates)."""
+    if x != x:
+        return x
+    if y != y:
+        return y
+    return x if x <= y else y
+
+
+@kernel
+def _ray(ki, rr, c, u, v, out):
+    """Unit world direction of undistorted pixel (u, v) of camera c into ``out`` (3,):
+    ``Rᵀ K⁻¹ (u, v, 1)`` normalised (:meth:`Prepared.rays_t`, operation for operation)."""
+    x = ki[c, 0] * u + ki[c, 1] * v + ki[c, 2]
+    y = ki[c, 3] * u + ki[c, 4] * v + ki[c, 5]
+    z = ki[c, 6] * u + ki[c, 7] * v + ki[c, 8]
+    for j in range(3):
+        out[j] = rr[c, j] * x
+    for j in range(3):
+        out[j] += rr[c, 3 + j] * y
+    for j in range(3):
+        out[j] += rr[c, 6 + j] * z
+    norm = math.sqrt(out[0] * out[0] + out[1] * out[1] + out[2] * out[2])
+    for j in range(3):
+        out[j] /= norm
+
+
+@kernel
+def _dot3(a, b):
+    """Dot product summed in np.einsum's order (x, then z, then y: geometry._dot)."""
+    out = a[0] * b[0]
+    out += a[2] * b[2]
+    out += a[1] * b[1]
+    return out
+
+
+@kernel
+def _crossing(oa, da, ob, db, point):
+    """Step 3, the crossing of rays ``oa + s da`` and ``ob + k db``: the midpoint of their
+    common perpendicular into ``point`` (3,); returns (miss, s, k), NaN s, k (and point)
+    for parallel rays (:func:`pslog.geometry.crossing_of_rays`)."""
+    w0 = np.empty(3)
+    for i in range(3):
+        w0[i] = oa[i] - ob[i]
+    a = _dot3(da, da)
+    b = _dot3(da, db)
+    c = _dot3(db, db)
+    d = _dot3(da, w0)
+    e = _dot3(db, w0)
+    denom = a * c - b * b
+    if denom <= _PARALLEL_EPS * a * c:
+        s = np.nan
+        k = np.nan
+    else:
+        s = (b * e - c * d) / denom
+        k = (a * e - b * d) / denom
+    miss = 0.0
+    for i in range(3):
+        foot_a = oa[i] + s * da[i]
+        foot_b = ob[i] + k * db[i]
+        point[i] = 0.5 * (foot_a + foot_b)
+        gap = foot_a - foot_b
+        miss += gap * gap
+    return math.sqrt(miss), s, k
+
+
+@kernel
+def _distorted(cam, c, x, y):
+    """Pixels of ideal normalised (x, y) through camera c's lens (reprojection's
+    ``_distorted_pixels``); ``cam[c]``: K (9), R (9), t (3), dist (5), box (4), lens flag."""
+    k1, k2, p1, p2, k3 = cam[c, 21], cam[c, 22], cam[c, 23], cam[c, 24], cam[c, 25]
+    r2 = x * x + y * y
+    if cam[c, 30] == 0.0 and math.isfinite(r2 + r2):  # no lens: (x, y) exactly
+        xd, yd = x, y
+    else:
+        radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
+        yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+    return cam[c, 0] * xd + cam[c, 1] * yd + cam[c, 2], cam[c, 4] * yd + cam[c, 5]
+
+
+@kernel
+def _in_camera(cam, c, p, i):
+    """Coordinate i of world point p (3,) in camera c's frame, ``R p + t``."""
+    return p[0] * cam[c, 9 + 3 * i] + p[1] * cam[c, 10 + 3 * i] + p[2] * cam[c, 11 + 3 * i] \
+        + cam[c, 18 + i]
+
+
+@kernel
+def _reprojection(cam, c, p, u_img, v_img):
+    """Distance in camera c's recorded image between world point p's projection and the
+    undistorted pixel (u_img, v_img), pixels; NaN behind the camera (reprojection_one)."""
+    z = _in_camera(cam, c, p, 2)
+    in_front = z > 1e-12
+    if not in_front:
+        z = np.nan
+    u, v = _distorted(cam, c, _in_camera(cam, c, p, 0) / z, _in_camera(cam, c, p, 1) / z)
+    y = (v_img - cam[c, 5]) / cam[c, 4]
+    x = (u_img - cam[c, 2] - cam[c, 1] * y) / cam[c, 0]
+    tu, tv = _distorted(cam, c, x, y)
+    u -= tu
+    v -= tv
+    u *= u
+    v *= v
+    u += v
+    return math.sqrt(u) if in_front else np.nan
+
+
+@kernel
+def _invalid(cam, c, p):
+    """:func:`~pslog.fusion._prepare.invalid_points`' bits for one contributing camera c
+    and a finite point p: BEHIND (1) at or behind its image plane, OUTSIDE_VIEW (2) outside
+    its view box."""
+    x = _in_camera(cam, c, p, 0)
+    y = _in_camera(cam, c, p, 1)
+    z = _in_camera(cam, c, p, 2)
+    if z <= 1e-9:
+        return 1
+    xn, yn = x / z, y / z
+    u = xn * cam[c, 0] + yn * cam[c, 1] + cam[c, 2]
+    v = xn * cam[c, 3] + yn * cam[c, 4] + cam[c, 5]
+    if (u >= cam[c, 26]) and (u <= cam[c, 28]) and (v >= cam[c, 27]) and (v <= cam[c, 29]):
+        return 0
+    return 2
+
+
+@kernel
+def pseudo_kernel(rows, not_after, max_gap_ns, time_ns, camera, prev_b, next_b, uv,
+                  observed_rays, centers, ki, rr, f9, cam, span_tie_ns, min_angle_deg,
+                  partner, prev_row, next_row, weight, uv_interp, uv_snapped, snap_px,
+                  points, miss, angle, miss_unsnapped, res_obs, res_partner, dir_obs,
+                  dir_partner, flags, valid):
+    """Steps 1-3 of the paper's section 2.2 for past observations ``rows`` (k,), each from
+    a partner bracket ending at or before global row ``not_after`` (k,); fills the (k, ...)
+    outputs (the fields of :class:`~pslog.fusion.pseudo.PseudoStereoPoints`).
+
+    For each row (camera ``c``, time ``t_j``): the partner is the other camera whose bracket
+    ``prev <= t_j <= next`` (``prev_b``, ``next_b``: (m, n) rows, -1 none) is shortest
+    (ties within ``span_tie_ns``: the one ending latest), not after ``not_after`` and
+    within ``max_gap_ns``. Then
+
+    - eq. (1): ``u = (δ_a u_next + δ_b u_prev) / (δ_a + δ_b)``, ``δ_a = t_j - t_prev``,
+      ``δ_b = t_next - t_j``, written ``(1 - w) u_prev + w u_next`` with
+      ``w = δ_a / (δ_a + δ_b)`` from the integer times, in undistorted pixels;
+    - step 2: the snap onto the epipolar line ``F (u_obs, v_obs, 1)`` of the observed point
+      in the partner's image (``snap_px``: the distance moved);
+    - step 3: the crossing of the two viewing rays, with its ray parameters ``s, k``
+      (``s, k <= 0``: behind a camera, flagged BEHIND);
+    - quality: the angle between the rays (PARALLEL below ``min_angle_deg``), the miss of the
+      observed ray and the interpolated point's ray BEFORE the snap, and the reprojection
+      errors of that unsnapped crossing in the observed and the partner's recorded images.
+
+    ``cam`` (m, 31): per camera K (9), R (9), t (3), dist (5), view box (4), lens flag
+    (:func:`camera_tables`); ``ki``, ``rr`` (m, 9): K⁻¹ and R; ``f9`` (m * m, 9): ``F[a, b]``
+    at row ``a m + b``. A row without partner gets the arithmetic of camera 0 and rows 0
+    (as the former columns did) and ``valid`` False with no flags.
+    """
+    m = centers.shape[0]
+    d_int = np.empty(3)
+    unsnapped = np.empty(3)
+    for i in range(rows.shape[0]):
+        r = rows[i]
+        t_row = time_ns[r]
+        c = camera[r]
+        best_span = np.int64(2**62)
+        best_end = _INT64_MIN
+        p = -1
+        pv_best = 0
+        nx_best = 0
+        for d in range(m):
+            pv = prev_b[d, r]
+            nx = next_b[d, r]
+            end = time_ns[max(nx, 0)]
+            span = end - time_ns[max(pv, 0)]
+            ok = (pv >= 0) and (nx >= 0) and (c != d) and (nx <= not_after[i]) \
+                and (span <= max_gap_ns)
+            if ok and ((span < best_span - span_tie_ns)
+                       or ((span <= best_span + span_tie_ns) and (end > best_end))):
+                best_span = span
+                best_end = end
+                p = d
+                pv_best = pv
+                nx_best = nx
+        partner[i] = p
+        prev_row[i] = pv_best
+        next_row[i] = nx_best
+        q = max(p, 0)
+        # eq. (1)'s weight from integer capture times
+        t_prev = time_ns[pv_best]
+        span_ns = time_ns[nx_best] - t_prev
+        w = (t_row - t_prev) / span_ns if span_ns > 0 else 0.0
+        weight[i] = w
+        # eq. (1): linear interpolation of the partner's 2D track to the observation's time
+        ui0 = (1.0 - w) * uv[pv_best, 0] + w * uv[nx_best, 0]
+        ui1 = (1.0 - w) * uv[pv_best, 1] + w * uv[nx_best, 1]
+        uv_interp[i, 0] = ui0
+        uv_interp[i, 1] = ui1
+        # step 2: nearest point on the epipolar line of the observed point, partner image
+        fr = c * m + q
+        uo, vo = uv[r, 0], uv[r, 1]
+        a = f9[fr, 0] * uo + f9[fr, 2]
+        a += f9[fr, 1] * vo
+        b = f9[fr, 3] * uo + f9[fr, 5]
+        b += f9[fr, 4] * vo
+        cl = f9[fr, 6] * uo + f9[fr, 8]
+        cl += f9[fr, 7] * vo
+        big = _max(abs(a), abs(b))
+        a /= big
+        b /= big
+        cl /= big
+        size = math.sqrt(a * a + b * b)
+        n0, n1, n2 = a / size, b / size, cl / size
+        signed = n0 * ui0 + n1 * ui1 + n2
+        us0 = ui0 - signed * n0
+        us1 = ui1 - signed * n1
+        uv_snapped[i, 0] = us0
+        uv_snapped[i, 1] = us1
+        snap_px[i] = abs(signed)
+        # step 3: crossing point of the observed ray and the snapped point's ray
+        for j in range(3):
+            dir_obs[i, j] = observed_rays[r, j]
+        _ray(ki, rr, q, us0, us1, dir_partner[i])
+        miss[i], s, k = _crossing(centers[c], dir_obs[i], centers[q], dir_partner[i],
+                                  points[i])
+        # both directions are unit vectors; a line has no sense, hence the absolute value
+        ang = math.acos(_min(abs(_dot3(dir_obs[i], dir_partner[i])), 1.0))
+        angle[i] = ang
+        # the disagreement before the snap: the interpolated point's ray against the observed
+        _ray(ki, rr, q, ui0, ui1, d_int)
+        miss_unsnapped[i] = _crossing(centers[c], dir_obs[i], centers[q], d_int,
+                                      unsnapped)[0]
+        res_obs[i] = _reprojection(cam, c, unsnapped, uo, vo)
+        res_partner[i] = _reprojection(cam, q, unsnapped, ui0, ui1)
+        pt = points[i]
+        finite = math.isfinite(pt[0]) and math.isfinite(pt[1]) and math.isfinite(pt[2])
+        bits = 0
+        if finite:
+            for cc in range(m):  # (in camera order, as invalid_points)
+                if cc == c or cc == q:
+                    bits |= _invalid(cam, cc, pt)
+            if not ((s > 0) and (k > 0)):
+                bits |= 1  # BEHIND: the crossing behind a camera
+        if ang * _DEGREES < min_angle_deg:
+            bits |= 4  # PARALLEL (NaN: no ray, no flag)
+        if p < 0:
+            bits = 0  # no partner: no point, and nothing to say about its geometry
+        flags[i] = bits
+        valid[i] = (p >= 0) and finite and bits == 0
+
+
+@kernel
+def _pseudo_jacobian(r, cam_obs, partner, row, uv, obs_jac, f9, rtki, m, point, d1, d2,
+                     centers, uv_interp, uv_snapped, w_eq1, out):
+    """``rᵀ d(P) / d(undistorted pixel)`` of one pseudo-stereo point P for its observed
+    detection, the bracket's prev and next (out (3, 2), rows in that order):
+    :func:`pslog.fusion.pseudo._pseudo_jacobians` for one point, operation for operation.
+
+    With ``P = T_j + s_j d_j`` on both rays (they meet after the snap), a turn ``δd_j`` of
+    ray j moves P by ``s_j A⁻¹ δd_j``, ``A = Σ (I - d dᵀ)``; ``rᵀ A⁻¹ = wᵀ`` with
+    ``w = r / 2 + (r_d1 + c r_d2) d1 + (c r_d1 + r_d2) d2`` (Woodbury). The snapped point
+    moves with the interpolated one by ``I - n nᵀ`` and with the observed pixel as it moves
+    the epipolar line; eq. (1) weighs the bracket by ``1 - w`` and ``w``."""
+    cos = d1[0] * d2[0] + d1[1] * d2[1] + d1[2] * d2[2]
+    scale = 0.5 / (1 - cos**2)
+    r_d1 = (r[0] * d1[0] + r[1] * d1[1] + r[2] * d1[2]) * scale
+    r_d2 = (r[0] * d2[0] + r[1] * d2[1] + r[2] * d2[2]) * scale
+    w = np.empty(3)
+    for i in range(3):
+        w[i] = 0.5 * r[i]
+    for i in range(3):
+        w[i] += (r_d1 + cos * r_d2) * d1[i]
+    for i in range(3):
+        w[i] += (cos * r_d1 + r_d2) * d2[i]
+    C1 = centers[cam_obs]
+    C2 = centers[partner]
+    s1 = (point[0] - C1[0]) * d1[0] + (point[1] - C1[1]) * d1[1] + (point[2] - C1[2]) * d1[2]
+    s2 = (point[0] - C2[0]) * d2[0] + (point[1] - C2[1]) * d2[1] + (point[2] - C2[2]) * d2[2]
+    # J_obs = wᵀ G (G: the observed ray's direction Jacobian), times s1
+    j_obs0 = w[0] * obs_jac[0, 0, row]
+    j_obs0 += w[1] * obs_jac[1, 0, row]
+    j_obs0 += w[2] * obs_jac[2, 0, row]
+    j_obs1 = w[0] * obs_jac[0, 1, row]
+    j_obs1 += w[1] * obs_jac[1, 1, row]
+    j_obs1 += w[2] * obs_jac[2, 1, row]
+    j_obs0 *= s1
+    j_obs1 *= s1
+    # J_snapped = wᵀ dd/duv of the partner's ray at the snapped pixel (direction_jacobian_
+    # along), times s2
+    M = rtki[partner]
+    us0, us1 = uv_snapped[0], uv_snapped[1]
+    rv0 = M[0] * us0
+    rv0 += M[1] * us1
+    rv0 += M[2]
+    rv1 = M[3] * us0
+    rv1 += M[4] * us1
+    rv1 += M[5]
+    rv2 = M[6] * us0
+    rv2 += M[7] * us1
+    rv2 += M[8]
+    norm2 = rv0 * rv0 + rv1 * rv1 + rv2 * rv2
+    vm0 = w[0] * M[0]
+    vm0 += w[1] * M[3]
+    vm0 += w[2] * M[6]
+    vm1 = w[0] * M[1]
+    vm1 += w[1] * M[4]
+    vm1 += w[2] * M[7]
+    rm0 = rv0 * M[0]
+    rm0 += rv1 * M[3]
+    rm0 += rv2 * M[6]
+    rm1 = rv0 * M[1]
+    rm1 += rv1 * M[4]
+    rm1 += rv2 * M[7]
+    along = (w[0] * rv0 + w[1] * rv1 + w[2] * rv2) / norm2
+    rm0 *= along
+    rm1 *= along
+    vm0 -= rm0
+    vm1 -= rm1
+    root = math.sqrt(norm2)
+    js0 = vm0 / root
+    js1 = vm1 / root
+    js0 *= s2
+    js1 *= s2
+    # the snap u_s = u_i - s n onto the line l = F (u_o, v_o, 1) = (a, l3), n = a / |a|
+    fr = cam_obs * m + partner
+    F = f9[fr]
+    u, v = uv[row, 0], uv[row, 1]
+    l0 = F[0] * u + F[1] * v + F[2]
+    l1 = F[3] * u + F[4] * v + F[5]
+    l2 = F[6] * u + F[7] * v + F[8]
+    size = math.sqrt(l0**2 + l1**2)
+    nn0 = l0 / size
+    nn1 = l1 / size
+    signed = (l0 * uv_interp[0] + l1 * uv_interp[1] + l2) / size
+    da00, da01, da10, da11 = F[0] / size, F[1] / size, F[3] / size, F[4] / size
+    dl0, dl1 = F[6] / size, F[7] / size
+    shift0 = uv_snapped[0] * da00 + uv_snapped[1] * da10 + dl0
+    shift1 = uv_snapped[0] * da01 + uv_snapped[1] * da11 + dl1
+    nda0 = nn0 * da00 + nn1 * da10
+    nda1 = nn0 * da01 + nn1 * da11
+    ml00 = -nn0 * shift0 - signed * (da00 - nn0 * nda0)
+    ml01 = -nn0 * shift1 - signed * (da01 - nn0 * nda1)
+    ml10 = -nn1 * shift0 - signed * (da10 - nn1 * nda0)
+    ml11 = -nn1 * shift1 - signed * (da11 - nn1 * nda1)
+    j_obs0 += js0 * ml00 + js1 * ml10
+    j_obs1 += js0 * ml01 + js1 * ml11
+    jn = js0 * nn0 + js1 * nn1
+    ji0 = js0 - jn * nn0
+    ji1 = js1 - jn * nn1
+    out[0, 0] = j_obs0
+    out[0, 1] = j_obs1
+    out[1, 0] = (1 - w_eq1) * ji0
+    out[1, 1] = (1 - w_eq1) * ji1
+    out[2, 0] = w_eq1 * ji0
+    out[2, 1] = w_eq1 * ji1
+
+
+@kernel
+def _pixel_jacobian(jac4, lens, row, g0, g1):
+    """``g L`` of a (2,) row vector g and the detection's d(undistorted) / d(recorded pixel)
+    ``L`` (``jac4[row]``, (2, 2) row-major, NaN as 0); ``g`` itself without lens distortion
+    (:func:`~pslog.fusion._prepare.times_pixel_jacobian` with None)."""
+    if not lens:
+        return g0, g1
+    return (g0 * jac4[row, 0] + g1 * jac4[row, 2], g0 * jac4[row, 1] + g1 * jac4[row, 3])
+
+
+@kernel
+def event_kernel(events, time_ns, camera, uv, ray_dir, centers, obs_jac, jac4, lens, f9,
+                 rtki, cam, ns, noise_px, with_cov,
+                 row1, partner1, prev1, next1, weight1, points1, dir_obs1, dir_partner1,
+                 uv_interp1, uv_snapped1, snap1, angle1, miss_unsnapped1, res_obs1, res_part1,
+                 row2, partner2, prev2, next2, weight2, points2, dir_obs2, dir_partner2,
+                 uv_interp2, uv_snapped2, snap2, angle2, miss_unsnapped2, res_obs2, res_part2,
+                 predicted, points, flags, innovation, quality):
+    """Type A's points at detections ``events`` (k,) from their past points ``P_{t-1}``
+    (fields ``*1``) and ``P_{t-2}`` (``*2``), k rows each (:func:`pseudo_kernel`'s outputs).
+
+    - eq. (2), linear prediction with the actual capture intervals (integer nanoseconds):
+      ``P̂_t = P_{t-1} + (P_{t-1} - P_{t-2}) δ_pred / δ_prev``;
+    - eqs. (3)-(4): ``P'_t = ((P̂_t - T) · r / |r|²) r + T``, the point of the newest viewing
+      ray ``l = k r + T`` nearest to ``P̂_t``; its ``k <= 0`` (the foot behind the newest
+      camera) and a point behind or outside a contributing camera are flagged;
+    - ``innovation``: the newest detection against the prediction (recorded pixels);
+    - ``quality`` (16, k): snap_px, ray_miss_m (before the snap), ray_shift_m,
+      ray_angle_deg, residual_max_px, residual_mean_px, camera_mask, n_detections, gap_s,
+      span_s, and (``with_cov``) std_m, cov_xx ... cov_yz m² with the closed-form Jacobians
+      of eqs. (1)-(4): eq. (4), ``P' = T + r rᵀ (P̂ - T)``, gives each past slot ``r gᵀ``
+      with ``g = scale rᵀ J`` (``scale``: eq. (2)'s ``1 + ratio`` or ``-ratio``), the newest
+      ray's turn ``δr`` moves P' by ``((rᵀq) I + r qᵀ) δr``, ``q = P̂ - T``; a detection in
+      several slots adds its slots' Jacobians (the earliest slot holds them).
+    """
+    m = centers.shape[0]
+    slots = np.empty(7, dtype=np.int64)
+    times = np.empty(7, dtype=np.int64)
+    res = np.empty(5)
+    jac = np.empty((2, 3, 2))  # (past point, slot obs/prev/next, pixel axis)
+    g = np.empty((7, 2))
+    newest = np.empty((3, 2))
+    taken = np.zeros(7, dtype=np.bool_)
+    nl = np.empty((3, 2))
+    r = np.empty(3)
+    q = np.empty(3)
+    for i in range(events.shape[0]):
+        e = events[i]
+        slots[0], slots[1], slots[2], slots[3] = e, row1[i], prev1[i], next1[i]
+        slots[4], slots[5], slots[6] = row2[i], prev2[i], next2[i]
+        for s in range(7):
+            times[s] = time_ns[slots[s]]
+        t_event, t1, t2 = times[0], times[1], times[4]
+        c0 = camera[e]
+        # eq. (2): linear prediction with the actual capture intervals
+        ratio = (t_event - t1) / (t1 - t2)
+        for j in range(3):
+            predicted[i, j] = points1[i, j] + ratio * (points1[i, j] - points2[i, j])
+        # eqs. (3)-(4): nearest point on the newest viewing ray
+        origin = centers[c0]
+        d = ray_dir[e]
+        for j in range(3):
+            q[j] = predicted[i, j] - origin[j]
+        k_foot = _dot3(q, d) / _dot3(d, d)
+        for j in range(3):
+            points[i, j] = k_foot * d[j] + origin[j]
+        pt = points[i]
+        bits = 0
+        if math.isfinite(pt[0]) and math.isfinite(pt[1]) and math.isfinite(pt[2]):
+            for cc in range(m):  # the cameras of the seven detections, in camera order
+                for s in range(7):
+                    if camera[slots[s]] == cc:
+                        bits |= _invalid(cam, cc, pt)
+                        break
+        if not (k_foot > 0):
+            bits |= 1  # eq. (4)'s k: the foot behind the newest camera
+        flags[i] = bits
+        res[0], res[1], res[2], res[3] = res_obs1[i], res_part1[i], res_obs2[i], res_part2[i]
+        # the newest detection against the prediction, before eq. (4) moves it onto its ray
+        res[4] = _reprojection(cam, c0, predicted[i], uv[e, 0], uv[e, 1])
+        innovation[i] = res[4]
+        # slots holding a detection no earlier slot holds
+        n_distinct = 1
+        for s in range(1, 7):
+            repeated = False
+            for t in range(s):
+                if slots[t] == slots[s]:
+                    repeated = True
+            if not repeated:
+                n_distinct += 1
+        t_earliest = times[0]
+        for s in range(1, 7):
+            t_earliest = min(t_earliest, times[s])
+        span1 = (times[3] - times[2]) / ns
+        span2 = (times[6] - times[5]) / ns
+        quality[0, i] = _max(snap1[i], snap2[i])
+        # measured before the snap: after it the rays cross by construction
+        quality[1, i] = _max(miss_unsnapped1[i], miss_unsnapped2[i])
+        shift = (pt[0] - predicted[i, 0]) * (pt[0] - predicted[i, 0])
+        shift += (pt[1] - predicted[i, 1]) * (pt[1] - predicted[i, 1])
+        shift += (pt[2] - predicted[i, 2]) * (pt[2] - predicted[i, 2])
+        quality[2, i] = math.sqrt(shift)
+        quality[3, i] = _min(angle1[i], angle2[i]) * _DEGREES
+        worst = res[0]
+        total = res[0] + res[1]
+        for s in range(1, 5):
+            worst = _max(worst, res[s])
+        for s in range(2, 5):
+            total += res[s]
+        quality[4, i] = worst
+        quality[5, i] = total / 5
+        mask = 0.0
+        for cc in range(m):  # (sums of distinct powers of two: exact in any order)
+            for s in range(7):
+                if camera[slots[s]] == cc:
+                    mask += 2.0**cc
+                    break
+        quality[6, i] = mask
+        quality[7, i] = float(n_distinct)
+        quality[8, i] = _max(_max(span1, span2), (t_event - t2) / ns)
+        quality[9, i] = (t_event - t_earliest) / ns
+        if not with_cov:
+            continue
+        # the newest ray's turn: ((rᵀq) I + r qᵀ) G, G its direction's Jacobian
+        for j in range(3):
+            r[j] = d[j]
+        rq = r[0] * q[0] + r[1] * q[1] + r[2] * q[2]
+        for a in range(2):
+            qg = q[0] * obs_jac[0, a, e]
+            qg += q[1] * obs_jac[1, a, e]
+            qg += q[2] * obs_jac[2, a, e]
+            for j in range(3):
+                newest[j, a] = rq * obs_jac[j, a, e]
+                newest[j, a] += r[j] * qg
+        # the past points' Jacobians seen along r, times eq. (2)'s weights
+        _pseudo_jacobian(r, camera[row1[i]], max(partner1[i], 0), row1[i], uv, obs_jac, f9,
+                         rtki, m, points1[i], dir_obs1[i], dir_partner1[i], centers,
+                         uv_interp1[i], uv_snapped1[i], weight1[i], jac[0])
+        _pseudo_jacobian(r, camera[row2[i]], max(partner2[i], 0), row2[i], uv, obs_jac, f9,
+                         rtki, m, points2[i], dir_obs2[i], dir_partner2[i], centers,
+                         uv_interp2[i], uv_snapped2[i], weight2[i], jac[1])
+        scale1 = 1 + ratio
+        scale2 = -ratio
+        for s in range(3):
+            for a in range(2):
+                g[1 + s, a] = jac[0, s, a] * scale1
+                g[4 + s, a] = jac[1, s, a] * scale2
+        # a detection in several slots: its later slots' Jacobians into its first
+        for s in range(7):
+            taken[s] = False
+        for s in range(7):
+            if taken[s] or slots[s] < 0:
+                continue
+            for t in range(s + 1, 7):
+                if slots[t] == slots[s] and not taken[t]:
+                    taken[t] = True
+                    if s == 0:
+                        for j in range(3):
+                            for a in range(2):
+                                newest[j, a] += r[j] * g[t, a]
+                    else:
+                        g[s, 0] += g[t, 0]
+                        g[s, 1] += g[t, 1]
+        along = 0.0  # Σ |g L|² of the past slots
+        for s in range(1, 7):
+            gl0, gl1 = _pixel_jacobian(jac4, lens, slots[s], g[s, 0], g[s, 1])
+            along += 0.0 if taken[s] else gl0 * gl0 + gl1 * gl1
+        for j in range(3):
+            nl[j, 0], nl[j, 1] = _pixel_jacobian(jac4, lens, e, newest[j, 0], newest[j, 1])
+        var = noise_px**2
+        for n in range(6):  # xx, yy, zz, xy, xz, yz
+            a = n if n < 3 else (0 if n < 5 else 1)
+            b = n if n < 3 else (1 if n == 3 else 2)
+            quality[11 + n, i] = (nl[a, 0] * nl[b, 0] + nl[a, 1] * nl[b, 1]
+                                  + r[a] * r[b] * along) * var
+        quality[10, i] = math.sqrt(quality[11, i] + quality[12, i] + quality[13, i])
+
+
+def camera_tables(prep):
+    """The per-camera tables the kernels take: ``cam`` (m, 31), ``ki``, ``rr``, ``rtki``
+    (m, 9) and ``f9`` (m * m, 9) (see :func:`pseudo_kernel`), cached on ``prep``."""
+    cache = prep.__dict__.get("_kernel_tables")
+    if cache is not None:
+        return cache
+    m = len(prep.centers)
+    cam = np.zeros((m, 31))
+    for c, camera in enumerate(prep.cameras):
+        cam[c, 0:9] = np.asarray(camera.K, np.float64).ravel()
+        cam[c, 9:18] = np.asarray(camera.R, np.float64).ravel()
+        cam[c, 18:21] = np.asarray(camera.t, np.float64).ravel()
+        cam[c, 21:26] = np.asarray(camera.dist, np.float64).ravel()
+        cam[c, 26:30] = prep.view_box[c]
+        cam[c, 30] = 1.0 if np.any(camera.dist) else 0.0
+    tables = (cam, np.ascontiguousarray(prep._cols("K_inv").T),
+              np.ascontiguousarray(prep._cols("R").T),
+              np.ascontiguousarray(prep._rt_k_inv_cols.T),
+              np.ascontiguousarray(prep._f_cols.T))
+    prep.__dict__["_kernel_tables"] = tables
+    return tables
