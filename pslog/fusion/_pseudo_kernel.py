@@ -89,14 +89,16 @@ def _crossing(oa, da, ob, db, point):
     """Step 3, the crossing of rays ``oa + s da`` and ``ob + k db``: the midpoint of their
     common perpendicular into ``point`` (3,); returns (miss, s, k), NaN s, k (and point)
     for parallel rays (:func:`pslog.geometry.crossing_of_rays`)."""
-    w0 = np.empty(3)
-    for i in range(3):
-        w0[i] = oa[i] - ob[i]
+    w0, w1, w2 = oa[0] - ob[0], oa[1] - ob[1], oa[2] - ob[2]
     a = _dot3(da, da)
     b = _dot3(da, db)
     c = _dot3(db, db)
-    d = _dot3(da, w0)
-    e = _dot3(db, w0)
+    d = da[0] * w0
+    d += da[2] * w2
+    d += da[1] * w1
+    e = db[0] * w0
+    e += db[2] * w2
+    e += db[1] * w1
     denom = a * c - b * b
     if denom <= _PARALLEL_EPS * a * c:
         s = np.nan
@@ -299,112 +301,6 @@ def pseudo_kernel(rows, not_after, max_gap_ns, time_ns, camera, prev_b, next_b, 
 
 
 @kernel
-def _pseudo_jacobian(r, cam_obs, partner, row, uv, obs_jac, f9, rtki, m, point, d1, d2,
-                     centers, uv_interp, uv_snapped, w_eq1, out):
-    """``rᵀ d(P) / d(undistorted pixel)`` of one pseudo-stereo point P for its observed
-    detection, the bracket's prev and next (out (3, 2), rows in that order):
-    :func:`pslog.fusion.pseudo._pseudo_jacobians` for one point, operation for operation.
-
-    With ``P = T_j + s_j d_j`` on both rays (they meet after the snap), a turn ``δd_j`` of
-    ray j moves P by ``s_j A⁻¹ δd_j``, ``A = Σ (I - d dᵀ)``; ``rᵀ A⁻¹ = wᵀ`` with
-    ``w = r / 2 + (r_d1 + c r_d2) d1 + (c r_d1 + r_d2) d2`` (Woodbury). The snapped point
-    moves with the interpolated one by ``I - n nᵀ`` and with the observed pixel as it moves
-    the epipolar line; eq. (1) weighs the bracket by ``1 - w`` and ``w``."""
-    cos = d1[0] * d2[0] + d1[1] * d2[1] + d1[2] * d2[2]
-    scale = 0.5 / (1 - cos**2)
-    r_d1 = (r[0] * d1[0] + r[1] * d1[1] + r[2] * d1[2]) * scale
-    r_d2 = (r[0] * d2[0] + r[1] * d2[1] + r[2] * d2[2]) * scale
-    w = np.empty(3)
-    for i in range(3):
-        w[i] = 0.5 * r[i]
-    for i in range(3):
-        w[i] += (r_d1 + cos * r_d2) * d1[i]
-    for i in range(3):
-        w[i] += (cos * r_d1 + r_d2) * d2[i]
-    C1 = centers[cam_obs]
-    C2 = centers[partner]
-    s1 = (point[0] - C1[0]) * d1[0] + (point[1] - C1[1]) * d1[1] + (point[2] - C1[2]) * d1[2]
-    s2 = (point[0] - C2[0]) * d2[0] + (point[1] - C2[1]) * d2[1] + (point[2] - C2[2]) * d2[2]
-    # J_obs = wᵀ G (G: the observed ray's direction Jacobian), times s1
-    j_obs0 = w[0] * obs_jac[0, 0, row]
-    j_obs0 += w[1] * obs_jac[1, 0, row]
-    j_obs0 += w[2] * obs_jac[2, 0, row]
-    j_obs1 = w[0] * obs_jac[0, 1, row]
-    j_obs1 += w[1] * obs_jac[1, 1, row]
-    j_obs1 += w[2] * obs_jac[2, 1, row]
-    j_obs0 *= s1
-    j_obs1 *= s1
-    # J_snapped = wᵀ dd/duv of the partner's ray at the snapped pixel (direction_jacobian_
-    # along), times s2
-    M = rtki[partner]
-    us0, us1 = uv_snapped[0], uv_snapped[1]
-    rv0 = M[0] * us0
-    rv0 += M[1] * us1
-    rv0 += M[2]
-    rv1 = M[3] * us0
-    rv1 += M[4] * us1
-    rv1 += M[5]
-    rv2 = M[6] * us0
-    rv2 += M[7] * us1
-    rv2 += M[8]
-    norm2 = rv0 * rv0 + rv1 * rv1 + rv2 * rv2
-    vm0 = w[0] * M[0]
-    vm0 += w[1] * M[3]
-    vm0 += w[2] * M[6]
-    vm1 = w[0] * M[1]
-    vm1 += w[1] * M[4]
-    vm1 += w[2] * M[7]
-    rm0 = rv0 * M[0]
-    rm0 += rv1 * M[3]
-    rm0 += rv2 * M[6]
-    rm1 = rv0 * M[1]
-    rm1 += rv1 * M[4]
-    rm1 += rv2 * M[7]
-    along = (w[0] * rv0 + w[1] * rv1 + w[2] * rv2) / norm2
-    rm0 *= along
-    rm1 *= along
-    vm0 -= rm0
-    vm1 -= rm1
-    root = math.sqrt(norm2)
-    js0 = vm0 / root
-    js1 = vm1 / root
-    js0 *= s2
-    js1 *= s2
-    # the snap u_s = u_i - s n onto the line l = F (u_o, v_o, 1) = (a, l3), n = a / |a|
-    fr = cam_obs * m + partner
-    F = f9[fr]
-    u, v = uv[row, 0], uv[row, 1]
-    l0 = F[0] * u + F[1] * v + F[2]
-    l1 = F[3] * u + F[4] * v + F[5]
-    l2 = F[6] * u + F[7] * v + F[8]
-    size = math.sqrt(l0**2 + l1**2)
-    nn0 = l0 / size
-    nn1 = l1 / size
-    signed = (l0 * uv_interp[0] + l1 * uv_interp[1] + l2) / size
-    da00, da01, da10, da11 = F[0] / size, F[1] / size, F[3] / size, F[4] / size
-    dl0, dl1 = F[6] / size, F[7] / size
-    shift0 = uv_snapped[0] * da00 + uv_snapped[1] * da10 + dl0
-    shift1 = uv_snapped[0] * da01 + uv_snapped[1] * da11 + dl1
-    nda0 = nn0 * da00 + nn1 * da10
-    nda1 = nn0 * da01 + nn1 * da11
-    ml00 = -nn0 * shift0 - signed * (da00 - nn0 * nda0)
-    ml01 = -nn0 * shift1 - signed * (da01 - nn0 * nda1)
-    ml10 = -nn1 * shift0 - signed * (da10 - nn1 * nda0)
-    ml11 = -nn1 * shift1 - signed * (da11 - nn1 * nda1)
-    j_obs0 += js0 * ml00 + js1 * ml10
-    j_obs1 += js0 * ml01 + js1 * ml11
-    jn = js0 * nn0 + js1 * nn1
-    ji0 = js0 - jn * nn0
-    ji1 = js1 - jn * nn1
-    out[0, 0] = j_obs0
-    out[0, 1] = j_obs1
-    out[1, 0] = (1 - w_eq1) * ji0
-    out[1, 1] = (1 - w_eq1) * ji1
-    out[2, 0] = w_eq1 * ji0
-    out[2, 1] = w_eq1 * ji1
-
-
-@kernel
 def _pixel_jacobian(jac4, lens, row, g0, g1):
     """``g L`` of a (2,) row vector g and the detection's d(undistorted) / d(recorded pixel)
     ``L`` (``jac4[row]``, (2, 2) row-major, NaN as 0); ``g`` itself without lens distortion
@@ -417,13 +313,15 @@ def _pixel_jacobian(jac4, lens, row, g0, g1):
 @kernel
 def event_kernel(events, time_ns, camera, uv, ray_dir, centers, obs_jac, jac4, lens, f9,
                  rtki, cam, ns, noise_px, with_cov,
-                 row1, partner1, prev1, next1, weight1, points1, dir_obs1, dir_partner1,
-                 uv_interp1, uv_snapped1, snap1, angle1, miss_unsnapped1, res_obs1, res_part1,
-                 row2, partner2, prev2, next2, weight2, points2, dir_obs2, dir_partner2,
-                 uv_interp2, uv_snapped2, snap2, angle2, miss_unsnapped2, res_obs2, res_part2,
-                 predicted, points, flags, innovation, quality):
+                 row1, partner1, prev1, next1, weight1, snap1, angle1, miss_unsnapped1, res_obs1,
+                 res_part1, row2, partner2, prev2, next2, weight2, snap2, angle2,
+                 miss_unsnapped2, res_obs2, res_part2, geo, predicted, points, flags, innovation,
+                 quality):
     """Type A's points at detections ``events`` (k,) from their past points ``P_{t-1}``
-    (fields ``*1``) and ``P_{t-2}`` (``*2``), k rows each (:func:`pseudo_kernel`'s outputs).
+    (fields ``*1``) and ``P_{t-2}`` (``*2``), k rows each (:func:`pseudo_kernel`'s outputs);
+    ``geo`` (2, k, 13): of each past point its ``points_world`` (3), ``dir_obs`` (3),
+    ``dir_partner`` (3), ``uv_interpolated`` (2) and ``uv_snapped`` (2), in one table (the
+    kernel reads one array for both points).
 
     - eq. (2), linear prediction with the actual capture intervals (integer nanoseconds):
       ``P̂_t = P_{t-1} + (P_{t-1} - P_{t-2}) δ_pred / δ_prev``;
@@ -461,7 +359,7 @@ def event_kernel(events, time_ns, camera, uv, ray_dir, centers, obs_jac, jac4, l
         # eq. (2): linear prediction with the actual capture intervals
         ratio = (t_event - t1) / (t1 - t2)
         for j in range(3):
-            predicted[i, j] = points1[i, j] + ratio * (points1[i, j] - points2[i, j])
+            predicted[i, j] = geo[0, i, j] + ratio * (geo[0, i, j] - geo[1, i, j])
         # eqs. (3)-(4): nearest point on the newest viewing ray
         origin = centers[c0]
         d = ray_dir[e]
@@ -538,13 +436,113 @@ def event_kernel(events, time_ns, camera, uv, ray_dir, centers, obs_jac, jac4, l
             for j in range(3):
                 newest[j, a] = rq * obs_jac[j, a, e]
                 newest[j, a] += r[j] * qg
-        # the past points' Jacobians seen along r, times eq. (2)'s weights
-        _pseudo_jacobian(r, camera[row1[i]], max(partner1[i], 0), row1[i], uv, obs_jac, f9,
-                         rtki, m, points1[i], dir_obs1[i], dir_partner1[i], centers,
-                         uv_interp1[i], uv_snapped1[i], weight1[i], jac[0])
-        _pseudo_jacobian(r, camera[row2[i]], max(partner2[i], 0), row2[i], uv, obs_jac, f9,
-                         rtki, m, points2[i], dir_obs2[i], dir_partner2[i], centers,
-                         uv_interp2[i], uv_snapped2[i], weight2[i], jac[1])
+        # the past points' Jacobians seen along r (steps 1-3 differentiated, for one point;
+        # pslog.fusion.pseudo's former _pseudo_jacobians, operation for operation): with
+        # P = T_j + s_j d_j on both rays (they meet after the snap), a turn δd_j of ray j
+        # moves P by s_j A⁻¹ δd_j, A = Σ (I - d dᵀ); rᵀ A⁻¹ = wᵀ with
+        # w = r / 2 + (r_d1 + c r_d2) d1 + (c r_d1 + r_d2) d2 (Woodbury). The snapped point
+        # moves with the interpolated one by I - n nᵀ and with the observed pixel as it moves
+        # the epipolar line; eq. (1) weighs the bracket by 1 - w and w.
+        for pp in range(2):
+            first = pp == 0
+            row = row1[i] if first else row2[i]
+            cam_obs = camera[row]
+            partner = max(partner1[i] if first else partner2[i], 0)
+            w_eq1 = weight1[i] if first else weight2[i]
+            a0, a1, a2 = geo[pp, i, 3], geo[pp, i, 4], geo[pp, i, 5]
+            b0, b1, b2 = geo[pp, i, 6], geo[pp, i, 7], geo[pp, i, 8]
+            cos = a0 * b0 + a1 * b1 + a2 * b2
+            scale = 0.5 / (1 - cos * cos)
+            r_d1 = (r[0] * a0 + r[1] * a1 + r[2] * a2) * scale
+            r_d2 = (r[0] * b0 + r[1] * b1 + r[2] * b2) * scale
+            f1 = r_d1 + cos * r_d2
+            f2 = cos * r_d1 + r_d2
+            w0 = 0.5 * r[0] + f1 * a0 + f2 * b0
+            w1 = 0.5 * r[1] + f1 * a1 + f2 * b1
+            w2 = 0.5 * r[2] + f1 * a2 + f2 * b2
+            p0, p1, p2 = geo[pp, i, 0], geo[pp, i, 1], geo[pp, i, 2]
+            s1 = ((p0 - centers[cam_obs, 0]) * a0 + (p1 - centers[cam_obs, 1]) * a1
+                  + (p2 - centers[cam_obs, 2]) * a2)
+            s2 = ((p0 - centers[partner, 0]) * b0 + (p1 - centers[partner, 1]) * b1
+                  + (p2 - centers[partner, 2]) * b2)
+            # J_obs = wᵀ G (G: the observed ray's direction Jacobian), times s1
+            j_obs0 = w0 * obs_jac[0, 0, row]
+            j_obs0 += w1 * obs_jac[1, 0, row]
+            j_obs0 += w2 * obs_jac[2, 0, row]
+            j_obs1 = w0 * obs_jac[0, 1, row]
+            j_obs1 += w1 * obs_jac[1, 1, row]
+            j_obs1 += w2 * obs_jac[2, 1, row]
+            j_obs0 *= s1
+            j_obs1 *= s1
+            # J_snapped = wᵀ dd/duv of the partner's ray at the snapped pixel (direction_jacobian_
+            # along), times s2
+            us0, us1 = geo[pp, i, 11], geo[pp, i, 12]
+            rv0 = rtki[partner, 0] * us0
+            rv0 += rtki[partner, 1] * us1
+            rv0 += rtki[partner, 2]
+            rv1 = rtki[partner, 3] * us0
+            rv1 += rtki[partner, 4] * us1
+            rv1 += rtki[partner, 5]
+            rv2 = rtki[partner, 6] * us0
+            rv2 += rtki[partner, 7] * us1
+            rv2 += rtki[partner, 8]
+            norm2 = rv0 * rv0 + rv1 * rv1 + rv2 * rv2
+            vm0 = w0 * rtki[partner, 0]
+            vm0 += w1 * rtki[partner, 3]
+            vm0 += w2 * rtki[partner, 6]
+            vm1 = w0 * rtki[partner, 1]
+            vm1 += w1 * rtki[partner, 4]
+            vm1 += w2 * rtki[partner, 7]
+            rm0 = rv0 * rtki[partner, 0]
+            rm0 += rv1 * rtki[partner, 3]
+            rm0 += rv2 * rtki[partner, 6]
+            rm1 = rv0 * rtki[partner, 1]
+            rm1 += rv1 * rtki[partner, 4]
+            rm1 += rv2 * rtki[partner, 7]
+            along = (w0 * rv0 + w1 * rv1 + w2 * rv2) / norm2
+            rm0 *= along
+            rm1 *= along
+            vm0 -= rm0
+            vm1 -= rm1
+            root = math.sqrt(norm2)
+            js0 = vm0 / root
+            js1 = vm1 / root
+            js0 *= s2
+            js1 *= s2
+            # the snap u_s = u_i - s n onto the line l = F (u_o, v_o, 1) = (a, l3), n = a / |a|,
+            # s = (a·u_i + l3) / |a|; a move of u_o changes l by F[:, :2] δ, which moves u_s by
+            # -n ((u_sᵀ da + dl3) / |a|) - s (I - n nᵀ) da / |a|
+            fr = cam_obs * m + partner
+            u, v = uv[row, 0], uv[row, 1]
+            l0 = f9[fr, 0] * u + f9[fr, 1] * v + f9[fr, 2]
+            l1 = f9[fr, 3] * u + f9[fr, 4] * v + f9[fr, 5]
+            l2 = f9[fr, 6] * u + f9[fr, 7] * v + f9[fr, 8]
+            size = math.sqrt(l0 * l0 + l1 * l1)
+            nn0 = l0 / size
+            nn1 = l1 / size
+            signed = (l0 * geo[pp, i, 9] + l1 * geo[pp, i, 10] + l2) / size
+            da00, da01 = f9[fr, 0] / size, f9[fr, 1] / size
+            da10, da11 = f9[fr, 3] / size, f9[fr, 4] / size
+            dl0, dl1 = f9[fr, 6] / size, f9[fr, 7] / size
+            shift0 = us0 * da00 + us1 * da10 + dl0
+            shift1 = us0 * da01 + us1 * da11 + dl1
+            nda0 = nn0 * da00 + nn1 * da10
+            nda1 = nn0 * da01 + nn1 * da11
+            ml00 = -nn0 * shift0 - signed * (da00 - nn0 * nda0)
+            ml01 = -nn0 * shift1 - signed * (da01 - nn0 * nda1)
+            ml10 = -nn1 * shift0 - signed * (da10 - nn1 * nda0)
+            ml11 = -nn1 * shift1 - signed * (da11 - nn1 * nda1)
+            j_obs0 += js0 * ml00 + js1 * ml10
+            j_obs1 += js0 * ml01 + js1 * ml11
+            jn = js0 * nn0 + js1 * nn1
+            ji0 = js0 - jn * nn0
+            ji1 = js1 - jn * nn1
+            jac[pp, 0, 0] = j_obs0
+            jac[pp, 0, 1] = j_obs1
+            jac[pp, 1, 0] = (1 - w_eq1) * ji0
+            jac[pp, 1, 1] = (1 - w_eq1) * ji1
+            jac[pp, 2, 0] = w_eq1 * ji0
+            jac[pp, 2, 1] = w_eq1 * ji1
         scale1 = 1 + ratio
         scale2 = -ratio
         for s in range(3):

@@ -378,14 +378,17 @@ def _type_a_points(prep: Prepared, events: np.ndarray, p1: PseudoStereoPoints,
     innovation = np.empty(k)
     quality = np.empty((len(_QUALITY), k))
     with_cov = noise_px is not None and not _prepare.FINITE_DIFFERENCES
-    fields = ("row", "partner", "prev_row", "next_row", "weight", "points_world", "dir_obs",
-              "dir_partner", "uv_interpolated", "uv_snapped", "snap_px", "angle_rad",
+    fields = ("row", "partner", "prev_row", "next_row", "weight", "snap_px", "angle_rad",
               "miss_unsnapped_m", "residual_obs_px", "residual_partner_px")
+    geo = np.empty((2, k, 13))  # the past points' geometry, one table
+    for g, p in zip(geo, (p1, p2), strict=True):
+        g[:, 0:3], g[:, 3:6], g[:, 6:9] = p.points_world, p.dir_obs, p.dir_partner
+        g[:, 9:11], g[:, 11:13] = p.uv_interpolated, p.uv_snapped
     _pseudo_kernel.event_kernel(
         np.ascontiguousarray(events, dtype=np.int64), prep.obs.time_ns, prep.obs.camera,
         prep.uv_undistorted, prep.ray_dir, prep.centers, prep.observed_direction_jacobians,
         jac4, lens, f9, rtki, cam, NS, 0.0 if noise_px is None else float(noise_px),
-        with_cov, *(getattr(p1, f) for f in fields), *(getattr(p2, f) for f in fields),
+        with_cov, *(getattr(p1, f) for f in fields), *(getattr(p2, f) for f in fields), geo,
         predicted, points, flags, innovation, quality)
     n_columns = len(_QUALITY) if with_cov else 10
     return predicted, points, flags, innovation, dict(zip(_QUALITY[:n_columns], quality,
