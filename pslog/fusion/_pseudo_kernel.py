@@ -33,6 +33,14 @@ from .._jit import kernel
 _PARALLEL_EPS = 1e-12
 #: np.degrees' factor (numpy multiplies by 180 / pi, computed once in double precision).
 _DEGREES = 180.0 / np.pi
+#: The float columns of a past point in the kernels' tables ``ff[slot, i]`` (20 floats).
+FLOATS = ("weight", "snap_px", "miss_m", "angle_rad", "miss_unsnapped_m", "residual_obs_px",
+          "residual_partner_px", "points_world", "points_world", "points_world", "dir_obs",
+          "dir_obs", "dir_obs", "dir_partner", "dir_partner", "dir_partner", "uv_interpolated",
+          "uv_interpolated", "uv_snapped", "uv_snapped")
+#: The int columns of a past point in ``fi[slot, i]``: its row, partner camera (-1: none),
+#: the partner's bracket (prev, next rows), its validity flags and whether it is valid.
+INTS = ("row", "partner", "prev_row", "next_row", "flags", "valid")
 #: "No bracket end yet" in the partner choice (np.iinfo(np.int64).min).
 _INT64_MIN = np.iinfo(np.int64).min
 
@@ -177,16 +185,13 @@ def _invalid(cam, c, p):
 
 
 @kernel
-def pseudo_kernel(rows, not_after, max_gap_ns, time_ns, camera, prev_b, next_b, uv,
-                  observed_rays, centers, ki, rr, f9, cam, span_tie_ns, min_angle_deg,
-                  partner, prev_row, next_row, weight, uv_interp, uv_snapped, snap_px,
-                  points, miss, angle, miss_unsnapped, res_obs, res_partner, dir_obs,
-                  dir_partner, flags, valid):
-    """Steps 1-3 of the paper's section 2.2 for past observations ``rows`` (k,), each from
-    a partner bracket ending at or before global row ``not_after`` (k,); fills the (k, ...)
-    outputs (the fields of :class:`~pslog.fusion.pseudo.PseudoStereoPoints`).
+def _pseudo_one(r, not_after, max_gap_ns, time_ns, camera, prev_b, next_b, uv, observed_rays,
+                centers, ki, rr, f9, cam, span_tie_ns, min_angle_deg, scratch, ff, fi, slot, i):
+    """Steps 1-3 of the paper's section 2.2 for past observation ``r`` from a partner
+    bracket ending at or before global row ``not_after``, into ``ff[slot, i]`` (floats,
+    :data:`FLOATS`) and ``fi[slot, i]`` (ints, :data:`INTS`); returns (valid, flags).
 
-    For each row (camera ``c``, time ``t_j``): the partner is the other camera whose bracket
+    For row ``r`` (camera ``c``, time ``t_j``): the partner is the other camera whose bracket
     ``prev <= t_j <= next`` (``prev_b``, ``next_b``: (m, n) rows, -1 none) is shortest
     (ties within ``span_tie_ns``: the one ending latest), not after ``not_after`` and
     within ``max_gap_ns``. Then
@@ -204,100 +209,113 @@ def pseudo_kernel(rows, not_after, max_gap_ns, time_ns, camera, prev_b, next_b, 
 
     ``cam`` (m, 31): per camera K (9), R (9), t (3), dist (5), view box (4), lens flag
     (:func:`camera_tables`); ``ki``, ``rr`` (m, 9): K⁻¹ and R; ``f9`` (m * m, 9): ``F[a, b]``
-    at row ``a m + b``. A row without partner gets the arithmetic of camera 0 and rows 0
-    (as the former columns did) and ``valid`` False with no flags.
+    at row ``a m + b``; ``scratch`` (6,) float64. A row without partner gets the arithmetic
+    of camera 0 and rows 0 (as the former numpy columns did), not valid and no flags.
     """
     m = centers.shape[0]
-    d_int = np.empty(3)
-    unsnapped = np.empty(3)
+    fi[slot, i, 0] = r
+    t_row = time_ns[r]
+    c = camera[r]
+    best_span = np.int64(2**62)
+    best_end = _INT64_MIN
+    p = -1
+    pv_best = 0
+    nx_best = 0
+    for d in range(m):
+        pv = prev_b[d, r]
+        nx = next_b[d, r]
+        end = time_ns[max(nx, 0)]
+        span = end - time_ns[max(pv, 0)]
+        ok = (pv >= 0) and (nx >= 0) and (c != d) and (nx <= not_after) \
+            and (span <= max_gap_ns)
+        if ok and ((span < best_span - span_tie_ns)
+                   or ((span <= best_span + span_tie_ns) and (end > best_end))):
+            best_span = span
+            best_end = end
+            p = d
+            pv_best = pv
+            nx_best = nx
+    fi[slot, i, 1] = p
+    fi[slot, i, 2] = pv_best
+    fi[slot, i, 3] = nx_best
+    q = max(p, 0)
+    # eq. (1)'s weight from integer capture times
+    t_prev = time_ns[pv_best]
+    span_ns = time_ns[nx_best] - t_prev
+    w = (t_row - t_prev) / span_ns if span_ns > 0 else 0.0
+    ff[slot, i, 0] = w
+    # eq. (1): linear interpolation of the partner's 2D track to the observation's time
+    ui0 = (1.0 - w) * uv[pv_best, 0] + w * uv[nx_best, 0]
+    ui1 = (1.0 - w) * uv[pv_best, 1] + w * uv[nx_best, 1]
+    ff[slot, i, 16] = ui0
+    ff[slot, i, 17] = ui1
+    # step 2: nearest point on the epipolar line of the observed point, partner image
+    fr = c * m + q
+    uo, vo = uv[r, 0], uv[r, 1]
+    a = f9[fr, 0] * uo + f9[fr, 2]
+    a += f9[fr, 1] * vo
+    b = f9[fr, 3] * uo + f9[fr, 5]
+    b += f9[fr, 4] * vo
+    cl = f9[fr, 6] * uo + f9[fr, 8]
+    cl += f9[fr, 7] * vo
+    big = _max(abs(a), abs(b))
+    a /= big
+    b /= big
+    cl /= big
+    size = math.sqrt(a * a + b * b)
+    n0, n1, n2 = a / size, b / size, cl / size
+    signed = n0 * ui0 + n1 * ui1 + n2
+    us0 = ui0 - signed * n0
+    us1 = ui1 - signed * n1
+    ff[slot, i, 18] = us0
+    ff[slot, i, 19] = us1
+    ff[slot, i, 1] = abs(signed)
+    # step 3: crossing point of the observed ray and the snapped point's ray
+    for j in range(3):
+        ff[slot, i, 10 + j] = observed_rays[r, j]
+    _ray(ki, rr, q, us0, us1, ff[slot, i, 13:16])
+    ff[slot, i, 2], s, k = _crossing(centers[c], ff[slot, i, 10:13], centers[q], ff[slot, i, 13:16],
+                              ff[slot, i, 7:10])
+    # both directions are unit vectors; a line has no sense, hence the absolute value
+    ang = math.acos(_min(abs(_dot3(ff[slot, i, 10:13], ff[slot, i, 13:16])), 1.0))
+    ff[slot, i, 3] = ang
+    # the disagreement before the snap: the interpolated point's ray against the observed
+    d_int = scratch[0:3]
+    unsnapped = scratch[3:6]
+    _ray(ki, rr, q, ui0, ui1, d_int)
+    ff[slot, i, 4] = _crossing(centers[c], ff[slot, i, 10:13], centers[q], d_int,
+                                  unsnapped)[0]
+    ff[slot, i, 5] = _reprojection(cam, c, unsnapped, uo, vo)
+    ff[slot, i, 6] = _reprojection(cam, q, unsnapped, ui0, ui1)
+    pt = ff[slot, i, 7:10]
+    finite = math.isfinite(pt[0]) and math.isfinite(pt[1]) and math.isfinite(pt[2])
+    bits = 0
+    if finite:
+        for cc in range(m):  # (in camera order, as invalid_points)
+            if cc == c or cc == q:
+                bits |= _invalid(cam, cc, pt)
+        if not ((s > 0) and (k > 0)):
+            bits |= 1  # BEHIND: the crossing behind a camera
+    if ang * _DEGREES < min_angle_deg:
+        bits |= 4  # PARALLEL (NaN: no ray, no flag)
+    if p < 0:
+        bits = 0  # no partner: no point, and nothing to say about its geometry
+    fi[slot, i, 4] = bits
+    ok = (p >= 0) and finite and bits == 0
+    fi[slot, i, 5] = ok
+    return ok, bits
+
+
+@kernel
+def pseudo_kernel(rows, not_after, max_gap_ns, time_ns, camera, prev_b, next_b, uv,
+                  observed_rays, centers, ki, rr, f9, cam, span_tie_ns, min_angle_deg, ff, fi):
+    """:func:`_pseudo_one` for past observations ``rows`` (k,) and their ``not_after`` (k,)
+    rows, into ``ff[0]`` (k, 20) and ``fi[0]`` (k, 6)."""
+    scratch = np.empty(6)
     for i in range(rows.shape[0]):
-        r = rows[i]
-        t_row = time_ns[r]
-        c = camera[r]
-        best_span = np.int64(2**62)
-        best_end = _INT64_MIN
-        p = -1
-        pv_best = 0
-        nx_best = 0
-        for d in range(m):
-            pv = prev_b[d, r]
-            nx = next_b[d, r]
-            end = time_ns[max(nx, 0)]
-            span = end - time_ns[max(pv, 0)]
-            ok = (pv >= 0) and (nx >= 0) and (c != d) and (nx <= not_after[i]) \
-                and (span <= max_gap_ns)
-            if ok and ((span < best_span - span_tie_ns)
-                       or ((span <= best_span + span_tie_ns) and (end > best_end))):
-                best_span = span
-                best_end = end
-                p = d
-                pv_best = pv
-                nx_best = nx
-        partner[i] = p
-        prev_row[i] = pv_best
-        next_row[i] = nx_best
-        q = max(p, 0)
-        # eq. (1)'s weight from integer capture times
-        t_prev = time_ns[pv_best]
-        span_ns = time_ns[nx_best] - t_prev
-        w = (t_row - t_prev) / span_ns if span_ns > 0 else 0.0
-        weight[i] = w
-        # eq. (1): linear interpolation of the partner's 2D track to the observation's time
-        ui0 = (1.0 - w) * uv[pv_best, 0] + w * uv[nx_best, 0]
-        ui1 = (1.0 - w) * uv[pv_best, 1] + w * uv[nx_best, 1]
-        uv_interp[i, 0] = ui0
-        uv_interp[i, 1] = ui1
-        # step 2: nearest point on the epipolar line of the observed point, partner image
-        fr = c * m + q
-        uo, vo = uv[r, 0], uv[r, 1]
-        a = f9[fr, 0] * uo + f9[fr, 2]
-        a += f9[fr, 1] * vo
-        b = f9[fr, 3] * uo + f9[fr, 5]
-        b += f9[fr, 4] * vo
-        cl = f9[fr, 6] * uo + f9[fr, 8]
-        cl += f9[fr, 7] * vo
-        big = _max(abs(a), abs(b))
-        a /= big
-        b /= big
-        cl /= big
-        size = math.sqrt(a * a + b * b)
-        n0, n1, n2 = a / size, b / size, cl / size
-        signed = n0 * ui0 + n1 * ui1 + n2
-        us0 = ui0 - signed * n0
-        us1 = ui1 - signed * n1
-        uv_snapped[i, 0] = us0
-        uv_snapped[i, 1] = us1
-        snap_px[i] = abs(signed)
-        # step 3: crossing point of the observed ray and the snapped point's ray
-        for j in range(3):
-            dir_obs[i, j] = observed_rays[r, j]
-        _ray(ki, rr, q, us0, us1, dir_partner[i])
-        miss[i], s, k = _crossing(centers[c], dir_obs[i], centers[q], dir_partner[i],
-                                  points[i])
-        # both directions are unit vectors; a line has no sense, hence the absolute value
-        ang = math.acos(_min(abs(_dot3(dir_obs[i], dir_partner[i])), 1.0))
-        angle[i] = ang
-        # the disagreement before the snap: the interpolated point's ray against the observed
-        _ray(ki, rr, q, ui0, ui1, d_int)
-        miss_unsnapped[i] = _crossing(centers[c], dir_obs[i], centers[q], d_int,
-                                      unsnapped)[0]
-        res_obs[i] = _reprojection(cam, c, unsnapped, uo, vo)
-        res_partner[i] = _reprojection(cam, q, unsnapped, ui0, ui1)
-        pt = points[i]
-        finite = math.isfinite(pt[0]) and math.isfinite(pt[1]) and math.isfinite(pt[2])
-        bits = 0
-        if finite:
-            for cc in range(m):  # (in camera order, as invalid_points)
-                if cc == c or cc == q:
-                    bits |= _invalid(cam, cc, pt)
-            if not ((s > 0) and (k > 0)):
-                bits |= 1  # BEHIND: the crossing behind a camera
-        if ang * _DEGREES < min_angle_deg:
-            bits |= 4  # PARALLEL (NaN: no ray, no flag)
-        if p < 0:
-            bits = 0  # no partner: no point, and nothing to say about its geometry
-        flags[i] = bits
-        valid[i] = (p >= 0) and finite and bits == 0
+        _pseudo_one(rows[i], not_after[i], max_gap_ns, time_ns, camera, prev_b, next_b, uv,
+                    observed_rays, centers, ki, rr, f9, cam, span_tie_ns, min_angle_deg,
+                    scratch, ff, fi, 0, i)
 
 
 @kernel
@@ -311,33 +329,43 @@ def _pixel_jacobian(jac4, lens, row, g0, g1):
 
 
 @kernel
-def event_kernel(events, time_ns, camera, uv, ray_dir, centers, obs_jac, jac4, lens, f9,
-                 rtki, cam, ns, noise_px, with_cov,
-                 row1, partner1, prev1, next1, weight1, snap1, angle1, miss_unsnapped1, res_obs1,
-                 res_part1, row2, partner2, prev2, next2, weight2, snap2, angle2,
-                 miss_unsnapped2, res_obs2, res_part2, geo, predicted, points, flags, innovation,
-                 quality):
-    """Type A's points at detections ``events`` (k,) from their past points ``P_{t-1}``
-    (fields ``*1``) and ``P_{t-2}`` (``*2``), k rows each (:func:`pseudo_kernel`'s outputs);
-    ``geo`` (2, k, 13): of each past point its ``points_world`` (3), ``dir_obs`` (3),
-    ``dir_partner`` (3), ``uv_interpolated`` (2) and ``uv_snapped`` (2), in one table (the
-    kernel reads one array for both points).
+def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_ns, time_ns,
+                  camera, prev_b, next_b, uv, observed_rays, centers, ki, rr, f9, cam,
+                  span_tie_ns, min_angle_deg, ray_dir, obs_jac, jac4, lens, rtki, ns,
+                  noise_px, with_cov, ff, fi, refused, has, predicted, points, flags,
+                  innovation, quality):
+    """Type A's point at each detection of ``targets`` (k,), sorted global rows.
+
+    The two past points: for each target, the latest rows of the 1st, 2nd, ... distinct
+    instants before it (``previous_instant``), up to ``depth`` instants back and within
+    ``max_gap_ns``, are triangulated by :func:`_pseudo_one` (steps 1-3, the partner's
+    bracket ending at or before the target: causality) until two are valid: ``P_{t-1}``
+    into ``ff[0, i]``, ``fi[0, i]`` and ``P_{t-2}`` into ``ff[1, i]``, ``fi[1, i]``;
+    ``P_{t-2}`` only if eq. (2) stays a bounded extrapolation,
+    ``δ_pred <= max_extrapolation δ_prev``. Every past point made ORs its flags into
+    ``refused`` (n,) at its row. ``has[i]``: both were found; then
 
     - eq. (2), linear prediction with the actual capture intervals (integer nanoseconds):
       ``P̂_t = P_{t-1} + (P_{t-1} - P_{t-2}) δ_pred / δ_prev``;
     - eqs. (3)-(4): ``P'_t = ((P̂_t - T) · r / |r|²) r + T``, the point of the newest viewing
       ray ``l = k r + T`` nearest to ``P̂_t``; its ``k <= 0`` (the foot behind the newest
-      camera) and a point behind or outside a contributing camera are flagged;
+      camera) and a point behind or outside a contributing camera are flagged (``flags``);
     - ``innovation``: the newest detection against the prediction (recorded pixels);
-    - ``quality`` (16, k): snap_px, ray_miss_m (before the snap), ray_shift_m,
+    - ``quality`` (17, k): snap_px, ray_miss_m (before the snap), ray_shift_m,
       ray_angle_deg, residual_max_px, residual_mean_px, camera_mask, n_detections, gap_s,
       span_s, and (``with_cov``) std_m, cov_xx ... cov_yz m² with the closed-form Jacobians
       of eqs. (1)-(4): eq. (4), ``P' = T + r rᵀ (P̂ - T)``, gives each past slot ``r gᵀ``
       with ``g = scale rᵀ J`` (``scale``: eq. (2)'s ``1 + ratio`` or ``-ratio``), the newest
       ray's turn ``δr`` moves P' by ``((rᵀq) I + r qᵀ) δr``, ``q = P̂ - T``; a detection in
       several slots adds its slots' Jacobians (the earliest slot holds them).
+
+    The other arguments are :func:`_pseudo_one`'s and: ``ray_dir`` (n, 3) the detections'
+    rays, ``obs_jac`` (3, 2, n) their direction Jacobians, ``jac4`` (n, 4) their
+    d(undistorted) / d(recorded pixel) (``lens`` False: the identity), ``rtki`` (m, 9)
+    Rᵀ K⁻¹, ``ns`` nanoseconds per second, ``noise_px`` the detection noise (pixels).
     """
     m = centers.shape[0]
+    scratch = np.empty(6)
     slots = np.empty(7, dtype=np.int64)
     times = np.empty(7, dtype=np.int64)
     res = np.empty(5)
@@ -348,10 +376,44 @@ def event_kernel(events, time_ns, camera, uv, ray_dir, centers, obs_jac, jac4, l
     nl = np.empty((3, 2))
     r = np.empty(3)
     q = np.empty(3)
-    for i in range(events.shape[0]):
-        e = events[i]
-        slots[0], slots[1], slots[2], slots[3] = e, row1[i], prev1[i], next1[i]
-        slots[4], slots[5], slots[6] = row2[i], prev2[i], next2[i]
+    for i in range(targets.shape[0]):
+        e = targets[i]
+        # the past points, instant by instant back from the target
+        first = -1
+        second = -1
+        t_first = np.int64(0)
+        before = e
+        candidate = e
+        for k in range(depth):
+            b = previous_instant[max(before, 0)]
+            if k > 0 and candidate < 0:
+                b = -1
+            reachable = (b >= 0) and (time_ns[e] - time_ns[max(b, 0)] <= max_gap_ns)
+            before = b
+            candidate = b if reachable else -1
+            # as P_{t-2}, a candidate must leave eq. (2) a bounded extrapolation
+            spaced = (first < 0) or (time_ns[e] - t_first <= max_extrapolation * (
+                t_first - time_ns[max(candidate, 0)]))
+            if candidate >= 0 and spaced:
+                slot = 0 if first < 0 else 1
+                ok, bits = _pseudo_one(candidate, e, max_gap_ns, time_ns, camera, prev_b,
+                                       next_b, uv, observed_rays, centers, ki, rr, f9, cam,
+                                       span_tie_ns, min_angle_deg, scratch, ff, fi, slot, i)
+                refused[candidate] |= bits
+                if ok:
+                    if first < 0:
+                        first = k
+                        t_first = time_ns[candidate]
+                    else:
+                        second = k
+                        break
+            if candidate < 0:
+                break  # (no earlier instant within max_gap_ns: none further back either)
+        has[i] = second >= 0
+        if second < 0:
+            continue
+        slots[0], slots[1], slots[2], slots[3] = e, fi[0, i, 0], fi[0, i, 2], fi[0, i, 3]
+        slots[4], slots[5], slots[6] = fi[1, i, 0], fi[1, i, 2], fi[1, i, 3]
         for s in range(7):
             times[s] = time_ns[slots[s]]
         t_event, t1, t2 = times[0], times[1], times[4]
@@ -359,7 +421,7 @@ def event_kernel(events, time_ns, camera, uv, ray_dir, centers, obs_jac, jac4, l
         # eq. (2): linear prediction with the actual capture intervals
         ratio = (t_event - t1) / (t1 - t2)
         for j in range(3):
-            predicted[i, j] = geo[0, i, j] + ratio * (geo[0, i, j] - geo[1, i, j])
+            predicted[i, j] = ff[0, i, 7 + j] + ratio * (ff[0, i, 7 + j] - ff[1, i, 7 + j])
         # eqs. (3)-(4): nearest point on the newest viewing ray
         origin = centers[c0]
         d = ray_dir[e]
@@ -379,7 +441,7 @@ def event_kernel(events, time_ns, camera, uv, ray_dir, centers, obs_jac, jac4, l
         if not (k_foot > 0):
             bits |= 1  # eq. (4)'s k: the foot behind the newest camera
         flags[i] = bits
-        res[0], res[1], res[2], res[3] = res_obs1[i], res_part1[i], res_obs2[i], res_part2[i]
+        res[0], res[1], res[2], res[3] = ff[0, i, 5], ff[0, i, 6], ff[1, i, 5], ff[1, i, 6]
         # the newest detection against the prediction, before eq. (4) moves it onto its ray
         res[4] = _reprojection(cam, c0, predicted[i], uv[e, 0], uv[e, 1])
         innovation[i] = res[4]
@@ -397,14 +459,14 @@ def event_kernel(events, time_ns, camera, uv, ray_dir, centers, obs_jac, jac4, l
             t_earliest = min(t_earliest, times[s])
         span1 = (times[3] - times[2]) / ns
         span2 = (times[6] - times[5]) / ns
-        quality[0, i] = _max(snap1[i], snap2[i])
+        quality[0, i] = _max(ff[0, i, 1], ff[1, i, 1])
         # measured before the snap: after it the rays cross by construction
-        quality[1, i] = _max(miss_unsnapped1[i], miss_unsnapped2[i])
+        quality[1, i] = _max(ff[0, i, 4], ff[1, i, 4])
         shift = (pt[0] - predicted[i, 0]) * (pt[0] - predicted[i, 0])
         shift += (pt[1] - predicted[i, 1]) * (pt[1] - predicted[i, 1])
         shift += (pt[2] - predicted[i, 2]) * (pt[2] - predicted[i, 2])
         quality[2, i] = math.sqrt(shift)
-        quality[3, i] = _min(angle1[i], angle2[i]) * _DEGREES
+        quality[3, i] = _min(ff[0, i, 3], ff[1, i, 3]) * _DEGREES
         worst = res[0]
         total = res[0] + res[1]
         for s in range(1, 5):
@@ -444,13 +506,12 @@ def event_kernel(events, time_ns, camera, uv, ray_dir, centers, obs_jac, jac4, l
         # moves with the interpolated one by I - n nᵀ and with the observed pixel as it moves
         # the epipolar line; eq. (1) weighs the bracket by 1 - w and w.
         for pp in range(2):
-            first = pp == 0
-            row = row1[i] if first else row2[i]
+            row = fi[pp, i, 0]
             cam_obs = camera[row]
-            partner = max(partner1[i] if first else partner2[i], 0)
-            w_eq1 = weight1[i] if first else weight2[i]
-            a0, a1, a2 = geo[pp, i, 3], geo[pp, i, 4], geo[pp, i, 5]
-            b0, b1, b2 = geo[pp, i, 6], geo[pp, i, 7], geo[pp, i, 8]
+            partner = max(fi[pp, i, 1], 0)
+            w_eq1 = ff[pp, i, 0]
+            a0, a1, a2 = ff[pp, i, 10], ff[pp, i, 11], ff[pp, i, 12]
+            b0, b1, b2 = ff[pp, i, 13], ff[pp, i, 14], ff[pp, i, 15]
             cos = a0 * b0 + a1 * b1 + a2 * b2
             scale = 0.5 / (1 - cos * cos)
             r_d1 = (r[0] * a0 + r[1] * a1 + r[2] * a2) * scale
@@ -460,7 +521,7 @@ def event_kernel(events, time_ns, camera, uv, ray_dir, centers, obs_jac, jac4, l
             w0 = 0.5 * r[0] + f1 * a0 + f2 * b0
             w1 = 0.5 * r[1] + f1 * a1 + f2 * b1
             w2 = 0.5 * r[2] + f1 * a2 + f2 * b2
-            p0, p1, p2 = geo[pp, i, 0], geo[pp, i, 1], geo[pp, i, 2]
+            p0, p1, p2 = ff[pp, i, 7], ff[pp, i, 8], ff[pp, i, 9]
             s1 = ((p0 - centers[cam_obs, 0]) * a0 + (p1 - centers[cam_obs, 1]) * a1
                   + (p2 - centers[cam_obs, 2]) * a2)
             s2 = ((p0 - centers[partner, 0]) * b0 + (p1 - centers[partner, 1]) * b1
@@ -476,7 +537,7 @@ def event_kernel(events, time_ns, camera, uv, ray_dir, centers, obs_jac, jac4, l
             j_obs1 *= s1
             # J_snapped = wᵀ dd/duv of the partner's ray at the snapped pixel (direction_jacobian_
             # along), times s2
-            us0, us1 = geo[pp, i, 11], geo[pp, i, 12]
+            us0, us1 = ff[pp, i, 18], ff[pp, i, 19]
             rv0 = rtki[partner, 0] * us0
             rv0 += rtki[partner, 1] * us1
             rv0 += rtki[partner, 2]
@@ -520,7 +581,7 @@ def event_kernel(events, time_ns, camera, uv, ray_dir, centers, obs_jac, jac4, l
             size = math.sqrt(l0 * l0 + l1 * l1)
             nn0 = l0 / size
             nn1 = l1 / size
-            signed = (l0 * geo[pp, i, 9] + l1 * geo[pp, i, 10] + l2) / size
+            signed = (l0 * ff[pp, i, 16] + l1 * ff[pp, i, 17] + l2) / size
             da00, da01 = f9[fr, 0] / size, f9[fr, 1] / size
             da10, da11 = f9[fr, 3] / size, f9[fr, 4] / size
             dl0, dl1 = f9[fr, 6] / size, f9[fr, 7] / size

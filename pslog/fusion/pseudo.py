@@ -53,6 +53,7 @@ from ._prepare import (
     MIN_RAY_ANGLE_DEG,
     Prepared,
     covariance,
+    direction_jacobian,
     finite_difference_jacobians,
     finite_rows,
 )
@@ -158,22 +159,33 @@ def pseudo_stereo_points(
     k = len(rows)
     prev_b, next_b = _all_brackets(prep)
     cam, ki, rr, _, f9 = _pseudo_kernel.camera_tables(prep)
-    ints = [np.empty(k, dtype=np.int64) for _ in range(3)]  # partner, prev_row, next_row
-    pairs = [np.empty((k, 2)) for _ in range(2)]  # uv_interpolated, uv_snapped
-    triples = [np.empty((k, 3)) for _ in range(3)]  # points, dir_obs, dir_partner
-    # weight, snap_px, miss, angle, miss_unsnapped, residual_obs, residual_partner
-    singles = [np.empty(k) for _ in range(7)]
-    flags = np.empty(k, dtype=np.int64)
-    valid = np.empty(k, dtype=bool)
+    ff = np.empty((1, k, len(_pseudo_kernel.FLOATS)))
+    fi = np.empty((1, k, len(_pseudo_kernel.INTS)), dtype=np.int64)
     _pseudo_kernel.pseudo_kernel(
         rows, not_after, int(max_gap_ns), prep.obs.time_ns, prep.obs.camera, prev_b, next_b,
         prep.uv_undistorted, prep.observed_rays, prep.centers, ki, rr, f9, cam,
-        _SPAN_TIE_NS, MIN_RAY_ANGLE_DEG, *ints, singles[0], *pairs, singles[1], triples[0],
-        singles[2], singles[3], singles[4], singles[5], singles[6], triples[1], triples[2],
-        flags, valid)
-    return PseudoStereoPoints(rows, valid, *ints, *pairs, singles[1], triples[0], singles[2],
-                              singles[3], singles[0], *singles[4:], triples[1], triples[2],
-                              flags)
+        _SPAN_TIE_NS, MIN_RAY_ANGLE_DEG, ff, fi)
+    return _from_tables(ff[0], fi[0], None)
+
+
+def _from_tables(ff: np.ndarray, fi: np.ndarray, at: np.ndarray | None) -> PseudoStereoPoints:
+    """The :class:`PseudoStereoPoints` of the kernels' tables of past points, ``ff`` (k, 20)
+    and ``fi`` (k, 6) (:data:`~pslog.fusion._pseudo_kernel.FLOATS`, ``INTS``), rows ``at``
+    (None: all), each field a contiguous array of its own."""
+    if at is not None:
+        ff, fi = ff[at], fi[at]
+
+    def col(i: int, j: int | None = None) -> np.ndarray:
+        return np.ascontiguousarray(ff[:, i] if j is None else ff[:, i:j])
+
+    return PseudoStereoPoints(
+        row=np.ascontiguousarray(fi[:, 0]), valid=fi[:, 5] != 0,
+        partner=np.ascontiguousarray(fi[:, 1]), prev_row=np.ascontiguousarray(fi[:, 2]),
+        next_row=np.ascontiguousarray(fi[:, 3]), uv_interpolated=col(16, 18),
+        uv_snapped=col(18, 20), snap_px=col(1), points_world=col(7, 10), miss_m=col(2),
+        angle_rad=col(3), weight=col(0), miss_unsnapped_m=col(4), residual_obs_px=col(5),
+        residual_partner_px=col(6), dir_obs=col(10, 13), dir_partner=col(13, 16),
+        flags=np.ascontiguousarray(fi[:, 4]))
 
 
 def _all_brackets(prep: Prepared) -> tuple[np.ndarray, np.ndarray]:
@@ -231,77 +243,47 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
     ``noise``: the session's estimate of the detection noise for the tests of innovation.py,
     updated in place (a stream keeps one across its pushes; None: a new one).
     """
+    from . import _pseudo_kernel
+
     obs = prep.obs
     time_ns = obs.time_ns
     n, max_gap_ns = len(obs), int(max_gap_s * NS)
-    depth = 2 * len(prep.centers)
-    # triangulate predecessors depth by depth, only for events still lacking two points
-    first = np.full(n, -1, dtype=np.int64)  # depth of P_{t-1} (the later past point)
-    second = np.full(n, -1, dtype=np.int64)  # depth of P_{t-2}
-    t_first = np.zeros(n, dtype=np.int64)  # capture time of P_{t-1}
-    computed: list[tuple[int, np.ndarray, PseudoStereoPoints]] = []  # (depth, events, points)
-    # candidate: latest row of the k-th distinct instant before each event (-1: none within
-    # max_gap_s), followed depth by depth only for the events still lacking two points
-    before = np.arange(n)
-    candidate = np.full(n, -1, dtype=np.int64)
-    targets = before.copy() if events is None else np.asarray(events, dtype=np.int64)
-    # depth 1's points made ahead with depth 0's: (events, points, offset)
-    ahead: tuple[np.ndarray, PseudoStereoPoints, int] | None = None
-    for k in range(depth):
-        # (the other rows keep candidate -1, so only targets are ever needed)
-        pending = targets[second[targets] < 0] if k else targets.copy()
-        if len(pending) == 0:
-            break
-        b = np.take(prep.previous_instant, np.maximum(before[pending], 0))
-        b = np.where(candidate[pending] < 0, -1, b) if k else b
-        reachable = (b >= 0) & (time_ns[pending] - time_ns[np.maximum(b, 0)] <= max_gap_ns)
-        before[pending] = b
-        candidate[pending] = np.where(reachable, b, -1)
-        # as P_{t-2}, a candidate must leave eq. (2) a bounded extrapolation
-        # (only pending rows can be needed: the others have two points, or candidate -1)
-        c_pending = candidate[pending]
-        t_first_pending = t_first[pending]
-        spaced = (first[pending] < 0) | (time_ns[pending] - t_first_pending <= MAX_EXTRAPOLATION * (
-            t_first_pending - time_ns[np.maximum(c_pending, 0)]))
-        need = pending[(c_pending >= 0) & spaced]
-        if k == 0 and events is not None:
-            # a few events (a stream): depth 1's candidates too, in the same call (each row's
-            # point is its own, elementwise), for the usual P_{t-2} without a second call
-            b1 = np.take(prep.previous_instant, np.maximum(b, 0))
-            b1 = np.where(candidate[pending] < 0, -1, b1)
-            ok1 = (b1 >= 0) & (time_ns[pending] - time_ns[np.maximum(b1, 0)] <= max_gap_ns)
-            ahead_rows, ahead_candidates = pending[ok1], b1[ok1]
-            both = pseudo_stereo_points(prep, np.concatenate([candidate[need],
-                                                              ahead_candidates]),
-                                        np.concatenate([need, ahead_rows]), max_gap_ns)
-            points_k = _take(both, slice(0, len(need)))
-            ahead = (ahead_rows, both, len(need))
-        elif k == 1 and ahead is not None:
-            points_k = _take(ahead[1], ahead[2] + np.searchsorted(ahead[0], need))
-        else:
-            points_k = pseudo_stereo_points(prep, candidate[need], need, max_gap_ns)
-        computed.append((k, need, points_k))
-        good = need[points_k.valid]
-        is_first = first[good] < 0
-        first[good[is_first]] = k
-        t_first[good[is_first]] = time_ns[candidate[good[is_first]]]
-        second[good[~is_first]] = k
-
-    events = np.flatnonzero(second >= 0)
-    if not computed:  # fewer than three instants: no point yet
-        computed.append((0, events, pseudo_stereo_points(prep, events, events, max_gap_ns)))
-    p1 = _gather(computed, events, first[events])
-    p2 = _gather(computed, events, second[events])
+    targets = (np.arange(n) if events is None
+               else np.ascontiguousarray(events, dtype=np.int64))
+    k = len(targets)
+    # per target, point by point (compiled): the two past points, up to 2 * n_cameras
+    # instants back (steps 1-3), then eqs. (2)-(4), the quality columns and the covariance
+    prev_b, next_b = _all_brackets(prep)
+    cam, ki, rr, rtki, f9 = _pseudo_kernel.camera_tables(prep)
+    lens = any(np.any(c.dist) for c in prep.cameras)  # (else the identity, no product)
+    ff = np.empty((2, k, len(_pseudo_kernel.FLOATS)))
+    fi = np.empty((2, k, len(_pseudo_kernel.INTS)), dtype=np.int64)
     # past points refused as invalid (each detection once): the points they would have made
     # are missing, or made from earlier instants
     refused = np.zeros(n, dtype=np.int64)
-    for _, _, points_k in computed:
-        np.bitwise_or.at(refused, points_k.row, points_k.flags)
-    del computed, points_k, ahead  # (only p1 and p2 from here on: their memory for what follows)
+    has = np.empty(k, dtype=bool)
+    predicted, points = np.empty((k, 3)), np.empty((k, 3))
+    flags = np.empty(k, dtype=np.int64)
+    innovation = np.empty(k)
+    quality_table = np.empty((len(_QUALITY), k))
+    with_cov = noise_px is not None and not _prepare.FINITE_DIFFERENCES
+    _pseudo_kernel.type_a_kernel(
+        targets, prep.previous_instant, 2 * len(prep.centers), MAX_EXTRAPOLATION, max_gap_ns,
+        time_ns, obs.camera, prev_b, next_b, prep.uv_undistorted, prep.observed_rays,
+        prep.centers, ki, rr, f9, cam, _SPAN_TIE_NS, MIN_RAY_ANGLE_DEG, prep.ray_dir,
+        prep.observed_direction_jacobians, _jacobian_rows(prep) if lens else np.zeros((1, 4)),
+        lens, rtki, NS, 0.0 if noise_px is None else float(noise_px), with_cov, ff, fi,
+        refused, has, predicted, points, flags, innovation, quality_table)
+    at = None if np.all(has) else np.flatnonzero(has)  # (None: every target has a point)
+    events = targets if at is None else targets[at]
+    p1, p2 = (_from_tables(ff[s], fi[s], at) for s in range(2))
+    if at is not None:
+        predicted, points, flags, innovation = (a[at] for a in (predicted, points, flags,
+                                                                innovation))
+        quality_table = quality_table[:, at]
+    n_columns = len(_QUALITY) if with_cov else 10
+    quality = dict(zip(_QUALITY[:n_columns], quality_table, strict=False))
     j1, j2 = p1.row, p2.row
-    # eqs. (2)-(4), the quality columns and the covariance, point by point (compiled)
-    predicted, points, flags, innovation, quality = _type_a_points(prep, events, p1, p2,
-                                                                   noise_px)
     if noise_px is not None and _prepare.FINITE_DIFFERENCES:
         # the reference covariance: forward differences through the whole construction
         columns = [events, j1, p1.prev_row, p1.next_row, j2, p2.prev_row, p2.next_row]
@@ -358,43 +340,6 @@ _QUALITY = ("snap_px", "ray_miss_m", "ray_shift_m", "ray_angle_deg", "residual_m
             "cov_xx_m2", "cov_yy_m2", "cov_zz_m2", "cov_xy_m2", "cov_xz_m2", "cov_yz_m2")
 
 
-def _type_a_points(prep: Prepared, events: np.ndarray, p1: PseudoStereoPoints,
-                   p2: PseudoStereoPoints, noise_px: float | None):
-    """Eqs. (2)-(4) for ``events`` (k,) with their past points, by the compiled
-    :func:`~pslog.fusion._pseudo_kernel.event_kernel`.
-
-    Returns predicted (k, 3) ``P̂_t``, points (k, 3) ``P'_t`` (metres), flags (k,) int64
-    (validity bits), innovation (k,) (the newest detection against the projection of
-    ``P̂_t``, recorded pixels) and the quality columns (dict of (k,) float64; ``std_m`` and
-    ``cov_*_m2`` only with a ``noise_px``)."""
-    from . import _pseudo_kernel
-
-    k = len(events)
-    cam, _, _, rtki, f9 = _pseudo_kernel.camera_tables(prep)
-    lens = any(np.any(c.dist) for c in prep.cameras)  # (else the identity, no product)
-    jac4 = _jacobian_rows(prep) if lens else np.zeros((1, 4))
-    predicted, points = np.empty((k, 3)), np.empty((k, 3))
-    flags = np.empty(k, dtype=np.int64)
-    innovation = np.empty(k)
-    quality = np.empty((len(_QUALITY), k))
-    with_cov = noise_px is not None and not _prepare.FINITE_DIFFERENCES
-    fields = ("row", "partner", "prev_row", "next_row", "weight", "snap_px", "angle_rad",
-              "miss_unsnapped_m", "residual_obs_px", "residual_partner_px")
-    geo = np.empty((2, k, 13))  # the past points' geometry, one table
-    for g, p in zip(geo, (p1, p2), strict=True):
-        g[:, 0:3], g[:, 3:6], g[:, 6:9] = p.points_world, p.dir_obs, p.dir_partner
-        g[:, 9:11], g[:, 11:13] = p.uv_interpolated, p.uv_snapped
-    _pseudo_kernel.event_kernel(
-        np.ascontiguousarray(events, dtype=np.int64), prep.obs.time_ns, prep.obs.camera,
-        prep.uv_undistorted, prep.ray_dir, prep.centers, prep.observed_direction_jacobians,
-        jac4, lens, f9, rtki, cam, NS, 0.0 if noise_px is None else float(noise_px),
-        with_cov, *(getattr(p1, f) for f in fields), *(getattr(p2, f) for f in fields), geo,
-        predicted, points, flags, innovation, quality)
-    n_columns = len(_QUALITY) if with_cov else 10
-    return predicted, points, flags, innovation, dict(zip(_QUALITY[:n_columns], quality,
-                                                          strict=False))
-
-
 def _jacobian_rows(prep: Prepared) -> np.ndarray:
     """:attr:`Prepared.uv_jacobian` as (n, 4) rows, NaN as 0 (made once per Prepared)."""
     cache = prep.__dict__.get("_jacobian_rows")
@@ -402,40 +347,6 @@ def _jacobian_rows(prep: Prepared) -> np.ndarray:
         cache = prep.__dict__["_jacobian_rows"] = np.ascontiguousarray(
             np.nan_to_num(prep.uv_jacobian).reshape(-1, 4))
     return cache
-
-
-def _gather(computed: list[tuple[int, np.ndarray, PseudoStereoPoints]], events: np.ndarray,
-            depth: np.ndarray) -> PseudoStereoPoints:
-    """Rows of the per-depth results: for each event, the entry computed at its ``depth``
-    (every event has one: ``depth >= 0``, and its row is in that depth's sorted rows)."""
-    fields = PseudoStereoPoints.__dataclass_fields__
-    template = computed[0][2]
-    mine = [depth == k for k, _, _ in computed]
-    counts = [int(np.count_nonzero(m)) for m in mine]
-    if not computed or sum(counts) == 0:
-        return PseudoStereoPoints(**{f: np.zeros((len(events), *getattr(template, f).shape[1:]),
-                                                 dtype=getattr(template, f).dtype)
-                                     for f in fields})
-    # the depth of most events first, as a take of all of them (the others' rows of it are
-    # placeholders, each replaced below by its own depth's entry)
-    base = int(np.argmax(counts))
-    _, rows_b, points_b = computed[base]
-    if counts[base] == len(events) and len(rows_b) == len(events):  # (the same rows)
-        return points_b
-    where = np.minimum(np.searchsorted(rows_b, events), len(rows_b) - 1)
-    out = {f: np.take(getattr(points_b, f), where, axis=0) for f in fields}
-    for i, (_, rows_k, points_k) in enumerate(computed):
-        if i == base or counts[i] == 0:
-            continue
-        at = np.flatnonzero(mine[i])
-        where = np.searchsorted(rows_k, events[at])  # rows_k is sorted
-        for f in fields:
-            out[f][at] = getattr(points_k, f)[where]
-    return PseudoStereoPoints(**out)
-
-
-def _take(p: PseudoStereoPoints, index) -> PseudoStereoPoints:
-    return PseudoStereoPoints(*(getattr(p, f)[index] for f in p.__dataclass_fields__))
 
 
 def _select(p: PseudoStereoPoints, keep: np.ndarray) -> PseudoStereoPoints:
@@ -463,6 +374,7 @@ class TypeAStream:
     """
 
     def __init__(self, rig, options) -> None:
+        from . import _pseudo_kernel
         from ._prepare import default_max_gap_s, prepare
 
         self.rig = rig
@@ -477,7 +389,8 @@ class TypeAStream:
         self._template = template = prepare(empty, rig)
         template._cols("K_inv"), template._cols("R")
         self._shared = {"_columns": template.__dict__["_columns"], "_f_cols": template._f_cols,
-                        "_rt_k_inv_cols": template._rt_k_inv_cols}
+                        "_rt_k_inv_cols": template._rt_k_inv_cols,
+                        "_kernel_tables": _pseudo_kernel.camera_tables(template)}
         self._time = np.zeros(0, np.int64)
         self._camera = np.zeros(0, np.int32)
         self._uv = np.zeros((0, 2))
@@ -485,6 +398,11 @@ class TypeAStream:
         self._uv_und = np.zeros((0, 2))
         self._ray_dir = np.zeros((0, 3))
         self._jac = np.zeros((0, 2, 2))
+        # each row's own-pixel ray, its direction Jacobian and its pixel Jacobian's rows (as
+        # Prepared makes them for a session, elementwise: made once, when the row arrives)
+        self._rays = np.zeros((0, 3))
+        self._dir_jac = np.zeros((3, 2, 0))
+        self._jac_rows = np.zeros((0, 4))
         self._seen = np.zeros(0, np.int64)  # past refusals already counted, per row
         self._noise = NoiseEstimate()  # the detection noise the innovations imply, so far
         self._empty = fuse_type_a(template, self._max_gap_s, self._noise_px,
@@ -533,9 +451,14 @@ class TypeAStream:
         self._uv_und = np.concatenate([self._uv_und[cut:], uv_und])
         self._ray_dir = np.concatenate([self._ray_dir[cut:], ray_dir])
         self._jac = np.concatenate([self._jac[cut:], jac])
+        t = self._template
+        self._rays = np.concatenate([self._rays[cut:], t.rays_from_undistorted(camera, uv_und)])
+        self._dir_jac = np.concatenate([self._dir_jac[:, :, cut:],
+                                        direction_jacobian(t, camera, uv_und)], axis=2)
+        self._jac_rows = np.concatenate([self._jac_rows[cut:],
+                                         np.nan_to_num(jac).reshape(-1, 4)])
         self._seen = np.concatenate([self._seen[cut:], np.zeros(n_new, np.int64)])
         obs = Observations(self._time, self._camera, self._uv, self._frame)
-        t = self._template
         n = len(obs)
         prep = Prepared(
             obs=obs, t=(self._time - self._time[0]) / NS, uv_undistorted=self._uv_und,
@@ -544,6 +467,8 @@ class TypeAStream:
             per_camera=[np.flatnonzero(self._camera == i) for i in range(len(rig))],
             cameras=t.cameras, uv_jacobian=self._jac, view_box=t.view_box)
         prep.__dict__.update(self._shared)
+        prep.__dict__.update(observed_rays=self._rays, observed_direction_jacobians=self._dir_jac,
+                             _jacobian_rows=self._jac_rows)
         return fuse_type_a(prep, self._max_gap_s, self._noise_px,
                            events=np.arange(n - n_new, n), seen=self._seen,
                            noise=self._noise)[0]
