@@ -643,7 +643,8 @@ def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_n
 
 def camera_tables(prep):
     """The per-camera tables the kernels take: ``cam`` (m, 31), ``ki``, ``rr``, ``rtki``
-    (m, 9) and ``f9`` (m * m, 9) (see :func:`pseudo_kernel`), cached on ``prep``."""
+    (m, 9), ``f9`` (m * m, 9) (see :func:`_pseudo_one`) and ``lens`` (bool: some camera has
+    lens distortion), cached on ``prep``."""
     cache = prep.__dict__.get("_kernel_tables")
     if cache is not None:
         return cache
@@ -659,6 +660,42 @@ def camera_tables(prep):
     tables = (cam, np.ascontiguousarray(prep._cols("K_inv").T),
               np.ascontiguousarray(prep._cols("R").T),
               np.ascontiguousarray(prep._rt_k_inv_cols.T),
-              np.ascontiguousarray(prep._f_cols.T))
+              np.ascontiguousarray(prep._f_cols.T), bool(np.any(cam[:, 30])))
     prep.__dict__["_kernel_tables"] = tables
     return tables
+
+
+@kernel
+def brackets_kernel(time_ns, camera, prev_b, next_b, previous_instant):
+    """Each row's bracket in every camera and its previous instant, in two passes over the
+    sorted rows: ``prev_b[d, r]`` the latest row of camera d at or before row r's time,
+    ``next_b[d, r]`` the earliest at or after it (-1: none; the same row on an exact match:
+    :func:`~pslog.fusion._prepare.bracket`), ``previous_instant[r]`` the latest row of the
+    instant before r's (a strictly earlier time; -1: none)."""
+    m = prev_b.shape[0]
+    n = time_ns.shape[0]
+    last = np.full(m, -1, dtype=np.int64)
+    start = 0
+    while start < n:  # instants (rows of one time) forwards
+        end = start + 1
+        while end < n and time_ns[end] == time_ns[start]:
+            end += 1
+        for r in range(start, end):
+            last[camera[r]] = r
+        for r in range(start, end):
+            previous_instant[r] = start - 1
+            for d in range(m):
+                prev_b[d, r] = last[d]
+        start = end
+    last[:] = -1
+    end = n
+    while end > 0:  # instants backwards
+        start = end - 1
+        while start > 0 and time_ns[start - 1] == time_ns[end - 1]:
+            start -= 1
+        for r in range(end - 1, start - 1, -1):
+            last[camera[r]] = r
+        for r in range(start, end):
+            for d in range(m):
+                next_b[d, r] = last[d]
+        end = start

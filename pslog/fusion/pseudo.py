@@ -157,8 +157,8 @@ def pseudo_stereo_points(
     not_after = np.ascontiguousarray(np.broadcast_to(not_after_row, rows.shape),
                                      dtype=np.int64)
     k = len(rows)
-    prev_b, next_b = _all_brackets(prep)
-    cam, ki, rr, _, f9 = _pseudo_kernel.camera_tables(prep)
+    prev_b, next_b, _ = _all_brackets(prep)
+    cam, ki, rr, _, f9, _ = _pseudo_kernel.camera_tables(prep)
     ff = np.empty((1, k, len(_pseudo_kernel.FLOATS)))
     fi = np.empty((1, k, len(_pseudo_kernel.INTS)), dtype=np.int64)
     _pseudo_kernel.pseudo_kernel(
@@ -188,15 +188,18 @@ def _from_tables(ff: np.ndarray, fi: np.ndarray, at: np.ndarray | None) -> Pseud
         flags=np.ascontiguousarray(fi[:, 4]))
 
 
-def _all_brackets(prep: Prepared) -> tuple[np.ndarray, np.ndarray]:
-    """:meth:`Prepared.row_brackets` of every camera, stacked: prev and next (m, n) int64."""
+def _all_brackets(prep: Prepared) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:meth:`Prepared.row_brackets` of every camera, stacked (prev and next, (m, n) int64),
+    and :attr:`Prepared.previous_instant` (n,), by one compiled pass (made once)."""
+    from . import _pseudo_kernel
+
     cache = prep.__dict__.get("_all_brackets")
     if cache is None:
         m, n = len(prep.centers), len(prep.obs)
-        prev, nxt = np.empty((m, n), dtype=np.int64), np.empty((m, n), dtype=np.int64)
-        for d in range(m):
-            prev[d], nxt[d] = prep.row_brackets(d)
-        cache = prep.__dict__["_all_brackets"] = (prev, nxt)
+        cache = (np.empty((m, n), dtype=np.int64), np.empty((m, n), dtype=np.int64),
+                 np.empty(n, dtype=np.int64))
+        _pseudo_kernel.brackets_kernel(prep.obs.time_ns, prep.obs.camera, *cache)
+        prep.__dict__["_all_brackets"] = cache
     return cache
 
 
@@ -253,9 +256,9 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
     k = len(targets)
     # per target, point by point (compiled): the two past points, up to 2 * n_cameras
     # instants back (steps 1-3), then eqs. (2)-(4), the quality columns and the covariance
-    prev_b, next_b = _all_brackets(prep)
-    cam, ki, rr, rtki, f9 = _pseudo_kernel.camera_tables(prep)
-    lens = any(np.any(c.dist) for c in prep.cameras)  # (else the identity, no product)
+    prev_b, next_b, previous_instant = _all_brackets(prep)
+    # (lens: some camera has distortion; else the pixel Jacobians are the identity)
+    cam, ki, rr, rtki, f9, lens = _pseudo_kernel.camera_tables(prep)
     ff = np.empty((2, k, len(_pseudo_kernel.FLOATS)))
     fi = np.empty((2, k, len(_pseudo_kernel.INTS)), dtype=np.int64)
     # past points refused as invalid (each detection once): the points they would have made
@@ -268,7 +271,7 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
     quality_table = np.empty((len(_QUALITY), k))
     with_cov = noise_px is not None and not _prepare.FINITE_DIFFERENCES
     _pseudo_kernel.type_a_kernel(
-        targets, prep.previous_instant, 2 * len(prep.centers), MAX_EXTRAPOLATION, max_gap_ns,
+        targets, previous_instant, 2 * len(prep.centers), MAX_EXTRAPOLATION, max_gap_ns,
         time_ns, obs.camera, prev_b, next_b, prep.uv_undistorted, prep.observed_rays,
         prep.centers, ki, rr, f9, cam, _SPAN_TIE_NS, MIN_RAY_ANGLE_DEG, prep.ray_dir,
         prep.observed_direction_jacobians, _jacobian_rows(prep) if lens else np.zeros((1, 4)),
