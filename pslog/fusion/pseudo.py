@@ -175,21 +175,16 @@ def pseudo_stereo_points(
 def _from_tables(ff: np.ndarray, fi: np.ndarray, at: np.ndarray | None) -> PseudoStereoPoints:
     """The :class:`PseudoStereoPoints` of the kernels' tables of past points, ``ff`` (k, 20)
     and ``fi`` (k, 6) (:data:`~pslog.fusion._pseudo_kernel.FLOATS`, ``INTS``), rows ``at``
-    (None: all), each field a contiguous array of its own."""
+    (None: all); each field a view of the table's columns (no copies)."""
     if at is not None:
         ff, fi = ff[at], fi[at]
-
-    def col(i: int, j: int | None = None) -> np.ndarray:
-        return np.ascontiguousarray(ff[:, i] if j is None else ff[:, i:j])
-
     return PseudoStereoPoints(
-        row=np.ascontiguousarray(fi[:, 0]), valid=fi[:, 5] != 0,
-        partner=np.ascontiguousarray(fi[:, 1]), prev_row=np.ascontiguousarray(fi[:, 2]),
-        next_row=np.ascontiguousarray(fi[:, 3]), uv_interpolated=col(16, 18),
-        uv_snapped=col(18, 20), snap_px=col(1), points_world=col(7, 10), miss_m=col(2),
-        angle_rad=col(3), weight=col(0), miss_unsnapped_m=col(4), residual_obs_px=col(5),
-        residual_partner_px=col(6), dir_obs=col(10, 13), dir_partner=col(13, 16),
-        flags=np.ascontiguousarray(fi[:, 4]))
+        row=fi[:, 0], valid=fi[:, 5] != 0, partner=fi[:, 1], prev_row=fi[:, 2],
+        next_row=fi[:, 3], uv_interpolated=ff[:, 16:18], uv_snapped=ff[:, 18:20],
+        snap_px=ff[:, 1], points_world=ff[:, 7:10], miss_m=ff[:, 2], angle_rad=ff[:, 3],
+        weight=ff[:, 0], miss_unsnapped_m=ff[:, 4], residual_obs_px=ff[:, 5],
+        residual_partner_px=ff[:, 6], dir_obs=ff[:, 10:13], dir_partner=ff[:, 13:16],
+        flags=fi[:, 4])
 
 
 def _all_brackets(prep: Prepared) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
