@@ -41,6 +41,7 @@ kink tests (:mod:`pslog.fusion.innovation`) run on the kernel's outputs.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 
@@ -280,9 +281,8 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
     events = targets if at is None else targets[at]
     p1, p2 = (_from_tables(ff[s], fi[s], at) for s in range(2))
     if at is not None:
-        predicted, points, flags, innovation = (a[at] for a in (predicted, points, flags,
-                                                                innovation))
-        quality_table = quality_table[:, at]
+        predicted, points, flags = predicted[at], points[at], flags[at]
+        innovation, quality_table = innovation[at], quality_table[:, at]
     n_columns = len(_QUALITY) if with_cov else 10
     quality = dict(zip(_QUALITY[:n_columns], quality_table, strict=False))
     j1, j2 = p1.row, p2.row
@@ -346,8 +346,9 @@ def _jacobian_rows(prep: Prepared) -> np.ndarray:
     """:attr:`Prepared.uv_jacobian` as (n, 4) rows, NaN as 0 (made once per Prepared)."""
     cache = prep.__dict__.get("_jacobian_rows")
     if cache is None:
+        jac = cast(np.ndarray, prep.uv_jacobian)  # (set by prepare() and every Prepared made)
         cache = prep.__dict__["_jacobian_rows"] = np.ascontiguousarray(
-            np.nan_to_num(prep.uv_jacobian).reshape(-1, 4))
+            np.nan_to_num(jac).reshape(-1, 4))
     return cache
 
 
