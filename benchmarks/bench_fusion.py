@@ -16,12 +16,16 @@ Printed, best of ``--repeat`` runs, on a ``--minutes`` session of three 30 fps c
   on three synchronised views (``pip install "aniposelib<0.6" numba pandas tqdm toml``:
   its numba DLT, one thread; later releases need jax; undistortion inside it, as it does).
 
+``typeA`` runs compiled kernels (numba, cached on disk): the figures are warm (the first call
+is made before timing). ``--compile`` also prints the first call's time in a fresh process
+with an empty numba cache (the compile a new install pays once) and with the cache filled.
+
 Issue 12's target: ``typeA`` at least 1,000,000 points/s and at least the faster peer. The
 exit status is 1 if it is missed. Speed figures on a shared machine are noisy: compare the
 ratios printed in one run, not figures of separate runs.
 
     python benchmarks/bench_fusion.py [--minutes 10] [--repeat 3] [--quick] [--stream 10]
-        [--json out.json]
+        [--json out.json] [--compile]
 """
 
 from __future__ import annotations
@@ -118,6 +122,8 @@ def main() -> int:
     parser.add_argument("--stream", type=float, default=0.0, metavar="SECONDS",
                         help="also time StreamFuser on a session this long (0: not)")
     parser.add_argument("--json", default=None, help="write the rows here as JSON")
+    parser.add_argument("--compile", action="store_true",
+                        help="also time typeA's first call with a cold and a warm numba cache")
     args = parser.parse_args()
     if args.quick:
         args.minutes, args.repeat = 2.0, 2
@@ -176,6 +182,8 @@ def main() -> int:
           f"({best_peer:,.0f}/s, ratio {type_a / best_peer:.2f}): {'met' if ok else 'MISSED'}")
     if args.stream > 0:
         stream(args.stream, args.repeat)
+    if args.compile:
+        compile_times()
     if args.json:  # the suite's rows (python -m benchmarks), with this bench's own columns
         best_name = max(peers, key=peers.get)
         suite = []
@@ -193,6 +201,39 @@ def main() -> int:
             json.dump({"minutes": args.minutes, "rows": suite, "target_typeA": TARGET_TYPEA,
                        "met": ok}, f, indent=2)
     return 0 if ok else 1
+
+
+_FIRST_CALL = """
+import time
+t0 = time.perf_counter()
+from pslog import SimulationOptions, apply_timing, builtin_rig, get_motion, simulate
+from pslog.fusion import fuse
+rig = apply_timing(builtin_rig("paper3"), "typeA")
+obs = simulate(rig, get_motion("throw"), options=SimulationOptions(noise_px=0.5))[0].best()
+t1 = time.perf_counter()
+fuse(obs, rig, "typeA")
+t2 = time.perf_counter()
+fuse(obs, rig, "typeA")
+t3 = time.perf_counter()
+print(t2 - t1, t3 - t2)
+"""
+
+
+def compile_times() -> None:
+    """typeA's first call in a fresh process: numba's cache empty (a temporary
+    NUMBA_CACHE_DIR), then filled by that run; and a second call, for comparison."""
+    import subprocess
+    import sys
+    import tempfile
+
+    print("\ntypeA first call in a new process (a throw, 180 detections)")
+    with tempfile.TemporaryDirectory() as cache:
+        env = dict(os.environ, NUMBA_CACHE_DIR=cache)
+        for label in ("cold cache (compiles)", "warm cache (loads)"):
+            out = subprocess.run([sys.executable, "-c", _FIRST_CALL], env=env, check=True,
+                                 capture_output=True, text=True).stdout.split()
+            first, second = float(out[0]), float(out[1])
+            print(f"  {label:<24} first call {first:7.2f} s, second {second * 1e3:7.2f} ms")
 
 
 def stream(seconds: float, repeat: int) -> None:

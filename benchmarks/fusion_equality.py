@@ -1,13 +1,21 @@
 """Old against new fusion outputs: every paper method's points, quality columns and covariance
 on dirty sessions (strong lens or none, 30 % missed detections, 10 % dropped frames, 0.5 ms
-jitter, 5 % outliers), under this tree's code and under a git revision's.
+jitter, 5 % outliers), under this tree's code and under a git revision's; and ``typeA``
+(with its past pseudo-stereo points) over a matrix of sessions: rigs ``paper3``, ``lab3``
+(three 800 x 600 wide-angle cameras with lens distortion, uneven offsets), ``paper2`` (two
+cameras) and ``quad4`` (four), detection noise 0, 0.3 and 1 px, each clean, with missed
+detections and dropped frames, and with dirty candidates (spurious blobs in 5 % of frames
+and a static second object, the frame's ball chosen by the gate), with the covariance and
+without (``noise_px`` None).
 
     python benchmarks/fusion_equality.py [--ref HEAD~1]
 
 Exits 1 if any value differs by more than 1e-12 relative (to the value, or to the column's
 median magnitude for entries near zero); prints the worst difference and the fields that
 are not bit-identical. Type A's internal ``miss_m`` (the snapped rays' distance, rounding
-noise around 0) is held to 1e-13 m absolute instead.
+noise around 0) is held to 1e-13 m absolute instead, and reprojection residuals (0 in exact
+arithmetic on a noise-free session: their median is rounding noise) to 1e-12 of at least
+1 px.
 """
 
 from __future__ import annotations
@@ -76,8 +84,66 @@ def dump(path: str) -> None:
                 p = pseudo_stereo_points(prep, rows, rows, int(0.2e9))
                 out[timing, seed, lens, "pseudo"] = {f: getattr(p, f)
                                                      for f in p.__dataclass_fields__}
+    _type_a_matrix(out)
     with open(path, "wb") as f:
         pickle.dump(out, f)
+
+
+def _lab_rig():
+    """bench_dirty's ``lab3``: three 800 x 600 cameras around the floor, a wide lens, type A
+    offsets of 0, 1/90 and 2/90 s."""
+    from pslog import Camera, Rig, look_at
+
+    dist = np.array([-0.12, 0.03, 5e-4, -4e-4, 0.0])
+    cams = []
+    for i in range(3):
+        angle = 2 * np.pi * i / 3 - 1.2
+        eye = (1.5 + 3.4 * np.cos(angle), 1.0 + 3.0 * np.sin(angle), 2.4 + 0.3 * i)
+        R, t = look_at(eye, (1.5, 1.0, 0.6))
+        f = 520.0 + 20 * i
+        K = [[f, 0.0, 399.5], [0.0, f, 299.5], [0.0, 0.0, 1.0]]
+        cams.append(Camera(f"lab{i + 1}", 800, 600, K, dist, R, t, 30.0, i / 90.0))
+    return Rig(tuple(cams), "lab3")
+
+
+def _quad_rig():
+    """``paper3`` and a fourth camera (opposite corner, 2.5 m high), type A offsets."""
+    from pslog import Rig, apply_timing, builtin_rig, look_at
+
+    paper = builtin_rig("paper3")
+    R, t = look_at((-1.0, -1.5, 2.5), (1.5, 1.0, 1.0))
+    extra = paper.cameras[0].replace(name="cam4", R=R, t=t)
+    return apply_timing(Rig((*paper.cameras, extra), "quad4"), "typeA")
+
+
+def _type_a_matrix(out: dict) -> None:
+    """``typeA`` and its pseudo-stereo points over rigs x noise x faults (module docstring)."""
+    from pslog import SimulationOptions, apply_timing, builtin_rig, get_motion
+    from pslog.fusion import FusionOptions, fuse, prepare, pseudo_stereo_points
+    from pslog.simulation import simulate_labelled
+
+    rigs = {"paper3": apply_timing(builtin_rig("paper3"), "typeA"), "lab3": _lab_rig(),
+            "paper2": apply_timing(builtin_rig("paper2"), "typeA"), "quad4": _quad_rig()}
+    faults = {"clean": {}, "misses": dict(miss_rate=0.2, drop_rate=0.1, jitter_s=0.0005),
+              "dirty": dict(miss_rate=0.1, spurious_rate=0.05,
+                            distractors=((None, (1.0, 1.5, 0.2)),))}
+    for name, rig in rigs.items():
+        for noise in (0.0, 0.3, 1.0):
+            for fault, extra in faults.items():
+                seed = len(out)
+                det, _, _ = simulate_labelled(rig, get_motion("throw"), options=SimulationOptions(
+                    noise_px=noise, seed=seed, **extra))
+                key = ("matrix", name, noise, fault)
+                for noise_px in (0.5, None):
+                    t = fuse(det, rig, "typeA", FusionOptions(noise_px=noise_px))
+                    out[(*key, f"typeA/{noise_px}")] = dict(
+                        time=t.time_ns, pos=t.position_world, cam=t.camera,
+                        dropped=dict(t.dropped), **{f"q_{k}": v for k, v in t.quality.items()})
+                obs = det.best()
+                prep = prepare(obs, rig)
+                rows = np.arange(len(obs))
+                p = pseudo_stereo_points(prep, rows, rows, int(0.2e9))
+                out[(*key, "pseudo")] = {f: getattr(p, f) for f in p.__dataclass_fields__}
 
 
 def compare(a: dict, b: dict) -> int:
@@ -124,17 +190,21 @@ def compare(a: dict, b: dict) -> int:
             if not np.any(fin):
                 continue
             diff = np.abs(u[fin] - v[fin])
-            if key[3] == "pseudo" and f == "miss_m":
+            if key[-1] == "pseudo" and f == "miss_m":
                 if diff.max() > 1e-13:
                     print("ABS", key, f, diff.max())
                     bad += 1
                 continue
             ref = np.maximum(np.maximum(np.abs(u[fin]), np.abs(v[fin])), np.median(np.abs(u[fin])))
+            if "residual" in f:  # pixels: 0 in exact arithmetic on noise-free sessions, so
+                ref = np.maximum(ref, 1.0)  # relative to 1 px at least (rounding noise)
             rel = float(np.max(diff / np.where(ref > 0, ref, 1.0)))
             if rel > worst:
                 worst, where = rel, (key, f)
             if rel > 1e-12:
-                print("REL", key, f, rel)
+                at = int(np.argmax(diff / np.where(ref > 0, ref, 1.0)))
+                print("REL", key, f, rel, "at", int(np.flatnonzero(fin)[at]), u[fin][at],
+                      v[fin][at])
                 bad += 1
     print(f"compared {len(a)} outputs, {n:,} values: worst relative difference {worst:.2e}"
           f" ({where}); {bad} failing")

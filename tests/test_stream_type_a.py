@@ -79,3 +79,33 @@ def test_refused_past_points_are_counted_once_each_as_in_batch():
              for i in range(len(obs))]
     parts.append(fuser.flush())
     assert_same(parts, batch)
+
+
+def _quad_rig():
+    """paper3 and a fourth camera at the opposite corner, type A offsets."""
+    from pslog import Rig, apply_timing, builtin_rig, look_at
+
+    paper = builtin_rig("paper3")
+    R, t = look_at((-1.0, -1.5, 2.5), (1.5, 1.0, 1.0))
+    return apply_timing(Rig((*paper.cameras, paper.cameras[0].replace(name="cam4", R=R, t=t)),
+                            "quad4"), "typeA")
+
+
+@pytest.mark.parametrize("n_cameras", [2, 4])
+def test_two_and_four_camera_streams_equal_batch(n_cameras):
+    # the compiled kernels loop over any number of cameras: partner choice, brackets, masks
+    from pslog import SimulationOptions, apply_timing, builtin_rig, get_motion, simulate
+
+    rig = (apply_timing(builtin_rig("paper2"), "typeA") if n_cameras == 2 else _quad_rig())
+    det, _ = simulate(rig, get_motion("throw"), options=SimulationOptions(
+        noise_px=0.5, miss_rate=0.2, drop_rate=0.1, jitter_s=0.0005, seed=5))
+    obs = det.best()
+    batch = fuse(obs, rig, "typeA")
+    assert len(batch) > 20
+    if n_cameras == 4:
+        assert batch.quality["camera_mask"].max() >= 8  # the fourth camera takes part
+    fuser = StreamFuser(rig, "typeA")
+    parts = [fuser.push(obs.time_ns[i], obs.camera[i], obs.uv[i], obs.frame_index[i])
+             for i in range(len(obs))]
+    parts.append(fuser.flush())
+    assert_same(parts, batch)

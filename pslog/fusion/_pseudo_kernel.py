@@ -1,0 +1,701 @@
+"""Type A's per-point kernels (the paper's section 2.2, eqs. (1)-(4)), compiled with numba.
+
+:mod:`pslog.fusion.pseudo` used to compute type A on (k,) columns with numpy, ~200 small
+array operations per batch; numpy's fixed cost per call dominated a stream's single point
+and much of a session's. These kernels loop over points instead, doing for each exactly the
+arithmetic of the former columns, in the same order (so the same bits, except for the
+3 x 3 products numpy did with ``@``, whose summation order BLAS may choose: those are
+written out here as ``p0 R[i, 0] + p1 R[i, 1] + p2 R[i, 2] + t_i``, and agree to the last
+bit or two).
+
+- :func:`pseudo_kernel`: steps 1-3 for past observations (the partner's bracket, eq. (1),
+  the epipolar snap, the crossing of the two rays with its ray parameters ``s, k > 0``, and
+  the quality of each: the rays' miss before the snap, ``snap_px``, the angle between the
+  rays, the reprojection errors, the validity flags);
+- :func:`event_kernel`: a type-A point from its two past points (eq. (2)'s linear
+  prediction, eqs. (3)-(4)'s projection onto the newest ray with ``k > 0``, the quality
+  columns and the closed-form covariance of :func:`pslog.fusion.pseudo._type_a_covariance`).
+
+Imported lazily (numba compiles on first use; ``pslog --help`` never loads it). Camera
+tables are per camera rows of 9 (a 3 x 3 matrix, row-major) or fewer values; see
+:func:`camera_tables`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .._jit import kernel
+
+#: geometry._PARALLEL_EPS: rays whose cross product is this small (relative) do not cross.
+_PARALLEL_EPS = 1e-12
+#: np.degrees' factor (numpy multiplies by 180 / pi, computed once in double precision).
+_DEGREES = 180.0 / np.pi
+#: The float columns of a past point in the kernels' tables ``ff[slot, i]`` (20 floats).
+FLOATS = ("weight", "snap_px", "miss_m", "angle_rad", "miss_unsnapped_m", "residual_obs_px",
+          "residual_partner_px", "points_world", "points_world", "points_world", "dir_obs",
+          "dir_obs", "dir_obs", "dir_partner", "dir_partner", "dir_partner", "uv_interpolated",
+          "uv_interpolated", "uv_snapped", "uv_snapped")
+#: The int columns of a past point in ``fi[slot, i]``: its row, partner camera (-1: none),
+#: the partner's bracket (prev, next rows), its validity flags and whether it is valid.
+INTS = ("row", "partner", "prev_row", "next_row", "flags", "valid")
+#: "No bracket end yet" in the partner choice (np.iinfo(np.int64).min).
+_INT64_MIN = np.iinfo(np.int64).min
+
+
+@kernel
+def _max(x, y):
+    """np.maximum of two floats (NaN propagates, the first NaN returned)."""
+    if x != x:
+        return x
+    if y != y:
+        return y
+    return x if x >= y else y
+
+
+@kernel
+def _min(x, y):
+    """np.minimum of two floats (NaN propagates)."""
+    if x != x:
+        return x
+    if y != y:
+        return y
+    return x if x <= y else y
+
+
+@kernel
+def _ray(ki, rr, c, u, v, out):
+    """Unit world direction of undistorted pixel (u, v) of camera c into ``out`` (3,):
+    ``Rᵀ K⁻¹ (u, v, 1)`` normalised (:meth:`Prepared.rays_t`, operation for operation)."""
+    x = ki[c, 0] * u + ki[c, 1] * v + ki[c, 2]
+    y = ki[c, 3] * u + ki[c, 4] * v + ki[c, 5]
+    z = ki[c, 6] * u + ki[c, 7] * v + ki[c, 8]
+    for j in range(3):
+        out[j] = rr[c, j] * x
+    for j in range(3):
+        out[j] += rr[c, 3 + j] * y
+    for j in range(3):
+        out[j] += rr[c, 6 + j] * z
+    norm = math.sqrt(out[0] * out[0] + out[1] * out[1] + out[2] * out[2])
+    for j in range(3):
+        out[j] /= norm
+
+
+@kernel
+def _dot3(a, b):
+    """Dot product summed in np.einsum's order (x, then z, then y: geometry._dot)."""
+    out = a[0] * b[0]
+    out += a[2] * b[2]
+    out += a[1] * b[1]
+    return out
+
+
+@kernel
+def _crossing(oa, da, ob, db, point):
+    """Step 3, the crossing of rays ``oa + s da`` and ``ob + k db``: the midpoint of their
+    common perpendicular into ``point`` (3,); returns (miss, s, k), NaN s, k (and point)
+    for parallel rays (:func:`pslog.geometry.crossing_of_rays`)."""
+    w0, w1, w2 = oa[0] - ob[0], oa[1] - ob[1], oa[2] - ob[2]
+    a = _dot3(da, da)
+    b = _dot3(da, db)
+    c = _dot3(db, db)
+    d = da[0] * w0
+    d += da[2] * w2
+    d += da[1] * w1
+    e = db[0] * w0
+    e += db[2] * w2
+    e += db[1] * w1
+    denom = a * c - b * b
+    if denom <= _PARALLEL_EPS * a * c:
+        s = np.nan
+        k = np.nan
+    else:
+        s = (b * e - c * d) / denom
+        k = (a * e - b * d) / denom
+    miss = 0.0
+    for i in range(3):
+        foot_a = oa[i] + s * da[i]
+        foot_b = ob[i] + k * db[i]
+        point[i] = 0.5 * (foot_a + foot_b)
+        gap = foot_a - foot_b
+        miss += gap * gap
+    return math.sqrt(miss), s, k
+
+
+@kernel
+def _distorted(cam, c, x, y):
+    """Pixels of ideal normalised (x, y) through camera c's lens (reprojection's
+    ``_distorted_pixels``); ``cam[c]``: K (9), R (9), t (3), dist (5), box (4), lens flag."""
+    k1, k2, p1, p2, k3 = cam[c, 21], cam[c, 22], cam[c, 23], cam[c, 24], cam[c, 25]
+    r2 = x * x + y * y
+    if cam[c, 30] == 0.0 and math.isfinite(r2 + r2):  # no lens: (x, y) exactly
+        xd, yd = x, y
+    else:
+        radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
+        yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+    return cam[c, 0] * xd + cam[c, 1] * yd + cam[c, 2], cam[c, 4] * yd + cam[c, 5]
+
+
+@kernel
+def _in_camera(cam, c, p, i):
+    """Coordinate i of world point p (3,) in camera c's frame, ``R p + t``."""
+    return p[0] * cam[c, 9 + 3 * i] + p[1] * cam[c, 10 + 3 * i] + p[2] * cam[c, 11 + 3 * i] \
+        + cam[c, 18 + i]
+
+
+@kernel
+def _reprojection(cam, c, p, u_img, v_img):
+    """Distance in camera c's recorded image between world point p's projection and the
+    undistorted pixel (u_img, v_img), pixels; NaN behind the camera (reprojection_one)."""
+    z = _in_camera(cam, c, p, 2)
+    in_front = z > 1e-12
+    if not in_front:
+        z = np.nan
+    u, v = _distorted(cam, c, _in_camera(cam, c, p, 0) / z, _in_camera(cam, c, p, 1) / z)
+    y = (v_img - cam[c, 5]) / cam[c, 4]
+    x = (u_img - cam[c, 2] - cam[c, 1] * y) / cam[c, 0]
+    tu, tv = _distorted(cam, c, x, y)
+    u -= tu
+    v -= tv
+    u *= u
+    v *= v
+    u += v
+    return math.sqrt(u) if in_front else np.nan
+
+
+@kernel
+def _invalid(cam, c, p):
+    """:func:`~pslog.fusion._prepare.invalid_points`' bits for one contributing camera c
+    and a finite point p: BEHIND (1) at or behind its image plane, OUTSIDE_VIEW (2) outside
+    its view box."""
+    x = _in_camera(cam, c, p, 0)
+    y = _in_camera(cam, c, p, 1)
+    z = _in_camera(cam, c, p, 2)
+    if z <= 1e-9:
+        return 1
+    xn, yn = x / z, y / z
+    u = xn * cam[c, 0] + yn * cam[c, 1] + cam[c, 2]
+    v = xn * cam[c, 3] + yn * cam[c, 4] + cam[c, 5]
+    if (u >= cam[c, 26]) and (u <= cam[c, 28]) and (v >= cam[c, 27]) and (v <= cam[c, 29]):
+        return 0
+    return 2
+
+
+@kernel
+def _pseudo_one(r, not_after, max_gap_ns, time_ns, camera, prev_b, next_b, uv, observed_rays,
+                centers, ki, rr, f9, cam, span_tie_ns, min_angle_deg, scratch, ff, fi, slot, i):
+    """Steps 1-3 of the paper's section 2.2 for past observation ``r`` from a partner
+    bracket ending at or before global row ``not_after``, into ``ff[slot, i]`` (floats,
+    :data:`FLOATS`) and ``fi[slot, i]`` (ints, :data:`INTS`); returns (valid, flags).
+
+    For row ``r`` (camera ``c``, time ``t_j``): the partner is the other camera whose bracket
+    ``prev <= t_j <= next`` (``prev_b``, ``next_b``: (m, n) rows, -1 none) is shortest
+    (ties within ``span_tie_ns``: the one ending latest), not after ``not_after`` and
+    within ``max_gap_ns``. Then
+
+    - eq. (1): ``u = (δ_a u_next + δ_b u_prev) / (δ_a + δ_b)``, ``δ_a = t_j - t_prev``,
+      ``δ_b = t_next - t_j``, written ``(1 - w) u_prev + w u_next`` with
+      ``w = δ_a / (δ_a + δ_b)`` from the integer times, in undistorted pixels;
+    - step 2: the snap onto the epipolar line ``F (u_obs, v_obs, 1)`` of the observed point
+      in the partner's image (``snap_px``: the distance moved);
+    - step 3: the crossing of the two viewing rays, with its ray parameters ``s, k``
+      (``s, k <= 0``: behind a camera, flagged BEHIND);
+    - quality: the angle between the rays (PARALLEL below ``min_angle_deg``), the miss of the
+      observed ray and the interpolated point's ray BEFORE the snap, and the reprojection
+      errors of that unsnapped crossing in the observed and the partner's recorded images.
+
+    ``cam`` (m, 31): per camera K (9), R (9), t (3), dist (5), view box (4), lens flag
+    (:func:`camera_tables`); ``ki``, ``rr`` (m, 9): K⁻¹ and R; ``f9`` (m * m, 9): ``F[a, b]``
+    at row ``a m + b``; ``scratch`` (6,) float64. A row without partner gets the arithmetic
+    of camera 0 and rows 0 (as the former numpy columns did), not valid and no flags.
+    """
+    m = centers.shape[0]
+    fi[slot, i, 0] = r
+    t_row = time_ns[r]
+    c = camera[r]
+    best_span = np.int64(2**62)
+    best_end = _INT64_MIN
+    p = -1
+    pv_best = 0
+    nx_best = 0
+    for d in range(m):
+        pv = prev_b[d, r]
+        nx = next_b[d, r]
+        end = time_ns[max(nx, 0)]
+        span = end - time_ns[max(pv, 0)]
+        ok = (pv >= 0) and (nx >= 0) and (c != d) and (nx <= not_after) \
+            and (span <= max_gap_ns)
+        if ok and ((span < best_span - span_tie_ns)
+                   or ((span <= best_span + span_tie_ns) and (end > best_end))):
+            best_span = span
+            best_end = end
+            p = d
+            pv_best = pv
+            nx_best = nx
+    fi[slot, i, 1] = p
+    fi[slot, i, 2] = pv_best
+    fi[slot, i, 3] = nx_best
+    q = max(p, 0)
+    # eq. (1)'s weight from integer capture times
+    t_prev = time_ns[pv_best]
+    span_ns = time_ns[nx_best] - t_prev
+    w = (t_row - t_prev) / span_ns if span_ns > 0 else 0.0
+    ff[slot, i, 0] = w
+    # eq. (1): linear interpolation of the partner's 2D track to the observation's time
+    ui0 = (1.0 - w) * uv[pv_best, 0] + w * uv[nx_best, 0]
+    ui1 = (1.0 - w) * uv[pv_best, 1] + w * uv[nx_best, 1]
+    ff[slot, i, 16] = ui0
+    ff[slot, i, 17] = ui1
+    # step 2: nearest point on the epipolar line of the observed point, partner image
+    fr = c * m + q
+    uo, vo = uv[r, 0], uv[r, 1]
+    a = f9[fr, 0] * uo + f9[fr, 2]
+    a += f9[fr, 1] * vo
+    b = f9[fr, 3] * uo + f9[fr, 5]
+    b += f9[fr, 4] * vo
+    cl = f9[fr, 6] * uo + f9[fr, 8]
+    cl += f9[fr, 7] * vo
+    big = _max(abs(a), abs(b))
+    a /= big
+    b /= big
+    cl /= big
+    size = math.sqrt(a * a + b * b)
+    n0, n1, n2 = a / size, b / size, cl / size
+    signed = n0 * ui0 + n1 * ui1 + n2
+    us0 = ui0 - signed * n0
+    us1 = ui1 - signed * n1
+    ff[slot, i, 18] = us0
+    ff[slot, i, 19] = us1
+    ff[slot, i, 1] = abs(signed)
+    # step 3: crossing point of the observed ray and the snapped point's ray
+    for j in range(3):
+        ff[slot, i, 10 + j] = observed_rays[r, j]
+    _ray(ki, rr, q, us0, us1, ff[slot, i, 13:16])
+    ff[slot, i, 2], s, k = _crossing(centers[c], ff[slot, i, 10:13], centers[q], ff[slot, i, 13:16],
+                              ff[slot, i, 7:10])
+    # both directions are unit vectors; a line has no sense, hence the absolute value
+    ang = math.acos(_min(abs(_dot3(ff[slot, i, 10:13], ff[slot, i, 13:16])), 1.0))
+    ff[slot, i, 3] = ang
+    # the disagreement before the snap: the interpolated point's ray against the observed
+    d_int = scratch[0:3]
+    unsnapped = scratch[3:6]
+    _ray(ki, rr, q, ui0, ui1, d_int)
+    ff[slot, i, 4] = _crossing(centers[c], ff[slot, i, 10:13], centers[q], d_int,
+                                  unsnapped)[0]
+    ff[slot, i, 5] = _reprojection(cam, c, unsnapped, uo, vo)
+    ff[slot, i, 6] = _reprojection(cam, q, unsnapped, ui0, ui1)
+    pt = ff[slot, i, 7:10]
+    finite = math.isfinite(pt[0]) and math.isfinite(pt[1]) and math.isfinite(pt[2])
+    bits = 0
+    if finite:
+        for cc in range(m):  # (in camera order, as invalid_points)
+            if cc == c or cc == q:
+                bits |= _invalid(cam, cc, pt)
+        if not ((s > 0) and (k > 0)):
+            bits |= 1  # BEHIND: the crossing behind a camera
+    if ang * _DEGREES < min_angle_deg:
+        bits |= 4  # PARALLEL (NaN: no ray, no flag)
+    if p < 0:
+        bits = 0  # no partner: no point, and nothing to say about its geometry
+    fi[slot, i, 4] = bits
+    ok = (p >= 0) and finite and bits == 0
+    fi[slot, i, 5] = ok
+    return ok, bits
+
+
+@kernel
+def pseudo_kernel(rows, not_after, max_gap_ns, time_ns, camera, prev_b, next_b, uv,
+                  observed_rays, centers, ki, rr, f9, cam, span_tie_ns, min_angle_deg, ff, fi):
+    """:func:`_pseudo_one` for past observations ``rows`` (k,) and their ``not_after`` (k,)
+    rows, into ``ff[0]`` (k, 20) and ``fi[0]`` (k, 6)."""
+    scratch = np.empty(6)
+    for i in range(rows.shape[0]):
+        _pseudo_one(rows[i], not_after[i], max_gap_ns, time_ns, camera, prev_b, next_b, uv,
+                    observed_rays, centers, ki, rr, f9, cam, span_tie_ns, min_angle_deg,
+                    scratch, ff, fi, 0, i)
+
+
+@kernel
+def _pixel_jacobian(jac4, lens, row, g0, g1):
+    """``g L`` of a (2,) row vector g and the detection's d(undistorted) / d(recorded pixel)
+    ``L`` (``jac4[row]``, (2, 2) row-major, NaN as 0); ``g`` itself without lens distortion
+    (:func:`~pslog.fusion._prepare.times_pixel_jacobian` with None)."""
+    if not lens:
+        return g0, g1
+    return (g0 * jac4[row, 0] + g1 * jac4[row, 2], g0 * jac4[row, 1] + g1 * jac4[row, 3])
+
+
+@kernel
+def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_ns, time_ns,
+                  camera, prev_b, next_b, uv, observed_rays, centers, ki, rr, f9, cam,
+                  span_tie_ns, min_angle_deg, ray_dir, obs_jac, jac4, lens, rtki, ns,
+                  noise_px, with_cov, ff, fi, refused, has, predicted, points, flags,
+                  innovation, quality):
+    """Type A's point at each detection of ``targets`` (k,), sorted global rows.
+
+    The two past points: for each target, the latest rows of the 1st, 2nd, ... distinct
+    instants before it (``previous_instant``), up to ``depth`` instants back and within
+    ``max_gap_ns``, are triangulated by :func:`_pseudo_one` (steps 1-3, the partner's
+    bracket ending at or before the target: causality) until two are valid: ``P_{t-1}``
+    into ``ff[0, i]``, ``fi[0, i]`` and ``P_{t-2}`` into ``ff[1, i]``, ``fi[1, i]``;
+    ``P_{t-2}`` only if eq. (2) stays a bounded extrapolation,
+    ``δ_pred <= max_extrapolation δ_prev``. Every past point made ORs its flags into
+    ``refused`` (n,) at its row. ``has[i]``: both were found; then
+
+    - eq. (2), linear prediction with the actual capture intervals (integer nanoseconds):
+      ``P̂_t = P_{t-1} + (P_{t-1} - P_{t-2}) δ_pred / δ_prev``;
+    - eqs. (3)-(4): ``P'_t = ((P̂_t - T) · r / |r|²) r + T``, the point of the newest viewing
+      ray ``l = k r + T`` nearest to ``P̂_t``; its ``k <= 0`` (the foot behind the newest
+      camera) and a point behind or outside a contributing camera are flagged (``flags``);
+    - ``innovation``: the newest detection against the prediction (recorded pixels);
+    - ``quality`` (17, k): snap_px, ray_miss_m (before the snap), ray_shift_m,
+      ray_angle_deg, residual_max_px, residual_mean_px, camera_mask, n_detections, gap_s,
+      span_s, and (``with_cov``) std_m, cov_xx ... cov_yz m² with the closed-form Jacobians
+      of eqs. (1)-(4): eq. (4), ``P' = T + r rᵀ (P̂ - T)``, gives each past slot ``r gᵀ``
+      with ``g = scale rᵀ J`` (``scale``: eq. (2)'s ``1 + ratio`` or ``-ratio``), the newest
+      ray's turn ``δr`` moves P' by ``((rᵀq) I + r qᵀ) δr``, ``q = P̂ - T``; a detection in
+      several slots adds its slots' Jacobians (the earliest slot holds them).
+
+    The other arguments are :func:`_pseudo_one`'s and: ``ray_dir`` (n, 3) the detections'
+    rays, ``obs_jac`` (3, 2, n) their direction Jacobians, ``jac4`` (n, 4) their
+    d(undistorted) / d(recorded pixel) (``lens`` False: the identity), ``rtki`` (m, 9)
+    Rᵀ K⁻¹, ``ns`` nanoseconds per second, ``noise_px`` the detection noise (pixels).
+    """
+    m = centers.shape[0]
+    scratch = np.empty(6)
+    slots = np.empty(7, dtype=np.int64)
+    times = np.empty(7, dtype=np.int64)
+    res = np.empty(5)
+    jac = np.empty((2, 3, 2))  # (past point, slot obs/prev/next, pixel axis)
+    g = np.empty((7, 2))
+    newest = np.empty((3, 2))
+    taken = np.zeros(7, dtype=np.bool_)
+    nl = np.empty((3, 2))
+    r = np.empty(3)
+    q = np.empty(3)
+    for i in range(targets.shape[0]):
+        e = targets[i]
+        # the past points, instant by instant back from the target
+        first = -1
+        second = -1
+        t_first = np.int64(0)
+        before = e
+        candidate = e
+        for k in range(depth):
+            b = previous_instant[max(before, 0)]
+            if k > 0 and candidate < 0:
+                b = -1
+            reachable = (b >= 0) and (time_ns[e] - time_ns[max(b, 0)] <= max_gap_ns)
+            before = b
+            candidate = b if reachable else -1
+            # as P_{t-2}, a candidate must leave eq. (2) a bounded extrapolation
+            spaced = (first < 0) or (time_ns[e] - t_first <= max_extrapolation * (
+                t_first - time_ns[max(candidate, 0)]))
+            if candidate >= 0 and spaced:
+                slot = 0 if first < 0 else 1
+                ok, bits = _pseudo_one(candidate, e, max_gap_ns, time_ns, camera, prev_b,
+                                       next_b, uv, observed_rays, centers, ki, rr, f9, cam,
+                                       span_tie_ns, min_angle_deg, scratch, ff, fi, slot, i)
+                refused[candidate] |= bits
+                if ok:
+                    if first < 0:
+                        first = k
+                        t_first = time_ns[candidate]
+                    else:
+                        second = k
+                        break
+            if candidate < 0:
+                break  # (no earlier instant within max_gap_ns: none further back either)
+        has[i] = second >= 0
+        if second < 0:
+            continue
+        slots[0], slots[1], slots[2], slots[3] = e, fi[0, i, 0], fi[0, i, 2], fi[0, i, 3]
+        slots[4], slots[5], slots[6] = fi[1, i, 0], fi[1, i, 2], fi[1, i, 3]
+        for s in range(7):
+            times[s] = time_ns[slots[s]]
+        t_event, t1, t2 = times[0], times[1], times[4]
+        c0 = camera[e]
+        # eq. (2): linear prediction with the actual capture intervals
+        ratio = (t_event - t1) / (t1 - t2)
+        for j in range(3):
+            predicted[i, j] = ff[0, i, 7 + j] + ratio * (ff[0, i, 7 + j] - ff[1, i, 7 + j])
+        # eqs. (3)-(4): nearest point on the newest viewing ray
+        origin = centers[c0]
+        d = ray_dir[e]
+        for j in range(3):
+            q[j] = predicted[i, j] - origin[j]
+        k_foot = _dot3(q, d) / _dot3(d, d)
+        for j in range(3):
+            points[i, j] = k_foot * d[j] + origin[j]
+        pt = points[i]
+        bits = 0
+        if math.isfinite(pt[0]) and math.isfinite(pt[1]) and math.isfinite(pt[2]):
+            for cc in range(m):  # the cameras of the seven detections, in camera order
+                for s in range(7):
+                    if camera[slots[s]] == cc:
+                        bits |= _invalid(cam, cc, pt)
+                        break
+        if not (k_foot > 0):
+            bits |= 1  # eq. (4)'s k: the foot behind the newest camera
+        flags[i] = bits
+        res[0], res[1], res[2], res[3] = ff[0, i, 5], ff[0, i, 6], ff[1, i, 5], ff[1, i, 6]
+        # the newest detection against the prediction, before eq. (4) moves it onto its ray
+        res[4] = _reprojection(cam, c0, predicted[i], uv[e, 0], uv[e, 1])
+        innovation[i] = res[4]
+        # slots holding a detection no earlier slot holds
+        n_distinct = 1
+        for s in range(1, 7):
+            repeated = False
+            for t in range(s):
+                if slots[t] == slots[s]:
+                    repeated = True
+            if not repeated:
+                n_distinct += 1
+        t_earliest = times[0]
+        for s in range(1, 7):
+            t_earliest = min(t_earliest, times[s])
+        span1 = (times[3] - times[2]) / ns
+        span2 = (times[6] - times[5]) / ns
+        quality[0, i] = _max(ff[0, i, 1], ff[1, i, 1])
+        # measured before the snap: after it the rays cross by construction
+        quality[1, i] = _max(ff[0, i, 4], ff[1, i, 4])
+        shift = (pt[0] - predicted[i, 0]) * (pt[0] - predicted[i, 0])
+        shift += (pt[1] - predicted[i, 1]) * (pt[1] - predicted[i, 1])
+        shift += (pt[2] - predicted[i, 2]) * (pt[2] - predicted[i, 2])
+        quality[2, i] = math.sqrt(shift)
+        quality[3, i] = _min(ff[0, i, 3], ff[1, i, 3]) * _DEGREES
+        worst = res[0]
+        total = res[0] + res[1]
+        for s in range(1, 5):
+            worst = _max(worst, res[s])
+        for s in range(2, 5):
+            total += res[s]
+        quality[4, i] = worst
+        quality[5, i] = total / 5
+        mask = 0.0
+        for cc in range(m):  # (sums of distinct powers of two: exact in any order)
+            for s in range(7):
+                if camera[slots[s]] == cc:
+                    mask += 2.0**cc
+                    break
+        quality[6, i] = mask
+        quality[7, i] = float(n_distinct)
+        quality[8, i] = _max(_max(span1, span2), (t_event - t2) / ns)
+        quality[9, i] = (t_event - t_earliest) / ns
+        if not with_cov:
+            continue
+        # the newest ray's turn: ((rᵀq) I + r qᵀ) G, G its direction's Jacobian
+        for j in range(3):
+            r[j] = d[j]
+        rq = r[0] * q[0] + r[1] * q[1] + r[2] * q[2]
+        for a in range(2):
+            qg = q[0] * obs_jac[0, a, e]
+            qg += q[1] * obs_jac[1, a, e]
+            qg += q[2] * obs_jac[2, a, e]
+            for j in range(3):
+                newest[j, a] = rq * obs_jac[j, a, e]
+                newest[j, a] += r[j] * qg
+        # the past points' Jacobians seen along r (steps 1-3 differentiated, for one point;
+        # pslog.fusion.pseudo's former _pseudo_jacobians, operation for operation): with
+        # P = T_j + s_j d_j on both rays (they meet after the snap), a turn δd_j of ray j
+        # moves P by s_j A⁻¹ δd_j, A = Σ (I - d dᵀ); rᵀ A⁻¹ = wᵀ with
+        # w = r / 2 + (r_d1 + c r_d2) d1 + (c r_d1 + r_d2) d2 (Woodbury). The snapped point
+        # moves with the interpolated one by I - n nᵀ and with the observed pixel as it moves
+        # the epipolar line; eq. (1) weighs the bracket by 1 - w and w.
+        for pp in range(2):
+            row = fi[pp, i, 0]
+            cam_obs = camera[row]
+            partner = max(fi[pp, i, 1], 0)
+            w_eq1 = ff[pp, i, 0]
+            a0, a1, a2 = ff[pp, i, 10], ff[pp, i, 11], ff[pp, i, 12]
+            b0, b1, b2 = ff[pp, i, 13], ff[pp, i, 14], ff[pp, i, 15]
+            cos = a0 * b0 + a1 * b1 + a2 * b2
+            scale = 0.5 / (1 - cos * cos)
+            r_d1 = (r[0] * a0 + r[1] * a1 + r[2] * a2) * scale
+            r_d2 = (r[0] * b0 + r[1] * b1 + r[2] * b2) * scale
+            f1 = r_d1 + cos * r_d2
+            f2 = cos * r_d1 + r_d2
+            w0 = 0.5 * r[0] + f1 * a0 + f2 * b0
+            w1 = 0.5 * r[1] + f1 * a1 + f2 * b1
+            w2 = 0.5 * r[2] + f1 * a2 + f2 * b2
+            p0, p1, p2 = ff[pp, i, 7], ff[pp, i, 8], ff[pp, i, 9]
+            s1 = ((p0 - centers[cam_obs, 0]) * a0 + (p1 - centers[cam_obs, 1]) * a1
+                  + (p2 - centers[cam_obs, 2]) * a2)
+            s2 = ((p0 - centers[partner, 0]) * b0 + (p1 - centers[partner, 1]) * b1
+                  + (p2 - centers[partner, 2]) * b2)
+            # J_obs = wᵀ G (G: the observed ray's direction Jacobian), times s1
+            j_obs0 = w0 * obs_jac[0, 0, row]
+            j_obs0 += w1 * obs_jac[1, 0, row]
+            j_obs0 += w2 * obs_jac[2, 0, row]
+            j_obs1 = w0 * obs_jac[0, 1, row]
+            j_obs1 += w1 * obs_jac[1, 1, row]
+            j_obs1 += w2 * obs_jac[2, 1, row]
+            j_obs0 *= s1
+            j_obs1 *= s1
+            # J_snapped = wᵀ dd/duv of the partner's ray at the snapped pixel (direction_jacobian_
+            # along), times s2
+            us0, us1 = ff[pp, i, 18], ff[pp, i, 19]
+            rv0 = rtki[partner, 0] * us0
+            rv0 += rtki[partner, 1] * us1
+            rv0 += rtki[partner, 2]
+            rv1 = rtki[partner, 3] * us0
+            rv1 += rtki[partner, 4] * us1
+            rv1 += rtki[partner, 5]
+            rv2 = rtki[partner, 6] * us0
+            rv2 += rtki[partner, 7] * us1
+            rv2 += rtki[partner, 8]
+            norm2 = rv0 * rv0 + rv1 * rv1 + rv2 * rv2
+            vm0 = w0 * rtki[partner, 0]
+            vm0 += w1 * rtki[partner, 3]
+            vm0 += w2 * rtki[partner, 6]
+            vm1 = w0 * rtki[partner, 1]
+            vm1 += w1 * rtki[partner, 4]
+            vm1 += w2 * rtki[partner, 7]
+            rm0 = rv0 * rtki[partner, 0]
+            rm0 += rv1 * rtki[partner, 3]
+            rm0 += rv2 * rtki[partner, 6]
+            rm1 = rv0 * rtki[partner, 1]
+            rm1 += rv1 * rtki[partner, 4]
+            rm1 += rv2 * rtki[partner, 7]
+            along = (w0 * rv0 + w1 * rv1 + w2 * rv2) / norm2
+            rm0 *= along
+            rm1 *= along
+            vm0 -= rm0
+            vm1 -= rm1
+            root = math.sqrt(norm2)
+            js0 = vm0 / root
+            js1 = vm1 / root
+            js0 *= s2
+            js1 *= s2
+            # the snap u_s = u_i - s n onto the line l = F (u_o, v_o, 1) = (a, l3), n = a / |a|,
+            # s = (a·u_i + l3) / |a|; a move of u_o changes l by F[:, :2] δ, which moves u_s by
+            # -n ((u_sᵀ da + dl3) / |a|) - s (I - n nᵀ) da / |a|
+            fr = cam_obs * m + partner
+            u, v = uv[row, 0], uv[row, 1]
+            l0 = f9[fr, 0] * u + f9[fr, 1] * v + f9[fr, 2]
+            l1 = f9[fr, 3] * u + f9[fr, 4] * v + f9[fr, 5]
+            l2 = f9[fr, 6] * u + f9[fr, 7] * v + f9[fr, 8]
+            size = math.sqrt(l0 * l0 + l1 * l1)
+            nn0 = l0 / size
+            nn1 = l1 / size
+            signed = (l0 * ff[pp, i, 16] + l1 * ff[pp, i, 17] + l2) / size
+            da00, da01 = f9[fr, 0] / size, f9[fr, 1] / size
+            da10, da11 = f9[fr, 3] / size, f9[fr, 4] / size
+            dl0, dl1 = f9[fr, 6] / size, f9[fr, 7] / size
+            shift0 = us0 * da00 + us1 * da10 + dl0
+            shift1 = us0 * da01 + us1 * da11 + dl1
+            nda0 = nn0 * da00 + nn1 * da10
+            nda1 = nn0 * da01 + nn1 * da11
+            ml00 = -nn0 * shift0 - signed * (da00 - nn0 * nda0)
+            ml01 = -nn0 * shift1 - signed * (da01 - nn0 * nda1)
+            ml10 = -nn1 * shift0 - signed * (da10 - nn1 * nda0)
+            ml11 = -nn1 * shift1 - signed * (da11 - nn1 * nda1)
+            j_obs0 += js0 * ml00 + js1 * ml10
+            j_obs1 += js0 * ml01 + js1 * ml11
+            jn = js0 * nn0 + js1 * nn1
+            ji0 = js0 - jn * nn0
+            ji1 = js1 - jn * nn1
+            jac[pp, 0, 0] = j_obs0
+            jac[pp, 0, 1] = j_obs1
+            jac[pp, 1, 0] = (1 - w_eq1) * ji0
+            jac[pp, 1, 1] = (1 - w_eq1) * ji1
+            jac[pp, 2, 0] = w_eq1 * ji0
+            jac[pp, 2, 1] = w_eq1 * ji1
+        scale1 = 1 + ratio
+        scale2 = -ratio
+        for s in range(3):
+            for a in range(2):
+                g[1 + s, a] = jac[0, s, a] * scale1
+                g[4 + s, a] = jac[1, s, a] * scale2
+        # a detection in several slots: its later slots' Jacobians into its first
+        for s in range(7):
+            taken[s] = False
+        for s in range(7):
+            if taken[s] or slots[s] < 0:
+                continue
+            for t in range(s + 1, 7):
+                if slots[t] == slots[s] and not taken[t]:
+                    taken[t] = True
+                    if s == 0:
+                        for j in range(3):
+                            for a in range(2):
+                                newest[j, a] += r[j] * g[t, a]
+                    else:
+                        g[s, 0] += g[t, 0]
+                        g[s, 1] += g[t, 1]
+        along = 0.0  # Σ |g L|² of the past slots
+        for s in range(1, 7):
+            gl0, gl1 = _pixel_jacobian(jac4, lens, slots[s], g[s, 0], g[s, 1])
+            along += 0.0 if taken[s] else gl0 * gl0 + gl1 * gl1
+        for j in range(3):
+            nl[j, 0], nl[j, 1] = _pixel_jacobian(jac4, lens, e, newest[j, 0], newest[j, 1])
+        var = noise_px**2
+        for n in range(6):  # xx, yy, zz, xy, xz, yz
+            a = n if n < 3 else (0 if n < 5 else 1)
+            b = n if n < 3 else (1 if n == 3 else 2)
+            quality[11 + n, i] = (nl[a, 0] * nl[b, 0] + nl[a, 1] * nl[b, 1]
+                                  + r[a] * r[b] * along) * var
+        quality[10, i] = math.sqrt(quality[11, i] + quality[12, i] + quality[13, i])
+
+
+def camera_tables(prep):
+    """The per-camera tables the kernels take: ``cam`` (m, 31), ``ki``, ``rr``, ``rtki``
+    (m, 9), ``f9`` (m * m, 9) (see :func:`_pseudo_one`) and ``lens`` (bool: some camera has
+    lens distortion), cached on ``prep``."""
+    cache = prep.__dict__.get("_kernel_tables")
+    if cache is not None:
+        return cache
+    m = len(prep.centers)
+    cam = np.zeros((m, 31))
+    for c, camera in enumerate(prep.cameras):
+        cam[c, 0:9] = np.asarray(camera.K, np.float64).ravel()
+        cam[c, 9:18] = np.asarray(camera.R, np.float64).ravel()
+        cam[c, 18:21] = np.asarray(camera.t, np.float64).ravel()
+        cam[c, 21:26] = np.asarray(camera.dist, np.float64).ravel()
+        cam[c, 26:30] = prep.view_box[c]
+        cam[c, 30] = 1.0 if np.any(camera.dist) else 0.0
+    tables = (cam, np.ascontiguousarray(prep._cols("K_inv").T),
+              np.ascontiguousarray(prep._cols("R").T),
+              np.ascontiguousarray(prep._rt_k_inv_cols.T),
+              np.ascontiguousarray(prep._f_cols.T), bool(np.any(cam[:, 30])))
+    prep.__dict__["_kernel_tables"] = tables
+    return tables
+
+
+@kernel
+def brackets_kernel(time_ns, camera, prev_b, next_b, previous_instant):
+    """Each row's bracket in every camera and its previous instant, in two passes over the
+    sorted rows: ``prev_b[d, r]`` the latest row of camera d at or before row r's time,
+    ``next_b[d, r]`` the earliest at or after it (-1: none; the same row on an exact match:
+    :func:`~pslog.fusion._prepare.bracket`), ``previous_instant[r]`` the latest row of the
+    instant before r's (a strictly earlier time; -1: none)."""
+    m = prev_b.shape[0]
+    n = time_ns.shape[0]
+    last = np.full(m, -1, dtype=np.int64)
+    start = 0
+    while start < n:  # instants (rows of one time) forwards
+        end = start + 1
+        while end < n and time_ns[end] == time_ns[start]:
+            end += 1
+        for r in range(start, end):
+            last[camera[r]] = r
+        for r in range(start, end):
+            previous_instant[r] = start - 1
+            for d in range(m):
+                prev_b[d, r] = last[d]
+        start = end
+    last[:] = -1
+    end = n
+    while end > 0:  # instants backwards
+        start = end - 1
+        while start > 0 and time_ns[start - 1] == time_ns[end - 1]:
+            start -= 1
+        for r in range(end - 1, start - 1, -1):
+            last[camera[r]] = r
+        for r in range(start, end):
+            for d in range(m):
+                next_b[d, r] = last[d]
+        end = start
