@@ -18,6 +18,9 @@ setup() {
     if [ ! -f "$VENV/.pslog-installed" ] || [ pyproject.toml -nt "$VENV/.pslog-installed" ]; then
         "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check --upgrade pip
         "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check -e ".[test]"
+        # numba compiles pslog's kernels on first use: do it now, once, announced (pslog/warm.py)
+        echo "pslog: compiling the numba kernels (once per machine, about half a minute)" >&2
+        "$VENV/bin/python" -m pslog.warm >&2
         touch "$VENV/.pslog-installed"
     fi
 }
