@@ -147,7 +147,7 @@ def test_unpacked_repeated_doubles_and_negative_frame_index_decode_as_protobuf_d
                            ((4, 1.5), (4, 2.5), (5, 3.0), (5, 4.0), (6, 1.0), (6, 1.0),
                             (7, 0.5), (7, 0.25))])
     packed = S.DetectionFrame(time_ns=9, frame_index=-3, u=[5.0], v=[6.0], radius=[1.0],
-                              score=[0.75]).SerializeToString()
+                              score=[0.75]).SerializeToString(deterministic=True)
     got = R.decode_detections(["a", "b"], [[(7, 0, unpacked)], [(9, 1, packed)]])
     assert got.frame_index.tolist() in ([-2, -3], [-3, -2])
     order = np.argsort(got.frame_time_ns)
@@ -166,7 +166,7 @@ def test_track_maps_of_other_key_sets_fall_back_with_the_per_message_key_order()
                          ray_miss_m=float("nan"))
         for k in keys:
             m.quality[k] = float(len(k)) + t
-        return (t, 0, m.SerializeToString())
+        return (t, 0, m.SerializeToString(deterministic=True))
 
     same_keys = [point(t, ["gap_s", "a_long_quality_name_beyond_16"]) for t in (3, 1, 2)]
     mixed = [point(1, ["gap_s"]), point(2, ["std_m", "gap_s"]), point(3, [])]
@@ -229,7 +229,7 @@ def test_track_quality_entries_are_protobufs_own_bytes(fused):
             msg = S.TrackPoint()
             for k, values in extra.items():
                 msg.quality[k] = float(values[i])
-            assert msg.SerializeToString() == entries[i]
+            assert msg.SerializeToString(deterministic=True) == entries[i]
     # keys of 117 bytes or more do not fit the one-byte entry length: the per-point way
     assert _quality_entries({"k" * 120: np.ones(1)}, 1) is None
     assert list(_quality_entries({}, 2)) == [b"", b""]

@@ -62,7 +62,7 @@ def test_track_blocks_are_protobufs_own_bytes(tmp_path, rig3, extra):
             for key, values in track.quality.items():
                 if key not in S.TRACK_FIXED_QUALITY:
                     msg.quality[key] = float(values[i])
-            assert points[i] == (t, msg.SerializeToString()), (method, i)
+            assert points[i] == (t, msg.SerializeToString(deterministic=True)), (method, i)
             assert scenes[i] == (t, W.scene_point(method, first_id + i, t, (x, y, z), color))
 
 
@@ -114,7 +114,7 @@ def test_detection_blocks_are_protobufs_own_bytes(tmp_path, rig3):
                                 frame_index=int(det.frame_index[i]),
                                 u=det.cand_uv[a:b, 0].tolist(), v=det.cand_uv[a:b, 1].tolist(),
                                 radius=det.cand_radius[a:b].tolist(),
-                                score=det.cand_score[a:b].tolist()).SerializeToString()
+                                score=det.cand_score[a:b].tolist()).SerializeToString(deterministic=True)
         row = got[S.detections_topic(name)][seen[name]]
         seen[name] += 1
         assert row == (int(det.frame_time_ns[i]), int(det.frame_index[i]), want), i
@@ -154,7 +154,7 @@ def test_compiled_track_encoder_equals_its_python_and_protobuf(rig3):
                     msg.quality[key] = float(values[i])
             point = block.data[ends[2 * i] - block.length[2 * i]:ends[2 * i]]
             scene = block.data[ends[2 * i + 1] - block.length[2 * i + 1]:ends[2 * i + 1]]
-            assert point == msg.SerializeToString(), (first_id, i)
+            assert point == msg.SerializeToString(deterministic=True), (first_id, i)
             assert scene == W.scene_point("typeA", first_id + i, t, (x, y, z), color)
 
     # the compiled kernel and its Python original, on the same arrays
@@ -208,5 +208,5 @@ def test_rejection_blocks_are_protobufs_own_bytes(tmp_path, rig3):
         want = S.Rejection(time_ns=int(t[i]), camera=rig3.names[rej.camera[i]],
                            frame_index=int(rej.frame_index[i]), u=float(uv[i, 0]),
                            v=float(uv[i, 1]), score=float(score[i]),
-                           reason=REASONS[rej.reason[i]]).SerializeToString()
+                           reason=REASONS[rej.reason[i]]).SerializeToString(deterministic=True)
         assert got[i] == (int(t[i]), int(rej.frame_index[i]), want), i

@@ -602,7 +602,7 @@ class FoxgloveSink(_QueuedSink):
                               for k in S.TRACK_FIXED_QUALITY})
         for k, v in quality.items():
             msg.quality[k] = float(v)
-        track.log(msg.SerializeToString(), log_time=t)
+        track.log(msg.SerializeToString(deterministic=True), log_time=t)
         i = self._track_index[method]
         self._track_index[method] = i + 1
         color = track_color(method)

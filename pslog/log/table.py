@@ -345,7 +345,7 @@ def _map_order(track) -> list[str]:
     msg = S.TrackPoint()
     for key in extra:
         msg.quality[key] = float(track.quality[key][0])
-    return _entry_keys(msg.SerializeToString())
+    return _entry_keys(msg.SerializeToString(deterministic=True))
 
 
 def _entry_keys(data: bytes) -> list[str]:

@@ -457,7 +457,7 @@ class SessionWriter:
                                u=uv[:, 0].tolist(), v=uv[:, 1].tolist(),
                                radius=radius.tolist(), score=score.tolist())
         self._queue(self._channel(S.detections_topic(name), S.DetectionFrame), time_ns,
-                    msg.SerializeToString(), frame_index)
+                    msg.SerializeToString(deterministic=True), frame_index)
         self._count(S.detections_topic(name))
         if image is not None:
             self.add_image(camera, frame_index, time_ns, image, image_format)
@@ -501,7 +501,7 @@ class SessionWriter:
             a, b = bounds[row], bounds[row + 1]
             msg = make(time_ns=t, camera=self._names[cam], frame_index=idx, u=u[a:b],
                        v=v[a:b], radius=radius[a:b], score=score[a:b])
-            self._queue(channels[cam], t, msg.SerializeToString(), idx)
+            self._queue(channels[cam], t, msg.SerializeToString(deterministic=True), idx)
 
     @_locked
     def add_ball_truth(self, ball: Detections) -> None:
@@ -523,7 +523,7 @@ class SessionWriter:
             idx = int(ball.frame_index[f])
             msg = S.DetectionFrame(time_ns=t, camera=self._names[cam], frame_index=idx,
                                    u=[u], v=[v], radius=[r], score=[s])
-            self._queue(channels[cam], t, msg.SerializeToString(), idx)
+            self._queue(channels[cam], t, msg.SerializeToString(deterministic=True), idx)
             self._count(S.ball_truth_topic(self._names[cam]))
 
     @_locked
@@ -552,7 +552,7 @@ class SessionWriter:
                 raise InputError(_negative_time(t))
             msg = S.Rejection(time_ns=t, camera=names[cam], frame_index=idx, u=u, v=v,
                               score=score, reason=reason)
-            self._queue(channel, t, msg.SerializeToString(), idx)
+            self._queue(channel, t, msg.SerializeToString(deterministic=True), idx)
         self._count(S.rejections_topic(method), len(rejections))
 
     @_locked
@@ -701,17 +701,17 @@ class SessionWriter:
             msg = S.TrackPoint(time_ns=t, method=method, x=x, y=y, z=z, camera=cameras[cam],
                                **{k: fixed[k][j] for k in S.TRACK_FIXED_QUALITY})
             if entries is not None:
-                data = msg.SerializeToString() + next(entries)
+                data = msg.SerializeToString(deterministic=True) + next(entries)
                 if j == 0:  # the same bytes as protobuf's own, checked on the first point
                     for k, values in extra.items():
                         msg.quality[k] = float(values[i])
-                    if msg.SerializeToString() != data:
+                    if msg.SerializeToString(deterministic=True) != data:
                         entries = None
-                        data = msg.SerializeToString()
+                        data = msg.SerializeToString(deterministic=True)
             else:
                 for k, values in extra.items():
                     msg.quality[k] = float(values[i])
-                data = msg.SerializeToString()
+                data = msg.SerializeToString(deterministic=True)
             self._queue(channel, t, data)
             self._queue(scene_channel, t, scene_point(method, first_id + i, t, (x, y, z), color))
 
@@ -889,7 +889,7 @@ def _detections_block(detections: Detections, lo: int, hi: int, names, channels)
         msg = make(time_ns=int(t[j]), camera=names[int(cam[j])], frame_index=int(idx[j]),
                    u=cols[0][a:b].tolist(), v=cols[1][a:b].tolist(),
                    radius=cols[2][a:b].tolist(), score=cols[3][a:b].tolist())
-        if data[starts[j]:ends[j]] != msg.SerializeToString():
+        if data[starts[j]:ends[j]] != msg.SerializeToString(deterministic=True):
             return None
     return _Block(np.asarray(channels, dtype=np.int64)[cam], t, idx, lengths, data)
 
@@ -918,7 +918,7 @@ def _rejections_block(rejections, lo: int, hi: int, names, channel: int):
         want = S.Rejection(time_ns=int(t[j]), camera=names[int(cam[j])],
                            frame_index=int(idx[j]), u=float(uv[j, 0]), v=float(uv[j, 1]),
                            score=float(score[j]), reason=REASONS[int(reason[j])])
-        if data[ends[j] - lengths[j]:ends[j]] != want.SerializeToString():
+        if data[ends[j] - lengths[j]:ends[j]] != want.SerializeToString(deterministic=True):
             return None
     return _Block(np.full(n, channel, dtype=np.int64), t, idx, lengths, data)
 
@@ -930,7 +930,7 @@ def _quality_template(extra: dict[str, np.ndarray]):
     probe = S.TrackPoint()
     for k in extra:
         probe.quality[k] = 1.0
-    raw = probe.SerializeToString()
+    raw = probe.SerializeToString(deterministic=True)
     template, slots, at = bytearray(), {}, 0
     while at < len(raw):
         if at + 4 > len(raw):
@@ -1012,7 +1012,7 @@ def _track_block(track: Track, lo: int, hi: int, method: str, cameras, fixed: di
         for k in names:
             if k not in S.TRACK_FIXED_QUALITY:
                 msg.quality[k] = float(track.quality[k][i])
-        point = msg.SerializeToString()
+        point = msg.SerializeToString(deterministic=True)
         want = point + scene_point(method, first_id + i, int(t[j]), (x, y, z), color)
         if data[starts[j]:ends[j]] != want or point_len[j] != len(point):
             return None
@@ -1089,5 +1089,5 @@ def scene_point(method: str, i: int, time_ns: int, xyz, color) -> bytes:
     sphere.size.x = sphere.size.y = sphere.size.z = _TRACK_SPHERE_M
     sphere.color.r, sphere.color.g, sphere.color.b = color
     sphere.color.a = 1.0
-    return update.SerializeToString()
+    return update.SerializeToString(deterministic=True)
 
