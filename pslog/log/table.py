@@ -53,7 +53,8 @@ COLUMNS = {
 }
 #: a track table's fixed columns (leading dimension: the track's points); each per-point
 #: quality column follows as ``quality/<name>``, ``<f8``, in the order of the Track's
-#: ``quality`` mapping (protobuf's map order of the first point, as the messages read)
+#: ``quality`` mapping (the map order of the first point's message: protobuf's deterministic,
+#: key-sorted form, as the writer serialises it)
 TRACK_COLUMNS = {"time_ns": ("<i8", ()), "position_world": ("<f8", (3,)),
                  "camera": ("<i4", ())}
 QUALITY_PREFIX = "quality/"
