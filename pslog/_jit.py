@@ -7,8 +7,9 @@ functions over float64 arrays and scalars, decorated with :func:`kernel`, which 
 with numba in nopython mode:
 
 - ``cache=True``: the machine code is written next to the module (``__pycache__``) or, where
-  that is read-only, to numba's per-user cache, so only the first run on a machine pays the
-  compile time;
+  that is read-only, to numba's per-user cache (or ``NUMBA_CACHE_DIR``), so only the first run
+  on a machine pays the compile time (``python -m pslog.warm`` pays it at install); where no
+  cache folder can be written, kernels are compiled in memory at every run instead;
 - ``nogil=True``: a kernel releases the GIL (live fusion beside a recorder thread);
 - ``error_model="numpy"``: a division by zero gives inf/nan as in numpy instead of raising;
 - no ``fastmath``: IEEE arithmetic is kept, so results do not depend on reassociation.
@@ -29,4 +30,11 @@ def kernel(fn: F) -> F:
     """Compile ``fn`` with numba (nopython, cached, GIL released, numpy error model)."""
     import numba  # imported here: `pslog --help` and the light commands never load LLVM
 
-    return cast(F, numba.njit(cache=True, nogil=True, error_model="numpy")(fn))
+    try:
+        return cast(F, numba.njit(cache=True, nogil=True, error_model="numpy")(fn))
+    except RuntimeError:
+        # numba raises "cannot cache function ...: no locator available" when neither the
+        # module's folder nor numba's per-user cache folder can be written (a read-only
+        # install with no writable home, as in some containers): compile in memory then,
+        # at every run, rather than fail (NUMBA_CACHE_DIR names a writable cache folder)
+        return cast(F, numba.njit(cache=False, nogil=True, error_model="numpy")(fn))
