@@ -153,6 +153,7 @@ def _main(argv: list[str] | None) -> int:
     real_stdout = sys.stdout  # None when started with standard output closed
     if real_stdout is not None:
         sys.stdout = _GuardedStdout(real_stdout)
+    restore_sigterm = _sigterm_interrupts()
     try:
         _release_sigint()  # only now: a KeyboardInterrupt in a C extension's import (numpy,
         # cv2, while add_arguments loads them) surfaces as an ImportError traceback
@@ -172,6 +173,9 @@ def _main(argv: list[str] | None) -> int:
             _drop_stdout(real_stdout)
         print(f"pslog {name}: error: {exc}", file=sys.stderr)
         return 1
+    except Terminated:
+        print(f"pslog {name}: terminated (SIGTERM)", file=sys.stderr)
+        return 143
     except KeyboardInterrupt:
         print(f"pslog {name}: interrupted", file=sys.stderr)
         return 130
@@ -185,6 +189,29 @@ def _main(argv: list[str] | None) -> int:
         return 1
     finally:
         sys.stdout = real_stdout
+        restore_sigterm()
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where a Ctrl-C would be: a command's interrupt handling (worker pools
+    shut down, ``.partial`` outputs removed) runs for either; the exit code is 143."""
+
+
+def _sigterm_interrupts():
+    """Make SIGTERM raise :class:`Terminated` in the main thread while a command runs (a
+    command that records installs its own stop handler over this one); returns the function
+    that puts the previous handler back (callers of ``main()`` in-process)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return lambda: None
+
+    def raise_terminated(signum, frame):
+        raise Terminated
+
+    previous = signal.signal(signal.SIGTERM, raise_terminated)
+    return lambda: signal.signal(signal.SIGTERM, previous)
 
 
 class StdoutError(PslogError):
