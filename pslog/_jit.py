@@ -28,7 +28,13 @@ F = TypeVar("F", bound=Callable[..., Any])
 
 def kernel(fn: F) -> F:
     """Compile ``fn`` with numba (nopython, cached, GIL released, numpy error model)."""
-    import numba  # imported here: `pslog --help` and the light commands never load LLVM
+    try:
+        import numba  # imported here: `pslog --help` and the light commands never load LLVM
+    except Exception as exc:  # e.g. NUMBA_NUM_THREADS=0: numba refuses to start
+        from .errors import PslogError
+
+        raise PslogError(f"numba could not start ({type(exc).__name__}: {exc}); check the "
+                         f"NUMBA_* environment variables") from exc
 
     try:
         return cast(F, numba.njit(cache=True, nogil=True, error_model="numpy")(fn))

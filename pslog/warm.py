@@ -69,7 +69,18 @@ def _stream(session: str) -> None:
         fuser.flush()
 
 
-if __name__ == "__main__":
-    seconds = warm()
-    print(f"pslog: numba kernels ready in {seconds:.1f} s (compiled once per machine, "
+def main() -> int:
+    try:
+        seconds = warm()
+    except Exception as exc:  # one line: run.sh carries on, the kernels compile on first use
+        print(f"pslog warm: could not compile the kernels ahead of use "
+              f"({type(exc).__name__}: {exc}); they compile on first use instead",
+              file=sys.stderr)
+        return 1
+    print(f"pslog: numba kernels ready in {seconds:.1f} s (compiled once per install, "
           f"then loaded from the cache)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

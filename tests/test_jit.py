@@ -23,3 +23,22 @@ def test_a_kernel_without_a_cache_location_is_compiled_in_memory():
     a = np.arange(5.0)
     assert fn(a) == fn.py_func(a) == 10.0
     assert np.isinf(fn(-a - 1))  # numpy's error model: a division by zero gives inf
+
+
+def test_numba_refusing_to_start_is_one_line(tmp_path):
+    import os
+    import subprocess
+    import sys
+
+    session = tmp_path / "s.mcap"
+    cli = [sys.executable, "-m", "pslog.cli"]
+    subprocess.run([*cli, "simulate", "--rig", "paper3", "--timing", "typeA", "--duration",
+                    "1", "-o", str(session)], check=True, capture_output=True)
+    run = subprocess.run([*cli, "fuse", str(session), "--method", "typeA", "-o",
+                          str(tmp_path / "f.mcap")], capture_output=True, text=True,
+                         env=dict(os.environ, NUMBA_NUM_THREADS="0", PSLOG_PROGRESS="off"))
+    assert run.returncode == 1
+    assert run.stderr.strip().splitlines() == [
+        "pslog fuse: error: numba could not start (ValueError: Number of threads specified "
+        "must be > 0.); check the NUMBA_* environment variables"]
+    assert not (tmp_path / "f.mcap").exists()
