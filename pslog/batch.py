@@ -621,7 +621,7 @@ def parse_address(text: str) -> tuple[str, int] | None:
     host = host.strip("[]")  # an IPv6 address in brackets
     if not host or "/" in host or not port.isdigit() or not 1 <= int(port) <= 65535:
         raise InputError(f"{text!r}: give HOST:PORT (a node of the cluster), "
-                         f"ray://HOST:PORT (Ray Client, default port 10001) or auto")
+                         f"ray://HOST:PORT (Ray Client, on port 10001 by default) or auto")
     return host, int(port)
 
 
