@@ -1,6 +1,6 @@
 """Work done in blocks to bound a 90-minute match's memory gives the same bits as all at
-once: type A's kink test (innovation.kinked_points, blocks of events) and the gate's
-decisions (gating._decide_in_order, blocks of frames)."""
+once: the gate's decisions (gating._decide_in_order, blocks of frames). (Type A's kink test
+is a compiled per-point kernel with no (k,) temporaries: tests/test_kink_kernel.py.)"""
 
 from __future__ import annotations
 
@@ -8,9 +8,7 @@ import numpy as np
 from _rally import rally
 
 from pslog import SimulationOptions, apply_timing, builtin_rig
-from pslog.fusion import FusionOptions, innovation
 from pslog.fusion import gating as G
-from pslog.fusion.gating import fuse_detections
 from pslog.simulation import simulate_labelled
 
 
@@ -20,24 +18,6 @@ def _session(seed: int, **faults):
     det, _truth, _ = simulate_labelled(rig, motion, 6.0,
                                        SimulationOptions(noise_px=0.3, seed=seed, **faults))
     return det, rig
-
-
-def _same(a, b) -> None:
-    assert a.time_ns.tobytes() == b.time_ns.tobytes()
-    assert a.position_world.tobytes() == b.position_world.tobytes()
-    assert set(a.quality) == set(b.quality)
-    for k in a.quality:
-        assert a.quality[k].tobytes() == b.quality[k].tobytes(), k
-    assert a.dropped == b.dropped
-
-
-def test_kink_test_in_blocks_equals_all_at_once(monkeypatch):
-    det, rig = _session(3)
-    whole, _ = fuse_detections(det, rig, ["typeA"], FusionOptions())
-    assert whole["typeA"].dropped.get("kink", 0) > 0  # the test refuses points here
-    monkeypatch.setattr(innovation, "_KINK_BLOCK", 37)
-    blocks, _ = fuse_detections(det, rig, ["typeA"], FusionOptions())
-    _same(blocks["typeA"], whole["typeA"])
 
 
 def test_gate_in_small_blocks_equals_large_ones(monkeypatch):

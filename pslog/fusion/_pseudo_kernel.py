@@ -28,6 +28,8 @@ import math
 import numpy as np
 
 from .._jit import kernel
+from ..motion import G as _G
+from .innovation import KINK_SIGMAS as _KINK_SIGMAS
 
 #: geometry._PARALLEL_EPS: rays whose cross product is this small (relative) do not cross.
 _PARALLEL_EPS = 1e-12
@@ -699,3 +701,101 @@ def brackets_kernel(time_ns, camera, prev_b, next_b, previous_instant):
             for d in range(m):
                 next_b[d, r] = last[d]
         end = start
+
+
+# -- type A's kink test (pslog.fusion.innovation.kinked_points), point by point -----------
+
+@kernel
+def _bend(a, b, c, px, py, pz, speed, sigma, time_ns, uv, camera, lens, ns):
+    """Whether one camera's 2D track bends at row ``b`` (rows ``a < b < c``) more than
+    ballistic motion and the noise ``sigma`` (px) allow; ``px, py, pz`` a world point near
+    the ball (metres, for its depth), ``speed`` m/s; ``lens`` (n_cameras, 8): fx, fy, cx,
+    cy, R[2] (3), t[2]. The arithmetic of innovation._bends' former columns, in the same
+    order (the same bits); its derivation is :func:`~pslog.fusion.innovation.kinked_points`'."""
+    cam = camera[b]
+    fx, fy, cx, cy = lens[cam, 0], lens[cam, 1], lens[cam, 2], lens[cam, 3]
+    dt1 = (time_ns[b] - time_ns[a]) / ns
+    dt2 = (time_ns[c] - time_ns[b]) / ns
+    v1x, v1y = (uv[b, 0] - uv[a, 0]) / dt1, (uv[b, 1] - uv[a, 1]) / dt1
+    v2x, v2y = (uv[c, 0] - uv[b, 0]) / dt2, (uv[c, 1] - uv[b, 1]) / dt2
+    dx, dy = v2x - v1x, v2y - v1y
+    change = math.sqrt(dx * dx + dy * dy)
+    both = 1.0 / dt1 + 1.0 / dt2
+    sigma_change = sigma * math.sqrt(1.0 / (dt1 * dt1) + both * both + 1.0 / (dt2 * dt2))
+    focal = _max(fx, fy)
+    depth = lens[cam, 4] * px + lens[cam, 5] * py + lens[cam, 6] * pz + lens[cam, 7]
+    ox, oy = (uv[b, 0] - cx) / focal, (uv[b, 1] - cy) / focal
+    # d²u/dt² = f (a_xy - x a_z) / Z - 2 (Ż / Z) du/dt; |a| = g, |Ż| <= speed
+    pixel_speed = _max(math.sqrt(v1x * v1x + v1y * v1y), math.sqrt(v2x * v2x + v2y * v2y))
+    acceleration = (focal * _G * math.sqrt(1.0 + ox * ox + oy * oy)
+                    + 2.0 * speed * pixel_speed) / depth
+    bound = _KINK_SIGMAS * sigma_change + 0.5 * (dt1 + dt2) * acceleration
+    return dt1 > 0 and dt2 > 0 and depth > 0 and change > bound
+
+
+@kernel
+def _bent(a, b, c, event, t_event, max_gap_ns, px, py, pz, speed, sigma, time_ns, uv,
+          camera, lens, ns):
+    """:func:`_bend` where the triplet is available (all three rows, none after the newest
+    detection ``event``, ``a`` within ``2 max_gap`` of it); False elsewhere."""
+    if a < 0 or b < 0 or c < 0 or c > event or t_event - time_ns[a] > 2 * max_gap_ns:
+        return False
+    return _bend(a, b, c, px, py, pz, speed, sigma, time_ns, uv, camera, lens, ns)
+
+
+@kernel
+def kink_kernel(events, rows1, prev1, next1, world1, rows2, prev2, next2, world2, predicted,
+                sigma, before, after, time_ns, uv, camera, lens, max_gap_ns, ns, out):
+    """Type A's kink flags, point by point (:func:`pslog.fusion.innovation.kinked_points`,
+    whose docstring derives the test and names the triplets).
+
+    events (k,) int64, rows of the newest detections; rows/prev/next (k,) int64 and world
+    (k, 3) metres of ``P_{t-1}`` (1) and ``P_{t-2}`` (2); predicted (k, 3) metres; sigma (k,)
+    px; before/after (n,) int64, each row's previous/next row of its camera (-1: none);
+    time_ns (n,) int64; uv (n, 2) undistorted px; camera (n,) int64; lens (n_cameras, 8);
+    max_gap_ns int; ns the nanoseconds per second; out (k,) bool, written.
+    """
+    for i in range(len(events)):
+        event = events[i]
+        t_event = time_ns[event]
+        sg = sigma[i]
+        speed = (math.sqrt((world1[i, 0] - world2[i, 0]) * (world1[i, 0] - world2[i, 0])
+                           + (world1[i, 1] - world2[i, 1]) * (world1[i, 1] - world2[i, 1])
+                           + (world1[i, 2] - world2[i, 2]) * (world1[i, 2] - world2[i, 2]))
+                 / ((time_ns[rows1[i]] - time_ns[rows2[i]]) / ns))
+        kinked = False
+        for s in range(2):
+            prev = prev1[i] if s == 0 else prev2[i]
+            nxt = next1[i] if s == 0 else next2[i]
+            world = world1 if s == 0 else world2
+            px, py, pz = world[i, 0], world[i, 1], world[i, 2]
+            first = before[prev] if prev >= 0 else -1
+            # a bend at prev: the change lies between prev and next if the triplet after
+            # bends too, or (that one still to come) if the triplet before does not
+            if _bent(first, prev, nxt, event, t_event, max_gap_ns, px, py, pz, speed, sg,
+                     time_ns, uv, camera, lens, ns):
+                later = after[nxt] if nxt >= 0 else -1
+                if (prev >= 0 and nxt >= 0 and later >= 0 and later <= event
+                        and t_event - time_ns[prev] <= 2 * max_gap_ns):  # the one after: has
+                    kinked = kinked or _bend(prev, nxt, later, px, py, pz, speed, sg,
+                                             time_ns, uv, camera, lens, ns)
+                else:
+                    kinked = kinked or not _bent(before[first] if first >= 0 else -1, first,
+                                                 prev, event, t_event, max_gap_ns, px, py,
+                                                 pz, speed, sg, time_ns, uv, camera, lens, ns)
+        # the newest camera: its last triplet bends at b, the change between b and the
+        # newest detection (or between a and b, if the triplet before bends too); refused
+        # when that interval lies inside eq. (2)'s span, from P_{t-2} on (before it, the
+        # past points are already on the new motion)
+        if not kinked:
+            b = before[event]
+            a = before[b] if b >= 0 else -1
+            px, py, pz = predicted[i, 0], predicted[i, 1], predicted[i, 2]
+            if _bent(a, b, event, event, t_event, max_gap_ns, px, py, pz, speed, sg,
+                     time_ns, uv, camera, lens, ns):
+                start = time_ns[max(b, 0)]
+                if _bent(before[a] if a >= 0 else -1, a, b, event, t_event, max_gap_ns, px,
+                         py, pz, speed, sg, time_ns, uv, camera, lens, ns):
+                    start = time_ns[max(a, 0)]
+                kinked = start >= time_ns[rows2[i]]
+        out[i] = kinked

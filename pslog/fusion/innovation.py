@@ -204,55 +204,6 @@ def _previous_next(camera: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return before, after
 
 
-def _bends(prep, a, b, c, point, speed, sigma):
-    """Whether a camera's 2D track bends at ``b`` more than ballistic motion and the
-    detection noise allow (:func:`kinked_points`); rows ``a < b < c`` of one camera, (k,)
-    each; ``point`` (k, 3) world metres near the ball (for its depth), ``speed`` (k,) m/s.
-    Row by row on columns (the same bits whatever k: a stream decides as the batch does)."""
-    time_ns, uv = prep.obs.time_ns, prep.uv_undistorted
-    cam = prep.obs.camera[b]
-    cameras = prep.cameras
-    fx = np.array([c_.K[0, 0] for c_ in cameras])[cam]
-    fy = np.array([c_.K[1, 1] for c_ in cameras])[cam]
-    cx = np.array([c_.K[0, 2] for c_ in cameras])[cam]
-    cy = np.array([c_.K[1, 2] for c_ in cameras])[cam]
-    r2 = np.array([c_.R[2] for c_ in cameras])[cam]
-    tz = np.array([c_.t[2] for c_ in cameras])[cam]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        dt1 = (time_ns[b] - time_ns[a]) / NS
-        dt2 = (time_ns[c] - time_ns[b]) / NS
-        v1x, v1y = (uv[b, 0] - uv[a, 0]) / dt1, (uv[b, 1] - uv[a, 1]) / dt1
-        v2x, v2y = (uv[c, 0] - uv[b, 0]) / dt2, (uv[c, 1] - uv[b, 1]) / dt2
-        dx, dy = v2x - v1x, v2y - v1y
-        change = np.sqrt(dx * dx + dy * dy)
-        sigma_change = sigma * np.sqrt(1.0 / dt1 ** 2 + (1.0 / dt1 + 1.0 / dt2) ** 2
-                                       + 1.0 / dt2 ** 2)
-        focal = np.maximum(fx, fy)
-        depth = r2[:, 0] * point[:, 0] + r2[:, 1] * point[:, 1] + r2[:, 2] * point[:, 2] + tz
-        ox, oy = (uv[b, 0] - cx) / focal, (uv[b, 1] - cy) / focal
-        # d²u/dt² = f (a_xy - x a_z) / Z - 2 (Ż / Z) du/dt; |a| = g, |Ż| <= speed
-        pixel_speed = np.maximum(np.sqrt(v1x * v1x + v1y * v1y), np.sqrt(v2x * v2x + v2y * v2y))
-        acceleration = (focal * G * np.sqrt(1.0 + ox * ox + oy * oy)
-                        + 2.0 * speed * pixel_speed) / depth
-        bound = KINK_SIGMAS * sigma_change + 0.5 * (dt1 + dt2) * acceleration
-        return (dt1 > 0) & (dt2 > 0) & (depth > 0) & (change > bound)
-
-
-#: events whose kinks are tested at a time (bounded memory)
-_KINK_BLOCK = 1 << 14
-
-
-def _rows_of(p, lo: int, hi: int):
-    """Rows ``lo:hi`` of a PseudoStereoPoints (the fields :func:`kinked_points` reads), or
-    of a (k, 3) array."""
-    if isinstance(p, np.ndarray):
-        return p[lo:hi]
-    from types import SimpleNamespace
-
-    return SimpleNamespace(row=p.row[lo:hi], prev_row=p.prev_row[lo:hi],
-                           next_row=p.next_row[lo:hi], points_world=p.points_world[lo:hi])
-
-
 def kinked_points(prep, events: np.ndarray, past: tuple, noise_px: float | np.ndarray | None,
                   max_gap_ns: int) -> np.ndarray:
     """Which type A points rest on an interval in which some camera saw the motion change.
@@ -300,76 +251,31 @@ def kinked_points(prep, events: np.ndarray, past: tuple, noise_px: float | np.nd
     -------
     (k,) bool, True where a bend is detected in an interval the point relies on
     """
-    if len(events) > _KINK_BLOCK:
-        # in blocks of events (each point's test uses its own rows alone: the same bits);
-        # all at once, the temporaries of a 90-minute match took over 1 GB
-        return np.concatenate([kinked_points(
-            prep, events[s:s + _KINK_BLOCK], tuple(_rows_of(p, s, s + _KINK_BLOCK)
-                                                   for p in past),
-            noise_px[s:s + _KINK_BLOCK] if isinstance(noise_px, np.ndarray) and noise_px.ndim
-            else noise_px,
-            max_gap_ns) for s in range(0, len(events), _KINK_BLOCK)])
+    from . import _pseudo_kernel  # (numba: imported at the first use)
+
     p1, p2, predicted = past
-    time_ns = prep.obs.time_ns
-    sigma = np.broadcast_to(DEFAULT_NOISE_PX if noise_px is None
-                            else np.asarray(noise_px, dtype=np.float64), events.shape)
-    before, after = _previous_next(prep.obs.camera)
-    t_event = time_ns[events]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        d = p1.points_world - p2.points_world
-        speed = (np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2])
-                 / ((time_ns[p1.row] - time_ns[p2.row]) / NS))
-
-    triplets = []  # (a, b, c, point) of every triplet looked at, (k,) rows each
-
-    def bend(a, b, c, point):
-        """Index of the triplets ``a, b, c`` (-1: none) among those looked at."""
-        triplets.append((a, b, c, point))
-        return len(triplets) - 1
-
-    def earlier(rows):
-        return np.where(rows >= 0, before[np.maximum(rows, 0)], -1)
-
-    parts = []
-    for p in (p1, p2):
-        prev, nxt = p.prev_row, p.next_row
-        first = earlier(prev)
-        parts.append((bend(first, prev, nxt, p.points_world),
-                      bend(prev, nxt, np.where(nxt >= 0, after[np.maximum(nxt, 0)], -1),
-                           p.points_world),
-                      bend(earlier(first), first, prev, p.points_world)))
-    b = before[events]
-    a = earlier(b)
-    newest = (bend(a, b, events, predicted), bend(earlier(a), a, b, predicted))
-    # every triplet in one pass (elementwise: the same bits as one by one)
     k = len(events)
-    a_all, b_all, c_all = (np.concatenate([t[i] for t in triplets]) for i in range(3))
-    available = ((a_all >= 0) & (b_all >= 0) & (c_all >= 0)
-                 & (c_all <= np.tile(events, len(triplets)))
-                 & (np.tile(t_event, len(triplets)) - time_ns[np.maximum(a_all, 0)]
-                    <= 2 * max_gap_ns))
-    bent_all = available & _bends(prep, np.maximum(a_all, 0), np.maximum(b_all, 0),
-                                  np.maximum(c_all, 0),
-                                  np.concatenate([t[3] for t in triplets]),
-                                  np.tile(speed, len(triplets)),
-                                  np.tile(sigma, len(triplets)))
+    sigma = np.ascontiguousarray(np.broadcast_to(
+        DEFAULT_NOISE_PX if noise_px is None else np.asarray(noise_px, dtype=np.float64),
+        (k,)), dtype=np.float64)
+    before, after = _previous_next(prep.obs.camera)
+    # per camera: fx, fy, cx, cy, the optical axis R[2] and t[2] (the depth of a point)
+    lens = np.array([[c.K[0, 0], c.K[1, 1], c.K[0, 2], c.K[1, 2], *c.R[2], c.t[2]]
+                     for c in prep.cameras], dtype=np.float64).reshape(-1, 8)
 
-    def has(i):
-        return available[i * k:(i + 1) * k]
+    def ints(x):
+        return np.ascontiguousarray(x, dtype=np.int64)
 
-    def bent(i):
-        return bent_all[i * k:(i + 1) * k]
+    def floats(x):
+        return np.ascontiguousarray(x, dtype=np.float64).reshape(-1, 3)
 
+    # point by point, each from its own rows (compiled; no (k,) temporaries per triplet, so
+    # a 90-minute match needs no blocks; the same bits in a stream as in the batch run)
     kinked = np.zeros(k, dtype=bool)
-    for at, later, before_prev in parts:
-        # a bend at prev: the change lies between prev and next if the triplet after bends
-        # too, or (that one still to come) if the triplet before does not
-        kinked |= bent(at) & np.where(has(later), bent(later), ~bent(before_prev))
-    # the newest camera: its last triplet bends at b, the change between b and the newest
-    # detection (or between a and b, if the triplet before bends too); refused when that
-    # interval lies inside eq. (2)'s span, from P_{t-2} on (before it, the past points are
-    # already on the new motion)
-    last, before_last = newest
-    start = time_ns[np.where(bent(before_last), np.maximum(a, 0), np.maximum(b, 0))]
-    kinked |= bent(last) & (start >= time_ns[p2.row])
+    _pseudo_kernel.kink_kernel(
+        ints(events), ints(p1.row), ints(p1.prev_row), ints(p1.next_row),
+        floats(p1.points_world), ints(p2.row), ints(p2.prev_row), ints(p2.next_row),
+        floats(p2.points_world), floats(predicted), sigma, before, after,
+        ints(prep.obs.time_ns), np.ascontiguousarray(prep.uv_undistorted, dtype=np.float64),
+        ints(prep.obs.camera), lens, int(max_gap_ns), NS, kinked)
     return kinked
