@@ -254,7 +254,10 @@ class Camera:
         in_front : array, shape (n,), bool; False for points at or behind the camera plane
         """
         points_world = _check_points(points_world, 3, "points_world")
-        points_cam = points_world @ self.R.T + self.t
+        # R applied to each row, written out (as in rays: a matmul's rounding may depend on
+        # the number of rows, and a point's pixels must not)
+        p, R = points_world, self.R
+        points_cam = p[:, 0:1] * R[:, 0] + p[:, 1:2] * R[:, 1] + p[:, 2:3] * R[:, 2] + self.t
         z = points_cam[:, 2]
         in_front = z > 1e-12
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -355,8 +358,15 @@ class Camera:
         # scale by the largest component first: the norm of a far-off pixel's ray
         # (1e300 px) would overflow although its direction is well defined
         rays_cam /= np.max(np.abs(rays_cam), axis=1, keepdims=True)
-        directions_world = rays_cam @ self.R  # Rᵀ applied to each row
-        directions_world /= np.linalg.norm(directions_world, axis=1, keepdims=True)
+        # Rᵀ applied to each row, written out: a matmul (BLAS) may sum in another order, and
+        # so round differently, depending on how many rows it is given, so one detection's
+        # ray would depend on the batch it came in (a stream, pushed row by row, would then
+        # differ from the batch fusion of the session in the last bits)
+        x, y, z = rays_cam[:, 0:1], rays_cam[:, 1:2], rays_cam[:, 2:3]
+        R = self.R
+        directions_world = x * R[0] + y * R[1] + z * R[2]
+        d0, d1, d2 = directions_world[:, 0], directions_world[:, 1], directions_world[:, 2]
+        directions_world /= np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)[:, None]
         return self.center_world, directions_world
 
     def in_image(self, uv: np.ndarray, margin: float = 0.0) -> np.ndarray:

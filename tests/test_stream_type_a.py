@@ -81,14 +81,18 @@ def test_refused_past_points_are_counted_once_each_as_in_batch():
     assert_same(parts, batch)
 
 
-def _quad_rig():
-    """paper3 and a fourth camera at the opposite corner, type A offsets."""
+def _quad_rig(fps=(60, 240, 120, 60)):
+    """paper3 and a fourth camera at the opposite corner, type A offsets, a strong lens and
+    mixed frame rates (a distorted camera's rays were one matmul whose last bits depended on
+    how many rows it was given: one per push vs all in batch)."""
     from pslog import Rig, apply_timing, builtin_rig, look_at
 
+    lens = np.array([-0.35, 0.15, 0.002, -0.002, -0.03])
     paper = builtin_rig("paper3")
     R, t = look_at((-1.0, -1.5, 2.5), (1.5, 1.0, 1.0))
-    return apply_timing(Rig((*paper.cameras, paper.cameras[0].replace(name="cam4", R=R, t=t)),
-                            "quad4"), "typeA")
+    cams = (*paper.cameras, paper.cameras[0].replace(name="cam4", R=R, t=t))
+    cams = tuple(c.replace(dist=lens, fps=f) for c, f in zip(cams, fps, strict=True))
+    return apply_timing(Rig(cams, "quad4"), "typeA")
 
 
 @pytest.mark.parametrize("n_cameras", [2, 4])

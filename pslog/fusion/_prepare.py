@@ -348,7 +348,9 @@ def reprojection_one(prep: Prepared, c: int, points: np.ndarray, uv_undistorted:
     """:func:`reprojection_px` of points (k, 3) and image points (k, 2) of one camera ``c``."""
     cam = prep.cameras[c]
     with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
-        in_cam = points @ cam.R.T + cam.t
+        R = cam.R  # written out as in Camera.project (the bits must not depend on k)
+        in_cam = (points[:, 0:1] * R[:, 0] + points[:, 1:2] * R[:, 1]
+                  + points[:, 2:3] * R[:, 2] + cam.t)
         z = in_cam[:, 2]
         in_front = z > 1e-12
         z = np.where(in_front, z, np.nan)

@@ -73,8 +73,9 @@ class StreamFuser:
         # settling time (which _settled keeps on top), and uses, at most, ``nearest`` the
         # other cameras' latest detections within max_gap_s, ``typeB`` and ``linear`` two
         # stereo points within max_gap_s whose detections lie within the tolerance of them,
-        # ``sync`` one group within the tolerance: max_gap_s + tolerance, no more (more only
-        # costs time; less loses a bridged partner: stream-equals-batch tests at long gaps)
+        # ``sync`` one group within the tolerance: max_gap_s + tolerance (less loses a bridged
+        # partner: stream-equals-batch tests at long gaps). The cut is then moved back to the
+        # start of a sync group (see _settled), so the window groups exactly as the batch does.
         self._history_ns = int((self._max_gap_s + self.options.tolerance_s) * NS) + 1
         self._settle_ns = 0 if self._immediate else int(self.options.tolerance_s * NS)
         self._F = fundamental_matrices(rig.cameras)
@@ -217,11 +218,36 @@ class StreamFuser:
         out = track.select(new)
         if len(out):
             self._emitted_until = (int(out.time_ns[-1]), int(out.camera[-1]))
-        # keep only the history the next points can reach
-        keep = self._time >= newest - self._history_ns - self._settle_ns
-        self._time, self._camera = self._time[keep], self._camera[keep]
-        self._uv, self._frame = self._uv[keep], self._frame[keep]
+        # keep only the history the next points can reach, cut at the start of a group
+        cut = self._cut_row(obs, newest - self._history_ns - self._settle_ns)
+        self._time, self._camera = self._time[cut:], self._camera[cut:]
+        self._uv, self._frame = self._uv[cut:], self._frame[cut:]
         return out
+
+    def _cut_row(self, obs: Observations, reach_ns: int) -> int:
+        """First row of the window to keep: the start of the latest sync group starting at
+        or before ``reach_ns`` (the earliest time a point still to emit can use), 0 if none.
+
+        Cutting at a time alone is not enough: :func:`~pslog.fusion.stereo.sync_groups`
+        groups greedily from the start of each run of detections closer than the tolerance,
+        and at several unsynchronised cameras such a run can last the whole session, so a
+        window starting inside a group splits it, and every later group of the run (a common
+        instant that is not one, or a lone detection that was not alone) shifts with it: a
+        stereo point, and so a ``typeB`` / ``linear`` point, that batch does not make.
+
+        The greedy grouping is causal (a group's start depends only on the detections before
+        it), so a window starting at a group start of the batch grouping groups its rows
+        exactly as the batch does; by induction, every window does. A group spans at most the
+        tolerance, so a point at ``t`` that uses a group within ``max_gap_s`` (its time at
+        most ``tolerance`` after the group's start) finds it whole in the window, which keeps
+        ``tolerance`` more than ``max_gap_s + tolerance`` at most.
+        """
+        if not len(obs) or int(obs.time_ns[0]) > reach_ns:
+            return 0
+        group = sync_groups(obs, len(self.rig), self.options.tolerance_s)[0]
+        starts = np.flatnonzero(np.r_[True, group[1:] != group[:-1]])
+        latest = int(np.searchsorted(obs.time_ns[starts], reach_ns, side="right")) - 1
+        return int(starts[latest])
 
 
 def _empty(method: str) -> Track:
