@@ -529,12 +529,14 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
     support's) within ``static_m`` of a candidate's point in each of its camera's earlier
     frames; or, for a candidate whose point rests on one other camera (``paired``), its
     pixel within ``static_m`` across its ray (:func:`_still_px`) of a candidate's pixel
-    there. (Still in one image is not enough in general: a ball moving along a camera's ray
-    is. But one other camera fixes the point's depth by a single epipolar constraint, which
-    a static object seen by this camera alone meets whenever the ball crosses its epipolar
+    there, unless that support held in every one of those frames (:func:`_still_alone`).
+    (Still in one image is not enough in general: a ball moving along a camera's ray is.
+    But one other camera fixes the point's depth by a single epipolar constraint, which a
+    static object seen by this camera alone meets whenever the ball crosses its epipolar
     line: its points then run along its ray, however still it is, and with no third camera
-    to deny them they make a track. Two or more supports whose rays meet fix the point in
-    3D, and the 3D test judges it.) Causal: only earlier frames of the same camera.
+    to deny them they make a track. Such a crossing ends; a ball moving along the ray is
+    supported in every frame. Two or more supports whose rays meet fix the point in 3D,
+    and the 3D test judges it.) Causal: only earlier frames of the same camera.
 
     Returns
     -------
