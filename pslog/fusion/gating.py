@@ -597,13 +597,14 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
 def _still_alone(run_px, held, lags: int):
     """The image test's verdict (:func:`_static`; arrays elementwise or floats): still
     across its ray in every one of the ``lags`` frames (``run_px``), and its support not
-    continuous there: not held (a still pixel whose own point rested on support) in every
-    one of them (``held``). A static object seen by one camera is supported only while
-    the ball crosses its epipolar line in the other (a slow crossing lasted 4-6 of 8
-    frames in ``bench_dirty.py --more``); a ball moving along its camera's ray is
-    supported in every frame (its partner slides along that line), and is still in its
-    image too."""
-    return (run_px >= lags) & (held < lags)
+    continuous there: held (a still pixel whose own point rested on support) in fewer
+    than all but one of them (``held``). A static object seen by one camera is supported
+    only while the ball crosses its epipolar line in the other (a slow crossing lasted
+    4-6 of 8 frames in ``bench_dirty.py --more``); a ball moving along its camera's ray
+    is supported in every frame (its partner slides along that line), and is still in
+    its image too; one frame whose point a coincidence spoiled does not count (a camera
+    going blind made one ball point's rays miss: 8 ball detections lost on wide3)."""
+    return (run_px >= lags) & (held < lags - 1)
 
 
 def _still_px(cam, x, y, z, options: GatingOptions, sqrt):
