@@ -529,12 +529,14 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
     support's) within ``static_m`` of a candidate's point in each of its camera's earlier
     frames; or, for a candidate whose point rests on one other camera (``paired``), its
     pixel within ``static_m`` across its ray (:func:`_still_px`) of a candidate's pixel
-    there. (Still in one image is not enough in general: a ball moving along a camera's ray
-    is. But one other camera fixes the point's depth by a single epipolar constraint, which
-    a static object seen by this camera alone meets whenever the ball crosses its epipolar
+    there, unless that support held in every one of those frames (:func:`_still_alone`).
+    (Still in one image is not enough in general: a ball moving along a camera's ray is.
+    But one other camera fixes the point's depth by a single epipolar constraint, which a
+    static object seen by this camera alone meets whenever the ball crosses its epipolar
     line: its points then run along its ray, however still it is, and with no third camera
-    to deny them they make a track. Two or more supports whose rays meet fix the point in
-    3D, and the 3D test judges it.) Causal: only earlier frames of the same camera.
+    to deny them they make a track. Such a crossing ends; a ball moving along the ray is
+    supported in every frame. Two or more supports whose rays meet fix the point in 3D,
+    and the 3D test judges it.) Causal: only earlier frames of the same camera.
 
     Returns
     -------
@@ -559,6 +561,7 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
         else:
             tol[~paired[np.maximum(table, 0)]] = np.nan
         run_px = np.zeros(table.shape)
+        held = np.zeros(table.shape)
         for lag in range(1, min(lags, len(times) - 1) + 1):
             prev = np.full(table.shape, -1)
             prev[lag:] = table[:-lag]
@@ -574,6 +577,11 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
                 d_px = np.sqrt(du * du + dv * dv)
             valid = prev[:, None, :] >= 0
             d = np.where(valid & np.isfinite(d), d, np.inf).min(axis=2)
+            with np.errstate(invalid="ignore"):
+                # a still pixel there whose own point rested on support too (the support held)
+                near = valid & (d_px <= tol[:, :, None])
+            held += recent[:, None] & np.any(near & np.isfinite(pp).all(axis=-1)[:, None, :],
+                                             axis=2)
             d_px = np.where(valid & np.isfinite(d_px), d_px, np.inf).min(axis=2)
             run += recent[:, None] & (d <= options.static_m)
             with np.errstate(invalid="ignore"):
@@ -582,8 +590,21 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
         stillness[table[ok]] = run[ok] / lags
         # still in most of them: one frame whose point a coincidence spoiled does not count;
         # across the ray, in every one of them (a static object's pixel is in every frame)
-        static[table[ok & ((run >= 0.75 * lags) | (run_px >= lags))]] = True
+        static[table[ok & ((run >= 0.75 * lags) | _still_alone(run_px, held, lags))]] = True
     return static, stillness
+
+
+def _still_alone(run_px, held, lags: int):
+    """The image test's verdict (:func:`_static`; arrays elementwise or floats): still
+    across its ray in every one of the ``lags`` frames (``run_px``), and its support not
+    continuous there: held (a still pixel whose own point rested on support) in fewer
+    than all but one of them (``held``). A static object seen by one camera is supported
+    only while the ball crosses its epipolar line in the other (a slow crossing lasted
+    4-6 of 8 frames in ``bench_dirty.py --more``); a ball moving along its camera's ray
+    is supported in every frame (its partner slides along that line), and is still in
+    its image too; one frame whose point a coincidence spoiled does not count (a camera
+    going blind made one ball point's rays miss: 8 ball detections lost on wide3)."""
+    return (run_px >= lags) & (held < lags - 1)
 
 
 def _still_px(cam, x, y, z, options: GatingOptions, sqrt):
@@ -1256,6 +1277,7 @@ def _stillness_one(key: int, pts, earlier, lags: int, options: GatingOptions,
     bool, stillness (k,))."""
     run = np.zeros(len(pts))
     run_px = np.zeros(len(pts))
+    held = np.zeros(len(pts))
     tols = [_still_px(cam, x, y, z, options, _sqrt)
             if cam is not None and paired[j] and math.isfinite(x) else math.nan
             for j, (x, y, z) in enumerate(pts)]
@@ -1270,18 +1292,23 @@ def _stillness_one(key: int, pts, earlier, lags: int, options: GatingOptions,
                 if d < best:  # NaN (no point) never is
                     best = d
             best_px = math.inf
+            supported = False
             if tols[j] == tols[j]:  # (an image test: not NaN)
                 u, v = uvs[j]
-                for pu, pv in prev_uvs[0]:
+                for (pu, pv), (px, py, pz) in zip(prev_uvs[0], prev_points, strict=True):
                     du, dv = u - pu, v - pv
                     d = _sqrt(du * du + dv * dv)
                     if d < best_px:
                         best_px = d
+                    if d <= tols[j] and px == px and py == py and pz == pz:  # (finite)
+                        supported = True
+            if supported:
+                held[j] += 1.0
             if best <= options.static_m:
                 run[j] += 1.0
             if best_px <= tols[j]:
                 run_px[j] += 1.0
-    return (run >= 0.75 * lags) | (run_px >= lags), run / lags
+    return (run >= 0.75 * lags) | _still_alone(run_px, held, lags), run / lags
 
 
 def _result(detections: Detections, rig: Rig, reason: np.ndarray) -> Gated:
