@@ -73,6 +73,8 @@ _KEY = {"offset": "clock_offset", "drift": "clock_drift_ppm", "readout": "readou
 MIN_DETECTIONS = 30
 #: The coarse scan fits at most this long a stretch of the session, seconds.
 _SCAN_WINDOW_S = 12.0
+#: Stretches the coarse scan tries (each seen by both cameras) before it gives up.
+_SCAN_TRIES = 3
 #: A session longer than _ALL_UP_TO_S is synced on _N_WINDOWS windows of _WINDOW_S spread
 #: over it (a bounded cost; the spread keeps the drift's lever arm).
 _ALL_UP_TO_S = 150.0
@@ -569,22 +571,19 @@ def _scan_offsets(obs, rig, unknowns, theta, params, search_s, options) -> np.nd
         half = search_s if search_s is not None else period / 2
         pair = (obs.camera == 0) | (obs.camera == c)
         rows = np.flatnonzero(pair)
-        t = obs.time_ns[rows] / NS
-        # the central stretch of the session: enough motion, a bounded cost
-        mid = np.median(t)
-        if len(t) and not np.any(np.abs(t - mid) <= _SCAN_WINDOW_S / 2):
-            # a long session's median falls between two of :func:`_windows`' stretches
-            # (the same number of detections either side): the stretch next to it, from the
-            # nearest detection on
-            near = t[np.argmin(np.abs(t - mid))]
-            mid = near + np.sign(near - mid) * _SCAN_WINDOW_S / 2
-        keep = rows[np.abs(t - mid) <= _SCAN_WINDOW_S / 2]
-        sub = obs.select(keep)
-        step = min(1e-3, half / 8)
-        grid = theta[j] + np.arange(-half, half + step / 2, step)
-        costs = np.array([_pair_cost(sub, rig, c, unknowns, theta, j, value, params, options)
-                          for value in grid])
-        if np.all(np.isnan(costs)):
+        # the scan's stretch, on the clocks' current values: among the stretches both cameras
+        # see (a blackout of either leaves the pair's trial costs undefined); the first whose
+        # trial costs are defined is scanned
+        t = params.times(obs, theta)[rows]
+        for mid in _scan_centres(t, obs.camera[rows] == c, options.max_gap_s):
+            sub = obs.select(rows[np.abs(t - mid) <= _SCAN_WINDOW_S / 2])
+            step = min(1e-3, half / 8)
+            grid = theta[j] + np.arange(-half, half + step / 2, step)
+            costs = np.array([_pair_cost(sub, rig, c, unknowns, theta, j, value, params,
+                                         options) for value in grid])
+            if not np.all(np.isnan(costs)):
+                break
+        else:
             raise FusionError(f"camera {rig.cameras[c].name}: no stretch of the session is "
                               f"seen by it and camera {rig.cameras[0].name} together long "
                               f"enough to scan its offset")
@@ -597,6 +596,60 @@ def _scan_offsets(obs, rig, unknowns, theta, params, search_s, options) -> np.nd
                 best += 0.5 * (cm - cp) / curv * step
         theta[j] = best
     return theta
+
+
+def _scan_centres(t: np.ndarray, other: np.ndarray, max_gap_s: float) -> np.ndarray:
+    """Centres (s) of the offset scan's stretch of ``_SCAN_WINDOW_S``, to try in this order.
+
+    Parameters
+    ----------
+    t : (n,) float
+        The pair's detection times (s, session clock at the clocks' current values).
+    other : (n,) bool
+        True for the scanned camera's detections, False for camera 1's.
+    max_gap_s : float
+        A detection is *shared* when one of the other camera's is within this (s).
+
+    Returns
+    -------
+    (m,) float
+        First the centre nearest the pair's median time (the session's central stretch:
+        enough motion, a bounded cost) among the stretches holding at least 90 % of the most
+        shared detections any stretch holds; then, should its trial costs be undefined,
+        up to ``_SCAN_TRIES - 1`` further stretches, most shared first, none overlapping one
+        before. Empty when no detection is shared. Deterministic: ties go to the earlier.
+    """
+    mine, first = np.sort(t[other]), np.sort(t[~other])
+    shared = np.sort(np.r_[mine[_near(mine, first, max_gap_s)],
+                           first[_near(first, mine, max_gap_s)]])
+    if not len(shared):
+        return np.zeros(0)
+    half = _SCAN_WINDOW_S / 2
+    mid = float(np.median(t))
+    # candidates: the median itself (the stretch scanned when both cameras see it) and each
+    # shared detection (every stretch of shared detections has one at its centre's reach)
+    centres = np.r_[mid, shared]
+    count = (np.searchsorted(shared, centres + half, "right")
+             - np.searchsorted(shared, centres - half, "left"))
+    good = np.flatnonzero(count >= 0.9 * count.max())
+    chosen = [centres[good[np.argmin(np.abs(centres[good] - mid))]]]
+    for k in np.lexsort((centres, -count)):
+        if len(chosen) == _SCAN_TRIES or count[k] == 0:
+            break
+        if np.all(np.abs(centres[k] - np.array(chosen)) >= _SCAN_WINDOW_S):
+            chosen.append(centres[k])
+    return np.array(chosen)
+
+
+def _near(x: np.ndarray, y: np.ndarray, tol_s: float) -> np.ndarray:
+    """(len(x),) bool: the sorted times ``x`` (s) with one of the sorted ``y`` within
+    ``tol_s``."""
+    if not len(y):
+        return np.zeros(len(x), dtype=bool)
+    j = np.searchsorted(y, x)
+    after = np.abs(y[np.minimum(j, len(y) - 1)] - x)
+    before = np.abs(x - y[np.maximum(j - 1, 0)])
+    return np.minimum(after, before) <= tol_s
 
 
 def _pair_cost(sub, rig, c, unknowns, theta, j, value, params, options) -> float:
