@@ -171,21 +171,21 @@ class SessionWriter:
         # copies of its messages: those are most of a fused session's bytes)
         self._tracks_of: dict[int, list[Track]] = {}
 
-        # metadata first and flushed at once, so even a file killed seconds later is a session
-        record = {
-            "format": S.FORMAT_NAME,
-            "format_version": S.FORMAT_VERSION,
-            "rig_toml": rig.to_toml(),
-            "timing": str(timing),
-            "source": str(source),
-            "creator": _creator(),
-            "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
-            "camera_names": ",".join(self._names),
-            **extra,
-        }
-        if self._discard:  # made from inputs that still exist: a stale partial may go
-            record[DERIVED_KEY] = "true"
-        try:
+        try:  # from here on an exception (a Ctrl-C or SIGTERM included) removes the file
+            # metadata first and flushed at once, so even a file killed seconds later is a session
+            record = {
+                "format": S.FORMAT_NAME,
+                "format_version": S.FORMAT_VERSION,
+                "rig_toml": rig.to_toml(),
+                "timing": str(timing),
+                "source": str(source),
+                "creator": _creator(),
+                "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
+                "camera_names": ",".join(self._names),
+                **extra,
+            }
+            if self._discard:  # made from inputs that still exist: a stale partial may go
+                record[DERIVED_KEY] = "true"
             with self._lock:
                 try:
                     self._mcap.start(profile="", library=_creator())
@@ -743,7 +743,15 @@ class SessionWriter:
     def close(self) -> None:
         """Flush and finish the file (summary, indexes, footer), then put it in place.
         Idempotent. Raises WriteError if the OS refused a write; a failed discard-mode
-        writer leaves nothing, a failed keep-mode writer keeps what it wrote."""
+        writer leaves nothing, a failed keep-mode writer keeps what it wrote.
+
+        Ctrl-C and SIGTERM are held while it runs (in the main thread): a KeyboardInterrupt
+        raised half-way (waiting for the flusher, between finishing and moving the file)
+        would leave the ``.partial`` behind; one that came meanwhile is raised after."""
+        with _signals_held():
+            self._close()
+
+    def _close(self) -> None:
         self._stop.set()
         flusher = getattr(self, "_flusher", None)
         if flusher is not None and flusher is not threading.current_thread():
@@ -812,6 +820,23 @@ class SessionWriter:
         if exc_type is not None:
             self._failed = True
         self.close()
+
+
+@contextlib.contextmanager
+def _signals_held():
+    """Block SIGINT and SIGTERM in the main thread for the block's length; a signal that
+    came meanwhile is delivered (its handler raising) when the block ends."""
+    import signal
+
+    if (threading.current_thread() is not threading.main_thread()
+            or not hasattr(signal, "pthread_sigmask")):
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
 class _Block:
