@@ -1,3 +1,6 @@
+# The pure-Python filter as it was before its step was compiled (session 6), kept verbatim
+# (imports made absolute; the jump replay's gravity weight mended as in pslog/fusion/filter.py)
+# as the reference benchmarks/filter_equality.py compares the compiled filter with.
 """``filter``: a causal extended Kalman filter, a point at every detection it can vouch for.
 
 Each detection updates the ball's state at its own (corrected, :mod:`pslog.timing`) capture
