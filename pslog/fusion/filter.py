@@ -268,7 +268,8 @@ class FilterOptions:
 
 
 class _Cam:
-    """One camera's projection constants as plain floats (no numpy per detection)."""
+    """One camera's projection constants as plain floats (a row of the filter's camera
+    table, :func:`_project`)."""
 
     __slots__ = ("camera", "cx", "cy", "distorted", "far", "fx", "fy", "k1", "k2", "k3",
                  "p1", "p2", "r", "s", "t")
@@ -283,45 +284,6 @@ class _Cam:
         self.k1, self.k2, self.p1, self.p2, self.k3 = (float(x) for x in camera.dist)
         self.distorted = bool(np.any(camera.dist))
         self.far = _FAR_IMAGES * max(camera.width, camera.height)
-
-    def project(self, px: float, py: float, pz: float):
-        """Distorted pixel ``(u, v)`` of a world point and ``∂(u, v)/∂p`` as two rows of 3;
-        None when the point is not in front of the camera."""
-        r = self.r
-        xc = r[0] * px + r[1] * py + r[2] * pz + self.t[0]
-        yc = r[3] * px + r[4] * py + r[5] * pz + self.t[1]
-        zc = r[6] * px + r[7] * py + r[8] * pz + self.t[2]
-        if not zc > _MIN_DEPTH_M:
-            return None
-        iz = 1.0 / zc
-        x, y = xc * iz, yc * iz
-        if self.distorted:
-            k1, k2, k3, p1, p2 = self.k1, self.k2, self.k3, self.p1, self.p2
-            r2 = x * x + y * y
-            radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-            dr = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)
-            xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
-            yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
-            d00 = radial + 2.0 * x * x * dr + 2.0 * p1 * y + 6.0 * p2 * x
-            d01 = 2.0 * x * y * dr + 2.0 * p1 * x + 2.0 * p2 * y
-            d11 = radial + 2.0 * y * y * dr + 6.0 * p1 * y + 2.0 * p2 * x
-            # A = K₂ · D (D symmetric: d10 = d01)
-            a00, a01 = self.fx * d00 + self.s * d01, self.fx * d01 + self.s * d11
-            a10, a11 = self.fy * d01, self.fy * d11
-        else:
-            xd, yd = x, y
-            a00, a01, a10, a11 = self.fx, self.s, 0.0, self.fy
-        u = self.fx * xd + self.s * yd + self.cx
-        v = self.fy * yd + self.cy
-        # M = A · ∂(x, y)/∂X_c, then H = M · R
-        m00, m01, m02 = a00 * iz, a01 * iz, -(a00 * x + a01 * y) * iz
-        m10, m11, m12 = a10 * iz, a11 * iz, -(a10 * x + a11 * y) * iz
-        h0 = (m00 * r[0] + m01 * r[3] + m02 * r[6], m00 * r[1] + m01 * r[4] + m02 * r[7],
-              m00 * r[2] + m01 * r[5] + m02 * r[8])
-        h1 = (m10 * r[0] + m11 * r[3] + m12 * r[6], m10 * r[1] + m11 * r[4] + m12 * r[7],
-              m10 * r[2] + m11 * r[5] + m12 * r[8])
-        return u, v, h0, h1
-
 
 
 # ---- the compiled per-detection step (numba, pslog._jit.kernel) ------------------------------
@@ -392,7 +354,8 @@ def _pmax(a, b):
 @kernel
 def _project(cams, ci, px, py, pz):
     """Distorted pixel of a world point and ``∂(u, v)/∂p`` (two rows of 3) through camera
-    ``ci`` (``_Cam.project``); ``ok`` False when the point is not in front of it.
+    ``ci`` (a row of the filter's camera table); ``ok`` False when the point is not in
+    front of it.
     Returns ``(ok, u, v, h00, h01, h02, h10, h11, h12)``."""
     r = cams[ci]
     xc = r[0] * px + r[1] * py + r[2] * pz + r[9]
@@ -1592,10 +1555,10 @@ class BallFilter:
                   + 0.5 * (tau * tau)[:, None] * accel).tolist()
         rows, res = [], []
         for (_, camera, u, v), ti, p in zip(window, tau.tolist(), points, strict=True):
-            proj = self._cams[camera].project(p[0], p[1], p[2])
-            if proj is None:
+            ok, pu, pv, *h = _project(self._cam_table, camera, p[0], p[1], p[2])
+            if not ok:
                 return None, None
-            pu, pv, h0, h1 = proj
+            h0, h1 = h[:3], h[3:]
             rows.append([h0[0], h0[1], h0[2], ti * h0[0], ti * h0[1], ti * h0[2]])
             rows.append([h1[0], h1[1], h1[2], ti * h1[0], ti * h1[1], ti * h1[2]])
             res.append(u - pu)
