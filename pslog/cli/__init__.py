@@ -174,9 +174,11 @@ def _main(argv: list[str] | None) -> int:
         print(f"pslog {name}: error: {exc}", file=sys.stderr)
         return 1
     except Terminated:
+        _close_abandoned_writers()
         print(f"pslog {name}: terminated (SIGTERM)", file=sys.stderr)
         return 143
     except KeyboardInterrupt:
+        _close_abandoned_writers()
         print(f"pslog {name}: interrupted", file=sys.stderr)
         return 130
     except BrokenPipeError:  # the reader went away (``| head``): nobody to tell
@@ -190,6 +192,14 @@ def _main(argv: list[str] | None) -> int:
     finally:
         sys.stdout = real_stdout
         restore_sigterm()
+
+
+def _close_abandoned_writers() -> None:
+    """After a Ctrl-C or SIGTERM: no ``.partial`` of a session writer left open (one the
+    interrupt caught before its ``with`` block was entered); only if one was ever made."""
+    writer = sys.modules.get("pslog.log.writer")
+    if writer is not None:
+        writer.close_abandoned()
 
 
 class Terminated(KeyboardInterrupt):

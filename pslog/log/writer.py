@@ -13,6 +13,7 @@ import contextlib
 import functools
 import threading
 import time
+import weakref
 from collections.abc import Mapping
 from datetime import UTC, datetime
 from typing import cast
@@ -136,14 +137,6 @@ class SessionWriter:
         self.rig = rig
         self._names = rig.names
         self._flush_interval = float(flush_interval_s)
-        try:
-            # locked while written: no other pslog run takes it for a stale partial
-            self._file = open_locked(self.target)  # closed in close()
-        except OSError as exc:
-            raise write_error(self.path, exc) from None
-        self._closed = False
-        self._mcap = Writer(self._file, compression=CompressionType.ZSTD)
-        self._bulk = _chunks.supported(self._mcap)  # messages written in blocks (_chunks)
         self._schema_ids: dict[str, int] = {}
         self._channels: dict[str, int] = {}
         # (channel, time, data, sequence) messages, or whole blocks of them (_add_block)
@@ -171,7 +164,23 @@ class SessionWriter:
         # copies of its messages: those are most of a fused session's bytes)
         self._tracks_of: dict[int, list[Track]] = {}
 
-        try:  # from here on an exception (a Ctrl-C or SIGTERM included) removes the file
+        opened = False
+        try:  # once the file exists an exception (a Ctrl-C or SIGTERM included) removes it
+            # the file is created, locked and wrapped with Ctrl-C and SIGTERM held, so that
+            # one coming at once (a service stopping the command as its output appears) is
+            # raised only where the cleanup below removes the file
+            with _signals_held():
+                try:
+                    # locked while written: no other pslog run takes it for a stale partial
+                    self._file = open_locked(self.target)  # closed in close()
+                except OSError as exc:
+                    raise write_error(self.path, exc) from None
+                opened = True
+                self._closed = False
+                _OPEN.add(self)
+                self._mcap = Writer(self._file, compression=CompressionType.ZSTD)
+                # messages written in blocks (_chunks)
+                self._bulk = _chunks.supported(self._mcap)
             # metadata first and flushed at once, so even a file killed seconds later is a session
             record = {
                 "format": S.FORMAT_NAME,
@@ -197,17 +206,20 @@ class SessionWriter:
                     self.flush()
                 except OSError as exc:
                     raise self._os_fault(exc) from None
+            if self._flush_interval > 0:
+                # flush on a timer too, so data is on disk within the interval even when the
+                # caller stops adding messages (a stalled camera) and is then killed
+                flusher = threading.Thread(target=self._flush_loop, daemon=True,
+                                           name=f"pslog-flush-{self.path.name}")
+                flusher.start()  # one interrupted here stops by itself (close() sets _stop)
+                self._flusher = flusher
         except BaseException:
+            if not opened:  # nothing of ours to remove (a busy partial is another run's)
+                raise
             self._failed = True
             self._discard = True  # nothing but the header was written: remove it
             self.close()  # never raises for a failed writer
             raise
-        if self._flush_interval > 0:
-            # flush on a timer too, so data is on disk within the interval even when the
-            # caller stops adding messages (a stalled camera) and is then killed
-            self._flusher = threading.Thread(target=self._flush_loop, daemon=True,
-                                             name=f"pslog-flush-{self.path.name}")
-            self._flusher.start()
 
     def _flush_loop(self) -> None:
         # poll often and flush a poll period early, so nothing stays buffered longer than
@@ -760,6 +772,7 @@ class SessionWriter:
             if self._closed:
                 return
             self._closed = True
+            _OPEN.discard(self)
             error: BaseException | None = None
             if self._flush_error is not None and not self._failed:
                 error = self._flush_failure()
@@ -820,6 +833,22 @@ class SessionWriter:
         if exc_type is not None:
             self._failed = True
         self.close()
+
+
+#: the writers whose file is open (see :func:`close_abandoned`)
+_OPEN: weakref.WeakSet[SessionWriter] = weakref.WeakSet()
+
+
+def close_abandoned() -> None:
+    """Close every writer still open as if its ``with`` block had failed (a discard-mode
+    writer's ``.partial`` removed, a keep-mode file finished with what it holds). For the
+    command line's Ctrl-C/SIGTERM handler: an interrupt that lands between a writer's
+    construction and its ``with`` block (or its caller's ``try``) leaves nobody else to
+    close it."""
+    for writer in list(_OPEN):
+        writer._failed = True
+        with contextlib.suppress(BaseException):
+            writer.close()
 
 
 @contextlib.contextmanager

@@ -79,3 +79,52 @@ def test_sigterm_mid_command_is_one_line_and_leaves_nothing(session_with_frames,
     assert_untouched(before, session)
     time.sleep(1.0)
     assert _pids_mentioning(str(tmp_path)) == []  # no worker left running
+
+
+def _thread_start_interrupted(monkeypatch) -> None:
+    """Make the start of the writer's flusher thread raise a Ctrl-C, as a signal landing
+    while ``Thread.start`` waits for the new thread does."""
+    import threading
+
+    start = threading.Thread.start
+
+    def interrupted(thread):
+        if thread.name.startswith("pslog-flush-"):
+            raise KeyboardInterrupt
+        return start(thread)
+
+    monkeypatch.setattr(threading.Thread, "start", interrupted)
+
+
+@pytest.mark.parametrize("existing", [False, True])
+def test_interrupt_while_the_writer_starts_leaves_no_partial(tmp_path, rig3, monkeypatch,
+                                                             existing):
+    """The CI failure of session 6: SIGTERM at once as ``pslog redetect``'s output appeared
+    landed in the flusher's start, outside the writer's cleanup, and left the ``.partial``."""
+    from pslog.log import SessionWriter
+
+    out = tmp_path / "out.mcap"
+    if existing:
+        out.write_bytes(b"an old output")
+    _thread_start_interrupted(monkeypatch)
+    with pytest.raises(KeyboardInterrupt):
+        SessionWriter(out, rig3, on_error="discard", force=True)
+    assert sorted(p.name for p in tmp_path.iterdir()) == (["out.mcap"] if existing else [])
+    if existing:
+        assert out.read_bytes() == b"an old output"
+
+
+def test_writer_left_open_by_an_interrupt_is_closed_by_the_command(tmp_path, rig3):
+    """A writer made but never entered (the interrupt came between its construction and its
+    ``with``): the command's interrupt handler removes a derived output's ``.partial`` and
+    finishes a recording with what it holds."""
+    from pslog.log import SessionWriter, read_session
+    from pslog.log.writer import close_abandoned
+
+    derived = SessionWriter(tmp_path / "derived.mcap", rig3, on_error="discard")
+    recording = SessionWriter(tmp_path / "rec.mcap", rig3)
+    recording.add_frame(0, 0, 1_000, uv=[[10.0, 20.0]])
+    assert derived.target == tmp_path / "derived.mcap.partial" and derived.target.exists()
+    close_abandoned()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rec.mcap"]
+    assert read_session(tmp_path / "rec.mcap").detections.n_frames == 1
