@@ -45,10 +45,22 @@ def _write(batches, bulk: bool) -> bytes:
     return out.getvalue()
 
 
+def _compressible(rng, n):
+    """Messages that zstd shrinks (repeated fields, as protobuf messages are): the level
+    shows in the bytes."""
+    channel, times, seq, _ = _messages(rng, n)
+    datas = [b"pslog" * int(k % 40) + rng.bytes(8) for k in range(n)]
+    return channel, times, seq, datas
+
+
 @pytest.mark.parametrize("big", [False, True])
-def test_block_write_is_add_message_byte_for_byte(big):
+def test_block_write_is_add_message_byte_for_byte(big, monkeypatch):
+    # at the mcap writer's own zstd level, the very bytes of add_message one by one (the
+    # small blocks by numpy's masks, the large ones by the compiled loop)
+    monkeypatch.setattr(_chunks, "ZSTD_LEVEL", 3)
     rng = np.random.default_rng(3)
     batches = [_messages(rng, n, big) for n in ([5000, 1, 20_000] if not big else [30, 7])]
+    batches.append(_compressible(rng, 30_000))
     one_by_one = _write(batches, bulk=False)
     block = _write(batches, bulk=True)
     assert block == one_by_one
@@ -59,3 +71,26 @@ def test_block_write_is_add_message_byte_for_byte(big):
             for c, t, s, d in zip(channel.tolist(), times.tolist(), seq.tolist(), datas,
                                   strict=True)]
     assert got == want
+
+
+def test_block_write_level_changes_bytes_not_content():
+    # pslog's own level (1: faster, as small) compresses differently from the mcap
+    # writer's 3; every reader gets the same records back
+    assert _chunks.ZSTD_LEVEL != 3
+    rng = np.random.default_rng(4)
+    batches = [_compressible(rng, n) for n in (20_000, 3, 40_000)]
+    one_by_one = _write(batches, bulk=False)
+    block = _write(batches, bulk=True)
+    assert block != one_by_one  # the compressed chunks differ
+
+    def records(data):
+        reader = make_reader(io.BytesIO(data))
+        summary = reader.get_summary()
+        return ([(c.id, m.log_time, m.publish_time, m.sequence, m.data)
+                 for _s, c, m in reader.iter_messages(log_time_order=False)],
+                [(i.message_start_time, i.message_end_time, i.uncompressed_size,
+                  sorted(i.message_index_offsets)) for i in summary.chunk_indexes],
+                dict(summary.statistics.channel_message_counts),
+                summary.statistics.message_count)
+
+    assert records(block) == records(one_by_one)

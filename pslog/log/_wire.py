@@ -183,3 +183,20 @@ def bound(n: int, method: bytes, names: list[bytes], extra_width: int, constants
     point = 11 + 10 + len(method) + 27 + 10 + widest + 27 + extra_width
     scene = 3 * 11 + 2 * 11 + 11 + 11 + len(method) + 1 + 20 + constants + 3 * 11 + 27 + 11
     return n * (point + scene)
+
+
+@kernel
+def assemble_records(body, heads, rec_start, payload, data_start, lengths):
+    """Write MCAP message records into a chunk's uncompressed ``body`` (uint8): record ``i``
+    is its 31-byte head ``heads[i]`` at ``rec_start[i]`` followed by its payload
+    ``payload[data_start[i]:data_start[i] + lengths[i]]`` (:func:`._chunks.write_messages`
+    lays out where each goes; this only copies, bytes that numpy's masks would place alike).
+    """
+    width = heads.shape[1]
+    for i in range(len(rec_start)):
+        at = rec_start[i]
+        for j in range(width):
+            body[at + j] = heads[i, j]
+        at += width
+        src = data_start[i]
+        body[at:at + lengths[i]] = payload[src:src + lengths[i]]

@@ -52,6 +52,10 @@ def copy_session(src, dst, *, detections: Detections | Callable[[], Detections] 
         meta, old_rig = f.meta, f.rig
         first_static = f.collect([S.calibration_topic(old_rig.names[0])])
         start_ns = min((t for t, _s, _d in next(iter(first_static.values()), [])), default=0)
+        # the copy keeps the source's channel ids: its chunks are then copied as they are
+        channel_ids: dict[str, int] = {}
+        for c in sorted(f.summary.channels.values(), key=lambda c: c.id):
+            channel_ids.setdefault(c.topic, c.id)
     if rig is not None and rig.names != old_rig.names:
         raise InputError(f"rig cameras {', '.join(rig.names)} differ from the session's "
                          f"{', '.join(old_rig.names)} (names and order must match)")
@@ -70,7 +74,7 @@ def copy_session(src, dst, *, detections: Detections | Callable[[], Detections] 
     with SessionWriter(dst, rig, force=force, timing=timing,
                        source=meta.get("source", ""), metadata=user_meta,
                        start_ns=start_ns, on_error="discard", inputs=[src_path],
-                       write_static=new_rig) as w:
+                       write_static=new_rig, channel_ids=channel_ids) as w:
         scan = io.Scan()
         # a corrected rig: its calibration and poses are written by the writer; otherwise
         # the recorded messages are copied verbatim (re-deriving them from the parsed rig
@@ -136,11 +140,17 @@ def _table_data(f: _Finished, name: str) -> bytes | None:
 
 def _copy_chunks(f: _Finished, w: SessionWriter, static: set[str], new_detections: bool,
                  replace_tracks: bool, new_methods: set[str]) -> bool:
-    """Copy the messages of ``f`` a chunk at a time (each chunk checked as the reader checks
-    it, its messages found through its MessageIndex records and written as one block: no
-    Python object per message); False, before writing anything, when the summary does not
-    account for every message (messages outside chunks, chunks without indexes, no
-    statistics): then the caller walks the file record by record."""
+    """Copy the messages of ``f`` a chunk at a time, each chunk checked as the reader checks
+    it (decompressed, its CRC and its MessageIndex records against its message records).
+
+    A chunk that holds only message records, all of them kept, on channels that have the
+    same id here, whose messages no table here is made from (:meth:`SessionWriter.
+    _adopt_table`), is written byte for byte, its compressed bytes and indexes as they
+    are (:meth:`SessionWriter._add_raw_chunk`): most of a session, never compressed
+    again. Any other chunk's kept messages are written as one block (no Python object
+    per message). False, before writing anything, when the summary does not account for
+    every message (messages outside chunks, chunks without indexes, no statistics): then
+    the caller walks the file record by record."""
     import mmap
 
     summary = f.summary
@@ -192,6 +202,10 @@ def _copy_chunks(f: _Finished, w: SessionWriter, static: set[str], new_detection
             except LogFormatError as exc:
                 raise io.damaged_error(f.path, index.chunk_start_offset, str(exc)) from None
             batch = _walk(records)
+        else:
+            if _verbatim(index, batch, len(records), fate, w):
+                _copy_raw(f, w, index, batch, topics)
+                continue
         del records
         for images in (False, True):
             cids = np.array([c for c, v in fate.items() if v is not None and v[1] == images],
@@ -204,6 +218,38 @@ def _copy_chunks(f: _Finished, w: SessionWriter, static: set[str], new_detection
                                 batch.end[sel] - batch.start[sel], payload.tobytes()),
                          topics, images=images)
     return True
+
+
+def _verbatim(index, batch: _Messages, size: int, fate: dict, w: SessionWriter) -> bool:
+    """Whether a chunk (its messages ``batch``, found through its indexes; ``size`` bytes of
+    records) can be copied byte for byte: message records only, back to back, each on a
+    kept channel with the same id here, none of whose messages a table is made from."""
+    cids = index.message_index_offsets.keys()
+    if not len(batch.channel) or not all(
+            fate.get(c) is not None and fate[c][0] == c and c not in w._table_parts
+            for c in cids):
+        return False
+    begin = batch.start - io._MESSAGE_HEAD - 9  # each record's opcode
+    return bool(begin[0] == 0 and batch.end[-1] == size
+                and np.array_equal(begin[1:], batch.end[:-1]))
+
+
+def _copy_raw(f: _Finished, w: SessionWriter, index, batch: _Messages,
+              topics: dict[int, str]) -> None:
+    """Write a chunk of ``f`` and its MessageIndex records as they are (see
+    :func:`_verbatim`)."""
+    end = index.chunk_start_offset + index.chunk_length
+    f.file.seek(index.chunk_start_offset)
+    record = f.file.read(index.chunk_length)
+    indexes = f.file.read(index.message_index_length)
+    if len(record) != index.chunk_length or len(indexes) != index.message_index_length:
+        raise io.damaged_error(f.path, index.chunk_start_offset, "chunk cut short")
+    ids, first, counts = np.unique(batch.channel, return_index=True, return_counts=True)
+    order = np.argsort(first, kind="stable")
+    w._add_raw_chunk(record, indexes,
+                     {cid: at - end for cid, at in index.message_index_offsets.items()},
+                     dict(zip(ids[order].tolist(), counts[order].tolist(), strict=True)),
+                     int(batch.time.min()), int(batch.time.max()), topics)
 
 
 class _Messages:

@@ -100,6 +100,9 @@ class SessionWriter:
           session copies): always written as ``<path>.partial``, removed on any failure, so
           nothing half-written is ever left under ``path`` and an old ``path`` stays.
     inputs : files the session is made from; ``path`` may not be one of them
+    channel_ids : topic -> the MCAP channel id to give it (a session copy keeps its source's
+        ids, so that the source's chunks are copied byte for byte); other topics get ids
+        above all of these. Ignored where the installed ``mcap`` writer does not allow it
 
     Attributes
     ----------
@@ -110,7 +113,8 @@ class SessionWriter:
     def __init__(self, path, rig: Rig, *, force: bool = False, timing: str = "custom",
                  source: str = "", metadata: Mapping[str, str] | None = None,
                  flush_interval_s: float = 0.5, start_ns: int = 0,
-                 on_error: str = "keep", inputs=(), write_static: bool = True) -> None:
+                 on_error: str = "keep", inputs=(), write_static: bool = True,
+                 channel_ids: Mapping[str, int] | None = None) -> None:
         from mcap.writer import CompressionType, Writer
 
         if on_error not in ("keep", "discard"):
@@ -139,6 +143,8 @@ class SessionWriter:
         self._flush_interval = float(flush_interval_s)
         self._schema_ids: dict[str, int] = {}
         self._channels: dict[str, int] = {}
+        self._wanted_ids = {str(k): int(v) for k, v in dict(channel_ids or {}).items()}
+        self._bulk = False
         # (channel, time, data, sequence) messages, or whole blocks of them (_add_block)
         self._pending: list[tuple[int, int, bytes, int] | _Block] = []
         # images wait here, not in the MCAP writer's chunk, so that the small messages buffered
@@ -246,18 +252,32 @@ class SessionWriter:
                 schema = self._mcap.register_schema(
                     name=name, encoding=S.PROTOBUF, data=S.file_descriptor_set(message_class))
                 self._schema_ids[name] = schema
-            channel = self._mcap.register_channel(topic=topic, message_encoding=S.PROTOBUF,
-                                                  schema_id=schema)
+            channel = self._register_channel(topic, S.PROTOBUF, schema, {})
             self._channels[topic] = channel
             self._note_channel(topic, channel)
         return channel
 
+    def _register_channel(self, topic: str, encoding: str, schema_id: int, metadata) -> int:
+        """Register a channel with the MCAP writer: the id :attr:`_wanted_ids` names for
+        ``topic`` when it is free, else one above every id used or wanted (the ``mcap``
+        writer's own numbering when no id is wanted)."""
+        if not (self._wanted_ids and self._bulk):
+            return self._mcap.register_channel(topic, encoding, schema_id, metadata)
+        used = self._channels.values()
+        cid = self._wanted_ids.get(topic)
+        if cid is None or cid in used:
+            cid = max([*used, *self._wanted_ids.values()], default=0) + 1
+        _chunks.register_channel(self._mcap, cid, topic, encoding, schema_id, metadata)
+        return cid
+
     def _note_channel(self, topic: str, channel: int) -> None:
-        """Keep the messages of ``channel`` if a columnar table stands for its topic."""
+        """Keep the messages of ``channel`` if a columnar table stands for its topic (and
+        no copied table stands for them: :meth:`_adopt_table`)."""
         row = table.table_of(topic, self._names)
         if row is not None:
             self._table_rows[channel] = row
-            self._table_parts[channel] = []
+            if self._adopted.get(row[0]) is None:
+                self._table_parts[channel] = []
             self._topic_of[channel] = topic
 
     def _keep_table_rows(self, channel: np.ndarray, times: np.ndarray, sequence: np.ndarray,
@@ -290,8 +310,15 @@ class SessionWriter:
     def _adopt_table(self, name: str, data: bytes | None) -> None:
         """A table read from the session being copied (checked): written as it is at close
         when the messages its topics got here are exactly as many as it names (a copy of
-        every one of them), else made again from the messages."""
+        every one of them). The messages of its topics are then not kept (they were most
+        of a copy's memory): should their number differ (messages added besides the copy),
+        the session gets no such table and readers decode the messages, as they do for
+        any file without tables."""
         self._adopted[name] = data
+        if data is not None:
+            for cid, (t, _cam) in self._table_rows.items():
+                if t == name:
+                    self._table_parts.pop(cid, None)
 
     def _write_tables(self) -> None:
         """Write each table whose topics have a channel as an attachment (see
@@ -306,6 +333,10 @@ class SessionWriter:
                          if cid in self._table_parts}
             counts = {t: sum(len(b) for b in per_topic.get(t, []))
                       for t in table.topics_of(name, self._names)}
+            unkept = any(cid not in self._table_parts and cid not in self._tracks_of
+                         for cid in channels)
+            if unkept:  # an adopted table's messages, counted but not kept
+                counts = {t: self.counts.get(t, 0) for t in table.topics_of(name, self._names)}
             if direct:  # a track channel fed by add_track only
                 counts = {t: sum(len(x) for x in direct[0])
                           for t in table.topics_of(name, self._names)}
@@ -320,6 +351,8 @@ class SessionWriter:
             if data is None and direct:
                 data = table.encode(name, self._names, counts,
                                     table.track_columns_of(direct[0]))
+            elif data is None and unkept:
+                continue  # nothing to make it from: the messages stand alone
             elif data is None:
                 data = table.build(name, self._names, per_topic)
             if data is not None:
@@ -620,6 +653,22 @@ class SessionWriter:
             self._drain()
         self._maybe_flush()
 
+    @_locked
+    def _add_raw_chunk(self, record, indexes, index_offsets: dict[int, int],
+                       counts: dict[int, int], start_time: int, end_time: int,
+                       topics: dict[int, str]) -> None:
+        """Copy a chunk of another session as it is (:func:`._chunks.write_raw_chunk`):
+        every channel of it registered here with its id there, ``topics`` their topics,
+        ``counts`` their messages in it. Whatever is buffered is written first (file order
+        as the messages came)."""
+        self._check_open()
+        self._write_images()
+        _chunks.write_raw_chunk(self._mcap, record, indexes, index_offsets, counts,
+                                start_time, end_time)
+        for cid, k in counts.items():
+            self._count(topics[cid], k)
+        self._maybe_flush()
+
     def _foreign_channel(self, topic: str, schema, channel) -> int:
         """This writer's channel of ``topic`` (registered from a copied file's records, a
         ``_mcapio.SchemaRec`` or None and a ``_mcapio.ChannelRec``, if new)."""
@@ -634,7 +683,7 @@ class SessionWriter:
                 if not sid:
                     sid = self._schema_ids[key] = self._mcap.register_schema(
                         schema.name, schema.encoding, schema.data)
-            cid = self._mcap.register_channel(topic, channel.encoding, sid, channel.metadata)
+            cid = self._register_channel(topic, channel.encoding, sid, channel.metadata)
             self._channels[topic] = cid
             self._note_channel(topic, cid)
         return cid
