@@ -143,32 +143,33 @@ def write_messages(writer, channel: np.ndarray, log_time: np.ndarray, sequence: 
             body[where] = head_bytes[s:e].ravel()
             body[~is_head] = payload[d0:int(data_ends[e - 1])]
             del is_head, where
-        bodies.append((s, e, rec_start, body.tobytes()))
+        bodies.append((s, e, rec_start, body))  # compressed from the array: no copy
         del body
         s, base = e, 0
-    for (s, e, rec_start, raw), compressed in zip(bodies, _compress_all([b[3] for b in bodies]),
-                                                 strict=True):
+    packed = _pack_all([b[3] for b in bodies], crcs)
+    for (s, e, rec_start, raw), (compressed, crc) in zip(bodies, packed, strict=True):
         times = log_time[s:e]
         start_time, end_time = int(times.min()), int(times.max())
-        # the chunk record
-        record = b"".join([
+        # the chunk record: its fixed fields, then the compressed records (written as they
+        # are, not joined into one more copy)
+        head = b"".join([
             bytes([_OP_CHUNK]),
             (8 + 8 + 8 + 4 + 4 + 4 + 8 + len(compressed)).to_bytes(8, "little"),
             start_time.to_bytes(8, "little"), end_time.to_bytes(8, "little"),
-            len(raw).to_bytes(8, "little"),
-            (zlib.crc32(raw) if crcs else 0).to_bytes(4, "little"),
-            (4).to_bytes(4, "little"), b"zstd",
-            len(compressed).to_bytes(8, "little"), compressed])
+            len(raw).to_bytes(8, "little"), crc.to_bytes(4, "little"),
+            (4).to_bytes(4, "little"), b"zstd", len(compressed).to_bytes(8, "little")])
         chunk_start = stream.tell()
-        stream.write(record)
+        stream.write(head)
+        stream.write(compressed)
+        record_length = len(head) + len(compressed)
         index = ChunkIndex(message_start_time=start_time, message_end_time=end_time,
-                           chunk_start_offset=chunk_start, chunk_length=len(record),
+                           chunk_start_offset=chunk_start, chunk_length=record_length,
                            message_index_offsets={}, message_index_length=0,
                            compression="zstd", compressed_size=len(compressed),
                            uncompressed_size=len(raw))
         # message indexes: one per channel, in order of each channel's first message
         pieces = []
-        index_start = chunk_start + len(record)
+        index_start = chunk_start + record_length
         if index_messages:
             chans = channel[s:e]
             uniq, first = np.unique(chans, return_index=True)
@@ -189,8 +190,8 @@ def write_messages(writer, channel: np.ndarray, log_time: np.ndarray, sequence: 
         index.message_index_length = len(indexes)
         stream.write(indexes)
         if data_crcs:
-            writer._Writer__data_section_crc = zlib.crc32(
-                indexes, zlib.crc32(record, writer._Writer__data_section_crc))
+            writer._Writer__data_section_crc = zlib.crc32(indexes, zlib.crc32(
+                compressed, zlib.crc32(head, writer._Writer__data_section_crc)))
         writer._Writer__chunk_indices.append(index)
         stats.chunk_count += 1
 
@@ -200,23 +201,46 @@ def write_messages(writer, channel: np.ndarray, log_time: np.ndarray, sequence: 
 _POOL: tuple[int, object] | None = None
 
 
-def _compress_all(raws: list[bytes]) -> list[bytes]:
-    """``zstandard.compress`` of each at :data:`ZSTD_LEVEL` (one zstd frame with its content
-    size, as the ``mcap`` writer makes them), on a pool of threads when there are several."""
-    import os
-
+def _pack(raw, crcs: bool) -> tuple[bytes, int]:
+    """A chunk's compressed records and their CRC-32 (0 when not computed): both release
+    the GIL, so a pool thread does both."""
     import zstandard
 
-    if len(raws) < 2 or (os.cpu_count() or 1) < 2:
-        return [zstandard.compress(r, ZSTD_LEVEL) for r in raws]
+    return zstandard.compress(raw, ZSTD_LEVEL), (zlib.crc32(raw) if crcs else 0)
+
+
+def _pack_all(raws: list, crcs: bool) -> list[tuple[bytes, int]]:
+    """:func:`_pack` of each, on the pool of :func:`_compress_all`."""
+    pool = _pool() if len(raws) > 1 else None
+    if pool is None:
+        return [_pack(r, crcs) for r in raws]
+    return list(pool.map(functools.partial(_pack, crcs=crcs), raws))
+
+
+def _pool():
+    """The thread pool compressing chunks (None on one core)."""
+    import os
+
+    if (os.cpu_count() or 1) < 2:
+        return None
     global _POOL
     if _POOL is None or _POOL[0] != os.getpid():
         from concurrent.futures import ThreadPoolExecutor
 
         _POOL = (os.getpid(), ThreadPoolExecutor(max_workers=min(4, os.cpu_count() or 1),
                                                  thread_name_prefix="pslog-zstd"))
-    return list(_POOL[1].map(functools.partial(zstandard.compress, level=ZSTD_LEVEL),  # type: ignore[attr-defined]
-                             raws))
+    return _POOL[1]
+
+
+def _compress_all(raws: list[bytes]) -> list[bytes]:
+    """``zstandard.compress`` of each at :data:`ZSTD_LEVEL` (one zstd frame with its content
+    size, as the ``mcap`` writer makes them), on a pool of threads when there are several."""
+    import zstandard
+
+    pool = _pool() if len(raws) > 1 else None
+    if pool is None:
+        return [zstandard.compress(r, ZSTD_LEVEL) for r in raws]
+    return list(pool.map(functools.partial(zstandard.compress, level=ZSTD_LEVEL), raws))
 
 
 def register_channel(writer, channel_id: int, topic: str, message_encoding: str,
