@@ -94,3 +94,24 @@ def test_block_write_level_changes_bytes_not_content():
                 summary.statistics.message_count)
 
     assert records(block) == records(one_by_one)
+
+
+def test_attachment_written_in_pieces_is_add_attachment_byte_for_byte():
+    rng = np.random.default_rng(5)
+    data = [rng.bytes(1000), b"", memoryview(np.arange(5000, dtype="<f8")).cast("B"), b"x"]
+
+    def write(pieces: bool) -> bytes:
+        out = io.BytesIO()
+        w = Writer(out, compression=CompressionType.ZSTD)
+        w.start(profile="", library="test")
+        sid = w.register_schema("s", "protobuf", b"xyz")
+        w.add_message(w.register_channel("/t", "protobuf", sid), 5, b"m", 5)
+        for name in ("pslog/table/a", "b"):
+            if pieces:
+                _chunks.write_attachment(w, name, "application/x", data)
+            else:
+                w.add_attachment(0, 0, name, "application/x", b"".join(data))
+        w.finish()
+        return out.getvalue()
+
+    assert write(True) == write(False)

@@ -20,7 +20,7 @@ import numpy as np
 #: publish time (MCAP spec, "Message" record), packed (31 bytes)
 _HEAD = np.dtype([("op", "u1"), ("length", "<u8"), ("channel", "<u2"), ("sequence", "<u4"),
                   ("log_time", "<u8"), ("publish_time", "<u8")])
-_OP_MESSAGE, _OP_CHUNK, _OP_MESSAGE_INDEX = 0x05, 0x06, 0x07
+_OP_MESSAGE, _OP_CHUNK, _OP_MESSAGE_INDEX, _OP_ATTACHMENT = 0x05, 0x06, 0x07, 0x09
 _U32 = 1 << 32
 #: payload bytes from which a block's chunk records are assembled by the compiled loop
 _COMPILED_FROM = 1 << 20
@@ -38,7 +38,8 @@ def supported(writer) -> bool:
     names = ("_Writer__chunk_builder", "_Writer__chunk_indices", "_Writer__statistics",
              "_Writer__stream", "_Writer__chunk_size", "_Writer__compression",
              "_Writer__index_types", "_Writer__enable_crcs", "_Writer__enable_data_crcs",
-             "_Writer__flush", "_Writer__channels", "_Writer__finalize_chunk")
+             "_Writer__flush", "_Writer__channels", "_Writer__finalize_chunk",
+             "_Writer__attachment_indexes")
     return (all(hasattr(writer, n) for n in names)
             and writer._Writer__chunk_builder is not None
             and writer._Writer__compression == CompressionType.ZSTD)
@@ -327,3 +328,38 @@ def write_raw_chunk(writer, record, indexes, index_offsets: dict[int, int],
         stats.channel_message_counts[cid] += k
     stats.message_count += n
     stats.chunk_count += 1
+
+
+def write_attachment(writer, name: str, media_type: str, parts) -> None:
+    """``writer.add_attachment(0, 0, name, media_type, b"".join(parts))`` (log and create
+    time 0) with the same bytes, its ``data`` written piece by piece: no copy of it (the
+    ``mcap`` writer copies an attachment's data four times on its way to the file)."""
+    from mcap.records import AttachmentIndex
+    from mcap.writer import IndexType
+
+    writer._Writer__flush()
+    stream = writer._Writer__stream
+    size = sum(len(p) for p in parts)
+    name_b, media_b = name.encode(), media_type.encode()
+    head = b"".join([(0).to_bytes(8, "little"), (0).to_bytes(8, "little"),
+                     len(name_b).to_bytes(4, "little"), name_b,
+                     len(media_b).to_bytes(4, "little"), media_b,
+                     size.to_bytes(8, "little")])
+    length = len(head) + size + 4
+    offset = stream.tell()
+    crc = zlib.crc32(head)
+    pieces = [bytes([_OP_ATTACHMENT]) + length.to_bytes(8, "little") + head]
+    for p in parts:
+        crc = zlib.crc32(p, crc)
+        pieces.append(p)
+    pieces.append(crc.to_bytes(4, "little"))
+    data_crcs = writer._Writer__enable_data_crcs
+    for p in pieces:
+        stream.write(p)
+        if data_crcs:
+            writer._Writer__data_section_crc = zlib.crc32(p, writer._Writer__data_section_crc)
+    writer._Writer__statistics.attachment_count += 1
+    if writer._Writer__index_types & IndexType.ATTACHMENT:
+        writer._Writer__attachment_indexes.append(AttachmentIndex(
+            offset=offset, length=9 + length, create_time=0, log_time=0, data_size=size,
+            name=name, media_type=media_type))

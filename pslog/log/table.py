@@ -113,7 +113,15 @@ def topics_of(table: str, camera_names: Sequence[str]) -> list[str]:
 
 def encode(table: str, camera_names: Sequence[str], counts: Mapping[str, int],
            columns: Mapping[str, np.ndarray]) -> bytes:
-    """The attachment data of ``table``.
+    """The attachment data of ``table`` (:func:`encode_parts` joined)."""
+    return b"".join(encode_parts(table, camera_names, counts, columns))
+
+
+def encode_parts(table: str, camera_names: Sequence[str], counts: Mapping[str, int],
+                 columns: Mapping[str, np.ndarray]) -> list:
+    """The attachment data of ``table`` as pieces (bytes-like) to write one after another:
+    the columns' bytes are not copied into one more buffer (a fused match's track table
+    is tens of MB).
 
     Parameters
     ----------
@@ -127,7 +135,7 @@ def encode(table: str, camera_names: Sequence[str], counts: Mapping[str, int],
     blobs, described, at = [], {}, 0
     named = list(_columns_of(table, list(columns)).items())
     values_of = [np.ascontiguousarray(columns[name], dtype=dtype) for name, (dtype, _s) in named]
-    raws = [v.tobytes() for v in values_of]
+    raws = [memoryview(v.reshape(-1)).cast("B") for v in values_of]  # no copy
     # every column large enough compressed at once (on the writer's thread pool)
     big = [i for i, raw in enumerate(raws) if len(raw) >= _COMPRESS_FROM]
     packed_of = dict(zip(big, _compress_all([raws[i] for i in big]), strict=True))
@@ -142,21 +150,21 @@ def encode(table: str, camera_names: Sequence[str], counts: Mapping[str, int],
         described[name] = {"dtype": dtype, "shape": list(values.shape), "codec": codec,
                            "offset": at, "size": len(stored)}
         pad = -len(stored) % 8
-        blobs.append(stored + bytes(pad))
+        blobs += [stored, bytes(pad)]
         at += len(stored) + pad
     header = json.dumps({"format": FORMAT, "version": VERSION, "table": table,
                          "cameras": list(camera_names),
                          "topics": {t: int(n) for t, n in counts.items()},
                          "columns": described}, separators=(",", ":")).encode()
     head = len(header).to_bytes(4, "little") + header
-    return head + bytes(-len(head) % 8) + b"".join(blobs)
+    return [head + bytes(-len(head) % 8), *blobs]
 
 
-def decode(data: bytes, table: str, camera_names: Sequence[str]
+def decode(data: bytes, table: str, camera_names: Sequence[str], header_only: bool = False
            ) -> tuple[dict[str, int], dict[str, np.ndarray]]:
     """``(topic counts, columns)`` of a table's attachment data; LogFormatError naming what
     does not check out (wrong format, version, table, cameras, a column's dtype, shape,
-    length or bytes)."""
+    length or bytes). ``header_only``: the header's checks alone, no column (``{}``)."""
     import zstandard
 
     if len(data) < 4:
@@ -187,6 +195,8 @@ def decode(data: bytes, table: str, camera_names: Sequence[str]
     expected_columns = _columns_of(table, list(described))
     if set(described) != set(expected_columns):
         raise LogFormatError("table columns differ from the format's")
+    if header_only:
+        return counts, {}
     body = 4 + size + (-(4 + size) % 8)
     out = {}
     for name, (dtype, shape) in expected_columns.items():

@@ -342,21 +342,28 @@ class SessionWriter:
                           for t in table.topics_of(name, self._names)}
             data = self._adopted.get(name)
             if data is not None:
-                try:
-                    copied, _ = table.decode(data, name, self._names)
+                try:  # (its columns were checked as the session was read)
+                    copied, _ = table.decode(data, name, self._names, header_only=True)
                 except LogFormatError:
                     copied = None
                 if copied != counts:
                     data = None
+            parts = None if data is None else [data]
             if data is None and direct:
-                data = table.encode(name, self._names, counts,
-                                    table.track_columns_of(direct[0]))
+                parts = table.encode_parts(name, self._names, counts,
+                                           table.track_columns_of(direct[0]))
             elif data is None and unkept:
                 continue  # nothing to make it from: the messages stand alone
             elif data is None:
                 data = table.build(name, self._names, per_topic)
-            if data is not None:
-                self._mcap.add_attachment(0, 0, name, table.MEDIA_TYPE, data)
+                parts = None if data is None else [data]
+            del data
+            if parts is not None:
+                if self._bulk:  # written piece by piece, not copied on its way
+                    _chunks.write_attachment(self._mcap, name, table.MEDIA_TYPE, parts)
+                else:
+                    self._mcap.add_attachment(0, 0, name, table.MEDIA_TYPE, b"".join(parts))
+                del parts
 
     def _write_static(self, time_ns: int) -> None:
         """Per camera: foxglove.CameraCalibration and foxglove.FrameTransform world -> camera."""
@@ -715,9 +722,9 @@ class SessionWriter:
         channel = self._channel(S.track_topic(method), S.TrackPoint)
         scene_channel = self._channel(S.track_scene_topic(method), S.SceneUpdate)
         n = len(track)
-        nan = [float("nan")] * n
-        fixed = {k: (track.quality[k].tolist() if k in track.quality else nan)
-                 for k in S.TRACK_FIXED_QUALITY}
+        nan = np.full(n, np.nan)  # (arrays: lists of a match's floats were ~100 MB)
+        fixed = {k: (np.asarray(track.quality[k], dtype=np.float64) if k in track.quality
+                     else nan) for k in S.TRACK_FIXED_QUALITY}
         extra = {k: np.asarray(v, dtype=np.float64) for k, v in track.quality.items()
                  if k not in S.TRACK_FIXED_QUALITY}
         if n and track.time_ns.min() < 0:
@@ -754,7 +761,7 @@ class SessionWriter:
         # the quality map's bytes of every point at once (setting its keys one point at a
         # time was most of the cost of writing a track); None: the per-point way
         entries = _quality_entries({k: v[lo:hi] for k, v in extra.items()}, hi - lo)
-        fixed = {k: v[lo:hi] for k, v in fixed.items()}
+        fixed = {k: v[lo:hi].tolist() for k, v in fixed.items()}
         for j, (t, (x, y, z), cam) in enumerate(zip(
                 track.time_ns[lo:hi].tolist(), track.position_world[lo:hi].tolist(),
                 track.camera[lo:hi].tolist(), strict=True)):
