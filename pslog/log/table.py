@@ -322,9 +322,15 @@ def track_columns_of(tracks: Sequence) -> dict[str, np.ndarray]:
     """
     n = sum(len(t) for t in tracks)
     times = np.concatenate([t.time_ns for t in tracks] or [np.zeros(0, np.int64)])
-    order = np.argsort(times, kind="stable")
+    # one track already in time order (a fused track): its own arrays, not copies (a
+    # match's columns are tens of MB)
+    one = len(tracks) == 1 and bool(np.all(times[1:] >= times[:-1]))
+    order = slice(None) if one else np.argsort(times, kind="stable")
 
     def column(key: str) -> np.ndarray:
+        if one:
+            t = tracks[0]
+            return t.quality[key] if key in t.quality else np.full(len(t), np.nan)
         return np.concatenate([t.quality[key] if key in t.quality else np.full(len(t), np.nan)
                                for t in tracks])[order]
 
@@ -336,11 +342,14 @@ def track_columns_of(tracks: Sequence) -> dict[str, np.ndarray]:
                 quality[key] = values
         for key in dict.fromkeys(k for t in tracks for k in _map_order(t)):
             quality[key] = column(key)
-    return {"time_ns": times[order],
-            "position_world": np.concatenate([t.position_world for t in tracks]
-                                             or [np.zeros((0, 3))])[order],
-            "camera": np.concatenate([t.camera for t in tracks]
-                                     or [np.zeros(0, np.int32)])[order].astype(np.int32),
+    if one:
+        position, camera = tracks[0].position_world, np.asarray(tracks[0].camera)
+    else:
+        position = np.concatenate([t.position_world for t in tracks]
+                                  or [np.zeros((0, 3))])[order]
+        camera = np.concatenate([t.camera for t in tracks] or [np.zeros(0, np.int32)])[order]
+    return {"time_ns": times if one else times[order], "position_world": position,
+            "camera": camera.astype(np.int32, copy=False),
             **{QUALITY_PREFIX + k: v for k, v in quality.items()}}
 
 
