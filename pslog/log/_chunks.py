@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import functools
 import zlib
+from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -118,9 +120,11 @@ def write_messages(writer, channel: np.ndarray, log_time: np.ndarray, sequence: 
     # GIL: the chunks of a block are compressed on every core), then written in order;
     # a large block's records are assembled by a compiled loop (numba, loaded only here:
     # numpy's masks cost as much as the compression), a small one's with numpy masks
-    compiled = None
+    compiled: Callable[..., None] | None = None
     if len(data) >= _COMPILED_FROM:
-        from ._wire import assemble_records as compiled
+        from ._wire import assemble_records
+
+        compiled = assemble_records
     bodies = []
     s, base = 0, len(prefix)
     while s < n:
@@ -153,16 +157,16 @@ def write_messages(writer, channel: np.ndarray, log_time: np.ndarray, sequence: 
         start_time, end_time = int(times.min()), int(times.max())
         # the chunk record: its fixed fields, then the compressed records (written as they
         # are, not joined into one more copy)
-        head = b"".join([
+        chunk_head = b"".join([
             bytes([_OP_CHUNK]),
             (8 + 8 + 8 + 4 + 4 + 4 + 8 + len(compressed)).to_bytes(8, "little"),
             start_time.to_bytes(8, "little"), end_time.to_bytes(8, "little"),
             len(raw).to_bytes(8, "little"), crc.to_bytes(4, "little"),
             (4).to_bytes(4, "little"), b"zstd", len(compressed).to_bytes(8, "little")])
         chunk_start = stream.tell()
-        stream.write(head)
+        stream.write(chunk_head)
         stream.write(compressed)
-        record_length = len(head) + len(compressed)
+        record_length = len(chunk_head) + len(compressed)
         index = ChunkIndex(message_start_time=start_time, message_end_time=end_time,
                            chunk_start_offset=chunk_start, chunk_length=record_length,
                            message_index_offsets={}, message_index_length=0,
@@ -192,7 +196,7 @@ def write_messages(writer, channel: np.ndarray, log_time: np.ndarray, sequence: 
         stream.write(indexes)
         if data_crcs:
             writer._Writer__data_section_crc = zlib.crc32(indexes, zlib.crc32(
-                compressed, zlib.crc32(head, writer._Writer__data_section_crc)))
+                compressed, zlib.crc32(chunk_head, writer._Writer__data_section_crc)))
         writer._Writer__chunk_indices.append(index)
         stats.chunk_count += 1
 
@@ -202,7 +206,7 @@ def write_messages(writer, channel: np.ndarray, log_time: np.ndarray, sequence: 
 _POOL: tuple[int, object] | None = None
 
 
-def _pack(raw, crcs: bool) -> tuple[bytes, int]:
+def _pack(raw: Any, crcs: bool) -> tuple[bytes, int]:
     """A chunk's compressed records and their CRC-32 (0 when not computed): both release
     the GIL, so a pool thread does both."""
     import zstandard
@@ -233,7 +237,7 @@ def _pool():
     return _POOL[1]
 
 
-def _compress_all(raws: list[bytes]) -> list[bytes]:
+def _compress_all(raws: Sequence[Any]) -> list[bytes]:
     """``zstandard.compress`` of each at :data:`ZSTD_LEVEL` (one zstd frame with its content
     size, as the ``mcap`` writer makes them), on a pool of threads when there are several."""
     import zstandard

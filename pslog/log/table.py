@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping, Sequence
+from typing import cast
 
 import numpy as np
 
@@ -135,13 +136,13 @@ def encode_parts(table: str, camera_names: Sequence[str], counts: Mapping[str, i
     blobs, described, at = [], {}, 0
     named = list(_columns_of(table, list(columns)).items())
     values_of = [np.ascontiguousarray(columns[name], dtype=dtype) for name, (dtype, _s) in named]
-    raws = [memoryview(v.reshape(-1)).cast("B") for v in values_of]  # no copy
+    raws = [v.reshape(-1).view(np.uint8).data for v in values_of]  # no copy
     # every column large enough compressed at once (on the writer's thread pool)
     big = [i for i, raw in enumerate(raws) if len(raw) >= _COMPRESS_FROM]
     packed_of = dict(zip(big, _compress_all([raws[i] for i in big]), strict=True))
     for i, ((name, (dtype, _s)), values, raw) in enumerate(zip(named, values_of, raws,
                                                                 strict=True)):
-        codec, stored = "none", raw
+        codec, stored = "none", cast("bytes | memoryview", raw)
         if i in packed_of:
             packed = packed_of[i]
             if len(packed) < 0.9 * len(raw):  # noisy doubles barely shrink: kept raw, read
