@@ -115,3 +115,30 @@ def test_attachment_written_in_pieces_is_add_attachment_byte_for_byte():
         return out.getvalue()
 
     assert write(True) == write(False)
+
+
+def test_assemble_records_kernel_is_its_python_original():
+    # the compiled loop that lays a block's records into a chunk: each record's 31-byte
+    # head then its payload, at the offsets given (empty payloads included)
+    from pslog.log._wire import assemble_records
+
+    rng = np.random.default_rng(6)
+    n = 50
+    lengths = rng.integers(0, 40, n)
+    lengths[[3, 17]] = 0
+    data_start = np.concatenate([[0], np.cumsum(lengths)[:-1]])
+    payload = rng.integers(0, 256, int(lengths.sum()), dtype=np.uint8)
+    heads = rng.integers(0, 256, (n, 31), dtype=np.uint8)
+    base = 7  # a prefix of schema/channel records before the first record
+    rec_start = base + np.concatenate([[0], np.cumsum(lengths + 31)[:-1]])
+    total = int(base + (lengths + 31).sum())
+    got, want = np.zeros(total, np.uint8), np.zeros(total, np.uint8)
+    assemble_records(got, heads, rec_start, payload, data_start, lengths)
+    assemble_records.py_func(want, heads, rec_start, payload, data_start, lengths)
+    expected = np.zeros(total, np.uint8)
+    for i in range(n):
+        at = rec_start[i]
+        expected[at:at + 31] = heads[i]
+        expected[at + 31:at + 31 + lengths[i]] = payload[data_start[i]:data_start[i] + lengths[i]]
+    np.testing.assert_array_equal(want, expected)
+    np.testing.assert_array_equal(got, expected)
