@@ -9,7 +9,10 @@ import pytest
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 
-from pslog.log import _chunks
+from pslog.log import (
+    _chunks,
+    _wire,  # noqa: F401  (loaded: large blocks take the compiled loop)
+)
 
 
 def _messages(rng, n, big=False):

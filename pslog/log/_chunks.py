@@ -12,6 +12,7 @@ caller adds messages one by one as before.
 from __future__ import annotations
 
 import functools
+import sys
 import zlib
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -118,10 +119,12 @@ def write_messages(writer, channel: np.ndarray, log_time: np.ndarray, sequence: 
 
     # the chunks' uncompressed records first, then compressed together (zstd releases the
     # GIL: the chunks of a block are compressed on every core), then written in order;
-    # a large block's records are assembled by a compiled loop (numba, loaded only here:
-    # numpy's masks cost as much as the compression), a small one's with numpy masks
+    # a large block's records are assembled by a compiled loop (numpy's masks cost as much
+    # as the compression) where numba's kernels are loaded already (a fused track's writer:
+    # ._wire); a recorder never waits for numba to load (seconds on a busy machine, frames
+    # lost meanwhile): numpy's masks, the same bytes
     compiled: Callable[..., None] | None = None
-    if len(data) >= _COMPILED_FROM:
+    if len(data) >= _COMPILED_FROM and "pslog.log._wire" in sys.modules:
         from ._wire import assemble_records
 
         compiled = assemble_records
