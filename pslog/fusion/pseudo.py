@@ -270,19 +270,18 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
     innovation = np.empty(k)
     quality_table = np.empty((len(_QUALITY), k))
     with_cov = noise_px is not None and not _prepare.FINITE_DIFFERENCES
-    _pseudo_kernel.type_a_kernel(
+    made = _pseudo_kernel.type_a_kernel(
         targets, previous_instant, 2 * len(prep.centers), MAX_EXTRAPOLATION, max_gap_ns,
         time_ns, obs.camera, prev_b, next_b, prep.uv_undistorted, prep.observed_rays,
         prep.centers, ki, rr, f9, cam, _SPAN_TIE_NS, MIN_RAY_ANGLE_DEG, prep.ray_dir,
         prep.observed_direction_jacobians, _jacobian_rows(prep) if lens else np.zeros((1, 4)),
         lens, rtki, NS, 0.0 if noise_px is None else float(noise_px), with_cov, ff, fi,
         refused, has, predicted, points, flags, innovation, quality_table)
-    at = None if np.all(has) else np.flatnonzero(has)  # (None: every target has a point)
-    events = targets if at is None else targets[at]
-    p1, p2 = (_from_tables(ff[s], fi[s], at) for s in range(2))
-    if at is not None:
-        predicted, points, flags = predicted[at], points[at], flags[at]
-        innovation, quality_table = innovation[at], quality_table[:, at]
+    # (the kernel packs the targets with a point first: views, no gather)
+    events = targets if made == k else targets[has]
+    p1, p2 = (_from_tables(ff[s, :made], fi[s, :made], None) for s in range(2))
+    predicted, points, flags = predicted[:made], points[:made], flags[:made]
+    innovation, quality_table = innovation[:made], quality_table[:, :made]
     n_columns = len(_QUALITY) if with_cov else 10
     quality = dict(zip(_QUALITY[:n_columns], quality_table, strict=False))
     j1, j2 = p1.row, p2.row
