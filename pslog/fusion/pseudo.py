@@ -343,9 +343,13 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
     keep = made & (flags == 0) & ~failed & ~kinked
     if seen is not None:  # count only the reasons not counted before (each detection once)
         refused, seen[:] = refused & ~seen, seen | refused
-    past = {f"past_{k}": v for k, v in count_invalid(refused).items()}
+    # (count_invalid's three scans only where some flag is set: a stream's push has none)
+    past = ({f"past_{k}": v for k, v in count_invalid(refused).items()} if refused.any()
+            else {})
     dropped: dict[str, int] = {}  # (stereo.with_dropped's sum, on the one Track made)
-    for counts in (count_invalid(flags[made]), past, failed_counts(failed, kinked)):
+    invalid = flags[made]
+    for counts in (count_invalid(invalid) if invalid.any() else {}, past,
+                   failed_counts(failed, kinked)):
         for reason, count in counts.items():
             dropped[reason] = dropped.get(reason, 0) + count
     if np.all(keep):  # (every point kept: the columns as they are)
