@@ -7,7 +7,8 @@ Printed, best of ``--repeat`` runs, on a ``--minutes`` session of three 30 fps c
 - ``typeA``, ``nearest`` (type-A timing) and ``typeB``, ``linear``, ``sync`` (their timings):
   fused points per second, ``fuse()`` end to end (``prepare`` included: undistortion and the
   viewing ray of every detection, also printed alone as the baseline every method shares),
-  quality columns and covariance included;
+  quality columns and covariance included; and ``typeA``'s fusion alone on a prepared
+  session (what the peers are timed on: given pixels, rays and cameras);
 - ``smooth``, ``filter`` (type-A timing) and ``sync`` (synchronised timing): detections
   consumed per second (issue 12's figures for the timing and robustness methods);
 - peers, on the same detections: OpenCV's ``cv2.triangulatePoints`` (DLT) on two
@@ -73,6 +74,25 @@ def synchronised_views(rig, obs, cameras: tuple[int, ...]) -> np.ndarray:
               for c in cameras]
     common = sorted(set.intersection(*(set(f) for f in frames)))
     return np.stack([obs.uv[[f[i] for i in common]] for f in frames])
+
+
+def type_a_alone(rig, obs, repeat: int) -> tuple[float, int]:
+    """Seconds and points of type A's fusion itself (``fuse_type_a``: its compiled pass, the
+    innovation and kink tests, the Track) on a session prepared beforehand (a new
+    preparation for each run, not timed: no cache of a previous run helps)."""
+    from pslog.fusion import FusionOptions
+    from pslog.fusion._prepare import default_max_gap_s
+    from pslog.fusion.pseudo import fuse_type_a
+
+    best, points = float("inf"), 0
+    for _ in range(repeat):
+        prep = prepare(obs, rig)
+        start = time.perf_counter()
+        track = fuse_type_a(prep, default_max_gap_s(rig), FusionOptions().noise_px,
+                            explain=False)[0]
+        best = min(best, time.perf_counter() - start)
+        points = len(track)
+    return best, points
 
 
 def peer_opencv(rig, uv: np.ndarray, repeat: int) -> tuple[float, int]:
@@ -151,6 +171,10 @@ def main() -> int:
                 f"{seconds / base_s:5.1f}x baseline")
             if method == "sync":
                 row("sync (detections)", timing, seconds, len(obs), "detections/s")
+            if method == "typeA":
+                seconds, count = type_a_alone(rig, obs, args.repeat)
+                row("typeA, fusion alone", timing, seconds, count, "points/s",
+                    "prepared session")
 
     rig, obs = sessions["typeA"]
     print(f"\ntiming and robustness methods (typeA timing, {len(obs):,} detections; "

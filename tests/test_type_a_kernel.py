@@ -88,7 +88,7 @@ def test_reprojection_and_validity_helpers_equal_the_numpy_forms():
     for c in range(len(rig)):
         camera = np.full(len(points), c)
         expected = reprojection_px(prep, points, camera, uv)
-        got = np.array([kernels._reprojection(cam, c, p, u, v) for p, (u, v) in zip(
+        got = np.array([kernels._reprojection(cam, c, *p, u, v) for p, (u, v) in zip(
             points, uv, strict=True)])
         assert_array_equal(np.isnan(got), np.isnan(expected))
         ok = ~np.isnan(expected)
@@ -97,6 +97,6 @@ def test_reprojection_and_validity_helpers_equal_the_numpy_forms():
         used = np.zeros((len(points), len(rig)), dtype=bool)
         used[:, c] = True
         flags = invalid_points(prep, points, used)
-        got_flags = np.array([kernels._invalid(cam, c, p) for p in points])
+        got_flags = np.array([kernels._invalid(cam, c, *p) for p in points])
         assert_array_equal(got_flags, flags)
         assert {0, 1, 2} <= set(got_flags.tolist())  # in view, behind, outside

@@ -142,7 +142,7 @@ def _nearest(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
 
 
 def _type_a(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
-    return fuse_type_a(prep, _gap(options), options.noise_px)[0]
+    return fuse_type_a(prep, _gap(options), options.noise_px, explain=False)[0]
 
 
 def _type_a_stream(rig: Rig, options: FusionOptions):

@@ -68,47 +68,53 @@ def _min(x, y):
 
 
 @kernel
-def _ray(ki, rr, c, u, v, out):
-    """Unit world direction of undistorted pixel (u, v) of camera c into ``out`` (3,):
+def _ray(ki, rr, c, u, v):
+    """Unit world direction (3 floats) of undistorted pixel (u, v) of camera c:
     ``Rᵀ K⁻¹ (u, v, 1)`` normalised (:meth:`Prepared.rays_t`, operation for operation)."""
     x = ki[c, 0] * u + ki[c, 1] * v + ki[c, 2]
     y = ki[c, 3] * u + ki[c, 4] * v + ki[c, 5]
     z = ki[c, 6] * u + ki[c, 7] * v + ki[c, 8]
-    for j in range(3):
-        out[j] = rr[c, j] * x
-    for j in range(3):
-        out[j] += rr[c, 3 + j] * y
-    for j in range(3):
-        out[j] += rr[c, 6 + j] * z
-    norm = math.sqrt(out[0] * out[0] + out[1] * out[1] + out[2] * out[2])
-    for j in range(3):
-        out[j] /= norm
+    o0 = rr[c, 0] * x
+    o1 = rr[c, 1] * x
+    o2 = rr[c, 2] * x
+    o0 += rr[c, 3] * y
+    o1 += rr[c, 4] * y
+    o2 += rr[c, 5] * y
+    o0 += rr[c, 6] * z
+    o1 += rr[c, 7] * z
+    o2 += rr[c, 8] * z
+    norm = math.sqrt(o0 * o0 + o1 * o1 + o2 * o2)
+    return o0 / norm, o1 / norm, o2 / norm
 
 
 @kernel
-def _dot3(a, b):
-    """Dot product summed in np.einsum's order (x, then z, then y: geometry._dot)."""
-    out = a[0] * b[0]
-    out += a[2] * b[2]
-    out += a[1] * b[1]
+def _dot3(a0, a1, a2, b0, b1, b2):
+    """Dot product of (a0, a1, a2) and (b0, b1, b2) summed in np.einsum's order (x, then z,
+    then y: geometry._dot)."""
+    out = a0 * b0
+    out += a2 * b2
+    out += a1 * b1
     return out
 
 
 @kernel
-def _crossing(oa, da, ob, db, point):
-    """Step 3, the crossing of rays ``oa + s da`` and ``ob + k db``: the midpoint of their
-    common perpendicular into ``point`` (3,); returns (miss, s, k), NaN s, k (and point)
-    for parallel rays (:func:`pslog.geometry.crossing_of_rays`)."""
-    w0, w1, w2 = oa[0] - ob[0], oa[1] - ob[1], oa[2] - ob[2]
-    a = _dot3(da, da)
-    b = _dot3(da, db)
-    c = _dot3(db, db)
-    d = da[0] * w0
-    d += da[2] * w2
-    d += da[1] * w1
-    e = db[0] * w0
-    e += db[2] * w2
-    e += db[1] * w1
+def _crossing(centers, ca, a0, a1, a2, cb, b0, b1, b2):
+    """Step 3, the crossing of rays ``C_a + s a`` and ``C_b + k b`` (``C``: ``centers`` of
+    cameras ``ca``, ``cb``): the midpoint of their common perpendicular; returns (miss, s, k,
+    x, y, z), NaN s, k (and point) for parallel rays (:func:`pslog.geometry.crossing_of_rays`).
+    (Scalars, not (3,) views: numba counts references to every view it makes, atomically, at
+    a cost above this arithmetic's.)"""
+    w0, w1, w2 = centers[ca, 0] - centers[cb, 0], centers[ca, 1] - centers[cb, 1], \
+        centers[ca, 2] - centers[cb, 2]
+    a = _dot3(a0, a1, a2, a0, a1, a2)
+    b = _dot3(a0, a1, a2, b0, b1, b2)
+    c = _dot3(b0, b1, b2, b0, b1, b2)
+    d = a0 * w0
+    d += a2 * w2
+    d += a1 * w1
+    e = b0 * w0
+    e += b2 * w2
+    e += b1 * w1
     denom = a * c - b * b
     if denom <= _PARALLEL_EPS * a * c:
         s = np.nan
@@ -116,14 +122,23 @@ def _crossing(oa, da, ob, db, point):
     else:
         s = (b * e - c * d) / denom
         k = (a * e - b * d) / denom
+    foot_a = centers[ca, 0] + s * a0
+    foot_b = centers[cb, 0] + k * b0
+    x = 0.5 * (foot_a + foot_b)
+    gap = foot_a - foot_b
     miss = 0.0
-    for i in range(3):
-        foot_a = oa[i] + s * da[i]
-        foot_b = ob[i] + k * db[i]
-        point[i] = 0.5 * (foot_a + foot_b)
-        gap = foot_a - foot_b
-        miss += gap * gap
-    return math.sqrt(miss), s, k
+    miss += gap * gap
+    foot_a = centers[ca, 1] + s * a1
+    foot_b = centers[cb, 1] + k * b1
+    y = 0.5 * (foot_a + foot_b)
+    gap = foot_a - foot_b
+    miss += gap * gap
+    foot_a = centers[ca, 2] + s * a2
+    foot_b = centers[cb, 2] + k * b2
+    z = 0.5 * (foot_a + foot_b)
+    gap = foot_a - foot_b
+    miss += gap * gap
+    return math.sqrt(miss), s, k, x, y, z
 
 
 @kernel
@@ -142,21 +157,23 @@ def _distorted(cam, c, x, y):
 
 
 @kernel
-def _in_camera(cam, c, p, i):
-    """Coordinate i of world point p (3,) in camera c's frame, ``R p + t``."""
-    return p[0] * cam[c, 9 + 3 * i] + p[1] * cam[c, 10 + 3 * i] + p[2] * cam[c, 11 + 3 * i] \
+def _in_camera(cam, c, p0, p1, p2, i):
+    """Coordinate i of world point (p0, p1, p2) in camera c's frame, ``R p + t``."""
+    return p0 * cam[c, 9 + 3 * i] + p1 * cam[c, 10 + 3 * i] + p2 * cam[c, 11 + 3 * i] \
         + cam[c, 18 + i]
 
 
 @kernel
-def _reprojection(cam, c, p, u_img, v_img):
-    """Distance in camera c's recorded image between world point p's projection and the
-    undistorted pixel (u_img, v_img), pixels; NaN behind the camera (reprojection_one)."""
-    z = _in_camera(cam, c, p, 2)
+def _reprojection(cam, c, p0, p1, p2, u_img, v_img):
+    """Distance in camera c's recorded image between world point (p0, p1, p2)'s projection
+    and the undistorted pixel (u_img, v_img), pixels; NaN behind the camera
+    (reprojection_one)."""
+    z = _in_camera(cam, c, p0, p1, p2, 2)
     in_front = z > 1e-12
     if not in_front:
         z = np.nan
-    u, v = _distorted(cam, c, _in_camera(cam, c, p, 0) / z, _in_camera(cam, c, p, 1) / z)
+    u, v = _distorted(cam, c, _in_camera(cam, c, p0, p1, p2, 0) / z,
+                      _in_camera(cam, c, p0, p1, p2, 1) / z)
     y = (v_img - cam[c, 5]) / cam[c, 4]
     x = (u_img - cam[c, 2] - cam[c, 1] * y) / cam[c, 0]
     tu, tv = _distorted(cam, c, x, y)
@@ -169,13 +186,13 @@ def _reprojection(cam, c, p, u_img, v_img):
 
 
 @kernel
-def _invalid(cam, c, p):
+def _invalid(cam, c, p0, p1, p2):
     """:func:`~pslog.fusion._prepare.invalid_points`' bits for one contributing camera c
-    and a finite point p: BEHIND (1) at or behind its image plane, OUTSIDE_VIEW (2) outside
-    its view box."""
-    x = _in_camera(cam, c, p, 0)
-    y = _in_camera(cam, c, p, 1)
-    z = _in_camera(cam, c, p, 2)
+    and a finite point (p0, p1, p2): BEHIND (1) at or behind its image plane, OUTSIDE_VIEW
+    (2) outside its view box."""
+    x = _in_camera(cam, c, p0, p1, p2, 0)
+    y = _in_camera(cam, c, p0, p1, p2, 1)
+    z = _in_camera(cam, c, p0, p1, p2, 2)
     if z <= 1e-9:
         return 1
     xn, yn = x / z, y / z
@@ -188,7 +205,7 @@ def _invalid(cam, c, p):
 
 @kernel
 def _pseudo_one(r, not_after, max_gap_ns, time_ns, camera, prev_b, next_b, uv, observed_rays,
-                centers, ki, rr, f9, cam, span_tie_ns, min_angle_deg, scratch, ff, fi, slot, i):
+                centers, ki, rr, f9, cam, span_tie_ns, min_angle_deg, ff, fi, slot, i):
     """Steps 1-3 of the paper's section 2.2 for past observation ``r`` from a partner
     bracket ending at or before global row ``not_after``, into ``ff[slot, i]`` (floats,
     :data:`FLOATS`) and ``fi[slot, i]`` (ints, :data:`INTS`); returns (valid, flags).
@@ -211,7 +228,7 @@ def _pseudo_one(r, not_after, max_gap_ns, time_ns, camera, prev_b, next_b, uv, o
 
     ``cam`` (m, 31): per camera K (9), R (9), t (3), dist (5), view box (4), lens flag
     (:func:`camera_tables`); ``ki``, ``rr`` (m, 9): K⁻¹ and R; ``f9`` (m * m, 9): ``F[a, b]``
-    at row ``a m + b``; ``scratch`` (6,) float64. A row without partner gets the arithmetic
+    at row ``a m + b``. A row without partner gets the arithmetic
     of camera 0 and rows 0 (as the former numpy columns did), not valid and no flags.
     """
     m = centers.shape[0]
@@ -273,29 +290,34 @@ def _pseudo_one(r, not_after, max_gap_ns, time_ns, camera, prev_b, next_b, uv, o
     ff[slot, i, 19] = us1
     ff[slot, i, 1] = abs(signed)
     # step 3: crossing point of the observed ray and the snapped point's ray
-    for j in range(3):
-        ff[slot, i, 10 + j] = observed_rays[r, j]
-    _ray(ki, rr, q, us0, us1, ff[slot, i, 13:16])
-    ff[slot, i, 2], s, k = _crossing(centers[c], ff[slot, i, 10:13], centers[q], ff[slot, i, 13:16],
-                              ff[slot, i, 7:10])
+    a0, a1, a2 = observed_rays[r, 0], observed_rays[r, 1], observed_rays[r, 2]
+    ff[slot, i, 10] = a0
+    ff[slot, i, 11] = a1
+    ff[slot, i, 12] = a2
+    b0, b1, b2 = _ray(ki, rr, q, us0, us1)
+    ff[slot, i, 13] = b0
+    ff[slot, i, 14] = b1
+    ff[slot, i, 15] = b2
+    miss, s, k, x0, x1, x2 = _crossing(centers, c, a0, a1, a2, q, b0, b1, b2)
+    ff[slot, i, 2] = miss
+    ff[slot, i, 7] = x0
+    ff[slot, i, 8] = x1
+    ff[slot, i, 9] = x2
     # both directions are unit vectors; a line has no sense, hence the absolute value
-    ang = math.acos(_min(abs(_dot3(ff[slot, i, 10:13], ff[slot, i, 13:16])), 1.0))
+    ang = math.acos(_min(abs(_dot3(a0, a1, a2, b0, b1, b2)), 1.0))
     ff[slot, i, 3] = ang
     # the disagreement before the snap: the interpolated point's ray against the observed
-    d_int = scratch[0:3]
-    unsnapped = scratch[3:6]
-    _ray(ki, rr, q, ui0, ui1, d_int)
-    ff[slot, i, 4] = _crossing(centers[c], ff[slot, i, 10:13], centers[q], d_int,
-                                  unsnapped)[0]
-    ff[slot, i, 5] = _reprojection(cam, c, unsnapped, uo, vo)
-    ff[slot, i, 6] = _reprojection(cam, q, unsnapped, ui0, ui1)
-    pt = ff[slot, i, 7:10]
-    finite = math.isfinite(pt[0]) and math.isfinite(pt[1]) and math.isfinite(pt[2])
+    d0, d1, d2 = _ray(ki, rr, q, ui0, ui1)
+    miss_u, _s, _k, y0, y1, y2 = _crossing(centers, c, a0, a1, a2, q, d0, d1, d2)
+    ff[slot, i, 4] = miss_u
+    ff[slot, i, 5] = _reprojection(cam, c, y0, y1, y2, uo, vo)
+    ff[slot, i, 6] = _reprojection(cam, q, y0, y1, y2, ui0, ui1)
+    finite = math.isfinite(x0) and math.isfinite(x1) and math.isfinite(x2)
     bits = 0
     if finite:
         for cc in range(m):  # (in camera order, as invalid_points)
             if cc == c or cc == q:
-                bits |= _invalid(cam, cc, pt)
+                bits |= _invalid(cam, cc, x0, x1, x2)
         if not ((s > 0) and (k > 0)):
             bits |= 1  # BEHIND: the crossing behind a camera
     if ang * _DEGREES < min_angle_deg:
@@ -313,11 +335,10 @@ def pseudo_kernel(rows, not_after, max_gap_ns, time_ns, camera, prev_b, next_b, 
                   observed_rays, centers, ki, rr, f9, cam, span_tie_ns, min_angle_deg, ff, fi):
     """:func:`_pseudo_one` for past observations ``rows`` (k,) and their ``not_after`` (k,)
     rows, into ``ff[0]`` (k, 20) and ``fi[0]`` (k, 6)."""
-    scratch = np.empty(6)
     for i in range(rows.shape[0]):
         _pseudo_one(rows[i], not_after[i], max_gap_ns, time_ns, camera, prev_b, next_b, uv,
                     observed_rays, centers, ki, rr, f9, cam, span_tie_ns, min_angle_deg,
-                    scratch, ff, fi, 0, i)
+                    ff, fi, 0, i)
 
 
 @kernel
@@ -345,7 +366,9 @@ def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_n
     into ``ff[0, i]``, ``fi[0, i]`` and ``P_{t-2}`` into ``ff[1, i]``, ``fi[1, i]``;
     ``P_{t-2}`` only if eq. (2) stays a bounded extrapolation,
     ``δ_pred <= max_extrapolation δ_prev``. Every past point made ORs its flags into
-    ``refused`` (n,) at its row. ``has[i]``: both were found; then
+    ``refused`` (n,) at its row. ``has`` (k,): both were found for the target; then its
+    point is made, at place ``i`` of the outputs (the targets with a point, in order: the
+    outputs' first ``made`` places, the number returned, are the points; no gather after):
 
     - eq. (2), linear prediction with the actual capture intervals (integer nanoseconds):
       ``P̂_t = P_{t-1} + (P_{t-1} - P_{t-2}) δ_pred / δ_prev``;
@@ -367,7 +390,6 @@ def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_n
     Rᵀ K⁻¹, ``ns`` nanoseconds per second, ``noise_px`` the detection noise (pixels).
     """
     m = centers.shape[0]
-    scratch = np.empty(6)
     slots = np.empty(7, dtype=np.int64)
     times = np.empty(7, dtype=np.int64)
     res = np.empty(5)
@@ -378,8 +400,10 @@ def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_n
     nl = np.empty((3, 2))
     r = np.empty(3)
     q = np.empty(3)
-    for i in range(targets.shape[0]):
-        e = targets[i]
+    made = 0
+    for target in range(targets.shape[0]):
+        e = targets[target]
+        i = made  # (the point's place in the outputs: the targets with a point, packed)
         # the past points, instant by instant back from the target
         first = -1
         second = -1
@@ -400,7 +424,7 @@ def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_n
                 slot = 0 if first < 0 else 1
                 ok, bits = _pseudo_one(candidate, e, max_gap_ns, time_ns, camera, prev_b,
                                        next_b, uv, observed_rays, centers, ki, rr, f9, cam,
-                                       span_tie_ns, min_angle_deg, scratch, ff, fi, slot, i)
+                                       span_tie_ns, min_angle_deg, ff, fi, slot, i)
                 refused[candidate] |= bits
                 if ok:
                     if first < 0:
@@ -411,9 +435,10 @@ def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_n
                         break
             if candidate < 0:
                 break  # (no earlier instant within max_gap_ns: none further back either)
-        has[i] = second >= 0
+        has[target] = second >= 0
         if second < 0:
             continue
+        made += 1
         slots[0], slots[1], slots[2], slots[3] = e, fi[0, i, 0], fi[0, i, 2], fi[0, i, 3]
         slots[4], slots[5], slots[6] = fi[1, i, 0], fi[1, i, 2], fi[1, i, 3]
         for s in range(7):
@@ -425,27 +450,30 @@ def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_n
         for j in range(3):
             predicted[i, j] = ff[0, i, 7 + j] + ratio * (ff[0, i, 7 + j] - ff[1, i, 7 + j])
         # eqs. (3)-(4): nearest point on the newest viewing ray
-        origin = centers[c0]
-        d = ray_dir[e]
+        d0, d1, d2 = ray_dir[e, 0], ray_dir[e, 1], ray_dir[e, 2]
         for j in range(3):
-            q[j] = predicted[i, j] - origin[j]
-        k_foot = _dot3(q, d) / _dot3(d, d)
-        for j in range(3):
-            points[i, j] = k_foot * d[j] + origin[j]
-        pt = points[i]
+            q[j] = predicted[i, j] - centers[c0, j]
+        k_foot = _dot3(q[0], q[1], q[2], d0, d1, d2) / _dot3(d0, d1, d2, d0, d1, d2)
+        pt0 = k_foot * d0 + centers[c0, 0]
+        pt1 = k_foot * d1 + centers[c0, 1]
+        pt2 = k_foot * d2 + centers[c0, 2]
+        points[i, 0] = pt0
+        points[i, 1] = pt1
+        points[i, 2] = pt2
         bits = 0
-        if math.isfinite(pt[0]) and math.isfinite(pt[1]) and math.isfinite(pt[2]):
+        if math.isfinite(pt0) and math.isfinite(pt1) and math.isfinite(pt2):
             for cc in range(m):  # the cameras of the seven detections, in camera order
                 for s in range(7):
                     if camera[slots[s]] == cc:
-                        bits |= _invalid(cam, cc, pt)
+                        bits |= _invalid(cam, cc, pt0, pt1, pt2)
                         break
         if not (k_foot > 0):
             bits |= 1  # eq. (4)'s k: the foot behind the newest camera
         flags[i] = bits
         res[0], res[1], res[2], res[3] = ff[0, i, 5], ff[0, i, 6], ff[1, i, 5], ff[1, i, 6]
         # the newest detection against the prediction, before eq. (4) moves it onto its ray
-        res[4] = _reprojection(cam, c0, predicted[i], uv[e, 0], uv[e, 1])
+        res[4] = _reprojection(cam, c0, predicted[i, 0], predicted[i, 1], predicted[i, 2],
+                               uv[e, 0], uv[e, 1])
         innovation[i] = res[4]
         # slots holding a detection no earlier slot holds
         n_distinct = 1
@@ -464,9 +492,9 @@ def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_n
         quality[0, i] = _max(ff[0, i, 1], ff[1, i, 1])
         # measured before the snap: after it the rays cross by construction
         quality[1, i] = _max(ff[0, i, 4], ff[1, i, 4])
-        shift = (pt[0] - predicted[i, 0]) * (pt[0] - predicted[i, 0])
-        shift += (pt[1] - predicted[i, 1]) * (pt[1] - predicted[i, 1])
-        shift += (pt[2] - predicted[i, 2]) * (pt[2] - predicted[i, 2])
+        shift = (pt0 - predicted[i, 0]) * (pt0 - predicted[i, 0])
+        shift += (pt1 - predicted[i, 1]) * (pt1 - predicted[i, 1])
+        shift += (pt2 - predicted[i, 2]) * (pt2 - predicted[i, 2])
         quality[2, i] = math.sqrt(shift)
         quality[3, i] = _min(ff[0, i, 3], ff[1, i, 3]) * _DEGREES
         worst = res[0]
@@ -490,8 +518,7 @@ def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_n
         if not with_cov:
             continue
         # the newest ray's turn: ((rᵀq) I + r qᵀ) G, G its direction's Jacobian
-        for j in range(3):
-            r[j] = d[j]
+        r[0], r[1], r[2] = d0, d1, d2
         rq = r[0] * q[0] + r[1] * q[1] + r[2] * q[2]
         for a in range(2):
             qg = q[0] * obs_jac[0, a, e]
@@ -641,6 +668,7 @@ def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_n
             quality[11 + n, i] = (nl[a, 0] * nl[b, 0] + nl[a, 1] * nl[b, 1]
                                   + r[a] * r[b] * along) * var
         quality[10, i] = math.sqrt(quality[11, i] + quality[12, i] + quality[13, i])
+    return made
 
 
 def camera_tables(prep):

@@ -41,7 +41,7 @@ kink tests (:mod:`pslog.fusion.innovation`) run on the kernel's outputs.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import cast
+from typing import Literal, cast, overload
 
 import numpy as np
 
@@ -69,7 +69,7 @@ from .innovation import (
     innovation_factors,
     kinked_points,
 )
-from .stereo import count_invalid, with_dropped
+from .stereo import count_invalid
 
 #: Brackets whose lengths differ by less than this are ties (shutter offsets are rounded to ns).
 _SPAN_TIE_NS = 1_000_000
@@ -221,9 +221,24 @@ class TypeAConstruction:
     points_world: np.ndarray
 
 
+@overload
+def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = ...,
+                events: np.ndarray | None = ..., seen: np.ndarray | None = ...,
+                noise: NoiseEstimate | None = ...,
+                explain: Literal[True] = ...) -> tuple[Track, TypeAConstruction]: ...
+
+
+@overload
+def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = ...,
+                events: np.ndarray | None = ..., seen: np.ndarray | None = ...,
+                noise: NoiseEstimate | None = ...,
+                *, explain: Literal[False]) -> tuple[Track, None]: ...
+
+
 def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
                 events: np.ndarray | None = None, seen: np.ndarray | None = None,
-                noise: NoiseEstimate | None = None) -> tuple[Track, TypeAConstruction]:
+                noise: NoiseEstimate | None = None,
+                explain: bool = True) -> tuple[Track, TypeAConstruction | None]:
     """``typeA``: a point at every detection with two earlier pseudo-stereo points.
 
     The two earlier points are those of the two latest earlier instants that can be
@@ -245,6 +260,8 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
     place; only refusals not in it are counted (a stream counts each detection once).
     ``noise``: the session's estimate of the detection noise for the tests of innovation.py,
     updated in place (a stream keeps one across its pushes; None: a new one).
+    ``explain``: also return how each point was made (False: None in its place, for callers
+    that keep only the Track).
     """
     from . import _pseudo_kernel
 
@@ -270,19 +287,18 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
     innovation = np.empty(k)
     quality_table = np.empty((len(_QUALITY), k))
     with_cov = noise_px is not None and not _prepare.FINITE_DIFFERENCES
-    _pseudo_kernel.type_a_kernel(
+    made = _pseudo_kernel.type_a_kernel(
         targets, previous_instant, 2 * len(prep.centers), MAX_EXTRAPOLATION, max_gap_ns,
         time_ns, obs.camera, prev_b, next_b, prep.uv_undistorted, prep.observed_rays,
         prep.centers, ki, rr, f9, cam, _SPAN_TIE_NS, MIN_RAY_ANGLE_DEG, prep.ray_dir,
         prep.observed_direction_jacobians, _jacobian_rows(prep) if lens else np.zeros((1, 4)),
         lens, rtki, NS, 0.0 if noise_px is None else float(noise_px), with_cov, ff, fi,
         refused, has, predicted, points, flags, innovation, quality_table)
-    at = None if np.all(has) else np.flatnonzero(has)  # (None: every target has a point)
-    events = targets if at is None else targets[at]
-    p1, p2 = (_from_tables(ff[s], fi[s], at) for s in range(2))
-    if at is not None:
-        predicted, points, flags = predicted[at], points[at], flags[at]
-        innovation, quality_table = innovation[at], quality_table[:, at]
+    # (the kernel packs the targets with a point first: views, no gather)
+    events = targets if made == k else targets[has]
+    p1, p2 = (_from_tables(ff[s, :made], fi[s, :made], None) for s in range(2))
+    predicted, points, flags = predicted[:made], points[:made], flags[:made]
+    innovation, quality_table = innovation[:made], quality_table[:, :made]
     n_columns = len(_QUALITY) if with_cov else 10
     quality = dict(zip(_QUALITY[:n_columns], quality_table, strict=False))
     j1, j2 = p1.row, p2.row
@@ -325,13 +341,24 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
     kinked = made & (flags == 0) & ~failed & kinked_points(prep, events, (p1, p2, predicted),
                                                            sigma, max_gap_ns)
     keep = made & (flags == 0) & ~failed & ~kinked
-    track = Track("typeA", t_event, points, cams0, quality)
-    if not np.all(keep):  # (every point kept: the Track as it is)
-        track = track.select(keep)
     if seen is not None:  # count only the reasons not counted before (each detection once)
         refused, seen[:] = refused & ~seen, seen | refused
-    past = {f"past_{k}": v for k, v in count_invalid(refused).items()}
-    track = with_dropped(track, count_invalid(flags[made]), past, failed_counts(failed, kinked))
+    # (count_invalid's three scans only where some flag is set: a stream's push has none)
+    past = ({f"past_{k}": v for k, v in count_invalid(refused).items()} if refused.any()
+            else {})
+    dropped: dict[str, int] = {}  # (stereo.with_dropped's sum, on the one Track made)
+    invalid = flags[made]
+    for counts in (count_invalid(invalid) if invalid.any() else {}, past,
+                   failed_counts(failed, kinked)):
+        for reason, count in counts.items():
+            dropped[reason] = dropped.get(reason, 0) + count
+    if np.all(keep):  # (every point kept: the columns as they are)
+        track = Track("typeA", t_event, points, cams0, quality, dropped)
+    else:
+        track = Track("typeA", t_event[keep], points[keep], cams0[keep],
+                      {name: column[keep] for name, column in quality.items()}, dropped)
+    if not explain:
+        return track, None
     construction = TypeAConstruction(
         events[keep], (_select(p1, keep), _select(p2, keep)), predicted[keep], points[keep])
     return track, construction
@@ -394,19 +421,13 @@ class TypeAStream:
         self._shared = {"_columns": template.__dict__["_columns"], "_f_cols": template._f_cols,
                         "_rt_k_inv_cols": template._rt_k_inv_cols,
                         "_kernel_tables": _pseudo_kernel.camera_tables(template)}
-        self._time = np.zeros(0, np.int64)
-        self._camera = np.zeros(0, np.int32)
-        self._uv = np.zeros((0, 2))
-        self._frame = np.zeros(0, np.int64)
-        self._uv_und = np.zeros((0, 2))
-        self._ray_dir = np.zeros((0, 3))
-        self._jac = np.zeros((0, 2, 2))
-        # each row's own-pixel ray, its direction Jacobian and its pixel Jacobian's rows (as
-        # Prepared makes them for a session, elementwise: made once, when the row arrives)
-        self._rays = np.zeros((0, 3))
-        self._dir_jac = np.zeros((3, 2, 0))
-        self._jac_rows = np.zeros((0, 4))
-        self._seen = np.zeros(0, np.int64)  # past refusals already counted, per row
+        # the window's columns: views [lo:hi] of buffers that grow by doubling; a push writes
+        # its rows after the window and moves the window to the front when the end is reached
+        # (no concatenation of every column at every push). Each row's own-pixel ray, its
+        # direction Jacobian and its pixel Jacobian's rows are made once, when it arrives
+        # (as Prepared makes them for a session, elementwise)
+        self._lo = self._hi = 0
+        self._buffers = _StreamColumns(64)
         self._noise = NoiseEstimate()  # the detection noise the innovations imply, so far
         self._empty = fuse_type_a(template, self._max_gap_s, self._noise_px,
                                   noise=NoiseEstimate())[0]
@@ -445,33 +466,74 @@ class TypeAStream:
             jac[rows] = _undistortion_jacobian(cam, uv_und[rows])
         # the window: the rows a new point can reach, then the new ones
         time_ns = np.asarray(time_ns, dtype=np.int64)
+        buf = self._buffers
+        lo, hi = self._lo, self._hi
         # (the history of the earliest new row: each new row's point is made)
-        cut = int(np.searchsorted(self._time, time_ns[0] - self._history_ns, side="left"))
-        self._time = np.concatenate([self._time[cut:], time_ns])
-        self._camera = np.concatenate([self._camera[cut:], camera])
-        self._uv = np.concatenate([self._uv[cut:], uv])
-        self._frame = np.concatenate([self._frame[cut:], np.asarray(frame_index, np.int64)])
-        self._uv_und = np.concatenate([self._uv_und[cut:], uv_und])
-        self._ray_dir = np.concatenate([self._ray_dir[cut:], ray_dir])
-        self._jac = np.concatenate([self._jac[cut:], jac])
+        lo += int(np.searchsorted(buf.time[lo:hi], time_ns[0] - self._history_ns, side="left"))
+        if hi + n_new > buf.capacity:  # the window to the front (in a larger buffer if need be)
+            buf = self._buffers = buf.moved(lo, hi, 2 * (hi - lo + n_new))
+            lo, hi = 0, hi - lo
+        end = hi + n_new
         t = self._template
-        self._rays = np.concatenate([self._rays[cut:], t.rays_from_undistorted(camera, uv_und)])
-        self._dir_jac = np.concatenate([self._dir_jac[:, :, cut:],
-                                        direction_jacobian(t, camera, uv_und)], axis=2)
-        self._jac_rows = np.concatenate([self._jac_rows[cut:],
-                                         np.nan_to_num(jac).reshape(-1, 4)])
-        self._seen = np.concatenate([self._seen[cut:], np.zeros(n_new, np.int64)])
-        obs = Observations(self._time, self._camera, self._uv, self._frame)
+        buf.time[hi:end] = time_ns
+        buf.camera[hi:end] = camera
+        buf.uv[hi:end] = uv
+        buf.frame[hi:end] = frame_index
+        buf.uv_und[hi:end] = uv_und
+        buf.ray_dir[hi:end] = ray_dir
+        buf.jac[hi:end] = jac
+        buf.rays[hi:end] = t.rays_from_undistorted(camera, uv_und)
+        buf.dir_jac[:, :, hi:end] = direction_jacobian(t, camera, uv_und)
+        buf.jac_rows[hi:end] = np.nan_to_num(jac).reshape(-1, 4)
+        buf.seen[hi:end] = 0
+        self._lo, self._hi = lo, end
+        window = slice(lo, end)
+        self._time, self._camera = buf.time[window], buf.camera[window]
+        obs = Observations(self._time, self._camera, buf.uv[window], buf.frame[window])
         n = len(obs)
         prep = Prepared(
-            obs=obs, t=(self._time - self._time[0]) / NS, uv_undistorted=self._uv_und,
-            ray_origin=t.centers[self._camera], ray_dir=self._ray_dir, centers=t.centers,
+            obs=obs, t=(self._time - self._time[0]) / NS, uv_undistorted=buf.uv_und[window],
+            ray_origin=t.centers[self._camera], ray_dir=buf.ray_dir[window], centers=t.centers,
             K_inv=t.K_inv, R=t.R, F=t.F,
             per_camera=[np.flatnonzero(self._camera == i) for i in range(len(rig))],
-            cameras=t.cameras, uv_jacobian=self._jac, view_box=t.view_box)
+            cameras=t.cameras, uv_jacobian=buf.jac[window], view_box=t.view_box)
         prep.__dict__.update(self._shared)
-        prep.__dict__.update(observed_rays=self._rays, observed_direction_jacobians=self._dir_jac,
-                             _jacobian_rows=self._jac_rows)
+        prep.__dict__.update(observed_rays=buf.rays[window],
+                             observed_direction_jacobians=buf.dir_jac[:, :, window],
+                             _jacobian_rows=buf.jac_rows[window])
         return fuse_type_a(prep, self._max_gap_s, self._noise_px,
-                           events=np.arange(n - n_new, n), seen=self._seen,
-                           noise=self._noise)[0]
+                           events=np.arange(n - n_new, n), seen=buf.seen[window],
+                           noise=self._noise, explain=False)[0]
+
+
+class _StreamColumns:
+    """:class:`TypeAStream`'s per-row columns, ``capacity`` rows each (a window of them in
+    use): times, cameras, recorded and undistorted pixels, frames, rays (recorded pixel's
+    and undistorted pixel's), the undistortion Jacobians (as (2, 2) and as rows of 4), the
+    rays' direction Jacobians (3, 2, capacity) and the past refusals counted per row."""
+
+    def __init__(self, capacity: int) -> None:
+        self.capacity = capacity
+        self.time = np.zeros(capacity, np.int64)
+        self.camera = np.zeros(capacity, np.int32)
+        self.uv = np.zeros((capacity, 2))
+        self.frame = np.zeros(capacity, np.int64)
+        self.uv_und = np.zeros((capacity, 2))
+        self.ray_dir = np.zeros((capacity, 3))
+        self.jac = np.zeros((capacity, 2, 2))
+        self.rays = np.zeros((capacity, 3))
+        self.dir_jac = np.zeros((3, 2, capacity))
+        self.jac_rows = np.zeros((capacity, 4))
+        self.seen = np.zeros(capacity, np.int64)
+
+    def moved(self, lo: int, hi: int, capacity: int) -> _StreamColumns:
+        """Rows [lo, hi) at the front of columns of at least ``capacity`` rows (these
+        columns, if large enough)."""
+        out = self if capacity <= self.capacity else _StreamColumns(capacity)
+        k = hi - lo
+        for name in ("time", "camera", "uv", "frame", "uv_und", "ray_dir", "jac", "rays",
+                     "jac_rows", "seen"):
+            column = getattr(self, name)
+            getattr(out, name)[:k] = column[lo:hi].copy()  # (overlapping when in place)
+        out.dir_jac[:, :, :k] = self.dir_jac[:, :, lo:hi].copy()
+        return out
