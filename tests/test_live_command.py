@@ -257,19 +257,18 @@ def test_status_lines_show_every_camera_live(synthetic_run):
     assert status, "\n".join(run.err)
 
 
-def test_the_recorded_session_re_fuses_to_the_live_points(synthetic_run):
+def test_the_recorded_session_re_fuses_to_the_live_points(synthetic_run, cli):
     from pslog.log import read_session
 
     folder, _, code, points = synthetic_run
     assert code == 0
-    info = subprocess.run([sys.executable, "-m", "pslog.cli", "info", "session.mcap"],
-                          cwd=folder, capture_output=True, text=True, timeout=60)
-    assert info.returncode == 0 and "truncated" not in info.stdout, info.stdout + info.stderr
-    assert "source: live --synthetic" in info.stdout
-    fuse = subprocess.run([sys.executable, "-m", "pslog.cli", "fuse", "session.mcap",
-                           "--method", "typeA", "-o", "fused.mcap"],
-                          cwd=folder, capture_output=True, text=True, timeout=60)
-    assert fuse.returncode == 0, fuse.stderr
+    # in-process: the live run itself was the real process; these read its file
+    code, out, err = cli("info", folder / "session.mcap")
+    assert code == 0 and "truncated" not in out, out + err
+    assert "source: live --synthetic" in out
+    code, _, err = cli("fuse", folder / "session.mcap", "--method", "typeA", "-o",
+                       folder / "fused.mcap")
+    assert code == 0, err
     session = read_session(folder / "session.mcap")
     epoch = session_epoch_ns(session)
     track = read_session(folder / "fused.mcap").tracks["typeA"]
@@ -531,7 +530,7 @@ def test_a_camera_process_that_crashes_is_one_line_and_is_restarted(capfd):
 
 
 # ---- shutters that fire together: --hold --------------------------------------------------------
-def test_hold_fuses_frames_of_synchronised_shutters_that_overtake_one_another(tmp_path):
+def test_hold_fuses_frames_of_synchronised_shutters_that_overtake_one_another(tmp_path, cli):
     """Three cameras at one instant send frames that arrive in any order: without --hold
     many are dropped as reordered (about 40 % here); held up to 0.2 s for the others they are
     fused in capture order, and the recording still re-fuses to the live points."""
@@ -545,10 +544,9 @@ def test_hold_fuses_frames_of_synchronised_shutters_that_overtake_one_another(tm
     received = int(re.search(r"datagrams (\d+) ", final).group(1))
     reordered = sum(int(n) for n in re.findall(r"reordered (\d+)", final))
     assert received > 60 and reordered <= 0.1 * received, final
-    fuse = subprocess.run([sys.executable, "-m", "pslog.cli", "fuse", "s.mcap", "--method",
-                           "filter", "-o", "fused.mcap"], cwd=tmp_path, capture_output=True,
-                          text=True, timeout=60)
-    assert fuse.returncode == 0, fuse.stderr
+    code, _, err = cli("fuse", tmp_path / "s.mcap", "--method", "filter", "-o",
+                       tmp_path / "fused.mcap")
+    assert code == 0, err
     live = read_session(tmp_path / "s.mcap").tracks["filter"]
     offline = read_session(tmp_path / "fused.mcap").tracks["filter"]
     np.testing.assert_array_equal(live.time_ns, offline.time_ns)

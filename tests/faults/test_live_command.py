@@ -6,8 +6,6 @@ from __future__ import annotations
 
 import signal
 import socket
-import subprocess
-import sys
 import time
 from dataclasses import replace
 
@@ -95,7 +93,8 @@ def _wait_for_points(run: LiveRun, count: int = 20) -> None:
 
 
 @pytest.mark.parametrize("sig, old", [(signal.SIGINT, False), (signal.SIGTERM, True)])
-def test_a_stop_signal_ends_every_process_and_leaves_a_complete_session(tmp_path, sig, old):
+def test_a_stop_signal_ends_every_process_and_leaves_a_complete_session(tmp_path, sig, old,
+                                                                        cli):
     from pslog.log import read_session
 
     force = ()
@@ -114,9 +113,8 @@ def test_a_stop_signal_ends_every_process_and_leaves_a_complete_session(tmp_path
     pids = [pid for cam in camera_pids(run).values() for pid in cam]
     assert len(pids) == 3 and all(gone(pid) for pid in pids)
     assert not (tmp_path / "s.mcap.partial").exists()
-    info = subprocess.run([sys.executable, "-m", "pslog.cli", "info", "s.mcap"], cwd=tmp_path,
-                          capture_output=True, text=True, timeout=60)
-    assert info.returncode == 0 and "truncated" not in info.stdout, info.stdout + info.stderr
+    code, out, err = cli("info", tmp_path / "s.mcap")  # in-process: it reads the file
+    assert code == 0 and "truncated" not in out, out + err
     session = read_session(tmp_path / "s.mcap")
     assert len(session.detections.frame_time_ns) >= 20
     # every point printed is in the session (the last ones too: written at the stop)

@@ -16,7 +16,7 @@ from pslog.live.fuser import LiveFuser
 from pslog.live.protocol import _DET_HEADER, DetectionDatagram, encode_detections
 from tests._live import EPOCH, datagrams, frames, rally_session
 
-from .promises import assert_one_line_error, assert_untouched, fingerprint, run_pslog
+from .promises import HANG_S, assert_one_line_error, assert_untouched, fingerprint, run_pslog
 
 
 @pytest.fixture(scope="module")
@@ -136,19 +136,39 @@ def test_sigint_stops_a_run_whose_jsonl_reader_stopped_reading(tmp_path):
          "--record", "s.mcap"], cwd=tmp_path, stdout=w, stderr=subprocess.PIPE, text=True)
     os.close(w)
     try:
-        time.sleep(6)  # the pipe fills within a second of the first points
+        # Ctrl-C once points came (a pipe of one page is full, to select(), as soon as it
+        # holds anything) and a few seconds later, not after a fixed sleep from the start:
+        # on a loaded machine the cameras may not even have started by then. A hang guard.
+        deadline = time.monotonic() + HANG_S
+        while _unread_bytes(r) == 0:
+            assert proc.poll() is None, proc.communicate()[1]
+            assert time.monotonic() < deadline, f"no point on stdout within {HANG_S} s"
+            time.sleep(0.05)
+        time.sleep(3.0)  # the run goes on fusing and recording while stdout is full
         proc.send_signal(signal.SIGINT)
         try:
-            _, err = proc.communicate(timeout=20)
+            _, err = proc.communicate(timeout=HANG_S)
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.communicate()
             raise AssertionError("Ctrl-C did not stop a run whose stdout was full") from None
     finally:
         os.close(r)
+        if proc.poll() is None:  # a failed wait above: not left running for a minute
+            proc.kill()
+            proc.communicate()
     assert proc.returncode == 0, err
     assert "Traceback" not in err
     assert len(read_session(tmp_path / "s.mcap").tracks["filter"].time_ns) > 20
+
+
+def _unread_bytes(fd: int) -> int:
+    """Bytes waiting in the pipe whose read end is ``fd`` (FIONREAD)."""
+    import fcntl
+    import struct
+    import termios
+
+    return struct.unpack("i", fcntl.ioctl(fd, termios.FIONREAD, b"\0" * 4))[0]
 
 
 @pytest.mark.parametrize("sequence, future", [(2**64 - 1, False), (10**6, True)])
