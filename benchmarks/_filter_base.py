@@ -199,7 +199,7 @@ class FilterOptions:
     noise_px: float = 0.5
     noise_prior_weight: float = 1.0
     adapt_rate: float = 0.02
-    min_noise_px: float = 0.05
+    min_noise_px: float = 0.01
     max_noise_px: float = 5.0
     accel_psd: float = 0.01
     drag_per_m: float = Ball().drag_per_metre

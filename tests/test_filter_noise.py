@@ -111,7 +111,7 @@ def test_the_window_fit_updates_the_prior_by_its_residuals():
     assert fixed._var == 0.25  # a fixed noise stays fixed
 
 
-@pytest.mark.parametrize("noise, low, high", [(0.0, 0.05, 0.06), (0.3, 0.24, 0.36),
+@pytest.mark.parametrize("noise, low, high", [(0.0, 0.01, 0.05), (0.3, 0.24, 0.36),
                                               (1.0, 0.8, 1.2)])
 def test_the_estimate_finds_the_detectors_noise(noise, low, high):
     rig = lab_rig(3, fps=60.0)
@@ -120,7 +120,8 @@ def test_the_estimate_finds_the_detectors_noise(noise, low, high):
     for t, c, (u, v) in zip(obs.time_ns.tolist(), obs.camera.tolist(), obs.uv.tolist(),
                             strict=True):
         flt.push(t, c, u, v)
-    assert low <= math.sqrt(flt._var) <= high  # measured 0.050, 0.29, 0.96
+    # measured 0.038 (a 1 s throw: still falling; 0.2 px before), 0.29, 0.96
+    assert low <= math.sqrt(flt._var) <= high
 
 
 @pytest.mark.parametrize("case", ["paper3 60 fps turntable", "lab3 240 fps rally"])

@@ -32,10 +32,14 @@ equations, exactly as implemented, are in ``docs/methods.md`` (section ``filter`
   its ``ω`` is within 2σ of 0; the pair leaves while the turn model alone explains the
   motion and rejoins when ``q`` grows again or at a jump. So a flight pays for one model
   set and a circle for the other, not both;
-- the pixel noise ``σ`` adapts to the detector's (``E[NIS] = 2``); the process noise ``q``
-  adapts to the motion: a consistent filter's innovations are white, a lagging one's
-  consecutive innovations of a camera agree, so ``q`` grows with their product (a spiral, a
-  straight line without gravity, a turntable) and shrinks back to ``accel_psd`` on a flight;
+- the pixel noise ``σ`` is estimated: an inverse-gamma posterior of ``σ²`` updated by
+  variational Bayes at every accepted detection (Särkkä & Nummenmaa, IEEE Trans. AC 54(3),
+  2009; forgetting ``1 - adapt_rate``), its weak prior (``noise_px``, weight
+  ``noise_prior_weight``) updated at each start by the window fit's residuals (conjugate
+  least-squares update); the process noise ``q`` adapts to the motion: a consistent
+  filter's innovations are white, a lagging one's consecutive innovations of a camera
+  agree, so ``q`` grows with their product (a spiral, a straight line without gravity, a
+  turntable) and shrinks back to ``accel_psd`` on a flight;
 - measurement: the detection's *distorted* pixel, ``z = π_c(p) + w``, ``w ~ N(0, σ² I)``,
   through camera ``c``'s projection with its lens model; ``H = [∂π_c/∂p, 0]`` (2 x 6).
   Pixels, not rays: the detector's noise is isotropic in the recorded image, no detection is
@@ -168,7 +172,9 @@ class FilterOptions:
         (mean ``noise_px²``): the prior counts as ``α₀`` detections (each adds 1 to ``α``)
     adapt_rate : float, forgetting ``1 - ρ`` of the pixel variance's variational-Bayes
         estimate (its memory: about ``1 / adapt_rate`` detections; 0: ``noise_px`` fixed)
-    min_noise_px, max_noise_px : float, bounds of the adapted pixel noise
+    min_noise_px, max_noise_px : float, bounds of the adapted pixel noise (the lower one
+        reached on noise-free detections, where 0.05 px kept the filter behind type A at
+        120 fps and above)
     max_rejects : int, consecutive rejected detections after which the track is lost
     init_detections : int, detections (of at least two cameras) a (re)initialisation fits
     init_window : int, most detections kept for a (re)initialisation, unless a fit of a
@@ -211,7 +217,7 @@ class FilterOptions:
     noise_px: float = 0.5
     noise_prior_weight: float = 1.0
     adapt_rate: float = 0.02
-    min_noise_px: float = 0.05
+    min_noise_px: float = 0.01
     max_noise_px: float = 5.0
     accel_psd: float = 0.01
     drag_per_m: float = Ball().drag_per_metre
