@@ -145,3 +145,6 @@ def test_a_bad_prior_weight_is_refused():
     for value in (0.0, -1.0, float("nan")):
         with pytest.raises(FusionError, match="noise_prior_weight"):
             FilterOptions(noise_prior_weight=value)
+    for value in (1.0, 1.5, -0.01, float("nan")):  # ρ = 1 - adapt_rate must be in (0, 1]
+        with pytest.raises(FusionError, match="adapt_rate"):
+            FilterOptions(adapt_rate=value)

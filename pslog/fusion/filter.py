@@ -259,6 +259,8 @@ class FilterOptions:
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise FusionError(f"filter {name} must be finite and >= 0, got {value!r}")
+        if not (math.isfinite(self.adapt_rate) and 0.0 <= self.adapt_rate < 1.0):
+            raise FusionError(f"filter adapt_rate must be in [0, 1), got {self.adapt_rate!r}")
         if not self.turn_on_psd > 0:
             raise FusionError(f"filter turn_on_psd must be > 0, got {self.turn_on_psd!r}")
         if not (math.isfinite(self.drag_per_m) and self.drag_per_m >= 0):
