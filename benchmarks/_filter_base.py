@@ -197,8 +197,9 @@ class FilterOptions:
     """
 
     noise_px: float = 0.5
+    noise_prior_weight: float = 1.0
     adapt_rate: float = 0.02
-    min_noise_px: float = 0.05
+    min_noise_px: float = 0.01
     max_noise_px: float = 5.0
     accel_psd: float = 0.01
     drag_per_m: float = Ball().drag_per_metre
@@ -339,6 +340,7 @@ class BallFilter:
         self._cams = [_Cam(c) for c in rig.cameras]
         self._max_gap_ns = int((options.max_gap_s or default_max_gap_s(rig)) * NS)
         self._var = options.noise_px ** 2
+        self._alpha = options.noise_prior_weight
         self._adapt = options.adapt_rate
         self._var_min, self._var_max = options.min_noise_px ** 2, options.max_noise_px ** 2
         self._q = self._q_min = options.accel_psd
@@ -709,10 +711,12 @@ class BallFilter:
         if accepted and solo:
             xt, Pt = self._updated(xt, Pt, inn)
             xn, Pn, nis = xt[:6], _block6(Pt), inn[7]
+            sy = (inn[0], inn[1], inn[4], inn[5], inn[6])
             xo, pvar = xt, (Pt[0], Pt[8], Pt[16])
         elif accepted:
             xn, Pn = self._updated(x, P, inn)
             nis = inn[7]
+            sy = (inn[0], inn[1], inn[4], inn[5], inn[6])
             if nu:
                 nu_post = self._nu_post
                 xt, Pt = self._updated(xt, Pt, inn_t)
@@ -723,6 +727,7 @@ class BallFilter:
                                  inn[5] + nu_post * (inn_t[5] - inn[5]),
                                  inn[6] + nu_post * (inn_t[6] - inn[6]))
                 nis = y0 * (i00 * y0 + i01 * y1) + y1 * (i01 * y0 + i11 * y1)
+                sy = (y0, y1, i00, i01, i11)
                 xo, pvar = self._combined_point(xn, Pn, xt, Pt, nu_post)
             else:
                 xo, pvar = xn, (Pn[0], Pn[7], Pn[14])
@@ -765,9 +770,17 @@ class BallFilter:
                     q = self._q * math.exp(self._q_rate * (r - self._q_target))
                     self._q = min(max(q, self._q_min), self._q_max)
                 self._cam_inn[camera] = (time_ns, prior_y0, prior_y1)
-            if self._adapt:  # pixel noise by stochastic approximation of E[NIS] = 2
-                var = self._var * (1.0 + self._adapt * (0.5 * nis - 1.0))
-                self._var = min(max(var, self._var_min), self._var_max)
+            if self._adapt:  # pixel noise: variational Bayes (Särkkä & Nummenmaa 2009)
+                y0, y1, i00, i01, i11 = sy
+                var, rho = self._var, 1.0 - self._adapt
+                a0 = i00 * y0 + i01 * y1
+                a1 = i01 * y0 + i11 * y1
+                resid2 = var * var * (a0 * a0 + a1 * a1)
+                trace = var * (2.0 - var * (i00 + i11))
+                alpha = rho * self._alpha + 1.0
+                beta = rho * self._alpha * var + 0.5 * (resid2 + trace)
+                self._alpha = alpha
+                self._var = min(max(beta / alpha, self._var_min), self._var_max)
             if nis > self._confirm_nis:  # a surprising update: confirmed like a jump
                 self._pending, self._confirms, self._other = camera, 0, False
             elif self._pending >= 0:
@@ -1035,6 +1048,14 @@ class BallFilter:
             elif fit is not None:
                 x, P, residuals = fit
                 self.set_state(window[-1][0], x[:3], x[3:], P)
+                if self._adapt:  # the window's residuals: a conjugate update of σ²
+                    n = len(window)
+                    decay = (1.0 - self._adapt) ** n
+                    alpha = decay * self._alpha + (n - 3)
+                    beta = (decay * self._alpha * self._var
+                            + 0.5 * float(np.sum(residuals * residuals)))
+                    self._alpha = alpha
+                    self._var = min(max(beta / alpha, self._var_min), self._var_max)
                 for t, c, _, _ in window:
                     self._cam_last[c] = t
                 P = self._P

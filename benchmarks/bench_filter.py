@@ -139,6 +139,51 @@ def accuracy_table(seconds: float) -> bool:
     return ok
 
 
+def rate_rigs():
+    """(name, rig at ``fps``) of the frame-rate grid: the built-in ``paper3``, the tests'
+    3-camera lab rig (lens distortion), and this benchmark's 2- and 4-camera rigs."""
+    from test_filter import lab_rig
+    from test_filter_rates import rig_at
+
+    paper3 = apply_timing(builtin_rig("paper3"), "typeA")
+    return [("paper3", lambda fps: rig_at(paper3, *(fps,) * 3)),
+            ("lab3", lambda fps: lab_rig(3, fps=fps)),
+            ("2 cams", lambda fps: bench_rig(2, fps=fps)),
+            ("4 cams", lambda fps: bench_rig(4, fps=fps))]
+
+
+def rates_table(rates=(30.0, 60.0, 120.0, 240.0), seconds: float = 4.0,
+                motions=("straight", "spiral", "turntable", "rally")) -> bool:
+    """``filter`` against ``typeA`` on every rig of :func:`rate_rigs` x frame rate x motion
+    x noise (0, 0.3, 1 px): mean error, mm, and the ratio; the targets (never worse; at
+    0.3 px at most half) per row. The library's motions over their own duration, the
+    tests' kicked rally over ``seconds``."""
+    print(f"frame rates: mean 3D error, mm; {seconds:g} s sessions")
+    print(f"  {'rig':<7} {'fps':>4} {'motion':<10} " + "  ".join(
+        f"{'A ' + format(n, 'g'):>7} {'F':>7} {'F/A':>5}" for n in NOISES))
+    ok = True
+    kicked, _ = rally(seconds, seed=3)
+    for rig_name, make in rate_rigs():
+        for fps in rates:
+            rig = make(fps)
+            for motion_name in motions:
+                motion = kicked if motion_name == "rally" else get_motion(motion_name)
+                duration = seconds if motion_name == "rally" else motion.duration
+                cells = []
+                for noise in NOISES:
+                    detections, truth = simulate(rig, motion, duration,
+                                                 SimulationOptions(noise_px=noise, seed=11))
+                    obs = detections.best()
+                    a = evaluate(fuse(obs, rig, "typeA"), truth).mean_mm
+                    f = evaluate(fuse(obs, rig, "filter"), truth).mean_mm
+                    met = f / a <= (0.5 if noise == 0.3 else 1.0)
+                    ok &= met
+                    cells.append(f"{a:7.3f} {f:7.3f} {f / a:5.2f}{' ' if met else '!'}")
+                print(f"  {rig_name:<7} {fps:4g} {motion_name:<10} " + " ".join(cells),
+                      flush=True)
+    return ok
+
+
 _ROWS: list[dict] = []  # for --json
 
 
@@ -239,7 +284,11 @@ def main() -> int:
     parser.add_argument("--json", default=None, help="write the latency rows as JSON")
     parser.add_argument("--minutes", type=float, default=None,
                         help="session of the throughput figure (default 2, --quick 0.5)")
+    parser.add_argument("--rates", action="store_true",
+                        help="only the frame-rate grid (30-240 fps, 4 rigs, 4 motions)")
     args = parser.parse_args()
+    if args.rates:
+        return 0 if rates_table() else 1
     print("throughput, batch (3 cameras, 30 fps):")
     rate_ok = throughput(args.minutes or (0.5 if args.quick else 2.0))
     print("latency per detection, streamed one at a time (3 cameras, 0.3 px):")

@@ -32,10 +32,14 @@ equations, exactly as implemented, are in ``docs/methods.md`` (section ``filter`
   its ``ω`` is within 2σ of 0; the pair leaves while the turn model alone explains the
   motion and rejoins when ``q`` grows again or at a jump. So a flight pays for one model
   set and a circle for the other, not both;
-- the pixel noise ``σ`` adapts to the detector's (``E[NIS] = 2``); the process noise ``q``
-  adapts to the motion: a consistent filter's innovations are white, a lagging one's
-  consecutive innovations of a camera agree, so ``q`` grows with their product (a spiral, a
-  straight line without gravity, a turntable) and shrinks back to ``accel_psd`` on a flight;
+- the pixel noise ``σ`` is estimated: an inverse-gamma posterior of ``σ²`` updated by
+  variational Bayes at every accepted detection (Särkkä & Nummenmaa, IEEE Trans. AC 54(3),
+  2009; forgetting ``1 - adapt_rate``), its weak prior (``noise_px``, weight
+  ``noise_prior_weight``) updated at each start by the window fit's residuals (conjugate
+  least-squares update); the process noise ``q`` adapts to the motion: a consistent
+  filter's innovations are white, a lagging one's consecutive innovations of a camera
+  agree, so ``q`` grows with their product (a spiral, a straight line without gravity, a
+  turntable) and shrinks back to ``accel_psd`` on a flight;
 - measurement: the detection's *distorted* pixel, ``z = π_c(p) + w``, ``w ~ N(0, σ² I)``,
   through camera ``c``'s projection with its lens model; ``H = [∂π_c/∂p, 0]`` (2 x 6).
   Pixels, not rays: the detector's noise is isotropic in the recorded image, no detection is
@@ -164,8 +168,13 @@ class FilterOptions:
     restitution, bounce_friction : float, a floor bounce's expected reflection: the velocity
         along gravity times ``-restitution``, the rest times ``1 - bounce_friction`` (a golf
         ball on a floor)
-    adapt_rate : float, step of the pixel noise's adaptation (0: ``noise_px`` fixed)
-    min_noise_px, max_noise_px : float, bounds of the adapted pixel noise
+    noise_prior_weight : float, shape ``α₀`` of the pixel variance's inverse-gamma prior
+        (mean ``noise_px²``): the prior counts as ``α₀`` detections (each adds 1 to ``α``)
+    adapt_rate : float, forgetting ``1 - ρ`` of the pixel variance's variational-Bayes
+        estimate (its memory: about ``1 / adapt_rate`` detections; 0: ``noise_px`` fixed)
+    min_noise_px, max_noise_px : float, bounds of the adapted pixel noise (the lower one
+        reached on noise-free detections, where 0.05 px kept the filter behind type A at
+        120 fps and above)
     max_rejects : int, consecutive rejected detections after which the track is lost
     init_detections : int, detections (of at least two cameras) a (re)initialisation fits
     init_window : int, most detections kept for a (re)initialisation, unless a fit of a
@@ -206,8 +215,9 @@ class FilterOptions:
     """
 
     noise_px: float = 0.5
+    noise_prior_weight: float = 1.0
     adapt_rate: float = 0.02
-    min_noise_px: float = 0.05
+    min_noise_px: float = 0.01
     max_noise_px: float = 5.0
     accel_psd: float = 0.01
     drag_per_m: float = Ball().drag_per_metre
@@ -238,7 +248,7 @@ class FilterOptions:
     turn_rate_std: float = 6.0
 
     def __post_init__(self) -> None:
-        for name in ("noise_px", "accel_psd", "gate", "jump_speed"):
+        for name in ("noise_px", "accel_psd", "gate", "jump_speed", "noise_prior_weight"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise FusionError(f"filter {name} must be finite and > 0, got {value!r}")
@@ -249,6 +259,8 @@ class FilterOptions:
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise FusionError(f"filter {name} must be finite and >= 0, got {value!r}")
+        if not (math.isfinite(self.adapt_rate) and 0.0 <= self.adapt_rate < 1.0):
+            raise FusionError(f"filter adapt_rate must be in [0, 1), got {self.adapt_rate!r}")
         if not self.turn_on_psd > 0:
             raise FusionError(f"filter turn_on_psd must be > 0, got {self.turn_on_psd!r}")
         if not (math.isfinite(self.drag_per_m) and self.drag_per_m >= 0):
@@ -293,13 +305,13 @@ class _Cam:
 # replaced (IEEE arithmetic, no fastmath): the points are bit for bit those of that filter.
 
 #: ``S``: the pair's mean x (6) and covariance P (6 x 6), the turn model's mean (7) and
-#: covariance (7 x 7), the models' difference e (6), μ, ν, ν⁺, q, σ², the jump search's
-#: history (_HISTORY entries: x, P, u, v, score), per camera the latest innovation (y0, y1),
-#: then the window's pixels (u, v)
+#: covariance (7 x 7), the models' difference e (6), μ, ν, ν⁺, q, σ², α (σ²'s
+#: inverse-gamma shape), the jump search's history (_HISTORY entries: x, P, u, v, score),
+#: per camera the latest innovation (y0, y1), then the window's pixels (u, v)
 _SX, _SP, _SXT, _SPT, _SE = 0, 6, 42, 49, 98
-_SMU, _SNU, _SNUPOST, _SQ, _SVAR = 104, 105, 106, 107, 108
+_SMU, _SNU, _SNUPOST, _SQ, _SVAR, _SALPHA = 104, 105, 106, 107, 108, 109
 _HISTORY = _JUMP_LAG + 1
-_SHX = 109
+_SHX = 110
 _SHP = _SHX + 6 * _HISTORY
 _SHUV = _SHP + 36 * _HISTORY
 _SHSC = _SHUV + 2 * _HISTORY
@@ -423,6 +435,30 @@ def _innovation(cams, ci, x, P, n, u, v, var):
     inn[6] = det
     inn[7], inn[8], inn[9], inn[10], inn[11], inn[12] = a0, a1, a2, b0, b1, b2
     return True, inn
+
+
+@kernel
+def _noise_update(S, O, y0, y1, i00, i01, i11):
+    """One variational-Bayes step of the pixel variance ``σ² = β/α`` (inverse-gamma
+    ``IG(α, β)``; Särkkä & Nummenmaa, "Recursive noise adaptive Kalman filtering by
+    variational Bayesian approximations", IEEE Trans. AC 54(3), 2009, one fixed-point
+    iteration, isotropic ``R = σ² I₂``) after an update with innovation ``y`` and ``S⁻¹ =
+    [[i00, i01], [i01, i11]]`` (``S = H P⁻ Hᵀ + σ² I``): forgetting ``ρ = 1 - adapt_rate``,
+
+        α ← ρ α + 1,   β ← ρ β + (‖z − H x⁺‖² + tr(H P⁺ Hᵀ)) / 2,
+
+    with, for the Kalman update with ``R = σ² I``, ``z − H x⁺ = σ² S⁻¹ y`` and ``H P⁺ Hᵀ =
+    σ² (I − σ² S⁻¹)``; the new ``σ² = β/α`` is clipped to its bounds (β with it). In place
+    in ``S`` (σ² at ``_SVAR``, α at ``_SALPHA``)."""
+    var, rho = S[_SVAR], 1.0 - O[_OADAPT]
+    a0 = i00 * y0 + i01 * y1  # S⁻¹ y
+    a1 = i01 * y0 + i11 * y1
+    resid2 = var * var * (a0 * a0 + a1 * a1)
+    trace = var * (2.0 - var * (i00 + i11))
+    alpha = rho * S[_SALPHA] + 1.0
+    beta = rho * S[_SALPHA] * var + 0.5 * (resid2 + trace)
+    S[_SALPHA] = alpha
+    S[_SVAR] = _pmin(_pmax(beta / alpha, O[_OVMIN]), O[_OVMAX])
 
 
 @kernel
@@ -1003,11 +1039,13 @@ def _push(S, I, cams, O, N, t, cam, u, v, out):
     if accepted and solo:
         xt, Pt = _updated(xt, Pt, inn)
         xn, Pn, nis = xt[:6], _block6(Pt), inn[5]
+        sy0, sy1, s00, s01, s11 = inn[0], inn[1], inn[2], inn[3], inn[4]
         xo0, xo1, xo2 = xt[0], xt[1], xt[2]
         v0, v1, v2 = Pt[0], Pt[8], Pt[16]
     elif accepted:
         xn, Pn = _updated(x, P, inn)
         nis = inn[5]
+        sy0, sy1, s00, s01, s11 = inn[0], inn[1], inn[2], inn[3], inn[4]
         if nu:
             nu_post = S[_SNUPOST]
             xt, Pt = _updated(xt, Pt, inn_t)
@@ -1018,10 +1056,12 @@ def _push(S, I, cams, O, N, t, cam, u, v, out):
             i01 = inn[3] + nu_post * (inn_t[3] - inn[3])
             i11 = inn[4] + nu_post * (inn_t[4] - inn[4])
             nis = y0 * (i00 * y0 + i01 * y1) + y1 * (i01 * y0 + i11 * y1)
+            sy0, sy1, s00, s01, s11 = y0, y1, i00, i01, i11
             xo0, xo1, xo2, v0, v1, v2 = _combined_point(xn, Pn, xt, Pt, nu_post)
         else:
             xo0, xo1, xo2, v0, v1, v2 = xn[0], xn[1], xn[2], Pn[0], Pn[7], Pn[14]
     else:
+        sy0 = sy1 = s00 = s01 = s11 = 0.0  # (a jump: σ² is not adapted)
         S[_SNU] = nu  # the turn model's state is its prediction (as the pair's)
         if nu:
             S[_SXT:_SXT + 7] = xt
@@ -1076,9 +1116,8 @@ def _push(S, I, cams, O, N, t, cam, u, v, out):
             I[cinn_has + cam] = 1
             I[cinn_t + cam] = t
             S[_SCAM + 2 * cam], S[_SCAM + 2 * cam + 1] = prior_y0, prior_y1
-        if O[_OADAPT] != 0.0:  # pixel noise by stochastic approximation of E[NIS] = 2
-            vn = S[_SVAR] * (1.0 + O[_OADAPT] * (0.5 * nis - 1.0))
-            S[_SVAR] = _pmin(_pmax(vn, O[_OVMIN]), O[_OVMAX])
+        if O[_OADAPT] != 0.0:  # pixel noise: variational Bayes (Särkkä & Nummenmaa 2009)
+            _noise_update(S, O, sy0, sy1, s00, s01, s11)
         if nis > O[_OCONFNIS]:  # a surprising update: confirmed like a jump
             I[_IPEND], I[_ICONFS], I[_IOTHER] = cam, 0, 0
         elif I[_IPEND] >= 0:
@@ -1296,6 +1335,7 @@ class BallFilter:
         self._I = np.zeros(_ICAM + 3 * n_cams + 2 * capacity, dtype=np.int64)
         self._S[_SMU], self._S[_SQ] = self._mu0, options.accel_psd
         self._S[_SVAR] = options.noise_px ** 2
+        self._S[_SALPHA] = options.noise_prior_weight
         self._I[_IPEND], self._I[_IJUMPNS], self._I[_IJUMPCAM] = -1, -(2**62), -1
         self._I[_ICAP] = options.init_window
         self._I[_ICAM:_ICAM + n_cams] = -(2**62)  # last accepted detection per camera
@@ -1307,6 +1347,7 @@ class BallFilter:
     _nu = _state_scalar(_SNU, "probability of the turn model (0: not in the model set)")
     _q = _state_scalar(_SQ, "the adapted process noise's spectral density, m²/s³")
     _var = _state_scalar(_SVAR, "the adapted pixel variance, px²")
+    _alpha = _state_scalar(_SALPHA, "the pixel variance's inverse-gamma shape α (σ² = β/α)")
     _x = _state_vector(_SX, 6, "the pair's mean (position, velocity)")
     _P = _state_vector(_SP, 36, "the pair's covariance (6 x 6 flat)")
     _xt = _state_vector(_SXT, 7, "the turn model's mean (position, velocity, ω)")
@@ -1464,6 +1505,7 @@ class BallFilter:
             elif fit is not None:
                 x, P, residuals = fit
                 self.set_state(window[-1][0], x[:3], x[3:], P)
+                self._window_noise(len(window), residuals)
                 for t, c, _, _ in window:
                     self._I[_ICAM + c] = t
                 vx, vy, vz = P[0], P[7], P[14]
@@ -1473,6 +1515,21 @@ class BallFilter:
             del window[0]
         self._set_window(window)
         return False
+
+    def _window_noise(self, n: int, residuals) -> None:
+        """The pixel variance's conjugate update by a window fit of ``n`` detections with
+        these pixel residuals (``2n - 6`` degrees of freedom: the least-squares residual
+        variance, Gelman et al., *Bayesian Data Analysis*, 3rd ed., 2013, §14.2): after
+        ``n`` steps of forgetting ``ρ``, ``α ← ρⁿ α + (2n - 6)/2``, ``β ← ρⁿ β + ‖r‖²/2``,
+        ``σ² = β/α`` clipped to its bounds."""
+        if self.options.adapt_rate == 0.0:
+            return
+        S = self._S
+        decay = (1.0 - self.options.adapt_rate) ** n
+        alpha = decay * S[_SALPHA] + (n - 3)
+        beta = decay * S[_SALPHA] * S[_SVAR] + 0.5 * float(np.sum(residuals * residuals))
+        S[_SALPHA] = alpha
+        S[_SVAR] = min(max(beta / alpha, self._var_min), self._var_max)
 
     def _ray(self, time_ns: int, camera: int, u: float, v: float):
         key = (time_ns, camera)
