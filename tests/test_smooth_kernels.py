@@ -363,3 +363,19 @@ def test_band_from_rows_reads_the_symmetric_band():
                 assert_array_equal(band[i, k], S[3 * i:3 * i + 3, 3 * (i + k):3 * (i + k) + 3])
             else:  # beyond the last control point: zero
                 assert_array_equal(band[i, k], 0.0)
+
+
+def test_window_positions_are_the_basis_sums_of_the_numpy_form_bit_for_bit():
+    local, t, J, z, w, index, valid, centre, h, _ = _window_case(6)
+    base = _breaks._Base(local, t, J, z, w, index, valid, centre, h)
+    X = _kernels.window_positions(base.first, base.N, np.ascontiguousarray(base.x0))
+    assert_array_equal(X, _kernels.window_positions.py_func(base.first, base.N,
+                                                            np.ascontiguousarray(base.x0)))
+    B, W = base.first.shape
+    gathered = np.take_along_axis(base.x0, (base.first[..., None] + np.arange(4)).reshape(
+        B, -1)[..., None], axis=1).reshape(B, W, 4, 3)
+    assert_array_equal(X, np.einsum("bwa,bwad->bwd", base.N, gathered))
+    # by hand, one detection
+    f = base.first[1, 2]
+    assert_allclose(X[1, 2], sum(base.N[1, 2, a] * base.x0[1, f + a] for a in range(4)),
+                    rtol=1e-15, atol=0)

@@ -492,3 +492,21 @@ def band_from_rows(rows: np.ndarray, m: int) -> np.ndarray:
                     else:
                         band[i, k, a, b] = rows[3 * i + b, -j]
     return band
+
+
+@kernel
+def window_positions(first: np.ndarray, N: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Each window's spline at its detections, ``X[b, w] = Σ_a N[b, w, a] x[b, first + a]``
+    (B, W, 3), for control points ``x`` (B, m, 3) (summed over ``a`` in order, as numpy's
+    einsum does: the same bits)."""
+    B, W = first.shape
+    out = np.empty((B, W, 3))
+    for b in range(B):
+        for w in range(W):
+            f = first[b, w]
+            for d in range(3):
+                acc = 0.0
+                for a in range(4):
+                    acc += N[b, w, a] * x[b, f + a, d]
+                out[b, w, d] = acc
+    return out

@@ -72,11 +72,12 @@ point; the prior assumes ballistic flight between breaks (a rolling ball, with n
 acceleration, is fitted with a small bias; air drag is absorbed by σ_a, not modelled); a
 velocity change spread over more than a few knot spans (a ball rolling to a stop) is smoothed
 rather than broken. numpy and scipy, with compiled per-point loops
-(:mod:`pslog.estimation._kernels`, numba): the B-spline basis, the normal equations summed
-per control point (:class:`pslog.estimation._normal.Points`), the covariance band's Takahashi
-recurrence and the break test's local normal equations; the banded Cholesky factorisations
-are LAPACK's (scipy). ~50,000 detections per second on one core at 10 minutes
-(``benchmarks/bench_smooth.py``).
+(:mod:`pslog.estimation._kernels`, numba): the B-spline basis, the projection with its
+residual and Jacobian, each detection's quadratic form and the normal equations summed per
+control point (:class:`pslog.estimation._normal.Points`), the covariance band's Takahashi
+recurrence and the break test's local normal equations and solves; the banded Cholesky
+factorisations are LAPACK's (scipy). ~70,000 detections per second on one core at 10
+minutes (``benchmarks/bench_smooth.py``, ``--base`` for a paired comparison).
 """
 
 from __future__ import annotations
