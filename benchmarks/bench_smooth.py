@@ -14,7 +14,13 @@ process (steadier than wall time on a shared machine), best of ``--repeat``; bot
 once on the session's first three seconds first, so the numba kernels' compilation (cached
 on disk after the first run on a machine) and the imports are not timed.
 
+With ``--base REV`` (a git revision), ``smooth`` is also timed under that revision's code on
+the same session in the same run: both in child processes (the session pickled once), their
+runs alternating (``--repeat`` pairs, best of each), so a shared machine's load hits both
+alike; the ratio is printed (the previous figure, measured beside today's).
+
     python benchmarks/bench_smooth.py [--minutes 2 [10 45 90]] [--repeat 1] [--no-sync]
+        [--base REV]
 """
 
 from __future__ import annotations
@@ -25,7 +31,12 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")  # one core, before numpy loads
 
 import argparse  # noqa: E402
+import pickle  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
 import time  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 from pslog import SimulationOptions, apply_timing, builtin_rig, simulate  # noqa: E402
 from pslog.estimation.sync import estimate_clocks  # noqa: E402
@@ -51,6 +62,47 @@ def best_cpu(repeat: int, fn) -> tuple[float, object]:
     return best, result
 
 
+ROOT = Path(__file__).resolve().parents[1]
+#: a child's timing of smooth on a pickled session: warm-up on its first 3 s, then CPU s
+_CHILD = """
+import pickle, sys, time
+from pslog.fusion import fuse
+obs, rig = pickle.load(open(sys.argv[1], "rb"))
+fuse(obs.select(obs.time_ns < obs.time_ns[0] + 3 * 10**9), rig, "smooth")
+start = time.process_time()
+fuse(obs, rig, "smooth")
+print(time.process_time() - start)
+"""
+
+
+def child_cpu(code: Path, session: Path) -> float:
+    """CPU seconds of ``smooth`` on a pickled session in a child process running the pslog
+    package under ``code``."""
+    env = dict(os.environ, PYTHONPATH=str(code))
+    out = subprocess.run([sys.executable, "-c", _CHILD, str(session)], env=env, check=True,
+                         capture_output=True, text=True).stdout
+    return float(out.split()[-1])
+
+
+def paired(base: str, obs, rig, repeat: int) -> tuple[float, float]:
+    """Best CPU seconds of ``smooth`` under this tree and under git revision ``base``, their
+    runs alternating."""
+    with tempfile.TemporaryDirectory(prefix="bench-smooth-") as tmp:
+        old = Path(tmp) / "base"
+        old.mkdir()
+        archive = subprocess.run(["git", "archive", base, "pslog"], cwd=ROOT, check=True,
+                                 capture_output=True).stdout
+        subprocess.run(["tar", "-x", "-C", str(old)], input=archive, check=True)
+        session = Path(tmp) / "session.pkl"
+        with open(session, "wb") as f:
+            pickle.dump((obs, rig), f)
+        now, then = float("inf"), float("inf")
+        for _ in range(max(repeat, 1)):
+            now = min(now, child_cpu(ROOT, session))
+            then = min(then, child_cpu(old, session))
+    return now, then
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--minutes", type=float, nargs="+", default=[2.0],
@@ -58,6 +110,8 @@ def main() -> int:
     parser.add_argument("--repeat", type=int, default=1)
     parser.add_argument("--no-sync", action="store_true", help="time smooth only")
     parser.add_argument("--json", default=None, help="write the rows as JSON")
+    parser.add_argument("--base", default=None, metavar="REV",
+                        help="also time smooth under this git revision, paired, same session")
     args = parser.parse_args()
     rig = apply_timing(builtin_rig("paper3"), "typeA")
     logged_rig = rig  # the rig as logged: offsets 0, the start of sync
@@ -96,6 +150,14 @@ def main() -> int:
             print(f"{minutes:>7g} {len(obs):>10,} {'sync':<8} {seconds:8.2f} "
                   f"{seconds / minutes:7.3f} {len(obs) / seconds:>10,.0f}  offsets off by "
                   f"at most {err * 1e6:.1f} µs", flush=True)
+        if args.base:
+            now, then = paired(args.base, obs, true, args.repeat)
+            row["paired"] = {"now": now, "base": then}
+            print(f"{minutes:>7g} {len(obs):>10,} {'smooth':<8} {now:8.2f} "
+                  f"{now / minutes:7.3f} {len(obs) / now:>10,.0f}  paired run, this tree")
+            print(f"{minutes:>7g} {len(obs):>10,} {'@' + args.base[:7]:<8} {then:8.2f} "
+                  f"{then / minutes:7.3f} {len(obs) / then:>10,.0f}  paired run, {args.base}: "
+                  f"this tree {then / now:.2f}x faster", flush=True)
         results.append(row)
     last = results[-1]
     rate = last["n"] / last["smooth"]

@@ -255,7 +255,10 @@ def test_window_solve_is_the_dense_solve_and_refuses_a_non_positive_pivot():
     x, cov, ok = _kernels.window_solve(H, rhs, lo, hi)
     assert ok.all()
     inverse = np.linalg.inv(H)
-    assert_allclose(cov, inverse[:, :, lo:hi], rtol=1e-8, atol=1e-10 * np.abs(inverse).max())
+    # the rows and columns lo..hi-1 of the inverse (the rows before lo are not computed)
+    assert_allclose(cov[:, lo:], inverse[:, lo:, lo:hi], rtol=1e-8,
+                    atol=1e-10 * np.abs(inverse).max())
+    assert_array_equal(cov[:, :lo], 0.0)
     ref = np.linalg.solve(H, rhs[..., None])[..., 0]
     assert_allclose(x, ref, rtol=1e-8, atol=1e-10 * np.abs(ref).max())
     for got, want in zip((x, cov, ok), _kernels.window_solve.py_func(H, rhs, lo, hi),
@@ -270,3 +273,109 @@ def test_window_solve_is_the_dense_solve_and_refuses_a_non_positive_pivot():
     bad[1, n // 2, n // 2] = -1.0  # not positive definite
     _, _, ok = _kernels.window_solve(bad, rhs, lo, hi)
     assert_array_equal(ok, [True, False, True])
+
+
+def _lens_rig():
+    from pslog.camera import Camera, look_at
+    from pslog.rig import Rig
+
+    cams = []
+    for i in range(3):
+        angle = 2 * np.pi * i / 3 + 0.4
+        R, t = look_at((1.5 + 4.2 * np.cos(angle), 1.0 + 3.6 * np.sin(angle), 2.2 + 0.3 * i),
+                       (1.5, 1.0, 0.8))
+        cams.append(Camera(f"c{i + 1}", 800, 600, [[700.0 + 20 * i, 0.3, 401.0],
+                                                   [0, 702.0 + 20 * i, 298.0], [0, 0, 1]],
+                           np.array([-0.21, 0.08, 4e-4, -6e-4, -0.01]), R, t, 30.0))
+    return Rig(tuple(cams))
+
+
+def test_project_residuals_is_the_stacked_projection_bit_for_bit_and_flags_points_behind():
+    from pslog.estimation.projection import project_stacked, stack_cameras
+
+    rig = _lens_rig()
+    rng = np.random.default_rng(21)
+    n = 400
+    X = rng.uniform([0.3, 0.2, 0.1], [2.7, 1.8, 1.9], (n, 3))
+    X[7] = rig.cameras[0].center_world  # on its camera's plane: no projection
+    camera = rng.integers(0, 3, n)
+    camera[7] = 0
+    uv_obs = rng.uniform(0, 800, (n, 2))
+    params = [np.array([c.R for c in rig.cameras]), np.array([c.t for c in rig.cameras]),
+              np.array([[c.K[0, 0], c.K[0, 1], c.K[0, 2], c.K[1, 1], c.K[1, 2]]
+                        for c in rig.cameras]), np.array([c.dist for c in rig.cameras])]
+    r, J, invalid = _kernels.project_residuals(camera, *params, X, uv_obs)
+    for got, want in zip((r, J, invalid),
+                         _kernels.project_residuals.py_func(camera, *params, X, uv_obs),
+                         strict=True):
+        assert_array_equal(got, want)
+    uv, J_ref = project_stacked(stack_cameras(rig.cameras, camera), X)
+    ok = np.ones(n, bool)
+    ok[7] = False
+    assert_array_equal(invalid, ~ok)
+    assert_array_equal(r[ok], (uv - uv_obs)[ok])  # the same bits
+    assert_array_equal(J[ok], J_ref[ok])
+    assert_array_equal(r[7], 0.0)
+    assert_array_equal(J[7], 0.0)
+    # and the single-camera projection with its hand-written chain rule
+    for i, cam in enumerate(rig.cameras):
+        sel = ok & (camera == i)
+        uv_i, J_i = project_with_jacobian_of(cam, X[sel])
+        assert_allclose(r[sel] + uv_obs[sel], uv_i, rtol=1e-14, atol=1e-9)
+        assert_allclose(J[sel], J_i, rtol=1e-12, atol=1e-9)
+
+
+def project_with_jacobian_of(cam, X):
+    from pslog.estimation.projection import project_with_jacobian
+
+    return project_with_jacobian(cam, X)
+
+
+def test_data_terms_are_the_detections_quadratic_forms():
+    rng = np.random.default_rng(22)
+    n = 120
+    J = rng.normal(size=(n, 2, 3)) * 300
+    z = rng.normal(size=(n, 2)) * 20
+    w = rng.uniform(0.1, 2.0, n)
+    upper, v = _kernels.data_terms(J, z, w)
+    for got, want in zip((upper, v), _kernels.data_terms.py_func(J, z, w), strict=True):
+        assert_array_equal(got, want)
+    M = np.einsum("n,nai,nak->nik", w, J, J)  # w JᵀJ
+    assert_allclose(upper, M.reshape(n, 9)[:, [0, 1, 2, 4, 5, 8]], rtol=1e-13)
+    assert_allclose(v, np.einsum("nai,na->ni", J, w[:, None] * z), rtol=1e-12, atol=1e-9)
+
+
+def test_band_from_rows_reads_the_symmetric_band():
+    rng = np.random.default_rng(23)
+    m = 6
+    n = 3 * m
+    A = rng.normal(size=(n, n))
+    S = A @ A.T  # a symmetric "covariance"
+    rows = np.zeros((n + 12, 12))
+    for j in range(12):
+        i = np.arange(n - j)
+        rows[i, j] = S[i, i + j]
+    band = _kernels.band_from_rows(rows, m)
+    assert_array_equal(band, _kernels.band_from_rows.py_func(rows, m))
+    for i in range(m):
+        for k in range(4):
+            if i + k < m:
+                assert_array_equal(band[i, k], S[3 * i:3 * i + 3, 3 * (i + k):3 * (i + k) + 3])
+            else:  # beyond the last control point: zero
+                assert_array_equal(band[i, k], 0.0)
+
+
+def test_window_positions_are_the_basis_sums_of_the_numpy_form_bit_for_bit():
+    local, t, J, z, w, index, valid, centre, h, _ = _window_case(6)
+    base = _breaks._Base(local, t, J, z, w, index, valid, centre, h)
+    X = _kernels.window_positions(base.first, base.N, np.ascontiguousarray(base.x0))
+    assert_array_equal(X, _kernels.window_positions.py_func(base.first, base.N,
+                                                            np.ascontiguousarray(base.x0)))
+    B, W = base.first.shape
+    gathered = np.take_along_axis(base.x0, (base.first[..., None] + np.arange(4)).reshape(
+        B, -1)[..., None], axis=1).reshape(B, W, 4, 3)
+    assert_array_equal(X, np.einsum("bwa,bwad->bwd", base.N, gathered))
+    # by hand, one detection
+    f = base.first[1, 2]
+    assert_allclose(X[1, 2], sum(base.N[1, 2, a] * base.x0[1, f + a] for a in range(4)),
+                    rtol=1e-15, atol=0)

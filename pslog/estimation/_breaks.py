@@ -129,9 +129,9 @@ class _Base:
         self.cost = np.sum(wz, axis=1) + local.const - np.einsum("bk,bk->b", rhs, x)
         self.x0 = x.reshape(B, -1, 3)
         self.first, self.N = np.ascontiguousarray(first, dtype=np.int64), np.ascontiguousarray(N)
-        X0 = np.einsum("bwa,bwad->bwd", N, np.take_along_axis(
-            self.x0, (first[..., None] + np.arange(4)).reshape(B, -1)[..., None], axis=1
-        ).reshape(B, W, 4, 3))  # (B, W, 3)
+        from ._kernels import window_positions
+
+        X0 = window_positions(self.first, self.N, np.ascontiguousarray(self.x0))  # (B, W, 3)
         self.u = v - (self.M @ X0[..., None])[..., 0]  # w Jᵀ (z - J X₀)
         self.s_sorted = np.where(inside, s, 1e6)  # times in spacings from the centre, sorted
         self.local, self.spacing = local, spacing

@@ -303,9 +303,10 @@ def window_solve(H: np.ndarray, rhs: np.ndarray, lo: int, hi: int
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Solve a batch of the break test's local normal equations (B, n, n), symmetric
     positive definite and banded (every term touches 4 consecutive control points: 11
-    super-diagonals): the minimum ``H⁻¹ rhs`` (B, n) and the columns ``lo..hi-1`` of ``H⁻¹``
-    (B, n, hi - lo), by a banded Cholesky factorisation ``H = L Lᵀ`` and substitutions that
-    start at each unit column's first non-zero (Golub & Van Loan, *Matrix Computations*,
+    super-diagonals): the minimum ``H⁻¹ rhs`` (B, n) and the rows and columns ``lo..hi-1``
+    of ``H⁻¹`` (B, n, hi - lo; rows before ``lo`` are 0: the break test reads none), by a
+    banded Cholesky factorisation ``H = L Lᵀ`` and substitutions that start at each unit
+    column's first non-zero (Golub & Van Loan, *Matrix Computations*,
     4th ed., §4.3.5-4.3.6).
 
     Returns
@@ -319,7 +320,9 @@ def window_solve(H: np.ndarray, rhs: np.ndarray, lo: int, hi: int
     cov = np.zeros((B, n, hi - lo))
     ok = np.ones(B, dtype=np.bool_)
     L = np.zeros((n, n))
-    y = np.zeros(n)
+    ncol = hi - lo + 1
+    Y = np.zeros((n, ncol))
+    Z = np.zeros((n, ncol))
     for b in range(B):
         Hb = H[b]
         good = True
@@ -341,21 +344,169 @@ def window_solve(H: np.ndarray, rhs: np.ndarray, lo: int, hi: int
         if not good:
             ok[b] = False
             continue
-        for c in range(lo - 1, hi):  # lo - 1: the right-hand side; then the unit columns
-            start = 0 if c < lo else c
-            for i in range(start):
-                y[i] = 0.0
-            for i in range(start, n):
-                t = (rhs[b, i] if c < lo else (1.0 if i == c else 0.0))
+        # the right-hand side (column 0) and the unit columns lo..hi-1 (columns 1..) side by
+        # side, row by row: each column's sums run in the order a column-at-a-time solve
+        # takes (the same bits), but the columns' chains are independent, so the processor
+        # overlaps them instead of waiting on one column's previous row
+        for i in range(n):
+            lii = L[i, i]
+            for col in range(ncol):
+                start = 0 if col == 0 else lo + col - 1
+                if i < start:
+                    Y[i, col] = 0.0
+                    continue
+                t = rhs[b, i] if col == 0 else (1.0 if i == start else 0.0)
                 for k in range(max(start, i - bw), i):
-                    t -= L[i, k] * y[k]
-                y[i] = t / L[i, i]
-            for i in range(n - 1, -1, -1):
-                t = y[i]
-                for k in range(i + 1, min(n, i + bw + 1)):
-                    t -= L[k, i] * (x[b, k] if c < lo else cov[b, k, c - lo])
-                if c < lo:
-                    x[b, i] = t / L[i, i]
-                else:
-                    cov[b, i, c - lo] = t / L[i, i]
+                    t -= L[i, k] * Y[k, col]
+                Y[i, col] = t / lii
+        # the minimum in full; a unit column down to row lo only (the gains read the
+        # rows lo..hi-1 of these columns: the rows below them are left 0)
+        for i in range(n - 1, -1, -1):
+            lii = L[i, i]
+            kend = min(n, i + bw + 1)
+            for col in range(ncol if i >= lo else 1):
+                t = Y[i, col]
+                for k in range(i + 1, kend):
+                    t -= L[k, i] * Z[k, col]
+                Z[i, col] = t / lii
+        for i in range(n):
+            x[b, i] = Z[i, 0]
+        for i in range(lo, n):
+            for col in range(1, ncol):
+                cov[b, i, col - 1] = Z[i, col]
     return x, cov, ok
+
+
+@kernel
+def project_residuals(camera: np.ndarray, R: np.ndarray, t: np.ndarray, K: np.ndarray,
+                      dist: np.ndarray, X: np.ndarray, uv: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Reprojection residuals and Jacobians of world points, each seen by one camera: the
+    formulas of :func:`pslog.estimation.projection.project_with_jacobian` (OpenCV pinhole +
+    plumb_bob, analytic chain rule), one point at a time, in the same operations and order
+    as :func:`~pslog.estimation.projection.project_stacked` (so the same bits).
+
+    Parameters
+    ----------
+    camera : (n,) int64, each point's camera
+    R : (C, 3, 3), t : (C, 3), the cameras' poses (world to camera, metres)
+    K : (C, 5), ``fx, s, cx, fy, cy`` (pixels); dist : (C, 5), ``k1, k2, p1, p2, k3``
+    X : (n, 3) float64, metres; uv : (n, 2) float64, the detections, pixels
+
+    Returns
+    -------
+    r : (n, 2), projection minus detection, pixels; J : (n, 2, 3), ``∂uv/∂X``, pixels per
+    metre; invalid : (n,) bool, a point at or behind its camera plane (or any non-finite
+    value): its ``r`` and ``J`` are set to 0 (it adds nothing to the normal equations)
+    """
+    n = len(camera)
+    r = np.empty((n, 2))
+    J = np.empty((n, 2, 3))
+    invalid = np.zeros(n, dtype=np.bool_)
+    for i in range(n):
+        c = camera[i]
+        X0, X1, X2 = X[i, 0], X[i, 1], X[i, 2]
+        # R X + t, summed as numpy's einsum ("nij,nj->ni") does: its two SIMD lanes hold
+        # j = 0 and 2, and j = 1, then add up (the bits of project_stacked)
+        pc0 = ((R[c, 0, 0] * X0 + R[c, 0, 2] * X2) + R[c, 0, 1] * X1) + t[c, 0]
+        pc1 = ((R[c, 1, 0] * X0 + R[c, 1, 2] * X2) + R[c, 1, 1] * X1) + t[c, 1]
+        pc2 = ((R[c, 2, 0] * X0 + R[c, 2, 2] * X2) + R[c, 2, 1] * X1) + t[c, 2]
+        inv_z = 1.0 / pc2 if pc2 > 1e-12 else np.nan
+        x = pc0 * inv_z
+        y = pc1 * inv_z
+        k1, k2, p1, p2, k3 = dist[c, 0], dist[c, 1], dist[c, 2], dist[c, 3], dist[c, 4]
+        r2 = x * x + y * y
+        radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        d_radial = k1 + r2 * (2 * k2 + 3 * k3 * r2)
+        xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
+        yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+        fx, s, cx, fy, cy = K[c, 0], K[c, 1], K[c, 2], K[c, 3], K[c, 4]
+        r0 = (fx * xd + s * yd + cx) - uv[i, 0]
+        r1 = (fy * yd + cy) - uv[i, 1]
+        d00 = radial + 2 * x * x * d_radial + 2 * p1 * y + 6 * p2 * x
+        d01 = 2 * x * y * d_radial + 2 * p1 * x + 2 * p2 * y
+        d11 = radial + 2 * y * y * d_radial + 6 * p1 * y + 2 * p2 * x
+        a00 = fx * d00 + s * d01
+        a01 = fx * d01 + s * d11
+        a10 = fy * d01
+        a11 = fy * d11
+        total = r0 + r1
+        jsum = 0.0
+        for k in range(3):
+            px = inv_z * (R[c, 0, k] - x * R[c, 2, k])
+            py = inv_z * (R[c, 1, k] - y * R[c, 2, k])
+            J[i, 0, k] = a00 * px + a01 * py
+            J[i, 1, k] = a10 * px + a11 * py
+        for a in range(2):
+            for k in range(3):
+                jsum += J[i, a, k]
+        if np.isfinite(total + jsum):
+            r[i, 0] = r0
+            r[i, 1] = r1
+        else:
+            invalid[i] = True
+            r[i, 0] = 0.0
+            r[i, 1] = 0.0
+            for a in range(2):
+                for k in range(3):
+                    J[i, a, k] = 0.0
+    return r, J, invalid
+
+
+@kernel
+def data_terms(J: np.ndarray, target: np.ndarray, w: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """Each detection's quadratic form ``w ‖J p - z‖²`` as a point term of
+    :func:`points_normal`: ``upper`` (n, 6) the upper triangle of ``w JᵀJ`` (00, 01, 02, 11,
+    12, 22) and ``v = Jᵀ (w z)`` (n, 3); J (n, 2, 3), target z (n, 2), w (n,)."""
+    n = len(w)
+    upper = np.empty((n, 6))
+    v = np.empty((n, 3))
+    for i in range(n):
+        wi = w[i]
+        q = 0
+        for a in range(3):
+            for b in range(a, 3):
+                upper[i, q] = wi * (J[i, 0, a] * J[i, 0, b] + J[i, 1, a] * J[i, 1, b])
+                q += 1
+        v0 = wi * target[i, 0]
+        v1 = wi * target[i, 1]
+        for d in range(3):
+            v[i, d] = J[i, 0, d] * v0 + J[i, 1, d] * v1
+    return upper, v
+
+
+@kernel
+def band_from_rows(rows: np.ndarray, m: int) -> np.ndarray:
+    """The (m, 4, 3, 3) block band of a covariance from ``rows[r, j] = Σ_{r, r+j}``
+    (:func:`takahashi_rows`): block (i, i+k), entry (a, b) = ``rows[3i+a, 3k+b-a]`` (by
+    symmetry ``rows[3i+b, a-b]`` below a diagonal block's diagonal)."""
+    band = np.zeros((m, 4, 3, 3))
+    for i in range(m):
+        for k in range(4):
+            for a in range(3):
+                for b in range(3):
+                    j = 3 * k + b - a
+                    if j >= 0:
+                        band[i, k, a, b] = rows[3 * i + a, j]
+                    else:
+                        band[i, k, a, b] = rows[3 * i + b, -j]
+    return band
+
+
+@kernel
+def window_positions(first: np.ndarray, N: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Each window's spline at its detections, ``X[b, w] = Σ_a N[b, w, a] x[b, first + a]``
+    (B, W, 3), for control points ``x`` (B, m, 3) (summed over ``a`` in order, as numpy's
+    einsum does: the same bits)."""
+    B, W = first.shape
+    out = np.empty((B, W, 3))
+    for b in range(B):
+        for w in range(W):
+            f = first[b, w]
+            for d in range(3):
+                acc = 0.0
+                for a in range(4):
+                    acc += N[b, w, a] * x[b, f + a, d]
+                out[b, w, d] = acc
+    return out

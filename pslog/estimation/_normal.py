@@ -203,17 +203,9 @@ def covariance_band_sequential(U: np.ndarray) -> np.ndarray:
 def _band_from_rows(rows: np.ndarray, m: int) -> np.ndarray:
     """The (m, 4, 3, 3) block band from ``rows[r, j] = Σ_{r, r+j}`` (n + 12, 12): block
     (i, i+k), entry (a, b) = Σ_{3i+a, 3i+3k+b} = rows[3i+a, 3k+b-a] (b >= a if k = 0)."""
-    band = np.zeros((m, 4, 3, 3))
-    base = 3 * np.arange(m)
-    for k in range(4):
-        for a in range(3):
-            for b in range(3):
-                j = 3 * k + b - a
-                if j >= 0:
-                    band[:, k, a, b] = rows[base + a, j]
-                else:  # below the diagonal of a diagonal block: symmetry
-                    band[:, k, a, b] = rows[base + b, -j]
-    return band
+    from ._kernels import band_from_rows
+
+    return band_from_rows(np.ascontiguousarray(rows, dtype=np.float64), int(m))
 
 
 def marginal(band: np.ndarray, first: np.ndarray, N: np.ndarray) -> np.ndarray:

@@ -72,11 +72,12 @@ point; the prior assumes ballistic flight between breaks (a rolling ball, with n
 acceleration, is fitted with a small bias; air drag is absorbed by σ_a, not modelled); a
 velocity change spread over more than a few knot spans (a ball rolling to a stop) is smoothed
 rather than broken. numpy and scipy, with compiled per-point loops
-(:mod:`pslog.estimation._kernels`, numba): the B-spline basis, the normal equations summed
-per control point (:class:`pslog.estimation._normal.Points`), the covariance band's Takahashi
-recurrence and the break test's local normal equations; the banded Cholesky factorisations
-are LAPACK's (scipy). ~50,000 detections per second on one core at 10 minutes
-(``benchmarks/bench_smooth.py``).
+(:mod:`pslog.estimation._kernels`, numba): the B-spline basis, the projection with its
+residual and Jacobian, each detection's quadratic form and the normal equations summed per
+control point (:class:`pslog.estimation._normal.Points`), the covariance band's Takahashi
+recurrence and the break test's local normal equations and solves; the banded Cholesky
+factorisations are LAPACK's (scipy). ~70,000 detections per second on one core at 10
+minutes (``benchmarks/bench_smooth.py``, ``--base`` for a paired comparison).
 """
 
 from __future__ import annotations
@@ -92,7 +93,6 @@ from ..records import NS, Observations
 from ..rig import Rig
 from . import _breaks, _normal
 from .bspline import DEGREE, basis, basis_pieces, clamped_knots, n_control
-from .projection import project_stacked, stack_cameras
 
 
 @dataclass(frozen=True)
@@ -323,16 +323,23 @@ class _Problem:
         A point at or behind its camera (a wild iterate) has no projection: its row is set to
         0 with a zero Jacobian (it adds nothing to the normal equations) and flagged in
         ``self.invalid``, which the cost charges as a gross outlier."""
+        from ._kernels import project_residuals
+
         if self._cameras is None:
-            self._cameras = stack_cameras(self.rig.cameras, self.obs.camera[self.rows])
-            self._uv = self.obs.uv[self.rows]
-        uv, J = project_stacked(self._cameras, X)
-        r = uv - self._uv
-        finite = np.isfinite(r.sum(axis=1) + J.reshape(-1, 6).sum(axis=1))
-        self.invalid = ~finite
-        if not np.all(finite):
-            r[self.invalid] = 0.0
-            J[self.invalid] = 0.0
+            cams = self.rig.cameras
+            self._cameras = {
+                "camera": np.ascontiguousarray(self.obs.camera[self.rows], dtype=np.int64),
+                "R": np.array([c.R for c in cams], dtype=np.float64),
+                "t": np.array([c.t for c in cams], dtype=np.float64),
+                "K": np.array([[c.K[0, 0], c.K[0, 1], c.K[0, 2], c.K[1, 1], c.K[1, 2]]
+                               for c in cams], dtype=np.float64),
+                "dist": np.array([c.dist for c in cams], dtype=np.float64)}
+            self._uv = np.ascontiguousarray(self.obs.uv[self.rows], dtype=np.float64)
+        p = self._cameras
+        # the formulas of project_stacked, one compiled pass (residual and validity fused)
+        r, J, self.invalid = project_residuals(p["camera"], p["R"], p["t"], p["K"], p["dist"],
+                                               np.ascontiguousarray(X, dtype=np.float64),
+                                               self._uv)
         return r, J
 
     def project_control(self, control: np.ndarray
@@ -358,12 +365,12 @@ class _Problem:
         """Normal equations of the prior plus ``Σ_i w_i ‖J_i p(t_i) - target_i‖²``
         (:func:`_normal.accumulate_points`; the same sums as :meth:`data_rows` fed to
         :func:`_normal.accumulate`). J (n, 2, 3), target (n, 2), w (n,)."""
-        a = J.reshape(-1, 6).T  # (6, n): rows ∂u/∂X, ∂u/∂Y, ∂u/∂Z, ∂v/∂X, ∂v/∂Y, ∂v/∂Z
-        M = np.empty((len(w), 6))  # upper triangle of w JᵀJ
-        for k, (i, j) in enumerate(((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))):
-            M[:, k] = w * (a[i] * a[j] + a[3 + i] * a[3 + j])
-        v = (w[:, None] * target)
-        v = a[:3].T * v[:, :1] + a[3:].T * v[:, 1:]
+        from ._kernels import data_terms
+
+        # each detection's upper triangle of w JᵀJ (n, 6) and Jᵀ (w z) (n, 3), one pass
+        M, v = data_terms(np.ascontiguousarray(J, dtype=np.float64),
+                          np.ascontiguousarray(target, dtype=np.float64),
+                          np.ascontiguousarray(w, dtype=np.float64))
         return self.points.normal(M, v, self.prior_ab.copy(), self.prior_rhs.copy())
 
     def data_rows(self, J: np.ndarray, target: np.ndarray
