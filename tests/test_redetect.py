@@ -219,3 +219,37 @@ def test_a_file_without_a_usable_summary_is_read_image_by_image(tmp_path, monkey
     for name in ("frame_time_ns", "frame_camera", "frame_index", "cand_frame", "cand_uv",
                  "cand_radius", "cand_score"):
         assert_array_equal(getattr(b, name), getattr(a, name), err_msg=name)
+
+
+def test_chunks_are_decompressed_as_every_reader_does_damage_included():
+    """:func:`redetect._payload` gives :func:`chunk_payload`'s bytes for every chunk of the
+    sample, and its one-line error for a chunk damaged in its data, its CRC, its size or
+    cut short."""
+    from pslog.errors import LogFormatError
+    from pslog.log import _mcapio as io
+    from recorders import redetect
+
+    raw = SAMPLE.read_bytes()
+    with open(SAMPLE, "rb") as f:
+        summary = make_reader(f).get_summary()
+    chunks = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
+    for c in chunks:
+        body = memoryview(raw)[c.chunk_start_offset + 9:c.chunk_start_offset + c.chunk_length]
+        assert redetect._payload(body) == io.chunk_payload(body)
+    c = max(chunks, key=lambda c: c.chunk_length)  # an image chunk
+    record = bytearray(raw[c.chunk_start_offset:c.chunk_start_offset + c.chunk_length])
+    crc_at = 9 + 24  # message start and end times, uncompressed size, then the CRC
+    damaged = {"data": (len(record) // 2, 0xFF), "crc": (crc_at, 0x01),
+               "size": (9 + 16, 0x01), "cut": None}
+    for what, flip in damaged.items():
+        bad = bytearray(record)
+        if flip is None:
+            bad = bad[:-1000]
+        else:
+            bad[flip[0]] ^= flip[1]
+        body = memoryview(bytes(bad))[9:]
+        with pytest.raises(LogFormatError) as expected:
+            io.chunk_payload(body)
+        with pytest.raises(LogFormatError) as got:
+            redetect._payload(body)
+        assert str(got.value) == str(expected.value), what
