@@ -184,8 +184,9 @@ def _detecting(src, rig_names, row_of: dict, hsv: HsvRange, max_candidates: int,
     workers = workers or (os.cpu_count() or 1)
     compiled = n_images >= _COMPILED_FROM
     parallel = workers > 1 and n_images >= _PARALLEL_FROM
+    # (in this process: runs of about _BATCH images, each told to the progress as it is done)
     per_task = (int(np.clip(n_images // (4 * workers), _BATCH // 2, 4 * _BATCH)) if parallel
-                else max(n_images, 1))
+                else _BATCH)
     plan = _plan(src, rig_names, n_images, per_task)
     if not parallel:
         detector = BallDetector(hsv, max_candidates, compiled=compiled)
