@@ -8,16 +8,20 @@ processes, decoding, detecting, writing the new session; not the interpreter's s
 timed by wall clock and by the CPU seconds of the process and its workers;
 ``2 x frames / CPU seconds`` is what two idle cores would do and half of it what one core
 does (the machine may be shared: the wall figure then says little, the CPU figure and the
-ratio in one run hold). ``--base DIR`` runs the same on another checkout (e.g. a copy of the
-base commit), interleaved round by round. The floors of any exact OpenCV re-detection are
-printed beside them: the same JPEGs only decoded by ``cv2.imdecode`` in two processes
-(read beforehand, nothing pickled), and decoded and detected.
+ratio in one run hold); the CPU time is split into the main process's (reading, copying
+and writing the session) and the workers' (reading, decoding and detecting the frames).
+``--base DIR`` (repeatable) runs the same on other checkouts (e.g. a copy of the base
+commit), interleaved round by round; ``--session FILE`` re-detects a given session. The
+floors of any exact OpenCV re-detection are printed beside them: the same JPEGs only
+decoded by ``cv2.imdecode`` in two processes (read beforehand, nothing pickled), and
+decoded and detected (with the compiled screen from 2000 frames on, as redetect does).
 
 The detector's compiled screen is used from 2000 frames on (``recorders.redetect``):
 ``--seconds 24`` (2160 frames, about 550 MB) measures it.
 
 Target (issue 12): >= 400 frames/s on two cores.
-Run: ``python benchmarks/bench_redetect.py [--seconds 6] [--rounds 2] [--quick] [--base DIR]``
+Run: ``python benchmarks/bench_redetect.py [--seconds 6] [--rounds 2] [--quick] [--base DIR]
+[--session FILE]``
 """
 
 from __future__ import annotations
@@ -42,7 +46,7 @@ with contextlib.redirect_stdout(out):
 wall = time.perf_counter() - t
 c = os.times()  # the workers have been joined: their CPU time is in children_*
 assert rc == 0, rc
-print(out.getvalue().split()[1], wall, sum(c[:4]) - sum(c0[:4]))
+print(out.getvalue().split()[1], wall, sum(c[:4]) - sum(c0[:4]), sum(c[:2]) - sum(c0[:2]))
 """
 
 _DECODE = """
@@ -57,7 +61,7 @@ DETECT = sys.argv[3] == "detect"
 
 def decode(part):
     cv2.setNumThreads(1)
-    detector = BallDetector()
+    detector = BallDetector(compiled=len(BLOBS) >= 2000)  # as redetect does
     for b in BLOBS[part::2]:  # inherited from the parent by fork: nothing pickled
         frame = cv2.imdecode(np.frombuffer(b, np.uint8), cv2.IMREAD_COLOR)
         if DETECT:
@@ -71,7 +75,7 @@ if __name__ == "__main__":
         n = sum(pool.map(decode, [0, 1]))
     wall = time.perf_counter() - t
     c = os.times()
-    print(n, wall, sum(c[:4]) - sum(c0[:4]))
+    print(n, wall, sum(c[:4]) - sum(c0[:4]), 0.0)
 """
 
 
@@ -84,55 +88,61 @@ def _record(path: Path, seconds: float) -> None:
                      status=None, force=True)
 
 
-def _run(code: str, checkout: Path, *args: str) -> tuple[int, float, float]:
+def _run(code: str, checkout: Path, *args: str) -> tuple[int, float, float, float]:
+    """(frames, wall s, CPU s of the process and its workers, CPU s of the process alone)."""
     env = dict(os.environ, PYTHONPATH=str(checkout))
     out = subprocess.run([sys.executable, "-c", code, *args], env=env, check=True,
                          capture_output=True, text=True, cwd=checkout).stdout.split()
-    return int(out[0]), float(out[1]), float(out[2])
+    return int(out[0]), float(out[1]), float(out[2]), float(out[3])
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=6.0, help="session length (3 x 30 fps)")
     parser.add_argument("--rounds", type=int, default=2)
-    parser.add_argument("--base", help="another checkout run alongside")
+    parser.add_argument("--base", action="append", default=[],
+                        help="another checkout run alongside (may be repeated)")
+    parser.add_argument("--session", type=Path, default=None,
+                        help="re-detect this session instead of recording one")
     parser.add_argument("--quick", action="store_true", help="a 4.5 s session, one round")
     parser.add_argument("--json", type=Path, default=None, help="write the rows as JSON")
     args = parser.parse_args()
     if args.quick:
         args.seconds, args.rounds = 4.5, 1
     with tempfile.TemporaryDirectory() as tmp:
-        session = Path(tmp) / "hd.mcap"
-        _record(session, args.seconds)
+        session = args.session or Path(tmp) / "hd.mcap"
+        if args.session is None:
+            _record(session, args.seconds)
         runs = {"floor: decode only": (_DECODE, ROOT, "decode"),
                 "floor: decode + detect": (_DECODE, ROOT, "detect")}
-        if args.base:
-            runs[f"redetect of {args.base}"] = (_RUN, Path(args.base).resolve(), "")
+        for base in args.base:
+            runs[f"redetect of {base}"] = (_RUN, Path(base).resolve(), "")
         runs["redetect (this checkout)"] = (_RUN, ROOT, "")
-        totals = {name: [0, 0.0, 0.0] for name in runs}
+        totals = {name: [0, 0.0, 0.0, 0.0] for name in runs}
         for _ in range(args.rounds):
             for name, (code, checkout, what) in runs.items():
-                n, wall, cpu = _run(code, checkout, str(session), str(Path(tmp) / "out.mcap"),
-                                    what)
-                totals[name][0] += n
-                totals[name][1] += wall
-                totals[name][2] += cpu
+                got = _run(code, checkout, str(session), str(Path(tmp) / "out.mcap"), what)
+                for i, value in enumerate(got):
+                    totals[name][i] += value
         size = session.stat().st_size / 1e6
         frames = totals["redetect (this checkout)"][0] // args.rounds
         print(f"redetect, {frames} JPEG frames 1280x720 ({size:.0f} MB), workers=2, "
               f"{args.rounds} round(s):")
         ours = None
-        for name, (n, wall, cpu) in reversed(list(totals.items())):
+        for name, (n, wall, cpu, own) in reversed(list(totals.items())):
             per_wall, per_cpu2 = n / wall, 2 * n / cpu
             ours = ours or (per_wall, per_cpu2)
+            split = (f" = {1e3 * own / n:.2f} main + {1e3 * (cpu - own) / n:.2f} workers"
+                     if own else "")
             print(f"  {name:<34} {per_wall:6.0f} frames/s wall  {per_cpu2:6.0f} frames/s on two "
-                  f"idle cores, {per_cpu2 / 2:4.0f} per core ({1e3 * cpu / n:.2f} CPU-ms/frame)"
-                  f"   this checkout {ours[0] / per_wall:.2f} x, {ours[1] / per_cpu2:.2f} x")
+                  f"idle cores, {per_cpu2 / 2:4.0f} per core ({1e3 * cpu / n:.2f} CPU-ms/frame"
+                  f"{split})   this checkout {ours[0] / per_wall:.2f} x, "
+                  f"{ours[1] / per_cpu2:.2f} x")
         print(f"target: >= 400 frames/s on two cores: {'PASS' if ours[1] >= 400 else 'FAIL'} "
               f"({ours[1]:.0f}, from CPU time; the floors are what any exact re-detection "
               f"with OpenCV's JPEG decoder costs before reading and writing the session)")
         if args.json is not None:
-            n, _, cpu = totals["floor: decode only"]
+            n, _, cpu, _ = totals["floor: decode only"]
             args.json.write_text(json.dumps({"rows": [{
                 "stage": "redetect 1280x720", "figure": ours[1], "unit": "frames/s",
                 "target": ">= 400 (2 cores)", "ok": ours[1] >= 400,

@@ -10,12 +10,17 @@ sensor noise; ``benchmarks/bench_redetect.py``, CPU time per frame): ``cv2.imdec
 ``IMREAD_REDUCED_COLOR_8`` still costs 2.3 ms, and its pixels are not the full decode's, so
 the detector's candidates would change); detection 0.9 ms (0.55 ms with the compiled screen,
 used from :data:`_COMPILED_FROM` frames on, once numba's half second of loading is repaid);
-reading the frames from the file 0.3 ms; copying the session into the new file about 1 ms
-in the main process. So:
+reading the frames from the file 0.12 ms (0.6 ms when each worker parsed the summary with
+``mcap``'s reader and read its window with :func:`pslog.log.iter_images`: the same images);
+copying the session into the new file about 1 ms in the main process. So:
 
-- each worker reads its own time window of whole image chunks from the file (cut at the
-  chunks' first message times, so no chunk is read twice): no frame is pickled between
-  processes, and the main process never reads the images;
+- each worker reads its own run of whole image chunks from the file, located once by this
+  process from the summary section (:func:`_plan`: no worker parses the summary, and no
+  chunk is read twice): each chunk is read into one reused buffer, decompressed and
+  checked as every reader checks it, and each image decoded where it lies in the
+  decompressed records (no Python object or copy per message but the image's protobuf,
+  and the compressed bytes decompressed where they were read: :func:`_payload`):
+  no frame is pickled between processes, and the main process never reads the images;
 - every window is queued at once and the main process copies the session meanwhile
   (``copy_session`` takes the detections as a callable, called once the rest is copied):
   all cores stay busy until the end;
@@ -32,6 +37,7 @@ import contextlib
 import functools
 import itertools
 import os
+import struct
 from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
@@ -39,7 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pslog.errors import InputError, PslogError
+from pslog.errors import InputError, LogFormatError, PslogError
 from pslog.outputs import check_output_path
 from pslog.records import Detections
 
@@ -126,7 +132,6 @@ def redetect_session(src: str | Path, dst: str | Path, hsv: HsvRange | None = No
         for batch_rows, batch_results in batches:
             rows.extend(batch_rows)
             results.extend(batch_results)
-            progress.update(advance=len(batch_rows))
         done["redone"], done["new"] = _merged(old, rows, results)
         return done["new"]
 
@@ -166,10 +171,10 @@ def _merged(old: Detections, rows: list, results: list) -> tuple[np.ndarray, Det
 @contextlib.contextmanager
 def _detecting(src, rig_names, row_of: dict, hsv: HsvRange, max_candidates: int,
                workers: int | None, n_images: int) -> Iterator[Iterator[tuple[list, list]]]:
-    """Start re-detecting (worker processes start at once, on every window of the session);
-    give an iterator of (rows, [(uv, radius, score), ...]) batches, in the images' time
-    order, for every stored image with a frame record. On leaving, work not started is
-    cancelled."""
+    """Start re-detecting (worker processes start at once, on every part of the session);
+    give an iterator of (rows, [(uv, radius, score), ...]) batches for every stored image
+    with a frame record, the images in their time order overall. On leaving, work not
+    started is cancelled."""
     import cv2
 
     # one OpenCV thread in this process too, before any worker is forked: a worker inherits
@@ -178,23 +183,37 @@ def _detecting(src, rig_names, row_of: dict, hsv: HsvRange, max_candidates: int,
     cv2.setNumThreads(1)
     workers = workers or (os.cpu_count() or 1)
     compiled = n_images >= _COMPILED_FROM
-    if workers <= 1 or n_images < _PARALLEL_FROM:
-        yield _serial(src, row_of, BallDetector(hsv, max_candidates, compiled=compiled))
+    parallel = workers > 1 and n_images >= _PARALLEL_FROM
+    # (in this process: runs of about _BATCH images, each told to the progress as it is done)
+    per_task = (int(np.clip(n_images // (4 * workers), _BATCH // 2, 4 * _BATCH)) if parallel
+                else _BATCH)
+    plan = _plan(src, rig_names, n_images, per_task)
+    if not parallel:
+        detector = BallDetector(hsv, max_candidates, compiled=compiled)
+        if plan is None:
+            yield _serial(src, row_of, detector)
+        else:
+            yield _in_order((_read_and_detect(src, chunks, plan.cameras, detector)
+                             for chunks in plan.tasks), row_of)
         return
     # the screen box and the compiled screen made here once, inherited by the forked workers
     BallDetector(hsv, max_candidates, compiled=compiled).detect(np.zeros((16, 16, 3), np.uint8))
-    # each task is a time window of whole chunks that a worker reads from the file itself:
-    # nothing but a few numbers per frame crosses between the processes, so every task is
-    # queued at once (the workers stay busy while this process copies the session)
-    per_task = int(np.clip(n_images // (4 * workers), _BATCH // 2, 4 * _BATCH))
-    windows = _windows(src, rig_names, n_images, per_task)
+    # each task is a run of whole image chunks (or, for a file whose summary does not say
+    # where they are, the whole session) that a worker reads from the file itself: nothing
+    # but a few numbers per frame crosses between the processes, so every task is queued at
+    # once (the workers stay busy while this process copies the session)
     from concurrent.futures.process import BrokenProcessPool
 
     pool = ProcessPoolExecutor(max_workers=workers)
     try:
-        futures = [pool.submit(_detect_window, str(src), lo, hi, hsv, max_candidates, compiled)
-                   for lo, hi in windows]
-        yield (_rows(fut.result(), row_of) for fut in futures)
+        if plan is None:
+            futures = [pool.submit(_detect_window, str(src), None, None, hsv, max_candidates,
+                                   compiled)]
+            yield (_rows(_told(fut.result()), row_of) for fut in futures)
+        else:
+            futures = [pool.submit(_detect_chunks, str(src), chunks, plan.cameras, hsv,
+                                   max_candidates, compiled) for chunks in plan.tasks]
+            yield _in_order((fut.result() for fut in futures), row_of)
     except BrokenProcessPool:
         raise PslogError(f"re-detecting {src}: a worker process died (killed, or out of "
                          f"memory); try fewer --workers") from None
@@ -203,33 +222,59 @@ def _detecting(src, rig_names, row_of: dict, hsv: HsvRange, max_candidates: int,
 
 
 def _serial(src, row_of: dict, detector: BallDetector) -> Iterator[tuple[list, list]]:
+    from pslog import progress
+
     images = iter(_images(src, None, None))
     while batch := list(itertools.islice(images, _BATCH)):
+        progress.update(advance=len(batch))
         yield _rows(_detect_images(detector, batch), row_of)
 
 
-def _windows(src, rig_names, n_images: int, per_task: int) -> list[tuple[int | None,
-                                                                          int | None]]:
-    """Time windows ``[lo, hi)`` (ns; None: unbounded) covering the whole session, cut at
-    the first message times of the chunks holding images so that no chunk is read twice,
-    about ``per_task`` images each. A file whose summary cannot be read is one window (the
-    reader then reports what is wrong with it)."""
-    from mcap.reader import make_reader
+@dataclass(frozen=True)
+class _Plan:
+    """Where a session's images are: ``tasks``, runs of image chunks as ``(rank, offset,
+    length)`` (rank: the chunk's place in the order of first message times, then offsets;
+    offset and length of its Chunk record, bytes); ``cameras``, image channel id ->
+    (camera index, the channel's place in the summary)."""
 
-    topics = {f"/camera/{name}/image" for name in rig_names}
+    tasks: list[list[tuple[int, int, int]]]
+    cameras: dict[int, tuple[int, int]]
+
+
+def _plan(src, rig_names, n_images: int, per_task: int) -> _Plan | None:
+    """The image chunks of ``src`` (those whose indexes list an image channel, and any
+    chunk without indexes) in runs of about ``per_task`` images, as :func:`pslog.log.
+    iter_images` chooses them, from the summary section (pslog's own parse: a worker then
+    needs no summary, which ``mcap``'s parser reads at about 0.1 ms a chunk). None when the
+    file has no usable summary or no chunks: the images are then read by
+    :func:`pslog.log.iter_images` (which reports what is wrong with the file)."""
+    import mmap
+
+    from pslog.log import _mcapio as io
+    from pslog.log import _schemas as S
+
+    topics = {S.image_topic(name): c for c, name in enumerate(rig_names)}
     try:
-        with open(src, "rb") as f:
-            summary = make_reader(f).get_summary()
-        image_channels = {cid for cid, ch in summary.channels.items() if ch.topic in topics}
-        starts = sorted({c.message_start_time for c in summary.chunk_indexes
-                         if image_channels & c.message_index_offsets.keys()})
-    except Exception:  # any fault of the file: the reader names it
-        return [(None, None)]
-    if len(starts) < 2:
-        return [(None, None)]
-    step = max(1, round(per_task * len(starts) / max(n_images, 1)))  # chunks per window
-    cuts = starts[step::step]
-    return list(zip([None, *cuts], [*cuts, None], strict=True))
+        with open(src, "rb") as f, mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as buf:
+            summary = io.read_summary(buf)
+    except (OSError, ValueError):
+        return None
+    if summary is None or not summary.chunks:
+        return None
+    # the topics the statistics name (as the reader counts them), their channels in the
+    # summary's order
+    counted = {summary.channels[c].topic for c in summary.channel_counts
+               if c in summary.channels}
+    cameras = {cid: (topics[ch.topic], rank) for rank, (cid, ch) in enumerate(
+        (cid, ch) for cid, ch in summary.channels.items()
+        if ch.topic in topics and ch.topic in counted)}
+    chunks = sorted((c for c in summary.chunks
+                     if cameras.keys() & c.message_index_offsets.keys()
+                     or not c.message_index_offsets),
+                    key=lambda c: (c.start_ns, c.offset))
+    located = [(rank, c.offset, c.length) for rank, c in enumerate(chunks)]
+    step = max(1, round(per_task * len(located) / max(n_images, 1)))  # chunks per task
+    return _Plan([located[i:i + step] for i in range(0, len(located), step)], cameras)
 
 
 def _images(src, lo: int | None, hi: int | None) -> Iterator:
@@ -240,13 +285,150 @@ def _images(src, lo: int | None, hi: int | None) -> Iterator:
 
 def _detect_window(src: str, lo: int | None, hi: int | None, hsv: HsvRange,
                    max_candidates: int, compiled: bool) -> tuple[np.ndarray, np.ndarray, list]:
-    """In a worker: read the images of ``[lo, hi)`` from ``src``, decode and detect."""
+    """In a worker: read the images of ``[lo, hi)`` from ``src``, decode and detect (a file
+    without a usable summary: see :func:`_plan`)."""
     import cv2
 
     cv2.setNumThreads(1)
     _keep_freed_memory()
     return _detect_images(BallDetector(hsv, max_candidates, compiled=compiled),
                           _images(src, lo, hi))
+
+
+def _detect_chunks(src: str, chunks: list[tuple[int, int, int]], cameras: dict,
+                   hsv: HsvRange, max_candidates: int, compiled: bool) -> _Found:
+    """In a worker: decode and detect the images of ``chunks`` (see :class:`_Plan`)."""
+    import cv2
+
+    cv2.setNumThreads(1)
+    _keep_freed_memory()
+    return _read_and_detect(src, chunks, cameras,
+                            BallDetector(hsv, max_candidates, compiled=compiled))
+
+
+@dataclass
+class _Found:
+    """The images of some chunks and their candidates: ``camera``, ``index`` (frame index),
+    ``key`` ((n, 4) int64: log time, chunk rank, channel rank, byte offset in the chunk:
+    sorted, the order in which :func:`pslog.log.iter_images` gives them) and ``found``,
+    ``[(uv, radius, score)] * n``."""
+
+    camera: np.ndarray
+    index: np.ndarray
+    key: np.ndarray
+    found: list
+
+
+def _read_and_detect(src, chunks: list[tuple[int, int, int]], cameras: dict,
+                     detector: BallDetector) -> _Found:
+    """Read each chunk of ``chunks`` (one read into a buffer reused for every chunk,
+    decompressed and checked as every reader checks it), and decode and detect each image
+    in it where it lies in the decompressed records (no copy of its bytes)."""
+    from pslog.log import _mcapio as io
+    from pslog.log.reader import parse_image
+
+    path = Path(src)
+    camera, index, key, found = [], [], [], []
+    buffer = bytearray(max((length for _r, _o, length in chunks), default=0))
+    with open(path, "rb") as f:
+        for rank, offset, length in chunks:
+            view = memoryview(buffer)[:length]
+            try:
+                f.seek(offset)
+                got = f.readinto(view)
+                if got != length or view[0] != io.OP_CHUNK or \
+                        int.from_bytes(view[1:9], "little") != length - 9:
+                    raise LogFormatError("chunk record does not match the summary's index")
+                records = _payload(view[9:])
+            except LogFormatError as exc:
+                raise io.damaged_error(path, offset, str(exc)) from None
+            for cid, seq, t, a, b in _messages(records, cameras):
+                data = parse_image(memoryview(records)[a:b], path).data
+                camera.append(cameras[cid][0])
+                index.append(seq)
+                key.append((t, rank, cameras[cid][1], a))
+                found.append(_detect_blob(detector, data))
+            del records  # freed before the next chunk is read
+    return _Found(np.array(camera, dtype=np.int64), np.array(index, dtype=np.int64),
+                  np.array(key, dtype=np.int64).reshape(-1, 4), found)
+
+
+def _payload(body: memoryview) -> bytes:
+    """:func:`pslog.log._mcapio.chunk_payload` of a zstd chunk's body, decompressed from
+    ``body`` itself (``chunk_payload`` copies the compressed bytes first: a third of the
+    cost of reading an image chunk): the same bytes, or, when anything does not check
+    out, what ``chunk_payload`` says (its error)."""
+    import zlib
+
+    import zstandard
+
+    from pslog.log import _mcapio as io
+
+    try:
+        _start, _end, size, crc, n = struct.unpack_from("<QQQII", body, 0)
+        if bytes(body[32:32 + n]) == b"zstd" and size <= io._MAX_CHUNK_BYTES:
+            (length,) = struct.unpack_from("<Q", body, 32 + n)
+            if 32 + n + 8 + length == len(body):
+                data = _decompressor().decompress(body[32 + n + 8:], max_output_size=size)
+                if len(data) == size and (not crc or zlib.crc32(data) == crc):
+                    io.check_framing(data)
+                    return data
+    except (struct.error, zstandard.ZstdError, LogFormatError):
+        pass
+    return io.chunk_payload(body)
+
+
+@functools.cache
+def _decompressor():
+    """One zstd decompressor per process (it keeps its context from chunk to chunk; a
+    forked worker gets its own copy), used by one thread at a time."""
+    import zstandard
+
+    return zstandard.ZstdDecompressor()
+
+
+def _messages(records, cameras: dict) -> list[tuple[int, int, int, int, int]]:
+    """``(channel, sequence, log time, start, end)`` of each message in a chunk's records
+    (framing checked) on a channel of ``cameras``: its data is ``records[start:end]``."""
+    from pslog.log import _mcapio as io
+
+    out = []
+    pos, n = 0, len(records)
+    while pos < n:
+        op, length = struct.unpack_from("<BQ", records, pos)
+        body = pos + 9
+        if op == io.OP_MESSAGE:
+            cid, seq, t = struct.unpack_from("<HIQ", records, body)
+            if cid in cameras:
+                out.append((cid, seq, t, body + io._MESSAGE_HEAD, body + length))
+        pos = body + length
+    return out
+
+
+def _told(detected: tuple[np.ndarray, np.ndarray, list]) -> tuple[np.ndarray, np.ndarray,
+                                                                   list]:
+    from pslog import progress
+
+    progress.update(advance=len(detected[2]))
+    return detected
+
+
+def _in_order(parts, row_of: dict) -> Iterator[tuple[list, list]]:
+    """The frame rows and candidates of the images of every :class:`_Found` of ``parts``,
+    in the order of their keys (one batch at the end: the progress is told per part)."""
+    from pslog import progress
+
+    collected = []
+    for part in parts:
+        progress.update(advance=len(part.found))  # each part as it comes
+        collected.append(part)
+    parts = collected
+    camera = np.concatenate([p.camera for p in parts]) if parts else np.zeros(0, np.int64)
+    index = np.concatenate([p.index for p in parts]) if parts else np.zeros(0, np.int64)
+    key = np.concatenate([p.key for p in parts]) if parts else np.zeros((0, 4), np.int64)
+    found = list(itertools.chain.from_iterable(p.found for p in parts))
+    order = np.lexsort(key.T[::-1])
+    yield _rows((camera[order], index[order], [found[i] for i in order.tolist()]), row_of)
 
 
 @functools.cache

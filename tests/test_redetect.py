@@ -120,10 +120,17 @@ def test_compiled_screen_and_small_windows_give_the_same_session(tmp_path, monke
     monkeypatch.setattr(redetect, "_PARALLEL_FROM", 0)
     monkeypatch.setattr(redetect, "_COMPILED_FROM", 0)
     monkeypatch.setattr(redetect, "_BATCH", 2)  # windows of a couple of chunks
-    windows = redetect._windows(SAMPLE, ("cam1", "cam2", "cam3"), 135, 10)
-    assert len(windows) >= 4 and windows[0][0] is None and windows[-1][1] is None
-    cuts = [hi for _lo, hi in windows[:-1]]
-    assert cuts == [lo for lo, _hi in windows[1:]] and cuts == sorted(set(cuts))
+    plan = redetect._plan(SAMPLE, ("cam1", "cam2", "cam3"), 135, 10)
+    assert plan is not None and len(plan.tasks) >= 4
+    # every image chunk once, in the order of their first message times
+    with open(SAMPLE, "rb") as f:
+        summary = make_reader(f).get_summary()
+    images = {cid for cid, c in summary.channels.items() if c.topic.endswith("/image")}
+    chunks = sorted((c for c in summary.chunk_indexes if images & c.message_index_offsets.keys()),
+                    key=lambda c: (c.message_start_time, c.chunk_start_offset))
+    assert [(c.chunk_start_offset, c.chunk_length) for c in chunks] == \
+        [(offset, length) for task in plan.tasks for _rank, offset, length in task]
+    assert set(plan.cameras) == images
     redetect_session(SAMPLE, pool, workers=2)
     a, b = read_session(one).detections, read_session(pool).detections
     for name in ("frame_time_ns", "frame_camera", "frame_index", "cand_frame", "cand_uv",
@@ -157,10 +164,92 @@ def test_a_fault_in_a_worker_is_one_line_and_writes_nothing(tmp_path, monkeypatc
     monkeypatch.setattr(redetect, "_PARALLEL_FROM", 0)
     src = _damaged_copy(tmp_path) if fault == "damaged" else SAMPLE
     if fault == "killed":
-        monkeypatch.setattr(redetect, "_detect_window", _die)
+        monkeypatch.setattr(redetect, "_detect_chunks", _die)
     out = tmp_path / "out.mcap"
     assert main(["redetect", str(src), "-o", str(out), "--workers", "2"]) == 1
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and "Traceback" not in err
     assert ("damaged data at byte" in err) if fault == "damaged" else ("worker" in err)
     assert list(tmp_path.iterdir()) == ([src] if fault == "damaged" else [])
+
+
+def test_images_read_in_place_are_those_of_iter_images_in_the_same_order():
+    """The workers' reading (whole chunks, each image decoded where it lies in the
+    decompressed chunk) gives every image of :func:`iter_images`, ordered as it orders them
+    once sorted by their keys."""
+    from recorders import redetect
+
+    plan = redetect._plan(SAMPLE, ("cam1", "cam2", "cam3"), 135, 10)
+    assert plan is not None
+    seen = []
+
+    class _Keep:  # a detector that keeps every frame it is given
+        def detect(self, frame):
+            seen.append(frame)
+            return redetect.BallDetector().detect(frame)
+
+    parts = [redetect._read_and_detect(SAMPLE, chunks, plan.cameras, _Keep())
+             for chunks in plan.tasks]
+    key = np.concatenate([p.key for p in parts])
+    order = np.lexsort(key.T[::-1])
+    camera = np.concatenate([p.camera for p in parts])[order]
+    index = np.concatenate([p.index for p in parts])[order]
+    frames = [seen[i] for i in order.tolist()]
+    expected = list(iter_images(SAMPLE))
+    assert [(i.camera, i.frame_index, i.time_ns) for i in expected] == \
+        list(zip(camera.tolist(), index.tolist(), key[order, 0].tolist(), strict=True))
+    import cv2
+
+    for image, frame in zip(expected, frames, strict=True):
+        assert_array_equal(frame, cv2.imdecode(np.frombuffer(image.data, np.uint8),
+                                               cv2.IMREAD_COLOR))
+
+
+def test_a_file_without_a_usable_summary_is_read_image_by_image(tmp_path, monkeypatch):
+    """Where the summary says nothing of the chunks (:func:`redetect._plan` gives None),
+    the images are read by :func:`iter_images`: the same detections."""
+    from recorders import redetect
+
+    fast, slow = tmp_path / "fast.mcap", tmp_path / "slow.mcap"
+    monkeypatch.setattr(redetect, "_PARALLEL_FROM", 0)
+    redetect_session(SAMPLE, fast, workers=2)
+    monkeypatch.setattr(redetect, "_plan", lambda *_args: None)
+    redetect_session(SAMPLE, slow, workers=2)
+    a, b = read_session(fast).detections, read_session(slow).detections
+    for name in ("frame_time_ns", "frame_camera", "frame_index", "cand_frame", "cand_uv",
+                 "cand_radius", "cand_score"):
+        assert_array_equal(getattr(b, name), getattr(a, name), err_msg=name)
+
+
+def test_chunks_are_decompressed_as_every_reader_does_damage_included():
+    """:func:`redetect._payload` gives :func:`chunk_payload`'s bytes for every chunk of the
+    sample, and its one-line error for a chunk damaged in its data, its CRC, its size or
+    cut short."""
+    from pslog.errors import LogFormatError
+    from pslog.log import _mcapio as io
+    from recorders import redetect
+
+    raw = SAMPLE.read_bytes()
+    with open(SAMPLE, "rb") as f:
+        summary = make_reader(f).get_summary()
+    chunks = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
+    for c in chunks:
+        body = memoryview(raw)[c.chunk_start_offset + 9:c.chunk_start_offset + c.chunk_length]
+        assert redetect._payload(body) == io.chunk_payload(body)
+    c = max(chunks, key=lambda c: c.chunk_length)  # an image chunk
+    record = bytearray(raw[c.chunk_start_offset:c.chunk_start_offset + c.chunk_length])
+    crc_at = 9 + 24  # message start and end times, uncompressed size, then the CRC
+    damaged = {"data": (len(record) // 2, 0xFF), "crc": (crc_at, 0x01),
+               "size": (9 + 16, 0x01), "cut": None}
+    for what, flip in damaged.items():
+        bad = bytearray(record)
+        if flip is None:
+            bad = bad[:-1000]
+        else:
+            bad[flip[0]] ^= flip[1]
+        body = memoryview(bytes(bad))[9:]
+        with pytest.raises(LogFormatError) as expected:
+            io.chunk_payload(body)
+        with pytest.raises(LogFormatError) as got:
+            redetect._payload(body)
+        assert str(got.value) == str(expected.value), what
