@@ -33,8 +33,14 @@ not), with how many of those added fall in the blackout (from its start to two b
 after its end) and how many follow a kick or bounce of the rally by less than 40 ms (the
 same for the clean session's).
 
+``--first-seed N`` (with ``--more``): the rallies from seed N (new sessions: the tests' rallies
+are 300-302), the library's rally seed ``5 + N - 300``, and the faults' cameras and times of
+other seeds; ``--fps 60,120,240``: every rig again with its cameras at each rate (the same
+shutter staggering), the rig named ``<rig>@<fps>``.
+
     python benchmarks/bench_dirty.py [--seeds 3] [--duration 8] [--gating off] [--quick]
                                      [--methods typeA,smooth,filter] [--more]
+                                     [--first-seed 300] [--fps 60,120,240]
 """
 
 from __future__ import annotations
@@ -124,14 +130,16 @@ def sessions(n_seeds: int, duration: float, quick: bool):
     return out
 
 
-def more_sessions(n_seeds: int, duration: float):
-    """(label, motion, duration, kick times) of the --more sessions: the tests' rallies,
-    the library's rally and three other motions (kick times only for the tests' rallies)."""
+def more_sessions(n_seeds: int, duration: float, first_seed: int = 300):
+    """(label, motion, duration, kick times) of the --more sessions: the tests' rallies
+    (seeds from ``first_seed``), the library's rally and three other motions (kick times
+    only for the tests' rallies)."""
     out = []
-    for seed in range(n_seeds):
-        motion, kicks = rally(duration, seed=300 + seed, speed=4.0 + seed, kick_every_s=0.9)
-        out.append((f"rally-{300 + seed}", motion, duration, np.asarray(kicks)))
-    out.append(("library rally", rally_motion(5, duration), duration, None))
+    for k in range(n_seeds):
+        seed = first_seed + k
+        motion, kicks = rally(duration, seed=seed, speed=4.0 + seed % 3, kick_every_s=0.9)
+        out.append((f"rally-{seed}", motion, duration, np.asarray(kicks)))
+    out.append(("library rally", rally_motion(5 + first_seed - 300, duration), duration, None))
     for name in ("straight", "turntable"):
         out.append((name, get_motion(name), None, None))
     return out
@@ -188,14 +196,23 @@ def measure(rig: Rig, methods, runs, options: FusionOptions):
 KICK_WINDOW_S = 0.04
 
 
-def measure_more(rig: Rig, methods, runs, options: FusionOptions) -> dict:
-    """Per method, at TARGET_NOISE: the --more row's figures over the sessions ``runs``."""
+def at_rate(rig: Rig, fps: float) -> Rig:
+    """``rig`` with every camera at ``fps`` frames per second, its shutter offset scaled
+    with the period (the same staggering)."""
+    cams = tuple(c.replace(fps=fps, offset=c.offset * c.fps / fps) for c in rig.cameras)
+    return Rig(cams, rig.name if fps == rig.cameras[0].fps else f"{rig.name}@{fps:g}")
+
+
+def measure_more(rig: Rig, methods, runs, options: FusionOptions, first_seed: int = 300
+                 ) -> dict:
+    """Per method, at TARGET_NOISE: the --more row's figures over the sessions ``runs``
+    (simulation seeds from ``first_seed - 300``)."""
     from pslog.fusion._prepare import default_max_gap_s
 
     gap = options.max_gap_s or default_max_gap_s(rig)
     out = {m: {"clean": [], "dirty": [], "blackout": [], "ratios": [], "clean5": 0,
                "clean5_kick": 0, "added": 0, "in_blackout": 0, "after_kick": 0} for m in methods}
-    for seed, (label, motion, duration, kicks) in enumerate(runs):
+    for seed, (label, motion, duration, kicks) in enumerate(runs, start=first_seed - 300):
         span = motion.duration if duration is None else duration
         fault = faults(rig, seed, span)
         _, start, length = fault["blackouts"][0]
@@ -256,9 +273,11 @@ def more_table(rig: Rig, methods, figures) -> tuple[list[str], bool]:
 
 def main_more(args, methods, options: FusionOptions) -> int:
     """--more: the targets on other rigs and motions (0.3 px)."""
-    runs = more_sessions(args.seeds, args.duration)
+    runs = more_sessions(args.seeds, args.duration, args.first_seed)
+    rates = [float(x) for x in args.fps.split(",")] if args.fps else [None]
     print(f"dirty sessions, other rigs and motions, {TARGET_NOISE} px, gating {args.gating}: "
-          f"{', '.join(label for label, *_ in runs)} per rig")
+          f"{', '.join(label for label, *_ in runs)} per rig"
+          + (f"; cameras at {args.fps} fps" if args.fps else ""))
     print("mean errors mm pooled over the rig's sessions; ratio faults / clean (pooled, worst "
           "session); blackout: the ratio with the blackout alone; >5cm: points beyond 5 cm, "
           "clean / added by the faults")
@@ -268,8 +287,10 @@ def main_more(args, methods, options: FusionOptions) -> int:
     print("|---|---|---|---|---|---|---|---|")
     ok = True
     start = time.perf_counter()
-    for rig in rigs() + more_rigs():
-        rows, met = more_table(rig, methods, measure_more(rig, methods, runs, options))
+    for rig in (r if fps is None else at_rate(r, fps) for fps in rates
+                for r in rigs() + more_rigs()):
+        rows, met = more_table(rig, methods, measure_more(rig, methods, runs, options,
+                                                          args.first_seed))
         ok &= met
         print("\n".join(rows), flush=True)
     print(f"targets (worst session; no added point > 5 cm): {'met' if ok else 'MISSED'} "
@@ -312,6 +333,11 @@ def main() -> int:
     parser.add_argument("--json", default=None, help="write the target rows as JSON")
     parser.add_argument("--more", action="store_true",
                         help="other rigs (2, 4 cameras, a wide-angle lens) and motions, 0.3 px")
+    parser.add_argument("--first-seed", type=int, default=300,
+                        help="--more: the first rally's seed (default 300; others: new cases)")
+    parser.add_argument("--fps", default=None,
+                        help="--more: comma-separated camera rates to run every rig at "
+                             "(e.g. 60,120,240; default: the rigs' own, 30)")
     args = parser.parse_args()
     json_rows = []
     n_seeds, duration = (1, 4.0) if args.quick else (args.seeds, args.duration)

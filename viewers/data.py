@@ -140,6 +140,9 @@ class ViewData:
     every : thinning factor beyond ``detail_ns`` (1: none)
     thin : True for the copy the per-frame overlays are drawn from (:meth:`thinned`): its
         :meth:`in_window` also leaves out the thinned frames
+    construction_observations : the observations ``construction``'s rows index (the gated
+        ones type A fused: not ``observations`` where the gate kept another candidate or
+        none), or None without a construction
     """
 
     session: Session
@@ -153,6 +156,7 @@ class ViewData:
     detail_ns: tuple[int, int] = (-UNBOUNDED_NS, UNBOUNDED_NS)
     every: int = 1
     thin: bool = False
+    construction_observations: Observations | None = None
 
     @property
     def first_ns(self) -> int:
@@ -275,13 +279,14 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
     if unknown:
         have = sorted(set(tracks) | set(METHODS))
         raise InputError(f"unknown method {unknown[0]!r} (stored or fusable: {', '.join(have)})")
-    construction = None
+    construction = construction_obs = None
     if missing:
         # as 'pslog fuse' does: each frame's ball chosen among its candidates (gating)
         if "typeA" in missing and len(session.rig) >= 2 and len(observations):
             # one gating and one type-A pass give the track and its Figure 2 construction
             # (what fuse_all and explain_type_a would each compute again, bit for bit)
-            tracks["typeA"], construction = _type_a_with_construction(session)
+            tracks["typeA"], construction, construction_obs = _type_a_with_construction(
+                session)
         rest = [m for m in missing if m != "typeA" or "typeA" not in tracks]
         if rest:
             tracks.update(fuse_all(session.detections, session.rig, rest))
@@ -290,7 +295,8 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
 
     if (construction is None and "typeA" in shown and len(session.rig) >= 2
             and len(observations)):
-        construction = explain_type_a(session.detections, session.rig)
+        construction_obs = _type_a_observations(session)
+        construction = explain_type_a(construction_obs, session.rig)
 
     first = int(session.detections.frame_time_ns.min()) if session.detections.n_frames else 0
     lo = -np.inf if start is None else float(start)
@@ -310,20 +316,32 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
     choice = detail if isinstance(detail, DetailChoice) else DetailChoice.parse(detail)
     return ViewData(session, paths, observations, shown, construction, window, notes,
                     {m: rejections[m] for m in shown if m in rejections},
-                    detail_ns=choice.range_ns(first, window), every=choice.every)
+                    detail_ns=choice.range_ns(first, window), every=choice.every,
+                    construction_observations=construction_obs)
 
 
-def _type_a_with_construction(session: Session) -> tuple[Track, TypeAConstruction]:
-    """``typeA`` fused from the session's detections as :func:`pslog.fusion.fuse_all`
-    fuses it (gated, default options) and its construction as
-    :func:`pslog.fusion.explain_type_a` explains it, from one gating and one pass."""
-    from pslog.fusion import check_tolerance
+def _type_a_observations(session: Session) -> Observations:
+    """The observations type A fuses from the session's detections (gated, default
+    options), which its construction's rows index."""
     from pslog.fusion.gating import gate_for
+
+    options = FusionOptions()
+    return (gate_for(session.detections, session.rig, "typeA", options).observations
+            if options.gating else timed_observations(session.detections, session.rig))
+
+
+def _type_a_with_construction(session: Session
+                              ) -> tuple[Track, TypeAConstruction, Observations]:
+    """``typeA`` fused from the session's detections as :func:`pslog.fusion.fuse_all`
+    fuses it (gated, default options), its construction as
+    :func:`pslog.fusion.explain_type_a` explains it, from one gating and one pass, and the
+    observations both rest on."""
+    from pslog.fusion import check_tolerance
     from pslog.fusion.pseudo import fuse_type_a
 
     rig, options = session.rig, FusionOptions()
     check_tolerance(rig, options.tolerance_s)
-    obs = (gate_for(session.detections, rig, "typeA", options).observations if options.gating
-           else timed_observations(session.detections, rig))
-    return fuse_type_a(prepare(obs, rig), options.max_gap_s or default_max_gap_s(rig),
-                       options.noise_px)
+    obs = _type_a_observations(session)
+    track, construction = fuse_type_a(prepare(obs, rig), options.max_gap_s
+                                      or default_max_gap_s(rig), options.noise_px)
+    return track, construction, obs

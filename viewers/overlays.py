@@ -99,6 +99,13 @@ def log_construction(rec, data: ViewData, clock: C.Clock, uv_undistorted: np.nda
     con, rig, obs = data.construction, data.session.rig, data.observations
     if con is None or len(con.event_row) == 0:
         return 0
+    if data.construction_observations is not None and data.construction_observations is not obs:
+        # its rows index the observations type A fused (gated), not the best candidates
+        obs = data.construction_observations
+        uv_undistorted = np.empty_like(obs.uv)
+        for c, cam in enumerate(rig.cameras):
+            rows = obs.camera == c
+            uv_undistorted[rows] = cam.undistort(obs.uv[rows])
     events = np.flatnonzero(data.in_window(obs.time_ns[con.event_row]))
     if len(events) == 0:
         return 0
