@@ -25,10 +25,6 @@ A candidate ``x`` of camera ``a`` at (corrected) time ``t`` is judged by three g
    are fitted with a ballistic model (constant velocity plus gravity); the distance of
    ``x``'s viewing ray to the prediction ``p̂(t)`` must be at most ``track_m + Δv Δt``
    (``Δt``: time since the newest accepted point, ``Δv`` a kick's change of velocity).
-   Without a track (the first frames, or the ball lost), or when its prediction misses, a
-   candidate that passes the other gates is held back until it and two held-back points
-   (two cameras, three times) fit one ballistic arc: the track then restarts from them
-   (:meth:`_Decider._confirmed`; a kick beyond ``Δv``, a false pairing at the start).
 3. **Motion model**. The point ``x`` makes with its support must lie in front of every
    camera that contributed, be reachable from the last accepted point at a ball's speed,
    ``|p - p_last| <= max_speed · Δt + track_m``, and not stand still: a point within
