@@ -67,8 +67,8 @@ def test_a_new_method_is_one_registry_entry(monkeypatch, rig3, sim_session, tmp_
     entry = Method("centroid", centroid, True, False, frozenset(), "a toy", "this test")
     monkeypatch.setitem(fusion.METHODS, "centroid", entry)
     assert "centroid" in default_methods(sim_session.detections, rig3)
-    assert len(fuse(sim_session.detections, rig3, "centroid",
-                    fusion.FusionOptions(gating=False))) == len(sim_session.detections.best())
+    assert len(fuse(sim_session.detections, rig3, "centroid")) == len(
+        sim_session.detections.best())
     assert "centroid" in causal_methods()
     StreamFuser(rig3, "centroid")
     code, _, err = cli("fuse", sim_session.path, "--method", "centroid", "-o",

@@ -8,7 +8,7 @@ import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
 from pslog.errors import InputError, RigError
-from pslog.fusion import FusionOptions, fuse
+from pslog.fusion import fuse
 from pslog.motion import get_motion
 from pslog.records import NS, Detections
 from pslog.rig import Rig, apply_timing, builtin_rig
@@ -113,10 +113,8 @@ def test_observations_with_zero_clocks_are_best_bit_for_bit():
     obs, best = observations(det, rig), det.best()
     for name in ("time_ns", "camera", "uv", "frame_index"):
         assert_array_equal(getattr(obs, name), getattr(best, name))
-    # and fusion through Detections (which uses observations() without gating: the gate
-    # holds back the first frames, fusion/gating.py) gives the same track
-    a = fuse(det, rig, "typeA", FusionOptions(gating=False))
-    b = fuse(best, rig, "typeA")
+    # and fusion through Detections (which uses observations()) gives the same track
+    a, b = fuse(det, rig, "typeA"), fuse(best, rig, "typeA")
     assert_array_equal(a.position_world, b.position_world)
     assert_array_equal(a.time_ns, b.time_ns)
 
