@@ -83,13 +83,11 @@ def test_a_ball_moving_along_the_supporting_cameras_ray_is_not_static(speed_m_s,
     motion = _toward(rig, 1, speed_m_s, sideways_m_s)
     det, _truth = simulate(rig, motion, options=SimulationOptions(noise_px=0.3, seed=1))
     assert det.n_candidates > 40  # (at 5 m/s it passes the camera after 0.9 s)
-    # (the only other rejections: at 5 m/s the last detection, the ball out of cam1's view,
-    # and the gate's start: cam2's and cam1's first supported detections, 17 and 33 ms, held
-    # back until three points make an arc)
+    # (the only other rejection: at 5 m/s the last detection, the ball out of cam1's view)
     for causal in (True, False):
         g = gate(det, rig, causal=causal)
         assert "motion" not in g.rejections.reason_names(), causal
-        assert np.count_nonzero(g.chosen) >= det.n_candidates - 3, causal
+        assert np.count_nonzero(g.chosen) >= det.n_candidates - 1, causal
         if causal:
             stream = StreamGate(rig, 0.0)
             push_frames(stream, det)

@@ -863,15 +863,6 @@ class _Track:
         return p0, o.track_m + o.track_jump_m_s * dt
 
 
-def _arc_rms(ts: list[float], ps: list) -> float:
-    """RMS residual, metres, of points ``ps`` (k, 3) at times ``ts`` (k,) s about the
-    least-squares ballistic arc ``p0 + v τ + ½ g τ²`` through them (as
-    :meth:`_Track.predict` fits, τ from the newest)."""
-    ys = [(float(p[0]), float(p[1]), float(p[2]) + 0.5 * (t - ts[-1]) ** 2 * G)
-          for t, p in zip(ts, ps, strict=True)]
-    return _line_fit([t - ts[-1] for t in ts], ys)[1]
-
-
 def _line_fit(ts: list[float], ys: list[tuple]) -> tuple[list[float], float]:
     """Least-squares ``y ≈ p0 + v τ`` of points ``ys`` (3,) at ``ts`` (closed form, on
     floats): ``p0`` (3,) and the RMS residual, metres. All at one time: their mean."""
@@ -961,46 +952,6 @@ class _Decider:
         self.track = _Track(options)
         self.verified = False  # a candidate has passed a gate: from then on none passes unjudged
         self.centers = [cam.center_world.tolist() for cam in rig.cameras]
-        # (t s, camera, point) of the recent candidates only the track held back: no track
-        # to judge them yet, or one they missed (:meth:`_confirmed`)
-        self.held: list[tuple[float, int, list[float]]] = []
-
-    def _confirmed(self, t_s: float, camera: int, p: list[float]) -> bool:
-        """Whether a candidate at ``t_s`` s whose point ``p`` (3,) only the track holds
-        back (no track, or its ray missed the prediction) starts a new track: with two of the
-        recent held-back candidates (within ``track_window_s``, two cameras at least among
-        the three) it fits one ballistic arc (:func:`_arc_rms` at most ``track_m / 2``, the
-        fit the track trusts, :meth:`_Track.predict`). Three points are the fewest a
-        ballistic arc checks (two fix ``p0`` and ``v``). Then the track restarts from the
-        two (its old points describe the motion before a kick, or nothing) and True;
-        otherwise the candidate is held back (False). Re-initialisation from a short
-        window, as a tracking filter's after a lost track (Bar-Shalom, Li and Kirubarajan
-        2001, §11.3): a kick bigger than the allowance's ``track_jump_m_s``, or the first
-        frames, where a point paired with a false candidate would otherwise seed the track.
-        (Two cameras: a static object seen by one, paired with the ball where it crosses
-        its epipolar line, makes points along its ray, which fit an arc.)
-        """
-        o = self.options
-        held = [h for h in self.held if abs(t_s - h[0]) <= o.track_window_s]
-        if not math.isfinite(p[0]):
-            self.held = held
-            return False
-        for a in range(len(held) - 1, 0, -1):  # the newest pairs first
-            for b in range(a - 1, -1, -1):
-                (ta, ca, pa), (tb, cb, pb) = held[a], held[b]
-                if ca == cb == camera or len({ta, tb, t_s}) < 3:
-                    continue
-                if _arc_rms([tb, ta, t_s], [pb, pa, p]) <= 0.5 * o.track_m:
-                    first, second = sorted(((tb, pb), (ta, pa)))
-                    self.track.t.clear()
-                    self.track.p.clear()
-                    for t, q in (first, second):
-                        self.track.add(t, np.array(q))
-                    self.held = []
-                    return True
-        held.append((t_s, camera, p))
-        self.held = held[-2 * o.track_points:]
-        return False
 
     def run(self, c: _Candidates, frames, ratio, points, in_front, reason,
             static=None) -> None:
@@ -1063,22 +1014,14 @@ class _Decider:
                     if pred and math.isfinite(rays[i][0]):
                         miss = _ray_miss(pred[0], centers[camera[i]], rays[i])
                         if miss > (2.0 if loose else 1.0) * pred[1]:
-                            # (unless it and two held back before make an arc: a kick)
-                            if not self._confirmed(t_s[i], camera[i], pts[i]):
-                                reason[i] = TRACK
-                                continue
-                        else:
-                            track_cost = min((miss / pred[1]) ** 2, 4.0)
+                            reason[i] = TRACK
+                            continue
+                        track_cost = min((miss / pred[1]) ** 2, 4.0)
                     elif not available[i]:
                         if self.verified:  # nothing can confirm it: no other camera, no track
                             reason[i] = EPIPOLAR
                             continue
                         unverified.append(i)  # the session's first frames: nothing to judge by
-                    elif not self._confirmed(t_s[i], camera[i], pts[i]):
-                        # one camera's support and no track (the first frames, or after the
-                        # ball was lost): held back until three such points make an arc
-                        reason[i] = TRACK
-                        continue
                 key = (-n_support[i], epi_cost[i] + track_cost + stillness[i])
                 if best_key is None or key < best_key:
                     best_key, best_row = key, i
