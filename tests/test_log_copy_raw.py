@@ -151,3 +151,27 @@ def test_copy_of_a_damaged_chunk_is_refused_not_copied(recorded, tmp_path):
     with pytest.raises(LogFormatError, match="recover"):
         copy_session(damaged, out, tracks=[_track("typeA", 10)])
     assert not out.exists() and not (tmp_path / "out.mcap.partial").exists()
+
+
+def test_a_chunk_whose_header_times_are_wrong_is_written_anew(recorded, tmp_path):
+    """The Chunk record's start/end times are outside its CRC: a chunk whose header says
+    other times than its messages' is not copied as it is (the copy's chunk and its index
+    would disagree), but written again with the right ones (review, session 7)."""
+    data = bytearray(recorded.read_bytes())
+    with open(recorded, "rb") as f:
+        chunk = [c for c in make_reader(f).get_summary().chunk_indexes
+                 if c.message_start_time > 0][5]
+    data[chunk.chunk_start_offset + 9:chunk.chunk_start_offset + 17] = bytes(8)  # start 0
+    odd = tmp_path / "odd.mcap"
+    odd.write_bytes(bytes(data))
+    out = tmp_path / "out.mcap"
+    copy_session(odd, out, tracks=[_track("typeA", 10)])
+    with open(out, "rb") as f:
+        summary = make_reader(f).get_summary()
+    raw = out.read_bytes()
+    for c in summary.chunk_indexes:
+        record = raw[c.chunk_start_offset:c.chunk_start_offset + c.chunk_length]
+        assert int.from_bytes(record[9:17], "little") == c.message_start_time
+        assert int.from_bytes(record[17:25], "little") == c.message_end_time
+    np.testing.assert_array_equal(read_session(out).detections.cand_uv,
+                                  read_session(recorded).detections.cand_uv)

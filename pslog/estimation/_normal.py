@@ -205,6 +205,9 @@ def _band_from_rows(rows: np.ndarray, m: int) -> np.ndarray:
     (i, i+k), entry (a, b) = Σ_{3i+a, 3i+3k+b} = rows[3i+a, 3k+b-a] (b >= a if k = 0)."""
     from ._kernels import band_from_rows
 
+    # the kernel reads rows[3i+a, j] for i < m, j < 12 unchecked (numba checks no bounds)
+    if rows.ndim != 2 or rows.shape[1] != 12 or rows.shape[0] < 3 * m:
+        raise ValueError(f"rows must be (>= {3 * m}, 12), got {rows.shape}")
     return band_from_rows(np.ascontiguousarray(rows, dtype=np.float64), int(m))
 
 

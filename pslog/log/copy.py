@@ -203,8 +203,8 @@ def _copy_chunks(f: _Finished, w: SessionWriter, static: set[str], new_detection
                 raise io.damaged_error(f.path, index.chunk_start_offset, str(exc)) from None
             batch = _walk(records)
         else:
-            if _verbatim(index, batch, len(records), fate, w):
-                _copy_raw(f, w, index, batch, topics)
+            if _verbatim(index, batch, len(records), fate, w) and _copy_raw(
+                    f, w, index, batch, topics):
                 continue
         del records
         for images in (False, True):
@@ -235,21 +235,29 @@ def _verbatim(index, batch: _Messages, size: int, fate: dict, w: SessionWriter) 
 
 
 def _copy_raw(f: _Finished, w: SessionWriter, index, batch: _Messages,
-              topics: dict[int, str]) -> None:
+              topics: dict[int, str]) -> bool:
     """Write a chunk of ``f`` and its MessageIndex records as they are (see
-    :func:`_verbatim`)."""
+    :func:`_verbatim`); False (nothing written) when the chunk record's start and end times,
+    which its CRC does not cover, are not its messages' first and last log times: then the
+    chunk is written anew."""
     end = index.chunk_start_offset + index.chunk_length
     f.file.seek(index.chunk_start_offset)
     record = f.file.read(index.chunk_length)
     indexes = f.file.read(index.message_index_length)
     if len(record) != index.chunk_length or len(indexes) != index.message_index_length:
         raise io.damaged_error(f.path, index.chunk_start_offset, "chunk cut short")
+    start, end_time = int(batch.time.min()), int(batch.time.max())
+    # the Chunk record's message start and end times (after opcode and length: MCAP spec)
+    if (int.from_bytes(record[9:17], "little") != start
+            or int.from_bytes(record[17:25], "little") != end_time):
+        return False
     ids, first, counts = np.unique(batch.channel, return_index=True, return_counts=True)
     order = np.argsort(first, kind="stable")
     w._add_raw_chunk(record, indexes,
                      {cid: at - end for cid, at in index.message_index_offsets.items()},
                      dict(zip(ids[order].tolist(), counts[order].tolist(), strict=True)),
-                     int(batch.time.min()), int(batch.time.max()), topics)
+                     start, end_time, topics)
+    return True
 
 
 class _Messages:
