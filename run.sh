@@ -36,7 +36,10 @@ case "${1:-}" in
         setup
         "$VENV/bin/ruff" check pslog recorders viewers tests benchmarks tools samples
         "$VENV/bin/mypy"  # pslog/, as configured in pyproject.toml [tool.mypy]
-        exec "$VENV/bin/python" -m pytest "$@"
+        # two test processes (pytest-xdist), each running whole test files (--dist loadfile:
+        # a module's shared fixture, e.g. a Ray cluster or a live run, is built once);
+        # PSLOG_TEST_PROCESSES=0 runs the suite in this process alone
+        exec "$VENV/bin/python" -m pytest -n "${PSLOG_TEST_PROCESSES:-2}" --dist loadfile "$@"
         ;;
     *)
         echo "usage: bash run.sh demo|test [args...]" >&2
