@@ -926,8 +926,9 @@ def _unseen_jump(I, cams, O, t, cam, before, px, py, pz, vx, vy, vz):
     seen, when camera ``cam`` goes on alone (its previous accepted detection, at ``before``
     ns, came after every other camera's): since another camera's latest accepted detection
     (``T`` s ago) only ``cam`` has fixed the point, and its pixels do not see a jump's
-    component along its ray ``d`` (a kick towards the camera passes every gate). With jumps at a rate ``λ_j`` (a
-    Poisson process: one in ``T`` with probability ``≈ λ_j T``) of ``σ_j²`` per axis at an
+    component along its ray ``d`` (a kick towards the camera passes every gate). With
+    jumps at a rate ``λ_j`` (a Poisson process: one in ``T`` with probability ``≈ λ_j T``)
+    of ``σ_j²`` per axis at an
     instant uniform in ``T`` (``E[s²] = T²/3``), the mixture's covariance (Bar-Shalom, Li &
     Kirubarajan, "Estimation with Applications to Tracking and Navigation", 2001, eq.
     1.4.16-4: the moments of a mixture; a zero-mean jump adds no spread of the means) gains
