@@ -78,3 +78,25 @@ def test_the_jump_rate_must_be_finite_and_non_negative(bad):
 
     with pytest.raises(FusionError, match="jump_rate_per_s"):
         FilterOptions(jump_rate_per_s=bad)
+
+
+def test_the_unseen_jump_variance_by_hand_and_equal_to_its_python_original():
+    from pslog.fusion import filter as FM
+    from pslog.fusion.filter import BallFilter
+
+    rig = lab_rig(3)
+    flt = BallFilter(rig, FilterOptions(jump_speed=5.0, jump_rate_per_s=2.0))
+    cams, O, I = flt._cam_table, flt._opts, flt._I.copy()
+    p = np.array([1.3, 0.9, 1.1])
+    t = 2_000_000_000
+    I[FM._ICAM:FM._ICAM + 3] = [t - 40_000_000, t - 25_000_000, t - 33_000_000]
+    var = (1e-5, 2e-5, 3e-5)
+    # camera 1 alone since camera 2's detection 33 ms ago (its own previous one 20 ms ago)
+    got = FM._unseen_jump(I, cams, O, t, 1, t - 20_000_000, *p, *var)
+    d = p - rig.cameras[1].center_world
+    d /= np.linalg.norm(d)
+    a = 2.0 * 25.0 * 0.033**3 / 3.0  # λ_j σ_j² T³ / 3
+    np.testing.assert_allclose(got, np.array(var) + a * d * d, rtol=1e-12, atol=0)
+    assert got == FM._unseen_jump.py_func(I, cams, O, t, 1, t - 20_000_000, *p, *var)
+    # taking turns (another camera's detection after this one's previous): no term
+    assert FM._unseen_jump(I, cams, O, t, 1, t - 36_000_000, *p, *var) == var
