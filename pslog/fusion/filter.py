@@ -1555,8 +1555,18 @@ class BallFilter:
                     break
             elif fit is not None:
                 x, P, residuals = fit
-                self.set_state(window[-1][0], x[:3], x[3:], P)
+                # the noise estimate starts again at each (re)start, from its prior (or the
+                # estimate, if larger) and the window's residuals: a lost track may mean
+                # the detector's noise changed, and an estimate that had shrunk below it
+                # would gate out the very detections that could raise it again
+                var = self._start_var()
+                self._S[_SALPHA] = self.options.noise_prior_weight
+                self._S[_SVAR] = var
                 self._window_noise(len(window), residuals)
+                # the fit's covariance was σ² (JᵀJ)⁻¹ at the start's σ²: at the updated one
+                scale = float(self._S[_SVAR]) / var
+                P = [a * scale for a in P]
+                self.set_state(window[-1][0], x[:3], x[3:], P)
                 for t, c, _, _ in window:
                     self._I[_ICAM + c] = t
                 vx, vy, vz = P[0], P[7], P[14]
@@ -1566,6 +1576,15 @@ class BallFilter:
             del window[0]
         self._set_window(window)
         return False
+
+    def _start_var(self) -> float:
+        """The pixel variance a (re)start is judged by: the estimate, or the prior's
+        ``noise_px²`` if larger (an estimate that shrank on a clean stretch must not refuse
+        every window once the detector got noisier)."""
+        var = float(self._var)
+        if self.options.adapt_rate == 0.0:
+            return var
+        return max(var, min(max(self.options.noise_px ** 2, self._var_min), self._var_max))
 
     def _window_noise(self, n: int, residuals) -> None:
         """The pixel variance's conjugate update by a window fit of ``n`` detections with
@@ -1640,12 +1659,13 @@ class BallFilter:
         residuals = np.hypot(r[0::2], r[1::2])
         # every detection inside the gate, and the whole fit inside the chi-square quantile
         # of its 2n - 6 degrees of freedom (a break inside the window shows in the sum)
-        if not (np.all(residuals ** 2 <= self._gate * self._var)
-                and float(r @ r) <= _chi2_quantile(len(r) - 6) * self._var):
+        var = self._start_var()
+        if not (np.all(residuals ** 2 <= self._gate * var)
+                and float(r @ r) <= _chi2_quantile(len(r) - 6) * var):
             return None
         info = J.T @ J
         try:
-            cov = self._var * np.linalg.inv(info)
+            cov = var * np.linalg.inv(info)
         except np.linalg.LinAlgError:
             return None
         if (not np.all(np.isfinite(cov)) or np.linalg.cond(info) > 1e14
