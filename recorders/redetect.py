@@ -37,7 +37,9 @@ import contextlib
 import functools
 import itertools
 import os
+import signal
 import struct
+import threading
 from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
@@ -204,21 +206,54 @@ def _detecting(src, rig_names, row_of: dict, hsv: HsvRange, max_candidates: int,
     # once (the workers stay busy while this process copies the session)
     from concurrent.futures.process import BrokenProcessPool
 
-    pool = ProcessPoolExecutor(max_workers=workers)
+    pool = ProcessPoolExecutor(max_workers=workers, initializer=_ignore_stop_signals)
     try:
+        # the workers are forked while the submissions go, with Ctrl-C and SIGTERM blocked
+        # here, so that none comes to a worker before it ignores them (a terminal's Ctrl-C
+        # goes to the whole process group: a worker interrupted while holding the task
+        # queue's lock hung the pool's shutdown, or printed its traceback); this process
+        # gets the signal once they are unblocked, and stops them by shutting the pool down
+        with _stop_signals_blocked():
+            if plan is None:
+                futures = [pool.submit(_detect_window, str(src), None, None, hsv,
+                                       max_candidates, compiled)]
+            else:
+                futures = [pool.submit(_detect_chunks, str(src), chunks, plan.cameras, hsv,
+                                       max_candidates, compiled) for chunks in plan.tasks]
         if plan is None:
-            futures = [pool.submit(_detect_window, str(src), None, None, hsv, max_candidates,
-                                   compiled)]
             yield (_rows(_told(fut.result()), row_of) for fut in futures)
         else:
-            futures = [pool.submit(_detect_chunks, str(src), chunks, plan.cameras, hsv,
-                                   max_candidates, compiled) for chunks in plan.tasks]
             yield _in_order((fut.result() for fut in futures), row_of)
     except BrokenProcessPool:
         raise PslogError(f"re-detecting {src}: a worker process died (killed, or out of "
                          f"memory); try fewer --workers") from None
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
+
+
+_STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}
+
+
+@contextlib.contextmanager
+def _stop_signals_blocked() -> Iterator[None]:
+    """Block Ctrl-C and SIGTERM in this thread for the block (the main thread: a process
+    forked meanwhile starts with them blocked); one that came is delivered at its end."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
+def _ignore_stop_signals() -> None:
+    """A worker's first act: ignore Ctrl-C and SIGTERM (the main process handles them and
+    shuts the pool down; a worker ends when its task queue closes), then unblock them."""
+    for sig in _STOP_SIGNALS:
+        signal.signal(sig, signal.SIG_IGN)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOP_SIGNALS)
 
 
 def _serial(src, row_of: dict, detector: BallDetector) -> Iterator[tuple[list, list]]:

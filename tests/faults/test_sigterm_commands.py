@@ -128,3 +128,56 @@ def test_writer_left_open_by_an_interrupt_is_closed_by_the_command(tmp_path, rig
     close_abandoned()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["rec.mcap"]
     assert read_session(tmp_path / "rec.mcap").detections.n_frames == 1
+
+
+def _children(pid: int) -> list[int]:
+    try:
+        return [int(p) for p in Path(f"/proc/{pid}/task/{pid}/children").read_text().split()]
+    except OSError:
+        return []
+
+
+def _ignored_signals(pid: int) -> int:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("SigIgn:"):
+            return int(line.split()[1], 16)
+    return 0
+
+
+def test_redetect_workers_leave_ctrl_c_to_the_main_process(session_with_frames, tmp_path):
+    """A terminal's Ctrl-C goes to the whole process group: a worker interrupted while it held
+    the task queue's lock hung the pool's shutdown (review, session 7: 1 run in ~50), others
+    printed their tracebacks. The workers ignore SIGINT and SIGTERM; the main process stops
+    them. Then Ctrl-C to the group is one line, exit 130, nothing left."""
+    out = tmp_path / "out.mcap"
+    proc = subprocess.Popen([sys.executable, "-m", "pslog.cli", "redetect",
+                             str(session_with_frames), "--workers", "2", "-o", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=dict(os.environ, PSLOG_PROGRESS="off"), start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        workers: list[int] = []
+        while len(workers) < 2 and proc.poll() is None and time.monotonic() < deadline:
+            workers = [c for c in _children(proc.pid)
+                       if b"pslog" in Path(f"/proc/{c}/cmdline").read_bytes()
+                       or Path(f"/proc/{c}/cmdline").read_bytes().startswith(
+                           sys.executable.encode())]
+            time.sleep(0.01)
+        if proc.poll() is not None:
+            pytest.skip("the command finished before its workers could be seen")
+        time.sleep(0.2)  # the workers' initializer has run by now
+        masks = [_ignored_signals(w) for w in workers if Path(f"/proc/{w}").exists()]
+        both = (1 << (signal.SIGINT - 1)) | (1 << (signal.SIGTERM - 1))
+        assert masks and all(m & both == both for m in masks), [hex(m) for m in masks]
+        os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.communicate()
+    if proc.returncode == 0:  # finished meanwhile: the output is complete
+        assert out.exists()
+        return
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines() == ["pslog redetect: interrupted"], err
+    assert not (tmp_path / "out.mcap.partial").exists()
