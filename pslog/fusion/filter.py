@@ -169,7 +169,9 @@ class FilterOptions:
         along gravity times ``-restitution``, the rest times ``1 - bounce_friction`` (a golf
         ball on a floor)
     noise_prior_weight : float, shape ``α₀`` of the pixel variance's inverse-gamma prior
-        (mean ``noise_px²``): the prior counts as ``α₀`` detections (each adds 1 to ``α``)
+        ``IG(α₀, α₀ noise_px²)`` (so ``β/α = 1/E[σ⁻²] = noise_px²``, the variance the
+        filter uses; with ``α₀ <= 1`` the prior has no mean): the prior counts as ``α₀``
+        detections (each adds 1 to ``α``)
     adapt_rate : float, forgetting ``1 - ρ`` of the pixel variance's variational-Bayes
         estimate (its memory: about ``1 / adapt_rate`` detections; 0: ``noise_px`` fixed)
     min_noise_px, max_noise_px : float, bounds of the adapted pixel noise (the lower one
@@ -1096,7 +1098,10 @@ def _push(S, I, cams, O, N, t, cam, u, v, out):
         if nu:
             nu_post = S[_SNUPOST]
             xt, Pt = _updated(xt, Pt, inn_t)
-            # the mixture's innovation and S⁻¹ (the models' weighted by ν⁺)
+            # the mixture's innovation and S⁻¹ (the models' weighted by ν⁺); for the noise
+            # update an approximation: the mixture's posterior residual is σ² Σ ν_j S_j⁻¹ y_j
+            # plus the spread of the models' means, equal to this when one model holds
+            # the weight (ν⁺ near 0 or 1, most of the time)
             y0 = inn[0] + nu_post * (inn_t[0] - inn[0])
             y1 = inn[1] + nu_post * (inn_t[1] - inn[1])
             i00 = inn[2] + nu_post * (inn_t[2] - inn[2])
