@@ -54,7 +54,11 @@ QUALITY_FIELDS = {
 
 
 def _frozen(array, dtype, shape_tail: tuple[int, ...], name: str) -> np.ndarray:
-    array = np.ascontiguousarray(array, dtype=dtype)
+    # (an array already of the dtype and contiguous, the usual case, is taken as it is:
+    # ascontiguousarray would return it too, at several times the cost of the test)
+    if not (type(array) is np.ndarray and array.dtype.type is dtype and array.dtype.isnative
+            and array.flags.c_contiguous):
+        array = np.ascontiguousarray(array, dtype=dtype)
     if array.shape[1:] != shape_tail:
         raise InputError(f"{name} must have shape (n, {', '.join(map(str, shape_tail))}) "
                          f"got {array.shape}" if shape_tail else
@@ -93,8 +97,8 @@ class Observations:
         if not (len(self.camera) == len(self.uv) == len(self.frame_index) == n):
             raise InputError("observation columns differ in length")
         if n > 1:
-            order_ok = (np.diff(self.time_ns) > 0) | (
-                (np.diff(self.time_ns) == 0) & (np.diff(self.camera) > 0))
+            step = np.diff(self.time_ns)
+            order_ok = (step > 0) | ((step == 0) & (np.diff(self.camera) > 0))
             if not np.all(order_ok):
                 raise InputError("observations must be sorted by (time, camera) without repeats")
 

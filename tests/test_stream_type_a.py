@@ -113,3 +113,23 @@ def test_two_and_four_camera_streams_equal_batch(n_cameras):
              for i in range(len(obs))]
     parts.append(fuser.flush())
     assert_same(parts, batch)
+
+
+@pytest.mark.parametrize("noise_px", [None, 0.0, 0.8])
+def test_noise_estimate_one_point_path_equals_batch(noise_px):
+    """NoiseEstimate.sigmas of one point (a stream's push: a median made once per
+    checkpoint) gives the batch call's bits, pushes of one and of several points mixed,
+    points not made (NaN) among them, past several checkpoints and windows."""
+    from pslog.fusion.innovation import NoiseEstimate
+
+    rng = np.random.default_rng(3)
+    x = 1.2 * np.hypot(rng.standard_normal(1500), rng.standard_normal(1500))
+    x[rng.random(1500) < 0.1] = np.nan
+    whole = NoiseEstimate().sigmas(x, noise_px)
+    sizes = rng.choice([1, 1, 1, 2, 5, 40], size=1500)
+    cuts = np.minimum(np.cumsum(sizes), 1500)
+    split = NoiseEstimate()
+    parts = [split.sigmas(x[a:b], noise_px)
+             for a, b in itertools.pairwise([0, *np.unique(cuts).tolist()])]
+    assert_array_equal(np.concatenate(parts), whole)
+    assert len(np.unique(whole)) > 10  # (checkpoints past the first: medians, not the floor)

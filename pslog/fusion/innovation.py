@@ -93,6 +93,8 @@ class NoiseEstimate:
         self._count = 0  # innovations so far
         # the last NOISE_WINDOW + NOISE_EVERY of them: every window still to be needed
         self._tail = np.zeros(0)
+        # (checkpoint, median of its window), made once by the one-point path
+        self._median: tuple[int, float] | None = None
 
     @property
     def count(self) -> int:
@@ -110,6 +112,8 @@ class NoiseEstimate:
         """
         floor = DEFAULT_NOISE_PX if noise_px is None else float(noise_px)
         normalised = np.asarray(normalised, dtype=np.float64)
+        if normalised.shape == (1,):  # one point (a stream's push): the same value, scalar
+            return self._one(float(normalised[0]), floor)
         valid = ~np.isnan(normalised)
         values = normalised[valid]
         # innovations taken before each point, and the checkpoint (a multiple of EVERY) it uses
@@ -139,6 +143,44 @@ class NoiseEstimate:
         self._tail = combined[-(NOISE_WINDOW + NOISE_EVERY):]
         return out
 
+    def _one(self, value: float, floor: float) -> np.ndarray:
+        """:meth:`sigmas` of one point (``value``: its ``r / factor``, NaN: not taken), as a
+        (1,) array: the median of its checkpoint, a selection, is made once per checkpoint
+        (every NOISE_EVERY innovations) instead of at every point."""
+        checkpoint = self._count // NOISE_EVERY * NOISE_EVERY
+        sigma = max(floor, DEFAULT_NOISE_PX)
+        if checkpoint >= NOISE_EVERY:
+            if self._median is None or self._median[0] != checkpoint:
+                # the last NOISE_WINDOW innovations before the checkpoint (all of them before
+                # NOISE_WINDOW), all in the tail: it keeps NOISE_EVERY more than a window
+                offset = self._count - len(self._tail)
+                window = self._tail[max(0, checkpoint - NOISE_WINDOW) - offset:
+                                    checkpoint - offset]
+                half = len(window) // 2
+                self._median = (checkpoint, float(np.partition(window, half)[half]))
+            sigma = max(floor, self._median[1] / RAYLEIGH_MEDIAN)
+        if value == value:  # (not NaN: taken)
+            self._count += 1
+            self._tail = np.append(self._tail, value)[-(NOISE_WINDOW + NOISE_EVERY):]
+        return np.array([sigma])
+
+
+def _camera_constants(prep) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per camera of ``prep``: the focal length ``max(fx, fy)`` (m,), pixels; the optical
+    axis ``R[2]`` (m, 3); and the kink test's (m, 8) rows ``fx, fy, cx, cy, R[2], t[2]``.
+    Made once per camera set: kept in ``prep``'s per-camera cache (which a stream shares
+    across its pushes)."""
+    cache = prep.__dict__.setdefault("_columns", {})
+    constants = cache.get("_innovation")
+    if constants is None:
+        cameras = prep.cameras
+        constants = cache["_innovation"] = (
+            np.array([max(c.K[0, 0], c.K[1, 1]) for c in cameras]),
+            np.array([c.R[2] for c in cameras]),
+            np.array([[c.K[0, 0], c.K[1, 1], c.K[0, 2], c.K[1, 2], *c.R[2], c.t[2]]
+                      for c in cameras], dtype=np.float64).reshape(-1, 8))
+    return constants
+
 
 def failed_predictions(prep, events: np.ndarray, j1: np.ndarray, j2: np.ndarray,
                        predicted: np.ndarray, innovation_px: np.ndarray,
@@ -164,8 +206,9 @@ def failed_predictions(prep, events: np.ndarray, j1: np.ndarray, j2: np.ndarray,
     delta_pred = (time_ns[events] - time_ns[j1]) / NS
     delta_prev = (time_ns[j1] - time_ns[j2]) / NS
     cam = prep.obs.camera[events]
-    focal = np.array([max(c.K[0, 0], c.K[1, 1]) for c in prep.cameras])[cam]
-    axis = np.array([c.R[2] for c in prep.cameras])[cam]  # optical axes in the world
+    focal_all, axis_all, _ = _camera_constants(prep)
+    focal = focal_all[cam]
+    axis = axis_all[cam]  # optical axes in the world
     sigma = DEFAULT_NOISE_PX if noise_px is None else np.asarray(noise_px, dtype=np.float64)
     with np.errstate(invalid="ignore", divide="ignore"):
         sigma_r = sigma * innovation_factors(events, j1, j2, time_ns)
@@ -260,8 +303,7 @@ def kinked_points(prep, events: np.ndarray, past: tuple, noise_px: float | np.nd
         (k,)), dtype=np.float64)
     before, after = _previous_next(prep.obs.camera)
     # per camera: fx, fy, cx, cy, the optical axis R[2] and t[2] (the depth of a point)
-    lens = np.array([[c.K[0, 0], c.K[1, 1], c.K[0, 2], c.K[1, 2], *c.R[2], c.t[2]]
-                     for c in prep.cameras], dtype=np.float64).reshape(-1, 8)
+    lens = _camera_constants(prep)[2]
 
     def ints(x):
         return np.ascontiguousarray(x, dtype=np.int64)
