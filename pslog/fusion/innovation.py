@@ -211,7 +211,9 @@ def failed_predictions(prep, events: np.ndarray, j1: np.ndarray, j2: np.ndarray,
     axis = axis_all[cam]  # optical axes in the world
     sigma = DEFAULT_NOISE_PX if noise_px is None else np.asarray(noise_px, dtype=np.float64)
     with np.errstate(invalid="ignore", divide="ignore"):
-        sigma_r = sigma * innovation_factors(events, j1, j2, time_ns)
+        # innovation_factors' expression, on the intervals above (one errstate, one gather)
+        rho = delta_pred / delta_prev
+        sigma_r = sigma * np.sqrt(1.0 + (1.0 + rho) ** 2 + rho ** 2)
         offset = predicted - prep.ray_origin[events]
         depth = np.linalg.norm(offset, axis=1)
         z = np.sum(offset * axis, axis=1)  # depth along the optical axis, D cos θ

@@ -131,7 +131,8 @@ class StreamFuser:
                        else np.atleast_1d(np.asarray(frame_index, dtype=np.int64)))
         if len(time_ns) == 0:
             return self._settled(final=False)
-        keys = list(zip(time_ns.tolist(), camera.tolist(), strict=True))
+        keys = ([(int(time_ns[0]), int(camera[0]))] if len(time_ns) == len(camera) == 1  # (one)
+                else list(zip(time_ns.tolist(), camera.tolist(), strict=True)))
         if any(b <= a for a, b in zip([self._last_logged, *keys[:-1]], keys, strict=True)):
             raise FusionError("StreamFuser.push: detections must arrive in (time, camera) "
                               f"order of their logged times; got t={time_ns[0]} ns after "
