@@ -11,6 +11,7 @@ import pytest
 
 from pslog import SimulationOptions, apply_timing, builtin_rig, get_motion, simulate
 from pslog.fusion import _pseudo_kernel, fuse, innovation
+from pslog.fusion._prepare import Prepared
 from pslog.motion import G
 from pslog.records import NS
 
@@ -118,7 +119,8 @@ def _synthetic(seed: int, n: int = 600, k: int = 400):
     uv = 320 + np.cumsum(velocity * 0.033 + rng.normal(0, 0.4, (n, 2)), axis=0)
     uv[rng.random(n) < 0.02] = np.nan
     prep = SimpleNamespace(obs=SimpleNamespace(time_ns=time_ns, camera=camera),
-                           uv_undistorted=uv, cameras=cameras)
+                           uv_undistorted=uv, cameras=cameras,
+                           lens_rows=Prepared.lens_rows.func(SimpleNamespace(cameras=cameras)))
     events = np.sort(rng.choice(np.arange(10, n), k, replace=False)).astype(np.int64)
 
     def rows(offset):

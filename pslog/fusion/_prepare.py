@@ -144,6 +144,14 @@ class Prepared:
         return cache[name]
 
     @cached_property
+    def lens_rows(self) -> np.ndarray:
+        """Per camera (m, 8): ``fx, fy, cx, cy``, the optical axis ``R[2]`` in the world and
+        ``t[2]`` (a world point's depth is ``R[2] · X + t[2]``), made once (the innovation
+        test and the kink test of a fusion both read it)."""
+        return np.array([[c.K[0, 0], c.K[1, 1], c.K[0, 2], c.K[1, 2], *c.R[2], c.t[2]]
+                         for c in self.cameras], dtype=np.float64).reshape(-1, 8)
+
+    @cached_property
     def _rt_k_inv_cols(self) -> np.ndarray:
         """Rᵀ K⁻¹ of every camera as (9, m) columns."""
         return np.ascontiguousarray((np.swapaxes(self.R, 1, 2) @ self.K_inv).reshape(-1, 9).T)

@@ -61,8 +61,11 @@ def innovation_factors(events: np.ndarray, j1: np.ndarray, j2: np.ndarray,
                        time_ns: np.ndarray) -> np.ndarray:
     """``√(1 + (1 + ρ)² + ρ²)``: the innovation's noise in units of the detection noise σ
     (module docstring), (k,) float, for the rows ``events`` and past points ``j1, j2``."""
-    delta_pred = (time_ns[events] - time_ns[j1]) / NS
-    delta_prev = (time_ns[j1] - time_ns[j2]) / NS
+    return _factors((time_ns[events] - time_ns[j1]) / NS, (time_ns[j1] - time_ns[j2]) / NS)
+
+
+def _factors(delta_pred: np.ndarray, delta_prev: np.ndarray) -> np.ndarray:
+    """:func:`innovation_factors` of the intervals ``t - t1`` and ``t1 - t2``, seconds."""
     with np.errstate(invalid="ignore", divide="ignore"):
         rho = delta_pred / delta_prev
         return np.sqrt(1.0 + (1.0 + rho) ** 2 + rho ** 2)
@@ -165,23 +168,6 @@ class NoiseEstimate:
         return np.array([sigma])
 
 
-def _camera_constants(prep) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per camera of ``prep``: the focal length ``max(fx, fy)`` (m,), pixels; the optical
-    axis ``R[2]`` (m, 3); and the kink test's (m, 8) rows ``fx, fy, cx, cy, R[2], t[2]``.
-    Made once per camera set: kept in ``prep``'s per-camera cache (which a stream shares
-    across its pushes)."""
-    cache = prep.__dict__.setdefault("_columns", {})
-    constants = cache.get("_innovation")
-    if constants is None:
-        cameras = prep.cameras
-        constants = cache["_innovation"] = (
-            np.array([max(c.K[0, 0], c.K[1, 1]) for c in cameras]),
-            np.array([c.R[2] for c in cameras]),
-            np.array([[c.K[0, 0], c.K[1, 1], c.K[0, 2], c.K[1, 2], *c.R[2], c.t[2]]
-                      for c in cameras], dtype=np.float64).reshape(-1, 8))
-    return constants
-
-
 def failed_predictions(prep, events: np.ndarray, j1: np.ndarray, j2: np.ndarray,
                        predicted: np.ndarray, innovation_px: np.ndarray,
                        noise_px: float | np.ndarray | None) -> np.ndarray:
@@ -206,14 +192,12 @@ def failed_predictions(prep, events: np.ndarray, j1: np.ndarray, j2: np.ndarray,
     delta_pred = (time_ns[events] - time_ns[j1]) / NS
     delta_prev = (time_ns[j1] - time_ns[j2]) / NS
     cam = prep.obs.camera[events]
-    focal_all, axis_all, _ = _camera_constants(prep)
-    focal = focal_all[cam]
-    axis = axis_all[cam]  # optical axes in the world
+    lens = prep.lens_rows
+    focal = np.maximum(lens[:, 0], lens[:, 1])[cam]
+    axis = lens[cam, 4:7]  # optical axes in the world
     sigma = DEFAULT_NOISE_PX if noise_px is None else np.asarray(noise_px, dtype=np.float64)
     with np.errstate(invalid="ignore", divide="ignore"):
-        # innovation_factors' expression, on the intervals above (one errstate, one gather)
-        rho = delta_pred / delta_prev
-        sigma_r = sigma * np.sqrt(1.0 + (1.0 + rho) ** 2 + rho ** 2)
+        sigma_r = sigma * _factors(delta_pred, delta_prev)
         offset = predicted - prep.ray_origin[events]
         depth = np.linalg.norm(offset, axis=1)
         z = np.sum(offset * axis, axis=1)  # depth along the optical axis, D cos θ
@@ -305,7 +289,7 @@ def kinked_points(prep, events: np.ndarray, past: tuple, noise_px: float | np.nd
         (k,)), dtype=np.float64)
     before, after = _previous_next(prep.obs.camera)
     # per camera: fx, fy, cx, cy, the optical axis R[2] and t[2] (the depth of a point)
-    lens = _camera_constants(prep)[2]
+    lens = prep.lens_rows
 
     def ints(x):
         return np.ascontiguousarray(x, dtype=np.int64)
