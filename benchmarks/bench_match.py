@@ -187,18 +187,19 @@ def main() -> None:
     else:
         work = args.dir
         work.mkdir(parents=True, exist_ok=True)
-    base_dir = None
-    if args.base:
-        base_dir = work / f"base-{args.base}"
-        if not base_dir.exists():
-            subprocess.run(["git", "worktree", "add", "--detach", "-f", str(base_dir),
-                            args.base], cwd=ROOT, check=True, capture_output=True)
-    fuse_base_dir = None
-    if args.fuse_base:
-        fuse_base_dir = work / f"base-{args.fuse_base}"
-        if not fuse_base_dir.exists():
-            subprocess.run(["git", "worktree", "add", "--detach", "-f", str(fuse_base_dir),
-                            args.fuse_base], cwd=ROOT, check=True, capture_output=True)
+
+    def checkout(rev: str | None) -> Path | None:
+        """A worktree of ``rev`` in the work folder (made once; None without a revision)."""
+        if not rev:
+            return None
+        folder = work / f"base-{rev}"
+        if not folder.exists():
+            subprocess.run(["git", "worktree", "add", "--detach", "-f", str(folder), rev],
+                           cwd=ROOT, check=True, capture_output=True)
+        return folder
+
+    base_dir = checkout(args.base)
+    fuse_base_dir = checkout(args.fuse_base)
     rows = []
 
     def row(stage: str, m: float, seconds: float, peak: float, extra: str = "",

@@ -91,7 +91,8 @@ def dump(path: str) -> None:
 
 def _lab_rig():
     """bench_dirty's ``lab3``: three 800 x 600 cameras around the floor, a wide lens, type A
-    offsets of 0, 1/90 and 2/90 s."""
+    offsets of 0, 1/90 and 2/90 s. A copy, not an import: :func:`dump` runs under the
+    compared revision's pslog, where bench_dirty's own imports may not exist."""
     from pslog import Camera, Rig, look_at
 
     dist = np.array([-0.12, 0.03, 5e-4, -4e-4, 0.0])
