@@ -19,7 +19,7 @@ copying the session into the new file about 1 ms in the main process. So:
   chunk is read twice): each chunk is read into one reused buffer, decompressed and
   checked as every reader checks it, and each image decoded where it lies in the
   decompressed records (no Python object or copy per message but the image's protobuf,
-  and the compressed bytes decompressed where they were read: :func:`_payload`):
+  and the compressed bytes decompressed where they were read):
   no frame is pickled between processes, and the main process never reads the images;
 - every window is queued at once and the main process copies the session meanwhile
   (``copy_session`` takes the detections as a callable, called once the rest is copied):
@@ -374,7 +374,7 @@ def _read_and_detect(src, chunks: list[tuple[int, int, int]], cameras: dict,
                 if got != length or view[0] != io.OP_CHUNK or \
                         int.from_bytes(view[1:9], "little") != length - 9:
                     raise LogFormatError("chunk record does not match the summary's index")
-                records = _payload(view[9:])
+                records = io.chunk_payload(view[9:])
             except LogFormatError as exc:
                 raise io.damaged_error(path, offset, str(exc)) from None
             for cid, seq, t, a, b in _messages(records, cameras):
@@ -386,40 +386,6 @@ def _read_and_detect(src, chunks: list[tuple[int, int, int]], cameras: dict,
             del records  # freed before the next chunk is read
     return _Found(np.array(camera, dtype=np.int64), np.array(index, dtype=np.int64),
                   np.array(key, dtype=np.int64).reshape(-1, 4), found)
-
-
-def _payload(body: memoryview) -> bytes:
-    """:func:`pslog.log._mcapio.chunk_payload` of a zstd chunk's body, decompressed from
-    ``body`` itself (``chunk_payload`` copies the compressed bytes first: a third of the
-    cost of reading an image chunk): the same bytes, or, when anything does not check
-    out, what ``chunk_payload`` says (its error)."""
-    import zlib
-
-    import zstandard
-
-    from pslog.log import _mcapio as io
-
-    try:
-        _start, _end, size, crc, n = struct.unpack_from("<QQQII", body, 0)
-        if bytes(body[32:32 + n]) == b"zstd" and size <= io._MAX_CHUNK_BYTES:
-            (length,) = struct.unpack_from("<Q", body, 32 + n)
-            if 32 + n + 8 + length == len(body):
-                data = _decompressor().decompress(body[32 + n + 8:], max_output_size=size)
-                if len(data) == size and (not crc or zlib.crc32(data) == crc):
-                    io.check_framing(data)
-                    return data
-    except (struct.error, zstandard.ZstdError, LogFormatError):
-        pass
-    return io.chunk_payload(body)
-
-
-@functools.cache
-def _decompressor():
-    """One zstd decompressor per process (it keeps its context from chunk to chunk; a
-    forked worker gets its own copy), used by one thread at a time."""
-    import zstandard
-
-    return zstandard.ZstdDecompressor()
 
 
 def _messages(records, cameras: dict) -> list[tuple[int, int, int, int, int]]:

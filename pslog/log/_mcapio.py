@@ -355,8 +355,9 @@ def chunk_payload(body: bytes, validate_crc: bool = True, framing: bool = True) 
         if compression == "zstd":
             import zstandard
 
-            # read at most one byte more than promised: a damaged stream cannot balloon
-            with zstandard.ZstdDecompressor().stream_reader(bytes(data)) as reader:
+            # read at most one byte more than promised: a damaged stream cannot balloon;
+            # from the caller's buffer as it is (a memoryview too: no copy of the bytes)
+            with zstandard.ZstdDecompressor().stream_reader(data) as reader:
                 data = reader.read(size + 1)
         elif compression == "lz4":
             import lz4.frame
