@@ -38,7 +38,6 @@ import functools
 import itertools
 import os
 import signal
-import struct
 import threading
 from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor
@@ -377,7 +376,7 @@ def _read_and_detect(src, chunks: list[tuple[int, int, int]], cameras: dict,
                 records = io.chunk_payload(view[9:])
             except LogFormatError as exc:
                 raise io.damaged_error(path, offset, str(exc)) from None
-            for cid, seq, t, a, b in _messages(records, cameras):
+            for cid, seq, t, a, b in io.message_spans(records, cameras):
                 data = parse_image(memoryview(records)[a:b], path).data
                 camera.append(cameras[cid][0])
                 index.append(seq)
@@ -386,24 +385,6 @@ def _read_and_detect(src, chunks: list[tuple[int, int, int]], cameras: dict,
             del records  # freed before the next chunk is read
     return _Found(np.array(camera, dtype=np.int64), np.array(index, dtype=np.int64),
                   np.array(key, dtype=np.int64).reshape(-1, 4), found)
-
-
-def _messages(records, cameras: dict) -> list[tuple[int, int, int, int, int]]:
-    """``(channel, sequence, log time, start, end)`` of each message in a chunk's records
-    (framing checked) on a channel of ``cameras``: its data is ``records[start:end]``."""
-    from pslog.log import _mcapio as io
-
-    out = []
-    pos, n = 0, len(records)
-    while pos < n:
-        op, length = struct.unpack_from("<BQ", records, pos)
-        body = pos + 9
-        if op == io.OP_MESSAGE:
-            cid, seq, t = struct.unpack_from("<HIQ", records, body)
-            if cid in cameras:
-                out.append((cid, seq, t, body + io._MESSAGE_HEAD, body + length))
-        pos = body + length
-    return out
 
 
 def _told(detected: tuple[np.ndarray, np.ndarray, list]) -> tuple[np.ndarray, np.ndarray,

