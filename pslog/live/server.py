@@ -28,7 +28,7 @@ import numpy as np
 from ..errors import InputError, PslogError
 from ..records import NS
 from ..rig import Rig
-from .fuser import CameraLiveState, LiveFuser
+from .fuser import CameraLiveState, LiveFuser, warm_up
 from .protocol import MAX_DETECTION_BYTES
 from .sinks import Sink, resolve_udp
 
@@ -168,6 +168,8 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
             raise InputError(f"duration must be >= 0 seconds, got {duration_s!r}")
         fuser = LiveFuser(rig, method, late_s=late_s, options=options, candidates=candidates,
                           epoch_ns=epoch_ns, silent_after_s=silent_after_s, hold_s=hold_s)
+        # the method's kernels loaded now, not behind the first datagrams (fuser.warm_up)
+        warm_up(method, candidates=fuser.candidates, options=fuser.options)
         if sock is None:
             sock = bind_udp(listen)
     except BaseException:
