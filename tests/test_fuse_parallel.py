@@ -147,3 +147,23 @@ def test_an_error_making_the_shared_input_fails_every_method_of_its_key():
         run_methods(["a", "b", "c"], ["good", "bad", "bad"], make, lambda m, v: v, workers=2)
     assert run_methods(["a", "b"], ["good", "good"], make, lambda m, v: v, workers=2) == [
         "good", "good"]
+
+
+def test_preload_starts_numba_and_the_kernel_modules_on_a_thread():
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, threading\n"
+        "from pslog._jit import preload\n"
+        "assert 'numba' not in sys.modules\n"
+        "preload('pslog.no_such_module', 'pslog.fusion.filter')\n"
+        "for t in threading.enumerate():\n"
+        "    if t.name == 'pslog-preload':\n"
+        "        t.join(300)\n"
+        "print('numba' in sys.modules, 'pslog.fusion.filter' in sys.modules)\n")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=300)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.split() == ["True", "True"]  # a missing module stops nothing
+    assert run.stderr == ""

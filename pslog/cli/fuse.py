@@ -69,6 +69,7 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from pslog import progress
+    from pslog._jit import preload
     from pslog.errors import FusionError, RigError
     from pslog.evaluation import LEFT_OUT_KEY
     from pslog.fusion import (
@@ -117,6 +118,9 @@ def run(args: argparse.Namespace) -> int:
         if skipped:
             print(f"not run on this timing: {', '.join(skipped)} (name them with --method "
                   f"to run them anyway)")
+    # numba's start and the kernel modules these methods (and the writer) run, on another
+    # core while the detections are gated: not on the way of the first kernel
+    preload(*dict.fromkeys(k for m in methods for k in METHODS[m].kernels), "pslog.log._wire")
     progress.update(total=len(methods) + 2)  # read, each method, write
     n_observations = len(observations)
     detections = session.detections
