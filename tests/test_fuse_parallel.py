@@ -167,3 +167,56 @@ def test_preload_starts_numba_and_the_kernel_modules_on_a_thread():
     assert run.returncode == 0, run.stderr
     assert run.stdout.split() == ["True", "True"]  # a missing module stops nothing
     assert run.stderr == ""
+
+
+def test_a_method_failing_beside_others_is_one_line(tmp_path, capsys):
+    """sync needs shared instants, which a type-A session lacks: its error, raised on a
+    worker thread while typeA and filter fuse, is the command's one line; nothing written."""
+    session = tmp_path / "a.mcap"
+    assert main(["simulate", "--rig", "paper3", "--timing", "typeA", "--duration", "2",
+                 "-o", str(session)]) == 0
+    capsys.readouterr()
+    out = tmp_path / "f.mcap"
+    code = main(["fuse", str(session), "--method", "typeA,sync,filter", "-o", str(out),
+                 "--workers", "2"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 1
+    assert len(err) == 1 and err[0].startswith("pslog fuse: error: method sync needs"), err
+    assert not out.exists() and not (tmp_path / "f.mcap.partial").exists()
+
+
+def test_sigterm_while_methods_fuse_on_threads_is_one_line(tmp_path):
+    """SIGTERM while the worker threads fuse: the waiting main thread takes it at once, one
+    line, exit 143, nothing written, and a method still running does not hold the exit."""
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    session = tmp_path / "long.mcap"
+    subprocess.run([sys.executable, "-m", "pslog.cli", "simulate", "--rig", "paper3",
+                    "--timing", "typeA", "--motion", "rally", "--duration", "240",
+                    "-o", str(session)], check=True, capture_output=True, timeout=300)
+    out = tmp_path / "f.mcap"
+    proc = subprocess.Popen([sys.executable, "-m", "pslog.cli", "fuse", str(session), "-o",
+                             str(out), "--workers", "2"], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True,
+                            env=dict(os.environ, PSLOG_PROGRESS="lines",
+                                     PSLOG_PROGRESS_INTERVAL="0.05"))
+    assert proc.stderr is not None
+    seen = []
+    for line in proc.stderr:  # progress lines until a method fuses
+        seen.append(line)
+        if "fusing" in line:
+            break
+    if proc.poll() is not None:
+        pytest.skip("the command finished before it could be signalled")
+    proc.send_signal(signal.SIGTERM)
+    rest = proc.communicate(timeout=60)[1]  # hang guard: a running method holds nothing
+    lines = [x for x in (seen + rest.splitlines()) if x.strip()]
+    if proc.returncode == 0:
+        pytest.skip("the command finished before the signal reached it")
+    assert proc.returncode == 143, rest
+    assert lines[-1].strip() == "pslog fuse: terminated (SIGTERM)", lines[-3:]
+    assert not any("Traceback" in x or "Exception" in x for x in lines), lines
+    assert not out.exists() and not (tmp_path / "f.mcap.partial").exists()
