@@ -32,6 +32,7 @@ from __future__ import annotations
 import os
 import threading
 from collections.abc import Callable, Hashable, Sequence
+from functools import partial
 from typing import Any
 
 #: the methods' relative cost on a long session (seconds per minute of a three-camera
@@ -114,7 +115,7 @@ def run_methods(
         for i, (method, key) in enumerate(zip(methods, keys, strict=True)):
             if started is not None:
                 started(method)
-            results[i] = run(method, shared[key].get(lambda k=key, m=method: make(k, m)))
+            results[i] = run(method, shared[key].get(partial(make, key, method)))
             shared[key].release()  # the last method of its key: its arrays go
         return results
 
@@ -141,7 +142,7 @@ def run_methods(
                 try:
                     if started is not None:
                         started(method)
-                    value = shared[key].get(lambda k=key, m=method: make(k, m))
+                    value = shared[key].get(partial(make, key, method))
                     results[i] = run(method, value)
                     del value
                 except BaseException as exc:  # raised by the caller's thread, ranked
