@@ -118,23 +118,26 @@ def test_the_first_failing_method_in_the_asked_order_is_raised(workers):
 
 
 def test_no_method_starts_after_a_failure_later_in_order_than_it():
-    """smooth (second asked, costliest: started first) fails at once: typeA, asked before
-    it, still runs (one after another it would have run first); nearest, asked after it,
-    never starts (one after another would have stopped at smooth)."""
+    """smooth (second asked, the costliest: started first) fails at once: typeA, asked
+    before it, still runs (one after another it would have run first); filter, asked after
+    it and not yet started, never starts (one after another would have stopped at smooth)."""
+    from pslog.fusion._parallel import COST
+
+    assert COST["smooth"] > COST["nearest"] > COST["typeA"] > COST["filter"]  # the premise
     ran = []
 
     def run(method, value):
         ran.append(method)
         if method == "smooth":
             raise RuntimeError("smooth failed")
-        if method == "filter":
+        if method == "nearest":
             time.sleep(0.2)
         return method
 
     with pytest.raises(RuntimeError, match="smooth failed"):
-        run_methods(["typeA", "smooth", "filter", "nearest"], [0, 1, 0, 0],
+        run_methods(["typeA", "smooth", "nearest", "filter"], [0, 1, 0, 0],
                     lambda k, m: None, run, workers=2)
-    assert "typeA" in ran and "nearest" not in ran
+    assert "typeA" in ran and "filter" not in ran
 
 
 def test_an_error_making_the_shared_input_fails_every_method_of_its_key():

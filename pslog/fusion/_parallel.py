@@ -35,12 +35,13 @@ from collections.abc import Callable, Hashable, Sequence
 from functools import partial
 from typing import Any
 
-#: the methods' relative cost on a long session (seconds per minute of a three-camera
-#: match, roughly, on one core): the costliest start first, so that the longest chain runs
-#: beside the others instead of after them (a scheduling hint only: results do not depend
-#: on it)
-COST = {"smooth": 10.0, "filter": 3.6, "typeB": 1.5, "linear": 1.5, "typeA": 1.0,
-        "sync": 0.5, "nearest": 0.5}
+#: the methods' relative cost: CPU seconds of each on the 90-minute three-camera type-A
+#: session of benchmarks/bench_match.py (its gating excluded; sync, typeB and linear, which
+#: do not suit it, guessed from nearest's numpy work). The costliest start first, so that
+#: the longest chain runs beside the others instead of after them (a scheduling hint only:
+#: the results do not depend on it)
+COST = {"smooth": 9.0, "nearest": 1.7, "sync": 1.5, "typeB": 2.0, "linear": 2.0,
+        "typeA": 1.0, "filter": 0.8}
 
 
 def usable_cores() -> int:
