@@ -89,6 +89,7 @@ class _Shared:
 def run_methods(
     methods: Sequence[str], keys: Sequence[Hashable], make: Callable[[Hashable, str], Any],
     run: Callable[[str, Any], Any], workers: int, started: Callable[[str], None] | None = None,
+    finished: Callable[[str], None] | None = None,
 ) -> list[Any]:
     """``[run(m, make(key_m, m)) for m in methods]``, on ``workers`` threads.
 
@@ -101,6 +102,7 @@ def run_methods(
     run : ``run(method, input) -> result``
     workers : threads; 1 runs every method in turn on the calling thread
     started : ``started(method)`` called as each method starts (progress)
+    finished : ``finished(method)`` called as each method ends (progress)
 
     Returns
     -------
@@ -118,6 +120,8 @@ def run_methods(
                 started(method)
             results[i] = run(method, shared[key].get(partial(make, key, method)))
             shared[key].release()  # the last method of its key: its arrays go
+            if finished is not None:
+                finished(method)
         return results
 
     # costliest first; ties in the asked order
@@ -152,6 +156,8 @@ def run_methods(
                         state["limit"] = min(state["limit"], i)
                 finally:
                     shared[key].release()
+                    if finished is not None:
+                        finished(method)
         finally:
             with lock:
                 state["running"] -= 1
@@ -171,3 +177,41 @@ def run_methods(
     if errors:
         raise errors[min(errors)]
     return results
+
+
+class MethodProgress:
+    """The command's progress (:mod:`pslog.progress`) while methods fuse, at once or in
+    turn: one step per method, named by the methods running (``fusing smooth, typeA``, in
+    the asked order), each counted complete when it ends; the last one when the command's
+    next step begins, as :func:`pslog.progress.step` counts a step done."""
+
+    def __init__(self, methods: Sequence[str]) -> None:
+        self.methods = list(methods)
+        self.running: list[str] = []
+        self.left = len(self.methods)
+        self.begun = False
+        self.lock = threading.Lock()
+
+    def _what(self) -> str | None:
+        names = [m for m in self.methods if m in self.running]
+        return f"fusing {', '.join(names)}" if names else None
+
+    def started(self, method: str) -> None:
+        from .. import progress
+
+        with self.lock:
+            self.running.append(method)
+            if not self.begun:  # the step before (reading) is complete
+                self.begun = True
+                progress.step(self._what() or "")
+            else:
+                progress.update(what=self._what())
+
+    def finished(self, method: str) -> None:
+        from .. import progress
+
+        with self.lock:
+            self.running.remove(method)
+            self.left -= 1
+            if self.left:  # (the last one: when the command's next step begins)
+                progress.update(advance=1.0, what=self._what())

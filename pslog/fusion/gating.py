@@ -1639,9 +1639,8 @@ def fuse_detections(detections: Detections, rig: Rig, methods, options=None, *,
     tracks : method -> Track
     rejections : method -> Rejections (empty ones without gating)
     """
-    from .. import progress
     from . import FusionOptions, check_method, fuse, prepare
-    from ._parallel import default_workers, run_methods
+    from ._parallel import MethodProgress, default_workers, run_methods
 
     options = options or FusionOptions()
     methods = list(methods)
@@ -1651,9 +1650,10 @@ def fuse_detections(detections: Detections, rig: Rig, methods, options=None, *,
     if not options.gating:
         obs = timed_observations(detections, rig)
         prep = prepare(obs, rig) if len(rig) >= 2 else None
+        shown = MethodProgress(methods)
         out = run_methods(methods, [None] * len(methods), lambda key, method: prep,
                           lambda m, p: fuse(obs, rig, m, options, prepared=p), workers,
-                          started=lambda m: progress.step(f"fusing {m}"))
+                          started=shown.started, finished=shown.finished)
         return dict(zip(methods, out, strict=True)), {m: Rejections.empty() for m in methods}
 
     def gated_input(key, method: str) -> tuple[Gated, Prepared | None]:  # once per form
@@ -1665,9 +1665,10 @@ def fuse_detections(detections: Detections, rig: Rig, methods, options=None, *,
         return fuse(gated.observations, rig, method, options, prepared=prep), gated.rejections
 
     # the methods run at once on threads (pslog.fusion._parallel: same results, same errors)
+    shown = MethodProgress(methods)
     out = run_methods(methods, [gating_key(method, options) for method in methods],
-                      gated_input, fused, workers,
-                      started=lambda method: progress.step(f"fusing {method}"))
+                      gated_input, fused, workers, started=shown.started,
+                      finished=shown.finished)
     return ({m: t for m, (t, _) in zip(methods, out, strict=True)},
             {m: r for m, (_, r) in zip(methods, out, strict=True)})
 
