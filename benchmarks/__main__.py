@@ -105,6 +105,10 @@ def match_rows(data: dict) -> list[dict]:
                      "note": f"{how}; CPU {longest.get('cpu_seconds') or float('nan'):.1f} s "
                              f"and peak {peak:.0f} MB at {longest['minutes']:g} min; "
                              f"s/min {per_min}"})
+        steps = [r for r in data.get("rows", []) if r["stage"] == f"{stage} steps"
+                 and r["minutes"] == longest["minutes"]]
+        if steps:  # where the time goes (bench_match.py's breakdown of the stage)
+            rows[-1]["note"] += f"; steps at {longest['minutes']:g} min: {steps[-1]['note']}"
     return rows
 
 

@@ -105,6 +105,71 @@ print(json.dumps(out))
 """
 
 
+#: ``pslog fuse`` with the default methods, in one process as the command runs them
+#: (``pslog.cli.main``), timed by stage: wall seconds from the start of each stage to its end
+#: and the CPU seconds of the thread that ran it (the methods run at once on threads, so the
+#: stages overlap: their wall seconds do not add up to the total); the imports, the numba
+#: cache loads (count, seconds), the total wall and CPU seconds and the peak resident set.
+#: Printed as JSON: where the default methods' time goes
+_FUSE_DEFAULT_PHASES = """
+import dataclasses, json, os, resource, sys, threading, time
+t_start, c_start = time.perf_counter(), time.process_time()
+out, loads = {}, []
+def wrap(name, fn):
+    def timed(*a, **k):
+        w, c = time.perf_counter(), time.thread_time()
+        try:
+            return fn(*a, **k)
+        finally:
+            label = name(a) if callable(name) else name
+            wall, cpu = time.perf_counter() - w, time.thread_time() - c
+            old = out.get(label, [0.0, 0.0])
+            out[label] = [round(old[0] + wall, 3), round(old[1] + cpu, 3)]
+    return timed
+import pslog.cli, pslog.cli.fuse, pslog.fusion, pslog.fusion.gating, pslog.log, pslog.timing
+out["imports"] = [round(time.perf_counter() - t_start, 3), round(time.process_time(), 3)]
+F, G, L = pslog.fusion, pslog.fusion.gating, pslog.log
+L.read_session = wrap("read", L.read_session)
+L.copy_session = wrap("write", L.copy_session)
+G.gate_for = wrap(lambda a: "gate " + ("causal" if G.gating_key(a[2], a[3])[0]
+                                       else "offline"), G.gate_for)
+F.prepare = wrap("prepare", F.prepare)
+for m in list(F.METHODS):
+    F.METHODS[m] = dataclasses.replace(F.METHODS[m],
+                                       function=wrap(m, F.METHODS[m].function))
+def watch_numba():  # the numba cache loads, once numba is imported (by a kernel module)
+    from numba.core import caching
+    load = caching.Cache.load_overload
+    def timed(self, sig, ctx):
+        w = time.perf_counter()
+        try:
+            return load(self, sig, ctx)
+        finally:
+            loads.append(time.perf_counter() - w)
+    caching.Cache.load_overload = timed
+import builtins
+real_import = builtins.__import__
+def spy(name, *a, **k):  # hook numba's cache once numba is imported (whole: not while its
+    module = real_import(name, *a, **k)  # own modules import each other)
+    numba = sys.modules.get("numba")
+    if (numba is not None and "hooked" not in out
+            and not getattr(numba.__spec__, "_initializing", False)):
+        out["hooked"] = True
+        watch_numba()
+    return module
+builtins.__import__ = spy
+os.environ["PSLOG_PROGRESS"] = "off"
+code = pslog.cli.main(["fuse", *sys.argv[1:]])
+builtins.__import__ = real_import
+out.pop("hooked", None)
+out["numba loads"] = [len(loads), round(sum(loads), 3)]
+out["total"] = [round(time.perf_counter() - t_start, 3), round(time.process_time() - c_start, 3)]
+out["peak MB"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss // 1024
+print(json.dumps(out), file=sys.__stderr__)
+sys.exit(code)
+"""
+
+
 def run(cmd: list[str]) -> None:
     """Run a preparation step (not timed)."""
     done = subprocess.run(cmd, capture_output=True, cwd=ROOT, env=_env(ROOT))
@@ -112,10 +177,11 @@ def run(cmd: list[str]) -> None:
         raise SystemExit(f"{' '.join(cmd)} failed ({done.returncode}):\n{done.stderr.decode()}")
 
 
-def run_peak(cmd: list[str], env: dict | None = None, timeout: float | None = None
-             ) -> tuple[float, float, str, bool]:
+def run_peak(cmd: list[str], env: dict | None = None, timeout: float | None = None,
+             stderr: bool = False) -> tuple:
     """``(seconds, peak MB, stdout, finished)`` of one process: wall time, and its own peak
-    resident set (``os.wait4``); ``finished`` False when it ran past ``timeout`` (killed)."""
+    resident set (``os.wait4``); ``finished`` False when it ran past ``timeout`` (killed);
+    with ``stderr``, its standard error too (a fifth item)."""
     import signal
 
     t0 = time.perf_counter()
@@ -132,7 +198,8 @@ def run_peak(cmd: list[str], env: dict | None = None, timeout: float | None = No
                 proc.send_signal(signal.SIGKILL)
                 os.wait4(proc.pid, 0)
                 proc.returncode = -9
-                return time.perf_counter() - t0, float("nan"), "", False
+                return (time.perf_counter() - t0, float("nan"), "", False) + (
+                    ("",) if stderr else ())
             time.sleep(0.005)
         seconds = time.perf_counter() - t0
         proc.returncode = os.waitstatus_to_exitcode(status)
@@ -144,6 +211,9 @@ def run_peak(cmd: list[str], env: dict | None = None, timeout: float | None = No
         global _CPU, _SYS
         _CPU = usage.ru_utime + usage.ru_stime
         _SYS = usage.ru_stime
+        if stderr:
+            return (seconds, usage.ru_maxrss / 1024, out.read().decode(), True,
+                    err.read().decode())
         return seconds, usage.ru_maxrss / 1024, out.read().decode(), True
 
 
@@ -246,11 +316,27 @@ def main() -> None:
                 s, peak, _, _ = run_peak(pslog("fuse", str(session), "-o", str(fused),
                                                "--force"), env=env)
                 row("fuse default" + label, m, s, peak)
+                if not label:  # the same, the methods one after another (paired)
+                    s, peak, _, _ = run_peak(pslog("fuse", str(session), "-o", str(fused),
+                                                   "--force", "--workers", "1"), env=env)
+                    row("fuse default 1 worker", m, s, peak)
             s, peak, out, _ = run_peak([sys.executable, "-c", _FUSE_PHASES, str(session),
                                         str(fused_a)])
             steps = json.loads(out)
             row("fuse typeA steps", m, s, peak, "cpu s (peak MB): " + ", ".join(
                 f"{k} {v[0]:.2f} ({v[1]})" for k, v in steps.items()))
+            s, peak, _, _, err = run_peak([sys.executable, "-c", _FUSE_DEFAULT_PHASES,
+                                           str(session), "-o", str(fused), "--force"],
+                                          stderr=True)
+            steps = json.loads(err.strip().splitlines()[-1])
+            total = steps.pop("total")
+            peak_in = steps.pop("peak MB")
+            n_loads, load_s = steps.pop("numba loads")
+            row("fuse default steps", m, s, peak,
+                "wall s (thread CPU s): " + ", ".join(
+                    f"{k} {v[0]:.2f} ({v[1]:.2f})" for k, v in steps.items())
+                + f"; {n_loads} numba cache loads {load_s:.2f} s; in process {total[0]:.2f} s "
+                  f"wall, {total[1]:.2f} s CPU, peak {peak_in} MB")
             s, peak, new_out, _ = run_peak(pslog("eval", str(fused), "--json"))
             row("eval", m, s, peak)
             if base_dir is not None:
@@ -282,9 +368,18 @@ def main() -> None:
         per = [r for r in rows if r["stage"] == stage and r["finished"]]
         figures = ", ".join(f"{r['minutes']:g} min {r['cpu_seconds'] / r['minutes']:.3f}"
                             for r in per)
+        # the longest session's CPU seconds per minute over the shortest's but one (the
+        # shortest carries the start-up, seconds that do not grow with the session): 1 for
+        # a linear stage, about 90 / 10 for a quadratic one
+        longer = [r for r in sorted(per, key=lambda r: r["minutes"]) if r["minutes"] >= 10]
+        ratio = ""
+        if len(longer) >= 2:
+            a, b = longer[0], longer[-1]
+            growth = (b["cpu_seconds"] / b["minutes"]) / (a["cpu_seconds"] / a["minutes"])
+            ratio = f"; ratio {b['minutes']:g}/{a['minutes']:g} min {growth:.2f}"
         target = TARGETS.get(stage, "")
-        print(f"  {stage:<22} {figures}   target {target}" if target
-              else f"  {stage:<22} {figures}")
+        print(f"  {stage:<22} {figures}{ratio}   target {target}" if target
+              else f"  {stage:<22} {figures}{ratio}")
     if args.json is not None:
         args.json.write_text(json.dumps({"rows": rows, "targets": TARGETS}, indent=2))
 

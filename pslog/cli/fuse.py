@@ -8,6 +8,7 @@ from ._common import (
     add_force,
     add_method_option,
     declare_files,
+    int_in,
     noise_px,
     nonnegative_float,
     number_at_most,
@@ -54,6 +55,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "epipolar, track and motion gates and record every rejected "
                              "candidate in the output; off: take each frame's best-scored "
                              "candidate (default %(default)s)")
+    parser.add_argument("--workers", type=int_in(1, 64), default=None, metavar="N",
+                        help="methods fused at once, on threads (the same tracks whatever "
+                             "the number; 1: one after another, e.g. beside other work) "
+                             "(default: the usable cores, at most one per method)")
     add_force(parser)
     declare_files(parser, inputs=("session", "rig"), outputs=("output",))
 
@@ -64,6 +69,7 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from pslog import progress
+    from pslog._jit import preload
     from pslog.errors import FusionError, RigError
     from pslog.evaluation import LEFT_OUT_KEY
     from pslog.fusion import (
@@ -112,11 +118,15 @@ def run(args: argparse.Namespace) -> int:
         if skipped:
             print(f"not run on this timing: {', '.join(skipped)} (name them with --method "
                   f"to run them anyway)")
+    # numba's start and the kernel modules these methods (and the writer) run, on another
+    # core while the detections are gated: not on the way of the first kernel
+    preload(*dict.fromkeys(k for m in methods for k in METHODS[m].kernels), "pslog.log._wire")
     progress.update(total=len(methods) + 2)  # read, each method, write
     n_observations = len(observations)
     detections = session.detections
     del observations, session  # freed before fusing (a 90-minute match's columns)
-    tracks, rejections = fuse_detections(detections, rig, methods, options)
+    tracks, rejections = fuse_detections(detections, rig, methods, options,
+                                         workers=args.workers)
     del detections  # the output is copied from the file itself
     dropped = {m: t.dropped for m, t in tracks.items()}  # invalid or untrustworthy points
     empty = [m for m, t in tracks.items() if len(t) == 0]

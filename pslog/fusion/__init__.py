@@ -109,6 +109,8 @@ class Method:
         frame_index) -> Track`` takes each admitted detection once, in order (the method's
         incremental form, which :class:`~pslog.fusion.stream.StreamFuser` then uses instead
         of re-running ``function`` on a window); None: no such form
+    kernels : the modules of the numba kernels the method runs (:func:`pslog._jit.preload`
+        starts them early; none for a numpy-only method)
     """
 
     name: str
@@ -119,6 +121,7 @@ class Method:
     description: str
     reference: str
     streamer: Callable | None = None
+    kernels: tuple[str, ...] = ()
 
     def suits(self, shared: bool, alone: bool) -> bool:
         """True if a session with (or without) shared and lone instants suits the method."""
@@ -188,7 +191,8 @@ METHODS: dict[str, Method] = {m.name: m for m in (
            f"{_PAPER}, Table 1"),
     Method("typeA", _type_a, True, False, frozenset({"alone"}),
            "pseudo stereo at every detection (paper section 2.2, eqs. 1-4)",
-           f"{_PAPER}, section 2.2", streamer=_type_a_stream),
+           f"{_PAPER}, section 2.2", streamer=_type_a_stream,
+           kernels=("pslog.fusion._pseudo_kernel",)),
     Method("typeB", _type_b, True, True, frozenset({"shared", "alone"}),
            "stereo at common instants + ray-constrained prediction (paper section 2.3)",
            f"{_PAPER}, section 2.3"),
@@ -197,11 +201,12 @@ METHODS: dict[str, Method] = {m.name: m for m in (
            f"{_PAPER}, Table 1"),
     Method("smooth", _smooth, False, False, frozenset(),
            "one continuous trajectory fitted to every detection's ray (offline)",
-           "continuous-time batch estimation: Furgale et al. 2013; Singer 1970 motion prior"),
+           "continuous-time batch estimation: Furgale et al. 2013; Singer 1970 motion prior",
+           kernels=("pslog.estimation", "pslog.estimation._kernels")),
     Method("filter", _filter, True, False, frozenset(),
            "causal extended Kalman filter with bounce/kick gating, a point at every detection",
            "Bar-Shalom, Li & Kirubarajan 2001 (EKF, NIS gate); docs/methods.md",
-           streamer=_filter_stream),
+           streamer=_filter_stream, kernels=("pslog.fusion.filter",)),
 )}
 
 

@@ -1624,45 +1624,53 @@ def gate_for(detections: Detections, rig: Rig, method: str, options) -> Gated:
     return gate(detections, rig, causal=causal, wait_s=wait_s, max_gap_s=options.max_gap_s)
 
 
-def fuse_detections(detections: Detections, rig: Rig, methods, options=None):
+def fuse_detections(detections: Detections, rig: Rig, methods, options=None, *,
+                    workers: int | None = None):
     """Fuse every method of ``methods`` from all the candidates of ``detections``, gated
     (:func:`gate`, in each method's form; once per form), or, with
     ``options.gating`` False, from each frame's best-scored candidate.
+
+    ``workers``: threads fusing methods at once (:mod:`pslog.fusion._parallel`; the same
+    tracks and errors as one after another); None: the usable cores, at most one per
+    method; 1: in turn on the calling thread.
 
     Returns
     -------
     tracks : method -> Track
     rejections : method -> Rejections (empty ones without gating)
     """
-    from .. import progress
     from . import FusionOptions, check_method, fuse, prepare
+    from ._parallel import MethodProgress, default_workers, run_methods
 
     options = options or FusionOptions()
+    methods = list(methods)
     for method in methods:
         check_method(method)
+    workers = default_workers(len(methods)) if workers is None else workers
     if not options.gating:
         obs = timed_observations(detections, rig)
         prep = prepare(obs, rig) if len(rig) >= 2 else None
-        out = {}
-        for m in methods:
-            progress.step(f"fusing {m}")  # (a command's progress shows the method at work)
-            out[m] = fuse(obs, rig, m, options, prepared=prep)
-        return out, {m: Rejections.empty() for m in methods}
-    shared: dict[tuple[bool, float], tuple[Gated, Prepared | None]] = {}
-    tracks, rejections = {}, {}
-    keys = [gating_key(method, options) for method in methods]
-    last_use = {key: i for i, key in enumerate(keys)}
-    for i, (method, key) in enumerate(zip(methods, keys, strict=True)):
-        progress.step(f"fusing {method}")
-        if key not in shared:
-            gated = gate_for(detections, rig, method, options)
-            shared[key] = gated, (prepare(gated.observations, rig) if len(rig) >= 2 else None)
-        gated, prep = shared[key]
-        tracks[method] = fuse(gated.observations, rig, method, options, prepared=prep)
-        rejections[method] = gated.rejections
-        if last_use[key] == i:  # no other method needs this gating: its arrays go
-            del shared[key], gated, prep
-    return tracks, rejections
+        shown = MethodProgress(methods)
+        out = run_methods(methods, [None] * len(methods), lambda key, method: prep,
+                          lambda m, p: fuse(obs, rig, m, options, prepared=p), workers,
+                          started=shown.started, finished=shown.finished)
+        return dict(zip(methods, out, strict=True)), {m: Rejections.empty() for m in methods}
+
+    def gated_input(key, method: str) -> tuple[Gated, Prepared | None]:  # once per form
+        gated = gate_for(detections, rig, method, options)
+        return gated, (prepare(gated.observations, rig) if len(rig) >= 2 else None)
+
+    def fused(method: str, shared: tuple[Gated, Prepared | None]):
+        gated, prep = shared
+        return fuse(gated.observations, rig, method, options, prepared=prep), gated.rejections
+
+    # the methods run at once on threads (pslog.fusion._parallel: same results, same errors)
+    shown = MethodProgress(methods)
+    out = run_methods(methods, [gating_key(method, options) for method in methods],
+                      gated_input, fused, workers, started=shown.started,
+                      finished=shown.finished)
+    return ({m: t for m, (t, _) in zip(methods, out, strict=True)},
+            {m: r for m, (_, r) in zip(methods, out, strict=True)})
 
 
 __all__ = [

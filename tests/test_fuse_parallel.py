@@ -1,0 +1,225 @@
+"""Fusion methods run at once on threads (pslog.fusion._parallel): the same tracks, the same
+rejections and the same errors as one after another, whatever the scheduling."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from pslog.cli import main
+from pslog.fusion import METHODS, FusionOptions
+from pslog.fusion._parallel import run_methods
+from pslog.fusion.gating import fuse_detections
+from pslog.log import read_session
+
+
+@pytest.fixture(scope="module")
+def dirty(tmp_path_factory):
+    """Four seconds of three type-B cameras (shared and lone instants: every method suits
+    them) with spurious blobs."""
+    path = tmp_path_factory.mktemp("parallel") / "dirty.mcap"
+    assert main(["simulate", "--rig", "paper3", "--timing", "typeB", "--motion", "rally",
+                 "--duration", "4", "--noise-px", "0.3", "--spurious", "0.05",
+                 "--seed", "4", "-o", str(path)]) == 0
+    return path
+
+
+def _same_track(a, b) -> None:
+    assert a.method == b.method
+    np.testing.assert_array_equal(a.time_ns, b.time_ns)
+    np.testing.assert_array_equal(a.camera, b.camera)
+    # bit for bit (NaN where NaN): compare the bytes
+    assert a.position_world.tobytes() == b.position_world.tobytes()
+    assert sorted(a.quality) == sorted(b.quality)
+    for name in a.quality:
+        assert np.asarray(a.quality[name]).tobytes() == np.asarray(b.quality[name]).tobytes()
+    assert dict(a.dropped) == dict(b.dropped)
+
+
+@pytest.mark.parametrize("gating", [True, False])
+def test_threads_give_the_tracks_of_one_after_another(dirty, gating):
+    s = read_session(dirty)
+    methods = list(METHODS)  # every method, both gating forms
+    options = FusionOptions(gating=gating)
+    one, rej_one = fuse_detections(s.detections, s.rig, methods, options, workers=1)
+    for workers in (2, 3):
+        many, rej_many = fuse_detections(s.detections, s.rig, methods, options,
+                                         workers=workers)
+        assert list(many) == methods  # in the asked order
+        for m in methods:
+            _same_track(one[m], many[m])
+            for name in ("frame_time_ns", "camera", "frame_index", "uv", "score", "reason"):
+                assert (getattr(rej_one[m], name).tobytes()
+                        == getattr(rej_many[m], name).tobytes())
+
+
+def test_cli_workers_write_the_same_tracks(dirty, tmp_path, capsys):
+    outs = {}
+    for workers in ("1", "2"):
+        out = tmp_path / f"fused{workers}.mcap"
+        assert main(["fuse", str(dirty), "-o", str(out), "--workers", workers]) == 0
+        outs[workers] = read_session(out).tracks
+    printed = capsys.readouterr().out.replace("fused2.mcap", "fused1.mcap").splitlines()
+    assert printed[: len(printed) // 2] == printed[len(printed) // 2:]  # same summary
+    assert list(outs["1"]) == list(outs["2"]) and len(outs["1"]) >= 5
+    for m in outs["1"]:
+        _same_track(outs["1"][m], outs["2"][m])
+
+
+@pytest.mark.parametrize("value", ["0", "65", "two"])
+def test_cli_workers_out_of_range_is_one_line(dirty, tmp_path, capsys, value):
+    with pytest.raises(SystemExit) as stop:
+        main(["fuse", str(dirty), "-o", str(tmp_path / "x.mcap"), "--workers", value])
+    assert stop.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--workers" in err[0], err
+    assert not (tmp_path / "x.mcap").exists()
+
+
+def test_shared_input_made_once_per_key_and_results_in_order():
+    made = []
+    lock = threading.Lock()
+
+    def make(key, method):
+        with lock:
+            made.append(key)
+        time.sleep(0.01)  # the other methods of the key wait for it
+        return {"key": key}
+
+    methods = ["typeA", "smooth", "nearest", "filter", "typeB"]
+    keys = ["causal", "offline", "causal", "causal", "wait"]
+    out = run_methods(methods, keys, make, lambda m, v: (m, v["key"]), workers=2)
+    assert out == list(zip(methods, keys, strict=True))
+    assert sorted(made) == ["causal", "offline", "wait"]
+
+
+@pytest.mark.parametrize("workers", [1, 2, 4])
+def test_the_first_failing_method_in_the_asked_order_is_raised(workers):
+    """smooth starts first (the costliest) and fails at once; typeA, earlier in the asked
+    order, fails later: typeA's error is the one raised, as one after another would."""
+    ran = []
+
+    def run(method, value):
+        ran.append(method)
+        if method == "smooth":
+            raise ValueError("smooth failed")
+        if method == "typeA":
+            time.sleep(0.05)
+            raise ValueError("typeA failed")
+        return method
+
+    methods = ["nearest", "typeA", "smooth", "filter"]
+    with pytest.raises(ValueError, match="typeA failed"):
+        run_methods(methods, [0, 0, 1, 0], lambda k, m: None, run, workers=workers)
+    assert "nearest" in ran  # before typeA in the asked order: it ran
+
+
+def test_no_method_starts_after_a_failure_later_in_order_than_it():
+    """smooth (second asked, the costliest: started first) fails at once: typeA, asked
+    before it, still runs (one after another it would have run first); filter, asked after
+    it and not yet started, never starts (one after another would have stopped at smooth)."""
+    from pslog.fusion._parallel import COST
+
+    assert COST["smooth"] > COST["nearest"] > COST["typeA"] > COST["filter"]  # the premise
+    ran = []
+
+    def run(method, value):
+        ran.append(method)
+        if method == "smooth":
+            raise RuntimeError("smooth failed")
+        if method == "nearest":
+            time.sleep(0.2)
+        return method
+
+    with pytest.raises(RuntimeError, match="smooth failed"):
+        run_methods(["typeA", "smooth", "nearest", "filter"], [0, 1, 0, 0],
+                    lambda k, m: None, run, workers=2)
+    assert "typeA" in ran and "filter" not in ran
+
+
+def test_an_error_making_the_shared_input_fails_every_method_of_its_key():
+    def make(key, method):
+        if key == "bad":
+            raise KeyError("gate failed")
+        return key
+
+    with pytest.raises(KeyError, match="gate failed"):
+        run_methods(["a", "b", "c"], ["good", "bad", "bad"], make, lambda m, v: v, workers=2)
+    assert run_methods(["a", "b"], ["good", "good"], make, lambda m, v: v, workers=2) == [
+        "good", "good"]
+
+
+def test_preload_starts_numba_and_the_kernel_modules_on_a_thread():
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, threading\n"
+        "from pslog._jit import preload\n"
+        "assert 'numba' not in sys.modules\n"
+        "preload('pslog.no_such_module', 'pslog.fusion.filter')\n"
+        "for t in threading.enumerate():\n"
+        "    if t.name == 'pslog-preload':\n"
+        "        t.join(300)\n"
+        "print('numba' in sys.modules, 'pslog.fusion.filter' in sys.modules)\n")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=300)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.split() == ["True", "True"]  # a missing module stops nothing
+    assert run.stderr == ""
+
+
+def test_a_method_failing_beside_others_is_one_line(tmp_path, capsys):
+    """sync needs shared instants, which a type-A session lacks: its error, raised on a
+    worker thread while typeA and filter fuse, is the command's one line; nothing written."""
+    session = tmp_path / "a.mcap"
+    assert main(["simulate", "--rig", "paper3", "--timing", "typeA", "--duration", "2",
+                 "-o", str(session)]) == 0
+    capsys.readouterr()
+    out = tmp_path / "f.mcap"
+    code = main(["fuse", str(session), "--method", "typeA,sync,filter", "-o", str(out),
+                 "--workers", "2"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 1
+    assert len(err) == 1 and err[0].startswith("pslog fuse: error: method sync needs"), err
+    assert not out.exists() and not (tmp_path / "f.mcap.partial").exists()
+
+
+def test_sigterm_while_methods_fuse_on_threads_is_one_line(tmp_path):
+    """SIGTERM while the worker threads fuse: the waiting main thread takes it at once, one
+    line, exit 143, nothing written, and a method still running does not hold the exit."""
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    session = tmp_path / "long.mcap"
+    subprocess.run([sys.executable, "-m", "pslog.cli", "simulate", "--rig", "paper3",
+                    "--timing", "typeA", "--motion", "rally", "--duration", "240",
+                    "-o", str(session)], check=True, capture_output=True, timeout=300)
+    out = tmp_path / "f.mcap"
+    proc = subprocess.Popen([sys.executable, "-m", "pslog.cli", "fuse", str(session), "-o",
+                             str(out), "--workers", "2"], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True,
+                            env=dict(os.environ, PSLOG_PROGRESS="lines",
+                                     PSLOG_PROGRESS_INTERVAL="0.05"))
+    assert proc.stderr is not None
+    seen = []
+    for line in proc.stderr:  # progress lines until a method fuses
+        seen.append(line)
+        if "fusing" in line:
+            break
+    if proc.poll() is not None:
+        pytest.skip("the command finished before it could be signalled")
+    proc.send_signal(signal.SIGTERM)
+    rest = proc.communicate(timeout=60)[1]  # hang guard: a running method holds nothing
+    lines = [x for x in (seen + rest.splitlines()) if x.strip()]
+    if proc.returncode == 0:
+        pytest.skip("the command finished before the signal reached it")
+    assert proc.returncode == 143, rest
+    assert lines[-1].strip() == "pslog fuse: terminated (SIGTERM)", lines[-3:]
+    assert not any("Traceback" in x or "Exception" in x for x in lines), lines
+    assert not out.exists() and not (tmp_path / "f.mcap.partial").exists()
