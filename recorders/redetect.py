@@ -142,8 +142,9 @@ def redetect_session(src: str | Path, dst: str | Path, hsv: HsvRange | None = No
         return done["new"]
 
     with _detecting(src, session.rig.names, row_of, hsv, max_candidates, workers,
-                    session.n_images) as batches:
+                    session.n_images) as (batches, checked):
         copy_session(src, dst, detections=detections, metadata={"detector_hsv": hsv.text()},
+                     checked_chunks=checked,
                      force=force)
     redone, new = done["redone"], done["new"]
     return RedetectSummary(dst, old.n_frames, int(redone.sum()), int((~redone).sum()),
@@ -176,11 +177,13 @@ def _merged(old: Detections, rows: list, results: list) -> tuple[np.ndarray, Det
 
 @contextlib.contextmanager
 def _detecting(src, rig_names, row_of: dict, hsv: HsvRange, max_candidates: int,
-               workers: int | None, n_images: int) -> Iterator[Iterator[tuple[list, list]]]:
+               workers: int | None, n_images: int
+               ) -> Iterator[tuple[Iterator[tuple[list, list]], frozenset[int]]]:
     """Start re-detecting (worker processes start at once, on every part of the session);
     give an iterator of (rows, [(uv, radius, score), ...]) batches for every stored image
-    with a frame record, the images in their time order overall. On leaving, work not
-    started is cancelled."""
+    with a frame record, the images in their time order overall, and the byte offsets of
+    the chunks whose CRC is checked while the batches are made (an iterator that ends
+    has checked them all). On leaving, work not started is cancelled."""
     import cv2
 
     # one OpenCV thread in this process too, before any worker is forked: a worker inherits
@@ -194,10 +197,10 @@ def _detecting(src, rig_names, row_of: dict, hsv: HsvRange, max_candidates: int,
         plan = _plan(src, rig_names, n_images, _BATCH)
         detector = BallDetector(hsv, max_candidates, compiled=compiled)
         if plan is None:
-            yield _serial(src, row_of, detector)
+            yield _serial(src, row_of, detector), frozenset()
         else:
             yield _in_order((_read_and_detect(src, chunks, plan.cameras, detector)
-                             for chunks in plan.tasks), row_of)
+                             for chunks in plan.tasks), row_of), _offsets(plan)
         return
     plan = _plan(src, rig_names, n_images, 1)  # one chunk a task: regrouped below
     if plan is not None:
@@ -243,15 +246,21 @@ def _detecting(src, rig_names, row_of: dict, hsv: HsvRange, max_candidates: int,
                 futures += [submit(pools[1], i, True) for i in range(first, n_tasks)]
             pools[0].shutdown(wait=False)  # its workers end once their tasks are done
         if plan is None:
-            yield (_rows(_told(fut.result()), row_of) for fut in futures)
+            yield (_rows(_told(fut.result()), row_of) for fut in futures), frozenset()
         else:
-            yield _in_order((fut.result() for fut in futures), row_of)
+            yield _in_order((fut.result() for fut in futures), row_of), _offsets(plan)
     except BrokenProcessPool:
         raise PslogError(f"re-detecting {src}: a worker process died (killed, or out of "
                          f"memory); try fewer --workers") from None
     finally:
         for pool in reversed(pools):
             pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _offsets(plan: _Plan) -> frozenset[int]:
+    """The offsets of the chunks of ``plan``: each is checked (CRC included) as it is read
+    for detection, so the copy of the session need not compute their CRC again."""
+    return frozenset(offset for task in plan.tasks for _rank, offset, _length in task)
 
 
 def _guided(chunks: list, n_images: int, workers: int, head: int) -> list[list]:
