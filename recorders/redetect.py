@@ -14,16 +14,21 @@ reading the frames from the file 0.12 ms (0.6 ms when each worker parsed the sum
 ``mcap``'s reader and read its window with :func:`pslog.log.iter_images`: the same images);
 copying the session into the new file about 1 ms in the main process. So:
 
-- each worker reads its own run of whole image chunks from the file, located once by this
+- each worker reads its own runs of whole image chunks from the file, located once by this
   process from the summary section (:func:`_plan`: no worker parses the summary, and no
   chunk is read twice): each chunk is read into one reused buffer, decompressed and
   checked as every reader checks it, and each image decoded where it lies in the
   decompressed records (no Python object or copy per message but the image's protobuf,
   and the compressed bytes decompressed where they were read):
   no frame is pickled between processes, and the main process never reads the images;
-- every window is queued at once and the main process copies the session meanwhile
-  (``copy_session`` takes the detections as a callable, called once the rest is copied):
-  all cores stay busy until the end;
+- the workers are forked as soon as the chunks are located; with the compiled screen, a
+  first pool detects a few short tasks with OpenCV's screen while this process loads numba
+  (about 0.5 s of one core, once), then a second pool forked with numba loaded detects the
+  rest (:func:`_detecting`): no core waits for numba;
+- the tasks shrink towards the end (:func:`_guided`), so the workers finish together;
+- every task is queued at once and the main process copies the session meanwhile
+  (``copy_session`` takes the detections as a callable, called once the rest is copied),
+  leaving the CRC of the image chunks to the workers, which check it as they read them;
 - the workers keep freed memory (:func:`_keep_freed_memory`): no page faults per frame.
 
 Every frame is still decoded whole and detected exactly as before (the tests compare the
@@ -211,6 +216,10 @@ def _detecting(src, rig_names, row_of: dict, hsv: HsvRange, max_candidates: int,
     # but a few numbers per frame crosses between the processes, so every task is queued at
     # once (the workers stay busy while this process copies the session)
     from concurrent.futures.process import BrokenProcessPool
+
+    from .detect import _bgr_box
+
+    _bgr_box(hsv)  # (about 40 ms, cached) made here once, inherited by every worker
 
     def submit(pool: ProcessPoolExecutor, i: int, compiled: bool):
         if plan is None:

@@ -120,6 +120,10 @@ def test_compiled_screen_and_small_windows_give_the_same_session(tmp_path, monke
     monkeypatch.setattr(redetect, "_PARALLEL_FROM", 0)
     monkeypatch.setattr(redetect, "_COMPILED_FROM", 0)
     monkeypatch.setattr(redetect, "_BATCH", 2)  # windows of a couple of chunks
+    monkeypatch.setattr(redetect, "_HEAD_TASKS", 2)  # two short tasks for the first pool,
+    monkeypatch.setattr(redetect, "_HEAD", 5)  # the rest for the compiled one
+    monkeypatch.setattr(redetect, "_detect_chunks", _recording_detect_chunks)
+    monkeypatch.setenv("PSLOG_TEST_TASKS", str(tmp_path / "tasks.txt"))
     plan = redetect._plan(SAMPLE, ("cam1", "cam2", "cam3"), 135, 10)
     assert plan is not None and len(plan.tasks) >= 4
     # every image chunk once, in the order of their first message times
@@ -136,6 +140,23 @@ def test_compiled_screen_and_small_windows_give_the_same_session(tmp_path, monke
     for name in ("frame_time_ns", "frame_camera", "frame_index", "cand_frame", "cand_uv",
                  "cand_radius", "cand_score"):
         assert_array_equal(getattr(b, name), getattr(a, name), err_msg=name)
+    # the first two tasks in a first pool with OpenCV's screen, the others in a second one
+    # (other processes) with the compiled screen
+    tasks = [line.split() for line in (tmp_path / "tasks.txt").read_text().splitlines()]
+    plain = {pid for pid, compiled in tasks if compiled == "False"}
+    fast = {pid for pid, compiled in tasks if compiled == "True"}
+    assert len(tasks) > 2 and sum(c == "False" for _p, c in tasks) == 2
+    assert plain and fast and not plain & fast and str(os.getpid()) not in plain | fast
+
+
+def _recording_detect_chunks(src, chunks, cameras, hsv, max_candidates, compiled):
+    """:func:`redetect._detect_chunks`, noting its process and screen in a file."""
+    from recorders import redetect
+
+    with open(os.environ["PSLOG_TEST_TASKS"], "a") as f:
+        f.write(f"{os.getpid()} {compiled}\n")
+    return redetect._read_and_detect(src, chunks, cameras, redetect.BallDetector(
+        hsv, max_candidates, compiled=compiled))
 
 
 def _damaged_copy(tmp_path: Path) -> Path:
@@ -330,3 +351,27 @@ def test_a_damaged_image_chunk_fails_redetect_though_the_copy_leaves_its_crc(tmp
             with pytest.raises(PslogError, match="CRC mismatch"):
                 redetect_session(bad, tmp_path / "out.mcap", workers=workers)
         assert sorted(tmp_path.iterdir()) == [bad]
+
+
+def test_an_interrupt_while_numba_loads_stops_the_first_pool_and_writes_nothing(
+        tmp_path, monkeypatch):
+    """Ctrl-C while the main process loads the compiled screen (the first pool's workers
+    already detecting): the interrupt propagates, every worker is ended, nothing written."""
+    import multiprocessing
+
+    from recorders import redetect
+
+    main_pid = os.getpid()
+
+    class _Interrupted(redetect.BallDetector):
+        def __init__(self, *args, compiled=False, **kwargs):
+            if compiled and os.getpid() == main_pid:
+                raise KeyboardInterrupt  # as a Ctrl-C landing in numba's import
+            super().__init__(*args, compiled=compiled, **kwargs)
+
+    for name, value in (("_PARALLEL_FROM", 0), ("_COMPILED_FROM", 0), ("_HEAD_TASKS", 2),
+                        ("_HEAD", 5), ("BallDetector", _Interrupted)):
+        monkeypatch.setattr(redetect, name, value)
+    with pytest.raises(KeyboardInterrupt):
+        redetect_session(SAMPLE, tmp_path / "out.mcap", workers=2)
+    assert list(tmp_path.iterdir()) == [] and multiprocessing.active_children() == []
