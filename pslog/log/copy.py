@@ -6,6 +6,7 @@ from __future__ import annotations
 import struct
 from collections.abc import Callable, Collection, Mapping, Sequence
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 
@@ -235,8 +236,9 @@ def _read_record(f: _Finished, index, validate_crc: bool) -> tuple[bytes, bytes]
         if len(record) != index.chunk_length or record[0] != io.OP_CHUNK or \
                 int.from_bytes(record[1:9], "little") != index.chunk_length - 9:
             raise LogFormatError("chunk record does not match the summary's index")
-        records = io.chunk_payload(memoryview(record)[9:], validate_crc=validate_crc,
-                                   framing=False)
+        # a view of the record (chunk_payload reads any buffer): decompressed in place
+        records = io.chunk_payload(cast(bytes, memoryview(record)[9:]),
+                                   validate_crc=validate_crc, framing=False)
     except LogFormatError as exc:
         raise io.damaged_error(f.path, index.chunk_start_offset, str(exc)) from None
     return record, bytes(records)  # (a copy only of an uncompressed chunk's view)
