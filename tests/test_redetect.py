@@ -100,7 +100,7 @@ def test_worker_processes_give_the_same_session_as_one_process(tmp_path, monkeyp
     one, pool = tmp_path / "one.mcap", tmp_path / "pool.mcap"
     redetect_session(SAMPLE, one, workers=1)
     monkeypatch.setattr(redetect, "_PARALLEL_FROM", 0)  # the sample has only 135 frames
-    monkeypatch.setattr(redetect, "_BATCH", 16)  # several batches in flight, out of order
+    # (the sample's 5 image chunks in 4 tasks (_guided): several in flight, out of order)
     redetect_session(SAMPLE, pool, workers=2)
     a, b = read_session(one).detections, read_session(pool).detections
     assert a.n_candidates >= 135
@@ -119,7 +119,6 @@ def test_compiled_screen_and_small_windows_give_the_same_session(tmp_path, monke
     redetect_session(SAMPLE, one, workers=1)
     monkeypatch.setattr(redetect, "_PARALLEL_FROM", 0)
     monkeypatch.setattr(redetect, "_COMPILED_FROM", 0)
-    monkeypatch.setattr(redetect, "_BATCH", 2)  # windows of a couple of chunks
     monkeypatch.setattr(redetect, "_HEAD_TASKS", 2)  # two short tasks for the first pool,
     monkeypatch.setattr(redetect, "_HEAD", 5)  # the rest for the compiled one
     monkeypatch.setattr(redetect, "_detect_chunks", _recording_detect_chunks)
