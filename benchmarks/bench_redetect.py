@@ -10,8 +10,12 @@ timed by wall clock and by the CPU seconds of the process and its workers;
 does (the machine may be shared: the wall figure then says little, the CPU figure and the
 ratio in one run hold); the CPU time is split into the main process's (reading, copying
 and writing the session) and the workers' (reading, decoding and detecting the frames).
-``--base DIR`` (repeatable) runs the same on other checkouts (e.g. a copy of the base
-commit), interleaved round by round; ``--session FILE`` re-detects a given session. The
+``--base DIR_OR_COMMIT`` (repeatable) runs the same on other checkouts, or on a commit of
+this repository (exported by ``git archive`` into a temporary folder), interleaved round by
+round after one untimed warm-up run of each (numba's cache of a fresh copy is cold); the
+figures of this checkout and of each base are then printed paired, with the load average
+of the machine before and after (the pairs hold on a shared machine, the figures alone
+do not); ``--session FILE`` re-detects a given session. The
 floors of any exact OpenCV re-detection are printed beside them: the same JPEGs only
 decoded by ``cv2.imdecode`` in two processes (read beforehand, nothing pickled), and
 decoded and detected (with the compiled screen from 2000 frames on, as redetect does).
@@ -88,6 +92,19 @@ def _record(path: Path, seconds: float) -> None:
                      status=None, force=True)
 
 
+def _checkout(base: str, tmp: Path) -> Path:
+    """``base`` itself if it is a folder, else a copy of commit ``base`` of this repository
+    (``git archive``: nothing is added to the repository, no worktree registered)."""
+    if Path(base).is_dir():
+        return Path(base).resolve()
+    out = tmp / f"base-{len(list(tmp.glob('base-*')))}"
+    out.mkdir()
+    archive = subprocess.run(["git", "archive", base], cwd=ROOT, check=True,
+                             capture_output=True).stdout
+    subprocess.run(["tar", "-x", "-C", str(out)], input=archive, check=True)
+    return out
+
+
 def _run(code: str, checkout: Path, *args: str) -> tuple[int, float, float, float]:
     """(frames, wall s, CPU s of the process and its workers, CPU s of the process alone)."""
     env = dict(os.environ, PYTHONPATH=str(checkout))
@@ -101,7 +118,8 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=6.0, help="session length (3 x 30 fps)")
     parser.add_argument("--rounds", type=int, default=2)
     parser.add_argument("--base", action="append", default=[],
-                        help="another checkout run alongside (may be repeated)")
+                        help="another checkout, or a commit of this repository, run "
+                             "alongside (may be repeated)")
     parser.add_argument("--session", type=Path, default=None,
                         help="re-detect this session instead of recording one")
     parser.add_argument("--quick", action="store_true", help="a 4.5 s session, one round")
@@ -116,12 +134,22 @@ def main() -> None:
         runs = {"floor: decode only": (_DECODE, ROOT, "decode"),
                 "floor: decode + detect": (_DECODE, ROOT, "detect")}
         for base in args.base:
-            runs[f"redetect of {base}"] = (_RUN, Path(base).resolve(), "")
+            runs[f"redetect of {base}"] = (_RUN, _checkout(base, Path(tmp)), "")
         runs["redetect (this checkout)"] = (_RUN, ROOT, "")
         totals = {name: [0, 0.0, 0.0, 0.0] for name in runs}
+        per_round: dict[str, list[tuple[int, float, float, float]]] = {n: [] for n in runs}
+        if args.base:  # warm numba's cache of every checkout, untimed
+            for code, checkout, what in runs.values():
+                if code is _RUN:
+                    _run(code, checkout, str(session), str(Path(tmp) / "out.mcap"), what)
+        load = os.getloadavg()[0]
         for _ in range(args.rounds):
             for name, (code, checkout, what) in runs.items():
+                # the last run's output removed untimed: replacing it (--force) would add the
+                # file system's freeing of 550 MB to the timed run
+                (Path(tmp) / "out.mcap").unlink(missing_ok=True)
                 got = _run(code, checkout, str(session), str(Path(tmp) / "out.mcap"), what)
+                per_round[name].append(got)
                 for i, value in enumerate(got):
                     totals[name][i] += value
         size = session.stat().st_size / 1e6
@@ -138,6 +166,19 @@ def main() -> None:
                   f"idle cores, {per_cpu2 / 2:4.0f} per core ({1e3 * cpu / n:.2f} CPU-ms/frame"
                   f"{split})   this checkout {ours[0] / per_wall:.2f} x, "
                   f"{ours[1] / per_cpu2:.2f} x")
+        if args.base:
+            print(f"paired, round by round (load average {load:.1f} before, "
+                  f"{os.getloadavg()[0]:.1f} after, {os.cpu_count()} cores):")
+            ours_rounds = per_round["redetect (this checkout)"]
+            for name in runs:
+                if not name.startswith("redetect of"):
+                    continue
+                for r, (a, b) in enumerate(zip(per_round[name], ours_rounds, strict=True)):
+                    print(f"  round {r + 1}: {name[12:]} {a[0] / a[1]:5.0f} frames/s wall, "
+                          f"{1e3 * a[2] / a[0]:.2f} CPU-ms/frame; this checkout "
+                          f"{b[0] / b[1]:5.0f} frames/s wall, {1e3 * b[2] / b[0]:.2f} "
+                          f"CPU-ms/frame: {(b[0] / b[1]) / (a[0] / a[1]):.2f} x wall, "
+                          f"{(a[2] / a[0]) / (b[2] / b[0]):.2f} x CPU")
         print(f"target: >= 400 frames/s on two cores: {'PASS' if ours[1] >= 400 else 'FAIL'} "
               f"({ours[1]:.0f}, from CPU time; the floors are what any exact re-detection "
               f"with OpenCV's JPEG decoder costs before reading and writing the session)")

@@ -14,16 +14,21 @@ reading the frames from the file 0.12 ms (0.6 ms when each worker parsed the sum
 ``mcap``'s reader and read its window with :func:`pslog.log.iter_images`: the same images);
 copying the session into the new file about 1 ms in the main process. So:
 
-- each worker reads its own run of whole image chunks from the file, located once by this
+- each worker reads its own runs of whole image chunks from the file, located once by this
   process from the summary section (:func:`_plan`: no worker parses the summary, and no
   chunk is read twice): each chunk is read into one reused buffer, decompressed and
   checked as every reader checks it, and each image decoded where it lies in the
   decompressed records (no Python object or copy per message but the image's protobuf,
   and the compressed bytes decompressed where they were read):
   no frame is pickled between processes, and the main process never reads the images;
-- every window is queued at once and the main process copies the session meanwhile
-  (``copy_session`` takes the detections as a callable, called once the rest is copied):
-  all cores stay busy until the end;
+- the workers are forked as soon as the chunks are located; with the compiled screen, a
+  first pool detects a few short tasks with OpenCV's screen while this process loads numba
+  (about 0.5 s of one core, once), then a second pool forked with numba loaded detects the
+  rest (:func:`_detecting`): no core waits for numba;
+- the tasks shrink towards the end (:func:`_guided`), so the workers finish together;
+- every task is queued at once and the main process copies the session meanwhile
+  (``copy_session`` takes the detections as a callable, called once the rest is copied),
+  leaving the CRC of the image chunks to the workers, which check it as they read them;
 - the workers keep freed memory (:func:`_keep_freed_memory`): no page faults per frame.
 
 Every frame is still decoded whole and detected exactly as before (the tests compare the
@@ -52,7 +57,12 @@ from pslog.records import Detections
 
 from .detect import BallDetector, HsvRange
 
-_BATCH = 64  # images per task when several processes decode and detect
+_BATCH = 64  # images per batch when one process decodes and detects
+# images per task of the first pool while this process loads the compiled screen, and how
+# many such tasks (more than it can start meanwhile: the rest go to the compiled pool)
+_HEAD = 48
+_HEAD_TASKS = 6
+_TAIL = 12  # images in the last, shortest tasks (every worker then finishes at once)
 _PARALLEL_FROM = 400  # images; below this one process is faster than starting a pool
 # images from which the detector's compiled screen is used: loading numba costs about 0.5 s
 # of CPU once, the screen saves about 0.35 ms per 1280 x 720 frame
@@ -137,8 +147,9 @@ def redetect_session(src: str | Path, dst: str | Path, hsv: HsvRange | None = No
         return done["new"]
 
     with _detecting(src, session.rig.names, row_of, hsv, max_candidates, workers,
-                    session.n_images) as batches:
+                    session.n_images) as (batches, checked):
         copy_session(src, dst, detections=detections, metadata={"detector_hsv": hsv.text()},
+                     checked_chunks=checked,
                      force=force)
     redone, new = done["redone"], done["new"]
     return RedetectSummary(dst, old.n_frames, int(redone.sum()), int((~redone).sum()),
@@ -171,11 +182,13 @@ def _merged(old: Detections, rows: list, results: list) -> tuple[np.ndarray, Det
 
 @contextlib.contextmanager
 def _detecting(src, rig_names, row_of: dict, hsv: HsvRange, max_candidates: int,
-               workers: int | None, n_images: int) -> Iterator[Iterator[tuple[list, list]]]:
+               workers: int | None, n_images: int
+               ) -> Iterator[tuple[Iterator[tuple[list, list]], frozenset[int]]]:
     """Start re-detecting (worker processes start at once, on every part of the session);
     give an iterator of (rows, [(uv, radius, score), ...]) batches for every stored image
-    with a frame record, the images in their time order overall. On leaving, work not
-    started is cancelled."""
+    with a frame record, the images in their time order overall, and the byte offsets of
+    the chunks whose CRC is checked while the batches are made (an iterator that ends
+    has checked them all). On leaving, work not started is cancelled."""
     import cv2
 
     # one OpenCV thread in this process too, before any worker is forked: a worker inherits
@@ -185,49 +198,101 @@ def _detecting(src, rig_names, row_of: dict, hsv: HsvRange, max_candidates: int,
     workers = workers or (os.cpu_count() or 1)
     compiled = n_images >= _COMPILED_FROM
     parallel = workers > 1 and n_images >= _PARALLEL_FROM
-    # (in this process: runs of about _BATCH images, each told to the progress as it is done)
-    per_task = (int(np.clip(n_images // (4 * workers), _BATCH // 2, 4 * _BATCH)) if parallel
-                else _BATCH)
-    plan = _plan(src, rig_names, n_images, per_task)
-    if not parallel:
+    if not parallel:  # runs of about _BATCH images, each told to the progress as it is done
+        plan = _plan(src, rig_names, n_images, _BATCH)
         detector = BallDetector(hsv, max_candidates, compiled=compiled)
         if plan is None:
-            yield _serial(src, row_of, detector)
+            yield _serial(src, row_of, detector), frozenset()
         else:
             yield _in_order((_read_and_detect(src, chunks, plan.cameras, detector)
-                             for chunks in plan.tasks), row_of)
+                             for chunks in plan.tasks), row_of), _offsets(plan)
         return
-    # the screen box and the compiled screen made here once, inherited by the forked workers
-    BallDetector(hsv, max_candidates, compiled=compiled).detect(np.zeros((16, 16, 3), np.uint8))
+    plan = _plan(src, rig_names, n_images, 1)  # one chunk a task: regrouped below
+    if plan is not None:
+        plan = _Plan(_guided([c for task in plan.tasks for c in task], n_images, workers,
+                             _HEAD if compiled else 0), plan.cameras)
     # each task is a run of whole image chunks (or, for a file whose summary does not say
     # where they are, the whole session) that a worker reads from the file itself: nothing
     # but a few numbers per frame crosses between the processes, so every task is queued at
     # once (the workers stay busy while this process copies the session)
     from concurrent.futures.process import BrokenProcessPool
 
-    pool = ProcessPoolExecutor(max_workers=workers, initializer=_ignore_stop_signals)
+    from .detect import _bgr_box
+
+    _bgr_box(hsv)  # (about 40 ms, cached) made here once, inherited by every worker
+
+    def submit(pool: ProcessPoolExecutor, i: int, compiled: bool):
+        if plan is None:
+            return pool.submit(_detect_window, str(src), None, None, hsv, max_candidates,
+                               compiled)
+        return pool.submit(_detect_chunks, str(src), plan.tasks[i], plan.cameras, hsv,
+                           max_candidates, compiled)
+
+    pools: list[ProcessPoolExecutor] = []
     try:
         # the workers are forked while the submissions go, with Ctrl-C and SIGTERM blocked
         # here, so that none comes to a worker before it ignores them (a terminal's Ctrl-C
         # goes to the whole process group: a worker interrupted while holding the task
         # queue's lock hung the pool's shutdown, or printed its traceback); this process
-        # gets the signal once they are unblocked, and stops them by shutting the pool down
+        # gets the signal once they are unblocked, and stops them by shutting the pools down
+        # with the compiled screen: the workers forked at once detect the first few short
+        # tasks with OpenCV's screen while this process loads numba's (about 0.5 s of one
+        # core: loaded once, here, instead of once per worker or before any worker starts),
+        # and a second pool forked then, inheriting it, detects the rest
+        two = compiled and plan is not None
+        n_tasks = 1 if plan is None else len(plan.tasks)
+        first = min(_HEAD_TASKS, n_tasks) if two else n_tasks
         with _stop_signals_blocked():
-            if plan is None:
-                futures = [pool.submit(_detect_window, str(src), None, None, hsv,
-                                       max_candidates, compiled)]
-            else:
-                futures = [pool.submit(_detect_chunks, str(src), chunks, plan.cameras, hsv,
-                                       max_candidates, compiled) for chunks in plan.tasks]
+            pools.append(ProcessPoolExecutor(max_workers=workers,
+                                             initializer=_ignore_stop_signals))
+            futures = [submit(pools[0], i, compiled and plan is None) for i in range(first)]
+        if two and first < n_tasks:
+            BallDetector(hsv, max_candidates, compiled=True).detect(
+                np.zeros((16, 16, 3), np.uint8))
+            with _stop_signals_blocked():
+                pools.append(ProcessPoolExecutor(max_workers=workers,
+                                                 initializer=_ignore_stop_signals))
+                futures += [submit(pools[1], i, True) for i in range(first, n_tasks)]
+            pools[0].shutdown(wait=False)  # its workers end once their tasks are done
         if plan is None:
-            yield (_rows(_told(fut.result()), row_of) for fut in futures)
+            yield (_rows(_told(fut.result()), row_of) for fut in futures), frozenset()
         else:
-            yield _in_order((fut.result() for fut in futures), row_of)
+            yield _in_order((fut.result() for fut in futures), row_of), _offsets(plan)
     except BrokenProcessPool:
         raise PslogError(f"re-detecting {src}: a worker process died (killed, or out of "
                          f"memory); try fewer --workers") from None
     finally:
-        pool.shutdown(wait=True, cancel_futures=True)
+        for pool in reversed(pools):
+            pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _offsets(plan: _Plan) -> frozenset[int]:
+    """The offsets of the chunks of ``plan``: each is checked (CRC included) as it is read
+    for detection, so the copy of the session need not compute their CRC again."""
+    return frozenset(offset for task in plan.tasks for _rank, offset, _length in task)
+
+
+def _guided(chunks: list, n_images: int, workers: int, head: int) -> list[list]:
+    """``chunks`` in consecutive runs for ``workers`` processes: ``head`` images' worth per
+    run for the first :data:`_HEAD_TASKS` runs when ``head`` (the first pool's, see
+    :func:`_detecting`), then runs of a fraction of what is left, each ``1 / (2 workers)``
+    of it ("factoring", Hummel, Schonberg & Flynn 1992, CACM 35(8)), down to about
+    :data:`_TAIL` images: the first runs are long (few tasks) and the last ones short, so
+    that every worker finishes within about one short run of the others."""
+    per_chunk = max(n_images, 1) / max(len(chunks), 1)  # images per chunk, on average
+    smallest = max(1, round(_TAIL / per_chunk))
+    runs, at = [], 0
+    if head:
+        size = max(1, round(head / per_chunk))
+        for _ in range(_HEAD_TASKS):
+            if at < len(chunks):
+                runs.append(chunks[at:at + size])
+                at += size
+    while at < len(chunks):
+        size = max(smallest, -(-(len(chunks) - at) // (2 * workers)))
+        runs.append(chunks[at:at + size])
+        at += size
+    return runs
 
 
 _STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}

@@ -11,7 +11,7 @@ from mcap.reader import make_reader
 from numpy.testing import assert_array_equal
 
 from pslog.cli import main
-from pslog.errors import InputError
+from pslog.errors import InputError, PslogError
 from pslog.log import SessionWriter, iter_images, read_session
 from pslog.rig import builtin_rig
 from recorders import HsvRange, redetect_session
@@ -100,7 +100,7 @@ def test_worker_processes_give_the_same_session_as_one_process(tmp_path, monkeyp
     one, pool = tmp_path / "one.mcap", tmp_path / "pool.mcap"
     redetect_session(SAMPLE, one, workers=1)
     monkeypatch.setattr(redetect, "_PARALLEL_FROM", 0)  # the sample has only 135 frames
-    monkeypatch.setattr(redetect, "_BATCH", 16)  # several batches in flight, out of order
+    # (the sample's 5 image chunks in 4 tasks (_guided): several in flight, out of order)
     redetect_session(SAMPLE, pool, workers=2)
     a, b = read_session(one).detections, read_session(pool).detections
     assert a.n_candidates >= 135
@@ -119,7 +119,10 @@ def test_compiled_screen_and_small_windows_give_the_same_session(tmp_path, monke
     redetect_session(SAMPLE, one, workers=1)
     monkeypatch.setattr(redetect, "_PARALLEL_FROM", 0)
     monkeypatch.setattr(redetect, "_COMPILED_FROM", 0)
-    monkeypatch.setattr(redetect, "_BATCH", 2)  # windows of a couple of chunks
+    monkeypatch.setattr(redetect, "_HEAD_TASKS", 2)  # two short tasks for the first pool,
+    monkeypatch.setattr(redetect, "_HEAD", 5)  # the rest for the compiled one
+    monkeypatch.setattr(redetect, "_detect_chunks", _recording_detect_chunks)
+    monkeypatch.setenv("PSLOG_TEST_TASKS", str(tmp_path / "tasks.txt"))
     plan = redetect._plan(SAMPLE, ("cam1", "cam2", "cam3"), 135, 10)
     assert plan is not None and len(plan.tasks) >= 4
     # every image chunk once, in the order of their first message times
@@ -136,6 +139,23 @@ def test_compiled_screen_and_small_windows_give_the_same_session(tmp_path, monke
     for name in ("frame_time_ns", "frame_camera", "frame_index", "cand_frame", "cand_uv",
                  "cand_radius", "cand_score"):
         assert_array_equal(getattr(b, name), getattr(a, name), err_msg=name)
+    # the first two tasks in a first pool with OpenCV's screen, the others in a second one
+    # (other processes) with the compiled screen
+    tasks = [line.split() for line in (tmp_path / "tasks.txt").read_text().splitlines()]
+    plain = {pid for pid, compiled in tasks if compiled == "False"}
+    fast = {pid for pid, compiled in tasks if compiled == "True"}
+    assert len(tasks) > 2 and sum(c == "False" for _p, c in tasks) == 2
+    assert plain and fast and not plain & fast and str(os.getpid()) not in plain | fast
+
+
+def _recording_detect_chunks(src, chunks, cameras, hsv, max_candidates, compiled):
+    """:func:`redetect._detect_chunks`, noting its process and screen in a file."""
+    from recorders import redetect
+
+    with open(os.environ["PSLOG_TEST_TASKS"], "a") as f:
+        f.write(f"{os.getpid()} {compiled}\n")
+    return redetect._read_and_detect(src, chunks, cameras, redetect.BallDetector(
+        hsv, max_candidates, compiled=compiled))
 
 
 def _damaged_copy(tmp_path: Path) -> Path:
@@ -253,3 +273,104 @@ def test_chunks_are_decompressed_as_every_reader_does_damage_included():
         with pytest.raises(LogFormatError) as got:
             io.chunk_payload(body)
         assert str(got.value) == str(expected.value), what
+
+
+@pytest.mark.parametrize("n_chunks,n_images,workers,head", [
+    (454, 2160, 2, 48), (454, 2160, 2, 0), (30, 135, 2, 48), (7, 7, 4, 0), (1, 5, 2, 48),
+    (100, 30, 3, 0)])
+def test_tasks_cover_every_chunk_once_in_order_and_shrink_towards_the_end(
+        n_chunks, n_images, workers, head):
+    """:func:`redetect._guided`: consecutive runs of every chunk, in order; with a head,
+    the first runs hold about ``head`` images; then each run is at most the one before it,
+    the last ones about ``_TAIL`` images, so the workers finish together."""
+    from recorders import redetect
+
+    chunks = [(i, 1000 * i, 10) for i in range(n_chunks)]
+    runs = redetect._guided(chunks, n_images, workers, head)
+    assert [c for run in runs for c in run] == chunks and all(runs)
+    per_chunk = n_images / n_chunks
+    heads = min(redetect._HEAD_TASKS, len(runs)) if head else 0
+    for run in runs[:max(heads - 1, 0)]:  # (the last head run may be cut short)
+        assert len(run) == max(1, round(head / per_chunk))
+    rest = [len(run) for run in runs[heads:]]
+    assert rest == sorted(rest, reverse=True)
+    if rest:
+        smallest = max(1, round(redetect._TAIL / per_chunk))
+        assert rest[-1] <= smallest and rest[0] <= max(smallest, -(-n_chunks // (2 * workers)))
+    if n_chunks == 454 and not head:  # the redetect benchmark's session: a short tail
+        assert len(runs) <= 40 and rest[-1] * per_chunk <= 2 * redetect._TAIL
+
+
+def _crc_damaged_copy(tmp_path: Path) -> Path:
+    """The sample with the stored CRC of an image chunk changed: it decompresses, and only
+    its CRC says it is damaged."""
+    bad = tmp_path / "crc.mcap"
+    bad.write_bytes(SAMPLE.read_bytes())
+    with open(bad, "rb") as f:
+        summary = make_reader(f).get_summary()
+    images = {cid for cid, c in summary.channels.items() if c.topic.endswith("/image")}
+    chunk = sorted((c for c in summary.chunk_indexes if images & c.message_index_offsets.keys()),
+                   key=lambda c: c.chunk_start_offset)[2]
+    with open(bad, "r+b") as f:
+        f.seek(chunk.chunk_start_offset + 9 + 24)  # after start, end, uncompressed size
+        crc = f.read(1)
+        f.seek(-1, 1)
+        f.write(bytes([crc[0] ^ 1]))
+    return bad
+
+
+def test_copy_leaves_the_crc_of_the_chunks_the_caller_checks(tmp_path):
+    """``copy_session(checked_chunks=...)``: the CRC of those chunks is not computed (the
+    caller checks it: redetect's workers do, and fail the copy), that of every other chunk
+    is."""
+    from pslog.errors import LogFormatError
+    from pslog.log import copy_session
+
+    bad = _crc_damaged_copy(tmp_path)
+    with open(bad, "rb") as f:
+        summary = make_reader(f).get_summary()
+    offsets = [c.chunk_start_offset for c in summary.chunk_indexes]
+    with pytest.raises(LogFormatError, match="CRC mismatch"):
+        copy_session(bad, tmp_path / "a.mcap")
+    assert not (tmp_path / "a.mcap").exists()
+    copy_session(bad, tmp_path / "b.mcap", checked_chunks=offsets)
+    assert read_session(tmp_path / "b.mcap").n_images == 135
+
+
+def test_a_damaged_image_chunk_fails_redetect_though_the_copy_leaves_its_crc(tmp_path):
+    """The copy leaves the CRC of the image chunks to the workers, which read each of them:
+    a chunk whose CRC does not match still fails the command, nothing written, with one
+    worker or two."""
+    from recorders import redetect
+
+    bad = _crc_damaged_copy(tmp_path)
+    for workers in (1, 2):
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setattr(redetect, "_PARALLEL_FROM", 0)
+            with pytest.raises(PslogError, match="CRC mismatch"):
+                redetect_session(bad, tmp_path / "out.mcap", workers=workers)
+        assert sorted(tmp_path.iterdir()) == [bad]
+
+
+def test_an_interrupt_while_numba_loads_stops_the_first_pool_and_writes_nothing(
+        tmp_path, monkeypatch):
+    """Ctrl-C while the main process loads the compiled screen (the first pool's workers
+    already detecting): the interrupt propagates, every worker is ended, nothing written."""
+    import multiprocessing
+
+    from recorders import redetect
+
+    main_pid = os.getpid()
+
+    class _Interrupted(redetect.BallDetector):
+        def __init__(self, *args, compiled=False, **kwargs):
+            if compiled and os.getpid() == main_pid:
+                raise KeyboardInterrupt  # as a Ctrl-C landing in numba's import
+            super().__init__(*args, compiled=compiled, **kwargs)
+
+    for name, value in (("_PARALLEL_FROM", 0), ("_COMPILED_FROM", 0), ("_HEAD_TASKS", 2),
+                        ("_HEAD", 5), ("BallDetector", _Interrupted)):
+        monkeypatch.setattr(redetect, name, value)
+    with pytest.raises(KeyboardInterrupt):
+        redetect_session(SAMPLE, tmp_path / "out.mcap", workers=2)
+    assert list(tmp_path.iterdir()) == [] and multiprocessing.active_children() == []

@@ -4,8 +4,9 @@ optionally replacing the detections (re-detection) and adding or replacing fused
 from __future__ import annotations
 
 import struct
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 
@@ -24,7 +25,8 @@ def copy_session(src, dst, *, detections: Detections | Callable[[], Detections] 
                  tracks: Sequence[Track] = (),
                  replace_tracks: bool = True, metadata: Mapping[str, str] | None = None,
                  rig: Rig | None = None, force: bool = False,
-                 rejections: Mapping | None = None) -> None:
+                 rejections: Mapping | None = None, checked_chunks: Collection[int] = ()
+                 ) -> None:
     """Write ``dst`` as a copy of session ``src``.
 
     Parameters
@@ -40,6 +42,9 @@ def copy_session(src, dst, *, detections: Detections | Callable[[], Detections] 
     force : overwrite ``dst``
     rejections : method -> :class:`pslog.fusion.gating.Rejections`, the candidates the
         gating stage rejected for that method's track (written beside it; replaced with it)
+    checked_chunks : byte offsets of Chunk records of ``src`` whose CRC the caller checks
+        (``pslog redetect``'s workers check every image chunk they read: not computed
+        twice); the caller must fail the copy if one does not match
 
     Calibration, poses, images, truth, events, metadata and any foreign topics are copied
     byte for byte (the calibration and poses are re-derived only from a given ``rig``).
@@ -111,7 +116,7 @@ def copy_session(src, dst, *, detections: Detections | Callable[[], Detections] 
                     name = tables.track_table(method)
                     w._adopt_table(name, _table_data(f, name))
             fast = _copy_chunks(f, w, static, detections is not None, replace_tracks,
-                                new_methods)
+                                new_methods, frozenset(checked_chunks))
         if not fast:  # no summary index to go by: every record in turn
             io.scan_file(src_path, copy, scan=scan)  # copy's own errors propagate unchanged
         if detections is not None:
@@ -139,7 +144,8 @@ def _table_data(f: _Finished, name: str) -> bytes | None:
 
 
 def _copy_chunks(f: _Finished, w: SessionWriter, static: set[str], new_detections: bool,
-                 replace_tracks: bool, new_methods: set[str]) -> bool:
+                 replace_tracks: bool, new_methods: set[str],
+                 checked: frozenset[int] = frozenset()) -> bool:
     """Copy the messages of ``f`` a chunk at a time, each chunk checked as the reader checks
     it (decompressed, its CRC and its MessageIndex records against its message records).
 
@@ -191,7 +197,7 @@ def _copy_chunks(f: _Finished, w: SessionWriter, static: set[str], new_detection
         here = [cid for cid in index.message_index_offsets if fate.get(cid) is not None]
         if not here:
             continue
-        records = f.read_chunk(index, framing=False)
+        record, records = _read_record(f, index, index.chunk_start_offset not in checked)
         rec = np.frombuffer(records, dtype=np.uint8)
         try:
             got = f._indexed(index, rec, index.message_index_offsets.keys())
@@ -204,9 +210,9 @@ def _copy_chunks(f: _Finished, w: SessionWriter, static: set[str], new_detection
             batch = _walk(records)
         else:
             if _verbatim(index, batch, len(records), fate, w) and _copy_raw(
-                    f, w, index, batch, topics):
+                    f, w, index, batch, topics, record):
                 continue
-        del records
+        del records, record
         for images in (False, True):
             cids = np.array([c for c, v in fate.items() if v is not None and v[1] == images],
                             dtype=np.int64)
@@ -218,6 +224,24 @@ def _copy_chunks(f: _Finished, w: SessionWriter, static: set[str], new_detection
                                 batch.end[sel] - batch.start[sel], payload.tobytes()),
                          topics, images=images)
     return True
+
+
+def _read_record(f: _Finished, index, validate_crc: bool) -> tuple[bytes, bytes]:
+    """(the Chunk record as stored, its decompressed records checked as
+    :meth:`_Finished.read_chunk` checks them, framing left to the caller): the record read
+    once, for :func:`_copy_raw` too, and decompressed where it was read."""
+    f.file.seek(index.chunk_start_offset)
+    record = f.file.read(index.chunk_length)
+    try:
+        if len(record) != index.chunk_length or record[0] != io.OP_CHUNK or \
+                int.from_bytes(record[1:9], "little") != index.chunk_length - 9:
+            raise LogFormatError("chunk record does not match the summary's index")
+        # a view of the record (chunk_payload reads any buffer): decompressed in place
+        records = io.chunk_payload(cast(bytes, memoryview(record)[9:]),
+                                   validate_crc=validate_crc, framing=False)
+    except LogFormatError as exc:
+        raise io.damaged_error(f.path, index.chunk_start_offset, str(exc)) from None
+    return record, bytes(records)  # (a copy only of an uncompressed chunk's view)
 
 
 def _verbatim(index, batch: _Messages, size: int, fate: dict, w: SessionWriter) -> bool:
@@ -235,16 +259,15 @@ def _verbatim(index, batch: _Messages, size: int, fate: dict, w: SessionWriter) 
 
 
 def _copy_raw(f: _Finished, w: SessionWriter, index, batch: _Messages,
-              topics: dict[int, str]) -> bool:
+              topics: dict[int, str], record: bytes) -> bool:
     """Write a chunk of ``f`` and its MessageIndex records as they are (see
     :func:`_verbatim`); False (nothing written) when the chunk record's start and end times,
     which its CRC does not cover, are not its messages' first and last log times: then the
     chunk is written anew."""
     end = index.chunk_start_offset + index.chunk_length
-    f.file.seek(index.chunk_start_offset)
-    record = f.file.read(index.chunk_length)
+    f.file.seek(end)
     indexes = f.file.read(index.message_index_length)
-    if len(record) != index.chunk_length or len(indexes) != index.message_index_length:
+    if len(indexes) != index.message_index_length:
         raise io.damaged_error(f.path, index.chunk_start_offset, "chunk cut short")
     start, end_time = int(batch.time.min()), int(batch.time.max())
     # the Chunk record's message start and end times (after opcode and length: MCAP spec)
