@@ -86,3 +86,28 @@ def test_a_guess_before_the_track_can_predict_does_not_seed_it(rally_seed, sim_s
     assert start.sum() >= 8
     assert np.nanmax(err[start]) < 0.05, err[start]
     _stream_equals_batch(det, rig, batch)
+
+
+def test_the_track_allowance_counts_from_when_its_newest_point_was_observed():
+    """paper3, rally 300, cam2 blind from 2.0 s, a kick at 2.105 s. cam3's point at 2.122 s
+    rests on one other camera, cam1, whose ray was carried from its frame at 2.100 s, before
+    the kick: 96 mm off. The track allowance grew from 2.122 s (8 cm + 6 m/s x 11 ms = 15 cm),
+    and cam1's next ball, 2.133 s (18 cm from the prediction), was rejected; type A then
+    predicted across the kick from 2.100 s, 55 ms: a point 281 mm off at 2.156 s. A point
+    resting on one carried ray was last observed at that ray's frame: the allowance grows
+    from there (8 cm + 6 m/s x 33 ms = 28 cm)."""
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    det, truth, ball = _session(rig, 300, 0, "cam1", ("cam2", 2.0, 0.5))
+    batch = gate(det, rig, causal=True)
+    is_ball = ball_mask(det, ball)
+    frame_t = det.frame_time_ns[det.cand_frame]
+    window = (frame_t > 2.0e9) & (frame_t < 2.5e9)
+    lost = window & is_ball & ~batch.chosen
+    assert not np.any(lost), frame_t[lost] / 1e9
+    assert not np.any(window & batch.chosen & ~is_ball)
+    track = fuse(det, rig, "typeA")
+    err = errors_m(track, truth)
+    after = (track.time_ns > 2.13e9) & (track.time_ns < 2.5e9)
+    assert after.sum() >= 20
+    assert np.nanmax(err[after]) < 0.05, track.time_ns[after][err[after] >= 0.05] / 1e9
+    _stream_equals_batch(det, rig, batch)
