@@ -70,7 +70,7 @@ def test_a_guess_before_the_track_can_predict_does_not_seed_it(rally_seed, sim_s
     supports both); type A's first points 13-23 cm off at 0.08-0.12 s. The reach test waits
     for a track that can predict (three points), and several candidates that one camera's
     epipolar line alone judges, with no such track, are all rejected: keeping one is a
-    guess."""
+    guess (before the track has ever predicted: the session's start)."""
     rig = apply_timing(builtin_rig("paper2"), "typeA")
     det, truth, ball = _session(rig, rally_seed, sim_seed, "cam1", blind)
     batch = gate(det, rig, causal=True)

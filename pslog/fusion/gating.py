@@ -995,6 +995,9 @@ class _Decider:
         self.rig, self.options = rig, options
         self.track = _Track(options)
         self.verified = False  # a candidate has passed a gate: from then on none passes unjudged
+        # the track has predicted (three points in its window) for a candidate one camera
+        # alone supports: from then on several such candidates are told apart by their cost
+        self.tracked = False
         self.centers = [cam.center_world.tolist() for cam in rig.cameras]
 
     def run(self, c: _Candidates, frames, ratio, points, in_front, reason,
@@ -1074,17 +1077,19 @@ class _Decider:
                             reason[i] = EPIPOLAR
                             continue
                         unverified.append(i)  # the session's first frames: nothing to judge by
-                    if not pred:
-                        untracked.append(i)  # no track to tell it from another candidate
+                    if pred:
+                        self.tracked = True
+                    elif not self.tracked:
+                        untracked.append(i)  # no track yet to tell it from another candidate
                 key = (-n_support[i], epi_cost[i] + track_cost + stillness[i])
                 if best_key is None or key < best_key:
                     best_key, best_row = key, i
             if best_row < 0:
                 continue
             if len(untracked) > 1 and best_row in untracked and n_support[best_row] < 2:
-                # several candidates that one camera's epipolar line alone judges, and no
-                # track to tell them apart (the session's start, or after the track was lost):
-                # keeping one would be a guess, and a guess seeds the track (paper2 in
+                # several candidates that one camera's epipolar line alone judges, before any
+                # track could tell them apart (the session's start): keeping one would be a
+                # guess, and a guess seeds the track (paper2 in
                 # bench_dirty.py --more: a static object seen by one camera, chosen in the
                 # first 0.03 s, made the ball unreachable; type A points 13-23 cm off)
                 for i in untracked:
