@@ -151,7 +151,8 @@ def faults(rig: Rig, seed: int, duration: float) -> dict:
     names = rig.names
     distractor_cam = names[seed % len(names)]
     blackout_cam = names[(seed + 1 + seed // len(names)) % len(names)]
-    start = 0.25 * duration + 0.1 * seed
+    # (seed % 10: the blackout inside the session for --first-seed's seeds too)
+    start = 0.25 * duration + 0.1 * (seed % 10)
     return {"spurious_rate": 0.05,
             "distractors": ((distractor_cam, DISTRACTOR),),
             "blackouts": ((blackout_cam, start, 0.5),)}
@@ -211,7 +212,8 @@ def measure_more(rig: Rig, methods, runs, options: FusionOptions, first_seed: in
 
     gap = options.max_gap_s or default_max_gap_s(rig)
     out = {m: {"clean": [], "dirty": [], "blackout": [], "ratios": [], "clean5": 0,
-               "clean5_kick": 0, "added": 0, "in_blackout": 0, "after_kick": 0} for m in methods}
+               "clean5_kick": 0, "added": 0, "in_blackout": 0, "after_kick": 0,
+               "points": [0, 0]} for m in methods}
     for seed, (label, motion, duration, kicks) in enumerate(runs, start=first_seed - 300):
         span = motion.duration if duration is None else duration
         fault = faults(rig, seed, span)
@@ -225,6 +227,8 @@ def measure_more(rig: Rig, methods, runs, options: FusionOptions, first_seed: in
         for m in methods:
             err = {kind: errors_m(tracks[kind][m], truth) for kind in kinds}
             row = out[m]
+            row["points"][0] += len(tracks["clean"][m])  # recall: the points output
+            row["points"][1] += len(tracks["dirty"][m])
             for kind in kinds:
                 row[kind].append(err[kind][np.isfinite(err[kind])])
             row["ratios"].append((np.nanmean(err["dirty"]) / np.nanmean(err["clean"]), label))
@@ -267,7 +271,8 @@ def more_table(rig: Rig, methods, figures) -> tuple[list[str], bool]:
         rows.append(f"| {rig.name} | {m} | {clean:.3g} | {dirty:.3g} | {dirty / clean:.2f} | "
                     f"{worst:.2f} ({where}) | {blackout / clean:.2f} | {f['clean5']} "
                     f"({f['clean5_kick']} after a kick) / {f['added']} ({f['in_blackout']} in "
-                    f"blackout, {f['after_kick']} after a kick) |{'' if met else ' MISSED'}")
+                    f"blackout, {f['after_kick']} after a kick) | {f['points'][0]} / "
+                    f"{f['points'][1]} |{'' if met else ' MISSED'}")
     return rows, ok
 
 
@@ -280,11 +285,11 @@ def main_more(args, methods, options: FusionOptions) -> int:
           + (f"; cameras at {args.fps} fps" if args.fps else ""))
     print("mean errors mm pooled over the rig's sessions; ratio faults / clean (pooled, worst "
           "session); blackout: the ratio with the blackout alone; >5cm: points beyond 5 cm, "
-          "clean / added by the faults")
+          "clean / added by the faults; points: points output, clean / faults")
     print()
     print("| rig | method | clean mean | faults mean | ratio | worst (session) | blackout alone "
-          "| >5cm clean / added |")
-    print("|---|---|---|---|---|---|---|---|")
+          "| >5cm clean / added | points |")
+    print("|---|---|---|---|---|---|---|---|---|")
     ok = True
     start = time.perf_counter()
     for rig in (r if fps is None else at_rate(r, fps) for fps in rates

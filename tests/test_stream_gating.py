@@ -135,9 +135,9 @@ def test_stream_gate_waits_for_the_other_cameras_frames_a_low_candidate_reaches(
 
     class Recording(gating.StreamGate):
         def _support(self, f):
-            every, decided, differs = super()._support(f)
+            every, decided, differs, lag = super()._support(f)
             seen[f.t, f.camera] = decided[0]
-            return every, decided, differs
+            return every, decided, differs, lag
 
     seen: dict = {}
     stream = Recording(rig)
