@@ -352,7 +352,8 @@ def run_session(job: Job, settings: Settings) -> dict:
             _kill_once(kill)
         if "fuse" in settings.steps:
             methods = [a for m in settings.methods for a in ("--method", m)]
-            _command(["fuse", current, "-o", out["fuse"], "--force", *methods])
+            # one thread: a Ray task holds one CPU (as redetect's one worker above)
+            _command(["fuse", current, "-o", out["fuse"], "--force", "--workers", "1", *methods])
             current = out["fuse"]
         if "eval" in settings.steps or "fuse" in settings.steps:
             # the summary's points and rates come from eval's figures, asked for or not
