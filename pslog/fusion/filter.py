@@ -13,8 +13,9 @@ equations, exactly as implemented, are in ``docs/methods.md`` (section ``filter`
   Applications to Tracking and Navigation*, 2001, section 6.2.2): the drag's Jacobian term,
   ``k ‖v‖ Δt``, is below 1e-3 at a rally's speeds and frame rates and is left to ``q``;
 - two motion models mixed by an interacting multiple model (Blom & Bar-Shalom 1988;
-  Bar-Shalom et al. section 11.6): ballistic (the above) and *supported* (the same without
-  gravity: a ball rolling on the floor, carried, swung), switching at rate
+  Bar-Shalom et al. section 11.6): ballistic (the above) and *supported* (without gravity
+  and, by default, without air drag, ``supported_drag_per_m``: a ball rolling on the floor,
+  carried, swung, or on a line), switching at rate
   ``model_switch_per_s``. Their covariances are equal (same ``F``, ``q``, ``H``), so the
   filter carries one covariance, the mixture's mean, the ballistic model's probability ``μ``
   and the difference ``e`` of the models' means; the models' likelihoods (equal ``S``)
@@ -57,8 +58,10 @@ equations, exactly as implemented, are in ``docs/methods.md`` (section ``filter`
   detection longer than ``max_gap_s``, the track is lost;
 - (re)initialisation: from a short window of the latest detections (at least
   ``init_detections`` of two cameras or more, within ``max_gap_s`` of each other): a
-  ballistic least-squares fit (gravity and drag) to their viewing rays, refined by
-  Gauss-Newton in distorted pixels; accepted when every detection reprojects inside the gate.
+  least-squares fit per model (ballistic, supported: to their viewing rays, refined by
+  Gauss-Newton in distorted pixels; the coordinated turn by Gauss-Newton in pixels under its
+  turn rate's prior), accepted when every detection reprojects inside the gate; each model
+  starts at its own fit, its probability from the fits' likelihoods (``start_models``).
   A window too short in time to pin the velocity (``init_window`` detections at 60 fps and
   above) grows by the next detections until its fit passes (``init_span_s``).
 
@@ -214,6 +217,13 @@ class FilterOptions:
     turn_rate_std : float, standard deviation of the turn rate when the model joins, rad/s
     withhold : bool, withhold unconfirmed and uncertain points (counted in
         ``Track.dropped``); False: a point at every detection of a live track
+    supported_drag_per_m : float, ``k_s`` of the supported model's quadratic drag, 1/m (0: a
+        ball held, rolling or guided, whose support's forces dwarf the air's; the ballistic
+        model keeps ``drag_per_m``); ``drag_per_m`` gives the filter before session 8
+    start_models : bool, a (re)start fits its window by every model of the set (ballistic,
+        supported, coordinated turn) and starts each at its own fit with a probability from
+        the fits' likelihoods; False: the ballistic fit alone starts the pair (``μ = 0.9``)
+        and the turn model joins at the next detection at ``ω = 0`` (before session 8)
     jump_rate_per_s : float, expected rate ``λ_j`` of velocity jumps (kicks, bounces), 1/s:
         a point's reported covariance adds the variance ``λ_j T σ_j² T² / 3`` along its
         camera's ray of a jump no other camera has seen in the time ``T`` since another
