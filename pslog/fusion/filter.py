@@ -1844,6 +1844,8 @@ class BallFilter:
                 return None
             weights = np.concatenate([1.0 / depth, 1.0 / depth])
             accel = g - k * np.linalg.norm(theta[3:]) * theta[3:]
+        if theta is None:  # pragma: no cover - the loop above runs twice
+            return None
         # Gauss-Newton in distorted pixels (the filter's measurement model)
         for _ in range(3):
             J, r = self._pixel_system(window, tau, theta, accel)
