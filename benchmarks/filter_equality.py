@@ -41,8 +41,11 @@ from pslog import SimulationOptions, get_motion, simulate  # noqa: E402
 from pslog.fusion import fuse  # noqa: E402
 from pslog.rig import apply_timing, builtin_rig  # noqa: E402
 
-#: The compiled filter without the unseen-jump variance (FilterOptions.jump_rate_per_s).
-UNSEEN_OFF = compiled.FilterOptions(jump_rate_per_s=0.0)
+#: The compiled filter as the base was: without the unseen-jump variance
+#: (FilterOptions.jump_rate_per_s), with the ballistic model's drag in the supported model too
+#: and the ballistic start alone (supported_drag_per_m, start_models: session 8).
+BASE_OPTIONS = compiled.FilterOptions(jump_rate_per_s=0.0, start_models=False,
+                                      supported_drag_per_m=compiled.FilterOptions().drag_per_m)
 
 COLUMNS = ("time_ns", "camera", "position", *compiled.FILTER_QUALITY)
 
@@ -118,7 +121,7 @@ def main() -> int:
                     t0 = time.perf_counter()
                     # the unseen-jump variance (issue 10, after the compilation) off: the
                     # comparison is of the compiled step with the one it replaced
-                    new = fused(functools.partial(compiled.fuse_filter, options=UNSEEN_OFF),
+                    new = fused(functools.partial(compiled.fuse_filter, options=BASE_OPTIONS),
                                 data, rig)
                     t1 = time.perf_counter()
                     old = fused(base.fuse_filter, data, rig)

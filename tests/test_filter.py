@@ -160,8 +160,10 @@ def test_one_step_of_the_two_models_equals_the_hand_computation():
     # one covariance, the mixture's mean, μ and the models' difference e
     rig = lab_rig(3)
     cam = rig.cameras[2]
+    # the supported model's own drag k_s (0 by default) apart from the ballistic one's k
     options = FilterOptions(noise_px=0.4, accel_psd=0.3, drag_per_m=0.02, adapt_rate=0.0,
                             accel_adapt_rate=0.0, model_switch_per_s=3.0,
+                            supported_drag_per_m=0.005,
                             turn_switch_per_s=0.0)  # the turn model has its own test
     flt = BallFilter(rig, options)
     rng = np.random.default_rng(4)
@@ -175,13 +177,18 @@ def test_one_step_of_the_two_models_equals_the_hand_computation():
     g = np.array([0.0, 0.0, -G])
     p = 3.0 * dt
     c = 0.9 * (1 - p) + 0.1 * p
-    a = c * g - 0.02 * np.linalg.norm(v0) * v0
+    # the mixture's acceleration: c (g - k‖v‖v) + (1 - c)(-k_s‖v‖v)
+    a = c * g - (0.005 + c * (0.02 - 0.005)) * np.linalg.norm(v0) * v0
     x_pred = np.concatenate([p0 + v0 * dt + 0.5 * a * dt**2, v0 + a * dt])
     F = np.block([[np.eye(3), dt * np.eye(3)], [np.zeros((3, 3)), np.eye(3)]])
     Q = 0.3 * np.block([[dt**3 / 3 * np.eye(3), dt**2 / 2 * np.eye(3)],
                         [dt**2 / 2 * np.eye(3), dt * np.eye(3)]])
     P_pred = F @ P0 @ F.T + Q
-    e = np.concatenate([0.5 * g * dt**2, g * dt])  # e = 0 before: gravity's step alone
+    # e = 0 before: the models' step difference alone, gravity and the drags' difference
+    # at the mixture's predicted velocity
+    v_pred = x_pred[3:]
+    d = g - (0.02 - 0.005) * np.linalg.norm(v_pred) * v_pred
+    e = np.concatenate([0.5 * d * dt**2, d * dt])
     # a detection of the supported model's prediction (no gravity), a little off
     z = cam.project((x_pred[:3] - c * e[:3])[None] + [[0.001, -0.002, 0.001]])[0][0]
     h, J = project_with_jacobian(cam, x_pred[:3][None])

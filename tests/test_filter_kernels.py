@@ -39,8 +39,11 @@ def test_each_kernel_equals_its_python_original_on_random_cases():
     rig = lab_rig(3)
     flt = BallFilter(rig)
     cams, O = flt._cam_table, flt._opts
+    # the supported model with a drag of its own too (its terms in _predicted and _mixed)
+    O_ks = BallFilter(rig, FilterOptions(supported_drag_per_m=0.003))._opts
     rng = np.random.default_rng(1)
-    for _ in range(40):
+    for i in range(40):
+        O = O_ks if i % 2 else flt._opts
         x6, P6 = _random_state(rng, 6)
         x7, P7 = _random_state(rng, 7)
         dt, c = rng.uniform(-0.05, 0.2), rng.uniform(0, 1)
