@@ -356,7 +356,7 @@ def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_n
                   camera, prev_b, next_b, uv, observed_rays, centers, ki, rr, f9, cam,
                   span_tie_ns, min_angle_deg, ray_dir, obs_jac, jac4, lens, rtki, ns,
                   noise_px, with_cov, ff, fi, refused, has, predicted, points, flags,
-                  innovation, quality):
+                  innovation, factor, model, quality):
     """Type A's point at each detection of ``targets`` (k,), sorted global rows.
 
     The two past points: for each target, the latest rows of the 1st, 2nd, ... distinct
@@ -375,7 +375,10 @@ def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_n
     - eqs. (3)-(4): ``P'_t = ((P̂_t - T) · r / |r|²) r + T``, the point of the newest viewing
       ray ``l = k r + T`` nearest to ``P̂_t``; its ``k <= 0`` (the foot behind the newest
       camera) and a point behind or outside a contributing camera are flagged (``flags``);
-    - ``innovation``: the newest detection against the prediction (recorded pixels);
+    - ``innovation``: the newest detection against the prediction (recorded pixels), and
+      the prediction test's terms (:func:`pslog.fusion.innovation.failed_predictions`,
+      its expressions in its order): ``factor`` ``√(1 + (1 + ρ)² + ρ²)`` (the innovation's
+      noise in detection noises) and ``model`` the extrapolation error's bound, pixels;
     - ``quality`` (17, k): snap_px, ray_miss_m (before the snap), ray_shift_m,
       ray_angle_deg, residual_max_px, residual_mean_px, camera_mask, n_detections, gap_s,
       span_s, and (``with_cov``) std_m, cov_xx ... cov_yz m² with the closed-form Jacobians
@@ -475,6 +478,20 @@ def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_n
         res[4] = _reprojection(cam, c0, predicted[i, 0], predicted[i, 1], predicted[i, 2],
                                uv[e, 0], uv[e, 1])
         innovation[i] = res[4]
+        # the prediction test's terms (innovation.failed_predictions, operation for
+        # operation): the noise factor of ρ = δ_pred / δ_prev and the model's bound
+        delta_pred = (t_event - t1) / ns
+        delta_prev = (t1 - t2) / ns
+        rho = delta_pred / delta_prev
+        factor[i] = math.sqrt(1.0 + (1.0 + rho) * (1.0 + rho) + rho * rho)
+        distance = q[0] * q[0] + q[1] * q[1]  # (np.linalg.norm's order)
+        distance += q[2] * q[2]
+        distance = math.sqrt(distance)
+        z_axis = q[0] * cam[c0, 15] + q[1] * cam[c0, 16]  # (np.sum's order; R[2]: the axis)
+        z_axis += q[2] * cam[c0, 17]
+        focal = _max(cam[c0, 0], cam[c0, 4])
+        model[i] = (0.5 * _G * delta_pred * (delta_pred + delta_prev) * focal * distance
+                    / (z_axis * z_axis))
         # slots holding a detection no earlier slot holds
         n_distinct = 1
         for s in range(1, 7):
@@ -750,14 +767,22 @@ def _bend(a, b, c, px, py, pz, speed, sigma, time_ns, uv, camera, lens, ns):
     change = math.sqrt(dx * dx + dy * dy)
     both = 1.0 / dt1 + 1.0 / dt2
     sigma_change = sigma * math.sqrt(1.0 / (dt1 * dt1) + both * both + 1.0 / (dt2 * dt2))
+    noise_bound = _KINK_SIGMAS * sigma_change
     focal = _max(fx, fy)
+    if change <= noise_bound and focal >= 0.0 and speed >= 0.0:
+        # within the noise alone: the model's term below is >= 0 (or NaN) wherever the
+        # test can fire (depth > 0; focal, speed >= 0), and IEEE addition of a non-negative
+        # term never rounds below the other (fl(x + y) >= x), so the bend cannot exceed
+        # the bound: the usual case (a smooth track), decided without the depth and three
+        # square roots, the same decision as the full test's, bit for bit
+        return False
     depth = lens[cam, 4] * px + lens[cam, 5] * py + lens[cam, 6] * pz + lens[cam, 7]
     ox, oy = (uv[b, 0] - cx) / focal, (uv[b, 1] - cy) / focal
     # d²u/dt² = f (a_xy - x a_z) / Z - 2 (Ż / Z) du/dt; |a| = g, |Ż| <= speed
     pixel_speed = _max(math.sqrt(v1x * v1x + v1y * v1y), math.sqrt(v2x * v2x + v2y * v2y))
     acceleration = (focal * _G * math.sqrt(1.0 + ox * ox + oy * oy)
                     + 2.0 * speed * pixel_speed) / depth
-    bound = _KINK_SIGMAS * sigma_change + 0.5 * (dt1 + dt2) * acceleration
+    bound = noise_bound + 0.5 * (dt1 + dt2) * acceleration
     return dt1 > 0 and dt2 > 0 and depth > 0 and change > bound
 
 

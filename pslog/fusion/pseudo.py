@@ -63,10 +63,9 @@ from ._prepare import (
     finite_rows,
 )
 from .innovation import (
+    INNOVATION_SIGMAS,
     NoiseEstimate,
     failed_counts,
-    failed_predictions,
-    innovation_factors,
     kinked_points,
 )
 from .stereo import count_invalid
@@ -284,7 +283,7 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
     has = np.empty(k, dtype=bool)
     predicted, points = np.empty((k, 3)), np.empty((k, 3))
     flags = np.empty(k, dtype=np.int64)
-    innovation = np.empty(k)
+    innovation, factor, model = np.empty(k), np.empty(k), np.empty(k)
     quality_table = np.empty((len(_QUALITY), k))
     with_cov = noise_px is not None and not _prepare.FINITE_DIFFERENCES
     made = _pseudo_kernel.type_a_kernel(
@@ -293,12 +292,13 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
         prep.centers, ki, rr, f9, cam, _SPAN_TIE_NS, MIN_RAY_ANGLE_DEG, prep.ray_dir,
         prep.observed_direction_jacobians, _jacobian_rows(prep) if lens else np.zeros((1, 4)),
         lens, rtki, NS, 0.0 if noise_px is None else float(noise_px), with_cov, ff, fi,
-        refused, has, predicted, points, flags, innovation, quality_table)
+        refused, has, predicted, points, flags, innovation, factor, model, quality_table)
     # (the kernel packs the targets with a point first: views, no gather)
     events = targets if made == k else targets[has]
     p1, p2 = (_from_tables(ff[s, :made], fi[s, :made], None) for s in range(2))
     predicted, points, flags = predicted[:made], points[:made], flags[:made]
     innovation, quality_table = innovation[:made], quality_table[:, :made]
+    factor, model = factor[:made], model[:made]
     n_columns = len(_QUALITY) if with_cov else 10
     quality = dict(zip(_QUALITY[:n_columns], quality_table, strict=False))
     j1, j2 = p1.row, p2.row
@@ -326,21 +326,20 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
                                       noise_px))
     t_event = np.take(time_ns, events)
     cams0 = np.take(obs.camera, events)
-    # (residual[4]: the newest detection against the prediction, as the tests below read it)
-    residual = (None, None, None, None, innovation)
     made = finite_rows(points)
+    good = made & (flags == 0)
     # the tests' detection noise: at least what the earlier points' innovations imply
     with np.errstate(invalid="ignore"):
-        normalised = np.where(made & (flags == 0), residual[4], np.nan) / innovation_factors(
-            events, j1, j2, time_ns)
+        normalised = np.where(good, innovation, np.nan) / factor
     sigma = (NoiseEstimate() if noise is None else noise).sigmas(normalised, noise_px)
-    # the newest detection contradicts eq. (2)'s prediction: the motion changed (innovation.py)
-    failed = made & (flags == 0) & failed_predictions(prep, events, j1, j2, predicted,
-                                                      residual[4], sigma)
+    # the newest detection contradicts eq. (2)'s prediction: the motion changed
+    # (innovation.failed_predictions' test, its terms made by the kernel)
+    with np.errstate(invalid="ignore"):
+        failed = good & (innovation > INNOVATION_SIGMAS * (sigma * factor) + model)
     # a camera saw the motion change inside eq. (1)'s or eq. (2)'s interval (innovation.py)
-    kinked = made & (flags == 0) & ~failed & kinked_points(prep, events, (p1, p2, predicted),
-                                                           sigma, max_gap_ns)
-    keep = made & (flags == 0) & ~failed & ~kinked
+    kinked = good & ~failed & kinked_points(prep, events, (p1, p2, predicted), sigma,
+                                            max_gap_ns)
+    keep = good & ~failed & ~kinked
     if seen is not None:  # count only the reasons not counted before (each detection once)
         refused, seen[:] = refused & ~seen, seen | refused
     # (count_invalid's three scans only where some flag is set: a stream's push has none)
