@@ -205,8 +205,11 @@ def prepare(obs: Observations, rig: Rig, F: np.ndarray | None = None) -> Prepare
         rows = np.flatnonzero(obs.camera == i)
         per_camera.append(rows)
         if len(rows):
-            uv_und[rows] = cam.undistort(obs.uv[rows])
-            ray_dir[rows] = cam.rays(obs.uv[rows])[1]
+            # the lens inverted once: Camera.undistort's pixels and Camera.rays' directions
+            # from the same ideal normalised coordinates (each method inverts it itself)
+            xy = cam.undistort_normalized(obs.uv[rows])
+            uv_und[rows] = cam.pixels_from_normalized(xy)
+            ray_dir[rows] = _rays(cam, xy)
             # a pixel far outside the image (1e300 from a damaged file) is no detection: no
             # ray, as for a pixel beyond the lens model's fold-over (and no overflow later)
             far = rows[~np.all(np.abs(obs.uv[rows]) <= _FAR_IMAGES * max(cam.width,
@@ -226,6 +229,18 @@ def prepare(obs: Observations, rig: Rig, F: np.ndarray | None = None) -> Prepare
         cameras=tuple(rig.cameras), uv_jacobian=jac,
         view_box=np.array([_view_box(c) for c in rig.cameras]),
     )
+
+
+def _rays(cam, xy: np.ndarray) -> np.ndarray:
+    """:meth:`~pslog.camera.Camera.rays`' unit world directions (k, 3) of ideal normalised
+    coordinates ``xy`` (k, 2) (:meth:`~pslog.camera.Camera.undistort_normalized`), by its
+    operations in its order, compiled (the same bits; numba loaded here, at the first use)."""
+    from . import _prepare_kernel
+
+    out = np.empty((len(xy), 3))
+    _prepare_kernel.rays_from_normalized(np.ascontiguousarray(xy, dtype=np.float64),
+                                         np.ascontiguousarray(cam.R, dtype=np.float64), out)
+    return out
 
 
 def _undistortion_jacobian(cam, uv_und: np.ndarray) -> np.ndarray:
