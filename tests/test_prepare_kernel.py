@@ -48,3 +48,44 @@ def test_rays_hand_computed():
                                          np.asarray(cam.R, float), out)
     assert np.allclose(out[0], cam.R[2], atol=1e-15)
     assert np.allclose(out[1], (cam.R[0] + cam.R[2]) / np.sqrt(2), atol=1e-15)
+
+
+@pytest.mark.parametrize("lens", LENSES[:2])
+def test_observed_rays_and_jacobians_equal_numpy_forms(lens):
+    """Prepared.observed_rays / observed_direction_jacobians (compiled) against
+    rays_from_undistorted and direction_jacobian (numpy), byte for byte, on a session with
+    missed detections and damaged pixels (NaN, 1e300: no ray)."""
+    from pslog import Observations, Rig, SimulationOptions, apply_timing, get_motion, simulate
+    from pslog.fusion import prepare
+    from pslog.fusion._prepare import direction_jacobian
+
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    if lens is not None:
+        rig = Rig(tuple(c.replace(dist=np.array(lens)) for c in rig.cameras), rig.name)
+    det, _ = simulate(rig, get_motion("throw"),
+                      options=SimulationOptions(noise_px=0.5, miss_rate=0.2, seed=3))
+    obs = det.best()
+    uv = obs.uv.copy()
+    uv[::17], uv[5::19] = 1e300, np.nan
+    prep = prepare(Observations(obs.time_ns, obs.camera, uv, obs.frame_index), rig)
+    with np.errstate(all="ignore"):
+        rays = prep.rays_from_undistorted(prep.obs.camera, prep.uv_undistorted)
+        jac = direction_jacobian(prep, prep.obs.camera, prep.uv_undistorted)
+    assert np.isnan(rays).any() and np.isfinite(rays).any()
+    assert prep.observed_rays.tobytes() == rays.tobytes()
+    assert prep.observed_direction_jacobians.tobytes() == jac.tobytes()
+
+
+def test_previous_next_equals_stable_sort_form():
+    from pslog.fusion.innovation import _previous_next
+
+    rng = np.random.default_rng(2)
+    for n, m in ((0, 1), (1, 1), (50, 3), (2000, 4)):
+        camera = rng.integers(0, m, n).astype(np.int32)
+        order = np.argsort(camera, kind="stable")
+        same = camera[order][1:] == camera[order][:-1]
+        before, after = np.full(n, -1), np.full(n, -1)
+        before[order[1:][same]] = order[:-1][same]
+        after[order[:-1][same]] = order[1:][same]
+        got = _previous_next(camera)
+        assert np.array_equal(got[0], before) and np.array_equal(got[1], after)

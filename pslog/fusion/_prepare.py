@@ -105,13 +105,28 @@ class Prepared:
         """:meth:`rays_from_undistorted` of every observation's own undistorted pixel (n, 3),
         made once (type A needs each row's ray several times; elementwise, so a row of it
         has the bits of a call on that row alone)."""
-        return self.rays_from_undistorted(self.obs.camera, self.uv_undistorted)
+        return self._observed[0]
 
     @cached_property
     def observed_direction_jacobians(self) -> np.ndarray:
         """:func:`direction_jacobian` of every observation at its own undistorted pixel,
         (3, 2, n), made once (elementwise: a row's entries are those of a call on it alone)."""
-        return direction_jacobian(self, self.obs.camera, self.uv_undistorted)
+        return self._observed[1]
+
+    @cached_property
+    def _observed(self) -> tuple[np.ndarray, np.ndarray]:
+        """:attr:`observed_rays` and :attr:`observed_direction_jacobians` in one compiled
+        pass (their numpy expressions, operation for operation: the same bits)."""
+        from . import _prepare_kernel
+
+        n = len(self.obs)
+        rays, jac = np.empty((n, 3)), np.empty((3, 2, n))
+        _prepare_kernel.observed_rays_and_jacobians(
+            np.ascontiguousarray(self.obs.camera, dtype=np.int64),
+            np.ascontiguousarray(self.uv_undistorted, dtype=np.float64),
+            np.ascontiguousarray(self._cols("K_inv").T), np.ascontiguousarray(self._cols("R").T),
+            np.ascontiguousarray(self._rt_k_inv_cols.T), rays, jac)
+        return rays, jac
 
     @cached_property
     def previous_instant(self) -> np.ndarray:

@@ -223,13 +223,13 @@ KINK_SIGMAS = 5.0
 
 def _previous_next(camera: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Each row's previous and next row of the same camera (-1: none), (n,) int64 each."""
+    from . import _prepare_kernel  # (numba: imported at the first use)
+
     n = len(camera)
-    order = np.argsort(camera, kind="stable")  # rows by camera, in time order within each
-    same = camera[order][1:] == camera[order][:-1]
-    before = np.full(n, -1, dtype=np.int64)
-    after = np.full(n, -1, dtype=np.int64)
-    before[order[1:][same]] = order[:-1][same]
-    after[order[:-1][same]] = order[1:][same]
+    before, after = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
+    # (one compiled pass each way: a stable argsort by camera did the same, 10x slower)
+    _prepare_kernel.previous_next(np.ascontiguousarray(camera, dtype=np.int64),
+                                  int(camera.max()) + 1 if n else 0, before, after)
     return before, after
 
 
