@@ -41,7 +41,7 @@ kink tests (:mod:`pslog.fusion.innovation`) run on the kernel's outputs.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal, cast, overload
+from typing import Literal, NamedTuple, cast, overload
 
 import numpy as np
 
@@ -202,6 +202,16 @@ def _all_brackets(prep: Prepared) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return cache
 
 
+class _KinkPast(NamedTuple):
+    """What :func:`~pslog.fusion.innovation.kinked_points` reads of a past point, k rows:
+    its row, its partner's bracket (prev, next rows; int64) and its point (k, 3), metres."""
+
+    row: np.ndarray
+    prev_row: np.ndarray
+    next_row: np.ndarray
+    points_world: np.ndarray
+
+
 @dataclass(frozen=True, eq=False)
 class TypeAConstruction:
     """How each type-A point was made (for viewers and diagnostics); k output points.
@@ -275,8 +285,13 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
     prev_b, next_b, previous_instant = _all_brackets(prep)
     # (lens: some camera has distortion; else the pixel Jacobians are the identity)
     cam, ki, rr, rtki, f9, lens = _pseudo_kernel.camera_tables(prep)
-    ff = np.empty((2, k, len(_pseudo_kernel.FLOATS)))
-    fi = np.empty((2, k, len(_pseudo_kernel.INTS)), dtype=np.int64)
+    # the past points' tables: each target's place, or (no construction kept) one scratch
+    # place, the kink test's columns then in past_rows / past_points (less fresh memory)
+    tables = explain or (noise_px is not None and _prepare.FINITE_DIFFERENCES)
+    places = k if tables else 1
+    ff = np.empty((2, places, len(_pseudo_kernel.FLOATS)))
+    fi = np.empty((2, places, len(_pseudo_kernel.INTS)), dtype=np.int64)
+    past_rows, past_points = np.empty((2, k, 3), dtype=np.int64), np.empty((2, k, 3))
     # past points refused as invalid (each detection once): the points they would have made
     # are missing, or made from earlier instants
     refused = np.zeros(n, dtype=np.int64)
@@ -292,17 +307,23 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
         prep.centers, ki, rr, f9, cam, _SPAN_TIE_NS, MIN_RAY_ANGLE_DEG, prep.ray_dir,
         prep.observed_direction_jacobians, _jacobian_rows(prep) if lens else np.zeros((1, 4)),
         lens, rtki, NS, 0.0 if noise_px is None else float(noise_px), with_cov, ff, fi,
-        refused, has, predicted, points, flags, innovation, factor, model, quality_table)
+        refused, has, predicted, points, flags, innovation, factor, model, quality_table,
+        past_rows, past_points)
     # (the kernel packs the targets with a point first: views, no gather)
     events = targets if made == k else targets[has]
-    p1, p2 = (_from_tables(ff[s, :made], fi[s, :made], None) for s in range(2))
+    if tables:
+        p1, p2 = (_from_tables(ff[s, :made], fi[s, :made], None) for s in range(2))
+    # (what the kink test reads of P_{t-1} and P_{t-2}: rows, brackets and points)
+    kink_past = tuple(_KinkPast(past_rows[s, :made, 0], past_rows[s, :made, 1],
+                                past_rows[s, :made, 2], past_points[s, :made])
+                      for s in range(2))
     predicted, points, flags = predicted[:made], points[:made], flags[:made]
     innovation, quality_table = innovation[:made], quality_table[:, :made]
     factor, model = factor[:made], model[:made]
     n_columns = len(_QUALITY) if with_cov else 10
     quality = dict(zip(_QUALITY[:n_columns], quality_table, strict=False))
-    j1, j2 = p1.row, p2.row
     if noise_px is not None and _prepare.FINITE_DIFFERENCES:
+        j1, j2 = p1.row, p2.row
         # the reference covariance: forward differences through the whole construction
         columns = [events, j1, p1.prev_row, p1.next_row, j2, p2.prev_row, p2.next_row]
         slots = np.stack(columns, 1)
@@ -337,7 +358,7 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
     with np.errstate(invalid="ignore"):
         failed = good & (innovation > INNOVATION_SIGMAS * (sigma * factor) + model)
     # a camera saw the motion change inside eq. (1)'s or eq. (2)'s interval (innovation.py)
-    kinked = good & ~failed & kinked_points(prep, events, (p1, p2, predicted), sigma,
+    kinked = good & ~failed & kinked_points(prep, events, (*kink_past, predicted), sigma,
                                             max_gap_ns)
     keep = good & ~failed & ~kinked
     if seen is not None:  # count only the reasons not counted before (each detection once)
