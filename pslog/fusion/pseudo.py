@@ -58,7 +58,6 @@ from ._prepare import (
     MIN_RAY_ANGLE_DEG,
     Prepared,
     covariance,
-    direction_jacobian,
     finite_difference_jacobians,
     finite_rows,
 )
@@ -438,6 +437,10 @@ class TypeAStream:
         # the per-camera parts of prepare, made once; their column caches warmed and shared
         self._template = template = prepare(empty, rig)
         template._cols("K_inv"), template._cols("R")
+        # (K⁻¹, R, Rᵀ K⁻¹ rows: the compiled pass of each new row's ray and its Jacobian)
+        self._ray_tables = (np.ascontiguousarray(template._cols("K_inv").T),
+                            np.ascontiguousarray(template._cols("R").T),
+                            np.ascontiguousarray(template._rt_k_inv_cols.T))
         self._shared = {"_columns": template.__dict__["_columns"], "_f_cols": template._f_cols,
                         "_rt_k_inv_cols": template._rt_k_inv_cols,
                         "_kernel_tables": _pseudo_kernel.camera_tables(template)}
@@ -454,7 +457,8 @@ class TypeAStream:
 
     def push(self, time_ns, camera, uv, frame_index) -> Track:
         """Rows (n,) after every row pushed before; returns their points (possibly none)."""
-        from ._prepare import _FAR_IMAGES, _undistortion_jacobian
+        from . import _prepare_kernel
+        from ._prepare import _FAR_IMAGES, _rays, _undistortion_jacobian
 
         n_new = len(time_ns)
         if n_new == 0:
@@ -477,8 +481,9 @@ class TypeAStream:
         for i in np.unique(camera).tolist():
             cam = rig.cameras[i]
             rows = np.flatnonzero(camera == i)
-            uv_und[rows] = cam.undistort(uv[rows])
-            ray_dir[rows] = cam.rays(uv[rows])[1]
+            xy = cam.undistort_normalized(uv[rows])  # (the lens inverted once, as prepare)
+            uv_und[rows] = cam.pixels_from_normalized(xy)
+            ray_dir[rows] = _rays(cam, xy)
             far = rows[~np.all(np.abs(uv[rows]) <= _FAR_IMAGES * max(cam.width, cam.height),
                                axis=1)]
             uv_und[far] = np.nan
@@ -502,8 +507,11 @@ class TypeAStream:
         buf.uv_und[hi:end] = uv_und
         buf.ray_dir[hi:end] = ray_dir
         buf.jac[hi:end] = jac
-        buf.rays[hi:end] = t.rays_from_undistorted(camera, uv_und)
-        buf.dir_jac[:, :, hi:end] = direction_jacobian(t, camera, uv_und)
+        # (Prepared.observed_rays' and observed_direction_jacobians' compiled pass)
+        rays, dir_jac = buf.rays[hi:end], buf.dir_jac[:, :, hi:end]
+        _prepare_kernel.observed_rays_and_jacobians(
+            camera.astype(np.int64), np.ascontiguousarray(uv_und), *self._ray_tables, rays,
+            dir_jac)
         buf.jac_rows[hi:end] = np.nan_to_num(jac).reshape(-1, 4)
         buf.seen[hi:end] = 0
         self._lo, self._hi = lo, end
