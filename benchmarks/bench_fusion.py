@@ -25,8 +25,13 @@ Issue 12's target: ``typeA`` at least 1,000,000 points/s and at least the faster
 exit status is 1 if it is missed. Speed figures on a shared machine are noisy: compare the
 ratios printed in one run, not figures of separate runs.
 
+``--base REV`` also times ``fuse(..., "typeA")`` under a git revision's ``pslog`` (``git
+archive``, run in a child process) and this tree's, alternating, ``--rounds`` times each on
+the same session (CPU time of each child, best of ``--repeat``): the paired figure a shared
+machine allows.
+
     python benchmarks/bench_fusion.py [--minutes 10] [--repeat 3] [--quick] [--stream 10]
-        [--json out.json] [--compile]
+        [--json out.json] [--compile] [--base REV [--rounds 3]]
 """
 
 from __future__ import annotations
@@ -144,7 +149,13 @@ def main() -> int:
     parser.add_argument("--json", default=None, help="write the rows here as JSON")
     parser.add_argument("--compile", action="store_true",
                         help="also time typeA's first call with a cold and a warm numba cache")
+    parser.add_argument("--base", default=None, metavar="REV",
+                        help="also time typeA under this git revision, alternating (paired)")
+    parser.add_argument("--rounds", type=int, default=3, help="alternations with --base")
     args = parser.parse_args()
+    if args.base:
+        paired(args.base, args.minutes if not args.quick else 2.0, args.repeat, args.rounds)
+        return 0
     if args.quick:
         args.minutes, args.repeat = 2.0, 2
     print(f"fusion benchmark: {args.minutes:g}-minute session, 3 cameras at 30 fps, "
@@ -258,6 +269,55 @@ def compile_times() -> None:
                                  capture_output=True, text=True).stdout.split()
             first, second = float(out[0]), float(out[1])
             print(f"  {label:<24} first call {first:7.2f} s, second {second * 1e3:7.2f} ms")
+
+
+_PAIRED_CHILD = """
+import sys, time
+from pslog import SimulationOptions, apply_timing, builtin_rig, get_motion, simulate
+from pslog.fusion import fuse
+minutes, repeat = float(sys.argv[1]), int(sys.argv[2])
+rig = apply_timing(builtin_rig("paper3"), "typeA")
+obs = simulate(rig, get_motion("turntable"), minutes * 60,
+               SimulationOptions(noise_px=0.5, seed=0))[0].best()
+points = len(fuse(obs, rig, "typeA"))
+best = float("inf")
+for _ in range(repeat):
+    start = time.process_time()
+    fuse(obs, rig, "typeA")
+    best = min(best, time.process_time() - start)
+print(best, points)
+"""
+
+
+def paired(base: str, minutes: float, repeat: int, rounds: int) -> None:
+    """``fuse(..., "typeA")`` under revision ``base`` and this tree, alternating in child
+    processes on the same session: CPU seconds, best of ``repeat`` per child."""
+    import subprocess
+    import sys
+    import tempfile
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    print(f"typeA fuse(), {minutes:g}-minute session, base {base} against this tree, "
+          f"alternating {rounds} times (CPU time, best of {repeat} per run)")
+    with tempfile.TemporaryDirectory() as tmp:
+        archive = subprocess.run(["git", "-C", str(root), "archive", base, "pslog"],
+                                 check=True, capture_output=True).stdout
+        subprocess.run(["tar", "-x", "-C", tmp], input=archive, check=True)
+        figures: dict[str, list[float]] = {"base": [], "now": []}
+        for _ in range(rounds):
+            for label, path in (("base", tmp), ("now", str(root))):
+                env = dict(os.environ, PYTHONPATH=path)
+                out = subprocess.run([sys.executable, "-c", _PAIRED_CHILD, str(minutes),
+                                      str(repeat)], env=env, check=True, cwd=tmp,
+                                     capture_output=True, text=True).stdout.split()
+                seconds, points = float(out[0]), int(out[1])
+                figures[label].append(points / seconds)
+                print(f"  {label:<5} {seconds * 1e3:8.2f} ms  {points / seconds:>12,.0f} points/s")
+    best_base, best_now = max(figures["base"]), max(figures["now"])
+    print(f"best: base {best_base:,.0f}, now {best_now:,.0f} points/s "
+          f"(x{best_now / best_base:.2f}); median ratio of the rounds "
+          f"x{float(np.median(np.array(figures['now']) / np.array(figures['base']))):.2f}")
 
 
 def stream(seconds: float, repeat: int) -> None:

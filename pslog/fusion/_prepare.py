@@ -105,13 +105,28 @@ class Prepared:
         """:meth:`rays_from_undistorted` of every observation's own undistorted pixel (n, 3),
         made once (type A needs each row's ray several times; elementwise, so a row of it
         has the bits of a call on that row alone)."""
-        return self.rays_from_undistorted(self.obs.camera, self.uv_undistorted)
+        return self._observed[0]
 
     @cached_property
     def observed_direction_jacobians(self) -> np.ndarray:
         """:func:`direction_jacobian` of every observation at its own undistorted pixel,
         (3, 2, n), made once (elementwise: a row's entries are those of a call on it alone)."""
-        return direction_jacobian(self, self.obs.camera, self.uv_undistorted)
+        return self._observed[1]
+
+    @cached_property
+    def _observed(self) -> tuple[np.ndarray, np.ndarray]:
+        """:attr:`observed_rays` and :attr:`observed_direction_jacobians` in one compiled
+        pass (their numpy expressions, operation for operation: the same bits)."""
+        from . import _prepare_kernel
+
+        n = len(self.obs)
+        rays, jac = np.empty((n, 3)), np.empty((3, 2, n))
+        _prepare_kernel.observed_rays_and_jacobians(
+            np.ascontiguousarray(self.obs.camera, dtype=np.int64),
+            np.ascontiguousarray(self.uv_undistorted, dtype=np.float64),
+            np.ascontiguousarray(self._cols("K_inv").T), np.ascontiguousarray(self._cols("R").T),
+            np.ascontiguousarray(self._rt_k_inv_cols.T), rays, jac)
+        return rays, jac
 
     @cached_property
     def previous_instant(self) -> np.ndarray:
@@ -205,8 +220,11 @@ def prepare(obs: Observations, rig: Rig, F: np.ndarray | None = None) -> Prepare
         rows = np.flatnonzero(obs.camera == i)
         per_camera.append(rows)
         if len(rows):
-            uv_und[rows] = cam.undistort(obs.uv[rows])
-            ray_dir[rows] = cam.rays(obs.uv[rows])[1]
+            # the lens inverted once: Camera.undistort's pixels and Camera.rays' directions
+            # from the same ideal normalised coordinates (each method inverts it itself)
+            xy = cam.undistort_normalized(obs.uv[rows])
+            uv_und[rows] = cam.pixels_from_normalized(xy)
+            ray_dir[rows] = _rays(cam, xy)
             # a pixel far outside the image (1e300 from a damaged file) is no detection: no
             # ray, as for a pixel beyond the lens model's fold-over (and no overflow later)
             far = rows[~np.all(np.abs(obs.uv[rows]) <= _FAR_IMAGES * max(cam.width,
@@ -226,6 +244,18 @@ def prepare(obs: Observations, rig: Rig, F: np.ndarray | None = None) -> Prepare
         cameras=tuple(rig.cameras), uv_jacobian=jac,
         view_box=np.array([_view_box(c) for c in rig.cameras]),
     )
+
+
+def _rays(cam, xy: np.ndarray) -> np.ndarray:
+    """:meth:`~pslog.camera.Camera.rays`' unit world directions (k, 3) of ideal normalised
+    coordinates ``xy`` (k, 2) (:meth:`~pslog.camera.Camera.undistort_normalized`), by its
+    operations in its order, compiled (the same bits; numba loaded here, at the first use)."""
+    from . import _prepare_kernel
+
+    out = np.empty((len(xy), 3))
+    _prepare_kernel.rays_from_normalized(np.ascontiguousarray(xy, dtype=np.float64),
+                                         np.ascontiguousarray(cam.R, dtype=np.float64), out)
+    return out
 
 
 def _undistortion_jacobian(cam, uv_und: np.ndarray) -> np.ndarray:

@@ -356,7 +356,7 @@ def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_n
                   camera, prev_b, next_b, uv, observed_rays, centers, ki, rr, f9, cam,
                   span_tie_ns, min_angle_deg, ray_dir, obs_jac, jac4, lens, rtki, ns,
                   noise_px, with_cov, ff, fi, refused, has, predicted, points, flags,
-                  innovation, quality):
+                  innovation, factor, model, quality, past_rows, past_points):
     """Type A's point at each detection of ``targets`` (k,), sorted global rows.
 
     The two past points: for each target, the latest rows of the 1st, 2nd, ... distinct
@@ -375,7 +375,10 @@ def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_n
     - eqs. (3)-(4): ``P'_t = ((P̂_t - T) · r / |r|²) r + T``, the point of the newest viewing
       ray ``l = k r + T`` nearest to ``P̂_t``; its ``k <= 0`` (the foot behind the newest
       camera) and a point behind or outside a contributing camera are flagged (``flags``);
-    - ``innovation``: the newest detection against the prediction (recorded pixels);
+    - ``innovation``: the newest detection against the prediction (recorded pixels), and
+      the prediction test's terms (:func:`pslog.fusion.innovation.failed_predictions`,
+      its expressions in its order): ``factor`` ``√(1 + (1 + ρ)² + ρ²)`` (the innovation's
+      noise in detection noises) and ``model`` the extrapolation error's bound, pixels;
     - ``quality`` (17, k): snap_px, ray_miss_m (before the snap), ray_shift_m,
       ray_angle_deg, residual_max_px, residual_mean_px, camera_mask, n_detections, gap_s,
       span_s, and (``with_cov``) std_m, cov_xx ... cov_yz m² with the closed-form Jacobians
@@ -388,6 +391,11 @@ def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_n
     rays, ``obs_jac`` (3, 2, n) their direction Jacobians, ``jac4`` (n, 4) their
     d(undistorted) / d(recorded pixel) (``lens`` False: the identity), ``rtki`` (m, 9)
     Rᵀ K⁻¹, ``ns`` nanoseconds per second, ``noise_px`` the detection noise (pixels).
+    ``ff``, ``fi`` may have one place (``(2, 1, ·)``): a scratch row for each target, for
+    callers that keep no construction; ``past_rows`` (2, k, 3) int64 (row, prev, next) and
+    ``past_points`` (2, k, 3) float64 receive each point's two past points either way (what
+    the kink test reads), 96 bytes a point instead of the tables' 416 (fresh memory's page
+    faults were a quarter of a session's time).
     """
     m = centers.shape[0]
     slots = np.empty(7, dtype=np.int64)
@@ -404,6 +412,9 @@ def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_n
     for target in range(targets.shape[0]):
         e = targets[target]
         i = made  # (the point's place in the outputs: the targets with a point, packed)
+        # (the place in the tables: i, or 0 in tables of one place, a scratch row for
+        # callers that keep no construction; past_rows/past_points keep what they need)
+        at = i if ff.shape[1] > 1 else 0
         # the past points, instant by instant back from the target
         first = -1
         second = -1
@@ -424,7 +435,7 @@ def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_n
                 slot = 0 if first < 0 else 1
                 ok, bits = _pseudo_one(candidate, e, max_gap_ns, time_ns, camera, prev_b,
                                        next_b, uv, observed_rays, centers, ki, rr, f9, cam,
-                                       span_tie_ns, min_angle_deg, ff, fi, slot, i)
+                                       span_tie_ns, min_angle_deg, ff, fi, slot, at)
                 refused[candidate] |= bits
                 if ok:
                     if first < 0:
@@ -439,8 +450,12 @@ def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_n
         if second < 0:
             continue
         made += 1
-        slots[0], slots[1], slots[2], slots[3] = e, fi[0, i, 0], fi[0, i, 2], fi[0, i, 3]
-        slots[4], slots[5], slots[6] = fi[1, i, 0], fi[1, i, 2], fi[1, i, 3]
+        for pp in range(2):  # the past points' rows (row, bracket) and points, compact
+            for j in range(3):
+                past_rows[pp, i, j] = fi[pp, at, j if j == 0 else j + 1]
+                past_points[pp, i, j] = ff[pp, at, 7 + j]
+        slots[0], slots[1], slots[2], slots[3] = e, fi[0, at, 0], fi[0, at, 2], fi[0, at, 3]
+        slots[4], slots[5], slots[6] = fi[1, at, 0], fi[1, at, 2], fi[1, at, 3]
         for s in range(7):
             times[s] = time_ns[slots[s]]
         t_event, t1, t2 = times[0], times[1], times[4]
@@ -448,7 +463,7 @@ def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_n
         # eq. (2): linear prediction with the actual capture intervals
         ratio = (t_event - t1) / (t1 - t2)
         for j in range(3):
-            predicted[i, j] = ff[0, i, 7 + j] + ratio * (ff[0, i, 7 + j] - ff[1, i, 7 + j])
+            predicted[i, j] = ff[0, at, 7 + j] + ratio * (ff[0, at, 7 + j] - ff[1, at, 7 + j])
         # eqs. (3)-(4): nearest point on the newest viewing ray
         d0, d1, d2 = ray_dir[e, 0], ray_dir[e, 1], ray_dir[e, 2]
         for j in range(3):
@@ -470,11 +485,25 @@ def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_n
         if not (k_foot > 0):
             bits |= 1  # eq. (4)'s k: the foot behind the newest camera
         flags[i] = bits
-        res[0], res[1], res[2], res[3] = ff[0, i, 5], ff[0, i, 6], ff[1, i, 5], ff[1, i, 6]
+        res[0], res[1], res[2], res[3] = ff[0, at, 5], ff[0, at, 6], ff[1, at, 5], ff[1, at, 6]
         # the newest detection against the prediction, before eq. (4) moves it onto its ray
         res[4] = _reprojection(cam, c0, predicted[i, 0], predicted[i, 1], predicted[i, 2],
                                uv[e, 0], uv[e, 1])
         innovation[i] = res[4]
+        # the prediction test's terms (innovation.failed_predictions, operation for
+        # operation): the noise factor of ρ = δ_pred / δ_prev and the model's bound
+        delta_pred = (t_event - t1) / ns
+        delta_prev = (t1 - t2) / ns
+        rho = delta_pred / delta_prev
+        factor[i] = math.sqrt(1.0 + (1.0 + rho) * (1.0 + rho) + rho * rho)
+        distance = q[0] * q[0] + q[1] * q[1]  # (np.linalg.norm's order)
+        distance += q[2] * q[2]
+        distance = math.sqrt(distance)
+        z_axis = q[0] * cam[c0, 15] + q[1] * cam[c0, 16]  # (np.sum's order; R[2]: the axis)
+        z_axis += q[2] * cam[c0, 17]
+        focal = _max(cam[c0, 0], cam[c0, 4])
+        model[i] = (0.5 * _G * delta_pred * (delta_pred + delta_prev) * focal * distance
+                    / (z_axis * z_axis))
         # slots holding a detection no earlier slot holds
         n_distinct = 1
         for s in range(1, 7):
@@ -489,14 +518,14 @@ def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_n
             t_earliest = min(t_earliest, times[s])
         span1 = (times[3] - times[2]) / ns
         span2 = (times[6] - times[5]) / ns
-        quality[0, i] = _max(ff[0, i, 1], ff[1, i, 1])
+        quality[0, i] = _max(ff[0, at, 1], ff[1, at, 1])
         # measured before the snap: after it the rays cross by construction
-        quality[1, i] = _max(ff[0, i, 4], ff[1, i, 4])
+        quality[1, i] = _max(ff[0, at, 4], ff[1, at, 4])
         shift = (pt0 - predicted[i, 0]) * (pt0 - predicted[i, 0])
         shift += (pt1 - predicted[i, 1]) * (pt1 - predicted[i, 1])
         shift += (pt2 - predicted[i, 2]) * (pt2 - predicted[i, 2])
         quality[2, i] = math.sqrt(shift)
-        quality[3, i] = _min(ff[0, i, 3], ff[1, i, 3]) * _DEGREES
+        quality[3, i] = _min(ff[0, at, 3], ff[1, at, 3]) * _DEGREES
         worst = res[0]
         total = res[0] + res[1]
         for s in range(1, 5):
@@ -535,12 +564,12 @@ def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_n
         # moves with the interpolated one by I - n nᵀ and with the observed pixel as it moves
         # the epipolar line; eq. (1) weighs the bracket by 1 - w and w.
         for pp in range(2):
-            row = fi[pp, i, 0]
+            row = fi[pp, at, 0]
             cam_obs = camera[row]
-            partner = max(fi[pp, i, 1], 0)
-            w_eq1 = ff[pp, i, 0]
-            a0, a1, a2 = ff[pp, i, 10], ff[pp, i, 11], ff[pp, i, 12]
-            b0, b1, b2 = ff[pp, i, 13], ff[pp, i, 14], ff[pp, i, 15]
+            partner = max(fi[pp, at, 1], 0)
+            w_eq1 = ff[pp, at, 0]
+            a0, a1, a2 = ff[pp, at, 10], ff[pp, at, 11], ff[pp, at, 12]
+            b0, b1, b2 = ff[pp, at, 13], ff[pp, at, 14], ff[pp, at, 15]
             cos = a0 * b0 + a1 * b1 + a2 * b2
             scale = 0.5 / (1 - cos * cos)
             r_d1 = (r[0] * a0 + r[1] * a1 + r[2] * a2) * scale
@@ -550,7 +579,7 @@ def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_n
             w0 = 0.5 * r[0] + f1 * a0 + f2 * b0
             w1 = 0.5 * r[1] + f1 * a1 + f2 * b1
             w2 = 0.5 * r[2] + f1 * a2 + f2 * b2
-            p0, p1, p2 = ff[pp, i, 7], ff[pp, i, 8], ff[pp, i, 9]
+            p0, p1, p2 = ff[pp, at, 7], ff[pp, at, 8], ff[pp, at, 9]
             s1 = ((p0 - centers[cam_obs, 0]) * a0 + (p1 - centers[cam_obs, 1]) * a1
                   + (p2 - centers[cam_obs, 2]) * a2)
             s2 = ((p0 - centers[partner, 0]) * b0 + (p1 - centers[partner, 1]) * b1
@@ -566,7 +595,7 @@ def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_n
             j_obs1 *= s1
             # J_snapped = wᵀ dd/duv of the partner's ray at the snapped pixel (direction_jacobian_
             # along), times s2
-            us0, us1 = ff[pp, i, 18], ff[pp, i, 19]
+            us0, us1 = ff[pp, at, 18], ff[pp, at, 19]
             rv0 = rtki[partner, 0] * us0
             rv0 += rtki[partner, 1] * us1
             rv0 += rtki[partner, 2]
@@ -610,7 +639,7 @@ def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_n
             size = math.sqrt(l0 * l0 + l1 * l1)
             nn0 = l0 / size
             nn1 = l1 / size
-            signed = (l0 * ff[pp, i, 16] + l1 * ff[pp, i, 17] + l2) / size
+            signed = (l0 * ff[pp, at, 16] + l1 * ff[pp, at, 17] + l2) / size
             da00, da01 = f9[fr, 0] / size, f9[fr, 1] / size
             da10, da11 = f9[fr, 3] / size, f9[fr, 4] / size
             dl0, dl1 = f9[fr, 6] / size, f9[fr, 7] / size
@@ -750,14 +779,22 @@ def _bend(a, b, c, px, py, pz, speed, sigma, time_ns, uv, camera, lens, ns):
     change = math.sqrt(dx * dx + dy * dy)
     both = 1.0 / dt1 + 1.0 / dt2
     sigma_change = sigma * math.sqrt(1.0 / (dt1 * dt1) + both * both + 1.0 / (dt2 * dt2))
+    noise_bound = _KINK_SIGMAS * sigma_change
     focal = _max(fx, fy)
+    if change <= noise_bound and focal >= 0.0 and speed >= 0.0:
+        # within the noise alone: the model's term below is >= 0 (or NaN) wherever the
+        # test can fire (depth > 0; focal, speed >= 0), and IEEE addition of a non-negative
+        # term never rounds below the other (fl(x + y) >= x), so the bend cannot exceed
+        # the bound: the usual case (a smooth track), decided without the depth and three
+        # square roots, the same decision as the full test's, bit for bit
+        return False
     depth = lens[cam, 4] * px + lens[cam, 5] * py + lens[cam, 6] * pz + lens[cam, 7]
     ox, oy = (uv[b, 0] - cx) / focal, (uv[b, 1] - cy) / focal
     # d²u/dt² = f (a_xy - x a_z) / Z - 2 (Ż / Z) du/dt; |a| = g, |Ż| <= speed
     pixel_speed = _max(math.sqrt(v1x * v1x + v1y * v1y), math.sqrt(v2x * v2x + v2y * v2y))
     acceleration = (focal * _G * math.sqrt(1.0 + ox * ox + oy * oy)
                     + 2.0 * speed * pixel_speed) / depth
-    bound = _KINK_SIGMAS * sigma_change + 0.5 * (dt1 + dt2) * acceleration
+    bound = noise_bound + 0.5 * (dt1 + dt2) * acceleration
     return dt1 > 0 and dt2 > 0 and depth > 0 and change > bound
 
 

@@ -41,7 +41,7 @@ kink tests (:mod:`pslog.fusion.innovation`) run on the kernel's outputs.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal, cast, overload
+from typing import Literal, NamedTuple, cast, overload
 
 import numpy as np
 
@@ -58,15 +58,13 @@ from ._prepare import (
     MIN_RAY_ANGLE_DEG,
     Prepared,
     covariance,
-    direction_jacobian,
     finite_difference_jacobians,
     finite_rows,
 )
 from .innovation import (
+    INNOVATION_SIGMAS,
     NoiseEstimate,
     failed_counts,
-    failed_predictions,
-    innovation_factors,
     kinked_points,
 )
 from .stereo import count_invalid
@@ -203,6 +201,16 @@ def _all_brackets(prep: Prepared) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return cache
 
 
+class _KinkPast(NamedTuple):
+    """What :func:`~pslog.fusion.innovation.kinked_points` reads of a past point, k rows:
+    its row, its partner's bracket (prev, next rows; int64) and its point (k, 3), metres."""
+
+    row: np.ndarray
+    prev_row: np.ndarray
+    next_row: np.ndarray
+    points_world: np.ndarray
+
+
 @dataclass(frozen=True, eq=False)
 class TypeAConstruction:
     """How each type-A point was made (for viewers and diagnostics); k output points.
@@ -276,15 +284,20 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
     prev_b, next_b, previous_instant = _all_brackets(prep)
     # (lens: some camera has distortion; else the pixel Jacobians are the identity)
     cam, ki, rr, rtki, f9, lens = _pseudo_kernel.camera_tables(prep)
-    ff = np.empty((2, k, len(_pseudo_kernel.FLOATS)))
-    fi = np.empty((2, k, len(_pseudo_kernel.INTS)), dtype=np.int64)
+    # the past points' tables: each target's place, or (no construction kept) one scratch
+    # place, the kink test's columns then in past_rows / past_points (less fresh memory)
+    tables = explain or (noise_px is not None and _prepare.FINITE_DIFFERENCES)
+    places = k if tables else 1
+    ff = np.empty((2, places, len(_pseudo_kernel.FLOATS)))
+    fi = np.empty((2, places, len(_pseudo_kernel.INTS)), dtype=np.int64)
+    past_rows, past_points = np.empty((2, k, 3), dtype=np.int64), np.empty((2, k, 3))
     # past points refused as invalid (each detection once): the points they would have made
     # are missing, or made from earlier instants
     refused = np.zeros(n, dtype=np.int64)
     has = np.empty(k, dtype=bool)
     predicted, points = np.empty((k, 3)), np.empty((k, 3))
     flags = np.empty(k, dtype=np.int64)
-    innovation = np.empty(k)
+    innovation, factor, model = np.empty(k), np.empty(k), np.empty(k)
     quality_table = np.empty((len(_QUALITY), k))
     with_cov = noise_px is not None and not _prepare.FINITE_DIFFERENCES
     made = _pseudo_kernel.type_a_kernel(
@@ -293,16 +306,23 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
         prep.centers, ki, rr, f9, cam, _SPAN_TIE_NS, MIN_RAY_ANGLE_DEG, prep.ray_dir,
         prep.observed_direction_jacobians, _jacobian_rows(prep) if lens else np.zeros((1, 4)),
         lens, rtki, NS, 0.0 if noise_px is None else float(noise_px), with_cov, ff, fi,
-        refused, has, predicted, points, flags, innovation, quality_table)
+        refused, has, predicted, points, flags, innovation, factor, model, quality_table,
+        past_rows, past_points)
     # (the kernel packs the targets with a point first: views, no gather)
     events = targets if made == k else targets[has]
-    p1, p2 = (_from_tables(ff[s, :made], fi[s, :made], None) for s in range(2))
+    if tables:
+        p1, p2 = (_from_tables(ff[s, :made], fi[s, :made], None) for s in range(2))
+    # (what the kink test reads of P_{t-1} and P_{t-2}: rows, brackets and points)
+    kink_past = tuple(_KinkPast(past_rows[s, :made, 0], past_rows[s, :made, 1],
+                                past_rows[s, :made, 2], past_points[s, :made])
+                      for s in range(2))
     predicted, points, flags = predicted[:made], points[:made], flags[:made]
     innovation, quality_table = innovation[:made], quality_table[:, :made]
+    factor, model = factor[:made], model[:made]
     n_columns = len(_QUALITY) if with_cov else 10
     quality = dict(zip(_QUALITY[:n_columns], quality_table, strict=False))
-    j1, j2 = p1.row, p2.row
     if noise_px is not None and _prepare.FINITE_DIFFERENCES:
+        j1, j2 = p1.row, p2.row
         # the reference covariance: forward differences through the whole construction
         columns = [events, j1, p1.prev_row, p1.next_row, j2, p2.prev_row, p2.next_row]
         slots = np.stack(columns, 1)
@@ -326,21 +346,20 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
                                       noise_px))
     t_event = np.take(time_ns, events)
     cams0 = np.take(obs.camera, events)
-    # (residual[4]: the newest detection against the prediction, as the tests below read it)
-    residual = (None, None, None, None, innovation)
     made = finite_rows(points)
+    good = made & (flags == 0)
     # the tests' detection noise: at least what the earlier points' innovations imply
     with np.errstate(invalid="ignore"):
-        normalised = np.where(made & (flags == 0), residual[4], np.nan) / innovation_factors(
-            events, j1, j2, time_ns)
+        normalised = np.where(good, innovation, np.nan) / factor
     sigma = (NoiseEstimate() if noise is None else noise).sigmas(normalised, noise_px)
-    # the newest detection contradicts eq. (2)'s prediction: the motion changed (innovation.py)
-    failed = made & (flags == 0) & failed_predictions(prep, events, j1, j2, predicted,
-                                                      residual[4], sigma)
+    # the newest detection contradicts eq. (2)'s prediction: the motion changed
+    # (innovation.failed_predictions' test, its terms made by the kernel)
+    with np.errstate(invalid="ignore"):
+        failed = good & (innovation > INNOVATION_SIGMAS * (sigma * factor) + model)
     # a camera saw the motion change inside eq. (1)'s or eq. (2)'s interval (innovation.py)
-    kinked = made & (flags == 0) & ~failed & kinked_points(prep, events, (p1, p2, predicted),
-                                                           sigma, max_gap_ns)
-    keep = made & (flags == 0) & ~failed & ~kinked
+    kinked = good & ~failed & kinked_points(prep, events, (*kink_past, predicted), sigma,
+                                            max_gap_ns)
+    keep = good & ~failed & ~kinked
     if seen is not None:  # count only the reasons not counted before (each detection once)
         refused, seen[:] = refused & ~seen, seen | refused
     # (count_invalid's three scans only where some flag is set: a stream's push has none)
@@ -418,6 +437,10 @@ class TypeAStream:
         # the per-camera parts of prepare, made once; their column caches warmed and shared
         self._template = template = prepare(empty, rig)
         template._cols("K_inv"), template._cols("R")
+        # (K⁻¹, R, Rᵀ K⁻¹ rows: the compiled pass of each new row's ray and its Jacobian)
+        self._ray_tables = (np.ascontiguousarray(template._cols("K_inv").T),
+                            np.ascontiguousarray(template._cols("R").T),
+                            np.ascontiguousarray(template._rt_k_inv_cols.T))
         self._shared = {"_columns": template.__dict__["_columns"], "_f_cols": template._f_cols,
                         "_rt_k_inv_cols": template._rt_k_inv_cols,
                         "_kernel_tables": _pseudo_kernel.camera_tables(template)}
@@ -434,7 +457,8 @@ class TypeAStream:
 
     def push(self, time_ns, camera, uv, frame_index) -> Track:
         """Rows (n,) after every row pushed before; returns their points (possibly none)."""
-        from ._prepare import _FAR_IMAGES, _undistortion_jacobian
+        from . import _prepare_kernel
+        from ._prepare import _FAR_IMAGES, _rays, _undistortion_jacobian
 
         n_new = len(time_ns)
         if n_new == 0:
@@ -457,8 +481,9 @@ class TypeAStream:
         for i in np.unique(camera).tolist():
             cam = rig.cameras[i]
             rows = np.flatnonzero(camera == i)
-            uv_und[rows] = cam.undistort(uv[rows])
-            ray_dir[rows] = cam.rays(uv[rows])[1]
+            xy = cam.undistort_normalized(uv[rows])  # (the lens inverted once, as prepare)
+            uv_und[rows] = cam.pixels_from_normalized(xy)
+            ray_dir[rows] = _rays(cam, xy)
             far = rows[~np.all(np.abs(uv[rows]) <= _FAR_IMAGES * max(cam.width, cam.height),
                                axis=1)]
             uv_und[far] = np.nan
@@ -482,8 +507,11 @@ class TypeAStream:
         buf.uv_und[hi:end] = uv_und
         buf.ray_dir[hi:end] = ray_dir
         buf.jac[hi:end] = jac
-        buf.rays[hi:end] = t.rays_from_undistorted(camera, uv_und)
-        buf.dir_jac[:, :, hi:end] = direction_jacobian(t, camera, uv_und)
+        # (Prepared.observed_rays' and observed_direction_jacobians' compiled pass)
+        rays, dir_jac = buf.rays[hi:end], buf.dir_jac[:, :, hi:end]
+        _prepare_kernel.observed_rays_and_jacobians(
+            camera.astype(np.int64), np.ascontiguousarray(uv_und), *self._ray_tables, rays,
+            dir_jac)
         buf.jac_rows[hi:end] = np.nan_to_num(jac).reshape(-1, 4)
         buf.seen[hi:end] = 0
         self._lo, self._hi = lo, end

@@ -1,0 +1,126 @@
+"""Compiled per-detection arithmetic of :func:`pslog.fusion._prepare.prepare` (numba).
+
+:meth:`pslog.camera.Camera.rays` builds its viewing rays with about fifteen numpy operations
+on (n, 3) arrays (a stack, a row maximum, broadcast divisions), whose fixed and per-element
+costs made it the largest part of ``prepare`` on a session without lens distortion. The
+kernel here does, row by row, the same operations in the same order (so the same bits:
+each is an IEEE operation on the same operands; no fastmath), from the normalised
+coordinates ``prepare`` already has, so the lens is inverted once per detection instead of
+twice. Imported lazily (numba compiles or loads on first use).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .._jit import kernel
+
+
+@kernel
+def rays_from_normalized(xy, R, out):
+    """Unit world directions of ideal normalised image coordinates, Camera.rays' arithmetic.
+
+    Parameters
+    ----------
+    xy : (k, 2) float64, ideal (undistorted) normalised coordinates ``K⁻¹ (u, v, 1)``
+        (:meth:`~pslog.camera.Camera.undistort_normalized`; NaN rows give NaN rays)
+    R : (3, 3) float64, the camera's rotation world -> camera
+    out : (k, 3) float64, written: ``Rᵀ (x, y, 1)`` after scaling by the largest absolute
+        component (a far-off pixel's norm would overflow), then normalised to unit length
+    """
+    for i in range(xy.shape[0]):
+        x, y, z = xy[i, 0], xy[i, 1], 1.0
+        # np.max(np.abs(.)) of the row: NaN wins, as in numpy's maximum reduction
+        big = abs(x)
+        ay = abs(y)
+        if not (big != big) and (ay != ay or ay > big):
+            big = ay
+        if not (big != big) and big < 1.0:
+            big = 1.0
+        x /= big
+        y /= big
+        z /= big
+        # Rᵀ (x, y, z) written out as Camera.rays: x R[0] + y R[1] + z R[2], left to right
+        d0 = x * R[0, 0] + y * R[1, 0] + z * R[2, 0]
+        d1 = x * R[0, 1] + y * R[1, 1] + z * R[2, 1]
+        d2 = x * R[0, 2] + y * R[1, 2] + z * R[2, 2]
+        norm = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        out[i, 0] = d0 / norm
+        out[i, 1] = d1 / norm
+        out[i, 2] = d2 / norm
+
+
+@kernel
+def observed_rays_and_jacobians(camera, uv, ki, rr, rtki, rays, jac):
+    """Each detection's ray at its own undistorted pixel and that ray's direction Jacobian,
+    in one pass: :meth:`~pslog.fusion._prepare.Prepared.rays_t` and
+    :func:`~pslog.fusion._prepare.direction_jacobian`, operation for operation (the same
+    bits as those numpy columns).
+
+    Parameters
+    ----------
+    camera : (n,) int, each detection's camera
+    uv : (n, 2) float64, undistorted pixels
+    ki, rr, rtki : (m, 9) float64, per camera ``K⁻¹``, ``R`` and ``Rᵀ K⁻¹``, row-major
+    rays : (n, 3) float64, written: unit world directions ``Rᵀ K⁻¹ (u, v, 1)`` normalised
+    jac : (3, 2, n) float64, written: d(unit direction) / d(pixel),
+        ``(I - d dᵀ) Rᵀ K⁻¹[:, :2] / |r|`` with ``r = Rᵀ K⁻¹ (u, v, 1)``
+    """
+    for i in range(camera.shape[0]):
+        c = camera[i]
+        u, v = uv[i, 0], uv[i, 1]
+        # rays_t: K⁻¹ then Rᵀ
+        x = ki[c, 0] * u + ki[c, 1] * v + ki[c, 2]
+        y = ki[c, 3] * u + ki[c, 4] * v + ki[c, 5]
+        z = ki[c, 6] * u + ki[c, 7] * v + ki[c, 8]
+        o0 = rr[c, 0] * x
+        o1 = rr[c, 1] * x
+        o2 = rr[c, 2] * x
+        o0 += rr[c, 3] * y
+        o1 += rr[c, 4] * y
+        o2 += rr[c, 5] * y
+        o0 += rr[c, 6] * z
+        o1 += rr[c, 7] * z
+        o2 += rr[c, 8] * z
+        norm = math.sqrt(o0 * o0 + o1 * o1 + o2 * o2)
+        rays[i, 0] = o0 / norm
+        rays[i, 1] = o1 / norm
+        rays[i, 2] = o2 / norm
+        # direction_jacobian: r = M (u, v, 1), M = Rᵀ K⁻¹
+        r0 = rtki[c, 0] * u
+        r0 += rtki[c, 1] * v
+        r0 += rtki[c, 2]
+        r1 = rtki[c, 3] * u
+        r1 += rtki[c, 4] * v
+        r1 += rtki[c, 5]
+        r2 = rtki[c, 6] * u
+        r2 += rtki[c, 7] * v
+        r2 += rtki[c, 8]
+        size = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+        d0, d1, d2 = r0 / size, r1 / size, r2 / size
+        for j in range(2):
+            m0 = rtki[c, j] / size
+            m1 = rtki[c, 3 + j] / size
+            m2 = rtki[c, 6 + j] / size
+            dm = d0 * m0
+            dm += d1 * m1
+            dm += d2 * m2
+            jac[0, j, i] = m0 - d0 * dm
+            jac[1, j, i] = m1 - d1 * dm
+            jac[2, j, i] = m2 - d2 * dm
+
+
+@kernel
+def previous_next(camera, n_cameras, before, after):
+    """Each row's previous and next row of the same camera (-1: none), in row order: two
+    passes with the last row seen per camera (``before``, ``after`` (n,) int64, written)."""
+    last = np.full(n_cameras, -1, dtype=np.int64)
+    for r in range(camera.shape[0]):
+        before[r] = last[camera[r]]
+        last[camera[r]] = r
+    last[:] = -1
+    for r in range(camera.shape[0] - 1, -1, -1):
+        after[r] = last[camera[r]]
+        last[camera[r]] = r
