@@ -390,7 +390,10 @@ def _prior_normal(knots: list[np.ndarray], offset: np.ndarray, m: int, prior: Mo
     if parts is None:
         parts = _prior_parts(knots, offset, m)
     _PRIOR_CACHE[key] = parts  # most recent last
-    while len(_PRIOR_CACHE) > 4:
+    # the few most recent, and of a long session's (100 MB each at 90 minutes) the latest
+    # only: a fit comes back to the knots it just left, never to older ones
+    while len(_PRIOR_CACHE) > 4 or (len(_PRIOR_CACHE) > 1 and sum(
+            p[0].nbytes + p[1].nbytes for p in _PRIOR_CACHE.values()) > _PRIOR_CACHE_BYTES):
         del _PRIOR_CACHE[next(iter(_PRIOR_CACHE))]
     ab_accel, ab_jerk, pull, length = parts
     g = np.asarray(prior.gravity, dtype=np.float64)
@@ -401,6 +404,8 @@ def _prior_normal(knots: list[np.ndarray], offset: np.ndarray, m: int, prior: Mo
 
 #: the prior's parts per knot pattern (:func:`_prior_parts`), the few most recent
 _PRIOR_CACHE: dict = {}
+#: the cache's bound beyond its latest entry, bytes
+_PRIOR_CACHE_BYTES = 32 * 2**20
 
 
 def _prior_parts(knots: list[np.ndarray], offset: np.ndarray, m: int
