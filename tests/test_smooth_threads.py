@@ -8,12 +8,12 @@ import pytest
 from _rally import rally
 from numpy.testing import assert_array_equal
 
+from pslog import builtin_rig
 from pslog.errors import PslogError
 from pslog.estimation import _breaks, fit_trajectory
 from pslog.estimation.trajectory import MotionPrior
 from pslog.rig import apply_timing
 from pslog.simulation import SimulationOptions, simulate
-from pslog import builtin_rig
 
 
 def _scan_case(C=40, seed=0):
@@ -79,5 +79,5 @@ def test_the_thread_count_comes_from_the_environment(monkeypatch, text, expected
 
 def test_a_thread_count_that_is_no_number_is_a_clear_error(monkeypatch):
     monkeypatch.setenv("PSLOG_SMOOTH_THREADS", "two")
-    with pytest.raises(PslogError, match="PSLOG_SMOOTH_THREADS.*'two'"):
+    with pytest.raises(PslogError, match=r"PSLOG_SMOOTH_THREADS.*'two'"):
         _breaks.smooth_threads()
