@@ -642,7 +642,14 @@ def fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions | None = 
     -------
     Fit; a :class:`FusionError` if no piece of the session is seen by two cameras
     """
-    options = options or SmoothOptions()
+    from ._memory import kept
+
+    with kept():  # the iterations' large temporaries reused, not faulted in again
+        return _fit_trajectory(obs, rig, options or SmoothOptions())
+
+
+def _fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions) -> Fit:
+    """:func:`fit_trajectory`."""
     if len(rig) < 2:
         raise FusionError(f"smooth needs at least two cameras (one camera cannot triangulate); "
                           f"rig has {len(rig)}")
