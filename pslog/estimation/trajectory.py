@@ -76,8 +76,10 @@ rather than broken. numpy and scipy, with compiled per-point loops
 residual and Jacobian, each detection's quadratic form and the normal equations summed per
 control point (:class:`pslog.estimation._normal.Points`), the covariance band's Takahashi
 recurrence and the break test's local normal equations and solves; the banded Cholesky
-factorisations are LAPACK's (scipy). ~70,000 detections per second on one core at 10
-minutes (``benchmarks/bench_smooth.py``, ``--base`` for a paired comparison).
+factorisations are LAPACK's (scipy). ~65,000 detections per second on one core at 10
+minutes (``benchmarks/bench_smooth.py``, ``--base`` for a paired comparison). The break
+search runs its candidates in blocks on ``PSLOG_SMOOTH_THREADS`` threads (default 2; the
+same bits on any count, :func:`pslog.estimation._breaks.smooth_threads`).
 """
 
 from __future__ import annotations
