@@ -383,7 +383,7 @@ def test_window_positions_are_the_basis_sums_of_the_numpy_form_bit_for_bit():
                     rtol=1e-15, atol=0)
 
 
-@pytest.mark.parametrize("order", ["sorted", "shuffled", "gaps"])
+@pytest.mark.parametrize("order", ["sorted", "shuffled", "gaps", "one step back"])
 def test_points_normal_streamed_or_kept_is_the_sparse_product(order):
     """points_normal adds a control point's sums as soon as the (sorted) terms pass it, or
     keeps them all when the terms are not in order (a prior's Gauss nodes, moved times):
@@ -391,6 +391,11 @@ def test_points_normal_streamed_or_kept_is_the_sparse_product(order):
     first, N, M, v, m = _points_case(11, r=300, m=60)
     if order == "shuffled":
         perm = np.random.default_rng(12).permutation(len(first))
+        first, N, M, v = first[perm], N[perm], M[perm], v[perm]
+    elif order == "one step back":  # sorted but for one term a control point back
+        i = int(np.flatnonzero(np.diff(first) == 1)[len(first) // 40])
+        perm = np.arange(len(first))
+        perm[[i, i + 1]] = i + 1, i
         first, N, M, v = first[perm], N[perm], M[perm], v[perm]
     elif order == "gaps":  # control points no term touches (more than the ring's 8 in a row)
         keep = (first < 20) | (first > 40)
