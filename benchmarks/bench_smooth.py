@@ -66,18 +66,25 @@ def best_cpu(repeat: int, fn) -> tuple[float, object]:
 
 ROOT = Path(__file__).resolve().parents[1]
 #: a child's timing of smooth on a pickled session: warm-up on its first 3 s, then CPU s,
-#: wall s, the process's peak resident set (MB) and the fit's own share of it (MB above the
-#: resident set before the fit)
+#: wall s, the peak resident set during the fit (MB; Linux: the peak is reset before it
+#: through /proc/self/clear_refs, so loading the session does not count) and the fit's own
+#: share of it (MB above the resident set before the fit)
 _CHILD = """
-import pickle, resource, sys, time
+import pickle, sys, time
 from pslog.fusion import fuse
 obs, rig = pickle.load(open(sys.argv[1], "rb"))
 fuse(obs.select(obs.time_ns < obs.time_ns[0] + 3 * 10**9), rig, "smooth")
-before = int(open("/proc/self/statm").read().split()[1]) * 4096 / 2**20
+def status(key):
+    for line in open("/proc/self/status"):
+        if line.startswith(key):
+            return int(line.split()[1]) / 1024
+with open("/proc/self/clear_refs", "w") as f:
+    f.write("5")  # resets the peak resident set (VmHWM)
+before = status("VmRSS")
 start, wall = time.process_time(), time.perf_counter()
 fuse(obs, rig, "smooth")
 cpu, wall = time.process_time() - start, time.perf_counter() - wall
-peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+peak = status("VmHWM")
 print(cpu, wall, peak, peak - before)
 """
 
