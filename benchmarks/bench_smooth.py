@@ -15,9 +15,11 @@ once on the session's first three seconds first, so the numba kernels' compilati
 on disk after the first run on a machine) and the imports are not timed.
 
 With ``--base REV`` (a git revision), ``smooth`` is also timed under that revision's code on
-the same session in the same run: both in child processes (the session pickled once), their
-runs alternating (``--repeat`` pairs, best of each), so a shared machine's load hits both
-alike; the ratio is printed (the previous figure, measured beside today's).
+the same session in the same run: in child processes (the session pickled once), this tree
+(its default 2 threads for the break scan, and ``PSLOG_SMOOTH_THREADS=1``) and the revision
+alternating (``--repeat`` rounds, best of each), so a shared machine's load hits them alike;
+printed for each: CPU s (all threads), detections per CPU second, wall s, the child's peak
+resident set and the fit's share of it, and the CPU ratio to the revision.
 
     python benchmarks/bench_smooth.py [--minutes 2 [10 45 90]] [--repeat 1] [--no-sync]
         [--base REV]
@@ -63,30 +65,44 @@ def best_cpu(repeat: int, fn) -> tuple[float, object]:
 
 
 ROOT = Path(__file__).resolve().parents[1]
-#: a child's timing of smooth on a pickled session: warm-up on its first 3 s, then CPU s
+#: a child's timing of smooth on a pickled session: warm-up on its first 3 s, then CPU s,
+#: wall s, the peak resident set during the fit (MB; Linux: the peak is reset before it
+#: through /proc/self/clear_refs, so loading the session does not count) and the fit's own
+#: share of it (MB above the resident set before the fit)
 _CHILD = """
 import pickle, sys, time
 from pslog.fusion import fuse
 obs, rig = pickle.load(open(sys.argv[1], "rb"))
 fuse(obs.select(obs.time_ns < obs.time_ns[0] + 3 * 10**9), rig, "smooth")
-start = time.process_time()
+def status(key):
+    for line in open("/proc/self/status"):
+        if line.startswith(key):
+            return int(line.split()[1]) / 1024
+with open("/proc/self/clear_refs", "w") as f:
+    f.write("5")  # resets the peak resident set (VmHWM)
+before = status("VmRSS")
+start, wall = time.process_time(), time.perf_counter()
 fuse(obs, rig, "smooth")
-print(time.process_time() - start)
+cpu, wall = time.process_time() - start, time.perf_counter() - wall
+peak = status("VmHWM")
+print(cpu, wall, peak, peak - before)
 """
 
 
-def child_cpu(code: Path, session: Path) -> float:
-    """CPU seconds of ``smooth`` on a pickled session in a child process running the pslog
-    package under ``code``."""
+def child_run(code: Path, session: Path, threads: str | None = None) -> list[float]:
+    """CPU s, wall s, peak MB and the fit's MB of ``smooth`` on a pickled session in a child
+    process running the pslog package under ``code`` (``threads``: PSLOG_SMOOTH_THREADS)."""
     env = dict(os.environ, PYTHONPATH=str(code))
+    if threads is not None:
+        env["PSLOG_SMOOTH_THREADS"] = threads
     out = subprocess.run([sys.executable, "-c", _CHILD, str(session)], env=env, check=True,
                          capture_output=True, text=True).stdout
-    return float(out.split()[-1])
+    return [float(x) for x in out.split()[-4:]]
 
 
-def paired(base: str, obs, rig, repeat: int) -> tuple[float, float]:
-    """Best CPU seconds of ``smooth`` under this tree and under git revision ``base``, their
-    runs alternating."""
+def paired(base: str, obs, rig, repeat: int) -> dict[str, list[float]]:
+    """Best CPU s, wall s, peak MB, fit MB of ``smooth`` under this tree (2 threads and 1)
+    and under git revision ``base``, their runs alternating."""
     with tempfile.TemporaryDirectory(prefix="bench-smooth-") as tmp:
         old = Path(tmp) / "base"
         old.mkdir()
@@ -96,11 +112,14 @@ def paired(base: str, obs, rig, repeat: int) -> tuple[float, float]:
         session = Path(tmp) / "session.pkl"
         with open(session, "wb") as f:
             pickle.dump((obs, rig), f)
-        now, then = float("inf"), float("inf")
+        best: dict[str, list[float]] = {}
         for _ in range(max(repeat, 1)):
-            now = min(now, child_cpu(ROOT, session))
-            then = min(then, child_cpu(old, session))
-    return now, then
+            for name, code, threads in (("now", ROOT, None), ("base", old, None),
+                                        ("now, 1 thread", ROOT, "1")):
+                run = child_run(code, session, threads)
+                best[name] = [min(a, b) for a, b in zip(best.get(name, run), run,
+                                                         strict=True)]
+    return best
 
 
 def main() -> int:
@@ -151,13 +170,17 @@ def main() -> int:
                   f"{seconds / minutes:7.3f} {len(obs) / seconds:>10,.0f}  offsets off by "
                   f"at most {err * 1e6:.1f} µs", flush=True)
         if args.base:
-            now, then = paired(args.base, obs, true, args.repeat)
-            row["paired"] = {"now": now, "base": then}
-            print(f"{minutes:>7g} {len(obs):>10,} {'smooth':<8} {now:8.2f} "
-                  f"{now / minutes:7.3f} {len(obs) / now:>10,.0f}  paired run, this tree")
-            print(f"{minutes:>7g} {len(obs):>10,} {'@' + args.base[:7]:<8} {then:8.2f} "
-                  f"{then / minutes:7.3f} {len(obs) / then:>10,.0f}  paired run, {args.base}: "
-                  f"this tree {then / now:.2f}x faster", flush=True)
+            runs = paired(args.base, obs, true, args.repeat)
+            row["paired"] = runs
+            then = runs["base"][0]
+            for name, (cpu, wall, peak, fit_mb) in runs.items():
+                label = "@" + args.base[:7] if name == "base" else "smooth"
+                note = (f"paired run, {args.base}" if name == "base" else
+                        f"paired run, this tree{name[3:]}: {then / cpu:.2f}x less CPU")
+                print(f"{minutes:>7g} {len(obs):>10,} {label:<8} {cpu:8.2f} "
+                      f"{cpu / minutes:7.3f} {len(obs) / cpu:>10,.0f}  {note}; wall "
+                      f"{wall:.2f} s ({len(obs) / wall:,.0f} det/s), peak {peak:,.0f} MB "
+                      f"(the fit {fit_mb:,.0f} MB above its start)", flush=True)
         results.append(row)
     last = results[-1]
     rate = last["n"] / last["smooth"]

@@ -381,3 +381,40 @@ def test_window_positions_are_the_basis_sums_of_the_numpy_form_bit_for_bit():
     f = base.first[1, 2]
     assert_allclose(X[1, 2], sum(base.N[1, 2, a] * base.x0[1, f + a] for a in range(4)),
                     rtol=1e-15, atol=0)
+
+
+@pytest.mark.parametrize("order", ["sorted", "shuffled", "gaps", "one step back"])
+def test_points_normal_streamed_or_kept_is_the_sparse_product(order):
+    """points_normal adds a control point's sums as soon as the (sorted) terms pass it, or
+    keeps them all when the terms are not in order (a prior's Gauss nodes, moved times):
+    either way the sums of the sparse products, bit for bit, added once to ab and rhs."""
+    first, N, M, v, m = _points_case(11, r=300, m=60)
+    if order == "shuffled":
+        perm = np.random.default_rng(12).permutation(len(first))
+        first, N, M, v = first[perm], N[perm], M[perm], v[perm]
+    elif order == "one step back":  # sorted but for one term a control point back
+        i = int(np.flatnonzero(np.diff(first) == 1)[len(first) // 40])
+        perm = np.arange(len(first))
+        perm[[i, i + 1]] = i + 1, i
+        first, N, M, v = first[perm], N[perm], M[perm], v[perm]
+    elif order == "gaps":  # control points no term touches (more than the ring's 8 in a row)
+        keep = (first < 20) | (first > 40)
+        first, N, M, v = first[keep], N[keep], M[keep], v[keep]
+    G, B = _sparse_points(first, N, m)
+    upper = np.take(M.reshape(-1, 9), [0, 1, 2, 4, 5, 8], axis=1)
+    blocks = np.take(G @ upper, [0, 1, 2, 1, 3, 4, 2, 4, 5], axis=1).reshape(m + 3, 4, 3, 3)
+    ab0 = np.random.default_rng(2).normal(size=(12, 3 * m))
+    rhs0 = np.random.default_rng(3).normal(size=3 * m)
+    ref_ab = ab0.copy()
+    for k in range(4):
+        for d in range(3):
+            for e in range(3):
+                off = 3 * k + e - d
+                if off >= 0:
+                    ref_ab[11 - off, 3 * k + e::3][:m - k] += blocks[:m - k, k, d, e]
+    ref_rhs = rhs0 + (B.T.tocsr() @ v).reshape(-1)
+    for fn in (_kernels.points_normal, _kernels.points_normal.py_func):
+        ab, rhs = ab0.copy(), rhs0.copy()
+        fn(first, N, upper, v, m, ab, rhs)
+        assert_array_equal(ab, ref_ab)
+        assert_array_equal(rhs, ref_rhs)

@@ -39,6 +39,29 @@ from .bspline import basis, clamped_knots, n_control
 _GRID = 7  # trial instants per scan
 _STAGES = 3
 _BATCH = 2000  # (candidate, τ) pairs per batched solve: bounds memory
+#: candidates per block of the scan: their local problems (two 3m x 3m matrices each) stay
+#: in cache, where a whole session's at once (20,000 windows at 90 minutes) took 500 MB
+_BLOCK = 128
+
+
+def smooth_threads() -> int:
+    """Threads of the break scan (``PSLOG_SMOOTH_THREADS``, default 2, at most the CPUs this
+    process may use; 1 forces one): blocks of candidates are independent problems, each
+    written to its own place, so the result is the same bits on any number."""
+    import os
+
+    text = os.environ.get("PSLOG_SMOOTH_THREADS", "").strip()
+    try:
+        wanted = int(text) if text else 2
+    except ValueError:
+        from ..errors import PslogError
+
+        raise PslogError(f"PSLOG_SMOOTH_THREADS must be a whole number, got {text!r}") from None
+    try:
+        cpus = len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        cpus = os.cpu_count() or 1
+    return max(1, min(wanted, cpus))
 _GAUSS = 1 / np.sqrt(3.0)
 _ACCEL = np.arange(12) < 8  # of the 12 prior nodes: p'' at the Gauss nodes, the jerk at mids
 
@@ -319,20 +342,51 @@ def scan(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray, centers: np
     hi = np.minimum(centers + half_width, limits[:, 1])
     i0 = np.searchsorted(t, lo, side="left")
     i1 = np.searchsorted(t, hi, side="right")
+    # the window length, the knot pattern and the spans solved for are the whole scan's:
+    # every block of candidates below then computes exactly what one batch of all did
     Wmax = max(int(np.max(i1 - i0)), 1)
-    index = i0[:, None] + np.arange(Wmax)
-    valid = index < i1[:, None]
-    index = np.minimum(index, len(t) - 1)
     # knots reach the window and two spans beyond any trial instant
     reach = max(half_width, float(np.max(np.abs(bounds - centers[:, None]))) + 2.5 * spacing)
     K = int(np.ceil(reach / spacing)) + 1
     local = _local(K, spacing, prior, 1)
-    # two bases, knots at the centre + k·h and shifted by h/2 (windows C..2C-1): a trial
-    # instant is tested on the one whose knots are at least h/4 away from it
-    both = np.r_[centers, centers + spacing / 2]
     # the spans a trial instant may fall in, on either base (the shifted one h/2 later)
     rel = (bounds - centers[:, None]) / spacing
     spans = (int(np.floor(np.min(rel))) - 1, int(np.floor(np.max(rel))))
+
+    def block(c0: int, c1: int) -> tuple[np.ndarray, np.ndarray]:
+        """The scan of candidates c0..c1-1 (each candidate's result depends on its own
+        window only)."""
+        return _scan_block(t, J, z, w, centers[c0:c1], bounds[c0:c1], i0[c0:c1],
+                           i1[c0:c1], Wmax, local, spacing, spans, prior)
+
+    jobs = [(c0, min(c0 + _BLOCK, C)) for c0 in range(0, C, _BLOCK)]
+    threads = min(smooth_threads(), len(jobs))
+    if threads > 1:
+        from concurrent.futures import ThreadPoolExecutor
+
+        # the kernels release the GIL and the large numpy operations do too; each block's
+        # result lands in its own place, so the output does not depend on the thread count
+        with ThreadPoolExecutor(threads) as pool:
+            parts = list(pool.map(lambda job: block(*job), jobs))
+    else:
+        parts = [block(c0, c1) for c0, c1 in jobs]
+    return (np.concatenate([tau for tau, _ in parts]),
+            np.concatenate([gain for _, gain in parts]))
+
+
+def _scan_block(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray,
+                centers: np.ndarray, bounds: np.ndarray, i0: np.ndarray, i1: np.ndarray,
+                Wmax: int, local: _Local, spacing: float, spans: tuple[int, int], prior
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`scan` of a block of candidates (C,), their windows ``t[i0:i1]`` padded to
+    ``Wmax`` detections, on the scan's knot pattern ``local`` and ``spans``."""
+    C = len(centers)
+    index = i0[:, None] + np.arange(Wmax)
+    valid = index < i1[:, None]
+    index = np.minimum(index, len(t) - 1)
+    # two bases, knots at the centre + k·h and shifted by h/2 (windows C..2C-1): a trial
+    # instant is tested on the one whose knots are at least h/4 away from it
+    both = np.r_[centers, centers + spacing / 2]
     base = _Base(local, t, J, z, w, np.r_[index, index], np.r_[valid, valid], both, spacing,
                  spans)
     rows = np.arange(C)

@@ -76,8 +76,10 @@ rather than broken. numpy and scipy, with compiled per-point loops
 residual and Jacobian, each detection's quadratic form and the normal equations summed per
 control point (:class:`pslog.estimation._normal.Points`), the covariance band's Takahashi
 recurrence and the break test's local normal equations and solves; the banded Cholesky
-factorisations are LAPACK's (scipy). ~70,000 detections per second on one core at 10
-minutes (``benchmarks/bench_smooth.py``, ``--base`` for a paired comparison).
+factorisations are LAPACK's (scipy). ~65,000 detections per second on one core at 10
+minutes (``benchmarks/bench_smooth.py``, ``--base`` for a paired comparison). The break
+search runs its candidates in blocks on ``PSLOG_SMOOTH_THREADS`` threads (default 2; the
+same bits on any count, :func:`pslog.estimation._breaks.smooth_threads`).
 """
 
 from __future__ import annotations
@@ -390,7 +392,10 @@ def _prior_normal(knots: list[np.ndarray], offset: np.ndarray, m: int, prior: Mo
     if parts is None:
         parts = _prior_parts(knots, offset, m)
     _PRIOR_CACHE[key] = parts  # most recent last
-    while len(_PRIOR_CACHE) > 4:
+    # the few most recent, and of a long session's (100 MB each at 90 minutes) the latest
+    # only: a fit comes back to the knots it just left, never to older ones
+    while len(_PRIOR_CACHE) > 4 or (len(_PRIOR_CACHE) > 1 and sum(
+            p[0].nbytes + p[1].nbytes for p in _PRIOR_CACHE.values()) > _PRIOR_CACHE_BYTES):
         del _PRIOR_CACHE[next(iter(_PRIOR_CACHE))]
     ab_accel, ab_jerk, pull, length = parts
     g = np.asarray(prior.gravity, dtype=np.float64)
@@ -401,6 +406,8 @@ def _prior_normal(knots: list[np.ndarray], offset: np.ndarray, m: int, prior: Mo
 
 #: the prior's parts per knot pattern (:func:`_prior_parts`), the few most recent
 _PRIOR_CACHE: dict = {}
+#: the cache's bound beyond its latest entry, bytes
+_PRIOR_CACHE_BYTES = 32 * 2**20
 
 
 def _prior_parts(knots: list[np.ndarray], offset: np.ndarray, m: int
@@ -637,7 +644,14 @@ def fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions | None = 
     -------
     Fit; a :class:`FusionError` if no piece of the session is seen by two cameras
     """
-    options = options or SmoothOptions()
+    from ._memory import kept
+
+    with kept():  # the iterations' large temporaries reused, not faulted in again
+        return _fit_trajectory(obs, rig, options or SmoothOptions())
+
+
+def _fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions) -> Fit:
+    """:func:`fit_trajectory`."""
     if len(rig) < 2:
         raise FusionError(f"smooth needs at least two cameras (one camera cannot triangulate); "
                           f"rig has {len(rig)}")

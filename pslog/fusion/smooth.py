@@ -14,6 +14,9 @@ pieces (never inside a gap the model does not bridge). Per-point quality:
 A detection in an end segment of a piece beyond a bounce or kick that fewer than four
 detections of two cameras hold gets no point (its position along the rays is not determined):
 counted in ``Track.dropped["underdetermined_end"]``.
+
+The fit's search for bounces and kicks runs on two threads; ``PSLOG_SMOOTH_THREADS=1`` forces
+one (the track is the same, bit for bit, on any number).
 """
 
 from __future__ import annotations

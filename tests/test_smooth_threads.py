@@ -1,0 +1,83 @@
+"""The break scan in blocks of candidates, on one thread or two (PSLOG_SMOOTH_THREADS): the
+same bits as one batch of every candidate, whatever the thread count."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from _rally import rally
+from numpy.testing import assert_array_equal
+
+from pslog import builtin_rig
+from pslog.errors import PslogError
+from pslog.estimation import _breaks, fit_trajectory
+from pslog.estimation.trajectory import MotionPrior
+from pslog.rig import apply_timing
+from pslog.simulation import SimulationOptions, simulate
+
+
+def _scan_case(C=40, seed=0):
+    """Candidates of a break scan on random linearised detections, as trajectory builds them
+    (windows of ±5 spacings, cut at neighbours: windows of different lengths)."""
+    rng = np.random.default_rng(seed)
+    h = 0.011
+    n = 1200
+    t = np.sort(rng.uniform(0.0, 4.0, n))
+    J = rng.normal(size=(n, 2, 3)) * 300
+    z = rng.normal(size=(n, 2))
+    w = rng.uniform(0.5, 4.0, n)
+    centers = np.sort(rng.uniform(0.2, 3.8, C))
+    bounds = np.stack([centers - rng.uniform(0.3, 1.0, C) * h,
+                       centers + rng.uniform(0.3, 1.0, C) * h], axis=1)
+    limits = np.stack([centers - rng.uniform(2, 9, C) * h, centers + rng.uniform(2, 9, C) * h],
+                      axis=1)
+    return t, J, z, w, centers, bounds, limits, h, 5 * h, MotionPrior()
+
+
+@pytest.mark.parametrize("block", [1, 3, 16])
+def test_the_scan_in_blocks_on_one_or_two_threads_is_one_batch_bit_for_bit(monkeypatch, block):
+    case = _scan_case()
+    monkeypatch.setattr(_breaks, "_BLOCK", 10**9)  # one batch of every candidate
+    monkeypatch.setenv("PSLOG_SMOOTH_THREADS", "1")
+    tau, gain = _breaks.scan(*case)
+    assert np.all(np.isfinite(gain)) and len(tau) == 40
+    monkeypatch.setattr(_breaks, "_BLOCK", block)
+    for threads in ("1", "2"):
+        monkeypatch.setenv("PSLOG_SMOOTH_THREADS", threads)
+        t2, g2 = _breaks.scan(*case)
+        assert_array_equal(t2, tau)
+        assert_array_equal(g2, gain)
+
+
+def test_a_fit_on_one_thread_is_the_fit_on_two_bit_for_bit(monkeypatch):
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    motion, _ = rally(20, seed=5)
+    detections, _ = simulate(rig, motion, 20, SimulationOptions(noise_px=0.5, seed=2))
+    obs = detections.best()
+    monkeypatch.setattr(_breaks, "_BLOCK", 2)  # several blocks even on a short session
+    fits = []
+    for threads in ("1", "2"):
+        monkeypatch.setenv("PSLOG_SMOOTH_THREADS", threads)
+        fits.append(fit_trajectory(obs, rig))
+    one, two = fits
+    assert len(one.trajectory.breaks_s) >= 3  # the scan ran, on several blocks
+    assert_array_equal(one.trajectory.breaks_s, two.trajectory.breaks_s)
+    assert_array_equal(one.trajectory.control, two.trajectory.control)
+    assert_array_equal(one.position, two.position)
+    assert_array_equal(one.covariance, two.covariance)
+
+
+@pytest.mark.parametrize("text, expected", [("1", 1), ("2", 2), ("", 2), (" 1 ", 1),
+                                            ("0", 1), ("-3", 1), ("64", None)])
+def test_the_thread_count_comes_from_the_environment(monkeypatch, text, expected):
+    import os
+
+    monkeypatch.setenv("PSLOG_SMOOTH_THREADS", text)
+    cpus = len(os.sched_getaffinity(0))
+    assert _breaks.smooth_threads() == (min(expected, cpus) if expected else min(64, cpus))
+
+
+def test_a_thread_count_that_is_no_number_is_a_clear_error(monkeypatch):
+    monkeypatch.setenv("PSLOG_SMOOTH_THREADS", "two")
+    with pytest.raises(PslogError, match=r"PSLOG_SMOOTH_THREADS.*'two'"):
+        _breaks.smooth_threads()
