@@ -184,6 +184,7 @@ def _run(args: argparse.Namespace, stop) -> int:
     import numpy as np
 
     from pslog.errors import InputError
+    from pslog.live.fuser import warm_up
     from pslog.live.server import bind_udp, serve
     from pslog.rig import apply_timing, resolve_rig
 
@@ -220,6 +221,9 @@ def _run(args: argparse.Namespace, stop) -> int:
         options = SenderOptions(
             hsv=parse_hsv(args.hsv), max_candidates=args.max_candidates,
             duration_ns=None if args.duration is None else int(args.duration * 1e9))
+    # the method's compiled kernels loaded before the session clock's zero is fixed and the
+    # cameras start: else their first frames would wait behind the load (docs/live.md, serve)
+    warm_up(args.method)  # silent: a failure after it is still one line
     sock = bind_udp(listen)  # a busy port fails here, before any output is opened
     try:
         sinks, recording = _sinks(args, rig, stop)

@@ -204,8 +204,15 @@ def warm_up(method: str, *, candidates: bool = True, options=None) -> None:
     The rally (1.5 s, the paper's rig with type-A shutters, 0.3 px noise, misses and false
     candidates, chip kicks and bounces) starts, restarts and updates the method's state as a
     match does; the kernels' signatures depend on dtypes, not on the rig, so the user's rig
-    need not see it. Nothing of it is kept.
+    need not see it. Nothing of it is kept but the note that it ran: a second call with the
+    same arguments returns at once (``pslog live`` warms up before it fixes the session
+    clock's zero and starts its cameras; :func:`pslog.live.server.serve` calls it again).
     """
+    from ..fusion import FusionOptions
+
+    key = (method, bool(candidates), options or FusionOptions())
+    if key in _WARMED:
+        return
     from ..motion import rally_motion
     from ..rig import apply_timing, builtin_rig
     from ..simulation import SimulationOptions, simulate
@@ -222,6 +229,11 @@ def warm_up(method: str, *, candidates: bool = True, options=None) -> None:
         now[0] = d.t_capture_ns
         fuser.feed(encode_detections(d), d.t_capture_ns)
     fuser.flush()
+    _WARMED.add(key)
+
+
+#: the (method, candidates, options) :func:`warm_up` ran for in this process
+_WARMED: set = set()
 
 
 class LiveFuser:
