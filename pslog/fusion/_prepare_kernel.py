@@ -53,6 +53,26 @@ def rays_from_normalized(xy, R, out):
 
 
 @kernel
+def ray(ki, rr, c, u, v):
+    """Unit world direction (3 floats) of undistorted pixel (u, v) of camera c:
+    ``Rᵀ K⁻¹ (u, v, 1)`` normalised (:meth:`Prepared.rays_t`, operation for operation)."""
+    x = ki[c, 0] * u + ki[c, 1] * v + ki[c, 2]
+    y = ki[c, 3] * u + ki[c, 4] * v + ki[c, 5]
+    z = ki[c, 6] * u + ki[c, 7] * v + ki[c, 8]
+    o0 = rr[c, 0] * x
+    o1 = rr[c, 1] * x
+    o2 = rr[c, 2] * x
+    o0 += rr[c, 3] * y
+    o1 += rr[c, 4] * y
+    o2 += rr[c, 5] * y
+    o0 += rr[c, 6] * z
+    o1 += rr[c, 7] * z
+    o2 += rr[c, 8] * z
+    norm = math.sqrt(o0 * o0 + o1 * o1 + o2 * o2)
+    return o0 / norm, o1 / norm, o2 / norm
+
+
+@kernel
 def observed_rays_and_jacobians(camera, uv, ki, rr, rtki, rays, jac):
     """Each detection's ray at its own undistorted pixel and that ray's direction Jacobian,
     in one pass: :meth:`~pslog.fusion._prepare.Prepared.rays_t` and
@@ -71,23 +91,7 @@ def observed_rays_and_jacobians(camera, uv, ki, rr, rtki, rays, jac):
     for i in range(camera.shape[0]):
         c = camera[i]
         u, v = uv[i, 0], uv[i, 1]
-        # rays_t: K⁻¹ then Rᵀ
-        x = ki[c, 0] * u + ki[c, 1] * v + ki[c, 2]
-        y = ki[c, 3] * u + ki[c, 4] * v + ki[c, 5]
-        z = ki[c, 6] * u + ki[c, 7] * v + ki[c, 8]
-        o0 = rr[c, 0] * x
-        o1 = rr[c, 1] * x
-        o2 = rr[c, 2] * x
-        o0 += rr[c, 3] * y
-        o1 += rr[c, 4] * y
-        o2 += rr[c, 5] * y
-        o0 += rr[c, 6] * z
-        o1 += rr[c, 7] * z
-        o2 += rr[c, 8] * z
-        norm = math.sqrt(o0 * o0 + o1 * o1 + o2 * o2)
-        rays[i, 0] = o0 / norm
-        rays[i, 1] = o1 / norm
-        rays[i, 2] = o2 / norm
+        rays[i, 0], rays[i, 1], rays[i, 2] = ray(ki, rr, c, u, v)  # rays_t
         # direction_jacobian: r = M (u, v, 1), M = Rᵀ K⁻¹
         r0 = rtki[c, 0] * u
         r0 += rtki[c, 1] * v

@@ -29,6 +29,7 @@ import numpy as np
 
 from .._jit import kernel
 from ..motion import G as _G
+from ._prepare_kernel import ray as _ray
 from .innovation import KINK_SIGMAS as _KINK_SIGMAS
 
 #: geometry._PARALLEL_EPS: rays whose cross product is this small (relative) do not cross.
@@ -65,26 +66,6 @@ def _min(x, y):
     if y != y:
         return y
     return x if x <= y else y
-
-
-@kernel
-def _ray(ki, rr, c, u, v):
-    """Unit world direction (3 floats) of undistorted pixel (u, v) of camera c:
-    ``Rᵀ K⁻¹ (u, v, 1)`` normalised (:meth:`Prepared.rays_t`, operation for operation)."""
-    x = ki[c, 0] * u + ki[c, 1] * v + ki[c, 2]
-    y = ki[c, 3] * u + ki[c, 4] * v + ki[c, 5]
-    z = ki[c, 6] * u + ki[c, 7] * v + ki[c, 8]
-    o0 = rr[c, 0] * x
-    o1 = rr[c, 1] * x
-    o2 = rr[c, 2] * x
-    o0 += rr[c, 3] * y
-    o1 += rr[c, 4] * y
-    o2 += rr[c, 5] * y
-    o0 += rr[c, 6] * z
-    o1 += rr[c, 7] * z
-    o2 += rr[c, 8] * z
-    norm = math.sqrt(o0 * o0 + o1 * o1 + o2 * o2)
-    return o0 / norm, o1 / norm, o2 / norm
 
 
 @kernel
