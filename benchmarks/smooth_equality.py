@@ -30,30 +30,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _lab_rig():
-    """bench_dirty's ``lab3`` (a copy: :func:`dump` runs under the compared revision)."""
-    from pslog import Camera, Rig, look_at
-
-    dist = np.array([-0.12, 0.03, 5e-4, -4e-4, 0.0])
-    cams = []
-    for i in range(3):
-        angle = 2 * np.pi * i / 3 - 1.2
-        eye = (1.5 + 3.4 * np.cos(angle), 1.0 + 3.0 * np.sin(angle), 2.4 + 0.3 * i)
-        R, t = look_at(eye, (1.5, 1.0, 0.6))
-        f = 520.0 + 20 * i
-        K = [[f, 0.0, 399.5], [0.0, f, 299.5], [0.0, 0.0, 1.0]]
-        cams.append(Camera(f"lab{i + 1}", 800, 600, K, dist, R, t, 30.0, i / 90.0))
-    return Rig(tuple(cams), "lab3")
-
-
-def _quad_rig():
-    """``paper3`` and a fourth camera (opposite corner, 2.5 m high), type A offsets."""
-    from pslog import Rig, apply_timing, builtin_rig, look_at
-
-    paper = builtin_rig("paper3")
-    R, t = look_at((-1.0, -1.5, 2.5), (1.5, 1.0, 1.0))
-    extra = paper.cameras[0].replace(name="cam4", R=R, t=t)
-    return apply_timing(Rig((*paper.cameras, extra), "quad4"), "typeA")
+# the rigs of fusion_equality (this folder: the script runs itself under the compared
+# revision's pslog, beside this tree's benchmarks)
+from fusion_equality import _lab_rig, _quad_rig  # noqa: E402
 
 
 def _track(t) -> dict:
