@@ -259,11 +259,26 @@ def _detecting(src, rig_names, row_of: dict, hsv: HsvRange, max_candidates: int,
         else:
             yield _in_order((fut.result() for fut in futures), row_of), _offsets(plan)
     except BrokenProcessPool:
+        # the pool's own clean-up stops the other workers with SIGTERM, which they ignore,
+        # and waits for them: one busy with a task, or blocked on a queue the dead one left
+        # locked, would never end (the command hung)
+        _kill_workers(pools)
         raise PslogError(f"re-detecting {src}: a worker process died (killed, or out of "
                          f"memory); try fewer --workers") from None
     finally:
         for pool in reversed(pools):
             pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _kill_workers(pools: list[ProcessPoolExecutor]) -> None:
+    """SIGKILL every worker process still alive in ``pools`` (after one died: their results
+    are lost with the pool anyway)."""
+    for pool in pools:
+        # ProcessPoolExecutor keeps its processes in ``_processes`` (pid -> Process); there
+        # is no public way to stop a busy worker
+        for process in list((getattr(pool, "_processes", None) or {}).values()):
+            with contextlib.suppress(Exception):
+                process.kill()
 
 
 def _offsets(plan: _Plan) -> frozenset[int]:

@@ -374,3 +374,41 @@ def test_an_interrupt_while_numba_loads_stops_the_first_pool_and_writes_nothing(
     with pytest.raises(KeyboardInterrupt):
         redetect_session(SAMPLE, tmp_path / "out.mcap", workers=2)
     assert list(tmp_path.iterdir()) == [] and multiprocessing.active_children() == []
+
+
+_DIES_WHILE_ANOTHER_WORKS = """
+import os, sys, time
+from recorders import redetect
+from pslog.cli import main
+
+real, flag = redetect._detect_chunks, sys.argv[3]
+
+def task(*args):
+    try:  # the first task's worker dies at once; the others are busy meanwhile
+        os.close(os.open(flag, os.O_CREAT | os.O_EXCL))
+    except FileExistsError:  # a result too big for the pipe: its writer waits for a reader
+        time.sleep(1.0)
+        return real(*args), bytes(4 << 20)
+    os._exit(3)
+
+redetect._PARALLEL_FROM = 0
+redetect._detect_chunks = task
+sys.exit(main(["redetect", sys.argv[1], "-o", sys.argv[2], "--workers", "2"]))
+"""
+
+
+def test_a_worker_dying_while_another_works_is_one_line_not_a_hang(tmp_path):
+    """The pool's clean-up sends SIGTERM to the other workers, which ignore it (Ctrl-C and
+    SIGTERM are the main process's to handle): they are killed instead, not waited for."""
+    import subprocess
+    import sys
+
+    out, flag = tmp_path / "out" / "out.mcap", tmp_path / "died"
+    out.parent.mkdir()
+    run = subprocess.run([sys.executable, "-c", _DIES_WHILE_ANOTHER_WORKS, str(SAMPLE),
+                          str(out), str(flag)], capture_output=True, text=True, timeout=120,
+                         cwd=Path(__file__).resolve().parents[1])
+    err = run.stderr.strip()
+    assert run.returncode == 1, err
+    assert "\n" not in err and "Traceback" not in err and "worker process died" in err
+    assert flag.exists() and not list(out.parent.iterdir())
