@@ -258,6 +258,8 @@ def _command(argv: list[str]) -> str:
     # the batch shows its own progress (sessions done/failed/running): not each command's
     shown = os.environ.get("PSLOG_PROGRESS")
     os.environ["PSLOG_PROGRESS"] = "off"
+    # a Ray task holds one CPU: smooth's break scan on one thread (unless the user said)
+    os.environ.setdefault("PSLOG_SMOOTH_THREADS", "1")
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         try:
             code = main(argv)

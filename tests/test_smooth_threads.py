@@ -3,6 +3,8 @@ same bits as one batch of every candidate, whatever the thread count."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from _rally import rally
@@ -14,6 +16,8 @@ from pslog.estimation import _breaks, fit_trajectory
 from pslog.estimation.trajectory import MotionPrior
 from pslog.rig import apply_timing
 from pslog.simulation import SimulationOptions, simulate
+
+SAMPLE = Path(__file__).resolve().parents[1] / "samples" / "throw.mcap"
 
 
 def _scan_case(C=40, seed=0):
@@ -68,7 +72,7 @@ def test_a_fit_on_one_thread_is_the_fit_on_two_bit_for_bit(monkeypatch):
 
 
 @pytest.mark.parametrize("text, expected", [("1", 1), ("2", 2), ("", 2), (" 1 ", 1),
-                                            ("0", 1), ("-3", 1), ("64", None)])
+                                            ("64", None)])
 def test_the_thread_count_comes_from_the_environment(monkeypatch, text, expected):
     import os
 
@@ -77,7 +81,19 @@ def test_the_thread_count_comes_from_the_environment(monkeypatch, text, expected
     assert _breaks.smooth_threads() == (min(expected, cpus) if expected else min(64, cpus))
 
 
-def test_a_thread_count_that_is_no_number_is_a_clear_error(monkeypatch):
-    monkeypatch.setenv("PSLOG_SMOOTH_THREADS", "two")
-    with pytest.raises(PslogError, match=r"PSLOG_SMOOTH_THREADS.*'two'"):
+@pytest.mark.parametrize("text", ["two", "0", "-3", "1.5"])
+def test_a_thread_count_that_is_no_whole_number_from_1_is_a_clear_error(monkeypatch, text):
+    monkeypatch.setenv("PSLOG_SMOOTH_THREADS", text)
+    with pytest.raises(PslogError, match=rf"PSLOG_SMOOTH_THREADS.*'{text}'"):
         _breaks.smooth_threads()
+
+
+def test_pslog_fuse_says_a_bad_thread_count_before_it_fuses(tmp_path, monkeypatch, capsys):
+    from pslog.cli import main
+
+    monkeypatch.setenv("PSLOG_SMOOTH_THREADS", "0")
+    out = tmp_path / "out.mcap"
+    assert main(["fuse", str(SAMPLE), "-o", str(out), "--method", "smooth"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "PSLOG_SMOOTH_THREADS" in err and not out.exists()
+    assert main(["fuse", str(SAMPLE), "-o", str(out), "--method", "typeA"]) == 0

@@ -57,8 +57,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "candidate (default %(default)s)")
     parser.add_argument("--workers", type=int_in(1, 64), default=None, metavar="N",
                         help="methods fused at once, on threads (the same tracks whatever "
-                             "the number; 1: one after another, e.g. beside other work) "
-                             "(default: the usable cores, at most one per method)")
+                             "the number; 1..64; 1: one after another, e.g. beside other "
+                             "work) (default: the usable cores, at most one per method; "
+                             "smooth's own threads: PSLOG_SMOOTH_THREADS, default 2)")
     add_force(parser)
     declare_files(parser, inputs=("session", "rig"), outputs=("output",))
 
@@ -121,6 +122,10 @@ def run(args: argparse.Namespace) -> int:
     # numba's start and the kernel modules these methods (and the writer) run, on another
     # core while the detections are gated: not on the way of the first kernel
     preload(*dict.fromkeys(k for m in methods for k in METHODS[m].kernels), "pslog.log._wire")
+    if "smooth" in methods:  # a malformed PSLOG_SMOOTH_THREADS said now, not after gating
+        from pslog.estimation._breaks import smooth_threads
+
+        smooth_threads()
     progress.update(total=len(methods) + 2)  # read, each method, write
     n_observations = len(observations)
     detections = session.detections

@@ -54,9 +54,11 @@ def smooth_threads() -> int:
     try:
         wanted = int(text) if text else 2
     except ValueError:
+        wanted = 0
+    if wanted < 1:
         from ..errors import PslogError
 
-        raise PslogError(f"PSLOG_SMOOTH_THREADS must be a whole number, got {text!r}") from None
+        raise PslogError(f"PSLOG_SMOOTH_THREADS must be a whole number >= 1, got {text!r}")
     try:
         cpus = len(os.sched_getaffinity(0))
     except AttributeError:  # not on Linux
