@@ -78,3 +78,15 @@ with _memory.kept():
 assert _memory._depth == 0
 assert mapped_while_alive()[0] >= SIZE
 """)
+
+
+@pytest.mark.parametrize("variable, value", [("MALLOC_TOP_PAD_", "0"),
+                                             ("GLIBC_TUNABLES", "glibc.malloc.trim_threshold=0")])
+def test_an_allocator_the_user_tunes_is_left_alone(variable, value):
+    _run(f"""
+import os
+os.environ[{variable!r}] = {value!r}  # as if the process had started with it
+with _memory.kept():
+    mapped, _ = mapped_while_alive()
+    assert mapped >= SIZE, mapped  # glibc's own setting: a fresh mapping
+""")

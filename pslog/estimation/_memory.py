@@ -14,12 +14,23 @@ the heap is not trimmed (``mallopt``: ``M_MMAP_THRESHOLD``, ``M_TRIM_THRESHOLD``
 after large arrays were freed (32 MB mapped, 64 MB trimmed). The peak memory is unchanged
 (the same arrays are alive at once); the outputs cannot change (only where memory comes
 from does).
+
+The setting is the process's, not the fit's: while a fit runs, every thread's allocations
+follow it (in ``pslog fuse`` the other methods' on their threads too), and after the first
+fit the thresholds stay at the fixed values above instead of glibc's own adjustment. A user
+who tunes glibc's allocator (``MALLOC_MMAP_THRESHOLD_``, ``MALLOC_TRIM_THRESHOLD_``,
+``MALLOC_TOP_PAD_``, ``GLIBC_TUNABLES``) is left alone: :func:`kept` then changes nothing;
+where ``mallopt`` refuses a value the fit runs with glibc's settings. A thread other than
+the main one allocates from its own arena, whose heaps glibc caps at 64 MB: there arrays
+larger than that are mapped afresh whatever the threshold (the gain is the main thread's
+and smaller arrays').
 """
 
 from __future__ import annotations
 
 import ctypes
 import ctypes.util
+import os
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -47,20 +58,29 @@ def _glibc():
     return _libc or None
 
 
+def _tuned_by_user() -> bool:
+    """Whether the environment tunes glibc's allocator (then :func:`kept` leaves it)."""
+    return (any(os.environ.get(k) for k in ("MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_",
+                                            "MALLOC_TOP_PAD_"))
+            or "glibc.malloc" in os.environ.get("GLIBC_TUNABLES", ""))
+
+
 @contextmanager
 def kept() -> Iterator[None]:
     """Inside: freed large arrays stay with the process for reuse (module docstring)."""
     global _depth
-    lib = _glibc()
+    lib = None if _tuned_by_user() else _glibc()
     if lib is None:
         yield
         return
     with _lock:
         _depth += 1
         if _depth == 1:
-            lib.mallopt(_M_MMAP_THRESHOLD, 2**31 - 1)
-            lib.mallopt(_M_TRIM_THRESHOLD, 2**31 - 1)
-            lib.mallopt(_M_TOP_PAD, 64 * 2**20)
+            # mallopt returns 0 for a value it refuses (older glibc: thresholds above 32 MB):
+            # the fit then runs with glibc's settings, restored below all the same
+            (lib.mallopt(_M_MMAP_THRESHOLD, 2**31 - 1)
+             and lib.mallopt(_M_TRIM_THRESHOLD, 2**31 - 1)
+             and lib.mallopt(_M_TOP_PAD, 64 * 2**20))
     try:
         yield
     finally:
