@@ -76,7 +76,7 @@ def test_turn_model_starts_at_its_own_fit():
     rig, obs, truth = _detections("turntable")
     flt = _started(rig, obs)
     Pt = np.array(flt._Pt).reshape(7, 7)
-    assert flt._nu == pytest.approx(0.1)  # 4 detections: the prior's odds, nearly
+    assert 0.1 <= flt._nu < 0.2  # 4 detections: near the prior's odds
     assert flt._xt[6] != 0.0 and 0.0 < Pt[6, 6] < 6.0 ** 2
     assert np.any(np.abs(Pt[6, :3]) > 1e-6)
     assert _started(rig, obs, BEFORE)._nu == 0.0
@@ -98,3 +98,38 @@ def test_streaming_equals_batch_with_the_fitted_starts():
 def test_negative_supported_drag_is_refused():
     with pytest.raises(FusionError, match="supported_drag_per_m"):
         FilterOptions(supported_drag_per_m=-0.1)
+
+
+def test_turn_probability_is_its_bayes_factor_against_the_pair():
+    # ν from the three fits by hand (docs/methods.md, "One fit per model"): the turn model's
+    # Laplace Bayes factor against the supported model it nests, the pair's evidence
+    # (ballistic and supported at the prior μ₀) divided out; windows of a turning ball
+    import math
+
+    rig, obs, _ = _detections("turntable", noise=0.3)
+    flt = BallFilter(rig)
+    rows = list(zip(obs.time_ns.tolist(), obs.camera.tolist(), obs.uv[:, 0].tolist(),
+                    obs.uv[:, 1].tolist(), strict=True))
+    checked = inside = 0
+    for start in range(0, len(rows) - 8, 3):
+        window = rows[start:start + 8]
+        fit, _mu, _e, turn = flt._fit_models(window)
+        ballistic, supported = flt._fit(window), flt._fit(window, ballistic=False)
+        if turn is None or not isinstance(supported, tuple):
+            continue
+        xt, Pt, nu = turn
+        ss = {k: float(np.sum(f[2] ** 2)) for k, f in (("b", ballistic), ("s", supported))
+              if isinstance(f, tuple)}
+        rt = flt._turn_fit(window, supported[0], flt._window_var(8, (
+            ballistic if ss.get("b", math.inf) <= ss["s"] else supported)[2]))[2]
+        var = flt._window_var(8, fit[2])  # the noise from the best of the three fits
+        log_b = (0.5 * (ss["s"] - float(rt @ rt)) / var
+                 + 0.5 * math.log(Pt[48] / flt._turn_var) - 0.5 * xt[6] ** 2 / flt._turn_var)
+        if "b" in ss:
+            mu0 = flt._mu0
+            log_b -= math.log(mu0 * math.exp(0.5 * (ss["s"] - ss["b"]) / var) + 1 - mu0)
+        odds = 0.1 / 0.9 * math.exp(log_b)
+        assert nu == pytest.approx(min(max(odds / (1 + odds), 0.1), 0.9), rel=1e-9)
+        checked += 1
+        inside += 0.1 < nu < 0.9
+    assert checked >= 5 and inside >= 1, (checked, inside)

@@ -1666,10 +1666,12 @@ class BallFilter:
         coordinated turn (:meth:`_turn_fit`) nests the supported model (``ω = 0``), so its
         better fit is weighed with the Occam factor of its extra parameter under the
         prior ``ω ~ N(0, turn_rate_std²)`` (Laplace's approximation of the Bayes factor,
-        Kass & Raftery 1995, §4.1): ``log B = (‖r_p‖² - ‖r_t‖²) / 2σ² + ½ log(V_ω /
-        turn_rate_std²) - ω̂² / (2 turn_rate_std²)`` against the pair's better fit, from
-        the prior odds ``ν₀ = 0.1``. Both probabilities are bounded to ``[0.1, 0.9]`` (a
-        window's evidence starts the Markov chain, it does not end it).
+        Kass & Raftery 1995, §4.1): ``log B_ts = (‖r_s‖² - ‖r_t‖²) / 2σ² + ½ log(V_ω /
+        turn_rate_std²) - ω̂² / (2 turn_rate_std²)`` against the supported fit, and the
+        pair's evidence relative to the supported fit's, ``μ₀ exp((‖r_s‖² - ‖r_b‖²) / 2σ²)
+        + 1 - μ₀`` (1 when the ballistic fit failed), divided out: ``log B = log B_ts -
+        log(that)``, from the prior odds ``ν₀ = 0.1``. Both probabilities are bounded to
+        ``[0.1, 0.9]`` (a window's evidence starts the Markov chain, it does not end it).
 
         Why: a ballistic start of a ball that is not falling (on a line, rolling,
         carried) began with gravity's curvature absorbed into its velocity (a straight line
@@ -1710,8 +1712,15 @@ class BallFilter:
             var *= scale
             Pt = [a * scale for a in Pt]
         w = xt[6]
-        log_b = (0.5 * (ssp - sst) / var + 0.5 * math.log(Pt[48] / self._turn_var)
+        # against the model it nests (supported: ω = 0), then against the pair's evidence,
+        # the ballistic and supported fits' mixture at the prior μ₀
+        sss = float(np.sum(supported[2] * supported[2]))
+        log_b = (0.5 * (sss - sst) / var + 0.5 * math.log(Pt[48] / self._turn_var)
                  - 0.5 * w * w / self._turn_var)
+        if isinstance(ballistic, tuple):
+            ssb = float(np.sum(ballistic[2] * ballistic[2]))
+            log_b -= float(np.logaddexp(math.log(mu0) + 0.5 * (sss - ssb) / var,
+                                        math.log(1.0 - mu0)))
         nu = _posterior(_TURN_START, log_b, _TURN_START, 1.0 - _TURN_START)
         return fit, mu, e, (xt, Pt, nu)
 
