@@ -201,12 +201,13 @@ def warm_up(method: str, *, candidates: bool = True, options=None) -> None:
     install, before the first real datagram: else the first datagrams of a live run wait
     ~0.3 s (loaded) to ~30 s (compiled) behind it, and the ones queued meanwhile with them.
 
-    The rally (1.5 s, the paper's rig with type-A shutters, 0.3 px noise, misses and false
-    candidates, chip kicks and bounces) starts, restarts and updates the method's state as a
-    match does; the kernels' signatures depend on dtypes, not on the rig, so the user's rig
-    need not see it. Nothing of it is kept but the note that it ran: a second call with the
-    same arguments returns at once (``pslog live`` warms up before it fixes the session
-    clock's zero and starts its cameras; :func:`pslog.live.server.serve` calls it again).
+    The rally (1.5 s, the paper's rig with the shutters the method fuses — type A unless it
+    needs instants cameras share — 0.3 px noise, misses and false candidates, chip kicks and
+    bounces) starts, restarts and updates the method's state as a match does; the kernels'
+    signatures depend on dtypes, not on the rig, so the user's rig need not see it. Nothing
+    of it is kept but the note that it ran: a second call with the same arguments returns at
+    once (``pslog live`` warms up before it fixes the session clock's zero and starts its
+    cameras; :func:`pslog.live.server.serve` calls it again).
     """
     from ..fusion import FusionOptions
 
@@ -218,7 +219,9 @@ def warm_up(method: str, *, candidates: bool = True, options=None) -> None:
     from ..simulation import SimulationOptions, simulate
     from .protocol import detection_datagrams, encode_detections
 
-    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    # the shutters the method fuses (sync and type B need instants cameras share)
+    timing = {"sync": "sync", "typeB": "typeB", "linear": "typeB"}.get(method, "typeA")
+    rig = apply_timing(builtin_rig("paper3"), timing)
     detections, _ = simulate(rig, rally_motion(seed=1, duration=1.5), 1.5,
                              SimulationOptions(noise_px=0.3, miss_rate=0.02,
                                                spurious_rate=0.05, seed=2))
