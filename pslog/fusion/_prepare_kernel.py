@@ -53,12 +53,20 @@ def rays_from_normalized(xy, R, out):
 
 
 @kernel
+def homogeneous(m, c, u, v):
+    """``M (u, v, 1)`` (3 floats) for camera c's 3 x 3 matrix ``m[c]`` (row-major, 9
+    entries): each row ``(m0 u + m1 v) + m2``, the order numpy's ``@`` of these columns
+    gives (``K⁻¹`` in :meth:`Prepared.rays_t`, ``Rᵀ K⁻¹`` in ``direction_jacobian``)."""
+    return (m[c, 0] * u + m[c, 1] * v + m[c, 2],
+            m[c, 3] * u + m[c, 4] * v + m[c, 5],
+            m[c, 6] * u + m[c, 7] * v + m[c, 8])
+
+
+@kernel
 def ray(ki, rr, c, u, v):
     """Unit world direction (3 floats) of undistorted pixel (u, v) of camera c:
     ``Rᵀ K⁻¹ (u, v, 1)`` normalised (:meth:`Prepared.rays_t`, operation for operation)."""
-    x = ki[c, 0] * u + ki[c, 1] * v + ki[c, 2]
-    y = ki[c, 3] * u + ki[c, 4] * v + ki[c, 5]
-    z = ki[c, 6] * u + ki[c, 7] * v + ki[c, 8]
+    x, y, z = homogeneous(ki, c, u, v)
     o0 = rr[c, 0] * x
     o1 = rr[c, 1] * x
     o2 = rr[c, 2] * x
@@ -93,15 +101,7 @@ def observed_rays_and_jacobians(camera, uv, ki, rr, rtki, rays, jac):
         u, v = uv[i, 0], uv[i, 1]
         rays[i, 0], rays[i, 1], rays[i, 2] = ray(ki, rr, c, u, v)  # rays_t
         # direction_jacobian: r = M (u, v, 1), M = Rᵀ K⁻¹
-        r0 = rtki[c, 0] * u
-        r0 += rtki[c, 1] * v
-        r0 += rtki[c, 2]
-        r1 = rtki[c, 3] * u
-        r1 += rtki[c, 4] * v
-        r1 += rtki[c, 5]
-        r2 = rtki[c, 6] * u
-        r2 += rtki[c, 7] * v
-        r2 += rtki[c, 8]
+        r0, r1, r2 = homogeneous(rtki, c, u, v)
         size = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
         d0, d1, d2 = r0 / size, r1 / size, r2 / size
         for j in range(2):

@@ -29,6 +29,7 @@ import numpy as np
 
 from .._jit import kernel
 from ..motion import G as _G
+from ._prepare_kernel import homogeneous as _homogeneous
 from ._prepare_kernel import ray as _ray
 from .innovation import KINK_SIGMAS as _KINK_SIGMAS
 
@@ -577,15 +578,7 @@ def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_n
             # J_snapped = wᵀ dd/duv of the partner's ray at the snapped pixel (direction_jacobian_
             # along), times s2
             us0, us1 = ff[pp, at, 18], ff[pp, at, 19]
-            rv0 = rtki[partner, 0] * us0
-            rv0 += rtki[partner, 1] * us1
-            rv0 += rtki[partner, 2]
-            rv1 = rtki[partner, 3] * us0
-            rv1 += rtki[partner, 4] * us1
-            rv1 += rtki[partner, 5]
-            rv2 = rtki[partner, 6] * us0
-            rv2 += rtki[partner, 7] * us1
-            rv2 += rtki[partner, 8]
+            rv0, rv1, rv2 = _homogeneous(rtki, partner, us0, us1)
             norm2 = rv0 * rv0 + rv1 * rv1 + rv2 * rv2
             vm0 = w0 * rtki[partner, 0]
             vm0 += w1 * rtki[partner, 3]
