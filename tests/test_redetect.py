@@ -158,15 +158,20 @@ def _recording_detect_chunks(src, chunks, cameras, hsv, max_candidates, compiled
         hsv, max_candidates, compiled=compiled))
 
 
+def _copy_and_its_image_chunk(path: Path):
+    """A copy of the sample at ``path`` and the chunk index of its third image chunk."""
+    path.write_bytes(SAMPLE.read_bytes())
+    with open(path, "rb") as f:
+        summary = make_reader(f).get_summary()
+    images = {cid for cid, c in summary.channels.items() if c.topic.endswith("/image")}
+    return sorted((c for c in summary.chunk_indexes if images & c.message_index_offsets.keys()),
+                  key=lambda c: c.chunk_start_offset)[2]
+
+
 def _damaged_copy(tmp_path: Path) -> Path:
     """The sample with 64 bytes zeroed in the middle of an image chunk."""
     bad = tmp_path / "bad.mcap"
-    bad.write_bytes(SAMPLE.read_bytes())
-    with open(bad, "rb") as f:
-        summary = make_reader(f).get_summary()
-    images = {cid for cid, c in summary.channels.items() if c.topic.endswith("/image")}
-    chunk = sorted((c for c in summary.chunk_indexes if images & c.message_index_offsets.keys()),
-                   key=lambda c: c.chunk_start_offset)[2]
+    chunk = _copy_and_its_image_chunk(bad)
     with open(bad, "r+b") as f:
         f.seek(chunk.chunk_start_offset + chunk.chunk_length // 2)
         f.write(bytes(64))
@@ -305,12 +310,7 @@ def _crc_damaged_copy(tmp_path: Path) -> Path:
     """The sample with the stored CRC of an image chunk changed: it decompresses, and only
     its CRC says it is damaged."""
     bad = tmp_path / "crc.mcap"
-    bad.write_bytes(SAMPLE.read_bytes())
-    with open(bad, "rb") as f:
-        summary = make_reader(f).get_summary()
-    images = {cid for cid, c in summary.channels.items() if c.topic.endswith("/image")}
-    chunk = sorted((c for c in summary.chunk_indexes if images & c.message_index_offsets.keys()),
-                   key=lambda c: c.chunk_start_offset)[2]
+    chunk = _copy_and_its_image_chunk(bad)
     with open(bad, "r+b") as f:
         f.seek(chunk.chunk_start_offset + 9 + 24)  # after start, end, uncompressed size
         crc = f.read(1)
