@@ -60,25 +60,32 @@ def _points_case(seed=0, r=400, m=40):
     return first, N, M, v, m
 
 
+def _reference_normal(G, B, M, v, m):
+    """The points' normal equations from the sparse products, laid into a random band and
+    right-hand side: ``(upper, ab0, rhs0, ab, rhs)`` (``upper``: M's 6 distinct entries;
+    ``ab0``, ``rhs0``: the band and vector before; ``ab``, ``rhs``: after)."""
+    upper = np.take(M.reshape(-1, 9), [0, 1, 2, 4, 5, 8], axis=1)
+    # G @ upper, expanded to 3 x 3 blocks and laid into the band
+    blocks = np.take(G @ upper, [0, 1, 2, 1, 3, 4, 2, 4, 5], axis=1).reshape(m + 3, 4, 3, 3)
+    ab0 = np.random.default_rng(2).normal(size=(12, 3 * m))
+    rhs0 = np.random.default_rng(3).normal(size=3 * m)
+    ab = ab0.copy()
+    for k in range(4):
+        for d in range(3):
+            for e in range(3):
+                off = 3 * k + e - d
+                if off >= 0:
+                    ab[11 - off, 3 * k + e::3][:m - k] += blocks[:m - k, k, d, e]
+    return upper, ab0, rhs0, ab, rhs0 + (B.T.tocsr() @ v).reshape(-1)
+
+
 def test_points_passes_are_the_sparse_products_bit_for_bit():
     first, N, M, v, m = _points_case()
     G, B = _sparse_points(first, N, m)
     points = _normal.Points(first, N, m)
     control = np.random.default_rng(1).normal(size=(m, 3))
     assert_array_equal(points.positions(control), B @ control)
-    # normal equations: G @ upper, expanded to 3 x 3 blocks and laid into the band
-    upper = np.take(M.reshape(-1, 9), [0, 1, 2, 4, 5, 8], axis=1)
-    blocks = np.take(G @ upper, [0, 1, 2, 1, 3, 4, 2, 4, 5], axis=1).reshape(m + 3, 4, 3, 3)
-    ab0 = np.random.default_rng(2).normal(size=(12, 3 * m))
-    rhs0 = np.random.default_rng(3).normal(size=3 * m)
-    ref_ab = ab0.copy()
-    for k in range(4):
-        for d in range(3):
-            for e in range(3):
-                off = 3 * k + e - d
-                if off >= 0:
-                    ref_ab[11 - off, 3 * k + e::3][:m - k] += blocks[:m - k, k, d, e]
-    ref_rhs = rhs0 + (B.T.tocsr() @ v).reshape(-1)
+    _, ab0, rhs0, ref_ab, ref_rhs = _reference_normal(G, B, M, v, m)
     ab, rhs = points.normal(M, v, ab0.copy(), rhs0.copy())
     assert_array_equal(ab, ref_ab)
     assert_array_equal(rhs, ref_rhs)
@@ -401,18 +408,7 @@ def test_points_normal_streamed_or_kept_is_the_sparse_product(order):
         keep = (first < 20) | (first > 40)
         first, N, M, v = first[keep], N[keep], M[keep], v[keep]
     G, B = _sparse_points(first, N, m)
-    upper = np.take(M.reshape(-1, 9), [0, 1, 2, 4, 5, 8], axis=1)
-    blocks = np.take(G @ upper, [0, 1, 2, 1, 3, 4, 2, 4, 5], axis=1).reshape(m + 3, 4, 3, 3)
-    ab0 = np.random.default_rng(2).normal(size=(12, 3 * m))
-    rhs0 = np.random.default_rng(3).normal(size=3 * m)
-    ref_ab = ab0.copy()
-    for k in range(4):
-        for d in range(3):
-            for e in range(3):
-                off = 3 * k + e - d
-                if off >= 0:
-                    ref_ab[11 - off, 3 * k + e::3][:m - k] += blocks[:m - k, k, d, e]
-    ref_rhs = rhs0 + (B.T.tocsr() @ v).reshape(-1)
+    upper, ab0, rhs0, ref_ab, ref_rhs = _reference_normal(G, B, M, v, m)
     for fn in (_kernels.points_normal, _kernels.points_normal.py_func):
         ab, rhs = ab0.copy(), rhs0.copy()
         fn(first, N, upper, v, m, ab, rhs)
