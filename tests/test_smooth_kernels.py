@@ -414,3 +414,75 @@ def test_points_normal_streamed_or_kept_is_the_sparse_product(order):
         fn(first, N, upper, v, m, ab, rhs)
         assert_array_equal(ab, ref_ab)
         assert_array_equal(rhs, ref_rhs)
+
+
+def _window_solve_by_columns(H, rhs, lo, hi):
+    """The break windows' solve one entry at a time (the form window_solve replaced: each
+    entry's own chain over ascending k; the reference its loop order must match bit for
+    bit)."""
+    B, n, _ = H.shape
+    bw = 11
+    x, cov, ok = np.zeros((B, n)), np.zeros((B, n, hi - lo)), np.ones(B, dtype=bool)
+    ncol = hi - lo + 1
+    for b in range(B):
+        L = np.zeros((n, n))
+        Y, Z = np.zeros((n, ncol)), np.zeros((n, ncol))
+        good = True
+        for j in range(n):
+            s = H[b, j, j]
+            for k in range(max(0, j - bw), j):
+                s -= L[j, k] * L[j, k]
+            if not s > 0.0:
+                good = False
+                break
+            d = np.sqrt(s)
+            L[j, j] = d
+            for i in range(j + 1, min(n, j + bw + 1)):
+                t = H[b, i, j]
+                for k in range(max(0, i - bw), j):
+                    t -= L[i, k] * L[j, k]
+                L[i, j] = t / d
+        if not good:
+            ok[b] = False
+            continue
+        for col in range(ncol):
+            start = 0 if col == 0 else lo + col - 1
+            for i in range(start, n):
+                t = rhs[b, i] if col == 0 else (1.0 if i == start else 0.0)
+                for k in range(max(start, i - bw), i):
+                    t -= L[i, k] * Y[k, col]
+                Y[i, col] = t / L[i, i]
+            for i in range(n - 1, (-1 if col == 0 else lo - 1), -1):
+                t = Y[i, col]
+                for k in range(i + 1, min(n, i + bw + 1)):
+                    t -= L[k, i] * Z[k, col]
+                Z[i, col] = t / L[i, i]
+        x[b] = Z[:, 0]
+        cov[b, lo:] = Z[lo:, 1:]
+    return x, cov, ok
+
+
+@pytest.mark.parametrize("lo, hi", [(0, 45), (9, 36), (21, 39), (27, 45)])
+def test_window_solve_is_the_column_at_a_time_solve_bit_for_bit(lo, hi):
+    """window_solve runs k outside and the rows (factor) or columns (substitutions) inside:
+    every entry still sums the same terms in the same order as one entry at a time."""
+    local, t, J, z, w, index, valid, centre, h, _ = _window_case(8)
+    base = _breaks._Base(local, t, J, z, w, index, valid, centre, h)
+    v = np.ascontiguousarray(np.einsum("bwai,bwa,bw->bwi", J[index], z[index],
+                                       np.where(base.s_sorted < 1e5, w[index], 0.0)))
+    H, rhs = _kernels.window_normal(local.P, local.rhs, base.first, base.N, base.M, v,
+                                    base.s_sorted < 1e5)
+    # a random symmetric positive definite banded batch too (not a spline's pattern)
+    rng = np.random.default_rng(lo + hi)
+    n = H.shape[1]
+    A = rng.normal(size=(4, n, n)) * (np.abs(np.subtract.outer(np.arange(n), np.arange(n)))
+                                      <= 5)
+    R = A @ np.swapaxes(A, 1, 2) + 0.1 * np.eye(n)
+    R[:, np.arange(n - 1), np.arange(1, n)] *= 1 + 1e-9  # not exactly symmetric: the lower
+    H = np.concatenate([H, R])                            # triangle is the one read
+    rhs = np.concatenate([rhs, rng.normal(size=(4, n))])
+    H[2, n // 3, n // 3] = -1.0  # a window that fails
+    for got, want in zip(_kernels.window_solve(H, rhs, lo, hi),
+                         _window_solve_by_columns(H, rhs, lo, hi), strict=True):
+        assert_array_equal(got, want)
+    assert not _kernels.window_solve(H, rhs, lo, hi)[2][2]

@@ -350,9 +350,16 @@ def window_solve(H: np.ndarray, rhs: np.ndarray, lo: int, hi: int
     positive definite and banded (every term touches 4 consecutive control points: 11
     super-diagonals): the minimum ``H⁻¹ rhs`` (B, n) and the rows and columns ``lo..hi-1``
     of ``H⁻¹`` (B, n, hi - lo; rows before ``lo`` are 0: the break test reads none), by a
-    banded Cholesky factorisation ``H = L Lᵀ`` and substitutions that start at each unit
-    column's first non-zero (Golub & Van Loan, *Matrix Computations*,
-    4th ed., §4.3.5-4.3.6).
+    banded Cholesky factorisation ``H = L Lᵀ`` (left-looking, from the lower triangle of
+    ``H``) and substitutions that start at each unit column's first non-zero (Golub & Van
+    Loan, *Matrix Computations*, 4th ed., §4.3.5-4.3.6).
+
+    Every entry is the sum of the same terms in the same order as a column-at-a-time form
+    (``L[i, j] = (H[i, j] - Σ_k L[i, k] L[j, k]) / L[j, j]`` over ascending ``k``; each
+    substitution likewise), the same bits; the loops run ``k`` outside and the independent
+    rows or columns inside, so those chains overlap (and vectorise) instead of each waiting
+    on its previous term. ``U = Lᵀ`` is stored: the factorisation's inner loop then reads
+    a row.
 
     Returns
     -------
@@ -364,56 +371,63 @@ def window_solve(H: np.ndarray, rhs: np.ndarray, lo: int, hi: int
     x = np.zeros((B, n))
     cov = np.zeros((B, n, hi - lo))
     ok = np.ones(B, dtype=np.bool_)
-    L = np.zeros((n, n))
+    U = np.zeros((n, n))  # U[k, i] = L[i, k]
     ncol = hi - lo + 1
     Y = np.zeros((n, ncol))
     Z = np.zeros((n, ncol))
+    T = np.zeros(max(ncol, bw + 1))
     for b in range(B):
         Hb = H[b]
         good = True
         for j in range(n):
-            k0 = max(0, j - bw)
             s = Hb[j, j]
-            for k in range(k0, j):
-                s -= L[j, k] * L[j, k]
+            for k in range(max(0, j - bw), j):
+                s -= U[k, j] * U[k, j]
             if not s > 0.0:
                 good = False
                 break
             d = np.sqrt(s)
-            L[j, j] = d
-            for i in range(j + 1, min(n, j + bw + 1)):
-                t = Hb[i, j]
-                for k in range(max(0, i - bw), j):
-                    t -= L[i, k] * L[j, k]
-                L[i, j] = t / d
+            U[j, j] = d
+            iend = min(n, j + bw + 1)
+            for i in range(j + 1, iend):
+                T[i - j] = Hb[i, j]
+            # L[i, j] for the rows below: each over k >= i - bw, ascending
+            for k in range(max(0, j + 1 - bw), j):
+                ukj = U[k, j]
+                for i in range(j + 1, min(iend, k + bw + 1)):
+                    T[i - j] -= U[k, i] * ukj
+            for i in range(j + 1, iend):
+                U[j, i] = T[i - j] / d
         if not good:
             ok[b] = False
             continue
-        # the right-hand side (column 0) and the unit columns lo..hi-1 (columns 1..) side by
-        # side, row by row: each column's sums run in the order a column-at-a-time solve
-        # takes (the same bits), but the columns' chains are independent, so the processor
-        # overlaps them instead of waiting on one column's previous row
+        # forward: the right-hand side (column 0) and the unit columns lo..hi-1 (columns
+        # 1.., column c's first non-zero at row lo + c - 1) side by side; row k adds to the
+        # columns that have started by row k
         for i in range(n):
-            lii = L[i, i]
+            T[0] = rhs[b, i]
+            for col in range(1, ncol):
+                T[col] = 1.0 if i == lo + col - 1 else 0.0
+            for k in range(max(0, i - bw), i):
+                lik = U[k, i]
+                for col in range(min(ncol, max(1, k - lo + 2))):
+                    T[col] -= lik * Y[k, col]
+            lii = U[i, i]
             for col in range(ncol):
-                start = 0 if col == 0 else lo + col - 1
-                if i < start:
-                    Y[i, col] = 0.0
-                    continue
-                t = rhs[b, i] if col == 0 else (1.0 if i == start else 0.0)
-                for k in range(max(start, i - bw), i):
-                    t -= L[i, k] * Y[k, col]
-                Y[i, col] = t / lii
-        # the minimum in full; a unit column down to row lo only (the gains read the
+                Y[i, col] = T[col] / lii if col == 0 or i >= lo + col - 1 else 0.0
+        # back: the minimum in full; a unit column down to row lo only (the gains read the
         # rows lo..hi-1 of these columns: the rows below them are left 0)
         for i in range(n - 1, -1, -1):
-            lii = L[i, i]
-            kend = min(n, i + bw + 1)
-            for col in range(ncol if i >= lo else 1):
-                t = Y[i, col]
-                for k in range(i + 1, kend):
-                    t -= L[k, i] * Z[k, col]
-                Z[i, col] = t / lii
+            nc = ncol if i >= lo else 1
+            for col in range(nc):
+                T[col] = Y[i, col]
+            for k in range(i + 1, min(n, i + bw + 1)):
+                lki = U[i, k]
+                for col in range(nc):
+                    T[col] -= lki * Z[k, col]
+            lii = U[i, i]
+            for col in range(nc):
+                Z[i, col] = T[col] / lii
         for i in range(n):
             x[b, i] = Z[i, 0]
         for i in range(lo, n):
