@@ -222,62 +222,34 @@ def _new_splines(a: np.ndarray) -> list:
 def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, prior
            ) -> np.ndarray:
     """Cost decrease (B,) of a triple knot at ``tau`` (B,) in window ``which`` (B,) of
-    ``base``, whose uniform knots are ``centre + k·h`` (module docstring)."""
+    ``base``, whose uniform knots are ``centre + k·h`` (module docstring).
+
+    The per-trial terms are compiled passes (:mod:`pslog.estimation._kernels`:
+    ``trial_splines``, ``gains_data``, ``trial_gather``, ``trial_blocks``: the operations of
+    :func:`_new_splines`, :func:`_horner` and the numpy forms, in order); the small matrix
+    products and the 9 x 9 solves stay numpy's (BLAS and LAPACK: their sums' order is the
+    library's)."""
+    from ._kernels import gains_data, trial_blocks, trial_gather, trial_splines
+
     local, h = base.local, base.spacing
     K = local.K
-    B = len(tau)
     s = (tau - centre[which]) / h
     j = np.floor(s)
-    jm, jp = j - 1, j + 1
-    pieces = _new_splines(s - j)  # in spacings from u_j
+    a = s - j  # in spacings from u_j
     q0 = (j + K - 1).astype(np.int64)  # the six base control points over spans j-1..j+1
-
-    def spread(first, N):
-        """(B, P, 4) basis values at control points first..first+3 onto q0..q0+5."""
-        pos = np.clip(first - q0[:, None], 0, 2)
-        out = np.zeros((*N.shape[:2], 6))
-        flat = (6 * np.arange(pos.size).reshape(pos.shape) + pos)[..., None] + np.arange(4)
-        out.reshape(-1)[flat.reshape(-1)] = N.reshape(-1)
-        return out
-
+    both = np.stack([a, 1 - a])  # the first new B-spline's ``a`` and the mirrored third's
+    lo, hi, coef, nodes, fn, fw, first, Nd = trial_splines(
+        a, both**3, both**-3, s, j, K, h, h**2, h**3, _GAUSS, prior.q_accel, prior.q_jerk)
     # data: the window's detections on the three spans [j-1, j+2) the new B-splines live on:
     # Σ_w (f fᵀ) ⊗ M_w, Σ_w (old fᵀ) ⊗ M_w (old: the base's B-splines q0..q0+5) and Σ_w f uᵀ,
     # one compiled pass over each window's detections
-    from ._kernels import gains_data
-
-    lo = np.empty((B, 3, 2))
-    hi = np.empty((B, 3, 2))
-    coef = np.empty((B, 3, 2, 4))
-    for e, spline in enumerate(pieces):
-        for k, (a, b, c) in enumerate(spline):
-            lo[:, e, k], hi[:, e, k] = a, b
-            for d in range(4):
-                coef[:, e, k, d] = c[d]
     Hyy, Hxy, g = gains_data(base.s_sorted, base.first, base.N, base.M, base.u,
                              np.ascontiguousarray(which, dtype=np.int64), j, q0, lo, hi, coef)
     m = local.m
 
-    # prior: four sub-spans [j-1, j], [j, τ], [τ, j+1], [j+1, j+2]
-    lo = np.stack([jm, j, s, jp], 1)
-    hi = np.stack([j, s, jp, jp + 1], 1)
-    half, mid = (hi - lo) / 2, (hi + lo) / 2  # (B, 4), spacings
-    nodes = np.concatenate([mid - _GAUSS * half, mid + _GAUSS * half, mid], axis=1)  # (B, 12)
-    # each new B-spline is one polynomial piece on each of its two sub-spans
-    fn = np.zeros((B, 3, 12))
-    xn = nodes - j[:, None]
-    for e, spline in enumerate(pieces):
-        for k, (_, _, c) in enumerate(spline):
-            sub = np.array([0, 4, 8]) + e + k  # the sub-span's two Gauss nodes and midpoint
-            fn[:, e, sub[:2]] = _horner(c, xn[:, sub[:2]], 2) / h**2
-            fn[:, e, sub[2:]] = _horner(c, xn[:, sub[2:]], 3) / h**3
-    # the base's B-splines at the nodes: uniform ones (closed form), but near the clamped ends
-    span = np.floor(nodes)
-    u = nodes - span
-    first = (span + K).astype(np.int64)  # (B, 12)
-    Nd = np.empty((B, 12, 4))  # (B, 12, 4), per second^d
-    ua = u[:, :8]
-    Nd[:, :8] = np.stack([1 - ua, 3 * ua - 2, 1 - 3 * ua, ua], axis=-1) / h**2
-    Nd[:, 8:] = np.array([-1.0, 3.0, -3.0, 1.0]) / h**3
+    # prior: four sub-spans [j-1, j], [j, τ], [τ, j+1], [j+1, j+2], each new B-spline one
+    # polynomial piece on each of its two; the base's B-splines at the nodes are uniform
+    # ones (closed form), but near the clamped ends
     clamped = (first < 3) | (first > 2 * K - 4)
     if np.any(clamped):
         f_c, N_c = basis(local.knots, nodes[clamped], 3)
@@ -285,35 +257,22 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
         Nd[clamped] = np.where(_ACCEL[np.nonzero(clamped)[1]][:, None], N_c[:, 2] / h**2,
                                N_c[:, 3] / h**3)
     # the nodes' B-splines on the six base control points q0..q0+5 of the three spans
-    Nd6 = spread(first, Nd)  # (B, 12, 6)
-    x0 = np.take(base.x0.reshape(-1, 3), (which * m + q0)[:, None] + np.arange(6), axis=0)
+    Nd6, x0 = trial_gather(first, Nd, q0, base.x0.reshape(-1, 3), which * m + q0)
     p0 = Nd6 @ x0  # p'' or jerk, (B, 12, 3)
     p0[:, :8] -= np.asarray(prior.gravity, dtype=np.float64)  # deviation from gravity
-    wq = h * np.concatenate([half / prior.q_accel, half / prior.q_accel,
-                             2 * half / prior.q_jerk], axis=1)  # (B, 12)
-    fw = fn * wq[:, None, :]
     pyy = fw @ np.swapaxes(fn, 1, 2)  # (B, 3, 3)
     pxy = np.swapaxes(Nd6, 1, 2) @ np.swapaxes(fw, 1, 2)  # (B, 6, 3)
-    H5 = Hyy.reshape(B, 3, 3, 3, 3)
-    X5 = Hxy.reshape(B, 6, 3, 3, 3)
-    for i in range(3):  # ⊗ I₃
-        H5[:, :, i, :, i] += pyy
-        X5[:, :, i, :, i] += pxy
-    g -= fw @ p0
-
-    # the 18 x 18 diagonal blocks of each window's inverse, as a view of its columns
+    # ⊗ I₃ into the data terms, and the 18 x 18 diagonal block of each window's inverse
     col0 = base.col0
-    cols = base.cov[:, col0:]
-    s0, s1, s2 = cols.strides
-    blocks = np.lib.stride_tricks.as_strided(cols, (len(cols), cols.shape[2] - 17, 18, 18),
-                                             (s0, s1 + s2, s1, s2), writeable=False)
     k = 3 * q0 - col0
-    if np.any((k < 0) | (k > cols.shape[2] - 18)):
+    if np.any((k < 0) | (k > base.cov.shape[2] - 18)):
         raise AssertionError("trial instant outside the spans its base was solved for")
-    cov = blocks[which, k]  # (B, 18, 18)
+    cov = trial_blocks(Hyy, Hxy, pyy, pxy, base.cov, np.ascontiguousarray(which, np.int64),
+                       3 * q0, k)
+    g -= fw @ p0
     S = Hyy - np.swapaxes(Hxy, 1, 2) @ cov @ Hxy
     S = (S + np.swapaxes(S, 1, 2)) / 2
-    g = g.reshape(B, 9)
+    g = g.reshape(len(tau), 9)
     load = 1e-12 * np.max(np.abs(np.diagonal(S, axis1=1, axis2=2)), axis=1) + 1e-300
     S[:, np.arange(9), np.arange(9)] += load[:, None]
     gain = np.einsum("bk,bk->b", g, np.linalg.solve(S, g[..., None])[..., 0])

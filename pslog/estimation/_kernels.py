@@ -168,6 +168,9 @@ def points_normal(first: np.ndarray, N: np.ndarray, upper: np.ndarray, v: np.nda
             ordered = False
             break
     size = 8 if ordered else m + 3
+    # a control point's slot: its index modulo 8 in the ring (a mask: a division per term
+    # cost more than the sums), its index when every one is kept
+    mask = 7 if ordered else -1
     blocks = np.zeros((size, 4, 6))
     rv = np.zeros((size, 3))
     done = 0  # control points below this one are in ab and rhs
@@ -175,14 +178,14 @@ def points_normal(first: np.ndarray, N: np.ndarray, upper: np.ndarray, v: np.nda
         f = first[i]
         if ordered:
             while done < f:
-                _fold_row(blocks, rv, done, done % size, m, ab, rhs)
+                _fold_row(blocks, rv, done, done & mask, m, ab, rhs)
                 done += 1
         n0, n1, n2, n3 = N[i, 0], N[i, 1], N[i, 2], N[i, 3]
         u0, u1, u2 = upper[i, 0], upper[i, 1], upper[i, 2]
         u3, u4, u5 = upper[i, 3], upper[i, 4], upper[i, 5]
         for a in range(4):
             na = n0 if a == 0 else (n1 if a == 1 else (n2 if a == 2 else n3))
-            row = blocks[(f + a) % size]
+            row = blocks[(f + a) & mask]
             for k in range(4 - a):
                 c = a + k
                 nn = na * (n0 if c == 0 else (n1 if c == 1 else (n2 if c == 2 else n3)))
@@ -196,12 +199,12 @@ def points_normal(first: np.ndarray, N: np.ndarray, upper: np.ndarray, v: np.nda
         v0, v1, v2 = v[i, 0], v[i, 1], v[i, 2]
         for a in range(4):
             na = n0 if a == 0 else (n1 if a == 1 else (n2 if a == 2 else n3))
-            rr = rv[(f + a) % size]
+            rr = rv[(f + a) & mask]
             rr[0] += na * v0
             rr[1] += na * v1
             rr[2] += na * v2
     while done < m:
-        _fold_row(blocks, rv, done, done % size, m, ab, rhs)
+        _fold_row(blocks, rv, done, done & mask, m, ab, rhs)
         done += 1
 
 
@@ -280,6 +283,8 @@ def gains_data(s_sorted: np.ndarray, first: np.ndarray, N: np.ndarray, M: np.nda
     g = np.zeros((B, 3, 3))
     f = np.zeros(3)
     old = np.zeros(6)
+    ff = np.zeros((3, 3))  # f_e f_f
+    of = np.zeros((6, 3))  # b_c f_e
     for b in range(B):
         wb = which[b]
         jb = j[b]
@@ -304,13 +309,24 @@ def gains_data(s_sorted: np.ndarray, first: np.ndarray, N: np.ndarray, M: np.nda
             for e in range(3):
                 for i in range(3):
                     g[b, e, i] += f[e] * u[wb, w, i]
-                for i in range(3):
-                    for k in range(3):
-                        mik = M[wb, w, i, k]
-                        for e2 in range(3):
-                            Hyy[b, 3 * e + i, 3 * e2 + k] += (f[e] * f[e2]) * mik
-                        for c6 in range(6):
-                            Hxy[b, 3 * c6 + i, 3 * e + k] += (old[c6] * f[e]) * mik
+                for e2 in range(3):
+                    ff[e, e2] = f[e] * f[e2]
+                for c6 in range(6):
+                    of[c6, e] = old[c6] * f[e]
+            # each entry takes this detection's one term; a row's entries side by side
+            for i in range(3):
+                for e in range(3):
+                    row = Hyy[b, 3 * e + i]
+                    for e2 in range(3):
+                        fe = ff[e, e2]
+                        for k in range(3):
+                            row[3 * e2 + k] += fe * M[wb, w, i, k]
+                for c6 in range(6):
+                    row = Hxy[b, 3 * c6 + i]
+                    for e in range(3):
+                        oe = of[c6, e]
+                        for k in range(3):
+                            row[3 * e + k] += oe * M[wb, w, i, k]
     return Hyy, Hxy, g
 
 
@@ -569,3 +585,295 @@ def window_positions(first: np.ndarray, N: np.ndarray, x: np.ndarray) -> np.ndar
                     acc += N[b, w, a] * x[b, f + a, d]
                 out[b, w, d] = acc
     return out
+
+
+@kernel
+def band_cholesky(ab: np.ndarray) -> int:
+    """Upper banded Cholesky factor ``U`` (``A = Uᵀ U``) of ``ab`` (kd + 1, n) in place
+    (upper banded storage, ``ab[kd + i - j, j] = A[i, j]``): LAPACK's ``dpbtf2`` (the
+    unblocked form ``dpbtrf`` runs for a band this narrow), step for step — the row's
+    entries beyond the diagonal scaled by the pivot's reciprocal (``dscal``), then the
+    rank-one update of the trailing block one column at a time (``dsyr``: each entry
+    ``a + (-x_c) x_r``, no fused multiply-add), so the same bits as scipy's
+    ``cholesky_banded``. Golub & Van Loan, *Matrix Computations*, 4th ed., §4.3.5.
+
+    Returns
+    -------
+    info : int, 0, or ``j + 1`` where pivot ``j`` was not positive (``ab`` then holds the
+    partial factor, as LAPACK's)
+    """
+    kd = ab.shape[0] - 1
+    n = ab.shape[1]
+    x = np.zeros(max(kd, 1))
+    for j in range(n):
+        ajj = ab[kd, j]
+        if not ajj > 0.0:
+            return j + 1
+        ajj = np.sqrt(ajj)
+        ab[kd, j] = ajj
+        kn = min(kd, n - j - 1)
+        inv = 1.0 / ajj
+        for p in range(kn):
+            v = ab[kd - 1 - p, j + 1 + p] * inv
+            ab[kd - 1 - p, j + 1 + p] = v
+            x[p] = v
+        for c in range(kn):
+            da = -1.0 * x[c]
+            col = j + 1 + c
+            for r in range(c + 1):
+                ab[kd + r - c, col] = ab[kd + r - c, col] + da * x[r]
+    return 0
+
+
+@kernel
+def band_solve(U: np.ndarray, b: np.ndarray) -> None:
+    """Solve ``Uᵀ U x = b`` in place for each row of ``b`` (r, n) (a right-hand side per
+    row), ``U`` (kd + 1, n) from :func:`band_cholesky`: LAPACK's ``dpbtrs`` with OpenBLAS's
+    ``dtbsv``, step for step — the forward solve ``Uᵀ y = b`` subtracts each row's dot
+    product (summed from 0 in order) and divides by the pivot; the back solve ``U x = y``
+    divides by the pivot, then subtracts ``x_i`` times column ``i`` from the rows above
+    (``daxpy``): the same bits as scipy's ``cho_solve_banded``."""
+    kd = U.shape[0] - 1
+    n = U.shape[1]
+    for q in range(b.shape[0]):
+        x = b[q]
+        for i in range(n):
+            length = min(i, kd)
+            if length > 0:
+                dot = 0.0
+                for p in range(length):
+                    dot += x[i - length + p] * U[kd - length + p, i]
+                x[i] -= dot
+            x[i] /= U[kd, i]
+        for i in range(n - 1, -1, -1):
+            x[i] /= U[kd, i]
+            da = -x[i]
+            length = min(i, kd)
+            for p in range(length):
+                x[i - length + p] += da * U[kd - length + p, i]
+
+
+@kernel
+def trial_splines(a: np.ndarray, both3: np.ndarray, cube: np.ndarray, s: np.ndarray,
+                  j: np.ndarray, K: int, h: float, h2: float, h3: float, gauss: float,
+                  q_accel: float, q_jerk: float):
+    """The per-trial terms of the break test (:func:`pslog.estimation._breaks._gains`) for B
+    trial instants ``s = j + a`` (spacings from the window's centre): the three new
+    B-splines' polynomial pieces (:func:`pslog.estimation._breaks._new_splines`, whose
+    operations this repeats in order: the same bits), their p'' and jerk at the prior's 12
+    nodes of the four sub-spans around the instant, weighted, and the base's uniform
+    B-splines there.
+
+    Parameters
+    ----------
+    a : (B,) float64, the instant's fraction of its span; both3, cube : (2, B), ``b**3`` and
+        ``b**-3`` of ``b = (a, 1 - a)`` (numpy's power, passed in: its SIMD ``pow`` is not
+        libm's); s, j : (B,) the instant and its span, in spacings; K : the window's half
+        width in spacings; h, h2, h3 : the spacing (s) and its square and cube (as numpy
+        computed them); gauss : ``1/√3``; q_accel, q_jerk : the prior's spectral densities
+
+    Returns
+    -------
+    lo, hi : (B, 3, 2) each new B-spline's two pieces' bounds; coef : (B, 3, 2, 4) their
+    power-basis coefficients; nodes : (B, 12) the prior's nodes (two Gauss nodes of each
+    sub-span, then its midpoint); fn : (B, 3, 12) the new B-splines' p'' (Gauss nodes,
+    per s²) and jerk (midpoints, per s³); fw : (B, 3, 12) ``fn`` times each node's
+    quadrature weight over its prior density; first : (B, 12) int64, Nd : (B, 12, 4) the
+    base's uniform B-splines there (the clamped ones near the window's ends are not
+    corrected here)
+    """
+    B = len(a)
+    lo = np.empty((B, 3, 2))
+    hi = np.empty((B, 3, 2))
+    coef = np.empty((B, 3, 2, 4))
+    nodes = np.empty((B, 12))
+    fn = np.zeros((B, 3, 12))
+    fw = np.empty((B, 3, 12))
+    first = np.empty((B, 12), dtype=np.int64)
+    Nd = np.empty((B, 12, 4))
+    left = np.empty((2, 4))
+    right = np.empty((2, 4))
+    half = np.empty(4)
+    mid = np.empty(4)
+    for b in range(B):
+        for row in range(2):
+            av = a[b] if row == 0 else 1 - a[b]
+            ap1 = av + 1
+            sq = ap1 * ap1
+            # (x + 1)³ / (a + 1)²
+            left[row, 0] = 1.0 / sq
+            left[row, 1] = 3.0 / sq
+            left[row, 2] = 3.0 / sq
+            left[row, 3] = 1.0 / sq
+            # the power-basis products of _new_splines' _mul, term by term from 0.0
+            p0 = 0.0 + 1.0 * av
+            p1 = (0.0 + 1.0 * -1.0) + 2.0 * av
+            p2 = (0.0 + 2.0 * -1.0) + 1.0 * av
+            p3 = 0.0 + 1.0 * -1.0
+            ud0 = 0.0 + 1.0 * av
+            ud1 = (0.0 + 1.0 * -1.0) + 1.0 * av
+            ud2 = 0.0 + 1.0 * -1.0
+            q0 = 0.0 + ud0 * 0.0
+            q1 = (0.0 + ud0 * 1.0) + ud1 * 0.0
+            q2 = (0.0 + ud1 * 1.0) + ud2 * 0.0
+            q3 = 0.0 + ud2 * 1.0
+            xx0 = 0.0 + 0.0 * 0.0
+            xx1 = (0.0 + 0.0 * 1.0) + 1.0 * 0.0
+            xx2 = 0.0 + 1.0 * 1.0
+            r0 = 0.0 + av * xx0
+            r1 = (0.0 + av * xx1) + -1.0 * xx0
+            r2 = (0.0 + av * xx2) + -1.0 * xx1
+            r3 = 0.0 + -1.0 * xx2
+            d1 = sq * av
+            d2 = ap1 * (av * av)
+            d3 = both3[row, b]
+            right[row, 0] = p0 / d1 + q0 / d2 + r0 / d3
+            right[row, 1] = p1 / d1 + q1 / d2 + r1 / d3
+            right[row, 2] = p2 / d1 + q2 / d2 + r2 / d3
+            right[row, 3] = p3 / d1 + q3 / d2 + r3 / d3
+        ab = a[b]
+        # spline 0: (-1, 0) the left piece, (0, a) the right one
+        lo[b, 0, 0], hi[b, 0, 0] = -1.0, 0.0
+        lo[b, 0, 1], hi[b, 0, 1] = 0.0, ab
+        for d in range(4):
+            coef[b, 0, 0, d] = left[0, d]
+            coef[b, 0, 1, d] = right[0, d]
+        # spline 1: (x / a)³ on (0, a), ((1 - x) / (1 - a))³ on (a, 1)
+        lo[b, 1, 0], hi[b, 1, 0] = 0.0, ab
+        lo[b, 1, 1], hi[b, 1, 1] = ab, 1.0
+        coef[b, 1, 0, 0] = 0.0
+        coef[b, 1, 0, 1] = 0.0
+        coef[b, 1, 0, 2] = 0.0
+        coef[b, 1, 0, 3] = cube[0, b]
+        _reflect_into(0.0, 0.0, 0.0, cube[1, b], coef[b, 1, 1])
+        # spline 2: spline 0 mirrored (x -> 1 - x, a -> 1 - a)
+        lo[b, 2, 0], hi[b, 2, 0] = ab, 1.0
+        lo[b, 2, 1], hi[b, 2, 1] = 1.0, 2.0
+        _reflect_into(right[1, 0], right[1, 1], right[1, 2], right[1, 3], coef[b, 2, 0])
+        _reflect_into(left[1, 0], left[1, 1], left[1, 2], left[1, 3], coef[b, 2, 1])
+        # the prior's four sub-spans [j-1, j], [j, s], [s, j+1], [j+1, j+2]
+        jb = j[b]
+        jm = jb - 1
+        jp = jb + 1
+        l0, l1, l2, l3 = jm, jb, s[b], jp
+        h0, h1, h2_, h3_ = jb, s[b], jp, jp + 1
+        half[0], mid[0] = (h0 - l0) / 2, (h0 + l0) / 2
+        half[1], mid[1] = (h1 - l1) / 2, (h1 + l1) / 2
+        half[2], mid[2] = (h2_ - l2) / 2, (h2_ + l2) / 2
+        half[3], mid[3] = (h3_ - l3) / 2, (h3_ + l3) / 2
+        for p in range(4):
+            nodes[b, p] = mid[p] - gauss * half[p]
+            nodes[b, 4 + p] = mid[p] + gauss * half[p]
+            nodes[b, 8 + p] = mid[p]
+        # each new B-spline is one polynomial piece on each of its two sub-spans: p'' at the
+        # sub-span's Gauss nodes, the jerk at its midpoint (_horner's operations)
+        for e in range(3):
+            for k in range(2):
+                c = coef[b, e, k]
+                sub = e + k
+                dd0 = 1.0 * (2.0 * c[2])
+                dd1 = 2.0 * (3.0 * c[3])
+                for node in (sub, 4 + sub):
+                    x = nodes[b, node] - jb
+                    fn[b, e, node] = ((dd1 * 1.0) * x + dd0) / h2
+                fn[b, e, 8 + sub] = ((1.0 * dd1) * 1.0) / h3
+        for p in range(12):
+            wq = h * (half[p % 4] / q_accel) if p < 8 else h * (2 * half[p - 8] / q_jerk)
+            for e in range(3):
+                fw[b, e, p] = fn[b, e, p] * wq
+        # the base's uniform cubic B-splines at the nodes: p'' (Gauss nodes), jerk (mids)
+        for p in range(12):
+            span = np.floor(nodes[b, p])
+            u = nodes[b, p] - span
+            first[b, p] = int(span + K)
+            if p < 8:
+                Nd[b, p, 0] = (1 - u) / h2
+                Nd[b, p, 1] = (3 * u - 2) / h2
+                Nd[b, p, 2] = (1 - 3 * u) / h2
+                Nd[b, p, 3] = u / h2
+            else:
+                Nd[b, p, 0] = -1.0 / h3
+                Nd[b, p, 1] = 3.0 / h3
+                Nd[b, p, 2] = -3.0 / h3
+                Nd[b, p, 3] = 1.0 / h3
+    return lo, hi, coef, nodes, fn, fw, first, Nd
+
+
+@kernel
+def _reflect_into(c0: float, c1: float, c2: float, c3: float, out: np.ndarray) -> None:
+    """Coefficients of ``p(1 - x)`` from those of a cubic ``p(x)`` into ``out`` (4,)
+    (:func:`pslog.estimation._breaks._reflect`'s operations)."""
+    out[0] = c0 + c1 + c2 + c3
+    out[1] = -c1 - 2 * c2 - 3 * c3
+    out[2] = c2 + 3 * c3
+    out[3] = -c3
+
+
+@kernel
+def trial_gather(first: np.ndarray, Nd: np.ndarray, q0: np.ndarray, x0: np.ndarray,
+                 base_row: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The nodes' base B-splines spread onto the six control points ``q0..q0+5`` of each
+    trial (B, 12, 6) (a function ``first + a`` outside them lands on the nearest, as the
+    clipped scatter did), and those control points (B, 6, 3) of its window: ``x0`` (rows,
+    3) the bases' control points laid end to end, ``base_row`` (B,) the trial's window's
+    first row plus ``q0``."""
+    B = len(q0)
+    Nd6 = np.zeros((B, 12, 6))
+    x6 = np.empty((B, 6, 3))
+    for b in range(B):
+        for p in range(12):
+            pos = first[b, p] - q0[b]
+            pos = 0 if pos < 0 else (2 if pos > 2 else pos)
+            for a in range(4):
+                Nd6[b, p, pos + a] = Nd[b, p, a]
+        for c in range(6):
+            for d in range(3):
+                x6[b, c, d] = x0[base_row[b] + c, d]
+    return Nd6, x6
+
+
+@kernel
+def trial_blocks(Hyy: np.ndarray, Hxy: np.ndarray, pyy: np.ndarray, pxy: np.ndarray,
+                 cov: np.ndarray, which: np.ndarray, row0: np.ndarray, col: np.ndarray
+                 ) -> np.ndarray:
+    """The prior's terms ``pyy ⊗ I₃`` (B, 3, 3) and ``pxy ⊗ I₃`` (B, 6, 3) added to
+    ``Hyy`` (B, 9, 9) and ``Hxy`` (B, 18, 9) in place, and the 18 x 18 block of each
+    trial's window's inverse information (B, 18, 18): ``cov[which, row0 + r, col + c]``."""
+    B = len(which)
+    out = np.empty((B, 18, 18))
+    for b in range(B):
+        for i in range(3):
+            for e in range(3):
+                for e2 in range(3):
+                    Hyy[b, 3 * e + i, 3 * e2 + i] += pyy[b, e, e2]
+                for c in range(6):
+                    Hxy[b, 3 * c + i, 3 * e + i] += pxy[b, c, e]
+        w, r0, c0 = which[b], row0[b], col[b]
+        for r in range(18):
+            for c in range(18):
+                out[b, r, c] = cov[w, r0 + r, c0 + c]
+    return out
+
+
+@kernel
+def prior_band(ab_accel: np.ndarray, ab_jerk: np.ndarray, q_accel: float, q_jerk: float
+               ) -> np.ndarray:
+    """The motion prior's band ``ab_accel / q_accel + ab_jerk / q_jerk`` (12, n), in one pass
+    (the numpy form's two temporaries of a whole session's band)."""
+    rows, n = ab_accel.shape
+    out = np.empty((rows, n))
+    for r in range(rows):
+        for i in range(n):
+            out[r, i] = ab_accel[r, i] / q_accel + ab_jerk[r, i] / q_jerk
+    return out
+
+
+@kernel
+def prior_pull(first: np.ndarray, w: np.ndarray, N: np.ndarray, m: int) -> np.ndarray:
+    """``Σ_i w_i N_i,a`` added to control point ``first_i + a`` (m + 3,), for ``a`` = 0..3
+    and then the terms in order (the order ``np.add.at`` added them in: the same bits)."""
+    pull = np.zeros(m + 3)
+    for a in range(4):
+        for i in range(len(first)):
+            pull[first[i] + a] += w[i] * N[i, a]
+    return pull

@@ -5,7 +5,6 @@ inverse (the marginal covariances) of their information matrix."""
 from __future__ import annotations
 
 import numpy as np
-from scipy.linalg import cho_solve_banded, cholesky_banded
 
 from ..errors import FusionError
 
@@ -128,27 +127,42 @@ class Points:
 
 
 def factor(ab: np.ndarray) -> np.ndarray:
-    """Upper banded Cholesky factor ``U`` (``A = Uᵀ U``) of an information matrix; a
-    :class:`FusionError` if it is not positive definite (a trajectory the detections and the
-    motion prior leave undetermined)."""
-    try:
-        return cholesky_banded(ab, lower=False)
-    except np.linalg.LinAlgError:
-        pass
+    """Upper banded Cholesky factor ``U`` (``A = Uᵀ U``) of an information matrix (a new
+    array; LAPACK's ``dpbtrf`` step for step, the same bits as scipy's ``cholesky_banded``:
+    :func:`pslog.estimation._kernels.band_cholesky`); a :class:`FusionError` if it is not
+    positive definite (a trajectory the detections and the motion prior leave undetermined).
+    """
+    from ._kernels import band_cholesky
+
+    U = np.array(ab, dtype=np.float64, order="C")
+    if band_cholesky(U) == 0:
+        return U
     # a direction no detection reaches (a wild iterate put a short segment's only detection
     # behind its camera): a Levenberg-Marquardt-like load on the diagonal keeps the step
     # defined; the covariance then says that direction is unknown
-    loaded = ab.copy()
-    loaded[_U] += 1e-9 * np.max(np.abs(ab[_U]), initial=0.0) + 1e-12
-    try:
-        return cholesky_banded(loaded, lower=False)
-    except np.linalg.LinAlgError:
-        raise FusionError("smooth: the detections leave the trajectory undetermined "
-                          "(information matrix not positive definite)") from None
+    U[:] = ab
+    U[_U] += 1e-9 * np.max(np.abs(ab[_U]), initial=0.0) + 1e-12
+    if band_cholesky(U) == 0:
+        return U
+    raise FusionError("smooth: the detections leave the trajectory undetermined "
+                      "(information matrix not positive definite)")
 
 
 def solve(U: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-    return cho_solve_banded((U, False), rhs)
+    """``A⁻¹ rhs`` (n,) or (n, r) from the factor of :func:`factor` (LAPACK's ``dpbtrs`` step
+    for step, the same bits as scipy's ``cho_solve_banded``:
+    :func:`pslog.estimation._kernels.band_solve`; (n, r) comes back in Fortran order, as
+    scipy's)."""
+    from ._kernels import band_solve
+
+    U = np.ascontiguousarray(U, dtype=np.float64)
+    if np.ndim(rhs) == 1:
+        x = np.array(rhs, dtype=np.float64)
+        band_solve(U, x.reshape(1, -1))
+        return x
+    xt = np.array(np.transpose(rhs), dtype=np.float64, order="C")  # a right-hand side a row
+    band_solve(U, xt)
+    return xt.T
 
 
 def covariance_band(U: np.ndarray) -> np.ndarray:

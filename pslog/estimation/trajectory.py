@@ -399,7 +399,9 @@ def _prior_normal(knots: list[np.ndarray], offset: np.ndarray, m: int, prior: Mo
         del _PRIOR_CACHE[next(iter(_PRIOR_CACHE))]
     ab_accel, ab_jerk, pull, length = parts
     g = np.asarray(prior.gravity, dtype=np.float64)
-    ab = ab_accel / prior.q_accel + ab_jerk / prior.q_jerk
+    from ._kernels import prior_band
+
+    ab = prior_band(ab_accel, ab_jerk, prior.q_accel, prior.q_jerk)  # one pass, no temporary
     rhs = (pull[:, None] * g).reshape(-1) / prior.q_accel
     return ab, rhs, float(length * (g @ g) / prior.q_accel)
 
@@ -431,20 +433,29 @@ def _prior_parts(knots: list[np.ndarray], offset: np.ndarray, m: int
         jerk.append(N[2 * s:, 3])
         weights.append((np.r_[half, half], 2 * half))
         lengths += float(np.sum(2 * half))
-    eye = np.eye(3)
+    from ._kernels import prior_pull
+
     wa = np.concatenate([w for w, _ in weights])
     wj = np.concatenate([w for _, w in weights])
     fa = np.concatenate([f for f, _ in firsts])
     fj = np.concatenate([f for _, f in firsts])
     Na = np.concatenate(accel)
-    ab_accel, _ = _normal.accumulate_points(fa, Na, wa[:, None, None] * eye, np.zeros((len(fa), 3)),
-                                            m)
-    ab_jerk, _ = _normal.accumulate_points(fj, np.concatenate(jerk), wj[:, None, None] * eye,
+    # the terms' quadratic forms w I, as their upper triangles (00, 01, 02, 11, 12, 22)
+    ab_accel, _ = _normal.accumulate_points(fa, Na, _scaled_identity(wa),
+                                            np.zeros((len(fa), 3)), m)
+    ab_jerk, _ = _normal.accumulate_points(fj, np.concatenate(jerk), _scaled_identity(wj),
                                            np.zeros((len(fj), 3)), m)
-    pull = np.zeros(m + 3)
-    for a in range(4):
-        np.add.at(pull, fa + a, wa * Na[:, a])
+    # ∫ N_k'' per control point: the terms added in order (as np.add.at did)
+    pull = prior_pull(np.ascontiguousarray(fa), np.ascontiguousarray(wa),
+                      np.ascontiguousarray(Na), m)
     return ab_accel, ab_jerk, pull[:m], lengths
+
+
+def _scaled_identity(w: np.ndarray) -> np.ndarray:
+    """The upper triangles (r, 6) of ``w_i I₃`` (r,), in :class:`_normal.Points`' order."""
+    upper = np.zeros((len(w), 6))
+    upper[:, 0] = upper[:, 3] = upper[:, 5] = w
+    return upper
 
 
 def _prior_cost(problem: _Problem, c: np.ndarray) -> float:
