@@ -281,10 +281,14 @@ def gains_data(s_sorted: np.ndarray, first: np.ndarray, N: np.ndarray, M: np.nda
     Hyy = np.zeros((B, 9, 9))
     Hxy = np.zeros((B, 18, 9))
     g = np.zeros((B, 3, 3))
-    f = np.zeros(3)
-    old = np.zeros(6)
-    ff = np.zeros((3, 3))  # f_e f_f
-    of = np.zeros((6, 3))  # b_c f_e
+    # per detection of the trial's three spans: f_e, f_e f_f and b_c f_e (each product
+    # formed once, as before), then every entry's sum over the detections in order from 0
+    # in a register (the entries' chains side by side, none stored between detections)
+    F = np.zeros((Wb, 3))
+    FF = np.zeros((Wb, 3, 3))
+    OF = np.zeros((Wb, 6, 3))
+    Mw = np.zeros((Wb, 3, 3))
+    Uw = np.zeros((Wb, 3))
     for b in range(B):
         wb = which[b]
         jb = j[b]
@@ -295,38 +299,51 @@ def gains_data(s_sorted: np.ndarray, first: np.ndarray, N: np.ndarray, M: np.nda
                 lo_col += 1
             if s_sorted[wb, w] < jb + 1 + 1:
                 hi_col += 1
+        nw = 0
         for w in range(lo_col, hi_col):
             x = s_sorted[wb, w] - jb
             for e in range(3):
-                f[e] = 0.0
+                fe = 0.0
                 for k in range(2):
                     if x >= lo[b, e, k] and x < hi[b, e, k]:
                         c = coef[b, e, k]
-                        f[e] = ((c[3] * 1.0 * x + c[2]) * x + c[1]) * x + c[0]
+                        fe = ((c[3] * 1.0 * x + c[2]) * x + c[1]) * x + c[0]
+                F[nw, e] = fe
+            for e in range(3):
+                for e2 in range(3):
+                    FF[nw, e, e2] = F[nw, e] * F[nw, e2]
             for c6 in range(6):
                 a = q0[b] + c6 - first[wb, w]
-                old[c6] = N[wb, w, a] if 0 <= a <= 3 else 0.0
-            for e in range(3):
-                for i in range(3):
-                    g[b, e, i] += f[e] * u[wb, w, i]
+                oc = N[wb, w, a] if 0 <= a <= 3 else 0.0
+                for e in range(3):
+                    OF[nw, c6, e] = oc * F[nw, e]
+            for i in range(3):
+                Uw[nw, i] = u[wb, w, i]
+                for k in range(3):
+                    Mw[nw, i, k] = M[wb, w, i, k]
+            nw += 1
+        for e in range(3):
+            for i in range(3):
+                acc = 0.0
+                for w in range(nw):
+                    acc += F[w, e] * Uw[w, i]
+                g[b, e, i] = acc
+        for e in range(3):
+            for i in range(3):
                 for e2 in range(3):
-                    ff[e, e2] = f[e] * f[e2]
-                for c6 in range(6):
-                    of[c6, e] = old[c6] * f[e]
-            # each entry takes this detection's one term; a row's entries side by side
+                    for k in range(3):
+                        acc = 0.0
+                        for w in range(nw):
+                            acc += FF[w, e, e2] * Mw[w, i, k]
+                        Hyy[b, 3 * e + i, 3 * e2 + k] = acc
+        for c6 in range(6):
             for i in range(3):
                 for e in range(3):
-                    row = Hyy[b, 3 * e + i]
-                    for e2 in range(3):
-                        fe = ff[e, e2]
-                        for k in range(3):
-                            row[3 * e2 + k] += fe * M[wb, w, i, k]
-                for c6 in range(6):
-                    row = Hxy[b, 3 * c6 + i]
-                    for e in range(3):
-                        oe = of[c6, e]
-                        for k in range(3):
-                            row[3 * e + k] += oe * M[wb, w, i, k]
+                    for k in range(3):
+                        acc = 0.0
+                        for w in range(nw):
+                            acc += OF[w, c6, e] * Mw[w, i, k]
+                        Hxy[b, 3 * c6 + i, 3 * e + k] = acc
     return Hyy, Hxy, g
 
 
