@@ -550,3 +550,23 @@ def test_band_cholesky_reports_the_first_non_positive_pivot_and_factor_loads_it(
 
     with pytest.raises(FusionError, match="undetermined"):
         _normal.factor(bad)
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 8, 101, 4000])
+def test_abs_median_of_finite_rows_is_numpys_median(n):
+    """The noise scale's median: the value np.median gives on the finite rows' absolute
+    residuals (ties, heavy tails, non-finite rows, odd and even counts), and the rows
+    counted; its Python original the same."""
+    rng = np.random.default_rng(n)
+    for trial in range(6):
+        r = rng.standard_cauchy((n, 2)) if trial % 2 else np.round(rng.normal(size=(n, 2)), 1)
+        if trial >= 3 and n > 3:
+            r[rng.integers(0, n, 3), rng.integers(0, 2, 3)] = [np.nan, np.inf, -np.inf]
+        finite = r[np.all(np.isfinite(r), axis=1)]
+        for fn in (_kernels.abs_median_finite_rows, _kernels.abs_median_finite_rows.py_func):
+            median, rows = fn(r)
+            assert rows == len(finite)
+            assert median == np.median(np.abs(finite))
+    assert np.isnan(_kernels.abs_median_finite_rows(np.full((3, 2), np.nan))[0])
+    # by hand: |-3|, 1, 2, |-0.5| -> (1 + 2) / 2
+    assert _kernels.abs_median_finite_rows(np.array([[-3.0, 1.0], [2.0, -0.5]]))[0] == 1.5

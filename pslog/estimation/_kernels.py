@@ -894,3 +894,69 @@ def prior_pull(first: np.ndarray, w: np.ndarray, N: np.ndarray, m: int) -> np.nd
         for i in range(len(first)):
             pull[first[i] + a] += w[i] * N[i, a]
     return pull
+
+
+@kernel
+def abs_median_finite_rows(r: np.ndarray) -> tuple[float, int]:
+    """``np.median(np.abs(r[rows with every entry finite]))`` of ``r`` (n, d) and the number
+    of those rows, in one pass and a selection (no masked copy, absolute copy and
+    partition's copy of a whole session's residuals): the order statistics are the same
+    values, and the middle two are averaged as ``np.median`` does (``(a + b) / 2``).
+    The median is NaN when no row is finite."""
+    n, d = r.shape
+    buf = np.empty(n * d)
+    size = 0
+    rows = 0
+    for i in range(n):
+        ok = True
+        for k in range(d):
+            if not np.isfinite(r[i, k]):
+                ok = False
+        if ok:
+            for k in range(d):
+                buf[size] = abs(r[i, k])
+                size += 1
+            rows += 1
+    if size == 0:
+        return np.nan, 0
+    half = size // 2
+    upper = _select(buf, size, half)
+    if size % 2 == 1:
+        return upper, rows
+    # the largest of the lower half (all at most the selected one after the selection)
+    lower = buf[0]
+    for i in range(1, half):
+        if buf[i] > lower:
+            lower = buf[i]
+    return (lower + upper) / 2, rows
+
+
+@kernel
+def _select(buf: np.ndarray, size: int, k: int) -> float:
+    """The ``k``-th smallest of ``buf[:size]`` (0-based), by quickselect with a
+    median-of-three pivot; ``buf`` is reordered so that ``buf[:k]`` holds values at most it
+    and ``buf[k+1:size]`` values at least it."""
+    lo, hi = 0, size - 1
+    while hi > lo:
+        mid = (lo + hi) // 2
+        # median of three to buf[hi]
+        if buf[mid] < buf[lo]:
+            buf[mid], buf[lo] = buf[lo], buf[mid]
+        if buf[hi] < buf[lo]:
+            buf[hi], buf[lo] = buf[lo], buf[hi]
+        if buf[mid] < buf[hi]:
+            buf[mid], buf[hi] = buf[hi], buf[mid]
+        pivot = buf[hi]
+        i = lo
+        for jj in range(lo, hi):
+            if buf[jj] < pivot:
+                buf[i], buf[jj] = buf[jj], buf[i]
+                i += 1
+        buf[i], buf[hi] = buf[hi], buf[i]
+        if i == k:
+            return buf[i]
+        if i < k:
+            lo = i + 1
+        else:
+            hi = i - 1
+    return buf[k]

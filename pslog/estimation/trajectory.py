@@ -636,10 +636,15 @@ class _Solver:
         return control, sigma, r, 1 / (1 + s / _CAUCHY**2), J
 
     def _scale(self, r: np.ndarray, sigma: float, dof: float) -> float:
-        finite = r[np.all(np.isfinite(r), axis=1)]
-        if len(finite) == 0:
+        """``dof`` · 1.4826 · the median absolute residual of the finite rows (one compiled
+        pass and selection: :func:`pslog.estimation._kernels.abs_median_finite_rows`, the
+        value ``np.median`` gives); ``sigma`` if no row is finite."""
+        from ._kernels import abs_median_finite_rows
+
+        median, rows = abs_median_finite_rows(np.ascontiguousarray(r, dtype=np.float64))
+        if rows == 0:
             return sigma
-        return max(dof * 1.4826 * float(np.median(np.abs(finite))), self.options.min_noise_px)
+        return max(dof * 1.4826 * float(median), self.options.min_noise_px)
 
 
 def fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions | None = None) -> Fit:
