@@ -75,8 +75,10 @@ rather than broken. numpy and scipy, with compiled per-point loops
 (:mod:`pslog.estimation._kernels`, numba): the B-spline basis, the projection with its
 residual and Jacobian, each detection's quadratic form and the normal equations summed per
 control point (:class:`pslog.estimation._normal.Points`), the covariance band's Takahashi
-recurrence and the break test's local normal equations and solves; the banded Cholesky
-factorisations are LAPACK's (scipy). ~65,000 detections per second on one core at 10
+recurrence, the noise scale's median, the break test's local normal equations and solves
+and its per-trial terms (its small matrix products and 9 x 9 solves stay numpy's BLAS and
+LAPACK), and the banded Cholesky factorisation and solve (LAPACK's ``dpbtrf``/``dpbtrs``
+step for step: the same bits as scipy's). ~80,000 detections per second on one core at 10
 minutes (``benchmarks/bench_smooth.py``, ``--base`` for a paired comparison). The break
 search runs its candidates in blocks on ``PSLOG_SMOOTH_THREADS`` threads (default 2; the
 same bits on any count, :func:`pslog.estimation._breaks.smooth_threads`).
