@@ -71,7 +71,9 @@ ROOT = Path(__file__).resolve().parents[1]
 #: share of it (MB above the resident set before the fit)
 _CHILD = """
 import pickle, sys, time
+import pslog
 from pslog.fusion import fuse
+print(pslog.__file__)
 obs, rig = pickle.load(open(sys.argv[1], "rb"))
 fuse(obs.select(obs.time_ns < obs.time_ns[0] + 3 * 10**9), rig, "smooth")
 def status(key):
@@ -95,8 +97,13 @@ def child_run(code: Path, session: Path, threads: str | None = None) -> list[flo
     env = dict(os.environ, PYTHONPATH=str(code))
     if threads is not None:
         env["PSLOG_SMOOTH_THREADS"] = threads
+    # run from the session's folder: ``python -c`` puts the working folder first on the
+    # path, and from the repository's root its pslog would shadow the revision's
     out = subprocess.run([sys.executable, "-c", _CHILD, str(session)], env=env, check=True,
-                         capture_output=True, text=True).stdout
+                         capture_output=True, text=True, cwd=session.parent).stdout
+    where = Path(out.split()[0]).resolve()
+    if not where.is_relative_to(Path(code).resolve()):
+        raise RuntimeError(f"the child ran the pslog of {where}, not of {code}")
     return [float(x) for x in out.split()[-4:]]
 
 
