@@ -138,3 +138,23 @@ def test_lensless_rows_are_prepare_columns(python):
                                    np.nan_to_num(prep.uv_jacobian).reshape(-1, 4), rays, jac),
                              strict=True):
         assert got.tobytes() == np.ascontiguousarray(expected).tobytes()
+
+
+def test_rig_geometry_checked_once_and_refused_every_time():
+    """prepare's rig constants (check_baselines, the fundamental matrices) are made once per
+    camera geometry: the same F bit for bit, a copy each time (a caller's change does not
+    reach the next prepare); a rig with two cameras at one centre is refused at every call."""
+    from pslog.errors import RigError
+    from pslog.fusion._prepare import _checked_geometry
+    from pslog.geometry import fundamental_matrices
+
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    first = _checked_geometry(rig)
+    assert first.tobytes() == fundamental_matrices(rig.cameras).tobytes()
+    first[:] = 0.0
+    assert _checked_geometry(rig).tobytes() == fundamental_matrices(rig.cameras).tobytes()
+    cams = rig.cameras
+    bad = Rig((cams[0], cams[1].replace(R=cams[0].R, t=cams[0].t), cams[2]), "bad")
+    for _ in range(2):
+        with pytest.raises(RigError, match="same centre"):
+            _checked_geometry(bad)

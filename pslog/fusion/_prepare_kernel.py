@@ -148,7 +148,8 @@ def lensless_rows(camera, uv, kk, far, R, ki, rr, rtki, uv_und, ray_dir, jac, ja
         :func:`observed_rays_and_jacobians`
     uv_und (k, 2), ray_dir (k, 3), jac (k, 2, 2), jac_rows (k, 4), rays (k, 3),
     dir_jac (3, 2, k) : written (``jac``: the identity, as ``_undistortion_jacobian``
-        without a lens)
+        without a lens); ``jac_rows`` of no rows: not written; ``rays`` of no rows: neither
+        they nor ``dir_jac`` (a session's prepare leaves them to ``Prepared.observed_rays``)
     """
     xy = np.empty((1, 2))
     out = np.empty((1, 3))
@@ -168,5 +169,7 @@ def lensless_rows(camera, uv, kk, far, R, ki, rr, rtki, uv_und, ray_dir, jac, ja
             uv_und[i, 0] = uv_und[i, 1] = np.nan
             ray_dir[i, 0] = ray_dir[i, 1] = ray_dir[i, 2] = np.nan
         jac[i, 0, 0], jac[i, 0, 1], jac[i, 1, 0], jac[i, 1, 1] = 1.0, 0.0, 0.0, 1.0
-        jac_rows[i, 0], jac_rows[i, 1], jac_rows[i, 2], jac_rows[i, 3] = 1.0, 0.0, 0.0, 1.0
-    observed_rays_and_jacobians(camera, uv_und, ki, rr, rtki, rays, dir_jac)
+        if jac_rows.shape[0]:
+            jac_rows[i, 0], jac_rows[i, 1], jac_rows[i, 2], jac_rows[i, 3] = 1.0, 0.0, 0.0, 1.0
+    if rays.shape[0]:
+        observed_rays_and_jacobians(camera, uv_und, ki, rr, rtki, rays, dir_jac)
