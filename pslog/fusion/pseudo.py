@@ -460,7 +460,7 @@ class TypeAStream:
         # one new row (the usual push): the per-camera constants, made once (_push_one)
         self._max_gap_ns = int(self._max_gap_s * NS)
         self._tables = self._shared["_kernel_tables"]
-        self._lens_rows = template.lens_rows
+        self._lens_table = template.lens_rows
         # cameras without lens distortion: their new rows in one compiled pass
         # (_prepare_kernel.lensless_rows; a lens's rows go through numpy as prepare does)
         self._lensless = [not np.any(c.dist) for c in rig.cameras]
@@ -469,11 +469,26 @@ class TypeAStream:
             np.array([float(_FAR_IMAGES_ * max(c.width, c.height)) for c in rig.cameras]),
             np.ascontiguousarray([np.asarray(c.R, np.float64) for c in rig.cameras]),
             *self._ray_tables)
+        # _push_one's scratch (what does not leave in its Track), made once
+        self._scratch = (np.empty((2, 1, len(_pseudo_kernel.FLOATS))),
+                         np.empty((2, 1, len(_pseudo_kernel.INTS)), dtype=np.int64),
+                         np.empty((2, 1, 3), dtype=np.int64), np.empty((2, 1, 3)),
+                         np.empty(1, dtype=bool), np.empty((1, 3)),
+                         np.empty(1, dtype=np.int64), np.empty(1), np.empty(1), np.empty(1),
+                         np.zeros(1, dtype=bool))
+        if not all(self._lensless):
+            # a lens's rows take _lens_rows' kernels, which pslog live's warm-up (a lensless
+            # rig) does not run: one row of scratch loads (or compiles) them now, not at the
+            # first datagram
+            c = self._lensless.index(False)
+            scratch = _StreamColumns(2)
+            scratch.camera[:] = scratch.camera64[:] = c
+            scratch.uv[:] = (rig.cameras[c].K[0, 2], rig.cameras[c].K[1, 2])
+            self._lens_rows(scratch, 0, 1)
 
     def push(self, time_ns, camera, uv, frame_index) -> Track:
         """Rows (n,) after every row pushed before; returns their points (possibly none)."""
         from . import _prepare_kernel
-        from ._prepare import _FAR_IMAGES, _rays, _undistortion_jacobian
 
         n_new = len(time_ns)
         if n_new == 0:
@@ -507,35 +522,15 @@ class TypeAStream:
         # undistortion, rays and Jacobians of the new rows: prepare's per-camera pass, and
         # Prepared.observed_rays' and observed_direction_jacobians' compiled pass
         lensless = self._lensless
-        cameras = camera.tolist()
-        if all(lensless[c] for c in cameras):  # (one compiled pass: the same bits)
+        camera64 = buf.camera64[hi:end]
+        camera64[:] = camera
+        if all(lensless[c] for c in camera.tolist()):  # (one compiled pass: the same bits)
             _prepare_kernel.lensless_rows(
-                camera.astype(np.int64), uv, *self._lensless_tables, buf.uv_und[hi:end],
+                camera64, uv, *self._lensless_tables, buf.uv_und[hi:end],
                 buf.ray_dir[hi:end], buf.jac[hi:end], buf.jac_rows[hi:end],
                 buf.rays[hi:end], buf.dir_jac[:, :, hi:end])
         else:
-            uv_und = np.empty_like(uv)
-            ray_dir = np.empty((n_new, 3))
-            jac = np.empty((n_new, 2, 2))
-            for i in sorted(set(cameras)):
-                cam = rig.cameras[i]
-                rows = np.flatnonzero(camera == i)
-                xy = cam.undistort_normalized(uv[rows])  # (the lens inverted once, as prepare)
-                uv_und[rows] = cam.pixels_from_normalized(xy)
-                ray_dir[rows] = _rays(cam, xy)
-                far = rows[~np.all(np.abs(uv[rows]) <= _FAR_IMAGES * max(cam.width,
-                                                                        cam.height), axis=1)]
-                uv_und[far] = np.nan
-                ray_dir[far] = np.nan
-                jac[rows] = _undistortion_jacobian(cam, uv_und[rows])
-            buf.uv_und[hi:end] = uv_und
-            buf.ray_dir[hi:end] = ray_dir
-            buf.jac[hi:end] = jac
-            rays, dir_jac = buf.rays[hi:end], buf.dir_jac[:, :, hi:end]
-            _prepare_kernel.observed_rays_and_jacobians(
-                camera.astype(np.int64), np.ascontiguousarray(uv_und), *self._ray_tables,
-                rays, dir_jac)
-            buf.jac_rows[hi:end] = np.nan_to_num(jac).reshape(-1, 4)
+            self._lens_rows(buf, hi, end)
         self._lo, self._hi = lo, end
         if n_new == 1:  # the usual push: its one point without a Prepared (_push_one)
             return self._push_one(lo, end)
@@ -557,6 +552,37 @@ class TypeAStream:
         return fuse_type_a(prep, self._max_gap_s, self._noise_px,
                            events=np.arange(n - n_new, n), seen=buf.seen[window],
                            noise=self._noise, explain=False)[0]
+
+    def _lens_rows(self, buf: _StreamColumns, hi: int, end: int) -> None:
+        """prepare's per-camera pass (numpy: a lens's iterative undistortion) and
+        Prepared.observed_rays' and observed_direction_jacobians' compiled pass, for the
+        buffers' rows ``hi:end`` (their camera and recorded pixels already written)."""
+        from . import _prepare_kernel
+        from ._prepare import _FAR_IMAGES, _rays, _undistortion_jacobian
+
+        camera, uv = buf.camera[hi:end], buf.uv[hi:end]
+        n_new = end - hi
+        uv_und = np.empty_like(uv)
+        ray_dir = np.empty((n_new, 3))
+        jac = np.empty((n_new, 2, 2))
+        for i in sorted(set(camera.tolist())):
+            cam = self.rig.cameras[i]
+            rows = np.flatnonzero(camera == i)
+            xy = cam.undistort_normalized(uv[rows])  # (the lens inverted once, as prepare)
+            uv_und[rows] = cam.pixels_from_normalized(xy)
+            ray_dir[rows] = _rays(cam, xy)
+            far = rows[~np.all(np.abs(uv[rows]) <= _FAR_IMAGES * max(cam.width, cam.height),
+                               axis=1)]
+            uv_und[far] = np.nan
+            ray_dir[far] = np.nan
+            jac[rows] = _undistortion_jacobian(cam, uv_und[rows])
+        buf.uv_und[hi:end] = uv_und
+        buf.ray_dir[hi:end] = ray_dir
+        buf.jac[hi:end] = jac
+        _prepare_kernel.observed_rays_and_jacobians(
+            buf.camera64[hi:end], np.ascontiguousarray(uv_und), *self._ray_tables,
+            buf.rays[hi:end], buf.dir_jac[:, :, hi:end])
+        buf.jac_rows[hi:end] = np.nan_to_num(jac).reshape(-1, 4)
 
     def _push_one(self, lo: int, end: int) -> Track:
         """The point of the window's newest row (rows ``lo:end`` of the buffers), as
@@ -580,19 +606,15 @@ class TypeAStream:
         previous_instant = np.empty(n, dtype=np.int64)
         _pseudo_kernel.brackets_kernel(time_ns, camera, prev_b, next_b, previous_instant)
         cam, ki, rr, rtki, f9, lens = self._tables
-        ff = np.empty((2, 1, len(_pseudo_kernel.FLOATS)))
-        fi = np.empty((2, 1, len(_pseudo_kernel.INTS)), dtype=np.int64)
-        past_rows, past_points = np.empty((2, 1, 3), dtype=np.int64), np.empty((2, 1, 3))
+        (ff, fi, past_rows, past_points, has, predicted, flags, innovation, factor, model,
+         kinked_out) = self._scratch
         refused = np.zeros(n, dtype=np.int64)
-        has = np.empty(1, dtype=bool)
-        predicted, points = np.empty((1, 3)), np.empty((1, 3))
-        flags = np.empty(1, dtype=np.int64)
-        innovation, factor, model = np.empty(1), np.empty(1), np.empty(1)
-        quality_table = np.empty((len(_QUALITY), 1))
+        points, quality_table = np.empty((1, 3)), np.empty((len(_QUALITY), 1))  # (returned)
+        target = np.array([e], dtype=np.int64)
         noise_px = self._noise_px
         with_cov = noise_px is not None and not _prepare.FINITE_DIFFERENCES
         made = _pseudo_kernel.type_a_kernel(
-            np.array([e], dtype=np.int64), previous_instant, 2 * m, MAX_EXTRAPOLATION,
+            target, previous_instant, 2 * m, MAX_EXTRAPOLATION,
             self._max_gap_ns, time_ns, camera, prev_b, next_b, uv_und, buf.rays[lo:end],
             self._template.centers, ki, rr, f9, cam, _SPAN_TIE_NS, MIN_RAY_ANGLE_DEG,
             buf.ray_dir[lo:end], buf.dir_jac[:, :, lo:end],
@@ -614,15 +636,14 @@ class TypeAStream:
             sg = float(sigma[0])
             failed = good and inn > INNOVATION_SIGMAS * (sg * fac) + float(model[0])
             if good and not failed:
-                out = np.zeros(1, dtype=bool)
+                camera64 = buf.camera64[lo:end]
                 _pseudo_kernel.kink_kernel(
-                    np.array([e], dtype=np.int64), past_rows[0, :, 0], past_rows[0, :, 1],
-                    past_rows[0, :, 2], past_points[0], past_rows[1, :, 0],
-                    past_rows[1, :, 1], past_rows[1, :, 2], past_points[1], predicted,
-                    sigma, *_window_previous_next(camera, m, previous_next), time_ns,
-                    uv_und, camera.astype(np.int64), self._lens_rows, self._max_gap_ns, NS,
-                    out)
-                kinked = bool(out[0])
+                    target, past_rows[0, :, 0], past_rows[0, :, 1], past_rows[0, :, 2],
+                    past_points[0], past_rows[1, :, 0], past_rows[1, :, 1],
+                    past_rows[1, :, 2], past_points[1], predicted, sigma,
+                    *_window_previous_next(camera64, m, previous_next), time_ns, uv_und,
+                    camera64, self._lens_table, self._max_gap_ns, NS, kinked_out)
+                kinked = bool(kinked_out[0])
             keep = good and not failed and not kinked
         else:
             finite = False
@@ -656,11 +677,12 @@ class TypeAStream:
 
 def _window_previous_next(camera: np.ndarray, m: int, previous_next
                           ) -> tuple[np.ndarray, np.ndarray]:
-    """Each window row's previous and next row of its camera (-1: none), (n,) int64 each:
-    :func:`~pslog.fusion.innovation._previous_next` with the rig's ``m`` cameras."""
+    """Each window row's previous and next row of its camera (``camera`` (n,) int64; -1:
+    none), (n,) int64 each: :func:`~pslog.fusion.innovation._previous_next` with the rig's
+    ``m`` cameras."""
     n = len(camera)
     before, after = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
-    previous_next(camera.astype(np.int64), m, before, after)
+    previous_next(camera, m, before, after)
     return before, after
 
 
@@ -689,6 +711,7 @@ class _StreamColumns:
         self.capacity = capacity
         self.time = np.zeros(capacity, np.int64)
         self.camera = np.zeros(capacity, np.int32)
+        self.camera64 = np.zeros(capacity, np.int64)  # (the kernels' int64 form of it)
         self.uv = np.zeros((capacity, 2))
         self.frame = np.zeros(capacity, np.int64)
         self.uv_und = np.zeros((capacity, 2))
@@ -704,8 +727,8 @@ class _StreamColumns:
         columns, if large enough)."""
         out = self if capacity <= self.capacity else _StreamColumns(capacity)
         k = hi - lo
-        for name in ("time", "camera", "uv", "frame", "uv_und", "ray_dir", "jac", "rays",
-                     "jac_rows", "seen"):
+        for name in ("time", "camera", "camera64", "uv", "frame", "uv_und", "ray_dir", "jac",
+                     "rays", "jac_rows", "seen"):
             column = getattr(self, name)
             getattr(out, name)[:k] = column[lo:hi].copy()  # (overlapping when in place)
         out.dir_jac[:, :, :k] = self.dir_jac[:, :, lo:hi].copy()
