@@ -28,9 +28,12 @@ to the sinks (``LiveSummary.cpu_ns``): what the fusion latency would be on an id
         [--method filter,typeA] [--candidates all,best] [--record] [--direct [GAP_MS]]
 
 ``--direct``: no sender, no socket in: the same datagrams fed to ``LiveFuser.feed`` in a
-loop, each point's datagram sent by a ``UdpSink``, ``GAP_MS`` asleep between two datagrams
-(default 8; 0: back to back, warm caches). Reports the CPU per datagram that made a point
-and the part of it spent in the fusion (``StreamFuser.push`` and the filter's ``predict``).
+loop (after the method's warm-up, the collector frozen, as ``serve`` runs), each point's
+datagram sent by a ``UdpSink``, ``GAP_MS`` asleep between two datagrams (default 8; 0: back
+to back, warm caches). Reports the CPU per datagram that made a point, the part of it spent
+in the fusion (``StreamFuser.push`` and the filter's ``predict``), and per stage (decoding,
+the candidates' gate, the method's own push, the LivePoints, the send: median, p99 and the
+mean over the slowest 1 % of datagrams, µs) with the garbage collections in the loop.
 """
 
 from __future__ import annotations
@@ -196,8 +199,14 @@ def run(rig, frames, method: str, candidates: bool, record: bool = False) -> dic
 
 
 def direct(rig, frames, method: str, candidates: bool, gap_s: float) -> dict:
-    """The fuser's loop without sockets in: (cpu med, p99, fusion mean), ms."""
-    from pslog.live.fuser import LiveFuser
+    """The fuser's loop without sockets in, warmed up and with the collector frozen as
+    :func:`~pslog.live.server.serve` runs it: CPU per datagram that made a point (med, p99,
+    fusion mean, ms) and per stage (``stages``: name -> (k,) µs of each such datagram) and
+    the garbage collections during the loop (``gc``: their CPU µs)."""
+    import gc
+
+    import pslog.live.fuser as live_fuser
+    from pslog.live.fuser import LiveFuser, warm_up
 
     epoch = time.time_ns()
     rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -210,41 +219,79 @@ def direct(rig, frames, method: str, candidates: bool, gap_s: float) -> dict:
     now = [epoch]
     fuser = LiveFuser(rig, method, candidates=candidates, epoch_ns=epoch, keep=False,
                       clock=lambda: now[0])
+    warm_up(method, candidates=fuser.candidates, options=fuser.options)
     sink = UdpSink(rx.getsockname())
     tt = time.thread_time_ns
     fusion = [0]
+    spent: dict[str, int] = {}  # this datagram's CPU per stage, ns
 
-    def timed(f):
+    def timed(f, stage=None):
         def run(*args):
             c = tt()
             out = f(*args)
-            fusion[0] += tt() - c
+            d = tt() - c
+            if stage is None:
+                fusion[0] += d
+            else:
+                spent[stage] = spent.get(stage, 0) + d
             return out
         return run
 
+    # the stages: decoding, the candidates' gate, the method's own push (typeA's
+    # TypeAStream, the filter's), the points made into LivePoints, the sink's send
+    decode = live_fuser.decode_detections
+    live_fuser.decode_detections = timed(decode, "decode")
+    if fuser.stream._gate is not None:
+        fuser.stream._gate.push = timed(fuser.stream._gate.push, "gate")
+    if fuser.stream.incremental is not None:
+        fuser.stream.incremental.push = timed(fuser.stream.incremental.push, "method")
+    fuser._points = timed(fuser._points, "points")
     fuser.stream.push = timed(fuser.stream.push)
     if fuser._filter is not None:
         fuser._filter.predict = timed(fuser._filter.predict)
-    cpu = []
-    for t, b in data:
-        if gap_s:
-            time.sleep(gap_s)
-        now[0] = t + 200_000
-        c0 = tt()
-        points = fuser.feed(b, t + 100_000)
-        if points:
-            sink.emit(points)
-            cpu.append(tt() - c0)
-        while True:  # the receiver's queue emptied, not timed
-            try:
-                rx.recv(4096, socket.MSG_DONTWAIT)
-            except BlockingIOError:
-                break
+    emit = timed(sink.emit, "send")
+    pauses: list[int] = []
+    started = [0]
+
+    def collected(phase, info) -> None:
+        if phase == "start":
+            started[0] = tt()
+        else:
+            pauses.append(tt() - started[0])
+
+    cpu, stages = [], []
+    gc.collect()
+    gc.freeze()
+    gc.callbacks.append(collected)
+    try:
+        for t, b in data:
+            if gap_s:
+                time.sleep(gap_s)
+            now[0] = t + 200_000
+            spent.clear()
+            c0 = tt()
+            points = fuser.feed(b, t + 100_000)
+            if points:
+                emit(points)
+                cpu.append(tt() - c0)
+                stages.append(dict(spent))
+            while True:  # the receiver's queue emptied, not timed
+                try:
+                    rx.recv(4096, socket.MSG_DONTWAIT)
+                except BlockingIOError:
+                    break
+    finally:
+        gc.callbacks.remove(collected)
+        gc.unfreeze()
+        live_fuser.decode_detections = decode
     sink.close()
     rx.close()
     cpu = np.array(cpu) / 1e6
+    names = ("decode", "gate", "method", "points", "send")
     return dict(cpu_med=float(np.median(cpu)), cpu_p99=float(np.percentile(cpu, 99)),
-                fusion=fusion[0] / 1e6 / len(cpu), n=len(cpu))
+                fusion=fusion[0] / 1e6 / len(cpu), n=len(cpu), cpu=cpu,
+                stages={k: np.array([s.get(k, 0) for s in stages]) / 1e3 for k in names},
+                gc=np.array(pauses) / 1e3)
 
 
 def main() -> int:
@@ -274,6 +321,13 @@ def main() -> int:
                           f"{r['n']:6d} | cpu med {r['cpu_med']:.3f} p99 {r['cpu_p99']:.3f} "
                           f"| of which fusion (push, predict) mean {r['fusion']:.3f}",
                           flush=True)
+                    tail = r["cpu"] >= np.percentile(r["cpu"], 99)  # the slowest 1 %
+                    print(f"{'':>10} stages, µs median / p99 / mean at the slowest 1 %: "
+                          + ", ".join(f"{k} {np.median(v):.0f} / {np.percentile(v, 99):.0f}"
+                                      f" / {v[tail].mean():.0f}"
+                                      for k, v in r["stages"].items() if v.any())
+                          + f"; gc: {len(r['gc'])} collections, max "
+                          f"{r['gc'].max() if len(r['gc']) else 0:.0f} µs", flush=True)
         return 0
     print(f"live fuser, 3 type-A cameras, {seconds:g} s per run, sender and robot processes "
           f"on loopback; latencies in ms (target: p99 fusion <= {TARGET_P99_MS:g} ms, "

@@ -100,3 +100,61 @@ def test_type_a_is_the_same_with_a_fresh_and_a_reused_preparation(prep):
         assert_array_equal(track.position_world, first.position_world)
         for k, v in first.quality.items():
             assert_array_equal(track.quality[k], v)
+
+
+@pytest.mark.parametrize("python", [False, True])
+def test_lensless_rows_are_prepare_columns(python):
+    """_prepare_kernel.lensless_rows (a stream's new rows of cameras without a lens, one
+    compiled pass) gives prepare's undistorted pixels, rays, pixel Jacobians and observed
+    rays and direction Jacobians, byte for byte, far-off and NaN pixels included (no ray);
+    its pure-Python original the same."""
+    from pslog import Observations
+    from pslog.fusion import _prepare_kernel
+
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    rng = np.random.default_rng(11)
+    n = 400
+    uv = np.concatenate([rng.uniform(-100, 740, (n - 4, 2)),
+                         [[1e300, 5.0], [-7e3, 100.0], [6400.0, -6400.0], [np.nan, 3.0]]])
+    obs = Observations(np.arange(n, dtype=np.int64) * 1000, np.arange(n) % 3, uv,
+                       np.zeros(n, np.int64))
+    with np.errstate(all="ignore"):
+        prep = prepare(obs, rig)
+        rays, jac = prep.observed_rays, prep.observed_direction_jacobians
+    cams = rig.cameras
+    tables = (np.array([np.asarray(c.K, float).ravel() for c in cams]),
+              np.array([10.0 * max(c.width, c.height) for c in cams]),
+              np.ascontiguousarray([np.asarray(c.R, float) for c in cams]),
+              np.ascontiguousarray(prep._cols("K_inv").T), np.ascontiguousarray(prep._cols("R").T),
+              np.ascontiguousarray(prep._rt_k_inv_cols.T))
+    out = (np.empty((n, 2)), np.empty((n, 3)), np.empty((n, 2, 2)), np.empty((n, 4)),
+           np.empty((n, 3)), np.empty((3, 2, n)))
+    fn = _prepare_kernel.lensless_rows.py_func if python else _prepare_kernel.lensless_rows
+    with np.errstate(all="ignore"):
+        fn(obs.camera.astype(np.int64), uv, *tables, *out)
+    assert np.isnan(out[0][[-4, -3, -1]]).all() and np.isfinite(out[0][:-4]).all()
+    assert np.isfinite(out[1][-2]).all()  # 6400 px: at the edge, a ray
+    for got, expected in zip(out, (prep.uv_undistorted, prep.ray_dir, prep.uv_jacobian,
+                                   np.nan_to_num(prep.uv_jacobian).reshape(-1, 4), rays, jac),
+                             strict=True):
+        assert got.tobytes() == np.ascontiguousarray(expected).tobytes()
+
+
+def test_rig_geometry_checked_once_and_refused_every_time():
+    """prepare's rig constants (check_baselines, the fundamental matrices) are made once per
+    camera geometry: the same F bit for bit, a copy each time (a caller's change does not
+    reach the next prepare); a rig with two cameras at one centre is refused at every call."""
+    from pslog.errors import RigError
+    from pslog.fusion._prepare import _checked_geometry
+    from pslog.geometry import fundamental_matrices
+
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    first = _checked_geometry(rig)
+    assert first.tobytes() == fundamental_matrices(rig.cameras).tobytes()
+    first[:] = 0.0
+    assert _checked_geometry(rig).tobytes() == fundamental_matrices(rig.cameras).tobytes()
+    cams = rig.cameras
+    bad = Rig((cams[0], cams[1].replace(R=cams[0].R, t=cams[0].t), cams[2]), "bad")
+    for _ in range(2):
+        with pytest.raises(RigError, match="same centre"):
+            _checked_geometry(bad)

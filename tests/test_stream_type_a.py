@@ -36,11 +36,16 @@ def test_type_a_streams_through_its_incremental_form():
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
 @pytest.mark.parametrize("noise_px", [0.5, None])
-def test_one_detection_per_push_equals_batch_with_its_drops(seed, noise_px):
-    rig, obs, _ = dirty_session("typeA", seed)
+@pytest.mark.parametrize("lens", [True, False])
+def test_one_detection_per_push_equals_batch_with_its_drops(seed, noise_px, lens):
+    # (one row a push: TypeAStream._push_one, the decisions on scalars; without a lens the
+    # new row's rays in one compiled pass, _prepare_kernel.lensless_rows)
+    rig, obs, _ = dirty_session("typeA", seed, lens=lens)
     options = FusionOptions(noise_px=noise_px)
     batch = fuse(obs, rig, "typeA", options)
     assert len(batch) > 15
+    if seed == 0:  # every kind of drop the one-row path decides is met
+        assert {"prediction_failed", "kink", "outside_view"} <= set(batch.dropped)
     fuser = StreamFuser(rig, "typeA", options)
     parts = [fuser.push(obs.time_ns[i], obs.camera[i], obs.uv[i], obs.frame_index[i])
              for i in range(len(obs))]
@@ -133,3 +138,25 @@ def test_noise_estimate_one_point_path_equals_batch(noise_px):
              for a, b in itertools.pairwise([0, *np.unique(cuts).tolist()])]
     assert_array_equal(np.concatenate(parts), whole)
     assert len(np.unique(whole)) > 10  # (checkpoints past the first: medians, not the floor)
+
+
+def test_far_and_refused_rows_one_per_push_equal_batch_without_a_lens():
+    """A lensless rig's far-off pixels (a damaged datagram's 1e300: no ray, as prepare has
+    it) and a static ball crossing behind the cameras (past refusals, counted once), one row
+    a push, are the batch's: points, quality and dropped counts."""
+    rig = rectified_rig(offsets=(0.0, 1 / 60))
+    assert not any(np.any(c.dist) for c in rig.cameras)
+    rows = [(10 * i, i % 2, 320.0 if i % 2 == 0 else (380.0 if i < 10 else 260.0), 240.0)
+            for i in range(30)]
+    rows[14] = (140, 0, 1e300, 240.0)
+    rows[21] = (210, 1, -7e3, 240.0)
+    obs = observations(rows)
+    batch = fuse(obs, rig, "typeA")
+    assert batch.dropped.get("past_behind_camera", 0) >= 4 and len(batch) > 3, batch.dropped
+    fuser = StreamFuser(rig, "typeA")
+    parts = [fuser.push(obs.time_ns[i], obs.camera[i], obs.uv[i], obs.frame_index[i])
+             for i in range(len(obs))]
+    parts.append(fuser.flush())
+    assert_same(parts, batch)
+    # the stream's point columns are its own: later pushes do not change earlier points
+    assert all(not p.time_ns.flags.writeable for p in parts)

@@ -208,18 +208,22 @@ def prepare(obs: Observations, rig: Rig, F: np.ndarray | None = None) -> Prepare
     ``F`` may pass :func:`pslog.geometry.fundamental_matrices` of ``rig.cameras`` computed
     earlier."""
     n_cams = len(rig)
-    check_baselines(rig)
+    checked_F = _checked_geometry(rig)  # (check_baselines: a one-line error for a bad rig)
     if len(obs) and (obs.camera.min() < 0 or obs.camera.max() >= n_cams):
         raise FusionError(f"observation camera index {int(obs.camera.max())} is not in the "
                           f"{n_cams}-camera rig")
     uv_und = np.empty_like(obs.uv)
     ray_dir = np.empty((len(obs), 3))
     jac = np.empty((len(obs), 2, 2))
-    per_camera = []
+    per_camera = [np.flatnonzero(obs.camera == i) for i in range(n_cams)]
+    lensless = not any(np.any(cam.dist) for cam in rig.cameras)
+    if lensless and len(obs):
+        # no lens: every row's ideal pixel, ray and (identity) Jacobian in one compiled pass,
+        # the per-camera numpy operations below row by row (the same bits; fewer temporaries)
+        _lensless_rows(rig, obs, uv_und, ray_dir, jac)
     for i, cam in enumerate(rig.cameras):
-        rows = np.flatnonzero(obs.camera == i)
-        per_camera.append(rows)
-        if len(rows):
+        rows = per_camera[i]
+        if len(rows) and not lensless:
             # the lens inverted once: Camera.undistort's pixels and Camera.rays' directions
             # from the same ideal normalised coordinates (each method inverts it itself)
             xy = cam.undistort_normalized(obs.uv[rows])
@@ -234,7 +238,7 @@ def prepare(obs: Observations, rig: Rig, F: np.ndarray | None = None) -> Prepare
             jac[rows] = _undistortion_jacobian(cam, uv_und[rows])
     centers = np.array([c.center_world for c in rig.cameras])
     if F is None:
-        F = fundamental_matrices(rig.cameras)
+        F = checked_F
     t = (obs.time_ns - (obs.time_ns[0] if len(obs) else 0)) / NS
     return Prepared(
         obs=obs, t=t.astype(np.float64), uv_undistorted=uv_und,
@@ -244,6 +248,44 @@ def prepare(obs: Observations, rig: Rig, F: np.ndarray | None = None) -> Prepare
         cameras=tuple(rig.cameras), uv_jacobian=jac,
         view_box=np.array([_view_box(c) for c in rig.cameras]),
     )
+
+
+#: The rigs whose geometry :func:`_checked_geometry` checked (keyed by the cameras' K, R and
+#: t), with their fundamental matrices: a rig is checked and F made once, not per prepare
+_RIG_GEOMETRY: dict[tuple, np.ndarray] = {}
+
+
+def _checked_geometry(rig: Rig) -> np.ndarray:
+    """:func:`~pslog.geometry.fundamental_matrices` of ``rig`` (m, m, 3, 3), a copy of the
+    one made when its geometry (K, R, t) was first met and passed
+    :func:`~pslog.rig.check_baselines` (which raises, every time, for a rig that fails)."""
+    key = tuple((np.asarray(c.K, np.float64).tobytes(), np.asarray(c.R, np.float64).tobytes(),
+                 np.asarray(c.t, np.float64).tobytes()) for c in rig.cameras)
+    F = _RIG_GEOMETRY.get(key)
+    if F is None:
+        check_baselines(rig)
+        F = fundamental_matrices(rig.cameras)
+        if len(_RIG_GEOMETRY) > 256:
+            _RIG_GEOMETRY.clear()
+        _RIG_GEOMETRY[key] = F
+    return F.copy()
+
+
+def _lensless_rows(rig: Rig, obs: Observations, uv_und: np.ndarray, ray_dir: np.ndarray,
+                   jac: np.ndarray) -> None:
+    """:func:`prepare`'s per-camera pass for a rig without lens distortion, compiled
+    (:func:`~pslog.fusion._prepare_kernel.lensless_rows`): ``uv_und`` (n, 2), ``ray_dir``
+    (n, 3) and ``jac`` (n, 2, 2) written."""
+    from . import _prepare_kernel
+
+    cams = rig.cameras
+    none = np.empty((0, 9))
+    _prepare_kernel.lensless_rows(
+        np.ascontiguousarray(obs.camera, dtype=np.int64), np.ascontiguousarray(obs.uv),
+        np.array([np.asarray(c.K, np.float64).ravel() for c in cams]),
+        np.array([float(_FAR_IMAGES * max(c.width, c.height)) for c in cams]),
+        np.ascontiguousarray([np.asarray(c.R, np.float64) for c in cams]), none, none, none,
+        uv_und, ray_dir, jac, np.empty((0, 4)), np.empty((0, 3)), np.empty((3, 2, 0)))
 
 
 def _rays(cam, xy: np.ndarray) -> np.ndarray:

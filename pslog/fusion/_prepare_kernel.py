@@ -128,3 +128,48 @@ def previous_next(camera, n_cameras, before, after):
     for r in range(camera.shape[0] - 1, -1, -1):
         after[r] = last[camera[r]]
         last[camera[r]] = r
+
+
+@kernel
+def lensless_rows(camera, uv, kk, far, R, ki, rr, rtki, uv_und, ray_dir, jac, jac_rows,
+                  rays, dir_jac):
+    """:func:`~pslog.fusion._prepare.prepare`'s per-detection columns of detections of
+    cameras WITHOUT lens distortion, row by row, in one pass (a stream's new rows: numpy's
+    fixed cost per call was most of a push). The same operations in the same order as
+    :meth:`~pslog.camera.Camera.normalized_from_pixels`, ``pixels_from_normalized``,
+    :func:`rays_from_normalized` and :func:`observed_rays_and_jacobians` (the same bits).
+
+    Parameters
+    ----------
+    camera : (k,) int64; uv : (k, 2) float64, recorded pixels
+    kk : (m, 9) float64, each camera's K, row-major; far : (m,) float64, the largest
+        absolute pixel coordinate of a detection (``_FAR_IMAGES`` image sizes; beyond: no
+        ray, NaN); R : (m, 3, 3) float64, rotations; ki, rr, rtki : (m, 9) as
+        :func:`observed_rays_and_jacobians`
+    uv_und (k, 2), ray_dir (k, 3), jac (k, 2, 2), jac_rows (k, 4), rays (k, 3),
+    dir_jac (3, 2, k) : written (``jac``: the identity, as ``_undistortion_jacobian``
+        without a lens); ``jac_rows`` of no rows: not written; ``rays`` of no rows: neither
+        they nor ``dir_jac`` (a session's prepare leaves them to ``Prepared.observed_rays``)
+    """
+    xy = np.empty((1, 2))
+    out = np.empty((1, 3))
+    for i in range(camera.shape[0]):
+        c = camera[i]
+        u, v = uv[i, 0], uv[i, 1]
+        # normalized_from_pixels, then pixels_from_normalized (no lens: the ideal point)
+        y = (v - kk[c, 5]) / kk[c, 4]
+        x = (u - kk[c, 2] - kk[c, 1] * y) / kk[c, 0]
+        xy[0, 0], xy[0, 1] = x, y
+        rays_from_normalized(xy, R[c], out)
+        if abs(u) <= far[c] and abs(v) <= far[c]:
+            uv_und[i, 0] = kk[c, 0] * x + kk[c, 1] * y + kk[c, 2]
+            uv_und[i, 1] = kk[c, 4] * y + kk[c, 5]
+            ray_dir[i, 0], ray_dir[i, 1], ray_dir[i, 2] = out[0, 0], out[0, 1], out[0, 2]
+        else:  # far outside the image (or NaN): no detection, no ray
+            uv_und[i, 0] = uv_und[i, 1] = np.nan
+            ray_dir[i, 0] = ray_dir[i, 1] = ray_dir[i, 2] = np.nan
+        jac[i, 0, 0], jac[i, 0, 1], jac[i, 1, 0], jac[i, 1, 1] = 1.0, 0.0, 0.0, 1.0
+        if jac_rows.shape[0]:
+            jac_rows[i, 0], jac_rows[i, 1], jac_rows[i, 2], jac_rows[i, 3] = 1.0, 0.0, 0.0, 1.0
+    if rays.shape[0]:
+        observed_rays_and_jacobians(camera, uv_und, ki, rr, rtki, rays, dir_jac)

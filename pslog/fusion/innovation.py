@@ -54,7 +54,7 @@ RAYLEIGH_MEDIAN = float(np.sqrt(2.0 * np.log(2.0)))
 #: NOISE_EVERY innovations (vectorised in a batch run, the same values in a stream); until
 #: NOISE_EVERY innovations exist, the tests' σ is at least DEFAULT_NOISE_PX.
 NOISE_WINDOW = 256
-NOISE_EVERY = 32
+NOISE_EVERY = 32  # (a power of two: NoiseEstimate.sigmas clears its low bits)
 
 
 def innovation_factors(events: np.ndarray, j1: np.ndarray, j2: np.ndarray,
@@ -121,7 +121,9 @@ class NoiseEstimate:
         values = normalised[valid]
         # innovations taken before each point, and the checkpoint (a multiple of EVERY) it uses
         before = self._count + np.cumsum(valid) - valid
-        checkpoint = before // NOISE_EVERY * NOISE_EVERY
+        # before // NOISE_EVERY * NOISE_EVERY: the low bits cleared (a power of two; before
+        # >= 0), without numpy's integer division, the dearest operation of this method
+        checkpoint = before & -NOISE_EVERY
         # the innovations kept and the new ones: global index g at combined[g - offset]
         combined = np.concatenate([self._tail, values])
         offset = self._count - len(self._tail)

@@ -40,6 +40,7 @@ kink tests (:mod:`pslog.fusion.innovation`) run on the kernel's outputs.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Literal, NamedTuple, cast, overload
 
@@ -62,6 +63,7 @@ from ._prepare import (
     finite_rows,
 )
 from .innovation import (
+    DEFAULT_NOISE_PX,
     INNOVATION_SIGMAS,
     NoiseEstimate,
     failed_counts,
@@ -424,6 +426,7 @@ class TypeAStream:
 
     def __init__(self, rig, options) -> None:
         from . import _pseudo_kernel
+        from ._prepare import _FAR_IMAGES as _FAR_IMAGES_
         from ._prepare import default_max_gap_s, prepare
 
         self.rig = rig
@@ -454,11 +457,38 @@ class TypeAStream:
         self._noise = NoiseEstimate()  # the detection noise the innovations imply, so far
         self._empty = fuse_type_a(template, self._max_gap_s, self._noise_px,
                                   noise=NoiseEstimate())[0]
+        # one new row (the usual push): the per-camera constants, made once (_push_one)
+        self._max_gap_ns = int(self._max_gap_s * NS)
+        self._tables = self._shared["_kernel_tables"]
+        self._lens_table = template.lens_rows
+        # cameras without lens distortion: their new rows in one compiled pass
+        # (_prepare_kernel.lensless_rows; a lens's rows go through numpy as prepare does)
+        self._lensless = [not np.any(c.dist) for c in rig.cameras]
+        self._lensless_tables = (
+            np.array([np.asarray(c.K, np.float64).ravel() for c in rig.cameras]),
+            np.array([float(_FAR_IMAGES_ * max(c.width, c.height)) for c in rig.cameras]),
+            np.ascontiguousarray([np.asarray(c.R, np.float64) for c in rig.cameras]),
+            *self._ray_tables)
+        # _push_one's scratch (what does not leave in its Track), made once
+        self._scratch = (np.empty((2, 1, len(_pseudo_kernel.FLOATS))),
+                         np.empty((2, 1, len(_pseudo_kernel.INTS)), dtype=np.int64),
+                         np.empty((2, 1, 3), dtype=np.int64), np.empty((2, 1, 3)),
+                         np.empty(1, dtype=bool), np.empty((1, 3)),
+                         np.empty(1, dtype=np.int64), np.empty(1), np.empty(1), np.empty(1),
+                         np.zeros(1, dtype=bool))
+        if not all(self._lensless):
+            # a lens's rows take _lens_rows' kernels, which pslog live's warm-up (a lensless
+            # rig) does not run: one row of scratch loads (or compiles) them now, not at the
+            # first datagram
+            c = self._lensless.index(False)
+            scratch = _StreamColumns(2)
+            scratch.camera[:] = scratch.camera64[:] = c
+            scratch.uv[:] = (rig.cameras[c].K[0, 2], rig.cameras[c].K[1, 2])
+            self._lens_rows(scratch, 0, 1)
 
     def push(self, time_ns, camera, uv, frame_index) -> Track:
         """Rows (n,) after every row pushed before; returns their points (possibly none)."""
         from . import _prepare_kernel
-        from ._prepare import _FAR_IMAGES, _rays, _undistortion_jacobian
 
         n_new = len(time_ns)
         if n_new == 0:
@@ -473,24 +503,9 @@ class TypeAStream:
         if camera.min() < 0 or camera.max() >= len(rig):
             raise FusionError(f"observation camera index {int(camera.max())} is not in the "
                               f"{len(rig)}-camera rig")
-        uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
-        # undistortion, rays and Jacobians of the new rows: prepare's per-camera pass
-        uv_und = np.empty_like(uv)
-        ray_dir = np.empty((n_new, 3))
-        jac = np.empty((n_new, 2, 2))
-        for i in np.unique(camera).tolist():
-            cam = rig.cameras[i]
-            rows = np.flatnonzero(camera == i)
-            xy = cam.undistort_normalized(uv[rows])  # (the lens inverted once, as prepare)
-            uv_und[rows] = cam.pixels_from_normalized(xy)
-            ray_dir[rows] = _rays(cam, xy)
-            far = rows[~np.all(np.abs(uv[rows]) <= _FAR_IMAGES * max(cam.width, cam.height),
-                               axis=1)]
-            uv_und[far] = np.nan
-            ray_dir[far] = np.nan
-            jac[rows] = _undistortion_jacobian(cam, uv_und[rows])
-        # the window: the rows a new point can reach, then the new ones
+        uv = np.ascontiguousarray(np.asarray(uv, dtype=np.float64).reshape(-1, 2))
         time_ns = np.asarray(time_ns, dtype=np.int64)
+        # the window: the rows a new point can reach, then the new ones
         buf = self._buffers
         lo, hi = self._lo, self._hi
         # (the history of the earliest new row: each new row's point is made)
@@ -499,22 +514,27 @@ class TypeAStream:
             buf = self._buffers = buf.moved(lo, hi, 2 * (hi - lo + n_new))
             lo, hi = 0, hi - lo
         end = hi + n_new
-        t = self._template
         buf.time[hi:end] = time_ns
         buf.camera[hi:end] = camera
         buf.uv[hi:end] = uv
         buf.frame[hi:end] = frame_index
-        buf.uv_und[hi:end] = uv_und
-        buf.ray_dir[hi:end] = ray_dir
-        buf.jac[hi:end] = jac
-        # (Prepared.observed_rays' and observed_direction_jacobians' compiled pass)
-        rays, dir_jac = buf.rays[hi:end], buf.dir_jac[:, :, hi:end]
-        _prepare_kernel.observed_rays_and_jacobians(
-            camera.astype(np.int64), np.ascontiguousarray(uv_und), *self._ray_tables, rays,
-            dir_jac)
-        buf.jac_rows[hi:end] = np.nan_to_num(jac).reshape(-1, 4)
         buf.seen[hi:end] = 0
+        # undistortion, rays and Jacobians of the new rows: prepare's per-camera pass, and
+        # Prepared.observed_rays' and observed_direction_jacobians' compiled pass
+        lensless = self._lensless
+        camera64 = buf.camera64[hi:end]
+        camera64[:] = camera
+        if all(lensless[c] for c in camera.tolist()):  # (one compiled pass: the same bits)
+            _prepare_kernel.lensless_rows(
+                camera64, uv, *self._lensless_tables, buf.uv_und[hi:end],
+                buf.ray_dir[hi:end], buf.jac[hi:end], buf.jac_rows[hi:end],
+                buf.rays[hi:end], buf.dir_jac[:, :, hi:end])
+        else:
+            self._lens_rows(buf, hi, end)
         self._lo, self._hi = lo, end
+        if n_new == 1:  # the usual push: its one point without a Prepared (_push_one)
+            return self._push_one(lo, end)
+        t = self._template
         window = slice(lo, end)
         self._time, self._camera = buf.time[window], buf.camera[window]
         obs = Observations(self._time, self._camera, buf.uv[window], buf.frame[window])
@@ -533,6 +553,153 @@ class TypeAStream:
                            events=np.arange(n - n_new, n), seen=buf.seen[window],
                            noise=self._noise, explain=False)[0]
 
+    def _lens_rows(self, buf: _StreamColumns, hi: int, end: int) -> None:
+        """prepare's per-camera pass (numpy: a lens's iterative undistortion) and
+        Prepared.observed_rays' and observed_direction_jacobians' compiled pass, for the
+        buffers' rows ``hi:end`` (their camera and recorded pixels already written)."""
+        from . import _prepare_kernel
+        from ._prepare import _FAR_IMAGES, _rays, _undistortion_jacobian
+
+        camera, uv = buf.camera[hi:end], buf.uv[hi:end]
+        n_new = end - hi
+        uv_und = np.empty_like(uv)
+        ray_dir = np.empty((n_new, 3))
+        jac = np.empty((n_new, 2, 2))
+        for i in sorted(set(camera.tolist())):
+            cam = self.rig.cameras[i]
+            rows = np.flatnonzero(camera == i)
+            xy = cam.undistort_normalized(uv[rows])  # (the lens inverted once, as prepare)
+            uv_und[rows] = cam.pixels_from_normalized(xy)
+            ray_dir[rows] = _rays(cam, xy)
+            far = rows[~np.all(np.abs(uv[rows]) <= _FAR_IMAGES * max(cam.width, cam.height),
+                               axis=1)]
+            uv_und[far] = np.nan
+            ray_dir[far] = np.nan
+            jac[rows] = _undistortion_jacobian(cam, uv_und[rows])
+        buf.uv_und[hi:end] = uv_und
+        buf.ray_dir[hi:end] = ray_dir
+        buf.jac[hi:end] = jac
+        _prepare_kernel.observed_rays_and_jacobians(
+            buf.camera64[hi:end], np.ascontiguousarray(uv_und), *self._ray_tables,
+            buf.rays[hi:end], buf.dir_jac[:, :, hi:end])
+        buf.jac_rows[hi:end] = np.nan_to_num(jac).reshape(-1, 4)
+
+    def _push_one(self, lo: int, end: int) -> Track:
+        """The point of the window's newest row (rows ``lo:end`` of the buffers), as
+        :func:`fuse_type_a` makes it with ``events`` that one row, ``seen`` and ``noise``
+        the stream's, ``explain=False``: its compiled kernels on the window's columns, and
+        the decisions that follow it (the prediction and kink tests, the counts) on one
+        point's scalars, each the same IEEE operation as the (1,) columns' (the same bits,
+        the same Track: tests/test_stream_type_a.py) without a Prepared, an Observations
+        and ~60 numpy calls on arrays of one element."""
+        from . import _pseudo_kernel
+        from ._prepare_kernel import previous_next
+
+        buf = self._buffers
+        time_ns, camera = buf.time[lo:end], buf.camera[lo:end]
+        uv_und = buf.uv_und[lo:end]
+        n = end - lo
+        e = n - 1
+        m = len(self.rig)
+        # (brackets_kernel over the window: what _all_brackets makes of a Prepared)
+        prev_b, next_b = np.empty((m, n), dtype=np.int64), np.empty((m, n), dtype=np.int64)
+        previous_instant = np.empty(n, dtype=np.int64)
+        _pseudo_kernel.brackets_kernel(time_ns, camera, prev_b, next_b, previous_instant)
+        cam, ki, rr, rtki, f9, lens = self._tables
+        (ff, fi, past_rows, past_points, has, predicted, flags, innovation, factor, model,
+         kinked_out) = self._scratch
+        refused = np.zeros(n, dtype=np.int64)
+        points, quality_table = np.empty((1, 3)), np.empty((len(_QUALITY), 1))  # (returned)
+        target = np.array([e], dtype=np.int64)
+        noise_px = self._noise_px
+        with_cov = noise_px is not None and not _prepare.FINITE_DIFFERENCES
+        made = _pseudo_kernel.type_a_kernel(
+            target, previous_instant, 2 * m, MAX_EXTRAPOLATION,
+            self._max_gap_ns, time_ns, camera, prev_b, next_b, uv_und, buf.rays[lo:end],
+            self._template.centers, ki, rr, f9, cam, _SPAN_TIE_NS, MIN_RAY_ANGLE_DEG,
+            buf.ray_dir[lo:end], buf.dir_jac[:, :, lo:end],
+            buf.jac_rows[lo:end] if lens else np.zeros((1, 4)), lens, rtki, NS,
+            0.0 if noise_px is None else float(noise_px), with_cov, ff, fi, refused, has,
+            predicted, points, flags, innovation, factor, model, quality_table, past_rows,
+            past_points)
+        # the decisions of fuse_type_a on its one point (made: 1), or none (made: 0)
+        keep = good = failed = kinked = False
+        bits = int(flags[0]) if made else 0
+        if made:
+            p0, p1, p2 = points[0].tolist()
+            finite = math.isfinite(p0) and math.isfinite(p1) and math.isfinite(p2)
+            good = finite and bits == 0
+            inn, fac = float(innovation[0]), float(factor[0])
+            # NoiseEstimate.sigmas of (innovation / factor,) or (NaN,): its one-point path
+            sigma = self._noise._one(inn / fac if good else math.nan,
+                                     DEFAULT_NOISE_PX if noise_px is None else float(noise_px))
+            sg = float(sigma[0])
+            failed = good and inn > INNOVATION_SIGMAS * (sg * fac) + float(model[0])
+            if good and not failed:
+                camera64 = buf.camera64[lo:end]
+                _pseudo_kernel.kink_kernel(
+                    target, past_rows[0, :, 0], past_rows[0, :, 1], past_rows[0, :, 2],
+                    past_points[0], past_rows[1, :, 0], past_rows[1, :, 1],
+                    past_rows[1, :, 2], past_points[1], predicted, sigma,
+                    *_window_previous_next(camera64, m, previous_next), time_ns, uv_und,
+                    camera64, self._lens_table, self._max_gap_ns, NS, kinked_out)
+                kinked = bool(kinked_out[0])
+            keep = good and not failed and not kinked
+        else:
+            finite = False
+        # Track.dropped: each detection's past refusals once (seen), the invalid point's
+        # reasons, the tests' refusals, in fuse_type_a's order
+        dropped: dict[str, int] = {}
+        if made and finite and bits:
+            dropped.update(count_invalid(flags))
+        if refused.any():
+            seen = buf.seen[lo:end]
+            refused, seen[:] = refused & ~seen, seen | refused
+            if refused.any():
+                for reason, count in count_invalid(refused).items():
+                    dropped[f"past_{reason}"] = dropped.get(f"past_{reason}", 0) + count
+        if failed:
+            dropped["prediction_failed"] = 1
+        elif kinked:
+            dropped["kink"] = 1
+        if not keep:
+            if not dropped:
+                return self._empty
+            return _trusted_track(self._empty.time_ns, self._empty.position_world,
+                                  self._empty.camera, dict(self._empty.quality), dropped)
+        n_columns = len(_QUALITY) if with_cov else 10
+        quality_table.flags.writeable = False
+        # (the time and camera copied out of the buffers, which later pushes overwrite)
+        return _trusted_track(time_ns[e:].copy(), points, camera[e:].copy(),
+                              dict(zip(_QUALITY[:n_columns], quality_table, strict=False)),
+                              dropped)
+
+
+def _window_previous_next(camera: np.ndarray, m: int, previous_next
+                          ) -> tuple[np.ndarray, np.ndarray]:
+    """Each window row's previous and next row of its camera (``camera`` (n,) int64; -1:
+    none), (n,) int64 each: :func:`~pslog.fusion.innovation._previous_next` with the rig's
+    ``m`` cameras."""
+    n = len(camera)
+    before, after = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
+    previous_next(camera, m, before, after)
+    return before, after
+
+
+def _trusted_track(time_ns: np.ndarray, points: np.ndarray, camera: np.ndarray,
+                   quality: dict, dropped: dict) -> Track:
+    """A :class:`Track` of columns already of its dtypes and shapes (checked by whoever made
+    them), without its constructor's checks: read-only views of them, as it keeps."""
+    track = object.__new__(Track)
+    columns = []
+    for column in (time_ns, points, camera):
+        view = column.view()
+        view.flags.writeable = False
+        columns.append(view)
+    track.__dict__.update(method="typeA", time_ns=columns[0], position_world=columns[1],
+                          camera=columns[2], quality=quality, dropped=dropped)
+    return track
+
 
 class _StreamColumns:
     """:class:`TypeAStream`'s per-row columns, ``capacity`` rows each (a window of them in
@@ -544,6 +711,7 @@ class _StreamColumns:
         self.capacity = capacity
         self.time = np.zeros(capacity, np.int64)
         self.camera = np.zeros(capacity, np.int32)
+        self.camera64 = np.zeros(capacity, np.int64)  # (the kernels' int64 form of it)
         self.uv = np.zeros((capacity, 2))
         self.frame = np.zeros(capacity, np.int64)
         self.uv_und = np.zeros((capacity, 2))
@@ -559,8 +727,8 @@ class _StreamColumns:
         columns, if large enough)."""
         out = self if capacity <= self.capacity else _StreamColumns(capacity)
         k = hi - lo
-        for name in ("time", "camera", "uv", "frame", "uv_und", "ray_dir", "jac", "rays",
-                     "jac_rows", "seen"):
+        for name in ("time", "camera", "camera64", "uv", "frame", "uv_und", "ray_dir", "jac",
+                     "rays", "jac_rows", "seen"):
             column = getattr(self, name)
             getattr(out, name)[:k] = column[lo:hi].copy()  # (overlapping when in place)
         out.dir_jac[:, :, :k] = self.dir_jac[:, :, lo:hi].copy()
