@@ -138,6 +138,7 @@ _INIT_BALLISTIC = 0.9
 #: Bound of one detection's log likelihood ratio between the models (an outlier moves μ little).
 _LOG_ODDS_CLIP = 4.0
 _ZERO6 = (0.0,) * 6
+_ZERO3 = np.zeros(3)  # the supported model's gravity in the window fit
 #: What :meth:`BallFilter._fit` returns for a fit whose velocity alone is too uncertain.
 _SHORT = "short"
 #: Accepted updates (one at least from another camera) that confirm a jump.
@@ -1269,6 +1270,142 @@ def _run(S, I, cams, O, N, times, cameras, uv, start, rows, index, n_out):
     return times.shape[0], n_out, _NONE
 
 
+# ---- the start's window fit (compiled: a start attempt runs it up to 2 x 5 times) -------------
+#: :func:`_window_fit`'s results: not trustworthy, too short (the velocity's uncertainty
+#: alone fails), a fit
+_WFIT_NONE, _WFIT_SHORT, _WFIT_OK = 0, 1, 2
+
+
+@kernel
+def _dot3(a0, a1, a2, b0, b1, b2):
+    """``a · b`` of two 3-vectors summed as numpy's ``einsum("ij,ij->i")`` summed a row of
+    three in the fit this replaced (two SIMD lanes: ``(a0 b0 + a2 b2) + a1 b1``), so that the
+    start is the same bit for bit."""
+    return (a0 * b0 + a2 * b2) + a1 * b1
+
+
+@kernel
+def _pixel_rows(cams, cam, uv, tau, theta, accel, J, r):
+    """:meth:`BallFilter._fit`'s pixel system into ``J`` (2n x 6) and ``r`` (2n) at the path
+    ``theta`` (6) with the constant acceleration ``accel`` (3); False when a point is behind
+    its camera."""
+    for i in range(tau.shape[0]):
+        ti = tau[i]
+        h = 0.5 * (ti * ti)
+        ok, pu, pv, a0, a1, a2, b0, b1, b2 = _project(
+            cams, cam[i], theta[0] + ti * theta[3] + h * accel[0],
+            theta[1] + ti * theta[4] + h * accel[1], theta[2] + ti * theta[5] + h * accel[2])
+        if not ok:
+            return False
+        J[2 * i, 0], J[2 * i, 1], J[2 * i, 2] = a0, a1, a2
+        J[2 * i, 3], J[2 * i, 4], J[2 * i, 5] = ti * a0, ti * a1, ti * a2
+        J[2 * i + 1, 0], J[2 * i + 1, 1], J[2 * i + 1, 2] = b0, b1, b2
+        J[2 * i + 1, 3], J[2 * i + 1, 4], J[2 * i + 1, 5] = ti * b0, ti * b1, ti * b2
+        r[2 * i] = uv[i, 0] - pu
+        r[2 * i + 1] = uv[i, 1] - pv
+    return True
+
+
+@kernel
+def _window_fit(cams, cam, uv, tau, O, D, g, k, var, gate, chi2, max_std2, max_speed2,
+                theta_out, cov_out, res_out):
+    """The start's fit of a window of ``n`` detections (camera ``cam`` (n,), distorted
+    pixel ``uv`` (n, 2), time ``tau`` (n,) s before the newest, viewing ray origin ``O`` and
+    unit direction ``D`` (n, 3)) on the path ``p0 + v0 τ + a τ²/2`` with ``a = g - k‖v‖v``
+    (``g`` (3), m/s²; ``k`` 1/m): the linear start on the rays (unit weights, then
+    ``1/depth`` with the drag at the first pass's speed), three Gauss-Newton steps in
+    pixels, and the start's tests at pixel variance ``var`` (px²): every residual within
+    ``gate`` (χ²₂), their sum within ``chi2`` (χ² of ``2n - 6``), a well-conditioned normal
+    matrix, ``trace P_pp <= max_std2`` (m²) and ``trace P_vv <= max_speed2`` ((m/s)²).
+    Writes ``θ = (p0, v0)`` into ``theta_out`` (6), ``P = var (JᵀJ)⁻¹`` into ``cov_out``
+    (6 x 6) and the pixel residuals' lengths into ``res_out`` (n). Returns ``_WFIT_OK``,
+    ``_WFIT_SHORT`` (every test passed but the velocity's) or ``_WFIT_NONE``.
+
+    The operations are numpy's in :meth:`BallFilter._fit`'s former form, in the same order
+    (the same LAPACK least squares, ``einsum``'s and ``norm``'s sums as written below), so the
+    fit is the same bit for bit (``tests/test_filter_start.py``)."""
+    n = tau.shape[0]
+    m = 2 * n
+    for i in range(n):
+        if not (np.isfinite(D[i, 0]) and np.isfinite(D[i, 1]) and np.isfinite(D[i, 2])):
+            return _WFIT_NONE
+    # two unit vectors normal to each ray: E (2n x 3), the offsets' directions
+    E = np.empty((m, 3))
+    for i in range(n):
+        d0, d1, d2 = D[i, 0], D[i, 1], D[i, 2]
+        if abs(d0) < 0.9:
+            h0, h1, h2 = 1.0, 0.0, 0.0
+        else:
+            h0, h1, h2 = 0.0, 1.0, 0.0
+        c0 = d1 * h2 - d2 * h1
+        c1 = d2 * h0 - d0 * h2
+        c2 = d0 * h1 - d1 * h0
+        nrm = math.sqrt(c0 * c0 + (c1 * c1 + c2 * c2))  # numpy's reduce: a0 + (a1 + a2)
+        c0, c1, c2 = c0 / nrm, c1 / nrm, c2 / nrm
+        E[i, 0], E[i, 1], E[i, 2] = c0, c1, c2
+        E[n + i, 0] = d1 * c2 - d2 * c1
+        E[n + i, 1] = d2 * c0 - d0 * c2
+        E[n + i, 2] = d0 * c1 - d1 * c0
+    a0, a1, a2 = g[0], g[1], g[2]
+    w = np.ones(m)
+    A = np.empty((m, 6))
+    b = np.empty(m)
+    theta = np.empty(6)
+    rcond = np.finfo(np.float64).eps * m  # numpy's rcond=None
+    for _ in range(2):
+        for j in range(m):
+            i = j - n if j >= n else j
+            t = tau[i]
+            e0, e1, e2 = E[j, 0], E[j, 1], E[j, 2]
+            wj = w[j]
+            A[j, 0], A[j, 1], A[j, 2] = wj * e0, wj * e1, wj * e2
+            A[j, 3], A[j, 4], A[j, 5] = wj * (t * e0), wj * (t * e1), wj * (t * e2)
+            h = 0.5 * (t * t)
+            b[j] = wj * _dot3(e0, e1, e2, O[i, 0] - h * a0, O[i, 1] - h * a1,
+                              O[i, 2] - h * a2)
+        theta, _, rank, sv = np.linalg.lstsq(A, b, rcond)
+        if rank < 6 or sv[5] < 1e-10 * sv[0]:
+            return _WFIT_NONE
+        for i in range(n):
+            t = tau[i]
+            depth = _dot3(theta[0] + t * theta[3] - O[i, 0], theta[1] + t * theta[4] - O[i, 1],
+                          theta[2] + t * theta[5] - O[i, 2], D[i, 0], D[i, 1], D[i, 2])
+            if not depth > _MIN_DEPTH_M:
+                return _WFIT_NONE
+            w[i] = w[n + i] = 1.0 / depth
+        vel = theta[3:].copy()
+        kv = k * math.sqrt(np.dot(vel, vel))
+        a0, a1, a2 = g[0] - kv * vel[0], g[1] - kv * vel[1], g[2] - kv * vel[2]
+    accel = np.array([a0, a1, a2])
+    # Gauss-Newton in distorted pixels (the filter's measurement model)
+    J = np.empty((m, 6))
+    r = np.empty(m)
+    for _ in range(3):
+        if not _pixel_rows(cams, cam, uv, tau, theta, accel, J, r):
+            return _WFIT_NONE
+        theta = theta + np.linalg.lstsq(J, r, rcond)[0]
+    if not _pixel_rows(cams, cam, uv, tau, theta, accel, J, r):
+        return _WFIT_NONE
+    ok = True
+    for i in range(n):
+        res_out[i] = np.hypot(r[2 * i], r[2 * i + 1])
+        if not res_out[i] ** 2 <= gate * var:
+            ok = False
+    theta_out[:] = theta
+    if not (ok and np.dot(r, r) <= chi2 * var):
+        return _WFIT_NONE
+    info = J.T @ J
+    cov = var * np.linalg.solve(info, np.eye(6))  # numpy's inv: LAPACK gesv on I
+    sv = np.linalg.svd(info)[1]
+    if (not np.all(np.isfinite(cov)) or sv[0] / sv[5] > 1e14
+            or cov[0, 0] + (cov[1, 1] + cov[2, 2]) > max_std2):
+        return _WFIT_NONE  # a degenerate geometry (rays nearly parallel)
+    if cov[3, 3] + (cov[4, 4] + cov[5, 5]) > max_speed2:
+        return _WFIT_SHORT
+    cov_out[:, :] = 0.5 * (cov + cov.T)
+    return _WFIT_OK
+
+
 @kernel
 def _predict(S, I, O, t):
     """The state predicted to ``t`` ns (``BallFilter.predict``): mean (6) and covariance
@@ -1371,6 +1508,7 @@ class BallFilter:
         self._down = tuple(float(a) / norm for a in options.gravity)
         self._k = options.drag_per_m
         self._g = tuple(float(x) for x in options.gravity)
+        self._g_array = np.array(self._g)
         self._gate = options.gate
         self._switch = options.model_switch_per_s
         # without switching the ballistic model alone (probability 1)
@@ -1821,87 +1959,31 @@ class BallFilter:
         """Fit of the window's detections at the newest one's time, ballistic (gravity and
         drag) or supported (the supported model's drag alone): ``(x (6,), P (6x6 flat
         list), pixel residuals)``, or None when it is not trustworthy, or ``_SHORT`` when it
-        passes every test but the velocity's uncertainty."""
+        passes every test but the velocity's uncertainty (:func:`_window_fit`, compiled)."""
         t_ref = window[-1][0]
+        n = len(window)
         tau = np.array([(w[0] - t_ref) / NS for w in window])
-        g = np.array(self._g) if ballistic else np.zeros(3)
-        k = self._k if ballistic else self.options.supported_drag_per_m
         rays = [self._ray(*w) for w in window]
         O = np.array([o for o, _ in rays])
         D = np.array([d for _, d in rays])
-        if not np.all(np.isfinite(D)):
-            return None
-        # linear start: the path p0 + v0 τ + a τ²/2 on each ray (2 equations per ray: its
-        # offsets along two unit directions normal to it), weighted by 1/depth in a 2nd pass
-        helper = np.where((np.abs(D[:, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
-        E1 = np.cross(D, helper)
-        E1 /= np.linalg.norm(E1, axis=1, keepdims=True)
-        E = np.concatenate([E1, np.cross(D, E1)])  # (2n, 3)
-        T = np.concatenate([tau, tau])
-        OO = np.concatenate([O, O])
-        accel = g
-        weights = np.ones(len(T))
-        theta = None
-        for _ in range(2):
-            A = weights[:, None] * np.hstack([E, T[:, None] * E])
-            b = weights * np.einsum("ij,ij->i", E, OO - 0.5 * (T * T)[:, None] * accel)
-            theta, _, rank, sv = np.linalg.lstsq(A, b, rcond=None)
-            if rank < 6 or sv[-1] < 1e-10 * sv[0]:
-                return None
-            depth = np.einsum("ij,ij->i", theta[:3] + tau[:, None] * theta[3:] - O, D)
-            if not np.all(depth > _MIN_DEPTH_M):
-                return None
-            weights = np.concatenate([1.0 / depth, 1.0 / depth])
-            accel = g - k * np.linalg.norm(theta[3:]) * theta[3:]
-        if theta is None:  # pragma: no cover - the loop above runs twice
-            return None
-        # Gauss-Newton in distorted pixels (the filter's measurement model)
-        for _ in range(3):
-            J, r = self._pixel_system(window, tau, theta, accel)
-            if J is None:
-                return None
-            step = np.linalg.lstsq(J, r, rcond=None)[0]
-            theta = theta + step
-        J, r = self._pixel_system(window, tau, theta, accel)
-        if J is None:
-            return None
-        residuals = np.hypot(r[0::2], r[1::2])
-        # every detection inside the gate, and the whole fit inside the chi-square quantile
-        # of its 2n - 6 degrees of freedom (a break inside the window shows in the sum)
+        cam = np.array([w[1] for w in window], dtype=np.int64)
+        uv = np.array([w[2:] for w in window])
+        theta, cov, residuals = np.empty(6), np.empty((6, 6)), np.empty(n)
         var = self._start_var()
-        if not (np.all(residuals ** 2 <= self._gate * var)
-                and float(r @ r) <= _chi2_quantile(len(r) - 6) * var):
-            return None
-        info = J.T @ J
         try:
-            cov = var * np.linalg.inv(info)
-        except np.linalg.LinAlgError:
+            status = _window_fit(
+                self._cam_table, cam, uv, tau, O, D,
+                self._g_array if ballistic else _ZERO3,
+                self._k if ballistic else self.options.supported_drag_per_m,
+                var, self._gate, _chi2_quantile(2 * n - 6), self.options.max_init_std_m ** 2,
+                self.options.max_init_speed_std ** 2, theta, cov, residuals)
+        except np.linalg.LinAlgError:  # a singular normal matrix, a non-finite system
             return None
-        if (not np.all(np.isfinite(cov)) or np.linalg.cond(info) > 1e14
-                or np.trace(cov[:3, :3]) > self.options.max_init_std_m ** 2):
-            return None  # a degenerate geometry (rays nearly parallel): no trustworthy start
-        if np.trace(cov[3:, 3:]) > self.options.max_init_speed_std ** 2:
+        if status == _WFIT_NONE:
+            return None
+        if status == _WFIT_SHORT:
             return _SHORT  # too short a window (or mostly one camera's): more detections
-        cov = 0.5 * (cov + cov.T)
-        return [float(a) for a in theta], [float(a) for a in cov.ravel()], residuals
-
-    def _pixel_system(self, window, tau, theta, accel):
-        """Jacobian (2n, 6) and residuals (2n,) of the window's pixels at the path
-        ``theta``; (None, None) when a point is behind its camera."""
-        points = (theta[:3] + tau[:, None] * theta[3:]
-                  + 0.5 * (tau * tau)[:, None] * accel).tolist()
-        rows, res = [], []
-        for (_, camera, u, v), ti, p in zip(window, tau.tolist(), points, strict=True):
-            ok, pu, pv, *h = _project(self._cam_table, camera, p[0], p[1], p[2])
-            if not ok:
-                return None, None
-            h0, h1 = h[:3], h[3:]
-            rows.append([h0[0], h0[1], h0[2], ti * h0[0], ti * h0[1], ti * h0[2]])
-            rows.append([h1[0], h1[1], h1[2], ti * h1[0], ti * h1[1], ti * h1[2]])
-            res.append(u - pu)
-            res.append(v - pv)
-        return np.array(rows), np.array(res)
-
+        return theta.tolist(), cov.ravel().tolist(), residuals
 
 
 
