@@ -2038,21 +2038,23 @@ def _track(flt: BallFilter, time_ns, camera, uv) -> Track:
             n_out += 1
         i += 1
     rows, index = rows[:n_out], index[:n_out]
-    q = np.empty((n_out, len(FILTER_QUALITY)))
-    q[:, 0:4] = rows[:, 3:7]
+    # one row per quality column: each column a contiguous array, which Track keeps as it
+    # is (a column of a row-major table was copied by Track, 14 copies per push)
+    q = np.empty((len(FILTER_QUALITY), n_out))
+    q[0:4] = rows[:, 3:7].T
     # lengths by CPython's math.hypot, as the pure-Python filter took them (numba's hypot
     # is libm's, which differs in the last bit now and then)
     hypot = math.hypot
-    q[:, 4] = np.fromiter(map(hypot, rows[:, 7].tolist(), rows[:, 8].tolist()), np.float64,
-                          n_out)
-    q[:, 5] = np.fromiter(map(hypot, rows[:, 9].tolist(), rows[:, 10].tolist()), np.float64,
-                          n_out)
+    q[4] = np.fromiter(map(hypot, rows[:, 7].tolist(), rows[:, 8].tolist()), np.float64,
+                       n_out)
+    q[5] = np.fromiter(map(hypot, rows[:, 9].tolist(), rows[:, 10].tolist()), np.float64,
+                       n_out)
     init = rows[:, 15] == 1.0
-    q[init, 5] = rows[init, 9]  # a start's residual, as its fit gave it
-    q[:, 6:] = rows[:, 11:16]
+    q[5, init] = rows[init, 9]  # a start's residual, as its fit gave it
+    q[6:] = rows[:, 11:16].T
     return Track("filter", times[index], np.ascontiguousarray(rows[:, :3]),
                  cameras[index].astype(np.int32),
-                 {name: q[:, i] for i, name in enumerate(FILTER_QUALITY)},
+                 {name: q[i] for i, name in enumerate(FILTER_QUALITY)},
                  dropped={k: n - before.get(k, 0) for k, n in flt.dropped.items()
                           if n > before.get(k, 0)})
 
