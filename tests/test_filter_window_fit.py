@@ -94,26 +94,98 @@ def _numpy_fit(flt, window, ballistic=True):
     return [float(a) for a in theta], [float(a) for a in cov.ravel()], residuals
 
 
+def _numpy_turn_fit(flt, window, theta, var):
+    """The turn model's MAP fit as it was before it was compiled (``BallFilter._turn_fit``
+    of session 8, numpy), the reference: ``(x_t, P_t flat, residuals)`` or None."""
+    t_ref = window[-1][0]
+    tau = np.array([(w[0] - t_ref) / NS for w in window])
+    th = np.array([*theta, 0.0])
+    prior = math.sqrt(var / flt._turn_var)
+    row = np.zeros((1, 7))
+    row[0, 6] = prior
+
+    def system(th):
+        vx, vy, vz, w = th[3], th[4], th[5], th[6]
+        a = w * tau
+        s, c = np.sin(a), np.cos(a)
+        small = np.abs(a) <= 1e-3
+        wd = np.where(small, 1.0, w)
+        a2 = a * a
+        sw = np.where(small, tau * (1.0 - a2 / 6.0 * (1.0 - a2 / 20.0)), s / wd)
+        cw = np.where(small, tau * a * (0.5 - a2 / 24.0), (1.0 - c) / wd)
+        dsw = np.where(small, tau * tau * a * (a2 / 30.0 - 1.0 / 3.0), (tau * c - sw) / wd)
+        dcw = np.where(small, tau * tau * (0.5 - a2 / 8.0), (tau * s - cw) / wd)
+        px = th[0] + sw * vx - cw * vy
+        py = th[1] + cw * vx + sw * vy
+        pz = th[2] + vz * tau
+        D = np.zeros((len(tau), 3, 7))
+        D[:, 0, 0] = D[:, 1, 1] = D[:, 2, 2] = 1.0
+        D[:, 0, 3], D[:, 0, 4], D[:, 1, 3], D[:, 1, 4] = sw, -cw, cw, sw
+        D[:, 2, 5] = tau
+        D[:, 0, 6], D[:, 1, 6] = dsw * vx - dcw * vy, dcw * vx + dsw * vy
+        rows, res = [], []
+        for i, ((_, camera, u, v), X, Y, Z) in enumerate(
+                zip(window, px.tolist(), py.tolist(), pz.tolist(), strict=True)):
+            ok, pu, pv, *h = F._project(flt._cam_table, camera, X, Y, Z)
+            if not ok:
+                return None, None
+            rows.append(np.array([h[:3], h[3:]]) @ D[i])
+            res.append(u - pu)
+            res.append(v - pv)
+        return np.vstack(rows), np.array(res)
+
+    for _ in range(4):
+        J, r = system(th)
+        if J is None:
+            return None
+        th = th + np.linalg.lstsq(np.vstack([J, row]), np.append(r, -prior * th[6]),
+                                  rcond=None)[0]
+    J, r = system(th)
+    if J is None:
+        return None
+    residuals = np.hypot(r[0::2], r[1::2])
+    start_var = flt._start_var()
+    if not (np.all(residuals ** 2 <= flt._gate * start_var)
+            and float(r @ r) <= F._chi2_quantile(len(r) - 7) * start_var):
+        return None
+    info = J.T @ J
+    info[6, 6] += prior * prior
+    try:
+        cov = var * np.linalg.inv(info)
+    except np.linalg.LinAlgError:
+        return None
+    if (not np.all(np.isfinite(cov)) or np.linalg.cond(info) > 1e14
+            or np.trace(cov[:3, :3]) > flt.options.max_init_std_m ** 2
+            or np.trace(cov[3:6, 3:6]) > flt.options.max_init_speed_std ** 2):
+        return None
+    cov = 0.5 * (cov + cov.T)
+    return [float(a) for a in th], [float(a) for a in cov.ravel()], residuals
+
+
 def _windows(rig, motion, seconds, noise):
     """Every (filter, window, ballistic) the filter fits on a session (misses included)."""
     seen = []
-    fit = BallFilter._fit
+    fit, turn_fit = BallFilter._fit, BallFilter._turn_fit
 
     def record(self, window, ballistic=True):
         seen.append((self, list(window), ballistic))
         return fit(self, window, ballistic)
 
+    def record_turn(self, window, theta, var):
+        seen.append((self, list(window), (list(theta), var)))
+        return turn_fit(self, window, theta, var)
+
     detections, _ = simulate(rig, motion, seconds, SimulationOptions(
         noise_px=noise, seed=7, miss_rate=0.1))
     obs = detections.best()
     flt = BallFilter(rig)
-    BallFilter._fit = record
+    BallFilter._fit, BallFilter._turn_fit = record, record_turn
     try:
         for t, c, (u, v) in zip(obs.time_ns.tolist(), obs.camera.tolist(),
                                 obs.uv.tolist(), strict=True):
             flt.push(t, c, u, v)
     finally:
-        BallFilter._fit = fit
+        BallFilter._fit, BallFilter._turn_fit = fit, turn_fit
     return seen
 
 
@@ -133,13 +205,18 @@ def _same(a, b) -> bool:
 def test_compiled_window_fit_is_the_numpy_fit_bit_for_bit(rig, motion):
     m = rally(3.0, seed=3)[0] if motion == "rally" else get_motion(motion)
     seen = _windows(rig, m, 3.0, 0.3) + _windows(rig, m, 1.0, 1.0)
-    kinds = {"fit": 0, "None": 0, "short": 0}
-    for flt, window, ballistic in seen:
-        new = flt._fit(window, ballistic)
-        assert _same(new, _numpy_fit(flt, window, ballistic)), (window, ballistic)
+    kinds = {"fit": 0, "None": 0, "short": 0, "turn": 0}
+    for flt, window, how in seen:
+        if isinstance(how, tuple):  # the turn model's fit from the supported one
+            new = flt._turn_fit(window, *how)
+            assert _same(new, _numpy_turn_fit(flt, window, *how)), (window, how)
+            kinds["turn"] += isinstance(new, tuple)
+            continue
+        new = flt._fit(window, how)
+        assert _same(new, _numpy_fit(flt, window, how)), (window, how)
         kinds["fit" if isinstance(new, tuple) else str(new)] += 1
     # the comparison covers the fits that pass and, on the kicked rallies, ones that fail
-    assert kinds["fit"] >= 2, kinds
+    assert kinds["fit"] >= 2 and kinds["turn"] >= 1, kinds
     assert motion != "rally" or kinds["None"] + kinds["short"] >= 1, kinds
 
 
@@ -147,7 +224,7 @@ def test_window_fit_kernel_equals_its_python_form():
     rig = lab_rig(3)
     seen = _windows(rig, get_motion("turntable"), 2.0, 0.3)
     assert seen
-    for flt, window, ballistic in seen[:12]:
+    for flt, window, ballistic in [s for s in seen if not isinstance(s[2], tuple)][:12]:
         n = len(window)
         t_ref = window[-1][0]
         rays = [flt._ray(*w) for w in window]

@@ -1407,6 +1407,94 @@ def _window_fit(cams, cam, uv, tau, O, D, g, k, var, gate, chi2, max_std2, max_s
 
 
 @kernel
+def _turn_rows(cams, cam, uv, tau, th, J, r):
+    """:meth:`BallFilter._turn_fit`'s system into ``J`` (2n x 7) and ``r`` (2n): the
+    window's pixels on the coordinated turn through ``th`` (7: p, v, ω) at ``τ = 0`` (the
+    closed form of :func:`_turn_predicted` over ``Δt = τ``, its series below ``|ωτ| =
+    1e-3``); False when a point is behind its camera. numpy's operations of the fit this
+    replaced, in their order (``H @ D`` by the same BLAS product)."""
+    vx, vy, vz, w = th[3], th[4], th[5], th[6]
+    Di = np.zeros((3, 7))
+    H = np.empty((2, 3))
+    for i in range(tau.shape[0]):
+        t = tau[i]
+        a = w * t
+        s, c = np.sin(a), np.cos(a)
+        a2 = a * a
+        if np.abs(a) <= 1e-3:
+            sw = t * (1.0 - a2 / 6.0 * (1.0 - a2 / 20.0))
+            cw = t * a * (0.5 - a2 / 24.0)
+            dsw = t * t * a * (a2 / 30.0 - 1.0 / 3.0)
+            dcw = t * t * (0.5 - a2 / 8.0)
+        else:
+            sw = s / w
+            cw = (1.0 - c) / w
+            dsw = (t * c - sw) / w
+            dcw = (t * s - cw) / w
+        ok, pu, pv, h00, h01, h02, h10, h11, h12 = _project(
+            cams, cam[i], th[0] + sw * vx - cw * vy, th[1] + cw * vx + sw * vy,
+            th[2] + vz * t)
+        if not ok:
+            return False
+        Di[0, 0] = Di[1, 1] = Di[2, 2] = 1.0
+        Di[0, 3], Di[0, 4], Di[1, 3], Di[1, 4] = sw, -cw, cw, sw
+        Di[2, 5] = t
+        Di[0, 6], Di[1, 6] = dsw * vx - dcw * vy, dcw * vx + dsw * vy
+        H[0, 0], H[0, 1], H[0, 2] = h00, h01, h02
+        H[1, 0], H[1, 1], H[1, 2] = h10, h11, h12
+        J[2 * i:2 * i + 2, :] = H @ Di
+        r[2 * i] = uv[i, 0] - pu
+        r[2 * i + 1] = uv[i, 1] - pv
+    return True
+
+
+@kernel
+def _turn_window_fit(cams, cam, uv, tau, theta, var, start_var, turn_var, gate, chi2,
+                     th_out, J_out, res_out):
+    """The coordinated turn's MAP fit of the window (:meth:`BallFilter._turn_fit`; arrays as
+    :func:`_window_fit`'s) from the supported fit ``theta`` (6) and ``ω = 0``: four
+    Gauss-Newton steps in pixels of variance ``var`` with the prior ``ω ~ N(0, turn_var)``
+    as one more residual row, then the start's tests of the residuals at ``start_var``
+    (every residual within ``gate``, their sum within ``chi2``, of ``2n - 7`` degrees of
+    freedom). Writes ``(p, v, ω)`` into ``th_out`` (7), the pixel Jacobian at it into
+    ``J_out`` (2n x 7: the caller forms ``JᵀJ`` with numpy, whose symmetric product is not
+    numba's in the last bit) and the residuals' lengths into ``res_out`` (n); returns
+    ``_WFIT_OK`` or ``_WFIT_NONE``. numpy's operations of the fit this replaced, in their
+    order: the same bits (``tests/test_filter_window_fit.py``)."""
+    n = tau.shape[0]
+    m = 2 * n
+    th = np.zeros(7)
+    th[:6] = theta
+    prior = math.sqrt(var / turn_var)  # the prior's row, in pixels per rad/s
+    J = np.empty((m, 7))
+    r = np.empty(m)
+    A = np.zeros((m + 1, 7))
+    b = np.empty(m + 1)
+    rcond = np.finfo(np.float64).eps * (m + 1)  # numpy's rcond=None
+    for _ in range(4):
+        if not _turn_rows(cams, cam, uv, tau, th, J, r):
+            return _WFIT_NONE
+        A[:m] = J
+        A[m, :] = 0.0
+        A[m, 6] = prior
+        b[:m] = r
+        b[m] = -prior * th[6]
+        th = th + np.linalg.lstsq(A, b, rcond)[0]
+    if not _turn_rows(cams, cam, uv, tau, th, J, r):
+        return _WFIT_NONE
+    th_out[:] = th
+    ok = True
+    for i in range(n):
+        res_out[i] = np.hypot(r[2 * i], r[2 * i + 1])
+        if not res_out[i] ** 2 <= gate * start_var:
+            ok = False
+    J_out[:, :] = J
+    if not (ok and np.dot(r, r) <= chi2 * start_var):
+        return _WFIT_NONE
+    return _WFIT_OK
+
+
+@kernel
 def _predict(S, I, O, t):
     """The state predicted to ``t`` ns (``BallFilter.predict``): mean (6) and covariance
     (6 x 6 flat) of the models' mixture, new arrays."""
@@ -1871,28 +1959,23 @@ class BallFilter:
         fit ``theta`` (6) and ``ω = 0``: ``(x_t (7,), P_t (7x7 flat list, at ``var``),
         pixel residuals)``, or None when it fails the start's tests (:meth:`_fit`).
         Regularised least squares (the prior as an extra residual row) is the Gaussian
-        MAP estimate (Bar-Shalom et al. 2001, §3.4: the prior as a measurement)."""
+        MAP estimate (Bar-Shalom et al. 2001, §3.4: the prior as a measurement). Compiled:
+        :func:`_turn_window_fit`."""
         t_ref = window[-1][0]
+        n = len(window)
         tau = np.array([(w[0] - t_ref) / NS for w in window])
-        th = np.array([*theta, 0.0])
-        prior = math.sqrt(var / self._turn_var)  # the prior's row, in pixels per rad/s
-        row = np.zeros((1, 7))
-        row[0, 6] = prior
-        J = r = None
-        for _ in range(4):
-            J, r = self._turn_system(window, tau, th)
-            if J is None:
-                return None
-            step = np.linalg.lstsq(np.vstack([J, row]), np.append(r, -prior * th[6]),
-                                   rcond=None)[0]
-            th = th + step
-        J, r = self._turn_system(window, tau, th)
-        if J is None:
+        cam = np.array([w[1] for w in window], dtype=np.int64)
+        uv = np.array([w[2:] for w in window])
+        th, J, residuals = np.empty(7), np.empty((2 * n, 7)), np.empty(n)
+        prior = math.sqrt(var / self._turn_var)
+        try:
+            status = _turn_window_fit(
+                self._cam_table, cam, uv, tau, np.asarray(theta, dtype=np.float64), var,
+                self._start_var(), self._turn_var, self._gate, _chi2_quantile(2 * n - 7),
+                th, J, residuals)
+        except np.linalg.LinAlgError:  # a non-finite system
             return None
-        residuals = np.hypot(r[0::2], r[1::2])
-        start_var = self._start_var()
-        if not (np.all(residuals ** 2 <= self._gate * start_var)
-                and float(r @ r) <= _chi2_quantile(len(r) - 7) * start_var):
+        if status != _WFIT_OK:
             return None
         info = J.T @ J
         info[6, 6] += prior * prior
@@ -1905,43 +1988,7 @@ class BallFilter:
                 or np.trace(cov[3:6, 3:6]) > self.options.max_init_speed_std ** 2):
             return None
         cov = 0.5 * (cov + cov.T)
-        return [float(a) for a in th], [float(a) for a in cov.ravel()], residuals
-
-    def _turn_system(self, window, tau, th):
-        """Jacobian (2n, 7) and residuals (2n,) of the window's pixels on the coordinated
-        turn through the state ``th`` (7) at ``τ = 0`` (the closed form of
-        :func:`_turn_predicted` over ``Δt = τ``, its series below ``|ωτ| = 1e-3``);
-        (None, None) when a point is behind its camera."""
-        vx, vy, vz, w = th[3], th[4], th[5], th[6]
-        a = w * tau
-        s, c = np.sin(a), np.cos(a)
-        small = np.abs(a) <= 1e-3
-        wd = np.where(small, 1.0, w)
-        a2 = a * a
-        sw = np.where(small, tau * (1.0 - a2 / 6.0 * (1.0 - a2 / 20.0)), s / wd)
-        cw = np.where(small, tau * a * (0.5 - a2 / 24.0), (1.0 - c) / wd)
-        dsw = np.where(small, tau * tau * a * (a2 / 30.0 - 1.0 / 3.0), (tau * c - sw) / wd)
-        dcw = np.where(small, tau * tau * (0.5 - a2 / 8.0), (tau * s - cw) / wd)
-        px = th[0] + sw * vx - cw * vy
-        py = th[1] + cw * vx + sw * vy
-        pz = th[2] + vz * tau
-        # ∂p/∂(p, v, ω) per detection (3 x 7)
-        D = np.zeros((len(tau), 3, 7))
-        D[:, 0, 0] = D[:, 1, 1] = D[:, 2, 2] = 1.0
-        D[:, 0, 3], D[:, 0, 4], D[:, 1, 3], D[:, 1, 4] = sw, -cw, cw, sw
-        D[:, 2, 5] = tau
-        D[:, 0, 6], D[:, 1, 6] = dsw * vx - dcw * vy, dcw * vx + dsw * vy
-        rows, res = [], []
-        for i, ((_, camera, u, v), X, Y, Z) in enumerate(
-                zip(window, px.tolist(), py.tolist(), pz.tolist(), strict=True)):
-            ok, pu, pv, *h = _project(self._cam_table, camera, X, Y, Z)
-            if not ok:
-                return None, None
-            H = np.array([h[:3], h[3:]])
-            rows.append(H @ D[i])
-            res.append(u - pu)
-            res.append(v - pv)
-        return np.vstack(rows), np.array(res)
+        return th.tolist(), cov.ravel().tolist(), residuals
 
     def _window_var(self, n: int, residuals) -> float:
         """The pixel variance :meth:`_window_noise` would give after a start of ``n``
