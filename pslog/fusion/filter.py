@@ -79,9 +79,11 @@ Implementation: the per-detection step (prediction, innovation, update, the mode
 the gate, the jump search, the noise adaptations, withholding) is compiled with numba
 (:func:`pslog._jit.kernel`) over the state kept in two preallocated arrays (float64 and
 int64, layout below); :func:`fuse_filter` runs one compiled loop over every detection and
-:meth:`BallFilter.push` the same compiled step for one. Only the (re)initialisation's window
-fit (least squares on rays, then Gauss-Newton in pixels: numpy's LAPACK) runs in Python,
-while there is no track. Every equation keeps the pure-Python filter's order of operations
+:meth:`BallFilter.push` the same compiled step for one. The (re)initialisation's window
+fits (least squares on rays, then Gauss-Newton in pixels, per model) are compiled too
+(:func:`_window_fit`, :func:`_turn_window_fit`: the same LAPACK least squares as numpy's);
+their search over windows and the models' weighing stay in Python, while there is no
+track. Every equation keeps the pure-Python filter's order of operations
 (IEEE arithmetic, no fastmath, ``x ** 3.0`` through libm's ``pow`` as Python's ``**``, the
 pixel lengths by CPython's ``math.hypot``), so the points are bit for bit that filter's
 (``benchmarks/filter_equality.py``).
@@ -121,6 +123,9 @@ _FAR_IMAGES = 10
 #: A point closer than this to a camera's plane (metres) is not in front of it.
 _MIN_DEPTH_M = 1e-3
 _NAN = float("nan")
+#: The largest error a point may have, with 95 % probability, to be output (issue 10: "no
+#: output point further than 5 cm from the truth"): ``max_std_m``'s default is this / 1.96.
+_MAX_ERROR_M = 0.05
 #: A jump is looked for before this many accepted detections back (and at the newest one).
 _JUMP_LAG = 2
 #: A track whose first detections after its start include a rejected one is dropped (no
@@ -208,7 +213,10 @@ class FilterOptions:
     confirm_nis : float, an accepted update whose NIS exceeds this (99 % quantile of χ²₂)
         must be confirmed like a jump
     max_std_m : float or None, a point whose ``std_m`` exceeds this is withheld, metres
-        (None: no bound)
+        (None: no bound); default ``0.05 / 1.96``: a point is output when its error is
+        within 5 cm (issue 10's bound) with 95 % probability, whatever the shape of its
+        covariance (for a Gaussian error of ``trace P = std_m²``, ``P(‖e‖ > 1.96 std_m) <=
+        5 %``, the one-dimensional error being the extreme: Székely & Bakirov 2003)
     turn_switch_per_s : float, rate of switches between the turn model (a coordinated turn
         about the vertical: a ball swung, on a turntable, circling) and the other two, 1/s
         (0: no turn model; also none when gravity is not along the world's z)
@@ -259,7 +267,7 @@ class FilterOptions:
     accel_adapt_rate: float = 0.5
     model_switch_per_s: float = 0.5
     accel_adapt_target: float = 0.4
-    max_std_m: float | None = 0.03
+    max_std_m: float | None = _MAX_ERROR_M / 1.96
     turn_switch_per_s: float = 0.5
     turn_on_psd: float = 0.3
     turn_rate_psd: float = 0.1
@@ -1553,8 +1561,8 @@ class BallFilter:
 
     The per-detection work (prediction, innovation, update, the models' mixing, the gate,
     the jump search, withholding) is one compiled kernel (:func:`_push`, numba) over the
-    state arrays; the (re)initialisation's window fit (least squares, only while there is no
-    track) stays in Python (:meth:`_try_window`).
+    state arrays; the (re)initialisation's search over windows (only while there is no
+    track) is Python (:meth:`_try_window`), its fits compiled (:func:`_window_fit`).
 
     Examples
     --------
