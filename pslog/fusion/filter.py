@@ -79,9 +79,11 @@ Implementation: the per-detection step (prediction, innovation, update, the mode
 the gate, the jump search, the noise adaptations, withholding) is compiled with numba
 (:func:`pslog._jit.kernel`) over the state kept in two preallocated arrays (float64 and
 int64, layout below); :func:`fuse_filter` runs one compiled loop over every detection and
-:meth:`BallFilter.push` the same compiled step for one. Only the (re)initialisation's window
-fit (least squares on rays, then Gauss-Newton in pixels: numpy's LAPACK) runs in Python,
-while there is no track. Every equation keeps the pure-Python filter's order of operations
+:meth:`BallFilter.push` the same compiled step for one. The (re)initialisation's window
+fits (least squares on rays, then Gauss-Newton in pixels, per model) are compiled too
+(:func:`_window_fit`, :func:`_turn_window_fit`: the same LAPACK least squares as numpy's);
+their search over windows and the models' weighing stay in Python, while there is no
+track. Every equation keeps the pure-Python filter's order of operations
 (IEEE arithmetic, no fastmath, ``x ** 3.0`` through libm's ``pow`` as Python's ``**``, the
 pixel lengths by CPython's ``math.hypot``), so the points are bit for bit that filter's
 (``benchmarks/filter_equality.py``).
@@ -121,6 +123,9 @@ _FAR_IMAGES = 10
 #: A point closer than this to a camera's plane (metres) is not in front of it.
 _MIN_DEPTH_M = 1e-3
 _NAN = float("nan")
+#: The largest error a point may have, with 95 % probability, to be output (issue 10: "no
+#: output point further than 5 cm from the truth"): ``max_std_m``'s default is this / 1.96.
+_MAX_ERROR_M = 0.05
 #: A jump is looked for before this many accepted detections back (and at the newest one).
 _JUMP_LAG = 2
 #: A track whose first detections after its start include a rejected one is dropped (no
@@ -138,6 +143,7 @@ _INIT_BALLISTIC = 0.9
 #: Bound of one detection's log likelihood ratio between the models (an outlier moves μ little).
 _LOG_ODDS_CLIP = 4.0
 _ZERO6 = (0.0,) * 6
+_ZERO3 = np.zeros(3)  # the supported model's gravity in the window fit
 #: What :meth:`BallFilter._fit` returns for a fit whose velocity alone is too uncertain.
 _SHORT = "short"
 #: Accepted updates (one at least from another camera) that confirm a jump.
@@ -207,7 +213,10 @@ class FilterOptions:
     confirm_nis : float, an accepted update whose NIS exceeds this (99 % quantile of χ²₂)
         must be confirmed like a jump
     max_std_m : float or None, a point whose ``std_m`` exceeds this is withheld, metres
-        (None: no bound)
+        (None: no bound); default ``0.05 / 1.96``: a point is output when its error is
+        within 5 cm (issue 10's bound) with 95 % probability, whatever the shape of its
+        covariance (for a Gaussian error of ``trace P = std_m²``, ``P(‖e‖ > 1.96 std_m) <=
+        5 %``, the one-dimensional error being the extreme: Székely & Bakirov 2003)
     turn_switch_per_s : float, rate of switches between the turn model (a coordinated turn
         about the vertical: a ball swung, on a turntable, circling) and the other two, 1/s
         (0: no turn model; also none when gravity is not along the world's z)
@@ -258,7 +267,7 @@ class FilterOptions:
     accel_adapt_rate: float = 0.5
     model_switch_per_s: float = 0.5
     accel_adapt_target: float = 0.4
-    max_std_m: float | None = 0.03
+    max_std_m: float | None = _MAX_ERROR_M / 1.96
     turn_switch_per_s: float = 0.5
     turn_on_psd: float = 0.3
     turn_rate_psd: float = 0.1
@@ -1269,6 +1278,230 @@ def _run(S, I, cams, O, N, times, cameras, uv, start, rows, index, n_out):
     return times.shape[0], n_out, _NONE
 
 
+# ---- the start's window fit (compiled: a start attempt runs it up to 2 x 5 times) -------------
+#: :func:`_window_fit`'s results: not trustworthy, too short (the velocity's uncertainty
+#: alone fails), a fit
+_WFIT_NONE, _WFIT_SHORT, _WFIT_OK = 0, 1, 2
+
+
+@kernel
+def _dot3(a0, a1, a2, b0, b1, b2):
+    """``a · b`` of two 3-vectors summed as numpy's ``einsum("ij,ij->i")`` summed a row of
+    three in the fit this replaced (two SIMD lanes: ``(a0 b0 + a2 b2) + a1 b1``), so that the
+    start is the same bit for bit."""
+    return (a0 * b0 + a2 * b2) + a1 * b1
+
+
+@kernel
+def _pixel_rows(cams, cam, uv, tau, theta, accel, J, r):
+    """:meth:`BallFilter._fit`'s pixel system into ``J`` (2n x 6) and ``r`` (2n) at the path
+    ``theta`` (6) with the constant acceleration ``accel`` (3); False when a point is behind
+    its camera."""
+    for i in range(tau.shape[0]):
+        ti = tau[i]
+        h = 0.5 * (ti * ti)
+        ok, pu, pv, a0, a1, a2, b0, b1, b2 = _project(
+            cams, cam[i], theta[0] + ti * theta[3] + h * accel[0],
+            theta[1] + ti * theta[4] + h * accel[1], theta[2] + ti * theta[5] + h * accel[2])
+        if not ok:
+            return False
+        J[2 * i, 0], J[2 * i, 1], J[2 * i, 2] = a0, a1, a2
+        J[2 * i, 3], J[2 * i, 4], J[2 * i, 5] = ti * a0, ti * a1, ti * a2
+        J[2 * i + 1, 0], J[2 * i + 1, 1], J[2 * i + 1, 2] = b0, b1, b2
+        J[2 * i + 1, 3], J[2 * i + 1, 4], J[2 * i + 1, 5] = ti * b0, ti * b1, ti * b2
+        r[2 * i] = uv[i, 0] - pu
+        r[2 * i + 1] = uv[i, 1] - pv
+    return True
+
+
+@kernel
+def _window_fit(cams, cam, uv, tau, O, D, g, k, var, gate, chi2, max_std2, max_speed2,
+                theta_out, cov_out, res_out):
+    """The start's fit of a window of ``n`` detections (camera ``cam`` (n,), distorted
+    pixel ``uv`` (n, 2), time ``tau`` (n,) s before the newest, viewing ray origin ``O`` and
+    unit direction ``D`` (n, 3)) on the path ``p0 + v0 τ + a τ²/2`` with ``a = g - k‖v‖v``
+    (``g`` (3), m/s²; ``k`` 1/m): the linear start on the rays (unit weights, then
+    ``1/depth`` with the drag at the first pass's speed), three Gauss-Newton steps in
+    pixels, and the start's tests at pixel variance ``var`` (px²): every residual within
+    ``gate`` (χ²₂), their sum within ``chi2`` (χ² of ``2n - 6``), a well-conditioned normal
+    matrix, ``trace P_pp <= max_std2`` (m²) and ``trace P_vv <= max_speed2`` ((m/s)²).
+    Writes ``θ = (p0, v0)`` into ``theta_out`` (6), ``P = var (JᵀJ)⁻¹`` into ``cov_out``
+    (6 x 6) and the pixel residuals' lengths into ``res_out`` (n). Returns ``_WFIT_OK``,
+    ``_WFIT_SHORT`` (every test passed but the velocity's) or ``_WFIT_NONE``.
+
+    The operations are numpy's in :meth:`BallFilter._fit`'s former form, in the same order
+    (the same LAPACK least squares, ``einsum``'s and ``norm``'s sums as written below), so the
+    fit is the same bit for bit (``tests/test_filter_start.py``)."""
+    n = tau.shape[0]
+    m = 2 * n
+    for i in range(n):
+        if not (np.isfinite(D[i, 0]) and np.isfinite(D[i, 1]) and np.isfinite(D[i, 2])):
+            return _WFIT_NONE
+    # two unit vectors normal to each ray: E (2n x 3), the offsets' directions
+    E = np.empty((m, 3))
+    for i in range(n):
+        d0, d1, d2 = D[i, 0], D[i, 1], D[i, 2]
+        if abs(d0) < 0.9:
+            h0, h1, h2 = 1.0, 0.0, 0.0
+        else:
+            h0, h1, h2 = 0.0, 1.0, 0.0
+        c0 = d1 * h2 - d2 * h1
+        c1 = d2 * h0 - d0 * h2
+        c2 = d0 * h1 - d1 * h0
+        nrm = math.sqrt(c0 * c0 + (c1 * c1 + c2 * c2))  # numpy's reduce: a0 + (a1 + a2)
+        c0, c1, c2 = c0 / nrm, c1 / nrm, c2 / nrm
+        E[i, 0], E[i, 1], E[i, 2] = c0, c1, c2
+        E[n + i, 0] = d1 * c2 - d2 * c1
+        E[n + i, 1] = d2 * c0 - d0 * c2
+        E[n + i, 2] = d0 * c1 - d1 * c0
+    a0, a1, a2 = g[0], g[1], g[2]
+    w = np.ones(m)
+    A = np.empty((m, 6))
+    b = np.empty(m)
+    theta = np.empty(6)
+    rcond = np.finfo(np.float64).eps * m  # numpy's rcond=None
+    for _ in range(2):
+        for j in range(m):
+            i = j - n if j >= n else j
+            t = tau[i]
+            e0, e1, e2 = E[j, 0], E[j, 1], E[j, 2]
+            wj = w[j]
+            A[j, 0], A[j, 1], A[j, 2] = wj * e0, wj * e1, wj * e2
+            A[j, 3], A[j, 4], A[j, 5] = wj * (t * e0), wj * (t * e1), wj * (t * e2)
+            h = 0.5 * (t * t)
+            b[j] = wj * _dot3(e0, e1, e2, O[i, 0] - h * a0, O[i, 1] - h * a1,
+                              O[i, 2] - h * a2)
+        theta, _, rank, sv = np.linalg.lstsq(A, b, rcond)
+        if rank < 6 or sv[5] < 1e-10 * sv[0]:
+            return _WFIT_NONE
+        for i in range(n):
+            t = tau[i]
+            depth = _dot3(theta[0] + t * theta[3] - O[i, 0], theta[1] + t * theta[4] - O[i, 1],
+                          theta[2] + t * theta[5] - O[i, 2], D[i, 0], D[i, 1], D[i, 2])
+            if not depth > _MIN_DEPTH_M:
+                return _WFIT_NONE
+            w[i] = w[n + i] = 1.0 / depth
+        vel = theta[3:].copy()
+        kv = k * math.sqrt(np.dot(vel, vel))
+        a0, a1, a2 = g[0] - kv * vel[0], g[1] - kv * vel[1], g[2] - kv * vel[2]
+    accel = np.array([a0, a1, a2])
+    # Gauss-Newton in distorted pixels (the filter's measurement model)
+    J = np.empty((m, 6))
+    r = np.empty(m)
+    for _ in range(3):
+        if not _pixel_rows(cams, cam, uv, tau, theta, accel, J, r):
+            return _WFIT_NONE
+        theta = theta + np.linalg.lstsq(J, r, rcond)[0]
+    if not _pixel_rows(cams, cam, uv, tau, theta, accel, J, r):
+        return _WFIT_NONE
+    ok = True
+    for i in range(n):
+        res_out[i] = np.hypot(r[2 * i], r[2 * i + 1])
+        if not res_out[i] ** 2 <= gate * var:
+            ok = False
+    theta_out[:] = theta
+    if not (ok and np.dot(r, r) <= chi2 * var):
+        return _WFIT_NONE
+    info = J.T @ J
+    cov = var * np.linalg.solve(info, np.eye(6))  # numpy's inv: LAPACK gesv on I
+    sv = np.linalg.svd(info)[1]
+    if (not np.all(np.isfinite(cov)) or sv[0] / sv[5] > 1e14
+            or cov[0, 0] + (cov[1, 1] + cov[2, 2]) > max_std2):
+        return _WFIT_NONE  # a degenerate geometry (rays nearly parallel)
+    if cov[3, 3] + (cov[4, 4] + cov[5, 5]) > max_speed2:
+        return _WFIT_SHORT
+    cov_out[:, :] = 0.5 * (cov + cov.T)
+    return _WFIT_OK
+
+
+@kernel
+def _turn_rows(cams, cam, uv, tau, th, J, r):
+    """:meth:`BallFilter._turn_fit`'s system into ``J`` (2n x 7) and ``r`` (2n): the
+    window's pixels on the coordinated turn through ``th`` (7: p, v, ω) at ``τ = 0`` (the
+    closed form of :func:`_turn_predicted` over ``Δt = τ``, its series below ``|ωτ| =
+    1e-3``); False when a point is behind its camera. numpy's operations of the fit this
+    replaced, in their order (``H @ D`` by the same BLAS product)."""
+    vx, vy, vz, w = th[3], th[4], th[5], th[6]
+    Di = np.zeros((3, 7))
+    H = np.empty((2, 3))
+    for i in range(tau.shape[0]):
+        t = tau[i]
+        a = w * t
+        s, c = np.sin(a), np.cos(a)
+        a2 = a * a
+        if np.abs(a) <= 1e-3:
+            sw = t * (1.0 - a2 / 6.0 * (1.0 - a2 / 20.0))
+            cw = t * a * (0.5 - a2 / 24.0)
+            dsw = t * t * a * (a2 / 30.0 - 1.0 / 3.0)
+            dcw = t * t * (0.5 - a2 / 8.0)
+        else:
+            sw = s / w
+            cw = (1.0 - c) / w
+            dsw = (t * c - sw) / w
+            dcw = (t * s - cw) / w
+        ok, pu, pv, h00, h01, h02, h10, h11, h12 = _project(
+            cams, cam[i], th[0] + sw * vx - cw * vy, th[1] + cw * vx + sw * vy,
+            th[2] + vz * t)
+        if not ok:
+            return False
+        Di[0, 0] = Di[1, 1] = Di[2, 2] = 1.0
+        Di[0, 3], Di[0, 4], Di[1, 3], Di[1, 4] = sw, -cw, cw, sw
+        Di[2, 5] = t
+        Di[0, 6], Di[1, 6] = dsw * vx - dcw * vy, dcw * vx + dsw * vy
+        H[0, 0], H[0, 1], H[0, 2] = h00, h01, h02
+        H[1, 0], H[1, 1], H[1, 2] = h10, h11, h12
+        J[2 * i:2 * i + 2, :] = H @ Di
+        r[2 * i] = uv[i, 0] - pu
+        r[2 * i + 1] = uv[i, 1] - pv
+    return True
+
+
+@kernel
+def _turn_window_fit(cams, cam, uv, tau, theta, var, start_var, turn_var, gate, chi2,
+                     th_out, J_out, res_out):
+    """The coordinated turn's MAP fit of the window (:meth:`BallFilter._turn_fit`; arrays as
+    :func:`_window_fit`'s) from the supported fit ``theta`` (6) and ``ω = 0``: four
+    Gauss-Newton steps in pixels of variance ``var`` with the prior ``ω ~ N(0, turn_var)``
+    as one more residual row, then the start's tests of the residuals at ``start_var``
+    (every residual within ``gate``, their sum within ``chi2``, of ``2n - 7`` degrees of
+    freedom). Writes ``(p, v, ω)`` into ``th_out`` (7), the pixel Jacobian at it into
+    ``J_out`` (2n x 7: the caller forms ``JᵀJ`` with numpy, whose symmetric product is not
+    numba's in the last bit) and the residuals' lengths into ``res_out`` (n); returns
+    ``_WFIT_OK`` or ``_WFIT_NONE``. numpy's operations of the fit this replaced, in their
+    order: the same bits (``tests/test_filter_window_fit.py``)."""
+    n = tau.shape[0]
+    m = 2 * n
+    th = np.zeros(7)
+    th[:6] = theta
+    prior = math.sqrt(var / turn_var)  # the prior's row, in pixels per rad/s
+    J = np.empty((m, 7))
+    r = np.empty(m)
+    A = np.zeros((m + 1, 7))
+    b = np.empty(m + 1)
+    rcond = np.finfo(np.float64).eps * (m + 1)  # numpy's rcond=None
+    for _ in range(4):
+        if not _turn_rows(cams, cam, uv, tau, th, J, r):
+            return _WFIT_NONE
+        A[:m] = J
+        A[m, :] = 0.0
+        A[m, 6] = prior
+        b[:m] = r
+        b[m] = -prior * th[6]
+        th = th + np.linalg.lstsq(A, b, rcond)[0]
+    if not _turn_rows(cams, cam, uv, tau, th, J, r):
+        return _WFIT_NONE
+    th_out[:] = th
+    ok = True
+    for i in range(n):
+        res_out[i] = np.hypot(r[2 * i], r[2 * i + 1])
+        if not res_out[i] ** 2 <= gate * start_var:
+            ok = False
+    J_out[:, :] = J
+    if not (ok and np.dot(r, r) <= chi2 * start_var):
+        return _WFIT_NONE
+    return _WFIT_OK
+
+
 @kernel
 def _predict(S, I, O, t):
     """The state predicted to ``t`` ns (``BallFilter.predict``): mean (6) and covariance
@@ -1328,8 +1561,8 @@ class BallFilter:
 
     The per-detection work (prediction, innovation, update, the models' mixing, the gate,
     the jump search, withholding) is one compiled kernel (:func:`_push`, numba) over the
-    state arrays; the (re)initialisation's window fit (least squares, only while there is no
-    track) stays in Python (:meth:`_try_window`).
+    state arrays; the (re)initialisation's search over windows (only while there is no
+    track) is Python (:meth:`_try_window`), its fits compiled (:func:`_window_fit`).
 
     Examples
     --------
@@ -1371,6 +1604,7 @@ class BallFilter:
         self._down = tuple(float(a) / norm for a in options.gravity)
         self._k = options.drag_per_m
         self._g = tuple(float(x) for x in options.gravity)
+        self._g_array = np.array(self._g)
         self._gate = options.gate
         self._switch = options.model_switch_per_s
         # without switching the ballistic model alone (probability 1)
@@ -1733,28 +1967,23 @@ class BallFilter:
         fit ``theta`` (6) and ``ω = 0``: ``(x_t (7,), P_t (7x7 flat list, at ``var``),
         pixel residuals)``, or None when it fails the start's tests (:meth:`_fit`).
         Regularised least squares (the prior as an extra residual row) is the Gaussian
-        MAP estimate (Bar-Shalom et al. 2001, §3.4: the prior as a measurement)."""
+        MAP estimate (Bar-Shalom et al. 2001, §3.4: the prior as a measurement). Compiled:
+        :func:`_turn_window_fit`."""
         t_ref = window[-1][0]
+        n = len(window)
         tau = np.array([(w[0] - t_ref) / NS for w in window])
-        th = np.array([*theta, 0.0])
-        prior = math.sqrt(var / self._turn_var)  # the prior's row, in pixels per rad/s
-        row = np.zeros((1, 7))
-        row[0, 6] = prior
-        J = r = None
-        for _ in range(4):
-            J, r = self._turn_system(window, tau, th)
-            if J is None:
-                return None
-            step = np.linalg.lstsq(np.vstack([J, row]), np.append(r, -prior * th[6]),
-                                   rcond=None)[0]
-            th = th + step
-        J, r = self._turn_system(window, tau, th)
-        if J is None:
+        cam = np.array([w[1] for w in window], dtype=np.int64)
+        uv = np.array([w[2:] for w in window])
+        th, J, residuals = np.empty(7), np.empty((2 * n, 7)), np.empty(n)
+        prior = math.sqrt(var / self._turn_var)
+        try:
+            status = _turn_window_fit(
+                self._cam_table, cam, uv, tau, np.asarray(theta, dtype=np.float64), var,
+                self._start_var(), self._turn_var, self._gate, _chi2_quantile(2 * n - 7),
+                th, J, residuals)
+        except np.linalg.LinAlgError:  # a non-finite system
             return None
-        residuals = np.hypot(r[0::2], r[1::2])
-        start_var = self._start_var()
-        if not (np.all(residuals ** 2 <= self._gate * start_var)
-                and float(r @ r) <= _chi2_quantile(len(r) - 7) * start_var):
+        if status != _WFIT_OK:
             return None
         info = J.T @ J
         info[6, 6] += prior * prior
@@ -1767,43 +1996,7 @@ class BallFilter:
                 or np.trace(cov[3:6, 3:6]) > self.options.max_init_speed_std ** 2):
             return None
         cov = 0.5 * (cov + cov.T)
-        return [float(a) for a in th], [float(a) for a in cov.ravel()], residuals
-
-    def _turn_system(self, window, tau, th):
-        """Jacobian (2n, 7) and residuals (2n,) of the window's pixels on the coordinated
-        turn through the state ``th`` (7) at ``τ = 0`` (the closed form of
-        :func:`_turn_predicted` over ``Δt = τ``, its series below ``|ωτ| = 1e-3``);
-        (None, None) when a point is behind its camera."""
-        vx, vy, vz, w = th[3], th[4], th[5], th[6]
-        a = w * tau
-        s, c = np.sin(a), np.cos(a)
-        small = np.abs(a) <= 1e-3
-        wd = np.where(small, 1.0, w)
-        a2 = a * a
-        sw = np.where(small, tau * (1.0 - a2 / 6.0 * (1.0 - a2 / 20.0)), s / wd)
-        cw = np.where(small, tau * a * (0.5 - a2 / 24.0), (1.0 - c) / wd)
-        dsw = np.where(small, tau * tau * a * (a2 / 30.0 - 1.0 / 3.0), (tau * c - sw) / wd)
-        dcw = np.where(small, tau * tau * (0.5 - a2 / 8.0), (tau * s - cw) / wd)
-        px = th[0] + sw * vx - cw * vy
-        py = th[1] + cw * vx + sw * vy
-        pz = th[2] + vz * tau
-        # ∂p/∂(p, v, ω) per detection (3 x 7)
-        D = np.zeros((len(tau), 3, 7))
-        D[:, 0, 0] = D[:, 1, 1] = D[:, 2, 2] = 1.0
-        D[:, 0, 3], D[:, 0, 4], D[:, 1, 3], D[:, 1, 4] = sw, -cw, cw, sw
-        D[:, 2, 5] = tau
-        D[:, 0, 6], D[:, 1, 6] = dsw * vx - dcw * vy, dcw * vx + dsw * vy
-        rows, res = [], []
-        for i, ((_, camera, u, v), X, Y, Z) in enumerate(
-                zip(window, px.tolist(), py.tolist(), pz.tolist(), strict=True)):
-            ok, pu, pv, *h = _project(self._cam_table, camera, X, Y, Z)
-            if not ok:
-                return None, None
-            H = np.array([h[:3], h[3:]])
-            rows.append(H @ D[i])
-            res.append(u - pu)
-            res.append(v - pv)
-        return np.vstack(rows), np.array(res)
+        return th.tolist(), cov.ravel().tolist(), residuals
 
     def _window_var(self, n: int, residuals) -> float:
         """The pixel variance :meth:`_window_noise` would give after a start of ``n``
@@ -1821,87 +2014,31 @@ class BallFilter:
         """Fit of the window's detections at the newest one's time, ballistic (gravity and
         drag) or supported (the supported model's drag alone): ``(x (6,), P (6x6 flat
         list), pixel residuals)``, or None when it is not trustworthy, or ``_SHORT`` when it
-        passes every test but the velocity's uncertainty."""
+        passes every test but the velocity's uncertainty (:func:`_window_fit`, compiled)."""
         t_ref = window[-1][0]
+        n = len(window)
         tau = np.array([(w[0] - t_ref) / NS for w in window])
-        g = np.array(self._g) if ballistic else np.zeros(3)
-        k = self._k if ballistic else self.options.supported_drag_per_m
         rays = [self._ray(*w) for w in window]
         O = np.array([o for o, _ in rays])
         D = np.array([d for _, d in rays])
-        if not np.all(np.isfinite(D)):
-            return None
-        # linear start: the path p0 + v0 τ + a τ²/2 on each ray (2 equations per ray: its
-        # offsets along two unit directions normal to it), weighted by 1/depth in a 2nd pass
-        helper = np.where((np.abs(D[:, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
-        E1 = np.cross(D, helper)
-        E1 /= np.linalg.norm(E1, axis=1, keepdims=True)
-        E = np.concatenate([E1, np.cross(D, E1)])  # (2n, 3)
-        T = np.concatenate([tau, tau])
-        OO = np.concatenate([O, O])
-        accel = g
-        weights = np.ones(len(T))
-        theta = None
-        for _ in range(2):
-            A = weights[:, None] * np.hstack([E, T[:, None] * E])
-            b = weights * np.einsum("ij,ij->i", E, OO - 0.5 * (T * T)[:, None] * accel)
-            theta, _, rank, sv = np.linalg.lstsq(A, b, rcond=None)
-            if rank < 6 or sv[-1] < 1e-10 * sv[0]:
-                return None
-            depth = np.einsum("ij,ij->i", theta[:3] + tau[:, None] * theta[3:] - O, D)
-            if not np.all(depth > _MIN_DEPTH_M):
-                return None
-            weights = np.concatenate([1.0 / depth, 1.0 / depth])
-            accel = g - k * np.linalg.norm(theta[3:]) * theta[3:]
-        if theta is None:  # pragma: no cover - the loop above runs twice
-            return None
-        # Gauss-Newton in distorted pixels (the filter's measurement model)
-        for _ in range(3):
-            J, r = self._pixel_system(window, tau, theta, accel)
-            if J is None:
-                return None
-            step = np.linalg.lstsq(J, r, rcond=None)[0]
-            theta = theta + step
-        J, r = self._pixel_system(window, tau, theta, accel)
-        if J is None:
-            return None
-        residuals = np.hypot(r[0::2], r[1::2])
-        # every detection inside the gate, and the whole fit inside the chi-square quantile
-        # of its 2n - 6 degrees of freedom (a break inside the window shows in the sum)
+        cam = np.array([w[1] for w in window], dtype=np.int64)
+        uv = np.array([w[2:] for w in window])
+        theta, cov, residuals = np.empty(6), np.empty((6, 6)), np.empty(n)
         var = self._start_var()
-        if not (np.all(residuals ** 2 <= self._gate * var)
-                and float(r @ r) <= _chi2_quantile(len(r) - 6) * var):
-            return None
-        info = J.T @ J
         try:
-            cov = var * np.linalg.inv(info)
-        except np.linalg.LinAlgError:
+            status = _window_fit(
+                self._cam_table, cam, uv, tau, O, D,
+                self._g_array if ballistic else _ZERO3,
+                self._k if ballistic else self.options.supported_drag_per_m,
+                var, self._gate, _chi2_quantile(2 * n - 6), self.options.max_init_std_m ** 2,
+                self.options.max_init_speed_std ** 2, theta, cov, residuals)
+        except np.linalg.LinAlgError:  # a singular normal matrix, a non-finite system
             return None
-        if (not np.all(np.isfinite(cov)) or np.linalg.cond(info) > 1e14
-                or np.trace(cov[:3, :3]) > self.options.max_init_std_m ** 2):
-            return None  # a degenerate geometry (rays nearly parallel): no trustworthy start
-        if np.trace(cov[3:, 3:]) > self.options.max_init_speed_std ** 2:
+        if status == _WFIT_NONE:
+            return None
+        if status == _WFIT_SHORT:
             return _SHORT  # too short a window (or mostly one camera's): more detections
-        cov = 0.5 * (cov + cov.T)
-        return [float(a) for a in theta], [float(a) for a in cov.ravel()], residuals
-
-    def _pixel_system(self, window, tau, theta, accel):
-        """Jacobian (2n, 6) and residuals (2n,) of the window's pixels at the path
-        ``theta``; (None, None) when a point is behind its camera."""
-        points = (theta[:3] + tau[:, None] * theta[3:]
-                  + 0.5 * (tau * tau)[:, None] * accel).tolist()
-        rows, res = [], []
-        for (_, camera, u, v), ti, p in zip(window, tau.tolist(), points, strict=True):
-            ok, pu, pv, *h = _project(self._cam_table, camera, p[0], p[1], p[2])
-            if not ok:
-                return None, None
-            h0, h1 = h[:3], h[3:]
-            rows.append([h0[0], h0[1], h0[2], ti * h0[0], ti * h0[1], ti * h0[2]])
-            rows.append([h1[0], h1[1], h1[2], ti * h1[0], ti * h1[1], ti * h1[2]])
-            res.append(u - pu)
-            res.append(v - pv)
-        return np.array(rows), np.array(res)
-
+        return theta.tolist(), cov.ravel().tolist(), residuals
 
 
 
@@ -1956,21 +2093,23 @@ def _track(flt: BallFilter, time_ns, camera, uv) -> Track:
             n_out += 1
         i += 1
     rows, index = rows[:n_out], index[:n_out]
-    q = np.empty((n_out, len(FILTER_QUALITY)))
-    q[:, 0:4] = rows[:, 3:7]
+    # one row per quality column: each column a contiguous array, which Track keeps as it
+    # is (a column of a row-major table was copied by Track, 14 copies per push)
+    q = np.empty((len(FILTER_QUALITY), n_out))
+    q[0:4] = rows[:, 3:7].T
     # lengths by CPython's math.hypot, as the pure-Python filter took them (numba's hypot
     # is libm's, which differs in the last bit now and then)
     hypot = math.hypot
-    q[:, 4] = np.fromiter(map(hypot, rows[:, 7].tolist(), rows[:, 8].tolist()), np.float64,
-                          n_out)
-    q[:, 5] = np.fromiter(map(hypot, rows[:, 9].tolist(), rows[:, 10].tolist()), np.float64,
-                          n_out)
+    q[4] = np.fromiter(map(hypot, rows[:, 7].tolist(), rows[:, 8].tolist()), np.float64,
+                       n_out)
+    q[5] = np.fromiter(map(hypot, rows[:, 9].tolist(), rows[:, 10].tolist()), np.float64,
+                       n_out)
     init = rows[:, 15] == 1.0
-    q[init, 5] = rows[init, 9]  # a start's residual, as its fit gave it
-    q[:, 6:] = rows[:, 11:16]
+    q[5, init] = rows[init, 9]  # a start's residual, as its fit gave it
+    q[6:] = rows[:, 11:16].T
     return Track("filter", times[index], np.ascontiguousarray(rows[:, :3]),
                  cameras[index].astype(np.int32),
-                 {name: q[:, i] for i, name in enumerate(FILTER_QUALITY)},
+                 {name: q[i] for i, name in enumerate(FILTER_QUALITY)},
                  dropped={k: n - before.get(k, 0) for k, n in flt.dropped.items()
                           if n > before.get(k, 0)})
 
