@@ -8,11 +8,14 @@ Where the time goes (1280 x 720 JPEGs of quality 90, about 250 kB each with the 
 sensor noise; ``benchmarks/bench_redetect.py``, CPU time per frame): ``cv2.imdecode`` 3.4 ms
 (libjpeg-turbo with SIMD; most of it entropy decoding, which no reduced-size decode avoids:
 ``IMREAD_REDUCED_COLOR_8`` still costs 2.3 ms, and its pixels are not the full decode's, so
-the detector's candidates would change); detection 0.9 ms (0.55 ms with the compiled screen,
+the detector's candidates would change); detection about 1.1 ms of a frame just decoded
+(the coarse pixels screened in place, :meth:`BallDetector._coarse_cells_strided`; 0.1 ms
+less than subsampling the frame first), 0.85 ms with the compiled screen,
 used from :data:`_COMPILED_FROM` frames on, once numba's half second of loading is repaid);
 reading the frames from the file 0.12 ms (0.6 ms when each worker parsed the summary with
 ``mcap``'s reader and read its window with :func:`pslog.log.iter_images`: the same images);
-copying the session into the new file about 1 ms in the main process. So:
+copying the session into the new file about 0.2 ms in the main process, which also imports
+OpenCV and numpy once (about 0.12 s, before the workers are forked: they inherit them). So:
 
 - each worker reads its own runs of whole image chunks from the file, located once by this
   process from the summary section (:func:`_plan`: no worker parses the summary, and no

@@ -219,6 +219,49 @@ def test_compiled_screen_gives_the_same_candidates(monkeypatch, downscale, spars
     assert total > 40
 
 
+@pytest.mark.parametrize("downscale", [1, 2, 3, 4])
+@pytest.mark.parametrize("sparse", [8, 1, 10**9])
+def test_strided_screen_gives_the_candidates_of_opencvs_subsampling(monkeypatch, downscale,
+                                                                    sparse):
+    """Without numba, the coarse pixels are screened in place (every ``downscale``-th row
+    seen as pixels of ``3 * downscale`` channels) and gathered from the frame: the same
+    candidates, to the last bit, as subsampling the frame with OpenCV's resize first (the
+    detector made to believe the subsampling is no stride), in both regimes of the coarse
+    pass, on odd sizes, non-contiguous views and JPEG round trips."""
+    monkeypatch.setattr(detect, "_SPARSE_FRACTION", sparse)
+    detector = BallDetector(max_candidates=20, downscale=downscale)
+    # and a frame of saturated colours (0 and 255 channels: the bounds of the channels the
+    # screen leaves open), orange blobs on random black, white and primary pixels
+    rng = np.random.default_rng(3)
+    levels = np.array([[0, 0, 0], [255, 255, 255], [255, 0, 0], [0, 0, 255], [0, 255, 0]],
+                      np.uint8)
+    saturated = levels[rng.integers(0, len(levels), (96, 160))]
+    for x, y, r in ((30, 20, 6), (100, 60, 9), (140, 15, 4)):
+        cv2.circle(saturated, (x, y), r, (0, 140, 255), -1)
+    frames = [*_odd_frames(), saturated]
+    strided = [detector.detect(frame) for frame in frames]
+    monkeypatch.setattr(detect, "_nearest_is_stride", lambda h, w, s: False)
+    total = 0
+    for frame, b in zip(frames, strided, strict=True):
+        a = detector.detect(frame)
+        total += len(a)
+        for name in ("uv", "radius", "area", "roundness", "score"):
+            assert_array_equal(getattr(b, name), getattr(a, name), err_msg=name)
+            assert getattr(b, name).dtype == getattr(a, name).dtype
+    assert total > 40
+
+
+def test_gather_takes_the_strided_pixels():
+    """``_gather`` (a flat ``np.take`` on contiguous images) against indexing by row and
+    column, contiguous or not."""
+    rng = np.random.default_rng(5)
+    image = rng.integers(0, 256, (37, 53, 3), dtype=np.uint8)
+    for s, view in ((1, image), (2, image), (3, image), (1, image[:, ::-1]), (2, image[1:])):
+        h, w = view.shape[0] // s, view.shape[1] // s
+        xy = np.stack([rng.integers(0, w, 50), rng.integers(0, h, 50)], axis=1).astype(np.int32)
+        assert_array_equal(detect._gather(view, xy, s), view[xy[:, 1] * s, xy[:, 0] * s])
+
+
 def test_screen_kernel_is_inrange_and_findnonzero_of_the_subsampled_frame():
     """The kernel (compiled and pure Python) against OpenCV on frames whose colours sit on
     and around the box's bounds; only the first ``m`` pixels stored, all counted."""
