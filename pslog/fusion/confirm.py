@@ -121,7 +121,8 @@ def residual_test(rows: np.ndarray, cam: np.ndarray, point: np.ndarray, cov: np.
     (k,) bool, True where the confirming camera contradicts the point (NaN: not)
     """
     r = rows[cam]
-    if not noise_px:  # (no covariance, or one of zero noise: nothing to scale)
+    stated = 0.0 if noise_px is None else float(noise_px)
+    if not stated:  # (no covariance, or one of zero noise: nothing to scale)
         cov = None
     px, py, pz = point[:, 0], point[:, 1], point[:, 2]
     # camera coordinates X = R P + t, written out (no matrix product: the same bits per row)
@@ -146,7 +147,7 @@ def residual_test(rows: np.ndarray, cam: np.ndarray, point: np.ndarray, cov: np.
             b = np.zeros_like(a)
         else:
             # J = Jc R: Jc = [[fx/z, s/z, -(fx x + s y)/z²], [0, fy/z, -fy y/z²]]
-            scale = (sigma / float(noise_px)) ** 2  # (noise_px > 0 here)
+            scale = (sigma / stated) ** 2
             ju = [(fx * r[:, 5 + i] + s * r[:, 8 + i]) / z - (fx * x + s * y) * r[:, 11 + i]
                   / (z * z) for i in range(3)]
             jv = [fy * r[:, 8 + i] / z - fy * y * r[:, 11 + i] / (z * z) for i in range(3)]
