@@ -318,8 +318,12 @@ def test_stream_fuser_equals_batch(timing, method):
     parts.append(fuser.flush())
     assert_array_equal(np.concatenate([p.time_ns for p in parts]), batch.time_ns)
     assert_array_equal(np.concatenate([p.position_world for p in parts]), batch.position_world)
-    if method == "typeA":  # its point comes out with the detection that makes it
-        assert all(len(p) <= 1 for p in parts[:-1]) and len(parts[-1]) == 0
+    if method == "typeA":  # its point comes out with the detection that makes it, or
+        # (across a long gap: pslog.fusion.confirm) with the next camera's detection
+        assert all(np.all(p.time_ns <= obs.time_ns[i]) for i, p in enumerate(parts[:-1]))
+        late = sum(len(p) - int(np.any(p.time_ns == obs.time_ns[i]))
+                   for i, p in enumerate(parts[:-1]))
+        assert late + len(parts[-1]) <= 0.2 * len(batch)  # (10 % of the detections missed)
 
 
 @pytest.mark.parametrize("method", causal_methods())

@@ -9,7 +9,7 @@ import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
 from pslog import Rig, SimulationOptions, apply_timing, builtin_rig, get_motion, simulate
-from pslog.fusion import fuse, prepare
+from pslog.fusion import prepare
 from pslog.fusion._prepare import (
     bracket,
     default_max_gap_s,
@@ -94,7 +94,7 @@ def test_type_a_is_the_same_with_a_fresh_and_a_reused_preparation(prep):
     max_gap_s = default_max_gap_s(rig)
     first = fuse_type_a(prep, max_gap_s)[0]
     again = fuse_type_a(prep, max_gap_s)[0]
-    fresh = fuse(prep.obs, rig, "typeA")
+    fresh = fuse_type_a(prepare(prep.obs, rig), max_gap_s)[0]
     for track in (again, fresh):
         assert_array_equal(track.time_ns, first.time_ns)
         assert_array_equal(track.position_world, first.position_world)

@@ -31,7 +31,10 @@ def assert_same(parts, batch):
 
 def test_type_a_streams_through_its_incremental_form():
     rig = dirty_session("typeA", 0)[0]
-    assert isinstance(StreamFuser(rig, "typeA").incremental, TypeAStream)
+    # (by default through pslog.fusion.confirm's ConfirmedStream, which holds long-gap points)
+    assert isinstance(StreamFuser(rig, "typeA").incremental.inner, TypeAStream)
+    options = FusionOptions(confirm_gaps=False)
+    assert isinstance(StreamFuser(rig, "typeA", options).incremental, TypeAStream)
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -41,7 +44,8 @@ def test_one_detection_per_push_equals_batch_with_its_drops(seed, noise_px, lens
     # (one row a push: TypeAStream._push_one, the decisions on scalars; without a lens the
     # new row's rays in one compiled pass, _prepare_kernel.lensless_rows)
     rig, obs, _ = dirty_session("typeA", seed, lens=lens)
-    options = FusionOptions(noise_px=noise_px)
+    # (no long-gap point held: tests/test_dirty_confirm.py has those)
+    options = FusionOptions(noise_px=noise_px, confirm_gaps=False)
     batch = fuse(obs, rig, "typeA", options)
     assert len(batch) > 15
     if seed == 0:  # every kind of drop the one-row path decides is met

@@ -68,6 +68,10 @@ class FusionOptions:
         innovations imply (:class:`~pslog.fusion.innovation.NoiseEstimate`)
     gating : bool, fusing Detections: choose each frame's ball among its candidates by the
         gates of :mod:`pslog.fusion.gating` (True), or take the best-scored one (False)
+    confirm_gaps : bool, typeA: withhold a point whose prediction bridged a gap longer than
+        the rig's usual one until the next camera's detection confirms it, and drop it when
+        that detection contradicts it (:mod:`pslog.fusion.confirm`; a stream outputs it one
+        detection later); False: every point at once (``pslog live``: a point per shutter)
     """
 
     tolerance_s: float = 1e-3
@@ -75,6 +79,7 @@ class FusionOptions:
     rate_hz: float | None = None
     noise_px: float | None = 0.5
     gating: bool = True
+    confirm_gaps: bool = True
 
     def __post_init__(self) -> None:
         if not self.tolerance_s >= 0:
@@ -145,13 +150,20 @@ def _nearest(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
 
 
 def _type_a(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
-    return fuse_type_a(prep, _gap(options), options.noise_px, explain=False)[0]
+    from .confirm import confirm_batch  # (long-gap points confirmed by the next camera)
+
+    track = fuse_type_a(prep, _gap(options), options.noise_px, explain=False)[0]
+    if not options.confirm_gaps:
+        return track
+    return confirm_batch(prep, track, rig, _gap(options), options.noise_px)
 
 
 def _type_a_stream(rig: Rig, options: FusionOptions):
+    from .confirm import ConfirmedStream
     from .pseudo import TypeAStream
 
-    return TypeAStream(rig, options)
+    stream = TypeAStream(rig, options)
+    return ConfirmedStream(stream, rig, options) if options.confirm_gaps else stream
 
 
 def _type_b(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:

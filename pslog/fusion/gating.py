@@ -945,7 +945,15 @@ def _columns(c: _Candidates, ratio, points, in_front, static=None, lag=None) -> 
     # NaN: within track_m): lines alone can agree by chance, two false or carried-across-a-
     # gap candidates near the epipolar lines of a random blob. Rays that miss count as one
     # support (the track gate then judges).
-    n_support = np.where((supported >= 2) & ~np.isfinite(points[:, 0]), 1, supported)
+    # One support whose carried ray misses the candidate's by more than track_m (no point)
+    # is no support either: the 3D geometry denies what the line allowed, and with no point
+    # no stillness, reach or track test can judge it (paper3, rally seed 19 at 1 px: a lone
+    # blob of a camera not seeing the ball, carried as it is across 22-56 ms, 21 cm from
+    # the ray of a static object seen by cam2, "supported" it; chosen with no track to deny
+    # it, smooth's points 2-3 m off).
+    no_point = ~np.isfinite(points[:, 0])
+    n_support = np.where(no_point & (supported >= 2), 1,
+                         np.where(no_point & (supported == 1), 0, supported))
     lag = (np.zeros(ratio.shape) if lag is None
            else np.asarray(lag, dtype=np.float64).reshape(ratio.shape))
     return _Columns(rows=ratio.tolist(), available=np.isfinite(ratio).sum(axis=1).tolist(),

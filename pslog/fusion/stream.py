@@ -192,10 +192,15 @@ class StreamFuser:
     def _settled(self, final: bool) -> Track:
         if self.incremental is not None:  # it keeps its own state: feed the new rows once
             f = self._fed
+            ends = final and hasattr(self.incremental, "flush")  # (points it still holds)
             if f == len(self._time):  # nothing new (a frame the gate or the queue holds)
+                if ends:
+                    return Track.concat([cast(Track, self._nothing), self.incremental.flush()])
                 return cast(Track, self._nothing)  # set whenever incremental is
             out = self.incremental.push(self._time[f:], self._camera[f:], self._uv[f:],
                                         self._frame[f:])
+            if ends:
+                out = Track.concat([out, self.incremental.flush()])
             self._time, self._camera = self._time[-1:], self._camera[-1:]
             self._uv, self._frame = self._uv[-1:], self._frame[-1:]
             self._fed = len(self._time)

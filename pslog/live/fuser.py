@@ -40,7 +40,7 @@ import heapq
 import math
 import time
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -295,7 +295,9 @@ class LiveFuser:
         self._n_held = 0
         self.rig = rig
         self.method = method
-        self.options = options or FusionOptions()
+        # (a point per shutter at once: typeA's long-gap points are not held for the next
+        # camera's confirmation, pslog.fusion.confirm)
+        self.options = replace(options or FusionOptions(), confirm_gaps=False)
         # without gating a frame's candidates cannot be told apart: its best one alone, as
         # fuse() does with gating off
         self.candidates = bool(candidates) and self.options.gating

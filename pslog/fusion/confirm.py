@@ -1,0 +1,453 @@
+"""Type A across a long gap: a point withheld until the next camera confirms it.
+
+Type A's output ``P'_t`` takes its depth along the newest viewing ray from eq. (2)'s linear
+prediction from ``P_{t-1}`` and ``P_{t-2}``. When the newest detection follows the previous
+one by more than the rig's usual interval (a camera blind or out of view, a missed frame),
+the prediction bridges that longer gap, and a kick or a bounce inside it puts the point at
+the wrong depth, *along the newest ray*: the newest camera cannot see it (the prediction
+test of :mod:`pslog.fusion.innovation` sees only the error across its ray), and when the
+kick follows the previous detection no other camera has seen the ball since (its kink test
+has no triplet to bend). At the point's own time no causal test can see the error; the next
+detection of another camera can. So such a point is withheld until then, and then
+
+- *confirmed* (output, one detection later than the others) when it agrees with that
+  camera's 2D track: the camera's detections ``prev`` (its latest before ``t``) and ``next``
+  (the confirming one) interpolated to ``t`` as eq. (1) does,
+  ``u_i = (1 - w) u_prev + w u_next``, ``w = (t - t_prev) / (t_next - t_prev)``, against the
+  projection of ``P'_t`` into that camera (undistorted pixels), the residual ``r``;
+- ``contradicted`` (dropped, counted in ``Track.dropped``) when
+
+      r > 4 σ_r + e_model
+
+  with ``σ_r²`` the larger eigenvalue of ``J Σ J' + σ² ((1 - w)² + w²) I`` (``Σ``: the point's
+  own first-order covariance, the ``cov_*_m2`` columns, from the detection noise ``σ``;
+  ``J``: the projection's Jacobian; the interpolation's noise) and ``e_model`` the model's
+  bound for a ball in flight, as the prediction test's: eq. (1)'s interpolation error
+  ``½ g (t - t_prev) (t_next - t)`` plus eq. (2)'s extrapolation error, at most
+  ``½ g δ span`` (``δ`` the gap bridged, ``span`` the point's ``span_s``), times ``f D / Z²``
+  pixels per metre (``D``: distance from the camera, ``Z``: depth along its axis);
+- ``unconfirmed`` (dropped) when no other camera detects the ball within the longest
+  bridged gap (``max_gap_s``) after ``t``, or that camera has no detection within it before
+  ``t``: nothing can tell.
+
+``σ`` is at least the stated noise (``FusionOptions.noise_px``; 0.5 px when None) and the
+noise the session's epipolar snaps imply (:func:`confirm_noise`), so a stated noise below
+the detector's real one does not contradict good points in numbers. Four σ, not the
+prediction test's five: a 2-D Gaussian residual exceeds ``4 σ_r`` with probability
+``exp(-8) ≈ 3e-4``, and only the few percent of points that bridged a long gap are tested
+(about 1e-5 of all points), while the covariance, which leaves out the correlation of the
+point with the interpolated pixel (both use the confirming camera's earlier detection), is
+itself on the large side (``bench_dirty.py --more``: a 77 mm point at 8.3 px against 5 σ_r
+of 8.7 px). Without a covariance (``noise_px`` None or 0) ``Σ`` is replaced by ``σ² 14 I``
+in the image (the prediction test's largest factor ``1 + (1 + ρ)² + ρ²``, ``ρ <= 2``).
+
+Only points whose newest detection follows the previous detection (of any camera, an
+earlier instant) by more than :data:`LONG_FACTOR` times the rig's usual interval (the
+largest gap between consecutive shutter instants of its cameras' nominal schedules), or
+whose previous instant has no detection of the newest camera within ``max_gap_s`` before it
+(eq. (2)'s ``P_{t-1}`` then lies further back: a camera's first detection after a blind
+spell), wait: the others are output at once, as before. Causal: a point's decision uses
+the detections up to the confirming one, so :class:`ConfirmedStream` (``StreamFuser``'s
+``typeA``) decides as the batch run does, bit for bit (every step elementwise), and outputs
+a withheld point with the confirming detection's push. docs/methods.md, "Type A across a
+long gap", has the figures.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..motion import G
+from ..records import NS, Track
+
+#: A point waits for confirmation when its newest detection follows the previous one by
+#: more than this many times the rig's usual interval between shutter instants.
+LONG_FACTOR = 1.5
+#: The test's threshold in standard deviations (module docstring: why 4, not 5).
+CONFIRM_SIGMAS = 4.0
+#: ``1 + (1 + ρ)² + ρ²`` at ``ρ = 2`` (eq. (2)'s largest extrapolation): the point's
+#: projection noise in σ² when no covariance is made.
+_NO_COV_FACTOR2 = 14.0
+_NONE = np.iinfo(np.int64).min
+_COV = ("cov_xx_m2", "cov_yy_m2", "cov_zz_m2", "cov_xy_m2", "cov_xz_m2", "cov_yz_m2")
+
+
+def usual_interval_s(rig) -> float:
+    """The largest gap between consecutive shutter instants of the rig's cameras' nominal
+    schedules (offset + k / fps over one second), seconds: for type-A staggered shutters
+    ``1 / (n fps)``; the interval eq. (2) extrapolates across when every camera sees."""
+    times = np.sort(np.concatenate([
+        (c.offset % (1.0 / c.fps)) + np.arange(math.ceil(c.fps) + 1) / c.fps
+        for c in rig.cameras]))
+    times = times[times <= 1.0 + 1e-9]
+    return float(np.max(np.diff(times))) if len(times) > 1 else 1.0
+
+
+def _camera_rows(rig) -> np.ndarray:
+    """Per camera (m, 17) float: K's fx, skew, cx, fy, cy, then R row-major (9), then t (3)
+    (the world-to-camera rotation and translation)."""
+    return np.array([[c.K[0, 0], c.K[0, 1], c.K[0, 2], c.K[1, 1], c.K[1, 2],
+                      *np.asarray(c.R, dtype=np.float64).ravel(), *np.asarray(c.t).ravel()]
+                     for c in rig.cameras], dtype=np.float64)
+
+
+def residual_test(rows: np.ndarray, cam: np.ndarray, point: np.ndarray, cov: np.ndarray | None,
+                  t_ns: np.ndarray, prev_ns: np.ndarray, next_ns: np.ndarray,
+                  uv_prev: np.ndarray, uv_next: np.ndarray, gap_s: np.ndarray,
+                  span_s: np.ndarray, sigma: np.ndarray, noise_px: float | None
+                  ) -> np.ndarray:
+    """The test of the module docstring for k withheld points (elementwise: the same bits
+    for one point as for many).
+
+    Parameters
+    ----------
+    rows : (m, 17) float, :func:`_camera_rows` of the rig
+    cam : (k,) int, the confirming camera
+    point : (k, 3) float, ``P'_t``, world metres
+    cov : (k, 6) float or None, its covariance xx, yy, zz, xy, xz, yz, m²
+    t_ns, prev_ns, next_ns : (k,) int, the point's time and the confirming camera's
+        detections before and after it, ns
+    uv_prev, uv_next : (k, 2) float, their undistorted pixels
+    gap_s : (k,) float, the gap the point bridged (newest minus previous detection), s
+    span_s : (k,) float, the point's ``span_s``, s
+    sigma : (k,) float, the detection noise the test assumes per axis, pixels
+        (:func:`confirm_noise`)
+    noise_px : float or None, the stated noise the covariance ``cov`` was made with
+
+    Returns
+    -------
+    (k,) bool, True where the confirming camera contradicts the point (NaN: not)
+    """
+    r = rows[cam]
+    stated = 0.0 if noise_px is None else float(noise_px)
+    if not stated:  # (no covariance, or one of zero noise: nothing to scale)
+        cov = None
+    px, py, pz = point[:, 0], point[:, 1], point[:, 2]
+    # camera coordinates X = R P + t, written out (no matrix product: the same bits per row)
+    x = r[:, 5] * px + r[:, 6] * py + r[:, 7] * pz + r[:, 14]
+    y = r[:, 8] * px + r[:, 9] * py + r[:, 10] * pz + r[:, 15]
+    z = r[:, 11] * px + r[:, 12] * py + r[:, 13] * pz + r[:, 16]
+    fx, s, cx, fy, cy = r[:, 0], r[:, 1], r[:, 2], r[:, 3], r[:, 4]
+    with np.errstate(invalid="ignore", divide="ignore"):  # (rows not ok: NaN, never True)
+        t = t_ns.astype(np.float64)
+        d_prev = (t - prev_ns) / NS
+        d_next = (next_ns - t) / NS
+        w = d_prev / (d_prev + d_next)
+        u_i = (1.0 - w) * uv_prev[:, 0] + w * uv_next[:, 0]
+        v_i = (1.0 - w) * uv_prev[:, 1] + w * uv_next[:, 1]
+        u = (fx * x + s * y) / z + cx
+        v = fy * y / z + cy
+        du, dv = u - u_i, v - v_i
+        res = np.sqrt(du * du + dv * dv)
+        interp = sigma * sigma * ((1.0 - w) * (1.0 - w) + w * w)
+        if cov is None:
+            a = c = interp + sigma * sigma * _NO_COV_FACTOR2
+            b = np.zeros_like(a)
+        else:
+            # J = Jc R: Jc = [[fx/z, s/z, -(fx x + s y)/z²], [0, fy/z, -fy y/z²]]
+            scale = (sigma / stated) ** 2
+            ju = [(fx * r[:, 5 + i] + s * r[:, 8 + i]) / z - (fx * x + s * y) * r[:, 11 + i]
+                  / (z * z) for i in range(3)]
+            jv = [fy * r[:, 8 + i] / z - fy * y * r[:, 11 + i] / (z * z) for i in range(3)]
+            cxx, cyy, czz, cxy, cxz, cyz = (cov[:, i] * scale for i in range(6))
+
+            def quad(p, q):
+                """p Σ q' for rows p, q of J."""
+                return (p[0] * (cxx * q[0] + cxy * q[1] + cxz * q[2])
+                        + p[1] * (cxy * q[0] + cyy * q[1] + cyz * q[2])
+                        + p[2] * (cxz * q[0] + cyz * q[1] + czz * q[2]))
+
+            a = quad(ju, ju) + interp
+            c = quad(jv, jv) + interp
+            b = quad(ju, jv)
+        half = 0.5 * (a - c)
+        sigma_r = np.sqrt(0.5 * (a + c) + np.sqrt(half * half + b * b))
+        dist = np.sqrt(x * x + y * y + z * z)
+        per_m = np.maximum(fx, fy) * dist / (z * z)
+        model = 0.5 * G * (d_prev * d_next + gap_s * span_s) * per_m
+        return res > CONFIRM_SIGMAS * sigma_r + model
+
+
+#: Median of |N(0, 1)|: a half-normal's median, in σ.
+_HALF_NORMAL_MEDIAN = 0.6744897501960817
+
+
+def confirm_noise(snap_px: np.ndarray, noise_px: float | None, estimate=None) -> np.ndarray:
+    """The detection noise the test assumes for each of k points in row order, pixels:
+    at least the stated one (0.5 when None) and the noise the points' own epipolar snaps
+    imply (a stated noise below the detector's real one would contradict good points in
+    numbers, as it refused them in type A's tests: docs/methods.md, "The tests' σ").
+
+    ``snap_px`` is eq. (1)'s interpolated point's distance to the epipolar line: under the
+    model a 1-D Gaussian's norm, of about ``σ √((1 - w)² + w² + 1) ≈ σ √1.5`` (the
+    interpolation, and the observed point moving the line), whose median is 0.674 times
+    that. Each is scaled to the Rayleigh median :class:`~pslog.fusion.innovation.NoiseEstimate`
+    takes, which gives each point the causal median of those before it (the same values in
+    a stream, ``estimate`` kept across its pushes). Returns (k,) float."""
+    from .innovation import RAYLEIGH_MEDIAN, NoiseEstimate
+
+    scale = RAYLEIGH_MEDIAN / (_HALF_NORMAL_MEDIAN * math.sqrt(1.5))
+    values = np.asarray(snap_px, dtype=np.float64) * scale
+    return (NoiseEstimate() if estimate is None else estimate).sigmas(values, noise_px)
+
+
+def _previous_instant(time_ns: np.ndarray, camera: np.ndarray, max_gap_ns: int
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """Per row (n,): its time minus the latest earlier time of any row, ns (-1: none), and
+    whether that earlier instant's row (the last one) has no bracket of this row's camera
+    (no detection of it within ``max_gap_ns`` before): then eq. (2)'s ``P_{t-1}`` is an
+    earlier instant still, a longer gap (a camera's first detection after a blind spell)."""
+    n = len(time_ns)
+    first = np.searchsorted(time_ns, time_ns, side="left")
+    gap = np.full(n, -1, dtype=np.int64)
+    has = first > 0
+    p = first[has] - 1
+    gap[has] = time_ns[has] - time_ns[p]
+    # each row's previous row of its own camera
+    before = np.full(n, -1, dtype=np.int64)
+    for c in np.unique(camera).tolist():
+        rows_c = np.flatnonzero(camera == c)
+        before[rows_c[1:]] = rows_c[:-1]
+    unbracketed = np.zeros(n, dtype=bool)
+    own = before[has]
+    unbracketed[has] = ((camera[p] != camera[has])
+                        & ((own < 0) | (time_ns[p] - time_ns[np.maximum(own, 0)] > max_gap_ns)))
+    return gap, unbracketed
+
+
+def confirm_batch(prep, track: Track, rig, max_gap_s: float, noise_px: float | None) -> Track:
+    """``track`` (type A's, from ``prep``'s observations) with its long-gap points confirmed,
+    contradicted or unconfirmed (module docstring); the dropped ones counted in
+    ``Track.dropped`` (``contradicted``, ``unconfirmed``)."""
+    if not len(track):
+        return track
+    sigma = confirm_noise(track.quality["snap_px"], noise_px)
+    obs = prep.obs
+    time_ns, camera = obs.time_ns, obs.camera
+    n = len(time_ns)
+    # each point's row: its (time, camera) in the (time, camera)-sorted observations
+    row = np.searchsorted(time_ns, track.time_ns, side="left")
+    for _ in range(len(rig)):
+        off = (row < n) & (camera[np.minimum(row, n - 1)] != track.camera)
+        if not off.any():
+            break
+        row[off] += 1
+    max_gap_ns = int(max_gap_s * NS)
+    gap_all, unbracketed = _previous_instant(time_ns, camera, max_gap_ns)
+    gap = gap_all[row]
+    long = (gap > LONG_FACTOR * usual_interval_s(rig) * NS) | unbracketed[row]
+    if not long.any():
+        return track
+    e = row[long]
+    # the confirming detection: the first later row of another camera (the row after the
+    # run of this camera's rows)
+    change = np.r_[camera[1:] != camera[:-1], True]
+    run_end = np.flatnonzero(change)  # the last row of each run
+    nxt = run_end[np.searchsorted(run_end, e, side="left")] + 1
+    ok = nxt < n
+    nxt_c = np.where(ok, nxt, 0)
+    ok &= time_ns[nxt_c] - time_ns[e] <= max_gap_ns
+    cam2 = camera[nxt_c]
+    # the confirming camera's latest row before the point
+    prev = np.full(len(e), -1, dtype=np.int64)
+    for c in np.unique(cam2[ok]).tolist():
+        rows_c = np.flatnonzero(camera == c)
+        sel = ok & (cam2 == c)
+        k = np.searchsorted(rows_c, e[sel], side="left") - 1
+        prev[sel] = np.where(k >= 0, rows_c[np.maximum(k, 0)], -1)
+    ok &= prev >= 0
+    prev_c = np.maximum(prev, 0)
+    ok &= time_ns[e] - time_ns[prev_c] <= max_gap_ns
+    uv = prep.uv_undistorted
+    ok &= np.all(np.isfinite(uv[prev_c]), axis=1) & np.all(np.isfinite(uv[nxt_c]), axis=1)
+    q = track.quality
+    idx = np.flatnonzero(long)
+    cov = (np.stack([q[k][idx] for k in _COV], axis=1) if all(k in q for k in _COV)
+           else None)
+    contradicted = residual_test(
+        _camera_rows(rig), cam2, track.position_world[idx], cov, time_ns[e],
+        time_ns[prev_c], time_ns[nxt_c], uv[prev_c], uv[nxt_c], gap[long] / NS,
+        q["span_s"][idx], sigma[idx], noise_px) & ok
+    drop = np.zeros(len(track), dtype=bool)
+    drop[idx[~ok]] = True
+    drop[idx[contradicted]] = True
+    return _with_drops(track, drop, int(np.count_nonzero(contradicted)),
+                       int(np.count_nonzero(~ok)))
+
+
+def _with_drops(track: Track, drop: np.ndarray, contradicted: int, unconfirmed: int) -> Track:
+    dropped = dict(track.dropped)
+    for reason, count in (("contradicted", contradicted), ("unconfirmed", unconfirmed)):
+        if count:
+            dropped[reason] = dropped.get(reason, 0) + count
+    if not drop.any():
+        return Track(track.method, track.time_ns, track.position_world, track.camera,
+                     track.quality, dropped)
+    keep = ~drop
+    return Track(track.method, track.time_ns[keep], track.position_world[keep],
+                 track.camera[keep], {k: v[keep] for k, v in track.quality.items()}, dropped)
+
+
+class ConfirmedStream:
+    """:class:`~pslog.fusion.pseudo.TypeAStream` with :func:`confirm_batch`'s decisions,
+    causally: a long-gap point is held until the first later detection of another camera
+    (output with that push when confirmed), or dropped when that detection contradicts it,
+    when a detection beyond ``max_gap_s`` arrives first, or at :meth:`flush`. The same points
+    and counts as the batch run.
+
+    Parameters
+    ----------
+    inner : the TypeAStream
+    rig : Rig
+    options : FusionOptions (``max_gap_s`` None: the rig's default)
+    """
+
+    def __init__(self, inner, rig, options) -> None:
+        from ._prepare import default_max_gap_s
+
+        self.inner = inner
+        self.rig = rig
+        self._noise_px = options.noise_px
+        self._max_gap_ns = int((options.max_gap_s or default_max_gap_s(rig)) * NS)
+        self._long_ns = LONG_FACTOR * usual_interval_s(rig) * NS
+        self._rows = _camera_rows(rig)
+        from .innovation import NoiseEstimate
+
+        self._noise = NoiseEstimate()  # the test's noise, from every point's snap so far
+        # the last row of each camera: (time ns, recorded uv (2,)); undistorted when needed
+        self._last: list[tuple[int, np.ndarray] | None] = [None] * len(rig)
+        self._newest = (_NONE, _NONE)  # the newest time, and the latest before it
+        # (time, camera) of the newest row, and of the last row before the newest instant
+        self._latest: tuple[int, int] | None = None
+        self._previous_row: tuple[int, int] | None = None
+        # the points not yet output, in row order: [one-row Track, status ("wait",
+        # "confirmed", "contradicted", "unconfirmed"), (time, camera, gap ns, the last row
+        # of each camera then) of a withheld one]
+        self._queue: list[list] = []
+
+    def _undistorted(self, cam: int, uv: np.ndarray) -> np.ndarray:
+        """prepare's undistorted pixel of one recorded pixel (the same bits, row by row)."""
+        from ._prepare import _FAR_IMAGES
+
+        c = self.rig.cameras[cam]
+        uv = uv.reshape(1, 2)
+        if not np.all(np.abs(uv) <= _FAR_IMAGES * max(c.width, c.height)):
+            return np.full((1, 2), np.nan)
+        return c.pixels_from_normalized(c.undistort_normalized(uv))
+
+    def push(self, time_ns, camera, uv, frame_index) -> Track:
+        """The inner stream's push; returns the points decided (in time order: a point
+        behind a withheld one waits with it)."""
+        out = self.inner.push(time_ns, camera, uv, frame_index)
+        if not len(time_ns):
+            return out
+        if not self._queue and not len(out):  # (nothing withheld, no point: the rows only)
+            self._rows_seen(np.asarray(time_ns, dtype=np.int64).tolist(),
+                            np.asarray(camera).tolist(), np.asarray(uv, dtype=np.float64))
+            return out
+        time_l = np.asarray(time_ns, dtype=np.int64).tolist()
+        cam_l = np.asarray(camera).tolist()
+        uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+        point_of = {(t, c): i for i, (t, c) in enumerate(zip(out.time_ns.tolist(),
+                                                             out.camera.tolist(),
+                                                             strict=True))}
+        sigma = (confirm_noise(out.quality["snap_px"], self._noise_px, self._noise).tolist()
+                 if len(out) else [])
+        queue = self._queue
+        for j, (t, c) in enumerate(zip(time_l, cam_l, strict=True)):
+            for entry in queue:  # the withheld points this row decides
+                if entry[1] == "wait":
+                    entry[1] = self._decide(entry, t, c, uv[j])
+            gap, previous = self._gap(t), self._previous
+            i = point_of.get((t, c))
+            if i is not None:
+                own = self._last[c]
+                unbracketed = previous is not None and previous[1] != c and (
+                    own is None or previous[0] - own[0] > self._max_gap_ns)
+                if gap > self._long_ns or unbracketed:
+                    queue.append([out.select([i]), "wait",
+                                  (t, c, gap, list(self._last), sigma[i])])
+                else:
+                    queue.append([out.select([i]), "confirmed", None])
+            self._record(t, c, uv[j])
+        return self._emit(out.dropped, final=False)
+
+    def _rows_seen(self, time_l, cam_l, uv) -> None:
+        """The rows' times and pixels recorded (no point to decide)."""
+        uv = uv.reshape(-1, 2)
+        for j, (t, c) in enumerate(zip(time_l, cam_l, strict=True)):
+            self._gap(t)
+            self._record(t, c, uv[j])
+
+    def _record(self, t: int, c: int, uv: np.ndarray) -> None:
+        """A row seen: the last row of its camera, and of the session (the previous
+        instant's row of the rows at later times)."""
+        self._last[c] = (t, uv)
+        self._latest = (t, c)
+
+    @property
+    def _previous(self) -> tuple[int, int] | None:
+        """(time, camera) of the last row at the latest instant before the newest row's."""
+        return self._previous_row
+
+    def _gap(self, t: int) -> int:
+        """The new row's time minus the latest earlier instant, ns (-1: none); recorded."""
+        newest, before = self._newest
+        if t > newest:
+            before, newest = newest, t
+            self._previous_row = self._latest
+        self._newest = (newest, before)
+        return t - before if before != _NONE else -1
+
+    def _emit(self, dropped, final: bool) -> Track:
+        """The decided front of the queue (every entry when ``final``: the withheld ones
+        unconfirmed), as one Track with ``dropped`` and this push's drops."""
+        parts = [Track("typeA", np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0, np.int32),
+                       dropped=dropped)]
+        counts = {"contradicted": 0, "unconfirmed": 0}
+        queue = self._queue
+        k = 0
+        while k < len(queue) and (final or queue[k][1] != "wait"):
+            status = queue[k][1]
+            if status == "confirmed":
+                parts.append(queue[k][0])
+            else:
+                counts["unconfirmed" if status == "wait" else status] += 1
+            k += 1
+        del queue[:k]
+        if len(parts) == 2 and not dropped and not any(counts.values()):
+            return parts[1]
+        result = Track.concat(parts)
+        return _with_drops(result, np.zeros(len(result), dtype=bool), counts["contradicted"],
+                           counts["unconfirmed"])
+
+    def _decide(self, entry, t: int, c: int, uv: np.ndarray) -> str:
+        """A withheld point's verdict at a new row (time ``t``, camera ``c``, recorded pixel
+        ``uv``): wait, confirmed, contradicted or unconfirmed."""
+        point, _, held = entry
+        t0, c0, gap, last, sigma = held
+        if t - t0 > self._max_gap_ns:
+            return "unconfirmed"
+        if c == c0:
+            return "wait"
+        before = last[c]
+        if before is None or t0 - before[0] > self._max_gap_ns:
+            return "unconfirmed"
+        uv_prev = self._undistorted(c, before[1])
+        uv_next = self._undistorted(c, uv)
+        if not (np.all(np.isfinite(uv_prev)) and np.all(np.isfinite(uv_next))):
+            return "unconfirmed"
+        q = point.quality
+        cov = (np.stack([q[k] for k in _COV], axis=1) if all(k in q for k in _COV) else None)
+        bad = residual_test(self._rows, np.array([c]), point.position_world, cov,
+                            np.array([t0]), np.array([before[0]]), np.array([t]), uv_prev,
+                            uv_next, np.array([gap / NS]), q["span_s"], np.array([sigma]),
+                            self._noise_px)
+        return "contradicted" if bool(bad[0]) else "confirmed"
+
+    def flush(self) -> Track:
+        """The end of the stream: the points still withheld are unconfirmed; those behind
+        them are output."""
+        return self._emit({}, final=True)
