@@ -160,7 +160,10 @@ def run(rig, frames, method: str, candidates: bool, record: bool = False) -> dic
     tmp = tempfile.TemporaryDirectory(prefix="bench-live-")
     fuser = threading.Thread(target=fuse)
     fuser.start()
-    ready.wait(30)
+    # (a cold numba cache compiles the method's kernels first: minutes on a loaded machine)
+    while not ready.wait(1.0):
+        if not fuser.is_alive():
+            raise RuntimeError("pslog serve ended before it was ready")
     s_parent, s_child = ctx.Pipe()
     start = time.time_ns() + NS // 2
     # the session's frames must not come before the fuser's clock zero

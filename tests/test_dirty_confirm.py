@@ -93,6 +93,32 @@ def test_a_point_across_a_kick_in_a_long_gap_waits_for_the_next_camera(case):
     assert lost <= 0.005 * len(track) + 1, (lost, len(track))
 
 
+def test_fuse_confirm_gaps_option_holds_or_emits_the_long_gap_point(tmp_path, cli):
+    """`pslog fuse --confirm-gaps on` (the default) leaves the paper3 kick point out as
+    contradicted; `off` emits it, as `pslog live` does (so a live recording re-fuses to the
+    live points)."""
+    from pslog.fusion import FusionOptions
+    from pslog.log import SessionWriter, read_session
+
+    rig, det, _truth, at = _session("paper3")
+    path = tmp_path / "dirty.mcap"
+    with SessionWriter(path, rig, timing="typeA", source="test") as writer:
+        writer.add_detections(det)
+    tracks = {}
+    for flag in ("on", "off"):
+        out = tmp_path / f"fused-{flag}.mcap"
+        code, _, err = cli("fuse", path, "--method", "typeA", "--confirm-gaps", flag,
+                           "-o", out)
+        assert code == 0, err
+        tracks[flag] = read_session(out).tracks["typeA"]
+    held = fuse(det, rig, "typeA")
+    at_once = fuse(det, rig, "typeA", FusionOptions(confirm_gaps=False))
+    assert_array_equal(tracks["on"].time_ns, held.time_ns)
+    assert_array_equal(tracks["off"].time_ns, at_once.time_ns)
+    kick = np.abs(at_once.time_ns / 1e9 - at) < 0.001
+    assert kick.any() and not np.any(np.abs(held.time_ns / 1e9 - at) < 0.001)
+
+
 def test_the_stream_withholds_and_decides_as_the_batch_run():
     """StreamFuser (candidates, gated as fuse gates them): the same points, columns and
     counts as the batch run, on a session where cam2 goes blind for good at 2.5 s (many

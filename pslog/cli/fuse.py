@@ -55,6 +55,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "epipolar, track and motion gates and record every rejected "
                              "candidate in the output; off: take each frame's best-scored "
                              "candidate (default %(default)s)")
+    parser.add_argument("--confirm-gaps", choices=("on", "off"), default="on",
+                        help="typeA: on: a point whose prediction bridged a gap longer than "
+                             "the rig's usual one is kept only once the next camera's "
+                             "detection confirms it (left out as contradicted or "
+                             "unconfirmed otherwise); off: every point at once, as `pslog "
+                             "live` emits them (default %(default)s)")
     parser.add_argument("--workers", type=int_in(1, 64), default=None, metavar="N",
                         help="methods fused at once, on threads (the same tracks whatever "
                              "the number; 1..64; 1: one after another, e.g. beside other "
@@ -103,7 +109,8 @@ def run(args: argparse.Namespace) -> int:
     options = FusionOptions(tolerance_s=args.tolerance_ms / 1e3,
                             max_gap_s=None if args.max_gap_ms is None else args.max_gap_ms / 1e3,
                             rate_hz=args.rate, noise_px=args.noise_px,
-                            gating=args.gating == "on")
+                            gating=args.gating == "on",
+                            confirm_gaps=args.confirm_gaps == "on")
     observations = timed_observations(session.detections, rig)  # the rig's clock model
     if len(observations) == 0:
         raise FusionError(f"{args.session} has no detection to fuse")
