@@ -203,6 +203,15 @@ def test_the_residual_test_by_hand():
         got = residual_test(rows, args[0], args[1], cov, *args[3:], uv, uv,
                             np.array([0.02]), np.array([0.05]), np.array([0.5]), 0.5)
         assert bool(got[0]) is expected, (x, bound)
+    # a covariance that is not finite: tested as a point without one (NaN compares False:
+    # it was never contradicted)
+    cov = np.array([[np.nan, 0, 0, 0, 0, 0]])
+    bound = CONFIRM_SIGMAS * np.sqrt(0.25 * 14.5) + 0.5 * 9.8 * (1e-4 + 1e-3) * 125
+    for x, expected in ((bound - 0.01, False), (bound + 0.01, True)):
+        uv = np.array([[320.0 + x, 240.0]])
+        got = residual_test(rows, args[0], args[1], cov, *args[3:], uv, uv,
+                            np.array([0.02]), np.array([0.05]), np.array([0.5]), 0.5)
+        assert bool(got[0]) is expected, (x, bound)
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -222,3 +231,79 @@ def test_one_detection_per_push_equals_batch_on_dirty_sessions(seed):
     assert_array_equal(streamed.position_world, batch.position_world)
     for key, column in batch.quality.items():
         assert_array_equal(streamed.quality[key], column, err_msg=key)
+
+
+def _missing_session(rig_name: str, seed: int, dirty: bool):
+    """A kicked rally with 25 % missed detections, 10 % dropped frames, cam1 blind 0.4 s;
+    ``dirty``: 5 % of the pixels anywhere in the image and 1 % absurd (1e300)."""
+    from pslog import Observations, simulate
+
+    base = apply_timing(builtin_rig("paper3"), "typeA")
+    if rig_name == "paper3 240 fps":
+        rig = Rig(tuple(c.replace(fps=240.0, offset=i / 720.0)
+                        for i, c in enumerate(base.cameras)), base.name)
+    else:  # a strong lens
+        lens = np.array([-0.25, 0.08, 0.001, -0.001, 0.0])
+        rig = Rig(tuple(c.replace(dist=lens) for c in base.cameras), base.name)
+    motion = rally(4.0, seed=300 + seed, speed=5.0, kick_every_s=0.7)[0]
+    options = SimulationOptions(noise_px=0.5, miss_rate=0.25, drop_rate=0.1, jitter_s=3e-4,
+                                seed=seed, blackouts=((rig.cameras[0].name, 1.0, 0.4),))
+    det, _ = simulate(rig, motion, 4.0, options=options)
+    obs = det.best()
+    uv = obs.uv.copy()
+    if dirty:
+        rng = np.random.default_rng(seed)
+        out = rng.random(len(obs)) < 0.05
+        uv[out] = rng.uniform([0, 0], [640, 480], (int(out.sum()), 2))
+        uv[rng.random(len(obs)) < 0.01] = 1e300
+    return rig, Observations(obs.time_ns, obs.camera, uv, obs.frame_index)
+
+
+@pytest.mark.parametrize(("rig_name", "seed", "dirty"), [("paper3 240 fps", 1, True),
+                                                         ("paper3 240 fps", 1, False),
+                                                         ("paper3 lens", 2, False)])
+def test_missed_detections_try_the_next_camera_and_the_stream_agrees(rig_name, seed, dirty):
+    """With missed detections the first later detection of another camera often has no
+    detection of its camera before the point: the next one is tried (session 9's review:
+    19 of 1,768 good points were dropped unconfirmed at 240 fps, 1.1 %). Stream (one
+    detection a push) equals batch, the held points' decisions included (the unbracketed
+    wait and the confirming camera's age test of the stream)."""
+    rig, obs = _missing_session(rig_name, seed, dirty)
+    batch = fuse(obs, rig, "typeA")
+    if rig_name == "paper3 240 fps" and not dirty:  # (at 30 fps a few are truly unseen)
+        assert batch.dropped.get("unconfirmed", 0) <= 0.005 * len(batch), batch.dropped
+    fuser = StreamFuser(rig, "typeA")
+    parts = [fuser.push(obs.time_ns[i], obs.camera[i], obs.uv[i], obs.frame_index[i])
+             for i in range(len(obs))]
+    parts.append(fuser.flush())
+    stream = Track.concat(parts)
+    assert stream.dropped == batch.dropped
+    assert_array_equal(stream.time_ns, batch.time_ns)
+    assert_array_equal(stream.camera, batch.camera)
+    assert_array_equal(stream.position_world, batch.position_world)
+    for k, v in batch.quality.items():
+        assert_array_equal(stream.quality[k], v, err_msg=k)
+
+
+def test_explain_type_a_and_the_viewer_leave_out_the_points_fuse_drops(tmp_path):
+    """The construction (explain_type_a, the viewer's rays and epipolar lines) is of the
+    points `pslog fuse` outputs: the paper3 kick point, contradicted, is in neither (the
+    viewer fused typeA on the fly without the confirmation: 2 more points shown)."""
+    from pslog.fusion import FusionOptions, explain_type_a
+    from pslog.fusion.gating import gate_for
+    from pslog.log import SessionWriter, read_session
+    from viewers.data import _type_a_with_construction
+
+    rig, det, _truth, _at = _session("paper3")
+    track = fuse(det, rig, "typeA")
+    assert track.dropped.get("contradicted", 0) >= 1
+    obs = gate_for(det, rig, "typeA", FusionOptions()).observations
+    construction = explain_type_a(det, rig)
+    assert_array_equal(obs.time_ns[construction.event_row], track.time_ns)
+    assert_array_equal(construction.points_world, track.position_world)
+    path = tmp_path / "dirty.mcap"
+    with SessionWriter(path, rig, timing="typeA", source="test") as writer:
+        writer.add_detections(det)
+    shown, shown_construction, _ = _type_a_with_construction(read_session(path))
+    assert_array_equal(shown.time_ns, track.time_ns)
+    assert len(shown_construction.event_row) == len(track)

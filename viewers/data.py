@@ -18,7 +18,6 @@ from pslog.fusion import (
     METHODS,
     FusionOptions,
     TypeAConstruction,
-    default_max_gap_s,
     explain_type_a,
     fuse_all,
     prepare,
@@ -336,12 +335,11 @@ def _type_a_with_construction(session: Session
     fuses it (gated, default options), its construction as
     :func:`pslog.fusion.explain_type_a` explains it, from one gating and one pass, and the
     observations both rest on."""
-    from pslog.fusion import check_tolerance
-    from pslog.fusion.pseudo import fuse_type_a
+    from pslog.fusion import check_tolerance, type_a_explained
 
     rig, options = session.rig, FusionOptions()
     check_tolerance(rig, options.tolerance_s)
     obs = _type_a_observations(session)
-    track, construction = fuse_type_a(prepare(obs, rig), options.max_gap_s
-                                      or default_max_gap_s(rig), options.noise_px)
+    # (with the long-gap confirmation, as pslog fuse: the points it drops are not shown)
+    track, construction = type_a_explained(prepare(obs, rig), rig, options)
     return track, construction, obs

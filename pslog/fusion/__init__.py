@@ -346,7 +346,28 @@ def explain_type_a(
                         if options.gating and len(rig) >= 2
                         else timed_observations(observations, rig))
     prep = prepare(observations, rig)
-    return fuse_type_a(prep, options.max_gap_s or default_max_gap_s(rig), options.noise_px)[1]
+    return type_a_explained(prep, rig, options)[1]
+
+
+def type_a_explained(prep: Prepared, rig: Rig, options: FusionOptions
+                     ) -> tuple[Track, TypeAConstruction]:
+    """``typeA``'s track as :func:`fuse` makes it from ``prep`` (the long-gap confirmation
+    of :mod:`pslog.fusion.confirm` included when ``options.confirm_gaps``) and the
+    construction of each of its points (the points the confirmation drops left out too)."""
+    max_gap_s = options.max_gap_s or default_max_gap_s(rig)
+    track, construction = fuse_type_a(prep, max_gap_s, options.noise_px)
+    if not options.confirm_gaps or not len(track):
+        return track, construction
+    from .confirm import confirm_batch
+
+    confirmed = confirm_batch(prep, track, rig, max_gap_s, options.noise_px)
+    if len(confirmed) == len(track):
+        return confirmed, construction
+    # the construction's rows are the track's points, in order; the confirmation only drops
+    # (a point: its time and camera, keyed as one int64: times < 2**55 ns, cameras < 256)
+    kept = np.isin(track.time_ns * 256 + track.camera, confirmed.time_ns * 256
+                   + confirmed.camera)
+    return confirmed, construction.select(kept)
 
 
 __all__ = [

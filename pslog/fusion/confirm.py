@@ -26,9 +26,10 @@ detection of another camera can. So such a point is withheld until then, and the
   ``½ g (t - t_prev) (t_next - t)`` plus eq. (2)'s extrapolation error, at most
   ``½ g δ span`` (``δ`` the gap bridged, ``span`` the point's ``span_s``), times ``f D / Z²``
   pixels per metre (``D``: distance from the camera, ``Z``: depth along its axis);
-- ``unconfirmed`` (dropped) when no other camera detects the ball within the longest
-  bridged gap (``max_gap_s``) after ``t``, or that camera has no detection within it before
-  ``t``: nothing can tell.
+- ``unconfirmed`` (dropped) when no other camera that can check it detects the ball within
+  the longest bridged gap (``max_gap_s``) after ``t``: a camera checks it with a detection
+  within ``max_gap_s`` before ``t`` (else the next one is tried; with missed detections the
+  first one often has none): nothing can tell.
 
 ``σ`` is at least the stated noise (``FusionOptions.noise_px``; 0.5 px when None) and the
 noise the session's epipolar snaps imply (:func:`confirm_noise`), so a stated noise below
@@ -164,6 +165,9 @@ def residual_test(rows: np.ndarray, cam: np.ndarray, point: np.ndarray, cov: np.
             b = quad(ju, jv)
         half = 0.5 * (a - c)
         sigma_r = np.sqrt(0.5 * (a + c) + np.sqrt(half * half + b * b))
+        if cov is not None:  # a point without a finite covariance: tested as without one
+            lost = ~np.isfinite(sigma_r)
+            sigma_r[lost] = np.sqrt(interp[lost] + sigma[lost] * sigma[lost] * _NO_COV_FACTOR2)
         dist = np.sqrt(x * x + y * y + z * z)
         per_m = np.maximum(fx, fy) * dist / (z * z)
         model = 0.5 * G * (d_prev * d_next + gap_s * span_s) * per_m
@@ -241,27 +245,34 @@ def confirm_batch(prep, track: Track, rig, max_gap_s: float, noise_px: float | N
     if not long.any():
         return track
     e = row[long]
-    # the confirming detection: the first later row of another camera (the row after the
-    # run of this camera's rows)
-    change = np.r_[camera[1:] != camera[:-1], True]
-    run_end = np.flatnonzero(change)  # the last row of each run
-    nxt = run_end[np.searchsorted(run_end, e, side="left")] + 1
-    ok = nxt < n
-    nxt_c = np.where(ok, nxt, 0)
-    ok &= time_ns[nxt_c] - time_ns[e] <= max_gap_ns
-    cam2 = camera[nxt_c]
-    # the confirming camera's latest row before the point
-    prev = np.full(len(e), -1, dtype=np.int64)
-    for c in np.unique(cam2[ok]).tolist():
-        rows_c = np.flatnonzero(camera == c)
-        sel = ok & (cam2 == c)
-        k = np.searchsorted(rows_c, e[sel], side="left") - 1
-        prev[sel] = np.where(k >= 0, rows_c[np.maximum(k, 0)], -1)
-    ok &= prev >= 0
-    prev_c = np.maximum(prev, 0)
-    ok &= time_ns[e] - time_ns[prev_c] <= max_gap_ns
+    # the confirming detection: the first later row of another camera that can check the
+    # point (its camera has a row within max_gap_s before the point, both pixels finite),
+    # within max_gap_s of the point; the rows are scanned in order, as a stream meets them
     uv = prep.uv_undistorted
-    ok &= np.all(np.isfinite(uv[prev_c]), axis=1) & np.all(np.isfinite(uv[nxt_c]), axis=1)
+    finite = np.all(np.isfinite(uv), axis=1)
+    # each row's previous row of its own camera, and each long point's latest row per camera
+    last_before = np.full((len(e), len(rig)), -1, dtype=np.int64)
+    for c in range(len(rig)):
+        rows_c = np.flatnonzero(camera == c)
+        k = np.searchsorted(rows_c, e, side="left") - 1
+        last_before[:, c] = np.where(k >= 0, rows_c[np.maximum(k, 0)], -1)
+    nxt = np.full(len(e), -1, dtype=np.int64)
+    prev = np.full(len(e), -1, dtype=np.int64)
+    pending = np.ones(len(e), dtype=bool)
+    r = e + 1
+    while pending.any():
+        r_c = np.minimum(r, n - 1)
+        pending &= (r < n) & (time_ns[r_c] - time_ns[e] <= max_gap_ns)  # else unconfirmed
+        before = last_before[np.arange(len(e)), camera[r_c]]
+        b_c = np.maximum(before, 0)
+        found = (pending & (camera[r_c] != camera[e]) & (before >= 0)
+                 & (time_ns[e] - time_ns[b_c] <= max_gap_ns) & finite[b_c] & finite[r_c])
+        nxt[found], prev[found] = r_c[found], before[found]
+        pending &= ~found
+        r += 1
+    ok = nxt >= 0
+    nxt_c, prev_c = np.maximum(nxt, 0), np.maximum(prev, 0)
+    cam2 = camera[nxt_c]
     q = track.quality
     idx = np.flatnonzero(long)
     cov = (np.stack([q[k][idx] for k in _COV], axis=1) if all(k in q for k in _COV)
@@ -293,6 +304,7 @@ def _with_drops(track: Track, drop: np.ndarray, contradicted: int, unconfirmed: 
 class ConfirmedStream:
     """:class:`~pslog.fusion.pseudo.TypeAStream` with :func:`confirm_batch`'s decisions,
     causally: a long-gap point is held until the first later detection of another camera
+    that can check it (a detection of that camera within ``max_gap_s`` before the point)
     (output with that push when confirmed), or dropped when that detection contradicts it,
     when a detection beyond ``max_gap_s`` arrives first, or at :meth:`flush`. The same points
     and counts as the batch run.
@@ -432,13 +444,15 @@ class ConfirmedStream:
             return "unconfirmed"
         if c == c0:
             return "wait"
+        # a camera that cannot check it (no row of its own within max_gap_s before the
+        # point, a pixel not undistorted): the next row of another camera may
         before = last[c]
         if before is None or t0 - before[0] > self._max_gap_ns:
-            return "unconfirmed"
+            return "wait"
         uv_prev = self._undistorted(c, before[1])
         uv_next = self._undistorted(c, uv)
         if not (np.all(np.isfinite(uv_prev)) and np.all(np.isfinite(uv_next))):
-            return "unconfirmed"
+            return "wait"
         q = point.quality
         cov = (np.stack([q[k] for k in _COV], axis=1) if all(k in q for k in _COV) else None)
         bad = residual_test(self._rows, np.array([c]), point.position_world, cov,

@@ -55,6 +55,7 @@ RAYLEIGH_MEDIAN = float(np.sqrt(2.0 * np.log(2.0)))
 #: NOISE_EVERY innovations exist, the tests' σ is at least DEFAULT_NOISE_PX.
 NOISE_WINDOW = 256
 NOISE_EVERY = 32  # (a power of two: NoiseEstimate.sigmas clears its low bits)
+assert NOISE_EVERY & (NOISE_EVERY - 1) == 0, "NoiseEstimate.sigmas needs a power of two"
 
 
 def innovation_factors(events: np.ndarray, j1: np.ndarray, j2: np.ndarray,

@@ -42,7 +42,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Literal, NamedTuple, cast, overload
+from typing import Any, Literal, NamedTuple, cast, overload
 
 import numpy as np
 
@@ -229,6 +229,13 @@ class TypeAConstruction:
     past: tuple[PseudoStereoPoints, PseudoStereoPoints]
     predicted_world: np.ndarray
     points_world: np.ndarray
+
+    def select(self, keep: np.ndarray) -> TypeAConstruction:
+        """The rows ``keep`` ((k,) bool or int indices) of every field."""
+        past = tuple(type(p)(**{f: getattr(p, f)[keep] for f in p.__dataclass_fields__})
+                     for p in self.past)
+        return TypeAConstruction(self.event_row[keep], cast(Any, past),
+                                 self.predicted_world[keep], self.points_world[keep])
 
 
 @overload

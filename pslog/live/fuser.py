@@ -250,7 +250,8 @@ class LiveFuser:
         than this is counted ``late``, else ``reordered``, seconds
     future_s : float, a frame captured more than this after its arrival is dropped as
         ``future`` (clocks disagree or the time is forged), seconds
-    options : FusionOptions
+    options : FusionOptions (``confirm_gaps`` is always off here: a point per shutter at
+        once; a typeA point across a long gap is not held for the next camera)
     candidates : bool, fuse every candidate through the gates (True) or each frame's best
         candidate (False)
     epoch_ns : int, the session clock's zero, wall clock ns (default: now)

@@ -19,7 +19,7 @@ offset  size  type     field
 5       1     u8       n: length of the camera name in bytes (1..32)
 6       2     u16      k: number of candidates (0..64; 0: a frame where nothing was seen)
 8       8     u64      sequence: per camera, +1 per frame (gaps: frames lost on the way)
-16      8     i64      frame_index: the camera's frame counter
+16      8     i64      frame_index: the camera's frame counter (>= 0)
 24      8     i64      t_capture_ns: the frame's top-row capture time (wall clock)
 32      8     i64      t_sent_ns: the sender's wall clock when it sent the datagram
 40      32    char[32] camera name, UTF-8, the rig's name, n bytes then zeros
@@ -255,6 +255,9 @@ def decode_detections(data: bytes) -> DetectionDatagram:
         camera = raw[:n_name].decode("utf-8")
     except UnicodeDecodeError:
         raise DatagramError("malformed", "detection datagram: camera name is not UTF-8") from None
+    if frame < 0:  # (a session's frame indices are counters: its writer refuses them)
+        raise DatagramError("malformed", f"detection datagram of camera {camera!r}: "
+                                         f"negative frame index {frame}")
     cand = np.frombuffer(data, dtype="<f8", count=4 * k,
                          offset=DETECTION_HEADER_BYTES).reshape(k, 4)
     # radius may be NaN (unknown); pixels and scores must be numbers (in Python: a few
