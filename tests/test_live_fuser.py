@@ -384,8 +384,15 @@ def _serve_session(rig, det, path, method, faults=True, interrupt=False):
     sender = threading.Thread(target=send, daemon=True)
     sender.start()
     sinks = [UdpSink(rx.getsockname()), RecordSink(path, rig, method)]
-    summary = serve(rig, "udp://127.0.0.1:0", sinks, method=method, stop=stop, ready=ready,
-                    status_stream=None, duration_s=60)
+    # Python's own SIGINT handler, as in a terminal (serve leaves an ignored SIGINT ignored:
+    # a test run started in the background inherits SIG_IGN)
+    before = signal.signal(signal.SIGINT, signal.default_int_handler) if interrupt else None
+    try:
+        summary = serve(rig, "udp://127.0.0.1:0", sinks, method=method, stop=stop,
+                        ready=ready, status_stream=None, duration_s=60)
+    finally:
+        if interrupt:
+            signal.signal(signal.SIGINT, before)
     sender.join(30)
     points = []
     try:

@@ -297,6 +297,7 @@ def test_sigkill_during_shutdown_then_recover(start, tmp_path):
 #: sends a real SIGINT to the process when the import named by argv[1] begins)
 _EARLY_CTRL_C = """
 import os, signal, sys
+signal.signal(signal.SIGINT, signal.default_int_handler)  # as in a terminal (not inherited SIG_IGN)
 module, sys.argv = sys.argv[1], ["pslog", *sys.argv[2:]]
 sent = []
 def hook(event, args):
