@@ -19,7 +19,7 @@ setup() {
         "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check --upgrade pip
         "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check -e ".[test]"
         # numba compiles pslog's kernels on first use: do it now, once, announced (pslog/warm.py)
-        echo "pslog: compiling the numba kernels (once per install, about half a minute)" >&2
+        echo "pslog: compiling the numba kernels (once per install, about a minute)" >&2
         "$VENV/bin/python" -m pslog.warm >&2 || true  # best effort: else on first use
         touch "$VENV/.pslog-installed"
     fi

@@ -1,9 +1,9 @@
 """Compile pslog's numba kernels now instead of at their first use.
 
 numba compiles a kernel (:mod:`pslog._jit`) the first time it runs on a machine, then loads
-it from its cache: the first ``pslog fuse`` of a fresh install spends about half a minute
+it from its cache: the first ``pslog fuse`` of a fresh install spends about a minute
 compiling (type A's kernel, the filter's step, the smooth trajectory's passes, the track
-encoder; 26 s on this project's two-core build machine), every later run a fraction of a
+encoder; about 50 s on this project's two-core build machine), every later run a fraction of a
 second loading. ``bash run.sh`` runs this
 module after installing, so the cost is paid once, announced, before the demo or the tests:
 
