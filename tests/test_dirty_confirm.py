@@ -10,11 +10,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from _rally import rally
+from _rigs import ring_rig
 from numpy.testing import assert_array_equal
 from test_gating import DISTRACTOR
 from test_stream_gating import push_frames
+from test_stream_type_a import assert_same, pushed_one_by_one
 
-from pslog import Camera, Rig, look_at
+from pslog import Camera, Rig
 from pslog.evaluation import errors_m
 from pslog.fusion import fuse
 from pslog.fusion.confirm import (
@@ -32,22 +34,6 @@ from pslog.simulation import SimulationOptions, simulate_labelled
 from pslog.timing import observations as timed_observations
 
 
-def _ring(n: int, name: str, f: float = 520.0, dist=(-0.12, 0.03, 5e-4, -4e-4, 0.0),
-          radius: float = 3.4, height: float = 2.4) -> Rig:
-    """bench_dirty.py's ring rigs (lab4, wide3): ``n`` 800 x 600 cameras, type-A shutters."""
-    cams = []
-    for i in range(n):
-        angle = 2 * np.pi * i / n - 1.2
-        eye = (1.5 + radius * np.cos(angle), 1.0 + 0.9 * radius * np.sin(angle),
-               height + 0.2 * i)
-        R, t = look_at(eye, (1.5, 1.0, 0.6))
-        fi = f + 10 * i
-        K = [[fi, 0.0, 399.5], [0.0, fi, 299.5], [0.0, 0.0, 1.0]]
-        cams.append(Camera(f"{name}-{i + 1}", 800, 600, K, np.array(dist), R, t, 30.0,
-                           i / (n * 30.0)))
-    return Rig(tuple(cams), name)
-
-
 def _session(case: str):
     """(rig, detections, truth, the added point's time s) of one of bench_dirty's cases."""
     if case == "paper3":  # rally 300, cam2 blind from 2.0 s, a kick at 2.105 s
@@ -56,12 +42,12 @@ def _session(case: str):
         faults = (("cam1", DISTRACTOR),), ("cam2", 2.0, 0.5), 0
         at = 2.122
     elif case == "lab4":  # rally 400, lab4-3 blind from 2.0 s, a kick at 2.145 s
-        rig = _ring(4, "lab4")
+        rig = ring_rig(4, "lab4")
         motion = rally(8.0, seed=400, speed=4.0 + 400 % 3, kick_every_s=0.9)[0]
         faults = (("lab4-1", DISTRACTOR),), ("lab4-3", 2.0, 0.5), 100
         at = 2.158
     else:  # wide3, the library's rally (seed 105), wide3-1 blind 2.3-2.8 s
-        rig = _ring(3, "wide3", f=330.0, dist=(-0.25, 0.05, 3e-4, -2e-4, 0.0), radius=2.4,
+        rig = ring_rig(3, "wide3", f=330.0, dist=(-0.25, 0.05, 3e-4, -2e-4, 0.0), radius=2.4,
                     height=2.2)
         motion = rally_motion(105, 8.0)
         faults = (("wide3-2", DISTRACTOR),), ("wide3-1", 2.3, 0.5), 103
@@ -175,7 +161,7 @@ def _inner(rig):
 def test_the_usual_interval_of_staggered_shutters():
     rig = apply_timing(builtin_rig("paper3"), "typeA")
     assert usual_interval_s(rig) == pytest.approx(1 / 90, rel=1e-6)
-    assert usual_interval_s(_ring(4, "lab4")) == pytest.approx(1 / 120, rel=1e-6)
+    assert usual_interval_s(ring_rig(4, "lab4")) == pytest.approx(1 / 120, rel=1e-6)
 
 
 def test_the_residual_test_by_hand():
@@ -222,15 +208,7 @@ def test_one_detection_per_push_equals_batch_on_dirty_sessions(seed):
 
     rig, obs, _ = dirty_session("typeA", seed)
     batch = fuse(obs, rig, "typeA")
-    fuser = StreamFuser(rig, "typeA")
-    parts = [fuser.push(obs.time_ns[i], obs.camera[i], obs.uv[i], obs.frame_index[i])
-             for i in range(len(obs))]
-    streamed = Track.concat([*parts, fuser.flush()])
-    assert streamed.dropped == batch.dropped
-    assert_array_equal(streamed.time_ns, batch.time_ns)
-    assert_array_equal(streamed.position_world, batch.position_world)
-    for key, column in batch.quality.items():
-        assert_array_equal(streamed.quality[key], column, err_msg=key)
+    assert_same(pushed_one_by_one(StreamFuser(rig, "typeA"), obs), batch)
 
 
 def _missing_session(rig_name: str, seed: int, dirty: bool):
@@ -272,17 +250,7 @@ def test_missed_detections_try_the_next_camera_and_the_stream_agrees(rig_name, s
     batch = fuse(obs, rig, "typeA")
     if rig_name == "paper3 240 fps" and not dirty:  # (at 30 fps a few are truly unseen)
         assert batch.dropped.get("unconfirmed", 0) <= 0.005 * len(batch), batch.dropped
-    fuser = StreamFuser(rig, "typeA")
-    parts = [fuser.push(obs.time_ns[i], obs.camera[i], obs.uv[i], obs.frame_index[i])
-             for i in range(len(obs))]
-    parts.append(fuser.flush())
-    stream = Track.concat(parts)
-    assert stream.dropped == batch.dropped
-    assert_array_equal(stream.time_ns, batch.time_ns)
-    assert_array_equal(stream.camera, batch.camera)
-    assert_array_equal(stream.position_world, batch.position_world)
-    for k, v in batch.quality.items():
-        assert_array_equal(stream.quality[k], v, err_msg=k)
+    assert_same(pushed_one_by_one(StreamFuser(rig, "typeA"), obs), batch)
 
 
 def test_explain_type_a_and_the_viewer_leave_out_the_points_fuse_drops(tmp_path):

@@ -17,6 +17,14 @@ from pslog.fusion.stream import StreamFuser
 from pslog.records import Track
 
 
+def pushed_one_by_one(fuser, obs) -> list[Track]:
+    """Each detection of ``obs`` in a push of its own, then the flush: the parts returned."""
+    parts = [fuser.push(obs.time_ns[i], obs.camera[i], obs.uv[i], obs.frame_index[i])
+             for i in range(len(obs))]
+    parts.append(fuser.flush())
+    return parts
+
+
 def assert_same(parts, batch):
     """Every column, quality column and dropped count of the joined stream is the batch's."""
     joined = Track.concat(parts)
@@ -51,10 +59,8 @@ def test_one_detection_per_push_equals_batch_with_its_drops(seed, noise_px, lens
     if seed == 0:  # every kind of drop the one-row path decides is met
         assert {"prediction_failed", "kink", "outside_view"} <= set(batch.dropped)
     fuser = StreamFuser(rig, "typeA", options)
-    parts = [fuser.push(obs.time_ns[i], obs.camera[i], obs.uv[i], obs.frame_index[i])
-             for i in range(len(obs))]
-    assert all(len(p) <= 1 for p in parts)  # each point with the detection that makes it
-    parts.append(fuser.flush())
+    parts = pushed_one_by_one(fuser, obs)
+    assert all(len(p) <= 1 for p in parts[:-1])  # each point with the detection that makes it
     assert len(parts[-1]) == 0
     assert_same(parts, batch)
 
@@ -84,9 +90,7 @@ def test_refused_past_points_are_counted_once_each_as_in_batch():
     batch = fuse(obs, rig, "typeA")
     assert batch.dropped.get("past_behind_camera", 0) >= 4 and len(batch) > 3, batch.dropped
     fuser = StreamFuser(rig, "typeA")
-    parts = [fuser.push(obs.time_ns[i], obs.camera[i], obs.uv[i], obs.frame_index[i])
-             for i in range(len(obs))]
-    parts.append(fuser.flush())
+    parts = pushed_one_by_one(fuser, obs)
     assert_same(parts, batch)
 
 
@@ -118,9 +122,7 @@ def test_two_and_four_camera_streams_equal_batch(n_cameras):
     if n_cameras == 4:
         assert batch.quality["camera_mask"].max() >= 8  # the fourth camera takes part
     fuser = StreamFuser(rig, "typeA")
-    parts = [fuser.push(obs.time_ns[i], obs.camera[i], obs.uv[i], obs.frame_index[i])
-             for i in range(len(obs))]
-    parts.append(fuser.flush())
+    parts = pushed_one_by_one(fuser, obs)
     assert_same(parts, batch)
 
 
@@ -158,9 +160,7 @@ def test_far_and_refused_rows_one_per_push_equal_batch_without_a_lens():
     batch = fuse(obs, rig, "typeA")
     assert batch.dropped.get("past_behind_camera", 0) >= 4 and len(batch) > 3, batch.dropped
     fuser = StreamFuser(rig, "typeA")
-    parts = [fuser.push(obs.time_ns[i], obs.camera[i], obs.uv[i], obs.frame_index[i])
-             for i in range(len(obs))]
-    parts.append(fuser.flush())
+    parts = pushed_one_by_one(fuser, obs)
     assert_same(parts, batch)
     # the stream's point columns are its own: later pushes do not change earlier points
     assert all(not p.time_ns.flags.writeable for p in parts)
