@@ -189,9 +189,34 @@ def _main(argv: list[str] | None) -> int:
         print(f"pslog {name}: error: {describe_os_error(exc, outputs + updates, inputs)}",
               file=sys.stderr)
         return 1
+    except Exception as exc:
+        cause = _out_of_memory(exc)
+        if cause is None:
+            raise  # a bug: its traceback is what a report needs
+        _close_abandoned_writers()
+        print(f"pslog {name}: error: out of memory: {cause} (free memory, or process a "
+              "shorter session)", file=sys.stderr)
+        return 1
     finally:
         sys.stdout = real_stdout
         restore_sigterm()
+
+
+def _out_of_memory(exc: BaseException) -> str | None:
+    """What ran out, when ``exc`` or an exception it was raised from (``__cause__`` /
+    ``__context__``: a module whose import failed half-way, a numba dispatcher's
+    ``SystemError``) is a ``MemoryError`` or a thread that could not start (its stack is memory
+    too, under ``ulimit -v`` or a container's limit); None otherwise."""
+    seen: set[int] = set()
+    current: BaseException | None = exc
+    while current is not None and id(current) not in seen:
+        seen.add(id(current))
+        if isinstance(current, MemoryError):
+            return str(current) or "an allocation failed"
+        if isinstance(current, RuntimeError) and "can't start new thread" in str(current):
+            return str(current)
+        current = current.__cause__ or current.__context__
+    return None
 
 
 def _close_abandoned_writers() -> None:

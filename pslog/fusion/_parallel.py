@@ -44,6 +44,9 @@ COST = {"smooth": 9.0, "nearest": 1.7, "sync": 1.5, "typeB": 2.0, "linear": 2.0,
         "typeA": 1.0, "filter": 0.8}
 
 
+_UNSET = object()
+
+
 def usable_cores() -> int:
     """The cores this process may run on (its CPU affinity where the OS tells it)."""
     try:
@@ -124,6 +127,7 @@ def run_methods(
                 finished(method)
         return results
 
+    results = [_UNSET] * n  # a thread's result, or still _UNSET if it never got there
     # costliest first; ties in the asked order
     order = sorted(range(n), key=lambda i: -COST.get(methods[i], 1.0))
     lock = threading.Lock()
@@ -164,18 +168,35 @@ def run_methods(
                 if state["running"] == 0:
                     done.set()
 
-    count = min(workers, n)
-    state["running"] = count
-    for j in range(count):
-        threading.Thread(target=worker, name=f"pslog-fuse-{j}", daemon=True).start()
+    threads = []
     try:
-        done.wait()  # interruptible: a Ctrl-C or SIGTERM is raised here, in the main thread
+        for j in range(min(workers, n)):
+            thread = threading.Thread(target=worker, name=f"pslog-fuse-{j}", daemon=True)
+            with lock:
+                state["running"] += 1
+            try:
+                thread.start()  # RuntimeError when its stack cannot be had (out of memory)
+            except BaseException:
+                with lock:
+                    state["running"] -= 1
+                raise
+            threads.append(thread)
+        # interruptible: a Ctrl-C or SIGTERM is raised here, in the main thread; a thread that
+        # died before its ``finally`` (out of memory in its start-up) must not hang the wait
+        while not done.wait(0.25):
+            if not any(thread.is_alive() for thread in threads):
+                break
     except BaseException:
         with lock:
-            state["stopped"] = True  # no method starts after an interrupt
+            state["stopped"] = True  # no method starts after an interrupt or a failed start
         raise
     if errors:
-        raise errors[min(errors)]
+        # out of memory in one thread makes others fail in odd ways (a module half imported):
+        # the MemoryError is the one to report
+        memory = [i for i, exc in errors.items() if isinstance(exc, MemoryError)]
+        raise errors[min(memory or errors)]
+    if any(result is _UNSET for result in results):  # a thread died without a word
+        raise MemoryError("a fusion thread ended before its method finished")
     return results
 
 
