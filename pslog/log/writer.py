@@ -449,19 +449,44 @@ class SessionWriter:
         self._image_bytes = 0
         self._mcap.flush()
 
-    def _queue_blocks(self, n: int, step: int, make) -> int:
+    def _queue_blocks(self, n: int, step: int, make, ahead: bool = False) -> int:
         """Write rows ``[0, n)`` as blocks ``make(lo, hi)`` of ``step`` rows, until ``make``
-        gives None (a block that is not protobuf's bytes); the first row not written."""
+        gives None (a block that is not protobuf's bytes); the first row not written.
+
+        ``ahead``: each block is made on a thread of its own while the one before is
+        written (``make`` must only read its inputs): its encoding (compiled, GIL
+        released) then runs while this thread waits for the chunks' compression and
+        writes them, instead of after (a fused match's tracks: a gigabyte of messages)."""
         lo = 0
-        while lo < n:
-            hi = min(lo + step, n)
-            block = make(lo, hi)
-            if block is None:
-                break
-            self._pending.append(block)
-            self._drain()
-            self._maybe_flush()
-            lo = hi
+        if not ahead or n <= step:
+            while lo < n:
+                hi = min(lo + step, n)
+                block = make(lo, hi)
+                if block is None:
+                    break
+                self._pending.append(block)
+                self._drain()
+                self._maybe_flush()
+                lo = hi
+            return lo
+        from concurrent.futures import ThreadPoolExecutor
+
+        # (on an error or an interrupt here, leaving the with waits for the block being
+        # made, one block's encoding: tens of milliseconds)
+        with ThreadPoolExecutor(1, thread_name_prefix="pslog-encode") as ahead_pool:
+            made = ahead_pool.submit(make, 0, min(step, n))
+            while lo < n:
+                hi = min(lo + step, n)
+                block = made.result()
+                if block is None:
+                    break
+                if hi < n:  # the next block made while this one is written
+                    made = ahead_pool.submit(make, hi, min(hi + step, n))
+                self._pending.append(block)
+                del block
+                self._drain()
+                self._maybe_flush()
+                lo = hi
         return lo
 
     def _maybe_flush(self) -> None:
@@ -751,7 +776,7 @@ class SessionWriter:
         if template is not None and all(self._names) and n >= _BLOCK_FROM:
             lo = self._queue_blocks(n, _TRACK_BLOCK, lambda a, b: _track_block(
                 track, a, b, method, self._names, fixed, template, first_id, color, channel,
-                scene_channel, records=self._bulk))
+                scene_channel, records=self._bulk), ahead=True)
         self._add_track_points(track, lo, n, method, fixed, extra, first_id, color, channel,
                                scene_channel)
         self._scene_ids[method] = first_id + n
