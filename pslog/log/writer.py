@@ -16,7 +16,7 @@ import time
 import weakref
 from collections.abc import Mapping
 from datetime import UTC, datetime
-from typing import cast
+from typing import Any, cast
 
 import numpy as np
 
@@ -964,8 +964,8 @@ class _Block:
 
     __slots__ = ("channel", "data", "length", "records", "seq", "time")
 
-    def __init__(self, channel, time, seq, length, data: bytes, records: bool = False
-                 ) -> None:
+    def __init__(self, channel, time, seq, length, data: Any, records: bool = False
+                 ) -> None:  # data: bytes, or a uint8 array (records)
         self.channel, self.time, self.seq, self.length, self.data = (
             channel, time, seq, length, data)
         #: ``data`` holds whole MCAP Message records (each message after its 31-byte head,
