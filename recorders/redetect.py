@@ -49,8 +49,9 @@ import signal
 import threading
 from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -150,10 +151,10 @@ def redetect_session(src: str | Path, dst: str | Path, hsv: HsvRange | None = No
         return done["new"]
 
     with _detecting(src, session.rig.names, row_of, hsv, max_candidates, workers,
-                    session.n_images) as (batches, checked):
+                    session.n_images) as (batches, checked, layout_of):
+        # (the image chunks the workers read: copied without decompressing them here)
         copy_session(src, dst, detections=detections, metadata={"detector_hsv": hsv.text()},
-                     checked_chunks=checked,
-                     force=force)
+                     checked_chunks=checked, layouts=layout_of, force=force)
     redone, new = done["redone"], done["new"]
     return RedetectSummary(dst, old.n_frames, int(redone.sum()), int((~redone).sum()),
                            int(np.count_nonzero(old.candidates_per_frame())),
@@ -186,12 +187,15 @@ def _merged(old: Detections, rows: list, results: list) -> tuple[np.ndarray, Det
 @contextlib.contextmanager
 def _detecting(src, rig_names, row_of: dict, hsv: HsvRange, max_candidates: int,
                workers: int | None, n_images: int
-               ) -> Iterator[tuple[Iterator[tuple[list, list]], frozenset[int]]]:
+               ) -> Iterator[tuple[Iterator[tuple[list, list]], frozenset[int], Any]]:
     """Start re-detecting (worker processes start at once, on every part of the session);
     give an iterator of (rows, [(uv, radius, score), ...]) batches for every stored image
     with a frame record, the images in their time order overall, and the byte offsets of
     the chunks whose CRC is checked while the batches are made (an iterator that ends
-    has checked them all). On leaving, work not started is cancelled."""
+    has checked them all), and, with worker processes, ``layout_of(offset)``: the layout
+    of such a chunk's records as its worker read them (waiting for its task; for
+    :func:`pslog.log.copy_session`), else None. On leaving, work not started is
+    cancelled."""
     import cv2
 
     # one OpenCV thread in this process too, before any worker is forked: a worker inherits
@@ -205,10 +209,10 @@ def _detecting(src, rig_names, row_of: dict, hsv: HsvRange, max_candidates: int,
         plan = _plan(src, rig_names, n_images, _BATCH)
         detector = BallDetector(hsv, max_candidates, compiled=compiled)
         if plan is None:
-            yield _serial(src, row_of, detector), frozenset()
+            yield _serial(src, row_of, detector), frozenset(), None
         else:
             yield _in_order((_read_and_detect(src, chunks, plan.cameras, detector)
-                             for chunks in plan.tasks), row_of), _offsets(plan)
+                             for chunks in plan.tasks), row_of), _offsets(plan), None
         return
     plan = _plan(src, rig_names, n_images, 1)  # one chunk a task: regrouped below
     if plan is not None:
@@ -258,9 +262,17 @@ def _detecting(src, rig_names, row_of: dict, hsv: HsvRange, max_candidates: int,
                 futures += [submit(pools[1], i, True) for i in range(first, n_tasks)]
             pools[0].shutdown(wait=False)  # its workers end once their tasks are done
         if plan is None:
-            yield (_rows(_told(fut.result()), row_of) for fut in futures), frozenset()
+            yield (_rows(_told(fut.result()), row_of) for fut in futures), frozenset(), None
         else:
-            yield _in_order((fut.result() for fut in futures), row_of), _offsets(plan)
+            task_of = {offset: i for i, task in enumerate(plan.tasks)
+                       for _rank, offset, _length in task}
+
+            def layout_of(offset: int):
+                i = task_of.get(offset)
+                return None if i is None else futures[i].result().layouts.get(offset)
+
+            yield (_in_order((fut.result() for fut in futures), row_of), _offsets(plan),
+                   layout_of)
     except BrokenProcessPool:
         # the pool's own clean-up stops the other workers with SIGTERM, which they ignore,
         # and waits for them: one busy with a task, or blocked on a queue the dead one left
@@ -434,6 +446,9 @@ class _Found:
     index: np.ndarray
     key: np.ndarray
     found: list
+    #: chunk offset -> the layout of its records (:func:`pslog.log.copy.record_layout`): the
+    #: copy writes a chunk whose indexes state it without decompressing it again
+    layouts: dict = field(default_factory=dict)
 
 
 def _read_and_detect(src, chunks: list[tuple[int, int, int]], cameras: dict,
@@ -445,7 +460,9 @@ def _read_and_detect(src, chunks: list[tuple[int, int, int]], cameras: dict,
     from pslog.log.reader import parse_image
 
     path = Path(src)
-    camera, index, key, found = [], [], [], []
+    from pslog.log.copy import record_layout
+
+    camera, index, key, found, layouts = [], [], [], [], {}
     buffer = bytearray(max((length for _r, _o, length in chunks), default=0))
     with open(path, "rb") as f:
         for rank, offset, length in chunks:
@@ -459,6 +476,7 @@ def _read_and_detect(src, chunks: list[tuple[int, int, int]], cameras: dict,
                 records = io.chunk_payload(view[9:])
             except LogFormatError as exc:
                 raise io.damaged_error(path, offset, str(exc)) from None
+            layouts[offset] = record_layout(records)
             for cid, seq, t, a, b in io.message_spans(records, cameras):
                 data = parse_image(memoryview(records)[a:b], path).data
                 camera.append(cameras[cid][0])
@@ -467,7 +485,7 @@ def _read_and_detect(src, chunks: list[tuple[int, int, int]], cameras: dict,
                 found.append(_detect_blob(detector, data))
             del records  # freed before the next chunk is read
     return _Found(np.array(camera, dtype=np.int64), np.array(index, dtype=np.int64),
-                  np.array(key, dtype=np.int64).reshape(-1, 4), found)
+                  np.array(key, dtype=np.int64).reshape(-1, 4), found, layouts)
 
 
 def _told(detected: tuple[np.ndarray, np.ndarray, list]) -> tuple[np.ndarray, np.ndarray,

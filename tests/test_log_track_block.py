@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from pslog.log import SessionWriter
+from pslog.log import SessionWriter, _chunks
 from pslog.log import _schemas as S
 from pslog.log import writer as W
 from pslog.records import Track
@@ -156,6 +156,16 @@ def test_compiled_track_encoder_equals_its_python_and_protobuf(rig3):
             scene = block.data[ends[2 * i + 1] - block.length[2 * i + 1]:ends[2 * i + 1]]
             assert point == msg.SerializeToString(deterministic=True), (first_id, i)
             assert scene == W.scene_point("typeA", first_id + i, t, (x, y, z), color)
+        # the same messages as whole MCAP records (each after its head: channel, sequence
+        # 0, log and publish time), as the bulk writer cuts chunks from them
+        records = W._track_block(track, 0, n, "typeA", names, fixed, template, first_id,
+                                 color, 1, 2, records=True)
+        assert records is not None and records.records and not block.records
+        assert records.plain().data == block.data
+        ends = np.cumsum(block.length)
+        assert bytes(records.data) == b"".join(
+            _chunks.record_head(int(c), int(t), int(k)) + block.data[e - k:e]
+            for c, t, k, e in zip(block.channel, block.time, block.length, ends, strict=True))
 
     # the compiled kernel and its Python original, on the same arrays
     from pslog.log._wire import encode_track
@@ -170,13 +180,14 @@ def test_compiled_track_encoder_equals_its_python_and_protobuf(rig3):
             np.arange(n, dtype=np.int64) * 37, *(np.frombuffer(x, np.uint8) for x in
                                                   (b"world", b"\x22\x02\x10\x05", b"\x12\x00",
                                                    b"", b"\x1a\x00")))
-    outs = []
-    for fn in (encode_track, encode_track.py_func):
-        out = np.zeros(_wire.bound(n, b"typeA", [b"cam2"], extra.shape[1], 12), np.uint8)
-        point_len, total_len = np.zeros(n, np.int64), np.zeros(n, np.int64)
-        used = fn(*args, out, point_len, total_len)
-        outs.append((out[:used].tobytes(), point_len.tolist(), total_len.tolist()))
-    assert outs[0] == outs[1]
+    for channels in ([-1, -1], [3, 70_000 % 65_536]):  # messages alone; whole records
+        outs = []
+        for fn in (encode_track, encode_track.py_func):
+            out = np.zeros(_wire.bound(n, b"typeA", [b"cam2"], extra.shape[1], 12), np.uint8)
+            point_len, total_len = np.zeros(n, np.int64), np.zeros(n, np.int64)
+            used = fn(*args, np.array(channels, np.int64), out, point_len, total_len)
+            outs.append((out[:used].tobytes(), point_len.tolist(), total_len.tolist()))
+        assert outs[0] == outs[1]
 
 
 def test_rejection_blocks_are_protobufs_own_bytes(tmp_path, rig3):

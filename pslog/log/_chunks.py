@@ -27,10 +27,15 @@ _OP_MESSAGE, _OP_CHUNK, _OP_MESSAGE_INDEX, _OP_ATTACHMENT = 0x05, 0x06, 0x07, 0x
 _U32 = 1 << 32
 #: payload bytes from which a block's chunk records are assembled by the compiled loop
 _COMPILED_FROM = 1 << 20
-#: zstd level of the chunks (and table columns) written in blocks: level 1 compresses
-#: pslog's messages as well as the ``mcap`` writer's default 3 (measured on a fused
-#: 90-minute match: ratio 3.49 against 3.47) at 1.5 times the speed; any level decodes alike
-ZSTD_LEVEL = 1
+#: zstd level of the chunks written in blocks: -1 (zstd's first "fast" level) shrinks a
+#: fused 90-minute match's track chunks as level 1 does (the file 623.2 MB against 621.3)
+#: for about 0.35 CPU s less of the 1.3 s level 1 took (1.06 GB of messages), and
+#: decompresses slightly faster (3.6 against 3.3 GB/s); level 1 had replaced the ``mcap``
+#: writer's default 3 (ratio 3.49 against 3.47, 1.5 times the speed); any level decodes alike
+ZSTD_LEVEL = -1
+#: zstd level of the table columns (:func:`_compress_all`; a column is kept compressed only
+#: when zstd shrinks it by 10 %: a decision of this level, not changed with the chunks')
+TABLE_ZSTD_LEVEL = 1
 
 
 def supported(writer) -> bool:
@@ -54,8 +59,18 @@ def fits(sequence: np.ndarray, log_time: np.ndarray) -> bool:
                                        and log_time.min() >= 0))
 
 
+def record_head(channel: int, log_time: int, length: int, sequence: int = 0) -> bytes:
+    """The 31-byte head of a Message record of ``length`` payload bytes (publish time = log
+    time), as :func:`write_messages` lays it out."""
+    head = np.zeros(1, dtype=_HEAD)
+    head["op"], head["length"], head["channel"] = _OP_MESSAGE, length + _HEAD.itemsize - 9, \
+        channel
+    head["sequence"], head["log_time"], head["publish_time"] = sequence, log_time, log_time
+    return head.tobytes()
+
+
 def write_messages(writer, channel: np.ndarray, log_time: np.ndarray, sequence: np.ndarray,
-                   data: bytes, lengths: np.ndarray) -> None:
+                   data: bytes, lengths: np.ndarray, assembled: bool = False) -> None:
     """Add ``n`` messages to ``writer`` in order and finish their chunk(s), as ``n`` calls of
     ``add_message(channel[i], log_time[i], data_i, log_time[i], sequence[i])`` followed by
     ``flush()`` would (the stream itself is not flushed).
@@ -67,8 +82,12 @@ def write_messages(writer, channel: np.ndarray, log_time: np.ndarray, sequence: 
     channel : (n,) channel ids
     log_time : (n,) int64 log time, ns, >= 0 (also the publish time)
     sequence : (n,) sequence numbers in [0, 2**32)
-    data : the messages' payloads back to back
+    data : the messages' payloads back to back (bytes-like)
     lengths : (n,) int64 byte length of each payload
+    assembled : ``data`` holds the whole Message records back to back instead, each
+        payload after its head (:func:`record_head`, as the fields above make it): each
+        chunk's records are then compressed from ``data`` as they are (no copy unless
+        schema or channel records precede them in the chunk)
     """
     from mcap.records import ChunkIndex
     from mcap.writer import IndexType
@@ -96,14 +115,18 @@ def write_messages(writer, channel: np.ndarray, log_time: np.ndarray, sequence: 
     ends = np.cumsum(sizes)  # end of record i counted from the first record
     data_ends = np.cumsum(lengths)
     payload = np.frombuffer(data, dtype=np.uint8)
-    head = np.zeros(n, dtype=_HEAD)
-    head["op"] = _OP_MESSAGE
-    head["length"] = sizes - 9
-    head["channel"] = channel
-    head["sequence"] = sequence
-    head["log_time"] = log_time
-    head["publish_time"] = log_time
-    head_bytes = head.view(np.uint8).reshape(n, _HEAD.itemsize)
+    if assembled:
+        head_bytes = None
+    else:
+        head = np.zeros(n, dtype=_HEAD)
+        head["op"] = _OP_MESSAGE
+        head["length"] = sizes - 9
+        head["channel"] = channel
+        head["sequence"] = sequence
+        head["log_time"] = log_time
+        head["publish_time"] = log_time
+        head_bytes = head.view(np.uint8).reshape(n, _HEAD.itemsize)
+        del head
 
     # statistics as add_message keeps them
     if stats.message_count == 0:
@@ -124,7 +147,7 @@ def write_messages(writer, channel: np.ndarray, log_time: np.ndarray, sequence: 
     # ._wire); a recorder never waits for numba to load (seconds on a busy machine, frames
     # lost meanwhile): numpy's masks, the same bytes
     compiled: Callable[..., None] | None = None
-    if len(data) >= _COMPILED_FROM and "pslog.log._wire" in sys.modules:
+    if not assembled and len(data) >= _COMPILED_FROM and "pslog.log._wire" in sys.modules:
         from ._wire import assemble_records
 
         compiled = assemble_records
@@ -137,6 +160,20 @@ def write_messages(writer, channel: np.ndarray, log_time: np.ndarray, sequence: 
         e = min(e, n)
         rec_start = base + (ends[s:e] - sizes[s:e] - done_before)  # offsets in the chunk
         total = base + int(ends[e - 1]) - done_before
+        if assembled:  # the records as they are: a view, or after the pending records
+            records = payload[done_before:int(ends[e - 1])]
+            if base:
+                body = np.empty(total, dtype=np.uint8)
+                body[:base] = np.frombuffer(prefix, dtype=np.uint8)
+                body[base:] = records
+            else:
+                body = records
+            del records
+            bodies.append((s, e, rec_start, body))
+            del body
+            s, base = e, 0
+            continue
+        assert head_bytes is not None
         body = np.empty(total, dtype=np.uint8)
         body[:base] = np.frombuffer(prefix, dtype=np.uint8) if base else body[:0]
         d0 = int(data_ends[s - 1]) if s else 0
@@ -241,14 +278,16 @@ def _pool():
 
 
 def _compress_all(raws: Sequence[Any]) -> list[bytes]:
-    """``zstandard.compress`` of each at :data:`ZSTD_LEVEL` (one zstd frame with its content
-    size, as the ``mcap`` writer makes them), on a pool of threads when there are several."""
+    """``zstandard.compress`` of each at :data:`TABLE_ZSTD_LEVEL` (one zstd frame with its
+    content size, as the ``mcap`` writer makes them), on a pool of threads when there are
+    several."""
     import zstandard
 
     pool = _pool() if len(raws) > 1 else None
     if pool is None:
-        return [zstandard.compress(r, ZSTD_LEVEL) for r in raws]
-    return list(pool.map(functools.partial(zstandard.compress, level=ZSTD_LEVEL), raws))
+        return [zstandard.compress(r, TABLE_ZSTD_LEVEL) for r in raws]
+    return list(pool.map(functools.partial(zstandard.compress, level=TABLE_ZSTD_LEVEL),
+                         raws))
 
 
 def register_channel(writer, channel_id: int, topic: str, message_encoding: str,

@@ -74,8 +74,32 @@ def _decimal_size(v):
 
 
 @kernel
+def _put_head(out, at, length, channel, t):
+    """An MCAP Message record's 31-byte head at ``out[at]`` (MCAP spec, "Message"): opcode
+    0x05, record length (``length`` payload bytes + 22), channel id, sequence 0, log time
+    and publish time ``t``, little endian."""
+    out[at] = 0x05
+    v = length + 22
+    for j in range(8):
+        out[at + 1 + j] = (v >> (8 * j)) & 255
+    out[at + 9] = channel & 255
+    out[at + 10] = (channel >> 8) & 255
+    for j in range(4):
+        out[at + 11 + j] = 0
+    for j in range(8):
+        b = (t >> (8 * j)) & 255
+        out[at + 15 + j] = b
+        out[at + 23 + j] = b
+
+
+#: bytes of a Message record before its payload (MCAP spec: opcode, length, channel,
+#: sequence, log time, publish time)
+HEAD = 31
+
+
+@kernel
 def encode_track(t, bits, cam, names, name_start, method, extra, ids, world, lifetime,
-                 orientation, size, rgba, out, point_len, total_len):
+                 orientation, size, rgba, channels, out, point_len, total_len):
     """Write each point's TrackPoint then SceneUpdate into ``out``; returns the bytes used.
 
     Parameters
@@ -89,13 +113,22 @@ def encode_track(t, bits, cam, names, name_start, method, extra, ids, world, lif
     ids : (n,) int64 scene entity number (``<method>/<id>``)
     world, lifetime, orientation, size, rgba : uint8, the frame id and the constant fields
         (lifetime, the pose's orientation, the sphere's size and colour), already encoded
+    channels : (2,) int64, the TrackPoint's and the SceneUpdate's MCAP channel ids: each
+        message is then written as a whole MCAP Message record (:data:`HEAD` bytes of head,
+        sequence 0, log and publish time ``t``, then the message), ready for a chunk (one
+        copy less of a fused match's gigabyte of messages); (2,) of -1: the messages alone
     out : uint8 buffer large enough (see :func:`bound`)
     point_len, total_len : (n,) int64 outputs: TrackPoint bytes and both messages' bytes
+        (without the records' heads)
     """
     n = len(t)
     at = 0
     slash = np.uint8(47)
+    heads = channels[0] >= 0
+    gap = HEAD if heads else 0
     for i in range(n):
+        head_at = at
+        at += gap
         start = at
         ti = t[i]
         # TrackPoint
@@ -120,6 +153,11 @@ def encode_track(t, bits, cam, names, name_start, method, extra, ids, world, lif
         at = _put_double(out, at, 0x49, bits[i, 5])
         at = _put_bytes(out, at, extra[i])
         point_len[i] = at - start
+        if heads:
+            _put_head(out, head_at, at - start, channels[0], ti)
+            head_at = at
+            at += gap
+        scene_start = at
         # SceneUpdate { entities (2): SceneEntity }
         sec, nanos = ti // 1_000_000_000, ti % 1_000_000_000
         stamp = 0
@@ -172,7 +210,9 @@ def encode_track(t, bits, cam, names, name_start, method, extra, ids, world, lif
         at = _put_bytes(out, at, orientation)
         at = _put_bytes(out, at, size)
         at = _put_bytes(out, at, rgba)
-        total_len[i] = at - start
+        total_len[i] = point_len[i] + at - scene_start
+        if heads:
+            _put_head(out, head_at, at - scene_start, channels[1], ti)
     return at
 
 
@@ -182,7 +222,7 @@ def bound(n: int, method: bytes, names: list[bytes], extra_width: int, constants
     widest = max((len(x) for x in names), default=0)
     point = 11 + 10 + len(method) + 27 + 10 + widest + 27 + extra_width
     scene = 3 * 11 + 2 * 11 + 11 + 11 + len(method) + 1 + 20 + constants + 3 * 11 + 27 + 11
-    return n * (point + scene)
+    return n * (point + scene + 2 * HEAD)
 
 
 @kernel

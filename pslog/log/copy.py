@@ -25,7 +25,8 @@ def copy_session(src, dst, *, detections: Detections | Callable[[], Detections] 
                  tracks: Sequence[Track] = (),
                  replace_tracks: bool = True, metadata: Mapping[str, str] | None = None,
                  rig: Rig | None = None, force: bool = False,
-                 rejections: Mapping | None = None, checked_chunks: Collection[int] = ()
+                 rejections: Mapping | None = None, checked_chunks: Collection[int] = (),
+                 layouts: Callable[[int], np.ndarray | None] | None = None
                  ) -> None:
     """Write ``dst`` as a copy of session ``src``.
 
@@ -45,6 +46,12 @@ def copy_session(src, dst, *, detections: Detections | Callable[[], Detections] 
     checked_chunks : byte offsets of Chunk records of ``src`` whose CRC the caller checks
         (``pslog redetect``'s workers check every image chunk they read: not computed
         twice); the caller must fail the copy if one does not match
+    layouts : with ``checked_chunks``: ``layouts(offset)`` gives the layout of a checked
+        chunk's records as the caller found them reading it (:func:`record_layout`; it may
+        wait for it). A chunk whose MessageIndex records state exactly that layout (message
+        records only, each listed with its channel and log time) and whose every channel is
+        copied as it is, is then written byte for byte without being decompressed here
+        (``pslog redetect``: its workers decompress every image chunk anyway)
 
     Calibration, poses, images, truth, events, metadata and any foreign topics are copied
     byte for byte (the calibration and poses are re-derived only from a given ``rig``).
@@ -116,7 +123,7 @@ def copy_session(src, dst, *, detections: Detections | Callable[[], Detections] 
                     name = tables.track_table(method)
                     w._adopt_table(name, _table_data(f, name))
             fast = _copy_chunks(f, w, static, detections is not None, replace_tracks,
-                                new_methods, frozenset(checked_chunks))
+                                new_methods, frozenset(checked_chunks), layouts)
         if not fast:  # no summary index to go by: every record in turn
             io.scan_file(src_path, copy, scan=scan)  # copy's own errors propagate unchanged
         if detections is not None:
@@ -128,6 +135,87 @@ def copy_session(src, dst, *, detections: Detections | Callable[[], Detections] 
             w.add_track(track)
         for method, rejected in (rejections or {}).items():
             w.add_rejections(method, rejected)
+
+
+def record_layout(records) -> np.ndarray | None:
+    """A chunk's decompressed ``records`` (framing checked) as ``(k, 3)`` int64 rows
+    ``(offset of the record, channel, log time)``, one per record in file order; None when
+    a record is not a Message (or the records do not end with the last one)."""
+    rows, at = [], 0
+    for op, body, end in io.walk_records(records):
+        if op != io.OP_MESSAGE or end - body < io._MESSAGE_HEAD:
+            return None
+        cid, _seq, t = struct.unpack_from("<HIQ", records, body)
+        rows.append((body - 9, cid, t))
+        at = end
+    if at != len(records):
+        return None
+    return np.array(rows, dtype=np.int64).reshape(-1, 3)
+
+
+def _index_layout(indexes: bytes, offsets: dict[int, int], chunk_end: int
+                  ) -> np.ndarray | None:
+    """The layout (:func:`record_layout`) a chunk's MessageIndex records ``indexes`` (read
+    from ``chunk_end`` on; ``offsets``: channel -> their file offsets) state, sorted by
+    offset; None when a record does not check out."""
+    parts = []
+    for cid, at in offsets.items():
+        at -= chunk_end
+        if at < 0 or at + 15 > len(indexes):
+            return None
+        op, length, channel, size = struct.unpack_from("<BQHI", indexes, at)
+        if (op != io.OP_MESSAGE_INDEX or channel != cid or size % 16 or length != 6 + size
+                or at + 15 + size > len(indexes)):
+            return None
+        entries = np.frombuffer(indexes, dtype="<u8", count=size // 8,
+                                offset=at + 15).reshape(-1, 2)
+        if len(entries) and entries.max() >= 1 << 63:
+            return None
+        rows = np.empty((len(entries), 3), dtype=np.int64)
+        rows[:, 0], rows[:, 1], rows[:, 2] = entries[:, 1], cid, entries[:, 0]
+        parts.append(rows)
+    if not parts:
+        return None
+    layout = np.concatenate(parts)
+    return layout[np.argsort(layout[:, 0], kind="stable")]
+
+
+def _copy_indexed(f: _Finished, w: SessionWriter, index, fate: dict, topics: dict[int, str],
+                  found: np.ndarray | None) -> bool:
+    """Write a chunk of ``f`` byte for byte without decompressing it, when its records were
+    found (``found``: their layout, :func:`record_layout`, by the reader that checked the
+    chunk) to be exactly what its MessageIndex records state, every channel of it is kept
+    with the same id, none of whose messages a table is made from, and its record's start
+    and end times are their first and last log times: what :func:`_verbatim` and
+    :func:`_copy_raw` decide from the decompressed records. False: nothing written."""
+    cids = index.message_index_offsets.keys()
+    if found is None or not len(found) or not cids or not all(
+            fate.get(c) is not None and fate[c][0] == c and c not in w._table_parts
+            for c in cids):
+        return False
+    f.file.seek(index.chunk_start_offset)
+    record = f.file.read(index.chunk_length)
+    if len(record) != index.chunk_length or record[0] != io.OP_CHUNK or \
+            int.from_bytes(record[1:9], "little") != index.chunk_length - 9:
+        return False
+    end = index.chunk_start_offset + index.chunk_length
+    indexes = f.file.read(index.message_index_length)
+    if len(indexes) != index.message_index_length:
+        return False
+    layout = _index_layout(indexes, index.message_index_offsets, end)
+    if layout is None or not np.array_equal(layout, found):
+        return False
+    start, end_time = int(layout[:, 2].min()), int(layout[:, 2].max())
+    if (int.from_bytes(record[9:17], "little") != start
+            or int.from_bytes(record[17:25], "little") != end_time):
+        return False
+    ids, first, counts = np.unique(layout[:, 1], return_index=True, return_counts=True)
+    order = np.argsort(first, kind="stable")  # in order of each channel's first message
+    w._add_raw_chunk(record, indexes,
+                     {cid: at - end for cid, at in index.message_index_offsets.items()},
+                     dict(zip(ids[order].tolist(), counts[order].tolist(), strict=True)),
+                     start, end_time, topics)
+    return True
 
 
 def _check_cameras(detections: Detections, names: tuple[str, ...]) -> None:
@@ -145,7 +233,8 @@ def _table_data(f: _Finished, name: str) -> bytes | None:
 
 def _copy_chunks(f: _Finished, w: SessionWriter, static: set[str], new_detections: bool,
                  replace_tracks: bool, new_methods: set[str],
-                 checked: frozenset[int] = frozenset()) -> bool:
+                 checked: frozenset[int] = frozenset(),
+                 layouts: Callable[[int], np.ndarray | None] | None = None) -> bool:
     """Copy the messages of ``f`` a chunk at a time, each chunk checked as the reader checks
     it (decompressed, its CRC and its MessageIndex records against its message records).
 
@@ -196,6 +285,9 @@ def _copy_chunks(f: _Finished, w: SessionWriter, static: set[str], new_detection
     for index in chunks:
         here = [cid for cid in index.message_index_offsets if fate.get(cid) is not None]
         if not here:
+            continue
+        if layouts is not None and index.chunk_start_offset in checked and _copy_indexed(
+                f, w, index, fate, topics, layouts(index.chunk_start_offset)):
             continue
         record, records = _read_record(f, index, index.chunk_start_offset not in checked)
         rec = np.frombuffer(records, dtype=np.uint8)

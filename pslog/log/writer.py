@@ -16,7 +16,7 @@ import time
 import weakref
 from collections.abc import Mapping
 from datetime import UTC, datetime
-from typing import cast
+from typing import Any, cast
 
 import numpy as np
 
@@ -398,6 +398,15 @@ class SessionWriter:
         numpy (:mod:`._chunks`, the same bytes as the ``mcap`` writer's ``add_message`` one
         by one, which cost most of the time of writing a long session), or one by one when
         the installed ``mcap`` does not allow it or a field does not fit (its own error)."""
+        if (len(messages) == 1 and isinstance(messages[0], _Block) and messages[0].records
+                and self._bulk and _chunks.fits(messages[0].seq, messages[0].time)
+                and not self._table_parts.keys() & set(np.unique(messages[0].channel).tolist())):
+            # whole records (a fused track's): the chunks are cut from them as they are
+            block = messages[0]
+            _chunks.write_messages(self._mcap, block.channel, block.time, block.seq,
+                                   block.data, block.length, assembled=True)
+            return
+        messages = [m.plain() if isinstance(m, _Block) else m for m in messages]
         if any(isinstance(m, _Block) for m in messages):
             blocks, run = [], []
             for m in [*messages, None]:
@@ -440,19 +449,44 @@ class SessionWriter:
         self._image_bytes = 0
         self._mcap.flush()
 
-    def _queue_blocks(self, n: int, step: int, make) -> int:
+    def _queue_blocks(self, n: int, step: int, make, ahead: bool = False) -> int:
         """Write rows ``[0, n)`` as blocks ``make(lo, hi)`` of ``step`` rows, until ``make``
-        gives None (a block that is not protobuf's bytes); the first row not written."""
+        gives None (a block that is not protobuf's bytes); the first row not written.
+
+        ``ahead``: each block is made on a thread of its own while the one before is
+        written (``make`` must only read its inputs): its encoding (compiled, GIL
+        released) then runs while this thread waits for the chunks' compression and
+        writes them, instead of after (a fused match's tracks: a gigabyte of messages)."""
         lo = 0
-        while lo < n:
-            hi = min(lo + step, n)
-            block = make(lo, hi)
-            if block is None:
-                break
-            self._pending.append(block)
-            self._drain()
-            self._maybe_flush()
-            lo = hi
+        if not ahead or n <= step:
+            while lo < n:
+                hi = min(lo + step, n)
+                block = make(lo, hi)
+                if block is None:
+                    break
+                self._pending.append(block)
+                self._drain()
+                self._maybe_flush()
+                lo = hi
+            return lo
+        from concurrent.futures import ThreadPoolExecutor
+
+        # (on an error or an interrupt here, leaving the with waits for the block being
+        # made, one block's encoding: tens of milliseconds)
+        with ThreadPoolExecutor(1, thread_name_prefix="pslog-encode") as ahead_pool:
+            made = ahead_pool.submit(make, 0, min(step, n))
+            while lo < n:
+                hi = min(lo + step, n)
+                block = made.result()
+                if block is None:
+                    break
+                if hi < n:  # the next block made while this one is written
+                    made = ahead_pool.submit(make, hi, min(hi + step, n))
+                self._pending.append(block)
+                del block
+                self._drain()
+                self._maybe_flush()
+                lo = hi
         return lo
 
     def _maybe_flush(self) -> None:
@@ -742,7 +776,7 @@ class SessionWriter:
         if template is not None and all(self._names) and n >= _BLOCK_FROM:
             lo = self._queue_blocks(n, _TRACK_BLOCK, lambda a, b: _track_block(
                 track, a, b, method, self._names, fixed, template, first_id, color, channel,
-                scene_channel))
+                scene_channel, records=self._bulk), ahead=True)
         self._add_track_points(track, lo, n, method, fixed, extra, first_id, color, channel,
                                scene_channel)
         self._scene_ids[method] = first_id + n
@@ -928,11 +962,25 @@ class _Block:
     """Messages written at once: ``channel``, ``time`` (ns), ``seq`` and ``length`` (n,)
     int64 columns, ``data`` their payloads back to back."""
 
-    __slots__ = ("channel", "data", "length", "seq", "time")
+    __slots__ = ("channel", "data", "length", "records", "seq", "time")
 
-    def __init__(self, channel, time, seq, length, data: bytes) -> None:
+    def __init__(self, channel, time, seq, length, data: Any, records: bool = False
+                 ) -> None:  # data: bytes, or a uint8 array (records)
         self.channel, self.time, self.seq, self.length, self.data = (
             channel, time, seq, length, data)
+        #: ``data`` holds whole MCAP Message records (each message after its 31-byte head,
+        #: as :func:`._wire.encode_track` writes them), not the payloads alone
+        self.records = records
+
+    def plain(self) -> _Block:
+        """The same messages with ``data`` their payloads alone (a records block's heads
+        dropped)."""
+        if not self.records:
+            return self
+        buf = memoryview(self.data).cast("B")
+        ends = np.cumsum(self.length + _HEAD_BYTES)
+        return _Block(self.channel, self.time, self.seq, self.length, b"".join(
+            buf[e - n:e] for e, n in zip(ends.tolist(), self.length.tolist(), strict=True)))
 
     @classmethod
     def of(cls, messages: list[tuple[int, int, bytes, int]]) -> _Block:
@@ -945,6 +993,9 @@ class _Block:
                    b"".join([m[2] for m in messages]))
 
 
+#: bytes of an MCAP Message record before its payload (opcode, length, channel, sequence,
+#: log and publish time)
+_HEAD_BYTES = 31
 #: track points encoded and written at a time (bounded memory: a few hundred bytes a point)
 _TRACK_BLOCK = 1 << 14
 #: points of each block checked against protobuf's own serialization
@@ -1058,11 +1109,13 @@ def _quality_template(extra: dict[str, np.ndarray]):
 
 
 def _track_block(track: Track, lo: int, hi: int, method: str, cameras, fixed: dict,
-                 template, first_id: int, color, channel: int, scene_channel: int):
+                 template, first_id: int, color, channel: int, scene_channel: int,
+                 records: bool = False):
     """Points ``lo:hi`` of a track as one :class:`_Block` of messages (TrackPoint, then its
     SceneUpdate, per point, as :meth:`SessionWriter.add_track` queues them one by one),
     encoded by :func:`._wire.encode_track`; None when sample points differ from protobuf's
-    bytes."""
+    bytes. ``records``: the block holds whole MCAP Message records (:attr:`_Block.records`),
+    the messages' bytes the same."""
     from . import _encode as E
 
     n = hi - lo
@@ -1101,16 +1154,19 @@ def _track_block(track: Track, lo: int, hi: int, method: str, cameras, fixed: di
                                sum(len(x) for x in consts)), dtype=np.uint8)
     point_len = np.empty(n, dtype=np.int64)
     lengths = np.empty(n, dtype=np.int64)
+    channels = np.array([channel, scene_channel] if records else [-1, -1], dtype=np.int64)
     used = _wire.encode_track(t, np.ascontiguousarray(bits), cam,
                               np.frombuffer(b"".join(names_b), dtype=np.uint8), name_start,
                               method_b, extra, ids, world_a, lifetime_a, orientation_a, size_a,
-                              rgba_a, out, point_len, lengths)
-    data = out[:used].tobytes()
+                              rgba_a, channels, out, point_len, lengths)
+    # records: written from this buffer as it is (cut into chunks); else bytes of their own
+    data = out[:used] if records else out[:used].tobytes()
     del out
 
     # protobuf's own bytes of sample points, compared
-    ends = np.cumsum(lengths)
-    starts = ends - lengths
+    gap = _HEAD_BYTES if records else 0
+    ends = np.cumsum(lengths + 2 * gap)  # each point's end, its records' heads counted
+    starts = ends - lengths - 2 * gap
     names = list(track.quality)
     for j in sorted({0, n - 1, *np.linspace(0, n - 1, _TRACK_CHECKS).astype(int).tolist()}):
         i = lo + j
@@ -1123,12 +1179,19 @@ def _track_block(track: Track, lo: int, hi: int, method: str, cameras, fixed: di
             if k not in S.TRACK_FIXED_QUALITY:
                 msg.quality[k] = float(track.quality[k][i])
         point = msg.SerializeToString(deterministic=True)
-        want = point + scene_point(method, first_id + i, int(t[j]), (x, y, z), color)
-        if data[starts[j]:ends[j]] != want or point_len[j] != len(point):
+        scene = scene_point(method, first_id + i, int(t[j]), (x, y, z), color)
+        got = bytes(data[starts[j]:ends[j]])
+        if point_len[j] != len(point) or lengths[j] != len(point) + len(scene) or (
+                got[gap:gap + len(point)] != point or got[2 * gap + len(point):] != scene):
+            return None
+        if records and got[:gap] + got[gap + len(point):2 * gap + len(point)] != b"".join(
+                _chunks.record_head(c, int(t[j]), len(m))
+                for c, m in ((channel, point), (scene_channel, scene))):
             return None
     return _Block(np.tile(np.array([channel, scene_channel], dtype=np.int64), n),
                   np.repeat(t, 2), np.zeros(2 * n, dtype=np.int64),
-                  np.column_stack([point_len, lengths - point_len]).ravel(), data)
+                  np.column_stack([point_len, lengths - point_len]).ravel(), data,
+                  records=records)
 
 
 def _quality_entries(extra: dict[str, np.ndarray], n: int, block: int = 1 << 15):

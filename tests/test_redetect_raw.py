@@ -1,0 +1,108 @@
+"""``pslog redetect`` copies the image chunks its workers read byte for byte without
+decompressing them in the main process (``copy_session(layouts=...)``): the same file as the
+decompressing copy, and a chunk whose indexes do not state what its reader found is copied
+the usual way."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+
+from pslog.log import _mcapio as io
+from pslog.log import copy as C
+from pslog.log import copy_session, read_session
+from recorders import redetect_session
+
+SAMPLE = Path(__file__).resolve().parents[1] / "samples" / "throw.mcap"
+
+
+def _without_created(path: Path) -> bytes:
+    """The file's bytes with its ``created_utc`` metadata value blanked (the only field that
+    differs between two runs)."""
+    data = bytearray(path.read_bytes())
+    at = data.index(b"created_utc") + len(b"created_utc")
+    size = int.from_bytes(data[at:at + 4], "little")
+    data[at + 4:at + 4 + size] = bytes(size)
+    return bytes(data)
+
+
+def _layouts(path: Path) -> dict[int, np.ndarray | None]:
+    """Each chunk's record layout (:func:`pslog.log.copy.record_layout`), decompressed here."""
+    out = {}
+    with open(path, "rb") as f:
+        for c in make_reader(f).get_summary().chunk_indexes:
+            f.seek(c.chunk_start_offset)
+            record = f.read(c.chunk_length)
+            out[c.chunk_start_offset] = C.record_layout(io.chunk_payload(memoryview(record)[9:]))
+    return out
+
+
+def test_redetect_with_workers_copies_image_chunks_undecompressed_and_the_same(
+        tmp_path, monkeypatch):
+    from recorders import redetect
+
+    monkeypatch.setattr(redetect, "_PARALLEL_FROM", 0)  # workers for the 135-frame sample
+    taken: dict[str, list] = {"indexed": [], "raw": []}
+    for name, key in (("_copy_indexed", "indexed"), ("_copy_raw", "raw")):
+        real = getattr(C, name)
+        monkeypatch.setattr(C, name, lambda *a, _r=real, _k=key: taken[_k].append(_r(*a))
+                            or taken[_k][-1])
+    redetect_session(SAMPLE, tmp_path / "new.mcap", workers=2)
+    new = sum(taken["indexed"]), sum(taken["raw"])
+    monkeypatch.setattr(C, "_copy_indexed", lambda *a: False)  # the decompressing copy
+    taken = {"indexed": [], "raw": []}
+    redetect_session(SAMPLE, tmp_path / "old.mcap", workers=2)
+    # every chunk the decompressing copy wrote byte for byte (not the first image chunk,
+    # which also registers the image channels: written anew either way), now without
+    # being decompressed here
+    assert new == (sum(taken["raw"]), 0) and new[0] >= 4
+    assert _without_created(tmp_path / "new.mcap") == _without_created(tmp_path / "old.mcap")
+
+
+def test_a_layout_the_indexes_do_not_state_sends_the_chunk_the_usual_way(tmp_path, monkeypatch):
+    """The caller's layout of a chunk decides: the one its indexes state copies it without
+    decompressing it; a different one (a record moved, another channel or time, a record
+    that is no message: None) copies it through its decompressed records, the same file."""
+    layouts = _layouts(SAMPLE)
+    checked = [o for o, lay in layouts.items() if lay is not None]
+    assert len(checked) >= 5  # the sample's image chunks hold messages only
+    copy_session(SAMPLE, tmp_path / "plain.mcap", checked_chunks=checked)
+    taken = []
+    real = C._copy_indexed
+    monkeypatch.setattr(C, "_copy_indexed", lambda *a: taken.append(real(*a)) or taken[-1])
+    copy_session(SAMPLE, tmp_path / "fast.mcap", checked_chunks=checked,
+                 layouts=layouts.get)
+    assert sum(taken) >= 4  # written without being decompressed
+    wrong = {}
+    for k, (o, lay) in enumerate(sorted((o, lay) for o, lay in layouts.items()
+                                        if lay is not None)):
+        bad = lay.copy()
+        bad[-1, k % 3] += 1  # its offset, channel or log time
+        wrong[o] = bad if k % 4 != 3 else None
+    taken.clear()
+    copy_session(SAMPLE, tmp_path / "wrong.mcap", checked_chunks=checked, layouts=wrong.get)
+    assert taken and not any(taken)  # each of them decompressed after all
+    plain = _without_created(tmp_path / "plain.mcap")
+    assert _without_created(tmp_path / "fast.mcap") == plain
+    assert _without_created(tmp_path / "wrong.mcap") == plain
+    assert read_session(tmp_path / "fast.mcap").n_images == 135
+
+
+@pytest.mark.parametrize("records, want", [
+    (b"", (0, 3)),
+    (bytes([io.OP_MESSAGE]) + (22 + 3).to_bytes(8, "little") + (7).to_bytes(2, "little")
+     + (1).to_bytes(4, "little") + (99).to_bytes(8, "little") * 2 + b"abc", [[0, 7, 99]]),
+])
+def test_record_layout(records, want):
+    assert C.record_layout(records).tolist() == (np.zeros(want).tolist()
+                                                 if isinstance(want, tuple) else want)
+
+
+def test_record_layout_is_none_for_other_records():
+    channel = bytes([0x04]) + (2).to_bytes(8, "little") + b"\0\0"
+    assert C.record_layout(channel) is None
+    message = bytes([io.OP_MESSAGE]) + (22).to_bytes(8, "little") + bytes(22)
+    assert C.record_layout(message + b"\x05") is None  # records do not end with the last
