@@ -96,7 +96,7 @@ from ..motion import G
 from ..records import NS, Observations
 from ..rig import Rig
 from . import _breaks, _normal
-from .bspline import DEGREE, basis, basis_pieces, clamped_knots, n_control
+from .bspline import DEGREE, basis, basis_derivative, basis_pieces, clamped_knots, n_control
 
 
 @dataclass(frozen=True)
@@ -428,11 +428,14 @@ def _prior_parts(knots: list[np.ndarray], offset: np.ndarray, m: int
         half, mid = (hi - lo) / 2, (hi + lo) / 2
         # ∫ ‖p''‖² over the span at its two Gauss nodes; ∫ ‖p'''‖², constant over the
         # span, at its midpoint
-        first, N = basis(k, np.concatenate([mid - node * half, mid + node * half, mid]), 3)
         s = len(mid)
+        # the second derivative at the Gauss nodes, the third at the midpoints: only those
+        # rows of the basis
+        first, N = basis_derivative(k, np.concatenate(
+            [mid - node * half, mid + node * half, mid]), np.repeat([2, 3], [2 * s, s]))
         firsts.append((first[:2 * s] + offset[p], first[2 * s:] + offset[p]))
-        accel.append(N[:2 * s, 2])
-        jerk.append(N[2 * s:, 3])
+        accel.append(N[:2 * s])
+        jerk.append(N[2 * s:])
         weights.append((np.r_[half, half], 2 * half))
         lengths += float(np.sum(2 * half))
     from ._kernels import prior_pull
