@@ -273,6 +273,7 @@ class Fit:
 
 class _Problem:
     knots: list[np.ndarray]
+    prior_ab: np.ndarray
     """The observations, the pieces' knots and the design (basis values) that follow."""
 
     def __init__(self, obs: Observations, rig: Rig, rows_of_piece: list[np.ndarray],
@@ -299,6 +300,8 @@ class _Problem:
         self.m = int(sizes.sum())
         if not same:
             self.set_times(self.t)
+        if hasattr(self, "prior_ab"):
+            del self.prior_ab  # freed first: its memory serves the new one
         self.prior_ab, self.prior_rhs, self.prior_const = _prior_normal(
             knots, self.offset, self.m, self.prior)
 
@@ -392,13 +395,12 @@ def _prior_normal(knots: list[np.ndarray], offset: np.ndarray, m: int, prior: Mo
     key = (m, offset.tobytes(), tuple(np.asarray(k, dtype=np.float64).tobytes() for k in knots))
     parts = _PRIOR_CACHE.pop(key, None)
     if parts is None:
+        # the entries the new one will push out go first: their memory then serves it (a
+        # 90-minute session's 94 MB, faulted in afresh page by page otherwise)
+        _trim_prior_cache(2 * 12 * 3 * m * 8)
         parts = _prior_parts(knots, offset, m)
     _PRIOR_CACHE[key] = parts  # most recent last
-    # the few most recent, and of a long session's (100 MB each at 90 minutes) the latest
-    # only: a fit comes back to the knots it just left, never to older ones
-    while len(_PRIOR_CACHE) > 4 or (len(_PRIOR_CACHE) > 1 and sum(
-            p[0].nbytes + p[1].nbytes for p in _PRIOR_CACHE.values()) > _PRIOR_CACHE_BYTES):
-        del _PRIOR_CACHE[next(iter(_PRIOR_CACHE))]
+    _trim_prior_cache(0)
     ab_accel, ab_jerk, pull, length = parts
     g = np.asarray(prior.gravity, dtype=np.float64)
     from ._kernels import prior_band
@@ -406,6 +408,20 @@ def _prior_normal(knots: list[np.ndarray], offset: np.ndarray, m: int, prior: Mo
     ab = prior_band(ab_accel, ab_jerk, prior.q_accel, prior.q_jerk)  # one pass, no temporary
     rhs = (pull[:, None] * g).reshape(-1) / prior.q_accel
     return ab, rhs, float(length * (g @ g) / prior.q_accel)
+
+
+def _trim_prior_cache(coming: int) -> None:
+    """Keep the few most recent prior parts, and of a long session's (100 MB each at 90
+    minutes) the latest only (a fit comes back to the knots it just left, never to older
+    ones); ``coming``: bytes of an entry about to be added (0: none), counted as the latest
+    (the rule then leaves what it would leave once the entry is in)."""
+    def too_many() -> bool:
+        count = len(_PRIOR_CACHE) + (coming > 0)
+        size = sum(p[0].nbytes + p[1].nbytes for p in _PRIOR_CACHE.values()) + coming
+        return count > 4 or (count > 1 and size > _PRIOR_CACHE_BYTES)
+
+    while _PRIOR_CACHE and too_many():
+        del _PRIOR_CACHE[next(iter(_PRIOR_CACHE))]
 
 
 #: the prior's parts per knot pattern (:func:`_prior_parts`), the few most recent
