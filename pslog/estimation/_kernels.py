@@ -949,6 +949,42 @@ def trial_blocks(Hyy: np.ndarray, Hxy: np.ndarray, pyy: np.ndarray, pxy: np.ndar
 
 
 @kernel
+def trial_schur(Hyy: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """The break test's 9 x 9 Schur complements (B, 9, 9) from ``Hyy`` and the product
+    ``P = H_yxᵀ Σ H_xy`` (numpy's, BLAS): ``S = Hyy - P``, made symmetric as
+    ``(S + Sᵀ) / 2``, its diagonal loaded by ``1e-12 · max |diag S| + 1e-300`` (NaN if a
+    diagonal entry is: ``np.max`` propagates it) — the elementwise numpy steps of
+    :func:`pslog.estimation._breaks._gains`, one pass, the same operations (the same
+    bits)."""
+    B = Hyy.shape[0]
+    S = np.empty((B, 9, 9))
+    for b in range(B):
+        Sb = S[b]
+        for i in range(9):
+            for k in range(9):
+                Sb[i, k] = Hyy[b, i, k] - P[b, i, k]
+        for i in range(9):
+            for k in range(i + 1, 9):
+                v = (Sb[i, k] + Sb[k, i]) / 2
+                Sb[i, k] = v
+                Sb[k, i] = v
+        big = 0.0
+        nan = False
+        for i in range(9):
+            d = (Sb[i, i] + Sb[i, i]) / 2
+            Sb[i, i] = d
+            a = abs(d)
+            if a != a:
+                nan = True
+            elif a > big:
+                big = a
+        load = (np.nan if nan else 1e-12 * big) + 1e-300
+        for i in range(9):
+            Sb[i, i] += load
+    return S
+
+
+@kernel
 def prior_band(ab_accel: np.ndarray, ab_jerk: np.ndarray, q_accel: float, q_jerk: float
                ) -> np.ndarray:
     """The motion prior's band ``ab_accel / q_accel + ab_jerk / q_jerk`` (12, n), in one pass
