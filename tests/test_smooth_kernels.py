@@ -622,3 +622,24 @@ def test_abs_median_of_finite_rows_is_numpys_median(n):
     assert np.isnan(_kernels.abs_median_finite_rows(np.full((3, 2), np.nan))[0])
     # by hand: |-3|, 1, 2, |-0.5| -> (1 + 2) / 2
     assert _kernels.abs_median_finite_rows(np.array([[-3.0, 1.0], [2.0, -0.5]]))[0] == 1.5
+
+
+def test_factor_in_place_is_the_copy_and_rebuilds_the_original_on_a_failed_pivot():
+    """With ``rebuild`` the band is factored in place (the same bits as the copy); a pivot
+    that is not positive calls ``rebuild`` for the original (the half-factored band is no
+    start for the diagonal load) and gives what the copying factor gives."""
+    ab = _band_case(40, 9)
+    ref = _normal.factor(ab)
+    work = ab.copy()
+    calls = []
+    U = _normal.factor(work, rebuild=lambda: calls.append(1) or ab.copy())
+    assert U is work and not calls
+    assert_array_equal(U, ref)
+    empty = ab.copy()  # a direction nothing reaches: the loaded factor
+    empty[:, 17] = 0.0
+    for d in range(1, 12):
+        empty[11 - d, 17 + d] = 0.0
+    loaded = _normal.factor(empty)
+    got = _normal.factor(empty.copy(), rebuild=lambda: calls.append(1) or empty.copy())
+    assert calls == [1]
+    assert_array_equal(got, loaded)

@@ -575,8 +575,11 @@ def _initial_control(problem: _Problem, sigma_px: float) -> np.ndarray:
     for _ in range(2):
         scale = f / np.maximum(depth, 1e-3)
         J = A * scale[:, :, None]
-        ab, rhs = problem.normal(J, -(a0 * scale), weight / sigma_px**2)
-        control = _normal.solve(_normal.factor(ab), rhs).reshape(-1, 3)
+        target, wz = -(a0 * scale), weight / sigma_px**2
+        ab, rhs = problem.normal(J, target, wz)
+        U = _normal.factor(ab, rebuild=lambda J=J, target=target, wz=wz:
+                           problem.normal(J, target, wz)[0])
+        control = _normal.solve(U, rhs).reshape(-1, 3)
         X = problem.positions(control)
         depth = np.maximum(np.einsum("nj,nj->n", R[:, 2], X) + tt[:, 2], 1e-3)[:, None]
         r = np.einsum("naj,nj->na", J, X) + a0 * scale
@@ -635,7 +638,10 @@ class _Solver:
             w = 1 / (1 + s / _CAUCHY**2)  # Cauchy IRLS weight
             target = np.einsum("naj,nj->na", J, X) - r  # linearised: J X_new ≈ J X - r
             ab, rhs = problem.normal(J, target, w / sigma**2)
-            new = _normal.solve(_normal.factor(ab), rhs).reshape(-1, 3)
+            # factored in place (the band is this step's own); rebuilt only if a pivot fails
+            U = _normal.factor(ab, rebuild=lambda J=J, target=target, w=w, sigma=sigma:
+                               problem.normal(J, target, w / sigma**2)[0])
+            new = _normal.solve(U, rhs).reshape(-1, 3)
             if prior is None:
                 prior = _prior_cost(problem, control)
             before = self.cost(control, r, sigma, prior)
@@ -831,7 +837,9 @@ def _refit_control(problem: _Problem, X: np.ndarray) -> np.ndarray:
     M = np.broadcast_to(np.diag([2e6, 1e6, 1e6]), (len(X), 3, 3))
     ab, rhs = problem.points.normal(M, X * [2e6, 1e6, 1e6], problem.prior_ab.copy(),
                                     problem.prior_rhs.copy())
-    return _normal.solve(_normal.factor(ab), rhs).reshape(-1, 3)
+    U = _normal.factor(ab, rebuild=lambda: problem.points.normal(
+        M, X * [2e6, 1e6, 1e6], problem.prior_ab.copy(), problem.prior_rhs.copy())[0])
+    return _normal.solve(U, rhs).reshape(-1, 3)
 
 
 def _information(problem: _Problem, control: np.ndarray, sigma: float, r: np.ndarray,
@@ -845,7 +853,8 @@ def _information(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
     w = 1 / (1 + s / _CAUCHY**2)
     target = np.einsum("naj,nj->na", J, X) - r
     ab, _ = problem.normal(J, target, w / sigma**2)
-    band = _normal.covariance_band(_normal.factor(ab))
+    band = _normal.covariance_band(_normal.factor(
+        ab, rebuild=lambda: problem.normal(J, target, w / sigma**2)[0]))
     cov_X = problem.points.marginal(band)
     p_eff = float(np.sum(w * np.einsum("naj,njk,nak->n", J, cov_X, J)) / sigma**2)
     n_res = 2 * len(r)
