@@ -225,10 +225,14 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
     ``base``, whose uniform knots are ``centre + k·h`` (module docstring).
 
     The per-trial terms are compiled passes (:mod:`pslog.estimation._kernels`:
-    ``trial_splines``, ``gains_data``, ``trial_gather``, ``trial_blocks``: the operations of
-    :func:`_new_splines`, :func:`_horner` and the numpy forms, in order); the small matrix
-    products and the 9 x 9 solves stay numpy's (BLAS and LAPACK: their sums' order is the
-    library's)."""
+    ``trial_splines``, ``gains_data``, ``trial_gather``, ``trial_blocks``, ``trial_schur``:
+    the operations of :func:`_new_splines`, :func:`_horner` and the numpy forms, in order);
+    the small matrix products and the 9 x 9 solves stay numpy's (BLAS and LAPACK: their
+    sums' order is the library's). They cannot be recompiled without changing the gains'
+    bits, and the gains amplify such changes: ``S`` is a difference of nearly equal terms
+    (the base explains most of what the break would), so the products summed in another
+    order (and the solve by another elimination) moved the gains of a 10-minute session by
+    up to 1.2e-9 relative (measured: a compiled trial, 20 % faster)."""
     from ._kernels import gains_data, trial_blocks, trial_gather, trial_schur, trial_splines
 
     local, h = base.local, base.spacing
