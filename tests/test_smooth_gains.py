@@ -274,3 +274,29 @@ def test_trial_gather_and_blocks_are_their_python_originals():
     assert_array_equal(H1, Hyy + np.einsum("bef,ik->beifk", pyy, np.eye(3)).reshape(B, 9, 9))
     assert_array_equal(X1, Hxy + np.einsum("bce,ik->bciek", pxy, np.eye(3)).reshape(B, 18, 9))
     assert_array_equal(cov[3], base.cov[which[3], row0[3]:row0[3] + 18, col[3]:col[3] + 18])
+
+
+def test_trial_schur_is_the_numpy_steps_and_its_python_original():
+    """S = Hyy - P, symmetric, the diagonal loaded by 1e-12 of its largest |entry|: the
+    numpy steps bit for bit (a NaN diagonal propagates as np.max does), and by hand."""
+    rng = np.random.default_rng(17)
+    B = 40
+    Hyy = rng.normal(size=(B, 9, 9)) * 10.0 ** rng.uniform(-4, 6, (B, 1, 1))
+    P = rng.normal(size=(B, 9, 9)) * 10.0 ** rng.uniform(-4, 6, (B, 1, 1))
+    Hyy[3, 4, 4] = np.nan
+    Hyy[5] = P[5]  # S = 0: the load alone
+    S = Hyy - P
+    S = (S + np.swapaxes(S, 1, 2)) / 2
+    load = 1e-12 * np.max(np.abs(np.diagonal(S, axis1=1, axis2=2)), axis=1) + 1e-300
+    S[:, np.arange(9), np.arange(9)] += load[:, None]
+    got = _kernels.trial_schur(Hyy, P)
+    assert_array_equal(got, S)
+    assert_array_equal(_kernels.trial_schur.py_func(Hyy, P), S)
+    assert np.all(np.isnan(np.diagonal(got[3])))
+    assert_array_equal(got[5], 1e-300 * np.eye(9))
+    # by hand: [[4, 1], [3, -8]] in the corner -> off-diagonal 2, diagonal + 8e-12
+    H = np.zeros((1, 9, 9))
+    H[0, :2, :2] = [[4.0, 1.0], [3.0, -8.0]]
+    one = _kernels.trial_schur(H, np.zeros((1, 9, 9)))[0]
+    assert one[0, 1] == one[1, 0] == 2.0
+    assert one[0, 0] == 4.0 + (8e-12 + 1e-300) and one[1, 1] == -8.0 + (8e-12 + 1e-300)

@@ -13,7 +13,7 @@ from scipy.sparse import csr_matrix
 
 from pslog.estimation import _breaks, _kernels, _normal
 from pslog.estimation import trajectory as T
-from pslog.estimation.bspline import basis, clamped_knots, n_control, span_index
+from pslog.estimation.bspline import basis, basis_derivative, clamped_knots, n_control, span_index
 
 
 def _knots():
@@ -35,6 +35,24 @@ def test_basis_kernel_is_its_python_original_and_scipy(nd):
         ours = np.einsum("na,nad->nd", values[:, d], control[index])
         ref = BSpline(knots, control, 3)(t, nu=d)
         assert_allclose(ours, ref, rtol=1e-10, atol=1e-9 * np.abs(ref).max())
+
+
+def test_basis_derivative_is_that_row_of_the_whole_basis():
+    """One derivative per point (the prior's nodes): the same bits as the row of every
+    derivative's basis, compiled and its Python original; a wrong row is caught."""
+    knots = _knots()
+    t = np.r_[np.linspace(0.0, 0.8, 97), 0.25, 0.6, 0.8]
+    which = np.arange(len(t)) % 4
+    first, values = basis(knots, t, 3)
+    f1, one = basis_derivative(knots, t, which)
+    assert_array_equal(f1, first)
+    assert_array_equal(one, values[np.arange(len(t)), which])
+    j = span_index(knots, t)
+    assert_array_equal(_kernels.basis_derivative_in_span.py_func(knots, j, t, which), one)
+    # by hand: a uniform cubic's second derivative at a knot is (1, -2, 1, 0) / h²
+    u = clamped_knots(np.arange(9.0) * 0.5)
+    _, d2 = basis_derivative(u, np.array([2.0]), np.array([2]))
+    assert_allclose(d2[0], np.array([1.0, -2.0, 1.0, 0.0]) / 0.25, atol=1e-12)
 
 
 def _sparse_points(first, N, m):
@@ -247,6 +265,40 @@ def test_takahashi_kernel_is_its_python_original_and_the_dense_inverse():
     for j in range(12):
         i = np.arange(n - j)
         assert_allclose(rows[i, j], cov[i, i + j], rtol=0, atol=1e-12 * np.abs(cov).max())
+
+
+@pytest.mark.parametrize("m, seed", [(4, 0), (5, 1), (30, 2), (400, 3)])
+def test_takahashi_band_is_the_rows_recurrence_and_the_dense_inverse(m, seed):
+    """The one-pass covariance band (a ring of 12 rows, blocks read out as their rows are
+    done) is the whole-rows recurrence and its read-out to the last bit, and the dense
+    inverse's band; its Python original is the Python originals' chain."""
+    rng = np.random.default_rng(seed)
+    r = 8 * m
+    first = np.sort(rng.integers(0, m - 3, r))
+    J = rng.normal(size=(r, 2, 3)) * 10.0 ** rng.uniform(-2, 3, (r, 1, 1))
+    ab, _ = _normal.accumulate_points(first, rng.random((r, 4)),
+                                      np.einsum("nai,naj->nij", J, J), np.zeros((r, 3)), m)
+    ab[11] += 1e-3
+    U = _normal.factor(ab)
+    band = _normal.covariance_band(U)
+    assert_array_equal(band, _normal.covariance_band_rows(U))
+    n = 3 * m
+    right = np.zeros((n, 11))
+    for d in range(1, min(12, n)):
+        right[: n - d, d - 1] = U[11 - d, d:]
+    rows = _kernels.takahashi_rows.py_func(np.ascontiguousarray(U[11]), right)
+    assert_array_equal(_kernels.takahashi_band.py_func(U, m),
+                       _kernels.band_from_rows.py_func(rows, m))
+    dense = np.zeros((n, n))
+    for d in range(12):
+        i = np.arange(n - d)
+        dense[i, i + d] = dense[i + d, i] = ab[11 - d, d:]
+    cov = np.linalg.inv(dense)
+    for i in range(m):
+        for k in range(4):
+            want = (cov[3 * i:3 * i + 3, 3 * (i + k):3 * (i + k) + 3] if i + k < m
+                    else np.zeros((3, 3)))
+            assert_allclose(band[i, k], want, rtol=0, atol=1e-9 * np.abs(cov).max())
 
 
 def test_window_solve_is_the_dense_solve_and_refuses_a_non_positive_pivot():
@@ -570,3 +622,24 @@ def test_abs_median_of_finite_rows_is_numpys_median(n):
     assert np.isnan(_kernels.abs_median_finite_rows(np.full((3, 2), np.nan))[0])
     # by hand: |-3|, 1, 2, |-0.5| -> (1 + 2) / 2
     assert _kernels.abs_median_finite_rows(np.array([[-3.0, 1.0], [2.0, -0.5]]))[0] == 1.5
+
+
+def test_factor_in_place_is_the_copy_and_rebuilds_the_original_on_a_failed_pivot():
+    """With ``rebuild`` the band is factored in place (the same bits as the copy); a pivot
+    that is not positive calls ``rebuild`` for the original (the half-factored band is no
+    start for the diagonal load) and gives what the copying factor gives."""
+    ab = _band_case(40, 9)
+    ref = _normal.factor(ab)
+    work = ab.copy()
+    calls = []
+    U = _normal.factor(work, rebuild=lambda: calls.append(1) or ab.copy())
+    assert U is work and not calls
+    assert_array_equal(U, ref)
+    empty = ab.copy()  # a direction nothing reaches: the loaded factor
+    empty[:, 17] = 0.0
+    for d in range(1, 12):
+        empty[11 - d, 17 + d] = 0.0
+    loaded = _normal.factor(empty)
+    got = _normal.factor(empty.copy(), rebuild=lambda: calls.append(1) or empty.copy())
+    assert calls == [1]
+    assert_array_equal(got, loaded)

@@ -30,48 +30,79 @@ def basis_in_span(knots: np.ndarray, j: np.ndarray, t: np.ndarray, n_derivatives
     right = np.zeros(p + 1)
     a = np.zeros((2, p + 1))
     for i in range(n):
-        ti = t[i]
-        ji = j[i]
-        ndu[:] = 0.0
-        ndu[0, 0] = 1.0
-        for r in range(1, p + 1):
-            left[r] = ti - knots[ji + 1 - r]
-            right[r] = knots[ji + r] - ti
-            saved = 0.0
-            for s in range(r):
-                ndu[r, s] = right[s + 1] + left[r - s]  # a knot difference, > 0
-                temp = ndu[s, r - 1] / ndu[r, s]
-                ndu[s, r] = saved + right[s + 1] * temp
-                saved = left[r - s] * temp
-            ndu[r, r] = saved
-        for r in range(p + 1):
-            out[i, 0, r] = ndu[r, p]
-        for r in range(p + 1):
-            s1, s2 = 0, 1
-            a[:] = 0.0
-            a[0, 0] = 1.0
-            for k in range(1, n_derivatives + 1):
-                d = 0.0
-                rk, pk = r - k, p - k
-                if r >= k:
-                    a[s2, 0] = a[s1, 0] / ndu[pk + 1, rk]
-                    d = a[s2, 0] * ndu[rk, pk]
-                j1 = 1 if rk >= -1 else -rk
-                j2 = k - 1 if r - 1 <= pk else p - r
-                for jj in range(j1, j2 + 1):
-                    a[s2, jj] = (a[s1, jj] - a[s1, jj - 1]) / ndu[pk + 1, rk + jj]
-                    d = d + a[s2, jj] * ndu[rk + jj, pk]
-                if r <= pk:
-                    a[s2, k] = -a[s1, k - 1] / ndu[pk + 1, r]
-                    d = d + a[s2, k] * ndu[r, pk]
-                out[i, k, r] = d
-                s1, s2 = s2, s1
-        factor = 1.0
-        for k in range(1, n_derivatives + 1):
-            factor *= p - k + 1
-            for r in range(p + 1):
-                out[i, k, r] *= factor
+        _ders_basis(knots, j[i], t[i], n_derivatives, ndu, left, right, a, out[i])
     return out
+
+
+@kernel
+def basis_derivative_in_span(knots: np.ndarray, j: np.ndarray, t: np.ndarray,
+                             derivative: np.ndarray) -> np.ndarray:
+    """Row ``derivative[i]`` of :func:`basis_in_span` at each point (n, 4): the same
+    recurrence up to that derivative (the same bits), without the (n, 4, 4) array of every
+    derivative (the prior's nodes of a 90-minute session: 72 MB written, faulted in page by
+    page, and mostly thrown away)."""
+    p = _P
+    n = len(t)
+    out = np.zeros((n, p + 1))
+    ders = np.zeros((4, p + 1))
+    ndu = np.zeros((p + 1, p + 1))
+    left = np.zeros(p + 1)
+    right = np.zeros(p + 1)
+    a = np.zeros((2, p + 1))
+    for i in range(n):
+        d = derivative[i]
+        ders[:d + 1] = 0.0
+        _ders_basis(knots, j[i], t[i], d, ndu, left, right, a, ders)
+        for r in range(p + 1):
+            out[i, r] = ders[d, r]
+    return out
+
+
+@kernel
+def _ders_basis(knots: np.ndarray, ji: int, ti: float, n_derivatives: int, ndu: np.ndarray,
+                left: np.ndarray, right: np.ndarray, a: np.ndarray, out: np.ndarray) -> None:
+    """One point of :func:`basis_in_span` into ``out`` (>= n_derivatives + 1, 4), zero on
+    entry (``ndu``, ``left``, ``right``, ``a``: scratch)."""
+    p = _P
+    ndu[:] = 0.0
+    ndu[0, 0] = 1.0
+    for r in range(1, p + 1):
+        left[r] = ti - knots[ji + 1 - r]
+        right[r] = knots[ji + r] - ti
+        saved = 0.0
+        for s in range(r):
+            ndu[r, s] = right[s + 1] + left[r - s]  # a knot difference, > 0
+            temp = ndu[s, r - 1] / ndu[r, s]
+            ndu[s, r] = saved + right[s + 1] * temp
+            saved = left[r - s] * temp
+        ndu[r, r] = saved
+    for r in range(p + 1):
+        out[0, r] = ndu[r, p]
+    for r in range(p + 1):
+        s1, s2 = 0, 1
+        a[:] = 0.0
+        a[0, 0] = 1.0
+        for k in range(1, n_derivatives + 1):
+            d = 0.0
+            rk, pk = r - k, p - k
+            if r >= k:
+                a[s2, 0] = a[s1, 0] / ndu[pk + 1, rk]
+                d = a[s2, 0] * ndu[rk, pk]
+            j1 = 1 if rk >= -1 else -rk
+            j2 = k - 1 if r - 1 <= pk else p - r
+            for jj in range(j1, j2 + 1):
+                a[s2, jj] = (a[s1, jj] - a[s1, jj - 1]) / ndu[pk + 1, rk + jj]
+                d = d + a[s2, jj] * ndu[rk + jj, pk]
+            if r <= pk:
+                a[s2, k] = -a[s1, k - 1] / ndu[pk + 1, r]
+                d = d + a[s2, k] * ndu[r, pk]
+            out[k, r] = d
+            s1, s2 = s2, s1
+    factor = 1.0
+    for k in range(1, n_derivatives + 1):
+        factor *= p - k + 1
+        for r in range(p + 1):
+            out[k, r] *= factor
 
 
 @kernel
@@ -374,6 +405,51 @@ def takahashi_rows(diag: np.ndarray, right: np.ndarray) -> np.ndarray:
             acc += right[r, k - 1] * rows[r, k]
         rows[r, 0] = 1 / dr**2 - acc / dr
     return rows
+
+
+@kernel
+def takahashi_band(U: np.ndarray, m: int) -> np.ndarray:
+    """The (m, 4, 3, 3) block band of ``A⁻¹`` for ``A = Uᵀ U`` (``U`` (12, 3m) upper banded
+    storage, from :func:`band_cholesky`): :func:`takahashi_rows` and :func:`band_from_rows`
+    in one pass, the same operations in the same order (the same bits). The recurrence
+    reads only the 11 rows after the current one, so 12 rows in a ring stand for the
+    (3m + 12, 12) array (zero rows beyond the last unknown, as there); control point ``i``'s
+    blocks are read out as soon as its three rows are done. Row ``r``'s entries
+    ``U[r, r+1..r+11]`` are read from the band itself (zero beyond the last unknown, as
+    ``covariance_band`` built them), not from a copy of them."""
+    n = U.shape[1]
+    ring = np.zeros((12, 12))  # ring[r % 12] = row r of Σ within the band
+    right = np.zeros(11)
+    band = np.zeros((m, 4, 3, 3))
+    for r in range(n - 1, -1, -1):
+        dr = U[11, r]
+        for d in range(1, 12):
+            right[d - 1] = U[11 - d, r + d] if r + d < n else 0.0
+        row = ring[r % 12]
+        for j in range(1, 12):
+            acc = 0.0
+            for k in range(1, 12):
+                if k <= j:
+                    s = ring[(r + k) % 12, j - k]
+                else:
+                    s = ring[(r + j) % 12, k - j]
+                acc += right[k - 1] * s
+            row[j] = -acc / dr
+        acc = 0.0
+        for k in range(1, 12):
+            acc += right[k - 1] * row[k]
+        row[0] = 1 / dr**2 - acc / dr
+        if r % 3 == 0 and r // 3 < m:  # rows 3i..3i+2 done: control point i's blocks
+            i = r // 3
+            for k in range(4):
+                for a in range(3):
+                    for b in range(3):
+                        jj = 3 * k + b - a
+                        if jj >= 0:
+                            band[i, k, a, b] = ring[(r + a) % 12, jj]
+                        else:
+                            band[i, k, a, b] = ring[(r + b) % 12, -jj]
+    return band
 
 
 @kernel
@@ -870,6 +946,42 @@ def trial_blocks(Hyy: np.ndarray, Hxy: np.ndarray, pyy: np.ndarray, pxy: np.ndar
             for c in range(18):
                 out[b, r, c] = cov[w, r0 + r, c0 + c]
     return out
+
+
+@kernel
+def trial_schur(Hyy: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """The break test's 9 x 9 Schur complements (B, 9, 9) from ``Hyy`` and the product
+    ``P = H_yxᵀ Σ H_xy`` (numpy's, BLAS): ``S = Hyy - P``, made symmetric as
+    ``(S + Sᵀ) / 2``, its diagonal loaded by ``1e-12 · max |diag S| + 1e-300`` (NaN if a
+    diagonal entry is: ``np.max`` propagates it) — the elementwise numpy steps of
+    :func:`pslog.estimation._breaks._gains`, one pass, the same operations (the same
+    bits)."""
+    B = Hyy.shape[0]
+    S = np.empty((B, 9, 9))
+    for b in range(B):
+        Sb = S[b]
+        for i in range(9):
+            for k in range(9):
+                Sb[i, k] = Hyy[b, i, k] - P[b, i, k]
+        for i in range(9):
+            for k in range(i + 1, 9):
+                v = (Sb[i, k] + Sb[k, i]) / 2
+                Sb[i, k] = v
+                Sb[k, i] = v
+        big = 0.0
+        nan = False
+        for i in range(9):
+            d = (Sb[i, i] + Sb[i, i]) / 2
+            Sb[i, i] = d
+            a = abs(d)
+            if a != a:
+                nan = True
+            elif a > big:
+                big = a
+        load = (np.nan if nan else 1e-12 * big) + 1e-300
+        for i in range(9):
+            Sb[i, i] += load
+    return S
 
 
 @kernel

@@ -126,14 +126,23 @@ class Points:
         return ab, rhs
 
 
-def factor(ab: np.ndarray) -> np.ndarray:
-    """Upper banded Cholesky factor ``U`` (``A = Uᵀ U``) of an information matrix (a new
-    array; LAPACK's ``dpbtrf`` step for step, the same bits as scipy's ``cholesky_banded``:
+def factor(ab: np.ndarray, rebuild=None) -> np.ndarray:
+    """Upper banded Cholesky factor ``U`` (``A = Uᵀ U``) of an information matrix (LAPACK's
+    ``dpbtrf`` step for step, the same bits as scipy's ``cholesky_banded``:
     :func:`pslog.estimation._kernels.band_cholesky`); a :class:`FusionError` if it is not
     positive definite (a trajectory the detections and the motion prior leave undetermined).
+
+    ``rebuild``: None, a new array (``ab`` is left as it is); or a function returning ``ab``
+    anew (the same values), and ``ab`` (C-contiguous float64) is factored in place — no copy
+    of a 90-minute session's 47 MB band at every Gauss–Newton step — and only a pivot that
+    is not positive (``ab`` then half factored) calls it for the original again.
     """
     from ._kernels import band_cholesky
 
+    if rebuild is not None and ab.dtype == np.float64 and ab.flags.c_contiguous:
+        if band_cholesky(ab) == 0:
+            return ab
+        ab = rebuild()
     U = np.array(ab, dtype=np.float64, order="C")
     if band_cholesky(U) == 0:
         return U
@@ -172,14 +181,29 @@ def covariance_band(U: np.ndarray) -> np.ndarray:
     time from the last: with ``Σ = U⁻¹ U⁻ᵀ`` and ``k`` over the band of row ``r``,
     ``Σ_rj = -Σ_k U_rk Σ_kj / U_rr`` (``j > r``) and ``Σ_rr = 1/U_rr² - Σ_k U_rk Σ_kr / U_rr``.
     Only entries inside the band are ever needed, so the cost is linear in the number of
-    unknowns: a compiled loop (:func:`pslog.estimation._kernels.takahashi_rows`). (The same
-    recurrence grouped by 3 x 3 blocks is algebraically identical but numerically unstable on
-    these spline problems: errors grew ~6x per control point.)
+    unknowns: a compiled loop (:func:`pslog.estimation._kernels.takahashi_band`: the
+    recurrence of :func:`pslog.estimation._kernels.takahashi_rows` on a ring of 12 rows,
+    each control point's blocks read out as its rows are done — the same bits, without the
+    (n + 12, 12) rows and (n, 11) copy of ``U`` a 90-minute session's fit allocated twice,
+    47 and 43 MB faulted in page by page). (The same recurrence grouped by 3 x 3 blocks is
+    algebraically identical but numerically unstable on these spline problems: errors grew
+    ~6x per control point.)
 
     Returns
     -------
     band : (m, 4, 3, 3), ``band[i, k] = Σ_{i, i+k}`` (zero beyond the last control point)
     """
+    from ._kernels import takahashi_band
+
+    if U.ndim != 2 or U.shape[0] != WIDTH or U.shape[1] % 3:
+        raise ValueError(f"U must be (12, 3m), got {U.shape}")
+    return takahashi_band(np.ascontiguousarray(U, dtype=np.float64), U.shape[1] // 3)
+
+
+def covariance_band_rows(U: np.ndarray) -> np.ndarray:
+    """:func:`covariance_band` through the whole rows array (:func:`pslog.estimation.
+    _kernels.takahashi_rows`, then :func:`_band_from_rows`): the reference the tests
+    compare the one-pass kernel with."""
     from ._kernels import takahashi_rows
 
     n = U.shape[1]

@@ -96,7 +96,7 @@ from ..motion import G
 from ..records import NS, Observations
 from ..rig import Rig
 from . import _breaks, _normal
-from .bspline import DEGREE, basis, basis_pieces, clamped_knots, n_control
+from .bspline import DEGREE, basis, basis_derivative, basis_pieces, clamped_knots, n_control
 
 
 @dataclass(frozen=True)
@@ -273,6 +273,7 @@ class Fit:
 
 class _Problem:
     knots: list[np.ndarray]
+    prior_ab: np.ndarray
     """The observations, the pieces' knots and the design (basis values) that follow."""
 
     def __init__(self, obs: Observations, rig: Rig, rows_of_piece: list[np.ndarray],
@@ -299,6 +300,8 @@ class _Problem:
         self.m = int(sizes.sum())
         if not same:
             self.set_times(self.t)
+        if hasattr(self, "prior_ab"):
+            del self.prior_ab  # freed first: its memory serves the new one
         self.prior_ab, self.prior_rhs, self.prior_const = _prior_normal(
             knots, self.offset, self.m, self.prior)
 
@@ -392,13 +395,12 @@ def _prior_normal(knots: list[np.ndarray], offset: np.ndarray, m: int, prior: Mo
     key = (m, offset.tobytes(), tuple(np.asarray(k, dtype=np.float64).tobytes() for k in knots))
     parts = _PRIOR_CACHE.pop(key, None)
     if parts is None:
+        # the entries the new one will push out go first: their memory then serves it (a
+        # 90-minute session's 94 MB, faulted in afresh page by page otherwise)
+        _trim_prior_cache(2 * 12 * 3 * m * 8)
         parts = _prior_parts(knots, offset, m)
     _PRIOR_CACHE[key] = parts  # most recent last
-    # the few most recent, and of a long session's (100 MB each at 90 minutes) the latest
-    # only: a fit comes back to the knots it just left, never to older ones
-    while len(_PRIOR_CACHE) > 4 or (len(_PRIOR_CACHE) > 1 and sum(
-            p[0].nbytes + p[1].nbytes for p in _PRIOR_CACHE.values()) > _PRIOR_CACHE_BYTES):
-        del _PRIOR_CACHE[next(iter(_PRIOR_CACHE))]
+    _trim_prior_cache(0)
     ab_accel, ab_jerk, pull, length = parts
     g = np.asarray(prior.gravity, dtype=np.float64)
     from ._kernels import prior_band
@@ -406,6 +408,20 @@ def _prior_normal(knots: list[np.ndarray], offset: np.ndarray, m: int, prior: Mo
     ab = prior_band(ab_accel, ab_jerk, prior.q_accel, prior.q_jerk)  # one pass, no temporary
     rhs = (pull[:, None] * g).reshape(-1) / prior.q_accel
     return ab, rhs, float(length * (g @ g) / prior.q_accel)
+
+
+def _trim_prior_cache(coming: int) -> None:
+    """Keep the few most recent prior parts, and of a long session's (100 MB each at 90
+    minutes) the latest only (a fit comes back to the knots it just left, never to older
+    ones); ``coming``: bytes of an entry about to be added (0: none), counted as the latest
+    (the rule then leaves what it would leave once the entry is in)."""
+    def too_many() -> bool:
+        count = len(_PRIOR_CACHE) + (coming > 0)
+        size = sum(p[0].nbytes + p[1].nbytes for p in _PRIOR_CACHE.values()) + coming
+        return count > 4 or (count > 1 and size > _PRIOR_CACHE_BYTES)
+
+    while _PRIOR_CACHE and too_many():
+        del _PRIOR_CACHE[next(iter(_PRIOR_CACHE))]
 
 
 #: the prior's parts per knot pattern (:func:`_prior_parts`), the few most recent
@@ -428,11 +444,14 @@ def _prior_parts(knots: list[np.ndarray], offset: np.ndarray, m: int
         half, mid = (hi - lo) / 2, (hi + lo) / 2
         # ∫ ‖p''‖² over the span at its two Gauss nodes; ∫ ‖p'''‖², constant over the
         # span, at its midpoint
-        first, N = basis(k, np.concatenate([mid - node * half, mid + node * half, mid]), 3)
         s = len(mid)
+        # the second derivative at the Gauss nodes, the third at the midpoints: only those
+        # rows of the basis
+        first, N = basis_derivative(k, np.concatenate(
+            [mid - node * half, mid + node * half, mid]), np.repeat([2, 3], [2 * s, s]))
         firsts.append((first[:2 * s] + offset[p], first[2 * s:] + offset[p]))
-        accel.append(N[:2 * s, 2])
-        jerk.append(N[2 * s:, 3])
+        accel.append(N[:2 * s])
+        jerk.append(N[2 * s:])
         weights.append((np.r_[half, half], 2 * half))
         lengths += float(np.sum(2 * half))
     from ._kernels import prior_pull
@@ -556,8 +575,11 @@ def _initial_control(problem: _Problem, sigma_px: float) -> np.ndarray:
     for _ in range(2):
         scale = f / np.maximum(depth, 1e-3)
         J = A * scale[:, :, None]
-        ab, rhs = problem.normal(J, -(a0 * scale), weight / sigma_px**2)
-        control = _normal.solve(_normal.factor(ab), rhs).reshape(-1, 3)
+        target, wz = -(a0 * scale), weight / sigma_px**2
+        ab, rhs = problem.normal(J, target, wz)
+        U = _normal.factor(ab, rebuild=lambda J=J, target=target, wz=wz:
+                           problem.normal(J, target, wz)[0])
+        control = _normal.solve(U, rhs).reshape(-1, 3)
         X = problem.positions(control)
         depth = np.maximum(np.einsum("nj,nj->n", R[:, 2], X) + tt[:, 2], 1e-3)[:, None]
         r = np.einsum("naj,nj->na", J, X) + a0 * scale
@@ -616,7 +638,10 @@ class _Solver:
             w = 1 / (1 + s / _CAUCHY**2)  # Cauchy IRLS weight
             target = np.einsum("naj,nj->na", J, X) - r  # linearised: J X_new ≈ J X - r
             ab, rhs = problem.normal(J, target, w / sigma**2)
-            new = _normal.solve(_normal.factor(ab), rhs).reshape(-1, 3)
+            # factored in place (the band is this step's own); rebuilt only if a pivot fails
+            U = _normal.factor(ab, rebuild=lambda J=J, target=target, w=w, sigma=sigma:
+                               problem.normal(J, target, w / sigma**2)[0])
+            new = _normal.solve(U, rhs).reshape(-1, 3)
             if prior is None:
                 prior = _prior_cost(problem, control)
             before = self.cost(control, r, sigma, prior)
@@ -812,7 +837,9 @@ def _refit_control(problem: _Problem, X: np.ndarray) -> np.ndarray:
     M = np.broadcast_to(np.diag([2e6, 1e6, 1e6]), (len(X), 3, 3))
     ab, rhs = problem.points.normal(M, X * [2e6, 1e6, 1e6], problem.prior_ab.copy(),
                                     problem.prior_rhs.copy())
-    return _normal.solve(_normal.factor(ab), rhs).reshape(-1, 3)
+    U = _normal.factor(ab, rebuild=lambda: problem.points.normal(
+        M, X * [2e6, 1e6, 1e6], problem.prior_ab.copy(), problem.prior_rhs.copy())[0])
+    return _normal.solve(U, rhs).reshape(-1, 3)
 
 
 def _information(problem: _Problem, control: np.ndarray, sigma: float, r: np.ndarray,
@@ -826,7 +853,8 @@ def _information(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
     w = 1 / (1 + s / _CAUCHY**2)
     target = np.einsum("naj,nj->na", J, X) - r
     ab, _ = problem.normal(J, target, w / sigma**2)
-    band = _normal.covariance_band(_normal.factor(ab))
+    band = _normal.covariance_band(_normal.factor(
+        ab, rebuild=lambda: problem.normal(J, target, w / sigma**2)[0]))
     cov_X = problem.points.marginal(band)
     p_eff = float(np.sum(w * np.einsum("naj,njk,nak->n", J, cov_X, J)) / sigma**2)
     n_res = 2 * len(r)
