@@ -21,7 +21,7 @@ tests run both and compare, and a mutation of the equation fails both.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any, TypeVar, cast
+from typing import Any, Literal, TypeVar, cast
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -46,7 +46,7 @@ def kernel(fn: F | None = None, *, inline: bool = False) -> Any:
         raise PslogError(f"numba could not start ({type(exc).__name__}: {exc}); check the "
                          f"NUMBA_* environment variables") from exc
 
-    how = "always" if inline else "never"
+    how: Literal["never", "always"] = "always" if inline else "never"
     try:
         return cast(F, numba.njit(cache=True, nogil=True, error_model="numpy",
                                   inline=how)(fn))
