@@ -274,12 +274,14 @@ def compile_times() -> None:
 _PAIRED_CHILD = """
 import sys, time
 from pslog import SimulationOptions, apply_timing, builtin_rig, get_motion, simulate
+import pslog
 from pslog.fusion import fuse
 minutes, repeat = float(sys.argv[1]), int(sys.argv[2])
 rig = apply_timing(builtin_rig("paper3"), "typeA")
 obs = simulate(rig, get_motion("turntable"), minutes * 60,
                SimulationOptions(noise_px=0.5, seed=0))[0].best()
 points = len(fuse(obs, rig, "typeA"))
+assert pslog.__file__.startswith(sys.argv[3]), (pslog.__file__, sys.argv[3])
 best = float("inf")
 for _ in range(repeat):
     start = time.process_time()
@@ -303,13 +305,18 @@ def paired(base: str, minutes: float, repeat: int, rounds: int) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         archive = subprocess.run(["git", "-C", str(root), "archive", base, "pslog"],
                                  check=True, capture_output=True).stdout
-        subprocess.run(["tar", "-x", "-C", tmp], input=archive, check=True)
+        # (the children run in an empty folder: ``python -c`` puts its working folder
+        # first on sys.path, and a run inside the base's folder timed the base twice)
+        base_tree, empty = Path(tmp) / "base", Path(tmp) / "run"
+        base_tree.mkdir()
+        empty.mkdir()
+        subprocess.run(["tar", "-x", "-C", str(base_tree)], input=archive, check=True)
         figures: dict[str, list[float]] = {"base": [], "now": []}
         for _ in range(rounds):
-            for label, path in (("base", tmp), ("now", str(root))):
+            for label, path in (("base", str(base_tree)), ("now", str(root))):
                 env = dict(os.environ, PYTHONPATH=path)
                 out = subprocess.run([sys.executable, "-c", _PAIRED_CHILD, str(minutes),
-                                      str(repeat)], env=env, check=True, cwd=tmp,
+                                      str(repeat), path], env=env, check=True, cwd=empty,
                                      capture_output=True, text=True).stdout.split()
                 seconds, points = float(out[0]), int(out[1])
                 figures[label].append(points / seconds)

@@ -160,11 +160,19 @@ def test_kernel_equals_columnar_reference_and_py_func(seed, max_gap_ns):
     assert 0 < np.count_nonzero(reference) < len(events)
     compiled = innovation.kinked_points(prep, events, past, sigma, max_gap_ns)
     assert compiled.tobytes() == reference.tobytes()
-    python = np.zeros(len(events), dtype=bool)
+    args = _kernel_args(prep, events, past, sigma, max_gap_ns)
+    change, root = np.empty(len(args[13])), np.empty(len(args[13]))
     with np.errstate(all="ignore"):  # (numpy scalars warn where the kernel gives inf/nan)
-        _pseudo_kernel.kink_kernel.py_func(
-            *_kernel_args(prep, events, past, sigma, max_gap_ns), python)
-    assert python.tobytes() == reference.tobytes()
+        _pseudo_kernel.bend_rows.py_func(args[13], args[14], args[11], args[12], NS, change,
+                                         root)
+    # the kernel with bend_rows' tables and without (each triplet's terms where read: a
+    # stream's one point), compiled and in Python
+    for tables in ((change, root), (np.empty(0), np.empty(0))):
+        for fn in (_pseudo_kernel.kink_kernel, _pseudo_kernel.kink_kernel.py_func):
+            python = np.zeros(len(events), dtype=bool)
+            with np.errstate(all="ignore"):
+                fn(*args, python, *tables)
+            assert python.tobytes() == reference.tobytes()
 
 
 def test_scalar_noise_and_none_equal_reference():

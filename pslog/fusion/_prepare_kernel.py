@@ -52,7 +52,7 @@ def rays_from_normalized(xy, R, out):
         out[i, 2] = d2 / norm
 
 
-@kernel
+@kernel(inline=True)
 def homogeneous(m, c, u, v):
     """``M (u, v, 1)`` (3 floats) for camera c's 3 x 3 matrix ``m[c]`` (row-major, 9
     entries): each row ``(m0 u + m1 v) + m2``, the order numpy's ``@`` of these columns
@@ -62,7 +62,7 @@ def homogeneous(m, c, u, v):
             m[c, 6] * u + m[c, 7] * v + m[c, 8])
 
 
-@kernel
+@kernel(inline=True)
 def ray(ki, rr, c, u, v):
     """Unit world direction (3 floats) of undistorted pixel (u, v) of camera c:
     ``Rᵀ K⁻¹ (u, v, 1)`` normalised (:meth:`Prepared.rays_t`, operation for operation)."""

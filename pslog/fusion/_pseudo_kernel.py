@@ -79,7 +79,7 @@ def _dot3(a0, a1, a2, b0, b1, b2):
     return out
 
 
-@kernel
+@kernel(inline=True)
 def _crossing(centers, ca, a0, a1, a2, cb, b0, b1, b2):
     """Step 3, the crossing of rays ``C_a + s a`` and ``C_b + k b`` (``C``: ``centers`` of
     cameras ``ca``, ``cb``): the midpoint of their common perpendicular; returns (miss, s, k,
@@ -123,7 +123,7 @@ def _crossing(centers, ca, a0, a1, a2, cb, b0, b1, b2):
     return math.sqrt(miss), s, k, x, y, z
 
 
-@kernel
+@kernel(inline=True)
 def _distorted(cam, c, x, y):
     """Pixels of ideal normalised (x, y) through camera c's lens (reprojection's
     ``_distorted_pixels``); ``cam[c]``: K (9), R (9), t (3), dist (5), box (4), lens flag."""
@@ -138,14 +138,14 @@ def _distorted(cam, c, x, y):
     return cam[c, 0] * xd + cam[c, 1] * yd + cam[c, 2], cam[c, 4] * yd + cam[c, 5]
 
 
-@kernel
+@kernel(inline=True)
 def _in_camera(cam, c, p0, p1, p2, i):
     """Coordinate i of world point (p0, p1, p2) in camera c's frame, ``R p + t``."""
     return p0 * cam[c, 9 + 3 * i] + p1 * cam[c, 10 + 3 * i] + p2 * cam[c, 11 + 3 * i] \
         + cam[c, 18 + i]
 
 
-@kernel
+@kernel(inline=True)
 def _reprojection(cam, c, p0, p1, p2, u_img, v_img):
     """Distance in camera c's recorded image between world point (p0, p1, p2)'s projection
     and the undistorted pixel (u_img, v_img), pixels; NaN behind the camera
@@ -167,7 +167,7 @@ def _reprojection(cam, c, p0, p1, p2, u_img, v_img):
     return math.sqrt(u) if in_front else np.nan
 
 
-@kernel
+@kernel(inline=True)
 def _invalid(cam, c, p0, p1, p2):
     """:func:`~pslog.fusion._prepare.invalid_points`' bits for one contributing camera c
     and a finite point (p0, p1, p2): BEHIND (1) at or behind its image plane, OUTSIDE_VIEW
@@ -185,7 +185,7 @@ def _invalid(cam, c, p0, p1, p2):
     return 2
 
 
-@kernel
+@kernel(inline=True)
 def _pseudo_one(r, not_after, max_gap_ns, time_ns, camera, prev_b, next_b, uv, observed_rays,
                 centers, ki, rr, f9, cam, span_tie_ns, min_angle_deg, ff, fi, slot, i):
     """Steps 1-3 of the paper's section 2.2 for past observation ``r`` from a partner
@@ -323,7 +323,7 @@ def pseudo_kernel(rows, not_after, max_gap_ns, time_ns, camera, prev_b, next_b, 
                     ff, fi, 0, i)
 
 
-@kernel
+@kernel(inline=True)
 def _pixel_jacobian(jac4, lens, row, g0, g1):
     """``g L`` of a (2,) row vector g and the detection's d(undistorted) / d(recorded pixel)
     ``L`` (``jac4[row]``, (2, 2) row-major, NaN as 0); ``g`` itself without lens distortion
@@ -773,6 +773,39 @@ def _bend(a, b, c, px, py, pz, speed, sigma, time_ns, uv, camera, lens, ns):
 
 
 @kernel
+def bend_rows(time_ns, uv, before, after, ns, change, root):
+    """:func:`_bend`'s terms that depend on its triplet alone, for the triplet around each
+    row ``b``, ``(before[b], b, after[b])`` (its camera's rows before and after it), made
+    once per row instead of at every point whose kink test reads that triplet: ``change``
+    ``|Δv|`` (px/s) and ``root`` ``√(1/δ1² + (1/δ1 + 1/δ2)² + 1/δ2²)`` (1/s), (n,) float64,
+    written (NaN where the row has no triplet). The same IEEE operations on the same
+    operands as :func:`_bend`'s (the same bits); a pair of consecutive rows' interval,
+    velocity and inverse intervals are made once and read by the triplets on both sides."""
+    n = time_ns.shape[0]
+    pair = np.empty((n, 5))  # per row a and its camera's next row: δ, v (2), 1/δ, 1/δ²
+    for a in range(n):
+        b = after[a]
+        if b < 0:
+            continue
+        dt = (time_ns[b] - time_ns[a]) / ns
+        pair[a, 0] = dt
+        pair[a, 1] = (uv[b, 0] - uv[a, 0]) / dt
+        pair[a, 2] = (uv[b, 1] - uv[a, 1]) / dt
+        pair[a, 3] = 1.0 / dt
+        pair[a, 4] = 1.0 / (dt * dt)
+    for b in range(n):
+        a, c = before[b], after[b]
+        if a < 0 or c < 0:
+            change[b] = np.nan
+            root[b] = np.nan
+            continue
+        dx, dy = pair[b, 1] - pair[a, 1], pair[b, 2] - pair[a, 2]
+        change[b] = math.sqrt(dx * dx + dy * dy)
+        both = pair[a, 3] + pair[b, 3]
+        root[b] = math.sqrt(pair[a, 4] + both * both + pair[b, 4])
+
+
+@kernel
 def _bent(a, b, c, event, t_event, max_gap_ns, px, py, pz, speed, sigma, time_ns, uv,
           camera, lens, ns):
     """:func:`_bend` where the triplet is available (all three rows, none after the newest
@@ -783,8 +816,20 @@ def _bent(a, b, c, event, t_event, max_gap_ns, px, py, pz, speed, sigma, time_ns
 
 
 @kernel
+def _quiet(held, change, root, sigma, calm):
+    """Whether :func:`bend_rows`' tables decide a triplet within the noise: ``held`` (they
+    hold it: its rows are the camera's consecutive rows around its middle one), ``change``
+    and ``root`` its row's entries, ``calm`` (the camera's focal length and the speed are
+    >= 0). :func:`_bend`'s usual case, its same decision (no bend) from the same bits,
+    without its divisions; False where undecided (then :func:`_bent`). Scalars only: a
+    compiled call takes a reference to each array it is given (two atomic operations)."""
+    return held and calm and change <= _KINK_SIGMAS * (sigma * root)
+
+
+@kernel
 def kink_kernel(events, rows1, prev1, next1, world1, rows2, prev2, next2, world2, predicted,
-                sigma, before, after, time_ns, uv, camera, lens, max_gap_ns, ns, out):
+                sigma, before, after, time_ns, uv, camera, lens, max_gap_ns, ns, out,
+                change, root):
     """Type A's kink flags, point by point (:func:`pslog.fusion.innovation.kinked_points`,
     whose docstring derives the test and names the triplets).
 
@@ -792,8 +837,15 @@ def kink_kernel(events, rows1, prev1, next1, world1, rows2, prev2, next2, world2
     (k, 3) metres of ``P_{t-1}`` (1) and ``P_{t-2}`` (2); predicted (k, 3) metres; sigma (k,)
     px; before/after (n,) int64, each row's previous/next row of its camera (-1: none);
     time_ns (n,) int64; uv (n, 2) undistorted px; camera (n,) int64; lens (n_cameras, 8);
-    max_gap_ns int; ns the nanoseconds per second; out (k,) bool, written.
+    max_gap_ns int; ns the nanoseconds per second; out (k,) bool, written; change, root
+    (n,) float64: :func:`bend_rows`' tables of these rows (or of no rows: each triplet's
+    terms made where it is read, as a stream's one point does).
     """
+    tables = change.shape[0] > 0
+    m = lens.shape[0]
+    focal_ok = np.empty(m, dtype=np.bool_)  # (_bend's focal >= 0, per camera)
+    for cam in range(m):
+        focal_ok[cam] = _max(lens[cam, 0], lens[cam, 1]) >= 0.0
     for i in range(len(events)):
         event = events[i]
         t_event = time_ns[event]
@@ -802,6 +854,7 @@ def kink_kernel(events, rows1, prev1, next1, world1, rows2, prev2, next2, world2
                            + (world1[i, 1] - world2[i, 1]) * (world1[i, 1] - world2[i, 1])
                            + (world1[i, 2] - world2[i, 2]) * (world1[i, 2] - world2[i, 2]))
                  / ((time_ns[rows1[i]] - time_ns[rows2[i]]) / ns))
+        calm = speed >= 0.0
         kinked = False
         for s in range(2):
             prev = prev1[i] if s == 0 else prev2[i]
@@ -811,17 +864,34 @@ def kink_kernel(events, rows1, prev1, next1, world1, rows2, prev2, next2, world2
             first = before[prev] if prev >= 0 else -1
             # a bend at prev: the change lies between prev and next if the triplet after
             # bends too, or (that one still to come) if the triplet before does not
-            if _bent(first, prev, nxt, event, t_event, max_gap_ns, px, py, pz, speed, sg,
-                     time_ns, uv, camera, lens, ns):
+            # (_quiet first: most triplets are decided by bend_rows' tables, no divisions)
+            # (each triplet first through _quiet: most are decided by bend_rows' tables)
+            b = max(prev, 0)
+            quiet = _quiet(tables and prev >= 0 and before[b] == first and after[b] == nxt,
+                           change[b] if tables else 0.0, root[b] if tables else 0.0, sg,
+                           calm and focal_ok[camera[b]])
+            if not quiet and _bent(first, prev, nxt, event, t_event, max_gap_ns, px, py, pz,
+                                   speed, sg, time_ns, uv, camera, lens, ns):
                 later = after[nxt] if nxt >= 0 else -1
                 if (prev >= 0 and nxt >= 0 and later >= 0 and later <= event
                         and t_event - time_ns[prev] <= 2 * max_gap_ns):  # the one after: has
-                    kinked = kinked or _bend(prev, nxt, later, px, py, pz, speed, sg,
-                                             time_ns, uv, camera, lens, ns)
+                    quiet = _quiet(tables and before[nxt] == prev and after[nxt] == later,
+                                   change[nxt] if tables else 0.0,
+                                   root[nxt] if tables else 0.0, sg,
+                                   calm and focal_ok[camera[nxt]])
+                    kinked = kinked or (not quiet and _bend(
+                        prev, nxt, later, px, py, pz, speed, sg, time_ns, uv, camera, lens,
+                        ns))
                 else:
-                    kinked = kinked or not _bent(before[first] if first >= 0 else -1, first,
-                                                 prev, event, t_event, max_gap_ns, px, py,
-                                                 pz, speed, sg, time_ns, uv, camera, lens, ns)
+                    zero = before[first] if first >= 0 else -1
+                    b = max(first, 0)
+                    quiet = _quiet(tables and first >= 0 and before[b] == zero
+                                   and after[b] == prev, change[b] if tables else 0.0,
+                                   root[b] if tables else 0.0, sg,
+                                   calm and focal_ok[camera[b]])
+                    kinked = kinked or not (not quiet and _bent(
+                        zero, first, prev, event, t_event, max_gap_ns, px, py, pz, speed, sg,
+                        time_ns, uv, camera, lens, ns))
         # the newest camera: its last triplet bends at b, the change between b and the
         # newest detection (or between a and b, if the triplet before bends too); refused
         # when that interval lies inside eq. (2)'s span, from P_{t-2} on (before it, the
@@ -830,11 +900,20 @@ def kink_kernel(events, rows1, prev1, next1, world1, rows2, prev2, next2, world2
             b = before[event]
             a = before[b] if b >= 0 else -1
             px, py, pz = predicted[i, 0], predicted[i, 1], predicted[i, 2]
-            if _bent(a, b, event, event, t_event, max_gap_ns, px, py, pz, speed, sg,
-                     time_ns, uv, camera, lens, ns):
+            h = max(b, 0)
+            quiet = _quiet(tables and b >= 0 and before[h] == a and after[h] == event,
+                           change[h] if tables else 0.0, root[h] if tables else 0.0, sg,
+                           calm and focal_ok[camera[h]])
+            if not quiet and _bent(a, b, event, event, t_event, max_gap_ns, px, py, pz,
+                                   speed, sg, time_ns, uv, camera, lens, ns):
                 start = time_ns[max(b, 0)]
-                if _bent(before[a] if a >= 0 else -1, a, b, event, t_event, max_gap_ns, px,
-                         py, pz, speed, sg, time_ns, uv, camera, lens, ns):
+                zero = before[a] if a >= 0 else -1
+                h = max(a, 0)
+                quiet = _quiet(tables and a >= 0 and before[h] == zero and after[h] == b,
+                               change[h] if tables else 0.0, root[h] if tables else 0.0, sg,
+                               calm and focal_ok[camera[h]])
+                if not quiet and _bent(zero, a, b, event, t_event, max_gap_ns, px, py, pz,
+                                       speed, sg, time_ns, uv, camera, lens, ns):
                     start = time_ns[max(a, 0)]
                 kinked = start >= time_ns[rows2[i]]
         out[i] = kinked

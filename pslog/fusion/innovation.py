@@ -305,10 +305,15 @@ def kinked_points(prep, events: np.ndarray, past: tuple, noise_px: float | np.nd
     # point by point, each from its own rows (compiled; no (k,) temporaries per triplet, so
     # a 90-minute match needs no blocks; the same bits in a stream as in the batch run)
     kinked = np.zeros(k, dtype=bool)
+    time_ns = ints(prep.obs.time_ns)
+    uv = np.asarray(prep.uv_undistorted, dtype=np.float64)
+    # each row's triplet terms once (most points' tests read three triplets, each read by
+    # several points): _pseudo_kernel.bend_rows
+    change, root = np.empty(len(time_ns)), np.empty(len(time_ns))
+    _pseudo_kernel.bend_rows(time_ns, uv, before, after, NS, change, root)
     _pseudo_kernel.kink_kernel(
         ints(events), ints(p1.row), ints(p1.prev_row), ints(p1.next_row),
         floats(p1.points_world), ints(p2.row), ints(p2.prev_row), ints(p2.next_row),
-        floats(p2.points_world), floats(predicted), sigma, before, after,
-        ints(prep.obs.time_ns), np.asarray(prep.uv_undistorted, dtype=np.float64),
-        ints(prep.obs.camera), lens, int(max_gap_ns), NS, kinked)
+        floats(p2.points_world), floats(predicted), sigma, before, after, time_ns, uv,
+        ints(prep.obs.camera), lens, int(max_gap_ns), NS, kinked, change, root)
     return kinked

@@ -468,6 +468,7 @@ class TypeAStream:
         self._max_gap_ns = int(self._max_gap_s * NS)
         self._tables = self._shared["_kernel_tables"]
         self._lens_table = template.lens_rows
+        self._no_rows = np.empty(0)  # (kink_kernel without bend_rows' tables)
         # cameras without lens distortion: their new rows in one compiled pass
         # (_prepare_kernel.lensless_rows; a lens's rows go through numpy as prepare does)
         self._lensless = [not np.any(c.dist) for c in rig.cameras]
@@ -649,7 +650,8 @@ class TypeAStream:
                     past_points[0], past_rows[1, :, 0], past_rows[1, :, 1],
                     past_rows[1, :, 2], past_points[1], predicted, sigma,
                     *_window_previous_next(camera64, m, previous_next), time_ns, uv_und,
-                    camera64, self._lens_table, self._max_gap_ns, NS, kinked_out)
+                    camera64, self._lens_table, self._max_gap_ns, NS, kinked_out,
+                    self._no_rows, self._no_rows)
                 kinked = bool(kinked_out[0])
             keep = good and not failed and not kinked
         else:
