@@ -1,6 +1,8 @@
 # The pure-Python filter as it was before its step was compiled (session 6), kept verbatim
 # (imports made absolute; the jump replay's gravity weight mended as in pslog/fusion/filter.py)
-# as the reference benchmarks/filter_equality.py compares the compiled filter with.
+# as the reference benchmarks/filter_equality.py compares the compiled filter with. Later
+# changes of the algorithm that no FilterOptions switch off are ported here, each marked
+# with its session (session 8, 4efae4a: the noise estimate at each (re)start).
 """``filter``: a causal extended Kalman filter, a point at every detection it can vouch for.
 
 Each detection updates the ball's state at its own (corrected, :mod:`pslog.timing`) capture
@@ -1047,7 +1049,12 @@ class BallFilter:
                     return None
             elif fit is not None:
                 x, P, residuals = fit
-                self.set_state(window[-1][0], x[:3], x[3:], P)
+                # session 8 (4efae4a): the noise estimate starts again at each (re)start,
+                # from its prior (or the estimate, if larger) and the window's residuals,
+                # the start's covariance at the updated variance
+                var = self._start_var()
+                self._alpha = self.options.noise_prior_weight
+                self._var = var
                 if self._adapt:  # the window's residuals: a conjugate update of σ²
                     n = len(window)
                     decay = (1.0 - self._adapt) ** n
@@ -1056,6 +1063,9 @@ class BallFilter:
                             + 0.5 * float(np.sum(residuals * residuals)))
                     self._alpha = alpha
                     self._var = min(max(beta / alpha, self._var_min), self._var_max)
+                scale = float(self._var) / var
+                P = [a * scale for a in P]
+                self.set_state(window[-1][0], x[:3], x[3:], P)
                 for t, c, _, _ in window:
                     self._cam_last[c] = t
                 P = self._P
@@ -1064,6 +1074,14 @@ class BallFilter:
                                    0.0, 0.0, 1.0)
             del window[0]
         return None
+
+    def _start_var(self) -> float:
+        """The pixel variance a (re)start is judged by (session 8, 4efae4a): the estimate,
+        or the prior's ``noise_px²`` if larger."""
+        var = float(self._var)
+        if self._adapt == 0.0:
+            return var
+        return max(var, min(max(self.options.noise_px ** 2, self._var_min), self._var_max))
 
     def _ray(self, time_ns: int, camera: int, u: float, v: float):
         key = (time_ns, camera)
@@ -1123,12 +1141,13 @@ class BallFilter:
         residuals = np.hypot(r[0::2], r[1::2])
         # every detection inside the gate, and the whole fit inside the chi-square quantile
         # of its 2n - 6 degrees of freedom (a break inside the window shows in the sum)
-        if not (np.all(residuals ** 2 <= self._gate * self._var)
-                and float(r @ r) <= _chi2_quantile(len(r) - 6) * self._var):
+        var = self._start_var()
+        if not (np.all(residuals ** 2 <= self._gate * var)
+                and float(r @ r) <= _chi2_quantile(len(r) - 6) * var):
             return None
         info = J.T @ J
         try:
-            cov = self._var * np.linalg.inv(info)
+            cov = var * np.linalg.inv(info)
         except np.linalg.LinAlgError:
             return None
         if (not np.all(np.isfinite(cov)) or np.linalg.cond(info) > 1e14
