@@ -1,8 +1,6 @@
 # The pure-Python filter as it was before its step was compiled (session 6), kept verbatim
 # (imports made absolute; the jump replay's gravity weight mended as in pslog/fusion/filter.py)
-# as the reference benchmarks/filter_equality.py compares the compiled filter with. Later
-# changes of the algorithm that no FilterOptions switch off are ported here, each marked
-# with its session (session 8, 4efae4a: the noise estimate at each (re)start).
+# as the reference benchmarks/filter_equality.py compares the compiled filter with.
 """``filter``: a causal extended Kalman filter, a point at every detection it can vouch for.
 
 Each detection updates the ball's state at its own (corrected, :mod:`pslog.timing`) capture
@@ -126,6 +124,8 @@ _LOG_ODDS_CLIP = 4.0
 _ZERO6 = (0.0,) * 6
 #: What :meth:`BallFilter._fit` returns for a fit whose velocity alone is too uncertain.
 _SHORT = "short"
+#: A fit whose residuals pass but whose position is too uncertain (session 10).
+_WEAK = "weak"
 #: Accepted updates (one at least from another camera) that confirm a jump.
 _CONFIRM_UPDATES = 2
 #: The turn model's probability when it joins the model set, and below which it leaves it.
@@ -1042,11 +1042,13 @@ class BallFilter:
             if len({w[1] for w in window}) < 2:
                 return None
             fit = self._fit(window)
-            if fit is _SHORT:
-                if window[-1][0] - window[0][0] < self._init_grow_ns:
+            if fit is _SHORT or fit is _WEAK:
+                # session 10: a fit failing on its uncertainty alone ends the search (a
+                # shorter window has less information) and keeps the window to grow
+                if fit is _SHORT and window[-1][0] - window[0][0] < self._init_grow_ns:
                     self._init_cap = min(max(self._init_cap, len(window) + 1),
                                          self.options.init_max_window)
-                    return None
+                return None
             elif fit is not None:
                 x, P, residuals = fit
                 # session 8 (4efae4a): the noise estimate starts again at each (re)start,
@@ -1150,9 +1152,10 @@ class BallFilter:
             cov = var * np.linalg.inv(info)
         except np.linalg.LinAlgError:
             return None
-        if (not np.all(np.isfinite(cov)) or np.linalg.cond(info) > 1e14
-                or np.trace(cov[:3, :3]) > self.options.max_init_std_m ** 2):
+        if not np.all(np.isfinite(cov)) or np.linalg.cond(info) > 1e14:
             return None  # a degenerate geometry (rays nearly parallel): no trustworthy start
+        if np.trace(cov[:3, :3]) > self.options.max_init_std_m ** 2:
+            return _WEAK  # session 10: too little information (a shorter window has less)
         if np.trace(cov[3:, 3:]) > self.options.max_init_speed_std ** 2:
             return _SHORT  # too short a window (or mostly one camera's): more detections
         cov = 0.5 * (cov + cov.T)

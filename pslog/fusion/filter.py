@@ -146,6 +146,9 @@ _ZERO6 = (0.0,) * 6
 _ZERO3 = np.zeros(3)  # the supported model's gravity in the window fit
 #: What :meth:`BallFilter._fit` returns for a fit whose velocity alone is too uncertain.
 _SHORT = "short"
+#: What :meth:`BallFilter._fit` returns for a fit that passes the residual tests but whose
+#: position is too uncertain (too little information: a shorter window has still less).
+_WEAK = "weak"
 #: Accepted updates (one at least from another camera) that confirm a jump.
 _CONFIRM_UPDATES = 2
 #: The turn model's probability when it joins the model set, and below which it leaves it.
@@ -1280,8 +1283,8 @@ def _run(S, I, cams, O, N, times, cameras, uv, start, rows, index, n_out):
 
 # ---- the start's window fit (compiled: a start attempt runs it up to 2 x 5 times) -------------
 #: :func:`_window_fit`'s results: not trustworthy, too short (the velocity's uncertainty
-#: alone fails), a fit
-_WFIT_NONE, _WFIT_SHORT, _WFIT_OK = 0, 1, 2
+#: alone fails), a fit, too weak (the residuals pass, the position's uncertainty fails)
+_WFIT_NONE, _WFIT_SHORT, _WFIT_OK, _WFIT_WEAK = 0, 1, 2, 3
 
 
 @kernel
@@ -1405,9 +1408,10 @@ def _window_fit(cams, cam, uv, tau, O, D, g, k, var, gate, chi2, max_std2, max_s
     info = J.T @ J
     cov = var * np.linalg.solve(info, np.eye(6))  # numpy's inv: LAPACK gesv on I
     sv = np.linalg.svd(info)[1]
-    if (not np.all(np.isfinite(cov)) or sv[0] / sv[5] > 1e14
-            or cov[0, 0] + (cov[1, 1] + cov[2, 2]) > max_std2):
+    if not np.all(np.isfinite(cov)) or sv[0] / sv[5] > 1e14:
         return _WFIT_NONE  # a degenerate geometry (rays nearly parallel)
+    if cov[0, 0] + (cov[1, 1] + cov[2, 2]) > max_std2:
+        return _WFIT_WEAK  # consistent, but too little information to place the ball
     if cov[3, 3] + (cov[4, 4] + cov[5, 5]) > max_speed2:
         return _WFIT_SHORT
     cov_out[:, :] = 0.5 * (cov + cov.T)
@@ -1794,12 +1798,16 @@ class BallFilter:
         """Fit the window (newest last), dropping its oldest detection until a fit passes (a
         break or an outlier inside it) or fewer than ``init_detections`` are left (at most
         ``init_window - init_detections + 1`` fits per detection, and only while there is
-        no track); a fit that fails on its velocity's uncertainty alone, of a window shorter
-        than ``init_span_s``, ends the search and lets the window grow instead (a shorter
-        window would pin the velocity still worse: at 60 fps and above ``init_window``
-        detections span too short a time; at 30 fps ``init_detections`` of a 3-camera rig
-        span a frame period, 33 ms, so nothing grows there); on success start the track at
-        the newest detection, write its point into ``out`` and return True.
+        no track); a fit that passes the residual tests but fails on its uncertainty alone
+        (``_WEAK``: the position's; ``_SHORT``: the velocity's) ends the search and keeps
+        the window whole (a shorter window has still less information: cut, it kept
+        ``init_detections - 1`` detections and every later fit failed the same way, a
+        two-camera track at 1 px never started again), and a ``_SHORT`` window spanning
+        less than ``init_span_s`` may grow beyond ``init_window`` (at 60 fps and above
+        ``init_window`` detections span too short a time; at 30 fps ``init_detections``
+        of a 3-camera rig span a frame period, 33 ms, so nothing grows there); on success
+        start the track at the newest detection, write its point into ``out`` and return
+        True.
 
         The kernel has already dropped the detections older than the window's span and
         found at least ``init_detections`` of two cameras (:func:`_window_trim`)."""
@@ -1808,11 +1816,11 @@ class BallFilter:
             if len({w[1] for w in window}) < 2:
                 break
             fit, mu, e, turn = self._fit_models(window)
-            if fit is _SHORT:
-                if window[-1][0] - window[0][0] < self._init_grow_ns:
+            if fit is _SHORT or fit is _WEAK:
+                if fit is _SHORT and window[-1][0] - window[0][0] < self._init_grow_ns:
                     self._I[_ICAP] = min(max(int(self._I[_ICAP]), len(window) + 1),
                                          self.options.init_max_window)
-                    break
+                break
             elif fit is not None:
                 x, P, residuals = fit
                 # the noise estimate starts again at each (re)start, from its prior (or the
@@ -2038,6 +2046,8 @@ class BallFilter:
             return None
         if status == _WFIT_SHORT:
             return _SHORT  # too short a window (or mostly one camera's): more detections
+        if status == _WFIT_WEAK:
+            return _WEAK
         return theta.tolist(), cov.ravel().tolist(), residuals
 
 
