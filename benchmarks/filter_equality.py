@@ -50,10 +50,12 @@ from pslog.rig import apply_timing, builtin_rig  # noqa: E402
 
 #: The compiled filter as the base was: without the unseen-jump variance
 #: (FilterOptions.jump_rate_per_s), with the ballistic model's drag in the supported model too
-#: and the ballistic start alone (supported_drag_per_m, start_models: session 8).
+#: and the ballistic start alone (supported_drag_per_m, start_models: session 8), the noise
+#: prior at the stated noise alone (window_noise_prior: session 10).
 BASE_OPTIONS = compiled.FilterOptions(jump_rate_per_s=0.0, start_models=False,
                                       supported_drag_per_m=compiled.FilterOptions().drag_per_m,
-                                      max_std_m=base.FilterOptions().max_std_m)
+                                      max_std_m=base.FilterOptions().max_std_m,
+                                      window_noise_prior=False)
 
 COLUMNS = ("time_ns", "camera", "position", *compiled.FILTER_QUALITY)
 

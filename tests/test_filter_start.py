@@ -23,7 +23,8 @@ from pslog.records import NS
 
 #: The filter before session 8: the ballistic start alone, the golf ball's drag in both
 #: models of the pair (bit for bit its points: benchmarks/filter_equality.py).
-BEFORE = FilterOptions(start_models=False, supported_drag_per_m=Ball().drag_per_metre)
+BEFORE = FilterOptions(start_models=False, supported_drag_per_m=Ball().drag_per_metre,
+                       window_noise_prior=False)
 
 
 def _detections(motion: str, noise: float = 0.0, fps: float = 30.0):
@@ -46,14 +47,16 @@ def _started(rig, obs, options=None) -> BallFilter:
 def test_start_carries_each_models_fit():
     # noise-free line (3 m/s, no gravity, no drag): the supported model's state (x - μ e)
     # is its exact fit, the ballistic one's (x + (1 - μ) e) carries gravity's curvature in
-    # its velocity; a start's 4 detections over 44 ms barely tell them apart (μ stays near
-    # its prior), but the IMM's μ moves the state to the supported fit as detections come
+    # its velocity; a start's 4 detections over 44 ms tell them apart only by the noise
+    # the start assumes (at the stated 0.5 px μ stayed near its prior; with the window's
+    # own bound of its noise, session 10, it is at its bound 0.1), and the IMM's μ moves the
+    # state to the supported fit as detections come
     rig, obs, truth = _detections("straight")
     flt = _started(rig, obs)
     t = flt.time_ns
     v_true = (truth.at(np.array([t + 1000])) - truth.at(np.array([t - 1000])))[0] / 2e-6
     x, e, mu = np.array(flt._x), np.array(flt._e), flt._mu
-    assert 0.1 <= mu <= 0.9
+    assert 0.1 - 1e-12 <= mu <= 0.9
     np.testing.assert_allclose((x - mu * e)[3:], v_true, atol=1e-6)
     assert np.linalg.norm((x + (1 - mu) * e)[3:] - v_true) > 0.05
     before = _started(rig, obs, BEFORE)
