@@ -124,6 +124,8 @@ _LOG_ODDS_CLIP = 4.0
 _ZERO6 = (0.0,) * 6
 #: What :meth:`BallFilter._fit` returns for a fit whose velocity alone is too uncertain.
 _SHORT = "short"
+#: A fit whose residuals pass but whose position is too uncertain (session 10).
+_WEAK = "weak"
 #: Accepted updates (one at least from another camera) that confirm a jump.
 _CONFIRM_UPDATES = 2
 #: The turn model's probability when it joins the model set, and below which it leaves it.
@@ -1040,14 +1042,21 @@ class BallFilter:
             if len({w[1] for w in window}) < 2:
                 return None
             fit = self._fit(window)
-            if fit is _SHORT:
-                if window[-1][0] - window[0][0] < self._init_grow_ns:
+            if fit is _SHORT or fit is _WEAK:
+                # session 10: a fit failing on its uncertainty alone ends the search (a
+                # shorter window has less information) and keeps the window to grow
+                if fit is _SHORT and window[-1][0] - window[0][0] < self._init_grow_ns:
                     self._init_cap = min(max(self._init_cap, len(window) + 1),
                                          self.options.init_max_window)
-                    return None
+                return None
             elif fit is not None:
                 x, P, residuals = fit
-                self.set_state(window[-1][0], x[:3], x[3:], P)
+                # session 8 (4efae4a): the noise estimate starts again at each (re)start,
+                # from its prior (or the estimate, if larger) and the window's residuals,
+                # the start's covariance at the updated variance
+                var = self._start_var()
+                self._alpha = self.options.noise_prior_weight
+                self._var = var
                 if self._adapt:  # the window's residuals: a conjugate update of σ²
                     n = len(window)
                     decay = (1.0 - self._adapt) ** n
@@ -1056,6 +1065,9 @@ class BallFilter:
                             + 0.5 * float(np.sum(residuals * residuals)))
                     self._alpha = alpha
                     self._var = min(max(beta / alpha, self._var_min), self._var_max)
+                scale = float(self._var) / var
+                P = [a * scale for a in P]
+                self.set_state(window[-1][0], x[:3], x[3:], P)
                 for t, c, _, _ in window:
                     self._cam_last[c] = t
                 P = self._P
@@ -1064,6 +1076,14 @@ class BallFilter:
                                    0.0, 0.0, 1.0)
             del window[0]
         return None
+
+    def _start_var(self) -> float:
+        """The pixel variance a (re)start is judged by (session 8, 4efae4a): the estimate,
+        or the prior's ``noise_px²`` if larger."""
+        var = float(self._var)
+        if self._adapt == 0.0:
+            return var
+        return max(var, min(max(self.options.noise_px ** 2, self._var_min), self._var_max))
 
     def _ray(self, time_ns: int, camera: int, u: float, v: float):
         key = (time_ns, camera)
@@ -1123,17 +1143,19 @@ class BallFilter:
         residuals = np.hypot(r[0::2], r[1::2])
         # every detection inside the gate, and the whole fit inside the chi-square quantile
         # of its 2n - 6 degrees of freedom (a break inside the window shows in the sum)
-        if not (np.all(residuals ** 2 <= self._gate * self._var)
-                and float(r @ r) <= _chi2_quantile(len(r) - 6) * self._var):
+        var = self._start_var()
+        if not (np.all(residuals ** 2 <= self._gate * var)
+                and float(r @ r) <= _chi2_quantile(len(r) - 6) * var):
             return None
         info = J.T @ J
         try:
-            cov = self._var * np.linalg.inv(info)
+            cov = var * np.linalg.inv(info)
         except np.linalg.LinAlgError:
             return None
-        if (not np.all(np.isfinite(cov)) or np.linalg.cond(info) > 1e14
-                or np.trace(cov[:3, :3]) > self.options.max_init_std_m ** 2):
+        if not np.all(np.isfinite(cov)) or np.linalg.cond(info) > 1e14:
             return None  # a degenerate geometry (rays nearly parallel): no trustworthy start
+        if np.trace(cov[:3, :3]) > self.options.max_init_std_m ** 2:
+            return _WEAK  # session 10: too little information (a shorter window has less)
         if np.trace(cov[3:, 3:]) > self.options.max_init_speed_std ** 2:
             return _SHORT  # too short a window (or mostly one camera's): more detections
         cov = 0.5 * (cov + cov.T)

@@ -85,9 +85,10 @@ def _numpy_fit(flt, window, ballistic=True):
         cov = var * np.linalg.inv(info)
     except np.linalg.LinAlgError:
         return None
-    if (not np.all(np.isfinite(cov)) or np.linalg.cond(info) > 1e14
-            or np.trace(cov[:3, :3]) > flt.options.max_init_std_m ** 2):
+    if not np.all(np.isfinite(cov)) or np.linalg.cond(info) > 1e14:
         return None
+    if np.trace(cov[:3, :3]) > flt.options.max_init_std_m ** 2:
+        return "weak"  # consistent, too little information (session 10)
     if np.trace(cov[3:, 3:]) > flt.options.max_init_speed_std ** 2:
         return "short"
     cov = 0.5 * (cov + cov.T)
@@ -205,7 +206,7 @@ def _same(a, b) -> bool:
 def test_compiled_window_fit_is_the_numpy_fit_bit_for_bit(rig, motion):
     m = rally(3.0, seed=3)[0] if motion == "rally" else get_motion(motion)
     seen = _windows(rig, m, 3.0, 0.3) + _windows(rig, m, 1.0, 1.0)
-    kinds = {"fit": 0, "None": 0, "short": 0, "turn": 0}
+    kinds = {"fit": 0, "None": 0, "short": 0, "weak": 0, "turn": 0}
     for flt, window, how in seen:
         if isinstance(how, tuple):  # the turn model's fit from the supported one
             new = flt._turn_fit(window, *how)
@@ -217,7 +218,7 @@ def test_compiled_window_fit_is_the_numpy_fit_bit_for_bit(rig, motion):
         kinds["fit" if isinstance(new, tuple) else str(new)] += 1
     # the comparison covers the fits that pass and, on the kicked rallies, ones that fail
     assert kinds["fit"] >= 2 and kinds["turn"] >= 1, kinds
-    assert motion != "rally" or kinds["None"] + kinds["short"] >= 1, kinds
+    assert motion != "rally" or kinds["None"] + kinds["short"] + kinds["weak"] >= 1, kinds
 
 
 def test_window_fit_kernel_equals_its_python_form():

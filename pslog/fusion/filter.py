@@ -104,6 +104,7 @@ Per-point quality (columns of the Track, NaN where not applicable):
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -146,6 +147,9 @@ _ZERO6 = (0.0,) * 6
 _ZERO3 = np.zeros(3)  # the supported model's gravity in the window fit
 #: What :meth:`BallFilter._fit` returns for a fit whose velocity alone is too uncertain.
 _SHORT = "short"
+#: What :meth:`BallFilter._fit` returns for a fit that passes the residual tests but whose
+#: position is too uncertain (too little information: a shorter window has still less).
+_WEAK = "weak"
 #: Accepted updates (one at least from another camera) that confirm a jump.
 _CONFIRM_UPDATES = 2
 #: The turn model's probability when it joins the model set, and below which it leaves it.
@@ -233,6 +237,11 @@ class FilterOptions:
         supported, coordinated turn) and starts each at its own fit with a probability from
         the fits' likelihoods; False: the ballistic fit alone starts the pair (``μ = 0.9``)
         and the turn model joins at the next detection at ``ω = 0`` (before session 8)
+    window_noise_prior : bool, a (re)start's noise prior is scaled by the smaller of the
+        stated (or estimated) variance and the start window's 99.9 % upper confidence bound
+        of its residual variance (``‖r‖² / χ²_{0.001}(2n - 6)``; empirical
+        Bayes: the stated noise stands unless the window shows it too large beyond doubt);
+        False: the stated variance alone (before session 10)
     jump_rate_per_s : float, expected rate ``λ_j`` of velocity jumps (kicks, bounces), 1/s:
         a point's reported covariance adds the variance ``λ_j T σ_j² T² / 3`` along its
         camera's ray of a jump no other camera has seen in the time ``T`` since another
@@ -275,6 +284,7 @@ class FilterOptions:
     jump_rate_per_s: float = 1.0
     supported_drag_per_m: float = 0.0
     start_models: bool = True
+    window_noise_prior: bool = True
 
     def __post_init__(self) -> None:
         for name in ("noise_px", "accel_psd", "gate", "jump_speed", "noise_prior_weight"):
@@ -1280,8 +1290,8 @@ def _run(S, I, cams, O, N, times, cameras, uv, start, rows, index, n_out):
 
 # ---- the start's window fit (compiled: a start attempt runs it up to 2 x 5 times) -------------
 #: :func:`_window_fit`'s results: not trustworthy, too short (the velocity's uncertainty
-#: alone fails), a fit
-_WFIT_NONE, _WFIT_SHORT, _WFIT_OK = 0, 1, 2
+#: alone fails), a fit, too weak (the residuals pass, the position's uncertainty fails)
+_WFIT_NONE, _WFIT_SHORT, _WFIT_OK, _WFIT_WEAK = 0, 1, 2, 3
 
 
 @kernel
@@ -1405,9 +1415,10 @@ def _window_fit(cams, cam, uv, tau, O, D, g, k, var, gate, chi2, max_std2, max_s
     info = J.T @ J
     cov = var * np.linalg.solve(info, np.eye(6))  # numpy's inv: LAPACK gesv on I
     sv = np.linalg.svd(info)[1]
-    if (not np.all(np.isfinite(cov)) or sv[0] / sv[5] > 1e14
-            or cov[0, 0] + (cov[1, 1] + cov[2, 2]) > max_std2):
+    if not np.all(np.isfinite(cov)) or sv[0] / sv[5] > 1e14:
         return _WFIT_NONE  # a degenerate geometry (rays nearly parallel)
+    if cov[0, 0] + (cov[1, 1] + cov[2, 2]) > max_std2:
+        return _WFIT_WEAK  # consistent, but too little information to place the ball
     if cov[3, 3] + (cov[4, 4] + cov[5, 5]) > max_speed2:
         return _WFIT_SHORT
     cov_out[:, :] = 0.5 * (cov + cov.T)
@@ -1794,12 +1805,16 @@ class BallFilter:
         """Fit the window (newest last), dropping its oldest detection until a fit passes (a
         break or an outlier inside it) or fewer than ``init_detections`` are left (at most
         ``init_window - init_detections + 1`` fits per detection, and only while there is
-        no track); a fit that fails on its velocity's uncertainty alone, of a window shorter
-        than ``init_span_s``, ends the search and lets the window grow instead (a shorter
-        window would pin the velocity still worse: at 60 fps and above ``init_window``
-        detections span too short a time; at 30 fps ``init_detections`` of a 3-camera rig
-        span a frame period, 33 ms, so nothing grows there); on success start the track at
-        the newest detection, write its point into ``out`` and return True.
+        no track); a fit that passes the residual tests but fails on its uncertainty alone
+        (``_WEAK``: the position's; ``_SHORT``: the velocity's) ends the search and keeps
+        the window whole (a shorter window has still less information: cut, it kept
+        ``init_detections - 1`` detections and every later fit failed the same way, a
+        two-camera track at 1 px never started again), and a ``_SHORT`` window spanning
+        less than ``init_span_s`` may grow beyond ``init_window`` (at 60 fps and above
+        ``init_window`` detections span too short a time; at 30 fps ``init_detections``
+        of a 3-camera rig span a frame period, 33 ms, so nothing grows there); on success
+        start the track at the newest detection, write its point into ``out`` and return
+        True.
 
         The kernel has already dropped the detections older than the window's span and
         found at least ``init_detections`` of two cameras (:func:`_window_trim`)."""
@@ -1808,11 +1823,11 @@ class BallFilter:
             if len({w[1] for w in window}) < 2:
                 break
             fit, mu, e, turn = self._fit_models(window)
-            if fit is _SHORT:
-                if window[-1][0] - window[0][0] < self._init_grow_ns:
+            if fit is _SHORT or fit is _WEAK:
+                if fit is _SHORT and window[-1][0] - window[0][0] < self._init_grow_ns:
                     self._I[_ICAP] = min(max(int(self._I[_ICAP]), len(window) + 1),
                                          self.options.init_max_window)
-                    break
+                break
             elif fit is not None:
                 x, P, residuals = fit
                 # the noise estimate starts again at each (re)start, from its prior (or the
@@ -1821,7 +1836,7 @@ class BallFilter:
                 # would gate out the very detections that could raise it again
                 var = self._start_var()
                 self._S[_SALPHA] = self.options.noise_prior_weight
-                self._S[_SVAR] = var
+                self._S[_SVAR] = self._prior_var(len(window), residuals, var)
                 self._window_noise(len(window), residuals)
                 # the fit's covariance was σ² (JᵀJ)⁻¹ at the start's σ²: at the updated one
                 scale = float(self._S[_SVAR]) / var
@@ -1998,12 +2013,28 @@ class BallFilter:
         cov = 0.5 * (cov + cov.T)
         return th.tolist(), cov.ravel().tolist(), residuals
 
+    def _prior_var(self, n: int, residuals, var: float) -> float:
+        """The scale of the pixel variance's prior at a start: the start's variance
+        ``var``, or (``window_noise_prior``) the window's own upper confidence bound of its
+        residual variance if that is smaller: ``‖r‖² / χ²_{0.001}(2n - 6)`` (99.9 %, the
+        level of the start's own χ² test; :func:`_chi2_lower`, exact), within the noise
+        bounds (empirical Bayes). The stated noise stands unless the window shows it too
+        large beyond doubt: on noise-free detections the prior's 0.5 px held the estimate
+        near 0.16 px for ~0.2 s (worse than type A at 120-240 fps); a 95 % bound fell below a
+        0.3 px detector's noise on some starts (one in twenty), whose detections the
+        estimate then gated out."""
+        if not self.options.window_noise_prior or n <= 3:
+            return var
+        bound = float(np.sum(residuals * residuals)) / _chi2_lower(2 * n - 6)
+        return min(var, max(bound, self._var_min))
+
     def _window_var(self, n: int, residuals) -> float:
         """The pixel variance :meth:`_window_noise` would give after a start of ``n``
         detections with these residuals (the state unchanged)."""
         var = self._start_var()
         if self.options.adapt_rate == 0.0:
             return var
+        var = self._prior_var(n, residuals, var)
         decay = (1.0 - self.options.adapt_rate) ** n
         alpha = decay * self.options.noise_prior_weight + (n - 3)
         beta = (decay * self.options.noise_prior_weight * var
@@ -2038,6 +2069,8 @@ class BallFilter:
             return None
         if status == _WFIT_SHORT:
             return _SHORT  # too short a window (or mostly one camera's): more detections
+        if status == _WFIT_WEAK:
+            return _WEAK
         return theta.tolist(), cov.ravel().tolist(), residuals
 
 
@@ -2047,6 +2080,29 @@ def _posterior(prior: float, log_ratio: float, low: float, high: float) -> float
     alternative, bounded to ``[low, high]``."""
     odds = prior / (1.0 - prior) * math.exp(min(max(log_ratio, -50.0), 50.0))
     return min(max(odds / (1.0 + odds), low), high)
+
+
+@functools.lru_cache(maxsize=256)
+def _chi2_lower(dof: int, p: float = 0.001) -> float:
+    """The ``p`` quantile of the chi-square distribution of an even number ``dof`` of degrees
+    of freedom, exact: ``P(χ²_{2m} <= x) = 1 - e^{-x/2} Σ_{j<m} (x/2)^j / j!`` (Abramowitz
+    & Stegun 1964, 26.4.21) solved by bisection to a relative 1e-12."""
+    m = dof // 2
+
+    def cdf(x: float) -> float:
+        h, term, total = 0.5 * x, 1.0, 1.0
+        for j in range(1, m):
+            term *= h / j
+            total += term
+        return 1.0 - math.exp(-h) * total
+
+    lo, hi = 0.0, float(dof)
+    while cdf(hi) < p:
+        hi *= 2.0
+    while hi - lo > 1e-12 * hi:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if cdf(mid) < p else (lo, mid)
+    return 0.5 * (lo + hi)
 
 
 def _chi2_quantile(dof: int, z: float = 3.09) -> float:
