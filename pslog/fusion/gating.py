@@ -55,7 +55,7 @@ import math
 from bisect import bisect_left, bisect_right
 from collections import deque
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Literal, cast
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
@@ -1423,8 +1423,8 @@ class _Frame:
     gate computed of them once (corrected times, undistorted pixels, rays; once decided,
     their 3D points and rejection reasons)."""
 
-    __slots__ = ("camera", "every", "index", "key", "points", "ray_dir", "reason", "support",
-                 "t", "time_ns", "uv", "uv_und")
+    __slots__ = ("camera", "every", "index", "key", "latest", "points", "ray_dir", "reason",
+                 "support", "t", "time_ns", "uv", "uv_und")
 
     def __init__(self, t: int, camera: int, index: int, uv: np.ndarray, time_ns: list[int],
                  uv_und: np.ndarray, ray_dir: np.ndarray) -> None:
@@ -1432,12 +1432,26 @@ class _Frame:
         self.time_ns = time_ns  # corrected, per candidate
         self.uv_und, self.ray_dir = uv_und, ray_dir
         self.key = self.time_ns[0]  # the frame's time: its best candidate's (_frame_table)
+        self.latest = max(time_ns)  # (a rolling shutter's lowest row: when it is ready)
         self.reason: np.ndarray | None = None
         self.points: list | None = None
         # the candidates that may support another camera's choice, (t, u, v): every one
         # until the frame is decided, then the chosen one if any (:func:`_support_one`)
         self.every = [(t, u, v) for t, (u, v) in zip(time_ns, uv_und.tolist(), strict=True)]
         self.support = self.every
+
+
+class _Held:
+    """One frame pushed to a compiled :class:`StreamGate` (its state lives in
+    :class:`pslog.fusion._gate_kernel.GateState`): what releasing it needs."""
+
+    __slots__ = ("camera", "fid", "index", "key", "latest", "reason", "t", "uv")
+
+    def __init__(self, t: int, camera: int, index: int, uv: np.ndarray, key: int, latest: int,
+                 fid: int) -> None:
+        self.t, self.camera, self.index, self.uv = t, camera, index, uv
+        self.key, self.latest, self.fid = key, latest, fid  # (latest: of its corrected times)
+        self.reason: list[int] | None = None
 
 
 class StreamGate:
@@ -1463,7 +1477,7 @@ class StreamGate:
     """
 
     def __init__(self, rig: Rig, wait_s: float = 0.0, max_gap_s: float | None = None,
-                 options: GatingOptions | None = None) -> None:
+                 options: GatingOptions | None = None, compiled: bool | None = None) -> None:
         from ._prepare import default_max_gap_s
 
         self.rig = rig
@@ -1489,10 +1503,28 @@ class StreamGate:
         # per camera: its frames in (corrected time, push) order and their times
         self.keys: list[list[int]] = [[] for _ in rig.cameras]
         self.by_camera: list[list[_Frame]] = [[] for _ in rig.cameras]
-        self.pending: list[_Frame] = []  # not decided yet, in pushed order
-        self.unreleased: deque[_Frame] = deque()  # not returned yet, in pushed order
+        self.pending: list = []  # not decided yet, in pushed order (_Frame or _Held)
+        self.unreleased: deque = deque()  # not returned yet, in pushed order
         self.last: tuple[int, int] = (np.iinfo(np.int64).min, -1)
         self.rejected: list[tuple] = []
+        # the compiled form (pslog.fusion._gate_kernel: the same steps, the same bits, one
+        # call per frame), unless this Python's sum() is one it does not reproduce
+        self._state = None
+        if compiled is not False:
+            from . import _gate_kernel
+
+            if _gate_kernel.SUM_MODE >= 0:
+                self._state = _gate_kernel.GateState(rig, self.options, self.wait_ns,
+                                                     self.max_gap_ns, self.F, self.constants,
+                                                     self.lags, G)
+            elif compiled:
+                raise FusionError("the compiled stream gate cannot reproduce this Python's "
+                                  "sum() of floats")
+
+    @property
+    def compiled(self) -> bool:
+        """Whether the frames are decided by the compiled kernels (pslog.fusion._gate_kernel)."""
+        return self._state is not None
 
     def push(self, time_ns, camera, uv, frame_index=None):
         """Add candidates (rows with equal ``(time, camera)`` are one frame's, best first;
@@ -1534,6 +1566,20 @@ class StreamGate:
         clock = self.clock_model[cam]
         time_ns = ([t] * len(uv) if not self.corrected else
                    [_true_time_ns(t, v, clock) for v in uv[:, 1].tolist()])
+        if self._state is not None:
+            xy = None
+            if self.distorted[cam]:  # the iterative undistortion, in numpy (row by row)
+                camera = self.rig.cameras[cam]
+                limit = 10 * max(camera.width, camera.height)
+                sane = np.all(np.abs(uv) <= limit, axis=1)
+                xy = np.full((len(uv), 2), np.nan)
+                if sane.any():
+                    xy[sane] = camera.undistort_normalized(uv[sane])
+            fid = self._state.insert(cam, t, np.array(time_ns, np.int64), uv, xy)
+            held = _Held(t, cam, index, uv, time_ns[0], max(time_ns), fid)
+            self.pending.append(held)
+            self.unreleased.append(held)
+            return
         frame = _Frame(t, cam, index, uv, time_ns, *self._geometry(cam, uv))
         at = bisect_right(self.keys[cam], frame.key)  # after equal times: push order
         self.keys[cam].insert(at, frame.key)
@@ -1580,23 +1626,29 @@ class StreamGate:
                          else self.last[0] if self.wait_ns else None)
                 if bound is not None:
                     ready = 0
-                    while ready < len(todo) and max(todo[ready].time_ns) + self.wait_ns < bound:
+                    while ready < len(todo) and todo[ready].latest + self.wait_ns < bound:
                         ready += 1
                     todo = todo[:ready]
             if todo:
                 for f in todo:
-                    self._decide(f)
+                    if self._state is not None:
+                        f.reason = self._state.decide(f.fid, f.camera, len(f.uv))
+                    else:
+                        self._decide(f)
                 self.pending = [f for f in self.pending if f.reason is None]
         out = []
         while self.unreleased and self.unreleased[0].reason is not None:
             f = self.unreleased.popleft()  # released in pushed order
-            for k, r in enumerate(cast(np.ndarray, f.reason).tolist()):  # (not None: above)
+            reasons = f.reason if isinstance(f.reason, list) else f.reason.tolist()
+            for k, r in enumerate(reasons):  # (not None: above)
                 if r < 0:
                     out.append((f.t, f.camera, f.uv[k], f.index))
                 else:
                     self.rejected.append((f.t, f.camera, f.index, *f.uv[k].tolist(), r))
         # keep the history a later choice can reach
         old = self.last[0] - self.history_ns
+        if self._state is not None:
+            self._state.trim(old)
         for keys, frames in zip(self.keys, self.by_camera, strict=True):
             drop = 0
             while drop < len(frames) and frames[drop].reason is not None and frames[drop].t < old:
