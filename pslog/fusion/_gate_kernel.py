@@ -771,6 +771,20 @@ def trim(fi, fflag, ct, cf, csup, count, old):
             count[c] = n - drop
 
 
+@kernel
+def push_frame(fi, fflag, ct, cf, csup, count, cam, t, k, times, uv, xy, distorted, kmat,
+               limit, trk, ist, F, centers, k_inv, rot, still_f, lags, opt, work, reason, old):
+    """:func:`insert_frame`, :func:`decide_frame` and :func:`trim` in one call: a frame
+    decided the moment it is pushed (no clock correction, no wait: nothing still to come
+    can change its choice), as StreamGate._add then StreamGate._step do it."""
+    fid = insert_frame(fi, fflag, ct, cf, csup, count, cam, t, k, times, uv, xy, distorted,
+                       kmat, rot, limit)
+    decide_frame(fid, cam, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k_inv, rot,
+                 still_f, lags, opt, work, reason)
+    trim(fi, fflag, ct, cf, csup, count, old)
+    return fid
+
+
 def options_array(options, wait_ns: int, max_gap_ns: int, gravity: float) -> np.ndarray:
     """The float64 ``opt`` row the kernels read (``O_*`` indices): the gate's options, the
     wait and max gap (ns: below 2**53, exact), gravity, the exponent 2.0 and SUM_MODE."""
@@ -842,11 +856,11 @@ class GateState:
     def _grow(self, frames: int, candidates: int) -> None:
         """Room for ``frames`` frames per camera and ``candidates`` per frame (copied)."""
         m, h, k = self.m, self.frames, self.candidates
-        new = {"fi": np.zeros((m, frames, 4), np.int64),
-               "fflag": np.zeros((m, frames, 2), np.int8),
-               "ct": np.zeros((m, frames, candidates), np.int64),
-               "cf": np.full((m, frames, candidates, 8), np.nan),
-               "csup": np.zeros((m, frames, candidates), np.int8)}
+        new: dict[str, np.ndarray] = {"fi": np.zeros((m, frames, 4), np.int64),
+                                      "fflag": np.zeros((m, frames, 2), np.int8),
+                                      "ct": np.zeros((m, frames, candidates), np.int64),
+                                      "cf": np.full((m, frames, candidates, 8), np.nan),
+                                      "csup": np.zeros((m, frames, candidates), np.int8)}
         for name, a in new.items():
             old = getattr(self, name)
             a[:, :h, :k] = old
@@ -868,6 +882,20 @@ class GateState:
         return insert_frame(self.fi, self.fflag, self.ct, self.cf, self.csup, self.count, cam,
                             t, k, times, uv, self.no_xy if xy is None else xy, xy is not None,
                             self.kmat, self.rot, self.limit[cam])
+
+    def push_decide(self, cam: int, t: int, times: np.ndarray, uv: np.ndarray, xy,
+                    old: int) -> list[int]:
+        """:meth:`insert`, :meth:`decide` and :meth:`trim` (``old``) of a frame decided as
+        it comes, in one compiled call; its candidates' reason codes (-1 chosen)."""
+        k = len(times)
+        if int(self.count[cam]) >= self.frames or k > self.candidates:
+            self._grow(2 * self.frames if int(self.count[cam]) >= self.frames else self.frames,
+                       max(k, self.candidates))
+        push_frame(self.fi, self.fflag, self.ct, self.cf, self.csup, self.count, cam, t, k,
+                   times, uv, self.no_xy if xy is None else xy, xy is not None, self.kmat,
+                   self.limit[cam], self.trk, self.ist, self.F, self.centers, self.k_inv,
+                   self.rot, self.still_f, self.lags, self.opt, self.work, self.reason, old)
+        return self.reason[:k].tolist()
 
     def decide(self, fid: int, cam: int, k: int) -> list[int]:
         """Decide the frame of push id ``fid`` (camera ``cam``, ``k`` candidates): its

@@ -1537,6 +1537,15 @@ class StreamGate:
         frame_index = (np.zeros(len(time_ns), np.int64) if frame_index is None
                        else np.atleast_1d(np.asarray(frame_index, dtype=np.int64)))
         keys = list(zip(time_ns.tolist(), camera.tolist(), strict=True))
+        if (self._state is not None and keys and keys[0] == keys[-1] and not self.pending
+                and not self.corrected and not self.wait_ns):
+            # one frame, decided as it comes (what _add then _step do, in one compiled call)
+            if keys[0] <= self.last:
+                raise FusionError("candidates must arrive in (time, camera) order of "
+                                  "their logged times, each frame's in one push; got "
+                                  f"t={keys[0][0]} ns after t={self.last[0]} ns")
+            self.last = keys[0]
+            return self._one(keys[0][0], keys[0][1], int(frame_index[0]), uv.copy())
         start = 0
         for i in range(1, len(keys) + 1):
             if i == len(keys) or keys[i] != keys[start]:
@@ -1549,6 +1558,36 @@ class StreamGate:
                           uv[start:i].copy())
                 start = i
         return self._step(final=False)
+
+    def _one(self, t: int, cam: int, index: int, uv: np.ndarray):
+        """:meth:`push` of one frame that is decided at once (compiled; nothing pending)."""
+        xy = None
+        if self.distorted[cam]:  # the iterative undistortion, in numpy (row by row)
+            xy = self._normalized(cam, uv)
+        n = len(uv)
+        assert self._state is not None  # (push calls it in the compiled form only)
+        reasons = self._state.push_decide(cam, t, np.full(n, t, np.int64), uv, xy,
+                                          self.last[0] - self.history_ns)
+        chosen = []
+        for k, r in enumerate(reasons):
+            if r < 0:
+                chosen.append(k)
+            else:
+                self.rejected.append((t, cam, index, *uv[k].tolist(), r))
+        c = len(chosen)
+        return (np.full(c, t, np.int64), np.full(c, cam, np.int32),
+                uv[chosen] if c != n else uv, np.full(c, index, np.int64))
+
+    def _normalized(self, cam: int, uv: np.ndarray) -> np.ndarray:
+        """Ideal normalized coordinates (k, 2) of a lensed camera's pixels ``uv`` (k, 2)
+        (NaN where :func:`_pixel_geometry` gives none: far outside the image)."""
+        camera = self.rig.cameras[cam]
+        limit = 10 * max(camera.width, camera.height)
+        sane = np.all(np.abs(uv) <= limit, axis=1)
+        xy = np.full((len(uv), 2), np.nan)
+        if sane.any():
+            xy[sane] = camera.undistort_normalized(uv[sane])
+        return xy
 
     def flush(self):
         """Decide and return every remaining frame (end of stream)."""
@@ -1567,14 +1606,7 @@ class StreamGate:
         time_ns = ([t] * len(uv) if not self.corrected else
                    [_true_time_ns(t, v, clock) for v in uv[:, 1].tolist()])
         if self._state is not None:
-            xy = None
-            if self.distorted[cam]:  # the iterative undistortion, in numpy (row by row)
-                camera = self.rig.cameras[cam]
-                limit = 10 * max(camera.width, camera.height)
-                sane = np.all(np.abs(uv) <= limit, axis=1)
-                xy = np.full((len(uv), 2), np.nan)
-                if sane.any():
-                    xy[sane] = camera.undistort_normalized(uv[sane])
+            xy = self._normalized(cam, uv) if self.distorted[cam] else None
             fid = self._state.insert(cam, t, np.array(time_ns, np.int64), uv, xy)
             held = _Held(t, cam, index, uv, time_ns[0], max(time_ns), fid)
             self.pending.append(held)
