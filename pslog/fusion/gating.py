@@ -899,7 +899,7 @@ class _Columns:
     scalars), what :meth:`_Decider.decide` reads: made by :func:`_columns`."""
 
     __slots__ = ("available", "camera", "epi_cost", "front", "lag", "n_support", "pts", "rays",
-                 "rows", "static", "stillness", "t_ns", "t_s")
+                 "rows", "static", "stillness", "t_ns", "t_s", "unpointed")
     available: list[int]
     lag: list[list[float]]
     camera: list[int]
@@ -913,6 +913,7 @@ class _Columns:
     stillness: list[float]
     t_ns: list[int]
     t_s: list[float]
+    unpointed: list[bool]
 
     def __init__(self, **columns) -> None:
         for k, v in columns.items():
@@ -951,9 +952,14 @@ def _columns(c: _Candidates, ratio, points, in_front, static=None, lag=None) -> 
     # blob of a camera not seeing the ball, carried as it is across 22-56 ms, 21 cm from
     # the ray of a static object seen by cam2, "supported" it; chosen with no track to deny
     # it, smooth's points 2-3 m off).
+    # It is not evidence against the candidate either: the support may be the ball carried
+    # from a frame up to max_gap_s old while the ball moved (paper2 at 1 px: cam1 left the
+    # view, cam0's ball carried 83-117 ms "supported" cam0's next balls with rays 29-40 cm
+    # apart). Such a candidate (``unpointed``) is judged by the track alone, at the track's
+    # own allowance; with no track it is rejected (:meth:`_Decider.decide`).
     no_point = ~np.isfinite(points[:, 0])
-    n_support = np.where(no_point & (supported >= 2), 1,
-                         np.where(no_point & (supported == 1), 0, supported))
+    unpointed = no_point & (supported == 1)
+    n_support = np.where(no_point & (supported >= 2), 1, np.where(unpointed, 0, supported))
     lag = (np.zeros(ratio.shape) if lag is None
            else np.asarray(lag, dtype=np.float64).reshape(ratio.shape))
     return _Columns(rows=ratio.tolist(), available=np.isfinite(ratio).sum(axis=1).tolist(),
@@ -962,7 +968,7 @@ def _columns(c: _Candidates, ratio, points, in_front, static=None, lag=None) -> 
                     t_s=(c.time_ns / NS).tolist(), t_ns=c.time_ns.tolist(),
                     rays=c.ray_dir.tolist(), pts=points.tolist(),
                     front=np.asarray(in_front).tolist(), static=static, stillness=stillness,
-                    camera=np.asarray(c.camera).tolist())
+                    camera=np.asarray(c.camera).tolist(), unpointed=unpointed.tolist())
 
 
 def _age(ratio_row, lag_row) -> float:
@@ -1020,7 +1026,8 @@ class _Decider:
         rows, available, n_support, epi_cost = (cols.rows, cols.available, cols.n_support,
                                                 cols.epi_cost)
         t_s, t_ns, rays, pts, front = cols.t_s, cols.t_ns, cols.rays, cols.pts, cols.front
-        static, stillness, camera = cols.static, cols.stillness, cols.camera
+        static, stillness, camera, unpointed = (cols.static, cols.stillness, cols.camera,
+                                                cols.unpointed)
         centers = self.centers
         for lo, hi in frames:
             best_key, best_row = None, -1
@@ -1040,8 +1047,10 @@ class _Decider:
                     if pred is None:  # at the candidate's own time (a rolling shutter's row)
                         pred = preds[t_ns[i]] = track.predict(t_s[i]) or False
                     if pred and math.isfinite(rays[i][0]):
+                        # (a single support whose carried ray made no point: the track's own
+                        # allowance, as for a candidate one camera supports; _columns)
                         track_accepts = (_ray_miss(pred[0], centers[camera[i]], rays[i])
-                                         <= options.track_alone_m)
+                                         <= (pred[1] if unpointed[i] else options.track_alone_m))
                     if not track_accepts:
                         reason[i] = EPIPOLAR
                         continue
