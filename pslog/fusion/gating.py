@@ -1429,12 +1429,20 @@ def _stillness_one(key: int, pts, earlier, lags: int, options: GatingOptions,
     tols = [_still_px(cam, x, y, z, options, _sqrt)
             if cam is not None and paired[j] and math.isfinite(x) else math.nan
             for j, (x, y, z) in enumerate(pts)]
+    # the candidates still across their ray in every frame so far (only they can pass the
+    # long test, which asks for every one of its frames)
+    alive = [t == t for t in tols]  # (an image test: not NaN)
     for n, (prev_key, prev_points, *prev_uvs) in enumerate(earlier, start=1):
+        if n > lags and not any(alive):
+            break  # (the long image test's frames: nothing left to test)
         recent = key - prev_key <= 1.5 * options.static_s * NS
         recent_long = key - prev_key <= 1.5 * LONG_STILL * options.static_s * NS
         if not (recent or recent_long):
+            alive = [False] * len(pts)
             continue
         for j, (x, y, z) in enumerate(pts):
+            if n > lags and not alive[j]:
+                continue
             best_px = math.inf
             supported = False
             if tols[j] == tols[j]:  # (an image test: not NaN)
@@ -1448,6 +1456,8 @@ def _stillness_one(key: int, pts, earlier, lags: int, options: GatingOptions,
                         supported = True
             if recent_long and best_px <= tols[j]:
                 run_long[j] += 1.0
+            else:
+                alive[j] = False
             if n > lags or not recent:
                 continue  # (the long image test's frames only)
             best = math.inf
@@ -1463,11 +1473,13 @@ def _stillness_one(key: int, pts, earlier, lags: int, options: GatingOptions,
             if best_px <= tols[j]:
                 run_px[j] += 1.0
     static = (run >= 0.75 * lags) | _still_alone(run_px, held, lags)
-    if cam is not None and dz is not None:
+    if cam is not None and dz is not None and any(alive):
         long_lags = int(np.ceil(LONG_STILL * options.static_s * cam.fps))
-        with np.errstate(invalid="ignore"):
-            static |= _still_long(run_long, np.asarray(dz, dtype=np.float64), long_lags,
-                                  cam.fps, options, np.sqrt)
+        for j in range(len(pts)):
+            dz_j = float(dz[j])
+            if alive[j] and dz_j * dz_j <= 1.0:  # (np.sqrt's NaN in _static: not static)
+                static[j] |= bool(_still_long(run_long[j], dz_j, long_lags, cam.fps, options,
+                                              _sqrt))
     return static, run / lags
 
 
