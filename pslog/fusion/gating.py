@@ -529,7 +529,8 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
     support's) within ``static_m`` of a candidate's point in each of its camera's earlier
     frames; or, for a candidate whose point rests on one other camera (``paired``), its
     pixel within ``static_m`` across its ray (:func:`_still_px`) of a candidate's pixel
-    there, unless that support held in every one of those frames (:func:`_still_alone`).
+    there, unless that support held in every one of those frames (:func:`_still_alone`)
+    and no longer than a ball in flight can stay that still (:func:`_still_long`).
     (Still in one image is not enough in general: a ball moving along a camera's ray is.
     But one other camera fixes the point's depth by a single epipolar constraint, which a
     static object seen by this camera alone meets whenever the ball crosses its epipolar
@@ -550,6 +551,8 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
     stillness = np.zeros(len(c.camera))
     for b, (times, table) in enumerate(tables):
         lags = int(np.ceil(options.static_s * rig.cameras[b].fps))
+        long_lags = int(np.ceil(LONG_STILL * options.static_s * rig.cameras[b].fps))
+        run_long = np.zeros(table.shape)
         run = np.zeros(table.shape)
         p = points[np.maximum(table, 0)]  # (frames, K, 3)
         y = c.uv_und[np.maximum(table, 0)]  # (frames, K, 2)
@@ -562,12 +565,28 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
             tol[~paired[np.maximum(table, 0)]] = np.nan
         run_px = np.zeros(table.shape)
         held = np.zeros(table.shape)
-        for lag in range(1, min(lags, len(times) - 1) + 1):
+        for lag in range(1, min(long_lags, len(times) - 1) + 1):
             prev = np.full(table.shape, -1)
             prev[lag:] = table[:-lag]
+            if lag > lags:  # the long image test's frames only
+                recent = np.zeros(len(times), dtype=bool)
+                recent[lag:] = (times[lag:] - times[:-lag]
+                                <= 1.5 * LONG_STILL * options.static_s * NS)
+                yy = c.uv_und[np.maximum(prev, 0)]
+                with np.errstate(invalid="ignore"):
+                    du = y[:, :, None, 0] - yy[:, None, :, 0]
+                    dv = y[:, :, None, 1] - yy[:, None, :, 1]
+                    d_px = np.sqrt(du * du + dv * dv)
+                    d_px = np.where((prev[:, None, :] >= 0) & np.isfinite(d_px), d_px,
+                                    np.inf).min(axis=2)
+                    run_long += recent[:, None] & (d_px <= tol)
+                continue
             # the lag frames must lie within 1.5 static_s: missed frames do not count
             recent = np.zeros(len(times), dtype=bool)
             recent[lag:] = times[lag:] - times[:-lag] <= 1.5 * options.static_s * NS
+            recent_long = np.zeros(len(times), dtype=bool)
+            recent_long[lag:] = (times[lag:] - times[:-lag]
+                                 <= 1.5 * LONG_STILL * options.static_s * NS)
             pp = points[np.maximum(prev, 0)]
             yy = c.uv_und[np.maximum(prev, 0)]
             with np.errstate(invalid="ignore"):
@@ -586,11 +605,16 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
             run += recent[:, None] & (d <= options.static_m)
             with np.errstate(invalid="ignore"):
                 run_px += recent[:, None] & (d_px <= tol)
+                run_long += recent_long[:, None] & (d_px <= tol)
         ok = table >= 0
         stillness[table[ok]] = run[ok] / lags
         # still in most of them: one frame whose point a coincidence spoiled does not count;
         # across the ray, in every one of them (a static object's pixel is in every frame)
-        static[table[ok & ((run >= 0.75 * lags) | _still_alone(run_px, held, lags))]] = True
+        dz = c.ray_dir[np.maximum(table, 0), 2]
+        with np.errstate(invalid="ignore"):
+            long = _still_long(run_long, dz, long_lags, rig.cameras[b].fps, options, np.sqrt)
+        static[table[ok & ((run >= 0.75 * lags) | _still_alone(run_px, held, lags)
+                           | long)]] = True
     return static, stillness
 
 
@@ -605,6 +629,30 @@ def _still_alone(run_px, held, lags: int):
     its image too; one frame whose point a coincidence spoiled does not count (a camera
     going blind made one ball point's rays miss: 8 ball detections lost on wide3)."""
     return (run_px >= lags) & (held < lags - 1)
+
+
+#: The long image test's window, in ``static_s`` (:func:`_still_long`).
+LONG_STILL = 2.0
+#: ``min over v of max over s in [0, T] of |v s - g s² / 2|`` is ``LONG_STILL_C g T²``, the
+#: least a ball under an acceleration ``g`` across its ray moves across it in ``T``:
+#: ``(√2 - 1)² / 2`` (equal ripple at the turning point ``s = v/g`` and at ``s = T``).
+LONG_STILL_C = (math.sqrt(2.0) - 1.0) ** 2 / 2.0
+
+
+def _still_long(run_long, dz, frames: int, fps: float, options: GatingOptions, sqrt):
+    """The long image test (:func:`_static`; arrays elementwise or floats): still across its
+    ray in every one of the ``frames`` frames of the last ``LONG_STILL static_s``
+    (``run_long``), longer than a ball in flight can be: gravity's component across the
+    ray, ``g⊥ = G sqrt(1 - dz²)`` (``dz``: the ray's world z), moves it across the ray by
+    at least ``LONG_STILL_C g⊥ T²`` in ``T = frames / fps``, whatever its velocity; beyond
+    ``static_m`` it is not a ball moving along the ray, however continuous its support (a
+    ball sliding along a static object's epipolar line in the other camera supported the
+    object in every frame for 0.53 s: paper2, bench_dirty.py --more --first-seed 500,
+    rally-501 at 5.55-6.08 s). Rays near vertical keep the
+    exemption (a ball falling along them can stay that still; 14 degrees at 30 fps)."""
+    t = frames / fps
+    g_across = G * sqrt(1.0 - dz * dz)
+    return (run_long >= frames) & (LONG_STILL_C * g_across * t * t > options.static_m)
 
 
 def _still_px(cam, x, y, z, options: GatingOptions, sqrt):
@@ -899,7 +947,7 @@ class _Columns:
     scalars), what :meth:`_Decider.decide` reads: made by :func:`_columns`."""
 
     __slots__ = ("available", "camera", "epi_cost", "front", "lag", "n_support", "pts", "rays",
-                 "rows", "static", "stillness", "t_ns", "t_s")
+                 "rows", "static", "stillness", "t_ns", "t_s", "unpointed")
     available: list[int]
     lag: list[list[float]]
     camera: list[int]
@@ -913,6 +961,7 @@ class _Columns:
     stillness: list[float]
     t_ns: list[int]
     t_s: list[float]
+    unpointed: list[bool]
 
     def __init__(self, **columns) -> None:
         for k, v in columns.items():
@@ -951,9 +1000,14 @@ def _columns(c: _Candidates, ratio, points, in_front, static=None, lag=None) -> 
     # blob of a camera not seeing the ball, carried as it is across 22-56 ms, 21 cm from
     # the ray of a static object seen by cam2, "supported" it; chosen with no track to deny
     # it, smooth's points 2-3 m off).
+    # It is not evidence against the candidate either: the support may be the ball carried
+    # from a frame up to max_gap_s old while the ball moved (paper2 at 1 px: cam1 left the
+    # view, cam0's ball carried 83-117 ms "supported" cam0's next balls with rays 29-40 cm
+    # apart). Such a candidate (``unpointed``) is judged by the track alone, at the track's
+    # own allowance; with no track it is rejected (:meth:`_Decider.decide`).
     no_point = ~np.isfinite(points[:, 0])
-    n_support = np.where(no_point & (supported >= 2), 1,
-                         np.where(no_point & (supported == 1), 0, supported))
+    unpointed = no_point & (supported == 1)
+    n_support = np.where(no_point & (supported >= 2), 1, np.where(unpointed, 0, supported))
     lag = (np.zeros(ratio.shape) if lag is None
            else np.asarray(lag, dtype=np.float64).reshape(ratio.shape))
     return _Columns(rows=ratio.tolist(), available=np.isfinite(ratio).sum(axis=1).tolist(),
@@ -962,7 +1016,7 @@ def _columns(c: _Candidates, ratio, points, in_front, static=None, lag=None) -> 
                     t_s=(c.time_ns / NS).tolist(), t_ns=c.time_ns.tolist(),
                     rays=c.ray_dir.tolist(), pts=points.tolist(),
                     front=np.asarray(in_front).tolist(), static=static, stillness=stillness,
-                    camera=np.asarray(c.camera).tolist())
+                    camera=np.asarray(c.camera).tolist(), unpointed=unpointed.tolist())
 
 
 def _age(ratio_row, lag_row) -> float:
@@ -1020,7 +1074,8 @@ class _Decider:
         rows, available, n_support, epi_cost = (cols.rows, cols.available, cols.n_support,
                                                 cols.epi_cost)
         t_s, t_ns, rays, pts, front = cols.t_s, cols.t_ns, cols.rays, cols.pts, cols.front
-        static, stillness, camera = cols.static, cols.stillness, cols.camera
+        static, stillness, camera, unpointed = (cols.static, cols.stillness, cols.camera,
+                                                cols.unpointed)
         centers = self.centers
         for lo, hi in frames:
             best_key, best_row = None, -1
@@ -1040,8 +1095,10 @@ class _Decider:
                     if pred is None:  # at the candidate's own time (a rolling shutter's row)
                         pred = preds[t_ns[i]] = track.predict(t_s[i]) or False
                     if pred and math.isfinite(rays[i][0]):
+                        # (a single support whose carried ray made no point: the track's own
+                        # allowance, as for a candidate one camera supports; _columns)
                         track_accepts = (_ray_miss(pred[0], centers[camera[i]], rays[i])
-                                         <= options.track_alone_m)
+                                         <= (pred[1] if unpointed[i] else options.track_alone_m))
                     if not track_accepts:
                         reason[i] = EPIPOLAR
                         continue
@@ -1356,29 +1413,36 @@ def _can_judge(key: int, earlier: list[int], lags: int, options: GatingOptions) 
 
 
 def _stillness_one(key: int, pts, earlier, lags: int, options: GatingOptions,
-                   uvs=None, paired=None, cam=None):
+                   uvs=None, paired=None, cam=None, dz=None):
     """:func:`_static`'s rule for one frame on floats (the same bits): ``pts`` its
     candidates' points (k, 3) as lists, ``earlier`` (frame time ns, points, undistorted
-    pixels) of its camera's ``lags`` frames before it, newest first; ``uvs`` the frame's
-    undistorted pixels (k, 2), ``paired`` (k,) bool (its point rests on one other camera),
-    ``cam`` its Camera (the image test; None: the 3D test alone). Returns (static (k,)
+    pixels) of its camera's frames before it, newest first (``lags`` of them for the 3D
+    test and the image test; up to ``ceil(LONG_STILL static_s fps)`` for the long image
+    test); ``uvs`` the frame's undistorted pixels (k, 2), ``paired`` (k,) bool (its point
+    rests on one other camera), ``cam`` its Camera (the image tests; None: the 3D test
+    alone), ``dz`` (k,) its candidates' rays' world z (the long test). Returns (static (k,)
     bool, stillness (k,))."""
     run = np.zeros(len(pts))
     run_px = np.zeros(len(pts))
+    run_long = np.zeros(len(pts))
     held = np.zeros(len(pts))
     tols = [_still_px(cam, x, y, z, options, _sqrt)
             if cam is not None and paired[j] and math.isfinite(x) else math.nan
             for j, (x, y, z) in enumerate(pts)]
-    for prev_key, prev_points, *prev_uvs in earlier:
-        if not key - prev_key <= 1.5 * options.static_s * NS:  # (recent)
+    # the candidates still across their ray in every frame so far (only they can pass the
+    # long test, which asks for every one of its frames)
+    alive = [t == t for t in tols]  # (an image test: not NaN)
+    for n, (prev_key, prev_points, *prev_uvs) in enumerate(earlier, start=1):
+        if n > lags and not any(alive):
+            break  # (the long image test's frames: nothing left to test)
+        recent = key - prev_key <= 1.5 * options.static_s * NS
+        recent_long = key - prev_key <= 1.5 * LONG_STILL * options.static_s * NS
+        if not (recent or recent_long):
+            alive = [False] * len(pts)
             continue
         for j, (x, y, z) in enumerate(pts):
-            best = math.inf
-            for px, py, pz in prev_points:
-                dx, dy, dz = x - px, y - py, z - pz
-                d = math.sqrt(dx * dx + dy * dy + dz * dz)  # np.linalg.norm's order
-                if d < best:  # NaN (no point) never is
-                    best = d
+            if n > lags and not alive[j]:
+                continue
             best_px = math.inf
             supported = False
             if tols[j] == tols[j]:  # (an image test: not NaN)
@@ -1390,13 +1454,33 @@ def _stillness_one(key: int, pts, earlier, lags: int, options: GatingOptions,
                         best_px = d
                     if d <= tols[j] and px == px and py == py and pz == pz:  # (finite)
                         supported = True
+            if recent_long and best_px <= tols[j]:
+                run_long[j] += 1.0
+            else:
+                alive[j] = False
+            if n > lags or not recent:
+                continue  # (the long image test's frames only)
+            best = math.inf
+            for px, py, pz in prev_points:
+                dx, dy, dz_ = x - px, y - py, z - pz
+                d = math.sqrt(dx * dx + dy * dy + dz_ * dz_)  # np.linalg.norm's order
+                if d < best:  # NaN (no point) never is
+                    best = d
             if supported:
                 held[j] += 1.0
             if best <= options.static_m:
                 run[j] += 1.0
             if best_px <= tols[j]:
                 run_px[j] += 1.0
-    return (run >= 0.75 * lags) | _still_alone(run_px, held, lags), run / lags
+    static = (run >= 0.75 * lags) | _still_alone(run_px, held, lags)
+    if cam is not None and dz is not None and any(alive):
+        long_lags = int(np.ceil(LONG_STILL * options.static_s * cam.fps))
+        for j in range(len(pts)):
+            dz_j = float(dz[j])
+            if alive[j] and dz_j * dz_j <= 1.0:  # (np.sqrt's NaN in _static: not static)
+                static[j] |= bool(_still_long(run_long[j], dz_j, long_lags, cam.fps, options,
+                                              _sqrt))
+    return static, run / lags
 
 
 def _result(detections: Detections, rig: Rig, reason: np.ndarray) -> Gated:
@@ -1491,7 +1575,8 @@ class StreamGate:
         # frames older than this (logged) reach no later choice: neither as support (at
         # most max_gap_s away) nor as a stillness reference (1.5 static_s)
         self.history_ns = round((2 * (max_gap_s or default_max_gap_s(rig)) + wait_s
-                                 + 1.5 * self.options.static_s + 0.2 + 2 * spread) * NS)
+                                 + 1.5 * LONG_STILL * self.options.static_s + 0.2
+                                 + 2 * spread) * NS)
         self.decider = _Decider(rig, self.options)
         self.constants = _rig_constants(rig)
         self.camera_k = [cam.K.tolist() for cam in rig.cameras]
@@ -1721,12 +1806,13 @@ class StreamGate:
         # _static's rule on this frame: still against each of the camera's lags frames before
         frames, at = self.by_camera[a], self.by_camera[a].index(f)
         lags = self.lags[a]
+        long_lags = int(np.ceil(LONG_STILL * o.static_s * self.rig.cameras[a].fps))
         still = _stillness_one(f.key, f.points,
                                [(frames[at - lag].key, frames[at - lag].points,
                                  frames[at - lag].uv_und.tolist())
-                                for lag in range(1, min(lags, at) + 1)], lags, o,
+                                for lag in range(1, min(long_lags, at) + 1)], lags, o,
                                f.uv_und.tolist(), _paired(every[0]).tolist(),
-                               self.rig.cameras[a])
+                               self.rig.cameras[a], f.ray_dir[:, 2])
         reason = np.full(k, -1, dtype=np.int8)
         self.decider.run(c, [(0, k)], ratio, points, in_front, reason, still, lag)
         f.reason = reason
