@@ -49,8 +49,9 @@ _NS = 1_000_000_000
 _MIN_DET = 1e-12
 #: rows of ``opt`` (float64 options and constants, see :func:`options_array`)
 (O_EPI, O_VMAX, O_HALF_ACCEL, O_TRACK_M, O_JUMP, O_WINDOW, O_MAX_SPEED, O_LOOSE, O_STATIC_S,
- O_STATIC_M, O_ALONE, O_G, O_TWO, O_TRACK_POINTS, O_WAIT, O_GAP, O_SUM) = range(17)
-N_OPT = 17
+ O_STATIC_M, O_ALONE, O_G, O_TWO, O_TRACK_POINTS, O_WAIT, O_GAP, O_SUM, O_LONG_STILL,
+ O_LONG_STILL_C) = range(19)
+N_OPT = 19
 
 
 def _python_sum_mode() -> int:
@@ -417,13 +418,16 @@ def insert_frame(fi, fflag, ct, cf, csup, count, cam, t, k, times, uv, xy, disto
 
 @kernel
 def decide_frame(fid, a, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k_inv, rot,
-                 still_f, lags, opt, work, reason):
+                 still_f, lags, long_lags, long_t, opt, work, reason):
     """StreamGate._decide of camera ``a``'s frame of push id ``fid``: its candidates'
     support by every other camera from every candidate and from the decided ones
     (StreamGate._support), their points, their stillness (gating._stillness_one), the
     choice (gating._Decider.decide of one frame) and what later choices may use of it
     (gating._can_judge, gating._supporting). Sets ``reason`` (k,) (-1 chosen) and the state.
-    ``work``: float64 scratch of at least (k (7 m + 16) + 2 m + 8) values."""
+    ``lags``, ``long_lags`` (m,): per camera, the stillness test's frames and the long image
+    test's (``ceil(LONG_STILL static_s fps)``); ``long_t`` (m,) s: ``long_lags / fps``
+    (gating._still_long's ``T``). ``work``: float64 scratch of at least
+    (k (7 m + 16) + 6 (m + 1) + 4) values."""
     m = len(lags)
     at = count[a] - 1
     while fi[a, at, 2] != fid:
@@ -465,6 +469,12 @@ def decide_frame(fid, a, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k
     epi = work[off:off + k]
     off += k
     differs = work[off:off + k]
+    off += k
+    run_long = work[off:off + k]
+    off += k
+    alive = work[off:off + k]
+    off += k
+    unpointed = work[off:off + k]
     off += k
     rays = work[off:off + 6 * (m + 1)].reshape((m + 1, 6))
     off += 6 * (m + 1)
@@ -524,15 +534,20 @@ def decide_frame(fid, a, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k
                 x = y = z = math.nan
         chosen[j, 0], chosen[j, 1], chosen[j, 2] = x, y, z
         front[j] = 1.0 if ok else 0.0
-    # ---- gating._stillness_one against the camera's lags frames before (newest first)
+    # ---- gating._stillness_one against the camera's frames before (newest first): lags of
+    # them for the 3D and image tests, up to long_lags for the long image test
     static_s, static_m = opt[O_STATIC_S], opt[O_STATIC_M]
     la = lags[a]
     recent_ns = 1.5 * static_s * _NS
+    recent_long_ns = 1.5 * opt[O_LONG_STILL] * static_s * _NS
     n_back = min(la, at)
+    n_walk = min(long_lags[a], at)
+    n_alive = 0
     for j in range(k):
         run[j] = 0.0
         run_px[j] = 0.0
         held[j] = 0.0
+        run_long[j] = 0.0
         x = cf[a, at, j, 5]
         n_sup = 0
         for b in range(m):
@@ -546,19 +561,25 @@ def decide_frame(fid, a, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k
             tol[j] = still_f[a] * static_m / depth
         else:
             tol[j] = math.nan
-    for lg in range(1, n_back + 1):
+        # still across its ray in every frame so far (only those can pass the long test)
+        alive[j] = 1.0 if tol[j] == tol[j] else 0.0
+        if alive[j] != 0.0:
+            n_alive += 1
+    for lg in range(1, n_walk + 1):
+        if lg > la and n_alive == 0:
+            break  # (the long image test's frames: nothing left to test)
         h = at - lg
-        if not key - fi[a, h, 0] <= recent_ns:
+        recent = key - fi[a, h, 0] <= recent_ns
+        recent_long = key - fi[a, h, 0] <= recent_long_ns
+        if not (recent or recent_long):
+            for j in range(k):
+                alive[j] = 0.0
+            n_alive = 0
             continue
         nh = fi[a, h, 3]
         for j in range(k):
-            x, y, z = cf[a, at, j, 5], cf[a, at, j, 6], cf[a, at, j, 7]
-            best = math.inf
-            for q in range(nh):
-                dx, dy, dz = x - cf[a, h, q, 5], y - cf[a, h, q, 6], z - cf[a, h, q, 7]
-                d = math.sqrt(dx * dx + dy * dy + dz * dz)
-                if d < best:
-                    best = d
+            if lg > la and alive[j] == 0.0:
+                continue
             best_px = math.inf
             supported = False
             if tol[j] == tol[j]:
@@ -571,6 +592,20 @@ def decide_frame(fid, a, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k
                     px, py, pz = cf[a, h, q, 5], cf[a, h, q, 6], cf[a, h, q, 7]
                     if d <= tol[j] and px == px and py == py and pz == pz:
                         supported = True
+            if recent_long and best_px <= tol[j]:
+                run_long[j] += 1.0
+            elif alive[j] != 0.0:
+                alive[j] = 0.0
+                n_alive -= 1
+            if lg > la or not recent:
+                continue  # (the long image test's frames only)
+            x, y, z = cf[a, at, j, 5], cf[a, at, j, 6], cf[a, at, j, 7]
+            best = math.inf
+            for q in range(nh):
+                dx, dy, dz = x - cf[a, h, q, 5], y - cf[a, h, q, 6], z - cf[a, h, q, 7]
+                d = math.sqrt(dx * dx + dy * dy + dz * dz)
+                if d < best:
+                    best = d
             if supported:
                 held[j] += 1.0
             if best <= static_m:
@@ -579,6 +614,13 @@ def decide_frame(fid, a, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k
                 run_px[j] += 1.0
     for j in range(k):
         still = (run[j] >= 0.75 * la) or ((run_px[j] >= la) and (held[j] < la - 1))
+        # gating._still_long: longer than a ball in flight can stay still across its ray
+        dz = cf[a, at, j, 4]
+        if not still and n_alive > 0 and alive[j] != 0.0 and dz * dz <= 1.0:
+            t_long = long_t[a]
+            g_across = opt[O_G] * _sqrt(1.0 - dz * dz)
+            still = (run_long[j] >= long_lags[a]) and (
+                opt[O_LONG_STILL_C] * g_across * t_long * t_long > static_m)
         static[j] = 1.0 if still else 0.0
         run[j] = run[j] / la  # the stillness
     # ---- gating._columns
@@ -598,6 +640,9 @@ def decide_frame(fid, a, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k
         epi[j] = cost
         avail[j] = available
         no_point = not math.isfinite(chosen[j, 0])
+        # (a single support whose carried ray makes no point: the track alone judges it,
+        # at the track's own allowance: gating._columns's ``unpointed``)
+        unpointed[j] = 1.0 if no_point and supported == 1 else 0.0
         if no_point and supported >= 2:
             nsup[j] = 1
         elif no_point and supported == 1:
@@ -629,7 +674,7 @@ def decide_frame(fid, a, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k
             track_accepts = False
             if has_pred and math.isfinite(rx):
                 track_accepts = (_ray_miss(pred[0], pred[1], pred[2], centers[a], rx, ry, rz)
-                                 <= opt[O_ALONE])
+                                 <= (pred[3] if unpointed[i] != 0.0 else opt[O_ALONE]))
             if not track_accepts:
                 reason[i] = _EPIPOLAR
                 continue
@@ -773,21 +818,25 @@ def trim(fi, fflag, ct, cf, csup, count, old):
 
 @kernel
 def push_frame(fi, fflag, ct, cf, csup, count, cam, t, k, times, uv, xy, distorted, kmat,
-               limit, trk, ist, F, centers, k_inv, rot, still_f, lags, opt, work, reason, old):
+               limit, trk, ist, F, centers, k_inv, rot, still_f, lags, long_lags, long_t, opt,
+               work, reason, old):
     """:func:`insert_frame`, :func:`decide_frame` and :func:`trim` in one call: a frame
     decided the moment it is pushed (no clock correction, no wait: nothing still to come
     can change its choice), as StreamGate._add then StreamGate._step do it."""
     fid = insert_frame(fi, fflag, ct, cf, csup, count, cam, t, k, times, uv, xy, distorted,
                        kmat, rot, limit)
     decide_frame(fid, cam, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k_inv, rot,
-                 still_f, lags, opt, work, reason)
+                 still_f, lags, long_lags, long_t, opt, work, reason)
     trim(fi, fflag, ct, cf, csup, count, old)
     return fid
 
 
 def options_array(options, wait_ns: int, max_gap_ns: int, gravity: float) -> np.ndarray:
     """The float64 ``opt`` row the kernels read (``O_*`` indices): the gate's options, the
-    wait and max gap (ns: below 2**53, exact), gravity, the exponent 2.0 and SUM_MODE."""
+    wait and max gap (ns: below 2**53, exact), gravity, the exponent 2.0, SUM_MODE and the
+    long image test's constants (gating.LONG_STILL, gating.LONG_STILL_C)."""
+    from .gating import LONG_STILL, LONG_STILL_C
+
     opt = np.zeros(N_OPT)
     opt[O_EPI], opt[O_VMAX] = options.epipolar_px, options.max_image_speed_px_s
     opt[O_HALF_ACCEL] = 0.5 * options.accel_px_s2  # (as _support_one computes it)
@@ -797,6 +846,7 @@ def options_array(options, wait_ns: int, max_gap_ns: int, gravity: float) -> np.
     opt[O_STATIC_M], opt[O_ALONE] = options.static_m, options.track_alone_m
     opt[O_G], opt[O_TWO], opt[O_TRACK_POINTS] = gravity, 2.0, int(options.track_points)
     opt[O_WAIT], opt[O_GAP], opt[O_SUM] = wait_ns, max_gap_ns, SUM_MODE
+    opt[O_LONG_STILL], opt[O_LONG_STILL_C] = LONG_STILL, LONG_STILL_C
     return opt
 
 
@@ -834,6 +884,15 @@ class GateState:
         self.still_f = np.array([min(float(cam.K[0, 0]), float(cam.K[1, 1]))
                                  for cam in rig.cameras])
         self.lags = np.array(lags, dtype=np.int64)
+        # the long image test's frames and their span T = frames / fps (gating._stillness_one,
+        # gating._still_long)
+        from .gating import LONG_STILL
+
+        long_lags = [int(np.ceil(LONG_STILL * options.static_s * cam.fps))
+                     for cam in rig.cameras]
+        self.long_lags = np.array(long_lags, dtype=np.int64)
+        self.long_t = np.array([n / cam.fps for n, cam in zip(long_lags, rig.cameras,
+                                                               strict=True)], dtype=np.float64)
         self.limit = np.array([10 * max(cam.width, cam.height) for cam in rig.cameras],
                               dtype=np.float64)
         self.opt = options_array(options, wait_ns, max_gap_ns, gravity)
@@ -843,7 +902,7 @@ class GateState:
 
     def _work_size(self, k: int) -> int:
         m = self.m
-        return k * (7 * m + 16) + 6 * (m + 1) + 8
+        return k * (7 * m + 19) + 6 * (m + 1) + 8
 
     @property
     def frames(self) -> int:
@@ -894,7 +953,8 @@ class GateState:
         push_frame(self.fi, self.fflag, self.ct, self.cf, self.csup, self.count, cam, t, k,
                    times, uv, self.no_xy if xy is None else xy, xy is not None, self.kmat,
                    self.limit[cam], self.trk, self.ist, self.F, self.centers, self.k_inv,
-                   self.rot, self.still_f, self.lags, self.opt, self.work, self.reason, old)
+                   self.rot, self.still_f, self.lags, self.long_lags, self.long_t, self.opt,
+                   self.work, self.reason, old)
         return self.reason[:k].tolist()
 
     def decide(self, fid: int, cam: int, k: int) -> list[int]:
@@ -902,7 +962,8 @@ class GateState:
         candidates' reason codes (-1 chosen)."""
         decide_frame(fid, cam, self.fi, self.fflag, self.ct, self.cf, self.csup, self.count,
                      self.trk, self.ist, self.F, self.centers, self.k_inv, self.rot,
-                     self.still_f, self.lags, self.opt, self.work, self.reason)
+                     self.still_f, self.lags, self.long_lags, self.long_t, self.opt, self.work,
+                     self.reason)
         return self.reason[:k].tolist()
 
     def trim(self, old: int) -> None:
