@@ -258,3 +258,13 @@ def test_python_pow_and_sum_are_reproduced():
                                                                    strict=True)]
         p0, want = gating._line_fit(ts, ys)
         assert rms == want and out.tolist() == p0
+
+
+@pytest.mark.parametrize("compiled", [False, True])
+def test_a_flush_before_any_push_returns_nothing(compiled):
+    """(The compiled state's history bound starts below what an int64 holds: a live run
+    stopped before its first datagram flushed a gate that had seen nothing.)"""
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    for wait_s in (0.0, 0.004):
+        out = StreamGate(rig, wait_s=wait_s, compiled=compiled).flush()
+        assert [len(a) for a in out] == [0, 0, 0, 0]

@@ -47,6 +47,7 @@ from .._jit import kernel
 _EPIPOLAR, _TRACK, _MOTION, _OUTSCORED = 0, 1, 2, 3
 _NS = 1_000_000_000
 _MIN_DET = 1e-12
+_I64_MIN = int(np.iinfo(np.int64).min)
 #: rows of ``opt`` (float64 options and constants, see :func:`options_array`)
 (O_EPI, O_VMAX, O_HALF_ACCEL, O_TRACK_M, O_JUMP, O_WINDOW, O_MAX_SPEED, O_LOOSE, O_STATIC_S,
  O_STATIC_M, O_ALONE, O_G, O_TWO, O_TRACK_POINTS, O_WAIT, O_GAP, O_SUM, O_LONG_STILL,
@@ -954,7 +955,7 @@ class GateState:
                    times, uv, self.no_xy if xy is None else xy, xy is not None, self.kmat,
                    self.limit[cam], self.trk, self.ist, self.F, self.centers, self.k_inv,
                    self.rot, self.still_f, self.lags, self.long_lags, self.long_t, self.opt,
-                   self.work, self.reason, old)
+                   self.work, self.reason, max(old, _I64_MIN))
         return self.reason[:k].tolist()
 
     def decide(self, fid: int, cam: int, k: int) -> list[int]:
@@ -968,7 +969,9 @@ class GateState:
 
     def trim(self, old: int) -> None:
         """Forget the decided frames logged before ``old`` ns."""
-        trim(self.fi, self.fflag, self.ct, self.cf, self.csup, self.count, old)
+        # (before any push the stream's newest time is int64's least: its history reaches
+        # below what an int64 holds)
+        trim(self.fi, self.fflag, self.ct, self.cf, self.csup, self.count, max(old, _I64_MIN))
 
     def decided_ratio(self, k: int) -> np.ndarray:
         """The epipolar support ratio (k, m) the last :meth:`decide` chose with (its

@@ -1554,8 +1554,13 @@ class StreamGate:
     every batch step is elementwise in an order floats reproduce (no matrix product or
     LAPACK call, whose bits depend on the array's size), so the bits are the batch's. Each
     camera's frames are kept in (corrected time, push) order, as :func:`_frame_table` orders
-    them, for ``history`` seconds. Cost per push of a 3-camera 30 fps session with a few
-    candidates per frame: ~50-70 µs (``benchmarks/bench_stream.py``).
+    them, for ``history`` seconds.
+
+    ``compiled`` (default: when this Python's ``sum`` is one the kernels reproduce): the same
+    steps run as compiled kernels over a state in preallocated arrays
+    (:mod:`pslog.fusion._gate_kernel`, one call per frame pushed), the same bits; False keeps
+    the Python form above. Cost per push at 3 × 30 fps, a few candidates per frame: ~13 µs
+    compiled, ~100 µs in Python, on a warm core (``benchmarks/bench_live.py --direct 0``).
 
     Used by :class:`pslog.fusion.stream.StreamFuser` with ``candidates=True``.
     """
