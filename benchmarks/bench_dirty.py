@@ -26,7 +26,11 @@ the outliers add: a method whose clean session has some, at kicks, keeps them).
 about 116 degrees across, with a strong barrel distortion, k1 = -0.25, k2 = 0.05), more
 motions (the library's ``rally`` with its own seed, ``straight``, ``turntable``)
 and ``--seeds`` rallies per rig. One row per rig x method: clean and faults mean, pooled and
-worst-session ratio, the worst session, the ratio with the blackout alone (the camera's
+worst-session ratio, the worst session and its data ratio (what the blackout must cost it
+even for a method that does as well as the remaining cameras allow: the clean session's
+errors outside the blackout, and inside it those of the session without the blind camera
+at all; a worst ratio near it is the data's, not the method's), the ratio with the blackout
+alone (the camera's
 lost view: what no gating can give back), and the points beyond 5 cm: clean / added by the
 faults (beyond 5 cm with the faults where the clean session's point at that detection was
 not), with how many of those added fall in the blackout (from its start to two bridged gaps
@@ -203,7 +207,10 @@ def measure_more(rig: Rig, methods, runs, options: FusionOptions, first_seed: in
         span = motion.duration if duration is None else duration
         fault = faults(rig, seed, span)
         _, start, length = fault["blackouts"][0]
-        kinds = {"clean": {}, "dirty": fault, "blackout": {"blackouts": fault["blackouts"]}}
+        cam = fault["blackouts"][0][0]
+        kinds = {"clean": {}, "dirty": fault, "blackout": {"blackouts": fault["blackouts"]},
+                 # the blind camera absent all session: what the others alone give
+                 "without": {"blackouts": ((cam, 0.0, span + 1.0),)}}
         tracks = {}
         for kind, extra in kinds.items():
             det, truth, _ = simulate_labelled(rig, motion, duration, SimulationOptions(
@@ -214,9 +221,10 @@ def measure_more(rig: Rig, methods, runs, options: FusionOptions, first_seed: in
             row = out[m]
             row["points"][0] += len(tracks["clean"][m])  # recall: the points output
             row["points"][1] += len(tracks["dirty"][m])
-            for kind in kinds:
+            for kind in ("clean", "dirty", "blackout"):
                 row[kind].append(err[kind][np.isfinite(err[kind])])
-            row["ratios"].append((np.nanmean(err["dirty"]) / np.nanmean(err["clean"]), label))
+            row["ratios"].append((np.nanmean(err["dirty"]) / np.nanmean(err["clean"]), label,
+                                  _data_ratio(tracks, m, err, start, length)))
             bad_clean = {(int(t), int(c)) for t, c in zip(
                 tracks["clean"][m].time_ns[err["clean"] > MAX_ERROR_M],
                 tracks["clean"][m].camera[err["clean"] > MAX_ERROR_M], strict=True)}
@@ -236,6 +244,20 @@ def measure_more(rig: Rig, methods, runs, options: FusionOptions, first_seed: in
     return out
 
 
+def _data_ratio(tracks, m: str, err: dict, start: float, length: float) -> float:
+    """What the blackout alone must cost ``m`` in one session, if it did as well as the data
+    allow: the clean session's errors outside the blackout and, inside it, the errors of
+    the session without the blind camera at all (the other cameras' information there),
+    over the clean mean. A worst-session ratio near it is the camera's lost view, not the
+    method's loss."""
+    def inside(kind):
+        t = tracks[kind][m].time_ns / 1e9
+        return (t >= start) & (t <= start + length)
+    clean, without = err["clean"], err["without"]
+    parts = np.concatenate([clean[~inside("clean")], without[inside("without")]])
+    return float(np.nanmean(parts) / np.nanmean(clean))
+
+
 def _after_kick(t_s: float, kicks: np.ndarray) -> int:
     """1 when ``t_s`` follows a kick or bounce of ``kicks`` (s) by less than KICK_WINDOW_S."""
     since = t_s - kicks[kicks <= t_s]
@@ -250,11 +272,12 @@ def more_table(rig: Rig, methods, figures) -> tuple[list[str], bool]:
         f = figures[m]
         clean, dirty, blackout = (float(np.concatenate(f[k]).mean()) * 1e3
                                   for k in ("clean", "dirty", "blackout"))
-        worst, where = max(f["ratios"])
+        worst, where, data = max(f["ratios"])
         met = m not in TARGETS or (worst <= TARGETS[m] and f["added"] == 0)
         ok &= met
         rows.append(f"| {rig.name} | {m} | {clean:.3g} | {dirty:.3g} | {dirty / clean:.2f} | "
-                    f"{worst:.2f} ({where}) | {blackout / clean:.2f} | {f['clean5']} "
+                    f"{worst:.2f} ({where}; data {data:.2f}) | {blackout / clean:.2f} | "
+                    f"{f['clean5']} "
                     f"({f['clean5_kick']} after a kick) / {f['added']} ({f['in_blackout']} in "
                     f"blackout, {f['after_kick']} after a kick) | {f['points'][0]} / "
                     f"{f['points'][1]} |{'' if met else ' MISSED'}")
@@ -269,7 +292,9 @@ def main_more(args, methods, options: FusionOptions) -> int:
           f"{', '.join(label for label, *_ in runs)} per rig"
           + (f"; cameras at {args.fps} fps" if args.fps else ""))
     print("mean errors mm pooled over the rig's sessions; ratio faults / clean (pooled, worst "
-          "session); blackout: the ratio with the blackout alone; >5cm: points beyond 5 cm, "
+          "session; data: the ratio the blackout costs that session when the method does as "
+          "well as the remaining cameras allow, _data_ratio); blackout: the ratio with the "
+          "blackout alone; >5cm: points beyond 5 cm, "
           "clean / added by the faults; points: points output, clean / faults")
     print()
     print("| rig | method | clean mean | faults mean | ratio | worst (session) | blackout alone "

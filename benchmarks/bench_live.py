@@ -26,6 +26,7 @@ to the sinks (``LiveSummary.cpu_ns``): what the fusion latency would be on an id
 
     python benchmarks/bench_live.py [--seconds 60] [--quick] [--load 30,240]
         [--method filter,typeA] [--candidates all,best] [--record] [--direct [GAP_MS]]
+        [--bytecodes]
 
 ``--direct``: no sender, no socket in: the same datagrams fed to ``LiveFuser.feed`` in a
 loop (after the method's warm-up, the collector frozen, as ``serve`` runs), each point's
@@ -34,6 +35,7 @@ to back, warm caches). Reports the CPU per datagram that made a point, the part 
 in the fusion (``StreamFuser.push`` and the filter's ``predict``), and per stage (decoding,
 the candidates' gate, the method's own push, the LivePoints, the send: median, p99 and the
 mean over the slowest 1 % of datagrams, µs) with the garbage collections in the loop.
+``--bytecodes``: the Python bytecodes each stage runs per datagram (``sys.settrace``).
 """
 
 from __future__ import annotations
@@ -297,6 +299,65 @@ def direct(rig, frames, method: str, candidates: bool, gap_s: float) -> dict:
                 gc=np.array(pauses) / 1e3)
 
 
+def bytecodes(rig, frames, method: str, candidates: bool) -> dict:
+    """Python bytecodes executed per datagram that made a point, per stage (``sys.settrace``
+    with opcode events: what the interpreter runs, which a cold core pays for in cache
+    misses), after the method's warm-up: stage -> (k,) counts."""
+    import sys
+
+    import pslog.live.fuser as live_fuser
+    from pslog.live.fuser import LiveFuser, warm_up
+
+    fuser = LiveFuser(rig, method, candidates=candidates, epoch_ns=0, keep=False,
+                      clock=lambda: 0)
+    warm_up(method, candidates=fuser.candidates, options=fuser.options)
+    counts: dict[str, int] = {}
+    stage = ["other"]
+
+    def tracer(frame, event, arg):
+        frame.f_trace_opcodes = True
+        if event == "opcode":
+            counts[stage[0]] = counts.get(stage[0], 0) + 1
+        return tracer
+
+    def staged(f, name):
+        def run(*args):
+            outer, stage[0] = stage[0], name
+            try:
+                return f(*args)
+            finally:
+                stage[0] = outer
+        return run
+
+    decode = live_fuser.decode_detections
+    live_fuser.decode_detections = staged(decode, "decode")
+    if fuser.stream._gate is not None:
+        fuser.stream._gate.push = staged(fuser.stream._gate.push, "gate")
+    if fuser.stream.incremental is not None:
+        fuser.stream.incremental.push = staged(fuser.stream.incremental.push, "method")
+    fuser._points = staged(fuser._points, "points")
+    sink = UdpSink(("127.0.0.1", 9))  # (the discard port: nothing reads it)
+    emit = staged(sink.emit, "send")
+    per = []
+    try:
+        for t, data in frames:
+            counts.clear()
+            sys.settrace(tracer)
+            try:
+                points = fuser.feed(data, t)
+                if points:
+                    emit(points)
+            finally:
+                sys.settrace(None)
+            if points:
+                per.append(dict(counts))
+    finally:
+        live_fuser.decode_detections = decode
+        sink.close()
+    names = ("decode", "gate", "method", "points", "send", "other")
+    return {k: np.array([c.get(k, 0) for c in per]) for k in names}
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=60.0)
@@ -308,10 +369,27 @@ def main() -> int:
                         help="also record the session (RecordSink, as pslog live --record)")
     parser.add_argument("--direct", nargs="?", type=float, const=8.0, default=None,
                         metavar="GAP_MS", help="feed LiveFuser directly, GAP_MS apart")
+    parser.add_argument("--bytecodes", action="store_true",
+                        help="count the Python bytecodes run per datagram, per stage")
     parser.add_argument("--json", default=None, help="write the rows as JSON")
     args = parser.parse_args()
     json_rows = []
     seconds = 10.0 if args.quick else args.seconds
+    if args.bytecodes:
+        print(f"Python bytecodes per datagram that made a point, {seconds:g} s of datagrams "
+              f"(median / p99 per stage)")
+        for fps in (float(f) for f in args.load.split(",")):
+            rig, frames = session(fps, seconds)
+            for method in args.method.split(","):
+                for cand in args.candidates.split(","):
+                    r = bytecodes(rig, frames, method, cand == "all")
+                    total = sum(r.values())
+                    print(f"{f'3 x {fps:g} fps':>10} {method:>6} {cand:>4}: "
+                          + ", ".join(f"{k} {np.median(v):.0f} / {np.percentile(v, 99):.0f}"
+                                      for k, v in r.items() if v.any())
+                          + f"; total {np.median(total):.0f} / {np.percentile(total, 99):.0f}",
+                          flush=True)
+        return 0
     if args.direct is not None:
         print(f"LiveFuser.feed + UdpSink, {seconds:g} s of datagrams, {args.direct:g} ms "
               f"asleep between two; CPU per datagram that made a point, ms")

@@ -11,7 +11,8 @@ module after installing, so the cost is paid once, announced, before the demo or
 
 It runs the real commands on a 1.5-second simulated session in a temporary folder (simulate
 with a clock offset and spurious blobs, sync, fuse with every default method, the streaming
-forms of ``filter`` and ``typeA``), which compiles every kernel in the signatures those
+forms of ``filter`` and ``typeA``, the latter also with every candidate through the stream
+gate), which compiles every kernel in the signatures those
 commands use. Nothing is written outside the temporary folder and numba's cache.
 """
 
@@ -57,6 +58,8 @@ def warm() -> float:
 
 def _stream(session: str) -> None:
     """The streaming forms (live fusion) call the kernels one detection at a time."""
+    import numpy as np
+
     from pslog.api import read_session
     from pslog.fusion.stream import StreamFuser
 
@@ -67,6 +70,16 @@ def _stream(session: str) -> None:
         for i in range(min(len(best), 60)):
             fuser.push(int(best.time_ns[i]), int(best.camera[i]), best.uv[i])
         fuser.flush()
+    # every candidate through the stream gate (pslog live's default; its compiled kernels)
+    det = data.detections
+    fuser = StreamFuser(data.rig, "typeA", candidates=True)
+    for f in range(min(det.n_frames, 60)):
+        rows = slice(*np.searchsorted(det.cand_frame, [f, f + 1]).tolist())
+        n = rows.stop - rows.start
+        if n:
+            fuser.push([int(det.frame_time_ns[f])] * n, [int(det.frame_camera[f])] * n,
+                       det.cand_uv[rows])
+    fuser.flush()
 
 
 def main() -> int:

@@ -27,7 +27,7 @@ from pslog.fusion.confirm import (
     usual_interval_s,
 )
 from pslog.fusion.stream import StreamFuser
-from pslog.motion import rally_motion
+from pslog.motion import get_motion, rally_motion
 from pslog.records import Track
 from pslog.rig import apply_timing, builtin_rig
 from pslog.simulation import SimulationOptions, simulate_labelled
@@ -275,3 +275,21 @@ def test_explain_type_a_and_the_viewer_leave_out_the_points_fuse_drops(tmp_path)
     shown, shown_construction, _ = _type_a_with_construction(read_session(path))
     assert_array_equal(shown.time_ns, track.time_ns)
     assert len(shown_construction.event_row) == len(track)
+
+
+def test_a_camera_that_never_sees_the_ball_confirms_nothing_and_crashes_nothing():
+    """bench_dirty's ``straight`` on paper3 with cam2 blind for the whole session (the
+    two-camera reference of the blackout analysis): the confirmation looked up cam2's rows
+    though it has none (IndexError). Now its long-gap points are confirmed by cam1 and cam3
+    alone, in batch and in the stream alike, and no point is beyond 5 cm."""
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    motion = get_motion("straight")
+    det, truth, _ = simulate_labelled(rig, motion, None, SimulationOptions(
+        noise_px=0.3, seed=104, blackouts=(("cam2", 0.0, motion.duration + 1.0),)))
+    obs = det.best()
+    assert len(obs) > 50 and not np.any(obs.camera == 1)
+    track = fuse(obs, rig, "typeA")
+    assert set(np.unique(track.camera).tolist()) == {0, 2}
+    assert len(track) > 0.9 * len(obs)
+    assert np.nanmax(errors_m(track, truth)) < 0.05
+    assert_same(pushed_one_by_one(StreamFuser(rig, "typeA"), obs), track)

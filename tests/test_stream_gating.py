@@ -110,13 +110,14 @@ def test_stream_with_candidates_equals_gated_batch_on_a_dirty_session_with_a_len
         assert streamed.dropped == batch.dropped
 
 
-def test_stream_gate_waits_for_the_other_cameras_frames_a_low_candidate_reaches():
+@pytest.mark.parametrize("compiled", [False, True])
+def test_stream_gate_waits_for_the_other_cameras_frames_a_low_candidate_reaches(compiled):
     """30 ms rolling shutters; a false blob on the top row listed first in every frame whose
     ball is low: the frame's time is the blob's, early, but the ball's candidate is ~25 ms
     later and is supported by the frames up to ITS time — frames pushed after the blob's
     time has passed. The stream decides the frame only once those are in: every frame's
     epipolar support (ratio per candidate and camera, from the decided frames' chosen
-    candidates) is exactly the batch's."""
+    candidates) is exactly the batch's, in the Python form and the compiled one."""
     from test_gating_timing import with_top_row_blobs
 
     import pslog.fusion.gating as gating
@@ -140,7 +141,17 @@ def test_stream_gate_waits_for_the_other_cameras_frames_a_low_candidate_reaches(
             return every, decided, differs, lag
 
     seen: dict = {}
-    stream = Recording(rig)
+    stream = Recording(rig, compiled=compiled)
+    assert stream.compiled == compiled
+    if compiled:  # the support each frame was decided with, read after its decision
+        state, decide = stream._state, stream._state.decide
+
+        def recorded(fid, cam, k):
+            reasons = decide(fid, cam, k)
+            frame = next(f for f in stream.pending if f.fid == fid)
+            seen[frame.t, cam] = state.decided_ratio(k)
+            return reasons
+        state.decide = recorded
     push_frames(stream, det)
     stream.flush()
     starts = np.flatnonzero(np.r_[True, np.diff(det.cand_frame) != 0])

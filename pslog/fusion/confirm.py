@@ -254,6 +254,8 @@ def confirm_batch(prep, track: Track, rig, max_gap_s: float, noise_px: float | N
     last_before = np.full((len(e), len(rig)), -1, dtype=np.int64)
     for c in range(len(rig)):
         rows_c = np.flatnonzero(camera == c)
+        if len(rows_c) == 0:  # a camera with no detection at all: it confirms nothing
+            continue
         k = np.searchsorted(rows_c, e, side="left") - 1
         last_before[:, c] = np.where(k >= 0, rows_c[np.maximum(k, 0)], -1)
     nxt = np.full(len(e), -1, dtype=np.int64)

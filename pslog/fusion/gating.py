@@ -55,7 +55,7 @@ import math
 from bisect import bisect_left, bisect_right
 from collections import deque
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Literal, cast
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
@@ -529,7 +529,8 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
     support's) within ``static_m`` of a candidate's point in each of its camera's earlier
     frames; or, for a candidate whose point rests on one other camera (``paired``), its
     pixel within ``static_m`` across its ray (:func:`_still_px`) of a candidate's pixel
-    there, unless that support held in every one of those frames (:func:`_still_alone`).
+    there, unless that support held in every one of those frames (:func:`_still_alone`)
+    and no longer than a ball in flight can stay that still (:func:`_still_long`).
     (Still in one image is not enough in general: a ball moving along a camera's ray is.
     But one other camera fixes the point's depth by a single epipolar constraint, which a
     static object seen by this camera alone meets whenever the ball crosses its epipolar
@@ -550,6 +551,8 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
     stillness = np.zeros(len(c.camera))
     for b, (times, table) in enumerate(tables):
         lags = int(np.ceil(options.static_s * rig.cameras[b].fps))
+        long_lags = int(np.ceil(LONG_STILL * options.static_s * rig.cameras[b].fps))
+        run_long = np.zeros(table.shape)
         run = np.zeros(table.shape)
         p = points[np.maximum(table, 0)]  # (frames, K, 3)
         y = c.uv_und[np.maximum(table, 0)]  # (frames, K, 2)
@@ -562,12 +565,28 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
             tol[~paired[np.maximum(table, 0)]] = np.nan
         run_px = np.zeros(table.shape)
         held = np.zeros(table.shape)
-        for lag in range(1, min(lags, len(times) - 1) + 1):
+        for lag in range(1, min(long_lags, len(times) - 1) + 1):
             prev = np.full(table.shape, -1)
             prev[lag:] = table[:-lag]
+            if lag > lags:  # the long image test's frames only
+                recent = np.zeros(len(times), dtype=bool)
+                recent[lag:] = (times[lag:] - times[:-lag]
+                                <= 1.5 * LONG_STILL * options.static_s * NS)
+                yy = c.uv_und[np.maximum(prev, 0)]
+                with np.errstate(invalid="ignore"):
+                    du = y[:, :, None, 0] - yy[:, None, :, 0]
+                    dv = y[:, :, None, 1] - yy[:, None, :, 1]
+                    d_px = np.sqrt(du * du + dv * dv)
+                    d_px = np.where((prev[:, None, :] >= 0) & np.isfinite(d_px), d_px,
+                                    np.inf).min(axis=2)
+                    run_long += recent[:, None] & (d_px <= tol)
+                continue
             # the lag frames must lie within 1.5 static_s: missed frames do not count
             recent = np.zeros(len(times), dtype=bool)
             recent[lag:] = times[lag:] - times[:-lag] <= 1.5 * options.static_s * NS
+            recent_long = np.zeros(len(times), dtype=bool)
+            recent_long[lag:] = (times[lag:] - times[:-lag]
+                                 <= 1.5 * LONG_STILL * options.static_s * NS)
             pp = points[np.maximum(prev, 0)]
             yy = c.uv_und[np.maximum(prev, 0)]
             with np.errstate(invalid="ignore"):
@@ -586,11 +605,16 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
             run += recent[:, None] & (d <= options.static_m)
             with np.errstate(invalid="ignore"):
                 run_px += recent[:, None] & (d_px <= tol)
+                run_long += recent_long[:, None] & (d_px <= tol)
         ok = table >= 0
         stillness[table[ok]] = run[ok] / lags
         # still in most of them: one frame whose point a coincidence spoiled does not count;
         # across the ray, in every one of them (a static object's pixel is in every frame)
-        static[table[ok & ((run >= 0.75 * lags) | _still_alone(run_px, held, lags))]] = True
+        dz = c.ray_dir[np.maximum(table, 0), 2]
+        with np.errstate(invalid="ignore"):
+            long = _still_long(run_long, dz, long_lags, rig.cameras[b].fps, options, np.sqrt)
+        static[table[ok & ((run >= 0.75 * lags) | _still_alone(run_px, held, lags)
+                           | long)]] = True
     return static, stillness
 
 
@@ -605,6 +629,30 @@ def _still_alone(run_px, held, lags: int):
     its image too; one frame whose point a coincidence spoiled does not count (a camera
     going blind made one ball point's rays miss: 8 ball detections lost on wide3)."""
     return (run_px >= lags) & (held < lags - 1)
+
+
+#: The long image test's window, in ``static_s`` (:func:`_still_long`).
+LONG_STILL = 2.0
+#: ``min over v of max over s in [0, T] of |v s - g s² / 2|`` is ``LONG_STILL_C g T²``, the
+#: least a ball under an acceleration ``g`` across its ray moves across it in ``T``:
+#: ``(√2 - 1)² / 2`` (equal ripple at the turning point ``s = v/g`` and at ``s = T``).
+LONG_STILL_C = (math.sqrt(2.0) - 1.0) ** 2 / 2.0
+
+
+def _still_long(run_long, dz, frames: int, fps: float, options: GatingOptions, sqrt):
+    """The long image test (:func:`_static`; arrays elementwise or floats): still across its
+    ray in every one of the ``frames`` frames of the last ``LONG_STILL static_s``
+    (``run_long``), longer than a ball in flight can be: gravity's component across the
+    ray, ``g⊥ = G sqrt(1 - dz²)`` (``dz``: the ray's world z), moves it across the ray by
+    at least ``LONG_STILL_C g⊥ T²`` in ``T = frames / fps``, whatever its velocity; beyond
+    ``static_m`` it is not a ball moving along the ray, however continuous its support (a
+    ball sliding along a static object's epipolar line in the other camera supported the
+    object in every frame for 0.53 s: paper2, bench_dirty.py --more --first-seed 500,
+    rally-501 at 5.55-6.08 s). Rays near vertical keep the
+    exemption (a ball falling along them can stay that still; 14 degrees at 30 fps)."""
+    t = frames / fps
+    g_across = G * sqrt(1.0 - dz * dz)
+    return (run_long >= frames) & (LONG_STILL_C * g_across * t * t > options.static_m)
 
 
 def _still_px(cam, x, y, z, options: GatingOptions, sqrt):
@@ -899,7 +947,7 @@ class _Columns:
     scalars), what :meth:`_Decider.decide` reads: made by :func:`_columns`."""
 
     __slots__ = ("available", "camera", "epi_cost", "front", "lag", "n_support", "pts", "rays",
-                 "rows", "static", "stillness", "t_ns", "t_s")
+                 "rows", "static", "stillness", "t_ns", "t_s", "unpointed")
     available: list[int]
     lag: list[list[float]]
     camera: list[int]
@@ -913,6 +961,7 @@ class _Columns:
     stillness: list[float]
     t_ns: list[int]
     t_s: list[float]
+    unpointed: list[bool]
 
     def __init__(self, **columns) -> None:
         for k, v in columns.items():
@@ -951,9 +1000,14 @@ def _columns(c: _Candidates, ratio, points, in_front, static=None, lag=None) -> 
     # blob of a camera not seeing the ball, carried as it is across 22-56 ms, 21 cm from
     # the ray of a static object seen by cam2, "supported" it; chosen with no track to deny
     # it, smooth's points 2-3 m off).
+    # It is not evidence against the candidate either: the support may be the ball carried
+    # from a frame up to max_gap_s old while the ball moved (paper2 at 1 px: cam1 left the
+    # view, cam0's ball carried 83-117 ms "supported" cam0's next balls with rays 29-40 cm
+    # apart). Such a candidate (``unpointed``) is judged by the track alone, at the track's
+    # own allowance; with no track it is rejected (:meth:`_Decider.decide`).
     no_point = ~np.isfinite(points[:, 0])
-    n_support = np.where(no_point & (supported >= 2), 1,
-                         np.where(no_point & (supported == 1), 0, supported))
+    unpointed = no_point & (supported == 1)
+    n_support = np.where(no_point & (supported >= 2), 1, np.where(unpointed, 0, supported))
     lag = (np.zeros(ratio.shape) if lag is None
            else np.asarray(lag, dtype=np.float64).reshape(ratio.shape))
     return _Columns(rows=ratio.tolist(), available=np.isfinite(ratio).sum(axis=1).tolist(),
@@ -962,7 +1016,7 @@ def _columns(c: _Candidates, ratio, points, in_front, static=None, lag=None) -> 
                     t_s=(c.time_ns / NS).tolist(), t_ns=c.time_ns.tolist(),
                     rays=c.ray_dir.tolist(), pts=points.tolist(),
                     front=np.asarray(in_front).tolist(), static=static, stillness=stillness,
-                    camera=np.asarray(c.camera).tolist())
+                    camera=np.asarray(c.camera).tolist(), unpointed=unpointed.tolist())
 
 
 def _age(ratio_row, lag_row) -> float:
@@ -1020,7 +1074,8 @@ class _Decider:
         rows, available, n_support, epi_cost = (cols.rows, cols.available, cols.n_support,
                                                 cols.epi_cost)
         t_s, t_ns, rays, pts, front = cols.t_s, cols.t_ns, cols.rays, cols.pts, cols.front
-        static, stillness, camera = cols.static, cols.stillness, cols.camera
+        static, stillness, camera, unpointed = (cols.static, cols.stillness, cols.camera,
+                                                cols.unpointed)
         centers = self.centers
         for lo, hi in frames:
             best_key, best_row = None, -1
@@ -1040,8 +1095,10 @@ class _Decider:
                     if pred is None:  # at the candidate's own time (a rolling shutter's row)
                         pred = preds[t_ns[i]] = track.predict(t_s[i]) or False
                     if pred and math.isfinite(rays[i][0]):
+                        # (a single support whose carried ray made no point: the track's own
+                        # allowance, as for a candidate one camera supports; _columns)
                         track_accepts = (_ray_miss(pred[0], centers[camera[i]], rays[i])
-                                         <= options.track_alone_m)
+                                         <= (pred[1] if unpointed[i] else options.track_alone_m))
                     if not track_accepts:
                         reason[i] = EPIPOLAR
                         continue
@@ -1356,29 +1413,36 @@ def _can_judge(key: int, earlier: list[int], lags: int, options: GatingOptions) 
 
 
 def _stillness_one(key: int, pts, earlier, lags: int, options: GatingOptions,
-                   uvs=None, paired=None, cam=None):
+                   uvs=None, paired=None, cam=None, dz=None):
     """:func:`_static`'s rule for one frame on floats (the same bits): ``pts`` its
     candidates' points (k, 3) as lists, ``earlier`` (frame time ns, points, undistorted
-    pixels) of its camera's ``lags`` frames before it, newest first; ``uvs`` the frame's
-    undistorted pixels (k, 2), ``paired`` (k,) bool (its point rests on one other camera),
-    ``cam`` its Camera (the image test; None: the 3D test alone). Returns (static (k,)
+    pixels) of its camera's frames before it, newest first (``lags`` of them for the 3D
+    test and the image test; up to ``ceil(LONG_STILL static_s fps)`` for the long image
+    test); ``uvs`` the frame's undistorted pixels (k, 2), ``paired`` (k,) bool (its point
+    rests on one other camera), ``cam`` its Camera (the image tests; None: the 3D test
+    alone), ``dz`` (k,) its candidates' rays' world z (the long test). Returns (static (k,)
     bool, stillness (k,))."""
     run = np.zeros(len(pts))
     run_px = np.zeros(len(pts))
+    run_long = np.zeros(len(pts))
     held = np.zeros(len(pts))
     tols = [_still_px(cam, x, y, z, options, _sqrt)
             if cam is not None and paired[j] and math.isfinite(x) else math.nan
             for j, (x, y, z) in enumerate(pts)]
-    for prev_key, prev_points, *prev_uvs in earlier:
-        if not key - prev_key <= 1.5 * options.static_s * NS:  # (recent)
+    # the candidates still across their ray in every frame so far (only they can pass the
+    # long test, which asks for every one of its frames)
+    alive = [t == t for t in tols]  # (an image test: not NaN)
+    for n, (prev_key, prev_points, *prev_uvs) in enumerate(earlier, start=1):
+        if n > lags and not any(alive):
+            break  # (the long image test's frames: nothing left to test)
+        recent = key - prev_key <= 1.5 * options.static_s * NS
+        recent_long = key - prev_key <= 1.5 * LONG_STILL * options.static_s * NS
+        if not (recent or recent_long):
+            alive = [False] * len(pts)
             continue
         for j, (x, y, z) in enumerate(pts):
-            best = math.inf
-            for px, py, pz in prev_points:
-                dx, dy, dz = x - px, y - py, z - pz
-                d = math.sqrt(dx * dx + dy * dy + dz * dz)  # np.linalg.norm's order
-                if d < best:  # NaN (no point) never is
-                    best = d
+            if n > lags and not alive[j]:
+                continue
             best_px = math.inf
             supported = False
             if tols[j] == tols[j]:  # (an image test: not NaN)
@@ -1390,13 +1454,33 @@ def _stillness_one(key: int, pts, earlier, lags: int, options: GatingOptions,
                         best_px = d
                     if d <= tols[j] and px == px and py == py and pz == pz:  # (finite)
                         supported = True
+            if recent_long and best_px <= tols[j]:
+                run_long[j] += 1.0
+            else:
+                alive[j] = False
+            if n > lags or not recent:
+                continue  # (the long image test's frames only)
+            best = math.inf
+            for px, py, pz in prev_points:
+                dx, dy, dz_ = x - px, y - py, z - pz
+                d = math.sqrt(dx * dx + dy * dy + dz_ * dz_)  # np.linalg.norm's order
+                if d < best:  # NaN (no point) never is
+                    best = d
             if supported:
                 held[j] += 1.0
             if best <= options.static_m:
                 run[j] += 1.0
             if best_px <= tols[j]:
                 run_px[j] += 1.0
-    return (run >= 0.75 * lags) | _still_alone(run_px, held, lags), run / lags
+    static = (run >= 0.75 * lags) | _still_alone(run_px, held, lags)
+    if cam is not None and dz is not None and any(alive):
+        long_lags = int(np.ceil(LONG_STILL * options.static_s * cam.fps))
+        for j in range(len(pts)):
+            dz_j = float(dz[j])
+            if alive[j] and dz_j * dz_j <= 1.0:  # (np.sqrt's NaN in _static: not static)
+                static[j] |= bool(_still_long(run_long[j], dz_j, long_lags, cam.fps, options,
+                                              _sqrt))
+    return static, run / lags
 
 
 def _result(detections: Detections, rig: Rig, reason: np.ndarray) -> Gated:
@@ -1423,8 +1507,8 @@ class _Frame:
     gate computed of them once (corrected times, undistorted pixels, rays; once decided,
     their 3D points and rejection reasons)."""
 
-    __slots__ = ("camera", "every", "index", "key", "points", "ray_dir", "reason", "support",
-                 "t", "time_ns", "uv", "uv_und")
+    __slots__ = ("camera", "every", "index", "key", "latest", "points", "ray_dir", "reason",
+                 "support", "t", "time_ns", "uv", "uv_und")
 
     def __init__(self, t: int, camera: int, index: int, uv: np.ndarray, time_ns: list[int],
                  uv_und: np.ndarray, ray_dir: np.ndarray) -> None:
@@ -1432,12 +1516,26 @@ class _Frame:
         self.time_ns = time_ns  # corrected, per candidate
         self.uv_und, self.ray_dir = uv_und, ray_dir
         self.key = self.time_ns[0]  # the frame's time: its best candidate's (_frame_table)
+        self.latest = max(time_ns)  # (a rolling shutter's lowest row: when it is ready)
         self.reason: np.ndarray | None = None
         self.points: list | None = None
         # the candidates that may support another camera's choice, (t, u, v): every one
         # until the frame is decided, then the chosen one if any (:func:`_support_one`)
         self.every = [(t, u, v) for t, (u, v) in zip(time_ns, uv_und.tolist(), strict=True)]
         self.support = self.every
+
+
+class _Held:
+    """One frame pushed to a compiled :class:`StreamGate` (its state lives in
+    :class:`pslog.fusion._gate_kernel.GateState`): what releasing it needs."""
+
+    __slots__ = ("camera", "fid", "index", "key", "latest", "reason", "t", "uv")
+
+    def __init__(self, t: int, camera: int, index: int, uv: np.ndarray, key: int, latest: int,
+                 fid: int) -> None:
+        self.t, self.camera, self.index, self.uv = t, camera, index, uv
+        self.key, self.latest, self.fid = key, latest, fid  # (latest: of its corrected times)
+        self.reason: list[int] | None = None
 
 
 class StreamGate:
@@ -1456,14 +1554,19 @@ class StreamGate:
     every batch step is elementwise in an order floats reproduce (no matrix product or
     LAPACK call, whose bits depend on the array's size), so the bits are the batch's. Each
     camera's frames are kept in (corrected time, push) order, as :func:`_frame_table` orders
-    them, for ``history`` seconds. Cost per push of a 3-camera 30 fps session with a few
-    candidates per frame: ~50-70 µs (``benchmarks/bench_stream.py``).
+    them, for ``history`` seconds.
+
+    ``compiled`` (default: when this Python's ``sum`` is one the kernels reproduce): the same
+    steps run as compiled kernels over a state in preallocated arrays
+    (:mod:`pslog.fusion._gate_kernel`, one call per frame pushed), the same bits; False keeps
+    the Python form above. Cost per push at 3 × 30 fps, a few candidates per frame: ~13 µs
+    compiled, ~100 µs in Python, on a warm core (``benchmarks/bench_live.py --direct 0``).
 
     Used by :class:`pslog.fusion.stream.StreamFuser` with ``candidates=True``.
     """
 
     def __init__(self, rig: Rig, wait_s: float = 0.0, max_gap_s: float | None = None,
-                 options: GatingOptions | None = None) -> None:
+                 options: GatingOptions | None = None, compiled: bool | None = None) -> None:
         from ._prepare import default_max_gap_s
 
         self.rig = rig
@@ -1477,7 +1580,8 @@ class StreamGate:
         # frames older than this (logged) reach no later choice: neither as support (at
         # most max_gap_s away) nor as a stillness reference (1.5 static_s)
         self.history_ns = round((2 * (max_gap_s or default_max_gap_s(rig)) + wait_s
-                                 + 1.5 * self.options.static_s + 0.2 + 2 * spread) * NS)
+                                 + 1.5 * LONG_STILL * self.options.static_s + 0.2
+                                 + 2 * spread) * NS)
         self.decider = _Decider(rig, self.options)
         self.constants = _rig_constants(rig)
         self.camera_k = [cam.K.tolist() for cam in rig.cameras]
@@ -1489,10 +1593,28 @@ class StreamGate:
         # per camera: its frames in (corrected time, push) order and their times
         self.keys: list[list[int]] = [[] for _ in rig.cameras]
         self.by_camera: list[list[_Frame]] = [[] for _ in rig.cameras]
-        self.pending: list[_Frame] = []  # not decided yet, in pushed order
-        self.unreleased: deque[_Frame] = deque()  # not returned yet, in pushed order
+        self.pending: list = []  # not decided yet, in pushed order (_Frame or _Held)
+        self.unreleased: deque = deque()  # not returned yet, in pushed order
         self.last: tuple[int, int] = (np.iinfo(np.int64).min, -1)
         self.rejected: list[tuple] = []
+        # the compiled form (pslog.fusion._gate_kernel: the same steps, the same bits, one
+        # call per frame), unless this Python's sum() is one it does not reproduce
+        self._state = None
+        if compiled is not False:
+            from . import _gate_kernel
+
+            if _gate_kernel.SUM_MODE >= 0:
+                self._state = _gate_kernel.GateState(rig, self.options, self.wait_ns,
+                                                     self.max_gap_ns, self.F, self.constants,
+                                                     self.lags, G)
+            elif compiled:
+                raise FusionError("the compiled stream gate cannot reproduce this Python's "
+                                  "sum() of floats")
+
+    @property
+    def compiled(self) -> bool:
+        """Whether the frames are decided by the compiled kernels (pslog.fusion._gate_kernel)."""
+        return self._state is not None
 
     def push(self, time_ns, camera, uv, frame_index=None):
         """Add candidates (rows with equal ``(time, camera)`` are one frame's, best first;
@@ -1505,6 +1627,15 @@ class StreamGate:
         frame_index = (np.zeros(len(time_ns), np.int64) if frame_index is None
                        else np.atleast_1d(np.asarray(frame_index, dtype=np.int64)))
         keys = list(zip(time_ns.tolist(), camera.tolist(), strict=True))
+        if (self._state is not None and keys and keys[0] == keys[-1] and not self.pending
+                and not self.corrected and not self.wait_ns):
+            # one frame, decided as it comes (what _add then _step do, in one compiled call)
+            if keys[0] <= self.last:
+                raise FusionError("candidates must arrive in (time, camera) order of "
+                                  "their logged times, each frame's in one push; got "
+                                  f"t={keys[0][0]} ns after t={self.last[0]} ns")
+            self.last = keys[0]
+            return self._one(keys[0][0], keys[0][1], int(frame_index[0]), uv.copy())
         start = 0
         for i in range(1, len(keys) + 1):
             if i == len(keys) or keys[i] != keys[start]:
@@ -1517,6 +1648,36 @@ class StreamGate:
                           uv[start:i].copy())
                 start = i
         return self._step(final=False)
+
+    def _one(self, t: int, cam: int, index: int, uv: np.ndarray):
+        """:meth:`push` of one frame that is decided at once (compiled; nothing pending)."""
+        xy = None
+        if self.distorted[cam]:  # the iterative undistortion, in numpy (row by row)
+            xy = self._normalized(cam, uv)
+        n = len(uv)
+        assert self._state is not None  # (push calls it in the compiled form only)
+        reasons = self._state.push_decide(cam, t, np.full(n, t, np.int64), uv, xy,
+                                          self.last[0] - self.history_ns)
+        chosen = []
+        for k, r in enumerate(reasons):
+            if r < 0:
+                chosen.append(k)
+            else:
+                self.rejected.append((t, cam, index, *uv[k].tolist(), r))
+        c = len(chosen)
+        return (np.full(c, t, np.int64), np.full(c, cam, np.int32),
+                uv[chosen] if c != n else uv, np.full(c, index, np.int64))
+
+    def _normalized(self, cam: int, uv: np.ndarray) -> np.ndarray:
+        """Ideal normalized coordinates (k, 2) of a lensed camera's pixels ``uv`` (k, 2)
+        (NaN where :func:`_pixel_geometry` gives none: far outside the image)."""
+        camera = self.rig.cameras[cam]
+        limit = 10 * max(camera.width, camera.height)
+        sane = np.all(np.abs(uv) <= limit, axis=1)
+        xy = np.full((len(uv), 2), np.nan)
+        if sane.any():
+            xy[sane] = camera.undistort_normalized(uv[sane])
+        return xy
 
     def flush(self):
         """Decide and return every remaining frame (end of stream)."""
@@ -1534,6 +1695,13 @@ class StreamGate:
         clock = self.clock_model[cam]
         time_ns = ([t] * len(uv) if not self.corrected else
                    [_true_time_ns(t, v, clock) for v in uv[:, 1].tolist()])
+        if self._state is not None:
+            xy = self._normalized(cam, uv) if self.distorted[cam] else None
+            fid = self._state.insert(cam, t, np.array(time_ns, np.int64), uv, xy)
+            held = _Held(t, cam, index, uv, time_ns[0], max(time_ns), fid)
+            self.pending.append(held)
+            self.unreleased.append(held)
+            return
         frame = _Frame(t, cam, index, uv, time_ns, *self._geometry(cam, uv))
         at = bisect_right(self.keys[cam], frame.key)  # after equal times: push order
         self.keys[cam].insert(at, frame.key)
@@ -1580,23 +1748,29 @@ class StreamGate:
                          else self.last[0] if self.wait_ns else None)
                 if bound is not None:
                     ready = 0
-                    while ready < len(todo) and max(todo[ready].time_ns) + self.wait_ns < bound:
+                    while ready < len(todo) and todo[ready].latest + self.wait_ns < bound:
                         ready += 1
                     todo = todo[:ready]
             if todo:
                 for f in todo:
-                    self._decide(f)
+                    if self._state is not None:
+                        f.reason = self._state.decide(f.fid, f.camera, len(f.uv))
+                    else:
+                        self._decide(f)
                 self.pending = [f for f in self.pending if f.reason is None]
         out = []
         while self.unreleased and self.unreleased[0].reason is not None:
             f = self.unreleased.popleft()  # released in pushed order
-            for k, r in enumerate(cast(np.ndarray, f.reason).tolist()):  # (not None: above)
+            reasons = f.reason if isinstance(f.reason, list) else f.reason.tolist()
+            for k, r in enumerate(reasons):  # (not None: above)
                 if r < 0:
                     out.append((f.t, f.camera, f.uv[k], f.index))
                 else:
                     self.rejected.append((f.t, f.camera, f.index, *f.uv[k].tolist(), r))
         # keep the history a later choice can reach
         old = self.last[0] - self.history_ns
+        if self._state is not None:
+            self._state.trim(old)
         for keys, frames in zip(self.keys, self.by_camera, strict=True):
             drop = 0
             while drop < len(frames) and frames[drop].reason is not None and frames[drop].t < old:
@@ -1637,12 +1811,13 @@ class StreamGate:
         # _static's rule on this frame: still against each of the camera's lags frames before
         frames, at = self.by_camera[a], self.by_camera[a].index(f)
         lags = self.lags[a]
+        long_lags = int(np.ceil(LONG_STILL * o.static_s * self.rig.cameras[a].fps))
         still = _stillness_one(f.key, f.points,
                                [(frames[at - lag].key, frames[at - lag].points,
                                  frames[at - lag].uv_und.tolist())
-                                for lag in range(1, min(lags, at) + 1)], lags, o,
+                                for lag in range(1, min(long_lags, at) + 1)], lags, o,
                                f.uv_und.tolist(), _paired(every[0]).tolist(),
-                               self.rig.cameras[a])
+                               self.rig.cameras[a], f.ray_dir[:, 2])
         reason = np.full(k, -1, dtype=np.int8)
         self.decider.run(c, [(0, k)], ratio, points, in_front, reason, still, lag)
         f.reason = reason

@@ -1,0 +1,980 @@
+"""The stream gate's per-frame work, compiled (:class:`pslog.fusion.gating.StreamGate`).
+
+:class:`~pslog.fusion.gating.StreamGate` decides each frame as :func:`~pslog.fusion.gating.gate`
+would, on Python floats in the batch's order of operations (bit for bit). Live, one frame
+costs about 7,000 Python bytecodes and 500 allocations (its candidates' support by every
+other camera, their 3D points, their stillness, the sequential choice with the track's
+ballistic fit): ~0.1 ms on a warm core, ~0.4 ms on a core gone cold in the 11 ms between two
+30 fps datagrams. This module holds the same steps as kernels (:func:`pslog._jit.kernel`)
+over a state kept in preallocated arrays, one call per pushed frame: the same floating-point
+operations in the same order on the same history, so the same bits and the same decisions
+(``tests/test_gate_kernel.py`` compares it with the Python form, and the stream with the
+batch gate). Each function names the Python one it mirrors in :mod:`pslog.fusion.gating`.
+
+Two of Python's float operations are not the compiled ones and are reproduced on purpose:
+
+- ``x ** 2`` is C's ``pow(x, 2.0)`` in CPython, which differs from ``x * x`` in the last
+  bit on ~0.1 % of values (glibc); the kernels call ``pow`` with an exponent read from the
+  state (``two``), which the compiler cannot turn into a product;
+- the built-in ``sum`` of floats is a plain running sum up to Python 3.11 and Neumaier's
+  compensated sum from 3.12 (Neumaier 1974, "Rundungsfehleranalyse einiger Verfahren zur
+  Summation endlicher Summen", ZAMM 54: 39-51): :data:`SUM_MODE` says which one this Python
+  has (probed at import), and :func:`_sum_add` reproduces it; on a Python whose ``sum`` is
+  neither, :data:`SUM_MODE` is -1 and the stream gate keeps its Python form.
+
+State layout (``m`` cameras, ``H`` frames kept per camera, ``K`` candidates per frame; each
+camera's frames in (key, push) order at rows ``0 .. count[c]-1``):
+
+- ``fi`` (m, H, 4) int64: key (the first candidate's corrected time, ns), logged time ns,
+  push id, number of candidates;
+- ``fflag`` (m, H, 2) int8: decided, support narrowed (decided with a rejected candidate:
+  only its chosen and outscored candidates still support, :func:`gating._supporting`);
+- ``ct`` (m, H, K) int64 corrected times; ``cf`` (m, H, K, 8) float64: undistorted u, v,
+  unit ray x, y, z, the all-candidates 3D point x, y, z; ``csup`` (m, H, K) int8: may support;
+- ``trk`` (4 P + 1, 5) float64: the track's points (time s, x, y, z, age s), ``ist`` int64:
+  [points in the track, verified, tracked, next push id].
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .._jit import kernel
+
+#: rejection codes, as pslog.fusion.gating's
+_EPIPOLAR, _TRACK, _MOTION, _OUTSCORED = 0, 1, 2, 3
+_NS = 1_000_000_000
+_MIN_DET = 1e-12
+_I64_MIN = int(np.iinfo(np.int64).min)
+#: rows of ``opt`` (float64 options and constants, see :func:`options_array`)
+(O_EPI, O_VMAX, O_HALF_ACCEL, O_TRACK_M, O_JUMP, O_WINDOW, O_MAX_SPEED, O_LOOSE, O_STATIC_S,
+ O_STATIC_M, O_ALONE, O_G, O_TWO, O_TRACK_POINTS, O_WAIT, O_GAP, O_SUM, O_LONG_STILL,
+ O_LONG_STILL_C) = range(19)
+N_OPT = 19
+
+
+def _python_sum_mode() -> int:
+    """0: this Python's ``sum`` of floats is a plain running sum (<= 3.11); 1: Neumaier's
+    compensated sum as CPython 3.12 adds it; -1: neither (the kernels are not used)."""
+    probes = ([0.1] * 10, [1.0, 1e100, 1.0, -1e100], [-0.0], [1e308, 1e308, -1e308],
+              [0.3, -0.1, 1e-17, 2.5e-16, -0.2], [math.inf, 1.0], [math.nan, 1.0])
+    for mode in (0, 1):
+        ok = True
+        for p in probes:
+            f, c = 0.0, 0.0
+            for x in p:
+                f, c = _sum_add_py(f, c, x, mode)
+            mine, theirs = _sum_end_py(f, c, mode), sum(p)
+            if not (mine == theirs or (mine != mine and theirs != theirs)) or (
+                    math.copysign(1.0, mine) != math.copysign(1.0, theirs)):
+                ok = False
+        if ok:
+            return mode
+    return -1
+
+
+def _sum_add_py(f: float, c: float, x: float, mode: int):
+    if mode == 0:
+        return f + x, c
+    t = f + x
+    if abs(f) >= abs(x):
+        c += (f - t) + x
+    else:
+        c += (x - t) + f
+    return t, c
+
+
+def _sum_end_py(f: float, c: float, mode: int) -> float:
+    if mode == 1 and c != 0.0 and math.isfinite(c):
+        return f + c
+    return f
+
+
+#: how this Python's ``sum`` adds floats (:func:`_python_sum_mode`)
+SUM_MODE = _python_sum_mode()
+
+
+@kernel
+def _sum_add(f, c, x, mode):
+    """One float added to a running ``sum`` (``f``, compensation ``c``) as this Python's
+    built-in ``sum`` adds it (``mode``: :data:`SUM_MODE`)."""
+    if mode == 0:
+        return f + x, c
+    t = f + x
+    if abs(f) >= abs(x):
+        c += (f - t) + x
+    else:
+        c += (x - t) + f
+    return t, c
+
+
+@kernel
+def _sum_end(f, c, mode):
+    if mode == 1 and c != 0.0 and math.isfinite(c):
+        return f + c
+    return f
+
+
+@kernel
+def _pymax(a, b):
+    """Python's ``max(a, b)``: ``b`` only when ``b > a`` (NaN as Python orders it)."""
+    return b if b > a else a
+
+
+@kernel
+def _pymin(a, b):
+    """Python's ``min(a, b)``."""
+    return b if b < a else a
+
+
+@kernel
+def _sqrt(x):
+    """gating._sqrt: NaN for a negative or NaN argument."""
+    return math.sqrt(x) if x >= 0 else math.nan
+
+
+@kernel
+def _line_of(f, u, v):
+    """gating._line_of (``f``: F_ab (3, 3))."""
+    a = (f[0, 0] * u + f[0, 1] * v) + f[0, 2]
+    b = (f[1, 0] * u + f[1, 1] * v) + f[1, 2]
+    if not _pymax(abs(a), abs(b)) > 0 or not math.isfinite(a) or not math.isfinite(b):
+        return math.nan, math.nan, math.nan
+    c = (f[2, 0] * u + f[2, 1] * v) + f[2, 2]
+    big = _pymax(abs(a), abs(b))
+    a, b, c = a / big, b / big, c / big
+    size = _sqrt(a * a + b * b)
+    return a / size, b / size, c / size
+
+
+@kernel
+def _n_usable(csup, b, j, n, narrowed):
+    """How many candidates of camera b's frame j may support (all: ``narrowed`` False)."""
+    if not narrowed:
+        return n
+    got = 0
+    for q in range(n):
+        if csup[b, j, q]:
+            got += 1
+    return got
+
+
+@kernel
+def support_one(t, l0, l1, l2, b, keys, fi, fflag, ct, cf, csup, right, narrowed, opt):
+    """gating._support_one, causal, for one candidate at corrected time ``t`` (its epipolar
+    line ``l`` in camera b) over b's kept frames (``keys``: their times): from every
+    candidate (``narrowed`` False) or from the candidates that may support (``csup``) of
+    frames decided with a rejected one. ``right``: bisect_right (else bisect_left).
+    Returns (ratio, carried u, carried v, found): ratio NaN when no frame is near."""
+    epi, vmax, half_accel = opt[O_EPI], opt[O_VMAX], opt[O_HALF_ACCEL]
+    wait, gap = np.int64(opt[O_WAIT]), np.int64(opt[O_GAP])
+    target = t + wait
+    last = (np.searchsorted(keys, target, side="right") if right
+            else np.searchsorted(keys, target, side="left")) - 1
+    i1 = last
+    while i1 >= 0 and _n_usable(csup, b, i1, fi[b, i1, 3],
+                                narrowed and fflag[b, i1, 1] != 0) == 0:
+        i1 -= 1
+    i0 = i1 - 1
+    while i0 >= 0 and _n_usable(csup, b, i0, fi[b, i0, 3],
+                                narrowed and fflag[b, i0, 1] != 0) == 0:
+        i0 -= 1
+    near0 = i0 >= 0 and abs(t - keys[i0]) <= gap
+    near1 = i1 >= 0 and abs(t - keys[i1]) <= gap
+    if near0 and near1:
+        best, bu, bv, found = math.inf, math.nan, math.nan, False
+        only0 = narrowed and fflag[b, i0, 1] != 0
+        only1 = narrowed and fflag[b, i1, 1] != 0
+        for q0 in range(fi[b, i0, 3]):
+            if only0 and not csup[b, i0, q0]:
+                continue
+            t0, u0, v0 = ct[b, i0, q0], cf[b, i0, q0, 0], cf[b, i0, q0, 1]
+            for q1 in range(fi[b, i1, 3]):
+                if only1 and not csup[b, i1, q1]:
+                    continue
+                t1, u1, v1 = ct[b, i1, q1], cf[b, i1, q1, 0], cf[b, i1, q1, 1]
+                span = (t1 - t0) / _NS
+                if not span > 0:
+                    continue
+                w = (t - t0) / _NS / span
+                du, dv = u1 - u0, v1 - v0
+                yu, yv = u0 + w * du, v0 + w * dv
+                if not math.sqrt(du * du + dv * dv) / abs(span) <= vmax:
+                    continue
+                tau = epi + half_accel * abs(t - t0) / _NS * abs(t - t1) / _NS
+                d = abs(l0 * yu + l1 * yv + l2)
+                if math.isfinite(d) and d / tau < best:  # argmin: the first
+                    best, bu, bv, found = d / tau, yu, yv, True
+        return best, bu, bv, found
+    if near1:  # a single nearby frame, its candidates as they are
+        best, bu, bv, found = math.inf, math.nan, math.nan, False
+        only1 = narrowed and fflag[b, i1, 1] != 0
+        for q1 in range(fi[b, i1, 3]):
+            if only1 and not csup[b, i1, q1]:
+                continue
+            t1, u1, v1 = ct[b, i1, q1], cf[b, i1, q1, 0], cf[b, i1, q1, 1]
+            tau = epi + vmax * (abs(t - t1) / _NS)
+            d = abs(l0 * u1 + l1 * v1 + l2)
+            r = d / tau if math.isfinite(d) else math.inf
+            if not found or r < best:
+                best, bu, bv, found = r, u1, v1, True
+        return best, bu, bv, found
+    return math.nan, math.nan, math.nan, False
+
+
+@kernel
+def _carried_ray(u, v, k_inv, r):
+    """gating._carried_ray on floats (``k_inv``, ``r``: (3, 3))."""
+    cx = (k_inv[0, 0] * u + k_inv[0, 1] * v) + k_inv[0, 2]
+    cy = (k_inv[1, 0] * u + k_inv[1, 1] * v) + k_inv[1, 2]
+    cz = (k_inv[2, 0] * u + k_inv[2, 1] * v) + k_inv[2, 2]
+    x = (cx * r[0, 0] + cy * r[1, 0]) + cz * r[2, 0]
+    y = (cx * r[0, 1] + cy * r[1, 1]) + cz * r[2, 1]
+    z = (cx * r[0, 2] + cy * r[1, 2]) + cz * r[2, 2]
+    s = _sqrt((x * x + y * y) + z * z)
+    return x / s, y / s, z / s
+
+
+@kernel
+def points_one(a, ray, ratio, carried, centers, k_inv, rot, rays):
+    """gating._points_one of one candidate of camera ``a`` (``ray`` (3,), its ``ratio``
+    (m,) and ``carried`` (m, 2) rows; ``rays`` (m + 1, 6) scratch). Returns (solved, x, y, z,
+    in_front, miss): solved False is gating's None (x, y, z NaN)."""
+    n = 0
+    if math.isfinite(ray[0]) and math.isfinite(ray[1]) and math.isfinite(ray[2]):
+        rays[0, 0], rays[0, 1], rays[0, 2] = centers[a, 0], centers[a, 1], centers[a, 2]
+        rays[0, 3], rays[0, 4], rays[0, 5] = ray[0], ray[1], ray[2]
+        n = 1
+    for b in range(len(ratio)):
+        if ratio[b] <= 1.0:
+            dx, dy, dz = _carried_ray(carried[b, 0], carried[b, 1], k_inv[b], rot[b])
+            if math.isfinite(dx) and math.isfinite(dy) and math.isfinite(dz):
+                rays[n, 0], rays[n, 1], rays[n, 2] = centers[b, 0], centers[b, 1], centers[b, 2]
+                rays[n, 3], rays[n, 4], rays[n, 5] = dx, dy, dz
+                n += 1
+    if n < 2:
+        return False, math.nan, math.nan, math.nan, True, math.nan
+    # gating._normal_equations (w = 1.0 for every ray used: kept, x * 1.0 is x)
+    a00 = a01 = a02 = a11 = a12 = a22 = b0 = b1 = b2 = 0.0
+    for i in range(n):
+        ox, oy, oz, dx, dy, dz = rays[i, 0], rays[i, 1], rays[i, 2], rays[i, 3], rays[i, 4], \
+            rays[i, 5]
+        p00, p11, p22 = (1.0 - dx * dx) * 1.0, (1.0 - dy * dy) * 1.0, (1.0 - dz * dz) * 1.0
+        p01, p02, p12 = (0.0 - dx * dy) * 1.0, (0.0 - dx * dz) * 1.0, (0.0 - dy * dz) * 1.0
+        a00, a01, a02 = a00 + p00, a01 + p01, a02 + p02
+        a11, a12, a22 = a11 + p11, a12 + p12, a22 + p22
+        b0 = b0 + ((p00 * ox + p01 * oy) + p02 * oz)
+        b1 = b1 + ((p01 * ox + p11 * oy) + p12 * oz)
+        b2 = b2 + ((p02 * ox + p12 * oy) + p22 * oz)
+    c00, c01, c02 = a11 * a22 - a12 * a12, a02 * a12 - a01 * a22, a01 * a12 - a02 * a11
+    c11, c12, c22 = a00 * a22 - a02 * a02, a01 * a02 - a00 * a12, a00 * a11 - a01 * a01
+    det = (a00 * c00 + a01 * c01) + a02 * c02
+    if not abs(det) > _MIN_DET:
+        return False, math.nan, math.nan, math.nan, False, math.nan
+    px = ((c00 * b0 + c01 * b1) + c02 * b2) / det
+    py = ((c01 * b0 + c11 * b1) + c12 * b2) / det
+    pz = ((c02 * b0 + c12 * b1) + c22 * b2) / det
+    total = 0.0
+    in_front = True
+    for i in range(n):  # gating._ray_offsets
+        fx, fy, fz = px - rays[i, 0], py - rays[i, 1], pz - rays[i, 2]
+        dx, dy, dz = rays[i, 3], rays[i, 4], rays[i, 5]
+        along = (fx * dx + fy * dy) + fz * dz
+        qx, qy, qz = fx - along * dx, fy - along * dy, fz - along * dz
+        in_front = in_front and along > 0
+        total = total + ((qx * qx + qy * qy) + qz * qz)
+    return True, px, py, pz, in_front, math.sqrt(total / n)
+
+
+@kernel
+def _line_fit(trk, lo, hi, t_s, opt, out):
+    """gating._line_fit of the track's points ``lo:hi`` (times less ``t_s``, z less gravity,
+    as _Track.predict makes them): ``out`` (3,) = p0; returns the RMS residual."""
+    mode, g, two = np.int64(opt[O_SUM]), opt[O_G], opt[O_TWO]
+    n = hi - lo
+    s1, c1, s2, c2 = 0.0, 0.0, 0.0, 0.0
+    for i in range(lo, hi):
+        tau = trk[i, 0] - t_s
+        s1, c1 = _sum_add(s1, c1, tau, mode)
+        s2, c2 = _sum_add(s2, c2, tau * tau, mode)
+    s1, s2 = _sum_end(s1, c1, mode), _sum_end(s2, c2, mode)
+    det = n * s2 - s1 * s1
+    v0 = v1 = v2 = 0.0
+    for axis in range(3):
+        sy, cy = 0.0, 0.0
+        for i in range(lo, hi):
+            tau = trk[i, 0] - t_s
+            y = trk[i, 1 + axis] if axis < 2 else trk[i, 3] + 0.5 * tau * tau * g
+            sy, cy = _sum_add(sy, cy, y, mode)
+        sy = _sum_end(sy, cy, mode)
+        if not det > 1e-18:
+            out[axis] = sy / n
+            v = 0.0
+        else:
+            sty, cty = 0.0, 0.0
+            for i in range(lo, hi):
+                tau = trk[i, 0] - t_s
+                y = trk[i, 1 + axis] if axis < 2 else trk[i, 3] + 0.5 * tau * tau * g
+                sty, cty = _sum_add(sty, cty, tau * y, mode)
+            sty = _sum_end(sty, cty, mode)
+            out[axis] = (s2 * sy - s1 * sty) / det
+            v = (n * sty - s1 * sy) / det
+        if axis == 0:
+            v0 = v
+        elif axis == 1:
+            v1 = v
+        else:
+            v2 = v
+    sq, cq = 0.0, 0.0
+    for i in range(lo, hi):
+        tau = trk[i, 0] - t_s
+        for axis in range(3):
+            y = trk[i, 1 + axis] if axis < 2 else trk[i, 3] + 0.5 * tau * tau * g
+            v = v0 if axis == 0 else (v1 if axis == 1 else v2)
+            sq, cq = _sum_add(sq, cq, math.pow(out[axis] + v * tau - y, two), mode)
+    sq = _sum_end(sq, cq, mode)
+    return math.sqrt(sq / n)
+
+
+@kernel
+def predict(trk, n_trk, t_s, opt, out):
+    """gating._Track.predict at ``t_s``: False (None there), or True with ``out`` (4,) =
+    p̂ (3,), allowance (m)."""
+    points = np.int64(opt[O_TRACK_POINTS])
+    lo = n_trk
+    while lo > 0 and n_trk - lo < points and t_s - trk[lo - 1, 0] <= opt[O_WINDOW]:
+        lo -= 1
+    if n_trk - lo < 3:
+        return False
+    rms = _line_fit(trk, lo, n_trk, t_s, opt, out)
+    if rms > 0.5 * opt[O_TRACK_M] and n_trk - lo > 3:  # a bounce in the window: newest only
+        _line_fit(trk, n_trk - 3, n_trk, t_s, opt, out)
+    dt = abs(trk[n_trk - 1, 0] - t_s) + trk[n_trk - 1, 4]
+    out[3] = opt[O_TRACK_M] + opt[O_JUMP] * dt
+    return True
+
+
+@kernel
+def _ray_miss(px, py, pz, center, rx, ry, rz):
+    """gating._ray_miss."""
+    ox, oy, oz = px - center[0], py - center[1], pz - center[2]
+    cx, cy, cz = oy * rz - oz * ry, oz * rx - ox * rz, ox * ry - oy * rx
+    return _sqrt((cx * cx + cy * cy) + cz * cz)
+
+
+@kernel
+def insert_frame(fi, fflag, ct, cf, csup, count, cam, t, k, times, uv, xy, distorted, kmat,
+                 rot, limit):
+    """Add one pushed frame to camera ``cam``'s kept frames, after those of equal key (push
+    order), with its geometry (StreamGate._add, _geometry: ``uv`` (k, 2) distorted pixels;
+    ``xy`` (k, 2) their ideal normalized coordinates when the camera is ``distorted``, NaN
+    where not undistorted; ``times`` (k,) corrected ns). Returns its push id."""
+    n = count[cam]
+    key = times[0]
+    at = n
+    while at > 0 and fi[cam, at - 1, 0] > key:  # bisect_right
+        at -= 1
+    for j in range(n, at, -1):  # room at ``at``
+        fi[cam, j] = fi[cam, j - 1]
+        fflag[cam, j] = fflag[cam, j - 1]
+        ct[cam, j] = ct[cam, j - 1]
+        cf[cam, j] = cf[cam, j - 1]
+        csup[cam, j] = csup[cam, j - 1]
+    count[cam] = n + 1
+    fid = count[-1]  # (the last slot of ``count``: the next push id)
+    count[-1] = fid + 1
+    fi[cam, at, 0], fi[cam, at, 1], fi[cam, at, 2], fi[cam, at, 3] = key, t, fid, k
+    fflag[cam, at, 0] = 0
+    fflag[cam, at, 1] = 0
+    k_ = kmat[cam]
+    r = rot[cam]
+    for j in range(k):
+        ct[cam, at, j] = times[j]
+        csup[cam, at, j] = 1
+        u, v = uv[j, 0], uv[j, 1]
+        ok = abs(u) <= limit and abs(v) <= limit
+        if distorted:
+            x, y = xy[j, 0], xy[j, 1]
+        else:  # Camera.normalized_from_pixels
+            y = (v - k_[1, 2]) / k_[1, 1]
+            x = ((u - k_[0, 2]) - k_[0, 1] * y) / k_[0, 0]
+        for q in range(8):
+            cf[cam, at, j, q] = math.nan
+        if not (ok and math.isfinite(x) and math.isfinite(y)):
+            continue
+        # gating._from_normalized
+        cf[cam, at, j, 0] = (k_[0, 0] * x + k_[0, 1] * y) + k_[0, 2]
+        cf[cam, at, j, 1] = k_[1, 1] * y + k_[1, 2]
+        s = _pymax(_pymax(abs(x), abs(y)), 1.0)
+        cx, cy, cz = x / s, y / s, 1.0 / s
+        dx = (cx * r[0, 0] + cy * r[1, 0]) + cz * r[2, 0]
+        dy = (cx * r[0, 1] + cy * r[1, 1]) + cz * r[2, 1]
+        dz = (cx * r[0, 2] + cy * r[1, 2]) + cz * r[2, 2]
+        size = _sqrt((dx * dx + dy * dy) + dz * dz)
+        cf[cam, at, j, 2], cf[cam, at, j, 3], cf[cam, at, j, 4] = dx / size, dy / size, dz / size
+    return fid
+
+
+@kernel
+def decide_frame(fid, a, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k_inv, rot,
+                 still_f, lags, long_lags, long_t, opt, work, reason):
+    """StreamGate._decide of camera ``a``'s frame of push id ``fid``: its candidates'
+    support by every other camera from every candidate and from the decided ones
+    (StreamGate._support), their points, their stillness (gating._stillness_one), the
+    choice (gating._Decider.decide of one frame) and what later choices may use of it
+    (gating._can_judge, gating._supporting). Sets ``reason`` (k,) (-1 chosen) and the state.
+    ``lags``, ``long_lags`` (m,): per camera, the stillness test's frames and the long image
+    test's (``ceil(LONG_STILL static_s fps)``); ``long_t`` (m,) s: ``long_lags / fps``
+    (gating._still_long's ``T``). ``work``: float64 scratch of at least
+    (k (7 m + 16) + 6 (m + 1) + 4) values."""
+    m = len(lags)
+    at = count[a] - 1
+    while fi[a, at, 2] != fid:
+        at -= 1
+    k = fi[a, at, 3]
+    key = fi[a, at, 0]
+    wait, gap = np.int64(opt[O_WAIT]), np.int64(opt[O_GAP])
+    # scratch: every ratio (k, m), carried (k, m, 2); decided ratio, carried; lag (k, m);
+    # chosen points (k, 3), front, stillness, static, tol, n_support, available, epi_cost
+    off = 0
+    r_every = work[off:off + k * m].reshape((k, m))
+    off += k * m
+    c_every = work[off:off + 2 * k * m].reshape((k, m, 2))
+    off += 2 * k * m
+    r_dec = work[off:off + k * m].reshape((k, m))
+    off += k * m
+    c_dec = work[off:off + 2 * k * m].reshape((k, m, 2))
+    off += 2 * k * m
+    lag = work[off:off + k * m].reshape((k, m))
+    off += k * m
+    chosen = work[off:off + 3 * k].reshape((k, 3))
+    off += 3 * k
+    front = work[off:off + k]
+    off += k
+    run = work[off:off + k]
+    off += k
+    run_px = work[off:off + k]
+    off += k
+    held = work[off:off + k]
+    off += k
+    tol = work[off:off + k]
+    off += k
+    static = work[off:off + k]
+    off += k
+    nsup = work[off:off + k]
+    off += k
+    avail = work[off:off + k]
+    off += k
+    epi = work[off:off + k]
+    off += k
+    differs = work[off:off + k]
+    off += k
+    run_long = work[off:off + k]
+    off += k
+    alive = work[off:off + k]
+    off += k
+    unpointed = work[off:off + k]
+    off += k
+    rays = work[off:off + 6 * (m + 1)].reshape((m + 1, 6))
+    off += 6 * (m + 1)
+    pred = work[off:off + 4]
+    r_every[:] = math.nan
+    c_every[:] = math.nan
+    r_dec[:] = math.nan
+    c_dec[:] = math.nan
+    lag[:] = math.inf
+    differs[:] = 0.0
+    # ---- StreamGate._support
+    for b in range(m):
+        nb = count[b]
+        if b == a or nb == 0:
+            continue
+        keys = fi[b, :nb, 0]
+        right = wait > 0 or b < a
+        for j in range(k):
+            t = ct[a, at, j]
+            u, v = cf[a, at, j, 0], cf[a, at, j, 1]
+            last = (np.searchsorted(keys, t + wait, side="right") if right
+                    else np.searchsorted(keys, t + wait, side="left"))
+            if last - 1 >= 0:
+                lag[j, b] = abs(t - keys[last - 1]) / _NS
+            l0, l1, l2 = _line_of(F[a, b], u, v)
+            r, cu, cv, found = support_one(t, l0, l1, l2, b, keys, fi, fflag, ct, cf, csup,
+                                           right, False, opt)
+            r_every[j, b] = r
+            if found:
+                c_every[j, b, 0], c_every[j, b, 1] = cu, cv
+            first = np.searchsorted(keys, t - gap, side="left")
+            narrowed = False
+            for i in range(first, last):
+                if fflag[b, i, 1]:
+                    narrowed = True
+                    break
+            if narrowed:
+                r, cu, cv, found = support_one(t, l0, l1, l2, b, keys, fi, fflag, ct, cf,
+                                               csup, right, True, opt)
+                differs[j] = 1.0
+            r_dec[j, b] = r
+            if found:
+                c_dec[j, b, 0], c_dec[j, b, 1] = cu, cv
+    # ---- the points: of the all-candidates support (the stillness's) and the decided one
+    track_m = opt[O_TRACK_M]
+    for j in range(k):
+        ray = cf[a, at, j, 2:5]
+        ok_p, x, y, z, ok, miss = points_one(a, ray, r_every[j], c_every[j], centers, k_inv,
+                                             rot, rays)
+        if not (ok_p and not miss > track_m):
+            x = y = z = math.nan
+        cf[a, at, j, 5], cf[a, at, j, 6], cf[a, at, j, 7] = x, y, z
+        if differs[j] != 0.0:
+            ok_p, x, y, z, ok, miss = points_one(a, ray, r_dec[j], c_dec[j], centers, k_inv,
+                                                 rot, rays)
+            if not (ok_p and not miss > track_m):
+                x = y = z = math.nan
+        chosen[j, 0], chosen[j, 1], chosen[j, 2] = x, y, z
+        front[j] = 1.0 if ok else 0.0
+    # ---- gating._stillness_one against the camera's frames before (newest first): lags of
+    # them for the 3D and image tests, up to long_lags for the long image test
+    static_s, static_m = opt[O_STATIC_S], opt[O_STATIC_M]
+    la = lags[a]
+    recent_ns = 1.5 * static_s * _NS
+    recent_long_ns = 1.5 * opt[O_LONG_STILL] * static_s * _NS
+    n_back = min(la, at)
+    n_walk = min(long_lags[a], at)
+    n_alive = 0
+    for j in range(k):
+        run[j] = 0.0
+        run_px[j] = 0.0
+        held[j] = 0.0
+        run_long[j] = 0.0
+        x = cf[a, at, j, 5]
+        n_sup = 0
+        for b in range(m):
+            if r_every[j, b] <= 1.0:
+                n_sup += 1
+        if n_sup == 1 and math.isfinite(x):  # gating._paired, gating._still_px
+            dx = x - centers[a, 0]
+            dy = cf[a, at, j, 6] - centers[a, 1]
+            dz = cf[a, at, j, 7] - centers[a, 2]
+            depth = _sqrt((dx * dx + dy * dy) + dz * dz)
+            tol[j] = still_f[a] * static_m / depth
+        else:
+            tol[j] = math.nan
+        # still across its ray in every frame so far (only those can pass the long test)
+        alive[j] = 1.0 if tol[j] == tol[j] else 0.0
+        if alive[j] != 0.0:
+            n_alive += 1
+    for lg in range(1, n_walk + 1):
+        if lg > la and n_alive == 0:
+            break  # (the long image test's frames: nothing left to test)
+        h = at - lg
+        recent = key - fi[a, h, 0] <= recent_ns
+        recent_long = key - fi[a, h, 0] <= recent_long_ns
+        if not (recent or recent_long):
+            for j in range(k):
+                alive[j] = 0.0
+            n_alive = 0
+            continue
+        nh = fi[a, h, 3]
+        for j in range(k):
+            if lg > la and alive[j] == 0.0:
+                continue
+            best_px = math.inf
+            supported = False
+            if tol[j] == tol[j]:
+                u, v = cf[a, at, j, 0], cf[a, at, j, 1]
+                for q in range(nh):
+                    du, dv = u - cf[a, h, q, 0], v - cf[a, h, q, 1]
+                    d = _sqrt(du * du + dv * dv)
+                    if d < best_px:
+                        best_px = d
+                    px, py, pz = cf[a, h, q, 5], cf[a, h, q, 6], cf[a, h, q, 7]
+                    if d <= tol[j] and px == px and py == py and pz == pz:
+                        supported = True
+            if recent_long and best_px <= tol[j]:
+                run_long[j] += 1.0
+            elif alive[j] != 0.0:
+                alive[j] = 0.0
+                n_alive -= 1
+            if lg > la or not recent:
+                continue  # (the long image test's frames only)
+            x, y, z = cf[a, at, j, 5], cf[a, at, j, 6], cf[a, at, j, 7]
+            best = math.inf
+            for q in range(nh):
+                dx, dy, dz = x - cf[a, h, q, 5], y - cf[a, h, q, 6], z - cf[a, h, q, 7]
+                d = math.sqrt(dx * dx + dy * dy + dz * dz)
+                if d < best:
+                    best = d
+            if supported:
+                held[j] += 1.0
+            if best <= static_m:
+                run[j] += 1.0
+            if best_px <= tol[j]:
+                run_px[j] += 1.0
+    for j in range(k):
+        still = (run[j] >= 0.75 * la) or ((run_px[j] >= la) and (held[j] < la - 1))
+        # gating._still_long: longer than a ball in flight can stay still across its ray
+        dz = cf[a, at, j, 4]
+        if not still and n_alive > 0 and alive[j] != 0.0 and dz * dz <= 1.0:
+            t_long = long_t[a]
+            g_across = opt[O_G] * _sqrt(1.0 - dz * dz)
+            still = (run_long[j] >= long_lags[a]) and (
+                opt[O_LONG_STILL_C] * g_across * t_long * t_long > static_m)
+        static[j] = 1.0 if still else 0.0
+        run[j] = run[j] / la  # the stillness
+    # ---- gating._columns
+    for j in range(k):
+        supported = 0
+        available = 0
+        cost = 0.0
+        for b in range(m):
+            r = r_dec[j, b]
+            if r <= 1.0:
+                supported += 1
+                cost = cost + r * r
+            else:
+                cost = cost + 1.0
+            if math.isfinite(r):
+                available += 1
+        epi[j] = cost
+        avail[j] = available
+        no_point = not math.isfinite(chosen[j, 0])
+        # (a single support whose carried ray makes no point: the track alone judges it,
+        # at the track's own allowance: gating._columns's ``unpointed``)
+        unpointed[j] = 1.0 if no_point and supported == 1 else 0.0
+        if no_point and supported >= 2:
+            nsup[j] = 1
+        elif no_point and supported == 1:
+            nsup[j] = 0
+        else:
+            nsup[j] = supported
+    # ---- gating._Decider.decide, one frame
+    verified, tracked = ist[1] != 0, ist[2] != 0
+    n_trk = ist[0]
+    loose_ratio = opt[O_LOOSE]
+    for j in range(k):
+        reason[j] = -1
+    best_row = -1
+    best_n, best_c = 0.0, 0.0
+    # (unverified / untracked: marks in ``differs``, reused: 1 unverified, 2 untracked, 3 both)
+    for j in range(k):
+        differs[j] = 0.0
+    n_unverified = n_untracked = 0
+    t_s_frame = 0.0
+    for i in range(k):
+        t_s = ct[a, at, i] / _NS
+        t_s_frame = t_s
+        rx, ry, rz = cf[a, at, i, 2], cf[a, at, i, 3], cf[a, at, i, 4]
+        if static[i] != 0.0:
+            reason[i] = _MOTION
+            continue
+        if avail[i] != 0 and nsup[i] == 0:
+            has_pred = predict(trk, n_trk, t_s, opt, pred)
+            track_accepts = False
+            if has_pred and math.isfinite(rx):
+                track_accepts = (_ray_miss(pred[0], pred[1], pred[2], centers[a], rx, ry, rz)
+                                 <= (pred[3] if unpointed[i] != 0.0 else opt[O_ALONE]))
+            if not track_accepts:
+                reason[i] = _EPIPOLAR
+                continue
+        if front[i] == 0.0:
+            reason[i] = _MOTION
+            continue
+        strong = nsup[i] >= 2
+        loose = False
+        if not strong and avail[i] >= 2:
+            n_le = 0
+            all_loose = True
+            for b in range(m):
+                r = r_dec[i, b]
+                if r <= 1.0:
+                    n_le += 1
+                if math.isfinite(r) and not r <= loose_ratio:
+                    all_loose = False
+            loose = not (nsup[i] == 1 and n_le >= 2) and all_loose
+        track_cost = 0.0
+        if not strong:
+            has_pred = predict(trk, n_trk, t_s, opt, pred)
+            if has_pred and n_trk > 0 and math.isfinite(chosen[i, 0]):
+                dt = abs(t_s - trk[n_trk - 1, 0])
+                if dt <= opt[O_WINDOW]:
+                    dx = chosen[i, 0] - trk[n_trk - 1, 1]
+                    dy = chosen[i, 1] - trk[n_trk - 1, 2]
+                    dz = chosen[i, 2] - trk[n_trk - 1, 3]
+                    if _sqrt((dx * dx + dy * dy) + dz * dz) > (opt[O_MAX_SPEED] * dt
+                                                               + opt[O_TRACK_M]):
+                        reason[i] = _MOTION
+                        continue
+            if has_pred and math.isfinite(rx):
+                miss = _ray_miss(pred[0], pred[1], pred[2], centers[a], rx, ry, rz)
+                if miss > (2.0 if loose else 1.0) * pred[3]:
+                    reason[i] = _TRACK
+                    continue
+                track_cost = _pymin(math.pow(miss / pred[3], opt[O_TWO]), 4.0)
+            elif avail[i] == 0:
+                if verified:
+                    reason[i] = _EPIPOLAR
+                    continue
+                differs[i] += 1.0  # unverified
+                n_unverified += 1
+            if has_pred:
+                tracked = True
+            elif not tracked:
+                differs[i] += 2.0  # untracked
+                n_untracked += 1
+        kn, kc = -nsup[i], (epi[i] + track_cost) + run[i]
+        if best_row < 0 or kn < best_n or (kn == best_n and kc < best_c):
+            best_row, best_n, best_c = i, kn, kc
+    if best_row >= 0 and n_untracked > 1 and differs[best_row] >= 2.0 and nsup[best_row] < 2:
+        for i in range(k):
+            if differs[i] >= 2.0 and nsup[i] < 2:
+                reason[i] = _EPIPOLAR
+        best_row = -1
+        for i in range(k):
+            if reason[i] < 0 and not (differs[i] == 1.0 or differs[i] == 3.0):
+                kn, kc = -nsup[i], epi[i] + run[i]
+                if best_row < 0 or kn < best_n or (kn == best_n and kc < best_c):
+                    best_row, best_n, best_c = i, kn, kc
+    if best_row >= 0 and (differs[best_row] == 1.0 or differs[best_row] == 3.0) \
+            and n_unverified > 1:
+        for i in range(k):
+            if differs[i] == 1.0 or differs[i] == 3.0:
+                reason[i] = _EPIPOLAR
+        best_row = -1
+        for i in range(k):
+            if reason[i] < 0 and not (differs[i] == 1.0 or differs[i] == 3.0):
+                best_row = i
+    if best_row >= 0:
+        for i in range(k):
+            if i != best_row and reason[i] < 0:
+                reason[i] = _OUTSCORED
+        if not (differs[best_row] == 1.0 or differs[best_row] == 3.0):
+            verified = True
+        if math.isfinite(chosen[best_row, 0]):  # _Track.add, with _age
+            n_one, age = 0, 0.0
+            for b in range(m):
+                if r_dec[best_row, b] <= 1.0:
+                    n_one += 1
+                    if n_one == 1:
+                        age = lag[best_row, b]
+            if n_one != 1:
+                age = 0.0
+            trk[n_trk, 0] = ct[a, at, best_row] / _NS
+            trk[n_trk, 1] = chosen[best_row, 0]
+            trk[n_trk, 2] = chosen[best_row, 1]
+            trk[n_trk, 3] = chosen[best_row, 2]
+            trk[n_trk, 4] = age
+            n_trk += 1
+            points = np.int64(opt[O_TRACK_POINTS])
+            if n_trk > 4 * points:
+                for i in range(points):
+                    trk[i] = trk[n_trk - points + i]
+                n_trk = points
+    ist[0] = n_trk
+    ist[1] = 1 if verified else 0
+    ist[2] = 1 if tracked else 0
+    fflag[a, at, 0] = 1
+    # ---- gating._can_judge, gating._supporting: what later choices may use of it
+    recent = 0
+    for lg in range(1, n_back + 1):
+        if key - fi[a, at - lg, 0] <= recent_ns:
+            recent += 1
+    if recent >= 0.75 * la:
+        any_chosen = False
+        all_kept = True
+        for j in range(k):
+            if reason[j] < 0:
+                any_chosen = True
+            elif reason[j] != _OUTSCORED:
+                all_kept = False
+        if any_chosen and not all_kept:
+            fflag[a, at, 1] = 1
+            for j in range(k):
+                if not (reason[j] < 0 or reason[j] == _OUTSCORED):
+                    csup[a, at, j] = 0
+    return t_s_frame
+
+
+@kernel
+def trim(fi, fflag, ct, cf, csup, count, old):
+    """Forget each camera's oldest decided frames logged before ``old`` ns (no later choice
+    reaches them: StreamGate._step)."""
+    m = len(count) - 1
+    for c in range(m):
+        n = count[c]
+        drop = 0
+        while drop < n and fflag[c, drop, 0] != 0 and fi[c, drop, 1] < old:
+            drop += 1
+        if drop:
+            for j in range(n - drop):
+                fi[c, j] = fi[c, j + drop]
+                fflag[c, j] = fflag[c, j + drop]
+                ct[c, j] = ct[c, j + drop]
+                cf[c, j] = cf[c, j + drop]
+                csup[c, j] = csup[c, j + drop]
+            count[c] = n - drop
+
+
+@kernel
+def push_frame(fi, fflag, ct, cf, csup, count, cam, t, k, times, uv, xy, distorted, kmat,
+               limit, trk, ist, F, centers, k_inv, rot, still_f, lags, long_lags, long_t, opt,
+               work, reason, old):
+    """:func:`insert_frame`, :func:`decide_frame` and :func:`trim` in one call: a frame
+    decided the moment it is pushed (no clock correction, no wait: nothing still to come
+    can change its choice), as StreamGate._add then StreamGate._step do it."""
+    fid = insert_frame(fi, fflag, ct, cf, csup, count, cam, t, k, times, uv, xy, distorted,
+                       kmat, rot, limit)
+    decide_frame(fid, cam, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k_inv, rot,
+                 still_f, lags, long_lags, long_t, opt, work, reason)
+    trim(fi, fflag, ct, cf, csup, count, old)
+    return fid
+
+
+def options_array(options, wait_ns: int, max_gap_ns: int, gravity: float) -> np.ndarray:
+    """The float64 ``opt`` row the kernels read (``O_*`` indices): the gate's options, the
+    wait and max gap (ns: below 2**53, exact), gravity, the exponent 2.0, SUM_MODE and the
+    long image test's constants (gating.LONG_STILL, gating.LONG_STILL_C)."""
+    from .gating import LONG_STILL, LONG_STILL_C
+
+    opt = np.zeros(N_OPT)
+    opt[O_EPI], opt[O_VMAX] = options.epipolar_px, options.max_image_speed_px_s
+    opt[O_HALF_ACCEL] = 0.5 * options.accel_px_s2  # (as _support_one computes it)
+    opt[O_TRACK_M], opt[O_JUMP] = options.track_m, options.track_jump_m_s
+    opt[O_WINDOW], opt[O_MAX_SPEED] = options.track_window_s, options.max_speed_m_s
+    opt[O_LOOSE], opt[O_STATIC_S] = options.loose_ratio, options.static_s
+    opt[O_STATIC_M], opt[O_ALONE] = options.static_m, options.track_alone_m
+    opt[O_G], opt[O_TWO], opt[O_TRACK_POINTS] = gravity, 2.0, int(options.track_points)
+    opt[O_WAIT], opt[O_GAP], opt[O_SUM] = wait_ns, max_gap_ns, SUM_MODE
+    opt[O_LONG_STILL], opt[O_LONG_STILL_C] = LONG_STILL, LONG_STILL_C
+    return opt
+
+
+class GateState:
+    """The compiled stream gate's state (module docstring) and its three steps: add a
+    frame (:meth:`insert`), decide one (:meth:`decide`), forget old ones (:meth:`trim`).
+
+    Parameters
+    ----------
+    rig : Rig; options : GatingOptions; wait_ns, max_gap_ns : int
+    F : (m, m, 3, 3) fundamental matrices; constants : gating._rig_constants(rig)
+    lags : per camera, the stillness test's frames (gating._static)
+    gravity : float, m/s² (the track's model)
+    """
+
+    def __init__(self, rig, options, wait_ns: int, max_gap_ns: int, F, constants, lags,
+                 gravity: float, frames: int = 64, candidates: int = 4) -> None:
+        m = len(rig)
+        self.m = m
+        self.fi = np.zeros((m, frames, 4), np.int64)
+        self.fflag = np.zeros((m, frames, 2), np.int8)
+        self.ct = np.zeros((m, frames, candidates), np.int64)
+        self.cf = np.full((m, frames, candidates, 8), np.nan)
+        self.csup = np.zeros((m, frames, candidates), np.int8)
+        self.count = np.zeros(m + 1, np.int64)  # frames per camera, then the next push id
+        self.trk = np.zeros((4 * int(options.track_points) + 1, 5))
+        self.ist = np.zeros(3, np.int64)
+        self.F = np.ascontiguousarray(F, dtype=np.float64)
+        centers, k_inv, rot = constants
+        self.centers = np.array(centers, dtype=np.float64)
+        self.k_inv = np.array(k_inv, dtype=np.float64)
+        self.rot = np.array(rot, dtype=np.float64)
+        self.kmat = np.array([cam.K for cam in rig.cameras], dtype=np.float64)
+        # gating._still_px's factor (Python's min of the two focal lengths)
+        self.still_f = np.array([min(float(cam.K[0, 0]), float(cam.K[1, 1]))
+                                 for cam in rig.cameras])
+        self.lags = np.array(lags, dtype=np.int64)
+        # the long image test's frames and their span T = frames / fps (gating._stillness_one,
+        # gating._still_long)
+        from .gating import LONG_STILL
+
+        long_lags = [int(np.ceil(LONG_STILL * options.static_s * cam.fps))
+                     for cam in rig.cameras]
+        self.long_lags = np.array(long_lags, dtype=np.int64)
+        self.long_t = np.array([n / cam.fps for n, cam in zip(long_lags, rig.cameras,
+                                                               strict=True)], dtype=np.float64)
+        self.limit = np.array([10 * max(cam.width, cam.height) for cam in rig.cameras],
+                              dtype=np.float64)
+        self.opt = options_array(options, wait_ns, max_gap_ns, gravity)
+        self.reason = np.zeros(candidates, np.int64)
+        self.work = np.zeros(self._work_size(candidates))
+        self.no_xy = np.zeros((candidates, 2))
+
+    def _work_size(self, k: int) -> int:
+        m = self.m
+        return k * (7 * m + 19) + 6 * (m + 1) + 8
+
+    @property
+    def frames(self) -> int:
+        return self.fi.shape[1]
+
+    @property
+    def candidates(self) -> int:
+        return self.ct.shape[2]
+
+    def _grow(self, frames: int, candidates: int) -> None:
+        """Room for ``frames`` frames per camera and ``candidates`` per frame (copied)."""
+        m, h, k = self.m, self.frames, self.candidates
+        new: dict[str, np.ndarray] = {"fi": np.zeros((m, frames, 4), np.int64),
+                                      "fflag": np.zeros((m, frames, 2), np.int8),
+                                      "ct": np.zeros((m, frames, candidates), np.int64),
+                                      "cf": np.full((m, frames, candidates, 8), np.nan),
+                                      "csup": np.zeros((m, frames, candidates), np.int8)}
+        for name, a in new.items():
+            old = getattr(self, name)
+            a[:, :h, :k] = old
+            setattr(self, name, a)
+        if candidates > k:
+            self.reason = np.zeros(candidates, np.int64)
+            self.work = np.zeros(self._work_size(candidates))
+            self.no_xy = np.zeros((candidates, 2))
+
+    def insert(self, cam: int, t: int, times: np.ndarray, uv: np.ndarray, xy) -> int:
+        """Add a frame of camera ``cam`` logged at ``t`` ns: its candidates' corrected
+        ``times`` (k,) ns, distorted pixels ``uv`` (k, 2) and, for a camera with a lens
+        model, their ideal normalized coordinates ``xy`` (k, 2) (NaN: not undistorted; None
+        without). Returns the frame's push id."""
+        k = len(times)
+        if int(self.count[cam]) >= self.frames or k > self.candidates:
+            self._grow(2 * self.frames if int(self.count[cam]) >= self.frames else self.frames,
+                       max(k, self.candidates))
+        return insert_frame(self.fi, self.fflag, self.ct, self.cf, self.csup, self.count, cam,
+                            t, k, times, uv, self.no_xy if xy is None else xy, xy is not None,
+                            self.kmat, self.rot, self.limit[cam])
+
+    def push_decide(self, cam: int, t: int, times: np.ndarray, uv: np.ndarray, xy,
+                    old: int) -> list[int]:
+        """:meth:`insert`, :meth:`decide` and :meth:`trim` (``old``) of a frame decided as
+        it comes, in one compiled call; its candidates' reason codes (-1 chosen)."""
+        k = len(times)
+        if int(self.count[cam]) >= self.frames or k > self.candidates:
+            self._grow(2 * self.frames if int(self.count[cam]) >= self.frames else self.frames,
+                       max(k, self.candidates))
+        push_frame(self.fi, self.fflag, self.ct, self.cf, self.csup, self.count, cam, t, k,
+                   times, uv, self.no_xy if xy is None else xy, xy is not None, self.kmat,
+                   self.limit[cam], self.trk, self.ist, self.F, self.centers, self.k_inv,
+                   self.rot, self.still_f, self.lags, self.long_lags, self.long_t, self.opt,
+                   self.work, self.reason, max(old, _I64_MIN))
+        return self.reason[:k].tolist()
+
+    def decide(self, fid: int, cam: int, k: int) -> list[int]:
+        """Decide the frame of push id ``fid`` (camera ``cam``, ``k`` candidates): its
+        candidates' reason codes (-1 chosen)."""
+        decide_frame(fid, cam, self.fi, self.fflag, self.ct, self.cf, self.csup, self.count,
+                     self.trk, self.ist, self.F, self.centers, self.k_inv, self.rot,
+                     self.still_f, self.lags, self.long_lags, self.long_t, self.opt, self.work,
+                     self.reason)
+        return self.reason[:k].tolist()
+
+    def trim(self, old: int) -> None:
+        """Forget the decided frames logged before ``old`` ns."""
+        # (before any push the stream's newest time is int64's least: its history reaches
+        # below what an int64 holds)
+        trim(self.fi, self.fflag, self.ct, self.cf, self.csup, self.count, max(old, _I64_MIN))
+
+    def decided_ratio(self, k: int) -> np.ndarray:
+        """The epipolar support ratio (k, m) the last :meth:`decide` chose with (its
+        candidates' support from the decided frames: gating._decided's ``ratio``), a copy."""
+        m = self.m
+        return self.work[3 * k * m:4 * k * m].reshape(k, m).copy()
