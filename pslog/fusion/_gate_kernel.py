@@ -65,35 +65,14 @@ def _python_sum_mode() -> int:
         for p in probes:
             f, c = 0.0, 0.0
             for x in p:
-                f, c = _sum_add_py(f, c, x, mode)
-            mine, theirs = _sum_end_py(f, c, mode), sum(p)
+                f, c = _sum_add.py_func(f, c, x, mode)  # uncompiled: import stays light
+            mine, theirs = _sum_end.py_func(f, c, mode), sum(p)
             if not (mine == theirs or (mine != mine and theirs != theirs)) or (
                     math.copysign(1.0, mine) != math.copysign(1.0, theirs)):
                 ok = False
         if ok:
             return mode
     return -1
-
-
-def _sum_add_py(f: float, c: float, x: float, mode: int):
-    if mode == 0:
-        return f + x, c
-    t = f + x
-    if abs(f) >= abs(x):
-        c += (f - t) + x
-    else:
-        c += (x - t) + f
-    return t, c
-
-
-def _sum_end_py(f: float, c: float, mode: int) -> float:
-    if mode == 1 and c != 0.0 and math.isfinite(c):
-        return f + c
-    return f
-
-
-#: how this Python's ``sum`` adds floats (:func:`_python_sum_mode`)
-SUM_MODE = _python_sum_mode()
 
 
 @kernel
@@ -115,6 +94,10 @@ def _sum_end(f, c, mode):
     if mode == 1 and c != 0.0 and math.isfinite(c):
         return f + c
     return f
+
+
+#: how this Python's ``sum`` adds floats (:func:`_python_sum_mode`)
+SUM_MODE = _python_sum_mode()
 
 
 @kernel
