@@ -47,6 +47,7 @@ import numpy as np
 
 from pslog.records import NS
 
+from ._flag import ProcessFlag
 from .detect import HsvRange
 from .record import _STOP_SIGNALS, _stop_signals_blocked
 
@@ -263,8 +264,10 @@ class LiveCameras:
             "q", [-1, 0, 0, 0, 0, -1], lock=False)) for name, spec in specs.items()]
         self._t0 = self._ctx.Value("q", 0, lock=False)
         self._t0_wall = self._ctx.Value("q", 0, lock=False)
-        self._start = self._ctx.Event()
-        self._stop = self._ctx.Event()
+        # lock-free: a camera killed while reading a multiprocessing.Event would hang the
+        # others and this watcher (recorders._flag)
+        self._start = ProcessFlag(self._ctx)
+        self._stop = ProcessFlag(self._ctx)
         self.t0_ns: int | None = None  # session time 0 on the monotonic clock
         self.t0_wall_ns: int | None = None  # and on the wall clock
 

@@ -34,6 +34,7 @@ from pslog.outputs import WriteError, check_output_path, write_error
 from pslog.records import NS, Truth
 from pslog.rig import Rig, timing_label
 
+from ._flag import ProcessFlag
 from .detect import BallDetector, HsvRange
 from .status import CameraStatus, StatusBoard
 
@@ -348,7 +349,9 @@ class _Session:
         ctx = mp.get_context("spawn")
         n = len(self.specs)
         q = ctx.Queue(maxsize=_QUEUE_PER_CAMERA * n)
-        start, stop = ctx.Event(), ctx.Event()
+        # lock-free flags: a camera killed inside a multiprocessing.Event's is_set() would
+        # leave its lock taken and hang every other camera and this loop (recorders._flag)
+        start, stop = ProcessFlag(ctx), ProcessFlag(ctx)
         t0 = ctx.Value("q", 0, lock=False)
         procs = [ctx.Process(target=camera_main, name=f"pslog-{cam.name}",
                              args=(i, self.specs[i], self.options, q, start, stop, t0,
