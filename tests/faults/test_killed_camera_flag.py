@@ -4,7 +4,7 @@
 (in ``pslog live`` on CI, the killed camera was never reported and the others went silent)
 leaves the lock taken for ever. The recorders share :class:`recorders._flag.ProcessFlag`
 instead. Here a process spins on the flag's every operation and is SIGKILLed ten times at
-arbitrary moments; each time the parent's own operations must return at once. (With
+arbitrary moments; each time another process must still read and set it. (With
 ``multiprocessing.Event`` in its place this hangs in about 3 rounds out of 10.)
 """
 
@@ -26,11 +26,22 @@ def _spin(flag: ProcessFlag, ready) -> None:
         flag.wait(0)
 
 
-def _returns(call, timeout: float = 5.0) -> bool:
-    t = threading.Thread(target=call, daemon=True)
-    t.start()
-    t.join(timeout)
-    return not t.is_alive()
+def _probe(flag: ProcessFlag) -> None:
+    flag.is_set()
+    flag.set()
+
+
+def _others_go_on(ctx, flag: ProcessFlag, timeout: float = 20.0) -> bool:
+    """Whether another process can still read and set the flag. In a process of its own:
+    one stuck on a lock is killed, and this test process never waits on that lock."""
+    p = ctx.Process(target=_probe, args=(flag,), daemon=True)
+    p.start()
+    p.join(timeout)
+    if p.is_alive():
+        p.kill()
+        p.join(5)
+        return False
+    return p.exitcode == 0
 
 
 def test_a_process_killed_while_using_the_flag_never_blocks_the_others():
@@ -48,8 +59,10 @@ def test_a_process_killed_while_using_the_flag_never_blocks_the_others():
         os.kill(p.pid, signal.SIGKILL)
         p.join(10)
         assert p.exitcode == -signal.SIGKILL
-        assert _returns(flag.is_set), f"round {round_}: is_set() hangs after the kill"
-        assert _returns(flag.set), f"round {round_}: set() hangs after the kill"
+        # (not in the assert: pytest's message would repr the flag, and an Event's repr
+        # takes its lock)
+        go_on = _others_go_on(ctx, flag)
+        assert go_on, f"round {round_}: the flag hangs after the kill"
         assert flag.is_set() and flag.wait(0.5)
 
 
