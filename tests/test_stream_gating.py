@@ -190,3 +190,27 @@ def test_stream_gate_keeps_the_stillness_history_a_short_max_gap_still_needs(see
     assert_array_equal(stream.rejections.uv, batch.rejections.uv)
     assert_array_equal(np.concatenate([c[0] for c in chosen]), batch.observations.time_ns)
     assert_array_equal(np.concatenate([c[2] for c in chosen]), batch.observations.uv)
+
+
+_MALFORMED = [
+    ((1_000_000, 0, np.zeros((0, 2))), "one row per detection, got 1, 1, 0 and 1 rows"),
+    (([1, 2], [0, 1], [[1.0, 2.0]]), "one row per detection, got 2, 2, 1 and 2 rows"),
+    ((5, 3, [1.0, 2.0]), "camera index 3 is not one of the rig's 3 cameras"),
+    ((5, -1, [1.0, 2.0]), "camera index -1 is not one of the rig's 3 cameras"),
+    ((5, 0, np.zeros((1, 3))), "uv must be (n, 2) pixels"),
+]
+
+
+@pytest.mark.parametrize("candidates", [True, False])
+@pytest.mark.parametrize(("args", "message"), _MALFORMED)
+def test_a_malformed_push_is_refused_before_a_kernel_reads_past_its_tables(args, message,
+                                                                           candidates):
+    """A frame of no candidates once went into the compiled gate as a frame with a random
+    key (kept for ever); a camera index past the rig read outside its tables."""
+    from pslog.errors import FusionError
+
+    fuser = StreamFuser(builtin_rig("paper3"), "typeA", candidates=candidates)
+    with pytest.raises(FusionError, match=message.replace("(", r"\(").replace(")", r"\)")):
+        fuser.push(*args)
+    assert len(fuser.push([], [], np.zeros((0, 2)))) == 0  # an empty push is still fine
+    assert len(fuser.flush()) == 0

@@ -414,8 +414,10 @@ def decide_frame(fid, a, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k
     (k (7 m + 16) + 6 (m + 1) + 4) values."""
     m = len(lags)
     at = count[a] - 1
-    while fi[a, at, 2] != fid:
+    while at >= 0 and fi[a, at, 2] != fid:
         at -= 1
+    if at < 0:  # (never from StreamGate: a pending frame is never trimmed)
+        raise IndexError("decide_frame: camera has no kept frame of this push id")
     k = fi[a, at, 3]
     key = fi[a, at, 0]
     wait, gap = np.int64(opt[O_WAIT]), np.int64(opt[O_GAP])

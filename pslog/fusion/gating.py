@@ -1538,6 +1538,30 @@ class _Held:
         self.reason: list[int] | None = None
 
 
+def stream_arrays(time_ns, camera, uv, frame_index, n_cameras: int, who: str):
+    """The columns one stream push takes, checked: ``time_ns`` (n,) int64, ``camera`` (n,)
+    int32 in ``[0, n_cameras)``, ``uv`` (n, 2) float64, ``frame_index`` (n,) int64 (zeros when
+    None). A FusionError names the push (``who``) and what does not fit: the compiled kernels
+    index their tables with these values and would read past them otherwise."""
+    time_ns = np.atleast_1d(np.asarray(time_ns, dtype=np.int64))
+    camera = np.atleast_1d(np.asarray(camera, dtype=np.int32))
+    uv = np.asarray(uv, dtype=np.float64)
+    if uv.size % 2 or (uv.ndim > 1 and uv.shape[-1] != 2):
+        raise FusionError(f"{who}: uv must be (n, 2) pixels, got shape {uv.shape}")
+    uv = uv.reshape(-1, 2)
+    frame_index = (np.zeros(len(time_ns), np.int64) if frame_index is None
+                   else np.atleast_1d(np.asarray(frame_index, dtype=np.int64)))
+    if not len(time_ns) == len(camera) == len(uv) == len(frame_index):
+        raise FusionError(f"{who}: time_ns, camera, uv and frame_index must have one row per "
+                          f"detection, got {len(time_ns)}, {len(camera)}, {len(uv)} and "
+                          f"{len(frame_index)} rows")
+    if len(camera) and (camera.min() < 0 or camera.max() >= n_cameras):
+        bad = camera[(camera < 0) | (camera >= n_cameras)][0]
+        raise FusionError(f"{who}: camera index {bad} is not one of the rig's {n_cameras} "
+                          f"cameras (0 to {n_cameras - 1})")
+    return time_ns, camera, uv, frame_index
+
+
 class StreamGate:
     """The causal gate of :func:`gate` for a stream: frames pushed as they arrive, each
     frame's candidates in one push, best first; each frame is decided once nothing still to
@@ -1621,11 +1645,8 @@ class StreamGate:
         LOGGED times, in (time, camera) order, later than any pushed before). Returns the
         chosen candidates ready to fuse, ``(time_ns, camera, uv, frame_index)`` arrays in
         logged order."""
-        time_ns = np.atleast_1d(np.asarray(time_ns, dtype=np.int64))
-        camera = np.atleast_1d(np.asarray(camera, dtype=np.int32))
-        uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
-        frame_index = (np.zeros(len(time_ns), np.int64) if frame_index is None
-                       else np.atleast_1d(np.asarray(frame_index, dtype=np.int64)))
+        time_ns, camera, uv, frame_index = stream_arrays(
+            time_ns, camera, uv, frame_index, len(self.rig), "StreamGate.push")
         keys = list(zip(time_ns.tolist(), camera.tolist(), strict=True))
         if (self._state is not None and keys and keys[0] == keys[-1] and not self.pending
                 and not self.corrected and not self.wait_ns):

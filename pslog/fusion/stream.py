@@ -34,7 +34,7 @@ from ..records import NS, Observations, Track
 from ..rig import Rig
 from . import METHODS, FusionOptions, causal_methods, check_method, check_tolerance, fuse
 from ._prepare import default_max_gap_s, prepare
-from .gating import _clock_model, _true_time_ns
+from .gating import _clock_model, _true_time_ns, stream_arrays
 from .stereo import sync_groups
 
 
@@ -124,11 +124,9 @@ class StreamFuser:
         """
         if self._gate is not None:  # the chosen candidates, in logged order
             time_ns, camera, uv, frame_index = self._gate.push(time_ns, camera, uv, frame_index)
-        time_ns = np.atleast_1d(np.asarray(time_ns, dtype=np.int64))
-        camera = np.atleast_1d(np.asarray(camera, dtype=np.int32))
-        uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
-        frame_index = (np.zeros(len(time_ns), np.int64) if frame_index is None
-                       else np.atleast_1d(np.asarray(frame_index, dtype=np.int64)))
+        else:
+            time_ns, camera, uv, frame_index = stream_arrays(
+                time_ns, camera, uv, frame_index, len(self.rig), "StreamFuser.push")
         if len(time_ns) == 0:
             return self._settled(final=False)
         keys = ([(int(time_ns[0]), int(camera[0]))] if len(time_ns) == len(camera) == 1  # (one)
