@@ -30,7 +30,7 @@ T0 = 1_764_470_000_123_456_789  # a wall-clock time, ns
 
 def _det(k=2, camera="cam2", **kw) -> DetectionDatagram:
     rng = np.random.default_rng(k)
-    args = dict(camera=camera, sequence=2**40 + 3, frame_index=2**33 + 7, t_capture_ns=T0,
+    args = dict(camera=camera, sequence=2**40 + 3, frame_index=2**32 - 9, t_capture_ns=T0,
                 t_sent_ns=T0 + 1_500_000, uv=rng.uniform(0, 640, (k, 2)),
                 radius=np.r_[np.nan, rng.uniform(1, 9, max(k - 1, 0))][:k],
                 score=rng.uniform(0, 1, k))
@@ -127,9 +127,17 @@ GOOD = encode_detections(_det(3))
     (_with(GOOD, 5, b"\x02"), "malformed"),         # bytes after the name's length
     (_with(GOOD, 40, b"\xff\xfe\x00\x00"), "malformed"),  # not UTF-8
     (_with(GOOD, 16, struct.pack("<q", -5)), "malformed"),  # a negative frame index
+    # past the session's u32 frame counter: once ended a recording run (the writer refused it)
+    (_with(GOOD, 16, struct.pack("<q", 2**32)), "malformed"),
 ])
 def test_every_bad_detection_datagram_has_its_reason(data, reason):
     assert _reason(data) == reason
+
+
+def test_the_largest_frame_index_a_session_stores_is_accepted_and_no_larger_one_is_sent():
+    assert decode_detections(_with(GOOD, 16, struct.pack("<q", 2**32 - 1))).frame_index == 2**32 - 1
+    with pytest.raises(DatagramError, match=r"frame index 4294967296 is not in 0\.\.4294967295"):
+        encode_detections(_det(1, frame_index=2**32))
 
 
 def test_oversize_bound_is_the_largest_valid_datagram():

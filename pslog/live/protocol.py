@@ -19,7 +19,7 @@ offset  size  type     field
 5       1     u8       n: length of the camera name in bytes (1..32)
 6       2     u16      k: number of candidates (0..64; 0: a frame where nothing was seen)
 8       8     u64      sequence: per camera, +1 per frame (gaps: frames lost on the way)
-16      8     i64      frame_index: the camera's frame counter (>= 0)
+16      8     i64      frame_index: the camera's frame counter (0 .. 2**32 - 1)
 24      8     i64      t_capture_ns: the frame's top-row capture time (wall clock)
 32      8     i64      t_sent_ns: the sender's wall clock when it sent the datagram
 40      32    char[32] camera name, UTF-8, the rig's name, n bytes then zeros
@@ -197,16 +197,24 @@ def _name_bytes(name: str, limit: int, what: str) -> bytes:
     return raw
 
 
+#: the largest frame index a session stores (u32, as pslog.log.csvio.MAX_FRAME_INDEX)
+MAX_FRAME_INDEX = 2**32 - 1
+
+
 def encode_detections(d: DetectionDatagram) -> bytes:
     """The detection datagram of ``d`` (layout: module docstring).
 
-    Raises DatagramError (``malformed``) for a name that does not fit or more than
-    :data:`MAX_CANDIDATES` candidates."""
+    Raises DatagramError (``malformed``) for a name that does not fit, more than
+    :data:`MAX_CANDIDATES` candidates or a frame index past :data:`MAX_FRAME_INDEX` (what
+    :func:`decode_detections` refuses)."""
     name = _name_bytes(d.camera, MAX_NAME_BYTES, "camera name")
     k = len(d.uv)
     if k > MAX_CANDIDATES:
         raise DatagramError("malformed", f"{k} candidates; a datagram carries at most "
                                          f"{MAX_CANDIDATES}")
+    if not 0 <= int(d.frame_index) <= MAX_FRAME_INDEX:
+        raise DatagramError("malformed", f"frame index {d.frame_index} is not in "
+                                         f"0..{MAX_FRAME_INDEX}")
     header = _DET_HEADER.pack(DETECTION_MAGIC, PROTOCOL_VERSION, len(name), k,
                               int(d.sequence), int(d.frame_index), int(d.t_capture_ns),
                               int(d.t_sent_ns), name)
@@ -255,9 +263,10 @@ def decode_detections(data: bytes) -> DetectionDatagram:
         camera = raw[:n_name].decode("utf-8")
     except UnicodeDecodeError:
         raise DatagramError("malformed", "detection datagram: camera name is not UTF-8") from None
-    if frame < 0:  # (a session's frame indices are counters: its writer refuses them)
-        raise DatagramError("malformed", f"detection datagram of camera {camera!r}: "
-                                         f"negative frame index {frame}")
+    if not 0 <= frame <= MAX_FRAME_INDEX:  # (a session stores them as u32 counters: its
+        # writer refuses the others, which would end a recording run)
+        raise DatagramError("malformed", f"detection datagram of camera {camera!r}: frame "
+                                         f"index {frame} is not in 0..{MAX_FRAME_INDEX}")
     cand = np.frombuffer(data, dtype="<f8", count=4 * k,
                          offset=DETECTION_HEADER_BYTES).reshape(k, 4)
     # radius may be NaN (unknown); pixels and scores must be numbers (in Python: a few
