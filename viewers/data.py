@@ -304,8 +304,10 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
         raise InputError(f"start and end must be finite seconds, got {start!r}, {end!r}")
     if lo >= hi:
         raise InputError(f"start ({start} s) must be before end ({end} s)")
-    window = (first + round(lo * NS) if start is not None else -UNBOUNDED_NS,
-              first + round(hi * NS) if end is not None else UNBOUNDED_NS)
+    # (beyond UNBOUNDED_NS from the session's start, a bound is no bound: 1e308 s is inf ns)
+    window = (first + round(min(lo * NS, UNBOUNDED_NS)) if start is not None
+              else -UNBOUNDED_NS,
+              first + round(min(hi * NS, UNBOUNDED_NS)) if end is not None else UNBOUNDED_NS)
     frame_times = session.detections.frame_time_ns
     if (start is not None or end is not None) and not np.any(
             (frame_times >= window[0]) & (frame_times < window[1])):
