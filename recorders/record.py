@@ -262,15 +262,17 @@ class StopRequest:
         return self.event.is_set()
 
     def install(self) -> Callable[[], None]:
-        """Route SIGINT and SIGTERM here; returns a function restoring the previous handlers
-        (both a no-op outside the main thread, where Python allows no handler)."""
+        """Route SIGINT, SIGTERM and SIGHUP here; returns a function restoring the previous
+        handlers (both a no-op outside the main thread, where Python allows no handler)."""
         if threading.current_thread() is not threading.main_thread():
             return _nothing
 
         def handler(signum, frame):
             self.set(signal.Signals(signum).name)
 
-        previous = {sig: signal.signal(sig, handler) for sig in _STOP_SIGNALS}
+        # (a SIGHUP ignored, under nohup, stays ignored)
+        previous = {sig: signal.signal(sig, handler) for sig in _STOP_SIGNALS
+                    if not (sig == signal.SIGHUP and signal.getsignal(sig) is signal.SIG_IGN)}
 
         def restore() -> None:
             for sig, old in previous.items():
@@ -581,7 +583,7 @@ def jpeg_params(quality: int) -> list[int]:
             cv2.IMWRITE_JPEG_SAMPLING_FACTOR, cv2.IMWRITE_JPEG_SAMPLING_FACTOR_444]
 
 
-_STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+_STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)  # HUP: a closed terminal
 
 
 def _nothing() -> None:

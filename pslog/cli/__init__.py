@@ -173,10 +173,10 @@ def _main(argv: list[str] | None) -> int:
             _drop_stdout(real_stdout)
         print(f"pslog {name}: error: {exc}", file=sys.stderr)
         return 1
-    except Terminated:
+    except Terminated as exc:
         _close_abandoned_writers()
-        print(f"pslog {name}: terminated (SIGTERM)", file=sys.stderr)
-        return 143
+        print(f"pslog {name}: terminated ({exc.signal_name})", file=sys.stderr)
+        return 128 + exc.signum
     except KeyboardInterrupt:
         _close_abandoned_writers()
         print(f"pslog {name}: interrupted", file=sys.stderr)
@@ -228,14 +228,26 @@ def _close_abandoned_writers() -> None:
 
 
 class Terminated(KeyboardInterrupt):
-    """SIGTERM, raised where a Ctrl-C would be: a command's interrupt handling (worker pools
-    shut down, ``.partial`` outputs removed) runs for either; the exit code is 143."""
+    """SIGTERM or SIGHUP (a closed terminal, a dropped ssh session), raised where a Ctrl-C
+    would be: a command's interrupt handling (worker pools shut down, ``.partial`` outputs
+    removed) runs for any; the exit code is 128 + the signal's number (143, 129)."""
+
+    def __init__(self, signum: int = 15) -> None:
+        super().__init__(signum)
+        self.signum = int(signum)
+
+    @property
+    def signal_name(self) -> str:
+        import signal
+
+        return signal.Signals(self.signum).name
 
 
 def _sigterm_interrupts():
-    """Make SIGTERM raise :class:`Terminated` in the main thread while a command runs (a
-    command that records installs its own stop handler over this one); returns the function
-    that puts the previous handler back (callers of ``main()`` in-process)."""
+    """Make SIGTERM and SIGHUP raise :class:`Terminated` in the main thread while a command
+    runs (a command that records installs its own stop handler over this one; a SIGHUP that
+    is ignored, under ``nohup``, stays ignored); returns the function that puts the previous
+    handlers back (callers of ``main()`` in-process)."""
     import signal
     import threading
 
@@ -243,10 +255,17 @@ def _sigterm_interrupts():
         return lambda: None
 
     def raise_terminated(signum, frame):
-        raise Terminated
+        raise Terminated(signum)
 
-    previous = signal.signal(signal.SIGTERM, raise_terminated)
-    return lambda: signal.signal(signal.SIGTERM, previous)
+    previous = {sig: signal.signal(sig, raise_terminated) for sig in (signal.SIGTERM,
+                                                                       signal.SIGHUP)
+                if signal.getsignal(sig) is not signal.SIG_IGN}
+
+    def restore() -> None:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+
+    return restore
 
 
 class StdoutError(PslogError):

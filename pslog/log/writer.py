@@ -943,7 +943,7 @@ def close_abandoned() -> None:
 
 @contextlib.contextmanager
 def _signals_held():
-    """Block SIGINT and SIGTERM in the main thread for the block's length; a signal that
+    """Block SIGINT, SIGTERM and SIGHUP in the main thread for the block's length; a signal that
     came meanwhile is delivered (its handler raising) when the block ends."""
     import signal
 
@@ -951,7 +951,8 @@ def _signals_held():
             or not hasattr(signal, "pthread_sigmask")):
         yield
         return
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM,
+                                                    signal.SIGHUP})
     try:
         yield
     finally:
