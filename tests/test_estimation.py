@@ -272,6 +272,20 @@ def test_smooth_through_the_cli_with_a_rate(tmp_path, cli):
     assert len(rig) == 3
 
 
+@pytest.mark.parametrize("rate", ["1e-300", "0.0005", "2e6"])
+def test_a_rate_outside_a_milli_to_a_megahertz_is_a_usage_error(tmp_path, cli, capsys, rate):
+    """1e-300 Hz once made the grid's step inf ns: numpy warnings, then exit 0."""
+    path = tmp_path / "s.mcap"
+    assert cli("simulate", "--rig", "paper2", "--motion", "throw", "-o", path)[0] == 0
+    with pytest.raises(SystemExit) as exit_:  # argparse's usage error, in-process
+        cli("fuse", path, "--method", "smooth", "--rate", rate, "-o", tmp_path / "f.mcap")
+    err = capsys.readouterr().err
+    assert exit_.value.code == 2 and "--rate" in err and "Warning" not in err, err
+    assert not (tmp_path / "f.mcap").exists()
+    with pytest.raises(FusionError, match="rate must be in"):
+        FusionOptions(rate_hz=float(rate))
+
+
 # ---- numeric kernels: each against its plain definition ------------------------------------
 def _dense(ab: np.ndarray) -> np.ndarray:
     """The symmetric matrix of upper banded storage ``ab[11 + i - j, j] = A[i, j]``."""

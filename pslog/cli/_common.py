@@ -157,10 +157,14 @@ def noise_px(text: str) -> float:
     return value
 
 
-def number_at_most(limit: float, unit: str, why: str, positive: bool = False):
-    """argparse type: a number in [0, limit] (in (0, limit] if ``positive``)."""
+def number_at_most(limit: float, unit: str, why: str, positive: bool = False,
+                   least: float | None = None):
+    """argparse type: a number in [0, limit] (in (0, limit] if ``positive``; in [least,
+    limit] if ``least`` is given)."""
     def parse(text: str) -> float:
         value = positive_float(text) if positive else nonnegative_float(text)
+        if least is not None and value < least:
+            raise argparse.ArgumentTypeError(f"must be at least {least:g} {unit}, got {text!r}")
         if value > limit:
             raise argparse.ArgumentTypeError(f"must be at most {limit:g} {unit} ({why}), "
                                              f"got {text!r}")

@@ -40,7 +40,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         metavar="MS", help="longest time span a method may bridge, "
                                            "milliseconds, at most an hour (default: 3.5 frame "
                                            "periods)")
-    parser.add_argument("--rate", type=number_at_most(1e6, "Hz", "a megahertz", positive=True),
+    parser.add_argument("--rate", type=number_at_most(1e6, "Hz", "a megahertz", positive=True,
+                                                        least=1e-3),
                         default=None, metavar="HZ",
                         help="smooth: points on a regular grid of this rate instead of at "
                              "every detection time")

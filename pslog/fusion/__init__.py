@@ -87,8 +87,9 @@ class FusionOptions:
         if self.max_gap_s is not None and not 0 < self.max_gap_s <= MAX_GAP_S:
             raise FusionError(f"max gap must be in (0, {MAX_GAP_S:g}] seconds, got "
                               f"{self.max_gap_s!r}")
-        if self.rate_hz is not None and not 0 < self.rate_hz <= 1e6:
-            raise FusionError(f"rate must be in (0, 1e6] Hz, got {self.rate_hz!r}")
+        if self.rate_hz is not None and not 1e-3 <= self.rate_hz <= 1e6:
+            # (below a point per 1000 s the grid's step overflows to inf ns near 1e-300)
+            raise FusionError(f"rate must be in [0.001, 1e6] Hz, got {self.rate_hz!r}")
         if self.noise_px is not None and not 0 <= self.noise_px <= 1e3:
             raise FusionError(f"pixel noise must be in [0, 1000] pixels, got {self.noise_px!r}")
 
