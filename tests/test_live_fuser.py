@@ -239,6 +239,21 @@ def test_sequence_gaps_are_counted_lost(session):
     assert sum(c.lost for c in fuser.cameras()) == 4
 
 
+def test_forged_sequence_numbers_before_any_fused_frame_are_not_counted_lost(session):
+    """Datagrams dropped before a frame of their camera was fused (captured before the
+    session's start) once counted any jump of their sequence numbers as lost frames (the
+    hostile sweep saw ``lost 23930939241261424455``)."""
+    rig, det = session
+    d = frames(det, rig)[0]
+    fuser = LiveFuser(rig, "typeA", epoch_ns=EPOCH)
+    for seq in (1, 2**62, 2**63 + 5, 3):
+        forged = DetectionDatagram(d.camera, seq, d.frame_index, EPOCH - 1_000_000,
+                                   d.t_sent_ns, d.uv, d.radius, d.score)
+        fuser.feed(encode_detections(forged), EPOCH)
+    assert fuser.counters()["late"] == 4
+    assert fuser.counters()["lost"] == 0
+
+
 def test_restarted_sender_is_not_a_duplicate(session):
     """A sender that restarts its sequence at 1 sends new capture times: fused, not dropped."""
     rig, det = session

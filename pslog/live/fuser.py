@@ -359,10 +359,12 @@ class LiveFuser:
             if last is not None and d.sequence < last and state._newest_logged is not None \
                     and d.t_capture_ns - self.epoch_ns > state._newest_logged:
                 last = None  # a lower sequence with a newer capture time: the sender restarted
-            if last is not None and d.sequence > last + 1 and state._newest_logged is not None \
-                    and d.sequence - last - 1 > 10 + 10 * self._fps[cam] * max(
-                        0, d.t_capture_ns - self.epoch_ns - state._newest_logged) / NS:
-                last = None  # more frames than the time since could hold: renumbered, not lost
+            if last is not None and d.sequence > last + 1 and d.sequence - last - 1 > 10 + (
+                    0 if state._newest_logged is None else 10 * self._fps[cam] * max(
+                        0, d.t_capture_ns - self.epoch_ns - state._newest_logged) / NS):
+                # more frames than the time since could hold (any gap past 10 before a frame
+                # of the camera was fused: forged numbers, never 2**64 lost): renumbered
+                last = None
             if last is not None and d.sequence > last + 1:
                 gap = d.sequence - last - 1
                 state.lost += gap
