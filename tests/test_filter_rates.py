@@ -143,3 +143,34 @@ def test_streaming_equals_batch_exactly_at_240_fps_with_misses_and_outliers():
 def test_bad_start_up_options_are_refused(changes, match):
     with pytest.raises(FusionError, match=match):
         FilterOptions(**changes)
+
+
+def test_the_floor_of_q_is_a_velocity_variance_per_detection_interval():
+    # q_min = accel_step_var · Σ fps (session 11): the same velocity variance q T added per
+    # detection interval T = 1 / Σ fps on every rig; an explicit accel_psd replaces it
+    from pslog.fusion.filter import BallFilter, accel_floor
+
+    paper3 = builtin_rig("paper3")
+    for fps, floor in (((30.0, 30.0), 0.001), ((60.0, 30.0, 60.0), 0.0025),
+                       ((240.0,) * 3, 0.012)):
+        rig = rig_at(Rig(paper3.cameras[:len(fps)], "p"), *fps)
+        assert accel_floor(rig, FilterOptions()) == pytest.approx(floor, rel=1e-12)
+        flt = BallFilter(rig)
+        assert flt._q_min == flt._q == pytest.approx(floor, rel=1e-12)  # floor and start
+        assert BallFilter(rig, FilterOptions(accel_psd=0.3))._q == 0.3
+    with pytest.raises(FusionError, match="accel_step_var"):
+        FilterOptions(accel_step_var=0.0)
+
+
+@pytest.mark.parametrize("motion", ["straight", "turntable"])
+def test_two_cameras_at_30_fps_reach_half_of_type_a(motion):
+    # issue 10's 0.3 px target on the sparsest rig (60 detections/s), mean over four noise
+    # seeds: measured 0.48 (straight) and 0.48 (turntable); 0.56 and 0.55 with the fixed
+    # 0.01 m²/s³ floor of q before session 11
+    rig = lab_rig(2)
+    ratios = []
+    for seed in (1, 2, 3, 4):
+        obs, truth = session(rig, get_motion(motion), noise_px=0.3, seed=seed)
+        ratios.append(evaluate(fuse(obs, rig, "filter"), truth).mean_mm
+                      / evaluate(fuse(obs, rig, "typeA"), truth).mean_mm)
+    assert np.mean(ratios) < 0.5, ratios

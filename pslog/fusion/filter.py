@@ -40,7 +40,9 @@ equations, exactly as implemented, are in ``docs/methods.md`` (section ``filter`
   least-squares update); the process noise ``q`` adapts to the motion: a consistent
   filter's innovations are white, a lagging one's consecutive innovations of a camera
   agree, so ``q`` grows with their product (a spiral, a straight line without gravity, a
-  turntable) and shrinks back to ``accel_psd`` on a flight;
+  turntable) and shrinks back to its floor on a flight (``accel_step_var`` times the
+  rig's detections per second: the same velocity variance per detection interval,
+  :func:`accel_floor`; or ``accel_psd``);
 - measurement: the detection's *distorted* pixel, ``z = π_c(p) + w``, ``w ~ N(0, σ² I)``,
   through camera ``c``'s projection with its lens model; ``H = [∂π_c/∂p, 0]`` (2 x 6).
   Pixels, not rays: the detector's noise is isotropic in the recorded image, no detection is
@@ -168,8 +170,13 @@ class FilterOptions:
     Attributes
     ----------
     noise_px : float, standard deviation of a detection's pixel, per axis, pixels
-    accel_psd : float, spectral density ``q`` of the white-noise acceleration (drag error,
-        spin, model error), m²/s³
+    accel_psd : float or None, spectral density ``q`` of the white-noise acceleration (drag
+        error, spin, model error), m²/s³: the adapted ``q``'s start and floor; None (the
+        default): ``accel_step_var`` times the rig's detection rate ``R = Σ fps``
+    accel_step_var : float, m²/s², the velocity variance the floor of ``q`` adds per
+        detection interval (``q T`` with ``T = 1/R``) when ``accel_psd`` is None: 0.001
+        m²/s³ at two cameras at 30 fps, 0.0015 at three, 0.012 at three at 240 fps (session
+        11; before, 0.01 on every rig)
     drag_per_m : float, ``k`` of the quadratic drag ``a = -k ‖v‖ v``, 1/m (a golf ball's)
     gravity : (3,) m/s²
     gate : float, chi-square gate on the normalised innovation (2 degrees of freedom;
@@ -205,9 +212,9 @@ class FilterOptions:
     max_gap_s : float or None, longest time without an accepted detection the track bridges;
         None: :func:`pslog.fusion._prepare.default_max_gap_s` of the rig
     max_accel_psd : float, upper bound of the adapted process noise ``q``, m²/s³ (its lower
-        bound is ``accel_psd``)
+        bound is the floor: ``accel_psd``, or ``accel_step_var R``)
     accel_adapt_rate : float, step ``η`` of ``q``'s adaptation (0: ``q`` fixed at
-        ``accel_psd``)
+        the floor)
     accel_adapt_target : float, the value ``r₀`` of the whiteness statistic ``q`` settles at
     model_switch_per_s : float, rate ``λ`` of switches between the ballistic model and the
         supported one (no gravity: a ball rolling, carried, on a string), 1/s; the models
@@ -254,7 +261,8 @@ class FilterOptions:
     adapt_rate: float = 0.02
     min_noise_px: float = 0.01
     max_noise_px: float = 5.0
-    accel_psd: float = 0.01
+    accel_psd: float | None = None
+    accel_step_var: float = 1.0 / 60_000
     drag_per_m: float = Ball().drag_per_metre
     gravity: tuple[float, float, float] = (0.0, 0.0, -G)
     gate: float = 18.4
@@ -287,8 +295,11 @@ class FilterOptions:
     window_noise_prior: bool = True
 
     def __post_init__(self) -> None:
-        for name in ("noise_px", "accel_psd", "gate", "jump_speed", "noise_prior_weight"):
+        for name in ("noise_px", "accel_psd", "accel_step_var", "gate", "jump_speed",
+                     "noise_prior_weight"):
             value = getattr(self, name)
+            if name == "accel_psd" and value is None:
+                continue
             if not (math.isfinite(value) and value > 0):
                 raise FusionError(f"filter {name} must be finite and > 0, got {value!r}")
         if not (math.isfinite(self.model_switch_per_s) and self.model_switch_per_s >= 0):
@@ -1595,8 +1606,8 @@ class BallFilter:
         self._cam_table = cams
         self._max_gap_ns = int((options.max_gap_s or default_max_gap_s(rig)) * NS)
         self._var_min, self._var_max = options.min_noise_px ** 2, options.max_noise_px ** 2
-        self._q_min = options.accel_psd
-        self._q_max = max(options.max_accel_psd, options.accel_psd)
+        self._q_min = accel_floor(rig, options)
+        self._q_max = max(options.max_accel_psd, self._q_min)
         self._max_std = options.max_std_m
         self._jump_var = options.jump_speed ** 2
         # the jump hypotheses (reflect, variance per axis): a floor bounce (the velocity
@@ -1655,7 +1666,7 @@ class BallFilter:
         # the state (layout: the _S* and _I* offsets)
         self._S = np.zeros(_SCAM + 2 * n_cams + 2 * capacity)
         self._I = np.zeros(_ICAM + 3 * n_cams + 2 * capacity, dtype=np.int64)
-        self._S[_SMU], self._S[_SQ] = self._mu0, options.accel_psd
+        self._S[_SMU], self._S[_SQ] = self._mu0, self._q_min
         self._S[_SVAR] = options.noise_px ** 2
         self._S[_SALPHA] = options.noise_prior_weight
         self._I[_IPEND], self._I[_IJUMPNS], self._I[_IJUMPCAM] = -1, -(2**62), -1
@@ -2073,6 +2084,24 @@ class BallFilter:
             return _WEAK
         return theta.tolist(), cov.ravel().tolist(), residuals
 
+
+
+def accel_floor(rig: Rig, options: FilterOptions) -> float:
+    """The floor (and start) of the adapted process noise ``q``, m²/s³: ``accel_psd``, or
+    when it is None ``accel_step_var R``, ``R = Σ fps`` the rig's detections per second.
+
+    Session 11 (issue 10, ``docs/methods.md``, "The floor of q"): ``q``'s floor is the
+    model error the filter allows while its innovations look white; with continuous white
+    noise acceleration of density ``q`` the velocity variance added between two detections
+    is ``q T`` (Bar-Shalom, Li & Kirubarajan 2001, §6.2.2), so this floor allows the same
+    velocity variance per detection interval on every rig. A fixed 0.01 m²/s³ left the
+    filter at 0.52-0.61 of ``typeA`` on two cameras at 30 fps (the floor, not the jumps or
+    the start, per phase); a fixed 0.001 fixed those and cost the turning motions at 120-240
+    fps up to 2.4 x (the turn model's set switches on ``q``)."""
+    if options.accel_psd is not None:
+        return float(options.accel_psd)
+    rate = sum(float(c.fps) for c in rig.cameras)
+    return options.accel_step_var * rate
 
 
 def _posterior(prior: float, log_ratio: float, low: float, high: float) -> float:
