@@ -227,7 +227,6 @@ def confirm_batch(prep, track: Track, rig, max_gap_s: float, noise_px: float | N
     ``Track.dropped`` (``contradicted``, ``unconfirmed``)."""
     if not len(track):
         return track
-    sigma = confirm_noise(track.quality["snap_px"], noise_px)
     obs = prep.obs
     time_ns, camera = obs.time_ns, obs.camera
     n = len(time_ns)
@@ -244,6 +243,8 @@ def confirm_batch(prep, track: Track, rig, max_gap_s: float, noise_px: float | N
     long = (gap > LONG_FACTOR * usual_interval_s(rig) * NS) | unbracketed[row]
     if not long.any():
         return track
+    # (the tests' noise, a causal median over every point: made only when some point waits)
+    sigma = confirm_noise(track.quality["snap_px"], noise_px)
     e = row[long]
     # the confirming detection: the first later row of another camera that can check the
     # point (its camera has a row within max_gap_s before the point, both pixels finite),
