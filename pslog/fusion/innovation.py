@@ -234,6 +234,15 @@ def failed_counts(failed: np.ndarray, kinked: np.ndarray | None = None) -> dict[
 KINK_SIGMAS = 5.0
 
 
+def previous_next_rows(prep) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_previous_next` of ``prep``'s observations, made once per Prepared (the kink
+    test and the long-gap confirmation read it; not to be written)."""
+    cache = prep.__dict__.get("_previous_next")
+    if cache is None:
+        cache = prep.__dict__["_previous_next"] = _previous_next(prep.obs.camera)
+    return cache
+
+
 def _previous_next(camera: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Each row's previous and next row of the same camera (-1: none), (n,) int64 each."""
     from . import _prepare_kernel  # (numba: imported at the first use)
@@ -300,7 +309,7 @@ def kinked_points(prep, events: np.ndarray, past: tuple, noise_px: float | np.nd
     sigma = np.ascontiguousarray(np.broadcast_to(
         DEFAULT_NOISE_PX if noise_px is None else np.asarray(noise_px, dtype=np.float64),
         (k,)), dtype=np.float64)
-    before, after = _previous_next(prep.obs.camera)
+    before, after = previous_next_rows(prep)
     # per camera: fx, fy, cx, cy, the optical axis R[2] and t[2] (the depth of a point)
     lens = prep.lens_rows
 
