@@ -78,12 +78,23 @@ _COV = ("cov_xx_m2", "cov_yy_m2", "cov_zz_m2", "cov_xy_m2", "cov_xz_m2", "cov_yz
 def usual_interval_s(rig) -> float:
     """The largest gap between consecutive shutter instants of the rig's cameras' nominal
     schedules (offset + k / fps over one second), seconds: for type-A staggered shutters
-    ``1 / (n fps)``; the interval eq. (2) extrapolates across when every camera sees."""
-    times = np.sort(np.concatenate([
-        (c.offset % (1.0 / c.fps)) + np.arange(math.ceil(c.fps) + 1) / c.fps
-        for c in rig.cameras]))
-    times = times[times <= 1.0 + 1e-9]
-    return float(np.max(np.diff(times))) if len(times) > 1 else 1.0
+    ``1 / (n fps)``; the interval eq. (2) extrapolates across when every camera sees.
+    (Made once per schedule: every type A run asks.)"""
+    key = tuple((float(c.offset), float(c.fps)) for c in rig.cameras)
+    interval = _USUAL_INTERVALS.get(key)
+    if interval is None:
+        times = np.sort(np.concatenate([
+            (offset % (1.0 / fps)) + np.arange(math.ceil(fps) + 1) / fps
+            for offset, fps in key]))
+        times = times[times <= 1.0 + 1e-9]
+        interval = float(np.max(np.diff(times))) if len(times) > 1 else 1.0
+        if len(_USUAL_INTERVALS) < 64:  # (a few rigs in a process; bounded regardless)
+            _USUAL_INTERVALS[key] = interval
+    return interval
+
+
+#: :func:`usual_interval_s` of the schedules met so far, by (offset, fps) per camera.
+_USUAL_INTERVALS: dict[tuple, float] = {}
 
 
 def _camera_rows(rig) -> np.ndarray:
