@@ -293,3 +293,37 @@ def test_a_camera_that_never_sees_the_ball_confirms_nothing_and_crashes_nothing(
     assert len(track) > 0.9 * len(obs)
     assert np.nanmax(errors_m(track, truth)) < 0.05
     assert_same(pushed_one_by_one(StreamFuser(rig, "typeA"), obs), track)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_previous_instant_from_type_a_tables_equals_the_binary_search(seed):
+    """confirm's gaps and unbracketed rows, read from type A's tables (each row's previous
+    instant and its camera's previous row), against their definition by binary search and
+    a pass per camera, on sessions with missed detections, dropped frames and shared
+    instants (synchronised cameras) and a camera blind for half a second."""
+    from pslog.fusion import prepare
+    from pslog.fusion.confirm import _previous_instant
+
+    for timing, blind in (("typeA", ("cam2", 0.5, 0.5)), ("typeB", ("cam1", 0.3, 0.4))):
+        rig = apply_timing(builtin_rig("paper3"), timing)
+        det, _, _ = simulate_labelled(rig, get_motion("throw"), 1.5, SimulationOptions(
+            noise_px=0.3, miss_rate=0.2, drop_rate=0.1, seed=seed, blackouts=(blind,)))
+        obs = det.best()
+        prep = prepare(obs, rig)
+        time_ns, camera = obs.time_ns, obs.camera
+        n, max_gap_ns = len(time_ns), 60_000_000
+        first = np.searchsorted(time_ns, time_ns, side="left")
+        gap = np.where(first > 0, time_ns - time_ns[np.maximum(first - 1, 0)], -1)
+        before = np.full(n, -1)
+        for c in np.unique(camera).tolist():
+            rows_c = np.flatnonzero(camera == c)
+            before[rows_c[1:]] = rows_c[:-1]
+        p = np.maximum(first - 1, 0)
+        unbracketed = (first > 0) & (camera[p] != camera) & (
+            (before < 0) | (time_ns[p] - time_ns[np.maximum(before, 0)] > max_gap_ns))
+        got_gap, got_unbracketed = _previous_instant(prep, max_gap_ns)
+        assert_array_equal(got_gap, gap)
+        assert_array_equal(got_unbracketed, unbracketed)
+        # (the cases the tables must get right are there: blind spells, shared instants)
+        assert unbracketed.any()
+        assert timing == "typeA" or np.any(first != np.arange(n))

@@ -138,6 +138,14 @@ def test_lensless_rows_are_prepare_columns(python):
                                    np.nan_to_num(prep.uv_jacobian).reshape(-1, 4), rays, jac),
                              strict=True):
         assert got.tobytes() == np.ascontiguousarray(expected).tobytes()
+    # (prepare's lensless rows are this kernel's: the rays also against Camera.rays, the
+    # numpy form, for the pixels that have one)
+    for c, cam in enumerate(cams):
+        rows = np.flatnonzero((obs.camera == c) & np.isfinite(out[1]).all(axis=1))
+        assert len(rows) > 100
+        with np.errstate(all="ignore"):
+            expected = cam.rays(uv[rows])[1]
+        assert out[1][rows].tobytes() == np.ascontiguousarray(expected).tobytes()
 
 
 def test_rig_geometry_checked_once_and_refused_every_time():

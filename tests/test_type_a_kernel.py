@@ -100,3 +100,41 @@ def test_reprojection_and_validity_helpers_equal_the_numpy_forms():
         got_flags = np.array([kernels._invalid(cam, c, *p) for p in points])
         assert_array_equal(got_flags, flags)
         assert {0, 1, 2} <= set(got_flags.tolist())  # in view, behind, outside
+
+
+def test_past_point_flags_name_both_cameras_that_made_them():
+    """A past point is OUTSIDE_VIEW when it falls outside the view of either camera that
+    made it (the observed one and the partner: the kernel tests both), PARALLEL where its
+    rays meet at less than the least angle, and has no flag without a partner: against
+    invalid_points' columns, camera 1's view shrunk to its centre (a point outside the
+    partner's view only is then common)."""
+    from dataclasses import replace
+
+    from pslog.fusion._prepare import MIN_RAY_ANGLE_DEG, OUTSIDE_VIEW, PARALLEL, invalid_points
+
+    rig, obs, _ = dirty_session("typeA", 0, lens=True)
+    prep = prepare(obs, rig)
+    box = prep.view_box.copy()
+    cu, cv = (box[1, 0] + box[1, 2]) / 2, (box[1, 1] + box[1, 3]) / 2
+    box[1] = (cu - 5.0, cv - 5.0, cu + 5.0, cv + 5.0)
+    prep = replace(prep, view_box=box)
+    rows = np.arange(len(obs))
+    # (each past point as the second next detection's P_{t-2} makes it: partner brackets
+    # ending up to two rows later)
+    past = pseudo_stereo_points(prep, rows, np.minimum(rows + 2, len(obs) - 1), int(0.2e9))
+    has = past.partner >= 0
+    used = np.zeros((len(rows), len(rig)), dtype=bool)
+    used[rows, obs.camera] = True
+    used[rows[has], past.partner[has]] = True
+    expected = invalid_points(prep, past.points_world, used) & OUTSIDE_VIEW
+    assert_array_equal(past.flags[has] & OUTSIDE_VIEW, expected[has])
+    with np.errstate(invalid="ignore"):
+        parallel = np.degrees(past.angle_rad) < MIN_RAY_ANGLE_DEG
+    assert_array_equal((past.flags[has] & PARALLEL) > 0, parallel[has])
+    assert_array_equal(past.flags[~has], 0)
+    assert_array_equal(past.valid, has & (past.flags == 0) & np.all(
+        np.isfinite(past.points_world), axis=1))
+    # the cases are there: outside the partner's view only, and inside both
+    partner_only = has & (obs.camera != 1) & (past.partner == 1)
+    assert np.any(partner_only & (past.flags & OUTSIDE_VIEW > 0))
+    assert np.any(has & (past.flags == 0))

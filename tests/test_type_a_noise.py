@@ -151,3 +151,28 @@ def test_the_model_bound_holds_near_an_image_corner():
     # and a contradiction beyond the bound is still refused
     assert failed_predictions(prep, np.array([2]), np.array([1]), np.array([0]),
                               predicted[None], np.array([2.5 * innovation]), 0.0)[0]
+
+
+def test_noise_estimate_medians_are_each_windows_middle_element():
+    """Every σ_t against its definition written out point by point: the element of rank
+    128 of the last 256 innovations before the point's checkpoint (all of them, rank
+    half, before 256), over a session of many blocks of windows (sigmas selects them
+    _MEDIAN_ROWS at a time) with ties and NaNs, in one call and split."""
+    from pslog.fusion.innovation import _MEDIAN_ROWS, NOISE_EVERY, NOISE_WINDOW
+
+    rng = np.random.default_rng(3)
+    n = NOISE_EVERY * _MEDIAN_ROWS * 5 + 77  # (several blocks and a part block)
+    x = np.round(np.hypot(rng.standard_normal(n), rng.standard_normal(n)), 1)  # ties
+    x[rng.random(n) < 0.05] = np.nan
+    values = x[~np.isnan(x)]
+    taken = np.cumsum(~np.isnan(x)) - ~np.isnan(x)  # innovations before each point
+    expected = np.full(n, 0.7)
+    for i in range(n):
+        checkpoint = taken[i] // NOISE_EVERY * NOISE_EVERY
+        if checkpoint >= NOISE_EVERY:
+            window = np.sort(values[max(0, checkpoint - NOISE_WINDOW):checkpoint])
+            expected[i] = max(0.7, window[len(window) // 2] / RAYLEIGH_MEDIAN)
+    assert_array_equal(NoiseEstimate().sigmas(x, 0.7), expected)
+    split = NoiseEstimate()
+    parts = [split.sigmas(x[a:b], 0.7) for a, b in itertools.pairwise([0, 999, 1000, n])]
+    assert_array_equal(np.concatenate(parts), expected)

@@ -30,7 +30,7 @@ def basis_in_span(knots: np.ndarray, j: np.ndarray, t: np.ndarray, n_derivatives
     right = np.zeros(p + 1)
     a = np.zeros((2, p + 1))
     for i in range(n):
-        _ders_basis(knots, j[i], t[i], n_derivatives, ndu, left, right, a, out[i])
+        _ders_basis(knots, j[i], t[i], n_derivatives, ndu, left, right, a, out, i)
     return out
 
 
@@ -44,25 +44,28 @@ def basis_derivative_in_span(knots: np.ndarray, j: np.ndarray, t: np.ndarray,
     p = _P
     n = len(t)
     out = np.zeros((n, p + 1))
-    ders = np.zeros((4, p + 1))
+    ders = np.zeros((1, 4, p + 1))
     ndu = np.zeros((p + 1, p + 1))
     left = np.zeros(p + 1)
     right = np.zeros(p + 1)
     a = np.zeros((2, p + 1))
     for i in range(n):
         d = derivative[i]
-        ders[:d + 1] = 0.0
-        _ders_basis(knots, j[i], t[i], d, ndu, left, right, a, ders)
+        ders[0, :d + 1] = 0.0
+        _ders_basis(knots, j[i], t[i], d, ndu, left, right, a, ders, 0)
         for r in range(p + 1):
-            out[i, r] = ders[d, r]
+            out[i, r] = ders[0, d, r]
     return out
 
 
-@kernel
+@kernel(inline=True)
 def _ders_basis(knots: np.ndarray, ji: int, ti: float, n_derivatives: int, ndu: np.ndarray,
-                left: np.ndarray, right: np.ndarray, a: np.ndarray, out: np.ndarray) -> None:
-    """One point of :func:`basis_in_span` into ``out`` (>= n_derivatives + 1, 4), zero on
-    entry (``ndu``, ``left``, ``right``, ``a``: scratch)."""
+                left: np.ndarray, right: np.ndarray, a: np.ndarray, out: np.ndarray, i: int
+                ) -> None:
+    """One point of :func:`basis_in_span` into ``out[i]`` (>= n_derivatives + 1, 4), zero on
+    entry (``ndu``, ``left``, ``right``, ``a``: scratch). Inlined into its callers, ``out``
+    indexed in place: a compiled call (and a view ``out[i]``) took and released a reference
+    to each of its arrays, two atomic operations each, at every point."""
     p = _P
     ndu[:] = 0.0
     ndu[0, 0] = 1.0
@@ -77,7 +80,7 @@ def _ders_basis(knots: np.ndarray, ji: int, ti: float, n_derivatives: int, ndu: 
             saved = left[r - s] * temp
         ndu[r, r] = saved
     for r in range(p + 1):
-        out[0, r] = ndu[r, p]
+        out[i, 0, r] = ndu[r, p]
     for r in range(p + 1):
         s1, s2 = 0, 1
         a[:] = 0.0
@@ -96,13 +99,13 @@ def _ders_basis(knots: np.ndarray, ji: int, ti: float, n_derivatives: int, ndu: 
             if r <= pk:
                 a[s2, k] = -a[s1, k - 1] / ndu[pk + 1, r]
                 d = d + a[s2, k] * ndu[r, pk]
-            out[k, r] = d
+            out[i, k, r] = d
             s1, s2 = s2, s1
     factor = 1.0
     for k in range(1, n_derivatives + 1):
         factor *= p - k + 1
         for r in range(p + 1):
-            out[k, r] *= factor
+            out[i, k, r] *= factor
 
 
 @kernel

@@ -30,26 +30,35 @@ def rays_from_normalized(xy, R, out):
     out : (k, 3) float64, written: ``Rᵀ (x, y, 1)`` after scaling by the largest absolute
         component (a far-off pixel's norm would overflow), then normalised to unit length
     """
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = (R[0, 0], R[0, 1], R[0, 2], R[1, 0], R[1, 1],
+                                                   R[1, 2], R[2, 0], R[2, 1], R[2, 2])
     for i in range(xy.shape[0]):
-        x, y, z = xy[i, 0], xy[i, 1], 1.0
-        # np.max(np.abs(.)) of the row: NaN wins, as in numpy's maximum reduction
-        big = abs(x)
-        ay = abs(y)
-        if not (big != big) and (ay != ay or ay > big):
-            big = ay
-        if not (big != big) and big < 1.0:
-            big = 1.0
-        x /= big
-        y /= big
-        z /= big
-        # Rᵀ (x, y, z) written out as Camera.rays: x R[0] + y R[1] + z R[2], left to right
-        d0 = x * R[0, 0] + y * R[1, 0] + z * R[2, 0]
-        d1 = x * R[0, 1] + y * R[1, 1] + z * R[2, 1]
-        d2 = x * R[0, 2] + y * R[1, 2] + z * R[2, 2]
-        norm = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-        out[i, 0] = d0 / norm
-        out[i, 1] = d1 / norm
-        out[i, 2] = d2 / norm
+        out[i, 0], out[i, 1], out[i, 2] = _normalized_ray(
+            xy[i, 0], xy[i, 1], r00, r01, r02, r10, r11, r12, r20, r21, r22)
+
+
+@kernel(inline=True)
+def _normalized_ray(x, y, r00, r01, r02, r10, r11, r12, r20, r21, r22):
+    """:func:`rays_from_normalized` of one point (x, y) and rotation R (its nine entries,
+    row-major): scalars only, so a caller's loop makes it without a compiled call or a view
+    of R (each took and released a reference to its arrays)."""
+    z = 1.0
+    # np.max(np.abs(.)) of the row: NaN wins, as in numpy's maximum reduction
+    big = abs(x)
+    ay = abs(y)
+    if not (big != big) and (ay != ay or ay > big):
+        big = ay
+    if not (big != big) and big < 1.0:
+        big = 1.0
+    x /= big
+    y /= big
+    z /= big
+    # Rᵀ (x, y, z) written out as Camera.rays: x R[0] + y R[1] + z R[2], left to right
+    d0 = x * r00 + y * r10 + z * r20
+    d1 = x * r01 + y * r11 + z * r21
+    d2 = x * r02 + y * r12 + z * r22
+    norm = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    return d0 / norm, d1 / norm, d2 / norm
 
 
 @kernel(inline=True)
@@ -151,20 +160,19 @@ def lensless_rows(camera, uv, kk, far, R, ki, rr, rtki, uv_und, ray_dir, jac, ja
         without a lens); ``jac_rows`` of no rows: not written; ``rays`` of no rows: neither
         they nor ``dir_jac`` (a session's prepare leaves them to ``Prepared.observed_rays``)
     """
-    xy = np.empty((1, 2))
-    out = np.empty((1, 3))
     for i in range(camera.shape[0]):
         c = camera[i]
         u, v = uv[i, 0], uv[i, 1]
         # normalized_from_pixels, then pixels_from_normalized (no lens: the ideal point)
         y = (v - kk[c, 5]) / kk[c, 4]
         x = (u - kk[c, 2] - kk[c, 1] * y) / kk[c, 0]
-        xy[0, 0], xy[0, 1] = x, y
-        rays_from_normalized(xy, R[c], out)
+        # rays_from_normalized's arithmetic, inlined (no call, no view R[c] per row)
+        d0, d1, d2 = _normalized_ray(x, y, R[c, 0, 0], R[c, 0, 1], R[c, 0, 2], R[c, 1, 0],
+                                     R[c, 1, 1], R[c, 1, 2], R[c, 2, 0], R[c, 2, 1], R[c, 2, 2])
         if abs(u) <= far[c] and abs(v) <= far[c]:
             uv_und[i, 0] = kk[c, 0] * x + kk[c, 1] * y + kk[c, 2]
             uv_und[i, 1] = kk[c, 4] * y + kk[c, 5]
-            ray_dir[i, 0], ray_dir[i, 1], ray_dir[i, 2] = out[0, 0], out[0, 1], out[0, 2]
+            ray_dir[i, 0], ray_dir[i, 1], ray_dir[i, 2] = d0, d1, d2
         else:  # far outside the image (or NaN): no detection, no ray
             uv_und[i, 0] = uv_und[i, 1] = np.nan
             ray_dir[i, 0] = ray_dir[i, 1] = ray_dir[i, 2] = np.nan

@@ -175,14 +175,17 @@ def _invalid(cam, c, p0, p1, p2):
     x = _in_camera(cam, c, p0, p1, p2, 0)
     y = _in_camera(cam, c, p0, p1, p2, 1)
     z = _in_camera(cam, c, p0, p1, p2, 2)
-    if z <= 1e-9:
-        return 1
-    xn, yn = x / z, y / z
+    # (no branch: the inlined body one basic block, so numba's reference pruning drops its
+    # reference to ``cam``, two atomic operations per call; behind, the projection is made
+    # anyway, by 1 (never 0: the Python form does not raise), and not used)
+    behind = np.float64(z <= 1e-9)
+    depth = z * (1.0 - behind) + behind  # (in front: z * 1.0 + 0.0 == z, bit for bit)
+    xn, yn = x / depth, y / depth
     u = xn * cam[c, 0] + yn * cam[c, 1] + cam[c, 2]
     v = xn * cam[c, 3] + yn * cam[c, 4] + cam[c, 5]
-    if (u >= cam[c, 26]) and (u <= cam[c, 28]) and (v >= cam[c, 27]) and (v <= cam[c, 29]):
-        return 0
-    return 2
+    inside = (u >= cam[c, 26]) & (u <= cam[c, 28]) & (v >= cam[c, 27]) & (v <= cam[c, 29])
+    bits = np.int64(behind) + 2 * np.int64(1.0 - behind) * np.int64(not inside)
+    return bits
 
 
 @kernel(inline=True)
@@ -294,20 +297,20 @@ def _pseudo_one(r, not_after, max_gap_ns, time_ns, camera, prev_b, next_b, uv, o
     ff[slot, i, 4] = miss_u
     ff[slot, i, 5] = _reprojection(cam, c, y0, y1, y2, uo, vo)
     ff[slot, i, 6] = _reprojection(cam, q, y0, y1, y2, ui0, ui1)
-    finite = math.isfinite(x0) and math.isfinite(x1) and math.isfinite(x2)
-    bits = 0
-    if finite:
-        for cc in range(m):  # (in camera order, as invalid_points)
-            if cc == c or cc == q:
-                bits |= _invalid(cam, cc, x0, x1, x2)
-        if not ((s > 0) and (k > 0)):
-            bits |= 1  # BEHIND: the crossing behind a camera
-    if ang * _DEGREES < min_angle_deg:
-        bits |= 4  # PARALLEL (NaN: no ray, no flag)
-    if p < 0:
-        bits = 0  # no partner: no point, and nothing to say about its geometry
+    # the flags without a branch (the inlined body then holds no reference to cam and fi:
+    # numba prunes the pair of atomic operations of a straight block; in branches it kept
+    # them, at every past point): the bits of the contributing cameras c and q (an OR, in
+    # any order; c == q without partner), BEHIND (1) for a crossing behind a camera, then
+    # PARALLEL (4, NaN: no ray, no flag); a point not finite has no camera bits, and a row
+    # without partner no bits at all (no point, nothing to say about its geometry)
+    finite = math.isfinite(x0) & math.isfinite(x1) & math.isfinite(x2)
+    behind = not ((s > 0) & (k > 0))
+    bits = (_invalid(cam, c, x0, x1, x2) | _invalid(cam, q, x0, x1, x2)
+            | np.int64(behind)) * np.int64(finite)
+    bits |= 4 * np.int64(ang * _DEGREES < min_angle_deg)
+    bits *= np.int64(p >= 0)
     fi[slot, i, 4] = bits
-    ok = (p >= 0) and finite and bits == 0
+    ok = (p >= 0) & finite & (bits == 0)
     fi[slot, i, 5] = ok
     return ok, bits
 

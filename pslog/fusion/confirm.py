@@ -78,12 +78,23 @@ _COV = ("cov_xx_m2", "cov_yy_m2", "cov_zz_m2", "cov_xy_m2", "cov_xz_m2", "cov_yz
 def usual_interval_s(rig) -> float:
     """The largest gap between consecutive shutter instants of the rig's cameras' nominal
     schedules (offset + k / fps over one second), seconds: for type-A staggered shutters
-    ``1 / (n fps)``; the interval eq. (2) extrapolates across when every camera sees."""
-    times = np.sort(np.concatenate([
-        (c.offset % (1.0 / c.fps)) + np.arange(math.ceil(c.fps) + 1) / c.fps
-        for c in rig.cameras]))
-    times = times[times <= 1.0 + 1e-9]
-    return float(np.max(np.diff(times))) if len(times) > 1 else 1.0
+    ``1 / (n fps)``; the interval eq. (2) extrapolates across when every camera sees.
+    (Made once per schedule: every type A run asks.)"""
+    key = tuple((float(c.offset), float(c.fps)) for c in rig.cameras)
+    interval = _USUAL_INTERVALS.get(key)
+    if interval is None:
+        times = np.sort(np.concatenate([
+            (offset % (1.0 / fps)) + np.arange(math.ceil(fps) + 1) / fps
+            for offset, fps in key]))
+        times = times[times <= 1.0 + 1e-9]
+        interval = float(np.max(np.diff(times))) if len(times) > 1 else 1.0
+        if len(_USUAL_INTERVALS) < 64:  # (a few rigs in a process; bounded regardless)
+            _USUAL_INTERVALS[key] = interval
+    return interval
+
+
+#: :func:`usual_interval_s` of the schedules met so far, by (offset, fps) per camera.
+_USUAL_INTERVALS: dict[tuple, float] = {}
 
 
 def _camera_rows(rig) -> np.ndarray:
@@ -197,23 +208,27 @@ def confirm_noise(snap_px: np.ndarray, noise_px: float | None, estimate=None) ->
     return (NoiseEstimate() if estimate is None else estimate).sigmas(values, noise_px)
 
 
-def _previous_instant(time_ns: np.ndarray, camera: np.ndarray, max_gap_ns: int
-                      ) -> tuple[np.ndarray, np.ndarray]:
-    """Per row (n,): its time minus the latest earlier time of any row, ns (-1: none), and
-    whether that earlier instant's row (the last one) has no bracket of this row's camera
-    (no detection of it within ``max_gap_ns`` before): then eq. (2)'s ``P_{t-1}`` is an
-    earlier instant still, a longer gap (a camera's first detection after a blind spell)."""
+def _previous_instant(prep, max_gap_ns: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per row (n,) of ``prep``'s observations: its time minus the latest earlier time of
+    any row, ns (-1: none), and whether that earlier instant's row (the last one) has no
+    bracket of this row's camera (no detection of it within ``max_gap_ns`` before): then
+    eq. (2)'s ``P_{t-1}`` is an earlier instant still, a longer gap (a camera's first
+    detection after a blind spell). From the tables type A made of the same rows (each row's
+    previous instant, :func:`~pslog.fusion.pseudo._all_brackets`, and its camera's previous
+    row, :func:`~pslog.fusion.innovation.previous_next_rows`) instead of a binary search of
+    every row and a pass per camera: the same rows, the same values."""
+    from .innovation import previous_next_rows
+    from .pseudo import _all_brackets
+
+    time_ns, camera = prep.obs.time_ns, prep.obs.camera
     n = len(time_ns)
-    first = np.searchsorted(time_ns, time_ns, side="left")
+    previous = _all_brackets(prep)[2]  # the last row of the instant before, -1: none
     gap = np.full(n, -1, dtype=np.int64)
-    has = first > 0
-    p = first[has] - 1
+    has = previous >= 0
+    p = previous[has]
     gap[has] = time_ns[has] - time_ns[p]
     # each row's previous row of its own camera
-    before = np.full(n, -1, dtype=np.int64)
-    for c in np.unique(camera).tolist():
-        rows_c = np.flatnonzero(camera == c)
-        before[rows_c[1:]] = rows_c[:-1]
+    before = previous_next_rows(prep)[0]
     unbracketed = np.zeros(n, dtype=bool)
     own = before[has]
     unbracketed[has] = ((camera[p] != camera[has])
@@ -227,7 +242,6 @@ def confirm_batch(prep, track: Track, rig, max_gap_s: float, noise_px: float | N
     ``Track.dropped`` (``contradicted``, ``unconfirmed``)."""
     if not len(track):
         return track
-    sigma = confirm_noise(track.quality["snap_px"], noise_px)
     obs = prep.obs
     time_ns, camera = obs.time_ns, obs.camera
     n = len(time_ns)
@@ -239,11 +253,13 @@ def confirm_batch(prep, track: Track, rig, max_gap_s: float, noise_px: float | N
             break
         row[off] += 1
     max_gap_ns = int(max_gap_s * NS)
-    gap_all, unbracketed = _previous_instant(time_ns, camera, max_gap_ns)
+    gap_all, unbracketed = _previous_instant(prep, max_gap_ns)
     gap = gap_all[row]
     long = (gap > LONG_FACTOR * usual_interval_s(rig) * NS) | unbracketed[row]
     if not long.any():
         return track
+    # (the tests' noise, a causal median over every point: made only when some point waits)
+    sigma = confirm_noise(track.quality["snap_px"], noise_px)
     e = row[long]
     # the confirming detection: the first later row of another camera that can check the
     # point (its camera has a row within max_gap_s before the point, both pixels finite),

@@ -56,6 +56,8 @@ RAYLEIGH_MEDIAN = float(np.sqrt(2.0 * np.log(2.0)))
 NOISE_WINDOW = 256
 NOISE_EVERY = 32  # (a power of two: NoiseEstimate.sigmas clears its low bits)
 assert NOISE_EVERY & (NOISE_EVERY - 1) == 0, "NoiseEstimate.sigmas needs a power of two"
+#: Windows selected at once by :meth:`NoiseEstimate.sigmas` (64 KB blocks).
+_MEDIAN_ROWS = 32
 
 
 def innovation_factors(events: np.ndarray, j1: np.ndarray, j2: np.ndarray,
@@ -141,7 +143,15 @@ class NoiseEstimate:
                 starts = marks[full] - NOISE_WINDOW - offset
                 windows = np.lib.stride_tricks.sliding_window_view(combined, NOISE_WINDOW)
                 half = NOISE_WINDOW // 2
-                medians[full] = np.partition(windows[starts], half, axis=1)[:, half]
+                # the windows gathered and partitioned in place, _MEDIAN_ROWS at a time (a
+                # session's windows at once were two fresh copies of them all, 1.4 MB for two
+                # minutes, whose page faults cost more than the selection; a small block
+                # reuses the allocator's memory); the same selections, row by row
+                at = np.flatnonzero(full)
+                for lo in range(0, len(starts), _MEDIAN_ROWS):
+                    rows = windows[starts[lo:lo + _MEDIAN_ROWS]]
+                    rows.partition(half, axis=1)
+                    medians[at[lo:lo + _MEDIAN_ROWS]] = rows[:, half]
             use = checkpoint >= NOISE_EVERY
             implied = medians[(checkpoint[use] - marks[0]) // NOISE_EVERY] / RAYLEIGH_MEDIAN
             out[use] = np.maximum(floor, implied)
@@ -224,6 +234,15 @@ def failed_counts(failed: np.ndarray, kinked: np.ndarray | None = None) -> dict[
 KINK_SIGMAS = 5.0
 
 
+def previous_next_rows(prep) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_previous_next` of ``prep``'s observations, made once per Prepared (the kink
+    test and the long-gap confirmation read it; not to be written)."""
+    cache = prep.__dict__.get("_previous_next")
+    if cache is None:
+        cache = prep.__dict__["_previous_next"] = _previous_next(prep.obs.camera)
+    return cache
+
+
 def _previous_next(camera: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Each row's previous and next row of the same camera (-1: none), (n,) int64 each."""
     from . import _prepare_kernel  # (numba: imported at the first use)
@@ -290,7 +309,7 @@ def kinked_points(prep, events: np.ndarray, past: tuple, noise_px: float | np.nd
     sigma = np.ascontiguousarray(np.broadcast_to(
         DEFAULT_NOISE_PX if noise_px is None else np.asarray(noise_px, dtype=np.float64),
         (k,)), dtype=np.float64)
-    before, after = _previous_next(prep.obs.camera)
+    before, after = previous_next_rows(prep)
     # per camera: fx, fy, cx, cy, the optical axis R[2] and t[2] (the depth of a point)
     lens = prep.lens_rows
 
