@@ -128,7 +128,8 @@ def run(args: argparse.Namespace) -> int:
                   f"to run them anyway)")
     # numba's start and the kernel modules these methods (and the writer) run, on another
     # core while the detections are gated: not on the way of the first kernel
-    preload(*dict.fromkeys(k for m in methods for k in METHODS[m].kernels), "pslog.log._wire")
+    preload(*dict.fromkeys(k for m in methods for k in METHODS[m].kernels), "pslog.log._wire",
+            "pslog.fusion._gate_kernel")
     if "smooth" in methods:  # a malformed PSLOG_SMOOTH_THREADS said now, not after gating
         from pslog.estimation._breaks import smooth_threads
 

@@ -271,6 +271,21 @@ def points_one(a, ray, ratio, carried, centers, k_inv, rot, rays):
     return True, px, py, pz, in_front, math.sqrt(total / n)
 
 
+
+@kernel
+def points_all(camera, ray_dir, ratio, carried, centers, k_inv, rot, points, in_front, miss):
+    """gating._points of every candidate: :func:`points_one` of each row (``camera`` (C,),
+    ``ray_dir`` (C, 3), ``ratio`` (C, m), ``carried`` (C, m, 2)), written into ``points``
+    (C, 3), ``in_front`` (C,) bool and ``miss`` (C,): the numpy form's values, the same bits
+    (its sums over unused rays add zeros; each candidate's arithmetic in its order)."""
+    rays = np.empty((ratio.shape[1] + 1, 6))
+    for i in range(len(camera)):
+        _solved, x, y, z, front, ms = points_one(camera[i], ray_dir[i], ratio[i], carried[i],
+                                                 centers, k_inv, rot, rays)
+        points[i, 0], points[i, 1], points[i, 2] = x, y, z
+        in_front[i] = front
+        miss[i] = ms
+
 @kernel
 def _line_fit(trk, lo, hi, t_s, opt, out):
     """gating._line_fit of the track's points ``lo:hi`` (times less ``t_s``, z less gravity,

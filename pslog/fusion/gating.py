@@ -52,6 +52,7 @@ tolerance) and from its own earlier decisions, so a causal method fed by it stay
 from __future__ import annotations
 
 import math
+import sys
 from bisect import bisect_left, bisect_right
 from collections import deque
 from dataclasses import dataclass
@@ -549,6 +550,7 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
     """
     static = np.zeros(len(c.camera), dtype=bool)
     stillness = np.zeros(len(c.camera))
+    finite = np.isfinite(points).all(axis=-1)  # (C,) whether each candidate has a point
     for b, (times, table) in enumerate(tables):
         lags = int(np.ceil(options.static_s * rig.cameras[b].fps))
         long_lags = int(np.ceil(LONG_STILL * options.static_s * rig.cameras[b].fps))
@@ -556,6 +558,7 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
         run = np.zeros(table.shape)
         p = points[np.maximum(table, 0)]  # (frames, K, 3)
         y = c.uv_und[np.maximum(table, 0)]  # (frames, K, 2)
+        p_finite = finite[np.maximum(table, 0)]  # (frames, K)
         with np.errstate(invalid="ignore", divide="ignore"):
             tol = _still_px(rig.cameras[b], p[..., 0], p[..., 1], p[..., 2], options,
                             np.sqrt)
@@ -572,7 +575,7 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
                 recent = np.zeros(len(times), dtype=bool)
                 recent[lag:] = (times[lag:] - times[:-lag]
                                 <= 1.5 * LONG_STILL * options.static_s * NS)
-                yy = c.uv_und[np.maximum(prev, 0)]
+                yy = _lagged(y, lag, c.uv_und[0])  # c.uv_und[max(prev, 0)]
                 with np.errstate(invalid="ignore"):
                     du = y[:, :, None, 0] - yy[:, None, :, 0]
                     dv = y[:, :, None, 1] - yy[:, None, :, 1]
@@ -587,8 +590,9 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
             recent_long = np.zeros(len(times), dtype=bool)
             recent_long[lag:] = (times[lag:] - times[:-lag]
                                  <= 1.5 * LONG_STILL * options.static_s * NS)
-            pp = points[np.maximum(prev, 0)]
-            yy = c.uv_und[np.maximum(prev, 0)]
+            # points[max(prev, 0)] and c.uv_und[max(prev, 0)]: the frames' rows shifted
+            pp = _lagged(p, lag, points[0])
+            yy = _lagged(y, lag, c.uv_und[0])
             with np.errstate(invalid="ignore"):
                 d = np.linalg.norm(p[:, :, None, :] - pp[:, None, :, :], axis=-1)
                 du = y[:, :, None, 0] - yy[:, None, :, 0]
@@ -599,8 +603,8 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
             with np.errstate(invalid="ignore"):
                 # a still pixel there whose own point rested on support too (the support held)
                 near = valid & (d_px <= tol[:, :, None])
-            held += recent[:, None] & np.any(near & np.isfinite(pp).all(axis=-1)[:, None, :],
-                                             axis=2)
+            held += recent[:, None] & np.any(
+                near & _lagged(p_finite, lag, finite[0])[:, None, :], axis=2)
             d_px = np.where(valid & np.isfinite(d_px), d_px, np.inf).min(axis=2)
             run += recent[:, None] & (d <= options.static_m)
             with np.errstate(invalid="ignore"):
@@ -617,6 +621,16 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
                            | long)]] = True
     return static, stillness
 
+
+
+def _lagged(rows: np.ndarray, lag: int, fill) -> np.ndarray:
+    """``rows`` (frames, ...) of a camera's frames ``lag`` frames back: row ``f`` is row
+    ``f - lag``, the first ``lag`` rows ``fill`` (what gathering at a frame table shifted by
+    ``lag``, -1 clipped to row 0, gives; those rows count for nothing)."""
+    out = np.empty_like(rows)
+    out[lag:] = rows[:-lag]
+    out[:lag] = fill
+    return out
 
 def _still_alone(run_px, held, lags: int):
     """The image test's verdict (:func:`_static`; arrays elementwise or floats): still
@@ -742,6 +756,25 @@ def _points(c: _Candidates, rig: Rig, ratio: np.ndarray, carried: np.ndarray, co
     ``constants``: :func:`_rig_constants` of ``rig`` (computed when None)."""
     n, m = ratio.shape
     centers, k_inv, rot = constants or _rig_constants(rig)
+    if n and "pslog.fusion._gate_kernel" in sys.modules:
+        # loaded (pslog fuse preloads it): the compiled form, one candidate at a time in
+        # _points_one's order (the same bits); a light command never waits for numba here
+        from ._gate_kernel import points_all
+
+        points = np.empty((n, 3))
+        in_front = np.empty(n, dtype=bool)
+        miss = np.empty(n)
+        points_all(c.camera, c.ray_dir, ratio, carried, np.array(centers, dtype=np.float64),
+                   np.array(k_inv, dtype=np.float64), np.array(rot, dtype=np.float64),
+                   points, in_front, miss)
+        return points, in_front, miss
+    return _points_arrays(c, ratio, carried, (centers, k_inv, rot))
+
+
+def _points_arrays(c: _Candidates, ratio: np.ndarray, carried: np.ndarray, constants):
+    """:func:`_points` in numpy, elementwise over the candidates."""
+    n, m = ratio.shape
+    centers, k_inv, rot = constants
     own = np.all(np.isfinite(c.ray_dir), axis=1)
     d = np.where(own[:, None], c.ray_dir, 0.0)
     o = np.where(own[:, None], np.array(centers)[c.camera], 0.0)
