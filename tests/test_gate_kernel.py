@@ -255,7 +255,7 @@ def test_batch_points_compiled_equal_the_numpy_form_bit_for_bit():
     carried = rng.uniform(-50, 700, (n, m, 2))
     carried[rng.random((n, m)) < 0.05] = math.nan
     # parallel: the carried ray of camera b through b's own centre along the candidate's ray
-    centers, k_inv, rot = (np.array(c, dtype=np.float64) for c in constants)
+    _centers, k_inv, rot = (np.array(c, dtype=np.float64) for c in constants)
     par = np.flatnonzero(rng.random(n) < 0.05)
     for i in par.tolist():
         b = (int(camera[i]) + 1) % m

@@ -754,7 +754,7 @@ def _points(c: _Candidates, rig: Rig, ratio: np.ndarray, carried: np.ndarray, co
     do not meet: the supports are not one ball). Elementwise, in the order of
     :func:`_points_one`, which gives the stream the same bits one candidate at a time;
     ``constants``: :func:`_rig_constants` of ``rig`` (computed when None)."""
-    n, m = ratio.shape
+    n = len(ratio)
     centers, k_inv, rot = constants or _rig_constants(rig)
     if n and "pslog.fusion._gate_kernel" in sys.modules:
         # loaded (pslog fuse preloads it): the compiled form, one candidate at a time in
