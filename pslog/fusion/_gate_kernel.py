@@ -286,6 +286,16 @@ def points_all(camera, ray_dir, ratio, carried, centers, k_inv, rot, points, in_
         in_front[i] = front
         miss[i] = ms
 
+
+def _preload() -> None:
+    """:func:`points_all` loaded from numba's cache (or compiled) now, in the signature of
+    gating._points' call (int32 cameras, C-contiguous float64 rows): called by
+    :func:`pslog._jit.preload` on its thread while the command reads its session, so that
+    the batch gate's first call does not pay the load (~0.3 s on a busy machine)."""
+    points_all(np.zeros(0, dtype=np.int32), np.zeros((0, 3)), np.zeros((0, 1)),
+               np.zeros((0, 1, 2)), np.zeros((1, 3)), np.zeros((1, 3, 3)), np.zeros((1, 3, 3)),
+               np.empty((0, 3)), np.empty(0, dtype=np.bool_), np.empty(0))
+
 @kernel
 def _line_fit(trk, lo, hi, t_s, opt, out):
     """gating._line_fit of the track's points ``lo:hi`` (times less ``t_s``, z less gravity,
