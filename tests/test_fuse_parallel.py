@@ -172,6 +172,36 @@ def test_preload_starts_numba_and_the_kernel_modules_on_a_thread():
     assert run.stderr == ""
 
 
+
+def test_preload_loads_the_batch_gates_kernel_in_the_signature_gating_calls():
+    """The preload thread runs a kernel module's _preload(): the batch gate's compiled
+    points (pslog.fusion._gate_kernel.points_all) is then ready in the very signature
+    gating._points calls it with (a gate adds none), before any gate runs."""
+    import subprocess
+    import sys
+
+    code = (
+        "import threading\n"
+        "from pslog._jit import preload\n"
+        "preload('pslog.fusion._gate_kernel')\n"
+        "for t in threading.enumerate():\n"
+        "    if t.name == 'pslog-preload':\n"
+        "        t.join(300)\n"
+        "import pslog.fusion._gate_kernel as gk\n"
+        "before = list(gk.points_all.signatures)\n"
+        "from pslog.fusion.gating import gate\n"
+        "from pslog.motion import get_motion\n"
+        "from pslog.simulation import simulate\n"
+        "from pslog.rig import apply_timing, builtin_rig\n"
+        "rig = apply_timing(builtin_rig('paper3'), 'typeA')\n"
+        "gated = gate(simulate(rig, get_motion('spiral'), 1.0)[0], rig)\n"
+        "assert len(gated.observations) > 0\n"
+        "print(len(before), before == list(gk.points_all.signatures))\n")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=600)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.split() == ["1", "True"]
+
 def test_a_method_failing_beside_others_is_one_line(tmp_path, capsys):
     """sync needs shared instants, which a type-A session lacks: its error, raised on a
     worker thread while typeA and filter fuse, is the command's one line; nothing written."""
