@@ -11,6 +11,10 @@ operations in the same order on the same history, so the same bits and the same 
 (``tests/test_gate_kernel.py`` compares it with the Python form, and the stream with the
 batch gate). Each function names the Python one it mirrors in :mod:`pslog.fusion.gating`.
 
+The batch gate (:func:`~pslog.fusion.gating.gate`) uses one of them too: every candidate's
+3D point by :func:`points_all` (``points_one`` per row, the numpy form's bits) where this
+module is loaded (``pslog fuse`` preloads it), its numpy form otherwise.
+
 Two of Python's float operations are not the compiled ones and are reproduced on purpose:
 
 - ``x ** 2`` is C's ``pow(x, 2.0)`` in CPython, which differs from ``x * x`` in the last
