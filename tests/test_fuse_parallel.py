@@ -152,6 +152,40 @@ def test_an_error_making_the_shared_input_fails_every_method_of_its_key():
         "good", "good"]
 
 
+
+@pytest.mark.parametrize("workers", [1, 2, 3])
+def test_gating_forms_share_their_common_part_and_gate_as_alone(dirty, workers, monkeypatch):
+    """Methods of three gating forms (offline; causal; causal waiting for the tolerance)
+    fused together compute the forms' common part (gating.gate_common) once, and each form's
+    rejections and each track are bit for bit those of the form gated alone."""
+    from pslog.fusion import fuse, prepare
+    from pslog.fusion import gating as G
+
+    session = read_session(dirty)
+    det, rig = session.detections, session.rig
+    options = FusionOptions()
+    methods = ["smooth", "typeA", "typeB", "nearest"]
+    assert len({G.gating_key(m, options) for m in methods}) == 3
+    made = []
+    real = G.gate_common
+
+    def counted(*args):
+        made.append(threading.current_thread().name)
+        return real(*args)
+
+    monkeypatch.setattr(G, "gate_common", counted)
+    tracks, rejections = fuse_detections(det, rig, methods, options, workers=workers)
+    assert len(made) == 1
+    monkeypatch.setattr(G, "gate_common", real)
+    for m in methods:
+        alone = G.gate_for(det, rig, m, options)
+        for field in ("frame_time_ns", "camera", "frame_index", "uv", "score", "reason"):
+            assert (getattr(alone.rejections, field).tobytes()
+                    == getattr(rejections[m], field).tobytes())
+        assert len(alone.rejections) == len(rejections[m]) > 0
+        _same_track(tracks[m], fuse(alone.observations, rig, m, options,
+                                    prepared=prepare(alone.observations, rig)))
+
 def test_preload_starts_numba_and_the_kernel_modules_on_a_thread():
     import subprocess
     import sys

@@ -53,6 +53,7 @@ from __future__ import annotations
 
 import math
 import sys
+import threading
 from bisect import bisect_left, bisect_right
 from collections import deque
 from dataclasses import dataclass
@@ -69,6 +70,8 @@ from ..timing import camera_parameters, true_times_ns
 from ..timing import observations as timed_observations
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
     from ._prepare import Prepared
 
 #: Why a candidate was rejected (the ``reason`` codes of :class:`Rejections`).
@@ -1223,7 +1226,8 @@ class _Decider:
 
 
 def gate(detections: Detections, rig: Rig, *, causal: bool = True, wait_s: float = 0.0,
-         max_gap_s: float | None = None, options: GatingOptions | None = None) -> Gated:
+         max_gap_s: float | None = None, options: GatingOptions | None = None,
+         common: Callable[[], tuple] | None = None) -> Gated:
     """Choose the ball among every frame's candidates (module docstring).
 
     Parameters
@@ -1237,6 +1241,9 @@ def gate(detections: Detections, rig: Rig, *, causal: bool = True, wait_s: float
     max_gap_s : float, frames of other cameras further than this from t give no support
         (default: 3.5 frame periods of the slowest camera)
     options : GatingOptions
+    common : ``common()`` gives :func:`gate_common` of ``detections`` and ``rig`` (the
+        part of the work every form shares: several forms gating the same detections
+        compute it once); None: computed here
 
     Returns
     -------
@@ -1246,21 +1253,31 @@ def gate(detections: Detections, rig: Rig, *, causal: bool = True, wait_s: float
 
     options = options or GatingOptions()
     max_gap_ns = round((max_gap_s or default_max_gap_s(rig)) * NS)
-    c = _candidates(detections, rig)
+    c, tables = common() if common is not None else gate_common(detections, rig)
     n = len(c.camera)
     reason = np.full(n, -1, dtype=np.int8)
     if n == 0:
         return _result(detections, rig, reason)
-    _decided(c, rig, options, causal, round(wait_s * NS), max_gap_ns, reason)
+    _decided(c, rig, options, causal, round(wait_s * NS), max_gap_ns, reason, tables)
     return _result(detections, rig, reason)
 
 
+def gate_common(detections: Detections, rig: Rig) -> tuple:
+    """What :func:`gate` computes whatever its form (causal or not, its wait and gap): the
+    candidates' geometry (corrected times, undistorted pixels, viewing rays) and each
+    camera's frame table; read only by the gate."""
+    c = _candidates(detections, rig)
+    return c, (_frame_table(c, len(rig)) if len(c.camera) else None)
+
+
 def _decided(c: _Candidates, rig: Rig, options: GatingOptions, causal: bool, wait_ns: int,
-             max_gap_ns: int, reason: np.ndarray) -> np.ndarray:
+             max_gap_ns: int, reason: np.ndarray, tables=None) -> np.ndarray:
     """:func:`gate`'s choice: sets ``reason`` (C,) of every rejected candidate; returns the
-    epipolar support ratio (C, m) each candidate was decided with."""
+    epipolar support ratio (C, m) each candidate was decided with (``tables``: the frame
+    tables of ``c``, made here when None)."""
     n = len(c.camera)
-    tables = _frame_table(c, len(rig))
+    if tables is None:
+        tables = _frame_table(c, len(rig))
     F = fundamental_matrices(rig.cameras)
     ratio, carried, used = _support(c, rig, F, tables, options, max_gap_ns, causal, wait_ns)
     constants = _rig_constants(rig)
@@ -1918,11 +1935,13 @@ def gating_key(method: str, options) -> tuple[bool, float]:
     return m.causal, (options.tolerance_s if m.causal and m.waits_tolerance else 0.0)
 
 
-def gate_for(detections: Detections, rig: Rig, method: str, options) -> Gated:
+def gate_for(detections: Detections, rig: Rig, method: str, options,
+             common: Callable[[], tuple] | None = None) -> Gated:
     """:func:`gate` in the form ``method`` needs (``options``: FusionOptions with
-    ``max_gap_s`` set or None)."""
+    ``max_gap_s`` set or None; ``common``: as :func:`gate`'s)."""
     causal, wait_s = gating_key(method, options)
-    return gate(detections, rig, causal=causal, wait_s=wait_s, max_gap_s=options.max_gap_s)
+    return gate(detections, rig, causal=causal, wait_s=wait_s, max_gap_s=options.max_gap_s,
+                common=common)
 
 
 def fuse_detections(detections: Detections, rig: Rig, methods, options=None, *,
@@ -1957,8 +1976,25 @@ def fuse_detections(detections: Detections, rig: Rig, methods, options=None, *,
                           started=shown.started, finished=shown.finished)
         return dict(zip(methods, out, strict=True)), {m: Rejections.empty() for m in methods}
 
+    # the forms' shared part (gate_common) once, by the first form to start, dropped once
+    # every form has it (the forms gate at once, on threads: the others wait for it)
+    forms = len({gating_key(method, options) for method in methods})
+    lock = threading.Lock()
+    shared: dict = {}
+
+    def common() -> tuple:
+        with lock:
+            if "value" not in shared:
+                shared["value"] = gate_common(detections, rig)
+                shared["left"] = forms
+            value = shared["value"]
+            shared["left"] -= 1
+            if shared["left"] == 0:
+                shared["value"] = None  # (its arrays go with the last form's gate)
+            return value
+
     def gated_input(key, method: str) -> tuple[Gated, Prepared | None]:  # once per form
-        gated = gate_for(detections, rig, method, options)
+        gated = gate_for(detections, rig, method, options, common)
         return gated, (prepare(gated.observations, rig) if len(rig) >= 2 else None)
 
     def fused(method: str, shared: tuple[Gated, Prepared | None]):
