@@ -92,7 +92,13 @@ def preload(*modules: str) -> None:
             return
         for name in modules:
             try:
-                importlib.import_module(name)
+                module = importlib.import_module(name)
+                # a module's own warm-up: its kernels' machine code loaded from numba's
+                # cache in the signatures the command calls (the load otherwise falls on
+                # the first call, on the command's way)
+                warm = getattr(module, "_preload", None)
+                if callable(warm):
+                    warm()
             except BaseException:  # (likewise)
                 pass
 

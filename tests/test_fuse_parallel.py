@@ -152,6 +152,40 @@ def test_an_error_making_the_shared_input_fails_every_method_of_its_key():
         "good", "good"]
 
 
+
+@pytest.mark.parametrize("workers", [1, 2, 3])
+def test_gating_forms_share_their_common_part_and_gate_as_alone(dirty, workers, monkeypatch):
+    """Methods of three gating forms (offline; causal; causal waiting for the tolerance)
+    fused together compute the forms' common part (gating.gate_common) once, and each form's
+    rejections and each track are bit for bit those of the form gated alone."""
+    from pslog.fusion import fuse, prepare
+    from pslog.fusion import gating as G
+
+    session = read_session(dirty)
+    det, rig = session.detections, session.rig
+    options = FusionOptions()
+    methods = ["smooth", "typeA", "typeB", "nearest"]
+    assert len({G.gating_key(m, options) for m in methods}) == 3
+    made = []
+    real = G.gate_common
+
+    def counted(*args):
+        made.append(threading.current_thread().name)
+        return real(*args)
+
+    monkeypatch.setattr(G, "gate_common", counted)
+    tracks, rejections = fuse_detections(det, rig, methods, options, workers=workers)
+    assert len(made) == 1
+    monkeypatch.setattr(G, "gate_common", real)
+    for m in methods:
+        alone = G.gate_for(det, rig, m, options)
+        for field in ("frame_time_ns", "camera", "frame_index", "uv", "score", "reason"):
+            assert (getattr(alone.rejections, field).tobytes()
+                    == getattr(rejections[m], field).tobytes())
+        assert len(alone.rejections) == len(rejections[m]) > 0
+        _same_track(tracks[m], fuse(alone.observations, rig, m, options,
+                                    prepared=prepare(alone.observations, rig)))
+
 def test_preload_starts_numba_and_the_kernel_modules_on_a_thread():
     import subprocess
     import sys
@@ -171,6 +205,36 @@ def test_preload_starts_numba_and_the_kernel_modules_on_a_thread():
     assert run.stdout.split() == ["True", "True"]  # a missing module stops nothing
     assert run.stderr == ""
 
+
+
+def test_preload_loads_the_batch_gates_kernel_in_the_signature_gating_calls():
+    """The preload thread runs a kernel module's _preload(): the batch gate's compiled
+    points (pslog.fusion._gate_kernel.points_all) is then ready in the very signature
+    gating._points calls it with (a gate adds none), before any gate runs."""
+    import subprocess
+    import sys
+
+    code = (
+        "import threading\n"
+        "from pslog._jit import preload\n"
+        "preload('pslog.fusion._gate_kernel')\n"
+        "for t in threading.enumerate():\n"
+        "    if t.name == 'pslog-preload':\n"
+        "        t.join(300)\n"
+        "import pslog.fusion._gate_kernel as gk\n"
+        "before = list(gk.points_all.signatures)\n"
+        "from pslog.fusion.gating import gate\n"
+        "from pslog.motion import get_motion\n"
+        "from pslog.simulation import simulate\n"
+        "from pslog.rig import apply_timing, builtin_rig\n"
+        "rig = apply_timing(builtin_rig('paper3'), 'typeA')\n"
+        "gated = gate(simulate(rig, get_motion('spiral'), 1.0)[0], rig)\n"
+        "assert len(gated.observations) > 0\n"
+        "print(len(before), before == list(gk.points_all.signatures))\n")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=600)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.split() == ["1", "True"]
 
 def test_a_method_failing_beside_others_is_one_line(tmp_path, capsys):
     """sync needs shared instants, which a type-A session lacks: its error, raised on a

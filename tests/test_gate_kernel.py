@@ -237,6 +237,45 @@ def test_points_and_lines_equal_gating_on_random_cases():
         assert np.array_equal(got_line, line, equal_nan=True)
 
 
+
+def test_batch_points_compiled_equal_the_numpy_form_bit_for_bit():
+    """gating._points' compiled form (_gate_kernel.points_all, which pslog fuse uses) gives
+    the numpy form's points, in-front flags and misses, bit for bit, on random candidates:
+    unsupported, one support, parallel rays (det ~ 0), NaN own rays, inf/NaN ratios."""
+    rng = np.random.default_rng(11)
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    constants = gating._rig_constants(rig)
+    n, m = 4000, 3
+    camera = rng.integers(0, m, n).astype(np.int32)
+    ray = rng.normal(size=(n, 3))
+    ray /= np.linalg.norm(ray, axis=1, keepdims=True)
+    ray[rng.random(n) < 0.05, 0] = math.nan
+    ratio = rng.choice([0.3, 0.9, 1.0, 1.5, math.inf, math.nan], size=(n, m))
+    ratio[np.arange(n), camera] = math.nan
+    carried = rng.uniform(-50, 700, (n, m, 2))
+    carried[rng.random((n, m)) < 0.05] = math.nan
+    # parallel: the carried ray of camera b through b's own centre along the candidate's ray
+    _centers, k_inv, rot = (np.array(c, dtype=np.float64) for c in constants)
+    par = np.flatnonzero(rng.random(n) < 0.05)
+    for i in par.tolist():
+        b = (int(camera[i]) + 1) % m
+        ratio[i] = math.nan
+        ratio[i, b] = 0.5
+        d = rot[b] @ ray[i]  # the candidate's direction in b's camera frame
+        if np.isfinite(d).all() and d[2] != 0:
+            uv = (np.linalg.inv(k_inv[b]) @ (d / d[2]))[:2]
+            carried[i, b] = uv
+    c = gating._Candidates(camera, np.zeros(n, dtype=np.int64), np.zeros((n, 2)), ray,
+                           np.arange(n))
+    want = gating._points_arrays(c, ratio, carried, constants)
+    got = gating._points(c, rig, ratio, carried, constants)  # gk imported: compiled
+    assert "pslog.fusion._gate_kernel" in __import__("sys").modules
+    for w, g in zip(want, got, strict=True):
+        assert w.dtype == g.dtype and w.shape == g.shape
+        assert_array_equal(w.view(np.uint8), g.view(np.uint8))  # the bits, NaNs included
+    assert np.isfinite(want[0]).all(axis=1).sum() > n // 4  # points made
+    assert (~want[1]).sum() > 10 and np.isnan(want[2]).sum() > 10  # behind, no point
+
 def test_python_pow_and_sum_are_reproduced():
     """CPython's ``x ** 2`` is C's pow, not ``x * x`` (they differ in the last bit on some
     values); the kernels call pow with an exponent the compiler cannot fold; ``sum`` is the

@@ -145,3 +145,22 @@ def test_assemble_records_kernel_is_its_python_original():
         expected[at + 31:at + 31 + lengths[i]] = payload[data_start[i]:data_start[i] + lengths[i]]
     np.testing.assert_array_equal(want, expected)
     np.testing.assert_array_equal(got, expected)
+
+
+@pytest.mark.parametrize("n_channels", [1, 2, 5, _chunks._FEW_CHANNELS,
+                                        _chunks._FEW_CHANNELS + 1, 300])
+def test_channels_seen_is_unique_in_order_of_first_appearance(n_channels):
+    """The writer's channel census (bincount and a scan per channel for a few channels,
+    np.unique past them) gives np.unique's ids and counts, ordered by first appearance."""
+    rng = np.random.default_rng(n_channels)
+    ids = rng.permutation(np.arange(1, 60_000))[:n_channels]  # first seen in no sorted order
+    channel = np.concatenate([ids, ids[rng.integers(0, n_channels, 20_000)]])
+    rng.shuffle(channel[n_channels:])
+    for dtype in (np.int64, np.uint16, np.int32):
+        seen, counts = _chunks.channels_seen(channel.astype(dtype))
+        want, first, want_counts = np.unique(channel, return_index=True, return_counts=True)
+        order = np.argsort(first, kind="stable")
+        assert seen.tolist() == want[order].tolist() == ids.tolist()
+        assert counts.tolist() == want_counts[order].tolist()
+    empty = _chunks.channels_seen(np.zeros(0, dtype=np.int64))
+    assert empty[0].tolist() == [] and empty[1].tolist() == []

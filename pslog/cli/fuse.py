@@ -128,8 +128,10 @@ def run(args: argparse.Namespace) -> int:
             print(f"not run on this timing: {', '.join(skipped)} (name them with --method "
                   f"to run them anyway)")
     # numba's start and the kernel modules these methods (and the writer) run, on another
-    # core while the detections are gated: not on the way of the first kernel
-    preload(*dict.fromkeys(k for m in methods for k in METHODS[m].kernels), "pslog.log._wire")
+    # core while the detections are gated: not on the way of the first kernel (and the
+    # gate's compiled points, pslog.fusion._gate_kernel.points_all)
+    preload(*dict.fromkeys(k for m in methods for k in METHODS[m].kernels), "pslog.log._wire",
+            *(("pslog.fusion._gate_kernel",) if options.gating else ()))
     if "smooth" in methods:  # a malformed PSLOG_SMOOTH_THREADS said now, not after gating
         from pslog.estimation._breaks import smooth_threads
 

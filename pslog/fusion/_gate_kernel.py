@@ -11,6 +11,10 @@ operations in the same order on the same history, so the same bits and the same 
 (``tests/test_gate_kernel.py`` compares it with the Python form, and the stream with the
 batch gate). Each function names the Python one it mirrors in :mod:`pslog.fusion.gating`.
 
+The batch gate (:func:`~pslog.fusion.gating.gate`) uses one of them too: every candidate's
+3D point by :func:`points_all` (``points_one`` per row, the numpy form's bits) where this
+module is loaded (``pslog fuse`` preloads it), its numpy form otherwise.
+
 Two of Python's float operations are not the compiled ones and are reproduced on purpose:
 
 - ``x ** 2`` is C's ``pow(x, 2.0)`` in CPython, which differs from ``x * x`` in the last
@@ -270,6 +274,31 @@ def points_one(a, ray, ratio, carried, centers, k_inv, rot, rays):
         total = total + ((qx * qx + qy * qy) + qz * qz)
     return True, px, py, pz, in_front, math.sqrt(total / n)
 
+
+
+@kernel
+def points_all(camera, ray_dir, ratio, carried, centers, k_inv, rot, points, in_front, miss):
+    """gating._points of every candidate: :func:`points_one` of each row (``camera`` (C,),
+    ``ray_dir`` (C, 3), ``ratio`` (C, m), ``carried`` (C, m, 2)), written into ``points``
+    (C, 3), ``in_front`` (C,) bool and ``miss`` (C,): the numpy form's values, the same bits
+    (its sums over unused rays add zeros; each candidate's arithmetic in its order)."""
+    rays = np.empty((ratio.shape[1] + 1, 6))
+    for i in range(len(camera)):
+        _solved, x, y, z, front, ms = points_one(camera[i], ray_dir[i], ratio[i], carried[i],
+                                                 centers, k_inv, rot, rays)
+        points[i, 0], points[i, 1], points[i, 2] = x, y, z
+        in_front[i] = front
+        miss[i] = ms
+
+
+def _preload() -> None:
+    """:func:`points_all` loaded from numba's cache (or compiled) now, in the signature of
+    gating._points' call (int32 cameras, C-contiguous float64 rows): called by
+    :func:`pslog._jit.preload` on its thread while the command reads its session, so that
+    the batch gate's first call does not pay the load (~0.3 s on a busy machine)."""
+    points_all(np.zeros(0, dtype=np.int32), np.zeros((0, 3)), np.zeros((0, 1)),
+               np.zeros((0, 1, 2)), np.zeros((1, 3)), np.zeros((1, 3, 3)), np.zeros((1, 3, 3)),
+               np.empty((0, 3)), np.empty(0, dtype=np.bool_), np.empty(0))
 
 @kernel
 def _line_fit(trk, lo, hi, t_s, opt, out):

@@ -52,6 +52,8 @@ tolerance) and from its own earlier decisions, so a causal method fed by it stay
 from __future__ import annotations
 
 import math
+import sys
+import threading
 from bisect import bisect_left, bisect_right
 from collections import deque
 from dataclasses import dataclass
@@ -68,6 +70,8 @@ from ..timing import camera_parameters, true_times_ns
 from ..timing import observations as timed_observations
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
     from ._prepare import Prepared
 
 #: Why a candidate was rejected (the ``reason`` codes of :class:`Rejections`).
@@ -549,6 +553,7 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
     """
     static = np.zeros(len(c.camera), dtype=bool)
     stillness = np.zeros(len(c.camera))
+    finite = np.isfinite(points).all(axis=-1)  # (C,) whether each candidate has a point
     for b, (times, table) in enumerate(tables):
         lags = int(np.ceil(options.static_s * rig.cameras[b].fps))
         long_lags = int(np.ceil(LONG_STILL * options.static_s * rig.cameras[b].fps))
@@ -556,6 +561,7 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
         run = np.zeros(table.shape)
         p = points[np.maximum(table, 0)]  # (frames, K, 3)
         y = c.uv_und[np.maximum(table, 0)]  # (frames, K, 2)
+        p_finite = finite[np.maximum(table, 0)]  # (frames, K)
         with np.errstate(invalid="ignore", divide="ignore"):
             tol = _still_px(rig.cameras[b], p[..., 0], p[..., 1], p[..., 2], options,
                             np.sqrt)
@@ -572,7 +578,7 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
                 recent = np.zeros(len(times), dtype=bool)
                 recent[lag:] = (times[lag:] - times[:-lag]
                                 <= 1.5 * LONG_STILL * options.static_s * NS)
-                yy = c.uv_und[np.maximum(prev, 0)]
+                yy = _lagged(y, lag, c.uv_und[0])  # c.uv_und[max(prev, 0)]
                 with np.errstate(invalid="ignore"):
                     du = y[:, :, None, 0] - yy[:, None, :, 0]
                     dv = y[:, :, None, 1] - yy[:, None, :, 1]
@@ -587,8 +593,9 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
             recent_long = np.zeros(len(times), dtype=bool)
             recent_long[lag:] = (times[lag:] - times[:-lag]
                                  <= 1.5 * LONG_STILL * options.static_s * NS)
-            pp = points[np.maximum(prev, 0)]
-            yy = c.uv_und[np.maximum(prev, 0)]
+            # points[max(prev, 0)] and c.uv_und[max(prev, 0)]: the frames' rows shifted
+            pp = _lagged(p, lag, points[0])
+            yy = _lagged(y, lag, c.uv_und[0])
             with np.errstate(invalid="ignore"):
                 d = np.linalg.norm(p[:, :, None, :] - pp[:, None, :, :], axis=-1)
                 du = y[:, :, None, 0] - yy[:, None, :, 0]
@@ -599,8 +606,8 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
             with np.errstate(invalid="ignore"):
                 # a still pixel there whose own point rested on support too (the support held)
                 near = valid & (d_px <= tol[:, :, None])
-            held += recent[:, None] & np.any(near & np.isfinite(pp).all(axis=-1)[:, None, :],
-                                             axis=2)
+            held += recent[:, None] & np.any(
+                near & _lagged(p_finite, lag, finite[0])[:, None, :], axis=2)
             d_px = np.where(valid & np.isfinite(d_px), d_px, np.inf).min(axis=2)
             run += recent[:, None] & (d <= options.static_m)
             with np.errstate(invalid="ignore"):
@@ -617,6 +624,16 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
                            | long)]] = True
     return static, stillness
 
+
+
+def _lagged(rows: np.ndarray, lag: int, fill) -> np.ndarray:
+    """``rows`` (frames, ...) of a camera's frames ``lag`` frames back: row ``f`` is row
+    ``f - lag``, the first ``lag`` rows ``fill`` (what gathering at a frame table shifted by
+    ``lag``, -1 clipped to row 0, gives; those rows count for nothing)."""
+    out = np.empty_like(rows)
+    out[lag:] = rows[:-lag]
+    out[:lag] = fill
+    return out
 
 def _still_alone(run_px, held, lags: int):
     """The image test's verdict (:func:`_static`; arrays elementwise or floats): still
@@ -740,8 +757,27 @@ def _points(c: _Candidates, rig: Rig, ratio: np.ndarray, carried: np.ndarray, co
     do not meet: the supports are not one ball). Elementwise, in the order of
     :func:`_points_one`, which gives the stream the same bits one candidate at a time;
     ``constants``: :func:`_rig_constants` of ``rig`` (computed when None)."""
-    n, m = ratio.shape
+    n = len(ratio)
     centers, k_inv, rot = constants or _rig_constants(rig)
+    if n and "pslog.fusion._gate_kernel" in sys.modules:
+        # loaded (pslog fuse preloads it): the compiled form, one candidate at a time in
+        # _points_one's order (the same bits); a light command never waits for numba here
+        from ._gate_kernel import points_all
+
+        points = np.empty((n, 3))
+        in_front = np.empty(n, dtype=bool)
+        miss = np.empty(n)
+        points_all(c.camera, c.ray_dir, ratio, carried, np.array(centers, dtype=np.float64),
+                   np.array(k_inv, dtype=np.float64), np.array(rot, dtype=np.float64),
+                   points, in_front, miss)
+        return points, in_front, miss
+    return _points_arrays(c, ratio, carried, (centers, k_inv, rot))
+
+
+def _points_arrays(c: _Candidates, ratio: np.ndarray, carried: np.ndarray, constants):
+    """:func:`_points` in numpy, elementwise over the candidates."""
+    n, m = ratio.shape
+    centers, k_inv, rot = constants
     own = np.all(np.isfinite(c.ray_dir), axis=1)
     d = np.where(own[:, None], c.ray_dir, 0.0)
     o = np.where(own[:, None], np.array(centers)[c.camera], 0.0)
@@ -1190,7 +1226,8 @@ class _Decider:
 
 
 def gate(detections: Detections, rig: Rig, *, causal: bool = True, wait_s: float = 0.0,
-         max_gap_s: float | None = None, options: GatingOptions | None = None) -> Gated:
+         max_gap_s: float | None = None, options: GatingOptions | None = None,
+         common: Callable[[], tuple] | None = None) -> Gated:
     """Choose the ball among every frame's candidates (module docstring).
 
     Parameters
@@ -1204,6 +1241,9 @@ def gate(detections: Detections, rig: Rig, *, causal: bool = True, wait_s: float
     max_gap_s : float, frames of other cameras further than this from t give no support
         (default: 3.5 frame periods of the slowest camera)
     options : GatingOptions
+    common : ``common()`` gives :func:`gate_common` of ``detections`` and ``rig`` (the
+        part of the work every form shares: several forms gating the same detections
+        compute it once); None: computed here
 
     Returns
     -------
@@ -1213,21 +1253,31 @@ def gate(detections: Detections, rig: Rig, *, causal: bool = True, wait_s: float
 
     options = options or GatingOptions()
     max_gap_ns = round((max_gap_s or default_max_gap_s(rig)) * NS)
-    c = _candidates(detections, rig)
+    c, tables = common() if common is not None else gate_common(detections, rig)
     n = len(c.camera)
     reason = np.full(n, -1, dtype=np.int8)
     if n == 0:
         return _result(detections, rig, reason)
-    _decided(c, rig, options, causal, round(wait_s * NS), max_gap_ns, reason)
+    _decided(c, rig, options, causal, round(wait_s * NS), max_gap_ns, reason, tables)
     return _result(detections, rig, reason)
 
 
+def gate_common(detections: Detections, rig: Rig) -> tuple:
+    """What :func:`gate` computes whatever its form (causal or not, its wait and gap): the
+    candidates' geometry (corrected times, undistorted pixels, viewing rays) and each
+    camera's frame table; read only by the gate."""
+    c = _candidates(detections, rig)
+    return c, (_frame_table(c, len(rig)) if len(c.camera) else None)
+
+
 def _decided(c: _Candidates, rig: Rig, options: GatingOptions, causal: bool, wait_ns: int,
-             max_gap_ns: int, reason: np.ndarray) -> np.ndarray:
+             max_gap_ns: int, reason: np.ndarray, tables=None) -> np.ndarray:
     """:func:`gate`'s choice: sets ``reason`` (C,) of every rejected candidate; returns the
-    epipolar support ratio (C, m) each candidate was decided with."""
+    epipolar support ratio (C, m) each candidate was decided with (``tables``: the frame
+    tables of ``c``, made here when None)."""
     n = len(c.camera)
-    tables = _frame_table(c, len(rig))
+    if tables is None:
+        tables = _frame_table(c, len(rig))
     F = fundamental_matrices(rig.cameras)
     ratio, carried, used = _support(c, rig, F, tables, options, max_gap_ns, causal, wait_ns)
     constants = _rig_constants(rig)
@@ -1906,11 +1956,13 @@ def gating_key(method: str, options) -> tuple[bool, float]:
     return m.causal, (options.tolerance_s if m.causal and m.waits_tolerance else 0.0)
 
 
-def gate_for(detections: Detections, rig: Rig, method: str, options) -> Gated:
+def gate_for(detections: Detections, rig: Rig, method: str, options,
+             common: Callable[[], tuple] | None = None) -> Gated:
     """:func:`gate` in the form ``method`` needs (``options``: FusionOptions with
-    ``max_gap_s`` set or None)."""
+    ``max_gap_s`` set or None; ``common``: as :func:`gate`'s)."""
     causal, wait_s = gating_key(method, options)
-    return gate(detections, rig, causal=causal, wait_s=wait_s, max_gap_s=options.max_gap_s)
+    return gate(detections, rig, causal=causal, wait_s=wait_s, max_gap_s=options.max_gap_s,
+                common=common)
 
 
 def fuse_detections(detections: Detections, rig: Rig, methods, options=None, *,
@@ -1945,8 +1997,25 @@ def fuse_detections(detections: Detections, rig: Rig, methods, options=None, *,
                           started=shown.started, finished=shown.finished)
         return dict(zip(methods, out, strict=True)), {m: Rejections.empty() for m in methods}
 
+    # the forms' shared part (gate_common) once, by the first form to start, dropped once
+    # every form has it (the forms gate at once, on threads: the others wait for it)
+    forms = len({gating_key(method, options) for method in methods})
+    lock = threading.Lock()
+    shared: dict = {}
+
+    def common() -> tuple:
+        with lock:
+            if "value" not in shared:
+                shared["value"] = gate_common(detections, rig)
+                shared["left"] = forms
+            value = shared["value"]
+            shared["left"] -= 1
+            if shared["left"] == 0:
+                shared["value"] = None  # (its arrays go with the last form's gate)
+            return value
+
     def gated_input(key, method: str) -> tuple[Gated, Prepared | None]:  # once per form
-        gated = gate_for(detections, rig, method, options)
+        gated = gate_for(detections, rig, method, options, common)
         return gated, (prepare(gated.observations, rig) if len(rig) >= 2 else None)
 
     def fused(method: str, shared: tuple[Gated, Prepared | None]):

@@ -38,6 +38,33 @@ ZSTD_LEVEL = -1
 TABLE_ZSTD_LEVEL = 1
 
 
+#: distinct channels of a block from which :func:`channels_seen` sorts (``np.unique``) rather
+#: than scanning the block once per channel
+_FEW_CHANNELS = 16
+
+
+def channels_seen(channel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct values of ``channel`` (n,) integer ids, in order of first appearance, and
+    how many times each appears: ``np.unique(channel, return_index=True,
+    return_counts=True)`` reordered by first index, the same values. A block holds a few
+    channels (a fused track's: two) among hundreds of thousands of messages: counted by
+    ``np.bincount`` and found by a scan per channel instead of sorted (a tenth of the time,
+    on the writer's thread)."""
+    channel = np.asarray(channel)
+    if (len(channel) and channel.dtype.kind in "iu" and channel.min() >= 0
+            and channel.max() < 1 << 16):
+        counts = np.bincount(channel)
+        ids = np.flatnonzero(counts)
+        if len(ids) <= _FEW_CHANNELS:
+            first = np.array([int(np.argmax(channel == i)) for i in ids.tolist()],
+                             dtype=np.int64)
+            order = np.argsort(first, kind="stable")
+            return ids[order].astype(channel.dtype), counts[ids][order]
+    ids, first, counts = np.unique(channel, return_index=True, return_counts=True)
+    order = np.argsort(first, kind="stable")
+    return ids[order], counts[order]
+
+
 def supported(writer) -> bool:
     """Whether ``writer`` (an ``mcap.writer.Writer``) exposes the state this module needs and
     compresses chunks with zstd (the only compression pslog writes)."""
@@ -134,9 +161,8 @@ def write_messages(writer, channel: np.ndarray, log_time: np.ndarray, sequence: 
     else:
         stats.message_start_time = min(int(log_time.min()), stats.message_start_time)
     stats.message_end_time = max(int(log_time.max()), stats.message_end_time)
-    ids, first, counts = np.unique(channel, return_index=True, return_counts=True)
-    order = np.argsort(first, kind="stable")  # a new channel's key where add_message puts it
-    for cid, k in zip(ids[order].tolist(), counts[order].tolist(), strict=True):
+    ids, counts = channels_seen(channel)  # a new channel's key where add_message puts it
+    for cid, k in zip(ids.tolist(), counts.tolist(), strict=True):
         stats.channel_message_counts[cid] += k
     stats.message_count += n
 
@@ -217,9 +243,8 @@ def write_messages(writer, channel: np.ndarray, log_time: np.ndarray, sequence: 
         index_start = chunk_start + record_length
         if index_messages:
             chans = channel[s:e]
-            uniq, first = np.unique(chans, return_index=True)
             at = 0
-            for cid in uniq[np.argsort(first, kind="stable")].tolist():
+            for cid in channels_seen(chans)[0].tolist():
                 sel = np.flatnonzero(chans == cid)
                 entries = np.empty((len(sel), 2), dtype="<u8")
                 entries[:, 0] = times[sel]

@@ -286,7 +286,7 @@ class SessionWriter:
         sequence numbers) for :meth:`_write_tables`."""
         from .reader import _Batch, _gather
 
-        here = set(np.unique(channel).tolist()) & self._table_parts.keys()
+        here = set(_chunks.channels_seen(channel)[0].tolist()) & self._table_parts.keys()
         if not here:
             return
         ends = np.cumsum(lengths)
@@ -400,7 +400,8 @@ class SessionWriter:
         the installed ``mcap`` does not allow it or a field does not fit (its own error)."""
         if (len(messages) == 1 and isinstance(messages[0], _Block) and messages[0].records
                 and self._bulk and _chunks.fits(messages[0].seq, messages[0].time)
-                and not self._table_parts.keys() & set(np.unique(messages[0].channel).tolist())):
+                and not self._table_parts.keys()
+                & set(_chunks.channels_seen(messages[0].channel)[0].tolist())):
             # whole records (a fused track's): the chunks are cut from them as they are
             block = messages[0]
             _chunks.write_messages(self._mcap, block.channel, block.time, block.seq,
