@@ -653,7 +653,16 @@ def _stop_signals_blocked():
     the whole foreground process group) or SIGTERM to the group stays pending in a camera
     that is still importing, until :func:`camera_main` ignores these signals (which discards
     it there): the parent stops the cameras. The parent's handlers stay in place meanwhile:
-    its other threads take such a signal, or it waits for the end of the block, never lost."""
+    its other threads take such a signal, or it waits for the end of the block, never lost.
+
+    multiprocessing's resource tracker is started first: the first ``Process.start()`` starts
+    it otherwise, and its start UNBLOCKS these signals in the calling thread (Python's
+    ``resource_tracker.ensure_running``), so the cameras started after it got a Ctrl-C while
+    importing (a KeyboardInterrupt traceback). The shared ``multiprocessing.Queue`` used to
+    start it earlier by chance (its lock registers with the tracker)."""
+    from multiprocessing import resource_tracker
+
+    resource_tracker.ensure_running()
     old = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)
     try:
         yield
