@@ -2,10 +2,17 @@
 
 As in the paper's system, each camera has its own process that captures and analyses its
 frames and sends the results, with the capture time, to the parent, which owns the only
-:class:`pslog.log.SessionWriter`. The parent shows a live status line, watches for cameras
-that fail or stall (logging the gap as an event while the others keep recording) and finishes
-the file cleanly on Ctrl-C or SIGTERM; the writer flushes at least once a second, so SIGKILL
-loses at most the last second (``pslog recover`` salvages the rest).
+:class:`pslog.log.SessionWriter`. Each camera has its own one-way pipe to the parent, whose
+write end only that camera holds: a camera killed at any instant (SIGKILL, the OOM killer),
+even in the middle of a message, gives the parent an end of file on that pipe alone -- its
+complete messages are kept, the other cameras are not affected. (One shared
+``multiprocessing.Queue`` was not safe: a camera killed while its feeder thread held the
+queue's write lock blocked every other camera for ever, and a partial message left by a
+killed camera blocked the parent's next read for ever.) The parent shows a live status line,
+watches for cameras that fail or stall (logging the gap as an event while the others keep
+recording) and finishes the file cleanly on Ctrl-C or SIGTERM; the writer flushes at least
+once a second, so SIGKILL loses at most the last second (``pslog recover`` salvages the
+rest).
 
 Worker -> parent messages (tuples, first item the kind):
 ``ready(cam, clock, live)``, ``failed(cam, text)``, ``frame(cam, index, time_ns, uv, radius,
@@ -38,7 +45,8 @@ from ._flag import ProcessFlag
 from .detect import BallDetector, HsvRange
 from .status import CameraStatus, StatusBoard
 
-_QUEUE_PER_CAMERA = 32  # frame messages in flight per camera (about 3 MB of JPEG)
+_QUEUE_PER_CAMERA = 32  # frame messages waiting in a camera process (about 3 MB of JPEG)
+_DRAIN = 64  # messages read after a wait before the loop's housekeeping
 _OPEN_TIMEOUT_S = 60.0  # longest wait for every camera to open (spawning included)
 _STOP_TIMEOUT_S = 10.0  # longest wait for cameras to finish after a stop request
 _TTY_REFRESH_S = 0.25
@@ -349,37 +357,44 @@ class _Session:
         # thread pool (and the parent holds an open writer). As with any spawning code, a
         # script calling this must guard its top level with ``if __name__ == "__main__"``.
         ctx = mp.get_context("spawn")
-        n = len(self.specs)
-        q = ctx.Queue(maxsize=_QUEUE_PER_CAMERA * n)
+        # one pipe per camera: the parent keeps only the reading ends (see the module text)
+        pipes = [ctx.Pipe(duplex=False) for _ in self.specs]
+        inbox = _Inbox([receive for receive, _send in pipes])
         # lock-free flags: a camera killed inside a multiprocessing.Event's is_set() would
         # leave its lock taken and hang every other camera and this loop (recorders._flag)
         start, stop = ProcessFlag(ctx), ProcessFlag(ctx)
         t0 = ctx.Value("q", 0, lock=False)
         procs = [ctx.Process(target=camera_main, name=f"pslog-{cam.name}",
-                             args=(i, self.specs[i], self.options, q, start, stop, t0,
-                                   os.getpid()), daemon=True)
+                             args=(i, self.specs[i], self.options, pipes[i][1], start, stop,
+                                   t0, os.getpid()), daemon=True)
                  for i, cam in enumerate(self.rig.cameras)]
         interrupted = self.stop_signal
         wall0 = time.monotonic()
         try:
+            try:
+                if not interrupted.is_set():
+                    with _stop_signals_blocked():
+                        for p, (_receive, send) in zip(procs, pipes, strict=True):
+                            p.start()
+                            send.close()  # the camera's alone: EOF here once it is gone
+            finally:
+                for _receive, send in pipes:
+                    send.close()  # a camera not started: its pipe ends at once
             if not interrupted.is_set():
-                with _stop_signals_blocked():
-                    for p in procs:
-                        p.start()
-                self._wait_ready(q, procs, interrupted)
+                self._wait_ready(inbox, procs, interrupted)
             t0.value = time.monotonic_ns()
             start.set()
             if not interrupted.is_set():
                 # relates the session clock to the host's monotonic clock (and UTC)
                 self._event(0, f"recording started: session time 0 is host monotonic clock "
                                f"{t0.value} ns, {_utc_now()}", None)
-            self._loop(q, procs, stop, interrupted, t0.value)
+            self._loop(inbox, procs, stop, interrupted, t0.value)
         finally:
             stop.set()
             start.set()
             if interrupted.is_set():
                 self.stop_reason, self.stopped = f"stopped by {interrupted.name}", True
-            self._finish(q, procs)
+            self._finish(inbox, procs)
         if self._line_shown and self.tty and self.status is not None:
             self.status.write("\r\033[K")
         summary_text = self.board.summary()
@@ -396,7 +411,7 @@ class _Session:
                              time.monotonic() - wall0, interrupted.is_set(),
                              tuple(self.events), summary_text)
 
-    def _wait_ready(self, q, procs, interrupted: StopRequest) -> None:
+    def _wait_ready(self, inbox: _Inbox, procs, interrupted: StopRequest) -> None:
         """Until every camera has opened or failed."""
         cams = self.board.cameras
         deadline = time.monotonic() + _OPEN_TIMEOUT_S
@@ -406,14 +421,14 @@ class _Session:
                     if c.state == "opening":
                         self._fail(i, 0, f"{c.source} did not open within {_OPEN_TIMEOUT_S:g} s")
                 return
-            try:
-                msg = q.get(timeout=0.1)
-            except queue_module.Empty:
-                self._check_alive(procs, 0)
-                continue
-            self._handle(msg, 0)
+            msgs = inbox.get(timeout=0.1, limit=1)
+            if not msgs:
+                self._check_alive(procs, 0, inbox)
+            for msg in msgs:
+                self._handle(msg, 0)
 
-    def _loop(self, q, procs, stop, interrupted: StopRequest, t0_ns: int) -> None:
+    def _loop(self, inbox: _Inbox, procs, stop, interrupted: StopRequest,
+              t0_ns: int) -> None:
         cams = self.board.cameras
         last_line = 0.0
         refresh = _TTY_REFRESH_S if self.tty else _LOG_REFRESH_S
@@ -436,21 +451,14 @@ class _Session:
                 self.stop_reason = "stopped: the file could not be written"
                 self.stopped = True
                 stop.set()
-            try:
-                msg = q.get(timeout=0.05)
-            except queue_module.Empty:
-                msg = None
+            # the first message within 50 ms and what is already there, before housekeeping
+            msgs = inbox.get(timeout=0.05, limit=1 + _DRAIN)
             now_ns = time.monotonic_ns() - t0_ns
-            if msg is not None:
+            for msg in msgs:
                 self._handle(msg, now_ns)
-                for _ in range(64):  # drain what is already there before housekeeping
-                    try:
-                        self._handle(q.get_nowait(), now_ns)
-                    except queue_module.Empty:
-                        break
             if not stop.is_set():  # cameras that are finishing may pause
                 self._check_stalls()
-            self._check_alive(procs, now_ns)
+            self._check_alive(procs, now_ns, inbox)
             if (duration_ns is not None and any(self.live) and not stop.is_set()
                     and now_ns > duration_ns + 2 * NS):
                 # a stalled live camera never reaches the duration by itself
@@ -529,31 +537,28 @@ class _Session:
                             level="warning")
                 self._say(f"warning: {c.name}: no frame for {now - self.last_arrival[i]:.1f} s")
 
-    def _check_alive(self, procs, now_ns: int) -> None:
+    def _check_alive(self, procs, now_ns: int, inbox: _Inbox) -> None:
         for i, (p, c) in enumerate(zip(procs, self.board.cameras, strict=True)):
             if c.state in ("opening", "recording", "stalled") and not p.is_alive():
-                # give its last messages a moment to arrive before declaring it dead
-                if p.exitcode is not None and time.monotonic() - getattr(
-                        p, "_pslog_seen_dead", time.monotonic()) > 1.0:
+                # its last messages are read once its pipe ended; give them a moment anyway
+                if p.exitcode is not None and (inbox.ended(i) or time.monotonic() - getattr(
+                        p, "_pslog_seen_dead", time.monotonic()) > 1.0):
                     self._fail(i, c.last_ns + 1 if c.last_ns is not None else max(now_ns, 0),
                                f"camera process died (exit code {p.exitcode})")
                 elif not hasattr(p, "_pslog_seen_dead"):
                     p._pslog_seen_dead = time.monotonic()
 
-    def _finish(self, q, procs) -> None:
+    def _finish(self, inbox: _Inbox, procs) -> None:
         """Collect the last messages and reap the camera processes."""
         deadline = time.monotonic() + _STOP_TIMEOUT_S
         cams = self.board.cameras
-        while time.monotonic() < deadline and any(p.is_alive() for p in procs):
-            try:
-                self._handle(q.get(timeout=0.05), 0)
-            except queue_module.Empty:
-                pass
-            except PslogError:
-                break  # writer closed or broken: only reap
-        with contextlib.suppress(Exception):
-            while True:
-                self._handle(q.get_nowait(), 0)
+        try:
+            while time.monotonic() < deadline and (
+                    any(p.is_alive() for p in procs) or not inbox.all_ended()):
+                for msg in inbox.get(timeout=0.05, limit=1 + _DRAIN):
+                    self._handle(msg, 0)
+        except PslogError:
+            pass  # writer closed or broken: only reap
         for p in procs:
             if p.pid is None:
                 continue  # never started (stopped before the start)
@@ -569,7 +574,60 @@ class _Session:
                     c.state, c.message = "done", c.message or self.stop_reason
                 else:
                     self._fail(i, (c.last_ns or 0) + 1, "ended without reporting")
-        q.close()
+        inbox.close()
+
+
+class _Inbox:
+    """The parent's reading ends of the cameras' pipes (one per camera, by index).
+
+    A pipe whose camera is gone ends (EOF): after all of that camera's complete messages, also
+    when it was killed in the middle of writing one (the partial message is dropped). Only the
+    camera holds the write end, so the end comes however the camera died."""
+
+    def __init__(self, conns) -> None:
+        self._conns = list(conns)  # None once ended
+
+    def ended(self, cam: int) -> bool:
+        return self._conns[cam] is None
+
+    def all_ended(self) -> bool:
+        return all(c is None for c in self._conns)
+
+    def get(self, timeout: float, limit: int) -> list[tuple]:
+        """Up to ``limit`` messages: waits up to ``timeout`` seconds for the first, then takes
+        what is already there, a message per camera in turn."""
+        from multiprocessing.connection import wait
+
+        open_conns = [c for c in self._conns if c is not None]
+        if not open_conns:
+            time.sleep(timeout)
+            return []
+        ready = wait(open_conns, timeout=timeout)
+        msgs: list[tuple] = []
+        while ready and len(msgs) < limit:
+            still = []
+            for conn in ready:
+                if len(msgs) >= limit:
+                    break
+                try:
+                    msgs.append(conn.recv())
+                    if conn.poll():
+                        still.append(conn)
+                except (EOFError, OSError):  # the camera is gone (maybe mid-message)
+                    self._end(conn)
+            ready = still
+        return msgs
+
+    def _end(self, conn) -> None:
+        i = self._conns.index(conn)
+        self._conns[i] = None
+        conn.close()
+
+    def close(self) -> None:
+        for conn in self._conns:
+            if conn is not None:
+                conn.close()
+        self._conns = [None] * len(self._conns)
 
 
 def jpeg_params(quality: int) -> list[int]:
@@ -597,7 +655,16 @@ def _stop_signals_blocked():
     the whole foreground process group) or SIGTERM to the group stays pending in a camera
     that is still importing, until :func:`camera_main` ignores these signals (which discards
     it there): the parent stops the cameras. The parent's handlers stay in place meanwhile:
-    its other threads take such a signal, or it waits for the end of the block, never lost."""
+    its other threads take such a signal, or it waits for the end of the block, never lost.
+
+    multiprocessing's resource tracker is started first: the first ``Process.start()`` starts
+    it otherwise, and its start UNBLOCKS these signals in the calling thread (Python's
+    ``resource_tracker.ensure_running``), so the cameras started after it got a Ctrl-C while
+    importing (a KeyboardInterrupt traceback). The shared ``multiprocessing.Queue`` used to
+    start it earlier by chance (its lock registers with the tracker)."""
+    from multiprocessing import resource_tracker
+
+    resource_tracker.ensure_running()
     old = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)
     try:
         yield
@@ -619,10 +686,12 @@ def _utc_now() -> str:
 
 
 # ---- the camera process -------------------------------------------------------------------
-def camera_main(cam: int, spec, options: WorkerOptions, q, start, stop, t0,
+def camera_main(cam: int, spec, options: WorkerOptions, conn, start, stop, t0,
                 parent_pid: int) -> None:
     """Body of one camera process: open, wait for the start, then capture -> detect ->
-    encode -> send until the source ends, the duration is reached or the parent says stop."""
+    encode -> send until the source ends, the duration is reached or the parent says stop.
+
+    ``conn`` is the write end of this camera's own pipe to the parent."""
     import cv2
 
     # Ctrl-C and SIGTERM to the process group reach the parent too, which stops us. They
@@ -634,21 +703,27 @@ def camera_main(cam: int, spec, options: WorkerOptions, q, start, stop, t0,
     cv2.setNumThreads(1)  # one process per camera already uses the cores
     with contextlib.suppress(AttributeError):  # our own message says what failed
         cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
-    from .sources import SourceError
 
     def parent_gone() -> bool:
         return os.getppid() != parent_pid
 
+    outbox = _Outbox(conn, parent_gone)
+
     def send(msg, block: bool = True) -> bool:
-        while True:
-            try:
-                q.put(msg, timeout=0.5) if block else q.put_nowait(msg)
-                return True
-            except queue_module.Full:
-                if not block:
-                    return False
-                if parent_gone() or (stop.is_set() and msg[0] == "frame"):
-                    return False
+        return outbox.put(msg, block=block,
+                          give_up=lambda: stop.is_set() and msg[0] == "frame")
+
+    try:
+        _camera_body(cam, spec, options, start, stop, t0, send, parent_gone)
+    finally:
+        outbox.close()
+
+
+def _camera_body(cam: int, spec, options: WorkerOptions, start, stop, t0,
+                 send: Callable[..., bool], parent_gone: Callable[[], bool]) -> None:
+    import cv2
+
+    from .sources import SourceError
 
     try:
         source = spec.open()
@@ -659,7 +734,6 @@ def camera_main(cam: int, spec, options: WorkerOptions, q, start, stop, t0,
     send(("ready", cam, source.clock, source.live))
     while not start.wait(0.2):
         if parent_gone():
-            q.cancel_join_thread()
             return
     if stop.is_set():
         send(("done", cam, "stopped before the start"))
@@ -694,8 +768,62 @@ def camera_main(cam: int, spec, options: WorkerOptions, q, start, stop, t0,
             msg = ("frame", cam, index, time_ns, found.uv, found.radius, found.score, jpeg)
             send(msg, block=not source.live)  # a live source cannot wait: drop instead
             if parent_gone():
-                q.cancel_join_thread()
                 return
         send(("done", cam, reason))
     finally:
         source.close()
+
+
+class _Outbox:
+    """A camera process's sending end: a bounded local queue and a thread writing its
+    messages into the camera's pipe, so the capture loop never waits in a pipe write (a live
+    source drops a frame instead when the parent is behind)."""
+
+    def __init__(self, conn, parent_gone: Callable[[], bool]) -> None:
+        self._conn = conn
+        self._parent_gone = parent_gone
+        self._queue: queue_module.Queue = queue_module.Queue(maxsize=_QUEUE_PER_CAMERA)
+        self._broken = False  # the parent's end is closed: nothing can be sent any more
+        self._thread = threading.Thread(target=self._run, name="pslog-sender", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while True:
+            msg = self._queue.get()
+            if msg is None:
+                return
+            try:
+                self._conn.send(msg)
+            except OSError:  # the parent is gone (its reading end closed)
+                self._broken = True
+                return
+
+    def put(self, msg: tuple, block: bool, give_up: Callable[[], bool]) -> bool:
+        """Queue ``msg``; without ``block`` drop it when the queue is full. A blocking put
+        gives up when the parent is gone or ``give_up()``. Returns whether it was queued."""
+        while not self._broken:
+            try:
+                if not block:
+                    self._queue.put_nowait(msg)
+                else:
+                    self._queue.put(msg, timeout=0.5)
+                return True
+            except queue_module.Full:
+                if not block or self._parent_gone() or give_up():
+                    return False
+        return False
+
+    def close(self) -> None:
+        """Send what is queued (while the parent is there to read it), then end."""
+        while not self._broken and self._thread.is_alive():
+            try:
+                self._queue.put(None, timeout=0.2)
+                break
+            except queue_module.Full:
+                if self._parent_gone():
+                    return
+        while self._thread.is_alive():
+            self._thread.join(0.2)
+            if self._parent_gone():
+                return
+        self._conn.close()

@@ -1,0 +1,239 @@
+"""One camera process of a real ``pslog record`` SIGKILLed mid-recording (three cameras).
+
+The cameras used to share one ``multiprocessing.Queue`` to the parent. A camera killed while
+its queue feeder thread was writing a message into the full pipe (the usual state with
+~100 KB JPEG frames and a parent that is behind) left the queue's write lock taken, so every
+other camera's frames stopped for ever, and left a partial message in the pipe, so the
+parent's next read never returned: the recorder hung. Each camera now has its own pipe, which
+ends (EOF) when its camera dies, however it died.
+
+Here three video files of noise frames (each JPEG ~128 KB, quick to detect and encode, so the
+single writer is the bottleneck and the cameras' pipes are full) are recorded by the real
+command; one camera process is SIGKILLed (a) at several moments and (b) while one of its
+threads is blocked writing into its full pipe (seen in ``/proc/PID/task/*/wchan``). The
+recorder must say in one line that this camera died, record every frame of the other two (so
+frames well beyond the kill), end by itself with a readable session and print no traceback.
+(With the shared queue, case (b) hangs: the recorder never ends.)
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from pslog.log import read_session
+from pslog.rig import builtin_rig, save_rig
+
+N_FRAMES = 240  # per camera
+CAMERAS = ("cam1", "cam2", "cam3")
+HANG_S = 120.0  # a recorder still running this long after the kill hangs
+
+
+@pytest.fixture(scope="module")
+def clips(tmp_path_factory) -> tuple[Path, dict[str, Path]]:
+    """A three-camera rig and one video file of grey-noise frames per camera."""
+    folder = tmp_path_factory.mktemp("clips")
+    rig = folder / "rig.toml"
+    save_rig(builtin_rig("paper3"), rig)
+    rng = np.random.default_rng(7)
+    first = folder / "cam1.avi"
+    writer = cv2.VideoWriter(str(first), cv2.VideoWriter_fourcc(*"MJPG"), 30.0, (640, 480))
+    assert writer.isOpened()
+    for _ in range(N_FRAMES):
+        frame = np.full((480, 640, 3), (60, 120, 70), np.uint8)
+        # grey: no ball anywhere (detection stays quick), but a large JPEG
+        frame[:240] = rng.integers(0, 256, (240, 640, 1), dtype=np.uint8)
+        writer.write(frame)
+    writer.release()
+    files = {"cam1": first}
+    for name in CAMERAS[1:]:  # a file of its own per camera: it tells the processes apart
+        files[name] = folder / f"{name}.avi"
+        shutil.copyfile(first, files[name])
+    return rig, files
+
+
+class Recording:
+    """A running ``pslog record`` of the clips and its stderr, line by line."""
+
+    def __init__(self, rig: Path, files: dict[str, Path], out: Path) -> None:
+        args = [sys.executable, "-m", "pslog.cli", "record", "--rig", str(rig), "-o", str(out)]
+        for name, path in files.items():
+            args += ["--source", f"{name}={path}"]
+        self.files = files
+        self.out = out
+        self.proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                     stdin=subprocess.DEVNULL, text=True,
+                                     start_new_session=True)
+        self.lines: list[str] = []
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+        self.stdout = ""
+
+    def _read(self) -> None:
+        for line in self.proc.stderr:
+            self.lines.append(line.rstrip("\n"))
+
+    @property
+    def stderr(self) -> str:
+        return "\n".join(self.lines)
+
+    def camera_pids(self, timeout: float = 60.0) -> dict[str, int]:
+        """camera -> pid of its process, once each has opened its video file."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            assert self.proc.poll() is None, f"recorder ended early:\n{self.stderr}"
+            found = {}
+            for pid in _children(self.proc.pid):
+                name = _camera_of(pid, self.files)
+                if name is not None:
+                    found[name] = pid
+            if len(found) == len(self.files):
+                return found
+            time.sleep(0.01)
+        raise AssertionError(f"the camera processes did not open their files:\n{self.stderr}")
+
+    def finish(self) -> int:
+        try:
+            code = self.proc.wait(timeout=HANG_S)
+        except subprocess.TimeoutExpired:
+            raise AssertionError(f"the recorder hung after the kill:\n{self.stderr}") from None
+        self._reader.join(timeout=10)
+        self.stdout = self.proc.stdout.read()
+        return code
+
+    def kill_all(self) -> None:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(self.proc.pid, signal.SIGKILL)
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            self.proc.wait(timeout=10)
+
+
+@pytest.fixture
+def recording(clips, tmp_path):
+    """``recording()`` starts a recorder; on teardown whatever is left of it is killed."""
+    started: list[Recording] = []
+
+    def start() -> Recording:
+        rec = Recording(*clips, tmp_path / "s.mcap")
+        started.append(rec)
+        return rec
+
+    yield start
+    for rec in started:
+        rec.kill_all()
+
+
+def _children(pid: int) -> list[int]:
+    found = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            with contextlib.suppress(OSError, IndexError):
+                if int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1]) == pid:
+                    found.append(int(entry.name))
+    return found
+
+
+def _camera_of(pid: int, files: dict[str, Path]) -> str | None:
+    """The camera whose video file process ``pid`` has open, if any."""
+    with contextlib.suppress(OSError):
+        for fd in Path(f"/proc/{pid}/fd").iterdir():
+            with contextlib.suppress(OSError):
+                target = os.readlink(fd)
+                for name, path in files.items():
+                    if target == str(path):
+                        return name
+    return None
+
+
+def _blocked_in_pipe_write(pid: int) -> bool:
+    """Some thread of ``pid`` sleeps in the kernel's pipe write (``pipe_write``,
+    ``anon_pipe_write`` in newer kernels): its pipe is full."""
+    with contextlib.suppress(OSError):
+        for task in Path(f"/proc/{pid}/task").iterdir():
+            with contextlib.suppress(OSError):
+                if (task / "wchan").read_text().strip().endswith("pipe_write"):
+                    return True
+    return False
+
+
+def _alive(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def _assert_survived(rec: Recording, victim: str, context: str) -> None:
+    """The recorder ended by itself, said once that ``victim`` died, recorded every frame of
+    the others and the victim's frames up to the kill, in a readable session."""
+    code = rec.finish()
+    err = rec.stderr
+    assert "Traceback" not in err and "Traceback" not in rec.stdout, err
+    assert code == 0, f"exit {code} ({context})\n{err}"
+    died = [line for line in rec.lines  # the messages, not the summary's table
+            if "camera process died" in line and not line.startswith("  ")]
+    assert died == [f"error: {victim}: camera process died (exit code -9); the other cameras "
+                    f"keep recording"], f"{context}\n{err}"
+    summary = {line.split()[0]: line for line in rec.lines if re.match(r"  cam\d ", line)}
+    assert "[failed]" in summary[victim], err
+    for name in CAMERAS:
+        if name != victim:
+            assert f"{N_FRAMES} frames" in summary[name] and "[done]" in summary[name], err
+    session = read_session(rec.out)  # readable, complete (not a salvage)
+    det = session.detections
+    assert session.n_images == det.n_frames
+    index = {name: det.frame_index[det.frame_camera == i] for i, name in enumerate(CAMERAS)}
+    last_ns = {name: det.frame_time_ns[det.frame_camera == i].max(initial=-1)
+               for i, name in enumerate(CAMERAS)}
+    k = len(index[victim])
+    assert k < N_FRAMES, f"{victim} was killed after its last frame ({context})"
+    # the victim's complete frames before the kill are kept, in order, none missing
+    np.testing.assert_array_equal(np.sort(index[victim]), np.arange(k))
+    for name in CAMERAS:
+        if name != victim:  # every frame of the others, so frames far beyond the kill
+            np.testing.assert_array_equal(np.sort(index[name]), np.arange(N_FRAMES))
+            assert last_ns[name] > last_ns[victim]
+    events = [text for _t, text in session.events]
+    assert f"camera {victim} failed: camera process died (exit code -9)" in events
+
+
+@pytest.mark.parametrize("after_s", [0.0, 0.4, 1.3])
+def test_camera_killed_at_some_moment(recording, after_s):
+    rec = recording()
+    pids = rec.camera_pids()
+    victim = CAMERAS[int(after_s * 10) % 3]
+    time.sleep(after_s)
+    assert _alive(pids[victim]), f"{victim} ended before the kill:\n{rec.stderr}"
+    os.kill(pids[victim], signal.SIGKILL)
+    _assert_survived(rec, victim, f"killed {after_s} s after the cameras opened")
+
+
+def test_camera_killed_while_writing_into_its_full_pipe(recording):
+    """The state that jammed the shared queue: a thread of the camera sleeps in a pipe write
+    (the parent is behind), holding the queue's lock and halfway through a message."""
+    rec = recording()
+    pids = rec.camera_pids()
+    victim = None
+    deadline = time.monotonic() + 60
+    while victim is None and time.monotonic() < deadline:
+        for name in ("cam2", "cam1", "cam3"):
+            if _blocked_in_pipe_write(pids[name]):
+                os.kill(pids[name], signal.SIGKILL)
+                victim = name
+                break
+        assert rec.proc.poll() is None, f"recorder ended before the kill:\n{rec.stderr}"
+    assert victim is not None, f"no camera was ever blocked writing:\n{rec.stderr}"
+    _assert_survived(rec, victim, "killed while blocked in a pipe write")
