@@ -206,7 +206,6 @@ def test_preload_starts_numba_and_the_kernel_modules_on_a_thread():
     assert run.stderr == ""
 
 
-
 def test_preload_loads_the_batch_gates_kernel_in_the_signature_gating_calls():
     """The preload thread runs a kernel module's _preload(): the batch gate's compiled
     points (pslog.fusion._gate_kernel.points_all) is then ready in the very signature
@@ -235,6 +234,7 @@ def test_preload_loads_the_batch_gates_kernel_in_the_signature_gating_calls():
                          timeout=600)
     assert run.returncode == 0, run.stderr
     assert run.stdout.split() == ["1", "True"]
+
 
 def test_a_method_failing_beside_others_is_one_line(tmp_path, capsys):
     """sync needs shared instants, which a type-A session lacks: its error, raised on a
