@@ -14,6 +14,9 @@ import numpy as np
 from .errors import InputError
 
 NS = 1_000_000_000  # nanoseconds per second
+#: Largest frame index a session stores: the MCAP message sequence, a 32-bit count (4.3e9
+#: frames are 4.5 years at 30 fps); CSV import and live datagrams refuse larger ones.
+MAX_FRAME_INDEX = 2**32 - 1
 
 #: Per-point quality columns a fusion method may fill (NaN where not applicable).
 QUALITY_FIELDS = {

@@ -153,7 +153,7 @@ def _main(argv: list[str] | None) -> int:
     real_stdout = sys.stdout  # None when started with standard output closed
     if real_stdout is not None:
         sys.stdout = _GuardedStdout(real_stdout)
-    restore_sigterm = _sigterm_interrupts()
+    restore_termination = _termination_interrupts()
     try:
         _release_sigint()  # only now: a KeyboardInterrupt in a C extension's import (numpy,
         # cv2, while add_arguments loads them) surfaces as an ImportError traceback
@@ -199,7 +199,7 @@ def _main(argv: list[str] | None) -> int:
         return 1
     finally:
         sys.stdout = real_stdout
-        restore_sigterm()
+        restore_termination()
 
 
 def _out_of_memory(exc: BaseException) -> str | None:
@@ -243,7 +243,7 @@ class Terminated(KeyboardInterrupt):
         return signal.Signals(self.signum).name
 
 
-def _sigterm_interrupts():
+def _termination_interrupts():
     """Make SIGTERM and SIGHUP raise :class:`Terminated` in the main thread while a command
     runs (a command that records installs its own stop handler over this one; a SIGHUP that
     is ignored, under ``nohup``, stays ignored); returns the function that puts the previous

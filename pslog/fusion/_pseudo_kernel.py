@@ -868,7 +868,6 @@ def kink_kernel(events, rows1, prev1, next1, world1, rows2, prev2, next2, world2
             # a bend at prev: the change lies between prev and next if the triplet after
             # bends too, or (that one still to come) if the triplet before does not
             # (_quiet first: most triplets are decided by bend_rows' tables, no divisions)
-            # (each triplet first through _quiet: most are decided by bend_rows' tables)
             b = max(prev, 0)
             quiet = _quiet(tables and prev >= 0 and before[b] == first and after[b] == nxt,
                            change[b] if tables else 0.0, root[b] if tables else 0.0, sg,

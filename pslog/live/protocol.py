@@ -76,6 +76,7 @@ from math import isfinite
 import numpy as np
 
 from ..errors import PslogError
+from ..records import MAX_FRAME_INDEX
 
 #: The version byte of both datagrams written by this code.
 PROTOCOL_VERSION = 1
@@ -195,10 +196,6 @@ def _name_bytes(name: str, limit: int, what: str) -> bytes:
     if not 0 < len(raw) <= limit:
         raise DatagramError("malformed", f"{what} {name!r} must be 1 to {limit} bytes of UTF-8")
     return raw
-
-
-#: the largest frame index a session stores (u32, as pslog.log.csvio.MAX_FRAME_INDEX)
-MAX_FRAME_INDEX = 2**32 - 1
 
 
 def encode_detections(d: DetectionDatagram) -> bytes:

@@ -40,7 +40,7 @@ from ..camera import MAX_IMAGE_SIZE
 from ..errors import InputError
 from ..inputs import check_input_file
 from ..outputs import replacing
-from ..records import NS, Detections
+from ..records import MAX_FRAME_INDEX, NS, Detections
 from ..rig import Rig
 
 DETECTION_COLUMNS = ("camera", "time", "u", "v", "frame", "score")
@@ -91,11 +91,6 @@ def _pixel(text: str) -> float:
     if abs(value) > _MAX_PIXEL:
         raise _Invalid(f"beyond any image (at most {_MAX_PIXEL:g} pixels)")
     return value
-
-
-#: Largest frame index accepted: a session stores it as the MCAP message sequence, a
-#: 32-bit count (4.3e9 frames are 4.5 years at 30 fps).
-MAX_FRAME_INDEX = 2**32 - 1
 
 
 def _frame_number(text: str) -> int:
