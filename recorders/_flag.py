@@ -46,3 +46,13 @@ class ProcessFlag:
                 return False
             time.sleep(min(_POLL_S, left))
         return True
+
+
+def settled(value, stop: ProcessFlag) -> int:
+    """A shared integer the parent writes once just before it sets the start flag (the session
+    clock's origin), read by a camera once the flag is set: waits until it is nonzero (or the
+    stop flag is set). Without a lock nothing orders the two stores for another core: x86 keeps
+    their order, a weaker memory model (ARM) may show the flag first."""
+    while not value.value and not stop.is_set():
+        time.sleep(_POLL_S)
+    return int(value.value)

@@ -47,7 +47,7 @@ import numpy as np
 
 from pslog.records import NS
 
-from ._flag import ProcessFlag
+from ._flag import ProcessFlag, settled
 from .detect import HsvRange
 from .record import _STOP_SIGNALS, _stop_signals_blocked
 
@@ -124,7 +124,7 @@ def sender_main(name: str, spec, options: SenderOptions, address: tuple[str, int
         if parent_gone() or stop.is_set():
             source.close()
             return
-    t0_ns, wall_ns = int(t0.value), int(t0_wall.value)
+    t0_ns, wall_ns = settled(t0, stop), settled(t0_wall, stop)
     source.set_start(t0_ns)
     detector = BallDetector(options.hsv, options.max_candidates)
     family = socket.AF_INET6 if ":" in address[0] else socket.AF_INET

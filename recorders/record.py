@@ -41,7 +41,7 @@ from pslog.outputs import WriteError, check_output_path, write_error
 from pslog.records import NS, Truth
 from pslog.rig import Rig, timing_label
 
-from ._flag import ProcessFlag
+from ._flag import ProcessFlag, settled
 from .detect import BallDetector, HsvRange
 from .status import CameraStatus, StatusBoard
 
@@ -738,7 +738,7 @@ def _camera_body(cam: int, spec, options: WorkerOptions, start, stop, t0,
     if stop.is_set():
         send(("done", cam, "stopped before the start"))
         return
-    source.set_start(t0.value)
+    source.set_start(settled(t0, stop))
     detector = BallDetector(options.hsv, options.max_candidates)
     params = jpeg_params(options.jpeg_quality)
     clock = ""

@@ -198,6 +198,14 @@ _MALFORMED = [
     ((5, 3, [1.0, 2.0]), "camera index 3 is not one of the rig's 3 cameras"),
     ((5, -1, [1.0, 2.0]), "camera index -1 is not one of the rig's 3 cameras"),
     ((5, 0, np.zeros((1, 3))), "uv must be (n, 2) pixels"),
+    # checked before the conversion, which wrapped 2**32 + 1 to camera 1 and cut 1.7 to 1
+    ((5, np.array([2**32 + 1]), [1.0, 2.0]), "camera index 4294967297 is not one of"),
+    ((5, [2**32 + 1], [1.0, 2.0]), "camera index 4294967297 is not one of"),
+    ((5, [1.7], [1.0, 2.0]), "camera 1.7 is not an integer within int64"),
+    ((5, [float("nan")], [1.0, 2.0]), "camera nan is not an integer within int64"),
+    (([float("nan")], 0, [1.0, 2.0]), "time_ns nan is not an integer within int64"),
+    (([2**70], 0, [1.0, 2.0]), "time_ns 1180591620717411303424 is not an integer within"),
+    ((5, 0, [["a", "b"]]), "uv must be (n, 2) pixels"),
 ]
 
 
@@ -214,3 +222,17 @@ def test_a_malformed_push_is_refused_before_a_kernel_reads_past_its_tables(args,
         fuser.push(*args)
     assert len(fuser.push([], [], np.zeros((0, 2)))) == 0  # an empty push is still fine
     assert len(fuser.flush()) == 0
+
+
+@pytest.mark.parametrize(("fid", "camera"), [(0, 1), (7, 0)])
+def test_the_compiled_gate_refuses_a_push_id_its_camera_does_not_keep(fid, camera):
+    """``decide_frame`` looked for the push id down camera ``a``'s rows without a bound: an id
+    that camera does not keep (another camera's, one never pushed) ran past row 0 and read
+    outside the table (an abort, "double free", in session 10)."""
+    from pslog.fusion.gating import StreamGate
+
+    gate_ = StreamGate(apply_timing(builtin_rig("paper3"), "typeA"), compiled=True,
+                       wait_s=0.004)
+    gate_.push([1_000_000], [0], [[300.0, 200.0]])  # push id 0, camera 0
+    with pytest.raises(IndexError, match="no kept frame of this push id"):
+        gate_._state.decide(fid, camera, 1)

@@ -1593,14 +1593,17 @@ def stream_arrays(time_ns, camera, uv, frame_index, n_cameras: int, who: str):
     int32 in ``[0, n_cameras)``, ``uv`` (n, 2) float64, ``frame_index`` (n,) int64 (zeros when
     None). A FusionError names the push (``who``) and what does not fit: the compiled kernels
     index their tables with these values and would read past them otherwise."""
-    time_ns = np.atleast_1d(np.asarray(time_ns, dtype=np.int64))
-    camera = np.atleast_1d(np.asarray(camera, dtype=np.int32))
-    uv = np.asarray(uv, dtype=np.float64)
+    time_ns = _integer_column(time_ns, "time_ns", who)
+    camera = _integer_column(camera, "camera", who)
+    try:
+        uv = np.asarray(uv, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise FusionError(f"{who}: uv must be (n, 2) pixels: {exc}") from None
     if uv.size % 2 or (uv.ndim > 1 and uv.shape[-1] != 2):
         raise FusionError(f"{who}: uv must be (n, 2) pixels, got shape {uv.shape}")
     uv = uv.reshape(-1, 2)
     frame_index = (np.zeros(len(time_ns), np.int64) if frame_index is None
-                   else np.atleast_1d(np.asarray(frame_index, dtype=np.int64)))
+                   else _integer_column(frame_index, "frame_index", who))
     if not len(time_ns) == len(camera) == len(uv) == len(frame_index):
         raise FusionError(f"{who}: time_ns, camera, uv and frame_index must have one row per "
                           f"detection, got {len(time_ns)}, {len(camera)}, {len(uv)} and "
@@ -1609,7 +1612,44 @@ def stream_arrays(time_ns, camera, uv, frame_index, n_cameras: int, who: str):
         bad = camera[(camera < 0) | (camera >= n_cameras)][0]
         raise FusionError(f"{who}: camera index {bad} is not one of the rig's {n_cameras} "
                           f"cameras (0 to {n_cameras - 1})")
-    return time_ns, camera, uv, frame_index
+    return time_ns, camera.astype(np.int32), uv, frame_index
+
+
+def _integer_column(values, name: str, who: str) -> np.ndarray:
+    """``values`` as an (n,) int64 column, checked BEFORE the conversion (which would wrap
+    2**32 + 1 or truncate 1.7 silently): integers within int64, or floats that are whole
+    numbers within it."""
+    try:
+        array = np.atleast_1d(np.asarray(values))
+    except (TypeError, ValueError) as exc:
+        raise FusionError(f"{who}: {name} must be integers: {exc}") from None
+    if array.dtype.kind == "u" and len(array) and array.max() > np.iinfo(np.int64).max:
+        _bad_integer(array.max(), name, who)
+    if array.dtype.kind in "iub":
+        return array.astype(np.int64, copy=False)
+    if array.dtype.kind == "f":
+        whole = np.isfinite(array) & (array == np.round(array)) & (np.abs(array) < 2.0**63)
+        if not whole.all():
+            _bad_integer(array[~whole][0], name, who)
+        return array.astype(np.int64)
+    if array.dtype.kind == "O":  # Python ints too large for int64 land here
+        try:
+            return np.asarray([_python_int(v, name, who) for v in array.tolist()], np.int64)
+        except OverflowError:
+            pass
+    raise FusionError(f"{who}: {name} must be integers, got {array.dtype} values "
+                      f"such as {array.reshape(-1)[:1].tolist()}")
+
+
+def _python_int(value, name: str, who: str) -> int:
+    if not isinstance(value, int | np.integer) or not -2**63 <= int(value) < 2**63:
+        _bad_integer(value, name, who)
+    return int(value)
+
+
+def _bad_integer(value, name: str, who: str):
+    shown = value.item() if isinstance(value, np.generic) else value
+    raise FusionError(f"{who}: {name} {shown!r} is not an integer within int64")
 
 
 class StreamGate:

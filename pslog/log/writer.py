@@ -942,22 +942,65 @@ def close_abandoned() -> None:
             writer.close()
 
 
+#: True while :func:`_signals_held` holds the interrupts (blocks nest)
+_HOLDING = False
+
+
 @contextlib.contextmanager
 def _signals_held():
-    """Block SIGINT, SIGTERM and SIGHUP in the main thread for the block's length; a signal that
-    came meanwhile is delivered (its handler raising) when the block ends."""
+    """Hold SIGINT, SIGTERM and SIGHUP for the block's length (in the main thread): a signal
+    that came meanwhile is delivered (its handler raising) when the block ends.
+
+    Masking the main thread alone is not enough: the kernel hands a process-directed signal to
+    any thread that does not block it (the writer's flush and compression threads), and
+    CPython then runs the Python handler in the main thread all the same. So the handlers
+    themselves are swapped for one that notes the signal, and the noted signals are raised
+    again, with the previous handlers back, when the block ends. An ignored signal (``nohup``)
+    stays ignored; the mask stays too, so that no system call of the block sees EINTR."""
     import signal
 
-    if (threading.current_thread() is not threading.main_thread()
+    global _HOLDING
+    if (_HOLDING or threading.current_thread() is not threading.main_thread()
             or not hasattr(signal, "pthread_sigmask")):
         yield
         return
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM,
-                                                    signal.SIGHUP})
+    came: list[int] = []
+    previous: dict[int, Any] = {}
+    held = [True]
+
+    def note(signum, _frame) -> None:
+        if held[0]:
+            if signum not in came:
+                came.append(signum)
+            return
+        # left in place by a restore that a signal cut short: the previous handler's turn
+        signal.signal(signum, previous[signum])
+        signal.raise_signal(signum)
+
+    watched = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+    old_mask = signal.pthread_sigmask(signal.SIG_BLOCK, set(watched))
+    _HOLDING = True
     try:
+        for sig in watched:
+            handler = signal.getsignal(sig)
+            if handler is not signal.SIG_IGN and handler is not None:
+                previous[sig] = signal.signal(sig, note)
         yield
     finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+        _HOLDING = False
+        held[0] = False
+        error: BaseException | None = None
+        for sig, handler in previous.items():
+            try:
+                signal.signal(sig, handler)
+            except BaseException as exc:  # a signal that came just now, raised by its handler
+                error = error or exc
+        signal.pthread_sigmask(signal.SIG_SETMASK, old_mask)  # one still pending in the
+        # main thread is delivered here, to its own handler
+        if error is not None:
+            raise error
+        for sig in came:
+            signal.raise_signal(sig)
 
 
 class _Block:

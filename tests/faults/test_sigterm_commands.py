@@ -131,6 +131,65 @@ def test_writer_left_open_by_an_interrupt_is_closed_by_the_command(tmp_path, rig
     assert read_session(tmp_path / "rec.mcap").detections.n_frames == 1
 
 
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP, signal.SIGINT])
+def test_a_signal_taken_by_another_thread_waits_for_the_writer_close(tmp_path, rig3, sig):
+    """Review of session 11: the kernel hands a process-directed signal to any thread that does
+    not block it (the writer's flush and compression threads), and CPython runs the Python
+    handler in the main thread anyway, so masking the main thread alone let SIGTERM raise inside
+    ``close()`` and leave the ``.partial``. Here the signal goes to another thread on purpose
+    (as the kernel may choose) while ``close()`` runs: it is raised after ``close()``, the old
+    output replaced by the complete new one and no ``.partial`` left."""
+    import threading
+
+    from pslog.cli import Terminated, _termination_interrupts
+    from pslog.log import SessionWriter, read_session
+    from pslog.log import writer as writer_module
+
+    out = tmp_path / "out.mcap"
+    out.write_bytes(b"an old output")
+    writer = SessionWriter(out, rig3, on_error="discard", force=True)
+    writer.add_frame(0, 0, 1_000, uv=[[10.0, 20.0]])
+    go, sent = threading.Event(), threading.Event()
+
+    def signal_myself() -> None:  # started before the close: a thread of the writer's age
+        go.wait(10)
+        signal.pthread_kill(threading.get_ident(), sig)
+        sent.set()
+
+    signaller = threading.Thread(target=signal_myself, daemon=True)
+    signaller.start()
+    close = writer._close
+    raised_in_close: list[BaseException] = []
+
+    def close_with_a_signal() -> None:
+        """The signal arrives in the middle of the close, on another thread."""
+        go.set()
+        sent.wait(5)
+        signaller.join(5)
+        time.sleep(0.05)  # the main thread's eval loop runs pending Python handlers here
+        try:
+            close()
+        except BaseException as exc:  # what the old mask let through
+            raised_in_close.append(exc)
+            raise
+
+    writer._close = close_with_a_signal  # type: ignore[method-assign]
+    restore = _termination_interrupts()
+    expected = KeyboardInterrupt if sig == signal.SIGINT else Terminated
+    try:
+        with pytest.raises(expected):
+            writer.close()
+            time.sleep(0.05)
+        writer_module.close_abandoned()  # what the command does on the interrupt
+    finally:
+        restore()
+    assert sent.is_set() and not raised_in_close
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.mcap"]
+    assert read_session(out).detections.n_frames == 1
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    assert signal.pthread_sigmask(signal.SIG_BLOCK, set()) == set()
+
+
 def _children(pid: int) -> list[int]:
     try:
         return [int(p) for p in Path(f"/proc/{pid}/task/{pid}/children").read_text().split()]
