@@ -21,11 +21,14 @@ score, jpeg)``, ``event(cam, time_ns, text)``, ``stopped(cam, text)``, ``done(ca
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import multiprocessing as mp
 import os
+import pickle
 import queue as queue_module
 import signal
+import struct
 import sys
 import threading
 import time
@@ -577,21 +580,35 @@ class _Session:
         inbox.close()
 
 
+#: a message on a camera's pipe: its pickle's length (8 bytes, big-endian), then the pickle
+_LENGTH = struct.Struct("!Q")
+_READ_BYTES = 1 << 20  # the most read from one pipe at a time
+
+
 class _Inbox:
     """The parent's reading ends of the cameras' pipes (one per camera, by index).
 
     A pipe whose camera is gone ends (EOF): after all of that camera's complete messages, also
     when it was killed in the middle of writing one (the partial message is dropped). Only the
-    camera holds the write end, so the end comes however the camera died."""
+    camera holds the write end, so the end comes however the camera died. The pipes are read
+    without blocking and messages rebuilt here (:data:`_LENGTH` framing, written by
+    :class:`_Outbox`): a camera stopped in the middle of a message (SIGSTOP, a debugger, a
+    frozen cgroup) holds back only its own messages, never the parent, whose Ctrl-C still
+    stops the recording."""
 
     def __init__(self, conns) -> None:
         self._conns = list(conns)  # None once ended
+        for conn in self._conns:
+            os.set_blocking(conn.fileno(), False)
+        self._buffers = [bytearray() for _ in self._conns]
+        self._ready: list[collections.deque] = [collections.deque() for _ in self._conns]
+        self._turn = 0
 
     def ended(self, cam: int) -> bool:
-        return self._conns[cam] is None
+        return self._conns[cam] is None and not self._ready[cam]
 
     def all_ended(self) -> bool:
-        return all(c is None for c in self._conns)
+        return all(self.ended(cam) for cam in range(len(self._conns)))
 
     def get(self, timeout: float, limit: int) -> list[tuple]:
         """Up to ``limit`` messages: waits up to ``timeout`` seconds for the first, then takes
@@ -599,35 +616,64 @@ class _Inbox:
         from multiprocessing.connection import wait
 
         open_conns = [c for c in self._conns if c is not None]
-        if not open_conns:
-            time.sleep(timeout)
-            return []
-        ready = wait(open_conns, timeout=timeout)
+        if not any(self._ready):
+            if not open_conns:
+                time.sleep(timeout)
+                return []
+            ready = wait(open_conns, timeout=timeout)
+        else:
+            ready = wait(open_conns, timeout=0) if open_conns else []
+        for conn in ready:
+            self._read(self._conns.index(conn))
         msgs: list[tuple] = []
-        while ready and len(msgs) < limit:
-            still = []
-            for conn in ready:
-                if len(msgs) >= limit:
-                    break
-                try:
-                    msgs.append(conn.recv())
-                    if conn.poll():
-                        still.append(conn)
-                except (EOFError, OSError):  # the camera is gone (maybe mid-message)
-                    self._end(conn)
-            ready = still
+        n = len(self._conns)
+        while len(msgs) < limit and any(self._ready):
+            cam = self._turn
+            self._turn = (self._turn + 1) % n
+            if self._ready[cam]:
+                msgs.append(self._ready[cam].popleft())
         return msgs
 
-    def _end(self, conn) -> None:
-        i = self._conns.index(conn)
-        self._conns[i] = None
-        conn.close()
+    def _read(self, cam: int) -> None:
+        """What camera ``cam``'s pipe holds now, into whole messages (the rest kept)."""
+        conn = self._conns[cam]
+        buffer = self._buffers[cam]
+        ended = False
+        while True:
+            try:
+                data = os.read(conn.fileno(), _READ_BYTES)
+            except BlockingIOError:
+                break
+            except OSError:  # the camera is gone
+                ended = True
+                break
+            if not data:
+                ended = True
+                break
+            buffer += data
+            if len(data) < _READ_BYTES:
+                break
+        at = 0
+        while len(buffer) - at >= _LENGTH.size:
+            (length,) = _LENGTH.unpack_from(buffer, at)
+            if len(buffer) - at - _LENGTH.size < length:
+                break
+            start = at + _LENGTH.size
+            self._ready[cam].append(pickle.loads(buffer[start:start + length]))
+            at = start + length
+        del buffer[:at]
+        if ended:  # a partial message of a camera killed mid-write is dropped
+            self._conns[cam] = None
+            buffer.clear()
+            conn.close()
 
     def close(self) -> None:
         for conn in self._conns:
             if conn is not None:
                 conn.close()
         self._conns = [None] * len(self._conns)
+        for ready in self._ready:
+            ready.clear()
 
 
 def jpeg_params(quality: int) -> list[int]:
@@ -774,6 +820,13 @@ def _camera_body(cam: int, spec, options: WorkerOptions, start, stop, t0,
         source.close()
 
 
+def _write_all(fd: int, data: bytes) -> None:
+    """All of ``data`` into the blocking file ``fd`` (a pipe's write takes what fits)."""
+    view = memoryview(data)
+    while view:
+        view = view[os.write(fd, view):]
+
+
 class _Outbox:
     """A camera process's sending end: a bounded local queue and a thread writing its
     messages into the camera's pipe, so the capture loop never waits in a pipe write (a live
@@ -792,8 +845,9 @@ class _Outbox:
             msg = self._queue.get()
             if msg is None:
                 return
+            data = pickle.dumps(msg, protocol=pickle.HIGHEST_PROTOCOL)
             try:
-                self._conn.send(msg)
+                _write_all(self._conn.fileno(), _LENGTH.pack(len(data)) + data)
             except OSError:  # the parent is gone (its reading end closed)
                 self._broken = True
                 return

@@ -237,3 +237,42 @@ def test_camera_killed_while_writing_into_its_full_pipe(recording):
         assert rec.proc.poll() is None, f"recorder ended before the kill:\n{rec.stderr}"
     assert victim is not None, f"no camera was ever blocked writing:\n{rec.stderr}"
     _assert_survived(rec, victim, "killed while blocked in a pipe write")
+
+
+def test_camera_stopped_halfway_through_a_message_holds_back_only_itself(recording):
+    """Review of session 11: a camera process stopped, not killed (SIGSTOP, a debugger, a
+    frozen cgroup), while writing a frame into its full pipe left half a message there, and the
+    parent's read of that pipe never returned: the other cameras could not deliver (their
+    processes never ended) and Ctrl-C did not stop the recording. The pipes are now read
+    without blocking: the others finish, Ctrl-C stops the recording, the stopped camera's
+    complete frames are kept."""
+    rec = recording()
+    pids = rec.camera_pids()
+    victim = None
+    deadline = time.monotonic() + 60
+    while victim is None and time.monotonic() < deadline:
+        for name in ("cam3", "cam1", "cam2"):
+            if _blocked_in_pipe_write(pids[name]):
+                os.kill(pids[name], signal.SIGSTOP)
+                victim = name
+                break
+        assert rec.proc.poll() is None, f"recorder ended before the stop:\n{rec.stderr}"
+    assert victim is not None, f"no camera was ever blocked writing:\n{rec.stderr}"
+    others = [pids[name] for name in CAMERAS if name != victim]
+    deadline = time.monotonic() + HANG_S
+    while any(_alive(pid) for pid in others):  # their last frames delivered: they end
+        assert time.monotonic() < deadline, f"the other cameras never finished:\n{rec.stderr}"
+        time.sleep(0.05)
+    os.kill(rec.proc.pid, signal.SIGINT)
+    code = rec.finish()
+    err = rec.stderr
+    assert "Traceback" not in err and "Traceback" not in rec.stdout, err
+    assert code == 0, f"exit {code}\n{err}"
+    det = read_session(rec.out).detections
+    index = {name: np.sort(det.frame_index[det.frame_camera == i])
+             for i, name in enumerate(CAMERAS)}
+    for name in CAMERAS:
+        if name != victim:
+            np.testing.assert_array_equal(index[name], np.arange(N_FRAMES))
+    assert len(index[victim]) < N_FRAMES
+    np.testing.assert_array_equal(index[victim], np.arange(len(index[victim])))
