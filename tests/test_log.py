@@ -694,3 +694,33 @@ def test_a_track_added_in_batches_keeps_distinct_scene_ids(tmp_path, rig3):
             update = S.SceneUpdate.FromString(message.data)
             ids += [e.id for e in update.entities]
     assert ids == [f"filter/{i}" for i in range(6)]
+
+
+@pytest.mark.parametrize("drop", [0.0, 0.3, 0.5, 0.6, 0.8])
+def test_frame_period_and_phase_are_measured_with_most_frames_dropped(drop):
+    """New-user sweep: with 60 % of frames dropped the median gap is two periods; taken as the
+    period, ``pslog info`` read 13 fps instead of 30 and shutter offsets off by milliseconds."""
+    from pslog.log.info import measure_timing
+
+    rng = np.random.default_rng(11)
+    period, phase = 1 / 30, 0.0123
+    k = np.arange(3000)
+    k = k[rng.random(len(k)) >= drop]
+    t = np.round((phase + period * k + rng.normal(0, 2e-4, len(k))) * NS).astype(np.int64)
+    t.sort()
+    measured, measured_phase = measure_timing(t, ref_ns=0)
+    assert abs(measured - period) < 1e-6 * period, measured
+    off = (measured_phase - phase) / period  # the phase of the first kept frame: any k
+    assert abs(off - round(off)) * period < 1e-4, measured_phase
+
+
+def test_info_measures_30_fps_on_a_session_with_most_frames_dropped(tmp_path, cli):
+    code, out, _ = cli("simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "rally",
+                       "--duration", "6", "--drop-rate", "0.6", "--seed", "3", "-o",
+                       tmp_path / "d.mcap")
+    assert code == 0
+    code, out, _ = cli("info", tmp_path / "d.mcap")
+    rows = [line.split() for line in out.splitlines() if line.split()[:1] in (["cam1"], ["cam2"],
+                                                                          ["cam3"])]
+    assert [row[2] for row in rows] == ["30.00"] * 3, out
+    assert [row[4] for row in rows] == ["0.000", "11.111", "22.222"], out
