@@ -1,6 +1,7 @@
 """A robot controller's side of `pslog live --out udp://HOST:PORT`: receive the 3D points.
 
-Run: python samples/live_client.py [HOST:PORT] [COUNT]   (default 127.0.0.1:10010, forever)
+Run: python samples/live_client.py [HOST:PORT] [COUNT]   (default 127.0.0.1:10010, forever;
+with a COUNT it gives up after 30 s without a point)
 Layout of the 224-byte point datagram: docs/live.md (pslog.live.protocol). No pslog needed.
 """
 import socket
@@ -14,9 +15,14 @@ host, _, port = (sys.argv[1] if len(sys.argv) > 1 else "127.0.0.1:10010").rparti
 count = int(sys.argv[2]) if len(sys.argv) > 2 else -1
 sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
 sock.bind((host, int(port)))
+if count > 0:
+    sock.settimeout(30.0)  # a run that ended before COUNT points: do not wait for ever
 print(f"listening on udp://{host}:{port}", flush=True)
 while count != 0:
-    data = sock.recv(1024)
+    try:
+        data = sock.recv(1024)
+    except TimeoutError:
+        sys.exit(f"no point for 30 s: {count} of {sys.argv[2]} not received")
     if len(data) != POINT.size or data[:5] != b"PSLP\x01":
         continue  # not a version-1 point datagram
     f = POINT.unpack(data)

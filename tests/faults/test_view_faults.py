@@ -74,7 +74,7 @@ def test_save_into_a_read_only_folder(tmp_path, session):
 @pytest.mark.parametrize("option", ["--web-port", "--grpc-port"])
 def test_serve_port_out_of_range(tmp_path, session, option, value):
     before = fingerprint(tmp_path)
-    run = run_pslog("view", session, "--serve", f"{option}={value}", timeout=20)
+    run = run_pslog("view", session, "--serve", f"{option}={value}", timeout=90)
     assert_one_line_error(run, 2, contains=option)
     assert_untouched(before, tmp_path)
 
@@ -93,7 +93,7 @@ def test_serve_port_in_use(tmp_path, session, option):
     with _busy_loopback_port() as busy:
         number = busy.getsockname()[1]
         run = run_pslog("view", session, "--serve", f"{option}={number}", "--frames", "none",
-                        env=HEADLESS, timeout=20)
+                        env=HEADLESS, timeout=90)
     assert_one_line_error(run, 1, contains=(f"port {number} is in use", option))
     assert_untouched(before, tmp_path)
 
@@ -106,7 +106,7 @@ def test_serve_privileged_port_when_not_root(tmp_path, session):
     if os.geteuid() == 0:
         preexec = drop_capability(CAP_NET_BIND_SERVICE)
         try:
-            run_pslog("--version", preexec_fn=preexec, timeout=20)
+            run_pslog("--version", preexec_fn=preexec, timeout=90)
         except (OSError, subprocess.SubprocessError) as exc:
             pytest.skip(f"cannot drop the privilege to listen on port 80 here: {exc}")
     before = fingerprint(tmp_path)
@@ -147,7 +147,7 @@ def test_connect_to_a_program_that_is_not_a_viewer(tmp_path, session):
 def test_two_sinks_at_once(tmp_path, session):
     before = fingerprint(tmp_path)
     run = run_pslog("view", session, "--save", tmp_path / "out.rrd", "--serve", env=HEADLESS,
-                    timeout=20)
+                    timeout=90)
     assert_one_line_error(run, 2, contains=("choose one of", "--save and --serve"))
     assert_untouched(before, tmp_path)
 
@@ -155,7 +155,7 @@ def test_two_sinks_at_once(tmp_path, session):
 def test_url_without_connect_on_a_headless_machine(tmp_path, session):
     before = fingerprint(tmp_path)
     run = run_pslog("view", session, "--url", "rerun+http://127.0.0.1:9876/proxy",
-                    env=HEADLESS, timeout=20)
+                    env=HEADLESS, timeout=90)
     assert_one_line_error(run, 2, contains="add --connect")
     assert_untouched(before, tmp_path)
 
