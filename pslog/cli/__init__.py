@@ -16,7 +16,8 @@ from __future__ import annotations
 
 import sys
 
-#: SIGINTs that arrived while the ``pslog`` command was still loading (see _hold_sigint)
+#: SIGINT/SIGTERM/SIGHUPs that arrived while the ``pslog`` command was still loading
+#: (see _hold_sigint)
 _EARLY_SIGINT: list[int] = []
 
 
@@ -35,7 +36,17 @@ def _hold_sigint():
     if ((entry not in ("pslog", "pslog.exe") and not run_as_module)
             or _signal.getsignal(_signal.SIGINT) is not _signal.default_int_handler):
         return None
-    return _signal.signal(_signal.SIGINT, lambda signum, _frame: _EARLY_SIGINT.append(signum))
+
+    def note(signum, _frame) -> None:
+        _EARLY_SIGINT.append(signum)
+
+    # SIGTERM and SIGHUP too (unless ignored, as under nohup): their default action ended the
+    # command silently while it loaded; noted, they are raised as Terminated once it runs
+    for name in ("SIGTERM", "SIGHUP"):
+        sig = getattr(_signal, name, None)
+        if sig is not None and _signal.getsignal(sig) == _signal.SIG_DFL:
+            _signal.signal(sig, note)
+    return _signal.signal(_signal.SIGINT, note)
 
 
 _SIGINT_HELD = _hold_sigint()
@@ -114,6 +125,10 @@ def _release_sigint() -> None:
 
         signal.signal(signal.SIGINT, _SIGINT_HELD)
         _SIGINT_HELD = None
+        # SIGTERM/SIGHUP's noting handlers were replaced by _termination_interrupts already
+        for signum in _EARLY_SIGINT:
+            if signum != signal.SIGINT:
+                raise Terminated(signum)
         if _EARLY_SIGINT:
             raise KeyboardInterrupt
 

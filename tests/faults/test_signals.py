@@ -293,37 +293,47 @@ def test_sigkill_during_shutdown_then_recover(start, tmp_path):
                        "SIGINT, then SIGKILL to the group during shutdown")
 
 
-#: a ``pslog`` console script whose Ctrl-C comes at the start of one import (an audit hook
-#: sends a real SIGINT to the process when the import named by argv[1] begins)
+#: a ``pslog`` console script whose Ctrl-C (or SIGTERM, SIGHUP: argv[1]) comes at the start of
+#: one import (an audit hook sends a real signal to the process when the import named by
+#: argv[2] begins)
 _EARLY_CTRL_C = """
 import os, signal, sys
 signal.signal(signal.SIGINT, signal.default_int_handler)  # as in a terminal (not inherited SIG_IGN)
-module, sys.argv = sys.argv[1], ["pslog", *sys.argv[2:]]
+signal.signal(signal.SIGTERM, signal.SIG_DFL)
+signal.signal(signal.SIGHUP, signal.SIG_DFL)
+signum, module, sys.argv = int(sys.argv[1]), sys.argv[2], ["pslog", *sys.argv[3:]]
 sent = []
 def hook(event, args):
     if event == "import" and args[0] == module and not sent:
         sent.append(1)
-        os.kill(os.getpid(), signal.SIGINT)
+        os.kill(os.getpid(), signum)
 sys.addaudithook(hook)
 from pslog.cli import main
 sys.exit(main())
 """
 
 
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
 @pytest.mark.parametrize("module", ["argparse", "pslog.cli._common", "numpy"],
                          ids=["loading pslog.cli", "loading the command", "loading numpy"])
-def test_ctrl_c_while_the_command_loads(tmp_path, module):
+def test_ctrl_c_while_the_command_loads(tmp_path, module, sig):
     """Ctrl-C in the first hundredth of a second of ``pslog record`` (the tester's 0.05 s):
     a KeyboardInterrupt traceback from the imports, or numpy's ImportError when it hit
-    numpy's C extension. Now: one line, exit 130, nothing written. Only the interpreter's
-    own start-up, before ``pslog.cli`` is imported, remains uncovered."""
+    numpy's C extension. Now: one line, exit 130, nothing written. SIGTERM and SIGHUP there
+    (a service stopped at once, a terminal closed) ended it silently with their default
+    action (review of session 11): now one line, exit 143 / 129. Only the interpreter's own
+    start-up, before ``pslog.cli`` is imported, remains uncovered."""
     from .promises import Run, assert_one_line_error
 
     args = ("record", "--synthetic", "--rig", "paper3", "--fast", "--duration", "1", "-o",
             str(tmp_path / "s.mcap"))
-    proc = subprocess.run([sys.executable, "-c", _EARLY_CTRL_C, module, *args],
+    proc = subprocess.run([sys.executable, "-c", _EARLY_CTRL_C, str(int(sig)), module, *args],
                           capture_output=True, text=True, timeout=60,
                           stdin=subprocess.DEVNULL)
     run = Run(args, proc.returncode, proc.stdout, proc.stderr)
-    assert_one_line_error(run, 130, contains="pslog record: interrupted")
+    if sig == signal.SIGINT:
+        assert_one_line_error(run, 130, contains="pslog record: interrupted")
+    else:
+        assert_one_line_error(run, 128 + sig, contains=(
+            f"pslog record: terminated ({signal.Signals(sig).name})"))
     assert list(tmp_path.iterdir()) == []
