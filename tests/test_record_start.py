@@ -186,6 +186,52 @@ def test_a_warmed_detector_computes_nothing_lazily_on_the_first_frame():
     assert run.returncode == 0 and run.stdout.strip() == "warm", run.stderr
 
 
+class _WarmCheckSource:
+    """Three frames; the first read fails unless this camera process's detector was warmed
+    before (the colour range's BGR box already computed)."""
+
+    clock = "test clock"
+    live = False
+
+    def __init__(self) -> None:
+        self.k = 0
+
+    def read(self):
+        from recorders import detect
+        from recorders.sources import SourceError
+
+        if self.k == 0 and not detect._bgr_box.cache_info().currsize:
+            raise SourceError("the detector was not warmed before the first frame")
+        if self.k == 3:
+            return None
+        self.k += 1
+        return self.k - 1, int((self.k - 1) * NS / 30), np.zeros((480, 640, 3), np.uint8)
+
+    def set_start(self, t0_ns: int) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+class WarmCheckSpec:
+    width, height = 640, 480
+
+    def describe(self) -> str:
+        return "warm-check test camera"
+
+    def open(self):
+        return _WarmCheckSource()
+
+
+def test_camera_processes_warm_their_detector_before_the_first_frame(tmp_path):
+    from recorders.record import record
+
+    summary = record(builtin_rig("paper2"), {"cam1": WarmCheckSpec(), "cam2": WarmCheckSpec()},
+                     tmp_path / "s.mcap", status=None)
+    assert [(c.frames, c.message) for c in summary.cameras] == [(3, "end of source")] * 2
+
+
 # ---- what the help texts and the README say -----------------------------------------------
 def _help(command: str, capsys) -> str:
     try:
