@@ -530,11 +530,15 @@ class _Session:
             return
         c.state, c.message = "failed", text
         self._event(time_ns, f"camera {c.name} failed: {text}", cam, level="error")
-        # only cameras that opened record (one still opening may fail too)
-        others = any(o.state in ("recording", "stalled")
-                     for o in self.board.cameras if o is not c)
-        self._say(f"error: {c.name}: {text}" + ("; the other cameras keep recording"
-                                                 if others else ""))
+        # only cameras that opened record; ones still opening may fail too
+        rest = [o.state for o in self.board.cameras if o is not c]
+        if "recording" in rest or "stalled" in rest:
+            others = "; the other cameras keep recording"
+        elif "opening" in rest:
+            others = "; the other cameras are still opening"
+        else:
+            others = ""
+        self._say(f"error: {c.name}: {text}{others}")
 
     def _check_stalls(self) -> None:
         now = time.monotonic()
