@@ -392,7 +392,8 @@ class _Session:
                 self._wait_ready(inbox, procs, interrupted)
             t0.value = time.monotonic_ns()
             self.started_at = time.monotonic()
-            self.board.session_started = self.started_at
+            if not interrupted.is_set():  # else the cameras were still starting
+                self.board.session_started = self.started_at
             start.set()
             if not interrupted.is_set():
                 # relates the session clock to the host's monotonic clock (and UTC)
