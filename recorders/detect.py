@@ -155,6 +155,23 @@ class BallDetector:
         self._screen = _compiled_screen() if self.compiled else None
         self._buffers: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
 
+    def warm(self, width: int, height: int) -> np.ndarray:
+        """Do now what the first frame of ``width`` x ``height`` would do lazily -- the BGR box
+        of the colour range (about 0.3 s, cached per range), this OpenCV build's subsampling
+        check for the size, every pass on a frame holding a ball -- so a camera's first frames
+        are not late. Returns the frame used (a ball-coloured disc on black)."""
+        frame = np.zeros((int(height), int(width), 3), np.uint8)
+        hsv = self.hsv
+        hue = (hsv.hmin + (hsv.hmax - hsv.hmin) % 180 // 2) % 180
+        pixel = np.array([[[hue, (hsv.smin + hsv.smax) // 2, (hsv.vmin + hsv.vmax) // 2]]],
+                         np.uint8)
+        colour = cv2.cvtColor(pixel, cv2.COLOR_HSV2BGR)[0, 0]
+        radius = max(min(int(width), int(height)) // 40, 3)
+        cv2.circle(frame, (int(width) // 2, int(height) // 2), radius,
+                   tuple(int(c) for c in colour), -1)
+        self.detect(frame)
+        return frame
+
     def detect(self, frame_bgr: np.ndarray) -> Candidates:
         """Candidates of one frame (H, W, 3) uint8 BGR."""
         if frame_bgr.ndim != 3 or frame_bgr.shape[2] != 3 or frame_bgr.dtype != np.uint8:

@@ -49,7 +49,7 @@ from pslog.records import NS
 
 from ._flag import ProcessFlag, settled
 from .detect import HsvRange
-from .record import _STOP_SIGNALS, _stop_signals_blocked
+from .record import _STOP_SIGNALS, _stop_signals_blocked, warm_camera
 
 #: exit codes of a camera process (anything else, e.g. -9, is a death)
 EXIT_DONE = 0  # the source ended or the duration was reached
@@ -59,6 +59,8 @@ _OPEN_TIMEOUT_S = 60.0  # longest wait for every camera to open before the clock
 _STOP_TIMEOUT_S = 5.0  # longest wait for a camera process to end once told to stop
 _BACKOFF_S = (1.0, 30.0)  # first and longest wait before restarting a dead camera
 _STABLE_S = 10.0  # a process that ran this long restarts after the first back-off again
+_FIRST_FRAME_S = 5.0  # a camera is "starting" until its first datagram or this long after
+# the session clock started
 
 # shared per-camera counters (int64, written by the camera's process, read by the parent)
 _SEQ, _FRAMES, _DETECTED, _SKIPPED, _SEND_ERRORS, _LAST_INDEX = range(6)
@@ -119,6 +121,8 @@ def sender_main(name: str, spec, options: SenderOptions, address: tuple[str, int
         tell("failed", str(exc) if isinstance(exc, PslogError) else f"{spec.describe()}: "
                                                                      f"{exc!r}")
         sys.exit(EXIT_FAILED)
+    detector = BallDetector(options.hsv, options.max_candidates)
+    warm_camera(detector, spec, None)  # before "ready": its first frames are not late
     tell("ready", source.clock)
     while not start.wait(0.2):
         if parent_gone() or stop.is_set():
@@ -126,7 +130,6 @@ def sender_main(name: str, spec, options: SenderOptions, address: tuple[str, int
             return
     t0_ns, wall_ns = settled(t0, stop), settled(t0_wall, stop)
     source.set_start(t0_ns)
-    detector = BallDetector(options.hsv, options.max_candidates)
     family = socket.AF_INET6 if ":" in address[0] else socket.AF_INET
     sock = socket.socket(family, socket.SOCK_DGRAM)
     sequence = int(counters[_SEQ])
@@ -270,6 +273,7 @@ class LiveCameras:
         self._stop = ProcessFlag(self._ctx)
         self.t0_ns: int | None = None  # session time 0 on the monotonic clock
         self.t0_wall_ns: int | None = None  # and on the wall clock
+        self._started_at: float | None = None  # monotonic seconds when the clock started
 
     # ---- start --------------------------------------------------------------------------
     def _spawn(self, cam: CameraProcess) -> None:
@@ -315,6 +319,7 @@ class LiveCameras:
         self.t0_ns, self.t0_wall_ns = mono, wall
         self._t0.value, self._t0_wall.value = mono, wall
         self._start.set()
+        self._started_at = time.monotonic()
         if stop_requested():
             return self.t0_ns  # stopped before the clock started: nothing to say
         running = sum(c.state == "running" for c in self.cameras)
@@ -408,6 +413,17 @@ class LiveCameras:
         """Every camera ended for good (its source ended, or it never opened)."""
         return all(c.state in ("done", "failed", "stopped") for c in self.cameras)
 
+    def starting(self, name: str) -> bool:
+        """Whether camera ``name`` may still be starting (for a status line that has not
+        heard it yet): its process opening its source, or the session clock not started or
+        started less than :data:`_FIRST_FRAME_S` ago."""
+        cam = next((c for c in self.cameras if c.name == name), None)
+        if cam is None or cam.state in ("done", "failed", "stopped"):
+            return False
+        if cam.state == "opening" or self._started_at is None:
+            return True
+        return time.monotonic() - self._started_at < _FIRST_FRAME_S
+
     @property
     def opened_any(self) -> bool:
         return any(c.opened for c in self.cameras)
@@ -426,6 +442,11 @@ class LiveCameras:
         """Tell every process to stop, wait for them, kill the ones that do not end."""
         self._stop.set()
         self._start.set()  # a process still waiting for the start ends at once
+        for cam in self.cameras:
+            if cam.state == "opening":
+                # not ready yet (importing, opening its source for seconds): it has sent
+                # nothing, nothing is lost
+                self._end(cam)
         deadline = time.monotonic() + _STOP_TIMEOUT_S
         for cam in self.cameras:
             p = cam.process

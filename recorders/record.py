@@ -10,9 +10,9 @@ complete messages are kept, the other cameras are not affected. (One shared
 queue's write lock blocked every other camera for ever, and a partial message left by a
 killed camera blocked the parent's next read for ever.) The parent shows a live status line,
 watches for cameras that fail or stall (logging the gap as an event while the others keep
-recording) and finishes the file cleanly on Ctrl-C or SIGTERM; the writer flushes at least
-once a second, so SIGKILL loses at most the last second (``pslog recover`` salvages the
-rest).
+recording) and finishes the file cleanly on Ctrl-C, SIGTERM or SIGHUP; the writer flushes
+every 0.5 s, so a SIGKILL loses at most the last half second written (``pslog recover``
+salvages the rest).
 
 Worker -> parent messages (tuples, first item the kind):
 ``ready(cam, clock, live)``, ``failed(cam, text)``, ``frame(cam, index, time_ns, uv, radius,
@@ -52,6 +52,7 @@ _QUEUE_PER_CAMERA = 32  # frame messages waiting in a camera process (about 3 MB
 _DRAIN = 64  # messages read after a wait before the loop's housekeeping
 _OPEN_TIMEOUT_S = 60.0  # longest wait for every camera to open (spawning included)
 _STOP_TIMEOUT_S = 10.0  # longest wait for cameras to finish after a stop request
+_FIRST_FRAME_S = 5.0  # a live camera without a first frame this long after the start: said
 _TTY_REFRESH_S = 0.25
 _LOG_REFRESH_S = 5.0  # status line period when stderr is not a terminal
 
@@ -75,8 +76,8 @@ class RecordSummary:
     ----------
     output : the session file
     cameras : per-camera counters (frames, detections, drops, state, message)
-    wall_s : wall-clock duration of the recording, seconds
-    interrupted : True when stopped by Ctrl-C / SIGTERM
+    wall_s : wall-clock duration of the call, seconds (starting the camera processes included)
+    interrupted : True when stopped by Ctrl-C / SIGTERM / SIGHUP
     events : (time_ns, text) logged as session events
     """
 
@@ -233,8 +234,10 @@ def _record(rig: Rig, sources: Mapping[str, object], output: Path, options: Work
             kept += f"; the old {output} is untouched"
         raise RecordWriteError(f"cannot write {output}: {reason}; stopped the cameras; {kept}",
                                reason)
-    if summary.n_frames == 0 and summary.interrupted and not existed:
-        output.unlink(missing_ok=True)  # stopped before the first frame: nothing to keep
+    if summary.n_frames == 0 and not existed:
+        # stopped before the first frame, or no camera opened: a file of the calibration
+        # alone is not a recording, and would only refuse the next run ("exists")
+        output.unlink(missing_ok=True)
     return summary
 
 
@@ -310,6 +313,8 @@ class _Session:
         self.events: list[tuple[int, str]] = []
         self.live = [False] * len(rig)
         self.last_arrival = [0.0] * len(rig)
+        self.started_at: float | None = None  # monotonic seconds at session time 0
+        self._no_first_frame_said = [False] * len(rig)
         # why the recording ended before the sources did; ``stopped``: the cameras were
         # stopped (a signal, a write failure) rather than reaching an end or the duration
         self.stop_reason = ""
@@ -386,6 +391,9 @@ class _Session:
             if not interrupted.is_set():
                 self._wait_ready(inbox, procs, interrupted)
             t0.value = time.monotonic_ns()
+            self.started_at = time.monotonic()
+            if not interrupted.is_set():  # else the cameras were still starting
+                self.board.session_started = self.started_at
             start.set()
             if not interrupted.is_set():
                 # relates the session clock to the host's monotonic clock (and UTC)
@@ -405,10 +413,12 @@ class _Session:
             if self.write_error is not None:
                 head = "recording stopped, the file could not be written"
             elif interrupted.is_set():
-                head = f"recording stopped by {interrupted.name}"
+                head = f"recording stopped by {interrupted.name}: {self.writer.path}"
+            elif self.board.total_frames() == 0:
+                head = f"nothing recorded to {self.writer.path}: no camera delivered a frame"
             else:
-                head = "recorded"
-            self.status.write(f"{head}: {self.writer.path}\n{summary_text}\n")
+                head = f"recorded: {self.writer.path}"
+            self.status.write(f"{head}\n{summary_text}\n")
             self.status.flush()
         return RecordSummary(Path(self.writer.path), tuple(self.board.cameras),
                              time.monotonic() - wall0, interrupted.is_set(),
@@ -521,22 +531,34 @@ class _Session:
             return
         c.state, c.message = "failed", text
         self._event(time_ns, f"camera {c.name} failed: {text}", cam, level="error")
-        others = any(o.state in ("opening", "recording", "stalled")
-                     for o in self.board.cameras if o is not c)
-        self._say(f"error: {c.name}: {text}" + ("; the other cameras keep recording"
-                                                 if others else ""))
+        # only cameras that opened record; ones still opening may fail too
+        rest = [o.state for o in self.board.cameras if o is not c]
+        if "recording" in rest or "stalled" in rest:
+            others = "; the other cameras keep recording"
+        elif "opening" in rest:
+            others = "; the other cameras are still opening"
+        else:
+            others = ""
+        self._say(f"error: {c.name}: {text}{others}")
 
     def _check_stalls(self) -> None:
         now = time.monotonic()
         for i, c in enumerate(self.board.cameras):
             if c.state != "recording" or not self.live[i]:
                 continue
+            if c.last_ns is None:
+                # not a stall: a camera's first frame may come late (its source starting);
+                # said once after a while, neither a state nor an event
+                since = now - (self.started_at if self.started_at is not None else now)
+                if since > _FIRST_FRAME_S and not self._no_first_frame_said[i]:
+                    self._no_first_frame_said[i] = True
+                    self._say(f"warning: {c.name}: no frame yet, {since:.1f} s after the start")
+                continue
             limit = max(1.0, 10.0 / self.rig.cameras[i].fps)
             if now - self.last_arrival[i] > limit:
                 c.state = "stalled"
-                at = (c.last_ns if c.last_ns is not None else 0) + int(
-                    NS / self.rig.cameras[i].fps)
-                self._event(at, f"camera {c.name} stopped delivering frames", i,
+                # just after its last frame: before the "delivering again" of its next one
+                self._event(c.last_ns + 1, f"camera {c.name} stopped delivering frames", i,
                             level="warning")
                 self._say(f"warning: {c.name}: no frame for {now - self.last_arrival[i]:.1f} s")
 
@@ -555,6 +577,11 @@ class _Session:
         """Collect the last messages and reap the camera processes."""
         deadline = time.monotonic() + _STOP_TIMEOUT_S
         cams = self.board.cameras
+        for p, c in zip(procs, cams, strict=True):
+            if c.state == "opening" and p.pid is not None and p.is_alive():
+                # stopped before it said "ready": it holds no frame, and may be importing or
+                # opening its source for many seconds yet
+                p.kill()
         try:
             while time.monotonic() < deadline and (
                     any(p.is_alive() for p in procs) or not inbox.all_ended()):
@@ -707,10 +734,17 @@ def _stop_signals_blocked():
     it otherwise, and its start UNBLOCKS these signals in the calling thread (Python's
     ``resource_tracker.ensure_running``), so the cameras started after it got a Ctrl-C while
     importing (a KeyboardInterrupt traceback). The shared ``multiprocessing.Queue`` used to
-    start it earlier by chance (its lock registers with the tracker)."""
+    start it earlier by chance (its lock registers with the tracker). The tracker ignores
+    only SIGINT and SIGTERM: it is started with SIGHUP blocked (a mask survives ``exec``),
+    else a SIGHUP to the group (a closed terminal) killed it, and the next camera's start
+    printed multiprocessing's "resource_tracker: process died unexpectedly" warning."""
     from multiprocessing import resource_tracker
 
-    resource_tracker.ensure_running()
+    hup = signal.pthread_sigmask(signal.SIG_BLOCK, (signal.SIGHUP,))
+    try:
+        resource_tracker.ensure_running()
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, hup)
     old = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)
     try:
         yield
@@ -777,6 +811,11 @@ def _camera_body(cam: int, spec, options: WorkerOptions, start, stop, t0,
         text = str(exc) if isinstance(exc, PslogError) else f"{spec.describe()}: {exc!r}"
         send(("failed", cam, text))
         return
+    detector = BallDetector(options.hsv, options.max_candidates)
+    params = jpeg_params(options.jpeg_quality)
+    # what the first frame would do lazily (about 0.3 s), done before "ready": a live
+    # source's first frames would otherwise be late and skipped
+    warm_camera(detector, spec, params if options.frames else None)
     send(("ready", cam, source.clock, source.live))
     while not start.wait(0.2):
         if parent_gone():
@@ -785,8 +824,6 @@ def _camera_body(cam: int, spec, options: WorkerOptions, start, stop, t0,
         send(("done", cam, "stopped before the start"))
         return
     source.set_start(settled(t0, stop))
-    detector = BallDetector(options.hsv, options.max_candidates)
-    params = jpeg_params(options.jpeg_quality)
     clock = ""
     reason = "stopped by user"
     try:
@@ -818,6 +855,26 @@ def _camera_body(cam: int, spec, options: WorkerOptions, start, stop, t0,
         send(("done", cam, reason))
     finally:
         source.close()
+
+
+def frame_size(spec) -> tuple[int, int]:
+    """(width, height) of the frames a source spec delivers (640 x 480 when it does not say:
+    only the warm-up uses it)."""
+    camera = getattr(spec, "camera", None)
+    width = getattr(spec, "width", None) or getattr(camera, "width", None) or 640
+    height = getattr(spec, "height", None) or getattr(camera, "height", None) or 480
+    return int(width), int(height)
+
+
+def warm_camera(detector: BallDetector, spec, jpeg: list[int] | None) -> None:
+    """The detector (:meth:`BallDetector.warm`) and the JPEG encoder (``jpeg``: its
+    parameters, None for none) warmed for the spec's frame size."""
+    import cv2
+
+    width, height = frame_size(spec)
+    frame = detector.warm(width, height)
+    if jpeg is not None:
+        cv2.imencode(".jpg", frame, jpeg)
 
 
 def _write_all(fd: int, data: bytes) -> None:

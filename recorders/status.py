@@ -73,6 +73,11 @@ class StatusBoard:
     def __init__(self, cameras: list[CameraStatus]) -> None:
         self.cameras = cameras
         self.started = time.monotonic()
+        #: monotonic seconds at the session start (the cameras started and ready), if any
+        self.session_started: float | None = None
+
+    def total_frames(self) -> int:
+        return sum(c.frames for c in self.cameras)
 
     def line(self) -> str:
         """One line: per camera ``name state frames fps det drops``."""
@@ -98,8 +103,17 @@ class StatusBoard:
             if c.message:
                 line += f"  {c.message}"
             lines.append(line)
-        total = sum(c.frames for c in self.cameras)
-        wall = time.monotonic() - self.started
-        lines.append(f"  total    {total:6d} frames in {wall:.1f} s wall time "
-                     f"({total / wall if wall > 0 else 0.0:.1f} frames/s)")
+        total = self.total_frames()
+        now = time.monotonic()
+        wall = now - self.started
+        if self.session_started is None:  # stopped before the cameras were ready
+            lines.append(f"  total    {total:6d} frames; {wall:.1f} s wall time (the cameras "
+                         f"were still starting)")
+        else:
+            # the rate over the recording itself: starting the camera processes (seconds:
+            # imports, opening the sources) is not part of it
+            run = now - self.session_started
+            lines.append(f"  total    {total:6d} frames in {run:.1f} s of recording "
+                         f"({total / run if run > 0 else 0.0:.1f} frames/s); {wall:.1f} s "
+                         f"wall time with the cameras' start")
         return "\n".join(lines)

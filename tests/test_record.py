@@ -210,9 +210,16 @@ def test_camera_that_stalls_and_dies_is_logged_while_others_record(tmp_path):
     assert cam1.frames == 30 and cam1.state == "done"
     assert cam2.frames == 20 and "unplugged" in cam2.message
     assert cam2.drops >= 40  # the 1.6 s gap at 30 fps
-    texts = [text for _t, text in read_session(out).events]
+    events = read_session(out).events
+    texts = [text for _t, text in events]
     assert any("cam2 stopped delivering frames" in t for t in texts)
     assert any("cam2 delivering again" in t for t in texts)
+    # the stall just after its last frame, before the frame that ends it
+    stalled = next(t for t, text in events if "cam2 stopped delivering" in text)
+    again = next(t for t, text in events if "cam2 delivering again" in text)
+    frames = np.sort(read_session(out).detections.frame_time_ns[
+        read_session(out).detections.frame_camera == 1])
+    assert stalled == frames[9] + 1 and again == frames[10] > stalled
     assert any("cam2 failed: test camera unplugged" in t for t in texts)
     det = read_session(out).detections
     assert_array_equal(np.bincount(det.frame_camera), [30, 20])

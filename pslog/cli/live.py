@@ -37,11 +37,12 @@ says its pid when it starts. A camera process that dies (crashes, is killed, its
 stops delivering) is reported and restarted after a back-off (1 s, doubling up to 30 s); a
 source that cannot be opened at all is not retried, and if none can, the run ends with
 exit code 1. The other cameras keep fusing, and the camera is fused again once it sends.
-The run ends at --duration, when every source has ended, or on Ctrl-C / SIGTERM, which
-stops the camera processes and finishes the session file cleanly (exit code 0). The
-session file is flushed twice a second: a killed run leaves it unfinished, and 'pslog
-recover' salvages it. With --force an old session is replaced only by a complete new one,
-never by an empty one.
+The run ends at --duration, when every source has ended, or on Ctrl-C, SIGTERM or SIGHUP
+(a closed terminal), which stop the camera processes and finish the session file cleanly
+(exit code 0). A SIGKILL loses at most the last half second written (the session file is
+flushed every 0.5 s): the file is left unfinished, and 'pslog recover' salvages it. If the
+disk fills up, the run stops and what was written is kept; the error says where. With
+--force an old session is replaced only by a complete new one, never by an empty one.
 """
 
 EXAMPLES = """\
@@ -251,11 +252,23 @@ def _run(args: argparse.Namespace, stop) -> int:
                                            "epoch_ns": lambda: epoch_ns},
                                    name="pslog-live-cameras", daemon=True)
         watcher.start()
+    from pslog.outputs import WriteError
+
     try:
         summary = serve(rig, listen, sinks, method=args.method,
                         duration_s=args.duration if cameras is None else None,
                         stop=stop.event, status_every_s=args.status_every, ready=ready,
-                        epoch_ns=epoch_ns, sock=sock, hold_s=args.hold)
+                        epoch_ns=epoch_ns, sock=sock, hold_s=args.hold,
+                        starting=None if cameras is None else cameras.starting)
+    except WriteError as exc:
+        stop.event.set()
+        if watcher is not None:
+            watcher.join()
+        if recording is None or not _recording_failed(recording, exc):
+            raise
+        if cameras is not None:
+            _say("camera processes:\n" + cameras.summary())
+        raise _record_write_error(recording, args.record, exc, cameras is not None) from None
     finally:
         stop.event.set()
         if watcher is not None:
@@ -282,6 +295,26 @@ def _run(args: argparse.Namespace, stop) -> int:
         failed = "; ".join(f"{c.name}: {c.message}" for c in cameras.cameras)
         raise InputError(f"no camera could be opened ({failed})")
     return 0
+
+
+def _recording_failed(recording, exc: BaseException) -> bool:
+    """Whether ``exc`` is the session file's own write error (not another output's)."""
+    return exc is getattr(recording, "_error", None) or str(exc).startswith(
+        f"cannot write {recording.path}")
+
+
+def _record_write_error(recording, name: str, exc, cameras: bool):
+    """The one line for a session file that could not be written, as ``pslog record`` says
+    it: where what was written is kept and how to salvage it."""
+    from pslog.outputs import WriteError
+
+    target = recording.writer.target
+    kept = (f"what was written before is in {target}, unfinished (salvage it with: pslog "
+            f"recover {target} -o fixed.mcap)" if target.exists() else "nothing was kept")
+    if target != recording.path:
+        kept += f"; the old {name} is untouched"
+    stopped = "stopped the fuser and the cameras" if cameras else "stopped the fuser"
+    return WriteError(f"cannot write {name}: {exc.reason}; {stopped}; {kept}", exc.reason)
 
 
 def _camera_specs(args: argparse.Namespace, rig):

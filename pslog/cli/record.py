@@ -28,8 +28,10 @@ Record a session: every camera of the rig is captured in its own process (captur
 detection, JPEG encoding) and one writer stores the frames, the detections, the calibration
 and the timing into an MCAP session. A status line on stderr shows per camera the frames,
 the frame rate, the frames with a ball and the drops; a summary follows at the end.
-Ctrl-C or SIGTERM, at any moment, stops the cameras and finishes the file cleanly (a
-killed recorder loses at most the last second; see 'pslog recover'). If the disk fills up,
+Ctrl-C, SIGTERM or SIGHUP (a closed terminal), at any moment, stops the cameras and
+finishes the file cleanly: exit code 0 once frames were recorded, 1 (and no file) when
+stopped before any camera delivered a frame. A SIGKILL loses at most the last half second
+written (the file is flushed every 0.5 s; 'pslog recover' salvages the rest). If the disk fills up,
 the cameras are stopped and what was written is kept; the error says where. Detections are
 written before the images of the same frames, so a full disk costs images first: every
 frame whose image was kept has its detection too.
@@ -43,11 +45,13 @@ Sources (one --source per camera of the rig, NAME a camera name of the rig):
                              one session; --offset NAME=SECONDS does the same
 Video files are read as fast as they decode; live cameras in real time. A camera that
 fails to open or stops delivering is reported and logged; the others keep recording (exit
-code 0 if any camera recorded frames, 1 if none did).
+code 0 if any camera recorded frames, 1 and no file if none did).
 
 --synthetic renders what each camera sees of a ball (shaded sphere, motion blur over the
 exposure, lens distortion, sensor noise, a lined green field) following --motion under the
-rig's shutter schedule, in real time unless --fast, and stores the ground truth too.
+rig's shutter schedule, in real time unless --fast, and stores the ground truth too. The
+summary's frame rate is over the recording itself; its wall time includes starting the
+camera processes (a few seconds).
 
 Ball detection: pixels inside an HSV box (OpenCV scales: hue 0..179, saturation and value
 0..255; a hue minimum above the maximum wraps around red), connected components, sub-pixel
@@ -90,9 +94,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--timing", choices=TIMING_PRESETS,
                         help="set the rig's shutter offsets from a preset (default: the "
                              "rig's own offsets)")
+    from pslog.motion import MOTIONS
+
     parser.add_argument("--motion", default="throw", type=motion_name,
-                        metavar="MOTION", help="synthetic ball motion: straight, spiral, "
-                                               "fall, turntable, throw (default %(default)s)")
+                        metavar="MOTION", help=f"synthetic ball motion: {', '.join(MOTIONS)} "
+                                               f"(default %(default)s)")
     parser.add_argument("--fast", action="store_true",
                         help="synthetic: render as fast as possible instead of in real time")
     parser.add_argument("--duration", type=positive_float, metavar="S",
@@ -196,7 +202,7 @@ def _run(args: argparse.Namespace, stop) -> int:
         raise InputError(f"stopped before any camera delivered a frame; nothing was written "
                          f"to {output}")
     if summary.n_frames == 0:
-        raise InputError(f"no camera delivered a frame; {output} holds only the calibration")
+        raise InputError(f"no camera delivered a frame; nothing was written to {output}")
     if not args.synthetic:
         _note_offsets(output, rig)
     return 0

@@ -20,7 +20,7 @@ import struct
 import sys
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -87,15 +87,17 @@ def bind_udp(listen, *, what: str = "--listen address") -> socket.socket:
 
 
 def format_status(fuser: LiveFuser, cameras: list[CameraLiveState], now_ns: int,
-                  started_ns: int) -> str:
+                  started_ns: int, starting: Callable[[str], bool] | None = None) -> str:
     """One status line: time served; per camera live or silent (for how long), its datagrams
     (``dg``) and the points of its shutters (``pt``); all datagrams and points; the non-zero
-    drop counters."""
+    drop counters. A camera never heard is ``starting`` while ``starting(name)`` says it may
+    still be (its process starting up), else ``silent (never heard)``."""
     c = fuser.counters()
     parts = [f"live {(now_ns - started_ns) / NS:6.1f} s"]
     for cam in cameras:
         if cam.last_arrival_ns is None:
-            parts.append(f"{cam.name} silent (never heard)")
+            still = starting is not None and starting(cam.name)
+            parts.append(f"{cam.name} " + ("starting" if still else "silent (never heard)"))
             continue
         state = ("live" if not cam.silent else
                  f"SILENT {(now_ns - cam.last_arrival_ns) / NS:.1f} s")
@@ -124,7 +126,7 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
           ready: threading.Event | None = None, late_s: float = 0.1, options=None,
           candidates: bool = True, epoch_ns: int | None = None,
           status_stream="stderr", sock: socket.socket | None = None,
-          hold_s: float = 0.0) -> LiveSummary:
+          hold_s: float = 0.0, starting: Callable[[str], bool] | None = None) -> LiveSummary:
     """Run the live fuser on ``listen`` until ``stop`` is set, ``duration_s`` passes or
     Ctrl-C.
 
@@ -147,6 +149,8 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
     status_stream : where status lines go: a text stream, ``"stderr"`` (``sys.stderr`` when
         called) or None (nowhere)
     sock : an already bound UDP socket to use instead of binding ``listen``
+    starting : camera name -> whether it may still be starting up (the status line then says
+        ``starting`` rather than ``silent (never heard)``); None: never
 
     Raises
     ------
@@ -309,7 +313,7 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
                 events(now)
             if now >= next_status:
                 next_status = now + period
-                text = format_status(fuser, fuser.cameras(now), now, started)
+                text = format_status(fuser, fuser.cameras(now), now, started, starting)
                 say(text)
                 counters = fuser.counters()
                 for f in on_status:
@@ -360,7 +364,7 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
             signal.signal(signal.SIGINT, restore_sigint)
         end = clock()
         counters = fuser.counters()
-        final = format_status(fuser, fuser.cameras(end), end, started)
+        final = format_status(fuser, fuser.cameras(end), end, started, starting)
         for ev in on_event:
             with contextlib.suppress(Exception):
                 ev(end, "live fuser stopped: " + ", ".join(f"{k} {v}"

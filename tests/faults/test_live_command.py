@@ -4,10 +4,13 @@ SIGKILL leaves an unfinished session that ``pslog recover`` salvages, and no orp
 
 from __future__ import annotations
 
+import contextlib
+import os
 import signal
 import socket
 import time
 from dataclasses import replace
+from pathlib import Path
 
 import pytest
 
@@ -174,19 +177,72 @@ def test_a_run_that_records_nothing_leaves_no_session_and_keeps_an_old_one(tmp_p
         assert_untouched(before, tmp_path)
 
 
-def test_a_stop_while_the_cameras_start_is_clean_and_records_nothing(tmp_path):
+def _descendants(pid: int) -> list[int]:
+    """Every process below ``pid`` (its camera processes, multiprocessing's resource tracker)."""
+    found, todo = [], [pid]
+    while todo:
+        parent = todo.pop()
+        for task in Path(f"/proc/{parent}/task").glob("*"):
+            try:
+                children = [int(c) for c in (task / "children").read_text().split()]
+            except (OSError, ValueError):
+                continue
+            found.extend(children)
+            todo.extend(children)
+    return found
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGHUP], ids=["SIGINT", "SIGHUP"])
+def test_a_stop_while_the_cameras_start_is_clean_and_records_nothing(tmp_path, sig):
+    """Ctrl-C to the command, or SIGHUP (a closed terminal) to it and every process it
+    started, as to a process group, while the cameras start: a clean stop, nothing recorded,
+    no Python warning (SIGHUP killed multiprocessing's resource tracker, which ignores only
+    SIGINT and SIGTERM: "resource_tracker: process died unexpectedly"). The status line says
+    the cameras are starting, not "silent (never heard)" as if they had failed."""
     run = LiveRun("--rig", "paper3", "--timing", "typeA", "--synthetic", "--motion", "rally",
-                  "--listen", _listen(), "--record", "s.mcap", cwd=tmp_path)
+                  "--listen", _listen(), "--record", "s.mcap", "--status-every", "0.1",
+                  cwd=tmp_path)
     run.wait_for(lambda: len(camera_pids(run)) == 3, "three camera processes")
-    run.proc.send_signal(signal.SIGINT)
+    status = run.wait_err(r"^live +[0-9.]+ s \|").string
+    assert "cam1 starting" in status and "never heard" not in status, status
+    for pid in [run.proc.pid, *_descendants(run.proc.pid)] if sig == signal.SIGHUP else \
+            [run.proc.pid]:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, sig)
     code = run.finish()
     err = "\n".join(run.err)
     assert code == 0 and "error" not in err, err
-    assert "session clock started" not in err  # (a slow start would make this test moot)
+    assert "Warning" not in err and "resource_tracker" not in err, err
     assert "nothing was recorded to s.mcap" in err
     assert not (tmp_path / "s.mcap").exists()
     pids = [pid for cam in camera_pids(run).values() for pid in cam]
     assert all(gone(pid) for pid in pids)
+
+
+def test_a_full_disk_says_where_the_data_is_and_how_to_recover_it(tmp_path):
+    """``--record`` on a disk that fills up mid-run: the run stops, one error line that, as
+    ``pslog record``'s, says the file holds what was written and how to salvage it."""
+    from pslog.log import read_session
+
+    from ._mounts import fill, small_tmpfs
+
+    with small_tmpfs(tmp_path / "disk", "256k") as disk:
+        fill(disk, free=14_000)
+        run = LiveRun("--rig", "paper3", "--timing", "typeA", "--synthetic", "--motion",
+                      "rally", "--duration", "60", "--listen", _listen(), "--record",
+                      disk / "s.mcap", cwd=tmp_path)
+        code = run.finish(timeout=120)
+        err = "\n".join(run.err)
+        assert code == 1 and "Traceback" not in err, err
+        last = run.err[-1]
+        assert last.startswith(f"pslog live: error: cannot write {disk / 's.mcap'}: No space "
+                               f"left on device; stopped the fuser and the cameras; what was "
+                               f"written before is in {disk / 's.mcap'}, unfinished (salvage "
+                               f"it with: pslog recover "), err
+        assert [line for line in run.err if "error" in line] == [last], err
+        fixed = run_pslog("recover", disk / "s.mcap", "-o", tmp_path / "fixed.mcap")
+        assert fixed.code == 0, fixed.stderr
+        assert read_session(tmp_path / "fixed.mcap").detections.n_frames > 0
 
 
 def test_a_reader_that_goes_away_ends_a_run_whose_only_output_it_was(tmp_path):

@@ -185,8 +185,10 @@ def _assert_survived(rec: Recording, victim: str, context: str) -> None:
     assert code == 0, f"exit {code} ({context})\n{err}"
     died = [line for line in rec.lines  # the messages, not the summary's table
             if "camera process died" in line and not line.startswith("  ")]
-    assert died == [f"error: {victim}: camera process died (exit code -9); the other cameras "
-                    f"keep recording"], f"{context}\n{err}"
+    # (killed before the others said "ready": they are still opening)
+    assert died in ([f"error: {victim}: camera process died (exit code -9); the other cameras "
+                     f"{going}"] for going in ("keep recording", "are still opening")), \
+        f"{context}\n{err}"
     summary = {line.split()[0]: line for line in rec.lines if re.match(r"  cam\d ", line)}
     assert "[failed]" in summary[victim], err
     for name in CAMERAS:
