@@ -316,13 +316,13 @@ def gains_data(s_sorted: np.ndarray, first: np.ndarray, N: np.ndarray, M: np.nda
     Hxy = np.zeros((B, 18, 9))
     g = np.zeros((B, 3, 3))
     # per detection of the trial's three spans: f_e, f_e f_f and b_c f_e (each product
-    # formed once, as before), then every entry's sum over the detections in order from 0
-    # in a register (the entries' chains side by side, none stored between detections)
+    # formed once), then the entries' sums over the detections (each from 0, the detections
+    # in order), nine side by side in registers — a row of a 3 x 3 block: the detection's
+    # coefficient times a row of its M — so nine independent chains overlap instead of one
+    # waiting on its previous addition (the same terms in the same order: the same bits)
     F = np.zeros((Wb, 3))
     FF = np.zeros((Wb, 3, 3))
     OF = np.zeros((Wb, 6, 3))
-    Mw = np.zeros((Wb, 3, 3))
-    Uw = np.zeros((Wb, 3))
     for b in range(B):
         wb = which[b]
         jb = j[b]
@@ -333,8 +333,9 @@ def gains_data(s_sorted: np.ndarray, first: np.ndarray, N: np.ndarray, M: np.nda
                 lo_col += 1
             if s_sorted[wb, w] < jb + 1 + 1:
                 hi_col += 1
-        nw = 0
-        for w in range(lo_col, hi_col):
+        nw = hi_col - lo_col
+        for n in range(nw):
+            w = lo_col + n
             x = s_sorted[wb, w] - jb
             for e in range(3):
                 fe = 0.0
@@ -342,43 +343,76 @@ def gains_data(s_sorted: np.ndarray, first: np.ndarray, N: np.ndarray, M: np.nda
                     if x >= lo[b, e, k] and x < hi[b, e, k]:
                         c = coef[b, e, k]
                         fe = ((c[3] * 1.0 * x + c[2]) * x + c[1]) * x + c[0]
-                F[nw, e] = fe
+                F[n, e] = fe
             for e in range(3):
                 for e2 in range(3):
-                    FF[nw, e, e2] = F[nw, e] * F[nw, e2]
+                    FF[n, e, e2] = F[n, e] * F[n, e2]
             for c6 in range(6):
                 a = q0[b] + c6 - first[wb, w]
                 oc = N[wb, w, a] if 0 <= a <= 3 else 0.0
                 for e in range(3):
-                    OF[nw, c6, e] = oc * F[nw, e]
-            for i in range(3):
-                Uw[nw, i] = u[wb, w, i]
-                for k in range(3):
-                    Mw[nw, i, k] = M[wb, w, i, k]
-            nw += 1
+                    OF[n, c6, e] = oc * F[n, e]
+        Mb = M[wb, lo_col:hi_col]
+        Ub = u[wb, lo_col:hi_col]
+        for e in range(3):
+            g0 = 0.0
+            g1 = 0.0
+            g2 = 0.0
+            for n in range(nw):
+                fe = F[n, e]
+                g0 += fe * Ub[n, 0]
+                g1 += fe * Ub[n, 1]
+                g2 += fe * Ub[n, 2]
+            g[b, e, 0] = g0
+            g[b, e, 1] = g1
+            g[b, e, 2] = g2
         for e in range(3):
             for i in range(3):
-                acc = 0.0
-                for w in range(nw):
-                    acc += F[w, e] * Uw[w, i]
-                g[b, e, i] = acc
-        for e in range(3):
-            for i in range(3):
-                for e2 in range(3):
-                    for k in range(3):
-                        acc = 0.0
-                        for w in range(nw):
-                            acc += FF[w, e, e2] * Mw[w, i, k]
-                        Hyy[b, 3 * e + i, 3 * e2 + k] = acc
+                _block_row(FF[:nw, e], Mb[:, i], Hyy[b, 3 * e + i])
         for c6 in range(6):
             for i in range(3):
-                for e in range(3):
-                    for k in range(3):
-                        acc = 0.0
-                        for w in range(nw):
-                            acc += OF[w, c6, e] * Mw[w, i, k]
-                        Hxy[b, 3 * c6 + i, 3 * e + k] = acc
+                _block_row(OF[:nw, c6], Mb[:, i], Hxy[b, 3 * c6 + i])
     return Hyy, Hxy, g
+
+
+@kernel(inline=True)
+def _block_row(f: np.ndarray, m: np.ndarray, out: np.ndarray) -> None:
+    """``out[3e + k] = Σ_n f[n, e] m[n, k]`` (f, m (nw, 3); out (9,)): each sum from 0 over
+    ``n`` in order (:func:`gains_data`), the nine in registers side by side."""
+    a00 = 0.0
+    a01 = 0.0
+    a02 = 0.0
+    a10 = 0.0
+    a11 = 0.0
+    a12 = 0.0
+    a20 = 0.0
+    a21 = 0.0
+    a22 = 0.0
+    for n in range(f.shape[0]):
+        f0 = f[n, 0]
+        f1 = f[n, 1]
+        f2 = f[n, 2]
+        m0 = m[n, 0]
+        m1 = m[n, 1]
+        m2 = m[n, 2]
+        a00 += f0 * m0
+        a01 += f0 * m1
+        a02 += f0 * m2
+        a10 += f1 * m0
+        a11 += f1 * m1
+        a12 += f1 * m2
+        a20 += f2 * m0
+        a21 += f2 * m1
+        a22 += f2 * m2
+    out[0] = a00
+    out[1] = a01
+    out[2] = a02
+    out[3] = a10
+    out[4] = a11
+    out[5] = a12
+    out[6] = a20
+    out[7] = a21
+    out[8] = a22
 
 
 @kernel
