@@ -334,6 +334,45 @@ def test_window_solve_is_the_dense_solve_and_refuses_a_non_positive_pivot():
     assert_array_equal(ok, [True, False, True])
 
 
+
+def test_window_normal_solve_is_the_normal_then_the_solve_bit_for_bit():
+    """The fused pass (a window's normal matrix built in a work array, its lower band only,
+    then solved) gives the bits of window_normal, the diagonal times 1 + 1e-12 and
+    window_solve; a window whose matrix is not positive definite is flagged, not solved, and
+    the base solves it by LU on the matrix window_normal builds (the dense minimum)."""
+    local, t, J, z, w, index, valid, centre, h, _ = _window_case(5)
+    w = w.copy()
+    # window 1's detections weighed negatively: its normal matrix is not positive definite
+    inside1 = np.zeros(len(t), bool)
+    inside1[index[1][valid[1]]] = True
+    inside1[index[0][valid[0]]] = False
+    inside1[index[2][valid[2]]] = False
+    w[inside1] = -1e6
+    base = _breaks._Base(local, t, J, z, w, index, valid, centre, h)
+    inside = base.s_sorted < 1e5
+    # w Jᵀ z as the base forms it
+    wJ = np.where(inside, w[index], 0.0)[..., None, None] * J[index]
+    v = np.ascontiguousarray(np.einsum("bwai,bwa->bwi", wJ, z[index]))
+    args = (local.P, local.rhs, base.first, base.N, base.M, v, inside)
+    H, rhs = _kernels.window_normal(*args)
+    n = H.shape[1]
+    H[:, np.arange(n), np.arange(n)] *= 1 + 1e-12
+    lo, hi = 9, 36
+    want = (*_kernels.window_solve(H, rhs, lo, hi), rhs)
+    assert_array_equal(want[2], [True, False, True])
+    for fused in (_kernels.window_normal_solve, _kernels.window_normal_solve.py_func):
+        got = fused(*args, lo, hi)
+        for a, b in zip(got, want, strict=True):
+            assert_array_equal(a, b)
+            assert_array_equal(np.signbit(a), np.signbit(b))
+    # the base: the good windows solved by the pass, the bad one by LU on its whole matrix
+    ref = np.linalg.solve(H, rhs[..., None])[..., 0]
+    assert_array_equal(base.x0.reshape(3, -1)[[0, 2]], want[0][[0, 2]])
+    assert_allclose(base.x0.reshape(3, -1)[1], ref[1], rtol=1e-8,
+                    atol=1e-10 * np.abs(ref[1]).max())
+    assert np.all(np.isfinite(base.cov[1]))
+
+
 def _lens_rig():
     from pslog.camera import Camera, look_at
     from pslog.rig import Rig

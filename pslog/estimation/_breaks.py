@@ -125,29 +125,30 @@ class _Base:
         wJ = wi[..., None, None] * Ji
         self.M = np.swapaxes(wJ, 2, 3) @ Ji  # (B, W, 3, 3): w JᵀJ
         v = np.einsum("bwai,bwa->bwi", wJ, zi)  # w Jᵀ z
-        # H = P + Σ_w (b_w b_wᵀ) ⊗ M_w, each detection's 12 x 12 block where its four
-        # control points are (a compiled loop: the dense products of the basis matrix cost
-        # m / 4 times more)
-        from ._kernels import window_normal
-
-        H, rhs = window_normal(local.P, local.rhs, first, np.ascontiguousarray(N),
-                               np.ascontiguousarray(self.M), np.ascontiguousarray(v), inside)
-        H[:, np.arange(n), np.arange(n)] *= 1 + 1e-12  # keeps a degenerate window solvable
         # only the inverse's columns the gains read (a solve for them and the minimum is
         # cheaper than the whole inverse)
         lo, hi = 0, n
         if spans is not None:
             lo = int(np.clip(3 * (spans[0] + local.K - 1), 0, n - 18))
             hi = int(np.clip(3 * (spans[1] + local.K - 1) + 18, lo + 18, n))
-        from ._kernels import window_solve
+        # H = P + Σ_w (b_w b_wᵀ) ⊗ M_w, each detection's 12 x 12 block where its four
+        # control points are (a compiled loop: the dense products of the basis matrix cost
+        # m / 4 times more), its diagonal times 1 + 1e-12 (keeps a degenerate window
+        # solvable), factored and solved: one window at a time in one compiled pass
+        from ._kernels import window_normal, window_normal_solve
 
-        x, self.cov, ok = window_solve(H, rhs, lo, hi)
+        args = (np.ascontiguousarray(N), np.ascontiguousarray(self.M),
+                np.ascontiguousarray(v), inside)
+        x, self.cov, ok, rhs = window_normal_solve(local.P, local.rhs, first, *args, lo, hi)
         self.col0 = lo
         if not np.all(ok):  # a pivot not positive (a degenerate window): LU there
             bad = np.flatnonzero(~ok)
+            H, _ = window_normal(local.P, local.rhs, np.ascontiguousarray(first[bad]),
+                                 *(np.ascontiguousarray(a[bad]) for a in args))
+            H[:, np.arange(n), np.arange(n)] *= 1 + 1e-12
             unit = np.zeros((n, hi - lo + 1))
             unit[np.arange(lo, hi), np.arange(hi - lo)] = 1.0
-            sol = np.linalg.solve(H[bad], np.concatenate([np.broadcast_to(
+            sol = np.linalg.solve(H, np.concatenate([np.broadcast_to(
                 unit, (len(bad), n, hi - lo + 1))[..., :-1], rhs[bad][..., None]], axis=2))
             self.cov[bad], x[bad] = sol[..., :-1], sol[..., -1]
         wz = wi * np.sum(zi * zi, axis=2)

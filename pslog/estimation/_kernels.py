@@ -316,13 +316,13 @@ def gains_data(s_sorted: np.ndarray, first: np.ndarray, N: np.ndarray, M: np.nda
     Hxy = np.zeros((B, 18, 9))
     g = np.zeros((B, 3, 3))
     # per detection of the trial's three spans: f_e, f_e f_f and b_c f_e (each product
-    # formed once, as before), then every entry's sum over the detections in order from 0
-    # in a register (the entries' chains side by side, none stored between detections)
+    # formed once), then the entries' sums over the detections (each from 0, the detections
+    # in order), nine side by side in registers — a row of a 3 x 3 block: the detection's
+    # coefficient times a row of its M — so nine independent chains overlap instead of one
+    # waiting on its previous addition (the same terms in the same order: the same bits)
     F = np.zeros((Wb, 3))
     FF = np.zeros((Wb, 3, 3))
     OF = np.zeros((Wb, 6, 3))
-    Mw = np.zeros((Wb, 3, 3))
-    Uw = np.zeros((Wb, 3))
     for b in range(B):
         wb = which[b]
         jb = j[b]
@@ -333,8 +333,9 @@ def gains_data(s_sorted: np.ndarray, first: np.ndarray, N: np.ndarray, M: np.nda
                 lo_col += 1
             if s_sorted[wb, w] < jb + 1 + 1:
                 hi_col += 1
-        nw = 0
-        for w in range(lo_col, hi_col):
+        nw = hi_col - lo_col
+        for n in range(nw):
+            w = lo_col + n
             x = s_sorted[wb, w] - jb
             for e in range(3):
                 fe = 0.0
@@ -342,43 +343,76 @@ def gains_data(s_sorted: np.ndarray, first: np.ndarray, N: np.ndarray, M: np.nda
                     if x >= lo[b, e, k] and x < hi[b, e, k]:
                         c = coef[b, e, k]
                         fe = ((c[3] * 1.0 * x + c[2]) * x + c[1]) * x + c[0]
-                F[nw, e] = fe
+                F[n, e] = fe
             for e in range(3):
                 for e2 in range(3):
-                    FF[nw, e, e2] = F[nw, e] * F[nw, e2]
+                    FF[n, e, e2] = F[n, e] * F[n, e2]
             for c6 in range(6):
                 a = q0[b] + c6 - first[wb, w]
                 oc = N[wb, w, a] if 0 <= a <= 3 else 0.0
                 for e in range(3):
-                    OF[nw, c6, e] = oc * F[nw, e]
-            for i in range(3):
-                Uw[nw, i] = u[wb, w, i]
-                for k in range(3):
-                    Mw[nw, i, k] = M[wb, w, i, k]
-            nw += 1
+                    OF[n, c6, e] = oc * F[n, e]
+        Mb = M[wb, lo_col:hi_col]
+        Ub = u[wb, lo_col:hi_col]
+        for e in range(3):
+            g0 = 0.0
+            g1 = 0.0
+            g2 = 0.0
+            for n in range(nw):
+                fe = F[n, e]
+                g0 += fe * Ub[n, 0]
+                g1 += fe * Ub[n, 1]
+                g2 += fe * Ub[n, 2]
+            g[b, e, 0] = g0
+            g[b, e, 1] = g1
+            g[b, e, 2] = g2
         for e in range(3):
             for i in range(3):
-                acc = 0.0
-                for w in range(nw):
-                    acc += F[w, e] * Uw[w, i]
-                g[b, e, i] = acc
-        for e in range(3):
-            for i in range(3):
-                for e2 in range(3):
-                    for k in range(3):
-                        acc = 0.0
-                        for w in range(nw):
-                            acc += FF[w, e, e2] * Mw[w, i, k]
-                        Hyy[b, 3 * e + i, 3 * e2 + k] = acc
+                _block_row(FF[:nw, e], Mb[:, i], Hyy[b, 3 * e + i])
         for c6 in range(6):
             for i in range(3):
-                for e in range(3):
-                    for k in range(3):
-                        acc = 0.0
-                        for w in range(nw):
-                            acc += OF[w, c6, e] * Mw[w, i, k]
-                        Hxy[b, 3 * c6 + i, 3 * e + k] = acc
+                _block_row(OF[:nw, c6], Mb[:, i], Hxy[b, 3 * c6 + i])
     return Hyy, Hxy, g
+
+
+@kernel(inline=True)
+def _block_row(f: np.ndarray, m: np.ndarray, out: np.ndarray) -> None:
+    """``out[3e + k] = Σ_n f[n, e] m[n, k]`` (f, m (nw, 3); out (9,)): each sum from 0 over
+    ``n`` in order (:func:`gains_data`), the nine in registers side by side."""
+    a00 = 0.0
+    a01 = 0.0
+    a02 = 0.0
+    a10 = 0.0
+    a11 = 0.0
+    a12 = 0.0
+    a20 = 0.0
+    a21 = 0.0
+    a22 = 0.0
+    for n in range(f.shape[0]):
+        f0 = f[n, 0]
+        f1 = f[n, 1]
+        f2 = f[n, 2]
+        m0 = m[n, 0]
+        m1 = m[n, 1]
+        m2 = m[n, 2]
+        a00 += f0 * m0
+        a01 += f0 * m1
+        a02 += f0 * m2
+        a10 += f1 * m0
+        a11 += f1 * m1
+        a12 += f1 * m2
+        a20 += f2 * m0
+        a21 += f2 * m1
+        a22 += f2 * m2
+    out[0] = a00
+    out[1] = a01
+    out[2] = a02
+    out[3] = a10
+    out[4] = a11
+    out[5] = a12
+    out[6] = a20
+    out[7] = a21
+    out[8] = a22
 
 
 @kernel
@@ -489,63 +523,129 @@ def window_solve(H: np.ndarray, rhs: np.ndarray, lo: int, hi: int
     Z = np.zeros((n, ncol))
     T = np.zeros(max(ncol, bw + 1))
     for b in range(B):
-        Hb = H[b]
-        good = True
-        for j in range(n):
-            s = Hb[j, j]
-            for k in range(max(0, j - bw), j):
-                s -= U[k, j] * U[k, j]
-            if not s > 0.0:
-                good = False
-                break
-            d = np.sqrt(s)
-            U[j, j] = d
-            iend = min(n, j + bw + 1)
-            for i in range(j + 1, iend):
-                T[i - j] = Hb[i, j]
-            # L[i, j] for the rows below: each over k >= i - bw, ascending
-            for k in range(max(0, j + 1 - bw), j):
-                ukj = U[k, j]
-                for i in range(j + 1, min(iend, k + bw + 1)):
-                    T[i - j] -= U[k, i] * ukj
-            for i in range(j + 1, iend):
-                U[j, i] = T[i - j] / d
-        if not good:
-            ok[b] = False
-            continue
-        # forward: the right-hand side (column 0) and the unit columns lo..hi-1 (columns
-        # 1.., column c's first non-zero at row lo + c - 1) side by side; row k adds to the
-        # columns that have started by row k
-        for i in range(n):
-            T[0] = rhs[b, i]
-            for col in range(1, ncol):
-                T[col] = 1.0 if i == lo + col - 1 else 0.0
-            for k in range(max(0, i - bw), i):
-                lik = U[k, i]
-                for col in range(min(ncol, max(1, k - lo + 2))):
-                    T[col] -= lik * Y[k, col]
-            lii = U[i, i]
-            for col in range(ncol):
-                Y[i, col] = T[col] / lii if col == 0 or i >= lo + col - 1 else 0.0
-        # back: the minimum in full; a unit column down to row lo only (the gains read the
-        # rows lo..hi-1 of these columns: the rows below them are left 0)
-        for i in range(n - 1, -1, -1):
-            nc = ncol if i >= lo else 1
-            for col in range(nc):
-                T[col] = Y[i, col]
-            for k in range(i + 1, min(n, i + bw + 1)):
-                lki = U[i, k]
-                for col in range(nc):
-                    T[col] -= lki * Z[k, col]
-            lii = U[i, i]
-            for col in range(nc):
-                Z[i, col] = T[col] / lii
-        for i in range(n):
-            x[b, i] = Z[i, 0]
-        for i in range(lo, n):
-            for col in range(1, ncol):
-                cov[b, i, col - 1] = Z[i, col]
+        ok[b] = _solve_window(H[b], rhs[b], lo, hi, U, Y, Z, T, x[b], cov[b])
     return x, cov, ok
+
+
+@kernel(inline=True)
+def _solve_window(Hb: np.ndarray, rb: np.ndarray, lo: int, hi: int, U: np.ndarray,
+                  Y: np.ndarray, Z: np.ndarray, T: np.ndarray, xb: np.ndarray,
+                  covb: np.ndarray) -> bool:
+    """:func:`window_solve` of one window (``Hb`` (n, n), of which the lower band is read;
+    ``rb`` (n,)) into ``xb`` (n,) and ``covb`` (n, hi - lo), with the work arrays ``U``
+    (n, n), ``Y``, ``Z`` (n, hi - lo + 1) and ``T``; False (and nothing written) where a
+    pivot is not positive."""
+    n = Hb.shape[0]
+    bw = 11
+    ncol = hi - lo + 1
+    for j in range(n):
+        s = Hb[j, j]
+        for k in range(max(0, j - bw), j):
+            s -= U[k, j] * U[k, j]
+        if not s > 0.0:
+            return False
+        d = np.sqrt(s)
+        U[j, j] = d
+        iend = min(n, j + bw + 1)
+        for i in range(j + 1, iend):
+            T[i - j] = Hb[i, j]
+        # L[i, j] for the rows below: each over k >= i - bw, ascending
+        for k in range(max(0, j + 1 - bw), j):
+            ukj = U[k, j]
+            for i in range(j + 1, min(iend, k + bw + 1)):
+                T[i - j] -= U[k, i] * ukj
+        for i in range(j + 1, iend):
+            U[j, i] = T[i - j] / d
+    # forward: the right-hand side (column 0) and the unit columns lo..hi-1 (columns
+    # 1.., column c's first non-zero at row lo + c - 1) side by side; row k adds to the
+    # columns that have started by row k
+    for i in range(n):
+        T[0] = rb[i]
+        for col in range(1, ncol):
+            T[col] = 1.0 if i == lo + col - 1 else 0.0
+        for k in range(max(0, i - bw), i):
+            lik = U[k, i]
+            for col in range(min(ncol, max(1, k - lo + 2))):
+                T[col] -= lik * Y[k, col]
+        lii = U[i, i]
+        for col in range(ncol):
+            Y[i, col] = T[col] / lii if col == 0 or i >= lo + col - 1 else 0.0
+    # back: the minimum in full; a unit column down to row lo only (the gains read the
+    # rows lo..hi-1 of these columns: the rows below them are left 0)
+    for i in range(n - 1, -1, -1):
+        nc = ncol if i >= lo else 1
+        for col in range(nc):
+            T[col] = Y[i, col]
+        for k in range(i + 1, min(n, i + bw + 1)):
+            lki = U[i, k]
+            for col in range(nc):
+                T[col] -= lki * Z[k, col]
+        lii = U[i, i]
+        for col in range(nc):
+            Z[i, col] = T[col] / lii
+    for i in range(n):
+        xb[i] = Z[i, 0]
+    for i in range(lo, n):
+        for col in range(1, ncol):
+            covb[i, col - 1] = Z[i, col]
+    return True
+
+
+@kernel
+def window_normal_solve(P: np.ndarray, prior_rhs: np.ndarray, first: np.ndarray,
+                        N: np.ndarray, M: np.ndarray, v: np.ndarray, inside: np.ndarray,
+                        lo: int, hi: int
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`window_normal`, the diagonal times ``1 + 1e-12``, then :func:`window_solve`,
+    one window at a time: its normal matrix built in a work array that stays in cache (a
+    batch's (B, n, n) matrices, 4 MB for a block of the scan, were written out and read
+    back) and only its lower band, the part the factorisation reads (each entry the same
+    terms in the same order: the same bits).
+
+    Returns
+    -------
+    x : (B, n); cov : (B, n, hi - lo); ok : (B,) bool (False: a pivot not positive, that
+    window's outputs not set); rhs : (B, n), :func:`window_normal`'s
+    """
+    B, W = first.shape
+    n = P.shape[0]
+    bw = 11
+    x = np.zeros((B, n))
+    cov = np.zeros((B, n, hi - lo))
+    ok = np.ones(B, dtype=np.bool_)
+    rhs = np.empty((B, n))
+    Hb = np.zeros((n, n))
+    U = np.zeros((n, n))  # U[k, i] = L[i, k]
+    ncol = hi - lo + 1
+    Y = np.zeros((n, ncol))
+    Z = np.zeros((n, ncol))
+    T = np.zeros(max(ncol, bw + 1))
+    for b in range(B):
+        for j in range(n):
+            for i in range(j, min(n, j + bw + 1)):
+                Hb[i, j] = P[i, j]
+        rb = rhs[b]
+        rb[:] = 0.0
+        for w in range(W):
+            if not inside[b, w]:
+                continue
+            f3 = 3 * first[b, w]
+            for a in range(4):
+                na = N[b, w, a]
+                for i in range(3):
+                    rb[f3 + 3 * a + i] += na * v[b, w, i]
+                for c in range(a + 1):  # the blocks on and below the diagonal
+                    nc = N[b, w, c]
+                    for i in range(3):
+                        for k in range(3 if c < a else i + 1):
+                            mik = M[b, w, i, k] if i <= k else M[b, w, k, i]
+                            Hb[f3 + 3 * a + i, f3 + 3 * c + k] += na * (mik * nc)
+        for r in range(n):
+            rb[r] += prior_rhs[r]
+        for r in range(n):
+            Hb[r, r] *= 1 + 1e-12
+        ok[b] = _solve_window(Hb, rb, lo, hi, U, Y, Z, T, x[b], cov[b])
+    return x, cov, ok, rhs
 
 
 @kernel
