@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import json
 import threading
 import time
 import weakref
@@ -169,6 +170,12 @@ class SessionWriter:
         # the tracks added on a track channel (its table is made from them at close, not from
         # copies of its messages: those are most of a fused session's bytes)
         self._tracks_of: dict[int, list[Track]] = {}
+        #: topic -> metadata of its channel, set before the channel is registered (a track's
+        #: left-out counts: :meth:`add_track`; a copied track's: :func:`.copy.open_copy`)
+        self.channel_metadata: dict[str, dict[str, str]] = {}
+        # channel -> (tracks added so far, its table's encoded parts): a finished track's
+        # table encoded as it is added (:meth:`add_track` ``last=True``), not at close
+        self._track_tables: dict[int, tuple[int, list]] = {}
 
         opened = False
         try:  # once the file exists an exception (a Ctrl-C or SIGTERM included) removes it
@@ -252,7 +259,8 @@ class SessionWriter:
                 schema = self._mcap.register_schema(
                     name=name, encoding=S.PROTOBUF, data=S.file_descriptor_set(message_class))
                 self._schema_ids[name] = schema
-            channel = self._register_channel(topic, S.PROTOBUF, schema, {})
+            channel = self._register_channel(topic, S.PROTOBUF, schema,
+                                             self.channel_metadata.get(topic, {}))
             self._channels[topic] = channel
             self._note_channel(topic, channel)
         return channel
@@ -349,7 +357,10 @@ class SessionWriter:
                 if copied != counts:
                     data = None
             parts = None if data is None else [data]
-            if data is None and direct:
+            made = self._track_tables.get(channels[0]) if direct else None
+            if data is None and made is not None and made[0] == len(direct[0]):
+                parts = made[1]  # encoded as its track was added
+            elif data is None and direct:
                 parts = table.encode_parts(name, self._names, counts,
                                            table.track_columns_of(direct[0]))
             elif data is None and unkept:
@@ -725,7 +736,9 @@ class SessionWriter:
                 if not sid:
                     sid = self._schema_ids[key] = self._mcap.register_schema(
                         schema.name, schema.encoding, schema.data)
-            cid = self._register_channel(topic, channel.encoding, sid, channel.metadata)
+            cid = self._register_channel(topic, channel.encoding, sid,
+                                         {**channel.metadata,
+                                          **self.channel_metadata.get(topic, {})})
             self._channels[topic] = cid
             self._note_channel(topic, cid)
         return cid
@@ -744,13 +757,25 @@ class SessionWriter:
         self._count(S.TRUTH_TOPIC, len(truth))
 
     @_locked
-    def add_track(self, track: Track) -> None:
+    def add_track(self, track: Track, *, left_out: Mapping[str, int] | None = None,
+                  last: bool = False) -> None:
         """A fused track: ``pslog.TrackPoint`` per point on ``/tracks/<method>`` and a
-        Foxglove-viewable ``foxglove.SceneUpdate`` sphere per point on its ``/scene`` topic."""
+        Foxglove-viewable ``foxglove.SceneUpdate`` sphere per point on its ``/scene`` topic.
+
+        ``left_out``: the points the method left out, by reason (``Track.dropped``), kept in
+        the metadata of the track's channel (:data:`pslog.log._schemas.LEFT_OUT_KEY`): only
+        with the first part of a track. ``last``: no more points of this method follow (its
+        columnar table is encoded now, beside whatever runs meanwhile, not at close)."""
         self._check_open()
         method = track.method
         if not method or "/" in method:
             raise InputError(f"track method must be a non-empty name without '/', got {method!r}")
+        if left_out is not None:
+            topic = S.track_topic(method)
+            if topic in self._channels:
+                raise InputError(f"track {method!r}: left-out counts go with its first part")
+            self.channel_metadata[topic] = {S.LEFT_OUT_KEY: json.dumps(
+                {str(k): int(v) for k, v in dict(left_out).items()}, sort_keys=True)}
         if method not in self._track_methods:
             self._track_methods.append(method)
         color = track_color(method)
@@ -783,6 +808,11 @@ class SessionWriter:
         self._scene_ids[method] = first_id + n
         if direct is not None:
             direct.append(track)
+            if last and self._adopted.get(table.track_table(method)) is None:
+                self._track_tables[channel] = (len(direct), table.encode_parts(
+                    table.track_table(method), self._names,
+                    {S.track_topic(method): sum(len(x) for x in direct)},
+                    table.track_columns_of(direct)))
         self._count(S.track_topic(method), n)
         self._count(S.track_scene_topic(method), n)
 
