@@ -84,6 +84,7 @@ def run(args: argparse.Namespace) -> int:
         check_tolerance,
         default_methods,
     )
+    from pslog.fusion._parallel import finishing_order
     from pslog.fusion.gating import start_fusion
     from pslog.log import read_session
     from pslog.log.copy import open_copy
@@ -149,22 +150,32 @@ def run(args: argparse.Namespace) -> int:
     try:
         with open_copy(args.session, output, new_methods=methods, force=args.force,
                        rig=None if args.rig is None else rig) as w:
+            # written in a fixed order (the expected finishing order: the same file whatever
+            # the scheduling), each as soon as it and those before it have ended
+            order = finishing_order(methods)
+            ended: dict[str, tuple] = {}
             for method, track, rejected in fusing:
-                dropped = dict(track.dropped)  # invalid or untrustworthy points
-                if len(track) == 0:
-                    empty.append(method)
-                    continue
-                # a camera whose clock runs behind camera 1's has true times before the
-                # session clock's zero, which a session cannot store: left out, said below
-                n_early = int(np.count_nonzero(track.time_ns < 0))
-                if n_early:
-                    early[method] = n_early
-                    track = track.select(track.time_ns >= 0)
-                w.add_track(track, left_out=dropped, last=True)
-                if options.gating:
-                    w.add_rejections(method, rejected)
-                written[method] = (len(track), dropped, len(rejected))
+                ended[method] = (track, rejected)
                 del track, rejected
+                while order and order[0] in ended:
+                    method = order.pop(0)
+                    track, rejected = ended.pop(method)
+                    dropped = dict(track.dropped)  # invalid or untrustworthy points
+                    if len(track) == 0:
+                        empty.append(method)
+                        continue
+                    # a camera whose clock runs behind camera 1's has true times before the
+                    # session clock's zero, which a session cannot store: left out, said
+                    # below
+                    n_early = int(np.count_nonzero(track.time_ns < 0))
+                    if n_early:
+                        early[method] = n_early
+                        track = track.select(track.time_ns >= 0)
+                    w.add_track(track, left_out=dropped, last=True)
+                    if options.gating:
+                        w.add_rejections(method, rejected)
+                    written[method] = (len(track), dropped, len(rejected))
+                    del track, rejected
             empty.sort(key=methods.index)
             if empty:
                 print(f"no point from {', '.join(empty)}: too few detections close enough "

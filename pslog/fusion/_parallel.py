@@ -48,6 +48,15 @@ COST = {"smooth": 9.0, "nearest": 1.7, "sync": 1.5, "typeB": 2.0, "linear": 2.0,
 _UNSET = object()
 
 
+def finishing_order(methods: Sequence[str]) -> list[str]:
+    """``methods`` in the order they are expected to end: the cheapest first (:data:`COST`;
+    ties in the asked order). ``pslog fuse`` writes the tracks in this order, each as soon
+    as it and those before it have ended: the file's layout is then the same whatever the
+    scheduling and the number of threads (the same command writes the same bytes), and the
+    costliest method's track, written last, is the only one written after the fusion."""
+    return sorted(methods, key=lambda m: COST.get(m, 1.0))
+
+
 def usable_cores() -> int:
     """The cores this process may run on (its CPU affinity where the OS tells it)."""
     try:
