@@ -173,9 +173,9 @@ class SessionWriter:
         #: topic -> metadata of its channel, set before the channel is registered (a track's
         #: left-out counts: :meth:`add_track`; a copied track's: :func:`.copy.open_copy`)
         self.channel_metadata: dict[str, dict[str, str]] = {}
-        # channel -> (tracks added so far, its table's encoded parts): a finished track's
-        # table encoded as it is added (:meth:`add_track` ``last=True``), not at close
-        self._track_tables: dict[int, tuple[int, list]] = {}
+        # the tables already written: a finished track's, as it is added (:meth:`add_track`
+        # ``last=True``), not at close
+        self._tables_written: set[str] = set()
 
         opened = False
         try:  # once the file exists an exception (a Ctrl-C or SIGTERM included) removes it
@@ -334,7 +334,7 @@ class SessionWriter:
         copied one (:meth:`_adopt_table`) that names as many messages as were written."""
         for name in table.names(self._topic_of.values()):  # fused tracks' tables too
             channels = [cid for cid, (t, _cam) in self._table_rows.items() if t == name]
-            if not channels:
+            if not channels or name in self._tables_written:
                 continue
             direct = [self._tracks_of[cid] for cid in channels if cid in self._tracks_of]
             per_topic = {self._topic_of[cid]: self._table_parts[cid] for cid in channels
@@ -357,10 +357,7 @@ class SessionWriter:
                 if copied != counts:
                     data = None
             parts = None if data is None else [data]
-            made = self._track_tables.get(channels[0]) if direct else None
-            if data is None and made is not None and made[0] == len(direct[0]):
-                parts = made[1]  # encoded as its track was added
-            elif data is None and direct:
+            if data is None and direct:
                 parts = table.encode_parts(name, self._names, counts,
                                            table.track_columns_of(direct[0]))
             elif data is None and unkept:
@@ -764,12 +761,16 @@ class SessionWriter:
 
         ``left_out``: the points the method left out, by reason (``Track.dropped``), kept in
         the metadata of the track's channel (:data:`pslog.log._schemas.LEFT_OUT_KEY`): only
-        with the first part of a track. ``last``: no more points of this method follow (its
-        columnar table is encoded now, beside whatever runs meanwhile, not at close)."""
+        with the first part of a track. ``last``: no more points of this method follow: its
+        columnar table is written now, right after its messages, and the writer keeps none
+        of its tracks (not at close: ``pslog fuse`` writes each method's track as the
+        method ends, the fusion of the others going on meanwhile)."""
         self._check_open()
         method = track.method
         if not method or "/" in method:
             raise InputError(f"track method must be a non-empty name without '/', got {method!r}")
+        if table.track_table(method) in self._tables_written:
+            raise InputError(f"track {method!r} was added with last=True already")
         if left_out is not None:
             topic = S.track_topic(method)
             if topic in self._channels:
@@ -808,11 +809,19 @@ class SessionWriter:
         self._scene_ids[method] = first_id + n
         if direct is not None:
             direct.append(track)
-            if last and self._adopted.get(table.track_table(method)) is None:
-                self._track_tables[channel] = (len(direct), table.encode_parts(
-                    table.track_table(method), self._names,
-                    {S.track_topic(method): sum(len(x) for x in direct)},
-                    table.track_columns_of(direct)))
+            name = table.track_table(method)
+            if last and self._adopted.get(name) is None:
+                # (the messages of this track are buffered or written: the table names as
+                # many, as a table written at close does)
+                parts = table.encode_parts(name, self._names, {S.track_topic(method): sum(
+                    len(x) for x in direct)}, table.track_columns_of(direct))
+                if self._bulk:
+                    _chunks.write_attachment(self._mcap, name, table.MEDIA_TYPE, parts)
+                else:
+                    self._mcap.add_attachment(0, 0, name, table.MEDIA_TYPE, b"".join(parts))
+                del parts
+                self._tables_written.add(name)
+                direct.clear()  # the tracks go with their caller's references
         self._count(S.track_topic(method), n)
         self._count(S.track_scene_topic(method), n)
 
