@@ -142,7 +142,10 @@ def run(args: argparse.Namespace) -> int:
     # the methods fuse on threads while this thread copies the session into the output and
     # writes each method's track as the method ends (its left-out counts go with it, in its
     # channel's metadata: docs/log-format.md); the output appears only once complete
-    fusing = start_fusion(detections, rig, methods, options, workers=args.workers)
+    # (one method, or one usable core: on a thread all the same, the copy going on beside
+    # it; --workers 1 keeps everything on this thread, one step after another)
+    fusing = start_fusion(detections, rig, methods, options, workers=args.workers,
+                          background=args.workers is None)
     del detections  # (held by the gating until the last form is gated)
     written: dict[str, tuple[int, dict[str, int], int]] = {}  # points, left out, rejected
     empty: list[str] = []

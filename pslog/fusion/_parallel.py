@@ -142,13 +142,14 @@ class MethodRun:
     too: once a method failed no further result is delivered, and the iteration raises,
     when every method still running has ended, the error :func:`run_methods` raises (the
     first failing method's in the asked order). An interrupt in the iterating thread (or
-    the iteration abandoned) stops every method that has not started."""
+    the iteration abandoned) stops every method that has not started. ``background``: on
+    a thread even with one worker (or one method), the calling thread free meanwhile."""
 
     def __init__(
         self, methods: Sequence[str], keys: Sequence[Hashable],
         make: Callable[[Hashable, str], Any], run: Callable[[str, Any], Any], workers: int,
         started: Callable[[str], None] | None = None,
-        finished: Callable[[str], None] | None = None,
+        finished: Callable[[str], None] | None = None, background: bool = False,
     ) -> None:
         self.methods, self.keys, self.make, self.run = list(methods), list(keys), make, run
         self.started, self.finished = started, finished
@@ -157,7 +158,9 @@ class MethodRun:
         for key in self.keys:
             uses[key] = uses.get(key, 0) + 1
         self.shared = {key: _Shared(count) for key, count in uses.items()}
-        self.in_turn = workers <= 1 or n <= 1
+        # background: one worker thread even for one method or one worker (the caller's
+        # thread meanwhile free: pslog fuse copies the session into its output)
+        self.in_turn = (workers <= 1 or n <= 1) and not background
         self.results: list[Any] = [_UNSET] * n  # a thread's result, or _UNSET
         self.errors: dict[int, BaseException] = {}
         self.lock = threading.Lock()

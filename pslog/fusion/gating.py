@@ -2010,10 +2010,10 @@ class FusionRun:
 
 
 def start_fusion(detections: Detections, rig: Rig, methods, options=None, *,
-                 workers: int | None = None) -> FusionRun:
+                 workers: int | None = None, background: bool = False) -> FusionRun:
     """:func:`fuse_detections` started (on threads, at once; ``workers=1``: each method
-    as the iteration reaches it), its tracks delivered as each method ends: the caller
-    writes them meanwhile (``pslog fuse``)."""
+    as the iteration reaches it, unless ``background``: on one thread), its tracks
+    delivered as each method ends: the caller writes them meanwhile (``pslog fuse``)."""
     from . import FusionOptions, check_method, fuse, prepare
     from ._parallel import MethodProgress, MethodRun, default_workers
 
@@ -2029,7 +2029,8 @@ def start_fusion(detections: Detections, rig: Rig, methods, options=None, *,
         return FusionRun(methods, MethodRun(
             methods, [None] * len(methods), lambda key, method: prep,
             lambda m, p: fuse(obs, rig, m, options, prepared=p), workers,
-            started=shown.started, finished=shown.finished), gating=False)
+            started=shown.started, finished=shown.finished, background=background),
+            gating=False)
 
     # the forms' shared part (gate_common) once, by the first form to start, dropped once
     # every form has it (the forms gate at once, on threads: the others wait for it)
@@ -2060,7 +2061,8 @@ def start_fusion(detections: Detections, rig: Rig, methods, options=None, *,
     shown = MethodProgress(methods)
     return FusionRun(methods, MethodRun(
         methods, [gating_key(method, options) for method in methods], gated_input, fused,
-        workers, started=shown.started, finished=shown.finished), gating=True)
+        workers, started=shown.started, finished=shown.finished, background=background),
+        gating=True)
 
 
 __all__ = [
