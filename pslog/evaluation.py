@@ -300,24 +300,19 @@ def format_rejection_table(rows: list[RejectionCounts]) -> str:
     return format_table(header, cells, left={0, len(header) - 1})
 
 
-#: Session metadata key of the points each method left out, by reason (``pslog fuse`` writes
-#: ``Track.dropped`` of every track there as JSON: ``{method: {reason: count}}``).
+#: Where ``pslog fuse`` keeps the points each method left out, by reason (``Track.dropped``):
+#: the metadata key of each track's channel; files fused before kept every method's counts
+#: under this key of the session metadata (:attr:`pslog.log.Session.left_out` reads both).
 LEFT_OUT_KEY = "left_out_points"
 
 
 def left_out_counts(metadata: Mapping[str, str]) -> dict[str, dict[str, int]]:
-    """``{method: {reason: count}}`` of the points a fused session's methods left out
-    (invalid or untrustworthy: behind a camera, outside its view, near-parallel rays, an
-    underdetermined end, unconfirmed after a jump, ...); empty when not recorded or
-    unreadable (a session fused before the counts were kept)."""
-    import json
+    """``{method: {reason: count}}`` of the points the methods of a session fused before the
+    counts went with each track left out (invalid or untrustworthy: behind a camera,
+    outside its view, near-parallel rays, an underdetermined end, unconfirmed after a
+    jump, ...), from its session ``metadata``; empty when not recorded or unreadable. A
+    session read with :func:`pslog.log.read_session` has them in ``Session.left_out``,
+    whichever way the file holds them."""
+    from .log.reader import old_left_out_counts
 
-    try:
-        value = json.loads(metadata.get(LEFT_OUT_KEY, "{}"))
-    except ValueError:
-        return {}
-    if not isinstance(value, dict):
-        return {}
-    return {str(m): {str(r): int(n) for r, n in reasons.items()
-                     if isinstance(n, (int, float)) and n == n}
-            for m, reasons in value.items() if isinstance(reasons, dict)}
+    return old_left_out_counts(metadata)

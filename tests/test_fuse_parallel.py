@@ -153,6 +153,53 @@ def test_an_error_making_the_shared_input_fails_every_method_of_its_key():
 
 
 
+def test_each_result_is_delivered_as_its_method_ends():
+    """MethodRun (what ``pslog fuse`` writes each track from) hands typeA's result to the
+    iterating thread while smooth still runs: smooth waits for the consumer to have got
+    typeA's result, so the run completes only if results come as each method ends, not
+    once all have (no timing involved)."""
+    from pslog.fusion._parallel import MethodRun
+
+    got_type_a = threading.Event()
+
+    def run(method, value):
+        if method == "smooth":  # started first (the costliest)
+            assert got_type_a.wait(30), "typeA's result was not delivered before smooth ended"
+        return method
+
+    order = []
+    for i, result in MethodRun(["smooth", "typeA"], [0, 0], lambda k, m: None, run, 2):
+        order.append((i, result))
+        if result == "typeA":
+            got_type_a.set()
+    assert order == [(1, "typeA"), (0, "smooth")]
+
+
+def test_a_failure_stops_the_delivery_and_the_ranked_error_is_raised():
+    """The error raised once every method has ended is the first failing one in the asked
+    order (filter, asked first, fails after nearest); no failed method's result is
+    delivered."""
+    from pslog.fusion._parallel import MethodRun
+
+    nearest_failed = threading.Event()
+
+    def run(method, value):
+        if method == "nearest":
+            nearest_failed.set()
+            raise ValueError("nearest failed")
+        assert nearest_failed.wait(30)
+        if method == "filter":
+            raise ValueError("filter failed")
+        return method
+
+    delivered = []
+    with pytest.raises(ValueError, match="filter failed"):
+        for _i, result in MethodRun(["filter", "typeA", "nearest"], [0, 0, 0],
+                                    lambda k, m: None, run, 3):
+            delivered.append(result)
+    assert set(delivered) <= {"typeA"}  # (delivered only if it came before the failure)
+
+
 @pytest.mark.parametrize("workers", [1, 2, 3])
 def test_gating_forms_share_their_common_part_and_gate_as_alone(dirty, workers, monkeypatch):
     """Methods of three gating forms (offline; causal; causal waiting for the tolerance)

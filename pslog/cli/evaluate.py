@@ -29,7 +29,6 @@ def run(args: argparse.Namespace) -> int:
         format_accuracy_table,
         format_quality_table,
         format_rejection_table,
-        left_out_counts,
         rejection_counts,
         summarise_quality,
     )
@@ -55,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
     gated = {m: rejection_counts(m, session.rejections[m], session.detections,
                                  session.ball_truth)
              for m in methods if m in session.rejections}
-    left_out = left_out_counts(session.metadata)  # points the methods did not vouch for
+    left_out = session.left_out  # points the methods did not vouch for
     if args.json:
         # NaN (a summary a track has no column for) is null: JSON has no NaN
         # without truth: the points and output rate still (pslog batch's summary)

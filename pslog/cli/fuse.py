@@ -72,14 +72,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import json
-
     import numpy as np
 
     from pslog import progress
     from pslog._jit import preload
     from pslog.errors import FusionError, RigError
-    from pslog.evaluation import LEFT_OUT_KEY
     from pslog.fusion import (
         METHODS,
         FusionOptions,
@@ -87,8 +84,10 @@ def run(args: argparse.Namespace) -> int:
         check_tolerance,
         default_methods,
     )
-    from pslog.fusion.gating import fuse_detections
-    from pslog.log import copy_session, read_session
+    from pslog.fusion._parallel import finishing_order
+    from pslog.fusion.gating import start_fusion
+    from pslog.log import read_session
+    from pslog.log.copy import open_copy
     from pslog.rig import check_baselines, resolve_rig
     from pslog.timing import observations as timed_observations
 
@@ -140,37 +139,67 @@ def run(args: argparse.Namespace) -> int:
     n_observations = len(observations)
     detections = session.detections
     del observations, session  # freed before fusing (a 90-minute match's columns)
-    tracks, rejections = fuse_detections(detections, rig, methods, options,
-                                         workers=args.workers)
-    del detections  # the output is copied from the file itself
-    dropped = {m: t.dropped for m, t in tracks.items()}  # invalid or untrustworthy points
-    empty = [m for m, t in tracks.items() if len(t) == 0]
-    if empty:
-        print(f"no point from {', '.join(empty)}: too few detections close enough in time")
-        tracks = {m: t for m, t in tracks.items() if len(t)}
-    if not tracks:
-        raise FusionError(f"no fusion method produced a point from the "
-                          f"{n_observations} detections of {args.session}")
-    # a camera whose clock runs behind camera 1's has true times before the session clock's
-    # zero, which a session cannot store: say so rather than fail after the work
-    early = {m: int(np.count_nonzero(t.time_ns < 0)) for m, t in tracks.items()}
-    if any(early.values()):
-        tracks = {m: t.select(t.time_ns >= 0) for m, t in tracks.items()}
-        print("left out, being before the session clock's zero after clock correction: "
-              + ", ".join(f"{n} {m} point{'s' if n > 1 else ''}" for m, n in early.items() if n))
-    rejections = {m: rejections[m] for m in tracks} if options.gating else {}
-    # the points each method left out, by reason, for eval (always written: a re-fuse
-    # replaces the previous fuse's counts)
-    left_out = {m: dict(dropped[m]) for m in tracks if dropped.get(m)}
-    progress.step(f"writing {output}")
-    copy_session(args.session, output, tracks=list(tracks.values()), force=args.force,
-                 rig=None if args.rig is None else rig, rejections=rejections,
-                 metadata={LEFT_OUT_KEY: json.dumps(left_out, sort_keys=True)})
-    for method, track in tracks.items():
-        why = ", ".join(f"{reason} {n}" for reason, n in dropped.get(method, {}).items())
-        rejected = (f"  {len(rejections[method]):>6d} candidates rejected by gating"
-                    if options.gating else "")
-        print(f"{method:<8} {len(track):>7d} points{rejected}"
+    # the methods fuse on threads while this thread copies the session into the output and
+    # writes each method's track as the method ends (its left-out counts go with it, in its
+    # channel's metadata: docs/log-format.md); the output appears only once complete
+    # (one method, or one usable core: on a thread all the same, the copy going on beside
+    # it; --workers 1 keeps everything on this thread, one step after another)
+    fusing = start_fusion(detections, rig, methods, options, workers=args.workers,
+                          background=args.workers is None)
+    del detections  # (held by the gating until the last form is gated)
+    written: dict[str, tuple[int, dict[str, int], int]] = {}  # points, left out, rejected
+    empty: list[str] = []
+    early: dict[str, int] = {}
+    try:
+        with open_copy(args.session, output, new_methods=methods, force=args.force,
+                       rig=None if args.rig is None else rig) as w:
+            # written in a fixed order (the expected finishing order: the same file whatever
+            # the scheduling), each as soon as it and those before it have ended
+            order = finishing_order(methods)
+            ended: dict[str, tuple] = {}
+            for method, track, rejected in fusing:
+                ended[method] = (track, rejected)
+                del track, rejected
+                while order and order[0] in ended:
+                    method = order.pop(0)
+                    track, rejected = ended.pop(method)
+                    dropped = dict(track.dropped)  # invalid or untrustworthy points
+                    if len(track) == 0:
+                        empty.append(method)
+                        continue
+                    # a camera whose clock runs behind camera 1's has true times before the
+                    # session clock's zero, which a session cannot store: left out, said
+                    # below
+                    n_early = int(np.count_nonzero(track.time_ns < 0))
+                    if n_early:
+                        early[method] = n_early
+                        track = track.select(track.time_ns >= 0)
+                    w.add_track(track, left_out=dropped, last=True)
+                    if options.gating:
+                        w.add_rejections(method, rejected)
+                    written[method] = (len(track), dropped, len(rejected))
+                    del track, rejected
+            empty.sort(key=methods.index)
+            if empty:
+                print(f"no point from {', '.join(empty)}: too few detections close enough "
+                      f"in time")
+            if not written:
+                raise FusionError(f"no fusion method produced a point from the "
+                                  f"{n_observations} detections of {args.session}")
+            if early:
+                print("left out, being before the session clock's zero after clock "
+                      "correction: " + ", ".join(f"{n} {m} point{'s' if n > 1 else ''}"
+                                                 for m in methods if (n := early.get(m, 0))))
+            progress.step(f"writing {output}")
+    except BaseException:
+        fusing.stop()  # no method starts after a failure or an interrupt
+        raise
+    for method in (m for m in methods if m in written):
+        n_points, dropped, n_rejected = written[method]
+        why = ", ".join(f"{reason} {n}" for reason, n in dropped.items())
+        rejected_text = (f"  {n_rejected:>6d} candidates rejected by gating"
+                         if options.gating else "")
+        print(f"{method:<8} {n_points:>7d} points{rejected_text}"
               + (f" (left out, untrustworthy: {why})" if why else ""))
     print(f"wrote {output}")
     return 0

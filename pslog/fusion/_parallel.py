@@ -25,13 +25,18 @@ The outcome does not depend on the scheduling:
   already running cannot delay the process's exit.
 
 ``workers=1`` runs the methods in turn on the calling thread (``pslog fuse --workers 1``).
+
+:class:`MethodRun` hands each result to the calling thread as its method ends (``pslog
+fuse`` writes each track then, in :func:`finishing_order`, while the other methods still
+fuse: the write, once a serial 2.8 s after the fusion of a 90-minute match, overlaps it).
 """
 
 from __future__ import annotations
 
 import os
+import queue
 import threading
-from collections.abc import Callable, Hashable, Sequence
+from collections.abc import Callable, Hashable, Iterator, Sequence
 from functools import partial
 from typing import Any
 
@@ -45,6 +50,15 @@ COST = {"smooth": 9.0, "nearest": 1.7, "sync": 1.5, "typeB": 2.0, "linear": 2.0,
 
 
 _UNSET = object()
+
+
+def finishing_order(methods: Sequence[str]) -> list[str]:
+    """``methods`` in the order they are expected to end: the cheapest first (:data:`COST`;
+    ties in the asked order). ``pslog fuse`` writes the tracks in this order, each as soon
+    as it and those before it have ended: the file's layout is then the same whatever the
+    scheduling and the number of threads (the same command writes the same bytes), and the
+    costliest method's track, written last, is the only one written after the fusion."""
+    return sorted(methods, key=lambda m: COST.get(m, 1.0))
 
 
 def usable_cores() -> int:
@@ -111,93 +125,160 @@ def run_methods(
     -------
     list, the results in ``methods`` order
     """
-    n = len(methods)
-    uses: dict[Hashable, int] = {}
-    for key in keys:
-        uses[key] = uses.get(key, 0) + 1
-    shared = {key: _Shared(count) for key, count in uses.items()}
-    results: list[Any] = [None] * n
-    if workers <= 1 or n <= 1:
-        for i, (method, key) in enumerate(zip(methods, keys, strict=True)):
-            if started is not None:
-                started(method)
-            results[i] = run(method, shared[key].get(partial(make, key, method)))
-            shared[key].release()  # the last method of its key: its arrays go
-            if finished is not None:
-                finished(method)
-        return results
+    results: list[Any] = [None] * len(methods)
+    for i, result in MethodRun(methods, keys, make, run, workers, started, finished):
+        results[i] = result
+    return results
 
-    results = [_UNSET] * n  # a thread's result, or still _UNSET if it never got there
-    # costliest first; ties in the asked order
-    order = sorted(range(n), key=lambda i: -COST.get(methods[i], 1.0))
-    lock = threading.Lock()
-    state = {"next": 0, "limit": n, "stopped": False, "running": 0}
-    errors: dict[int, BaseException] = {}
-    done = threading.Event()
 
-    def take() -> int | None:
-        with lock:
-            while state["next"] < n and not state["stopped"]:
-                i = order[state["next"]]
+class MethodRun:
+    """The methods of :func:`run_methods` started at once (on ``workers`` threads, from the
+    constructor on), their results delivered to the calling thread as each method ends:
+    iterating gives ``(i, result)`` pairs, ``i`` the method's place in ``methods``, in the
+    order the methods end (with one worker, or ``workers=1`` in turn on the calling
+    thread as it iterates: the asked order). ``pslog fuse`` writes each track meanwhile.
+
+    The results are those of running the methods in turn (see the module); the errors
+    too: once a method failed no further result is delivered, and the iteration raises,
+    when every method still running has ended, the error :func:`run_methods` raises (the
+    first failing method's in the asked order). An interrupt in the iterating thread (or
+    the iteration abandoned) stops every method that has not started. ``background``: on
+    a thread even with one worker (or one method), the calling thread free meanwhile."""
+
+    def __init__(
+        self, methods: Sequence[str], keys: Sequence[Hashable],
+        make: Callable[[Hashable, str], Any], run: Callable[[str, Any], Any], workers: int,
+        started: Callable[[str], None] | None = None,
+        finished: Callable[[str], None] | None = None, background: bool = False,
+    ) -> None:
+        self.methods, self.keys, self.make, self.run = list(methods), list(keys), make, run
+        self.started, self.finished = started, finished
+        n = len(self.methods)
+        uses: dict[Hashable, int] = {}
+        for key in self.keys:
+            uses[key] = uses.get(key, 0) + 1
+        self.shared = {key: _Shared(count) for key, count in uses.items()}
+        # background: one worker thread even for one method or one worker (the caller's
+        # thread meanwhile free: pslog fuse copies the session into its output)
+        self.in_turn = (workers <= 1 or n <= 1) and not background
+        self.results: list[Any] = [_UNSET] * n  # a thread's result, or _UNSET
+        self.errors: dict[int, BaseException] = {}
+        self.lock = threading.Lock()
+        self.state = {"next": 0, "limit": n, "stopped": False, "running": 0}
+        # a method's place as it ends (None: every worker has ended)
+        self.ended: queue.SimpleQueue[int | None] = queue.SimpleQueue()
+        self.threads: list[threading.Thread] = []
+        if self.in_turn:
+            return
+        # costliest first; ties in the asked order
+        self.order = sorted(range(n), key=lambda i: -COST.get(self.methods[i], 1.0))
+        try:
+            for j in range(min(workers, n)):
+                thread = threading.Thread(target=self._worker, name=f"pslog-fuse-{j}",
+                                          daemon=True)
+                with self.lock:
+                    self.state["running"] += 1
+                try:
+                    thread.start()  # RuntimeError when its stack cannot be had (out of memory)
+                except BaseException:
+                    with self.lock:
+                        self.state["running"] -= 1
+                        if self.state["running"] == 0:
+                            self.ended.put(None)
+                    raise
+                self.threads.append(thread)
+        except BaseException:
+            self.stop()
+            raise
+
+    def stop(self) -> None:
+        """No method starts after this (an interrupt, a failed start, an abandoned run)."""
+        with self.lock:
+            self.state["stopped"] = True
+
+    def _take(self) -> int | None:
+        with self.lock:
+            state = self.state
+            while state["next"] < len(self.methods) and not state["stopped"]:
+                i = self.order[state["next"]]
                 state["next"] += 1
                 if i < state["limit"]:  # not after a failed method in the asked order
                     return i
             return None
 
-    def worker() -> None:
+    def _worker(self) -> None:
         try:
-            while (i := take()) is not None:
-                method, key = methods[i], keys[i]
+            while (i := self._take()) is not None:
+                method, key = self.methods[i], self.keys[i]
                 try:
-                    if started is not None:
-                        started(method)
-                    value = shared[key].get(partial(make, key, method))
-                    results[i] = run(method, value)
+                    if self.started is not None:
+                        self.started(method)
+                    value = self.shared[key].get(partial(self.make, key, method))
+                    self.results[i] = self.run(method, value)
                     del value
                 except BaseException as exc:  # raised by the caller's thread, ranked
-                    with lock:
-                        errors[i] = exc
-                        state["limit"] = min(state["limit"], i)
+                    with self.lock:
+                        self.errors[i] = exc
+                        self.state["limit"] = min(self.state["limit"], i)
                 finally:
-                    shared[key].release()
-                    if finished is not None:
-                        finished(method)
+                    self.shared[key].release()
+                    if self.finished is not None:
+                        self.finished(method)
+                    self.ended.put(i)
         finally:
-            with lock:
-                state["running"] -= 1
-                if state["running"] == 0:
-                    done.set()
+            with self.lock:
+                self.state["running"] -= 1
+                if self.state["running"] == 0:
+                    self.ended.put(None)
 
-    threads = []
-    try:
-        for j in range(min(workers, n)):
-            thread = threading.Thread(target=worker, name=f"pslog-fuse-{j}", daemon=True)
-            with lock:
-                state["running"] += 1
-            try:
-                thread.start()  # RuntimeError when its stack cannot be had (out of memory)
-            except BaseException:
-                with lock:
-                    state["running"] -= 1
-                raise
-            threads.append(thread)
-        # interruptible: a Ctrl-C or SIGTERM is raised here, in the main thread; a thread that
-        # died before its ``finally`` (out of memory in its start-up) must not hang the wait
-        while not done.wait(0.25):
-            if not any(thread.is_alive() for thread in threads):
-                break
-    except BaseException:
-        with lock:
-            state["stopped"] = True  # no method starts after an interrupt or a failed start
-        raise
-    if errors:
-        # out of memory in one thread makes others fail in odd ways (a module half imported):
-        # the MemoryError is the one to report
-        memory = [i for i, exc in errors.items() if isinstance(exc, MemoryError)]
-        raise errors[min(memory or errors)]
-    if any(result is _UNSET for result in results):  # a thread died without a word
-        raise MemoryError("a fusion thread ended before its method finished")
-    return results
+    def __iter__(self) -> Iterator[tuple[int, Any]]:
+        if self.in_turn:
+            yield from self._in_turn()
+            return
+        complete = False
+        try:
+            while True:
+                # interruptible: a Ctrl-C or SIGTERM is raised here, in the main thread; a
+                # thread that died before its ``finally`` (out of memory in its start-up)
+                # must not hang the wait
+                try:
+                    i = self.ended.get(timeout=0.25)
+                except queue.Empty:
+                    if not any(thread.is_alive() for thread in self.threads):
+                        break
+                    continue
+                if i is None:
+                    break
+                with self.lock:
+                    failed = bool(self.errors)
+                result = self.results[i]
+                if failed or result is _UNSET:
+                    continue  # after a failure: no result is delivered any more
+                self.results[i] = None  # delivered: held by the caller only
+                yield i, result
+                del result
+            complete = True
+        finally:
+            if not complete:
+                self.stop()  # no method starts after an interrupt or an abandoned run
+        if self.errors:
+            # out of memory in one thread makes others fail in odd ways (a module half
+            # imported): the MemoryError is the one to report
+            memory = [i for i, exc in self.errors.items() if isinstance(exc, MemoryError)]
+            raise self.errors[min(memory or self.errors)]
+        if any(result is _UNSET for result in self.results):  # a thread died without a word
+            raise MemoryError("a fusion thread ended before its method finished")
+
+    def _in_turn(self) -> Iterator[tuple[int, Any]]:
+        for i, (method, key) in enumerate(zip(self.methods, self.keys, strict=True)):
+            if self.started is not None:
+                self.started(method)
+            result = self.run(method, self.shared[key].get(partial(self.make, key, method)))
+            self.shared[key].release()  # the last method of its key: its arrays go
+            if self.finished is not None:
+                self.finished(method)
+            yield i, result
+            del result
 
 
 class MethodProgress:

@@ -2017,11 +2017,45 @@ def fuse_detections(detections: Detections, rig: Rig, methods, options=None, *,
 
     Returns
     -------
-    tracks : method -> Track
+    tracks : method -> Track, in the order of ``methods``
     rejections : method -> Rejections (empty ones without gating)
     """
+    methods = list(methods)
+    done = {m: (t, r) for m, t, r in start_fusion(detections, rig, methods, options,
+                                                  workers=workers)}
+    return ({m: done[m][0] for m in methods}, {m: done[m][1] for m in methods})
+
+
+class FusionRun:
+    """The methods of :func:`start_fusion`, fusing: iterate for ``(method, track,
+    rejections)`` as each method ends (see :class:`pslog.fusion._parallel.MethodRun`:
+    the tracks and errors of one method after another; with one worker in the asked
+    order); :meth:`stop` keeps the methods not started from starting."""
+
+    def __init__(self, methods: list[str], run, gating: bool) -> None:
+        self.methods, self._run, self._gating = methods, run, gating
+
+    def stop(self) -> None:
+        self._run.stop()
+
+    def __iter__(self):
+        for i, out in self._run:
+            method = self.methods[i]
+            if self._gating:
+                track, rejections = out
+                del out
+                yield method, track, rejections
+            else:
+                yield method, out, Rejections.empty()
+
+
+def start_fusion(detections: Detections, rig: Rig, methods, options=None, *,
+                 workers: int | None = None, background: bool = False) -> FusionRun:
+    """:func:`fuse_detections` started (on threads, at once; ``workers=1``: each method
+    as the iteration reaches it, unless ``background``: on one thread), its tracks
+    delivered as each method ends: the caller writes them meanwhile (``pslog fuse``)."""
     from . import FusionOptions, check_method, fuse, prepare
-    from ._parallel import MethodProgress, default_workers, run_methods
+    from ._parallel import MethodProgress, MethodRun, default_workers
 
     options = options or FusionOptions()
     methods = list(methods)
@@ -2032,10 +2066,11 @@ def fuse_detections(detections: Detections, rig: Rig, methods, options=None, *,
         obs = timed_observations(detections, rig)
         prep = prepare(obs, rig) if len(rig) >= 2 else None
         shown = MethodProgress(methods)
-        out = run_methods(methods, [None] * len(methods), lambda key, method: prep,
-                          lambda m, p: fuse(obs, rig, m, options, prepared=p), workers,
-                          started=shown.started, finished=shown.finished)
-        return dict(zip(methods, out, strict=True)), {m: Rejections.empty() for m in methods}
+        return FusionRun(methods, MethodRun(
+            methods, [None] * len(methods), lambda key, method: prep,
+            lambda m, p: fuse(obs, rig, m, options, prepared=p), workers,
+            started=shown.started, finished=shown.finished, background=background),
+            gating=False)
 
     # the forms' shared part (gate_common) once, by the first form to start, dropped once
     # every form has it (the forms gate at once, on threads: the others wait for it)
@@ -2064,16 +2099,16 @@ def fuse_detections(detections: Detections, rig: Rig, methods, options=None, *,
 
     # the methods run at once on threads (pslog.fusion._parallel: same results, same errors)
     shown = MethodProgress(methods)
-    out = run_methods(methods, [gating_key(method, options) for method in methods],
-                      gated_input, fused, workers, started=shown.started,
-                      finished=shown.finished)
-    return ({m: t for m, (t, _) in zip(methods, out, strict=True)},
-            {m: r for m, (_, r) in zip(methods, out, strict=True)})
+    return FusionRun(methods, MethodRun(
+        methods, [gating_key(method, options) for method in methods], gated_input, fused,
+        workers, started=shown.started, finished=shown.finished, background=background),
+        gating=True)
 
 
 __all__ = [
     "REASONS",
     "REASON_TEXT",
+    "FusionRun",
     "Gated",
     "GatingOptions",
     "Rejections",
@@ -2083,4 +2118,5 @@ __all__ = [
     "gate",
     "gate_for",
     "gating_key",
+    "start_fusion",
 ]

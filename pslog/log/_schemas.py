@@ -38,6 +38,13 @@ WORLD_FRAME = "world"
 #: Quality fields with fixed field numbers in ``pslog.TrackPoint`` (others go to its map).
 TRACK_FIXED_QUALITY = ("ray_miss_m", "snap_px", "ray_shift_m")
 
+#: the points a method made but left out, by reason (``Track.dropped``, JSON
+#: ``{reason: count}``): a key of the metadata of its track's channel (``/tracks/<method>``,
+#: written with the track by ``pslog fuse``). Files fused before held every method's counts
+#: under the same name in the session metadata record, as ``{method: {reason: count}}``
+#: (docs/log-format.md, "Left-out points"); readers still read that.
+LEFT_OUT_KEY = "left_out_points"
+
 
 # ---- topics ---------------------------------------------------------------------------
 def calibration_topic(camera: str) -> str:

@@ -3,8 +3,10 @@ optionally replacing the detections (re-detection) and adding or replacing fused
 
 from __future__ import annotations
 
+import contextlib
+import json
 import struct
-from collections.abc import Callable, Collection, Mapping, Sequence
+from collections.abc import Callable, Collection, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import cast
 
@@ -17,7 +19,7 @@ from ..rig import Rig, timing_label
 from . import _mcapio as io
 from . import _schemas as S
 from . import table as tables
-from .reader import _PAD, _Batch, _Finished, _gather, _Irregular
+from .reader import _PAD, _Batch, _Finished, _gather, _Irregular, old_left_out_counts
 from .writer import SessionWriter, _Block
 
 
@@ -58,6 +60,30 @@ def copy_session(src, dst, *, detections: Detections | Callable[[], Detections] 
     ``dst`` may not be ``src`` in any spelling; it is written as ``<dst>.partial`` and
     appears only when complete (on any failure nothing is left and an old ``dst`` stays).
     """
+    new_methods = {t.method for t in tracks}
+    with open_copy(src, dst, detections=detections, new_methods=new_methods,
+                   replace_tracks=replace_tracks, metadata=metadata, rig=rig, force=force,
+                   checked_chunks=checked_chunks, layouts=layouts) as w:
+        for track in tracks:
+            w.add_track(track)
+        for method, rejected in (rejections or {}).items():
+            w.add_rejections(method, rejected)
+
+
+@contextlib.contextmanager
+def open_copy(src, dst, *, detections: Detections | Callable[[], Detections] | None = None,
+              new_methods: Collection[str] = (), replace_tracks: bool = True,
+              metadata: Mapping[str, str] | None = None, rig: Rig | None = None,
+              force: bool = False, checked_chunks: Collection[int] = (),
+              layouts: Callable[[int], np.ndarray | None] | None = None
+              ) -> Iterator[SessionWriter]:
+    """:func:`copy_session` as a context: ``dst``'s writer once everything of ``src`` is
+    copied (and ``detections`` written), for the caller to add the new tracks and their
+    rejections (``new_methods``: their methods, the tracks of ``src`` dropped for them when
+    ``replace_tracks`` is False) while it still makes some (``pslog fuse`` writes each
+    method's track as the method ends). ``dst`` appears when the context ends without an
+    exception, complete; on any exception (an interrupt too) nothing is left and an old
+    ``dst`` stays. The parameters are :func:`copy_session`'s."""
     src_path = Path(src)
     dst = check_output_path(dst, force, inputs=[src_path])  # before reading anything
     with _Finished(src_path) as f:
@@ -73,8 +99,13 @@ def copy_session(src, dst, *, detections: Detections | Callable[[], Detections] 
                          f"{', '.join(old_rig.names)} (names and order must match)")
     if isinstance(detections, Detections):
         _check_cameras(detections, old_rig.names)
-    new_methods = {t.method for t in tracks}
-    user_meta = {k: v for k, v in meta.items() if k not in S.RESERVED_KEYS}
+    new_methods = set(new_methods)
+    # the left-out counts of a file fused before they went with each track (one session
+    # metadata key, every method's): a track kept gets its own in its channel's metadata,
+    # the key itself is not copied (it would name tracks the copy does not have)
+    old_left_out = old_left_out_counts(meta)
+    user_meta = {k: v for k, v in meta.items()
+                 if k not in S.RESERVED_KEYS and k != S.LEFT_OUT_KEY}
     user_meta["derived_from"] = src_path.name
     user_meta.update(metadata or {})
 
@@ -87,6 +118,11 @@ def copy_session(src, dst, *, detections: Detections | Callable[[], Detections] 
                        source=meta.get("source", ""), metadata=user_meta,
                        start_ns=start_ns, on_error="discard", inputs=[src_path],
                        write_static=new_rig, channel_ids=channel_ids) as w:
+        if not replace_tracks:
+            for kept, counts in old_left_out.items():
+                if kept not in new_methods:
+                    w.channel_metadata[S.track_topic(kept)] = {
+                        S.LEFT_OUT_KEY: json.dumps(counts, sort_keys=True)}
         scan = io.Scan()
         # a corrected rig: its calibration and poses are written by the writer; otherwise
         # the recorded messages are copied verbatim (re-deriving them from the parsed rig
@@ -131,10 +167,7 @@ def copy_session(src, dst, *, detections: Detections | Callable[[], Detections] 
                 detections = detections()
                 _check_cameras(detections, old_rig.names)
             w.add_detections(detections)
-        for track in tracks:
-            w.add_track(track)
-        for method, rejected in (rejections or {}).items():
-            w.add_rejections(method, rejected)
+        yield w
 
 
 def record_layout(records) -> np.ndarray | None:

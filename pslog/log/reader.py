@@ -17,10 +17,11 @@ naming the file, the byte offset and ``pslog recover`` (which keeps every intact
 from __future__ import annotations
 
 import heapq
+import json
 import mmap
 import struct
 import zlib
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import cast
@@ -55,6 +56,10 @@ class Session:
         candidate of each frame (:func:`pslog.simulation.ball_mask`), else None
     rejections : method -> :class:`pslog.fusion.gating.Rejections`, the candidates the
         gating stage rejected for that method's track (fused sessions)
+    left_out : method -> {reason: count}, the points each fused track's method made but
+        left out as invalid or untrustworthy (``Track.dropped`` as ``pslog fuse`` wrote it:
+        in each track channel's metadata, or in an older file's session metadata; empty
+        when not recorded)
     """
 
     path: Path
@@ -68,6 +73,52 @@ class Session:
     n_images: int
     ball_truth: Detections | None = None
     rejections: dict = field(default_factory=dict)
+    left_out: dict[str, dict[str, int]] = field(default_factory=dict)
+
+
+def _reason_counts(value) -> dict[str, int] | None:
+    """``{reason: count}`` of a parsed JSON value; None when it is no such mapping."""
+    if not isinstance(value, dict):
+        return None
+    return {str(r): int(n) for r, n in value.items()
+            if isinstance(n, (int, float)) and not isinstance(n, bool) and n == n
+            and abs(n) < 2 ** 63}
+
+
+def old_left_out_counts(metadata: Mapping[str, str]) -> dict[str, dict[str, int]]:
+    """``{method: {reason: count}}`` as a file fused before the counts went with each track
+    holds them: every method's in the session metadata (:data:`._schemas.LEFT_OUT_KEY`);
+    empty when absent or unreadable."""
+    try:
+        value = json.loads(metadata.get(S.LEFT_OUT_KEY, "{}"))
+    except ValueError:
+        return {}
+    if not isinstance(value, dict):
+        return {}
+    return {str(m): counts for m, reasons in value.items()
+            if (counts := _reason_counts(reasons)) is not None}
+
+
+def left_out_counts(f: _Finished, methods) -> dict[str, dict[str, int]]:
+    """``{method: {reason: count}}`` of the tracks of ``methods`` in ``f``: each from its
+    track channel's metadata, else (a file fused before) from the session metadata."""
+    old = old_left_out_counts(f.meta)
+    out: dict[str, dict[str, int]] = {}
+    by_topic = {c.topic: c for c in sorted(f.summary.channels.values(), key=lambda c: c.id)
+                if S.LEFT_OUT_KEY in c.metadata}
+    for method in methods:
+        channel = by_topic.get(S.track_topic(method))
+        counts = None
+        if channel is not None:
+            try:
+                counts = _reason_counts(json.loads(channel.metadata[S.LEFT_OUT_KEY]))
+            except ValueError:
+                counts = None
+        elif method in old:
+            counts = old[method]
+        if counts:
+            out[method] = counts
+    return out
 
 
 @dataclass(frozen=True)
@@ -455,7 +506,7 @@ def _read(f: _Finished, skip: frozenset[int] = frozenset()) -> Session:
     return Session(path=f.path, rig=rig, detections=detections, truth=truth, tracks=tracks,
                    timing=f.meta.get("timing", "custom"), metadata=dict(f.meta),
                    events=events, n_images=n_images, ball_truth=ball_truth,
-                   rejections=rejections)
+                   rejections=rejections, left_out=left_out_counts(f, tracks))
 
 
 def decode_detections(camera_names: Sequence[str], per_camera: Sequence) -> Detections:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import json
 import threading
 import time
 import weakref
@@ -169,6 +170,12 @@ class SessionWriter:
         # the tracks added on a track channel (its table is made from them at close, not from
         # copies of its messages: those are most of a fused session's bytes)
         self._tracks_of: dict[int, list[Track]] = {}
+        #: topic -> metadata of its channel, set before the channel is registered (a track's
+        #: left-out counts: :meth:`add_track`; a copied track's: :func:`.copy.open_copy`)
+        self.channel_metadata: dict[str, dict[str, str]] = {}
+        # the tables already written: a finished track's, as it is added (:meth:`add_track`
+        # ``last=True``), not at close
+        self._tables_written: set[str] = set()
 
         opened = False
         try:  # once the file exists an exception (a Ctrl-C or SIGTERM included) removes it
@@ -252,7 +259,8 @@ class SessionWriter:
                 schema = self._mcap.register_schema(
                     name=name, encoding=S.PROTOBUF, data=S.file_descriptor_set(message_class))
                 self._schema_ids[name] = schema
-            channel = self._register_channel(topic, S.PROTOBUF, schema, {})
+            channel = self._register_channel(topic, S.PROTOBUF, schema,
+                                             self.channel_metadata.get(topic, {}))
             self._channels[topic] = channel
             self._note_channel(topic, channel)
         return channel
@@ -326,7 +334,7 @@ class SessionWriter:
         copied one (:meth:`_adopt_table`) that names as many messages as were written."""
         for name in table.names(self._topic_of.values()):  # fused tracks' tables too
             channels = [cid for cid, (t, _cam) in self._table_rows.items() if t == name]
-            if not channels:
+            if not channels or name in self._tables_written:
                 continue
             direct = [self._tracks_of[cid] for cid in channels if cid in self._tracks_of]
             per_topic = {self._topic_of[cid]: self._table_parts[cid] for cid in channels
@@ -725,7 +733,9 @@ class SessionWriter:
                 if not sid:
                     sid = self._schema_ids[key] = self._mcap.register_schema(
                         schema.name, schema.encoding, schema.data)
-            cid = self._register_channel(topic, channel.encoding, sid, channel.metadata)
+            cid = self._register_channel(topic, channel.encoding, sid,
+                                         {**channel.metadata,
+                                          **self.channel_metadata.get(topic, {})})
             self._channels[topic] = cid
             self._note_channel(topic, cid)
         return cid
@@ -744,13 +754,29 @@ class SessionWriter:
         self._count(S.TRUTH_TOPIC, len(truth))
 
     @_locked
-    def add_track(self, track: Track) -> None:
+    def add_track(self, track: Track, *, left_out: Mapping[str, int] | None = None,
+                  last: bool = False) -> None:
         """A fused track: ``pslog.TrackPoint`` per point on ``/tracks/<method>`` and a
-        Foxglove-viewable ``foxglove.SceneUpdate`` sphere per point on its ``/scene`` topic."""
+        Foxglove-viewable ``foxglove.SceneUpdate`` sphere per point on its ``/scene`` topic.
+
+        ``left_out``: the points the method left out, by reason (``Track.dropped``), kept in
+        the metadata of the track's channel (:data:`pslog.log._schemas.LEFT_OUT_KEY`): only
+        with the first part of a track. ``last``: no more points of this method follow: its
+        columnar table is written now, right after its messages, and the writer keeps none
+        of its tracks (not at close: ``pslog fuse`` writes each method's track as the
+        method ends, the fusion of the others going on meanwhile)."""
         self._check_open()
         method = track.method
         if not method or "/" in method:
             raise InputError(f"track method must be a non-empty name without '/', got {method!r}")
+        if table.track_table(method) in self._tables_written:
+            raise InputError(f"track {method!r} was added with last=True already")
+        if left_out is not None:
+            topic = S.track_topic(method)
+            if topic in self._channels:
+                raise InputError(f"track {method!r}: left-out counts go with its first part")
+            self.channel_metadata[topic] = {S.LEFT_OUT_KEY: json.dumps(
+                {str(k): int(v) for k, v in dict(left_out).items()}, sort_keys=True)}
         if method not in self._track_methods:
             self._track_methods.append(method)
         color = track_color(method)
@@ -783,6 +809,19 @@ class SessionWriter:
         self._scene_ids[method] = first_id + n
         if direct is not None:
             direct.append(track)
+            name = table.track_table(method)
+            if last and self._adopted.get(name) is None:
+                # (the messages of this track are buffered or written: the table names as
+                # many, as a table written at close does)
+                parts = table.encode_parts(name, self._names, {S.track_topic(method): sum(
+                    len(x) for x in direct)}, table.track_columns_of(direct))
+                if self._bulk:
+                    _chunks.write_attachment(self._mcap, name, table.MEDIA_TYPE, parts)
+                else:
+                    self._mcap.add_attachment(0, 0, name, table.MEDIA_TYPE, b"".join(parts))
+                del parts
+                self._tables_written.add(name)
+                direct.clear()  # the tracks go with their caller's references
         self._count(S.track_topic(method), n)
         self._count(S.track_scene_topic(method), n)
 
