@@ -774,9 +774,9 @@ def _fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions) -> Fit:
     control, sigma, r, w, J = _Solver(problem, options).run(control, sigma,
                                                             _DOF_ITERATIONS, dof)
     band, _, p_eff = _information(problem, control, sigma, r, J)
-    # the covariance at the noise the residuals show: the robust scale σ above weighs the
-    # fit (it stays: the points do not move), but the noise that reaches a point is the
-    # residuals' variance, not their median's (:func:`variance_factor`)
+    # the covariance at the noise the residuals show (the M-estimator's sandwich,
+    # :func:`variance_factor`); the robust scale σ above still weighs the fit: the points
+    # do not move
     band = band * variance_factor(r, w, sigma, p_eff)
     out_rows, valid_s = _underdetermined_ends(problem, breaks)
     trajectory = Trajectory(problem.t0_ns, problem.knots, problem.offset, control, band,
@@ -847,22 +847,27 @@ def _refit_control(problem: _Problem, X: np.ndarray) -> np.ndarray:
 
 
 def variance_factor(r: np.ndarray, w: np.ndarray, sigma: float, p_eff: float) -> float:
-    """``k = σ̂² / σ²``, the factor that scales the covariance ``H⁻¹`` (made at the robust scale
-    ``σ``) to the noise the residuals show: ``σ̂² = Σ_i w_i ‖r_i‖² / (n_res - p_eff)``, the
-    weighted residual sum of squares over the residual degrees of freedom, ``p_eff`` the trace
-    of the hat matrix (Wahba 1983, *Bayesian "confidence intervals" for the cross-validated
-    smoothing spline*, JRSS B 45; Nychka 1988, JASA 83: the posterior covariance at that
-    σ̂² has its nominal coverage on average over the curve). Never below 1: a
-    residual variance under σ² (a fit at the ``min_noise_px`` floor) does not make a point
-    surer than its fit's own information says. The Cauchy weights bound an outlier's share
-    (``w ‖r‖² < c² σ²``). Rows with a non-finite residual (a point behind its camera) are
-    left out."""
+    """``k``, the factor that scales the covariance ``H⁻¹`` (made at the robust scale ``σ``
+    that weighs the fit) to the noise the residuals show, by the sandwich covariance of an
+    M-estimator (Huber, *Robust Statistics*, 1981, §7.6: ``K² [Σψ² / (n - p)] / [Σψ' / n]²
+    (JᵀJ)⁻¹``): with the Cauchy weights ``w`` for ``ψ'`` (the curvature the iteratively
+    reweighted fit uses) and ``ψ = w r / σ``,
+
+        k = [Σ_i w_i² ‖r_i‖² / (n_res - p_eff)] / (σ² · mean(w)²),
+
+    ``n_res - p_eff`` the residual degrees of freedom of the penalised fit, ``p_eff`` the
+    trace of its hat matrix (Wahba 1983, JRSS B 45: σ̂² = RSS / (n - tr A)). Noise the weights
+    take out of the points (a scale mixture's noisy detections) does not count in full:
+    ``w ‖r‖`` is bounded. Never below 1: a fit at the ``min_noise_px`` floor, or one whose
+    weights cut more than the noise, is not made surer than its own information says. Rows
+    with a non-finite residual (a point behind its camera) are left out."""
     fin = np.all(np.isfinite(r), axis=1)
     n_res = 2 * int(np.count_nonzero(fin))
     if n_res == 0 or sigma <= 0:
         return 1.0
-    rss = float(np.sum(w[fin] * np.einsum("ni,ni->n", r[fin], r[fin])))
-    k = rss / (sigma**2 * max(n_res - p_eff, 1.0))
+    wf = w[fin]
+    score = float(np.sum(wf * wf * np.einsum("ni,ni->n", r[fin], r[fin])))
+    k = score / (sigma**2 * max(n_res - p_eff, 1.0)) / float(np.mean(wf)) ** 2
     return max(k, 1.0)
 
 
