@@ -201,7 +201,8 @@ def motion_shifts(prep: Prepared, rows: np.ndarray, time_ns: np.ndarray, max_gap
         with np.errstate(invalid="ignore", divide="ignore"):
             vel = (uv[np.maximum(row, 0)] - uv[np.maximum(prev, 0)]) / dt[:, None]
         lag = (time_ns - t_obs[np.maximum(row, 0)]) / NS
-        out.append(np.where(ok[:, None], vel * lag[:, None], 0.0))
+        with np.errstate(invalid="ignore"):
+            out.append(np.where(ok[:, None], vel * lag[:, None], 0.0))
     return out
 
 
