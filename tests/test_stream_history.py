@@ -1,9 +1,11 @@
 """The window StreamFuser keeps for the methods it re-fuses (``sync``, ``nearest``, ``typeB``,
 ``linear``) is what a point still to emit can reach back to, ``max_gap_s + tolerance``
-(``nearest``: one ``max_gap_s`` more, its partners' previous detections; pslog/fusion/stream.py; the cut then moves back to a sync group's start, which
-tests/test_stream_window.py covers): the stream equals batch on sessions whose points do
-reach back that far, and a shorter window (half of it) would lose their partners (checked:
-halving the reach fails nearest, typeB and linear here and in test_stream_window.py)."""
+(``nearest``: one ``max_gap_s`` more, its partners' previous detections, whose image
+velocity its covariance uses; pslog/fusion/stream.py; the cut then moves back to a sync
+group's start, which tests/test_stream_window.py covers): the stream equals batch on
+sessions whose points do reach back that far, and a shorter window (half of it) would lose
+their partners (checked: halving the reach fails nearest, typeB and linear here and in
+test_stream_window.py)."""
 
 from __future__ import annotations
 
