@@ -55,9 +55,8 @@ def test_smooth_covariance_is_honest_when_the_robust_scale_is_below_the_noise():
         scale = np.where(rng.random(len(obs)) < 0.25, 1.0, 0.1)
         uv = obs.uv + rng.normal(size=obs.uv.shape) * scale[:, None]
         obs = Observations(obs.time_ns, obs.camera, uv, obs.frame_index)
-        fit = fit_trajectory(obs, rig)
+        fit, (r, w, sigma, p_eff) = _fit_and_final_residuals(obs, rig)
         assert fit.trajectory.noise_px < 0.5 * np.sqrt(np.mean(scale**2))
-        r, w, sigma, p_eff = _final_residuals(obs, rig)
         k = T.variance_factor(r, w, sigma, p_eff)
         plain = np.sum(w * (r * r).sum(axis=1)) / (sigma**2 * (2 * len(r) - p_eff))
         d2 = _d2(fit, obs, truth)
@@ -67,9 +66,9 @@ def test_smooth_covariance_is_honest_when_the_robust_scale_is_below_the_noise():
     assert np.mean(inside_plain) > 0.87, inside_plain
 
 
-def _final_residuals(obs, rig):
-    """The final fit's residuals, weights, robust σ and p_eff (as :func:`variance_factor`
-    gets them), caught on their way in."""
+def _fit_and_final_residuals(obs, rig):
+    """The fit, and its final residuals, weights, robust σ and p_eff (as
+    :func:`variance_factor` gets them), caught on their way in."""
     caught = {}
     original = T.variance_factor
 
@@ -79,10 +78,10 @@ def _final_residuals(obs, rig):
 
     T.variance_factor = spy
     try:
-        fit_trajectory(obs, rig)
+        fit = fit_trajectory(obs, rig)
     finally:
         T.variance_factor = original
-    return caught["args"]
+    return fit, caught["args"]
 
 
 def test_variance_factor_is_hubers_sandwich_scale():
