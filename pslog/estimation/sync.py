@@ -282,7 +282,7 @@ def _solve_joint(obs, rig, unknowns, theta, params, options, regularized=None):
             k = (obs.frame_index[rows] - rep.first_index).astype(np.float64)
             extra = np.c_[extra, (cam == c) * 1.0, np.where(cam == c, k, 0.0)]
     # σ corrected for the degrees of freedom the fit absorbs; the covariance there
-    _, dof = _information(problem, control, sigma, r, J)
+    _, dof, _ = _information(problem, control, sigma, r, J)
     control, theta, sigma, r, w, J, S, _ = _joint_step(
         problem, solver, obs, unknowns, theta, params, control, sigma,
         np.c_[dt_dtheta, extra], t0, dof, break_cols, n_extra=extra.shape[1])

@@ -770,10 +770,14 @@ def _fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions) -> Fit:
             control, sigma, max(options.iterations - _DOF_ITERATIONS, 1))
 
     # σ corrected for the degrees of freedom the fit absorbs, then the covariance there
-    _, dof = _information(problem, control, sigma, r, J)
+    _, dof, _ = _information(problem, control, sigma, r, J)
     control, sigma, r, w, J = _Solver(problem, options).run(control, sigma,
                                                             _DOF_ITERATIONS, dof)
-    band, _ = _information(problem, control, sigma, r, J)
+    band, _, p_eff = _information(problem, control, sigma, r, J)
+    # the covariance at the noise the residuals show (the M-estimator's sandwich,
+    # :func:`variance_factor`); the robust scale σ above still weighs the fit: the points
+    # do not move
+    band = band * variance_factor(r, w, sigma, p_eff)
     out_rows, valid_s = _underdetermined_ends(problem, breaks)
     trajectory = Trajectory(problem.t0_ns, problem.knots, problem.offset, control, band,
                             np.concatenate([np.asarray(b) for b in breaks]) if breaks
@@ -842,12 +846,37 @@ def _refit_control(problem: _Problem, X: np.ndarray) -> np.ndarray:
     return _normal.solve(U, rhs).reshape(-1, 3)
 
 
+def variance_factor(r: np.ndarray, w: np.ndarray, sigma: float, p_eff: float) -> float:
+    """``k``, the factor that scales the covariance ``H⁻¹`` (made at the robust scale ``σ``
+    that weighs the fit) to the noise the residuals show, by the sandwich covariance of an
+    M-estimator (Huber, *Robust Statistics*, 1981, §7.6: ``K² [Σψ² / (n - p)] / [Σψ' / n]²
+    (JᵀJ)⁻¹``): with the Cauchy weights ``w`` for ``ψ'`` (the curvature the iteratively
+    reweighted fit uses) and ``ψ = w r / σ``,
+
+        k = [Σ_i w_i² ‖r_i‖² / (n_res - p_eff)] / (σ² · mean(w)²),
+
+    ``n_res - p_eff`` the residual degrees of freedom of the penalised fit, ``p_eff`` the
+    trace of its hat matrix (Wahba 1983, JRSS B 45: σ̂² = RSS / (n - tr A)). Noise the weights
+    take out of the points (a scale mixture's noisy detections) does not count in full:
+    ``w ‖r‖`` is bounded. Never below 1: a fit at the ``min_noise_px`` floor, or one whose
+    weights cut more than the noise, is not made surer than its own information says. Rows
+    with a non-finite residual (a point behind its camera) are left out."""
+    fin = np.all(np.isfinite(r), axis=1)
+    n_res = 2 * int(np.count_nonzero(fin))
+    if n_res == 0 or sigma <= 0:
+        return 1.0
+    wf = w[fin]
+    score = float(np.sum(wf * wf * np.einsum("ni,ni->n", r[fin], r[fin])))
+    k = score / (sigma**2 * max(n_res - p_eff, 1.0)) / float(np.mean(wf)) ** 2
+    return max(k, 1.0)
+
+
 def _information(problem: _Problem, control: np.ndarray, sigma: float, r: np.ndarray,
-                 J: np.ndarray) -> tuple[np.ndarray, float]:
-    """The band of the control points' covariance ``H⁻¹`` at the solution, and the factor
+                 J: np.ndarray) -> tuple[np.ndarray, float, float]:
+    """The band of the control points' covariance ``H⁻¹`` at the solution, the factor
     ``sqrt(n_res / (n_res - p_eff))`` that corrects the median-based noise scale for the
-    fit's effective number of parameters ``p_eff = Σ w tr(J Σ_X Jᵀ) / σ²`` (the trace of the
-    hat matrix)."""
+    fit's effective number of parameters, and ``p_eff = Σ w tr(J Σ_X Jᵀ) / σ²`` itself (the
+    trace of the hat matrix)."""
     X = problem.positions(control)
     s = np.sum(r * r, axis=1) / sigma**2
     w = 1 / (1 + s / _CAUCHY**2)
@@ -858,7 +887,7 @@ def _information(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
     cov_X = problem.points.marginal(band)
     p_eff = float(np.sum(w * np.einsum("naj,njk,nak->n", J, cov_X, J)) / sigma**2)
     n_res = 2 * len(r)
-    return band, float(np.sqrt(n_res / max(n_res - p_eff, 1.0)))
+    return band, float(np.sqrt(n_res / max(n_res - p_eff, 1.0))), p_eff
 
 
 def _find_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.ndarray,

@@ -9,7 +9,12 @@ pieces (never inside a gap the model does not bridge). Per-point quality:
   expects), metres; the full 3 x 3 covariance is :attr:`Fit.covariance`;
 - ``std_x_m``, ``std_y_m``, ``std_z_m``: per axis, metres; ``cov_xx_m2`` ... ``cov_yz_m2``:
   the full 3 x 3 covariance (m²);
-- ``residual_px``: the detection's reprojection residual, pixels (NaN on grid points).
+- ``residual_px``: the detection's reprojection residual, pixels (NaN on grid points);
+- ``gap_s``: the largest time gap bridged: the longest interval between consecutive fitted
+  detections (any camera) that touches the point (at a detection, the longer of the
+  intervals before and after it; on a grid point, the interval around it): how far the
+  motion model carries the trajectory there, as the other methods' ``gap_s`` says how far
+  they interpolate or extrapolate.
 
 A detection in an end segment of a piece beyond a bounce or kick that fewer than four
 detections of two cameras hold gets no point (its position along the rays is not determined):
@@ -57,10 +62,11 @@ def fuse_smooth(prep: Prepared, rig: Rig, options) -> Track:
     keep = np.all(np.isfinite(position), axis=1)
     time_ns, camera, position = time_ns[keep], camera[keep], position[keep]
     cov, residual = cov[keep], residual[keep]
+    gap = _bridged(obs.time_ns[fit.used], time_ns)
     var = np.einsum("nii->ni", cov)
     quality = {"std_m": np.sqrt(var.sum(axis=1)), "std_x_m": np.sqrt(var[:, 0]),
                "std_y_m": np.sqrt(var[:, 1]), "std_z_m": np.sqrt(var[:, 2]),
-               "residual_px": residual}
+               "residual_px": residual, "gap_s": gap}
     # the full covariance, as the paper's methods give it (eval's 2σ share and NEES use it)
     for name, (i, j) in (("xx", (0, 0)), ("yy", (1, 1)), ("zz", (2, 2)), ("xy", (0, 1)),
                          ("xz", (0, 2)), ("yz", (1, 2))):
@@ -68,6 +74,22 @@ def fuse_smooth(prep: Prepared, rig: Rig, options) -> Track:
     # detections in an end segment beyond a break that too few of them determine
     dropped = {"underdetermined_end": fit.withheld} if fit.withheld else {}
     return Track("smooth", time_ns, position, camera, quality, dropped=dropped)
+
+
+def _bridged(fitted_ns: np.ndarray, time_ns: np.ndarray) -> np.ndarray:
+    """(n,) seconds: the longest interval between consecutive ``fitted_ns`` (sorted) that
+    touches each time: at a fitted time the longer of the intervals on either side, between
+    two the interval around it (an end's missing side counts 0)."""
+    if len(fitted_ns) == 0:
+        return np.full(len(time_ns), np.nan)
+    t = np.sort(fitted_ns)
+    lo = np.searchsorted(t, time_ns, side="left")  # first fitted time >= each
+    hi = np.searchsorted(t, time_ns, side="right")  # first fitted time > each
+    before = np.where(lo > 0, time_ns - t[np.maximum(lo - 1, 0)], 0)
+    after = np.where(hi < len(t), t[np.minimum(hi, len(t) - 1)] - time_ns, 0)
+    exact = hi > lo  # the time is a fitted one: the intervals on either side of it
+    gap = np.where(exact, np.maximum(before, after), before + after)
+    return gap / NS
 
 
 def _grid(fit, rate_hz: float) -> np.ndarray:

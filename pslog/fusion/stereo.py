@@ -18,6 +18,7 @@ from ._prepare import (
     Prepared,
     camera_mask,
     covariance,
+    covariance_columns,
     direction_jacobian,
     finite_difference_jacobians,
     finite_rows,
@@ -68,7 +69,8 @@ def sync_groups(obs: Observations, n_cams: int, tolerance_s: float
     return group, seen.sum(axis=1)
 
 
-def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | None):
+def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | None,
+                 shift_px: list[np.ndarray] | None = None):
     """N-view least-squares point of each row of detections, with its quality and validity.
 
     Parameters
@@ -76,6 +78,11 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | None):
     rows : (k, m) int64, the detection of camera c for point i at ``rows[i, c]`` (-1: none)
     noise_px : float or None, standard deviation of the detections' pixel noise, pixels per
         axis (None: no covariance columns)
+    shift_px : list of (k, 2) per camera slot, or None: how far each slot's undistorted pixel
+        is from where it would be at the point's time (the ball moved between the shutters
+        taken as simultaneous; :func:`motion_shifts`); the point's error it makes to first
+        order, ``m = Σ_s J_s δ_s``, is added to the covariance as ``m mᵀ`` (docs/methods.md,
+        "nearest's uncertainty")
 
     Returns
     -------
@@ -132,6 +139,8 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | None):
     if noise_px is not None:
         cov = covariance(slot_rows, jacobians,
                          [prep.pixel_jacobians_t(r[:, c]) for c in range(m)], noise_px)
+        if shift_px is not None:
+            cov = _with_motion(cov, jacobians, shift_px, used)
     # (k,) columns, each reduction over the m cameras in numpy's order (the same bits)
     times = [prep.obs.time_ns[r[:, c]] for c in range(m)]
     t_max = np.maximum.reduce([np.where(used[:, c], times[c], np.iinfo(np.int64).min)
@@ -156,6 +165,45 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | None):
             **(cov if cov is not None else {}),
         }
     return points, quality, flags, used
+
+
+def _with_motion(cov: dict[str, np.ndarray], jacobians: list[np.ndarray],
+                 shift_px: list[np.ndarray], used: np.ndarray) -> dict[str, np.ndarray]:
+    """``cov`` (quality columns) plus ``m mᵀ``, ``m = Σ_s J_s δ_s`` (3, k): the point's move
+    when each slot's pixel is shifted by ``δ_s`` (``J_s`` component-major (3, 2, k))."""
+    move = np.zeros((3, used.shape[0]))
+    for s, (J, d) in enumerate(zip(jacobians, shift_px, strict=True)):
+        ok = used[:, s] & np.all(np.isfinite(d), axis=1)
+        move += np.where(ok, J[:, 0] * d[:, 0] + J[:, 1] * d[:, 1], 0.0)
+    six = np.stack([cov[f"cov_{a}_m2"] for a in ("xx", "yy", "zz", "xy", "xz", "yz")])
+    six = six + np.stack([move[0] * move[0], move[1] * move[1], move[2] * move[2],
+                          move[0] * move[1], move[0] * move[2], move[1] * move[2]])
+    return covariance_columns(six)
+
+
+def motion_shifts(prep: Prepared, rows: np.ndarray, time_ns: np.ndarray, max_gap_s: float
+                  ) -> list[np.ndarray]:
+    """Per camera slot (k, 2): ``δ = u̇ (t - t_s)``, how far the slot's detection (undistorted
+    pixels, at its capture time ``t_s``) is from where the ball was in that image at the
+    point's time ``t``; ``u̇`` the camera's image velocity from that detection and the
+    camera's previous one (within ``max_gap_s``; none: 0). Causal: only detections at or
+    before the slot's own."""
+    out = []
+    max_gap_ns = int(max_gap_s * NS)
+    t_obs = prep.obs.time_ns
+    uv = prep.uv_undistorted
+    for c in range(rows.shape[1]):
+        row = rows[:, c]
+        have = row >= 0
+        prev = np.where(have, latest_row_at_or_before(prep, c, np.maximum(row, 0) - 1), -1)
+        dt = (t_obs[np.maximum(row, 0)] - t_obs[np.maximum(prev, 0)]) / NS
+        ok = have & (prev >= 0) & (dt > 0) & (dt <= max_gap_ns / NS)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            vel = (uv[np.maximum(row, 0)] - uv[np.maximum(prev, 0)]) / dt[:, None]
+        lag = (time_ns - t_obs[np.maximum(row, 0)]) / NS
+        with np.errstate(invalid="ignore"):
+            out.append(np.where(ok[:, None], vel * lag[:, None], 0.0))
+    return out
 
 
 def triangulate_groups(prep: Prepared, group: np.ndarray, n_groups: int,
@@ -232,7 +280,10 @@ def fuse_nearest(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5)
         rows[ok, d] = latest[ok]
     others = (rows >= 0).sum(axis=1)
     rows[events, camera] = events
-    points, quality, flags, _ = nview_points(prep, rows, noise_px)
+    # the other cameras' detections are older than the point: the ball moved since
+    shifts = (motion_shifts(prep, rows, time_ns, max_gap_s) if noise_px is not None
+              else None)
+    points, quality, flags, _ = nview_points(prep, rows, noise_px, shifts)
     made = (others >= 1) & (quality["n_detections"] >= 2)
     keep = made & (flags == 0) & np.all(np.isfinite(points), axis=1)
     track = Track("nearest", time_ns[keep], points[keep], camera[keep],
