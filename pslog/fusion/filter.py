@@ -2125,9 +2125,9 @@ def turn_on_threshold(rig: Rig, options: FilterOptions) -> float:
     adaptation raises ``q`` until consecutive innovations stop agreeing, i.e. until the
     lag a missing acceleration ``a`` causes is a fixed fraction of the pixel noise. For a
     white-noise-acceleration filter in steady state the lag under a constant ``a`` is
-    ``b = a T² / β`` (Bar-Shalom, Li & Kirubarajan 2001, section 6.5.3; Kalata, "The
-    tracking index: a generalized parameter for α-β and α-β-γ target trackers", IEEE Trans.
-    AES 20(2), 1984), with ``β ≈ Λ`` for a small tracking index ``Λ = sqrt(q T³) / σ``
+    ``b = a T² / β`` (Bar-Shalom, Li & Kirubarajan 2001, section 6.5, steady-state α-β
+    filters; Kalata, "The tracking index: a generalized parameter for α-β and α-β-γ target
+    trackers", IEEE Trans. AES 20(2), 1984), with ``β ≈ Λ`` for a small tracking index ``Λ = sqrt(q T³) / σ``
     (``T = 1/R`` the detection interval, ``σ`` the measurement noise): ``b ∝ σ`` gives
     ``q ∝ a² T``, the same acceleration settling at a ``q`` eight times smaller at 240 fps
     than at 30. A fixed threshold switched on at accelerations growing as ``sqrt(R)``:
