@@ -2127,7 +2127,8 @@ def turn_on_threshold(rig: Rig, options: FilterOptions) -> float:
     white-noise-acceleration filter in steady state the lag under a constant ``a`` is
     ``b = a T² / β`` (Bar-Shalom, Li & Kirubarajan 2001, section 6.5, steady-state α-β
     filters; Kalata, "The tracking index: a generalized parameter for α-β and α-β-γ target
-    trackers", IEEE Trans. AES 20(2), 1984), with ``β ≈ Λ`` for a small tracking index ``Λ = sqrt(q T³) / σ``
+    trackers", IEEE Trans. AES 20(2), 1984), with ``β ≈ Λ`` for a small tracking index
+    ``Λ = sqrt(q T³) / σ``
     (``T = 1/R`` the detection interval, ``σ`` the measurement noise): ``b ∝ σ`` gives
     ``q ∝ a² T``, the same acceleration settling at a ``q`` eight times smaller at 240 fps
     than at 30. A fixed threshold switched on at accelerations growing as ``sqrt(R)``:
