@@ -29,7 +29,8 @@ equations, exactly as implemented, are in ``docs/methods.md`` (section ``filter`
   supported) by a second interacting multiple model (switching at ``turn_switch_per_s``)
   in a *variable* model set (Li & Bar-Shalom, "Multiple-model estimation with variable
   structure", IEEE Trans. AC 41(4), 1996): it joins at a track's start and when the adapted
-  ``q`` reaches ``turn_on_psd`` (an acceleration the pair lacks), leaves when unlikely or
+  ``q`` reaches ``turn_on_accel2 / Σ fps`` (an acceleration the pair lacks, the same on
+  every rig: :func:`turn_on_threshold`), leaves when unlikely or
   its ``ω`` is within 2σ of 0; the pair leaves while the turn model alone explains the
   motion and rejoins when ``q`` grows again or at a jump. So a flight pays for one model
   set and a circle for the other, not both;
