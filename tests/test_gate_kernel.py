@@ -141,6 +141,21 @@ def test_compiled_stream_gate_applies_the_long_stillness_test():
     assert motion_t.min() > gating.LONG_STILL * GatingOptions().static_s
 
 
+@pytest.mark.parametrize("crowd_every", [0, 5])
+def test_compiled_stream_gate_takes_each_pairs_smaller_long_stillness_tolerance(crowd_every):
+    """gating._still_pair in the compiled form: a lob rising toward a steep camera along
+    its ray (test_gating_paired_static.lob, 30 deg from the vertical) is not static in
+    either form (the newest depth's tolerance alone called it static at 0.83 s); with 6
+    random candidates in every 5th frame the pairs' tolerances differ, the same decisions."""
+    from test_gating_paired_static import lob, lob_rig
+
+    rig = lob_rig()
+    det, _ = simulate(rig, lob(30.0, 2.0, 0.6), options=SimulationOptions(noise_px=0.3, seed=0))
+    rejected = assert_same_stream(det, rig, crowd_every=crowd_every)
+    if not crowd_every:
+        assert np.all(rejected.frame_time_ns >= 1.0e9), rejected.frame_time_ns
+
+
 def test_compiled_stream_gate_leaves_an_unpointed_candidate_to_the_track():
     """gating._columns's ``unpointed`` in the compiled form: paper2, the tests' rally seed 3
     at 1 px (test_gating_dirty_limits): cam0's last ball carried 83-117 ms "supports" cam1's

@@ -182,11 +182,11 @@ def test_methods_doc_states_the_filters_turn_defaults():
     text = Path(__file__).resolve().parents[1].joinpath("docs", "methods.md").read_text()
     o = FilterOptions()
     quoted = {name: float(v) for name, v in re.findall(
-        r"`(turn_on_psd|turn_switch_per_s|turn_rate_psd|init_span_s|init_max_window)`? ?=\s*"
-        r"([0-9.]+)", text)}
+        r"`(turn_on_accel2|turn_switch_per_s|turn_rate_psd|init_span_s|init_max_window)`? ?="
+        r"\s*([0-9.]+)", text)}
     quoted.update({name: float(v) for v, name in re.findall(
         r"`?λ_t = ([0-9.]+) /s`? \(`(turn_switch_per_s)`", text)})
-    assert quoted.get("turn_on_psd") == o.turn_on_psd
+    assert o.turn_on_psd is None and quoted.get("turn_on_accel2") == o.turn_on_accel2
     for name, value in quoted.items():
         want = getattr(o, name)
         assert math.isclose(value, want) or (name == "init_span_s" and value == want * 1000), \

@@ -597,6 +597,7 @@ def decide_frame(fid, a, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k
                 continue
             best_px = math.inf
             supported = False
+            still_long = False
             if tol[j] == tol[j]:
                 u, v = cf[a, at, j, 0], cf[a, at, j, 1]
                 for q in range(nh):
@@ -605,9 +606,21 @@ def decide_frame(fid, a, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k
                     if d < best_px:
                         best_px = d
                     px, py, pz = cf[a, h, q, 5], cf[a, h, q, 6], cf[a, h, q, 7]
-                    if d <= tol[j] and px == px and py == py and pz == pz:
+                    finite = px == px and py == py and pz == pz
+                    if d <= tol[j] and finite:
                         supported = True
-            if recent_long and best_px <= tol[j]:
+                    # gating._still_pair: the smaller of the two candidates' tolerances
+                    pair = tol[j]
+                    if finite:
+                        dx = px - centers[a, 0]
+                        dy = py - centers[a, 1]
+                        dz = pz - centers[a, 2]
+                        own = still_f[a] * static_m / _sqrt((dx * dx + dy * dy) + dz * dz)
+                        if own < pair:
+                            pair = own
+                    if d <= pair:
+                        still_long = True
+            if recent_long and still_long:
                 run_long[j] += 1.0
             elif alive[j] != 0.0:
                 alive[j] = 0.0

@@ -29,7 +29,8 @@ equations, exactly as implemented, are in ``docs/methods.md`` (section ``filter`
   supported) by a second interacting multiple model (switching at ``turn_switch_per_s``)
   in a *variable* model set (Li & Bar-Shalom, "Multiple-model estimation with variable
   structure", IEEE Trans. AC 41(4), 1996): it joins at a track's start and when the adapted
-  ``q`` reaches ``turn_on_psd`` (an acceleration the pair lacks), leaves when unlikely or
+  ``q`` reaches ``turn_on_accel2 / Σ fps`` (an acceleration the pair lacks, the same on
+  every rig: :func:`turn_on_threshold`), leaves when unlikely or
   its ``ω`` is within 2σ of 0; the pair leaves while the turn model alone explains the
   motion and rejoins when ``q`` grows again or at a jump. So a flight pays for one model
   set and a circle for the other, not both;
@@ -221,8 +222,8 @@ class FilterOptions:
         are mixed by an interacting multiple model (0: the ballistic model alone)
     max_init_speed_std : float, a (re)initialisation whose velocity standard deviation
         ``sqrt(trace P_vv)`` exceeds this is refused, m/s
-    confirm_nis : float, an accepted update whose NIS exceeds this (99 % quantile of χ²₂)
-        must be confirmed like a jump
+    confirm_nis : float, an accepted update whose NIS exceeds this (98 % quantile of χ²₂;
+        9.21, the 99 % one, before session 12) must be confirmed like a jump
     max_std_m : float or None, a point whose ``std_m`` exceeds this is withheld, metres
         (None: no bound); default ``0.05 / 1.96``: a point is output when its error is
         within 5 cm (issue 10's bound) with 95 % probability, whatever the shape of its
@@ -231,8 +232,13 @@ class FilterOptions:
     turn_switch_per_s : float, rate of switches between the turn model (a coordinated turn
         about the vertical: a ball swung, on a turntable, circling) and the other two, 1/s
         (0: no turn model; also none when gravity is not along the world's z)
-    turn_on_psd : float, the turn model joins the model set when the adapted process noise
-        ``q`` reaches this (an acceleration the other models lack), m²/s³
+    turn_on_psd : float or None, the turn model joins the model set when the adapted
+        process noise ``q`` reaches this (an acceleration the other models lack), m²/s³;
+        None (the default): ``turn_on_accel2 / R``, ``R = Σ fps`` (:func:`turn_on_threshold`)
+    turn_on_accel2 : float, m²/s⁴, ``q R`` at which the turn model joins when
+        ``turn_on_psd`` is None: the ``q`` the adaptation settles at for an acceleration
+        the model lacks falls as ``1/R`` (:func:`turn_on_threshold`); 27 is 0.3 m²/s³
+        at three cameras at 30 fps (the fixed value before session 12)
     turn_rate_psd : float, spectral density of the turn rate's random walk, rad²/s³
     turn_rate_std : float, standard deviation of the turn rate when the model joins, rad/s
     withhold : bool, withhold unconfirmed and uncertain points (counted in
@@ -277,7 +283,7 @@ class FilterOptions:
     init_span_s: float = 0.03
     max_init_std_m: float = 0.05
     max_init_speed_std: float = 1.0
-    confirm_nis: float = 9.21
+    confirm_nis: float = 7.82
     withhold: bool = True
     max_gap_s: float | None = None
     max_accel_psd: float = 100.0
@@ -286,7 +292,8 @@ class FilterOptions:
     accel_adapt_target: float = 0.4
     max_std_m: float | None = _MAX_ERROR_M / 1.96
     turn_switch_per_s: float = 0.5
-    turn_on_psd: float = 0.3
+    turn_on_psd: float | None = None
+    turn_on_accel2: float = 27.0
     turn_rate_psd: float = 0.1
     turn_rate_std: float = 6.0
     jump_rate_per_s: float = 1.0
@@ -311,8 +318,13 @@ class FilterOptions:
                 raise FusionError(f"filter {name} must be finite and >= 0, got {value!r}")
         if not (math.isfinite(self.adapt_rate) and 0.0 <= self.adapt_rate < 1.0):
             raise FusionError(f"filter adapt_rate must be in [0, 1), got {self.adapt_rate!r}")
-        if not self.turn_on_psd > 0:
-            raise FusionError(f"filter turn_on_psd must be > 0, got {self.turn_on_psd!r}")
+        if self.turn_on_psd is not None and not (math.isfinite(self.turn_on_psd)
+                                                 and self.turn_on_psd > 0):
+            raise FusionError(f"filter turn_on_psd must be finite and > 0, got "
+                              f"{self.turn_on_psd!r}")
+        if not (math.isfinite(self.turn_on_accel2) and self.turn_on_accel2 > 0):
+            raise FusionError(f"filter turn_on_accel2 must be finite and > 0, got "
+                              f"{self.turn_on_accel2!r}")
         for name in ("drag_per_m", "supported_drag_per_m"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
@@ -1652,7 +1664,7 @@ class BallFilter:
         O[_OWITHHOLD], O[_OCONFNIS] = float(options.withhold), options.confirm_nis
         O[_OSWITCH], O[_OMU0], O[_OTURN] = self._switch, self._mu0, float(self._turn)
         O[_OTSWITCH], O[_OTON], O[_OTPSD], O[_OTVAR] = (
-            self._turn_switch, options.turn_on_psd, self._turn_psd, self._turn_var)
+            self._turn_switch, turn_on_threshold(rig, options), self._turn_psd, self._turn_var)
         O[_OREST], O[_OFRIC] = options.restitution, options.bounce_friction
         O[_ONSHAPES] = len(self._jump_shapes)
         for i, (reflect, var) in enumerate(self._jump_shapes):
@@ -2102,6 +2114,30 @@ def accel_floor(rig: Rig, options: FilterOptions) -> float:
         return float(options.accel_psd)
     rate = sum(float(c.fps) for c in rig.cameras)
     return options.accel_step_var * rate
+
+
+def turn_on_threshold(rig: Rig, options: FilterOptions) -> float:
+    """The adapted process noise ``q`` at which the turn model joins the model set (and the
+    pair rejoins it, and below which the turn model may leave), m²/s³: ``turn_on_psd``, or
+    when it is None ``turn_on_accel2 / R``, ``R = Σ fps`` the rig's detections per second.
+
+    Session 12 (issue 10, ``docs/methods.md``, "The turn model's switch and the rate"): the
+    switch is meant for an acceleration the pair lacks, but ``q`` is no acceleration: the
+    adaptation raises ``q`` until consecutive innovations stop agreeing, i.e. until the
+    lag a missing acceleration ``a`` causes is a fixed fraction of the pixel noise. For a
+    white-noise-acceleration filter in steady state the lag under a constant ``a`` is
+    ``b = a T² / β`` (Bar-Shalom, Li & Kirubarajan 2001, section 6.5, steady-state α-β
+    filters; Kalata, "The tracking index: a generalized parameter for α-β and α-β-γ target
+    trackers", IEEE Trans. AES 20(2), 1984), with ``β ≈ Λ`` for a small tracking index
+    ``Λ = sqrt(q T³) / σ``
+    (``T = 1/R`` the detection interval, ``σ`` the measurement noise): ``b ∝ σ`` gives
+    ``q ∝ a² T``, the same acceleration settling at a ``q`` eight times smaller at 240 fps
+    than at 30. A fixed threshold switched on at accelerations growing as ``sqrt(R)``:
+    two cameras at 240 fps gave the turntable to the pair alone (0.52 of ``typeA``)."""
+    if options.turn_on_psd is not None:
+        return float(options.turn_on_psd)
+    rate = sum(float(c.fps) for c in rig.cameras)
+    return options.turn_on_accel2 / rate
 
 
 def _posterior(prior: float, log_ratio: float, low: float, high: float) -> float:

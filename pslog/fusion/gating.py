@@ -565,6 +565,9 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
         with np.errstate(invalid="ignore", divide="ignore"):
             tol = _still_px(rig.cameras[b], p[..., 0], p[..., 1], p[..., 2], options,
                             np.sqrt)
+        # each candidate's own tolerance (NaN without a point): the long test's pair of
+        # frames takes the smaller of the two (_still_long)
+        own = tol.copy()
         if paired is None:
             tol[:] = np.nan
         else:
@@ -583,9 +586,8 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
                     du = y[:, :, None, 0] - yy[:, None, :, 0]
                     dv = y[:, :, None, 1] - yy[:, None, :, 1]
                     d_px = np.sqrt(du * du + dv * dv)
-                    d_px = np.where((prev[:, None, :] >= 0) & np.isfinite(d_px), d_px,
-                                    np.inf).min(axis=2)
-                    run_long += recent[:, None] & (d_px <= tol)
+                    run_long += recent[:, None] & _still_pair(
+                        d_px, tol, _lagged(own, lag, own[0]), prev[:, None, :] >= 0)
                 continue
             # the lag frames must lie within 1.5 static_s: missed frames do not count
             recent = np.zeros(len(times), dtype=bool)
@@ -608,11 +610,13 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
                 near = valid & (d_px <= tol[:, :, None])
             held += recent[:, None] & np.any(
                 near & _lagged(p_finite, lag, finite[0])[:, None, :], axis=2)
+            d_px_pair = d_px
             d_px = np.where(valid & np.isfinite(d_px), d_px, np.inf).min(axis=2)
             run += recent[:, None] & (d <= options.static_m)
             with np.errstate(invalid="ignore"):
                 run_px += recent[:, None] & (d_px <= tol)
-                run_long += recent_long[:, None] & (d_px <= tol)
+                run_long += recent_long[:, None] & _still_pair(
+                    d_px_pair, tol, _lagged(own, lag, own[0]), valid)
         ok = table >= 0
         stillness[table[ok]] = run[ok] / lags
         # still in most of them: one frame whose point a coincidence spoiled does not count;
@@ -634,6 +638,21 @@ def _lagged(rows: np.ndarray, lag: int, fill) -> np.ndarray:
     out[lag:] = rows[:-lag]
     out[:lag] = fill
     return out
+
+def _still_pair(d_px, tol, tol_prev, valid):
+    """The long image test's frame (:func:`_static`): (frames, K) whether some candidate of
+    the earlier frame (``valid``, (frames, 1, K')) lies within the smaller tolerance of the
+    pair: ``tol`` (frames, K) the candidate's own (:func:`_still_px`, NaN: no image test),
+    ``tol_prev`` (frames, K') the earlier candidate's (NaN without a point: ``tol``), at
+    pixel distance ``d_px`` (frames, K, K'). (A motion ``e`` across the ray at the earlier
+    point's depth ``D'`` moves the image by ``f e / D'``: with the newest depth alone a ball
+    coming towards the camera looked still while it moved ``static_m D' / D`` across its
+    ray, more than ``_still_long``'s bound: a lob along a steep camera's ray.)"""
+    pair = tol[:, :, None]
+    prev = tol_prev[:, None, :]
+    pair = np.where(prev < pair, prev, pair)  # Python's min(tol, tol_prev); NaN tol stays
+    return np.any(valid & (d_px <= pair), axis=2)
+
 
 def _still_alone(run_px, held, lags: int):
     """The image test's verdict (:func:`_static`; arrays elementwise or floats): still
@@ -1495,6 +1514,7 @@ def _stillness_one(key: int, pts, earlier, lags: int, options: GatingOptions,
                 continue
             best_px = math.inf
             supported = False
+            still_long = False
             if tols[j] == tols[j]:  # (an image test: not NaN)
                 u, v = uvs[j]
                 for (pu, pv), (px, py, pz) in zip(prev_uvs[0], prev_points, strict=True):
@@ -1502,9 +1522,18 @@ def _stillness_one(key: int, pts, earlier, lags: int, options: GatingOptions,
                     d = _sqrt(du * du + dv * dv)
                     if d < best_px:
                         best_px = d
-                    if d <= tols[j] and px == px and py == py and pz == pz:  # (finite)
+                    finite = px == px and py == py and pz == pz
+                    if d <= tols[j] and finite:
                         supported = True
-            if recent_long and best_px <= tols[j]:
+                    # _still_pair: the smaller of the two candidates' tolerances
+                    pair = tols[j]
+                    if finite:
+                        own = _still_px(cam, px, py, pz, options, _sqrt)
+                        if own < pair:
+                            pair = own
+                    if d <= pair:
+                        still_long = True
+            if recent_long and still_long:
                 run_long[j] += 1.0
             else:
                 alive[j] = False
