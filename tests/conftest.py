@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import signal
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -15,6 +16,11 @@ from pslog.rig import Rig, apply_timing, builtin_rig
 # a command that runs longer than the progress period (5 s, on a loaded machine) would add a
 # progress line to the standard error other tests read; tests/test_progress.py turns it on
 os.environ.setdefault("PSLOG_PROGRESS", "off")
+
+# the suite started under ``nohup`` (or by a service that ignores SIGHUP) would hand its ignored
+# SIGHUP to every command it starts, and the tests of what a closed terminal does would then
+# test nothing: commands run as from a terminal
+signal.signal(signal.SIGHUP, signal.SIG_DFL)
 
 
 def make_jpeg(value: int = 128, width: int = 64, height: int = 48) -> bytes:

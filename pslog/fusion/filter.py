@@ -2106,7 +2106,9 @@ def accel_floor(rig: Rig, options: FilterOptions) -> float:
     model error the filter allows while its innovations look white; with continuous white
     noise acceleration of density ``q`` the velocity variance added between two detections
     is ``q T`` (Bar-Shalom, Li & Kirubarajan 2001, §6.2.2), so this floor allows the same
-    velocity variance per detection interval on every rig. A fixed 0.01 m²/s³ left the
+    velocity variance per mean detection interval ``T = 1 / Σ fps`` on every rig (per actual
+    interval on staggered shutters; synchronised shutters' detections share an instant, so
+    each instant gets the variance of its cameras' intervals together). A fixed 0.01 m²/s³ left the
     filter at 0.52-0.61 of ``typeA`` on two cameras at 30 fps (the floor, not the jumps or
     the start, per phase); a fixed 0.001 fixed those and cost the turning motions at 120-240
     fps up to 2.4 x (the turn model's set switches on ``q``)."""
