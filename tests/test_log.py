@@ -732,3 +732,26 @@ def test_info_measures_30_fps_on_a_session_with_most_frames_dropped(tmp_path, cl
                                                                           ["cam3"])]
     assert [row[2] for row in rows] == ["30.00"] * 3, out
     assert [row[4] for row in rows] == ["0.000", "11.111", "22.222"], out
+
+
+@pytest.mark.parametrize(("fps", "tick_s", "late_s", "drop", "jitter_s"), [
+    (30, 0.010, 0.0, 0.0, 0.0),       # timestamps on 10-ms ticks: not a 100 fps camera
+    (15, 0.015625, 0.0, 0.0, 0.0),    # Windows' 15.625-ms clock: not 64 fps
+    (30, 0.0, 0.008, 0.0, 0.0),       # randomly 0 or 8 ms late (a busy host): not 120 fps
+    (30, 0.0, 0.0, 0.6, 0.003),       # 60 % dropped and 3 ms of jitter
+])
+def test_frame_period_is_not_a_fraction_of_it_on_coarse_or_late_timestamps(
+        fps, tick_s, late_s, drop, jitter_s):
+    """Review of session 12: a period shorter than the median gap was taken whenever the gaps
+    fit it, and timestamps rounded to a coarse tick or late by a fixed amount fit a fraction of
+    the period (30 fps read as 100, 15 as 64). A shorter period now needs single gaps too."""
+    from pslog.log.info import measure_timing
+
+    rng = np.random.default_rng(5)
+    k = np.arange(1500)
+    k = k[rng.random(len(k)) >= drop]
+    t = 1.0 + k / fps + rng.normal(0, jitter_s, len(k)) + late_s * rng.integers(0, 2, len(k))
+    if tick_s:
+        t = np.floor(t / tick_s) * tick_s
+    period, _ = measure_timing(np.round(np.sort(t) * NS).astype(np.int64))
+    assert abs(1 / period - fps) < 0.02 * fps, 1 / period

@@ -85,13 +85,14 @@ def _fit_and_final_residuals(obs, rig):
 
 
 def test_variance_factor_is_hubers_sandwich_scale():
-    """``k = [Σ w² ‖r‖² / (n_res - p_eff)] / (σ² mean(w)²)``, at least 1."""
+    """``k = [Σ w² ‖r‖² / (n_res - p_eff)] / σ² · mean(w) / mean(w²)²`` (Huber's sandwich with
+    the radial Cauchy's ψ' averaged over a row's two directions, w²), at least 1."""
     rng = np.random.default_rng(3)
     r = rng.normal(size=(500, 2)) * 0.4
     w = rng.uniform(0.5, 1.0, 500)
     k = T.variance_factor(r, w, 0.2, 120.0)
     assert np.isclose(k, np.sum(w**2 * (r * r).sum(axis=1)) / (0.2**2 * (1000 - 120.0))
-                      / np.mean(w) ** 2)
+                      * np.mean(w) / np.mean(w**2) ** 2)
     assert T.variance_factor(r, w, 10.0, 120.0) == 1.0  # never below the fit's own
     r[0] = np.nan  # a point behind its camera: left out
     assert np.isfinite(T.variance_factor(r, w, 0.2, 120.0))

@@ -850,11 +850,15 @@ def variance_factor(r: np.ndarray, w: np.ndarray, sigma: float, p_eff: float) ->
     """``k``, the factor that scales the covariance ``H⁻¹`` (made at the robust scale ``σ``
     that weighs the fit) to the noise the residuals show, by the sandwich covariance of an
     M-estimator (Huber, *Robust Statistics*, 1981, §7.6: ``K² [Σψ² / (n - p)] / [Σψ' / n]²
-    (JᵀJ)⁻¹``): with the Cauchy weights ``w`` for ``ψ'`` (the curvature the iteratively
-    reweighted fit uses) and ``ψ = w r / σ``,
+    (JᵀJ)⁻¹``, ``K`` ≈ 1 for ``p`` ≪ ``n``). ``H⁻¹`` is made with the Cauchy weights ``w``
+    (``H ≈ mean(w) JᵀJ / σ²``), ``ψ = w r / σ`` per row, and ``ψ'`` the derivative of the radial
+    Cauchy influence averaged over a row's two pixel directions: ``w (2w - 1)`` along the
+    residual, ``w`` across it, ``w²`` on average. So
 
-        k = [Σ_i w_i² ‖r_i‖² / (n_res - p_eff)] / (σ² · mean(w)²),
+        k = [Σ_i w_i² ‖r_i‖² / (n_res - p_eff)] / σ² · mean(w) / mean(w²)²,
 
+    which is the plain weighted residual variance when every ``w`` is 1. (Session 12's review:
+    ``w`` in place of ``ψ'`` understated the variance of a scale mixture by ~13 %.)
     ``n_res - p_eff`` the residual degrees of freedom of the penalised fit, ``p_eff`` the
     trace of its hat matrix (Wahba 1983, JRSS B 45: σ̂² = RSS / (n - tr A)). Noise the weights
     take out of the points (a scale mixture's noisy detections) does not count in full:
@@ -867,7 +871,8 @@ def variance_factor(r: np.ndarray, w: np.ndarray, sigma: float, p_eff: float) ->
         return 1.0
     wf = w[fin]
     score = float(np.sum(wf * wf * np.einsum("ni,ni->n", r[fin], r[fin])))
-    k = score / (sigma**2 * max(n_res - p_eff, 1.0)) / float(np.mean(wf)) ** 2
+    k = (score / (sigma**2 * max(n_res - p_eff, 1.0)) * float(np.mean(wf))
+         / float(np.mean(wf * wf)) ** 2)
     return max(k, 1.0)
 
 

@@ -65,7 +65,7 @@ def copy_session(src, dst, *, detections: Detections | Callable[[], Detections] 
                    replace_tracks=replace_tracks, metadata=metadata, rig=rig, force=force,
                    checked_chunks=checked_chunks, layouts=layouts) as w:
         for track in tracks:
-            w.add_track(track)
+            w.add_track(track, left_out=track.dropped or None)
         for method, rejected in (rejections or {}).items():
             w.add_rejections(method, rejected)
 
@@ -83,7 +83,9 @@ def open_copy(src, dst, *, detections: Detections | Callable[[], Detections] | N
     ``replace_tracks`` is False) while it still makes some (``pslog fuse`` writes each
     method's track as the method ends). ``dst`` appears when the context ends without an
     exception, complete; on any exception (an interrupt too) nothing is left and an old
-    ``dst`` stays. The parameters are :func:`copy_session`'s."""
+    ``dst`` stays. An interrupt during the final close itself is held until the close is done
+    (:func:`pslog.log.writer._signals_held`): ``dst`` is then the complete new file, and the
+    interrupt is raised after. The parameters are :func:`copy_session`'s."""
     src_path = Path(src)
     dst = check_output_path(dst, force, inputs=[src_path])  # before reading anything
     with _Finished(src_path) as f:
@@ -117,7 +119,10 @@ def open_copy(src, dst, *, detections: Detections | Callable[[], Detections] | N
     with SessionWriter(dst, rig, force=force, timing=timing,
                        source=meta.get("source", ""), metadata=user_meta,
                        start_ns=start_ns, on_error="discard", inputs=[src_path],
-                       write_static=new_rig, channel_ids=channel_ids) as w:
+                       write_static=new_rig, channel_ids=channel_ids,
+                       # no timed flush: the same command writes the same bytes however long
+                       # its methods took (pslog fuse writes tracks as they end)
+                       flush_interval_s=float("inf")) as w:
         if not replace_tracks:
             for kept, counts in old_left_out.items():
                 if kept not in new_methods:

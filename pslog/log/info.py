@@ -52,24 +52,32 @@ def measure_timing(time_ns: np.ndarray, ref_ns: int = 0) -> tuple[float, float]:
 #: gaps within this fraction of a period of a whole number of periods fit that period
 _FIT_TOLERANCE = 0.2
 #: the share of gaps that must fit a period for it to be the frame period
-_FIT_SHARE = 0.9
+_FIT_SHARE = 0.8
+#: a period shorter than the median gap needs this share of gaps of about one period
+_SINGLE_SHARE = 0.1
 #: the median gap is tried as up to this many frame periods (frames dropped in between)
 _MOST_PERIODS = 8
 
 
 def _first_period(gaps: np.ndarray) -> float:
     """The frame period the positive ``gaps`` (s) are whole multiples of: the median gap
-    divided by the smallest ``m`` in 1.._MOST_PERIODS for which _FIT_SHARE of the gaps lie within
-    _FIT_TOLERANCE of a multiple of ``median / m`` (the median alone when none does: jitter
-    beyond the tolerance). With half the frames or more dropped the median gap is two periods
-    or more: taken as the period, every single-period gap rounded to 0 or 1 at random (a
-    session with 60 % drops measured 13 fps instead of 30, and offsets off by milliseconds)."""
+    divided by the smallest ``m`` in 1.._MOST_PERIODS for which _FIT_SHARE of the gaps lie
+    within _FIT_TOLERANCE of a multiple of ``median / m`` and, for ``m`` > 1, _SINGLE_SHARE of
+    them about one such period (frames dropped leave some single gaps; timestamps rounded to
+    a coarse tick or late by a fixed amount fit a fraction of the period without any: a 30 fps
+    camera on 10-ms ticks is not a 100 fps one); the median alone when none fits (jitter beyond
+    the tolerance; the least-squares slope of :func:`measure_timing` then refines it). With half
+    the frames or more dropped the median gap is two periods or more: taken as the period,
+    every single-period gap rounded to 0 or 1 at random (a session with 60 % drops measured
+    13 fps instead of 30, and offsets off by milliseconds)."""
     if not len(gaps):
         return float("nan")
     median = float(np.median(gaps))
     for m in range(1, _MOST_PERIODS + 1):
         ratio = gaps / (median / m)
-        if np.mean(np.abs(ratio - np.round(ratio)) <= _FIT_TOLERANCE) >= _FIT_SHARE:
+        whole = np.round(ratio)
+        fits = np.mean(np.abs(ratio - whole) <= _FIT_TOLERANCE) >= _FIT_SHARE
+        if fits and (m == 1 or np.mean(whole == 1) >= _SINGLE_SHARE):
             return median / m
     return median
 

@@ -86,7 +86,9 @@ class SessionWriter:
     timing : shutter preset name (``sync``, ``typeA``, ``typeB``) or ``custom``
     source : free text: what produced the session (``simulate motion=spiral ...``)
     metadata : extra string key/values for the session metadata record
-    flush_interval_s : longest time, seconds, that written data stays in memory
+    flush_interval_s : longest time, seconds, that written data stays in memory (``math.inf``:
+        no timed flush — a derived output, whose ``.partial`` goes on any failure: its chunk
+        boundaries then depend on what is written, never on how long the caller took)
     start_ns : session clock time (ns) stamped on the static calibration and pose messages
     write_static : write the rig's calibration and pose messages (False: the caller copies
         them, e.g. verbatim from the session it derives from)
@@ -219,7 +221,7 @@ class SessionWriter:
                     self.flush()
                 except OSError as exc:
                     raise self._os_fault(exc) from None
-            if self._flush_interval > 0:
+            if 0 < self._flush_interval < float("inf"):
                 # flush on a timer too, so data is on disk within the interval even when the
                 # caller stops adding messages (a stalled camera) and is then killed
                 flusher = threading.Thread(target=self._flush_loop, daemon=True,
@@ -499,7 +501,7 @@ class SessionWriter:
         return lo
 
     def _maybe_flush(self) -> None:
-        if time.monotonic() - self._last_flush >= self._flush_interval:
+        if time.monotonic() - self._last_flush >= self._flush_interval:  # never when inf
             self.flush()
 
     def _camera_name(self, camera: int) -> str:
@@ -1038,7 +1040,8 @@ def _signals_held():
         # main thread is delivered here, to its own handler
         if error is not None:
             raise error
-        for sig in came:
+        # the first raised ends the block: a termination (SIGTERM, SIGHUP) before a Ctrl-C
+        for sig in sorted(came, key=lambda s: s == signal.SIGINT):
             signal.raise_signal(sig)
 
 

@@ -174,6 +174,8 @@ def test_a_signal_taken_by_another_thread_waits_for_the_writer_close(tmp_path, r
             raise
 
     writer._close = close_with_a_signal  # type: ignore[method-assign]
+    # as in a terminal, whatever started the suite (a background job ignores SIGINT)
+    old_sigint = signal.signal(signal.SIGINT, signal.default_int_handler)
     restore = _termination_interrupts()
     expected = KeyboardInterrupt if sig == signal.SIGINT else Terminated
     try:
@@ -181,12 +183,13 @@ def test_a_signal_taken_by_another_thread_waits_for_the_writer_close(tmp_path, r
             writer.close()
             time.sleep(0.05)
         writer_module.close_abandoned()  # what the command does on the interrupt
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
     finally:
         restore()
+        signal.signal(signal.SIGINT, old_sigint)
     assert sent.is_set() and not raised_in_close
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out.mcap"]
     assert read_session(out).detections.n_frames == 1
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
     assert signal.pthread_sigmask(signal.SIG_BLOCK, set()) == set()
 
 
