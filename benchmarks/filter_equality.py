@@ -52,10 +52,9 @@ from pslog.rig import apply_timing, builtin_rig  # noqa: E402
 #: (FilterOptions.jump_rate_per_s), with the ballistic model's drag in the supported model too
 #: and the ballistic start alone (supported_drag_per_m, start_models: session 8), the noise
 #: prior at the stated noise alone (window_noise_prior: session 10), the process noise's floor
-#: 0.01 m²/s³ on every rig (accel_psd: session 11), the turn model's switch at a fixed q
-#: (turn_on_psd) and surprises at the 99 % quantile (confirm_nis: session 12).
+#: 0.01 m²/s³ on every rig (accel_psd: session 11).
 BASE_OPTIONS = compiled.FilterOptions(jump_rate_per_s=0.0, start_models=False, accel_psd=0.01,
-                                      turn_on_psd=0.3, confirm_nis=9.21,
+                                      turn_on_psd=0.3,
                                       supported_drag_per_m=compiled.FilterOptions().drag_per_m,
                                       max_std_m=base.FilterOptions().max_std_m,
                                       window_noise_prior=False)

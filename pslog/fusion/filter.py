@@ -222,8 +222,8 @@ class FilterOptions:
         are mixed by an interacting multiple model (0: the ballistic model alone)
     max_init_speed_std : float, a (re)initialisation whose velocity standard deviation
         ``sqrt(trace P_vv)`` exceeds this is refused, m/s
-    confirm_nis : float, an accepted update whose NIS exceeds this (98 % quantile of χ²₂;
-        9.21, the 99 % one, before session 12) must be confirmed like a jump
+    confirm_nis : float, an accepted update whose NIS exceeds this (99 % quantile of χ²₂)
+        must be confirmed like a jump
     max_std_m : float or None, a point whose ``std_m`` exceeds this is withheld, metres
         (None: no bound); default ``0.05 / 1.96``: a point is output when its error is
         within 5 cm (issue 10's bound) with 95 % probability, whatever the shape of its
@@ -283,7 +283,7 @@ class FilterOptions:
     init_span_s: float = 0.03
     max_init_std_m: float = 0.05
     max_init_speed_std: float = 1.0
-    confirm_nis: float = 7.82
+    confirm_nis: float = 9.21
     withhold: bool = True
     max_gap_s: float | None = None
     max_accel_psd: float = 100.0
