@@ -6,6 +6,7 @@ still read, and a failure or SIGTERM after some track was written leaves no outp
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import signal
@@ -69,6 +70,8 @@ def test_a_file_in_the_old_layout_still_reads(rally, tmp_path, capsys):
     fuse`` wrote until the tracks went out as each method ended)."""
     s = read_session(rally)
     tracks, _ = fuse_detections(s.detections, s.rig, ["typeA", "nearest"], FusionOptions())
+    # without their own counts, which copy_session now writes in the tracks' channels
+    tracks = {m: dataclasses.replace(t, dropped={}) for m, t in tracks.items()}
     counts = {"typeA": {"kink": 7, "prediction_failed": 2}, "nearest": {"behind_camera": 1}}
     old = tmp_path / "old.mcap"
     copy_session(rally, old, tracks=list(tracks.values()),
@@ -150,3 +153,16 @@ def test_sigterm_after_a_track_was_written_leaves_nothing(tmp_path):
         from pslog.log import read_session
 
         assert len(read_session(out).tracks) > 0
+
+
+def test_copy_session_keeps_each_tracks_left_out_counts(rally, tmp_path):
+    """Review of session 12: ``copy_session`` (the Python API, ``pslog demo``) wrote tracks
+    without their left-out counts, so ``eval`` of its files said nothing was left out."""
+    s = read_session(rally)
+    tracks, _ = fuse_detections(s.detections, s.rig, ["typeA", "nearest"], FusionOptions())
+    tracks["typeA"] = dataclasses.replace(tracks["typeA"], dropped={"kink": 3})
+    out = tmp_path / "copied.mcap"
+    copy_session(rally, out, tracks=list(tracks.values()))
+    channels, _ = _channels_and_session_meta(out)
+    assert json.loads(channels["/tracks/typeA"][LEFT_OUT_KEY]) == {"kink": 3}
+    assert read_session(out).left_out.get("typeA") == {"kink": 3}

@@ -1,7 +1,8 @@
 """The same command on the same input writes the same file: every message and attachment of
 two ``pslog fuse`` runs (separate processes, any number of workers) are equal bytes, and so
-is the whole file but for the session's creation time. Protobuf serialises a map (a TrackPoint's ``quality``) in an order of its own
-that changes between processes unless asked for the deterministic (key-sorted) form."""
+is the whole file but for the session's creation time. Protobuf serialises a map (a
+TrackPoint's ``quality``) in an order of its own that changes between processes unless asked
+for the deterministic (key-sorted) form."""
 
 import subprocess
 import sys
