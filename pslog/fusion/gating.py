@@ -1637,7 +1637,11 @@ def stream_arrays(time_ns, camera, uv, frame_index, n_cameras: int, who: str):
         raise FusionError(f"{who}: time_ns, camera, uv and frame_index must have one row per "
                           f"detection, got {len(time_ns)}, {len(camera)}, {len(uv)} and "
                           f"{len(frame_index)} rows")
-    if len(camera) and (camera.min() < 0 or camera.max() >= n_cameras):
+    if len(camera) == 1:  # (one detection per push, the live case: no numpy reductions)
+        outside = not 0 <= int(camera[0]) < n_cameras
+    else:
+        outside = bool(len(camera)) and (camera.min() < 0 or camera.max() >= n_cameras)
+    if outside:
         bad = camera[(camera < 0) | (camera >= n_cameras)][0]
         raise FusionError(f"{who}: camera index {bad} is not one of the rig's {n_cameras} "
                           f"cameras (0 to {n_cameras - 1})")
@@ -1648,6 +1652,8 @@ def _integer_column(values, name: str, who: str) -> np.ndarray:
     """``values`` as an (n,) int64 column, checked BEFORE the conversion (which would wrap
     2**32 + 1 or truncate 1.7 silently): integers within int64, or floats that are whole
     numbers within it."""
+    if isinstance(values, np.ndarray) and values.dtype.kind == "i" and values.ndim == 1:
+        return values if values.dtype == np.int64 else values.astype(np.int64)  # (fast path)
     try:
         array = np.atleast_1d(np.asarray(values))
     except (TypeError, ValueError) as exc:
