@@ -227,18 +227,23 @@ def test_camera_killed_while_writing_into_its_full_pipe(recording):
     """The state that jammed the shared queue: a thread of the camera sleeps in a pipe write
     (the parent is behind), holding the queue's lock and halfway through a message."""
     rec = recording()
-    pids = rec.camera_pids()
-    victim = None
-    deadline = time.monotonic() + 60
-    while victim is None and time.monotonic() < deadline:
-        for name in ("cam2", "cam1", "cam3"):
-            if _blocked_in_pipe_write(pids[name]):
-                os.kill(pids[name], signal.SIGKILL)
-                victim = name
-                break
-        assert rec.proc.poll() is None, f"recorder ended before the kill:\n{rec.stderr}"
-    assert victim is not None, f"no camera was ever blocked writing:\n{rec.stderr}"
+    victim, _ = _signal_a_writing_camera(rec, signal.SIGKILL, ("cam2", "cam1", "cam3"))
     _assert_survived(rec, victim, "killed while blocked in a pipe write")
+
+
+def _signal_a_writing_camera(rec: Recording, sig: int, order: tuple[str, ...]
+                             ) -> tuple[str, dict[str, int]]:
+    """Send ``sig`` to the first camera (in ``order``) seen blocked in a write into its full
+    pipe (halfway through a message); its name and every camera's pid."""
+    pids = rec.camera_pids()
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:
+        for name in order:
+            if _blocked_in_pipe_write(pids[name]):
+                os.kill(pids[name], sig)
+                return name, pids
+        assert rec.proc.poll() is None, f"recorder ended before the signal:\n{rec.stderr}"
+    raise AssertionError(f"no camera was ever blocked writing:\n{rec.stderr}")
 
 
 def test_camera_stopped_halfway_through_a_message_holds_back_only_itself(recording):
@@ -249,17 +254,7 @@ def test_camera_stopped_halfway_through_a_message_holds_back_only_itself(recordi
     without blocking: the others finish, Ctrl-C stops the recording, the stopped camera's
     complete frames are kept."""
     rec = recording()
-    pids = rec.camera_pids()
-    victim = None
-    deadline = time.monotonic() + 60
-    while victim is None and time.monotonic() < deadline:
-        for name in ("cam3", "cam1", "cam2"):
-            if _blocked_in_pipe_write(pids[name]):
-                os.kill(pids[name], signal.SIGSTOP)
-                victim = name
-                break
-        assert rec.proc.poll() is None, f"recorder ended before the stop:\n{rec.stderr}"
-    assert victim is not None, f"no camera was ever blocked writing:\n{rec.stderr}"
+    victim, pids = _signal_a_writing_camera(rec, signal.SIGSTOP, ("cam3", "cam1", "cam2"))
     others = [pids[name] for name in CAMERAS if name != victim]
     deadline = time.monotonic() + HANG_S
     while any(_alive(pid) for pid in others):  # their last frames delivered: they end
