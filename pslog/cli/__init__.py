@@ -123,7 +123,9 @@ def _release_sigint() -> None:
     if _SIGINT_HELD is not None:
         import signal
 
-        signal.signal(signal.SIGINT, _SIGINT_HELD)
+        # Python's own handler raises anywhere, importlib's code included (see _raising)
+        signal.signal(signal.SIGINT, _raising(_keyboard_interrupt)
+                      if _SIGINT_HELD is signal.default_int_handler else _SIGINT_HELD)
         _SIGINT_HELD = None
         # SIGTERM/SIGHUP's noting handlers were replaced by _termination_interrupts already
         for signum in _EARLY_SIGINT:
@@ -258,6 +260,37 @@ class Terminated(KeyboardInterrupt):
         return signal.Signals(self.signum).name
 
 
+def _raising(make):
+    """A signal handler raising ``make(signum)`` in the main thread where it was interrupted,
+    unless that is importlib's own code: there an exception can land between a lock's
+    acquisition and the ``try`` that releases it, or inside a weakref callback
+    (``_get_module_lock``'s ``cb``), where Python prints and drops it — the interrupt was lost
+    and the global import lock stayed taken, so every thread's next import waited for ever
+    (``pslog fuse`` hung after a SIGTERM while its threads loaded modules). There the signal
+    is sent again to the main thread 10 ms later, to be raised somewhere safe."""
+    def handler(signum, frame):
+        if frame is not None and frame.f_code.co_filename.startswith("<frozen importlib"):
+            _deliver_later(signum)
+            return
+        raise make(signum)
+
+    return handler
+
+
+def _deliver_later(signum: int, delay_s: float = 0.01) -> None:
+    import signal
+    import threading
+
+    timer = threading.Timer(delay_s, signal.pthread_kill,
+                            (threading.main_thread().ident, signum))
+    timer.daemon = True
+    timer.start()
+
+
+def _keyboard_interrupt(signum: int) -> KeyboardInterrupt:
+    return KeyboardInterrupt()
+
+
 def _termination_interrupts():
     """Make SIGTERM and SIGHUP raise :class:`Terminated` in the main thread while a command
     runs (a command that records installs its own stop handler over this one; a SIGHUP that
@@ -269,9 +302,7 @@ def _termination_interrupts():
     if threading.current_thread() is not threading.main_thread():
         return lambda: None
 
-    def raise_terminated(signum, frame):
-        raise Terminated(signum)
-
+    raise_terminated = _raising(Terminated)
     previous = {sig: signal.signal(sig, raise_terminated) for sig in (signal.SIGTERM,
                                                                        signal.SIGHUP)
                 if signal.getsignal(sig) is not signal.SIG_IGN}

@@ -244,3 +244,29 @@ def test_redetect_workers_leave_ctrl_c_to_the_main_process(session_with_frames, 
     assert proc.returncode == 130, err
     assert err.strip().splitlines() == ["pslog redetect: interrupted"], err
     assert not (tmp_path / "out.mcap.partial").exists()
+
+
+def test_a_signal_in_importlibs_code_is_raised_again_elsewhere():
+    """CI saw ``pslog fuse`` hang after a SIGTERM: the handler raised Terminated inside
+    importlib's weakref callback (``_get_module_lock``'s ``cb``, run in the main thread),
+    where Python prints and drops an exception — the interrupt was lost and the global import
+    lock stayed taken, so the fusion threads' next imports waited for ever. In importlib's
+    own code the handler now sends the signal again a moment later, raised where it is safe."""
+    import types
+
+    from pslog.cli import Terminated, _raising, _termination_interrupts
+
+    in_importlib = types.SimpleNamespace(
+        f_code=types.SimpleNamespace(co_filename="<frozen importlib._bootstrap>"))
+    restore = _termination_interrupts()
+    try:
+        _raising(Terminated)(signal.SIGTERM, in_importlib)  # must not raise here...
+        with pytest.raises(Terminated):
+            deadline = time.monotonic() + 10
+            while time.monotonic() < deadline:  # ...but here, once sent again
+                time.sleep(0.01)
+            pytest.fail("the signal was never raised again")
+    finally:
+        restore()
+    with pytest.raises(Terminated):  # anywhere else: at once
+        _raising(Terminated)(signal.SIGTERM, None)
