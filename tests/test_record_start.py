@@ -61,14 +61,20 @@ class _LateSource:
         pass
 
 
-class LateSpec:
+class _Spec:
+    """A camera of the recorder made of a test source class (picklable: the camera process
+    opens it)."""
+
     width, height = 640, 480
 
+    def __init__(self, source: type, text: str) -> None:
+        self.source, self.text = source, text
+
     def describe(self) -> str:
-        return "late test camera"
+        return self.text
 
     def open(self):
-        return _LateSource()
+        return self.source()
 
 
 def test_a_camera_whose_first_frame_is_late_is_not_stalled(tmp_path):
@@ -80,8 +86,9 @@ def test_a_camera_whose_first_frame_is_late_is_not_stalled(tmp_path):
 
     out = tmp_path / "s.mcap"
     said = io.StringIO()
-    summary = record(builtin_rig("paper2"), {"cam1": FileSpec(_clip(tmp_path / "a.avi"), 640, 480),
-                                             "cam2": LateSpec()}, out, status=said)
+    cameras = {"cam1": FileSpec(_clip(tmp_path / "a.avi"), 640, 480),
+               "cam2": _Spec(_LateSource, "late test camera")}
+    summary = record(builtin_rig("paper2"), cameras, out, status=said)
     assert [c.frames for c in summary.cameras] == [10, 10], said.getvalue()
     assert "no frame" not in said.getvalue() and "STALLED" not in said.getvalue(), said.getvalue()
     events = read_session(out).events
@@ -214,20 +221,11 @@ class _WarmCheckSource:
         pass
 
 
-class WarmCheckSpec:
-    width, height = 640, 480
-
-    def describe(self) -> str:
-        return "warm-check test camera"
-
-    def open(self):
-        return _WarmCheckSource()
-
-
 def test_camera_processes_warm_their_detector_before_the_first_frame(tmp_path):
     from recorders.record import record
 
-    summary = record(builtin_rig("paper2"), {"cam1": WarmCheckSpec(), "cam2": WarmCheckSpec()},
+    summary = record(builtin_rig("paper2"), {name: _Spec(_WarmCheckSource, "warm-check test camera")
+                                             for name in ("cam1", "cam2")},
                      tmp_path / "s.mcap", status=None)
     assert [(c.frames, c.message) for c in summary.cameras] == [(3, "end of source")] * 2
 
