@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import cv2
@@ -16,6 +15,7 @@ from pslog.records import NS
 from pslog.rig import apply_timing, builtin_rig, save_rig
 from recorders import record_synthetic
 from recorders.sources import synthetic_times
+from tests._sources import ScheduledSource, Spec
 
 ORANGE_BGR = (20, 110, 255)
 
@@ -158,42 +158,21 @@ def test_record_errors(tmp_path, two_camera_rig, capsys):
     assert Path(out).read_bytes() == b"keep me"
 
 
-class _StallingSource:
-    """A live 30 fps camera that pauses after 10 frames, resumes for 10 frames, then dies."""
+class _StallingSource(ScheduledSource):
+    """A live 30 fps camera that pauses 1.6 s after 10 frames, resumes for 10 frames, then
+    dies (stamped when delivered)."""
 
-    clock = "test clock"
-    live = True
+    stamp_due = False
 
-    def __init__(self) -> None:
-        self.k = 0
-        self.t0 = time.monotonic_ns()
+    def delay_s(self, k: int) -> float:
+        return 1.6 if k >= 10 else 0.0
 
-    def set_start(self, t0_ns: int) -> None:
-        self.t0 = t0_ns
-
-    def read(self):
+    def end(self, k: int) -> bool:
         from recorders.sources import SourceError
 
-        if self.k == 20:
+        if k == 20:
             raise SourceError("test camera unplugged")
-        pause = 1.6 if self.k >= 10 else 0.0
-        due = self.t0 + int((self.k / 30 + pause) * NS)
-        time.sleep(max(due - time.monotonic_ns(), 0) / NS)
-        frame = np.full((480, 640, 3), (60, 120, 70), np.uint8)
-        cv2.circle(frame, (300 + self.k, 200), 6, ORANGE_BGR, -1)
-        self.k += 1
-        return self.k - 1, time.monotonic_ns() - self.t0, frame
-
-    def close(self) -> None:
-        pass
-
-
-class StallingSpec:
-    def describe(self) -> str:
-        return "stalling test camera"
-
-    def open(self):
-        return _StallingSource()
+        return False
 
 
 def test_camera_that_stalls_and_dies_is_logged_while_others_record(tmp_path):
@@ -204,7 +183,7 @@ def test_camera_that_stalls_and_dies_is_logged_while_others_record(tmp_path):
     rig = builtin_rig("paper2")
     out = tmp_path / "s.mcap"
     summary = record(rig, {"cam1": FileSpec(str(tmp_path / "a.avi"), 640, 480),
-                           "cam2": StallingSpec()}, out, status=None)
+                           "cam2": Spec(_StallingSource, "stalling test camera")}, out, status=None)
     assert summary.failed == ("cam2",)
     cam1, cam2 = summary.cameras
     assert cam1.frames == 30 and cam1.state == "done"

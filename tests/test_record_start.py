@@ -18,8 +18,7 @@ from pslog.cli import main
 from pslog.log import read_session
 from pslog.records import NS
 from pslog.rig import builtin_rig, save_rig
-
-ORANGE_BGR = (20, 110, 255)
+from tests._sources import ORANGE_BGR, ScheduledSource, Spec
 
 
 def _clip(path: Path, n: int = 10) -> str:
@@ -33,48 +32,15 @@ def _clip(path: Path, n: int = 10) -> str:
 
 
 # ---- a camera whose first frame comes late ------------------------------------------------
-class _LateSource:
+class _LateSource(ScheduledSource):
     """A live 30 fps camera whose first frame comes 1.6 s after the start (a camera that
     starts slowly), then 10 frames on time."""
 
-    clock = "test clock"
-    live = True
+    def delay_s(self, k: int) -> float:
+        return 1.6
 
-    def __init__(self) -> None:
-        self.k = 0
-        self.t0 = time.monotonic_ns()
-
-    def set_start(self, t0_ns: int) -> None:
-        self.t0 = t0_ns
-
-    def read(self):
-        if self.k == 10:
-            return None
-        due = self.t0 + int((1.6 + self.k / 30) * NS)
-        time.sleep(max(due - time.monotonic_ns(), 0) / NS)
-        frame = np.full((480, 640, 3), (60, 120, 70), np.uint8)
-        cv2.circle(frame, (300 + self.k, 200), 6, ORANGE_BGR, -1)
-        self.k += 1
-        return self.k - 1, due - self.t0, frame
-
-    def close(self) -> None:
-        pass
-
-
-class _Spec:
-    """A camera of the recorder made of a test source class (picklable: the camera process
-    opens it)."""
-
-    width, height = 640, 480
-
-    def __init__(self, source: type, text: str) -> None:
-        self.source, self.text = source, text
-
-    def describe(self) -> str:
-        return self.text
-
-    def open(self):
-        return self.source()
+    def end(self, k: int) -> bool:
+        return k == 10
 
 
 def test_a_camera_whose_first_frame_is_late_is_not_stalled(tmp_path):
@@ -87,7 +53,7 @@ def test_a_camera_whose_first_frame_is_late_is_not_stalled(tmp_path):
     out = tmp_path / "s.mcap"
     said = io.StringIO()
     cameras = {"cam1": FileSpec(_clip(tmp_path / "a.avi"), 640, 480),
-               "cam2": _Spec(_LateSource, "late test camera")}
+               "cam2": Spec(_LateSource, "late test camera")}
     summary = record(builtin_rig("paper2"), cameras, out, status=said)
     assert [c.frames for c in summary.cameras] == [10, 10], said.getvalue()
     assert "no frame" not in said.getvalue() and "STALLED" not in said.getvalue(), said.getvalue()
@@ -224,7 +190,7 @@ class _WarmCheckSource:
 def test_camera_processes_warm_their_detector_before_the_first_frame(tmp_path):
     from recorders.record import record
 
-    summary = record(builtin_rig("paper2"), {name: _Spec(_WarmCheckSource, "warm-check test camera")
+    summary = record(builtin_rig("paper2"), {name: Spec(_WarmCheckSource, "warm-check test camera")
                                              for name in ("cam1", "cam2")},
                      tmp_path / "s.mcap", status=None)
     assert [(c.frames, c.message) for c in summary.cameras] == [(3, "end of source")] * 2
