@@ -1175,3 +1175,237 @@ def _select(buf: np.ndarray, size: int, k: int) -> float:
         else:
             hi = i - 1
     return buf[k]
+
+
+@kernel
+def trial_gains(s_sorted: np.ndarray, bfirst: np.ndarray, bN: np.ndarray, bM: np.ndarray,
+                bu: np.ndarray, which: np.ndarray, j: np.ndarray, q0: np.ndarray,
+                lo: np.ndarray, hi: np.ndarray, coef: np.ndarray, first: np.ndarray,
+                Nd: np.ndarray, fn: np.ndarray, fw: np.ndarray, x0: np.ndarray,
+                base_row: np.ndarray, gravity: np.ndarray, cov: np.ndarray, col: np.ndarray
+                ) -> np.ndarray:
+    """The break test's gains ``gᵀ S⁻¹ g`` (B,) of B trial instants
+    (:func:`pslog.estimation._breaks._gains`), one trial at a time in one compiled pass:
+    the data terms of :func:`gains_data`, the prior's terms (:func:`trial_gather`, the
+    products ``Nd6 x0``, ``fw fnᵀ``, ``Nd6ᵀ fwᵀ``, ``fw p0``), :func:`trial_blocks`, the
+    Schur complement ``S = Hyy - H_xyᵀ Σ H_xy`` (its upper triangle, mirrored),
+    :func:`trial_schur`'s diagonal load, and the 9 x 9 solve (Gaussian elimination with
+    partial pivoting, as LAPACK's ``gesv``). The same terms as the numpy form, but the
+    small products' sums and the solve in this loop's order, not BLAS's and LAPACK's: the
+    gains agree to rounding (:func:`pslog.estimation._breaks._gains` is the reference).
+
+    Parameters: as :func:`gains_data` (``s_sorted`` .. ``coef``), :func:`trial_splines`'
+    ``first``, ``Nd`` (the clamped ones corrected), ``fn``, ``fw``; ``x0`` (rows, 3) the
+    bases' control points laid end to end and ``base_row`` (B,) the trial's window's first
+    row plus ``q0`` (:func:`trial_gather`); ``gravity`` (3,); ``cov`` (Bb, n, c) the
+    bases' inverse columns, ``col`` (B,) the trial's first column there (``3 q0 - col0``).
+    """
+    B = len(which)
+    Wb = s_sorted.shape[1]
+    out = np.empty(B)
+    F = np.zeros((Wb, 3))
+    OF = np.zeros((Wb, 6, 3))
+    Hyy = np.zeros((9, 9))
+    Hxy = np.zeros((18, 9))
+    g = np.zeros(9)
+    Nd6 = np.zeros((12, 6))
+    p0 = np.zeros((12, 3))
+    T = np.zeros((18, 9))
+    S = np.zeros((9, 9))
+    x = np.zeros(9)
+    rows = np.zeros(18, dtype=np.int64)
+    for b in range(B):
+        wb = which[b]
+        jb = j[b]
+        lo_col = 0
+        hi_col = 0
+        for w in range(Wb):  # the same counts as the detections before each bound
+            if s_sorted[wb, w] < jb - 1:
+                lo_col += 1
+            if s_sorted[wb, w] < jb + 1 + 1:
+                hi_col += 1
+        nw = hi_col - lo_col
+        for n in range(nw):
+            w = lo_col + n
+            xs = s_sorted[wb, w] - jb
+            for e in range(3):
+                fe = 0.0
+                for k in range(2):
+                    if xs >= lo[b, e, k] and xs < hi[b, e, k]:
+                        c = coef[b, e, k]
+                        fe = ((c[3] * 1.0 * xs + c[2]) * xs + c[1]) * xs + c[0]
+                F[n, e] = fe
+            for c6 in range(6):
+                a = q0[b] + c6 - bfirst[wb, w]
+                oc = bN[wb, w, a] if 0 <= a <= 3 else 0.0
+                for e in range(3):
+                    OF[n, c6, e] = oc * F[n, e]
+        # data: Hyy[3e+i, 3e2+k] = Σ f_e f_e2 M[i, k] (e <= e2), Hxy[3c+i, 3e+k] =
+        # Σ b_c f_e M[i, k], g[3e+d] = Σ f_e u[d]: a detection at a time, every entry its own
+        # running sum (independent: they overlap, none waits on its previous addition)
+        Hyy[:, :] = 0.0
+        Hxy[:, :] = 0.0
+        g[:] = 0.0
+        for n in range(nw):
+            w = lo_col + n
+            for e in range(3):
+                fe = F[n, e]
+                for d in range(3):
+                    g[3 * e + d] += fe * bu[wb, w, d]
+                for e2 in range(e, 3):
+                    ff = fe * F[n, e2]
+                    for i in range(3):
+                        for k in range(3):
+                            Hyy[3 * e + i, 3 * e2 + k] += ff * bM[wb, w, i, k]
+            for c6 in range(6):
+                for e in range(3):
+                    of = OF[n, c6, e]
+                    if of != 0.0:
+                        for i in range(3):
+                            for k in range(3):
+                                Hxy[3 * c6 + i, 3 * e + k] += of * bM[wb, w, i, k]
+        # prior: the nodes' base B-splines on q0..q0+5, p'' - g (jerk) of the base there
+        Nd6[:, :] = 0.0
+        for p in range(12):
+            pos = first[b, p] - q0[b]
+            pos = 0 if pos < 0 else (2 if pos > 2 else pos)
+            for a in range(4):
+                Nd6[p, pos + a] = Nd[b, p, a]
+        r0 = base_row[b]
+        for p in range(12):
+            for d in range(3):
+                acc = 0.0
+                for c6 in range(6):
+                    acc += Nd6[p, c6] * x0[r0 + c6, d]
+                p0[p, d] = acc - gravity[d] if p < 8 else acc
+        for e in range(3):
+            for e2 in range(e, 3):
+                acc = 0.0
+                for p in range(12):
+                    acc += fw[b, e, p] * fn[b, e2, p]
+                for i in range(3):
+                    Hyy[3 * e + i, 3 * e2 + i] += acc
+            for c6 in range(6):
+                acc = 0.0
+                for p in range(12):
+                    acc += Nd6[p, c6] * fw[b, e, p]
+                for i in range(3):
+                    Hxy[3 * c6 + i, 3 * e + i] += acc
+            for d in range(3):
+                acc = 0.0
+                for p in range(12):
+                    acc += fw[b, e, p] * p0[p, d]
+                g[3 * e + d] -= acc
+        # Σ H_xy (18 x 9), Σ the 18 x 18 block of the window's inverse (a zero row of H_xy
+        # adds nothing)
+        k0 = col[b]
+        q3 = 3 * q0[b]
+        nk = 0
+        for k in range(18):
+            nz = False
+            for c in range(9):
+                if Hxy[k, c] != 0.0:
+                    nz = True
+            if nz:
+                rows[nk] = k
+                nk += 1
+        for rr in range(nk):  # the rows of Σ H_xy that H_xyᵀ reads
+            r = rows[rr]
+            # a row of Σ H_xy: nine running sums side by side (in registers)
+            t0 = t1 = t2 = t3 = t4 = t5 = t6 = t7 = t8 = 0.0
+            for kk in range(nk):
+                k = rows[kk]
+                ck = cov[wb, q3 + r, k0 + k]
+                t0 += ck * Hxy[k, 0]
+                t1 += ck * Hxy[k, 1]
+                t2 += ck * Hxy[k, 2]
+                t3 += ck * Hxy[k, 3]
+                t4 += ck * Hxy[k, 4]
+                t5 += ck * Hxy[k, 5]
+                t6 += ck * Hxy[k, 6]
+                t7 += ck * Hxy[k, 7]
+                t8 += ck * Hxy[k, 8]
+            T[r, 0] = t0
+            T[r, 1] = t1
+            T[r, 2] = t2
+            T[r, 3] = t3
+            T[r, 4] = t4
+            T[r, 5] = t5
+            T[r, 6] = t6
+            T[r, 7] = t7
+            T[r, 8] = t8
+        # S = Hyy - H_xyᵀ (Σ H_xy): a row's nine sums over the rows H_xy has side by side,
+        # its upper triangle kept (Hyy's data block is its upper triangle of blocks), mirrored
+        for a in range(9):
+            t0 = t1 = t2 = t3 = t4 = t5 = t6 = t7 = t8 = 0.0
+            for kk in range(nk):
+                r = rows[kk]
+                h = Hxy[r, a]
+                t0 += h * T[r, 0]
+                t1 += h * T[r, 1]
+                t2 += h * T[r, 2]
+                t3 += h * T[r, 3]
+                t4 += h * T[r, 4]
+                t5 += h * T[r, 5]
+                t6 += h * T[r, 6]
+                t7 += h * T[r, 7]
+                t8 += h * T[r, 8]
+            S[a, 0] = t0
+            S[a, 1] = t1
+            S[a, 2] = t2
+            S[a, 3] = t3
+            S[a, 4] = t4
+            S[a, 5] = t5
+            S[a, 6] = t6
+            S[a, 7] = t7
+            S[a, 8] = t8
+        big = 0.0
+        nan = False
+        for a in range(9):
+            for c in range(a, 9):
+                hy = Hyy[a, c] if (a // 3) <= (c // 3) else Hyy[c, a]
+                S[a, c] = hy - S[a, c]
+                S[c, a] = S[a, c]
+            d = abs(S[a, a])
+            if d != d:
+                nan = True
+            elif d > big:
+                big = d
+        load = (np.nan if nan else 1e-12 * big) + 1e-300
+        for a in range(9):
+            S[a, a] += load
+            x[a] = g[a]
+        # S x = g: Gaussian elimination with partial pivoting
+        for c in range(9):
+            piv = c
+            best = abs(S[c, c])
+            for r in range(c + 1, 9):
+                v = abs(S[r, c])
+                if v > best:
+                    best = v
+                    piv = r
+            if piv != c:
+                for k in range(c, 9):
+                    tmp = S[c, k]
+                    S[c, k] = S[piv, k]
+                    S[piv, k] = tmp
+                tmp = x[c]
+                x[c] = x[piv]
+                x[piv] = tmp
+            inv = 1.0 / S[c, c]
+            for r in range(c + 1, 9):
+                f = S[r, c] * inv
+                if f != 0.0:
+                    for k in range(c + 1, 9):
+                        S[r, k] -= f * S[c, k]
+                    x[r] -= f * x[c]
+        for c in range(8, -1, -1):
+            acc = x[c]
+            for k in range(c + 1, 9):
+                acc -= S[c, k] * x[k]
+            x[c] = acc / S[c, c]
+        gain = 0.0
+        for a in range(9):
+            gain += g[a] * x[a]
+        out[b] = gain
+    return out
