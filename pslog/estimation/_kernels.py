@@ -1409,3 +1409,65 @@ def trial_gains(s_sorted: np.ndarray, bfirst: np.ndarray, bN: np.ndarray, bM: np
             gain += g[a] * x[a]
         out[b] = gain
     return out
+
+
+@kernel
+def scaled_norms(r: np.ndarray, sigma2: float) -> np.ndarray:
+    """``np.sum(r * r, axis=1) / sigma2`` (n,) of ``r`` (n, 2), one pass (numpy's sum of
+    two: ``r0² + r1²``; the same bits)."""
+    n = r.shape[0]
+    out = np.empty(n)
+    for i in range(n):
+        out[i] = (r[i, 0] * r[i, 0] + r[i, 1] * r[i, 1]) / sigma2
+    return out
+
+
+@kernel
+def linear_target(J: np.ndarray, X: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """``einsum("naj,nj->na", J, X) - r`` (n, 2): the linearised measurements ``J X - r``,
+    one pass. The three products are added as numpy's einsum adds them here (its
+    sum-of-products loop: ``(p0 + p2) + p1``; the same bits, measured on whole sessions)."""
+    n = r.shape[0]
+    out = np.empty((n, 2))
+    for i in range(n):
+        for a in range(2):
+            out[i, a] = ((J[i, a, 0] * X[i, 0] + J[i, a, 2] * X[i, 2])
+                         + J[i, a, 1] * X[i, 1]) - r[i, a]
+    return out
+
+
+@kernel
+def band_matvec(ab: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``A x`` (n,) of the symmetric band ``ab`` (12, n) (upper storage,
+    :mod:`pslog.estimation._normal`): each entry the diagonal's term, then per
+    super-diagonal ``d = 1..11`` the term above and the term below (the order of
+    :func:`pslog.estimation.trajectory._prior_cost`'s numpy passes: the same bits)."""
+    rows, n = ab.shape
+    u = rows - 1
+    out = np.empty(n)
+    for i in range(n):
+        acc = ab[u, i] * x[i]
+        for d in range(1, rows):
+            if i + d < n:
+                acc += ab[u - d, i + d] * x[i + d]
+            if i - d >= 0:
+                acc += ab[u - d, i] * x[i - d]
+        out[i] = acc
+    return out
+
+
+@kernel
+def hat_diagonal(J: np.ndarray, cov: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """``w_n tr(J_n Σ_n J_nᵀ)`` (n,) of Jacobians (n, 2, 3), marginal covariances (n, 3, 3)
+    and weights (n,) (``w * np.einsum("naj,njk,nak->n", J, cov, J)``), one pass: per row
+    the sum over ``a, j, k`` in that order."""
+    n = J.shape[0]
+    out = np.empty(n)
+    for i in range(n):
+        acc = 0.0
+        for a in range(2):
+            for j in range(3):
+                for k in range(3):
+                    acc += J[i, a, j] * cov[i, j, k] * J[i, a, k]
+        out[i] = w[i] * acc
+    return out
