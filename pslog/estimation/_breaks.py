@@ -220,14 +220,21 @@ def _new_splines(a: np.ndarray) -> list:
             [(a, one, _reflect(right3)), (one, 2 * one, _reflect(left3))]]
 
 
-def _trial_terms(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray,
-                 prior) -> tuple:
-    """The per-trial terms :func:`_gains` and :func:`_gains_compiled` share: the trial's span
-    ``j``, the six base control points from ``q0``, the new B-splines (``lo``, ``hi``,
-    ``coef``), the prior's nodes with the new B-splines' ``fn`` and weighted ``fw`` there,
-    and the base's B-splines there (``first``, ``Nd``: the clamped ones near the window's
-    ends from the knots)."""
-    from ._kernels import trial_splines
+def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, prior
+           ) -> np.ndarray:
+    """Cost decrease (B,) of a triple knot at ``tau`` (B,) in window ``which`` (B,) of
+    ``base``, whose uniform knots are ``centre + k·h`` (module docstring).
+
+    The per-trial terms are compiled passes (:mod:`pslog.estimation._kernels`:
+    ``trial_splines``, ``gains_data``, ``trial_gather``, ``trial_blocks``, ``trial_schur``:
+    the operations of :func:`_new_splines`, :func:`_horner` and the numpy forms, in order);
+    the small matrix products and the 9 x 9 solves stay numpy's (BLAS and LAPACK: their
+    sums' order is the library's). They cannot be recompiled without changing the gains'
+    bits, and the gains amplify such changes: ``S`` is a difference of nearly equal terms
+    (the base explains most of what the break would), so the products summed in another
+    order (and the solve by another elimination) moved the gains of a 10-minute session by
+    up to 1.2e-9 relative (measured: a compiled trial, 20 % faster)."""
+    from ._kernels import gains_data, trial_blocks, trial_gather, trial_schur, trial_splines
 
     local, h = base.local, base.spacing
     K = local.K
@@ -238,6 +245,13 @@ def _trial_terms(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.nda
     both = np.stack([a, 1 - a])  # the first new B-spline's ``a`` and the mirrored third's
     lo, hi, coef, nodes, fn, fw, first, Nd = trial_splines(
         a, both**3, both**-3, s, j, K, h, h**2, h**3, _GAUSS, prior.q_accel, prior.q_jerk)
+    # data: the window's detections on the three spans [j-1, j+2) the new B-splines live on:
+    # Σ_w (f fᵀ) ⊗ M_w, Σ_w (old fᵀ) ⊗ M_w (old: the base's B-splines q0..q0+5) and Σ_w f uᵀ,
+    # one compiled pass over each window's detections
+    Hyy, Hxy, g = gains_data(base.s_sorted, base.first, base.N, base.M, base.u,
+                             np.ascontiguousarray(which, dtype=np.int64), j, q0, lo, hi, coef)
+    m = local.m
+
     # prior: four sub-spans [j-1, j], [j, τ], [τ, j+1], [j+1, j+2], each new B-spline one
     # polynomial piece on each of its two; the base's B-splines at the nodes are uniform
     # ones (closed form), but near the clamped ends
@@ -247,35 +261,6 @@ def _trial_terms(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.nda
         first[clamped] = f_c
         Nd[clamped] = np.where(_ACCEL[np.nonzero(clamped)[1]][:, None], N_c[:, 2] / h**2,
                                N_c[:, 3] / h**3)
-    # the 18 x 18 diagonal block of each window's inverse starts at column 3 q0 - col0
-    k = 3 * q0 - base.col0
-    if np.any((k < 0) | (k > base.cov.shape[2] - 18)):
-        raise AssertionError("trial instant outside the spans its base was solved for")
-    return j, q0, k, lo, hi, coef, fn, fw, first, Nd
-
-
-def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, prior
-           ) -> np.ndarray:
-    """Cost decrease (B,) of a triple knot at ``tau`` (B,) in window ``which`` (B,) of
-    ``base``, whose uniform knots are ``centre + k·h`` (module docstring): the reference
-    form, its small matrix products and 9 x 9 solves numpy's (BLAS and LAPACK);
-    :func:`_gains_compiled`, which the scan runs, is the same terms in one compiled pass.
-
-    The per-trial terms are compiled passes (:mod:`pslog.estimation._kernels`:
-    ``trial_splines``, ``gains_data``, ``trial_gather``, ``trial_blocks``, ``trial_schur``:
-    the operations of :func:`_new_splines`, :func:`_horner` and the numpy forms, in order).
-    The gains amplify rounding: ``S`` is a difference of nearly equal terms (the base
-    explains most of what the break would), so the products summed in another order (and
-    the solve by another elimination) move a gain by up to ~1e-9 relative."""
-    from ._kernels import gains_data, trial_blocks, trial_gather, trial_schur
-
-    j, q0, k, lo, hi, coef, fn, fw, first, Nd = _trial_terms(base, which, tau, centre, prior)
-    # data: the window's detections on the three spans [j-1, j+2) the new B-splines live on:
-    # Σ_w (f fᵀ) ⊗ M_w, Σ_w (old fᵀ) ⊗ M_w (old: the base's B-splines q0..q0+5) and Σ_w f uᵀ,
-    # one compiled pass over each window's detections
-    Hyy, Hxy, g = gains_data(base.s_sorted, base.first, base.N, base.M, base.u,
-                             np.ascontiguousarray(which, dtype=np.int64), j, q0, lo, hi, coef)
-    m = base.local.m
     # the nodes' B-splines on the six base control points q0..q0+5 of the three spans
     Nd6, x0 = trial_gather(first, Nd, q0, base.x0.reshape(-1, 3), which * m + q0)
     p0 = Nd6 @ x0  # p'' or jerk, (B, 12, 3)
@@ -283,6 +268,10 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
     pyy = fw @ np.swapaxes(fn, 1, 2)  # (B, 3, 3)
     pxy = np.swapaxes(Nd6, 1, 2) @ np.swapaxes(fw, 1, 2)  # (B, 6, 3)
     # ⊗ I₃ into the data terms, and the 18 x 18 diagonal block of each window's inverse
+    col0 = base.col0
+    k = 3 * q0 - col0
+    if np.any((k < 0) | (k > base.cov.shape[2] - 18)):
+        raise AssertionError("trial instant outside the spans its base was solved for")
     cov = trial_blocks(Hyy, Hxy, pyy, pxy, base.cov, np.ascontiguousarray(which, np.int64),
                        3 * q0, k)
     g -= fw @ p0
@@ -292,23 +281,6 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
     g = g.reshape(len(tau), 9)
     gain = np.einsum("bk,bk->b", g, np.linalg.solve(S, g[..., None])[..., 0])
     return gain
-
-
-def _gains_compiled(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray,
-                    prior) -> np.ndarray:
-    """:func:`_gains` in one compiled pass per trial (:func:`pslog.estimation._kernels.
-    trial_gains`): the same terms, their sums in its loops' order and the 9 x 9 solve by
-    its own elimination, so a gain agrees with :func:`_gains` to rounding (a few 1e-12
-    relative; the numpy form's (B, 18, 18) blocks and BLAS calls on 9 x 18 matrices cost
-    twice the arithmetic)."""
-    from ._kernels import trial_gains
-
-    j, q0, k, lo, hi, coef, fn, fw, first, Nd = _trial_terms(base, which, tau, centre, prior)
-    which = np.ascontiguousarray(which, dtype=np.int64)
-    return trial_gains(base.s_sorted, base.first, base.N, base.M, base.u, which, j, q0, lo,
-                       hi, coef, first, Nd, fn, fw, base.x0.reshape(-1, 3),
-                       which * base.local.m + q0,
-                       np.asarray(prior.gravity, dtype=np.float64), base.cov, k)
 
 
 def scan(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray, centers: np.ndarray,
@@ -392,7 +364,7 @@ def _scan_block(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray,
         out = np.empty(len(tau))
         for s in range(0, len(tau), _BATCH):
             sl = slice(s, s + _BATCH)
-            out[sl] = (_gains_compiled(base, on[sl], tau[sl], both, prior) + base.cost[which[sl]]
+            out[sl] = (_gains(base, on[sl], tau[sl], both, prior) + base.cost[which[sl]]
                        - base.cost[on[sl]])
         return out
 
