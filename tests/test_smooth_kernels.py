@@ -682,3 +682,64 @@ def test_factor_in_place_is_the_copy_and_rebuilds_the_original_on_a_failed_pivot
     got = _normal.factor(empty.copy(), rebuild=lambda: calls.append(1) or empty.copy())
     assert calls == [1]
     assert_array_equal(got, loaded)
+
+
+@pytest.mark.parametrize("n", [2048, 2049, 5000, 30001])
+def test_abs_median_of_many_rows_from_a_sample_bracket_is_numpys_median(n):
+    """From 4096 values on, the middle order statistics come from the values a sample's
+    order statistics bracket: the same value as np.median with ties (a coarse rounding),
+    heavy tails, non-finite rows and a sample that misses the middle (every sampled value
+    huge: the selection over all then), compiled and its Python original."""
+    rng = np.random.default_rng(n)
+    for trial in range(4):
+        r = rng.standard_cauchy((n, 2)) if trial % 2 else np.round(rng.normal(size=(n, 2)), 1)
+        if trial == 2:
+            r[rng.integers(0, n, 5), rng.integers(0, 2, 5)] = np.nan
+            r[rng.integers(0, n, 5), rng.integers(0, 2, 5)] = np.inf
+        if trial == 3:  # the sampled positions (every step-th value) all far out
+            r.reshape(-1)[:: max(2 * n // 1024, 1)] = 1e9
+        finite = r[np.all(np.isfinite(r), axis=1)]
+        for fn in (_kernels.abs_median_finite_rows, _kernels.abs_median_finite_rows.py_func):
+            median, rows = fn(r)
+            assert rows == len(finite)
+            assert median == np.median(np.abs(finite))
+
+
+def test_the_gauss_newton_passes_are_the_numpy_forms_bit_for_bit():
+    """‖r‖²/σ², the linearised targets J X - r, the prior's band times a vector and the hat
+    matrix's diagonal w tr(J Σ Jᵀ): compiled, the same bits as the numpy forms they replaced
+    (the einsum adds a row's three products as (p0 + p2) + p1) and as their Python
+    originals."""
+    rng = np.random.default_rng(3)
+    n = 3001
+    r = rng.normal(size=(n, 2)) * 10.0 ** rng.uniform(-3, 2, (n, 1))
+    J = rng.normal(size=(n, 2, 3)) * 400
+    X = rng.normal(size=(n, 3)) + np.array([1.5, 1.0, 0.5])
+    sigma = 0.37
+    for fn in (_kernels.scaled_norms, _kernels.scaled_norms.py_func):
+        assert_array_equal(fn(r, sigma**2), np.sum(r * r, axis=1) / sigma**2)
+    for fn in (_kernels.linear_target, _kernels.linear_target.py_func):
+        assert_array_equal(fn(J, X, r), np.einsum("naj,nj->na", J, X) - r)
+    ab = _band_case(60, 4)
+    x = rng.normal(size=ab.shape[1])
+    Ax = ab[-1] * x
+    for d in range(1, 12):
+        Ax[:-d] += ab[-1 - d, d:] * x[d:]
+        Ax[d:] += ab[-1 - d, d:] * x[:-d]
+    for fn in (_kernels.band_matvec, _kernels.band_matvec.py_func):
+        assert_array_equal(fn(ab, x), Ax)
+    # and the dense product of the symmetric matrix the band stands for
+    A = np.zeros((ab.shape[1], ab.shape[1]))
+    for d in range(12):
+        i = np.arange(ab.shape[1] - d)
+        A[i, i + d] = A[i + d, i] = ab[11 - d, d:]
+    assert_allclose(_kernels.band_matvec(ab, x), A @ x, rtol=1e-12, atol=1e-12)
+    L = rng.normal(size=(n, 3, 3))
+    cov = L @ np.swapaxes(L, 1, 2)
+    w = rng.uniform(0, 1, n)
+    for fn in (_kernels.hat_diagonal, _kernels.hat_diagonal.py_func):
+        assert_array_equal(fn(J, cov, w), w * np.einsum("naj,njk,nak->n", J, cov, J))
+    # by hand: J = [[1, 0, 0], [0, 2, 0]], Σ = diag(3, 5, 7), w = 0.5 -> 0.5 (3 + 4·5)
+    one = np.array([[[1.0, 0, 0], [0, 2.0, 0]]])
+    assert _kernels.hat_diagonal(one, np.diag([3.0, 5.0, 7.0])[None], np.array([0.5]))[0] \
+        == 11.5

@@ -1135,6 +1135,37 @@ def abs_median_finite_rows(r: np.ndarray) -> tuple[float, int]:
     if size == 0:
         return np.nan, 0
     half = size // 2
+    # a large set: the two middle order statistics from the few values between two of an
+    # evenly spaced sample's order statistics that bracket them (Floyd & Rivest, CACM 18(3),
+    # 1975: the same values as a selection over all, in one pass over them and a selection
+    # over a few hundred)
+    if size >= 4096:
+        step = size // 1024
+        sample = np.sort(buf[:size:step])
+        ns = len(sample)
+        at = (half * ns) // size
+        below_v = sample[max(at - 96, 0)]
+        above_v = sample[min(at + 96, ns - 1)]
+        below = 0
+        inner = np.empty(size)
+        count = 0
+        for i in range(size):
+            v = buf[i]
+            if v < below_v:
+                below += 1
+            elif v <= above_v:
+                inner[count] = v
+                count += 1
+        lo_rank = half - 1 if size % 2 == 0 else half
+        if below <= lo_rank and below + count > half:
+            upper = _select(inner, count, half - below)
+            if size % 2 == 1:
+                return upper, rows
+            lower = inner[0]
+            for i in range(1, half - below):
+                if inner[i] > lower:
+                    lower = inner[i]
+            return (lower + upper) / 2, rows
     upper = _select(buf, size, half)
     if size % 2 == 1:
         return upper, rows
@@ -1175,3 +1206,91 @@ def _select(buf: np.ndarray, size: int, k: int) -> float:
         else:
             hi = i - 1
     return buf[k]
+
+
+@kernel
+def scaled_norms(r: np.ndarray, sigma2: float) -> np.ndarray:
+    """``np.sum(r * r, axis=1) / sigma2`` (n,) of ``r`` (n, 2), one pass (numpy's sum of
+    two: ``r0² + r1²``; the same bits)."""
+    n = r.shape[0]
+    out = np.empty(n)
+    for i in range(n):
+        out[i] = (r[i, 0] * r[i, 0] + r[i, 1] * r[i, 1]) / sigma2
+    return out
+
+
+@kernel
+def linear_target(J: np.ndarray, X: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """``einsum("naj,nj->na", J, X) - r`` (n, 2): the linearised measurements ``J X - r``,
+    one pass. The three products are added as numpy's einsum adds them here (its
+    sum-of-products loop: ``(p0 + p2) + p1``; the same bits, measured on whole sessions)."""
+    n = r.shape[0]
+    out = np.empty((n, 2))
+    for i in range(n):
+        for a in range(2):
+            out[i, a] = ((J[i, a, 0] * X[i, 0] + J[i, a, 2] * X[i, 2])
+                         + J[i, a, 1] * X[i, 1]) - r[i, a]
+    return out
+
+
+@kernel
+def band_matvec(ab: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``A x`` (n,) of the symmetric band ``ab`` (12, n) (upper storage,
+    :mod:`pslog.estimation._normal`): each entry the diagonal's term, then per
+    super-diagonal ``d = 1..11`` the term above and the term below (the order of
+    :func:`pslog.estimation.trajectory._prior_cost`'s numpy passes: the same bits)."""
+    rows, n = ab.shape
+    u = rows - 1
+    out = np.empty(n)
+    # inside, every term is there: four entries at a time, each its own running sum of the
+    # same terms in the same order (four chains overlap instead of one waiting on its
+    # previous addition); the ends test each term
+    i = 0
+    while i < n:
+        if u <= i and i + 3 < n - u:
+            a0 = ab[u, i] * x[i]
+            a1 = ab[u, i + 1] * x[i + 1]
+            a2 = ab[u, i + 2] * x[i + 2]
+            a3 = ab[u, i + 3] * x[i + 3]
+            for d in range(1, rows):
+                row = u - d
+                a0 += ab[row, i + d] * x[i + d]
+                a0 += ab[row, i] * x[i - d]
+                a1 += ab[row, i + 1 + d] * x[i + 1 + d]
+                a1 += ab[row, i + 1] * x[i + 1 - d]
+                a2 += ab[row, i + 2 + d] * x[i + 2 + d]
+                a2 += ab[row, i + 2] * x[i + 2 - d]
+                a3 += ab[row, i + 3 + d] * x[i + 3 + d]
+                a3 += ab[row, i + 3] * x[i + 3 - d]
+            out[i] = a0
+            out[i + 1] = a1
+            out[i + 2] = a2
+            out[i + 3] = a3
+            i += 4
+            continue
+        acc = ab[u, i] * x[i]
+        for d in range(1, rows):
+            if i + d < n:
+                acc += ab[u - d, i + d] * x[i + d]
+            if i - d >= 0:
+                acc += ab[u - d, i] * x[i - d]
+        out[i] = acc
+        i += 1
+    return out
+
+
+@kernel
+def hat_diagonal(J: np.ndarray, cov: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """``w_n tr(J_n Σ_n J_nᵀ)`` (n,) of Jacobians (n, 2, 3), marginal covariances (n, 3, 3)
+    and weights (n,) (``w * np.einsum("naj,njk,nak->n", J, cov, J)``), one pass: per row
+    the sum over ``a, j, k`` in that order."""
+    n = J.shape[0]
+    out = np.empty(n)
+    for i in range(n):
+        acc = 0.0
+        for a in range(2):
+            for j in range(3):
+                for k in range(3):
+                    acc += J[i, a, j] * cov[i, j, k] * J[i, a, k]
+        out[i] = w[i] * acc
+    return out

@@ -481,15 +481,32 @@ def _scaled_identity(w: np.ndarray) -> np.ndarray:
 
 def _prior_cost(problem: _Problem, c: np.ndarray) -> float:
     """Value of (2) at ``c`` from the prior's normal equations: xᵀAx - 2 rhsᵀx + const."""
-    x = c.reshape(-1)
-    ab = problem.prior_ab
-    Ax = ab[-1] * x
-    for d in range(1, _normal.WIDTH):
-        Ax[:-d] += ab[-1 - d, d:] * x[d:]
-        Ax[d:] += ab[-1 - d, d:] * x[:-d]
+    from ._kernels import band_matvec
+
+    x = np.ascontiguousarray(c, dtype=np.float64).reshape(-1)
+    # A x in one compiled pass (the terms of the numpy passes per diagonal, in their order)
+    Ax = band_matvec(problem.prior_ab, x)
     # einsum, not a BLAS dot: the value must not depend on the number of BLAS threads
     return float(np.einsum("i,i->", x, Ax) - 2 * np.einsum("i,i->", problem.prior_rhs, x)
                  + problem.prior_const)
+
+
+def _scaled_norms(r: np.ndarray, sigma: float) -> np.ndarray:
+    """``‖r_i‖² / σ²`` (n,) of residuals (n, 2): ``np.sum(r * r, axis=1) / sigma**2`` in one
+    compiled pass (the same bits)."""
+    from ._kernels import scaled_norms
+
+    return scaled_norms(np.ascontiguousarray(r, dtype=np.float64), float(sigma**2))
+
+
+def _linear_target(J: np.ndarray, X: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """The linearised measurements ``J X - r`` (n, 2) (``np.einsum("naj,nj->na", J, X) - r``,
+    one compiled pass: :func:`pslog.estimation._kernels.linear_target`)."""
+    from ._kernels import linear_target
+
+    return linear_target(np.ascontiguousarray(J, dtype=np.float64),
+                         np.ascontiguousarray(X, dtype=np.float64),
+                         np.ascontiguousarray(r, dtype=np.float64))
 
 
 def split_pieces(obs: Observations, usable: np.ndarray, max_gap_s: float
@@ -583,9 +600,20 @@ def _initial_control(problem: _Problem, sigma_px: float) -> np.ndarray:
         X = problem.positions(control)
         depth = np.maximum(np.einsum("nj,nj->n", R[:, 2], X) + tt[:, 2], 1e-3)[:, None]
         r = np.einsum("naj,nj->na", J, X) + a0 * scale
-        s = max(1.4826 * np.median(np.abs(r)), sigma_px)
+        s = max(1.4826 * _abs_median(r), sigma_px)
         weight = 1 / (1 + np.sum(r * r, axis=1) / (_CAUCHY * s) ** 2)
     return control
+
+
+def _abs_median(r: np.ndarray) -> float:
+    """``np.median(np.abs(r))``: by the compiled selection when every entry is finite (the
+    same value, :func:`pslog.estimation._kernels.abs_median_finite_rows`), else numpy's."""
+    from ._kernels import abs_median_finite_rows
+
+    r = np.ascontiguousarray(r, dtype=np.float64)
+    if r.size and np.all(np.isfinite(r)):
+        return float(abs_median_finite_rows(r)[0])
+    return float(np.median(np.abs(r)))
 
 
 def _scene_depth(rig: Rig) -> float:
@@ -613,10 +641,11 @@ class _Solver:
         self.problem, self.options = problem, options
 
     def cost(self, control: np.ndarray, r: np.ndarray, sigma: float,
-             prior: float | None = None) -> float:
+             prior: float | None = None, s: np.ndarray | None = None) -> float:
         """The robust cost (1) + (2) of ``control`` whose residuals are ``r`` (``prior``: its
-        prior cost (2), if already known)."""
-        s = np.sum(r * r, axis=1) / sigma**2
+        prior cost (2), if already known; ``s``: ``‖r‖² / σ²`` per row, if known)."""
+        if s is None:
+            s = _scaled_norms(r, sigma)
         c2 = _CAUCHY**2
         data = c2 * np.log1p(s / c2)
         # a point behind its camera costs as a detection 1000 σ off
@@ -634,9 +663,9 @@ class _Solver:
         prior = None  # the prior cost (2) of ``control``: it does not depend on σ
         for _ in range(iterations):
             sigma = self._scale(r, sigma, dof)
-            s = np.sum(r * r, axis=1) / sigma**2
+            s = _scaled_norms(r, sigma)
             w = 1 / (1 + s / _CAUCHY**2)  # Cauchy IRLS weight
-            target = np.einsum("naj,nj->na", J, X) - r  # linearised: J X_new ≈ J X - r
+            target = _linear_target(J, X, r)  # linearised: J X_new ≈ J X - r
             ab, rhs = problem.normal(J, target, w / sigma**2)
             # factored in place (the band is this step's own); rebuilt only if a pivot fails
             U = _normal.factor(ab, rebuild=lambda J=J, target=target, w=w, sigma=sigma:
@@ -644,22 +673,24 @@ class _Solver:
             new = _normal.solve(U, rhs).reshape(-1, 3)
             if prior is None:
                 prior = _prior_cost(problem, control)
-            before = self.cost(control, r, sigma, prior)
+            before = self.cost(control, r, sigma, prior, s)
             step = 1.0
             for _ in range(6):  # step halving keeps the robust cost from rising
                 trial = control + step * (new - control)
                 X_trial = problem.positions(trial)
                 r_trial, J_trial = problem.project(X_trial)
                 prior_trial = _prior_cost(problem, trial)
-                if self.cost(trial, r_trial, sigma, prior_trial) <= before:
+                s_trial = _scaled_norms(r_trial, sigma)
+                if self.cost(trial, r_trial, sigma, prior_trial, s_trial) <= before:
                     break
                 step /= 2
             moved = float(np.max(np.abs(trial - control), initial=0.0))
             control, X, r, J, prior = trial, X_trial, r_trial, J_trial, prior_trial
+            s_last = s_trial  # ‖r‖² / σ² of the new residuals (σ is kept until the next step)
             if moved < 1e-7:  # 0.1 µm: converged
                 break
         problem.remember(control, X, r, J)
-        s = np.sum(r * r, axis=1) / sigma**2
+        s = s_last if iterations > 0 else _scaled_norms(r, sigma)
         return control, sigma, r, 1 / (1 + s / _CAUCHY**2), J
 
     def _scale(self, r: np.ndarray, sigma: float, dof: float) -> float:
@@ -883,14 +914,18 @@ def _information(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
     fit's effective number of parameters, and ``p_eff = Σ w tr(J Σ_X Jᵀ) / σ²`` itself (the
     trace of the hat matrix)."""
     X = problem.positions(control)
-    s = np.sum(r * r, axis=1) / sigma**2
+    s = _scaled_norms(r, sigma)
     w = 1 / (1 + s / _CAUCHY**2)
-    target = np.einsum("naj,nj->na", J, X) - r
+    target = _linear_target(J, X, r)
     ab, _ = problem.normal(J, target, w / sigma**2)
     band = _normal.covariance_band(_normal.factor(
         ab, rebuild=lambda: problem.normal(J, target, w / sigma**2)[0]))
     cov_X = problem.points.marginal(band)
-    p_eff = float(np.sum(w * np.einsum("naj,njk,nak->n", J, cov_X, J)) / sigma**2)
+    from ._kernels import hat_diagonal
+
+    # w tr(J Σ_X Jᵀ) per row, one compiled pass (the einsum's terms in its order)
+    p_eff = float(np.sum(hat_diagonal(np.ascontiguousarray(J, dtype=np.float64), cov_X,
+                                      np.ascontiguousarray(w, dtype=np.float64))) / sigma**2)
     n_res = 2 * len(r)
     return band, float(np.sqrt(n_res / max(n_res - p_eff, 1.0))), p_eff
 
@@ -906,7 +941,7 @@ def _find_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
     ``break_accel``, each kept if a break near it gains more than ``break_threshold``."""
     g = np.asarray(options.prior.gravity)
     X = problem.positions(control)
-    target = np.einsum("naj,nj->na", J, X) - r  # the linearised measurements
+    target = _linear_target(J, X, r)  # the linearised measurements
     weight = w / sigma**2
     t_obs = problem.t[problem.rows]
     # ‖p'' - g‖ at every span's midpoint of every piece, in one pass
@@ -1034,7 +1069,7 @@ def _refine_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.n
     the final fit, the neighbouring breaks held (the first estimate was linearised at the
     loose fit)."""
     X = problem.positions(control)
-    target = np.einsum("naj,nj->na", J, X) - r
+    target = _linear_target(J, X, r)
     weight = w / sigma**2
     t_obs = problem.t[problem.rows]
     jobs = []
