@@ -145,6 +145,16 @@ class SmoothOptions:
     iterations : int, Gauss–Newton iterations per fit; the refit after the breaks'
         refinement runs this many in all, its last two after σ is corrected for the fit's
         degrees of freedom
+    detector_offset_m : float, standard deviation (metres, per axis) of the detector's
+        constant 3-D offset ``δ ~ N(0, σ_δ² I₃)`` of the ball's apparent centre, the same for
+        every detection of every camera (a centroid drawn toward the lit side of the ball):
+        every fitted point moves by exactly ``δ``, so each point's covariance gains
+        ``σ_δ² I₃``. A systematic error the fit can neither average away nor see in its
+        residuals (a consider parameter); the points do not move. 0: none
+    detector_bias_px : float, standard deviation (pixels, per image axis) of each camera's
+        own constant detector bias ``b_c ~ N(0, σ_b² I₂)``, independent between cameras (a
+        camera's own systematic error: threshold, lens, calibration); added as consider
+        parameters through the fit's sensitivity to them (:func:`bias_sensitivity`). 0: none
     """
 
     prior: MotionPrior = MotionPrior()
@@ -154,6 +164,16 @@ class SmoothOptions:
     break_accel: float = 15.0
     break_threshold: float = 25.0
     iterations: int = 4
+    detector_offset_m: float = 0.0
+    detector_bias_px: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.detector_bias_px <= 1e3:
+            raise FusionError(f"detector bias must be in [0, 1000] pixels, got "
+                              f"{self.detector_bias_px!r}")
+        if not 0 <= self.detector_offset_m <= 1.0:
+            raise FusionError(f"detector offset must be in [0, 1] metres, got "
+                              f"{self.detector_offset_m!r}")
 
 
 #: Cauchy kernel scale, in units of σ on the 2-D residual norm
@@ -195,6 +215,10 @@ class Trajectory:
     valid_s : (n_pieces, 2) float64 or None, seconds since ``t0_ns``: the part of each piece
         the detections determine (an end segment beyond a break that too few detections
         hold is left out, :func:`_underdetermined_ends`); None: every piece whole
+    consider : (m, 3, 2·cameras) float64 or None, metres: the control points' sensitivity
+        to each camera's detector bias (per image axis) times its standard deviation
+        (:func:`bias_sensitivity`); the covariance of a point ``p = Σ N_a c_a`` gains
+        ``S Sᵀ``, ``S = Σ N_a consider_a`` (:func:`consider_points`). None: no bias term
     """
 
     t0_ns: int
@@ -206,6 +230,7 @@ class Trajectory:
     noise_px: float
     spacing_s: float = 0.0
     valid_s: np.ndarray | None = None
+    consider: np.ndarray | None = None
 
     def piece_of(self, time_ns: np.ndarray) -> np.ndarray:
         """Index of the piece covering each time (n,), -1 outside every piece."""
@@ -240,6 +265,9 @@ class Trajectory:
             index = first[:, None] + np.arange(DEGREE + 1)
             value[rows] = np.einsum("na,nad->nd", N[:, derivative], self.control[index])
             cov[rows] = _normal.marginal(self.band, first, N[:, 0])
+            if self.consider is not None:  # the detector bias, fully correlated in time
+                S = consider_points(self.consider, first, N[:, 0])
+                cov[rows] += np.einsum("nik,njk->nij", S, S)
         return value, cov
 
 
@@ -773,21 +801,26 @@ def _fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions) -> Fit:
     _, dof, _ = _information(problem, control, sigma, r, J)
     control, sigma, r, w, J = _Solver(problem, options).run(control, sigma,
                                                             _DOF_ITERATIONS, dof)
-    band, _, p_eff = _information(problem, control, sigma, r, J)
+    band, _, p_eff, U, w_info = _information_factored(problem, control, sigma, r, J)
     # the covariance at the noise the residuals show (the M-estimator's sandwich,
     # :func:`variance_factor`); the robust scale σ above still weighs the fit: the points
     # do not move
     band = band * variance_factor(r, w, sigma, p_eff)
+    consider = _consider(problem, U, J, w_info / sigma**2, options)
+    del U
     out_rows, valid_s = _underdetermined_ends(problem, breaks)
     trajectory = Trajectory(problem.t0_ns, problem.knots, problem.offset, control, band,
                             np.concatenate([np.asarray(b) for b in breaks]) if breaks
-                            else np.zeros(0), sigma, spacing, valid_s)
+                            else np.zeros(0), sigma, spacing, valid_s, consider)
     position = np.full((n, 3), np.nan)
     covariance = np.full((n, 3, 3), np.nan)
     residual = np.full(n, np.nan)
     weight = np.zeros(n)
     position[problem.rows] = problem.positions(control)
     covariance[problem.rows] = problem.points.marginal(band)
+    if consider is not None:
+        S = consider_points(consider, problem.first, problem.N)
+        covariance[problem.rows] += np.einsum("nik,njk->nij", S, S)
     residual[problem.rows] = np.linalg.norm(r, axis=1)
     weight[problem.rows] = w
     used = np.zeros(n, dtype=bool)
@@ -882,17 +915,90 @@ def _information(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
     ``sqrt(n_res / (n_res - p_eff))`` that corrects the median-based noise scale for the
     fit's effective number of parameters, and ``p_eff = Σ w tr(J Σ_X Jᵀ) / σ²`` itself (the
     trace of the hat matrix)."""
+    band, dof, p_eff, _, _ = _information_factored(problem, control, sigma, r, J)
+    return band, dof, p_eff
+
+
+def _information_factored(problem: _Problem, control: np.ndarray, sigma: float,
+                          r: np.ndarray, J: np.ndarray
+                          ) -> tuple[np.ndarray, float, float, np.ndarray, np.ndarray]:
+    """:func:`_information`, and the banded Cholesky factor ``U`` of ``H`` (``H = UᵀU``) and
+    the robust weights ``w`` (n,) it was made with (for :func:`bias_sensitivity`)."""
     X = problem.positions(control)
     s = np.sum(r * r, axis=1) / sigma**2
     w = 1 / (1 + s / _CAUCHY**2)
     target = np.einsum("naj,nj->na", J, X) - r
     ab, _ = problem.normal(J, target, w / sigma**2)
-    band = _normal.covariance_band(_normal.factor(
-        ab, rebuild=lambda: problem.normal(J, target, w / sigma**2)[0]))
+    U = _normal.factor(ab, rebuild=lambda: problem.normal(J, target, w / sigma**2)[0])
+    band = _normal.covariance_band(U)
     cov_X = problem.points.marginal(band)
     p_eff = float(np.sum(w * np.einsum("naj,njk,nak->n", J, cov_X, J)) / sigma**2)
     n_res = 2 * len(r)
-    return band, float(np.sqrt(n_res / max(n_res - p_eff, 1.0))), p_eff
+    return band, float(np.sqrt(n_res / max(n_res - p_eff, 1.0))), p_eff, U, w
+
+
+def bias_sensitivity(U: np.ndarray, first: np.ndarray, N: np.ndarray, J: np.ndarray,
+                     weight: np.ndarray, camera: np.ndarray, n_cameras: int) -> np.ndarray:
+    """``∂ĉ/∂b`` (m, 3, 2·n_cameras): how the fitted control points move per pixel of a
+    constant offset ``b_c`` (per camera ``c`` and image axis ``a``, column ``2c + a``) added
+    to every detection of camera ``c`` — the sensitivity of a Schmidt *consider* parameter
+    (Tapley, Schutz & Born, *Statistical Orbit Determination*, 2004, §6.3; Bierman,
+    *Factorization Methods for Discrete Sequential Estimation*, 1977).
+
+    At the solution the Gauss–Newton step is linear in the detections ``z``: ``H ĉ = Σ_i
+    (N_i ⊗ J_iᵀ) w_i (J_i X_i - r_i) + prior``, ``r_i = π(X_i) - z_i``, so ``z_i → z_i + b_c``
+    (every detection of camera ``c``) moves ``ĉ`` by ``H⁻¹ Σ_{i∈c} (N_i ⊗ J_iᵀ) w_i b_c``:
+    one right-hand side per camera and axis, two banded solves per camera with the fit's own
+    factor ``U``.
+
+    Parameters
+    ----------
+    U : (12, 3m) banded Cholesky factor of ``H`` (:func:`_normal.factor`)
+    first : (n,) int64, each detection's first control point; N : (n, 4) basis values
+    J : (n, 2, 3) ``∂uv/∂X``; weight : (n,) ``w_i / σ²`` as in ``H``
+    camera : (n,) int, each detection's camera; n_cameras : int
+    """
+    n3 = U.shape[1]
+    k = 2 * n_cameras
+    wJ = weight[:, None, None] * J  # (n, 2, 3): row a is w_i ∂u_a/∂X
+    row = 3 * (np.asarray(first, np.int64)[:, None, None] + np.arange(4)[None, :, None]) \
+        + np.arange(3)[None, None, :]  # (n, 4, 3): the unknown of (control point a, coord d)
+    rhs = np.zeros(n3 * k)
+    for a in range(2):
+        col = 2 * np.asarray(camera, np.int64) + a
+        value = N[:, :, None] * wJ[:, a, None, :]  # (n, 4, 3)
+        rhs += np.bincount((row * k + col[:, None, None]).ravel(), value.ravel(),
+                           minlength=n3 * k)
+    return _normal.solve(U, rhs.reshape(n3, k)).reshape(-1, 3, k)
+
+
+def _consider(problem: _Problem, U: np.ndarray, J: np.ndarray, weight: np.ndarray,
+              options: SmoothOptions) -> np.ndarray | None:
+    """The control points' consider sensitivities (m, 3, k) scaled by the parameters'
+    standard deviations: the detector's common 3-D offset (3 columns, ``σ_δ I₃`` at every
+    control point: a constant shift of every detection's ball moves the fit by exactly that
+    shift, since the B-splines sum to one and the prior (2) sees only the path's second and
+    third derivatives) and each camera's own pixel bias (2 columns per camera,
+    :func:`bias_sensitivity`); None when both are 0."""
+    parts = []
+    if options.detector_offset_m > 0:
+        parts.append(np.broadcast_to(options.detector_offset_m * np.eye(3),
+                                     (problem.m, 3, 3)))
+    if options.detector_bias_px > 0:
+        parts.append(options.detector_bias_px * bias_sensitivity(
+            U, problem.first, problem.N, J, weight, problem.obs.camera[problem.rows],
+            len(problem.rig)))
+    return np.concatenate(parts, axis=2) if parts else None
+
+
+def consider_points(consider: np.ndarray, first: np.ndarray, N: np.ndarray) -> np.ndarray:
+    """``S_i = Σ_a N_ia A[first_i + a]`` (n, 3, k): the points' sensitivities to the consider
+    parameters from the control points' ``A`` (m, 3, k); the points' covariance gains
+    ``S_i S_iᵀ`` (with ``A`` already scaled by the parameters' standard deviations)."""
+    S = np.zeros((len(first), 3, consider.shape[2]))
+    for a in range(DEGREE + 1):
+        S += N[:, a, None, None] * consider[first + a]
+    return S
 
 
 def _find_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.ndarray,
