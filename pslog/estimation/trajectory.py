@@ -219,6 +219,9 @@ class Trajectory:
         to each camera's detector bias (per image axis) times its standard deviation
         (:func:`bias_sensitivity`); the covariance of a point ``p = Σ N_a c_a`` gains
         ``S Sᵀ``, ``S = Σ N_a consider_a`` (:func:`consider_points`). None: no bias term
+    offset_m : float, metres, the standard deviation per axis of the detector's common 3-D
+        offset: every point's covariance gains ``offset_m² I₃`` (its sensitivity is ``I₃``,
+        :func:`_add_consider`)
     """
 
     t0_ns: int
@@ -231,6 +234,7 @@ class Trajectory:
     spacing_s: float = 0.0
     valid_s: np.ndarray | None = None
     consider: np.ndarray | None = None
+    offset_m: float = 0.0
 
     def piece_of(self, time_ns: np.ndarray) -> np.ndarray:
         """Index of the piece covering each time (n,), -1 outside every piece."""
@@ -265,27 +269,30 @@ class Trajectory:
             index = first[:, None] + np.arange(DEGREE + 1)
             value[rows] = np.einsum("na,nad->nd", N[:, derivative], self.control[index])
             cov[rows] = _normal.marginal(self.band, first, N[:, 0])
-            if self.consider is not None:  # the detector bias, fully correlated in time
-                S = consider_points(self.consider, first, N[:, 0])
-                cov[rows] += np.einsum("nik,njk->nij", S, S)
+            _add_consider(cov, rows, self, first, N[:, 0])
         return value, cov
 
     def sensitivity(self, time_ns: np.ndarray) -> np.ndarray:
         """``S(t)`` (n, 3, k), metres: how the position at each time moves per standard
-        deviation of each consider parameter (the detector's 3-D offset, then each camera's
-        pixel bias per axis, :func:`_consider`); k = 0 without any; NaN outside every
-        piece. The position covariance holds ``S Sᵀ`` beside the white noise's."""
+        deviation of each consider parameter — the detector's 3-D offset (3 columns,
+        ``offset_m I₃``, when ``offset_m`` > 0), then each camera's pixel bias per axis (2
+        per camera, when ``consider`` is set); NaN outside every piece. The position
+        covariance holds ``S Sᵀ`` beside the white noise's."""
         time_ns = np.asarray(time_ns, dtype=np.int64)
-        k = 0 if self.consider is None else self.consider.shape[2]
+        k = (3 if self.offset_m > 0 else 0) + (
+            0 if self.consider is None else self.consider.shape[2])
         out = np.full((len(time_ns), 3, k), np.nan)
-        if self.consider is None:
-            return out
         piece = self.piece_of(time_ns)
         t = (time_ns - self.t0_ns) / NS
         for p in np.unique(piece[piece >= 0]):
             rows = np.flatnonzero(piece == p)
             first, N = basis(self.knots[p], t[rows], 0)
-            out[rows] = consider_points(self.consider, first + self.offset[p], N[:, 0])
+            parts = [np.broadcast_to(self.offset_m * np.eye(3), (len(rows), 3, 3))] \
+                if self.offset_m > 0 else []
+            if self.consider is not None:
+                parts.append(consider_points(self.consider, first + self.offset[p], N[:, 0]))
+            if parts:
+                out[rows] = np.concatenate(parts, axis=2)
         return out
 
 
@@ -819,26 +826,26 @@ def _fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions) -> Fit:
     _, dof, _ = _information(problem, control, sigma, r, J)
     control, sigma, r, w, J = _Solver(problem, options).run(control, sigma,
                                                             _DOF_ITERATIONS, dof)
-    band, _, p_eff, U, _ = _information_factored(problem, control, sigma, r, J)
+    band, _, p_eff, U = _information_factored(problem, control, sigma, r, J)
     # the covariance at the noise the residuals show (the M-estimator's sandwich,
     # :func:`variance_factor`); the robust scale σ above still weighs the fit: the points
     # do not move
     band = band * variance_factor(r, w, sigma, p_eff)
-    consider = _consider(problem, U, J, r, sigma, options)
+    consider = (options.detector_bias_px * bias_sensitivity(problem, U, J, r, sigma)
+                if options.detector_bias_px > 0 else None)
     del U
     out_rows, valid_s = _underdetermined_ends(problem, breaks)
     trajectory = Trajectory(problem.t0_ns, problem.knots, problem.offset, control, band,
                             np.concatenate([np.asarray(b) for b in breaks]) if breaks
-                            else np.zeros(0), sigma, spacing, valid_s, consider)
+                            else np.zeros(0), sigma, spacing, valid_s, consider,
+                            options.detector_offset_m)
     position = np.full((n, 3), np.nan)
     covariance = np.full((n, 3, 3), np.nan)
     residual = np.full(n, np.nan)
     weight = np.zeros(n)
     position[problem.rows] = problem.positions(control)
     covariance[problem.rows] = problem.points.marginal(band)
-    if consider is not None:
-        S = consider_points(consider, problem.first, problem.N)
-        covariance[problem.rows] += np.einsum("nik,njk->nij", S, S)
+    _add_consider(covariance, problem.rows, trajectory, problem.first, problem.N)
     residual[problem.rows] = np.linalg.norm(r, axis=1)
     weight[problem.rows] = w
     used = np.zeros(n, dtype=bool)
@@ -933,15 +940,15 @@ def _information(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
     ``sqrt(n_res / (n_res - p_eff))`` that corrects the median-based noise scale for the
     fit's effective number of parameters, and ``p_eff = Σ w tr(J Σ_X Jᵀ) / σ²`` itself (the
     trace of the hat matrix)."""
-    band, dof, p_eff, _, _ = _information_factored(problem, control, sigma, r, J)
+    band, dof, p_eff, _ = _information_factored(problem, control, sigma, r, J)
     return band, dof, p_eff
 
 
 def _information_factored(problem: _Problem, control: np.ndarray, sigma: float,
                           r: np.ndarray, J: np.ndarray
-                          ) -> tuple[np.ndarray, float, float, np.ndarray, np.ndarray]:
-    """:func:`_information`, and the banded Cholesky factor ``U`` of ``H`` (``H = UᵀU``) and
-    the robust weights ``w`` (n,) it was made with (for :func:`bias_sensitivity`)."""
+                          ) -> tuple[np.ndarray, float, float, np.ndarray]:
+    """:func:`_information`, and the banded Cholesky factor ``U`` of ``H`` (``H = UᵀU``, for
+    :func:`bias_sensitivity`)."""
     X = problem.positions(control)
     s = np.sum(r * r, axis=1) / sigma**2
     w = 1 / (1 + s / _CAUCHY**2)
@@ -952,7 +959,7 @@ def _information_factored(problem: _Problem, control: np.ndarray, sigma: float,
     cov_X = problem.points.marginal(band)
     p_eff = float(np.sum(w * np.einsum("naj,njk,nak->n", J, cov_X, J)) / sigma**2)
     n_res = 2 * len(r)
-    return band, float(np.sqrt(n_res / max(n_res - p_eff, 1.0))), p_eff, U, w
+    return band, float(np.sqrt(n_res / max(n_res - p_eff, 1.0))), p_eff, U
 
 
 def bias_sensitivity(problem: _Problem, U: np.ndarray, J: np.ndarray, r: np.ndarray,
@@ -998,21 +1005,20 @@ def bias_sensitivity(problem: _Problem, U: np.ndarray, J: np.ndarray, r: np.ndar
     return _normal.solve(factor, rhs.reshape(n3, k)).reshape(-1, 3, k)
 
 
-def _consider(problem: _Problem, U: np.ndarray, J: np.ndarray, r: np.ndarray, sigma: float,
-              options: SmoothOptions) -> np.ndarray | None:
-    """The control points' consider sensitivities (m, 3, k) scaled by the parameters'
-    standard deviations: the detector's common 3-D offset (3 columns, ``σ_δ I₃`` at every
-    control point: a constant shift of every detection's ball moves the fit by exactly that
-    shift, since the B-splines sum to one and the prior (2) sees only the path's second and
-    third derivatives) and each camera's own pixel bias (2 columns per camera,
-    :func:`bias_sensitivity`); None when both are 0."""
-    parts = []
-    if options.detector_offset_m > 0:
-        parts.append(np.broadcast_to(options.detector_offset_m * np.eye(3),
-                                     (problem.m, 3, 3)))
-    if options.detector_bias_px > 0:
-        parts.append(options.detector_bias_px * bias_sensitivity(problem, U, J, r, sigma))
-    return np.concatenate(parts, axis=2) if parts else None
+def _add_consider(cov: np.ndarray, rows: np.ndarray, trajectory: Trajectory,
+                  first: np.ndarray, N: np.ndarray) -> None:
+    """Add the consider parameters' covariance to ``cov[rows]`` (points ``Σ_a N_a c[first +
+    a]``): the detector's common 3-D offset, ``offset_m² I₃`` — a constant shift of every
+    detection's ball moves the fit by exactly that shift (the B-splines sum to one, the
+    prior (2) sees only the path's second and third derivatives, the robust weights the
+    same residuals), so its sensitivity is ``I₃`` at every point — and each camera's pixel
+    bias, ``S Sᵀ`` (:func:`bias_sensitivity`, :func:`consider_points`)."""
+    if trajectory.offset_m > 0:
+        diagonal = np.arange(3)
+        cov[rows[:, None], diagonal, diagonal] += trajectory.offset_m**2
+    if trajectory.consider is not None:
+        S = consider_points(trajectory.consider, first, N)
+        cov[rows] += np.einsum("nik,njk->nij", S, S)
 
 
 def consider_points(consider: np.ndarray, first: np.ndarray, N: np.ndarray) -> np.ndarray:
