@@ -122,7 +122,10 @@ def fuse(session: Session | str | os.PathLike[str] | Detections,
         ``pslog.sync(session).rig``; or, as ``pslog fuse --rig``, a built-in rig's name or a
         rig file (pslog's TOML or an aniposelib / Pose2Sim / OpenCV calibration: a file
         without frame rates and offsets takes the session's)
-    options : :class:`pslog.fusion.FusionOptions` (tolerance, max gap, noise, gating)
+    options : :class:`pslog.fusion.FusionOptions` (tolerance, max gap, noise, gating); its
+        ``detector_offset_m`` None takes the session's default
+        (:func:`pslog.fusion.detector_bias_for`: 0 for simulated sessions and bare
+        detections, 0.5 mm per axis for detections found in images)
 
     Returns
     -------
@@ -135,7 +138,7 @@ def fuse(session: Session | str | os.PathLike[str] | Detections,
     pslog.errors.RigError : a rig whose cameras differ from the session's, or a bad rig file
     """
     from . import progress
-    from .fusion import FusionOptions, check_method, default_methods
+    from .fusion import FusionOptions, check_method, default_methods, for_session
     from .fusion.gating import fuse_detections
     from .rig import Rig, check_baselines, resolve_rig
 
@@ -151,6 +154,7 @@ def fuse(session: Session | str | os.PathLike[str] | Detections,
         if isinstance(rig, (str, os.PathLike)):
             rig = resolve_rig(os.fspath(rig), timing_from=read.rig)  # a calibration has no timing
         detections, used = read.detections, rig or read.rig
+        options = for_session(options or FusionOptions(), read.metadata)
         if rig is not None and rig.names != read.rig.names:
             from .errors import RigError
 

@@ -19,6 +19,7 @@ from pslog.fusion import (
     FusionOptions,
     TypeAConstruction,
     explain_type_a,
+    for_session,
     fuse_all,
     prepare,
 )
@@ -288,7 +289,8 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
                 session)
         rest = [m for m in missing if m != "typeA" or "typeA" not in tracks]
         if rest:
-            tracks.update(fuse_all(session.detections, session.rig, rest))
+            tracks.update(fuse_all(session.detections, session.rig, rest,
+                                   for_session(FusionOptions(), session.metadata)))
         notes.append(f"fused on the fly: {', '.join(missing)}")
     shown = {m: tracks[m] for m in wanted}
 

@@ -99,7 +99,7 @@ def _run(args: argparse.Namespace, folder: Path) -> int:
 
     from pslog import paper
     from pslog.evaluation import evaluate, format_accuracy_table
-    from pslog.fusion import METHODS, default_methods, fuse_all
+    from pslog.fusion import METHODS, FusionOptions, default_methods, for_session, fuse_all
     from pslog.log import copy_session, read_session
     from pslog.rig import apply_timing, builtin_rig
     from pslog.timing import observations
@@ -129,7 +129,9 @@ def _run(args: argparse.Namespace, folder: Path) -> int:
     if skipped:
         print(f"    {', '.join(skipped)}: need cameras with a common shutter instant (sync or "
               f"typeB timing), not type A; the paper's table below has them")
-    tracks = fuse_all(session.detections, session.rig, methods)
+    # (as pslog fuse: smooth's detector offset for detections found in images)
+    tracks = fuse_all(session.detections, session.rig, methods,
+                      for_session(FusionOptions(), session.metadata))
     copy_session(session_path, fused_path, tracks=list(tracks.values()), force=args.force)
 
     print(f"3/4 accuracy against ground truth ({fused_path}):\n")

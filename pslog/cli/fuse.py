@@ -51,6 +51,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "prediction and kink tests assume (they use the larger of it and "
                              "the noise the session's own innovations imply); `pslog sync` "
                              "prints the estimated noise (default %(default)s)")
+    parser.add_argument("--detector-offset-mm", type=number_at_most(1000.0, "mm", "a metre"),
+                        default=None, metavar="MM",
+                        help="smooth: standard deviation per axis of the detector's constant "
+                             "3-D offset of the ball's apparent centre (the same for every "
+                             "camera: a centroid drawn toward the lit side of the ball), a "
+                             "systematic error that smooth's averaging cannot shrink, added "
+                             "to its std_m and covariance; the points do not move (default: "
+                             "0.5 for detections found in images, 0 for `pslog simulate` "
+                             "sessions)")
+    parser.add_argument("--detector-bias-px", type=noise_px, default=0.0, metavar="PX",
+                        help="smooth: standard deviation per image axis of each camera's own "
+                             "constant detection bias, independent between cameras, "
+                             "propagated through the fit into std_m and the covariance "
+                             "(default %(default)s)")
     parser.add_argument("--gating", choices=("on", "off"), default="on",
                         help="on: choose each frame's ball among its candidates by the "
                              "epipolar, track and motion gates and record every rejected "
@@ -83,6 +97,7 @@ def run(args: argparse.Namespace) -> int:
         check_method,
         check_tolerance,
         default_methods,
+        for_session,
     )
     from pslog.fusion._parallel import finishing_order
     from pslog.fusion.gating import start_fusion
@@ -110,7 +125,11 @@ def run(args: argparse.Namespace) -> int:
                             max_gap_s=None if args.max_gap_ms is None else args.max_gap_ms / 1e3,
                             rate_hz=args.rate, noise_px=args.noise_px,
                             gating=args.gating == "on",
-                            confirm_gaps=args.confirm_gaps == "on")
+                            confirm_gaps=args.confirm_gaps == "on",
+                            detector_offset_m=None if args.detector_offset_mm is None
+                            else args.detector_offset_mm / 1e3,
+                            detector_bias_px=args.detector_bias_px)
+    options = for_session(options, session.metadata)  # the detector's default offset
     observations = timed_observations(session.detections, rig)  # the rig's clock model
     if len(observations) == 0:
         raise FusionError(f"{args.session} has no detection to fuse")

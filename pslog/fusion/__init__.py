@@ -72,6 +72,17 @@ class FusionOptions:
         the rig's usual one until the next camera's detection confirms it, and drop it when
         that detection contradicts it (:mod:`pslog.fusion.confirm`; a stream outputs it one
         detection later); False: every point at once (``pslog live``: a point per shutter)
+    detector_offset_m : float or None, smooth only: standard deviation (metres, per axis)
+        of the detector's constant 3-D offset of the ball's apparent centre (every camera's
+        centroid drawn toward the lit side of the ball), a systematic error that smooth's
+        averaging of many detections cannot shrink: each point's covariance gains
+        ``σ² I₃`` (the points do not move; docs/estimation.md). None: the session's default
+        (:func:`detector_bias_for`, applied by ``pslog fuse`` and :func:`pslog.fuse` from the
+        session's metadata; 0 for bare detections)
+    detector_bias_px : float or None, smooth only: standard deviation (pixels, per image
+        axis) of each camera's own constant bias, independent between cameras, through the
+        fit's sensitivity to it (:func:`pslog.estimation.trajectory.bias_sensitivity`).
+        None: 0
     """
 
     tolerance_s: float = 1e-3
@@ -80,6 +91,8 @@ class FusionOptions:
     noise_px: float | None = 0.5
     gating: bool = True
     confirm_gaps: bool = True
+    detector_offset_m: float | None = None
+    detector_bias_px: float | None = None
 
     def __post_init__(self) -> None:
         if not self.tolerance_s >= 0:
@@ -92,6 +105,40 @@ class FusionOptions:
             raise FusionError(f"rate must be in [0.001, 1e6] Hz, got {self.rate_hz!r}")
         if self.noise_px is not None and not 0 <= self.noise_px <= 1e3:
             raise FusionError(f"pixel noise must be in [0, 1000] pixels, got {self.noise_px!r}")
+        if self.detector_bias_px is not None and not 0 <= self.detector_bias_px <= 1e3:
+            raise FusionError(f"detector bias must be in [0, 1000] pixels, got "
+                              f"{self.detector_bias_px!r}")
+        if self.detector_offset_m is not None and not 0 <= self.detector_offset_m <= 1.0:
+            raise FusionError(f"detector offset must be in [0, 1] metres, got "
+                              f"{self.detector_offset_m!r}")
+
+
+#: Standard deviation (metres, per axis) of the constant 3-D offset of the ball's apparent
+#: centre for detections found in images (pslog's HSV detector, ``recorders/detect.py``, or
+#: an imported detector's): measured on nine rendered sessions of six rigs, the centroid
+#: sits 0.7-1.1 mm (3-5 % of a golf ball's radius) toward the light, the same for every
+#: camera (RMS 0.52 mm per axis in an unknown direction; docs/estimation.md, "Detector
+#: bias"). The default of :func:`detector_bias_for`.
+DETECTOR_OFFSET_M = 0.5e-3
+
+
+def detector_bias_for(metadata) -> float:
+    """The default detector offset (metres, per axis) of a session from its metadata
+    record: 0 for ``pslog simulate`` sessions (projected truth plus white noise: no bias),
+    else :data:`DETECTOR_OFFSET_M` (detections found in images by pslog's detector —
+    ``record``, ``record --synthetic``, ``redetect``, ``live`` — or by another, ``import``)."""
+    metadata = metadata or {}
+    simulated = str(metadata.get("source", "")).startswith("pslog simulate") or any(
+        str(k).startswith("simulate.") for k in metadata)
+    return 0.0 if simulated else DETECTOR_OFFSET_M
+
+
+def for_session(options: FusionOptions, metadata) -> FusionOptions:
+    """``options`` with the session's default detector offset (:func:`detector_bias_for`)
+    when it is None."""
+    if options.detector_offset_m is not None:
+        return options
+    return replace(options, detector_offset_m=detector_bias_for(metadata))
 
 
 @dataclass(frozen=True)
@@ -372,7 +419,8 @@ def type_a_explained(prep: Prepared, rig: Rig, options: FusionOptions
 
 
 __all__ = [
-    "METHODS", "FusionOptions", "Method", "Prepared", "PseudoStereoPoints", "TypeAConstruction",
-    "causal_methods", "check_method", "check_tolerance", "default_methods", "explain_type_a",
-    "fuse", "fuse_all", "prepare", "pseudo_stereo_points",
+    "DETECTOR_OFFSET_M", "METHODS", "FusionOptions", "Method", "Prepared", "PseudoStereoPoints",
+    "TypeAConstruction", "causal_methods", "check_method", "check_tolerance", "default_methods",
+    "detector_bias_for", "explain_type_a", "for_session", "fuse", "fuse_all", "prepare",
+    "pseudo_stereo_points",
 ]

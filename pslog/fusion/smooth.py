@@ -41,7 +41,9 @@ def fuse_smooth(prep: Prepared, rig: Rig, options) -> Track:
 
     obs = prep.obs
     try:
-        fit = fit_trajectory(obs, rig, SmoothOptions(max_gap_s=options.max_gap_s))
+        fit = fit_trajectory(obs, rig, SmoothOptions(
+            max_gap_s=options.max_gap_s, detector_offset_m=options.detector_offset_m or 0.0,
+            detector_bias_px=options.detector_bias_px or 0.0))
     except FusionError as exc:
         if "two cameras" in str(exc):
             return _empty()
