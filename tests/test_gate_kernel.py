@@ -291,6 +291,37 @@ def test_batch_points_compiled_equal_the_numpy_form_bit_for_bit():
     assert np.isfinite(want[0]).all(axis=1).sum() > n // 4  # points made
     assert (~want[1]).sum() > 10 and np.isnan(want[2]).sum() > 10  # behind, no point
 
+@pytest.mark.parametrize("timing", ["typeA", "typeB", "sync"])
+def test_batch_support_compiled_equals_the_numpy_form_bit_for_bit(timing):
+    """gating._support's compiled form (_gate_kernel.support_all, which pslog fuse uses)
+    gives the numpy form's ratios, carried pixels and frames used, bit for bit, in every
+    form the gate runs (causal without and with a wait, offline; the usual and a short
+    gap), on dirty sessions: several candidates a frame (a distractor, spurious blobs, 6
+    more in some frames), missed and dropped frames, a camera gone blind."""
+    from pslog.geometry import fundamental_matrices
+
+    seen = np.zeros(3, dtype=np.int64)
+    for seed in range(2):
+        det, rig = dirty(seed, apply_timing(builtin_rig("paper3"), timing), 3.0)
+        c, tables = gating.gate_common(det, rig)
+        F = fundamental_matrices(rig.cameras)
+        options = GatingOptions()
+        for causal, wait_ns in ((True, 0), (True, 1_000_000), (False, 0)):
+            for gap_ns in (round(3.5e9 / 30), 20_000_000):
+                want = gating._support(c, rig, F, tables, options, gap_ns, causal, wait_ns,
+                                       compiled=False)
+                got = gating._support(c, rig, F, tables, options, gap_ns, causal, wait_ns,
+                                      compiled=True)
+                for w, g in zip(want, got, strict=True):
+                    assert w.dtype == g.dtype and w.shape == g.shape
+                    assert_array_equal(w.view(np.uint8), g.view(np.uint8),
+                                       err_msg=f"seed {seed} causal {causal} wait {wait_ns}")
+                ratio = want[0]
+                seen += [(ratio <= 1.0).sum(), np.isinf(ratio).sum(), np.isnan(ratio).sum()]
+    # every kind of outcome met: supported, no plausible pair, no frame near
+    assert seen.min() > 0 and seen[0] > 1000
+
+
 def test_python_pow_and_sum_are_reproduced():
     """CPython's ``x ** 2`` is C's pow, not ``x * x`` (they differ in the last bit on some
     values); the kernels call pow with an exponent the compiler cannot fold; ``sum`` is the

@@ -291,6 +291,101 @@ def points_all(camera, ray_dir, ratio, carried, centers, k_inv, rot, points, in_
         miss[i] = ms
 
 
+@kernel
+def _bisect(keys, x, right):
+    """``bisect.bisect_right`` (``right``) or ``bisect_left`` of ``x`` in sorted ``keys``."""
+    lo, hi = 0, len(keys)
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if keys[mid] < x or (right and keys[mid] == x):
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@kernel
+def support_all(rows, b, t_all, uv, lines, times, table, causal, right, wait_ns, gap_ns,
+                epi, vmax, half_accel, ratio, carried, used):
+    """gating._support's rule for the candidates ``rows`` of one camera a and one other
+    camera b (its frame table: ``times`` (F,), ``table`` (F, K) candidate rows, -1
+    padding), every candidate of b's frames supporting: writes ``ratio[rows, b]``,
+    ``carried[rows, b]`` and ``used[rows, b]`` as the numpy form does, one candidate at a
+    time in its order of operations (the same bits). ``t_all`` (C,) corrected times, ``uv``
+    (C, 2) undistorted pixels, ``lines`` (len(rows), 3) each candidate's epipolar line in
+    b; ``causal``: b's frames up to ``t + wait_ns`` (``right``: bisect_right, else left),
+    else offline (interpolation between the frames around t where both are near);
+    ``gap_ns``: frames further than this give no support; ``epi``, ``vmax``,
+    ``half_accel``: GatingOptions' epipolar_px, max_image_speed_px_s, 0.5 accel_px_s2."""
+    n_f, k_max = table.shape[0], table.shape[1]
+    for i in range(len(rows)):
+        r = rows[i]
+        t = t_all[r]
+        if causal:
+            last = _bisect(times, t + wait_ns, right) - 1
+            inext = -1
+        else:
+            last = _bisect(times, t, True) - 1
+            inext = last + 1 if last + 1 < n_f else -1
+        i1, i0 = last, last - 1
+        used[r, b, 0], used[r, b, 1], used[r, b, 2] = i0, i1, inext
+        l0, l1, l2 = lines[i, 0], lines[i, 1], lines[i, 2]
+        best, bu, bv = math.inf, math.nan, math.nan
+        near = False
+        # interpolation between the frames around t, else extrapolation from the two
+        # latest at or before it (only where no later frame exists)
+        for extrapolate in range(2):
+            if extrapolate == 0:
+                first, second = i1, inext
+            else:
+                first, second = i0, i1
+                if inext >= 0:
+                    continue
+            if first < 0 or second < 0:
+                continue
+            if not (abs(t - times[first]) <= gap_ns and abs(t - times[second]) <= gap_ns):
+                continue
+            near = True
+            for q0 in range(k_max):  # numpy's argmin over (q0, q1): the first smallest
+                r0 = table[first, q0]
+                if r0 < 0:
+                    continue
+                t0, u0, v0 = t_all[r0], uv[r0, 0], uv[r0, 1]
+                for q1 in range(k_max):
+                    r1 = table[second, q1]
+                    if r1 < 0:
+                        continue
+                    t1, u1, v1 = t_all[r1], uv[r1, 0], uv[r1, 1]
+                    span = (t1 - t0) / _NS
+                    if not span > 0:
+                        continue
+                    du, dv = u1 - u0, v1 - v0
+                    if not math.sqrt(du * du + dv * dv) / abs(span) <= vmax:
+                        continue
+                    w = (t - t0) / _NS / span
+                    yu, yv = u0 + w * du, v0 + w * dv
+                    tau = epi + half_accel * abs(t - t0) / _NS * abs(t - t1) / _NS
+                    d = abs(l0 * yu + l1 * yv + l2)
+                    if math.isfinite(d) and d / tau < best:
+                        best, bu, bv = d / tau, yu, yv
+        # a single nearby frame (the other camera missed the one before): its candidates
+        # as they are, allowing the image motion a ball can make since
+        if not near and i1 >= 0 and abs(t - times[i1]) <= gap_ns:
+            near = True
+            for q1 in range(k_max):
+                r1 = table[i1, q1]
+                rr = r1 if r1 >= 0 else 0
+                y0, y1 = uv[rr, 0], uv[rr, 1]
+                tau = epi + vmax * (abs(t - t_all[rr]) / _NS)
+                d = abs(l0 * y0 + l1 * y1 + l2)
+                rv = d / tau if (r1 >= 0 and math.isfinite(d)) else math.inf
+                if q1 == 0 or rv < best:  # argmin: the first smallest, 0 when all inf
+                    best, bu, bv = rv, y0, y1
+        if near:
+            ratio[r, b] = best
+        carried[r, b, 0], carried[r, b, 1] = bu, bv
+
+
 def _preload() -> None:
     """:func:`points_all` loaded from numba's cache (or compiled) now, in the signature of
     gating._points' call (int32 cameras, C-contiguous float64 rows): called by
@@ -299,6 +394,11 @@ def _preload() -> None:
     points_all(np.zeros(0, dtype=np.int32), np.zeros((0, 3)), np.zeros((0, 1)),
                np.zeros((0, 1, 2)), np.zeros((1, 3)), np.zeros((1, 3, 3)), np.zeros((1, 3, 3)),
                np.empty((0, 3)), np.empty(0, dtype=np.bool_), np.empty(0))
+    # (and support_all, in the signature of gating._support's call)
+    support_all(np.zeros(0, dtype=np.int64), 0, np.zeros(1, dtype=np.int64), np.zeros((1, 2)),
+                np.zeros((0, 3)), np.zeros(1, dtype=np.int64), np.zeros((1, 1), dtype=np.int64),
+                True, True, 0, 0, 1.0, 1.0, 1.0, np.zeros((1, 1)), np.zeros((1, 1, 2)),
+                np.zeros((1, 1, 3), dtype=np.int64))
 
 @kernel
 def _line_fit(trk, lo, hi, t_s, opt, out):
