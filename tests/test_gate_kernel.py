@@ -322,6 +322,52 @@ def test_batch_support_compiled_equals_the_numpy_form_bit_for_bit(timing):
     assert seen.min() > 0 and seen[0] > 1000
 
 
+def _static_sessions():
+    """Sessions for gating._static: dirty rallies (a distractor standing still, spurious
+    blobs), paper2 with a static object that one camera sees alone (the image test and its
+    support), paper2's ball flying along cam1's ray (the long image test) and a lob toward
+    a steep camera (each pair's smaller tolerance)."""
+    from test_gating_paired_static import _session, _toward, lob, lob_rig
+
+    yield dirty(0, apply_timing(builtin_rig("paper3"), "typeA"), 3.0)
+    rig, det, _truth, _ball = _session("paper2")
+    yield det, rig
+    rig = apply_timing(builtin_rig("paper2"), "typeA")
+    yield simulate(rig, _toward(rig, 1, 2.0, 0.0),
+                   options=SimulationOptions(noise_px=0.3, seed=1))[0], rig
+    rig = lob_rig()
+    yield simulate(rig, lob(30.0, 2.0, 0.6), options=SimulationOptions(noise_px=0.3,
+                                                                       seed=0))[0], rig
+
+
+def test_batch_static_compiled_equals_the_numpy_form():
+    """gating._static's compiled form (_gate_kernel.static_camera, which pslog fuse uses)
+    gives the numpy form's static flags and stillness, bit for bit, in both gating forms,
+    with and without the image tests (``paired``), on sessions where each of its tests
+    calls something static."""
+    from pslog.geometry import fundamental_matrices
+
+    found = still = 0
+    for det, rig in _static_sessions():
+        c, tables = gating.gate_common(det, rig)
+        F = fundamental_matrices(rig.cameras)
+        options = GatingOptions()
+        for causal in (True, False):
+            ratio, carried, _ = gating._support(c, rig, F, tables, options,
+                                                round(3.5e9 / 30), causal, 0)
+            points, _, miss = gating._points(c, rig, ratio, carried)
+            points[miss > options.track_m] = np.nan
+            for paired in (gating._paired(ratio), None):
+                want = gating._static(c, tables, rig, options, points, paired, compiled=False)
+                got = gating._static(c, tables, rig, options, points, paired, compiled=True)
+                for w, g in zip(want, got, strict=True):
+                    assert w.dtype == g.dtype and w.shape == g.shape
+                    assert_array_equal(w.view(np.uint8), g.view(np.uint8))
+                found += int(want[0].sum())
+                still += int((want[1] > 0).sum())
+    assert found > 50 and still > 20
+
+
 def test_python_pow_and_sum_are_reproduced():
     """CPython's ``x ** 2`` is C's pow, not ``x * x`` (they differ in the last bit on some
     values); the kernels call pow with an exponent the compiler cannot fold; ``sum`` is the

@@ -386,6 +386,86 @@ def support_all(rows, b, t_all, uv, lines, times, table, causal, right, wait_ns,
         carried[r, b, 0], carried[r, b, 1] = bu, bv
 
 
+@kernel
+def static_camera(times, table, points, uv, finite, paired, dz, lags, long_lags, recent_ns,
+                  recent_long_ns, focal_static, center, long_t, static_m, long_c, g,
+                  static, stillness):
+    """gating._static for one camera's frames (``times`` (F,), ``table`` (F, K) candidate
+    rows, -1 padding), every earlier frame's candidates counting: sets ``static`` and
+    ``stillness`` of its candidates, one candidate at a time with _stillness_one's floats
+    (the same decisions, the same stillness). ``points`` (C, 3), ``uv`` (C, 2) undistorted
+    pixels, ``finite`` (C,) whether each has a point, ``paired`` (C,) its point rests on one
+    other camera (the image tests), ``dz`` (C,) its ray's world z; ``lags`` and
+    ``long_lags``: frames of the 3D / image test and of the long image test; ``recent_ns``,
+    ``recent_long_ns``: how far back those frames may lie (1.5 static_s, 1.5 LONG_STILL
+    static_s, ns); ``focal_static``: min(f_x, f_y) static_m (_still_px); ``center`` (3,)
+    the camera's; ``long_t``: long_lags / fps; ``long_c``: LONG_STILL_C; ``g``: gravity."""
+    n_f, k_max = table.shape[0], table.shape[1]
+    top = min(long_lags, n_f - 1)
+    for f in range(n_f):
+        for q in range(k_max):
+            r = table[f, q]
+            if r < 0:
+                continue
+            x, y, z = points[r, 0], points[r, 1], points[r, 2]
+            u, v = uv[r, 0], uv[r, 1]
+            # _still_px (NaN without a point), NaN too where the image test does not apply
+            ex, ey, ez = x - center[0], y - center[1], z - center[2]
+            dd = (ex * ex + ey * ey) + ez * ez
+            own = focal_static / (math.sqrt(dd) if dd >= 0 else math.nan)
+            tol = own if paired[r] else math.nan
+            run = run_px = held = run_long = 0.0
+            for lag in range(1, top + 1):
+                if f < lag:
+                    break  # (no frame that far back: counts for nothing)
+                gap = times[f] - times[f - lag]
+                recent = gap <= recent_ns
+                recent_long = gap <= recent_long_ns
+                best = math.inf
+                best_px = math.inf
+                supported = False
+                still_long = False
+                for q2 in range(k_max):
+                    r2 = table[f - lag, q2]
+                    if r2 < 0:
+                        continue
+                    du, dv = u - uv[r2, 0], v - uv[r2, 1]
+                    d_px = math.sqrt(du * du + dv * dv)
+                    # _still_pair: the smaller of the two candidates' tolerances
+                    px, py, pz = points[r2, 0], points[r2, 1], points[r2, 2]
+                    fx, fy, fz = px - center[0], py - center[1], pz - center[2]
+                    dd2 = (fx * fx + fy * fy) + fz * fz
+                    own2 = focal_static / (math.sqrt(dd2) if dd2 >= 0 else math.nan)
+                    pair = own2 if own2 < tol else tol
+                    if d_px <= pair:
+                        still_long = True
+                    if lag <= lags:
+                        if d_px <= tol and finite[r2]:
+                            supported = True
+                        if d_px < best_px:  # (NaN never is)
+                            best_px = d_px
+                        ax, ay, az = x - px, y - py, z - pz
+                        d = math.sqrt((ax * ax + ay * ay) + az * az)
+                        if d < best:
+                            best = d
+                if recent_long and still_long:
+                    run_long += 1.0
+                if lag <= lags and recent:
+                    if best <= static_m:
+                        run += 1.0
+                    if best_px <= tol:
+                        run_px += 1.0
+                    if supported:
+                        held += 1.0
+            stillness[r] = run / lags
+            dzr = dz[r]
+            across = 1.0 - dzr * dzr
+            g_across = g * (math.sqrt(across) if across >= 0 else math.nan)
+            long = run_long >= long_lags and long_c * g_across * long_t * long_t > static_m
+            if run >= 0.75 * lags or (run_px >= lags and held < lags - 1) or long:
+                static[r] = True
+
+
 def _preload() -> None:
     """:func:`points_all` loaded from numba's cache (or compiled) now, in the signature of
     gating._points' call (int32 cameras, C-contiguous float64 rows): called by
@@ -399,6 +479,11 @@ def _preload() -> None:
                 np.zeros((0, 3)), np.zeros(1, dtype=np.int64), np.zeros((1, 1), dtype=np.int64),
                 True, True, 0, 0, 1.0, 1.0, 1.0, np.zeros((1, 1)), np.zeros((1, 1, 2)),
                 np.zeros((1, 1, 3), dtype=np.int64))
+    # (and static_camera, in the signature of gating._static's call)
+    static_camera(np.zeros(1, dtype=np.int64), np.zeros((1, 1), dtype=np.int64),
+                  np.zeros((1, 3)), np.zeros((1, 2)), np.zeros(1, dtype=np.bool_),
+                  np.zeros(1, dtype=np.bool_), np.zeros(1), 1, 1, 1.0, 1.0, 1.0, np.zeros(3),
+                  1.0, 1.0, 1.0, 1.0, np.zeros(1, dtype=np.bool_), np.zeros(1))
 
 @kernel
 def _line_fit(trk, lo, hi, t_s, opt, out):

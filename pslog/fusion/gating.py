@@ -549,8 +549,8 @@ def _support_one(t: int, line, keys: list[int], usable, search, wait_ns: int, ca
 
 
 def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
-            points: np.ndarray, paired: np.ndarray | None = None
-            ) -> tuple[np.ndarray, np.ndarray]:
+            points: np.ndarray, paired: np.ndarray | None = None,
+            compiled: bool | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Which candidates stood still in space: each one's 3D point (its ray crossed with its
     support's) within ``static_m`` of a candidate's point in each of its camera's earlier
     frames; or, for a candidate whose point rests on one other camera (``paired``), its
@@ -572,10 +572,35 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
         seen by several cameras (a second orange thing, a lamp), not a ball in play
     stillness : (C,) float in [0, 1], the share of those frames, back from the newest,
         it was still in (a candidate that has not moved yet is the less likely ball)
+
+    ``compiled``: by :func:`pslog.fusion._gate_kernel.static_camera` (the same values);
+    None: where that module is loaded.
     """
     static = np.zeros(len(c.camera), dtype=bool)
     stillness = np.zeros(len(c.camera))
     finite = np.isfinite(points).all(axis=-1)  # (C,) whether each candidate has a point
+    if compiled is None:
+        compiled = "pslog.fusion._gate_kernel" in sys.modules
+    if compiled and len(c.camera):
+        from ._gate_kernel import static_camera
+
+        pts = np.ascontiguousarray(points, dtype=np.float64)
+        uv = np.ascontiguousarray(c.uv_und, dtype=np.float64)
+        pair_of = (np.zeros(len(c.camera), dtype=bool) if paired is None
+                   else np.ascontiguousarray(paired, dtype=bool))
+        dz = np.ascontiguousarray(c.ray_dir[:, 2], dtype=np.float64)
+        for b, (times, table) in enumerate(tables):
+            cam = rig.cameras[b]
+            long_lags = int(np.ceil(LONG_STILL * options.static_s * cam.fps))
+            static_camera(np.ascontiguousarray(times, dtype=np.int64),
+                          np.ascontiguousarray(table, dtype=np.int64), pts, uv, finite,
+                          pair_of, dz, int(np.ceil(options.static_s * cam.fps)), long_lags,
+                          1.5 * options.static_s * NS, 1.5 * LONG_STILL * options.static_s * NS,
+                          min(float(cam.K[0, 0]), float(cam.K[1, 1])) * options.static_m,
+                          np.ascontiguousarray(cam.center_world, dtype=np.float64),
+                          long_lags / cam.fps,
+                          float(options.static_m), LONG_STILL_C, G, static, stillness)
+        return static, stillness
     for b, (times, table) in enumerate(tables):
         lags = int(np.ceil(options.static_s * rig.cameras[b].fps))
         long_lags = int(np.ceil(LONG_STILL * options.static_s * rig.cameras[b].fps))
