@@ -399,3 +399,28 @@ def test_a_flush_before_any_push_returns_nothing(compiled):
     for wait_s in (0.0, 0.004):
         out = StreamGate(rig, wait_s=wait_s, compiled=compiled).flush()
         assert [len(a) for a in out] == [0, 0, 0, 0]
+
+
+def test_a_large_batch_gate_loads_its_kernels_a_small_one_never_waits_for_numba():
+    """gating._kernels: a gate of many candidates loads the compiled kernels itself (pslog
+    fuse's gate started before the preload thread had imported them and ran the numpy
+    forms, ~1 CPU s more on a 90-minute match); a small one does not start numba."""
+    import subprocess
+    import sys
+
+    code = """
+import sys
+from pslog.fusion import gating
+from pslog.rig import apply_timing, builtin_rig
+from pslog.simulation import SimulationOptions, simulate
+from pslog.motion import rally_motion
+rig = apply_timing(builtin_rig("paper3"), "typeA")
+det, _ = simulate(rig, rally_motion(1, 1.0), options=SimulationOptions(noise_px=0.3, seed=1))
+gating._KERNELS_FROM = int(sys.argv[1])
+gating.gate(det, rig, causal=True)
+print("numba" in sys.modules, "pslog.fusion._gate_kernel" in sys.modules)
+"""
+    for limit, loaded in ((10, "True True"), (10**9, "False False")):
+        done = subprocess.run([sys.executable, "-c", code, str(limit)], capture_output=True,
+                              text=True, check=True)
+        assert done.stdout.split() == loaded.split(), (limit, done.stdout, done.stderr)

@@ -1345,11 +1345,14 @@ def _decided(c: _Candidates, rig: Rig, options: GatingOptions, causal: bool, wai
     if tables is None:
         tables = _frame_table(c, len(rig))
     F = fundamental_matrices(rig.cameras)
-    ratio, carried, used = _support(c, rig, F, tables, options, max_gap_ns, causal, wait_ns)
+    compiled = _kernels(n)
+    ratio, carried, used = _support(c, rig, F, tables, options, max_gap_ns, causal, wait_ns,
+                                    compiled=compiled)
     constants = _rig_constants(rig)
     points, in_front, miss = _points(c, rig, ratio, carried, constants)
     points[miss > options.track_m] = np.nan  # rays that do not meet: no point to track
-    static, stillness = _static(c, tables, rig, options, points, _paired(ratio))
+    static, stillness = _static(c, tables, rig, options, points, _paired(ratio),
+                                compiled=compiled)
     # frames in (time, camera) order of their best candidate; candidates contiguous per frame
     starts = np.flatnonzero(np.r_[True, c.frame[1:] != c.frame[:-1]])
     ends = np.r_[starts[1:], n]
@@ -1359,6 +1362,30 @@ def _decided(c: _Candidates, rig: Rig, options: GatingOptions, causal: bool, wai
                      (points, in_front), (static, stillness), reason,
                      causal, wait_ns, max_gap_ns, constants)
     return ratio
+
+
+#: candidates from which the batch gate loads its compiled kernels itself (numba's start,
+#: ~0.5 s, then costs less than the numpy forms of _support and _static, ~2 µs a candidate
+#: per form); below, they are used only where already loaded
+_KERNELS_FROM = 200_000
+
+
+def _kernels(n: int) -> bool:
+    """Whether the gate of ``n`` candidates runs :mod:`._gate_kernel`'s kernels (the same
+    bits as the numpy forms): where that module is loaded (``pslog fuse`` preloads it on
+    another thread; a gate that starts before that import is done waits for it here, at
+    ``_KERNELS_FROM`` candidates or more, rather than burn the numpy forms' CPU meanwhile)."""
+    if "pslog.fusion._gate_kernel" in sys.modules:
+        return True
+    if n < _KERNELS_FROM:
+        return False
+    try:
+        import importlib
+
+        importlib.import_module("pslog.fusion._gate_kernel")
+    except Exception:  # numba cannot start: the numpy forms
+        return False
+    return True
 
 
 #: frames decided by one :meth:`_Decider.decide` call at most (bounds the Python floats held)
