@@ -291,6 +291,83 @@ def test_batch_points_compiled_equal_the_numpy_form_bit_for_bit():
     assert np.isfinite(want[0]).all(axis=1).sum() > n // 4  # points made
     assert (~want[1]).sum() > 10 and np.isnan(want[2]).sum() > 10  # behind, no point
 
+@pytest.mark.parametrize("timing", ["typeA", "typeB", "sync"])
+def test_batch_support_compiled_equals_the_numpy_form_bit_for_bit(timing):
+    """gating._support's compiled form (_gate_kernel.support_all, which pslog fuse uses)
+    gives the numpy form's ratios, carried pixels and frames used, bit for bit, in every
+    form the gate runs (causal without and with a wait, offline; the usual and a short
+    gap), on dirty sessions: several candidates a frame (a distractor, spurious blobs, 6
+    more in some frames), missed and dropped frames, a camera gone blind."""
+    from pslog.geometry import fundamental_matrices
+
+    seen = np.zeros(3, dtype=np.int64)
+    for seed in range(2):
+        det, rig = dirty(seed, apply_timing(builtin_rig("paper3"), timing), 3.0)
+        c, tables = gating.gate_common(det, rig)
+        F = fundamental_matrices(rig.cameras)
+        options = GatingOptions()
+        for causal, wait_ns in ((True, 0), (True, 1_000_000), (False, 0)):
+            for gap_ns in (round(3.5e9 / 30), 20_000_000):
+                want = gating._support(c, rig, F, tables, options, gap_ns, causal, wait_ns,
+                                       compiled=False)
+                got = gating._support(c, rig, F, tables, options, gap_ns, causal, wait_ns,
+                                      compiled=True)
+                for w, g in zip(want, got, strict=True):
+                    assert w.dtype == g.dtype and w.shape == g.shape
+                    assert_array_equal(w.view(np.uint8), g.view(np.uint8),
+                                       err_msg=f"seed {seed} causal {causal} wait {wait_ns}")
+                ratio = want[0]
+                seen += [(ratio <= 1.0).sum(), np.isinf(ratio).sum(), np.isnan(ratio).sum()]
+    # every kind of outcome met: supported, no plausible pair, no frame near
+    assert seen.min() > 0 and seen[0] > 1000
+
+
+def _static_sessions():
+    """Sessions for gating._static: dirty rallies (a distractor standing still, spurious
+    blobs), paper2 with a static object that one camera sees alone (the image test and its
+    support), paper2's ball flying along cam1's ray (the long image test) and a lob toward
+    a steep camera (each pair's smaller tolerance)."""
+    from test_gating_paired_static import _session, _toward, lob, lob_rig
+
+    yield dirty(0, apply_timing(builtin_rig("paper3"), "typeA"), 3.0)
+    rig, det, _truth, _ball = _session("paper2")
+    yield det, rig
+    rig = apply_timing(builtin_rig("paper2"), "typeA")
+    yield simulate(rig, _toward(rig, 1, 2.0, 0.0),
+                   options=SimulationOptions(noise_px=0.3, seed=1))[0], rig
+    rig = lob_rig()
+    yield simulate(rig, lob(30.0, 2.0, 0.6), options=SimulationOptions(noise_px=0.3,
+                                                                       seed=0))[0], rig
+
+
+def test_batch_static_compiled_equals_the_numpy_form():
+    """gating._static's compiled form (_gate_kernel.static_camera, which pslog fuse uses)
+    gives the numpy form's static flags and stillness, bit for bit, in both gating forms,
+    with and without the image tests (``paired``), on sessions where each of its tests
+    calls something static."""
+    from pslog.geometry import fundamental_matrices
+
+    found = still = 0
+    for det, rig in _static_sessions():
+        c, tables = gating.gate_common(det, rig)
+        F = fundamental_matrices(rig.cameras)
+        options = GatingOptions()
+        for causal in (True, False):
+            ratio, carried, _ = gating._support(c, rig, F, tables, options,
+                                                round(3.5e9 / 30), causal, 0)
+            points, _, miss = gating._points(c, rig, ratio, carried)
+            points[miss > options.track_m] = np.nan
+            for paired in (gating._paired(ratio), None):
+                want = gating._static(c, tables, rig, options, points, paired, compiled=False)
+                got = gating._static(c, tables, rig, options, points, paired, compiled=True)
+                for w, g in zip(want, got, strict=True):
+                    assert w.dtype == g.dtype and w.shape == g.shape
+                    assert_array_equal(w.view(np.uint8), g.view(np.uint8))
+                found += int(want[0].sum())
+                still += int((want[1] > 0).sum())
+    assert found > 50 and still > 20
+
+
 def test_python_pow_and_sum_are_reproduced():
     """CPython's ``x ** 2`` is C's pow, not ``x * x`` (they differ in the last bit on some
     values); the kernels call pow with an exponent the compiler cannot fold; ``sum`` is the
@@ -322,3 +399,28 @@ def test_a_flush_before_any_push_returns_nothing(compiled):
     for wait_s in (0.0, 0.004):
         out = StreamGate(rig, wait_s=wait_s, compiled=compiled).flush()
         assert [len(a) for a in out] == [0, 0, 0, 0]
+
+
+def test_a_large_batch_gate_loads_its_kernels_a_small_one_never_waits_for_numba():
+    """gating._kernels: a gate of many candidates loads the compiled kernels itself (pslog
+    fuse's gate started before the preload thread had imported them and ran the numpy
+    forms, ~1 CPU s more on a 90-minute match); a small one does not start numba."""
+    import subprocess
+    import sys
+
+    code = """
+import sys
+from pslog.fusion import gating
+from pslog.rig import apply_timing, builtin_rig
+from pslog.simulation import SimulationOptions, simulate
+from pslog.motion import rally_motion
+rig = apply_timing(builtin_rig("paper3"), "typeA")
+det, _ = simulate(rig, rally_motion(1, 1.0), options=SimulationOptions(noise_px=0.3, seed=1))
+gating._KERNELS_FROM = int(sys.argv[1])
+gating.gate(det, rig, causal=True)
+print("numba" in sys.modules, "pslog.fusion._gate_kernel" in sys.modules)
+"""
+    for limit, loaded in ((10, "True True"), (10**9, "False False")):
+        done = subprocess.run([sys.executable, "-c", code, str(limit)], capture_output=True,
+                              text=True, check=True)
+        assert done.stdout.split() == loaded.split(), (limit, done.stdout, done.stderr)

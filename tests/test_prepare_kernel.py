@@ -89,3 +89,58 @@ def test_previous_next_equals_stable_sort_form():
         after[order[:-1][same]] = order[1:][same]
         got = _previous_next(camera)
         assert np.array_equal(got[0], before) and np.array_equal(got[1], after)
+
+
+@pytest.mark.parametrize("shared_origins", [True, False])
+def test_least_squares_pixel_jacobians_compiled_equal_numpy_bit_for_bit(shared_origins):
+    """nview_points' d(point)/d(pixel) (_prepare.least_squares_pixel_jacobians) by the
+    compiled kernels (normal_inverse, ray_pixel_jacobian; what pslog fuse's nearest, sync,
+    typeB and linear use) equals its numpy form bit for bit: two, three and four rays,
+    unused rays (NaN directions there too), near-parallel rays (|det A| at the 1e-12
+    cut), NaN points, origins broadcast from one per camera (a rig's centres) or per
+    point; and the Jacobian moves the least-squares point as a finite difference does."""
+    from pslog.fusion._prepare import least_squares_pixel_jacobians
+    from pslog.geometry import triangulate_rays
+
+    rng = np.random.default_rng(3)
+    for m in (2, 3, 4):
+        k = 3000
+        centers = rng.normal(size=(m, 3)) * 3.0
+        origins = (np.broadcast_to(centers, (k, m, 3)) if shared_origins
+                   else centers + rng.normal(size=(k, m, 3)) * 0.1)
+        dirs = rng.normal(size=(k, m, 3))
+        dirs /= np.linalg.norm(dirs, axis=2, keepdims=True)
+        dirs[:50, 1] = dirs[:50, 0] * (1 + 1e-7)  # near-parallel pairs
+        dirs[:50, 1] /= np.linalg.norm(dirs[:50, 1], axis=1, keepdims=True)
+        used = rng.random((k, m)) < 0.8
+        used[:100] = True
+        dirs[~used & (rng.random((k, m)) < 0.5)] = np.nan
+        points = triangulate_rays(origins, np.where(used[..., None], dirs, 0.0), used)[0]
+        points[rng.random(k) < 0.02] = np.nan
+        turns = [rng.normal(size=(3, 2, k)) for _ in range(m)]
+        with np.errstate(all="ignore"):
+            want = least_squares_pixel_jacobians(points, origins, dirs, used, turns,
+                                                 compiled=False)
+            got = least_squares_pixel_jacobians(points, origins, dirs, used, turns,
+                                                compiled=True)
+        assert len(want) == len(got) == m
+        for w, g in zip(want, got, strict=True):
+            assert w.shape == g.shape == (3, 2, k)
+            assert w.tobytes() == g.tobytes()
+        assert np.isnan(want[0]).any() and np.isfinite(want[0]).sum() > want[0].size // 2
+    # (the equation itself: a turn of ray 0 by the Jacobian's direction moves the point
+    # as the triangulation of the turned ray does, to first order)
+    k, eps = 200, 1e-7
+    origins = np.broadcast_to(centers[:2], (k, 2, 3))
+    dirs = rng.normal(size=(k, 2, 3))
+    dirs /= np.linalg.norm(dirs, axis=2, keepdims=True)
+    used = np.ones((k, 2), dtype=bool)
+    points = triangulate_rays(origins, dirs, used)[0]
+    turn = rng.normal(size=(3, 2, k))  # tangent to the unit directions (they stay unit)
+    turn -= dirs[:, 0].T[:, None, :] * np.einsum("ijk,ki->jk", turn, dirs[:, 0])[None]
+    J = least_squares_pixel_jacobians(points, origins, dirs, used, [turn, np.zeros_like(turn)],
+                                      compiled=True)[0]
+    moved = dirs.copy()
+    moved[:, 0] += eps * turn[:, 0].T
+    shifted = triangulate_rays(origins, moved, used)[0]
+    assert np.allclose((shifted - points) / eps, J[:, 0].T, rtol=1e-4, atol=1e-4)

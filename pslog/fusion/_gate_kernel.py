@@ -291,6 +291,181 @@ def points_all(camera, ray_dir, ratio, carried, centers, k_inv, rot, points, in_
         miss[i] = ms
 
 
+@kernel
+def _bisect(keys, x, right):
+    """``bisect.bisect_right`` (``right``) or ``bisect_left`` of ``x`` in sorted ``keys``."""
+    lo, hi = 0, len(keys)
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if keys[mid] < x or (right and keys[mid] == x):
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@kernel
+def support_all(rows, b, t_all, uv, lines, times, table, causal, right, wait_ns, gap_ns,
+                epi, vmax, half_accel, ratio, carried, used):
+    """gating._support's rule for the candidates ``rows`` of one camera a and one other
+    camera b (its frame table: ``times`` (F,), ``table`` (F, K) candidate rows, -1
+    padding), every candidate of b's frames supporting: writes ``ratio[rows, b]``,
+    ``carried[rows, b]`` and ``used[rows, b]`` as the numpy form does, one candidate at a
+    time in its order of operations (the same bits). ``t_all`` (C,) corrected times, ``uv``
+    (C, 2) undistorted pixels, ``lines`` (len(rows), 3) each candidate's epipolar line in
+    b; ``causal``: b's frames up to ``t + wait_ns`` (``right``: bisect_right, else left),
+    else offline (interpolation between the frames around t where both are near);
+    ``gap_ns``: frames further than this give no support; ``epi``, ``vmax``,
+    ``half_accel``: GatingOptions' epipolar_px, max_image_speed_px_s, 0.5 accel_px_s2."""
+    n_f, k_max = table.shape[0], table.shape[1]
+    for i in range(len(rows)):
+        r = rows[i]
+        t = t_all[r]
+        if causal:
+            last = _bisect(times, t + wait_ns, right) - 1
+            inext = -1
+        else:
+            last = _bisect(times, t, True) - 1
+            inext = last + 1 if last + 1 < n_f else -1
+        i1, i0 = last, last - 1
+        used[r, b, 0], used[r, b, 1], used[r, b, 2] = i0, i1, inext
+        l0, l1, l2 = lines[i, 0], lines[i, 1], lines[i, 2]
+        best, bu, bv = math.inf, math.nan, math.nan
+        near = False
+        # interpolation between the frames around t, else extrapolation from the two
+        # latest at or before it (only where no later frame exists)
+        for extrapolate in range(2):
+            if extrapolate == 0:
+                first, second = i1, inext
+            else:
+                first, second = i0, i1
+                if inext >= 0:
+                    continue
+            if first < 0 or second < 0:
+                continue
+            if not (abs(t - times[first]) <= gap_ns and abs(t - times[second]) <= gap_ns):
+                continue
+            near = True
+            for q0 in range(k_max):  # numpy's argmin over (q0, q1): the first smallest
+                r0 = table[first, q0]
+                if r0 < 0:
+                    continue
+                t0, u0, v0 = t_all[r0], uv[r0, 0], uv[r0, 1]
+                for q1 in range(k_max):
+                    r1 = table[second, q1]
+                    if r1 < 0:
+                        continue
+                    t1, u1, v1 = t_all[r1], uv[r1, 0], uv[r1, 1]
+                    span = (t1 - t0) / _NS
+                    if not span > 0:
+                        continue
+                    du, dv = u1 - u0, v1 - v0
+                    if not math.sqrt(du * du + dv * dv) / abs(span) <= vmax:
+                        continue
+                    w = (t - t0) / _NS / span
+                    yu, yv = u0 + w * du, v0 + w * dv
+                    tau = epi + half_accel * abs(t - t0) / _NS * abs(t - t1) / _NS
+                    d = abs(l0 * yu + l1 * yv + l2)
+                    if math.isfinite(d) and d / tau < best:
+                        best, bu, bv = d / tau, yu, yv
+        # a single nearby frame (the other camera missed the one before): its candidates
+        # as they are, allowing the image motion a ball can make since
+        if not near and i1 >= 0 and abs(t - times[i1]) <= gap_ns:
+            near = True
+            for q1 in range(k_max):
+                r1 = table[i1, q1]
+                rr = r1 if r1 >= 0 else 0
+                y0, y1 = uv[rr, 0], uv[rr, 1]
+                tau = epi + vmax * (abs(t - t_all[rr]) / _NS)
+                d = abs(l0 * y0 + l1 * y1 + l2)
+                rv = d / tau if (r1 >= 0 and math.isfinite(d)) else math.inf
+                if q1 == 0 or rv < best:  # argmin: the first smallest, 0 when all inf
+                    best, bu, bv = rv, y0, y1
+        if near:
+            ratio[r, b] = best
+        carried[r, b, 0], carried[r, b, 1] = bu, bv
+
+
+@kernel
+def static_camera(times, table, points, uv, finite, paired, dz, lags, long_lags, recent_ns,
+                  recent_long_ns, focal_static, center, long_t, static_m, long_c, g,
+                  static, stillness):
+    """gating._static for one camera's frames (``times`` (F,), ``table`` (F, K) candidate
+    rows, -1 padding), every earlier frame's candidates counting: sets ``static`` and
+    ``stillness`` of its candidates, one candidate at a time with _stillness_one's floats
+    (the same decisions, the same stillness). ``points`` (C, 3), ``uv`` (C, 2) undistorted
+    pixels, ``finite`` (C,) whether each has a point, ``paired`` (C,) its point rests on one
+    other camera (the image tests), ``dz`` (C,) its ray's world z; ``lags`` and
+    ``long_lags``: frames of the 3D / image test and of the long image test; ``recent_ns``,
+    ``recent_long_ns``: how far back those frames may lie (1.5 static_s, 1.5 LONG_STILL
+    static_s, ns); ``focal_static``: min(f_x, f_y) static_m (_still_px); ``center`` (3,)
+    the camera's; ``long_t``: long_lags / fps; ``long_c``: LONG_STILL_C; ``g``: gravity."""
+    n_f, k_max = table.shape[0], table.shape[1]
+    top = min(long_lags, n_f - 1)
+    for f in range(n_f):
+        for q in range(k_max):
+            r = table[f, q]
+            if r < 0:
+                continue
+            x, y, z = points[r, 0], points[r, 1], points[r, 2]
+            u, v = uv[r, 0], uv[r, 1]
+            # _still_px (NaN without a point), NaN too where the image test does not apply
+            ex, ey, ez = x - center[0], y - center[1], z - center[2]
+            dd = (ex * ex + ey * ey) + ez * ez
+            own = focal_static / (math.sqrt(dd) if dd >= 0 else math.nan)
+            tol = own if paired[r] else math.nan
+            run = run_px = held = run_long = 0.0
+            for lag in range(1, top + 1):
+                if f < lag:
+                    break  # (no frame that far back: counts for nothing)
+                gap = times[f] - times[f - lag]
+                recent = gap <= recent_ns
+                recent_long = gap <= recent_long_ns
+                best = math.inf
+                best_px = math.inf
+                supported = False
+                still_long = False
+                for q2 in range(k_max):
+                    r2 = table[f - lag, q2]
+                    if r2 < 0:
+                        continue
+                    du, dv = u - uv[r2, 0], v - uv[r2, 1]
+                    d_px = math.sqrt(du * du + dv * dv)
+                    # _still_pair: the smaller of the two candidates' tolerances
+                    px, py, pz = points[r2, 0], points[r2, 1], points[r2, 2]
+                    fx, fy, fz = px - center[0], py - center[1], pz - center[2]
+                    dd2 = (fx * fx + fy * fy) + fz * fz
+                    own2 = focal_static / (math.sqrt(dd2) if dd2 >= 0 else math.nan)
+                    pair = own2 if own2 < tol else tol
+                    if d_px <= pair:
+                        still_long = True
+                    if lag <= lags:
+                        if d_px <= tol and finite[r2]:
+                            supported = True
+                        if d_px < best_px:  # (NaN never is)
+                            best_px = d_px
+                        ax, ay, az = x - px, y - py, z - pz
+                        d = math.sqrt((ax * ax + ay * ay) + az * az)
+                        if d < best:
+                            best = d
+                if recent_long and still_long:
+                    run_long += 1.0
+                if lag <= lags and recent:
+                    if best <= static_m:
+                        run += 1.0
+                    if best_px <= tol:
+                        run_px += 1.0
+                    if supported:
+                        held += 1.0
+            stillness[r] = run / lags
+            dzr = dz[r]
+            across = 1.0 - dzr * dzr
+            g_across = g * (math.sqrt(across) if across >= 0 else math.nan)
+            long = run_long >= long_lags and long_c * g_across * long_t * long_t > static_m
+            if run >= 0.75 * lags or (run_px >= lags and held < lags - 1) or long:
+                static[r] = True
+
+
 def _preload() -> None:
     """:func:`points_all` loaded from numba's cache (or compiled) now, in the signature of
     gating._points' call (int32 cameras, C-contiguous float64 rows): called by
@@ -299,6 +474,16 @@ def _preload() -> None:
     points_all(np.zeros(0, dtype=np.int32), np.zeros((0, 3)), np.zeros((0, 1)),
                np.zeros((0, 1, 2)), np.zeros((1, 3)), np.zeros((1, 3, 3)), np.zeros((1, 3, 3)),
                np.empty((0, 3)), np.empty(0, dtype=np.bool_), np.empty(0))
+    # (and support_all, in the signature of gating._support's call)
+    support_all(np.zeros(0, dtype=np.int64), 0, np.zeros(1, dtype=np.int64), np.zeros((1, 2)),
+                np.zeros((0, 3)), np.zeros(1, dtype=np.int64), np.zeros((1, 1), dtype=np.int64),
+                True, True, 0, 0, 1.0, 1.0, 1.0, np.zeros((1, 1)), np.zeros((1, 1, 2)),
+                np.zeros((1, 1, 3), dtype=np.int64))
+    # (and static_camera, in the signature of gating._static's call)
+    static_camera(np.zeros(1, dtype=np.int64), np.zeros((1, 1), dtype=np.int64),
+                  np.zeros((1, 3)), np.zeros((1, 2)), np.zeros(1, dtype=np.bool_),
+                  np.zeros(1, dtype=np.bool_), np.zeros(1), 1, 1, 1.0, 1.0, 1.0, np.zeros(3),
+                  1.0, 1.0, 1.0, 1.0, np.zeros(1, dtype=np.bool_), np.zeros(1))
 
 @kernel
 def _line_fit(trk, lo, hi, t_s, opt, out):

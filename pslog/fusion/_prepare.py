@@ -520,8 +520,8 @@ def dot_t(v: np.ndarray | Sequence[np.ndarray], J: np.ndarray) -> np.ndarray:
 
 
 def least_squares_pixel_jacobians(points: np.ndarray, origins: np.ndarray, dirs: np.ndarray,
-                                  used: np.ndarray, turns: list[np.ndarray]
-                                  ) -> list[np.ndarray]:
+                                  used: np.ndarray, turns: list[np.ndarray],
+                                  compiled: bool | None = None) -> list[np.ndarray]:
     """d(point) / d(undistorted pixel of ray j), component-major (3, 2, k), for each of m rays
     of the least-squares point (:func:`pslog.geometry.triangulate_rays`; for two rays the
     midpoint of their common perpendicular), given each ray's ``turns[j]`` = d(unit
@@ -529,8 +529,36 @@ def least_squares_pixel_jacobians(points: np.ndarray, origins: np.ndarray, dirs:
     ``A = Σ (I - d dᵀ)``, ``b = Σ (I - d dᵀ) o``: a turn ``δd`` of ray j moves the point by
     ``-A⁻¹ ((dᵀw) δd + d (wᵀ δd))`` with ``w = o - p``. Zero for unused rays.
 
-    ``points`` (k, 3), ``origins`` and ``dirs`` (k, m, 3), ``used`` (k, m)."""
+    ``points`` (k, 3), ``origins`` and ``dirs`` (k, m, 3), ``used`` (k, m). ``compiled``:
+    by :mod:`._prepare_kernel`'s kernels (the same bits; None: where that module is loaded,
+    as :func:`prepare` loads it)."""
+    import sys
+
     m = used.shape[1]
+    if compiled is None:
+        compiled = "pslog.fusion._prepare_kernel" in sys.modules
+    if compiled and len(used):
+        from . import _prepare_kernel as pk
+
+        k = len(used)
+        used = np.ascontiguousarray(used, dtype=bool)
+        dirs = np.ascontiguousarray(dirs, dtype=np.float64)
+        inverse = np.empty((6, k))
+        pk.normal_inverse(used, dirs, inverse)
+        pts = np.ascontiguousarray(points, dtype=np.float64)
+        # origins broadcast from one per ray (a rig's camera centres): one row each
+        shared = origins.strides[0] == 0
+        out = []
+        for j in range(m):
+            origin = np.ascontiguousarray(origins[:1, j] if shared else origins[:, j],
+                                          dtype=np.float64)
+            moved = np.empty((3, 2, k))
+            pk.ray_pixel_jacobian(pts, origin, np.ascontiguousarray(dirs[:, j]),
+                                  np.ascontiguousarray(used[:, j]),
+                                  np.ascontiguousarray(turns[j], dtype=np.float64), inverse,
+                                  moved)
+            out.append(moved)
+        return out
     # (k,) columns throughout: numpy is slow on short axes
     d = [[np.where(used[:, j], dirs[:, j, i], 0.0) for i in range(3)] for j in range(m)]
     n_used = used.sum(axis=1).astype(np.float64)

@@ -181,3 +181,72 @@ def lensless_rows(camera, uv, kk, far, R, ki, rr, rtki, uv_und, ray_dir, jac, ja
             jac_rows[i, 0], jac_rows[i, 1], jac_rows[i, 2], jac_rows[i, 3] = 1.0, 0.0, 0.0, 1.0
     if rays.shape[0]:
         observed_rays_and_jacobians(camera, uv_und, ki, rr, rtki, rays, dir_jac)
+
+
+@kernel
+def normal_inverse(used, dirs, out):
+    """The inverse of ``A = Σ_j (I - d_j d_jᵀ)`` over the rays each point uses, as
+    :func:`pslog.fusion._prepare.least_squares_pixel_jacobians` forms it (the same
+    operations in the same order: the same bits): ``used`` (k, m) bool, ``dirs`` (k, m, 3)
+    unit directions; ``out`` (6, k) written, entries (0,0) (1,1) (2,2) (0,1) (0,2) (1,2)
+    (NaN where ``|det A| <= 1e-12``)."""
+    k, m = used.shape[0], used.shape[1]
+    for p in range(k):
+        n_used = 0.0
+        for j in range(m):
+            if used[p, j]:
+                n_used += 1.0
+        a, e, i_ = n_used, n_used, n_used
+        b = c = f = 0.0
+        for j in range(m):
+            if used[p, j]:
+                x, y, z = dirs[p, j, 0], dirs[p, j, 1], dirs[p, j, 2]
+            else:
+                x = y = z = 0.0
+            a -= x * x
+            e -= y * y
+            i_ -= z * z
+            b -= x * y
+            c -= x * z
+            f -= y * z
+        co00, co01, co02 = e * i_ - f * f, c * f - b * i_, b * f - c * e
+        co11, co12, co22 = a * i_ - c * c, c * b - a * f, a * e - b * b
+        det = (a * co00 + b * co01) + c * co02
+        inv_det = 1.0 / (det if abs(det) > 1e-12 else np.nan)
+        out[0, p], out[1, p], out[2, p] = co00 * inv_det, co11 * inv_det, co22 * inv_det
+        out[3, p], out[4, p], out[5, p] = co01 * inv_det, co02 * inv_det, co12 * inv_det
+
+
+@kernel
+def ray_pixel_jacobian(points, origin, direction, used, turn, inverse, out):
+    """d(point) / d(undistorted pixel of one ray), component-major (3, 2, k), as
+    :func:`pslog.fusion._prepare.least_squares_pixel_jacobians` forms it for that ray (the
+    same bits; zero where the ray is not ``used`` (k,)): ``points`` (k, 3), ``origin``
+    (k, 3) or (1, 3) (one origin for every point), ``direction`` (k, 3), ``turn`` (3, 2, k)
+    d(unit direction) / d(pixel), ``inverse`` (6, k) :func:`normal_inverse`; ``out``
+    (3, 2, k) written."""
+    k = points.shape[0]
+    one = origin.shape[0] == 1
+    for p in range(k):
+        if not used[p]:
+            for r in range(3):
+                out[r, 0, p] = 0.0
+                out[r, 1, p] = 0.0
+            continue
+        o = 0 if one else p
+        w0 = origin[o, 0] - points[p, 0]
+        w1 = origin[o, 1] - points[p, 1]
+        w2 = origin[o, 2] - points[p, 2]
+        d0, d1, d2 = direction[p, 0], direction[p, 1], direction[p, 2]
+        s = (d0 * w0 + d1 * w1) + d2 * w2
+        i00, i11, i22 = inverse[0, p], inverse[1, p], inverse[2, p]
+        i01, i02, i12 = inverse[3, p], inverse[4, p], inverse[5, p]
+        for q in range(2):
+            g0, g1, g2 = turn[0, q, p], turn[1, q, p], turn[2, q, p]
+            dot = (w0 * g0 + w1 * g1) + w2 * g2
+            n0 = s * g0 + d0 * dot
+            n1 = s * g1 + d1 * dot
+            n2 = s * g2 + d2 * dot
+            out[0, q, p] = -((i00 * n0 + i01 * n1) + i02 * n2)
+            out[1, q, p] = -((i01 * n0 + i11 * n1) + i12 * n2)
+            out[2, q, p] = -((i02 * n0 + i12 * n1) + i22 * n2)

@@ -347,8 +347,11 @@ def _frame_table(c: _Candidates, n_cams: int):
 
 
 def _support(c: _Candidates, rig: Rig, F: np.ndarray, tables, options: GatingOptions,
-             max_gap_ns: int, causal: bool, wait_ns: int, only: np.ndarray | None = None):
-    """Epipolar support of every candidate by every other camera.
+             max_gap_ns: int, causal: bool, wait_ns: int, only: np.ndarray | None = None,
+             compiled: bool | None = None):
+    """Epipolar support of every candidate by every other camera (``compiled``: by
+    :func:`pslog.fusion._gate_kernel.support_all`, the same bits; None: where that module is
+    loaded).
 
     Returns
     -------
@@ -365,6 +368,17 @@ def _support(c: _Candidates, rig: Rig, F: np.ndarray, tables, options: GatingOpt
     carried = np.full((n, m, 2), np.nan)
     used = np.full((n, m, 3), -1, dtype=np.int64)
     accel, vmax = options.accel_px_s2, options.max_image_speed_px_s
+    # loaded (pslog fuse preloads it): the compiled rule, one candidate at a time in this
+    # function's order of operations (the same bits, ~10 times faster); a light command
+    # never waits for numba here
+    if compiled is None:
+        compiled = "pslog.fusion._gate_kernel" in sys.modules
+    compiled = compiled and n > 0
+    if compiled:
+        from ._gate_kernel import support_all
+
+        t_all = np.ascontiguousarray(c.time_ns, dtype=np.int64)
+        uv_all = np.ascontiguousarray(c.uv_und, dtype=np.float64)
     for a in range(m):
         rows = np.flatnonzero((c.camera == a) if only is None else (c.camera == a) & only)
         if len(rows) == 0:
@@ -380,6 +394,14 @@ def _support(c: _Candidates, rig: Rig, F: np.ndarray, tables, options: GatingOpt
                 lines = np.column_stack(_epipolar_line(F[a, b].tolist(), c.uv_und[rows, 0],
                                                        c.uv_und[rows, 1], np.sqrt,
                                                        np.maximum))
+            if compiled:
+                support_all(rows, b, t_all, uv_all, np.ascontiguousarray(lines),
+                            np.ascontiguousarray(times, dtype=np.int64),
+                            np.ascontiguousarray(table, dtype=np.int64), causal,
+                            wait_ns > 0 or b < a, wait_ns, max_gap_ns,
+                            float(options.epipolar_px), float(vmax), float(0.5 * accel),
+                            ratio, carried, used)
+                continue
             if causal:
                 # b's frames a causal choice at t may use: (time, camera) order, or up to
                 # t + wait for the methods that wait for the tolerance
@@ -527,8 +549,8 @@ def _support_one(t: int, line, keys: list[int], usable, search, wait_ns: int, ca
 
 
 def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
-            points: np.ndarray, paired: np.ndarray | None = None
-            ) -> tuple[np.ndarray, np.ndarray]:
+            points: np.ndarray, paired: np.ndarray | None = None,
+            compiled: bool | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Which candidates stood still in space: each one's 3D point (its ray crossed with its
     support's) within ``static_m`` of a candidate's point in each of its camera's earlier
     frames; or, for a candidate whose point rests on one other camera (``paired``), its
@@ -550,10 +572,35 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
         seen by several cameras (a second orange thing, a lamp), not a ball in play
     stillness : (C,) float in [0, 1], the share of those frames, back from the newest,
         it was still in (a candidate that has not moved yet is the less likely ball)
+
+    ``compiled``: by :func:`pslog.fusion._gate_kernel.static_camera` (the same values);
+    None: where that module is loaded.
     """
     static = np.zeros(len(c.camera), dtype=bool)
     stillness = np.zeros(len(c.camera))
     finite = np.isfinite(points).all(axis=-1)  # (C,) whether each candidate has a point
+    if compiled is None:
+        compiled = "pslog.fusion._gate_kernel" in sys.modules
+    if compiled and len(c.camera):
+        from ._gate_kernel import static_camera
+
+        pts = np.ascontiguousarray(points, dtype=np.float64)
+        uv = np.ascontiguousarray(c.uv_und, dtype=np.float64)
+        pair_of = (np.zeros(len(c.camera), dtype=bool) if paired is None
+                   else np.ascontiguousarray(paired, dtype=bool))
+        dz = np.ascontiguousarray(c.ray_dir[:, 2], dtype=np.float64)
+        for b, (times, table) in enumerate(tables):
+            cam = rig.cameras[b]
+            long_lags = int(np.ceil(LONG_STILL * options.static_s * cam.fps))
+            static_camera(np.ascontiguousarray(times, dtype=np.int64),
+                          np.ascontiguousarray(table, dtype=np.int64), pts, uv, finite,
+                          pair_of, dz, int(np.ceil(options.static_s * cam.fps)), long_lags,
+                          1.5 * options.static_s * NS, 1.5 * LONG_STILL * options.static_s * NS,
+                          min(float(cam.K[0, 0]), float(cam.K[1, 1])) * options.static_m,
+                          np.ascontiguousarray(cam.center_world, dtype=np.float64),
+                          long_lags / cam.fps,
+                          float(options.static_m), LONG_STILL_C, G, static, stillness)
+        return static, stillness
     for b, (times, table) in enumerate(tables):
         lags = int(np.ceil(options.static_s * rig.cameras[b].fps))
         long_lags = int(np.ceil(LONG_STILL * options.static_s * rig.cameras[b].fps))
@@ -1298,11 +1345,14 @@ def _decided(c: _Candidates, rig: Rig, options: GatingOptions, causal: bool, wai
     if tables is None:
         tables = _frame_table(c, len(rig))
     F = fundamental_matrices(rig.cameras)
-    ratio, carried, used = _support(c, rig, F, tables, options, max_gap_ns, causal, wait_ns)
+    compiled = _kernels(n)
+    ratio, carried, used = _support(c, rig, F, tables, options, max_gap_ns, causal, wait_ns,
+                                    compiled=compiled)
     constants = _rig_constants(rig)
     points, in_front, miss = _points(c, rig, ratio, carried, constants)
     points[miss > options.track_m] = np.nan  # rays that do not meet: no point to track
-    static, stillness = _static(c, tables, rig, options, points, _paired(ratio))
+    static, stillness = _static(c, tables, rig, options, points, _paired(ratio),
+                                compiled=compiled)
     # frames in (time, camera) order of their best candidate; candidates contiguous per frame
     starts = np.flatnonzero(np.r_[True, c.frame[1:] != c.frame[:-1]])
     ends = np.r_[starts[1:], n]
@@ -1312,6 +1362,30 @@ def _decided(c: _Candidates, rig: Rig, options: GatingOptions, causal: bool, wai
                      (points, in_front), (static, stillness), reason,
                      causal, wait_ns, max_gap_ns, constants)
     return ratio
+
+
+#: candidates from which the batch gate loads its compiled kernels itself (numba's start,
+#: ~0.5 s, then costs less than the numpy forms of _support and _static, ~2 µs a candidate
+#: per form); below, they are used only where already loaded
+_KERNELS_FROM = 200_000
+
+
+def _kernels(n: int) -> bool:
+    """Whether the gate of ``n`` candidates runs :mod:`._gate_kernel`'s kernels (the same
+    bits as the numpy forms): where that module is loaded (``pslog fuse`` preloads it on
+    another thread; a gate that starts before that import is done waits for it here, at
+    ``_KERNELS_FROM`` candidates or more, rather than burn the numpy forms' CPU meanwhile)."""
+    if "pslog.fusion._gate_kernel" in sys.modules:
+        return True
+    if n < _KERNELS_FROM:
+        return False
+    try:
+        import importlib
+
+        importlib.import_module("pslog.fusion._gate_kernel")
+    except Exception:  # numba cannot start: the numpy forms
+        return False
+    return True
 
 
 #: frames decided by one :meth:`_Decider.decide` call at most (bounds the Python floats held)
