@@ -95,13 +95,15 @@ def _numpy_fit(flt, window, ballistic=True):
     return [float(a) for a in theta], [float(a) for a in cov.ravel()], residuals
 
 
-def _numpy_turn_fit(flt, window, theta, var):
+def _numpy_turn_fit(flt, window, theta, var, turn_prior=None):
     """The turn model's MAP fit as it was before it was compiled (``BallFilter._turn_fit``
-    of session 8, numpy), the reference: ``(x_t, P_t flat, residuals)`` or None."""
+    of session 8, numpy; session 13: the prior ``ω ~ N(mean, variance)`` of ``turn_prior``,
+    default ``N(0, turn_rate_std²)``), the reference: ``(x_t, P_t flat, residuals)`` or None."""
+    mean, turn_var = (0.0, flt._turn_var) if turn_prior is None else turn_prior
     t_ref = window[-1][0]
     tau = np.array([(w[0] - t_ref) / NS for w in window])
-    th = np.array([*theta, 0.0])
-    prior = math.sqrt(var / flt._turn_var)
+    th = np.array([*theta, mean])
+    prior = math.sqrt(var / turn_var)
     row = np.zeros((1, 7))
     row[0, 6] = prior
 
@@ -139,7 +141,7 @@ def _numpy_turn_fit(flt, window, theta, var):
         J, r = system(th)
         if J is None:
             return None
-        th = th + np.linalg.lstsq(np.vstack([J, row]), np.append(r, -prior * th[6]),
+        th = th + np.linalg.lstsq(np.vstack([J, row]), np.append(r, -prior * (th[6] - mean)),
                                   rcond=None)[0]
     J, r = system(th)
     if J is None:
@@ -172,9 +174,9 @@ def _windows(rig, motion, seconds, noise):
         seen.append((self, list(window), ballistic))
         return fit(self, window, ballistic)
 
-    def record_turn(self, window, theta, var):
-        seen.append((self, list(window), (list(theta), var)))
-        return turn_fit(self, window, theta, var)
+    def record_turn(self, window, theta, var, prior=None):
+        seen.append((self, list(window), (list(theta), var, prior)))
+        return turn_fit(self, window, theta, var, prior)
 
     detections, _ = simulate(rig, motion, seconds, SimulationOptions(
         noise_px=noise, seed=7, miss_rate=0.1))

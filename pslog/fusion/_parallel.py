@@ -244,9 +244,14 @@ class MethodRun:
                 try:
                     i = self.ended.get(timeout=0.25)
                 except queue.Empty:
-                    if not any(thread.is_alive() for thread in self.threads):
+                    if any(thread.is_alive() for thread in self.threads):
+                        continue
+                    # every thread has ended, perhaps after the wait timed out and before
+                    # the check: what they queued meanwhile is still to be delivered
+                    try:
+                        i = self.ended.get_nowait()
+                    except queue.Empty:
                         break
-                    continue
                 if i is None:
                     break
                 with self.lock:

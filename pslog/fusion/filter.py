@@ -1492,11 +1492,11 @@ def _turn_rows(cams, cam, uv, tau, th, J, r):
 
 @kernel
 def _turn_window_fit(cams, cam, uv, tau, theta, var, start_var, turn_var, gate, chi2,
-                     th_out, J_out, res_out):
+                     th_out, J_out, res_out, turn_mean=0.0):
     """The coordinated turn's MAP fit of the window (:meth:`BallFilter._turn_fit`; arrays as
-    :func:`_window_fit`'s) from the supported fit ``theta`` (6) and ``ω = 0``: four
-    Gauss-Newton steps in pixels of variance ``var`` with the prior ``ω ~ N(0, turn_var)``
-    as one more residual row, then the start's tests of the residuals at ``start_var``
+    :func:`_window_fit`'s) from the supported fit ``theta`` (6) and ``ω = turn_mean``: four
+    Gauss-Newton steps in pixels of variance ``var`` with the prior ``ω ~ N(turn_mean,
+    turn_var)`` as one more residual row, then the start's tests of the residuals at ``start_var``
     (every residual within ``gate``, their sum within ``chi2``, of ``2n - 7`` degrees of
     freedom). Writes ``(p, v, ω)`` into ``th_out`` (7), the pixel Jacobian at it into
     ``J_out`` (2n x 7: the caller forms ``JᵀJ`` with numpy, whose symmetric product is not
@@ -1507,6 +1507,7 @@ def _turn_window_fit(cams, cam, uv, tau, theta, var, start_var, turn_var, gate, 
     m = 2 * n
     th = np.zeros(7)
     th[:6] = theta
+    th[6] = turn_mean
     prior = math.sqrt(var / turn_var)  # the prior's row, in pixels per rad/s
     J = np.empty((m, 7))
     r = np.empty(m)
@@ -1520,7 +1521,7 @@ def _turn_window_fit(cams, cam, uv, tau, theta, var, start_var, turn_var, gate, 
         A[m, :] = 0.0
         A[m, 6] = prior
         b[:m] = r
-        b[m] = -prior * th[6]
+        b[m] = -prior * (th[6] - turn_mean)
         th = th + np.linalg.lstsq(A, b, rcond)[0]
     if not _turn_rows(cams, cam, uv, tau, th, J, r):
         return _WFIT_NONE
@@ -1973,7 +1974,8 @@ class BallFilter:
         if not self._turn:
             return fit, mu, e, None
         var = self._window_var(len(window), fit[2])
-        turn = self._turn_fit(window, supported[0], var)
+        nu0, mean, turn_var = self._turn_prior(window[-1][0])
+        turn = self._turn_fit(window, supported[0], var, (mean, turn_var))
         if turn is None:
             return fit, mu, e, None
         xt, Pt, rt = turn
@@ -1987,16 +1989,45 @@ class BallFilter:
         # against the model it nests (supported: ω = 0), then against the pair's evidence,
         # the ballistic and supported fits' mixture at the prior μ₀
         sss = float(np.sum(supported[2] * supported[2]))
-        log_b = (0.5 * (sss - sst) / var + 0.5 * math.log(Pt[48] / self._turn_var)
-                 - 0.5 * w * w / self._turn_var)
+        log_b = (0.5 * (sss - sst) / var + 0.5 * math.log(Pt[48] / turn_var)
+                 - 0.5 * (w - mean) * (w - mean) / turn_var)
         if isinstance(ballistic, tuple):
             ssb = float(np.sum(ballistic[2] * ballistic[2]))
             log_b -= float(np.logaddexp(math.log(mu0) + 0.5 * (sss - ssb) / var,
                                         math.log(1.0 - mu0)))
-        nu = _posterior(_TURN_START, log_b, _TURN_START, 1.0 - _TURN_START)
+        nu = _posterior(nu0, log_b, _TURN_START, 1.0 - _TURN_START)
         return fit, mu, e, (xt, Pt, nu)
 
-    def _turn_fit(self, window, theta, var: float):
+    def _turn_prior(self, t_ns: int) -> tuple[float, float, float]:
+        """The turn model's prior at a (re)start at ``t_ns``: ``(ν₀, ω mean, ω variance)``.
+
+        At a first start, or when the lost track's model set had no turn model (ν = 0),
+        the start's prior: ``ν₀ = 0.1`` and ``ω ~ N(0, turn_rate_std²)``. A track lost
+        with the turn model in its set (a camera blind, the other alone for longer than
+        ``max_gap_s``) leaves what its model says of the time since: its turn rate is a
+        random walk of density ``turn_rate_psd`` (:func:`_turn_predicted`), so ``ω ~
+        N(ω_lost, P_ωω + turn_rate_psd Δ)`` (Δ: from the lost state's time to ``t_ns``), and
+        its probability moves by the Markov chain of the switches (:func:`_turn_mixed`):
+        ``ν₀ = ν (1 - p) + (1 - ν) p``, ``p = min(λ_t Δ, 1/2)``, within the bounds of a
+        start's probability, ``[0.1, 0.9]``. Where that variance
+        reaches ``turn_rate_std²`` the start's prior is the better-informed one (kept).
+        Before session 13 every restart took the start's prior: a turning ball's track,
+        lost across one camera's half-second blackout, started again at ``ν = 0.1`` and
+        ``ω = 0 ± 6 rad/s``, and took 0.2-0.3 s to find the turn again (``paper2``
+        ``turntable``: 6.3 mm over the 0.3 s after the blackout against 3.2 mm clean)."""
+        S = self._S
+        nu = float(S[_SNU])
+        if not self._turn or nu == 0.0:
+            return _TURN_START, 0.0, self._turn_var
+        dt = abs(t_ns - int(self._I[_ITIME])) / NS
+        turn_var = float(S[_SPT + 48]) + self._turn_psd * dt
+        if not turn_var < self._turn_var:
+            return _TURN_START, 0.0, self._turn_var
+        p = min(self._turn_switch * dt, 0.5)
+        nu0 = min(max(nu * (1.0 - p) + (1.0 - nu) * p, _TURN_START), 1.0 - _TURN_START)
+        return nu0, float(S[_SXT + 6]), turn_var
+
+    def _turn_fit(self, window, theta, var: float, prior: tuple[float, float] | None = None):
         """Fit of the coordinated turn (:func:`_turn_predicted`'s mean, the turn rate ``ω``
         in the state) to the window at the newest detection's time: maximum a posteriori
         under the turn model's prior ``ω ~ N(0, turn_rate_std²)`` (a pseudo-observation of
@@ -2013,18 +2044,19 @@ class BallFilter:
         cam = np.array([w[1] for w in window], dtype=np.int64)
         uv = np.array([w[2:] for w in window])
         th, J, residuals = np.empty(7), np.empty((2 * n, 7)), np.empty(n)
-        prior = math.sqrt(var / self._turn_var)
+        mean, turn_var = (0.0, self._turn_var) if prior is None else prior
+        prior_row = math.sqrt(var / turn_var)
         try:
             status = _turn_window_fit(
                 self._cam_table, cam, uv, tau, np.asarray(theta, dtype=np.float64), var,
-                self._start_var(), self._turn_var, self._gate, _chi2_quantile(2 * n - 7),
-                th, J, residuals)
+                self._start_var(), turn_var, self._gate, _chi2_quantile(2 * n - 7),
+                th, J, residuals, mean)
         except np.linalg.LinAlgError:  # a non-finite system
             return None
         if status != _WFIT_OK:
             return None
         info = J.T @ J
-        info[6, 6] += prior * prior
+        info[6, 6] += prior_row * prior_row
         try:
             cov = var * np.linalg.inv(info)
         except np.linalg.LinAlgError:
