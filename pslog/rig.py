@@ -206,9 +206,23 @@ def save_rig(rig: Rig, path: str | Path, inputs=()) -> None:
         f.write(rig.to_toml())
 
 
+def _is_session_file(path: Path) -> bool:
+    """Whether ``path`` is a regular file starting with the MCAP magic (a session)."""
+    from .log._mcapio import MAGIC
+
+    try:
+        if not path.is_file():
+            return False
+        with open(path, "rb") as f:
+            return f.read(len(MAGIC)) == MAGIC
+    except OSError:
+        return False
+
+
 def resolve_rig(name_or_path: str | Path, timing_from: Rig | None = None) -> Rig:
-    """A built-in rig by name (``paper3``, ``paper2``) or a rig file (pslog's TOML, or an
-    aniposelib / Pose2Sim / OpenCV calibration: :func:`load_rig`).
+    """A built-in rig by name (``paper3``, ``paper2``), a rig file (pslog's TOML, or an
+    aniposelib / Pose2Sim / OpenCV calibration: :func:`load_rig`), or a session file (an
+    MCAP file: the rig it was recorded, synced or corrected with).
 
     ``timing_from``: for a file that gives no timing (a foreign calibration has no frame
     rate or shutter offset), the frame rate, offset and clock keys of the camera of the same
@@ -220,6 +234,10 @@ def resolve_rig(name_or_path: str | Path, timing_from: Rig | None = None) -> Rig
     if not path.exists():
         raise RigError(f"no rig {str(name_or_path)!r}: not a file and not a built-in rig "
                        f"({', '.join(BUILTIN_RIGS)})")
+    if _is_session_file(path):  # a session's rig (e.g. a synced one's), as `pslog rig show`
+        from .log import read_session
+
+        return read_session(path).rig
     loaded = load_rig_file(path)
     if loaded.timed or timing_from is None:
         return loaded.rig

@@ -238,3 +238,34 @@ def test_every_command_chooses_methods_one_way():
         listed = parser.parse_args([*base, "--method", "typeA,smooth"])
         assert repeated.methods == listed.methods == ["typeA", "smooth"], prog
     assert choosing >= 2
+
+
+def test_a_session_file_gives_its_rig_whatever_its_name(tmp_path, sim_session, cli):
+    """`fuse --rig` and `rig show/check` take a session's rig from its MCAP magic, not its
+    suffix (a session named .bin was read as rig text: "'utf-8' codec can't decode")."""
+    import shutil
+
+    from pslog.rig import Rig, resolve_rig
+
+    copy = tmp_path / "session.bin"
+    shutil.copyfile(sim_session.path, copy)
+    assert resolve_rig(copy) == sim_session.rig
+    code, out, _ = cli("rig", "show", copy)
+    assert code == 0 and Rig.from_toml(out) == sim_session.rig
+    code, _, err = cli("fuse", sim_session.path, "--rig", copy, "--method", "typeA",
+                       "-o", tmp_path / "f.mcap")
+    assert code == 0, err
+
+
+def test_rig_check_notes_two_cameras_at_one_centre(tmp_path, cli):
+    """Valid (a rig being calibrated) but refused by fuse and sync: check says so."""
+    code, toml, _ = cli("rig", "show", "paper2")
+    rig = tmp_path / "same.toml"
+    from pslog.rig import Rig
+
+    paper2 = Rig.from_toml(toml)
+    rig.write_text(Rig((paper2.cameras[0], paper2.cameras[1].replace(
+        R=paper2.cameras[0].R, t=paper2.cameras[0].t)), "same").to_toml())
+    code, out, _ = cli("rig", "check", rig)
+    assert code == 0 and "a valid rig 'same' of 2 cameras" in out
+    assert "note:" in out and "same centre" in out and "fuse and sync refuse" in out

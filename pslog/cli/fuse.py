@@ -30,7 +30,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--rig", metavar="RIG.toml",
         help="fuse with this corrected rig (same camera names and order; start from 'pslog rig "
              "show SESSION.mcap') instead of the recorded calibration; the output carries it. "
-             "An anipose / Pose2Sim / OpenCV calibration replaces the geometry only")
+             "An anipose / Pose2Sim / OpenCV calibration replaces the geometry only; a "
+             "session file gives its rig (e.g. a synced session's)")
     parser.add_argument("--tolerance-ms", type=nonnegative_float, default=1.0,
                         metavar="MS", help="detections this close in time count as "
                                            "simultaneous, milliseconds, below a third of the "

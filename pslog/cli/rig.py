@@ -146,7 +146,7 @@ def run(args: argparse.Namespace) -> int:
     if args.action == "export":
         return _export(args)
     if args.action == "show":
-        rig = load_any_rig(args.rig)
+        rig = _resolve(args.rig)
         if args.timing:
             from pslog.rig import apply_timing
 
@@ -154,24 +154,25 @@ def run(args: argparse.Namespace) -> int:
         print(rig.to_toml(), end="")
         return 0
     path = args.rig
-    rig = load_any_rig(path)
+    rig = _resolve(path)
     print(f"{path}: a valid rig{f' {rig.name!r}' if rig.name else ''} of {len(rig)} "
           f"camera{'s' if len(rig) != 1 else ''}{_described_format(path)}")
     for line in describe_cameras(rig):
         print("  " + line)
+    from pslog.errors import RigError
+    from pslog.rig import check_baselines
+
+    try:
+        check_baselines(rig, path)
+    except RigError as exc:  # valid (a rig being calibrated), but not yet for fusion
+        print(f"note: {exc} (fuse and sync refuse it until then)")
     return 0
 
 
-def load_any_rig(name_or_path: str):
-    """A built-in rig, a rig TOML file, or the rig stored in a session MCAP file."""
-    from pathlib import Path
+def _resolve(name_or_path: str):
+    """A built-in rig, a rig file, or the rig stored in a session MCAP file."""
+    from pslog.rig import resolve_rig
 
-    from pslog.rig import BUILTIN_RIGS, resolve_rig
-
-    if name_or_path not in BUILTIN_RIGS and Path(name_or_path).suffix.lower() == ".mcap":
-        from pslog.log import read_session
-
-        return read_session(name_or_path).rig
     return resolve_rig(name_or_path)
 
 
@@ -179,9 +180,9 @@ def _described_format(path: str) -> str:
     """`` (anipose calibration, translations read as m, ...)`` for a foreign rig file."""
     from pathlib import Path
 
-    from pslog.rig import BUILTIN_RIGS, load_rig_file
+    from pslog.rig import BUILTIN_RIGS, _is_session_file, load_rig_file
 
-    if path in BUILTIN_RIGS or Path(path).suffix.lower() == ".mcap":
+    if path in BUILTIN_RIGS or _is_session_file(Path(path)):
         return ""
     loaded = load_rig_file(path)
     if loaded.format == "pslog":
@@ -222,7 +223,7 @@ def _export(args: argparse.Namespace) -> int:
     if args.format == "opencv" and suffix not in OPENCV_SUFFIXES:
         raise InputError(f"-o {args.output}: an OpenCV FileStorage file is named "
                          f"{', '.join(OPENCV_SUFFIXES)} (YAML, XML or JSON)")
-    rig = load_any_rig(args.rig)
+    rig = _resolve(args.rig)
     text = rig_to_format(rig, args.format, args.units, suffix)
     with replacing(args.output, force=args.force, inputs=[args.rig]) as f:
         f.write(text)
