@@ -290,6 +290,20 @@ class Track:
     def __len__(self) -> int:
         return len(self.time_ns)
 
+    @classmethod
+    def _of_frozen(cls, method: str, time_ns: np.ndarray, position_world: np.ndarray,
+                   camera: np.ndarray, quality: dict[str, np.ndarray],
+                   dropped: dict[str, int]) -> Track:
+        """A Track of columns its maker has already made as :meth:`__post_init__` leaves
+        them: read-only, C-contiguous, native int64 / float64 (n, 3) / int32 / float64,
+        of one length; ``dropped`` str -> int. No check, no view: the streaming form of a
+        method makes a Track per detection, and the checks cost more than its point
+        (``tests/test_records.py`` compares with the checked constructor)."""
+        track = object.__new__(cls)
+        track.__dict__.update(method=method, time_ns=time_ns, position_world=position_world,
+                              camera=camera, quality=quality, dropped=dropped)
+        return track
+
     def select(self, mask_or_index) -> Track:
         return Track(self.method, self.time_ns[mask_or_index],
                      self.position_world[mask_or_index], self.camera[mask_or_index],
