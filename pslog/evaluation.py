@@ -153,14 +153,16 @@ def covariances(track: Track) -> np.ndarray | None:
     """(n, 3, 3) position covariances of ``track`` from its quality columns (full, or diagonal
     from per-axis standard deviations), m²; None if it has neither."""
     columns = covariance_columns(track)
-    return None if columns is None else _matrices(columns)
+    return None if columns is None else np.ascontiguousarray(_matrices(columns))
 
 
 def _matrices(columns: tuple[np.ndarray, ...]) -> np.ndarray:
-    cov = np.empty((len(columns[0]), 3, 3))
+    """The (n, 3, 3) matrices of the six columns: a view of a (3, 3, n) array (each entry
+    a contiguous row, written at memory speed; numpy's linalg reads any strides)."""
+    cov = np.empty((3, 3, len(columns[0])))
     for column, (i, j) in zip(columns, _TRIANGLE, strict=True):
-        cov[:, i, j] = cov[:, j, i] = column
-    return cov
+        cov[i, j] = cov[j, i] = column
+    return cov.transpose(2, 0, 1)
 
 
 def mahalanobis_sq(track: Track, truth: Truth) -> np.ndarray | None:

@@ -110,17 +110,42 @@ def test_eval_figures_equal_the_lu_reference(method):
     assert alone.n_points == len(track) and np.isnan(alone.nees)
 
 
+def _interpolation(truth: Truth, time_ns: np.ndarray) -> np.ndarray:
+    """The truth at ``time_ns`` as ``Truth.at`` always computed it (the reference)."""
+    out = np.full((len(time_ns), 3), np.nan)
+    inside = (time_ns >= truth.time_ns[0]) & (time_ns <= truth.time_ns[-1])
+    t = time_ns[inside]
+    hi = np.clip(np.searchsorted(truth.time_ns, t, side="left"), 0, len(truth) - 1)
+    lo = np.maximum(hi - 1, 0)
+    t_lo, t_hi = truth.time_ns[lo], truth.time_ns[hi]
+    span = (t_hi - t_lo).astype(np.float64)
+    w = np.where(span > 0, (t - t_lo) / np.where(span > 0, span, 1.0), 1.0)
+    out[inside] = ((1 - w)[:, None] * truth.position_world[lo]
+                   + w[:, None] * truth.position_world[hi])
+    return out
+
+
 def test_truth_at_its_own_samples_and_between_them():
-    """At a sampled time the truth is that sample (a negative zero after a positive
-    sample comes out positive: ``0 * previous + 1 * sample``, as the interpolation always
-    gave it); between two it is the linear interpolation; outside the span NaN."""
-    t = np.array([0, 10, 20, 30], np.int64) * NS // 100
-    p = np.array([[1.0, -0.0, 2.0], [3.0, 0.0, -1.0], [-0.0, 5.0, 0.5], [2.0, 2.0, 2.0]])
+    """At a sampled time the truth is that sample, between two the linear interpolation,
+    outside the span NaN: bit for bit the interpolation, the sign of a zero too (a negative
+    zero after a positive sample comes out positive: ``0 * previous + 1 * sample``) and a
+    NaN where the previous sample has one (``0 * NaN``), whether every time asked is a
+    sample's (the simulator's sessions) or not."""
+    t = np.array([0, 10, 20, 30, 40], np.int64) * NS // 100
+    p = np.array([[1.0, -0.0, 2.0], [3.0, 0.0, -1.0], [-0.0, 5.0, 0.5], [2.0, 2.0, 2.0],
+                  [0.0, -0.0, 1.0]])
+    mixed = np.array([0, 10, 20, 30, 40, 5, 25, -1, 41], np.int64) * NS // 100
+    nan = np.zeros((5, 3), dtype=bool)
+    nan[2, 1] = True  # (the next sample, [2, 2, 2], has no zero)
+    for positions in (p, np.where(nan, np.nan, p)):
+        truth = Truth(t, positions)
+        for times in (t, t[::-1], t[1:3], mixed):
+            got, expected = truth.at(times), _interpolation(truth, times)
+            assert_array_equal(got, expected)
+            assert_array_equal(np.signbit(got), np.signbit(expected))
     truth = Truth(t, p)
-    at = truth.at(np.array([0, 10, 20, 30, 5, 25, -1, 31], np.int64) * NS // 100)
-    assert_array_equal(at[:4], p)
-    signs = np.signbit(p)
-    signs[2, 0] = False  # -0.0 after 3.0: +0.0 (the first sample's -0.0 stays: -0 + -0)
-    assert_array_equal(np.signbit(at[:4]), signs)
-    assert_array_equal(at[4:6], [(p[0] + p[1]) / 2, (p[2] + p[3]) / 2])
-    assert np.isnan(at[6:]).all()
+    assert_array_equal(truth.at(t), p)  # (numerically)
+    assert not np.signbit(truth.at(t)[2, 0]) and np.signbit(truth.at(t)[0, 1])
+    assert_array_equal(truth.at(mixed[5:7]), [(p[0] + p[1]) / 2, (p[2] + p[3]) / 2])
+    assert np.isnan(truth.at(mixed[7:])).all()
+    assert truth.at(np.zeros(0, np.int64)).shape == (0, 3)
