@@ -342,6 +342,21 @@ def _member(keys: np.ndarray, of: np.ndarray) -> np.ndarray:
     in the candidates (a Python set of tuples cost seconds on a match)."""
     if len(of) == 0 or len(keys) == 0:
         return np.zeros(len(keys), dtype=bool)
+    if 4 * len(of) < len(keys):
+        # few to look for (a method's rejections): only the keys whose frame index (the
+        # second int64 of a key) one of them has can be among them, found by an integer
+        # test; the byte keys of those alone are searched
+        frames = keys.view(np.int64).reshape(len(keys), -1)[:, 1]
+        wanted = np.unique(of.view(np.int64).reshape(len(of), -1)[:, 1])
+        maybe = np.flatnonzero(np.isin(frames, wanted))
+        out = np.zeros(len(keys), dtype=bool)
+        out[maybe] = _search(keys[maybe], of)
+        return out
+    return _search(keys, of)
+
+
+def _search(keys: np.ndarray, of: np.ndarray) -> np.ndarray:
+    """:func:`_member` by a sorted search of every key."""
     of = np.sort(of)
     at = np.minimum(np.searchsorted(of, keys), len(of) - 1)
     found = of[at] == keys
@@ -355,24 +370,34 @@ def rejection_counts(method: str, rejections, detections, ball=None) -> Rejectio
     candidates and, with ``ball`` (the session's ball labels, a Detections of the ball's
     candidates), how many were right. Candidates are matched by camera, frame index and
     pixel."""
+    return all_rejection_counts({method: rejections}, detections, ball)[method]
+
+
+def all_rejection_counts(rejections: Mapping, detections, ball=None
+                         ) -> dict[str, RejectionCounts]:
+    """:func:`rejection_counts` of every method's ``rejections`` (method -> Rejections) of
+    one session, its candidates' keys and ball labels made once for all."""
     cand = _keys(detections.frame_camera[detections.cand_frame],
                  detections.frame_index[detections.cand_frame], detections.cand_uv)
-    rejected = _member(cand, _keys(rejections.camera, rejections.frame_index, rejections.uv))
     had = detections.candidates_per_frame() > 0
-    kept_frame = np.zeros(detections.n_frames, dtype=bool)
-    kept_frame[detections.cand_frame[~rejected]] = True
-    counts = RejectionCounts(method, detections.n_candidates, len(rejections),
-                             int(np.count_nonzero(had & ~kept_frame)), rejections.counts())
-    if ball is None:
-        return counts
-    is_ball = _member(cand, _keys(ball.frame_camera[ball.cand_frame],
-                                  ball.frame_index[ball.cand_frame], ball.cand_uv))
-    return RejectionCounts(
-        method, counts.candidates, counts.rejected, counts.rejected_detections,
-        counts.by_reason, correct=int(np.count_nonzero(rejected & ~is_ball)),
-        wrong=int(np.count_nonzero(rejected & is_ball)),
-        kept_false=int(np.count_nonzero(~rejected & ~is_ball)),
-        false_candidates=int(np.count_nonzero(~is_ball)))
+    is_ball = None if ball is None else _member(cand, _keys(
+        ball.frame_camera[ball.cand_frame], ball.frame_index[ball.cand_frame], ball.cand_uv))
+    out = {}
+    for method, rej in rejections.items():
+        rejected = _member(cand, _keys(rej.camera, rej.frame_index, rej.uv))
+        kept_frame = np.zeros(detections.n_frames, dtype=bool)
+        kept_frame[detections.cand_frame[~rejected]] = True
+        counts = RejectionCounts(method, detections.n_candidates, len(rej),
+                                 int(np.count_nonzero(had & ~kept_frame)), rej.counts())
+        if is_ball is not None:
+            counts = RejectionCounts(
+                method, counts.candidates, counts.rejected, counts.rejected_detections,
+                counts.by_reason, correct=int(np.count_nonzero(rejected & ~is_ball)),
+                wrong=int(np.count_nonzero(rejected & is_ball)),
+                kept_false=int(np.count_nonzero(~rejected & ~is_ball)),
+                false_candidates=int(np.count_nonzero(~is_ball)))
+        out[method] = counts
+    return out
 
 
 def format_rejection_table(rows: list[RejectionCounts]) -> str:

@@ -149,3 +149,30 @@ def test_truth_at_its_own_samples_and_between_them():
     assert_array_equal(truth.at(mixed[5:7]), [(p[0] + p[1]) / 2, (p[2] + p[3]) / 2])
     assert np.isnan(truth.at(mixed[7:])).all()
     assert truth.at(np.zeros(0, np.int64)).shape == (0, 3)
+
+
+def test_candidates_are_matched_by_camera_frame_and_pixel():
+    """A rejected candidate is found among the session's by its camera, frame index and
+    pixel (-0.0 equal to 0.0; a NaN pixel equal to nothing), whether the rejected ones are
+    few (an integer test on the frame index first) or many: the same answer as searching
+    every key."""
+    from pslog.evaluation import _keys, _member, _search
+
+    rng = np.random.default_rng(5)
+    n = 4000
+    camera = rng.integers(0, 3, n)
+    frame = rng.integers(0, 300, n)
+    uv = np.round(rng.uniform(0, 640, (n, 2)), 1)
+    uv[:20, 0] = 0.0
+    uv[20:30] = np.nan
+    keys = _keys(camera, frame, uv)
+    for size in (1, 7, 60, 3000):
+        pick = rng.choice(n, size, replace=False)
+        pick = np.r_[pick, np.arange(30)]  # (zeros and NaN pixels among them)
+        cam, fr, px = camera[pick].copy(), frame[pick].copy(), uv[pick].copy()
+        px[px == 0.0] = -0.0
+        cam[:3] = (cam[:3] + 1) % 3  # the same frame and pixel of another camera
+        of = _keys(cam, fr, px)
+        found = _member(keys, of)
+        assert_array_equal(found, _search(keys, of))
+        assert not found[20:30].any() and found[pick[3:]][~np.isnan(px[3:, 0])].all()
