@@ -184,15 +184,22 @@ def _mahalanobis_sq(track: Track, err: np.ndarray) -> np.ndarray | None:
         ok &= np.isfinite(column)
     good = ok & _positive_det(columns)
     rows = np.flatnonzero(good)
-    if len(rows) == len(track):  # (every point: no gather)
-        sol = np.linalg.solve(_matrices(columns), err[..., None])[..., 0]
-        out = np.einsum("ni,ni->n", err, sol)
-    elif len(rows):
-        sol = np.linalg.solve(_matrices(tuple(c[rows] for c in columns)),
-                              err[rows][..., None])[..., 0]
-        out[rows] = np.einsum("ni,ni->n", err[rows], sol)
+    every = len(rows) == len(track)  # (every point: no gather)
+    # in blocks: the stacks of a block stay in the cache and their memory is reused, not
+    # a match's hundreds of MB taken from the system and zeroed (each matrix's solve is
+    # its own: the same bits in any block)
+    for start in range(0, len(rows), _BLOCK):
+        block = slice(start, start + _BLOCK) if every else rows[start:start + _BLOCK]
+        e = err[block]
+        sol = np.linalg.solve(_matrices(tuple(c[block] for c in columns)),
+                              e[..., None])[..., 0]
+        out[block] = np.einsum("ni,ni->n", e, sol)
     out[~inside] = np.nan
     return out
+
+
+#: rows per block of :func:`_mahalanobis_sq` (its stacks: about 1.5 MB)
+_BLOCK = 16384
 
 
 def _positive_det(columns: tuple[np.ndarray, ...]) -> np.ndarray:
