@@ -77,11 +77,16 @@ def _fused(method: str) -> tuple[Track, Truth]:
                  quality), truth
 
 
+@pytest.mark.parametrize("block", [16384, 7])
 @pytest.mark.parametrize("method", ["typeA", "filter"])
-def test_eval_figures_equal_the_lu_reference(method):
+def test_eval_figures_equal_the_lu_reference(method, block, monkeypatch):
     """``mahalanobis_sq`` is LAPACK's determinant test and solve at every point (the
-    reference, written as eval computed it before); ``assess`` is ``evaluate`` and
-    ``summarise_quality``; NaN outside the truth's span, inf at the unusable covariances."""
+    reference, written as eval computed it before), in one block or many; ``assess`` is
+    ``evaluate`` and ``summarise_quality``; NaN outside the truth's span, inf at the
+    unusable covariances."""
+    from pslog import evaluation
+
+    monkeypatch.setattr(evaluation, "_BLOCK", block)
     track, truth = _fused(method)
     columns = covariance_columns(track)
     assert columns is not None
