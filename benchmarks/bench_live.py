@@ -68,6 +68,16 @@ NS = 1_000_000_000
 _T_OFFSET = 24  # t_capture_ns and t_sent_ns in the detection datagram (docs/live.md)
 
 
+def _one_path(stream, wrap) -> None:
+    """The method's one-detection path (``push_one``, which ``StreamFuser`` holds as
+    ``_push_one``, and as ``_one`` without a gate) wrapped as the ``method`` stage too."""
+    one = getattr(stream, "_push_one", None)
+    if one is not None:
+        stream._push_one = wrap(one, "method")
+        if stream._one is not None:
+            stream._one = stream._push_one
+
+
 def bench_rig(fps: float) -> Rig:
     rig = builtin_rig("paper3")
     rig = Rig(tuple(c.replace(fps=fps) for c in rig.cameras), rig.name)
@@ -250,6 +260,7 @@ def direct(rig, frames, method: str, candidates: bool, gap_s: float) -> dict:
         fuser.stream._gate.push = timed(fuser.stream._gate.push, "gate")
     if fuser.stream.incremental is not None:
         fuser.stream.incremental.push = timed(fuser.stream.incremental.push, "method")
+        _one_path(fuser.stream, timed)
     fuser._points = timed(fuser._points, "points")
     fuser.stream.push = timed(fuser.stream.push)
     if fuser._filter is not None:
@@ -335,6 +346,7 @@ def bytecodes(rig, frames, method: str, candidates: bool) -> dict:
         fuser.stream._gate.push = staged(fuser.stream._gate.push, "gate")
     if fuser.stream.incremental is not None:
         fuser.stream.incremental.push = staged(fuser.stream.incremental.push, "method")
+        _one_path(fuser.stream, staged)
     fuser._points = staged(fuser._points, "points")
     sink = UdpSink(("127.0.0.1", 9))  # (the discard port: nothing reads it)
     emit = staged(sink.emit, "send")

@@ -39,7 +39,17 @@ class Accuracy:
 
 def errors_m(track: Track, truth: Truth) -> np.ndarray:
     """3D error of every point of ``track``, metres (n,); NaN outside the truth's span."""
-    return np.linalg.norm(track.position_world - truth.at(track.time_ns), axis=1)
+    return _norms(_offsets(track, truth))
+
+
+def _offsets(track: Track, truth: Truth) -> np.ndarray:
+    """Each point's position minus the truth at its time (n, 3), metres; NaN outside the
+    truth's span. Made once per track by :func:`assess` (accuracy and quality share it)."""
+    return track.position_world - truth.at(track.time_ns)
+
+
+def _norms(offsets: np.ndarray) -> np.ndarray:
+    return np.linalg.norm(offsets, axis=1)
 
 
 def output_rate_hz(time_ns: np.ndarray) -> float:
@@ -57,7 +67,11 @@ def output_rate_hz(time_ns: np.ndarray) -> float:
 
 def evaluate(track: Track, truth: Truth) -> Accuracy:
     """Error statistics of ``track`` against ``truth``."""
-    err = errors_m(track, truth)
+    return _accuracy(track, errors_m(track, truth))
+
+
+def _accuracy(track: Track, err: np.ndarray) -> Accuracy:
+    """:func:`evaluate` of ``track`` given its points' errors (:func:`errors_m`)."""
     err = err[np.isfinite(err)] * 1e3
     if len(err) == 0:
         raise InputError(f"track {track.method!r} has no point inside the ground truth's span")
@@ -118,62 +132,149 @@ class QualitySummary:
         return asdict(self)
 
 
+#: the upper triangle of a 3 x 3 covariance, as :func:`covariance_columns` gives it
+_TRIANGLE = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+
+
+def covariance_columns(track: Track) -> tuple[np.ndarray, ...] | None:
+    """The position covariances of ``track`` as six (n,) columns, m²: ``xx, yy, zz, xy, xz,
+    yz`` (full, ``cov_*_m2``; or diagonal from per-axis standard deviations, the others
+    zero); None if it has neither."""
+    q = track.quality
+    if all(f"cov_{a}_m2" in q for a in ("xx", "yy", "zz", "xy", "xz", "yz")):
+        return tuple(q[f"cov_{a}_m2"] for a in ("xx", "yy", "zz", "xy", "xz", "yz"))
+    if all(f"std_{a}_m" in q for a in "xyz"):
+        zero = np.zeros(len(track))
+        return (*(q[f"std_{a}_m"] ** 2 for a in "xyz"), zero, zero, zero)
+    return None
+
+
 def covariances(track: Track) -> np.ndarray | None:
     """(n, 3, 3) position covariances of ``track`` from its quality columns (full, or diagonal
     from per-axis standard deviations), m²; None if it has neither."""
-    q = track.quality
-    n = len(track)
-    if all(f"cov_{a}_m2" in q for a in ("xx", "yy", "zz", "xy", "xz", "yz")):
-        cov = np.empty((n, 3, 3))
-        for name, (i, j) in (("xx", (0, 0)), ("yy", (1, 1)), ("zz", (2, 2)), ("xy", (0, 1)),
-                             ("xz", (0, 2)), ("yz", (1, 2))):
-            cov[:, i, j] = cov[:, j, i] = q[f"cov_{name}_m2"]
-        return cov
-    if all(f"std_{a}_m" in q for a in "xyz"):
-        cov = np.zeros((n, 3, 3))
-        for i, a in enumerate("xyz"):
-            cov[:, i, i] = q[f"std_{a}_m"] ** 2
-        return cov
-    return None
+    columns = covariance_columns(track)
+    return None if columns is None else np.ascontiguousarray(_matrices(columns))
+
+
+def _matrices(columns: tuple[np.ndarray, ...]) -> np.ndarray:
+    """The (n, 3, 3) matrices of the six columns: a view of a (3, 3, n) array (each entry
+    a contiguous row, written at memory speed; numpy's linalg reads any strides)."""
+    cov = np.empty((3, 3, len(columns[0])))
+    for column, (i, j) in zip(columns, _TRIANGLE, strict=True):
+        cov[i, j] = cov[j, i] = column
+    return cov.transpose(2, 0, 1)
 
 
 def mahalanobis_sq(track: Track, truth: Truth) -> np.ndarray | None:
     """``eᵀ Σ⁻¹ e`` of every point (n,) (NaN outside the truth's span; inf where the
     covariance is singular or missing); None if the track has no covariance."""
-    cov = covariances(track)
-    if cov is None:
+    return _mahalanobis_sq(track, _offsets(track, truth))
+
+
+def _mahalanobis_sq(track: Track, err: np.ndarray) -> np.ndarray | None:
+    """:func:`mahalanobis_sq` given the points' offsets from the truth (:func:`_offsets`):
+    ``np.linalg.solve`` of each covariance whose determinant is positive."""
+    columns = covariance_columns(track)
+    if columns is None:
         return None
-    err = track.position_world - truth.at(track.time_ns)
     out = np.full(len(track), np.inf)
-    ok = np.all(np.isfinite(cov), axis=(1, 2)) & np.all(np.isfinite(err), axis=1)
-    if np.any(ok):
-        det = np.linalg.det(cov[ok])
-        good = det > 0
-        rows = np.flatnonzero(ok)[good]
-        sol = np.linalg.solve(cov[rows], err[rows][..., None])[..., 0]
-        out[rows] = np.einsum("ni,ni->n", err[rows], sol)
-    out[~np.all(np.isfinite(err), axis=1)] = np.nan
+    inside = np.all(np.isfinite(err), axis=1)
+    ok = inside.copy()
+    for column in columns:
+        ok &= np.isfinite(column)
+    good = ok & _positive_det(columns)
+    rows = np.flatnonzero(good)
+    every = len(rows) == len(track)  # (every point: no gather)
+    # in blocks: the stacks of a block stay in the cache and their memory is reused, not
+    # a match's hundreds of MB taken from the system and zeroed (each matrix's solve is
+    # its own: the same bits in any block)
+    for start in range(0, len(rows), _BLOCK):
+        block = slice(start, start + _BLOCK) if every else rows[start:start + _BLOCK]
+        e = err[block]
+        sol = np.linalg.solve(_matrices(tuple(c[block] for c in columns)),
+                              e[..., None])[..., 0]
+        out[block] = np.einsum("ni,ni->n", e, sol)
+    out[~inside] = np.nan
     return out
+
+
+#: rows per block of :func:`_mahalanobis_sq` (its stacks: about 1.5 MB)
+_BLOCK = 16384
+
+
+def _positive_det(columns: tuple[np.ndarray, ...]) -> np.ndarray:
+    """Whether ``np.linalg.det`` of each covariance (:func:`covariance_columns`; where all
+    six are finite) is positive, its LU (which cost more than the solve it guards) made only
+    where the sign is in doubt.
+
+    With ``s`` the largest magnitude of a matrix's entries, the cofactor expansion is within
+    about 1e-14 s³ of the true determinant, and LAPACK's (LU with partial pivoting, growth
+    at most 4 at n = 3: a backward error of about 1e-14 s per entry, Higham, *Accuracy and
+    Stability of Numerical Algorithms*, 2nd ed., sections 9.3 and 14.6) within about
+    1e-13 s³: where the expansion exceeds 1e-9 s³ in magnitude, both have the true sign.
+    The others (near-singular, entries of very different scales, s³ outside the normal
+    range, a non-finite entry) are decided by ``np.linalg.det`` itself, as before."""
+    xx, yy, zz, xy, xz, yz = columns
+    with np.errstate(invalid="ignore", over="ignore", under="ignore"):
+        det = xx * (yy * zz - yz * yz) - xy * (xy * zz - yz * xz) + xz * (xy * yz - yy * xz)
+        scale = np.abs(xx)
+        for column in columns[1:]:
+            scale = np.maximum(scale, np.abs(column))
+        sure = ((np.abs(det) > 1e-9 * scale * scale * scale) & (scale > 1e-90)
+                & (scale < 1e90))
+    positive = det > 0
+    unsure = np.flatnonzero(~sure)
+    if len(unsure):
+        cov = _matrices(tuple(c[unsure] for c in columns))
+        finite = np.all(np.isfinite(cov), axis=(1, 2))
+        positive[unsure] = False
+        positive[unsure[finite]] = np.linalg.det(cov[finite]) > 0
+    return positive
 
 
 def summarise_quality(track: Track, truth: Truth | None) -> QualitySummary:
     """:class:`QualitySummary` of ``track``'s points inside the truth's span; without truth
     (a real session) of every point, ``within_2sigma`` and ``nees`` NaN."""
-    inside = (np.ones(len(track), dtype=bool) if truth is None
-              else np.isfinite(errors_m(track, truth)))
-    q = {k: v[inside] for k, v in track.quality.items()}
+    return _quality(track, None if truth is None else _offsets(track, truth))
+
+
+def assess(track: Track, truth: Truth | None) -> tuple[Accuracy | None, QualitySummary]:
+    """``(evaluate(track, truth), summarise_quality(track, truth))`` (the accuracy None
+    without truth), the truth interpolated at the track's times once for both."""
+    if truth is None:
+        return None, _quality(track, None)
+    offsets = _offsets(track, truth)
+    err = _norms(offsets)
+    return _accuracy(track, err), _quality(track, offsets, err)
+
+
+def _quality(track: Track, offsets: np.ndarray | None,
+             err: np.ndarray | None = None) -> QualitySummary:
+    """:func:`summarise_quality` given the points' offsets from the truth (None: no truth)
+    and, if made, their lengths (:func:`errors_m`)."""
+    if offsets is not None and err is None:
+        err = _norms(offsets)
+    inside = None if err is None else np.isfinite(err)
+    if inside is not None and inside.all():
+        inside = None  # (every point: the columns as they are, not copies)
     nan = float("nan")
+
+    def column(name):
+        values = track.quality.get(name)
+        return values if values is None or inside is None else values[inside]
 
     def stat(values, fn):
         values = values[np.isfinite(values)] if values is not None else np.zeros(0)
         return float(fn(values)) if len(values) else nan
 
-    residual = q.get("residual_max_px", q.get("residual_px"))
-    d2 = None if truth is None else mahalanobis_sq(track, truth)
-    if d2 is not None:
+    residual = column("residual_max_px" if "residual_max_px" in track.quality
+                      else "residual_px")
+    d2 = None if offsets is None else _mahalanobis_sq(track, offsets)
+    if d2 is not None and inside is not None:
         d2 = d2[inside]
+    q = {"gap_s": column("gap_s"), "std_m": column("std_m")}
     return QualitySummary(
-        method=track.method, n_points=int(inside.sum()),
+        method=track.method, n_points=len(track) if inside is None else int(inside.sum()),
         residual_median_px=stat(residual, np.median),
         residual_p95_px=stat(residual, lambda v: np.percentile(v, 95)),
         gap_max_ms=stat(q.get("gap_s"), np.max) * 1e3,
@@ -248,6 +349,21 @@ def _member(keys: np.ndarray, of: np.ndarray) -> np.ndarray:
     in the candidates (a Python set of tuples cost seconds on a match)."""
     if len(of) == 0 or len(keys) == 0:
         return np.zeros(len(keys), dtype=bool)
+    if 4 * len(of) < len(keys):
+        # few to look for (a method's rejections): only the keys whose frame index (the
+        # second int64 of a key) one of them has can be among them, found by an integer
+        # test; the byte keys of those alone are searched
+        frames = keys.view(np.int64).reshape(len(keys), -1)[:, 1]
+        wanted = np.unique(of.view(np.int64).reshape(len(of), -1)[:, 1])
+        maybe = np.flatnonzero(np.isin(frames, wanted))
+        out = np.zeros(len(keys), dtype=bool)
+        out[maybe] = _search(keys[maybe], of)
+        return out
+    return _search(keys, of)
+
+
+def _search(keys: np.ndarray, of: np.ndarray) -> np.ndarray:
+    """:func:`_member` by a sorted search of every key."""
     of = np.sort(of)
     at = np.minimum(np.searchsorted(of, keys), len(of) - 1)
     found = of[at] == keys
@@ -261,24 +377,34 @@ def rejection_counts(method: str, rejections, detections, ball=None) -> Rejectio
     candidates and, with ``ball`` (the session's ball labels, a Detections of the ball's
     candidates), how many were right. Candidates are matched by camera, frame index and
     pixel."""
+    return all_rejection_counts({method: rejections}, detections, ball)[method]
+
+
+def all_rejection_counts(rejections: Mapping, detections, ball=None
+                         ) -> dict[str, RejectionCounts]:
+    """:func:`rejection_counts` of every method's ``rejections`` (method -> Rejections) of
+    one session, its candidates' keys and ball labels made once for all."""
     cand = _keys(detections.frame_camera[detections.cand_frame],
                  detections.frame_index[detections.cand_frame], detections.cand_uv)
-    rejected = _member(cand, _keys(rejections.camera, rejections.frame_index, rejections.uv))
     had = detections.candidates_per_frame() > 0
-    kept_frame = np.zeros(detections.n_frames, dtype=bool)
-    kept_frame[detections.cand_frame[~rejected]] = True
-    counts = RejectionCounts(method, detections.n_candidates, len(rejections),
-                             int(np.count_nonzero(had & ~kept_frame)), rejections.counts())
-    if ball is None:
-        return counts
-    is_ball = _member(cand, _keys(ball.frame_camera[ball.cand_frame],
-                                  ball.frame_index[ball.cand_frame], ball.cand_uv))
-    return RejectionCounts(
-        method, counts.candidates, counts.rejected, counts.rejected_detections,
-        counts.by_reason, correct=int(np.count_nonzero(rejected & ~is_ball)),
-        wrong=int(np.count_nonzero(rejected & is_ball)),
-        kept_false=int(np.count_nonzero(~rejected & ~is_ball)),
-        false_candidates=int(np.count_nonzero(~is_ball)))
+    is_ball = None if ball is None else _member(cand, _keys(
+        ball.frame_camera[ball.cand_frame], ball.frame_index[ball.cand_frame], ball.cand_uv))
+    out = {}
+    for method, rej in rejections.items():
+        rejected = _member(cand, _keys(rej.camera, rej.frame_index, rej.uv))
+        kept_frame = np.zeros(detections.n_frames, dtype=bool)
+        kept_frame[detections.cand_frame[~rejected]] = True
+        counts = RejectionCounts(method, detections.n_candidates, len(rej),
+                                 int(np.count_nonzero(had & ~kept_frame)), rej.counts())
+        if is_ball is not None:
+            counts = RejectionCounts(
+                method, counts.candidates, counts.rejected, counts.rejected_detections,
+                counts.by_reason, correct=int(np.count_nonzero(rejected & ~is_ball)),
+                wrong=int(np.count_nonzero(rejected & is_ball)),
+                kept_false=int(np.count_nonzero(~rejected & ~is_ball)),
+                false_candidates=int(np.count_nonzero(~is_ball)))
+        out[method] = counts
+    return out
 
 
 def format_rejection_table(rows: list[RejectionCounts]) -> str:

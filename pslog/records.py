@@ -290,6 +290,20 @@ class Track:
     def __len__(self) -> int:
         return len(self.time_ns)
 
+    @classmethod
+    def _of_frozen(cls, method: str, time_ns: np.ndarray, position_world: np.ndarray,
+                   camera: np.ndarray, quality: dict[str, np.ndarray],
+                   dropped: dict[str, int]) -> Track:
+        """A Track of columns its maker has already made as :meth:`__post_init__` leaves
+        them: read-only, C-contiguous, native int64 / float64 (n, 3) / int32 / float64,
+        of one length; ``dropped`` str -> int. No check, no view: the streaming form of a
+        method makes a Track per detection, and the checks cost more than its point
+        (``tests/test_records.py`` compares with the checked constructor)."""
+        track = object.__new__(cls)
+        track.__dict__.update(method=method, time_ns=time_ns, position_world=position_world,
+                              camera=camera, quality=quality, dropped=dropped)
+        return track
+
     def select(self, mask_or_index) -> Track:
         return Track(self.method, self.time_ns[mask_or_index],
                      self.position_world[mask_or_index], self.camera[mask_or_index],
@@ -351,16 +365,42 @@ class Truth:
         """Truth at ``time_ns`` (m,), linearly interpolated, shape (m, 3); NaN outside the
         sampled span. Exact at sampled times (the simulator samples every capture time)."""
         time_ns = np.asarray(time_ns, dtype=np.int64)
-        out = np.full((len(time_ns), 3), np.nan)
         if len(self.time_ns) == 0:
-            return out
+            return np.full((len(time_ns), 3), np.nan)
         inside = (time_ns >= self.time_ns[0]) & (time_ns <= self.time_ns[-1])
-        t = time_ns[inside]
-        hi = np.clip(np.searchsorted(self.time_ns, t, side="left"), 0, len(self.time_ns) - 1)
+        every = bool(inside.all())
+        t = time_ns if every else time_ns[inside]
+        # (inside the span: hi within [0, n - 1])
+        hi = np.searchsorted(self.time_ns, t, side="left")
+        sampled = self.time_ns[hi] == t
+        if sampled.all() and len(t):
+            # every time a sample's (the simulator samples every capture time): the
+            # interpolation below gives 0 * previous + 1 * sample, which is the sample
+            # itself but where the sample is a zero (a negative zero after a positive
+            # sample comes out positive) or the previous sample is not finite (NaN):
+            # those rows are made by the interpolation itself, as before
+            value = self.position_world[hi]
+            redo = np.unique(np.flatnonzero(value.reshape(-1) == 0) // 3)
+            if not np.isfinite(self.position_world).all():
+                lo = np.maximum(hi - 1, 0)
+                redo = np.union1d(redo, np.flatnonzero(
+                    ~np.isfinite(self.position_world[lo]).all(axis=1)))
+            if len(redo):
+                value[redo] = self._interpolated(t[redo], hi[redo])
+        else:
+            value = self._interpolated(t, hi)
+        if every:
+            return value
+        out = np.full((len(time_ns), 3), np.nan)
+        out[inside] = value
+        return out
+
+    def _interpolated(self, t: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """The linear interpolation at times ``t`` within the span, ``hi`` the first sample
+        at or after each."""
         lo = np.maximum(hi - 1, 0)
         t_lo, t_hi = self.time_ns[lo], self.time_ns[hi]
         span = (t_hi - t_lo).astype(np.float64)
         w = np.where(span > 0, (t - t_lo) / np.where(span > 0, span, 1.0), 1.0)
-        out[inside] = ((1 - w)[:, None] * self.position_world[lo]
-                       + w[:, None] * self.position_world[hi])
-        return out
+        return ((1 - w)[:, None] * self.position_world[lo]
+                + w[:, None] * self.position_world[hi])

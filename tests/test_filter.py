@@ -666,10 +666,30 @@ def test_std_is_honest_and_quality_columns_are_complete():
 # ---- streaming, causality, registry --------------------------------------------------------
 
 def _stream(rig, logged):
+    """Every detection pushed alone, in turn in each form a caller gives one in: numpy
+    scalars and a (2,) pixel; Python numbers (the one-detection path of the filter's
+    streaming form); one-row arrays, as ``pslog live`` pushes a frame."""
     fuser = StreamFuser(rig, "filter")
-    parts = [fuser.push(logged.time_ns[i], logged.camera[i], logged.uv[i],
-                        logged.frame_index[i]) for i in range(len(logged))]
+    times, cams, uv, frames = (logged.time_ns.tolist(), logged.camera.tolist(),
+                               logged.uv.tolist(), logged.frame_index.tolist())
+    parts = []
+    for i in range(len(logged)):
+        if i % 3 == 0:
+            args = (logged.time_ns[i], logged.camera[i], logged.uv[i], logged.frame_index[i])
+        elif i % 3 == 1:
+            args = (times[i], cams[i], uv[i], frames[i])
+        else:
+            args = (logged.time_ns[i:i + 1], logged.camera[i:i + 1], logged.uv[i:i + 1],
+                    logged.frame_index[i:i + 1])
+        parts.append(fuser.push(*args))
     parts.append(fuser.flush())
+    for p in parts:  # each a Track as the checked constructor leaves one: frozen columns
+        columns = [p.time_ns, p.position_world, p.camera, *p.quality.values()]
+        assert not any(c.flags.writeable for c in columns)
+        assert all(c.flags.c_contiguous for c in columns)
+        assert [c.dtype for c in columns[:3]] == [np.int64, np.float64, np.int32]
+        assert p.position_world.shape == (len(p), 3) and list(p.quality) == list(
+            FILTER_QUALITY) and all(c.shape == (len(p),) for c in columns[3:])
     return parts
 
 

@@ -223,3 +223,33 @@ def test_fuse_carries_the_tables_over(sim_session, tmp_path, cli):
     _same_detections(a.detections, b.detections)
     np.testing.assert_array_equal(a.tracks["typeA"].position_world,
                                   b.tracks["typeA"].position_world)
+
+
+def test_the_reader_reads_a_table_into_place(sim_session):
+    """read_session reads each table into one aligned, writable buffer: its raw columns are
+    arrays on it (no copy), equal to the columns of the plain bytes; the same data at an
+    odd address decodes to aligned copies (what a misaligned buffer would give)."""
+    from pslog.log import table as tables
+    from pslog.log.reader import _Finished
+
+    with _Finished(sim_session.path) as f:
+        index = f.attachments[tables.DETECTIONS]
+        plain = f._attachment(index)
+        view = f._attachment_data(index, aligned=True)
+    assert isinstance(plain, bytes) and bytes(view) == plain
+    names = sim_session.rig.names
+    _, expected = tables.decode(plain, tables.DETECTIONS, names)
+    _, columns = tables.decode(view, tables.DETECTIONS, names)
+    odd = np.empty(len(plain) + 1, np.uint8)
+    odd[1:] = np.frombuffer(plain, np.uint8)
+    _, copies = tables.decode(odd.data[1:], tables.DETECTIONS, names)
+    header = json.loads(plain[4:4 + int.from_bytes(plain[:4], "little")])["columns"]
+    raw = [k for k, d in header.items() if d["codec"] == "none"]
+    assert "cand_uv" in raw
+    for k in DET_COLUMNS:
+        for got in (columns[k], copies[k]):
+            np.testing.assert_array_equal(got, expected[k], err_msg=k)
+            assert got.dtype == expected[k].dtype and got.flags.aligned, k
+            assert got.flags.writeable and got.dtype.isnative, k
+        assert np.shares_memory(columns[k], view) == (k in raw), k
+        assert not np.shares_memory(copies[k], odd), k

@@ -206,22 +206,50 @@ _MALFORMED = [
     (([float("nan")], 0, [1.0, 2.0]), "time_ns nan is not an integer within int64"),
     (([2**70], 0, [1.0, 2.0]), "time_ns 1180591620717411303424 is not an integer within"),
     ((5, 0, [["a", "b"]]), "uv must be (n, 2) pixels"),
+    # one detection as Python numbers (the filter's one-detection path takes the valid ones)
+    ((2**63, 0, [1.0, 2.0]), "time_ns 9223372036854775808 is not an integer within int64"),
+    ((5, 0, [1.0, 2.0], 1.5), "frame_index 1.5 is not an integer within int64"),
+    ((5, 0, [1.0, 2.0], 2**64), "frame_index 18446744073709551616 is not an integer"),
+    ((np.array([5]), np.array([0]), np.zeros((1, 2)), np.array([0.5])),
+     "frame_index 0.5 is not an integer within int64"),
 ]
 
 
+@pytest.mark.parametrize("method", ["typeA", "filter"])
 @pytest.mark.parametrize("candidates", [True, False])
 @pytest.mark.parametrize(("args", "message"), _MALFORMED)
 def test_a_malformed_push_is_refused_before_a_kernel_reads_past_its_tables(args, message,
-                                                                           candidates):
+                                                                           candidates, method):
     """A frame of no candidates once went into the compiled gate as a frame with a random
     key (kept for ever); a camera index past the rig read outside its tables."""
     from pslog.errors import FusionError
 
-    fuser = StreamFuser(builtin_rig("paper3"), "typeA", candidates=candidates)
+    fuser = StreamFuser(builtin_rig("paper3"), method, candidates=candidates)
     with pytest.raises(FusionError, match=message.replace("(", r"\(").replace(")", r"\)")):
         fuser.push(*args)
     assert len(fuser.push([], [], np.zeros((0, 2)))) == 0  # an empty push is still fine
     assert len(fuser.flush()) == 0
+
+
+@pytest.mark.parametrize("method", ["typeA", "filter"])
+@pytest.mark.parametrize("form", ["python", "arrays"])
+def test_a_push_out_of_order_is_refused_in_every_form(method, form):
+    """One detection at or before the last one pushed, in (time, camera) order, is refused
+    by the one-detection path as by the general one, and the stream goes on."""
+    from pslog.errors import FusionError
+
+    def one(t, c):
+        if form == "python":
+            return t, c, [320.5, 240.5]
+        return np.array([t]), np.array([c], np.int32), np.array([[320.5, 240.5]])
+
+    fuser = StreamFuser(builtin_rig("paper3"), method)
+    fuser.push(*one(1_000_000, 1))
+    for t, c in [(1_000_000, 1), (1_000_000, 0), (999_999, 2)]:
+        with pytest.raises(FusionError, match="order of their logged times; got t="):
+            fuser.push(*one(t, c))
+    fuser.push(*one(1_000_000, 2))
+    fuser.flush()
 
 
 @pytest.mark.parametrize(("fid", "camera"), [(0, 1), (7, 0)])

@@ -25,12 +25,11 @@ def run(args: argparse.Namespace) -> int:
     from pslog import progress
     from pslog.errors import InputError
     from pslog.evaluation import (
-        evaluate,
+        all_rejection_counts,
+        assess,
         format_accuracy_table,
         format_quality_table,
         format_rejection_table,
-        rejection_counts,
-        summarise_quality,
     )
     from pslog.log import read_session
 
@@ -47,13 +46,13 @@ def run(args: argparse.Namespace) -> int:
     if missing:
         raise InputError(f"no track for method(s) {', '.join(missing)} in {args.session} "
                          f"(have {', '.join(session.tracks)})")
-    rows = [evaluate(session.tracks[m], truth) if truth is not None else None
-            for m in methods]
-    quality = [summarise_quality(session.tracks[m], truth) for m in methods]
+    # accuracy and quality of each track (the truth at its times made once for both)
+    rows, quality = map(list, zip(*(assess(session.tracks[m], truth) for m in methods),
+                                  strict=True))
     # the gating's rejections, against the ball labels of a simulated dirty session
-    gated = {m: rejection_counts(m, session.rejections[m], session.detections,
-                                 session.ball_truth)
-             for m in methods if m in session.rejections}
+    gated = all_rejection_counts({m: session.rejections[m] for m in methods
+                                  if m in session.rejections},
+                                 session.detections, session.ball_truth)
     left_out = session.left_out  # points the methods did not vouch for
     if args.json:
         # NaN (a summary a track has no column for) is null: JSON has no NaN

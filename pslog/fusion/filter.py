@@ -2220,9 +2220,68 @@ class FilterStream:
 
     def __init__(self, rig: Rig, options) -> None:
         self.filter = BallFilter(rig, FilterOptions(max_gap_s=options.max_gap_s))
+        # the Track of a detection without a point and nothing withheld (Tracks are frozen:
+        # one, shared)
+        self._none = _track(self.filter, np.zeros(0, np.int64), np.zeros(0, np.int64),
+                            np.zeros((0, 2)))
 
     def push(self, time_ns, camera, uv, frame_index=None) -> Track:
         return _track(self.filter, time_ns, camera, uv)
+
+    def push_one(self, time_ns: int, camera: int, u: float, v: float) -> Track:
+        """One detection (Python int, int, float, float; checked by the caller): the Track
+        :meth:`push` gives for it (the same columns, the same bits: ``_run``'s step, then a
+        one-row Track built from Python floats, not from a table of rows)."""
+        flt = self.filter
+        I, out = flt._I, flt._out
+        dropped = int(I[_IDROPC]), int(I[_IDROPU])
+        status = _step(flt._S, I, flt._cam_table, flt._opts, flt._nopts, time_ns, camera, u,
+                       v, out)
+        point = status == _POINT or (status != _NONE and flt._fitted(status, out))
+        if dropped != (int(I[_IDROPC]), int(I[_IDROPU])):  # a point withheld (counted)
+            before = dict(zip(("unconfirmed", "uncertain"), dropped, strict=True))
+            counts = {k: n - before[k] for k, n in flt.dropped.items() if n > before[k]}
+        elif not point:
+            return self._none
+        else:
+            counts = {}
+        if not point:
+            time, position, camera_, quality = _NO_POINT
+            return Track._of_frozen("filter", time, position, camera_, dict(quality), counts)
+        return _one_point(time_ns, camera, out.tolist(), counts)
+
+
+def _frozen_empty() -> tuple:
+    """Empty columns of a filter Track, read-only (as Track freezes them), shared."""
+    columns: list[np.ndarray] = [np.zeros(0, np.int64), np.zeros((0, 3)),
+                                 np.zeros(0, np.int32), np.zeros(0)]
+    for c in columns:
+        c.setflags(write=False)
+    return (*columns[:3], dict.fromkeys(FILTER_QUALITY, columns[3]))
+
+
+_NO_POINT = _frozen_empty()
+
+
+def _one_point(time_ns: int, camera: int, o: list, dropped: dict) -> Track:
+    """The Track of one point: ``o`` the step's output row (``out.tolist()``), its columns
+    as :func:`_track` makes them (lengths by ``math.hypot``, a start's residual as its fit
+    gave it), every column a read-only view of one array of 14 floats."""
+    init = o[15] == 1.0
+    values = np.array((o[0], o[1], o[2], o[3], o[4], o[5], o[6], math.hypot(o[7], o[8]),
+                       o[9] if init else math.hypot(o[9], o[10]), o[11], o[12], o[13], o[14],
+                       o[15]))
+    values.setflags(write=False)  # (its views inherit it)
+    time = np.array((time_ns,), np.int64)
+    time.setflags(write=False)
+    cam = np.array((camera,), np.int32)
+    cam.setflags(write=False)
+    return Track._of_frozen(
+        "filter", time, values[:3].reshape(1, 3), cam,
+        {"std_m": values[3:4], "std_x_m": values[4:5], "std_y_m": values[5:6],
+         "std_z_m": values[6:7], "innovation_px": values[7:8], "residual_px": values[8:9],
+         "nis": values[9:10], "gap_s": values[10:11], "jump": values[11:12],
+         "rejected": values[12:13], "init": values[13:14]}, dropped)
 
 
 def _track(flt: BallFilter, time_ns, camera, uv) -> Track:
@@ -2248,8 +2307,8 @@ def _track(flt: BallFilter, time_ns, camera, uv) -> Track:
             n_out += 1
         i += 1
     rows, index = rows[:n_out], index[:n_out]
-    # one row per quality column: each column a contiguous array, which Track keeps as it
-    # is (a column of a row-major table was copied by Track, 14 copies per push)
+    # one row per quality column: each column a contiguous array, read-only as Track keeps
+    # it (made here as Track's checks would leave it: no check, no copy)
     q = np.empty((len(FILTER_QUALITY), n_out))
     q[0:4] = rows[:, 3:7].T
     # lengths by CPython's math.hypot, as the pure-Python filter took them (numba's hypot
@@ -2262,11 +2321,14 @@ def _track(flt: BallFilter, time_ns, camera, uv) -> Track:
     init = rows[:, 15] == 1.0
     q[5, init] = rows[init, 9]  # a start's residual, as its fit gave it
     q[6:] = rows[:, 11:16].T
-    return Track("filter", times[index], np.ascontiguousarray(rows[:, :3]),
-                 cameras[index].astype(np.int32),
-                 {name: q[i] for i, name in enumerate(FILTER_QUALITY)},
-                 dropped={k: n - before.get(k, 0) for k, n in flt.dropped.items()
-                          if n > before.get(k, 0)})
+    time, position = times[index], np.ascontiguousarray(rows[:, :3])
+    cams = cameras[index].astype(np.int32)
+    for c in (time, position, cams, q):
+        c.setflags(write=False)
+    return Track._of_frozen("filter", time, position, cams,
+                            dict(zip(FILTER_QUALITY, q, strict=True)),
+                            {k: n - before.get(k, 0) for k, n in flt.dropped.items()
+                             if n > before.get(k, 0)})
 
 
 def fuse_filter(obs: Observations, rig: Rig, max_gap_s: float | None = None,

@@ -112,6 +112,12 @@ class StreamFuser:
             from .gating import StreamGate, gating_key
 
             self._gate = StreamGate(rig, gating_key(method, self.options)[1], self._max_gap_s)
+        # the incremental form's own path for one detection (push_one(t, c, u, v) -> Track),
+        # when nothing is to reorder; and when nothing is to gate either, a push of one
+        # detection goes straight to it
+        self._push_one = (getattr(self.incremental, "push_one", None)
+                          if not self._corrected else None)
+        self._one = self._push_one if self._gate is None else None
 
     def push(self, time_ns, camera, uv, frame_index=None) -> Track:
         """Add detections (arrays, or scalars for one); returns the points that became settled
@@ -125,6 +131,16 @@ class StreamFuser:
         uv : float (n, 2), distorted pixel coordinates (``v``, the row, times a rolling shutter)
         frame_index : int (n,), optional
         """
+        if self._one is not None and (one := _one_detection(time_ns, camera, uv, frame_index,
+                                                              len(self.rig))) is not None:
+            # one detection of the usual form (the live case): checked as below, to the
+            # incremental form's own one-detection path
+            if one[:2] <= self._last_logged:
+                raise FusionError("StreamFuser.push: detections must arrive in (time, camera) "
+                                  f"order of their logged times; got t={one[0]} ns after "
+                                  f"t={self._last_logged[0]} ns")
+            self._last_logged = one[:2]
+            return self._one(*one)
         if self._gate is not None:  # the chosen candidates, in logged order
             time_ns, camera, uv, frame_index = self._gate.push(time_ns, camera, uv, frame_index)
         else:
@@ -140,6 +156,9 @@ class StreamFuser:
                               f"t={self._last_logged[0]} ns")
         self._last_logged = keys[-1]
         if self.incremental is not None and not self._corrected:  # nothing to reorder
+            if len(time_ns) == 1 and self._push_one is not None:  # (a frame's chosen one)
+                u, v = uv[0].tolist()
+                return self._push_one(int(time_ns[0]), int(camera[0]), u, v)
             return self.incremental.push(time_ns, camera, uv, frame_index)
         model = self._clock_model  # true_times_ns, row by row in floats (the same ns)
         true_ns = np.array([_true_time_ns(t, v, model[c]) for t, v, c in zip(
@@ -255,6 +274,45 @@ class StreamFuser:
         starts = np.flatnonzero(np.r_[True, group[1:] != group[:-1]])
         latest = int(np.searchsorted(obs.time_ns[starts], reach_ns, side="right")) - 1
         return int(starts[latest])
+
+
+def _one_detection(time_ns, camera, uv, frame_index, n_cameras: int
+                   ) -> tuple[int, int, float, float] | None:
+    """``(time, camera, u, v)`` as Python numbers when a push is one detection in a usual
+    form, valid as :func:`~pslog.fusion.gating.stream_arrays` checks it: integer scalars
+    (time within int64, camera in the rig) and a pair of floats (a sequence, or a (2,) or
+    (1, 2) float64 array), or one-row integer arrays and a (1, 2) float64 array;
+    ``frame_index`` None or an integer of the same form. None otherwise: the general path
+    converts the push, or names what is wrong with it."""
+    if isinstance(time_ns, int | np.integer) and isinstance(camera, int | np.integer):
+        t, c = int(time_ns), int(camera)
+        if frame_index is not None and not (isinstance(frame_index, int | np.integer)
+                                            and -2**63 <= frame_index < 2**63):
+            return None
+        if type(uv) is np.ndarray:
+            if uv.dtype != np.float64 or uv.size != 2 or uv.ndim > 2 or uv.shape[-1] != 2:
+                return None
+            u, v = uv.reshape(2).tolist()
+        elif type(uv) in (list, tuple) and len(uv) == 2 and isinstance(uv[0], float) \
+                and isinstance(uv[1], float):
+            u, v = float(uv[0]), float(uv[1])
+        else:
+            return None
+    elif (type(time_ns) is np.ndarray and type(camera) is np.ndarray and type(uv) is np.ndarray
+          and time_ns.shape == (1,) and camera.shape == (1,) and uv.shape == (1, 2)
+          and time_ns.dtype.kind == "i" and camera.dtype.kind == "i"
+          and uv.dtype == np.float64):
+        if frame_index is not None and not (type(frame_index) is np.ndarray
+                                            and frame_index.shape == (1,)
+                                            and frame_index.dtype.kind == "i"):
+            return None
+        t, c = int(time_ns[0]), int(camera[0])
+        u, v = uv[0].tolist()
+    else:
+        return None
+    if not (0 <= c < n_cameras and -2**63 <= t < 2**63):
+        return None
+    return t, c, u, v
 
 
 def _empty(method: str) -> Track:

@@ -212,7 +212,7 @@ class _Finished:
         if index is None or not self.use_tables:
             return None
         try:
-            data = self._attachment(index)
+            data = self._attachment_data(index, aligned=True)
             counts, columns = tables.decode(data, name, self.rig.names)
             topics = tables.topics_of(name, self.rig.names)
             expected = {t: self.counts.get(t, 0) for t in topics}
@@ -245,8 +245,25 @@ class _Finished:
 
     def _attachment(self, index) -> bytes:
         """The data of an attachment, its record and CRC checked (MCAP "Attachment")."""
+        return cast(bytes, self._attachment_data(index, aligned=False))
+
+    def _attachment_data(self, index, aligned: bool) -> bytes | memoryview:
+        """:meth:`_attachment`; ``aligned``: a view of the data in a writable buffer, its
+        start 8-byte aligned in memory (a table's raw columns are then arrays on that
+        buffer, not copies), read there straight from the file."""
         self.file.seek(index.offset)
-        record = self.file.read(index.length)
+        if aligned:
+            # where the data starts in the record: after opcode, length, two times, and
+            # the name and media type the index names (checked below as in any record)
+            start = 25 + 4 + len(index.name.encode()) + 4 + len(index.media_type.encode()) + 8
+            # (a bytearray: numpy's own large buffers ask the kernel for huge pages, which
+            # cost twice the CPU time to fault in here)
+            buffer = bytearray(index.length + 8)
+            shift = -(np.frombuffer(buffer, np.uint8, 1).ctypes.data + start) % 8
+            view = memoryview(buffer)[shift:shift + index.length]
+            record: bytes | memoryview = view[:self.file.readinto(view)]
+        else:
+            record = self.file.read(index.length)
         if len(record) != index.length or len(record) < 9 + 8 + 8 + 4 + 4 + 8 + 4 or \
                 record[0] != io.OP_ATTACHMENT or \
                 int.from_bytes(record[1:9], "little") != len(record) - 9:

@@ -161,11 +161,16 @@ def encode_parts(table: str, camera_names: Sequence[str], counts: Mapping[str, i
     return [head + bytes(-len(head) % 8), *blobs]
 
 
-def decode(data: bytes, table: str, camera_names: Sequence[str], header_only: bool = False
-           ) -> tuple[dict[str, int], dict[str, np.ndarray]]:
+def decode(data: bytes | memoryview, table: str, camera_names: Sequence[str],
+           header_only: bool = False) -> tuple[dict[str, int], dict[str, np.ndarray]]:
     """``(topic counts, columns)`` of a table's attachment data; LogFormatError naming what
     does not check out (wrong format, version, table, cameras, a column's dtype, shape,
-    length or bytes). ``header_only``: the header's checks alone, no column (``{}``)."""
+    length or bytes). ``header_only``: the header's checks alone, no column (``{}``).
+
+    Every column is a writable native-order array. A raw column of ``data`` that is a
+    writable buffer is an array on it where its bytes are aligned (no copy: the reader
+    reads a table into such a buffer); any other column is a copy, as the per-message
+    decoder gives one."""
     import zstandard
 
     if len(data) < 4:
@@ -174,7 +179,7 @@ def decode(data: bytes, table: str, camera_names: Sequence[str], header_only: bo
     if 4 + size > len(data):
         raise LogFormatError("table header runs past its data")
     try:
-        header = json.loads(data[4:4 + size].decode("utf-8"))
+        header = json.loads(bytes(data[4:4 + size]).decode("utf-8"))
         if not isinstance(header, dict):
             raise ValueError("not an object")
     except (UnicodeDecodeError, ValueError) as exc:
@@ -226,9 +231,11 @@ def decode(data: bytes, table: str, camera_names: Sequence[str], header_only: bo
         if len(blob) != expected:
             raise LogFormatError(f"table column {name} holds {len(blob)} bytes, not "
                                  f"{expected}")
-        # a writable copy in native order, as the per-message decoder gives
-        out[name] = np.array(np.frombuffer(blob, dtype=dtype).reshape(dims),
-                             dtype=np.dtype(dtype).newbyteorder("="))
+        array = np.frombuffer(blob, dtype=dtype).reshape(dims)
+        if not (array.flags.writeable and array.flags.aligned and array.dtype.isnative):
+            # a writable copy in native order, as the per-message decoder gives
+            array = np.array(array, dtype=np.dtype(dtype).newbyteorder("="))
+        out[name] = array
     if track_method(table) is not None and len({len(v) for v in out.values()}) > 1:
         raise LogFormatError("track table columns differ in length")
     return counts, out
