@@ -743,3 +743,19 @@ def test_the_gauss_newton_passes_are_the_numpy_forms_bit_for_bit():
     one = np.array([[[1.0, 0, 0], [0, 2.0, 0]]])
     assert _kernels.hat_diagonal(one, np.diag([3.0, 5.0, 7.0])[None], np.array([0.5]))[0] \
         == 11.5
+
+
+@pytest.mark.parametrize("n", [5, 4096, 60001])
+def test_abs_median_of_many_equal_values(n):
+    """Zero residuals (a noiseless simulation) and two-valued ones: np.median's value. (The
+    selection's three-way partition settles equal values at once: 80,000 zeros took 8.9 s
+    with a two-way partition, quadratic; measured, not asserted.)"""
+    cases = [np.zeros((n, 2)), np.tile([[0.0, 1.0]], (n, 1)),
+             np.where(np.arange(2 * n).reshape(n, 2) % 7 == 0, 2.0, -0.5)]
+    for r in cases:
+        fns = [_kernels.abs_median_finite_rows]
+        if n < 5000:
+            fns.append(_kernels.abs_median_finite_rows.py_func)
+        for fn in fns:
+            median, rows = fn(r)
+            assert rows == n and median == np.median(np.abs(r))

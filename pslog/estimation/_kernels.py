@@ -1179,9 +1179,11 @@ def abs_median_finite_rows(r: np.ndarray) -> tuple[float, int]:
 
 @kernel
 def _select(buf: np.ndarray, size: int, k: int) -> float:
-    """The ``k``-th smallest of ``buf[:size]`` (0-based), by quickselect with a
-    median-of-three pivot; ``buf`` is reordered so that ``buf[:k]`` holds values at most it
-    and ``buf[k+1:size]`` values at least it."""
+    """The ``k``-th smallest of ``buf[:size]`` (0-based, finite values), by quickselect
+    with a median-of-three pivot and a three-way partition (Dijkstra's Dutch national flag:
+    values equal to the pivot are settled at once, so many equal values — zero residuals —
+    take linear time, not quadratic); ``buf`` is reordered so that ``buf[:k]`` holds values
+    at most it and ``buf[k+1:size]`` values at least it."""
     lo, hi = 0, size - 1
     while hi > lo:
         mid = (lo + hi) // 2
@@ -1193,18 +1195,25 @@ def _select(buf: np.ndarray, size: int, k: int) -> float:
         if buf[mid] < buf[hi]:
             buf[mid], buf[hi] = buf[hi], buf[mid]
         pivot = buf[hi]
-        i = lo
-        for jj in range(lo, hi):
-            if buf[jj] < pivot:
-                buf[i], buf[jj] = buf[jj], buf[i]
+        # buf[lo:lt] < pivot, buf[lt:i] == pivot, buf[gt+1:hi+1] > pivot
+        lt, i, gt = lo, lo, hi
+        while i <= gt:
+            v = buf[i]
+            if v < pivot:
+                buf[lt], buf[i] = buf[i], buf[lt]
+                lt += 1
                 i += 1
-        buf[i], buf[hi] = buf[hi], buf[i]
-        if i == k:
-            return buf[i]
-        if i < k:
-            lo = i + 1
+            elif v > pivot:
+                buf[gt], buf[i] = buf[i], buf[gt]
+                gt -= 1
+            else:
+                i += 1
+        if k < lt:
+            hi = lt - 1
+        elif k > gt:
+            lo = gt + 1
         else:
-            hi = i - 1
+            return pivot
     return buf[k]
 
 
