@@ -83,9 +83,14 @@ def test_the_carried_prior_by_hand():
     assert math.isclose(nu0, 0.97 * (1 - p) + 0.03 * p, rel_tol=1e-12)
     assert mean == 4.2
     assert math.isclose(var, 0.003 + 0.2 * dt, rel_tol=1e-12)
-    # a long time: p is at most 1/2
-    nu0, _, _ = flt._turn_prior(2 * 10**9 + 3 * 10**9)
-    assert math.isclose(nu0, 0.5, rel_tol=1e-12)
+    # once the chain has mixed (p = λ_t Δ >= 1/2: 0.625 s here) the lost track says nothing:
+    # a new ball 3 s later starts from the start's prior, not the old ball's turn rate
+    # (review: ω stayed N(4.2, 0.6) for minutes)
+    assert flt._turn_prior(2 * 10**9 + int(0.6 * 1e9))[1] == 4.2
+    assert flt._turn_prior(2 * 10**9 + int(0.63 * 1e9)) == (
+        FM._TURN_START, 0.0, options.turn_rate_std ** 2)
+    assert flt._turn_prior(2 * 10**9 + 3 * 10**9) == (
+        FM._TURN_START, 0.0, options.turn_rate_std ** 2)
     # so long that the random walk is vaguer than the start's prior: the start's
     assert flt._turn_prior(2 * 10**9 + 400 * 10**9) == (
         FM._TURN_START, 0.0, options.turn_rate_std ** 2)

@@ -2008,9 +2008,11 @@ class BallFilter:
         random walk of density ``turn_rate_psd`` (:func:`_turn_predicted`), so ``ω ~
         N(ω_lost, P_ωω + turn_rate_psd Δ)`` (Δ: from the lost state's time to ``t_ns``), and
         its probability moves by the Markov chain of the switches (:func:`_turn_mixed`):
-        ``ν₀ = ν (1 - p) + (1 - ν) p``, ``p = min(λ_t Δ, 1/2)``, within the bounds of a
-        start's probability, ``[0.1, 0.9]``. Where that variance
-        reaches ``turn_rate_std²`` the start's prior is the better-informed one (kept).
+        ``ν₀ = ν (1 - p) + (1 - ν) p``, ``p = λ_t Δ``, within the bounds of a start's
+        probability, ``[0.1, 0.9]``. Where that variance reaches ``turn_rate_std²``, or
+        the chain has mixed (``p >= 1/2``: ν no longer says anything of the lost track; a
+        new ball seconds later must not start from the old one's turn rate — inside a track
+        the turn model rejoins with ω unknown too), the start's prior is kept.
         Before session 13 every restart took the start's prior: a turning ball's track,
         lost across one camera's half-second blackout, started again at ``ν = 0.1`` and
         ``ω = 0 ± 6 rad/s``, and took 0.2-0.3 s to find the turn again (``paper2``
@@ -2023,7 +2025,9 @@ class BallFilter:
         turn_var = float(S[_SPT + 48]) + self._turn_psd * dt
         if not turn_var < self._turn_var:
             return _TURN_START, 0.0, self._turn_var
-        p = min(self._turn_switch * dt, 0.5)
+        p = self._turn_switch * dt
+        if p >= 0.5:  # the chain has forgotten the lost model: so has its turn rate
+            return _TURN_START, 0.0, self._turn_var
         nu0 = min(max(nu * (1.0 - p) + (1.0 - nu) * p, _TURN_START), 1.0 - _TURN_START)
         return nu0, float(S[_SXT + 6]), turn_var
 

@@ -372,7 +372,7 @@ def _support(c: _Candidates, rig: Rig, F: np.ndarray, tables, options: GatingOpt
     # function's order of operations (the same bits, ~10 times faster); a light command
     # never waits for numba here
     if compiled is None:
-        compiled = "pslog.fusion._gate_kernel" in sys.modules
+        compiled = _kernels_ready()
     compiled = compiled and n > 0
     if compiled:
         from ._gate_kernel import support_all
@@ -580,7 +580,7 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
     stillness = np.zeros(len(c.camera))
     finite = np.isfinite(points).all(axis=-1)  # (C,) whether each candidate has a point
     if compiled is None:
-        compiled = "pslog.fusion._gate_kernel" in sys.modules
+        compiled = _kernels_ready()
     if compiled and len(c.camera):
         from ._gate_kernel import static_camera
 
@@ -825,7 +825,7 @@ def _points(c: _Candidates, rig: Rig, ratio: np.ndarray, carried: np.ndarray, co
     ``constants``: :func:`_rig_constants` of ``rig`` (computed when None)."""
     n = len(ratio)
     centers, k_inv, rot = constants or _rig_constants(rig)
-    if n and "pslog.fusion._gate_kernel" in sys.modules:
+    if n and _kernels_ready():
         # loaded (pslog fuse preloads it): the compiled form, one candidate at a time in
         # _points_one's order (the same bits); a light command never waits for numba here
         from ._gate_kernel import points_all
@@ -1370,20 +1370,33 @@ def _decided(c: _Candidates, rig: Rig, options: GatingOptions, causal: bool, wai
 _KERNELS_FROM = 200_000
 
 
-def _kernels(n: int) -> bool:
-    """Whether the gate of ``n`` candidates runs :mod:`._gate_kernel`'s kernels (the same
-    bits as the numpy forms): where that module is loaded (``pslog fuse`` preloads it on
-    another thread; a gate that starts before that import is done waits for it here, at
-    ``_KERNELS_FROM`` candidates or more, rather than burn the numpy forms' CPU meanwhile)."""
-    if "pslog.fusion._gate_kernel" in sys.modules:
-        return True
-    if n < _KERNELS_FROM:
+def _kernels_ready() -> bool:
+    """Whether :mod:`._gate_kernel` is loaded — or being loaded by ``pslog fuse``'s preload
+    thread: then wait for it —, False where that import failed (numba cannot start: the
+    numpy forms, not a traceback from the ``from ._gate_kernel import`` that follows)."""
+    if "pslog.fusion._gate_kernel" not in sys.modules:
         return False
     try:
         import importlib
 
         importlib.import_module("pslog.fusion._gate_kernel")
-    except Exception:  # numba cannot start: the numpy forms
+    except Exception:
+        return False
+    return True
+
+
+def _kernels(n: int) -> bool:
+    """Whether the gate of ``n`` candidates runs :mod:`._gate_kernel`'s kernels (the same
+    bits as the numpy forms): where that module is loaded (``pslog fuse`` preloads it on
+    another thread; a gate that starts before that import is done waits for it here, at
+    ``_KERNELS_FROM`` candidates or more, rather than burn the numpy forms' CPU meanwhile)."""
+    if "pslog.fusion._gate_kernel" not in sys.modules and n < _KERNELS_FROM:
+        return False
+    try:  # loaded, being loaded by the preload (wait for it), or to be loaded here
+        import importlib
+
+        importlib.import_module("pslog.fusion._gate_kernel")
+    except Exception:  # numba cannot start (here or in the preload): the numpy forms
         return False
     return True
 
