@@ -135,6 +135,18 @@ def estimate_clocks(obs: Observations, rig: Rig, estimate=("offset",),
     ------
     FusionError naming what is missing when the ball is seen too little or does not move.
     """
+    try:
+        return _estimate_clocks(obs, rig, estimate, search_s, options, regularized)
+    except np.linalg.LinAlgError:
+        # a singular system: some clock has no information left (its detections all
+        # rejected as outliers, or a motion that cannot tell it apart)
+        raise FusionError("the clocks are not determined by the detections (a singular "
+                          "system): check that every camera sees the same moving ball"
+                          ) from None
+
+
+def _estimate_clocks(obs: Observations, rig: Rig, estimate, search_s: float | None,
+                     options: SmoothOptions | None, regularized) -> SyncResult:
     options = options or SmoothOptions()
     estimate = tuple(p for p in PARAMETERS if p in set(estimate))
     if len(rig) < 2:
@@ -143,6 +155,12 @@ def estimate_clocks(obs: Observations, rig: Rig, estimate=("offset",),
     unknowns = [(c, p) for c in range(len(rig)) for p in estimate
                 if not (c == 0 and p in ("offset", "drift"))]
     _check_coverage(obs, rig, options.max_gap_s)
+    span = float(obs.time_ns.max() - obs.time_ns.min()) / NS
+    if search_s is not None and "offset" in estimate and not search_s < span:
+        # an offset as long as the session leaves the cameras no time in common
+        raise FusionError(f"offset search ±{search_s * 1e3:g} ms is not shorter than the "
+                          f"session's detections ({span * 1e3:.0f} ms): search less than the "
+                          f"session's length")
 
     obs = _windows(obs)
     logged = obs.time_ns / NS
@@ -247,6 +265,13 @@ def _solve_joint(obs, rig, unknowns, theta, params, options, regularized=None):
     knots = [_knots_with_breaks(a, b, spacing, br) for (a, b), br in zip(spans, breaks,
                                                                          strict=True)]
     problem = _Problem(obs, rig, pieces, knots, options.prior)
+    seen = np.bincount(obs.camera[problem.rows], minlength=len(rig))
+    for c in sorted({c for c, _ in unknowns}):
+        if seen[c] == 0:
+            raise FusionError(
+                f"camera {rig.cameras[c].name}: none of its detections fits the ball's track "
+                f"that the other cameras see (they lie off every epipolar line: another "
+                f"object, or a wrong pose in the rig): its clock cannot be estimated")
     problem.set_times(times - t0)
     control = _initial_control(problem, fit.trajectory.noise_px)
     solver = _Solver(problem, options)
