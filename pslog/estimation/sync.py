@@ -46,6 +46,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import sparse
 
+from ..camera import MAX_CLOCK_DRIFT_PPM, MAX_CLOCK_OFFSET_S
 from ..errors import FusionError
 from ..records import NS, Observations
 from ..rig import Rig
@@ -212,6 +213,9 @@ def _estimate_clocks(obs: Observations, rig: Rig, estimate, search_s: float | No
     theta = params.to_external(theta)
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
 
+    # before the rig takes the values: an undetermined estimate may lie beyond what a rig
+    # accepts, and the message is then the estimate's, not a bad rig value's
+    _check_motion(problem, control, unknowns, std, rig, theta)
     norms = np.linalg.norm(r, axis=1)
     inlier = w > 0.5
     estimates, new_cams = [], []
@@ -231,7 +235,6 @@ def _estimate_clocks(obs: Observations, rig: Rig, estimate, search_s: float | No
         readout = min(max(values["readout"], 0.0), np.nextafter(camera.frame_period, 0))
         new_cams.append(camera.replace(clock_offset=values["offset"],
                                        clock_drift_ppm=values["drift"], readout=readout))
-    _check_motion(problem, control, unknowns, std, rig)
     return SyncResult(tuple(estimates), Rig(tuple(new_cams), rig.name),
                       float(np.sqrt(np.mean(norms[inlier] ** 2))), float(sigma))
 
@@ -725,18 +728,21 @@ def _check_coverage(obs: Observations, rig: Rig, max_gap_s: float) -> None:
                               f"'s; sync needs at least {MIN_DETECTIONS} shared in time")
 
 
-def _check_motion(problem, control, unknowns, std, rig) -> None:
+def _check_motion(problem, control, unknowns, std, rig, theta) -> None:
     """A one-line :class:`FusionError` when the ball barely moves, or when an estimate is so
-    uncertain that the data did not determine it."""
+    uncertain that the data did not determine it, or lies beyond what a clock can be (a
+    drift beyond ±1000 ppm, an offset beyond a day: ``theta``, the rig's parametrisation)."""
     speed = np.linalg.norm(problem.velocities(control), axis=1)
     if np.median(speed) < 0.05:
         raise FusionError(f"the ball barely moves (median speed {np.median(speed):.3f} m/s): "
                           f"its track cannot tell the cameras' clocks apart")
-    for (c, p), s in zip(unknowns, std, strict=True):
+    bound = {"offset": MAX_CLOCK_OFFSET_S, "drift": MAX_CLOCK_DRIFT_PPM, "readout": np.inf}
+    for (c, p), s, value in zip(unknowns, std, theta, strict=True):
         limit = {"offset": 0.25 / rig.cameras[c].fps, "drift": 1000.0,
                  "readout": 1 / rig.cameras[c].fps}[p]
-        if not s < limit:
+        if not (s < limit and abs(value) <= bound[p]):
             raise FusionError(f"camera {rig.cameras[c].name}: the {p} is not determined by "
-                              f"the ball's motion (standard deviation {s:.3g}); "
+                              f"the ball's motion (estimate {value:.3g}, standard deviation "
+                              f"{s:.3g}); "
                               + ("a readout needs the ball to move up or down the image"
                                  if p == "readout" else "the ball needs to move more"))
