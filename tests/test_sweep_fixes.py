@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import re
+import warnings
 
 import numpy as np
 import pytest
@@ -96,3 +97,25 @@ def test_eval_prints_dashes_without_truth_and_strict_json_for_an_infinite_nees(
     assert code == 0
     rows = _strict_json(out)
     assert rows[0]["quality"]["nees"] is None
+
+
+@pytest.mark.parametrize("columns, what", [((3, 4), "u,v"), ((0, 1, 2), "x,y,z")])
+def test_calibrate_refuses_points_all_at_one_place_before_solving(tmp_path, cli, columns,
+                                                                   what):
+    from pathlib import Path
+
+    rows = (Path(__file__).parent.parent / "samples" / "cam1_points.csv").read_text().split()
+    out = [rows[0]]
+    for row in rows[1:]:
+        cells = row.split(",")
+        for j in columns:
+            cells[j] = "7"
+        out.append(",".join(cells))
+    points = tmp_path / "p.csv"
+    points.write_text("\n".join(out) + "\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no RuntimeWarning on the way
+        code, _, err = cli("calibrate", "--points", points, "--name", "c", "--width", 640,
+                           "--height", 480, "--rig", tmp_path / "x.toml")
+    assert code != 0
+    assert f"have the same {what}" in err and "Traceback" not in err
