@@ -119,3 +119,18 @@ def test_calibrate_refuses_points_all_at_one_place_before_solving(tmp_path, cli,
                            "--height", 480, "--rig", tmp_path / "x.toml")
     assert code != 0
     assert f"have the same {what}" in err and "Traceback" not in err
+
+
+def test_view_says_why_a_method_fused_on_the_fly_gave_no_track(tmp_path, rig3):
+    from viewers.data import load_view_data
+
+    detections, _ = simulate(rig3, get_motion("spiral"), 1.0, SimulationOptions(seed=1))
+    obs = detections.best()
+    path = tmp_path / "one.mcap"
+    with SessionWriter(path, rig3, timing="typeA", source="test") as writer:
+        writer.add_detections(Detections.from_observations(rig3.names,
+                                                           obs.select(obs.camera == 0)))
+    data = load_view_data([path], methods="smooth")
+    assert not len(data.tracks["smooth"])
+    assert ("no track from smooth: only camera cam1 has detections; fusing needs at least "
+            "two cameras") in data.notes
