@@ -134,3 +134,18 @@ def test_view_says_why_a_method_fused_on_the_fly_gave_no_track(tmp_path, rig3):
     assert not len(data.tracks["smooth"])
     assert ("no track from smooth: only camera cam1 has detections; fusing needs at least "
             "two cameras") in data.notes
+
+
+def test_fuse_says_when_most_candidates_are_rejected_as_a_still_ball(tmp_path, rig3, cli):
+    from pslog.motion import Motion
+
+    here = get_motion("spiral").position(np.zeros(1))[0]
+    still = Motion("still", 3.0, lambda t: np.tile(here, (len(t), 1)))
+    detections, _ = simulate(rig3, still, 3.0, SimulationOptions(noise_px=0.3, seed=1))
+    path = tmp_path / "still.mcap"
+    with SessionWriter(path, rig3, timing="typeA", source="test") as writer:
+        writer.add_detections(detections)
+    code, out, _ = cli("fuse", path, "-o", tmp_path / "f.mcap", "--method", "nearest")
+    assert code == 0
+    line = next(line for line in out.splitlines() if "still object" in line)
+    assert "is not tracked" in line and "--gating off" in line
