@@ -148,6 +148,13 @@ class DamagedSummaryError(LogFormatError):
         self.reason = reason
 
 
+def _pslog_topic(topic: str) -> bool:
+    """Whether ``topic`` is one pslog writes and reads (docs/log-format.md)."""
+    return bool(topic in (S.TRUTH_TOPIC, S.EVENTS_TOPIC) or S.parse_camera_topic(topic)
+                or S.parse_track_topic(topic) or S.parse_rejections_topic(topic)
+                or S.parse_ball_truth_topic(topic))
+
+
 class _Finished:
     """A finished session file opened for seeking: summary, metadata, rig."""
 
@@ -189,6 +196,15 @@ class _Finished:
         self.summary = summary
         self.reader = reader
         self.topics = {c.id: c.topic for c in summary.channels.values()}
+        for c in summary.channels.values():
+            if c.message_encoding != S.PROTOBUF and _pslog_topic(c.topic):
+                # another tool's channel on one of pslog's topics: its messages would be
+                # decoded as pslog's (and recover would copy them as they are)
+                self.file.close()
+                raise LogFormatError(
+                    f"{path}: channel {c.id} on pslog's topic {c.topic} has message encoding "
+                    f"{c.message_encoding!r}, not {S.PROTOBUF!r}: another tool's channel; "
+                    f"remove it or move it to a topic of its own")
         stats = summary.statistics
         #: topic -> messages in the file, summed over every channel of the topic (pslog
         #: writes one channel per topic; another tool may add a second one on it)
