@@ -149,3 +149,37 @@ def test_fuse_says_when_most_candidates_are_rejected_as_a_still_ball(tmp_path, r
     assert code == 0
     line = next(line for line in out.splitlines() if "still object" in line)
     assert "is not tracked" in line and "--gating off" in line
+
+
+def test_a_foreign_channel_on_a_pslog_topic_is_named_not_sent_to_recover(sim_session,
+                                                                        tmp_path, cli):
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    out = tmp_path / "clash.mcap"
+    with open(sim_session.path, "rb") as f, open(out, "wb") as g:
+        reader = make_reader(f)
+        header = reader.get_header()
+        writer = Writer(g)
+        writer.start(profile=header.profile, library=header.library)
+        for m in reader.iter_metadata():
+            writer.add_metadata(m.name, m.metadata)
+        foreign = writer.register_channel("/camera/cam1/detections", "json",
+                                          writer.register_schema("foo", "jsonschema", b"{}"))
+        schemas, channels = {}, {}
+        for schema, channel, msg in reader.iter_messages():
+            if schema is not None and schema.id not in schemas:
+                schemas[schema.id] = writer.register_schema(schema.name, schema.encoding,
+                                                            schema.data)
+            if channel.id not in channels:
+                channels[channel.id] = writer.register_channel(
+                    channel.topic, channel.message_encoding,
+                    schemas.get(channel.schema_id, 0), channel.metadata)
+            writer.add_message(channels[channel.id], msg.log_time, msg.data, msg.publish_time)
+            writer.add_message(foreign, msg.log_time, b'{"x": 1}', msg.publish_time)
+        writer.finish()
+    for args in (("info", out), ("fuse", out, "-o", tmp_path / "f.mcap")):
+        code, _, err = cli(*args)
+        assert code != 0
+        assert ("on pslog's topic /camera/cam1/detections has message encoding 'json'" in err
+                and "recover" not in err), err

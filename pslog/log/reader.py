@@ -148,11 +148,16 @@ class DamagedSummaryError(LogFormatError):
         self.reason = reason
 
 
-def _pslog_topic(topic: str) -> bool:
-    """Whether ``topic`` is one pslog writes and reads (docs/log-format.md)."""
-    return bool(topic in (S.TRUTH_TOPIC, S.EVENTS_TOPIC) or S.parse_camera_topic(topic)
-                or S.parse_track_topic(topic) or S.parse_rejections_topic(topic)
-                or S.parse_ball_truth_topic(topic))
+def _pslog_topic(topic: str, cameras: Sequence[str]) -> bool:
+    """Whether ``topic`` is one pslog writes and reads (docs/log-format.md) in a session of
+    ``cameras``."""
+    camera = S.parse_camera_topic(topic)
+    return bool(topic in (S.TRUTH_TOPIC, S.EVENTS_TOPIC)
+                or (camera is not None and camera[0] in cameras and topic in (
+                    S.detections_topic(camera[0]), S.image_topic(camera[0]),
+                    S.calibration_topic(camera[0]), S.transform_topic(camera[0]),
+                    S.ball_truth_topic(camera[0])))
+                or S.parse_track_topic(topic) or S.parse_rejections_topic(topic))
 
 
 class _Finished:
@@ -197,7 +202,7 @@ class _Finished:
         self.reader = reader
         self.topics = {c.id: c.topic for c in summary.channels.values()}
         for c in summary.channels.values():
-            if c.message_encoding != S.PROTOBUF and _pslog_topic(c.topic):
+            if c.message_encoding != S.PROTOBUF and _pslog_topic(c.topic, self.rig.names):
                 # another tool's channel on one of pslog's topics: its messages would be
                 # decoded as pslog's (and recover would copy them as they are)
                 self.file.close()
