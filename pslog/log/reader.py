@@ -201,14 +201,16 @@ class _Finished:
         self.summary = summary
         self.reader = reader
         self.topics = {c.id: c.topic for c in summary.channels.values()}
-        for c in summary.channels.values():
-            if c.message_encoding != S.PROTOBUF and _pslog_topic(c.topic, self.rig.names):
+        for channel in summary.channels.values():
+            if (channel.message_encoding != S.PROTOBUF
+                    and _pslog_topic(channel.topic, self.rig.names)):
                 # another tool's channel on one of pslog's topics: its messages would be
                 # decoded as pslog's (and recover would copy them as they are)
                 self.file.close()
                 raise LogFormatError(
-                    f"{path}: channel {c.id} on pslog's topic {c.topic} has message encoding "
-                    f"{c.message_encoding!r}, not {S.PROTOBUF!r}: another tool's channel; "
+                    f"{path}: channel {channel.id} on pslog's topic {channel.topic} has "
+                    f"message encoding {channel.message_encoding!r}, not {S.PROTOBUF!r}: "
+                    f"another tool's channel; "
                     f"remove it or move it to a topic of its own")
         stats = summary.statistics
         #: topic -> messages in the file, summed over every channel of the topic (pslog
