@@ -271,10 +271,15 @@ def _solve_joint(obs, rig, unknowns, theta, params, options, regularized=None):
     seen = np.bincount(obs.camera[problem.rows], minlength=len(rig))
     for c in sorted({c for c, _ in unknowns}):
         if seen[c] == 0:
+            at = [v for (cj, p), v in zip(unknowns, params.to_external(theta), strict=True)
+                  if cj == c and p == "offset"]
             raise FusionError(
                 f"camera {rig.cameras[c].name}: none of its detections fits the ball's track "
-                f"that the other cameras see (they lie off every epipolar line: another "
-                f"object, or a wrong pose in the rig): its clock cannot be estimated")
+                f"that the other cameras see"
+                + (f" at clock offset {at[0] * 1e3:.3f} ms" if at else "")
+                + " (they lie off every epipolar line: another object, a wrong pose in the "
+                  "rig, or an offset search so wide that it found a wrong offset): its clock "
+                  "cannot be estimated")
     problem.set_times(times - t0)
     control = _initial_control(problem, fit.trajectory.noise_px)
     solver = _Solver(problem, options)
