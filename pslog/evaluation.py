@@ -288,12 +288,23 @@ def format_quality_table(rows: list[QualitySummary]) -> str:
     """A table of quality summaries, one line per method, and what its columns mean."""
     return format_table(
         ("method", "resid px", "p95 px", "gap ms", "std mm", "in 2σ", "NEES"),
-        [(r.method, f"{r.residual_median_px:.3f}", f"{r.residual_p95_px:.3f}",
-          f"{r.gap_max_ms:.1f}", f"{r.std_median_mm:.3f}", f"{r.within_2sigma * 100:.1f}%",
-          f"{r.nees:.2f}") for r in rows],
+        [(r.method, _cell(r.residual_median_px, ".3f"), _cell(r.residual_p95_px, ".3f"),
+          _cell(r.gap_max_ms, ".1f"), _cell(r.std_median_mm, ".3f"),
+          _cell(r.within_2sigma * 100, ".1f", "%"), _cell(r.nees, ".2f")) for r in rows],
         note=f"resid: median of each point's largest reprojection error; in 2σ: share of "
              f"truth inside the covariance's 2σ ellipsoid ({CHI2_3D_2SIGMA * 100:.1f}% if "
-             f"honest); NEES: mean d²/3 (1 if honest)")
+             f"honest); NEES: mean d²/3 (1 if honest); -: no figure (in 2σ and NEES need "
+             f"ground truth); σ 0: a zero covariance (NEES unbounded)")
+
+
+def _cell(value: float, spec: str, unit: str = "") -> str:
+    """A table cell: ``-`` for NaN (no figure, e.g. no truth), ``σ 0`` for an infinite
+    value (a zero covariance), else the number."""
+    if value != value:
+        return "-"
+    if np.isinf(value):
+        return "σ 0"
+    return f"{value:{spec}}{unit}"
 
 
 @dataclass(frozen=True)

@@ -292,6 +292,17 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
             tracks.update(fuse_all(session.detections, session.rig, rest,
                                    for_session(FusionOptions(), session.metadata)))
         notes.append(f"fused on the fly: {', '.join(missing)}")
+        empty = [m for m in missing if not len(tracks[m])]
+        if empty:
+            # say why nothing is shown for them ('pslog fuse' would refuse)
+            seen = [session.rig.names[c] for c in np.unique(observations.camera)]
+            why = (f"fusing needs at least two cameras; the rig has {len(session.rig)}"
+                   if len(session.rig) < 2 else
+                   "the session has no detection" if not seen else
+                   f"only camera {seen[0]} has detections; fusing needs at least two "
+                   f"cameras" if len(seen) == 1 else
+                   "no point could be fused (run 'pslog fuse' to see why)")
+            notes.append(f"no track from {', '.join(empty)}: {why}")
     shown = {m: tracks[m] for m in wanted}
 
     if (construction is None and "typeA" in shown and len(session.rig) >= 2

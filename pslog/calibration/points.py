@@ -280,6 +280,21 @@ def _check_correspondences(points_world, uv) -> tuple[np.ndarray, np.ndarray]:
         raise InputError(f"uv must have shape ({len(points_world)}, 2), got {uv.shape}")
     if not (np.all(np.isfinite(points_world)) and np.all(np.isfinite(uv))):
         raise InputError("points contain non-finite values")
+    n = len(points_world)
+    if n > 1:
+        # degenerate sets before any solver: every x,y,z (or every u,v) the same leaves
+        # the solvers NaN spreads and an SVD that does not converge
+        world = _spread(points_world)
+        if not world[0] > 0:
+            raise InputError(f"all {n} points have the same x,y,z: the points must be "
+                             f"spread out in the world")
+        image = np.linalg.svd(uv - uv.mean(axis=0), compute_uv=False)
+        if not image[0] > 0:
+            raise InputError(f"all {n} points have the same u,v: each point's pixel must "
+                             f"be where the camera sees it")
+        if image[1] <= COLLINEAR_RATIO * image[0]:
+            raise InputError(f"the {n} points' u,v lie on one line in the image: each "
+                             f"point's pixel must be where the camera sees it")
     return points_world, uv
 
 

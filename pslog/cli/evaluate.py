@@ -55,17 +55,18 @@ def run(args: argparse.Namespace) -> int:
                                  session.detections, session.ball_truth)
     left_out = session.left_out  # points the methods did not vouch for
     if args.json:
-        # NaN (a summary a track has no column for) is null: JSON has no NaN
+        # NaN (a summary a track has no column for, or no truth) and ±inf (a zero
+        # covariance's NEES) are null: strict JSON has neither
         # without truth: the points and output rate still (pslog batch's summary)
-        print(json.dumps([{**(r.as_dict() if r is not None else {
+        print(json.dumps(_strict([{**(r.as_dict() if r is not None else {
                                "method": q.method, "n_points": q.n_points,
                                "rate_hz": _rate(session.tracks[q.method])}),
-                           "quality": {k: (None if isinstance(v, float) and v != v else v)
-                                       for k, v in q.as_dict().items()},
+                           "quality": q.as_dict(),
                            **({"gating": gated[q.method].as_dict()}
                               if q.method in gated else {}),
                            "left_out": left_out.get(q.method, {})}
-                          for r, q in zip(rows, quality, strict=True)], indent=2))
+                          for r, q in zip(rows, quality, strict=True)]), indent=2,
+                         allow_nan=False))
     else:
         if truth is None:
             print(f"{args.session} has no ground truth (only simulated or synthetic sessions "
@@ -94,3 +95,16 @@ def _rate(track) -> float | None:
 
     rate = output_rate_hz(track.time_ns)
     return None if rate != rate else rate
+
+
+def _strict(value):
+    """``value`` with every non-finite float (NaN, ±inf) made None, recursively."""
+    import math
+
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _strict(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_strict(v) for v in value]
+    return value

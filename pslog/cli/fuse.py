@@ -158,6 +158,7 @@ def run(args: argparse.Namespace) -> int:
     progress.update(total=len(methods) + 2)  # read, each method, write
     n_observations = len(observations)
     detections = session.detections
+    n_candidates = detections.n_candidates
     del observations, session  # freed before fusing (a 90-minute match's columns)
     # the methods fuse on threads while this thread copies the session into the output and
     # writes each method's track as the method ends (its left-out counts go with it, in its
@@ -170,6 +171,7 @@ def run(args: argparse.Namespace) -> int:
     written: dict[str, tuple[int, dict[str, int], int]] = {}  # points, left out, rejected
     empty: list[str] = []
     early: dict[str, int] = {}
+    still: dict[str, int] = {}  # candidates rejected as a still object, by method
     try:
         with open_copy(args.session, output, new_methods=methods, force=args.force,
                        rig=None if args.rig is None else rig) as w:
@@ -184,6 +186,8 @@ def run(args: argparse.Namespace) -> int:
                     method = order.pop(0)
                     track, rejected = ended.pop(method)
                     dropped = dict(track.dropped)  # invalid or untrustworthy points
+                    if options.gating:
+                        still[method] = _still_rejections(rejected)
                     if len(track) == 0:
                         empty.append(method)
                         continue
@@ -200,6 +204,12 @@ def run(args: argparse.Namespace) -> int:
                     written[method] = (len(track), dropped, len(rejected))
                     del track, rejected
             empty.sort(key=methods.index)
+            most = max(still.values(), default=0)
+            if most > n_candidates / 2:
+                # by design (docs/methods.md): a still object is not a ball in play
+                print(f"{most} of {n_candidates} candidates rejected as a still object: a "
+                      f"ball that stands still (slower than about 20 cm/s) is not tracked; "
+                      f"run with --gating off to fuse it anyway")
             if empty:
                 print(f"no point from {', '.join(empty)}: too few detections close enough "
                       f"in time")
@@ -223,3 +233,21 @@ def run(args: argparse.Namespace) -> int:
               + (f" (left out, untrustworthy: {why})" if why else ""))
     print(f"wrote {output}")
     return 0
+
+
+def _still_rejections(rejected) -> int:
+    """How many of a method's gating rejections (:class:`pslog.fusion.gating.Rejections`)
+    are a still object's: rejected for ``motion`` (the gate's reason for a static object as
+    for a point behind a camera) in a camera whose such candidates barely move in the image
+    (median step between them under 2 px)."""
+    import numpy as np
+
+    from pslog.fusion.gating import MOTION
+
+    count = 0
+    for cam in np.unique(rejected.camera):
+        rows = (rejected.camera == cam) & (rejected.reason == MOTION)
+        uv = rejected.uv[rows]
+        if len(uv) >= 2 and np.median(np.linalg.norm(np.diff(uv, axis=0), axis=1)) < 2.0:
+            count += len(uv)
+    return count

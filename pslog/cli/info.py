@@ -48,6 +48,13 @@ def _jsonable(value):
     return value
 
 
+def _fps(value: float, frames: int) -> str:
+    """A measured rate, or why there is none (0 or 1 frame has no period)."""
+    if value == value:
+        return f"{value:.2f}"
+    return "1 frame" if frames == 1 else "-"
+
+
 def _pct(value: float) -> str:
     return "-" if value != value else f"{value:.1%}"
 
@@ -94,7 +101,8 @@ def _text(info: dict) -> list[str]:
     table = format_table(
         ("camera", "frames", "fps measured", "nominal", "offset measured",
          f"rig ({info['timing']})", "detected", "images"),
-        [(c["name"], f"{c['frames']}", f"{c['fps_measured']:.2f}", f"{c['fps_nominal']:g}",
+        [(c["name"], f"{c['frames']}", _fps(c["fps_measured"], c["frames"]),
+          f"{c['fps_nominal']:g}",
           _ms(c["offset_measured_s"]), _ms(c["offset_nominal_s"]),
           _pct(c["detection_rate"]), f"{c['images']}") for c in info["cameras"]])
     lines += ["  " + line for line in table.splitlines()]

@@ -46,6 +46,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import sparse
 
+from ..camera import MAX_CLOCK_DRIFT_PPM, MAX_CLOCK_OFFSET_S
 from ..errors import FusionError
 from ..records import NS, Observations
 from ..rig import Rig
@@ -135,6 +136,18 @@ def estimate_clocks(obs: Observations, rig: Rig, estimate=("offset",),
     ------
     FusionError naming what is missing when the ball is seen too little or does not move.
     """
+    try:
+        return _estimate_clocks(obs, rig, estimate, search_s, options, regularized)
+    except np.linalg.LinAlgError:
+        # a singular system: some clock has no information left (its detections all
+        # rejected as outliers, or a motion that cannot tell it apart)
+        raise FusionError("the clocks are not determined by the detections (a singular "
+                          "system): check that every camera sees the same moving ball"
+                          ) from None
+
+
+def _estimate_clocks(obs: Observations, rig: Rig, estimate, search_s: float | None,
+                     options: SmoothOptions | None, regularized) -> SyncResult:
     options = options or SmoothOptions()
     estimate = tuple(p for p in PARAMETERS if p in set(estimate))
     if len(rig) < 2:
@@ -143,6 +156,12 @@ def estimate_clocks(obs: Observations, rig: Rig, estimate=("offset",),
     unknowns = [(c, p) for c in range(len(rig)) for p in estimate
                 if not (c == 0 and p in ("offset", "drift"))]
     _check_coverage(obs, rig, options.max_gap_s)
+    span = float(obs.time_ns.max() - obs.time_ns.min()) / NS
+    if search_s is not None and "offset" in estimate and not search_s < span:
+        # an offset as long as the session leaves the cameras no time in common
+        raise FusionError(f"offset search ±{search_s * 1e3:g} ms is not shorter than the "
+                          f"session's detections ({span * 1e3:.0f} ms): search less than the "
+                          f"session's length")
 
     obs = _windows(obs)
     logged = obs.time_ns / NS
@@ -194,6 +213,9 @@ def estimate_clocks(obs: Observations, rig: Rig, estimate=("offset",),
     theta = params.to_external(theta)
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
 
+    # before the rig takes the values: an undetermined estimate may lie beyond what a rig
+    # accepts, and the message is then the estimate's, not a bad rig value's
+    _check_motion(problem, control, unknowns, std, rig, theta)
     norms = np.linalg.norm(r, axis=1)
     inlier = w > 0.5
     estimates, new_cams = [], []
@@ -213,7 +235,6 @@ def estimate_clocks(obs: Observations, rig: Rig, estimate=("offset",),
         readout = min(max(values["readout"], 0.0), np.nextafter(camera.frame_period, 0))
         new_cams.append(camera.replace(clock_offset=values["offset"],
                                        clock_drift_ppm=values["drift"], readout=readout))
-    _check_motion(problem, control, unknowns, std, rig)
     return SyncResult(tuple(estimates), Rig(tuple(new_cams), rig.name),
                       float(np.sqrt(np.mean(norms[inlier] ** 2))), float(sigma))
 
@@ -247,6 +268,18 @@ def _solve_joint(obs, rig, unknowns, theta, params, options, regularized=None):
     knots = [_knots_with_breaks(a, b, spacing, br) for (a, b), br in zip(spans, breaks,
                                                                          strict=True)]
     problem = _Problem(obs, rig, pieces, knots, options.prior)
+    seen = np.bincount(obs.camera[problem.rows], minlength=len(rig))
+    for c in sorted({c for c, _ in unknowns}):
+        if seen[c] == 0:
+            at = [v for (cj, p), v in zip(unknowns, params.to_external(theta), strict=True)
+                  if cj == c and p == "offset"]
+            raise FusionError(
+                f"camera {rig.cameras[c].name}: none of its detections fits the ball's track "
+                f"that the other cameras see"
+                + (f" at clock offset {at[0] * 1e3:.3f} ms" if at else "")
+                + " (they lie off every epipolar line: another object, a wrong pose in the "
+                  "rig, or an offset search so wide that it found a wrong offset): its clock "
+                  "cannot be estimated")
     problem.set_times(times - t0)
     control = _initial_control(problem, fit.trajectory.noise_px)
     solver = _Solver(problem, options)
@@ -700,18 +733,21 @@ def _check_coverage(obs: Observations, rig: Rig, max_gap_s: float) -> None:
                               f"'s; sync needs at least {MIN_DETECTIONS} shared in time")
 
 
-def _check_motion(problem, control, unknowns, std, rig) -> None:
+def _check_motion(problem, control, unknowns, std, rig, theta) -> None:
     """A one-line :class:`FusionError` when the ball barely moves, or when an estimate is so
-    uncertain that the data did not determine it."""
+    uncertain that the data did not determine it, or lies beyond what a clock can be (a
+    drift beyond ±1000 ppm, an offset beyond a day: ``theta``, the rig's parametrisation)."""
     speed = np.linalg.norm(problem.velocities(control), axis=1)
     if np.median(speed) < 0.05:
         raise FusionError(f"the ball barely moves (median speed {np.median(speed):.3f} m/s): "
                           f"its track cannot tell the cameras' clocks apart")
-    for (c, p), s in zip(unknowns, std, strict=True):
+    bound = {"offset": MAX_CLOCK_OFFSET_S, "drift": MAX_CLOCK_DRIFT_PPM, "readout": np.inf}
+    for (c, p), s, value in zip(unknowns, std, theta, strict=True):
         limit = {"offset": 0.25 / rig.cameras[c].fps, "drift": 1000.0,
                  "readout": 1 / rig.cameras[c].fps}[p]
-        if not s < limit:
+        if not (s < limit and abs(value) <= bound[p]):
             raise FusionError(f"camera {rig.cameras[c].name}: the {p} is not determined by "
-                              f"the ball's motion (standard deviation {s:.3g}); "
+                              f"the ball's motion (estimate {value:.3g}, standard deviation "
+                              f"{s:.3g}); "
                               + ("a readout needs the ball to move up or down the image"
                                  if p == "readout" else "the ball needs to move more"))

@@ -80,7 +80,8 @@ EPIPOLAR, TRACK, MOTION, OUTSCORED = range(4)
 REASON_TEXT = {
     "epipolar": "no other camera's detections near that time lie near its epipolar line",
     "track": "its viewing ray passes too far from the track of the recent accepted points",
-    "motion": "the point it makes is behind a camera or out of a ball's reach",
+    "motion": "the point it makes is behind a camera, out of a ball's reach, or still (a "
+              "static object: a ball slower than about 20 cm/s is not tracked)",
     "outscored": "another candidate of its frame fitted the gates better",
 }
 

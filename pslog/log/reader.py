@@ -148,6 +148,18 @@ class DamagedSummaryError(LogFormatError):
         self.reason = reason
 
 
+def _pslog_topic(topic: str, cameras: Sequence[str]) -> bool:
+    """Whether ``topic`` is one pslog writes and reads (docs/log-format.md) in a session of
+    ``cameras``."""
+    camera = S.parse_camera_topic(topic)
+    return bool(topic in (S.TRUTH_TOPIC, S.EVENTS_TOPIC)
+                or (camera is not None and camera[0] in cameras and topic in (
+                    S.detections_topic(camera[0]), S.image_topic(camera[0]),
+                    S.calibration_topic(camera[0]), S.transform_topic(camera[0]),
+                    S.ball_truth_topic(camera[0])))
+                or S.parse_track_topic(topic) or S.parse_rejections_topic(topic))
+
+
 class _Finished:
     """A finished session file opened for seeking: summary, metadata, rig."""
 
@@ -189,6 +201,17 @@ class _Finished:
         self.summary = summary
         self.reader = reader
         self.topics = {c.id: c.topic for c in summary.channels.values()}
+        for channel in summary.channels.values():
+            if (channel.message_encoding != S.PROTOBUF
+                    and _pslog_topic(channel.topic, self.rig.names)):
+                # another tool's channel on one of pslog's topics: its messages would be
+                # decoded as pslog's (and recover would copy them as they are)
+                self.file.close()
+                raise LogFormatError(
+                    f"{path}: channel {channel.id} on pslog's topic {channel.topic} has "
+                    f"message encoding {channel.message_encoding!r}, not {S.PROTOBUF!r}: "
+                    f"another tool's channel; "
+                    f"remove it or move it to a topic of its own")
         stats = summary.statistics
         #: topic -> messages in the file, summed over every channel of the topic (pslog
         #: writes one channel per topic; another tool may add a second one on it)
