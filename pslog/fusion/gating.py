@@ -112,7 +112,7 @@ class GatingOptions:
     static_s, static_m : float, a candidate whose 3D point stays within ``static_m``
         metres of one of its camera's earlier candidates' in every frame of the last
         ``static_s`` seconds is a static object, not a ball in play (a ball slower than
-        about 10 cm/s is not tracked)
+        about 20 cm/s, 5 cm in 0.25 s, is not tracked)
     """
 
     epipolar_px: float = 8.0
