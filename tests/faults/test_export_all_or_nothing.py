@@ -24,8 +24,8 @@ from .promises import assert_one_line_error, assert_untouched, fingerprint, run_
 def fused(tmp_path_factory) -> Path:
     """A fused simulated session (two methods and the truth: three TUM files)."""
     folder = tmp_path_factory.mktemp("export")
-    assert main(["simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "throw",
-                 "--duration", "0.5", "-o", str(folder / "s.mcap")]) == 0
+    assert main(["simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "rally",
+                 "--duration", "1.5", "-o", str(folder / "s.mcap")]) == 0
     assert main(["fuse", str(folder / "s.mcap"), "--method", "typeA", "--method", "nearest",
                  "-o", str(folder / "f.mcap")]) == 0
     return folder / "f.mcap"
@@ -44,12 +44,13 @@ def _ceil_page(n: int) -> int:
 
 
 def test_tum_on_a_full_disk_keeps_every_old_file(fused, tmp_path):
-    """Room for the first new TUM file, not the second: before, the first was replaced and
-    the others kept (a mix of new and old trajectories)."""
+    """Room for the first new TUM file and a page, not for the second (even with the page
+    of the first's old file freed): before, the first was replaced and the others kept (a
+    mix of new and old trajectories)."""
     scratch = tmp_path / "scratch"
     assert main(["export", str(fused), "--tum", str(scratch)]) == 0
     first = _ceil_page((scratch / "nearest.tum").stat().st_size)
-    assert (scratch / "typeA.tum").stat().st_size > 4096
+    assert (scratch / "typeA.tum").stat().st_size > 2 * 4096
     with small_tmpfs(tmp_path / "full", "256k") as disk:
         tum = _old_tum(disk)
         fill(disk, first + 4096)  # the first file fits; the second no longer does
@@ -62,6 +63,7 @@ def test_tum_on_a_full_disk_keeps_every_old_file(fused, tmp_path):
 def test_a_file_size_limit_on_the_last_output_keeps_the_earlier_ones(fused, tmp_path):
     """The TUM files fit under the limit, the JSON lines do not."""
     scratch = tmp_path / "scratch"
+    scratch.mkdir()
     assert main(["export", str(fused), "--tum", str(scratch / "tum"),
                  "--jsonl", str(scratch / "t.jsonl")]) == 0
     limit = max(p.stat().st_size for p in (scratch / "tum").iterdir()) + 1024
