@@ -30,7 +30,7 @@ import os
 import shutil
 import sys
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -728,8 +728,12 @@ def ray_cluster(workers: int | None, address: str | None):
                              "include_dashboard": False}
     native = io.StringIO()  # what Ray's C++ core wrote while joining a cluster
     handlers = _signal_handlers()  # the command's, which ray.init replaces with Ray's
+    from pslog.outputs import signals_held
+
     try:
-        with contextlib.redirect_stdout(sys.stderr):  # never mix Ray's words into stdout
+        # a Ctrl-C while Ray starts is acted on once it has started (then shut down in
+        # full: one cut short left Ray's agents running); never mix Ray's words into stdout
+        with signals_held(), contextlib.redirect_stdout(sys.stderr):
             if address is not None:
                 # Ray's core logs each failed attempt to join (a wrong token: one warning a
                 # second for ~20 s) on the process's standard error: kept aside, the
@@ -749,7 +753,16 @@ def ray_cluster(workers: int | None, address: str | None):
                       "the cluster's token as RAY_AUTH_TOKEN or in ~/.ray/auth_token: "
                       "docs/batch.md)")
         raise PslogError(f"cannot start or join {where}: {reason}") from None
-    except BaseException:  # Ctrl-C or SIGTERM while the cluster started: none left behind
+    except SystemExit as exc:  # ray.init's own SIGTERM handler: sys.exit(15), no word
+        _shutdown(ray, temp, handlers)
+        import signal
+
+        if exc.code == signal.SIGTERM:
+            from pslog.cli import Terminated
+
+            raise Terminated(signal.SIGTERM) from None
+        raise
+    except BaseException:  # Ctrl-C or SIGTERM as the cluster started: none left behind
         _shutdown(ray, temp, handlers)
         raise
     try:
@@ -855,7 +868,7 @@ def run_batch(jobs: list[Job], settings: Settings, *, workers: int | None = None
 
 
 def _gather(pending: dict, slots: int, progress: Progress | None,
-            on_row: Callable[[dict], None] | None, came: list[int]) -> list[dict]:
+            on_row: Callable[[dict], None] | None, came: _Noted) -> list[dict]:
     """The rows of the ``pending`` tasks (Ray object ref -> job) as they finish; each
     finished one leaves ``pending``. A signal noted in ``came`` (:func:`_signals_noted`)
     stops it between two waits: KeyboardInterrupt for SIGINT, ``Terminated`` for another
@@ -864,6 +877,7 @@ def _gather(pending: dict, slots: int, progress: Progress | None,
 
     rows = []
     while pending:
+        came.again()
         if came:
             import signal
 
@@ -895,21 +909,41 @@ def _gather(pending: dict, slots: int, progress: Progress | None,
     return rows
 
 
+class _Noted(list):
+    """The signals that came (their numbers); :meth:`again` re-installs the noting handler
+    over one Ray's core installed meanwhile (its C++ failure handler takes SIGTERM some
+    seconds into a batch, dumps a stack and aborts the process: exit 134)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.signals: tuple = ()
+
+    def note(self, signum, _frame) -> None:
+        self.append(signum)
+
+    def again(self) -> None:
+        import signal
+
+        for sig in self.signals:
+            signal.signal(sig, self.note)
+
+
 @contextlib.contextmanager
-def _signals_noted():
+def _signals_noted() -> Iterator[_Noted]:
     """SIGINT and SIGTERM noted (the list yielded), not raised, while the block waits on
     Ray: an exception thrown out of Ray's native wait left its core in a state that
     crashed at shutdown now and then (exit 139); the loop stops at its next turn, within a
-    second. Also replaces Ray's SIGTERM handler (an exit with code 15 and no word)."""
+    second. Also replaces Ray's SIGTERM handlers (ray.init's exits with code 15 and no
+    word, its core's aborts)."""
     import signal
     import threading
 
-    came: list[int] = []
+    came = _Noted()
     if threading.current_thread() is not threading.main_thread():
         yield came
         return
-    previous = {sig: signal.signal(sig, lambda signum, _frame: came.append(signum))
-                for sig in (signal.SIGINT, signal.SIGTERM)}
+    came.signals = (signal.SIGINT, signal.SIGTERM)
+    previous = {sig: signal.signal(sig, came.note) for sig in came.signals}
     try:
         yield came
     finally:
