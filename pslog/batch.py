@@ -62,6 +62,10 @@ SYNC_FIGURES = (("offset_s", "offset_ms", 1e3), ("offset_std_s", "offset_std_ms"
 KILL_ONCE_ENV = "PSLOG_BATCH_TEST_KILL_ONCE"
 #: seconds between progress lines when standard error is not a terminal
 PROGRESS_EVERY_S = 10.0
+#: seconds of one wait on Ray's tasks: a signal is acted on, and pslog's SIGTERM handler put
+#: back over the one Ray's core installs when it likes (a stack dump, then abort), at least
+#: this often
+WAIT_S = 0.25
 #: Ray's retries of a task whose worker process died (an exception is never retried: the
 #: task turns every error into a failed row)
 MAX_RETRIES = 3
@@ -884,7 +888,7 @@ def _gather(pending: dict, slots: int, progress: Progress | None,
             from pslog.cli import Terminated
 
             raise KeyboardInterrupt if came[0] == signal.SIGINT else Terminated(came[0])
-        ready, _ = ray.wait(list(pending), num_returns=1, timeout=1.0)
+        ready, _ = ray.wait(list(pending), num_returns=1, timeout=WAIT_S)
         for ref in ready:
             job = pending.pop(ref)
             try:
@@ -932,9 +936,9 @@ class _Noted(list):
 def _signals_noted() -> Iterator[_Noted]:
     """SIGINT and SIGTERM noted (the list yielded), not raised, while the block waits on
     Ray: an exception thrown out of Ray's native wait left its core in a state that
-    crashed at shutdown now and then (exit 139); the loop stops at its next turn, within a
-    second. Also replaces Ray's SIGTERM handlers (ray.init's exits with code 15 and no
-    word, its core's aborts)."""
+    crashed at shutdown now and then (exit 139); the loop stops at its next turn, within
+    :data:`WAIT_S`. Also replaces Ray's SIGTERM handlers (ray.init's exits with code 15 and
+    no word, its core's aborts)."""
     import signal
     import threading
 
