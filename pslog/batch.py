@@ -27,9 +27,10 @@ import io
 import json
 import math
 import os
+import shutil
 import sys
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -43,6 +44,9 @@ OUTPUT_NAMES = {"redetect": "redetected.mcap", "sync": "synced.mcap", "fuse": "f
                 "eval": "eval.json", "view": "view.rrd"}
 #: the marker written last: the session's outputs are complete (``--resume`` skips it)
 DONE_NAME = "done.json"
+#: the folder (in a session's result folder) where a task makes its new outputs; they
+#: replace the old ones only when every one is complete
+STAGING_NAME = ".pslog-batch-new"
 SUMMARY_NAMES = ("summary.csv", "summary.parquet")
 #: the summary's leading columns; per-method, per-camera columns follow
 BASE_COLUMNS = ("session", "status", "error", "cameras", "duration_s", "frames", "detections",
@@ -58,6 +62,10 @@ SYNC_FIGURES = (("offset_s", "offset_ms", 1e3), ("offset_std_s", "offset_std_ms"
 KILL_ONCE_ENV = "PSLOG_BATCH_TEST_KILL_ONCE"
 #: seconds between progress lines when standard error is not a terminal
 PROGRESS_EVERY_S = 10.0
+#: seconds of one wait on Ray's tasks: a signal is acted on, and pslog's SIGTERM handler put
+#: back over the one Ray's core installs when it likes (a stack dump, then abort), at least
+#: this often
+WAIT_S = 0.25
 #: Ray's retries of a task whose worker process died (an exception is never retried: the
 #: task turns every error into a failed row)
 MAX_RETRIES = 3
@@ -299,9 +307,11 @@ def run_session(job: Job, settings: Settings) -> dict:
     """Process one session with the commands a user would type; its summary row.
 
     The task of :func:`run_batch`, a pure function of the session file and the settings to
-    the files below ``job.outdir``. Each command writes its output as ``.partial`` and
-    renames it when complete; ``done.json`` is removed first and written last, so an
-    interrupted session is never taken for a complete one. Every error becomes the row's
+    the files below ``job.outdir``. The commands write into the staging folder
+    :data:`STAGING_NAME`; only when every step is done do the new outputs replace the old
+    ones (``done.json`` removed first, written last), so an interrupted session keeps its
+    old, complete set and is never taken for a complete new one. A session that fails
+    keeps none of its old outputs (its failed row says so). Every error becomes the row's
     ``status`` ``failed`` and ``error`` (the command's one-line message); nothing raises.
 
     Returns
@@ -309,6 +319,18 @@ def run_session(job: Job, settings: Settings) -> dict:
     row : dict of the summary's columns (:func:`summary_row`)
     """
     start = time.perf_counter()
+    outdir = Path(job.outdir)
+    staging = outdir / STAGING_NAME
+    try:
+        return _run_staged(job, settings, staging, start)
+    finally:
+        # whatever happened (an error, Ctrl-C in this process): no staged file stays
+        shutil.rmtree(staging, ignore_errors=True)
+        _remove_empty(_result_folders(job))  # no empty folders left for it
+
+
+def _run_staged(job: Job, settings: Settings, staging: Path, start: float) -> dict:
+    """:func:`run_session`'s steps, writing into ``staging``; the row."""
     outdir = Path(job.outdir)
     info = sync = evaluation = None
     error = ""
@@ -325,21 +347,16 @@ def run_session(job: Job, settings: Settings) -> dict:
             raise StepFailed(f"pslog batch: error: {job.path}: {os_reason(exc)}") from None
         try:
             outdir.mkdir(parents=True, exist_ok=True)
-            # an earlier run's outputs go first (done.json first of all), so that a
-            # session failing now leaves none of them beside its failed row; the steps
-            # are this batch's and those the earlier marker names (both the batch's own)
-            earlier = read_marker(job) or {}
-            (outdir / DONE_NAME).unlink(missing_ok=True)
-            old = [s for s in earlier.get("steps", []) if s in OUTPUT_NAMES]
-            for step in dict.fromkeys([*settings.steps, *old]):
-                (outdir / OUTPUT_NAMES[step]).unlink(missing_ok=True)
+            # the new outputs are made in a staging folder and replace the old ones only
+            # when all are complete (_install): an interrupted run keeps the old set
+            shutil.rmtree(staging, ignore_errors=True)  # an interrupted run's
+            staging.mkdir()
         except OSError as exc:
             from pslog.outputs import os_reason
 
             raise StepFailed(f"pslog batch: error: cannot write {outdir}: "
                              f"{os_reason(exc)}") from None
-        out = {s: str(outdir / OUTPUT_NAMES[s]) for s in settings.steps}
-        # outputs are the batch's own: the conflicts were checked before the batch started
+        out = {s: str(staging / OUTPUT_NAMES[s]) for s in settings.steps}
         info = json.loads(_command(["info", job.path, "--json"]))
         current = job.path
         if "redetect" in settings.steps:
@@ -379,16 +396,55 @@ def run_session(job: Job, settings: Settings) -> dict:
         if changed:
             error = f"pslog batch: error: {job.path}: input changed during the run"
             row.update(status="failed", error=error)
-    if error:
-        _remove_empty(_result_folders(job))  # no empty folders left for it
-    else:
+    if not error:
         try:
-            _write_json(outdir / DONE_NAME, {"session": job.session, "settings": settings.key(),
-                                             "steps": list(settings.steps),
-                                             "input": stamp, "row": _json_row(row)})
+            _install(job, settings, staging, {"session": job.session,
+                                              "settings": settings.key(),
+                                              "steps": list(settings.steps),
+                                              "input": stamp, "row": _json_row(row)})
         except (OSError, PslogError, ValueError) as exc:
-            row.update(status="failed", error=f"pslog batch: error: {exc}")
+            from pslog.outputs import os_reason
+
+            reason = os_reason(exc) if isinstance(exc, OSError) else str(exc)
+            error = f"pslog batch: error: cannot write {outdir}: {reason}"
+            row.update(status="failed", error=error)
+    if error:
+        # the session failed (not interrupted): none of its old outputs stays beside its
+        # failed row (done.json first, so they are never taken for complete ones)
+        _discard(job, settings)
     return row
+
+
+def _old_outputs(job: Job, settings: Settings) -> list[Path]:
+    """The session's outputs of this batch's steps and of the steps its earlier marker
+    names (both the batch's own), ``done.json`` not included."""
+    earlier = read_marker(job) or {}
+    old = [s for s in earlier.get("steps", []) if s in OUTPUT_NAMES]
+    return [Path(job.outdir) / OUTPUT_NAMES[s] for s in dict.fromkeys([*settings.steps, *old])]
+
+
+def _discard(job: Job, settings: Settings) -> None:
+    outputs = _old_outputs(job, settings)
+    with contextlib.suppress(OSError):
+        (Path(job.outdir) / DONE_NAME).unlink(missing_ok=True)
+    for path in outputs:
+        with contextlib.suppress(OSError):
+            path.unlink(missing_ok=True)
+
+
+def _install(job: Job, settings: Settings, staging: Path, marker: dict) -> None:
+    """Every staged output (all complete) replaces the old one: ``done.json`` goes first,
+    the staged files are renamed into place, an old output of a step not run now is
+    removed, and the new ``done.json`` is written last."""
+    outdir = Path(job.outdir)
+    keep = {OUTPUT_NAMES[s] for s in settings.steps}
+    stale = [p for p in _old_outputs(job, settings) if p.name not in keep]
+    (outdir / DONE_NAME).unlink(missing_ok=True)
+    for step in settings.steps:
+        os.replace(staging / OUTPUT_NAMES[step], outdir / OUTPUT_NAMES[step])
+    for path in stale:
+        path.unlink(missing_ok=True)
+    _write_json(outdir / DONE_NAME, marker)
 
 
 def _result_folders(job: Job) -> list[Path]:
@@ -661,7 +717,6 @@ def ray_cluster(workers: int | None, address: str | None):
     ``address``, or a local one of ``workers`` CPUs (a temporary folder, no dashboard,
     quiet logs), shut down and removed at the end. Yields the number of task slots."""
     import logging
-    import shutil
     import tempfile
 
     try:
@@ -676,8 +731,13 @@ def ray_cluster(workers: int | None, address: str | None):
     quiet: dict[str, Any] = {"logging_level": logging.ERROR, "log_to_driver": False,
                              "include_dashboard": False}
     native = io.StringIO()  # what Ray's C++ core wrote while joining a cluster
+    handlers = _signal_handlers()  # the command's, which ray.init replaces with Ray's
+    from pslog.outputs import signals_held
+
     try:
-        with contextlib.redirect_stdout(sys.stderr):  # never mix Ray's words into stdout
+        # a Ctrl-C while Ray starts is acted on once it has started (then shut down in
+        # full: one cut short left Ray's agents running); never mix Ray's words into stdout
+        with signals_held(), contextlib.redirect_stdout(sys.stderr):
             if address is not None:
                 # Ray's core logs each failed attempt to join (a wrong token: one warning a
                 # second for ~20 s) on the process's standard error: kept aside, the
@@ -689,8 +749,7 @@ def ray_cluster(workers: int | None, address: str | None):
                 temp = tempfile.mkdtemp(prefix="pslog-ray-")
                 ray.init(num_cpus=workers or os.cpu_count() or 1, _temp_dir=temp, **quiet)
     except Exception as exc:
-        if temp is not None:
-            shutil.rmtree(temp, ignore_errors=True)
+        _shutdown(ray, temp, handlers)
         where = f"the Ray cluster at {address}" if address else "a local Ray cluster"
         reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         if "InvalidAuthToken" in native.getvalue() or "Unauthenticated" in native.getvalue():
@@ -698,10 +757,52 @@ def ray_cluster(workers: int | None, address: str | None):
                       "the cluster's token as RAY_AUTH_TOKEN or in ~/.ray/auth_token: "
                       "docs/batch.md)")
         raise PslogError(f"cannot start or join {where}: {reason}") from None
+    except SystemExit as exc:  # ray.init's own SIGTERM handler: sys.exit(15), no word
+        _shutdown(ray, temp, handlers)
+        import signal
+
+        if exc.code == signal.SIGTERM:
+            from pslog.cli import Terminated
+
+            raise Terminated(signal.SIGTERM) from None
+        raise
+    except BaseException:  # Ctrl-C or SIGTERM as the cluster started: none left behind
+        _shutdown(ray, temp, handlers)
+        raise
     try:
-        with _terminate_as_interrupt():
-            yield int(ray.cluster_resources().get("CPU", 1))
+        _restore(handlers)  # Ray's SIGTERM handler would exit with code 15 and no word
+        yield int(ray.cluster_resources().get("CPU", 1))
     finally:
+        _shutdown(ray, temp, handlers)
+
+
+def _signal_handlers() -> dict:
+    """SIGINT's and SIGTERM's handlers now (the main thread's; none elsewhere)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return {}
+    return {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+
+
+def _restore(handlers: dict) -> None:
+    import signal
+
+    for sig, handler in handlers.items():
+        if handler is not None:
+            signal.signal(sig, handler)
+
+
+def _shutdown(ray, temp: str | None, handlers: dict) -> None:
+    """The cluster shut down (its local processes ended) and its folder removed, with the
+    command's signal handlers back in place of Ray's (whose SIGTERM handler exits with
+    code 15 and no word); a Ctrl-C or SIGTERM meanwhile is acted on only once that is
+    done (it would leave Ray's processes running)."""
+    from pslog.outputs import signals_held
+
+    _restore(handlers)
+    with signals_held():
         ray.shutdown()
         if temp is not None:
             shutil.rmtree(temp, ignore_errors=True)
@@ -727,29 +828,6 @@ def _native_stderr(into: io.StringIO):
             into.write(spool.read().decode("utf-8", "replace"))
 
 
-@contextlib.contextmanager
-def _terminate_as_interrupt():
-    """SIGTERM (a job scheduler's stop, ``kill``) handled as Ctrl-C while the batch runs, so
-    that the local cluster is shut down and removed rather than orphaned (the sessions done
-    keep their ``done.json`` for ``--resume``). Installed after ``ray.init``, which replaces
-    the handler with its own (a stack dump and abort)."""
-    import signal
-    import threading
-
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-
-    def interrupt(_signum, _frame):
-        raise KeyboardInterrupt
-
-    old = signal.signal(signal.SIGTERM, interrupt)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, old)
-
-
 def run_batch(jobs: list[Job], settings: Settings, *, workers: int | None = None,
               address: str | None = None, progress: Progress | None = None,
               on_row: Callable[[dict], None] | None = None) -> list[dict]:
@@ -770,31 +848,108 @@ def run_batch(jobs: list[Job], settings: Settings, *, workers: int | None = None
         if on_row is not None:
             on_row(row)
         return [row]
-    with ray_cluster(workers, address) as slots:
-        task = ray.remote(num_cpus=1, max_retries=MAX_RETRIES)(run_session)
-        pending = {task.remote(job, settings): job for job in jobs}
-        rows = []
-        while pending:
-            ready, _ = ray.wait(list(pending), num_returns=1, timeout=1.0)
-            for ref in ready:
-                job = pending.pop(ref)
-                try:
-                    row = ray.get(ref)
-                except Exception as exc:  # the worker died MAX_RETRIES + 1 times
-                    reason = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
-                    row = summary_row(job.session, None, None, None,
-                                      error=f"pslog batch: error: the task failed "
-                                            f"({type(exc).__name__}: {reason})")
-                rows.append(row)
-                if progress is not None:
-                    if row["status"] == "ok":
-                        progress.done += 1
-                    else:
-                        progress.failed += 1
-                if on_row is not None:
-                    on_row(row)
-            if progress is not None:
-                progress.update(min(len(pending), slots))
-        if progress is not None:
-            progress.update(0, final=True)
+    pending: dict = {}
+    try:
+        with ray_cluster(workers, address) as slots:
+            task = ray.remote(num_cpus=1, max_retries=MAX_RETRIES)(run_session)
+            pending = {task.remote(job, settings): job for job in jobs}
+            try:
+                with _signals_noted() as came:
+                    rows = _gather(pending, slots, progress, on_row, came)
+            except BaseException:
+                for ref in pending:  # a cluster that outlives the batch (--address, tests)
+                    with contextlib.suppress(Exception):
+                        ray.cancel(ref, force=True)
+                raise
+    except BaseException:
+        # interrupted: the tasks were ended (their workers killed with the local cluster)
+        # and may have left staged outputs; the old, complete ones stay
+        for job in pending.values():
+            shutil.rmtree(Path(job.outdir) / STAGING_NAME, ignore_errors=True)
+            _remove_empty(_result_folders(job))
+        raise
     return rows
+
+
+def _gather(pending: dict, slots: int, progress: Progress | None,
+            on_row: Callable[[dict], None] | None, came: _Noted) -> list[dict]:
+    """The rows of the ``pending`` tasks (Ray object ref -> job) as they finish; each
+    finished one leaves ``pending``. A signal noted in ``came`` (:func:`_signals_noted`)
+    stops it between two waits: KeyboardInterrupt for SIGINT, ``Terminated`` for another
+    (exit 128 + its number)."""
+    import ray
+
+    rows = []
+    while pending:
+        came.again()
+        if came:
+            import signal
+
+            from pslog.cli import Terminated
+
+            raise KeyboardInterrupt if came[0] == signal.SIGINT else Terminated(came[0])
+        ready, _ = ray.wait(list(pending), num_returns=1, timeout=WAIT_S)
+        for ref in ready:
+            job = pending.pop(ref)
+            try:
+                row = ray.get(ref)
+            except Exception as exc:  # the worker died MAX_RETRIES + 1 times
+                reason = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+                row = summary_row(job.session, None, None, None,
+                                  error=f"pslog batch: error: the task failed "
+                                        f"({type(exc).__name__}: {reason})")
+            rows.append(row)
+            if progress is not None:
+                if row["status"] == "ok":
+                    progress.done += 1
+                else:
+                    progress.failed += 1
+            if on_row is not None:
+                on_row(row)
+        if progress is not None:
+            progress.update(min(len(pending), slots))
+    if progress is not None:
+        progress.update(0, final=True)
+    return rows
+
+
+class _Noted(list):
+    """The signals that came (their numbers); :meth:`again` re-installs the noting handler
+    over one Ray's core installed meanwhile (its C++ failure handler takes SIGTERM some
+    seconds into a batch, dumps a stack and aborts the process: exit 134)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.signals: tuple = ()
+
+    def note(self, signum, _frame) -> None:
+        self.append(signum)
+
+    def again(self) -> None:
+        import signal
+
+        for sig in self.signals:
+            signal.signal(sig, self.note)
+
+
+@contextlib.contextmanager
+def _signals_noted() -> Iterator[_Noted]:
+    """SIGINT and SIGTERM noted (the list yielded), not raised, while the block waits on
+    Ray: an exception thrown out of Ray's native wait left its core in a state that
+    crashed at shutdown now and then (exit 139); the loop stops at its next turn, within
+    :data:`WAIT_S`. Also replaces Ray's SIGTERM handlers (ray.init's exits with code 15 and
+    no word, its core's aborts)."""
+    import signal
+    import threading
+
+    came = _Noted()
+    if threading.current_thread() is not threading.main_thread():
+        yield came
+        return
+    came.signals = (signal.SIGINT, signal.SIGTERM)
+    previous = {sig: signal.signal(sig, came.note) for sig in came.signals}
+    try:
+        yield came
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)

@@ -337,6 +337,76 @@ def open_locked(path: str | Path, mode: str = "wb", **open_kwargs) -> IO:
         raise
 
 
+#: the open all_or_nothing blocks' lists of (file, partial, output) written complete
+_STAGED: list[list[tuple[IO, Path, Path]]] = []
+
+
+@contextmanager
+def all_or_nothing() -> Iterator[None]:
+    """A command with several outputs replaces all of them or none: inside the block, each
+    file written with :func:`replacing` stays a complete ``.partial`` (its lock held) and is
+    moved over its output only when the whole block has completed. On any error or signal
+    (KeyboardInterrupt) every partial is removed and every old output stays as it was. The
+    moves themselves run with SIGINT, SIGTERM and SIGHUP held back (acted on once all are
+    done), so a signal never leaves some outputs new and some old. Nested blocks join the
+    outermost."""
+    if _STAGED:
+        yield
+        return
+    staged: list[tuple[IO, Path, Path]] = []
+    _STAGED.append(staged)
+    moved = 0
+    try:
+        try:
+            yield
+        finally:
+            _STAGED.remove(staged)
+        with signals_held():
+            for _f, partial, path in staged:
+                try:
+                    partial.replace(path)
+                except OSError as exc:
+                    raise write_error(path, exc) from None
+                moved += 1
+    except BaseException:
+        for _f, partial, _path in staged[moved:]:
+            with suppress(OSError):
+                partial.unlink()
+        raise
+    finally:
+        for f, _partial, _path in staged:
+            with suppress(OSError):
+                f.close()
+
+
+@contextmanager
+def signals_held() -> Iterator[None]:
+    """SIGINT, SIGTERM and SIGHUP noted, not acted on, while the block runs; then the
+    handlers that were there are called for those that came (in the main thread; elsewhere
+    signals are not Python's to handle and the block simply runs)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    came: list[int] = []
+    names = [getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n)]
+    previous = {sig: signal.signal(sig, lambda signum, _frame: came.append(signum))
+                for sig in names}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    for signum in came:
+        handler = previous[signum]
+        if callable(handler):
+            handler(signum, None)
+        elif handler == signal.SIG_DFL:
+            signal.raise_signal(signum)
+
+
 @contextmanager
 def replacing(path: str | Path, mode: str = "w", *, force: bool = False,
               inputs: Iterable[str | Path] = ()) -> Iterator[IO]:
@@ -352,13 +422,17 @@ def replacing(path: str | Path, mode: str = "w", *, force: bool = False,
         f = open_locked(partial, mode, **text)
     except OSError as exc:
         raise write_error(path, exc) from None
+    staged = _STAGED[-1] if _STAGED else None
     try:
         try:
             yield f
             f.flush()
-            # moved, or removed below, while the lock is held: another run never sees a
-            # complete-looking partial that it could take for stale
-            partial.replace(path)
+            if staged is not None:  # moved with the others at the end (all_or_nothing)
+                staged.append((f, partial, path))
+            else:
+                # moved, or removed below, while the lock is held: another run never sees
+                # a complete-looking partial that it could take for stale
+                partial.replace(path)
         except OSError as exc:
             if exc.filename is not None and os.fsdecode(exc.filename) not in (
                     os.fspath(partial), os.fspath(path)):
@@ -370,6 +444,8 @@ def replacing(path: str | Path, mode: str = "w", *, force: bool = False,
         with suppress(OSError):
             f.close()
         raise
+    if staged is not None:
+        return  # still open (its lock held) until all_or_nothing moves it
     try:
         f.close()
     except OSError as exc:

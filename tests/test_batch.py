@@ -330,3 +330,59 @@ def test_ray_is_imported_by_a_running_batch_alone():
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          timeout=120)
     assert run.stdout.strip() == "False", run.stderr
+
+
+@pytest.mark.parametrize(("sig", "exit_code", "said"), [
+    (signal.SIGINT, 130, "pslog batch: interrupted"),
+    (signal.SIGTERM, 143, "pslog batch: terminated (SIGTERM)")])
+def test_a_forced_batch_interrupted_keeps_every_old_output(cluster, tmp_path, short_tmpdir,
+                                                           sig, exit_code, said):
+    """``--force`` then Ctrl-C or SIGTERM: the new outputs are made aside and replace the
+    old ones only when complete, so every old output (and the summary that lists them)
+    stays as it was and nothing half-made is left (a sweep found all of them deleted at
+    each task's start). The exit code and line say which signal (a SIGTERM was "interrupted",
+    exit 130); after Ctrl-C the batch's local cluster is shut down (no process of its group
+    is left)."""
+    root = tmp_path / "season"
+    for i in range(2):
+        simulate(root / f"m{i}.mcap", 20 + i)
+    out = tmp_path / "results"
+    steps = ["--do", "sync,fuse,eval", *METHODS, "-o", out]
+    code, _, err = pslog("batch", root / "*.mcap", *steps)  # on the module's cluster
+    assert code == 0, err
+    before = _stamps(out)
+    summary = (out / "summary.csv").read_bytes()
+    argv = [sys.executable, "-m", "pslog.cli", "batch", str(root / "*.mcap"),
+            *map(str, steps), "--workers", "2", "--force"]
+    proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            start_new_session=True,
+                            env={**os.environ, "TMPDIR": short_tmpdir})
+    deadline = time.monotonic() + 240  # a hang guard only
+    sessions = {name: _stamps(out / name) for name in ("m0", "m1")}
+    # a task has started on a session: something new, changed or gone in its result folder
+    while all(_stamps(out / name) == sessions[name]
+              and {p.name for p in (out / name).iterdir()} == set(sessions[name])
+              for name in sessions):
+        assert proc.poll() is None, proc.stderr.read().decode()
+        assert time.monotonic() < deadline, "the batch started no task"
+        time.sleep(0.01)
+    proc.send_signal(sig)
+    try:
+        assert proc.wait(timeout=120) == exit_code
+        err = proc.stderr.read().decode()
+        assert [line for line in err.splitlines() if line.strip()][-1] == said, err
+        gone_by = time.monotonic() + 30  # Ray's processes end with it, not a minute later
+        # (after a SIGTERM Ray's agents sometimes outlive its shutdown: docs/batch.md)
+        while sig == signal.SIGINT:
+            try:
+                os.killpg(proc.pid, 0)
+            except ProcessLookupError:
+                break
+            assert time.monotonic() < gone_by, "the batch left processes running"
+            time.sleep(0.05)
+    finally:
+        proc.stderr.close()
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert _stamps(out) == before  # the same files, not rewritten
+    assert (out / "summary.csv").read_bytes() == summary

@@ -210,3 +210,25 @@ def test_a_failed_nested_session_leaves_no_empty_folders(tmp_path):
     assert code == 1
     assert "failed d1/d2/bad.mcap" in stdout
     assert sorted(p.name for p in out.iterdir()) == ["summary.csv", "summary.parquet"]
+
+
+def test_a_forced_session_interrupted_in_process_keeps_its_old_outputs(tmp_path, monkeypatch):
+    """Ctrl-C during a session's fuse (the one-session batch runs in this process): the
+    old outputs stay, the new sync made aside is removed."""
+    a = session(tmp_path / "s" / "a.mcap")
+    out = tmp_path / "res"
+    job = Job(str(a), "a.mcap", str(out / "a"))
+    settings = Settings(steps=("sync", "fuse", "eval"))
+    assert batch.run_session(job, settings)["status"] == "ok"
+    before = {p.name: (p.stat().st_ino, p.read_bytes()) for p in (out / "a").iterdir()}
+    real = batch._command
+
+    def interrupted_fuse(argv):
+        if argv[0] == "fuse":
+            raise KeyboardInterrupt
+        return real(argv)
+
+    monkeypatch.setattr(batch, "_command", interrupted_fuse)
+    with pytest.raises(KeyboardInterrupt):
+        batch.run_session(job, settings)
+    assert {p.name: (p.stat().st_ino, p.read_bytes()) for p in (out / "a").iterdir()} == before

@@ -55,12 +55,35 @@ def run(args: argparse.Namespace) -> int:
     session = read_session(args.session)
     if any(track_options) and not session.tracks:
         raise InputError(f"{args.session} has no fused tracks to export (run 'pslog fuse')")
-    # one exporter per option: each writes its own file(s) from the session
-    for path, export in ((args.detections, _export_detections), (args.csv, _export_tracks),
-                         (args.tum, _export_tum), (args.jsonl, _export_jsonl),
-                         (args.parquet, _export_parquet), (args.c3d, _export_c3d)):
-        if path:
-            export(session, path, args.force)
+    if args.c3d:  # what can be refused before anything is written, is
+        from pslog.interchange.track_formats import c3d_check
+
+        c3d_check(session)
+    # one exporter per option: each writes its own file(s) from the session, all or nothing
+    # (all_or_nothing: every file complete first, then all moved over the old ones; on an
+    # error or a signal none is, and the old files stay); the lines after the moves
+    import contextlib
+    import io
+    import os
+
+    from pslog.outputs import all_or_nothing
+
+    said = io.StringIO()
+    made_tum = args.tum is not None and not os.path.exists(args.tum)
+    try:
+        with all_or_nothing(), contextlib.redirect_stdout(said):
+            for path, export in ((args.detections, _export_detections),
+                                 (args.csv, _export_tracks), (args.tum, _export_tum),
+                                 (args.jsonl, _export_jsonl), (args.parquet, _export_parquet),
+                                 (args.c3d, _export_c3d)):
+                if path:
+                    export(session, path, args.force)
+    except BaseException:
+        if made_tum:  # the --tum folder this run made, left empty
+            with contextlib.suppress(OSError):
+                os.rmdir(args.tum)
+        raise
+    print(said.getvalue(), end="")
     return 0
 
 

@@ -214,6 +214,20 @@ def c3d_grid(session) -> tuple[float, int, int]:
 C3D_MAX_FRAMES = 65535
 
 
+def c3d_check(session) -> None:
+    """:class:`InputError` when :func:`write_c3d` would refuse ``session`` (no c3d package,
+    no track to set the frame rate, too many frames): said before any file is written."""
+    try:
+        import c3d  # noqa: F401 (only whether it is there)
+    except ImportError:
+        raise InputError("--c3d needs the c3d package, which is not installed: pip install "
+                         "'pslog[c3d]' (or pip install c3d)") from None
+    rate, _first, n_frames = c3d_grid(session)
+    if n_frames > C3D_MAX_FRAMES:
+        raise InputError(f"{session.path}: {n_frames} frames at {rate:g} Hz: beyond the "
+                         f"{C3D_MAX_FRAMES} frames a C3D file holds")
+
+
 def write_c3d(session, path: str | Path, *, force: bool = False
               ) -> tuple[int, float, dict[str, int]]:
     """Write one C3D point per method (labels are the method names) and ``truth`` (when the
@@ -236,16 +250,11 @@ def write_c3d(session, path: str | Path, *, force: bool = False
     -------
     (n_frames, rate_hz, {method: points left out, sharing a frame with a nearer one})
     """
-    try:
-        import c3d
-    except ImportError:
-        raise InputError("--c3d needs the c3d package, which is not installed: pip install "
-                         "'pslog[c3d]' (or pip install c3d)") from None
+    c3d_check(session)
+    import c3d
+
     tracks = _tracks(session)
     rate, first, n_frames = c3d_grid(session)
-    if n_frames > C3D_MAX_FRAMES:
-        raise InputError(f"{session.path}: {n_frames} frames at {rate:g} Hz: beyond the "
-                         f"{C3D_MAX_FRAMES} frames a C3D file holds")
     labels = list(tracks)
     has_truth = session.truth is not None and len(session.truth) > 1
     if has_truth:
