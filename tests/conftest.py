@@ -21,6 +21,10 @@ os.environ.setdefault("PSLOG_PROGRESS", "off")
 # SIGHUP to every command it starts, and the tests of what a closed terminal does would then
 # test nothing: commands run as from a terminal
 signal.signal(signal.SIGHUP, signal.SIG_DFL)
+# likewise a suite started in the background of a script (bash then ignores SIGINT in it):
+# the tests of what Ctrl-C does would find it ignored in the commands they start
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def make_jpeg(value: int = 128, width: int = 64, height: int = 48) -> bytes:
