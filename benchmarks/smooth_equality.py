@@ -114,40 +114,48 @@ def dump(path: str, quick: bool, more: bool = False) -> None:
         pickle.dump(out, f)
 
 
-def compare(a: dict, b: dict) -> int:
+def _field_pairs(a: dict, b: dict, unlike: list):
+    """``(output, field, value in a, value in b)`` of every field two outputs of one name
+    both have; an output whose fields differ is printed and appended to ``unlike``."""
     assert a.keys() == b.keys()
-    worst, where, bad, n = 0.0, None, 0, 0
     for key in a:
         x, y = a[key], b[key]
         if x.keys() != y.keys():
             print("FIELDS", key, set(x) ^ set(y))
-            bad += 1
+            unlike.append(key)
             continue
         for f in x:
-            u, v = x[f], y[f]
-            if isinstance(u, dict):
-                if u != v:
-                    print("DIFF", key, f, u, v)
-                    bad += 1
-                continue
-            u, v = np.asarray(u), np.asarray(v)
-            if u.shape != v.shape or u.dtype != v.dtype:
-                print("SHAPE", key, f, u.shape, v.shape)
+            yield key, f, x[f], y[f]
+
+
+def compare(a: dict, b: dict) -> int:
+    worst, where, bad, n = 0.0, None, 0, 0
+    unlike: list = []
+    for key, f, u, v in _field_pairs(a, b, unlike):
+        if isinstance(u, dict):
+            if u != v:
+                print("DIFF", key, f, u, v)
                 bad += 1
-                continue
-            n += u.size
-            if np.array_equal(u, v, equal_nan=u.dtype.kind == "f"):
-                continue
+            continue
+        u, v = np.asarray(u), np.asarray(v)
+        if u.shape != v.shape or u.dtype != v.dtype:
+            print("SHAPE", key, f, u.shape, v.shape)
             bad += 1
-            if u.dtype.kind == "f":
-                fin = np.isfinite(u) & np.isfinite(v)
-                ref = np.maximum(np.abs(u[fin]), np.median(np.abs(u[fin])))
-                rel = float(np.max(np.abs(u[fin] - v[fin]) / np.where(ref > 0, ref, 1.0)))
-                if rel > worst:
-                    worst, where = rel, (key, f)
-                print("DIFF", key, f, f"relative {rel:.2e}")
-            else:
-                print("DIFF", key, f)
+            continue
+        n += u.size
+        if np.array_equal(u, v, equal_nan=u.dtype.kind == "f"):
+            continue
+        bad += 1
+        if u.dtype.kind == "f":
+            fin = np.isfinite(u) & np.isfinite(v)
+            ref = np.maximum(np.abs(u[fin]), np.median(np.abs(u[fin])))
+            rel = float(np.max(np.abs(u[fin] - v[fin]) / np.where(ref > 0, ref, 1.0)))
+            if rel > worst:
+                worst, where = rel, (key, f)
+            print("DIFF", key, f, f"relative {rel:.2e}")
+        else:
+            print("DIFF", key, f)
+    bad += len(unlike)
     print(f"compared {len(a)} outputs, {n:,} values: worst relative difference {worst:.2e}"
           f" ({where}); {bad} not bit-identical")
     return 1 if bad else 0
@@ -174,45 +182,39 @@ def _kind(field: str) -> str:
 
 def compare_rounding(a: dict, b: dict) -> int:
     """The --rounding comparison (module docstring)."""
-    assert a.keys() == b.keys()
     worst: dict = {}
     bad = n = 0
-    for key in a:
-        x, y = a[key], b[key]
-        if x.keys() != y.keys():
-            print("FIELDS", key, set(x) ^ set(y))
+    unlike: list = []
+    for key, f, u, v in _field_pairs(a, b, unlike):
+        if isinstance(u, dict) or np.asarray(u).dtype.kind != "f":
+            same = u == v if isinstance(u, dict) else np.array_equal(u, v)
+            if not same:
+                print("DIFF", key, f, "(must be equal)")
+                bad += 1
+            continue
+        u, v = np.asarray(u), np.asarray(v)
+        if u.shape != v.shape:
+            print("SHAPE", key, f, u.shape, v.shape)
             bad += 1
             continue
-        for f in x:
-            u, v = x[f], y[f]
-            if isinstance(u, dict) or np.asarray(u).dtype.kind != "f":
-                same = u == v if isinstance(u, dict) else np.array_equal(u, v)
-                if not same:
-                    print("DIFF", key, f, "(must be equal)")
-                    bad += 1
-                continue
-            u, v = np.asarray(u), np.asarray(v)
-            if u.shape != v.shape:
-                print("SHAPE", key, f, u.shape, v.shape)
-                bad += 1
-                continue
-            n += u.size
-            if not np.array_equal(np.isnan(u), np.isnan(v)):
-                print("NAN", key, f, "NaN in different places")
-                bad += 1
-                continue
-            if f == "weight" and not np.array_equal(u == 0, v == 0):
-                print("REJECTED", key, "different detections rejected")
-                bad += 1
-            fin = np.isfinite(u)
-            d = np.abs(u[fin] - v[fin])
-            kind = _kind(f)
-            if "relative" in kind:  # a covariance near 0: relative to the typical size
-                typical = np.median(np.abs(u[fin])) if "covariance" in kind else 1e-300
-                d = d / np.maximum(np.abs(u[fin]), max(typical, 1e-300))
-            value = float(np.max(d, initial=0.0))
-            if value > worst.get(kind, (-1.0,))[0]:
-                worst[kind] = (value, key, f)
+        n += u.size
+        if not np.array_equal(np.isnan(u), np.isnan(v)):
+            print("NAN", key, f, "NaN in different places")
+            bad += 1
+            continue
+        if f == "weight" and not np.array_equal(u == 0, v == 0):
+            print("REJECTED", key, "different detections rejected")
+            bad += 1
+        fin = np.isfinite(u)
+        d = np.abs(u[fin] - v[fin])
+        kind = _kind(f)
+        if "relative" in kind:  # a covariance near 0: relative to the typical size
+            typical = np.median(np.abs(u[fin])) if "covariance" in kind else 1e-300
+            d = d / np.maximum(np.abs(u[fin]), max(typical, 1e-300))
+        value = float(np.max(d, initial=0.0))
+        if value > worst.get(kind, (-1.0,))[0]:
+            worst[kind] = (value, key, f)
+    bad += len(unlike)
     for kind, (value, key, f) in sorted(worst.items()):
         print(f"largest difference, {kind}: {value:.3g} ({key} {f})")
     # (covariances: relative to the larger of the entry and the field's median |entry|)
