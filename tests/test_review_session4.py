@@ -241,6 +241,8 @@ while time.monotonic() < end:  # faster than any fuser: one datagram every few Â
     except OSError:
         pass
     i += 1
+    if i == 2000:  # under way: the test stops the server from now on
+        print("flooding", flush=True)
 """
 
 
@@ -273,9 +275,15 @@ def test_serve_stops_while_a_sender_floods_it(tmp_path):
     script.write_text(_FLOOD)
     tests = str(Path(__file__).resolve().parent)
     flood = subprocess.Popen([sys.executable, str(script), str(ready.address[1]), str(EPOCH),
-                              tests])
+                              tests], stdout=subprocess.PIPE, text=True)
     try:
-        time.sleep(5)  # the flood under way (its setup included)
+        # the flood under way (its setup done, 2,000 datagrams sent), not a fixed sleep; a
+        # hang guard as the flood's own 60 s
+        under_way = threading.Thread(target=flood.stdout.readline, daemon=True)
+        under_way.start()
+        under_way.join(60)
+        assert not under_way.is_alive() and flood.poll() is None, "the flood did not start"
+        time.sleep(0.5)  # the server draining the flood meanwhile
         assert flood.poll() is None
         stop.set()
         server.join(30)  # a generous hang guard: the flood lasts 60 s
