@@ -39,7 +39,8 @@ case "${1:-}" in
         # two test processes (pytest-xdist), each running whole test files (--dist loadfile:
         # a module's shared fixture, e.g. a Ray cluster or a live run, is built once);
         # PSLOG_TEST_PROCESSES=0 runs the suite in this process alone
-        exec "$VENV/bin/python" -m pytest -n "${PSLOG_TEST_PROCESSES:-2}" --dist loadfile "$@"
+        exec "$VENV/bin/python" -m pytest -n "${PSLOG_TEST_PROCESSES:-2}" --dist loadfile \
+            --no-loadscope-reorder "$@"
         ;;
     *)
         echo "usage: bash run.sh demo|test [args...]" >&2

@@ -111,3 +111,57 @@ def truth_first_session(tmp_path, rig3) -> tuple[bytes, list[int]]:
     data = path.read_bytes()
     ends = [end for op, _, end in io.walk_records(data, len(io.MAGIC)) if op == io.OP_CHUNK]
     return data, ends
+
+
+#: the files that take longest, longest first (per-file times of a whole run, 2026-12-01).
+#: `bash run.sh test`'s two processes take whole files (--dist loadfile); these start first,
+#: so that both processes end together. xdist's own order (most tests first; run.sh turns it
+#: off with --no-loadscope-reorder) left files of few but long tests for the end -- the
+#: README's examples, Ray's batches, the live runs -- where the README's ran alone on one
+#: process for minutes after the other had finished.
+LONGEST_FIRST = (
+    "test_readme.py",
+    "test_batch.py",
+    "test_stream_gating.py",
+    "test_live_command.py",
+    "faults/test_live_command.py",
+    "faults/test_writers.py",
+    "faults/test_inputs.py",
+    "test_stream_window.py",
+    "faults/test_view_faults.py",
+    "test_sync.py",
+    "faults/test_signals.py",
+    "faults/test_corruption.py",
+    "faults/test_record_camera_killed.py",
+    "faults/test_record_faults.py",
+    "test_fusion_validity.py",
+    "test_progress.py",
+    "test_detect.py",
+    "test_smooth_kernels.py",
+    "test_estimation.py",
+    "faults/test_live_hostile.py",
+    "test_batch_threads.py",
+    "test_record.py",
+    "test_log_chunks.py",
+    "test_batch_address.py",
+    "test_cli.py",
+    "faults/test_sigterm_commands.py",
+)
+
+
+def pytest_collection_modifyitems(config, items):
+    """Run the files of :data:`LONGEST_FIRST` first, in that order, then the others, most
+    tests first (as xdist orders them); each file's tests in their own order."""
+    here = Path(__file__).parent
+    rank = {name: i for i, name in enumerate(LONGEST_FIRST)}
+    files: dict[str, int] = {}
+    for item in items:
+        name = item.path.relative_to(here).as_posix() if item.path.is_relative_to(here) else ""
+        files[name] = files.get(name, 0) + 1
+
+    def key(item) -> tuple[int, int]:
+        path = item.path
+        name = path.relative_to(here).as_posix() if path.is_relative_to(here) else ""
+        return (rank.get(name, len(rank)), -files[name] if name not in rank else 0)
+
+    items.sort(key=key)  # stable: a file's tests stay in order
