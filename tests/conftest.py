@@ -115,10 +115,10 @@ def truth_first_session(tmp_path, rig3) -> tuple[bytes, list[int]]:
 
 #: the files that take longest, longest first (per-file times of a whole run, 2026-12-01).
 #: `bash run.sh test`'s two processes take whole files (--dist loadfile); these start first,
-#: so that both processes end together. xdist's own order (most tests first; run.sh turns it
-#: off with --no-loadscope-reorder) left files of few but long tests for the end -- the
-#: README's examples, Ray's batches, the live runs -- where the README's ran alone on one
-#: process for minutes after the other had finished.
+#: so that both processes end on short files. xdist's own order (most tests first; run.sh
+#: turns it off with --no-loadscope-reorder) left the files of few but long tests for the
+#: end -- the README's examples, Ray's batches, the live runs: the README's 4 tests were the
+#: last 15 % of a process's run, and the other process ended before them or not by luck.
 LONGEST_FIRST = (
     "test_readme.py",
     "test_batch.py",
