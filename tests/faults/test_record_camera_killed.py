@@ -36,7 +36,7 @@ import pytest
 from pslog.log import read_session
 from pslog.rig import builtin_rig, save_rig
 
-N_FRAMES = 240  # per camera
+N_FRAMES = 120  # per camera (a camera reads at most ~33 ahead of the recorder)
 CAMERAS = ("cam1", "cam2", "cam3")
 HANG_S = 120.0  # a recorder still running this long after the kill hangs
 
@@ -231,7 +231,7 @@ def test_camera_killed_at_some_moment(recording, after_s):
     clock alone came, on a fast idle machine, after the victim had sent its last frame and
     its "done" while its process was still exiting: the recorder then rightly recorded it
     complete, and the test failed. A camera reads at most its queue and its pipe (~33
-    frames) ahead of the recorder: at half its clip it is still 120 frames from its end.)"""
+    frames) ahead of the recorder: at half its clip it is still 60 frames from its end.)"""
     rec = recording()
     pids = rec.camera_pids()
     victim = CAMERAS[int(after_s * 10) % 3]
