@@ -174,16 +174,18 @@ def test_compiled_track_encoder_equals_its_python_and_protobuf(rig3):
     bits = np.column_stack([track.position_world, *(np.asarray(fixed[k])
                                                     for k in S.TRACK_FIXED_QUALITY)])
     bits = np.ascontiguousarray(bits).view(np.uint64)
-    extra = np.tile(template[0], (n, 1))
+    keys = list(template[1])
+    quality = np.column_stack([track.quality[k] for k in keys]).astype("<f8").view(np.uint8)
     args = (t, bits, track.camera.astype(np.int64), np.frombuffer(b"c1cam2", np.uint8),
-            np.array([0, 2, 6, 6]), np.frombuffer(b"typeA", np.uint8), extra,
+            np.array([0, 2, 6, 6]), np.frombuffer(b"typeA", np.uint8), template[0],
+            np.array([template[1][k] for k in keys], np.int64), np.ascontiguousarray(quality),
             np.arange(n, dtype=np.int64) * 37, *(np.frombuffer(x, np.uint8) for x in
                                                   (b"world", b"\x22\x02\x10\x05", b"\x12\x00",
                                                    b"", b"\x1a\x00")))
     for channels in ([-1, -1], [3, 70_000 % 65_536]):  # messages alone; whole records
         outs = []
         for fn in (encode_track, encode_track.py_func):
-            out = np.zeros(_wire.bound(n, b"typeA", [b"cam2"], extra.shape[1], 12), np.uint8)
+            out = np.zeros(_wire.bound(n, b"typeA", [b"cam2"], len(template[0]), 12), np.uint8)
             point_len, total_len = np.zeros(n, np.int64), np.zeros(n, np.int64)
             used = fn(*args, np.array(channels, np.int64), out, point_len, total_len)
             outs.append((out[:used].tobytes(), point_len.tolist(), total_len.tolist()))

@@ -27,12 +27,13 @@ _OP_MESSAGE, _OP_CHUNK, _OP_MESSAGE_INDEX, _OP_ATTACHMENT = 0x05, 0x06, 0x07, 0x
 _U32 = 1 << 32
 #: payload bytes from which a block's chunk records are assembled by the compiled loop
 _COMPILED_FROM = 1 << 20
-#: zstd level of the chunks written in blocks: -1 (zstd's first "fast" level) shrinks a
-#: fused 90-minute match's track chunks as level 1 does (the file 623.2 MB against 621.3)
-#: for about 0.35 CPU s less of the 1.3 s level 1 took (1.06 GB of messages), and
-#: decompresses slightly faster (3.6 against 3.3 GB/s); level 1 had replaced the ``mcap``
-#: writer's default 3 (ratio 3.49 against 3.47, 1.5 times the speed); any level decodes alike
-ZSTD_LEVEL = -1
+#: zstd level of the chunks written in blocks: -3 compresses a fused 90-minute match's
+#: track chunks (1.06 GB of messages) in 1.47 CPU s against -1's 1.90 (-23 %), to 291.1 MB
+#: against 278.1 (+4.7 %; the file +2 %): the compression is the writer's largest cost and
+#: CPU is what a default fuse lacks on two cores. Levels -4 to -15 were no faster per MB
+#: saved (-7: 1.37 s, 325.8 MB). -1 had replaced level 1 (the file 623.2 MB against 621.3,
+#: 0.35 CPU s less), level 1 the ``mcap`` writer's default 3; any level decodes alike
+ZSTD_LEVEL = -3
 #: zstd level of the table columns (:func:`_compress_all`; a column is kept compressed only
 #: when zstd shrinks it by 10 %: a decision of this level, not changed with the chunks')
 TABLE_ZSTD_LEVEL = 1
