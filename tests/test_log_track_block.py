@@ -223,3 +223,46 @@ def test_rejection_blocks_are_protobufs_own_bytes(tmp_path, rig3):
                            v=float(uv[i, 1]), score=float(score[i]),
                            reason=REASONS[rej.reason[i]]).SerializeToString(deterministic=True)
         assert got[i] == (int(t[i]), int(rej.frame_index[i]), want), i
+
+
+def test_track_chunks_at_the_track_level_detections_at_the_session_level(tmp_path, rig3):
+    """A fused track's chunks (its records written whole) are zstd frames of
+    _chunks.TRACK_ZSTD_LEVEL, a session's detection chunks of _chunks.ZSTD_LEVEL: each chunk's
+    compressed bytes are its records compressed again at that level (zstd is deterministic)."""
+    import zstandard
+    from mcap.reader import make_reader as reader_of
+
+    from pslog.log import _chunks
+    from pslog.records import Detections
+
+    assert _chunks.TRACK_ZSTD_LEVEL != _chunks.ZSTD_LEVEL
+    rng = np.random.default_rng(12)
+    n = 3000
+    times = np.sort(rng.integers(0, 10**11, n))
+    det = Detections.from_frames(rig3.names, times, rng.integers(0, 3, n), np.arange(n),
+                                 np.arange(n), rng.normal(size=(n, 2)) * 300,
+                                 np.full(n, 4.0), rng.random(n))
+    path = tmp_path / "t.mcap"
+    with SessionWriter(path, rig3) as w:
+        w.add_detections(det)
+        w.flush()
+        w.add_track(_track(6000, "typeA", True, rng), last=True)
+    levels = {}
+    with open(path, "rb") as f:
+        reader = reader_of(f)
+        summary = reader.get_summary()
+        topics = {c.id: c.topic for c in summary.channels.values()}
+        for index in summary.chunk_indexes:
+            f.seek(index.chunk_start_offset + 1 + 8 + 8 + 8 + 8 + 4)
+            size = int.from_bytes(f.read(4), "little")
+            assert f.read(size) == b"zstd"
+            stored = f.read(int.from_bytes(f.read(8), "little"))
+            raw = zstandard.ZstdDecompressor().decompress(stored)
+            kind = {topics[c].split("/")[1] for c in index.message_index_offsets}
+            if kind == {"tracks"} and len(raw) > 100_000:  # the blocks, not the metadata's
+                levels.setdefault("tracks", set()).update(
+                    lv for lv in (-3, -1, 1, 3) if zstandard.compress(raw, lv) == stored)
+            elif kind == {"camera"}:
+                levels.setdefault("camera", set()).update(
+                    lv for lv in (-3, -1, 1, 3) if zstandard.compress(raw, lv) == stored)
+    assert levels == {"tracks": {_chunks.TRACK_ZSTD_LEVEL}, "camera": {_chunks.ZSTD_LEVEL}}
