@@ -253,3 +253,42 @@ def test_the_reader_reads_a_table_into_place(sim_session):
             assert got.flags.writeable and got.dtype.isnative, k
         assert np.shares_memory(columns[k], view) == (k in raw), k
         assert not np.shares_memory(copies[k], odd), k
+
+
+def test_long_columns_are_compressed_as_a_sample_of_them_predicts():
+    """A long column (>= _SAMPLE_FROM bytes) is compressed whole only when zstd shrinks a
+    sample of it (start, middle, end) by 5 %: noise is stored raw, a column that compresses
+    (even one whose compressible part is only in the sample's middle) zstd, and one that
+    would compress but not where the sample looks stays raw (the sample decides); every
+    column decodes to the same values either way."""
+    from pslog.log import table as tables
+
+    rng = np.random.default_rng(5)
+    n = tables._SAMPLE_FROM // 8 + 1000
+    smooth_middle = rng.normal(size=n)
+    mid = n // 2
+    smooth_middle[mid - 8192:mid + 8192] = 1.5  # only the middle slice is compressible
+    hidden = rng.normal(size=n)  # compressible only where the sample does not look
+    hidden[tables._SAMPLE_BYTES // 8 + 10:mid - tables._SAMPLE_BYTES // 16 - 10] = 2.5
+    columns = {"time_ns": np.arange(n, dtype=np.int64) * 11_111_111,  # compresses
+               "position_world": rng.normal(size=(n, 3)),  # noise
+               "camera": np.zeros(n, np.int32),
+               "quality/noise": rng.normal(size=n),
+               "quality/ones": np.ones(n),
+               "quality/smooth_middle": smooth_middle, "quality/hidden": hidden}
+    name = tables.track_table("typeA")
+    data = tables.encode(name, ["a", "b"], {"/tracks/typeA": n}, columns)
+    header = json.loads(data[4:4 + int.from_bytes(data[:4], "little")])["columns"]
+    codecs = {k: d["codec"] for k, d in header.items()}
+    assert codecs == {"time_ns": "zstd", "position_world": "none", "camera": "zstd",
+                      "quality/noise": "none", "quality/ones": "zstd",
+                      "quality/smooth_middle": "zstd", "quality/hidden": "none"}, codecs
+    _, decoded = tables.decode(data, name, ["a", "b"])
+    for k, v in columns.items():
+        np.testing.assert_array_equal(decoded[k], v, err_msg=k)
+    # the sample is the column's start, middle and end
+    raw = np.arange(tables._SAMPLE_FROM, dtype=np.uint8)
+    k = tables._SAMPLE_BYTES
+    assert tables._sample(memoryview(raw.tobytes())) == (
+        raw[:k].tobytes() + raw[(len(raw) - k) // 2:(len(raw) + k) // 2].tobytes()
+        + raw[-k:].tobytes())

@@ -174,16 +174,18 @@ def test_compiled_track_encoder_equals_its_python_and_protobuf(rig3):
     bits = np.column_stack([track.position_world, *(np.asarray(fixed[k])
                                                     for k in S.TRACK_FIXED_QUALITY)])
     bits = np.ascontiguousarray(bits).view(np.uint64)
-    extra = np.tile(template[0], (n, 1))
+    keys = list(template[1])
+    quality = np.column_stack([track.quality[k] for k in keys]).astype("<f8").view(np.uint8)
     args = (t, bits, track.camera.astype(np.int64), np.frombuffer(b"c1cam2", np.uint8),
-            np.array([0, 2, 6, 6]), np.frombuffer(b"typeA", np.uint8), extra,
+            np.array([0, 2, 6, 6]), np.frombuffer(b"typeA", np.uint8), template[0],
+            np.array([template[1][k] for k in keys], np.int64), np.ascontiguousarray(quality),
             np.arange(n, dtype=np.int64) * 37, *(np.frombuffer(x, np.uint8) for x in
                                                   (b"world", b"\x22\x02\x10\x05", b"\x12\x00",
                                                    b"", b"\x1a\x00")))
     for channels in ([-1, -1], [3, 70_000 % 65_536]):  # messages alone; whole records
         outs = []
         for fn in (encode_track, encode_track.py_func):
-            out = np.zeros(_wire.bound(n, b"typeA", [b"cam2"], extra.shape[1], 12), np.uint8)
+            out = np.zeros(_wire.bound(n, b"typeA", [b"cam2"], len(template[0]), 12), np.uint8)
             point_len, total_len = np.zeros(n, np.int64), np.zeros(n, np.int64)
             used = fn(*args, np.array(channels, np.int64), out, point_len, total_len)
             outs.append((out[:used].tobytes(), point_len.tolist(), total_len.tolist()))
@@ -221,3 +223,46 @@ def test_rejection_blocks_are_protobufs_own_bytes(tmp_path, rig3):
                            v=float(uv[i, 1]), score=float(score[i]),
                            reason=REASONS[rej.reason[i]]).SerializeToString(deterministic=True)
         assert got[i] == (int(t[i]), int(rej.frame_index[i]), want), i
+
+
+def test_track_chunks_at_the_track_level_detections_at_the_session_level(tmp_path, rig3):
+    """A fused track's chunks (its records written whole) are zstd frames of
+    _chunks.TRACK_ZSTD_LEVEL, a session's detection chunks of _chunks.ZSTD_LEVEL: each chunk's
+    compressed bytes are its records compressed again at that level (zstd is deterministic)."""
+    import zstandard
+    from mcap.reader import make_reader as reader_of
+
+    from pslog.log import _chunks
+    from pslog.records import Detections
+
+    assert _chunks.TRACK_ZSTD_LEVEL != _chunks.ZSTD_LEVEL
+    rng = np.random.default_rng(12)
+    n = 3000
+    times = np.sort(rng.integers(0, 10**11, n))
+    det = Detections.from_frames(rig3.names, times, rng.integers(0, 3, n), np.arange(n),
+                                 np.arange(n), rng.normal(size=(n, 2)) * 300,
+                                 np.full(n, 4.0), rng.random(n))
+    path = tmp_path / "t.mcap"
+    with SessionWriter(path, rig3) as w:
+        w.add_detections(det)
+        w.flush()
+        w.add_track(_track(6000, "typeA", True, rng), last=True)
+    levels = {}
+    with open(path, "rb") as f:
+        reader = reader_of(f)
+        summary = reader.get_summary()
+        topics = {c.id: c.topic for c in summary.channels.values()}
+        for index in summary.chunk_indexes:
+            f.seek(index.chunk_start_offset + 1 + 8 + 8 + 8 + 8 + 4)
+            size = int.from_bytes(f.read(4), "little")
+            assert f.read(size) == b"zstd"
+            stored = f.read(int.from_bytes(f.read(8), "little"))
+            raw = zstandard.ZstdDecompressor().decompress(stored)
+            kind = {topics[c].split("/")[1] for c in index.message_index_offsets}
+            if kind == {"tracks"} and len(raw) > 100_000:  # the blocks, not the metadata's
+                levels.setdefault("tracks", set()).update(
+                    lv for lv in (-3, -1, 1, 3) if zstandard.compress(raw, lv) == stored)
+            elif kind == {"camera"}:
+                levels.setdefault("camera", set()).update(
+                    lv for lv in (-3, -1, 1, 3) if zstandard.compress(raw, lv) == stored)
+    assert levels == {"tracks": {_chunks.TRACK_ZSTD_LEVEL}, "camera": {_chunks.ZSTD_LEVEL}}

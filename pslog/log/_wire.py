@@ -22,7 +22,7 @@ import numpy as np
 from .._jit import kernel
 
 
-@kernel
+@kernel(inline=True)
 def _varint_size(v):
     size = 1
     while v >= 128:
@@ -31,7 +31,7 @@ def _varint_size(v):
     return size
 
 
-@kernel
+@kernel(inline=True)
 def _put_varint(buf, at, v):
     while v >= 128:
         buf[at] = (v & 127) | 128
@@ -41,14 +41,13 @@ def _put_varint(buf, at, v):
     return at + 1
 
 
-@kernel
+@kernel(inline=True)
 def _put_bytes(buf, at, src):
-    for j in range(len(src)):
-        buf[at + j] = src[j]
+    buf[at:at + len(src)] = src
     return at + len(src)
 
 
-@kernel
+@kernel(inline=True)
 def _put_double(buf, at, tag, bits):
     """A double field (``bits``: its IEEE bits as uint64), left out when all bits are 0."""
     if bits == 0:
@@ -59,12 +58,12 @@ def _put_double(buf, at, tag, bits):
     return at + 9
 
 
-@kernel
+@kernel(inline=True)
 def _double_size(bits):
     return 0 if bits == 0 else 9
 
 
-@kernel
+@kernel(inline=True)
 def _decimal_size(v):
     size = 1
     while v >= 10:
@@ -73,7 +72,7 @@ def _decimal_size(v):
     return size
 
 
-@kernel
+@kernel(inline=True)
 def _put_head(out, at, length, channel, t):
     """An MCAP Message record's 31-byte head at ``out[at]`` (MCAP spec, "Message"): opcode
     0x05, record length (``length`` payload bytes + 22), channel id, sequence 0, log time
@@ -98,8 +97,8 @@ HEAD = 31
 
 
 @kernel
-def encode_track(t, bits, cam, names, name_start, method, extra, ids, world, lifetime,
-                 orientation, size, rgba, channels, out, point_len, total_len):
+def encode_track(t, bits, cam, names, name_start, method, template, slots, quality, ids,
+                 world, lifetime, orientation, size, rgba, channels, out, point_len, total_len):
     """Write each point's TrackPoint then SceneUpdate into ``out``; returns the bytes used.
 
     Parameters
@@ -109,7 +108,10 @@ def encode_track(t, bits, cam, names, name_start, method, extra, ids, world, lif
     cam : (n,) int64 camera index into ``name_start``
     names, name_start : the camera names' UTF-8 bytes back to back, (cameras + 1,) offsets
     method : the method's UTF-8 bytes
-    extra : (n, w) uint8, each point's quality map entries (field 10), already encoded
+    template, slots, quality : the quality map entries (field 10) of every point: the
+        ``(w,)`` uint8 bytes of one point's entries (:func:`pslog.log.writer._quality_template`)
+        with the 8 bytes of key ``j``'s value at ``slots[j]``, filled in from ``quality``
+        ``(n, 8 k)`` uint8 (the values' little-endian IEEE bytes, key ``j`` at ``8 j``)
     ids : (n,) int64 scene entity number (``<method>/<id>``)
     world, lifetime, orientation, size, rgba : uint8, the frame id and the constant fields
         (lifetime, the pose's orientation, the sphere's size and colour), already encoded
@@ -151,7 +153,10 @@ def encode_track(t, bits, cam, names, name_start, method, extra, ids, world, lif
         at = _put_double(out, at, 0x39, bits[i, 3])
         at = _put_double(out, at, 0x41, bits[i, 4])
         at = _put_double(out, at, 0x49, bits[i, 5])
-        at = _put_bytes(out, at, extra[i])
+        at = _put_bytes(out, at, template)  # the map's entries, then their values
+        row = at - len(template)
+        for j in range(len(slots)):
+            out[row + slots[j]:row + slots[j] + 8] = quality[i, 8 * j:8 * j + 8]
         point_len[i] = at - start
         if heads:
             _put_head(out, head_at, at - start, channels[0], ti)

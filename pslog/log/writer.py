@@ -1203,28 +1203,20 @@ def _track_block(track: Track, lo: int, hi: int, method: str, cameras, fixed: di
     encoded by :func:`._wire.encode_track`; None when sample points differ from protobuf's
     bytes. ``records``: the block holds whole MCAP Message records (:attr:`_Block.records`),
     the messages' bytes the same."""
-    from . import _encode as E
-
     n = hi - lo
     t = track.time_ns[lo:hi].astype(np.int64)
     xyz = np.ascontiguousarray(track.position_world[lo:hi], dtype=np.float64)
     cam = np.asarray(track.camera[lo:hi], dtype=np.int64)
     tmpl, slots = template
-    extra = np.broadcast_to(tmpl, (n, len(tmpl))).copy()
-    for key, at in slots.items():
-        extra[:, at:at + 8] = np.ascontiguousarray(
-            track.quality[key][lo:hi], dtype="<f8").view(np.uint8).reshape(n, 8)
+    # each key's values as IEEE bits, one column per key, put in place by the kernel
+    keys = list(slots)
+    quality = np.empty((n, len(keys)), dtype="<f8")
+    for j, key in enumerate(keys):
+        quality[:, j] = track.quality[key][lo:hi]
     fixed_cols = [np.asarray(fixed[k][lo:hi], dtype=np.float64) if len(fixed[k]) == len(track)
                   else np.full(n, np.nan) for k in S.TRACK_FIXED_QUALITY]
     ids = first_id + lo + np.arange(n, dtype=np.int64)
-    lifetime = E.rows(E.field_message(4, E.concat([
-        E.field_varint(1, np.array([_TRACK_LIFETIME_NS // 1_000_000_000])),
-        E.field_varint(2, np.array([_TRACK_LIFETIME_NS % 1_000_000_000]))])))[0]
-    orientation = E.rows(E.field_message(2, E.field_double(4, np.array([1.0]))))[0]
-    size = E.rows(E.field_message(2, E.concat([E.field_double(k, np.array([_TRACK_SPHERE_M]))
-                                                for k in (1, 2, 3)])))[0]
-    rgba = E.rows(E.field_message(3, E.concat([E.field_double(k + 1, np.array([float(v)]))
-                                                for k, v in enumerate((*color, 1.0))])))[0]
+    lifetime, orientation, size, rgba = _scene_constants(tuple(float(v) for v in color))
 
     # every point's two messages by one compiled loop (_wire; numpy's per-field calls over
     # each layout group cost most of the time of writing a fused match)
@@ -1239,13 +1231,15 @@ def _track_block(track: Track, lo: int, hi: int, method: str, cameras, fixed: di
                                                    orientation, size, rgba)]
     out = np.empty(_wire.bound(n, method.encode(), names_b, len(tmpl),
                                sum(len(x) for x in consts)), dtype=np.uint8)
+    slot_at = np.array([slots[k] for k in keys], dtype=np.int64)
     point_len = np.empty(n, dtype=np.int64)
     lengths = np.empty(n, dtype=np.int64)
     channels = np.array([channel, scene_channel] if records else [-1, -1], dtype=np.int64)
     used = _wire.encode_track(t, np.ascontiguousarray(bits), cam,
                               np.frombuffer(b"".join(names_b), dtype=np.uint8), name_start,
-                              method_b, extra, ids, world_a, lifetime_a, orientation_a, size_a,
-                              rgba_a, channels, out, point_len, lengths)
+                              method_b, tmpl, slot_at, quality.view(np.uint8), ids, world_a,
+                              lifetime_a, orientation_a, size_a, rgba_a, channels, out,
+                              point_len, lengths)
     # records: written from this buffer as it is (cut into chunks); else bytes of their own
     data = out[:used] if records else out[:used].tobytes()
     del out
@@ -1279,6 +1273,23 @@ def _track_block(track: Track, lo: int, hi: int, method: str, cameras, fixed: di
                   np.repeat(t, 2), np.zeros(2 * n, dtype=np.int64),
                   np.column_stack([point_len, lengths - point_len]).ravel(), data,
                   records=records)
+
+
+@functools.lru_cache(maxsize=64)
+def _scene_constants(color: tuple[float, ...]) -> tuple[bytes, bytes, bytes, bytes]:
+    """The encoded constant fields of a track's SceneUpdate spheres (lifetime, the pose's
+    orientation, the sphere's size, ``color``'s RGBA), as :func:`scene_point` writes them."""
+    from . import _encode as E
+
+    lifetime = E.rows(E.field_message(4, E.concat([
+        E.field_varint(1, np.array([_TRACK_LIFETIME_NS // 1_000_000_000])),
+        E.field_varint(2, np.array([_TRACK_LIFETIME_NS % 1_000_000_000]))])))[0]
+    orientation = E.rows(E.field_message(2, E.field_double(4, np.array([1.0]))))[0]
+    size = E.rows(E.field_message(2, E.concat([E.field_double(k, np.array([_TRACK_SPHERE_M]))
+                                                for k in (1, 2, 3)])))[0]
+    rgba = E.rows(E.field_message(3, E.concat([E.field_double(k + 1, np.array([v]))
+                                                for k, v in enumerate((*color, 1.0))])))[0]
+    return lifetime, orientation, size, rgba
 
 
 def _quality_entries(extra: dict[str, np.ndarray], n: int, block: int = 1 << 15):
