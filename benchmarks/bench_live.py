@@ -32,7 +32,7 @@ to the sinks (``LiveSummary.cpu_ns``): what the fusion latency would be on an id
 loop (after the method's warm-up, the collector frozen, as ``serve`` runs), each point's
 datagram sent by a ``UdpSink``, ``GAP_MS`` asleep between two datagrams (default 8; 0: back
 to back, warm caches). Reports the CPU per datagram that made a point, the part of it spent
-in the fusion (``StreamFuser.push`` and the filter's ``predict``), and per stage (decoding,
+in the fusion (``StreamFuser.push_frame`` and the filter's ``predict``), and per stage (decoding,
 the candidates' gate, the method's own push, the LivePoints, the send: median, p99 and the
 mean over the slowest 1 % of datagrams, µs) with the garbage collections in the loop.
 ``--bytecodes``: the Python bytecodes each stage runs per datagram (``sys.settrace``).
@@ -256,13 +256,14 @@ def direct(rig, frames, method: str, candidates: bool, gap_s: float) -> dict:
     # TypeAStream, the filter's), the points made into LivePoints, the sink's send
     decode = live_fuser.decode_detections
     live_fuser.decode_detections = timed(decode, "decode")
-    if fuser.stream._gate is not None:
-        fuser.stream._gate.push = timed(fuser.stream._gate.push, "gate")
+    gate = fuser.stream._gate
+    if gate is not None:
+        gate.push, gate.push_frame = timed(gate.push, "gate"), timed(gate.push_frame, "gate")
     if fuser.stream.incremental is not None:
         fuser.stream.incremental.push = timed(fuser.stream.incremental.push, "method")
         _one_path(fuser.stream, timed)
     fuser._points = timed(fuser._points, "points")
-    fuser.stream.push = timed(fuser.stream.push)
+    fuser.stream.push_frame = timed(fuser.stream.push_frame)  # (what LiveFuser pushes)
     if fuser._filter is not None:
         fuser._filter.predict = timed(fuser._filter.predict)
     emit = timed(sink.emit, "send")
@@ -342,8 +343,9 @@ def bytecodes(rig, frames, method: str, candidates: bool) -> dict:
 
     decode = live_fuser.decode_detections
     live_fuser.decode_detections = staged(decode, "decode")
-    if fuser.stream._gate is not None:
-        fuser.stream._gate.push = staged(fuser.stream._gate.push, "gate")
+    gate = fuser.stream._gate
+    if gate is not None:
+        gate.push, gate.push_frame = staged(gate.push, "gate"), staged(gate.push_frame, "gate")
     if fuser.stream.incremental is not None:
         fuser.stream.incremental.push = staged(fuser.stream.incremental.push, "method")
         _one_path(fuser.stream, staged)

@@ -4,6 +4,8 @@ flush keeps every column and count of the points it joins."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from _rally import rally
@@ -19,16 +21,35 @@ from pslog.rig import Rig, apply_timing, builtin_rig
 from pslog.simulation import SimulationOptions, simulate_labelled, true_rig
 
 
-def push_frames(fuser, det):
-    """Every frame with candidates, one push per frame (its candidates best first)."""
+def push_frames(fuser, det, form: str = "push", best: bool = False):
+    """Every frame with candidates, one push per frame (its candidates best first; ``best``:
+    the best one alone); ``form`` "push_frame": :meth:`StreamFuser.push_frame` (Python
+    integers, as ``pslog live`` pushes)."""
     out = []
     starts = np.flatnonzero(np.r_[True, np.diff(det.cand_frame) != 0])
     ends = np.r_[starts[1:], det.n_candidates]
     for lo, hi in zip(starts.tolist(), ends.tolist(), strict=True):
+        hi = lo + 1 if best else hi
         f, n = int(det.cand_frame[lo]), hi - lo
+        if form == "push_frame":
+            out.append(fuser.push_frame(int(det.frame_time_ns[f]), int(det.frame_camera[f]),
+                                        det.cand_uv[lo:hi].copy(), int(det.frame_index[f])))
+            continue
         out.append(fuser.push(np.full(n, det.frame_time_ns[f]), np.full(n, det.frame_camera[f]),
                               det.cand_uv[lo:hi], np.full(n, det.frame_index[f])))
     return out
+
+
+def assert_same_track(streamed, batch, dropped: bool = True) -> None:
+    """Every point, column and (``dropped``) count of ``streamed`` is ``batch``'s, bit for bit."""
+    assert_array_equal(streamed.time_ns, batch.time_ns)
+    assert_array_equal(streamed.camera, batch.camera)
+    assert_array_equal(streamed.position_world, batch.position_world)
+    assert streamed.quality.keys() == batch.quality.keys()
+    for key, column in batch.quality.items():
+        assert_array_equal(streamed.quality[key], column, err_msg=key)
+    if dropped:
+        assert streamed.dropped == batch.dropped
 
 
 def test_track_concat_keeps_every_column_and_sums_the_dropped_counts():
@@ -76,18 +97,16 @@ LENS = np.array([-0.25, 0.08, 0.001, -0.001, 0.0])
 DISTRACTOR = (1.0, 1.5, 0.2)  # on the floor, seen by every camera of paper3
 
 
-@pytest.mark.parametrize("method", causal_methods())
-@pytest.mark.parametrize("clocks", [False, True])
-def test_stream_with_candidates_equals_gated_batch_on_a_dirty_session_with_a_lens(method, clocks):
-    """Spurious blobs in 5 % of frames, a static distractor, a half-second blackout, 30 %
-    misses, 10 % drops, a strong lens (with ``clocks``: offsets and rolling shutters too):
-    streaming every frame's candidates gives ``fuse(detections, rig, method)`` (gating on),
-    every point, column and count, bit for bit."""
+def dirty(method: str, clocks: bool, lens: bool = True):
+    """(rig, detections): spurious blobs in 5 % of frames, a static distractor, a half-second
+    blackout, 30 % misses, 10 % drops, a strong lens (with ``clocks``: offsets and rolling
+    shutters too)."""
     from pslog.fusion import METHODS
 
     timing = "typeB" if "shared" in METHODS[method].needs else "typeA"
     rig = apply_timing(builtin_rig("paper3"), timing)
-    rig = Rig(tuple(c.replace(dist=LENS) for c in rig.cameras), rig.name)
+    if lens:
+        rig = Rig(tuple(c.replace(dist=LENS) for c in rig.cameras), rig.name)
     faults = ({"clock_offset_s": {"cam2": 0.004, "cam3": -0.006},
                "readout_s": dict.fromkeys(rig.names, 0.01)} if clocks else {})
     options = SimulationOptions(noise_px=0.3, seed=5, miss_rate=0.3, drop_rate=0.1,
@@ -95,19 +114,45 @@ def test_stream_with_candidates_equals_gated_batch_on_a_dirty_session_with_a_len
                                 blackouts=(("cam3", 1.0, 0.5),), **faults)
     det, _, _ = simulate_labelled(rig, rally(3.0, seed=7, speed=4.0, kick_every_s=0.9)[0], 3.0,
                                   options)
-    rig = true_rig(rig, options)
+    return true_rig(rig, options), det
+
+
+@pytest.mark.parametrize("method", causal_methods())
+@pytest.mark.parametrize("clocks", [False, True])
+def test_stream_with_candidates_equals_gated_batch_on_a_dirty_session_with_a_lens(method, clocks):
+    """On :func:`dirty` sessions streaming every frame's candidates gives ``fuse(detections,
+    rig, method)`` (gating on), every point, column and count, bit for bit."""
+    from pslog.fusion import METHODS
+
+    rig, det = dirty(method, clocks)
     batch = fuse(det, rig, method)
     assert len(batch) >= 8
     fuser = StreamFuser(rig, method, candidates=True)
     streamed = Track.concat([*push_frames(fuser, det), fuser.flush()])
-    assert_array_equal(streamed.time_ns, batch.time_ns)
-    assert_array_equal(streamed.camera, batch.camera)
-    assert_array_equal(streamed.position_world, batch.position_world)
-    assert streamed.quality.keys() == batch.quality.keys()
-    for key, column in batch.quality.items():
-        assert_array_equal(streamed.quality[key], column, err_msg=key)
-    if METHODS[method].streamer is not None:  # (the windowed methods count no drops yet)
-        assert streamed.dropped == batch.dropped
+    # (the windowed methods count no drops yet)
+    assert_same_track(streamed, batch, dropped=METHODS[method].streamer is not None)
+
+
+@pytest.mark.parametrize("method", ["filter", "typeA"])
+@pytest.mark.parametrize("candidates", [True, False])
+def test_push_frame_equals_push_of_the_frames_columns(method, candidates):
+    """``StreamFuser.push_frame`` (``pslog live``'s push: the gate's decision at once, the
+    method's one-detection path) gives what ``push`` of the frame's (k,) columns gives and
+    the batch, every point, column and count, on a dirty session without a lens (``typeA``'s
+    rays in its compiled one-row pass) and with one (``typeA``'s ``push``), with every
+    candidate through the gate or the best one alone (the batch without gating)."""
+    from pslog.fusion import FusionOptions
+
+    options = FusionOptions(confirm_gaps=False)  # (as pslog live: a point per shutter)
+    for lens in (False, True) if method == "typeA" else (False,):
+        rig, det = dirty(method, False, lens=lens)
+        batch = fuse(det, rig, method, replace(options, gating=candidates))
+        assert len(batch) >= 20
+        for form in ("push", "push_frame"):
+            fuser = StreamFuser(rig, method, options, candidates=candidates)
+            streamed = Track.concat([*push_frames(fuser, det, form, best=not candidates),
+                                     fuser.flush()])
+            assert_same_track(streamed, batch)
 
 
 @pytest.mark.parametrize("compiled", [False, True])
@@ -232,23 +277,27 @@ def test_a_malformed_push_is_refused_before_a_kernel_reads_past_its_tables(args,
 
 
 @pytest.mark.parametrize("method", ["typeA", "filter"])
-@pytest.mark.parametrize("form", ["python", "arrays"])
+@pytest.mark.parametrize("form", ["python", "arrays", "frame", "gated frame"])
 def test_a_push_out_of_order_is_refused_in_every_form(method, form):
     """One detection at or before the last one pushed, in (time, camera) order, is refused
-    by the one-detection path as by the general one, and the stream goes on."""
+    by the one-detection path as by the general one (and by ``push_frame``, with or without
+    the gate), and the stream goes on."""
     from pslog.errors import FusionError
 
-    def one(t, c):
-        if form == "python":
-            return t, c, [320.5, 240.5]
-        return np.array([t]), np.array([c], np.int32), np.array([[320.5, 240.5]])
+    fuser = StreamFuser(builtin_rig("paper3"), method, candidates=form == "gated frame")
 
-    fuser = StreamFuser(builtin_rig("paper3"), method)
-    fuser.push(*one(1_000_000, 1))
+    def push(t, c):
+        if form == "python":
+            return fuser.push(t, c, [320.5, 240.5])
+        if form == "arrays":
+            return fuser.push(np.array([t]), np.array([c], np.int32), np.array([[320.5, 240.5]]))
+        return fuser.push_frame(t, c, np.array([[320.5, 240.5]]), 0)
+
+    push(1_000_000, 1)
     for t, c in [(1_000_000, 1), (1_000_000, 0), (999_999, 2)]:
-        with pytest.raises(FusionError, match="order of their logged times; got t="):
-            fuser.push(*one(t, c))
-    fuser.push(*one(1_000_000, 2))
+        with pytest.raises(FusionError, match=r"order of their logged times.*got t="):
+            push(t, c)
+    push(1_000_000, 2)
     fuser.flush()
 
 

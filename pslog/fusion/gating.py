@@ -1883,8 +1883,31 @@ class StreamGate:
                 start = i
         return self._step(final=False)
 
+    def push_frame(self, t: int, cam: int, index: int, uv: np.ndarray):
+        """:meth:`push` of one frame's candidates (Python integers, ``uv`` (k, 2) float64 of
+        the caller's own; checked by the caller) when it is decided at once (compiled,
+        nothing pending, no clock correction, no wait): the chosen candidates' pixels (c, 2)
+        (the frame's time, camera and index are its own); None otherwise, nothing done (then
+        :meth:`push` it)."""
+        if self._state is None or self.pending or self.corrected or self.wait_ns:
+            return None
+        if (t, cam) <= self.last:
+            raise FusionError("candidates must arrive in (time, camera) order of their logged "
+                              f"times, each frame's in one push; got t={t} ns after "
+                              f"t={self.last[0]} ns")
+        self.last = (t, cam)
+        return self._chosen(t, cam, index, uv)
+
     def _one(self, t: int, cam: int, index: int, uv: np.ndarray):
         """:meth:`push` of one frame that is decided at once (compiled; nothing pending)."""
+        chosen = self._chosen(t, cam, index, uv)
+        c = len(chosen)
+        return (np.full(c, t, np.int64), np.full(c, cam, np.int32), chosen,
+                np.full(c, index, np.int64))
+
+    def _chosen(self, t: int, cam: int, index: int, uv: np.ndarray) -> np.ndarray:
+        """The frame's chosen candidates' pixels, decided at once (compiled); the rejected
+        ones recorded."""
         xy = None
         if self.distorted[cam]:  # the iterative undistortion, in numpy (row by row)
             xy = self._normalized(cam, uv)
@@ -1898,9 +1921,7 @@ class StreamGate:
                 chosen.append(k)
             else:
                 self.rejected.append((t, cam, index, *uv[k].tolist(), r))
-        c = len(chosen)
-        return (np.full(c, t, np.int64), np.full(c, cam, np.int32),
-                uv[chosen] if c != n else uv, np.full(c, index, np.int64))
+        return uv[chosen] if len(chosen) != n else uv
 
     def _normalized(self, cam: int, uv: np.ndarray) -> np.ndarray:
         """Ideal normalized coordinates (k, 2) of a lensed camera's pixels ``uv`` (k, 2)

@@ -460,7 +460,7 @@ class TypeAStream:
         # direction Jacobian and its pixel Jacobian's rows are made once, when it arrives
         # (as Prepared makes them for a session, elementwise)
         self._lo = self._hi = 0
-        self._buffers = _StreamColumns(64)
+        self._buffers = _StreamColumns(1024)  # (the window moved to the front rarely)
         self._noise = NoiseEstimate()  # the detection noise the innovations imply, so far
         self._empty = fuse_type_a(template, self._max_gap_s, self._noise_px,
                                   noise=NoiseEstimate())[0]
@@ -469,6 +469,12 @@ class TypeAStream:
         self._tables = self._shared["_kernel_tables"]
         self._lens_table = template.lens_rows
         self._no_rows = np.empty(0)  # (kink_kernel without bend_rows' tables)
+        # (the kernels of _push_one and push_one, held: no import at each push)
+        from ._prepare_kernel import lensless_rows, previous_next
+
+        self._kernels = _pseudo_kernel
+        self._previous_next = previous_next
+        self._lensless_rows = lensless_rows
         # cameras without lens distortion: their new rows in one compiled pass
         # (_prepare_kernel.lensless_rows; a lens's rows go through numpy as prepare does)
         self._lensless = [not np.any(c.dist) for c in rig.cameras]
@@ -561,6 +567,37 @@ class TypeAStream:
                            events=np.arange(n - n_new, n), seen=buf.seen[window],
                            noise=self._noise, explain=False)[0]
 
+    def push_one(self, time_ns: int, camera: int, u: float, v: float) -> Track:
+        """One detection (Python int, int, float, float; after every row pushed before, the
+        camera the rig's: checked by the caller, :class:`~pslog.fusion.stream.StreamFuser`):
+        the Track :meth:`push` gives for it, without push's conversions and checks of (n,)
+        columns: its row written into the buffers (frame index 0: no point uses it) and
+        :meth:`_push_one`. The first push and a lensed camera's rows take :meth:`push`."""
+        if not self._checked or not self._lensless[camera]:
+            return self.push(np.array([time_ns], np.int64), np.array([camera], np.int32),
+                             np.array([[u, v]]), np.zeros(1, np.int64))
+        buf = self._buffers
+        lo, hi = self._lo, self._hi
+        # (push's searchsorted, side left, of the window's sorted times)
+        bound, times = time_ns - self._history_ns, buf.time
+        while lo < hi and times[lo] < bound:
+            lo += 1
+        if hi + 1 > buf.capacity:  # the window to the front (in a larger buffer if need be)
+            buf = self._buffers = buf.moved(lo, hi, 2 * (hi - lo + 1))
+            lo, hi = 0, hi - lo
+        end = hi + 1
+        buf.time[hi] = time_ns
+        buf.camera[hi] = buf.camera64[hi] = camera
+        row = buf.uv[hi]
+        row[0], row[1] = u, v
+        buf.frame[hi] = buf.seen[hi] = 0
+        self._lensless_rows(
+            buf.camera64[hi:end], buf.uv[hi:end], *self._lensless_tables, buf.uv_und[hi:end],
+            buf.ray_dir[hi:end], buf.jac[hi:end], buf.jac_rows[hi:end], buf.rays[hi:end],
+            buf.dir_jac[:, :, hi:end])
+        self._lo, self._hi = lo, end
+        return self._push_one(lo, end)
+
     def _lens_rows(self, buf: _StreamColumns, hi: int, end: int) -> None:
         """prepare's per-camera pass (numpy: a lens's iterative undistortion) and
         Prepared.observed_rays' and observed_direction_jacobians' compiled pass, for the
@@ -600,9 +637,7 @@ class TypeAStream:
         point's scalars, each the same IEEE operation as the (1,) columns' (the same bits,
         the same Track: tests/test_stream_type_a.py) without a Prepared, an Observations
         and ~60 numpy calls on arrays of one element."""
-        from . import _pseudo_kernel
-        from ._prepare_kernel import previous_next
-
+        _pseudo_kernel, previous_next = self._kernels, self._previous_next
         buf = self._buffers
         time_ns, camera = buf.time[lo:end], buf.camera[lo:end]
         uv_und = buf.uv_und[lo:end]

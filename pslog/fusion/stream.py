@@ -146,6 +146,41 @@ class StreamFuser:
         else:
             time_ns, camera, uv, frame_index = stream_arrays(
                 time_ns, camera, uv, frame_index, len(self.rig), "StreamFuser.push")
+        return self._push_rows(time_ns, camera, uv, frame_index)
+
+    def push_frame(self, time_ns: int, camera: int, uv: np.ndarray, frame_index: int) -> Track:
+        """:meth:`push` of one frame's candidates, best first, as ``pslog live`` pushes them:
+        Python integers (``camera`` in the rig, ``time_ns`` and ``frame_index`` within int64:
+        checked by the caller) and a (k, 2) float64 array of the caller's own, k >= 1. The
+        same Track (and the same errors) as ``push(np.full(k, time_ns), np.full(k, camera),
+        uv, np.full(k, frame_index))``, without making and checking those columns: the
+        gate's decision at once and the incremental form's one-detection path where they
+        apply."""
+        one, gate = self._push_one, self._gate
+        if one is not None:
+            chosen = uv if gate is None else gate.push_frame(time_ns, camera, frame_index, uv)
+            if chosen is not None and len(chosen) <= 1:
+                if not len(chosen):  # (every candidate rejected: nothing new)
+                    return self._settled(final=False)
+                key = (time_ns, camera)
+                if key <= self._last_logged:
+                    raise FusionError("StreamFuser.push: detections must arrive in (time, "
+                                      f"camera) order of their logged times; got t={time_ns} "
+                                      f"ns after t={self._last_logged[0]} ns")
+                self._last_logged = key
+                u, v = chosen[0].tolist()
+                return one(time_ns, camera, u, v)
+            if chosen is not None:  # (the gate kept several: the rows of push)
+                c = len(chosen)
+                return self._push_rows(np.full(c, time_ns, np.int64),
+                                       np.full(c, camera, np.int32), chosen,
+                                       np.full(c, frame_index, np.int64))
+        k = len(uv)
+        return self.push(np.full(k, time_ns, np.int64), np.full(k, camera, np.int32), uv,
+                         np.full(k, frame_index, np.int64))
+
+    def _push_rows(self, time_ns, camera, uv, frame_index) -> Track:
+        """The rest of :meth:`push`: checked rows (the gate's chosen ones) into the method."""
         if len(time_ns) == 0:
             return self._settled(final=False)
         keys = ([(int(time_ns[0]), int(camera[0]))] if len(time_ns) == len(camera) == 1  # (one)

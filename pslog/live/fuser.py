@@ -38,6 +38,7 @@ from __future__ import annotations
 import bisect
 import heapq
 import math
+import operator
 import time
 from collections import deque
 from dataclasses import dataclass, field, replace
@@ -155,6 +156,21 @@ class LivePoint:
                 "flags": self.flags,
                 "predicted": [_num(a) for a in self.predicted_position.tolist()],
                 "velocity": [_num(a) for a in self.predicted_velocity.tolist()]}
+
+
+def _layout(keys: tuple) -> tuple:
+    """Where a Track's quality row (its columns ``keys`` in order) holds what a LivePoint
+    takes: ``(residual, camera_mask, covariance getter, std getter, [(flag column, bit)])``,
+    indices or None (:meth:`LiveFuser._points`, cached per key tuple)."""
+    at = {k: j for j, k in enumerate(keys)}
+    cov = (operator.itemgetter(*(at[k] for k in _COV_KEYS))
+           if all(k in at for k in _COV_KEYS) else None)
+    std = (operator.itemgetter(*(at[k] for k in ("std_x_m", "std_y_m", "std_z_m")))
+           if all(k in at for k in ("std_x_m", "std_y_m", "std_z_m")) else None)
+    flags = [(at[k], bit) for k, bit in (
+        ("rejected", FLAG_PREDICTION), ("jump", FLAG_JUMP), ("init", FLAG_INIT)) if k in at]
+    return at.get("residual_px", at.get("residual_max_px")), at.get("camera_mask"), cov, std, \
+        flags
 
 
 def _num(value) -> float | None:
@@ -325,6 +341,7 @@ class LiveFuser:
         self._max_gap_ns = int((self.options.max_gap_s or default_max_gap_s(rig)) * NS)
         self._filter = getattr(getattr(self.stream, "incremental", None), "filter", None)
         self._last_point: tuple[int, np.ndarray] | None = None  # (session ns, position)
+        self._layouts: dict[tuple, tuple] = {}  # quality keys -> _layout
         self._flushed = False
         #: name of the camera of the latest valid datagram ("" before any)
         self.last_camera = ""
@@ -433,15 +450,15 @@ class LiveFuser:
         try:
             if k:
                 if k == 1:  # the usual frame: nothing to order (a copy: the stream's own)
-                    n, uv = 1, d.uv.copy()
+                    uv = d.uv.copy()
                 else:  # best first, as a session stores
                     order = np.argsort(-d.score, kind="stable")
                     if not self.candidates:
                         order = order[:1]
-                    n, uv = len(order), d.uv[order]
-                track = self.stream.push(np.array([logged] * n, np.int64),
-                                         np.array([cam] * n, np.int32), uv,
-                                         np.array([d.frame_index] * n, np.int64))
+                    uv = d.uv[order]
+                # (Python integers, checked: the camera the rig's, the times and the frame
+                # index within int64)
+                track = self.stream.push_frame(logged, cam, uv, d.frame_index)
             else:
                 track = None
         except FusionError:
@@ -521,31 +538,40 @@ class LiveFuser:
         times = track.time_ns.tolist()
         cams = track.camera.tolist()
         positions = track.position_world
-        residual = q.get("residual_px", q.get("residual_max_px"))
-        mask = q.get("camera_mask")
-        has_cov = all(k in q for k in _COV_KEYS)
+        # the quality columns as one row of Python floats per point (float(column[i]) each,
+        # the same values; one numpy call per track, not one per column and point)
+        keys = tuple(q)
+        rows = (np.array(list(q.values()), dtype=np.float64).T.tolist() if keys
+                else [[]] * n)
+        layout = self._layouts.get(keys)
+        if layout is None:
+            layout = self._layouts[keys] = _layout(keys)
+        residual, mask, cov_at, std_at, flag_at = layout
         flt = self._filter
-        state = flt.state() if flt is not None else None
-        # per track, not per point: the flag columns as Python lists (== 1 as numpy's)
-        flag_cols = [(q[k].tolist(), bit) for k, bit in (
-            ("rejected", FLAG_PREDICTION), ("jump", FLAG_JUMP), ("init", FLAG_INIT)) if k in q]
+        state = flt.state() if flt is not None and cov_at is None else None
+        epoch = self.epoch_ns
+        method = self.method
+        new = object.__new__
         out = []
         for i in range(n):
             t, cam = times[i], cams[i]
             p = positions[i]
-            if has_cov:
-                xx, xy, xz, yy, yz, zz = (float(q[k][i]) for k in _COV_KEYS)
+            row = rows[i]
+            if cov_at is not None:
+                xx, xy, xz, yy, yz, zz = cov_at(row)
                 cov = np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
             elif state is not None and state[0] == t and i == n - 1:
                 cov = state[2][:3, :3].copy()  # the filter's own, after this update
-            elif "std_x_m" in q:
-                cov = np.diag([float(q[k][i]) ** 2 for k in ("std_x_m", "std_y_m", "std_z_m")])
-                cov[~np.eye(3, dtype=bool)] = np.nan  # off-diagonal terms not kept
+            elif std_at is not None:
+                sx, sy, sz = std_at(row)
+                # (np.diag of the squares, the off-diagonal terms not kept)
+                cov = np.array([[sx ** 2, math.nan, math.nan], [math.nan, sy ** 2, math.nan],
+                                [math.nan, math.nan, sz ** 2]])
             else:
                 cov = _NAN33
             flags = 0
-            for col, bit in flag_cols:
-                if col[i] == 1:
+            for j, bit in flag_at:
+                if row[j] == 1:
                     flags |= bit
             pred_p, pred_v = self._predicted(t, p, now)
             arrivals = self._cams[cam]._arrivals
@@ -556,16 +582,19 @@ class LiveFuser:
             else:
                 j = bisect.bisect_right(arrivals, (t, _I64_MAX)) - 1
             arrival = arrivals[j][1] if j >= 0 else now
-            out.append(LivePoint(
-                method=self.method, camera=names[cam], camera_index=cam,
-                t_capture_ns=t + self.epoch_ns, t_emit_ns=now, position_world=_ro(p),
+            m = row[mask] if mask is not None else math.nan
+            # a LivePoint of these fields (its frozen __init__ sets them one by one)
+            point = new(LivePoint)
+            point.__dict__.update(
+                method=method, camera=names[cam], camera_index=cam,
+                t_capture_ns=t + epoch, t_emit_ns=now, position_world=_ro(p),
                 cov_world=_ro(cov),
-                residual_px=float(residual[i]) if residual is not None else math.nan,
-                camera_mask=int(mask[i]) if mask is not None and math.isfinite(mask[i])
-                else 1 << cam,
+                residual_px=row[residual] if residual is not None else math.nan,
+                camera_mask=int(m) if math.isfinite(m) else 1 << cam,
                 predicted_position=_ro(pred_p), predicted_velocity=_ro(pred_v),
-                arrival_ns=arrival, flags=flags,
-                quality={k: float(v[i]) for k, v in q.items()}, epoch_ns=self.epoch_ns))
+                arrival_ns=arrival, flags=flags, quality=dict(zip(keys, row, strict=True)),
+                epoch_ns=epoch)
+            out.append(point)
             self._cams[cam].points += 1
         self._counts["points"] += n
         return out
