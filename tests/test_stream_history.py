@@ -1,7 +1,7 @@
 """The window StreamFuser keeps for the methods it re-fuses (``sync``, ``nearest``, ``typeB``,
 ``linear``) is what a point still to emit can reach back to, ``max_gap_s + tolerance``
-(``nearest``: one ``max_gap_s`` more, its partners' previous detections, whose image
-velocity its covariance uses; pslog/fusion/stream.py; the cut then moves back to a sync
+(``nearest``: two ``max_gap_s`` more, its partners' previous two detections, from which its
+covariance extrapolates their image motion; pslog/fusion/stream.py; the cut then moves back to a sync
 group's start, which tests/test_stream_window.py covers): the stream equals batch on
 sessions whose points do reach back that far, and a shorter window (half of it) would lose
 their partners (checked: halving the reach fails nearest, typeB and linear here and in
@@ -29,9 +29,9 @@ def test_stream_keeps_exactly_the_history_its_points_reach_back_to(method):
         rig, obs, _ = dirty_session(timing, seed)
         fuser = StreamFuser(rig, method)
         need = default_max_gap_s(rig) + fuser.options.tolerance_s
-        # nearest's covariance takes each partner's image velocity from that camera's
-        # previous detection, up to max_gap_s before the partner
-        window = need + (default_max_gap_s(rig) if method == "nearest" else 0.0)
+        # nearest's covariance extrapolates each partner's image motion from that camera's
+        # previous two detections, each up to max_gap_s before the next
+        window = need + (2 * default_max_gap_s(rig) if method == "nearest" else 0.0)
         batch = fuse(obs, rig, method)
         parts = streamed(rig, method, obs)
         assert len(batch) > 15

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
+from typing import NamedTuple
 
 import numpy as np
 
@@ -70,7 +71,7 @@ def sync_groups(obs: Observations, n_cams: int, tolerance_s: float
 
 
 def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | None,
-                 shift_px: list[np.ndarray] | None = None):
+                 motion: list[SlotMotion] | None = None):
     """N-view least-squares point of each row of detections, with its quality and validity.
 
     Parameters
@@ -78,11 +79,10 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | None,
     rows : (k, m) int64, the detection of camera c for point i at ``rows[i, c]`` (-1: none)
     noise_px : float or None, standard deviation of the detections' pixel noise, pixels per
         axis (None: no covariance columns)
-    shift_px : list of (k, 2) per camera slot, or None: how far each slot's undistorted pixel
-        is from where it would be at the point's time (the ball moved between the shutters
-        taken as simultaneous; :func:`motion_shifts`); the point's error it makes to first
-        order, ``m = Σ_s J_s δ_s``, is added to the covariance as ``m mᵀ`` (docs/methods.md,
-        "nearest's uncertainty")
+    motion : list of :class:`SlotMotion` per camera slot, or None: how each slot's detection
+        moved in its image between its shutter and the point's time (the shutters taken as
+        simultaneous are not; :func:`slot_motion`): the covariance is then
+        :func:`motion_covariance`'s (docs/methods.md, "nearest's uncertainty")
 
     Returns
     -------
@@ -137,10 +137,11 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | None,
                 points, origins, dirs, used,
                 [direction_jacobian(prep, c, uv[c]) for c in range(m)])
     if noise_px is not None:
-        cov = covariance(slot_rows, jacobians,
-                         [prep.pixel_jacobians_t(r[:, c]) for c in range(m)], noise_px)
-        if shift_px is not None:
-            cov = _with_motion(cov, jacobians, shift_px, used)
+        if motion is None:
+            cov = covariance(slot_rows, jacobians,
+                             [prep.pixel_jacobians_t(r[:, c]) for c in range(m)], noise_px)
+        else:
+            cov = motion_covariance(prep, slot_rows, jacobians, motion, used, noise_px)
     # (k,) columns, each reduction over the m cameras in numpy's order (the same bits)
     times = [prep.obs.time_ns[r[:, c]] for c in range(m)]
     t_max = np.maximum.reduce([np.where(used[:, c], times[c], np.iinfo(np.int64).min)
@@ -181,29 +182,129 @@ def _with_motion(cov: dict[str, np.ndarray], jacobians: list[np.ndarray],
     return covariance_columns(six)
 
 
-def motion_shifts(prep: Prepared, rows: np.ndarray, time_ns: np.ndarray, max_gap_s: float
-                  ) -> list[np.ndarray]:
-    """Per camera slot (k, 2): ``δ = u̇ (t - t_s)``, how far the slot's detection (undistorted
-    pixels, at its capture time ``t_s``) is from where the ball was in that image at the
-    point's time ``t``; ``u̇`` the camera's image velocity from that detection and the
-    camera's previous one (within ``max_gap_s``; none: 0). Causal: only detections at or
-    before the slot's own."""
+#: The image speed (pixels per second, per axis) taken as unknown for a slot whose camera has
+#: no previous detection within ``max_gap_s`` (its first detection, or its first after a gap
+#: or a blackout): its shift over the lag is a zero-mean guess of this size, not 0 (a ball at
+#: 5 m/s seen from 3 m by a 600 px focal length: 1,000 px/s). See docs/methods.md,
+#: "nearest's covariance at the true noise".
+UNKNOWN_IMAGE_SPEED_PX_S = 1000.0
+
+
+class SlotMotion(NamedTuple):
+    """Where one camera slot's detection is off the ball's image at the point's time, and
+    the detections that say so (:func:`slot_motion`); (k,) or (k, 2) per point."""
+
+    shift: np.ndarray  # (k, 2) δ = u̇ (t - t_s), undistorted pixels (0: no velocity)
+    accel: np.ndarray  # (k, 2) α = ½ ü (t - t_s)(t - t_s'), undistorted pixels (0: none)
+    rows: np.ndarray  # (k, 3) the slot's detection and its camera's two previous (-1: none)
+    linear: np.ndarray  # (k, 3) weights of those detections in the linear extrapolation
+    quadratic: np.ndarray  # (k, 3) weights in the quadratic extrapolation
+    lag: np.ndarray  # (k,) t - t_s, seconds
+
+
+def slot_motion(prep: Prepared, rows: np.ndarray, time_ns: np.ndarray, max_gap_s: float
+                ) -> list[SlotMotion]:
+    """Per camera slot: the image motion between the slot's detection (at ``t_s``) and the
+    point's time ``t``, from that detection and its camera's previous ones (each within
+    ``max_gap_s`` of the next; causal: only detections at or before the slot's own).
+
+    With ``L = t - t_s``, ``h = t_s - t_s'``, ``g = t_s' - t_s''`` (``s'``, ``s''`` the
+    camera's previous two detections), the ball's undistorted image position at ``t`` is
+    extrapolated from them with the weights ``w`` (Lagrange, through the detection times):
+
+        linear (two detections):      w = (1 + ρ, -ρ, 0),  ρ = L / h
+        quadratic (three):            w = ((L+h)(L+h+g) / (h(h+g)), -L(L+h+g) / (h g),
+                                           L(L+h) / ((h+g) g))
+
+    ``shift`` is the linear extrapolation's move ``δ = u̇ L``, ``u̇ = (u_s - u_s') / h``
+    (unchanged since session 12), ``accel`` the quadratic's further move
+    ``α = ½ ü L (L + h)``, ``ü = 2 ((u_s - u_s') / h - (u_s' - u_s'') / g) / (h + g)``
+    (the backward difference is the velocity half a frame earlier, hence ``L + h``, not
+    ``L``). A slot without a previous detection has ``w = (1, 0, 0)``.
+    """
     out = []
     max_gap_ns = int(max_gap_s * NS)
     t_obs = prep.obs.time_ns
     uv = prep.uv_undistorted
+    k = rows.shape[0]
     for c in range(rows.shape[1]):
         row = rows[:, c]
         have = row >= 0
-        prev = np.where(have, latest_row_at_or_before(prep, c, np.maximum(row, 0) - 1), -1)
-        dt = (t_obs[np.maximum(row, 0)] - t_obs[np.maximum(prev, 0)]) / NS
+        r0 = np.maximum(row, 0)
+        prev = np.where(have, latest_row_at_or_before(prep, c, r0 - 1), -1)
+        p0 = np.maximum(prev, 0)
+        dt = (t_obs[r0] - t_obs[p0]) / NS
         ok = have & (prev >= 0) & (dt > 0) & (dt <= max_gap_ns / NS)
+        prev2 = np.where(ok, latest_row_at_or_before(prep, c, p0 - 1), -1)
+        q0 = np.maximum(prev2, 0)
+        g = (t_obs[p0] - t_obs[q0]) / NS
+        ok2 = ok & (prev2 >= 0) & (g > 0) & (g <= max_gap_ns / NS)
         with np.errstate(invalid="ignore", divide="ignore"):
-            vel = (uv[np.maximum(row, 0)] - uv[np.maximum(prev, 0)]) / dt[:, None]
-        lag = (time_ns - t_obs[np.maximum(row, 0)]) / NS
+            vel = (uv[r0] - uv[p0]) / dt[:, None]
+        lag = (time_ns - t_obs[r0]) / NS
         with np.errstate(invalid="ignore"):
-            out.append(np.where(ok[:, None], vel * lag[:, None], 0.0))
+            shift = np.where(ok[:, None], vel * lag[:, None], 0.0)
+        h = np.where(ok, dt, 1.0)
+        g = np.where(ok2, g, 1.0)
+        L = np.where(ok, lag, 0.0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            acc = 2.0 * ((uv[r0] - uv[p0]) / h[:, None] - (uv[p0] - uv[q0]) / g[:, None]) \
+                / (h + g)[:, None]
+            accel = np.where(ok2[:, None], 0.5 * acc * (L * (L + h))[:, None], 0.0)
+        rho = L / h
+        linear = np.stack([1.0 + rho, -rho, np.zeros(k)], axis=1)
+        quad = np.stack([(L + h) * (L + h + g) / (h * (h + g)), -L * (L + h + g) / (h * g),
+                         L * (L + h) / ((h + g) * g)], axis=1)
+        quad = np.where(ok2[:, None], quad, linear)
+        out.append(SlotMotion(shift, accel,
+                              np.stack([row, np.where(ok, prev, -1),
+                                        np.where(ok2, prev2, -1)], axis=1), linear, quad,
+                              np.where(have, lag, 0.0)))
     return out
+
+
+def motion_covariance(prep: Prepared, slot_rows: np.ndarray, jacobians: list[np.ndarray],
+                      motion: list[SlotMotion], used: np.ndarray, noise_px: float
+                      ) -> dict[str, np.ndarray]:
+    """``nearest``'s covariance (quality columns): the point ``P`` is made from the slots'
+    unshifted pixels ``u_s`` while the ball was at ``ū_s(t)``; to first order its error is
+    ``Σ_s J_s (u_s - ū_s(t))``, and with ``ū_s(t)`` extrapolated from the slot's detection
+    and its camera's previous ones (``Σ_j w_sj u_sj``, :func:`slot_motion`)
+
+        P - P(t) = -(m + a) + Σ_s J_s Σ_j w_sj n_sj      (n: the detections' noise)
+
+    ``m + a = Σ_s J_s (δ_s + α_s)`` the extrapolated move. Hence
+
+        Σ = σ² Σ_s J_s (Σ_j w_sj² L_sj L_sjᵀ) J_sᵀ + Σ_s (v₀ (t - t_s))² J_s J_sᵀ [no u̇_s]
+            + (m + a)(m + a)ᵀ
+
+    (``L_sj`` the recorded-to-undistorted pixel Jacobian of detection ``sj``; a detection
+    in two slots adds its weighted Jacobians first, :func:`covariance`; ``v₀``
+    :data:`UNKNOWN_IMAGE_SPEED_PX_S` where the slot's camera has no previous detection).
+    ``slot_rows`` (k, m) the detections used (-1: none), ``jacobians`` (3, 2, k) per slot."""
+    k, m = slot_rows.shape
+    rows, jac, pixel = [], [], []
+    for s in range(m):
+        for j in range(3):
+            r = np.where(used[:, s], motion[s].rows[:, j], -1)
+            rows.append(r)
+            jac.append(jacobians[s] * np.where(r >= 0, motion[s].quadratic[:, j], 0.0))
+            pixel.append(prep.pixel_jacobians_t(np.maximum(r, 0)))
+    cov = covariance(np.stack(rows, axis=1), jac, pixel, noise_px)
+    # the unknown shift of a slot without image velocity: independent of every detection's
+    # noise and of the other slots' (rows of their own, distinct: nothing merges them)
+    blind = [used[:, s] & (motion[s].rows[:, 1] < 0) & (motion[s].lag > 0) for s in range(m)]
+    if any(np.any(b) for b in blind):
+        unknown = covariance(
+            np.stack([np.where(b, np.arange(k) + s * k, -1) for s, b in enumerate(blind)],
+                     axis=1),
+            [J * np.where(b, motion[s].lag * UNKNOWN_IMAGE_SPEED_PX_S, 0.0)
+             for s, (J, b) in enumerate(zip(jacobians, blind, strict=True))],
+            [None] * m, 1.0)
+        six = np.stack([cov[f"cov_{a}_m2"] + unknown[f"cov_{a}_m2"]
+                        for a in ("xx", "yy", "zz", "xy", "xz", "yz")])
+        cov = covariance_columns(six)
+    return _with_motion(cov, jacobians, [d.shift + d.accel for d in motion], used)
 
 
 def triangulate_groups(prep: Prepared, group: np.ndarray, n_groups: int,
@@ -281,9 +382,9 @@ def fuse_nearest(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5)
     others = (rows >= 0).sum(axis=1)
     rows[events, camera] = events
     # the other cameras' detections are older than the point: the ball moved since
-    shifts = (motion_shifts(prep, rows, time_ns, max_gap_s) if noise_px is not None
+    motion = (slot_motion(prep, rows, time_ns, max_gap_s) if noise_px is not None
               else None)
-    points, quality, flags, _ = nview_points(prep, rows, noise_px, shifts)
+    points, quality, flags, _ = nview_points(prep, rows, noise_px, motion)
     made = (others >= 1) & (quality["n_detections"] >= 2)
     keep = made & (flags == 0) & np.all(np.isfinite(points), axis=1)
     track = Track("nearest", time_ns[keep], points[keep], camera[keep],

@@ -76,9 +76,10 @@ class StreamFuser:
         # ``sync`` one group within the tolerance: max_gap_s + tolerance (less loses a bridged
         # partner: stream-equals-batch tests at long gaps). The cut is then moved back to the
         # start of a sync group (see _settled), so the window groups exactly as the batch does.
-        # ``nearest``'s covariance also takes each partner's image velocity from that camera's
-        # previous detection, within max_gap_s of the partner: twice max_gap_s back.
-        reach = 2 if method == "nearest" else 1
+        # ``nearest``'s covariance also extrapolates each partner's image motion from that
+        # camera's previous two detections, each within max_gap_s of the next: three times
+        # max_gap_s back.
+        reach = 3 if method == "nearest" else 1
         self._history_ns = int((reach * self._max_gap_s + self.options.tolerance_s) * NS) + 1
         self._settle_ns = 0 if self._immediate else int(self.options.tolerance_s * NS)
         self._F = fundamental_matrices(rig.cameras)
