@@ -167,6 +167,30 @@ def _three_partner_detections(n_prev: int):
     return rig, Observations(time_ns, cam, uv, np.arange(len(t), dtype=np.int64))
 
 
+def _pair_point(prep, u_c, u_d):
+    """The least-squares point of camera 0's undistorted pixel ``u_c`` and camera 1's."""
+    from pslog.geometry import triangulate_rays
+
+    dirs = np.stack([prep.rays_from_undistorted(0, u_c[None]),
+                     prep.rays_from_undistorted(1, u_d[None])], axis=1)
+    return triangulate_rays(prep.centers[None], dirs)[0][0]
+
+
+def _pair_jacobian(prep, e: int, d: int, slot: int) -> np.ndarray:
+    """d(point) / d(undistorted pixel of ``slot``) (3, 2) of rows ``e`` (camera 0) and ``d``
+    (camera 1), by central differences."""
+    uv = prep.uv_undistorted
+    out = np.empty((3, 2))
+    for axis in range(2):
+        step = np.zeros(2)
+        step[axis] = 1e-4
+        hi, lo = [uv[e], uv[d]], [uv[e], uv[d]]
+        hi[slot] = hi[slot] + step
+        lo[slot] = lo[slot] - step
+        out[:, axis] = (_pair_point(prep, *hi) - _pair_point(prep, *lo)) / 2e-4
+    return out
+
+
 def test_nearest_covariance_is_the_extrapolation_noise_and_the_extrapolated_move():
     """Hand-computed (docs/methods.md, "nearest's covariance at the true noise"): the point
     P is made of c1's detection u_c (lag 0) and c2's latest u_d (lag L = 0.021 s), while
@@ -180,7 +204,6 @@ def test_nearest_covariance_is_the_extrapolation_noise_and_the_extrapolated_move
     the sign of the cross term of u_d's own noise flips, or α takes L² for L (L + h)."""
     from pslog.fusion._prepare import prepare
     from pslog.fusion.stereo import UNKNOWN_IMAGE_SPEED_PX_S
-    from pslog.geometry import triangulate_rays
 
     sigma = 0.4
     for n_prev in (0, 1, 2):
@@ -191,25 +214,8 @@ def test_nearest_covariance_is_the_extrapolation_noise_and_the_extrapolated_move
         e, d = len(obs) - 1, len(obs) - 2  # the point's own row, its partner's
         uv = prep.uv_undistorted
 
-        def point(u_c, u_d):
-            dirs = np.stack([prep.rays_from_undistorted(0, u_c[None]),
-                             prep.rays_from_undistorted(1, u_d[None])], axis=1)
-            return triangulate_rays(prep.centers[None], dirs)[0][0]
-
-        def jacobian(slot):
-            out = np.empty((3, 2))
-            for axis in range(2):
-                step = np.zeros(2)
-                step[axis] = 1e-4
-                hi = [uv[e], uv[d]]
-                lo = [uv[e], uv[d]]
-                hi[slot] = hi[slot] + step
-                lo[slot] = lo[slot] - step
-                out[:, axis] = (point(*hi) - point(*lo)) / 2e-4
-            return out
-
-        J_c, J_d = jacobian(0), jacobian(1)
-        assert np.allclose(point(uv[e], uv[d]), track.position_world[0], atol=1e-9)
+        J_c, J_d = _pair_jacobian(prep, e, d, 0), _pair_jacobian(prep, e, d, 1)
+        assert np.allclose(_pair_point(prep, uv[e], uv[d]), track.position_world[0], atol=1e-9)
         L_all = [prep.pixel_jacobians_t(np.array([r]))[..., 0] for r in range(len(obs))]
         t_s = obs.time_ns[:e] / NS
         lag = (obs.time_ns[e] - obs.time_ns[d]) / NS

@@ -70,15 +70,15 @@ def sync_groups(obs: Observations, n_cams: int, tolerance_s: float
     return group, seen.sum(axis=1)
 
 
-def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | None,
+def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | np.ndarray | None,
                  motion: list[SlotMotion] | None = None):
     """N-view least-squares point of each row of detections, with its quality and validity.
 
     Parameters
     ----------
     rows : (k, m) int64, the detection of camera c for point i at ``rows[i, c]`` (-1: none)
-    noise_px : float or None, standard deviation of the detections' pixel noise, pixels per
-        axis (None: no covariance columns)
+    noise_px : float, (k,) float or None, standard deviation of the detections' pixel noise,
+        pixels per axis (an array: each point's; None: no covariance columns)
     motion : list of :class:`SlotMotion` per camera slot, or None: how each slot's detection
         moved in its image between its shutter and the point's time (the shutters taken as
         simultaneous are not; :func:`slot_motion`): the covariance is then
@@ -190,6 +190,71 @@ def _with_motion(cov: dict[str, np.ndarray], jacobians: list[np.ndarray],
 UNKNOWN_IMAGE_SPEED_PX_S = 1000.0
 
 
+#: ``nearest``'s detection noise (:func:`detection_noise`): the residuals of the last
+#: NOISE_WINDOW_S seconds before each checkpoint, checkpoints every NOISE_EVERY_S seconds
+#: (of the session's clock), an estimate once NOISE_MIN_COUNT residuals are in its window,
+#: and at least NOISE_FLOOR_PX (or the stated noise, if lower).
+NOISE_WINDOW_S = 1.0
+NOISE_EVERY_S = 0.25
+NOISE_MIN_COUNT = 16
+NOISE_FLOOR_PX = 0.1
+
+
+def detection_noise(prep: Prepared, time_ns: np.ndarray, max_gap_s: float,
+                    noise_px: float) -> np.ndarray:
+    """The detection noise σ (pixels per axis, (k,)) of points at ``time_ns`` (k,), as the
+    session's own detections show it, causally.
+
+    Each detection with its camera's three previous ones (each within ``max_gap_s`` of the
+    next) has a residual from the quadratic through those three, extrapolated to it with
+    the Lagrange weights ``l`` (:func:`slot_motion`'s, ``L``, ``h``, ``g`` the intervals):
+    ``r = ‖u - Σ l_j u_j‖ / √(1 + Σ l_j²)`` (undistorted pixels), under the model the norm
+    of a 2-D Gaussian of σ per axis (plus the ball's jerk, small between bounces), whose
+    median is ``σ √(2 ln 2)`` (Rayleigh). A point at ``t`` takes the median of the residuals
+    of the detections in ``[T - NOISE_WINDOW_S, T)``, ``T`` the latest multiple of
+    ``NOISE_EVERY_S`` at or before ``t`` (a selection over detections strictly before the
+    point: causal; the stream keeps that history and so gives every point the batch's
+    bits), divided by ``√(2 ln 2)``; ``noise_px`` while fewer than ``NOISE_MIN_COUNT``
+    residuals are in the window; never below ``min(noise_px, NOISE_FLOOR_PX)``. Robust: a
+    bounce or kick spoils three or four residuals of a camera, a few percent of a window.
+    """
+    from .innovation import RAYLEIGH_MEDIAN
+
+    n = len(prep.obs)
+    t_obs = prep.obs.time_ns
+    norm = np.full(n, np.nan)
+    for rows in prep.per_camera:
+        if len(rows) < 4:
+            continue
+        t = t_obs[rows]
+        u = prep.uv_undistorted[rows]
+        a, b, c = ((t[3:] - t[2:-1]) / NS, (t[2:-1] - t[1:-2]) / NS, (t[1:-2] - t[:-3]) / NS)
+        gap = int(max_gap_s * NS) / NS  # (as slot_motion's)
+        ok = (a > 0) & (b > 0) & (c > 0) & (a <= gap) & (b <= gap) & (c <= gap)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            l1 = (a + b) * (a + b + c) / (b * (b + c))
+            l2 = -a * (a + b + c) / (b * c)
+            l3 = a * (a + b) / ((b + c) * c)
+            res = u[3:] - (l1[:, None] * u[2:-1] + l2[:, None] * u[1:-2]
+                           + l3[:, None] * u[:-3])
+            value = np.hypot(res[:, 0], res[:, 1]) / np.sqrt(1 + l1**2 + l2**2 + l3**2)
+        norm[rows[3:][ok]] = value[ok]
+    finite = np.flatnonzero(np.isfinite(norm))
+    t_fin = t_obs[finite]
+    v_fin = norm[finite]
+    every = int(NOISE_EVERY_S * NS)
+    window = int(NOISE_WINDOW_S * NS)
+    checkpoint = time_ns // every * every
+    marks, inverse = np.unique(checkpoint, return_inverse=True)
+    lo = np.searchsorted(t_fin, marks - window, side="left")
+    hi = np.searchsorted(t_fin, marks, side="left")
+    est = np.full(len(marks), np.nan)
+    for i in np.flatnonzero(hi - lo >= NOISE_MIN_COUNT).tolist():
+        est[i] = np.median(v_fin[lo[i]:hi[i]]) / RAYLEIGH_MEDIAN
+    sigma = np.where(np.isfinite(est), est, noise_px)[inverse]
+    return np.maximum(sigma, min(noise_px, NOISE_FLOOR_PX))
+
+
 class SlotMotion(NamedTuple):
     """Where one camera slot's detection is off the ball's image at the point's time, and
     the detections that say so (:func:`slot_motion`); (k,) or (k, 2) per point."""
@@ -264,8 +329,8 @@ def slot_motion(prep: Prepared, rows: np.ndarray, time_ns: np.ndarray, max_gap_s
 
 
 def motion_covariance(prep: Prepared, slot_rows: np.ndarray, jacobians: list[np.ndarray],
-                      motion: list[SlotMotion], used: np.ndarray, noise_px: float
-                      ) -> dict[str, np.ndarray]:
+                      motion: list[SlotMotion], used: np.ndarray,
+                      noise_px: float | np.ndarray) -> dict[str, np.ndarray]:
     """``nearest``'s covariance (quality columns): the point ``P`` is made from the slots'
     unshifted pixels ``u_s`` while the ball was at ``ū_s(t)``; to first order its error is
     ``Σ_s J_s (u_s - ū_s(t))``, and with ``ū_s(t)`` extrapolated from the slot's detection
@@ -368,7 +433,9 @@ def fuse_sync(prep: Prepared, tolerance_s: float = 1e-3, noise_px: float | None 
 def fuse_nearest(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5) -> Track:
     """``nearest``: each detection triangulated with the latest detection of every other camera
     as if they were simultaneous (the paper's "unsynchronized" baseline). Geometrically
-    invalid points are dropped and counted in ``Track.dropped``."""
+    invalid points are dropped and counted in ``Track.dropped``. ``noise_px``: the
+    detections' noise until the session's own shows (:func:`detection_noise`), and an upper
+    bound of its floor; None: no covariance."""
     n, n_cams = len(prep.obs), len(prep.centers)
     time_ns, camera = prep.obs.time_ns, prep.obs.camera
     rows = np.full((n, n_cams), -1, dtype=np.int64)
@@ -381,10 +448,14 @@ def fuse_nearest(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5)
         rows[ok, d] = latest[ok]
     others = (rows >= 0).sum(axis=1)
     rows[events, camera] = events
-    # the other cameras' detections are older than the point: the ball moved since
-    motion = (slot_motion(prep, rows, time_ns, max_gap_s) if noise_px is not None
-              else None)
-    points, quality, flags, _ = nview_points(prep, rows, noise_px, motion)
+    # the other cameras' detections are older than the point: the ball moved since; and the
+    # noise is the detections' own (docs/methods.md, "nearest's covariance at the true noise")
+    if noise_px is None:
+        points, quality, flags, _ = nview_points(prep, rows, None)
+    else:
+        points, quality, flags, _ = nview_points(
+            prep, rows, detection_noise(prep, time_ns, max_gap_s, noise_px),
+            slot_motion(prep, rows, time_ns, max_gap_s))
     made = (others >= 1) & (quality["n_detections"] >= 2)
     keep = made & (flags == 0) & np.all(np.isfinite(points), axis=1)
     track = Track("nearest", time_ns[keep], points[keep], camera[keep],
