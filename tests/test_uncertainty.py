@@ -240,3 +240,43 @@ def test_nearest_covariance_is_the_extrapolation_noise_and_the_extrapolated_move
         # the terms are not small here: each weight differs from the old model's (1, 0, 0)
         # and the extrapolated move from the linear one by more than the tolerance
         assert n_prev == 0 or np.sum(w**2) > 1.5
+
+
+def test_nearest_noise_is_the_noise_its_detections_show_causally():
+    """``detection_noise``: the median residual of each camera's detection from the quadratic
+    through its three previous ones, normalised by ``√(1 + Σ l²)`` and Rayleigh's
+    ``√(2 ln 2)``, is the detections' σ (0.8 px here, 0.3 px in a second session); the
+    stated noise until 16 residuals are in a point's window; at least min(stated, 0.1 px);
+    and a point's σ does not change when the detections after it do (causal)."""
+    from pslog.fusion._prepare import default_max_gap_s, prepare
+    from pslog.fusion.stereo import NOISE_EVERY_S, detection_noise
+
+    rig = _rig(3)
+    gap = default_max_gap_s(rig)
+    for sigma in (0.8, 0.3):
+        detections, _ = simulate(rig, _straight(4.0), 4.0,
+                                 SimulationOptions(noise_px=sigma, seed=3))
+        obs = detections.best()
+        prep = prepare(obs, rig)
+        est = detection_noise(prep, obs.time_ns, gap, 0.5)
+        t = (obs.time_ns - obs.time_ns[0]) / NS
+        late = t > 1.5
+        assert np.all(np.abs(est[late] / sigma - 1) < 0.3), (sigma, est[late].min(),
+                                                           est[late].max())
+        assert abs(np.median(est[late]) / sigma - 1) < 0.08, np.median(est[late])
+        assert np.all(est[t < NOISE_EVERY_S] == 0.5)  # no residual before the first mark
+        # causal: the first half's σ with the second half's detections moved far away
+        half = len(obs) // 2
+        uv = obs.uv.copy()
+        uv[half:] += 40.0
+        moved = Observations(obs.time_ns, obs.camera, uv, obs.frame_index)
+        est2 = detection_noise(prepare(moved, rig), obs.time_ns, gap, 0.5)
+        assert np.array_equal(est2[:half + 1], est[:half + 1])
+        assert not np.array_equal(est2, est)
+    # noise-free detections: the floor, min(stated, 0.1 px)
+    detections, _ = simulate(rig, _straight(2.0), 2.0, SimulationOptions(noise_px=0.0))
+    obs = detections.best()
+    t = (obs.time_ns - obs.time_ns[0]) / NS
+    for stated, floor in ((0.5, 0.1), (0.05, 0.05)):
+        est = detection_noise(prepare(obs, rig), obs.time_ns, gap, stated)
+        assert np.all(est[t > 1.5] == floor)
