@@ -198,6 +198,7 @@ NOISE_WINDOW_S = 1.0
 NOISE_EVERY_S = 0.25
 NOISE_MIN_COUNT = 16
 NOISE_FLOOR_PX = 0.1
+_NOISE_BLOCK = 1024  # checkpoints whose windows are sorted at once
 
 
 def detection_noise(prep: Prepared, time_ns: np.ndarray, max_gap_s: float,
@@ -211,12 +212,13 @@ def detection_noise(prep: Prepared, time_ns: np.ndarray, max_gap_s: float,
     ``r = ‖u - Σ l_j u_j‖ / √(1 + Σ l_j²)`` (undistorted pixels), under the model the norm
     of a 2-D Gaussian of σ per axis (plus the ball's jerk, small between bounces), whose
     median is ``σ √(2 ln 2)`` (Rayleigh). A point at ``t`` takes the median of the residuals
-    of the detections in ``[T - NOISE_WINDOW_S, T)``, ``T`` the latest multiple of
-    ``NOISE_EVERY_S`` at or before ``t`` (a selection over detections strictly before the
-    point: causal; the stream keeps that history and so gives every point the batch's
-    bits), divided by ``√(2 ln 2)``; ``noise_px`` while fewer than ``NOISE_MIN_COUNT``
-    residuals are in the window; never below ``min(noise_px, NOISE_FLOOR_PX)``. Robust: a
-    bounce or kick spoils three or four residuals of a camera, a few percent of a window.
+    of the detections in ``[T - NOISE_WINDOW_S, T)`` (the upper median: the middle element),
+    ``T`` the latest multiple of ``NOISE_EVERY_S`` at or before ``t`` (a selection over
+    detections strictly before the point: causal; the stream keeps that history and so
+    gives every point the batch's bits), divided by ``√(2 ln 2)``; ``noise_px`` while
+    fewer than ``NOISE_MIN_COUNT`` residuals are in the window; never below
+    ``min(noise_px, NOISE_FLOOR_PX)``. Robust: a bounce or kick spoils three or four
+    residuals of a camera, a few percent of a window.
     """
     from .innovation import RAYLEIGH_MEDIAN
 
@@ -248,9 +250,20 @@ def detection_noise(prep: Prepared, time_ns: np.ndarray, max_gap_s: float,
     marks, inverse = np.unique(checkpoint, return_inverse=True)
     lo = np.searchsorted(t_fin, marks - window, side="left")
     hi = np.searchsorted(t_fin, marks, side="left")
+    count = hi - lo
     est = np.full(len(marks), np.nan)
-    for i in np.flatnonzero(hi - lo >= NOISE_MIN_COUNT).tolist():
-        est[i] = np.median(v_fin[lo[i]:hi[i]]) / RAYLEIGH_MEDIAN
+    full = np.flatnonzero(count >= NOISE_MIN_COUNT)
+    if len(full):
+        # each window's middle element (the upper median: a selection, as type A's), the
+        # windows padded with inf and sorted a block of marks at a time
+        width = int(count[full].max())
+        padded = np.append(v_fin, np.inf)
+        for at in range(0, len(full), _NOISE_BLOCK):
+            block = full[at:at + _NOISE_BLOCK]
+            index = lo[block, None] + np.arange(width)
+            index = np.where(index < hi[block, None], index, len(v_fin))
+            windows = np.sort(padded[index], axis=1)
+            est[block] = windows[np.arange(len(block)), count[block] // 2] / RAYLEIGH_MEDIAN
     sigma = np.where(np.isfinite(est), est, noise_px)[inverse]
     return np.maximum(sigma, min(noise_px, NOISE_FLOOR_PX))
 
@@ -348,27 +361,43 @@ def motion_covariance(prep: Prepared, slot_rows: np.ndarray, jacobians: list[np.
     :data:`UNKNOWN_IMAGE_SPEED_PX_S` where the slot's camera has no previous detection).
     ``slot_rows`` (k, m) the detections used (-1: none), ``jacobians`` (3, 2, k) per slot."""
     k, m = slot_rows.shape
-    rows, jac, pixel = [], [], []
+    # no detection is in two slots of a point (a slot's are its camera's), so the weighted
+    # detections of slot s add up to J_s M_s J_sᵀ, M_s = Σ_j w_sj² L_sj L_sjᵀ (2 x 2), given
+    # to covariance as its Cholesky factor C_s (C_s C_sᵀ = M_s): three slots, not nine
+    factors = []
     for s in range(m):
+        M = np.zeros((2, 2, k))
         for j in range(3):
             r = np.where(used[:, s], motion[s].rows[:, j], -1)
-            rows.append(r)
-            jac.append(jacobians[s] * np.where(r >= 0, motion[s].quadratic[:, j], 0.0))
-            pixel.append(prep.pixel_jacobians_t(np.maximum(r, 0)))
-    cov = covariance(np.stack(rows, axis=1), jac, pixel, noise_px)
-    # the unknown shift of a slot without image velocity: independent of every detection's
-    # noise and of the other slots' (rows of their own, distinct: nothing merges them)
-    blind = [used[:, s] & (motion[s].rows[:, 1] < 0) & (motion[s].lag > 0) for s in range(m)]
-    if any(np.any(b) for b in blind):
-        unknown = covariance(
-            np.stack([np.where(b, np.arange(k) + s * k, -1) for s, b in enumerate(blind)],
-                     axis=1),
-            [J * np.where(b, motion[s].lag * UNKNOWN_IMAGE_SPEED_PX_S, 0.0)
-             for s, (J, b) in enumerate(zip(jacobians, blind, strict=True))],
-            [None] * m, 1.0)
-        six = np.stack([cov[f"cov_{a}_m2"] + unknown[f"cov_{a}_m2"]
-                        for a in ("xx", "yy", "zz", "xy", "xz", "yz")])
-        cov = covariance_columns(six)
+            w2 = np.where(r >= 0, motion[s].quadratic[:, j] ** 2, 0.0)
+            L = prep.pixel_jacobians_t(np.maximum(r, 0))
+            if L is None:
+                M[0, 0] += w2
+                M[1, 1] += w2
+            else:  # L Lᵀ: (a, c) = Σ_b L[a, b] L[c, b]
+                M[0, 0] += w2 * (L[0, 0] * L[0, 0] + L[0, 1] * L[0, 1])
+                M[1, 1] += w2 * (L[1, 0] * L[1, 0] + L[1, 1] * L[1, 1])
+                M[1, 0] += w2 * (L[1, 0] * L[0, 0] + L[1, 1] * L[0, 1])
+        C = np.zeros((2, 2, k))
+        C[0, 0] = np.sqrt(M[0, 0])
+        with np.errstate(invalid="ignore", divide="ignore"):
+            C[1, 0] = np.where(C[0, 0] > 0, M[1, 0] / C[0, 0], 0.0)
+        C[1, 1] = np.sqrt(np.maximum(M[1, 1] - C[1, 0] * C[1, 0], 0.0))
+        factors.append(C)
+    cov = covariance(slot_rows, jacobians, factors, noise_px)
+    # the unknown shift of a slot without image velocity, independent of every detection's
+    # noise and of the other slots': Σ_s (v₀ L_s)² J_s J_sᵀ
+    unknown = np.zeros((6, k))
+    first, second = np.array([0, 1, 2, 0, 0, 1]), np.array([0, 1, 2, 1, 2, 2])
+    for s in range(m):
+        blind = used[:, s] & (motion[s].rows[:, 1] < 0) & (motion[s].lag > 0)
+        if np.any(blind):
+            f2 = np.where(blind, (motion[s].lag * UNKNOWN_IMAGE_SPEED_PX_S) ** 2, 0.0)
+            J = jacobians[s]
+            unknown += f2 * (J[first, 0] * J[second, 0] + J[first, 1] * J[second, 1])
+    if np.any(unknown):
+        cov = covariance_columns(np.stack([cov[f"cov_{a}_m2"] for a in
+                                           ("xx", "yy", "zz", "xy", "xz", "yz")]) + unknown)
     return _with_motion(cov, jacobians, [d.shift + d.accel for d in motion], used)
 
 
