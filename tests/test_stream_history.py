@@ -1,11 +1,12 @@
 """The window StreamFuser keeps for the methods it re-fuses (``sync``, ``nearest``, ``typeB``,
 ``linear``) is what a point still to emit can reach back to, ``max_gap_s + tolerance``
-(``nearest``: one ``max_gap_s`` more, its partners' previous detections, whose image
-velocity its covariance uses; pslog/fusion/stream.py; the cut then moves back to a sync
-group's start, which tests/test_stream_window.py covers): the stream equals batch on
-sessions whose points do reach back that far, and a shorter window (half of it) would lose
-their partners (checked: halving the reach fails nearest, typeB and linear here and in
-test_stream_window.py)."""
+(``nearest``: also the residuals its covariance's noise estimate takes, the second before
+the latest quarter-second checkpoint, each from its camera's three previous detections;
+checked: without them the stream's std_m differs from batch; pslog/fusion/stream.py; the
+cut then moves back to a sync group's start, which tests/test_stream_window.py covers):
+the stream equals batch on sessions whose points do reach back that far, and a shorter
+window (half of it) would lose their partners (checked: halving the reach fails nearest,
+typeB and linear here and in test_stream_window.py)."""
 
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ from test_fusion_validity import dirty_session, streamed
 from pslog import NS
 from pslog.fusion import METHODS, fuse
 from pslog.fusion._prepare import default_max_gap_s
+from pslog.fusion.stereo import NOISE_EVERY_S, NOISE_WINDOW_S
 from pslog.fusion.stream import StreamFuser
 
 
@@ -29,9 +31,11 @@ def test_stream_keeps_exactly_the_history_its_points_reach_back_to(method):
         rig, obs, _ = dirty_session(timing, seed)
         fuser = StreamFuser(rig, method)
         need = default_max_gap_s(rig) + fuser.options.tolerance_s
-        # nearest's covariance takes each partner's image velocity from that camera's
-        # previous detection, up to max_gap_s before the partner
-        window = need + (default_max_gap_s(rig) if method == "nearest" else 0.0)
+        # nearest's covariance takes the detections' noise from the residuals of the second
+        # before its latest checkpoint (a quarter second apart), each from its camera's
+        # three previous detections, each up to max_gap_s before the next
+        window = need + (NOISE_EVERY_S + NOISE_WINDOW_S + 2 * default_max_gap_s(rig)
+                         if method == "nearest" else 0.0)
         batch = fuse(obs, rig, method)
         parts = streamed(rig, method, obs)
         assert len(batch) > 15

@@ -637,7 +637,7 @@ def times_pixel_jacobian(J: np.ndarray, L: np.ndarray | None) -> np.ndarray:
 
 def covariance(rows: np.ndarray, jacobians: list[np.ndarray],
                uv_jacobians: Sequence[np.ndarray | None],
-               noise_px: float) -> dict[str, np.ndarray]:
+               noise_px: float | np.ndarray) -> dict[str, np.ndarray]:
     """First-order covariance of points made from detections, as the quality columns
     ``std_m`` (sqrt of the trace: the RMS 3-D error to expect) and the six distinct entries
     ``cov_xx_m2`` ... ``cov_yz_m2`` (k,), m².
@@ -646,8 +646,9 @@ def covariance(rows: np.ndarray, jacobians: list[np.ndarray],
     major (3, 2, k), is d(point) / d(its undistorted pixel) (zero where unused); a detection
     used in several slots of a point (type A's newest frame ends a bracket) adds up its slots'
     Jacobians. Each detection's recorded pixel has independent isotropic noise of ``noise_px``
-    per axis, mapped to undistorted pixels by ``uv_jacobians[s]`` (2, 2, k)
-    (:meth:`Prepared.pixel_jacobians_t`; None for the identity, a rig without lens distortion).
+    per axis (a (k,) array: each point's), mapped to undistorted pixels by ``uv_jacobians[s]``
+    (2, 2, k) (:meth:`Prepared.pixel_jacobians_t`; None for the identity, a rig without lens
+    distortion).
     """
     k = rows.shape[0]
     merges, taken = merged_slots(rows)

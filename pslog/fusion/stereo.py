@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
+from typing import NamedTuple
 
 import numpy as np
 
@@ -69,20 +70,19 @@ def sync_groups(obs: Observations, n_cams: int, tolerance_s: float
     return group, seen.sum(axis=1)
 
 
-def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | None,
-                 shift_px: list[np.ndarray] | None = None):
+def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | np.ndarray | None,
+                 motion: list[SlotMotion] | None = None):
     """N-view least-squares point of each row of detections, with its quality and validity.
 
     Parameters
     ----------
     rows : (k, m) int64, the detection of camera c for point i at ``rows[i, c]`` (-1: none)
-    noise_px : float or None, standard deviation of the detections' pixel noise, pixels per
-        axis (None: no covariance columns)
-    shift_px : list of (k, 2) per camera slot, or None: how far each slot's undistorted pixel
-        is from where it would be at the point's time (the ball moved between the shutters
-        taken as simultaneous; :func:`motion_shifts`); the point's error it makes to first
-        order, ``m = Σ_s J_s δ_s``, is added to the covariance as ``m mᵀ`` (docs/methods.md,
-        "nearest's uncertainty")
+    noise_px : float, (k,) float or None, standard deviation of the detections' pixel noise,
+        pixels per axis (an array: each point's; None: no covariance columns)
+    motion : list of :class:`SlotMotion` per camera slot, or None: how each slot's detection
+        moved in its image between its shutter and the point's time (the shutters taken as
+        simultaneous are not; :func:`slot_motion`): the covariance is then
+        :func:`motion_covariance`'s (docs/methods.md, "nearest's uncertainty")
 
     Returns
     -------
@@ -137,10 +137,11 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | None,
                 points, origins, dirs, used,
                 [direction_jacobian(prep, c, uv[c]) for c in range(m)])
     if noise_px is not None:
-        cov = covariance(slot_rows, jacobians,
-                         [prep.pixel_jacobians_t(r[:, c]) for c in range(m)], noise_px)
-        if shift_px is not None:
-            cov = _with_motion(cov, jacobians, shift_px, used)
+        if motion is None:
+            cov = covariance(slot_rows, jacobians,
+                             [prep.pixel_jacobians_t(r[:, c]) for c in range(m)], noise_px)
+        else:
+            cov = motion_covariance(prep, slot_rows, jacobians, motion, used, noise_px)
     # (k,) columns, each reduction over the m cameras in numpy's order (the same bits)
     times = [prep.obs.time_ns[r[:, c]] for c in range(m)]
     t_max = np.maximum.reduce([np.where(used[:, c], times[c], np.iinfo(np.int64).min)
@@ -181,29 +182,223 @@ def _with_motion(cov: dict[str, np.ndarray], jacobians: list[np.ndarray],
     return covariance_columns(six)
 
 
-def motion_shifts(prep: Prepared, rows: np.ndarray, time_ns: np.ndarray, max_gap_s: float
-                  ) -> list[np.ndarray]:
-    """Per camera slot (k, 2): ``δ = u̇ (t - t_s)``, how far the slot's detection (undistorted
-    pixels, at its capture time ``t_s``) is from where the ball was in that image at the
-    point's time ``t``; ``u̇`` the camera's image velocity from that detection and the
-    camera's previous one (within ``max_gap_s``; none: 0). Causal: only detections at or
-    before the slot's own."""
+#: The image speed (pixels per second, per axis) taken as unknown for a slot whose camera has
+#: no previous detection within ``max_gap_s`` (its first detection, or its first after a gap
+#: or a blackout): its shift over the lag is a zero-mean guess of this size, not 0 (a ball at
+#: 5 m/s seen from 3 m by a 600 px focal length: 1,000 px/s). See docs/methods.md,
+#: "nearest's covariance at the true noise".
+UNKNOWN_IMAGE_SPEED_PX_S = 1000.0
+
+
+#: ``nearest``'s detection noise (:func:`detection_noise`): the residuals of the last
+#: NOISE_WINDOW_S seconds before each checkpoint, checkpoints every NOISE_EVERY_S seconds
+#: (of the session's clock), an estimate once NOISE_MIN_COUNT residuals are in its window,
+#: and at least NOISE_FLOOR_PX (or the stated noise, if lower).
+NOISE_WINDOW_S = 1.0
+NOISE_EVERY_S = 0.25
+NOISE_MIN_COUNT = 16
+NOISE_FLOOR_PX = 0.1
+_NOISE_BLOCK = 1024  # checkpoints whose windows are sorted at once
+
+
+def detection_noise(prep: Prepared, time_ns: np.ndarray, max_gap_s: float,
+                    noise_px: float) -> np.ndarray:
+    """The detection noise σ (pixels per axis, (k,)) of points at ``time_ns`` (k,), as the
+    session's own detections show it, causally.
+
+    Each detection with its camera's three previous ones (each within ``max_gap_s`` of the
+    next) has a residual from the quadratic through those three, extrapolated to it with
+    the Lagrange weights ``l`` (:func:`slot_motion`'s, ``L``, ``h``, ``g`` the intervals):
+    ``r = ‖u - Σ l_j u_j‖ / √(1 + Σ l_j²)`` (undistorted pixels), under the model the norm
+    of a 2-D Gaussian of σ per axis (plus the ball's jerk, small between bounces), whose
+    median is ``σ √(2 ln 2)`` (Rayleigh). A point at ``t`` takes the median of the residuals
+    of the detections in ``[T - NOISE_WINDOW_S, T)`` (the upper median: the middle element),
+    ``T`` the latest multiple of ``NOISE_EVERY_S`` at or before ``t`` (a selection over
+    detections strictly before the point: causal; the stream keeps that history and so
+    gives every point the batch's bits), divided by ``√(2 ln 2)``; ``noise_px`` while
+    fewer than ``NOISE_MIN_COUNT`` residuals are in the window; never below
+    ``min(noise_px, NOISE_FLOOR_PX)``. Robust: a bounce or kick spoils three or four
+    residuals of a camera, a few percent of a window.
+    """
+    from .innovation import RAYLEIGH_MEDIAN
+
+    n = len(prep.obs)
+    t_obs = prep.obs.time_ns
+    norm = np.full(n, np.nan)
+    for rows in prep.per_camera:
+        if len(rows) < 4:
+            continue
+        t = t_obs[rows]
+        u = prep.uv_undistorted[rows]
+        a, b, c = ((t[3:] - t[2:-1]) / NS, (t[2:-1] - t[1:-2]) / NS, (t[1:-2] - t[:-3]) / NS)
+        gap = int(max_gap_s * NS) / NS  # (as slot_motion's)
+        ok = (a > 0) & (b > 0) & (c > 0) & (a <= gap) & (b <= gap) & (c <= gap)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            l1 = (a + b) * (a + b + c) / (b * (b + c))
+            l2 = -a * (a + b + c) / (b * c)
+            l3 = a * (a + b) / ((b + c) * c)
+            res = u[3:] - (l1[:, None] * u[2:-1] + l2[:, None] * u[1:-2]
+                           + l3[:, None] * u[:-3])
+            value = np.hypot(res[:, 0], res[:, 1]) / np.sqrt(1 + l1**2 + l2**2 + l3**2)
+        norm[rows[3:][ok]] = value[ok]
+    finite = np.flatnonzero(np.isfinite(norm))
+    t_fin = t_obs[finite]
+    v_fin = norm[finite]
+    every = int(NOISE_EVERY_S * NS)
+    window = int(NOISE_WINDOW_S * NS)
+    checkpoint = time_ns // every * every
+    marks, inverse = np.unique(checkpoint, return_inverse=True)
+    lo = np.searchsorted(t_fin, marks - window, side="left")
+    hi = np.searchsorted(t_fin, marks, side="left")
+    count = hi - lo
+    est = np.full(len(marks), np.nan)
+    full = np.flatnonzero(count >= NOISE_MIN_COUNT)
+    if len(full):
+        # each window's middle element (the upper median: a selection, as type A's), the
+        # windows padded with inf and sorted a block of marks at a time
+        width = int(count[full].max())
+        padded = np.append(v_fin, np.inf)
+        for at in range(0, len(full), _NOISE_BLOCK):
+            block = full[at:at + _NOISE_BLOCK]
+            index = lo[block, None] + np.arange(width)
+            index = np.where(index < hi[block, None], index, len(v_fin))
+            windows = np.sort(padded[index], axis=1)
+            est[block] = windows[np.arange(len(block)), count[block] // 2] / RAYLEIGH_MEDIAN
+    sigma = np.where(np.isfinite(est), est, noise_px)[inverse]
+    return np.maximum(sigma, min(noise_px, NOISE_FLOOR_PX))
+
+
+class SlotMotion(NamedTuple):
+    """Where one camera slot's detection is off the ball's image at the point's time, and
+    the detections that say so (:func:`slot_motion`); (k,) or (k, 2) per point."""
+
+    shift: np.ndarray  # (k, 2) δ = u̇ (t - t_s), undistorted pixels (0: no velocity)
+    accel: np.ndarray  # (k, 2) α = ½ ü (t - t_s)(t - t_s'), undistorted pixels (0: none)
+    rows: np.ndarray  # (k, 3) the slot's detection and its camera's two previous (-1: none)
+    linear: np.ndarray  # (k, 3) weights of those detections in the linear extrapolation
+    quadratic: np.ndarray  # (k, 3) weights in the quadratic extrapolation
+    lag: np.ndarray  # (k,) t - t_s, seconds
+
+
+def slot_motion(prep: Prepared, rows: np.ndarray, time_ns: np.ndarray, max_gap_s: float
+                ) -> list[SlotMotion]:
+    """Per camera slot: the image motion between the slot's detection (at ``t_s``) and the
+    point's time ``t``, from that detection and its camera's previous ones (each within
+    ``max_gap_s`` of the next; causal: only detections at or before the slot's own).
+
+    With ``L = t - t_s``, ``h = t_s - t_s'``, ``g = t_s' - t_s''`` (``s'``, ``s''`` the
+    camera's previous two detections), the ball's undistorted image position at ``t`` is
+    extrapolated from them with the weights ``w`` (Lagrange, through the detection times):
+
+        linear (two detections):      w = (1 + ρ, -ρ, 0),  ρ = L / h
+        quadratic (three):            w = ((L+h)(L+h+g) / (h(h+g)), -L(L+h+g) / (h g),
+                                           L(L+h) / ((h+g) g))
+
+    ``shift`` is the linear extrapolation's move ``δ = u̇ L``, ``u̇ = (u_s - u_s') / h``
+    (unchanged since session 12), ``accel`` the quadratic's further move
+    ``α = ½ ü L (L + h)``, ``ü = 2 ((u_s - u_s') / h - (u_s' - u_s'') / g) / (h + g)``
+    (the backward difference is the velocity half a frame earlier, hence ``L + h``, not
+    ``L``). A slot without a previous detection has ``w = (1, 0, 0)``.
+    """
     out = []
     max_gap_ns = int(max_gap_s * NS)
     t_obs = prep.obs.time_ns
     uv = prep.uv_undistorted
+    k = rows.shape[0]
     for c in range(rows.shape[1]):
         row = rows[:, c]
         have = row >= 0
-        prev = np.where(have, latest_row_at_or_before(prep, c, np.maximum(row, 0) - 1), -1)
-        dt = (t_obs[np.maximum(row, 0)] - t_obs[np.maximum(prev, 0)]) / NS
+        r0 = np.maximum(row, 0)
+        prev = np.where(have, latest_row_at_or_before(prep, c, r0 - 1), -1)
+        p0 = np.maximum(prev, 0)
+        dt = (t_obs[r0] - t_obs[p0]) / NS
         ok = have & (prev >= 0) & (dt > 0) & (dt <= max_gap_ns / NS)
+        prev2 = np.where(ok, latest_row_at_or_before(prep, c, p0 - 1), -1)
+        q0 = np.maximum(prev2, 0)
+        g = (t_obs[p0] - t_obs[q0]) / NS
+        ok2 = ok & (prev2 >= 0) & (g > 0) & (g <= max_gap_ns / NS)
         with np.errstate(invalid="ignore", divide="ignore"):
-            vel = (uv[np.maximum(row, 0)] - uv[np.maximum(prev, 0)]) / dt[:, None]
-        lag = (time_ns - t_obs[np.maximum(row, 0)]) / NS
+            vel = (uv[r0] - uv[p0]) / dt[:, None]
+        lag = (time_ns - t_obs[r0]) / NS
         with np.errstate(invalid="ignore"):
-            out.append(np.where(ok[:, None], vel * lag[:, None], 0.0))
+            shift = np.where(ok[:, None], vel * lag[:, None], 0.0)
+        h = np.where(ok, dt, 1.0)
+        g = np.where(ok2, g, 1.0)
+        L = np.where(ok, lag, 0.0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            acc = 2.0 * ((uv[r0] - uv[p0]) / h[:, None] - (uv[p0] - uv[q0]) / g[:, None]) \
+                / (h + g)[:, None]
+            accel = np.where(ok2[:, None], 0.5 * acc * (L * (L + h))[:, None], 0.0)
+        rho = L / h
+        linear = np.stack([1.0 + rho, -rho, np.zeros(k)], axis=1)
+        quad = np.stack([(L + h) * (L + h + g) / (h * (h + g)), -L * (L + h + g) / (h * g),
+                         L * (L + h) / ((h + g) * g)], axis=1)
+        quad = np.where(ok2[:, None], quad, linear)
+        out.append(SlotMotion(shift, accel,
+                              np.stack([row, np.where(ok, prev, -1),
+                                        np.where(ok2, prev2, -1)], axis=1), linear, quad,
+                              np.where(have, lag, 0.0)))
     return out
+
+
+def motion_covariance(prep: Prepared, slot_rows: np.ndarray, jacobians: list[np.ndarray],
+                      motion: list[SlotMotion], used: np.ndarray,
+                      noise_px: float | np.ndarray) -> dict[str, np.ndarray]:
+    """``nearest``'s covariance (quality columns): the point ``P`` is made from the slots'
+    unshifted pixels ``u_s`` while the ball was at ``ū_s(t)``; to first order its error is
+    ``Σ_s J_s (u_s - ū_s(t))``, and with ``ū_s(t)`` extrapolated from the slot's detection
+    and its camera's previous ones (``Σ_j w_sj u_sj``, :func:`slot_motion`)
+
+        P - P(t) = -(m + a) + Σ_s J_s Σ_j w_sj n_sj      (n: the detections' noise)
+
+    ``m + a = Σ_s J_s (δ_s + α_s)`` the extrapolated move. Hence
+
+        Σ = σ² Σ_s J_s (Σ_j w_sj² L_sj L_sjᵀ) J_sᵀ + Σ_s (v₀ (t - t_s))² J_s J_sᵀ [no u̇_s]
+            + (m + a)(m + a)ᵀ
+
+    (``L_sj`` the recorded-to-undistorted pixel Jacobian of detection ``sj``; a detection
+    in two slots adds its weighted Jacobians first, :func:`covariance`; ``v₀``
+    :data:`UNKNOWN_IMAGE_SPEED_PX_S` where the slot's camera has no previous detection).
+    ``slot_rows`` (k, m) the detections used (-1: none), ``jacobians`` (3, 2, k) per slot."""
+    k, m = slot_rows.shape
+    # no detection is in two slots of a point (a slot's are its camera's), so the weighted
+    # detections of slot s add up to J_s M_s J_sᵀ, M_s = Σ_j w_sj² L_sj L_sjᵀ (2 x 2), given
+    # to covariance as its Cholesky factor C_s (C_s C_sᵀ = M_s): three slots, not nine
+    factors = []
+    for s in range(m):
+        M = np.zeros((2, 2, k))
+        for j in range(3):
+            r = np.where(used[:, s], motion[s].rows[:, j], -1)
+            w2 = np.where(r >= 0, motion[s].quadratic[:, j] ** 2, 0.0)
+            L = prep.pixel_jacobians_t(np.maximum(r, 0))
+            if L is None:
+                M[0, 0] += w2
+                M[1, 1] += w2
+            else:  # L Lᵀ: (a, c) = Σ_b L[a, b] L[c, b]
+                M[0, 0] += w2 * (L[0, 0] * L[0, 0] + L[0, 1] * L[0, 1])
+                M[1, 1] += w2 * (L[1, 0] * L[1, 0] + L[1, 1] * L[1, 1])
+                M[1, 0] += w2 * (L[1, 0] * L[0, 0] + L[1, 1] * L[0, 1])
+        C = np.zeros((2, 2, k))
+        C[0, 0] = np.sqrt(M[0, 0])
+        with np.errstate(invalid="ignore", divide="ignore"):
+            C[1, 0] = np.where(C[0, 0] > 0, M[1, 0] / C[0, 0], 0.0)
+        C[1, 1] = np.sqrt(np.maximum(M[1, 1] - C[1, 0] * C[1, 0], 0.0))
+        factors.append(C)
+    cov = covariance(slot_rows, jacobians, factors, noise_px)
+    # the unknown shift of a slot without image velocity, independent of every detection's
+    # noise and of the other slots': Σ_s (v₀ L_s)² J_s J_sᵀ
+    unknown = np.zeros((6, k))
+    first, second = np.array([0, 1, 2, 0, 0, 1]), np.array([0, 1, 2, 1, 2, 2])
+    for s in range(m):
+        blind = used[:, s] & (motion[s].rows[:, 1] < 0) & (motion[s].lag > 0)
+        if np.any(blind):
+            f2 = np.where(blind, (motion[s].lag * UNKNOWN_IMAGE_SPEED_PX_S) ** 2, 0.0)
+            J = jacobians[s]
+            unknown += f2 * (J[first, 0] * J[second, 0] + J[first, 1] * J[second, 1])
+    if np.any(unknown):
+        cov = covariance_columns(np.stack([cov[f"cov_{a}_m2"] for a in
+                                           ("xx", "yy", "zz", "xy", "xz", "yz")]) + unknown)
+    return _with_motion(cov, jacobians, [d.shift + d.accel for d in motion], used)
 
 
 def triangulate_groups(prep: Prepared, group: np.ndarray, n_groups: int,
@@ -267,7 +462,9 @@ def fuse_sync(prep: Prepared, tolerance_s: float = 1e-3, noise_px: float | None 
 def fuse_nearest(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5) -> Track:
     """``nearest``: each detection triangulated with the latest detection of every other camera
     as if they were simultaneous (the paper's "unsynchronized" baseline). Geometrically
-    invalid points are dropped and counted in ``Track.dropped``."""
+    invalid points are dropped and counted in ``Track.dropped``. ``noise_px``: the
+    detections' noise until the session's own shows (:func:`detection_noise`), and an upper
+    bound of its floor; None: no covariance."""
     n, n_cams = len(prep.obs), len(prep.centers)
     time_ns, camera = prep.obs.time_ns, prep.obs.camera
     rows = np.full((n, n_cams), -1, dtype=np.int64)
@@ -280,10 +477,14 @@ def fuse_nearest(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5)
         rows[ok, d] = latest[ok]
     others = (rows >= 0).sum(axis=1)
     rows[events, camera] = events
-    # the other cameras' detections are older than the point: the ball moved since
-    shifts = (motion_shifts(prep, rows, time_ns, max_gap_s) if noise_px is not None
-              else None)
-    points, quality, flags, _ = nview_points(prep, rows, noise_px, shifts)
+    # the other cameras' detections are older than the point: the ball moved since; and the
+    # noise is the detections' own (docs/methods.md, "nearest's covariance at the true noise")
+    if noise_px is None:
+        points, quality, flags, _ = nview_points(prep, rows, None)
+    else:
+        points, quality, flags, _ = nview_points(
+            prep, rows, detection_noise(prep, time_ns, max_gap_s, noise_px),
+            slot_motion(prep, rows, time_ns, max_gap_s))
     made = (others >= 1) & (quality["n_detections"] >= 2)
     keep = made & (flags == 0) & np.all(np.isfinite(points), axis=1)
     track = Track("nearest", time_ns[keep], points[keep], camera[keep],

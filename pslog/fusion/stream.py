@@ -35,7 +35,7 @@ from ..rig import Rig
 from . import METHODS, FusionOptions, causal_methods, check_method, check_tolerance, fuse
 from ._prepare import default_max_gap_s, prepare
 from .gating import _clock_model, _true_time_ns, stream_arrays
-from .stereo import sync_groups
+from .stereo import NOISE_EVERY_S, NOISE_WINDOW_S, sync_groups
 
 
 class StreamFuser:
@@ -76,10 +76,15 @@ class StreamFuser:
         # ``sync`` one group within the tolerance: max_gap_s + tolerance (less loses a bridged
         # partner: stream-equals-batch tests at long gaps). The cut is then moved back to the
         # start of a sync group (see _settled), so the window groups exactly as the batch does.
-        # ``nearest``'s covariance also takes each partner's image velocity from that camera's
-        # previous detection, within max_gap_s of the partner: twice max_gap_s back.
-        reach = 2 if method == "nearest" else 1
-        self._history_ns = int((reach * self._max_gap_s + self.options.tolerance_s) * NS) + 1
+        # ``nearest``'s covariance also extrapolates each partner's image motion from that
+        # camera's previous two detections, each within max_gap_s of the next (three times
+        # max_gap_s back), and takes the detections' noise from the residuals of the
+        # NOISE_WINDOW_S before the latest checkpoint (NOISE_EVERY_S apart), each residual
+        # from its camera's three previous detections (stereo.detection_noise).
+        reach_s = self._max_gap_s
+        if method == "nearest":
+            reach_s = NOISE_EVERY_S + NOISE_WINDOW_S + 3 * self._max_gap_s
+        self._history_ns = int((reach_s + self.options.tolerance_s) * NS) + 1
         self._settle_ns = 0 if self._immediate else int(self.options.tolerance_s * NS)
         self._F = fundamental_matrices(rig.cameras)
         self._time = np.zeros(0, np.int64)
