@@ -431,7 +431,7 @@ class _Problem:
         M, v = data_terms(np.ascontiguousarray(J, dtype=np.float64),
                           np.ascontiguousarray(target, dtype=np.float64),
                           np.ascontiguousarray(w, dtype=np.float64))
-        return self.points.normal(M, v, self.prior_ab.copy(), self.prior_rhs.copy())
+        return self.points.normal_onto(M, v, self.prior_ab, self.prior_rhs)
 
     def data_rows(self, J: np.ndarray, target: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -928,10 +928,10 @@ def _refit_control(problem: _Problem, X: np.ndarray) -> np.ndarray:
     prior): the starting point after breaks are inserted."""
     # each position's x, y, z at weight 1e6 (x twice: the rows pair (x, y) and (z, x))
     M = np.broadcast_to(np.diag([2e6, 1e6, 1e6]), (len(X), 3, 3))
-    ab, rhs = problem.points.normal(M, X * [2e6, 1e6, 1e6], problem.prior_ab.copy(),
-                                    problem.prior_rhs.copy())
-    U = _normal.factor(ab, rebuild=lambda: problem.points.normal(
-        M, X * [2e6, 1e6, 1e6], problem.prior_ab.copy(), problem.prior_rhs.copy())[0])
+    ab, rhs = problem.points.normal_onto(M, X * [2e6, 1e6, 1e6], problem.prior_ab,
+                                         problem.prior_rhs)
+    U = _normal.factor(ab, rebuild=lambda: problem.points.normal_onto(
+        M, X * [2e6, 1e6, 1e6], problem.prior_ab, problem.prior_rhs)[0])
     return _normal.solve(U, rhs).reshape(-1, 3)
 
 
@@ -1024,8 +1024,9 @@ def bias_sensitivity(problem: _Problem, U: np.ndarray, J: np.ndarray, r: np.ndar
     W = (w[:, None, None] * np.eye(2)
          - (2 * w * w / (_CAUCHY * sigma) ** 2)[:, None, None] * r[:, :, None] * r[:, None, :])
     WJ = np.einsum("nab,nbj->naj", W, J) / sigma**2
-    ab, _ = problem.points.normal(np.einsum("nai,naj->nij", J, WJ), np.zeros((len(J), 3)),
-                                  problem.prior_ab.copy(), problem.prior_rhs.copy())
+    ab, _ = problem.points.normal_onto(np.einsum("nai,naj->nij", J, WJ),
+                                       np.zeros((len(J), 3)), problem.prior_ab,
+                                       problem.prior_rhs)
     try:
         factor = _normal.factor(ab)
     except FusionError:
