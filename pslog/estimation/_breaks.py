@@ -124,7 +124,7 @@ class _Base:
         m = local.m
         n = 3 * m
         if terms is None:
-            terms = detection_terms(J, w, [np.zeros(0, np.int64)], [np.zeros(0, np.int64)])
+            terms = detection_terms(J, w, np.zeros(0, np.int64), np.zeros(0, np.int64))
         at, wJ_all, M_all = terms
         rows = at[index]  # each window detection's row in the terms
         zi = z[index]
@@ -264,7 +264,8 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
     (the base explains most of what the break would), so the products summed in another
     order (and the solve by another elimination) moved the gains of a 10-minute session by
     up to 1.2e-9 relative (measured: a compiled trial, 20 % faster)."""
-    from ._kernels import gains_data, trial_blocks, trial_gather, trial_schur, trial_splines
+    from ._kernels import (gains_data, trial_blocks, trial_gather, trial_prior_terms,
+                           trial_schur, trial_splines)
 
     local, h = base.local, base.spacing
     K = local.K
@@ -293,10 +294,11 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
                                N_c[:, 3] / h**3)
     # the nodes' B-splines on the six base control points q0..q0+5 of the three spans
     Nd6, x0 = trial_gather(first, Nd, q0, base.x0.reshape(-1, 3), which * m + q0)
-    p0 = Nd6 @ x0  # p'' or jerk, (B, 12, 3)
-    p0[:, :8] -= np.asarray(prior.gravity, dtype=np.float64)  # deviation from gravity
-    pyy = fw @ np.swapaxes(fn, 1, 2)  # (B, 3, 3)
-    pxy = np.swapaxes(Nd6, 1, 2) @ np.swapaxes(fw, 1, 2)  # (B, 6, 3)
+    # p'' or jerk less gravity p0 = Nd6 @ x0 - g (B, 12, 3), pyy = fw fnᵀ (B, 3, 3), pxy =
+    # Nd6ᵀ fwᵀ (B, 6, 3), and g -= fw @ p0: the matmuls' sums, one compiled pass
+    p0, pyy, pxy = trial_prior_terms(Nd6, x0, np.ascontiguousarray(fw),
+                                     np.ascontiguousarray(fn),
+                                     np.asarray(prior.gravity, dtype=np.float64), g)
     # ⊗ I₃ into the data terms, and the 18 x 18 diagonal block of each window's inverse
     col0 = base.col0
     k = 3 * q0 - col0
@@ -304,7 +306,6 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
         raise AssertionError("trial instant outside the spans its base was solved for")
     cov = trial_blocks(Hyy, Hxy, pyy, pxy, base.cov, np.ascontiguousarray(which, np.int64),
                        3 * q0, k)
-    g -= fw @ p0
     # S = Hyy - H_yxᵀ Σ H_xy (the products BLAS's), symmetric, its diagonal loaded
     # by 1e-12 of its largest entry: the elementwise steps one compiled pass (trial_schur)
     S = trial_schur(Hyy, np.swapaxes(Hxy, 1, 2) @ cov @ Hxy)

@@ -1071,6 +1071,55 @@ def trial_gather(first: np.ndarray, Nd: np.ndarray, q0: np.ndarray, x0: np.ndarr
     return Nd6, x6
 
 
+@kernel(contract=True)
+def trial_prior_terms(Nd6: np.ndarray, x0: np.ndarray, fw: np.ndarray, fn: np.ndarray,
+                      gravity: np.ndarray, g: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The break test's small prior products (:func:`pslog.estimation._breaks._gains`), one
+    pass over B trials: ``p0 = Nd6 @ x0`` (B, 12, 3) less ``gravity`` at the 8 Gauss nodes,
+    ``pyy = fw @ fnᵀ`` (B, 3, 3), ``pxy = Nd6ᵀ @ fwᵀ`` (B, 6, 3), and ``g -= fw @ p0`` in
+    place (g (B, 3, 3)). Each product entry summed as numpy's matmul gets it from OpenBLAS
+    for these shapes (k = 6 or 12, at most 12 rows, 3 columns): ``k`` in order from 0, each
+    term a fused multiply-add (``contract``: where the CPU has none, neither has the BLAS
+    kernel), then the subtraction — the same bits (tests/test_smooth_gains.py compares with
+    the matmuls). Every trial's products were separate BLAS calls of a few dozen flops.
+
+    Returns
+    -------
+    p0, pyy, pxy
+    """
+    B = Nd6.shape[0]
+    p0 = np.empty((B, 12, 3))
+    pyy = np.empty((B, 3, 3))
+    pxy = np.empty((B, 6, 3))
+    for b in range(B):
+        for p in range(12):
+            for d in range(3):
+                acc = 0.0
+                for c in range(6):
+                    acc = acc + Nd6[b, p, c] * x0[b, c, d]
+                p0[b, p, d] = acc - gravity[d] if p < 8 else acc
+        for e in range(3):
+            for f in range(3):
+                acc = 0.0
+                for p in range(12):
+                    acc = acc + fw[b, e, p] * fn[b, f, p]
+                pyy[b, e, f] = acc
+        for c in range(6):
+            for e in range(3):
+                acc = 0.0
+                for p in range(12):
+                    acc = acc + Nd6[b, p, c] * fw[b, e, p]
+                pxy[b, c, e] = acc
+        for e in range(3):
+            for d in range(3):
+                acc = 0.0
+                for p in range(12):
+                    acc = acc + fw[b, e, p] * p0[b, p, d]
+                g[b, e, d] = g[b, e, d] - acc
+    return p0, pyy, pxy
+
+
 @kernel
 def trial_blocks(Hyy: np.ndarray, Hxy: np.ndarray, pyy: np.ndarray, pxy: np.ndarray,
                  cov: np.ndarray, which: np.ndarray, row0: np.ndarray, col: np.ndarray
