@@ -257,15 +257,25 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
 
     The per-trial terms are compiled passes (:mod:`pslog.estimation._kernels`:
     ``trial_splines``, ``gains_data``, ``trial_gather``, ``trial_blocks``, ``trial_schur``:
-    the operations of :func:`_new_splines`, :func:`_horner` and the numpy forms, in order);
-    the small matrix products and the 9 x 9 solves stay numpy's (BLAS and LAPACK: their
-    sums' order is the library's). They cannot be recompiled without changing the gains'
-    bits, and the gains amplify such changes: ``S`` is a difference of nearly equal terms
-    (the base explains most of what the break would), so the products summed in another
-    order (and the solve by another elimination) moved the gains of a 10-minute session by
-    up to 1.2e-9 relative (measured: a compiled trial, 20 % faster)."""
-    from ._kernels import (gains_data, trial_blocks, trial_gather, trial_prior_terms,
-                           trial_schur, trial_splines)
+    the operations of :func:`_new_splines`, :func:`_horner` and the numpy forms, in order),
+    and so are the prior's small products (``trial_prior_terms``: k = 6 or 12, 3 columns,
+    summed as OpenBLAS's kernels sum them, k in order with fused multiply-adds — the same
+    bits, tests/test_smooth_passes.py); the Schur product ``H_yxᵀ Σ H_xy`` (k = 18: the
+    kernel for the ninth row sums in an order of its own, not reproduced) and the 9 x 9
+    solves stay numpy's (BLAS and LAPACK: their sums' order is the library's). Those cannot
+    be recompiled without changing the gains' bits, and the gains amplify such changes:
+    ``S`` is a difference of nearly equal terms (the base explains most of what the break
+    would), so the products summed in another order (and the solve by another elimination)
+    moved the gains of a 10-minute session by up to 1.2e-9 relative (measured: a compiled
+    trial, 20 % faster)."""
+    from ._kernels import (
+        gains_data,
+        trial_blocks,
+        trial_gather,
+        trial_prior_terms,
+        trial_schur,
+        trial_splines,
+    )
 
     local, h = base.local, base.spacing
     K = local.K
@@ -296,9 +306,9 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
     Nd6, x0 = trial_gather(first, Nd, q0, base.x0.reshape(-1, 3), which * m + q0)
     # p'' or jerk less gravity p0 = Nd6 @ x0 - g (B, 12, 3), pyy = fw fnᵀ (B, 3, 3), pxy =
     # Nd6ᵀ fwᵀ (B, 6, 3), and g -= fw @ p0: the matmuls' sums, one compiled pass
-    p0, pyy, pxy = trial_prior_terms(Nd6, x0, np.ascontiguousarray(fw),
-                                     np.ascontiguousarray(fn),
-                                     np.asarray(prior.gravity, dtype=np.float64), g)
+    _, pyy, pxy = trial_prior_terms(Nd6, x0, np.ascontiguousarray(fw),
+                                    np.ascontiguousarray(fn),
+                                    np.asarray(prior.gravity, dtype=np.float64), g)
     # ⊗ I₃ into the data terms, and the 18 x 18 diagonal block of each window's inverse
     col0 = base.col0
     k = 3 * q0 - col0
