@@ -113,3 +113,21 @@ def test_trial_prior_terms_are_the_matmuls():
         assert_array_equal(_bits(qyy), _bits(pyy))
         assert_array_equal(_bits(qxy), _bits(pxy))
         assert_array_equal(_bits(g), _bits(g_ref))
+
+
+@pytest.mark.parametrize("shuffled", [False, True])
+def test_isotropic_band_is_points_normal_of_w_identity(shuffled):
+    """The prior's band from terms ``w I₃``: each pair's sum once, the band the general pass
+    forms from the upper triangles (w, 0, 0, w, 0, w) bit for bit (zeros off the diagonal
+    of each block included)."""
+    first, N, _, _, m = _points_case(31, r=500, m=70)
+    N = N - 0.5  # second derivatives of B-splines change sign
+    w = np.random.default_rng(32).uniform(0.001, 0.02, len(first))
+    if shuffled:  # the prior's Gauss nodes come two per span, not in order
+        perm = np.random.default_rng(33).permutation(len(first))
+        first, N, w = first[perm], N[perm], w[perm]
+    upper = np.zeros((len(w), 6))
+    upper[:, 0] = upper[:, 3] = upper[:, 5] = w
+    ref, _ = _normal.accumulate_points(first, N, upper, np.zeros((len(w), 3)), m)
+    ab = _kernels.points_normal_isotropic(first, N, w, m)
+    assert_array_equal(_bits(ab), _bits(ref))

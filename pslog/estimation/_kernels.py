@@ -307,6 +307,33 @@ def _fold_row(blocks: np.ndarray, rv: np.ndarray, p: int, slot: int, m: int,
 
 
 @kernel
+def points_normal_isotropic(first: np.ndarray, N: np.ndarray, w: np.ndarray, m: int
+                            ) -> np.ndarray:
+    """The band (12, 3m) :func:`points_normal` forms from zero for terms ``w_i I₃`` (the
+    motion prior's: ``upper`` = (w, 0, 0, w, 0, w), ``v`` = 0), each pair's sum formed once:
+    the three diagonal entries of a block take the same products in the same order (the
+    same bits), the off-diagonal ones only ``±0`` products, which leave ``+0`` (IEEE:
+    ``0 + -0 = +0``). Ordered or not, each control point's sums take its terms in order."""
+    r = len(first)
+    sums = np.zeros((m + 3, 4))  # sums[p, k]: Σ N_a N_(a+k) w over terms with first + a = p
+    for i in range(r):
+        f = first[i]
+        wi = w[i]
+        for a in range(4):
+            na = N[i, a]
+            for k in range(4 - a):
+                sums[f + a, k] += (na * N[i, a + k]) * wi
+    ab = np.zeros((12, 3 * m))
+    for p in range(m):
+        for k in range(4):
+            if p + k >= m:
+                break
+            for d in range(3):
+                ab[11 - 3 * k, 3 * (p + k) + d] = 0.0 + sums[p, k]
+    return ab
+
+
+@kernel
 def points_marginal(first: np.ndarray, N: np.ndarray, band: np.ndarray) -> np.ndarray:
     """``Σ_ab N_a N_b Σ_{first+a, first+b}`` (r, 3, 3) from the covariance band (m, 4, 3, 3)
     (an off-diagonal pair stands for both orders: its block plus its transpose)."""

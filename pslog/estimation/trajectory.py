@@ -507,29 +507,26 @@ def _prior_parts(knots: list[np.ndarray], offset: np.ndarray, m: int
         jerk.append(N[2 * s:])
         weights.append((np.r_[half, half], 2 * half))
         lengths += float(np.sum(2 * half))
-    from ._kernels import prior_pull
+    from ._kernels import points_normal_isotropic, prior_pull
 
     wa = np.concatenate([w for w, _ in weights])
     wj = np.concatenate([w for _, w in weights])
     fa = np.concatenate([f for f, _ in firsts])
     fj = np.concatenate([f for _, f in firsts])
     Na = np.concatenate(accel)
-    # the terms' quadratic forms w I, as their upper triangles (00, 01, 02, 11, 12, 22)
-    ab_accel, _ = _normal.accumulate_points(fa, Na, _scaled_identity(wa),
-                                            np.zeros((len(fa), 3)), m)
-    ab_jerk, _ = _normal.accumulate_points(fj, np.concatenate(jerk), _scaled_identity(wj),
-                                           np.zeros((len(fj), 3)), m)
+    # the terms' quadratic forms w I: the band accumulate_points forms for the upper
+    # triangles (w, 0, 0, w, 0, w), each pair's sum once (points_normal_isotropic)
+    ab_accel = points_normal_isotropic(np.ascontiguousarray(fa, dtype=np.int64),
+                                       np.ascontiguousarray(Na, dtype=np.float64),
+                                       np.ascontiguousarray(wa, dtype=np.float64), m)
+    ab_jerk = points_normal_isotropic(np.ascontiguousarray(fj, dtype=np.int64),
+                                      np.ascontiguousarray(np.concatenate(jerk),
+                                                           dtype=np.float64),
+                                      np.ascontiguousarray(wj, dtype=np.float64), m)
     # ∫ N_k'' per control point: the terms added in order (as np.add.at did)
     pull = prior_pull(np.ascontiguousarray(fa), np.ascontiguousarray(wa),
                       np.ascontiguousarray(Na), m)
     return ab_accel, ab_jerk, pull[:m], lengths
-
-
-def _scaled_identity(w: np.ndarray) -> np.ndarray:
-    """The upper triangles (r, 6) of ``w_i I₃`` (r,), in :class:`_normal.Points`' order."""
-    upper = np.zeros((len(w), 6))
-    upper[:, 0] = upper[:, 3] = upper[:, 5] = w
-    return upper
 
 
 def _prior_cost(problem: _Problem, c: np.ndarray) -> float:
