@@ -360,15 +360,26 @@ class _Problem:
 
     def set_times(self, t: np.ndarray) -> None:
         """Observation times (n,) s since ``t0_ns`` (the clock estimator moves them); the
-        basis at each, its value ``N`` and first derivative ``N1`` (n_fit, 4)."""
+        basis at each, its value ``N`` (n_fit, 4) (its first derivative :attr:`N1` when
+        first asked for: only the clock estimator's velocities read it)."""
         self.t = t
         # the design changes: no projection of it is known
         self._last: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None \
             = None
-        self.first, N = basis_pieces(self.knots, self._piece_of_row, t[self.rows], 1)
+        # the values alone: the recurrence's values do not depend on how many derivatives
+        # follow them (the same bits)
+        self.first, N = basis_pieces(self.knots, self._piece_of_row, t[self.rows], 0)
         self.N = np.ascontiguousarray(N[:, 0])
-        self.N1 = np.ascontiguousarray(N[:, 1])
+        self._N1: np.ndarray | None = None
         self.points = _normal.Points(self.first, self.N, self.m)
+
+    @property
+    def N1(self) -> np.ndarray:
+        """The first derivative (n_fit, 4) of the basis at each observation (per second)."""
+        if self._N1 is None:
+            _, N = basis_pieces(self.knots, self._piece_of_row, self.t[self.rows], 1)
+            self._N1 = np.ascontiguousarray(N[:, 1])
+        return self._N1
 
     def velocities(self, control: np.ndarray) -> np.ndarray:
         index = self.first[:, None] + np.arange(DEGREE + 1)
