@@ -12,7 +12,9 @@ with numba in nopython mode:
   cache folder can be written, kernels are compiled in memory at every run instead;
 - ``nogil=True``: a kernel releases the GIL (live fusion beside a recorder thread);
 - ``error_model="numpy"``: a division by zero gives inf/nan as in numpy instead of raising;
-- no ``fastmath``: IEEE arithmetic is kept, so results do not depend on reassociation.
+- no ``fastmath``: IEEE arithmetic is kept, so results do not depend on reassociation (one
+  exception, opted into per kernel: ``contract``, a product added to a sum fused into one
+  multiply-add, for a kernel that repeats a BLAS product whose kernels fuse them).
 
 The undecorated Python function stays available as ``kernel_fn.py_func`` (numba's attribute):
 tests run both and compare, and a mutation of the equation fails both.

@@ -2,7 +2,8 @@
 
 Each kernel is the loop its numpy caller ran over arrays of points, written once per point
 with the same floating-point operations in the same order, so it returns the same bits
-(no fastmath: no reassociation, no fused multiply-add). Imported by the estimator's functions
+(no fastmath: no reassociation, no fused multiply-add — but in ``trial_prior_terms``,
+which repeats OpenBLAS's products and so fuses as they do). Imported by the estimator's functions
 when they run, never at import time (``pslog --help`` does not load numba).
 """
 
