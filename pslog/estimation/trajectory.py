@@ -935,7 +935,9 @@ def _refit_control(problem: _Problem, X: np.ndarray) -> np.ndarray:
     """Control points on new knots closest to positions ``X`` at the observations (with the
     prior): the starting point after breaks are inserted."""
     # each position's x, y, z at weight 1e6 (x twice: the rows pair (x, y) and (z, x))
-    M = np.broadcast_to(np.diag([2e6, 1e6, 1e6]), (len(X), 3, 3))
+    # as the upper triangles (00, 01, 02, 11, 12, 22) of diag(2e6, 1e6, 1e6): no (n, 3, 3)
+    # copy to take them from
+    M = np.broadcast_to(np.array([2e6, 0.0, 0.0, 1e6, 0.0, 1e6]), (len(X), 6))
     ab, rhs = problem.points.normal_onto(M, X * [2e6, 1e6, 1e6], problem.prior_ab,
                                          problem.prior_rhs)
     U = _normal.factor(ab, rebuild=lambda: problem.points.normal_onto(
