@@ -12,7 +12,9 @@ with numba in nopython mode:
   cache folder can be written, kernels are compiled in memory at every run instead;
 - ``nogil=True``: a kernel releases the GIL (live fusion beside a recorder thread);
 - ``error_model="numpy"``: a division by zero gives inf/nan as in numpy instead of raising;
-- no ``fastmath``: IEEE arithmetic is kept, so results do not depend on reassociation.
+- no ``fastmath``: IEEE arithmetic is kept, so results do not depend on reassociation (one
+  exception, opted into per kernel: ``contract``, a product added to a sum fused into one
+  multiply-add, for a kernel that repeats a BLAS product whose kernels fuse them).
 
 The undecorated Python function stays available as ``kernel_fn.py_func`` (numba's attribute):
 tests run both and compare, and a mutation of the equation fails both.
@@ -26,7 +28,7 @@ from typing import Any, Literal, TypeVar, cast
 F = TypeVar("F", bound=Callable[..., Any])
 
 
-def kernel(fn: F | None = None, *, inline: bool = False) -> Any:
+def kernel(fn: F | None = None, *, inline: bool = False, contract: bool = False) -> Any:
     """Compile ``fn`` with numba (nopython, cached, GIL released, numpy error model).
 
     ``@kernel(inline=True)``: a helper that numba inlines into the kernels calling it (numba
@@ -35,9 +37,15 @@ def kernel(fn: F | None = None, *, inline: bool = False) -> Any:
     few arrays and called several times per point spent more on those than on its
     arithmetic (type A's per-point helpers: ~40 % of the kink test's time). Inlined, it
     reads its caller's arrays directly. The arithmetic is the same (the same bits); the
-    first compile of its callers takes longer."""
+    first compile of its callers takes longer.
+
+    ``@kernel(contract=True)``: a product added to a sum (``acc + a * b``) is one fused
+    multiply-add where the CPU has one (LLVM's ``contract``, no other fast-math: no
+    reassociation): for a kernel that repeats a BLAS matrix product whose kernels sum
+    ``k`` in order with fused multiply-adds (OpenBLAS's on x86-64 with FMA), so it gives
+    the product's bits (a test compares them)."""
     if fn is None:
-        return lambda f: kernel(f, inline=inline)
+        return lambda f: kernel(f, inline=inline, contract=contract)
     try:
         import numba  # imported here: `pslog --help` and the light commands never load LLVM
     except Exception as exc:  # e.g. NUMBA_NUM_THREADS=0: numba refuses to start
@@ -49,14 +57,14 @@ def kernel(fn: F | None = None, *, inline: bool = False) -> Any:
     how: Literal["never", "always"] = "always" if inline else "never"
     try:
         return cast(F, numba.njit(cache=True, nogil=True, error_model="numpy",
-                                  inline=how)(fn))
+                                  inline=how, fastmath={"contract"} if contract else False)(fn))
     except RuntimeError:
         # numba raises "cannot cache function ...: no locator available" when neither the
         # module's folder nor numba's per-user cache folder can be written (a read-only
         # install with no writable home, as in some containers): compile in memory then,
         # at every run, rather than fail (NUMBA_CACHE_DIR names a writable cache folder)
         return cast(F, numba.njit(cache=False, nogil=True, error_model="numpy",
-                                  inline=how)(fn))
+                                  inline=how, fastmath={"contract"} if contract else False)(fn))
 
 
 def preload(*modules: str) -> None:

@@ -107,9 +107,12 @@ class _Base:
     of those spans' six control points read, ``cov`` (B, 3m, c), minimum cost, and per
     detection the basis (``first`` (B, W), ``N`` (B, W, 4)), ``M = w JᵀJ`` (B, W, 3, 3) and
     the weighted residual ``u = w Jᵀ (z - J X₀)`` (B, W, 3) at the minimum. Without
-    ``spans`` every column of the inverse is kept."""
+    ``spans`` every column of the inverse is kept. ``terms``: :func:`detection_terms` of the
+    detections the windows read (None: made here), each detection's ``w J`` and ``w JᵀJ``
+    formed once, not once per window and base that holds it."""
 
-    def __init__(self, local, t, J, z, w, index, valid, centre, spacing, spans=None):
+    def __init__(self, local, t, J, z, w, index, valid, centre, spacing, spans=None,
+                 terms=None):
         B, W = index.shape
         s = (t[index] - centre[:, None]) / spacing
         inside = valid & (np.abs(s) < local.K - 1e-9)
@@ -120,10 +123,15 @@ class _Base:
         wi = np.where(inside, w[index], 0.0)
         m = local.m
         n = 3 * m
-        Ji = J[index]  # (B, W, 2, 3)
+        if terms is None:
+            terms = detection_terms(J, w, np.zeros(0, np.int64), np.zeros(0, np.int64))
+        at, wJ_all, M_all = terms
+        rows = at[index]  # each window detection's row in the terms
         zi = z[index]
-        wJ = wi[..., None, None] * Ji
-        self.M = np.swapaxes(wJ, 2, 3) @ Ji  # (B, W, 3, 3): w JᵀJ
+        # w J and w JᵀJ of the detections inside (the products of w[index] J[index], entry for
+        # entry); the rest, padding, zero (no term reads them)
+        wJ = np.where(inside[..., None, None], wJ_all[rows], 0.0)
+        self.M = np.where(inside[..., None, None], M_all[rows], 0.0)  # (B, W, 3, 3): w JᵀJ
         v = np.einsum("bwai,bwa->bwi", wJ, zi)  # w Jᵀ z
         # only the inverse's columns the gains read (a solve for them and the minimum is
         # cheaper than the whole inverse)
@@ -161,6 +169,28 @@ class _Base:
         self.u = v - (self.M @ X0[..., None])[..., 0]  # w Jᵀ (z - J X₀)
         self.s_sorted = np.where(inside, s, 1e6)  # times in spacings from the centre, sorted
         self.local, self.spacing = local, spacing
+
+
+def detection_terms(J: np.ndarray, w: np.ndarray, i0: np.ndarray, i1: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each detection's ``w J`` (r, 2, 3) and ``w JᵀJ`` (r, 3, 3) (numpy's products, as
+    :class:`_Base` formed them per window: the same bits) for the r detections that some
+    window ``i0[c]..i1[c]-1`` holds (every detection when the windows are empty), and
+    ``at`` (n,): a detection's row in them (0 for one no window holds). A detection lies in
+    the windows of several candidates and in both bases of each: formed once here."""
+    n = len(w)
+    if len(i0):
+        starts = np.bincount(i0, minlength=n + 1)[:n + 1]
+        ends = np.bincount(i1, minlength=n + 1)[:n + 1]
+        held = np.cumsum(starts - ends)[:n] > 0
+        rows = np.flatnonzero(held)
+        at = np.maximum(np.cumsum(held) - 1, 0)
+    else:
+        rows = np.arange(n)
+        at = rows
+    Jr = J[rows]
+    wJ = w[rows][:, None, None] * Jr
+    return at, wJ, np.swapaxes(wJ, 1, 2) @ Jr
 
 
 def _mul(p: list, q: list) -> list:
@@ -227,14 +257,25 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
 
     The per-trial terms are compiled passes (:mod:`pslog.estimation._kernels`:
     ``trial_splines``, ``gains_data``, ``trial_gather``, ``trial_blocks``, ``trial_schur``:
-    the operations of :func:`_new_splines`, :func:`_horner` and the numpy forms, in order);
-    the small matrix products and the 9 x 9 solves stay numpy's (BLAS and LAPACK: their
-    sums' order is the library's). They cannot be recompiled without changing the gains'
-    bits, and the gains amplify such changes: ``S`` is a difference of nearly equal terms
-    (the base explains most of what the break would), so the products summed in another
-    order (and the solve by another elimination) moved the gains of a 10-minute session by
-    up to 1.2e-9 relative (measured: a compiled trial, 20 % faster)."""
-    from ._kernels import gains_data, trial_blocks, trial_gather, trial_schur, trial_splines
+    the operations of :func:`_new_splines`, :func:`_horner` and the numpy forms, in order),
+    and so are the prior's small products (``trial_prior_terms``: k = 6 or 12, 3 columns,
+    summed as OpenBLAS's kernels sum them, k in order with fused multiply-adds — the same
+    bits, tests/test_smooth_passes.py); the Schur product ``H_yxᵀ Σ H_xy`` (k = 18: the
+    kernel for the ninth row sums in an order of its own, not reproduced) and the 9 x 9
+    solves stay numpy's (BLAS and LAPACK: their sums' order is the library's). Those cannot
+    be recompiled without changing the gains' bits, and the gains amplify such changes:
+    ``S`` is a difference of nearly equal terms (the base explains most of what the break
+    would), so the products summed in another order (and the solve by another elimination)
+    moved the gains of a 10-minute session by up to 1.2e-9 relative (measured: a compiled
+    trial, 20 % faster)."""
+    from ._kernels import (
+        gains_data,
+        trial_blocks,
+        trial_gather,
+        trial_prior_terms,
+        trial_schur,
+        trial_splines,
+    )
 
     local, h = base.local, base.spacing
     K = local.K
@@ -263,10 +304,11 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
                                N_c[:, 3] / h**3)
     # the nodes' B-splines on the six base control points q0..q0+5 of the three spans
     Nd6, x0 = trial_gather(first, Nd, q0, base.x0.reshape(-1, 3), which * m + q0)
-    p0 = Nd6 @ x0  # p'' or jerk, (B, 12, 3)
-    p0[:, :8] -= np.asarray(prior.gravity, dtype=np.float64)  # deviation from gravity
-    pyy = fw @ np.swapaxes(fn, 1, 2)  # (B, 3, 3)
-    pxy = np.swapaxes(Nd6, 1, 2) @ np.swapaxes(fw, 1, 2)  # (B, 6, 3)
+    # p'' or jerk less gravity p0 = Nd6 @ x0 - g (B, 12, 3), pyy = fw fnᵀ (B, 3, 3), pxy =
+    # Nd6ᵀ fwᵀ (B, 6, 3), and g -= fw @ p0: the matmuls' sums, one compiled pass
+    _, pyy, pxy = trial_prior_terms(Nd6, x0, np.ascontiguousarray(fw),
+                                    np.ascontiguousarray(fn),
+                                    np.asarray(prior.gravity, dtype=np.float64), g)
     # ⊗ I₃ into the data terms, and the 18 x 18 diagonal block of each window's inverse
     col0 = base.col0
     k = 3 * q0 - col0
@@ -274,7 +316,6 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
         raise AssertionError("trial instant outside the spans its base was solved for")
     cov = trial_blocks(Hyy, Hxy, pyy, pxy, base.cov, np.ascontiguousarray(which, np.int64),
                        3 * q0, k)
-    g -= fw @ p0
     # S = Hyy - H_yxᵀ Σ H_xy (the products BLAS's), symmetric, its diagonal loaded
     # by 1e-12 of its largest entry: the elementwise steps one compiled pass (trial_schur)
     S = trial_schur(Hyy, np.swapaxes(Hxy, 1, 2) @ cov @ Hxy)
@@ -318,11 +359,13 @@ def scan(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray, centers: np
     rel = (bounds - centers[:, None]) / spacing
     spans = (int(np.floor(np.min(rel))) - 1, int(np.floor(np.max(rel))))
 
+    terms = detection_terms(J, w, i0, i1)
+
     def block(c0: int, c1: int) -> tuple[np.ndarray, np.ndarray]:
         """The scan of candidates c0..c1-1 (each candidate's result depends on its own
         window only)."""
         return _scan_block(t, J, z, w, centers[c0:c1], bounds[c0:c1], i0[c0:c1],
-                           i1[c0:c1], Wmax, local, spacing, spans, prior)
+                           i1[c0:c1], Wmax, local, spacing, spans, prior, terms)
 
     jobs = [(c0, min(c0 + _BLOCK, C)) for c0 in range(0, C, _BLOCK)]
     threads = min(smooth_threads(), len(jobs))
@@ -341,8 +384,8 @@ def scan(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray, centers: np
 
 def _scan_block(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray,
                 centers: np.ndarray, bounds: np.ndarray, i0: np.ndarray, i1: np.ndarray,
-                Wmax: int, local: _Local, spacing: float, spans: tuple[int, int], prior
-                ) -> tuple[np.ndarray, np.ndarray]:
+                Wmax: int, local: _Local, spacing: float, spans: tuple[int, int], prior,
+                terms=None) -> tuple[np.ndarray, np.ndarray]:
     """:func:`scan` of a block of candidates (C,), their windows ``t[i0:i1]`` padded to
     ``Wmax`` detections, on the scan's knot pattern ``local`` and ``spans``."""
     C = len(centers)
@@ -353,7 +396,7 @@ def _scan_block(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray,
     # instant is tested on the one whose knots are at least h/4 away from it
     both = np.r_[centers, centers + spacing / 2]
     base = _Base(local, t, J, z, w, np.r_[index, index], np.r_[valid, valid], both, spacing,
-                 spans)
+                 spans, terms)
     rows = np.arange(C)
 
     def gains(which, tau):

@@ -2,7 +2,8 @@
 
 Each kernel is the loop its numpy caller ran over arrays of points, written once per point
 with the same floating-point operations in the same order, so it returns the same bits
-(no fastmath: no reassociation, no fused multiply-add). Imported by the estimator's functions
+(no fastmath: no reassociation, no fused multiply-add — but in ``trial_prior_terms``,
+which repeats OpenBLAS's products and so fuses as they do). Imported by the estimator's functions
 when they run, never at import time (``pslog --help`` does not load numba).
 """
 
@@ -195,6 +196,41 @@ def points_normal(first: np.ndarray, N: np.ndarray, upper: np.ndarray, v: np.nda
     and a ring of 8 control points' sums is all the memory used (a whole session's, 36 MB at
     90 minutes, cost a page fault every 4 kB at every call); otherwise every control point's
     sums are kept to the end. The same sums, the same bits."""
+    _points_normal_into(first, N, upper, v, m, ab, rhs, ab, rhs)
+
+
+@kernel
+def points_normal_onto(first: np.ndarray, N: np.ndarray, upper: np.ndarray, v: np.ndarray,
+                       m: int, base_ab: np.ndarray, base_rhs: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`points_normal` added to ``base_ab`` (12, 3m) and ``base_rhs`` (3m,) (the
+    prior's, left as they are) into new arrays, in one pass: each entry of the band is
+    reached by exactly one control point's sums (entry ``(11 - off, 3q + e)``: the pair of
+    control points ``q - k`` and ``q`` with ``3k + e - d = off``, one ``k`` for each ``off``),
+    so it is written once as ``base + sums`` — the value a copy of the base then
+    :func:`points_normal` gave, without the copy (47 MB read and written at every
+    Gauss–Newton step of a 90-minute session). The entries no control point reaches (the
+    band's corner before the first columns) are the base's."""
+    ab = np.empty_like(base_ab)
+    rhs = np.empty_like(base_rhs)
+    # the band's corner (rows above the first columns: no pair of control points there)
+    for i in range(ab.shape[0]):
+        for j in range(min(12, ab.shape[1])):
+            ab[i, j] = base_ab[i, j]
+    if len(first) == 0:
+        ab[:, :] = base_ab
+        rhs[:] = base_rhs
+        return ab, rhs
+    _points_normal_into(first, N, upper, v, m, base_ab, base_rhs, ab, rhs)
+    return ab, rhs
+
+
+@kernel(inline=True)
+def _points_normal_into(first: np.ndarray, N: np.ndarray, upper: np.ndarray, v: np.ndarray,
+                        m: int, base_ab: np.ndarray, base_rhs: np.ndarray, ab: np.ndarray,
+                        rhs: np.ndarray) -> None:
+    """:func:`points_normal` with each band entry and rhs entry written as the base's plus
+    its sums (``base_ab`` may be ``ab``: in place)."""
     r = len(first)
     ordered = True
     for i in range(1, r):
@@ -212,7 +248,7 @@ def points_normal(first: np.ndarray, N: np.ndarray, upper: np.ndarray, v: np.nda
         f = first[i]
         if ordered:
             while done < f:
-                _fold_row(blocks, rv, done, done & mask, m, ab, rhs)
+                _fold_row(blocks, rv, done, done & mask, m, base_ab, base_rhs, ab, rhs)
                 done += 1
         n0, n1, n2, n3 = N[i, 0], N[i, 1], N[i, 2], N[i, 3]
         u0, u1, u2 = upper[i, 0], upper[i, 1], upper[i, 2]
@@ -238,15 +274,17 @@ def points_normal(first: np.ndarray, N: np.ndarray, upper: np.ndarray, v: np.nda
             rr[1] += na * v1
             rr[2] += na * v2
     while done < m:
-        _fold_row(blocks, rv, done, done & mask, m, ab, rhs)
+        _fold_row(blocks, rv, done, done & mask, m, base_ab, base_rhs, ab, rhs)
         done += 1
 
 
 @kernel
-def _fold_row(blocks: np.ndarray, rv: np.ndarray, p: int, slot: int, m: int, ab: np.ndarray,
+def _fold_row(blocks: np.ndarray, rv: np.ndarray, p: int, slot: int, m: int,
+              base_ab: np.ndarray, base_rhs: np.ndarray, ab: np.ndarray,
               rhs: np.ndarray) -> None:
-    """Add control point ``p``'s sums (``blocks[slot]`` (4, 6): its pairs with points
-    ``p..p+3``, upper triangles; ``rv[slot]`` (3,)) to ``ab`` and ``rhs``, and zero them
+    """Write control point ``p``'s sums (``blocks[slot]`` (4, 6): its pairs with points
+    ``p..p+3``, upper triangles; ``rv[slot]`` (3,)) added to ``base_ab`` and ``base_rhs``
+    into ``ab`` and ``rhs`` (the same arrays: added in place), and zero them
     (:func:`points_normal`)."""
     for k in range(4):
         if p + k >= m:
@@ -256,11 +294,44 @@ def _fold_row(blocks: np.ndarray, rv: np.ndarray, p: int, slot: int, m: int, ab:
                 off = 3 * k + e - d  # column minus row
                 if off < 0:
                     continue
-                ab[11 - off, 3 * (p + k) + e] += blocks[slot, k, _SYM[d, e]]
+                ab[11 - off, 3 * (p + k) + e] = (base_ab[11 - off, 3 * (p + k) + e]
+                                                 + blocks[slot, k, _SYM[d, e]])
+    # the entries of point p's columns that no pair reaches (a pair 4 points apart: off 10
+    # and 11 of coordinate 0, off 11 of coordinate 1): the base's
+    ab[0, 3 * p] = base_ab[0, 3 * p]
+    ab[1, 3 * p] = base_ab[1, 3 * p]
+    ab[0, 3 * p + 1] = base_ab[0, 3 * p + 1]
     for d in range(3):
-        rhs[3 * p + d] += rv[slot, d]
+        rhs[3 * p + d] = base_rhs[3 * p + d] + rv[slot, d]
     blocks[slot] = 0.0
     rv[slot] = 0.0
+
+
+@kernel
+def points_normal_isotropic(first: np.ndarray, N: np.ndarray, w: np.ndarray, m: int
+                            ) -> np.ndarray:
+    """The band (12, 3m) :func:`points_normal` forms from zero for terms ``w_i I₃`` (the
+    motion prior's: ``upper`` = (w, 0, 0, w, 0, w), ``v`` = 0), each pair's sum formed once:
+    the three diagonal entries of a block take the same products in the same order (the
+    same bits), the off-diagonal ones only ``±0`` products, which leave ``+0`` (IEEE:
+    ``0 + -0 = +0``). Ordered or not, each control point's sums take its terms in order."""
+    r = len(first)
+    sums = np.zeros((m + 3, 4))  # sums[p, k]: Σ N_a N_(a+k) w over terms with first + a = p
+    for i in range(r):
+        f = first[i]
+        wi = w[i]
+        for a in range(4):
+            na = N[i, a]
+            for k in range(4 - a):
+                sums[f + a, k] += (na * N[i, a + k]) * wi
+    ab = np.zeros((12, 3 * m))
+    for p in range(m):
+        for k in range(4):
+            if p + k >= m:
+                break
+            for d in range(3):
+                ab[11 - 3 * k, 3 * (p + k) + d] = 0.0 + sums[p, k]
+    return ab
 
 
 @kernel
@@ -1026,6 +1097,55 @@ def trial_gather(first: np.ndarray, Nd: np.ndarray, q0: np.ndarray, x0: np.ndarr
             for d in range(3):
                 x6[b, c, d] = x0[base_row[b] + c, d]
     return Nd6, x6
+
+
+@kernel(contract=True)
+def trial_prior_terms(Nd6: np.ndarray, x0: np.ndarray, fw: np.ndarray, fn: np.ndarray,
+                      gravity: np.ndarray, g: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The break test's small prior products (:func:`pslog.estimation._breaks._gains`), one
+    pass over B trials: ``p0 = Nd6 @ x0`` (B, 12, 3) less ``gravity`` at the 8 Gauss nodes,
+    ``pyy = fw @ fnᵀ`` (B, 3, 3), ``pxy = Nd6ᵀ @ fwᵀ`` (B, 6, 3), and ``g -= fw @ p0`` in
+    place (g (B, 3, 3)). Each product entry summed as numpy's matmul gets it from OpenBLAS
+    for these shapes (k = 6 or 12, at most 12 rows, 3 columns): ``k`` in order from 0, each
+    term a fused multiply-add (``contract``: where the CPU has none, neither has the BLAS
+    kernel), then the subtraction — the same bits (tests/test_smooth_gains.py compares with
+    the matmuls). Every trial's products were separate BLAS calls of a few dozen flops.
+
+    Returns
+    -------
+    p0, pyy, pxy
+    """
+    B = Nd6.shape[0]
+    p0 = np.empty((B, 12, 3))
+    pyy = np.empty((B, 3, 3))
+    pxy = np.empty((B, 6, 3))
+    for b in range(B):
+        for p in range(12):
+            for d in range(3):
+                acc = 0.0
+                for c in range(6):
+                    acc = acc + Nd6[b, p, c] * x0[b, c, d]
+                p0[b, p, d] = acc - gravity[d] if p < 8 else acc
+        for e in range(3):
+            for f in range(3):
+                acc = 0.0
+                for p in range(12):
+                    acc = acc + fw[b, e, p] * fn[b, f, p]
+                pyy[b, e, f] = acc
+        for c in range(6):
+            for e in range(3):
+                acc = 0.0
+                for p in range(12):
+                    acc = acc + Nd6[b, p, c] * fw[b, e, p]
+                pxy[b, c, e] = acc
+        for e in range(3):
+            for d in range(3):
+                acc = 0.0
+                for p in range(12):
+                    acc = acc + fw[b, e, p] * p0[b, p, d]
+                g[b, e, d] = g[b, e, d] - acc
+    return p0, pyy, pxy
 
 
 @kernel

@@ -125,6 +125,21 @@ class Points:
                       np.ascontiguousarray(v, dtype=np.float64), m, ab, rhs)
         return ab, rhs
 
+    def normal_onto(self, M: np.ndarray, v: np.ndarray, base_ab: np.ndarray,
+                    base_rhs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`normal` added to normal equations ``base_ab``, ``base_rhs`` (left as they
+        are: e.g. the prior's) into new arrays, in one pass (the values ``normal(M, v,
+        base_ab.copy(), base_rhs.copy())`` gives, without the copy:
+        :func:`pslog.estimation._kernels.points_normal_onto`)."""
+        from ._kernels import points_normal_onto
+
+        upper = M if M.ndim == 2 else np.take(M.reshape(self.r, 9), _UPPER9, axis=1)
+        return points_normal_onto(self.first, self.N,
+                                  np.ascontiguousarray(upper, dtype=np.float64),
+                                  np.ascontiguousarray(v, dtype=np.float64), self.m,
+                                  np.ascontiguousarray(base_ab, dtype=np.float64),
+                                  np.ascontiguousarray(base_rhs, dtype=np.float64))
+
 
 def factor(ab: np.ndarray, rebuild=None) -> np.ndarray:
     """Upper banded Cholesky factor ``U`` (``A = Uᵀ U``) of an information matrix (LAPACK's

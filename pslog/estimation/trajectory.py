@@ -360,15 +360,26 @@ class _Problem:
 
     def set_times(self, t: np.ndarray) -> None:
         """Observation times (n,) s since ``t0_ns`` (the clock estimator moves them); the
-        basis at each, its value ``N`` and first derivative ``N1`` (n_fit, 4)."""
+        basis at each, its value ``N`` (n_fit, 4) (its first derivative :attr:`N1` when
+        first asked for: only the clock estimator's velocities read it)."""
         self.t = t
         # the design changes: no projection of it is known
         self._last: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None \
             = None
-        self.first, N = basis_pieces(self.knots, self._piece_of_row, t[self.rows], 1)
+        # the values alone: the recurrence's values do not depend on how many derivatives
+        # follow them (the same bits)
+        self.first, N = basis_pieces(self.knots, self._piece_of_row, t[self.rows], 0)
         self.N = np.ascontiguousarray(N[:, 0])
-        self.N1 = np.ascontiguousarray(N[:, 1])
+        self._N1: np.ndarray | None = None
         self.points = _normal.Points(self.first, self.N, self.m)
+
+    @property
+    def N1(self) -> np.ndarray:
+        """The first derivative (n_fit, 4) of the basis at each observation (per second)."""
+        if self._N1 is None:
+            _, N = basis_pieces(self.knots, self._piece_of_row, self.t[self.rows], 1)
+            self._N1 = np.ascontiguousarray(N[:, 1])
+        return self._N1
 
     def velocities(self, control: np.ndarray) -> np.ndarray:
         index = self.first[:, None] + np.arange(DEGREE + 1)
@@ -431,7 +442,7 @@ class _Problem:
         M, v = data_terms(np.ascontiguousarray(J, dtype=np.float64),
                           np.ascontiguousarray(target, dtype=np.float64),
                           np.ascontiguousarray(w, dtype=np.float64))
-        return self.points.normal(M, v, self.prior_ab.copy(), self.prior_rhs.copy())
+        return self.points.normal_onto(M, v, self.prior_ab, self.prior_rhs)
 
     def data_rows(self, J: np.ndarray, target: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -507,29 +518,26 @@ def _prior_parts(knots: list[np.ndarray], offset: np.ndarray, m: int
         jerk.append(N[2 * s:])
         weights.append((np.r_[half, half], 2 * half))
         lengths += float(np.sum(2 * half))
-    from ._kernels import prior_pull
+    from ._kernels import points_normal_isotropic, prior_pull
 
     wa = np.concatenate([w for w, _ in weights])
     wj = np.concatenate([w for _, w in weights])
     fa = np.concatenate([f for f, _ in firsts])
     fj = np.concatenate([f for _, f in firsts])
     Na = np.concatenate(accel)
-    # the terms' quadratic forms w I, as their upper triangles (00, 01, 02, 11, 12, 22)
-    ab_accel, _ = _normal.accumulate_points(fa, Na, _scaled_identity(wa),
-                                            np.zeros((len(fa), 3)), m)
-    ab_jerk, _ = _normal.accumulate_points(fj, np.concatenate(jerk), _scaled_identity(wj),
-                                           np.zeros((len(fj), 3)), m)
+    # the terms' quadratic forms w I: the band accumulate_points forms for the upper
+    # triangles (w, 0, 0, w, 0, w), each pair's sum once (points_normal_isotropic)
+    ab_accel = points_normal_isotropic(np.ascontiguousarray(fa, dtype=np.int64),
+                                       np.ascontiguousarray(Na, dtype=np.float64),
+                                       np.ascontiguousarray(wa, dtype=np.float64), m)
+    ab_jerk = points_normal_isotropic(np.ascontiguousarray(fj, dtype=np.int64),
+                                      np.ascontiguousarray(np.concatenate(jerk),
+                                                           dtype=np.float64),
+                                      np.ascontiguousarray(wj, dtype=np.float64), m)
     # ∫ N_k'' per control point: the terms added in order (as np.add.at did)
     pull = prior_pull(np.ascontiguousarray(fa), np.ascontiguousarray(wa),
                       np.ascontiguousarray(Na), m)
     return ab_accel, ab_jerk, pull[:m], lengths
-
-
-def _scaled_identity(w: np.ndarray) -> np.ndarray:
-    """The upper triangles (r, 6) of ``w_i I₃`` (r,), in :class:`_normal.Points`' order."""
-    upper = np.zeros((len(w), 6))
-    upper[:, 0] = upper[:, 3] = upper[:, 5] = w
-    return upper
 
 
 def _prior_cost(problem: _Problem, c: np.ndarray) -> float:
@@ -927,11 +935,13 @@ def _refit_control(problem: _Problem, X: np.ndarray) -> np.ndarray:
     """Control points on new knots closest to positions ``X`` at the observations (with the
     prior): the starting point after breaks are inserted."""
     # each position's x, y, z at weight 1e6 (x twice: the rows pair (x, y) and (z, x))
-    M = np.broadcast_to(np.diag([2e6, 1e6, 1e6]), (len(X), 3, 3))
-    ab, rhs = problem.points.normal(M, X * [2e6, 1e6, 1e6], problem.prior_ab.copy(),
-                                    problem.prior_rhs.copy())
-    U = _normal.factor(ab, rebuild=lambda: problem.points.normal(
-        M, X * [2e6, 1e6, 1e6], problem.prior_ab.copy(), problem.prior_rhs.copy())[0])
+    # as the upper triangles (00, 01, 02, 11, 12, 22) of diag(2e6, 1e6, 1e6): no (n, 3, 3)
+    # copy to take them from
+    M = np.broadcast_to(np.array([2e6, 0.0, 0.0, 1e6, 0.0, 1e6]), (len(X), 6))
+    ab, rhs = problem.points.normal_onto(M, X * [2e6, 1e6, 1e6], problem.prior_ab,
+                                         problem.prior_rhs)
+    U = _normal.factor(ab, rebuild=lambda: problem.points.normal_onto(
+        M, X * [2e6, 1e6, 1e6], problem.prior_ab, problem.prior_rhs)[0])
     return _normal.solve(U, rhs).reshape(-1, 3)
 
 
@@ -1024,8 +1034,9 @@ def bias_sensitivity(problem: _Problem, U: np.ndarray, J: np.ndarray, r: np.ndar
     W = (w[:, None, None] * np.eye(2)
          - (2 * w * w / (_CAUCHY * sigma) ** 2)[:, None, None] * r[:, :, None] * r[:, None, :])
     WJ = np.einsum("nab,nbj->naj", W, J) / sigma**2
-    ab, _ = problem.points.normal(np.einsum("nai,naj->nij", J, WJ), np.zeros((len(J), 3)),
-                                  problem.prior_ab.copy(), problem.prior_rhs.copy())
+    ab, _ = problem.points.normal_onto(np.einsum("nai,naj->nij", J, WJ),
+                                       np.zeros((len(J), 3)), problem.prior_ab,
+                                       problem.prior_rhs)
     try:
         factor = _normal.factor(ab)
     except FusionError:
