@@ -14,6 +14,19 @@ from test_smooth_kernels import _points_case, _reference_normal, _sparse_points,
 from pslog.estimation import _breaks, _kernels, _normal
 
 
+def _blas_like_here() -> bool:
+    """Whether numpy's BLAS sums a (B, 12, 6) @ (B, 6, 3) product in the order that
+    ``trial_prior_terms`` reproduces (k ascending, fused multiply-adds: this build
+    machine's OpenBLAS kernels, on which smooth's outputs were compared bit for bit).
+    Another BLAS may round differently; then only the few-ulp half of the test applies."""
+    rng = np.random.default_rng(0)
+    a, b = rng.normal(size=(64, 12, 6)), rng.normal(size=(64, 6, 3))
+    zeros = np.zeros((64, 3, 12))
+    p0, *_ = _kernels.trial_prior_terms(a, b, zeros, zeros, np.zeros(3),
+                                        np.zeros((64, 3, 3)))
+    return bool(np.array_equal(_bits(p0), _bits(a @ b)))
+
+
 def _bits(a: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(a, dtype=np.float64).view(np.uint64)
 
@@ -98,6 +111,7 @@ def test_trial_prior_terms_are_the_matmuls():
     cases.append((rng.normal(size=(B, 12, 6)) * 10.0 ** rng.integers(-3, 6, (B, 1, 1)),
                   rng.normal(size=(B, 6, 3)), rng.normal(size=(B, 3, 12)),
                   rng.normal(size=(B, 3, 12)) * 1e4))
+    blas_like_here = _blas_like_here()
     for Nd6, x0, fw, fn in cases:
         g0 = rng.normal(size=(len(Nd6), 3, 3))
         p0 = Nd6 @ x0
@@ -109,6 +123,20 @@ def test_trial_prior_terms_are_the_matmuls():
         g = g0.copy()
         q0_, qyy, qxy = _kernels.trial_prior_terms(Nd6, x0, np.ascontiguousarray(fw),
                                                    np.ascontiguousarray(fn), gravity, g)
+        # Bit for bit where numpy's BLAS sums as this machine's OpenBLAS (Haswell/Zen
+        # kernels, fused multiply-adds: what smooth's outputs were compared on); any other
+        # BLAS order may differ by rounding, so the products are held to a few ulps of
+        # their terms' magnitudes (|A| |B|), which a wrong index or term still breaks.
+        bound = 8 * np.finfo(float).eps
+        for got, ref, scale in (
+                (q0_, p0, np.abs(Nd6) @ np.abs(x0) + np.abs(gravity)),
+                (qyy, pyy, np.abs(fw) @ np.swapaxes(np.abs(fn), 1, 2)),
+                (qxy, pxy, np.swapaxes(np.abs(Nd6), 1, 2) @ np.swapaxes(np.abs(fw), 1, 2)),
+                (g, g_ref, np.abs(g0) + np.abs(fw) @ (np.abs(Nd6) @ np.abs(x0)
+                                                       + np.abs(gravity)))):
+            assert np.all(np.abs(got - ref) <= bound * scale)
+        if not blas_like_here:
+            continue
         assert_array_equal(_bits(q0_), _bits(p0))
         assert_array_equal(_bits(qyy), _bits(pyy))
         assert_array_equal(_bits(qxy), _bits(pxy))

@@ -1109,7 +1109,7 @@ def trial_prior_terms(Nd6: np.ndarray, x0: np.ndarray, fw: np.ndarray, fn: np.nd
     place (g (B, 3, 3)). Each product entry summed as numpy's matmul gets it from OpenBLAS
     for these shapes (k = 6 or 12, at most 12 rows, 3 columns): ``k`` in order from 0, each
     term a fused multiply-add (``contract``: where the CPU has none, neither has the BLAS
-    kernel), then the subtraction — the same bits (tests/test_smooth_gains.py compares with
+    kernel), then the subtraction — the same bits (tests/test_smooth_passes.py compares with
     the matmuls). Every trial's products were separate BLAS calls of a few dozen flops.
 
     Returns
