@@ -255,6 +255,11 @@ class FilterOptions:
         of its residual variance (``‖r‖² / χ²_{0.001}(2n - 6)``; empirical
         Bayes: the stated noise stands unless the window shows it too large beyond doubt);
         False: the stated variance alone (before session 10)
+    restart_prior : bool, a restart after a track loss takes the lost track's prediction
+        to the window's newest detection (each model's: the pair's and, when it was in the
+        set, the turn model's position and velocity with their covariance) as a prior of
+        the window's fit, when the two agree (:func:`_with_prior`); False: the window's fit
+        alone (before session 14)
     jump_rate_per_s : float, expected rate ``λ_j`` of velocity jumps (kicks, bounces), 1/s:
         a point's reported covariance adds the variance ``λ_j T σ_j² T² / 3`` along its
         camera's ray of a jump no other camera has seen in the time ``T`` since another
@@ -300,6 +305,7 @@ class FilterOptions:
     supported_drag_per_m: float = 0.0
     start_models: bool = True
     window_noise_prior: bool = True
+    restart_prior: bool = True
 
     def __post_init__(self) -> None:
         for name in ("noise_px", "accel_psd", "accel_step_var", "gate", "jump_speed",
@@ -1903,7 +1909,8 @@ class BallFilter:
         both). The prediction is the process model's own (:func:`_predicted` with the
         models' mixing, :func:`_turn_predicted`), from the lost state."""
         S, I = self._S, self._I
-        if not np.any(S[_SP:_SP + 36]) or window[0][0] <= I[_ILAST]:
+        if (not self.options.restart_prior or not np.any(S[_SP:_SP + 36])
+                or window[0][0] <= I[_ILAST]):
             return None
         t = window[-1][0]
         dt = (t - int(I[_ITIME])) / NS
@@ -2165,7 +2172,7 @@ class BallFilter:
 
 #: A restart's fit takes the lost track's prediction as a prior when the two agree: their
 #: difference's NIS at most this (χ²₆'s 99.9 % quantile, :func:`_with_prior`).
-_PRIOR_GATE = 22.46
+_PRIOR_GATE = 22.458
 
 
 def _with_prior(x, P, prior, prior_P):
