@@ -57,7 +57,7 @@ BASE_OPTIONS = compiled.FilterOptions(jump_rate_per_s=0.0, start_models=False, a
                                       turn_on_psd=0.3,
                                       supported_drag_per_m=compiled.FilterOptions().drag_per_m,
                                       max_std_m=base.FilterOptions().max_std_m,
-                                      window_noise_prior=False)
+                                      window_noise_prior=False, restart_prior=False)
 
 COLUMNS = ("time_ns", "camera", "position", *compiled.FILTER_QUALITY)
 

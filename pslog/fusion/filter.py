@@ -255,6 +255,11 @@ class FilterOptions:
         of its residual variance (``‖r‖² / χ²_{0.001}(2n - 6)``; empirical
         Bayes: the stated noise stands unless the window shows it too large beyond doubt);
         False: the stated variance alone (before session 10)
+    restart_prior : bool, a restart after a track loss takes the lost track's prediction
+        to the window's newest detection (each model's: the pair's and, when it was in the
+        set, the turn model's position and velocity with their covariance) as a prior of
+        the window's fit, when the two agree (:func:`_with_prior`); False: the window's fit
+        alone (before session 14)
     jump_rate_per_s : float, expected rate ``λ_j`` of velocity jumps (kicks, bounces), 1/s:
         a point's reported covariance adds the variance ``λ_j T σ_j² T² / 3`` along its
         camera's ray of a jump no other camera has seen in the time ``T`` since another
@@ -300,6 +305,7 @@ class FilterOptions:
     supported_drag_per_m: float = 0.0
     start_models: bool = True
     window_noise_prior: bool = True
+    restart_prior: bool = True
 
     def __post_init__(self) -> None:
         for name in ("noise_px", "accel_psd", "accel_step_var", "gate", "jump_speed",
@@ -1865,6 +1871,11 @@ class BallFilter:
                 # the fit's covariance was σ² (JᵀJ)⁻¹ at the start's σ²: at the updated one
                 scale = float(self._S[_SVAR]) / var
                 P = [a * scale for a in P]
+                lost = self._lost_prediction(window)
+                if lost is not None:
+                    x, P = _with_prior(x, P, *lost[0])
+                    if turn is not None and lost[1] is not None:
+                        turn = (*_with_prior(turn[0], turn[1], *lost[1]), turn[2])
                 self.set_state(window[-1][0], x[:3], x[3:], P)
                 self._S[_SMU] = mu
                 self._S[_SE:_SE + 6] = e
@@ -1888,6 +1899,31 @@ class BallFilter:
             del window[0]
         self._set_window(window)
         return False
+
+    def _lost_prediction(self, window):
+        """What a lost track says of a restart's window (newest at ``window[-1]``): the pair's
+        and the turn model's predicted means and covariances at the newest detection's time
+        (6, 6 x 6 flat each; the turn model's ``None`` when it was not in the lost track's
+        model set), or None at a first start and when the window holds a detection the lost
+        track already used (at or before its last accepted one: its information is in
+        both). The prediction is the process model's own (:func:`_predicted` with the
+        models' mixing, :func:`_turn_predicted`), from the lost state."""
+        S, I = self._S, self._I
+        if (not self.options.restart_prior or not np.any(S[_SP:_SP + 36])
+                or window[0][0] <= I[_ILAST]):
+            return None
+        t = window[-1][0]
+        dt = (t - int(I[_ITIME])) / NS
+        mu = float(S[_SMU])
+        p = min(self._switch * abs(dt), 0.5)
+        c = mu * (1.0 - p) + (1.0 - mu) * p
+        pair = _predicted(S[_SX:_SX + 6], S[_SP:_SP + 36], dt, c, self._opts, float(S[_SQ]))
+        turn = None
+        if S[_SNU]:
+            xt, Pt = _turn_predicted(S[_SXT:_SXT + 7], S[_SPT:_SPT + 49], dt, float(S[_SQ]),
+                                     self._turn_psd)
+            turn = (xt[:6], _block6(Pt))
+        return pair, turn
 
     def _start_var(self) -> float:
         """The pixel variance a (re)start is judged by: the estimate, or the prior's
@@ -2132,6 +2168,41 @@ class BallFilter:
             return _WEAK
         return theta.tolist(), cov.ravel().tolist(), residuals
 
+
+
+#: A restart's fit takes the lost track's prediction as a prior when the two agree: their
+#: difference's NIS at most this (χ²₆'s 99.9 % quantile, :func:`_with_prior`).
+_PRIOR_GATE = 22.458
+
+
+def _with_prior(x, P, prior, prior_P):
+    """A restart's window fit ``(x, P)`` (``x`` of 6 or 7 values, ``P`` flat) with the lost
+    track's prediction ``prior`` (position, velocity; 6 and 6 x 6 flat) as a pseudo-
+    measurement of its position and velocity (Bar-Shalom, Li & Kirubarajan 2001, §3.4:
+    a prior is a measurement; the window's detections and the lost track's are distinct,
+    so the two are independent): ``H = [I₆ 0]``, ``K = P Hᵀ (H P Hᵀ + P_prior)⁻¹``,
+    ``x += K (prior - H x)``, ``P -= K H P``, when they agree: ``dᵀ (H P Hᵀ + P_prior)⁻¹ d
+    <= _PRIOR_GATE`` (``d = prior - H x``; a kick or a bounce while the track was lost
+    makes them disagree, and the window's fit stands alone). Returns ``(x, P)`` as lists
+    (unchanged when they disagree or the sum is singular)."""
+    n = len(x)
+    xa = np.asarray(x, dtype=np.float64)
+    Pa = np.asarray(P, dtype=np.float64).reshape(n, n)
+    Pr = np.asarray(prior_P, dtype=np.float64).reshape(6, 6)
+    d = np.asarray(prior, dtype=np.float64) - xa[:6]
+    Sd = Pa[:6, :6] + Pr
+    try:
+        Si = np.linalg.inv(Sd)
+    except np.linalg.LinAlgError:
+        return x, P
+    nis = float(d @ Si @ d)
+    if not (np.all(np.isfinite(Si)) and nis <= _PRIOR_GATE):
+        return x, P
+    K = Pa[:, :6] @ Si
+    xn = xa + K @ d
+    Pn = Pa - K @ Pa[:6, :]
+    Pn = 0.5 * (Pn + Pn.T)
+    return xn.tolist(), Pn.ravel().tolist()
 
 
 def accel_floor(rig: Rig, options: FilterOptions) -> float:
