@@ -313,3 +313,20 @@ def test_the_compiled_gate_refuses_a_push_id_its_camera_does_not_keep(fid, camer
     gate_.push([1_000_000], [0], [[300.0, 200.0]])  # push id 0, camera 0
     with pytest.raises(IndexError, match="no kept frame of this push id"):
         gate_._state.decide(fid, camera, 1)
+
+
+@pytest.mark.parametrize("method", ["filter", "typeA"])
+def test_push_frame_of_an_empty_frame_is_push_of_no_rows(method):
+    """An empty frame through ``push_frame`` takes no (time, camera) slot, as ``push`` of
+    empty columns does: the same frame's candidates after it are fused, not refused as out
+    of order (the gate kept the empty frame's key: review, session 14)."""
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    for form in ("push", "push_frame"):
+        fuser = StreamFuser(rig, method, candidates=True)
+        fuser.push_frame(1_000_000_000, 0, np.array([[640.0, 360.0]]), 0)
+        if form == "push":
+            fuser.push(np.zeros(0, np.int64), np.zeros(0, np.int32), np.zeros((0, 2)),
+                       np.zeros(0, np.int64))
+        else:
+            fuser.push_frame(1_010_000_000, 1, np.zeros((0, 2)), 1)
+        fuser.push_frame(1_010_000_000, 1, np.array([[600.0, 300.0]]), 1)  # no error

@@ -209,7 +209,8 @@ def detection_noise(prep: Prepared, time_ns: np.ndarray, max_gap_s: float,
     Each detection with its camera's three previous ones (each within ``max_gap_s`` of the
     next) has a residual from the quadratic through those three, extrapolated to it with
     the Lagrange weights ``l`` (:func:`slot_motion`'s, ``L``, ``h``, ``g`` the intervals):
-    ``r = ‖u - Σ l_j u_j‖ / √(1 + Σ l_j²)`` (undistorted pixels), under the model the norm
+    ``r = ‖u - Σ l_j u_j‖ / √(1 + Σ l_j²)`` (recorded pixels: the noise is the detector's,
+    in the image it saw; the lens is smooth over three frames), under the model the norm
     of a 2-D Gaussian of σ per axis (plus the ball's jerk, small between bounces), whose
     median is ``σ √(2 ln 2)`` (Rayleigh). A point at ``t`` takes the median of the residuals
     of the detections in ``[T - NOISE_WINDOW_S, T)`` (the upper median: the middle element),
@@ -229,7 +230,9 @@ def detection_noise(prep: Prepared, time_ns: np.ndarray, max_gap_s: float,
         if len(rows) < 4:
             continue
         t = t_obs[rows]
-        u = prep.uv_undistorted[rows]
+        # recorded pixels: σ is the detector's noise where it acts, before the lens model
+        # (the covariance maps it through L itself; undistorted residuals would carry L twice)
+        u = prep.obs.uv[rows]
         a, b, c = ((t[3:] - t[2:-1]) / NS, (t[2:-1] - t[1:-2]) / NS, (t[1:-2] - t[:-3]) / NS)
         gap = int(max_gap_s * NS) / NS  # (as slot_motion's)
         ok = (a > 0) & (b > 0) & (c > 0) & (a <= gap) & (b <= gap) & (c <= gap)

@@ -156,13 +156,13 @@ class StreamFuser:
     def push_frame(self, time_ns: int, camera: int, uv: np.ndarray, frame_index: int) -> Track:
         """:meth:`push` of one frame's candidates, best first, as ``pslog live`` pushes them:
         Python integers (``camera`` in the rig, ``time_ns`` and ``frame_index`` within int64:
-        checked by the caller) and a (k, 2) float64 array of the caller's own, k >= 1. The
+        checked by the caller) and a (k, 2) float64 array of the caller's own (k = 0: push's). The
         same Track (and the same errors) as ``push(np.full(k, time_ns), np.full(k, camera),
         uv, np.full(k, frame_index))``, without making and checking those columns: the
         gate's decision at once and the incremental form's one-detection path where they
         apply."""
         one, gate = self._push_one, self._gate
-        if one is not None:
+        if one is not None and len(uv):  # (an empty frame: push's own path, which keeps no key)
             chosen = uv if gate is None else gate.push_frame(time_ns, camera, frame_index, uv)
             if chosen is not None and len(chosen) <= 1:
                 if not len(chosen):  # (every candidate rejected: nothing new)
