@@ -140,3 +140,19 @@ def test_with_prior_by_hand():
         xn, Pn = FM._with_prior(x.tolist(), P.ravel().tolist(), p2, R.ravel())
         assert (xn != x.tolist()) is fused
     assert FM._PRIOR_GATE == pytest.approx(FM._chi2_lower(6, 0.999), abs=1e-3)  # χ²₆ 99.9 %
+
+
+def test_no_prior_from_a_start_its_next_detections_denied():
+    """Only a confirmed track is "lost": after a start whose next detections denied it
+    (fewer than ``_CONFIRM`` confirmations) its stored state is no prior of the next
+    window's fit, though its covariance is still there (review, session 14)."""
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    flt = BallFilter(rig, FilterOptions())
+    flt.set_state(1_000_000_000, (0.0, 0.0, 1.0), (1.0, 0.0, 0.0), np.eye(6) * 1e-4)
+    window = [(1_100_000_000,), (1_133_000_000,)]
+    assert flt._I[FM._ICONF] < FM._CONFIRM
+    assert flt._lost_prediction(window) is None  # a denied start
+    flt._I[FM._ICONF] = FM._CONFIRM
+    pair, _ = flt._lost_prediction(window)  # a confirmed track, lost
+    x = np.asarray(pair[0])  # predicted 133 ms on: moved along x, falling
+    assert abs(x[0] - 0.133) < 2e-3 and abs(x[3] - 1.0) < 0.01 and x[2] < 0.95 and x[5] < -0.5

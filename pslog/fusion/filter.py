@@ -1904,12 +1904,14 @@ class BallFilter:
         """What a lost track says of a restart's window (newest at ``window[-1]``): the pair's
         and the turn model's predicted means and covariances at the newest detection's time
         (6, 6 x 6 flat each; the turn model's ``None`` when it was not in the lost track's
-        model set), or None at a first start and when the window holds a detection the lost
+        model set), or None at a first start, after a start its next detections denied
+        (never confirmed: review, session 14) and when the window holds a detection the lost
         track already used (at or before its last accepted one: its information is in
         both). The prediction is the process model's own (:func:`_predicted` with the
         models' mixing, :func:`_turn_predicted`), from the lost state."""
         S, I = self._S, self._I
         if (not self.options.restart_prior or not np.any(S[_SP:_SP + 36])
+                or I[_ICONF] < _CONFIRM  # (a start its next detections denied: no track)
                 or window[0][0] <= I[_ILAST]):
             return None
         t = window[-1][0]
