@@ -40,7 +40,7 @@ def warm() -> float:
         try:
             steps = [
                 ["simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "rally",
-                 "--duration", "1.5", "--noise-px", "0.3", "--spurious", "0.05",
+                 "--duration", "3", "--noise-px", "0.3", "--spurious", "0.05",
                  "--clock-offset", "cam2=3", "--seed", "1", "-o", session],
                 ["sync", session, "-o", synced],
                 ["fuse", synced, "-o", fused],
@@ -53,6 +53,7 @@ def warm() -> float:
             sys.stdout, sys.stderr = out, err
             quiet.close()
         _stream(session)
+        _direct(session)
     return time.perf_counter() - start
 
 
@@ -80,6 +81,41 @@ def _stream(session: str) -> None:
             fuser.push([int(det.frame_time_ns[f])] * n, [int(det.frame_camera[f])] * n,
                        det.cand_uv[rows])
     fuser.flush()
+
+
+def _direct(session: str) -> None:
+    """Kernels the commands above reach only on some inputs, or through public functions
+    the library's users (and its tests) call: compiled in the signatures those calls use."""
+    import numpy as np
+
+    from pslog.api import read_session
+    from pslog.estimation import _normal
+    from pslog.fusion import prepare, pseudo_stereo_points
+    from pslog.fusion.filter import BallFilter
+
+    data = read_session(session)
+    best = data.detections.best()
+    # the filter's state and prediction (pslog live's sinks, the library's BallFilter)
+    flt = BallFilter(data.rig)
+    for i in range(min(len(best), 30)):
+        flt.push(int(best.time_ns[i]), int(best.camera[i]), float(best.uv[i, 0]),
+                 float(best.uv[i, 1]))
+    flt.state()
+    flt.predict(int(best.time_ns[min(len(best), 30) - 1]) + 10_000_000)
+    # eq. (1)'s pseudo stereo points of given pairs (pslog.fusion.pseudo_stereo_points)
+    prep = prepare(best, data.rig)
+    pseudo_stereo_points(prep, np.array([1]), np.array([2]), max_gap_ns=1_000_000_000)
+    # the smooth trajectory's normal equations by points, its covariance band's references
+    rng = np.random.default_rng(0)
+    m, r = 8, 64
+    first = rng.integers(0, m - 3, r)
+    J = rng.normal(size=(r, 2, 3))
+    M = np.einsum("nai,naj->nij", J, J)
+    ab, rhs = _normal.accumulate_points(first, rng.random((r, 4)), M, np.zeros((r, 3)), m)
+    ab[11] += 1e-3
+    U = _normal.factor(ab)
+    _normal.covariance_band_rows(U)
+    _normal.covariance_band_sequential(U)
 
 
 def main() -> int:
