@@ -111,11 +111,20 @@ def _direct(session: str) -> None:
     first = rng.integers(0, m - 3, r)
     J = rng.normal(size=(r, 2, 3))
     M = np.einsum("nai,naj->nij", J, J)
-    ab, rhs = _normal.accumulate_points(first, rng.random((r, 4)), M, np.zeros((r, 3)), m)
+    ab, _ = _normal.accumulate_points(first, rng.random((r, 4)), M, np.zeros((r, 3)), m)
     ab[11] += 1e-3
     U = _normal.factor(ab)
     _normal.covariance_band_rows(U)
     _normal.covariance_band_sequential(U)
+    # the local windows' dense normal equations and solve (a degenerate window's path)
+    from pslog.estimation import _kernels
+
+    B, W, n = 2, 6, 3 * m
+    H, rhs = _kernels.window_normal(np.eye(n), np.zeros(n), rng.integers(0, m - 3, (B, W)),
+                                    rng.random((B, W, 4)), np.ascontiguousarray(M[:B * W].reshape(
+                                        B, W, 3, 3)), rng.normal(size=(B, W, 3)),
+                                    np.ones((B, W), dtype=bool))
+    _kernels.window_solve(H, rhs, 3, n)
 
 
 def main() -> int:
