@@ -125,6 +125,19 @@ def _direct(session: str) -> None:
                                         B, W, 3, 3)), rng.normal(size=(B, W, 3)),
                                     np.ones((B, W), dtype=bool))
     _kernels.window_solve(H, rhs, 3, n)
+    # a lens's rays (prepare() on a rig with distortion)
+    from pslog.fusion._prepare import _rays
+
+    _rays(data.rig.cameras[0], np.zeros((4, 2)))
+    # a large block's MCAP records laid by the compiled loop (a long fused track's writer);
+    # its payload is a writable array or read-only bytes
+    from pslog.log._wire import assemble_records
+
+    lengths = np.full(4, 5, dtype=np.int64)
+    starts = np.arange(0, 20, 5, dtype=np.int64)
+    heads = np.zeros((4, 31), dtype=np.uint8)
+    for payload in (np.zeros(20, np.uint8), np.frombuffer(bytes(20), dtype=np.uint8)):
+        assemble_records(np.zeros(200, np.uint8), heads, starts * 9, payload, starts, lengths)
 
 
 def main() -> int:
