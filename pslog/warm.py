@@ -19,13 +19,18 @@ commands use. Nothing is written outside the temporary folder and numba's cache.
 from __future__ import annotations
 
 import os
+import subprocess
 import sys
 import tempfile
 import time
 
 
 def warm() -> float:
-    """Run the commands that compile every kernel; returns the seconds it took."""
+    """Run the commands that compile every kernel; returns the seconds it took.
+
+    Where two cores are free, the streaming forms and the direct calls (:func:`_side`)
+    compile in a second process while this one syncs and fuses (numba compiles on one
+    core; each process loads from the cache what the other has written meanwhile)."""
     start = time.perf_counter()
     from pslog.cli import main
 
@@ -34,27 +39,63 @@ def warm() -> float:
         session = os.path.join(tmp, "session.mcap")
         synced = os.path.join(tmp, "synced.mcap")
         fused = os.path.join(tmp, "fused.mcap")
-        quiet = open(os.devnull, "w")  # closed below
-        out, err = sys.stdout, sys.stderr
-        sys.stdout = sys.stderr = quiet
+        _run(main, ["simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "rally",
+                    "--duration", "3", "--noise-px", "0.3", "--spurious", "0.05",
+                    "--clock-offset", "cam2=3", "--seed", "1", "-o", session])
+        side = None
+        cores = (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
+                 else os.cpu_count() or 1)
+        if cores >= 2:
+            log = open(os.path.join(tmp, "side.log"), "w")  # closed below
+            side = subprocess.Popen(
+                [sys.executable, "-c", "import sys; from pslog.warm import _side; "
+                 "_side(sys.argv[1])", session], stdout=log, stderr=subprocess.STDOUT)
         try:
-            steps = [
-                ["simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "rally",
-                 "--duration", "3", "--noise-px", "0.3", "--spurious", "0.05",
-                 "--clock-offset", "cam2=3", "--seed", "1", "-o", session],
-                ["sync", session, "-o", synced],
-                ["fuse", synced, "-o", fused],
-            ]
-            for argv in steps:
-                code = main(argv)
-                if code != 0:
-                    raise RuntimeError(f"pslog {argv[0]} exited {code}")
+            _run(main, ["sync", session, "-o", synced])
+            _run(main, ["fuse", synced, "-o", fused])
+            if side is None:
+                _side(session)
         finally:
-            sys.stdout, sys.stderr = out, err
-            quiet.close()
-        _stream(session)
-        _direct(session)
+            if side is not None:
+                code = side.wait()
+                log.close()
+                if code != 0:
+                    with open(log.name) as f:
+                        last = (f.read().strip().splitlines() or ["no output"])[-1]
+                    raise RuntimeError(f"its second process exited {code}: {last}")
     return time.perf_counter() - start
+
+
+def _run(main, argv: list[str]) -> None:
+    """``pslog argv``, its output discarded."""
+    quiet = open(os.devnull, "w")  # closed below
+    out, err = sys.stdout, sys.stderr
+    sys.stdout = sys.stderr = quiet
+    try:
+        code = main(argv)
+    finally:
+        sys.stdout, sys.stderr = out, err
+        quiet.close()
+    if code != 0:
+        raise RuntimeError(f"pslog {argv[0]} exited {code}")
+
+
+def _side(session: str) -> None:
+    """The streaming forms and the direct calls (run beside sync and fuse)."""
+    os.environ.setdefault("PSLOG_PROGRESS", "off")
+    _direct(session)
+    _stream(session)
+    _detector()
+
+
+def _detector() -> None:
+    """The recorders' compiled colour screen (``pslog redetect`` of a long session; imported
+    here only: the core never imports the recording layer)."""
+    import numpy as np
+
+    from recorders.detect import BallDetector
+
+    BallDetector(compiled=True).detect(np.zeros((16, 16, 3), np.uint8))
 
 
 def _stream(session: str) -> None:
