@@ -9,11 +9,17 @@ module after installing, so the cost is paid once, announced, before the demo or
 
     python -m pslog.warm
 
-It runs the real commands on a 1.5-second simulated session in a temporary folder (simulate
-with a clock offset and spurious blobs, sync, fuse with every default method, the streaming
-forms of ``filter`` and ``typeA``, the latter also with every candidate through the stream
-gate), which compiles every kernel in the signatures those
-commands use. Nothing is written outside the temporary folder and numba's cache.
+It runs the real commands on a 3-second simulated session in a temporary folder (simulate
+with a clock offset and spurious blobs, sync, fuse with every default method: a track of
+more than 256 points, written by the compiled track encoder), and, in a second process
+where two cores are free, the streaming forms of ``filter`` and ``typeA`` (the latter also
+with every candidate through the stream gate) and direct calls of the kernels those
+commands reach only on some inputs or that the library's functions use (the filter's
+state and prediction, eq. (1)'s pseudo stereo points, the smooth trajectory's reference
+and degenerate-window kernels, a lens's rays, a large block's record assembler, the
+recorders' compiled colour screen of a long ``pslog redetect``). That compiles every kernel
+of pslog and recorders (``python tools/warm_coverage.py`` checks it) in the signatures
+those calls use. Nothing is written outside the temporary folder and numba's cache.
 """
 
 from __future__ import annotations
