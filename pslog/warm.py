@@ -91,7 +91,22 @@ def _side(session: str) -> None:
     os.environ.setdefault("PSLOG_PROGRESS", "off")
     _direct(session)
     _stream(session)
+    _in_memory(session)
     _detector()
+
+
+def _in_memory(session: str) -> None:
+    """The filter over arrays in memory (writable; a session read from a file gives
+    read-only ones, another signature of the same kernel): the library's callers' form."""
+    import numpy as np
+
+    from pslog.api import read_session
+    from pslog.fusion.filter import BallFilter, _track
+
+    data = read_session(session)
+    best = data.detections.best()
+    _track(BallFilter(data.rig), np.array(best.time_ns), np.array(best.camera),
+           np.array(best.uv))
 
 
 def _detector() -> None:
@@ -115,13 +130,13 @@ def _stream(session: str) -> None:
     best = data.detections.best()
     for method in ("filter", "typeA"):
         fuser = StreamFuser(data.rig, method)
-        for i in range(min(len(best), 60)):
+        for i in range(len(best)):  # all: past the buffer's first trim
             fuser.push(int(best.time_ns[i]), int(best.camera[i]), best.uv[i])
         fuser.flush()
     # every candidate through the stream gate (pslog live's default; its compiled kernels)
     det = data.detections
     fuser = StreamFuser(data.rig, "typeA", candidates=True)
-    for f in range(min(det.n_frames, 60)):
+    for f in range(det.n_frames):
         rows = slice(*np.searchsorted(det.cand_frame, [f, f + 1]).tolist())
         n = rows.stop - rows.start
         if n:
