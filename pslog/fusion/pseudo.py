@@ -660,7 +660,7 @@ class TypeAStream:
             target, previous_instant, 2 * m, MAX_EXTRAPOLATION,
             self._max_gap_ns, time_ns, camera, prev_b, next_b, uv_und, buf.rays[lo:end],
             self._template.centers, ki, rr, f9, cam, _SPAN_TIE_NS, MIN_RAY_ANGLE_DEG,
-            buf.ray_dir[lo:end], np.ascontiguousarray(buf.dir_jac[:, :, lo:end]),  # one signature
+            buf.ray_dir[lo:end], buf.dir_jac[:, :, lo:end],
             buf.jac_rows[lo:end] if lens else np.zeros((1, 4)), lens, rtki, NS,
             0.0 if noise_px is None else float(noise_px), with_cov, ff, fi, refused, has,
             predicted, points, flags, innovation, factor, model, quality_table, past_rows,
