@@ -232,7 +232,8 @@ def detection_noise(prep: Prepared, time_ns: np.ndarray, max_gap_s: float,
         t = t_obs[rows]
         # recorded pixels: σ is the detector's noise where it acts, before the lens model
         # (the covariance maps it through L itself; undistorted residuals would carry L twice)
-        u = prep.obs.uv[rows]
+        # (a detection the rig says is no detection — undistorted NaN — has no residual)
+        u = np.where(np.isfinite(prep.uv_undistorted[rows]), prep.obs.uv[rows], np.nan)
         a, b, c = ((t[3:] - t[2:-1]) / NS, (t[2:-1] - t[1:-2]) / NS, (t[1:-2] - t[:-3]) / NS)
         gap = int(max_gap_s * NS) / NS  # (as slot_motion's)
         ok = (a > 0) & (b > 0) & (c > 0) & (a <= gap) & (b <= gap) & (c <= gap)
