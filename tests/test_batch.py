@@ -142,6 +142,18 @@ def same_tracks(a: str, b: str) -> None:
     assert [c.clock_offset for c in sa.rig.cameras] == [c.clock_offset for c in sb.rig.cameras]
 
 
+def _wait_until_gone(pgid: int, deadline: float, message: str) -> None:
+    """Poll process group ``pgid`` until none of it is left; fail with ``message`` once
+    ``time.monotonic()`` passes ``deadline``."""
+    while True:
+        try:
+            os.killpg(pgid, 0)
+        except ProcessLookupError:
+            return
+        assert time.monotonic() < deadline, message
+        time.sleep(0.05)
+
+
 def test_summary_equals_the_commands_by_hand_and_the_bad_session_fails(cluster, sessions,
                                                                       tmp_path):
     out = tmp_path / "results"
@@ -252,13 +264,7 @@ def test_resume_after_a_batch_killed_halfway(tmp_path, short_tmpdir):
     # that loses power would, and wait until none is left
     with contextlib.suppress(ProcessLookupError):
         os.killpg(proc.pid, signal.SIGKILL)
-    while True:
-        try:
-            os.killpg(proc.pid, 0)
-        except ProcessLookupError:
-            break
-        assert time.monotonic() < deadline, "the killed batch's processes do not end"
-        time.sleep(0.05)
+    _wait_until_gone(proc.pid, deadline, "the killed batch's processes do not end")
     complete = sorted(p.parent.name for p in out.glob("*/done.json"))
     assert 2 <= len(complete) < 6, "the batch was not killed halfway"
     assert not (out / "summary.csv").exists()
@@ -373,13 +379,8 @@ def test_a_forced_batch_interrupted_keeps_every_old_output(cluster, tmp_path, sh
         assert [line for line in err.splitlines() if line.strip()][-1] == said, err
         gone_by = time.monotonic() + 30  # Ray's processes end with it, not a minute later
         # (after a SIGTERM Ray's agents sometimes outlive its shutdown: docs/batch.md)
-        while sig == signal.SIGINT:
-            try:
-                os.killpg(proc.pid, 0)
-            except ProcessLookupError:
-                break
-            assert time.monotonic() < gone_by, "the batch left processes running"
-            time.sleep(0.05)
+        if sig == signal.SIGINT:
+            _wait_until_gone(proc.pid, gone_by, "the batch left processes running")
     finally:
         proc.stderr.close()
         with contextlib.suppress(ProcessLookupError):
