@@ -36,6 +36,10 @@ case "${1:-}" in
         setup
         "$VENV/bin/ruff" check pslog recorders viewers tests benchmarks tools samples
         "$VENV/bin/mypy"  # pslog/, as configured in pyproject.toml [tool.mypy]
+        # the suite starts ~1,000 pslog processes; with PYTHONDONTWRITEBYTECODE set (as on
+        # some CI images) each would compile pslog's sources again (~0.15-0.5 CPU s each):
+        # write the bytecode once (only files changed since are compiled)
+        "$VENV/bin/python" -m compileall -q pslog recorders viewers >/dev/null
         # two test processes (pytest-xdist), each running whole test files (--dist loadfile:
         # a module's shared fixture, e.g. a Ray cluster or a live run, is built once);
         # PSLOG_TEST_PROCESSES=0 runs the suite in this process alone

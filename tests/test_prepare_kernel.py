@@ -144,3 +144,30 @@ def test_least_squares_pixel_jacobians_compiled_equal_numpy_bit_for_bit(shared_o
     moved[:, 0] += eps * turn[:, 0].T
     shifted = triangulate_rays(origins, moved, used)[0]
     assert np.allclose((shifted - points) / eps, J[:, 0].T, rtol=1e-4, atol=1e-4)
+
+
+@pytest.mark.parametrize("lens", LENSES)
+def test_prepare_with_a_head_of_earlier_rows_is_prepare_of_all_bit_for_bit(lens):
+    # a stream prepares its window again at every push, reusing the rows prepared before
+    # (prepare's ``head``): every row's values are its own, so the result is the same bits
+    from pslog import Observations, Rig
+    from pslog.fusion._prepare import prepare
+
+    rig = builtin_rig("paper3")
+    if lens is not None:
+        rig = Rig(tuple(c.replace(dist=np.array(lens)) for c in rig.cameras), rig.name)
+    rng = np.random.default_rng(3)
+    n = 400
+    uv = np.concatenate([rng.uniform(0, 640, (n - 3, 2)), [[1e300, 5.0], [np.nan, 1.0],
+                                                           [-3000.0, 9000.0]]])
+    obs = Observations(np.arange(n, dtype=np.int64) * 1_000_000, rng.integers(0, 3, n),
+                       uv, np.arange(n))
+    with np.errstate(all="ignore"):
+        whole = prepare(obs, rig)
+        for h in (0, 1, 150, n - 1, n):
+            first = prepare(obs.select(slice(0, h)), rig)
+            again = prepare(obs, rig, head=(first.uv_undistorted, first.ray_dir,
+                                            first.uv_jacobian))
+            for name in ("uv_undistorted", "ray_dir", "uv_jacobian"):
+                assert getattr(again, name).tobytes() == getattr(whole, name).tobytes(), (h,
+                                                                                          name)

@@ -202,11 +202,16 @@ def _per_point(columns: np.ndarray, camera) -> np.ndarray:
     return np.take(columns, camera, axis=1)
 
 
-def prepare(obs: Observations, rig: Rig, F: np.ndarray | None = None) -> Prepared:
+def prepare(obs: Observations, rig: Rig, F: np.ndarray | None = None,
+            head: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> Prepared:
     """Undistort every observation and compute its viewing ray (one vectorized pass per camera).
 
     ``F`` may pass :func:`pslog.geometry.fundamental_matrices` of ``rig.cameras`` computed
-    earlier."""
+    earlier. ``head``: the undistorted pixels (h, 2), ray directions (h, 3) and pixel
+    Jacobians (h, 2, 2) of the first ``h`` observations, from an earlier :func:`prepare` of
+    them with this rig (a stream's window, prepared again at every push with new rows at
+    its end): only the rows after them are computed. Every row's values depend on that row
+    alone (the lens is inverted row by row), so the result has the same bits either way."""
     n_cams = len(rig)
     checked_F = _checked_geometry(rig)  # (check_baselines: a one-line error for a bad rig)
     if len(obs) and (obs.camera.min() < 0 or obs.camera.max() >= n_cams):
@@ -215,14 +220,21 @@ def prepare(obs: Observations, rig: Rig, F: np.ndarray | None = None) -> Prepare
     uv_und = np.empty_like(obs.uv)
     ray_dir = np.empty((len(obs), 3))
     jac = np.empty((len(obs), 2, 2))
+    h = 0
+    if head is not None:
+        h = min(len(head[0]), len(obs))
+        uv_und[:h], ray_dir[:h], jac[:h] = head[0][:h], head[1][:h], head[2][:h]
     per_camera = [np.flatnonzero(obs.camera == i) for i in range(n_cams)]
     lensless = not any(np.any(cam.dist) for cam in rig.cameras)
-    if lensless and len(obs):
+    if lensless and len(obs) > h:
         # no lens: every row's ideal pixel, ray and (identity) Jacobian in one compiled pass,
         # the per-camera numpy operations below row by row (the same bits; fewer temporaries)
-        _lensless_rows(rig, obs, uv_und, ray_dir, jac)
+        _lensless_rows(rig, obs.select(slice(h, None)) if h else obs, uv_und[h:],
+                       ray_dir[h:], jac[h:])
     for i, cam in enumerate(rig.cameras):
         rows = per_camera[i]
+        if h:
+            rows = rows[rows >= h]
         if len(rows) and not lensless:
             # the lens inverted once: Camera.undistort's pixels and Camera.rays' directions
             # from the same ideal normalised coordinates (each method inverts it itself)

@@ -91,6 +91,9 @@ class StreamFuser:
         self._camera = np.zeros(0, np.int32)
         self._uv = np.zeros((0, 2))
         self._frame = np.zeros(0, np.int64)
+        # the window's first rows as prepare made them at the last push (undistorted pixels,
+        # rays, pixel Jacobians; each row's own: prepared again, the same bits)
+        self._head: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._emitted_until: tuple[int, int] = (np.iinfo(np.int64).min, -1)  # (time, camera)
         # the clock model (pslog.timing), per camera in rig order
         self._clock_model = _clock_model(rig)
@@ -274,8 +277,9 @@ class StreamFuser:
             # the ball): no point, which on a valid stream is no error, even at the end
             track = _empty(self.method)
         else:
-            track = fuse(obs, self.rig, self.method, self.options,
-                         prepared=prepare(obs, self.rig, self._F))
+            prepared = prepare(obs, self.rig, self._F, head=self._head)
+            self._head = (prepared.uv_undistorted, prepared.ray_dir, prepared.uv_jacobian)
+            track = fuse(obs, self.rig, self.method, self.options, prepared=prepared)
         newest = int(self._time[-1])
         key_t, key_c = self._emitted_until
         new = (track.time_ns > key_t) | ((track.time_ns == key_t) & (track.camera > key_c))
@@ -288,6 +292,8 @@ class StreamFuser:
         cut = self._cut_row(obs, newest - self._history_ns - self._settle_ns)
         self._time, self._camera = self._time[cut:], self._camera[cut:]
         self._uv, self._frame = self._uv[cut:], self._frame[cut:]
+        if self._head is not None:
+            self._head = (self._head[0][cut:], self._head[1][cut:], self._head[2][cut:])
         return out
 
     def _cut_row(self, obs: Observations, reach_ns: int) -> int:
