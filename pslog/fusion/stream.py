@@ -278,7 +278,9 @@ class StreamFuser:
             track = _empty(self.method)
         else:
             prepared = prepare(obs, self.rig, self._F, head=self._head)
-            self._head = (prepared.uv_undistorted, prepared.ray_dir, prepared.uv_jacobian)
+            jac = prepared.uv_jacobian  # (always made by prepare)
+            self._head = (None if jac is None
+                          else (prepared.uv_undistorted, prepared.ray_dir, jac))
             track = fuse(obs, self.rig, self.method, self.options, prepared=prepared)
         newest = int(self._time[-1])
         key_t, key_c = self._emitted_until
