@@ -22,8 +22,14 @@ centroid is (to first order) the ball's position at the timestamp.
 
 from __future__ import annotations
 
+import contextlib
+import hashlib
+import os
+import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -222,13 +228,19 @@ class CameraRenderer:
 # ---- background ---------------------------------------------------------------------------
 def render_background(camera: Camera, options: RenderOptions | None = None) -> np.ndarray:
     """The field as seen by ``camera`` without the ball: (H, W, 3) uint8 BGR (read-only;
-    cached per camera geometry, texture seed and field size)."""
+    cached per camera geometry, texture seed and field size: in the process, and on disk
+    (:func:`background_cache_dir`), since every synthetic camera process of ``pslog
+    record`` / ``live`` would otherwise trace its ~1.2 million rays again, ~0.5 CPU s)."""
     options = options or RenderOptions()
     key = (camera.width, camera.height, camera.K.tobytes(), camera.dist.tobytes(),
            camera.R.tobytes(), camera.t.tobytes(), options.seed, tuple(options.field_size))
     cached = _BACKGROUNDS.get(key)
     if cached is None:
-        cached = _trace_background(camera, options)
+        path = _background_file(key)
+        cached = _load_background(path, (camera.height, camera.width, 3))
+        if cached is None:
+            cached = _trace_background(camera, options)
+            _store_background(path, cached)
         cached.setflags(write=False)
         if len(_BACKGROUNDS) >= 8:
             _BACKGROUNDS.pop(next(iter(_BACKGROUNDS)))
@@ -237,6 +249,84 @@ def render_background(camera: Camera, options: RenderOptions | None = None) -> n
 
 
 _BACKGROUNDS: dict[tuple, np.ndarray] = {}
+
+#: Background files kept on disk (the least recently written beyond it are removed).
+BACKGROUND_CACHE_FILES = 64
+
+
+def background_cache_dir() -> Path | None:
+    """Where rendered backgrounds are kept between processes: ``$PSLOG_CACHE_DIR`` (empty:
+    no disk cache), else ``$XDG_CACHE_HOME/pslog`` or ``~/.cache/pslog``, each with a
+    ``backgrounds`` folder. A folder that cannot be made or written is no cache (each
+    process renders its own), never an error."""
+    root = os.environ.get("PSLOG_CACHE_DIR")
+    if root is None:
+        xdg = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"),
+                                                               ".cache")
+        root = os.path.join(xdg, "pslog")
+    return Path(root) / "backgrounds" if root else None
+
+
+@lru_cache(maxsize=1)
+def _render_code_digest() -> str:
+    """A digest of the code a background is made by (this module and the camera model's
+    rays): a file rendered by other code is another file, never a stale one."""
+    from pslog import camera as camera_module
+
+    digest = hashlib.sha256()
+    for module_file in (__file__, camera_module.__file__):
+        try:
+            digest.update(Path(module_file).read_bytes())
+        except OSError:  # (a frozen install: no source) — no disk cache then
+            return ""
+    return digest.hexdigest()
+
+
+def _background_file(key: tuple) -> Path | None:
+    folder, code = background_cache_dir(), _render_code_digest()
+    if folder is None or not code:
+        return None
+    digest = hashlib.sha256(code.encode())
+    digest.update(repr(key).encode())
+    return folder / f"{digest.hexdigest()[:40]}.npy"
+
+
+def _load_background(path: Path | None, shape: tuple[int, int, int]) -> np.ndarray | None:
+    """The background stored at ``path``, or None (none, unreadable, or not of ``shape``)."""
+    if path is None:
+        return None
+    try:
+        image = np.load(path, allow_pickle=False)
+    except (OSError, ValueError, EOFError):
+        return None
+    if image.shape != shape or image.dtype != np.uint8:
+        return None
+    return image
+
+
+def _store_background(path: Path | None, image: np.ndarray) -> None:
+    """Write ``image`` to ``path`` whole (a temporary file renamed: a reader never sees half
+    of it) and keep the folder at :data:`BACKGROUND_CACHE_FILES`; any failure (read-only
+    home, full disk) leaves no file and is no error."""
+    if path is None:
+        return
+    tmp = None
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=".partial-", suffix=".npy", dir=path.parent)
+        with os.fdopen(fd, "wb") as f:
+            np.save(f, image, allow_pickle=False)
+        os.replace(tmp, path)
+        tmp = None
+        files = sorted(path.parent.glob("*.npy"), key=lambda p: p.stat().st_mtime)
+        for old in files[:-BACKGROUND_CACHE_FILES]:
+            old.unlink(missing_ok=True)
+    except OSError:
+        pass
+    finally:
+        if tmp is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
 
 
 def _trace_background(camera: Camera, options: RenderOptions) -> np.ndarray:

@@ -108,3 +108,50 @@ def test_options_validated():
                 {"supersample": 0}):
         with pytest.raises(InputError):
             RenderOptions(**bad)
+
+
+def test_a_background_is_rendered_once_and_read_back_from_disk_the_same(tmp_path,
+                                                                         monkeypatch):
+    """Every synthetic camera process renders its background (~1.2 M rays); the disk cache
+    gives the same bytes, and a bad cache (corrupt file, wrong size, unwritable folder,
+    disabled) is never an error: the background is rendered."""
+    import recorders.render as render
+
+    cam = builtin_rig("paper3").cameras[2].replace(width=160, height=120)
+    options = RenderOptions(seed=11)
+    expected = render._trace_background(cam, options)
+
+    def fresh():
+        render._BACKGROUNDS.clear()
+        return render_background(cam, options)
+
+    monkeypatch.setenv("PSLOG_CACHE_DIR", str(tmp_path / "cache"))
+    assert_array_equal(fresh(), expected)
+    (stored,) = (tmp_path / "cache" / "backgrounds").glob("*.npy")
+    assert_array_equal(np.load(stored), expected)
+    # read back (not rendered): a file of the right shape is used as it is
+    marked = expected.copy()
+    marked[0, 0] = (1, 2, 3)
+    np.save(stored, marked)
+    got = fresh()
+    assert_array_equal(got, marked) and not got.flags.writeable
+    # a corrupt file and a file of another size are rendered again (and replaced)
+    for bad in (b"not a numpy file", None):
+        if bad is None:
+            np.save(stored, np.zeros((4, 4, 3), np.uint8))
+        else:
+            stored.write_bytes(bad)
+        assert_array_equal(fresh(), expected)
+        assert_array_equal(np.load(stored), expected)
+    # other options: another file
+    render._BACKGROUNDS.clear()
+    render_background(cam, RenderOptions(seed=12))
+    assert len(list((tmp_path / "cache" / "backgrounds").glob("*.npy"))) == 2
+    # a folder that cannot be written (a file where it would be), or the cache off
+    (tmp_path / "blocked").write_text("a file")
+    monkeypatch.setenv("PSLOG_CACHE_DIR", str(tmp_path / "blocked"))
+    assert_array_equal(fresh(), expected)
+    monkeypatch.setenv("PSLOG_CACHE_DIR", "")
+    assert render._background_file(("any",)) is None
+    assert_array_equal(fresh(), expected)
+    assert not list(tmp_path.glob("**/.partial-*"))
