@@ -284,8 +284,8 @@ class SlotMotion(NamedTuple):
     lag: np.ndarray  # (k,) t - t_s, seconds
 
 
-def slot_motion(prep: Prepared, rows: np.ndarray, time_ns: np.ndarray, max_gap_s: float
-                ) -> list[SlotMotion]:
+def slot_motion(prep: Prepared, rows: np.ndarray, time_ns: np.ndarray, max_gap_s: float,
+                compiled: bool = True) -> list[SlotMotion]:
     """Per camera slot: the image motion between the slot's detection (at ``t_s``) and the
     point's time ``t``, from that detection and its camera's previous ones (each within
     ``max_gap_s`` of the next; causal: only detections at or before the slot's own).
@@ -303,9 +303,14 @@ def slot_motion(prep: Prepared, rows: np.ndarray, time_ns: np.ndarray, max_gap_s
     ``α = ½ ü L (L + h)``, ``ü = 2 ((u_s - u_s') / h - (u_s' - u_s'') / g) / (h + g)``
     (the backward difference is the velocity half a frame earlier, hence ``L + h``, not
     ``L``). A slot without a previous detection has ``w = (1, 0, 0)``.
+
+    ``compiled``: every slot in one compiled pass (:func:`._stereo_kernel.slot_motion`,
+    the same operations: the same bits), else with numpy per slot.
     """
     out = []
     max_gap_ns = int(max_gap_s * NS)
+    if compiled:
+        return _slot_motion_compiled(prep, rows, time_ns, max_gap_ns)
     t_obs = prep.obs.time_ns
     uv = prep.uv_undistorted
     k = rows.shape[0]
@@ -345,9 +350,36 @@ def slot_motion(prep: Prepared, rows: np.ndarray, time_ns: np.ndarray, max_gap_s
     return out
 
 
+def _slot_motion_compiled(prep: Prepared, rows: np.ndarray, time_ns: np.ndarray,
+                          max_gap_ns: int) -> list[SlotMotion]:
+    """:func:`slot_motion` by :func:`._stereo_kernel.slot_motion`."""
+    from . import _stereo_kernel
+    from .innovation import previous_next_rows
+
+    k, m = rows.shape
+    obs = prep.obs
+    cam_rows = np.concatenate([np.asarray(r, dtype=np.int64) for r in prep.per_camera]
+                              + [np.zeros(0, np.int64)])
+    cam_start = np.zeros(len(prep.per_camera) + 1, dtype=np.int64)
+    np.cumsum([len(r) for r in prep.per_camera], out=cam_start[1:])
+    shift, accel = np.empty((m, k, 2)), np.empty((m, k, 2))
+    mrows = np.empty((m, k, 3), dtype=np.int64)
+    linear, quad, lag = np.empty((m, k, 3)), np.empty((m, k, 3)), np.empty((m, k))
+    _stereo_kernel.slot_motion(
+        np.ascontiguousarray(rows, dtype=np.int64), np.ascontiguousarray(time_ns, np.int64),
+        np.ascontiguousarray(obs.time_ns, dtype=np.int64),
+        np.ascontiguousarray(prep.uv_undistorted, dtype=np.float64),
+        np.ascontiguousarray(obs.camera, dtype=np.int64), previous_next_rows(prep)[0],
+        cam_rows, cam_start, max_gap_ns, max_gap_ns / NS, float(NS),
+        shift, accel, mrows, linear, quad, lag)
+    return [SlotMotion(shift[c], accel[c], mrows[c], linear[c], quad[c], lag[c])
+            for c in range(m)]
+
+
 def motion_covariance(prep: Prepared, slot_rows: np.ndarray, jacobians: list[np.ndarray],
                       motion: list[SlotMotion], used: np.ndarray,
-                      noise_px: float | np.ndarray) -> dict[str, np.ndarray]:
+                      noise_px: float | np.ndarray, compiled: bool = True
+                      ) -> dict[str, np.ndarray]:
     """``nearest``'s covariance (quality columns): the point ``P`` is made from the slots'
     unshifted pixels ``u_s`` while the ball was at ``ū_s(t)``; to first order its error is
     ``Σ_s J_s (u_s - ū_s(t))``, and with ``ū_s(t)`` extrapolated from the slot's detection
@@ -363,8 +395,30 @@ def motion_covariance(prep: Prepared, slot_rows: np.ndarray, jacobians: list[np.
     (``L_sj`` the recorded-to-undistorted pixel Jacobian of detection ``sj``; a detection
     in two slots adds its weighted Jacobians first, :func:`covariance`; ``v₀``
     :data:`UNKNOWN_IMAGE_SPEED_PX_S` where the slot's camera has no previous detection).
-    ``slot_rows`` (k, m) the detections used (-1: none), ``jacobians`` (3, 2, k) per slot."""
+    ``slot_rows`` (k, m) the detections used (-1: none), ``jacobians`` (3, 2, k) per slot.
+    ``compiled``: per point in one compiled pass (:func:`._stereo_kernel.motion_covariance`,
+    the same operations: the same bits), else on numpy columns."""
     k, m = slot_rows.shape
+    if compiled:
+        from . import _stereo_kernel
+
+        out = np.empty((7, k))
+        lens = prep._uv_jacobian_cols
+        _stereo_kernel.motion_covariance(
+            np.ascontiguousarray(slot_rows, dtype=np.int64),
+            np.ascontiguousarray(np.stack(jacobians), dtype=np.float64),
+            np.ascontiguousarray(used, dtype=bool),
+            np.ascontiguousarray(np.stack([d.rows for d in motion]), dtype=np.int64),
+            np.ascontiguousarray(np.stack([d.quadratic for d in motion]), dtype=np.float64),
+            np.ascontiguousarray(np.stack([d.lag for d in motion]), dtype=np.float64),
+            np.ascontiguousarray(np.stack([d.shift for d in motion]), dtype=np.float64),
+            np.ascontiguousarray(np.stack([d.accel for d in motion]), dtype=np.float64),
+            np.zeros((4, 0)) if lens is None else lens,
+            # noise_px ** 2 as numpy makes it (a column: its square; a float: Python's power)
+            np.square(noise_px) if np.ndim(noise_px) else np.full(k, noise_px**2),
+            UNKNOWN_IMAGE_SPEED_PX_S, out)
+        return {"std_m": out[0], **{f"cov_{a}_m2": out[1 + i] for i, a in
+                                    enumerate(("xx", "yy", "zz", "xy", "xz", "yz"))}}
     # no detection is in two slots of a point (a slot's are its camera's), so the weighted
     # detections of slot s add up to J_s M_s J_sᵀ, M_s = Σ_j w_sj² L_sj L_sjᵀ (2 x 2), given
     # to covariance as its Cholesky factor C_s (C_s C_sᵀ = M_s): three slots, not nine
@@ -469,18 +523,8 @@ def fuse_nearest(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5)
     invalid points are dropped and counted in ``Track.dropped``. ``noise_px``: the
     detections' noise until the session's own shows (:func:`detection_noise`), and an upper
     bound of its floor; None: no covariance."""
-    n, n_cams = len(prep.obs), len(prep.centers)
     time_ns, camera = prep.obs.time_ns, prep.obs.camera
-    rows = np.full((n, n_cams), -1, dtype=np.int64)
-    max_gap_ns = int(max_gap_s * NS)
-    events = np.arange(n)
-    for d in range(n_cams):  # loop over cameras, vectorized over events
-        latest = latest_row_at_or_before(prep, d, events)
-        ok = (latest >= 0) & (camera != d)
-        ok &= time_ns - prep.obs.time_ns[np.maximum(latest, 0)] <= max_gap_ns
-        rows[ok, d] = latest[ok]
-    others = (rows >= 0).sum(axis=1)
-    rows[events, camera] = events
+    rows, others = nearest_rows(prep, int(max_gap_s * NS))
     # the other cameras' detections are older than the point: the ball moved since; and the
     # noise is the detections' own (docs/methods.md, "nearest's covariance at the true noise")
     if noise_px is None:
@@ -494,6 +538,35 @@ def fuse_nearest(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5)
     track = Track("nearest", time_ns[keep], points[keep], camera[keep],
                   {k: v[keep] for k, v in quality.items()})
     return with_dropped(track, count_invalid(flags[made]))
+
+
+def nearest_rows(prep: Prepared, max_gap_ns: int, compiled: bool = True
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """``nearest``'s rows (n, m) int64: for each detection, the latest detection of every
+    other camera at or before it (row order) within ``max_gap_ns``, and itself in its own
+    camera's slot (-1: none); and the other cameras' detections found (n,). ``compiled``:
+    in one pass (:func:`._stereo_kernel.nearest_rows`), else per camera with numpy (the
+    same rows)."""
+    n, n_cams = len(prep.obs), len(prep.centers)
+    time_ns, camera = prep.obs.time_ns, prep.obs.camera
+    rows = np.full((n, n_cams), -1, dtype=np.int64)
+    if compiled:
+        from . import _stereo_kernel
+
+        others = np.empty(n, dtype=np.int64)
+        _stereo_kernel.nearest_rows(np.ascontiguousarray(camera, dtype=np.int64),
+                                    np.ascontiguousarray(time_ns, dtype=np.int64),
+                                    max_gap_ns, rows, others)
+        return rows, others
+    events = np.arange(n)
+    for d in range(n_cams):  # loop over cameras, vectorized over events
+        latest = latest_row_at_or_before(prep, d, events)
+        ok = (latest >= 0) & (camera != d)
+        ok &= time_ns - prep.obs.time_ns[np.maximum(latest, 0)] <= max_gap_ns
+        rows[ok, d] = latest[ok]
+    others = (rows >= 0).sum(axis=1)
+    rows[events, camera] = events
+    return rows, others
 
 
 def count_invalid(flags: np.ndarray) -> dict[str, int]:
