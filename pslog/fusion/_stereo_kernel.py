@@ -17,6 +17,8 @@ import math
 import numpy as np
 
 from .._jit import kernel
+from ._prepare_kernel import homogeneous as _homogeneous
+from ._prepare_kernel import ray as _ray
 
 
 @kernel
@@ -248,3 +250,216 @@ def motion_covariance(slot_rows, jac, used, mrows, quad, lag, shift, accel, lens
         out[4, p] = cov[3] + m0 * m1
         out[5, p] = cov[4] + m0 * m2
         out[6, p] = cov[5] + m1 * m2
+
+
+@kernel
+def nview_normal(rows, uv, ki, rr, centers, dirs, A, rhs, n_rays):
+    """The rays of each point's detections and the normal equations of their least-squares
+    point, as :func:`pslog.fusion.stereo.nview_points` and the column form of
+    :func:`pslog.geometry.triangulate_rays` make them (operation for operation: the same
+    bits; numpy then solves them, :func:`pslog.geometry._solve_rays`).
+
+    ``rows`` (k, m) each slot's detection (-1: none; its ray is then row 0's pixel's, not
+    used), ``uv`` (n, 2) undistorted pixels, ``ki``, ``rr`` (m, 9) each camera's K⁻¹ and R
+    row-major, ``centers`` (m, 3). Written: ``dirs`` (k, m, 3) unit directions,
+    ``A`` (k, 3, 3) ``Σ_j (I - d_j d_jᵀ)``, ``rhs`` (k, 3) ``Σ_j (I - d_j d_jᵀ) o_j`` (sums
+    over the valid rays in slot order, from the first slot's term), ``n_rays`` (k,)."""
+    k, m = rows.shape[0], rows.shape[1]
+    for p in range(k):
+        a00 = a01 = a02 = a11 = a12 = a22 = b0 = b1 = b2 = 0.0
+        count = 0
+        for c in range(m):
+            r0 = max(rows[p, c], 0)
+            d0, d1, d2 = _ray(ki, rr, c, uv[r0, 0], uv[r0, 1])
+            dirs[p, c, 0], dirs[p, c, 1], dirs[p, c, 2] = d0, d1, d2
+            o0, o1, o2 = centers[c, 0], centers[c, 1], centers[c, 2]
+            u0, u1, u2, w0, w1, w2, vf = _unit_ray(rows[p, c] >= 0, d0, d1, d2, o0, o1, o2)
+            if vf > 0.0:
+                count += 1
+            p00 = (1.0 - u0 * u0) * vf
+            p01 = (0.0 - u0 * u1) * vf
+            p02 = (0.0 - u0 * u2) * vf
+            p11 = (1.0 - u1 * u1) * vf
+            p12 = (0.0 - u1 * u2) * vf
+            p22 = (1.0 - u2 * u2) * vf
+            # geometry._dot's order: first, last, then middle products
+            t0 = p00 * w0 + p02 * w2
+            t0 += p01 * w1
+            t1 = p01 * w0 + p12 * w2
+            t1 += p11 * w1
+            t2 = p02 * w0 + p22 * w2
+            t2 += p12 * w1
+            if c == 0:
+                a00, a01, a02, a11, a12, a22 = p00, p01, p02, p11, p12, p22
+                b0, b1, b2 = t0, t1, t2
+            else:
+                a00 += p00
+                a01 += p01
+                a02 += p02
+                a11 += p11
+                a12 += p12
+                a22 += p22
+                b0 += t0
+                b1 += t1
+                b2 += t2
+        A[p, 0, 0], A[p, 0, 1], A[p, 0, 2] = a00, a01, a02
+        A[p, 1, 0], A[p, 1, 1], A[p, 1, 2] = a01, a11, a12
+        A[p, 2, 0], A[p, 2, 1], A[p, 2, 2] = a02, a12, a22
+        rhs[p, 0], rhs[p, 1], rhs[p, 2] = b0, b1, b2
+        n_rays[p] = count
+
+
+@kernel(inline=True)
+def _unit_ray(valid, d0, d1, d2, o0, o1, o2):
+    """triangulate_rays' column form for one ray: its unit direction and origin (zeros
+    where not valid) and 1.0 / 0.0 for valid (a direction or an origin not finite, or a
+    zero direction, is not)."""
+    valid = valid and math.isfinite(d0) and math.isfinite(d1) and math.isfinite(d2) \
+        and math.isfinite(o0) and math.isfinite(o1) and math.isfinite(o2)
+    norm = d0 * d0
+    norm += d1 * d1
+    norm += d2 * d2
+    norm = math.sqrt(norm)
+    valid = valid and norm > 0
+    scale = norm if norm > 0 else 1.0
+    if valid:
+        return d0 / scale, d1 / scale, d2 / scale, o0, o1, o2, 1.0
+    return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+
+
+@kernel(inline=True)
+def _distorted(cam, c, x, y, short):
+    """``_prepare._distorted_pixels`` of camera c (``cam[c]``: K 9, R 9, t 3, dist 5) at
+    ideal normalised (x, y); ``short``: its lens-free form (no lens, and every r² of the
+    column it is called on finite)."""
+    r2 = x * x + y * y
+    if short:
+        xd, yd = x, y
+    else:
+        k1, k2, p1, p2, k3 = cam[c, 21], cam[c, 22], cam[c, 23], cam[c, 24], cam[c, 25]
+        radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
+        yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+    return cam[c, 0] * xd + cam[c, 1] * yd + cam[c, 2], cam[c, 4] * yd + cam[c, 5]
+
+
+@kernel(inline=True)
+def _projected(cam, c, p0, p1, p2):
+    """reprojection_one's ideal normalised coordinates of world point (p0, p1, p2) in
+    camera c, and whether it is in front (else NaN)."""
+    x = p0 * cam[c, 9] + p1 * cam[c, 10] + p2 * cam[c, 11] + cam[c, 18]
+    y = p0 * cam[c, 12] + p1 * cam[c, 13] + p2 * cam[c, 14] + cam[c, 19]
+    z = p0 * cam[c, 15] + p1 * cam[c, 16] + p2 * cam[c, 17] + cam[c, 20]
+    in_front = z > 1e-12
+    if not in_front:
+        z = np.nan
+    return x / z, y / z, in_front
+
+
+@kernel(inline=True)
+def _ideal(cam, c, u, v):
+    """reprojection_one's ideal normalised coordinates of undistorted pixel (u, v)."""
+    y = (v - cam[c, 5]) / cam[c, 4]
+    x = (u - cam[c, 2] - cam[c, 1] * y) / cam[c, 0]
+    return x, y
+
+
+@kernel
+def nview_after(rows, uv, points, dirs, centers, n_rays, cam, lens, rtki, rms_miss, used,
+                smallest_cos, residual, turns):
+    """What :func:`pslog.fusion.stereo.nview_points` makes of the solved points, operation
+    for operation (the same bits): triangulate_rays' ``rms_miss`` (k,), the rays ``used``
+    (k, m), the smallest |cosine| between two used rays (k,; inf with fewer than two:
+    :func:`pslog.geometry.ray_angles`' column form before its arccos), each slot's
+    reprojection error ``residual`` (m, k) (:func:`~._prepare.reprojection_one`, NaN where
+    not used) and its direction Jacobian ``turns`` (m, 3, 2, k)
+    (:func:`~._prepare.direction_jacobian`).
+
+    ``cam`` (m, 26) per camera K (9), R (9), t (3), dist (5); ``lens`` (m,) bool, a camera
+    with lens distortion; ``rtki`` (m, 9) Rᵀ K⁻¹ row-major; the rest as
+    :func:`nview_normal`'s."""
+    k, m = rows.shape[0], rows.shape[1]
+    # _distorted_pixels takes the lens-free form for a whole column (a camera's slot) only
+    # if every r² of it is finite: the projected points' and the detections' columns
+    short_proj = np.empty(m, dtype=np.bool_)
+    short_obs = np.empty(m, dtype=np.bool_)
+    for c in range(m):
+        short_proj[c] = not lens[c]
+        short_obs[c] = not lens[c]
+    for p in range(k):
+        for c in range(m):
+            if short_proj[c]:
+                x, y, _f = _projected(cam, c, points[p, 0], points[p, 1], points[p, 2])
+                r2 = x * x + y * y
+                if not math.isfinite(r2 + r2):
+                    short_proj[c] = False
+            if short_obs[c]:
+                r0 = max(rows[p, c], 0)
+                x, y = _ideal(cam, c, uv[r0, 0], uv[r0, 1])
+                r2 = x * x + y * y
+                if not math.isfinite(r2 + r2):
+                    short_obs[c] = False
+    for p in range(k):
+        q0, q1, q2 = points[p, 0], points[p, 1], points[p, 2]
+        sq_sum = 0.0
+        smallest = np.inf
+        for c in range(m):
+            r0 = max(rows[p, c], 0)
+            d0, d1, d2 = dirs[p, c, 0], dirs[p, c, 1], dirs[p, c, 2]
+            # triangulate_rays: the distance of the point to each valid ray
+            u0, u1, u2, w0, w1, w2, vf = _unit_ray(rows[p, c] >= 0, d0, d1, d2,
+                                                   centers[c, 0], centers[c, 1], centers[c, 2])
+            f0, f1, f2 = q0 - w0, q1 - w1, q2 - w2
+            along = f0 * u0 + f2 * u2
+            along += f1 * u1
+            e0, e1, e2 = f0 - along * u0, f1 - along * u1, f2 - along * u2
+            sq = e0 * e0 + e2 * e2
+            sq += e1 * e1
+            if vf == 0.0:
+                sq = 0.0
+            sq_sum = sq if c == 0 else sq_sum + sq
+            # the rays used: a detection with a finite direction
+            use = rows[p, c] >= 0 and math.isfinite(d0) and math.isfinite(d1) \
+                and math.isfinite(d2)
+            used[p, c] = use
+            # ray_angles: the unit directions of the used rays, every pair's |cosine|
+            a0, a1, a2, _w0, _w1, _w2, va = _unit_ray(use, d0, d1, d2, 0.0, 0.0, 0.0)
+            for b in range(c):
+                b_use = used[p, b]
+                g0, g1, g2, _w0, _w1, _w2, vb = _unit_ray(
+                    b_use, dirs[p, b, 0], dirs[p, b, 1], dirs[p, b, 2], 0.0, 0.0, 0.0)
+                cos = g0 * a0 + g2 * a2
+                cos += g1 * a1
+                cos = abs(cos)
+                cand = cos if (va > 0.0 and vb > 0.0) else np.inf
+                if cand != cand or smallest != smallest:
+                    smallest = np.nan
+                elif cand < smallest:
+                    smallest = cand
+            # reprojection_one, in the recorded image
+            x, y, in_front = _projected(cam, c, q0, q1, q2)
+            u, v = _distorted(cam, c, x, y, short_proj[c])
+            ix, iy = _ideal(cam, c, uv[r0, 0], uv[r0, 1])
+            tu, tv = _distorted(cam, c, ix, iy, short_obs[c])
+            u -= tu
+            v -= tv
+            u *= u
+            v *= v
+            u += v
+            residual[c, p] = math.sqrt(u) if (in_front and use) else np.nan
+            # direction_jacobian at the detection's undistorted pixel
+            h0, h1, h2 = _homogeneous(rtki, c, uv[r0, 0], uv[r0, 1])
+            size = math.sqrt(h0 * h0 + h1 * h1 + h2 * h2)
+            s0, s1, s2 = h0 / size, h1 / size, h2 / size
+            for j in range(2):
+                m0 = rtki[c, j] / size
+                m1 = rtki[c, 3 + j] / size
+                m2 = rtki[c, 6 + j] / size
+                dm = s0 * m0
+                dm += s1 * m1
+                dm += s2 * m2
+                turns[c, 0, j, p] = m0 - s0 * dm
+                turns[c, 1, j, p] = m1 - s1 * dm
+                turns[c, 2, j, p] = m2 - s2 * dm
+        rms_miss[p] = math.sqrt(sq_sum / n_rays[p])
+        smallest_cos[p] = smallest

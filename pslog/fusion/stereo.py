@@ -8,7 +8,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..errors import FusionError
-from ..geometry import ray_angles, ray_depths, triangulate_rays
+from ..geometry import _FEW, _solve_rays, ray_angles, ray_depths, triangulate_rays
 from ..records import NS, Observations, Track
 from . import _prepare
 from ._prepare import (
@@ -98,18 +98,29 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | np.ndarray 
     """
     k, m = rows.shape
     r = np.maximum(rows, 0)
-    uv = [prep.uv_undistorted[r[:, c]] for c in range(m)]
+    # compiled (the column forms of triangulate_rays and ray_angles, which they take from
+    # _FEW points and below 8 rays: the same bits), unless the finite differences are asked
+    compiled = k >= _FEW and m < 8 and not _prepare.FINITE_DIFFERENCES
+    uv = [] if compiled else [prep.uv_undistorted[r[:, c]] for c in range(m)]
     origins = np.broadcast_to(prep.centers, (k, m, 3))
 
     def directions(uvs):
         return np.stack([prep.rays_from_undistorted(c, uvs[c]) for c in range(m)], axis=1)
 
-    with np.errstate(invalid="ignore"):
-        dirs = directions(uv)
-    points, rms_miss, _ = triangulate_rays(origins, dirs, rows >= 0)
-    used = (rows >= 0) & np.isfinite(dirs[..., 0]) & np.isfinite(dirs[..., 1]) \
-        & np.isfinite(dirs[..., 2])
-    angle = np.degrees(ray_angles(dirs, used))
+    turns = None
+    if compiled:
+        dirs, points, rms_miss, used, smallest_cos, residual, turns = _nview_compiled(
+            prep, rows)
+        with np.errstate(invalid="ignore"):
+            angle = np.degrees(np.where(np.isfinite(smallest_cos),
+                                        np.arccos(np.clip(smallest_cos, 0.0, 1.0)), np.nan))
+    else:
+        with np.errstate(invalid="ignore"):
+            dirs = directions(uv)
+        points, rms_miss, _ = triangulate_rays(origins, dirs, rows >= 0)
+        used = (rows >= 0) & np.isfinite(dirs[..., 0]) & np.isfinite(dirs[..., 1]) \
+            & np.isfinite(dirs[..., 2])
+        angle = np.degrees(ray_angles(dirs, used))
     finite = finite_rows(points)
     flags = invalid_points(prep, points, used, finite)
     with np.errstate(invalid="ignore"):
@@ -119,8 +130,9 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | np.ndarray 
             behind |= used[:, c] & ~(depth[:, c] > 0)
         flags[behind & finite] |= BEHIND
         flags[angle < MIN_RAY_ANGLE_DEG] |= PARALLEL  # (NaN: fewer than two rays)
-    residual = [np.where(used[:, c], reprojection_one(prep, c, points, uv[c]), np.nan)
-                for c in range(m)]
+    if not compiled:
+        residual = [np.where(used[:, c], reprojection_one(prep, c, points, uv[c]), np.nan)
+                    for c in range(m)]
 
     slot_rows = np.where(used, rows, -1)
     if noise_px is None:
@@ -135,7 +147,8 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | np.ndarray 
         with np.errstate(invalid="ignore"):
             jacobians = least_squares_pixel_jacobians(
                 points, origins, dirs, used,
-                [direction_jacobian(prep, c, uv[c]) for c in range(m)])
+                [direction_jacobian(prep, c, uv[c]) for c in range(m)]
+                if turns is None else list(turns))
     if noise_px is not None:
         if motion is None:
             cov = covariance(slot_rows, jacobians,
@@ -166,6 +179,36 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | np.ndarray 
             **(cov if cov is not None else {}),
         }
     return points, quality, flags, used
+
+
+def _nview_compiled(prep: Prepared, rows: np.ndarray):
+    """:func:`nview_points`' rays, points, ``rms_miss``, rays used, smallest |cosine|
+    between two used rays, residuals (m, k) and direction Jacobians (m, 3, 2, k) by
+    :mod:`._stereo_kernel`'s passes, numpy solving the normal equations between them."""
+    from . import _stereo_kernel
+
+    k, m = rows.shape
+    rows = np.ascontiguousarray(rows, dtype=np.int64)
+    uv = np.ascontiguousarray(prep.uv_undistorted, dtype=np.float64)
+    centers = np.ascontiguousarray(prep.centers, dtype=np.float64)
+    dirs, A, rhs = np.empty((k, m, 3)), np.empty((k, 3, 3)), np.empty((k, 3))
+    n_rays = np.empty(k, dtype=np.int64)
+    _stereo_kernel.nview_normal(rows, uv, np.ascontiguousarray(prep._cols("K_inv").T),
+                                np.ascontiguousarray(prep._cols("R").T), centers, dirs, A,
+                                rhs, n_rays)
+    points = _solve_rays(A, rhs, n_rays)
+    del A, rhs
+    cam = np.array([np.concatenate([np.ravel(c.K), np.ravel(c.R), np.ravel(c.t),
+                                    np.ravel(c.dist)]) for c in prep.cameras],
+                   dtype=np.float64).reshape(-1, 26)
+    lens = np.array([bool(np.any(c.dist)) for c in prep.cameras], dtype=bool)
+    rms_miss, smallest_cos = np.empty(k), np.empty(k)
+    used = np.empty((k, m), dtype=bool)
+    residual, turns = np.empty((m, k)), np.empty((m, 3, 2, k))
+    _stereo_kernel.nview_after(rows, uv, points, dirs, centers, n_rays, cam, lens,
+                               np.ascontiguousarray(prep._rt_k_inv_cols.T), rms_miss, used,
+                               smallest_cos, residual, turns)
+    return dirs, points, rms_miss, used, smallest_cos, list(residual), turns
 
 
 def _with_motion(cov: dict[str, np.ndarray], jacobians: list[np.ndarray],
