@@ -419,6 +419,19 @@ def _slot_motion_compiled(prep: Prepared, rows: np.ndarray, time_ns: np.ndarray,
             for c in range(m)]
 
 
+def _stacked(parts: list[np.ndarray]) -> np.ndarray:
+    """``np.stack(parts)``, without a copy when ``parts`` are the consecutive slices of one
+    contiguous array (the compiled :func:`slot_motion`'s and Jacobians' blocks): that
+    array."""
+    base = parts[0].base if len(parts) else None
+    if (isinstance(base, np.ndarray) and base.flags.c_contiguous
+            and base.shape == (len(parts), *parts[0].shape) and base.dtype == parts[0].dtype
+            and all(p.base is base and p.__array_interface__["data"][0]
+                    == base[i].__array_interface__["data"][0] for i, p in enumerate(parts))):
+        return base
+    return np.stack(parts)
+
+
 def motion_covariance(prep: Prepared, slot_rows: np.ndarray, jacobians: list[np.ndarray],
                       motion: list[SlotMotion], used: np.ndarray,
                       noise_px: float | np.ndarray, compiled: bool = True
@@ -449,13 +462,13 @@ def motion_covariance(prep: Prepared, slot_rows: np.ndarray, jacobians: list[np.
         lens = prep._uv_jacobian_cols
         _stereo_kernel.motion_covariance(
             np.ascontiguousarray(slot_rows, dtype=np.int64),
-            np.ascontiguousarray(np.stack(jacobians), dtype=np.float64),
+            np.ascontiguousarray(_stacked(jacobians), dtype=np.float64),
             np.ascontiguousarray(used, dtype=bool),
-            np.ascontiguousarray(np.stack([d.rows for d in motion]), dtype=np.int64),
-            np.ascontiguousarray(np.stack([d.quadratic for d in motion]), dtype=np.float64),
-            np.ascontiguousarray(np.stack([d.lag for d in motion]), dtype=np.float64),
-            np.ascontiguousarray(np.stack([d.shift for d in motion]), dtype=np.float64),
-            np.ascontiguousarray(np.stack([d.accel for d in motion]), dtype=np.float64),
+            np.ascontiguousarray(_stacked([d.rows for d in motion]), dtype=np.int64),
+            np.ascontiguousarray(_stacked([d.quadratic for d in motion]), dtype=np.float64),
+            np.ascontiguousarray(_stacked([d.lag for d in motion]), dtype=np.float64),
+            np.ascontiguousarray(_stacked([d.shift for d in motion]), dtype=np.float64),
+            np.ascontiguousarray(_stacked([d.accel for d in motion]), dtype=np.float64),
             np.zeros((4, 0)) if lens is None else lens,
             # noise_px ** 2 as numpy makes it (a column: its square; a float: Python's power)
             np.square(noise_px) if np.ndim(noise_px) else np.full(k, noise_px**2),
