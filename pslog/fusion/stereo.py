@@ -71,7 +71,7 @@ def sync_groups(obs: Observations, n_cams: int, tolerance_s: float
 
 
 def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | np.ndarray | None,
-                 motion: list[SlotMotion] | None = None):
+                 motion: list[SlotMotion] | None = None, compiled: bool = True):
     """N-view least-squares point of each row of detections, with its quality and validity.
 
     Parameters
@@ -83,6 +83,9 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | np.ndarray 
         moved in its image between its shutter and the point's time (the shutters taken as
         simultaneous are not; :func:`slot_motion`): the covariance is then
         :func:`motion_covariance`'s (docs/methods.md, "nearest's uncertainty")
+    compiled : the per-point arithmetic in :mod:`._stereo_kernel`'s compiled passes (from
+        ``_FEW`` points and below 8 cameras, where the numpy forms are columns; the same
+        bits), else with numpy
 
     Returns
     -------
@@ -100,7 +103,7 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | np.ndarray 
     r = np.maximum(rows, 0)
     # compiled (the column forms of triangulate_rays and ray_angles, which they take from
     # _FEW points and below 8 rays: the same bits), unless the finite differences are asked
-    compiled = k >= _FEW and m < 8 and not _prepare.FINITE_DIFFERENCES
+    compiled = compiled and k >= _FEW and m < 8 and not _prepare.FINITE_DIFFERENCES
     uv = [] if compiled else [prep.uv_undistorted[r[:, c]] for c in range(m)]
     origins = np.broadcast_to(prep.centers, (k, m, 3))
 
@@ -154,7 +157,8 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | np.ndarray 
             cov = covariance(slot_rows, jacobians,
                              [prep.pixel_jacobians_t(r[:, c]) for c in range(m)], noise_px)
         else:
-            cov = motion_covariance(prep, slot_rows, jacobians, motion, used, noise_px)
+            cov = motion_covariance(prep, slot_rows, jacobians, motion, used, noise_px,
+                                    compiled)
     # (k,) columns, each reduction over the m cameras in numpy's order (the same bits)
     times = [prep.obs.time_ns[r[:, c]] for c in range(m)]
     t_max = np.maximum.reduce([np.where(used[:, c], times[c], np.iinfo(np.int64).min)
@@ -573,22 +577,24 @@ def fuse_sync(prep: Prepared, tolerance_s: float = 1e-3, noise_px: float | None 
     return stereo_at_common_instants(prep, tolerance_s, "sync", noise_px)[0]
 
 
-def fuse_nearest(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5) -> Track:
+def fuse_nearest(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
+                 compiled: bool = True) -> Track:
     """``nearest``: each detection triangulated with the latest detection of every other camera
     as if they were simultaneous (the paper's "unsynchronized" baseline). Geometrically
     invalid points are dropped and counted in ``Track.dropped``. ``noise_px``: the
     detections' noise until the session's own shows (:func:`detection_noise`), and an upper
-    bound of its floor; None: no covariance."""
+    bound of its floor; None: no covariance. ``compiled``: the per-point arithmetic by
+    :mod:`._stereo_kernel` (the same bits), else by the numpy forms (a reference)."""
     time_ns, camera = prep.obs.time_ns, prep.obs.camera
-    rows, others = nearest_rows(prep, int(max_gap_s * NS))
+    rows, others = nearest_rows(prep, int(max_gap_s * NS), compiled)
     # the other cameras' detections are older than the point: the ball moved since; and the
     # noise is the detections' own (docs/methods.md, "nearest's covariance at the true noise")
     if noise_px is None:
-        points, quality, flags, _ = nview_points(prep, rows, None)
+        points, quality, flags, _ = nview_points(prep, rows, None, compiled=compiled)
     else:
         points, quality, flags, _ = nview_points(
             prep, rows, detection_noise(prep, time_ns, max_gap_s, noise_px),
-            slot_motion(prep, rows, time_ns, max_gap_s))
+            slot_motion(prep, rows, time_ns, max_gap_s, compiled), compiled)
     made = (others >= 1) & (quality["n_detections"] >= 2)
     keep = made & (flags == 0) & np.all(np.isfinite(points), axis=1)
     track = Track("nearest", time_ns[keep], points[keep], camera[keep],
