@@ -25,7 +25,6 @@ from pslog.fusion.stereo import fuse_nearest
 from pslog.geometry import _FEW
 
 LENS = (-0.25, 0.08, 0.001, -0.001, 0.0)
-KERNELS = ("nearest_rows", "slot_motion", "motion_covariance", "nview_normal", "nview_after")
 
 
 def _session(lens, seed=3):
@@ -73,8 +72,12 @@ def test_nearest_kernels_python_originals_equal(monkeypatch):
     gap = default_max_gap_s(rig)
     with np.errstate(all="ignore"):
         got = fuse_nearest(prep, gap, 0.5)
-        for name in KERNELS:
-            monkeypatch.setattr(_stereo_kernel, name, getattr(_stereo_kernel, name).py_func)
+        # every kernel and helper the module calls (inlined ones too: their Python
+        # originals, looked up by the originals at their call; nothing compiled here)
+        for name in dir(_stereo_kernel):
+            fn = getattr(_stereo_kernel, name)
+            if hasattr(fn, "py_func"):
+                monkeypatch.setattr(_stereo_kernel, name, fn.py_func)
         python = fuse_nearest(prep, gap, 0.5)
     _same(python, got)
 

@@ -192,13 +192,13 @@ def _nview_compiled(prep: Prepared, rows: np.ndarray):
     from . import _stereo_kernel
 
     k, m = rows.shape
-    rows = np.ascontiguousarray(rows, dtype=np.int64)
-    uv = np.ascontiguousarray(prep.uv_undistorted, dtype=np.float64)
-    centers = np.ascontiguousarray(prep.centers, dtype=np.float64)
+    rows = _c(rows, dtype=np.int64)
+    uv = _c(prep.uv_undistorted, dtype=np.float64)
+    centers = _c(prep.centers, dtype=np.float64)
     dirs, A, rhs = np.empty((k, m, 3)), np.empty((k, 3, 3)), np.empty((k, 3))
     n_rays = np.empty(k, dtype=np.int64)
-    _stereo_kernel.nview_normal(rows, uv, np.ascontiguousarray(prep._cols("K_inv").T),
-                                np.ascontiguousarray(prep._cols("R").T), centers, dirs, A,
+    _stereo_kernel.nview_normal(rows, uv, _c(prep._cols("K_inv").T),
+                                _c(prep._cols("R").T), centers, dirs, A,
                                 rhs, n_rays)
     points = _solve_rays(A, rhs, n_rays)
     del A, rhs
@@ -210,7 +210,7 @@ def _nview_compiled(prep: Prepared, rows: np.ndarray):
     used = np.empty((k, m), dtype=bool)
     residual, turns = np.empty((m, k)), np.empty((m, 3, 2, k))
     _stereo_kernel.nview_after(rows, uv, points, dirs, centers, n_rays, cam, lens,
-                               np.ascontiguousarray(prep._rt_k_inv_cols.T), rms_miss, used,
+                               _c(prep._rt_k_inv_cols.T), rms_miss, used,
                                smallest_cos, residual, turns)
     return dirs, points, rms_miss, used, smallest_cos, list(residual), turns
 
@@ -413,14 +413,22 @@ def _slot_motion_compiled(prep: Prepared, rows: np.ndarray, time_ns: np.ndarray,
     mrows = np.empty((m, k, 3), dtype=np.int64)
     linear, quad, lag = np.empty((m, k, 3)), np.empty((m, k, 3)), np.empty((m, k))
     _stereo_kernel.slot_motion(
-        np.ascontiguousarray(rows, dtype=np.int64), np.ascontiguousarray(time_ns, np.int64),
-        np.ascontiguousarray(obs.time_ns, dtype=np.int64),
-        np.ascontiguousarray(prep.uv_undistorted, dtype=np.float64),
-        np.ascontiguousarray(obs.camera, dtype=np.int64), previous_next_rows(prep)[0],
+        _c(rows, dtype=np.int64), _c(time_ns, np.int64),
+        _c(obs.time_ns, dtype=np.int64),
+        _c(prep.uv_undistorted, dtype=np.float64),
+        _c(obs.camera, dtype=np.int64), previous_next_rows(prep)[0],
         cam_rows, cam_start, max_gap_ns, max_gap_ns / NS, float(NS),
         shift, accel, mrows, linear, quad, lag)
     return [SlotMotion(shift[c], accel[c], mrows[c], linear[c], quad[c], lag[c])
             for c in range(m)]
+
+
+def _c(a: np.ndarray, dtype=None) -> np.ndarray:
+    """``a`` as a C-contiguous, writable array (of ``dtype``) for a compiled kernel: a copy
+    if it is not one (numba compiles a read-only array, such as a column read from a file,
+    as another signature: one signature per kernel, the one ``pslog.warm`` compiles)."""
+    a = np.ascontiguousarray(a, dtype=dtype)
+    return a if a.flags.writeable else a.copy()
 
 
 def _stacked(parts: list[np.ndarray]) -> np.ndarray:
@@ -465,14 +473,14 @@ def motion_covariance(prep: Prepared, slot_rows: np.ndarray, jacobians: list[np.
         out = np.empty((7, k))
         lens = prep._uv_jacobian_cols
         _stereo_kernel.motion_covariance(
-            np.ascontiguousarray(slot_rows, dtype=np.int64),
-            np.ascontiguousarray(_stacked(jacobians), dtype=np.float64),
-            np.ascontiguousarray(used, dtype=bool),
-            np.ascontiguousarray(_stacked([d.rows for d in motion]), dtype=np.int64),
-            np.ascontiguousarray(_stacked([d.quadratic for d in motion]), dtype=np.float64),
-            np.ascontiguousarray(_stacked([d.lag for d in motion]), dtype=np.float64),
-            np.ascontiguousarray(_stacked([d.shift for d in motion]), dtype=np.float64),
-            np.ascontiguousarray(_stacked([d.accel for d in motion]), dtype=np.float64),
+            _c(slot_rows, dtype=np.int64),
+            _c(_stacked(jacobians), dtype=np.float64),
+            _c(used, dtype=bool),
+            _c(_stacked([d.rows for d in motion]), dtype=np.int64),
+            _c(_stacked([d.quadratic for d in motion]), dtype=np.float64),
+            _c(_stacked([d.lag for d in motion]), dtype=np.float64),
+            _c(_stacked([d.shift for d in motion]), dtype=np.float64),
+            _c(_stacked([d.accel for d in motion]), dtype=np.float64),
             np.zeros((4, 0)) if lens is None else lens,
             # noise_px ** 2 as numpy makes it (a column: its square; a float: Python's power)
             np.square(noise_px) if np.ndim(noise_px) else np.full(k, noise_px**2),
@@ -616,8 +624,8 @@ def nearest_rows(prep: Prepared, max_gap_ns: int, compiled: bool = True
         from . import _stereo_kernel
 
         others = np.empty(n, dtype=np.int64)
-        _stereo_kernel.nearest_rows(np.ascontiguousarray(camera, dtype=np.int64),
-                                    np.ascontiguousarray(time_ns, dtype=np.int64),
+        _stereo_kernel.nearest_rows(_c(camera, dtype=np.int64),
+                                    _c(time_ns, dtype=np.int64),
                                     max_gap_ns, rows, others)
         return rows, others
     events = np.arange(n)
