@@ -136,8 +136,6 @@ def motion_covariance(slot_rows, jac, used, mrows, quad, lag, shift, accel, lens
     point (``noise_px ** 2``), ``unknown_speed`` :data:`~.stereo.UNKNOWN_IMAGE_SPEED_PX_S`."""
     k, m = slot_rows.shape[0], slot_rows.shape[1]
     has_lens = lens.shape[1] > 0
-    first = (0, 1, 2, 0, 0, 1)
-    second = (0, 1, 2, 1, 2, 2)
     # the slots any of whose points is used without a merged duplicate (covariance's
     # ``if not np.any(use): continue``), and those with a blind point (motion_covariance's
     # ``if np.any(blind)``): a skipped slot adds nothing, not 0 * NaN
@@ -145,22 +143,13 @@ def motion_covariance(slot_rows, jac, used, mrows, quad, lag, shift, accel, lens
     any_blind = np.zeros(m, dtype=np.bool_)
     for p in range(k):
         for s in range(m):
-            if slot_rows[p, s] >= 0:
-                taken = False
-                for t in range(s):  # merged into an earlier slot (merged_slots)
-                    if slot_rows[p, t] == slot_rows[p, s]:
-                        taken = True
-                if not taken:
-                    any_use[s] = True
+            if slot_rows[p, s] >= 0 and not _taken(slot_rows, p, s):
+                any_use[s] = True
             if used[p, s] and mrows[s, p, 1] < 0 and lag[s, p] > 0:
                 any_blind[s] = True
-    merged = np.empty((3, 2))
-    cov = np.empty(6)
-    unknown = np.empty(6)
-    JL = np.empty((3, 2))
     for p in range(k):
-        for e in range(6):
-            cov[e] = 0.0
+        # the six distinct entries xx, yy, zz, xy, xz, yz
+        c0 = c1 = c2 = c3 = c4 = c5 = 0.0
         for s in range(m):
             if not any_use[s]:
                 continue
@@ -184,49 +173,52 @@ def motion_covariance(slot_rows, jac, used, mrows, quad, lag, shift, accel, lens
             C11 = math.sqrt(diff if (diff != diff or diff >= 0.0) else 0.0)
             # covariance: slot s's Jacobian plus those of later slots holding its detection
             row = slot_rows[p, s]
-            taken = False
-            for t in range(s):
-                if row >= 0 and slot_rows[p, t] == row:
-                    taken = True
-            for i in range(3):
-                merged[i, 0] = jac[s, i, 0, p]
-                merged[i, 1] = jac[s, i, 1, p]
-            if row >= 0 and not taken:
+            use = row >= 0 and not _taken(slot_rows, p, s)
+            j00, j01 = jac[s, 0, 0, p], jac[s, 0, 1, p]
+            j10, j11 = jac[s, 1, 0, p], jac[s, 1, 1, p]
+            j20, j21 = jac[s, 2, 0, p], jac[s, 2, 1, p]
+            if use:
                 for t in range(s + 1, m):
                     if slot_rows[p, t] == row:
-                        for i in range(3):
-                            merged[i, 0] += jac[t, i, 0, p]
-                            merged[i, 1] += jac[t, i, 1, p]
-            use = row >= 0 and not taken
-            # J C (times_pixel_jacobian: C[0, 1] = 0 written out), zero where not used
-            for i in range(3):
-                if use:
-                    JL[i, 0] = merged[i, 0] * C00 + merged[i, 1] * C10
-                    JL[i, 1] = merged[i, 0] * 0.0 + merged[i, 1] * C11
-                else:
-                    JL[i, 0] = 0.0
-                    JL[i, 1] = 0.0
-            for e in range(6):
-                a, b = first[e], second[e]
-                cov[e] += JL[a, 0] * JL[b, 0] + JL[a, 1] * JL[b, 1]
-        for e in range(6):
-            cov[e] = cov[e] * s2[p]
+                        j00 += jac[t, 0, 0, p]
+                        j01 += jac[t, 0, 1, p]
+                        j10 += jac[t, 1, 0, p]
+                        j11 += jac[t, 1, 1, p]
+                        j20 += jac[t, 2, 0, p]
+                        j21 += jac[t, 2, 1, p]
+                # J C (times_pixel_jacobian: C[0, 1] = 0 written out)
+                a0, a1 = j00 * C00 + j01 * C10, j00 * 0.0 + j01 * C11
+                b0, b1 = j10 * C00 + j11 * C10, j10 * 0.0 + j11 * C11
+                e0, e1 = j20 * C00 + j21 * C10, j20 * 0.0 + j21 * C11
+            else:  # zero where not used
+                a0 = a1 = b0 = b1 = e0 = e1 = 0.0
+            c0 += a0 * a0 + a1 * a1
+            c1 += b0 * b0 + b1 * b1
+            c2 += e0 * e0 + e1 * e1
+            c3 += a0 * b0 + a1 * b1
+            c4 += a0 * e0 + a1 * e1
+            c5 += b0 * e0 + b1 * e1
+        v = s2[p]
+        c0, c1, c2, c3, c4, c5 = c0 * v, c1 * v, c2 * v, c3 * v, c4 * v, c5 * v
         # the unknown shift of a slot without image velocity: Σ_s (v₀ L_s)² J_s J_sᵀ, summed
         # apart, then added (a sum of zeros where no slot is blind: adding it changes no bit)
-        for e in range(6):
-            unknown[e] = 0.0
+        u0 = u1 = u2 = u3 = u4 = u5 = 0.0
         for s in range(m):
             if not any_blind[s]:
                 continue
             blind = used[p, s] and mrows[s, p, 1] < 0 and lag[s, p] > 0
             f = lag[s, p] * unknown_speed
             f2 = f * f if blind else 0.0
-            for e in range(6):
-                a, b = first[e], second[e]
-                unknown[e] += f2 * (jac[s, a, 0, p] * jac[s, b, 0, p]
-                                    + jac[s, a, 1, p] * jac[s, b, 1, p])
-        for e in range(6):
-            cov[e] += unknown[e]
+            j00, j01 = jac[s, 0, 0, p], jac[s, 0, 1, p]
+            j10, j11 = jac[s, 1, 0, p], jac[s, 1, 1, p]
+            j20, j21 = jac[s, 2, 0, p], jac[s, 2, 1, p]
+            u0 += f2 * (j00 * j00 + j01 * j01)
+            u1 += f2 * (j10 * j10 + j11 * j11)
+            u2 += f2 * (j20 * j20 + j21 * j21)
+            u3 += f2 * (j00 * j10 + j01 * j11)
+            u4 += f2 * (j00 * j20 + j01 * j21)
+            u5 += f2 * (j10 * j20 + j11 * j21)
+        c0, c1, c2, c3, c4, c5 = c0 + u0, c1 + u1, c2 + u2, c3 + u3, c4 + u4, c5 + u5
         # _with_motion: plus m mᵀ, m = Σ_s J_s (δ_s + α_s)
         m0 = m1 = m2 = 0.0
         for s in range(m):
@@ -240,16 +232,26 @@ def motion_covariance(slot_rows, jac, used, mrows, quad, lag, shift, accel, lens
                 m0 += 0.0
                 m1 += 0.0
                 m2 += 0.0
-        c0 = cov[0] + m0 * m0
-        c1 = cov[1] + m1 * m1
-        c2 = cov[2] + m2 * m2
+        c0 = c0 + m0 * m0
+        c1 = c1 + m1 * m1
+        c2 = c2 + m2 * m2
         out[0, p] = math.sqrt(c0 + c1 + c2)
         out[1, p] = c0
         out[2, p] = c1
         out[3, p] = c2
-        out[4, p] = cov[3] + m0 * m1
-        out[5, p] = cov[4] + m0 * m2
-        out[6, p] = cov[5] + m1 * m2
+        out[4, p] = c3 + m0 * m1
+        out[5, p] = c4 + m0 * m2
+        out[6, p] = c5 + m1 * m2
+
+
+@kernel(inline=True)
+def _taken(slot_rows, p, s):
+    """Slot s of point p holds the detection of an earlier slot (merged into it:
+    ``merged_slots``)."""
+    for t in range(s):
+        if slot_rows[p, t] == slot_rows[p, s]:
+            return True
+    return False
 
 
 @kernel
@@ -309,7 +311,7 @@ def nview_normal(rows, uv, ki, rr, centers, dirs, A, rhs, n_rays):
         n_rays[p] = count
 
 
-@kernel(inline=True)
+@kernel
 def _unit_ray(valid, d0, d1, d2, o0, o1, o2):
     """triangulate_rays' column form for one ray: its unit direction and origin (zeros
     where not valid) and 1.0 / 0.0 for valid (a direction or an origin not finite, or a
@@ -327,20 +329,20 @@ def _unit_ray(valid, d0, d1, d2, o0, o1, o2):
     return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
 
 
-@kernel(inline=True)
-def _distorted(cam, c, x, y, short):
-    """``_prepare._distorted_pixels`` of camera c (``cam[c]``: K 9, R 9, t 3, dist 5) at
-    ideal normalised (x, y); ``short``: its lens-free form (no lens, and every r² of the
-    column it is called on finite)."""
+@kernel
+def _distorted(x, y, short, k1, k2, p1, p2, k3, k00, k01, k02, k11, k12):
+    """``_prepare._distorted_pixels`` of a camera (K's entries ``k00`` ... ``k12``, lens
+    ``k1, k2, p1, p2, k3``) at ideal normalised (x, y); ``short``: its lens-free form (no
+    lens, and every r² of the column it is called on finite). Scalars only: compiled once,
+    called without a reference to an array."""
     r2 = x * x + y * y
     if short:
         xd, yd = x, y
     else:
-        k1, k2, p1, p2, k3 = cam[c, 21], cam[c, 22], cam[c, 23], cam[c, 24], cam[c, 25]
         radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
         xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
         yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
-    return cam[c, 0] * xd + cam[c, 1] * yd + cam[c, 2], cam[c, 4] * yd + cam[c, 5]
+    return k00 * xd + k01 * yd + k02, k11 * yd + k12
 
 
 @kernel(inline=True)
@@ -438,9 +440,13 @@ def nview_after(rows, uv, points, dirs, centers, n_rays, cam, lens, rtki, rms_mi
                     smallest = cand
             # reprojection_one, in the recorded image
             x, y, in_front = _projected(cam, c, q0, q1, q2)
-            u, v = _distorted(cam, c, x, y, short_proj[c])
+            u, v = _distorted(x, y, short_proj[c], cam[c, 21], cam[c, 22], cam[c, 23],
+                              cam[c, 24], cam[c, 25], cam[c, 0], cam[c, 1], cam[c, 2],
+                              cam[c, 4], cam[c, 5])
             ix, iy = _ideal(cam, c, uv[r0, 0], uv[r0, 1])
-            tu, tv = _distorted(cam, c, ix, iy, short_obs[c])
+            tu, tv = _distorted(ix, iy, short_obs[c], cam[c, 21], cam[c, 22], cam[c, 23],
+                                cam[c, 24], cam[c, 25], cam[c, 0], cam[c, 1], cam[c, 2],
+                                cam[c, 4], cam[c, 5])
             u -= tu
             v -= tv
             u *= u
