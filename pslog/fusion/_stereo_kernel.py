@@ -6,8 +6,13 @@ its covariance (:func:`~.stereo.motion_covariance`, :func:`~._prepare.covariance
 writing a temporary: ~5 µs per point of a 90-minute match. The kernels here loop over the
 points instead and do, for each, exactly the arithmetic of those columns in the same order
 (elementwise IEEE operations on the same operands, no fastmath: the same bits; ``x ** 2`` of
-a float column is numpy's square, ``x * x``). Imported lazily (numba loads them from its
-cache at the first use; ``python -m pslog.warm`` compiles them).
+a float column is numpy's square, ``x * x``). :func:`nview_normal` and :func:`nview_after`
+do the same for :func:`~.stereo.nview_points` (and so ``sync``, ``typeB``, ``linear``) from
+``_FEW`` points and below 8 cameras, where triangulate_rays and ray_angles use their column
+forms. Left to numpy, whose bits a loop need not reproduce: the 3 x 3 solves and
+determinants (LAPACK), the arccos of the ray angle, ``invalid_points``' products (BLAS)
+and ``ray_depths``' einsum. Imported lazily (numba loads them from its cache at the first
+use; ``python -m pslog.warm`` compiles them).
 """
 
 from __future__ import annotations
