@@ -561,10 +561,11 @@ def least_squares_pixel_jacobians(points: np.ndarray, origins: np.ndarray, dirs:
         # origins broadcast from one per ray (a rig's camera centres): one row each
         shared = origins.strides[0] == 0
         out = []
+        block = np.empty((m, 3, 2, k))  # one block: a caller may take the m slots at once
         for j in range(m):
             origin = np.ascontiguousarray(origins[:1, j] if shared else origins[:, j],
                                           dtype=np.float64)
-            moved = np.empty((3, 2, k))
+            moved = block[j]
             pk.ray_pixel_jacobian(pts, origin, np.ascontiguousarray(dirs[:, j]),
                                   np.ascontiguousarray(used[:, j]),
                                   np.ascontiguousarray(turns[j], dtype=np.float64), inverse,

@@ -8,7 +8,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..errors import FusionError
-from ..geometry import ray_angles, ray_depths, triangulate_rays
+from ..geometry import _FEW, _solve_rays, ray_angles, ray_depths, triangulate_rays
 from ..records import NS, Observations, Track
 from . import _prepare
 from ._prepare import (
@@ -71,7 +71,7 @@ def sync_groups(obs: Observations, n_cams: int, tolerance_s: float
 
 
 def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | np.ndarray | None,
-                 motion: list[SlotMotion] | None = None):
+                 motion: list[SlotMotion] | None = None, compiled: bool = True):
     """N-view least-squares point of each row of detections, with its quality and validity.
 
     Parameters
@@ -83,6 +83,9 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | np.ndarray 
         moved in its image between its shutter and the point's time (the shutters taken as
         simultaneous are not; :func:`slot_motion`): the covariance is then
         :func:`motion_covariance`'s (docs/methods.md, "nearest's uncertainty")
+    compiled : the per-point arithmetic in :mod:`._stereo_kernel`'s compiled passes (from
+        ``_FEW`` points and below 8 cameras, where the numpy forms are columns; the same
+        bits), else with numpy
 
     Returns
     -------
@@ -98,18 +101,29 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | np.ndarray 
     """
     k, m = rows.shape
     r = np.maximum(rows, 0)
-    uv = [prep.uv_undistorted[r[:, c]] for c in range(m)]
+    # compiled (the column forms of triangulate_rays and ray_angles, which they take from
+    # _FEW points and below 8 rays: the same bits), unless the finite differences are asked
+    compiled = compiled and k >= _FEW and m < 8 and not _prepare.FINITE_DIFFERENCES
+    uv = [] if compiled else [prep.uv_undistorted[r[:, c]] for c in range(m)]
     origins = np.broadcast_to(prep.centers, (k, m, 3))
 
     def directions(uvs):
         return np.stack([prep.rays_from_undistorted(c, uvs[c]) for c in range(m)], axis=1)
 
-    with np.errstate(invalid="ignore"):
-        dirs = directions(uv)
-    points, rms_miss, _ = triangulate_rays(origins, dirs, rows >= 0)
-    used = (rows >= 0) & np.isfinite(dirs[..., 0]) & np.isfinite(dirs[..., 1]) \
-        & np.isfinite(dirs[..., 2])
-    angle = np.degrees(ray_angles(dirs, used))
+    turns = None
+    if compiled:
+        dirs, points, rms_miss, used, smallest_cos, residual, turns = _nview_compiled(
+            prep, rows)
+        with np.errstate(invalid="ignore"):
+            angle = np.degrees(np.where(np.isfinite(smallest_cos),
+                                        np.arccos(np.clip(smallest_cos, 0.0, 1.0)), np.nan))
+    else:
+        with np.errstate(invalid="ignore"):
+            dirs = directions(uv)
+        points, rms_miss, _ = triangulate_rays(origins, dirs, rows >= 0)
+        used = (rows >= 0) & np.isfinite(dirs[..., 0]) & np.isfinite(dirs[..., 1]) \
+            & np.isfinite(dirs[..., 2])
+        angle = np.degrees(ray_angles(dirs, used))
     finite = finite_rows(points)
     flags = invalid_points(prep, points, used, finite)
     with np.errstate(invalid="ignore"):
@@ -119,8 +133,9 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | np.ndarray 
             behind |= used[:, c] & ~(depth[:, c] > 0)
         flags[behind & finite] |= BEHIND
         flags[angle < MIN_RAY_ANGLE_DEG] |= PARALLEL  # (NaN: fewer than two rays)
-    residual = [np.where(used[:, c], reprojection_one(prep, c, points, uv[c]), np.nan)
-                for c in range(m)]
+    if not compiled:
+        residual = [np.where(used[:, c], reprojection_one(prep, c, points, uv[c]), np.nan)
+                    for c in range(m)]
 
     slot_rows = np.where(used, rows, -1)
     if noise_px is None:
@@ -135,13 +150,15 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | np.ndarray 
         with np.errstate(invalid="ignore"):
             jacobians = least_squares_pixel_jacobians(
                 points, origins, dirs, used,
-                [direction_jacobian(prep, c, uv[c]) for c in range(m)])
+                [direction_jacobian(prep, c, uv[c]) for c in range(m)]
+                if turns is None else list(turns))
     if noise_px is not None:
         if motion is None:
             cov = covariance(slot_rows, jacobians,
                              [prep.pixel_jacobians_t(r[:, c]) for c in range(m)], noise_px)
         else:
-            cov = motion_covariance(prep, slot_rows, jacobians, motion, used, noise_px)
+            cov = motion_covariance(prep, slot_rows, jacobians, motion, used, noise_px,
+                                    compiled)
     # (k,) columns, each reduction over the m cameras in numpy's order (the same bits)
     times = [prep.obs.time_ns[r[:, c]] for c in range(m)]
     t_max = np.maximum.reduce([np.where(used[:, c], times[c], np.iinfo(np.int64).min)
@@ -166,6 +183,36 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | np.ndarray 
             **(cov if cov is not None else {}),
         }
     return points, quality, flags, used
+
+
+def _nview_compiled(prep: Prepared, rows: np.ndarray):
+    """:func:`nview_points`' rays, points, ``rms_miss``, rays used, smallest |cosine|
+    between two used rays, residuals (m, k) and direction Jacobians (m, 3, 2, k) by
+    :mod:`._stereo_kernel`'s passes, numpy solving the normal equations between them."""
+    from . import _stereo_kernel
+
+    k, m = rows.shape
+    rows = _c(rows, dtype=np.int64)
+    uv = _c(prep.uv_undistorted, dtype=np.float64)
+    centers = _c(prep.centers, dtype=np.float64)
+    dirs, A, rhs = np.empty((k, m, 3)), np.empty((k, 3, 3)), np.empty((k, 3))
+    n_rays = np.empty(k, dtype=np.int64)
+    _stereo_kernel.nview_normal(rows, uv, _c(prep._cols("K_inv").T),
+                                _c(prep._cols("R").T), centers, dirs, A,
+                                rhs, n_rays)
+    points = _solve_rays(A, rhs, n_rays)
+    del A, rhs
+    cam = np.array([np.concatenate([np.ravel(c.K), np.ravel(c.R), np.ravel(c.t),
+                                    np.ravel(c.dist)]) for c in prep.cameras],
+                   dtype=np.float64).reshape(-1, 26)
+    lens = np.array([bool(np.any(c.dist)) for c in prep.cameras], dtype=bool)
+    rms_miss, smallest_cos = np.empty(k), np.empty(k)
+    used = np.empty((k, m), dtype=bool)
+    residual, turns = np.empty((m, k)), np.empty((m, 3, 2, k))
+    _stereo_kernel.nview_after(rows, uv, points, dirs, centers, n_rays, cam, lens,
+                               _c(prep._rt_k_inv_cols.T), rms_miss, used,
+                               smallest_cos, residual, turns)
+    return dirs, points, rms_miss, used, smallest_cos, list(residual), turns
 
 
 def _with_motion(cov: dict[str, np.ndarray], jacobians: list[np.ndarray],
@@ -284,8 +331,8 @@ class SlotMotion(NamedTuple):
     lag: np.ndarray  # (k,) t - t_s, seconds
 
 
-def slot_motion(prep: Prepared, rows: np.ndarray, time_ns: np.ndarray, max_gap_s: float
-                ) -> list[SlotMotion]:
+def slot_motion(prep: Prepared, rows: np.ndarray, time_ns: np.ndarray, max_gap_s: float,
+                compiled: bool = True) -> list[SlotMotion]:
     """Per camera slot: the image motion between the slot's detection (at ``t_s``) and the
     point's time ``t``, from that detection and its camera's previous ones (each within
     ``max_gap_s`` of the next; causal: only detections at or before the slot's own).
@@ -303,9 +350,14 @@ def slot_motion(prep: Prepared, rows: np.ndarray, time_ns: np.ndarray, max_gap_s
     ``α = ½ ü L (L + h)``, ``ü = 2 ((u_s - u_s') / h - (u_s' - u_s'') / g) / (h + g)``
     (the backward difference is the velocity half a frame earlier, hence ``L + h``, not
     ``L``). A slot without a previous detection has ``w = (1, 0, 0)``.
+
+    ``compiled``: every slot in one compiled pass (:func:`._stereo_kernel.slot_motion`,
+    the same operations: the same bits), else with numpy per slot.
     """
     out = []
     max_gap_ns = int(max_gap_s * NS)
+    if compiled:
+        return _slot_motion_compiled(prep, rows, time_ns, max_gap_ns)
     t_obs = prep.obs.time_ns
     uv = prep.uv_undistorted
     k = rows.shape[0]
@@ -345,9 +397,57 @@ def slot_motion(prep: Prepared, rows: np.ndarray, time_ns: np.ndarray, max_gap_s
     return out
 
 
+def _slot_motion_compiled(prep: Prepared, rows: np.ndarray, time_ns: np.ndarray,
+                          max_gap_ns: int) -> list[SlotMotion]:
+    """:func:`slot_motion` by :func:`._stereo_kernel.slot_motion`."""
+    from . import _stereo_kernel
+    from .innovation import previous_next_rows
+
+    k, m = rows.shape
+    obs = prep.obs
+    cam_rows = np.concatenate([np.asarray(r, dtype=np.int64) for r in prep.per_camera]
+                              + [np.zeros(0, np.int64)])
+    cam_start = np.zeros(len(prep.per_camera) + 1, dtype=np.int64)
+    np.cumsum([len(r) for r in prep.per_camera], out=cam_start[1:])
+    shift, accel = np.empty((m, k, 2)), np.empty((m, k, 2))
+    mrows = np.empty((m, k, 3), dtype=np.int64)
+    linear, quad, lag = np.empty((m, k, 3)), np.empty((m, k, 3)), np.empty((m, k))
+    _stereo_kernel.slot_motion(
+        _c(rows, dtype=np.int64), _c(time_ns, np.int64),
+        _c(obs.time_ns, dtype=np.int64),
+        _c(prep.uv_undistorted, dtype=np.float64),
+        _c(obs.camera, dtype=np.int64), previous_next_rows(prep)[0],
+        cam_rows, cam_start, max_gap_ns, max_gap_ns / NS, float(NS),
+        shift, accel, mrows, linear, quad, lag)
+    return [SlotMotion(shift[c], accel[c], mrows[c], linear[c], quad[c], lag[c])
+            for c in range(m)]
+
+
+def _c(a: np.ndarray, dtype=None) -> np.ndarray:
+    """``a`` as a C-contiguous, writable array (of ``dtype``) for a compiled kernel: a copy
+    if it is not one (numba compiles a read-only array, such as a column read from a file,
+    as another signature: one signature per kernel, the one ``pslog.warm`` compiles)."""
+    a = np.ascontiguousarray(a, dtype=dtype)
+    return a if a.flags.writeable else a.copy()
+
+
+def _stacked(parts: list[np.ndarray]) -> np.ndarray:
+    """``np.stack(parts)``, without a copy when ``parts`` are the consecutive slices of one
+    contiguous array (the compiled :func:`slot_motion`'s and Jacobians' blocks): that
+    array."""
+    base = parts[0].base if len(parts) else None
+    if (isinstance(base, np.ndarray) and base.flags.c_contiguous
+            and base.shape == (len(parts), *parts[0].shape) and base.dtype == parts[0].dtype
+            and all(p.base is base and p.__array_interface__["data"][0]
+                    == base[i].__array_interface__["data"][0] for i, p in enumerate(parts))):
+        return base
+    return np.stack(parts)
+
+
 def motion_covariance(prep: Prepared, slot_rows: np.ndarray, jacobians: list[np.ndarray],
                       motion: list[SlotMotion], used: np.ndarray,
-                      noise_px: float | np.ndarray) -> dict[str, np.ndarray]:
+                      noise_px: float | np.ndarray, compiled: bool = True
+                      ) -> dict[str, np.ndarray]:
     """``nearest``'s covariance (quality columns): the point ``P`` is made from the slots'
     unshifted pixels ``u_s`` while the ball was at ``ū_s(t)``; to first order its error is
     ``Σ_s J_s (u_s - ū_s(t))``, and with ``ū_s(t)`` extrapolated from the slot's detection
@@ -363,8 +463,30 @@ def motion_covariance(prep: Prepared, slot_rows: np.ndarray, jacobians: list[np.
     (``L_sj`` the recorded-to-undistorted pixel Jacobian of detection ``sj``; a detection
     in two slots adds its weighted Jacobians first, :func:`covariance`; ``v₀``
     :data:`UNKNOWN_IMAGE_SPEED_PX_S` where the slot's camera has no previous detection).
-    ``slot_rows`` (k, m) the detections used (-1: none), ``jacobians`` (3, 2, k) per slot."""
+    ``slot_rows`` (k, m) the detections used (-1: none), ``jacobians`` (3, 2, k) per slot.
+    ``compiled``: per point in one compiled pass (:func:`._stereo_kernel.motion_covariance`,
+    the same operations: the same bits), else on numpy columns."""
     k, m = slot_rows.shape
+    if compiled:
+        from . import _stereo_kernel
+
+        out = np.empty((7, k))
+        lens = prep._uv_jacobian_cols
+        _stereo_kernel.motion_covariance(
+            _c(slot_rows, dtype=np.int64),
+            _c(_stacked(jacobians), dtype=np.float64),
+            _c(used, dtype=bool),
+            _c(_stacked([d.rows for d in motion]), dtype=np.int64),
+            _c(_stacked([d.quadratic for d in motion]), dtype=np.float64),
+            _c(_stacked([d.lag for d in motion]), dtype=np.float64),
+            _c(_stacked([d.shift for d in motion]), dtype=np.float64),
+            _c(_stacked([d.accel for d in motion]), dtype=np.float64),
+            np.zeros((4, 0)) if lens is None else lens,
+            # noise_px ** 2 as numpy makes it (a column: its square; a float: Python's power)
+            np.square(noise_px) if np.ndim(noise_px) else np.full(k, noise_px**2),
+            UNKNOWN_IMAGE_SPEED_PX_S, out)
+        return {"std_m": out[0], **{f"cov_{a}_m2": out[1 + i] for i, a in
+                                    enumerate(("xx", "yy", "zz", "xy", "xz", "yz"))}}
     # no detection is in two slots of a point (a slot's are its camera's), so the weighted
     # detections of slot s add up to J_s M_s J_sᵀ, M_s = Σ_j w_sj² L_sj L_sjᵀ (2 x 2), given
     # to covariance as its Cholesky factor C_s (C_s C_sᵀ = M_s): three slots, not nine
@@ -463,16 +585,49 @@ def fuse_sync(prep: Prepared, tolerance_s: float = 1e-3, noise_px: float | None 
     return stereo_at_common_instants(prep, tolerance_s, "sync", noise_px)[0]
 
 
-def fuse_nearest(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5) -> Track:
+def fuse_nearest(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
+                 compiled: bool = True) -> Track:
     """``nearest``: each detection triangulated with the latest detection of every other camera
     as if they were simultaneous (the paper's "unsynchronized" baseline). Geometrically
     invalid points are dropped and counted in ``Track.dropped``. ``noise_px``: the
     detections' noise until the session's own shows (:func:`detection_noise`), and an upper
-    bound of its floor; None: no covariance."""
+    bound of its floor; None: no covariance. ``compiled``: the per-point arithmetic by
+    :mod:`._stereo_kernel` (the same bits), else by the numpy forms (a reference)."""
+    time_ns, camera = prep.obs.time_ns, prep.obs.camera
+    rows, others = nearest_rows(prep, int(max_gap_s * NS), compiled)
+    # the other cameras' detections are older than the point: the ball moved since; and the
+    # noise is the detections' own (docs/methods.md, "nearest's covariance at the true noise")
+    if noise_px is None:
+        points, quality, flags, _ = nview_points(prep, rows, None, compiled=compiled)
+    else:
+        points, quality, flags, _ = nview_points(
+            prep, rows, detection_noise(prep, time_ns, max_gap_s, noise_px),
+            slot_motion(prep, rows, time_ns, max_gap_s, compiled), compiled)
+    made = (others >= 1) & (quality["n_detections"] >= 2)
+    keep = made & (flags == 0) & np.all(np.isfinite(points), axis=1)
+    track = Track("nearest", time_ns[keep], points[keep], camera[keep],
+                  {k: v[keep] for k, v in quality.items()})
+    return with_dropped(track, count_invalid(flags[made]))
+
+
+def nearest_rows(prep: Prepared, max_gap_ns: int, compiled: bool = True
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """``nearest``'s rows (n, m) int64: for each detection, the latest detection of every
+    other camera at or before it (row order) within ``max_gap_ns``, and itself in its own
+    camera's slot (-1: none); and the other cameras' detections found (n,). ``compiled``:
+    in one pass (:func:`._stereo_kernel.nearest_rows`), else per camera with numpy (the
+    same rows)."""
     n, n_cams = len(prep.obs), len(prep.centers)
     time_ns, camera = prep.obs.time_ns, prep.obs.camera
     rows = np.full((n, n_cams), -1, dtype=np.int64)
-    max_gap_ns = int(max_gap_s * NS)
+    if compiled:
+        from . import _stereo_kernel
+
+        others = np.empty(n, dtype=np.int64)
+        _stereo_kernel.nearest_rows(_c(camera, dtype=np.int64),
+                                    _c(time_ns, dtype=np.int64),
+                                    max_gap_ns, rows, others)
+        return rows, others
     events = np.arange(n)
     for d in range(n_cams):  # loop over cameras, vectorized over events
         latest = latest_row_at_or_before(prep, d, events)
@@ -481,19 +636,7 @@ def fuse_nearest(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5)
         rows[ok, d] = latest[ok]
     others = (rows >= 0).sum(axis=1)
     rows[events, camera] = events
-    # the other cameras' detections are older than the point: the ball moved since; and the
-    # noise is the detections' own (docs/methods.md, "nearest's covariance at the true noise")
-    if noise_px is None:
-        points, quality, flags, _ = nview_points(prep, rows, None)
-    else:
-        points, quality, flags, _ = nview_points(
-            prep, rows, detection_noise(prep, time_ns, max_gap_s, noise_px),
-            slot_motion(prep, rows, time_ns, max_gap_s))
-    made = (others >= 1) & (quality["n_detections"] >= 2)
-    keep = made & (flags == 0) & np.all(np.isfinite(points), axis=1)
-    track = Track("nearest", time_ns[keep], points[keep], camera[keep],
-                  {k: v[keep] for k, v in quality.items()})
-    return with_dropped(track, count_invalid(flags[made]))
+    return rows, others
 
 
 def count_invalid(flags: np.ndarray) -> dict[str, int]:
