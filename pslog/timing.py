@@ -88,7 +88,16 @@ def _readout_ns(readout, v, h) -> np.ndarray:
     if not np.all(np.isfinite(term)):
         raise InputError("a rolling-shutter time needs the detection's pixel row: got a "
                          "non-finite row")
+    if np.any(np.abs(term) > MAX_READOUT_TERM_NS):
+        far = float(np.broadcast_to(v, np.shape(term))[np.argmax(np.abs(term))])
+        raise InputError(f"a rolling-shutter time needs the detection's pixel row: got row "
+                         f"{far:g}, far outside the image")
     return term
+
+
+#: The largest rolling-shutter term (ns) a detection's row may give: a row further out is no
+#: pixel of the image (1e18 ns, ~32 years, keeps every corrected time within int64)
+MAX_READOUT_TERM_NS = 1e18
 
 
 def true_times_s(logged_s, v_px, height, clock_offset_s, drift_ppm, readout_s) -> np.ndarray:

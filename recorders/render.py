@@ -264,16 +264,19 @@ def background_cache_dir() -> Path | None:
         xdg = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"),
                                                                ".cache")
         root = os.path.join(xdg, "pslog")
-    return Path(root) / "backgrounds" if root else None
+    # only an absolute folder: with no home (``~`` unexpanded) or a relative setting the
+    # cache would land in the working folder, beside the user's outputs
+    return Path(root) / "backgrounds" if root and os.path.isabs(root) else None
 
 
 @lru_cache(maxsize=1)
 def _render_code_digest() -> str:
-    """A digest of the code a background is made by (this module and the camera model's
-    rays): a file rendered by other code is another file, never a stale one."""
+    """A digest of the code a background is made by (this module, the camera model's rays,
+    numpy's and OpenCV's versions: the texture's random numbers and blur): a file rendered
+    by other code is another file, never a stale one."""
     from pslog import camera as camera_module
 
-    digest = hashlib.sha256()
+    digest = hashlib.sha256(f"numpy {np.__version__} opencv {cv2.__version__}".encode())
     for module_file in (__file__, camera_module.__file__):
         try:
             digest.update(Path(module_file).read_bytes())
@@ -297,9 +300,9 @@ def _load_background(path: Path | None, shape: tuple[int, int, int]) -> np.ndarr
         return None
     try:
         image = np.load(path, allow_pickle=False)
-    except (OSError, ValueError, EOFError):
+    except Exception:  # whatever lies there (a zip, a damaged file): rendered again
         return None
-    if image.shape != shape or image.dtype != np.uint8:
+    if not isinstance(image, np.ndarray) or image.shape != shape or image.dtype != np.uint8:
         return None
     return image
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import signal
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -16,6 +17,12 @@ from pslog.rig import Rig, apply_timing, builtin_rig
 # a command that runs longer than the progress period (5 s, on a loaded machine) would add a
 # progress line to the standard error other tests read; tests/test_progress.py turns it on
 os.environ.setdefault("PSLOG_PROGRESS", "off")
+
+# the synthetic cameras' rendered backgrounds (recorders.render.background_cache_dir): one
+# folder for the suite's processes (both test processes and every command they start share
+# it), not the user's cache
+os.environ.setdefault("PSLOG_CACHE_DIR", os.path.join(
+    tempfile.gettempdir(), f"pslog-test-cache-{os.getuid()}"))
 
 # the suite started under ``nohup`` (or by a service that ignores SIGHUP) would hand its ignored
 # SIGHUP to every command it starts, and the tests of what a closed terminal does would then

@@ -136,9 +136,12 @@ def test_a_background_is_rendered_once_and_read_back_from_disk_the_same(tmp_path
     got = fresh()
     assert_array_equal(got, marked) and not got.flags.writeable
     # a corrupt file and a file of another size are rendered again (and replaced)
-    for bad in (b"not a numpy file", None):
+    for bad in (b"not a numpy file", b"PK\x03\x04 not a zip", "zip", None):
         if bad is None:
             np.save(stored, np.zeros((4, 4, 3), np.uint8))
+        elif bad == "zip":  # np.load gives an NpzFile, no array
+            with open(stored, "wb") as f:
+                np.savez(f, a=expected)
         else:
             stored.write_bytes(bad)
         assert_array_equal(fresh(), expected)
@@ -152,6 +155,8 @@ def test_a_background_is_rendered_once_and_read_back_from_disk_the_same(tmp_path
     monkeypatch.setenv("PSLOG_CACHE_DIR", str(tmp_path / "blocked"))
     assert_array_equal(fresh(), expected)
     monkeypatch.setenv("PSLOG_CACHE_DIR", "")
+    assert render._background_file(("any",)) is None
+    monkeypatch.setenv("PSLOG_CACHE_DIR", "relative/cache")  # never the working folder
     assert render._background_file(("any",)) is None
     assert_array_equal(fresh(), expected)
     assert not list(tmp_path.glob("**/.partial-*"))

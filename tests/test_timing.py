@@ -56,6 +56,25 @@ def test_a_global_shutter_needs_no_row_and_a_rolling_one_refuses_a_missing_row()
         true_times_ns(NS, np.nan, 480, 1e-3, 0.0, 0.01)
 
 
+def test_a_rolling_shutter_row_far_outside_the_image_is_refused_by_batch_and_stream():
+    # a finite row of 1e300 px gave a correction beyond int64: a wrong time in batch, an
+    # OverflowError traceback from StreamFuser.push (review, session 15); a row a few
+    # images away is still a time
+    from dataclasses import replace
+
+    from pslog import Rig, apply_timing, builtin_rig
+    from pslog.fusion.stream import StreamFuser
+
+    assert true_times_ns(NS, 5000.0, 480, 0.0, 0.0, 0.01) == NS + 104_166_667
+    with pytest.raises(InputError, match="row 1e\\+300, far outside the image"):
+        true_times_ns(np.array([NS, NS]), np.array([1.0, 1e300]), 480, 0.0, 0.0, 0.01)
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    rig = Rig(tuple(replace(c, readout=0.01) for c in rig.cameras), rig.name)
+    for method in ("nearest", "filter"):
+        with pytest.raises(InputError, match="far outside the image"):
+            StreamFuser(rig, method).push([NS], [0], [[100.0, 1e300]])
+
+
 def test_model_broadcasts_per_observation_parameters():
     logged = np.array([0, NS, 2 * NS, 3 * NS], dtype=np.int64)
     offset = np.array([0.0, 1e-3, 0.0, -2e-3])

@@ -66,7 +66,7 @@ from ..geometry import epipolar_lines, fundamental_matrices
 from ..motion import G
 from ..records import NS, Detections, Observations
 from ..rig import Rig
-from ..timing import camera_parameters, true_times_ns
+from ..timing import MAX_READOUT_TERM_NS, camera_parameters, true_times_ns
 from ..timing import observations as timed_observations
 
 if TYPE_CHECKING:
@@ -949,6 +949,9 @@ def _true_time_ns(logged: int, v: float, clock) -> int:
     if not math.isfinite(term):
         raise InputError("a rolling-shutter time needs the detection's pixel row: got a "
                          "non-finite row")
+    if abs(term) > MAX_READOUT_TERM_NS:
+        raise InputError(f"a rolling-shutter time needs the detection's pixel row: got row "
+                         f"{v:g}, far outside the image")
     return logged + round(offset * NS + drift * 1e-6 * float(logged) + term)
 
 
