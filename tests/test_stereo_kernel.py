@@ -108,6 +108,13 @@ def test_nearest_rows_and_motion_by_hand():
     assert rows[10].tolist() == [8, 9, 10]  # camera 2 at 110 ms: 90 ms and 100 ms
     want_rows, want_others = nearest_rows(prep, gap_ns, compiled=False)
     assert np.array_equal(rows, want_rows) and np.array_equal(others, want_others)
+    # a partner exactly max_gap before the point is within it (<=): cam1's 10 ms for the
+    # point at 30 ms, 20 ms gap (review: a < here survived the tests)
+    for compiled in (True, False):
+        assert nearest_rows(prep, 20_000_000, compiled=compiled)[0][3].tolist() == [3, 1, 2]
+        # and a camera's detections exactly max_gap apart make its slot's motion (30 ms)
+        exact = slot_motion(prep, rows, prep.obs.time_ns, 0.03, compiled=compiled)
+        assert exact[0].rows[10].tolist() == [8, 5, 3]
     time_ns = prep.obs.time_ns
     motion = slot_motion(prep, rows, time_ns, gap_ns / 1e9)
     p = 10
