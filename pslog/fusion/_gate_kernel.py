@@ -898,12 +898,17 @@ def decide_frame(fid, a, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k
             reason[i] = _MOTION
             continue
         if lone[i] == lone[i]:  # gating._Decider.decide: kept where the camera followed it
+            # (gating._picked_there: its newest choice, within 1.5 static_s)
             there = False
-            if at >= 1 and fi[a, at - 1, 4] >= 0:  # (the camera's frame before: decided)
-                q = fi[a, at - 1, 4]
-                du = cf[a, at, i, 0] - cf[a, at - 1, q, 0]
-                dv = cf[a, at, i, 1] - cf[a, at - 1, q, 1]
-                there = _sqrt(du * du + dv * dv) <= lone[i]
+            h = at - 1
+            while h >= 0 and key - fi[a, h, 0] <= recent_ns:
+                q = fi[a, h, 4]
+                if q >= 0:
+                    du = cf[a, at, i, 0] - cf[a, h, q, 0]
+                    dv = cf[a, at, i, 1] - cf[a, h, q, 1]
+                    there = _sqrt(du * du + dv * dv) <= lone[i]
+                    break
+                h -= 1
             if not there:
                 reason[i] = _MOTION
                 continue

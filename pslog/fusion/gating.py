@@ -1136,10 +1136,12 @@ def _columns(c: _Candidates, ratio, points, in_front, static=None, lag=None) -> 
                     camera=np.asarray(c.camera).tolist(), unpointed=unpointed.tolist())
 
 
-def _picked_there(before, uv, tol: float) -> bool:
-    """Whether a camera's choice in its frame before (``before``: (u, v) undistorted, None:
-    nothing chosen) lies within ``tol`` pixels of ``uv`` (:meth:`_Decider.decide`)."""
-    if before is None:
+def _picked_there(before, key: int, uv, tol: float, options: GatingOptions) -> bool:
+    """Whether a camera's newest choice (``before``: undistorted (u, v) and its frame's
+    time ns; None: none yet) lies among the frames the stillness test looks at (within
+    1.5 ``static_s`` of this frame's time ``key`` ns) and within ``tol`` pixels of ``uv``
+    (:meth:`_Decider.decide`: the camera was following what stands still there)."""
+    if before is None or not key - before[2] <= 1.5 * options.static_s * NS:
         return False
     du, dv = uv[0] - before[0], uv[1] - before[1]
     return _sqrt(du * du + dv * dv) <= tol
@@ -1187,10 +1189,10 @@ class _Decider:
         # alone supports: from then on several such candidates are told apart by their cost
         self.tracked = False
         self.centers = [cam.center_world.tolist() for cam in rig.cameras]
-        # per camera: the undistorted pixel (u, v) chosen in its latest decided frame, None
-        # where that frame kept none (or none yet): a still pixel that is not the one the
-        # camera itself was following is a static object's (the ``lone`` candidates)
-        self.picked: list[tuple[float, float] | None] = [None] * len(rig)
+        # per camera: its newest choice, (undistorted u, v, its frame's time ns), None
+        # before any: a still pixel that is not the one the camera itself was following is
+        # a static object's (the ``lone`` candidates)
+        self.picked: list[tuple[float, float, int] | None] = [None] * len(rig)
 
     def run(self, c: _Candidates, frames, ratio, points, in_front, reason,
             static=None, lag=None) -> None:
@@ -1215,16 +1217,14 @@ class _Decider:
             preds: dict[int, tuple | Literal[False]] = {}
             unverified = []
             untracked = []
-            # what this camera chose in its frame before (None: nothing); this frame's
-            # choice replaces it below
-            before = picked[camera[lo]]
-            picked[camera[lo]] = None
+            before = picked[camera[lo]]  # this camera's newest choice (None: none yet)
             for i in range(lo, hi):
                 track_accepts = False
                 if static[i]:  # a static object, whatever supports it (or no longer does)
                     reason[i] = MOTION
                     continue
-                if lone[i] == lone[i] and not _picked_there(before, uv[i], lone[i]):
+                if lone[i] == lone[i] and not _picked_there(before, t_ns[lo], uv[i], lone[i],
+                                                            options):
                     # a pixel as still as a static object's, whose support came and went,
                     # that this camera was not following: the ball did not arrive there out
                     # of nowhere (its camera blind or following it elsewhere); a static
@@ -1326,7 +1326,7 @@ class _Decider:
             for i in range(lo, hi):
                 if i != best_row and reason[i] < 0:
                     reason[i] = OUTSCORED
-            picked[camera[lo]] = (uv[best_row][0], uv[best_row][1])
+            picked[camera[lo]] = (uv[best_row][0], uv[best_row][1], t_ns[lo])
             self.verified |= best_row not in unverified
             if math.isfinite(pts[best_row][0]):
                 track.add(t_s[best_row], np.array(pts[best_row]),
@@ -1553,7 +1553,7 @@ def _decide_in_order(c: _Candidates, rig: Rig, options: GatingOptions, frames, t
                 if b not in seen:
                     seen.add(b)
                     u, v = c.uv_und[lo_all[k]].tolist()
-                    decider.picked[b] = (u, v)
+                    decider.picked[b] = (u, v, int(c.time_ns[lo_all[k]]))
                     if len(seen) == m:
                         break
             continue
