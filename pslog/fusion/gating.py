@@ -29,7 +29,9 @@ A candidate ``x`` of camera ``a`` at (corrected) time ``t`` is judged by three g
    camera that contributed, be reachable from the last accepted point at a ball's speed,
    ``|p - p_last| <= max_speed · Δt + track_m``, and not stand still: a point within
    ``static_m`` of its camera's earlier points over ``static_s`` is a static object (a second
-   orange thing seen by every camera passes every epipolar test; it does not move).
+   orange thing seen by every camera passes every epipolar test; it does not move); so is a
+   pixel that stood still in its camera's image with its support coming and going, unless
+   that camera's newest choice was there (it was following the ball: ``_static``'s ``lone``).
 
 A candidate is accepted when the epipolar gate accepts it (some other camera supports it)
 and the track and motion gates do not object, or when the track gate alone accepts it
