@@ -1167,7 +1167,10 @@ class GateState:
                                       "csup": np.zeros((m, frames, candidates), np.int8)}
         for name, a in new.items():
             old = getattr(self, name)
-            a[:, :h, :k] = old
+            if name in ("fi", "fflag"):  # (per frame: every column)
+                a[:, :h] = old
+            else:
+                a[:, :h, :k] = old
             setattr(self, name, a)
         if candidates > k:
             self.reason = np.zeros(candidates, np.int64)
