@@ -898,7 +898,8 @@ def decide_frame(fid, a, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k
             reason[i] = _MOTION
             continue
         if lone[i] == lone[i]:  # gating._Decider.decide: kept where the camera followed it
-            # (gating._picked_there: its newest choice, within 1.5 static_s)
+            # (gating._picked_there: its newest choice, within 1.5 static_s; from its frame
+            # before, within reach of a ball)
             there = False
             h = at - 1
             while h >= 0 and key - fi[a, h, 0] <= recent_ns:
@@ -906,7 +907,11 @@ def decide_frame(fid, a, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k
                 if q >= 0:
                     du = cf[a, at, i, 0] - cf[a, h, q, 0]
                     dv = cf[a, at, i, 1] - cf[a, h, q, 1]
-                    there = _sqrt(du * du + dv * dv) <= lone[i]
+                    d = _sqrt(du * du + dv * dv)
+                    if h == at - 1:
+                        there = d <= lone[i] + opt[O_VMAX] * ((key - fi[a, h, 0]) / _NS)
+                    else:
+                        there = d <= lone[i]
                     break
                 h -= 1
             if not there:

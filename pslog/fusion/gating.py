@@ -1138,15 +1138,22 @@ def _columns(c: _Candidates, ratio, points, in_front, static=None, lag=None) -> 
                     camera=np.asarray(c.camera).tolist(), unpointed=unpointed.tolist())
 
 
-def _picked_there(before, key: int, uv, tol: float, options: GatingOptions) -> bool:
-    """Whether a camera's newest choice (``before``: undistorted (u, v) and its frame's
-    time ns; None: none yet) lies among the frames the stillness test looks at (within
-    1.5 ``static_s`` of this frame's time ``key`` ns) and within ``tol`` pixels of ``uv``
-    (:meth:`_Decider.decide`: the camera was following what stands still there)."""
+def _picked_there(before, adjacent: bool, key: int, uv, tol: float,
+                  options: GatingOptions) -> bool:
+    """Whether a camera was following what a ``lone`` candidate at ``uv`` (undistorted) is
+    (:meth:`_Decider.decide`): its newest choice (``before``: undistorted (u, v) and its
+    frame's time ns; None: none yet), among the frames the stillness test looks at (within
+    1.5 ``static_s`` of this frame's time ``key`` ns), lies within ``tol`` pixels of it (it
+    stood still there), or, made in the camera's frame before (``adjacent``), within
+    ``tol + max_image_speed Δt`` (the ball the camera was following moved there: it passes
+    over a static object's pixel)."""
     if before is None or not key - before[2] <= 1.5 * options.static_s * NS:
         return False
     du, dv = uv[0] - before[0], uv[1] - before[1]
-    return _sqrt(du * du + dv * dv) <= tol
+    d = _sqrt(du * du + dv * dv)
+    if adjacent:
+        return d <= tol + options.max_image_speed_px_s * ((key - before[2]) / NS)
+    return d <= tol
 
 
 def _age(ratio_row, lag_row) -> float:
@@ -1192,9 +1199,10 @@ class _Decider:
         self.tracked = False
         self.centers = [cam.center_world.tolist() for cam in rig.cameras]
         # per camera: its newest choice, (undistorted u, v, its frame's time ns), None
-        # before any: a still pixel that is not the one the camera itself was following is
-        # a static object's (the ``lone`` candidates)
+        # before any, and its newest decided frame's time ns: a still pixel that is not the
+        # one the camera itself was following is a static object's (the ``lone`` candidates)
         self.picked: list[tuple[float, float, int] | None] = [None] * len(rig)
+        self.last_frame: list[int | None] = [None] * len(rig)
 
     def run(self, c: _Candidates, frames, ratio, points, in_front, reason,
             static=None, lag=None) -> None:
@@ -1219,14 +1227,17 @@ class _Decider:
             preds: dict[int, tuple | Literal[False]] = {}
             unverified = []
             untracked = []
-            before = picked[camera[lo]]  # this camera's newest choice (None: none yet)
+            # this camera's newest choice (None: none yet), and whether it was its frame before
+            before = picked[camera[lo]]
+            adjacent = before is not None and before[2] == self.last_frame[camera[lo]]
+            self.last_frame[camera[lo]] = t_ns[lo]
             for i in range(lo, hi):
                 track_accepts = False
                 if static[i]:  # a static object, whatever supports it (or no longer does)
                     reason[i] = MOTION
                     continue
-                if lone[i] == lone[i] and not _picked_there(before, t_ns[lo], uv[i], lone[i],
-                                                            options):
+                if lone[i] == lone[i] and not _picked_there(before, adjacent, t_ns[lo], uv[i],
+                                                            lone[i], options):
                     # a pixel as still as a static object's, whose support came and went,
                     # that this camera was not following: the ball did not arrive there out
                     # of nowhere (its camera blind or following it elsewhere); a static
@@ -1556,6 +1567,7 @@ def _decide_in_order(c: _Candidates, rig: Rig, options: GatingOptions, frames, t
                     seen.add(b)
                     u, v = c.uv_und[lo_all[k]].tolist()
                     decider.picked[b] = (u, v, int(c.time_ns[lo_all[k]]))
+                    decider.last_frame[b] = int(c.time_ns[lo_all[k]])
                     if len(seen) == m:
                         break
             continue
