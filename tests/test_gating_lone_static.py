@@ -76,7 +76,8 @@ def _same_in_the_stream(rig, det, g, forms=(False, True)) -> None:
         stream = StreamGate(rig, 0.0, compiled=compiled)
         push_frames(stream, det)
         stream.flush()
-        assert_array_equal(stream.rejections.reason, g.rejections.reason, err_msg=compiled)
+        assert_array_equal(stream.rejections.reason, g.rejections.reason,
+                           err_msg=f"compiled={compiled}")
         assert_array_equal(stream.rejections.frame_time_ns, g.rejections.frame_time_ns)
 
 
