@@ -389,7 +389,7 @@ def support_all(rows, b, t_all, uv, lines, times, table, causal, right, wait_ns,
 @kernel
 def static_camera(times, table, points, uv, finite, paired, dz, lags, long_lags, recent_ns,
                   recent_long_ns, focal_static, center, long_t, static_m, long_c, g,
-                  static, stillness):
+                  static, stillness, lone):
     """gating._static for one camera's frames (``times`` (F,), ``table`` (F, K) candidate
     rows, -1 padding), every earlier frame's candidates counting: sets ``static`` and
     ``stillness`` of its candidates, one candidate at a time with _stillness_one's floats
@@ -399,7 +399,9 @@ def static_camera(times, table, points, uv, finite, paired, dz, lags, long_lags,
     ``long_lags``: frames of the 3D / image test and of the long image test; ``recent_ns``,
     ``recent_long_ns``: how far back those frames may lie (1.5 static_s, 1.5 LONG_STILL
     static_s, ns); ``focal_static``: min(f_x, f_y) static_m (_still_px); ``center`` (3,)
-    the camera's; ``long_t``: long_lags / fps; ``long_c``: LONG_STILL_C; ``g``: gravity."""
+    the camera's; ``long_t``: long_lags / fps; ``long_c``: LONG_STILL_C; ``g``: gravity.
+    Sets ``lone`` (gating._static's third value) too: the image test counted with each
+    candidate's own tolerance, whatever supports it."""
     n_f, k_max = table.shape[0], table.shape[1]
     top = min(long_lags, n_f - 1)
     for f in range(n_f):
@@ -440,7 +442,7 @@ def static_camera(times, table, points, uv, finite, paired, dz, lags, long_lags,
                     if d_px <= pair:
                         still_long = True
                     if lag <= lags:
-                        if d_px <= tol and finite[r2]:
+                        if d_px <= own and finite[r2]:
                             supported = True
                         if d_px < best_px:  # (NaN never is)
                             best_px = d_px
@@ -453,16 +455,19 @@ def static_camera(times, table, points, uv, finite, paired, dz, lags, long_lags,
                 if lag <= lags and recent:
                     if best <= static_m:
                         run += 1.0
-                    if best_px <= tol:
+                    if best_px <= own:
                         run_px += 1.0
                     if supported:
                         held += 1.0
             stillness[r] = run / lags
+            alone = run_px >= lags and held < lags - 1  # gating._still_alone
+            if alone:
+                lone[r] = own
             dzr = dz[r]
             across = 1.0 - dzr * dzr
             g_across = g * (math.sqrt(across) if across >= 0 else math.nan)
             long = run_long >= long_lags and long_c * g_across * long_t * long_t > static_m
-            if run >= 0.75 * lags or (run_px >= lags and held < lags - 1) or long:
+            if run >= 0.75 * lags or (alone and tol == tol) or long:
                 static[r] = True
 
 
@@ -583,6 +588,7 @@ def insert_frame(fi, fflag, ct, cf, csup, count, cam, t, k, times, uv, xy, disto
     fid = count[-1]  # (the last slot of ``count``: the next push id)
     count[-1] = fid + 1
     fi[cam, at, 0], fi[cam, at, 1], fi[cam, at, 2], fi[cam, at, 3] = key, t, fid, k
+    fi[cam, at, 4] = -1  # (its chosen candidate, once decided: decide_frame)
     fflag[cam, at, 0] = 0
     fflag[cam, at, 1] = 0
     k_ = kmat[cam]
@@ -625,7 +631,8 @@ def decide_frame(fid, a, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k
     ``lags``, ``long_lags`` (m,): per camera, the stillness test's frames and the long image
     test's (``ceil(LONG_STILL static_s fps)``); ``long_t`` (m,) s: ``long_lags / fps``
     (gating._still_long's ``T``). ``work``: float64 scratch of at least
-    (k (7 m + 16) + 6 (m + 1) + 4) values."""
+    (k (7 m + 18) + 6 (m + 1) + 4) values. Stores the chosen candidate (-1 none) in
+    ``fi[a, at, 4]`` (gating._Decider.picked: the next frame of the camera reads it)."""
     m = len(lags)
     at = count[a] - 1
     while at >= 0 and fi[a, at, 2] != fid:
@@ -675,6 +682,10 @@ def decide_frame(fid, a, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k
     alive = work[off:off + k]
     off += k
     unpointed = work[off:off + k]
+    off += k
+    own_tol = work[off:off + k]  # each candidate's own _still_px (the image test's counts)
+    off += k
+    lone = work[off:off + k]  # gating._static's ``lone``
     off += k
     rays = work[off:off + 6 * (m + 1)].reshape((m + 1, 6))
     off += 6 * (m + 1)
@@ -753,14 +764,16 @@ def decide_frame(fid, a, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k
         for b in range(m):
             if r_every[j, b] <= 1.0:
                 n_sup += 1
-        if n_sup == 1 and math.isfinite(x):  # gating._paired, gating._still_px
+        if math.isfinite(x):  # gating._still_px
             dx = x - centers[a, 0]
             dy = cf[a, at, j, 6] - centers[a, 1]
             dz = cf[a, at, j, 7] - centers[a, 2]
             depth = _sqrt((dx * dx + dy * dy) + dz * dz)
-            tol[j] = still_f[a] * static_m / depth
+            own_tol[j] = still_f[a] * static_m / depth
         else:
-            tol[j] = math.nan
+            own_tol[j] = math.nan
+        # gating._paired: the image test's static verdict and the long test
+        tol[j] = own_tol[j] if n_sup == 1 else math.nan
         # still across its ray in every frame so far (only those can pass the long test)
         alive[j] = 1.0 if tol[j] == tol[j] else 0.0
         if alive[j] != 0.0:
@@ -783,7 +796,7 @@ def decide_frame(fid, a, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k
             best_px = math.inf
             supported = False
             still_long = False
-            if tol[j] == tol[j]:
+            if own_tol[j] == own_tol[j]:
                 u, v = cf[a, at, j, 0], cf[a, at, j, 1]
                 for q in range(nh):
                     du, dv = u - cf[a, h, q, 0], v - cf[a, h, q, 1]
@@ -792,7 +805,7 @@ def decide_frame(fid, a, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k
                         best_px = d
                     px, py, pz = cf[a, h, q, 5], cf[a, h, q, 6], cf[a, h, q, 7]
                     finite = px == px and py == py and pz == pz
-                    if d <= tol[j] and finite:
+                    if d <= own_tol[j] and finite:
                         supported = True
                     # gating._still_pair: the smaller of the two candidates' tolerances
                     pair = tol[j]
@@ -823,10 +836,12 @@ def decide_frame(fid, a, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k
                 held[j] += 1.0
             if best <= static_m:
                 run[j] += 1.0
-            if best_px <= tol[j]:
+            if best_px <= own_tol[j]:
                 run_px[j] += 1.0
     for j in range(k):
-        still = (run[j] >= 0.75 * la) or ((run_px[j] >= la) and (held[j] < la - 1))
+        alone = (run_px[j] >= la) and (held[j] < la - 1)  # gating._still_alone
+        lone[j] = own_tol[j] if alone else math.nan
+        still = (run[j] >= 0.75 * la) or (alone and tol[j] == tol[j])
         # gating._still_long: longer than a ball in flight can stay still across its ray
         dz = cf[a, at, j, 4]
         if not still and n_alive > 0 and alive[j] != 0.0 and dz * dz <= 1.0:
@@ -882,6 +897,26 @@ def decide_frame(fid, a, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k
         if static[i] != 0.0:
             reason[i] = _MOTION
             continue
+        if lone[i] == lone[i]:  # gating._Decider.decide: kept where the camera followed it
+            # (gating._picked_there: its newest choice, within 1.5 static_s; from its frame
+            # before, within reach of a ball)
+            there = False
+            h = at - 1
+            while h >= 0 and key - fi[a, h, 0] <= recent_ns:
+                q = fi[a, h, 4]
+                if q >= 0:
+                    du = cf[a, at, i, 0] - cf[a, h, q, 0]
+                    dv = cf[a, at, i, 1] - cf[a, h, q, 1]
+                    d = _sqrt(du * du + dv * dv)
+                    if h == at - 1:
+                        there = d <= lone[i] + opt[O_VMAX] * ((key - fi[a, h, 0]) / _NS)
+                    else:
+                        there = d <= lone[i]
+                    break
+                h -= 1
+            if not there:
+                reason[i] = _MOTION
+                continue
         if avail[i] != 0 and nsup[i] == 0:
             has_pred = predict(trk, n_trk, t_s, opt, pred)
             track_accepts = False
@@ -988,6 +1023,7 @@ def decide_frame(fid, a, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k
     ist[1] = 1 if verified else 0
     ist[2] = 1 if tracked else 0
     fflag[a, at, 0] = 1
+    fi[a, at, 4] = best_row  # (-1: none chosen)
     # ---- gating._can_judge, gating._supporting: what later choices may use of it
     recent = 0
     for lg in range(1, n_back + 1):
@@ -1079,7 +1115,8 @@ class GateState:
                  gravity: float, frames: int = 64, candidates: int = 4) -> None:
         m = len(rig)
         self.m = m
-        self.fi = np.zeros((m, frames, 4), np.int64)
+        # per frame: key, logged time, push id, candidates, chosen candidate (-1 none)
+        self.fi = np.zeros((m, frames, 5), np.int64)
         self.fflag = np.zeros((m, frames, 2), np.int8)
         self.ct = np.zeros((m, frames, candidates), np.int64)
         self.cf = np.full((m, frames, candidates, 8), np.nan)
@@ -1128,14 +1165,17 @@ class GateState:
     def _grow(self, frames: int, candidates: int) -> None:
         """Room for ``frames`` frames per camera and ``candidates`` per frame (copied)."""
         m, h, k = self.m, self.frames, self.candidates
-        new: dict[str, np.ndarray] = {"fi": np.zeros((m, frames, 4), np.int64),
+        new: dict[str, np.ndarray] = {"fi": np.zeros((m, frames, 5), np.int64),
                                       "fflag": np.zeros((m, frames, 2), np.int8),
                                       "ct": np.zeros((m, frames, candidates), np.int64),
                                       "cf": np.full((m, frames, candidates, 8), np.nan),
                                       "csup": np.zeros((m, frames, candidates), np.int8)}
         for name, a in new.items():
             old = getattr(self, name)
-            a[:, :h, :k] = old
+            if name in ("fi", "fflag"):  # (per frame: every column)
+                a[:, :h] = old
+            else:
+                a[:, :h, :k] = old
             setattr(self, name, a)
         if candidates > k:
             self.reason = np.zeros(candidates, np.int64)

@@ -29,7 +29,9 @@ A candidate ``x`` of camera ``a`` at (corrected) time ``t`` is judged by three g
    camera that contributed, be reachable from the last accepted point at a ball's speed,
    ``|p - p_last| <= max_speed · Δt + track_m``, and not stand still: a point within
    ``static_m`` of its camera's earlier points over ``static_s`` is a static object (a second
-   orange thing seen by every camera passes every epipolar test; it does not move).
+   orange thing seen by every camera passes every epipolar test; it does not move); so is a
+   pixel that stood still in its camera's image with its support coming and going, unless
+   that camera's newest choice was there (it was following the ball: ``_static``'s ``lone``).
 
 A candidate is accepted when the epipolar gate accepts it (some other camera supports it)
 and the track and motion gates do not object, or when the track gate alone accepts it
@@ -551,7 +553,7 @@ def _support_one(t: int, line, keys: list[int], usable, search, wait_ns: int, ca
 
 def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
             points: np.ndarray, paired: np.ndarray | None = None,
-            compiled: bool | None = None) -> tuple[np.ndarray, np.ndarray]:
+            compiled: bool | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Which candidates stood still in space: each one's 3D point (its ray crossed with its
     support's) within ``static_m`` of a candidate's point in each of its camera's earlier
     frames; or, for a candidate whose point rests on one other camera (``paired``), its
@@ -573,12 +575,19 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
         seen by several cameras (a second orange thing, a lamp), not a ball in play
     stillness : (C,) float in [0, 1], the share of those frames, back from the newest,
         it was still in (a candidate that has not moved yet is the less likely ball)
+    lone : (C,) float, pixels: where the image test's verdict (:func:`_still_alone`) holds
+        for a candidate whatever supports it (its pixel within its own ``f static_m / D``
+        of one in every one of the ``static_s`` frames, its support not continuous), that
+        tolerance; NaN elsewhere (without a point too). Such a candidate is kept only
+        where its camera's own previous frame chose a candidate within it
+        (:meth:`_Decider.decide`: a ball arriving at a static object's pixel)
 
     ``compiled``: by :func:`pslog.fusion._gate_kernel.static_camera` (the same values);
     None: where that module is loaded.
     """
     static = np.zeros(len(c.camera), dtype=bool)
     stillness = np.zeros(len(c.camera))
+    lone = np.full(len(c.camera), np.nan)
     finite = np.isfinite(points).all(axis=-1)  # (C,) whether each candidate has a point
     if compiled is None:
         compiled = _kernels_ready()
@@ -600,8 +609,9 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
                           min(float(cam.K[0, 0]), float(cam.K[1, 1])) * options.static_m,
                           np.ascontiguousarray(cam.center_world, dtype=np.float64),
                           long_lags / cam.fps,
-                          float(options.static_m), LONG_STILL_C, G, static, stillness)
-        return static, stillness
+                          float(options.static_m), LONG_STILL_C, G, static, stillness,
+                          lone)
+        return static, stillness, lone
     for b, (times, table) in enumerate(tables):
         lags = int(np.ceil(options.static_s * rig.cameras[b].fps))
         long_lags = int(np.ceil(LONG_STILL * options.static_s * rig.cameras[b].fps))
@@ -614,7 +624,8 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
             tol = _still_px(rig.cameras[b], p[..., 0], p[..., 1], p[..., 2], options,
                             np.sqrt)
         # each candidate's own tolerance (NaN without a point): the long test's pair of
-        # frames takes the smaller of the two (_still_long)
+        # frames takes the smaller of the two (_still_long); the image test's counts are
+        # made with it for every candidate (its verdict: static where paired, else lone)
         own = tol.copy()
         if paired is None:
             tol[:] = np.nan
@@ -655,14 +666,14 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
             d = np.where(valid & np.isfinite(d), d, np.inf).min(axis=2)
             with np.errstate(invalid="ignore"):
                 # a still pixel there whose own point rested on support too (the support held)
-                near = valid & (d_px <= tol[:, :, None])
+                near = valid & (d_px <= own[:, :, None])
             held += recent[:, None] & np.any(
                 near & _lagged(p_finite, lag, finite[0])[:, None, :], axis=2)
             d_px_pair = d_px
             d_px = np.where(valid & np.isfinite(d_px), d_px, np.inf).min(axis=2)
             run += recent[:, None] & (d <= options.static_m)
             with np.errstate(invalid="ignore"):
-                run_px += recent[:, None] & (d_px <= tol)
+                run_px += recent[:, None] & (d_px <= own)
                 run_long += recent_long[:, None] & _still_pair(
                     d_px_pair, tol, _lagged(own, lag, own[0]), valid)
         ok = table >= 0
@@ -672,9 +683,10 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
         dz = c.ray_dir[np.maximum(table, 0), 2]
         with np.errstate(invalid="ignore"):
             long = _still_long(run_long, dz, long_lags, rig.cameras[b].fps, options, np.sqrt)
-        static[table[ok & ((run >= 0.75 * lags) | _still_alone(run_px, held, lags)
-                           | long)]] = True
-    return static, stillness
+        alone = _still_alone(run_px, held, lags)
+        static[table[ok & ((run >= 0.75 * lags) | (alone & ~np.isnan(tol)) | long)]] = True
+        lone[table[ok & alone]] = own[ok & alone]
+    return static, stillness, lone
 
 
 
@@ -1052,8 +1064,8 @@ class _Columns:
     """Per candidate, as Python floats (the decision loop is sequential; numpy is slow on
     scalars), what :meth:`_Decider.decide` reads: made by :func:`_columns`."""
 
-    __slots__ = ("available", "camera", "epi_cost", "front", "lag", "n_support", "pts", "rays",
-                 "rows", "static", "stillness", "t_ns", "t_s", "unpointed")
+    __slots__ = ("available", "camera", "epi_cost", "front", "lag", "lone", "n_support", "pts",
+                 "rays", "rows", "static", "stillness", "t_ns", "t_s", "unpointed", "uv")
     available: list[int]
     lag: list[list[float]]
     camera: list[int]
@@ -1065,9 +1077,11 @@ class _Columns:
     rows: list[list[float]]
     static: list[bool]
     stillness: list[float]
+    lone: list[float]
     t_ns: list[int]
     t_s: list[float]
     unpointed: list[bool]
+    uv: list[list[float]]
 
     def __init__(self, **columns) -> None:
         for k, v in columns.items():
@@ -1076,13 +1090,14 @@ class _Columns:
 
 def _columns(c: _Candidates, ratio, points, in_front, static=None, lag=None) -> _Columns:
     """:class:`_Columns` of the candidates ``c``: their support ``ratio`` (n, m), ``points``
-    (n, 3), ``in_front`` (n,), ``static`` (:func:`_static`'s pair, or None: none static) and
-    ``lag`` (n, m) s (:func:`_lags`; None: 0).
+    (n, 3), ``in_front`` (n,), ``static`` (:func:`_static`'s three values, or None: none
+    static) and ``lag`` (n, m) s (:func:`_lags`; None: 0).
     Counted and summed with numpy in camera order, as the per-row Python sums did (the same
     bits: a sum of three non-negative floats from 0)."""
     n = len(c.camera)
-    static, stillness = (([False] * n, [0.0] * n) if static is None else
-                         (np.asarray(static[0]).tolist(), np.asarray(static[1]).tolist()))
+    static, stillness, lone = (([False] * n, [0.0] * n, [math.nan] * n) if static is None else
+                               (np.asarray(static[0]).tolist(), np.asarray(static[1]).tolist(),
+                                np.asarray(static[2]).tolist()))
     ratio = np.asarray(ratio, dtype=np.float64).reshape(n, -1)
     points = np.asarray(points, dtype=np.float64).reshape(n, 3)
     with np.errstate(invalid="ignore"):
@@ -1122,7 +1137,26 @@ def _columns(c: _Candidates, ratio, points, in_front, static=None, lag=None) -> 
                     t_s=(c.time_ns / NS).tolist(), t_ns=c.time_ns.tolist(),
                     rays=c.ray_dir.tolist(), pts=points.tolist(),
                     front=np.asarray(in_front).tolist(), static=static, stillness=stillness,
+                    lone=lone, uv=c.uv_und.tolist(),
                     camera=np.asarray(c.camera).tolist(), unpointed=unpointed.tolist())
+
+
+def _picked_there(before, adjacent: bool, key: int, uv, tol: float,
+                  options: GatingOptions) -> bool:
+    """Whether a camera was following what a ``lone`` candidate at ``uv`` (undistorted) is
+    (:meth:`_Decider.decide`): its newest choice (``before``: undistorted (u, v) and its
+    frame's time ns; None: none yet), among the frames the stillness test looks at (within
+    1.5 ``static_s`` of this frame's time ``key`` ns), lies within ``tol`` pixels of it (it
+    stood still there), or, made in the camera's frame before (``adjacent``), within
+    ``tol + max_image_speed Δt`` (the ball the camera was following moved there: it passes
+    over a static object's pixel)."""
+    if before is None or not key - before[2] <= 1.5 * options.static_s * NS:
+        return False
+    du, dv = uv[0] - before[0], uv[1] - before[1]
+    d = _sqrt(du * du + dv * dv)
+    if adjacent:
+        return d <= tol + options.max_image_speed_px_s * ((key - before[2]) / NS)
+    return d <= tol
 
 
 def _age(ratio_row, lag_row) -> float:
@@ -1167,11 +1201,17 @@ class _Decider:
         # alone supports: from then on several such candidates are told apart by their cost
         self.tracked = False
         self.centers = [cam.center_world.tolist() for cam in rig.cameras]
+        # per camera: its newest choice, (undistorted u, v, its frame's time ns), None
+        # before any, and its newest decided frame's time ns: a still pixel that is not the
+        # one the camera itself was following is a static object's (the ``lone`` candidates)
+        self.picked: list[tuple[float, float, int] | None] = [None] * len(rig)
+        self.last_frame: list[int | None] = [None] * len(rig)
 
     def run(self, c: _Candidates, frames, ratio, points, in_front, reason,
             static=None, lag=None) -> None:
         """Decide the frames ``[(lo, hi), ...]`` (candidate rows, in order): set ``reason``
-        of every rejected row (``static``: :func:`_static`'s pair; ``lag``: :func:`_lags`)."""
+        of every rejected row (``static``: :func:`_static`'s three values; ``lag``:
+        :func:`_lags`)."""
         self.decide(frames, _columns(c, ratio, points, in_front, static, lag), reason)
 
     def decide(self, frames, cols: _Columns, reason) -> None:
@@ -1182,16 +1222,29 @@ class _Decider:
         t_s, t_ns, rays, pts, front = cols.t_s, cols.t_ns, cols.rays, cols.pts, cols.front
         static, stillness, camera, unpointed = (cols.static, cols.stillness, cols.camera,
                                                 cols.unpointed)
-        centers = self.centers
+        lone, uv = cols.lone, cols.uv
+        centers, picked = self.centers, self.picked
         for lo, hi in frames:
             best_key, best_row = None, -1
             # the track's prediction at each time (False: none)
             preds: dict[int, tuple | Literal[False]] = {}
             unverified = []
             untracked = []
+            # this camera's newest choice (None: none yet), and whether it was its frame before
+            before = picked[camera[lo]]
+            adjacent = before is not None and before[2] == self.last_frame[camera[lo]]
+            self.last_frame[camera[lo]] = t_ns[lo]
             for i in range(lo, hi):
                 track_accepts = False
                 if static[i]:  # a static object, whatever supports it (or no longer does)
+                    reason[i] = MOTION
+                    continue
+                if lone[i] == lone[i] and not _picked_there(before, adjacent, t_ns[lo], uv[i],
+                                                            lone[i], options):
+                    # a pixel as still as a static object's, whose support came and went,
+                    # that this camera was not following: the ball did not arrive there out
+                    # of nowhere (its camera blind or following it elsewhere); a static
+                    # object that other cameras' rays happen to meet as the ball passes it
                     reason[i] = MOTION
                     continue
                 if available[i] and n_support[i] == 0:
@@ -1289,6 +1342,7 @@ class _Decider:
             for i in range(lo, hi):
                 if i != best_row and reason[i] < 0:
                     reason[i] = OUTSCORED
+            picked[camera[lo]] = (uv[best_row][0], uv[best_row][1], t_ns[lo])
             self.verified |= best_row not in unverified
             if math.isfinite(pts[best_row][0]):
                 track.add(t_s[best_row], np.array(pts[best_row]),
@@ -1355,15 +1409,15 @@ def _decided(c: _Candidates, rig: Rig, options: GatingOptions, causal: bool, wai
     constants = _rig_constants(rig)
     points, in_front, miss = _points(c, rig, ratio, carried, constants)
     points[miss > options.track_m] = np.nan  # rays that do not meet: no point to track
-    static, stillness = _static(c, tables, rig, options, points, _paired(ratio),
-                                compiled=compiled)
+    static, stillness, lone = _static(c, tables, rig, options, points, _paired(ratio),
+                                      compiled=compiled)
     # frames in (time, camera) order of their best candidate; candidates contiguous per frame
     starts = np.flatnonzero(np.r_[True, c.frame[1:] != c.frame[:-1]])
     ends = np.r_[starts[1:], n]
     order = np.lexsort((c.camera[starts], c.time_ns[starts]))
     _decide_in_order(c, rig, options, (starts, ends, order), tables, F,
                      (ratio, carried, used, _lags(c.time_ns, tables, used)),
-                     (points, in_front), (static, stillness), reason,
+                     (points, in_front), (static, stillness, lone), reason,
                      causal, wait_ns, max_gap_ns, constants)
     return ratio
 
@@ -1431,7 +1485,7 @@ def _decide_in_order(c: _Candidates, rig: Rig, options: GatingOptions, frames, t
     """
     ratio, carried, used, lag = support
     points, in_front = geometry
-    static, stillness = still
+    static, stillness, lone = still
     starts, ends, order = frames
     decider = _Decider(rig, options)
     m = len(rig)
@@ -1449,11 +1503,13 @@ def _decide_in_order(c: _Candidates, rig: Rig, options: GatingOptions, frames, t
     with np.errstate(invalid="ignore"):
         strong = ((ratio <= 1.0).sum(axis=1) >= 2) & np.isfinite(points[:, 0])
     first = lo_all
-    simple = single & ~redo_frame & strong[first] & ~static[first] & in_front[first]
+    simple = (single & ~redo_frame & strong[first] & ~static[first] & np.isnan(lone[first])
+              & in_front[first])
     special = ~single | redo_frame
     # each frame's kind: 0 simple, 1 any other frame decided as it comes, 2 special
     kind = np.where(simple, 0, np.where(special, 2, 1))
     cuts = np.flatnonzero(np.r_[True, kind[1:] != kind[:-1], True])
+    frame_camera = c.camera[lo_all].tolist()  # each frame's camera, in the order
 
     # what the special frames need, made as they come
     position = np.zeros(len(c.camera), dtype=np.int64)  # a frame's first row -> table row
@@ -1495,7 +1551,7 @@ def _decide_in_order(c: _Candidates, rig: Rig, options: GatingOptions, frames, t
         sub = _Candidates(c.camera[rows], c.time_ns[rows], c.uv_und[rows], c.ray_dir[rows],
                           c.frame[rows])
         cols = _columns(sub, ratio[rows], points[rows], in_front[rows],
-                        (static[rows], stillness[rows]), lag[rows])
+                        (static[rows], stillness[rows], lone[rows]), lag[rows])
         local = reason[rows]
         decider.decide(zip(local_lo.tolist(), local_hi.tolist(), strict=True), cols, local)
         reason[rows] = local
@@ -1506,6 +1562,17 @@ def _decide_in_order(c: _Candidates, rig: Rig, options: GatingOptions, frames, t
             decider.verified = True
             # (two supports whose rays meet: points of age 0, _age)
             decider.track.extend(c.time_ns[rows] / NS, points[rows], np.zeros(len(rows)))
+            # each camera's choice in its newest frame of the run (_Decider.picked)
+            seen: set[int] = set()
+            for k in range(e - 1, s - 1, -1):
+                b = frame_camera[k]
+                if b not in seen:
+                    seen.add(b)
+                    u, v = c.uv_und[lo_all[k]].tolist()
+                    decider.picked[b] = (u, v, int(c.time_ns[lo_all[k]]))
+                    decider.last_frame[b] = int(c.time_ns[lo_all[k]])
+                    if len(seen) == m:
+                        break
             continue
         if kind[s] == 1:
             for k0 in range(s, e, _DECIDE_BLOCK):
@@ -1581,14 +1648,17 @@ def _stillness_one(key: int, pts, earlier, lags: int, options: GatingOptions,
     test); ``uvs`` the frame's undistorted pixels (k, 2), ``paired`` (k,) bool (its point
     rests on one other camera), ``cam`` its Camera (the image tests; None: the 3D test
     alone), ``dz`` (k,) its candidates' rays' world z (the long test). Returns (static (k,)
-    bool, stillness (k,))."""
+    bool, stillness (k,), lone (k,): :func:`_static`'s three values)."""
     run = np.zeros(len(pts))
     run_px = np.zeros(len(pts))
     run_long = np.zeros(len(pts))
     held = np.zeros(len(pts))
-    tols = [_still_px(cam, x, y, z, options, _sqrt)
-            if cam is not None and paired[j] and math.isfinite(x) else math.nan
-            for j, (x, y, z) in enumerate(pts)]
+    # each candidate's own tolerance (the image test's counts, whatever supports it), and
+    # the paired ones' (the image test's static verdict and the long test)
+    owns = [_still_px(cam, x, y, z, options, _sqrt)
+            if cam is not None and math.isfinite(x) else math.nan for x, y, z in pts]
+    tols = [own if cam is not None and paired[j] else math.nan
+            for j, own in enumerate(owns)]
     # the candidates still across their ray in every frame so far (only they can pass the
     # long test, which asks for every one of its frames)
     alive = [t == t for t in tols]  # (an image test: not NaN)
@@ -1606,7 +1676,7 @@ def _stillness_one(key: int, pts, earlier, lags: int, options: GatingOptions,
             best_px = math.inf
             supported = False
             still_long = False
-            if tols[j] == tols[j]:  # (an image test: not NaN)
+            if owns[j] == owns[j]:  # (an image test: not NaN)
                 u, v = uvs[j]
                 for (pu, pv), (px, py, pz) in zip(prev_uvs[0], prev_points, strict=True):
                     du, dv = u - pu, v - pv
@@ -1614,7 +1684,7 @@ def _stillness_one(key: int, pts, earlier, lags: int, options: GatingOptions,
                     if d < best_px:
                         best_px = d
                     finite = px == px and py == py and pz == pz
-                    if d <= tols[j] and finite:
+                    if d <= owns[j] and finite:
                         supported = True
                     # _still_pair: the smaller of the two candidates' tolerances
                     pair = tols[j]
@@ -1640,9 +1710,11 @@ def _stillness_one(key: int, pts, earlier, lags: int, options: GatingOptions,
                 held[j] += 1.0
             if best <= options.static_m:
                 run[j] += 1.0
-            if best_px <= tols[j]:
+            if best_px <= owns[j]:
                 run_px[j] += 1.0
-    static = (run >= 0.75 * lags) | _still_alone(run_px, held, lags)
+    alone = _still_alone(run_px, held, lags)
+    static = (run >= 0.75 * lags) | (alone & ~np.isnan(np.array(tols)))
+    lone = np.where(alone, owns, math.nan)
     if cam is not None and dz is not None and any(alive):
         long_lags = int(np.ceil(LONG_STILL * options.static_s * cam.fps))
         for j in range(len(pts)):
@@ -1650,7 +1722,7 @@ def _stillness_one(key: int, pts, earlier, lags: int, options: GatingOptions,
             if alive[j] and dz_j * dz_j <= 1.0:  # (np.sqrt's NaN in _static: not static)
                 static[j] |= bool(_still_long(run_long[j], dz_j, long_lags, cam.fps, options,
                                               _sqrt))
-    return static, run / lags
+    return static, run / lags, lone
 
 
 def _result(detections: Detections, rig: Rig, reason: np.ndarray) -> Gated:
