@@ -16,12 +16,17 @@ under one lock per process, one kernel at a time: on two or more cores the work 
 between this process and a second one, each compiling its own kernels (no kernel in both:
 they share numba's cache on disk), which about halves the wall time:
 
-- this one: simulate, sync, then fuse with ``nearest``, ``typeA`` and ``smooth`` (the
-  trajectory's estimation kernels, the gating's and type A's batch kernels);
+- this one: simulate, fuse with ``nearest`` and ``typeA`` (the gate's and type A's batch
+  kernels), sync, fuse with ``smooth`` (the trajectory's estimation kernels), then the
+  streaming ``typeA``, one detection a push;
 - the second: its own simulated session (the same command), the streaming ``filter`` (its
-  per-detection step), the batch ``filter`` on that session (the batch loop around the step
-  and the start's window fits; the gating's kernels by then in the cache) and the streaming
-  ``typeA``, plain and through the stream gate.
+  per-detection step), the filter's state and prediction (``pslog live``), a lens's rays,
+  the batch ``filter`` (the loop around the step, the start's window fits; the gate's
+  kernels by then in the cache) and the streaming ``typeA`` through the stream gate (type
+  A's kernel in the cache by then: the streams give it the batch run's argument types).
+
+A kernel compiled by both processes would be compiled twice for nothing: the order above
+keeps each kernel to one of them on a machine the two share evenly.
 
 Nothing is written outside the temporary folders and numba's cache.
 """
@@ -38,8 +43,6 @@ import time
 _SIMULATE = ["simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "rally",
              "--duration", "1.5", "--noise-px", "0.3", "--spurious", "0.05",
              "--clock-offset", "cam2=3", "--seed", "1"]
-#: the default methods of that session that the first process fuses (the second: filter)
-_FIRST_METHODS = "nearest,typeA,smooth"
 #: the argument that makes ``python -m pslog.warm`` the second process (internal)
 _SECOND = "--second-part"
 
@@ -96,14 +99,30 @@ def _commands(steps: list[list[str]]) -> None:
 
 
 def _first_part() -> None:
-    """simulate, sync, fuse with every default method but filter (the second part's)."""
+    """simulate; fuse with nearest and typeA first (the gate's and type A's batch kernels,
+    which the second part's streams then load), sync, fuse with smooth; the stream of type A
+    one detection a push."""
     with tempfile.TemporaryDirectory(prefix="pslog-warm-") as tmp:
         session = os.path.join(tmp, "session.mcap")
         synced = os.path.join(tmp, "synced.mcap")
         _commands([[*_SIMULATE, "-o", session],
+                   ["fuse", session, "--method", "nearest,typeA",
+                    "-o", os.path.join(tmp, "fused-a.mcap")],
                    ["sync", session, "-o", synced],
-                   ["fuse", synced, "--method", _FIRST_METHODS,
-                    "-o", os.path.join(tmp, "fused.mcap")]])
+                   ["fuse", synced, "--method", "smooth", "-o", os.path.join(tmp, "fused.mcap")]])
+        _type_a_stream(session)
+
+
+def _type_a_stream(session: str) -> None:
+    from pslog.api import read_session
+    from pslog.fusion.stream import StreamFuser
+
+    data = read_session(session)
+    best = data.detections.best()
+    fuser = StreamFuser(data.rig, "typeA")
+    for i in range(min(len(best), 60)):
+        fuser.push(int(best.time_ns[i]), int(best.camera[i]), best.uv[i])
+    fuser.flush()
 
 
 def _second_part() -> None:
@@ -137,9 +156,9 @@ def _second_part() -> None:
         _rays(data.rig.cameras[0], np.zeros((1, 2)))
         _commands([["fuse", session, "--method", "filter",
                     "-o", os.path.join(tmp, "fused.mcap")]])
-    # every candidate through the stream gate (pslog live's default; its compiled kernels),
-    # then the best ones alone: type A's kernel last, when the first process has compiled it
-    # (the stream's arguments are of the batch run's types: one signature, in the cache)
+    # every candidate through the stream gate (pslog live's default; its compiled kernels):
+    # type A's kernel last, when the first part has compiled it (the stream's arguments are
+    # of the batch run's types: one signature, in the cache by then)
     det = data.detections
     fuser = StreamFuser(data.rig, "typeA", candidates=True)
     for f in range(min(det.n_frames, 60)):
@@ -148,10 +167,6 @@ def _second_part() -> None:
         if n:
             fuser.push([int(det.frame_time_ns[f])] * n, [int(det.frame_camera[f])] * n,
                        det.cand_uv[rows])
-    fuser.flush()
-    fuser = StreamFuser(data.rig, "typeA")
-    for i in range(min(len(best), 60)):
-        fuser.push(int(best.time_ns[i]), int(best.camera[i]), best.uv[i])
     fuser.flush()
 
 
