@@ -34,6 +34,7 @@ Nothing is written outside the temporary folders and numba's cache.
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 import tempfile
@@ -174,6 +175,8 @@ def main() -> int:
     if sys.argv[1:] == [_SECOND]:  # the second process of warm(): its failure is warm's
         _second_part()
         return 0
+    # stopped (run.sh stopped while it warms in the background): the second process with it
+    signal.signal(signal.SIGTERM, lambda signum, frame: sys.exit(128 + signum))
     try:
         seconds = warm()
     except Exception as exc:  # one line: run.sh carries on, the kernels compile on first use
