@@ -51,21 +51,28 @@ _SECOND = "--second-part"
 def warm() -> float:
     """Run the commands that compile every kernel; returns the seconds it took."""
     start = time.perf_counter()
-    second = _start_second() if _cores() >= 2 else None
-    try:
+    if _cores() < 2:
         _first_part()
-        if second is None:
-            _second_part()
-        else:
-            _, err = second.communicate()
-            if second.returncode != 0:
-                lines = err.strip().splitlines()
-                raise RuntimeError(f"the second warm process exited {second.returncode}"
-                                   + (f": {lines[-1]}" if lines else ""))
-    finally:
-        if second is not None and second.poll() is None:  # (this one failed or was stopped)
-            second.kill()
+        _second_part()
+        return time.perf_counter() - start
+    # the second part in a second process, its messages into a file read if it fails (a pipe
+    # nobody reads until this process is done could fill and stop it)
+    with tempfile.TemporaryFile() as messages:
+        second = subprocess.Popen([sys.executable, "-m", "pslog.warm", _SECOND],
+                                  stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                  stderr=messages)
+        try:
+            _first_part()
             second.wait()
+        finally:
+            if second.poll() is None:  # (this one failed or was stopped)
+                second.kill()
+                second.wait()
+        if second.returncode != 0:
+            messages.seek(0)
+            lines = messages.read().decode(errors="replace").strip().splitlines()
+            raise RuntimeError(f"the second warm process exited {second.returncode}"
+                               + (f": {lines[-1]}" if lines else ""))
     return time.perf_counter() - start
 
 
@@ -74,12 +81,6 @@ def _cores() -> int:
         return len(os.sched_getaffinity(0))
     except AttributeError:  # (not on every platform)
         return os.cpu_count() or 1
-
-
-def _start_second() -> subprocess.Popen[str]:
-    return subprocess.Popen([sys.executable, "-m", "pslog.warm", _SECOND],
-                            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE, text=True)
 
 
 def _commands(steps: list[list[str]]) -> None:
