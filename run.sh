@@ -8,8 +8,9 @@ cd "$(dirname "$0")"
 
 PYTHON=${PYTHON:-python3}
 VENV=${PSLOG_VENV:-.venv}
+WARMING=""  # pslog.warm running in the background (setup background), its process id
 
-setup() {
+setup() {  # setup [background]: with background, the kernels compile while the caller goes on
     if [ ! -x "$VENV/bin/python" ]; then
         "$PYTHON" -c 'import sys; sys.exit(0 if sys.version_info >= (3, 11) else "pslog needs Python >= 3.11, found " + sys.version.split()[0])'
         "$PYTHON" -m venv "$VENV"
@@ -19,8 +20,23 @@ setup() {
         "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check --upgrade pip
         "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check -e ".[test]"
         # numba compiles pslog's kernels on first use: do it now, once, announced (pslog/warm.py)
-        echo "pslog: compiling the numba kernels (once per install, about a minute)" >&2
-        "$VENV/bin/python" -m pslog.warm >&2 || true  # best effort: else on first use
+        echo "pslog: compiling the numba kernels (once per install, about 1.5 minutes)" >&2
+        "$VENV/bin/python" -m pslog.warm >&2 &
+        WARMING=$!
+        # (stopped with this script, the install then not marked done; a failing check after
+        # setup still waits for it)
+        trap 'kill -TERM "$WARMING" 2>/dev/null; WARMING=""; exit 130' INT TERM
+        trap warmed EXIT
+        if [ "${1:-}" != background ]; then
+            warmed
+        fi
+    fi
+}
+
+warmed() {  # wait for setup's pslog.warm, then mark the install done
+    if [ -n "$WARMING" ]; then
+        wait "$WARMING" || true  # best effort: else the kernels compile on first use
+        WARMING=""
         touch "$VENV/.pslog-installed"
     fi
 }
@@ -33,7 +49,7 @@ case "${1:-}" in
         ;;
     test)
         shift
-        setup
+        setup background  # the kernels compile (two cores) while ruff and mypy check
         "$VENV/bin/ruff" check pslog recorders viewers tests benchmarks tools samples
         "$VENV/bin/mypy"  # pslog/, as configured in pyproject.toml [tool.mypy]
         # the suite starts ~1,000 pslog processes; with PYTHONDONTWRITEBYTECODE set (as on
@@ -41,6 +57,7 @@ case "${1:-}" in
         # write the bytecode once (only files changed since are compiled)
         # (best effort: a read-only checkout compiles in memory as before)
         "$VENV/bin/python" -m compileall -q pslog recorders viewers >/dev/null 2>&1 || true
+        warmed  # before the tests, which would compile what warm has not yet
         # two test processes (pytest-xdist), each running whole test files (--dist loadfile:
         # a module's shared fixture, e.g. a Ray cluster or a live run, is built once);
         # PSLOG_TEST_PROCESSES=0 runs the suite in this process alone

@@ -1,76 +1,166 @@
 """Compile pslog's numba kernels now instead of at their first use.
 
 numba compiles a kernel (:mod:`pslog._jit`) the first time it runs on a machine, then loads
-it from its cache: the first ``pslog fuse`` of a fresh install spends about a minute
-compiling (type A's kernel, the filter's step, the smooth trajectory's passes, the track
-encoder; about 50 s on this project's two-core build machine), every later run a fraction of a
-second loading. ``bash run.sh`` runs this
-module after installing, so the cost is paid once, announced, before the demo or the tests:
+it from its cache: the first ``pslog fuse`` of a fresh install spends minutes of CPU
+compiling (type A's kernel, the filter's step, the smooth trajectory's passes, the gate),
+every later run a fraction of a second loading. ``bash run.sh`` runs this module after
+installing, so the cost is paid once, announced, before the demo or the tests:
 
     python -m pslog.warm
 
 It runs the real commands on a 1.5-second simulated session in a temporary folder (simulate
 with a clock offset and spurious blobs, sync, fuse with every default method, the streaming
 forms of ``filter`` and ``typeA``, the latter also with every candidate through the stream
-gate), which compiles every kernel in the signatures those
-commands use. Nothing is written outside the temporary folder and numba's cache.
+gate), which compiles every kernel in the signatures those commands use. numba compiles
+under one lock per process, one kernel at a time: on two or more cores the work is split
+between this process and a second one, each compiling its own kernels (no kernel in both:
+they share numba's cache on disk), which about halves the wall time:
+
+- this one: simulate, fuse with ``nearest`` and ``typeA`` (the gate's and type A's batch
+  kernels), sync, fuse with ``smooth`` (the trajectory's estimation kernels), then the
+  streaming ``typeA``, one detection a push;
+- the second: its own simulated session (the same command), the streaming ``filter`` (its
+  per-detection step), the filter's state and prediction (``pslog live``), a lens's rays,
+  the batch ``filter`` (the loop around the step, the start's window fits; the gate's
+  kernels by then in the cache) and the streaming ``typeA`` through the stream gate (type
+  A's kernel in the cache by then: the streams give it the batch run's argument types).
+
+A kernel compiled by both processes would be compiled twice for nothing: the order above
+keeps each kernel to one of them on a machine the two share evenly.
+
+Nothing is written outside the temporary folders and numba's cache.
 """
 
 from __future__ import annotations
 
 import os
+import signal
+import subprocess
 import sys
 import tempfile
 import time
+
+#: the session both processes simulate (the same command: the same session)
+_SIMULATE = ["simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "rally",
+             "--duration", "1.5", "--noise-px", "0.3", "--spurious", "0.05",
+             "--clock-offset", "cam2=3", "--seed", "1"]
+#: the argument that makes ``python -m pslog.warm`` the second process (internal)
+_SECOND = "--second-part"
 
 
 def warm() -> float:
     """Run the commands that compile every kernel; returns the seconds it took."""
     start = time.perf_counter()
+    if _cores() < 2:
+        _first_part()
+        _second_part()
+        return time.perf_counter() - start
+    # the second part in a second process, its messages into a file read if it fails (a pipe
+    # nobody reads until this process is done could fill and stop it)
+    with tempfile.TemporaryFile() as messages:
+        second = subprocess.Popen([sys.executable, "-m", "pslog.warm", _SECOND],
+                                  stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                  stderr=messages)
+        try:
+            _first_part()
+            second.wait()
+        finally:
+            if second.poll() is None:  # (this one failed or was stopped)
+                second.kill()
+                second.wait()
+        if second.returncode != 0:
+            messages.seek(0)
+            lines = messages.read().decode(errors="replace").strip().splitlines()
+            raise RuntimeError(f"the second warm process exited {second.returncode}"
+                               + (f": {lines[-1]}" if lines else ""))
+    return time.perf_counter() - start
+
+
+def _cores() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # (not on every platform)
+        return os.cpu_count() or 1
+
+
+def _commands(steps: list[list[str]]) -> None:
+    """``pslog`` commands in this process, their output discarded."""
     from pslog.cli import main
 
     os.environ.setdefault("PSLOG_PROGRESS", "off")
-    with tempfile.TemporaryDirectory(prefix="pslog-warm-") as tmp:
-        session = os.path.join(tmp, "session.mcap")
-        synced = os.path.join(tmp, "synced.mcap")
-        fused = os.path.join(tmp, "fused.mcap")
-        quiet = open(os.devnull, "w")  # closed below
+    with open(os.devnull, "w") as quiet:
         out, err = sys.stdout, sys.stderr
         sys.stdout = sys.stderr = quiet
         try:
-            steps = [
-                ["simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "rally",
-                 "--duration", "1.5", "--noise-px", "0.3", "--spurious", "0.05",
-                 "--clock-offset", "cam2=3", "--seed", "1", "-o", session],
-                ["sync", session, "-o", synced],
-                ["fuse", synced, "-o", fused],
-            ]
             for argv in steps:
                 code = main(argv)
                 if code != 0:
                     raise RuntimeError(f"pslog {argv[0]} exited {code}")
         finally:
             sys.stdout, sys.stderr = out, err
-            quiet.close()
-        _stream(session)
-    return time.perf_counter() - start
 
 
-def _stream(session: str) -> None:
-    """The streaming forms (live fusion) call the kernels one detection at a time."""
-    import numpy as np
+def _first_part() -> None:
+    """simulate; fuse with nearest and typeA first (the gate's and type A's batch kernels,
+    which the second part's streams then load), sync, fuse with smooth; the stream of type A
+    one detection a push."""
+    with tempfile.TemporaryDirectory(prefix="pslog-warm-") as tmp:
+        session = os.path.join(tmp, "session.mcap")
+        synced = os.path.join(tmp, "synced.mcap")
+        _commands([[*_SIMULATE, "-o", session],
+                   ["fuse", session, "--method", "nearest,typeA",
+                    "-o", os.path.join(tmp, "fused-a.mcap")],
+                   ["sync", session, "-o", synced],
+                   ["fuse", synced, "--method", "smooth", "-o", os.path.join(tmp, "fused.mcap")]])
+        _type_a_stream(session)
 
+
+def _type_a_stream(session: str) -> None:
     from pslog.api import read_session
     from pslog.fusion.stream import StreamFuser
 
     data = read_session(session)
     best = data.detections.best()
-    for method in ("filter", "typeA"):
-        fuser = StreamFuser(data.rig, method)
+    fuser = StreamFuser(data.rig, "typeA")
+    for i in range(min(len(best), 60)):
+        fuser.push(int(best.time_ns[i]), int(best.camera[i]), best.uv[i])
+    fuser.flush()
+
+
+def _second_part() -> None:
+    """The streaming forms (live fusion call the kernels one detection at a time) and the
+    batch ``filter``, on a session of its own."""
+    import numpy as np
+
+    from pslog.api import read_session
+    from pslog.fusion._prepare import _rays
+    from pslog.fusion.filter import BallFilter
+    from pslog.fusion.stream import StreamFuser
+
+    with tempfile.TemporaryDirectory(prefix="pslog-warm-") as tmp:
+        session = os.path.join(tmp, "session.mcap")
+        _commands([[*_SIMULATE, "-o", session]])
+        data = read_session(session)
+        best = data.detections.best()
+        fuser = StreamFuser(data.rig, "filter")
         for i in range(min(len(best), 60)):
             fuser.push(int(best.time_ns[i]), int(best.camera[i]), best.uv[i])
         fuser.flush()
-    # every candidate through the stream gate (pslog live's default; its compiled kernels)
+        # pslog live's state and prediction to "now" of the filter (compiled: _combined,
+        # _predict), once its track has started
+        flt = BallFilter(data.rig)
+        for i in range(len(best)):
+            flt.push(int(best.time_ns[i]), int(best.camera[i]), *best.uv[i].tolist())
+            if flt.state() is not None:
+                flt.predict(int(best.time_ns[i]) + 10_000_000)
+                break
+        # a lens's rays (prepare's pass for a camera with distortion; the session's have none)
+        _rays(data.rig.cameras[0], np.zeros((1, 2)))
+        _commands([["fuse", session, "--method", "filter",
+                    "-o", os.path.join(tmp, "fused.mcap")]])
+    # every candidate through the stream gate (pslog live's default; its compiled kernels):
+    # type A's kernel last, when the first part has compiled it (the stream's arguments are
+    # of the batch run's types: one signature, in the cache by then)
     det = data.detections
     fuser = StreamFuser(data.rig, "typeA", candidates=True)
     for f in range(min(det.n_frames, 60)):
@@ -83,6 +173,11 @@ def _stream(session: str) -> None:
 
 
 def main() -> int:
+    if sys.argv[1:] == [_SECOND]:  # the second process of warm(): its failure is warm's
+        _second_part()
+        return 0
+    # stopped (run.sh stopped while it warms in the background): the second process with it
+    signal.signal(signal.SIGTERM, lambda signum, frame: sys.exit(128 + signum))
     try:
         seconds = warm()
     except Exception as exc:  # one line: run.sh carries on, the kernels compile on first use

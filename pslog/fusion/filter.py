@@ -2369,6 +2369,11 @@ def _track(flt: BallFilter, time_ns, camera, uv) -> Track:
     uv = np.ascontiguousarray(np.asarray(uv, dtype=np.float64).reshape(-1, 2))
     if not len(times) == len(cameras) == len(uv):
         raise ValueError("time_ns, camera and uv differ in length")
+    # (read-only views, whoever's the arrays: _run is given one type of them, so one
+    # compiled signature serves fuse, the stream and the library's callers, and pslog.warm
+    # compiles it)
+    times, cameras, uv = times.view(), cameras.view(), uv.view()
+    times.flags.writeable = cameras.flags.writeable = uv.flags.writeable = False
     n = len(times)
     before = flt.dropped
     rows = np.empty((n, _OUT_COLS))

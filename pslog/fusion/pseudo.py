@@ -560,8 +560,11 @@ class TypeAStream:
             per_camera=[np.flatnonzero(self._camera == i) for i in range(len(rig))],
             cameras=t.cameras, uv_jacobian=buf.jac[window], view_box=t.view_box)
         prep.__dict__.update(self._shared)
+        # (the direction Jacobians contiguous, as a batch run's: type_a_kernel's one
+        # compiled signature, which pslog.warm compiles; the buffers' slice is strided)
         prep.__dict__.update(observed_rays=buf.rays[window],
-                             observed_direction_jacobians=buf.dir_jac[:, :, window],
+                             observed_direction_jacobians=np.ascontiguousarray(
+                                 buf.dir_jac[:, :, window]),
                              _jacobian_rows=buf.jac_rows[window])
         return fuse_type_a(prep, self._max_gap_s, self._noise_px,
                            events=np.arange(n - n_new, n), seen=buf.seen[window],
@@ -639,7 +642,11 @@ class TypeAStream:
         and ~60 numpy calls on arrays of one element."""
         _pseudo_kernel, previous_next = self._kernels, self._previous_next
         buf = self._buffers
-        time_ns, camera = buf.time[lo:end], buf.camera[lo:end]
+        # (the kernels' arguments of a batch run's types: read-only time and camera columns,
+        # as Observations holds them, and contiguous direction Jacobians, a copy of the
+        # buffers' strided slice: one compiled signature of brackets_kernel and
+        # type_a_kernel for batch and stream, which pslog.warm compiles)
+        time_ns, camera = buf.time_read[lo:end], buf.camera_read[lo:end]
         uv_und = buf.uv_und[lo:end]
         n = end - lo
         e = n - 1
@@ -660,7 +667,7 @@ class TypeAStream:
             target, previous_instant, 2 * m, MAX_EXTRAPOLATION,
             self._max_gap_ns, time_ns, camera, prev_b, next_b, uv_und, buf.rays[lo:end],
             self._template.centers, ki, rr, f9, cam, _SPAN_TIE_NS, MIN_RAY_ANGLE_DEG,
-            buf.ray_dir[lo:end], buf.dir_jac[:, :, lo:end],
+            buf.ray_dir[lo:end], np.ascontiguousarray(buf.dir_jac[:, :, lo:end]),
             buf.jac_rows[lo:end] if lens else np.zeros((1, 4)), lens, rtki, NS,
             0.0 if noise_px is None else float(noise_px), with_cov, ff, fi, refused, has,
             predicted, points, flags, innovation, factor, model, quality_table, past_rows,
@@ -755,6 +762,9 @@ class _StreamColumns:
         self.capacity = capacity
         self.time = np.zeros(capacity, np.int64)
         self.camera = np.zeros(capacity, np.int32)
+        # read-only views of them (their slices: the kernels' time and camera arguments)
+        self.time_read, self.camera_read = self.time.view(), self.camera.view()
+        self.time_read.flags.writeable = self.camera_read.flags.writeable = False
         self.camera64 = np.zeros(capacity, np.int64)  # (the kernels' int64 form of it)
         self.uv = np.zeros((capacity, 2))
         self.frame = np.zeros(capacity, np.int64)

@@ -1,0 +1,46 @@
+"""One compiled signature per kernel whatever the caller: the batch fuse, the streaming forms
+one detection or several rows a push, and the library's callers with arrays of their own
+(writable or read-only) give type A's and the filter's kernels arguments of the same types.
+
+numba compiles a kernel once per signature (array dtypes, layouts, read-only or not), then
+loads it from its cache; ``python -m pslog.warm`` compiles the signatures the commands use.
+A second signature of type A's kernel (~20 CPU s) or the filter's loop was compiled again in
+every fresh process that met it (tests, ``pslog live``), so the stream hands its kernels
+read-only, contiguous columns, as a batch run's Observations hold them."""
+
+import subprocess
+import sys
+
+_SCRIPT = """
+import numpy as np
+from pslog.fusion import FusionOptions, fuse
+from pslog.fusion import _pseudo_kernel, filter as filter_module
+from pslog.fusion.stream import StreamFuser
+from pslog.rig import apply_timing, builtin_rig
+from pslog.simulation import SimulationOptions, simulate
+from pslog.timing import observations as timed_observations
+from pslog.motion import rally_motion
+
+rig = apply_timing(builtin_rig("paper3"), "typeA")
+detections, _ = simulate(rig, rally_motion(seed=1, duration=1.0), 1.0,
+                         SimulationOptions(noise_px=0.3, seed=2))
+obs = timed_observations(detections, rig)
+for method in ("typeA", "filter"):
+    fuse(obs, rig, method, FusionOptions(gating=False))  # read-only columns
+    one, rows = StreamFuser(rig, method), StreamFuser(rig, method)
+    for i in range(len(obs)):  # one detection a push: Python scalars
+        one.push(int(obs.time_ns[i]), int(obs.camera[i]), obs.uv[i])
+    for i in range(0, len(obs) - 3, 3):  # three rows a push: writable arrays of the caller
+        rows.push(obs.time_ns[i:i + 3].copy(), obs.camera[i:i + 3].copy(), obs.uv[i:i + 3].copy())
+    one.flush(), rows.flush()
+for k in (_pseudo_kernel.type_a_kernel, _pseudo_kernel.brackets_kernel, filter_module._run):
+    print(k.py_func.__name__, len(k.signatures))
+"""
+
+
+def test_batch_and_streams_call_each_kernel_in_one_signature():
+    run = subprocess.run([sys.executable, "-c", _SCRIPT], capture_output=True, text=True,
+                         timeout=900)
+    assert run.returncode == 0, run.stderr
+    counts = dict(line.split() for line in run.stdout.splitlines())
+    assert counts == {"type_a_kernel": "1", "brackets_kernel": "1", "_run": "1"}
