@@ -18,14 +18,97 @@ with numba in nopython mode:
 
 The undecorated Python function stays available as ``kernel_fn.py_func`` (numba's attribute):
 tests run both and compare, and a mutation of the equation fails both.
+
+Cache freshness: numba keys a kernel's cached machine code by its own source file only, but
+the code also holds what the kernel took from other modules at compile time — inlined
+helpers (``_stereo_kernel`` inlines ``_prepare_kernel``'s ray helpers), frozen constants
+(``_pseudo_kernel`` freezes ``innovation.KINK_SIGMAS``). After an edit or a ``git pull``
+that changed only such a module, numba would load the stale code. A kernel's cache stamp
+here is numba's stamp *and* a digest of the contents of the pslog modules its file imports
+from (:func:`_imports_digest`, one level: a value a kernel freezes is defined in its own
+file or one it imports it from), so such a change compiles the kernel again.
 """
 
 from __future__ import annotations
 
+import functools
+import hashlib
+import importlib.util
+import os
+import re
 from collections.abc import Callable
 from typing import Any, Literal, TypeVar, cast
 
 F = TypeVar("F", bound=Callable[..., Any])
+
+#: the source files of the modules that defined kernels (their caches stamped by
+#: :func:`_imports_digest` as well)
+_KERNEL_FILES: set[str] = set()
+
+#: an import statement's module in a kernel file: relative (``from ._prepare_kernel import``,
+#: ``from .. import``) or absolute within pslog (``from pslog.motion import``)
+_IMPORT_FROM = re.compile(r"^\s*from\s+(\.+[\w.]*|pslog(?:\.\w+)*)\s+import\b", re.M)
+
+
+@functools.cache
+def _imports_digest(py_file: str, package: str) -> str:
+    """SHA-256 of the contents of ``py_file`` and of the source files of the modules it
+    imports from within its package tree (relative ``from`` imports, or ``pslog``'s),
+    in sorted path order; a file that cannot be read counts as its error's name."""
+    def read(path: str) -> bytes:
+        try:
+            with open(path, "rb") as f:
+                return f.read()
+        except OSError as exc:
+            return type(exc).__name__.encode()
+
+    own = read(py_file)
+    files = set()
+    for name in _IMPORT_FROM.findall(own.decode("utf-8", "replace")):
+        try:
+            spec = importlib.util.find_spec(importlib.util.resolve_name(name, package))
+        except (ImportError, ValueError):
+            continue
+        if spec is not None and spec.origin and spec.origin.endswith(".py"):
+            files.add(os.path.realpath(spec.origin))
+    files.discard(os.path.realpath(py_file))
+    digest = hashlib.sha256(own)
+    for path in sorted(files):
+        digest.update(b"\0" + path.encode() + b"\0" + read(path))
+    return digest.hexdigest()
+
+
+def _stamped_locators(numba_caching: Any) -> None:
+    """Put in front of numba's cache locators ones that stamp a kernel file's cache with
+    :func:`_imports_digest` too (numba's stamp: its own file's time and size); for any
+    other numba-cached function they decline and numba's own are used as before."""
+    impl = getattr(numba_caching, "CacheImpl", None) or getattr(numba_caching, "_CacheImpl", None)
+    names = ("UserProvidedCacheLocator", "InTreeCacheLocator", "UserWideCacheLocator")
+    if (impl is None or not hasattr(impl, "_locator_classes")
+            or not all(hasattr(numba_caching, n) for n in names)):
+        return  # a numba whose cache is arranged otherwise: its own stamps only
+    if getattr(impl, "_pslog_stamped", False):
+        return
+    ours = []
+    for base in (getattr(numba_caching, n) for n in names):
+        def get_source_stamp(self: Any, _base: Any = base) -> Any:
+            return (_base.get_source_stamp(self),
+                    _imports_digest(os.path.realpath(self._py_file), self._pslog_package))
+
+        def from_function(cls: Any, py_func: Any, py_file: str, _base: Any = base) -> Any:
+            if os.path.realpath(py_file) not in _KERNEL_FILES:
+                return None
+            locator = _base.from_function.__func__(cls, py_func, py_file)
+            if locator is not None:
+                module = py_func.__module__
+                locator._pslog_package = module.rpartition(".")[0] or module
+            return locator
+
+        ours.append(type("Pslog" + base.__name__, (base,), {
+            "__module__": __name__, "get_source_stamp": get_source_stamp,
+            "from_function": classmethod(from_function)}))
+    impl._locator_classes = [*ours, *impl._locator_classes]
+    impl._pslog_stamped = True
 
 
 def kernel(fn: F | None = None, *, inline: bool = False, contract: bool = False) -> Any:
@@ -55,6 +138,12 @@ def kernel(fn: F | None = None, *, inline: bool = False, contract: bool = False)
                          f"NUMBA_* environment variables") from exc
 
     how: Literal["never", "always"] = "always" if inline else "never"
+    import inspect
+
+    from numba.core import caching
+
+    _stamped_locators(caching)
+    _KERNEL_FILES.add(os.path.realpath(inspect.getfile(fn)))
     try:
         return cast(F, numba.njit(cache=True, nogil=True, error_model="numpy",
                                   inline=how, fastmath={"contract"} if contract else False)(fn))

@@ -42,3 +42,50 @@ def test_numba_refusing_to_start_is_one_line(tmp_path):
         "pslog fuse: error: numba could not start (ValueError: Number of threads specified "
         "must be > 0.); check the NUMBA_* environment variables"]
     assert not (tmp_path / "f.mcap").exists()
+
+
+HELPERS = '''
+from pslog._jit import kernel
+
+SCALE = {scale}
+
+
+@kernel(inline=True)
+def shifted(x):
+    return x + {shift}
+'''
+
+KERNELS = '''
+from pslog._jit import kernel
+
+from .helpers import SCALE, shifted
+
+
+@kernel
+def apply(x):
+    return shifted(x) * SCALE
+'''
+
+
+def test_a_cached_kernel_is_compiled_again_when_a_module_it_imports_from_changes(tmp_path):
+    # numba stamps a kernel's cache by its own file only; `apply` inlines a helper and
+    # freezes a constant of another file: editing only that file must not load stale code
+    import subprocess
+    import sys
+
+    package = tmp_path / "kernels_pkg"
+    package.mkdir()
+    (package / "__init__.py").write_text("")
+    (package / "kernels.py").write_text(KERNELS)
+
+    def run(scale: float, shift: float) -> float:
+        (package / "helpers.py").write_text(HELPERS.format(scale=scale, shift=shift))
+        out = subprocess.run([sys.executable, "-c", "from kernels_pkg.kernels import apply; "
+                              "print(apply(1.0), sum(apply.stats.cache_hits.values()))"],
+                             cwd=tmp_path, capture_output=True, text=True, check=True)
+        value, hits = out.stdout.split()
+        return float(value), int(hits)
+
+    assert run(2.0, 1.0) == (4.0, 0)  # compiled, cached
+    assert run(3.0, 5.0) == (18.0, 0)  # the inlined helper and the frozen constant changed
+    assert run(3.0, 5.0) == (18.0, 1)  # and then loaded from the cache
