@@ -22,7 +22,7 @@ import math
 import numpy as np
 
 from .._jit import kernel
-from ._prepare_kernel import homogeneous as _homogeneous
+from ._prepare_kernel import direction_jacobian as _direction_jacobian
 from ._prepare_kernel import ray as _ray
 
 
@@ -459,18 +459,8 @@ def nview_after(rows, uv, points, dirs, centers, n_rays, cam, lens, rtki, rms_mi
             u += v
             residual[c, p] = math.sqrt(u) if (in_front and use) else np.nan
             # direction_jacobian at the detection's undistorted pixel
-            h0, h1, h2 = _homogeneous(rtki, c, uv[r0, 0], uv[r0, 1])
-            size = math.sqrt(h0 * h0 + h1 * h1 + h2 * h2)
-            s0, s1, s2 = h0 / size, h1 / size, h2 / size
-            for j in range(2):
-                m0 = rtki[c, j] / size
-                m1 = rtki[c, 3 + j] / size
-                m2 = rtki[c, 6 + j] / size
-                dm = s0 * m0
-                dm += s1 * m1
-                dm += s2 * m2
-                turns[c, 0, j, p] = m0 - s0 * dm
-                turns[c, 1, j, p] = m1 - s1 * dm
-                turns[c, 2, j, p] = m2 - s2 * dm
+            (turns[c, 0, 0, p], turns[c, 1, 0, p], turns[c, 2, 0, p],
+             turns[c, 0, 1, p], turns[c, 1, 1, p], turns[c, 2, 1, p]) = \
+                _direction_jacobian(rtki, c, uv[r0, 0], uv[r0, 1])
         rms_miss[p] = math.sqrt(sq_sum / n_rays[p])
         smallest_cos[p] = smallest
