@@ -63,9 +63,10 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from _rally import rally  # noqa: E402
+from _rigs import lab3_rig as lab_rig  # noqa: E402  (three 800 x 600 cameras, wide lens)
 from _rigs import ring_rig  # noqa: E402
 
-from pslog import Camera, Rig, apply_timing, builtin_rig, look_at  # noqa: E402
+from pslog import Rig, apply_timing, builtin_rig  # noqa: E402
 from pslog.evaluation import errors_m  # noqa: E402
 from pslog.fusion import METHODS, FusionOptions  # noqa: E402
 from pslog.fusion.gating import fuse_detections  # noqa: E402
@@ -79,20 +80,6 @@ MAX_ERROR_M = 0.05
 NOISES = (0.0, 0.3, 1.0)
 #: Where the static second object is: on the floor, in view of every camera of both rigs.
 DISTRACTOR = (1.0, 1.5, 0.2)
-
-
-def lab_rig() -> Rig:
-    """Three 800 x 600 cameras around the 3 x 2 m floor with a wide lens, type A."""
-    dist = np.array([-0.12, 0.03, 5e-4, -4e-4, 0.0])
-    cams = []
-    for i in range(3):
-        angle = 2 * np.pi * i / 3 - 1.2
-        eye = (1.5 + 3.4 * np.cos(angle), 1.0 + 3.0 * np.sin(angle), 2.4 + 0.3 * i)
-        R, t = look_at(eye, (1.5, 1.0, 0.6))
-        f = 520.0 + 20 * i
-        K = [[f, 0.0, 399.5], [0.0, f, 299.5], [0.0, 0.0, 1.0]]
-        cams.append(Camera(f"lab{i + 1}", 800, 600, K, dist, R, t, 30.0, i / 90.0))
-    return Rig(tuple(cams), "lab3")
 
 
 def rigs() -> list[Rig]:

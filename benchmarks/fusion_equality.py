@@ -22,16 +22,15 @@ from __future__ import annotations
 
 import argparse
 import collections
-import os
 import pickle
-import subprocess
-import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+# (this folder: the script runs itself under the compared revision's pslog, beside this
+# tree's benchmarks)
+from _equality import ROOT, dumps, field_pairs
+
 LENS = [-0.25, 0.08, 0.001, -0.001, 0.0]
 
 
@@ -106,21 +105,16 @@ def dump(path: str) -> None:
 
 
 def _lab_rig():
-    """bench_dirty's ``lab3``: three 800 x 600 cameras around the floor, a wide lens, type A
-    offsets of 0, 1/90 and 2/90 s. A copy, not an import: :func:`dump` runs under the
-    compared revision's pslog, where bench_dirty's own imports may not exist."""
-    from pslog import Camera, Rig, look_at
+    """bench_dirty's ``lab3`` (tests/_rigs.py: three 800 x 600 wide-angle cameras, uneven
+    offsets). :func:`dump` runs under the compared revision's pslog: that module imports
+    nothing but pslog's Camera, Rig and look_at (bench_dirty's own imports may not exist
+    there)."""
+    import sys
 
-    dist = np.array([-0.12, 0.03, 5e-4, -4e-4, 0.0])
-    cams = []
-    for i in range(3):
-        angle = 2 * np.pi * i / 3 - 1.2
-        eye = (1.5 + 3.4 * np.cos(angle), 1.0 + 3.0 * np.sin(angle), 2.4 + 0.3 * i)
-        R, t = look_at(eye, (1.5, 1.0, 0.6))
-        f = 520.0 + 20 * i
-        K = [[f, 0.0, 399.5], [0.0, f, 299.5], [0.0, 0.0, 1.0]]
-        cams.append(Camera(f"lab{i + 1}", 800, 600, K, dist, R, t, 30.0, i / 90.0))
-    return Rig(tuple(cams), "lab3")
+    sys.path.insert(0, str(ROOT / "tests"))
+    from _rigs import lab3_rig
+
+    return lab3_rig()
 
 
 def _quad_rig():
@@ -166,65 +160,54 @@ def _type_a_matrix(out: dict) -> None:
 
 
 def compare(a: dict, b: dict) -> int:
-    assert a.keys() == b.keys()
     worst, where, bad, n = 0.0, None, 0, 0
     not_exact, total = collections.Counter(), collections.Counter()
-    for key in a:
-        x, y = a[key], b[key]
-        if isinstance(x, str) or isinstance(y, str):
-            if x != y:
-                print("DIFF", key, x, y)
+    unlike: list = []
+    for key, f, u, v in field_pairs(a, b, unlike):
+        if isinstance(u, dict):
+            if u != v:
+                print("DIFF", key, f, u, v)
                 bad += 1
             continue
-        if x.keys() != y.keys():
-            print("FIELDS", key, set(x) ^ set(y))
+        u, v = np.asarray(u), np.asarray(v)
+        total[f] += 1
+        if u.shape != v.shape or u.dtype != v.dtype:
+            print("SHAPE", key, f, u.shape, v.shape, u.dtype, v.dtype)
             bad += 1
             continue
-        for f in x:
-            u, v = x[f], y[f]
-            if isinstance(u, dict):
-                if u != v:
-                    print("DIFF", key, f, u, v)
-                    bad += 1
-                continue
-            u, v = np.asarray(u), np.asarray(v)
-            total[f] += 1
-            if u.shape != v.shape or u.dtype != v.dtype:
-                print("SHAPE", key, f, u.shape, v.shape, u.dtype, v.dtype)
+        n += u.size
+        if not np.array_equal(u, v, equal_nan=u.dtype.kind == "f"):
+            not_exact[f] += 1
+        if u.dtype.kind != "f":
+            if not np.array_equal(u, v):
+                print("DIFF", key, f)
                 bad += 1
-                continue
-            n += u.size
-            if not np.array_equal(u, v, equal_nan=u.dtype.kind == "f"):
-                not_exact[f] += 1
-            if u.dtype.kind != "f":
-                if not np.array_equal(u, v):
-                    print("DIFF", key, f)
-                    bad += 1
-                continue
-            if not np.array_equal(np.isnan(u), np.isnan(v)):
-                print("NAN", key, f)
+            continue
+        if not np.array_equal(np.isnan(u), np.isnan(v)):
+            print("NAN", key, f)
+            bad += 1
+            continue
+        fin = np.isfinite(u)
+        if not np.any(fin):
+            continue
+        diff = np.abs(u[fin] - v[fin])
+        if key[-1] == "pseudo" and f == "miss_m":
+            if diff.max() > 1e-13:
+                print("ABS", key, f, diff.max())
                 bad += 1
-                continue
-            fin = np.isfinite(u)
-            if not np.any(fin):
-                continue
-            diff = np.abs(u[fin] - v[fin])
-            if key[-1] == "pseudo" and f == "miss_m":
-                if diff.max() > 1e-13:
-                    print("ABS", key, f, diff.max())
-                    bad += 1
-                continue
-            ref = np.maximum(np.maximum(np.abs(u[fin]), np.abs(v[fin])), np.median(np.abs(u[fin])))
-            if "residual" in f:  # pixels: 0 in exact arithmetic on noise-free sessions, so
-                ref = np.maximum(ref, 1.0)  # relative to 1 px at least (rounding noise)
-            rel = float(np.max(diff / np.where(ref > 0, ref, 1.0)))
-            if rel > worst:
-                worst, where = rel, (key, f)
-            if rel > 1e-12:
-                at = int(np.argmax(diff / np.where(ref > 0, ref, 1.0)))
-                print("REL", key, f, rel, "at", int(np.flatnonzero(fin)[at]), u[fin][at],
-                      v[fin][at])
-                bad += 1
+            continue
+        ref = np.maximum(np.maximum(np.abs(u[fin]), np.abs(v[fin])), np.median(np.abs(u[fin])))
+        if "residual" in f:  # pixels: 0 in exact arithmetic on noise-free sessions, so
+            ref = np.maximum(ref, 1.0)  # relative to 1 px at least (rounding noise)
+        rel = float(np.max(diff / np.where(ref > 0, ref, 1.0)))
+        if rel > worst:
+            worst, where = rel, (key, f)
+        if rel > 1e-12:
+            at = int(np.argmax(diff / np.where(ref > 0, ref, 1.0)))
+            print("REL", key, f, rel, "at", int(np.flatnonzero(fin)[at]), u[fin][at],
+                  v[fin][at])
+            bad += 1
+    bad += len(unlike)
     print(f"compared {len(a)} outputs, {n:,} values: worst relative difference {worst:.2e}"
           f" ({where}); {bad} failing")
     print("not bit-identical (outputs):", {f: f"{not_exact[f]}/{total[f]}" for f in not_exact}
@@ -240,18 +223,7 @@ def main() -> int:
     if args.dump:
         dump(args.dump)
         return 0
-    with tempfile.TemporaryDirectory() as tmp:
-        archive = subprocess.run(["git", "-C", str(ROOT), "archive", args.ref, "pslog"],
-                                 check=True, capture_output=True).stdout
-        subprocess.run(["tar", "-x", "-C", tmp], input=archive, check=True)
-        old, new = os.path.join(tmp, "old.pkl"), os.path.join(tmp, "new.pkl")
-        script = str(Path(__file__).resolve())
-        env = dict(os.environ, PYTHONPATH=tmp)
-        subprocess.run([sys.executable, script, "--dump", old], env=env, check=True, cwd=tmp)
-        env = dict(os.environ, PYTHONPATH=str(ROOT))
-        subprocess.run([sys.executable, script, "--dump", new], env=env, check=True, cwd=tmp)
-        with open(old, "rb") as f_old, open(new, "rb") as f_new:
-            return compare(pickle.load(f_old), pickle.load(f_new))
+    return compare(*dumps(__file__, args.ref, []))
 
 
 if __name__ == "__main__":

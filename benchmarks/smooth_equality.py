@@ -32,19 +32,14 @@ from __future__ import annotations
 import argparse
 import os
 import pickle
-import subprocess
-import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-
-
-# the rigs of fusion_equality (this folder: the script runs itself under the compared
-# revision's pslog, beside this tree's benchmarks)
-from fusion_equality import _lab_rig, _quad_rig  # noqa: E402
+# the old-against-new runs and the rigs of fusion_equality (this folder: the script runs
+# itself under the compared revision's pslog, beside this tree's benchmarks)
+from _equality import ROOT, dumps, field_pairs
+from fusion_equality import _lab_rig, _quad_rig
 
 
 def _track(t) -> dict:
@@ -114,24 +109,10 @@ def dump(path: str, quick: bool, more: bool = False) -> None:
         pickle.dump(out, f)
 
 
-def _field_pairs(a: dict, b: dict, unlike: list):
-    """``(output, field, value in a, value in b)`` of every field two outputs of one name
-    both have; an output whose fields differ is printed and appended to ``unlike``."""
-    assert a.keys() == b.keys()
-    for key in a:
-        x, y = a[key], b[key]
-        if x.keys() != y.keys():
-            print("FIELDS", key, set(x) ^ set(y))
-            unlike.append(key)
-            continue
-        for f in x:
-            yield key, f, x[f], y[f]
-
-
 def compare(a: dict, b: dict) -> int:
     worst, where, bad, n = 0.0, None, 0, 0
     unlike: list = []
-    for key, f, u, v in _field_pairs(a, b, unlike):
+    for key, f, u, v in field_pairs(a, b, unlike):
         if isinstance(u, dict):
             if u != v:
                 print("DIFF", key, f, u, v)
@@ -185,7 +166,7 @@ def compare_rounding(a: dict, b: dict) -> int:
     worst: dict = {}
     bad = n = 0
     unlike: list = []
-    for key, f, u, v in _field_pairs(a, b, unlike):
+    for key, f, u, v in field_pairs(a, b, unlike):
         if isinstance(u, dict) or np.asarray(u).dtype.kind != "f":
             same = u == v if isinstance(u, dict) else np.array_equal(u, v)
             if not same:
@@ -238,22 +219,9 @@ def main() -> int:
     if args.dump:
         dump(args.dump, args.quick, args.more)
         return 0
-    with tempfile.TemporaryDirectory() as tmp:
-        archive = subprocess.run(["git", "-C", str(ROOT), "archive", args.ref, "pslog"],
-                                 check=True, capture_output=True).stdout
-        subprocess.run(["tar", "-x", "-C", tmp], input=archive, check=True)
-        old, new = os.path.join(tmp, "old.pkl"), os.path.join(tmp, "new.pkl")
-        script = str(Path(__file__).resolve())
-        extra = ["--quick"] * args.quick + ["--more"] * args.more
-        env = dict(os.environ, PYTHONPATH=tmp)
-        subprocess.run([sys.executable, script, "--dump", old, *extra], env=env, check=True,
-                       cwd=tmp)
-        env = dict(os.environ, PYTHONPATH=str(ROOT))
-        subprocess.run([sys.executable, script, "--dump", new, *extra], env=env, check=True,
-                       cwd=tmp)
-        with open(old, "rb") as f_old, open(new, "rb") as f_new:
-            old_out, new_out = pickle.load(f_old), pickle.load(f_new)
-        return (compare_rounding if args.rounding else compare)(old_out, new_out)
+    extra = ["--quick"] * args.quick + ["--more"] * args.more
+    old_out, new_out = dumps(__file__, args.ref, extra)
+    return (compare_rounding if args.rounding else compare)(old_out, new_out)
 
 
 if __name__ == "__main__":

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import socket
+
 import numpy as np
 
 from pslog.live.protocol import DetectionDatagram, detection_datagrams, encode_detections
@@ -43,3 +45,10 @@ def subset(det: Detections, keep: np.ndarray) -> Detections:
     return Detections(det.camera_names, det.frame_time_ns[rows], det.frame_camera[rows],
                       det.frame_index[rows], new_row[det.cand_frame[cand]], det.cand_uv[cand],
                       det.cand_radius[cand], det.cand_score[cand])
+
+
+def free_port() -> int:
+    """A TCP port of 127.0.0.1 free now (the system's pick)."""
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]

@@ -1,5 +1,5 @@
-"""Test rigs shared by the tests and ``benchmarks/bench_dirty.py`` (which puts this folder on
-its path, as for ``_rally``)."""
+"""Test rigs shared by the tests and the benchmarks (``bench_dirty.py``, ``fusion_equality.py``
+and ``smooth_equality.py`` put this folder on their path, as for ``_rally``)."""
 
 from __future__ import annotations
 
@@ -22,3 +22,18 @@ def ring_rig(n: int, name: str, f: float = 520.0, dist=(-0.12, 0.03, 5e-4, -4e-4
         cams.append(Camera(f"{name}-{i + 1}", 800, 600, K, np.array(dist), R, t, 30.0,
                            i / (n * 30.0)))
     return Rig(tuple(cams), name)
+
+
+def lab3_rig() -> Rig:
+    """bench_dirty's ``lab3``: three 800 x 600 cameras around the 3 x 2 m floor with a wide
+    lens, type A offsets of 0, 1/90 and 2/90 s."""
+    dist = np.array([-0.12, 0.03, 5e-4, -4e-4, 0.0])
+    cams = []
+    for i in range(3):
+        angle = 2 * np.pi * i / 3 - 1.2
+        eye = (1.5 + 3.4 * np.cos(angle), 1.0 + 3.0 * np.sin(angle), 2.4 + 0.3 * i)
+        R, t = look_at(eye, (1.5, 1.0, 0.6))
+        f = 520.0 + 20 * i
+        K = [[f, 0.0, 399.5], [0.0, f, 299.5], [0.0, 0.0, 1.0]]
+        cams.append(Camera(f"lab{i + 1}", 800, 600, K, dist, R, t, 30.0, i / 90.0))
+    return Rig(tuple(cams), "lab3")

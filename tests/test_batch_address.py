@@ -23,6 +23,7 @@ import time
 from pathlib import Path
 
 import pytest
+from _live import free_port
 
 from pslog.batch import read_summary_csv, summary_row
 from pslog.cli import main
@@ -37,12 +38,6 @@ def pslog(*argv) -> str:
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(io.StringIO()):
         assert main([str(a) for a in argv]) == 0
     return out.getvalue()
-
-
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
 
 
 @pytest.fixture(scope="module")

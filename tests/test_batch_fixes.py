@@ -8,8 +8,6 @@ Every batch here has one session, which runs in the test's process without a Ray
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 import os
 import shutil
@@ -19,23 +17,15 @@ import time
 from pathlib import Path
 
 import pytest
+from test_batch import pslog
 
 import pslog.batch as batch
 from pslog.batch import DONE_NAME, LOCK_NAME, Job, Settings, find_sessions, read_summary_csv
-from pslog.cli import main
 from tests.faults.promises import assert_one_line_error, run_pslog
 
 pytest.importorskip("ray")
 
 SAMPLE = Path(__file__).resolve().parents[1] / "samples" / "throw.mcap"
-
-
-def pslog(*argv) -> tuple[int, str, str]:
-    """``pslog ARGV`` in-process: (exit code, stdout, stderr)."""
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        code = main([str(a) for a in argv])
-    return code, out.getvalue(), err.getvalue()
 
 
 def session(path: Path) -> Path:

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 from _rally import rally
 from numpy.testing import assert_allclose, assert_array_equal
-from test_fusion import BASELINE, CX, CY, F_PX, LENS, K  # one rectified rig and lens
+from test_fusion import BASELINE, CX, CY, F_PX, K, observations  # one rectified rig
+from test_fusion import lens as distorted  # and lens
 
 from pslog import (
     NS,
@@ -48,17 +49,6 @@ def rectified_rig(offsets=(0.0, 0.0)) -> Rig:
     cam1 = Camera("right", 640, 480, K, np.zeros(5), np.eye(3), np.array([-BASELINE, 0, 0]),
                   30.0, offsets[1])
     return Rig((cam0, cam1), "rectified")
-
-
-def observations(rows) -> Observations:
-    """rows: (time in ms, camera, u, v)."""
-    rows = np.array(rows, dtype=np.float64)
-    return Observations.from_unsorted(np.round(rows[:, 0] * 1e6).astype(np.int64),
-                                      rows[:, 1].astype(np.int32), rows[:, 2:4])
-
-
-def distorted(rig: Rig) -> Rig:
-    return Rig(tuple(c.replace(dist=LENS) for c in rig.cameras), rig.name)
 
 
 def dirty_session(timing: str, seed: int, lens: bool = True):

@@ -485,22 +485,6 @@ def test_two_supports_whose_rays_do_not_meet_are_not_three_views():
     assert np.nanmax(err[during]) < 0.25, np.nanmax(err[during])
 
 
-def _lab_rig():
-    """benchmarks/bench_dirty.py's lab3: three 800 x 600 cameras with a wide lens."""
-    from pslog import Camera, Rig, look_at
-
-    dist = np.array([-0.12, 0.03, 5e-4, -4e-4, 0.0])
-    cams = []
-    for i in range(3):
-        angle = 2 * np.pi * i / 3 - 1.2
-        eye = (1.5 + 3.4 * np.cos(angle), 1.0 + 3.0 * np.sin(angle), 2.4 + 0.3 * i)
-        R, t = look_at(eye, (1.5, 1.0, 0.6))
-        f = 520.0 + 20 * i
-        K = [[f, 0.0, 399.5], [0.0, f, 299.5], [0.0, 0.0, 1.0]]
-        cams.append(Camera(f"lab{i + 1}", 800, 600, K, dist, R, t, 30.0, i / 90.0))
-    return Rig(tuple(cams), "lab3")
-
-
 def test_a_rejected_candidate_supports_no_later_choice():
     """bench_dirty's lab3 rally 1: lab2 sees a static object beside the ball, lab3 is blind
     from 2.1 s. lab2's frames were decided (ball chosen, the object rejected by the track
@@ -514,8 +498,9 @@ def test_a_rejected_candidate_supports_no_later_choice():
 
     sys.path.insert(0, str(Path(__file__).parent))
     from _rally import rally
+    from _rigs import lab3_rig
 
-    rig = _lab_rig()
+    rig = lab3_rig()  # benchmarks/bench_dirty.py's lab3
     motion = rally(8.0, seed=101, speed=4.0, kick_every_s=0.9)[0]
     options = SimulationOptions(noise_px=0.3, seed=1, spurious_rate=0.05,
                                 distractors=(("lab2", DISTRACTOR),),

@@ -9,8 +9,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from _rally import rally
+from _rigs import lab3_rig
 from numpy.testing import assert_array_equal
-from test_gating import DISTRACTOR, _lab_rig, _push_frames
+from test_gating import DISTRACTOR, _push_frames
 
 from pslog.evaluation import errors_m
 from pslog.fusion import fuse
@@ -45,7 +46,7 @@ def test_two_supports_whose_rays_miss_give_no_loose_allowance():
     then interpolated lab2 between the blob and the ball: a point 161 mm off at 1.156 s. Two
     supports that contradict each other are no evidence that the candidate is near every
     camera's line: no loose allowance."""
-    rig = _lab_rig()
+    rig = lab3_rig()
     det, truth, ball = _session(rig, 302, 2, "lab3", ("lab1", 2.2, 0.5))
     batch = gate(det, rig, causal=True)
     is_ball = ball_mask(det, ball)

@@ -30,18 +30,25 @@ from pslog.rig import apply_timing, builtin_rig
 from pslog.simulation import SimulationOptions, ball_mask, simulate_labelled
 
 
-def _fly_by():
-    """wide3 (116 degrees, strong barrel distortion), wide3-2 sees the static object and is
-    blind from 2.2 s; the ball passes the object at ~2.3 s (as in the --more session, whose
-    rally this is with a faster kick speed, cut short)."""
+def _wide3_rally(duration, rally_seed, speed, seed, distractor, blind):
+    """wide3 (116 degrees, strong barrel distortion): a rally cut at ``duration`` s, camera
+    ``distractor`` sees the static object, camera ``blind`` is blind from 2.2 s for 0.5 s,
+    spurious blobs in 5 % of frames; the rig, the detections and their ball mask."""
     rig = ring_rig(3, "wide3", f=330.0, dist=(-0.25, 0.05, 3e-4, -2e-4, 0.0), radius=2.4,
                    height=2.2)
-    motion = rally(2.45, seed=802, speed=6.0, kick_every_s=0.9)[0]
-    options = SimulationOptions(noise_px=0.3, seed=502, spurious_rate=0.05,
-                                distractors=(("wide3-2", DISTRACTOR),),
-                                blackouts=(("wide3-2", 2.2, 0.5),))
-    det, _truth, ball = simulate_labelled(rig, motion, 2.45, options)
+    motion = rally(duration, seed=rally_seed, speed=speed, kick_every_s=0.9)[0]
+    options = SimulationOptions(noise_px=0.3, seed=seed, spurious_rate=0.05,
+                                distractors=((distractor, DISTRACTOR),),
+                                blackouts=((blind, 2.2, 0.5),))
+    det, _truth, ball = simulate_labelled(rig, motion, duration, options)
     return rig, det, ball_mask(det, ball)
+
+
+def _fly_by():
+    """wide3-2 sees the static object and is blind from 2.2 s; the ball passes the object at
+    ~2.3 s (as in the --more session, whose rally this is with a faster kick speed, cut
+    short)."""
+    return _wide3_rally(2.45, 802, 6.0, 502, "wide3-2", "wide3-2")
 
 
 def _along_the_ray():
@@ -57,17 +64,10 @@ def _along_the_ray():
 
 
 def _over_the_object():
-    """wide3, wide3-1 sees the static object; at 5.133 s the ball it follows crosses the
-    object's pixel (8 px from it, 40 px from its previous detection): bench_dirty.py --more
+    """wide3-1 sees the static object; at 5.133 s the ball it follows crosses the object's
+    pixel (8 px from it, 40 px from its previous detection): bench_dirty.py --more
     --first-seed 400, rally 402, cut short."""
-    rig = ring_rig(3, "wide3", f=330.0, dist=(-0.25, 0.05, 3e-4, -2e-4, 0.0), radius=2.4,
-                   height=2.2)
-    motion = rally(5.2, seed=402, speed=4.0, kick_every_s=0.9)[0]
-    options = SimulationOptions(noise_px=0.3, seed=102, spurious_rate=0.05,
-                                distractors=(("wide3-1", DISTRACTOR),),
-                                blackouts=(("wide3-3", 2.2, 0.5),))
-    det, _truth, ball = simulate_labelled(rig, motion, 5.2, options)
-    return rig, det, ball_mask(det, ball)
+    return _wide3_rally(5.2, 402, 4.0, 102, "wide3-1", "wide3-3")
 
 
 def _same_in_the_stream(rig, det, g, forms=(False, True)) -> None:

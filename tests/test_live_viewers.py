@@ -14,18 +14,16 @@ import signal
 import socket
 import struct
 import subprocess
-import sys
 import threading
 import time
-import warnings
 from pathlib import Path
 
 import numpy as np
-import pyarrow as pa
 import pytest
 import rerun as rr
+from _live import free_port
+from _rrd import RERUN, batch_column, capture_times, rrd_chunks
 from mcap.reader import make_reader
-from rerun.chunk import RrdReader
 
 from pslog.errors import InputError
 from pslog.live.fuser import LivePoint
@@ -39,7 +37,6 @@ from pslog.simulation import SimulationOptions, simulate
 from viewers._columns import PIXEL_CENTER
 from viewers.live import FoxgloveSink, RerunLiveSink, std_m
 
-RERUN = Path(sys.executable).with_name("rerun")
 T0 = 1_790_000_000 * NS  # a wall-clock session clock, as the live camera processes stamp
 HANG_S = 60.0  # generous guard against a hang, never a timing assertion
 
@@ -78,41 +75,11 @@ def stream(rig):
     return datagrams, points
 
 
-def _free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
-
-
 # ---- rerun ---------------------------------------------------------------------------------
-def _chunks(rrd: Path) -> tuple[dict[str, list[pa.RecordBatch]], set[str]]:
-    """Temporal record batches by entity path, and the static entity paths."""
-    temporal: dict[str, list[pa.RecordBatch]] = {}
-    static: set[str] = set()
-    with warnings.catch_warnings():  # a file the killed client left has no footer
-        warnings.simplefilter("ignore")
-        stream = list(RrdReader(rrd).stream())
-    for chunk in stream:
-        if chunk.is_static:
-            static.add(chunk.entity_path)
-        else:
-            temporal.setdefault(chunk.entity_path, []).append(chunk.to_record_batch())
-    return temporal, static
-
-
-def _column(batches: list[pa.RecordBatch], name: str) -> list:
-    return [v for b in batches for v in b.column(name).to_pylist()]
-
-
-def _times(batches: list[pa.RecordBatch]) -> np.ndarray:
-    return np.concatenate([b.column("capture_time").cast(pa.int64()).to_numpy()
-                           for b in batches])
-
-
 def _rows(rrd: Path, entity: str) -> int:
     """Rows of ``entity`` in an .rrd that may still be being written (0 if unreadable yet)."""
     try:
-        temporal, _ = _chunks(rrd)
+        temporal, _ = rrd_chunks(rrd, unfinished=True)
     except Exception:  # the client is still writing the first bytes
         return 0
     return sum(b.num_rows for b in temporal.get(entity, []))
@@ -122,7 +89,7 @@ def _rows(rrd: Path, entity: str) -> int:
 def _rerun_client(uri: str, out: Path):
     """A real rerun client: ``rerun URI --save OUT`` reads the served stream into a file. It
     gets its own process group (``rerun`` is a wrapper that starts the binary), ended whole."""
-    client = subprocess.Popen([str(RERUN), uri, "--save", str(out), "--port", str(_free_port())],
+    client = subprocess.Popen([str(RERUN), uri, "--save", str(out), "--port", str(free_port())],
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                               start_new_session=True)
     try:
@@ -134,36 +101,36 @@ def _rerun_client(uri: str, out: Path):
 
 
 def _check_rerun_content(rrd: Path, rig, datagrams, points) -> None:
-    temporal, static = _chunks(rrd)
+    temporal, static = rrd_chunks(rrd, unfinished=True)
     for cam in rig.names:
         assert {f"/world/cameras/{cam}", f"/world/cameras/{cam}/image"} <= static
     base = "/world/tracks/filter"
     # every point where it was emitted, at its capture time on the session clock
     track = temporal[base]
-    np.testing.assert_array_equal(_times(track), [p.t_capture_ns for p in points])
-    np.testing.assert_allclose(np.array([v[0] for v in _column(track, "Points3D:positions")]),
+    np.testing.assert_array_equal(capture_times(track), [p.t_capture_ns for p in points])
+    np.testing.assert_allclose(np.array([v[0] for v in batch_column(track, "Points3D:positions")]),
                                np.array([p.position_world for p in points]), atol=1e-6)
     # its uncertainty: a sphere of radius 2σ (σ = sqrt of the covariance's trace)
-    radii = [v[0] for v in _column(temporal[f"{base}/uncertainty"], "Points3D:radii")]
+    radii = [v[0] for v in batch_column(temporal[f"{base}/uncertainty"], "Points3D:radii")]
     np.testing.assert_allclose(radii, [2 * std_m(p.cov_world) for p in points], rtol=1e-6)
     assert sum(b.num_rows for b in temporal[f"{base}/trail"]) == len(points) - 1
-    predicted = _column(temporal[f"{base}/predicted"], "Points3D:positions")
+    predicted = batch_column(temporal[f"{base}/predicted"], "Points3D:positions")
     np.testing.assert_allclose(np.array([v[0] for v in predicted]),
                                np.array([p.predicted_position for p in points]), atol=1e-6)
     assert sum(b.num_rows for b in temporal[f"{base}/predicted/velocity"]) == len(points)
-    latency = _column(temporal["/plots/latency_ms/filter"], "Scalars:scalars")
+    latency = batch_column(temporal["/plots/latency_ms/filter"], "Scalars:scalars")
     np.testing.assert_allclose([v[0] for v in latency], [0.1] * len(points))
     # each camera's detections on its image plane (rerun pixel centres), every frame logged
     # (an empty one clears the last), and one ray per candidate
     for cam in rig.names:
         mine = [d for d in datagrams if d.camera == cam]
         image = temporal[f"/world/cameras/{cam}/image/detections"]
-        np.testing.assert_array_equal(_times(image), [d.t_capture_ns for d in mine])
-        shown = _column(image, "Points2D:positions")
+        np.testing.assert_array_equal(capture_times(image), [d.t_capture_ns for d in mine])
+        shown = batch_column(image, "Points2D:positions")
         for d, uv in zip(mine, shown, strict=True):
             np.testing.assert_allclose(np.array(uv or np.zeros((0, 2))).reshape(-1, 2),
                                        d.uv + PIXEL_CENTER, atol=1e-3)
-        rays = _column(temporal[f"/world/rays/{cam}"], "LineStrips3D:strips")
+        rays = batch_column(temporal[f"/world/rays/{cam}"], "LineStrips3D:strips")
         assert [len(r or []) for r in rays] == [len(d) for d in mine]
         assert f"/plots/detection_rate/{cam}" in temporal
 
@@ -176,7 +143,7 @@ def test_rerun_serve_streams_points_and_detections_to_a_client(rig, stream, tmp_
     monkeypatch.delenv("DISPLAY", raising=False)  # no browser opens
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
     datagrams, points = stream
-    sink = RerunLiveSink("serve", rig, web_port=_free_port(), grpc_port=_free_port())
+    sink = RerunLiveSink("serve", rig, web_port=free_port(), grpc_port=free_port())
     assert sink.address.startswith("http://localhost:")
     out = tmp_path / "client.rrd"
     try:
@@ -208,7 +175,7 @@ def test_rerun_connect_sends_to_a_running_viewer(rig, stream, tmp_path):
     """``connect``: the stream goes to a rerun gRPC server already running (here one that saves
     what it receives); closing the sink delivers everything logged."""
     datagrams, points = stream
-    port = _free_port()
+    port = free_port()
     out = tmp_path / "viewer.rrd"
     viewer = subprocess.Popen([str(RERUN), "--bind", "127.0.0.1", "--port", str(port),
                                "--save", str(out)], stdout=subprocess.DEVNULL,
@@ -234,7 +201,7 @@ def test_rerun_connect_sends_to_a_running_viewer(rig, stream, tmp_path):
         with contextlib.suppress(ProcessLookupError):
             os.killpg(viewer.pid, signal.SIGKILL)
         viewer.wait()
-    temporal, static = _chunks(out)
+    temporal, static = rrd_chunks(out, unfinished=True)
     assert {f"/world/cameras/{c}/image" for c in rig.names} <= static
     assert sum(b.num_rows for b in temporal["/world/cameras/cam3/image/detections"]) == len(
         [d for d in datagrams if d.camera == "cam3"])
@@ -253,7 +220,7 @@ def test_rerun_serve_refuses_a_port_in_use(rig):
         busy.listen()
         port = busy.getsockname()[1]
         with pytest.raises(InputError) as info:
-            RerunLiveSink("serve", rig, web_port=_free_port(), grpc_port=port)
+            RerunLiveSink("serve", rig, web_port=free_port(), grpc_port=port)
     message = str(info.value)
     assert f"port {port} is in use" in message and "\n" not in message
 
@@ -297,8 +264,8 @@ def test_a_stalled_viewer_drops_and_counts_but_never_blocks(rig, stream, tmp_pat
     sink.close()
     rec.disconnect()
     assert sink.counters()["points"] == 4
-    temporal, _ = _chunks(path)
-    np.testing.assert_array_equal(_times(temporal["/world/tracks/filter"]),
+    temporal, _ = rrd_chunks(path, unfinished=True)
+    np.testing.assert_array_equal(capture_times(temporal["/world/tracks/filter"]),
                                   [p.t_capture_ns for p in points[:4]])
 
 
@@ -537,8 +504,8 @@ def test_a_live_run_shows_in_foxglove_and_rerun_as_it_is_recorded(tmp_path):
         topic = f"/camera/{cam}/detections"
         assert got[topic] == recorded[topic] and len(got[topic]) == sum(
             d.camera == cam for d in sent)
-    temporal, _ = _chunks(rrd)
-    shown = _times(temporal["/world/tracks/filter"])
+    temporal, _ = rrd_chunks(rrd, unfinished=True)
+    shown = capture_times(temporal["/world/tracks/filter"])
     stored = [t for t, _ in recorded["/tracks/filter"]]
     np.testing.assert_array_equal(shown, stored)  # session times, every point
     assert sinks[2].counters()["dropped_points"] == 0

@@ -46,10 +46,11 @@ def _same_detections(a, b) -> None:
         np.testing.assert_array_equal(x, y, err_msg=k)
 
 
-def _rewrite(src: Path, dst: Path, tables=None) -> None:
+def _rewrite(src: Path, dst: Path, tables=None, extra=None) -> None:
     """Copy a session with the mcap package (another tool), its pslog tables replaced by
     ``tables`` (name -> attachment data; None: the originals; {}: none, as an older pslog
-    wrote it)."""
+    wrote it); ``extra``: (topic, [(log_time, data)]) written on a second channel of that
+    topic."""
     from mcap.reader import make_reader
     from mcap.writer import CompressionType, Writer
 
@@ -69,6 +70,13 @@ def _rewrite(src: Path, dst: Path, tables=None) -> None:
                     for cid, c in summary.channels.items()}
         for _s, c, m in messages:
             w.add_message(channels[c.id], m.log_time, m.data, m.publish_time, m.sequence)
+        if extra is not None:
+            topic, added = extra
+            c = next(c for c in summary.channels.values() if c.topic == topic)
+            second = w.register_channel(topic, c.message_encoding, schemas[c.schema_id],
+                                        {"added_by": "another tool"})
+            for seq, (t, data) in enumerate(added):
+                w.add_message(second, t, data, t, seq)
         for m in metadata:
             w.add_metadata(m.name, m.metadata)
         for name, data in (attachments if tables is None else tables).items():

@@ -8,49 +8,12 @@ import json
 from pathlib import Path
 
 import numpy as np
+from test_log_table import DET_COLUMNS
+from test_log_table import _rewrite as _copy
 
 from pslog.log import read_session
 
 DETECTIONS = "pslog/table/detections"
-DET_COLUMNS = ("frame_time_ns", "frame_camera", "frame_index", "cand_frame", "cand_uv",
-               "cand_radius", "cand_score")
-
-
-def _copy(src: Path, dst: Path, tables=None, extra=None) -> None:
-    """Copy a session with the mcap package (another tool): its tables replaced by
-    ``tables`` (None: the originals); ``extra``: (topic, [(log_time, data)]) written on a
-    second channel of that topic."""
-    from mcap.reader import make_reader
-    from mcap.writer import CompressionType, Writer
-
-    with open(src, "rb") as f:
-        reader = make_reader(f)
-        summary = reader.get_summary()
-        metadata = list(reader.iter_metadata())
-        attachments = {a.name: a.data for a in reader.iter_attachments()}
-        messages = list(reader.iter_messages(log_time_order=False))
-    with open(dst, "wb") as out:
-        w = Writer(out, compression=CompressionType.ZSTD)
-        w.start()
-        schemas = {sid: w.register_schema(s.name, s.encoding, s.data)
-                   for sid, s in summary.schemas.items()}
-        channels = {cid: w.register_channel(c.topic, c.message_encoding,
-                                            schemas.get(c.schema_id, 0), c.metadata)
-                    for cid, c in summary.channels.items()}
-        for _s, c, m in messages:
-            w.add_message(channels[c.id], m.log_time, m.data, m.publish_time, m.sequence)
-        if extra is not None:
-            topic, added = extra
-            c = next(c for c in summary.channels.values() if c.topic == topic)
-            second = w.register_channel(topic, c.message_encoding, schemas[c.schema_id],
-                                        {"added_by": "another tool"})
-            for seq, (t, data) in enumerate(added):
-                w.add_message(second, t, data, t, seq)
-        for m in metadata:
-            w.add_metadata(m.name, m.metadata)
-        for name, data in (attachments if tables is None else tables).items():
-            w.add_attachment(0, 0, name, "application/vnd.pslog.table", data)
-        w.finish()
 
 
 def _table(path: Path, name: str) -> bytes:

@@ -19,7 +19,7 @@ from recorders import redetect_session
 SAMPLE = Path(__file__).resolve().parents[1] / "samples" / "throw.mcap"
 
 
-def _without_created(path: Path) -> bytes:
+def without_created(path: Path) -> bytes:
     """The file's bytes with its ``created_utc`` metadata value blanked (the only field that
     differs between two runs)."""
     data = bytearray(path.read_bytes())
@@ -77,7 +77,7 @@ def test_redetect_with_workers_copies_image_chunks_undecompressed_and_the_same(
     # chunk when it also registers the image channels: written anew either way), now without
     # being decompressed here (small chunks of other messages may still be, the usual way)
     assert new == (image_chunks("raw"), 0) and new[0] >= 4
-    assert _without_created(tmp_path / "new.mcap") == _without_created(tmp_path / "old.mcap")
+    assert without_created(tmp_path / "new.mcap") == without_created(tmp_path / "old.mcap")
 
 
 def test_a_layout_the_indexes_do_not_state_sends_the_chunk_the_usual_way(tmp_path, monkeypatch):
@@ -103,9 +103,9 @@ def test_a_layout_the_indexes_do_not_state_sends_the_chunk_the_usual_way(tmp_pat
     taken.clear()
     copy_session(SAMPLE, tmp_path / "wrong.mcap", checked_chunks=checked, layouts=wrong.get)
     assert taken and not any(taken)  # each of them decompressed after all
-    plain = _without_created(tmp_path / "plain.mcap")
-    assert _without_created(tmp_path / "fast.mcap") == plain
-    assert _without_created(tmp_path / "wrong.mcap") == plain
+    plain = without_created(tmp_path / "plain.mcap")
+    assert without_created(tmp_path / "fast.mcap") == plain
+    assert without_created(tmp_path / "wrong.mcap") == plain
     assert read_session(tmp_path / "fast.mcap").n_images == 135
 
 

@@ -8,6 +8,7 @@ import subprocess
 import sys
 
 from mcap.reader import make_reader
+from test_redetect_raw import without_created as _without_created
 
 
 def _contents(path):
@@ -44,12 +45,3 @@ def test_two_fuse_runs_write_equal_messages_and_tables(tmp_path):
     # the bytes too (review of session 12: a timed flush cut the chunks where the clock said,
     # and fuse now waits for its methods with the output open)
     assert files[0] == files[1]
-
-
-def _without_created(path) -> bytes:
-    """The file's bytes with the session's creation time blanked."""
-    data = bytearray(path.read_bytes())
-    at = data.index(b"created_utc") + len(b"created_utc")
-    size = int.from_bytes(data[at:at + 4], "little")
-    data[at + 4:at + 4 + size] = bytes(size)
-    return bytes(data)

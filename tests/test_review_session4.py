@@ -130,25 +130,22 @@ def test_turn_prediction_is_the_closed_form_circle_and_its_jacobian_the_derivati
             math.cos(a) * x[3] - math.sin(a) * x[4], math.sin(a) * x[3] + math.cos(a) * x[4],
             x[5], w]
     assert np.allclose(xn, want, rtol=0, atol=1e-12)
-    F = np.zeros((7, 7))
-    for j in range(7):
-        h = 1e-6
-        up, dn = list(x), list(x)
-        up[j] += h
-        dn[j] -= h
-        F[:, j] = (np.array(f._turn_predicted(up, P, dt)[0])
-                   - np.array(f._turn_predicted(dn, P, dt)[0])) / (2 * h)
+
+    def jacobian(x, h):  # ∂f/∂x by central differences of the predicted mean
+        F = np.zeros((7, 7))
+        for j in range(7):
+            up, dn = list(x), list(x)
+            up[j] += h
+            dn[j] -= h
+            F[:, j] = (np.array(f._turn_predicted(up, P, dt)[0])
+                       - np.array(f._turn_predicted(dn, P, dt)[0])) / (2 * h)
+        return F
+
+    F = jacobian(x, 1e-6)
     assert np.allclose(np.array(Pn).reshape(7, 7), F @ F.T, atol=1e-6)
     # near ω = 0 (the series branch) too
     x0 = [*x[:6], 1e-5]
-    F0 = np.zeros((7, 7))
-    for j in range(7):
-        h = 1e-7
-        up, dn = list(x0), list(x0)
-        up[j] += h
-        dn[j] -= h
-        F0[:, j] = (np.array(f._turn_predicted(up, P, dt)[0])
-                    - np.array(f._turn_predicted(dn, P, dt)[0])) / (2 * h)
+    F0 = jacobian(x0, 1e-7)
     assert np.allclose(np.array(f._turn_predicted(x0, P, dt)[1]).reshape(7, 7), F0 @ F0.T,
                        atol=1e-5)
 

@@ -82,6 +82,21 @@ def test_nearest_kernels_python_originals_equal(monkeypatch):
     _same(python, got)
 
 
+def test_each_slot_holds_a_detection_of_its_own_camera():
+    """slot_motion's kernel takes a slot's previous detections from its own camera's chain
+    (``before[row]``, ``before[before[row]]``): nearest_rows puts a detection of camera c,
+    and no other, in slot c (both forms, a dirty session)."""
+    from pslog.fusion.stereo import nearest_rows
+
+    prep, rig = _session(LENS)
+    for compiled in (True, False):
+        rows, _ = nearest_rows(prep, int(default_max_gap_s(rig) * 1e9), compiled)
+        slot = np.broadcast_to(np.arange(rows.shape[1]), rows.shape)
+        have = rows >= 0
+        assert np.count_nonzero(have) > 2 * len(rows)
+        assert np.array_equal(prep.obs.camera[rows[have]], slot[have])
+
+
 def test_nearest_rows_and_motion_by_hand():
     """Three cameras 10 ms apart (30 ms periods), camera 1's second detection missed: each
     point's rows are the latest detection of every other camera within the gap, and a

@@ -79,14 +79,19 @@ def test_pushes_of_several_detections_equal_batch():
     assert_same(parts, batch)
 
 
+def _behind_then_in_front(n: int) -> list[tuple]:
+    """``n`` rows (ms, camera, u, v) of a static ball seen by rectified_rig's two cameras in
+    turn: at a negative disparity for the first 10, a positive one after."""
+    return [(10 * i, i % 2, 320.0 if i % 2 == 0 else (380.0 if i < 10 else 260.0), 240.0)
+            for i in range(n)]
+
+
 def test_refused_past_points_are_counted_once_each_as_in_batch():
     # a static ball first at a negative disparity (every pseudo-stereo pair crosses behind
     # both cameras: refused, each detection once, though several points reach it), then at
     # a positive one (points)
     rig = rectified_rig(offsets=(0.0, 1 / 60))
-    rows = [(10 * i, i % 2, 320.0 if i % 2 == 0 else (380.0 if i < 10 else 260.0), 240.0)
-            for i in range(20)]
-    obs = observations(rows)
+    obs = observations(_behind_then_in_front(20))
     batch = fuse(obs, rig, "typeA")
     assert batch.dropped.get("past_behind_camera", 0) >= 4 and len(batch) > 3, batch.dropped
     fuser = StreamFuser(rig, "typeA")
@@ -152,8 +157,7 @@ def test_far_and_refused_rows_one_per_push_equal_batch_without_a_lens():
     a push, are the batch's: points, quality and dropped counts."""
     rig = rectified_rig(offsets=(0.0, 1 / 60))
     assert not any(np.any(c.dist) for c in rig.cameras)
-    rows = [(10 * i, i % 2, 320.0 if i % 2 == 0 else (380.0 if i < 10 else 260.0), 240.0)
-            for i in range(30)]
+    rows = _behind_then_in_front(30)
     rows[14] = (140, 0, 1e300, 240.0)
     rows[21] = (210, 1, -7e3, 240.0)
     obs = observations(rows)

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-import pyarrow as pa
 import pytest
+from _rrd import RERUN, batch_column, capture_times, temporal_chunks
 from rerun.chunk import RrdReader
 
 from pslog.cli import main as pslog_main
@@ -29,7 +29,6 @@ from pslog.simulation import SimulationOptions, simulate
 from viewers import FramesChoice, build_recording, load_view_data, save_rrd
 from viewers._columns import PIXEL_CENTER, line_polylines
 
-RERUN = Path(sys.executable).with_name("rerun")
 DURATION_S = 1.0
 
 
@@ -67,24 +66,6 @@ def session(tmp_path_factory) -> Path:
     return path
 
 
-def _chunks(rrd: Path) -> dict[str, list[pa.RecordBatch]]:
-    """Temporal chunks' record batches by entity path."""
-    out: dict[str, list[pa.RecordBatch]] = {}
-    for chunk in RrdReader(rrd).stream():
-        if not chunk.is_static:
-            out.setdefault(chunk.entity_path, []).append(chunk.to_record_batch())
-    return out
-
-
-def _column(batches: list[pa.RecordBatch], name: str) -> list:
-    return [v for b in batches for v in b.column(name).to_pylist()]
-
-
-def _times(batches: list[pa.RecordBatch]) -> np.ndarray:
-    return np.concatenate([b.column("capture_time").cast(pa.int64()).to_numpy()
-                           for b in batches])
-
-
 def _verify(rrd: Path) -> None:
     result = subprocess.run([str(RERUN), "rrd", "verify", str(rrd)], capture_output=True,
                             text=True, timeout=120)
@@ -102,7 +83,7 @@ def test_rrd_verifies_and_holds_every_entity(session, rrd):
     path, counts = rrd
     _verify(path)
     s = read_session(session)
-    chunks = _chunks(path)
+    chunks = temporal_chunks(path)
     names = s.rig.names
     expected = {"/world/tracks/typeA", "/world/tracks/typeA/trail", "/world/truth",
                 "/world/truth/trail", "/world/typeA/past", "/world/typeA/predicted",
@@ -122,7 +103,7 @@ def test_rrd_verifies_and_holds_every_entity(session, rrd):
     # each point's uncertainty: a sphere of radius 2 std_m
     sigma = chunks["/world/tracks/typeA/uncertainty"]
     track = fuse_all(s.detections, s.rig, ["typeA"])["typeA"]
-    at = {int(t): r for t, r in zip(_times(sigma), _column(sigma, "Points3D:radii"),
+    at = {int(t): r for t, r in zip(capture_times(sigma), batch_column(sigma, "Points3D:radii"),
                                     strict=True)}
     expected_radii = np.minimum(2 * track.quality["std_m"], 1.0)
     shown = [i for i, t in enumerate(track.time_ns.tolist()) if t in at]
@@ -141,9 +122,9 @@ def test_rrd_verifies_and_holds_every_entity(session, rrd):
         # every frame has a detections row (empty when nothing was detected) and an image
         assert sum(b.num_rows for b in chunks[f"{image}/detections"]) == frames.sum()
         assert sum(b.num_rows for b in chunks[image]) == frames.sum()
-        points = _column(chunks[f"{image}/detections"], "Points2D:positions")
+        points = batch_column(chunks[f"{image}/detections"], "Points2D:positions")
         assert sum(len(p) for p in points) == np.sum(obs.camera == i)
-        rejected = _column(chunks[f"{image}/rejected"], "Points2D:positions")
+        rejected = batch_column(chunks[f"{image}/rejected"], "Points2D:positions")
         assert sum(len(p) for p in rejected) == np.sum(
             (det.candidates_per_frame() > 1) & frames)
         assert sum(b.num_rows for b in chunks[f"/world/rays/{c}"]) == np.sum(obs.camera == i)
@@ -152,7 +133,7 @@ def test_rrd_verifies_and_holds_every_entity(session, rrd):
     assert counts["images"] == s.n_images == det.n_frames
 
     # timeline range: first to last frame, on the session clock
-    all_times = np.concatenate([_times(b) for b in chunks.values()])
+    all_times = np.concatenate([capture_times(b) for b in chunks.values()])
     assert all_times.min() == det.frame_time_ns.min()
     assert all_times.max() == det.frame_time_ns.max()
     frame_col = np.concatenate([b.column("frame").to_numpy() for b in chunks["/world/rays/cam1"]])
@@ -160,24 +141,24 @@ def test_rrd_verifies_and_holds_every_entity(session, rrd):
 
 
 def test_images_are_passed_through_unchanged(session, rrd):
-    chunks = _chunks(rrd[0])
+    chunks = temporal_chunks(rrd[0])
     image = chunks["/world/cameras/cam3/image"]
-    blobs = _column(image, "EncodedImage:blob")
+    blobs = batch_column(image, "EncodedImage:blob")
     frames = np.concatenate([b.column("frame").to_numpy() for b in image])
     assert bytes(blobs[0][0]) == _jpeg(2, int(frames[0]))
-    assert _column(image, "EncodedImage:media_type")[0] == ["image/jpeg"]
+    assert batch_column(image, "EncodedImage:media_type")[0] == ["image/jpeg"]
 
 
 def test_rays_end_at_the_type_a_points(session, rrd):
     s = read_session(session)
     track = fuse_all(s.detections, s.rig, ["typeA"])["typeA"]
-    chunks = _chunks(rrd[0])
+    chunks = temporal_chunks(rrd[0])
     cam = s.rig.cameras[0]
     rays = chunks["/world/rays/cam1"]
-    strips = np.array([s[0] for s in _column(rays, "LineStrips3D:strips")])  # (n, 2, 3)
+    strips = np.array([s[0] for s in batch_column(rays, "LineStrips3D:strips")])  # (n, 2, 3)
     np.testing.assert_allclose(strips[:, 0], np.broadcast_to(cam.center_world, (len(strips), 3)),
                                atol=1e-5)
-    times = _times(rays)
+    times = capture_times(rays)
     mine = track.camera == 0
     at = np.searchsorted(times, track.time_ns[mine])
     np.testing.assert_allclose(strips[at, 1], track.position_world[mine], atol=1e-5)
@@ -193,11 +174,11 @@ def _distance_to_polyline(point: np.ndarray, strip: np.ndarray) -> float:
 def test_figure2_snapped_points_lie_on_the_drawn_epipolar_lines(session, rrd):
     s = read_session(session)
     construction = explain_type_a(s.detections, s.rig)
-    chunks = _chunks(rrd[0])
+    chunks = temporal_chunks(rrd[0])
     base = "/world/cameras/cam2/image/typeA"  # the distorting camera
-    snapped = _column(chunks[f"{base}/snapped"], "Points2D:positions")
-    lines = _column(chunks[f"{base}/epipolar"], "LineStrips2D:strips")
-    interpolated = _column(chunks[f"{base}/interpolated"], "Points2D:positions")
+    snapped = batch_column(chunks[f"{base}/snapped"], "Points2D:positions")
+    lines = batch_column(chunks[f"{base}/epipolar"], "LineStrips2D:strips")
+    interpolated = batch_column(chunks[f"{base}/interpolated"], "Points2D:positions")
     assert len(snapped) == len(construction.event_row)
     checked = 0
     for points, strips in zip(snapped, lines, strict=True):
@@ -233,8 +214,8 @@ def test_window_frames_and_buffered_recording(session, tmp_path):
     rec.flush()
     rec.disconnect()
     _verify(out)
-    chunks = _chunks(out)
-    times = np.concatenate([_times(b) for b in chunks.values()])
+    chunks = temporal_chunks(out)
+    times = np.concatenate([capture_times(b) for b in chunks.values()])
     assert times.min() >= first + 0.25 * NS and times.max() < first + 0.75 * NS
     images = chunks["/world/cameras/cam1/image"]
     frames = np.concatenate([b.column("frame").to_numpy() for b in images])
@@ -303,7 +284,7 @@ def test_cli_save(session, tmp_path, capsys):
     text = capsys.readouterr().out
     assert "fused on the fly: typeA, nearest" in text and f"wrote {out}" in text
     _verify(out)
-    chunks = _chunks(out)
+    chunks = temporal_chunks(out)
     assert "/world/tracks/nearest" in chunks and "/world/cameras/cam1/image" not in chunks
     assert "/plots/ray_miss_mm/nearest" in chunks and "/plots/ray_miss_mm/typeA" in chunks
     assert pslog_main(["view", str(session), "--save", str(out)]) == 1
@@ -528,11 +509,11 @@ def test_smooth_and_the_camera_clocks_after_sync(tmp_path, capsys):
     assert pslog_main(["view", str(synced), str(fused), "--save", str(stored)]) == 0
     for rrd in (on_the_fly, stored):
         _verify(rrd)
-        chunks = _chunks(rrd)
+        chunks = temporal_chunks(rrd)
         assert "/world/tracks/smooth" in chunks and "/plots/error_mm/smooth" in chunks
         assert sum(b.num_rows for b in chunks["/world/tracks/smooth"]) == len(track)
         # smooth's own quality: each point's position std and reprojection residual
-        std_mm = np.concatenate([np.array(_column(chunks["/plots/std_mm/smooth"],
+        std_mm = np.concatenate([np.array(batch_column(chunks["/plots/std_mm/smooth"],
                                                   "Scalars:scalars")).ravel()])
         np.testing.assert_allclose(np.sort(std_mm), np.sort(1e3 * track.quality["std_m"]))
         assert sum(b.num_rows for b in chunks["/plots/residual_px/smooth"]) == len(track)
@@ -572,11 +553,11 @@ def long_session(tmp_path_factory) -> Path:
 def _series(chunks, entity: str, column: str | None = None):
     """(times int64 ns, values) of a temporal entity, sorted by time."""
     batches = chunks[entity]
-    t = _times(batches)
+    t = capture_times(batches)
     if column is None:
         order = np.argsort(t, kind="stable")
         return t[order], None
-    v = np.array([x[0] if isinstance(x, list) else x for x in _column(batches, column)])
+    v = np.array([x[0] if isinstance(x, list) else x for x in batch_column(batches, column)])
     order = np.argsort(t, kind="stable")
     return t[order], v[order]
 
@@ -609,7 +590,7 @@ def test_detail_range_keeps_every_frame_and_thins_beyond(long_session, tmp_path)
     counts_full = save_rrd([long_session], full, detail="all")
     counts_thin = save_rrd([long_session], thin, detail=DetailChoice.parse("3", every=5))
     _verify(thin)
-    a, b = _chunks(full), _chunks(thin)
+    a, b = temporal_chunks(full), temporal_chunks(thin)
     period = round(NS / 30.0)
     bucket = 5 * period
     detail_end = first + 3 * NS
@@ -653,7 +634,7 @@ def test_cli_detail_range_and_bad_values(long_session, tmp_path, capsys):
     out = tmp_path / "range.rrd"
     assert pslog_main(["view", str(long_session), "--detail", "4:6", "--thin-every", "20",
                        "--save", str(out)]) == 0
-    t, _ = _series(_chunks(out), "/world/rays/cam3")
+    t, _ = _series(temporal_chunks(out), "/world/rays/cam3")
     inside = (t >= first + 4 * NS) & (t < first + 6 * NS)
     assert inside.sum() == 60  # every frame of cam3 in those 2 s at 30 fps
     bucket, period = 20 * round(NS / 30.0), round(NS / 30.0)
@@ -662,7 +643,7 @@ def test_cli_detail_range_and_bad_values(long_session, tmp_path, capsys):
     out_all = tmp_path / "all.rrd"
     assert pslog_main(["view", str(long_session), "--detail", "all", "--thin-every", "20",
                        "--save", str(out_all)]) == 0
-    assert len(_series(_chunks(out_all), "/world/rays/cam3")[0]) == 360
+    assert len(_series(temporal_chunks(out_all), "/world/rays/cam3")[0]) == 360
     capsys.readouterr()
     for bad in (["--detail", "5:2"], ["--detail", "soon"], ["--detail", "-1"],
                 ["--thin-every", "0"]):

@@ -89,6 +89,33 @@ def ray(ki, rr, c, u, v):
     return o0 / norm, o1 / norm, o2 / norm
 
 
+@kernel(inline=True)
+def _jacobian_column(rtki, c, j, size, d0, d1, d2):
+    """Column ``j`` (pixel axis u or v) of :func:`direction_jacobian` (3 floats)."""
+    m0 = rtki[c, j] / size
+    m1 = rtki[c, 3 + j] / size
+    m2 = rtki[c, 6 + j] / size
+    dm = d0 * m0
+    dm += d1 * m1
+    dm += d2 * m2
+    return m0 - d0 * dm, m1 - d1 * dm, m2 - d2 * dm
+
+
+@kernel(inline=True)
+def direction_jacobian(rtki, c, u, v):
+    """d(unit world direction) / d(undistorted pixel) at pixel (u, v) of camera c:
+    ``(I - d dᵀ) Rᵀ K⁻¹[:, :2] / |r|`` with ``r = Rᵀ K⁻¹ (u, v, 1)``, ``d = r / |r|``
+    (``rtki`` (m, 9) ``Rᵀ K⁻¹`` row-major), as :func:`~pslog.fusion._prepare.
+    direction_jacobian` forms it, operation for operation. Six floats: the u column's
+    three components, then the v column's."""
+    r0, r1, r2 = homogeneous(rtki, c, u, v)
+    size = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+    d0, d1, d2 = r0 / size, r1 / size, r2 / size
+    a0, a1, a2 = _jacobian_column(rtki, c, 0, size, d0, d1, d2)
+    b0, b1, b2 = _jacobian_column(rtki, c, 1, size, d0, d1, d2)
+    return a0, a1, a2, b0, b1, b2
+
+
 @kernel
 def observed_rays_and_jacobians(camera, uv, ki, rr, rtki, rays, jac):
     """Each detection's ray at its own undistorted pixel and that ray's direction Jacobian,
@@ -109,20 +136,8 @@ def observed_rays_and_jacobians(camera, uv, ki, rr, rtki, rays, jac):
         c = camera[i]
         u, v = uv[i, 0], uv[i, 1]
         rays[i, 0], rays[i, 1], rays[i, 2] = ray(ki, rr, c, u, v)  # rays_t
-        # direction_jacobian: r = M (u, v, 1), M = Rᵀ K⁻¹
-        r0, r1, r2 = homogeneous(rtki, c, u, v)
-        size = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
-        d0, d1, d2 = r0 / size, r1 / size, r2 / size
-        for j in range(2):
-            m0 = rtki[c, j] / size
-            m1 = rtki[c, 3 + j] / size
-            m2 = rtki[c, 6 + j] / size
-            dm = d0 * m0
-            dm += d1 * m1
-            dm += d2 * m2
-            jac[0, j, i] = m0 - d0 * dm
-            jac[1, j, i] = m1 - d1 * dm
-            jac[2, j, i] = m2 - d2 * dm
+        (jac[0, 0, i], jac[1, 0, i], jac[2, 0, i],
+         jac[0, 1, i], jac[1, 1, i], jac[2, 1, i]) = direction_jacobian(rtki, c, u, v)
 
 
 @kernel

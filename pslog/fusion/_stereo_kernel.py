@@ -22,7 +22,7 @@ import math
 import numpy as np
 
 from .._jit import kernel
-from ._prepare_kernel import homogeneous as _homogeneous
+from ._prepare_kernel import direction_jacobian as _direction_jacobian
 from ._prepare_kernel import ray as _ray
 
 
@@ -51,36 +51,18 @@ def nearest_rows(camera, time_ns, max_gap_ns, rows, others):
         others[e] = found
 
 
-@kernel(inline=True)
-def _latest_before(cam_rows, cam_start, before, camera, c, row):
-    """The latest row of camera ``c`` strictly before global row ``row`` (-1: none):
-    ``latest_row_at_or_before(prep, c, row - 1)``. ``before`` (n,): each row's previous row
-    of its own camera (one lookup when ``row`` is camera c's); otherwise a binary search of
-    ``cam_rows[cam_start[c]:cam_start[c + 1]]``, camera c's rows in order."""
-    if camera[row] == c:
-        return before[row]
-    lo, hi = cam_start[c], cam_start[c + 1]
-    # searchsorted(rows, row - 1, side="right") - 1
-    a, b = lo, hi
-    while a < b:
-        mid = (a + b) // 2
-        if cam_rows[mid] <= row - 1:
-            a = mid + 1
-        else:
-            b = mid
-    return cam_rows[a - 1] if a > lo else -1
-
-
 @kernel
-def slot_motion(rows, time_ns, t_obs, uv, camera, before, cam_rows, cam_start, max_gap_ns,
-                max_gap_s, ns, shift, accel, mrows, linear, quad, lag):
+def slot_motion(rows, time_ns, t_obs, uv, before, max_gap_ns, max_gap_s, ns, shift, accel,
+                mrows, linear, quad, lag):
     """:func:`pslog.fusion.stereo.slot_motion` of every slot, operation for operation.
 
-    ``rows`` (k, m) the slots' detections (-1: none), ``time_ns`` (k,) the points' times,
-    ``t_obs`` (n,) int64 and ``uv`` (n, 2) the detections' times and undistorted pixels,
-    ``camera`` (n,) int64, ``before`` (n,) each row's previous row of its camera, ``cam_rows``
-    / ``cam_start`` every camera's rows in order (concatenated, (m + 1,) starts),
-    ``max_gap_ns`` int, ``max_gap_s`` its seconds (``max_gap_ns / NS``), ``ns`` float(NS).
+    ``rows`` (k, m) the slots' detections (-1: none), slot c's a detection of camera c (as
+    :func:`nearest_rows` makes them), ``time_ns`` (k,) the points' times, ``t_obs`` (n,)
+    int64 and ``uv`` (n, 2) the detections' times and undistorted pixels, ``before`` (n,)
+    each row's previous row of its camera: a slot's camera's detections before its own,
+    ``latest_row_at_or_before(prep, c, row - 1)``, are ``before[row]`` and
+    ``before[before[row]]``; ``max_gap_ns`` int, ``max_gap_s`` its seconds
+    (``max_gap_ns / NS``), ``ns`` float(NS).
     Written, per slot c: ``shift[c]``, ``accel[c]`` (k, 2), ``mrows[c]``, ``linear[c]``,
     ``quad[c]`` (k, 3), ``lag[c]`` (k,) (:class:`~pslog.fusion.stereo.SlotMotion`'s)."""
     k, m = rows.shape[0], rows.shape[1]
@@ -89,11 +71,11 @@ def slot_motion(rows, time_ns, t_obs, uv, camera, before, cam_rows, cam_start, m
             row = rows[p, c]
             have = row >= 0
             r0 = max(row, 0)
-            prev = _latest_before(cam_rows, cam_start, before, camera, c, r0) if have else -1
+            prev = before[r0] if have else -1
             p0 = max(prev, 0)
             dt = (t_obs[r0] - t_obs[p0]) / ns
             ok = have and prev >= 0 and dt > 0 and dt <= max_gap_s
-            prev2 = _latest_before(cam_rows, cam_start, before, camera, c, p0) if ok else -1
+            prev2 = before[p0] if ok else -1
             q0 = max(prev2, 0)
             g = (t_obs[p0] - t_obs[q0]) / ns
             ok2 = ok and prev2 >= 0 and g > 0 and g <= max_gap_s
@@ -459,18 +441,8 @@ def nview_after(rows, uv, points, dirs, centers, n_rays, cam, lens, rtki, rms_mi
             u += v
             residual[c, p] = math.sqrt(u) if (in_front and use) else np.nan
             # direction_jacobian at the detection's undistorted pixel
-            h0, h1, h2 = _homogeneous(rtki, c, uv[r0, 0], uv[r0, 1])
-            size = math.sqrt(h0 * h0 + h1 * h1 + h2 * h2)
-            s0, s1, s2 = h0 / size, h1 / size, h2 / size
-            for j in range(2):
-                m0 = rtki[c, j] / size
-                m1 = rtki[c, 3 + j] / size
-                m2 = rtki[c, 6 + j] / size
-                dm = s0 * m0
-                dm += s1 * m1
-                dm += s2 * m2
-                turns[c, 0, j, p] = m0 - s0 * dm
-                turns[c, 1, j, p] = m1 - s1 * dm
-                turns[c, 2, j, p] = m2 - s2 * dm
+            (turns[c, 0, 0, p], turns[c, 1, 0, p], turns[c, 2, 0, p],
+             turns[c, 0, 1, p], turns[c, 1, 1, p], turns[c, 2, 1, p]) = \
+                _direction_jacobian(rtki, c, uv[r0, 0], uv[r0, 1])
         rms_miss[p] = math.sqrt(sq_sum / n_rays[p])
         smallest_cos[p] = smallest

@@ -2298,9 +2298,9 @@ class FilterStream:
     def __init__(self, rig: Rig, options) -> None:
         self.filter = BallFilter(rig, FilterOptions(max_gap_s=options.max_gap_s))
         # the Track of a detection without a point and nothing withheld (Tracks are frozen:
-        # one, shared)
-        self._none = _track(self.filter, np.zeros(0, np.int64), np.zeros(0, np.int64),
-                            np.zeros((0, 2)))
+        # one, shared; the empty columns of a withheld point's Track, push_one's)
+        time, position, camera, quality = _NO_POINT
+        self._none = Track._of_frozen("filter", time, position, camera, dict(quality), {})
 
     def push(self, time_ns, camera, uv, frame_index=None) -> Track:
         return _track(self.filter, time_ns, camera, uv)

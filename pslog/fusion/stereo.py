@@ -333,7 +333,8 @@ class SlotMotion(NamedTuple):
 
 def slot_motion(prep: Prepared, rows: np.ndarray, time_ns: np.ndarray, max_gap_s: float,
                 compiled: bool = True) -> list[SlotMotion]:
-    """Per camera slot: the image motion between the slot's detection (at ``t_s``) and the
+    """Per camera slot (slot c: a detection of camera c, as :func:`nearest_rows` gives
+    them): the image motion between the slot's detection (at ``t_s``) and the
     point's time ``t``, from that detection and its camera's previous ones (each within
     ``max_gap_s`` of the next; causal: only detections at or before the slot's own).
 
@@ -405,19 +406,14 @@ def _slot_motion_compiled(prep: Prepared, rows: np.ndarray, time_ns: np.ndarray,
 
     k, m = rows.shape
     obs = prep.obs
-    cam_rows = np.concatenate([np.asarray(r, dtype=np.int64) for r in prep.per_camera]
-                              + [np.zeros(0, np.int64)])
-    cam_start = np.zeros(len(prep.per_camera) + 1, dtype=np.int64)
-    np.cumsum([len(r) for r in prep.per_camera], out=cam_start[1:])
     shift, accel = np.empty((m, k, 2)), np.empty((m, k, 2))
     mrows = np.empty((m, k, 3), dtype=np.int64)
     linear, quad, lag = np.empty((m, k, 3)), np.empty((m, k, 3)), np.empty((m, k))
     _stereo_kernel.slot_motion(
         _c(rows, dtype=np.int64), _c(time_ns, np.int64),
         _c(obs.time_ns, dtype=np.int64),
-        _c(prep.uv_undistorted, dtype=np.float64),
-        _c(obs.camera, dtype=np.int64), previous_next_rows(prep)[0],
-        cam_rows, cam_start, max_gap_ns, max_gap_ns / NS, float(NS),
+        _c(prep.uv_undistorted, dtype=np.float64), previous_next_rows(prep)[0],
+        max_gap_ns, max_gap_ns / NS, float(NS),
         shift, accel, mrows, linear, quad, lag)
     return [SlotMotion(shift[c], accel[c], mrows[c], linear[c], quad[c], lag[c])
             for c in range(m)]
