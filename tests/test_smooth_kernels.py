@@ -643,6 +643,22 @@ def test_band_cholesky_reports_the_first_non_positive_pivot_and_factor_loads_it(
         _normal.factor(bad)
 
 
+@pytest.mark.parametrize("n, pivot", [(5, 3), (12, 0), (13, 12), (40, 17), (40, 39), (300, 150)])
+def test_band_cholesky_leaves_lapacks_partial_factor_where_a_pivot_fails(n, pivot):
+    """A pivot that is not positive: the same ``info`` and the same half-factored band as
+    LAPACK's dpbtrf (its docstring's promise; a kernel that worked on a copy of the
+    columns would have to write them back), compiled and in Python."""
+    from scipy.linalg import lapack
+
+    ab = _band_case(n, pivot + 11, width=5 if n > 12 else 3)
+    ab[11, pivot] = -abs(ab[11, pivot]) - 1.0
+    want, info = lapack.dpbtrf(ab.copy())
+    for kernel in (_kernels.band_cholesky, _kernels.band_cholesky.py_func):
+        got = ab.copy()
+        assert kernel(got) == info == pivot + 1
+        assert_array_equal(got, want)
+
+
 @pytest.mark.parametrize("n", [1, 2, 3, 8, 101, 4000])
 def test_abs_median_of_finite_rows_is_numpys_median(n):
     """The noise scale's median: the value np.median gives on the finite rows' absolute

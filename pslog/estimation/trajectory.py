@@ -869,7 +869,7 @@ def _fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions) -> Fit:
     # the covariance at the noise the residuals show (the M-estimator's sandwich,
     # :func:`variance_factor`); the robust scale σ above still weighs the fit: the points
     # do not move
-    band = band * variance_factor(r, w, sigma, p_eff)
+    band *= variance_factor(r, w, sigma, p_eff)  # in place: the band is this fit's own
     consider = (options.detector_bias_px * bias_sensitivity(problem, U, J, r, sigma)
                 if options.detector_bias_px > 0 else None)
     del U

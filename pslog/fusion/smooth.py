@@ -50,6 +50,9 @@ def fuse_smooth(prep: Prepared, rig: Rig, options) -> Track:
         raise
     if options.rate_hz is None:
         rows = np.flatnonzero(fit.used)
+        # the points with a finite position, gathered once (the covariances of a 90-minute
+        # session are 35 MB: gathered and then filtered, they were copied twice)
+        rows = rows[np.all(np.isfinite(fit.position[rows]), axis=1)]
         time_ns, camera = obs.time_ns[rows], obs.camera[rows]
         position, cov, residual = fit.position[rows], fit.covariance[rows], fit.residual_px[rows]
     else:
@@ -61,9 +64,9 @@ def fuse_smooth(prep: Prepared, rig: Rig, options) -> Track:
         before = np.maximum(near - 1, 0)
         closer = np.abs(obs.time_ns[before] - time_ns) < np.abs(obs.time_ns[near] - time_ns)
         camera = obs.camera[np.where(closer, before, near)]
-    keep = np.all(np.isfinite(position), axis=1)
-    time_ns, camera, position = time_ns[keep], camera[keep], position[keep]
-    cov, residual = cov[keep], residual[keep]
+        keep = np.all(np.isfinite(position), axis=1)
+        time_ns, camera, position = time_ns[keep], camera[keep], position[keep]
+        cov, residual = cov[keep], residual[keep]
     gap = _bridged(obs.time_ns[fit.used], time_ns)
     var = np.einsum("nii->ni", cov)
     quality = {"std_m": np.sqrt(var.sum(axis=1)), "std_x_m": np.sqrt(var[:, 0]),
