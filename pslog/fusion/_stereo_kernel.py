@@ -128,7 +128,7 @@ def slot_motion(rows, time_ns, t_obs, uv, camera, before, cam_rows, cam_start, m
 
 @kernel
 def motion_covariance(slot_rows, jac, used, mrows, quad, lag, shift, accel, lens, s2,
-                      unknown_speed, nu2, nu_var, ppm2, gate, share, out):
+                      unknown_speed, nu2, nu2_rec, nu_var, ppm2, gate, share, out):
     """:func:`pslog.fusion.stereo.motion_covariance` (with :func:`~._prepare.covariance` and
     :func:`~.stereo._with_motion`), operation for operation: the quality columns ``std_m``
     and ``cov_xx_m2`` ... ``cov_yz_m2`` into ``out`` (7, k).
@@ -139,7 +139,7 @@ def motion_covariance(slot_rows, jac, used, mrows, quad, lag, shift, accel, lens
     ``lens`` (4, n) each detection's recorded-to-undistorted pixel Jacobian (NaN as 0; no
     rows: the identity, a rig without lens distortion), ``s2`` (k,) the noise variance per
     point (``noise_px ** 2``), ``unknown_speed`` :data:`~.stereo.UNKNOWN_IMAGE_SPEED_PX_S`;
-    ``nu2``, ``nu_var`` (n,) every detection's :func:`~.stereo.innovations` and ``ppm2``
+    ``nu2``, ``nu2_rec``, ``nu_var`` (n,) every detection's :func:`~.stereo.innovations`, ``ppm2``
     (m, k) :func:`~.stereo.pixels_per_metre_sq` (no rows: no break term), ``gate``
     :data:`~.stereo.KINK_GATE`, ``share`` :data:`~.stereo.KINK_SHARE`."""
     k, m = slot_rows.shape[0], slot_rows.shape[1]
@@ -153,8 +153,8 @@ def motion_covariance(slot_rows, jac, used, mrows, quad, lag, shift, accel, lens
             for a in range(m):
                 r = mrows[a, p, 0] if used[p, a] else -1
                 if r >= 0:
-                    excess = nu2[r] - gate * v * nu_var[r]
-                    y = share * excess / ppm2[a, p]
+                    excess = nu2_rec[r] - gate * v * nu_var[r]
+                    y = share * (nu2[r] * (excess / nu2_rec[r])) / ppm2[a, p]
                     if excess > 0 and y > kink[p]:
                         kink[p] = y
     # the slots any of whose points is used without a merged duplicate (covariance's

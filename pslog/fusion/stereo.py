@@ -72,7 +72,7 @@ def sync_groups(obs: Observations, n_cams: int, tolerance_s: float
 
 def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | np.ndarray | None,
                  motion: list[SlotMotion] | None = None, compiled: bool = True,
-                 breaks: tuple[np.ndarray, np.ndarray] | None = None):
+                 breaks: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None):
     """N-view least-squares point of each row of detections, with its quality and validity.
 
     Parameters
@@ -87,7 +87,7 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | np.ndarray 
     compiled : the per-point arithmetic in :mod:`._stereo_kernel`'s compiled passes (from
         ``_FEW`` points and below 8 cameras, where the numpy forms are columns; the same
         bits), else with numpy
-    breaks : with ``motion``, every detection's :func:`innovations` ``(ν², c)``: the
+    breaks : with ``motion``, every detection's :func:`innovations` ``(ν², ν_r², c)``: the
         covariance then also holds the breaks of the image motion they show (a bounce, a
         kick; :func:`motion_covariance`)
 
@@ -355,14 +355,20 @@ KINK_GATE = 9.21
 KINK_SHARE = 0.2
 
 
-def innovations(prep: Prepared, max_gap_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """``(ν², c)`` (n,) each: every detection's squared residual from the quadratic through
-    its camera's three previous ones, in undistorted pixels, and ``c = 1 + Σ l_j²``, its
-    variance over σ² per axis if the image motion has no break (:func:`quadratic_residuals`;
-    NaN: no three such previous detections). What :func:`motion_covariance`'s break term
-    tests."""
+def innovations(prep: Prepared, max_gap_s: float
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(ν², ν_r², c)`` (n,) each: every detection's squared residual from the quadratic
+    through its camera's three previous ones in undistorted pixels (its size, where the
+    Jacobians act) and in recorded pixels (what is tested against the noise: σ is the
+    detector's, in the image it saw; a lens stretches undistorted pixels toward the edges),
+    and ``c = 1 + Σ l_j²``, the recorded residual's variance over σ² per axis if the image
+    motion has no break (:func:`quadratic_residuals`; NaN: no three such previous
+    detections). What :func:`motion_covariance`'s break term takes."""
     res, weight = quadratic_residuals(prep, prep.uv_undistorted, max_gap_s)
-    return _c(res[:, 0] * res[:, 0] + res[:, 1] * res[:, 1]), _c(weight)
+    rec, _ = quadratic_residuals(
+        prep, np.where(np.isfinite(prep.uv_undistorted), prep.obs.uv, np.nan), max_gap_s)
+    return (_c(res[:, 0] * res[:, 0] + res[:, 1] * res[:, 1]),
+            _c(rec[:, 0] * rec[:, 0] + rec[:, 1] * rec[:, 1]), _c(weight))
 
 
 def pixels_per_metre_sq(prep: Prepared, points: np.ndarray) -> np.ndarray:
@@ -510,7 +516,7 @@ def _stacked(parts: list[np.ndarray]) -> np.ndarray:
 def motion_covariance(prep: Prepared, slot_rows: np.ndarray, jacobians: list[np.ndarray],
                       motion: list[SlotMotion], used: np.ndarray,
                       noise_px: float | np.ndarray, compiled: bool = True,
-                      breaks: tuple[np.ndarray, np.ndarray] | None = None,
+                      breaks: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
                       ppm2: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """``nearest``'s covariance (quality columns): the point ``P`` is made from the slots'
     unshifted pixels ``u_s`` while the ball was at ``ū_s(t)``; to first order its error is
@@ -527,12 +533,13 @@ def motion_covariance(prep: Prepared, slot_rows: np.ndarray, jacobians: list[np.
     (``L_sj`` the recorded-to-undistorted pixel Jacobian of detection ``sj``; a detection
     in two slots adds its weighted Jacobians first, :func:`covariance`; ``v₀``
     :data:`UNKNOWN_IMAGE_SPEED_PX_S` where the slot's camera has no previous detection).
-    With ``breaks`` (every detection's :func:`innovations` ``(ν², c)``) and ``ppm2``
+    With ``breaks`` (every detection's :func:`innovations` ``(ν², ν_r², c)``) and ``ppm2``
     (:func:`pixels_per_metre_sq` (m, k)), a break of the image motion (a bounce, a kick)
-    that a used slot's newest or previous detection shows (``ν² > KINK_GATE σ² c``) is
-    taken as the ball's departure from the extrapolated path, in metres across that
-    camera's ray, ``κ² = max (ν² - KINK_GATE σ² c) / ppm2``, and every slot with a lag and
-    a velocity is off by that much in its image: ``+ Σ_s κ² ppm2_s J_s J_sᵀ``
+    that a used slot's newest detection shows (``ν_r² > KINK_GATE σ² c``, recorded pixels)
+    is taken as the ball's departure from the extrapolated path, in metres across that
+    camera's ray, ``κ² = max KINK_SHARE ν² (1 - KINK_GATE σ² c / ν_r²) / ppm2_a``
+    (undistorted pixels: its share beyond the noise), and every slot with a lag and a
+    velocity is off by that much in its image: ``+ Σ_s κ² ppm2_s J_s J_sᵀ``
     (docs/methods.md, "nearest at bounces and kicks").
     ``slot_rows`` (k, m) the detections used (-1: none), ``jacobians`` (3, 2, k) per slot.
     ``compiled``: per point in one compiled pass (:func:`._stereo_kernel.motion_covariance`,
@@ -556,8 +563,8 @@ def motion_covariance(prep: Prepared, slot_rows: np.ndarray, jacobians: list[np.
             # noise_px ** 2 as numpy makes it (a column: its square; a float: Python's power)
             np.square(noise_px) if np.ndim(noise_px) else np.full(k, noise_px**2),
             UNKNOWN_IMAGE_SPEED_PX_S,
-            *((np.zeros(0), np.zeros(0), np.zeros((m, 0))) if breaks is None
-              else (breaks[0], breaks[1], _c(ppm2, dtype=np.float64))),
+            *((np.zeros(0), np.zeros(0), np.zeros(0), np.zeros((m, 0))) if breaks is None
+              else (*breaks, _c(ppm2, dtype=np.float64))),
             KINK_GATE, KINK_SHARE, out)
         return {"std_m": out[0], **{f"cov_{a}_m2": out[1 + i] for i, a in
                                     enumerate(("xx", "yy", "zz", "xy", "xz", "yz"))}}
@@ -610,23 +617,23 @@ def motion_covariance(prep: Prepared, slot_rows: np.ndarray, jacobians: list[np.
 
 
 def _break_size(motion: list[SlotMotion], used: np.ndarray, noise_px: float | np.ndarray,
-                breaks: tuple[np.ndarray, np.ndarray] | None, ppm2: np.ndarray | None
-                ) -> np.ndarray:
-    """κ² (k,) of :func:`motion_covariance` (numpy form): the largest ``(ν² - KINK_GATE σ² c)
-    / ppm2_a`` over the used slots ``a`` and their newest and previous detections (0: no
-    break shown, or no ``breaks``)."""
+                breaks: tuple[np.ndarray, np.ndarray, np.ndarray] | None,
+                ppm2: np.ndarray | None) -> np.ndarray:
+    """κ² (k,) of :func:`motion_covariance` (numpy form): the largest ``KINK_SHARE ν²
+    (1 - KINK_GATE σ² c / ν_r²) / ppm2_a`` over the used slots' newest detections whose
+    ``ν_r² > KINK_GATE σ² c`` (0: no break shown, or no ``breaks``)."""
     k = used.shape[0]
     kink = np.zeros(k)
     if breaks is None or ppm2 is None:
         return kink
-    nu2, var = breaks
+    nu2, nu2_rec, var = breaks
     s2 = np.square(noise_px) if np.ndim(noise_px) else np.full(k, noise_px**2)
     for a in range(used.shape[1]):
         r = np.where(used[:, a], motion[a].rows[:, 0], -1)
         rr = np.maximum(r, 0)
         with np.errstate(invalid="ignore", divide="ignore"):
-            excess = nu2[rr] - KINK_GATE * s2 * var[rr]
-            y = KINK_SHARE * excess / ppm2[a]
+            excess = nu2_rec[rr] - KINK_GATE * s2 * var[rr]
+            y = KINK_SHARE * (nu2[rr] * (excess / nu2_rec[rr])) / ppm2[a]
             kink = np.where((r >= 0) & (excess > 0) & (y > kink), y, kink)
     return kink
 
