@@ -254,7 +254,8 @@ _NOISE_BLOCK = 1024  # checkpoints whose windows are sorted at once
 
 
 def detection_noise(prep: Prepared, time_ns: np.ndarray, max_gap_s: float,
-                    noise_px: float) -> np.ndarray:
+                    noise_px: float,
+                    recorded: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """The detection noise σ (pixels per axis, (k,)) of points at ``time_ns`` (k,), as the
     session's own detections show it, causally.
 
@@ -271,15 +272,15 @@ def detection_noise(prep: Prepared, time_ns: np.ndarray, max_gap_s: float,
     gives every point the batch's bits), divided by ``√(2 ln 2)``; ``noise_px`` while
     fewer than ``NOISE_MIN_COUNT`` residuals are in the window; never below
     ``min(noise_px, NOISE_FLOOR_PX)``. Robust: a bounce or kick spoils three or four
-    residuals of a camera, a few percent of a window.
+    residuals of a camera, a few percent of a window. ``recorded``:
+    :func:`recorded_residuals`, if already made.
     """
     from .innovation import RAYLEIGH_MEDIAN
 
     # recorded pixels: σ is the detector's noise where it acts, before the lens model
     # (the covariance maps it through L itself; undistorted residuals would carry L twice)
     # (a detection the rig says is no detection — undistorted NaN — has no residual)
-    res, weight = quadratic_residuals(
-        prep, np.where(np.isfinite(prep.uv_undistorted), prep.obs.uv, np.nan), max_gap_s)
+    res, weight = recorded_residuals(prep, max_gap_s) if recorded is None else recorded
     t_obs = prep.obs.time_ns
     with np.errstate(invalid="ignore"):
         norm = np.hypot(res[:, 0], res[:, 1]) / np.sqrt(weight)
@@ -342,6 +343,13 @@ def quadratic_residuals(prep: Prepared, uv: np.ndarray, max_gap_s: float
     return out, weight
 
 
+def recorded_residuals(prep: Prepared, max_gap_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`quadratic_residuals` in recorded pixels (a detection the rig says is no
+    detection — undistorted NaN — has none)."""
+    return quadratic_residuals(
+        prep, np.where(np.isfinite(prep.uv_undistorted), prep.obs.uv, np.nan), max_gap_s)
+
+
 #: ``nearest``'s test of a break in the image motion (a bounce, a kick): a detection's
 #: residual from the quadratic through its camera's three previous ones
 #: (:func:`innovations`) is a break where its squared length exceeds KINK_GATE times its
@@ -355,7 +363,8 @@ KINK_GATE = 9.21
 KINK_SHARE = 0.2
 
 
-def innovations(prep: Prepared, max_gap_s: float
+def innovations(prep: Prepared, max_gap_s: float,
+                recorded: tuple[np.ndarray, np.ndarray] | None = None
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(ν², ν_r², c)`` (n,) each: every detection's squared residual from the quadratic
     through its camera's three previous ones in undistorted pixels (its size, where the
@@ -363,10 +372,10 @@ def innovations(prep: Prepared, max_gap_s: float
     detector's, in the image it saw; a lens stretches undistorted pixels toward the edges),
     and ``c = 1 + Σ l_j²``, the recorded residual's variance over σ² per axis if the image
     motion has no break (:func:`quadratic_residuals`; NaN: no three such previous
-    detections). What :func:`motion_covariance`'s break term takes."""
+    detections). What :func:`motion_covariance`'s break term takes. ``recorded``:
+    :func:`recorded_residuals`, if already made."""
     res, weight = quadratic_residuals(prep, prep.uv_undistorted, max_gap_s)
-    rec, _ = quadratic_residuals(
-        prep, np.where(np.isfinite(prep.uv_undistorted), prep.obs.uv, np.nan), max_gap_s)
+    rec, _ = recorded_residuals(prep, max_gap_s) if recorded is None else recorded
     return (_c(res[:, 0] * res[:, 0] + res[:, 1] * res[:, 1]),
             _c(rec[:, 0] * rec[:, 0] + rec[:, 1] * rec[:, 1]), _c(weight))
 
@@ -563,7 +572,8 @@ def motion_covariance(prep: Prepared, slot_rows: np.ndarray, jacobians: list[np.
             # noise_px ** 2 as numpy makes it (a column: its square; a float: Python's power)
             np.square(noise_px) if np.ndim(noise_px) else np.full(k, noise_px**2),
             UNKNOWN_IMAGE_SPEED_PX_S,
-            *((np.zeros(0), np.zeros(0), np.zeros(0), np.zeros((m, 0))) if breaks is None
+            *((np.zeros(0), np.zeros(0), np.zeros(0), np.zeros((m, 0)))
+              if breaks is None or ppm2 is None
               else (*breaks, _c(ppm2, dtype=np.float64))),
             KINK_GATE, KINK_SHARE, out)
         return {"std_m": out[0], **{f"cov_{a}_m2": out[1 + i] for i, a in
@@ -711,10 +721,11 @@ def fuse_nearest(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
     if noise_px is None:
         points, quality, flags, _ = nview_points(prep, rows, None, compiled=compiled)
     else:
+        recorded = recorded_residuals(prep, max_gap_s)
         points, quality, flags, _ = nview_points(
-            prep, rows, detection_noise(prep, time_ns, max_gap_s, noise_px),
+            prep, rows, detection_noise(prep, time_ns, max_gap_s, noise_px, recorded),
             slot_motion(prep, rows, time_ns, max_gap_s, compiled), compiled,
-            innovations(prep, max_gap_s))
+            innovations(prep, max_gap_s, recorded))
     made = (others >= 1) & (quality["n_detections"] >= 2)
     keep = made & (flags == 0) & np.all(np.isfinite(points), axis=1)
     track = Track("nearest", time_ns[keep], points[keep], camera[keep],
