@@ -6,10 +6,11 @@ from the quadratic through its camera's three previous ones exceeds what the noi
 undistorted; ``ppm`` a camera's pixels per metre at the point); a straight segment, whose
 residuals the noise explains, leaves the covariance as it was.
 
-Mutations tried (each fails a test here): the noise not subtracted (``excess = ν²``);
+Mutations tried (each fails a test here): the noise not subtracted (``excess = ν_r²``);
 KINK_GATE 9.21 -> 3; KINK_SHARE 0.2 -> 0.5; no transfer between cameras (``ppm_s`` for
-``ppm_a``); the point's own slot (no lag) inflated too; only the point's own camera tested
-(not the partners'); the partner's previous detection tested instead of its newest."""
+``ppm_a``); the size in recorded pixels (no lens); the point's own slot (no lag) inflated
+too; only the point's own camera tested (not the partners'); a slot's previous detection
+tested instead of its newest; the last firing slot's break taken instead of the largest."""
 
 from __future__ import annotations
 
@@ -197,3 +198,49 @@ def test_the_break_term_fires_on_a_bounce_and_the_compiled_form_is_the_numpy_one
     grown = got.quality["std_m"] > off.quality["std_m"]
     assert np.all(got.quality["std_m"] >= off.quality["std_m"])
     assert 0.01 < grown.mean() < 0.3, grown.mean()
+
+
+def test_the_largest_break_among_the_points_detections_is_taken():
+    """Both cameras' newest detections are past the bounce (0.090 s) with three before
+    each: κ² is the larger of the two, each in metres across its camera's ray."""
+    rows = [(0.0, 1), (0.0167, 0), (0.0333, 1), (0.05, 0), (0.0667, 1), (0.0833, 0),
+            (0.100, 1), (0.117, 0)]
+    rig, obs = _session(rows, bounce_s=0.090)
+    prep = prepare(obs, rig)
+    point, got = _fused(rig, obs)
+    before, J_d = _without_break(prep, obs, 7, [0, 2, 4, 6])
+    own = _size(*_residual(prep, obs, [1, 3, 5, 7])) / _ppm2(rig, 0, point)
+    partner = _size(*_residual(prep, obs, [0, 2, 4, 6])) / _ppm2(rig, 1, point)
+    assert own > 1.2 * partner > 0  # (the point's own camera's, the first slot's, is larger)
+    np.testing.assert_allclose(
+        got, before + S.KINK_SHARE * own * _ppm2(rig, 1, point) * J_d @ J_d.T, rtol=2e-6,
+        atol=1e-14)
+
+
+def test_the_share_is_the_mean_squared_extrapolation_error_over_the_largest_residual():
+    """KINK_SHARE from its model: a velocity jump at a time uniform over the last four
+    frames before the point; a partner's error is its quadratic extrapolation's from its
+    last three detections, the largest residual |ν| that of the point's detections'
+    (each from its camera's three previous): E[e² / ν²] over the jump's time, three
+    cameras at 1/3-frame offsets (frames of 1), is about 0.2."""
+    def u(t, tau):
+        return np.maximum(t - tau, 0.0)
+
+    def extrapolated(t, tau, newest):  # quadratic through newest, newest - 1, newest - 2
+        x = t - newest  # (Lagrange's weights at unit spacing)
+        return ((x + 1) * (x + 2) / 2 * u(newest, tau) - x * (x + 2) * u(newest - 1, tau)
+                + x * (x + 1) / 2 * u(newest - 2, tau))
+
+    ratios = []
+    for own in range(3):
+        t = 3.0 + own / 3
+        for tau in np.linspace(t - 4, t, 401)[1:-1]:
+            newest = [np.floor(t - c / 3 - 1e-9) + c / 3 if c != own else t for c in range(3)]
+            nu = max(abs(u(s, tau) - extrapolated(s, tau, s - 1)) for s in newest)
+            if nu < 1e-6:
+                continue
+            for c in range(3):
+                if c != own:
+                    e = u(t, tau) - extrapolated(t, tau, newest[c])
+                    ratios.append(e * e / (nu * nu))
+    assert abs(np.mean(ratios) - S.KINK_SHARE) < 0.015, np.mean(ratios)
