@@ -144,8 +144,8 @@ def motion_covariance(slot_rows, jac, used, mrows, quad, lag, shift, accel, lens
     :data:`~.stereo.KINK_GATE`, ``share`` :data:`~.stereo.KINK_SHARE`."""
     k, m = slot_rows.shape[0], slot_rows.shape[1]
     has_lens = lens.shape[1] > 0
-    # κ² per point (stereo._break_size): the largest break a used slot's newest or previous
-    # detection shows, in m² across that camera's ray (0: none)
+    # κ² per point, times KINK_SHARE (stereo._break_size): the largest break a used slot's
+    # newest detection shows, in m² across that camera's ray (0: none)
     kink = np.zeros(k)
     if nu2.shape[0] > 0:
         for p in range(k):
