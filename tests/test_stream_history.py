@@ -33,8 +33,11 @@ def test_stream_keeps_exactly_the_history_its_points_reach_back_to(method):
         need = default_max_gap_s(rig) + fuser.options.tolerance_s
         # nearest's covariance takes the detections' noise from the residuals of the second
         # before its latest checkpoint (a quarter second apart), each from its camera's
-        # three previous detections, each up to max_gap_s before the next
-        window = need + (NOISE_EVERY_S + NOISE_WINDOW_S + 2 * default_max_gap_s(rig)
+        # three previous detections, each up to max_gap_s before the next; and tests each
+        # partner's newest detection (up to max_gap_s old) against its camera's three
+        # previous ones for a break (four max_gap_s back: within the first here)
+        gap = default_max_gap_s(rig)
+        window = need + (max(NOISE_EVERY_S + NOISE_WINDOW_S + 2 * gap, 3 * gap)
                          if method == "nearest" else 0.0)
         batch = fuse(obs, rig, method)
         parts = streamed(rig, method, obs)

@@ -110,7 +110,7 @@ def slot_motion(rows, time_ns, t_obs, uv, before, max_gap_ns, max_gap_s, ns, shi
 
 @kernel
 def motion_covariance(slot_rows, jac, used, mrows, quad, lag, shift, accel, lens, s2,
-                      unknown_speed, out):
+                      unknown_speed, nu2, nu2_rec, nu_var, ppm2, gate, share, out):
     """:func:`pslog.fusion.stereo.motion_covariance` (with :func:`~._prepare.covariance` and
     :func:`~.stereo._with_motion`), operation for operation: the quality columns ``std_m``
     and ``cov_xx_m2`` ... ``cov_yz_m2`` into ``out`` (7, k).
@@ -120,19 +120,36 @@ def motion_covariance(slot_rows, jac, used, mrows, quad, lag, shift, accel, lens
     ``lag`` (m, k), ``shift`` / ``accel`` (m, k, 2) the slots' motion (:func:`slot_motion`),
     ``lens`` (4, n) each detection's recorded-to-undistorted pixel Jacobian (NaN as 0; no
     rows: the identity, a rig without lens distortion), ``s2`` (k,) the noise variance per
-    point (``noise_px ** 2``), ``unknown_speed`` :data:`~.stereo.UNKNOWN_IMAGE_SPEED_PX_S`."""
+    point (``noise_px ** 2``), ``unknown_speed`` :data:`~.stereo.UNKNOWN_IMAGE_SPEED_PX_S`;
+    ``nu2``, ``nu2_rec``, ``nu_var`` (n,) every detection's :func:`~.stereo.innovations`, ``ppm2``
+    (m, k) :func:`~.stereo.pixels_per_metre_sq` (no rows: no break term), ``gate``
+    :data:`~.stereo.KINK_GATE`, ``share`` :data:`~.stereo.KINK_SHARE`."""
     k, m = slot_rows.shape[0], slot_rows.shape[1]
     has_lens = lens.shape[1] > 0
+    # κ² per point, times KINK_SHARE (stereo._break_size): the largest break a used slot's
+    # newest detection shows, in m² across that camera's ray (0: none)
+    kink = np.zeros(k)
+    if nu2.shape[0] > 0:
+        for p in range(k):
+            v = s2[p]
+            for a in range(m):
+                r = mrows[a, p, 0] if used[p, a] else -1
+                if r >= 0:
+                    excess = nu2_rec[r] - gate * v * nu_var[r]
+                    y = share * (nu2[r] * (excess / nu2_rec[r])) / ppm2[a, p]
+                    if excess > 0 and y > kink[p]:
+                        kink[p] = y
     # the slots any of whose points is used without a merged duplicate (covariance's
-    # ``if not np.any(use): continue``), and those with a blind point (motion_covariance's
-    # ``if np.any(blind)``): a skipped slot adds nothing, not 0 * NaN
+    # ``if not np.any(use): continue``), and those with a blind or broken point
+    # (motion_covariance's ``if np.any(blind | kinked)``): a skipped slot adds nothing,
+    # not 0 * NaN
     any_use = np.zeros(m, dtype=np.bool_)
     any_blind = np.zeros(m, dtype=np.bool_)
     for p in range(k):
         for s in range(m):
             if slot_rows[p, s] >= 0 and not _taken(slot_rows, p, s):
                 any_use[s] = True
-            if used[p, s] and mrows[s, p, 1] < 0 and lag[s, p] > 0:
+            if used[p, s] and lag[s, p] > 0 and (mrows[s, p, 1] < 0 or kink[p] > 0):
                 any_blind[s] = True
     for p in range(k):
         # the six distinct entries xx, yy, zz, xy, xz, yz
@@ -187,15 +204,22 @@ def motion_covariance(slot_rows, jac, used, mrows, quad, lag, shift, accel, lens
             c5 += b0 * e0 + b1 * e1
         v = s2[p]
         c0, c1, c2, c3, c4, c5 = c0 * v, c1 * v, c2 * v, c3 * v, c4 * v, c5 * v
-        # the unknown shift of a slot without image velocity: Σ_s (v₀ L_s)² J_s J_sᵀ, summed
-        # apart, then added (a sum of zeros where no slot is blind: adding it changes no bit)
+        # the unknown shift of a slot without image velocity: Σ_s (v₀ L_s)² J_s J_sᵀ, and
+        # the break's of one with: Σ_s κ² ppm2_s J_s J_sᵀ, summed apart, then added (a sum
+        # of zeros where no slot is blind or broken: adding it changes no bit)
         u0 = u1 = u2 = u3 = u4 = u5 = 0.0
         for s in range(m):
             if not any_blind[s]:
                 continue
             blind = used[p, s] and mrows[s, p, 1] < 0 and lag[s, p] > 0
+            kinked = used[p, s] and not blind and lag[s, p] > 0 and kink[p] > 0
             f = lag[s, p] * unknown_speed
-            f2 = f * f if blind else 0.0
+            if blind:
+                f2 = f * f
+            elif kinked:
+                f2 = kink[p] * ppm2[s, p]
+            else:
+                f2 = 0.0
             j00, j01 = jac[s, 0, 0, p], jac[s, 0, 1, p]
             j10, j11 = jac[s, 1, 0, p], jac[s, 1, 1, p]
             j20, j21 = jac[s, 2, 0, p], jac[s, 2, 1, p]

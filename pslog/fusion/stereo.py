@@ -71,7 +71,8 @@ def sync_groups(obs: Observations, n_cams: int, tolerance_s: float
 
 
 def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | np.ndarray | None,
-                 motion: list[SlotMotion] | None = None, compiled: bool = True):
+                 motion: list[SlotMotion] | None = None, compiled: bool = True,
+                 breaks: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None):
     """N-view least-squares point of each row of detections, with its quality and validity.
 
     Parameters
@@ -86,6 +87,9 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | np.ndarray 
     compiled : the per-point arithmetic in :mod:`._stereo_kernel`'s compiled passes (from
         ``_FEW`` points and below 8 cameras, where the numpy forms are columns; the same
         bits), else with numpy
+    breaks : with ``motion``, every detection's :func:`innovations` ``(ν², ν_r², c)``: the
+        covariance then also holds the breaks of the image motion they show (a bounce, a
+        kick; :func:`motion_covariance`)
 
     Returns
     -------
@@ -158,7 +162,8 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | np.ndarray 
                              [prep.pixel_jacobians_t(r[:, c]) for c in range(m)], noise_px)
         else:
             cov = motion_covariance(prep, slot_rows, jacobians, motion, used, noise_px,
-                                    compiled)
+                                    compiled, breaks, None if breaks is None
+                                    else pixels_per_metre_sq(prep, points))
     # (k,) columns, each reduction over the m cameras in numpy's order (the same bits)
     times = [prep.obs.time_ns[r[:, c]] for c in range(m)]
     t_max = np.maximum.reduce([np.where(used[:, c], times[c], np.iinfo(np.int64).min)
@@ -249,7 +254,8 @@ _NOISE_BLOCK = 1024  # checkpoints whose windows are sorted at once
 
 
 def detection_noise(prep: Prepared, time_ns: np.ndarray, max_gap_s: float,
-                    noise_px: float) -> np.ndarray:
+                    noise_px: float,
+                    recorded: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """The detection noise σ (pixels per axis, (k,)) of points at ``time_ns`` (k,), as the
     session's own detections show it, causally.
 
@@ -266,32 +272,18 @@ def detection_noise(prep: Prepared, time_ns: np.ndarray, max_gap_s: float,
     gives every point the batch's bits), divided by ``√(2 ln 2)``; ``noise_px`` while
     fewer than ``NOISE_MIN_COUNT`` residuals are in the window; never below
     ``min(noise_px, NOISE_FLOOR_PX)``. Robust: a bounce or kick spoils three or four
-    residuals of a camera, a few percent of a window.
+    residuals of a camera, a few percent of a window. ``recorded``:
+    :func:`recorded_residuals`, if already made.
     """
     from .innovation import RAYLEIGH_MEDIAN
 
-    n = len(prep.obs)
+    # recorded pixels: σ is the detector's noise where it acts, before the lens model
+    # (the covariance maps it through L itself; undistorted residuals would carry L twice)
+    # (a detection the rig says is no detection — undistorted NaN — has no residual)
+    res, weight = recorded_residuals(prep, max_gap_s) if recorded is None else recorded
     t_obs = prep.obs.time_ns
-    norm = np.full(n, np.nan)
-    for rows in prep.per_camera:
-        if len(rows) < 4:
-            continue
-        t = t_obs[rows]
-        # recorded pixels: σ is the detector's noise where it acts, before the lens model
-        # (the covariance maps it through L itself; undistorted residuals would carry L twice)
-        # (a detection the rig says is no detection — undistorted NaN — has no residual)
-        u = np.where(np.isfinite(prep.uv_undistorted[rows]), prep.obs.uv[rows], np.nan)
-        a, b, c = ((t[3:] - t[2:-1]) / NS, (t[2:-1] - t[1:-2]) / NS, (t[1:-2] - t[:-3]) / NS)
-        gap = int(max_gap_s * NS) / NS  # (as slot_motion's)
-        ok = (a > 0) & (b > 0) & (c > 0) & (a <= gap) & (b <= gap) & (c <= gap)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            l1 = (a + b) * (a + b + c) / (b * (b + c))
-            l2 = -a * (a + b + c) / (b * c)
-            l3 = a * (a + b) / ((b + c) * c)
-            res = u[3:] - (l1[:, None] * u[2:-1] + l2[:, None] * u[1:-2]
-                           + l3[:, None] * u[:-3])
-            value = np.hypot(res[:, 0], res[:, 1]) / np.sqrt(1 + l1**2 + l2**2 + l3**2)
-        norm[rows[3:][ok]] = value[ok]
+    with np.errstate(invalid="ignore"):
+        norm = np.hypot(res[:, 0], res[:, 1]) / np.sqrt(weight)
     finite = np.flatnonzero(np.isfinite(norm))
     t_fin = t_obs[finite]
     v_fin = norm[finite]
@@ -317,6 +309,92 @@ def detection_noise(prep: Prepared, time_ns: np.ndarray, max_gap_s: float,
             est[block] = windows[np.arange(len(block)), count[block] // 2] / RAYLEIGH_MEDIAN
     sigma = np.where(np.isfinite(est), est, noise_px)[inverse]
     return np.maximum(sigma, min(noise_px, NOISE_FLOOR_PX))
+
+
+def quadratic_residuals(prep: Prepared, uv: np.ndarray, max_gap_s: float
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """Each detection's residual from the quadratic through its camera's three previous
+    detections (each within ``max_gap_s`` of the next), extrapolated to its time with the
+    Lagrange weights ``l`` (:func:`slot_motion`'s, one step on): ``u - Σ l_j u_j`` (n, 2),
+    in the pixels of ``uv`` (n, 2), and ``1 + Σ l_j²`` (n,), its variance over the
+    detections' σ² per axis under the model; NaN where a detection has no three such
+    previous ones. :func:`detection_noise` (recorded pixels) and :func:`innovations`
+    (undistorted) take them."""
+    n = len(prep.obs)
+    t_obs = prep.obs.time_ns
+    out, weight = np.full((n, 2), np.nan), np.full(n, np.nan)
+    for rows in prep.per_camera:
+        if len(rows) < 4:
+            continue
+        t = t_obs[rows]
+        u = uv[rows]
+        a, b, c = ((t[3:] - t[2:-1]) / NS, (t[2:-1] - t[1:-2]) / NS, (t[1:-2] - t[:-3]) / NS)
+        gap = int(max_gap_s * NS) / NS  # (as slot_motion's)
+        ok = (a > 0) & (b > 0) & (c > 0) & (a <= gap) & (b <= gap) & (c <= gap)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            l1 = (a + b) * (a + b + c) / (b * (b + c))
+            l2 = -a * (a + b + c) / (b * c)
+            l3 = a * (a + b) / ((b + c) * c)
+            res = u[3:] - (l1[:, None] * u[2:-1] + l2[:, None] * u[1:-2]
+                           + l3[:, None] * u[:-3])
+            w = 1 + l1**2 + l2**2 + l3**2
+        out[rows[3:][ok]] = res[ok]
+        weight[rows[3:][ok]] = w[ok]
+    return out, weight
+
+
+def recorded_residuals(prep: Prepared, max_gap_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`quadratic_residuals` in recorded pixels (a detection the rig says is no
+    detection — undistorted NaN — has none)."""
+    return quadratic_residuals(
+        prep, np.where(np.isfinite(prep.uv_undistorted), prep.obs.uv, np.nan), max_gap_s)
+
+
+#: ``nearest``'s test of a break in the image motion (a bounce, a kick): a detection's
+#: residual from the quadratic through its camera's three previous ones
+#: (:func:`innovations`) is a break where its squared length exceeds KINK_GATE times its
+#: variance under the detections' noise (the χ² of 2 degrees of freedom at 99 %). See
+#: docs/methods.md, "nearest at bounces and kicks".
+KINK_GATE = 9.21
+#: ... and the mean of ``e² / ν²`` over a break's time, ``e`` a partner's extrapolation
+#: error, ``ν`` the largest residual among the point's detections (a velocity jump at a
+#: uniformly distributed time between detections: 0.206, 0.198, 0.193 with 2, 3, 4 cameras
+#: at even offsets): the share of the residual's square taken as each slot's variance.
+KINK_SHARE = 0.2
+
+
+def innovations(prep: Prepared, max_gap_s: float,
+                recorded: tuple[np.ndarray, np.ndarray] | None = None
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(ν², ν_r², c)`` (n,) each: every detection's squared residual from the quadratic
+    through its camera's three previous ones in undistorted pixels (its size, where the
+    Jacobians act) and in recorded pixels (what is tested against the noise: σ is the
+    detector's, in the image it saw; a lens stretches undistorted pixels toward the edges),
+    and ``c = 1 + Σ l_j²``, the recorded residual's variance over σ² per axis if the image
+    motion has no break (:func:`quadratic_residuals`; NaN: no three such previous
+    detections). What :func:`motion_covariance`'s break term takes. ``recorded``:
+    :func:`recorded_residuals`, if already made."""
+    res, weight = quadratic_residuals(prep, prep.uv_undistorted, max_gap_s)
+    rec, _ = recorded_residuals(prep, max_gap_s) if recorded is None else recorded
+    return (_c(res[:, 0] * res[:, 0] + res[:, 1] * res[:, 1]),
+            _c(rec[:, 0] * rec[:, 0] + rec[:, 1] * rec[:, 1]), _c(weight))
+
+
+def pixels_per_metre_sq(prep: Prepared, points: np.ndarray) -> np.ndarray:
+    """``(f_s / z_s)²`` (m, k): each camera's (undistorted) pixels per metre across its ray
+    at each point, squared; ``f_s`` the mean of its focal lengths, ``z_s`` the point's depth
+    along its optical axis (NaN where the point is NaN)."""
+    out = np.empty((len(prep.cameras), len(points)))
+    for s, cam in enumerate(prep.cameras):
+        R = np.asarray(cam.R, dtype=np.float64)
+        z = (points[:, 0] - prep.centers[s, 0]) * R[2, 0] \
+            + (points[:, 1] - prep.centers[s, 1]) * R[2, 1] \
+            + (points[:, 2] - prep.centers[s, 2]) * R[2, 2]
+        f = 0.5 * (float(cam.K[0, 0]) + float(cam.K[1, 1]))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = f / z
+        out[s] = ratio * ratio
+    return out
 
 
 class SlotMotion(NamedTuple):
@@ -442,8 +520,9 @@ def _stacked(parts: list[np.ndarray]) -> np.ndarray:
 
 def motion_covariance(prep: Prepared, slot_rows: np.ndarray, jacobians: list[np.ndarray],
                       motion: list[SlotMotion], used: np.ndarray,
-                      noise_px: float | np.ndarray, compiled: bool = True
-                      ) -> dict[str, np.ndarray]:
+                      noise_px: float | np.ndarray, compiled: bool = True,
+                      breaks: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+                      ppm2: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """``nearest``'s covariance (quality columns): the point ``P`` is made from the slots'
     unshifted pixels ``u_s`` while the ball was at ``ū_s(t)``; to first order its error is
     ``Σ_s J_s (u_s - ū_s(t))``, and with ``ū_s(t)`` extrapolated from the slot's detection
@@ -459,6 +538,14 @@ def motion_covariance(prep: Prepared, slot_rows: np.ndarray, jacobians: list[np.
     (``L_sj`` the recorded-to-undistorted pixel Jacobian of detection ``sj``; a detection
     in two slots adds its weighted Jacobians first, :func:`covariance`; ``v₀``
     :data:`UNKNOWN_IMAGE_SPEED_PX_S` where the slot's camera has no previous detection).
+    With ``breaks`` (every detection's :func:`innovations` ``(ν², ν_r², c)``) and ``ppm2``
+    (:func:`pixels_per_metre_sq` (m, k)), a break of the image motion (a bounce, a kick)
+    that a used slot's newest detection shows (``ν_r² > KINK_GATE σ² c``, recorded pixels)
+    is taken as the ball's departure from the extrapolated path, in metres across that
+    camera's ray, ``κ² = max KINK_SHARE ν² (1 - KINK_GATE σ² c / ν_r²) / ppm2_a``
+    (undistorted pixels: its share beyond the noise), and every slot with a lag and a
+    velocity is off by that much in its image: ``+ Σ_s κ² ppm2_s J_s J_sᵀ``
+    (docs/methods.md, "nearest at bounces and kicks").
     ``slot_rows`` (k, m) the detections used (-1: none), ``jacobians`` (3, 2, k) per slot.
     ``compiled``: per point in one compiled pass (:func:`._stereo_kernel.motion_covariance`,
     the same operations: the same bits), else on numpy columns."""
@@ -480,7 +567,11 @@ def motion_covariance(prep: Prepared, slot_rows: np.ndarray, jacobians: list[np.
             np.zeros((4, 0)) if lens is None else lens,
             # noise_px ** 2 as numpy makes it (a column: its square; a float: Python's power)
             np.square(noise_px) if np.ndim(noise_px) else np.full(k, noise_px**2),
-            UNKNOWN_IMAGE_SPEED_PX_S, out)
+            UNKNOWN_IMAGE_SPEED_PX_S,
+            *((np.zeros(0), np.zeros(0), np.zeros(0), np.zeros((m, 0)))
+              if breaks is None or ppm2 is None
+              else (*breaks, _c(ppm2, dtype=np.float64))),
+            KINK_GATE, KINK_SHARE, out)
         return {"std_m": out[0], **{f"cov_{a}_m2": out[1 + i] for i, a in
                                     enumerate(("xx", "yy", "zz", "xy", "xz", "yz"))}}
     # no detection is in two slots of a point (a slot's are its camera's), so the weighted
@@ -509,18 +600,48 @@ def motion_covariance(prep: Prepared, slot_rows: np.ndarray, jacobians: list[np.
     cov = covariance(slot_rows, jacobians, factors, noise_px)
     # the unknown shift of a slot without image velocity, independent of every detection's
     # noise and of the other slots': Σ_s (v₀ L_s)² J_s J_sᵀ
+    # and the break of the image motion a used slot's newest or previous detection shows:
+    # κ² (m², across that camera's ray), the largest; each slot with a lag and a velocity
+    # off by κ² ppm2_s per axis in its image: Σ_s κ² ppm2_s J_s J_sᵀ
+    kink = _break_size(motion, used, noise_px, breaks, ppm2)
     unknown = np.zeros((6, k))
     first, second = np.array([0, 1, 2, 0, 0, 1]), np.array([0, 1, 2, 1, 2, 2])
     for s in range(m):
         blind = used[:, s] & (motion[s].rows[:, 1] < 0) & (motion[s].lag > 0)
-        if np.any(blind):
-            f2 = np.where(blind, (motion[s].lag * UNKNOWN_IMAGE_SPEED_PX_S) ** 2, 0.0)
+        kinked = used[:, s] & ~blind & (motion[s].lag > 0) & (kink > 0)
+        if np.any(blind | kinked):
+            with np.errstate(invalid="ignore"):
+                f2 = np.where(blind, (motion[s].lag * UNKNOWN_IMAGE_SPEED_PX_S) ** 2,
+                              np.where(kinked, kink * ppm2[s] if ppm2 is not None else 0.0,
+                                       0.0))
             J = jacobians[s]
             unknown += f2 * (J[first, 0] * J[second, 0] + J[first, 1] * J[second, 1])
     if np.any(unknown):
         cov = covariance_columns(np.stack([cov[f"cov_{a}_m2"] for a in
                                            ("xx", "yy", "zz", "xy", "xz", "yz")]) + unknown)
     return _with_motion(cov, jacobians, [d.shift + d.accel for d in motion], used)
+
+
+def _break_size(motion: list[SlotMotion], used: np.ndarray, noise_px: float | np.ndarray,
+                breaks: tuple[np.ndarray, np.ndarray, np.ndarray] | None,
+                ppm2: np.ndarray | None) -> np.ndarray:
+    """κ² (k,) of :func:`motion_covariance` (numpy form): the largest ``KINK_SHARE ν²
+    (1 - KINK_GATE σ² c / ν_r²) / ppm2_a`` over the used slots' newest detections whose
+    ``ν_r² > KINK_GATE σ² c`` (0: no break shown, or no ``breaks``)."""
+    k = used.shape[0]
+    kink = np.zeros(k)
+    if breaks is None or ppm2 is None:
+        return kink
+    nu2, nu2_rec, var = breaks
+    s2 = np.square(noise_px) if np.ndim(noise_px) else np.full(k, noise_px**2)
+    for a in range(used.shape[1]):
+        r = np.where(used[:, a], motion[a].rows[:, 0], -1)
+        rr = np.maximum(r, 0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            excess = nu2_rec[rr] - KINK_GATE * s2 * var[rr]
+            y = KINK_SHARE * (nu2[rr] * (excess / nu2_rec[rr])) / ppm2[a]
+            kink = np.where((r >= 0) & (excess > 0) & (y > kink), y, kink)
+    return kink
 
 
 def triangulate_groups(prep: Prepared, group: np.ndarray, n_groups: int,
@@ -596,9 +717,11 @@ def fuse_nearest(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
     if noise_px is None:
         points, quality, flags, _ = nview_points(prep, rows, None, compiled=compiled)
     else:
+        recorded = recorded_residuals(prep, max_gap_s)
         points, quality, flags, _ = nview_points(
-            prep, rows, detection_noise(prep, time_ns, max_gap_s, noise_px),
-            slot_motion(prep, rows, time_ns, max_gap_s, compiled), compiled)
+            prep, rows, detection_noise(prep, time_ns, max_gap_s, noise_px, recorded),
+            slot_motion(prep, rows, time_ns, max_gap_s, compiled), compiled,
+            innovations(prep, max_gap_s, recorded))
     made = (others >= 1) & (quality["n_detections"] >= 2)
     keep = made & (flags == 0) & np.all(np.isfinite(points), axis=1)
     track = Track("nearest", time_ns[keep], points[keep], camera[keep],

@@ -80,10 +80,14 @@ class StreamFuser:
         # camera's previous two detections, each within max_gap_s of the next (three times
         # max_gap_s back), and takes the detections' noise from the residuals of the
         # NOISE_WINDOW_S before the latest checkpoint (NOISE_EVERY_S apart), each residual
-        # from its camera's three previous detections (stereo.detection_noise).
+        # from its camera's three previous detections (stereo.detection_noise), and tests
+        # each slot's newest detection's residual from its camera's three previous ones for
+        # a break (stereo.innovations: four times max_gap_s back; within the noise's reach
+        # unless max_gap_s exceeds NOISE_EVERY_S + NOISE_WINDOW_S).
         reach_s = self._max_gap_s
         if method == "nearest":
-            reach_s = NOISE_EVERY_S + NOISE_WINDOW_S + 3 * self._max_gap_s
+            reach_s = max(NOISE_EVERY_S + NOISE_WINDOW_S + 3 * self._max_gap_s,
+                          4 * self._max_gap_s)
         self._history_ns = int((reach_s + self.options.tolerance_s) * NS) + 1
         self._settle_ns = 0 if self._immediate else int(self.options.tolerance_s * NS)
         self._F = fundamental_matrices(rig.cameras)
