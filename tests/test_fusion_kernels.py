@@ -214,3 +214,26 @@ def test_view_flags_are_the_matrix_products_flags(prep):
     expected = _view_flags_numpy(prep, points, used)
     assert np.count_nonzero(expected & 2) > 1000 and np.count_nonzero(expected & 1) > 1000
     assert_array_equal(flags, expected)
+
+
+def test_ray_depths_rows_are_ray_depths():
+    # every depth to the last bit, most of them about 0 (points in the plane through a
+    # camera's centre across its ray: the sign is what nview_points keeps), NaN rows too
+    from pslog.fusion._prepare_kernel import ray_depths_rows
+    from pslog.geometry import ray_depths
+
+    rng = np.random.default_rng(6)
+    k, m = 20_000, 3
+    centers = rng.normal(size=(m, 3)) * 5
+    dirs = rng.normal(size=(k, m, 3))
+    dirs /= np.linalg.norm(dirs, axis=2, keepdims=True)
+    dirs[::101, 1] = np.nan
+    points = rng.normal(size=(k, 3)) * 4
+    points[1::2] = centers[0] + np.cross(dirs[1::2, 0], rng.normal(size=(k // 2, 3)))
+    points[::97] = np.nan
+    out = np.empty((k, m))
+    ray_depths_rows(points, centers, dirs, out)
+    expected = ray_depths(points, np.broadcast_to(centers, (k, m, 3)), dirs)
+    assert np.count_nonzero(np.abs(expected[:, 0]) < 1e-14) > k // 4
+    assert_array_equal(out, expected)
+    assert_array_equal(out > 0, expected > 0)

@@ -303,3 +303,19 @@ def view_flags(points, used, finite, cams, boxes, behind_bit, outside_bit, flags
                     & (v <= boxes[c, 3])):
                 bits |= outside_bit
         flags[p] |= bits
+
+
+@kernel
+def ray_depths_rows(points, centers, dirs, out):
+    """:func:`pslog.geometry.ray_depths` of points (k, 3) along the rays (k, m, 3) from the
+    cameras' centres (m, 3) (the origins broadcast over the points), operation for
+    operation (the same bits): ``(p - o) · d / d · d``, each dot product summed as numpy's
+    einsum sums three terms (first, last, then middle). ``out`` (k, m) written."""
+    k, m = dirs.shape[0], dirs.shape[1]
+    for p in range(k):
+        for c in range(m):
+            o0 = points[p, 0] - centers[c, 0]
+            o1 = points[p, 1] - centers[c, 1]
+            o2 = points[p, 2] - centers[c, 2]
+            d0, d1, d2 = dirs[p, c, 0], dirs[p, c, 1], dirs[p, c, 2]
+            out[p, c] = ((o0 * d0 + o2 * d2) + o1 * d1) / ((d0 * d0 + d2 * d2) + d1 * d1)
