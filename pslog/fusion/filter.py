@@ -109,6 +109,7 @@ from __future__ import annotations
 
 import functools
 import math
+import sys
 from dataclasses import dataclass
 
 import numpy as np
@@ -1289,6 +1290,10 @@ def _push(S, I, cams, O, N, t, cam, u, v, out):
     return _POINT
 
 
+#: :func:`_lengths` takes the lengths where this interpreter's ``math.hypot`` is the one
+#: :func:`_py_hypot` repeats (CPython 3.11's; 3.12 changed its arithmetic), else
+#: ``math.hypot`` itself takes them
+_HYPOT_COMPILED = sys.implementation.name == "cpython" and sys.version_info[:2] == (3, 11)
 #: Veltkamp's splitting constant, 2**27 + 1: ``x * _SPLIT`` splits a double into two halves
 #: of 26 bits whose products are exact
 _SPLIT = 134217729.0
@@ -2475,7 +2480,16 @@ def _track(flt: BallFilter, time_ns, camera, uv) -> Track:
     q[0:4] = rows[:, 3:7].T
     # lengths as CPython's math.hypot takes them, as the pure-Python filter did; a start's
     # residual as its fit gave it
-    _lengths(rows, q)
+    if _HYPOT_COMPILED:
+        _lengths(rows, q)
+    else:  # another CPython's hypot (the kernel repeats 3.11's): its own, mapped
+        hypot = math.hypot
+        q[4] = np.fromiter(map(hypot, rows[:, 7].tolist(), rows[:, 8].tolist()), np.float64,
+                           n_out)
+        q[5] = np.fromiter(map(hypot, rows[:, 9].tolist(), rows[:, 10].tolist()), np.float64,
+                           n_out)
+        init = rows[:, 15] == 1.0
+        q[5, init] = rows[init, 9]
     q[6:] = rows[:, 11:16].T
     time, position = times[index], np.ascontiguousarray(rows[:, :3])
     cams = cameras[index].astype(np.int32)
