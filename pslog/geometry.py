@@ -294,14 +294,25 @@ def triangulate_rays(
     return points, rms_miss, n_rays
 
 
-def _solve_rays(A: np.ndarray, rhs: np.ndarray, n_rays: np.ndarray) -> np.ndarray:
+def _solve_rays(A: np.ndarray, rhs: np.ndarray, n_rays: np.ndarray,
+                overwrite: bool = False) -> np.ndarray:
     """Points (n, 3) solving ``A p = rhs`` (n, 3, 3) where two rays or more and ``A`` is not
-    singular (parallel rays); NaN elsewhere."""
+    singular (parallel rays); NaN elsewhere. ``overwrite``: ``A`` may be written (the
+    caller drops it)."""
     det = np.linalg.det(A)
     ok = (n_rays >= 2) & (np.abs(det) > 1e-12)
-    points = np.full((len(A), 3), np.nan)
-    if np.any(ok):
-        points[ok] = np.linalg.solve(A[ok], rhs[ok][..., None])[..., 0]
+    if not np.any(ok):
+        return np.full((len(A), 3), np.nan)
+    # every row solved at once, the others' matrices replaced by the identity (in a copy
+    # unless ``overwrite``) rather than the ok rows gathered and scattered back (a match's
+    # points have a row or two without a point); each matrix is solved on its own: the
+    # ok rows' bits are those of solving them alone
+    bad = ~ok
+    if np.any(bad):
+        A = A if overwrite else A.copy()
+        A[bad] = np.eye(3)
+    points = np.linalg.solve(A, rhs[..., None])[..., 0]
+    points[bad] = np.nan
     return points
 
 

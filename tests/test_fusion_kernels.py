@@ -166,3 +166,74 @@ def test_rig_geometry_checked_once_and_refused_every_time():
     for _ in range(2):
         with pytest.raises(RigError, match="same centre"):
             _checked_geometry(bad)
+
+
+def _view_flags_numpy(prep, points, used):
+    """invalid_points' numpy form (the matrix products of each camera's points, as it was
+    before its compiled pass): the reference of the compiled flags."""
+    from pslog.fusion._prepare import BEHIND, OUTSIDE_VIEW, finite_rows
+
+    flags = np.zeros(len(points), dtype=np.int64)
+    finite = finite_rows(points)
+    for c, cam in enumerate(prep.cameras):
+        rows = np.flatnonzero(used[:, c] & finite)
+        in_cam = np.take(points, rows, axis=0) @ cam.R.T + cam.t
+        z = in_cam[:, 2]
+        behind = z <= 1e-9
+        with np.errstate(divide="ignore", invalid="ignore"):
+            uv = (in_cam[:, :2] / z[:, None]) @ cam.K[:2, :2].T + cam.K[:2, 2]
+        box = prep.view_box[c]
+        outside = ~behind & ~((uv[:, 0] >= box[0]) & (uv[:, 0] <= box[2])
+                              & (uv[:, 1] >= box[1]) & (uv[:, 1] <= box[3]))
+        flags[rows] |= behind * BEHIND | outside * OUTSIDE_VIEW
+    return flags
+
+
+def test_view_flags_are_the_matrix_products_flags(prep):
+    # points on the edges of each camera's view box (to the last bit: a product rounded
+    # otherwise than numpy's matmul moves some across), behind it, NaN, at random
+    from pslog.fusion._prepare import invalid_points
+
+    rng = np.random.default_rng(5)
+    k, m = 30_000, len(prep.cameras)
+    parts = [rng.normal(size=(k, 3)) * 3]
+    for c, cam in enumerate(prep.cameras):
+        box = prep.view_box[c]
+        u = rng.choice([box[0], box[2]], k)
+        v = rng.uniform(box[1], box[3], k)
+        u[: k // 2], v[: k // 2] = rng.uniform(box[0], box[2], k // 2), rng.choice(
+            [box[1], box[3]], k // 2)
+        z = rng.uniform(0.5, 30.0, k) * rng.choice([1.0, 1.0, 1.0, -1.0], k)
+        x = (u - cam.K[0, 2] - cam.K[0, 1] * (v - cam.K[1, 2]) / cam.K[1, 1]) / cam.K[0, 0]
+        y = (v - cam.K[1, 2]) / cam.K[1, 1]
+        parts.append((np.column_stack([x * z, y * z, z]) - cam.t) @ cam.R)
+    points = np.ascontiguousarray(np.concatenate(parts))
+    points[::97] = np.nan
+    used = rng.random((len(points), m)) < 0.7
+    flags = invalid_points(prep, points, used)
+    expected = _view_flags_numpy(prep, points, used)
+    assert np.count_nonzero(expected & 2) > 1000 and np.count_nonzero(expected & 1) > 1000
+    assert_array_equal(flags, expected)
+
+
+def test_ray_depths_rows_are_ray_depths():
+    # every depth to the last bit, most of them about 0 (points in the plane through a
+    # camera's centre across its ray: the sign is what nview_points keeps), NaN rows too
+    from pslog.fusion._prepare_kernel import ray_depths_rows
+    from pslog.geometry import ray_depths
+
+    rng = np.random.default_rng(6)
+    k, m = 20_000, 3
+    centers = rng.normal(size=(m, 3)) * 5
+    dirs = rng.normal(size=(k, m, 3))
+    dirs /= np.linalg.norm(dirs, axis=2, keepdims=True)
+    dirs[::101, 1] = np.nan
+    points = rng.normal(size=(k, 3)) * 4
+    points[1::2] = centers[0] + np.cross(dirs[1::2, 0], rng.normal(size=(k // 2, 3)))
+    points[::97] = np.nan
+    out = np.empty((k, m))
+    ray_depths_rows(points, centers, dirs, out)
+    expected = ray_depths(points, np.broadcast_to(centers, (k, m, 3)), dirs)
+    assert np.count_nonzero(np.abs(expected[:, 0]) < 1e-14) > k // 4
+    assert_array_equal(out, expected)
+    assert_array_equal(out > 0, expected > 0)

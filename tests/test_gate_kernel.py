@@ -424,3 +424,26 @@ print("numba" in sys.modules, "pslog.fusion._gate_kernel" in sys.modules)
         done = subprocess.run([sys.executable, "-c", code, str(limit)], capture_output=True,
                               text=True, check=True)
         assert done.stdout.split() == loaded.split(), (limit, done.stdout, done.stderr)
+
+
+def test_lags_kernel_is_the_numpy_form():
+    # each camera's distance to the nearer of the latest frame and the next one looked at
+    # (the frame before them not counted; -1: none), ties, cameras with no frame, gaps of
+    # seconds and of one nanosecond
+    rng = np.random.default_rng(9)
+    n, m = 5_000, 4
+    t = np.sort(rng.integers(0, 10**10, n))
+    tables = []
+    used = np.full((n, m, 3), -1, dtype=np.int64)
+    for b in range(m):
+        times = np.zeros(0, np.int64) if b == 2 else np.sort(rng.integers(0, 10**10, 400))
+        tables.append((times, None))
+        if len(times):
+            used[:, b] = rng.integers(-1, len(times), (n, 3))
+    used[::7, 1, 1] = used[::7, 1, 2]  # ties
+    tables[3] = (tables[3][0].copy(), None)
+    tables[3][0][:] = t[rng.integers(0, n, 400)] + rng.integers(-1, 2, 400)
+    expected = gating._lags(t, tables, used)
+    got = gating._lags(t, tables, used, compiled=True)
+    assert np.isinf(expected[:, 2]).all() and np.isinf(expected).sum() < n * m
+    assert_array_equal(got, expected)

@@ -471,6 +471,24 @@ def static_camera(times, table, points, uv, finite, paired, dz, lags, long_lags,
                 static[r] = True
 
 
+@kernel
+def lags_camera(t, times, used, b, ns, out):
+    """:func:`pslog.fusion.gating._lags`' column of camera ``b`` (the same values): for
+    candidates at ``t`` (n,) ns, the distance to the nearer of the frames ``used[:, b, 1]``
+    and ``used[:, b, 2]`` of b's frame times ``times`` (-1: none), integer nanoseconds
+    divided once by ``ns``, into ``out[:, b]``; left as it is (inf) without one."""
+    big = np.iinfo(np.int64).max
+    for i in range(t.shape[0]):
+        best = big
+        for slot in range(1, 3):
+            j = used[i, b, slot]
+            gap = abs(t[i] - times[max(j, 0)])
+            if j >= 0 and gap < best:
+                best = gap
+        if best < big:
+            out[i, b] = best / ns
+
+
 def _preload() -> None:
     """:func:`points_all` loaded from numba's cache (or compiled) now, in the signature of
     gating._points' call (int32 cameras, C-contiguous float64 rows): called by
@@ -484,6 +502,9 @@ def _preload() -> None:
                 np.zeros((0, 3)), np.zeros(1, dtype=np.int64), np.zeros((1, 1), dtype=np.int64),
                 True, True, 0, 0, 1.0, 1.0, 1.0, np.zeros((1, 1)), np.zeros((1, 1, 2)),
                 np.zeros((1, 1, 3), dtype=np.int64))
+    # (and lags_camera, in the signature of gating._lags' call)
+    lags_camera(np.zeros(0, dtype=np.int64), np.zeros(1, dtype=np.int64),
+                np.zeros((0, 1, 3), dtype=np.int64), 0, 1, np.zeros((0, 1)))
     # (and static_camera, in the signature of gating._static's call)
     static_camera(np.zeros(1, dtype=np.int64), np.zeros((1, 1), dtype=np.int64),
                   np.zeros((1, 3)), np.zeros((1, 2)), np.zeros(1, dtype=np.bool_),

@@ -10,7 +10,7 @@ from typing import cast
 import numpy as np
 
 from ..errors import FusionError
-from ..geometry import fundamental_matrices
+from ..geometry import _FEW, fundamental_matrices
 from ..records import NS, Observations
 from ..rig import Rig, check_baselines
 
@@ -394,6 +394,25 @@ def invalid_points(prep: Prepared, points: np.ndarray, used: np.ndarray,
     k, m = used.shape
     flags = np.zeros(k, dtype=np.int64)
     finite = finite_rows(points) if finite is None else finite
+    mine = used & finite[:, None]
+    counts = np.count_nonzero(mine, axis=0)
+    if (k >= _FEW and points.flags.c_contiguous and points.dtype == np.float64
+            and np.all((counts == 0) | (counts >= 2))):
+        # one compiled pass (_prepare_kernel.view_flags: the numpy below, its matrix
+        # products' bits as OpenBLAS makes them of two rows or more of contiguous points;
+        # a camera with one point goes the numpy way, whose product of one row takes
+        # another path)
+        from . import _prepare_kernel
+
+        cams = np.array([np.concatenate([np.ravel(c.R), np.ravel(c.t), np.ravel(c.K[:2, :2])])
+                         for c in prep.cameras], dtype=np.float64).reshape(m, 16)
+        boxes = np.column_stack([np.asarray(prep.view_box, dtype=np.float64).reshape(m, 4),
+                                 [c.K[0, 2] for c in prep.cameras],
+                                 [c.K[1, 2] for c in prep.cameras]])
+        _prepare_kernel.view_flags(points, np.ascontiguousarray(used, dtype=np.bool_),
+                                   np.ascontiguousarray(finite, dtype=np.bool_), cams,
+                                   np.ascontiguousarray(boxes), BEHIND, OUTSIDE_VIEW, flags)
+        return flags
     for c in range(m):
         mine = used[:, c] & finite
         n_mine = np.count_nonzero(mine)

@@ -265,3 +265,72 @@ def ray_pixel_jacobian(points, origin, direction, used, turn, inverse, out):
             out[0, q, p] = -((i00 * n0 + i01 * n1) + i02 * n2)
             out[1, q, p] = -((i01 * n0 + i11 * n1) + i12 * n2)
             out[2, q, p] = -((i02 * n0 + i12 * n1) + i22 * n2)
+
+
+@kernel(contract=True)
+def view_flags(points, used, finite, cams, boxes, behind_bit, outside_bit, flags):
+    """:func:`pslog.fusion._prepare.invalid_points`' flags in one pass, its numpy operations
+    repeated operation for operation (the same bits): ``in_cam = points @ Rᵀ + t`` and the
+    projection ``(x / z, y / z) @ K[:2, :2]ᵀ + K[:2, 2]`` of each camera c a point used,
+    each product's entry summed as numpy's matmul gets it from OpenBLAS for these shapes
+    (two rows or more): the terms in order from 0, each a fused multiply-add
+    (``contract``: where the CPU has none, neither has the BLAS kernel), then the
+    addition. ``points`` (k, 3), ``used`` (k, m) bool, ``finite`` (k,) bool, ``cams``
+    (m, 16): R row-major (9), t (3), K[0, 0], K[0, 1], K[1, 0], K[1, 1]; ``boxes`` (m, 4)
+    the view boxes with K[0, 2], K[1, 2] after them (m, 6); ``flags`` (k,) int64, or-ed."""
+    k, m = used.shape[0], used.shape[1]
+    for p in range(k):
+        if not finite[p]:
+            continue
+        p0, p1, p2 = points[p, 0], points[p, 1], points[p, 2]
+        bits = 0
+        for c in range(m):
+            if not used[p, c]:
+                continue
+            acc = 0.0
+            acc = acc + p0 * cams[c, 0]
+            acc = acc + p1 * cams[c, 1]
+            acc = acc + p2 * cams[c, 2]
+            x = acc + cams[c, 9]
+            acc = 0.0
+            acc = acc + p0 * cams[c, 3]
+            acc = acc + p1 * cams[c, 4]
+            acc = acc + p2 * cams[c, 5]
+            y = acc + cams[c, 10]
+            acc = 0.0
+            acc = acc + p0 * cams[c, 6]
+            acc = acc + p1 * cams[c, 7]
+            acc = acc + p2 * cams[c, 8]
+            z = acc + cams[c, 11]
+            if z <= 1e-9:
+                bits |= behind_bit
+                continue
+            nx, ny = x / z, y / z
+            acc = 0.0
+            acc = acc + nx * cams[c, 12]
+            acc = acc + ny * cams[c, 13]
+            u = acc + boxes[c, 4]
+            acc = 0.0
+            acc = acc + nx * cams[c, 14]
+            acc = acc + ny * cams[c, 15]
+            v = acc + boxes[c, 5]
+            if not ((u >= boxes[c, 0]) & (u <= boxes[c, 2]) & (v >= boxes[c, 1])
+                    & (v <= boxes[c, 3])):
+                bits |= outside_bit
+        flags[p] |= bits
+
+
+@kernel
+def ray_depths_rows(points, centers, dirs, out):
+    """:func:`pslog.geometry.ray_depths` of points (k, 3) along the rays (k, m, 3) from the
+    cameras' centres (m, 3) (the origins broadcast over the points), operation for
+    operation (the same bits): ``(p - o) · d / d · d``, each dot product summed as numpy's
+    einsum sums three terms (first, last, then middle). ``out`` (k, m) written."""
+    k, m = dirs.shape[0], dirs.shape[1]
+    for p in range(k):
+        for c in range(m):
+            o0 = points[p, 0] - centers[c, 0]
+            o1 = points[p, 1] - centers[c, 1]
+            o2 = points[p, 2] - centers[c, 2]
+            d0, d1, d2 = dirs[p, c, 0], dirs[p, c, 1], dirs[p, c, 2]
+            out[p, c] = ((o0 * d0 + o2 * d2) + o1 * d1) / ((d0 * d0 + d2 * d2) + d1 * d1)

@@ -109,6 +109,7 @@ from __future__ import annotations
 
 import functools
 import math
+import sys
 from dataclasses import dataclass
 
 import numpy as np
@@ -413,8 +414,9 @@ _NMAXGAP, _NSPAN, _NINITWIN, _NINITDET, _NMAXREJ, _NWCAP = range(6)
 #: p2, distorted, far
 _CAM_COLS = 24
 #: one output row: position (3), std_m (4), innovation (y0, y1), residual (u, v): their
-#: lengths are taken by ``math.hypot`` in Python, as the pure-Python filter did (numba's
-#: hypot is libm's, not CPython's correctly rounded one), nis, gap_s, jump, rejected, init
+#: lengths are CPython's ``math.hypot``'s, as the pure-Python filter took them (numba's
+#: hypot is libm's, which differs in the last bit now and then: :func:`_py_hypot` repeats
+#: CPython's), nis, gap_s, jump, rejected, init
 _OUT_COLS = 16
 #: step results: no point; a point in ``out``; a window fit needed (Python), without or
 #: with a point in ``out`` for when it finds no start
@@ -1286,6 +1288,89 @@ def _push(S, I, cams, O, N, t, cam, u, v, out):
     _point(out, xo0, xo1, xo2, v0, v1, v2, inn[0], inn[1], u - pu, v - pv, nis, gap_s, jump,
            0.0, 0.0)
     return _POINT
+
+
+#: :func:`_lengths` takes the lengths where this interpreter's ``math.hypot`` is the one
+#: :func:`_py_hypot` repeats (CPython 3.11's; 3.12 changed its arithmetic), else
+#: ``math.hypot`` itself takes them
+_HYPOT_COMPILED = sys.implementation.name == "cpython" and sys.version_info[:2] == (3, 11)
+#: Veltkamp's splitting constant, 2**27 + 1: ``x * _SPLIT`` splits a double into two halves
+#: of 26 bits whose products are exact
+_SPLIT = 134217729.0
+
+
+@kernel(inline=True)
+def _py_hypot(x, y):
+    """CPython 3.11's ``math.hypot(x, y)``, bit for bit (``vector_norm`` of
+    Modules/mathmodule.c for two coordinates): the squares summed without loss (each
+    coordinate scaled by a power of two below 1, split in halves whose products are exact,
+    the sums' rounding errors kept in three registers), a square root, then one Newton step
+    taken in the same arithmetic; coordinates whose larger one is below 2**-1024 are
+    divided by it instead. Inf wins over NaN, as in CPython. (tests/test_filter_lengths.py
+    compares it with ``math.hypot`` on random and edge inputs.)"""
+    a, b = abs(x), abs(y)
+    big = a if a > b else b  # (NaN never taken: inf wins over it below)
+    if math.isinf(a) or math.isinf(b):
+        return math.inf
+    if math.isnan(a) or math.isnan(b):
+        return math.nan
+    if big == 0.0:
+        return big
+    e = math.frexp(big)[1]
+    if e < -1023:  # 2**e would overflow: CPython divides by the larger instead
+        total, low = 1.0, 0.0
+        for c in (a, b):
+            q = c / big
+            q = q * q
+            was = total
+            total += q
+            low += (was - total) + q
+        return big * math.sqrt(total - 1.0 + low)
+    scale = math.ldexp(1.0, -e)
+    total, low1, low2, low3 = 1.0, 0.0, 0.0, 0.0
+    for c in (a, b):
+        q = c * scale  # (exact: a power of two)
+        t = q * _SPLIT
+        hi = t - (t - q)
+        lo = q - hi
+        q = hi * hi
+        was = total
+        total += q
+        low1 += (was - total) + q
+        q = 2.0 * hi * lo
+        was = total
+        total += q
+        low2 += (was - total) + q
+        low3 += lo * lo
+    h = math.sqrt(total - 1.0 + (low1 + low2 + low3))
+    t = h * _SPLIT
+    hi = t - (t - h)
+    lo = h - hi
+    q = -hi * hi
+    was = total
+    total += q
+    low1 += (was - total) + q
+    q = -2.0 * hi * lo
+    was = total
+    total += q
+    low2 += (was - total) + q
+    q = -lo * lo
+    was = total
+    total += q
+    low3 += (was - total) + q
+    q = total - 1.0 + (low1 + low2 + low3)
+    return (h + q / (2.0 * h)) / scale
+
+
+@kernel
+def _lengths(rows, q):
+    """The filter's length columns of its output ``rows`` (n, _OUT_COLS) into ``q``
+    (FILTER_QUALITY rows, n): ``innovation_px`` the innovation's and ``residual_px`` the
+    residual's length, by :func:`_py_hypot` (CPython's ``math.hypot``, as the pure-Python
+    filter took them), a start's residual as its fit gave it."""
+    for i in range(rows.shape[0]):
+        q[4, i] = _py_hypot(rows[i, 7], rows[i, 8])
+        q[5, i] = rows[i, 9] if rows[i, 15] == 1.0 else _py_hypot(rows[i, 9], rows[i, 10])
 
 
 @kernel
@@ -2393,15 +2478,18 @@ def _track(flt: BallFilter, time_ns, camera, uv) -> Track:
     # it (made here as Track's checks would leave it: no check, no copy)
     q = np.empty((len(FILTER_QUALITY), n_out))
     q[0:4] = rows[:, 3:7].T
-    # lengths by CPython's math.hypot, as the pure-Python filter took them (numba's hypot
-    # is libm's, which differs in the last bit now and then)
-    hypot = math.hypot
-    q[4] = np.fromiter(map(hypot, rows[:, 7].tolist(), rows[:, 8].tolist()), np.float64,
-                       n_out)
-    q[5] = np.fromiter(map(hypot, rows[:, 9].tolist(), rows[:, 10].tolist()), np.float64,
-                       n_out)
-    init = rows[:, 15] == 1.0
-    q[5, init] = rows[init, 9]  # a start's residual, as its fit gave it
+    # lengths as CPython's math.hypot takes them, as the pure-Python filter did; a start's
+    # residual as its fit gave it
+    if _HYPOT_COMPILED:
+        _lengths(rows, q)
+    else:  # another CPython's hypot (the kernel repeats 3.11's): its own, mapped
+        hypot = math.hypot
+        q[4] = np.fromiter(map(hypot, rows[:, 7].tolist(), rows[:, 8].tolist()), np.float64,
+                           n_out)
+        q[5] = np.fromiter(map(hypot, rows[:, 9].tolist(), rows[:, 10].tolist()), np.float64,
+                           n_out)
+        init = rows[:, 15] == 1.0
+        q[5, init] = rows[init, 9]
     q[6:] = rows[:, 11:16].T
     time, position = times[index], np.ascontiguousarray(rows[:, :3])
     cams = cameras[index].astype(np.int32)

@@ -1169,15 +1169,24 @@ def _age(ratio_row, lag_row) -> float:
     return support[0] if len(support) == 1 else 0.0
 
 
-def _lags(t: np.ndarray, tables, used: np.ndarray) -> np.ndarray:
+def _lags(t: np.ndarray, tables, used: np.ndarray, compiled: bool = False) -> np.ndarray:
     """(n, m) s: for candidates at times ``t`` (n,) ns, the distance in time to the nearest
     frame of each camera that :func:`_support` looked at (``used`` (n, m, 3): the frame
     before, the latest at or before, the first after; -1 none), inf without one; exact
-    integer nanoseconds divided once, as :meth:`StreamGate._support` does."""
+    integer nanoseconds divided once, as :meth:`StreamGate._support` does. ``compiled``:
+    each camera's column by :func:`pslog.fusion._gate_kernel.lags_camera` (the same
+    values, one pass)."""
     n, m = used.shape[:2]
     out = np.full((n, m), np.inf)
     for b, (times, _) in enumerate(tables):
         if len(times) == 0:
+            continue
+        if compiled:
+            from ._gate_kernel import lags_camera
+
+            lags_camera(np.ascontiguousarray(t, dtype=np.int64),
+                        np.ascontiguousarray(times, dtype=np.int64),
+                        np.ascontiguousarray(used, dtype=np.int64), b, NS, out)
             continue
         best = np.full(n, np.iinfo(np.int64).max)
         for slot in (1, 2):
@@ -1416,7 +1425,7 @@ def _decided(c: _Candidates, rig: Rig, options: GatingOptions, causal: bool, wai
     ends = np.r_[starts[1:], n]
     order = np.lexsort((c.camera[starts], c.time_ns[starts]))
     _decide_in_order(c, rig, options, (starts, ends, order), tables, F,
-                     (ratio, carried, used, _lags(c.time_ns, tables, used)),
+                     (ratio, carried, used, _lags(c.time_ns, tables, used, compiled)),
                      (points, in_front), (static, stillness, lone), reason,
                      causal, wait_ns, max_gap_ns, constants)
     return ratio

@@ -131,7 +131,14 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | np.ndarray 
     finite = finite_rows(points)
     flags = invalid_points(prep, points, used, finite)
     with np.errstate(invalid="ignore"):
-        depth = ray_depths(points, origins, dirs)  # the ray parameters: > 0 in front
+        if compiled:  # (the same bits, one pass: _prepare_kernel.ray_depths_rows)
+            from . import _prepare_kernel
+
+            depth = np.empty((k, m))
+            _prepare_kernel.ray_depths_rows(points, _c(prep.centers, dtype=np.float64),
+                                            dirs, depth)
+        else:
+            depth = ray_depths(points, origins, dirs)  # the ray parameters: > 0 in front
         behind = used[:, 0] & ~(depth[:, 0] > 0)
         for c in range(1, m):
             behind |= used[:, c] & ~(depth[:, c] > 0)
@@ -205,7 +212,7 @@ def _nview_compiled(prep: Prepared, rows: np.ndarray):
     _stereo_kernel.nview_normal(rows, uv, _c(prep._cols("K_inv").T),
                                 _c(prep._cols("R").T), centers, dirs, A,
                                 rhs, n_rays)
-    points = _solve_rays(A, rhs, n_rays)
+    points = _solve_rays(A, rhs, n_rays, overwrite=True)
     del A, rhs
     cam = np.array([np.concatenate([np.ravel(c.K), np.ravel(c.R), np.ravel(c.t),
                                     np.ravel(c.dist)]) for c in prep.cameras],
