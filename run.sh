@@ -58,10 +58,12 @@ case "${1:-}" in
         # (best effort: a read-only checkout compiles in memory as before)
         "$VENV/bin/python" -m compileall -q pslog recorders viewers >/dev/null 2>&1 || true
         warmed  # before the tests, which would compile what warm has not yet
-        # two test processes (pytest-xdist), each running whole test files (--dist loadfile:
-        # a module's shared fixture, e.g. a Ray cluster or a live run, is built once);
+        # three test processes (pytest-xdist), each running whole test files (--dist
+        # loadfile: a module's shared fixture, e.g. a Ray cluster or a live run, is built
+        # once); three on two cores: much of the suite waits (real-time recordings and live
+        # runs, signals, Ray's start-ups), and a third process fills those waits;
         # PSLOG_TEST_PROCESSES=0 runs the suite in this process alone
-        exec "$VENV/bin/python" -m pytest -n "${PSLOG_TEST_PROCESSES:-2}" --dist loadfile \
+        exec "$VENV/bin/python" -m pytest -n "${PSLOG_TEST_PROCESSES:-3}" --dist loadfile \
             --no-loadscope-reorder "$@"
         ;;
     *)

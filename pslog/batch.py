@@ -47,6 +47,12 @@ DONE_NAME = "done.json"
 #: the folder (in a session's result folder) where a task makes its new outputs; they
 #: replace the old ones only when every one is complete
 STAGING_NAME = ".pslog-batch-new"
+#: the staging folder once complete (its new ``done.json`` inside), renamed in one step: the
+#: commit point of a session's install. From then on the new set is the session's, and
+#: whoever finds this folder finishes moving it into place (:func:`settle`)
+READY_NAME = ".pslog-batch-ready"
+#: in the staging/ready folder: the old outputs (of steps not run now) to remove on install
+STALE_NAME = "stale.json"
 SUMMARY_NAMES = ("summary.csv", "summary.parquet")
 #: the summary's leading columns; per-method, per-camera columns follow
 BASE_COLUMNS = ("session", "status", "error", "cameras", "duration_s", "frames", "detections",
@@ -229,6 +235,7 @@ def plan_batch(jobs: list[Job], settings: Settings, outdir: str | Path, *, resum
     key = settings.key()
     conflicts: list[str] = []
     for job in jobs:
+        settle(job)  # an install an interrupted batch committed: finished, then judged
         marker = read_marker(job) if resume else None
         if marker is not None and marker.get("settings") != key and not force:
             raise OutputExistsError(
@@ -309,8 +316,9 @@ def run_session(job: Job, settings: Settings) -> dict:
     The task of :func:`run_batch`, a pure function of the session file and the settings to
     the files below ``job.outdir``. The commands write into the staging folder
     :data:`STAGING_NAME`; only when every step is done do the new outputs replace the old
-    ones (``done.json`` removed first, written last), so an interrupted session keeps its
-    old, complete set and is never taken for a complete new one. A session that fails
+    ones, in one step (:func:`_install`), so a session interrupted at any point keeps its
+    old, complete set with its old ``done.json``, or has the new complete set with the new
+    one. A session that fails
     keeps none of its old outputs (its failed row says so). Every error becomes the row's
     ``status`` ``failed`` and ``error`` (the command's one-line message); nothing raises.
 
@@ -324,8 +332,10 @@ def run_session(job: Job, settings: Settings) -> dict:
     try:
         return _run_staged(job, settings, staging, start)
     finally:
-        # whatever happened (an error, Ctrl-C in this process): no staged file stays
-        shutil.rmtree(staging, ignore_errors=True)
+        # whatever happened (an error, Ctrl-C in this process): no staged file stays, and
+        # an install past its commit point is finished
+        with contextlib.suppress(OSError, ValueError):
+            settle(job)
         _remove_empty(_result_folders(job))  # no empty folders left for it
 
 
@@ -347,9 +357,9 @@ def _run_staged(job: Job, settings: Settings, staging: Path, start: float) -> di
             raise StepFailed(f"pslog batch: error: {job.path}: {os_reason(exc)}") from None
         try:
             outdir.mkdir(parents=True, exist_ok=True)
+            settle(job)  # an earlier task's install cut short: finished first
             # the new outputs are made in a staging folder and replace the old ones only
             # when all are complete (_install): an interrupted run keeps the old set
-            shutil.rmtree(staging, ignore_errors=True)  # an interrupted run's
             staging.mkdir()
         except OSError as exc:
             from pslog.outputs import os_reason
@@ -425,6 +435,8 @@ def _old_outputs(job: Job, settings: Settings) -> list[Path]:
 
 def _discard(job: Job, settings: Settings) -> None:
     outputs = _old_outputs(job, settings)
+    # a committed install that could not be finished: not installed by a later settle()
+    shutil.rmtree(Path(job.outdir) / READY_NAME, ignore_errors=True)
     with contextlib.suppress(OSError):
         (Path(job.outdir) / DONE_NAME).unlink(missing_ok=True)
     for path in outputs:
@@ -432,19 +444,78 @@ def _discard(job: Job, settings: Settings) -> None:
             path.unlink(missing_ok=True)
 
 
+#: test hook: called with a word naming each step boundary of an install (:func:`_install`,
+#: :func:`_finish_install`), where an interrupt could cut it
+_install_step: Callable[[str], None] | None = None
+
+
+def _step(name: str) -> None:
+    if _install_step is not None:
+        _install_step(name)
+
+
 def _install(job: Job, settings: Settings, staging: Path, marker: dict) -> None:
-    """Every staged output (all complete) replaces the old one: ``done.json`` goes first,
-    the staged files are renamed into place, an old output of a step not run now is
-    removed, and the new ``done.json`` is written last."""
+    """Every staged output (all complete) replaces the old ones, as one step: the new
+    ``done.json`` and the list of old outputs to remove (of steps not run now) are written
+    into ``staging``, which is then renamed to :data:`READY_NAME` — the commit point — and
+    :func:`_finish_install` moves its files into place. Cut short before the rename, the
+    old outputs are untouched (with their ``done.json``); after it, whoever settles the
+    folder next (this task's end, the batch after an interrupt, the next batch) finishes
+    the install, and until then no ``done.json`` names a mix of old and new outputs."""
     outdir = Path(job.outdir)
     keep = {OUTPUT_NAMES[s] for s in settings.steps}
-    stale = [p for p in _old_outputs(job, settings) if p.name not in keep]
+    stale = [p.name for p in _old_outputs(job, settings) if p.name not in keep]
+    _write_json(staging / STALE_NAME, stale)
+    _write_json(staging / DONE_NAME, marker)
+    _step("staged")
+    shutil.rmtree(outdir / READY_NAME, ignore_errors=True)  # settled before: never committed
+    os.rename(staging, outdir / READY_NAME)
+    _step("committed")
+    _finish_install(outdir)
+
+
+def _finish_install(outdir: Path) -> None:
+    """Move a committed install (the :data:`READY_NAME` folder) into place: the old
+    ``done.json`` removed first, then the new outputs renamed over the old ones, the stale
+    old outputs removed, the new ``done.json`` moved last and the folder removed. Each
+    step can be cut short and done again (a file already moved is not there any more)."""
+    ready = outdir / READY_NAME
+    if not (ready / DONE_NAME).is_file():  # none, or moved into place but for its folder
+        shutil.rmtree(ready, ignore_errors=True)
+        return
+    with open(ready / DONE_NAME, encoding="utf-8") as f:
+        marker = json.load(f)
     (outdir / DONE_NAME).unlink(missing_ok=True)
-    for step in settings.steps:
-        os.replace(staging / OUTPUT_NAMES[step], outdir / OUTPUT_NAMES[step])
-    for path in stale:
-        path.unlink(missing_ok=True)
-    _write_json(outdir / DONE_NAME, marker)
+    _step("old marker removed")
+    for step in marker.get("steps", []):
+        name = OUTPUT_NAMES.get(step)
+        if name is not None and (ready / name).exists():
+            os.replace(ready / name, outdir / name)
+            _step(f"moved {name}")
+    try:
+        with open(ready / STALE_NAME, encoding="utf-8") as f:
+            stale = json.load(f)
+    except FileNotFoundError:
+        stale = []
+    for name in stale:
+        if name in OUTPUT_NAMES.values():  # the batch's own names only
+            (outdir / name).unlink(missing_ok=True)
+            _step(f"removed {name}")
+    os.replace(ready / DONE_NAME, outdir / DONE_NAME)
+    _step("new marker")
+    shutil.rmtree(ready, ignore_errors=True)
+
+
+def settle(job: Job) -> None:
+    """What an interrupted task left in the session's result folder put right: staged
+    outputs (never committed) removed, a committed install finished (:func:`_install`).
+    Afterwards the folder holds the old outputs with their ``done.json`` or the new ones
+    with theirs. Run where no task of the session runs: at its task's start and end, by
+    the batch after an interrupt (its tasks ended) and when planning the next batch."""
+    outdir = Path(job.outdir)
+    shutil.rmtree(outdir / STAGING_NAME, ignore_errors=True)
+    if (outdir / READY_NAME).exists():
+        _finish_install(outdir)
 
 
 def _result_folders(job: Job) -> list[Path]:
@@ -863,9 +934,11 @@ def run_batch(jobs: list[Job], settings: Settings, *, workers: int | None = None
                 raise
     except BaseException:
         # interrupted: the tasks were ended (their workers killed with the local cluster)
-        # and may have left staged outputs; the old, complete ones stay
+        # and may have left staged outputs, removed (the old, complete ones stay), or an
+        # install past its commit point, finished (the new set, complete)
         for job in pending.values():
-            shutil.rmtree(Path(job.outdir) / STAGING_NAME, ignore_errors=True)
+            with contextlib.suppress(OSError, ValueError):
+                settle(job)
             _remove_empty(_result_folders(job))
         raise
     return rows

@@ -344,9 +344,10 @@ def test_ray_is_imported_by_a_running_batch_alone():
 def test_a_forced_batch_interrupted_keeps_every_old_output(cluster, tmp_path, short_tmpdir,
                                                            sig, exit_code, said):
     """``--force`` then Ctrl-C or SIGTERM: the new outputs are made aside and replace the
-    old ones only when complete, so every old output (and the summary that lists them)
-    stays as it was and nothing half-made is left (a sweep found all of them deleted at
-    each task's start). The exit code and line say which signal (a SIGTERM was "interrupted",
+    old ones only when complete, in one step, so every old output stays as it was (or, for
+    a session whose install was committed, the new complete set replaced it), the summary
+    too, and nothing half-made is left (a sweep found all of them deleted at each task's
+    start). The exit code and line say which signal (a SIGTERM was "interrupted",
     exit 130); after Ctrl-C the batch's local cluster is shut down (no process of its group
     is left)."""
     root = tmp_path / "season"
@@ -385,5 +386,16 @@ def test_a_forced_batch_interrupted_keeps_every_old_output(cluster, tmp_path, sh
         proc.stderr.close()
         with contextlib.suppress(ProcessLookupError):
             os.killpg(proc.pid, signal.SIGKILL)
-    assert _stamps(out) == before  # the same files, not rewritten
+    # each session: its old files, not rewritten; or, if its task had committed its install
+    # when the interrupt came, the new complete set with its new done.json (never a mix)
+    for name in ("m0", "m1"):
+        now = _stamps(out / name)
+        if now != sessions[name]:
+            assert sorted(now) == ["done.json", "eval.json", "fused.mcap", "synced.mcap"], now
+            assert all(now[f] != sessions[name][f] for f in now), (name, now)
+            marker = json.loads((out / name / "done.json").read_text())
+            assert marker["row"]["status"] == "ok" and marker["session"] == f"{name}.mcap"
+    assert sorted(p.name for p in out.iterdir()) == ["m0", "m1", "summary.csv",
+                                                     "summary.parquet"]
+    assert _stamps(out)["summary.parquet"] == before["summary.parquet"]
     assert (out / "summary.csv").read_bytes() == summary

@@ -9,11 +9,29 @@
 See :mod:`viewers.recording` for the entity paths and timelines.
 """
 
-from .blueprint import build_blueprint
-from .data import FramesChoice, ViewData, load_view_data
-from .recording import APPLICATION_ID, build_recording, log_view, new_stream, save_rrd
-from .sinks import Sink, open_sink
+from __future__ import annotations
 
-__all__ = ["APPLICATION_ID", "FramesChoice", "Sink", "ViewData", "build_blueprint",
-           "build_recording", "load_view_data", "log_view", "new_stream", "open_sink",
-           "save_rrd"]
+import importlib
+
+#: public name -> its submodule. Imported on first use (PEP 562): ``pslog view``'s argument
+#: parsing (``--help``, a usage error) needs :mod:`viewers.sinks`' flags only, not rerun and
+#: the session reader (over a CPU second of imports per process)
+_WHERE = {"build_blueprint": "blueprint", "FramesChoice": "data", "ViewData": "data",
+          "load_view_data": "data", "APPLICATION_ID": "recording",
+          "build_recording": "recording", "log_view": "recording", "new_stream": "recording",
+          "save_rrd": "recording", "Sink": "sinks", "open_sink": "sinks"}
+
+__all__ = sorted(_WHERE)
+
+
+def __getattr__(name: str):
+    module = _WHERE.get(name)
+    if module is None:
+        raise AttributeError(f"module 'viewers' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_WHERE))

@@ -23,11 +23,13 @@ import os
 import socket
 import sys
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 from urllib.parse import quote, urlsplit
 
-import rerun as rr
-
 from pslog.errors import InputError, PslogError
+
+if TYPE_CHECKING:
+    import rerun as rr
 
 #: seconds to wait for a rerun viewer to accept a connection (connect)
 CONNECT_TIMEOUT_S = 3.0
@@ -40,24 +42,36 @@ KINDS = ("spawn", "serve", "connect", "stdout")
 #: the HTTP/2 client connection preface and an empty SETTINGS frame (RFC 9113, 3.4)
 _HTTP2_PREFACE = b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n" + bytes([0, 0, 0, 4, 0, 0, 0, 0, 0])
 
-#: our wording of rerun's standard flags (same metavar and help style as pslog's options)
-_RERUN_FLAGS = {
-    "headless": (None, "do not open a viewer window"),
-    "connect": (None, "send to a rerun viewer already running (at --url)"),
-    "serve": (None, "serve a web viewer at http://localhost:PORT (--web-port) until Ctrl-C"),
-    "url": ("URL", "rerun viewer to send to with --connect (default: rerun's local viewer)"),
-    "save": ("OUT.rrd", "write a rerun recording to this file (open it with 'rerun OUT.rrd')"),
-    "stdout": (None, "write the recording to standard output, to pipe into 'rerun -'"),
+#: rerun's standard flags (``rr.script_add_args``: dest, action, type, default) in our
+#: wording (metavar and help in the style of pslog's options). Built here without importing
+#: rerun (over a CPU second per ``pslog view`` process, ``--help`` and usage errors included);
+#: tests/test_view_flags.py checks them against rerun's own
+_RERUN_FLAGS: dict[str, tuple[str, type | None, str | None, str]] = {
+    # dest: (action, type, metavar, help); every value flag defaults to None, every switch
+    # to False
+    "headless": ("store_true", None, None, "do not open a viewer window"),
+    "connect": ("store_true", None, None,
+                "send to a rerun viewer already running (at --url)"),
+    "serve": ("store_true", None, None,
+              "serve a web viewer at http://localhost:PORT (--web-port) until Ctrl-C"),
+    "url": ("store", str, "URL",
+            "rerun viewer to send to with --connect (default: rerun's local viewer)"),
+    "save": ("store", str, "OUT.rrd",
+             "write a rerun recording to this file (open it with 'rerun OUT.rrd')"),
+    "stdout": ("store_true", None, None,
+               "write the recording to standard output, to pipe into 'rerun -'"),
 }
 
 
 def add_sink_arguments(parser: argparse.ArgumentParser) -> None:
     """rerun's standard flags (``--headless``, ``--connect``, ``--serve``, ``--url``,
     ``--save``, ``--stdout``) in pslog's wording."""
-    rr.script_add_args(parser)
-    for action in parser._actions:
-        if action.dest in _RERUN_FLAGS:
-            action.metavar, action.help = _RERUN_FLAGS[action.dest]
+    for dest, (action, kind, metavar, text) in _RERUN_FLAGS.items():
+        if action == "store_true":
+            parser.add_argument(f"--{dest}", dest=dest, action=action, help=text)
+        else:
+            parser.add_argument(f"--{dest}", dest=dest, type=kind, default=None,
+                                metavar=metavar, help=text)
 
 
 def has_display() -> bool:
@@ -154,6 +168,8 @@ class Sink:
         if self.kind == "stdout":
             rec.stdout()
         elif self.kind == "serve":
+            import rerun as rr
+
             self.uri = rec.serve_grpc(grpc_port=self.grpc_port)
             try:
                 rr.serve_web_viewer(web_port=self.web_port, open_browser=has_display(),
@@ -182,6 +198,8 @@ class Sink:
 
     def serve_until_interrupted(self, rec: rr.RecordingStream) -> None:
         """Keep a ``serve`` sink up until Ctrl-C, then end the stream."""
+        import rerun as rr
+
         try:
             rr.script_teardown(argparse.Namespace(serve=True))  # sleeps until Ctrl-C
         except KeyboardInterrupt:

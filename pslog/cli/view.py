@@ -84,9 +84,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from pslog.errors import PslogError
-    from viewers import load_view_data, log_view, new_stream
     from viewers.data import parse_methods
-    from viewers.rrd_file import rrd_file, rrd_stdout
     from viewers.sinks import check_url, has_display, open_sink
 
     if args.url and not args.connect:
@@ -138,6 +136,10 @@ def run(args: argparse.Namespace) -> int:
         sink = open_sink(kind, web_port=args.web_port, grpc_port=args.grpc_port,
                          url=args.url, connect_timeout_s=args.connect_timeout)
     from pslog import progress
+
+    # rerun loaded only now: a command refused above did not pay for it (a CPU second)
+    from viewers import load_view_data, log_view, new_stream
+    from viewers.rrd_file import rrd_file, rrd_stdout
 
     # read and fuse before any sink starts, so errors come out before a viewer does
     progress.update(total=2, what="reading the sessions (fusing what is not stored)")
