@@ -53,6 +53,8 @@ STAGING_NAME = ".pslog-batch-new"
 READY_NAME = ".pslog-batch-ready"
 #: in the staging/ready folder: the old outputs (of steps not run now) to remove on install
 STALE_NAME = "stale.json"
+#: in the ready folder: its move into place has begun (the old done.json may be gone)
+MOVING_NAME = "moving"
 SUMMARY_NAMES = ("summary.csv", "summary.parquet")
 #: the summary's leading columns; per-method, per-camera columns follow
 BASE_COLUMNS = ("session", "status", "error", "cameras", "duration_s", "frames", "detections",
@@ -483,27 +485,49 @@ def _finish_install(outdir: Path) -> None:
     if not (ready / DONE_NAME).is_file():  # none, or moved into place but for its folder
         shutil.rmtree(ready, ignore_errors=True)
         return
-    with open(ready / DONE_NAME, encoding="utf-8") as f:
-        marker = json.load(f)
+    plan = _install_plan(ready)
+    moving = (ready / MOVING_NAME).exists()
+    if plan is None or not (moving or all((ready / n).is_file() for n in plan[0])):
+        # damaged (a crash before its files reached the disk) or not one of ours: before
+        # the move began the old set and its done.json are intact — kept; once begun, no
+        # done.json stands beside the mix: the session is done again
+        shutil.rmtree(ready, ignore_errors=True)
+        return
+    names, stale = plan
+    (ready / MOVING_NAME).touch()
     (outdir / DONE_NAME).unlink(missing_ok=True)
     _step("old marker removed")
-    for step in marker.get("steps", []):
-        name = OUTPUT_NAMES.get(step)
-        if name is not None and (ready / name).exists():
+    for name in names:
+        if (ready / name).exists():
             os.replace(ready / name, outdir / name)
             _step(f"moved {name}")
-    try:
-        with open(ready / STALE_NAME, encoding="utf-8") as f:
-            stale = json.load(f)
-    except FileNotFoundError:
-        stale = []
     for name in stale:
-        if name in OUTPUT_NAMES.values():  # the batch's own names only
-            (outdir / name).unlink(missing_ok=True)
-            _step(f"removed {name}")
+        (outdir / name).unlink(missing_ok=True)
+        _step(f"removed {name}")
     os.replace(ready / DONE_NAME, outdir / DONE_NAME)
     _step("new marker")
     shutil.rmtree(ready, ignore_errors=True)
+
+
+def _install_plan(ready: Path) -> tuple[list[str], list[str]] | None:
+    """The outputs a committed install moves into place and the stale old outputs it
+    removes (the batch's own output names only), from its ``done.json`` and
+    :data:`STALE_NAME`; None when either is unreadable or not what :func:`_install` wrote."""
+    try:
+        with open(ready / DONE_NAME, encoding="utf-8") as f:
+            marker = json.load(f)
+        with open(ready / STALE_NAME, encoding="utf-8") as f:
+            stale = json.load(f)
+    except (OSError, ValueError):
+        return None
+    steps = marker.get("steps") if isinstance(marker, dict) else None
+    known = set(OUTPUT_NAMES.values())
+    if (not isinstance(steps, list) or not all(isinstance(s, str) and s in OUTPUT_NAMES
+                                               for s in steps)
+            or not isinstance(stale, list) or not all(isinstance(n, str) and n in known
+                                                      for n in stale)):
+        return None
+    return [OUTPUT_NAMES[s] for s in steps], stale
 
 
 def settle(job: Job) -> None:

@@ -110,3 +110,34 @@ def test_an_install_interrupted_in_process_ends_with_the_whole_new_set(old_resul
     left = contents(Path(job.outdir))
     assert sorted(left) == NEW_FILES
     assert all(left[name] != old[name] for name in NEW_FILES)
+
+
+@pytest.mark.parametrize("damage", ["empty marker", "marker a list", "unknown step",
+                                    "stale not ours", "output missing"])
+def test_a_damaged_ready_folder_is_discarded_and_the_old_set_kept(old_results, tmp_path,
+                                                                  monkeypatch, damage):
+    """A ready folder whose files did not all reach the disk (a power cut) or that a batch
+    did not write: settled without a traceback, its move never begun — the old set and
+    its done.json stay as they were (no done.json beside a mix)."""
+    job, old = old_results
+    outdir = Path(job.outdir)
+    cut = tmp_path / "cut" / "a"
+
+    def snapshot(step: str) -> None:
+        if step == "committed":
+            shutil.copytree(outdir, cut)
+
+    monkeypatch.setattr(batch, "_install_step", snapshot)
+    assert batch.run_session(job, NEW)["status"] == "ok"
+    monkeypatch.setattr(batch, "_install_step", None)
+    ready = cut / batch.READY_NAME
+    changes = {"empty marker": ("done.json", ""), "marker a list": ("done.json", "[]"),
+               "unknown step": ("done.json", '{"steps": ["fuse", "x"]}'),
+               "stale not ours": ("stale.json", '["rig.toml"]')}
+    if damage == "output missing":
+        (ready / "eval.json").unlink()
+    else:
+        name, text = changes[damage]
+        (ready / name).write_text(text)
+    batch.settle(Job(job.path, job.session, str(cut)))
+    assert contents(cut) == old

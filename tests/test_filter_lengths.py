@@ -84,3 +84,8 @@ def test_a_starts_residual_is_its_fits():
     q = _lengths(np.array([3.0, 3.0]), np.array([4.0, 4.0]), init=np.array([1.0, 0.0]))
     assert q[1].tolist() == [4.0, 5.0]  # (column 9 holds y: 4.0 as given)
     assert q[0].tolist() == [5.0, 5.0]
+
+
+def test_the_filter_takes_the_compiled_lengths_here():
+    # the probe that decides it agrees with math.hypot on this interpreter and CPU
+    assert filter_module._hypot_compiled()

@@ -1290,10 +1290,32 @@ def _push(S, I, cams, O, N, t, cam, u, v, out):
     return _POINT
 
 
-#: :func:`_lengths` takes the lengths where this interpreter's ``math.hypot`` is the one
+#: :func:`_lengths` may take the lengths where this interpreter's ``math.hypot`` is the one
 #: :func:`_py_hypot` repeats (CPython 3.11's; 3.12 changed its arithmetic), else
-#: ``math.hypot`` itself takes them
+#: ``math.hypot`` itself takes them; :func:`_hypot_compiled` also checks the bits
 _HYPOT_COMPILED = sys.implementation.name == "cpython" and sys.version_info[:2] == (3, 11)
+
+
+@functools.cache
+def _hypot_compiled() -> bool:
+    """Whether :func:`_lengths` gives ``math.hypot``'s bits here: CPython 3.11, and the
+    compiled kernel agrees on probe pairs (random magnitudes over 2**±60, zeros, signed
+    zeros, subnormals, inf/NaN, huge ratios) — a compiler or CPU that fused the kernel's
+    products into multiply-adds, or a CPython built so, would differ: ``math.hypot`` then."""
+    if not _HYPOT_COMPILED:
+        return False
+    rng = np.random.default_rng(311)
+    pairs = rng.standard_normal((512, 4)) * np.exp2(rng.integers(-60, 61, (512, 4)))
+    pairs[:6] = [[0.0, 0.0, 3.0, 4.0], [math.inf, math.nan, math.nan, -math.inf],
+                 [5e-324, 1e-310, 1e308, 1e308], [-0.0, 1.0, 2.0 ** -1030, 2.0 ** -1074],
+                 [1e300, 1e-300, 1.0, 1e-17], [0.1, 0.2, 0.3, 0.7]]
+    rows = np.zeros((len(pairs), _OUT_COLS))
+    rows[:, 7:11] = pairs
+    q = np.zeros((len(FILTER_QUALITY), len(pairs)))
+    _lengths(rows, q)
+    want = np.array([[math.hypot(a, b) for a, b in pairs[:, :2].tolist()],
+                     [math.hypot(a, b) for a, b in pairs[:, 2:].tolist()]])
+    return bool(np.array_equal(q[4:6].view(np.int64), want.view(np.int64)))
 #: Veltkamp's splitting constant, 2**27 + 1: ``x * _SPLIT`` splits a double into two halves
 #: of 26 bits whose products are exact
 _SPLIT = 134217729.0
@@ -2480,7 +2502,7 @@ def _track(flt: BallFilter, time_ns, camera, uv) -> Track:
     q[0:4] = rows[:, 3:7].T
     # lengths as CPython's math.hypot takes them, as the pure-Python filter did; a start's
     # residual as its fit gave it
-    if _HYPOT_COMPILED:
+    if _hypot_compiled():
         _lengths(rows, q)
     else:  # another CPython's hypot (the kernel repeats 3.11's): its own, mapped
         hypot = math.hypot
