@@ -47,7 +47,8 @@ _KERNEL_FILES: set[str] = set()
 
 #: an import statement's module in a kernel file: relative (``from ._prepare_kernel import``,
 #: ``from .. import``) or absolute within pslog (``from pslog.motion import``)
-_IMPORT_FROM = re.compile(r"^\s*from\s+(\.+[\w.]*|pslog(?:\.\w+)*)\s+import\b", re.M)
+_IMPORT_FROM = re.compile(r"^[ \t]*from[ \t]+(\.+[\w.]*|pslog(?:\.\w+)*)[ \t]+import[ \t]+"
+                          r"(?:\(([\w\s,]*)\)|([\w \t,]*))", re.M)
 
 
 @functools.cache
@@ -64,13 +65,20 @@ def _imports_digest(py_file: str, package: str) -> str:
 
     own = read(py_file)
     files = set()
-    for name in _IMPORT_FROM.findall(own.decode("utf-8", "replace")):
+    for module, wrapped, names in _IMPORT_FROM.findall(own.decode("utf-8", "replace")):
         try:
-            spec = importlib.util.find_spec(importlib.util.resolve_name(name, package))
+            base = importlib.util.resolve_name(module, package)
         except (ImportError, ValueError):
             continue
-        if spec is not None and spec.origin and spec.origin.endswith(".py"):
-            files.add(os.path.realpath(spec.origin))
+        # the module, and each imported name that is a submodule (``from . import helpers``)
+        for name in [base, *(f"{base}.{n}" for n in re.findall(r"\w+", wrapped + names)
+                             if n != "as")]:
+            try:
+                spec = importlib.util.find_spec(name)
+            except (ImportError, ValueError):
+                continue
+            if spec is not None and spec.origin and spec.origin.endswith(".py"):
+                files.add(os.path.realpath(spec.origin))
     files.discard(os.path.realpath(py_file))
     digest = hashlib.sha256(own)
     for path in sorted(files):
@@ -80,17 +88,21 @@ def _imports_digest(py_file: str, package: str) -> str:
 
 def _stamped_locators(numba_caching: Any) -> None:
     """Put in front of numba's cache locators ones that stamp a kernel file's cache with
-    :func:`_imports_digest` too (numba's stamp: its own file's time and size); for any
-    other numba-cached function they decline and numba's own are used as before."""
-    impl = getattr(numba_caching, "CacheImpl", None) or getattr(numba_caching, "_CacheImpl", None)
-    names = ("UserProvidedCacheLocator", "InTreeCacheLocator", "UserWideCacheLocator")
-    if (impl is None or not hasattr(impl, "_locator_classes")
-            or not all(hasattr(numba_caching, n) for n in names)):
+    :func:`_imports_digest` too (numba's stamp: its own file only); for any other
+    numba-cached function they decline and numba's own are used as before. Not with
+    ``NUMBA_CACHE_LOCATOR_CLASSES`` set: numba then uses the classes it names alone."""
+    def named(name: str) -> Any:  # numba < 0.61 spelled its cache classes with a "_"
+        return getattr(numba_caching, name, None) or getattr(numba_caching, "_" + name, None)
+
+    impl = named("CacheImpl")
+    bases = [named(n) for n in ("UserProvidedCacheLocator", "InTreeCacheLocator",
+                                "UserWideCacheLocator")]
+    if impl is None or not hasattr(impl, "_locator_classes") or None in bases:
         return  # a numba whose cache is arranged otherwise: its own stamps only
     if getattr(impl, "_pslog_stamped", False):
         return
     ours = []
-    for base in (getattr(numba_caching, n) for n in names):
+    for base in bases:
         def get_source_stamp(self: Any, _base: Any = base) -> Any:
             return (_base.get_source_stamp(self),
                     _imports_digest(os.path.realpath(self._py_file), self._pslog_package))

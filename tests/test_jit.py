@@ -47,29 +47,32 @@ def test_numba_refusing_to_start_is_one_line(tmp_path):
 HELPERS = '''
 from pslog._jit import kernel
 
-SCALE = {scale}
-
 
 @kernel(inline=True)
 def shifted(x):
     return x + {shift}
 '''
 
+CONSTANTS = '''
+SCALE = {scale}
+'''
+
 KERNELS = '''
 from pslog._jit import kernel
 
-from .helpers import SCALE, shifted
+from . import constants
+from .helpers import shifted
 
 
 @kernel
 def apply(x):
-    return shifted(x) * SCALE
+    return shifted(x) * constants.SCALE
 '''
 
 
 def test_a_cached_kernel_is_compiled_again_when_a_module_it_imports_from_changes(tmp_path):
-    # numba stamps a kernel's cache by its own file only; `apply` inlines a helper and
-    # freezes a constant of another file: editing only that file must not load stale code
+    # numba stamps a kernel's cache by its own file only; `apply` inlines a helper of one
+    # file and freezes a constant of another: editing only those must not load stale code
     import subprocess
     import sys
 
@@ -79,7 +82,8 @@ def test_a_cached_kernel_is_compiled_again_when_a_module_it_imports_from_changes
     (package / "kernels.py").write_text(KERNELS)
 
     def run(scale: float, shift: float) -> float:
-        (package / "helpers.py").write_text(HELPERS.format(scale=scale, shift=shift))
+        (package / "helpers.py").write_text(HELPERS.format(shift=shift))
+        (package / "constants.py").write_text(CONSTANTS.format(scale=scale))
         out = subprocess.run([sys.executable, "-c", "from kernels_pkg.kernels import apply; "
                               "print(apply(1.0), sum(apply.stats.cache_hits.values()))"],
                              cwd=tmp_path, capture_output=True, text=True, check=True)
@@ -87,5 +91,6 @@ def test_a_cached_kernel_is_compiled_again_when_a_module_it_imports_from_changes
         return float(value), int(hits)
 
     assert run(2.0, 1.0) == (4.0, 0)  # compiled, cached
-    assert run(3.0, 5.0) == (18.0, 0)  # the inlined helper and the frozen constant changed
+    assert run(2.0, 5.0) == (12.0, 0)  # the inlined helper changed (from .helpers import)
+    assert run(3.0, 5.0) == (18.0, 0)  # the frozen constant changed (from . import constants)
     assert run(3.0, 5.0) == (18.0, 1)  # and then loaded from the cache

@@ -607,7 +607,7 @@ def motion_covariance(prep: Prepared, slot_rows: np.ndarray, jacobians: list[np.
     cov = covariance(slot_rows, jacobians, factors, noise_px)
     # the unknown shift of a slot without image velocity, independent of every detection's
     # noise and of the other slots': Σ_s (v₀ L_s)² J_s J_sᵀ
-    # and the break of the image motion a used slot's newest or previous detection shows:
+    # and the break of the image motion a used slot's newest detection shows:
     # κ² (m², across that camera's ray), the largest; each slot with a lag and a velocity
     # off by κ² ppm2_s per axis in its image: Σ_s κ² ppm2_s J_s J_sᵀ
     kink = _break_size(motion, used, noise_px, breaks, ppm2)
