@@ -15,7 +15,7 @@ not the recorder, renderer and simulation (about 40 ms of imports).
 
 from __future__ import annotations
 
-import importlib
+from pslog._lazy import lazy_names
 
 _WHERE = {"BallDetector": "detect", "Candidates": "detect", "HsvRange": "detect",
           "RecordSummary": "record", "RecordWriteError": "record", "StopRequest": "record",
@@ -25,14 +25,4 @@ _WHERE = {"BallDetector": "detect", "Candidates": "detect", "HsvRange": "detect"
 __all__ = sorted(_WHERE, key=str.lower)
 
 
-def __getattr__(name: str):
-    module = _WHERE.get(name)
-    if module is None:
-        raise AttributeError(f"module 'recorders' has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".{module}", __name__), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_WHERE))
+__getattr__, __dir__ = lazy_names(__name__, _WHERE)

@@ -11,7 +11,7 @@ See :mod:`viewers.recording` for the entity paths and timelines.
 
 from __future__ import annotations
 
-import importlib
+from pslog._lazy import lazy_names
 
 #: public name -> its submodule. Imported on first use (PEP 562): ``pslog view``'s argument
 #: parsing (``--help``, a usage error) needs :mod:`viewers.sinks`' flags only, not rerun and
@@ -24,14 +24,4 @@ _WHERE = {"build_blueprint": "blueprint", "FramesChoice": "data", "ViewData": "d
 __all__ = sorted(_WHERE)
 
 
-def __getattr__(name: str):
-    module = _WHERE.get(name)
-    if module is None:
-        raise AttributeError(f"module 'viewers' has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".{module}", __name__), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_WHERE))
+__getattr__, __dir__ = lazy_names(__name__, _WHERE)
