@@ -237,3 +237,48 @@ def test_ray_depths_rows_are_ray_depths():
     assert np.count_nonzero(np.abs(expected[:, 0]) < 1e-14) > k // 4
     assert_array_equal(out, expected)
     assert_array_equal(out > 0, expected > 0)
+
+
+def test_probes_take_the_compiled_passes_only_where_they_give_numpys_bits():
+    # here (x86-64, OpenBLAS, numpy's einsum) both kernels repeat numpy's order, so the
+    # probes pass; a kernel summing in another order (products rounded before the sum,
+    # or the dot's terms in the natural order) must fail its probe: numpy's forms then
+    import numba
+
+    from pslog.fusion._prepare import (
+        _ray_depths_probe,
+        _view_probe,
+        ray_depths_compiled,
+        view_flags_compiled,
+    )
+    from pslog.fusion._prepare_kernel import ray_depths_rows, view_project
+
+    assert view_flags_compiled() and _view_probe(view_project)
+    assert ray_depths_compiled() and _ray_depths_probe(ray_depths_rows)
+
+    @numba.njit  # view_project's sums without fused multiply-adds
+    def rounded_products(points, cams, boxes, out):
+        for p in range(points.shape[0]):
+            for c in range(cams.shape[0]):
+                q = points[p]
+                x = ((q[0] * cams[c, 0] + q[1] * cams[c, 1]) + q[2] * cams[c, 2]) + cams[c, 9]
+                y = ((q[0] * cams[c, 3] + q[1] * cams[c, 4]) + q[2] * cams[c, 5]) + cams[c, 10]
+                z = ((q[0] * cams[c, 6] + q[1] * cams[c, 7]) + q[2] * cams[c, 8]) + cams[c, 11]
+                u = v = 0.0
+                if z > 1e-9:
+                    u = ((x / z) * cams[c, 12] + (y / z) * cams[c, 13]) + boxes[c, 4]
+                    v = ((x / z) * cams[c, 14] + (y / z) * cams[c, 15]) + boxes[c, 5]
+                out[p, c, 0], out[p, c, 1], out[p, c, 2], out[p, c, 3], out[p, c, 4] = (
+                    x, y, z, u, v)
+
+    @numba.njit  # the dot products' terms in their natural order
+    def natural_order(points, centers, dirs, out):
+        for p in range(dirs.shape[0]):
+            for c in range(dirs.shape[1]):
+                o = points[p] - centers[c]
+                d = dirs[p, c]
+                out[p, c] = ((o[0] * d[0] + o[1] * d[1]) + o[2] * d[2]) / (
+                    (d[0] * d[0] + d[1] * d[1]) + d[2] * d[2])
+
+    assert not _view_probe(rounded_products)
+    assert not _ray_depths_probe(natural_order)

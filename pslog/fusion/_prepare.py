@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cache, cached_property
 from typing import cast
 
 import numpy as np
@@ -397,7 +397,7 @@ def invalid_points(prep: Prepared, points: np.ndarray, used: np.ndarray,
     mine = used & finite[:, None]
     counts = np.count_nonzero(mine, axis=0)
     if (k >= _FEW and points.flags.c_contiguous and points.dtype == np.float64
-            and np.all((counts == 0) | (counts >= 2))):
+            and np.all((counts == 0) | (counts >= 2)) and view_flags_compiled()):
         # one compiled pass (_prepare_kernel.view_flags: the numpy below, its matrix
         # products' bits as OpenBLAS makes them of two rows or more of contiguous points;
         # a camera with one point goes the numpy way, whose product of one row takes
@@ -434,6 +434,88 @@ def invalid_points(prep: Prepared, points: np.ndarray, used: np.ndarray,
         else:
             flags[rows] |= bits
     return flags
+
+
+#: row counts the probes of the compiled passes try (numpy's and the BLAS's kernels may
+#: take another path for a few rows, or at a multiple of their blocking)
+_PROBE_ROWS = (2, 3, 4, 5, 7, 8, 16, 17, 33, 64, 100, 257, 1000)
+
+
+def _probe_points(rows: int, seed: int) -> np.ndarray:
+    """(rows, 3) probe points: signed magnitudes over 2**±20 m, some near zero."""
+    rng = np.random.default_rng(seed)
+    return np.ascontiguousarray(rng.standard_normal((rows, 3))
+                                * np.exp2(rng.integers(-20, 21, (rows, 3))))
+
+
+@cache
+def view_flags_compiled() -> bool:
+    """Whether :func:`pslog.fusion._prepare_kernel.view_flags` may stand for
+    :func:`invalid_points`' numpy form here: its arithmetic (the probe kernel
+    ``view_project``) gives the bits of numpy's ``points @ Rᵀ + t`` and
+    ``(x / z, y / z) @ K[:2, :2]ᵀ + K[:2, 2]`` on probe points for several row counts and
+    cameras. It repeats OpenBLAS's order on x86-64 with FMA; another BLAS, CPU or numpy
+    may sum otherwise: the numpy form then (checked once per process, ~ms)."""
+    from . import _prepare_kernel
+
+    return _view_probe(_prepare_kernel.view_project)
+
+
+def _view_probe(view_project) -> bool:
+    """:func:`view_flags_compiled`'s probe of a kernel with ``view_project``'s signature."""
+    rng = np.random.default_rng(17)
+    m = 3
+    R = np.linalg.qr(rng.standard_normal((m, 3, 3)))[0]
+    t = rng.standard_normal((m, 3)) * 3
+    K = np.zeros((m, 3, 3))
+    K[:, 0, 0], K[:, 1, 1] = rng.uniform(300, 3000, m), rng.uniform(300, 3000, m)
+    K[:, 0, 1] = rng.uniform(-2, 2, m)
+    K[:, 0, 2], K[:, 1, 2], K[:, 2, 2] = rng.uniform(100, 2000, m), rng.uniform(100, 2000, m), 1
+    cams = np.ascontiguousarray(np.concatenate([R.reshape(m, 9), t, K[:, :2, :2].reshape(m, 4)],
+                                               axis=1))
+    boxes = np.ascontiguousarray(np.column_stack([np.zeros((m, 4)), K[:, 0, 2], K[:, 1, 2]]))
+    for i, rows in enumerate(_PROBE_ROWS):
+        points = _probe_points(rows, i)
+        out = np.empty((rows, m, 5))
+        view_project(points, cams, boxes, out)
+        for c in range(m):
+            in_cam = points @ R[c].T + t[c]
+            z = in_cam[:, 2]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                uv = (in_cam[:, :2] / z[:, None]) @ K[c, :2, :2].T + K[c, :2, 2]
+            uv[z <= 1e-9] = 0.0
+            if not (np.array_equal(out[:, c, :3].view(np.int64), in_cam.view(np.int64))
+                    and np.array_equal(out[:, c, 3:].view(np.int64), uv.view(np.int64))):
+                return False
+    return True
+
+
+@cache
+def ray_depths_compiled() -> bool:
+    """Whether :func:`pslog.fusion._prepare_kernel.ray_depths_rows` gives
+    :func:`pslog.geometry.ray_depths`' bits here (it repeats the order in which numpy's
+    einsum sums three terms on x86-64; another numpy or CPU may sum otherwise): probe rays
+    and points for several row counts, checked once per process."""
+    from . import _prepare_kernel
+
+    return _ray_depths_probe(_prepare_kernel.ray_depths_rows)
+
+
+def _ray_depths_probe(ray_depths_rows) -> bool:
+    """:func:`ray_depths_compiled`'s probe of a kernel with ``ray_depths_rows``' signature."""
+    from ..geometry import ray_depths
+
+    rng = np.random.default_rng(19)
+    centers = rng.standard_normal((3, 3)) * 5
+    for i, rows in enumerate(_PROBE_ROWS):
+        points = _probe_points(rows, 100 + i)
+        dirs = np.ascontiguousarray(rng.standard_normal((rows, 3, 3)))
+        out = np.empty((rows, 3))
+        ray_depths_rows(points, centers, dirs, out)
+        want = ray_depths(points, np.broadcast_to(centers, (rows, 3, 3)), dirs)
+        if not np.array_equal(out.view(np.int64), want.view(np.int64)):
+            return False
+    return True
 
 
 def reprojection_px(prep: Prepared, points: np.ndarray, camera: np.ndarray,

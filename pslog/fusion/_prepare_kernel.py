@@ -267,6 +267,40 @@ def ray_pixel_jacobian(points, origin, direction, used, turn, inverse, out):
             out[2, q, p] = -((i02 * n0 + i12 * n1) + i22 * n2)
 
 
+@kernel(inline=True, contract=True)
+def _view_project(p0, p1, p2, cams, boxes, c):
+    """Camera c's ``(x, y, z)`` of a point and its projection ``(u, v)``, as
+    :func:`pslog.fusion._prepare.invalid_points`' numpy gets them (see :func:`view_flags`);
+    ``u = v = 0`` at or behind the image plane (``z <= 1e-9``: not projected)."""
+    acc = 0.0
+    acc = acc + p0 * cams[c, 0]
+    acc = acc + p1 * cams[c, 1]
+    acc = acc + p2 * cams[c, 2]
+    x = acc + cams[c, 9]
+    acc = 0.0
+    acc = acc + p0 * cams[c, 3]
+    acc = acc + p1 * cams[c, 4]
+    acc = acc + p2 * cams[c, 5]
+    y = acc + cams[c, 10]
+    acc = 0.0
+    acc = acc + p0 * cams[c, 6]
+    acc = acc + p1 * cams[c, 7]
+    acc = acc + p2 * cams[c, 8]
+    z = acc + cams[c, 11]
+    if z <= 1e-9:
+        return x, y, z, 0.0, 0.0
+    nx, ny = x / z, y / z
+    acc = 0.0
+    acc = acc + nx * cams[c, 12]
+    acc = acc + ny * cams[c, 13]
+    u = acc + boxes[c, 4]
+    acc = 0.0
+    acc = acc + nx * cams[c, 14]
+    acc = acc + ny * cams[c, 15]
+    v = acc + boxes[c, 5]
+    return x, y, z, u, v
+
+
 @kernel(contract=True)
 def view_flags(points, used, finite, cams, boxes, behind_bit, outside_bit, flags):
     """:func:`pslog.fusion._prepare.invalid_points`' flags in one pass, its numpy operations
@@ -277,7 +311,9 @@ def view_flags(points, used, finite, cams, boxes, behind_bit, outside_bit, flags
     (``contract``: where the CPU has none, neither has the BLAS kernel), then the
     addition. ``points`` (k, 3), ``used`` (k, m) bool, ``finite`` (k,) bool, ``cams``
     (m, 16): R row-major (9), t (3), K[0, 0], K[0, 1], K[1, 0], K[1, 1]; ``boxes`` (m, 4)
-    the view boxes with K[0, 2], K[1, 2] after them (m, 6); ``flags`` (k,) int64, or-ed."""
+    the view boxes with K[0, 2], K[1, 2] after them (m, 6); ``flags`` (k,) int64, or-ed.
+    Used only where :func:`pslog.fusion._prepare.view_flags_compiled`'s probe found
+    :func:`view_project` (the same arithmetic) giving numpy's bits."""
     k, m = used.shape[0], used.shape[1]
     for p in range(k):
         if not finite[p]:
@@ -287,37 +323,27 @@ def view_flags(points, used, finite, cams, boxes, behind_bit, outside_bit, flags
         for c in range(m):
             if not used[p, c]:
                 continue
-            acc = 0.0
-            acc = acc + p0 * cams[c, 0]
-            acc = acc + p1 * cams[c, 1]
-            acc = acc + p2 * cams[c, 2]
-            x = acc + cams[c, 9]
-            acc = 0.0
-            acc = acc + p0 * cams[c, 3]
-            acc = acc + p1 * cams[c, 4]
-            acc = acc + p2 * cams[c, 5]
-            y = acc + cams[c, 10]
-            acc = 0.0
-            acc = acc + p0 * cams[c, 6]
-            acc = acc + p1 * cams[c, 7]
-            acc = acc + p2 * cams[c, 8]
-            z = acc + cams[c, 11]
+            _, _, z, u, v = _view_project(p0, p1, p2, cams, boxes, c)
             if z <= 1e-9:
                 bits |= behind_bit
                 continue
-            nx, ny = x / z, y / z
-            acc = 0.0
-            acc = acc + nx * cams[c, 12]
-            acc = acc + ny * cams[c, 13]
-            u = acc + boxes[c, 4]
-            acc = 0.0
-            acc = acc + nx * cams[c, 14]
-            acc = acc + ny * cams[c, 15]
-            v = acc + boxes[c, 5]
             if not ((u >= boxes[c, 0]) & (u <= boxes[c, 2]) & (v >= boxes[c, 1])
                     & (v <= boxes[c, 3])):
                 bits |= outside_bit
         flags[p] |= bits
+
+
+@kernel(contract=True)
+def view_project(points, cams, boxes, out):
+    """:func:`view_flags`' arithmetic for every point and camera: ``out`` (k, m, 5) written
+    with ``x, y, z, u, v`` (``u = v = 0`` where ``z <= 1e-9``) — what the probe
+    :func:`pslog.fusion._prepare.view_flags_compiled` compares with numpy's products."""
+    for p in range(points.shape[0]):
+        for c in range(cams.shape[0]):
+            x, y, z, u, v = _view_project(points[p, 0], points[p, 1], points[p, 2], cams,
+                                          boxes, c)
+            out[p, c, 0], out[p, c, 1], out[p, c, 2] = x, y, z
+            out[p, c, 3], out[p, c, 4] = u, v
 
 
 @kernel

@@ -131,7 +131,7 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | np.ndarray 
     finite = finite_rows(points)
     flags = invalid_points(prep, points, used, finite)
     with np.errstate(invalid="ignore"):
-        if compiled:  # (the same bits, one pass: _prepare_kernel.ray_depths_rows)
+        if compiled and _prepare.ray_depths_compiled():  # (the same bits, one pass)
             from . import _prepare_kernel
 
             depth = np.empty((k, m))
