@@ -74,6 +74,8 @@ PROGRESS_EVERY_S = 10.0
 #: back over the one Ray's core installs when it likes (a stack dump, then abort), at least
 #: this often
 WAIT_S = 0.25
+#: seconds an interrupted batch waits for its cancelled tasks' workers to end
+CANCEL_WAIT_S = 10.0
 #: Ray's retries of a task whose worker process died (an exception is never retried: the
 #: task turns every error into a failed row)
 MAX_RETRIES = 3
@@ -955,6 +957,11 @@ def run_batch(jobs: list[Job], settings: Settings, *, workers: int | None = None
                 for ref in pending:  # a cluster that outlives the batch (--address, tests)
                     with contextlib.suppress(Exception):
                         ray.cancel(ref, force=True)
+                # a forced cancel kills the workers asynchronously: wait (bounded) until
+                # they are gone, so that no task still installs outputs while this
+                # process settles the jobs' folders below
+                with contextlib.suppress(Exception):
+                    ray.wait(list(pending), num_returns=len(pending), timeout=CANCEL_WAIT_S)
                 raise
     except BaseException:
         # interrupted: the tasks were ended (their workers killed with the local cluster)
