@@ -1146,29 +1146,32 @@ def _find_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
 
 
 def _scan_pieces(jobs: list, t_obs: np.ndarray, J: np.ndarray, target: np.ndarray,
-                 weight: np.ndarray, spacing: float, options: SmoothOptions) -> list:
-    """:func:`_breaks.scan` of every piece's candidates in one batched call.
+                 weight: np.ndarray, spacing: float, options: SmoothOptions,
+                 near: bool = False) -> list:
+    """:func:`_breaks.scan` (``near``: :func:`_breaks.scan_near`) of every piece's
+    candidates in one batched call.
 
     jobs : list of (piece, rows in time order, centres (C,), bounds (C, 2), limits (C, 2));
     each window is also cut at its piece's first and last detection, so the pieces' rows
     laid end to end (in time order: the pieces follow each other in time) serve as one.
-    Returns a (tau, gain) per job."""
+    Returns a (tau, gain) per job (``near``: (tau, edge))."""
     if not jobs:
         return []
+    search = _breaks.scan_near if near else _breaks.scan
     rows = np.concatenate([here for _, here, *_ in jobs])
     t = t_obs[rows]
     if np.any(np.diff(t) < 0):  # moved times made pieces overlap: one piece at a time
-        return [_scan_pieces([job], t_obs, J, target, weight, spacing, options)[0]
-                for job in jobs] if len(jobs) > 1 else [_breaks.scan(
+        return [_scan_pieces([job], t_obs, J, target, weight, spacing, options, near)[0]
+                for job in jobs] if len(jobs) > 1 else [search(
                     t, J[rows], target[rows], weight[rows], jobs[0][2], jobs[0][3],
                     jobs[0][4], spacing, _WINDOW_SPANS * spacing, options.prior)]
     limits = np.concatenate([np.stack([np.maximum(lim[:, 0], t_obs[here[0]]),
                                        np.minimum(lim[:, 1], t_obs[here[-1]])], axis=1)
                              for _, here, _, _, lim in jobs])
-    tau, gain = _breaks.scan(t, J[rows], target[rows], weight[rows],
-                             np.concatenate([c for _, _, c, _, _ in jobs]),
-                             np.concatenate([b for _, _, _, b, _ in jobs]), limits, spacing,
-                             _WINDOW_SPANS * spacing, options.prior)
+    tau, gain = search(t, J[rows], target[rows], weight[rows],
+                       np.concatenate([c for _, _, c, _, _ in jobs]),
+                       np.concatenate([b for _, _, _, b, _ in jobs]), limits, spacing,
+                       _WINDOW_SPANS * spacing, options.prior)
     cuts = np.cumsum([len(c) for _, _, c, _, _ in jobs])[:-1]
     return list(zip(np.split(tau, cuts), np.split(gain, cuts), strict=True))
 
@@ -1212,14 +1215,16 @@ def _neighbours(centers: np.ndarray, known: np.ndarray) -> np.ndarray:
 def _refine_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.ndarray,
                    w: np.ndarray, J: np.ndarray, spacing: float, breaks: list[np.ndarray],
                    options: SmoothOptions) -> list[np.ndarray]:
-    """Each break's time re-estimated (within a knot spacing) on the problem linearised at
-    the final fit, the neighbouring breaks held (the first estimate was linearised at the
-    loose fit)."""
+    """Each break's time re-estimated on the problem linearised at the final fit, the
+    neighbouring breaks held (the first estimate was linearised at the loose fit): within a
+    quarter knot spacing of it (:func:`_breaks.scan_near`: one base, fewer trials), and
+    within a knot spacing (:func:`_breaks.scan`) for the breaks whose best first-stage trial
+    was at an end of that quarter spacing (the optimum may lie beyond it)."""
     X = problem.positions(control)
     target = _linear_target(J, X, r)
     weight = w / sigma**2
     t_obs = problem.t[problem.rows]
-    jobs = []
+    jobs, wide = [], []
     row0 = 0
     for p, known in enumerate(breaks):
         # the piece's rows in time order (the clock estimator moves the times)
@@ -1235,10 +1240,31 @@ def _refine_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.n
         ok = a < b
         limits = np.stack([np.r_[-np.inf, known[:-1]], np.r_[known[1:], np.inf]], axis=1)
         if np.any(ok):
-            jobs.append((p, here, known[ok], np.stack([a[ok], b[ok]], axis=1), limits[ok]))
-    results = _scan_pieces(jobs, t_obs, J, target, weight, spacing, options)
+            # the quarter spacing around each break, inside the whole spacing's bounds
+            # (which a break the moved detections no longer allow may lie outside of)
+            full = np.stack([a[ok], b[ok]], axis=1)
+            centre = np.clip(known[ok], full[:, 0], full[:, 1])
+            near = np.stack([np.maximum(centre - spacing / 4, full[:, 0]),
+                             np.minimum(centre + spacing / 4, full[:, 1])], axis=1)
+            jobs.append((p, here, centre, near, limits[ok]))
+            wide.append((p, here, known[ok], full, limits[ok]))
+    results = _scan_pieces(jobs, t_obs, J, target, weight, spacing, options, near=True)
+    # the breaks whose first stage peaked at a quarter spacing's end that is not the whole
+    # spacing's: searched again over the whole spacing
+    again, where = [], []
+    for (_, _, _, near, _), (p, here, known, full, limits), (_, edge) in zip(
+            jobs, wide, results, strict=True):
+        redo = (((edge < 0) & (near[:, 0] > full[:, 0]))
+                | ((edge > 0) & (near[:, 1] < full[:, 1])))
+        where.append(np.flatnonzero(redo))
+        if np.any(redo):
+            again.append((p, here, known[redo], full[redo], limits[redo]))
+    redone = iter(_scan_pieces(again, t_obs, J, target, weight, spacing, options))
     out = [np.zeros(0) for _ in breaks]
-    for (p, *_), (tau, _) in zip(jobs, results, strict=True):
+    for (p, *_), (tau, _), redo in zip(jobs, results, where, strict=True):
+        if len(redo):
+            tau = tau.copy()
+            tau[redo] = next(redone)[0]
         # a break the moved detections no longer allow (too near a piece's end) is dropped
         new = np.sort(tau)
         keep = np.r_[True, np.diff(new) > spacing]  # never two breaks in one span
