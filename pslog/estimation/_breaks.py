@@ -22,10 +22,21 @@ solve, and every (candidate, τ) pair of a scan stage is one batched call. The B
 ``(u_{j-1}, u_j, τ, τ, τ)`` degenerates as ``τ → u_j`` (and ``S`` with it), so every candidate
 has two bases, on knots ``t_c + k·h`` and ``t_c + h/2 + k·h``, and a trial instant is tested
 on the one whose knots are at least ``h/4`` from it (as the final knots keep no uniform knot
-within ``h/4`` of a break). ``τ`` is found by three nested grid scans and a parabola through
-the best three costs; the gain of the break is the cost of the base on ``t_c + k·h`` minus the
-least cost with it (a likelihood ratio in units of σ²), i.e. ``gᵀ S⁻¹ g`` plus the difference
-of the two bases' costs when the shifted one is used.
+within ``h/4`` of a break). The gain of the break is the cost of the base on ``t_c + k·h``
+minus the least cost with it (a likelihood ratio in units of σ²), i.e. ``gᵀ S⁻¹ g`` plus the
+difference of the two bases' costs when the shifted one is used.
+
+``τ`` is found by a grid of 7 trial instants over the bounds, then two stages of three
+trials ``v - d, v, v + d`` (``v`` the vertex of the parabola through the previous stage's
+best three, ``d`` a quarter of the previous step), then one at the last vertex: 14 trials,
+the best of them wins. The gain is a smooth function of ``τ`` between detection times (a
+kink at each) and broad: a bounce's gain falls by one σ² (one standard deviation of ``τ``)
+a few milliseconds from its peak, so vertices of parabolas through trials a few ms apart
+find the peak to well below that. A refinement (:func:`scan_near`, a break located already)
+searches a quarter spacing around it: every trial instant there is at least ``h/4`` from the
+knots ``t_c + h/2 + k·h``, so one base serves, and a grid of 5 with the same two stages and
+final trial makes 12 trials; where the grid's best was at an end of the quarter spacing, the
+caller searches the whole spacing again (:func:`scan`).
 """
 
 from __future__ import annotations

@@ -51,13 +51,15 @@ into those knots, which adds exactly three B-splines to the base's, so the least
 the break is the base's minus ``gᵀ S⁻¹ g``, a 9 x 9 Schur complement on the base's solution
 and inverse information (:mod:`pslog.estimation._breaks` has the equations; each trial instant
 is tested on knots at least ``h/4`` from it: a second base shifted by ``h/2``). All
-candidates and instants of a scan stage are one batched computation: three nested grid scans
-and a parabola between the neighbouring detections; the break is kept when it lowers the cost
+candidates and instants of a scan stage are one batched computation: a grid of 7 instants
+between the neighbouring detections, then two stages of three trials around parabola vertices
+and a last trial (14 in all); the break is kept when it lowers the cost
 by more than ``break_threshold`` (in units of σ², a likelihood-ratio test). Rounds repeat
 until no new break (a later round tests only the peaks within reach of the local problems of
 the breaks the round before added: further away the fit, and so the test, is unchanged); a
-fit under the real prior follows, then each break's instant is
-re-estimated at that fit and the session refitted. A break leaves detections of two cameras
+fit under the real prior follows, then each break's instant is re-estimated at that fit within
+a quarter knot spacing (one local base, 12 trials; the whole spacing again where the best of
+the first 5 was at an end of the quarter) and the session refitted. A break leaves detections of two cameras
 between it and a piece's end (a segment's velocity is otherwise free along a ray), and an end
 segment that fewer than four detections of two cameras hold gives no point: its 6 unknowns
 (position, velocity) are not determined by 2–3 pixels, and the linearised covariance there
