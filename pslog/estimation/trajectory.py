@@ -59,11 +59,11 @@ until no new break (a later round tests only the peaks within reach of the local
 the breaks the round before added: further away the fit, and so the test, is unchanged); a
 fit under the real prior follows, then each break's instant is re-estimated at that fit within
 a quarter knot spacing (one local base, 12 trials; the whole spacing again where the best of
-the first 5 was at an end of the quarter) and the session refitted. A break leaves detections of two cameras
-between it and a piece's end (a segment's velocity is otherwise free along a ray), and an end
-segment that fewer than four detections of two cameras hold gives no point: its 6 unknowns
-(position, velocity) are not determined by 2–3 pixels, and the linearised covariance there
-would not say so (``Fit.withheld``; ``Track.dropped["underdetermined_end"]``).
+the first 5 was at an end of the quarter) and the session refitted. A break leaves
+detections of two cameras between it and a piece's end (a segment's velocity is otherwise
+free along a ray), and an end segment that fewer than four detections of two cameras hold
+gives no point: its 6 unknowns (position, velocity) are not determined by 2–3 pixels, and
+the linearised covariance there would not say so (``Fit.withheld``; ``Track.dropped["underdetermined_end"]``).
 
 Why knots every three detection intervals: 8 pixel coordinates per 3 unknowns keep the pixel
 noise estimable from the residuals, and a cubic spline with knots that close represents
