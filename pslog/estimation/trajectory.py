@@ -63,7 +63,8 @@ the first 5 was at an end of the quarter) and the session refitted. A break leav
 detections of two cameras between it and a piece's end (a segment's velocity is otherwise
 free along a ray), and an end segment that fewer than four detections of two cameras hold
 gives no point: its 6 unknowns (position, velocity) are not determined by 2–3 pixels, and
-the linearised covariance there would not say so (``Fit.withheld``; ``Track.dropped["underdetermined_end"]``).
+the linearised covariance there would not say so (``Fit.withheld``;
+``Track.dropped["underdetermined_end"]``).
 
 Why knots every three detection intervals: 8 pixel coordinates per 3 unknowns keep the pixel
 noise estimable from the residuals, and a cubic spline with knots that close represents
