@@ -549,6 +549,9 @@ def test_an_end_segment_too_few_detections_hold_gives_no_point(monkeypatch):
         assert not np.any((track.time_ns > t - 20_000_000) & (track.time_ns < nxt)
                           & (track.time_ns > prv)), t
     assert fuse(obs, rig, "smooth").dropped == {"underdetermined_end": fit.withheld}
-    monkeypatch.setattr(T, "_END_DETECTIONS", 1)  # every end segment trusted: metres off
+    monkeypatch.setattr(T, "_END_DETECTIONS", 1)  # every end segment trusted: far off
     fit = fit_trajectory(obs, rig)
-    assert np.nanmax(np.linalg.norm(fit.position - truth.at(obs.time_ns), axis=1)) > 0.1
+    # the lone detection's point slides along its ray as far as rounding elsewhere in the fit
+    # takes it (0.70 m before the break search's trials changed, 27 mm after, same break):
+    # ten times the 1 mm every determined point of this noise-free fit keeps, at least
+    assert np.nanmax(np.linalg.norm(fit.position - truth.at(obs.time_ns), axis=1)) > 0.01

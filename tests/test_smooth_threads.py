@@ -53,6 +53,22 @@ def test_the_scan_in_blocks_on_one_or_two_threads_is_one_batch_bit_for_bit(monke
         assert_array_equal(g2, gain)
 
 
+
+def test_the_refinement_in_blocks_on_one_or_two_threads_is_one_batch_bit_for_bit(monkeypatch):
+    t, J, z, w, centers, _, limits, h, half, prior = _scan_case()
+    bounds = np.stack([centers - h / 4, centers + h / 5], axis=1)  # scan_near's quarter
+    case = (t, J, z, w, centers, bounds, limits, h, half, prior)
+    monkeypatch.setattr(_breaks, "_BLOCK", 10**9)
+    monkeypatch.setenv("PSLOG_SMOOTH_THREADS", "1")
+    tau, edge = _breaks.scan_near(*case)
+    assert np.all((tau >= bounds[:, 0]) & (tau <= bounds[:, 1]))
+    monkeypatch.setattr(_breaks, "_BLOCK", 3)
+    for threads in ("1", "2"):
+        monkeypatch.setenv("PSLOG_SMOOTH_THREADS", threads)
+        t2, e2 = _breaks.scan_near(*case)
+        assert_array_equal(t2, tau)
+        assert_array_equal(e2, edge)
+
 def test_a_fit_on_one_thread_is_the_fit_on_two_bit_for_bit(monkeypatch):
     rig = apply_timing(builtin_rig("paper3"), "typeA")
     motion, _ = rally(20, seed=5)

@@ -22,10 +22,21 @@ solve, and every (candidate, τ) pair of a scan stage is one batched call. The B
 ``(u_{j-1}, u_j, τ, τ, τ)`` degenerates as ``τ → u_j`` (and ``S`` with it), so every candidate
 has two bases, on knots ``t_c + k·h`` and ``t_c + h/2 + k·h``, and a trial instant is tested
 on the one whose knots are at least ``h/4`` from it (as the final knots keep no uniform knot
-within ``h/4`` of a break). ``τ`` is found by three nested grid scans and a parabola through
-the best three costs; the gain of the break is the cost of the base on ``t_c + k·h`` minus the
-least cost with it (a likelihood ratio in units of σ²), i.e. ``gᵀ S⁻¹ g`` plus the difference
-of the two bases' costs when the shifted one is used.
+within ``h/4`` of a break). The gain of the break is the cost of the base on ``t_c + k·h``
+minus the least cost with it (a likelihood ratio in units of σ²), i.e. ``gᵀ S⁻¹ g`` plus the
+difference of the two bases' costs when the shifted one is used.
+
+``τ`` is found by a grid of 7 trial instants over the bounds, then two stages of three
+trials ``v - d, v, v + d`` (``v`` the vertex of the parabola through the previous stage's
+best three, ``d`` a quarter of the previous step), then one at the last vertex: 14 trials,
+the best of them wins. The gain is a smooth function of ``τ`` between detection times (a
+kink at each) and broad: a bounce's gain falls by one σ² (one standard deviation of ``τ``)
+a few milliseconds from its peak, so vertices of parabolas through trials a few ms apart
+find the peak to well below that. A refinement (:func:`scan_near`, a break located already)
+searches a quarter spacing around it: every trial instant there is at least ``h/4`` from the
+knots ``t_c + h/2 + k·h``, so one base serves, and a grid of 5 with the same two stages and
+final trial makes 12 trials; where the grid's best was at an end of the quarter spacing, the
+caller searches the whole spacing again (:func:`scan`).
 """
 
 from __future__ import annotations
@@ -36,8 +47,9 @@ import numpy as np
 
 from .bspline import basis, clamped_knots, n_control
 
-_GRID = 7  # trial instants per scan
-_STAGES = 3
+_GRID = 7  # trial instants of a scan's first stage
+_NEAR_GRID = 5  # of a refinement's (:func:`scan_near`)
+_POLISH = 2  # stages of three trials around the last parabola's vertex
 _BATCH = 2000  # (candidate, τ) pairs per batched solve: bounds memory
 #: candidates per block of the scan: their local problems (two 3m x 3m matrices each) stay
 #: in cache, where a whole session's at once (20,000 windows at 90 minutes) took 500 MB
@@ -341,9 +353,38 @@ def scan(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray, centers: np
     -------
     tau : (C,) s; gain : (C,) cost without the break minus cost with it (σ² units)
     """
+    tau, gain, _ = _scan(t, J, z, w, centers, bounds, limits, spacing, half_width, prior,
+                         False)
+    return tau, gain
+
+
+def scan_near(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray,
+              centers: np.ndarray, bounds: np.ndarray, limits: np.ndarray, spacing: float,
+              half_width: float, prior) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`scan` of breaks already located near ``centers``, ``bounds`` within ``h/4`` of
+    them (a refinement): every trial instant is then at least ``h/4`` from the knots
+    ``center + h/2 + k·h``, so one base serves (no centred one, no second solve per
+    candidate), and the gains are not needed.
+
+    Returns
+    -------
+    tau : (C,) s, the best instant; edge : (C,) int, -1 / +1 where the first stage's best
+        trial was ``bounds``' lower / upper end (the optimum may lie beyond it), else 0
+    """
+    if np.any(np.abs(bounds - centers[:, None]) > spacing / 4 * (1 + 1e-9)):
+        raise ValueError("scan_near: bounds further than h/4 from their centres")
+    tau, _, edge = _scan(t, J, z, w, centers, bounds, limits, spacing, half_width, prior,
+                         True)
+    return tau, edge
+
+
+def _scan(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray, centers: np.ndarray,
+          bounds: np.ndarray, limits: np.ndarray, spacing: float, half_width: float, prior,
+          near: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`scan` (``near`` False) and :func:`scan_near` (True): tau, gain, edge."""
     C = len(centers)
     if C == 0:
-        return np.zeros(0), np.zeros(0)
+        return np.zeros(0), np.zeros(0), np.zeros(0, np.int64)
     lo = np.maximum(centers - half_width, limits[:, 0])
     hi = np.minimum(centers + half_width, limits[:, 1])
     i0 = np.searchsorted(t, lo, side="left")
@@ -361,11 +402,11 @@ def scan(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray, centers: np
 
     terms = detection_terms(J, w, i0, i1)
 
-    def block(c0: int, c1: int) -> tuple[np.ndarray, np.ndarray]:
+    def block(c0: int, c1: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The scan of candidates c0..c1-1 (each candidate's result depends on its own
         window only)."""
         return _scan_block(t, J, z, w, centers[c0:c1], bounds[c0:c1], i0[c0:c1],
-                           i1[c0:c1], Wmax, local, spacing, spans, prior, terms)
+                           i1[c0:c1], Wmax, local, spacing, spans, prior, terms, near)
 
     jobs = [(c0, min(c0 + _BLOCK, C)) for c0 in range(0, C, _BLOCK)]
     threads = min(smooth_threads(), len(jobs))
@@ -378,61 +419,90 @@ def scan(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray, centers: np
             parts = list(pool.map(lambda job: block(*job), jobs))
     else:
         parts = [block(c0, c1) for c0, c1 in jobs]
-    return (np.concatenate([tau for tau, _ in parts]),
-            np.concatenate([gain for _, gain in parts]))
+    return tuple(np.concatenate([part[i] for part in parts])  # type: ignore[return-value]
+                 for i in range(3))
+
+
+def vertex(gm: np.ndarray, g0: np.ndarray, gp: np.ndarray) -> np.ndarray:
+    """Where the parabola through gains ``(-1, gm), (0, g0), (1, gp)`` peaks, in units of
+    their spacing from the middle one, within [-1, 1]; where it opens upward (or is flat)
+    the better end (0 when they are equal)."""
+    curv = gm + gp - 2 * g0  # negative: a maximum
+    cap = curv < 0
+    shift = np.where(cap, 0.5 * (gm - gp) / np.where(cap, curv, -1.0), np.sign(gp - gm))
+    return np.clip(shift, -1.0, 1.0)
 
 
 def _scan_block(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray,
                 centers: np.ndarray, bounds: np.ndarray, i0: np.ndarray, i1: np.ndarray,
                 Wmax: int, local: _Local, spacing: float, spans: tuple[int, int], prior,
-                terms=None) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`scan` of a block of candidates (C,), their windows ``t[i0:i1]`` padded to
-    ``Wmax`` detections, on the scan's knot pattern ``local`` and ``spans``."""
+                terms=None, near: bool = False
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`_scan` of a block of candidates (C,), their windows ``t[i0:i1]`` padded to
+    ``Wmax`` detections, on the scan's knot pattern ``local`` and ``spans``.
+
+    The search: a grid of ``_GRID`` trial instants over ``bounds`` (``_NEAR_GRID`` with
+    ``near``), then ``_POLISH`` stages of three trials ``v - d, v, v + d`` each, ``v`` the
+    previous stage's parabola vertex and ``d`` a quarter of the previous step, then one
+    trial at the last vertex; the best trial of all wins."""
     C = len(centers)
     index = i0[:, None] + np.arange(Wmax)
     valid = index < i1[:, None]
     index = np.minimum(index, len(t) - 1)
-    # two bases, knots at the centre + k·h and shifted by h/2 (windows C..2C-1): a trial
-    # instant is tested on the one whose knots are at least h/4 away from it
-    both = np.r_[centers, centers + spacing / 2]
-    base = _Base(local, t, J, z, w, np.r_[index, index], np.r_[valid, valid], both, spacing,
-                 spans, terms)
     rows = np.arange(C)
+    if near:
+        # one base, knots at the centre + h/2 + k·h: every trial instant (within h/4 of the
+        # centre) is at least h/4 from them
+        both = centers + spacing / 2
+        base = _Base(local, t, J, z, w, index, valid, both, spacing, spans, terms)
+    else:
+        # two bases, knots at the centre + k·h and shifted by h/2 (windows C..2C-1): a trial
+        # instant is tested on the one whose knots are at least h/4 away from it
+        both = np.r_[centers, centers + spacing / 2]
+        base = _Base(local, t, J, z, w, np.r_[index, index], np.r_[valid, valid], both,
+                     spacing, spans, terms)
 
     def gains(which, tau):
-        """Cost of the centred base minus the least cost with a break at ``tau``."""
-        frac = (tau - centers[which]) / spacing
-        frac -= np.floor(frac)
-        on = which + C * ((frac < 0.25) | (frac > 0.75))
+        """Cost of the centred base minus the least cost with a break at ``tau`` (with
+        ``near``: of the shifted base)."""
+        if near:
+            on = which
+        else:
+            frac = (tau - centers[which]) / spacing
+            frac -= np.floor(frac)
+            on = which + C * ((frac < 0.25) | (frac > 0.75))
         out = np.empty(len(tau))
         for s in range(0, len(tau), _BATCH):
             sl = slice(s, s + _BATCH)
-            out[sl] = (_gains(base, on[sl], tau[sl], both, prior) + base.cost[which[sl]]
-                       - base.cost[on[sl]])
+            out[sl] = _gains(base, on[sl], tau[sl], both, prior)
+            if not near:
+                out[sl] += base.cost[which[sl]] - base.cost[on[sl]]
         return out
 
-    a, b = bounds[:, 0].copy(), bounds[:, 1].copy()
-    best_tau = (a + b) / 2
-    best = np.full(C, -np.inf)
-    for _ in range(_STAGES):
-        grid = a[:, None] + (b - a)[:, None] * np.linspace(0, 1, _GRID)[None, :]
-        gain = gains(np.repeat(rows, _GRID), grid.ravel()).reshape(C, _GRID)
-        k = np.argmax(gain, axis=1)
-        better = gain[rows, k] > best
-        best = np.where(better, gain[rows, k], best)
-        best_tau = np.where(better, grid[rows, k], best_tau)
-        step = (b - a) / (_GRID - 1)
-        # a parabola through the best grid point and its neighbours
-        km, kp = np.maximum(k - 1, 0), np.minimum(k + 1, _GRID - 1)
-        c0, cm, cp = -gain[rows, k], -gain[rows, km], -gain[rows, kp]
-        curv = cm + cp - 2 * c0
-        inner = (k > 0) & (k < _GRID - 1) & (curv > 0)
-        shift = np.where(inner, 0.5 * (cm - cp) / np.where(inner, curv, 1.0), 0.0)
-        centre = grid[rows, k] + shift * step
-        a = np.maximum(centre - step, bounds[:, 0])
-        b = np.minimum(centre + step, bounds[:, 1])
-    final = gains(rows, (a + b) / 2)
+    a, b = bounds[:, 0], bounds[:, 1]
+    P = _NEAR_GRID if near else _GRID
+    grid = a[:, None] + (b - a)[:, None] * np.linspace(0, 1, P)[None, :]
+    gain = gains(np.repeat(rows, P), grid.ravel()).reshape(C, P)
+    k = np.argmax(gain, axis=1)
+    best, best_tau = gain[rows, k], grid[rows, k]
+    edge = np.where(k == 0, -1, np.where(k == P - 1, 1, 0))
+    step = (b - a) / (P - 1)
+    # a parabola through the best grid point and its neighbours (at an end: that end)
+    km, kp = np.maximum(k - 1, 0), np.minimum(k + 1, P - 1)
+    shift = np.where(edge == 0, vertex(gain[rows, km], best, gain[rows, kp]), 0.0)
+    v = best_tau + shift * step
+    for _ in range(_POLISH):
+        step = step / 4
+        # three trials around v, inside the bounds
+        v = np.clip(v, np.minimum(a + step, (a + b) / 2), np.maximum(b - step, (a + b) / 2))
+        trial = v[:, None] + step[:, None] * np.array([-1.0, 0.0, 1.0])
+        trial = np.clip(trial, a[:, None], b[:, None])
+        g3 = gains(np.repeat(rows, 3), trial.ravel()).reshape(C, 3)
+        k = np.argmax(g3, axis=1)
+        better = g3[rows, k] > best
+        best = np.where(better, g3[rows, k], best)
+        best_tau = np.where(better, trial[rows, k], best_tau)
+        v = np.clip(v + vertex(g3[:, 0], g3[:, 1], g3[:, 2]) * step, a, b)
+    final = gains(rows, v)
     use = final > best
-    best_tau = np.where(use, (a + b) / 2, best_tau)
-    best = np.where(use, final, best)
-    return best_tau, best
+    return np.where(use, v, best_tau), np.where(use, final, best), edge

@@ -51,17 +51,20 @@ into those knots, which adds exactly three B-splines to the base's, so the least
 the break is the base's minus ``gᵀ S⁻¹ g``, a 9 x 9 Schur complement on the base's solution
 and inverse information (:mod:`pslog.estimation._breaks` has the equations; each trial instant
 is tested on knots at least ``h/4`` from it: a second base shifted by ``h/2``). All
-candidates and instants of a scan stage are one batched computation: three nested grid scans
-and a parabola between the neighbouring detections; the break is kept when it lowers the cost
+candidates and instants of a scan stage are one batched computation: a grid of 7 instants
+between the neighbouring detections, then two stages of three trials around parabola vertices
+and a last trial (14 in all); the break is kept when it lowers the cost
 by more than ``break_threshold`` (in units of σ², a likelihood-ratio test). Rounds repeat
 until no new break (a later round tests only the peaks within reach of the local problems of
 the breaks the round before added: further away the fit, and so the test, is unchanged); a
-fit under the real prior follows, then each break's instant is
-re-estimated at that fit and the session refitted. A break leaves detections of two cameras
-between it and a piece's end (a segment's velocity is otherwise free along a ray), and an end
-segment that fewer than four detections of two cameras hold gives no point: its 6 unknowns
-(position, velocity) are not determined by 2–3 pixels, and the linearised covariance there
-would not say so (``Fit.withheld``; ``Track.dropped["underdetermined_end"]``).
+fit under the real prior follows, then each break's instant is re-estimated at that fit within
+a quarter knot spacing (one local base, 12 trials; the whole spacing again where the best of
+the first 5 was at an end of the quarter) and the session refitted. A break leaves
+detections of two cameras between it and a piece's end (a segment's velocity is otherwise
+free along a ray), and an end segment that fewer than four detections of two cameras hold
+gives no point: its 6 unknowns (position, velocity) are not determined by 2–3 pixels, and
+the linearised covariance there would not say so (``Fit.withheld``;
+``Track.dropped["underdetermined_end"]``).
 
 Why knots every three detection intervals: 8 pixel coordinates per 3 unknowns keep the pixel
 noise estimable from the residuals, and a cubic spline with knots that close represents
@@ -1146,29 +1149,32 @@ def _find_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
 
 
 def _scan_pieces(jobs: list, t_obs: np.ndarray, J: np.ndarray, target: np.ndarray,
-                 weight: np.ndarray, spacing: float, options: SmoothOptions) -> list:
-    """:func:`_breaks.scan` of every piece's candidates in one batched call.
+                 weight: np.ndarray, spacing: float, options: SmoothOptions,
+                 near: bool = False) -> list:
+    """:func:`_breaks.scan` (``near``: :func:`_breaks.scan_near`) of every piece's
+    candidates in one batched call.
 
     jobs : list of (piece, rows in time order, centres (C,), bounds (C, 2), limits (C, 2));
     each window is also cut at its piece's first and last detection, so the pieces' rows
     laid end to end (in time order: the pieces follow each other in time) serve as one.
-    Returns a (tau, gain) per job."""
+    Returns a (tau, gain) per job (``near``: (tau, edge))."""
     if not jobs:
         return []
+    search = _breaks.scan_near if near else _breaks.scan
     rows = np.concatenate([here for _, here, *_ in jobs])
     t = t_obs[rows]
     if np.any(np.diff(t) < 0):  # moved times made pieces overlap: one piece at a time
-        return [_scan_pieces([job], t_obs, J, target, weight, spacing, options)[0]
-                for job in jobs] if len(jobs) > 1 else [_breaks.scan(
+        return [_scan_pieces([job], t_obs, J, target, weight, spacing, options, near)[0]
+                for job in jobs] if len(jobs) > 1 else [search(
                     t, J[rows], target[rows], weight[rows], jobs[0][2], jobs[0][3],
                     jobs[0][4], spacing, _WINDOW_SPANS * spacing, options.prior)]
     limits = np.concatenate([np.stack([np.maximum(lim[:, 0], t_obs[here[0]]),
                                        np.minimum(lim[:, 1], t_obs[here[-1]])], axis=1)
                              for _, here, _, _, lim in jobs])
-    tau, gain = _breaks.scan(t, J[rows], target[rows], weight[rows],
-                             np.concatenate([c for _, _, c, _, _ in jobs]),
-                             np.concatenate([b for _, _, _, b, _ in jobs]), limits, spacing,
-                             _WINDOW_SPANS * spacing, options.prior)
+    tau, gain = search(t, J[rows], target[rows], weight[rows],
+                       np.concatenate([c for _, _, c, _, _ in jobs]),
+                       np.concatenate([b for _, _, _, b, _ in jobs]), limits, spacing,
+                       _WINDOW_SPANS * spacing, options.prior)
     cuts = np.cumsum([len(c) for _, _, c, _, _ in jobs])[:-1]
     return list(zip(np.split(tau, cuts), np.split(gain, cuts), strict=True))
 
@@ -1212,14 +1218,16 @@ def _neighbours(centers: np.ndarray, known: np.ndarray) -> np.ndarray:
 def _refine_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.ndarray,
                    w: np.ndarray, J: np.ndarray, spacing: float, breaks: list[np.ndarray],
                    options: SmoothOptions) -> list[np.ndarray]:
-    """Each break's time re-estimated (within a knot spacing) on the problem linearised at
-    the final fit, the neighbouring breaks held (the first estimate was linearised at the
-    loose fit)."""
+    """Each break's time re-estimated on the problem linearised at the final fit, the
+    neighbouring breaks held (the first estimate was linearised at the loose fit): within a
+    quarter knot spacing of it (:func:`_breaks.scan_near`: one base, fewer trials), and
+    within a knot spacing (:func:`_breaks.scan`) for the breaks whose best first-stage trial
+    was at an end of that quarter spacing (the optimum may lie beyond it)."""
     X = problem.positions(control)
     target = _linear_target(J, X, r)
     weight = w / sigma**2
     t_obs = problem.t[problem.rows]
-    jobs = []
+    jobs, wide = [], []
     row0 = 0
     for p, known in enumerate(breaks):
         # the piece's rows in time order (the clock estimator moves the times)
@@ -1235,10 +1243,31 @@ def _refine_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.n
         ok = a < b
         limits = np.stack([np.r_[-np.inf, known[:-1]], np.r_[known[1:], np.inf]], axis=1)
         if np.any(ok):
-            jobs.append((p, here, known[ok], np.stack([a[ok], b[ok]], axis=1), limits[ok]))
-    results = _scan_pieces(jobs, t_obs, J, target, weight, spacing, options)
+            # the quarter spacing around each break, inside the whole spacing's bounds
+            # (which a break the moved detections no longer allow may lie outside of)
+            full = np.stack([a[ok], b[ok]], axis=1)
+            centre = np.clip(known[ok], full[:, 0], full[:, 1])
+            near = np.stack([np.maximum(centre - spacing / 4, full[:, 0]),
+                             np.minimum(centre + spacing / 4, full[:, 1])], axis=1)
+            jobs.append((p, here, centre, near, limits[ok]))
+            wide.append((p, here, known[ok], full, limits[ok]))
+    results = _scan_pieces(jobs, t_obs, J, target, weight, spacing, options, near=True)
+    # the breaks whose first stage peaked at a quarter spacing's end that is not the whole
+    # spacing's: searched again over the whole spacing
+    again, where = [], []
+    for (_, _, _, near, _), (p, here, known, full, limits), (_, edge) in zip(
+            jobs, wide, results, strict=True):
+        redo = (((edge < 0) & (near[:, 0] > full[:, 0]))
+                | ((edge > 0) & (near[:, 1] < full[:, 1])))
+        where.append(np.flatnonzero(redo))
+        if np.any(redo):
+            again.append((p, here, known[redo], full[redo], limits[redo]))
+    redone = iter(_scan_pieces(again, t_obs, J, target, weight, spacing, options))
     out = [np.zeros(0) for _ in breaks]
-    for (p, *_), (tau, _) in zip(jobs, results, strict=True):
+    for (p, *_), (tau, _), redo in zip(jobs, results, where, strict=True):
+        if len(redo):
+            tau = tau.copy()
+            tau[redo] = next(redone)[0]
         # a break the moved detections no longer allow (too near a piece's end) is dropped
         new = np.sort(tau)
         keep = np.r_[True, np.diff(new) > spacing]  # never two breaks in one span
