@@ -159,3 +159,32 @@ def test_isotropic_band_is_points_normal_of_w_identity(shuffled):
     ref, _ = _normal.accumulate_points(first, N, upper, np.zeros((len(w), 3)), m)
     ab = _kernels.points_normal_isotropic(first, N, w, m)
     assert_array_equal(_bits(ab), _bits(ref))
+
+
+def test_the_prior_terms_probe_takes_the_kernel_only_where_it_gives_numpys_bits():
+    # here the kernel repeats OpenBLAS's order (the probe passes); a kernel whose products
+    # are rounded before each sum (no fused multiply-add) must fail it: numpy's matmuls then
+    import numba
+
+    assert _breaks.prior_terms_compiled() == _blas_like_here()
+    assert _breaks._prior_terms_probe(_kernels.trial_prior_terms) == _blas_like_here()
+
+    @numba.njit
+    def rounded_p0(Nd6, x0, gravity):
+        p0 = np.empty((Nd6.shape[0], 12, 3))
+        for b in range(Nd6.shape[0]):
+            for p in range(12):
+                for d in range(3):
+                    acc = 0.0
+                    for c in range(6):
+                        acc = acc + Nd6[b, p, c] * x0[b, c, d]  # no contract: rounded
+                    p0[b, p, d] = acc - gravity[d] if p < 8 else acc
+        return p0
+
+    def rounded(Nd6, x0, fw, fn, gravity, g):
+        _, pyy, pxy = _breaks.prior_terms_numpy(Nd6, x0, fw, fn, gravity, g.copy())
+        p0 = rounded_p0(Nd6, x0, gravity)
+        g -= fw @ p0
+        return p0, pyy, pxy
+
+    assert not _breaks._prior_terms_probe(rounded)

@@ -41,7 +41,7 @@ caller searches the whole spacing again (:func:`scan`).
 
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import cache, lru_cache
 
 import numpy as np
 
@@ -318,9 +318,9 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
     Nd6, x0 = trial_gather(first, Nd, q0, base.x0.reshape(-1, 3), which * m + q0)
     # p'' or jerk less gravity p0 = Nd6 @ x0 - g (B, 12, 3), pyy = fw fnᵀ (B, 3, 3), pxy =
     # Nd6ᵀ fwᵀ (B, 6, 3), and g -= fw @ p0: the matmuls' sums, one compiled pass
-    _, pyy, pxy = trial_prior_terms(Nd6, x0, np.ascontiguousarray(fw),
-                                    np.ascontiguousarray(fn),
-                                    np.asarray(prior.gravity, dtype=np.float64), g)
+    prior_terms = trial_prior_terms if prior_terms_compiled() else prior_terms_numpy
+    _, pyy, pxy = prior_terms(Nd6, x0, np.ascontiguousarray(fw), np.ascontiguousarray(fn),
+                              np.asarray(prior.gravity, dtype=np.float64), g)
     # ⊗ I₃ into the data terms, and the 18 x 18 diagonal block of each window's inverse
     col0 = base.col0
     k = 3 * q0 - col0
@@ -334,6 +334,49 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
     g = g.reshape(len(tau), 9)
     gain = np.einsum("bk,bk->b", g, np.linalg.solve(S, g[..., None])[..., 0])
     return gain
+
+
+def prior_terms_numpy(Nd6: np.ndarray, x0: np.ndarray, fw: np.ndarray, fn: np.ndarray,
+                      gravity: np.ndarray, g: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`pslog.estimation._kernels.trial_prior_terms` as numpy's matmuls (the form it
+    repeats): ``p0 = Nd6 @ x0`` (B, 12, 3) less ``gravity`` at the 8 Gauss nodes, ``pyy =
+    fw @ fnᵀ`` (B, 3, 3), ``pxy = Nd6ᵀ @ fwᵀ`` (B, 6, 3), and ``g -= fw @ p0`` in place."""
+    p0 = Nd6 @ x0
+    p0[:, :8] -= gravity
+    pyy = fw @ np.swapaxes(fn, 1, 2)
+    pxy = np.swapaxes(Nd6, 1, 2) @ np.swapaxes(fw, 1, 2)
+    g -= fw @ p0
+    return p0, pyy, pxy
+
+
+@cache
+def prior_terms_compiled() -> bool:
+    """Whether ``trial_prior_terms`` gives :func:`prior_terms_numpy`'s bits here: it sums as
+    OpenBLAS's kernels do on x86-64 with fused multiply-adds; another BLAS, CPU or numpy may
+    sum otherwise (numpy's matmuls then). Probe terms of several batch sizes and
+    magnitudes, checked once per process (~ms)."""
+    from ._kernels import trial_prior_terms
+
+    return _prior_terms_probe(trial_prior_terms)
+
+
+def _prior_terms_probe(kernel) -> bool:
+    """:func:`prior_terms_compiled`'s probe of a kernel with ``trial_prior_terms``' form."""
+    rng = np.random.default_rng(23)
+    gravity = np.array([0.0, 0.0, -9.81])
+    for B in (1, 2, 3, 8, 64, 257):
+        Nd6 = rng.normal(size=(B, 12, 6)) * 10.0 ** rng.integers(-3, 6, (B, 1, 1))
+        x0, fw = rng.normal(size=(B, 6, 3)), rng.normal(size=(B, 3, 12))
+        fn = rng.normal(size=(B, 3, 12)) * 1e4
+        g0 = rng.normal(size=(B, 3, 3))
+        want_g, got_g = g0.copy(), g0.copy()
+        want = prior_terms_numpy(Nd6, x0, fw, fn, gravity, want_g)
+        got = kernel(Nd6, x0, fw, fn, gravity, got_g)
+        if not all(np.array_equal(a.view(np.int64), b.view(np.int64))
+                   for a, b in zip((*want, want_g), (*got, got_g), strict=True)):
+            return False
+    return True
 
 
 def scan(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray, centers: np.ndarray,
