@@ -84,3 +84,26 @@ def test_the_parabola_vertex_of_three_gains():
     assert _breaks.vertex(np.array([2.0]), np.array([1.0]), np.array([3.0]))[0] == 1.0
     g = [5 - 2 * (x + 4) ** 2 for x in (-1.0, 0.0, 1.0)]
     assert _breaks.vertex(*(np.array([v]) for v in g))[0] == -1.0
+    # a gain that is not finite (a failed solve's NaN, made -inf; no break fits): stay put
+    inf = np.array([-np.inf])
+    assert _breaks.vertex(inf, np.array([1.0]), np.array([2.0]))[0] == 0.0
+    assert _breaks.vertex(inf, inf, inf)[0] == 0.0
+
+
+@pytest.mark.filterwarnings("ignore:invalid value:RuntimeWarning")
+@pytest.mark.parametrize("bad", ["z nan", "w inf"])
+def test_a_detection_that_is_not_finite_gives_no_break_and_no_error(bad):
+    # a NaN gain (the window's solve failed) is no gain: the search ends without a break
+    # (gain -inf) and inside its bounds, rather than trying an instant of NaN
+    t, J, z, w, centers, limits = _case()
+    i = np.searchsorted(t, 0.005)
+    if bad == "z nan":
+        z[i] = np.nan
+    else:
+        w[i] = np.inf
+    bounds = np.array([[-0.02, 0.035]])
+    tau, gain = _breaks.scan(t, J, z, w, centers, bounds, limits, H, 5 * H, MotionPrior())
+    assert gain[0] == -np.inf and bounds[0, 0] <= tau[0] <= bounds[0, 1]
+    near = np.array([[0.005 - H / 4, 0.005 + H / 4]])
+    tau, _ = _breaks.scan_near(t, J, z, w, centers, near, limits, H, 5 * H, MotionPrior())
+    assert near[0, 0] <= tau[0] <= near[0, 1]

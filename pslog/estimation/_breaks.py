@@ -414,7 +414,9 @@ def scan_near(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray,
     tau : (C,) s, the best instant; edge : (C,) int, -1 / +1 where the first stage's best
         trial was ``bounds``' lower / upper end (the optimum may lie beyond it), else 0
     """
-    if np.any(np.abs(bounds - centers[:, None]) > spacing / 4 * (1 + 1e-9)):
+    # (the bounds were rounded from centre -/+ h/4: a few ulps of the centre allowed)
+    if np.any(np.abs(bounds - centers[:, None])
+              > spacing / 4 * (1 + 1e-9) + 4 * np.spacing(np.abs(centers))[:, None]):
         raise ValueError("scan_near: bounds further than h/4 from their centres")
     tau, _, edge = _scan(t, J, z, w, centers, bounds, limits, spacing, half_width, prior,
                          True)
@@ -470,10 +472,12 @@ def vertex(gm: np.ndarray, g0: np.ndarray, gp: np.ndarray) -> np.ndarray:
     """Where the parabola through gains ``(-1, gm), (0, g0), (1, gp)`` peaks, in units of
     their spacing from the middle one, within [-1, 1]; where it opens upward (or is flat)
     the better end (0 when they are equal)."""
-    curv = gm + gp - 2 * g0  # negative: a maximum
-    cap = curv < 0
-    shift = np.where(cap, 0.5 * (gm - gp) / np.where(cap, curv, -1.0), np.sign(gp - gm))
-    return np.clip(shift, -1.0, 1.0)
+    with np.errstate(invalid="ignore"):  # (-inf gains: NaN, handled below)
+        curv = gm + gp - 2 * g0  # negative: a maximum
+        cap = curv < 0
+        shift = np.where(cap, 0.5 * (gm - gp) / np.where(cap, curv, -1.0), np.sign(gp - gm))
+    # a gain that is not finite (-inf: no break fits there) leaves no parabola: stay
+    return np.clip(np.where(np.isfinite(shift), shift, 0.0), -1.0, 1.0)
 
 
 def _scan_block(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray,
@@ -520,6 +524,8 @@ def _scan_block(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray,
             out[sl] = _gains(base, on[sl], tau[sl], both, prior)
             if not near:
                 out[sl] += base.cost[which[sl]] - base.cost[on[sl]]
+        # a failed solve's NaN is no gain (argmax and the comparisons below would take it)
+        out[np.isnan(out)] = -np.inf
         return out
 
     a, b = bounds[:, 0], bounds[:, 1]

@@ -52,8 +52,8 @@ the break is the base's minus ``gᵀ S⁻¹ g``, a 9 x 9 Schur complement on the
 and inverse information (:mod:`pslog.estimation._breaks` has the equations; each trial instant
 is tested on knots at least ``h/4`` from it: a second base shifted by ``h/2``). All
 candidates and instants of a scan stage are one batched computation: a grid of 7 instants
-between the neighbouring detections, then two stages of three trials around parabola vertices
-and a last trial (14 in all); the break is kept when it lowers the cost
+over the five detection intervals around the peak, then two stages of three trials around
+parabola vertices and a last trial (14 in all); the break is kept when it lowers the cost
 by more than ``break_threshold`` (in units of σ², a likelihood-ratio test). Rounds repeat
 until no new break (a later round tests only the peaks within reach of the local problems of
 the breaks the round before added: further away the fit, and so the test, is unchanged); a

@@ -131,7 +131,9 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | np.ndarray 
     finite = finite_rows(points)
     flags = invalid_points(prep, points, used, finite)
     with np.errstate(invalid="ignore"):
-        if compiled and _prepare.ray_depths_compiled():  # (the same bits, one pass)
+        if compiled and dirs.flags.c_contiguous and _prepare.ray_depths_compiled():
+            # (the same bits, one pass: einsum sums C-contiguous rays in the order the
+            # kernel repeats; other strides in another)
             from . import _prepare_kernel
 
             depth = np.empty((k, m))
