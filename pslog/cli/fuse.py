@@ -109,6 +109,7 @@ def run(args: argparse.Namespace) -> int:
     from pslog.rig import check_baselines, resolve_rig
     from pslog.timing import observations as timed_observations
 
+    one_malloc_arena()  # before the command's threads allocate
     output = args.output  # checked before run() (declare_files)
     progress.update(what="reading the session")
     session = read_session(args.session)
@@ -235,6 +236,36 @@ def run(args: argparse.Namespace) -> int:
               + (f" (left out, untrustworthy: {why})" if why else ""))
     print(f"wrote {output}")
     return 0
+
+
+#: glibc's mallopt parameter of the most malloc arenas (malloc.h)
+_M_ARENA_MAX = -8
+
+
+def one_malloc_arena() -> bool:
+    """glibc: every thread of the process allocates from one malloc arena (``mallopt
+    (M_ARENA_MAX, 1)``, as ``MALLOC_ARENA_MAX=1`` would), unless ``MALLOC_ARENA_MAX`` is
+    set. A thread of its own arena (glibc gives each new thread one, up to 8 a core)
+    keeps the large blocks its numpy arrays freed for its own later ones, and takes fresh
+    pages from the OS for what another thread freed: the fuse threads' columns (tens of
+    MB each) came as fresh pages again and again. One arena: on the 90-minute three-camera
+    session the default ``pslog fuse`` took 23 % fewer page faults (231-241 thousand
+    against 301-308 thousand) and a 160-200 MB lower peak (1.39-1.44 GB against
+    1.57-1.60 GB; four alternating pairs on a loaded machine), its user CPU unchanged.
+    Its outputs do not depend on it. True where set (glibc on Linux)."""
+    import os
+    import sys
+
+    if not sys.platform.startswith("linux") or "MALLOC_ARENA_MAX" in os.environ:
+        return False
+    import ctypes
+
+    try:
+        mallopt = ctypes.CDLL(None).mallopt
+    except (OSError, AttributeError):  # (no such C library function here)
+        return False
+    mallopt.argtypes, mallopt.restype = [ctypes.c_int, ctypes.c_int], ctypes.c_int
+    return bool(mallopt(_M_ARENA_MAX, 1))
 
 
 def _still_rejections(rejected) -> int:
