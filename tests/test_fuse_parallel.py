@@ -341,7 +341,7 @@ _ARENAS = """
 import ctypes, os, sys
 from pslog.cli import main
 
-os.environ["PSLOG_PROGRESS"] = "off"
+os.environ["PSLOG_PROGRESS"] = "lines"  # (its thread starts before the command runs)
 code = main(["fuse", sys.argv[1], "-o", sys.argv[2]])  # every default method, on threads
 libc = ctypes.CDLL(None)
 libc.fopen.restype, libc.fopen.argtypes = ctypes.c_void_p, [ctypes.c_char_p, ctypes.c_char_p]

@@ -109,7 +109,7 @@ def run(args: argparse.Namespace) -> int:
     from pslog.rig import check_baselines, resolve_rig
     from pslog.timing import observations as timed_observations
 
-    one_malloc_arena()  # before the command's threads allocate
+    one_malloc_arena()  # before the command's threads allocate (done already by pslog.cli)
     output = args.output  # checked before run() (declare_files)
     progress.update(what="reading the session")
     session = read_session(args.session)
@@ -266,6 +266,13 @@ def one_malloc_arena() -> bool:
         return False
     mallopt.argtypes, mallopt.restype = [ctypes.c_int, ctypes.c_int], ctypes.c_int
     return bool(mallopt(_M_ARENA_MAX, 1))
+
+
+def before_threads() -> None:
+    """Called by :func:`pslog.cli.main` before any thread of the command starts (its
+    progress line's): :func:`one_malloc_arena` (a thread that allocated before it keeps an
+    arena of its own, which the fusing threads would then share in turn)."""
+    one_malloc_arena()
 
 
 def _still_rejections(rejected) -> int:
