@@ -249,10 +249,12 @@ def one_malloc_arena() -> bool:
     keeps the large blocks its numpy arrays freed for its own later ones, and takes fresh
     pages from the OS for what another thread freed: the fuse threads' columns (tens of
     MB each) came as fresh pages again and again. One arena: on the 90-minute three-camera
-    session the default ``pslog fuse`` took 23 % fewer page faults (231-241 thousand
-    against 301-308 thousand) and a 160-200 MB lower peak (1.39-1.44 GB against
-    1.57-1.60 GB; four alternating pairs on a loaded machine), its user CPU unchanged.
-    Its outputs do not depend on it. True where set (glibc on Linux)."""
+    session the default ``pslog fuse`` took 27 % fewer page faults (218-234 thousand
+    against 305-313 thousand), a 170-200 MB lower peak (1.40-1.45 GB against 1.60-1.62)
+    and 0.9 CPU s less (16.3-16.9 against 17.2-17.8, user and system; two alternating
+    pairs against ``MALLOC_ARENA_MAX=16`` on a loaded machine; with the variable set
+    alone, four more pairs alike). Its outputs do not depend on it. True where set
+    (glibc on Linux)."""
     import os
     import sys
 
