@@ -342,7 +342,7 @@ import ctypes, os, sys
 from pslog.cli import main
 
 os.environ["PSLOG_PROGRESS"] = "lines"  # (its thread starts before the command runs)
-code = main(["fuse", sys.argv[1], "-o", sys.argv[2]])  # every default method, on threads
+code = main(["fuse", sys.argv[1], "--method", "nearest,typeA", "-o", sys.argv[2]])  # on threads
 libc = ctypes.CDLL(None)
 libc.fopen.restype, libc.fopen.argtypes = ctypes.c_void_p, [ctypes.c_char_p, ctypes.c_char_p]
 libc.malloc_info.argtypes, libc.fclose.argtypes = [ctypes.c_int, ctypes.c_void_p], [ctypes.c_void_p]
