@@ -158,6 +158,7 @@ def _second_part() -> None:
         _rays(data.rig.cameras[0], np.zeros((1, 2)))
         _commands([["fuse", session, "--method", "filter",
                     "-o", os.path.join(tmp, "fused.mcap")]])
+        _track_writer(os.path.join(tmp, "track.mcap"), data.rig)
     # every candidate through the stream gate (pslog live's default; its compiled kernels):
     # type A's kernel last, when the first part has compiled it (the stream's arguments are
     # of the batch run's types: one signature, in the cache by then)
@@ -170,6 +171,31 @@ def _second_part() -> None:
             fuser.push([int(det.frame_time_ns[f])] * n, [int(det.frame_camera[f])] * n,
                        det.cand_uv[rows])
     fuser.flush()
+
+
+def _track_writer(path: str, rig) -> None:
+    """The fused-track writer's compiled encoders (:mod:`pslog.log._wire`), which a long
+    session's ``pslog fuse`` runs and the short warm sessions do not (a track is encoded by
+    them from :data:`pslog.log.writer._BLOCK_FROM` points, a block of messages assembled
+    from a megabyte): without this the first fuse of a match after an install compiled
+    them, ~8 CPU s. A track of a block and a bit written as ``pslog fuse`` writes it, after
+    a small message (its first block then written the other way: as a gating rejection
+    before it does)."""
+    import numpy as np
+
+    from pslog.log.writer import _TRACK_BLOCK, SessionWriter
+    from pslog.records import QUALITY_FIELDS, Track
+
+    n = _TRACK_BLOCK + 300
+    t = np.arange(1, n + 1, dtype=np.int64) * 11_111_111
+    values = np.linspace(0.0, 1.0, n)
+    track = Track("typeA", t, np.column_stack([values, values, values]),
+                  (np.arange(n) % len(rig)).astype(np.int32),
+                  {k: values for k in QUALITY_FIELDS})
+    with SessionWriter(path, rig, force=True, on_error="discard",
+                       flush_interval_s=float("inf")) as w:
+        w.add_event(0, "warm")
+        w.add_track(track, last=True)
 
 
 def main() -> int:

@@ -151,6 +151,9 @@ def _main(argv: list[str] | None) -> int:
     parser = _Parser(prog=f"pslog {name}", description=text)
     module.add_arguments(parser)
     args = parser.parse_args(argv[1:])
+    early = getattr(module, "before_threads", None)
+    if early is not None:  # a process-wide setting of the command, before any thread starts
+        early()  # (the progress line's: pslog fuse's malloc arena)
 
     from ._common import empty_file_option
 

@@ -509,7 +509,7 @@ def _preload() -> None:
     static_camera(np.zeros(1, dtype=np.int64), np.zeros((1, 1), dtype=np.int64),
                   np.zeros((1, 3)), np.zeros((1, 2)), np.zeros(1, dtype=np.bool_),
                   np.zeros(1, dtype=np.bool_), np.zeros(1), 1, 1, 1.0, 1.0, 1.0, np.zeros(3),
-                  1.0, 1.0, 1.0, 1.0, np.zeros(1, dtype=np.bool_), np.zeros(1))
+                  1.0, 1.0, 1.0, 1.0, np.zeros(1, dtype=np.bool_), np.zeros(1), np.zeros(1))
 
 @kernel
 def _line_fit(trk, lo, hi, t_s, opt, out):
