@@ -123,6 +123,78 @@ def _stamped_locators(numba_caching: Any) -> None:
     impl._pslog_stamped = True
 
 
+def _blas_found_by_file(numba_linalg: Any) -> None:
+    """numba's ``ensure_blas`` for the one call its ``numba.np.arraymath`` makes at import,
+    giving the same verdict without importing :mod:`scipy.linalg`.
+
+    numba asks once whether scipy's Cython BLAS exists (``_HAVE_BLAS``: a compiled ``np.dot``
+    of floats calls BLAS, else a loop) by importing ``scipy.linalg.cython_blas``; that
+    imports the whole of :mod:`scipy.linalg` (its decompositions, scipy's array-API layer,
+    numpy's f2py: 0.3-0.4 CPU s of the first load's ~0.6), in every process at its first
+    kernel load. The same question is answered by finding that extension module in
+    scipy's ``linalg`` folder (the import system's own search, not the import), then
+    numba's integer-width check as numba does it; a missing one raises ImportError as
+    numba's import would. Compiled code calls BLAS and LAPACK through numba's helper
+    library, which imports scipy's Cython modules itself at the first such call, as before
+    (the filter's window fit: LAPACK; type A, nearest, the gate, smooth: none, so a command
+    of those alone never imports :mod:`scipy.linalg`); later callers (a kernel's ``np.dot``
+    or ``np.linalg`` compiled) get numba's own function back."""
+    import importlib.machinery
+
+    import scipy  # (numba has imported it: its version check)
+
+    folders = [os.path.join(path, "linalg") for path in getattr(scipy, "__path__", [])]
+    if importlib.machinery.PathFinder.find_spec("cython_blas", folders) is None:
+        raise ImportError("scipy 0.16+ is required for linear algebra")
+    check = getattr(numba_linalg, "_check_lapack_int_width", None)
+    if check is not None:
+        check()
+
+
+def _lazy_blas_probe(numba_cpu: Any) -> None:
+    """Make numba's first kernel load answer its BLAS question without importing
+    :mod:`scipy.linalg` (:func:`_blas_found_by_file`). numba imports its modules, then
+    ``numba.np.linalg`` and ``numba.np.arraymath`` in that order, in
+    ``CPUContext.load_additional_registries`` (at the first cache load or compile); during
+    that call a hook on the import system (it finds nothing itself) sees ``arraymath``
+    looked for and gives ``numba.np.linalg`` the probe as ``ensure_blas`` for arraymath's
+    import; numba's own function is put back when the call returns. Every module is
+    imported when and in the order numba imports it. A numba arranged otherwise (no such
+    method, no ``ensure_blas``, arraymath already imported) is left as it is."""
+    import sys
+
+    context: Any = getattr(numba_cpu, "CPUContext", None)
+    load = getattr(context, "load_additional_registries", None)
+    if load is None or getattr(load, "_pslog_lazy_blas", False):
+        return
+
+    class BeforeArraymath:  # a meta-path finder that finds nothing: a hook on one import
+        patched: tuple[Any, Any] | None = None
+
+        def find_spec(self, name: str, path: Any = None, target: Any = None) -> None:
+            linalg: Any = sys.modules.get("numba.np.linalg")
+            own = getattr(linalg, "ensure_blas", None)
+            if name == "numba.np.arraymath" and self.patched is None and own is not None:
+                linalg.ensure_blas = functools.partial(_blas_found_by_file, linalg)
+                self.patched = (linalg, own)
+
+    def load_additional_registries(self: Any) -> Any:
+        if "numba.np.arraymath" in sys.modules:
+            return load(self)
+        hook = BeforeArraymath()
+        sys.meta_path.insert(0, hook)  # type: ignore[arg-type]
+        try:
+            return load(self)
+        finally:
+            sys.meta_path.remove(hook)  # type: ignore[arg-type]
+            if hook.patched is not None:
+                linalg, own = hook.patched
+                linalg.ensure_blas = own
+
+    load_additional_registries._pslog_lazy_blas = True  # type: ignore[attr-defined]
+    context.load_additional_registries = load_additional_registries
+
+
 def kernel(fn: F | None = None, *, inline: bool = False, contract: bool = False) -> Any:
     """Compile ``fn`` with numba (nopython, cached, GIL released, numpy error model).
 
@@ -152,9 +224,10 @@ def kernel(fn: F | None = None, *, inline: bool = False, contract: bool = False)
     how: Literal["never", "always"] = "always" if inline else "never"
     import inspect
 
-    from numba.core import caching
+    from numba.core import caching, cpu
 
     _stamped_locators(caching)
+    _lazy_blas_probe(cpu)
     _KERNEL_FILES.add(os.path.realpath(inspect.getfile(fn)))
     try:
         return cast(F, numba.njit(cache=True, nogil=True, error_model="numpy",
@@ -192,8 +265,11 @@ def preload(*modules: str) -> None:
 
         try:
             import numba  # noqa: F401 (the point: its import, off the command's thread)
+            from numba.core import cpu
             from numba.core.compiler_lock import global_compiler_lock
             from numba.core.registry import cpu_target
+
+            _lazy_blas_probe(cpu)
 
             with global_compiler_lock:  # as numba's own cache load refreshes it
                 cpu_target.target_context.refresh()

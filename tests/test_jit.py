@@ -94,3 +94,48 @@ def test_a_cached_kernel_is_compiled_again_when_a_module_it_imports_from_changes
     assert run(2.0, 5.0) == (12.0, 0)  # the inlined helper changed (from .helpers import)
     assert run(3.0, 5.0) == (18.0, 0)  # the frozen constant changed (from . import constants)
     assert run(3.0, 5.0) == (18.0, 1)  # and then loaded from the cache
+
+
+
+BLAS_PROBE = '''
+import sys
+
+import numpy as np
+
+from pslog._jit import kernel
+
+namespace = {"np": np}
+exec(compile("def add(a, b):\\n    return a + b\\n"
+             "def dot(a, b):\\n    return np.dot(a, b)\\n", "<no file>", "exec"), namespace)
+add = kernel(namespace["add"])  # compiled in memory: numba loads its registries first
+assert add(1.0, 2.0) == 3.0
+import numba.np.arraymath as arraymath
+import numba.np.linalg as numba_linalg
+
+print(arraymath._HAVE_BLAS, "scipy.linalg" in sys.modules, numba_linalg.ensure_blas.__module__)
+try:
+    numba_linalg.ensure_blas()  # numba's own check (it imports scipy.linalg): its verdict
+    print(True)
+except ImportError:
+    print(False)
+dot = kernel(namespace["dot"])  # a float np.dot: BLAS's ddot, through numba's helpers
+a, b = np.arange(1.0, 6.0), np.linspace(0.5, 3.0, 5)
+print(dot(a, b) == np.dot(a, b))
+'''
+
+
+def test_numba_answers_its_blas_question_without_importing_scipy_linalg():
+    # numba's first kernel load asks whether scipy's Cython BLAS exists (a compiled np.dot
+    # then calls BLAS) by importing all of scipy.linalg (~0.2-0.35 CPU s a process);
+    # pslog._jit answers it by finding the module: the same verdict as numba's own check,
+    # scipy.linalg left unimported, numba's function back for np.dot, which still runs
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-c", BLAS_PROBE], capture_output=True, text=True,
+                         check=True).stdout.split()
+    have_blas, linalg_imported, ensure_blas_module, numbas_verdict, dot_equal = out
+    assert have_blas == numbas_verdict == "True"
+    assert linalg_imported == "False"
+    assert ensure_blas_module == "numba.np.linalg"
+    assert dot_equal == "True"
