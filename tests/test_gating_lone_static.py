@@ -164,6 +164,11 @@ def test_a_lone_candidate_beside_the_ball_competes_as_fully_still():
     there = (np.abs(t - 5.9889) < 0.001) & (det.frame_camera[det.cand_frame] == 2)
     assert np.count_nonzero(there) == 2 and np.all(g.chosen[there] == is_ball[there])
     _same_in_the_stream(rig, det, g)
+    for compiled in (False, True):  # (and the same candidate outscored: its pixel)
+        stream = StreamGate(rig, 0.0, compiled=compiled)
+        push_frames(stream, det)
+        stream.flush()
+        assert_array_equal(stream.rejections.uv, g.rejections.uv, err_msg=f"{compiled=}")
 
 
 @pytest.mark.parametrize("session", [_fly_by, _along_the_ray, _over_the_object])
