@@ -46,6 +46,11 @@ def _session(case: str):
         motion = rally(8.0, seed=400, speed=4.0 + 400 % 3, kick_every_s=0.9)[0]
         faults = (("lab4-1", DISTRACTOR),), ("lab4-3", 2.0, 0.5), 100
         at = 2.158
+    elif case == "lab4-2001":  # --first-seed 2000's rally 2001, lab4-4 blind 2.1-2.6 s
+        rig = ring_rig(4, "lab4")
+        motion = rally(8.0, seed=2001, speed=4.0 + 2001 % 3, kick_every_s=0.9)[0]
+        faults = (("lab4-2", DISTRACTOR),), ("lab4-4", 2.1, 0.5), 1701
+        at = 2.4083
     else:  # wide3, the library's rally (seed 105), wide3-1 blind 2.3-2.8 s
         rig = ring_rig(3, "wide3", f=330.0, dist=(-0.25, 0.05, 3e-4, -2e-4, 0.0), radius=2.4,
                     height=2.2)
@@ -59,13 +64,17 @@ def _session(case: str):
     return rig, det, truth, at
 
 
-@pytest.mark.parametrize("case", ["paper3", "lab4", "wide3"])
+@pytest.mark.parametrize("case", ["paper3", "lab4", "wide3", "lab4-2001"])
 def test_a_point_across_a_kick_in_a_long_gap_waits_for_the_next_camera(case):
     """paper3: cam3's point at 2.122 s predicted 22 ms from cam1's detection at 2.100 s,
     before the kick at 2.105 s, along cam3's ray: 95 mm off (innovation and kink tests see
     nothing). lab4: the same 17 ms across a kick, 77 mm. wide3: wide3-1's first detection
     after its blind spell, 2.800 s: P_{t-1} is wide3-2's at 2.778 s (wide3-3's at 2.789 s
-    has no bracket of wide3-1), 74 mm. The next camera's detection contradicts each."""
+    has no bracket of wide3-1), 74 mm. lab4-2001 (session 17): the gap is between the two
+    past points — lab4-2's point at 2.4083 s follows P_{t-1} (lab4-1, 2.4000 s) by the
+    usual 8 ms, but P_{t-2} (lab4-3, 2.3833 s) is 17 ms before it (lab4-4 blind) and the
+    kick at 2.3945 s lies between them: 51 mm off, innovation 2.6 px against a bound of
+    4.8 px. The next camera's detection contradicts each."""
     rig, det, truth, at = _session(case)
     track = fuse(det, rig, "typeA")
     err = errors_m(track, truth)

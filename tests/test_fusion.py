@@ -323,7 +323,9 @@ def test_stream_fuser_equals_batch(timing, method):
         assert all(np.all(p.time_ns <= obs.time_ns[i]) for i, p in enumerate(parts[:-1]))
         late = sum(len(p) - int(np.any(p.time_ns == obs.time_ns[i]))
                    for i, p in enumerate(parts[:-1]))
-        assert late + len(parts[-1]) <= 0.2 * len(batch)  # (10 % of the detections missed)
+        # (10 % of the detections missed: a miss delays the next point, whose prediction
+        # bridges it, and the one after, whose P_{t-2} lies beyond it)
+        assert late + len(parts[-1]) <= 0.3 * len(batch)
 
 
 @pytest.mark.parametrize("method", causal_methods())

@@ -992,7 +992,8 @@ def decide_frame(fid, a, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k
             elif not tracked:
                 differs[i] += 2.0  # untracked
                 n_untracked += 1
-        kn, kc = -nsup[i], (epi[i] + track_cost) + run[i]
+        # (gating._Decider.decide: a lone candidate's stillness counts as 1)
+        kn, kc = -nsup[i], (epi[i] + track_cost) + (1.0 if lone[i] == lone[i] else run[i])
         if best_row < 0 or kn < best_n or (kn == best_n and kc < best_c):
             best_row, best_n, best_c = i, kn, kc
     if best_row >= 0 and n_untracked > 1 and differs[best_row] >= 2.0 and nsup[best_row] < 2:
@@ -1002,7 +1003,7 @@ def decide_frame(fid, a, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k
         best_row = -1
         for i in range(k):
             if reason[i] < 0 and not (differs[i] == 1.0 or differs[i] == 3.0):
-                kn, kc = -nsup[i], epi[i] + run[i]
+                kn, kc = -nsup[i], epi[i] + (1.0 if lone[i] == lone[i] else run[i])
                 if best_row < 0 or kn < best_n or (kn == best_n and kc < best_c):
                     best_row, best_n, best_c = i, kn, kc
     if best_row >= 0 and (differs[best_row] == 1.0 or differs[best_row] == 3.0) \

@@ -47,7 +47,12 @@ earlier instant) by more than :data:`LONG_FACTOR` times the rig's usual interval
 largest gap between consecutive shutter instants of its cameras' nominal schedules), or
 whose previous instant has no detection of the newest camera within ``max_gap_s`` before it
 (eq. (2)'s ``P_{t-1}`` then lies further back: a camera's first detection after a blind
-spell), wait: the others are output at once, as before. Causal: a point's decision uses
+spell), or whose previous instant itself followed the one before it by more than that
+(session 17: eq. (2)'s ``P_{t-2}`` lies further back than usual, a camera blind between
+the two past points; a kick inside that span makes the past velocity neither the motion
+before nor after it, and the newest detection sees the error along its ray: ``lab4``,
+``bench_dirty.py --more --first-seed 2000``, 51 mm), wait: the others are output at once,
+as before. Causal: a point's decision uses
 the detections up to the confirming one, so :class:`ConfirmedStream` (``StreamFuser``'s
 ``typeA``) decides as the batch run does, bit for bit (every step elementwise), and outputs
 a withheld point with the confirming detection's push. docs/methods.md, "Type A across a
@@ -255,7 +260,14 @@ def confirm_batch(prep, track: Track, rig, max_gap_s: float, noise_px: float | N
     max_gap_ns = int(max_gap_s * NS)
     gap_all, unbracketed = _previous_instant(prep, max_gap_ns)
     gap = gap_all[row]
-    long = (gap > LONG_FACTOR * usual_interval_s(rig) * NS) | unbracketed[row]
+    long_ns = LONG_FACTOR * usual_interval_s(rig) * NS
+    # the previous instant's own gap: eq. (2)'s P_{t-2} further back than usual (a camera
+    # blind between the two past points), the span a kick can hide in (module docstring)
+    from .pseudo import _all_brackets
+
+    previous = _all_brackets(prep)[2][row]
+    gap_before = np.where(previous >= 0, gap_all[np.maximum(previous, 0)], -1)
+    long = (gap > long_ns) | unbracketed[row] | (gap_before > long_ns)
     if not long.any():
         return track
     # (the tests' noise, a causal median over every point: made only when some point waits)
@@ -349,6 +361,9 @@ class ConfirmedStream:
         # the last row of each camera: (time ns, recorded uv (2,)); undistorted when needed
         self._last: list[tuple[int, np.ndarray] | None] = [None] * len(rig)
         self._newest = (_NONE, _NONE)  # the newest time, and the latest before it
+        # the latest time before the newest minus the one before it, ns (-1: none): the
+        # previous instant's own gap
+        self._gap_before = -1
         # (time, camera) of the newest row, and of the last row before the newest instant
         self._latest: tuple[int, int] | None = None
         self._previous_row: tuple[int, int] | None = None
@@ -396,7 +411,7 @@ class ConfirmedStream:
                 own = self._last[c]
                 unbracketed = previous is not None and previous[1] != c and (
                     own is None or previous[0] - own[0] > self._max_gap_ns)
-                if gap > self._long_ns or unbracketed:
+                if gap > self._long_ns or unbracketed or self._gap_before > self._long_ns:
                     queue.append([out.select([i]), "wait",
                                   (t, c, gap, list(self._last), sigma[i])])
                 else:
@@ -426,6 +441,7 @@ class ConfirmedStream:
         """The new row's time minus the latest earlier instant, ns (-1: none); recorded."""
         newest, before = self._newest
         if t > newest:
+            self._gap_before = newest - before if before != _NONE else -1
             before, newest = newest, t
             self._previous_row = self._latest
         self._newest = (newest, before)

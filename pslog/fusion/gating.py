@@ -1314,7 +1314,10 @@ class _Decider:
                         self.tracked = True
                     elif not self.tracked:
                         untracked.append(i)  # no track yet to tell it from another candidate
-                key = (-n_support[i], epi_cost[i] + track_cost + stillness[i])
+                # (a lone candidate, still in the image in every frame of static_s and
+                # kept only because its camera followed the ball to it: stillness 1)
+                key = (-n_support[i], epi_cost[i] + track_cost
+                       + (1.0 if lone[i] == lone[i] else stillness[i]))
                 if best_key is None or key < best_key:
                     best_key, best_row = key, i
             if best_row < 0:
@@ -1332,7 +1335,8 @@ class _Decider:
                 best_key = None
                 for i in range(lo, hi):
                     if reason[i] < 0 and i not in unverified:
-                        key = (-n_support[i], epi_cost[i] + stillness[i])
+                        key = (-n_support[i], epi_cost[i]
+                               + (1.0 if lone[i] == lone[i] else stillness[i]))
                         if best_key is None or key < best_key:
                             best_key, best_row = key, i
                 if best_row < 0:
