@@ -150,7 +150,7 @@ class Left:
 
 
 def run(rig, frames, method: str, candidates: bool, record: bool = False,
-        rehearse_s: float | None = 0.001) -> dict:
+        rehearse_s: float | None = 0.001, spin_s: float = 0.0) -> dict:
     ctx = mp.get_context("fork")
     rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     rx.bind(("127.0.0.1", 0))
@@ -169,7 +169,7 @@ def run(rig, frames, method: str, candidates: bool, record: bool = False,
         result["summary"] = serve(rig, "udp://127.0.0.1:0", sinks,
                                   method=method, candidates=candidates, stop=stop,
                                   ready=ready, status_stream=None, status_every_s=1.0,
-                                  rehearse_s=rehearse_s)
+                                  rehearse_s=rehearse_s, spin_s=spin_s)
 
     tmp = tempfile.TemporaryDirectory(prefix="bench-live-")
     fuser = threading.Thread(target=fuse)
@@ -213,7 +213,7 @@ def run(rig, frames, method: str, candidates: bool, record: bool = False,
                 fusion_max=float(fusion.max()) if n else float("nan"),
                 e2e_med=float(np.median(e2e)) if n else float("nan"),
                 e2e_p99=float(np.percentile(e2e, 99)) if n else float("nan"),
-                rehearsals=summary.rehearsals,
+                rehearsals=summary.rehearsals, overlaps=summary.rehearsal_overlaps,
                 rehearsal_cpu_ms_per_s=summary.rehearsal_cpu_ns / 1e6 / summary.duration_s)
 
 
@@ -391,6 +391,8 @@ def main() -> int:
                         help="count the Python bytecodes run per datagram, per stage")
     parser.add_argument("--rehearse", default="1", metavar="LEAD_MS",
                         help="serve's rehearse_s in ms ('off': none; default 1)")
+    parser.add_argument("--spin", type=float, default=0.0, metavar="MS",
+                        help="serve's spin_s in ms (busy poll after a rehearsal; default 0)")
     parser.add_argument("--json", default=None, help="write the rows as JSON")
     args = parser.parse_args()
     json_rows = []
@@ -444,7 +446,8 @@ def main() -> int:
         for method in args.method.split(","):
             for cand in args.candidates.split(","):
                 r = run(rig, frames, method, cand == "all", args.record,
-                        None if args.rehearse == "off" else float(args.rehearse) / 1e3)
+                        None if args.rehearse == "off" else float(args.rehearse) / 1e3,
+                        args.spin / 1e3)
                 ok = r["fusion_p99"] <= TARGET_P99_MS
                 worst |= r["lost"] > 0
                 json_rows.append({
@@ -461,7 +464,8 @@ def main() -> int:
                       flush=True)
                 if r["rehearsals"]:
                     print(f"{'':>10} ({r['rehearsals']} rehearsals, "
-                          f"{r['rehearsal_cpu_ms_per_s']:.1f} ms CPU per second)")
+                          f"{r['rehearsal_cpu_ms_per_s']:.1f} ms CPU per second; "
+                          f"{r['overlaps']} datagrams came during one)")
                 if r["late_sends"]:
                     print(f"{'':>10} (the sender was more than 1 ms late on "
                           f"{r['late_sends']} datagrams: the machine is busy)")
