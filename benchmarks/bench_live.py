@@ -26,7 +26,11 @@ to the sinks (``LiveSummary.cpu_ns``): what the fusion latency would be on an id
 
     python benchmarks/bench_live.py [--seconds 60] [--quick] [--load 30,240]
         [--method filter,typeA] [--candidates all,best] [--record] [--direct [GAP_MS]]
-        [--bytecodes]
+        [--bytecodes] [--rehearse LEAD_MS|off]
+
+``--rehearse``: ``serve``'s ``rehearse_s`` (default its own, 0.5 ms; ``off``: no rehearsal,
+the fuser as before session 17); each row then says how many rehearsals ran, their CPU per
+second and how many datagrams came while one ran (they waited for its end).
 
 ``--direct``: no sender, no socket in: the same datagrams fed to ``LiveFuser.feed`` in a
 loop (after the method's warm-up, the collector frozen, as ``serve`` runs), each point's
@@ -150,7 +154,7 @@ class Left:
 
 
 def run(rig, frames, method: str, candidates: bool, record: bool = False,
-        rehearse_s: float | None = 0.001, spin_s: float = 0.0) -> dict:
+        rehearse_s: float | None = 0.0005) -> dict:
     ctx = mp.get_context("fork")
     rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     rx.bind(("127.0.0.1", 0))
@@ -169,7 +173,7 @@ def run(rig, frames, method: str, candidates: bool, record: bool = False,
         result["summary"] = serve(rig, "udp://127.0.0.1:0", sinks,
                                   method=method, candidates=candidates, stop=stop,
                                   ready=ready, status_stream=None, status_every_s=1.0,
-                                  rehearse_s=rehearse_s, spin_s=spin_s)
+                                  rehearse_s=rehearse_s)
 
     tmp = tempfile.TemporaryDirectory(prefix="bench-live-")
     fuser = threading.Thread(target=fuse)
@@ -389,10 +393,8 @@ def main() -> int:
                         metavar="GAP_MS", help="feed LiveFuser directly, GAP_MS apart")
     parser.add_argument("--bytecodes", action="store_true",
                         help="count the Python bytecodes run per datagram, per stage")
-    parser.add_argument("--rehearse", default="1", metavar="LEAD_MS",
-                        help="serve's rehearse_s in ms ('off': none; default 1)")
-    parser.add_argument("--spin", type=float, default=0.0, metavar="MS",
-                        help="serve's spin_s in ms (busy poll after a rehearsal; default 0)")
+    parser.add_argument("--rehearse", default="0.5", metavar="LEAD_MS",
+                        help="serve's rehearse_s in ms ('off': none; default 0.5)")
     parser.add_argument("--json", default=None, help="write the rows as JSON")
     args = parser.parse_args()
     json_rows = []
@@ -446,8 +448,7 @@ def main() -> int:
         for method in args.method.split(","):
             for cand in args.candidates.split(","):
                 r = run(rig, frames, method, cand == "all", args.record,
-                        None if args.rehearse == "off" else float(args.rehearse) / 1e3,
-                        args.spin / 1e3)
+                        None if args.rehearse == "off" else float(args.rehearse) / 1e3)
                 ok = r["fusion_p99"] <= TARGET_P99_MS
                 worst |= r["lost"] > 0
                 json_rows.append({

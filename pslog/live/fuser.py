@@ -272,11 +272,12 @@ class Rehearsal:
     Parameters
     ----------
     fuser : the real LiveFuser (its method, candidates, options and cameras' rates)
-    lead_s : a rehearsal this long before the earliest time the next datagram can come
+    lead_s : a rehearsal ends this long before the earliest time the next datagram can come
+        (it starts the longest of the latest rehearsals' wall times earlier still)
     min_gap_s : no rehearsal when datagrams come closer than this (already warm)
     """
 
-    def __init__(self, fuser: LiveFuser, lead_s: float = 0.001,
+    def __init__(self, fuser: LiveFuser, lead_s: float = 0.0005,
                  min_gap_s: float = 0.004) -> None:
         warm_up(fuser.method, candidates=fuser.candidates, options=fuser.options)
         self._key = (fuser.method, bool(fuser.candidates), fuser.options)
@@ -294,6 +295,9 @@ class Rehearsal:
         self.due: int | None = None
         #: rehearsals run (each one datagram of the rally)
         self.steps = 0
+        self._durations: deque = deque(maxlen=8)  # the latest rehearsals' wall times, ns
+        #: the longest of the latest rehearsals' wall times, ns (0 before any)
+        self.duration_ns = 0
         self.renew()
 
     def renew(self) -> None:
@@ -310,18 +314,22 @@ class Rehearsal:
         """One datagram of the rally through the rehearsal's own fuser, its points packed."""
         if self._shadow is None or self._i >= len(self._frames):
             return
+        start = time.perf_counter_ns()
         t, data = self._frames[self._i]
         self._i += 1
         self._now[0] = t
         for n, p in enumerate(self._shadow.feed(data, t)):
             p.to_datagram(n)
         self.steps += 1
+        self._durations.append(time.perf_counter_ns() - start)
+        self.duration_ns = max(self._durations)
 
     def plan(self, fuser: LiveFuser, now: int) -> None:
         """After a datagram of ``fuser`` (handled at wall clock ``now``): when to rehearse for
         the next one. Each live camera's next frame is due a frame period after its latest
         fused one; it comes at the earliest with the least delay (arrival less capture) of
-        its latest datagrams; the rehearsal is ``lead_s`` before the earliest camera's."""
+        its latest datagrams; the rehearsal is to end ``lead_s`` before the earliest camera's
+        (it starts :attr:`duration_ns` before that)."""
         self.due = None
         earliest = None
         latest_arrival = 0
@@ -340,7 +348,7 @@ class Rehearsal:
                 earliest = expected
         if earliest is None or earliest - latest_arrival < self.min_gap_ns:
             return
-        self.due = earliest - self.lead_ns
+        self.due = earliest - self.lead_ns - self.duration_ns
 
 
 class LiveFuser:

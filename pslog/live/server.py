@@ -61,7 +61,7 @@ class LiveSummary:
     epoch_ns : the session clock's zero (wall clock)
     address : the bound (host, port)
     rehearsals : datagrams of the rehearsal run (``serve``'s ``rehearse_s``)
-    rehearsal_cpu_ns : the CPU time they took (and the busy polls after them), ns
+    rehearsal_cpu_ns : the CPU time they took, ns
     rehearsal_overlaps : datagrams that arrived while a rehearsal ran (they waited for it)
     """
 
@@ -144,7 +144,7 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
           candidates: bool = True, epoch_ns: int | None = None,
           status_stream="stderr", sock: socket.socket | None = None,
           hold_s: float = 0.0, starting: Callable[[str], bool] | None = None,
-          rehearse_s: float | None = 0.001, spin_s: float = 0.0) -> LiveSummary:
+          rehearse_s: float | None = 0.0005) -> LiveSummary:
     """Run the live fuser on ``listen`` until ``stop`` is set, ``duration_s`` passes or
     Ctrl-C.
 
@@ -169,14 +169,12 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
     sock : an already bound UDP socket to use instead of binding ``listen``
     starting : camera name -> whether it may still be starting up (the status line then says
         ``starting`` rather than ``silent (never heard)``); None: never
-    rehearse_s : while datagrams come at least 4 ms apart (3 x 30 fps: 11 ms), this long
-        before the next one can come, one datagram of a simulated rally goes through a fuser
-        of its own (:class:`~pslog.live.fuser.Rehearsal`): the method's code back in the
-        core's caches, so that the real datagram costs about what it costs back to back
-        (about half its cold CPU), at the price of one rehearsal per datagram (none when
-        a datagram is already waiting); None: none
-    spin_s : after a rehearsal, the socket is polled busily for at most this long (the
-        datagram then read without the wake-up of a blocked thread), seconds; 0: none
+    rehearse_s : while datagrams come at least 4 ms apart (3 x 30 fps: 11 ms), one datagram
+        of a simulated rally goes through a fuser of its own
+        (:class:`~pslog.live.fuser.Rehearsal`), to end this long before the next datagram
+        can come (seconds): the method's code back in the core's caches, so that the real
+        datagram costs nearer what it costs back to back, at the price of one rehearsal per
+        datagram (none when a datagram is already waiting); None: none
 
     Raises
     ------
@@ -338,10 +336,6 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
                         cpu0 = thread_time()
                         rehearsal.step()
                         rehearsed_until = clock()
-                        if spin_s > 0:
-                            spin_end = rehearsed_until + int(spin_s * NS)
-                            while not _readable(sock, 0.0) and clock() < spin_end:
-                                pass
                         rehearsal_cpu += thread_time() - cpu0
             try:
                 data, ancdata, _, _ = recv(bufsize, anc)
