@@ -361,7 +361,7 @@ def _fields(p: LivePoint) -> tuple:
 @pytest.mark.parametrize("method", ["filter", "typeA"])
 def test_a_rehearsal_before_every_datagram_changes_no_point(session, method):
     """A Rehearsal runs datagrams of warm_up's rally through a fuser of its own: the real
-    fuser's points, with a rehearsal (renewed at the rally's end) before each of its
+    fuser's points, with rehearsals (the rally replayed, later) before each of its
     datagrams, are those of a fuser without one, every field and counter."""
     from pslog.live.fuser import Rehearsal
 
@@ -373,12 +373,14 @@ def test_a_rehearsal_before_every_datagram_changes_no_point(session, method):
     rehearsal = Rehearsal(fuser)
     got = []
     for d in data:
-        rehearsal.renew()
         rehearsal.step()
         rehearsal.step()
         got += fuser.feed(d, EPOCH)
     got += fuser.flush()
-    assert rehearsal.steps > len(rehearsal._frames)  # (renewed on the way)
+    assert rehearsal.steps > len(rehearsal._frames)  # (replayed)
+    # the replayed rally fused as the first time (its frames later, none dropped)
+    c = rehearsal._shadow.counters()
+    assert c["fused"] == rehearsal.steps and c["points"] > rehearsal.steps // 2
     assert [_fields(p) for p in got] == [_fields(p) for p in want]
     assert fuser.counters() == plain.counters()
 

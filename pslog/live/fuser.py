@@ -39,6 +39,7 @@ import bisect
 import heapq
 import math
 import operator
+import struct
 import time
 from collections import deque
 from dataclasses import dataclass, field, replace
@@ -257,6 +258,8 @@ def warm_up(method: str, *, candidates: bool = True, options=None) -> None:
 _WARMED: set = set()
 #: per such key, the rig and the datagrams ((capture ns, bytes)) of its warm-up rally
 _RALLIES: dict = {}
+#: a detection datagram's capture and sent times (bytes 24-40, :mod:`.protocol`)
+_REHEARSAL_TIMES = struct.Struct("<qq")
 
 
 class Rehearsal:
@@ -266,8 +269,8 @@ class Rehearsal:
     leave its caches: a datagram then costs about twice its CPU back to back. :meth:`step`
     feeds ONE datagram of :func:`warm_up`'s rally to a fuser of its own (the method's
     decoding, gate, push, kernels, points and point datagrams; nothing sent, nothing of the
-    real fuser touched), shortly before the next real datagram is due
-    (:func:`pslog.live.server.serve` plans it, :meth:`plan`).
+    real fuser touched; the rally replayed later and later in a loop), shortly before the
+    next real datagram is due (:func:`pslog.live.server.serve` plans it, :meth:`plan`).
 
     Parameters
     ----------
@@ -280,11 +283,15 @@ class Rehearsal:
     def __init__(self, fuser: LiveFuser, lead_s: float = 0.0005,
                  min_gap_s: float = 0.004) -> None:
         warm_up(fuser.method, candidates=fuser.candidates, options=fuser.options)
-        self._key = (fuser.method, bool(fuser.candidates), fuser.options)
-        self._rig, self._frames = _RALLIES[self._key]
-        self._shadow: LiveFuser | None = None
+        rig, self._frames = _RALLIES[(fuser.method, bool(fuser.candidates), fuser.options)]
+        now = self._now = [0]
+        self._shadow = LiveFuser(rig, fuser.method, options=fuser.options,
+                                 candidates=fuser.candidates, epoch_ns=0, keep=False,
+                                 clock=lambda: now[0])
         self._i = 0
-        self._now = [0]
+        # the rally again, this much later each time (its times stamped anew)
+        self._shift = 0
+        self._span = self._frames[-1][0] - self._frames[0][0] + NS // 30
         self.lead_ns = int(lead_s * NS)
         self.min_gap_ns = int(min_gap_s * NS)
         self._period = [int(NS / f) for f in fuser._fps]
@@ -298,25 +305,19 @@ class Rehearsal:
         self._durations: deque = deque(maxlen=8)  # the latest rehearsals' wall times, ns
         #: the longest of the latest rehearsals' wall times, ns (0 before any)
         self.duration_ns = 0
-        self.renew()
-
-    def renew(self) -> None:
-        """A fresh fuser for the rally when the last one has fed it all (costs a few ms: run
-        it right after a datagram, not just before one)."""
-        if self._shadow is None or self._i >= len(self._frames):
-            now = self._now
-            self._shadow = LiveFuser(self._rig, self._key[0], options=self._key[2],
-                                     candidates=self._key[1], epoch_ns=0, keep=False,
-                                     clock=lambda: now[0])
-            self._i = 0
 
     def step(self) -> None:
         """One datagram of the rally through the rehearsal's own fuser, its points packed."""
-        if self._shadow is None or self._i >= len(self._frames):
-            return
         start = time.perf_counter_ns()
+        if self._i == len(self._frames):
+            self._i = 0
+            self._shift += self._span
         t, data = self._frames[self._i]
         self._i += 1
+        if self._shift:  # (its capture and sent times, protocol's header)
+            t += self._shift
+            data = bytearray(data)
+            _REHEARSAL_TIMES.pack_into(data, 24, t, t)
         self._now[0] = t
         for n, p in enumerate(self._shadow.feed(data, t)):
             p.to_datagram(n)

@@ -292,7 +292,6 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
         if fuser.keep:
             pass_on()
         if rehearsal is not None:  # (the next one's rehearsal planned: after the points)
-            rehearsal.renew()
             rehearsal.plan(fuser, now)
 
     bufsize = max(MAX_DETECTION_BYTES + 1, 65536)  # larger ones are seen whole: oversize
