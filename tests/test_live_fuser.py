@@ -430,6 +430,61 @@ def test_the_rehearsal_is_due_a_lead_before_the_next_frame_can_come(session):
         assert (rehearsal.due is None) == (k > 0)  # (one camera heard: its own period)
 
 
+def test_serve_rehearses_between_paced_datagrams_and_fuses_the_same_points(session):
+    """Over real UDP, datagrams 15 ms apart (as at 3 x 30 fps or slower): serve rehearses
+    between them (LiveSummary.rehearsals) and the robot gets the points of a serve without
+    rehearsals, bit for bit (times, cameras, positions, covariances, predictions at emit
+    aside: those follow the wall clock; capture times on the session clock)."""
+    import socket
+    import threading
+    import time
+
+    from pslog.live.protocol import decode_point
+    from pslog.live.server import serve
+    from pslog.live.sinks import UdpSink
+
+    rig, det = session
+    keys = ("camera_index", "position", "covariance", "residual_px", "camera_mask", "flags")
+
+    def run(rehearse_s):
+        rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        rx.bind(("127.0.0.1", 0))
+        rx.settimeout(0.3)
+        ready, stop = threading.Event(), threading.Event()
+
+        def send():
+            assert ready.wait(30)
+            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+                for d in frames(det, rig, ready.epoch_ns)[:30]:
+                    tx.sendto(encode_detections(d), ready.address)
+                    time.sleep(0.015)
+            time.sleep(0.05)
+            stop.set()
+
+        sender = threading.Thread(target=send, daemon=True)
+        sender.start()
+        summary = serve(rig, "udp://127.0.0.1:0", [UdpSink(rx.getsockname())],
+                        method="typeA", stop=stop, ready=ready, status_stream=None,
+                        duration_s=30, rehearse_s=rehearse_s)
+        sender.join(30)
+        points = []
+        try:
+            while True:
+                p = decode_point(rx.recv(4096))
+                points.append([p.t_capture_ns - ready.epoch_ns]
+                              + [np.asarray(getattr(p, k)).tobytes() for k in keys])
+        except TimeoutError:
+            pass
+        rx.close()
+        return summary, points
+
+    plain, want = run(None)
+    summary, got = run(0.004)
+    assert plain.rehearsals == 0 and summary.rehearsals > 0
+    assert len(got) == summary.counters["points"] > 15
+    assert got == want
+
+
 # ---- over real UDP, recorded: the session re-fused offline gives the live points ----------
 def _serve_session(rig, det, path, method, faults=True, interrupt=False):
     """Send ``det``'s frames (with a duplicate, a reordered and a late frame when

@@ -326,12 +326,15 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
         recv = sock.recvmsg
         while not stop.is_set():
             if rehearsal is not None and rehearsal.due is not None:
-                wait = (rehearsal.due - clock()) / NS
+                due = rehearsal.due
+                wait = (due - clock()) / NS
                 # a rehearsal due before the next look at the clock: a datagram awaited until
-                # then (to the microsecond: a socket's own timeout counts whole ms), else it
+                # then (to the microsecond: a socket's own timeout counts whole ms), else it,
+                # unless this thread woke up too late for it (by more than its lead: it
+                # would end after the next datagram can come)
                 if wait < poll_s:
                     rehearsal.due = None
-                    if not _readable(sock, wait):
+                    if not _readable(sock, wait) and clock() - due <= rehearsal.lead_ns:
                         cpu0 = thread_time()
                         rehearsal.step()
                         rehearsed_until = clock()
