@@ -410,7 +410,12 @@ def test_the_rehearsal_is_due_a_lead_before_the_next_frame_can_come(session):
         assert rehearsal.due == want - rehearsal.duration_ns
         if i == 3:  # (it starts the longest of the latest rehearsals' wall times earlier)
             rehearsal.step()
-            assert rehearsal.duration_ns > 0
+        assert (rehearsal.duration_ns > 0) == (i >= 4)
+    # one rehearsal preempted for 50 ms: the next ones start at most 2 ms earlier (else
+    # due before the datagram it is for, none would run, and the 50 ms would stay)
+    rehearsal._durations.append(50_000_000)
+    rehearsal.plan(fuser, arrival)
+    assert rehearsal.due == want - 2_000_000 > arrival
     # a camera silent (nothing for silent_after_s): not waited for
     now = arrival + fuser.silent_after_ns + 1
     rehearsal.plan(fuser, now)

@@ -260,6 +260,8 @@ _WARMED: set = set()
 _RALLIES: dict = {}
 #: a detection datagram's capture and sent times (bytes 24-40, :mod:`.protocol`)
 _REHEARSAL_TIMES = struct.Struct("<qq")
+#: the longest a rehearsal is expected to take, ns (:meth:`Rehearsal.plan`)
+_MAX_REHEARSAL_NS = 2_000_000
 
 
 class Rehearsal:
@@ -303,7 +305,8 @@ class Rehearsal:
         #: rehearsals run (each one datagram of the rally)
         self.steps = 0
         self._durations: deque = deque(maxlen=8)  # the latest rehearsals' wall times, ns
-        #: the longest of the latest rehearsals' wall times, ns (0 before any)
+        #: the longest of the latest rehearsals' wall times, at most 2 ms, ns (0 before any;
+        #: updated by :meth:`plan`)
         self.duration_ns = 0
 
     def step(self) -> None:
@@ -323,14 +326,17 @@ class Rehearsal:
             p.to_datagram(n)
         self.steps += 1
         self._durations.append(time.perf_counter_ns() - start)
-        self.duration_ns = max(self._durations)
 
     def plan(self, fuser: LiveFuser, now: int) -> None:
         """After a datagram of ``fuser`` (handled at wall clock ``now``): when to rehearse for
         the next one. Each live camera's next frame is due a frame period after its latest
         fused one; it comes at the earliest with the least delay (arrival less capture) of
         its latest datagrams; the rehearsal is to end ``lead_s`` before the earliest camera's
-        (it starts :attr:`duration_ns` before that)."""
+        (it starts :attr:`duration_ns` before that: the longest of the latest rehearsals' wall
+        times, at most 2 ms, so that one rehearsal preempted for long on a busy machine does
+        not move every later one before the datagram it is for, where none would run and
+        the estimate would never be renewed)."""
+        self.duration_ns = min(max(self._durations, default=0), _MAX_REHEARSAL_NS)
         self.due = None
         earliest = None
         latest_arrival = 0
