@@ -312,6 +312,8 @@ class Rehearsal:
     def step(self) -> None:
         """One datagram of the rally through the rehearsal's own fuser, its points packed."""
         start = time.perf_counter_ns()
+        if not self._frames:
+            return
         if self._i == len(self._frames):
             self._i = 0
             self._shift += self._span
@@ -322,8 +324,13 @@ class Rehearsal:
             data = bytearray(data)
             _REHEARSAL_TIMES.pack_into(data, 24, t, t)
         self._now[0] = t
-        for n, p in enumerate(self._shadow.feed(data, t)):
-            p.to_datagram(n)
+        try:
+            for n, p in enumerate(self._shadow.feed(data, t)):
+                p.to_datagram(n)
+        except Exception:  # (a rehearsal never stops the real fuser: no more of them)
+            self._frames = []
+            self.due = None
+            return
         self.steps += 1
         self._durations.append(time.perf_counter_ns() - start)
 
@@ -338,6 +345,8 @@ class Rehearsal:
         the estimate would never be renewed)."""
         self.duration_ns = min(max(self._durations, default=0), _MAX_REHEARSAL_NS)
         self.due = None
+        if not self._frames:  # (a rehearsal failed: none any more)
+            return
         earliest = None
         latest_arrival = 0
         silent = fuser.silent_after_ns
