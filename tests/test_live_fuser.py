@@ -436,7 +436,7 @@ def test_the_rehearsal_is_due_a_lead_before_the_next_frame_can_come(session):
 
 
 def test_serve_rehearses_between_paced_datagrams_and_fuses_the_same_points(session):
-    """Over real UDP, datagrams 15 ms apart (as at 3 x 30 fps or slower): serve rehearses
+    """Over real UDP, datagrams sent at their capture times (3 x 30 fps): serve rehearses
     between them (LiveSummary.rehearsals) and the robot gets the points of a serve without
     rehearsals, bit for bit (times, cameras, positions, covariances, predictions at emit
     aside: those follow the wall clock; capture times on the session clock)."""
@@ -459,10 +459,12 @@ def test_serve_rehearses_between_paced_datagrams_and_fuses_the_same_points(sessi
 
         def send():
             assert ready.wait(30)
+            sent = frames(det, rig, ready.epoch_ns)[:40]
+            start = time.time_ns() + 20_000_000 - sent[0].t_capture_ns
             with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
-                for d in frames(det, rig, ready.epoch_ns)[:30]:
+                for d in sent:  # (at their capture times, 20 ms later: 11 ms apart)
+                    time.sleep(max(0.0, (start + d.t_capture_ns - time.time_ns()) / 1e9))
                     tx.sendto(encode_detections(d), ready.address)
-                    time.sleep(0.015)
             time.sleep(0.05)
             stop.set()
 
