@@ -437,9 +437,9 @@ def test_the_rehearsal_is_due_a_lead_before_the_next_frame_can_come(session):
 
 def test_serve_rehearses_between_paced_datagrams_and_fuses_the_same_points(session):
     """Over real UDP, datagrams sent at their capture times (3 x 30 fps): serve rehearses
-    between them (LiveSummary.rehearsals) and the robot gets the points of a serve without
-    rehearsals, bit for bit (times, cameras, positions, covariances, predictions at emit
-    aside: those follow the wall clock; capture times on the session clock)."""
+    between them (LiveSummary.rehearsals) and the robot gets the points a LiveFuser fed the
+    same datagrams makes, bit for bit (times on the session clock, cameras, positions,
+    covariances, residuals, masks, flags; predictions at emit aside: the wall clock's)."""
     import socket
     import threading
     import time
@@ -477,19 +477,23 @@ def test_serve_rehearses_between_paced_datagrams_and_fuses_the_same_points(sessi
         points = []
         try:
             while True:
-                p = decode_point(rx.recv(4096))
-                points.append([p.t_capture_ns - ready.epoch_ns]
-                              + [np.asarray(getattr(p, k)).tobytes() for k in keys])
+                points.append(decode_point(rx.recv(4096)))
         except TimeoutError:
             pass
         rx.close()
-        return summary, points
+        return summary, points, ready.epoch_ns
 
-    plain, want = run(None)
-    summary, got = run(0.004)
-    assert plain.rehearsals == 0 and summary.rehearsals > 0
+    def row(p, epoch):
+        return [p.t_capture_ns - epoch] + [np.asarray(getattr(p, k)).tobytes() for k in keys]
+
+    summary, got, epoch = run(0.004)
+    fuser = LiveFuser(rig, "typeA", epoch_ns=EPOCH, clock=Clock())
+    want = [decode_point(p.to_datagram(1)) for d in datagrams(det, rig)[:40]
+            for p in fuser.feed(d, EPOCH)]
+    assert summary.rehearsals > 0
+    assert summary.counters["received"] == summary.counters["fused"] == 40  # (its own only)
     assert len(got) == summary.counters["points"] > 15
-    assert got == want
+    assert [row(p, epoch) for p in got] == [row(p, EPOCH) for p in want]
 
 
 # ---- over real UDP, recorded: the session re-fused offline gives the live points ----------
