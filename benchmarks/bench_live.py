@@ -26,7 +26,11 @@ to the sinks (``LiveSummary.cpu_ns``): what the fusion latency would be on an id
 
     python benchmarks/bench_live.py [--seconds 60] [--quick] [--load 30,240]
         [--method filter,typeA] [--candidates all,best] [--record] [--direct [GAP_MS]]
-        [--bytecodes]
+        [--bytecodes] [--rehearse LEAD_MS|off]
+
+``--rehearse``: ``serve``'s ``rehearse_s`` (default its own, 0.5 ms; ``off``: no rehearsal,
+the fuser as before session 17); each row then says how many rehearsals ran, their CPU per
+second and how many datagrams came while one ran (they waited for its end).
 
 ``--direct``: no sender, no socket in: the same datagrams fed to ``LiveFuser.feed`` in a
 loop (after the method's warm-up, the collector frozen, as ``serve`` runs), each point's
@@ -149,7 +153,8 @@ class Left:
         pass
 
 
-def run(rig, frames, method: str, candidates: bool, record: bool = False) -> dict:
+def run(rig, frames, method: str, candidates: bool, record: bool = False,
+        rehearse_s: float | None = 0.0005) -> dict:
     ctx = mp.get_context("fork")
     rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     rx.bind(("127.0.0.1", 0))
@@ -167,7 +172,8 @@ def run(rig, frames, method: str, candidates: bool, record: bool = False) -> dic
             sinks.append(RecordSink(Path(tmp.name) / "live.mcap", rig))
         result["summary"] = serve(rig, "udp://127.0.0.1:0", sinks,
                                   method=method, candidates=candidates, stop=stop,
-                                  ready=ready, status_stream=None, status_every_s=1.0)
+                                  ready=ready, status_stream=None, status_every_s=1.0,
+                                  rehearse_s=rehearse_s)
 
     tmp = tempfile.TemporaryDirectory(prefix="bench-live-")
     fuser = threading.Thread(target=fuse)
@@ -210,7 +216,9 @@ def run(rig, frames, method: str, candidates: bool, record: bool = False) -> dic
                 fusion_p99=float(np.percentile(fusion, 99)) if n else float("nan"),
                 fusion_max=float(fusion.max()) if n else float("nan"),
                 e2e_med=float(np.median(e2e)) if n else float("nan"),
-                e2e_p99=float(np.percentile(e2e, 99)) if n else float("nan"))
+                e2e_p99=float(np.percentile(e2e, 99)) if n else float("nan"),
+                rehearsals=summary.rehearsals, overlaps=summary.rehearsal_overlaps,
+                rehearsal_cpu_ms_per_s=summary.rehearsal_cpu_ns / 1e6 / summary.duration_s)
 
 
 def direct(rig, frames, method: str, candidates: bool, gap_s: float) -> dict:
@@ -385,6 +393,8 @@ def main() -> int:
                         metavar="GAP_MS", help="feed LiveFuser directly, GAP_MS apart")
     parser.add_argument("--bytecodes", action="store_true",
                         help="count the Python bytecodes run per datagram, per stage")
+    parser.add_argument("--rehearse", default="0.5", metavar="LEAD_MS",
+                        help="serve's rehearse_s in ms ('off': none; default 0.5)")
     parser.add_argument("--json", default=None, help="write the rows as JSON")
     args = parser.parse_args()
     json_rows = []
@@ -437,7 +447,8 @@ def main() -> int:
         rig, frames = session(fps, seconds)
         for method in args.method.split(","):
             for cand in args.candidates.split(","):
-                r = run(rig, frames, method, cand == "all", args.record)
+                r = run(rig, frames, method, cand == "all", args.record,
+                        None if args.rehearse == "off" else float(args.rehearse) / 1e3)
                 ok = r["fusion_p99"] <= TARGET_P99_MS
                 worst |= r["lost"] > 0
                 json_rows.append({
@@ -452,6 +463,10 @@ def main() -> int:
                       f"{'<= 1 ' + ('ok' if ok else 'NO'):>7} | {r['e2e_med']:7.3f} "
                       f"{r['e2e_p99']:6.3f} | {r['cpu_med']:7.3f} {r['cpu_p99']:6.3f}",
                       flush=True)
+                if r["rehearsals"]:
+                    print(f"{'':>10} ({r['rehearsals']} rehearsals, "
+                          f"{r['rehearsal_cpu_ms_per_s']:.1f} ms CPU per second; "
+                          f"{r['overlaps']} datagrams came during one)")
                 if r["late_sends"]:
                     print(f"{'':>10} (the sender was more than 1 ms late on "
                           f"{r['late_sends']} datagrams: the machine is busy)")

@@ -22,6 +22,7 @@ from pslog.live.protocol import (
     encode_point,
 )
 from pslog.records import NS
+from pslog.rig import Rig, apply_timing, builtin_rig
 from pslog.simulation import SimulationOptions, true_rig
 from pslog.timing import camera_parameters, true_times_ns
 from tests._live import EPOCH, datagrams, frames, rally_session, subset
@@ -348,6 +349,151 @@ def test_bad_settings_are_one_line_errors(session):
         with pytest.raises(PslogError) as info:
             LiveFuser(rig, **kwargs)
         assert "\n" not in str(info.value)
+
+
+# ---- the rehearsal (serve's keep-warm between datagrams far apart) --------------------------
+def _fields(p: LivePoint) -> tuple:
+    """Every field of a point: its datagram's bytes, its JSON, its quality columns."""
+    return (p.to_datagram(1), json.dumps(p.to_json()), p.t_emit_ns, p.arrival_ns,
+            tuple(p.quality), np.array(list(p.quality.values())).tobytes())
+
+
+@pytest.mark.parametrize("method", ["filter", "typeA"])
+def test_a_rehearsal_before_every_datagram_changes_no_point(session, method):
+    """A Rehearsal runs datagrams of warm_up's rally through a fuser of its own: the real
+    fuser's points, with rehearsals (the rally replayed, later) before each of its
+    datagrams, are those of a fuser without one, every field and counter."""
+    from pslog.live.fuser import Rehearsal
+
+    rig, det = session
+    data = datagrams(det, rig)
+    plain = LiveFuser(rig, method, epoch_ns=EPOCH, clock=Clock(EPOCH + 7))
+    want = _run(plain, data)
+    fuser = LiveFuser(rig, method, epoch_ns=EPOCH, clock=Clock(EPOCH + 7))
+    rehearsal = Rehearsal(fuser)
+    got = []
+    for d in data:
+        rehearsal.step()
+        rehearsal.step()
+        got += fuser.feed(d, EPOCH)
+    got += fuser.flush()
+    assert rehearsal.steps > len(rehearsal._frames)  # (replayed)
+    # the replayed rally fused as the first time (its frames later, none dropped)
+    c = rehearsal._shadow.counters()
+    assert c["fused"] == rehearsal.steps and c["points"] > rehearsal.steps // 2
+    assert [_fields(p) for p in got] == [_fields(p) for p in want]
+    assert fuser.counters() == plain.counters()
+
+
+def test_the_rehearsal_is_due_a_lead_before_the_next_frame_can_come(session):
+    """plan(): each live camera's next frame is due a frame period after its latest fused
+    one, at the earliest with the least delay (arrival - capture) of its latest datagrams;
+    the rehearsal is the lead before the earliest camera's. None when the datagrams come
+    closer than min_gap_s, and a silent camera is not waited for."""
+    from pslog.live.fuser import Rehearsal
+
+    rig, det = session
+    fuser = LiveFuser(rig, "typeA", epoch_ns=EPOCH, clock=Clock())
+    rehearsal = Rehearsal(fuser, lead_s=0.001)
+    period = [round(NS / c.fps) for c in rig.cameras]
+    delays = [3_000_000, 1_000_000, 2_500_000, 4_000_000, 1_500_000, 2_000_000, 1_200_000]
+    seen: dict[int, list[int]] = {}
+    last: dict[int, int] = {}
+    for i, d in enumerate(frames(det, rig)[:7]):
+        arrival = d.t_capture_ns + delays[i]
+        fuser.feed(encode_detections(d), arrival)
+        cam = fuser._index[d.camera]
+        seen.setdefault(cam, []).append(delays[i])
+        last[cam] = d.t_capture_ns
+        rehearsal.plan(fuser, arrival)
+        want = min(last[c] + period[c] + min(seen[c]) for c in last) - 1_000_000
+        assert rehearsal.due == want - rehearsal.duration_ns
+        if i == 3:  # (it starts the longest of the latest rehearsals' wall times earlier)
+            rehearsal.step()
+        assert (rehearsal.duration_ns > 0) == (i >= 4)
+    # one rehearsal preempted for 50 ms: the next ones start at most 2 ms earlier (else
+    # due before the datagram it is for, none would run, and the 50 ms would stay)
+    rehearsal._durations.append(50_000_000)
+    rehearsal.plan(fuser, arrival)
+    assert rehearsal.due == want - 2_000_000 > arrival
+    # a camera silent (nothing for silent_after_s): not waited for
+    now = arrival + fuser.silent_after_ns + 1
+    rehearsal.plan(fuser, now)
+    assert rehearsal.due is None  # (every camera silent by then)
+    # 3 x 240 fps: datagrams 1.4 ms apart, closer than min_gap_s: no rehearsal
+    paper = builtin_rig("paper3")
+    fast = apply_timing(Rig(tuple(c.replace(fps=240.0) for c in paper.cameras), "fast"),
+                        "typeA")
+    fuser = LiveFuser(fast, "typeA", epoch_ns=EPOCH, clock=Clock())
+    rehearsal = Rehearsal(fuser)
+    t0 = EPOCH + 10 * NS
+    for k in range(6):
+        t = t0 + k * round(NS / 720)
+        fuser.feed(encode_detections(DetectionDatagram(
+            fast.names[k % 3], k // 3 + 1, k // 3, t, t, [[320.0, 240.0]])), t)
+        rehearsal.plan(fuser, t)
+        assert (rehearsal.due is None) == (k > 0)  # (one camera heard: its own period)
+
+
+def test_serve_rehearses_between_paced_datagrams_and_fuses_the_same_points(session):
+    """Over real UDP, datagrams sent at their capture times (3 x 30 fps): serve rehearses
+    between them (LiveSummary.rehearsals) and the robot gets the points a LiveFuser fed the
+    same datagrams makes, bit for bit (times on the session clock, cameras, positions,
+    covariances, residuals, masks, flags; predictions at emit aside: the wall clock's)."""
+    import socket
+    import threading
+    import time
+
+    from pslog.live.protocol import decode_point
+    from pslog.live.server import serve
+    from pslog.live.sinks import UdpSink
+
+    rig, det = session
+    keys = ("camera_index", "position", "covariance", "residual_px", "camera_mask", "flags")
+
+    def run(rehearse_s):
+        rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        rx.bind(("127.0.0.1", 0))
+        rx.settimeout(0.3)
+        ready, stop = threading.Event(), threading.Event()
+
+        def send():
+            assert ready.wait(30)
+            sent = frames(det, rig, ready.epoch_ns)[:40]
+            start = time.time_ns() + 20_000_000 - sent[0].t_capture_ns
+            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+                for d in sent:  # (at their capture times, 20 ms later: 11 ms apart)
+                    time.sleep(max(0.0, (start + d.t_capture_ns - time.time_ns()) / 1e9))
+                    tx.sendto(encode_detections(d), ready.address)
+            time.sleep(0.05)
+            stop.set()
+
+        sender = threading.Thread(target=send, daemon=True)
+        sender.start()
+        summary = serve(rig, "udp://127.0.0.1:0", [UdpSink(rx.getsockname())],
+                        method="typeA", stop=stop, ready=ready, status_stream=None,
+                        duration_s=30, rehearse_s=rehearse_s)
+        sender.join(30)
+        points = []
+        try:
+            while True:
+                points.append(decode_point(rx.recv(4096)))
+        except TimeoutError:
+            pass
+        rx.close()
+        return summary, points, ready.epoch_ns
+
+    def row(p, epoch):
+        return [p.t_capture_ns - epoch] + [np.asarray(getattr(p, k)).tobytes() for k in keys]
+
+    summary, got, epoch = run(0.004)
+    fuser = LiveFuser(rig, "typeA", epoch_ns=EPOCH, clock=Clock())
+    want = [decode_point(p.to_datagram(1)) for d in datagrams(det, rig)[:40]
+            for p in fuser.feed(d, EPOCH)]
+    assert summary.rehearsals > 0
+    assert summary.counters["received"] == summary.counters["fused"] == 40  # (its own only)
+    assert len(got) == summary.counters["points"] > 15
+    assert [row(p, epoch) for p in got] == [row(p, EPOCH) for p in want]
 
 
 # ---- over real UDP, recorded: the session re-fused offline gives the live points ----------

@@ -39,6 +39,7 @@ import bisect
 import heapq
 import math
 import operator
+import struct
 import time
 from collections import deque
 from dataclasses import dataclass, field, replace
@@ -244,15 +245,126 @@ def warm_up(method: str, *, candidates: bool = True, options=None) -> None:
     now = [0]
     fuser = LiveFuser(rig, method, options=options, candidates=candidates, epoch_ns=0,
                       keep=False, clock=lambda: now[0])
-    for d in detection_datagrams(detections):
-        now[0] = d.t_capture_ns
-        fuser.feed(encode_detections(d), d.t_capture_ns)
+    frames = [(d.t_capture_ns, encode_detections(d)) for d in detection_datagrams(detections)]
+    for t, data in frames:
+        now[0] = t
+        fuser.feed(data, t)
     fuser.flush()
+    _RALLIES[key] = (rig, frames)
     _WARMED.add(key)
 
 
 #: the (method, candidates, options) :func:`warm_up` ran for in this process
 _WARMED: set = set()
+#: per such key, the rig and the datagrams ((capture ns, bytes)) of its warm-up rally
+_RALLIES: dict = {}
+#: a detection datagram's capture and sent times (bytes 24-40, :mod:`.protocol`)
+_REHEARSAL_TIMES = struct.Struct("<qq")
+#: the longest a rehearsal is expected to take, ns (:meth:`Rehearsal.plan`)
+_MAX_REHEARSAL_NS = 2_000_000
+
+
+class Rehearsal:
+    """Keeps a live fuser's code warm while its datagrams are far apart (3 x 30 fps: 11 ms).
+
+    Between two such datagrams the core runs other work and the fuser's code and tables
+    leave its caches: a datagram then costs about twice its CPU back to back. :meth:`step`
+    feeds ONE datagram of :func:`warm_up`'s rally to a fuser of its own (the method's
+    decoding, gate, push, kernels, points and point datagrams; nothing sent, nothing of the
+    real fuser touched; the rally replayed later and later in a loop), shortly before the
+    next real datagram is due (:func:`pslog.live.server.serve` plans it, :meth:`plan`).
+
+    Parameters
+    ----------
+    fuser : the real LiveFuser (its method, candidates, options and cameras' rates)
+    lead_s : a rehearsal ends this long before the earliest time the next datagram can come
+        (it starts the longest of the latest rehearsals' wall times earlier still)
+    min_gap_s : no rehearsal when datagrams come closer than this (already warm)
+    """
+
+    def __init__(self, fuser: LiveFuser, lead_s: float = 0.0005,
+                 min_gap_s: float = 0.004) -> None:
+        warm_up(fuser.method, candidates=fuser.candidates, options=fuser.options)
+        rig, self._frames = _RALLIES[(fuser.method, bool(fuser.candidates), fuser.options)]
+        now = self._now = [0]
+        self._shadow = LiveFuser(rig, fuser.method, options=fuser.options,
+                                 candidates=fuser.candidates, epoch_ns=0, keep=False,
+                                 clock=lambda: now[0])
+        self._i = 0
+        # the rally again, this much later each time (its times stamped anew)
+        self._shift = 0
+        self._span = self._frames[-1][0] - self._frames[0][0] + NS // 30
+        self.lead_ns = int(lead_s * NS)
+        self.min_gap_ns = int(min_gap_s * NS)
+        self._period = [int(NS / f) for f in fuser._fps]
+        #: per camera, its latest datagrams' delays (arrival - capture), ns
+        self._delays: list[deque] = [deque(maxlen=16) for _ in fuser._fps]
+        self._frames_seen = [0] * len(fuser._fps)
+        #: wall clock ns at which to rehearse (None: nothing planned)
+        self.due: int | None = None
+        #: rehearsals run (each one datagram of the rally)
+        self.steps = 0
+        self._durations: deque = deque(maxlen=8)  # the latest rehearsals' wall times, ns
+        #: the longest of the latest rehearsals' wall times, at most 2 ms, ns (0 before any;
+        #: updated by :meth:`plan`)
+        self.duration_ns = 0
+
+    def step(self) -> None:
+        """One datagram of the rally through the rehearsal's own fuser, its points packed."""
+        start = time.perf_counter_ns()
+        if not self._frames:
+            return
+        if self._i == len(self._frames):
+            self._i = 0
+            self._shift += self._span
+        t, data = self._frames[self._i]
+        self._i += 1
+        if self._shift:  # (its capture and sent times, protocol's header)
+            t += self._shift
+            data = bytearray(data)
+            _REHEARSAL_TIMES.pack_into(data, 24, t, t)
+        self._now[0] = t
+        try:
+            for n, p in enumerate(self._shadow.feed(data, t)):
+                p.to_datagram(n)
+        except Exception:  # (a rehearsal never stops the real fuser: no more of them)
+            self._frames = []
+            self.due = None
+            return
+        self.steps += 1
+        self._durations.append(time.perf_counter_ns() - start)
+
+    def plan(self, fuser: LiveFuser, now: int) -> None:
+        """After a datagram of ``fuser`` (handled at wall clock ``now``): when to rehearse for
+        the next one. Each live camera's next frame is due a frame period after its latest
+        fused one; it comes at the earliest with the least delay (arrival less capture) of
+        its latest datagrams; the rehearsal is to end ``lead_s`` before the earliest camera's
+        (it starts :attr:`duration_ns` before that: the longest of the latest rehearsals' wall
+        times, at most 2 ms, so that one rehearsal preempted for long on a busy machine does
+        not move every later one before the datagram it is for, where none would run and
+        the estimate would never be renewed)."""
+        self.duration_ns = min(max(self._durations, default=0), _MAX_REHEARSAL_NS)
+        self.due = None
+        if not self._frames:  # (a rehearsal failed: none any more)
+            return
+        earliest = None
+        latest_arrival = 0
+        silent = fuser.silent_after_ns
+        for c, state in enumerate(fuser._cams):
+            arrival, capture = state.last_arrival_ns, state.last_capture_ns
+            if arrival is None or capture is None or now - arrival > silent:
+                continue
+            delays = self._delays[c]
+            if state.frames != self._frames_seen[c]:
+                self._frames_seen[c] = state.frames
+                delays.append(arrival - capture)
+            latest_arrival = max(latest_arrival, arrival)
+            expected = capture + self._period[c] + min(delays)
+            if earliest is None or expected < earliest:
+                earliest = expected
+        if earliest is None or earliest - latest_arrival < self.min_gap_ns:
+            return
+        self.due = earliest - self.lead_ns - self.duration_ns
 
 
 class LiveFuser:
