@@ -946,6 +946,7 @@ def run_batch(jobs: list[Job], settings: Settings, *, workers: int | None = None
             on_row(row)
         return [row]
     pending: dict = {}
+    lasting = address is not None or ray.is_initialized()  # a cluster that outlives the batch
     try:
         with ray_cluster(workers, address) as slots:
             task = ray.remote(num_cpus=1, max_retries=MAX_RETRIES)(run_session)
@@ -957,11 +958,14 @@ def run_batch(jobs: list[Job], settings: Settings, *, workers: int | None = None
                 for ref in pending:  # a cluster that outlives the batch (--address, tests)
                     with contextlib.suppress(Exception):
                         ray.cancel(ref, force=True)
-                # a forced cancel kills the workers asynchronously: wait (bounded) until
-                # they are gone, so that no task still installs outputs while this
-                # process settles the jobs' folders below
-                with contextlib.suppress(Exception):
-                    ray.wait(list(pending), num_returns=len(pending), timeout=CANCEL_WAIT_S)
+                # a forced cancel kills the workers asynchronously: on a cluster that
+                # outlives the batch, wait (bounded) until they are gone, so that no task
+                # still installs outputs while this process settles the jobs' folders
+                # below (a local cluster's shutdown ends its workers)
+                if lasting and pending:
+                    with contextlib.suppress(Exception):
+                        ray.wait(list(pending), num_returns=len(pending),
+                                 timeout=CANCEL_WAIT_S)
                 raise
     except BaseException:
         # interrupted: the tasks were ended (their workers killed with the local cluster)

@@ -353,14 +353,16 @@ print(code, open(sys.argv[3]).read().count("<heap nr="))
 """
 
 
-@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's malloc arenas")
+@pytest.mark.skipif(__import__("platform").libc_ver()[0] != "glibc",
+                    reason="glibc's malloc arenas")
 def test_cli_fuse_threads_allocate_from_one_malloc_arena(dirty, tmp_path):
     # (pslog.cli.fuse.one_malloc_arena: fewer page faults, a lower peak; without it each
     # fusing thread, the preload's, the writer's get an arena of their own)
     import os
     import subprocess
 
-    env = {k: v for k, v in os.environ.items() if k != "MALLOC_ARENA_MAX"}
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("MALLOC_ARENA_MAX", "GLIBC_TUNABLES")}
     run = subprocess.run([sys.executable, "-c", _ARENAS, str(dirty), str(tmp_path / "f.mcap"),
                           str(tmp_path / "malloc.xml")], capture_output=True, text=True,
                          env=env, timeout=600)

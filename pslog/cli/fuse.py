@@ -109,7 +109,6 @@ def run(args: argparse.Namespace) -> int:
     from pslog.rig import check_baselines, resolve_rig
     from pslog.timing import observations as timed_observations
 
-    one_malloc_arena()  # before the command's threads allocate (done already by pslog.cli)
     output = args.output  # checked before run() (declare_files)
     progress.update(what="reading the session")
     session = read_session(args.session)
@@ -253,12 +252,19 @@ def one_malloc_arena() -> bool:
     against 305-313 thousand), a 170-200 MB lower peak (1.40-1.45 GB against 1.60-1.62)
     and 0.9 CPU s less (16.3-16.9 against 17.2-17.8, user and system; two alternating
     pairs against ``MALLOC_ARENA_MAX=16`` on a loaded machine; with the variable set
-    alone, four more pairs alike). Its outputs do not depend on it. True where set
-    (glibc on Linux)."""
+    alone, four more pairs alike). Its outputs do not depend on it. True where set: glibc
+    (on another C library, or where the user set ``MALLOC_ARENA_MAX`` or glibc's
+    ``arena_max`` tunable, nothing is changed), and only while the process has one thread
+    (glibc fixes its arenas' limit once it has more than 8 of them, and threads that have
+    one keep it: a process that called :func:`pslog.cli.main` from a busy program, a Ray
+    worker or a test runner with threads, is left as it is)."""
     import os
-    import sys
+    import platform
+    import threading
 
-    if not sys.platform.startswith("linux") or "MALLOC_ARENA_MAX" in os.environ:
+    if (platform.libc_ver()[0] != "glibc" or "MALLOC_ARENA_MAX" in os.environ
+            or "arena_max" in os.environ.get("GLIBC_TUNABLES", "")
+            or threading.active_count() != 1):
         return False
     import ctypes
 
