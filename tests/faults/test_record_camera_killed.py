@@ -260,15 +260,28 @@ def test_camera_killed_while_writing_into_its_full_pipe(recording):
 def _signal_a_writing_camera(rec: Recording, sig: int, order: tuple[str, ...]
                              ) -> tuple[str, dict[str, int]]:
     """Send ``sig`` to the first camera (in ``order``) seen blocked in a write into its full
-    pipe (halfway through a message); its name and every camera's pid."""
+    pipe (halfway through a message); its name and every camera's pid. The recorder's
+    process is held (SIGSTOP) until then and let go right after: a recorder that kept up
+    with its cameras (a quiet machine: 300 frames/s) left no pipe full to catch one in."""
     pids = rec.camera_pids()
     deadline = time.monotonic() + 60
-    while time.monotonic() < deadline:
-        for name in order:
-            if _blocked_in_pipe_write(pids[name]):
-                os.kill(pids[name], sig)
-                return name, pids
+    # once every camera is sending (past the recorder's start), the recorder is held:
+    # behind its cameras, whose pipes fill
+    while not all(_read_share(pids[name], rec.files[name]) > 0.05 for name in order):
         assert rec.proc.poll() is None, f"recorder ended before the signal:\n{rec.stderr}"
+        assert time.monotonic() < deadline, f"the cameras did not start:\n{rec.stderr}"
+        time.sleep(0.002)
+    os.kill(rec.proc.pid, signal.SIGSTOP)
+    try:
+        while time.monotonic() < deadline:
+            for name in order:
+                if _blocked_in_pipe_write(pids[name]):
+                    os.kill(pids[name], sig)
+                    return name, pids
+            assert rec.proc.poll() is None, f"recorder ended before the signal:\n{rec.stderr}"
+            time.sleep(0.001)
+    finally:
+        os.kill(rec.proc.pid, signal.SIGCONT)
     raise AssertionError(f"no camera was ever blocked writing:\n{rec.stderr}")
 
 
