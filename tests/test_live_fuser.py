@@ -474,14 +474,7 @@ def test_serve_rehearses_between_paced_datagrams_and_fuses_the_same_points(sessi
                         method="typeA", stop=stop, ready=ready, status_stream=None,
                         duration_s=30, rehearse_s=rehearse_s)
         sender.join(30)
-        points = []
-        try:
-            while True:
-                points.append(decode_point(rx.recv(4096)))
-        except TimeoutError:
-            pass
-        rx.close()
-        return summary, points, ready.epoch_ns
+        return summary, _received_points(rx), ready.epoch_ns
 
     def row(p, epoch):
         return [p.t_capture_ns - epoch] + [np.asarray(getattr(p, k)).tobytes() for k in keys]
@@ -555,6 +548,11 @@ def _serve_session(rig, det, path, method, faults=True, interrupt=False):
         if interrupt:
             signal.signal(signal.SIGINT, before)
     sender.join(30)
+    return summary, _received_points(rx), ready.epoch_ns
+
+
+def _received_points(rx) -> list:
+    """The points waiting in the robot's socket ``rx`` (it has a timeout), decoded; closes it."""
     points = []
     try:
         while True:
@@ -562,7 +560,7 @@ def _serve_session(rig, det, path, method, faults=True, interrupt=False):
     except TimeoutError:
         pass
     rx.close()
-    return summary, points, ready.epoch_ns
+    return points
 
 
 CLOCK_FAULTS = dict(clock_offset_s={"cam2": 0.003, "cam3": -0.004},
