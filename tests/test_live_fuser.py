@@ -452,9 +452,7 @@ def test_serve_rehearses_between_paced_datagrams_and_fuses_the_same_points(sessi
     keys = ("camera_index", "position", "covariance", "residual_px", "camera_mask", "flags")
 
     def run(rehearse_s):
-        rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        rx.bind(("127.0.0.1", 0))
-        rx.settimeout(0.3)
+        rx = _robot_socket()
         ready, stop = threading.Event(), threading.Event()
 
         def send():
@@ -502,9 +500,7 @@ def _serve_session(rig, det, path, method, faults=True, interrupt=False):
     from pslog.live.server import serve
     from pslog.live.sinks import RecordSink, UdpSink
 
-    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    rx.bind(("127.0.0.1", 0))
-    rx.settimeout(0.3)
+    rx = _robot_socket()
     ready, stop = threading.Event(), threading.Event()
 
     def send():
@@ -549,6 +545,16 @@ def _serve_session(rig, det, path, method, faults=True, interrupt=False):
             signal.signal(signal.SIGINT, before)
     sender.join(30)
     return summary, _received_points(rx), ready.epoch_ns
+
+
+def _robot_socket():
+    """A robot's UDP socket on a free loopback port, reads timing out after 0.3 s."""
+    import socket
+
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    rx.bind(("127.0.0.1", 0))
+    rx.settimeout(0.3)
+    return rx
 
 
 def _received_points(rx) -> list:
