@@ -10,7 +10,9 @@ PYTHON=${PYTHON:-python3}
 VENV=${PSLOG_VENV:-.venv}
 WARMING=""  # pslog.warm running in the background (setup background), its process id
 
-setup() {  # setup [background]: with background, the kernels compile while the caller goes on
+setup() {  # setup [background]: pslog and its .[test] extras installed, the kernels compiled
+           # (pslog.warm) while the extras install; with background, warm goes on after
+           # setup (the caller waits for it with `warmed`)
     if [ ! -x "$VENV/bin/python" ]; then
         "$PYTHON" -c 'import sys; sys.exit(0 if sys.version_info >= (3, 11) else "pslog needs Python >= 3.11, found " + sys.version.split()[0])'
         "$PYTHON" -m venv "$VENV"
@@ -18,7 +20,7 @@ setup() {  # setup [background]: with background, the kernels compile while the 
     # reinstall only when the project's dependencies changed
     if [ ! -f "$VENV/.pslog-installed" ] || [ pyproject.toml -nt "$VENV/.pslog-installed" ]; then
         "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check --upgrade pip
-        "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check -e ".[test]"
+        "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check -e .
         # numba compiles pslog's kernels on first use: do it now, once, announced (pslog/warm.py)
         echo "pslog: compiling the numba kernels (once per install, about 1.5 minutes)" >&2
         "$VENV/bin/python" -m pslog.warm >&2 &
@@ -27,12 +29,28 @@ setup() {  # setup [background]: with background, the kernels compile while the 
         # setup still waits for it)
         trap 'kill -TERM "$WARMING" 2>/dev/null; WARMING=""; exit 130' INT TERM
         trap warmed EXIT
-        if [ "${1:-}" != background ]; then
+    fi
+    if [ ! -f "$VENV/.pslog-test-installed" ] || [ pyproject.toml -nt "$VENV/.pslog-test-installed" ]; then
+        # the extras of .[test] (the test tools, and Ray, pyarrow, c3d for pslog batch and
+        # the Parquet/C3D exports: a third of the download) while the kernels
+        # compile, pslog itself not reinstalled under the running warm; pinned to what is
+        # installed, so that nothing warm uses changes under it (should the tools need another
+        # version of a core package: installed after warm, unpinned)
+        local tools="$VENV/.pslog-test-tools.txt" pins="$VENV/.pslog-core-pins.txt"
+        "$VENV/bin/python" -c 'import tomllib; print("\n".join(tomllib.load(open("pyproject.toml", "rb"))["project"]["optional-dependencies"]["test"]))' > "$tools"
+        "$VENV/bin/python" -m pip freeze --exclude-editable --disable-pip-version-check \
+            | grep -E '^[A-Za-z0-9._-]+==' > "$pins" || true
+        if ! "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check \
+                -c "$pins" -r "$tools" 2>/dev/null; then
             warmed
+            "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check -r "$tools"
         fi
+        touch "$VENV/.pslog-test-installed"
+    fi
+    if [ "${1:-}" != background ]; then
+        warmed
     fi
 }
-
 warmed() {  # wait for setup's pslog.warm, then mark the install done
     if [ -n "$WARMING" ]; then
         wait "$WARMING" || true  # best effort: else the kernels compile on first use
@@ -49,7 +67,7 @@ case "${1:-}" in
         ;;
     test)
         shift
-        setup background  # the kernels compile (two cores) while ruff and mypy check
+        setup background  # the kernels compile (two cores) while the extras install, ruff and mypy check
         "$VENV/bin/ruff" check pslog recorders viewers tests benchmarks tools samples
         "$VENV/bin/mypy"  # pslog/, as configured in pyproject.toml [tool.mypy]
         # the suite starts ~1,000 pslog processes; with PYTHONDONTWRITEBYTECODE set (as on
