@@ -370,7 +370,11 @@ def test_synthetic_cameras_with_clock_errors_are_fused_on_corrected_times(tmp_pa
     assert run.finish() == 0, "\n".join(run.err)
     session = read_session(tmp_path / "s.mcap")
     track = session.tracks["typeA"]
-    assert len(track.time_ns) > 30
+    # ~130 points on a machine with time to spare; a loaded one (the suite's three processes
+    # on two cores and more) delays frames and the live fuser drops those that come out of
+    # order: 10 were seen at load 14. The median below tells corrected from uncorrected
+    # times at any of these counts (~17 mm uncorrected)
+    assert len(track.time_ns) >= 8
     # the cameras' session time 0 is a whole number of seconds after the fuser's
     start_s = np.floor(session.detections.frame_time_ns.min() / 1e9)
     truth = get_motion("rally").position(track.time_ns / 1e9 - start_s)
