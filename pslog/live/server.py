@@ -144,8 +144,8 @@ def _collect_due(sock: socket.socket) -> None:
     without its rule that puts off a full collection until the objects that survived the
     younger ones are a quarter of the old generation's). :func:`serve` runs it after each
     datagram's points are out, with automatic collections off: at 3 x 30 fps a collection
-    of the youngest generation (0.1-0.2 ms on a busy core) came inside about one datagram
-    in a hundred, its whole length added to that datagram's latency. Put off while a
+    of the youngest generation (0.1-0.2 ms on a busy core) came inside 0.6 % of the
+    datagrams, its whole length added to their latency (docs/live.md). Put off while a
     datagram is already waiting in ``sock``, up to 4 times the threshold (a fuser that never
     catches up still collects)."""
     c0, c1, c2 = gc.get_count()
@@ -370,8 +370,6 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
             now = clock()
             if data is not None:
                 handle(data, ancdata, now)
-            if collecting:  # (after the datagram's points: in the wait for the next one)
-                _collect_due(sock)
             if fuser.hold_ns and data is None:
                 # nothing more in the socket: frames whose wait is over by the clock (while
                 # datagrams come, each one's arrival time releases them: a fuser running
@@ -381,6 +379,8 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
                     hand_out(points)
                 if fuser.keep:
                     pass_on()
+            if collecting:  # (after the points, held ones too: in the wait for the next datagram)
+                _collect_due(sock)
             # a camera silent or back: looked at between datagrams while one is silent
             if data is None or now >= next_status or was_silent.get(fuser.last_camera, False):
                 events(now)
