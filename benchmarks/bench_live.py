@@ -33,12 +33,13 @@ the fuser as before session 17); each row then says how many rehearsals ran, the
 second and how many datagrams came while one ran (they waited for its end).
 
 ``--direct``: no sender, no socket in: the same datagrams fed to ``LiveFuser.feed`` in a
-loop (after the method's warm-up, the collector frozen, as ``serve`` runs), each point's
-datagram sent by a ``UdpSink``, ``GAP_MS`` asleep between two datagrams (default 8; 0: back
-to back, warm caches). Reports the CPU per datagram that made a point, the part of it spent
-in the fusion (``StreamFuser.push_frame`` and the filter's ``predict``), and per stage (decoding,
-the candidates' gate, the method's own push, the LivePoints, the send: median, p99 and the
-mean over the slowest 1 % of datagrams, µs) with the garbage collections in the loop.
+loop (after the method's warm-up, the collector frozen and run between datagrams, as
+``serve`` runs), each point's datagram sent by a ``UdpSink``, ``GAP_MS`` asleep between two
+datagrams (default 8; 0: back to back, warm caches). Reports the CPU per datagram that made
+a point, the part of it spent in the fusion (``StreamFuser.push_frame`` and the filter's
+``predict``), and per stage (decoding, the candidates' gate, the method's own push, the
+LivePoints, the send: median, p99 and the mean over the slowest 1 % of datagrams, µs) with
+the garbage collections in the loop (and how many started inside a timed datagram: none).
 ``--bytecodes``: the Python bytecodes each stage runs per datagram (``sys.settrace``).
 """
 
@@ -222,14 +223,16 @@ def run(rig, frames, method: str, candidates: bool, record: bool = False,
 
 
 def direct(rig, frames, method: str, candidates: bool, gap_s: float) -> dict:
-    """The fuser's loop without sockets in, warmed up and with the collector frozen as
-    :func:`~pslog.live.server.serve` runs it: CPU per datagram that made a point (med, p99,
-    fusion mean, ms) and per stage (``stages``: name -> (k,) µs of each such datagram) and
-    the garbage collections during the loop (``gc``: their CPU µs)."""
+    """The fuser's loop without sockets in, warmed up and with the collector frozen and run
+    between datagrams as :func:`~pslog.live.server.serve` runs it: CPU per datagram that
+    made a point (med, p99, fusion mean, ms) and per stage (``stages``: name -> (k,) µs of
+    each such datagram) and the garbage collections during the loop (``gc``: their CPU µs;
+    ``gc_inside``: how many started inside a timed datagram)."""
     import gc
 
     import pslog.live.fuser as live_fuser
     from pslog.live.fuser import LiveFuser, warm_up
+    from pslog.live.server import _collect_due
 
     epoch = time.time_ns()
     rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -277,16 +280,20 @@ def direct(rig, frames, method: str, candidates: bool, gap_s: float) -> dict:
     emit = timed(sink.emit, "send")
     pauses: list[int] = []
     started = [0]
+    inside = [False, 0]  # (a datagram being timed, collections started inside one)
 
     def collected(phase, info) -> None:
         if phase == "start":
             started[0] = tt()
+            inside[1] += inside[0]
         else:
             pauses.append(tt() - started[0])
 
     cpu, stages = [], []
     gc.collect()
     gc.freeze()
+    collecting = gc.isenabled()
+    gc.disable()
     gc.callbacks.append(collected)
     try:
         for t, b in data:
@@ -294,20 +301,26 @@ def direct(rig, frames, method: str, candidates: bool, gap_s: float) -> dict:
                 time.sleep(gap_s)
             now[0] = t + 200_000
             spent.clear()
+            inside[0] = True
             c0 = tt()
             points = fuser.feed(b, t + 100_000)
             if points:
                 emit(points)
                 cpu.append(tt() - c0)
                 stages.append(dict(spent))
+            inside[0] = False
             while True:  # the receiver's queue emptied, not timed
                 try:
                     rx.recv(4096, socket.MSG_DONTWAIT)
                 except BlockingIOError:
                     break
+            if collecting:  # (between datagrams, as serve: nothing waits in rx now)
+                _collect_due(rx)
     finally:
         gc.callbacks.remove(collected)
         gc.unfreeze()
+        if collecting:
+            gc.enable()
         live_fuser.decode_detections = decode
     sink.close()
     rx.close()
@@ -316,7 +329,7 @@ def direct(rig, frames, method: str, candidates: bool, gap_s: float) -> dict:
     return dict(cpu_med=float(np.median(cpu)), cpu_p99=float(np.percentile(cpu, 99)),
                 fusion=fusion[0] / 1e6 / len(cpu), n=len(cpu), cpu=cpu,
                 stages={k: np.array([s.get(k, 0) for s in stages]) / 1e3 for k in names},
-                gc=np.array(pauses) / 1e3)
+                gc=np.array(pauses) / 1e3, gc_inside=inside[1])
 
 
 def bytecodes(rig, frames, method: str, candidates: bool) -> dict:
@@ -431,8 +444,9 @@ def main() -> int:
                           + ", ".join(f"{k} {np.median(v):.0f} / {np.percentile(v, 99):.0f}"
                                       f" / {v[tail].mean():.0f}"
                                       for k, v in r["stages"].items() if v.any())
-                          + f"; gc: {len(r['gc'])} collections, max "
-                          f"{r['gc'].max() if len(r['gc']) else 0:.0f} µs", flush=True)
+                          + f"; gc: {len(r['gc'])} collections ({r['gc_inside']} inside a "
+                          f"datagram), max {r['gc'].max() if len(r['gc']) else 0:.0f} µs",
+                          flush=True)
         return 0
     print(f"live fuser, 3 type-A cameras, {seconds:g} s per run, sender and robot processes "
           f"on loopback; latencies in ms (target: p99 fusion <= {TARGET_P99_MS:g} ms, "

@@ -3,8 +3,13 @@ fused, every bad datagram is counted and dropped without changing a point, silen
 
 from __future__ import annotations
 
+import gc
 import json
 import math
+import socket
+import threading
+import time
+import weakref
 from dataclasses import replace
 
 import numpy as np
@@ -21,6 +26,7 @@ from pslog.live.protocol import (
     encode_detections,
     encode_point,
 )
+from pslog.live.server import _collect_due
 from pslog.records import NS
 from pslog.rig import Rig, apply_timing, builtin_rig
 from pslog.simulation import SimulationOptions, true_rig
@@ -810,3 +816,186 @@ def test_point_wire_forms_equal_their_definitions(session):
         assert got["std_m"] == (std if math.isfinite(std) else None)
         assert [got["x"], got["y"], got["z"]] == [float(a) for a in p.position_world]
         assert json.dumps(got, allow_nan=False)
+
+
+# ---- the garbage collector: between datagrams, never inside one -------------------------
+class _Cycle:
+    """An object in a reference cycle (only the collector frees it), weakly referenceable."""
+
+    def __init__(self) -> None:
+        self.me = self
+
+
+@pytest.fixture
+def collector():
+    """The collector off and emptied for the test (its counts then move only by what the
+    test makes), its setting and callbacks back after; yields the collections started
+    (generations) while the test ran."""
+    started: list[int] = []
+
+    def seen(phase, info) -> None:
+        if phase == "start":
+            started.append(info["generation"])
+
+    enabled, threshold = gc.isenabled(), gc.get_threshold()
+    gc.disable()
+    gc.collect()
+    gc.callbacks.append(seen)
+    try:
+        yield started
+    finally:
+        gc.callbacks.remove(seen)
+        gc.set_threshold(*threshold)
+        if enabled:
+            gc.enable()
+
+
+def _make(n: int) -> list:
+    """``n`` cyclic objects made (container allocations: the collector's count), weak
+    references to them."""
+    return [weakref.ref(_Cycle()) for _ in range(n)]
+
+
+def _fill(count: int, refs: list | None = None) -> list:
+    """Cyclic objects made until the collector's young count is at least ``count``; weak
+    references to them (added to ``refs``)."""
+    refs = [] if refs is None else refs
+    while gc.get_count()[0] < count:
+        refs.append(weakref.ref(_Cycle()))
+    return refs
+
+
+def test_collect_due_runs_the_collection_python_would_have_run(collector):
+    """Over the youngest generation's threshold: the oldest generation whose count is over
+    its own is collected (the cycles freed); at or under it nothing; a datagram waiting in
+    the socket puts it off up to 4 thresholds; threshold 0 (collection off) never
+    collects."""
+    gc.set_threshold(100, 3, 2)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock, \
+            socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+        sock.bind(("127.0.0.1", 0))
+        refs = _fill(99)  # (two objects a step: 99 or 100)
+        assert gc.get_count()[0] <= 100
+        _collect_due(sock)
+        assert collector == [] and all(r() is not None for r in refs)  # (not over: nothing)
+        _fill(101, refs)
+        _collect_due(sock)
+        assert collector == [0] and all(r() is None for r in refs)
+        # each young collection counts one in generation 1: over 3, generation 1 next
+        # (the weak references kept: freeing a tracked object lowers the count)
+        for _ in range(3):
+            _fill(101, refs)
+            _collect_due(sock)
+        assert collector == [0, 0, 0, 0] and gc.get_count()[1] == 4
+        _fill(101, refs)
+        _collect_due(sock)
+        assert collector[-1] == 1 and gc.get_count()[1:] == (0, 1)
+        while collector[-1] != 2 and len(collector) < 30:  # (4 of generation 0 per 1)
+            _fill(101, refs)
+            _collect_due(sock)
+        assert collector == [0] * 4 + ([1] + [0] * 4) * 2 + [1, 2]  # (2 after the third 1)
+        del collector[:]
+        # a datagram waiting: put off, until over 4 thresholds' worth
+        tx.sendto(b"x", sock.getsockname())
+        time.sleep(0.05)
+        # (the earlier references kept too: freeing them would lower the count)
+        start = len(refs)
+        _fill(399, refs)
+        assert gc.get_count()[0] <= 400
+        _collect_due(sock)
+        assert collector == [] and all(r() is not None for r in refs[start:])
+        _fill(401, refs)
+        _collect_due(sock)
+        assert collector == [0] and all(r() is None for r in refs)
+        gc.set_threshold(0)
+        _fill(1000, refs)
+        _collect_due(sock)
+        assert collector == [0]
+
+
+def _serve_garbage(rig, det, sink, n: int = 12):
+    """``n`` frames over real UDP to serve() with ``sink``, 3 ms apart; its summary."""
+    ready, stop = threading.Event(), threading.Event()
+
+    def send() -> None:
+        assert ready.wait(30)
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+            for d in frames(det, rig, ready.epoch_ns)[:n]:
+                tx.sendto(encode_detections(d), ready.address)
+                time.sleep(0.003)
+        time.sleep(0.05)
+        stop.set()
+
+    sender = threading.Thread(target=send, daemon=True)
+    sender.start()
+    from pslog.live.server import serve
+
+    summary = serve(rig, "udp://127.0.0.1:0", [sink], method="typeA", stop=stop,
+                    ready=ready, status_stream=None, duration_s=30, rehearse_s=None)
+    sender.join(30)
+    return summary
+
+
+class _Garbage:
+    """A sink making cyclic garbage at every point handed out, 3 of the collector's young
+    thresholds of it: whether a collection started inside ``emit`` (with the automatic
+    collector on, every call would see one), and each call's references to what it made."""
+
+    def __init__(self) -> None:
+        self.inside = False
+        self.collected_inside = 0
+        self.made: list[list] = []
+        #: per call, how many of the objects the earlier calls made were alive then
+        self.alive: list[int] = []
+
+    def emit(self, points) -> None:
+        self.inside = True
+        try:
+            self.alive.append(sum(r() is not None for refs in self.made for r in refs))
+            self.made.append(_make(3 * gc.get_threshold()[0]))
+        finally:
+            self.inside = False
+
+    def close(self) -> None:
+        pass
+
+
+def test_serve_collects_between_datagrams_and_restores_the_collector(session):
+    """serve() with the collector on: no collection starts while a datagram's points are
+    handed out (a sink making 3 thresholds of cyclic garbage per call), the garbage of each
+    call is freed before the next datagram's points (collected between them), and the
+    collector is on again after; with the collector off (the user's choice) serve collects
+    nothing and leaves it off."""
+    rig, det = session
+    sink = _Garbage()
+
+    def seen(phase, info) -> None:
+        if phase == "start" and sink.inside:
+            sink.collected_inside += 1
+
+    enabled = gc.isenabled()
+    gc.callbacks.append(seen)
+    try:
+        gc.enable()
+        summary = _serve_garbage(rig, det, sink)
+        assert gc.isenabled()
+        assert summary.counters["points"] > 5 and len(sink.made) > 5
+        assert sink.collected_inside == 0
+        # each call's cycles freed by the next call (collected between the two)
+        assert sink.alive == [0] * len(sink.made)
+
+        gc.disable()
+        sink = _Garbage()
+        started = []
+        gc.callbacks.append(lambda phase, info: started.append(phase))
+        summary = _serve_garbage(rig, det, sink)
+        gc.callbacks.pop()
+        assert not gc.isenabled()
+        # (serve's own full collection before its freeze aside: none by the count)
+        assert len(sink.made) > 5 and started == ["start", "stop"]
+        assert sink.alive == [3 * gc.get_threshold()[0] * k for k in range(len(sink.made))]
+    finally:
+        gc.callbacks.remove(seen)
+        if enabled:
+            gc.enable()
+        gc.collect()
