@@ -263,8 +263,11 @@ def test_false_candidates_are_gated_before_the_clocks_are_estimated(tmp_path, cl
     # spurious blobs: with each frame's best-scored candidate the estimator meets a still
     # object in many frames and fails ("not determined by the ball's motion"); sync chooses
     # the ball among the candidates as fuse does and estimates what the clean session gives
+    # (4 s of the rally: each sync costs its length; with the best-scored candidates the
+    # estimator still fails, and over seeds 0-4 the dirty offsets stay within 2.5 sigma of
+    # the truth and 1.4 sigma of the clean ones)
     common = ("--rig", "paper3", "--timing", "typeA", "--motion", "rally", "--noise-px", "0.3",
-              "--clock-offset", "cam2=4", "--clock-offset", "cam3=-6")
+              "--clock-offset", "cam2=4", "--clock-offset", "cam3=-6", "--duration", "4")
     paths = {"clean": tmp_path / "clean.mcap", "dirty": tmp_path / "dirty.mcap"}
     assert cli("simulate", *common, "-o", paths["clean"])[0] == 0
     assert cli("simulate", *common, "--spurious", "0.05", "--distractor", "1.0,1.5,0.2",
