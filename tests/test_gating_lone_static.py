@@ -86,8 +86,9 @@ def _next_to_the_object():
     return rig, det, ball_mask(det, ball)
 
 
-def _same_in_the_stream(rig, det, g, forms=(False, True)) -> None:
-    """The stream gate's choices, in its Python and (``True``) compiled forms, are ``g``'s."""
+def _same_in_the_stream(rig, det, g, forms=(False, True), uv: bool = False) -> None:
+    """The stream gate's choices, in its Python and (``True``) compiled forms, are ``g``'s
+    (with ``uv``: the rejected candidates' pixels too)."""
     for compiled in forms:
         stream = StreamGate(rig, 0.0, compiled=compiled)
         push_frames(stream, det)
@@ -95,6 +96,8 @@ def _same_in_the_stream(rig, det, g, forms=(False, True)) -> None:
         assert_array_equal(stream.rejections.reason, g.rejections.reason,
                            err_msg=f"compiled={compiled}")
         assert_array_equal(stream.rejections.frame_time_ns, g.rejections.frame_time_ns)
+        if uv:
+            assert_array_equal(stream.rejections.uv, g.rejections.uv, err_msg=f"{compiled=}")
 
 
 def test_a_still_pixel_its_blind_camera_was_not_following_is_not_kept():
@@ -163,12 +166,7 @@ def test_a_lone_candidate_beside_the_ball_competes_as_fully_still():
     assert np.all(g.chosen[is_ball])
     there = (np.abs(t - 5.9889) < 0.001) & (det.frame_camera[det.cand_frame] == 2)
     assert np.count_nonzero(there) == 2 and np.all(g.chosen[there] == is_ball[there])
-    _same_in_the_stream(rig, det, g)
-    for compiled in (False, True):  # (and the same candidate outscored: its pixel)
-        stream = StreamGate(rig, 0.0, compiled=compiled)
-        push_frames(stream, det)
-        stream.flush()
-        assert_array_equal(stream.rejections.uv, g.rejections.uv, err_msg=f"{compiled=}")
+    _same_in_the_stream(rig, det, g, uv=True)  # (and the same candidate outscored: its pixel)
 
 
 @pytest.mark.parametrize("session", [_fly_by, _along_the_ray, _over_the_object])
