@@ -28,10 +28,12 @@ def test_demo_records_fuses_evaluates_and_saves_a_recording(tmp_path):
     assert 86.5 < type_a.rate_hz <= 90.0 and type_a.mean_mm < 10.0
     assert nearest.mean_mm > 3 * type_a.mean_mm
     assert (out / "demo.rrd").stat().st_size > 1_000_000
-    # a second run into the same folder refuses to overwrite, with one line
-    again = subprocess.run([sys.executable, "-m", "pslog.cli", "demo", "--out", str(out)],
-                           capture_output=True, text=True, timeout=300)
-    assert again.returncode == 1 and "--force" in again.stderr
+    # a second run into the same folder refuses to overwrite, with one line (in this
+    # process, tests/faults/_inprocess.py: the refusal comes before anything runs)
+    from faults._inprocess import run_inprocess
+
+    again = run_inprocess("demo", "--out", out, timeout=300)
+    assert again.code == 1 and "--force" in again.stderr
     assert "Traceback" not in again.stderr
 
 

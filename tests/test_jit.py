@@ -30,10 +30,12 @@ def test_numba_refusing_to_start_is_one_line(tmp_path):
     import subprocess
     import sys
 
-    session = tmp_path / "s.mcap"
+    from faults._inprocess import run_inprocess
+
+    session = tmp_path / "s.mcap"  # (made in this process: not what is tested)
     cli = [sys.executable, "-m", "pslog.cli"]
-    subprocess.run([*cli, "simulate", "--rig", "paper3", "--timing", "typeA", "--duration",
-                    "1", "-o", str(session)], check=True, capture_output=True)
+    assert run_inprocess("simulate", "--rig", "paper3", "--timing", "typeA", "--duration",
+                         "1", "-o", session).code == 0
     run = subprocess.run([*cli, "fuse", str(session), "--method", "typeA", "-o",
                           str(tmp_path / "f.mcap")], capture_output=True, text=True,
                          env=dict(os.environ, NUMBA_NUM_THREADS="0", PSLOG_PROGRESS="off"))

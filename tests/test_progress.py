@@ -60,9 +60,16 @@ def test_step_and_update_do_nothing_outside_a_command(monkeypatch):
 @pytest.mark.parametrize("name,value", [("PSLOG_PROGRESS", "loud"),
                                         ("PSLOG_PROGRESS_INTERVAL", "-1"),
                                         ("PSLOG_PROGRESS_INTERVAL", "often")])
-def test_a_bad_setting_is_one_line(tmp_path, name, value):
-    run = run_pslog("simulate", "--rig", "paper3", "-o", tmp_path / "s.mcap",
-                    env={"PSLOG_PROGRESS": "lines", name: value})
+def test_a_bad_setting_is_one_line(tmp_path, name, value, monkeypatch, request):
+    from tests.faults._inprocess import first_case, run_inprocess
+
+    env = {"PSLOG_PROGRESS": "lines", name: value}
+    if first_case(request):
+        run = run_pslog("simulate", "--rig", "paper3", "-o", tmp_path / "s.mcap", env=env)
+    else:  # in this process (tests/faults/_inprocess.py): the setting is read as it starts
+        for key, text in env.items():
+            monkeypatch.setenv(key, text)
+        run = run_inprocess("simulate", "--rig", "paper3", "-o", tmp_path / "s.mcap")
     assert_one_line_error(run, 1, contains=name)
     assert not (tmp_path / "s.mcap").exists()
 
@@ -70,12 +77,16 @@ def test_a_bad_setting_is_one_line(tmp_path, name, value):
 def test_a_command_prints_lines_to_stderr_and_the_same_stdout(tmp_path):
     """`pslog sync` on a 3 s session: progress lines on stderr naming its steps; stdout (the
     JSON result) identical to a run without progress."""
+    from tests.faults._inprocess import run_inprocess
+
     raw = tmp_path / "raw.mcap"
-    assert run_pslog("simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "rally",
-                     "--duration", "3", "--clock-offset", "cam2=2", "--seed", "3",
-                     "-o", raw).code == 0
-    quiet = run_pslog("sync", raw, "-o", tmp_path / "a.mcap", "--json",
-                      env={"PSLOG_PROGRESS": "off"})
+    # the session and the run without progress in this process; the run with it a real one
+    assert run_inprocess("simulate", "--rig", "paper3", "--timing", "typeA", "--motion",
+                         "rally", "--duration", "3", "--clock-offset", "cam2=2", "--seed", "3",
+                         "-o", raw).code == 0
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("PSLOG_PROGRESS", "off")
+        quiet = run_inprocess("sync", raw, "-o", tmp_path / "a.mcap", "--json")
     loud = run_pslog("sync", raw, "-o", tmp_path / "b.mcap", "--json",
                      env={"PSLOG_PROGRESS": "lines", "PSLOG_PROGRESS_INTERVAL": "0.05"})
     assert quiet.code == loud.code == 0, loud.stderr
@@ -119,9 +130,11 @@ def test_a_terminal_gets_a_bar_that_is_gone_at_the_end(tmp_path):
 
 
 def test_fuse_names_each_method_as_it_runs(tmp_path):
-    raw = tmp_path / "raw.mcap"
-    assert run_pslog("simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "rally",
-                     "--duration", "20", "--seed", "4", "-o", raw).code == 0
+    from tests.faults._inprocess import run_inprocess
+
+    raw = tmp_path / "raw.mcap"  # (made in this process: not what is tested)
+    assert run_inprocess("simulate", "--rig", "paper3", "--timing", "typeA", "--motion",
+                         "rally", "--duration", "20", "--seed", "4", "-o", raw).code == 0
     run = run_pslog("fuse", raw, "-o", tmp_path / "f.mcap", "--method", "smooth,typeA",
                     env={"PSLOG_PROGRESS": "lines", "PSLOG_PROGRESS_INTERVAL": "0.05"})
     assert run.code == 0, run.stderr

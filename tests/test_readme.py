@@ -11,6 +11,7 @@ is listed below and must stay small. Full commands appear only in those blocks: 
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import shutil
@@ -105,6 +106,85 @@ def test_readme_rig_toml_is_a_valid_rig():
         assert rig.names == ("cam1",) and rig.name == "lab"
 
 
+#: a README line that is one ``pslog`` command and no shell syntax (no pipe, redirection,
+#: background job, quoting, glob or expansion)
+_PLAIN = re.compile(r"pslog [^|&;<>()'\"`$*?\\]*")
+
+#: the forking runner of the plain ``pslog`` lines (see :class:`_Forks`)
+_ZYGOTE = r"""
+import importlib, json, os, signal, sys, traceback
+
+from pslog.cli import COMMANDS, main
+
+for module, _ in COMMANDS.values():
+    importlib.import_module("pslog.cli." + module)
+for name in ("numpy", "pslog.log", "pslog.fusion", "pslog.estimation", "numba", "cv2"):
+    importlib.import_module(name)
+script, hang_s = sys.argv[1], int(sys.argv[2])
+print("ready", flush=True)
+for line in sys.stdin:
+    job = json.loads(line)
+    pid = os.fork()
+    if pid == 0:  # the command's own process, as if started from its console script
+        code = 1
+        try:
+            signal.alarm(hang_s)  # a hang ends the process (SIGALRM), and fails the test
+            os.chdir(job["cwd"])
+            for fd, path in ((0, os.devnull), (1, job["out"]), (2, job["err"])):
+                f = os.open(path, os.O_RDONLY if fd == 0 else os.O_WRONLY | os.O_CREAT)
+                os.dup2(f, fd)
+                os.close(f)
+            sys.argv = [script, *job["argv"]]
+            try:
+                code = main(job["argv"])
+            except SystemExit as exc:
+                code = exc.code if isinstance(exc.code, int) else int(exc.code is not None)
+            except BaseException:  # uncaught: printed as the interpreter prints it
+                traceback.print_exc()
+            import atexit, threading
+            threading._shutdown()  # the interpreter's exit: threads joined, atexit run
+            atexit._run_exitfuncs()
+            sys.stdout.flush()
+            sys.stderr.flush()
+        finally:
+            os._exit(code)
+    _, status = os.waitpid(pid, 0)
+    print(os.waitstatus_to_exitcode(status), flush=True)
+"""
+
+
+class _Forks:
+    """Runs the README's plain ``pslog ARGS`` lines as ``pslog.cli.main(ARGS)`` (what the
+    ``pslog`` console script runs) each in its own process, forked from one that imported
+    pslog, numpy, numba and OpenCV once: every command starts in a fresh process, in the
+    examples' folder, with their environment and its own standard streams and exit code,
+    without paying those imports again (~0.3-1 CPU s per command, a third of the test's
+    CPU). The lines with shell syntax run in bash as written, the real ``pslog`` on PATH."""
+
+    def __init__(self, cwd: Path, env: dict, script: Path, hang_s: int) -> None:
+        self.cwd = cwd
+        self.proc = subprocess.Popen([sys.executable, "-c", _ZYGOTE, str(script), str(hang_s)],
+                                     cwd=cwd, env=env, stdin=subprocess.PIPE,
+                                     stdout=subprocess.PIPE, text=True)
+        assert self.proc.stdout.readline() == "ready\n", "the forking runner did not start"
+
+    def run(self, command: str, n: int) -> subprocess.CompletedProcess:
+        out, err = self.cwd.parent / f"readme-{n}.out", self.cwd.parent / f"readme-{n}.err"
+        argv = command.split()[1:]
+        self.proc.stdin.write(json.dumps({"argv": argv, "cwd": str(self.cwd), "out": str(out),
+                                          "err": str(err)}) + "\n")
+        self.proc.stdin.flush()
+        code = int(self.proc.stdout.readline())
+        result = subprocess.CompletedProcess(command, code, out.read_text(), err.read_text())
+        out.unlink()
+        err.unlink()
+        return result
+
+    def close(self) -> None:
+        self.proc.stdin.close()
+        self.proc.wait(60)
+
+
 def _tracked(paths: list[str]) -> set[str]:
     result = subprocess.run(["git", "-C", str(ROOT), "ls-files", "--", *paths],
                             capture_output=True, text=True, check=True)
@@ -114,9 +194,10 @@ def _tracked(paths: list[str]) -> set[str]:
 def test_readme_examples_run_in_order_and_their_outputs_are_git_ignored(tmp_path):
     text = README.read_text(encoding="utf-8")
     runnable, _, _ = split_examples(shell_lines(text))
-    shutil.copytree(ROOT / "samples", tmp_path / "samples",
+    work = tmp_path / "readme"  # the examples' folder (the forks' stdout and stderr beside it)
+    shutil.copytree(ROOT / "samples", work / "samples",
                     ignore=shutil.ignore_patterns("__pycache__"))
-    before = {p for p in tmp_path.rglob("*")}
+    before = {p for p in work.rglob("*")}
     bin_dir = Path(sys.executable).parent
     if not (bin_dir / "pslog").exists():
         pytest.skip(f"pslog is not installed beside {sys.executable}")
@@ -124,12 +205,23 @@ def test_readme_examples_run_in_order_and_their_outputs_are_git_ignored(tmp_path
            "PYTHONWARNINGS": "default"}
     env.pop("DISPLAY", None)
     env.pop("WAYLAND_DISPLAY", None)
-    for command in runnable:
-        result = subprocess.run(["bash", "-o", "pipefail", "-c", command], cwd=tmp_path,
-                                env=env, capture_output=True, text=True, timeout=180)
-        assert result.returncode == 0 and "Traceback" not in result.stderr, (
-            f"README example failed: {command}\nexit {result.returncode}\n"
-            f"stdout: {result.stdout[-2000:]}\nstderr: {result.stderr[-2000:]}")
+    forks = _Forks(work, env, bin_dir / "pslog", 180)
+    try:
+        for n, command in enumerate(runnable):
+            if _PLAIN.fullmatch(command):
+                result = forks.run(command, n)
+            else:
+                result = subprocess.run(["bash", "-o", "pipefail", "-c", command], cwd=work,
+                                        env=env, capture_output=True, text=True, timeout=180)
+            assert result.returncode == 0 and "Traceback" not in result.stderr, (
+                f"README example failed: {command}\nexit {result.returncode}\n"
+                f"stdout: {result.stdout[-2000:]}\nstderr: {result.stderr[-2000:]}")
+    finally:
+        forks.close()
+    # most lines ran forked, the others (pipes, redirections, jobs) in bash with the real
+    # pslog on PATH: both kinds ran
+    plain = sum(bool(_PLAIN.fullmatch(c)) for c in runnable)
+    assert 20 <= plain < len(runnable) - 3, plain
 
     # a fresh clone has what the examples read: the samples they name are in git
     named = sorted({m for c in runnable for m in re.findall(r"samples/[\w./-]+", c)})
@@ -139,7 +231,7 @@ def test_readme_examples_run_in_order_and_their_outputs_are_git_ignored(tmp_path
     assert _tracked(named) == set(named), "commit the sample files the README uses"
 
     # what the examples write in the checkout is ignored by git, and the samples are not
-    outputs = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*")
+    outputs = sorted(str(p.relative_to(work)) for p in work.rglob("*")
                      if p not in before and p.is_file())
     assert len(outputs) >= 15, outputs
     check = subprocess.run(["git", "-C", str(ROOT), "check-ignore", "--no-index", "--",

@@ -7,6 +7,8 @@ from pathlib import Path
 
 import pytest
 
+from ._inprocess import assert_refused as assert_refused_here
+from ._inprocess import first_case
 from .promises import assert_refused
 
 GOOD_ANIPOSE = """\
@@ -84,11 +86,13 @@ def inputs(tmp_path_factory) -> Path:
      ("cams.yml", "camera_matrix")),
     ("cams.yml", "tvec: [", "tvec: {[", ("cams.yml", "malformed OpenCV FileStorage")),
 ])
-def test_malformed_calibration_is_one_line_exit_1_nothing_written(work, name, old, new, why):
+def test_malformed_calibration_is_one_line_exit_1_nothing_written(work, name, old, new, why,
+                                                                  request):
     good = GOOD_ANIPOSE if name.endswith(".toml") else GOOD_OPENCV
     assert old in good
     (work / name).write_text(good.replace(old, new))
-    assert_refused(work, 1, ["rig", "import", name, "-o", "rig.toml"], why)
+    assert_refused_here(work, 1, ["rig", "import", name, "-o", "rig.toml"], why,
+                        real=first_case(request))
 
 
 def test_malformed_calibration_given_as_rig_to_fuse_is_refused(work):
@@ -105,9 +109,9 @@ def test_malformed_calibration_given_as_rig_to_fuse_is_refused(work):
     (["export", "f.mcap", "--tum", "old.jsonl"], ("old.jsonl", "not a folder")),
     (["export", "s.mcap", "--c3d", "t.c3d"], ("s.mcap", "no fused tracks")),
 ])
-def test_exports_never_overwrite_or_write_what_they_cannot(work, args, why):
+def test_exports_never_overwrite_or_write_what_they_cannot(work, args, why, request):
     (work / "cal.toml").write_text(GOOD_ANIPOSE)
-    assert_refused(work, 1, args, why)
+    assert_refused_here(work, 1, args, why, real=first_case(request))
 
 
 def test_parquet_without_pyarrow_is_one_line(work):

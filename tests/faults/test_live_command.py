@@ -17,6 +17,7 @@ import pytest
 # the live-run helpers of the command's own tests (tests/ is on the path, as for _rally)
 from test_live_command import LiveRun, camera_pids, gone
 
+from ._inprocess import first_case, run_inprocess
 from .promises import assert_one_line_error, assert_untouched, fingerprint, run_pslog
 
 
@@ -41,9 +42,11 @@ def _listen() -> str:
     (("--hold", "11"), ("--hold", "at most 10")),
     (("--hold", "-0.1"), ("--hold",)),
 ])
-def test_malformed_command_lines_are_usage_errors(tmp_path, args, contains):
+def test_malformed_command_lines_are_usage_errors(tmp_path, args, contains, request):
     before = fingerprint(tmp_path)
-    run = run_pslog("live", "--rig", "paper3", "--listen", _listen(), *args, cwd=tmp_path)
+    # the first case as a real process, the others in this one (tests/faults/_inprocess.py)
+    run = (run_pslog if first_case(request) else run_inprocess)(
+        "live", "--rig", "paper3", "--listen", _listen(), *args, cwd=tmp_path)
     assert_one_line_error(run, 2, contains=contains)
     assert_untouched(before, tmp_path)
 
@@ -64,8 +67,10 @@ def test_faults_before_the_start_are_one_line_and_write_nothing(tmp_path):
         (("--rig", "paper3", "--source", "cam1=missing.mp4"), "missing.mp4"),
         (("--rig", "paper3", "--synthetic", "--record", "old.mcap"), "old.mcap"),
     ]
-    for args, contains in cases:
-        run = run_pslog("live", *args, "--listen", _listen(), cwd=tmp_path)
+    for i, (args, contains) in enumerate(cases):
+        # the first case as a real process, the others in this one (tests/faults/_inprocess.py)
+        run = (run_inprocess if i else run_pslog)("live", *args, "--listen", _listen(),
+                                                  cwd=tmp_path)
         assert_one_line_error(run, 1, contains=contains)
     assert_untouched(before, tmp_path)
 
@@ -75,8 +80,10 @@ def test_a_busy_listen_port_is_one_line_naming_the_address(tmp_path):
         busy.bind(("127.0.0.1", 0))
         port = busy.getsockname()[1]
         before = fingerprint(tmp_path)
-        run = run_pslog("live", "--rig", "paper3", "--synthetic", "--record", "s.mcap",
-                        "--listen", f"udp://127.0.0.1:{port}", cwd=tmp_path)
+        # in this process: it fails before any output or camera starts (the real-process
+        # cases of this family: test_faults_before_the_start..., --view below)
+        run = run_inprocess("live", "--rig", "paper3", "--synthetic", "--record", "s.mcap",
+                            "--listen", f"udp://127.0.0.1:{port}", cwd=tmp_path)
     assert_one_line_error(run, 1, contains=f"127.0.0.1:{port}")
     assert_untouched(before, tmp_path)
 
@@ -154,9 +161,10 @@ def test_an_output_that_cannot_start_closes_the_others_and_leaves_nothing(tmp_pa
         busy.bind(("127.0.0.1", 0))
         busy.listen()
         port = busy.getsockname()[1]
-        run = run_pslog("live", "--rig", "paper3", "--synthetic", "--record", "s.mcap",
-                        "--foxglove", "--foxglove-port", port, "--listen", _listen(),
-                        cwd=tmp_path)
+        # in this process (the --view case below is the real process)
+        run = run_inprocess("live", "--rig", "paper3", "--synthetic", "--record", "s.mcap",
+                            "--foxglove", "--foxglove-port", port, "--listen", _listen(),
+                            cwd=tmp_path)
     assert_one_line_error(run, 1, contains=str(port))
     assert_untouched(before, tmp_path)
     run = run_pslog("live", "--rig", "paper3", "--synthetic", "--record", "s.mcap", "--view",
@@ -169,9 +177,11 @@ def test_an_output_that_cannot_start_closes_the_others_and_leaves_nothing(tmp_pa
 def test_a_run_that_records_nothing_leaves_no_session_and_keeps_an_old_one(tmp_path):
     (tmp_path / "old.mcap").write_bytes(b"an old session")
     before = fingerprint(tmp_path)
-    for args in (("--record", "new.mcap"), ("--record", "old.mcap", "--force")):
-        run = run_pslog("live", "--rig", "paper3", "--listen", _listen(), "--duration", "0.5",
-                        *args, cwd=tmp_path)
+    for i, args in enumerate((("--record", "new.mcap"), ("--record", "old.mcap", "--force"))):
+        # the first as a real process, the second in this one (tests/faults/_inprocess.py)
+        run = (run_inprocess if i else run_pslog)(
+            "live", "--rig", "paper3", "--listen", _listen(), "--duration", "0.5", *args,
+            cwd=tmp_path)
         assert run.code == 0 and "Traceback" not in run.stderr, run.stderr
         assert f"nothing was recorded to {args[1]}" in run.stderr
         assert_untouched(before, tmp_path)

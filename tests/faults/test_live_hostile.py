@@ -16,6 +16,7 @@ from pslog.live.fuser import LiveFuser
 from pslog.live.protocol import _DET_HEADER, DetectionDatagram, encode_detections
 from tests._live import EPOCH, datagrams, frames, rally_session
 
+from ._inprocess import first_case, run_inprocess
 from .promises import HANG_S, assert_one_line_error, assert_untouched, fingerprint, run_pslog
 
 
@@ -81,9 +82,10 @@ def test_a_capture_time_in_the_far_future_does_not_make_every_later_frame_late(s
     (("--duration", "1e300", "--source", "cam1=missing.mp4"), ("--duration", "at most")),
     (("--status-every", "1e300"), ("--status-every", "at most")),
 ])
-def test_absurdly_long_times_are_usage_errors(tmp_path, args, contains):
-    run = run_pslog("live", "--rig", "paper3", "--listen", "udp://127.0.0.1:0", *args,
-                    cwd=tmp_path)
+def test_absurdly_long_times_are_usage_errors(tmp_path, args, contains, request):
+    # the first case as a real process, the others in this one (tests/faults/_inprocess.py)
+    run = (run_pslog if first_case(request) else run_inprocess)(
+        "live", "--rig", "paper3", "--listen", "udp://127.0.0.1:0", *args, cwd=tmp_path)
     assert_one_line_error(run, 2, contains=contains)
     assert list(tmp_path.iterdir()) == []
 

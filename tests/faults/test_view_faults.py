@@ -16,6 +16,7 @@ from pathlib import Path
 
 import pytest
 
+from ._inprocess import first_case, run_inprocess
 from ._mounts import CAP_NET_BIND_SERVICE, drop_capability, read_only, small_tmpfs
 from .promises import assert_one_line_error, assert_untouched, fingerprint, run_pslog
 
@@ -31,7 +32,7 @@ def session(tmp_path) -> Path:
 
 
 @pytest.mark.parametrize("spelling", ["same", "dot", "symlink", "hardlink"])
-def test_save_onto_the_session_is_refused(tmp_path, session, spelling):
+def test_save_onto_the_session_is_refused(tmp_path, session, spelling, request):
     """``view s.mcap --save s.mcap --force`` once replaced the session with a .rrd."""
     target = {"same": session, "dot": tmp_path / "." / "s.mcap",
               "symlink": tmp_path / "link.mcap", "hardlink": tmp_path / "hard.mcap"}[spelling]
@@ -40,7 +41,9 @@ def test_save_onto_the_session_is_refused(tmp_path, session, spelling):
     elif spelling == "hardlink":
         os.link(session, target)
     before = fingerprint(tmp_path)
-    run = run_pslog("view", session, "--save", target, "--force", "--frames", "none")
+    # the first spelling as a real process, the others in this one (tests/faults/_inprocess.py)
+    run = (run_pslog if first_case(request) else run_inprocess)(
+        "view", session, "--save", target, "--force", "--frames", "none")
     assert_one_line_error(run, 1, contains=("is the input", "never replaces an input"))
     assert_untouched(before, tmp_path)
 

@@ -1,0 +1,103 @@
+"""``pslog ARGS`` run in the test's own process, seen as :func:`promises.run_pslog` sees a
+real process: the same :class:`promises.Run` (exit code, stdout, stderr), so the same promises
+are asserted on it.
+
+For the many cases whose process boundary is not what they test (a refused value, a refused
+file: the check runs before anything is written), a real process only adds its start-up
+(~0.4 CPU s each). What a real process would show is reproduced: argparse's exit 2
+(``SystemExit``), an uncaught exception as its traceback on stderr and exit 1, and Python
+warnings under the interpreter's default filters (``PYTHONWARNINGS`` unset, as
+:func:`promises.run_pslog` runs), printed to stderr as the interpreter prints them. A hang
+(an input read for ever) fails the test after ``timeout`` seconds (SIGALRM). Each family of
+cases keeps at least one case run as a real process (what only a process shows: start-up,
+output flushed at exit, warnings at shutdown).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import os
+import signal
+import sys
+import traceback
+import warnings
+from pathlib import Path
+
+from .promises import HANG_S, Run
+
+
+class _Hang(BaseException):
+    """Raised by the alarm: not an ``Exception``, so no handler of pslog's turns it into a
+    one-line error."""
+
+
+def _default_filters() -> None:
+    """The interpreter's default warning filters (``python -W`` unset, not a debug build)."""
+    warnings.resetwarnings()
+    warnings.filterwarnings("default", category=DeprecationWarning, module="__main__")
+    for category in (DeprecationWarning, PendingDeprecationWarning, ImportWarning,
+                     ResourceWarning):
+        warnings.filterwarnings("ignore", category=category)
+
+
+def run_inprocess(*args, cwd=None, timeout: float = HANG_S) -> Run:
+    """``pslog ARGS`` through :func:`pslog.cli.main` in this process (in ``cwd``)."""
+    from pslog.cli import main
+
+    argv = [str(a) for a in args]
+    out, err = io.StringIO(), io.StringIO()
+    here = os.getcwd()
+
+    def hang(_signum, _frame):
+        raise _Hang
+
+    previous = signal.signal(signal.SIGALRM, hang)
+    signal.setitimer(signal.ITIMER_REAL, timeout)
+    try:
+        with warnings.catch_warnings(record=True) as caught, \
+                contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            _default_filters()
+            if cwd is not None:
+                os.chdir(Path(cwd))
+            try:
+                code = main(argv)
+            except SystemExit as exc:  # argparse: --help, a usage error
+                code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+                if exc.code is not None and not isinstance(exc.code, int):
+                    print(exc.code, file=sys.stderr)
+            except _Hang:
+                raise
+            except Exception:  # uncaught: the interpreter prints it and exits 1
+                traceback.print_exc()
+                code = 1
+            for w in caught:
+                print(warnings.formatwarning(w.message, w.category, w.filename, w.lineno,
+                                             w.line), file=sys.stderr, end="")
+    except _Hang:
+        raise AssertionError(f"pslog {' '.join(argv)} hung for more than {timeout} s") from None
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+        os.chdir(here)
+    return Run(tuple(argv), int(code), out.getvalue(), err.getvalue())
+
+
+def assert_refused(folder: Path, code: int, args, contains: str | tuple[str, ...] = (), *,
+                   real: bool = False) -> str:
+    """:func:`promises.assert_refused` run in-process, or as a real process with ``real``
+    (a family's one real-process case)."""
+    from .promises import assert_one_line_error, assert_untouched, fingerprint, run_pslog
+
+    before = fingerprint(folder)
+    run = (run_pslog if real else run_inprocess)(*args, cwd=folder)
+    line = assert_one_line_error(run, code, contains=contains)
+    assert_untouched(before, folder)
+    return line
+
+
+def first_case(request) -> bool:
+    """Whether the test is the first case of its parametrized family: the one that runs as a
+    real process (the others run in this process: the same promises, without ~0.4 CPU s of
+    start-up each)."""
+    return all(i == 0 for i in request.node.callspec.indices.values())
