@@ -268,24 +268,22 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
     ``base``, whose uniform knots are ``centre + k·h`` (module docstring).
 
     The per-trial terms are compiled passes (:mod:`pslog.estimation._kernels`:
-    ``trial_splines``, ``gains_data``, ``trial_gather``, ``trial_blocks``, ``trial_schur``:
-    the operations of :func:`_new_splines`, :func:`_horner` and the numpy forms, in order),
-    and so are the prior's small products (``trial_prior_terms``: k = 6 or 12, 3 columns,
-    summed as OpenBLAS's kernels sum them, k in order with fused multiply-adds — the same
-    bits, tests/test_smooth_passes.py); the Schur product ``H_yxᵀ Σ H_xy`` (k = 18: the
-    kernel for the ninth row sums in an order of its own, not reproduced) and the 9 x 9
-    solves stay numpy's (BLAS and LAPACK: their sums' order is the library's). Those cannot
-    be recompiled without changing the gains' bits, and the gains amplify such changes:
-    ``S`` is a difference of nearly equal terms (the base explains most of what the break
-    would), so the products summed in another order (and the solve by another elimination)
-    moved the gains of a 10-minute session by up to 1.2e-9 relative (measured: a compiled
-    trial, 20 % faster)."""
+    ``trial_splines``, ``gains_data``, ``trial_gather`` — the operations of
+    :func:`_new_splines`, :func:`_horner` and the numpy forms, in order — and the prior's
+    small products, ``trial_prior_terms``: k = 6 or 12, 3 columns, summed as OpenBLAS's
+    kernels sum them, k in order with fused multiply-adds, tests/test_smooth_passes.py);
+    the Schur complement ``S = H_yy - H_yxᵀ Σ H_xy`` and ``gᵀ S⁻¹ g`` are one compiled pass
+    per trial (``trial_gains``: the products summed in loop order and Gaussian elimination
+    with partial pivoting, where numpy's batched BLAS products and LAPACK solves took 2.4x
+    the time). Their sums' order is not BLAS's and LAPACK's, and the gains amplify such
+    changes (``S`` is a difference of nearly equal terms: the base explains most of what
+    the break would): they moved by ~1e-9 relative, the breaks' instants and the points by
+    far less than their noise (session 18, docs/methods.md)."""
     from ._kernels import (
         gains_data,
-        trial_blocks,
+        trial_gains,
         trial_gather,
         trial_prior_terms,
-        trial_schur,
         trial_splines,
     )
 
@@ -321,19 +319,15 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
     prior_terms = trial_prior_terms if prior_terms_compiled() else prior_terms_numpy
     _, pyy, pxy = prior_terms(Nd6, x0, np.ascontiguousarray(fw), np.ascontiguousarray(fn),
                               np.asarray(prior.gravity, dtype=np.float64), g)
-    # ⊗ I₃ into the data terms, and the 18 x 18 diagonal block of each window's inverse
+    # ⊗ I₃ into the data terms, S = Hyy - H_yxᵀ Σ H_xy on the 18 x 18 diagonal block of each
+    # window's inverse, symmetric, its diagonal loaded by 1e-12 of its largest entry, and
+    # gᵀ S⁻¹ g: one compiled pass per trial (trial_gains)
     col0 = base.col0
     k = 3 * q0 - col0
     if np.any((k < 0) | (k > base.cov.shape[2] - 18)):
         raise AssertionError("trial instant outside the spans its base was solved for")
-    cov = trial_blocks(Hyy, Hxy, pyy, pxy, base.cov, np.ascontiguousarray(which, np.int64),
-                       3 * q0, k)
-    # S = Hyy - H_yxᵀ Σ H_xy (the products BLAS's), symmetric, its diagonal loaded
-    # by 1e-12 of its largest entry: the elementwise steps one compiled pass (trial_schur)
-    S = trial_schur(Hyy, np.swapaxes(Hxy, 1, 2) @ cov @ Hxy)
-    g = g.reshape(len(tau), 9)
-    gain = np.einsum("bk,bk->b", g, np.linalg.solve(S, g[..., None])[..., 0])
-    return gain
+    return trial_gains(Hyy, Hxy, pyy, pxy, base.cov, np.ascontiguousarray(which, np.int64),
+                       3 * q0, k, g.reshape(len(tau), 9))
 
 
 def prior_terms_numpy(Nd6: np.ndarray, x0: np.ndarray, fw: np.ndarray, fn: np.ndarray,
@@ -380,8 +374,8 @@ def _prior_terms_probe(kernel) -> bool:
 
 
 def scan(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray, centers: np.ndarray,
-         bounds: np.ndarray, limits: np.ndarray, spacing: float, half_width: float, prior
-         ) -> tuple[np.ndarray, np.ndarray]:
+         bounds: np.ndarray, limits: np.ndarray, spacing: float, half_width: float, prior,
+         polish: int = _POLISH) -> tuple[np.ndarray, np.ndarray]:
     """Best break instant in ``bounds`` and its cost gain, for every candidate at once.
 
     Parameters
@@ -391,13 +385,15 @@ def scan(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray, centers: np
         ``limits`` (C, 2) (neighbouring breaks, whose other side is not modelled here, and the
         piece's ends)
     bounds : (C, 2) s, the interval searched for ``τ``
+    polish : stages of three trials around the parabola vertices after the grid (0: the grid
+        and one trial at its vertex; a search whose instants a refinement searches again)
 
     Returns
     -------
     tau : (C,) s; gain : (C,) cost without the break minus cost with it (σ² units)
     """
     tau, gain, _ = _scan(t, J, z, w, centers, bounds, limits, spacing, half_width, prior,
-                         False)
+                         False, polish)
     return tau, gain
 
 
@@ -419,13 +415,13 @@ def scan_near(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray,
               > spacing / 4 * (1 + 1e-9) + 4 * np.spacing(np.abs(centers))[:, None]):
         raise ValueError("scan_near: bounds further than h/4 from their centres")
     tau, _, edge = _scan(t, J, z, w, centers, bounds, limits, spacing, half_width, prior,
-                         True)
+                         True, _POLISH)
     return tau, edge
 
 
 def _scan(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray, centers: np.ndarray,
           bounds: np.ndarray, limits: np.ndarray, spacing: float, half_width: float, prior,
-          near: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+          near: bool, polish: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`scan` (``near`` False) and :func:`scan_near` (True): tau, gain, edge."""
     C = len(centers)
     if C == 0:
@@ -451,7 +447,8 @@ def _scan(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray, centers: n
         """The scan of candidates c0..c1-1 (each candidate's result depends on its own
         window only)."""
         return _scan_block(t, J, z, w, centers[c0:c1], bounds[c0:c1], i0[c0:c1],
-                           i1[c0:c1], Wmax, local, spacing, spans, prior, terms, near)
+                           i1[c0:c1], Wmax, local, spacing, spans, prior, terms, near,
+                           polish)
 
     jobs = [(c0, min(c0 + _BLOCK, C)) for c0 in range(0, C, _BLOCK)]
     threads = min(smooth_threads(), len(jobs))
@@ -483,13 +480,13 @@ def vertex(gm: np.ndarray, g0: np.ndarray, gp: np.ndarray) -> np.ndarray:
 def _scan_block(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray,
                 centers: np.ndarray, bounds: np.ndarray, i0: np.ndarray, i1: np.ndarray,
                 Wmax: int, local: _Local, spacing: float, spans: tuple[int, int], prior,
-                terms=None, near: bool = False
+                terms=None, near: bool = False, polish: int = _POLISH
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`_scan` of a block of candidates (C,), their windows ``t[i0:i1]`` padded to
     ``Wmax`` detections, on the scan's knot pattern ``local`` and ``spans``.
 
     The search: a grid of ``_GRID`` trial instants over ``bounds`` (``_NEAR_GRID`` with
-    ``near``), then ``_POLISH`` stages of three trials ``v - d, v, v + d`` each, ``v`` the
+    ``near``), then ``polish`` stages of three trials ``v - d, v, v + d`` each, ``v`` the
     previous stage's parabola vertex and ``d`` a quarter of the previous step, then one
     trial at the last vertex; the best trial of all wins."""
     C = len(centers)
@@ -540,7 +537,7 @@ def _scan_block(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray,
     km, kp = np.maximum(k - 1, 0), np.minimum(k + 1, P - 1)
     shift = np.where(edge == 0, vertex(gain[rows, km], best, gain[rows, kp]), 0.0)
     v = best_tau + shift * step
-    for _ in range(_POLISH):
+    for _ in range(polish):
         step = step / 4
         # three trials around v, inside the bounds
         v = np.clip(v, np.minimum(a + step, (a + b) / 2), np.maximum(b - step, (a + b) / 2))
