@@ -374,8 +374,8 @@ def _prior_terms_probe(kernel) -> bool:
 
 
 def scan(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray, centers: np.ndarray,
-         bounds: np.ndarray, limits: np.ndarray, spacing: float, half_width: float, prior,
-         polish: int = _POLISH) -> tuple[np.ndarray, np.ndarray]:
+         bounds: np.ndarray, limits: np.ndarray, spacing: float, half_width: float, prior
+         ) -> tuple[np.ndarray, np.ndarray]:
     """Best break instant in ``bounds`` and its cost gain, for every candidate at once.
 
     Parameters
@@ -385,15 +385,13 @@ def scan(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray, centers: np
         ``limits`` (C, 2) (neighbouring breaks, whose other side is not modelled here, and the
         piece's ends)
     bounds : (C, 2) s, the interval searched for ``τ``
-    polish : stages of three trials around the parabola vertices after the grid (0: the grid
-        and one trial at its vertex; a search whose instants a refinement searches again)
 
     Returns
     -------
     tau : (C,) s; gain : (C,) cost without the break minus cost with it (σ² units)
     """
     tau, gain, _ = _scan(t, J, z, w, centers, bounds, limits, spacing, half_width, prior,
-                         False, polish)
+                         False)
     return tau, gain
 
 
@@ -415,13 +413,13 @@ def scan_near(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray,
               > spacing / 4 * (1 + 1e-9) + 4 * np.spacing(np.abs(centers))[:, None]):
         raise ValueError("scan_near: bounds further than h/4 from their centres")
     tau, _, edge = _scan(t, J, z, w, centers, bounds, limits, spacing, half_width, prior,
-                         True, _POLISH)
+                         True)
     return tau, edge
 
 
 def _scan(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray, centers: np.ndarray,
           bounds: np.ndarray, limits: np.ndarray, spacing: float, half_width: float, prior,
-          near: bool, polish: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+          near: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`scan` (``near`` False) and :func:`scan_near` (True): tau, gain, edge."""
     C = len(centers)
     if C == 0:
@@ -447,8 +445,7 @@ def _scan(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray, centers: n
         """The scan of candidates c0..c1-1 (each candidate's result depends on its own
         window only)."""
         return _scan_block(t, J, z, w, centers[c0:c1], bounds[c0:c1], i0[c0:c1],
-                           i1[c0:c1], Wmax, local, spacing, spans, prior, terms, near,
-                           polish)
+                           i1[c0:c1], Wmax, local, spacing, spans, prior, terms, near)
 
     jobs = [(c0, min(c0 + _BLOCK, C)) for c0 in range(0, C, _BLOCK)]
     threads = min(smooth_threads(), len(jobs))
@@ -480,13 +477,13 @@ def vertex(gm: np.ndarray, g0: np.ndarray, gp: np.ndarray) -> np.ndarray:
 def _scan_block(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray,
                 centers: np.ndarray, bounds: np.ndarray, i0: np.ndarray, i1: np.ndarray,
                 Wmax: int, local: _Local, spacing: float, spans: tuple[int, int], prior,
-                terms=None, near: bool = False, polish: int = _POLISH
+                terms=None, near: bool = False
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`_scan` of a block of candidates (C,), their windows ``t[i0:i1]`` padded to
     ``Wmax`` detections, on the scan's knot pattern ``local`` and ``spans``.
 
     The search: a grid of ``_GRID`` trial instants over ``bounds`` (``_NEAR_GRID`` with
-    ``near``), then ``polish`` stages of three trials ``v - d, v, v + d`` each, ``v`` the
+    ``near``), then ``_POLISH`` stages of three trials ``v - d, v, v + d`` each, ``v`` the
     previous stage's parabola vertex and ``d`` a quarter of the previous step, then one
     trial at the last vertex; the best trial of all wins."""
     C = len(centers)
@@ -537,7 +534,7 @@ def _scan_block(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray,
     km, kp = np.maximum(k - 1, 0), np.minimum(k + 1, P - 1)
     shift = np.where(edge == 0, vertex(gain[rows, km], best, gain[rows, kp]), 0.0)
     v = best_tau + shift * step
-    for _ in range(polish):
+    for _ in range(_POLISH):
         step = step / 4
         # three trials around v, inside the bounds
         v = np.clip(v, np.minimum(a + step, (a + b) / 2), np.maximum(b - step, (a + b) / 2))

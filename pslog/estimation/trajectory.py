@@ -1131,8 +1131,7 @@ def _find_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
             continue
         jobs.append((p, here, centers, np.stack([a, b], axis=1),
                      _neighbours(centers, known[p])))
-    # the grid and its vertex only: the refinement searches each break's instant again
-    results = _scan_pieces(jobs, t_obs, J, target, weight, spacing, options, polish=0)
+    results = _scan_pieces(jobs, t_obs, J, target, weight, spacing, options)
     out = [np.zeros(0) for _ in problem.knots]
     for (p, *_), (tau, gain) in zip(jobs, results, strict=True):
         # greedily by gain: a break more than a knot spacing from every known one and 1.5
@@ -1152,7 +1151,7 @@ def _find_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
 
 def _scan_pieces(jobs: list, t_obs: np.ndarray, J: np.ndarray, target: np.ndarray,
                  weight: np.ndarray, spacing: float, options: SmoothOptions,
-                 near: bool = False, polish: int = _breaks._POLISH) -> list:
+                 near: bool = False) -> list:
     """:func:`_breaks.scan` (``near``: :func:`_breaks.scan_near`) of every piece's
     candidates in one batched call.
 
@@ -1166,20 +1165,17 @@ def _scan_pieces(jobs: list, t_obs: np.ndarray, J: np.ndarray, target: np.ndarra
     rows = np.concatenate([here for _, here, *_ in jobs])
     t = t_obs[rows]
     if np.any(np.diff(t) < 0):  # moved times made pieces overlap: one piece at a time
-        return [_scan_pieces([job], t_obs, J, target, weight, spacing, options, near,
-                             polish)[0]
+        return [_scan_pieces([job], t_obs, J, target, weight, spacing, options, near)[0]
                 for job in jobs] if len(jobs) > 1 else [search(
                     t, J[rows], target[rows], weight[rows], jobs[0][2], jobs[0][3],
-                    jobs[0][4], spacing, _WINDOW_SPANS * spacing, options.prior,
-                    **({} if near else {"polish": polish}))]
+                    jobs[0][4], spacing, _WINDOW_SPANS * spacing, options.prior)]
     limits = np.concatenate([np.stack([np.maximum(lim[:, 0], t_obs[here[0]]),
                                        np.minimum(lim[:, 1], t_obs[here[-1]])], axis=1)
                              for _, here, _, _, lim in jobs])
     tau, gain = search(t, J[rows], target[rows], weight[rows],
                        np.concatenate([c for _, _, c, _, _ in jobs]),
                        np.concatenate([b for _, _, _, b, _ in jobs]), limits, spacing,
-                       _WINDOW_SPANS * spacing, options.prior,
-                       **({} if near else {"polish": polish}))
+                       _WINDOW_SPANS * spacing, options.prior)
     cuts = np.cumsum([len(c) for _, _, c, _, _ in jobs])[:-1]
     return list(zip(np.split(tau, cuts), np.split(gain, cuts), strict=True))
 
