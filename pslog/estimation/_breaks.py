@@ -268,24 +268,22 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
     ``base``, whose uniform knots are ``centre + k·h`` (module docstring).
 
     The per-trial terms are compiled passes (:mod:`pslog.estimation._kernels`:
-    ``trial_splines``, ``gains_data``, ``trial_gather``, ``trial_blocks``, ``trial_schur``:
-    the operations of :func:`_new_splines`, :func:`_horner` and the numpy forms, in order),
-    and so are the prior's small products (``trial_prior_terms``: k = 6 or 12, 3 columns,
-    summed as OpenBLAS's kernels sum them, k in order with fused multiply-adds — the same
-    bits, tests/test_smooth_passes.py); the Schur product ``H_yxᵀ Σ H_xy`` (k = 18: the
-    kernel for the ninth row sums in an order of its own, not reproduced) and the 9 x 9
-    solves stay numpy's (BLAS and LAPACK: their sums' order is the library's). Those cannot
-    be recompiled without changing the gains' bits, and the gains amplify such changes:
-    ``S`` is a difference of nearly equal terms (the base explains most of what the break
-    would), so the products summed in another order (and the solve by another elimination)
-    moved the gains of a 10-minute session by up to 1.2e-9 relative (measured: a compiled
-    trial, 20 % faster)."""
+    ``trial_splines``, ``gains_data``, ``trial_gather`` — the operations of
+    :func:`_new_splines`, :func:`_horner` and the numpy forms, in order — and the prior's
+    small products, ``trial_prior_terms``: k = 6 or 12, 3 columns, summed as OpenBLAS's
+    kernels sum them, k in order with fused multiply-adds, tests/test_smooth_passes.py);
+    the Schur complement ``S = H_yy - H_yxᵀ Σ H_xy`` and ``gᵀ S⁻¹ g`` are one compiled pass
+    per trial (``trial_gains``: the products summed in loop order and Gaussian elimination
+    with partial pivoting, where numpy's batched BLAS products and LAPACK solves took 2.4x
+    the time). Their sums' order is not BLAS's and LAPACK's, and the gains amplify such
+    changes (``S`` is a difference of nearly equal terms: the base explains most of what
+    the break would): they moved by ~1e-9 relative, the breaks' instants and the points by
+    far less than their noise (session 18, docs/methods.md)."""
     from ._kernels import (
         gains_data,
-        trial_blocks,
+        trial_gains,
         trial_gather,
         trial_prior_terms,
-        trial_schur,
         trial_splines,
     )
 
@@ -321,19 +319,15 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
     prior_terms = trial_prior_terms if prior_terms_compiled() else prior_terms_numpy
     _, pyy, pxy = prior_terms(Nd6, x0, np.ascontiguousarray(fw), np.ascontiguousarray(fn),
                               np.asarray(prior.gravity, dtype=np.float64), g)
-    # ⊗ I₃ into the data terms, and the 18 x 18 diagonal block of each window's inverse
+    # ⊗ I₃ into the data terms, S = Hyy - H_yxᵀ Σ H_xy on the 18 x 18 diagonal block of each
+    # window's inverse, symmetric, its diagonal loaded by 1e-12 of its largest entry, and
+    # gᵀ S⁻¹ g: one compiled pass per trial (trial_gains)
     col0 = base.col0
     k = 3 * q0 - col0
     if np.any((k < 0) | (k > base.cov.shape[2] - 18)):
         raise AssertionError("trial instant outside the spans its base was solved for")
-    cov = trial_blocks(Hyy, Hxy, pyy, pxy, base.cov, np.ascontiguousarray(which, np.int64),
-                       3 * q0, k)
-    # S = Hyy - H_yxᵀ Σ H_xy (the products BLAS's), symmetric, its diagonal loaded
-    # by 1e-12 of its largest entry: the elementwise steps one compiled pass (trial_schur)
-    S = trial_schur(Hyy, np.swapaxes(Hxy, 1, 2) @ cov @ Hxy)
-    g = g.reshape(len(tau), 9)
-    gain = np.einsum("bk,bk->b", g, np.linalg.solve(S, g[..., None])[..., 0])
-    return gain
+    return trial_gains(Hyy, Hxy, pyy, pxy, base.cov, np.ascontiguousarray(which, np.int64),
+                       3 * q0, k, g.reshape(len(tau), 9))
 
 
 def prior_terms_numpy(Nd6: np.ndarray, x0: np.ndarray, fw: np.ndarray, fn: np.ndarray,
