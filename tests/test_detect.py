@@ -149,10 +149,16 @@ def test_bgr_screen_box_holds_every_colour_of_the_range(hsv):
     assert_array_equal(values.max(axis=0), hi)
 
 
-@functools.cache
 def _busy_frames() -> tuple[np.ndarray, ...]:
     """Rendered frames with balls, specks and patches of random colours near the ball's
-    (rendered once per process for the tests that detect in them: read-only)."""
+    (rendered once per process for the tests that detect in them; each test gets writable
+    copies: a read-only frame would make numba compile the screen for read-only arrays, a
+    signature production never uses and warm does not compile)."""
+    return tuple(f.copy() for f in _busy_frames_rendered())
+
+
+@functools.cache
+def _busy_frames_rendered() -> tuple[np.ndarray, ...]:
     cam = Camera("wide", 1280, 720, np.array([[800.0, 0, 639.5], [0, 800.0, 359.5], [0, 0, 1]]),
                  np.zeros(5), *look_at((1.5, -1.5, 2.5), (1.5, 1.0, 0.0)))
     renderer = CameraRenderer(cam, RenderOptions(exposure_s=0.004, noise_sigma=2.0), 0)
@@ -165,7 +171,6 @@ def _busy_frames() -> tuple[np.ndarray, ...]:
         frame[200:260 + 40 * k, 700:790] = patch
         cv2.circle(frame, (100 + 200 * k, 600), 2 + 2 * k, ORANGE_BGR, -1)
         frame[30 + k, 30:34] = ORANGE_BGR  # a speck
-        frame.setflags(write=False)
         frames.append(frame)
     return tuple(frames)
 
@@ -194,19 +199,20 @@ def test_hsv_range_holding_no_colour_finds_nothing():
     assert len(BallDetector(empty).detect(frame)) == 0
 
 
-@functools.cache
 def _odd_frames() -> tuple[np.ndarray, ...]:
     """Busy frames, cropped to odd sizes, as non-contiguous views and after a JPEG round trip
-    (the frames `pslog redetect` sees); made once per process for the 24 tests that detect
-    in them: read-only."""
+    (the frames `pslog redetect` sees); the JPEG round trips made once per process for the
+    24 tests that detect in them, every frame a writable copy (or a view of one) per test."""
     frames = _busy_frames()
-    jpeg = [cv2.imdecode(cv2.imencode(".jpg", f, [cv2.IMWRITE_JPEG_QUALITY, 90])[1],
-                         cv2.IMREAD_COLOR) for f in frames[:2]]
-    flat = _flat((7, 9))
-    for frame in (*jpeg, flat):
-        frame.setflags(write=False)
+    jpeg = [f.copy() for f in _jpeg_frames()]
     return (*frames, *jpeg, frames[0][:717, :1279], frames[1][3:, 5:], frames[2][:, ::-1],
-            frames[3][::-1][:101, :203], flat)
+            frames[3][::-1][:101, :203], _flat((7, 9)))
+
+
+@functools.cache
+def _jpeg_frames() -> tuple[np.ndarray, ...]:
+    return tuple(cv2.imdecode(cv2.imencode(".jpg", f, [cv2.IMWRITE_JPEG_QUALITY, 90])[1],
+                              cv2.IMREAD_COLOR) for f in _busy_frames_rendered()[:2])
 
 
 @pytest.mark.parametrize("downscale", [1, 2, 3, 4])

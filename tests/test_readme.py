@@ -114,11 +114,12 @@ _PLAIN = re.compile(r"pslog [^|&;<>()'\"`$*?\\]*")
 _ZYGOTE = r"""
 import importlib, json, os, signal, sys, traceback
 
-from pslog.cli import COMMANDS, main
+from pslog.cli import main  # what the console script imports first
 
-for module, _ in COMMANDS.values():
-    importlib.import_module("pslog.cli." + module)
-for name in ("numpy", "pslog.log", "pslog.fusion", "pslog.estimation", "numba", "cv2"):
+# the third-party libraries only (most of the imports' cost): pslog's own modules are
+# imported by each command as a real process imports them (a command that worked only
+# because another module of pslog had been imported would pass here, and fail for users)
+for name in ("numpy", "numba", "cv2"):
     importlib.import_module(name)
 script, hang_s = sys.argv[1], int(sys.argv[2])
 print("ready", flush=True)
@@ -156,14 +157,16 @@ for line in sys.stdin:
 class _Forks:
     """Runs the README's plain ``pslog ARGS`` lines as ``pslog.cli.main(ARGS)`` (what the
     ``pslog`` console script runs) each in its own process, forked from one that imported
-    pslog, numpy, numba and OpenCV once: every command starts in a fresh process, in the
+    numpy, numba, OpenCV and ``pslog.cli`` once: every command starts in a fresh process, in the
     examples' folder, with their environment and its own standard streams and exit code,
     without paying those imports again (~0.3-1 CPU s per command, a third of the test's
     CPU). The lines with shell syntax run in bash as written, the real ``pslog`` on PATH."""
 
     def __init__(self, cwd: Path, env: dict, script: Path, hang_s: int) -> None:
         self.cwd = cwd
-        self.proc = subprocess.Popen([sys.executable, "-c", _ZYGOTE, str(script), str(hang_s)],
+        # -P: the examples' folder not first on sys.path (a console script's is its bin folder)
+        self.proc = subprocess.Popen([sys.executable, "-P", "-c", _ZYGOTE, str(script),
+                                      str(hang_s)],
                                      cwd=cwd, env=env, stdin=subprocess.PIPE,
                                      stdout=subprocess.PIPE, text=True)
         assert self.proc.stdout.readline() == "ready\n", "the forking runner did not start"

@@ -54,6 +54,7 @@ def run_inprocess(*args, cwd=None, timeout: float = HANG_S) -> Run:
 
     previous = signal.signal(signal.SIGALRM, hang)
     signal.setitimer(signal.ITIMER_REAL, timeout)
+    fds = _FdCapture()  # what C libraries write to fds 1 and 2 (OpenCV's, FFmpeg's warnings)
     try:
         with warnings.catch_warnings(record=True) as caught, \
                 contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
@@ -77,10 +78,37 @@ def run_inprocess(*args, cwd=None, timeout: float = HANG_S) -> Run:
     except _Hang:
         raise AssertionError(f"pslog {' '.join(argv)} hung for more than {timeout} s") from None
     finally:
+        raw_out, raw_err = fds.close()
         signal.setitimer(signal.ITIMER_REAL, 0)
         signal.signal(signal.SIGALRM, previous)
         os.chdir(here)
-    return Run(tuple(argv), int(code), out.getvalue(), err.getvalue())
+    return Run(tuple(argv), int(code), out.getvalue() + raw_out, err.getvalue() + raw_err)
+
+
+class _FdCapture:
+    """File descriptors 1 and 2 pointed at temporary files until :meth:`close`, which puts
+    them back and returns what was written there (after Python's own streams' text: a C
+    library's line and pslog's are not interleaved exactly as in a terminal)."""
+
+    def __init__(self) -> None:
+        import tempfile
+
+        sys.stdout.flush()
+        sys.stderr.flush()
+        self.files = [tempfile.TemporaryFile(), tempfile.TemporaryFile()]
+        self.saved = [os.dup(1), os.dup(2)]
+        for fd, f in zip((1, 2), self.files, strict=True):
+            os.dup2(f.fileno(), fd)
+
+    def close(self) -> tuple[str, str]:
+        texts = []
+        for fd, f, saved in zip((1, 2), self.files, self.saved, strict=True):
+            os.dup2(saved, fd)
+            os.close(saved)
+            f.seek(0)
+            texts.append(f.read().decode(errors="replace"))
+            f.close()
+        return texts[0], texts[1]
 
 
 def assert_refused(folder: Path, code: int, args, contains: str | tuple[str, ...] = (), *,
@@ -96,8 +124,24 @@ def assert_refused(folder: Path, code: int, args, contains: str | tuple[str, ...
     return line
 
 
-def first_case(request) -> bool:
+def first_case(request, per: tuple[str, ...] = ()) -> bool:
     """Whether the test is the first case of its parametrized family: the one that runs as a
     real process (the others run in this process: the same promises, without ~0.4 CPU s of
-    start-up each)."""
-    return all(i == 0 for i in request.node.callspec.indices.values())
+    start-up each). ``per``: parameter names whose every value gets a first case of its own
+    (e.g. each kind of output node once as a real process).
+
+    Decided by the parameters' values (each equal to the first of its ``parametrize`` list),
+    not by ``callspec.indices``: pytest 9 gives there the index of the whole combination for
+    every name of a stacked family, so only one case of all was real."""
+    params = request.node.callspec.params
+    for mark in request.node.iter_markers("parametrize"):
+        names, values = mark.args[0], mark.args[1]
+        names = [n.strip() for n in names.split(",")] if isinstance(names, str) else list(names)
+        if not values or any(n in per for n in names):
+            continue
+        first = values[0]
+        first = first.values if hasattr(first, "values") and hasattr(first, "marks") else first
+        first = tuple(first) if len(names) > 1 else (first,)
+        if any(params[n] != v for n, v in zip(names, first, strict=True)):
+            return False
+    return True

@@ -261,7 +261,7 @@ def test_a_special_file_as_input_is_refused_without_reading_it(work, kind, args,
     # a hang fails here. A named pipe (opened for ever when not refused) in this process
     # (tests/faults/_inprocess.py), but for the first case; the zero device as a real process
     # (read, it would fill the memory of whatever process reads it)
-    here = kind == "named pipe" and request.node.callspec.indices["args"] != 0
+    here = kind == "named pipe" and not first_case(request, per=("kind",))
     run = (run_inprocess if here else run_pslog)(*args, cwd=work, timeout=30)
     assert_one_line_error(run, 1, contains=node)
     assert kind in run.stderr or "not a file" in run.stderr, run.stderr

@@ -455,9 +455,10 @@ def test_an_output_that_is_not_a_regular_file_is_refused_even_with_force(kind, w
     _make_node(node, kind)
     before_mode = os.lstat(node).st_mode
     before = fingerprint(out)
-    # the first case as a real process, the others in this one (tests/faults/_inprocess.py;
-    # an output opened for ever, a named pipe's, fails there as a hang too)
-    run = (run_pslog if first_case(request) else run_inprocess)(*_args(writer, inputs, out))
+    # each kind's first case as a real process, the other in this one (tests/faults/
+    # _inprocess.py; an output opened for ever, a named pipe's, fails there as a hang too)
+    run = (run_pslog if first_case(request, per=("kind",)) else run_inprocess)(
+        *_args(writer, inputs, out))
     assert_one_line_error(run, 1, contains=(str(node), kind))
     assert_untouched(before, out)
     assert os.lstat(node).st_mode == before_mode  # still the same node, not a regular file
