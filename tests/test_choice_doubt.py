@@ -15,8 +15,13 @@ from numpy.testing import assert_allclose, assert_array_equal
 from pslog.evaluation import assess
 from pslog.fusion import FusionOptions, fuse
 from pslog.fusion._prepare import prepare
-from pslog.fusion.gating import (DOUBT_CHANCE, DOUBT_RADIUS_PX, choice_doubt, doubt_variance,
-                                 gate_for)
+from pslog.fusion.gating import (
+    DOUBT_CHANCE,
+    DOUBT_RADIUS_PX,
+    choice_doubt,
+    doubt_variance,
+    gate_for,
+)
 from pslog.fusion.stereo import nview_points
 from pslog.fusion.stream import StreamFuser
 from pslog.records import Detections, Observations, Track
