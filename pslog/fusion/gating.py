@@ -59,6 +59,7 @@ import threading
 from bisect import bisect_left, bisect_right
 from collections import deque
 from dataclasses import dataclass
+from itertools import pairwise
 from typing import TYPE_CHECKING, Literal
 
 import numpy as np
@@ -1756,8 +1757,9 @@ def _result(detections: Detections, rig: Rig, reason: np.ndarray,
 
 
 #: A choice is in doubt when its camera rejected a candidate this close to it (recorded
-#: pixels) by the motion gate (a static object, mostly) in its own frame or in the frames of
-#: the ``static_s`` before it (:func:`choice_doubt`).
+#: pixels) in its own frame or in the frames of the ``static_s`` before it: by the motion
+#: gate (a static object, mostly), or by any gate in a frame of several candidates (a clean
+#: camera's frames hold one, the ball) (:func:`choice_doubt`).
 DOUBT_RADIUS_PX = 5.0
 #: The chance that a choice in doubt is not the ball: the gate could not tell the two
 #: hypotheses apart (the ball has come to the still object's pixel, or the object is seen
@@ -1782,8 +1784,8 @@ def choice_doubt(time_ns: np.ndarray, camera: np.ndarray, uv: np.ndarray,
                  rig: Rig, static_s: float) -> np.ndarray:
     """The doubt of the gate's choices (k,): :func:`doubt_variance` (pixels² per axis)
     of each choice (LOGGED frame time ns, camera, recorded pixel) within
-    :data:`DOUBT_RADIUS_PX` of a candidate its camera rejected by the motion gate
-    (``still_*``: their logged frame times, cameras, recorded pixels) at a frame time in
+    :data:`DOUBT_RADIUS_PX` of a candidate its camera rejected (``still_*``: their logged
+    frame times, cameras, recorded pixels; :func:`doubt_source`) at a frame time in
     ``[t - static_s, t]``; 0 for the others. Causal: only its camera's decisions up to its
     own frame."""
     out = np.zeros(len(time_ns))
@@ -1813,15 +1815,23 @@ def choice_doubt(time_ns: np.ndarray, camera: np.ndarray, uv: np.ndarray,
     return out
 
 
+def doubt_source(reason, several):
+    """Whether a rejected candidate (``reason`` its code, ``several``: its frame held more
+    than one candidate) can put a choice beside it in doubt: rejected by the motion gate,
+    or by any gate in a frame of several candidates. Arrays or Python values."""
+    return (reason == MOTION) | ((reason >= 0) & several)
+
+
 def _observation_doubt(detections: Detections, rig: Rig, reason: np.ndarray,
                        observations: Observations, static_s: float) -> np.ndarray | None:
     """:func:`choice_doubt` of the chosen candidates (``reason`` -1) on the rows of
     ``observations`` (the chosen ones at their corrected times); None when none is in doubt."""
-    still = np.flatnonzero(reason == MOTION)
+    frame = detections.cand_frame
+    several = detections.candidates_per_frame()[frame] >= 2
+    still = np.flatnonzero(doubt_source(reason, several))
     if not len(still):
         return None
     chosen = np.flatnonzero(reason < 0)
-    frame = detections.cand_frame
     doubt = choice_doubt(detections.frame_time_ns[frame[chosen]],
                          detections.frame_camera[frame[chosen]], detections.cand_uv[chosen],
                          detections.frame_time_ns[frame[still]],
@@ -2326,9 +2336,28 @@ class StreamDoubt:
     def __init__(self, gate: StreamGate) -> None:
         self.gate = gate
         self.read = 0  # rows of gate.rejected read
+        # the pushed frames of several candidates ((logged time, camera)), in push order,
+        # for as long as the gate may still decide them
+        self.several: set[tuple[int, int]] = set()
+        self.pushed: deque = deque()
         self.window = round(gate.options.static_s * NS)
         self.recent: list[deque] = [deque() for _ in gate.rig.cameras]
         self.size = [(float(c.width), float(c.height)) for c in gate.rig.cameras]
+
+    def frames(self, time_ns, camera) -> None:
+        """Note the frames of a push (its rows, each frame's candidates together) before
+        the gate decides them."""
+        n = len(time_ns)
+        if n < 2:
+            return
+        keys = list(zip(time_ns.tolist(), camera.tolist(), strict=True))
+        for a, b in pairwise(keys):
+            if a == b and a not in self.several:
+                self.several.add(a)
+                self.pushed.append(a)
+        old = keys[-1][0] - self.gate.history_ns
+        while self.pushed and self.pushed[0][0] < old:
+            self.several.discard(self.pushed.popleft())
 
     def of(self, time_ns: np.ndarray, camera: np.ndarray, uv: np.ndarray) -> np.ndarray | None:
         """The doubt (pixels² per axis) of chosen rows in logged order, None when none
@@ -2336,7 +2365,7 @@ class StreamDoubt:
         rejected = self.gate.rejected
         if len(rejected) > self.read:
             for t, c, _, u, v, r in rejected[self.read:]:
-                if r == MOTION:
+                if doubt_source(r, (t, c) in self.several):
                     self.recent[c].append((t, u, v))
             self.read = len(rejected)
         if not len(time_ns) or not any(self.recent):

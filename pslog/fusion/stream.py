@@ -165,7 +165,11 @@ class StreamFuser:
             self._last_logged = one[:2]
             return self._one(*one)
         if self._gate is not None:  # the chosen candidates, in logged order
+            pushed = (time_ns, camera)
             time_ns, camera, uv, frame_index = self._gate.push(time_ns, camera, uv, frame_index)
+            if self._doubts is not None:  # (its frames of several candidates: valid rows)
+                self._doubts.frames(np.atleast_1d(np.asarray(pushed[0])),
+                                    np.atleast_1d(np.asarray(pushed[1])))
             return self._push_rows(time_ns, camera, uv, frame_index, self._doubt_of(
                 time_ns, camera, uv))
         time_ns, camera, uv, frame_index = stream_arrays(
