@@ -18,6 +18,7 @@ from pslog.fusion._prepare import prepare
 from pslog.fusion.gating import (
     DOUBT_CHANCE,
     DOUBT_RADIUS_PX,
+    DOUBT_REJECTIONS,
     choice_doubt,
     doubt_variance,
     gate_for,
@@ -42,20 +43,25 @@ def test_doubt_variance_is_half_the_chance_times_the_mean_squared_offset_to_any_
                             doubt_variance(333.3, 17.25, 640.0, 480.0)]
 
 
-def test_a_choice_is_in_doubt_only_beside_its_own_cameras_recent_still_rejection():
+def test_a_choice_is_in_doubt_only_beside_its_own_cameras_recent_rejections():
     rig = apply_timing(builtin_rig("paper2"), "typeA")
     cam = rig.cameras[0]
-    # the motion gate rejected camera 0's candidate at (300, 200) at 100 ms
-    still = (np.array([100 * MS]), np.array([0]), np.array([[300.0, 200.0]]))
+    # camera 0 rejected candidates at (300, 200) at 60 and 100 ms, and one at (400, 200)
+    # at 100 ms; camera 1 one at (300, 200) at 100 ms
+    still = (np.array([60, 100, 100, 100]) * MS, np.array([0, 0, 0, 1]),
+             np.array([[300.0, 200.0], [300.0, 200.0], [400.0, 200.0], [300.0, 200.0]]))
     r = DOUBT_RADIUS_PX
+    assert DOUBT_REJECTIONS == 2
     choices = [  # (time ms, camera, u, v, in doubt)
-        (100, 0, 300.0 + r, 200.0, True),          # its own frame, at the radius
+        (100, 0, 300.0 + r, 200.0, True),          # both, the latest in its own frame
         (200, 0, 300.0, 200.0 + 0.6 * r, True),    # 100 ms later
-        (350, 0, 300.0 + 0.6 * r, 200.0 + 0.8 * r, True),  # static_s (0.25 s) later, |d| = r
-        (351, 0, 300.0, 200.0, False),             # more than static_s later
+        (310, 0, 300.0 + 0.6 * r, 200.0 + 0.8 * r, True),  # static_s (0.25 s) after the
+        #                                            first, |d| = r
+        (311, 0, 300.0, 200.0, False),             # the first more than static_s back
         (200, 0, 300.0 + 1.01 * r, 200.0, False),  # beyond the radius
-        (200, 1, 300.0, 200.0, False),             # another camera
-        (99, 0, 300.0, 200.0, False),              # before the rejection (causal)
+        (200, 0, 400.0, 200.0, False),             # beside one rejection only
+        (200, 1, 300.0, 200.0, False),             # another camera's (one rejection)
+        (99, 0, 300.0, 200.0, False),              # before the second rejection (causal)
     ]
     t = np.array([c[0] * MS for c in choices])
     camera = np.array([c[1] for c in choices])

@@ -1756,11 +1756,16 @@ def _result(detections: Detections, rig: Rig, reason: np.ndarray,
                                     (options or GatingOptions()).static_s))
 
 
-#: A choice is in doubt when its camera rejected a candidate this close to it (recorded
-#: pixels) in its own frame or in the frames of the ``static_s`` before it: by the motion
-#: gate (a static object, mostly), or by any gate in a frame of several candidates (a clean
-#: camera's frames hold one, the ball) (:func:`choice_doubt`).
+#: A choice is in doubt when its camera rejected candidates this close to it (recorded
+#: pixels), at least :data:`DOUBT_REJECTIONS` of them, in its own frame or in the frames of
+#: the ``static_s`` before it: by the motion gate (a static object, mostly), or by any gate
+#: in a frame of several candidates (a clean camera's frames hold one, the ball)
+#: (:func:`choice_doubt`).
 DOUBT_RADIUS_PX = 5.0
+#: Rejections near a choice that put it in doubt: something stood there (one alone may be
+#: the ball itself, slow in the image, that the motion gate refused once: a clean wide3
+#: rally, 1.43 s).
+DOUBT_REJECTIONS = 2
 #: The chance that a choice in doubt is not the ball: the gate could not tell the two
 #: hypotheses apart (the ball has come to the still object's pixel, or the object is seen
 #: while the ball is elsewhere), so each is given half.
@@ -1784,10 +1789,10 @@ def choice_doubt(time_ns: np.ndarray, camera: np.ndarray, uv: np.ndarray,
                  rig: Rig, static_s: float) -> np.ndarray:
     """The doubt of the gate's choices (k,): :func:`doubt_variance` (pixels² per axis)
     of each choice (LOGGED frame time ns, camera, recorded pixel) within
-    :data:`DOUBT_RADIUS_PX` of a candidate its camera rejected (``still_*``: their logged
-    frame times, cameras, recorded pixels; :func:`doubt_source`) at a frame time in
-    ``[t - static_s, t]``; 0 for the others. Causal: only its camera's decisions up to its
-    own frame."""
+    :data:`DOUBT_RADIUS_PX` of at least :data:`DOUBT_REJECTIONS` candidates its camera
+    rejected (``still_*``: their logged frame times, cameras, recorded pixels;
+    :func:`doubt_source`) at frame times in ``[t - static_s, t]``; 0 for the others.
+    Causal: only its camera's decisions up to its own frame."""
     out = np.zeros(len(time_ns))
     if not len(time_ns) or not len(still_time_ns):
         return out
@@ -1810,7 +1815,8 @@ def choice_doubt(time_ns: np.ndarray, camera: np.ndarray, uv: np.ndarray,
         j = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n) + np.repeat(lo, n)
         du = uv[c[which], 0] - su[j, 0]
         dv = uv[c[which], 1] - su[j, 1]
-        near = np.unique(c[which[du * du + dv * dv <= DOUBT_RADIUS_PX * DOUBT_RADIUS_PX]])
+        close = which[du * du + dv * dv <= DOUBT_RADIUS_PX * DOUBT_RADIUS_PX]
+        near = c[np.bincount(close, minlength=len(c)) >= DOUBT_REJECTIONS]
         out[near] = doubt_variance(uv[near, 0], uv[near, 1], width[cam], height[cam])
     return out
 
@@ -2377,8 +2383,8 @@ class StreamDoubt:
             while near and near[0][0] < t - self.window:  # (a camera's choices come in order)
                 near.popleft()
             u, v = uv[i].tolist()
-            if any(t - self.window <= tj <= t and (u - uj) * (u - uj) + (v - vj) * (v - vj)
-                   <= radius2 for tj, uj, vj in near):
+            if sum(t - self.window <= tj <= t and (u - uj) * (u - uj) + (v - vj) * (v - vj)
+                   <= radius2 for tj, uj, vj in near) >= DOUBT_REJECTIONS:
                 if out is None:
                     out = np.zeros(len(time_ns))
                 out[i] = doubt_variance(u, v, *self.size[c])
