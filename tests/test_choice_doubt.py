@@ -6,6 +6,8 @@ bit for bit as in batch."""
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 from _rally import rally
@@ -19,6 +21,9 @@ from pslog.fusion.gating import (
     DOUBT_CHANCE,
     DOUBT_RADIUS_PX,
     DOUBT_REJECTIONS,
+    MOTION,
+    GatingOptions,
+    StreamDoubt,
     choice_doubt,
     doubt_variance,
     gate_for,
@@ -71,6 +76,20 @@ def test_a_choice_is_in_doubt_only_beside_its_own_cameras_recent_rejections():
                 for _, _, u, v, flag in choices]
     assert doubt.tolist() == expected
     assert min(d for d in expected if d) > 1e4  # (hundreds of pixels: the ball anywhere)
+    # the stream's form, reading a gate's record of rejections (motion: the still kind)
+    # choice by choice in logged order, gives the same bits
+    record = [(int(ti), int(ci), 0, u, v, MOTION) for ti, ci, (u, v) in zip(
+        still[0].tolist(), still[1].tolist(), still[2].tolist(), strict=True)]
+    stand_in = SimpleNamespace(rejected=[], options=GatingOptions(static_s=0.25), rig=rig,
+                               history_ns=10**9)
+    stream = StreamDoubt(stand_in)
+    order = np.argsort(t, kind="stable")
+    got = np.zeros(len(t))
+    for i in order.tolist():
+        stand_in.rejected[:] = [row for row in record if row[0] <= t[i]]
+        d = stream.of(t[i:i + 1], camera[i:i + 1], uv[i:i + 1])
+        got[i] = 0.0 if d is None else d[0]
+    assert got.tolist() == expected
 
 
 def test_the_doubt_adds_d_times_the_pixel_jacobians_outer_product_to_the_covariance():
