@@ -42,9 +42,17 @@ are 300-302), the library's rally seed ``5 + N - 300``, and the faults' cameras 
 other seeds; ``--fps 60,120,240``: every rig again with its cameras at each rate (the same
 shutter staggering), the rig named ``<rig>@<fps>``.
 
+``--calibration`` (with ``--more``'s rigs and rallies, ``--first-seed`` one or several,
+comma-separated; ``--noise``): whether each method's covariance stays honest with the
+faults: NEES (1 if honest) and the share of the truth inside 2σ (73.9 % if honest), clean
+and dirty, pooled over the sessions, with the worst session's NEES and the share of the
+pooled d² that the single largest point carries (docs/methods.md, "A choice in doubt").
+
     python benchmarks/bench_dirty.py [--seeds 3] [--duration 8] [--gating off] [--quick]
                                      [--methods typeA,smooth,filter] [--more]
                                      [--first-seed 300] [--fps 60,120,240]
+    python benchmarks/bench_dirty.py --calibration [--first-seed 400,5000] [--seeds 3]
+                                     [--noise 0.3] [--methods typeA,nearest,smooth,filter]
 """
 
 from __future__ import annotations
@@ -300,6 +308,45 @@ def main_more(args, methods, options: FusionOptions) -> int:
     return 0 if ok else 1
 
 
+def main_calibration(args, methods, options: FusionOptions) -> int:
+    """--calibration: NEES and the share in 2σ per rig x method, clean and dirty."""
+    from pslog.evaluation import _mahalanobis_sq, _offsets
+
+    first_seeds = [int(x) for x in str(args.first_seed).split(",")]
+    print(f"covariance calibration, {args.noise:g} px, rallies from seeds "
+          f"{', '.join(map(str, first_seeds))} ({args.seeds} each), faults as below; NEES "
+          "(1 if honest) / share in 2σ (73.9 % if honest) pooled; worst: the worst "
+          "session's NEES; top: the largest point's share of the pooled d²")
+    print()
+    print("| rig | method | clean NEES / in 2σ | dirty NEES / in 2σ | dirty worst | dirty top |")
+    print("|---|---|---|---|---|---|")
+    start = time.perf_counter()
+    for rig in rigs() + more_rigs():
+        found: dict[tuple, list] = {(m, k): [] for m in methods for k in ("clean", "dirty")}
+        for first in first_seeds:
+            runs = more_sessions(args.seeds, args.duration, first)[:args.seeds]
+            for seed, (label, motion, duration, _) in enumerate(runs, start=first - 300):
+                span = motion.duration if duration is None else duration
+                for kind, extra in (("clean", {}), ("dirty", faults(rig, seed, span))):
+                    det, truth, _ = simulate_labelled(rig, motion, duration, SimulationOptions(
+                        noise_px=args.noise, seed=seed, **extra))
+                    tracks = fuse_detections(det, rig, methods, options)[0]
+                    for m in methods:
+                        d2 = _mahalanobis_sq(tracks[m], _offsets(tracks[m], truth))
+                        found[m, kind].append((d2[np.isfinite(d2)], label))
+        for m in methods:
+            cells = []
+            for kind in ("clean", "dirty"):
+                d2 = np.concatenate([d for d, _ in found[m, kind]])
+                cells.append(f"{d2.mean() / 3:.2f} / {100 * np.mean(d2 <= 4):.1f} %")
+            worst = max(found[m, "dirty"], key=lambda x: x[0].mean() if len(x[0]) else 0.0)
+            cells.append(f"{worst[0].mean() / 3:.1f} ({worst[1]})")
+            cells.append(f"{d2.max() / d2.sum():.2f}")
+            print(f"| {rig.name} | {m} | " + " | ".join(cells) + " |", flush=True)
+    print(f"({time.perf_counter() - start:.0f} s)")
+    return 0
+
+
 def table(rig: Rig, methods, pooled, ratios) -> tuple[list[str], bool]:
     """The markdown rows of one rig, and whether its targets are met."""
     ok = True
@@ -335,8 +382,13 @@ def main() -> int:
     parser.add_argument("--json", default=None, help="write the target rows as JSON")
     parser.add_argument("--more", action="store_true",
                         help="other rigs (2, 4 cameras, a wide-angle lens) and motions, 0.3 px")
-    parser.add_argument("--first-seed", type=int, default=300,
-                        help="--more: the first rally's seed (default 300; others: new cases)")
+    parser.add_argument("--first-seed", default="300",
+                        help="--more: the first rally's seed (default 300; others: new cases); "
+                             "--calibration: comma-separated first seeds")
+    parser.add_argument("--calibration", action="store_true",
+                        help="NEES and share in 2σ per method, clean and dirty (--more's rigs)")
+    parser.add_argument("--noise", type=float, default=TARGET_NOISE,
+                        help="--calibration: detection noise, px (default 0.3)")
     parser.add_argument("--fps", default=None,
                         help="--more: comma-separated camera rates to run every rig at "
                              "(e.g. 60,120,240; default: the rigs' own, 30)")
@@ -345,6 +397,11 @@ def main() -> int:
     n_seeds, duration = (1, 4.0) if args.quick else (args.seeds, args.duration)
     methods = [m for m in args.methods.split(",") if m in METHODS]
     options = FusionOptions(gating=args.gating == "on")
+    if args.calibration:
+        return main_calibration(args, [m for m in (
+            args.methods if args.methods != "typeA,smooth,filter"
+            else "typeA,nearest,smooth,filter").split(",") if m in METHODS], options)
+    args.first_seed = int(args.first_seed)
     if args.more:
         return main_more(args, methods, options)
     runs = sessions(n_seeds, duration, args.quick)

@@ -346,11 +346,15 @@ def fuse(
     check_method(method)
     options = options or FusionOptions()
     if isinstance(observations, Detections):
-        from .gating import gate_for
+        from .gating import gate_for, prepared_for
 
-        observations = (gate_for(observations, rig, method, options).observations
-                        if options.gating and len(rig) >= 2
-                        else timed_observations(observations, rig))
+        if options.gating and len(rig) >= 2:
+            gated = gate_for(observations, rig, method, options)
+            observations = gated.observations
+            if prepared is None and gated.doubt_px2 is not None:
+                prepared = prepared_for(gated, rig)
+        else:
+            observations = timed_observations(observations, rig)
     if len(rig) < 2:
         raise FusionError(f"fusion needs at least two cameras; rig has {len(rig)}")
     check_tolerance(rig, options.tolerance_s)

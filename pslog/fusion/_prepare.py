@@ -54,6 +54,10 @@ class Prepared:
         observation: maps detection noise (isotropic in the recorded image) to ideal pixels
     view_box : (m, 4) float64, ``(u_min, v_min, u_max, v_max)`` of each camera's view in
         undistorted pixels, grown by :data:`VIEW_MARGIN`
+    doubt_px2 : (n,) float64 or None, the variance (recorded pixels², per axis) each
+        observation adds to its point's covariance for the chance that the gate chose the
+        wrong candidate (:func:`pslog.fusion.gating.choice_doubt`; 0 for a choice not in
+        doubt); None: no choice in doubt (every session without a gate)
     """
 
     obs: Observations
@@ -69,6 +73,7 @@ class Prepared:
     cameras: tuple = ()
     uv_jacobian: np.ndarray | None = None
     view_box: np.ndarray | None = None
+    doubt_px2: np.ndarray | None = None
 
     def pixel_jacobians(self, rows: np.ndarray) -> np.ndarray | None:
         """:attr:`uv_jacobian` of observations ``rows`` (NaN, for a pixel no lens maps,

@@ -59,6 +59,7 @@ import threading
 from bisect import bisect_left, bisect_right
 from collections import deque
 from dataclasses import dataclass
+from itertools import pairwise
 from typing import TYPE_CHECKING, Literal
 
 import numpy as np
@@ -219,12 +220,15 @@ class Gated:
     rejections : Rejections
     chosen : (C,) bool over the detections' candidates, True for the kept ones
     reason : (C,) int8, the rejection reason of each candidate (-1 for the kept ones)
+    doubt_px2 : (n,) float64 over the observations, or None: the variance each choice adds
+        for the chance it is wrong (:func:`choice_doubt`; None: no choice in doubt)
     """
 
     observations: Observations
     rejections: Rejections
     chosen: np.ndarray
     reason: np.ndarray
+    doubt_px2: np.ndarray | None = None
 
     def kept(self, detections: Detections) -> Detections:
         """``detections`` with only the chosen candidates (every frame kept, at its LOGGED
@@ -1396,7 +1400,7 @@ def gate(detections: Detections, rig: Rig, *, causal: bool = True, wait_s: float
     if n == 0:
         return _result(detections, rig, reason)
     _decided(c, rig, options, causal, round(wait_s * NS), max_gap_ns, reason, tables)
-    return _result(detections, rig, reason)
+    return _result(detections, rig, reason, options)
 
 
 def gate_common(detections: Detections, rig: Rig) -> tuple:
@@ -1738,15 +1742,126 @@ def _stillness_one(key: int, pts, earlier, lags: int, options: GatingOptions,
     return static, run / lags, lone
 
 
-def _result(detections: Detections, rig: Rig, reason: np.ndarray) -> Gated:
+def _result(detections: Detections, rig: Rig, reason: np.ndarray,
+            options: GatingOptions | None = None) -> Gated:
     chosen = reason < 0
     rej = ~chosen
     rows = detections.cand_frame[rej]
     rejections = Rejections(detections.frame_time_ns[rows], detections.frame_camera[rows],
                             detections.frame_index[rows], detections.cand_uv[rej],
                             detections.cand_score[rej], reason[rej])
-    return Gated(timed_observations(_chosen_candidates(detections, chosen), rig), rejections,
-                 chosen, reason)
+    observations = timed_observations(_chosen_candidates(detections, chosen), rig)
+    return Gated(observations, rejections, chosen, reason,
+                 _observation_doubt(detections, rig, reason, observations,
+                                    (options or GatingOptions()).static_s))
+
+
+#: A choice is in doubt when its camera rejected candidates this close to it (recorded
+#: pixels), at least :data:`DOUBT_REJECTIONS` of them, in its own frame or in the frames of
+#: the ``static_s`` before it: by the motion gate (a static object, mostly), or by any gate
+#: in a frame of several candidates (a clean camera's frames hold one, the ball)
+#: (:func:`choice_doubt`).
+DOUBT_RADIUS_PX = 5.0
+#: Rejections near a choice that put it in doubt: something stood there (one alone may be
+#: the ball itself, slow in the image, that the motion gate refused once: a clean wide3
+#: rally, 1.43 s).
+DOUBT_REJECTIONS = 2
+#: The chance that a choice in doubt is not the ball: the gate could not tell the two
+#: hypotheses apart (the ball has come to the still object's pixel, or the object is seen
+#: while the ball is elsewhere), so each is given half.
+DOUBT_CHANCE = 0.5
+
+
+def doubt_variance(u, v, width, height):
+    """The variance per image axis (pixels²) a choice at recorded pixel ``(u, v)`` of a
+    ``width`` x ``height`` camera adds when it is in doubt: with chance :data:`DOUBT_CHANCE`
+    the ball is not there but anywhere in the image (nothing else is known), uniform, whose
+    mean squared offset from ``(u, v)`` is ``(W² + H²)/12 + (u - W/2)² + (v - H/2)²``;
+    half of it per axis (docs/methods.md, "A choice in doubt"). Arrays or Python floats,
+    the same operations in the same order (the same bits in the batch and the stream)."""
+    du = u - 0.5 * width
+    dv = v - 0.5 * height
+    return DOUBT_CHANCE * 0.5 * ((width * width + height * height) / 12.0 + du * du + dv * dv)
+
+
+def choice_doubt(time_ns: np.ndarray, camera: np.ndarray, uv: np.ndarray,
+                 still_time_ns: np.ndarray, still_camera: np.ndarray, still_uv: np.ndarray,
+                 rig: Rig, static_s: float) -> np.ndarray:
+    """The doubt of the gate's choices (k,): :func:`doubt_variance` (pixels² per axis)
+    of each choice (LOGGED frame time ns, camera, recorded pixel) within
+    :data:`DOUBT_RADIUS_PX` of at least :data:`DOUBT_REJECTIONS` candidates its camera
+    rejected (``still_*``: their logged frame times, cameras, recorded pixels;
+    :func:`doubt_source`) at frame times in ``[t - static_s, t]``; 0 for the others.
+    Causal: only its camera's decisions up to its own frame."""
+    out = np.zeros(len(time_ns))
+    if not len(time_ns) or not len(still_time_ns):
+        return out
+    window = round(static_s * NS)
+    width = np.array([float(c.width) for c in rig.cameras])
+    height = np.array([float(c.height) for c in rig.cameras])
+    for cam in np.unique(still_camera).tolist():
+        s = np.flatnonzero(still_camera == cam)
+        s = s[np.argsort(still_time_ns[s], kind="stable")]
+        st, su = still_time_ns[s], still_uv[s]
+        c = np.flatnonzero(camera == cam)
+        if not len(c):
+            continue
+        lo = np.searchsorted(st, time_ns[c] - window, side="left")
+        hi = np.searchsorted(st, time_ns[c], side="right")
+        n = hi - lo
+        if not n.any():
+            continue
+        which = np.repeat(np.arange(len(c)), n)
+        j = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n) + np.repeat(lo, n)
+        du = uv[c[which], 0] - su[j, 0]
+        dv = uv[c[which], 1] - su[j, 1]
+        close = which[du * du + dv * dv <= DOUBT_RADIUS_PX * DOUBT_RADIUS_PX]
+        near = c[np.bincount(close, minlength=len(c)) >= DOUBT_REJECTIONS]
+        out[near] = doubt_variance(uv[near, 0], uv[near, 1], width[cam], height[cam])
+    return out
+
+
+def doubt_source(reason, several):
+    """Whether a rejected candidate (``reason`` its code, ``several``: its frame held more
+    than one candidate) can put a choice beside it in doubt: rejected by the motion gate,
+    or by any gate in a frame of several candidates. Arrays or Python values."""
+    return (reason == MOTION) | ((reason >= 0) & several)
+
+
+def _observation_doubt(detections: Detections, rig: Rig, reason: np.ndarray,
+                       observations: Observations, static_s: float) -> np.ndarray | None:
+    """:func:`choice_doubt` of the chosen candidates (``reason`` -1) on the rows of
+    ``observations`` (the chosen ones at their corrected times); None when none is in doubt."""
+    frame = detections.cand_frame
+    several = detections.candidates_per_frame()[frame] >= 2
+    still = np.flatnonzero(doubt_source(reason, several))
+    if not len(still):
+        return None
+    chosen = np.flatnonzero(reason < 0)
+    doubt = choice_doubt(detections.frame_time_ns[frame[chosen]],
+                         detections.frame_camera[frame[chosen]], detections.cand_uv[chosen],
+                         detections.frame_time_ns[frame[still]],
+                         detections.frame_camera[frame[still]], detections.cand_uv[still],
+                         rig, static_s)
+    flagged = np.flatnonzero(doubt)
+    if not len(flagged):
+        return None
+    out = np.zeros(len(observations))
+    rows = chosen[flagged]
+    # the observation of each (camera, frame index, pixel): few in doubt, found by frame index
+    maybe = np.flatnonzero(np.isin(observations.frame_index, detections.frame_index[frame[rows]]))
+    where: dict[tuple, list[int]] = {}
+    for i in maybe.tolist():
+        key = (int(observations.camera[i]), int(observations.frame_index[i]),
+               *observations.uv[i].tolist())
+        where.setdefault(key, []).append(i)
+    for k, r in zip(flagged.tolist(), rows.tolist(), strict=True):
+        f = frame[r]
+        key = (int(detections.frame_camera[f]), int(detections.frame_index[f]),
+               *detections.cand_uv[r].tolist())
+        for i in where.get(key, []):
+            out[i] = doubt[k]
+    return out
 
 
 def _chosen_candidates(detections: Detections, chosen: np.ndarray) -> Detections:
@@ -2219,6 +2334,63 @@ class StreamGate:
         return (ratio, carried), decided, differs, lag
 
 
+class StreamDoubt:
+    """:func:`choice_doubt` of a :class:`StreamGate`'s choices as they come out (the same
+    bits as the batch's): each camera's candidates the gate rejected by the motion gate over
+    the last ``static_s`` (LOGGED times), read from its record as it grows."""
+
+    def __init__(self, gate: StreamGate) -> None:
+        self.gate = gate
+        self.read = 0  # rows of gate.rejected read
+        # the pushed frames of several candidates ((logged time, camera)), in push order,
+        # for as long as the gate may still decide them
+        self.several: set[tuple[int, int]] = set()
+        self.pushed: deque = deque()
+        self.window = round(gate.options.static_s * NS)
+        self.recent: list[deque] = [deque() for _ in gate.rig.cameras]
+        self.size = [(float(c.width), float(c.height)) for c in gate.rig.cameras]
+
+    def frames(self, time_ns, camera) -> None:
+        """Note the frames of a push (its rows, each frame's candidates together) before
+        the gate decides them."""
+        n = len(time_ns)
+        if n < 2:
+            return
+        keys = list(zip(time_ns.tolist(), camera.tolist(), strict=True))
+        for a, b in pairwise(keys):
+            if a == b and a not in self.several:
+                self.several.add(a)
+                self.pushed.append(a)
+        old = keys[-1][0] - self.gate.history_ns
+        while self.pushed and self.pushed[0][0] < old:
+            self.several.discard(self.pushed.popleft())
+
+    def of(self, time_ns: np.ndarray, camera: np.ndarray, uv: np.ndarray) -> np.ndarray | None:
+        """The doubt (pixels² per axis) of chosen rows in logged order, None when none
+        is in doubt."""
+        rejected = self.gate.rejected
+        if len(rejected) > self.read:
+            for t, c, _, u, v, r in rejected[self.read:]:
+                if doubt_source(r, (t, c) in self.several):
+                    self.recent[c].append((t, u, v))
+            self.read = len(rejected)
+        if not len(time_ns) or not any(self.recent):
+            return None
+        out = None
+        radius2 = DOUBT_RADIUS_PX * DOUBT_RADIUS_PX
+        for i, (t, c) in enumerate(zip(time_ns.tolist(), camera.tolist(), strict=True)):
+            near = self.recent[c]
+            while near and near[0][0] < t - self.window:  # (a camera's choices come in order)
+                near.popleft()
+            u, v = uv[i].tolist()
+            if sum(t - self.window <= tj <= t and (u - uj) * (u - uj) + (v - vj) * (v - vj)
+                   <= radius2 for tj, uj, vj in near) >= DOUBT_REJECTIONS:
+                if out is None:
+                    out = np.zeros(len(time_ns))
+                out[i] = doubt_variance(u, v, *self.size[c])
+        return out
+
+
 def gating_key(method: str, options) -> tuple[bool, float]:
     """(causal, wait_s) of the gate ``method`` needs (``options``: FusionOptions): the
     causal form for a causal method, waiting for the tolerance as the method does."""
@@ -2235,6 +2407,17 @@ def gate_for(detections: Detections, rig: Rig, method: str, options,
     causal, wait_s = gating_key(method, options)
     return gate(detections, rig, causal=causal, wait_s=wait_s, max_gap_s=options.max_gap_s,
                 common=common)
+
+
+def prepared_for(gated: Gated, rig: Rig) -> Prepared:
+    """:func:`~pslog.fusion.prepare` of the gate's observations, with the doubt of its
+    choices (:attr:`Gated.doubt_px2`) for the methods' covariance."""
+    from dataclasses import replace
+
+    from ._prepare import prepare
+
+    prep = prepare(gated.observations, rig)
+    return prep if gated.doubt_px2 is None else replace(prep, doubt_px2=gated.doubt_px2)
 
 
 def fuse_detections(detections: Detections, rig: Rig, methods, options=None, *,
@@ -2323,7 +2506,7 @@ def start_fusion(detections: Detections, rig: Rig, methods, options=None, *,
 
     def gated_input(key, method: str) -> tuple[Gated, Prepared | None]:  # once per form
         gated = gate_for(detections, rig, method, options, common)
-        return gated, (prepare(gated.observations, rig) if len(rig) >= 2 else None)
+        return gated, (prepared_for(gated, rig) if len(rig) >= 2 else None)
 
     def fused(method: str, shared: tuple[Gated, Prepared | None]):
         gated, prep = shared
@@ -2344,11 +2527,14 @@ __all__ = [
     "Gated",
     "GatingOptions",
     "Rejections",
+    "StreamDoubt",
     "StreamGate",
+    "choice_doubt",
     "epipolar_distance",
     "fuse_detections",
     "gate",
     "gate_for",
     "gating_key",
+    "prepared_for",
     "start_fusion",
 ]

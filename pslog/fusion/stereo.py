@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import NamedTuple
+from typing import NamedTuple, cast
 
 import numpy as np
 
@@ -68,6 +68,41 @@ def sync_groups(obs: Observations, n_cams: int, tolerance_s: float
     seen = np.zeros((n_groups, n_cams), dtype=bool)
     seen[group, obs.camera] = True
     return group, seen.sum(axis=1)
+
+
+def doubt_covariance(prep: Prepared, slot_rows: np.ndarray, jacobians: list[np.ndarray],
+                     cov: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """``cov`` (quality columns ``std_m``, ``cov_*_m2`` of k points) with the doubt of the
+    gate's choices (:attr:`Prepared.doubt_px2`, ``d`` pixels² per axis of each detection,
+    :func:`pslog.fusion.gating.choice_doubt`): a point made from detections in doubt gains
+
+        Σ_s d_s (J_s L_s)(J_s L_s)ᵀ
+
+    over its slots ``s`` (``J_s`` (3, 2) d(point)/d(undistorted pixel), ``L_s`` the recorded-
+    to-undistorted pixel Jacobian): the first-order covariance of a pixel offset of
+    variance ``d_s`` per axis (docs/methods.md, "A choice in doubt"). Points without a
+    detection in doubt keep their columns (the same arrays' values). ``slot_rows`` (k, m)
+    the detection of each slot (-1: unused), each slot a different detection."""
+    doubt = cast(np.ndarray, prep.doubt_px2)
+    per_slot = np.where(slot_rows >= 0, doubt[np.maximum(slot_rows, 0)], 0.0)
+    hit = np.flatnonzero(np.any(per_slot > 0, axis=1))
+    if not len(hit):
+        return cov
+    names = ("cov_xx_m2", "cov_yy_m2", "cov_zz_m2", "cov_xy_m2", "cov_xz_m2", "cov_yz_m2")
+    six = np.stack([cov[name][hit] for name in names])
+    first = np.array([0, 1, 2, 0, 0, 1])
+    second = np.array([0, 1, 2, 1, 2, 2])
+    for s in range(slot_rows.shape[1]):
+        d = per_slot[hit, s]
+        if not np.any(d > 0):
+            continue
+        L = prep.pixel_jacobians_t(np.maximum(slot_rows[hit, s], 0))
+        JL = _prepare.times_pixel_jacobian(jacobians[s][:, :, hit], L)
+        six += (JL[first, 0] * JL[second, 0] + JL[first, 1] * JL[second, 1]) * d
+    out = {name: column.copy() for name, column in cov.items()}
+    for name, column in _prepare.covariance_columns(six).items():
+        out[name][hit] = column
+    return out
 
 
 def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | np.ndarray | None,
@@ -173,6 +208,8 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | np.ndarray 
             cov = motion_covariance(prep, slot_rows, jacobians, motion, used, noise_px,
                                     compiled, breaks, None if breaks is None
                                     else pixels_per_metre_sq(prep, points))
+        if prep.doubt_px2 is not None:
+            cov = doubt_covariance(prep, slot_rows, jacobians, cov)
     # (k,) columns, each reduction over the m cameras in numpy's order (the same bits)
     times = [prep.obs.time_ns[r[:, c]] for c in range(m)]
     t_max = np.maximum.reduce([np.where(used[:, c], times[c], np.iinfo(np.int64).min)

@@ -24,6 +24,7 @@ with no clock correction in the rig a detection is admitted when pushed (no extr
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import cast
 
 import numpy as np
@@ -95,6 +96,8 @@ class StreamFuser:
         self._camera = np.zeros(0, np.int32)
         self._uv = np.zeros((0, 2))
         self._frame = np.zeros(0, np.int64)
+        # each row's doubt (pslog.fusion.gating.choice_doubt, pixels²; 0: none)
+        self._doubt = np.zeros(0)
         # the window's first rows as prepare made them at the last push (undistorted pixels,
         # rays, pixel Jacobians; each row's own: prepared again, the same bits)
         self._head: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
@@ -108,6 +111,7 @@ class StreamFuser:
         self._q_camera = np.zeros(0, np.int32)
         self._q_uv = np.zeros((0, 2))
         self._q_frame = np.zeros(0, np.int64)
+        self._q_doubt = np.zeros(0)
         # a method with an incremental form (filter) takes each admitted detection once
         streamer = METHODS[method].streamer
         self.incremental = streamer(rig, self.options) if streamer is not None else None
@@ -124,6 +128,13 @@ class StreamFuser:
             from .gating import StreamGate, gating_key
 
             self._gate = StreamGate(rig, gating_key(method, self.options)[1], self._max_gap_s)
+        # the doubt of the gate's choices, for the methods re-run on the window (their
+        # covariance holds it: stereo.doubt_covariance; the incremental forms do not use it)
+        self._doubts = None
+        if self._gate is not None and self.incremental is None:
+            from .gating import StreamDoubt
+
+            self._doubts = StreamDoubt(self._gate)
         # the incremental form's own path for one detection (push_one(t, c, u, v) -> Track),
         # when nothing is to reorder; and when nothing is to gate either, a push of one
         # detection goes straight to it
@@ -154,11 +165,20 @@ class StreamFuser:
             self._last_logged = one[:2]
             return self._one(*one)
         if self._gate is not None:  # the chosen candidates, in logged order
+            pushed = (time_ns, camera)
             time_ns, camera, uv, frame_index = self._gate.push(time_ns, camera, uv, frame_index)
-        else:
-            time_ns, camera, uv, frame_index = stream_arrays(
-                time_ns, camera, uv, frame_index, len(self.rig), "StreamFuser.push")
+            if self._doubts is not None:  # (its frames of several candidates: valid rows)
+                self._doubts.frames(np.atleast_1d(np.asarray(pushed[0])),
+                                    np.atleast_1d(np.asarray(pushed[1])))
+            return self._push_rows(time_ns, camera, uv, frame_index, self._doubt_of(
+                time_ns, camera, uv))
+        time_ns, camera, uv, frame_index = stream_arrays(
+            time_ns, camera, uv, frame_index, len(self.rig), "StreamFuser.push")
         return self._push_rows(time_ns, camera, uv, frame_index)
+
+    def _doubt_of(self, time_ns, camera, uv) -> np.ndarray | None:
+        """The doubt of the gate's chosen rows (None: none in doubt, or not used)."""
+        return None if self._doubts is None else self._doubts.of(time_ns, camera, uv)
 
     def push_frame(self, time_ns: int, camera: int, uv: np.ndarray, frame_index: int) -> Track:
         """:meth:`push` of one frame's candidates, best first, as ``pslog live`` pushes them:
@@ -191,8 +211,10 @@ class StreamFuser:
         return self.push(np.full(k, time_ns, np.int64), np.full(k, camera, np.int32), uv,
                          np.full(k, frame_index, np.int64))
 
-    def _push_rows(self, time_ns, camera, uv, frame_index) -> Track:
-        """The rest of :meth:`push`: checked rows (the gate's chosen ones) into the method."""
+    def _push_rows(self, time_ns, camera, uv, frame_index,
+                   doubt: np.ndarray | None = None) -> Track:
+        """The rest of :meth:`push`: checked rows (the gate's chosen ones, with their
+        doubt: None for none) into the method."""
         if len(time_ns) == 0:
             return self._settled(final=False)
         keys = ([(int(time_ns[0]), int(camera[0]))] if len(time_ns) == len(camera) == 1  # (one)
@@ -214,6 +236,8 @@ class StreamFuser:
         self._q_camera = np.concatenate([self._q_camera, camera])
         self._q_uv = np.concatenate([self._q_uv, uv])
         self._q_frame = np.concatenate([self._q_frame, frame_index])
+        self._q_doubt = np.concatenate([self._q_doubt, np.zeros(len(time_ns)) if doubt is None
+                                        else doubt])
         self._admit(final=False)
         return self._settled(final=False)
 
@@ -222,7 +246,9 @@ class StreamFuser:
         end with no common instant left, for the methods that need one, emits nothing)."""
         if self._gate is not None:  # the frames the gate still held, then the rest
             gate, self._gate = self._gate, None
-            early = self.push(*gate.flush())
+            time_ns, camera, uv, frame_index = gate.flush()  # (checked arrays, as push's)
+            early = self._push_rows(time_ns, camera, uv, frame_index,
+                                    self._doubt_of(time_ns, camera, uv))
             return Track.concat([early, self.flush()])  # every column and count of both
         self._admit(final=True)
         return self._settled(final=True)
@@ -252,9 +278,11 @@ class StreamFuser:
         self._camera = np.concatenate([self._camera, camera])
         self._uv = np.concatenate([self._uv, self._q_uv[order]])
         self._frame = np.concatenate([self._frame, self._q_frame[order]])
+        self._doubt = np.concatenate([self._doubt, self._q_doubt[order]])
         keep = ~ready
         self._q_time, self._q_camera = self._q_time[keep], self._q_camera[keep]
         self._q_uv, self._q_frame = self._q_uv[keep], self._q_frame[keep]
+        self._q_doubt = self._q_doubt[keep]
 
     def _settled(self, final: bool) -> Track:
         if self.incremental is not None:  # it keeps its own state: feed the new rows once
@@ -270,6 +298,7 @@ class StreamFuser:
                 out = Track.concat([out, self.incremental.flush()])
             self._time, self._camera = self._time[-1:], self._camera[-1:]
             self._uv, self._frame = self._uv[-1:], self._frame[-1:]
+            self._doubt = self._doubt[-1:]
             self._fed = len(self._time)
             return out
         if len(self._time) == 0:
@@ -285,6 +314,8 @@ class StreamFuser:
             jac = prepared.uv_jacobian  # (always made by prepare)
             self._head = (None if jac is None
                           else (prepared.uv_undistorted, prepared.ray_dir, jac))
+            if np.any(self._doubt > 0):  # (the gate's choices in doubt: as the batch's)
+                prepared = replace(prepared, doubt_px2=self._doubt.copy())
             track = fuse(obs, self.rig, self.method, self.options, prepared=prepared)
         newest = int(self._time[-1])
         key_t, key_c = self._emitted_until
@@ -298,6 +329,7 @@ class StreamFuser:
         cut = self._cut_row(obs, newest - self._history_ns - self._settle_ns)
         self._time, self._camera = self._time[cut:], self._camera[cut:]
         self._uv, self._frame = self._uv[cut:], self._frame[cut:]
+        self._doubt = self._doubt[cut:]
         if self._head is not None:
             self._head = (self._head[0][cut:], self._head[1][cut:], self._head[2][cut:])
         return out
