@@ -278,8 +278,10 @@ def _signal_a_writing_camera(rec: Recording, sig: int, order: tuple[str, ...]
     pids = rec.camera_pids()
     deadline = time.monotonic() + 60
     # once every camera is sending (past the recorder's start), the recorder is held:
-    # behind its cameras, whose pipes fill
-    while not all(_read_share(pids[name], rec.files[name]) > 0.05 for name in order):
+    # behind its cameras, whose pipes fill. (Not while a camera still opens its file: the
+    # AVI's index is read at its end, an offset above 0.95 then; held there, the recorder
+    # never started the cameras and none ever wrote: seen once on a quiet fresh clone)
+    while not all(0.05 < _read_share(pids[name], rec.files[name]) < 0.95 for name in order):
         assert rec.proc.poll() is None, f"recorder ended before the signal:\n{rec.stderr}"
         assert time.monotonic() < deadline, f"the cameras did not start:\n{rec.stderr}"
         time.sleep(0.002)
