@@ -157,16 +157,15 @@ def _camera_of(pid: int, files: dict[str, Path]) -> str | None:
     return None
 
 
-def _read_share(pid: int, path: Path) -> float:
-    """How far process ``pid`` has read its open file ``path`` (its offset over the file's
-    size; 1 once it is closed: read to its end)."""
-    with contextlib.suppress(OSError):
-        for fd in Path(f"/proc/{pid}/fd").iterdir():
-            with contextlib.suppress(OSError, IndexError, ValueError):
-                if os.readlink(fd) == str(path):
-                    info = Path(f"/proc/{pid}/fdinfo/{fd.name}").read_text()
-                    return int(info.split()[1]) / path.stat().st_size
-    return 1.0
+def _bytes_read(pid: int) -> int:
+    """Bytes process ``pid`` has read so far (``rchar`` of /proc/PID/io: read and pread
+    alike; its file's offset does not tell, OpenCV's AVI reader leaving it at the index it
+    read at the file's end); -1 once it is gone."""
+    try:
+        with open(f"/proc/{pid}/io") as f:
+            return next(int(line.split()[1]) for line in f if line.startswith("rchar:"))
+    except (OSError, StopIteration, ValueError):
+        return -1
 
 
 def _blocked_in_pipe_write(pid: int) -> bool:
@@ -238,20 +237,25 @@ def test_camera_killed_at_some_moment(recording, after_s):
     pids = rec.camera_pids()
     victim = CAMERAS[int(after_s * 10) % 3]
     deadline = time.monotonic() + after_s
-    read = _read_share(pids[victim], rec.files[victim])
+    size = rec.files[victim].stat().st_size
+    start = _bytes_read(pids[victim])
+
+    def read_share() -> float:  # of its clip, since its file was open
+        now = _bytes_read(pids[victim])
+        return 1.0 if now < 0 else (now - start) / size
+
+    read = read_share()
     held = False
     try:
-        while time.monotonic() < deadline and not 0.5 <= read < 0.95:
-            if not held and 0.25 <= read < 0.95:
+        while time.monotonic() < deadline and read < 0.5:
+            if not held and read >= 0.25:
                 # the recorder is held from a quarter of the victim's clip: the victim then
                 # reads at most its queue and pipe (~33 frames, 27 %) further and cannot end
-                # before the kill, however briefly this process is scheduled (a loaded
-                # machine once saw the whole clip read between two looks)
+                # before the kill, however briefly this process is scheduled
                 os.kill(rec.proc.pid, signal.SIGSTOP)
                 held = True
             time.sleep(0.002)
-            # (an offset near the end while it opens the file: the AVI's index is read there)
-            read = _read_share(pids[victim], rec.files[victim])
+            read = read_share()
         assert _alive(pids[victim]), f"{victim} ended before the kill:\n{rec.stderr}"
         os.kill(pids[victim], signal.SIGKILL)
     finally:
@@ -278,10 +282,12 @@ def _signal_a_writing_camera(rec: Recording, sig: int, order: tuple[str, ...]
     pids = rec.camera_pids()
     deadline = time.monotonic() + 60
     # once every camera is sending (past the recorder's start), the recorder is held:
-    # behind its cameras, whose pipes fill. (Not while a camera still opens its file: the
-    # AVI's index is read at its end, an offset above 0.95 then; held there, the recorder
-    # never started the cameras and none ever wrote: seen once on a quiet fresh clone)
-    while not all(0.05 < _read_share(pids[name], rec.files[name]) < 0.95 for name in order):
+    # behind its cameras, whose pipes fill. (Not before each has read three frames: held
+    # while they still opened their files, the recorder never started them and none ever
+    # wrote: seen on a quiet fresh clone)
+    start = {name: _bytes_read(pids[name]) for name in order}
+    frame = rec.files[order[0]].stat().st_size / N_FRAMES
+    while not all(_bytes_read(pids[name]) - start[name] > 3 * frame for name in order):
         assert rec.proc.poll() is None, f"recorder ended before the signal:\n{rec.stderr}"
         assert time.monotonic() < deadline, f"the cameras did not start:\n{rec.stderr}"
         time.sleep(0.002)
