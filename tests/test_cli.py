@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from importlib.util import find_spec
+from pathlib import Path
 
 from pslog.cli import COMMANDS
 
@@ -36,58 +38,27 @@ def test_core_never_imports_recorders_or_viewers():
     assert "LAYERS []" in result.stdout, result.stdout + result.stderr
 
 
-#: each command's ``--help`` in a process of its own forked from one that imported only
-#: ``pslog.cli`` (what the console script imports first): a parser that worked only because
-#: another pslog module was imported (by the test's process, or an earlier command) fails
-_HELP_FORKS = r"""
-import json, os, sys
-from pslog.cli import COMMANDS, main
-
-folder = sys.argv[1]
-for name in COMMANDS:
-    out = os.path.join(folder, name)
-    pid = os.fork()
-    if pid == 0:
-        code = 1
-        try:
-            for fd, suffix in ((1, ".out"), (2, ".err")):
-                f = os.open(out + suffix, os.O_WRONLY | os.O_CREAT)
-                os.dup2(f, fd)
-                os.close(f)
-            try:
-                code = main([name, "--help"])
-            except SystemExit as exc:
-                code = exc.code if isinstance(exc.code, int) else int(exc.code is not None)
-            except BaseException:
-                import traceback
-                traceback.print_exc()
-            sys.stdout.flush()
-            sys.stderr.flush()
-        finally:
-            os._exit(code)
-    _, status = os.waitpid(pid, 0)
-    print(json.dumps([name, os.waitstatus_to_exitcode(status)]), flush=True)
-"""
-
-
 def test_every_command_module_exists_and_has_help(tmp_path):
-    import json
+    from test_readme import _Forks
 
     for module, _ in COMMANDS.values():
         assert find_spec(f"pslog.cli.{module}") is not None, module
-    # one real process of the entry point; each command's parser in a fresh fork (~0.4 CPU s
-    # of interpreter start-up each saved)
+    # one real process of the entry point; each command's parser in a process of its own
+    # forked from one that imported no pslog module but pslog.cli (test_readme's runner: a
+    # parser that worked only because another pslog module was imported fails; ~0.4 CPU s of
+    # interpreter start-up saved per command)
     result = run("fuse", "--help")
     assert result.returncode == 0 and "pslog fuse" in result.stdout, result.stderr
-    forks = subprocess.run([sys.executable, "-P", "-c", _HELP_FORKS, str(tmp_path)],
-                           capture_output=True, text=True, timeout=120)
-    assert forks.returncode == 0, forks.stderr
-    codes = dict(json.loads(line) for line in forks.stdout.splitlines())
-    assert list(codes) == list(COMMANDS)
-    for name, code in codes.items():
-        err = (tmp_path / f"{name}.err").read_text()
-        assert code == 0 and "Traceback" not in err, (name, err)
-        assert f"pslog {name}" in (tmp_path / f"{name}.out").read_text()
+    work = tmp_path / "work"
+    work.mkdir()
+    forks = _Forks(work, dict(os.environ), Path(sys.executable).parent / "pslog", 120)
+    try:
+        for n, name in enumerate(COMMANDS):
+            got = forks.run(f"pslog {name} --help", n)
+            assert got.returncode == 0 and "Traceback" not in got.stderr, (name, got.stderr)
+            assert f"pslog {name}" in got.stdout
+    finally:
+        forks.close()
 
 
 def test_unknown_command_and_bad_values_are_one_line_usage_errors():
