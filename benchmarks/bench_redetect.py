@@ -15,10 +15,18 @@ this repository (exported by ``git archive`` into a temporary folder), interleav
 round after one untimed warm-up run of each (numba's cache of a fresh copy is cold); the
 figures of this checkout and of each base are then printed paired, with the load average
 of the machine before and after (the pairs hold on a shared machine, the figures alone
-do not); ``--session FILE`` re-detects a given session. The
-floors of any exact OpenCV re-detection are printed beside them: the same JPEGs only
-decoded by ``cv2.imdecode`` in two processes (read beforehand, nothing pickled), and
-decoded and detected (with the compiled screen from 2000 frames on, as redetect does).
+do not); ``--session FILE`` re-detects a given session. ``pslog redetect --fast`` (frames
+decoded at half size) is timed beside it. The floors are printed in the same run: the
+same JPEGs (read beforehand, nothing pickled) decoded by ``cv2.imdecode`` in two processes
+that keep freed memory as redetect's workers do (without it each frame's page faults cost
+as much as its decoding): whole (the floor of any exact re-detection with OpenCV's
+decoder), whole and detected (with the compiled screen from 2000 frames on, as redetect
+does), at half size (DCT scaling: ``--fast``'s decode), at half size and detected as
+``--fast`` does, and at 1/8 (the blocks' means: little but the entropy decoding, which
+every decode of every pixel or coefficient pays).
+
+``--accuracy SESSION...`` only compares ``--fast``'s candidates to the exact ones, frame by
+frame (and both to the truth's projection where the session holds it).
 
 The detector's compiled screen is used from 2000 frames on (``recorders.redetect``):
 ``--seconds 24`` (2160 frames, about 550 MB) measures it.
@@ -35,7 +43,7 @@ machine only the CPU figure and the paired ratios hold.
 
 Target (issue 12): >= 400 frames/s on two cores.
 Run: ``python benchmarks/bench_redetect.py [--seconds 6] [--rounds 2] [--quick] [--base DIR]
-[--session FILE]``
+[--session FILE] [--accuracy SESSION...]``
 """
 
 from __future__ import annotations

@@ -37,6 +37,14 @@ OpenCV and numpy once (about 0.12 s, before the workers are forked: they inherit
 Every frame is still decoded whole and detected exactly as before (the tests compare the
 candidates to the last bit): the decode and detection alone bound two cores to about
 450 frames/s (500 compiled), before the session is read and written.
+
+Faster exact decoders were measured and none is (session 19, CPU per 1280 x 720 frame,
+one process, load 12-20): ``simplejpeg`` (libjpeg-turbo bundled) gives the same pixels at
+the same cost as ``cv2.imdecode`` once freed memory is kept (4.5-5.4 ms both; without
+:func:`_keep_freed_memory` OpenCV's page faults doubled its cost), Pillow 6.3 ms; the
+frames are 4:4:4 (no half-size chroma to keep). What no DCT scaling removes is the entropy
+decoding: the 1/8 decode (the blocks' means) still costs 2.8-3.3 ms, 60-70 % of a full
+one. ``fast`` (:class:`_Redetector`) trades exactness for the 1/2 decode's saving.
 """
 
 from __future__ import annotations
@@ -117,7 +125,7 @@ def redetect_session(src: str | Path, dst: str | Path, hsv: HsvRange | None = No
     force : overwrite ``dst``
     workers : processes decoding and detecting (default: all cores for large sessions)
     fast : detect in each frame decoded at half its size (:class:`_Redetector`): about a
-        third less work, not the same candidates (centroids about 0.35 px RMS apart)
+        fifth less CPU, not the same candidates (centroids 0.14-0.27 px RMS apart)
     """
     from pslog.log import copy_session, read_session
 
@@ -575,7 +583,7 @@ class _HalfSizeDetector(BallDetector):
     roundness, score) are in full-size pixels and the mask's edge falls between the
     half-size pixels, as the full-size frame's does: centroids about 0.25 px RMS from the
     truth on 1280 x 720 frames against 0.37 when thresholded at half size (the exact
-    re-detection: 0.16)."""
+    re-detection: 0.17)."""
 
     #: half-size pixel (x, y) -> full-size pixel: (2 x + 1/2, 2 y + 1/2)
     _UP = np.array([[2.0, 0.0, 0.5], [0.0, 2.0, 0.5]])
@@ -601,9 +609,11 @@ class _Redetector:
     ``fast``: the frame decoded at half its width and height by libjpeg's DCT scaling
     (``cv2.IMREAD_REDUCED_COLOR_2``: the 4 x 4 inverse DCT of each block's lowest
     frequencies, no full-size image made; the entropy decoding of every coefficient, most
-    of a decode's cost, stays) and detected by :class:`_HalfSizeDetector`: about a quarter
-    less work per frame; not the exact candidates (``benchmarks/bench_redetect.py
-    --accuracy``: centroids about 0.25 px RMS from the exact ones on 1280 x 720 frames).
+    of a decode's cost, stays) and detected by :class:`_HalfSizeDetector`: about a fifth
+    less CPU per 1280 x 720 frame; not the exact candidates (``benchmarks/bench_redetect.py
+    --accuracy``, five synthetic sessions of two rigs, ball sizes and motion blur: centroids
+    0.14-0.27 px RMS from the exact ones, no bias; 0 to 0.09 px RMS further from the truth;
+    radii 0.1-0.3 px smaller; one frame of 1,125 had one candidate fewer).
     """
 
     def __init__(self, hsv: HsvRange, max_candidates: int, compiled: bool,
