@@ -148,14 +148,14 @@ def test_compiled_screen_and_small_windows_give_the_same_session(tmp_path, monke
     assert plain and fast and not plain & fast and str(os.getpid()) not in plain | fast
 
 
-def _recording_detect_chunks(src, chunks, cameras, hsv, max_candidates, compiled):
+def _recording_detect_chunks(src, chunks, cameras, hsv, max_candidates, compiled, fast):
     """:func:`redetect._detect_chunks`, noting its process and screen in a file."""
     from recorders import redetect
 
     with open(os.environ["PSLOG_TEST_TASKS"], "a") as f:
         f.write(f"{os.getpid()} {compiled}\n")
-    return redetect._read_and_detect(src, chunks, cameras, redetect.BallDetector(
-        hsv, max_candidates, compiled=compiled))
+    return redetect._read_and_detect(src, chunks, cameras, redetect._Redetector(
+        hsv, max_candidates, compiled, fast))
 
 
 def _copy_and_its_image_chunk(path: Path):
@@ -213,7 +213,9 @@ def test_images_read_in_place_are_those_of_iter_images_in_the_same_order():
             seen.append(frame)
             return redetect.BallDetector().detect(frame)
 
-    parts = [redetect._read_and_detect(SAMPLE, chunks, plan.cameras, _Keep())
+    keep = redetect._Redetector(HsvRange(), 5, False)
+    keep.detector = _Keep()
+    parts = [redetect._read_and_detect(SAMPLE, chunks, plan.cameras, keep)
              for chunks in plan.tasks]
     key = np.concatenate([p.key for p in parts])
     order = np.lexsort(key.T[::-1])
