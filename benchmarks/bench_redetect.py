@@ -271,15 +271,16 @@ def main() -> None:
                   f"idle cores, {per_cpu2 / 2:4.0f} per core ({1e3 * cpu / n:.2f} CPU-ms/frame"
                   f"{split})   this checkout {ours[0] / per_wall:.2f} x, "
                   f"{ours[1] / per_cpu2:.2f} x")
-        if args.base:
+        if args.base or not args.exact_only:
             print(f"paired, round by round (load average {load:.1f} before, "
                   f"{os.getloadavg()[0]:.1f} after, {os.cpu_count()} cores):")
             ours_rounds = per_round["redetect (this checkout)"]
             for name in runs:
-                if not name.startswith("redetect of"):
+                if not name.startswith(("redetect of", "redetect --fast")):
                     continue
                 for r, (a, b) in enumerate(zip(per_round[name], ours_rounds, strict=True)):
-                    print(f"  round {r + 1}: {name[12:]} {a[0] / a[1]:5.0f} frames/s wall, "
+                    print(f"  round {r + 1}: {name.removeprefix('redetect of ')} "
+                          f"{a[0] / a[1]:5.0f} frames/s wall, "
                           f"{1e3 * a[2] / a[0]:.2f} CPU-ms/frame; this checkout "
                           f"{b[0] / b[1]:5.0f} frames/s wall, {1e3 * b[2] / b[0]:.2f} "
                           f"CPU-ms/frame: {(b[0] / b[1]) / (a[0] / a[1]):.2f} x wall, "
