@@ -163,9 +163,9 @@ def redetect_session(src: str | Path, dst: str | Path, hsv: HsvRange | None = No
     with _detecting(src, session.rig.names, row_of, hsv, max_candidates, workers,
                     session.n_images, fast) as (batches, checked, layout_of):
         # (the image chunks the workers read: copied without decompressing them here)
-        metadata = {"detector_hsv": hsv.text()}
-        if fast:  # says how the candidates were made (a reader can tell them apart)
-            metadata["detector_decode"] = "half size (pslog redetect --fast)"
+        # says how the candidates were made (a re-detection of a --fast output drops it)
+        metadata = {"detector_hsv": hsv.text(),
+                    "detector_decode": "half size (pslog redetect --fast)" if fast else None}
         copy_session(src, dst, detections=detections, metadata=metadata,
                      checked_chunks=checked, layouts=layout_of, force=force)
     redone, new = done["redone"], done["new"]

@@ -430,6 +430,9 @@ def test_fast_is_near_the_exact_detections_and_the_truth(tmp_path, monkeypatch):
     a, b = read_session(exact), read_session(fast)
     assert b.metadata["detector_decode"].startswith("half size")
     assert "detector_decode" not in a.metadata
+    again = tmp_path / "again.mcap"  # an exact re-detection of it no longer says half size
+    redetect_session(fast, again, workers=1)
+    assert "detector_decode" not in read_session(again).metadata
     da, db = a.detections, b.detections
     assert_array_equal(db.candidates_per_frame() > 0, da.candidates_per_frame() > 0)
     assert np.count_nonzero(db.candidates_per_frame()) == 135
