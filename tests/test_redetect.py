@@ -421,7 +421,8 @@ def test_fast_is_near_the_exact_detections_and_the_truth(tmp_path, monkeypatch):
     size) through the CLI: every frame keeps its candidate, in full-size pixels, near the
     exact re-detection's (0.24 px RMS measured, no bias) and as near the truth as it (0.26
     px RMS both; thresholding the half-size pixels themselves gave 0.49, a missing half
-    pixel's offset in the mapping a 0.5 px bias); worker processes give the same."""
+    pixel's offset in the mapping a 0.5 px bias); worker processes with the compiled screen
+    give the same."""
     from recorders import redetect
 
     exact, fast, pool = tmp_path / "exact.mcap", tmp_path / "fast.mcap", tmp_path / "pool.mcap"
@@ -456,6 +457,7 @@ def test_fast_is_near_the_exact_detections_and_the_truth(tmp_path, monkeypatch):
         errors[name] = np.sqrt(np.mean(np.sum(np.concatenate(err) ** 2, axis=1)))
     assert errors["exact"] < 0.3 and errors["fast"] < 0.35, errors
     monkeypatch.setattr(redetect, "_PARALLEL_FROM", 0)  # the sample has only 135 frames
+    monkeypatch.setattr(redetect, "_COMPILED_FROM", 0)  # and the compiled screen's step 1
     redetect_session(SAMPLE, pool, workers=2, fast=True)
     c = read_session(pool).detections
     for name in ("cand_frame", "cand_uv", "cand_radius", "cand_score"):
