@@ -124,8 +124,8 @@ def redetect_session(src: str | Path, dst: str | Path, hsv: HsvRange | None = No
     max_candidates : K, candidates kept per frame
     force : overwrite ``dst``
     workers : processes decoding and detecting (default: all cores for large sessions)
-    fast : detect in each frame decoded at half its size (:class:`_Redetector`): about a
-        fifth less CPU, not the same candidates (centroids 0.14-0.27 px RMS apart)
+    fast : detect in each frame decoded at half its size (:class:`_Redetector`): 10-20 %
+        less CPU, not the same candidates (centroids 0.14-0.27 px RMS apart)
     """
     from pslog.log import copy_session, read_session
 
@@ -609,9 +609,9 @@ class _Redetector:
     ``fast``: the frame decoded at half its width and height by libjpeg's DCT scaling
     (``cv2.IMREAD_REDUCED_COLOR_2``: the 4 x 4 inverse DCT of each block's lowest
     frequencies, no full-size image made; the entropy decoding of every coefficient, most
-    of a decode's cost, stays) and detected by :class:`_HalfSizeDetector`: about a fifth
-    less CPU per 1280 x 720 frame; not the exact candidates (``benchmarks/bench_redetect.py
-    --accuracy``, five synthetic sessions of two rigs, ball sizes and motion blur: centroids
+    of a decode's cost, stays) and detected by :class:`_HalfSizeDetector`: 10-20 % less
+    CPU per 1280 x 720 frame (1.11-1.24x paired, ``benchmarks/bench_redetect.py``); not
+    the exact candidates (``bench_redetect.py --accuracy``, five synthetic sessions of two rigs, ball sizes and motion blur: centroids
     0.14-0.27 px RMS from the exact ones, no bias; 0 to 0.09 px RMS further from the truth;
     radii 0.1-0.3 px smaller; one frame of 1,125 had one candidate fewer).
     """

@@ -14,8 +14,8 @@ Frames recorded without an image (--no-frames) cannot be re-detected.
 
 By default every frame is decoded whole and the candidates are exactly those the detector
 finds in it. --fast detects in each frame decoded at half its width and height (JPEG's DCT
-scaling), each ball's region brought back to full size before it is thresholded: about a
-fifth less CPU per 1280 x 720 frame, centroids 0.14-0.27 px RMS from the exact ones (no
+scaling), each ball's region brought back to full size before it is thresholded: 10-20 %
+less CPU per 1280 x 720 frame, centroids 0.14-0.27 px RMS from the exact ones (no
 bias; up to 0.09 px further from the truth on synthetic sessions), radii about 0.1-0.3 px
 smaller: for quick looks at new settings, not for the final detections.
 """
@@ -41,8 +41,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"processes decoding and detecting, at most {MAX_WORKERS} "
                              f"(default: all cores for large sessions)")
     parser.add_argument("--fast", action="store_true",
-                        help="detect in frames decoded at half size: about a fifth less "
-                             "CPU, centroids 0.14-0.27 px RMS from the exact ones")
+                        help="detect in frames decoded at half size: 10-20%% less CPU, "
+                             "centroids 0.14-0.27 px RMS from the exact ones")
     add_force(parser)
     declare_files(parser, inputs=("session",), outputs=("output",))
 
