@@ -611,9 +611,10 @@ class _Redetector:
     frequencies, no full-size image made; the entropy decoding of every coefficient, most
     of a decode's cost, stays) and detected by :class:`_HalfSizeDetector`: 10-20 % less
     CPU per 1280 x 720 frame (1.11-1.24x paired, ``benchmarks/bench_redetect.py``); not
-    the exact candidates (``bench_redetect.py --accuracy``, five synthetic sessions of two rigs, ball sizes and motion blur: centroids
-    0.14-0.27 px RMS from the exact ones, no bias; 0 to 0.09 px RMS further from the truth;
-    radii 0.1-0.3 px smaller; one frame of 1,125 had one candidate fewer).
+    the exact candidates (``bench_redetect.py --accuracy``, five synthetic sessions of two
+    rigs, ball sizes and motion blur: centroids 0.14-0.27 px RMS from the exact ones, no
+    bias; 0 to 0.09 px RMS further from the truth; radii 0.1-0.3 px smaller; one frame of
+    1,125 had one candidate fewer).
     """
 
     def __init__(self, hsv: HsvRange, max_candidates: int, compiled: bool,
