@@ -15,10 +15,18 @@ this repository (exported by ``git archive`` into a temporary folder), interleav
 round after one untimed warm-up run of each (numba's cache of a fresh copy is cold); the
 figures of this checkout and of each base are then printed paired, with the load average
 of the machine before and after (the pairs hold on a shared machine, the figures alone
-do not); ``--session FILE`` re-detects a given session. The
-floors of any exact OpenCV re-detection are printed beside them: the same JPEGs only
-decoded by ``cv2.imdecode`` in two processes (read beforehand, nothing pickled), and
-decoded and detected (with the compiled screen from 2000 frames on, as redetect does).
+do not); ``--session FILE`` re-detects a given session. ``pslog redetect --fast`` (frames
+decoded at half size) is timed beside it. The floors are printed in the same run: the
+same JPEGs (read beforehand, nothing pickled) decoded by ``cv2.imdecode`` in two processes
+that keep freed memory as redetect's workers do (without it each frame's page faults cost
+as much as its decoding): whole (the floor of any exact re-detection with OpenCV's
+decoder), whole and detected (with the compiled screen from 2000 frames on, as redetect
+does), at half size (DCT scaling: ``--fast``'s decode), at half size and detected as
+``--fast`` does, and at 1/8 (the blocks' means: little but the entropy decoding, which
+every decode of every pixel or coefficient pays).
+
+``--accuracy SESSION...`` only compares ``--fast``'s candidates to the exact ones, frame by
+frame (and both to the truth's projection where the session holds it).
 
 The detector's compiled screen is used from 2000 frames on (``recorders.redetect``):
 ``--seconds 24`` (2160 frames, about 550 MB) measures it.
@@ -35,7 +43,7 @@ machine only the CPU figure and the paired ratios hold.
 
 Target (issue 12): >= 400 frames/s on two cores.
 Run: ``python benchmarks/bench_redetect.py [--seconds 6] [--rounds 2] [--quick] [--base DIR]
-[--session FILE]``
+[--session FILE] [--accuracy SESSION...]``
 """
 
 from __future__ import annotations
@@ -56,7 +64,8 @@ from pslog.cli import main
 out = io.StringIO()
 c0, t = os.times(), time.perf_counter()
 with contextlib.redirect_stdout(out):
-    rc = main(["redetect", sys.argv[1], "-o", sys.argv[2], "--workers", "2", "--force"])
+    rc = main(["redetect", sys.argv[1], "-o", sys.argv[2], "--workers", "2", "--force"]
+              + (["--fast"] if sys.argv[3] == "fast" else []))
 wall = time.perf_counter() - t
 c = os.times()  # the workers have been joined: their CPU time is in children_*
 assert rc == 0, rc
@@ -73,11 +82,23 @@ from recorders.detect import BallDetector
 BLOBS = []
 DETECT = sys.argv[3] == "detect"
 
+FLAG = {"decode": cv2.IMREAD_COLOR, "detect": cv2.IMREAD_COLOR,
+        "half": cv2.IMREAD_REDUCED_COLOR_2, "eighth": cv2.IMREAD_REDUCED_COLOR_8,
+        "fast": cv2.IMREAD_REDUCED_COLOR_2}[sys.argv[3]]
+
 def decode(part):
+    from recorders.redetect import _keep_freed_memory, _Redetector
+    from recorders.detect import HsvRange
     cv2.setNumThreads(1)
-    detector = BallDetector(compiled=len(BLOBS) >= 2000)  # as redetect does
+    _keep_freed_memory()  # as redetect's workers (else each frame page-faults its buffers)
+    compiled = len(BLOBS) >= 2000  # as redetect does
+    detector = BallDetector(compiled=compiled)
+    fast = _Redetector(HsvRange(), 5, compiled, fast=True)
     for b in BLOBS[part::2]:  # inherited from the parent by fork: nothing pickled
-        frame = cv2.imdecode(np.frombuffer(b, np.uint8), cv2.IMREAD_COLOR)
+        if sys.argv[3] == "fast":
+            fast(b)
+            continue
+        frame = cv2.imdecode(np.frombuffer(b, np.uint8), FLAG)
         if DETECT:
             detector.detect(frame)
     return len(BLOBS[part::2])
@@ -132,6 +153,55 @@ def _run(code: str, checkout: Path, *args: str) -> tuple[int, float, float, floa
     return int(out[0]), float(out[1]), float(out[2]), float(out[3])
 
 
+def accuracy(paths: list[Path]) -> None:
+    """``pslog redetect --fast`` against the exact re-detection, frame by frame, on each
+    session of ``paths``: frames whose number of candidates differs, the distance between
+    the best candidates (RMS, 99th percentile, largest; mean offset per axis), the mean
+    radius difference, and, where the session holds the truth (synthetic), each one's
+    distance to the truth's projection at the frame's time (the exposure's centre)."""
+    import numpy as np
+
+    sys.path.insert(0, str(ROOT))
+    from pslog.log import iter_images, read_session
+    from recorders.detect import HsvRange
+    from recorders.redetect import _Redetector
+
+    exact, fast = _Redetector(HsvRange(), 5, False), _Redetector(HsvRange(), 5, False, True)
+    print("redetect --fast against the exact re-detection (best candidate of each frame):")
+    for path in paths:
+        session = read_session(path)
+        truth = session.truth
+        d, dr, te, tf, fewer, more, n, size = [], [], [], [], 0, 0, 0, None
+        for image in iter_images(path):
+            n += 1
+            (uv, radius, _), (fuv, fradius, _) = exact(image.data), fast(image.data)
+            fewer += len(fuv) < len(uv)
+            more += len(fuv) > len(uv)
+            if not (len(uv) and len(fuv)):
+                continue
+            d.append(fuv[0] - uv[0])
+            dr.append(fradius[0] - radius[0])
+            if truth is not None and len(truth) > 1:
+                xyz = np.array([np.interp(image.time_ns, truth.time_ns, truth.position_world[:, k])
+                                for k in range(3)])
+                camera = session.rig.cameras[image.camera]
+                size = (camera.width, camera.height)
+                px = camera.project(xyz[None])[0][0]
+                te.append(np.linalg.norm(uv[0] - px))
+                tf.append(np.linalg.norm(fuv[0] - px))
+        e = np.array(d).reshape(-1, 2)
+        dist = np.linalg.norm(e, axis=1)
+        line = (f"  {path.name}: {n} frames {size or ''}, candidates fewer {fewer} more {more}; "
+                f"best candidate {np.sqrt(np.mean(dist ** 2)):.3f} px RMS apart (99 % "
+                f"{np.percentile(dist, 99):.3f}, max {dist.max():.3f}, mean offset "
+                f"{e[:, 0].mean():+.3f}, {e[:, 1].mean():+.3f}), radius "
+                f"{np.mean(dr):+.3f} px")
+        if te:
+            line += (f"; from the truth: exact {np.sqrt(np.mean(np.square(te))):.3f} px RMS, "
+                     f"fast {np.sqrt(np.mean(np.square(tf))):.3f}")
+        print(line, flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=6.0, help="session length (3 x 30 fps)")
@@ -143,17 +213,31 @@ def main() -> None:
                         help="re-detect this session instead of recording one")
     parser.add_argument("--quick", action="store_true", help="a 4.5 s session, one round")
     parser.add_argument("--json", type=Path, default=None, help="write the rows as JSON")
+    parser.add_argument("--exact-only", action="store_true",
+                        help="neither --fast nor the reduced-size floors (the suite's quick run)")
+    parser.add_argument("--accuracy", type=Path, nargs="+", default=None, metavar="SESSION",
+                        help="only compare --fast's candidates to the exact ones on these "
+                             "sessions (no timing)")
     args = parser.parse_args()
+    if args.accuracy:
+        accuracy(args.accuracy)
+        return
     if args.quick:
         args.seconds, args.rounds = 4.5, 1
     with tempfile.TemporaryDirectory() as tmp:
         session = args.session or Path(tmp) / "hd.mcap"
         if args.session is None:
             _record(session, args.seconds)
-        runs = {"floor: decode only": (_DECODE, ROOT, "decode"),
-                "floor: decode + detect": (_DECODE, ROOT, "detect")}
+        runs = {} if args.exact_only else {
+            "floor: decode 1/8 (entropy)": (_DECODE, ROOT, "eighth"),
+            "floor: decode 1/2": (_DECODE, ROOT, "half"),
+            "floor: decode 1/2 + detect": (_DECODE, ROOT, "fast")}
+        runs["floor: decode only"] = (_DECODE, ROOT, "decode")
+        runs["floor: decode + detect"] = (_DECODE, ROOT, "detect")
         for base in args.base:
             runs[f"redetect of {base}"] = (_RUN, _checkout(base, Path(tmp)), "")
+        if not args.exact_only:
+            runs["redetect --fast"] = (_RUN, ROOT, "fast")
         runs["redetect (this checkout)"] = (_RUN, ROOT, "")
         for _code, checkout, _what in runs.values():
             _compile(checkout)
@@ -161,7 +245,7 @@ def main() -> None:
         per_round: dict[str, list[tuple[int, float, float, float]]] = {n: [] for n in runs}
         if args.base:  # warm numba's cache of every checkout, untimed
             for code, checkout, what in runs.values():
-                if code is _RUN:
+                if code is _RUN and what != "fast":
                     _run(code, checkout, str(session), str(Path(tmp) / "out.mcap"), what)
         load = os.getloadavg()[0]
         for _ in range(args.rounds):
@@ -187,15 +271,16 @@ def main() -> None:
                   f"idle cores, {per_cpu2 / 2:4.0f} per core ({1e3 * cpu / n:.2f} CPU-ms/frame"
                   f"{split})   this checkout {ours[0] / per_wall:.2f} x, "
                   f"{ours[1] / per_cpu2:.2f} x")
-        if args.base:
+        if args.base or not args.exact_only:
             print(f"paired, round by round (load average {load:.1f} before, "
                   f"{os.getloadavg()[0]:.1f} after, {os.cpu_count()} cores):")
             ours_rounds = per_round["redetect (this checkout)"]
             for name in runs:
-                if not name.startswith("redetect of"):
+                if not name.startswith(("redetect of", "redetect --fast")):
                     continue
                 for r, (a, b) in enumerate(zip(per_round[name], ours_rounds, strict=True)):
-                    print(f"  round {r + 1}: {name[12:]} {a[0] / a[1]:5.0f} frames/s wall, "
+                    print(f"  round {r + 1}: {name.removeprefix('redetect of ')} "
+                          f"{a[0] / a[1]:5.0f} frames/s wall, "
                           f"{1e3 * a[2] / a[0]:.2f} CPU-ms/frame; this checkout "
                           f"{b[0] / b[1]:5.0f} frames/s wall, {1e3 * b[2] / b[0]:.2f} "
                           f"CPU-ms/frame: {(b[0] / b[1]) / (a[0] / a[1]):.2f} x wall, "
@@ -204,12 +289,16 @@ def main() -> None:
               f"({ours[1]:.0f}, from CPU time; the floors are what any exact re-detection "
               f"with OpenCV's JPEG decoder costs before reading and writing the session)")
         if args.json is not None:
+            fast = ""
+            if "redetect --fast" in totals:
+                n, _, cpu, _ = totals["redetect --fast"]
+                fast = f"; --fast (half-size decode, not exact) {2 * n / cpu:.0f}"
             n, _, cpu, _ = totals["floor: decode only"]
             args.json.write_text(json.dumps({"rows": [{
                 "stage": "redetect 1280x720", "figure": ours[1], "unit": "frames/s",
                 "target": ">= 400 (2 cores)", "ok": ours[1] >= 400,
                 "peer": "JPEG decode only", "peer_figure": 2 * n / cpu, "better": "higher",
-                "note": f"{frames} frames, {args.rounds} round(s), from CPU time"}]}))
+                "note": f"{frames} frames, {args.rounds} round(s), from CPU time" + fast}]}))
 
 
 if __name__ == "__main__":

@@ -315,7 +315,11 @@ class BallDetector:
     def _fine(self, frame_bgr: np.ndarray, x0: int, y0: int, x1: int, y1: int) -> np.ndarray:
         """Components of the full-resolution mask in a box: rows (n, 5) of
         u, v (frame pixels), area, roundness, fill."""
-        roi = frame_bgr[y0:y1, x0:x1]
+        return self._components(frame_bgr[y0:y1, x0:x1], x0, y0)
+
+    def _components(self, roi: np.ndarray, x0: int, y0: int) -> np.ndarray:
+        """:meth:`_fine` of ``roi`` (h, w, 3) uint8 BGR, whose pixel (0, 0) is the frame's
+        pixel (x0, y0)."""
         mask = self.hsv.mask(cv2.cvtColor(roi, cv2.COLOR_BGR2HSV))
         _, labels, stats, centroids = cv2.connectedComponentsWithStats(mask, connectivity=8)
         keep = np.flatnonzero(stats[1:, cv2.CC_STAT_AREA] >= self.min_area) + 1

@@ -11,6 +11,13 @@ Re-run ball detection over the JPEG frames stored in a session, with new setting
 write a new session: frames, calibration, poses, truth, events, fused tracks and metadata
 are copied as stored; only the detections change. The result fuses like any session.
 Frames recorded without an image (--no-frames) cannot be re-detected.
+
+By default every frame is decoded whole and the candidates are exactly those the detector
+finds in it. --fast detects in each frame decoded at half its width and height (JPEG's DCT
+scaling), each ball's region brought back to full size before it is thresholded: 10-20 %
+less CPU per 1280 x 720 frame, centroids 0.14-0.27 px RMS from the exact ones (no
+bias; up to 0.09 px further from the truth on synthetic sessions), radii about 0.1-0.3 px
+smaller: for quick looks at new settings, not for the final detections.
 """
 
 
@@ -33,6 +40,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--workers", type=int_in(1, MAX_WORKERS), default=None, metavar="N",
                         help=f"processes decoding and detecting, at most {MAX_WORKERS} "
                              f"(default: all cores for large sessions)")
+    parser.add_argument("--fast", action="store_true",
+                        help="detect in frames decoded at half size: 10-20%% less CPU, "
+                             "centroids 0.14-0.27 px RMS from the exact ones")
     add_force(parser)
     declare_files(parser, inputs=("session",), outputs=("output",))
 
@@ -45,6 +55,6 @@ def run(args: argparse.Namespace) -> int:
     # the output was checked before run() (declare_files); the library checks it again
     summary = redetect_session(args.session, args.output, parse_hsv(args.hsv),
                                max_candidates=args.max_candidates, force=args.force,
-                               workers=args.workers)
+                               workers=args.workers, fast=args.fast)
     print(summary.text())
     return 0

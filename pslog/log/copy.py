@@ -25,7 +25,8 @@ from .writer import SessionWriter, _Block
 
 def copy_session(src, dst, *, detections: Detections | Callable[[], Detections] | None = None,
                  tracks: Sequence[Track] = (),
-                 replace_tracks: bool = True, metadata: Mapping[str, str] | None = None,
+                 replace_tracks: bool = True,
+                 metadata: Mapping[str, str | None] | None = None,
                  rig: Rig | None = None, force: bool = False,
                  rejections: Mapping | None = None, checked_chunks: Collection[int] = (),
                  layouts: Callable[[int], np.ndarray | None] | None = None
@@ -40,7 +41,8 @@ def copy_session(src, dst, *, detections: Detections | Callable[[], Detections] 
     tracks : fused tracks to add
     replace_tracks : drop every track of ``src`` (True) or only those whose method is in
         ``tracks`` (False)
-    metadata : user metadata to add or replace (e.g. the new detector settings)
+    metadata : user metadata to add or replace (e.g. the new detector settings); a key
+        given None is not copied (a setting of the source that no longer holds)
     rig : a corrected rig (same camera names, same order) replacing the session's calibration
     force : overwrite ``dst``
     rejections : method -> :class:`pslog.fusion.gating.Rejections`, the candidates the
@@ -73,7 +75,7 @@ def copy_session(src, dst, *, detections: Detections | Callable[[], Detections] 
 @contextlib.contextmanager
 def open_copy(src, dst, *, detections: Detections | Callable[[], Detections] | None = None,
               new_methods: Collection[str] = (), replace_tracks: bool = True,
-              metadata: Mapping[str, str] | None = None, rig: Rig | None = None,
+              metadata: Mapping[str, str | None] | None = None, rig: Rig | None = None,
               force: bool = False, checked_chunks: Collection[int] = (),
               layouts: Callable[[int], np.ndarray | None] | None = None
               ) -> Iterator[SessionWriter]:
@@ -109,7 +111,11 @@ def open_copy(src, dst, *, detections: Detections | Callable[[], Detections] | N
     user_meta = {k: v for k, v in meta.items()
                  if k not in S.RESERVED_KEYS and k != S.LEFT_OUT_KEY}
     user_meta["derived_from"] = src_path.name
-    user_meta.update(metadata or {})
+    for key, value in (metadata or {}).items():
+        if value is None:
+            user_meta.pop(key, None)
+        else:
+            user_meta[key] = value
 
     new_rig = rig is not None
     if rig is None:
