@@ -96,8 +96,8 @@ class LiveRun:
         progress -- no new line and no CPU time used by the run's processes (a loaded
         machine slows a run down, it does not stop it: 60 s to start at load 20) -- or
         after :data:`STUCK_TIMES` times ``timeout`` in all (a run busy for ever)."""
-        start = last = time.monotonic()
-        seen = (len(self.out), len(self.err), cpu_s(self.proc.pid))
+        start = last = looked = time.monotonic()
+        lines, used = (len(self.out), len(self.err)), cpu_s(self.proc.pid)
         with self._changed:
             while True:
                 found = check()
@@ -107,9 +107,12 @@ class LiveRun:
                     raise AssertionError(f"pslog live ended (exit {self.proc.returncode}) "
                                          f"before {what}\nstderr:\n" + "\n".join(self.err))
                 now = time.monotonic()
-                state = (len(self.out), len(self.err), cpu_s(self.proc.pid))
-                if state[:2] != seen[:2] or state[2] > seen[2] + 0.05:
-                    last, seen = now, state
+                if (len(self.out), len(self.err)) != lines:
+                    last, lines = now, (len(self.out), len(self.err))
+                elif now > looked + 1.0:  # (the processes' CPU: once a second at most)
+                    looked, cpu = now, cpu_s(self.proc.pid)
+                    if cpu > used + 0.02:
+                        last, used = now, cpu
                 if now - last > timeout or now - start > STUCK_TIMES * timeout:
                     self.proc.kill()
                     raise AssertionError(f"no {what}: {now - last:.0f} s without progress, "
