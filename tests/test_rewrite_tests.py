@@ -3,14 +3,24 @@ is the one pytest reads, with bytecode writing off, instead of rewriting the mod
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import subprocess
 import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT / "tools"))
-from rewrite_tests import rewrite  # noqa: E402
+
+
+def _tool():  # loaded by its path (tools/ is not put on the suite's sys.path)
+    spec = importlib.util.spec_from_file_location("rewrite_tests",
+                                                  ROOT / "tools" / "rewrite_tests.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+rewrite = _tool().rewrite
 
 
 def test_pytest_reads_the_written_cache_and_rewrites_nothing(tmp_path):
