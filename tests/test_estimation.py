@@ -8,6 +8,7 @@ import itertools
 import numpy as np
 import pytest
 from _rally import rally
+from _rigs import lab3_rig
 from numpy.testing import assert_allclose, assert_array_equal
 from scipy.interpolate import BSpline
 
@@ -514,24 +515,12 @@ def test_the_marginal_covariance_at_the_points_by_the_sparse_product_equals_the_
         assert_allclose(ours[i], B.T @ cov @ B, rtol=1e-10)
 
 
-def _edge_rig() -> Rig:
-    """Three 800 x 600 cameras with lens distortion whose views the ball leaves and re-enters:
-    a piece of the trajectory can start one detection before a kick."""
-    dist = np.array([-0.12, 0.03, 5e-4, -4e-4, 0.0])
-    cams = []
-    for i in range(3):
-        angle = 2 * np.pi * i / 3 - 1.2
-        eye = (1.5 + 3.4 * np.cos(angle), 1.0 + 3.0 * np.sin(angle), 2.4 + 0.2 * i)
-        R, t = look_at(eye, (1.5, 1.0, 0.6))
-        K = [[520.0 + 15 * i, 0.0, 399.5], [0.0, 520.0 + 15 * i, 299.5], [0.0, 0.0, 1.0]]
-        cams.append(Camera(f"e{i + 1}", 800, 600, K, dist, R, t, 30.0, i / 90))
-    return Rig(tuple(cams), "edge3")
-
-
 def test_an_end_segment_too_few_detections_hold_gives_no_point(monkeypatch):
     # seed 3: a piece starts with one camera's detection just before a kick, the others after
     # it; that lone detection's position along its ray is not determined by anything
-    rig = _edge_rig()
+    # three cameras with lens distortion whose views the ball leaves and re-enters: a piece
+    # of the trajectory can start one detection before a kick
+    rig = lab3_rig(rise=0.2, focal_step=15.0, prefix="e", name="edge3")
     motion, _ = rally(15, seed=3)
     detections, truth = simulate(rig, motion, 15, SimulationOptions(noise_px=0.0, seed=11))
     obs = detections.best()

@@ -17,9 +17,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _procs import cpu_s
 
 #: generous hang guard of one live run, seconds (no timing is asserted)
 HANG_S = 90.0
+#: a wait that sees progress still ends after this many times its hang guard
+STUCK_TIMES = 3
 
 
 class PointReceiver:
@@ -87,8 +90,14 @@ class LiveRun:
             self._changed.notify_all()
 
     def wait_for(self, check, what: str, timeout: float = HANG_S):
-        """Wait until ``check()`` returns something true (re-checked at every new line)."""
-        deadline = time.monotonic() + timeout
+        """Wait until ``check()`` returns something true (re-checked at every new line).
+
+        A hang guard, not a time limit: the test fails after ``timeout`` seconds without
+        progress -- no new line and no CPU time used by the run's processes (a loaded
+        machine slows a run down, it does not stop it: 60 s to start at load 20) -- or
+        after :data:`STUCK_TIMES` times ``timeout`` in all (a run busy for ever)."""
+        start = last = looked = time.monotonic()
+        lines, used = (len(self.out), len(self.err)), cpu_s(self.proc.pid)
         with self._changed:
             while True:
                 found = check()
@@ -97,12 +106,19 @@ class LiveRun:
                 if self.proc.poll() is not None and not any(t.is_alive() for t in self._readers):
                     raise AssertionError(f"pslog live ended (exit {self.proc.returncode}) "
                                          f"before {what}\nstderr:\n" + "\n".join(self.err))
-                left = deadline - time.monotonic()
-                if left <= 0:
+                now = time.monotonic()
+                if (len(self.out), len(self.err)) != lines:
+                    last, lines = now, (len(self.out), len(self.err))
+                elif now > looked + 1.0:  # (the processes' CPU: once a second at most)
+                    looked, cpu = now, cpu_s(self.proc.pid)
+                    if cpu > used + 0.02:
+                        last, used = now, cpu
+                if now - last > timeout or now - start > STUCK_TIMES * timeout:
                     self.proc.kill()
-                    raise AssertionError(f"no {what} within {timeout} s\nstderr:\n"
+                    raise AssertionError(f"no {what}: {now - last:.0f} s without progress, "
+                                         f"{now - start:.0f} s in all\nstderr:\n"
                                          + "\n".join(self.err))
-                self._changed.wait(min(left, 0.2))
+                self._changed.wait(0.2)
 
     def wait_err(self, pattern: str, timeout: float = HANG_S, start: int = 0) -> re.Match:
         rx = re.compile(pattern)

@@ -112,7 +112,7 @@ _PLAIN = re.compile(r"pslog [^|&;<>()'\"`$*?\\]*")
 
 #: the forking runner of the plain ``pslog`` lines (see :class:`_Forks`)
 _ZYGOTE = r"""
-import importlib, json, os, signal, sys, traceback
+import importlib, importlib.util, json, os, signal, sys, traceback
 
 from pslog.cli import main  # what the console script imports first
 
@@ -122,6 +122,11 @@ from pslog.cli import main  # what the console script imports first
 for name in ("numpy", "numba", "cv2"):
     importlib.import_module(name)
 script, hang_s = sys.argv[1], int(sys.argv[2])
+# the suite's SystemExit as the interpreter treats it (tests/_exit.py), loaded by its path:
+# tests/ is not put on the commands' sys.path
+spec = importlib.util.spec_from_file_location("_exit", sys.argv[3])
+_exit = importlib.util.module_from_spec(spec)
+spec.loader.exec_module(_exit)
 print("ready", flush=True)
 for line in sys.stdin:
     job = json.loads(line)
@@ -139,7 +144,7 @@ for line in sys.stdin:
             try:
                 code = main(job["argv"])
             except SystemExit as exc:
-                code = exc.code if isinstance(exc.code, int) else int(exc.code is not None)
+                code = _exit.exit_status(exc)
             except BaseException:  # uncaught: printed as the interpreter prints it
                 traceback.print_exc()
             import atexit, threading
@@ -166,7 +171,7 @@ class _Forks:
         self.cwd = cwd
         # -P: the examples' folder not first on sys.path (a console script's is its bin folder)
         self.proc = subprocess.Popen([sys.executable, "-P", "-c", _ZYGOTE, str(script),
-                                      str(hang_s)],
+                                      str(hang_s), str(Path(__file__).with_name("_exit.py"))],
                                      cwd=cwd, env=env, stdin=subprocess.PIPE,
                                      stdout=subprocess.PIPE, text=True)
         assert self.proc.stdout.readline() == "ready\n", "the forking runner did not start"

@@ -24,6 +24,8 @@ import traceback
 import warnings
 from pathlib import Path
 
+from _exit import exit_status
+
 from .promises import HANG_S, Run
 
 
@@ -64,9 +66,7 @@ def run_inprocess(*args, cwd=None, timeout: float = HANG_S) -> Run:
             try:
                 code = main(argv)
             except SystemExit as exc:  # argparse: --help, a usage error
-                code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
-                if exc.code is not None and not isinstance(exc.code, int):
-                    print(exc.code, file=sys.stderr)
+                code = exit_status(exc)
             except _Hang:
                 raise
             except Exception:  # uncaught: the interpreter prints it and exits 1

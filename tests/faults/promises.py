@@ -14,11 +14,16 @@ import hashlib
 import os
 import subprocess
 import sys
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
-#: longest a faulty command may take before the suite calls it a hang, seconds
+#: longest a faulty command may go without progress (no CPU time used) before the suite
+#: calls it a hang, seconds: a hang guard, not a time limit (a loaded machine slows a command
+#: down, it does not stop it: the same command takes 30 s at load 20 that takes 3 idle)
 HANG_S = 60.0
+#: a command that keeps using CPU is still called hung after this many times its guard
+STUCK_TIMES = 3
 
 
 @dataclass(frozen=True)
@@ -31,17 +36,35 @@ class Run:
 
 def run_pslog(*args, cwd=None, timeout: float = HANG_S, env=None, preexec_fn=None,
               stdin=subprocess.DEVNULL) -> Run:
-    """Run ``pslog ARGS...`` as a separate process; a hang fails the test."""
+    """Run ``pslog ARGS...`` as a separate process; a hang fails the test: ``timeout``
+    seconds in which it and its child processes used no CPU (blocked: on a lock, a pipe, a
+    wait), or :data:`STUCK_TIMES` times ``timeout`` in all."""
+    from _procs import cpu_s
+
     argv = [str(a) for a in args]
     full_env = {**os.environ, **(env or {})}
     full_env.pop("PYTHONWARNINGS", None)
-    try:
-        proc = subprocess.run([sys.executable, "-m", "pslog.cli", *argv], cwd=cwd, env=full_env,
-                              capture_output=True, text=True, timeout=timeout, stdin=stdin,
-                              preexec_fn=preexec_fn)
-    except subprocess.TimeoutExpired:
-        raise AssertionError(f"pslog {' '.join(argv)} hung for more than {timeout} s") from None
-    return Run(tuple(argv), proc.returncode, proc.stdout, proc.stderr)
+    proc = subprocess.Popen([sys.executable, "-m", "pslog.cli", *argv], cwd=cwd, env=full_env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            stdin=stdin, preexec_fn=preexec_fn)
+    start = last = time.monotonic()
+    used = 0.0
+    with proc:
+        while True:
+            try:
+                out, err = proc.communicate(timeout=0.5)  # (retried: no output lost)
+                break
+            except subprocess.TimeoutExpired:
+                now, cpu = time.monotonic(), cpu_s(proc.pid)
+                if cpu > used + 0.02:
+                    last, used = now, cpu
+                if now - last > timeout or now - start > STUCK_TIMES * timeout:
+                    proc.kill()
+                    proc.communicate()
+                    raise AssertionError(
+                        f"pslog {' '.join(argv)} hung: {now - last:.0f} s without using CPU, "
+                        f"{now - start:.0f} s in all") from None
+    return Run(tuple(argv), proc.returncode, out, err)
 
 
 def assert_one_line_error(run: Run, code: int = 1, *, contains: str | tuple[str, ...] = ()) -> str:

@@ -56,10 +56,10 @@ def test_save_onto_a_full_disk(tmp_path, session, old):
         if old:
             out.write_bytes(b"an old recording")
         before = fingerprint(session, disk)
-        start = time.monotonic()
+        # a hang (blocked for ever, or for pslog's own 60-s flush timeout) is 30 s without
+        # using CPU (promises.run_pslog): the command's time on a loaded machine is not one
         run = run_pslog("view", session, "--save", out, *(["--force"] if old else []),
                         env=HEADLESS, timeout=30)
-        assert time.monotonic() - start < 30
         assert_one_line_error(run, 1, contains=(str(out), "No space left on device"))
         assert_untouched(before, session, disk)  # no partial .rrd; an old one kept
 

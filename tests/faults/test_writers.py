@@ -534,7 +534,14 @@ def test_a_closed_standard_output_is_no_traceback(inputs):
 def test_force_onto_a_session_being_recorded_is_refused(tmp_path):
     """The tester's case with a real recording: 'pslog record' writes a new session in place
     (no .partial); a 'simulate --force' onto it meanwhile is refused, and the recording
-    completes into the file the user named."""
+    completes into the file the user named.
+
+    The recording is long (60 s of frames) and stopped by a Ctrl-C once the refusal is seen:
+    a short one could end, on a loaded machine, before the refused command had even started
+    (and that command then rightly replaced it). What the file must hold is what the
+    recorder says it recorded, not a share of a duration."""
+    import re
+    import signal
     import sys
 
     from pslog.log import read_session
@@ -543,12 +550,21 @@ def test_force_onto_a_session_being_recorded_is_refused(tmp_path):
     out = tmp_path / "w.mcap"
     inode = None
     rec = subprocess.Popen([sys.executable, "-m", "pslog.cli", "record", "--synthetic", "--rig",
-                            "paper3", "--timing", "typeA", "--duration", "4", "-o", str(out)],
-                           stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+                            "paper3", "--timing", "typeA", "--duration", "60", "-o", str(out)],
+                           stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                           start_new_session=True)  # (its own group: Ctrl-C as from a terminal)
+    lines: list[str] = []
+    reader = threading.Thread(target=lambda: lines.extend(rec.stderr), daemon=True)
+    reader.start()
+
+    def every_camera_delivered() -> bool:  # a status line: "[ 1.2 s] cam1: 36 fr ..."
+        return any(re.search(r"\] cam1: [1-9]", line) and len(re.findall(
+            r"cam\d: [1-9]\d* fr", line)) == 3 for line in list(lines))
+
     try:
         deadline = time.monotonic() + 60  # a hang guard, not a timing assertion
         while not (out.exists() and locked_by_another(out)):
-            assert rec.poll() is None, f"record ended early: {rec.stderr.read()}"
+            assert rec.poll() is None, "record ended early: " + "".join(lines)
             assert time.monotonic() < deadline, "record never started writing"
             time.sleep(0.05)
         inode = out.stat().st_ino
@@ -557,13 +573,28 @@ def test_force_onto_a_session_being_recorded_is_refused(tmp_path):
         # out grows as the cameras deliver: untouched means not replaced (same inode) and no
         # partial of the refused run
         assert sorted(p.name for p in tmp_path.iterdir()) == ["w.mcap"]
-        _, err = rec.communicate(timeout=120)
+        deadline = time.monotonic() + 120  # (a hang guard)
+        while not every_camera_delivered():  # the stop then leaves a session, not nothing
+            assert rec.poll() is None, "record ended early: " + "".join(lines)
+            assert time.monotonic() < deadline, "no frame from every camera:\n" + "".join(lines)
+            time.sleep(0.05)
+        os.killpg(rec.pid, signal.SIGINT)
+        rec.wait(timeout=120)
+        reader.join(10)
+        err = "".join(lines)
     finally:
         if rec.poll() is None:
-            rec.kill()
+            os.killpg(rec.pid, signal.SIGKILL)
             rec.wait()
     assert rec.returncode == 0, err
+    assert "recording stopped by SIGINT" in err, err
     assert out.stat().st_ino == inode  # never replaced: the recorder's file is the output
     session = read_session(out)  # the recording is in the file named, complete
-    assert session.detections.n_frames > 3 * 30 * 2
+    # every frame the recorder's summary counts, each camera's (none failed)
+    counted = {m.group(1): int(m.group(2)) for m in re.finditer(
+        r"^  (cam\d) +(\d+) frames .*\[stopped\]", err, re.M)}
+    assert sorted(counted) == ["cam1", "cam2", "cam3"] and min(counted.values()) > 0, err
+    names = [camera.name for camera in session.rig.cameras]
+    held = np.bincount(session.detections.frame_camera, minlength=len(names))
+    assert dict(zip(names, held.tolist(), strict=True)) == counted, err
     assert session.metadata["source"].startswith("record"), session.metadata["source"]
