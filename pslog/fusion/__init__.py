@@ -201,19 +201,26 @@ def _nearest(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
 
 def _type_a(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
     from .confirm import confirm_batch  # (long-gap points confirmed by the next camera)
+    from .pseudo import covariance_noise_px, type_a_noise
 
-    track = fuse_type_a(prep, _gap(options), options.noise_px, explain=False)[0]
-    if not options.confirm_gaps:
-        return track
-    return confirm_batch(prep, track, rig, _gap(options), options.noise_px)
+    # the covariance made at the stated noise (what the confirmation's test reads), then
+    # rescaled to the session's measured noise (docs/methods.md, "Type A's covariance at
+    # the measured noise")
+    gap = _gap(options)
+    track = fuse_type_a(prep, gap, options.noise_px, explain=False,
+                        cov_noise_px=covariance_noise_px(options.noise_px))[0]
+    if options.confirm_gaps:
+        track = confirm_batch(prep, track, rig, gap, options.noise_px)
+    return type_a_noise(prep, track, gap, options.noise_px)
 
 
 def _type_a_stream(rig: Rig, options: FusionOptions):
     from .confirm import ConfirmedStream
-    from .pseudo import TypeAStream
+    from .pseudo import MeasuredNoiseStream, TypeAStream, covariance_noise_px
 
-    stream = TypeAStream(rig, options)
-    return ConfirmedStream(stream, rig, options) if options.confirm_gaps else stream
+    stream = TypeAStream(rig, options, covariance_noise_px(options.noise_px))
+    inner = ConfirmedStream(stream, rig, options) if options.confirm_gaps else stream
+    return MeasuredNoiseStream(inner, rig, options)
 
 
 def _type_b(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
@@ -408,13 +415,17 @@ def type_a_explained(prep: Prepared, rig: Rig, options: FusionOptions
     """``typeA``'s track as :func:`fuse` makes it from ``prep`` (the long-gap confirmation
     of :mod:`pslog.fusion.confirm` included when ``options.confirm_gaps``) and the
     construction of each of its points (the points the confirmation drops left out too)."""
+    from .pseudo import covariance_noise_px, type_a_noise
+
     max_gap_s = options.max_gap_s or default_max_gap_s(rig)
-    track, construction = fuse_type_a(prep, max_gap_s, options.noise_px)
+    track, construction = fuse_type_a(prep, max_gap_s, options.noise_px,
+                                      cov_noise_px=covariance_noise_px(options.noise_px))
     if not options.confirm_gaps or not len(track):
-        return track, construction
+        return type_a_noise(prep, track, max_gap_s, options.noise_px), construction
     from .confirm import confirm_batch
 
-    confirmed = confirm_batch(prep, track, rig, max_gap_s, options.noise_px)
+    confirmed = type_a_noise(prep, confirm_batch(prep, track, rig, max_gap_s,
+                                                 options.noise_px), max_gap_s, options.noise_px)
     if len(confirmed) == len(track):
         return confirmed, construction
     # the construction's rows are the track's points, in order; the confirmation only drops

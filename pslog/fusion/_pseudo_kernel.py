@@ -919,3 +919,82 @@ def kink_kernel(events, rows1, prev1, next1, world1, rows2, prev2, next2, world2
                     start = time_ns[max(a, 0)]
                 kinked = start >= time_ns[rows2[i]]
         out[i] = kinked
+
+
+@kernel
+def residual_norms_kernel(time_ns, camera, uv, m, max_gap_ns, ns, out):
+    """Each row's residual from the quadratic through its camera's three previous rows
+    (each within ``max_gap_ns`` of the next), per axis's σ: ``‖u - Σ l_j u_j‖ / √(1 + Σ
+    l_j²)`` with the Lagrange weights ``l`` (:func:`pslog.fusion.stereo.quadratic_residuals`'
+    arithmetic, row by row), into ``out`` (n,); NaN where a row has no three such previous
+    rows or a pixel is NaN. ``time_ns`` (n,) int64 sorted, ``camera`` (n,) of ``m`` cameras,
+    ``uv`` (n, 2) recorded pixels (NaN: a detection the rig says is none), ``ns`` nanoseconds
+    per second. What :func:`pslog.fusion.pseudo.measured_noise` takes (type A's
+    covariance)."""
+    last = np.full((m, 3), -1, dtype=np.int64)  # each camera's three latest rows, newest first
+    gap = max_gap_ns / ns
+    for r in range(time_ns.shape[0]):
+        c = camera[r]
+        r1, r2, r3 = last[c, 0], last[c, 1], last[c, 2]
+        last[c, 2], last[c, 1], last[c, 0] = r2, r1, r
+        out[r] = np.nan
+        if r3 < 0:
+            continue
+        a = (time_ns[r] - time_ns[r1]) / ns
+        b = (time_ns[r1] - time_ns[r2]) / ns
+        cc = (time_ns[r2] - time_ns[r3]) / ns
+        if not (a > 0 and b > 0 and cc > 0 and a <= gap and b <= gap and cc <= gap):
+            continue
+        l1 = (a + b) * (a + b + cc) / (b * (b + cc))
+        l2 = -a * (a + b + cc) / (b * cc)
+        l3 = a * (a + b) / ((b + cc) * cc)
+        e0 = uv[r, 0] - (l1 * uv[r1, 0] + l2 * uv[r2, 0] + l3 * uv[r3, 0])
+        e1 = uv[r, 1] - (l1 * uv[r1, 1] + l2 * uv[r2, 1] + l3 * uv[r3, 1])
+        w = 1 + l1 * l1 + l2 * l2 + l3 * l3
+        out[r] = math.sqrt(e0 * e0 + e1 * e1) / math.sqrt(w)
+
+
+@kernel
+def window_medians_kernel(time_ns, values, marks, window_ns, min_count, out):
+    """For each of the sorted ``marks`` (k,) int64, the upper median (the middle element,
+    sorted) of the ``values`` (n,) whose ``time_ns`` (n,) sorted lie in ``[mark -
+    window_ns, mark)``, into ``out`` (k,); NaN where fewer than ``min_count`` are there.
+    ``values`` finite. A selection, not arithmetic: the same element whichever rows around
+    the window are given (a stream's history or the session)."""
+    n = time_ns.shape[0]
+    lo = 0
+    hi = 0
+    for j in range(marks.shape[0]):
+        while lo < n and time_ns[lo] < marks[j] - window_ns:
+            lo += 1
+        while hi < n and time_ns[hi] < marks[j]:
+            hi += 1
+        count = hi - lo
+        if count < min_count:
+            out[j] = np.nan
+            continue
+        out[j] = np.sort(values[lo:hi])[count // 2]
+
+
+@kernel
+def window_mean_squares_kernel(time_ns, values, ends, window_ns, min_count, out):
+    """For each of the sorted ``ends`` (k,) int64, the mean of the squares of the ``values``
+    (n,) whose ``time_ns`` (n,) sorted lie in ``[end - window_ns, end)``, halved (a 2-D
+    residual's norm over σ per axis: the unbiased estimate of σ²), summed in time order,
+    into ``out`` (k,); NaN where fewer than ``min_count`` are there."""
+    n = time_ns.shape[0]
+    lo = 0
+    hi = 0
+    for j in range(ends.shape[0]):
+        while lo < n and time_ns[lo] < ends[j] - window_ns:
+            lo += 1
+        while hi < n and time_ns[hi] < ends[j]:
+            hi += 1
+        count = hi - lo
+        if count < min_count:
+            out[j] = np.nan
+            continue
+        total = 0.0
+        for i in range(lo, hi):
+            total += values[i] * values[i]
+        out[j] = total / (2 * count)
