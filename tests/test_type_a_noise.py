@@ -87,13 +87,14 @@ def test_a_points_noise_uses_no_later_detection():
 
 @pytest.mark.parametrize("noise_px", [0.5, 0.0])
 def test_stream_equals_batch_with_misses_drops_outliers_and_a_pause(noise_px):
-    # a dirty 4 s session (30 % misses, 10 % drops, 5 % outliers, a lens) with the
+    # a dirty 1.5 s throw (30 % misses, 10 % drops, 5 % outliers, a lens), and a 5 s rally (30
+    # % misses, 10 % drops) with the
     # detections of 1.6-3.0 s removed (every checkpoint's window empties: the latest
     # estimate held), pushed one by one through StreamFuser (MeasuredNoiseStream, which keeps
     # ~1.5 s of detections: halved, the checkpoints after the pause differ), long-gap points
     # withheld and confirmed (ConfirmedStream); noise_px 0: the covariance made at 1 px
     rig, obs, _ = dirty_session("typeA", 4)
-    rig2, more, _ = _session(0.5, seed=4, duration=4.0, miss_rate=0.3,
+    rig2, more, _ = _session(0.5, seed=4, duration=5.0, miss_rate=0.3,
                                    drop_rate=0.1)
     t0 = obs.time_ns[0]
     keep = (more.time_ns - more.time_ns[0] < int(1.6 * NS)) | (

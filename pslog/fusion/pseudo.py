@@ -1000,15 +1000,17 @@ class MeasuredNoiseStream:
         session's start, no checkpoint's estimate yet) each new row's own."""
         k = len(time_ns)
         n = self._n
-        if n + k > len(self._time):
-            lo = int(np.searchsorted(self._time[:n], int(time_ns[0]) - self._keep_ns))
+        first = int(time_ns[0])
+        if first // self._every_ns * self._every_ns > self._last_mark or n + k > len(self._time):
+            # (at each new checkpoint, and when full: the rows older than the history out)
+            lo = int(np.searchsorted(self._time[:n], first - self._keep_ns))
             n -= lo
-            size = max(256, 2 * (n + k))
+            size = max(len(self._time), 2 * (n + k))
             t, c, u = np.zeros(size, np.int64), np.zeros(size, np.int64), np.zeros((size, 2))
             t[:n], c[:n], u[:n] = (self._time[lo:lo + n], self._camera[lo:lo + n],
                                    self._uv[lo:lo + n])
             self._time, self._camera, self._uv = t, c, u
-            self._prune(int(time_ns[0]))
+            self._prune(first)
         self._time[n:n + k] = time_ns
         self._camera[n:n + k] = camera
         self._uv[n:n + k] = recorded_or_nan(np.asarray(uv, np.float64).reshape(-1, 2),
