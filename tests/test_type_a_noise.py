@@ -15,7 +15,7 @@ from test_fusion_validity import dirty_session, streamed
 from pslog import SimulationOptions, apply_timing, builtin_rig, simulate
 from pslog.evaluation import _mahalanobis_sq, _offsets
 from pslog.fusion import FusionOptions, fuse, prepare
-from pslog.fusion.pseudo import fuse_type_a, measured_noise, recorded_or_nan
+from pslog.fusion.pseudo import fuse_type_a, measured_noise, no_detection_limits
 from pslog.fusion.stereo import NOISE_EVERY_S, NOISE_WINDOW_S, detection_noise
 from pslog.motion import rally_motion
 from pslog.records import NS, Observations, Track
@@ -31,9 +31,8 @@ def _session(noise_px: float, seed: int = 3, duration: float = 3.0, **faults):
 
 
 def _sigma(rig, obs, at_ns, noise_px, max_gap_s):
-    limits = np.array([10.0 * max(c.width, c.height) for c in rig.cameras])
-    return measured_noise(obs.time_ns, obs.camera, recorded_or_nan(obs.uv, obs.camera, limits),
-                          len(rig), max_gap_s, at_ns, noise_px)
+    return measured_noise(obs.time_ns, obs.camera, obs.uv, no_detection_limits(rig.cameras),
+                          max_gap_s, at_ns, noise_px)
 
 
 def test_covariance_scales_with_the_measured_noise_not_the_stated_one():

@@ -66,8 +66,10 @@ class FusionOptions:
         prediction and kink tests (:mod:`pslog.fusion.innovation`) take it as the least
         noise: they use the larger of it (0.5 px when None) and the noise the session's own
         innovations imply (:class:`~pslog.fusion.innovation.NoiseEstimate`); nearest's
-        covariance takes the noise its detections show once the session has enough of them,
-        never below the smaller of it and 0.1 px (:func:`pslog.fusion.stereo.detection_noise`)
+        and typeA's covariance take the noise their detections show once the session has
+        enough of them, never below the smaller of it and 0.1 px
+        (:func:`pslog.fusion.stereo.detection_noise`, :func:`pslog.fusion.pseudo.
+        measured_noise`)
     gating : bool, fusing Detections: choose each frame's ball among its candidates by the
         gates of :mod:`pslog.fusion.gating` (True), or take the best-scored one (False)
     confirm_gaps : bool, typeA: withhold a point whose prediction bridged a gap longer than

@@ -816,12 +816,10 @@ def covariance_noise_px(noise_px: float | None) -> float:
     return float(noise_px) if noise_px else 1.0
 
 
-def recorded_or_nan(uv: np.ndarray, camera: np.ndarray, limits: np.ndarray) -> np.ndarray:
-    """The recorded pixels (n, 2) of ``camera`` (n,), NaN where a pixel lies further than
-    its camera's ``limits`` (m,) from the image (prepare's "no detection":
-    ``_prepare._FAR_IMAGES`` image sizes)."""
-    lim = limits[camera][:, None]
-    return np.where(np.all(np.abs(uv) <= lim, axis=1)[:, None], uv, np.nan)
+def no_detection_limits(cameras) -> np.ndarray:
+    """Each camera's bound (m,) beyond which a recorded pixel is no detection (prepare's
+    ``_prepare._FAR_IMAGES`` image sizes: its undistorted pixel NaN)."""
+    return np.array([float(_prepare._FAR_IMAGES * max(c.width, c.height)) for c in cameras])
 
 
 #: type A's noise at a session's start, before any checkpoint's window holds
@@ -835,20 +833,20 @@ NOISE_START_COUNT = 4
 NOISE_UNKNOWN_PX = 2.0
 
 
-def residual_norms(time_ns: np.ndarray, camera: np.ndarray, uv: np.ndarray, n_cameras: int,
-                   max_gap_s: float) -> tuple[np.ndarray, np.ndarray]:
+def residual_norms(time_ns: np.ndarray, camera: np.ndarray, uv: np.ndarray,
+                   limits: np.ndarray, max_gap_s: float) -> tuple[np.ndarray, np.ndarray]:
     """The times (j,) and norms (j,) of the finite residuals of the detections ``time_ns``
-    (n,) sorted, ``camera`` (n,), ``uv`` (n, 2) recorded pixels (NaN: none;
-    :func:`recorded_or_nan`) from the quadratic through each one's camera's three previous
-    ones, per axis's σ (:func:`~pslog.fusion._pseudo_kernel.residual_norms_kernel`)."""
+    (n,) sorted, ``camera`` (n,), ``uv`` (n, 2) recorded pixels (``limits``:
+    :func:`no_detection_limits`) from the quadratic through each one's camera's three
+    previous ones, per axis's σ (:func:`~pslog.fusion._pseudo_kernel.residual_norms_kernel`)."""
     from . import _pseudo_kernel
 
-    norms = np.empty(len(time_ns))
-    _pseudo_kernel.residual_norms_kernel(
-        time_ns, np.ascontiguousarray(camera, dtype=np.int64), np.ascontiguousarray(uv),
-        n_cameras, int(max_gap_s * NS), NS, norms)
-    finite = np.isfinite(norms)
-    return np.ascontiguousarray(time_ns[finite]), np.ascontiguousarray(norms[finite])
+    n = len(time_ns)
+    t_out, v_out = np.empty(n, np.int64), np.empty(n)
+    j = _pseudo_kernel.residual_norms_kernel(
+        np.ascontiguousarray(time_ns), np.ascontiguousarray(camera, dtype=np.int64),
+        np.ascontiguousarray(uv), limits, len(limits), int(max_gap_s * NS), NS, t_out, v_out)
+    return t_out[:j], v_out[:j]
 
 
 def window_noise(t_fin: np.ndarray, v_fin: np.ndarray, ends_ns: np.ndarray, min_count: int
@@ -885,11 +883,11 @@ def start_noise(t_fin: np.ndarray, v_fin: np.ndarray, at_ns: np.ndarray, noise_p
                     max(noise_px, NOISE_UNKNOWN_PX))
 
 
-def measured_noise(time_ns: np.ndarray, camera: np.ndarray, uv: np.ndarray, n_cameras: int,
+def measured_noise(time_ns: np.ndarray, camera: np.ndarray, uv: np.ndarray, limits: np.ndarray,
                    max_gap_s: float, at_ns: np.ndarray, noise_px: float) -> np.ndarray:
     """The detection noise σ (pixels per axis, (k,)) of type-A points at ``at_ns`` (k,)
     sorted, from the detections ``time_ns`` (n,) sorted, ``camera`` (n,), ``uv`` (n, 2)
-    recorded pixels (NaN: none; :func:`recorded_or_nan`), causally, with ``nearest``'s
+    recorded pixels (``limits``: :func:`no_detection_limits`), causally, with ``nearest``'s
     estimator (:func:`pslog.fusion.stereo.detection_noise`: its constants and floor) and
     two changes at the start and across pauses (docs/methods.md, "Type A's covariance at
     the measured noise"):
@@ -907,19 +905,25 @@ def measured_noise(time_ns: np.ndarray, camera: np.ndarray, uv: np.ndarray, n_ca
 
     A point uses only detections before its own time: :class:`MeasuredNoiseStream` gives it
     the same bits."""
-    from .stereo import NOISE_EVERY_S, NOISE_FLOOR_PX, NOISE_MIN_COUNT
+    from . import _pseudo_kernel
+    from .innovation import RAYLEIGH_MEDIAN
+    from .stereo import NOISE_EVERY_S, NOISE_FLOOR_PX, NOISE_MIN_COUNT, NOISE_WINDOW_S
 
-    t_fin, v_fin = residual_norms(time_ns, camera, uv, n_cameras, max_gap_s)
-    every = int(NOISE_EVERY_S * NS)
-    marks = np.unique(time_ns // every * every)
-    est = window_noise(t_fin, v_fin, marks, NOISE_MIN_COUNT)
-    # (the latest checkpoint with an estimate, at or before each)
-    latest = np.maximum.accumulate(np.where(np.isfinite(est), np.arange(len(est)), -1))
-    filled = np.where(latest >= 0, est[np.maximum(latest, 0)], np.nan)
-    sigma = filled[np.searchsorted(marks, at_ns // every * every)]
-    start = np.flatnonzero(np.isnan(sigma))
+    time_ns = np.ascontiguousarray(time_ns)
+    camera = np.ascontiguousarray(camera, dtype=np.int64)
+    uv = np.ascontiguousarray(uv)
+    at_ns = np.ascontiguousarray(at_ns, dtype=np.int64)
+    sigma = np.empty(len(at_ns))
+    _pseudo_kernel.checkpoint_noise_kernel(
+        time_ns, camera, uv, limits, len(limits), int(max_gap_s * NS), NS,
+        int(NOISE_EVERY_S * NS), int(NOISE_WINDOW_S * NS), NOISE_MIN_COUNT, RAYLEIGH_MEDIAN,
+        at_ns, sigma)
+    start = np.flatnonzero(np.isnan(sigma))  # (the session's first points)
     if len(start):
-        sigma[start] = start_noise(t_fin, v_fin, at_ns[start], noise_px)
+        # (the residuals of the rows up to the last of them: the same as of every row)
+        end = int(np.searchsorted(time_ns, at_ns[start[-1]], side="right"))
+        fin = residual_norms(time_ns[:end], camera[:end], uv[:end], limits, max_gap_s)
+        sigma[start] = start_noise(*fin, at_ns[start], noise_px)
     return np.maximum(sigma, min(noise_px, NOISE_FLOOR_PX))
 
 
@@ -950,10 +954,8 @@ def type_a_noise(prep: Prepared, track: Track, max_gap_s: float, noise_px: float
     if noise_px is None or not len(track) or "std_m" not in track.quality:
         return track
     obs = prep.obs
-    limits = np.array([float(_prepare._FAR_IMAGES * max(c.width, c.height))
-                       for c in prep.cameras])
-    sigma = measured_noise(obs.time_ns, obs.camera, recorded_or_nan(obs.uv, obs.camera, limits),
-                           len(prep.cameras), max_gap_s, track.time_ns, float(noise_px))
+    sigma = measured_noise(obs.time_ns, obs.camera, obs.uv, no_detection_limits(prep.cameras),
+                           max_gap_s, track.time_ns, float(noise_px))
     return with_measured_noise(track, sigma, covariance_noise_px(noise_px))
 
 
@@ -975,9 +977,7 @@ class MeasuredNoiseStream:
         self._noise_px = options.noise_px
         self._cov_px = covariance_noise_px(options.noise_px)
         self._max_gap_s = options.max_gap_s or default_max_gap_s(rig)
-        self._m = len(rig)
-        self._limits = np.array([float(_prepare._FAR_IMAGES * max(c.width, c.height))
-                                 for c in rig.cameras])
+        self._limits = no_detection_limits(rig.cameras)
         self._every_ns = int(NOISE_EVERY_S * NS)
         self._keep_ns = int((NOISE_EVERY_S + NOISE_WINDOW_S + 3 * self._max_gap_s
                              + options.tolerance_s) * NS) + 1
@@ -1013,8 +1013,7 @@ class MeasuredNoiseStream:
             self._prune(first)
         self._time[n:n + k] = time_ns
         self._camera[n:n + k] = camera
-        self._uv[n:n + k] = recorded_or_nan(np.asarray(uv, np.float64).reshape(-1, 2),
-                                            np.asarray(camera, np.int64), self._limits)
+        self._uv[n:n + k] = np.asarray(uv, np.float64).reshape(-1, 2)
         self._n = n = n + k
         if self._noise_px is None:
             return
@@ -1025,7 +1024,7 @@ class MeasuredNoiseStream:
         for mk in sorted({t // every * every for t in time_ns.tolist()}):
             if mk > self._last_mark:
                 fin = fin or residual_norms(self._time[:n], self._camera[:n], self._uv[:n],
-                                            self._m, self._max_gap_s)
+                                            self._limits, self._max_gap_s)
                 est = window_noise(*fin, np.array([mk], np.int64), NOISE_MIN_COUNT)[0]
                 if math.isfinite(est):
                     self._latest = est
@@ -1036,7 +1035,7 @@ class MeasuredNoiseStream:
                 if math.isnan(self._sigma[t // every * every])]
         if ends:
             fin = fin or residual_norms(self._time[:n], self._camera[:n], self._uv[:n],
-                                        self._m, self._max_gap_s)
+                                        self._limits, self._max_gap_s)
             at = np.array(ends, np.int64)
             for t, sg in zip(ends, start_noise(*fin, at, float(self._noise_px)).tolist(),
                              strict=True):
