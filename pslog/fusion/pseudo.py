@@ -1041,6 +1041,20 @@ class MeasuredNoiseStream:
                              strict=True):
                 self._start[t] = sg
 
+    def _log_one(self, t: int, c: int, u: float, v: float) -> None:
+        """:meth:`_log` of one row (Python scalars) where it only writes the row (a
+        checkpoint already made, room left, past the session's start); else :meth:`_log`."""
+        n = self._n
+        if (t // self._every_ns * self._every_ns > self._last_mark or n >= len(self._time)
+                or self._latest != self._latest):
+            self._log(np.array([t], np.int64), np.array([c], np.int64), np.array([[u, v]]))
+            return
+        self._time[n] = t
+        self._camera[n] = c
+        row = self._uv[n]
+        row[0], row[1] = u, v
+        self._n = n + 1
+
     def _prune(self, newest: int) -> None:
         """The checkpoints no point can still take dropped (before the newest row's, and
         before the oldest point the inner stream withholds)."""
@@ -1055,11 +1069,31 @@ class MeasuredNoiseStream:
             del self._start[t]
 
     def _scaled(self, out: Track) -> Track:
+        """``out`` with each point's covariance at its checkpoint's σ (at the session's
+        start its own), at least the floor: :func:`type_a_noise`'s arithmetic (one point:
+        the same IEEE operations on Python floats)."""
         if self._noise_px is None or not len(out) or "std_m" not in out.quality:
             return out
         from .stereo import NOISE_FLOOR_PX
 
         every = self._every_ns
+        if len(out) == 1:  # (the usual push: one point, no numpy call on (1,) columns)
+            t = int(out.time_ns[0])
+            sg = self._sigma[t // every * every]
+            if sg != sg:
+                sg = self._start[t]
+            sg = max(float(sg), min(float(self._noise_px), NOISE_FLOOR_PX))
+            f = sg / self._cov_px
+            f = f * f
+            q = out.quality
+            cov = [float(q[name][0]) * f for name in _COV_COLUMNS]
+            values = np.array([[math.sqrt(cov[0] + cov[1] + cov[2])], *([x] for x in cov)])
+            quality = dict(q)
+            quality["std_m"] = values[0]
+            for i, name in enumerate(_COV_COLUMNS):
+                quality[name] = values[1 + i]
+            return _trusted_track(out.time_ns, out.position_world, out.camera, quality,
+                                  dict(out.dropped))
         cache, start = self._sigma, self._start
         sigma = np.array([cache[t // every * every] for t in out.time_ns.tolist()])
         if np.isnan(sigma).any():
@@ -1070,14 +1104,16 @@ class MeasuredNoiseStream:
 
     def push(self, time_ns, camera, uv, frame_index) -> Track:
         """The inner stream's push, its points' covariance at the measured noise."""
-        if len(time_ns):
+        if len(time_ns) == 1:
+            u, v = np.asarray(uv, np.float64).reshape(-1, 2)[0].tolist()
+            self._log_one(int(time_ns[0]), int(camera[0]), u, v)
+        elif len(time_ns):
             self._log(np.asarray(time_ns, np.int64), np.asarray(camera), uv)
         return self._scaled(self.inner.push(time_ns, camera, uv, frame_index))
 
     def _push_one(self, time_ns: int, camera: int, u: float, v: float) -> Track:
         """The inner stream's ``push_one``, its point's covariance at the measured noise."""
-        self._log(np.array([time_ns], np.int64), np.array([camera], np.int64),
-                  np.array([[u, v]]))
+        self._log_one(time_ns, camera, u, v)
         return self._scaled(self.inner.push_one(time_ns, camera, u, v))
 
     def _flush(self) -> Track:
