@@ -168,6 +168,9 @@ class Method:
         of re-running ``function`` on a window); None: no such form
     kernels : the modules of the numba kernels the method runs (:func:`pslog._jit.preload`
         starts them early; none for a numpy-only method)
+    uses_doubt : bool, its covariance takes the doubt of the gate's choices
+        (:attr:`Prepared.doubt_px2`, docs/methods.md "A choice in doubt"): the gate makes it
+        only for a form such a method fuses
     """
 
     name: str
@@ -179,6 +182,7 @@ class Method:
     reference: str
     streamer: Callable | None = None
     kernels: tuple[str, ...] = ()
+    uses_doubt: bool = False
 
     def suits(self, shared: bool, alone: bool) -> bool:
         """True if a session with (or without) shared and lone instants suits the method."""
@@ -256,20 +260,20 @@ _PAPER = "Fujiyoshi et al., RoboCup 2004"
 METHODS: dict[str, Method] = {m.name: m for m in (
     Method("sync", _sync, True, True, frozenset({"shared"}),
            "ordinary stereo of simultaneous detections (paper: synchronized)",
-           f"{_PAPER}, Table 1"),
+           f"{_PAPER}, Table 1", uses_doubt=True),
     Method("nearest", _nearest, True, False, frozenset({"alone"}),
            "latest detection of the other cameras, as if simultaneous (paper: unsynchronized)",
-           f"{_PAPER}, Table 1"),
+           f"{_PAPER}, Table 1", uses_doubt=True),
     Method("typeA", _type_a, True, False, frozenset({"alone"}),
            "pseudo stereo at every detection (paper section 2.2, eqs. 1-4)",
            f"{_PAPER}, section 2.2", streamer=_type_a_stream,
            kernels=("pslog.fusion._pseudo_kernel",)),
     Method("typeB", _type_b, True, True, frozenset({"shared", "alone"}),
            "stereo at common instants + ray-constrained prediction (paper section 2.3)",
-           f"{_PAPER}, section 2.3"),
+           f"{_PAPER}, section 2.3", uses_doubt=True),
     Method("linear", _linear, True, True, frozenset({"shared", "alone"}),
            "stereo at common instants + linear prediction (paper: linear prediction)",
-           f"{_PAPER}, Table 1"),
+           f"{_PAPER}, Table 1", uses_doubt=True),
     Method("smooth", _smooth, False, False, frozenset(),
            "one continuous trajectory fitted to every detection's ray (offline)",
            "continuous-time batch estimation: Furgale et al. 2013; Singer 1970 motion prior",
