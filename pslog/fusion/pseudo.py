@@ -1086,14 +1086,19 @@ class MeasuredNoiseStream:
             f = sg / self._cov_px
             f = f * f
             q = out.quality
-            cov = [float(q[name][0]) * f for name in _COV_COLUMNS]
-            values = np.array([[math.sqrt(cov[0] + cov[1] + cov[2])], *([x] for x in cov)])
+            xx, yy, zz, xy, xz, yz = (float(q[name][0]) * f for name in _COV_COLUMNS)
+            values = np.array([math.sqrt(xx + yy + zz), xx, yy, zz, xy, xz, yz])
+            values.flags.writeable = False
             quality = dict(q)
-            quality["std_m"] = values[0]
-            for i, name in enumerate(_COV_COLUMNS):
-                quality[name] = values[1 + i]
-            return _trusted_track(out.time_ns, out.position_world, out.camera, quality,
-                                  dict(out.dropped))
+            quality.update(std_m=values[0:1], cov_xx_m2=values[1:2], cov_yy_m2=values[2:3],
+                           cov_zz_m2=values[3:4], cov_xy_m2=values[4:5], cov_xz_m2=values[5:6],
+                           cov_yz_m2=values[6:7])
+            # (out's columns are a Track's already: read-only, shared as they are)
+            track = object.__new__(Track)
+            track.__dict__.update(method=out.method, time_ns=out.time_ns,
+                                  position_world=out.position_world, camera=out.camera,
+                                  quality=quality, dropped=out.dropped)
+            return track
         cache, start = self._sigma, self._start
         sigma = np.array([cache[t // every * every] for t in out.time_ns.tolist()])
         if np.isnan(sigma).any():
