@@ -317,12 +317,13 @@ def test_quality_columns_survive_the_fused_mcap_and_eval_reports_them(tmp_path, 
     assert report["smooth"]["within_2sigma"] > 0.4  # from its full covariance
     code, out, _ = cli("eval", fused)
     assert code == 0 and "in 2σ" in out and "NEES" in out
-    # the assumed pixel noise scales every standard deviation
-    code, _, err = cli("fuse", session, "--method", "typeA", "--noise-px", "1.0",
+    # the assumed pixel noise scales every standard deviation of sync (nearest's and typeA's
+    # take the noise the session's detections show: tests/test_type_a_noise.py)
+    code, _, err = cli("fuse", session, "--method", "sync", "--noise-px", "1.0",
                        "-o", tmp_path / "f1.mcap")
     assert code == 0, err
-    assert_allclose(read_session(tmp_path / "f1.mcap").tracks["typeA"].quality["std_m"],
-                    2 * tracks["typeA"].quality["std_m"], rtol=1e-12)
+    assert_allclose(read_session(tmp_path / "f1.mcap").tracks["sync"].quality["std_m"],
+                    2 * tracks["sync"].quality["std_m"], rtol=1e-12)
 
 
 # ---- streaming: never raises, equals batch exactly on dirty sessions -----------------------

@@ -40,9 +40,10 @@ def assert_same(parts, batch):
 def test_type_a_streams_through_its_incremental_form():
     rig = dirty_session("typeA", 0)[0]
     # (by default through pslog.fusion.confirm's ConfirmedStream, which holds long-gap points)
-    assert isinstance(StreamFuser(rig, "typeA").incremental.inner, TypeAStream)
+    # (and MeasuredNoiseStream around it: the covariance at the measured noise)
+    assert isinstance(StreamFuser(rig, "typeA").incremental.inner.inner, TypeAStream)
     options = FusionOptions(confirm_gaps=False)
-    assert isinstance(StreamFuser(rig, "typeA", options).incremental, TypeAStream)
+    assert isinstance(StreamFuser(rig, "typeA", options).incremental.inner, TypeAStream)
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])

@@ -51,9 +51,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "each point's std_m and covariance, and the least noise typeA's "
                              "prediction and kink tests assume (they use the larger of it and "
                              "the noise the session's own innovations imply); nearest's "
-                             "covariance takes the noise its detections show once a second "
-                             "of them has (at least the smaller of this and 0.1 px); `pslog "
-                             "sync` prints the estimated noise (default %(default)s)")
+                             "and typeA's covariance take the noise their detections show "
+                             "once a second of them has (at least the smaller of this and "
+                             "0.1 px); `pslog sync` prints the estimated noise (default "
+                             "%(default)s)")
     parser.add_argument("--detector-offset-mm", type=number_at_most(1000.0, "mm", "a metre"),
                         default=None, metavar="MM",
                         help="smooth: standard deviation per axis of the detector's constant "

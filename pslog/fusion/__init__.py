@@ -66,8 +66,10 @@ class FusionOptions:
         prediction and kink tests (:mod:`pslog.fusion.innovation`) take it as the least
         noise: they use the larger of it (0.5 px when None) and the noise the session's own
         innovations imply (:class:`~pslog.fusion.innovation.NoiseEstimate`); nearest's
-        covariance takes the noise its detections show once the session has enough of them,
-        never below the smaller of it and 0.1 px (:func:`pslog.fusion.stereo.detection_noise`)
+        and typeA's covariance take the noise their detections show once the session has
+        enough of them, never below the smaller of it and 0.1 px
+        (:func:`pslog.fusion.stereo.detection_noise`, :func:`pslog.fusion.pseudo.
+        measured_noise`)
     gating : bool, fusing Detections: choose each frame's ball among its candidates by the
         gates of :mod:`pslog.fusion.gating` (True), or take the best-scored one (False)
     confirm_gaps : bool, typeA: withhold a point whose prediction bridged a gap longer than
@@ -166,6 +168,9 @@ class Method:
         of re-running ``function`` on a window); None: no such form
     kernels : the modules of the numba kernels the method runs (:func:`pslog._jit.preload`
         starts them early; none for a numpy-only method)
+    uses_doubt : bool, its covariance takes the doubt of the gate's choices
+        (:attr:`Prepared.doubt_px2`, docs/methods.md "A choice in doubt"): the gate makes it
+        only for a form such a method fuses
     """
 
     name: str
@@ -177,6 +182,7 @@ class Method:
     reference: str
     streamer: Callable | None = None
     kernels: tuple[str, ...] = ()
+    uses_doubt: bool = False
 
     def suits(self, shared: bool, alone: bool) -> bool:
         """True if a session with (or without) shared and lone instants suits the method."""
@@ -201,19 +207,26 @@ def _nearest(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
 
 def _type_a(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
     from .confirm import confirm_batch  # (long-gap points confirmed by the next camera)
+    from .pseudo import covariance_noise_px, type_a_noise
 
-    track = fuse_type_a(prep, _gap(options), options.noise_px, explain=False)[0]
-    if not options.confirm_gaps:
-        return track
-    return confirm_batch(prep, track, rig, _gap(options), options.noise_px)
+    # the covariance made at the stated noise (what the confirmation's test reads), then
+    # rescaled to the session's measured noise (docs/methods.md, "Type A's covariance at
+    # the measured noise")
+    gap = _gap(options)
+    track = fuse_type_a(prep, gap, options.noise_px, explain=False,
+                        cov_noise_px=covariance_noise_px(options.noise_px))[0]
+    if options.confirm_gaps:
+        track = confirm_batch(prep, track, rig, gap, options.noise_px)
+    return type_a_noise(prep, track, gap, options.noise_px)
 
 
 def _type_a_stream(rig: Rig, options: FusionOptions):
     from .confirm import ConfirmedStream
-    from .pseudo import TypeAStream
+    from .pseudo import MeasuredNoiseStream, TypeAStream, covariance_noise_px
 
-    stream = TypeAStream(rig, options)
-    return ConfirmedStream(stream, rig, options) if options.confirm_gaps else stream
+    stream = TypeAStream(rig, options, covariance_noise_px(options.noise_px))
+    inner = ConfirmedStream(stream, rig, options) if options.confirm_gaps else stream
+    return MeasuredNoiseStream(inner, rig, options)
 
 
 def _type_b(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
@@ -247,20 +260,20 @@ _PAPER = "Fujiyoshi et al., RoboCup 2004"
 METHODS: dict[str, Method] = {m.name: m for m in (
     Method("sync", _sync, True, True, frozenset({"shared"}),
            "ordinary stereo of simultaneous detections (paper: synchronized)",
-           f"{_PAPER}, Table 1"),
+           f"{_PAPER}, Table 1", uses_doubt=True),
     Method("nearest", _nearest, True, False, frozenset({"alone"}),
            "latest detection of the other cameras, as if simultaneous (paper: unsynchronized)",
-           f"{_PAPER}, Table 1"),
+           f"{_PAPER}, Table 1", uses_doubt=True),
     Method("typeA", _type_a, True, False, frozenset({"alone"}),
            "pseudo stereo at every detection (paper section 2.2, eqs. 1-4)",
            f"{_PAPER}, section 2.2", streamer=_type_a_stream,
            kernels=("pslog.fusion._pseudo_kernel",)),
     Method("typeB", _type_b, True, True, frozenset({"shared", "alone"}),
            "stereo at common instants + ray-constrained prediction (paper section 2.3)",
-           f"{_PAPER}, section 2.3"),
+           f"{_PAPER}, section 2.3", uses_doubt=True),
     Method("linear", _linear, True, True, frozenset({"shared", "alone"}),
            "stereo at common instants + linear prediction (paper: linear prediction)",
-           f"{_PAPER}, Table 1"),
+           f"{_PAPER}, Table 1", uses_doubt=True),
     Method("smooth", _smooth, False, False, frozenset(),
            "one continuous trajectory fitted to every detection's ray (offline)",
            "continuous-time batch estimation: Furgale et al. 2013; Singer 1970 motion prior",
@@ -408,13 +421,17 @@ def type_a_explained(prep: Prepared, rig: Rig, options: FusionOptions
     """``typeA``'s track as :func:`fuse` makes it from ``prep`` (the long-gap confirmation
     of :mod:`pslog.fusion.confirm` included when ``options.confirm_gaps``) and the
     construction of each of its points (the points the confirmation drops left out too)."""
+    from .pseudo import covariance_noise_px, type_a_noise
+
     max_gap_s = options.max_gap_s or default_max_gap_s(rig)
-    track, construction = fuse_type_a(prep, max_gap_s, options.noise_px)
+    track, construction = fuse_type_a(prep, max_gap_s, options.noise_px,
+                                      cov_noise_px=covariance_noise_px(options.noise_px))
     if not options.confirm_gaps or not len(track):
-        return track, construction
+        return type_a_noise(prep, track, max_gap_s, options.noise_px), construction
     from .confirm import confirm_batch
 
-    confirmed = confirm_batch(prep, track, rig, max_gap_s, options.noise_px)
+    confirmed = type_a_noise(prep, confirm_batch(prep, track, rig, max_gap_s,
+                                                 options.noise_px), max_gap_s, options.noise_px)
     if len(confirmed) == len(track):
         return confirmed, construction
     # the construction's rows are the track's points, in order; the confirmation only drops

@@ -919,3 +919,173 @@ def kink_kernel(events, rows1, prev1, next1, world1, rows2, prev2, next2, world2
                     start = time_ns[max(a, 0)]
                 kinked = start >= time_ns[rows2[i]]
         out[i] = kinked
+
+
+@kernel(inline=True)
+def _residual_norm(time_ns, camera, uv, limits, r, r1, r2, r3, gap, ns):
+    """Row ``r``'s residual from the quadratic through rows ``r1, r2, r3`` (its camera's
+    three previous, newest first; ``r3 < 0``: fewer), per axis's σ; NaN where the intervals
+    are not all in ``(0, gap]`` s or a pixel is NaN or beyond its camera's ``limits``
+    (prepare's "no detection")."""
+    if r3 < 0:
+        return np.nan
+    lim = limits[camera[r]]
+    for q in (r, r1, r2, r3):
+        if not (abs(uv[q, 0]) <= lim and abs(uv[q, 1]) <= lim):
+            return np.nan
+    a = (time_ns[r] - time_ns[r1]) / ns
+    b = (time_ns[r1] - time_ns[r2]) / ns
+    cc = (time_ns[r2] - time_ns[r3]) / ns
+    if not (a > 0 and b > 0 and cc > 0 and a <= gap and b <= gap and cc <= gap):
+        return np.nan
+    l1 = (a + b) * (a + b + cc) / (b * (b + cc))
+    l2 = -a * (a + b + cc) / (b * cc)
+    l3 = a * (a + b) / ((b + cc) * cc)
+    e0 = uv[r, 0] - (l1 * uv[r1, 0] + l2 * uv[r2, 0] + l3 * uv[r3, 0])
+    e1 = uv[r, 1] - (l1 * uv[r1, 1] + l2 * uv[r2, 1] + l3 * uv[r3, 1])
+    w = 1 + l1 * l1 + l2 * l2 + l3 * l3
+    return math.sqrt(e0 * e0 + e1 * e1) / math.sqrt(w)
+
+
+@kernel
+def residual_norms_kernel(time_ns, camera, uv, limits, m, max_gap_ns, ns, t_out, v_out):
+    """The finite residuals of the rows, in row order: each row's residual from the
+    quadratic through its camera's three previous rows (each within ``max_gap_ns`` of the
+    next), per axis's σ, ``‖u - Σ l_j u_j‖ / √(1 + Σ l_j²)`` with the Lagrange weights ``l``
+    (:func:`pslog.fusion.stereo.quadratic_residuals`' arithmetic, row by row), its time
+    into ``t_out`` and its value into ``v_out`` (n,) each; returns how many. ``time_ns``
+    (n,) int64 sorted, ``camera`` (n,) of ``m`` cameras, ``uv`` (n, 2) recorded pixels,
+    ``limits`` (m,) each camera's "no detection" bound (|u| or |v| beyond it), ``ns``
+    nanoseconds per second. What :func:`pslog.fusion.pseudo.measured_noise` takes (type A's
+    covariance)."""
+    last = np.full((m, 3), -1, dtype=np.int64)  # each camera's three latest rows, newest first
+    gap = max_gap_ns / ns
+    j = 0
+    for r in range(time_ns.shape[0]):
+        c = camera[r]
+        r1, r2, r3 = last[c, 0], last[c, 1], last[c, 2]
+        last[c, 2], last[c, 1], last[c, 0] = r2, r1, r
+        value = _residual_norm(time_ns, camera, uv, limits, r, r1, r2, r3, gap, ns)
+        if value == value:
+            t_out[j] = time_ns[r]
+            v_out[j] = value
+            j += 1
+    return j
+
+
+@kernel(inline=True)
+def _select(values, count, k):
+    """The ``k``-th smallest of ``values[:count]`` (finite), reordering them in place
+    (Hoare's selection): the element ``np.sort(values[:count])[k]``."""
+    lo = 0
+    hi = count - 1
+    while lo < hi:
+        pivot = values[(lo + hi) // 2]
+        i = lo
+        j = hi
+        while i <= j:
+            while values[i] < pivot:
+                i += 1
+            while values[j] > pivot:
+                j -= 1
+            if i <= j:
+                values[i], values[j] = values[j], values[i]
+                i += 1
+                j -= 1
+        if k <= j:
+            hi = j
+        elif k >= i:
+            lo = i
+        else:
+            break
+    return values[k]
+
+
+@kernel
+def checkpoint_noise_kernel(time_ns, camera, uv, limits, m, max_gap_ns, ns, every_ns,
+                            window_ns, min_count, rayleigh, at_ns, out):
+    """A session's checkpoint noise at each of the sorted ``at_ns`` (k,) (rows' times), in
+    two passes over the rows: the residuals (:func:`residual_norms_kernel`), then each
+    checkpoint of the rows' times (a multiple of ``every_ns``) in order, its window's upper
+    median (``[T - window_ns, T)``, at least ``min_count`` residuals) over ``rayleigh``, or
+    the latest earlier checkpoint's; into ``out`` (k,), NaN before any checkpoint has one.
+    The arithmetic of :func:`pslog.fusion.pseudo.window_noise` (the same element divided by
+    ``rayleigh``), which :class:`~pslog.fusion.pseudo.MeasuredNoiseStream` makes one
+    checkpoint at a time."""
+    n = time_ns.shape[0]
+    t_fin = np.empty(n, dtype=np.int64)
+    v_fin = np.empty(n)
+    j = residual_norms_kernel(time_ns, camera, uv, limits, m, max_gap_ns, ns, t_fin, v_fin)
+    scratch = np.empty(j)
+    lo = 0
+    hi = 0
+    p = 0
+    k = at_ns.shape[0]
+    latest = np.nan
+    previous = np.iinfo(np.int64).min
+    for r in range(n):
+        mark = time_ns[r] // every_ns * every_ns
+        if mark == previous:
+            continue
+        previous = mark
+        while lo < j and t_fin[lo] < mark - window_ns:
+            lo += 1
+        while hi < j and t_fin[hi] < mark:
+            hi += 1
+        count = hi - lo
+        if count >= min_count:
+            for i in range(count):
+                scratch[i] = v_fin[lo + i]
+            latest = _select(scratch, count, count // 2) / rayleigh
+        while p < k and at_ns[p] // every_ns * every_ns <= mark:
+            out[p] = latest
+            p += 1
+    while p < k:  # (no row at a point's time: not a caller's case)
+        out[p] = np.nan
+        p += 1
+
+
+@kernel
+def window_medians_kernel(time_ns, values, marks, window_ns, min_count, out):
+    """For each of the sorted ``marks`` (k,) int64, the upper median (the middle element,
+    sorted) of the ``values`` (n,) whose ``time_ns`` (n,) sorted lie in ``[mark -
+    window_ns, mark)``, into ``out`` (k,); NaN where fewer than ``min_count`` are there.
+    ``values`` finite. A selection, not arithmetic: the same element whichever rows around
+    the window are given (a stream's history or the session)."""
+    n = time_ns.shape[0]
+    lo = 0
+    hi = 0
+    for j in range(marks.shape[0]):
+        while lo < n and time_ns[lo] < marks[j] - window_ns:
+            lo += 1
+        while hi < n and time_ns[hi] < marks[j]:
+            hi += 1
+        count = hi - lo
+        if count < min_count:
+            out[j] = np.nan
+            continue
+        out[j] = np.sort(values[lo:hi])[count // 2]
+
+
+@kernel
+def window_mean_squares_kernel(time_ns, values, ends, window_ns, min_count, out):
+    """For each of the sorted ``ends`` (k,) int64, the mean of the squares of the ``values``
+    (n,) whose ``time_ns`` (n,) sorted lie in ``[end - window_ns, end)``, halved (a 2-D
+    residual's norm over σ per axis: the unbiased estimate of σ²), summed in time order,
+    into ``out`` (k,); NaN where fewer than ``min_count`` are there."""
+    n = time_ns.shape[0]
+    lo = 0
+    hi = 0
+    for j in range(ends.shape[0]):
+        while lo < n and time_ns[lo] < ends[j] - window_ns:
+            lo += 1
+        while hi < n and time_ns[hi] < ends[j]:
+            hi += 1
+        count = hi - lo
+        if count < min_count:
+            out[j] = np.nan
+            continue
+        total = 0.0
+        for i in range(lo, hi):
+            total += values[i] * values[i]
+        out[j] = total / (2 * count)

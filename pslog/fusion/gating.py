@@ -1368,7 +1368,7 @@ class _Decider:
 
 def gate(detections: Detections, rig: Rig, *, causal: bool = True, wait_s: float = 0.0,
          max_gap_s: float | None = None, options: GatingOptions | None = None,
-         common: Callable[[], tuple] | None = None) -> Gated:
+         common: Callable[[], tuple] | None = None, doubt: bool = True) -> Gated:
     """Choose the ball among every frame's candidates (module docstring).
 
     Parameters
@@ -1385,6 +1385,8 @@ def gate(detections: Detections, rig: Rig, *, causal: bool = True, wait_s: float
     common : ``common()`` gives :func:`gate_common` of ``detections`` and ``rig`` (the
         part of the work every form shares: several forms gating the same detections
         compute it once); None: computed here
+    doubt : make :attr:`Gated.doubt_px2` (False: None, for methods whose covariance does
+        not take it: the registry's ``Method.uses_doubt``)
 
     Returns
     -------
@@ -1400,7 +1402,7 @@ def gate(detections: Detections, rig: Rig, *, causal: bool = True, wait_s: float
     if n == 0:
         return _result(detections, rig, reason)
     _decided(c, rig, options, causal, round(wait_s * NS), max_gap_ns, reason, tables)
-    return _result(detections, rig, reason, options)
+    return _result(detections, rig, reason, options, doubt)
 
 
 def gate_common(detections: Detections, rig: Rig) -> tuple:
@@ -1743,7 +1745,7 @@ def _stillness_one(key: int, pts, earlier, lags: int, options: GatingOptions,
 
 
 def _result(detections: Detections, rig: Rig, reason: np.ndarray,
-            options: GatingOptions | None = None) -> Gated:
+            options: GatingOptions | None = None, doubt: bool = True) -> Gated:
     chosen = reason < 0
     rej = ~chosen
     rows = detections.cand_frame[rej]
@@ -1753,7 +1755,7 @@ def _result(detections: Detections, rig: Rig, reason: np.ndarray,
     observations = timed_observations(_chosen_candidates(detections, chosen), rig)
     return Gated(observations, rejections, chosen, reason,
                  _observation_doubt(detections, rig, reason, observations,
-                                    (options or GatingOptions()).static_s))
+                                    (options or GatingOptions()).static_s) if doubt else None)
 
 
 #: A choice is in doubt when its camera rejected candidates this close to it (recorded
@@ -2401,12 +2403,16 @@ def gating_key(method: str, options) -> tuple[bool, float]:
 
 
 def gate_for(detections: Detections, rig: Rig, method: str, options,
-             common: Callable[[], tuple] | None = None) -> Gated:
+             common: Callable[[], tuple] | None = None, doubt: bool | None = None) -> Gated:
     """:func:`gate` in the form ``method`` needs (``options``: FusionOptions with
-    ``max_gap_s`` set or None; ``common``: as :func:`gate`'s)."""
+    ``max_gap_s`` set or None; ``common``: as :func:`gate`'s; ``doubt``: make the choices'
+    doubt, None: if ``method``'s covariance takes it, ``Method.uses_doubt``)."""
+    from . import METHODS
+
     causal, wait_s = gating_key(method, options)
     return gate(detections, rig, causal=causal, wait_s=wait_s, max_gap_s=options.max_gap_s,
-                common=common)
+                common=common,
+                doubt=METHODS[method].uses_doubt if doubt is None else doubt)
 
 
 def prepared_for(gated: Gated, rig: Rig) -> Prepared:
@@ -2469,7 +2475,7 @@ def start_fusion(detections: Detections, rig: Rig, methods, options=None, *,
     """:func:`fuse_detections` started (on threads, at once; ``workers=1``: each method
     as the iteration reaches it, unless ``background``: on one thread), its tracks
     delivered as each method ends: the caller writes them meanwhile (``pslog fuse``)."""
-    from . import FusionOptions, check_method, fuse, prepare
+    from . import METHODS, FusionOptions, check_method, fuse, prepare
     from ._parallel import MethodProgress, MethodRun, default_workers
 
     options = options or FusionOptions()
@@ -2504,8 +2510,11 @@ def start_fusion(detections: Detections, rig: Rig, methods, options=None, *,
                 shared["value"] = None  # (its arrays go with the last form's gate)
             return value
 
+    # (the choices' doubt where a method of the form takes it in its covariance)
+    doubting = {gating_key(m, options) for m in methods if METHODS[m].uses_doubt}
+
     def gated_input(key, method: str) -> tuple[Gated, Prepared | None]:  # once per form
-        gated = gate_for(detections, rig, method, options, common)
+        gated = gate_for(detections, rig, method, options, common, key in doubting)
         return gated, (prepared_for(gated, rig) if len(rig) >= 2 else None)
 
     def fused(method: str, shared: tuple[Gated, Prepared | None]):

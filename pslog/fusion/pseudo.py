@@ -242,20 +242,23 @@ class TypeAConstruction:
 def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = ...,
                 events: np.ndarray | None = ..., seen: np.ndarray | None = ...,
                 noise: NoiseEstimate | None = ...,
-                explain: Literal[True] = ...) -> tuple[Track, TypeAConstruction]: ...
+                explain: Literal[True] = ...,
+                cov_noise_px: float | None = ...) -> tuple[Track, TypeAConstruction]: ...
 
 
 @overload
 def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = ...,
                 events: np.ndarray | None = ..., seen: np.ndarray | None = ...,
                 noise: NoiseEstimate | None = ...,
-                *, explain: Literal[False]) -> tuple[Track, None]: ...
+                *, explain: Literal[False],
+                cov_noise_px: float | None = ...) -> tuple[Track, None]: ...
 
 
 def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
                 events: np.ndarray | None = None, seen: np.ndarray | None = None,
                 noise: NoiseEstimate | None = None,
-                explain: bool = True) -> tuple[Track, TypeAConstruction | None]:
+                explain: bool = True, cov_noise_px: float | None = None
+                ) -> tuple[Track, TypeAConstruction | None]:
     """``typeA``: a point at every detection with two earlier pseudo-stereo points.
 
     The two earlier points are those of the two latest earlier instants that can be
@@ -278,7 +281,9 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
     ``noise``: the session's estimate of the detection noise for the tests of innovation.py,
     updated in place (a stream keeps one across its pushes; None: a new one).
     ``explain``: also return how each point was made (False: None in its place, for callers
-    that keep only the Track).
+    that keep only the Track). ``cov_noise_px``: the noise the covariance is made with, if
+    not ``noise_px`` (the tests' least noise); the registry's ``typeA`` makes it at
+    :func:`covariance_noise_px` and rescales it to the measured noise (:func:`type_a_noise`).
     """
     from . import _pseudo_kernel
 
@@ -309,12 +314,15 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
     innovation, factor, model = np.empty(k), np.empty(k), np.empty(k)
     quality_table = np.empty((len(_QUALITY), k))
     with_cov = noise_px is not None and not _prepare.FINITE_DIFFERENCES
+    # (the covariance's noise: the stated one unless told)
+    var_px = (0.0 if noise_px is None else float(noise_px)) if cov_noise_px is None else float(
+        cov_noise_px)
     made = _pseudo_kernel.type_a_kernel(
         targets, previous_instant, 2 * len(prep.centers), MAX_EXTRAPOLATION, max_gap_ns,
         time_ns, obs.camera, prev_b, next_b, prep.uv_undistorted, prep.observed_rays,
         prep.centers, ki, rr, f9, cam, _SPAN_TIE_NS, MIN_RAY_ANGLE_DEG, prep.ray_dir,
         prep.observed_direction_jacobians, _jacobian_rows(prep) if lens else np.zeros((1, 4)),
-        lens, rtki, NS, 0.0 if noise_px is None else float(noise_px), with_cov, ff, fi,
+        lens, rtki, NS, var_px, with_cov, ff, fi,
         refused, has, predicted, points, flags, innovation, factor, model, quality_table,
         past_rows, past_points)
     # (the kernel packs the targets with a point first: views, no gather)
@@ -352,7 +360,7 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
                 evaluate, [prep.uv_undistorted[slots[:, s]] for s in range(7)], slots)
             quality.update(covariance(slots, jacobians,
                                       [prep.pixel_jacobians_t(slots[:, s]) for s in range(7)],
-                                      noise_px))
+                                      var_px))
     t_event = np.take(time_ns, events)
     cams0 = np.take(obs.camera, events)
     made = finite_rows(points)
@@ -429,15 +437,19 @@ class TypeAStream:
     ----------
     rig : Rig
     options : FusionOptions
+    cov_noise_px : float or None, the noise the covariance is made with (None: the stated
+        ``options.noise_px``; :func:`fuse_type_a`'s)
     """
 
-    def __init__(self, rig, options) -> None:
+    def __init__(self, rig, options, cov_noise_px: float | None = None) -> None:
         from . import _pseudo_kernel
         from ._prepare import _FAR_IMAGES as _FAR_IMAGES_
         from ._prepare import default_max_gap_s, prepare
 
         self.rig = rig
         self._noise_px = options.noise_px
+        # (the covariance's noise: the stated one unless told; fuse_type_a's cov_noise_px)
+        self._cov_px = options.noise_px if cov_noise_px is None else cov_noise_px
         self._max_gap_s = options.max_gap_s or default_max_gap_s(rig)
         # the history a new point can reach: two bridged gaps (and the stream's margin)
         self._history_ns = int((2 * self._max_gap_s + 2 * options.tolerance_s) * NS) + 1
@@ -568,7 +580,7 @@ class TypeAStream:
                              _jacobian_rows=buf.jac_rows[window])
         return fuse_type_a(prep, self._max_gap_s, self._noise_px,
                            events=np.arange(n - n_new, n), seen=buf.seen[window],
-                           noise=self._noise, explain=False)[0]
+                           noise=self._noise, explain=False, cov_noise_px=self._cov_px)[0]
 
     def push_one(self, time_ns: int, camera: int, u: float, v: float) -> Track:
         """One detection (Python int, int, float, float; after every row pushed before, the
@@ -669,7 +681,7 @@ class TypeAStream:
             self._template.centers, ki, rr, f9, cam, _SPAN_TIE_NS, MIN_RAY_ANGLE_DEG,
             buf.ray_dir[lo:end], np.ascontiguousarray(buf.dir_jac[:, :, lo:end]),
             buf.jac_rows[lo:end] if lens else np.zeros((1, 4)), lens, rtki, NS,
-            0.0 if noise_px is None else float(noise_px), with_cov, ff, fi, refused, has,
+            0.0 if self._cov_px is None else float(self._cov_px), with_cov, ff, fi, refused, has,
             predicted, points, flags, innovation, factor, model, quality_table, past_rows,
             past_points)
         # the decisions of fuse_type_a on its one point (made: 1), or none (made: 0)
@@ -787,3 +799,328 @@ class _StreamColumns:
             getattr(out, name)[:k] = column[lo:hi].copy()  # (overlapping when in place)
         out.dir_jac[:, :, :k] = self.dir_jac[:, :, lo:hi].copy()
         return out
+
+
+# ---------------------------------------------------------------------------------------
+# type A's covariance at the session's measured detection noise (docs/methods.md, "Type A's
+# covariance at the measured noise")
+
+#: the covariance columns a point's noise scales
+_COV_COLUMNS = ("cov_xx_m2", "cov_yy_m2", "cov_zz_m2", "cov_xy_m2", "cov_xz_m2", "cov_yz_m2")
+
+
+def covariance_noise_px(noise_px: float | None) -> float:
+    """The pixel noise type A's kernel makes the covariance with (``fuse_type_a``'s
+    ``cov_noise_px``) before :func:`with_measured_noise` rescales it: the stated noise, or
+    1 px where it is 0 (a covariance of zero noise cannot be rescaled)."""
+    return float(noise_px) if noise_px else 1.0
+
+
+def no_detection_limits(cameras) -> np.ndarray:
+    """Each camera's bound (m,) beyond which a recorded pixel is no detection (prepare's
+    ``_prepare._FAR_IMAGES`` image sizes: its undistorted pixel NaN)."""
+    return np.array([float(_prepare._FAR_IMAGES * max(c.width, c.height)) for c in cameras])
+
+
+#: type A's noise at a session's start, before any checkpoint's window holds
+#: ``NOISE_MIN_COUNT`` residuals: the root mean square of the residuals before the point's
+#: own time once this many are there (:func:`measured_noise`)
+NOISE_START_COUNT = 4
+#: ... and before that (a session's first ~0.1 s: each camera's fourth detection makes its
+#: first residual), at least this: nothing is measured yet, and the stated noise is what the
+#: user left at the default as often as what the detector does (at 2 px of true noise the
+#: stated 0.5 px made the first points' d² 16 times too large: docs/methods.md)
+NOISE_UNKNOWN_PX = 2.0
+
+
+def residual_norms(time_ns: np.ndarray, camera: np.ndarray, uv: np.ndarray,
+                   limits: np.ndarray, max_gap_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """The times (j,) and norms (j,) of the finite residuals of the detections ``time_ns``
+    (n,) sorted, ``camera`` (n,), ``uv`` (n, 2) recorded pixels (``limits``:
+    :func:`no_detection_limits`) from the quadratic through each one's camera's three
+    previous ones, per axis's σ (:func:`~pslog.fusion._pseudo_kernel.residual_norms_kernel`)."""
+    from . import _pseudo_kernel
+
+    n = len(time_ns)
+    t_out, v_out = np.empty(n, np.int64), np.empty(n)
+    j = _pseudo_kernel.residual_norms_kernel(
+        np.ascontiguousarray(time_ns), np.ascontiguousarray(camera, dtype=np.int64),
+        np.ascontiguousarray(uv), limits, len(limits), int(max_gap_s * NS), NS, t_out, v_out)
+    return t_out[:j], v_out[:j]
+
+
+def window_noise(t_fin: np.ndarray, v_fin: np.ndarray, ends_ns: np.ndarray, min_count: int
+                 ) -> np.ndarray:
+    """σ (k,) at each of the sorted ``ends_ns`` (k,): the upper median of the residual norms
+    ``v_fin`` at ``t_fin`` (:func:`residual_norms`) in ``[end - NOISE_WINDOW_S, end)``
+    over Rayleigh's median; NaN where fewer than ``min_count`` are there."""
+    from . import _pseudo_kernel
+    from .innovation import RAYLEIGH_MEDIAN
+    from .stereo import NOISE_WINDOW_S
+
+    est = np.empty(len(ends_ns))
+    _pseudo_kernel.window_medians_kernel(t_fin, v_fin, np.ascontiguousarray(ends_ns),
+                                         int(NOISE_WINDOW_S * NS), min_count, est)
+    return est / RAYLEIGH_MEDIAN
+
+
+def start_noise(t_fin: np.ndarray, v_fin: np.ndarray, at_ns: np.ndarray, noise_px: float
+                ) -> np.ndarray:
+    """σ (k,) of points at ``at_ns`` (k,) sorted before any checkpoint has an estimate: the
+    larger of ``noise_px`` and the root mean square of the residuals (per axis) in the
+    window up to the point's own time once :data:`NOISE_START_COUNT` are there, else the
+    larger of ``noise_px`` and :data:`NOISE_UNKNOWN_PX`. The mean of squares, not the
+    median: of a few residuals the median's ``E[σ² / σ̂²]`` is large (a checkpoint's window
+    holds 16 or more), the mean square's is ``n / (n - 1)`` (an inverse χ² of 2n degrees of
+    freedom), and an outlier makes it larger, not smaller."""
+    from . import _pseudo_kernel
+    from .stereo import NOISE_WINDOW_S
+
+    est = np.empty(len(at_ns))
+    _pseudo_kernel.window_mean_squares_kernel(t_fin, v_fin, np.ascontiguousarray(at_ns),
+                                              int(NOISE_WINDOW_S * NS), NOISE_START_COUNT, est)
+    return np.where(np.isfinite(est), np.maximum(np.sqrt(est), noise_px),
+                    max(noise_px, NOISE_UNKNOWN_PX))
+
+
+def measured_noise(time_ns: np.ndarray, camera: np.ndarray, uv: np.ndarray, limits: np.ndarray,
+                   max_gap_s: float, at_ns: np.ndarray, noise_px: float) -> np.ndarray:
+    """The detection noise σ (pixels per axis, (k,)) of type-A points at ``at_ns`` (k,)
+    sorted, from the detections ``time_ns`` (n,) sorted, ``camera`` (n,), ``uv`` (n, 2)
+    recorded pixels (``limits``: :func:`no_detection_limits`), causally, with ``nearest``'s
+    estimator (:func:`pslog.fusion.stereo.detection_noise`: its constants and floor) and
+    two changes at the start and across pauses (docs/methods.md, "Type A's covariance at
+    the measured noise"):
+
+    - each detection's residual from the quadratic through its camera's three previous ones,
+      per axis's σ (:func:`residual_norms`);
+    - a checkpoint ``T`` (each detection's time down to a multiple of ``NOISE_EVERY_S``)
+      has the median of the residuals in ``[T - NOISE_WINDOW_S, T)`` over Rayleigh's median
+      if ``NOISE_MIN_COUNT`` are there, else the latest earlier checkpoint's (of any
+      detection) that has one (a pause in the detections does not change the detector);
+    - a point takes its checkpoint's; before any checkpoint has one (the session's start),
+      :func:`start_noise` (at least ``noise_px``: the root mean square of the residuals
+      before the point once ``NOISE_START_COUNT`` are there, else ``NOISE_UNKNOWN_PX``);
+    - at least ``min(noise_px, NOISE_FLOOR_PX)``.
+
+    A point uses only detections before its own time: :class:`MeasuredNoiseStream` gives it
+    the same bits."""
+    from . import _pseudo_kernel
+    from .innovation import RAYLEIGH_MEDIAN
+    from .stereo import NOISE_EVERY_S, NOISE_FLOOR_PX, NOISE_MIN_COUNT, NOISE_WINDOW_S
+
+    time_ns = np.ascontiguousarray(time_ns)
+    camera = np.ascontiguousarray(camera, dtype=np.int64)
+    uv = np.ascontiguousarray(uv)
+    at_ns = np.ascontiguousarray(at_ns, dtype=np.int64)
+    sigma = np.empty(len(at_ns))
+    _pseudo_kernel.checkpoint_noise_kernel(
+        time_ns, camera, uv, limits, len(limits), int(max_gap_s * NS), NS,
+        int(NOISE_EVERY_S * NS), int(NOISE_WINDOW_S * NS), NOISE_MIN_COUNT, RAYLEIGH_MEDIAN,
+        at_ns, sigma)
+    start = np.flatnonzero(np.isnan(sigma))  # (the session's first points)
+    if len(start):
+        # (the residuals of the rows up to the last of them: the same as of every row)
+        end = int(np.searchsorted(time_ns, at_ns[start[-1]], side="right"))
+        fin = residual_norms(time_ns[:end], camera[:end], uv[:end], limits, max_gap_s)
+        sigma[start] = start_noise(*fin, at_ns[start], noise_px)
+    return np.maximum(sigma, min(noise_px, NOISE_FLOOR_PX))
+
+
+def with_measured_noise(track: Track, sigma: np.ndarray, cov_noise_px: float) -> Track:
+    """``track`` (type A's, its covariance made at ``cov_noise_px``) with the covariance of
+    each point at its own noise ``sigma`` (k,): the columns times ``(σ / cov_noise_px)²``
+    (the first-order covariance is the noise's variance times Jacobian products), ``std_m``
+    the root of the new diagonal's sum. Points and the other columns are the same arrays."""
+    q = track.quality
+    if not len(track) or "std_m" not in q:
+        return track
+    factor = sigma / cov_noise_px
+    factor = factor * factor
+    quality = dict(q)
+    for name in _COV_COLUMNS:
+        quality[name] = q[name] * factor
+    quality["std_m"] = np.sqrt(quality["cov_xx_m2"] + quality["cov_yy_m2"]
+                               + quality["cov_zz_m2"])
+    return _trusted_track(track.time_ns, track.position_world, track.camera, quality,
+                          dict(track.dropped))
+
+
+def type_a_noise(prep: Prepared, track: Track, max_gap_s: float, noise_px: float | None
+                 ) -> Track:
+    """``track`` (type A's from ``prep``, made with ``cov_noise_px =``
+    :func:`covariance_noise_px`) with its covariance at the session's measured noise
+    (:func:`measured_noise` over ``prep``'s detections); unchanged without covariance."""
+    if noise_px is None or not len(track) or "std_m" not in track.quality:
+        return track
+    obs = prep.obs
+    sigma = measured_noise(obs.time_ns, obs.camera, obs.uv, no_detection_limits(prep.cameras),
+                           max_gap_s, track.time_ns, float(noise_px))
+    return with_measured_noise(track, sigma, covariance_noise_px(noise_px))
+
+
+class MeasuredNoiseStream:
+    """A type-A stream (:class:`TypeAStream`, or :class:`~pslog.fusion.confirm.
+    ConfirmedStream` around one) whose points' covariance is at the measured noise, as
+    :func:`type_a_noise` makes the batch's. Each checkpoint's σ is made when its first row
+    arrives (every detection before the checkpoint is in then: rows arrive in time order)
+    from the detections of the last ``NOISE_EVERY_S + NOISE_WINDOW_S + 3 max_gap_s`` (its
+    window, and each residual's three previous detections), which it keeps; a point takes
+    its checkpoint's σ when it is output (a withheld one later: the checkpoints of the
+    points still withheld are kept). The same bits as the batch run."""
+
+    def __init__(self, inner, rig, options) -> None:
+        from ._prepare import default_max_gap_s
+        from .stereo import NOISE_EVERY_S, NOISE_WINDOW_S
+
+        self.inner = inner
+        self._noise_px = options.noise_px
+        self._cov_px = covariance_noise_px(options.noise_px)
+        self._max_gap_s = options.max_gap_s or default_max_gap_s(rig)
+        self._limits = no_detection_limits(rig.cameras)
+        self._every_ns = int(NOISE_EVERY_S * NS)
+        self._keep_ns = int((NOISE_EVERY_S + NOISE_WINDOW_S + 3 * self._max_gap_s
+                             + options.tolerance_s) * NS) + 1
+        self._time = np.zeros(256, np.int64)
+        self._camera = np.zeros(256, np.int64)
+        self._uv = np.zeros((256, 2))
+        self._n = 0
+        self._sigma: dict[int, float] = {}  # checkpoint ns -> σ (the recent ones)
+        self._last_mark = np.iinfo(np.int64).min
+        self._latest = math.nan  # the latest checkpoint's estimate (NaN: none yet)
+        self._start: dict[int, float] = {}  # the session's start: time ns -> σ of its rows
+        if hasattr(inner, "push_one"):
+            self.push_one = self._push_one
+        if hasattr(inner, "flush"):
+            self.flush = self._flush
+
+    def _log(self, time_ns: np.ndarray, camera: np.ndarray, uv: np.ndarray) -> None:
+        """New rows into the kept history (the rows older than it dropped first when the
+        buffers are full), the σ of each checkpoint they are the first rows of, and (at the
+        session's start, no checkpoint's estimate yet) each new row's own."""
+        k = len(time_ns)
+        n = self._n
+        first = int(time_ns[0])
+        if first // self._every_ns * self._every_ns > self._last_mark or n + k > len(self._time):
+            # (at each new checkpoint, and when full: the rows older than the history out)
+            lo = int(np.searchsorted(self._time[:n], first - self._keep_ns))
+            n -= lo
+            size = max(len(self._time), 2 * (n + k))
+            t, c, u = np.zeros(size, np.int64), np.zeros(size, np.int64), np.zeros((size, 2))
+            t[:n], c[:n], u[:n] = (self._time[lo:lo + n], self._camera[lo:lo + n],
+                                   self._uv[lo:lo + n])
+            self._time, self._camera, self._uv = t, c, u
+            self._prune(first)
+        self._time[n:n + k] = time_ns
+        self._camera[n:n + k] = camera
+        self._uv[n:n + k] = np.asarray(uv, np.float64).reshape(-1, 2)
+        self._n = n = n + k
+        if self._noise_px is None:
+            return
+        from .stereo import NOISE_MIN_COUNT
+
+        every = self._every_ns
+        fin = None
+        for mk in sorted({t // every * every for t in time_ns.tolist()}):
+            if mk > self._last_mark:
+                fin = fin or residual_norms(self._time[:n], self._camera[:n], self._uv[:n],
+                                            self._limits, self._max_gap_s)
+                est = window_noise(*fin, np.array([mk], np.int64), NOISE_MIN_COUNT)[0]
+                if math.isfinite(est):
+                    self._latest = est
+                self._sigma[mk] = self._latest
+                self._last_mark = mk
+        # (the session's start, no checkpoint's estimate yet: each row's own)
+        ends = [t for t in sorted(set(time_ns.tolist()))
+                if math.isnan(self._sigma[t // every * every])]
+        if ends:
+            fin = fin or residual_norms(self._time[:n], self._camera[:n], self._uv[:n],
+                                        self._limits, self._max_gap_s)
+            at = np.array(ends, np.int64)
+            for t, sg in zip(ends, start_noise(*fin, at, float(self._noise_px)).tolist(),
+                             strict=True):
+                self._start[t] = sg
+
+    def _log_one(self, t: int, c: int, u: float, v: float) -> None:
+        """:meth:`_log` of one row (Python scalars) where it only writes the row (a
+        checkpoint already made, room left, past the session's start); else :meth:`_log`."""
+        n = self._n
+        if (t // self._every_ns * self._every_ns > self._last_mark or n >= len(self._time)
+                or self._latest != self._latest):
+            self._log(np.array([t], np.int64), np.array([c], np.int64), np.array([[u, v]]))
+            return
+        self._time[n] = t
+        self._camera[n] = c
+        row = self._uv[n]
+        row[0], row[1] = u, v
+        self._n = n + 1
+
+    def _prune(self, newest: int) -> None:
+        """The checkpoints no point can still take dropped (before the newest row's, and
+        before the oldest point the inner stream withholds)."""
+        oldest = newest
+        queue = getattr(self.inner, "_queue", None)
+        if queue:
+            oldest = min(oldest, int(queue[0][0].time_ns[0]))
+        cut = oldest // self._every_ns * self._every_ns
+        for mk in [mk for mk in self._sigma if mk < cut]:
+            del self._sigma[mk]
+        for t in [t for t in self._start if t < cut]:
+            del self._start[t]
+
+    def _scaled(self, out: Track) -> Track:
+        """``out`` with each point's covariance at its checkpoint's σ (at the session's
+        start its own), at least the floor: :func:`type_a_noise`'s arithmetic (one point:
+        the same IEEE operations on Python floats)."""
+        if self._noise_px is None or not len(out) or "std_m" not in out.quality:
+            return out
+        from .stereo import NOISE_FLOOR_PX
+
+        every = self._every_ns
+        if len(out) == 1:  # (the usual push: one point, no numpy call on (1,) columns)
+            t = int(out.time_ns[0])
+            sg = self._sigma[t // every * every]
+            if sg != sg:
+                sg = self._start[t]
+            sg = max(float(sg), min(float(self._noise_px), NOISE_FLOOR_PX))
+            f = sg / self._cov_px
+            f = f * f
+            q = out.quality
+            xx, yy, zz, xy, xz, yz = (float(q[name][0]) * f for name in _COV_COLUMNS)
+            values = np.array([math.sqrt(xx + yy + zz), xx, yy, zz, xy, xz, yz])
+            values.flags.writeable = False
+            quality = dict(q)
+            quality.update(std_m=values[0:1], cov_xx_m2=values[1:2], cov_yy_m2=values[2:3],
+                           cov_zz_m2=values[3:4], cov_xy_m2=values[4:5], cov_xz_m2=values[5:6],
+                           cov_yz_m2=values[6:7])
+            # (out's columns are a Track's already: read-only, shared as they are)
+            track = object.__new__(Track)
+            track.__dict__.update(method=out.method, time_ns=out.time_ns,
+                                  position_world=out.position_world, camera=out.camera,
+                                  quality=quality, dropped=out.dropped)
+            return track
+        cache, start = self._sigma, self._start
+        sigma = np.array([cache[t // every * every] for t in out.time_ns.tolist()])
+        if np.isnan(sigma).any():
+            sigma = np.array([start[t] if math.isnan(sg) else sg for t, sg in zip(
+                out.time_ns.tolist(), sigma.tolist(), strict=True)])
+        sigma = np.maximum(sigma, min(float(self._noise_px), NOISE_FLOOR_PX))
+        return with_measured_noise(out, sigma, self._cov_px)
+
+    def push(self, time_ns, camera, uv, frame_index) -> Track:
+        """The inner stream's push, its points' covariance at the measured noise."""
+        if len(time_ns) == 1:
+            u, v = np.asarray(uv, np.float64).reshape(-1, 2)[0].tolist()
+            self._log_one(int(time_ns[0]), int(camera[0]), u, v)
+        elif len(time_ns):
+            self._log(np.asarray(time_ns, np.int64), np.asarray(camera), uv)
+        return self._scaled(self.inner.push(time_ns, camera, uv, frame_index))
+
+    def _push_one(self, time_ns: int, camera: int, u: float, v: float) -> Track:
+        """The inner stream's ``push_one``, its point's covariance at the measured noise."""
+        self._log_one(time_ns, camera, u, v)
+        return self._scaled(self.inner.push_one(time_ns, camera, u, v))
+
+    def _flush(self) -> Track:
+        """The inner stream's ``flush`` (the points it still holds), at the measured noise."""
+        return self._scaled(self.inner.flush())

@@ -131,7 +131,7 @@ class StreamFuser:
         # the doubt of the gate's choices, for the methods re-run on the window (their
         # covariance holds it: stereo.doubt_covariance; the incremental forms do not use it)
         self._doubts = None
-        if self._gate is not None and self.incremental is None:
+        if self._gate is not None and self.incremental is None and METHODS[method].uses_doubt:
             from .gating import StreamDoubt
 
             self._doubts = StreamDoubt(self._gate)
