@@ -266,3 +266,51 @@ def test_track_chunks_at_the_track_level_detections_at_the_session_level(tmp_pat
                 levels.setdefault("camera", set()).update(
                     lv for lv in (-3, -1, 1, 3) if zstandard.compress(raw, lv) == stored)
     assert levels == {"tracks": {_chunks.TRACK_ZSTD_LEVEL}, "camera": {_chunks.ZSTD_LEVEL}}
+
+
+def test_a_track_after_buffered_rejections_keeps_its_records_whole(tmp_path, rig3):
+    """pslog fuse writes a method's rejections (a few: queued one by one, still buffered)
+    and then the next method's track: the rejections go in a chunk of their own and the
+    track's first block is cut into chunks from its whole records like its other blocks
+    (only its own two channels in them, at the track level), every message as written."""
+    import zstandard
+
+    from pslog.fusion.gating import Rejections
+
+    rng = np.random.default_rng(13)
+    first = _track(300, "typeA", True, rng)
+    second = _track(W._TRACK_BLOCK + 100, "nearest", True, rng)
+    rej = Rejections(np.array([5, 9]), np.array([0, 1], dtype=np.int32), np.array([1, 2]),
+                     np.array([[10.0, 20.0], [30.0, 40.0]]), np.array([0.5, 0.25]),
+                     np.array([0, 1], dtype=np.int8))
+    path = tmp_path / "t.mcap"
+    with SessionWriter(path, rig3) as w:
+        w.add_track(first, last=True)
+        w.add_rejections("typeA", rej)
+        w.add_track(second, last=True)
+    with open(path, "rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        topics = {c.id: c.topic for c in summary.channels.values()}
+        own = {S.track_topic("nearest"), S.track_scene_topic("nearest")}
+        seen = 0
+        for index in summary.chunk_indexes:
+            here = {topics[c] for c in index.message_index_offsets}
+            if not here & own:
+                continue
+            assert here <= own, here  # no rejection joined to the track's records
+            f.seek(index.chunk_start_offset + 1 + 8 + 8 + 8 + 8 + 4)
+            size = int.from_bytes(f.read(4), "little")
+            assert f.read(size) == b"zstd"
+            stored = f.read(int.from_bytes(f.read(8), "little"))
+            raw = zstandard.ZstdDecompressor().decompress(stored)
+            assert zstandard.compress(raw, _chunks.TRACK_ZSTD_LEVEL) == stored
+            seen += 1
+        assert seen >= 2
+        got: dict[str, list[int]] = {}
+        for _s, c, m in reader.iter_messages(log_time_order=False):
+            got.setdefault(c.topic, []).append(m.log_time)
+    assert got[S.rejections_topic("typeA")] == [5, 9]
+    for track in (first, second):
+        for topic in (S.track_topic(track.method), S.track_scene_topic(track.method)):
+            assert got[topic] == track.time_ns.tolist()
