@@ -350,6 +350,7 @@ def _run_staged(job: Job, settings: Settings, staging: Path, start: float) -> di
     error = ""
     kill = os.environ.get(KILL_ONCE_ENV)
     stamp = None
+    staged = False  # this task made its staging folder
     try:
         try:
             # the input as it is when the task starts: done.json records this, so a file
@@ -365,6 +366,7 @@ def _run_staged(job: Job, settings: Settings, staging: Path, start: float) -> di
             # the new outputs are made in a staging folder and replace the old ones only
             # when all are complete (_install): an interrupted run keeps the old set
             staging.mkdir()
+            staged = True
         except OSError as exc:
             from pslog.outputs import os_reason
 
@@ -422,6 +424,12 @@ def _run_staged(job: Job, settings: Settings, staging: Path, start: float) -> di
             reason = os_reason(exc) if isinstance(exc, OSError) else str(exc)
             error = f"pslog batch: error: cannot write {outdir}: {reason}"
             row.update(status="failed", error=error)
+    if error and staged and not staging.is_dir():
+        # the staging folder was removed under this task: not a failure of the session but
+        # an interrupted batch, which settled the folder while this task's worker still ran
+        # (Ray ends a force-cancelled task's worker asynchronously; a step then failed on
+        # its vanished folder): the old outputs stay, as for any interrupted session
+        return row
     if error:
         # the session failed (not interrupted): none of its old outputs stays beside its
         # failed row (done.json first, so they are never taken for complete ones)

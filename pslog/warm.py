@@ -195,10 +195,21 @@ def _track_writer(path: str, rig) -> None:
     track = Track("typeA", t, np.column_stack([values, values, values]),
                   (np.arange(n) % len(rig)).astype(np.int32),
                   {k: values for k in QUALITY_FIELDS})
+    # and a dirty session's many rejections: a block of payloads (not whole records) of
+    # over a megabyte, its chunk records assembled by _wire.assemble_records (a track's
+    # first block no longer reaches it: written apart from the messages queued before it)
+    from pslog.fusion.gating import Rejections
+    from pslog.log.writer import _FRAME_BLOCK
+
+    k = _FRAME_BLOCK
+    rejected = Rejections(np.arange(1, k + 1, dtype=np.int64) * 11_111_111,
+                          np.arange(k) % len(rig), np.arange(k), np.full((k, 2), 100.5),
+                          np.ones(k), np.zeros(k, np.int8))
     with SessionWriter(path, rig, force=True, on_error="discard",
                        flush_interval_s=float("inf")) as w:
         w.add_event(0, "warm")
         w.add_track(track, last=True)
+        w.add_rejections("typeA", rejected)
 
 
 def main() -> int:

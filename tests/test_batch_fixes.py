@@ -222,3 +222,28 @@ def test_a_forced_session_interrupted_in_process_keeps_its_old_outputs(tmp_path,
     with pytest.raises(KeyboardInterrupt):
         batch.run_session(job, settings)
     assert {p.name: (p.stat().st_ino, p.read_bytes()) for p in (out / "a").iterdir()} == before
+
+
+def test_a_task_whose_staging_folder_an_interrupted_batch_removed_keeps_the_old_outputs(
+        tmp_path, monkeypatch):
+    """An interrupted batch settles each session's folder (its staging folder removed) while
+    a force-cancelled task's worker may still run (Ray ends it asynchronously): that task's
+    next step then fails on the vanished folder — an interruption, not a failure of the
+    session: its old outputs stay (seen once in the suite: a whole result folder gone)."""
+    a = session(tmp_path / "s" / "a.mcap")
+    out = tmp_path / "res"
+    job = Job(str(a), "a.mcap", str(out / "a"))
+    settings = Settings(steps=("sync", "fuse", "eval"))
+    assert batch.run_session(job, settings)["status"] == "ok"
+    before = {p.name: (p.stat().st_ino, p.read_bytes()) for p in (out / "a").iterdir()}
+    real = batch._command
+
+    def settled_under_the_fuse(argv):
+        if argv[0] == "fuse":  # the interrupted batch's settle(), from another process
+            batch.settle(job)
+        return real(argv)
+
+    monkeypatch.setattr(batch, "_command", settled_under_the_fuse)
+    row = batch.run_session(job, settings)
+    assert row["status"] == "failed" and "output folder does not exist" in row["error"], row
+    assert {p.name: (p.stat().st_ino, p.read_bytes()) for p in (out / "a").iterdir()} == before

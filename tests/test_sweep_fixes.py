@@ -84,13 +84,15 @@ def test_eval_prints_dashes_without_truth_and_strict_json_for_an_infinite_nees(
     assert code == 0, err
     code, out, _ = cli("eval", tmp_path / "freal.mcap")
     assert code == 0 and not re.search(r"\bnan\b", out)
-    # with truth and no pixel noise assumed, the covariance is zero: NEES infinite
+    # with truth and no pixel noise assumed, nearest's covariance is zero on noise-free
+    # detections: NEES infinite (typeA's is made at the noise its detections show since
+    # session 19: the quadratic's model error, not zero)
     sim = tmp_path / "sim.mcap"
     with SessionWriter(sim, rig3, timing="typeA", source="test") as writer:
         writer.add_detections(detections)
         writer.add_truth(truth)
     fused = tmp_path / "fsim.mcap"
-    assert cli("fuse", sim, "-o", fused, "--method", "typeA", "--noise-px", "0")[0] == 0
+    assert cli("fuse", sim, "-o", fused, "--method", "nearest", "--noise-px", "0")[0] == 0
     code, out, _ = cli("eval", fused)
     assert code == 0 and not re.search(r"\b(nan|inf)\b", out)
     code, out, _ = cli("eval", fused, "--json")

@@ -47,10 +47,14 @@ track = Track("nearest", (rows + 1) * 3_703_704, np.random.default_rng(0).normal
               (rows % 3).astype(np.int8), {"std_m": np.float32(0.01) * np.ones(n, np.float32)})
 first = Track("typeA", track.time_ns[:300], track.position_world[:300], track.camera[:300])
 rejected = Rejections.from_rows([(int(track.time_ns[0]), 0, 0, 1.0, 2.0, 0.5, "epipolar")])
+k = 1 << 15  # a dirty session's many rejections: one block of payloads over a megabyte
+many = Rejections(np.arange(1, k + 1) * 11_111_111, np.arange(k) % 3, np.arange(k),
+                  np.full((k, 2), 320.25), np.ones(k), np.ones(k, np.int8))
 with open_copy(src, out, new_methods=["typeA", "nearest"]) as w:  # as pslog fuse writes
     w.add_track(first, last=True)
     w.add_rejections("typeA", rejected)
     w.add_track(track, last=True)
+    w.add_rejections("nearest", many)
 print(*(len(k.signatures) for k in kernels))
 """
 
