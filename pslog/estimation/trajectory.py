@@ -637,7 +637,42 @@ def _initial_control(problem: _Problem, sigma_px: float) -> np.ndarray:
     """A first trajectory from the linear (DLT) form of the projection: undistorted normalised
     ``(x, y)`` gives ``f (R₀ - x R₂)·X + f (t₀ - x t₂) = 0`` (and likewise for ``y``), scaled by
     ``1/Z`` to approximate pixels; solved twice, the second time with the depths and robust
-    weights of the first."""
+    weights of the first. The rows' quadratic forms, residuals and depths are compiled
+    passes reading each detection's camera by index (:mod:`pslog.estimation._initial`; the
+    bits of :func:`_initial_control_numpy`)."""
+    from ._initial import dlt_residuals, dlt_terms
+
+    obs, rows = problem.obs, problem.rows
+    cams = obs.camera[rows]
+    xy = np.empty((len(rows), 2))
+    for i, cam in enumerate(problem.rig.cameras):
+        sel = cams == i
+        if np.any(sel):
+            xy[sel] = cam.undistort_normalized(obs.uv[rows[sel]])
+    camera = np.ascontiguousarray(cams, dtype=np.int64)
+    R = np.array([c.R for c in problem.rig.cameras], dtype=np.float64)
+    tt = np.array([c.t for c in problem.rig.cameras], dtype=np.float64)
+    f = np.array([[c.K[0, 0], c.K[1, 1]] for c in problem.rig.cameras], dtype=np.float64)
+    depth = np.full(len(rows), _scene_depth(problem.rig))
+    weight = np.ones(len(rows))
+    control = np.empty((0, 3))  # set by the first of the two passes
+    for _ in range(2):
+        wz = weight / sigma_px**2
+        upper, v = dlt_terms(camera, R, tt, f, xy, depth, wz)
+        ab, rhs = problem.points.normal_onto(upper, v, problem.prior_ab, problem.prior_rhs)
+        U = _normal.factor(ab, rebuild=lambda upper=upper, v=v: problem.points.normal_onto(
+            upper, v, problem.prior_ab, problem.prior_rhs)[0])
+        control = _normal.solve(U, rhs).reshape(-1, 3)
+        X = problem.positions(control)
+        r, depth = dlt_residuals(camera, R, tt, f, xy, depth, X)
+        s = max(1.4826 * _abs_median(r), sigma_px)
+        weight = 1 / (1 + np.sum(r * r, axis=1) / (_CAUCHY * s) ** 2)
+    return control
+
+
+def _initial_control_numpy(problem: _Problem, sigma_px: float) -> np.ndarray:
+    """:func:`_initial_control` in numpy's gathers and einsums (the form its compiled passes
+    repeat, :mod:`pslog.estimation._initial`: the tests compare the two, bit for bit)."""
     obs, rows = problem.obs, problem.rows
     cams = obs.camera[rows]
     xy = np.empty((len(rows), 2))
