@@ -91,7 +91,7 @@ def test_dlt_rows_of_a_hand_case():
     np.testing.assert_allclose(r[0], 0.0, atol=1e-12)
     assert depth[0] == 2.0
     r, _ = _initial.dlt_residuals(camera, R, t, f, xy, np.array([2.0]),
-                                  X + [0.01, 0.0, 0.0])
+                                  X + np.array([0.01, 0.0, 0.0]))
     np.testing.assert_allclose(r[0], [2.0, 0.0], atol=1e-12)  # 200 px per metre in x
 
 
