@@ -901,10 +901,10 @@ def _fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions) -> Fit:
             control, sigma, max(options.iterations - _DOF_ITERATIONS, 1))
 
     # σ corrected for the degrees of freedom the fit absorbs, then the covariance there
-    _, dof, _ = _information(problem, control, sigma, r, J)
+    _, dof, _ = _information(problem, control, sigma, r, J, trace=True)
     control, sigma, r, w, J = _Solver(problem, options).run(control, sigma,
                                                             _DOF_ITERATIONS, dof)
-    band, _, p_eff, U = _information_factored(problem, control, sigma, r, J)
+    band, _, p_eff, U = _information_factored(problem, control, sigma, r, J, trace=True)
     # the covariance at the noise the residuals show (the M-estimator's sandwich,
     # :func:`variance_factor`); the robust scale σ above still weighs the fit: the points
     # do not move
@@ -1015,17 +1015,19 @@ def variance_factor(r: np.ndarray, w: np.ndarray, sigma: float, p_eff: float) ->
 
 
 def _information(problem: _Problem, control: np.ndarray, sigma: float, r: np.ndarray,
-                 J: np.ndarray) -> tuple[np.ndarray, float, float]:
+                 J: np.ndarray, trace: bool = False) -> tuple[np.ndarray, float, float]:
     """The band of the control points' covariance ``H⁻¹`` at the solution, the factor
     ``sqrt(n_res / (n_res - p_eff))`` that corrects the median-based noise scale for the
     fit's effective number of parameters, and ``p_eff = Σ w tr(J Σ_X Jᵀ) / σ²`` itself (the
-    trace of the hat matrix)."""
-    band, dof, p_eff, _ = _information_factored(problem, control, sigma, r, J)
+    trace of the hat matrix). ``trace``: ``p_eff`` as ``3m - tr(H⁻¹ P)`` (the same number
+    to ~1e-14 relative, one pass over the unknowns: :mod:`pslog.estimation._hat`; ``smooth``
+    since session 19), else by the detections' marginal covariances (``sync``'s)."""
+    band, dof, p_eff, _ = _information_factored(problem, control, sigma, r, J, trace)
     return band, dof, p_eff
 
 
 def _information_factored(problem: _Problem, control: np.ndarray, sigma: float,
-                          r: np.ndarray, J: np.ndarray
+                          r: np.ndarray, J: np.ndarray, trace: bool = False
                           ) -> tuple[np.ndarray, float, float, np.ndarray]:
     """:func:`_information`, and the banded Cholesky factor ``U`` of ``H`` (``H = UᵀU``, for
     :func:`bias_sensitivity`)."""
@@ -1036,12 +1038,19 @@ def _information_factored(problem: _Problem, control: np.ndarray, sigma: float,
     ab, _ = problem.normal(J, target, w / sigma**2)
     U = _normal.factor(ab, rebuild=lambda: problem.normal(J, target, w / sigma**2)[0])
     band = _normal.covariance_band(U)
-    cov_X = problem.points.marginal(band)
-    from ._kernels import hat_diagonal
+    if trace:
+        from ._hat import prior_trace
 
-    # w tr(J Σ_X Jᵀ) per row, one compiled pass (the einsum's terms in its order)
-    p_eff = float(np.sum(hat_diagonal(np.ascontiguousarray(J, dtype=np.float64), cov_X,
-                                      np.ascontiguousarray(w, dtype=np.float64))) / sigma**2)
+        # tr(H⁻¹ H_data) = 3m - tr(H⁻¹ P): the covariance band against the prior's
+        p_eff = float(3 * problem.m - prior_trace(band, problem.prior_ab))
+    else:
+        cov_X = problem.points.marginal(band)
+        from ._kernels import hat_diagonal
+
+        # w tr(J Σ_X Jᵀ) per row, one compiled pass (the einsum's terms in its order)
+        p_eff = float(np.sum(hat_diagonal(np.ascontiguousarray(J, dtype=np.float64), cov_X,
+                                          np.ascontiguousarray(w, dtype=np.float64)))
+                      / sigma**2)
     n_res = 2 * len(r)
     return band, float(np.sqrt(n_res / max(n_res - p_eff, 1.0))), p_eff, U
 
@@ -1198,6 +1207,10 @@ def _scan_pieces(jobs: list, t_obs: np.ndarray, J: np.ndarray, target: np.ndarra
         return []
     search = _breaks.scan_near if near else _breaks.scan
     rows = np.concatenate([here for _, here, *_ in jobs])
+    if len(rows) and np.array_equal(rows, np.arange(rows[0], rows[0] + len(rows))):
+        # the rows in order already (a session's pieces in time order): views, not copies
+        # of a whole session's Jacobians, targets and weights (the same values)
+        rows = slice(int(rows[0]), int(rows[0]) + len(rows))
     t = t_obs[rows]
     if np.any(np.diff(t) < 0):  # moved times made pieces overlap: one piece at a time
         return [_scan_pieces([job], t_obs, J, target, weight, spacing, options, near)[0]
