@@ -1206,11 +1206,12 @@ def _scan_pieces(jobs: list, t_obs: np.ndarray, J: np.ndarray, target: np.ndarra
     if not jobs:
         return []
     search = _breaks.scan_near if near else _breaks.scan
-    rows = np.concatenate([here for _, here, *_ in jobs])
-    if len(rows) and np.array_equal(rows, np.arange(rows[0], rows[0] + len(rows))):
+    order = np.concatenate([here for _, here, *_ in jobs])
+    rows: np.ndarray | slice = order
+    if len(order) and np.array_equal(order, np.arange(order[0], order[0] + len(order))):
         # the rows in order already (a session's pieces in time order): views, not copies
         # of a whole session's Jacobians, targets and weights (the same values)
-        rows = slice(int(rows[0]), int(rows[0]) + len(rows))
+        rows = slice(int(order[0]), int(order[0]) + len(order))
     t = t_obs[rows]
     if np.any(np.diff(t) < 0):  # moved times made pieces overlap: one piece at a time
         return [_scan_pieces([job], t_obs, J, target, weight, spacing, options, near)[0]
