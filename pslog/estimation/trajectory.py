@@ -75,7 +75,10 @@ point; the prior assumes ballistic flight between breaks (a rolling ball, with n
 acceleration, is fitted with a small bias; air drag is absorbed by σ_a, not modelled); a
 velocity change spread over more than a few knot spans (a ball rolling to a stop) is smoothed
 rather than broken. numpy and scipy, with compiled per-point loops
-(:mod:`pslog.estimation._kernels`, numba): the B-spline basis, the projection with its
+(:mod:`pslog.estimation._kernels`, numba; the first trajectory's in
+:mod:`pslog.estimation._initial`, the break windows' gathers in
+:mod:`pslog.estimation._window`, the hat matrix's trace in :mod:`pslog.estimation._hat`):
+the B-spline basis, the projection with its
 residual and Jacobian, each detection's quadratic form and the normal equations summed per
 control point (:class:`pslog.estimation._normal.Points`), the covariance band's Takahashi
 recurrence, the noise scale's median, the break test's local normal equations and solves
