@@ -84,7 +84,7 @@ control point (:class:`pslog.estimation._normal.Points`), the covariance band's 
 recurrence, the noise scale's median, the break test's local normal equations and solves
 and its per-trial terms, the 9 x 9 Schur complement and solve included (``trial_gains``),
 and the banded Cholesky factorisation and solve (LAPACK's ``dpbtrf``/``dpbtrs``
-step for step: the same bits as scipy's). ~80,000 detections per second on one core at 10
+step for step: the same bits as scipy's). ~110,000 detections per second on one core at 10
 minutes (``benchmarks/bench_smooth.py``, ``--base`` for a paired comparison). The break
 search runs its candidates in blocks on ``PSLOG_SMOOTH_THREADS`` threads (default 2; the
 same bits on any count, :func:`pslog.estimation._breaks.smooth_threads`).
