@@ -132,19 +132,21 @@ class _Base:
         first, N = basis(local.knots, s.ravel(), 0)
         first = first.reshape(B, W)
         N = N[:, 0].reshape(B, W, 4)
-        wi = np.where(inside, w[index], 0.0)
         m = local.m
         n = 3 * m
         if terms is None:
             terms = detection_terms(J, w, np.zeros(0, np.int64), np.zeros(0, np.int64))
         at, wJ_all, M_all = terms
-        rows = at[index]  # each window detection's row in the terms
-        zi = z[index]
-        # w J and w JᵀJ of the detections inside (the products of w[index] J[index], entry for
-        # entry); the rest, padding, zero (no term reads them)
-        wJ = np.where(inside[..., None, None], wJ_all[rows], 0.0)
-        self.M = np.where(inside[..., None, None], M_all[rows], 0.0)  # (B, W, 3, 3): w JᵀJ
-        v = np.einsum("bwai,bwa->bwi", wJ, zi)  # w Jᵀ z
+        # w JᵀJ (B, W, 3, 3) and w Jᵀ z (B, W, 3) of the detections inside (their rows in
+        # the terms), w ‖z‖² (B, W); the rest, padding, zero (no term reads them): one
+        # compiled gather (:func:`pslog.estimation._window.window_terms`)
+        from ._window import window_terms
+
+        self.M, v, wz = window_terms(
+            np.ascontiguousarray(index, dtype=np.int64), np.ascontiguousarray(inside),
+            np.ascontiguousarray(at, dtype=np.int64), np.ascontiguousarray(wJ_all),
+            np.ascontiguousarray(M_all), np.ascontiguousarray(z, dtype=np.float64),
+            np.ascontiguousarray(w, dtype=np.float64))
         # only the inverse's columns the gains read (a solve for them and the minimum is
         # cheaper than the whole inverse)
         lo, hi = 0, n
@@ -171,7 +173,6 @@ class _Base:
             sol = np.linalg.solve(H, np.concatenate([np.broadcast_to(
                 unit, (len(bad), n, hi - lo + 1))[..., :-1], rhs[bad][..., None]], axis=2))
             self.cov[bad], x[bad] = sol[..., :-1], sol[..., -1]
-        wz = wi * np.sum(zi * zi, axis=2)
         self.cost = np.sum(wz, axis=1) + local.const - np.einsum("bk,bk->b", rhs, x)
         self.x0 = x.reshape(B, -1, 3)
         self.first, self.N = np.ascontiguousarray(first, dtype=np.int64), np.ascontiguousarray(N)

@@ -75,13 +75,16 @@ point; the prior assumes ballistic flight between breaks (a rolling ball, with n
 acceleration, is fitted with a small bias; air drag is absorbed by σ_a, not modelled); a
 velocity change spread over more than a few knot spans (a ball rolling to a stop) is smoothed
 rather than broken. numpy and scipy, with compiled per-point loops
-(:mod:`pslog.estimation._kernels`, numba): the B-spline basis, the projection with its
+(:mod:`pslog.estimation._kernels`, numba; the first trajectory's in
+:mod:`pslog.estimation._initial`, the break windows' gathers in
+:mod:`pslog.estimation._window`, the hat matrix's trace in :mod:`pslog.estimation._hat`):
+the B-spline basis, the projection with its
 residual and Jacobian, each detection's quadratic form and the normal equations summed per
 control point (:class:`pslog.estimation._normal.Points`), the covariance band's Takahashi
 recurrence, the noise scale's median, the break test's local normal equations and solves
 and its per-trial terms, the 9 x 9 Schur complement and solve included (``trial_gains``),
 and the banded Cholesky factorisation and solve (LAPACK's ``dpbtrf``/``dpbtrs``
-step for step: the same bits as scipy's). ~80,000 detections per second on one core at 10
+step for step: the same bits as scipy's). ~110,000 detections per second on one core at 10
 minutes (``benchmarks/bench_smooth.py``, ``--base`` for a paired comparison). The break
 search runs its candidates in blocks on ``PSLOG_SMOOTH_THREADS`` threads (default 2; the
 same bits on any count, :func:`pslog.estimation._breaks.smooth_threads`).
@@ -637,7 +640,42 @@ def _initial_control(problem: _Problem, sigma_px: float) -> np.ndarray:
     """A first trajectory from the linear (DLT) form of the projection: undistorted normalised
     ``(x, y)`` gives ``f (R₀ - x R₂)·X + f (t₀ - x t₂) = 0`` (and likewise for ``y``), scaled by
     ``1/Z`` to approximate pixels; solved twice, the second time with the depths and robust
-    weights of the first."""
+    weights of the first. The rows' quadratic forms, residuals and depths are compiled
+    passes reading each detection's camera by index (:mod:`pslog.estimation._initial`; the
+    bits of :func:`_initial_control_numpy`)."""
+    from ._initial import dlt_residuals, dlt_terms
+
+    obs, rows = problem.obs, problem.rows
+    cams = obs.camera[rows]
+    xy = np.empty((len(rows), 2))
+    for i, cam in enumerate(problem.rig.cameras):
+        sel = cams == i
+        if np.any(sel):
+            xy[sel] = cam.undistort_normalized(obs.uv[rows[sel]])
+    camera = np.ascontiguousarray(cams, dtype=np.int64)
+    R = np.array([c.R for c in problem.rig.cameras], dtype=np.float64)
+    tt = np.array([c.t for c in problem.rig.cameras], dtype=np.float64)
+    f = np.array([[c.K[0, 0], c.K[1, 1]] for c in problem.rig.cameras], dtype=np.float64)
+    depth = np.full(len(rows), _scene_depth(problem.rig))
+    weight = np.ones(len(rows))
+    control = np.empty((0, 3))  # set by the first of the two passes
+    for _ in range(2):
+        wz = weight / sigma_px**2
+        upper, v = dlt_terms(camera, R, tt, f, xy, depth, wz)
+        ab, rhs = problem.points.normal_onto(upper, v, problem.prior_ab, problem.prior_rhs)
+        U = _normal.factor(ab, rebuild=lambda upper=upper, v=v: problem.points.normal_onto(
+            upper, v, problem.prior_ab, problem.prior_rhs)[0])
+        control = _normal.solve(U, rhs).reshape(-1, 3)
+        X = problem.positions(control)
+        r, depth = dlt_residuals(camera, R, tt, f, xy, depth, X)
+        s = max(1.4826 * _abs_median(r), sigma_px)
+        weight = 1 / (1 + np.sum(r * r, axis=1) / (_CAUCHY * s) ** 2)
+    return control
+
+
+def _initial_control_numpy(problem: _Problem, sigma_px: float) -> np.ndarray:
+    """:func:`_initial_control` in numpy's gathers and einsums (the form its compiled passes
+    repeat, :mod:`pslog.estimation._initial`: the tests compare the two, bit for bit)."""
     obs, rows = problem.obs, problem.rows
     cams = obs.camera[rows]
     xy = np.empty((len(rows), 2))
@@ -866,10 +904,10 @@ def _fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions) -> Fit:
             control, sigma, max(options.iterations - _DOF_ITERATIONS, 1))
 
     # σ corrected for the degrees of freedom the fit absorbs, then the covariance there
-    _, dof, _ = _information(problem, control, sigma, r, J)
+    _, dof, _ = _information(problem, control, sigma, r, J, trace=True)
     control, sigma, r, w, J = _Solver(problem, options).run(control, sigma,
                                                             _DOF_ITERATIONS, dof)
-    band, _, p_eff, U = _information_factored(problem, control, sigma, r, J)
+    band, _, p_eff, U = _information_factored(problem, control, sigma, r, J, trace=True)
     # the covariance at the noise the residuals show (the M-estimator's sandwich,
     # :func:`variance_factor`); the robust scale σ above still weighs the fit: the points
     # do not move
@@ -980,17 +1018,19 @@ def variance_factor(r: np.ndarray, w: np.ndarray, sigma: float, p_eff: float) ->
 
 
 def _information(problem: _Problem, control: np.ndarray, sigma: float, r: np.ndarray,
-                 J: np.ndarray) -> tuple[np.ndarray, float, float]:
+                 J: np.ndarray, trace: bool = False) -> tuple[np.ndarray, float, float]:
     """The band of the control points' covariance ``H⁻¹`` at the solution, the factor
     ``sqrt(n_res / (n_res - p_eff))`` that corrects the median-based noise scale for the
     fit's effective number of parameters, and ``p_eff = Σ w tr(J Σ_X Jᵀ) / σ²`` itself (the
-    trace of the hat matrix)."""
-    band, dof, p_eff, _ = _information_factored(problem, control, sigma, r, J)
+    trace of the hat matrix). ``trace``: ``p_eff`` as ``3m - tr(H⁻¹ P)`` (the same number
+    to ~1e-14 relative, one pass over the unknowns: :mod:`pslog.estimation._hat`; ``smooth``
+    since session 19), else by the detections' marginal covariances (``sync``'s)."""
+    band, dof, p_eff, _ = _information_factored(problem, control, sigma, r, J, trace)
     return band, dof, p_eff
 
 
 def _information_factored(problem: _Problem, control: np.ndarray, sigma: float,
-                          r: np.ndarray, J: np.ndarray
+                          r: np.ndarray, J: np.ndarray, trace: bool = False
                           ) -> tuple[np.ndarray, float, float, np.ndarray]:
     """:func:`_information`, and the banded Cholesky factor ``U`` of ``H`` (``H = UᵀU``, for
     :func:`bias_sensitivity`)."""
@@ -1001,12 +1041,19 @@ def _information_factored(problem: _Problem, control: np.ndarray, sigma: float,
     ab, _ = problem.normal(J, target, w / sigma**2)
     U = _normal.factor(ab, rebuild=lambda: problem.normal(J, target, w / sigma**2)[0])
     band = _normal.covariance_band(U)
-    cov_X = problem.points.marginal(band)
-    from ._kernels import hat_diagonal
+    if trace:
+        from ._hat import prior_trace
 
-    # w tr(J Σ_X Jᵀ) per row, one compiled pass (the einsum's terms in its order)
-    p_eff = float(np.sum(hat_diagonal(np.ascontiguousarray(J, dtype=np.float64), cov_X,
-                                      np.ascontiguousarray(w, dtype=np.float64))) / sigma**2)
+        # tr(H⁻¹ H_data) = 3m - tr(H⁻¹ P): the covariance band against the prior's
+        p_eff = float(3 * problem.m - prior_trace(band, problem.prior_ab))
+    else:
+        cov_X = problem.points.marginal(band)
+        from ._kernels import hat_diagonal
+
+        # w tr(J Σ_X Jᵀ) per row, one compiled pass (the einsum's terms in its order)
+        p_eff = float(np.sum(hat_diagonal(np.ascontiguousarray(J, dtype=np.float64), cov_X,
+                                          np.ascontiguousarray(w, dtype=np.float64)))
+                      / sigma**2)
     n_res = 2 * len(r)
     return band, float(np.sqrt(n_res / max(n_res - p_eff, 1.0))), p_eff, U
 
@@ -1162,7 +1209,12 @@ def _scan_pieces(jobs: list, t_obs: np.ndarray, J: np.ndarray, target: np.ndarra
     if not jobs:
         return []
     search = _breaks.scan_near if near else _breaks.scan
-    rows = np.concatenate([here for _, here, *_ in jobs])
+    order = np.concatenate([here for _, here, *_ in jobs])
+    rows: np.ndarray | slice = order
+    if len(order) and np.array_equal(order, np.arange(order[0], order[0] + len(order))):
+        # the rows in order already (a session's pieces in time order): views, not copies
+        # of a whole session's Jacobians, targets and weights (the same values)
+        rows = slice(int(order[0]), int(order[0]) + len(order))
     t = t_obs[rows]
     if np.any(np.diff(t) < 0):  # moved times made pieces overlap: one piece at a time
         return [_scan_pieces([job], t_obs, J, target, weight, spacing, options, near)[0]
