@@ -202,15 +202,24 @@ def test_a_failed_nested_session_leaves_no_empty_folders(tmp_path):
     assert sorted(p.name for p in out.iterdir()) == ["summary.csv", "summary.parquet"]
 
 
+def _done_once(tmp_path: Path) -> tuple[Job, Settings, dict]:
+    """A one-session batch done in this process: its job, settings and its outputs'
+    (inode, bytes) by name."""
+    a = session(tmp_path / "s" / "a.mcap")
+    job = Job(str(a), "a.mcap", str(tmp_path / "res" / "a"))
+    settings = Settings(steps=("sync", "fuse", "eval"))
+    assert batch.run_session(job, settings)["status"] == "ok"
+    return job, settings, _outputs(job)
+
+
+def _outputs(job: Job) -> dict:
+    return {p.name: (p.stat().st_ino, p.read_bytes()) for p in Path(job.outdir).iterdir()}
+
+
 def test_a_forced_session_interrupted_in_process_keeps_its_old_outputs(tmp_path, monkeypatch):
     """Ctrl-C during a session's fuse (the one-session batch runs in this process): the
     old outputs stay, the new sync made aside is removed."""
-    a = session(tmp_path / "s" / "a.mcap")
-    out = tmp_path / "res"
-    job = Job(str(a), "a.mcap", str(out / "a"))
-    settings = Settings(steps=("sync", "fuse", "eval"))
-    assert batch.run_session(job, settings)["status"] == "ok"
-    before = {p.name: (p.stat().st_ino, p.read_bytes()) for p in (out / "a").iterdir()}
+    job, settings, before = _done_once(tmp_path)
     real = batch._command
 
     def interrupted_fuse(argv):
@@ -221,7 +230,7 @@ def test_a_forced_session_interrupted_in_process_keeps_its_old_outputs(tmp_path,
     monkeypatch.setattr(batch, "_command", interrupted_fuse)
     with pytest.raises(KeyboardInterrupt):
         batch.run_session(job, settings)
-    assert {p.name: (p.stat().st_ino, p.read_bytes()) for p in (out / "a").iterdir()} == before
+    assert _outputs(job) == before
 
 
 def test_a_task_whose_staging_folder_an_interrupted_batch_removed_keeps_the_old_outputs(
@@ -230,12 +239,7 @@ def test_a_task_whose_staging_folder_an_interrupted_batch_removed_keeps_the_old_
     a force-cancelled task's worker may still run (Ray ends it asynchronously): that task's
     next step then fails on the vanished folder — an interruption, not a failure of the
     session: its old outputs stay (seen once in the suite: a whole result folder gone)."""
-    a = session(tmp_path / "s" / "a.mcap")
-    out = tmp_path / "res"
-    job = Job(str(a), "a.mcap", str(out / "a"))
-    settings = Settings(steps=("sync", "fuse", "eval"))
-    assert batch.run_session(job, settings)["status"] == "ok"
-    before = {p.name: (p.stat().st_ino, p.read_bytes()) for p in (out / "a").iterdir()}
+    job, settings, before = _done_once(tmp_path)
     real = batch._command
 
     def settled_under_the_fuse(argv):
@@ -246,4 +250,4 @@ def test_a_task_whose_staging_folder_an_interrupted_batch_removed_keeps_the_old_
     monkeypatch.setattr(batch, "_command", settled_under_the_fuse)
     row = batch.run_session(job, settings)
     assert row["status"] == "failed" and "output folder does not exist" in row["error"], row
-    assert {p.name: (p.stat().st_ino, p.read_bytes()) for p in (out / "a").iterdir()} == before
+    assert _outputs(job) == before
