@@ -778,3 +778,22 @@ def test_abs_median_of_many_equal_values(n):
         for fn in fns:
             median, rows = fn(r)
             assert rows == n and median == np.median(np.abs(r))
+
+
+@pytest.mark.parametrize("core, plain", [("Haswell", True), ("Nehalem", False)])
+def test_the_exact_comparisons_are_on_where_openblas_runs_the_kernels_they_follow(core, plain):
+    """tests/_bits.py reads the cores numpy's and scipy's OpenBLAS chose (forced here by
+    OPENBLAS_CORETYPE, as OpenBLAS allows): exact comparisons on Haswell's kernels, within
+    rounding on Nehalem's; a probe that could not read them would leave every comparison
+    within rounding on every machine."""
+    import os
+    import subprocess
+    import sys
+
+    code = ("import sys; sys.path.insert(0, 'tests'); import _bits; "
+            "print(sorted(_bits.openblas_cores()), _bits.blas_is_plain())")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         env={**os.environ, "OPENBLAS_CORETYPE": core}, timeout=120,
+                         cwd=os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.split() == [f"['{core}']", str(plain)]
