@@ -76,3 +76,31 @@ def test_p_eff_by_the_trace_is_the_hat_diagonal_sum_of_a_fit():
     assert p_b == pytest.approx(p_a, rel=1e-11)
     assert dof_b == pytest.approx(dof_a, rel=1e-12)
     np.testing.assert_array_equal(band_a, band_b)
+
+
+def test_the_trace_under_factors_diagonal_load_counts_an_unreached_point_as_nothing():
+    """A control point neither the detections nor the prior reach: factor loads the
+    diagonal (H = H_data + P + λI) and the hat trace tr(H⁻¹ H_data), the detections' sum,
+    counts its three directions ~0; 3m - tr(H⁻¹P) alone counts them 1 each (review, session
+    19): hat_trace takes λ tr(H⁻¹) out. Hand case: diagonal H_data 2, P 1 on 5 points."""
+    from pslog.estimation import _hat, _normal
+
+    m = 6
+    n = 3 * m
+    h_data = np.r_[np.full(n - 3, 2.0), 0.0, 0.0, 0.0]
+    prior = np.r_[np.full(n - 3, 1.0), 0.0, 0.0, 0.0]
+    ab, prior_ab = np.zeros((12, n)), np.zeros((12, n))
+    ab[11], prior_ab[11] = h_data + prior, prior
+    loads: list[float] = []
+    U = _normal.factor(ab, loads=loads)
+    assert len(loads) == 1 and 0 < loads[0] < 1e-8
+    band = _normal.covariance_band(U)
+    data_sum = float(np.sum(np.diagonal(band[:, 0], axis1=1, axis2=2).ravel() * h_data))
+    assert data_sum == pytest.approx(15 * 2 / 3, rel=1e-8)  # 2 / (2 + 1 + λ) on each of 15
+    assert _hat.hat_trace(band, prior_ab, loads[0]) == pytest.approx(data_sum, rel=1e-6)
+    assert _hat.hat_trace(band, prior_ab) == pytest.approx(data_sum + 3, rel=1e-6)
+    # a positive definite band needs no load
+    loads.clear()
+    ab[11, -3:] = 1.0
+    _normal.factor(ab, loads=loads)
+    assert loads == []

@@ -8,6 +8,10 @@ with ``H = H_data + P`` the information matrix (the data's normal equations plus
 prior's), that is ``3m - tr(H⁻¹ P)``: the band of ``H⁻¹`` (which the Takahashi recurrence
 gives) against the prior's band ``P``, one pass over the ``3m`` unknowns instead of two over
 the detections and a (n, 3, 3) array. The sums differ in order only: ~1e-14 relative.
+Where the factor carries a diagonal load (:func:`pslog.estimation._normal.factor`: a
+direction neither the detections nor the prior reach), ``H = H_data + P + λ I`` and the
+trace is ``3m - tr(H⁻¹ P) - λ tr(H⁻¹)`` (:func:`hat_trace`): an unreached direction
+counts ~0 parameters, as in the detections' sum, not 1.
 """
 
 from __future__ import annotations
@@ -41,3 +45,13 @@ def prior_trace(band: np.ndarray, prior_ab: np.ndarray) -> float:
                     v = band[i, k, a, b] * prior_ab[kd - (c - r), c]
                     acc += v if c == r else 2.0 * v
     return acc
+
+
+def hat_trace(band: np.ndarray, prior_ab: np.ndarray, load: float = 0.0) -> float:
+    """``tr(H⁻¹ H_data)`` of ``H = H_data + P + load I`` from the covariance band ``band``
+    (m, 4, 3, 3) of ``H⁻¹`` and the prior's band ``prior_ab`` (:func:`prior_trace`):
+    ``3m - tr(H⁻¹ P) - load tr(H⁻¹)``."""
+    p_eff = 3 * band.shape[0] - prior_trace(band, prior_ab)
+    if load:
+        p_eff -= load * float(np.trace(band[:, 0], axis1=1, axis2=2).sum())
+    return float(p_eff)

@@ -141,7 +141,7 @@ class Points:
                                   np.ascontiguousarray(base_rhs, dtype=np.float64))
 
 
-def factor(ab: np.ndarray, rebuild=None) -> np.ndarray:
+def factor(ab: np.ndarray, rebuild=None, loads: list[float] | None = None) -> np.ndarray:
     """Upper banded Cholesky factor ``U`` (``A = Uᵀ U``) of an information matrix (LAPACK's
     ``dpbtrf`` step for step, the same bits as scipy's ``cholesky_banded``:
     :func:`pslog.estimation._kernels.band_cholesky`); a :class:`FusionError` if it is not
@@ -151,6 +151,8 @@ def factor(ab: np.ndarray, rebuild=None) -> np.ndarray:
     anew (the same values), and ``ab`` (C-contiguous float64) is factored in place — no copy
     of a 90-minute session's 47 MB band at every Gauss–Newton step — and only a pivot that
     is not positive (``ab`` then half factored) calls it for the original again.
+    ``loads``: a list, to which the diagonal load is appended when one was needed (the
+    factor is then of ``A + λ I``; :func:`pslog.estimation._hat.hat_trace` takes it out).
     """
     from ._kernels import band_cholesky
 
@@ -165,8 +167,11 @@ def factor(ab: np.ndarray, rebuild=None) -> np.ndarray:
     # behind its camera): a Levenberg-Marquardt-like load on the diagonal keeps the step
     # defined; the covariance then says that direction is unknown
     U[:] = ab
-    U[_U] += 1e-9 * np.max(np.abs(ab[_U]), initial=0.0) + 1e-12
+    load = 1e-9 * np.max(np.abs(ab[_U]), initial=0.0) + 1e-12
+    U[_U] += load
     if band_cholesky(U) == 0:
+        if loads is not None:
+            loads.append(float(load))
         return U
     raise FusionError("smooth: the detections leave the trajectory undetermined "
                       "(information matrix not positive definite)")

@@ -1039,13 +1039,16 @@ def _information_factored(problem: _Problem, control: np.ndarray, sigma: float,
     w = 1 / (1 + s / _CAUCHY**2)
     target = _linear_target(J, X, r)
     ab, _ = problem.normal(J, target, w / sigma**2)
-    U = _normal.factor(ab, rebuild=lambda: problem.normal(J, target, w / sigma**2)[0])
+    loads: list[float] = []
+    U = _normal.factor(ab, rebuild=lambda: problem.normal(J, target, w / sigma**2)[0],
+                       loads=loads)
     band = _normal.covariance_band(U)
     if trace:
-        from ._hat import prior_trace
+        from ._hat import hat_trace
 
-        # tr(H⁻¹ H_data) = 3m - tr(H⁻¹ P): the covariance band against the prior's
-        p_eff = float(3 * problem.m - prior_trace(band, problem.prior_ab))
+        # tr(H⁻¹ H_data) = 3m - tr(H⁻¹ P) (- λ tr(H⁻¹) under factor's diagonal load): the
+        # covariance band against the prior's
+        p_eff = hat_trace(band, problem.prior_ab, loads[0] if loads else 0.0)
     else:
         cov_X = problem.points.marginal(band)
         from ._kernels import hat_diagonal
