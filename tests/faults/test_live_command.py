@@ -171,10 +171,11 @@ def test_sigkill_leaves_a_session_that_recover_salvages_and_no_camera(tmp_path):
     run.wait_for(on_disk, "20 points and frames in the session file")
     # written as they come (flushed every 0.5 s), not held until a chunk is full: the
     # file had 20 points before the run had printed many more (a bound in points, the
-    # session's own pace: ~90 a second, about 13 flush intervals; 70 seen at load 17,
-    # 1,090 with the flush interval ignored)
+    # session's own pace: ~90 a second; 70 seen at load 17, 1,090 with the flush interval
+    # ignored — a full chunk's worth; the bound leaves ~9 s of a loaded machine's salvage
+    # copies between two looks, and still fails that mutation)
     print(f"\n[sigkill] 20 points on disk after {printed[0]} printed")
-    assert printed[0] < 600, f"{printed[0]} points printed before 20 were in the file"
+    assert printed[0] < 850, f"{printed[0]} points printed before 20 were in the file"
     run.proc.kill()
     run.finish()
     pids = [pid for cam in camera_pids(run).values() for pid in cam]
