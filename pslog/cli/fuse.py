@@ -53,7 +53,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "the noise the session's own innovations imply); nearest's "
                              "and typeA's covariance take the noise their detections show "
                              "once a second of them has (at least the smaller of this and "
-                             "0.1 px); `pslog sync` prints the estimated noise (default "
+                             "0.1 px; typeA's first points, before that, at least this and "
+                             "2 px); `pslog sync` prints the estimated noise (default "
                              "%(default)s)")
     parser.add_argument("--detector-offset-mm", type=number_at_most(1000.0, "mm", "a metre"),
                         default=None, metavar="MM",
