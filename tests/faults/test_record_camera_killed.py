@@ -125,8 +125,8 @@ def recording(clips, tmp_path):
     """``recording()`` starts a recorder; on teardown whatever is left of it is killed."""
     started: list[Recording] = []
 
-    def start() -> Recording:
-        rec = Recording(*clips, tmp_path / "s.mcap")
+    def start(name: str = "s.mcap") -> Recording:
+        rec = Recording(*clips, tmp_path / name)
         started.append(rec)
         return rec
 
@@ -232,10 +232,27 @@ def test_camera_killed_at_some_moment(recording, after_s):
     clock alone came, on a fast idle machine, after the victim had sent its last frame and
     its "done" while its process was still exiting: the recorder then rightly recorded it
     complete, and the test failed. A camera reads at most its queue and its pipe (~33
-    frames) ahead of the recorder: at half its clip it is still 60 frames from its end.)"""
-    rec = recording()
-    pids = rec.camera_pids()
+    frames) ahead of the recorder: at half its clip it is still 60 frames from its end.
+    Should the victim still end first — this process not scheduled while a fast recorder
+    drained its whole clip, between two looks 2 ms apart — the recording is started again,
+    at most three times: what is tested is the recorder after a kill, not this race.)"""
     victim = CAMERAS[int(after_s * 10) % 3]
+    for attempt in range(3):
+        rec = recording(f"s{attempt}.mcap")
+        read, killed = _kill_mid_clip(rec, victim, after_s)
+        if killed:
+            break
+        rec.kill_all()
+    assert killed, f"{victim} ended before the kill three times:\n{rec.stderr}"
+    _assert_survived(rec, victim, f"killed {after_s} s after the cameras opened, "
+                                  f"{read:.0%} of its clip read")
+
+
+def _kill_mid_clip(rec: Recording, victim: str, after_s: float) -> tuple[float, bool]:
+    """Kill ``victim`` ``after_s`` after the cameras opened, or once it has read half its clip
+    (the recorder held from a quarter); the share read, and whether it was still there to
+    be killed."""
+    pids = rec.camera_pids()
     deadline = time.monotonic() + after_s
     size = rec.files[victim].stat().st_size
     start = _bytes_read(pids[victim])
@@ -256,13 +273,13 @@ def test_camera_killed_at_some_moment(recording, after_s):
                 held = True
             time.sleep(0.002)
             read = read_share()
-        assert _alive(pids[victim]), f"{victim} ended before the kill:\n{rec.stderr}"
+        if not _alive(pids[victim]):
+            return read, False
         os.kill(pids[victim], signal.SIGKILL)
     finally:
         if held:
             os.kill(rec.proc.pid, signal.SIGCONT)
-    _assert_survived(rec, victim, f"killed {after_s} s after the cameras opened, "
-                                  f"{read:.0%} of its clip read")
+    return read, True
 
 
 def test_camera_killed_while_writing_into_its_full_pipe(recording):
