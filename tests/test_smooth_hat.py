@@ -6,11 +6,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from test_smooth_initial import rally_problem
 
-from pslog import SimulationOptions, apply_timing, builtin_rig, simulate
+from pslog import SimulationOptions, apply_timing, builtin_rig
 from pslog.estimation import _hat, _normal, trajectory
-from pslog.motion import rally_motion
-from pslog.timing import observations
 
 
 def _banded_spd(rng, m: int) -> tuple[np.ndarray, np.ndarray]:
@@ -57,17 +56,9 @@ def test_p_eff_by_the_trace_is_the_hat_diagonal_sum_of_a_fit():
     """On a fit of a 2-second rally (paper3, 0.5 px): ``p_eff`` by the prior's trace and by
     the detections' hat diagonal agree to 1e-11 relative, and so do the degrees-of-freedom
     factors and covariance bands (the same factorisation)."""
-    rig = apply_timing(builtin_rig("paper3"), "typeA")
-    detections, _ = simulate(rig, rally_motion(3, 2.0), 2.0,
-                             SimulationOptions(noise_px=0.5, seed=4))
-    obs = observations(detections, rig)
-    usable = np.all(np.isfinite(obs.uv), axis=1)
-    pieces = trajectory.split_pieces(obs, usable, 0.12)
-    t = (obs.time_ns - obs.time_ns[0]) / 1e9
-    knots = [trajectory._knots_with_breaks(t[p[0]], t[p[-1]] + 1e-9, 0.033, np.zeros(0))
-             for p in pieces]
     options = trajectory.SmoothOptions()
-    problem = trajectory._Problem(obs, rig, pieces, knots, options.prior)
+    problem = rally_problem(apply_timing(builtin_rig("paper3"), "typeA"), 3, 2.0,
+                            SimulationOptions(noise_px=0.5, seed=4), options.prior)
     control = trajectory._initial_control(problem, 1.0)
     control, sigma, r, _, J = trajectory._Solver(problem, options).run(control, 1.0, 3)
     band_a, dof_a, p_a = trajectory._information(problem, control, sigma, r, J)

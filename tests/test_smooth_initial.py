@@ -95,21 +95,27 @@ def test_dlt_rows_of_a_hand_case():
     np.testing.assert_allclose(r[0], [2.0, 0.0], atol=1e-12)  # 200 px per metre in x
 
 
-def test_first_trajectory_is_the_numpy_form_bit_for_bit():
-    """The whole first trajectory of a 3-second rally on a lensed four-camera ring: the
-    same control points as the numpy form's, bit for bit."""
-    rig = ring_rig(4, "lab4")
-    detections, _ = simulate(rig, rally_motion(5, 3.0), 3.0,
-                             SimulationOptions(noise_px=0.5, seed=3, miss_rate=0.05))
+def rally_problem(rig, motion_seed: int, seconds: float, options: SimulationOptions,
+                  prior) -> trajectory._Problem:
+    """smooth's problem of a simulated rally on ``rig``: its pieces, knots every 0.033 s
+    without breaks, and ``prior`` (the tests of the first trajectory and the hat trace)."""
+    detections, _ = simulate(rig, rally_motion(motion_seed, seconds), seconds, options)
     obs = observations(detections, rig)
     usable = np.all(np.isfinite(obs.uv), axis=1)
     pieces = trajectory.split_pieces(obs, usable, 0.12)
     t = (obs.time_ns - obs.time_ns[0]) / 1e9
     knots = [trajectory._knots_with_breaks(t[p[0]], t[p[-1]] + 1e-9, 0.033, np.zeros(0))
              for p in pieces]
+    return trajectory._Problem(obs, rig, pieces, knots, prior)
+
+
+def test_first_trajectory_is_the_numpy_form_bit_for_bit():
+    """The whole first trajectory of a 3-second rally on a lensed four-camera ring: the
+    same control points as the numpy form's, bit for bit."""
     prior = trajectory.SmoothOptions().prior
-    problem = trajectory._Problem(obs, rig, pieces, knots,
-                                  replace(prior, sigma_accel=10 * prior.sigma_accel))
+    problem = rally_problem(ring_rig(4, "lab4"), 5, 3.0,
+                            SimulationOptions(noise_px=0.5, seed=3, miss_rate=0.05),
+                            replace(prior, sigma_accel=10 * prior.sigma_accel))
     got = trajectory._initial_control(problem, 1.0)
     want = trajectory._initial_control_numpy(problem, 1.0)
     assert len(got) == problem.m
