@@ -636,6 +636,19 @@ def _knots_with_breaks(t_lo: float, t_hi: float, spacing: float, breaks: np.ndar
     return clamped_knots(points, mult[1:-1])
 
 
+def _normalised_rows(problem: _Problem) -> tuple[np.ndarray, np.ndarray]:
+    """The camera (n,) and the undistorted normalised ``(x, y)`` (n, 2) of each of
+    ``problem``'s detections (:func:`_initial_control`'s linear form)."""
+    obs, rows = problem.obs, problem.rows
+    cams = obs.camera[rows]
+    xy = np.empty((len(rows), 2))
+    for i, cam in enumerate(problem.rig.cameras):
+        sel = cams == i
+        if np.any(sel):
+            xy[sel] = cam.undistort_normalized(obs.uv[rows[sel]])
+    return cams, xy
+
+
 def _initial_control(problem: _Problem, sigma_px: float) -> np.ndarray:
     """A first trajectory from the linear (DLT) form of the projection: undistorted normalised
     ``(x, y)`` gives ``f (R₀ - x R₂)·X + f (t₀ - x t₂) = 0`` (and likewise for ``y``), scaled by
@@ -645,19 +658,13 @@ def _initial_control(problem: _Problem, sigma_px: float) -> np.ndarray:
     bits of :func:`_initial_control_numpy`)."""
     from ._initial import dlt_residuals, dlt_terms
 
-    obs, rows = problem.obs, problem.rows
-    cams = obs.camera[rows]
-    xy = np.empty((len(rows), 2))
-    for i, cam in enumerate(problem.rig.cameras):
-        sel = cams == i
-        if np.any(sel):
-            xy[sel] = cam.undistort_normalized(obs.uv[rows[sel]])
+    cams, xy = _normalised_rows(problem)
     camera = np.ascontiguousarray(cams, dtype=np.int64)
     R = np.array([c.R for c in problem.rig.cameras], dtype=np.float64)
     tt = np.array([c.t for c in problem.rig.cameras], dtype=np.float64)
     f = np.array([[c.K[0, 0], c.K[1, 1]] for c in problem.rig.cameras], dtype=np.float64)
-    depth = np.full(len(rows), _scene_depth(problem.rig))
-    weight = np.ones(len(rows))
+    depth = np.full(len(cams), _scene_depth(problem.rig))
+    weight = np.ones(len(cams))
     control = np.empty((0, 3))  # set by the first of the two passes
     for _ in range(2):
         wz = weight / sigma_px**2
@@ -676,21 +683,15 @@ def _initial_control(problem: _Problem, sigma_px: float) -> np.ndarray:
 def _initial_control_numpy(problem: _Problem, sigma_px: float) -> np.ndarray:
     """:func:`_initial_control` in numpy's gathers and einsums (the form its compiled passes
     repeat, :mod:`pslog.estimation._initial`: the tests compare the two, bit for bit)."""
-    obs, rows = problem.obs, problem.rows
-    cams = obs.camera[rows]
-    xy = np.empty((len(rows), 2))
-    for i, cam in enumerate(problem.rig.cameras):
-        sel = cams == i
-        if np.any(sel):
-            xy[sel] = cam.undistort_normalized(obs.uv[rows[sel]])
+    cams, xy = _normalised_rows(problem)
     R = np.array([c.R for c in problem.rig.cameras])[cams]
     tt = np.array([c.t for c in problem.rig.cameras])[cams]
     f = np.array([[c.K[0, 0], c.K[1, 1]] for c in problem.rig.cameras])[cams]
     # row a of the linear form: (R_a - xy_a R_2)·X + (t_a - xy_a t_2)
     A = R[:, :2, :] - xy[:, :, None] * R[:, 2:3, :]  # (n, 2, 3)
     a0 = tt[:, :2] - xy * tt[:, 2:3]
-    depth = np.full((len(rows), 1), _scene_depth(problem.rig))
-    weight = np.ones(len(rows))
+    depth = np.full((len(cams), 1), _scene_depth(problem.rig))
+    weight = np.ones(len(cams))
     control = np.empty((0, 3))  # set by the first of the two passes
     for _ in range(2):
         scale = f / np.maximum(depth, 1e-3)

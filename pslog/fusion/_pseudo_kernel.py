@@ -1001,6 +1001,18 @@ def _select(values, count, k):
     return values[k]
 
 
+@kernel(inline=True)
+def _window_rows(time_ns, n, lo, hi, end, window_ns):
+    """The rows ``[lo, hi)`` of the first ``n`` of ``time_ns`` (sorted) in ``[end -
+    window_ns, end)``, from the previous window's ``lo, hi`` (the ends come in order: each
+    bound only moves forward)."""
+    while lo < n and time_ns[lo] < end - window_ns:
+        lo += 1
+    while hi < n and time_ns[hi] < end:
+        hi += 1
+    return lo, hi
+
+
 @kernel
 def checkpoint_noise_kernel(time_ns, camera, uv, limits, m, max_gap_ns, ns, every_ns,
                             window_ns, min_count, rayleigh, at_ns, out):
@@ -1028,10 +1040,7 @@ def checkpoint_noise_kernel(time_ns, camera, uv, limits, m, max_gap_ns, ns, ever
         if mark == previous:
             continue
         previous = mark
-        while lo < j and t_fin[lo] < mark - window_ns:
-            lo += 1
-        while hi < j and t_fin[hi] < mark:
-            hi += 1
+        lo, hi = _window_rows(t_fin, j, lo, hi, mark, window_ns)
         count = hi - lo
         if count >= min_count:
             for i in range(count):
@@ -1056,10 +1065,7 @@ def window_medians_kernel(time_ns, values, marks, window_ns, min_count, out):
     lo = 0
     hi = 0
     for j in range(marks.shape[0]):
-        while lo < n and time_ns[lo] < marks[j] - window_ns:
-            lo += 1
-        while hi < n and time_ns[hi] < marks[j]:
-            hi += 1
+        lo, hi = _window_rows(time_ns, n, lo, hi, marks[j], window_ns)
         count = hi - lo
         if count < min_count:
             out[j] = np.nan
@@ -1077,10 +1083,7 @@ def window_mean_squares_kernel(time_ns, values, ends, window_ns, min_count, out)
     lo = 0
     hi = 0
     for j in range(ends.shape[0]):
-        while lo < n and time_ns[lo] < ends[j] - window_ns:
-            lo += 1
-        while hi < n and time_ns[hi] < ends[j]:
-            hi += 1
+        lo, hi = _window_rows(time_ns, n, lo, hi, ends[j], window_ns)
         count = hi - lo
         if count < min_count:
             out[j] = np.nan

@@ -41,6 +41,7 @@ kink tests (:mod:`pslog.fusion.innovation`) run on the kernel's outputs.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, Literal, NamedTuple, cast, overload
 
@@ -750,15 +751,18 @@ def _window_previous_next(camera: np.ndarray, m: int, previous_next
 
 
 def _trusted_track(time_ns: np.ndarray, points: np.ndarray, camera: np.ndarray,
-                   quality: dict, dropped: dict) -> Track:
+                   quality: dict, dropped: Mapping[str, int], shared: bool = False
+                   ) -> Track:
     """A :class:`Track` of columns already of its dtypes and shapes (checked by whoever made
-    them), without its constructor's checks: read-only views of them, as it keeps."""
+    them), without its constructor's checks: read-only views of them, as it keeps
+    (``shared``: the columns are a Track's already, read-only: kept as they are)."""
     track = object.__new__(Track)
-    columns = []
-    for column in (time_ns, points, camera):
-        view = column.view()
-        view.flags.writeable = False
-        columns.append(view)
+    columns = [time_ns, points, camera]
+    if not shared:
+        for i, column in enumerate(columns):
+            view = column.view()
+            view.flags.writeable = False
+            columns[i] = view
     track.__dict__.update(method="typeA", time_ns=columns[0], position_world=columns[1],
                           camera=columns[2], quality=quality, dropped=dropped)
     return track
@@ -1094,11 +1098,8 @@ class MeasuredNoiseStream:
                            cov_zz_m2=values[3:4], cov_xy_m2=values[4:5], cov_xz_m2=values[5:6],
                            cov_yz_m2=values[6:7])
             # (out's columns are a Track's already: read-only, shared as they are)
-            track = object.__new__(Track)
-            track.__dict__.update(method=out.method, time_ns=out.time_ns,
-                                  position_world=out.position_world, camera=out.camera,
-                                  quality=quality, dropped=out.dropped)
-            return track
+            return _trusted_track(out.time_ns, out.position_world, out.camera, quality,
+                                  out.dropped, shared=True)
         cache, start = self._sigma, self._start
         sigma = np.array([cache[t // every * every] for t in out.time_ns.tolist()])
         if np.isnan(sigma).any():
