@@ -168,9 +168,10 @@ class Method:
         of re-running ``function`` on a window); None: no such form
     kernels : the modules of the numba kernels the method runs (:func:`pslog._jit.preload`
         starts them early; none for a numpy-only method)
-    uses_doubt : bool, its covariance takes the doubt of the gate's choices
-        (:attr:`Prepared.doubt_px2`, docs/methods.md "A choice in doubt"): the gate makes it
-        only for a form such a method fuses
+    uses_doubt : bool, it takes the doubt of the gate's choices (:attr:`Prepared.doubt_px2`,
+        docs/methods.md "A choice in doubt"): in its covariance (``sync``, ``nearest``,
+        ``typeB``, ``linear``), or by withholding the points resting on a choice in doubt
+        (``typeA``); the gate makes it only for a form such a method fuses
     """
 
     name: str
@@ -267,7 +268,7 @@ METHODS: dict[str, Method] = {m.name: m for m in (
     Method("typeA", _type_a, True, False, frozenset({"alone"}),
            "pseudo stereo at every detection (paper section 2.2, eqs. 1-4)",
            f"{_PAPER}, section 2.2", streamer=_type_a_stream,
-           kernels=("pslog.fusion._pseudo_kernel",)),
+           kernels=("pslog.fusion._pseudo_kernel",), uses_doubt=True),
     Method("typeB", _type_b, True, True, frozenset({"shared", "alone"}),
            "stereo at common instants + ray-constrained prediction (paper section 2.3)",
            f"{_PAPER}, section 2.3", uses_doubt=True),

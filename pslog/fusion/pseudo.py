@@ -378,6 +378,13 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
     kinked = good & ~failed & kinked_points(prep, events, (*kink_past, predicted), sigma,
                                             max_gap_ns)
     keep = good & ~failed & ~kinked
+    # a point resting on a choice the gate put in doubt (its newest detection, or one of
+    # its past points' detections or brackets): withheld (docs/methods.md, "A choice in
+    # doubt": type A's points)
+    doubted = (keep & rests_on_doubt(prep.doubt_px2, events, kink_past)
+               if prep.doubt_px2 is not None else None)
+    if doubted is not None:
+        keep &= ~doubted
     if seen is not None:  # count only the reasons not counted before (each detection once)
         refused, seen[:] = refused & ~seen, seen | refused
     # (count_invalid's three scans only where some flag is set: a stream's push has none)
@@ -389,6 +396,8 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
                    failed_counts(failed, kinked)):
         for reason, count in counts.items():
             dropped[reason] = dropped.get(reason, 0) + count
+    if doubted is not None and doubted.any():
+        dropped[DOUBT] = int(np.count_nonzero(doubted))
     if np.all(keep):  # (every point kept: the columns as they are)
         track = Track("typeA", t_event, points, cams0, quality, dropped)
     else:
@@ -399,6 +408,23 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
     construction = TypeAConstruction(
         events[keep], (_select(p1, keep), _select(p2, keep)), predicted[keep], points[keep])
     return track, construction
+
+
+#: Track.dropped's reason for a point resting on a choice the gate put in doubt.
+DOUBT = "doubt"
+
+
+def rests_on_doubt(doubt_px2: np.ndarray, events: np.ndarray, past) -> np.ndarray:
+    """(k,) bool: whether each point (newest row ``events`` (k,), its past points
+    ``past``: two :class:`_KinkPast` of k rows, rows -1 for none) uses a detection whose
+    doubt (``doubt_px2`` (n,), :func:`pslog.fusion.gating.choice_doubt`) is not 0: its own,
+    ``P_{t-1}``'s and ``P_{t-2}``'s observed detections and their partners' brackets."""
+    doubted = doubt_px2 > 0
+    out = doubted[events]
+    for p in past:
+        for rows in (p.row, p.prev_row, p.next_row):
+            out = out | ((rows >= 0) & doubted[np.where(rows >= 0, rows, 0)])
+    return out
 
 
 _QUALITY = ("snap_px", "ray_miss_m", "ray_shift_m", "ray_angle_deg", "residual_max_px",
@@ -455,6 +481,8 @@ class TypeAStream:
         # the history a new point can reach: two bridged gaps (and the stream's margin)
         self._history_ns = int((2 * self._max_gap_s + 2 * options.tolerance_s) * NS) + 1
         self._checked = False
+        # the gate's doubt of the rows of the next push (StreamFuser sets it; None: none)
+        self.next_doubt: np.ndarray | None = None
         empty = Observations(np.zeros(0, np.int64), np.zeros(0, np.int32), np.zeros((0, 2)),
                              np.zeros(0, np.int64))
         # the per-camera parts of prepare, made once; their column caches warmed and shared
@@ -546,6 +574,8 @@ class TypeAStream:
         buf.uv[hi:end] = uv
         buf.frame[hi:end] = frame_index
         buf.seen[hi:end] = 0
+        buf.doubt[hi:end] = 0.0 if self.next_doubt is None else self.next_doubt
+        self.next_doubt = None
         # undistortion, rays and Jacobians of the new rows: prepare's per-camera pass, and
         # Prepared.observed_rays' and observed_direction_jacobians' compiled pass
         lensless = self._lensless
@@ -571,7 +601,8 @@ class TypeAStream:
             ray_origin=t.centers[self._camera], ray_dir=buf.ray_dir[window], centers=t.centers,
             K_inv=t.K_inv, R=t.R, F=t.F,
             per_camera=[np.flatnonzero(self._camera == i) for i in range(len(rig))],
-            cameras=t.cameras, uv_jacobian=buf.jac[window], view_box=t.view_box)
+            cameras=t.cameras, uv_jacobian=buf.jac[window], view_box=t.view_box,
+            doubt_px2=buf.doubt[window] if buf.doubt[window].any() else None)
         prep.__dict__.update(self._shared)
         # (the direction Jacobians contiguous, as a batch run's: type_a_kernel's one
         # compiled signature, which pslog.warm compiles; the buffers' slice is strided)
@@ -607,6 +638,8 @@ class TypeAStream:
         row = buf.uv[hi]
         row[0], row[1] = u, v
         buf.frame[hi] = buf.seen[hi] = 0
+        buf.doubt[hi] = 0.0 if self.next_doubt is None else float(self.next_doubt[0])
+        self.next_doubt = None
         self._lensless_rows(
             buf.camera64[hi:end], buf.uv[hi:end], *self._lensless_tables, buf.uv_und[hi:end],
             buf.ray_dir[hi:end], buf.jac[hi:end], buf.jac_rows[hi:end], buf.rays[hi:end],
@@ -711,6 +744,12 @@ class TypeAStream:
             keep = good and not failed and not kinked
         else:
             finite = False
+        doubted = False
+        if keep:  # (rests_on_doubt of the one point)
+            doubt = buf.doubt
+            doubted = doubt[lo + e] > 0 or any(
+                r >= 0 and doubt[lo + r] > 0 for r in past_rows[:, 0, :].ravel().tolist())
+            keep = not doubted
         # Track.dropped: each detection's past refusals once (seen), the invalid point's
         # reasons, the tests' refusals, in fuse_type_a's order
         dropped: dict[str, int] = {}
@@ -726,6 +765,8 @@ class TypeAStream:
             dropped["prediction_failed"] = 1
         elif kinked:
             dropped["kink"] = 1
+        elif doubted:
+            dropped[DOUBT] = 1
         if not keep:
             if not dropped:
                 return self._empty
@@ -791,6 +832,7 @@ class _StreamColumns:
         self.dir_jac = np.zeros((3, 2, capacity))
         self.jac_rows = np.zeros((capacity, 4))
         self.seen = np.zeros(capacity, np.int64)
+        self.doubt = np.zeros(capacity)  # the gate's doubt of each row (0: none)
 
     def moved(self, lo: int, hi: int, capacity: int) -> _StreamColumns:
         """Rows [lo, hi) at the front of columns of at least ``capacity`` rows (these
@@ -798,7 +840,7 @@ class _StreamColumns:
         out = self if capacity <= self.capacity else _StreamColumns(capacity)
         k = hi - lo
         for name in ("time", "camera", "camera64", "uv", "frame", "uv_und", "ray_dir", "jac",
-                     "rays", "jac_rows", "seen"):
+                     "rays", "jac_rows", "seen", "doubt"):
             column = getattr(self, name)
             getattr(out, name)[:k] = column[lo:hi].copy()  # (overlapping when in place)
         out.dir_jac[:, :, :k] = self.dir_jac[:, :, lo:hi].copy()

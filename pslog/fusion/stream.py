@@ -128,13 +128,20 @@ class StreamFuser:
             from .gating import StreamGate, gating_key
 
             self._gate = StreamGate(rig, gating_key(method, self.options)[1], self._max_gap_s)
-        # the doubt of the gate's choices, for the methods re-run on the window (their
-        # covariance holds it: stereo.doubt_covariance; the incremental forms do not use it)
+        # the doubt of the gate's choices, for the methods that take it: those re-run on the
+        # window (their covariance holds it: stereo.doubt_covariance) and typeA's incremental
+        # form (it withholds a point resting on a choice in doubt), which is told each push's
+        # doubt through its innermost stream's ``next_doubt``
         self._doubts = None
-        if self._gate is not None and self.incremental is None and METHODS[method].uses_doubt:
+        self._doubt_sink = None
+        if self._gate is not None and METHODS[method].uses_doubt:
             from .gating import StreamDoubt
 
             self._doubts = StreamDoubt(self._gate)
+            sink = self.incremental
+            while sink is not None and not hasattr(sink, "next_doubt"):
+                sink = getattr(sink, "inner", None)
+            self._doubt_sink = sink
         # the incremental form's own path for one detection (push_one(t, c, u, v) -> Track),
         # when nothing is to reorder; and when nothing is to gate either, a push of one
         # detection goes straight to it
@@ -176,6 +183,13 @@ class StreamFuser:
             time_ns, camera, uv, frame_index, len(self.rig), "StreamFuser.push")
         return self._push_rows(time_ns, camera, uv, frame_index)
 
+    def _tell_doubt(self, doubt: np.ndarray | None) -> None:
+        """Give the incremental form the doubt of the rows it is about to take (None, or
+        all 0: none), when it takes any (``next_doubt``: typeA's)."""
+        if self._doubt_sink is not None:
+            self._doubt_sink.next_doubt = (None if doubt is None or not np.any(doubt)
+                                           else np.asarray(doubt, np.float64))
+
     def _doubt_of(self, time_ns, camera, uv) -> np.ndarray | None:
         """The doubt of the gate's chosen rows (None: none in doubt, or not used)."""
         return None if self._doubts is None else self._doubts.of(time_ns, camera, uv)
@@ -191,6 +205,12 @@ class StreamFuser:
         one, gate = self._push_one, self._gate
         if one is not None and len(uv):  # (an empty frame: push's own path, which keeps no key)
             chosen = uv if gate is None else gate.push_frame(time_ns, camera, frame_index, uv)
+            doubt = None
+            if self._doubts is not None and chosen is not None:  # (as push: its frame, then)
+                self._doubts.frames(np.full(len(uv), time_ns, np.int64),
+                                    np.full(len(uv), camera, np.int32))
+                doubt = self._doubt_of(np.full(len(chosen), time_ns, np.int64),
+                                       np.full(len(chosen), camera, np.int32), chosen)
             if chosen is not None and len(chosen) <= 1:
                 if not len(chosen):  # (every candidate rejected: nothing new)
                     return self._settled(final=False)
@@ -201,12 +221,13 @@ class StreamFuser:
                                       f"ns after t={self._last_logged[0]} ns")
                 self._last_logged = key
                 u, v = chosen[0].tolist()
+                self._tell_doubt(doubt)
                 return one(time_ns, camera, u, v)
             if chosen is not None:  # (the gate kept several: the rows of push)
                 c = len(chosen)
                 return self._push_rows(np.full(c, time_ns, np.int64),
                                        np.full(c, camera, np.int32), chosen,
-                                       np.full(c, frame_index, np.int64))
+                                       np.full(c, frame_index, np.int64), doubt)
         k = len(uv)
         return self.push(np.full(k, time_ns, np.int64), np.full(k, camera, np.int32), uv,
                          np.full(k, frame_index, np.int64))
@@ -225,6 +246,7 @@ class StreamFuser:
                               f"t={self._last_logged[0]} ns")
         self._last_logged = keys[-1]
         if self.incremental is not None and not self._corrected:  # nothing to reorder
+            self._tell_doubt(doubt)
             if len(time_ns) == 1 and self._push_one is not None:  # (a frame's chosen one)
                 u, v = uv[0].tolist()
                 return self._push_one(int(time_ns[0]), int(camera[0]), u, v)
@@ -292,6 +314,7 @@ class StreamFuser:
                 if ends:
                     return Track.concat([cast(Track, self._nothing), self.incremental.flush()])
                 return cast(Track, self._nothing)  # set whenever incremental is
+            self._tell_doubt(self._doubt[f:])
             out = self.incremental.push(self._time[f:], self._camera[f:], self._uv[f:],
                                         self._frame[f:])
             if ends:
