@@ -37,6 +37,9 @@ not), with how many of those added fall in the blackout (from its start to two b
 after its end) and how many follow a kick or bounce of the rally by less than 40 ms (the
 same for the clean session's).
 
+``--misses F`` (with ``--more``): the detector also misses the ball in a fraction F of the
+frames and drops F/2 of them, in the clean sessions too (which share every ball detection).
+
 ``--first-seed N`` (with ``--more``): the rallies from seed N (new sessions: the tests' rallies
 are 300-302), the library's rally seed ``5 + N - 300``, and the faults' cameras and times of
 other seeds; ``--fps 60,120,240``: every rig again with its cameras at each rate (the same
@@ -188,10 +191,11 @@ def at_rate(rig: Rig, fps: float) -> Rig:
     return Rig(cams, rig.name if fps == rig.cameras[0].fps else f"{rig.name}@{fps:g}")
 
 
-def measure_more(rig: Rig, methods, runs, options: FusionOptions, first_seed: int = 300
-                 ) -> dict:
+def measure_more(rig: Rig, methods, runs, options: FusionOptions, first_seed: int = 300,
+                 misses: float = 0.0) -> dict:
     """Per method, at TARGET_NOISE: the --more row's figures over the sessions ``runs``
-    (simulation seeds from ``first_seed - 300``)."""
+    (simulation seeds from ``first_seed - 300``; ``misses``: the detector also misses the
+    ball in that fraction of frames and half of it are dropped, clean sessions too)."""
     from pslog.fusion._prepare import default_max_gap_s
 
     gap = options.max_gap_s or default_max_gap_s(rig)
@@ -209,7 +213,8 @@ def measure_more(rig: Rig, methods, runs, options: FusionOptions, first_seed: in
         tracks = {}
         for kind, extra in kinds.items():
             det, truth, _ = simulate_labelled(rig, motion, duration, SimulationOptions(
-                noise_px=TARGET_NOISE, seed=seed, **extra))
+                noise_px=TARGET_NOISE, seed=seed, miss_rate=misses, drop_rate=misses / 2,
+                **extra))
             tracks[kind] = fuse_detections(det, rig, methods, options)[0]
         for m in methods:
             err = {kind: errors_m(tracks[kind][m], truth) for kind in kinds}
@@ -285,7 +290,9 @@ def main_more(args, methods, options: FusionOptions) -> int:
     rates = [float(x) for x in args.fps.split(",")] if args.fps else [None]
     print(f"dirty sessions, other rigs and motions, {TARGET_NOISE} px, gating {args.gating}: "
           f"{', '.join(label for label, *_ in runs)} per rig"
-          + (f"; cameras at {args.fps} fps" if args.fps else ""))
+          + (f"; cameras at {args.fps} fps" if args.fps else "")
+          + (f"; the detector also misses {args.misses:g} of the frames and drops "
+             f"{args.misses / 2:g}" if args.misses else ""))
     print("mean errors mm pooled over the rig's sessions; ratio faults / clean (pooled, worst "
           "session; data: the ratio the blackout costs that session when the method does as "
           "well as the remaining cameras allow, _data_ratio); blackout: the ratio with the "
@@ -300,7 +307,7 @@ def main_more(args, methods, options: FusionOptions) -> int:
     for rig in (r if fps is None else at_rate(r, fps) for fps in rates
                 for r in rigs() + more_rigs()):
         rows, met = more_table(rig, methods, measure_more(rig, methods, runs, options,
-                                                          args.first_seed))
+                                                          args.first_seed, args.misses))
         ok &= met
         print("\n".join(rows), flush=True)
     print(f"targets (worst session; no added point > 5 cm): {'met' if ok else 'MISSED'} "
@@ -392,6 +399,10 @@ def main() -> int:
     parser.add_argument("--fps", default=None,
                         help="--more: comma-separated camera rates to run every rig at "
                              "(e.g. 60,120,240; default: the rigs' own, 30)")
+    parser.add_argument("--misses", type=float, default=0.0,
+                        help="--more: the detector also misses the ball in this fraction of "
+                             "frames, and half of it are dropped (clean sessions too; "
+                             "e.g. 0.1)")
     args = parser.parse_args()
     json_rows = []
     n_seeds, duration = (1, 4.0) if args.quick else (args.seeds, args.duration)
