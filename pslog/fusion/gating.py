@@ -1385,8 +1385,8 @@ def gate(detections: Detections, rig: Rig, *, causal: bool = True, wait_s: float
     common : ``common()`` gives :func:`gate_common` of ``detections`` and ``rig`` (the
         part of the work every form shares: several forms gating the same detections
         compute it once); None: computed here
-    doubt : make :attr:`Gated.doubt_px2` (False: None, for methods whose covariance does
-        not take it: the registry's ``Method.uses_doubt``)
+    doubt : make :attr:`Gated.doubt_px2` (False: None, for methods that do not take it:
+        the registry's ``Method.uses_doubt``)
 
     Returns
     -------
@@ -2406,7 +2406,7 @@ def gate_for(detections: Detections, rig: Rig, method: str, options,
              common: Callable[[], tuple] | None = None, doubt: bool | None = None) -> Gated:
     """:func:`gate` in the form ``method`` needs (``options``: FusionOptions with
     ``max_gap_s`` set or None; ``common``: as :func:`gate`'s; ``doubt``: make the choices'
-    doubt, None: if ``method``'s covariance takes it, ``Method.uses_doubt``)."""
+    doubt, None: if ``method`` takes it, ``Method.uses_doubt``)."""
     from . import METHODS
 
     causal, wait_s = gating_key(method, options)
