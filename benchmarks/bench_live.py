@@ -4,16 +4,23 @@ Targets (issue 11), synthetic three-camera type-A rig, 60 s (``--quick``: 10 s):
 
 - no datagram lost on loopback at 3 x 30 fps, nor at a replayed 3 x 240 fps load;
 - fusion latency, from a detection datagram's arrival (the kernel's receive timestamp, so
-  time spent queued behind other datagrams counts) to its 3D point leaving the fuser (the
-  UDP sink's ``send`` returned): median and p99, p99 at most 1 ms;
-- end-to-end, from the frame's capture time to the point leaving: reported.
+  time spent queued behind other datagrams counts) to its 3D point leaving the fuser (handed
+  to every sink: the UDP sink's ``send`` returned): median and p99, p99 at most 1 ms. It is
+  ``LiveSummary.latency_ns``, measured on the MONOTONIC clock (the kernel's wall-clock stamp
+  converted with the wall and monotonic clocks read together when ``recv`` returned it:
+  ``pslog.live.server.arrival_monotonic``), so a step or slew of the wall clock during a run
+  (an NTP correction, a VM's clock re-synchronised) does not enter it;
+- end-to-end, from the frame's capture time to the point leaving: reported (the fusion
+  latency plus the datagram's trip, capture to kernel arrival, both stamps wall clock and
+  microseconds apart).
 
 Setup: the paper's rig (three 640 x 480 cameras, type-A shutters 1/(3 fps) apart) at 30 fps,
 and the same cameras at 240 fps; the library's ``rally`` (chip kicks, floor bounces, drag)
 for the whole duration, 0.3 px detection noise, 2 % missed frames and a false candidate on
 5 % of the frames (so the gates have something to do). A SENDER PROCESS replays every
-frame's detection datagram at its capture time on the wall clock (a detector taking no
-time: end-to-end = the datagram's trip + queueing + fusion); the fuser is
+frame's detection datagram at its capture time (scheduled on the monotonic clock, stamped
+with the wall clock read with it; a detector taking no time: end-to-end = the datagram's
+trip + queueing + fusion); the fuser is
 :func:`pslog.live.server.serve` in this process with a :class:`~pslog.live.sinks.UdpSink`
 to a RECEIVER PROCESS (a robot) that counts the points. Per method (``filter``, ``typeA``)
 and per way of using a frame's candidates: ``all`` (every candidate through the gates,
@@ -100,21 +107,23 @@ def session(fps: float, seconds: float):
     return rig, out
 
 
-def sender(address, frames, start_ns, conn) -> None:
-    """Send each datagram at its capture time (``start_ns`` + session time), stamped."""
+def sender(address, frames, start_mono_ns, conn) -> None:
+    """Send each datagram at its capture time (``start_mono_ns`` + session time, monotonic
+    clock), stamped with the wall clock of that instant (read with the monotonic one)."""
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sent = late = 0
     pack = struct.Struct("<qq").pack_into
+    mono = time.monotonic_ns
     for t, data in frames:
-        due = start_ns + t
-        wait = (due - time.time_ns()) / NS
+        due = start_mono_ns + t
+        wait = (due - mono()) / NS
         if wait > 0.0005:
             time.sleep(wait - 0.0003)
-        while time.time_ns() < due:
+        while mono() < due:
             pass
         buf = bytearray(data)
-        now = time.time_ns()
-        pack(buf, _T_OFFSET, due, now)
+        wall, now = time.time_ns(), mono()
+        pack(buf, _T_OFFSET, wall - (now - due), wall)
         sock.sendto(buf, address)
         sent += 1
         late += now - due > 1_000_000
@@ -134,19 +143,18 @@ def receiver(sock: socket.socket, conn) -> None:
 
 
 class Left:
-    """The sink after the UDP one: when each point's datagram has been sent."""
+    """A sink after the UDP one: each point's arrival and capture times (wall clock, for the
+    trip from capture to arrival), in the order :func:`serve` notes their latencies."""
 
     def __init__(self, n: int) -> None:
-        self.left = np.zeros(n, np.int64)
         self.arrival = np.zeros(n, np.int64)
         self.capture = np.zeros(n, np.int64)
         self.n = 0
 
     def emit(self, points) -> None:
-        now = time.time_ns()
         for p in points:
-            if self.n < len(self.left):
-                self.left[self.n], self.arrival[self.n] = now, p.arrival_ns
+            if self.n < len(self.arrival):
+                self.arrival[self.n] = p.arrival_ns
                 self.capture[self.n] = p.t_capture_ns
                 self.n += 1
 
@@ -184,9 +192,8 @@ def run(rig, frames, method: str, candidates: bool, record: bool = False,
         if not fuser.is_alive():
             raise RuntimeError("pslog serve ended before it was ready")
     s_parent, s_child = ctx.Pipe()
-    start = time.time_ns() + NS // 2
-    # the session's frames must not come before the fuser's clock zero
-    start = max(start, ready.epoch_ns + NS // 10)
+    # (the fuser's clock zero, ready.epoch_ns, was fixed before its warm-up: in the past)
+    start = time.monotonic_ns() + NS // 2
     send = ctx.Process(target=sender, args=(ready.address, frames, start, s_child),
                        daemon=True)
     send.start()
@@ -203,10 +210,12 @@ def run(rig, frames, method: str, candidates: bool, record: bool = False,
     tmp.cleanup()
     summary = result["summary"]
     c = summary.counters
-    n = left.n
-    fusion = (left.left[:n] - left.arrival[:n]) / 1e6
-    e2e = (left.left[:n] - left.capture[:n]) / 1e6
+    fusion = summary.latency_ns / 1e6  # (monotonic clock: serve's arrival_monotonic)
+    n = min(left.n, len(fusion))
+    fusion = fusion[:n]
+    e2e = fusion + (left.arrival[:n] - left.capture[:n]) / 1e6
     cpu = summary.cpu_ns / 1e6
+    wait, handled = summary.wait_ns / 1e6, summary.handled_ns / 1e6
     return dict(cpu_med=float(np.median(cpu)) if len(cpu) else float("nan"),
                 cpu_p99=float(np.percentile(cpu, 99)) if len(cpu) else float("nan"),
                 sent=sent, late_sends=late, received=c["received"], lost=sent - c["received"],
@@ -216,6 +225,11 @@ def run(rig, frames, method: str, candidates: bool, record: bool = False,
                 fusion_med=float(np.median(fusion)) if n else float("nan"),
                 fusion_p99=float(np.percentile(fusion, 99)) if n else float("nan"),
                 fusion_max=float(fusion.max()) if n else float("nan"),
+                fusion_min=float(fusion.min()) if n else float("nan"),
+                wait_med=float(np.median(wait)) if len(wait) else float("nan"),
+                wait_p99=float(np.percentile(wait, 99)) if len(wait) else float("nan"),
+                handled_med=float(np.median(handled)) if len(wait) else float("nan"),
+                handled_p99=float(np.percentile(handled, 99)) if len(wait) else float("nan"),
                 e2e_med=float(np.median(e2e)) if n else float("nan"),
                 e2e_p99=float(np.percentile(e2e, 99)) if n else float("nan"),
                 rehearsals=summary.rehearsals, overlaps=summary.rehearsal_overlaps,
@@ -477,6 +491,9 @@ def main() -> int:
                       f"{'<= 1 ' + ('ok' if ok else 'NO'):>7} | {r['e2e_med']:7.3f} "
                       f"{r['e2e_p99']:6.3f} | {r['cpu_med']:7.3f} {r['cpu_p99']:6.3f}",
                       flush=True)
+                print(f"{'':>10} (per datagram, ms median / p99: arrival to recv "
+                      f"{r['wait_med']:.3f} / {r['wait_p99']:.3f}, recv to points out "
+                      f"{r['handled_med']:.3f} / {r['handled_p99']:.3f})")
                 if r["rehearsals"]:
                     print(f"{'':>10} ({r['rehearsals']} rehearsals, "
                           f"{r['rehearsal_cpu_ms_per_s']:.1f} ms CPU per second; "
