@@ -150,6 +150,7 @@ class Left:
         self.arrival = np.zeros(n, np.int64)
         self.capture = np.zeros(n, np.int64)
         self.n = 0
+        self.probe: SchedProbe | None = None
 
     def emit(self, points) -> None:
         for p in points:
@@ -157,13 +158,86 @@ class Left:
                 self.arrival[self.n] = p.arrival_ns
                 self.capture[self.n] = p.t_capture_ns
                 self.n += 1
+        if self.probe is not None:
+            self.probe.out()
 
     def close(self) -> None:
         pass
 
 
+class SchedProbe:
+    """``--sched``: what each datagram's latency was made of, from the fuser thread's
+    scheduler statistics (``/proc/thread-self/schedstat``: its time on a core and its time
+    waiting for one, read at each blocking wait's start, when ``recv`` returned a datagram
+    and when its points were out) and the collector's runs (``gc.callbacks``).
+
+    Per datagram that made points (ms): ``wait`` (arrival to ``recv`` returning) =
+    ``queued`` (it came before the thread's wait started: behind another datagram, a
+    rehearsal, a collection) + ``delay_wait`` (runnable, waiting for a core) + ``wake``
+    (the rest: the kernel's wake-up path, the sleeping thread and its idle (virtual) CPU
+    woken, time the host took the VM's CPU away); ``handled`` (``recv`` to
+    points out) = ``cpu`` + ``delay_handle`` (preempted) + the rest. The socket is wrapped
+    (its ``recvmsg``) and ``pslog.live.server._readable`` (the rehearsal's wait) too: the
+    probe costs a few µs per wait."""
+
+    def __init__(self, n: int) -> None:
+        self.fd = -1
+        self.block = (0, 0, 0)  # (monotonic, on cpu, delay) at the latest wait's start
+        self.rows = np.zeros((n, 7), np.int64)  # block, recv (mono, cpu, delay), out ...
+        self.n = 0
+        self.pending = None
+        self.ready = False
+        self.gc_starts: list[int] = []
+
+    def read(self) -> tuple[int, int, int]:
+        if self.fd < 0:
+            self.fd = os.open("/proc/thread-self/schedstat", os.O_RDONLY)
+        on_cpu, delay = os.pread(self.fd, 64, 0).split()[:2]
+        return time.monotonic_ns(), int(on_cpu), int(delay)
+
+    def waits(self, f):
+        def run(*args):
+            self.block = self.read()
+            self.ready = f(*args)  # (a datagram came in this wait: recv will not block)
+            return self.ready
+        return run
+
+    def received(self) -> None:
+        self.pending = (self.block, self.read())
+
+    def out(self) -> None:
+        if self.pending is not None and self.n < len(self.rows):
+            (b, _, bd), (r, rc, rd) = self.pending
+            o, oc, od = self.read()
+            self.rows[self.n] = (b, r, rd - bd, o, oc - rc, od - rd, 0)
+            self.n += 1
+        self.pending = None
+
+    def collected(self, phase, info) -> None:
+        if phase == "start":
+            self.gc_starts.append(time.monotonic_ns())
+
+
+class ProbedSocket:
+    """A UDP socket whose ``recvmsg`` notes the fuser thread's statistics (SchedProbe)."""
+
+    def __init__(self, sock: socket.socket, probe: SchedProbe) -> None:
+        self._sock, self._probe = sock, probe
+
+    def recvmsg(self, *args):
+        if not self._probe.ready:
+            self._probe.block = self._probe.read()
+        self._probe.ready = False
+        out = self._sock.recvmsg(*args)
+        self._probe.received()
+        return out
+
+    def __getattr__(self, name):
+        return getattr(self._sock, name)
+
+
 def run(rig, frames, method: str, candidates: bool, record: bool = False,
-        rehearse_s: float | None = 0.0005) -> dict:
+        rehearse_s: float | None = 0.0005, sched: bool = False) -> dict:
     ctx = mp.get_context("fork")
     rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     rx.bind(("127.0.0.1", 0))
@@ -174,15 +248,32 @@ def run(rig, frames, method: str, candidates: bool, record: bool = False,
     ready, stop = threading.Event(), threading.Event()
     left = Left(len(frames) * 2)
     result: dict = {}
+    probe = SchedProbe(len(frames)) if sched else None
 
     def fuse() -> None:
         sinks = [UdpSink(rx.getsockname()), left]
         if record:  # the session recorded as pslog live --record does (its writer thread)
             sinks.append(RecordSink(Path(tmp.name) / "live.mcap", rig))
-        result["summary"] = serve(rig, "udp://127.0.0.1:0", sinks,
-                                  method=method, candidates=candidates, stop=stop,
-                                  ready=ready, status_stream=None, status_every_s=1.0,
-                                  rehearse_s=rehearse_s)
+        sock = None
+        if probe is not None:
+            import gc
+
+            import pslog.live.server as server
+            from pslog.live.server import bind_udp
+
+            left.probe = probe
+            sock = ProbedSocket(bind_udp("udp://127.0.0.1:0"), probe)
+            readable, server._readable = server._readable, probe.waits(server._readable)
+            gc.callbacks.append(probe.collected)
+        try:
+            result["summary"] = serve(rig, "udp://127.0.0.1:0", sinks,
+                                      method=method, candidates=candidates, stop=stop,
+                                      ready=ready, status_stream=None, status_every_s=1.0,
+                                      rehearse_s=rehearse_s, sock=sock)
+        finally:
+            if probe is not None:
+                server._readable = readable
+                gc.callbacks.remove(probe.collected)
 
     tmp = tempfile.TemporaryDirectory(prefix="bench-live-")
     fuser = threading.Thread(target=fuse)
@@ -216,7 +307,10 @@ def run(rig, frames, method: str, candidates: bool, record: bool = False,
     e2e = fusion + (left.arrival[:n] - left.capture[:n]) / 1e6
     cpu = summary.cpu_ns / 1e6
     wait, handled = summary.wait_ns / 1e6, summary.handled_ns / 1e6
-    return dict(cpu_med=float(np.median(cpu)) if len(cpu) else float("nan"),
+    if probe is not None:
+        result["sched"] = sched_rows(probe, summary)
+    return dict(sched=result.get("sched"),
+                cpu_med=float(np.median(cpu)) if len(cpu) else float("nan"),
                 cpu_p99=float(np.percentile(cpu, 99)) if len(cpu) else float("nan"),
                 sent=sent, late_sends=late, received=c["received"], lost=sent - c["received"],
                 seq_gaps=c["lost"], points=c["points"], robot=received_points,
@@ -234,6 +328,45 @@ def run(rig, frames, method: str, candidates: bool, record: bool = False,
                 e2e_p99=float(np.percentile(e2e, 99)) if n else float("nan"),
                 rehearsals=summary.rehearsals, overlaps=summary.rehearsal_overlaps,
                 rehearsal_cpu_ms_per_s=summary.rehearsal_cpu_ns / 1e6 / summary.duration_s)
+
+
+def sched_rows(probe: SchedProbe, summary) -> dict:
+    """Per datagram that made points (the probe's rows matched with the summary's, in
+    order), ms: wait, delay_wait, wake (wait less delay_wait), handled, cpu, delay_handle,
+    slept (from the wait's start to the arrival), gc (a collection started between the
+    arrival and the points out: 1)."""
+    k = min(probe.n, len(summary.wait_ns))
+    rows = probe.rows[:k]
+    wait, handled = summary.wait_ns[:k], summary.handled_ns[:k]
+    recv = rows[:, 1]
+    arrival = recv - wait
+    starts = np.sort(np.array(probe.gc_starts, np.int64))
+    inside = (np.searchsorted(starts, arrival) < np.searchsorted(starts, rows[:, 3]))
+    ms = 1e6
+    queued = np.clip(rows[:, 0] - arrival, 0, wait)  # (came before the wait started)
+    delay_wait = np.minimum(rows[:, 2], wait - queued)
+    return dict(wait=wait / ms, queued=queued / ms, delay_wait=delay_wait / ms,
+                wake=(wait - queued - delay_wait) / ms, handled=handled / ms,
+                cpu=rows[:, 4] / ms, delay_handle=rows[:, 5] / ms,
+                slept=(arrival - rows[:, 0]) / ms, gc=inside.astype(float),
+                latency=(wait + handled) / ms, collections=len(starts))
+
+
+def print_sched(s: dict) -> None:
+    """The --sched breakdown: median, p99, and the mean over the slowest 1 % of datagrams
+    (by their first point's latency)."""
+    tail = s["latency"] >= np.percentile(s["latency"], 99)
+    print(f"{'':>10} breakdown, ms median / p99 / mean of the slowest 1 % ({tail.sum()}): "
+          + ", ".join(f"{k} {np.median(s[k]):.3f} / {np.percentile(s[k], 99):.3f} / "
+                      f"{s[k][tail].mean():.3f}"
+                      for k in ("latency", "wait", "queued", "delay_wait", "wake", "handled",
+                                "cpu", "delay_handle"))
+          + f"; slept before (median) {np.median(s['slept']):.2f}; collections "
+          f"{s['collections']}, {int(s['gc'].sum())} inside a datagram", flush=True)
+    if os.environ.get("BENCH_LIVE_SLOWEST"):
+        for i in np.argsort(s["latency"])[::-1][:int(os.environ["BENCH_LIVE_SLOWEST"])]:
+            print(f"{'':>12}" + " ".join(f"{k} {s[k][i]:.3f}" for k in (
+                "latency", "queued", "delay_wait", "wake", "cpu", "delay_handle", "slept")))
 
 
 def direct(rig, frames, method: str, candidates: bool, gap_s: float) -> dict:
@@ -422,6 +555,8 @@ def main() -> int:
                         help="count the Python bytecodes run per datagram, per stage")
     parser.add_argument("--rehearse", default="0.5", metavar="LEAD_MS",
                         help="serve's rehearse_s in ms ('off': none; default 0.5)")
+    parser.add_argument("--sched", action="store_true",
+                        help="per datagram: waits for a core, wake-up, CPU (SchedProbe)")
     parser.add_argument("--json", default=None, help="write the rows as JSON")
     args = parser.parse_args()
     json_rows = []
@@ -476,7 +611,8 @@ def main() -> int:
         for method in args.method.split(","):
             for cand in args.candidates.split(","):
                 r = run(rig, frames, method, cand == "all", args.record,
-                        None if args.rehearse == "off" else float(args.rehearse) / 1e3)
+                        None if args.rehearse == "off" else float(args.rehearse) / 1e3,
+                        sched=args.sched)
                 ok = r["fusion_p99"] <= TARGET_P99_MS
                 worst |= r["lost"] > 0
                 json_rows.append({
@@ -494,6 +630,8 @@ def main() -> int:
                 print(f"{'':>10} (per datagram, ms median / p99: arrival to recv "
                       f"{r['wait_med']:.3f} / {r['wait_p99']:.3f}, recv to points out "
                       f"{r['handled_med']:.3f} / {r['handled_p99']:.3f})")
+                if r["sched"] is not None:
+                    print_sched(r["sched"])
                 if r["rehearsals"]:
                     print(f"{'':>10} ({r['rehearsals']} rehearsals, "
                           f"{r['rehearsal_cpu_ms_per_s']:.1f} ms CPU per second; "
