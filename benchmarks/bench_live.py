@@ -65,6 +65,7 @@ import tempfile  # noqa: E402
 import threading  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
+from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
 
@@ -185,7 +186,7 @@ class SchedProbe:
         self.block = (0, 0, 0)  # (monotonic, on cpu, delay) at the latest wait's start
         self.rows = np.zeros((n, 7), np.int64)  # block, recv (mono, cpu, delay), out ...
         self.n = 0
-        self.pending = None
+        self.pending: tuple | None = None
         self.ready = False
         self.gc_starts: list[int] = []
 
@@ -251,10 +252,10 @@ def run(rig, frames, method: str, candidates: bool, record: bool = False,
     probe = SchedProbe(len(frames)) if sched else None
 
     def fuse() -> None:
-        sinks = [UdpSink(rx.getsockname()), left]
+        sinks: list = [UdpSink(rx.getsockname()), left]
         if record:  # the session recorded as pslog live --record does (its writer thread)
             sinks.append(RecordSink(Path(tmp.name) / "live.mcap", rig))
-        sock = None
+        sock: Any = None
         if probe is not None:
             import gc
 
