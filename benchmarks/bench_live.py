@@ -176,7 +176,10 @@ class SchedProbe:
     ``queued`` (it came before the thread's wait started: behind another datagram, a
     rehearsal, a collection) + ``delay_wait`` (runnable, waiting for a core) + ``wake``
     (the rest: the kernel's wake-up path, the sleeping thread and its idle (virtual) CPU
-    woken, time the host took the VM's CPU away); ``handled`` (``recv`` to
+    woken, time the host took the VM's CPU away), where ``undelivered`` is the part of
+    ``queued`` of a datagram stamped before the wait started but not in the socket then (the
+    thread slept in that wait: the kernel held it before the socket, e.g. its softirq
+    backlog starved on a loaded machine); ``handled`` (``recv`` to
     points out) = ``cpu`` + ``delay_handle`` (preempted) + the rest. The socket is wrapped
     (its ``recvmsg``) and ``pslog.live.server._readable`` (the rehearsal's wait) too: the
     probe costs a few µs per wait."""
@@ -189,6 +192,7 @@ class SchedProbe:
         self.pending: tuple | None = None
         self.ready = False
         self.gc_starts: list[int] = []
+        self.wall_waits: list[int] = []  # every datagram's wall now - kernel stamp, ns
 
     def read(self) -> tuple[int, int, int]:
         if self.fd < 0:
@@ -231,6 +235,11 @@ class ProbedSocket:
         self._probe.ready = False
         out = self._sock.recvmsg(*args)
         self._probe.received()
+        wall = time.time_ns()
+        for level, _kind, raw in out[1]:  # (the wall clock's own reading of the wait)
+            if level == socket.SOL_SOCKET and len(raw) >= 16:
+                sec, nsec = struct.unpack_from("@qq", raw)
+                self._probe.wall_waits.append(wall - sec * NS - nsec)
         return out
 
     def __getattr__(self, name):
@@ -346,11 +355,19 @@ def sched_rows(probe: SchedProbe, summary) -> dict:
     ms = 1e6
     queued = np.clip(rows[:, 0] - arrival, 0, wait)  # (came before the wait started)
     delay_wait = np.minimum(rows[:, 2], wait - queued)
-    return dict(wait=wait / ms, queued=queued / ms, delay_wait=delay_wait / ms,
+    # stamped before the wait started, yet the thread then slept in that wait (over 0.1 ms
+    # neither on a core nor waiting for one): not in the socket when the wait started, but
+    # held before it (the kernel's own backlog): "undelivered"
+    slept = (recv - rows[:, 0]) - rows[:, 2] > 100_000
+    undelivered = np.where(slept, queued, 0)
+    return dict(wait=wait / ms, queued=(queued - undelivered) / ms,
+                undelivered=undelivered / ms, delay_wait=delay_wait / ms,
                 wake=(wait - queued - delay_wait) / ms, handled=handled / ms,
                 cpu=rows[:, 4] / ms, delay_handle=rows[:, 5] / ms,
                 slept=(arrival - rows[:, 0]) / ms, gc=inside.astype(float),
-                latency=(wait + handled) / ms, collections=len(starts))
+                latency=(wait + handled) / ms, collections=len(starts),
+                wall_wait=np.array(probe.wall_waits) / ms,
+                between=(rows[1:, 0] - rows[:-1, 3]) / ms)
 
 
 def print_sched(s: dict) -> None:
@@ -360,14 +377,19 @@ def print_sched(s: dict) -> None:
     print(f"{'':>10} breakdown, ms median / p99 / mean of the slowest 1 % ({tail.sum()}): "
           + ", ".join(f"{k} {np.median(s[k]):.3f} / {np.percentile(s[k], 99):.3f} / "
                       f"{s[k][tail].mean():.3f}"
-                      for k in ("latency", "wait", "queued", "delay_wait", "wake", "handled",
-                                "cpu", "delay_handle"))
+                      for k in ("latency", "wait", "undelivered", "queued", "delay_wait",
+                                "wake", "handled", "cpu", "delay_handle"))
           + f"; slept before (median) {np.median(s['slept']):.2f}; collections "
-          f"{s['collections']}, {int(s['gc'].sum())} inside a datagram", flush=True)
+          f"{s['collections']}, {int(s['gc'].sum())} inside a datagram; the wall clock's "
+          f"own waits (now - stamp, every datagram) median {np.median(s['wall_wait']):.3f}, "
+          f"min {s['wall_wait'].min():.3f}, max {s['wall_wait'].max():.3f}; from a datagram's "
+          f"points out to the next wait: median {np.median(s['between']):.3f}, p99 "
+          f"{np.percentile(s['between'], 99):.3f}, in all {s['between'].sum():.0f}", flush=True)
     if os.environ.get("BENCH_LIVE_SLOWEST"):
         for i in np.argsort(s["latency"])[::-1][:int(os.environ["BENCH_LIVE_SLOWEST"])]:
             print(f"{'':>12}" + " ".join(f"{k} {s[k][i]:.3f}" for k in (
-                "latency", "queued", "delay_wait", "wake", "cpu", "delay_handle", "slept")))
+                "latency", "undelivered", "queued", "delay_wait", "wake", "cpu",
+                "delay_handle", "slept")))
 
 
 def direct(rig, frames, method: str, candidates: bool, gap_s: float) -> dict:
