@@ -33,7 +33,12 @@ to the sinks (``LiveSummary.cpu_ns``): what the fusion latency would be on an id
 
     python benchmarks/bench_live.py [--seconds 60] [--quick] [--load 30,240]
         [--method filter,typeA] [--candidates all,best] [--record] [--direct [GAP_MS]]
-        [--bytecodes] [--rehearse LEAD_MS|off]
+        [--bytecodes] [--rehearse LEAD_MS|off] [--sched]
+
+``--sched``: per datagram, what its latency was made of (:class:`SchedProbe`: queued,
+held before the socket, waiting for a core, the wake-up, CPU, preempted; collections
+inside one): median, p99 and the mean of the slowest 1 % (``BENCH_LIVE_SLOWEST=N``
+prints the N slowest datagrams' rows); docs/live.md "Where the 3 × 30 fps tail comes from".
 
 ``--rehearse``: ``serve``'s ``rehearse_s`` (default its own, 0.5 ms; ``off``: no rehearsal,
 the fuser as before session 17); each row then says how many rehearsals ran, their CPU per
