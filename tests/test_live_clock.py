@@ -57,3 +57,41 @@ def test_bench_latency_is_not_moved_by_a_wall_clock_step(monkeypatch, step_s):
     assert r["lost"] == 0 and r["points"] > 20
     assert 0 <= r["fusion_min"] <= r["fusion_p99"] <= r["fusion_max"] <= took_ms
     assert 0 <= r["wait_med"] <= r["wait_p99"] <= took_ms
+
+
+def test_serve_runs_its_duration_and_status_period_on_the_monotonic_clock(monkeypatch):
+    """serve(duration_s=0.5, status every 0.1 s) whose thread's wall clock steps 60 s back
+    once it is ready: it still ends after its 0.5 s and writes its status lines meanwhile
+    (on the wall clock it ran 60.5 s and wrote none until then)."""
+    import io
+
+    from pslog.live.server import serve
+    from pslog.rig import apply_timing, builtin_rig
+
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    ready, stop = threading.Event(), threading.Event()
+    real, main = time.time_ns, threading.main_thread()
+
+    def stepped() -> int:
+        back = ready.is_set() and threading.current_thread() is not main
+        return real() - (60 * NS if back else 0)
+
+    monkeypatch.setattr(time, "time_ns", stepped)
+    status, result = io.StringIO(), {}
+
+    def run() -> None:
+        result["summary"] = serve(rig, "udp://127.0.0.1:0", [], method="typeA", stop=stop,
+                                  ready=ready, status_stream=status, status_every_s=0.1,
+                                  duration_s=0.5, rehearse_s=None)
+
+    server = threading.Thread(target=run)
+    server.start()
+    assert ready.wait(300)
+    server.join(30)  # (a guard: 60 times the run's length)
+    held = server.is_alive()
+    stop.set()
+    server.join()
+    assert not held
+    lines = status.getvalue().splitlines()
+    assert len(lines) >= 2 and lines[-1].startswith("live ")  # (the last: the final one)
+    assert 0.5 <= result["summary"].duration_s

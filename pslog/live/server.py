@@ -284,9 +284,11 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
     # (latencies on the monotonic clock: the earliest a datagram read in this run can have
     # arrived, then each one's arrival; arrival_monotonic)
     started_mono = floor = mono()
-    deadline = None if duration_s is None else started + int(duration_s * NS)
+    # the run's length and the status period on the monotonic clock too: a step of the wall
+    # clock neither ends a run early nor holds it (or its status lines) for as long
+    deadline = None if duration_s is None else started_mono + int(duration_s * NS)
     period = int(status_every_s * NS)
-    next_status = started + period
+    next_status = started_mono + period
     was_silent = {c.name: True for c in fuser.cameras(started)}
     heard: set[str] = set()
     error: BaseException | None = None
@@ -425,16 +427,19 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
             if collecting:  # (after the points, held ones too: in the wait for the next datagram)
                 _collect_due(sock)
             # a camera silent or back: looked at between datagrams while one is silent
-            if data is None or now >= next_status or was_silent.get(fuser.last_camera, False):
+            if (data is None or now_mono >= next_status
+                    or was_silent.get(fuser.last_camera, False)):
                 events(now)
-            if now >= next_status:
-                next_status = now + period
-                text = format_status(fuser, fuser.cameras(now), now, started, starting)
+            if now_mono >= next_status:
+                next_status = now_mono + period
+                # (time served on the monotonic clock: started as the wall clock now says)
+                text = format_status(fuser, fuser.cameras(now), now,
+                                     now - (now_mono - started_mono), starting)
                 say(text)
                 counters = fuser.counters()
                 for f in on_status:
                     f(text, counters)
-            if deadline is not None and now >= deadline:
+            if deadline is not None and now_mono >= deadline:
                 break
     except KeyboardInterrupt:
         interrupted = True
@@ -482,7 +487,9 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
             signal.signal(signal.SIGINT, restore_sigint)
         end = clock()
         counters = fuser.counters()
-        final = format_status(fuser, fuser.cameras(end), end, started, starting)
+        end_mono = mono()
+        final = format_status(fuser, fuser.cameras(end), end, end - (end_mono - started_mono),
+                              starting)
         for ev in on_event:
             with contextlib.suppress(Exception):
                 ev(end, "live fuser stopped: " + ", ".join(f"{k} {v}"
@@ -503,7 +510,7 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
     lat = latencies[:min(n_lat, _KEEP_LATENCIES)].copy()
     kept = min(n_cpu, _KEEP_LATENCIES)
     return LiveSummary(counters=counters, cameras=fuser.cameras(end),
-                       duration_s=(end - started) / NS, interrupted=interrupted,
+                       duration_s=(end_mono - started_mono) / NS, interrupted=interrupted,
                        latency_ns=lat, cpu_ns=cpu[:kept].copy(),
                        wait_ns=waits[:kept].copy(), handled_ns=handled[:kept].copy(),
                        epoch_ns=fuser.epoch_ns,
