@@ -4,16 +4,23 @@ Targets (issue 11), synthetic three-camera type-A rig, 60 s (``--quick``: 10 s):
 
 - no datagram lost on loopback at 3 x 30 fps, nor at a replayed 3 x 240 fps load;
 - fusion latency, from a detection datagram's arrival (the kernel's receive timestamp, so
-  time spent queued behind other datagrams counts) to its 3D point leaving the fuser (the
-  UDP sink's ``send`` returned): median and p99, p99 at most 1 ms;
-- end-to-end, from the frame's capture time to the point leaving: reported.
+  time spent queued behind other datagrams counts) to its 3D point leaving the fuser (handed
+  to every sink: the UDP sink's ``send`` returned): median and p99, p99 at most 1 ms. It is
+  ``LiveSummary.latency_ns``, measured on the MONOTONIC clock (the kernel's wall-clock stamp
+  converted with the wall and monotonic clocks read together when ``recv`` returned it:
+  ``pslog.live.server.arrival_monotonic``), so a step or slew of the wall clock during a run
+  (an NTP correction, a VM's clock re-synchronised) does not enter it;
+- end-to-end, from the frame's capture time to the point leaving: reported (the fusion
+  latency plus the datagram's trip, capture to kernel arrival, both stamps wall clock and
+  microseconds apart).
 
 Setup: the paper's rig (three 640 x 480 cameras, type-A shutters 1/(3 fps) apart) at 30 fps,
 and the same cameras at 240 fps; the library's ``rally`` (chip kicks, floor bounces, drag)
 for the whole duration, 0.3 px detection noise, 2 % missed frames and a false candidate on
 5 % of the frames (so the gates have something to do). A SENDER PROCESS replays every
-frame's detection datagram at its capture time on the wall clock (a detector taking no
-time: end-to-end = the datagram's trip + queueing + fusion); the fuser is
+frame's detection datagram at its capture time (scheduled on the monotonic clock, stamped
+with the wall clock read with it; a detector taking no time: end-to-end = the datagram's
+trip + queueing + fusion); the fuser is
 :func:`pslog.live.server.serve` in this process with a :class:`~pslog.live.sinks.UdpSink`
 to a RECEIVER PROCESS (a robot) that counts the points. Per method (``filter``, ``typeA``)
 and per way of using a frame's candidates: ``all`` (every candidate through the gates,
@@ -26,7 +33,12 @@ to the sinks (``LiveSummary.cpu_ns``): what the fusion latency would be on an id
 
     python benchmarks/bench_live.py [--seconds 60] [--quick] [--load 30,240]
         [--method filter,typeA] [--candidates all,best] [--record] [--direct [GAP_MS]]
-        [--bytecodes] [--rehearse LEAD_MS|off]
+        [--bytecodes] [--rehearse LEAD_MS|off] [--sched]
+
+``--sched``: per datagram, what its latency was made of (:class:`SchedProbe`: queued,
+held before the socket, waiting for a core, the wake-up, CPU, preempted; collections
+inside one): median, p99 and the mean of the slowest 1 % (``BENCH_LIVE_SLOWEST=N``
+prints the N slowest datagrams' rows); docs/live.md "Where the 3 × 30 fps tail comes from".
 
 ``--rehearse``: ``serve``'s ``rehearse_s`` (default its own, 0.5 ms; ``off``: no rehearsal,
 the fuser as before session 17); each row then says how many rehearsals ran, their CPU per
@@ -58,6 +70,7 @@ import tempfile  # noqa: E402
 import threading  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
+from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
 
@@ -100,21 +113,23 @@ def session(fps: float, seconds: float):
     return rig, out
 
 
-def sender(address, frames, start_ns, conn) -> None:
-    """Send each datagram at its capture time (``start_ns`` + session time), stamped."""
+def sender(address, frames, start_mono_ns, conn) -> None:
+    """Send each datagram at its capture time (``start_mono_ns`` + session time, monotonic
+    clock), stamped with the wall clock of that instant (read with the monotonic one)."""
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sent = late = 0
     pack = struct.Struct("<qq").pack_into
+    mono = time.monotonic_ns
     for t, data in frames:
-        due = start_ns + t
-        wait = (due - time.time_ns()) / NS
+        due = start_mono_ns + t
+        wait = (due - mono()) / NS
         if wait > 0.0005:
             time.sleep(wait - 0.0003)
-        while time.time_ns() < due:
+        while mono() < due:
             pass
         buf = bytearray(data)
-        now = time.time_ns()
-        pack(buf, _T_OFFSET, due, now)
+        wall, now = time.time_ns(), mono()
+        pack(buf, _T_OFFSET, wall - (now - due), wall)
         sock.sendto(buf, address)
         sent += 1
         late += now - due > 1_000_000
@@ -134,28 +149,110 @@ def receiver(sock: socket.socket, conn) -> None:
 
 
 class Left:
-    """The sink after the UDP one: when each point's datagram has been sent."""
+    """A sink after the UDP one: each point's arrival and capture times (wall clock, for the
+    trip from capture to arrival), in the order :func:`serve` notes their latencies."""
 
     def __init__(self, n: int) -> None:
-        self.left = np.zeros(n, np.int64)
         self.arrival = np.zeros(n, np.int64)
         self.capture = np.zeros(n, np.int64)
         self.n = 0
+        self.probe: SchedProbe | None = None
 
     def emit(self, points) -> None:
-        now = time.time_ns()
         for p in points:
-            if self.n < len(self.left):
-                self.left[self.n], self.arrival[self.n] = now, p.arrival_ns
+            if self.n < len(self.arrival):
+                self.arrival[self.n] = p.arrival_ns
                 self.capture[self.n] = p.t_capture_ns
                 self.n += 1
+        if self.probe is not None:
+            self.probe.out()
 
     def close(self) -> None:
         pass
 
 
+class SchedProbe:
+    """``--sched``: what each datagram's latency was made of, from the fuser thread's
+    scheduler statistics (``/proc/thread-self/schedstat``: its time on a core and its time
+    waiting for one, read at each blocking wait's start, when ``recv`` returned a datagram
+    and when its points were out) and the collector's runs (``gc.callbacks``).
+
+    Per datagram that made points (ms): ``wait`` (arrival to ``recv`` returning) =
+    ``queued`` (it came before the thread's wait started: behind another datagram, a
+    rehearsal, a collection) + ``delay_wait`` (runnable, waiting for a core) + ``wake``
+    (the rest: the kernel's wake-up path, the sleeping thread and its idle (virtual) CPU
+    woken, time the host took the VM's CPU away), where ``undelivered`` is the part of
+    ``queued`` of a datagram stamped before the wait started but not in the socket then (the
+    thread slept in that wait: the kernel held it before the socket, e.g. its softirq
+    backlog starved on a loaded machine); ``handled`` (``recv`` to
+    points out) = ``cpu`` + ``delay_handle`` (preempted) + the rest. The socket is wrapped
+    (its ``recvmsg``) and ``pslog.live.server._readable`` (the rehearsal's wait) too: the
+    probe costs a few µs per wait."""
+
+    def __init__(self, n: int) -> None:
+        self.fd = -1
+        self.block = (0, 0, 0)  # (monotonic, on cpu, delay) at the latest wait's start
+        self.rows = np.zeros((n, 7), np.int64)  # block, recv (mono, cpu, delay), out ...
+        self.n = 0
+        self.pending: tuple | None = None
+        self.ready = False
+        self.gc_starts: list[int] = []
+        self.wall_waits: list[int] = []  # every datagram's wall now - kernel stamp, ns
+
+    def read(self) -> tuple[int, int, int]:
+        if self.fd < 0:
+            self.fd = os.open("/proc/thread-self/schedstat", os.O_RDONLY)
+        on_cpu, delay = os.pread(self.fd, 64, 0).split()[:2]
+        return time.monotonic_ns(), int(on_cpu), int(delay)
+
+    def waits(self, f):
+        def run(*args):
+            self.block = self.read()
+            self.ready = f(*args)  # (a datagram came in this wait: recv will not block)
+            return self.ready
+        return run
+
+    def received(self) -> None:
+        self.pending = (self.block, self.read())
+
+    def out(self) -> None:
+        if self.pending is not None and self.n < len(self.rows):
+            (b, _, bd), (r, rc, rd) = self.pending
+            o, oc, od = self.read()
+            self.rows[self.n] = (b, r, rd - bd, o, oc - rc, od - rd, 0)
+            self.n += 1
+        self.pending = None
+
+    def collected(self, phase, info) -> None:
+        if phase == "start":
+            self.gc_starts.append(time.monotonic_ns())
+
+
+class ProbedSocket:
+    """A UDP socket whose ``recvmsg`` notes the fuser thread's statistics (SchedProbe)."""
+
+    def __init__(self, sock: socket.socket, probe: SchedProbe) -> None:
+        self._sock, self._probe = sock, probe
+
+    def recvmsg(self, *args):
+        if not self._probe.ready:
+            self._probe.block = self._probe.read()
+        self._probe.ready = False
+        out = self._sock.recvmsg(*args)
+        self._probe.received()
+        wall = time.time_ns()
+        for level, _kind, raw in out[1]:  # (the wall clock's own reading of the wait)
+            if level == socket.SOL_SOCKET and len(raw) >= 16:
+                sec, nsec = struct.unpack_from("@qq", raw)
+                self._probe.wall_waits.append(wall - sec * NS - nsec)
+        return out
+
+    def __getattr__(self, name):
+        return getattr(self._sock, name)
+
+
 def run(rig, frames, method: str, candidates: bool, record: bool = False,
-        rehearse_s: float | None = 0.0005) -> dict:
+        rehearse_s: float | None = 0.0005, sched: bool = False) -> dict:
     ctx = mp.get_context("fork")
     rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     rx.bind(("127.0.0.1", 0))
@@ -166,15 +263,32 @@ def run(rig, frames, method: str, candidates: bool, record: bool = False,
     ready, stop = threading.Event(), threading.Event()
     left = Left(len(frames) * 2)
     result: dict = {}
+    probe = SchedProbe(len(frames)) if sched else None
 
     def fuse() -> None:
-        sinks = [UdpSink(rx.getsockname()), left]
+        sinks: list = [UdpSink(rx.getsockname()), left]
         if record:  # the session recorded as pslog live --record does (its writer thread)
             sinks.append(RecordSink(Path(tmp.name) / "live.mcap", rig))
-        result["summary"] = serve(rig, "udp://127.0.0.1:0", sinks,
-                                  method=method, candidates=candidates, stop=stop,
-                                  ready=ready, status_stream=None, status_every_s=1.0,
-                                  rehearse_s=rehearse_s)
+        sock: Any = None
+        if probe is not None:
+            import gc
+
+            import pslog.live.server as server
+            from pslog.live.server import bind_udp
+
+            left.probe = probe
+            sock = ProbedSocket(bind_udp("udp://127.0.0.1:0"), probe)
+            readable, server._readable = server._readable, probe.waits(server._readable)
+            gc.callbacks.append(probe.collected)
+        try:
+            result["summary"] = serve(rig, "udp://127.0.0.1:0", sinks,
+                                      method=method, candidates=candidates, stop=stop,
+                                      ready=ready, status_stream=None, status_every_s=1.0,
+                                      rehearse_s=rehearse_s, sock=sock)
+        finally:
+            if probe is not None:
+                server._readable = readable
+                gc.callbacks.remove(probe.collected)
 
     tmp = tempfile.TemporaryDirectory(prefix="bench-live-")
     fuser = threading.Thread(target=fuse)
@@ -184,9 +298,8 @@ def run(rig, frames, method: str, candidates: bool, record: bool = False,
         if not fuser.is_alive():
             raise RuntimeError("pslog serve ended before it was ready")
     s_parent, s_child = ctx.Pipe()
-    start = time.time_ns() + NS // 2
-    # the session's frames must not come before the fuser's clock zero
-    start = max(start, ready.epoch_ns + NS // 10)
+    # (the fuser's clock zero, ready.epoch_ns, was fixed before its warm-up: in the past)
+    start = time.monotonic_ns() + NS // 2
     send = ctx.Process(target=sender, args=(ready.address, frames, start, s_child),
                        daemon=True)
     send.start()
@@ -203,11 +316,16 @@ def run(rig, frames, method: str, candidates: bool, record: bool = False,
     tmp.cleanup()
     summary = result["summary"]
     c = summary.counters
-    n = left.n
-    fusion = (left.left[:n] - left.arrival[:n]) / 1e6
-    e2e = (left.left[:n] - left.capture[:n]) / 1e6
+    fusion = summary.latency_ns / 1e6  # (monotonic clock: serve's arrival_monotonic)
+    n = min(left.n, len(fusion))
+    fusion = fusion[:n]
+    e2e = fusion + (left.arrival[:n] - left.capture[:n]) / 1e6
     cpu = summary.cpu_ns / 1e6
-    return dict(cpu_med=float(np.median(cpu)) if len(cpu) else float("nan"),
+    wait, handled = summary.wait_ns / 1e6, summary.handled_ns / 1e6
+    if probe is not None:
+        result["sched"] = sched_rows(probe, summary)
+    return dict(sched=result.get("sched"),
+                cpu_med=float(np.median(cpu)) if len(cpu) else float("nan"),
                 cpu_p99=float(np.percentile(cpu, 99)) if len(cpu) else float("nan"),
                 sent=sent, late_sends=late, received=c["received"], lost=sent - c["received"],
                 seq_gaps=c["lost"], points=c["points"], robot=received_points,
@@ -216,10 +334,67 @@ def run(rig, frames, method: str, candidates: bool, record: bool = False,
                 fusion_med=float(np.median(fusion)) if n else float("nan"),
                 fusion_p99=float(np.percentile(fusion, 99)) if n else float("nan"),
                 fusion_max=float(fusion.max()) if n else float("nan"),
+                fusion_min=float(fusion.min()) if n else float("nan"),
+                wait_med=float(np.median(wait)) if len(wait) else float("nan"),
+                wait_p99=float(np.percentile(wait, 99)) if len(wait) else float("nan"),
+                handled_med=float(np.median(handled)) if len(wait) else float("nan"),
+                handled_p99=float(np.percentile(handled, 99)) if len(wait) else float("nan"),
                 e2e_med=float(np.median(e2e)) if n else float("nan"),
                 e2e_p99=float(np.percentile(e2e, 99)) if n else float("nan"),
                 rehearsals=summary.rehearsals, overlaps=summary.rehearsal_overlaps,
                 rehearsal_cpu_ms_per_s=summary.rehearsal_cpu_ns / 1e6 / summary.duration_s)
+
+
+def sched_rows(probe: SchedProbe, summary) -> dict:
+    """Per datagram that made points (the probe's rows matched with the summary's, in
+    order), ms: wait, delay_wait, wake (wait less delay_wait), handled, cpu, delay_handle,
+    slept (from the wait's start to the arrival), gc (a collection started between the
+    arrival and the points out: 1)."""
+    k = min(probe.n, len(summary.wait_ns))
+    rows = probe.rows[:k]
+    wait, handled = summary.wait_ns[:k], summary.handled_ns[:k]
+    recv = rows[:, 1]
+    arrival = recv - wait
+    starts = np.sort(np.array(probe.gc_starts, np.int64))
+    inside = (np.searchsorted(starts, arrival) < np.searchsorted(starts, rows[:, 3]))
+    ms = 1e6
+    queued = np.clip(rows[:, 0] - arrival, 0, wait)  # (came before the wait started)
+    delay_wait = np.minimum(rows[:, 2], wait - queued)
+    # stamped before the wait started, yet the thread then slept in that wait (over 0.1 ms
+    # neither on a core nor waiting for one): not in the socket when the wait started, but
+    # held before it (the kernel's own backlog): "undelivered"
+    slept = (recv - rows[:, 0]) - rows[:, 2] > 100_000
+    undelivered = np.where(slept, queued, 0)
+    return dict(wait=wait / ms, queued=(queued - undelivered) / ms,
+                undelivered=undelivered / ms, delay_wait=delay_wait / ms,
+                wake=(wait - queued - delay_wait) / ms, handled=handled / ms,
+                cpu=rows[:, 4] / ms, delay_handle=rows[:, 5] / ms,
+                slept=(arrival - rows[:, 0]) / ms, gc=inside.astype(float),
+                latency=(wait + handled) / ms, collections=len(starts),
+                wall_wait=np.array(probe.wall_waits) / ms,
+                between=(rows[1:, 0] - rows[:-1, 3]) / ms)
+
+
+def print_sched(s: dict) -> None:
+    """The --sched breakdown: median, p99, and the mean over the slowest 1 % of datagrams
+    (by their first point's latency)."""
+    tail = s["latency"] >= np.percentile(s["latency"], 99)
+    print(f"{'':>10} breakdown, ms median / p99 / mean of the slowest 1 % ({tail.sum()}): "
+          + ", ".join(f"{k} {np.median(s[k]):.3f} / {np.percentile(s[k], 99):.3f} / "
+                      f"{s[k][tail].mean():.3f}"
+                      for k in ("latency", "wait", "undelivered", "queued", "delay_wait",
+                                "wake", "handled", "cpu", "delay_handle"))
+          + f"; slept before (median) {np.median(s['slept']):.2f}; collections "
+          f"{s['collections']}, {int(s['gc'].sum())} inside a datagram; the wall clock's "
+          f"own waits (now - stamp, every datagram) median {np.median(s['wall_wait']):.3f}, "
+          f"min {s['wall_wait'].min():.3f}, max {s['wall_wait'].max():.3f}; from a datagram's "
+          f"points out to the next wait: median {np.median(s['between']):.3f}, p99 "
+          f"{np.percentile(s['between'], 99):.3f}, in all {s['between'].sum():.0f}", flush=True)
+    if os.environ.get("BENCH_LIVE_SLOWEST"):
+        for i in np.argsort(s["latency"])[::-1][:int(os.environ["BENCH_LIVE_SLOWEST"])]:
+            print(f"{'':>12}" + " ".join(f"{k} {s[k][i]:.3f}" for k in (
+                "latency", "undelivered", "queued", "delay_wait", "wake", "cpu",
+                "delay_handle", "slept")))
 
 
 def direct(rig, frames, method: str, candidates: bool, gap_s: float) -> dict:
@@ -408,6 +583,8 @@ def main() -> int:
                         help="count the Python bytecodes run per datagram, per stage")
     parser.add_argument("--rehearse", default="0.5", metavar="LEAD_MS",
                         help="serve's rehearse_s in ms ('off': none; default 0.5)")
+    parser.add_argument("--sched", action="store_true",
+                        help="per datagram: waits for a core, wake-up, CPU (SchedProbe)")
     parser.add_argument("--json", default=None, help="write the rows as JSON")
     args = parser.parse_args()
     json_rows = []
@@ -462,7 +639,8 @@ def main() -> int:
         for method in args.method.split(","):
             for cand in args.candidates.split(","):
                 r = run(rig, frames, method, cand == "all", args.record,
-                        None if args.rehearse == "off" else float(args.rehearse) / 1e3)
+                        None if args.rehearse == "off" else float(args.rehearse) / 1e3,
+                        sched=args.sched)
                 ok = r["fusion_p99"] <= TARGET_P99_MS
                 worst |= r["lost"] > 0
                 json_rows.append({
@@ -477,6 +655,11 @@ def main() -> int:
                       f"{'<= 1 ' + ('ok' if ok else 'NO'):>7} | {r['e2e_med']:7.3f} "
                       f"{r['e2e_p99']:6.3f} | {r['cpu_med']:7.3f} {r['cpu_p99']:6.3f}",
                       flush=True)
+                print(f"{'':>10} (per datagram, ms median / p99: arrival to recv "
+                      f"{r['wait_med']:.3f} / {r['wait_p99']:.3f}, recv to points out "
+                      f"{r['handled_med']:.3f} / {r['handled_p99']:.3f})")
+                if r["sched"] is not None:
+                    print_sched(r["sched"])
                 if r["rehearsals"]:
                     print(f"{'':>10} ({r['rehearsals']} rehearsals, "
                           f"{r['rehearsal_cpu_ms_per_s']:.1f} ms CPU per second; "

@@ -7,7 +7,9 @@ status line each ``status_every_s`` (per camera live or silent, datagrams, point
 
 Arrival times are the kernel's receive timestamps (``SO_TIMESTAMPNS``, wall clock) where the
 system gives them, so the latency a point reports includes any time its datagram waited in
-the socket's queue behind others; elsewhere the time ``recv`` returned.
+the socket's queue behind others; elsewhere the time ``recv`` returned. Latencies are measured
+on the monotonic clock (:func:`arrival_monotonic`): a step or slew of the wall clock during
+a run does not enter them.
 """
 
 from __future__ import annotations
@@ -53,11 +55,17 @@ class LiveSummary:
     cameras : each camera's state at the end
     duration_s : seconds served
     interrupted : True when Ctrl-C (KeyboardInterrupt) ended it
-    latency_ns : (n,) int64, each point's fusion latency (arrival to made), ns (at most the
-        last 2**20)
+    latency_ns : (n,) int64, each point's fusion latency, ns, on the monotonic clock: from
+        its datagram's arrival (:func:`arrival_monotonic`) to the point handed to every sink
+        (the last sink's ``emit`` returned); at most the last 2**20
     cpu_ns : (m,) int64, per datagram that made points: the CPU time the fuser's thread
         spent on it, from received to its points handed to every sink, ns (what the latency
         would be on an idle core; at most the last 2**20)
+    wait_ns : (m,) int64, per datagram that made points: from its arrival to ``recv``
+        returning it (queued behind others, or the thread waking up), monotonic ns
+    handled_ns : (m,) int64, per datagram that made points: from ``recv`` returning it to
+        its points handed to every sink, monotonic ns (its first point's latency is
+        ``wait_ns + handled_ns``)
     epoch_ns : the session clock's zero (wall clock)
     address : the bound (host, port)
     rehearsals : datagrams of the rehearsal run (``serve``'s ``rehearse_s``)
@@ -71,6 +79,8 @@ class LiveSummary:
     interrupted: bool = False
     latency_ns: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     cpu_ns: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    wait_ns: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    handled_ns: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     epoch_ns: int = 0
     address: tuple = ("", 0)
     rehearsals: int = 0
@@ -125,6 +135,21 @@ def _arrival(ancdata, default: int) -> int:
             sec, nsec = struct.unpack_from("@qq", raw)
             return sec * NS + nsec
     return default
+
+
+def arrival_monotonic(arrival_ns: int, now_ns: int, now_mono_ns: int, floor_ns: int) -> int:
+    """A datagram's arrival on the monotonic clock, ns.
+
+    ``arrival_ns`` is the kernel's receive stamp (wall clock); ``now_ns`` and ``now_mono_ns``
+    the wall and monotonic clocks read together when ``recv`` returned it. The time it
+    waited, ``now_ns - arrival_ns``, is an interval of the wall clock (microseconds, unless
+    it queued), so a slew of the wall clock changes it by its rate only (0.5 % of it), and a
+    step does not enter unless it came while that datagram waited: that wait is then bounded
+    to what it can have been, not negative and not before ``floor_ns`` (monotonic: the
+    previous datagram's arrival, a socket's queue being in arrival order, or the start of
+    the run). Latencies measured from it on the monotonic clock never mix two clocks.
+    """
+    return now_mono_ns - min(max(now_ns - arrival_ns, 0), max(now_mono_ns - floor_ns, 0))
 
 
 def _readable(sock: socket.socket, wait_s: float) -> bool:
@@ -248,14 +273,22 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
     latencies = np.zeros(_KEEP_LATENCIES, np.int64)
     n_lat = 0
     cpu = np.zeros(_KEEP_LATENCIES, np.int64)
+    waits = np.zeros(_KEEP_LATENCIES, np.int64)
+    handled = np.zeros(_KEEP_LATENCIES, np.int64)
     n_cpu = 0
     thread_time = time.thread_time_ns
+    mono = time.monotonic_ns
     interrupted = False
     clock = time.time_ns
     started = clock()
-    deadline = None if duration_s is None else started + int(duration_s * NS)
+    # (latencies on the monotonic clock: the earliest a datagram read in this run can have
+    # arrived, then each one's arrival; arrival_monotonic)
+    started_mono = floor = mono()
+    # the run's length and the status period on the monotonic clock too: a step of the wall
+    # clock neither ends a run early nor holds it (or its status lines) for as long
+    deadline = None if duration_s is None else started_mono + int(duration_s * NS)
     period = int(status_every_s * NS)
-    next_status = started + period
+    next_status = started_mono + period
     was_silent = {c.name: True for c in fuser.cameras(started)}
     heard: set[str] = set()
     error: BaseException | None = None
@@ -267,13 +300,21 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
             with contextlib.suppress(OSError, ValueError):
                 print(text, file=status_stream, flush=True)
 
-    def hand_out(points) -> None:
+    def hand_out(points, now: int, now_mono: int, arrival: int = -1,
+                 arrival_mono: int = 0) -> int:
+        """Every sink given ``points``; their latencies noted (monotonic: the datagram just
+        received, ``arrival`` at ``arrival_mono``, or an earlier one, held, converted with
+        the clocks read together at ``now``, ``now_mono``); returns when (monotonic)."""
         nonlocal n_lat
         for emit in emitters:
             emit(points)
+        out = mono()
         for p in points:
-            latencies[n_lat % _KEEP_LATENCIES] = p.t_emit_ns - p.arrival_ns
+            a = (arrival_mono if p.arrival_ns == arrival else
+                 arrival_monotonic(p.arrival_ns, now, now_mono, started_mono))
+            latencies[n_lat % _KEEP_LATENCIES] = out - a
             n_lat += 1
+        return out
 
     def events(now: int) -> None:
         for cam in fuser.cameras(now):
@@ -299,15 +340,19 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
             for f in on_dropped:
                 f(d, reason)
 
-    def handle(data: bytes, ancdata, now: int) -> None:
-        nonlocal n_cpu, overlaps
+    def handle(data: bytes, ancdata, now: int, now_mono: int) -> None:
+        nonlocal n_cpu, overlaps, floor
         cpu0 = thread_time()
         arrival = _arrival(ancdata, now)
+        floor = arrival_mono = arrival_monotonic(arrival, now, now_mono, floor)
         overlaps += arrival < rehearsed_until
         points = fuser.feed(data, arrival)
         if points:  # the points first: recording and viewers after
-            hand_out(points)
-            cpu[n_cpu % _KEEP_LATENCIES] = thread_time() - cpu0
+            out = hand_out(points, now, now_mono, arrival, arrival_mono)
+            i = n_cpu % _KEEP_LATENCIES
+            cpu[i] = thread_time() - cpu0
+            waits[i] = now_mono - arrival_mono
+            handled[i] = out - now_mono
             n_cpu += 1
         if fuser.keep:
             pass_on()
@@ -367,31 +412,34 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
                 data, ancdata, _, _ = recv(bufsize, anc)
             except TimeoutError:
                 data = None
-            now = clock()
+            now, now_mono = clock(), mono()  # (read together: arrival_monotonic)
             if data is not None:
-                handle(data, ancdata, now)
+                handle(data, ancdata, now, now_mono)
             if fuser.hold_ns and data is None:
                 # nothing more in the socket: frames whose wait is over by the clock (while
                 # datagrams come, each one's arrival time releases them: a fuser running
                 # behind reads what is queued before it gives up waiting for it)
-                points = fuser.poll(clock())
+                points = fuser.poll(now)
                 if points:
-                    hand_out(points)
+                    hand_out(points, now, now_mono)
                 if fuser.keep:
                     pass_on()
             if collecting:  # (after the points, held ones too: in the wait for the next datagram)
                 _collect_due(sock)
             # a camera silent or back: looked at between datagrams while one is silent
-            if data is None or now >= next_status or was_silent.get(fuser.last_camera, False):
+            if (data is None or now_mono >= next_status
+                    or was_silent.get(fuser.last_camera, False)):
                 events(now)
-            if now >= next_status:
-                next_status = now + period
-                text = format_status(fuser, fuser.cameras(now), now, started, starting)
+            if now_mono >= next_status:
+                next_status = now_mono + period
+                # (time served on the monotonic clock: started as the wall clock now says)
+                text = format_status(fuser, fuser.cameras(now), now,
+                                     now - (now_mono - started_mono), starting)
                 say(text)
                 counters = fuser.counters()
                 for f in on_status:
                     f(text, counters)
-            if deadline is not None and now >= deadline:
+            if deadline is not None and now_mono >= deadline:
                 break
     except KeyboardInterrupt:
         interrupted = True
@@ -413,10 +461,10 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
                     data, ancdata, _, _ = sock.recvmsg(bufsize, anc)
                 except (BlockingIOError, InterruptedError):
                     break
-                now = clock()
+                now, now_mono = clock(), mono()
                 if _arrival(ancdata, now) > stopped:
                     break
-                handle(data, ancdata, now)
+                handle(data, ancdata, now, now_mono)
     except KeyboardInterrupt:
         interrupted = True
     except BaseException as exc:  # closed below, raised after
@@ -426,7 +474,7 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
         try:
             points = fuser.flush()
             if points:
-                hand_out(points)
+                hand_out(points, clock(), mono())
             if fuser.keep:
                 pass_on()
         except BaseException as exc:
@@ -439,7 +487,9 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
             signal.signal(signal.SIGINT, restore_sigint)
         end = clock()
         counters = fuser.counters()
-        final = format_status(fuser, fuser.cameras(end), end, started, starting)
+        end_mono = mono()
+        final = format_status(fuser, fuser.cameras(end), end, end - (end_mono - started_mono),
+                              starting)
         for ev in on_event:
             with contextlib.suppress(Exception):
                 ev(end, "live fuser stopped: " + ", ".join(f"{k} {v}"
@@ -458,10 +508,12 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
             raise error
     say(final)
     lat = latencies[:min(n_lat, _KEEP_LATENCIES)].copy()
-    cpu_kept = cpu[:min(n_cpu, _KEEP_LATENCIES)].copy()
+    kept = min(n_cpu, _KEEP_LATENCIES)
     return LiveSummary(counters=counters, cameras=fuser.cameras(end),
-                       duration_s=(end - started) / NS, interrupted=interrupted,
-                       latency_ns=lat, cpu_ns=cpu_kept, epoch_ns=fuser.epoch_ns,
+                       duration_s=(end_mono - started_mono) / NS, interrupted=interrupted,
+                       latency_ns=lat, cpu_ns=cpu[:kept].copy(),
+                       wait_ns=waits[:kept].copy(), handled_ns=handled[:kept].copy(),
+                       epoch_ns=fuser.epoch_ns,
                        address=tuple(address),
                        rehearsals=0 if rehearsal is None else rehearsal.steps,
                        rehearsal_cpu_ns=rehearsal_cpu, rehearsal_overlaps=overlaps)

@@ -32,6 +32,11 @@ class Run:
     code: int
     stdout: str
     stderr: str
+    #: seconds the command's main thread spent blocked (asleep, waiting on a socket...),
+    #: neither on a core nor waiting for one, as last seen while it ran (``_procs.blocked_s``,
+    #: every 0.5 s; None: never seen, it ended within 0.5 s): a length the machine's load
+    #: does not stretch
+    blocked_s: float | None = None
 
 
 def run_pslog(*args, cwd=None, timeout: float = HANG_S, env=None, preexec_fn=None,
@@ -39,7 +44,7 @@ def run_pslog(*args, cwd=None, timeout: float = HANG_S, env=None, preexec_fn=Non
     """Run ``pslog ARGS...`` as a separate process; a hang fails the test: ``timeout``
     seconds in which it and its child processes used no CPU (blocked: on a lock, a pipe, a
     wait), or :data:`STUCK_TIMES` times ``timeout`` in all."""
-    from _procs import cpu_s
+    from _procs import blocked_s, cpu_s
 
     argv = [str(a) for a in args]
     full_env = {**os.environ, **(env or {})}
@@ -49,6 +54,7 @@ def run_pslog(*args, cwd=None, timeout: float = HANG_S, env=None, preexec_fn=Non
                             stdin=stdin, preexec_fn=preexec_fn)
     start = last = time.monotonic()
     used = 0.0
+    blocked = None
     with proc:
         while True:
             try:
@@ -56,6 +62,8 @@ def run_pslog(*args, cwd=None, timeout: float = HANG_S, env=None, preexec_fn=Non
                 break
             except subprocess.TimeoutExpired:
                 now, cpu = time.monotonic(), cpu_s(proc.pid)
+                seen = blocked_s(proc.pid)
+                blocked = blocked if seen is None else seen
                 if cpu > used + 0.02:
                     last, used = now, cpu
                 if now - last > timeout or now - start > STUCK_TIMES * timeout:
@@ -64,7 +72,7 @@ def run_pslog(*args, cwd=None, timeout: float = HANG_S, env=None, preexec_fn=Non
                     raise AssertionError(
                         f"pslog {' '.join(argv)} hung: {now - last:.0f} s without using CPU, "
                         f"{now - start:.0f} s in all") from None
-    return Run(tuple(argv), proc.returncode, out, err)
+    return Run(tuple(argv), proc.returncode, out, err, blocked)
 
 
 def assert_one_line_error(run: Run, code: int = 1, *, contains: str | tuple[str, ...] = ()) -> str:
