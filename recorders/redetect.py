@@ -267,8 +267,7 @@ def _detecting(src, rig_names, row_of: dict, hsv: HsvRange, max_candidates: int,
                                              initializer=_ignore_stop_signals))
             futures = [submit(pools[0], i, compiled and plan is None) for i in range(first)]
         if two and first < n_tasks:
-            BallDetector(hsv, max_candidates, compiled=True).detect(
-                np.zeros((16, 16, 3), np.uint8))
+            _warm_screened(hsv, max_candidates)
             with _stop_signals_blocked():
                 pools.append(ProcessPoolExecutor(max_workers=workers,
                                                  initializer=_ignore_stop_signals))
@@ -296,6 +295,22 @@ def _detecting(src, rig_names, row_of: dict, hsv: HsvRange, max_candidates: int,
     finally:
         for pool in reversed(pools):
             pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _warm_screened(hsv: HsvRange, max_candidates: int) -> None:
+    """Load (or compile, once per install) the compiled screen and the screened decoder's
+    kernels here, and make the decoder's colour table, so that the workers forked next
+    inherit them."""
+    import cv2
+
+    from ._jpeg import ScreenedDecoder
+    from .record import jpeg_params
+
+    detector = BallDetector(hsv, max_candidates, compiled=True)
+    frame = detector.warm(64, 48)
+    ok, blob = cv2.imencode(".jpg", frame, jpeg_params(90))
+    if ok:
+        ScreenedDecoder(detector).detect(blob.tobytes())
 
 
 def _kill_workers(pools: list[ProcessPoolExecutor]) -> None:
@@ -624,10 +639,19 @@ class _Redetector:
         self.detector = (_HalfSizeDetector(hsv, max_candidates, compiled) if fast else
                          BallDetector(hsv, max_candidates, compiled=compiled))
         self.flag = cv2.IMREAD_REDUCED_COLOR_2 if fast else cv2.IMREAD_COLOR
+        self.screened = None
+        if compiled and not fast:
+            from ._jpeg import ScreenedDecoder
+
+            self.screened = ScreenedDecoder(self.detector)
 
     def __call__(self, blob: bytes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         import cv2
 
+        if self.screened is not None:
+            found = self.screened.detect(blob)
+            if found is not None:
+                return found.uv, found.radius, found.score
         frame = cv2.imdecode(np.frombuffer(blob, dtype=np.uint8), self.flag)
         if frame is None:
             return np.zeros((0, 2)), np.zeros(0), np.zeros(0)  # undecodable: no candidate
