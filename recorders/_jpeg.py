@@ -45,6 +45,8 @@ import numpy as np
 
 from pslog._jit import kernel
 
+from .detect import Candidates
+
 _FAST_BITS = 11  # Huffman look-ahead bits (a table of 2048 int32 per Huffman table)
 #: zigzag index -> natural index (row-major 8 x 8), with 16 guard entries as libjpeg has
 _ZIGZAG = np.array([0, 1, 8, 16, 9, 2, 3, 10, 17, 24, 32, 25, 18, 11, 4, 5, 12, 19, 26, 33,
@@ -106,7 +108,7 @@ def _ycc_table(hsv) -> np.ndarray:
     lo, hi = _bgr_box(hsv)
     n = 256 // _CELL
     table = np.zeros((n + 1, n + 1, n + 1), np.int32)
-    if lo is None:
+    if lo is None or hi is None:
         return table
     # every colour of the BGR box of the range (the others are outside it), 16 blue levels
     # at a time
@@ -191,7 +193,7 @@ class _Header:
     """What the decoding needs from a frame's header (markers up to the scan's start);
     ``ok`` False where the frame is for ``cv2.imdecode``."""
 
-    def __init__(self, blob: bytes | memoryview) -> None:
+    def __init__(self, blob: bytes | memoryview | np.ndarray) -> None:
         self.ok = False
         try:
             self._parse(bytes(blob[:65536]))
@@ -295,7 +297,7 @@ def _refill(data: np.ndarray, pos: int, buf: np.uint64, nbits: int, fed: int
     while nbits <= 56:
         b = 0
         if pos < end:
-            b = np.int64(data[pos])
+            b = int(data[pos])
             if b == 0xFF:
                 if pos + 1 < end and data[pos + 1] == 0:
                     pos += 2
@@ -323,7 +325,7 @@ def _slow_code(buf: np.uint64, t: int, maxcode: np.ndarray, offset: np.ndarray,
         code = np.int64(buf >> np.uint64(64 - length))
     if length > 16:
         return -1, 0
-    return np.int64(symbols[t, code + offset[t, length]]), length
+    return int(symbols[t, code + offset[t, length]]), length
 
 
 @kernel
@@ -720,7 +722,7 @@ class ScreenedDecoder:
                                             else b"")
         return header
 
-    def detect(self, blob) -> object | None:
+    def detect(self, blob) -> Candidates | None:
         """The detector's candidates in the frame ``blob`` (JPEG bytes), or None."""
         if self.fill is None:
             return None

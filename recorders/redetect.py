@@ -34,9 +34,16 @@ OpenCV and numpy once (about 0.12 s, before the workers are forked: they inherit
   leaving the CRC of the image chunks to the workers, which check it as they read them;
 - the workers keep freed memory (:func:`_keep_freed_memory`): no page faults per frame.
 
-Every frame is still decoded whole and detected exactly as before (the tests compare the
-candidates to the last bit): the decode and detection alone bound two cores to about
-450 frames/s (500 compiled), before the session is read and written.
+With the compiled screen (from :data:`_COMPILED_FROM` frames on), a frame is not decoded
+whole: :class:`recorders._jpeg.ScreenedDecoder` entropy-decodes it, bounds each 8 x 8
+block's colours from its coefficients, and inverse-transforms only the blocks that may hold
+a pixel in the colour range (about 2 % of a recorded frame), bit-exactly as libjpeg does;
+the detector runs on those: the candidates of the frame decoded whole, to the last bit
+(the tests compare them), for about 60 % of a whole decode's CPU (the entropy decoding,
+which every exact decode pays, is most of what is left). A frame it does not take
+(progressive, subsampled, EXIF, damaged, ...) is decoded whole by ``cv2.imdecode``.
+Otherwise every frame is decoded whole and detected: the decode and detection alone bound
+two cores to about 450 frames/s, before the session is read and written.
 
 Faster exact decoders were measured and none is (session 19, CPU per 1280 x 720 frame,
 one process, load 12-20): ``simplejpeg`` (libjpeg-turbo bundled) gives the same pixels at
@@ -619,7 +626,9 @@ class _Redetector:
     score (k,))`` in full-resolution pixels (an undecodable frame: no candidate).
 
     Exact (default): the whole frame decoded by ``cv2.imdecode`` and given to
-    :class:`BallDetector`: the candidates of the frame the recorder saw.
+    :class:`BallDetector`: the candidates of the frame the recorder saw; with ``compiled``,
+    the same candidates from the blocks that may hold the ball's colour only
+    (:class:`recorders._jpeg.ScreenedDecoder`; a frame it does not take is decoded whole).
 
     ``fast``: the frame decoded at half its width and height by libjpeg's DCT scaling
     (``cv2.IMREAD_REDUCED_COLOR_2``: the 4 x 4 inverse DCT of each block's lowest
