@@ -54,9 +54,11 @@ _ZIGZAG = np.array([0, 1, 8, 16, 9, 2, 3, 10, 17, 24, 32, 25, 18, 11, 4, 5, 12, 
                     36, 29, 22, 15, 23, 30, 37, 44, 51, 58, 59, 52, 45, 38, 31, 39, 46, 53,
                     60, 61, 54, 47, 55, 62, 63] + [63] * 16, dtype=np.int64)
 _CELL = 4  # Y, Cb, Cr levels per cell of the colour table
-#: the largest dequantised coefficient (DC included) of a block decoded here: 8-bit samples
-#: give at most 8 x 255 x 8 / 8 ... about 2^11; beyond 2^14 the frame goes to cv2.imdecode
-_MAX_COEF = 1 << 14
+#: the largest |DC q_0| and bound sum_k |c_k| q_k max |b_k| of a block decoded here (8-bit
+#: samples give a few thousand at most): beyond, the frame goes to cv2.imdecode. Every
+#: max |b_k| >= 1/8, so each |c_k q_k| < 8 x 4000 < 2^15: libjpeg-turbo's SIMD IDCT, which
+#: multiplies in 16 bits, gives the C code's pixels for every block decoded here
+_MAX_COEF = 4000
 _MARGIN_LEVELS = 2.0  # added to each bound: libjpeg's integer IDCT against the real one
 _MARGIN_RELATIVE = 1.0 / 1024
 
