@@ -28,8 +28,11 @@ every decode of every pixel or coefficient pays).
 ``--accuracy SESSION...`` only compares ``--fast``'s candidates to the exact ones, frame by
 frame (and both to the truth's projection where the session holds it).
 
-The detector's compiled screen is used from 2000 frames on (``recorders.redetect``):
-``--seconds 24`` (2160 frames, about 550 MB) measures it.
+The detector's compiled screen is used from 2000 frames on (``recorders.redetect``), and
+with it the screened decoder (``recorders/_jpeg.py``: entropy decoding, a colour bound per
+8 x 8 block, only the blocks that may hold the ball's colour inverse-transformed; the same
+candidates as a whole decode), which is why the exact re-detection can beat the whole
+decode's floor: ``--seconds 24`` (2160 frames, about 550 MB) measures it.
 
 What the figures are: the wall clock and the CPU seconds of ``main([...])`` in a fresh
 interpreter (the interpreter's start and ``from pslog.cli import main`` excluded; the

@@ -23,7 +23,8 @@ they share numba's cache on disk), which about halves the wall time:
   per-detection step), the filter's state and prediction (``pslog live``), a lens's rays,
   the batch ``filter`` (the loop around the step, the start's window fits; the gate's
   kernels by then in the cache) and the streaming ``typeA`` through the stream gate (type
-  A's kernel in the cache by then: the streams give it the batch run's argument types).
+  A's kernel in the cache by then: the streams give it the batch run's argument types),
+  then ``pslog redetect``'s compiled screen and JPEG decoder (on one small frame).
 
 A kernel compiled by both processes would be compiled twice for nothing: the order above
 keeps each kernel to one of them on a machine the two share evenly.
@@ -174,6 +175,11 @@ def _second_part() -> None:
             fuser.push([int(det.frame_time_ns[f])] * n, [int(det.frame_camera[f])] * n,
                        det.cand_uv[rows])
     fuser.flush()
+    # pslog redetect's compiled screen and screened JPEG decoder (recorders/_jpeg.py)
+    from recorders.detect import HsvRange
+    from recorders.redetect import _warm_screened
+
+    _warm_screened(HsvRange(), 5)
 
 
 def _track_writer(path: str, rig) -> None:

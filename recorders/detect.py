@@ -185,8 +185,27 @@ class BallDetector:
             pooled = self._coarse_cells_compiled(frame_bgr)
         else:
             pooled = self._coarse_cells_strided(frame_bgr)
+        return self._from_pooled(frame_bgr, pooled)
+
+    def detect_screened(self, frame_bgr: np.ndarray, xy: np.ndarray, colours: np.ndarray
+                        ) -> Candidates:
+        """:meth:`detect` of a frame (H, W, 3) uint8 BGR whose coarse pixels inside the
+        BGR box of the range are those of ``xy`` ((n, 2) int32 coarse column and row) and
+        ``colours`` ((n, 3) uint8), in any order; the frame's other coarse pixels outside
+        it (:class:`recorders._jpeg.ScreenedDecoder`, which knows them without a pass over
+        the frame). The coarse grid must be the frame's every ``downscale``-th pixel
+        (:func:`_nearest_is_stride`). The same candidates as :meth:`detect`."""
+        s = self.downscale
+        h, w = frame_bgr.shape[:2]
+        pooled = self._pooled(xy, colours, h // s, w // s) if len(xy) else None
+        return self._from_pooled(frame_bgr, pooled)
+
+    def _from_pooled(self, frame_bgr: np.ndarray, pooled: np.ndarray | None) -> Candidates:
+        """The candidates of a frame from its pooled coarse mask (None: empty)."""
         if pooled is None:
             return Candidates.empty()
+        s = self.downscale
+        h, w = frame_bgr.shape[:2]
         _, _, stats, _ = cv2.connectedComponentsWithStats(pooled, connectivity=8)
         stats = stats[1:]
         # the largest blobs first; a few more than K since some may fade at full resolution

@@ -34,9 +34,16 @@ OpenCV and numpy once (about 0.12 s, before the workers are forked: they inherit
   leaving the CRC of the image chunks to the workers, which check it as they read them;
 - the workers keep freed memory (:func:`_keep_freed_memory`): no page faults per frame.
 
-Every frame is still decoded whole and detected exactly as before (the tests compare the
-candidates to the last bit): the decode and detection alone bound two cores to about
-450 frames/s (500 compiled), before the session is read and written.
+With the compiled screen (from :data:`_COMPILED_FROM` frames on), a frame is not decoded
+whole: :class:`recorders._jpeg.ScreenedDecoder` entropy-decodes it, bounds each 8 x 8
+block's colours from its coefficients, and inverse-transforms only the blocks that may hold
+a pixel in the colour range (about 2 % of a recorded frame), bit-exactly as libjpeg does;
+the detector runs on those: the candidates of the frame decoded whole, to the last bit
+(the tests compare them), for about 60 % of a whole decode's CPU (the entropy decoding,
+which every exact decode pays, is most of what is left). A frame it does not take
+(progressive, subsampled, EXIF, damaged, ...) is decoded whole by ``cv2.imdecode``.
+Otherwise every frame is decoded whole and detected: the decode and detection alone bound
+two cores to about 450 frames/s, before the session is read and written.
 
 Faster exact decoders were measured and none is (session 19, CPU per 1280 x 720 frame,
 one process, load 12-20): ``simplejpeg`` (libjpeg-turbo bundled) gives the same pixels at
@@ -267,8 +274,7 @@ def _detecting(src, rig_names, row_of: dict, hsv: HsvRange, max_candidates: int,
                                              initializer=_ignore_stop_signals))
             futures = [submit(pools[0], i, compiled and plan is None) for i in range(first)]
         if two and first < n_tasks:
-            BallDetector(hsv, max_candidates, compiled=True).detect(
-                np.zeros((16, 16, 3), np.uint8))
+            _warm_screened(hsv, max_candidates)
             with _stop_signals_blocked():
                 pools.append(ProcessPoolExecutor(max_workers=workers,
                                                  initializer=_ignore_stop_signals))
@@ -296,6 +302,22 @@ def _detecting(src, rig_names, row_of: dict, hsv: HsvRange, max_candidates: int,
     finally:
         for pool in reversed(pools):
             pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _warm_screened(hsv: HsvRange, max_candidates: int) -> None:
+    """Load (or compile, once per install) the compiled screen and the screened decoder's
+    kernels here, and make the decoder's colour table, so that the workers forked next
+    inherit them."""
+    import cv2
+
+    from ._jpeg import ScreenedDecoder
+    from .record import jpeg_params
+
+    detector = BallDetector(hsv, max_candidates, compiled=True)
+    frame = detector.warm(64, 48)
+    ok, blob = cv2.imencode(".jpg", frame, jpeg_params(90))
+    if ok:
+        ScreenedDecoder(detector).detect(blob.tobytes())
 
 
 def _kill_workers(pools: list[ProcessPoolExecutor]) -> None:
@@ -604,7 +626,9 @@ class _Redetector:
     score (k,))`` in full-resolution pixels (an undecodable frame: no candidate).
 
     Exact (default): the whole frame decoded by ``cv2.imdecode`` and given to
-    :class:`BallDetector`: the candidates of the frame the recorder saw.
+    :class:`BallDetector`: the candidates of the frame the recorder saw; with ``compiled``,
+    the same candidates from the blocks that may hold the ball's colour only
+    (:class:`recorders._jpeg.ScreenedDecoder`; a frame it does not take is decoded whole).
 
     ``fast``: the frame decoded at half its width and height by libjpeg's DCT scaling
     (``cv2.IMREAD_REDUCED_COLOR_2``: the 4 x 4 inverse DCT of each block's lowest
@@ -624,10 +648,19 @@ class _Redetector:
         self.detector = (_HalfSizeDetector(hsv, max_candidates, compiled) if fast else
                          BallDetector(hsv, max_candidates, compiled=compiled))
         self.flag = cv2.IMREAD_REDUCED_COLOR_2 if fast else cv2.IMREAD_COLOR
+        self.screened = None
+        if compiled and not fast:
+            from ._jpeg import ScreenedDecoder
+
+            self.screened = ScreenedDecoder(self.detector)
 
     def __call__(self, blob: bytes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         import cv2
 
+        if self.screened is not None:
+            found = self.screened.detect(blob)
+            if found is not None:
+                return found.uv, found.radius, found.score
         frame = cv2.imdecode(np.frombuffer(blob, dtype=np.uint8), self.flag)
         if frame is None:
             return np.zeros((0, 2)), np.zeros(0), np.zeros(0)  # undecodable: no candidate
