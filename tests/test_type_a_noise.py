@@ -15,8 +15,16 @@ from test_fusion_validity import dirty_session, streamed
 from pslog import SimulationOptions, apply_timing, builtin_rig, simulate
 from pslog.evaluation import _mahalanobis_sq, _offsets
 from pslog.fusion import FusionOptions, fuse, prepare
+from pslog.fusion.innovation import RAYLEIGH_MEDIAN
 from pslog.fusion.pseudo import fuse_type_a, measured_noise, no_detection_limits
-from pslog.fusion.stereo import NOISE_EVERY_S, NOISE_WINDOW_S, detection_noise
+from pslog.fusion.stereo import (
+    NOISE_EVERY_S,
+    NOISE_FLOOR_PX,
+    NOISE_MIN_COUNT,
+    NOISE_WINDOW_S,
+    detection_noise,
+    recorded_residuals,
+)
 from pslog.motion import rally_motion
 from pslog.records import NS, Observations, Track
 
@@ -30,6 +38,24 @@ def _session(noise_px: float, seed: int = 3, duration: float = 3.0, **faults):
     return rig, det.best(), truth
 
 
+def _numpy_noise(prep, at_ns, max_gap_s, noise_px):
+    """nearest's estimator in numpy (the reference both compiled users are held to): the
+    residuals of stereo.recorded_residuals (the quadratic's Lagrange weights, in numpy),
+    each checkpoint's window sorted, its middle element over Rayleigh's median."""
+    res, weight = recorded_residuals(prep, max_gap_s)
+    with np.errstate(invalid="ignore"):
+        norm = np.hypot(res[:, 0], res[:, 1]) / np.sqrt(weight)
+    fin = np.isfinite(norm)
+    t_fin, v_fin = prep.obs.time_ns[fin], norm[fin]
+    every, window = int(NOISE_EVERY_S * NS), int(NOISE_WINDOW_S * NS)
+    out = np.empty(len(at_ns))
+    for i, t in enumerate(at_ns):
+        mark = t // every * every
+        v = np.sort(v_fin[(t_fin >= mark - window) & (t_fin < mark)])
+        out[i] = v[len(v) // 2] / RAYLEIGH_MEDIAN if len(v) >= NOISE_MIN_COUNT else noise_px
+    return np.maximum(out, min(noise_px, NOISE_FLOOR_PX))
+
+
 def _sigma(rig, obs, at_ns, noise_px, max_gap_s):
     return measured_noise(obs.time_ns, obs.camera, obs.uv, no_detection_limits(rig.cameras),
                           max_gap_s, at_ns, noise_px)
@@ -38,8 +64,8 @@ def _sigma(rig, obs, at_ns, noise_px, max_gap_s):
 def test_covariance_scales_with_the_measured_noise_not_the_stated_one():
     # 1 px of true noise: whatever noise is stated, a point past the session's first window
     # has the covariance of the stated-noise kernel times (σ / stated)², σ the noise its
-    # detections show: nearest's estimator (stereo.detection_noise, an independent numpy
-    # form of it), about 1 px
+    # detections show: nearest's estimator (stereo.detection_noise; both held to a numpy
+    # reference, _numpy_noise), about 1 px
     rig, obs, _ = _session(1.0)
     prep = prepare(obs, rig)
     from pslog.fusion._prepare import default_max_gap_s
@@ -57,6 +83,8 @@ def test_covariance_scales_with_the_measured_noise_not_the_stated_one():
         assert late.sum() > 100
         t = track.time_ns[late]
         sigma = detection_noise(prep, t, gap, stated)
+        # (nearest's and type A's: the same compiled kernels, held to the numpy reference)
+        assert_allclose(sigma, _numpy_noise(prep, t, gap, stated), rtol=1e-12)
         assert np.all((sigma > 0.8) & (sigma < 1.4)), (sigma.min(), sigma.max())
         assert_allclose(_sigma(rig, obs, t, stated, gap), sigma, rtol=1e-12)
         assert_allclose(track.quality["std_m"][late],
