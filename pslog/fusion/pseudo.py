@@ -988,8 +988,8 @@ def with_measured_noise(track: Track, sigma: np.ndarray, cov_noise_px: float,
         ray = track.position_world - centers[track.camera]
         d0, d1, d2 = ray[:, 0], ray[:, 1], ray[:, 2]
         # v r rᵀ with r = ray / |ray|: v / |ray|² times the ray's products
-        w = model_variance(*(q[name] for name in _MODEL_COLUMNS), sigma) / (
-            d0 * d0 + d1 * d1 + d2 * d2)
+        gravity, across, per_px2 = (q[name] for name in _MODEL_COLUMNS)
+        w = model_variance(gravity, across, per_px2, sigma) / (d0 * d0 + d1 * d1 + d2 * d2)
         for name, a, b in zip(_COV_COLUMNS, (d0, d1, d2, d0, d0, d1), (d0, d1, d2, d1, d2, d2),
                               strict=True):
             quality[name] = quality[name] + w * (a * b)
