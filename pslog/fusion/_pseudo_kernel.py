@@ -1115,3 +1115,36 @@ def window_mean_squares_kernel(time_ns, values, ends, window_ns, min_count, out)
         for i in range(lo, hi):
             total += values[i] * values[i]
         out[j] = total / (2 * count)
+
+
+@kernel
+def model_rescale_kernel(cov, sigma, cov_px, gravity, across, per_px2, points, camera,
+                         centers, gate, out):
+    """Type A's covariance at the measured noise with eq. (2)'s model term, point by point
+    (:func:`pslog.fusion.pseudo.with_measured_noise`'s arithmetic, which
+    ``MeasuredNoiseStream`` repeats on one point's floats, operation for operation):
+    ``cov`` (6, k) the kernel's xx, yy, zz, xy, xz, yz made at ``cov_px``, ``sigma`` (k,)
+    the points' noise, ``gravity``, ``across``, ``per_px2`` (k,) the kernel's model columns,
+    ``points`` (k, 3), ``camera`` (k,), ``centers`` (m, 3), ``gate`` the innovation's χ²
+    gate; into ``out`` (7, k): std_m, then the six columns."""
+    for i in range(sigma.shape[0]):
+        sg = sigma[i]
+        f = sg / cov_px
+        f = f * f
+        noise = (sg * sg) * per_px2[i]
+        c = camera[i]
+        d0 = points[i, 0] - centers[c, 0]
+        d1 = points[i, 1] - centers[c, 1]
+        d2 = points[i, 2] - centers[c, 2]
+        v = gravity[i] + (0.5 * (across[i] - 2.0 * noise) if across[i] > gate * noise else 0.0)
+        w = v / (d0 * d0 + d1 * d1 + d2 * d2)
+        xx = cov[0, i] * f + w * (d0 * d0)
+        yy = cov[1, i] * f + w * (d1 * d1)
+        zz = cov[2, i] * f + w * (d2 * d2)
+        out[1, i] = xx
+        out[2, i] = yy
+        out[3, i] = zz
+        out[4, i] = cov[3, i] * f + w * (d0 * d1)
+        out[5, i] = cov[4, i] * f + w * (d0 * d2)
+        out[6, i] = cov[5, i] * f + w * (d1 * d2)
+        out[0, i] = math.sqrt(xx + yy + zz)

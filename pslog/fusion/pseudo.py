@@ -951,20 +951,8 @@ def without_model_columns(track: Track) -> Track:
 #: this, the χ² of 2 degrees of freedom at 99 % (``nearest``'s break test's
 #: ``stereo.KINK_GATE``): below it the noise explains it, and adding its excess over the
 #: noise anyway (zero on average, but not once clipped at 0) made the 0.3 px sessions' NEES
-#: 10-18 % lower
+#: 4-18 % lower
 MODEL_GATE = 9.21
-
-
-def model_variance(gravity: np.ndarray, across: np.ndarray, per_px2: np.ndarray,
-                   sigma: np.ndarray) -> np.ndarray:
-    """Eq. (2)'s model error variance along the newest ray (k,), m²: gravity's
-    ``(h rᵀg)²``, plus, where the innovation's across-ray offset less gravity's, ``|u|²``,
-    is beyond what the noise explains (``|u|² > MODEL_GATE σ² c``, ``c = (factor D / f)²``:
-    a change of motion, a kick), half of it less its noise ``2 σ² c`` (the kernel's three
-    model columns and the points' measured noise ``sigma``; docs/methods.md, "Type A's
-    model error in its covariance")."""
-    noise = (sigma * sigma) * per_px2
-    return gravity + np.where(across > MODEL_GATE * noise, 0.5 * (across - 2.0 * noise), 0.0)
 
 
 def with_measured_noise(track: Track, sigma: np.ndarray, cov_noise_px: float,
@@ -972,29 +960,39 @@ def with_measured_noise(track: Track, sigma: np.ndarray, cov_noise_px: float,
     """``track`` (type A's, its covariance made at ``cov_noise_px``) with the covariance of
     each point at its own noise ``sigma`` (k,): the columns times ``(σ / cov_noise_px)²``
     (the first-order covariance is the noise's variance times Jacobian products), plus
-    eq. (2)'s model error along the newest ray (:func:`model_variance`, the ray from the
-    point's camera's centre in ``centers`` (m, 3) to the point) where the kernel made its
-    columns (which leave the track); ``std_m`` the root of the new diagonal's sum. Points
-    and the other columns are the same arrays."""
+    eq. (2)'s model error along the newest ray where the kernel made its columns (which
+    leave the track): ``v r rᵀ``, ``v = (h rᵀg)² + [|u|² > MODEL_GATE σ² c] ½ (|u|² - 2 σ²
+    c)`` from the three columns (gravity's part, the innovation's across-ray offset less
+    gravity's ``|u|²``, ``c = (factor D / f)²``), ``r`` the unit ray from the point's
+    camera's centre in ``centers`` (m, 3) to the point
+    (:func:`~pslog.fusion._pseudo_kernel.model_rescale_kernel`); ``std_m`` the root of the
+    new diagonal's sum. Points and the other columns are the same arrays."""
     q = track.quality
     if not len(track) or "std_m" not in q:
         return without_model_columns(track)
-    factor = sigma / cov_noise_px
-    factor = factor * factor
     quality = {k: v for k, v in q.items() if k not in _MODEL_COLUMNS}
-    for name in _COV_COLUMNS:
-        quality[name] = q[name] * factor
     if centers is not None and _MODEL_COLUMNS[0] in q:
-        ray = track.position_world - centers[track.camera]
-        d0, d1, d2 = ray[:, 0], ray[:, 1], ray[:, 2]
-        # v r rᵀ with r = ray / |ray|: v / |ray|² times the ray's products
-        gravity, across, per_px2 = (q[name] for name in _MODEL_COLUMNS)
-        w = model_variance(gravity, across, per_px2, sigma) / (d0 * d0 + d1 * d1 + d2 * d2)
-        for name, a, b in zip(_COV_COLUMNS, (d0, d1, d2, d0, d0, d1), (d0, d1, d2, d1, d2, d2),
-                              strict=True):
-            quality[name] = quality[name] + w * (a * b)
-    quality["std_m"] = np.sqrt(quality["cov_xx_m2"] + quality["cov_yy_m2"]
-                               + quality["cov_zz_m2"])
+        # (one compiled pass: the rescaling and v r rᵀ with r = ray / |ray|, v / |ray|²
+        # times the ray's products; MeasuredNoiseStream the same operations on floats)
+        from . import _pseudo_kernel
+
+        out = np.empty((7, len(track)))
+        _pseudo_kernel.model_rescale_kernel(
+            np.stack([q[name] for name in _COV_COLUMNS]), np.ascontiguousarray(sigma, np.float64),
+            float(cov_noise_px), *(np.ascontiguousarray(q[name]) for name in _MODEL_COLUMNS),
+            np.ascontiguousarray(track.position_world), np.ascontiguousarray(track.camera,
+                                                                              np.int64),
+            np.ascontiguousarray(centers, np.float64), MODEL_GATE, out)
+        quality["std_m"] = out[0]
+        for name, column in zip(_COV_COLUMNS, out[1:], strict=True):
+            quality[name] = column
+    else:
+        factor = sigma / cov_noise_px
+        factor = factor * factor
+        for name in _COV_COLUMNS:
+            quality[name] = q[name] * factor
+        quality["std_m"] = np.sqrt(quality["cov_xx_m2"] + quality["cov_yy_m2"]
+                                   + quality["cov_zz_m2"])
     return _trusted_track(track.time_ns, track.position_world, track.camera, quality,
                           dict(track.dropped))
 
