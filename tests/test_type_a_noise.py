@@ -15,8 +15,16 @@ from test_fusion_validity import dirty_session, streamed
 from pslog import SimulationOptions, apply_timing, builtin_rig, simulate
 from pslog.evaluation import _mahalanobis_sq, _offsets
 from pslog.fusion import FusionOptions, fuse, prepare
+from pslog.fusion.innovation import RAYLEIGH_MEDIAN
 from pslog.fusion.pseudo import fuse_type_a, measured_noise, no_detection_limits
-from pslog.fusion.stereo import NOISE_EVERY_S, NOISE_WINDOW_S, detection_noise
+from pslog.fusion.stereo import (
+    NOISE_EVERY_S,
+    NOISE_FLOOR_PX,
+    NOISE_MIN_COUNT,
+    NOISE_WINDOW_S,
+    detection_noise,
+    recorded_residuals,
+)
 from pslog.motion import rally_motion
 from pslog.records import NS, Observations, Track
 
@@ -30,6 +38,40 @@ def _session(noise_px: float, seed: int = 3, duration: float = 3.0, **faults):
     return rig, det.best(), truth
 
 
+def _numpy_noise(prep, at_ns, max_gap_s, noise_px):
+    """nearest's estimator in numpy (the reference both compiled users are held to): the
+    residuals of stereo.recorded_residuals (the quadratic's Lagrange weights, in numpy),
+    each checkpoint's window sorted, its middle element over Rayleigh's median."""
+    res, weight = recorded_residuals(prep, max_gap_s)
+    with np.errstate(invalid="ignore"):
+        norm = np.hypot(res[:, 0], res[:, 1]) / np.sqrt(weight)
+    fin = np.isfinite(norm)
+    t_fin, v_fin = prep.obs.time_ns[fin], norm[fin]
+    every, window = int(NOISE_EVERY_S * NS), int(NOISE_WINDOW_S * NS)
+    out = np.empty(len(at_ns))
+    for i, t in enumerate(at_ns):
+        mark = t // every * every
+        v = np.sort(v_fin[(t_fin >= mark - window) & (t_fin < mark)])
+        out[i] = v[len(v) // 2] / RAYLEIGH_MEDIAN if len(v) >= NOISE_MIN_COUNT else noise_px
+    return np.maximum(out, min(noise_px, NOISE_FLOOR_PX))
+
+
+def _model_part(prep, kernel, sigma, rows):
+    """Eq. (2)'s model term (k, 3, 3) of the kernel's points ``rows`` at the noise ``sigma``
+    (k,), m², from the kernel's three model columns, written out: gravity's (h rᵀg)² plus,
+    where the innovation's across-ray |u|² is beyond the χ²₂ 99 % of its noise σ² c
+    (c = (factor D / f)²), half of it less 2 σ² c; along the unit ray from the point's
+    camera to the point."""
+    q = kernel.quality
+    noise = sigma**2 * q["_model_m2_per_px2"][rows]
+    across = q["_model_across_m2"][rows]
+    v = q["_model_gravity_m2"][rows] + np.where(across > 9.21 * noise,
+                                                0.5 * (across - 2 * noise), 0.0)
+    ray = kernel.position_world[rows] - prep.centers[kernel.camera[rows]]
+    r = ray / np.linalg.norm(ray, axis=1)[:, None]
+    return v[:, None, None] * r[:, :, None] * r[:, None, :]
+
+
 def _sigma(rig, obs, at_ns, noise_px, max_gap_s):
     return measured_noise(obs.time_ns, obs.camera, obs.uv, no_detection_limits(rig.cameras),
                           max_gap_s, at_ns, noise_px)
@@ -38,8 +80,8 @@ def _sigma(rig, obs, at_ns, noise_px, max_gap_s):
 def test_covariance_scales_with_the_measured_noise_not_the_stated_one():
     # 1 px of true noise: whatever noise is stated, a point past the session's first window
     # has the covariance of the stated-noise kernel times (σ / stated)², σ the noise its
-    # detections show: nearest's estimator (stereo.detection_noise, an independent numpy
-    # form of it), about 1 px
+    # detections show: nearest's estimator (stereo.detection_noise; both held to a numpy
+    # reference, _numpy_noise), about 1 px
     rig, obs, _ = _session(1.0)
     prep = prepare(obs, rig)
     from pslog.fusion._prepare import default_max_gap_s
@@ -57,12 +99,19 @@ def test_covariance_scales_with_the_measured_noise_not_the_stated_one():
         assert late.sum() > 100
         t = track.time_ns[late]
         sigma = detection_noise(prep, t, gap, stated)
+        # (nearest's and type A's: the same compiled kernels, held to the numpy reference)
+        assert_allclose(sigma, _numpy_noise(prep, t, gap, stated), rtol=1e-12)
         assert np.all((sigma > 0.8) & (sigma < 1.4)), (sigma.min(), sigma.max())
         assert_allclose(_sigma(rig, obs, t, stated, gap), sigma, rtol=1e-12)
-        assert_allclose(track.quality["std_m"][late],
-                        kernel.quality["std_m"][late] * sigma / 0.5, rtol=1e-10)
-        assert_allclose(track.quality["cov_xy_m2"][late],
-                        kernel.quality["cov_xy_m2"][late] * (sigma / 0.5) ** 2, rtol=1e-10)
+        # (the noise's part: the covariance less eq. (2)'s model term along the ray)
+        model = _model_part(prep, kernel, sigma, late)
+        noise_cov = track.quality["cov_xy_m2"][late] - model[:, 0, 1]
+        assert_allclose(noise_cov, kernel.quality["cov_xy_m2"][late] * (sigma / 0.5) ** 2,
+                        rtol=1e-9, atol=1e-9 * np.abs(noise_cov).max())
+        trace = sum(track.quality[f"cov_{a}{a}_m2"][late] - model[:, i, i]
+                    for i, a in enumerate("xyz"))
+        assert_allclose(np.sqrt(trace), kernel.quality["std_m"][late] * sigma / 0.5,
+                        rtol=1e-9)
 
 
 def test_a_points_noise_uses_no_later_detection():
@@ -122,3 +171,84 @@ def test_covariance_is_about_honest_at_one_pixel():
     assert len(d2) > 100
     nees, inside = d2.mean() / 3, np.mean(d2 <= 4)
     assert 0.6 < nees < 1.5 and 0.6 < inside < 0.92, (nees, inside)
+
+
+def test_the_model_terms_of_a_parabola_in_closed_form():
+    # a ball under gravity alone (the library's "fall", no noise) on paper3: for a motion of
+    # constant acceleration a, eq. (2)'s prediction from the TRUE positions at t-1 and t-2
+    # misses the truth at t by exactly -½ a δ_pred (δ_pred + δ_prev) (the remainder of linear
+    # interpolation); the kernel's gravity column is that miss along the newest ray, squared,
+    # here computed from the motion itself at each point's three times (not from h); and its
+    # across-ray column is the prediction's offset across the ray less gravity's: the past
+    # points' eq. (1) errors alone
+    from pslog.fusion import type_a_explained
+    from pslog.motion import get_motion
+
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    det, truth = simulate(rig, get_motion("fall"), options=SimulationOptions(noise_px=0.0))
+    prep = prepare(det.best(), rig)
+    from pslog.fusion._prepare import default_max_gap_s
+
+    track, con = fuse_type_a(prep, default_max_gap_s(rig), 0.5, cov_noise_px=0.5)
+    assert len(track) > 40
+    t = prep.obs.time_ns
+    t0, t1, t2 = t[con.event_row], t[con.past[0].row], t[con.past[1].row]
+    rho = ((t0 - t1) / (t1 - t2))[:, None]
+    miss = (1 + rho) * truth.at(t1) - rho * truth.at(t2) - truth.at(t0)
+    ray = track.position_world - prep.centers[track.camera]
+    r = ray / np.linalg.norm(ray, axis=1)[:, None]
+    along = np.einsum("ij,ij->i", miss, r)
+    assert np.median(np.abs(along)) > 1e-4  # (gravity's part is there: ~0.1-1 mm)
+    assert_allclose(track.quality["_model_gravity_m2"], along**2, rtol=1e-6)
+    # across: the prediction's offset across the (exact) newest ray less gravity's there,
+    # i.e. across the ray, P̂ - X(t) less the parabola's own miss: the past points' errors
+    off = con.predicted_world - truth.at(t0) - miss
+    u = off - np.einsum("ij,ij->i", off, r)[:, None] * r
+    assert_allclose(track.quality["_model_across_m2"], np.einsum("ij,ij->i", u, u),
+                    rtol=1e-6, atol=1e-14)
+    # (and the registry's typeA leaves none of the kernel's model columns in its output)
+    out = type_a_explained(prep, rig, FusionOptions(confirm_gaps=False))[0]
+    assert not [k for k in out.quality if k.startswith("_")]
+
+
+def test_the_model_term_lies_along_the_newest_ray_at_the_measured_noise():
+    # the registry's covariance is the kernel's at the measured noise plus v r rᵀ, v the
+    # model variance (gravity's (h rᵀg)², half |u|² beyond its noise), r the unit ray
+    # from the point's camera to the point: every point, every column
+    rig, obs, _ = _session(0.3, seed=6, duration=2.0)
+    prep = prepare(obs, rig)
+    from pslog.fusion._prepare import default_max_gap_s
+
+    gap = default_max_gap_s(rig)
+    track = fuse(obs, rig, "typeA", FusionOptions(confirm_gaps=False))
+    kernel = fuse_type_a(prep, gap, 0.5, explain=False, cov_noise_px=0.5)[0]
+    assert_array_equal(track.position_world, kernel.position_world)
+    sigma = _sigma(rig, obs, track.time_ns, 0.5, gap)
+    rows = np.arange(len(track))
+    model = _model_part(prep, kernel, sigma, rows)
+    assert np.median(model[:, 0, 0] + model[:, 1, 1] + model[:, 2, 2]) > 0
+    f = (sigma / 0.5) ** 2
+    for name, (a, b) in (("xx", (0, 0)), ("yy", (1, 1)), ("zz", (2, 2)), ("xy", (0, 1)),
+                         ("xz", (0, 2)), ("yz", (1, 2))):
+        expected = kernel.quality[f"cov_{name}_m2"] * f + model[:, a, b]
+        assert_allclose(track.quality[f"cov_{name}_m2"], expected, rtol=1e-9,
+                        atol=1e-12 * np.abs(expected).max(), err_msg=name)
+
+
+def test_covariance_at_no_noise_is_no_longer_over_confident():
+    # paper2 (two cameras) on a 4 s rally with no detection noise: the covariance held the
+    # detection noise only (at its 0.1 px floor) and eq. (2)'s model error — gravity's
+    # curvature over the three instants, the kicks — was not in it: the mean d² was 23.1
+    # (NEES 7.7), its largest 1,798 (after a kick); with the model term 0.73 and 42. Without
+    # noise the newest ray is exact and the error lies along it: an honest covariance's d²
+    # is about χ²₁'s (mean 1, 95 % within 4), not χ²₃'s
+    rig = apply_timing(builtin_rig("paper2"), "typeA")
+    det, truth = simulate(rig, rally_motion(7, 4.0), options=SimulationOptions(noise_px=0.0,
+                                                                                seed=7))
+    track = fuse(det.best(), rig, "typeA")
+    d2 = _mahalanobis_sq(track, _offsets(track, truth))
+    d2 = d2[np.isfinite(d2)]
+    assert len(d2) > 150
+    assert 0.1 < d2.mean() < 2.0, d2.mean()
+    assert np.mean(d2 <= 4) > 0.9
+    assert d2.max() < 100, d2.max()

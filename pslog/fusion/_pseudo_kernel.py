@@ -364,13 +364,17 @@ def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_n
       the prediction test's terms (:func:`pslog.fusion.innovation.failed_predictions`,
       its expressions in its order): ``factor`` ``√(1 + (1 + ρ)² + ρ²)`` (the innovation's
       noise in detection noises) and ``model`` the extrapolation error's bound, pixels;
-    - ``quality`` (17, k): snap_px, ray_miss_m (before the snap), ray_shift_m,
+    - ``quality`` (20, k): snap_px, ray_miss_m (before the snap), ray_shift_m,
       ray_angle_deg, residual_max_px, residual_mean_px, camera_mask, n_detections, gap_s,
       span_s, and (``with_cov``) std_m, cov_xx ... cov_yz m² with the closed-form Jacobians
       of eqs. (1)-(4): eq. (4), ``P' = T + r rᵀ (P̂ - T)``, gives each past slot ``r gᵀ``
       with ``g = scale rᵀ J`` (``scale``: eq. (2)'s ``1 + ratio`` or ``-ratio``), the newest
       ray's turn ``δr`` moves P' by ``((rᵀq) I + r qᵀ) δr``, ``q = P̂ - T``; a detection in
-      several slots adds its slots' Jacobians (the earliest slot holds them).
+      several slots adds its slots' Jacobians (the earliest slot holds them); and
+      (``with_cov``) eq. (2)'s model error's terms along the newest ray, which
+      :func:`pslog.fusion.pseudo.with_measured_noise` adds at the measured noise: gravity's
+      ``(h rᵀg)²``, the innovation's ``|u|²`` (the prediction's offset across the newest ray
+      less gravity's, m²) and its noise per pixel² ``(factor D / f)²``.
 
     The other arguments are :func:`_pseudo_one`'s and: ``ray_dir`` (n, 3) the detections'
     rays, ``obs_jac`` (3, 2, n) their direction Jacobians, ``jac4`` (n, 4) their
@@ -529,6 +533,25 @@ def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_n
         quality[7, i] = float(n_distinct)
         quality[8, i] = _max(_max(span1, span2), (t_event - t2) / ns)
         quality[9, i] = (t_event - t_earliest) / ns
+        # eq. (2)'s model error along the newest ray (docs/methods.md, "Type A's model error
+        # in its covariance"): under a constant acceleration a the prediction is off by
+        # -½ a δ_pred (δ_pred + δ_prev) = -h a, which eq. (4) keeps along r: gravity's part
+        # (h rᵀg)², and the innovation's across-ray offset u of P̂ less gravity's there
+        # (|u|², the rest of the acceleration seen across; its noise part made at the
+        # measured σ later: c σ², c = (factor D / f)², metres per pixel noise squared)
+        h = 0.5 * delta_pred * (delta_pred + delta_prev)
+        norm_r = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        ra0, ra1, ra2 = d0 / norm_r, d1 / norm_r, d2 / norm_r
+        along_q = q[0] * ra0 + q[1] * ra1 + q[2] * ra2
+        bias = -_G * h * ra2  # h rᵀg, g = (0, 0, -G): the world is z up
+        # u = (q - (rᵀq) r) + h (g - (rᵀg) r)
+        e0 = q[0] - along_q * ra0 - bias * ra0
+        e1 = q[1] - along_q * ra1 - bias * ra1
+        e2 = q[2] - along_q * ra2 - bias * ra2 - _G * h
+        quality[17, i] = bias * bias
+        quality[18, i] = e0 * e0 + e1 * e1 + e2 * e2
+        spread = factor[i] * distance / focal
+        quality[19, i] = spread * spread
         if not with_cov:
             continue
         # the newest ray's turn: ((rᵀq) I + r qᵀ) G, G its direction's Jacobian
@@ -1092,3 +1115,36 @@ def window_mean_squares_kernel(time_ns, values, ends, window_ns, min_count, out)
         for i in range(lo, hi):
             total += values[i] * values[i]
         out[j] = total / (2 * count)
+
+
+@kernel
+def model_rescale_kernel(cov, sigma, cov_px, gravity, across, per_px2, points, camera,
+                         centers, gate, out):
+    """Type A's covariance at the measured noise with eq. (2)'s model term, point by point
+    (:func:`pslog.fusion.pseudo.with_measured_noise`'s arithmetic, which
+    ``MeasuredNoiseStream`` repeats on one point's floats, operation for operation):
+    ``cov`` (6, k) the kernel's xx, yy, zz, xy, xz, yz made at ``cov_px``, ``sigma`` (k,)
+    the points' noise, ``gravity``, ``across``, ``per_px2`` (k,) the kernel's model columns,
+    ``points`` (k, 3), ``camera`` (k,), ``centers`` (m, 3), ``gate`` the innovation's χ²
+    gate; into ``out`` (7, k): std_m, then the six columns."""
+    for i in range(sigma.shape[0]):
+        sg = sigma[i]
+        f = sg / cov_px
+        f = f * f
+        noise = (sg * sg) * per_px2[i]
+        c = camera[i]
+        d0 = points[i, 0] - centers[c, 0]
+        d1 = points[i, 1] - centers[c, 1]
+        d2 = points[i, 2] - centers[c, 2]
+        v = gravity[i] + (0.5 * (across[i] - 2.0 * noise) if across[i] > gate * noise else 0.0)
+        w = v / (d0 * d0 + d1 * d1 + d2 * d2)
+        xx = cov[0, i] * f + w * (d0 * d0)
+        yy = cov[1, i] * f + w * (d1 * d1)
+        zz = cov[2, i] * f + w * (d2 * d2)
+        out[1, i] = xx
+        out[2, i] = yy
+        out[3, i] = zz
+        out[4, i] = cov[3, i] * f + w * (d0 * d1)
+        out[5, i] = cov[4, i] * f + w * (d0 * d2)
+        out[6, i] = cov[5, i] * f + w * (d1 * d2)
+        out[0, i] = math.sqrt(xx + yy + zz)

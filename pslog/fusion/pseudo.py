@@ -362,6 +362,8 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
             quality.update(covariance(slots, jacobians,
                                       [prep.pixel_jacobians_t(slots[:, s]) for s in range(7)],
                                       var_px))
+            # (eq. (2)'s model terms: the kernel's, which need no Jacobian)
+            quality.update(zip(_MODEL_COLUMNS, quality_table[len(_QUALITY) - 3:], strict=True))
     t_event = np.take(time_ns, events)
     cams0 = np.take(obs.camera, events)
     made = finite_rows(points)
@@ -427,9 +429,13 @@ def rests_on_doubt(doubt_px2: np.ndarray, events: np.ndarray, past) -> np.ndarra
     return out
 
 
+#: the kernel's terms of eq. (2)'s model error (``_pseudo_kernel.type_a_kernel``), which
+#: :func:`with_measured_noise` adds to the covariance at the measured noise and drops
+_MODEL_COLUMNS = ("_model_gravity_m2", "_model_across_m2", "_model_m2_per_px2")
 _QUALITY = ("snap_px", "ray_miss_m", "ray_shift_m", "ray_angle_deg", "residual_max_px",
             "residual_mean_px", "camera_mask", "n_detections", "gap_s", "span_s", "std_m",
-            "cov_xx_m2", "cov_yy_m2", "cov_zz_m2", "cov_xy_m2", "cov_xz_m2", "cov_yz_m2")
+            "cov_xx_m2", "cov_yy_m2", "cov_zz_m2", "cov_xy_m2", "cov_xz_m2", "cov_yz_m2",
+            *_MODEL_COLUMNS)
 
 
 def _jacobian_rows(prep: Prepared) -> np.ndarray:
@@ -973,21 +979,62 @@ def measured_noise(time_ns: np.ndarray, camera: np.ndarray, uv: np.ndarray, limi
     return np.maximum(sigma, min(noise_px, NOISE_FLOOR_PX))
 
 
-def with_measured_noise(track: Track, sigma: np.ndarray, cov_noise_px: float) -> Track:
+def without_model_columns(track: Track) -> Track:
+    """``track`` without the kernel's model-error columns (:data:`_MODEL_COLUMNS`), which
+    only :func:`with_measured_noise` reads (the same arrays otherwise)."""
+    if _MODEL_COLUMNS[0] not in track.quality:
+        return track
+    quality = {k: v for k, v in track.quality.items() if k not in _MODEL_COLUMNS}
+    return _trusted_track(track.time_ns, track.position_world, track.camera, quality,
+                          dict(track.dropped), shared=True)
+
+
+#: the innovation's part of type A's model error counts where ``|u|² / (σ² c)`` exceeds
+#: this, the χ² of 2 degrees of freedom at 99 % (``nearest``'s break test's
+#: ``stereo.KINK_GATE``): below it the noise explains it, and adding its excess over the
+#: noise anyway (zero on average, but not once clipped at 0) made the 0.3 px sessions' NEES
+#: 4-18 % lower
+MODEL_GATE = 9.21
+
+
+def with_measured_noise(track: Track, sigma: np.ndarray, cov_noise_px: float,
+                        centers: np.ndarray | None = None) -> Track:
     """``track`` (type A's, its covariance made at ``cov_noise_px``) with the covariance of
     each point at its own noise ``sigma`` (k,): the columns times ``(σ / cov_noise_px)²``
-    (the first-order covariance is the noise's variance times Jacobian products), ``std_m``
-    the root of the new diagonal's sum. Points and the other columns are the same arrays."""
+    (the first-order covariance is the noise's variance times Jacobian products), plus
+    eq. (2)'s model error along the newest ray where the kernel made its columns (which
+    leave the track): ``v r rᵀ``, ``v = (h rᵀg)² + [|u|² > MODEL_GATE σ² c] ½ (|u|² - 2 σ²
+    c)`` from the three columns (gravity's part, the innovation's across-ray offset less
+    gravity's ``|u|²``, ``c = (factor D / f)²``), ``r`` the unit ray from the point's
+    camera's centre in ``centers`` (m, 3) to the point
+    (:func:`~pslog.fusion._pseudo_kernel.model_rescale_kernel`); ``std_m`` the root of the
+    new diagonal's sum. Points and the other columns are the same arrays."""
     q = track.quality
     if not len(track) or "std_m" not in q:
-        return track
-    factor = sigma / cov_noise_px
-    factor = factor * factor
-    quality = dict(q)
-    for name in _COV_COLUMNS:
-        quality[name] = q[name] * factor
-    quality["std_m"] = np.sqrt(quality["cov_xx_m2"] + quality["cov_yy_m2"]
-                               + quality["cov_zz_m2"])
+        return without_model_columns(track)
+    quality = {k: v for k, v in q.items() if k not in _MODEL_COLUMNS}
+    if centers is not None and _MODEL_COLUMNS[0] in q:
+        # (one compiled pass: the rescaling and v r rᵀ with r = ray / |ray|, v / |ray|²
+        # times the ray's products; MeasuredNoiseStream the same operations on floats)
+        from . import _pseudo_kernel
+
+        out = np.empty((7, len(track)))
+        _pseudo_kernel.model_rescale_kernel(
+            np.stack([q[name] for name in _COV_COLUMNS]), np.ascontiguousarray(sigma, np.float64),
+            float(cov_noise_px), *(np.ascontiguousarray(q[name]) for name in _MODEL_COLUMNS),
+            np.ascontiguousarray(track.position_world), np.ascontiguousarray(track.camera,
+                                                                              np.int64),
+            np.ascontiguousarray(centers, np.float64), MODEL_GATE, out)
+        quality["std_m"] = out[0]
+        for name, column in zip(_COV_COLUMNS, out[1:], strict=True):
+            quality[name] = column
+    else:
+        factor = sigma / cov_noise_px
+        factor = factor * factor
+        for name in _COV_COLUMNS:
+            quality[name] = q[name] * factor
+        quality["std_m"] = np.sqrt(quality["cov_xx_m2"] + quality["cov_yy_m2"]
+                                   + quality["cov_zz_m2"])
     return _trusted_track(track.time_ns, track.position_world, track.camera, quality,
                           dict(track.dropped))
 
@@ -998,11 +1045,11 @@ def type_a_noise(prep: Prepared, track: Track, max_gap_s: float, noise_px: float
     :func:`covariance_noise_px`) with its covariance at the session's measured noise
     (:func:`measured_noise` over ``prep``'s detections); unchanged without covariance."""
     if noise_px is None or not len(track) or "std_m" not in track.quality:
-        return track
+        return without_model_columns(track)
     obs = prep.obs
     sigma = measured_noise(obs.time_ns, obs.camera, obs.uv, no_detection_limits(prep.cameras),
                            max_gap_s, track.time_ns, float(noise_px))
-    return with_measured_noise(track, sigma, covariance_noise_px(noise_px))
+    return with_measured_noise(track, sigma, covariance_noise_px(noise_px), prep.centers)
 
 
 class MeasuredNoiseStream:
@@ -1024,6 +1071,7 @@ class MeasuredNoiseStream:
         self._cov_px = covariance_noise_px(options.noise_px)
         self._max_gap_s = options.max_gap_s or default_max_gap_s(rig)
         self._limits = no_detection_limits(rig.cameras)
+        self._centers = np.array([c.center_world for c in rig.cameras])  # (prepare's)
         self._every_ns = int(NOISE_EVERY_S * NS)
         self._keep_ns = int((NOISE_EVERY_S + NOISE_WINDOW_S + 3 * self._max_gap_s
                              + options.tolerance_s) * NS) + 1
@@ -1119,7 +1167,7 @@ class MeasuredNoiseStream:
         start its own), at least the floor: :func:`type_a_noise`'s arithmetic (one point:
         the same IEEE operations on Python floats)."""
         if self._noise_px is None or not len(out) or "std_m" not in out.quality:
-            return out
+            return without_model_columns(out)
         from .stereo import NOISE_FLOOR_PX
 
         every = self._every_ns
@@ -1133,9 +1181,21 @@ class MeasuredNoiseStream:
             f = f * f
             q = out.quality
             xx, yy, zz, xy, xz, yz = (float(q[name][0]) * f for name in _COV_COLUMNS)
+            if _MODEL_COLUMNS[0] in q:  # (with_measured_noise's model term, on floats)
+                c = int(out.camera[0])
+                p = out.position_world[0]
+                d0 = float(p[0]) - float(self._centers[c, 0])
+                d1 = float(p[1]) - float(self._centers[c, 1])
+                d2 = float(p[2]) - float(self._centers[c, 2])
+                gravity, across, per_px2 = (float(q[name][0]) for name in _MODEL_COLUMNS)
+                noise = (sg * sg) * per_px2
+                w = (gravity + (0.5 * (across - 2.0 * noise) if across > MODEL_GATE * noise
+                                else 0.0)) / (d0 * d0 + d1 * d1 + d2 * d2)
+                xx, yy, zz = xx + w * (d0 * d0), yy + w * (d1 * d1), zz + w * (d2 * d2)
+                xy, xz, yz = xy + w * (d0 * d1), xz + w * (d0 * d2), yz + w * (d1 * d2)
             values = np.array([math.sqrt(xx + yy + zz), xx, yy, zz, xy, xz, yz])
             values.flags.writeable = False
-            quality = dict(q)
+            quality = {k: v for k, v in q.items() if k not in _MODEL_COLUMNS}
             quality.update(std_m=values[0:1], cov_xx_m2=values[1:2], cov_yy_m2=values[2:3],
                            cov_zz_m2=values[3:4], cov_xy_m2=values[4:5], cov_xz_m2=values[5:6],
                            cov_yz_m2=values[6:7])
@@ -1148,7 +1208,7 @@ class MeasuredNoiseStream:
             sigma = np.array([start[t] if math.isnan(sg) else sg for t, sg in zip(
                 out.time_ns.tolist(), sigma.tolist(), strict=True)])
         sigma = np.maximum(sigma, min(float(self._noise_px), NOISE_FLOOR_PX))
-        return with_measured_noise(out, sigma, self._cov_px)
+        return with_measured_noise(out, sigma, self._cov_px, self._centers)
 
     def push(self, time_ns, camera, uv, frame_index) -> Track:
         """The inner stream's push, its points' covariance at the measured noise."""

@@ -296,12 +296,10 @@ NOISE_WINDOW_S = 1.0
 NOISE_EVERY_S = 0.25
 NOISE_MIN_COUNT = 16
 NOISE_FLOOR_PX = 0.1
-_NOISE_BLOCK = 1024  # checkpoints whose windows are sorted at once
 
 
 def detection_noise(prep: Prepared, time_ns: np.ndarray, max_gap_s: float,
-                    noise_px: float,
-                    recorded: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+                    noise_px: float) -> np.ndarray:
     """The detection noise σ (pixels per axis, (k,)) of points at ``time_ns`` (k,), as the
     session's own detections show it, causally.
 
@@ -318,41 +316,23 @@ def detection_noise(prep: Prepared, time_ns: np.ndarray, max_gap_s: float,
     gives every point the batch's bits), divided by ``√(2 ln 2)``; ``noise_px`` while
     fewer than ``NOISE_MIN_COUNT`` residuals are in the window; never below
     ``min(noise_px, NOISE_FLOOR_PX)``. Robust: a bounce or kick spoils three or four
-    residuals of a camera, a few percent of a window. ``recorded``:
-    :func:`recorded_residuals`, if already made.
-    """
-    from .innovation import RAYLEIGH_MEDIAN
+    residuals of a camera, a few percent of a window.
+
+    Type A's estimator (:func:`pslog.fusion.pseudo.measured_noise`) is the same, with its
+    own rules at a session's start and across pauses: both take the residuals and each
+    window's median from the same compiled kernels (:func:`pslog.fusion.pseudo.
+    residual_norms`, :func:`~pslog.fusion.pseudo.window_noise`; a detection the rig says is
+    no detection — undistorted NaN — has no residual)."""
+    from .pseudo import no_detection_limits, residual_norms, window_noise
 
     # recorded pixels: σ is the detector's noise where it acts, before the lens model
     # (the covariance maps it through L itself; undistorted residuals would carry L twice)
-    # (a detection the rig says is no detection — undistorted NaN — has no residual)
-    res, weight = recorded_residuals(prep, max_gap_s) if recorded is None else recorded
-    t_obs = prep.obs.time_ns
-    with np.errstate(invalid="ignore"):
-        norm = np.hypot(res[:, 0], res[:, 1]) / np.sqrt(weight)
-    finite = np.flatnonzero(np.isfinite(norm))
-    t_fin = t_obs[finite]
-    v_fin = norm[finite]
+    obs = prep.obs
+    t_fin, v_fin = residual_norms(obs.time_ns, obs.camera, obs.uv,
+                                  no_detection_limits(prep.cameras), max_gap_s)
     every = int(NOISE_EVERY_S * NS)
-    window = int(NOISE_WINDOW_S * NS)
-    checkpoint = time_ns // every * every
-    marks, inverse = np.unique(checkpoint, return_inverse=True)
-    lo = np.searchsorted(t_fin, marks - window, side="left")
-    hi = np.searchsorted(t_fin, marks, side="left")
-    count = hi - lo
-    est = np.full(len(marks), np.nan)
-    full = np.flatnonzero(count >= NOISE_MIN_COUNT)
-    if len(full):
-        # each window's middle element (the upper median: a selection, as type A's), the
-        # windows padded with inf and sorted a block of marks at a time
-        width = int(count[full].max())
-        padded = np.append(v_fin, np.inf)
-        for at in range(0, len(full), _NOISE_BLOCK):
-            block = full[at:at + _NOISE_BLOCK]
-            index = lo[block, None] + np.arange(width)
-            index = np.where(index < hi[block, None], index, len(v_fin))
-            windows = np.sort(padded[index], axis=1)
-            est[block] = windows[np.arange(len(block)), count[block] // 2] / RAYLEIGH_MEDIAN
+    marks, inverse = np.unique(time_ns // every * every, return_inverse=True)
+    est = window_noise(t_fin, v_fin, marks, NOISE_MIN_COUNT)
     sigma = np.where(np.isfinite(est), est, noise_px)[inverse]
     return np.maximum(sigma, min(noise_px, NOISE_FLOOR_PX))
 
@@ -765,7 +745,7 @@ def fuse_nearest(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
     else:
         recorded = recorded_residuals(prep, max_gap_s)
         points, quality, flags, _ = nview_points(
-            prep, rows, detection_noise(prep, time_ns, max_gap_s, noise_px, recorded),
+            prep, rows, detection_noise(prep, time_ns, max_gap_s, noise_px),
             slot_motion(prep, rows, time_ns, max_gap_s, compiled), compiled,
             innovations(prep, max_gap_s, recorded))
     made = (others >= 1) & (quality["n_detections"] >= 2)
