@@ -161,6 +161,30 @@ def test_isotropic_band_is_points_normal_of_w_identity(shuffled):
     assert_array_equal(_bits(ab), _bits(ref))
 
 
+@pytest.mark.parametrize("m", [1, 2, 5, 70])
+def test_prior_band_from_compact_sums_is_the_bands_prior_band(m):
+    """The prior's band from the compact sums (4 per control point) bit for bit the one
+    ``prior_band`` forms from the two isotropic bands (every row, the zero rows and the first
+    columns no pair reaches included), and those bands' entries are the sums: the fit keeps
+    the sums (session 20) where it kept two whole bands."""
+    rng = np.random.default_rng(34)
+    r = 7 * m
+    first = np.sort(rng.integers(0, m, r))
+    Na, Nj = rng.normal(size=(r, 4)), rng.normal(size=(r, 4))
+    wa, wj = rng.uniform(0.001, 0.02, r), rng.uniform(0.001, 0.02, r)
+    q_a, q_j = 0.37, 3.1e3
+    sa, sj = _kernels.prior_sums(first, Na, wa, m), _kernels.prior_sums(first, Nj, wj, m)
+    assert sa.shape == (m + 3, 4)
+    want = _kernels.prior_band(_kernels.points_normal_isotropic(first, Na, wa, m),
+                               _kernels.points_normal_isotropic(first, Nj, wj, m), q_a, q_j)
+    got = _kernels.prior_band_sums(sa, sj, m, q_a, q_j)
+    assert_array_equal(_bits(got), _bits(want))
+    # by hand: control point p's sum with p + k sits on row 11 - 3k, columns 3(p + k) + d
+    p, k = 0, min(1, m - 1)
+    assert got[11 - 3 * k, 3 * (p + k) + 2] == sa[p, k] / q_a + sj[p, k] / q_j
+    assert np.count_nonzero(got[[0, 1, 3, 4, 6, 7, 9, 10]]) == 0
+
+
 def test_the_prior_terms_probe_takes_the_kernel_only_where_it_gives_numpys_bits():
     # here the kernel repeats OpenBLAS's order (the probe passes); a kernel whose products
     # are rounded before each sum (no fused multiply-add) must fail it: numpy's matmuls then
