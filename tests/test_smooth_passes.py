@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from numpy.testing import assert_array_equal
+from numpy.testing import assert_allclose, assert_array_equal
 from test_smooth_kernels import _points_case, _reference_normal, _sparse_points, _window_case
 
 from pslog.estimation import _breaks, _kernels, _normal
@@ -177,12 +177,23 @@ def test_prior_band_from_compact_sums_is_the_bands_prior_band(m):
     assert sa.shape == (m + 3, 4)
     want = _kernels.prior_band(_kernels.points_normal_isotropic(first, Na, wa, m),
                                _kernels.points_normal_isotropic(first, Nj, wj, m), q_a, q_j)
-    got = _kernels.prior_band_sums(sa, sj, m, q_a, q_j)
+    got, values = _kernels.prior_band_sums(sa, sj, m, q_a, q_j)
     assert_array_equal(_bits(got), _bits(want))
     # by hand: control point p's sum with p + k sits on row 11 - 3k, columns 3(p + k) + d
     p, k = 0, min(1, m - 1)
     assert got[11 - 3 * k, 3 * (p + k) + 2] == sa[p, k] / q_a + sj[p, k] / q_j
+    assert values[p, k] == got[11 - 3 * k, 3 * (p + k)]
     assert np.count_nonzero(got[[0, 1, 3, 4, 6, 7, 9, 10]]) == 0
+    # A x from the distinct entries: band_matvec's value (its +0 terms left out), and the
+    # dense product's to rounding
+    x = np.random.default_rng(35).normal(size=3 * m)
+    Ax = _kernels.prior_matvec(values, x)
+    assert_array_equal(_bits(Ax), _bits(_kernels.band_matvec(got, x)))
+    A = np.zeros((3 * m, 3 * m))
+    for d in range(12):
+        i = np.arange(3 * m - d)
+        A[i, i + d] = A[i + d, i] = got[11 - d, d:]
+    assert_allclose(Ax, A @ x, rtol=1e-12, atol=1e-12 * np.abs(A @ x).max())
 
 
 def test_the_prior_terms_probe_takes_the_kernel_only_where_it_gives_numpys_bits():

@@ -1278,9 +1278,16 @@ def prior_band_sums(sums_accel: np.ndarray, sums_jerk: np.ndarray, m: int, q_acc
     compact :func:`prior_sums` (m + 3, 4) each: every entry the same expression on the same
     values (``(0.0 + s_a) / q_accel + (0.0 + s_j) / q_jerk`` where a pair of control points
     reaches it, ``0.0 / q_accel + 0.0 / q_jerk`` elsewhere), so the same bits, reading
-    2 x 4 numbers per control point instead of 2 x 36."""
+    2 x 4 numbers per control point instead of 2 x 36.
+
+    Returns
+    -------
+    band : (12, 3m); values : (m, 4) the band's distinct entries, ``values[p, k]`` the one of
+    control points ``p`` and ``p + k`` (zero where ``p + k >= m``), for :func:`prior_matvec`
+    """
     n = 3 * m
     out = np.empty((12, n))
+    values = np.zeros((m, 4))
     zero = 0.0 / q_accel + 0.0 / q_jerk
     for r in range(12):
         if r % 3 != 2:  # rows 11 - 3k alone hold sums
@@ -1292,10 +1299,35 @@ def prior_band_sums(sums_accel: np.ndarray, sums_jerk: np.ndarray, m: int, q_acc
             out[row, i] = zero
         for p in range(m - k):
             value = (0.0 + sums_accel[p, k]) / q_accel + (0.0 + sums_jerk[p, k]) / q_jerk
+            values[p, k] = value
             c = 3 * (p + k)
             out[row, c] = value
             out[row, c + 1] = value
             out[row, c + 2] = value
+    return out, values
+
+
+@kernel
+def prior_matvec(values: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """:func:`band_matvec` of the prior's band from its distinct entries ``values`` (m, 4)
+    (:func:`prior_band_sums`), ``x`` (3m,): the band is zero but on its diagonals ``3k``
+    (entry ``values[p, k]`` at rows ``3p + d``, columns ``3(p + k) + d``), so each entry of
+    ``A x`` is the diagonal's term, then per ``k = 1, 2, 3`` the term above and the term below
+    — :func:`band_matvec`'s nonzero terms in its order, without its ``+0`` products
+    (``s + 0·x`` is ``s`` for a finite ``x``, but for the sign of a zero ``s``), reading
+    4 numbers per control point instead of 12 x 3."""
+    n = len(x)
+    out = np.empty(n)
+    for i in range(n):
+        p = i // 3
+        acc = values[p, 0] * x[i]
+        for k in range(1, 4):
+            d = 3 * k
+            if i + d < n:
+                acc += values[p, k] * x[i + d]
+            if i - d >= 0:
+                acc += values[p - k, k] * x[i - d]
+        out[i] = acc
     return out
 
 

@@ -362,7 +362,7 @@ class _Problem:
             self.set_times(self.t)
         if hasattr(self, "prior_ab"):
             del self.prior_ab  # freed first: its memory serves the new one
-        self.prior_ab, self.prior_rhs, self.prior_const = _prior_normal(
+        self.prior_ab, self.prior_rhs, self.prior_const, self.prior_values = _prior_normal(
             knots, self.offset, self.m, self.prior)
 
     def set_times(self, t: np.ndarray) -> None:
@@ -461,8 +461,10 @@ class _Problem:
 
 
 def _prior_normal(knots: list[np.ndarray], offset: np.ndarray, m: int, prior: MotionPrior
-                  ) -> tuple[np.ndarray, np.ndarray, float]:
-    """Normal equations of the motion prior (2), integrated exactly per knot span."""
+                  ) -> tuple[np.ndarray, np.ndarray, float, np.ndarray]:
+    """Normal equations of the motion prior (2), integrated exactly per knot span: the band
+    (12, 3m), rhs, constant, and the band's distinct entries (m, 4) (for :func:`_prior_cost`:
+    :func:`pslog.estimation._kernels.prior_band_sums`)."""
     key = (m, offset.tobytes(), tuple(np.asarray(k, dtype=np.float64).tobytes() for k in knots))
     parts = _PRIOR_CACHE.pop(key, None)
     if parts is None:
@@ -476,9 +478,9 @@ def _prior_normal(knots: list[np.ndarray], offset: np.ndarray, m: int, prior: Mo
     from ._kernels import prior_band_sums
 
     # the band ab_accel / q_a + ab_jerk / q_j, from the parts' compact sums in one pass
-    ab = prior_band_sums(sums_accel, sums_jerk, m, prior.q_accel, prior.q_jerk)
+    ab, values = prior_band_sums(sums_accel, sums_jerk, m, prior.q_accel, prior.q_jerk)
     rhs = (pull[:, None] * g).reshape(-1) / prior.q_accel
-    return ab, rhs, float(length * (g @ g) / prior.q_accel)
+    return ab, rhs, float(length * (g @ g) / prior.q_accel), values
 
 
 def _trim_prior_cache(coming: int) -> None:
@@ -552,11 +554,12 @@ def _prior_parts(knots: list[np.ndarray], offset: np.ndarray, m: int
 
 def _prior_cost(problem: _Problem, c: np.ndarray) -> float:
     """Value of (2) at ``c`` from the prior's normal equations: xᵀAx - 2 rhsᵀx + const."""
-    from ._kernels import band_matvec
+    from ._kernels import prior_matvec
 
     x = np.ascontiguousarray(c, dtype=np.float64).reshape(-1)
-    # A x in one compiled pass (the terms of the numpy passes per diagonal, in their order)
-    Ax = band_matvec(problem.prior_ab, x)
+    # A x in one compiled pass (the nonzero terms of the numpy passes per diagonal, in their
+    # order) from the band's 4 distinct entries per control point
+    Ax = prior_matvec(problem.prior_values, x)
     # einsum, not a BLAS dot: the value must not depend on the number of BLAS threads
     return float(np.einsum("i,i->", x, Ax) - 2 * np.einsum("i,i->", problem.prior_rhs, x)
                  + problem.prior_const)
