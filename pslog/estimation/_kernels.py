@@ -1273,7 +1273,7 @@ def prior_band(ab_accel: np.ndarray, ab_jerk: np.ndarray, q_accel: float, q_jerk
 
 @kernel
 def prior_band_sums(sums_accel: np.ndarray, sums_jerk: np.ndarray, m: int, q_accel: float,
-                    q_jerk: float) -> np.ndarray:
+                    q_jerk: float) -> tuple[np.ndarray, np.ndarray]:
     """:func:`prior_band` of the bands :func:`points_normal_isotropic` forms, from their
     compact :func:`prior_sums` (m + 3, 4) each: every entry the same expression on the same
     values (``(0.0 + s_a) / q_accel + (0.0 + s_j) / q_jerk`` where a pair of control points
