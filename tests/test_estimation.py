@@ -106,8 +106,9 @@ def test_prior_normal_equations_equal_the_integral_they_stand_for():
     knots = T._knots_with_breaks(0.0, 0.5, 0.045, np.array([0.21]))
     control = np.random.default_rng(5).normal(size=(n_control(knots), 3))
     problem = T._Problem.__new__(T._Problem)
-    problem.prior_ab, problem.prior_rhs, problem.prior_const = T._prior_normal(
-        [knots], np.zeros(1, np.int64), n_control(knots), prior)
+    (problem.prior_ab, problem.prior_rhs, problem.prior_const,
+     problem.prior_values) = T._prior_normal([knots], np.zeros(1, np.int64), n_control(knots),
+                                             prior)
     # the integral by a fine midpoint rule, span by span (the triple knot's jump excluded)
     total = 0.0
     g = np.array(prior.gravity)
@@ -391,7 +392,7 @@ def test_the_break_gain_is_the_cost_decrease_of_the_dense_local_problem():
 
     def dense_cost(knots):
         m = n_control(knots)
-        ab, rhs, const = T._prior_normal([knots], np.zeros(1, np.int64), m, prior)
+        ab, rhs, const, _ = T._prior_normal([knots], np.zeros(1, np.int64), m, prior)
         rows = index[0]
         first, values = basis(knots, t[rows], 0)
         D = np.zeros((len(rows), 2, 3 * m))

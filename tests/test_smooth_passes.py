@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from numpy.testing import assert_array_equal
+from numpy.testing import assert_allclose, assert_array_equal
 from test_smooth_kernels import _points_case, _reference_normal, _sparse_points, _window_case
 
 from pslog.estimation import _breaks, _kernels, _normal
@@ -159,6 +159,41 @@ def test_isotropic_band_is_points_normal_of_w_identity(shuffled):
     ref, _ = _normal.accumulate_points(first, N, upper, np.zeros((len(w), 3)), m)
     ab = _kernels.points_normal_isotropic(first, N, w, m)
     assert_array_equal(_bits(ab), _bits(ref))
+
+
+@pytest.mark.parametrize("m", [1, 2, 5, 70])
+def test_prior_band_from_compact_sums_is_the_bands_prior_band(m):
+    """The prior's band from the compact sums (4 per control point) bit for bit the one
+    ``prior_band`` forms from the two isotropic bands (every row, the zero rows and the first
+    columns no pair reaches included), and those bands' entries are the sums: the fit keeps
+    the sums (session 20) where it kept two whole bands."""
+    rng = np.random.default_rng(34)
+    r = 7 * m
+    first = np.sort(rng.integers(0, m, r))
+    Na, Nj = rng.normal(size=(r, 4)), rng.normal(size=(r, 4))
+    wa, wj = rng.uniform(0.001, 0.02, r), rng.uniform(0.001, 0.02, r)
+    q_a, q_j = 0.37, 3.1e3
+    sa, sj = _kernels.prior_sums(first, Na, wa, m), _kernels.prior_sums(first, Nj, wj, m)
+    assert sa.shape == (m + 3, 4)
+    want = _kernels.prior_band(_kernels.points_normal_isotropic(first, Na, wa, m),
+                               _kernels.points_normal_isotropic(first, Nj, wj, m), q_a, q_j)
+    got, values = _kernels.prior_band_sums(sa, sj, m, q_a, q_j)
+    assert_array_equal(_bits(got), _bits(want))
+    # by hand: control point p's sum with p + k sits on row 11 - 3k, columns 3(p + k) + d
+    p, k = 0, min(1, m - 1)
+    assert got[11 - 3 * k, 3 * (p + k) + 2] == sa[p, k] / q_a + sj[p, k] / q_j
+    assert values[p, k] == got[11 - 3 * k, 3 * (p + k)]
+    assert np.count_nonzero(got[[0, 1, 3, 4, 6, 7, 9, 10]]) == 0
+    # A x from the distinct entries: band_matvec's value (its +0 terms left out), and the
+    # dense product's to rounding
+    x = np.random.default_rng(35).normal(size=3 * m)
+    Ax = _kernels.prior_matvec(values, x)
+    assert_array_equal(_bits(Ax), _bits(_kernels.band_matvec(got, x)))
+    A = np.zeros((3 * m, 3 * m))
+    for d in range(12):
+        i = np.arange(3 * m - d)
+        A[i, i + d] = A[i + d, i] = got[11 - d, d:]
+    assert_allclose(Ax, A @ x, rtol=1e-12, atol=1e-12 * np.abs(A @ x).max())
 
 
 def test_the_prior_terms_probe_takes_the_kernel_only_where_it_gives_numpys_bits():

@@ -93,7 +93,7 @@ class _Local:
         self.knots = clamped_knots(breaks, mult)
         self.m = n_control(self.knots)
         self.K = K
-        ab, rhs, const = _prior_normal([spacing * self.knots], np.zeros(1, np.int64), self.m,
+        ab, rhs, const, _ = _prior_normal([spacing * self.knots], np.zeros(1, np.int64), self.m,
                                        prior)
         n = 3 * self.m
         P = np.zeros((n, n))

@@ -308,13 +308,14 @@ def _fold_row(blocks: np.ndarray, rv: np.ndarray, p: int, slot: int, m: int,
 
 
 @kernel
-def points_normal_isotropic(first: np.ndarray, N: np.ndarray, w: np.ndarray, m: int
-                            ) -> np.ndarray:
-    """The band (12, 3m) :func:`points_normal` forms from zero for terms ``w_i I₃`` (the
-    motion prior's: ``upper`` = (w, 0, 0, w, 0, w), ``v`` = 0), each pair's sum formed once:
-    the three diagonal entries of a block take the same products in the same order (the
-    same bits), the off-diagonal ones only ``±0`` products, which leave ``+0`` (IEEE:
-    ``0 + -0 = +0``). Ordered or not, each control point's sums take its terms in order."""
+def prior_sums(first: np.ndarray, N: np.ndarray, w: np.ndarray, m: int) -> np.ndarray:
+    """The motion prior's band in compact form: ``sums[p, k] = Σ N_a N_(a+k) w`` (m + 3, 4)
+    over the terms ``w_i I₃`` with ``first_i + a = p``, each control point's sums taking its
+    terms in order (ordered or not). The band of :func:`points_normal_isotropic` holds
+    ``0.0 + sums[p, k]`` on row ``11 - 3k`` at columns ``3(p + k) + d`` (``d`` = 0, 1, 2) and
+    zero elsewhere: 4 numbers per control point, not 36 (a 90-minute session's two bands
+    were 2 x 52 MB, zeroed and written at every knot change and read whole by
+    :func:`prior_band`; :func:`prior_band_sums` forms the prior's band from these)."""
     r = len(first)
     sums = np.zeros((m + 3, 4))  # sums[p, k]: Σ N_a N_(a+k) w over terms with first + a = p
     for i in range(r):
@@ -324,6 +325,20 @@ def points_normal_isotropic(first: np.ndarray, N: np.ndarray, w: np.ndarray, m: 
             na = N[i, a]
             for k in range(4 - a):
                 sums[f + a, k] += (na * N[i, a + k]) * wi
+    return sums
+
+
+@kernel
+def points_normal_isotropic(first: np.ndarray, N: np.ndarray, w: np.ndarray, m: int
+                            ) -> np.ndarray:
+    """The band (12, 3m) :func:`points_normal` forms from zero for terms ``w_i I₃`` (the
+    motion prior's: ``upper`` = (w, 0, 0, w, 0, w), ``v`` = 0), each pair's sum formed once:
+    the three diagonal entries of a block take the same products in the same order (the
+    same bits), the off-diagonal ones only ``±0`` products, which leave ``+0`` (IEEE:
+    ``0 + -0 = +0``). Ordered or not, each control point's sums take its terms in order.
+    (The fit keeps the compact :func:`prior_sums`; this band is the tests' bridge to
+    :func:`points_normal`.)"""
+    sums = prior_sums(first, N, w, m)
     ab = np.zeros((12, 3 * m))
     for p in range(m):
         for k in range(4):
@@ -1253,6 +1268,66 @@ def prior_band(ab_accel: np.ndarray, ab_jerk: np.ndarray, q_accel: float, q_jerk
     for r in range(rows):
         for i in range(n):
             out[r, i] = ab_accel[r, i] / q_accel + ab_jerk[r, i] / q_jerk
+    return out
+
+
+@kernel
+def prior_band_sums(sums_accel: np.ndarray, sums_jerk: np.ndarray, m: int, q_accel: float,
+                    q_jerk: float) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`prior_band` of the bands :func:`points_normal_isotropic` forms, from their
+    compact :func:`prior_sums` (m + 3, 4) each: every entry the same expression on the same
+    values (``(0.0 + s_a) / q_accel + (0.0 + s_j) / q_jerk`` where a pair of control points
+    reaches it, ``0.0 / q_accel + 0.0 / q_jerk`` elsewhere), so the same bits, reading
+    2 x 4 numbers per control point instead of 2 x 36.
+
+    Returns
+    -------
+    band : (12, 3m); values : (m, 4) the band's distinct entries, ``values[p, k]`` the one of
+    control points ``p`` and ``p + k`` (zero where ``p + k >= m``), for :func:`prior_matvec`
+    """
+    n = 3 * m
+    out = np.empty((12, n))
+    values = np.zeros((m, 4))
+    zero = 0.0 / q_accel + 0.0 / q_jerk
+    for r in range(12):
+        if r % 3 != 2:  # rows 11 - 3k alone hold sums
+            for i in range(n):
+                out[r, i] = zero
+    for k in range(4):
+        row = 11 - 3 * k
+        for i in range(min(3 * k, n)):  # the columns of control points below k: no pair
+            out[row, i] = zero
+        for p in range(m - k):
+            value = (0.0 + sums_accel[p, k]) / q_accel + (0.0 + sums_jerk[p, k]) / q_jerk
+            values[p, k] = value
+            c = 3 * (p + k)
+            out[row, c] = value
+            out[row, c + 1] = value
+            out[row, c + 2] = value
+    return out, values
+
+
+@kernel
+def prior_matvec(values: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """:func:`band_matvec` of the prior's band from its distinct entries ``values`` (m, 4)
+    (:func:`prior_band_sums`), ``x`` (3m,): the band is zero but on its diagonals ``3k``
+    (entry ``values[p, k]`` at rows ``3p + d``, columns ``3(p + k) + d``), so each entry of
+    ``A x`` is the diagonal's term, then per ``k = 1, 2, 3`` the term above and the term below
+    — :func:`band_matvec`'s nonzero terms in its order, without its ``+0`` products
+    (``s + 0·x`` is ``s`` for a finite ``x``, but for the sign of a zero ``s``), reading
+    4 numbers per control point instead of 12 x 3."""
+    n = len(x)
+    out = np.empty(n)
+    for i in range(n):
+        p = i // 3
+        acc = values[p, 0] * x[i]
+        for k in range(1, 4):
+            d = 3 * k
+            if i + d < n:
+                acc += values[p, k] * x[i + d]
+            if i - d >= 0:
+                acc += values[p - k, k] * x[i - d]
+        out[i] = acc
     return out
 
 

@@ -362,7 +362,7 @@ class _Problem:
             self.set_times(self.t)
         if hasattr(self, "prior_ab"):
             del self.prior_ab  # freed first: its memory serves the new one
-        self.prior_ab, self.prior_rhs, self.prior_const = _prior_normal(
+        self.prior_ab, self.prior_rhs, self.prior_const, self.prior_values = _prior_normal(
             knots, self.offset, self.m, self.prior)
 
     def set_times(self, t: np.ndarray) -> None:
@@ -461,29 +461,31 @@ class _Problem:
 
 
 def _prior_normal(knots: list[np.ndarray], offset: np.ndarray, m: int, prior: MotionPrior
-                  ) -> tuple[np.ndarray, np.ndarray, float]:
-    """Normal equations of the motion prior (2), integrated exactly per knot span."""
+                  ) -> tuple[np.ndarray, np.ndarray, float, np.ndarray]:
+    """Normal equations of the motion prior (2), integrated exactly per knot span: the band
+    (12, 3m), rhs, constant, and the band's distinct entries (m, 4) (for :func:`_prior_cost`:
+    :func:`pslog.estimation._kernels.prior_band_sums`)."""
     key = (m, offset.tobytes(), tuple(np.asarray(k, dtype=np.float64).tobytes() for k in knots))
     parts = _PRIOR_CACHE.pop(key, None)
     if parts is None:
-        # the entries the new one will push out go first: their memory then serves it (a
-        # 90-minute session's 94 MB, faulted in afresh page by page otherwise)
-        _trim_prior_cache(2 * 12 * 3 * m * 8)
+        # the entries the new one will push out go first: their memory then serves it
+        _trim_prior_cache(2 * 4 * (m + 3) * 8)
         parts = _prior_parts(knots, offset, m)
     _PRIOR_CACHE[key] = parts  # most recent last
     _trim_prior_cache(0)
-    ab_accel, ab_jerk, pull, length = parts
+    sums_accel, sums_jerk, pull, length = parts
     g = np.asarray(prior.gravity, dtype=np.float64)
-    from ._kernels import prior_band
+    from ._kernels import prior_band_sums
 
-    ab = prior_band(ab_accel, ab_jerk, prior.q_accel, prior.q_jerk)  # one pass, no temporary
+    # the band ab_accel / q_a + ab_jerk / q_j, from the parts' compact sums in one pass
+    ab, values = prior_band_sums(sums_accel, sums_jerk, m, prior.q_accel, prior.q_jerk)
     rhs = (pull[:, None] * g).reshape(-1) / prior.q_accel
-    return ab, rhs, float(length * (g @ g) / prior.q_accel)
+    return ab, rhs, float(length * (g @ g) / prior.q_accel), values
 
 
 def _trim_prior_cache(coming: int) -> None:
-    """Keep the few most recent prior parts, and of a long session's (100 MB each at 90
-    minutes) the latest only (a fit comes back to the knots it just left, never to older
+    """Keep the few most recent prior parts, and of a long session's (12 MB each at 90
+    minutes) the latest two only (a fit comes back to the knots it just left, never to older
     ones); ``coming``: bytes of an entry about to be added (0: none), counted as the latest
     (the rule then leaves what it would leave once the entry is in)."""
     def too_many() -> bool:
@@ -504,8 +506,11 @@ _PRIOR_CACHE_BYTES = 32 * 2**20
 def _prior_parts(knots: list[np.ndarray], offset: np.ndarray, m: int
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """The prior's normal equations for ``q_a = q_j = 1`` and ``g`` one: the banded matrices
-    of ``∫ ‖p''‖²`` and of ``∫ ‖p'''‖²``, ``∫ N_k''`` per control point (the rhs is that times
-    ``g / q_a``) and the total length (the constant is that times ``‖g‖² / q_a``)."""
+    of ``∫ ‖p''‖²`` and of ``∫ ‖p'''‖²`` in compact form (m + 3, 4) each (their 4 distinct
+    numbers per control point: :func:`pslog.estimation._kernels.prior_sums`; the band is
+    :func:`pslog.estimation._kernels.prior_band_sums`), ``∫ N_k''`` per control point (the
+    rhs is that times ``g / q_a``) and the total length (the constant is that times
+    ``‖g‖² / q_a``)."""
     firsts, accel, jerk, weights, lengths = [], [], [], [], 0.0
     node = 1 / np.sqrt(3.0)  # 2-point Gauss-Legendre, weights 1
     for p, k in enumerate(knots):
@@ -525,7 +530,7 @@ def _prior_parts(knots: list[np.ndarray], offset: np.ndarray, m: int
         jerk.append(N[2 * s:])
         weights.append((np.r_[half, half], 2 * half))
         lengths += float(np.sum(2 * half))
-    from ._kernels import points_normal_isotropic, prior_pull
+    from ._kernels import prior_pull, prior_sums
 
     wa = np.concatenate([w for w, _ in weights])
     wj = np.concatenate([w for _, w in weights])
@@ -533,27 +538,28 @@ def _prior_parts(knots: list[np.ndarray], offset: np.ndarray, m: int
     fj = np.concatenate([f for _, f in firsts])
     Na = np.concatenate(accel)
     # the terms' quadratic forms w I: the band accumulate_points forms for the upper
-    # triangles (w, 0, 0, w, 0, w), each pair's sum once (points_normal_isotropic)
-    ab_accel = points_normal_isotropic(np.ascontiguousarray(fa, dtype=np.int64),
-                                       np.ascontiguousarray(Na, dtype=np.float64),
-                                       np.ascontiguousarray(wa, dtype=np.float64), m)
-    ab_jerk = points_normal_isotropic(np.ascontiguousarray(fj, dtype=np.int64),
-                                      np.ascontiguousarray(np.concatenate(jerk),
-                                                           dtype=np.float64),
-                                      np.ascontiguousarray(wj, dtype=np.float64), m)
+    # triangles (w, 0, 0, w, 0, w), each pair's sum once, kept as those sums (prior_sums:
+    # 4 numbers per control point; the band is points_normal_isotropic's)
+    sums_accel = prior_sums(np.ascontiguousarray(fa, dtype=np.int64),
+                            np.ascontiguousarray(Na, dtype=np.float64),
+                            np.ascontiguousarray(wa, dtype=np.float64), m)
+    sums_jerk = prior_sums(np.ascontiguousarray(fj, dtype=np.int64),
+                           np.ascontiguousarray(np.concatenate(jerk), dtype=np.float64),
+                           np.ascontiguousarray(wj, dtype=np.float64), m)
     # ∫ N_k'' per control point: the terms added in order (as np.add.at did)
     pull = prior_pull(np.ascontiguousarray(fa), np.ascontiguousarray(wa),
                       np.ascontiguousarray(Na), m)
-    return ab_accel, ab_jerk, pull[:m], lengths
+    return sums_accel, sums_jerk, pull[:m], lengths
 
 
 def _prior_cost(problem: _Problem, c: np.ndarray) -> float:
     """Value of (2) at ``c`` from the prior's normal equations: xᵀAx - 2 rhsᵀx + const."""
-    from ._kernels import band_matvec
+    from ._kernels import prior_matvec
 
     x = np.ascontiguousarray(c, dtype=np.float64).reshape(-1)
-    # A x in one compiled pass (the terms of the numpy passes per diagonal, in their order)
-    Ax = band_matvec(problem.prior_ab, x)
+    # A x in one compiled pass (the nonzero terms of the numpy passes per diagonal, in their
+    # order) from the band's 4 distinct entries per control point
+    Ax = prior_matvec(problem.prior_values, x)
     # einsum, not a BLAS dot: the value must not depend on the number of BLAS threads
     return float(np.einsum("i,i->", x, Ax) - 2 * np.einsum("i,i->", problem.prior_rhs, x)
                  + problem.prior_const)
