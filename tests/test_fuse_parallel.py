@@ -312,37 +312,6 @@ def test_tracks_are_written_in_the_order_the_workers_end_them(tmp_path):
         assert firsts == ["nearest", "typeA", "filter", "smooth"], workers
 
 
-@pytest.mark.parametrize("named", [None, "typeA"])
-def test_fuse_starts_the_kernels_preload_before_reading_the_session(dirty, tmp_path,
-                                                                    monkeypatch, named):
-    """numba's start and the kernel modules go to the preload thread before the session is
-    read (the batch gate's first kernel waited for them when they started after it): the
-    modules of every method (none named: the default ones are known only once the session
-    is read) or of the named ones, the writer's and the gate's."""
-    import pslog._jit
-    import pslog.log
-    from pslog.fusion import METHODS
-
-    calls: list[tuple[str, tuple]] = []
-    real_preload, real_read = pslog._jit.preload, pslog.log.read_session
-
-    def preload(*modules):
-        calls.append(("preload", modules))
-        return real_preload(*modules)
-
-    def read_session(*a, **k):
-        calls.append(("read", ()))
-        return real_read(*a, **k)
-
-    monkeypatch.setattr(pslog._jit, "preload", preload)
-    monkeypatch.setattr(pslog.log, "read_session", read_session)
-    args = ["fuse", str(dirty), "-o", str(tmp_path / "f.mcap")]
-    assert main(args + (["--method", named] if named else [])) == 0
-    assert [c[0] for c in calls] == ["preload", "read"]
-    kernels = {k for m in ([named] if named else METHODS) for k in METHODS[m].kernels}
-    assert set(calls[0][1]) == kernels | {"pslog.log._wire", "pslog.fusion._gate_kernel"}
-
-
 def test_a_method_failing_beside_others_is_one_line(tmp_path, capsys):
     """sync needs shared instants, which a type-A session lacks: its error, raised on a
     worker thread while typeA and filter fuse, is the command's one line; nothing written."""

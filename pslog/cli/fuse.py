@@ -112,15 +112,6 @@ def run(args: argparse.Namespace) -> int:
     from pslog.timing import observations as timed_observations
 
     output = args.output  # checked before run() (declare_files)
-    # numba's start and the kernel modules the methods (and the writer) may run, on another
-    # core from now on, while the session is read and gated: not on the way of the first
-    # kernel (the batch gate's compiled points, pslog.fusion._gate_kernel.points_all, were
-    # waiting for it). The methods are known only once the session is read (those its
-    # timing suits): the kernels of every method named, or of every method, are started
-    # (a kernel module not used costs its import, on the other core)
-    named = [check_method(m) for m in dict.fromkeys(args.methods or ())] or list(METHODS)
-    preload(*dict.fromkeys(k for m in named for k in METHODS[m].kernels), "pslog.log._wire",
-            *(("pslog.fusion._gate_kernel",) if args.gating == "on" else ()))
     progress.update(what="reading the session")
     session = read_session(args.session)
     rig = session.rig
@@ -152,13 +143,18 @@ def run(args: argparse.Namespace) -> int:
         raise FusionError(f"{args.session}: only camera {rig.names[int(seen[0])]} has "
                           f"detections; fusing needs at least two cameras")
     if args.methods:
-        methods = named
+        methods = [check_method(m) for m in dict.fromkeys(args.methods)]
     else:  # every method this timing suits
         methods = default_methods(observations, rig, options)
         skipped = [m for m in METHODS if m not in methods]
         if skipped:
             print(f"not run on this timing: {', '.join(skipped)} (name them with --method "
                   f"to run them anyway)")
+    # numba's start and the kernel modules these methods (and the writer) run, on another
+    # core while the detections are gated: not on the way of the first kernel (and the
+    # gate's compiled points, pslog.fusion._gate_kernel.points_all)
+    preload(*dict.fromkeys(k for m in methods for k in METHODS[m].kernels), "pslog.log._wire",
+            *(("pslog.fusion._gate_kernel",) if options.gating else ()))
     if "smooth" in methods:  # a malformed PSLOG_SMOOTH_THREADS said now, not after gating
         from pslog.estimation._breaks import smooth_threads
 
