@@ -284,34 +284,6 @@ def test_preload_loads_the_batch_gates_kernel_in_the_signature_gating_calls():
     assert run.stdout.split() == ["1", "True"]
 
 
-def test_tracks_are_written_in_the_order_the_workers_end_them(tmp_path):
-    """The default methods of a type-A session end, on two cores, as the workers start
-    them with the costliest (smooth) last: nearest, typeA, filter, smooth. ``pslog fuse``
-    writes each track (messages, scene markers, rejections) in that order in the real
-    file, whatever the number of workers (the same order with one), so that no track
-    waits for a cheaper one that ends after it."""
-    from mcap.reader import make_reader
-
-    from pslog.fusion._parallel import finishing_order, take_order
-
-    session = tmp_path / "a.mcap"
-    assert main(["simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "rally",
-                 "--duration", "2", "--seed", "3", "-o", str(session)]) == 0
-    methods = ["nearest", "typeA", "smooth", "filter"]  # the default ones, asked order
-    assert take_order(methods) == ["smooth", "nearest", "typeA", "filter"]
-    assert finishing_order(methods) == ["nearest", "typeA", "filter", "smooth"]
-    for workers in ("2", "1"):
-        out = tmp_path / f"f{workers}.mcap"
-        assert main(["fuse", str(session), "-o", str(out), "--workers", workers]) == 0
-        firsts: list[str] = []  # each track's topics in the order the file holds them
-        with open(out, "rb") as f:
-            for _s, channel, _m in make_reader(f).iter_messages(log_time_order=False):
-                parts = channel.topic.split("/")
-                if len(parts) >= 3 and parts[1] == "tracks" and parts[2] not in firsts:
-                    firsts.append(parts[2])
-        assert firsts == ["nearest", "typeA", "filter", "smooth"], workers
-
-
 def test_a_method_failing_beside_others_is_one_line(tmp_path, capsys):
     """sync needs shared instants, which a type-A session lacks: its error, raised on a
     worker thread while typeA and filter fuse, is the command's one line; nothing written."""

@@ -52,25 +52,13 @@ COST = {"smooth": 9.0, "nearest": 1.7, "sync": 1.5, "typeB": 2.0, "linear": 2.0,
 _UNSET = object()
 
 
-def take_order(methods: Sequence[str]) -> list[str]:
-    """``methods`` in the order the workers of :class:`MethodRun` start them: the costliest
-    first (:data:`COST`; ties in the asked order)."""
-    return sorted(methods, key=lambda m: -COST.get(m, 1.0))
-
-
 def finishing_order(methods: Sequence[str]) -> list[str]:
-    """``methods`` in the order they are expected to end: as the workers start them
-    (:func:`take_order`), the costliest moved last. On two cores the costliest (``smooth``)
-    fuses on one while the others follow each other on the second, so they end in the
-    order they start, all before it. ``pslog fuse`` writes the tracks in this order, each
-    as soon as it and those before it have ended: the file's layout is then the same
-    whatever the scheduling and the number of threads (the same command writes the same
-    bytes), no track waits for one that ends after it (the cheapest first, as before,
-    held ``nearest``'s and ``typeA``'s tracks until ``filter``, the last of the second
-    core, ended: their writes then ran beside ``smooth``'s end and after it), and the
+    """``methods`` in the order they are expected to end: the cheapest first (:data:`COST`;
+    ties in the asked order). ``pslog fuse`` writes the tracks in this order, each as soon
+    as it and those before it have ended: the file's layout is then the same whatever the
+    scheduling and the number of threads (the same command writes the same bytes), and the
     costliest method's track, written last, is the only one written after the fusion."""
-    order = take_order(methods)
-    return order[1:] + order[:1]
+    return sorted(methods, key=lambda m: COST.get(m, 1.0))
 
 
 def usable_cores() -> int:
@@ -182,7 +170,7 @@ class MethodRun:
         self.threads: list[threading.Thread] = []
         if self.in_turn:
             return
-        # costliest first (take_order); ties in the asked order
+        # costliest first; ties in the asked order
         self.order = sorted(range(n), key=lambda i: -COST.get(self.methods[i], 1.0))
         try:
             for j in range(min(workers, n)):
