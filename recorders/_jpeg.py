@@ -729,6 +729,9 @@ class ScreenedDecoder:
         if self.fill is None:
             return None
         data = np.frombuffer(blob, dtype=np.uint8)
+        # (read-only whatever the blob's buffer: the kernels' one compiled signature, which
+        # pslog.warm compiles; an uncompressed chunk's bytes are a writable bytearray's)
+        data.flags.writeable = False
         h = self._header_of(data)
         if not h.ok:
             return None

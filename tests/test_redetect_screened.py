@@ -166,3 +166,15 @@ def test_redetect_command_gives_the_exact_session(tmp_path, monkeypatch):
     a, b = read_session(exact).detections, read_session(screened).detections
     for name in ("cand_frame", "cand_uv", "cand_radius", "cand_score", "frame_time_ns"):
         assert_array_equal(getattr(a, name), getattr(b, name))
+
+
+def test_a_writable_blob_uses_the_kernels_one_signature(frames):
+    """A frame's bytes in a writable buffer (an uncompressed chunk's bytearray) are decoded
+    through the same compiled signature as bytes (the one pslog.warm compiles): no compile
+    in a user's command."""
+    detector = BallDetector(HsvRange(), 5, compiled=True)
+    decoder = J.ScreenedDecoder(detector)
+    got = decoder.detect(frames[0])
+    again = decoder.detect(bytearray(frames[0]))
+    assert got is not None and again is not None and _same(got, again)
+    assert len(J.screen_blocks.signatures) == 1
