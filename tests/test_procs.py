@@ -8,6 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 from _procs import descendants
 
 # a parent with two children, one of which has a child of its own; the grandchild renames
@@ -57,11 +58,15 @@ def test_descendants_from_children_files_and_from_a_scan_of_proc():
 def test_blocked_time_is_the_sleep_not_the_work():
     """A process that sleeps 0.6 s, then computes about as long, reads its own blocked time:
     the sleep, not the computation nor its waits for a core (whatever the machine's load)."""
-    code = ("import sys, time; sys.path.insert(0, sys.argv[1]); from _procs import blocked_s;"
-            "time.sleep(0.6); t = time.thread_time(); n = 0\n"
+    if not Path("/proc/self/schedstat").exists():
+        pytest.skip("this kernel has no /proc/PID/schedstat (blocked_s is None there)")
+    # (the blocked time across the sleep and the computation only: the interpreter's start,
+    # which may wait on the disk, is not in it)
+    code = ("import os, sys, time; sys.path.insert(0, sys.argv[1]); from _procs import blocked_s;"
+            "b = blocked_s(os.getpid()); time.sleep(0.6); t = time.thread_time(); n = 0\n"
             "while time.thread_time() - t < 0.6: n += 1\n"
-            "print(blocked_s(__import__('os').getpid()))")
+            "print(blocked_s(os.getpid()) - b)")
     done = subprocess.run([sys.executable, "-c", code, str(Path(__file__).parent)],
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
-    assert 0.59 <= float(done.stdout) < 0.9
+    assert 0.59 <= float(done.stdout) < 0.8
