@@ -206,6 +206,14 @@ def test_the_model_terms_of_a_parabola_in_closed_form():
     u = off - np.einsum("ij,ij->i", off, r)[:, None] * r
     assert_allclose(track.quality["_model_across_m2"], np.einsum("ij,ij->i", u, u),
                     rtol=1e-6, atol=1e-14)
+    # the noise part's metres per pixel², c = (factor D / f)²: the innovation's noise factor
+    # of ρ, the prediction's distance from the newest camera, that camera's larger focal
+    factor = np.sqrt(1 + (1 + rho[:, 0]) ** 2 + rho[:, 0] ** 2)
+    cam = prep.obs.camera[con.event_row]
+    depth = np.linalg.norm(con.predicted_world - prep.centers[cam], axis=1)
+    focal = np.array([max(c.K[0, 0], c.K[1, 1]) for c in rig.cameras])[cam]
+    assert_allclose(track.quality["_model_m2_per_px2"], (factor * depth / focal) ** 2,
+                    rtol=1e-9)
     # (and the registry's typeA leaves none of the kernel's model columns in its output)
     out = type_a_explained(prep, rig, FusionOptions(confirm_gaps=False))[0]
     assert not [k for k in out.quality if k.startswith("_")]
