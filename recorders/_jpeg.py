@@ -523,6 +523,42 @@ def _descale(x: int, n: int) -> int:
 
 
 @kernel(inline=True)
+def _idct_1d(e0: int, e2: int, e4: int, e6: int, o1: int, o3: int, o5: int, o7: int):
+    """One pass of libjpeg's ``jpeg_idct_islow`` over 8 values (even part ``e0``..``e6``,
+    odd part ``o1``..``o7``, each already scaled as the pass takes it): the 8 outputs in
+    order, before the pass's descaling (its even and odd parts, operation for operation)."""
+    z1 = (e2 + e6) * 4433
+    tmp2 = z1 + e6 * (-15137)
+    tmp3 = z1 + e2 * 6270
+    tmp0 = (e0 + e4) << 13
+    tmp1 = (e0 - e4) << 13
+    tmp10 = tmp0 + tmp3
+    tmp13 = tmp0 - tmp3
+    tmp11 = tmp1 + tmp2
+    tmp12 = tmp1 - tmp2
+    tmp0, tmp1, tmp2, tmp3 = o7, o5, o3, o1
+    z1 = tmp0 + tmp3
+    z2 = tmp1 + tmp2
+    z3 = tmp0 + tmp2
+    z4 = tmp1 + tmp3
+    z5 = (z3 + z4) * 9633
+    tmp0 = tmp0 * 2446
+    tmp1 = tmp1 * 16819
+    tmp2 = tmp2 * 25172
+    tmp3 = tmp3 * 12299
+    z1 = z1 * (-7373)
+    z2 = z2 * (-20995)
+    z3 = z3 * (-16069) + z5
+    z4 = z4 * (-3196) + z5
+    tmp0 += z1 + z3
+    tmp1 += z2 + z4
+    tmp2 += z2 + z3
+    tmp3 += z1 + z4
+    return (tmp10 + tmp3, tmp11 + tmp2, tmp12 + tmp1, tmp13 + tmp0,
+            tmp13 - tmp0, tmp12 - tmp1, tmp11 - tmp2, tmp10 - tmp3)
+
+
+@kernel(inline=True)
 def _idct_islow(coef: np.ndarray, quant: np.ndarray, limit: np.ndarray, out: np.ndarray,
                 ws: np.ndarray) -> None:
     """libjpeg's ``jpeg_idct_islow`` (``jidctint.c``, CONST_BITS 13, PASS1_BITS 2, its
@@ -537,48 +573,15 @@ def _idct_islow(coef: np.ndarray, quant: np.ndarray, limit: np.ndarray, out: np.
             for r in range(8):
                 ws[r * 8 + col] = dc
             continue
-        z2 = np.int64(coef[16 + col]) * quant[16 + col]
-        z3 = np.int64(coef[48 + col]) * quant[48 + col]
-        z1 = (z2 + z3) * 4433
-        tmp2 = z1 + z3 * (-15137)
-        tmp3 = z1 + z2 * 6270
-        z2 = np.int64(coef[col]) * quant[col]
-        z3 = np.int64(coef[32 + col]) * quant[32 + col]
-        tmp0 = (z2 + z3) << 13
-        tmp1 = (z2 - z3) << 13
-        tmp10 = tmp0 + tmp3
-        tmp13 = tmp0 - tmp3
-        tmp11 = tmp1 + tmp2
-        tmp12 = tmp1 - tmp2
-        tmp0 = np.int64(coef[56 + col]) * quant[56 + col]
-        tmp1 = np.int64(coef[40 + col]) * quant[40 + col]
-        tmp2 = np.int64(coef[24 + col]) * quant[24 + col]
-        tmp3 = np.int64(coef[8 + col]) * quant[8 + col]
-        z1 = tmp0 + tmp3
-        z2 = tmp1 + tmp2
-        z3 = tmp0 + tmp2
-        z4 = tmp1 + tmp3
-        z5 = (z3 + z4) * 9633
-        tmp0 = tmp0 * 2446
-        tmp1 = tmp1 * 16819
-        tmp2 = tmp2 * 25172
-        tmp3 = tmp3 * 12299
-        z1 = z1 * (-7373)
-        z2 = z2 * (-20995)
-        z3 = z3 * (-16069) + z5
-        z4 = z4 * (-3196) + z5
-        tmp0 += z1 + z3
-        tmp1 += z2 + z4
-        tmp2 += z2 + z3
-        tmp3 += z1 + z4
-        ws[col] = _descale(tmp10 + tmp3, 11)
-        ws[56 + col] = _descale(tmp10 - tmp3, 11)
-        ws[8 + col] = _descale(tmp11 + tmp2, 11)
-        ws[48 + col] = _descale(tmp11 - tmp2, 11)
-        ws[16 + col] = _descale(tmp12 + tmp1, 11)
-        ws[40 + col] = _descale(tmp12 - tmp1, 11)
-        ws[24 + col] = _descale(tmp13 + tmp0, 11)
-        ws[32 + col] = _descale(tmp13 - tmp0, 11)
+        y = _idct_1d(np.int64(coef[col]) * quant[col], np.int64(coef[16 + col]) * quant[16 + col],
+                     np.int64(coef[32 + col]) * quant[32 + col],
+                     np.int64(coef[48 + col]) * quant[48 + col],
+                     np.int64(coef[8 + col]) * quant[8 + col],
+                     np.int64(coef[24 + col]) * quant[24 + col],
+                     np.int64(coef[40 + col]) * quant[40 + col],
+                     np.int64(coef[56 + col]) * quant[56 + col])
+        for r in range(8):
+            ws[r * 8 + col] = _descale(y[r], 11)
     for row in range(8):
         w = row * 8
         if (ws[w + 1] == 0 and ws[w + 2] == 0 and ws[w + 3] == 0 and ws[w + 4] == 0
@@ -587,46 +590,10 @@ def _idct_islow(coef: np.ndarray, quant: np.ndarray, limit: np.ndarray, out: np.
             for j in range(8):
                 out[w + j] = v
             continue
-        z2 = ws[w + 2]
-        z3 = ws[w + 6]
-        z1 = (z2 + z3) * 4433
-        tmp2 = z1 + z3 * (-15137)
-        tmp3 = z1 + z2 * 6270
-        tmp0 = (ws[w] + ws[w + 4]) << 13
-        tmp1 = (ws[w] - ws[w + 4]) << 13
-        tmp10 = tmp0 + tmp3
-        tmp13 = tmp0 - tmp3
-        tmp11 = tmp1 + tmp2
-        tmp12 = tmp1 - tmp2
-        tmp0 = ws[w + 7]
-        tmp1 = ws[w + 5]
-        tmp2 = ws[w + 3]
-        tmp3 = ws[w + 1]
-        z1 = tmp0 + tmp3
-        z2 = tmp1 + tmp2
-        z3 = tmp0 + tmp2
-        z4 = tmp1 + tmp3
-        z5 = (z3 + z4) * 9633
-        tmp0 = tmp0 * 2446
-        tmp1 = tmp1 * 16819
-        tmp2 = tmp2 * 25172
-        tmp3 = tmp3 * 12299
-        z1 = z1 * (-7373)
-        z2 = z2 * (-20995)
-        z3 = z3 * (-16069) + z5
-        z4 = z4 * (-3196) + z5
-        tmp0 += z1 + z3
-        tmp1 += z2 + z4
-        tmp2 += z2 + z3
-        tmp3 += z1 + z4
-        out[w] = limit[_descale(tmp10 + tmp3, 18) & 1023]
-        out[w + 7] = limit[_descale(tmp10 - tmp3, 18) & 1023]
-        out[w + 1] = limit[_descale(tmp11 + tmp2, 18) & 1023]
-        out[w + 6] = limit[_descale(tmp11 - tmp2, 18) & 1023]
-        out[w + 2] = limit[_descale(tmp12 + tmp1, 18) & 1023]
-        out[w + 5] = limit[_descale(tmp12 - tmp1, 18) & 1023]
-        out[w + 3] = limit[_descale(tmp13 + tmp0, 18) & 1023]
-        out[w + 4] = limit[_descale(tmp13 - tmp0, 18) & 1023]
+        y = _idct_1d(ws[w], ws[w + 2], ws[w + 4], ws[w + 6], ws[w + 1], ws[w + 3], ws[w + 5],
+                     ws[w + 7])
+        for j in range(8):
+            out[w + j] = limit[_descale(y[j], 18) & 1023]
 
 
 @kernel
