@@ -232,9 +232,12 @@ class _Header:
                 j = 0
                 while j < len(seg):
                     counts = seg[j + 1:j + 17]
-                    table = _huffman(counts, seg[j + 17:j + 17 + sum(counts)])
+                    values = seg[j + 17:j + 17 + sum(counts)]
+                    table = _huffman(counts, values)
                     if len(counts) != 16 or table is None or seg[j] >> 4 > 1:
                         return
+                    if seg[j] >> 4 == 0 and max(values, default=0) > 15:
+                        return  # a DC symbol beyond 15: libjpeg refuses the table
                     huff[(seg[j] >> 4, seg[j] & 15)] = table
                     j += 17 + sum(counts)
             elif marker in (0xC0, 0xC1):  # baseline / extended sequential, Huffman

@@ -126,9 +126,22 @@ def _screened(decoder: J.ScreenedDecoder, blob: bytes) -> tuple[np.ndarray, int]
     return kept.reshape(nby, nbx).repeat(8, 0).repeat(8, 1)[:h.height, :h.width], n
 
 
+def _dc_symbol_16(blob: bytes) -> bytes:
+    """``blob`` whose first DC Huffman table's last symbol (its longest code's, which the
+    frame's few large DC differences use, if any) is 16: a table libjpeg refuses (a DC
+    symbol is a difference's bit count, 0..15)."""
+    b = bytearray(blob)
+    at = b.index(b"\xff\xc4") + 4
+    while b[at] >> 4:  # (an AC table first: the next one)
+        at += 17 + sum(b[at + 1:at + 17])
+    b[at + 17 + sum(b[at + 1:at + 17]) - 1] = 16
+    return bytes(b)
+
+
 def test_other_jpegs_go_to_opencv(frames):
-    # 4:2:0, progressive, an EXIF orientation, a truncated file: None (the frame is then
-    # decoded by cv2.imdecode), and the re-detection stays exact
+    # 4:2:0, progressive, an EXIF orientation, a truncated file, a DC table with a symbol
+    # beyond 15: None (the frame is then decoded by cv2.imdecode), and the re-detection stays
+    # exact
     frame = cv2.imdecode(np.frombuffer(frames[10], np.uint8), cv2.IMREAD_COLOR)
     detector = BallDetector(HsvRange(), 5, compiled=True)
     decoder = J.ScreenedDecoder(detector)
@@ -136,7 +149,8 @@ def test_other_jpegs_go_to_opencv(frames):
     exif[2:2] = b"\xff\xe1\x00\x08Exif\x00\x00"
     others = [cv2.imencode(".jpg", frame, [cv2.IMWRITE_JPEG_QUALITY, 90])[1].tobytes(),
               cv2.imencode(".jpg", frame, [*jpeg_params(90), cv2.IMWRITE_JPEG_PROGRESSIVE, 1])[
-                  1].tobytes(), bytes(exif), frames[10][:len(frames[10]) // 2]]
+                  1].tobytes(), bytes(exif), frames[10][:len(frames[10]) // 2],
+              _dc_symbol_16(frames[10])]
     redetector = redetect._Redetector(HsvRange(), 5, True)
     for blob in others:
         assert decoder.detect(blob) is None
