@@ -333,6 +333,17 @@ def _slow_code(buf: np.uint64, t: int, maxcode: np.ndarray, offset: np.ndarray,
     return int(symbols[t, code + offset[t, length]]), length
 
 
+@kernel(inline=True)
+def _code(e: int, buf: np.uint64, t: int, maxcode: np.ndarray, offset: np.ndarray,
+          symbols: np.ndarray) -> tuple[int, int]:
+    """(symbol, code length) of the next code: from its fast-table entry ``e`` (a code of at
+    most 11 bits, not taken whole with its value), else by :func:`_slow_code`; (-1, 0) for
+    no valid code. (A DC table's symbols are 0..15: its header refuses others.)"""
+    if e:
+        return np.int64((e >> 8) & 255), np.int64(e & 31)
+    return _slow_code(buf, t, maxcode, offset, symbols)
+
+
 @kernel
 def screen_blocks(data: np.ndarray, start: int, nbx: int, nby: int, restart: int,
                   dc_table: np.ndarray, ac_table: np.ndarray, fast: np.ndarray,
@@ -416,13 +427,9 @@ def screen_blocks(data: np.ndarray, start: int, nbx: int, nby: int, restart: int
                 nbits -= length
                 pred[c] += e >> 16
             else:
-                if e:
-                    length = e & 31
-                    s = (e >> 8) & 15
-                else:
-                    s, length = _slow_code(buf, t, maxcode, offset, symbols)
-                    if length == 0:
-                        return -1
+                s, length = _code(e, buf, t, maxcode, offset, symbols)
+                if length == 0:
+                    return -1
                 buf <<= np.uint64(length)
                 nbits -= length
                 if s:
@@ -448,13 +455,9 @@ def screen_blocks(data: np.ndarray, start: int, nbx: int, nby: int, restart: int
                     k += (e >> 12) & 15
                     v = np.int64(e >> 16)
                 else:
-                    if e:
-                        length = e & 31
-                        rs = (e >> 8) & 255
-                    else:
-                        rs, length = _slow_code(buf, t, maxcode, offset, symbols)
-                        if length == 0:
-                            return -1
+                    rs, length = _code(e, buf, t, maxcode, offset, symbols)
+                    if length == 0:
+                        return -1
                     buf <<= np.uint64(length)
                     nbits -= length
                     r = rs >> 4
