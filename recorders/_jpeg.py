@@ -88,12 +88,22 @@ def _idct_limit() -> np.ndarray:
     return np.clip(np.where(x < 512, x, x - 1024) + 128, 0, 255).astype(np.uint8)
 
 
-def ycc_to_bgr(ycc: np.ndarray) -> np.ndarray:
-    """(..., 3) uint8 Y, Cb, Cr -> (..., 3) uint8 B, G, R as libjpeg converts them."""
-    t = _colour_tables().astype(np.int64)
-    y, cb, cr = (ycc[..., k].astype(np.int64) for k in range(3))
-    bgr = np.stack([y + t[1, cb], y + ((t[3, cb] + t[2, cr]) >> 16), y + t[0, cr]], axis=-1)
-    return np.clip(bgr, 0, 255).astype(np.uint8)
+@kernel(inline=True)
+def _blue(y: int, cb: int, tables: np.ndarray) -> int:
+    """B of Y, Cb as libjpeg converts it (``jdcolor.c``; ``tables`` :func:`_colour_tables`)."""
+    return min(max(y + tables[1, cb], 0), 255)
+
+
+@kernel(inline=True)
+def _green(y: int, cb: int, cr: int, tables: np.ndarray) -> int:
+    """G of Y, Cb, Cr as libjpeg converts it."""
+    return min(max(y + ((np.int64(tables[3, cb]) + tables[2, cr]) >> 16), 0), 255)
+
+
+@kernel(inline=True)
+def _red(y: int, cr: int, tables: np.ndarray) -> int:
+    """R of Y, Cr as libjpeg converts it."""
+    return min(max(y + tables[0, cr], 0), 255)
 
 
 @functools.lru_cache(maxsize=8)
@@ -137,14 +147,14 @@ def _ycc_cells(inside: np.ndarray, tables: np.ndarray, lo: np.ndarray, hi: np.nd
     [b, g, r], which is False outside the BGR box ``[lo, hi]`` ((3,) each)."""
     for y in range(256):
         for cb in range(256):
-            b = min(max(y + tables[1, cb], 0), 255)
+            b = _blue(y, cb, tables)
             if b < lo[0] or b > hi[0]:
                 continue
             for cr in range(256):
-                r = min(max(y + tables[0, cr], 0), 255)
+                r = _red(y, cr, tables)
                 if r < lo[2] or r > hi[2]:
                     continue
-                g = min(max(y + ((np.int64(tables[3, cb]) + tables[2, cr]) >> 16), 0), 255)
+                g = _green(y, cb, cr, tables)
                 if g >= lo[1] and g <= hi[1] and inside[b, g, r]:
                     cells[y // _CELL, cb // _CELL, cr // _CELL] = True
 
@@ -631,9 +641,9 @@ def render_blocks(coefs: np.ndarray, state: np.ndarray, n: int, nbx: int,
                 y = np.int64(ycc[0, i * 8 + j])
                 cb = ycc[1, i * 8 + j]
                 cr = ycc[2, i * 8 + j]
-                b = min(max(y + tables[1, cb], 0), 255)
-                g = min(max(y + ((np.int64(tables[3, cb]) + tables[2, cr]) >> 16), 0), 255)
-                r = min(max(y + tables[0, cr], 0), 255)
+                b = _blue(y, cb, tables)
+                g = _green(y, cb, cr, tables)
+                r = _red(y, cr, tables)
                 frame[yy, xx, 0] = b
                 frame[yy, xx, 1] = g
                 frame[yy, xx, 2] = r
