@@ -70,7 +70,7 @@ from .innovation import (
     failed_counts,
     kinked_points,
 )
-from .stereo import count_invalid
+from .stereo import KINK_GATE, count_invalid
 
 #: Brackets whose lengths differ by less than this are ties (shutter offsets are rounded to ns).
 _SPAN_TIE_NS = 1_000_000
@@ -990,11 +990,11 @@ def without_model_columns(track: Track) -> Track:
 
 
 #: the innovation's part of type A's model error counts where ``|u|² / (σ² c)`` exceeds
-#: this, the χ² of 2 degrees of freedom at 99 % (``nearest``'s break test's
-#: ``stereo.KINK_GATE``): below it the noise explains it, and adding its excess over the
+#: this, the χ² of 2 degrees of freedom at 99 % (the same gate as ``nearest``'s break
+#: test, ``stereo.KINK_GATE``): below it the noise explains it, and adding its excess over the
 #: noise anyway (zero on average, but not once clipped at 0) made the 0.3 px sessions' NEES
 #: 4-18 % lower
-MODEL_GATE = 9.21
+MODEL_GATE = KINK_GATE
 
 
 def with_measured_noise(track: Track, sigma: np.ndarray, cov_noise_px: float,
