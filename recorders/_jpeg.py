@@ -354,6 +354,16 @@ def _code(e: int, buf: np.uint64, t: int, maxcode: np.ndarray, offset: np.ndarra
     return _slow_code(buf, t, maxcode, offset, symbols)
 
 
+@kernel(inline=True)
+def _extended(buf: np.uint64, s: int) -> tuple[int, np.uint64]:
+    """(value, the bits after it): the next ``s`` bits of ``buf`` (at its top) as a signed
+    value, libjpeg's ``HUFF_EXTEND``."""
+    v = np.int64(buf >> np.uint64(64 - s))
+    if v < (1 << (s - 1)):
+        v += (-1 << s) + 1
+    return v, buf << np.uint64(s)
+
+
 @kernel
 def screen_blocks(data: np.ndarray, start: int, nbx: int, nby: int, restart: int,
                   dc_table: np.ndarray, ac_table: np.ndarray, fast: np.ndarray,
@@ -443,11 +453,8 @@ def screen_blocks(data: np.ndarray, start: int, nbx: int, nby: int, restart: int
                 buf <<= np.uint64(length)
                 nbits -= length
                 if s:
-                    diff = np.int64(buf >> np.uint64(64 - s))
-                    buf <<= np.uint64(s)
+                    diff, buf = _extended(buf, s)
                     nbits -= s
-                    if diff < (1 << (s - 1)):
-                        diff += (-1 << s) + 1
                     pred[c] += diff
             if store:
                 coefs[it, c, 0] = pred[c]
@@ -478,11 +485,8 @@ def screen_blocks(data: np.ndarray, start: int, nbx: int, nby: int, restart: int
                         k += 16
                         continue
                     k += r
-                    v = np.int64(buf >> np.uint64(64 - s))
-                    buf <<= np.uint64(s)
+                    v, buf = _extended(buf, s)
                     nbits -= s
-                    if v < (1 << (s - 1)):
-                        v += (-1 << s) + 1
                 if k > 63:
                     return -4
                 if store:
