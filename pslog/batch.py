@@ -85,6 +85,12 @@ class StepFailed(PslogError):
     """A command of a session's pipeline failed; the message is its one-line error."""
 
 
+class StepInterrupted(StepFailed):
+    """A command of a session's pipeline was ended by a signal (SIGINT, SIGTERM, SIGHUP:
+    its exit code 130 or 128 + the signal's number): the batch is being interrupted (Ray
+    ends a cancelled task's worker so), the session did not fail."""
+
+
 @dataclass(frozen=True)
 class Settings:
     """What is done to every session: the steps (in :data:`STEPS` order) and the options
@@ -291,7 +297,8 @@ def _command(argv: list[str]) -> str:
                 os.environ["PSLOG_PROGRESS"] = shown
     if code != 0:
         lines = [line for line in err.getvalue().splitlines() if line.strip()]
-        raise StepFailed(lines[-1] if lines else f"pslog {argv[0]} exited with code {code}")
+        raise (StepInterrupted if code > 128 else StepFailed)(
+            lines[-1] if lines else f"pslog {argv[0]} exited with code {code}")
     return out.getvalue()
 
 
@@ -351,6 +358,7 @@ def _run_staged(job: Job, settings: Settings, staging: Path, start: float) -> di
     kill = os.environ.get(KILL_ONCE_ENV)
     stamp = None
     staged = False  # this task made its staging folder
+    interrupted = False  # a command ended by a signal
     try:
         try:
             # the input as it is when the task starts: done.json records this, so a file
@@ -400,6 +408,7 @@ def _run_staged(job: Job, settings: Settings, staging: Path, start: float) -> di
             _command(["view", current, "--save", out["view"], "--force", *frames])
     except StepFailed as exc:
         error = str(exc)
+        interrupted = isinstance(exc, StepInterrupted)
     except Exception as exc:  # a bug: still one line in the summary, the batch goes on
         error = f"pslog batch: error: {type(exc).__name__}: {exc}".splitlines()[0]
     row = summary_row(job.session, info, sync, evaluation, error=error,
@@ -424,11 +433,12 @@ def _run_staged(job: Job, settings: Settings, staging: Path, start: float) -> di
             reason = os_reason(exc) if isinstance(exc, OSError) else str(exc)
             error = f"pslog batch: error: cannot write {outdir}: {reason}"
             row.update(status="failed", error=error)
-    if error and staged and not staging.is_dir():
-        # the staging folder was removed under this task: not a failure of the session but
-        # an interrupted batch, which settled the folder while this task's worker still ran
-        # (Ray ends a force-cancelled task's worker asynchronously; a step then failed on
-        # its vanished folder): the old outputs stay, as for any interrupted session
+    if error and (interrupted or (staged and not staging.is_dir())):
+        # a command ended by a signal, or the staging folder removed under this task: not a
+        # failure of the session but an interrupted batch (Ray ends a cancelled task's
+        # worker by signals, asynchronously; an interrupted batch settles the folder while
+        # that worker may still run, and a step then fails on its vanished folder): the old
+        # outputs stay, as for any interrupted session
         return row
     if error:
         # the session failed (not interrupted): none of its old outputs stays beside its

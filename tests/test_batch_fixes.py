@@ -251,3 +251,28 @@ def test_a_task_whose_staging_folder_an_interrupted_batch_removed_keeps_the_old_
     row = batch.run_session(job, settings)
     assert row["status"] == "failed" and "output folder does not exist" in row["error"], row
     assert _outputs(job) == before
+
+
+
+def test_a_task_whose_command_a_signal_ends_keeps_the_old_outputs(tmp_path, monkeypatch):
+    """A signal that ends a step's command (Ray ending a cancelled task's worker, a Ctrl-C):
+    pslog's command turns it into its exit code (130, 128 + the signal's number) and one
+    line, which the task took for a failure of the session, discarding its old outputs
+    (seen once in the suite: test_batch's forced batch ended by SIGTERM, a whole result
+    folder gone). An interruption: the old outputs stay. A real SIGINT to this process
+    while the fuse command runs (when it reads the session: its handler installed)."""
+    import signal
+
+    import pslog.log
+
+    job, settings, before = _done_once(tmp_path)
+    real = pslog.log.read_session
+
+    def read_then_interrupted(*args, **kwargs):
+        os.kill(os.getpid(), signal.SIGINT)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(pslog.log, "read_session", read_then_interrupted)
+    row = batch.run_session(job, settings)
+    assert row["status"] == "failed" and "interrupted" in row["error"], row
+    assert _outputs(job) == before
