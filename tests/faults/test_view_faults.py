@@ -122,7 +122,10 @@ def test_connect_with_no_viewer_running(tmp_path, session):
     """rerun retries silently for ever; pslog gives up within seconds and says why. Seconds
     of its own: the time the command spent blocked (asleep, waiting for the viewer), not
     its wall time, which a loaded machine stretches past any bound (a retry for ever, or a
-    wait of 10 s, fails it; one that never ends fails the hang guard, 30 s without CPU)."""
+    wait of 10 s, fails it; one that never ends fails the hang guard, 30 s without CPU).
+    The blocked time comes from /proc/PID/schedstat: on a kernel without it the rest is
+    checked, then the test is skipped, saying the bound was not (the hang guard alone
+    bounds the wait there)."""
     with socket.socket() as probe:  # a loopback port nobody listens on
         probe.bind(("127.0.0.1", 0))
         number = probe.getsockname()[1]
@@ -130,9 +133,14 @@ def test_connect_with_no_viewer_running(tmp_path, session):
     before = fingerprint(tmp_path)
     run = run_pslog("view", session, "--connect", "--url", url, "--frames", "none",
                     env=HEADLESS, timeout=30)
-    assert (run.blocked_s or 0.0) < 10  # (None: it ended within 0.5 s)
     assert_one_line_error(run, 1, contains=("no rerun viewer at", url))
     assert_untouched(before, tmp_path)
+    if not Path("/proc/self/schedstat").exists():
+        pytest.skip("no /proc/PID/schedstat on this kernel: the command's blocked time is "
+                    "unknown, its 10-s bound unchecked (the one-line error was checked; only "
+                    "the hang guard, 30 s without CPU, bounds the wait here)")
+    # (None: it ended within 0.5 s, before run_pslog's first look)
+    assert run.blocked_s is None or run.blocked_s < 10, run.blocked_s
 
 
 def test_connect_to_a_program_that_is_not_a_viewer(tmp_path, session):
