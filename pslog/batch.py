@@ -76,6 +76,17 @@ PROGRESS_EVERY_S = 10.0
 WAIT_S = 0.25
 #: seconds an interrupted batch waits for its cancelled tasks' workers to end
 CANCEL_WAIT_S = 10.0
+#: the lock file in a session's result folder: its task holds it (``flock``) while it works
+#: there, and whoever else settles or discards the folder (the batch after an interrupt, the
+#: next batch's plan, the discard of a failed session) takes it first: one process at a time
+#: changes a session's outputs (a cancelled task's worker outlives the batch's interrupt)
+TASK_LOCK_NAME = ".pslog-batch-task.lock"
+#: seconds a task waits for a session's folder that another process still works in (a task
+#: of a batch stopped just before, whose worker Ray has not ended yet) before it fails
+TASK_LOCK_WAIT_S = 300.0
+#: seconds the next batch's plan waits, in all, for such folders before it leaves them to
+#: their tasks (which wait for them in turn)
+PLAN_LOCK_WAIT_S = 60.0
 #: Ray's retries of a task whose worker process died (an exception is never retried: the
 #: task turns every error into a failed row)
 MAX_RETRIES = 3
@@ -244,8 +255,13 @@ def plan_batch(jobs: list[Job], settings: Settings, outdir: str | Path, *, resum
     plan = Plan()
     key = settings.key()
     conflicts: list[str] = []
+    deadline = time.monotonic() + PLAN_LOCK_WAIT_S
     for job in jobs:
-        settle(job)  # an install an interrupted batch committed: finished, then judged
+        # an install an interrupted batch committed: finished, then judged (a folder that a
+        # stopped batch's worker still holds is left to the session's task, which waits)
+        with session_lock(job, wait_s=max(0.0, deadline - time.monotonic())) as held:
+            if held is not False:
+                settle(job)
         marker = read_marker(job) if resume else None
         if marker is not None and marker.get("settings") != key and not force:
             raise OutputExistsError(
@@ -321,37 +337,150 @@ def _write_json(path: Path, value) -> None:
         f.write(json.dumps(value, indent=2, allow_nan=False) + "\n")
 
 
+def _take_lock(path: Path, deadline: float | None) -> int | None:
+    """An open descriptor of ``path`` (created) holding its exclusive ``flock``, or None
+    once ``time.monotonic()`` passed ``deadline`` (None: no limit) with another process
+    holding it. A holder removes the file before it lets go: a lock got on a file the path
+    no longer names is let go and taken again on the file it names now."""
+    import fcntl
+
+    while True:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            if deadline is not None and time.monotonic() >= deadline:
+                return None
+            time.sleep(0.05)
+            continue
+        except BaseException:
+            os.close(fd)
+            raise
+        try:
+            here, now = os.fstat(fd), os.stat(path)
+            if (here.st_dev, here.st_ino) == (now.st_dev, now.st_ino):
+                return fd
+        except FileNotFoundError:
+            pass
+        os.close(fd)
+
+
+@contextlib.contextmanager
+def session_lock(job: Job, *, wait_s: float | None, create: bool = False
+                 ) -> Iterator[bool | None]:
+    """The session's folder held by this process alone (:data:`TASK_LOCK_NAME`) while the
+    block runs: yields True; False when another process (a cancelled task's worker still
+    running) held it ``wait_s`` seconds (None: no limit); None when it cannot be taken —
+    no folder (``create``: made), or a file system without ``flock`` — where the block then
+    runs as before the lock. The lock file is removed at the end."""
+    outdir = Path(job.outdir)
+    deadline = None if wait_s is None else time.monotonic() + wait_s
+    fd = None
+    held: bool | None = None
+    try:
+        if create:
+            outdir.mkdir(parents=True, exist_ok=True)
+        if outdir.is_dir():
+            fd = _take_lock(outdir / TASK_LOCK_NAME, deadline)
+            held = fd is not None
+    except OSError:  # not writable, or no flock there (a Lustre mount without it)
+        held = None
+    try:
+        yield held
+    finally:
+        if fd is not None:
+            with contextlib.suppress(OSError):
+                (outdir / TASK_LOCK_NAME).unlink()
+            os.close(fd)
+
+
 def run_session(job: Job, settings: Settings) -> dict:
     """Process one session with the commands a user would type; its summary row.
 
-    The task of :func:`run_batch`, a pure function of the session file and the settings to
-    the files below ``job.outdir``. The commands write into the staging folder
-    :data:`STAGING_NAME`; only when every step is done do the new outputs replace the old
-    ones, in one step (:func:`_install`), so a session interrupted at any point keeps its
-    old, complete set with its old ``done.json``, or has the new complete set with the new
-    one. A session that fails
-    keeps none of its old outputs (its failed row says so). Every error becomes the row's
-    ``status`` ``failed`` and ``error`` (the command's one-line message); nothing raises.
+    :func:`run_task` (the batch's task), then, if the session failed, its old outputs
+    discarded (:func:`discard_failed`): what a batch does for one session in this process.
 
     Returns
     -------
     row : dict of the summary's columns (:func:`summary_row`)
     """
+    row, failed = run_task(job, settings)
+    if failed:
+        discard_failed(job, settings)
+    return row
+
+
+def run_task(job: Job, settings: Settings) -> tuple[dict, bool]:
+    """Process one session with the commands a user would type; its summary row and whether
+    the session failed (its old outputs are then to be discarded, by the batch, once it has
+    this row: :func:`discard_failed`).
+
+    The task of :func:`run_batch`, a pure function of the session file and the settings to
+    the files below ``job.outdir``, holding the session's folder (:func:`session_lock`)
+    throughout. The commands write into the staging folder :data:`STAGING_NAME`; only when
+    every step is done do the new outputs replace the old ones, in one step
+    (:func:`_install`), so a session interrupted at any point keeps its old, complete set
+    with its old ``done.json``, or has the new complete set with the new one. The task
+    itself never removes an old output but by that install: a session that fails keeps
+    none of its old outputs, but only once the batch has its failed row (a failure while
+    the batch is being interrupted, a cancelled task's, is no failure of the session).
+    Every error becomes the row's ``status`` ``failed`` and ``error`` (the command's
+    one-line message); nothing raises.
+    """
     start = time.perf_counter()
     outdir = Path(job.outdir)
     staging = outdir / STAGING_NAME
     try:
-        return _run_staged(job, settings, staging, start)
+        with session_lock(job, wait_s=TASK_LOCK_WAIT_S, create=True) as held:
+            if held is False:
+                error = (f"pslog batch: error: another process still works in {outdir} "
+                         f"(a task of a batch stopped {TASK_LOCK_WAIT_S:g} s ago?); run "
+                         f"the batch again")
+                return summary_row(job.session, None, None, None, error=error,
+                                   runtime_s=time.perf_counter() - start), False
+            try:
+                return _run_staged(job, settings, staging, start)
+            finally:
+                # whatever happened (an error, Ctrl-C in this process): no staged file
+                # stays, and an install past its commit point is finished
+                with contextlib.suppress(OSError, ValueError):
+                    settle(job)
     finally:
-        # whatever happened (an error, Ctrl-C in this process): no staged file stays, and
-        # an install past its commit point is finished
-        with contextlib.suppress(OSError, ValueError):
-            settle(job)
         _remove_empty(_result_folders(job))  # no empty folders left for it
 
 
-def _run_staged(job: Job, settings: Settings, staging: Path, start: float) -> dict:
-    """:func:`run_session`'s steps, writing into ``staging``; the row."""
+def discard_failed(job: Job, settings: Settings, wait_s: float | None = TASK_LOCK_WAIT_S
+                   ) -> None:
+    """A failed session's old outputs (and ``done.json``) removed, and its emptied folders:
+    none stays beside its failed row. Holding its folder (:func:`session_lock`): one that
+    another process still holds after ``wait_s`` keeps its outputs."""
+    with session_lock(job, wait_s=wait_s) as held:
+        if held is not False:
+            _discard(job, settings)
+            with contextlib.suppress(OSError, ValueError):
+                settle(job)  # a dead attempt's staging folder
+    _remove_empty(_result_folders(job))
+
+
+def settle_held(jobs: Iterable[Job], wait_s: float) -> None:
+    """:func:`settle` for each of ``jobs`` whose folder this process can hold within
+    ``wait_s`` seconds in all (a cancelled task's worker may still run there; one still
+    holding it is left as it is, to the next batch's settle), and its emptied folders
+    removed."""
+    deadline = time.monotonic() + wait_s
+    for job in jobs:
+        with session_lock(job, wait_s=max(0.0, deadline - time.monotonic())) as held:
+            if held is not False:
+                with contextlib.suppress(OSError, ValueError):
+                    settle(job)
+        _remove_empty(_result_folders(job))
+
+
+def _run_staged(job: Job, settings: Settings, staging: Path, start: float
+                ) -> tuple[dict, bool]:
+    """:func:`run_task`'s steps, writing into ``staging``; the row, and whether the session
+    failed (not interrupted)."""
     outdir = Path(job.outdir)
     info = sync = evaluation = None
     error = ""
@@ -439,12 +568,12 @@ def _run_staged(job: Job, settings: Settings, staging: Path, start: float) -> di
         # worker by signals, asynchronously; an interrupted batch settles the folder while
         # that worker may still run, and a step then fails on its vanished folder): the old
         # outputs stay, as for any interrupted session
-        return row
-    if error:
-        # the session failed (not interrupted): none of its old outputs stays beside its
-        # failed row (done.json first, so they are never taken for complete ones)
-        _discard(job, settings)
-    return row
+        return row, False
+    # failed (not interrupted): none of its old outputs is to stay beside its failed row —
+    # removed by the batch once it has the row (discard_failed), never here: a failure while
+    # the batch is interrupted (a cancelled task's worker ended under a step in any way) is
+    # no failure of the session, and its old outputs stay with the batch's old summary
+    return row, bool(error)
 
 
 def _old_outputs(job: Job, settings: Settings) -> list[Path]:
@@ -456,6 +585,8 @@ def _old_outputs(job: Job, settings: Settings) -> list[Path]:
 
 
 def _discard(job: Job, settings: Settings) -> None:
+    """The session's old outputs removed (``done.json`` first, so they are never taken for
+    complete ones); its folder held (:func:`discard_failed`)."""
     outputs = _old_outputs(job, settings)
     # a committed install that could not be finished: not installed by a later settle()
     shutil.rmtree(Path(job.outdir) / READY_NAME, ignore_errors=True)
@@ -515,6 +646,7 @@ def _finish_install(outdir: Path) -> None:
         return
     names, stale = plan
     (ready / MOVING_NAME).touch()
+    _step("moving")
     (outdir / DONE_NAME).unlink(missing_ok=True)
     _step("old marker removed")
     for name in names:
@@ -946,11 +1078,13 @@ def _native_stderr(into: io.StringIO):
 def run_batch(jobs: list[Job], settings: Settings, *, workers: int | None = None,
               address: str | None = None, progress: Progress | None = None,
               on_row: Callable[[dict], None] | None = None) -> list[dict]:
-    """Run :func:`run_session` for every job as a Ray task (1 CPU each; retried up to
+    """Run :func:`run_task` for every job as a Ray task (1 CPU each; retried up to
     :data:`MAX_RETRIES` times when its worker process dies); the summary rows, in the
-    order the sessions finished. A task lost for good (its worker died every time) is a
-    failed row naming why. A single session on the local machine runs in this process,
-    without a cluster (whose start-up would cost more than any gain)."""
+    order the sessions finished. Once every task has ended, the sessions that failed lose
+    their old outputs (:func:`discard_failed`); an interrupted batch removes none. A task
+    lost for good (its worker died every time) is a failed row naming why. A single
+    session on the local machine runs in this process, without a cluster (whose start-up
+    would cost more than any gain)."""
     import ray
 
     if len(jobs) == 1 and address is None and not ray.is_initialized():
@@ -967,19 +1101,19 @@ def run_batch(jobs: list[Job], settings: Settings, *, workers: int | None = None
     lasting = address is not None or ray.is_initialized()  # a cluster that outlives the batch
     try:
         with ray_cluster(workers, address) as slots:
-            task = ray.remote(num_cpus=1, max_retries=MAX_RETRIES)(run_session)
+            task = ray.remote(num_cpus=1, max_retries=MAX_RETRIES)(run_task)
             pending = {task.remote(job, settings): job for job in jobs}
             try:
                 with _signals_noted() as came:
-                    rows = _gather(pending, slots, progress, on_row, came)
+                    rows, failed = _gather(pending, slots, progress, on_row, came)
             except BaseException:
                 for ref in pending:  # a cluster that outlives the batch (--address, tests)
                     with contextlib.suppress(Exception):
                         ray.cancel(ref, force=True)
                 # a forced cancel kills the workers asynchronously: on a cluster that
-                # outlives the batch, wait (bounded) until they are gone, so that no task
-                # still installs outputs while this process settles the jobs' folders
-                # below (a local cluster's shutdown ends its workers)
+                # outlives the batch, wait (bounded) until they are gone (a local
+                # cluster's shutdown ends its workers, as asynchronously: the settle below
+                # waits for each folder's lock)
                 if lasting and pending:
                     with contextlib.suppress(Exception):
                         ray.wait(list(pending), num_returns=len(pending),
@@ -988,24 +1122,30 @@ def run_batch(jobs: list[Job], settings: Settings, *, workers: int | None = None
     except BaseException:
         # interrupted: the tasks were ended (their workers killed with the local cluster)
         # and may have left staged outputs, removed (the old, complete ones stay), or an
-        # install past its commit point, finished (the new set, complete)
-        for job in pending.values():
-            with contextlib.suppress(OSError, ValueError):
-                settle(job)
-            _remove_empty(_result_folders(job))
+        # install past its commit point, finished (the new set, complete). A cancelled
+        # task's worker can outlive all this (Ray ends it asynchronously): each folder is
+        # settled once this process holds it (the task holds it while it runs)
+        settle_held(pending.values(), CANCEL_WAIT_S)
         raise
+    # every task has ended: the failed sessions' old outputs go (none stays beside a failed
+    # row). Not before: a batch interrupted meanwhile keeps every old output (its old
+    # summary stays), whatever its tasks met while they were being ended
+    for job in failed:
+        discard_failed(job, settings)
     return rows
 
 
 def _gather(pending: dict, slots: int, progress: Progress | None,
-            on_row: Callable[[dict], None] | None, came: _Noted) -> list[dict]:
-    """The rows of the ``pending`` tasks (Ray object ref -> job) as they finish; each
-    finished one leaves ``pending``. A signal noted in ``came`` (:func:`_signals_noted`)
-    stops it between two waits: KeyboardInterrupt for SIGINT, ``Terminated`` for another
-    (exit 128 + its number)."""
+            on_row: Callable[[dict], None] | None, came: _Noted
+            ) -> tuple[list[dict], list[Job]]:
+    """The rows of the ``pending`` tasks (Ray object ref -> job) as they finish, and the
+    jobs whose session failed (:func:`run_task`); each finished one leaves ``pending``. A
+    signal noted in ``came`` (:func:`_signals_noted`) stops it between two waits:
+    KeyboardInterrupt for SIGINT, ``Terminated`` for another (exit 128 + its number)."""
     import ray
 
     rows = []
+    failed: list[Job] = []
     while pending:
         came.again()
         if came:
@@ -1018,7 +1158,9 @@ def _gather(pending: dict, slots: int, progress: Progress | None,
         for ref in ready:
             job = pending.pop(ref)
             try:
-                row = ray.get(ref)
+                row, session_failed = ray.get(ref)
+                if session_failed:
+                    failed.append(job)
             except Exception as exc:  # the worker died MAX_RETRIES + 1 times
                 reason = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
                 row = summary_row(job.session, None, None, None,
@@ -1036,7 +1178,7 @@ def _gather(pending: dict, slots: int, progress: Progress | None,
             progress.update(min(len(pending), slots))
     if progress is not None:
         progress.update(0, final=True)
-    return rows
+    return rows, failed
 
 
 class _Noted(list):

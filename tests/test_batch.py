@@ -411,3 +411,62 @@ def test_a_forced_batch_interrupted_keeps_every_old_output(cluster, tmp_path, sh
                                                      "summary.parquet"]
     assert _stamps(out)["summary.parquet"] == before["summary.parquet"]
     assert (out / "summary.csv").read_bytes() == summary
+
+
+def test_a_failed_session_of_a_batch_then_interrupted_keeps_its_old_outputs(
+        cluster, tmp_path, short_tmpdir):
+    """A ``--force`` batch in which one session fails (its input cut since the last batch)
+    and which SIGTERM ends while another session still runs: the failed session keeps every
+    old output. Its failed row removes them only once the batch has ended: an interrupted
+    batch writes no summary, and the old one, which stays, names them. Before, the task
+    removed them as soon as it failed — as it did when a step of a session ended in any
+    error while the batch was being interrupted (a cancelled task's worker outlives the
+    batch's settling of its folder): a result folder left empty, seen once in the suite."""
+    root = tmp_path / "season"
+    simulate(root / "m0.mcap", 30)
+    simulate(root / "m1.mcap", 31, duration=3.0)  # still running when m0 has failed
+    out = tmp_path / "results"
+    steps = ["--do", "sync,fuse,eval", *METHODS, "-o", out]
+    code, _, err = pslog("batch", root / "*.mcap", *steps)  # on the module's cluster
+    assert code == 0, err
+    before = {name: _stamps(out / name) for name in ("m0", "m1")}
+    summary = (out / "summary.csv").read_bytes()
+    m0 = root / "m0.mcap"
+    m0.write_bytes(m0.read_bytes()[:4000])  # cut: `pslog info` fails on it at once
+    hour_ago = time.time() - 3600  # (a cut recording, not one still being written)
+    os.utime(m0, (hour_ago, hour_ago))
+    argv = [sys.executable, "-m", "pslog.cli", "batch", str(root / "*.mcap"),
+            *map(str, steps), "--workers", "2", "--force"]
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True, env={**os.environ, "TMPDIR": short_tmpdir})
+    lines: list[str] = []
+
+    def read() -> None:
+        for line in proc.stdout:
+            lines.append(line.rstrip("\n"))
+
+    import threading
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    deadline = time.monotonic() + 240  # a hang guard only
+    try:
+        while not any(line.startswith("failed m0.mcap") for line in lines):
+            assert proc.poll() is None, f"{lines}\n{proc.stderr.read()}"
+            assert time.monotonic() < deadline, "the batch did not fail m0"
+            time.sleep(0.01)
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=120) == 143, proc.stderr.read()
+        reader.join(timeout=10)
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.stdout.close()
+        proc.stderr.close()
+    assert not any("m1.mcap" in line for line in lines), lines  # m1 was still running
+    assert _stamps(out / "m0") == before["m0"]  # every old output, untouched
+    now = _stamps(out / "m1")  # m1: its old set, or the new complete one
+    if now != before["m1"]:
+        assert sorted(now) == ["done.json", "eval.json", "fused.mcap", "synced.mcap"], now
+        assert all(now[f] != before["m1"][f] for f in now), now
+    assert (out / "summary.csv").read_bytes() == summary

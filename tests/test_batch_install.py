@@ -27,8 +27,8 @@ SAMPLE = Path(__file__).resolve().parents[1] / "samples" / "throw.mcap"
 OLD = Settings(steps=("sync", "fuse", "eval"), methods=("typeA",))
 NEW = Settings(steps=("fuse", "eval"), methods=("typeA", "nearest"))
 #: every step boundary of an install of NEW over OLD, in order
-STEPS = ["staged", "committed", "old marker removed", "moved fused.mcap", "moved eval.json",
-         "removed synced.mcap", "new marker"]
+STEPS = ["staged", "committed", "moving", "old marker removed", "moved fused.mcap",
+         "moved eval.json", "removed synced.mcap", "new marker"]
 #: the result folder's files after NEW
 NEW_FILES = ["done.json", "eval.json", "fused.mcap"]
 
@@ -87,8 +87,9 @@ def test_an_install_cut_at_any_step_leaves_the_old_set_or_the_new_one(old_result
             assert shown in (old, new), step
         if i <= STEPS.index("committed"):  # before the install changed any output
             assert shown == old, step
-        # settled (as the batch after an interrupt, or the next batch, does)
-        batch.settle(Job(job.path, job.session, str(folder)))
+        # settled (as the batch after an interrupt, or the next batch, does: the lock
+        # file the killed worker held removed too)
+        batch.settle_held([Job(job.path, job.session, str(folder))], 0.0)
         assert contents(folder) == (old if step == "staged" else new), step
 
 
@@ -139,5 +140,68 @@ def test_a_damaged_ready_folder_is_discarded_and_the_old_set_kept(old_results, t
     else:
         name, text = changes[damage]
         (ready / name).write_text(text)
-    batch.settle(Job(job.path, job.session, str(cut)))
+    batch.settle_held([Job(job.path, job.session, str(cut))], 0.0)
     assert contents(cut) == old
+
+
+def test_the_settle_after_an_interrupt_waits_for_a_task_still_installing(old_results,
+                                                                        tmp_path, monkeypatch):
+    """The batch settles each session's folder after an interrupt while a cancelled task's
+    worker may still run (Ray ends it asynchronously), maybe in the middle of its install.
+    Two installs of one folder at once: this process's settle, past its checks, removed
+    the old done.json after the task had moved the new one in: a complete new set left
+    without its marker (or, a step earlier, a mix). The task holds the folder while it
+    runs (batch.session_lock) and the settle waits for it: one install, with its marker.
+    The task runs in a child process (as a Ray worker does), held after its commit until
+    this process's settle, past its checks, lets it go — or, with the settle waiting for
+    the task's lock, after a second."""
+    job, _old = old_results
+    outdir = Path(job.outdir)
+    held, go = tmp_path / "held", tmp_path / "go"
+    code = (
+        "import json, sys, time, pathlib\n"
+        "import pslog.batch as batch\n"
+        "from pslog.batch import Job, Settings\n"
+        "held, go = pathlib.Path(sys.argv[1]), pathlib.Path(sys.argv[2])\n"
+        "def hold(step):\n"
+        "    if step == 'committed':\n"
+        "        held.touch()\n"
+        "        while not go.exists():\n"
+        "            time.sleep(0.01)\n"
+        "batch._install_step = hold\n"
+        "row, failed = batch.run_task(Job(*sys.argv[3:6]), Settings(**json.loads(sys.argv[6])))\n"
+        "print(row['status'])\n")
+    import json
+    import subprocess
+    import sys
+    import threading
+    import time
+    from dataclasses import asdict
+
+    child = subprocess.Popen([sys.executable, "-c", code, str(held), str(go), job.path,
+                              job.session, job.outdir, json.dumps(asdict(NEW))],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        while not held.exists():
+            assert child.poll() is None, child.communicate()
+            time.sleep(0.01)
+
+        def moving(step: str) -> None:  # this process's settle, past its checks
+            if step == "moving":
+                go.touch()
+                child.wait()
+
+        monkeypatch.setattr(batch, "_install_step", moving)
+        settle = threading.Thread(target=batch.settle_held, args=([job], 120.0))
+        settle.start()
+        settle.join(1.0)  # (not a time limit: lets a settle that does not wait get ahead)
+        go.touch()
+        out, err = child.communicate(timeout=120)
+        settle.join(120)
+        assert not settle.is_alive()
+    finally:
+        go.touch()
+        child.kill()
+        child.communicate()
+    assert out.strip() == "ok", err
+    assert sorted(contents(outdir)) == NEW_FILES
