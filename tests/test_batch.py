@@ -142,6 +142,19 @@ def same_tracks(a: str, b: str) -> None:
     assert [c.clock_offset for c in sa.rig.cameras] == [c.clock_offset for c in sb.rig.cameras]
 
 
+def _in_session(sid: int) -> list[int]:
+    """The processes of session ``sid`` (a ``start_new_session`` process and every process
+    below it, also those in process groups of their own: Ray puts each worker in one)."""
+    found = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            with contextlib.suppress(OSError, IndexError, ValueError):
+                fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+                if int(fields[3]) == sid and fields[0] != "Z":
+                    found.append(int(entry.name))
+    return found
+
+
 def _wait_until_gone(pgid: int, deadline: float, message: str) -> None:
     """Poll process group ``pgid`` until none of it is left; fail with ``message`` once
     ``time.monotonic()`` passes ``deadline``."""
@@ -268,10 +281,15 @@ def test_resume_after_a_batch_killed_halfway(tmp_path, short_tmpdir):
     proc.stderr.close()
     # the local cluster's processes notice their driver's death only within a minute or so
     # (a worker may even finish its session first): end them now, all at once, as a machine
-    # that loses power would, and wait until none is left
-    with contextlib.suppress(ProcessLookupError):
-        os.killpg(proc.pid, signal.SIGKILL)
-    _wait_until_gone(proc.pid, deadline, "the killed batch's processes do not end")
+    # that loses power would, and wait until none is left. Every one of the batch's session:
+    # Ray puts each worker in a process group of its own (a killpg of the batch's group
+    # left the workers running, one finishing its session while the resume planned)
+    while members := _in_session(proc.pid):
+        for pid in members:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+        assert time.monotonic() < deadline, "the killed batch's processes do not end"
+        time.sleep(0.05)
     # complete: its done.json in place, or its new set committed before the kill (renamed to
     # the ready folder, done.json inside; the resume's settle moves it into place: a kill
     # between the two made the resume find one more complete session than done.json files)
