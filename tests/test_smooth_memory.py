@@ -11,7 +11,7 @@ import sys
 
 import pytest
 
-from pslog import _memory
+from pslog.estimation import _memory
 
 pytestmark = pytest.mark.skipif(_memory._glibc() is None or not hasattr(
     _memory._glibc(), "mallinfo2"), reason="glibc's mallopt and mallinfo2 only")
@@ -19,7 +19,7 @@ pytestmark = pytest.mark.skipif(_memory._glibc() is None or not hasattr(
 _PRELUDE = """
 import ctypes
 import numpy as np
-from pslog import _memory
+from pslog.estimation import _memory
 
 SIZE = 48 * 2**20  # the band of a 90-minute fit's normal equations
 

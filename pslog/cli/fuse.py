@@ -91,17 +91,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pslog._memory import kept
-
-    # freed arrays kept for reuse for the whole command, not only smooth's fit: each
-    # method's and the writer's large temporaries (a 90-minute match's columns, tens of MB
-    # each) then come from the heap instead of fresh pages faulted in and zeroed again
-    # (pslog._memory); the outputs do not depend on it
-    with kept():
-        return _run(args)
-
-
-def _run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from pslog import progress

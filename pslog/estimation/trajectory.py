@@ -828,7 +828,7 @@ def fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions | None = 
     -------
     Fit; a :class:`FusionError` if no piece of the session is seen by two cameras
     """
-    from .._memory import kept
+    from ._memory import kept
 
     with kept():  # the iterations' large temporaries reused, not faulted in again
         return _fit_trajectory(obs, rig, options or SmoothOptions())

@@ -15,12 +15,6 @@ after large arrays were freed (32 MB mapped, 64 MB trimmed). The peak memory is 
 (the same arrays are alive at once); the outputs cannot change (only where memory comes
 from does).
 
-``pslog fuse`` runs its whole command inside :func:`kept` (reading, gating, every method,
-writing; the fit's own :func:`kept` nests in it): the other methods' and the writer's
-temporaries are reused the same way (on the 90-minute three-camera session a quarter fewer
-page faults, about 1.3 CPU s less in three alternating pairs, the peak 30-60 MB higher:
-the heap's top is kept, grown 64 MB at a time).
-
 The setting is the process's, not the fit's: while a fit runs, every thread's allocations
 follow it (in ``pslog fuse`` the other methods' on their threads too), and after the first
 fit the thresholds stay at the fixed values above instead of glibc's own adjustment. A user
