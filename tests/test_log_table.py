@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import zstandard
 
 from pslog.log import read_session
 
@@ -265,7 +266,7 @@ def test_the_reader_reads_a_table_into_place(sim_session):
 
 def test_long_columns_are_compressed_as_a_sample_of_them_predicts():
     """A long column (>= _SAMPLE_FROM bytes) is compressed whole only when zstd shrinks a
-    sample of it (start, middle, end) by 5 %: noise is stored raw, a column that compresses
+    sample of it (start, middle, end) by 10 %: noise is stored raw, a column that compresses
     (even one whose compressible part is only in the sample's middle) zstd, and one that
     would compress but not where the sample looks stays raw (the sample decides); every
     column decodes to the same values either way."""
@@ -278,19 +279,30 @@ def test_long_columns_are_compressed_as_a_sample_of_them_predicts():
     smooth_middle[mid - 8192:mid + 8192] = 1.5  # only the middle slice is compressible
     hidden = rng.normal(size=n)  # compressible only where the sample does not look
     hidden[tables._SAMPLE_BYTES // 8 + 10:mid - tables._SAMPLE_BYTES // 16 - 10] = 2.5
+    # a sample that shrinks by 5-10 % (a run of equal values in each part of it), the rest
+    # compressible: raw (the sample decides; compressed whole while the rule was 5 %)
+    almost = np.full(n, 3.5)
+    for lo in (0, mid - tables._SAMPLE_BYTES // 16, n - tables._SAMPLE_BYTES // 8):
+        almost[lo:lo + tables._SAMPLE_BYTES // 8] = rng.normal(size=tables._SAMPLE_BYTES // 8)
+        almost[lo + 100:lo + 100 + tables._SAMPLE_BYTES // 8 // 20] = 0.25
+    sample = tables._sample(memoryview(almost.tobytes()))
+    assert 0.9 < len(zstandard.compress(sample, 1)) / len(sample) < 0.95
+    assert len(zstandard.compress(almost.tobytes(), 1)) < 0.9 * almost.nbytes
     columns = {"time_ns": np.arange(n, dtype=np.int64) * 11_111_111,  # compresses
                "position_world": rng.normal(size=(n, 3)),  # noise
                "camera": np.zeros(n, np.int32),
                "quality/noise": rng.normal(size=n),
                "quality/ones": np.ones(n),
-               "quality/smooth_middle": smooth_middle, "quality/hidden": hidden}
+               "quality/smooth_middle": smooth_middle, "quality/hidden": hidden,
+               "quality/almost": almost}
     name = tables.track_table("typeA")
     data = tables.encode(name, ["a", "b"], {"/tracks/typeA": n}, columns)
     header = json.loads(data[4:4 + int.from_bytes(data[:4], "little")])["columns"]
     codecs = {k: d["codec"] for k, d in header.items()}
     assert codecs == {"time_ns": "zstd", "position_world": "none", "camera": "zstd",
                       "quality/noise": "none", "quality/ones": "zstd",
-                      "quality/smooth_middle": "zstd", "quality/hidden": "none"}, codecs
+                      "quality/smooth_middle": "zstd", "quality/hidden": "none",
+                      "quality/almost": "none"}, codecs
     _, decoded = tables.decode(data, name, ["a", "b"])
     for k, v in columns.items():
         np.testing.assert_array_equal(decoded[k], v, err_msg=k)

@@ -175,7 +175,7 @@ def test_compiled_track_encoder_equals_its_python_and_protobuf(rig3):
                                                     for k in S.TRACK_FIXED_QUALITY)])
     bits = np.ascontiguousarray(bits).view(np.uint64)
     keys = list(template[1])
-    quality = np.column_stack([track.quality[k] for k in keys]).astype("<f8").view(np.uint8)
+    quality = np.column_stack([track.quality[k] for k in keys]).astype("<f8").view(np.uint64)
     args = (t, bits, track.camera.astype(np.int64), np.frombuffer(b"c1cam2", np.uint8),
             np.array([0, 2, 6, 6]), np.frombuffer(b"typeA", np.uint8), template[0],
             np.array([template[1][k] for k in keys], np.int64), np.ascontiguousarray(quality),

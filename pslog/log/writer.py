@@ -1247,7 +1247,7 @@ def _track_block(track: Track, lo: int, hi: int, method: str, cameras, fixed: di
     channels = np.array([channel, scene_channel] if records else [-1, -1], dtype=np.int64)
     used = _wire.encode_track(t, np.ascontiguousarray(bits), cam,
                               np.frombuffer(b"".join(names_b), dtype=np.uint8), name_start,
-                              method_b, tmpl, slot_at, quality.view(np.uint8), ids, world_a,
+                              method_b, tmpl, slot_at, quality.view(np.uint64), ids, world_a,
                               lifetime_a, orientation_a, size_a, rgba_a, channels, out,
                               point_len, lengths)
     # records: written from this buffer as it is (cut into chunks); else bytes of their own
