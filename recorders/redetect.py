@@ -494,7 +494,7 @@ def _read_and_detect(src, chunks: list[tuple[int, int, int]], cameras: dict,
     decompressed and checked as every reader checks it), and decode and detect each image
     in it where it lies in the decompressed records (no copy of its bytes)."""
     from pslog.log import _mcapio as io
-    from pslog.log.reader import parse_image
+    from pslog.log.reader import image_data
 
     path = Path(src)
     from pslog.log.copy import record_layout
@@ -515,7 +515,7 @@ def _read_and_detect(src, chunks: list[tuple[int, int, int]], cameras: dict,
                 raise io.damaged_error(path, offset, str(exc)) from None
             layouts[offset] = record_layout(records)
             for cid, seq, t, a, b in io.message_spans(records, cameras):
-                data = parse_image(memoryview(records)[a:b], path).data
+                data = image_data(records, a, b, path)
                 camera.append(cameras[cid][0])
                 index.append(seq)
                 key.append((t, rank, cameras[cid][1], a))
