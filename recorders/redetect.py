@@ -78,9 +78,10 @@ from .detect import BallDetector, HsvRange
 
 _BATCH = 64  # images per batch when one process decodes and detects
 # images per task of the first pool while this process loads the compiled screen, and how
-# many such tasks (more than it can start meanwhile: the rest go to the compiled pool)
-_HEAD = 48
-_HEAD_TASKS = 6
+# many such tasks at most (more than it can start meanwhile; those it has not started when
+# numba is loaded go to the compiled pool: a frame costs it ~1.7 ms more, 1280 x 720)
+_HEAD = 16
+_HEAD_TASKS = 18
 _TAIL = 12  # images in the last, shortest tasks (every worker then finishes at once)
 _PARALLEL_FROM = 400  # images; below this one process is faster than starting a pool
 # images from which the detector's compiled screen is used: loading numba costs about 0.5 s
@@ -278,6 +279,11 @@ def _detecting(src, rig_names, row_of: dict, hsv: HsvRange, max_candidates: int,
             with _stop_signals_blocked():
                 pools.append(ProcessPoolExecutor(max_workers=workers,
                                                  initializer=_ignore_stop_signals))
+                # the first pool's tasks not started yet go to the compiled one, first: only
+                # what its workers took while numba loaded is detected the slower way
+                for i in range(first):
+                    if futures[i].cancel():
+                        futures[i] = submit(pools[1], i, True)
                 futures += [submit(pools[1], i, True) for i in range(first, n_tasks)]
             pools[0].shutdown(wait=False)  # its workers end once their tasks are done
         if plan is None:
