@@ -625,6 +625,18 @@ def _idct_islow(coef: np.ndarray, quant: np.ndarray, limit: np.ndarray, out: np.
             out[w + j] = limit[_descale(y[j], 18) & 1023]
 
 
+@kernel(inline=True)
+def _value_range(values: np.ndarray, bh: int, bw: int) -> tuple[int, int]:
+    """(least, largest) of a block's ``values`` (64,) uint8 row-major in its first ``bh``
+    rows and ``bw`` columns (those in the frame)."""
+    least, most = 255, 0
+    for i in range(bh):
+        for j in range(bw):
+            v = np.int64(values[i * 8 + j])
+            least, most = min(least, v), max(most, v)
+    return least, most
+
+
 @kernel
 def render_blocks(coefs: np.ndarray, state: np.ndarray, n: int, nbx: int,
                   quant: np.ndarray, limit: np.ndarray, tables: np.ndarray,
@@ -635,34 +647,41 @@ def render_blocks(coefs: np.ndarray, state: np.ndarray, n: int, nbx: int,
     :func:`_idct_limit`) and, where a colour of the box of their exact Y, Cb and Cr values
     is in the range (``colours`` :func:`_ycc_table`: the screen again, on the pixels' own
     values instead of their bound; most blocks that pass the bound, e.g. along the white
-    lines of a green field, do not), convert them to BGR (``tables`` :func:`_colour_tables`)
-    into ``frame`` (H, W, 3) uint8, and gather their pixels ``frame[i step, j step]``
-    inside the BGR box ``[lo, hi]`` (i < H // step, j < W // step): ``xy`` (m, 2) int32
-    out, coarse column and row; ``bgr`` (m, 3) uint8 out (m >= 64 n). ``drawn`` (n,) uint8
-    out: 1 where the MCU was written. Returns how many pixels were gathered. A block not
-    written holds no pixel in the range: its pixels in ``frame`` keep their colour."""
+    lines of a green field, do not, most of them on their Cr alone), convert them to BGR
+    (``tables`` :func:`_colour_tables`) into ``frame`` (H, W, 3) uint8, and gather their
+    pixels ``frame[i step, j step]`` inside the BGR box ``[lo, hi]`` (i < H // step,
+    j < W // step): ``xy`` (m, 2) int32 out, coarse column and row; ``bgr`` (m, 3) uint8
+    out (m >= 64 n). ``drawn`` (n,) uint8 out: 1 where the MCU was written. Returns how
+    many pixels were gathered. A block not written holds no pixel in the range: its pixels
+    in ``frame`` keep their colour."""
     ws = np.zeros(64, np.int64)
     ycc = np.zeros((3, 64), np.uint8)
     h, w = frame.shape[0], frame.shape[1]
     rows, cols = h // step, w // step
     found = 0
     for it in range(n):
-        for c in range(3):
-            _idct_islow(coefs[it, c], quant[c], limit, ycc[c], ws)
         y0 = (state[it, 0] // nbx) * 8
         x0 = (state[it, 0] % nbx) * 8
         bh, bw = min(8, h - y0), min(8, w - x0)
-        # each component's cells, from its least to its largest value in the frame
-        lo0 = lo1 = lo2 = 255
-        hi0 = hi1 = hi2 = 0
-        for i in range(bh):
-            for j in range(bw):
-                k = i * 8 + j
-                lo0, hi0 = min(lo0, ycc[0, k]), max(hi0, ycc[0, k])
-                lo1, hi1 = min(lo1, ycc[1, k]), max(hi1, ycc[1, k])
-                lo2, hi2 = min(lo2, ycc[2, k]), max(hi2, ycc[2, k])
-        drawn[it] = _any_inside(colours, lo0 // _CELL, hi0 // _CELL + 1, lo1 // _CELL,
-                                hi1 // _CELL + 1, lo2 // _CELL, hi2 // _CELL + 1)
+        # each component's cells, from its least to its largest value in the frame, Cr, Cb
+        # then Y, each tested once transformed, the others' cells all taken (a box holding
+        # the final one: none of its colours in the range, none of the block's): most blocks
+        # that pass the bound fail on one component, and need no other transform
+        lo0 = lo1 = lo2 = 0
+        hi0 = hi1 = hi2 = 256 // _CELL
+        drawn[it] = 1
+        for c in (2, 1, 0):
+            _idct_islow(coefs[it, c], quant[c], limit, ycc[c], ws)
+            least, most = _value_range(ycc[c], bh, bw)
+            if c == 2:
+                lo2, hi2 = least // _CELL, most // _CELL + 1
+            elif c == 1:
+                lo1, hi1 = least // _CELL, most // _CELL + 1
+            else:
+                lo0, hi0 = least // _CELL, most // _CELL + 1
+            if not _any_inside(colours, lo0, hi0, lo1, hi1, lo2, hi2):
+                drawn[it] = 0
+                break
         if not drawn[it]:
             continue
         for i in range(bh):
