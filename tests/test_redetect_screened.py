@@ -19,7 +19,8 @@ from recorders.record import jpeg_params
 
 SAMPLE = Path(__file__).resolve().parents[1] / "samples" / "throw.mcap"
 RANGES = [HsvRange(), HsvRange(100, 130, 120, 255, 70, 255), HsvRange(170, 10, 60, 255, 40, 255),
-          HsvRange(35, 85, 40, 255, 40, 255)]  # orange, blue, red (wrapping), the field's green
+          HsvRange(35, 85, 40, 255, 40, 255),  # orange, blue, red (wrapping), the field's green
+          HsvRange(0, 179, 0, 20, 245, 255)]  # the lines' brightest white (Y above 240 only)
 
 
 @pytest.fixture(scope="module")
@@ -36,7 +37,7 @@ def _same(a, b) -> bool:
                                                  (a.area, b.area), (a.score, b.score)))
 
 
-@pytest.mark.parametrize("hsv", RANGES, ids=["orange", "blue", "red", "green"])
+@pytest.mark.parametrize("hsv", RANGES, ids=["orange", "blue", "red", "green", "white"])
 def test_screened_candidates_are_the_decoded_frames(frames, hsv):
     detector = BallDetector(hsv, 5, compiled=True)
     decoder = J.ScreenedDecoder(detector)
@@ -118,7 +119,7 @@ def test_bound_keeps_every_block_with_a_pixel_in_range():
         assert not (drawn & ~kept).any()
 
 
-@pytest.mark.parametrize("hsv", RANGES, ids=["orange", "blue", "red", "green"])
+@pytest.mark.parametrize("hsv", RANGES, ids=["orange", "blue", "red", "green", "white"])
 def test_blocks_drawn_hold_every_pixel_in_range(frames, hsv):
     """Of the blocks that pass the bound, only those whose exact Y, Cb, Cr values' box
     holds a colour of the range are converted and drawn: every pixel in the range is in one
