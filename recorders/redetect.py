@@ -669,7 +669,7 @@ class _Redetector:
 
             self.screened = ScreenedDecoder(self.detector)
 
-    def __call__(self, blob: bytes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def __call__(self, blob: bytes | memoryview) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         import cv2
 
         if self.screened is not None:

@@ -850,7 +850,7 @@ def _images(f: _Finished, camera_of: dict[str, int], topics: list[str],
                     order += 1
 
 
-def parse_image(data: bytes, path) -> S.CompressedImage:
+def parse_image(data: bytes | memoryview, path) -> S.CompressedImage:
     from google.protobuf.message import DecodeError
 
     try:
