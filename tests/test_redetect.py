@@ -139,12 +139,13 @@ def test_compiled_screen_and_small_windows_give_the_same_session(tmp_path, monke
     for name in ("frame_time_ns", "frame_camera", "frame_index", "cand_frame", "cand_uv",
                  "cand_radius", "cand_score"):
         assert_array_equal(getattr(b, name), getattr(a, name), err_msg=name)
-    # the first two tasks in a first pool with OpenCV's screen (both started before numba
-    # is loaded here), the others in a second one (other processes) with the compiled screen
+    # the first two tasks in a first pool with OpenCV's screen (those its workers started
+    # before numba was loaded here: both, unless the load beat the pool's queue), the others
+    # in a second one (other processes) with the compiled screen, each task once
     tasks = [line.split() for line in (tmp_path / "tasks.txt").read_text().splitlines()]
     plain = {pid for pid, compiled in tasks if compiled == "False"}
     fast = {pid for pid, compiled in tasks if compiled == "True"}
-    assert len(tasks) > 2 and sum(c == "False" for _p, c in tasks) == 2
+    assert len(tasks) > 2 and 1 <= sum(c == "False" for _p, c in tasks) <= 2
     assert plain and fast and not plain & fast and str(os.getpid()) not in plain | fast
 
 
