@@ -17,12 +17,14 @@ compiled passes instead of by :func:`cv2.imdecode`:
    in the range. A block none of whose possible colours is in the range holds no pixel of
    the detector's mask. On the recorded sessions 2 % of the blocks of a frame pass;
 2. **the blocks that pass** are decoded again from the bit position the first pass noted
-   (:func:`decode_blocks`), inverse-transformed by libjpeg's default integer IDCT
-   (``jidctint.c``: the same integer arithmetic, hence the same pixels; libjpeg-turbo's SIMD
-   versions are bit-exact with it) and converted to BGR with libjpeg's tables
-   (``jdcolor.c``) into a frame whose other pixels hold a colour outside the range
-   (:func:`render_blocks`), which also gathers the coarse pixels of those blocks inside the
-   detector's BGR box.
+   (:func:`screen_blocks` with ``store``), inverse-transformed by libjpeg's default integer
+   IDCT (``jidctint.c``: the same integer arithmetic, hence the same pixels; libjpeg-turbo's
+   SIMD versions are bit-exact with it) and screened again by the same table on the box of
+   their exact Y, Cb, Cr values (:func:`render_blocks`): the bound is loose where a block
+   holds an edge (the white lines of a green field: 340 blocks of a 1280 x 720 frame pass
+   the bound, 15 this); only those are converted to BGR with libjpeg's tables
+   (``jdcolor.c``) into a frame whose other pixels hold a colour outside the range, and
+   their coarse pixels inside the detector's BGR box gathered.
 
 The detector then runs on that frame from those coarse pixels
 (:meth:`~recorders.detect.BallDetector.detect_screened`). Its candidates depend on the
@@ -364,6 +366,16 @@ def _extended(buf: np.uint64, s: int) -> tuple[int, np.uint64]:
     return v, buf << np.uint64(s)
 
 
+@kernel(inline=True)
+def _any_inside(colours: np.ndarray, lo0: int, hi0: int, lo1: int, hi1: int, lo2: int,
+                hi2: int) -> bool:
+    """Whether a cell of ``[lo0, hi0) x [lo1, hi1) x [lo2, hi2)`` (Y, Cb, Cr cells) of the
+    colour table holds a colour in the range (``colours`` its prefix sums, :func:`_ycc_table`)."""
+    return (colours[hi0, hi1, hi2] - colours[lo0, hi1, hi2] - colours[hi0, lo1, hi2]
+            - colours[hi0, hi1, lo2] + colours[lo0, lo1, hi2] + colours[lo0, hi1, lo2]
+            + colours[hi0, lo1, lo2] - colours[lo0, lo1, lo2]) > 0
+
+
 @kernel
 def screen_blocks(data: np.ndarray, start: int, nbx: int, nby: int, restart: int,
                   dc_table: np.ndarray, ac_table: np.ndarray, fast: np.ndarray,
@@ -513,10 +525,7 @@ def screen_blocks(data: np.ndarray, start: int, nbx: int, nby: int, restart: int
                 lo1, hi1 = lo, hi
             else:
                 lo2, hi2 = lo, hi
-        inside = (colours[hi0, hi1, hi2] - colours[lo0, hi1, hi2] - colours[hi0, lo1, hi2]
-                  - colours[hi0, hi1, lo2] + colours[lo0, lo1, hi2] + colours[lo0, hi1, lo2]
-                  + colours[hi0, lo1, lo2] - colours[lo0, lo1, lo2])
-        if inside > 0:
+        if _any_inside(colours, lo0, hi0, lo1, hi1, lo2, hi2):
             state[n_out, 0] = mcu
             state[n_out, 1] = s_pos
             state[n_out, 2] = np.int64(s_buf)
@@ -616,31 +625,69 @@ def _idct_islow(coef: np.ndarray, quant: np.ndarray, limit: np.ndarray, out: np.
             out[w + j] = limit[_descale(y[j], 18) & 1023]
 
 
+@kernel(inline=True)
+def _value_range(values: np.ndarray, bh: int, bw: int) -> tuple[int, int]:
+    """(least, largest) of a block's ``values`` (64,) uint8 row-major in its first ``bh``
+    rows and ``bw`` columns (those in the frame)."""
+    least, most = 255, 0
+    for i in range(bh):
+        for j in range(bw):
+            v = np.int64(values[i * 8 + j])
+            least, most = min(least, v), max(most, v)
+    return least, most
+
+
 @kernel
 def render_blocks(coefs: np.ndarray, state: np.ndarray, n: int, nbx: int,
                   quant: np.ndarray, limit: np.ndarray, tables: np.ndarray,
-                  frame: np.ndarray, step: int, lo: np.ndarray, hi: np.ndarray,
-                  xy: np.ndarray, bgr: np.ndarray) -> int:
-    """Inverse-transform and convert the first ``n`` MCUs of ``state`` (their
-    coefficients ``coefs`` (n, 3, 64)) into ``frame`` (H, W, 3) uint8 BGR, as libjpeg does
-    (``quant`` (3, 64) natural order, ``limit`` :func:`_idct_limit`, ``tables``
-    :func:`_colour_tables`); gather their pixels ``frame[i step, j step]`` inside the BGR
-    box ``[lo, hi]`` (i < H // step, j < W // step): ``xy`` (m, 2) int32 out, coarse
-    column and row; ``bgr`` (m, 3) uint8 out (m >= 64 n). Returns how many."""
+                  colours: np.ndarray, frame: np.ndarray, step: int, lo: np.ndarray,
+                  hi: np.ndarray, xy: np.ndarray, bgr: np.ndarray, drawn: np.ndarray) -> int:
+    """Inverse-transform the first ``n`` MCUs of ``state`` (their coefficients ``coefs``
+    (n, 3, 64)) as libjpeg does (``quant`` (3, 64) natural order, ``limit``
+    :func:`_idct_limit`) and, where a colour of the box of their exact Y, Cb and Cr values
+    is in the range (``colours`` :func:`_ycc_table`: the screen again, on the pixels' own
+    values instead of their bound; most blocks that pass the bound, e.g. along the white
+    lines of a green field, do not, most of them on their Cr alone), convert them to BGR
+    (``tables`` :func:`_colour_tables`) into ``frame`` (H, W, 3) uint8, and gather their
+    pixels ``frame[i step, j step]`` inside the BGR box ``[lo, hi]`` (i < H // step,
+    j < W // step): ``xy`` (m, 2) int32 out, coarse column and row; ``bgr`` (m, 3) uint8
+    out (m >= 64 n). ``drawn`` (n,) uint8 out: 1 where the MCU was written. Returns how
+    many pixels were gathered. A block not written holds no pixel in the range: its pixels
+    in ``frame`` keep their colour."""
     ws = np.zeros(64, np.int64)
     ycc = np.zeros((3, 64), np.uint8)
     h, w = frame.shape[0], frame.shape[1]
     rows, cols = h // step, w // step
     found = 0
     for it in range(n):
-        for c in range(3):
-            _idct_islow(coefs[it, c], quant[c], limit, ycc[c], ws)
         y0 = (state[it, 0] // nbx) * 8
         x0 = (state[it, 0] % nbx) * 8
-        for i in range(min(8, h - y0)):
+        bh, bw = min(8, h - y0), min(8, w - x0)
+        # each component's cells, from its least to its largest value in the frame, Cr, Cb
+        # then Y, each tested once transformed, the others' cells all taken (a box holding
+        # the final one: none of its colours in the range, none of the block's): most blocks
+        # that pass the bound fail on one component, and need no other transform
+        lo0 = lo1 = lo2 = 0
+        hi0 = hi1 = hi2 = 256 // _CELL
+        drawn[it] = 1
+        for c in (2, 1, 0):
+            _idct_islow(coefs[it, c], quant[c], limit, ycc[c], ws)
+            least, most = _value_range(ycc[c], bh, bw)
+            if c == 2:
+                lo2, hi2 = least // _CELL, most // _CELL + 1
+            elif c == 1:
+                lo1, hi1 = least // _CELL, most // _CELL + 1
+            else:
+                lo0, hi0 = least // _CELL, most // _CELL + 1
+            if not _any_inside(colours, lo0, hi0, lo1, hi1, lo2, hi2):
+                drawn[it] = 0
+                break
+        if not drawn[it]:
+            continue
+        for i in range(bh):
             yy = y0 + i
             coarse_row = yy % step == 0 and yy // step < rows
-            for j in range(min(8, w - x0)):
+            for j in range(bw):
                 xx = x0 + j
                 y = np.int64(ycc[0, i * 8 + j])
                 cb = ycc[1, i * 8 + j]
@@ -665,11 +712,14 @@ def render_blocks(coefs: np.ndarray, state: np.ndarray, n: int, nbx: int,
 
 @kernel
 def clear_blocks(frame: np.ndarray, state: np.ndarray, n: int, nbx: int,
-                 fill: np.ndarray) -> None:
-    """Give the blocks of the first ``n`` MCUs of ``state`` the colour ``fill`` (3,) uint8
-    again in ``frame`` (H, W, 3) uint8."""
+                 fill: np.ndarray, drawn: np.ndarray) -> None:
+    """Give the blocks of the first ``n`` MCUs of ``state`` that were ``drawn`` ((n,) uint8,
+    :func:`render_blocks`) the colour ``fill`` (3,) uint8 again in ``frame`` (H, W, 3)
+    uint8."""
     h, w = frame.shape[0], frame.shape[1]
     for it in range(n):
+        if not drawn[it]:
+            continue
         y0 = (state[it, 0] // nbx) * 8
         x0 = (state[it, 0] % nbx) * 8
         for yy in range(y0, min(y0 + 8, h)):
@@ -742,14 +792,15 @@ class ScreenedDecoder:
         s = self.detector.downscale
         xy = np.empty((64 * n, 2), np.int32)
         bgr = np.empty((64 * n, 3), np.uint8)
+        drawn = np.zeros(n, np.uint8)
         try:
             found = render_blocks(coefs, state, n, nbx, h.quant, self.limit, self.tables,
-                                  frame, s, self.lo, self.hi, xy, bgr)
+                                  self.table, frame, s, self.lo, self.hi, xy, bgr, drawn)
             if self._stride(h.height, h.width, s):
                 return self.detector.detect_screened(frame, xy[:found], bgr[:found])
             return self.detector.detect(frame)
         finally:
-            clear_blocks(frame, state, n, nbx, self.fill)
+            clear_blocks(frame, state, n, nbx, self.fill, drawn)
 
 
 def _outside(hsv) -> np.ndarray | None:

@@ -27,7 +27,9 @@ OpenCV and numpy once (about 0.12 s, before the workers are forked: they inherit
 - the workers are forked as soon as the chunks are located; with the compiled screen, a
   first pool detects a few short tasks with OpenCV's screen while this process loads numba
   (about 0.5 s of one core, once), then a second pool forked with numba loaded detects the
-  rest (:func:`_detecting`): no core waits for numba;
+  rest, the first pool's tasks not started by then included (:func:`_detecting`): no core
+  waits for numba, and only what the first pool's workers took meanwhile is detected the
+  dearer way (about 2.5 ms more a frame: 250 frames at load 8-15, ~90 on an idle machine);
 - the tasks shrink towards the end (:func:`_guided`), so the workers finish together;
 - every task is queued at once and the main process copies the session meanwhile
   (``copy_session`` takes the detections as a callable, called once the rest is copied),
@@ -40,7 +42,14 @@ block's colours from its coefficients, and inverse-transforms only the blocks th
 a pixel in the colour range (about 2 % of a recorded frame), bit-exactly as libjpeg does;
 the detector runs on those: the candidates of the frame decoded whole, to the last bit
 (the tests compare them), for about 60 % of a whole decode's CPU (the entropy decoding,
-which every exact decode pays, is most of what is left). A frame it does not take
+which every exact decode pays, is most of what is left). A worker's CPU per frame (session
+21, 2,160 frames of 1280 x 720, one process, load 10-15): reading the chunk 0.05 ms,
+decompressing 0.06, its CRC 0.10, the frame's bytes 0.01 (found in place,
+:func:`pslog.log.reader.image_data`: the protobuf parser's copy cost 0.10), the header 0.03,
+entropy decoding and the bound 3.3-3.4, decoding the ~340 blocks that pass the bound again
+0.2, their transforms and second screen on their exact values (~15 blocks left, drawn)
+0.2-0.3, the detector 0.25-0.7 (0.36-0.75 before its pooled mask was labelled from its
+set cells only); returning the results 0.015. A frame it does not take
 (progressive, subsampled, EXIF, damaged, ...) is decoded whole by ``cv2.imdecode``.
 Otherwise every frame is decoded whole and detected: the decode and detection alone bound
 two cores to about 450 frames/s, before the session is read and written.
@@ -78,9 +87,10 @@ from .detect import BallDetector, HsvRange
 
 _BATCH = 64  # images per batch when one process decodes and detects
 # images per task of the first pool while this process loads the compiled screen, and how
-# many such tasks (more than it can start meanwhile: the rest go to the compiled pool)
-_HEAD = 48
-_HEAD_TASKS = 6
+# many such tasks at most (more than it can start meanwhile; those it has not started when
+# numba is loaded go to the compiled pool: a frame costs it ~1.7 ms more, 1280 x 720)
+_HEAD = 16
+_HEAD_TASKS = 18
 _TAIL = 12  # images in the last, shortest tasks (every worker then finishes at once)
 _PARALLEL_FROM = 400  # images; below this one process is faster than starting a pool
 # images from which the detector's compiled screen is used: loading numba costs about 0.5 s
@@ -278,6 +288,11 @@ def _detecting(src, rig_names, row_of: dict, hsv: HsvRange, max_candidates: int,
             with _stop_signals_blocked():
                 pools.append(ProcessPoolExecutor(max_workers=workers,
                                                  initializer=_ignore_stop_signals))
+                # the first pool's tasks not started yet go to the compiled one, first: only
+                # what its workers took while numba loaded is detected the slower way
+                for i in range(first):
+                    if futures[i].cancel():
+                        futures[i] = submit(pools[1], i, True)
                 futures += [submit(pools[1], i, True) for i in range(first, n_tasks)]
             pools[0].shutdown(wait=False)  # its workers end once their tasks are done
         if plan is None:
@@ -494,7 +509,7 @@ def _read_and_detect(src, chunks: list[tuple[int, int, int]], cameras: dict,
     decompressed and checked as every reader checks it), and decode and detect each image
     in it where it lies in the decompressed records (no copy of its bytes)."""
     from pslog.log import _mcapio as io
-    from pslog.log.reader import parse_image
+    from pslog.log.reader import image_data
 
     path = Path(src)
     from pslog.log.copy import record_layout
@@ -515,7 +530,7 @@ def _read_and_detect(src, chunks: list[tuple[int, int, int]], cameras: dict,
                 raise io.damaged_error(path, offset, str(exc)) from None
             layouts[offset] = record_layout(records)
             for cid, seq, t, a, b in io.message_spans(records, cameras):
-                data = parse_image(memoryview(records)[a:b], path).data
+                data = image_data(records, a, b, path)
                 camera.append(cameras[cid][0])
                 index.append(seq)
                 key.append((t, rank, cameras[cid][1], a))
@@ -654,7 +669,7 @@ class _Redetector:
 
             self.screened = ScreenedDecoder(self.detector)
 
-    def __call__(self, blob: bytes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def __call__(self, blob: bytes | memoryview) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         import cv2
 
         if self.screened is not None:

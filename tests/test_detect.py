@@ -311,3 +311,26 @@ def test_nearest_subsampling_is_a_stride_where_opencv_says_so(h, w, s, stride):
     """The compiled screen is used only where OpenCV's nearest-neighbour resize takes every
     s-th pixel (1280 // 3 = 426 columns are spread over 1280: not a stride)."""
     assert detect._nearest_is_stride(h, w, s) is stride
+
+
+def test_pooled_part_is_labelled_as_the_whole_pooled_mask():
+    """The coarse pass keeps only the part of the pooled mask from its first set cells' even
+    row and column to its last ones (labelling the empty rest cost 0.1 ms a 1280 x 720
+    frame): OpenCV labels the components of that part in the whole mask's order, with its
+    statistics once offset (random masks of random sizes, sparse to dense; an odd first
+    row or column reorders them)."""
+    rng = np.random.default_rng(12)
+    detector = BallDetector()
+    for _ in range(400):
+        ch, cw = int(rng.integers(4, 120)), int(rng.integers(4, 200))
+        n = int(rng.integers(1, ch * cw // 2))
+        xy = np.stack([rng.integers(0, cw, n), rng.integers(0, ch, n)], axis=1).astype(np.int32)
+        cells, x0, y0 = detector._pooled(xy, np.tile(np.array(ORANGE_BGR, np.uint8), (n, 1)),
+                                         ch, cw)
+        whole = np.zeros((-(-ch // 4), -(-cw // 4)), np.uint8)
+        whole[xy[:, 1] // 4, xy[:, 0] // 4] = 255
+        _, _, expected, _ = cv2.connectedComponentsWithStats(whole, connectivity=8)
+        _, _, got, _ = cv2.connectedComponentsWithStats(cells, connectivity=8)
+        got[1:, 0] += x0
+        got[1:, 1] += y0
+        assert_array_equal(got[1:], expected[1:])

@@ -124,3 +124,60 @@ def test_record_layout_is_none_for_other_records():
     assert C.record_layout(channel) is None
     message = bytes([io.OP_MESSAGE]) + (22).to_bytes(8, "little") + bytes(22)
     assert C.record_layout(message + b"\x05") is None  # records do not end with the last
+
+
+def _messages(path: Path, n: int) -> list[bytes]:
+    """The first ``n`` image messages' data of a session (as stored)."""
+    with open(path, "rb") as f:
+        return [m.data for _s, c, m in make_reader(f).iter_messages()
+                if c.topic.endswith("/image")][:n]
+
+
+def test_image_data_is_the_parsers_without_a_copy():
+    """``image_data`` (the frame's bytes found in the stored message, no copy: what redetect's
+    workers decode) gives what protobuf's parser gives, on the sample's messages placed
+    anywhere in a buffer."""
+    from pslog.log.reader import image_data, parse_image
+
+    messages = _messages(SAMPLE, 12)
+    assert len(messages) == 12
+    for m in messages:
+        records = b"\x00" * 7 + m + b"\xff" * 5
+        got = image_data(records, 7, 7 + len(m), SAMPLE)
+        assert isinstance(got, memoryview)  # a view, not a copy
+        assert bytes(got) == parse_image(m, SAMPLE).data
+        assert len(got) > 1000
+
+
+def _field(number: int, payload: bytes) -> bytes:
+    return bytes([number << 3 | 2]) + bytes([len(payload)]) + payload
+
+
+@pytest.mark.parametrize("message", [
+    _field(4, b"cam1") + _field(2, b"first") + _field(3, b"jpeg") + _field(2, b"second"),
+    _field(1, b"\x08\x05\x10\x07") + _field(2, b"\xff\xd8abc"),
+    _field(2, b""),
+    b"",
+    _field(4, b"\xff\xfe") + _field(2, b"data"),  # frame_id not UTF-8: the parser's error
+    _field(1, b"\x18\x05") + _field(2, b"data"),  # a timestamp field 3: the parser's choice
+    _field(5, b"x") + _field(2, b"data"),  # an unknown field
+    b"\x10\x05" + _field(2, b"data"),  # field 2 as a varint
+    b"\x10\x02\x12\x00",  # the same, then an empty data field
+    _field(1, b"\x0c\x05") + _field(2, b"data"),  # a group's end in the timestamp
+    _field(2, b"data")[:-1],  # cut short
+    b"\x12\x80",  # a length varint that does not end
+])
+def test_image_data_is_the_parsers_on_any_message(message):
+    """The last ``data`` field wins, as in protobuf; anything pslog does not write goes to
+    the parser, whose bytes or error (one line, LogFormatError) come out unchanged."""
+    from pslog.errors import LogFormatError
+    from pslog.log.reader import image_data, parse_image
+
+    try:
+        want = parse_image(message, "s.mcap").data
+    except LogFormatError as exc:
+        with pytest.raises(LogFormatError) as got:
+            image_data(b"ab" + message, 2, 2 + len(message), "s.mcap")
+        assert str(got.value) == str(exc)
+        return
+    assert bytes(image_data(b"ab" + message + b"cd", 2, 2 + len(message), "s.mcap")) == want

@@ -19,7 +19,8 @@ from recorders.record import jpeg_params
 
 SAMPLE = Path(__file__).resolve().parents[1] / "samples" / "throw.mcap"
 RANGES = [HsvRange(), HsvRange(100, 130, 120, 255, 70, 255), HsvRange(170, 10, 60, 255, 40, 255),
-          HsvRange(35, 85, 40, 255, 40, 255)]  # orange, blue, red (wrapping), the field's green
+          HsvRange(35, 85, 40, 255, 40, 255),  # orange, blue, red (wrapping), the field's green
+          HsvRange(0, 179, 0, 20, 245, 255)]  # the lines' brightest white (Y above 240 only)
 
 
 @pytest.fixture(scope="module")
@@ -36,7 +37,7 @@ def _same(a, b) -> bool:
                                                  (a.area, b.area), (a.score, b.score)))
 
 
-@pytest.mark.parametrize("hsv", RANGES, ids=["orange", "blue", "red", "green"])
+@pytest.mark.parametrize("hsv", RANGES, ids=["orange", "blue", "red", "green", "white"])
 def test_screened_candidates_are_the_decoded_frames(frames, hsv):
     detector = BallDetector(hsv, 5, compiled=True)
     decoder = J.ScreenedDecoder(detector)
@@ -67,8 +68,10 @@ def _all_blocks(blob: bytes) -> tuple[np.ndarray, int]:
                     h.symbols, h.weights, h.quant, table, state, True, coefs)
     frame = np.zeros((h.height, h.width, 3), np.uint8)
     xy, bgr = np.zeros((64 * n, 2), np.int32), np.zeros((64 * n, 3), np.uint8)
-    J.render_blocks(coefs, state, n, nbx, h.quant, J._idct_limit(), J._colour_tables(), frame,
-                    2, np.zeros(3, np.uint8), np.full(3, 255, np.uint8), xy, bgr)
+    drawn = np.zeros(n, np.uint8)
+    J.render_blocks(coefs, state, n, nbx, h.quant, J._idct_limit(), J._colour_tables(), table,
+                    frame, 2, np.zeros(3, np.uint8), np.full(3, 255, np.uint8), xy, bgr, drawn)
+    assert drawn.all()
     return frame, n
 
 
@@ -111,6 +114,52 @@ def test_bound_keeps_every_block_with_a_pixel_in_range():
         kept, n = _screened(decoder, blob)
         assert n < 0.5 * 32 * 16  # most blocks screened out
         assert not (mask & ~kept).any()  # no pixel in range outside a kept block
+        drawn = _drawn(decoder, blob)
+        assert not (mask & ~drawn).any()  # nor outside a block drawn (its exact values)
+        assert not (drawn & ~kept).any()
+
+
+@pytest.mark.parametrize("hsv", RANGES, ids=["orange", "blue", "red", "green", "white"])
+def test_blocks_drawn_hold_every_pixel_in_range(frames, hsv):
+    """Of the blocks that pass the bound, only those whose exact Y, Cb, Cr values' box
+    holds a colour of the range are converted and drawn: every pixel in the range is in one
+    (the decoded frame's mask); for the ball's orange, most blocks that pass the bound are
+    not drawn."""
+    decoder = J.ScreenedDecoder(BallDetector(hsv, 5, compiled=True))
+    passed = drawn_total = 0
+    for blob in frames[::9]:
+        decoded = cv2.imdecode(np.frombuffer(blob, np.uint8), cv2.IMREAD_COLOR)
+        mask = hsv.mask(cv2.cvtColor(decoded, cv2.COLOR_BGR2HSV)) > 0
+        kept, _n = _screened(decoder, blob)
+        drawn = _drawn(decoder, blob)
+        assert not (mask & ~drawn).any() and not (drawn & ~kept).any()
+        passed += kept.sum()
+        drawn_total += drawn.sum()
+    if hsv == RANGES[0]:  # the ball's orange: the lines' blocks pass the bound, not this
+        assert 0 < drawn_total < 0.5 * passed
+
+
+def _drawn(decoder: J.ScreenedDecoder, blob: bytes) -> np.ndarray:
+    """(H, W) bool: the pixels of the blocks ``render_blocks`` draws of those that pass the
+    bound."""
+    data = np.frombuffer(blob, np.uint8)
+    h = J._Header(data)
+    nbx, nby = -(-h.width // 8), -(-h.height // 8)
+    state = np.zeros((nbx * nby, 8), np.int64)
+    coefs = np.zeros((nbx * nby, 3, 64), np.int16)
+    n = J.screen_blocks(data, h.start, nbx, nby, h.restart, h.dc, h.ac, h.fast, h.maxcode,
+                        h.offset, h.symbols, h.weights, h.quant, decoder.table, state, False,
+                        coefs)
+    J.screen_blocks(data, h.start, nbx, n, h.restart, h.dc, h.ac, h.fast, h.maxcode, h.offset,
+                    h.symbols, h.weights, h.quant, decoder.table, state, True, coefs)
+    frame = np.zeros((h.height, h.width, 3), np.uint8)
+    xy, bgr = np.zeros((64 * n, 2), np.int32), np.zeros((64 * n, 3), np.uint8)
+    drawn = np.zeros(n, np.uint8)
+    J.render_blocks(coefs, state, n, nbx, h.quant, J._idct_limit(), J._colour_tables(),
+                    decoder.table, frame, 2, decoder.lo, decoder.hi, xy, bgr, drawn)
+    kept = np.zeros(nbx * nby, bool)
+    kept[state[:n, 0][drawn > 0]] = True
+    return kept.reshape(nby, nbx).repeat(8, 0).repeat(8, 1)[:h.height, :h.width]
 
 
 def _screened(decoder: J.ScreenedDecoder, blob: bytes) -> tuple[np.ndarray, int]:

@@ -850,7 +850,7 @@ def _images(f: _Finished, camera_of: dict[str, int], topics: list[str],
                     order += 1
 
 
-def parse_image(data: bytes, path) -> S.CompressedImage:
+def parse_image(data: bytes | memoryview, path) -> S.CompressedImage:
     from google.protobuf.message import DecodeError
 
     try:
@@ -858,6 +858,69 @@ def parse_image(data: bytes, path) -> S.CompressedImage:
     except DecodeError as exc:  # only a chunk written without CRCs can get here damaged
         raise LogFormatError(f"{path}: an image does not decode ({exc}); run 'pslog recover "
                              f"{path} -o FIXED.mcap' to salvage the rest") from None
+
+
+def image_data(records, start: int, end: int, path) -> bytes | memoryview:
+    """The ``data`` (the encoded frame) of the ``foxglove.CompressedImage`` message
+    ``records[start:end]``: a view of its bytes in ``records`` (no copy: ``pslog redetect``
+    reads a 250 kB frame at about 0.1 ms less than :func:`parse_image`'s copy) where the
+    message holds exactly what pslog writes -- fields 1 (a timestamp of varints 1 and 2), 4
+    and 3 (UTF-8 strings) and 2 (bytes), each of its own wire type -- else
+    :func:`parse_image`'s (the same bytes, the same errors)."""
+    buf = memoryview(records)
+    span = _image_span(buf, start, end)
+    if span is None:
+        return parse_image(buf[start:end], path).data
+    return buf[span[0]:span[1]]
+
+
+def _one_varint(buf: memoryview, at: int, end: int) -> tuple[int, int]:
+    """(value, position after it) of the varint at ``buf[at]``; (-1, 0) if it does not end
+    before ``end`` within 10 bytes."""
+    value = shift = 0
+    for pos in range(at, min(at + 10, end)):
+        byte = buf[pos]
+        value |= (byte & 127) << shift
+        if byte < 128:
+            return value, pos + 1
+        shift += 7
+    return -1, 0
+
+
+def _image_span(buf: memoryview, at: int, end: int) -> tuple[int, int] | None:
+    """(start, end) of the last ``data`` field of the CompressedImage ``buf[at:end]``, or
+    None where the message holds anything else than :func:`image_data` says (a field of
+    another number or wire type, a varint or length beyond it, a timestamp with other
+    fields, a string that is not UTF-8): protobuf's parser then decides."""
+    span = None
+    while at < end:
+        tag, at = _one_varint(buf, at, end)
+        if tag < 0 or tag & 7 != 2:
+            return None
+        length, at = _one_varint(buf, at, end)
+        if length < 0 or at + length > end:
+            return None
+        field = tag >> 3
+        if field == 2:
+            span = (at, at + length)
+        elif field == 1:  # google.protobuf.Timestamp: seconds (1), nanos (2), varints
+            pos = at
+            while pos < at + length:
+                key, pos = _one_varint(buf, pos, at + length)
+                if key not in (8, 16):
+                    return None
+                _value, pos = _one_varint(buf, pos, at + length)
+                if pos == 0:
+                    return None
+        elif field in (3, 4):
+            try:
+                bytes(buf[at:at + length]).decode("utf-8")
+            except UnicodeDecodeError:
+                return None
+        else:
+            return None
+        at += length
+    return span
 
 
 # ---- columnar fast path ---------------------------------------------------------------------
