@@ -1021,9 +1021,9 @@ def decide_frame(fid, a, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k
         for i in range(k):
             if i != best_row and reason[i] < 0:
                 reason[i] = _OUTSCORED
-        if differs[best_row] >= 2.0:  # gating._Decider.decide: untracked and _denied
-            within = 0
-            denied = False
+        if differs[best_row] >= 2.0:  # gating._Decider.decide: untracked and _denied,
+            within = 0  # or a frame of several candidates
+            denied = k >= 2
             for b in range(m):
                 r = r_dec[best_row, b]
                 if r <= 1.0:

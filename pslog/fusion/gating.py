@@ -83,8 +83,9 @@ EPIPOLAR, TRACK, MOTION, OUTSCORED = range(4)
 #: The ``reason`` code of a kept candidate whose choice is CONTESTED (-1: any other kept one):
 #: chosen before the track first predicted, on fewer than two supports whose rays meet,
 #: while another available camera denied it (its carried candidates off the line, or a
-#: second support whose ray misses): the cameras disagree and nothing else can judge
-#: (docs/methods.md, "A contested start"). It is in doubt (:func:`doubt_variance`).
+#: second support whose ray misses) or other candidates of its frame were refused: nothing
+#: but one epipolar line judged it (docs/methods.md, "A contested start"). It is in doubt
+#: (:func:`doubt_variance`).
 CONTESTED = -2
 REASON_TEXT = {
     "epipolar": "no other camera's detections near that time lie near its epipolar line",
@@ -1366,11 +1367,14 @@ class _Decider:
             for i in range(lo, hi):
                 if i != best_row and reason[i] < 0:
                     reason[i] = OUTSCORED
-            if best_row in untracked and _denied(rows[best_row]):
-                # chosen on one support before the track could predict, while another camera
-                # denies it: the session's start, where no track can judge (paper3 in
-                # bench_dirty.py --more --misses 0.1: cam3's first frame holds only the static
-                # object, chosen on cam1's line; type A's first point 4.1 m off)
+            if best_row in untracked and (hi - lo >= 2 or _denied(rows[best_row])):
+                # chosen on one support before the track could predict (the session's start:
+                # nothing else can judge) while another camera denies it (paper3 in
+                # bench_dirty.py --more --first-seed 1200 --misses 0.1: cam3's first frame
+                # holds only the static object, on cam1's line, off cam2's; type A's first
+                # point 4.1 m off), or among other candidates of its frame that the one line
+                # refused (paper2, --first-seed 700: the object beside the refused ball,
+                # type A 310 mm): a guess, in doubt
                 reason[best_row] = CONTESTED
             picked[camera[lo]] = (uv[best_row][0], uv[best_row][1], t_ns[lo])
             self.verified |= best_row not in unverified
