@@ -36,7 +36,10 @@ A candidate ``x`` of camera ``a`` at (corrected) time ``t`` is judged by three g
 A candidate is accepted when the epipolar gate accepts it (some other camera supports it)
 and the track and motion gates do not object, or when the track gate alone accepts it
 firmly (its ray within ``track_alone_m`` of the prediction); one nothing can judge is kept
-only in the session's first frames. A candidate supported by two or more other cameras
+only in the session's first frames. Before the track first predicts, a choice one epipolar
+line alone made while another camera denies it, or beside candidates that line refused, is
+kept but CONTESTED (:data:`CONTESTED`): in doubt, like a choice beside rejected ones.
+A candidate supported by two or more other cameras
 whose rays meet (a point within ``track_m`` of each) is consistent in three views and is
 accepted whatever the track says (that is how the track follows kicks and bounces); rays that
 miss count as one support. Among a frame's accepted candidates the one with the most
