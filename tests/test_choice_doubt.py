@@ -18,6 +18,7 @@ from pslog.evaluation import assess
 from pslog.fusion import FusionOptions, fuse
 from pslog.fusion._prepare import prepare
 from pslog.fusion.gating import (
+    CONTESTED,
     DOUBT_CHANCE,
     DOUBT_RADIUS_PX,
     DOUBT_REJECTIONS,
@@ -81,7 +82,7 @@ def test_a_choice_is_in_doubt_only_beside_its_own_cameras_recent_rejections():
     record = [(int(ti), int(ci), 0, u, v, MOTION) for ti, ci, (u, v) in zip(
         still[0].tolist(), still[1].tolist(), still[2].tolist(), strict=True)]
     stand_in = SimpleNamespace(rejected=[], options=GatingOptions(static_s=0.25), rig=rig,
-                               history_ns=10**9)
+                               history_ns=10**9, contested=set())
     stream = StreamDoubt(stand_in)
     order = np.argsort(t, kind="stable")
     got = np.zeros(len(t))
@@ -157,7 +158,12 @@ def test_a_dirty_sessions_nearest_covariance_is_calibrated_with_the_doubt_not_wi
     rig, det, truth = object_chosen
     options = FusionOptions()
     gated = gate_for(det, rig, "nearest", options)
-    assert gated.doubt_px2 is not None and np.count_nonzero(gated.doubt_px2) == 1
+    # (the cut session's start, before the track first predicts: camera 1's choices among
+    # its ball and the object are contested, "A contested start"; then the object at 3.25 s)
+    start = gated.observations.time_ns < 2.1e9
+    assert gated.doubt_px2 is not None and np.count_nonzero(gated.doubt_px2[~start]) == 1
+    assert np.count_nonzero(gated.doubt_px2[start]) == np.count_nonzero(
+        gated.reason == CONTESTED) == 2
     without = assess(fuse(gated.observations, rig, "nearest", options), truth)[1]
     track = fuse(det, rig, "nearest", options)
     with_doubt = assess(track, truth)[1]

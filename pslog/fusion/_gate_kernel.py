@@ -47,8 +47,9 @@ import numpy as np
 
 from .._jit import kernel
 
-#: rejection codes, as pslog.fusion.gating's
+#: rejection codes, as pslog.fusion.gating's (and its CONTESTED choice's)
 _EPIPOLAR, _TRACK, _MOTION, _OUTSCORED = 0, 1, 2, 3
+_CONTESTED = -2
 _NS = 1_000_000_000
 _MIN_DET = 1e-12
 _I64_MIN = int(np.iinfo(np.int64).min)
@@ -648,7 +649,8 @@ def decide_frame(fid, a, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k
     support by every other camera from every candidate and from the decided ones
     (StreamGate._support), their points, their stillness (gating._stillness_one), the
     choice (gating._Decider.decide of one frame) and what later choices may use of it
-    (gating._can_judge, gating._supporting). Sets ``reason`` (k,) (-1 chosen) and the state.
+    (gating._can_judge, gating._supporting). Sets ``reason`` (k,) (-1 chosen, -2 contested)
+    and the state.
     ``lags``, ``long_lags`` (m,): per camera, the stillness test's frames and the long image
     test's (``ceil(LONG_STILL static_s fps)``); ``long_t`` (m,) s: ``long_lags / fps``
     (gating._still_long's ``T``). ``work``: float64 scratch of at least
@@ -1019,6 +1021,17 @@ def decide_frame(fid, a, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k
         for i in range(k):
             if i != best_row and reason[i] < 0:
                 reason[i] = _OUTSCORED
+        if differs[best_row] >= 2.0:  # gating._Decider.decide: untracked and _denied,
+            within = 0  # or a frame of several candidates
+            denied = k >= 2
+            for b in range(m):
+                r = r_dec[best_row, b]
+                if r <= 1.0:
+                    within += 1
+                elif math.isfinite(r):
+                    denied = True
+            if denied or within >= 2:
+                reason[best_row] = _CONTESTED
         if not (differs[best_row] == 1.0 or differs[best_row] == 3.0):
             verified = True
         if math.isfinite(chosen[best_row, 0]):  # _Track.add, with _age
@@ -1220,7 +1233,8 @@ class GateState:
     def push_decide(self, cam: int, t: int, times: np.ndarray, uv: np.ndarray, xy,
                     old: int) -> list[int]:
         """:meth:`insert`, :meth:`decide` and :meth:`trim` (``old``) of a frame decided as
-        it comes, in one compiled call; its candidates' reason codes (-1 chosen)."""
+        it comes, in one compiled call; its candidates' reason codes (< 0 chosen: -1, or -2
+        contested)."""
         k = len(times)
         if int(self.count[cam]) >= self.frames or k > self.candidates:
             self._grow(2 * self.frames if int(self.count[cam]) >= self.frames else self.frames,
@@ -1234,7 +1248,7 @@ class GateState:
 
     def decide(self, fid: int, cam: int, k: int) -> list[int]:
         """Decide the frame of push id ``fid`` (camera ``cam``, ``k`` candidates): its
-        candidates' reason codes (-1 chosen)."""
+        candidates' reason codes (< 0 chosen: -1, or -2 contested)."""
         decide_frame(fid, cam, self.fi, self.fflag, self.ct, self.cf, self.csup, self.count,
                      self.trk, self.ist, self.F, self.centers, self.k_inv, self.rot,
                      self.still_f, self.lags, self.long_lags, self.long_t, self.opt, self.work,

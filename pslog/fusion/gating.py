@@ -36,7 +36,10 @@ A candidate ``x`` of camera ``a`` at (corrected) time ``t`` is judged by three g
 A candidate is accepted when the epipolar gate accepts it (some other camera supports it)
 and the track and motion gates do not object, or when the track gate alone accepts it
 firmly (its ray within ``track_alone_m`` of the prediction); one nothing can judge is kept
-only in the session's first frames. A candidate supported by two or more other cameras
+only in the session's first frames. Before the track first predicts, a choice one epipolar
+line alone made while another camera denies it, or beside candidates that line refused, is
+kept but CONTESTED (:data:`CONTESTED`): in doubt, like a choice beside rejected ones.
+A candidate supported by two or more other cameras
 whose rays meet (a point within ``track_m`` of each) is consistent in three views and is
 accepted whatever the track says (that is how the track follows kicks and bounces); rays that
 miss count as one support. Among a frame's accepted candidates the one with the most
@@ -80,6 +83,13 @@ if TYPE_CHECKING:
 #: Why a candidate was rejected (the ``reason`` codes of :class:`Rejections`).
 REASONS = ("epipolar", "track", "motion", "outscored")
 EPIPOLAR, TRACK, MOTION, OUTSCORED = range(4)
+#: The ``reason`` code of a kept candidate whose choice is CONTESTED (-1: any other kept one):
+#: chosen before the track first predicted, on fewer than two supports whose rays meet,
+#: while another available camera denied it (its carried candidates off the line, or a
+#: second support whose ray misses) or other candidates of its frame were refused: nothing
+#: but one epipolar line judged it (docs/methods.md, "A contested start"). It is in doubt
+#: (:func:`doubt_variance`).
+CONTESTED = -2
 REASON_TEXT = {
     "epipolar": "no other camera's detections near that time lie near its epipolar line",
     "track": "its viewing ray passes too far from the track of the recent accepted points",
@@ -219,7 +229,8 @@ class Gated:
         corrected time (as :func:`pslog.timing.observations` makes them)
     rejections : Rejections
     chosen : (C,) bool over the detections' candidates, True for the kept ones
-    reason : (C,) int8, the rejection reason of each candidate (-1 for the kept ones)
+    reason : (C,) int8, the rejection reason of each candidate (< 0 for the kept ones:
+        -1, or :data:`CONTESTED`)
     doubt_px2 : (n,) float64 over the observations, or None: the variance each choice adds
         for the chance it is wrong (:func:`choice_doubt`; None: no choice in doubt)
     """
@@ -1359,11 +1370,34 @@ class _Decider:
             for i in range(lo, hi):
                 if i != best_row and reason[i] < 0:
                     reason[i] = OUTSCORED
+            if best_row in untracked and (hi - lo >= 2 or _denied(rows[best_row])):
+                # chosen on one support before the track could predict (the session's start:
+                # nothing else can judge) while another camera denies it (paper3 in
+                # bench_dirty.py --more --first-seed 1200 --misses 0.1: cam3's first frame
+                # holds only the static object, on cam1's line, off cam2's; type A's first
+                # point 4.1 m off), or among other candidates of its frame that the one line
+                # refused (paper2, --first-seed 700: the object beside the refused ball,
+                # type A 310 mm): a guess, in doubt
+                reason[best_row] = CONTESTED
             picked[camera[lo]] = (uv[best_row][0], uv[best_row][1], t_ns[lo])
             self.verified |= best_row not in unverified
             if math.isfinite(pts[best_row][0]):
                 track.add(t_s[best_row], np.array(pts[best_row]),
                           _age(rows[best_row], cols.lag[best_row]))
+
+
+def _denied(ratios) -> bool:
+    """Whether another available camera denies a choice that fewer than two supports whose
+    rays meet made (``ratios``: its epipolar ratio per camera, NaN / inf: not available):
+    one camera's candidates lie off its line (ratio above 1), or two supports' rays miss
+    (two ratios within 1 that :func:`_columns` counts as one support)."""
+    within = 0
+    for r in ratios:
+        if r <= 1.0:
+            within += 1
+        elif math.isfinite(r):
+            return True
+    return within >= 2
 
 
 def gate(detections: Detections, rig: Rig, *, causal: bool = True, wait_s: float = 0.0,
@@ -1837,7 +1871,8 @@ def _observation_doubt(detections: Detections, rig: Rig, reason: np.ndarray,
     frame = detections.cand_frame
     several = detections.candidates_per_frame()[frame] >= 2
     still = np.flatnonzero(doubt_source(reason, several))
-    if not len(still):
+    contested = np.flatnonzero(reason[reason < 0] == CONTESTED)
+    if not len(still) and not len(contested):
         return None
     chosen = np.flatnonzero(reason < 0)
     doubt = choice_doubt(detections.frame_time_ns[frame[chosen]],
@@ -1845,6 +1880,11 @@ def _observation_doubt(detections: Detections, rig: Rig, reason: np.ndarray,
                          detections.frame_time_ns[frame[still]],
                          detections.frame_camera[frame[still]], detections.cand_uv[still],
                          rig, static_s)
+    if len(contested):  # (a contested choice: in doubt whatever was rejected near it)
+        size = np.array([(float(c.width), float(c.height)) for c in rig.cameras])
+        cam = detections.frame_camera[frame[chosen[contested]]]
+        uv = detections.cand_uv[chosen[contested]]
+        doubt[contested] = doubt_variance(uv[:, 0], uv[:, 1], size[cam, 0], size[cam, 1])
     flagged = np.flatnonzero(doubt)
     if not len(flagged):
         return None
@@ -2039,6 +2079,9 @@ class StreamGate:
         self.unreleased: deque = deque()  # not returned yet, in pushed order
         self.last: tuple[int, int] = (np.iinfo(np.int64).min, -1)
         self.rejected: list[tuple] = []
+        # the CONTESTED choices ((logged time, camera, u, v)): only before the track first
+        # predicted, so a few per session at most
+        self.contested: set[tuple] = set()
         # the compiled form (pslog.fusion._gate_kernel: the same steps, the same bits, one
         # call per frame), unless this Python's sum() is one it does not reproduce
         self._state = None
@@ -2124,6 +2167,8 @@ class StreamGate:
         for k, r in enumerate(reasons):
             if r < 0:
                 chosen.append(k)
+                if r == CONTESTED:
+                    self.contested.add((t, cam, *uv[k].tolist()))
             else:
                 self.rejected.append((t, cam, index, *uv[k].tolist(), r))
         return uv[chosen] if len(chosen) != n else uv
@@ -2225,6 +2270,8 @@ class StreamGate:
             for k, r in enumerate(reasons):  # (not None: above)
                 if r < 0:
                     out.append((f.t, f.camera, f.uv[k], f.index))
+                    if r == CONTESTED:
+                        self.contested.add((f.t, f.camera, *f.uv[k].tolist()))
                 else:
                     self.rejected.append((f.t, f.camera, f.index, *f.uv[k].tolist(), r))
         # keep the history a later choice can reach
@@ -2376,7 +2423,8 @@ class StreamDoubt:
                 if doubt_source(r, (t, c) in self.several):
                     self.recent[c].append((t, u, v))
             self.read = len(rejected)
-        if not len(time_ns) or not any(self.recent):
+        contested = self.gate.contested
+        if not len(time_ns) or not (contested or any(self.recent)):
             return None
         out = None
         radius2 = DOUBT_RADIUS_PX * DOUBT_RADIUS_PX
@@ -2385,7 +2433,12 @@ class StreamDoubt:
             while near and near[0][0] < t - self.window:  # (a camera's choices come in order)
                 near.popleft()
             u, v = uv[i].tolist()
-            if sum(t - self.window <= tj <= t and (u - uj) * (u - uj) + (v - vj) * (v - vj)
+            if contested and (t, c, u, v) in contested:  # (in doubt whatever lies near it)
+                contested.discard((t, c, u, v))
+                if out is None:
+                    out = np.zeros(len(time_ns))
+                out[i] = doubt_variance(u, v, *self.size[c])
+            elif sum(t - self.window <= tj <= t and (u - uj) * (u - uj) + (v - vj) * (v - vj)
                    <= radius2 for tj, uj, vj in near) >= DOUBT_REJECTIONS:
                 if out is None:
                     out = np.zeros(len(time_ns))
