@@ -763,7 +763,7 @@ def _offline_support(c: _Candidates, rig: Rig, F: np.ndarray, tables, options: G
     with np.errstate(invalid="ignore"):
         unsupported = ~(ratio <= 1.0)
     moving = _moving_tables(tables, still)
-    n, m = ratio.shape
+    m = ratio.shape[1]
     for b in range(m):
         times, table, positions = moving[b]
         if len(times) == len(tables[b][0]) and not still[np.maximum(tables[b][1], 0)].any():
