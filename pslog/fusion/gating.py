@@ -484,7 +484,7 @@ def _support(c: _Candidates, rig: Rig, F: np.ndarray, tables, options: GatingOpt
 
 
 def _support_one(t: int, line, keys: list[int], usable, search, wait_ns: int, causal: bool,
-                 gap_ns: int, options: GatingOptions):
+                 gap_ns: int, options: GatingOptions, pairs_only: bool = False):
     """:func:`_support`'s rule for one candidate (at corrected time ``t``, its epipolar
     ``line`` in camera b) and one other camera b, on floats, over the candidates of b's
     frames as decided so far (:func:`_supporting`): a frame decided with a chosen candidate
@@ -500,7 +500,8 @@ def _support_one(t: int, line, keys: list[int], usable, search, wait_ns: int, ca
     ``keys``: b's frame times in frame-table order; ``usable(j)``: the candidates of b's
     frame ``j`` that may support, a list of (corrected time ns, undistorted u, v);
     ``search``: ``bisect_right`` (b's frames at ``t`` + wait count) or ``bisect_left``.
-    Returns (ratio: NaN when b has no usable frame near ``t``, carried (u, v) or None).
+    Returns (ratio: NaN when b has no usable frame near ``t``, carried (u, v) or None;
+    ``pairs_only``: inf where a single frame would judge it, :func:`_offline_support`).
     """
     epi, vmax = options.epipolar_px, options.max_image_speed_px_s
     half_accel = 0.5 * options.accel_px_s2
@@ -545,6 +546,8 @@ def _support_one(t: int, line, keys: list[int], usable, search, wait_ns: int, ca
         return best, best_uv
     if near(i1):  # a single nearby frame (no pair near), its candidates as they are
         best, best_uv = math.inf, None
+        if pairs_only:
+            return best, best_uv
         for t1, u1, v1 in usable(i1):
             tau = epi + vmax * (abs(t - t1) / NS)
             d = abs(l0 * u1 + l1 * v1 + l2)
@@ -750,15 +753,18 @@ def _offline_support(c: _Candidates, rig: Rig, F: np.ndarray, tables, options: G
     """The offline form's support (:func:`_support`'s ``ratio, carried, used``, changed in
     place and returned) where a camera's frames hold pixels that stood still
     (:func:`_still_pixels`): where camera b does not support a candidate with every
-    candidate, it is judged again without b's still pixels, as if the frames holding only
-    them were missed (they would have been, had the detector not seen the static object):
-    b may then support it from its frames around them, or have no frame near (not
-    available: it could not have seen the ball there). A camera whose only candidate is a
+    candidate, and b has no frame near it once those pixels are left out (its frames
+    there held nothing else), b is not available (ratio NaN): as if it had missed those
+    frames, as it would have without the static object. A camera whose only candidate is a
     static object says nothing about the ball (``lab3``, ``bench_dirty.py --more
     --first-seed 600 --misses 0.1``, rally-600: ``lab1`` saw only its object at 1.77 s
     and counted as available, so ``lab2``'s ball was rejected (``epipolar``) and
-    ``smooth`` fitted a kick without it, 70-120 mm off). A camera that supports a candidate
-    with all its candidates keeps that support (a ball along the ray is still in its image)."""
+    ``smooth`` fitted a kick without it, 70-120 mm off). Only availability changes: a
+    camera that supports a candidate keeps that support (a ball along the ray is still in
+    its image), and b's frames further away never support it instead (their candidates
+    carried across the left-out frames, as they are with ``V Δt`` of allowance, supported
+    a static object beside the ball: ``paper2``, ``--first-seed 1600``, rally-1602 at
+    2.30 s)."""
     ratio, carried, used = support
     with np.errstate(invalid="ignore"):
         unsupported = ~(ratio <= 1.0)
@@ -775,11 +781,24 @@ def _offline_support(c: _Candidates, rig: Rig, F: np.ndarray, tables, options: G
         only_tables[b] = (times, table)
         r2, c2, u2 = _support(c, rig, F, only_tables, options, max_gap_ns, False, 0,
                               only=rows, compiled=compiled)
-        idx = np.flatnonzero(rows)
-        ratio[idx, b] = r2[idx, b]
-        carried[idx, b] = c2[idx, b]
-        slots = u2[idx, b]
-        used[idx, b] = np.where(slots >= 0, positions[np.maximum(slots, 0)], -1)
+        gone = np.flatnonzero(rows & np.isnan(r2[:, b]))
+        ratio[gone, b] = np.nan
+        carried[gone, b] = np.nan
+        # supported by a pair of b's frames carried across the left-out ones (as the session
+        # without the object interpolates across its missed frames); not by a single frame
+        i0, i1, inext = (u2[:, b, k] for k in range(3))
+
+        def near(j, times=times):
+            return (j >= 0) & (np.abs(c.time_ns - times[np.maximum(j, 0)]) <= max_gap_ns)
+
+        with np.errstate(invalid="ignore"):
+            pair = rows & (r2[:, b] <= 1.0) & ((near(i1) & near(inext))
+                                              | ((inext < 0) & near(i0) & near(i1)))
+        won = np.flatnonzero(pair)
+        ratio[won, b] = r2[won, b]
+        carried[won, b] = c2[won, b]
+        slots = u2[won, b]
+        used[won, b] = np.where(slots >= 0, positions[np.maximum(slots, 0)], -1)
     return ratio, carried, used
 
 
@@ -1716,8 +1735,11 @@ def _decide_in_order(c: _Candidates, rig: Rig, options: GatingOptions, frames, t
                         r, uv = _support_one(t_i, line, keys(b), usable_of(b), search, wait_ns,
                                              causal, max_gap_ns, options)
                         if still_px is not None and not r <= 1.0:  # _offline_support
-                            r, uv = _support_one(t_i, line, keys(b), usable_of(b, True), search,
-                                                 wait_ns, causal, max_gap_ns, options)
+                            r2, uv2 = _support_one(t_i, line, keys(b), usable_of(b, True),
+                                                   search, wait_ns, causal, max_gap_ns,
+                                                   options, pairs_only=True)
+                            if math.isnan(r2) or r2 <= 1.0:
+                                r, uv = r2, uv2
                         ratio[i, b] = r
                         carried[i, b] = uv if uv is not None else (math.nan, math.nan)
                     p, ok, miss = _points_one(a, c.ray_dir[i].tolist(), ratio[i].tolist(),
