@@ -1672,8 +1672,9 @@ def _decide_in_order(c: _Candidates, rig: Rig, options: GatingOptions, frames, t
             if got is None:
                 got = [(r, int(c.time_ns[r]), *c.uv_und[r].tolist()) for r in table[j].tolist()
                        if r >= 0]
-            # (the offline form's second look: without the pixels that stood still)
-            return [x[1:] for x in got if not (moving and still_px[x[0]])]
+            if moving and still_px is not None:  # (the offline form's second look)
+                return [x[1:] for x in got if not still_px[x[0]]]
+            return [x[1:] for x in got]
         return usable
 
     F_lists = F.tolist()
