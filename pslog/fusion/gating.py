@@ -484,7 +484,7 @@ def _support(c: _Candidates, rig: Rig, F: np.ndarray, tables, options: GatingOpt
 
 
 def _support_one(t: int, line, keys: list[int], usable, search, wait_ns: int, causal: bool,
-                 gap_ns: int, options: GatingOptions, pairs_only: bool = False):
+                 gap_ns: int, options: GatingOptions):
     """:func:`_support`'s rule for one candidate (at corrected time ``t``, its epipolar
     ``line`` in camera b) and one other camera b, on floats, over the candidates of b's
     frames as decided so far (:func:`_supporting`): a frame decided with a chosen candidate
@@ -500,8 +500,7 @@ def _support_one(t: int, line, keys: list[int], usable, search, wait_ns: int, ca
     ``keys``: b's frame times in frame-table order; ``usable(j)``: the candidates of b's
     frame ``j`` that may support, a list of (corrected time ns, undistorted u, v);
     ``search``: ``bisect_right`` (b's frames at ``t`` + wait count) or ``bisect_left``.
-    Returns (ratio: NaN when b has no usable frame near ``t``, carried (u, v) or None;
-    ``pairs_only``: inf where a single frame would judge it, :func:`_offline_support`).
+    Returns (ratio: NaN when b has no usable frame near ``t``, carried (u, v) or None).
     """
     epi, vmax = options.epipolar_px, options.max_image_speed_px_s
     half_accel = 0.5 * options.accel_px_s2
@@ -546,8 +545,6 @@ def _support_one(t: int, line, keys: list[int], usable, search, wait_ns: int, ca
         return best, best_uv
     if near(i1):  # a single nearby frame (no pair near), its candidates as they are
         best, best_uv = math.inf, None
-        if pairs_only:
-            return best, best_uv
         for t1, u1, v1 in usable(i1):
             tau = epi + vmax * (abs(t - t1) / NS)
             d = abs(l0 * u1 + l1 * v1 + l2)
@@ -695,111 +692,6 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
         lone[table[ok & alone]] = own[ok & alone]
     return static, stillness, lone
 
-
-
-def _still_pixels(c: _Candidates, tables, rig: Rig, options: GatingOptions) -> np.ndarray:
-    """(C,) bool: the candidates whose pixel stood still in their camera's image, with or
-    without a point: within ``epipolar_px`` (the gate's allowance for detection noise in
-    pixels) of a candidate's undistorted pixel in each of the camera's ``ceil(static_s
-    fps)`` frames before it, all within 1.5 ``static_s`` (as :func:`_static` counts). A
-    static object's pixel (also one no other camera supports, so with no point to test in
-    3D), or a ball at rest or moving along the camera's ray. The offline form does not let
-    a camera whose frames near a candidate hold only such pixels refute it
-    (:func:`_offline_support`)."""
-    still = np.zeros(len(c.camera), dtype=bool)
-    tol = float(options.epipolar_px)
-    for b, (times, table) in enumerate(tables):
-        lags = int(np.ceil(options.static_s * rig.cameras[b].fps))
-        if len(times) <= lags:
-            continue
-        y = c.uv_und[np.maximum(table, 0)]  # (frames, K, 2)
-        run = np.zeros(table.shape, dtype=np.int64)
-        for lag in range(1, lags + 1):
-            recent = np.zeros(len(times), dtype=bool)
-            recent[lag:] = times[lag:] - times[:-lag] <= 1.5 * options.static_s * NS
-            prev = _lagged(table, lag, -1)
-            yy = _lagged(y, lag, c.uv_und[0])
-            with np.errstate(invalid="ignore"):
-                du = y[:, :, None, 0] - yy[:, None, :, 0]
-                dv = y[:, :, None, 1] - yy[:, None, :, 1]
-                near = (prev[:, None, :] >= 0) & (np.sqrt(du * du + dv * dv) <= tol)
-            run += recent[:, None] & np.any(near, axis=2)
-        ok = table >= 0
-        still[table[ok & (run >= lags)]] = True
-    return still
-
-
-def _moving_tables(tables, still: np.ndarray):
-    """``tables`` (:func:`_frame_table`) without the ``still`` candidates (:func:`_still_pixels`)
-    and the frames holding only such: per camera (times, table, positions), ``positions``
-    each kept frame's row in the full table (a frame keeps its time: its first candidate's,
-    as :func:`_support_one`'s keys)."""
-    out = []
-    for times, table in tables:
-        keep = (table >= 0) & ~still[np.maximum(table, 0)]
-        frames = np.flatnonzero(keep.any(axis=1))
-        moving = np.full((len(frames), table.shape[1]), -1, dtype=np.int64)
-        sub = keep[frames]
-        # each kept frame's candidates, left-aligned in their order
-        slot = np.cumsum(sub, axis=1) - 1
-        rows, cols = np.nonzero(sub)
-        moving[rows, slot[rows, cols]] = table[frames][rows, cols]
-        out.append((times[frames], moving, frames))
-    return out
-
-
-def _offline_support(c: _Candidates, rig: Rig, F: np.ndarray, tables, options: GatingOptions,
-                     max_gap_ns: int, support, still: np.ndarray, compiled: bool):
-    """The offline form's support (:func:`_support`'s ``ratio, carried, used``, changed in
-    place and returned) where a camera's frames hold pixels that stood still
-    (:func:`_still_pixels`): where camera b does not support a candidate with every
-    candidate, and b has no frame near it once those pixels are left out (its frames
-    there held nothing else), b is not available (ratio NaN): as if it had missed those
-    frames, as it would have without the static object. A camera whose only candidate is a
-    static object says nothing about the ball (``lab3``, ``bench_dirty.py --more
-    --first-seed 600 --misses 0.1``, rally-600: ``lab1`` saw only its object at 1.77 s
-    and counted as available, so ``lab2``'s ball was rejected (``epipolar``) and
-    ``smooth`` fitted a kick without it, 70-120 mm off). Only availability changes: a
-    camera that supports a candidate keeps that support (a ball along the ray is still in
-    its image), and b's frames further away never support it instead (their candidates
-    carried across the left-out frames, as they are with ``V Δt`` of allowance, supported
-    a static object beside the ball: ``paper2``, ``--first-seed 1600``, rally-1602 at
-    2.30 s)."""
-    ratio, carried, used = support
-    with np.errstate(invalid="ignore"):
-        unsupported = ~(ratio <= 1.0)
-    moving = _moving_tables(tables, still)
-    m = ratio.shape[1]
-    for b in range(m):
-        times, table, positions = moving[b]
-        if len(times) == len(tables[b][0]) and not still[np.maximum(tables[b][1], 0)].any():
-            continue  # no still pixel in camera b: the same support
-        rows = unsupported[:, b] & (c.camera != b)
-        if not rows.any():
-            continue
-        only_tables = [(np.zeros(0, dtype=np.int64), np.zeros((0, 1), dtype=np.int64))] * m
-        only_tables[b] = (times, table)
-        r2, c2, u2 = _support(c, rig, F, only_tables, options, max_gap_ns, False, 0,
-                              only=rows, compiled=compiled)
-        gone = np.flatnonzero(rows & np.isnan(r2[:, b]))
-        ratio[gone, b] = np.nan
-        carried[gone, b] = np.nan
-        # supported by a pair of b's frames carried across the left-out ones (as the session
-        # without the object interpolates across its missed frames); not by a single frame
-        i0, i1, inext = (u2[:, b, k] for k in range(3))
-
-        def near(j, times=times):
-            return (j >= 0) & (np.abs(c.time_ns - times[np.maximum(j, 0)]) <= max_gap_ns)
-
-        with np.errstate(invalid="ignore"):
-            pair = rows & (r2[:, b] <= 1.0) & ((near(i1) & near(inext))
-                                              | ((inext < 0) & near(i0) & near(i1)))
-        won = np.flatnonzero(pair)
-        ratio[won, b] = r2[won, b]
-        carried[won, b] = c2[won, b]
-        slots = u2[won, b]
-        used[won, b] = np.where(slots >= 0, positions[np.maximum(slots, 0)], -1)
-    return ratio, carried, used
 
 
 def _lagged(rows: np.ndarray, lag: int, fill) -> np.ndarray:
@@ -1533,14 +1425,6 @@ def _decided(c: _Candidates, rig: Rig, options: GatingOptions, causal: bool, wai
     compiled = _kernels(n)
     ratio, carried, used = _support(c, rig, F, tables, options, max_gap_ns, causal, wait_ns,
                                     compiled=compiled)
-    still = None
-    if not causal:
-        still = _still_pixels(c, tables, rig, options)
-        if still.any():
-            ratio, carried, used = _offline_support(c, rig, F, tables, options, max_gap_ns,
-                                                    (ratio, carried, used), still, compiled)
-        else:
-            still = None
     constants = _rig_constants(rig)
     points, in_front, miss = _points(c, rig, ratio, carried, constants)
     points[miss > options.track_m] = np.nan  # rays that do not meet: no point to track
@@ -1553,7 +1437,7 @@ def _decided(c: _Candidates, rig: Rig, options: GatingOptions, causal: bool, wai
     _decide_in_order(c, rig, options, (starts, ends, order), tables, F,
                      (ratio, carried, used, _lags(c.time_ns, tables, used, compiled)),
                      (points, in_front), (static, stillness, lone), reason,
-                     causal, wait_ns, max_gap_ns, constants, still)
+                     causal, wait_ns, max_gap_ns, constants)
     return ratio
 
 
@@ -1600,7 +1484,7 @@ _DECIDE_BLOCK = 8192
 
 def _decide_in_order(c: _Candidates, rig: Rig, options: GatingOptions, frames, tables, F,
                      support, geometry, still, reason, causal: bool, wait_ns: int,
-                     max_gap_ns: int, constants, still_px: np.ndarray | None = None) -> None:
+                     max_gap_ns: int, constants) -> None:
     """:class:`_Decider` over the frames in order, each frame's support as decided so far
     (:func:`_support_one`): the all-candidates support and points computed in arrays
     (``support``: :func:`_support`'s; ``geometry``: points, in_front) hold while no frame
@@ -1613,9 +1497,7 @@ def _decide_in_order(c: _Candidates, rig: Rig, options: GatingOptions, frames, t
     ``frames``: ``(starts, ends, order)``, each frame's candidate rows ``starts[f]:ends[f]``
     (frames in row order) and the order to decide them in. Only a frame with several
     candidates can be decided with one rejected (:func:`_supporting`), so only a frame whose
-    support used such a frame may need its support redone (``still_px``: the offline form's
-    still pixels, :func:`_offline_support`, judged again without them where the frame does
-    not support); the others are decided in blocks
+    support used such a frame may need its support redone; the others are decided in blocks
     (:meth:`_Decider.decide` over many frames), and a run of frames of one candidate that
     two other cameras support with meeting rays, neither static nor behind a camera (each
     one chosen, whatever the track says) only adds its points to the track.
@@ -1664,17 +1546,15 @@ def _decide_in_order(c: _Candidates, rig: Rig, options: GatingOptions, frames, t
     kept_of: list[dict[int, list]] = [{} for _ in range(m)]
     spoiled: list[set[int]] = [set() for _ in range(m)]
 
-    def usable_of(b: int, moving: bool = False):
+    def usable_of(b: int):
         table, kept = tables[b][1], kept_of[b]
 
         def usable(j: int) -> list:
             got = kept.get(j)
             if got is None:
-                got = [(r, int(c.time_ns[r]), *c.uv_und[r].tolist()) for r in table[j].tolist()
+                got = [(int(c.time_ns[r]), *c.uv_und[r].tolist()) for r in table[j].tolist()
                        if r >= 0]
-            if moving and still_px is not None:  # (the offline form's second look)
-                return [x[1:] for x in got if not still_px[x[0]]]
-            return [x[1:] for x in got]
+            return got
         return usable
 
     F_lists = F.tolist()
@@ -1732,15 +1612,9 @@ def _decide_in_order(c: _Candidates, rig: Rig, options: GatingOptions, frames, t
                             continue
                         search = (bisect_right if (not causal or wait_ns > 0 or b < a)
                                   else bisect_left)
-                        line = _line_of(F_lists[a][b], *und_i)
-                        r, uv = _support_one(t_i, line, keys(b), usable_of(b), search, wait_ns,
-                                             causal, max_gap_ns, options)
-                        if still_px is not None and not r <= 1.0:  # _offline_support
-                            r2, uv2 = _support_one(t_i, line, keys(b), usable_of(b, True),
-                                                   search, wait_ns, causal, max_gap_ns,
-                                                   options, pairs_only=True)
-                            if math.isnan(r2) or r2 <= 1.0:
-                                r, uv = r2, uv2
+                        r, uv = _support_one(t_i, _line_of(F_lists[a][b], *und_i), keys(b),
+                                             usable_of(b), search, wait_ns, causal,
+                                             max_gap_ns, options)
                         ratio[i, b] = r
                         carried[i, b] = uv if uv is not None else (math.nan, math.nan)
                     p, ok, miss = _points_one(a, c.ray_dir[i].tolist(), ratio[i].tolist(),
@@ -1757,7 +1631,7 @@ def _decide_in_order(c: _Candidates, rig: Rig, options: GatingOptions, frames, t
             if _can_judge(keys(a)[at], [keys(a)[at - lag] for lag in
                                         range(1, min(lags[a], at) + 1)], lags[a], options):
                 spoiled[a].add(at)
-                kept_of[a][at] = [(i, int(c.time_ns[i]), *c.uv_und[i].tolist())
+                kept_of[a][at] = [(int(c.time_ns[i]), *c.uv_und[i].tolist())
                                   for i, ok in zip(range(lo, hi), kept, strict=True) if ok]
 
 
