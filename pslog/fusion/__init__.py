@@ -170,8 +170,9 @@ class Method:
         starts them early; none for a numpy-only method)
     uses_doubt : bool, it takes the doubt of the gate's choices (:attr:`Prepared.doubt_px2`,
         docs/methods.md "A choice in doubt"): in its covariance (``sync``, ``nearest``,
-        ``typeB``, ``linear``), or by withholding the points resting on a choice in doubt
-        (``typeA``); the gate makes it only for a form such a method fuses
+        ``typeB``, ``linear``), by withholding the points resting on a choice in doubt
+        (``typeA``), or by leaving such a choice out (``filter``); the gate makes it only
+        for a form such a method fuses
     """
 
     name: str
@@ -241,7 +242,7 @@ def _linear(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
 def _filter(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
     from .filter import fuse_filter
 
-    return fuse_filter(prep.obs, rig, options.max_gap_s)
+    return fuse_filter(prep.obs, rig, options.max_gap_s, doubt=prep.doubt_px2)
 
 
 def _filter_stream(rig: Rig, options: FusionOptions):
@@ -282,7 +283,7 @@ METHODS: dict[str, Method] = {m.name: m for m in (
     Method("filter", _filter, True, False, frozenset(),
            "causal extended Kalman filter with bounce/kick gating, a point at every detection",
            "Bar-Shalom, Li & Kirubarajan 2001 (EKF, NIS gate); docs/methods.md",
-           streamer=_filter_stream, kernels=("pslog.fusion.filter",)),
+           streamer=_filter_stream, kernels=("pslog.fusion.filter",), uses_doubt=True),
 )}
 
 

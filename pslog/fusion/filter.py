@@ -2404,19 +2404,29 @@ class FilterStream:
 
     def __init__(self, rig: Rig, options) -> None:
         self.filter = BallFilter(rig, FilterOptions(max_gap_s=options.max_gap_s))
+        # the gate's doubt of the rows of the next push (StreamFuser sets it; None: none): a
+        # choice in doubt is left out, as the batch leaves it out (:func:`fuse_filter`)
+        self.next_doubt: np.ndarray | None = None
         # the Track of a detection without a point and nothing withheld (Tracks are frozen:
         # one, shared; the empty columns of a withheld point's Track, push_one's)
         time, position, camera, quality = _NO_POINT
         self._none = Track._of_frozen("filter", time, position, camera, dict(quality), {})
 
     def push(self, time_ns, camera, uv, frame_index=None) -> Track:
-        return _track(self.filter, time_ns, camera, uv)
+        doubt, self.next_doubt = self.next_doubt, None
+        return _track(self.filter, time_ns, camera, uv, doubt)
 
     def push_one(self, time_ns: int, camera: int, u: float, v: float) -> Track:
         """One detection (Python int, int, float, float; checked by the caller): the Track
         :meth:`push` gives for it (the same columns, the same bits: ``_run``'s step, then a
         one-row Track built from Python floats, not from a table of rows)."""
         flt = self.filter
+        if self.next_doubt is not None:
+            doubt, self.next_doubt = self.next_doubt, None
+            if doubt[0] > 0:  # a choice in doubt: left out (_track)
+                time, position, camera_, quality = _NO_POINT
+                return Track._of_frozen("filter", time, position, camera_, dict(quality),
+                                        {DOUBT: 1})
         I, out = flt._I, flt._out
         dropped = int(I[_IDROPC]), int(I[_IDROPU])
         status = _step(flt._S, I, flt._cam_table, flt._opts, flt._nopts, time_ns, camera, u,
@@ -2468,14 +2478,32 @@ def _one_point(time_ns: int, camera: int, o: list, dropped: dict) -> Track:
          "rejected": values[12:13], "init": values[13:14]}, dropped)
 
 
-def _track(flt: BallFilter, time_ns, camera, uv) -> Track:
+#: Track.dropped's reason for a detection left out as a choice the gate put in doubt.
+DOUBT = "doubt"
+
+
+def _track(flt: BallFilter, time_ns, camera, uv, doubt: np.ndarray | None = None) -> Track:
     """The Track of the points of detections pushed into ``flt``: one compiled loop
-    (:func:`_run`) over them, back in Python only for a window fit."""
+    (:func:`_run`) over them, back in Python only for a window fit. ``doubt`` (n,) the
+    gate's doubt of each detection (:func:`pslog.fusion.gating.choice_doubt`; None: none):
+    a detection in doubt is left out, counted in ``dropped`` as ``doubt`` (docs/methods.md,
+    "The filter and a choice in doubt")."""
     times = np.ascontiguousarray(time_ns, dtype=np.int64).reshape(-1)
     cameras = np.ascontiguousarray(camera, dtype=np.int64).reshape(-1)
     uv = np.ascontiguousarray(np.asarray(uv, dtype=np.float64).reshape(-1, 2))
     if not len(times) == len(cameras) == len(uv):
         raise ValueError("time_ns, camera and uv differ in length")
+    n_doubt = 0
+    if doubt is not None:
+        doubted = np.asarray(doubt, dtype=np.float64).reshape(-1) > 0
+        if len(doubted) != len(times):
+            raise ValueError("doubt differs in length from the detections")
+        n_doubt = int(np.count_nonzero(doubted))
+        if n_doubt:
+            keep = ~doubted
+            times, cameras = np.ascontiguousarray(times[keep]), np.ascontiguousarray(
+                cameras[keep])
+            uv = np.ascontiguousarray(uv[keep])
     # (read-only views, whoever's the arrays: _run is given one type of them, so one
     # compiled signature serves fuse, the stream and the library's callers, and pslog.warm
     # compiles it)
@@ -2517,19 +2545,24 @@ def _track(flt: BallFilter, time_ns, camera, uv) -> Track:
     cams = cameras[index].astype(np.int32)
     for c in (time, position, cams, q):
         c.setflags(write=False)
+    dropped = {k: n - before.get(k, 0) for k, n in flt.dropped.items()
+               if n > before.get(k, 0)}
+    if n_doubt:
+        dropped[DOUBT] = n_doubt
     return Track._of_frozen("filter", time, position, cams,
-                            dict(zip(FILTER_QUALITY, q, strict=True)),
-                            {k: n - before.get(k, 0) for k, n in flt.dropped.items()
-                             if n > before.get(k, 0)})
+                            dict(zip(FILTER_QUALITY, q, strict=True)), dropped)
 
 
 def fuse_filter(obs: Observations, rig: Rig, max_gap_s: float | None = None,
-                options: FilterOptions | None = None) -> Track:
+                options: FilterOptions | None = None, doubt: np.ndarray | None = None
+                ) -> Track:
     """The ``filter`` track of observations (true times, sorted by (time, camera)): the
-    same per-detection code as the streaming form, so the same points."""
+    same per-detection code as the streaming form, so the same points. ``doubt`` (n,):
+    the gate's doubt of each observation (:attr:`pslog.fusion.Prepared.doubt_px2`; None:
+    none): a choice in doubt is left out (:func:`_track`)."""
     options = options or FilterOptions()
     if max_gap_s is not None and options.max_gap_s is None:
         from dataclasses import replace
 
         options = replace(options, max_gap_s=max_gap_s)
-    return _track(BallFilter(rig, options), obs.time_ns, obs.camera, obs.uv)
+    return _track(BallFilter(rig, options), obs.time_ns, obs.camera, obs.uv, doubt)
