@@ -191,6 +191,9 @@ class CameraLiveState:
     points : int, points whose shutter was this camera's
     lost : int, frames never received (gaps in the sequence)
     last_arrival_ns : int or None, wall clock arrival of its latest datagram
+    last_seen_ns : int or None, the same arrival on the clock the fuser's waits are counted
+        on (:attr:`LiveFuser.monotonic`: the monotonic clock in :func:`~pslog.live.server.
+        serve`; else the wall clock, the same as ``last_arrival_ns``)
     last_capture_ns : int or None, capture time of its latest fused frame
     silent : bool, no datagram for ``silent_after_s`` (set by :meth:`LiveFuser.cameras`)
     """
@@ -202,6 +205,7 @@ class CameraLiveState:
     points: int = 0
     lost: int = 0
     last_arrival_ns: int | None = None
+    last_seen_ns: int | None = None
     last_capture_ns: int | None = None
     silent: bool = True
     _last_sequence: int | None = None
@@ -334,15 +338,17 @@ class Rehearsal:
         self.steps += 1
         self._durations.append(time.perf_counter_ns() - start)
 
-    def plan(self, fuser: LiveFuser, now: int) -> None:
-        """After a datagram of ``fuser`` (handled at wall clock ``now``): when to rehearse for
-        the next one. Each live camera's next frame is due a frame period after its latest
-        fused one; it comes at the earliest with the least delay (arrival less capture) of
-        its latest datagrams; the rehearsal is to end ``lead_s`` before the earliest camera's
-        (it starts :attr:`duration_ns` before that: the longest of the latest rehearsals' wall
-        times, at most 2 ms, so that one rehearsal preempted for long on a busy machine does
-        not move every later one before the datagram it is for, where none would run and
-        the estimate would never be renewed)."""
+    def plan(self, fuser: LiveFuser, now: int, now_seen: int | None = None) -> None:
+        """After a datagram of ``fuser`` (handled at wall clock ``now``; ``now_seen``: the
+        same instant on the fuser's waits' clock, :attr:`LiveFuser.monotonic`, None: ``now``,
+        which a camera's silence is told by): when to rehearse for the next one. Each
+        live camera's next frame is due a frame period after its latest fused one; it comes
+        at the earliest with the least delay (arrival less capture) of its latest datagrams;
+        the rehearsal is to end ``lead_s`` before the earliest camera's (it starts
+        :attr:`duration_ns` before that: the longest of the latest rehearsals' wall times, at
+        most 2 ms, so that one rehearsal preempted for long on a busy machine does not move
+        every later one before the datagram it is for, where none would run and the
+        estimate would never be renewed)."""
         self.duration_ns = min(max(self._durations, default=0), _MAX_REHEARSAL_NS)
         self.due = None
         if not self._frames:  # (a rehearsal failed: none any more)
@@ -350,9 +356,11 @@ class Rehearsal:
         earliest = None
         latest_arrival = 0
         silent = fuser.silent_after_ns
+        seen_now = now if now_seen is None else now_seen
         for c, state in enumerate(fuser._cams):
-            arrival, capture = state.last_arrival_ns, state.last_capture_ns
-            if arrival is None or capture is None or now - arrival > silent:
+            arrival, capture, seen = state.last_arrival_ns, state.last_capture_ns, \
+                state.last_seen_ns
+            if arrival is None or capture is None or seen is None or seen_now - seen > silent:
                 continue
             delays = self._delays[c]
             if state.frames != self._frames_seen[c]:
@@ -393,6 +401,14 @@ class LiveFuser:
         that overtake one another by up to ``hold_s`` are all fused instead of dropped as
         ``reordered``, at the cost of that wait (:meth:`poll` releases frames whose wait
         is over between datagrams)
+    monotonic : callable returning the clock the fuser's waits are counted on, ns (the
+        hold, a camera's silence), or None (default): the wall clock, ``clock``, and each
+        datagram's wall-clock ``arrival_ns``. :func:`~pslog.live.server.serve` gives
+        ``time.monotonic_ns`` and each datagram's arrival on it (:meth:`feed`): a step of
+        the wall clock (NTP, a VM's clock set again) then neither makes a silent camera
+        look live (a step back: held frames waiting for it as long as the step) nor a live
+        one silent (forward); the capture-time checks (``future``, the points' times) stay
+        on the wall clock, the senders' clock
 
     Attributes
     ----------
@@ -405,7 +421,7 @@ class LiveFuser:
     def __init__(self, rig: Rig, method: str = "filter", *, late_s: float = 0.1,
                  options=None, candidates: bool = True, epoch_ns: int | None = None,
                  silent_after_s: float = 1.0, clock=time.time_ns, keep: bool = True,
-                 hold_s: float = 0.0, future_s: float = 5.0) -> None:
+                 hold_s: float = 0.0, future_s: float = 5.0, monotonic=None) -> None:
         from ..fusion import FusionOptions, check_method
         from ..fusion._prepare import default_max_gap_s
         from ..fusion.gating import _clock_model, _true_time_ns
@@ -419,7 +435,8 @@ class LiveFuser:
         if not 0 <= hold_s <= 10:
             raise FusionError(f"hold must be in [0, 10] seconds, got {hold_s!r}")
         self.hold_ns = int(hold_s * NS)
-        # frames waiting (hold_s > 0): heap of (logged ns, camera, order, datagram, arrival)
+        # frames waiting (hold_s > 0): heap of (logged ns, camera, order, datagram, arrival
+        # (wall clock), arrival on the waits' clock)
         self._held: list = []
         self._n_held = 0
         self.rig = rig
@@ -432,6 +449,9 @@ class LiveFuser:
         self.candidates = bool(candidates) and self.options.gating
         self.stream = StreamFuser(rig, method, self.options, candidates=self.candidates)
         self.clock = clock
+        #: the clock of the waits (hold, silence): :meth:`feed`'s ``arrival_mono_ns``,
+        #: :meth:`poll`'s and :meth:`cameras`' ``now_ns`` (None: the wall clock, ``clock``)
+        self.monotonic = monotonic
         self.epoch_ns = int(clock() if epoch_ns is None else epoch_ns)
         self.late_ns = int(late_s * NS)
         self.future_ns = int(future_s * NS)
@@ -459,9 +479,15 @@ class LiveFuser:
         self.last_camera = ""
 
     # ---- public ---------------------------------------------------------------------------
-    def feed(self, data: bytes, arrival_ns: int) -> list[LivePoint]:
-        """One received datagram (``arrival_ns``: wall clock); returns the points it made
-        (possibly none). Never raises on bad bytes: they are counted (:meth:`counters`)."""
+    def feed(self, data: bytes, arrival_ns: int,
+             arrival_mono_ns: int | None = None) -> list[LivePoint]:
+        """One received datagram (``arrival_ns``: wall clock; ``arrival_mono_ns``: the same
+        arrival on :attr:`monotonic`'s clock, None: ``arrival_ns`` without one, now on it
+        with one); returns the points it made (possibly none). Never raises on bad bytes:
+        they are counted (:meth:`counters`)."""
+        if arrival_mono_ns is None:
+            arrival_mono_ns = arrival_ns if self.monotonic is None else self.monotonic()
+        seen = int(arrival_mono_ns)
         counts = self._counts
         counts["received"] += 1
         try:
@@ -477,6 +503,7 @@ class LiveFuser:
         self.last_camera = d.camera
         state.datagrams += 1
         state.last_arrival_ns = int(arrival_ns)
+        state.last_seen_ns = seen
         state.silent = False
         reason = self._check(d, cam, state)
         if reason is None and d.t_capture_ns - arrival_ns > self.future_ns:
@@ -517,27 +544,29 @@ class LiveFuser:
         if not self.hold_ns:
             return self._fuse(d, cam, logged, int(arrival_ns))
         if len(d):
-            heapq.heappush(self._held, (logged, cam, self._n_held, d, int(arrival_ns)))
+            heapq.heappush(self._held, (logged, cam, self._n_held, d, int(arrival_ns), seen))
             self._n_held += 1
-            return self._release(int(arrival_ns))
-        return self._fuse(d, cam, logged, int(arrival_ns)) + self._release(int(arrival_ns))
+            return self._release(seen)
+        return self._fuse(d, cam, logged, int(arrival_ns)) + self._release(seen)
 
     def poll(self, now_ns: int) -> list[LivePoint]:
-        """With ``hold_s``: fuse the held frames whose wait is over at ``now_ns`` (wall
-        clock); returns their points. Without: nothing to do."""
+        """With ``hold_s``: fuse the held frames whose wait is over at ``now_ns`` (on
+        :attr:`monotonic`'s clock; without one, the wall clock); returns their points.
+        Without: nothing to do."""
         return self._release(int(now_ns)) if self._held else []
 
     def _release(self, now: int, final: bool = False) -> list[LivePoint]:
         """Fuse the held frames, oldest first, while the oldest one is complete (every
-        other live camera has sent a frame at least as recent) or has waited ``hold_s``."""
+        other live camera has sent a frame at least as recent) or has waited ``hold_s``
+        (``now`` and the arrivals compared: on the waits' clock, :attr:`monotonic`)."""
         held = self._held
         points: list[LivePoint] = []
         while held:
-            logged, cam, _, d, arrival = held[0]
-            if not final and now - arrival < self.hold_ns:
+            logged, cam, _, d, arrival, seen = held[0]
+            if not final and now - seen < self.hold_ns:
                 for c in self._cams:
-                    if c.index == cam or c.last_arrival_ns is None \
-                            or now - c.last_arrival_ns > self.silent_after_ns:
+                    if c.index == cam or c.last_seen_ns is None \
+                            or now - c.last_seen_ns > self.silent_after_ns:
                         continue  # a silent camera is not waited for
                     if c._newest_logged is None or c._newest_logged < logged:
                         return points
@@ -606,10 +635,13 @@ class LiveFuser:
         return dict(self._counts)
 
     def cameras(self, now_ns: int | None = None) -> list[CameraLiveState]:
-        """Each camera's state, ``silent`` updated to ``now_ns`` (wall clock; default now)."""
-        now = self.clock() if now_ns is None else int(now_ns)
+        """Each camera's state, ``silent`` updated to ``now_ns`` (on :attr:`monotonic`'s
+        clock; without one, the wall clock; default: now)."""
+        if now_ns is None:
+            now_ns = (self.monotonic or self.clock)()
+        now = int(now_ns)
         for c in self._cams:
-            c.silent = c.last_arrival_ns is None or now - c.last_arrival_ns > self.silent_after_ns
+            c.silent = c.last_seen_ns is None or now - c.last_seen_ns > self.silent_after_ns
         return list(self._cams)
 
     def take(self) -> tuple[list[DetectionDatagram], list[tuple[DetectionDatagram, str]]]:
