@@ -71,6 +71,7 @@ _ARRIVALS = 256
 _NAN3 = np.full(3, np.nan)
 _I64_MAX = int(np.iinfo(np.int64).max)
 _NAN33 = np.full((3, 3), np.nan)
+_NAN_ROW = (math.nan, math.nan, math.nan)
 _COV_KEYS = ("cov_xx_m2", "cov_xy_m2", "cov_xz_m2", "cov_yy_m2", "cov_yz_m2", "cov_zz_m2")
 
 
@@ -472,7 +473,8 @@ class LiveFuser:
         self._fps = [c.fps for c in rig.cameras]
         self._max_gap_ns = int((self.options.max_gap_s or default_max_gap_s(rig)) * NS)
         self._filter = getattr(getattr(self.stream, "incremental", None), "filter", None)
-        self._last_point: tuple[int, np.ndarray] | None = None  # (session ns, position)
+        # (session ns, position: an array, or a list of floats without a filter)
+        self._last_point: tuple[int, np.ndarray | list] | None = None
         self._layouts: dict[tuple, tuple] = {}  # quality keys -> _layout
         self._flushed = False
         #: name of the camera of the latest valid datagram ("" before any)
@@ -701,7 +703,9 @@ class LiveFuser:
             t, cam = times[i], cams[i]
             p = positions[i]
             row = rows[i]
-            if cov_at is not None:
+            if flt is None:  # (constant velocity: on Python floats, one array of the four)
+                position, cov_w, pred_p, pred_v = self._made(t, p.tolist(), row, layout, now)
+            elif cov_at is not None:
                 xx, xy, xz, yy, yz, zz = cov_at(row)
                 cov = np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
             elif state is not None and state[0] == t and i == n - 1:
@@ -713,11 +717,14 @@ class LiveFuser:
                                 [math.nan, math.nan, sz ** 2]])
             else:
                 cov = _NAN33
+            if flt is not None:
+                position, cov_w = _ro(p), _ro(cov)
+                pred_p, pred_v = self._predicted(t, p, now)
+                pred_p, pred_v = _ro(pred_p), _ro(pred_v)
             flags = 0
             for j, bit in flag_at:
                 if row[j] == 1:
                     flags |= bit
-            pred_p, pred_v = self._predicted(t, p, now)
             arrivals = self._cams[cam]._arrivals
             # the latest frame of the camera at or before the point (sorted: in fused order);
             # usually the frame just fused, its last one
@@ -731,17 +738,47 @@ class LiveFuser:
             point = new(LivePoint)
             point.__dict__.update(
                 method=method, camera=names[cam], camera_index=cam,
-                t_capture_ns=t + epoch, t_emit_ns=now, position_world=_ro(p),
-                cov_world=_ro(cov),
+                t_capture_ns=t + epoch, t_emit_ns=now, position_world=position,
+                cov_world=cov_w,
                 residual_px=row[residual] if residual is not None else math.nan,
                 camera_mask=int(m) if math.isfinite(m) else 1 << cam,
-                predicted_position=_ro(pred_p), predicted_velocity=_ro(pred_v),
+                predicted_position=pred_p, predicted_velocity=pred_v,
                 arrival_ns=arrival, flags=flags, quality=dict(zip(keys, row, strict=True)),
                 epoch_ns=epoch)
             out.append(point)
             self._cams[cam].points += 1
         self._counts["points"] += n
         return out
+
+    def _made(self, t: int, p: list, row: list, layout: tuple, now: int) -> tuple:
+        """A point of a method without a filter: its position, covariance, predicted
+        position and velocity at ``now`` (wall clock), read-only views of one (6, 3) array
+        made from Python floats (``p``: its position; ``row``: its quality row, ``layout``
+        where). :meth:`_predicted`'s constant velocity and the covariance of :meth:`_points`,
+        each the same IEEE operation as on the (3,) arrays: the same bits."""
+        cov_at, std_at = layout[2], layout[3]
+        if cov_at is not None:
+            xx, xy, xz, yy, yz, zz = cov_at(row)
+            c0, c1, c2 = (xx, xy, xz), (xy, yy, yz), (xz, yz, zz)
+        elif std_at is not None:
+            sx, sy, sz = std_at(row)
+            nan = math.nan
+            c0, c1, c2 = (sx ** 2, nan, nan), (nan, sy ** 2, nan), (nan, nan, sz ** 2)
+        else:
+            c0 = c1 = c2 = _NAN_ROW
+        px, py, pz = p
+        last, self._last_point = self._last_point, (t, p)
+        if last is None or not 0 < t - last[0] <= self._max_gap_ns:
+            pred, vel = (px, py, pz), _NAN_ROW
+        else:
+            dt = (t - last[0]) / NS
+            lx, ly, lz = last[1]
+            vx, vy, vz = (px - lx) / dt, (py - ly) / dt, (pz - lz) / dt
+            ahead = (now - self.epoch_ns - t) / NS
+            pred, vel = (px + vx * ahead, py + vy * ahead, pz + vz * ahead), (vx, vy, vz)
+        block = np.array((p, c0, c1, c2, pred, vel))
+        block.flags.writeable = False
+        return block[0], block[1:4], block[4], block[5]
 
     def _predicted(self, t: int, p: np.ndarray, now: int):
         """The state at ``now`` (wall clock): the filter's prediction, else constant velocity
