@@ -70,7 +70,7 @@ from .innovation import (
     failed_counts,
     kinked_points,
 )
-from .stereo import KINK_GATE, count_invalid
+from .stereo import KINK_GATE, NOISE_FLOOR_PX, count_invalid
 
 #: Brackets whose lengths differ by less than this are ties (shutter offsets are rounded to ns).
 _SPAN_TIE_NS = 1_000_000
@@ -735,8 +735,12 @@ class TypeAStream:
         doubted = False
         if keep:  # (rests_on_doubt of the one point)
             doubt = buf.doubt
-            doubted = doubt[lo + e] > 0 or any(
-                r >= 0 and doubt[lo + r] > 0 for r in past_rows[:, 0, :].ravel().tolist())
+            doubted = doubt[lo + e] > 0
+            if not doubted:  # (the rows of its past points: any in doubt)
+                for r in past_rows[:, 0, :].ravel().tolist():
+                    if r >= 0 and doubt[lo + r] > 0:
+                        doubted = True
+                        break
             keep = not doubted
         # Track.dropped: each detection's past refusals once (seen), the invalid point's
         # reasons, the tests' refusals, in fuse_type_a's order
@@ -1139,8 +1143,6 @@ class MeasuredNoiseStream:
         the same IEEE operations on Python floats)."""
         if self._noise_px is None or not len(out) or "std_m" not in out.quality:
             return without_model_columns(out)
-        from .stereo import NOISE_FLOOR_PX
-
         every = self._every_ns
         if len(out) == 1:  # (the usual push: one point, no numpy call on (1,) columns)
             t = int(out.time_ns[0])
@@ -1151,14 +1153,20 @@ class MeasuredNoiseStream:
             f = sg / self._cov_px
             f = f * f
             q = out.quality
-            xx, yy, zz, xy, xz, yz = (float(q[name][0]) * f for name in _COV_COLUMNS)
+            # (_COV_COLUMNS' order; written out: no generator per point)
+            xx, yy, zz = (float(q["cov_xx_m2"][0]) * f, float(q["cov_yy_m2"][0]) * f,
+                          float(q["cov_zz_m2"][0]) * f)
+            xy, xz, yz = (float(q["cov_xy_m2"][0]) * f, float(q["cov_xz_m2"][0]) * f,
+                          float(q["cov_yz_m2"][0]) * f)
             if _MODEL_COLUMNS[0] in q:  # (with_measured_noise's model term, on floats)
                 c = int(out.camera[0])
                 p = out.position_world[0]
                 d0 = float(p[0]) - float(self._centers[c, 0])
                 d1 = float(p[1]) - float(self._centers[c, 1])
                 d2 = float(p[2]) - float(self._centers[c, 2])
-                gravity, across, per_px2 = (float(q[name][0]) for name in _MODEL_COLUMNS)
+                gravity, across, per_px2 = (float(q["_model_gravity_m2"][0]),
+                                            float(q["_model_across_m2"][0]),
+                                            float(q["_model_m2_per_px2"][0]))
                 noise = (sg * sg) * per_px2
                 w = (gravity + (0.5 * (across - 2.0 * noise) if across > MODEL_GATE * noise
                                 else 0.0)) / (d0 * d0 + d1 * d1 + d2 * d2)
