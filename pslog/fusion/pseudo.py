@@ -1141,10 +1141,11 @@ class MeasuredNoiseStream:
         """``out`` with each point's covariance at its checkpoint's σ (at the session's
         start its own), at least the floor: :func:`type_a_noise`'s arithmetic (one point:
         the same IEEE operations on Python floats)."""
-        if self._noise_px is None or not len(out) or "std_m" not in out.quality:
+        n = len(out.time_ns)  # (len(out), without Track's Python __len__)
+        if self._noise_px is None or not n or "std_m" not in out.quality:
             return without_model_columns(out)
         every = self._every_ns
-        if len(out) == 1:  # (the usual push: one point, no numpy call on (1,) columns)
+        if n == 1:  # (the usual push: one point, no numpy call on (1,) columns)
             t = int(out.time_ns[0])
             sg = self._sigma[t // every * every]
             if sg != sg:

@@ -545,7 +545,7 @@ class LiveFuser:
             state._seen.discard(state._seen_order.popleft())
         if not self.hold_ns:
             return self._fuse(d, cam, logged, int(arrival_ns))
-        if len(d):
+        if len(d.uv):
             heapq.heappush(self._held, (logged, cam, self._n_held, d, int(arrival_ns), seen))
             self._n_held += 1
             return self._release(seen)
@@ -583,7 +583,7 @@ class LiveFuser:
     def _fuse(self, d: DetectionDatagram, cam: int, logged: int, arrival_ns: int):
         """Push one accepted frame into the stream; its points."""
         counts, state = self._counts, self._cams[cam]
-        k = len(d)
+        k = len(d.uv)  # (len(d), without its Python __len__: once per datagram)
         if k:  # from now on the newest: an older frame with candidates cannot be fused
             self._newest = (logged, cam)
             # true_times_ns of the top row, in floats (the same ns; numpy costs more for one)
@@ -613,7 +613,7 @@ class LiveFuser:
         state.last_capture_ns = d.t_capture_ns
         if self.keep:
             self.accepted.append(d)
-        return self._points(track) if track is not None and len(track) else []
+        return self._points(track) if track is not None and len(track.time_ns) else []
 
     def flush(self) -> list[LivePoint]:
         """The points still held (methods that wait for the tolerance, clock corrections);
@@ -656,14 +656,15 @@ class LiveFuser:
     def _check(self, d: DetectionDatagram, cam: int, state: CameraLiveState) -> str | None:
         if (d.sequence, d.t_capture_ns) in state._seen:
             return "duplicate"
-        if len(d) and self._readout[cam]:
+        k = len(d.uv)
+        if k and self._readout[cam]:
             h = self._clock_model[cam][0]
             if not all(0 <= v <= h for v in d.uv[:, 1].tolist()):  # rows: finite (decoded)
                 return "malformed"
         logged = d.t_capture_ns - self.epoch_ns
         if logged < 0:
             return "late"
-        if len(d) and (logged, cam) <= self._newest:
+        if k and (logged, cam) <= self._newest:
             return "late" if self._newest[0] - logged > self.late_ns else "reordered"
         # a frame without candidates fuses nothing (offline fusion never sees it either):
         # in any order it only says that its camera is alive
@@ -678,7 +679,7 @@ class LiveFuser:
 
     def _points(self, track: Track) -> list[LivePoint]:
         now = int(self.clock())
-        n = len(track)
+        n = len(track.time_ns)
         q = track.quality
         names = self._names
         times = track.time_ns.tolist()
