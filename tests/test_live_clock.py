@@ -6,6 +6,9 @@ off the kernel's stamps: what every datagram queued across such a step sees."""
 
 from __future__ import annotations
 
+import io
+import socket
+import struct
 import sys
 import threading
 import time
@@ -13,6 +16,7 @@ from pathlib import Path
 
 import pytest
 
+from pslog.live.protocol import encode_detections
 from pslog.live.server import arrival_monotonic
 from pslog.records import NS
 
@@ -95,3 +99,191 @@ def test_serve_runs_its_duration_and_status_period_on_the_monotonic_clock(monkey
     lines = status.getvalue().splitlines()
     assert len(lines) >= 2 and lines[-1].startswith("live ")  # (the last: the final one)
     assert 0.5 <= result["summary"].duration_s
+
+
+class _SteppedSocket:
+    """A bound UDP socket as ``serve`` sees it through a wall clock that steps by
+    ``step_ns``: the kernel's receive stamp (SO_TIMESTAMPNS, wall clock) of every datagram
+    received after the step moved by it, as the kernel's own stamps would be. The step comes
+    at the real wall-clock instant ``at`` (set by the test), or, with ``at_datagram`` k, while
+    the k-th datagram (from 0) waited in the socket: its own stamp is from before the step,
+    every later one's after (:attr:`stepped` says when, for the thread's clock)."""
+
+    def __init__(self, sock, step_ns: int, at_datagram: int | None = None) -> None:
+        self.sock, self.step_ns, self.at_datagram = sock, step_ns, at_datagram
+        self.at: int | None = None  # (real wall ns of the step, when set by the test)
+        self.stepped = False
+        self.received = 0
+        self._real = time.time_ns
+
+    def recvmsg(self, *args):
+        from pslog.live.server import _SO_TIMESTAMPNS
+
+        data, ancdata, flags, address = self.sock.recvmsg(*args)
+        k, self.received = self.received, self.received + 1
+        out = []
+        for level, kind, raw in ancdata:
+            if kind == _SO_TIMESTAMPNS and len(raw) >= 16:
+                sec, nsec = struct.unpack_from("@qq", raw)
+                stamp = sec * NS + nsec
+                if self.stepped or (self.at is not None and stamp >= self.at):
+                    stamp += self.step_ns
+                raw = struct.pack("@qq", *divmod(stamp, NS)) + raw[16:]
+            out.append((level, kind, raw))
+        if k == self.at_datagram:
+            self.stepped = True  # (after its stamp: it waited across the step)
+        return data, out, flags, address
+
+    def __getattr__(self, name):
+        return getattr(self.sock, name)
+
+
+def _step_thread_clock(monkeypatch, sock: _SteppedSocket, server_thread) -> None:
+    """time.time_ns of the server's thread stepped with ``sock`` (the others' real)."""
+    real = time.time_ns
+
+    def stepped() -> int:
+        now = real()
+        if threading.current_thread() is server_thread() and (
+                sock.stepped or (sock.at is not None and now >= sock.at)):
+            return now + sock.step_ns
+        return now
+
+    monkeypatch.setattr(time, "time_ns", stepped)
+
+
+def _wait_until(predicate, what: str, timeout_s: float = 60.0) -> None:
+    deadline = time.monotonic() + timeout_s  # (a hang guard, not a timing)
+    while not predicate():
+        assert time.monotonic() < deadline, f"never {what}"
+        time.sleep(0.005)
+
+
+class _Collector:
+    """A sink noting each point and whether the run had been told to stop when it came."""
+
+    def __init__(self, stop: threading.Event) -> None:
+        self.stop, self.fuser = stop, None
+        self.points: list = []  # (LivePoint, the run told to stop before it)
+        self.events: list[str] = []
+
+    def start(self, fuser) -> None:
+        self.fuser = fuser
+
+    def emit(self, points) -> None:
+        self.points += [(p, self.stop.is_set()) for p in points]
+
+    def event(self, t, text) -> None:
+        self.events.append(text)
+
+    def close(self) -> None:
+        pass
+
+
+def test_hold_and_silence_are_not_fooled_by_a_wall_clock_stepped_back(monkeypatch):
+    """serve with a hold over real UDP: cam3 stops sending, then the fuser host's wall
+    clock (its thread's clock and the kernel's receive stamps) steps 60 s back, then cam1
+    and cam2 send the next 0.3 s of frames, 0.4 s after cam3's last (its silence is 0.3 s).
+    cam3 is silent and not waited for: the frames after it are fused while the run goes on,
+    and the run ends with cam3 silent. On the wall clock cam3's last datagram came 60 s
+    after the others: it looked live, every later frame waited for it (the 10-s hold) and
+    came out only when the run was stopped, cam3 still live."""
+    from pslog.live.server import bind_udp, serve
+    from tests._live import frames, rally_session
+
+    rig, det = rally_session(0.6, spurious_rate=0.0, miss_rate=0.0)
+    epoch = time.time_ns() - 120 * NS  # (the frames' capture times: in the past)
+    cut = epoch + int(0.3 * NS)
+    sent = [(d, encode_detections(d))
+            for d in frames(det, rig, epoch) if d.camera != "cam3" or d.t_capture_ns < cut]
+    before = [b for d, b in sent if d.t_capture_ns < cut]
+    after = [b for d, b in sent if d.t_capture_ns >= cut]
+    sock = _SteppedSocket(bind_udp("udp://127.0.0.1:0"), -60 * NS)
+    ready, stop = threading.Event(), threading.Event()
+    sink, status, result = _Collector(stop), io.StringIO(), {}
+
+    def run() -> None:
+        result["summary"] = serve(rig, "", [sink], method="typeA", candidates=False,
+                                  hold_s=10.0, silent_after_s=0.3, rehearse_s=None,
+                                  epoch_ns=epoch, stop=stop, ready=ready, sock=sock,
+                                  status_stream=status, status_every_s=60.0)
+
+    server = threading.Thread(target=run)
+    _step_thread_clock(monkeypatch, sock, lambda: server)
+    server.start()
+    try:
+        assert ready.wait(300)
+        tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        for b in before:
+            tx.sendto(b, ready.address)  # type: ignore[attr-defined]
+        _wait_until(lambda: sink.fuser.counters()["received"] == len(before), "received")
+        sock.at = time.time_ns()  # the step: every later stamp and clock reading 60 s back
+        time.sleep(0.4)  # (cam3's silence: 0.3 s)
+        for b in after:
+            tx.sendto(b, ready.address)  # type: ignore[attr-defined]
+        tx.close()
+        _wait_until(lambda: sink.fuser.counters()["received"] == len(sent), "received")
+    finally:
+        stop.set()
+        server.join()
+    summary = result["summary"]
+    assert summary.counters["fused"] == len(sent)
+    later = [p for p, stopped in sink.points if p.t_capture_ns >= cut]
+    on_time = [p for p, stopped in sink.points if p.t_capture_ns >= cut and not stopped]
+    # every frame after cam3's last but the last one or two (waiting for the other live
+    # camera's next frame when the run stopped)
+    assert len(later) >= len(after) - 2 and len(on_time) >= len(later) - 2
+    assert [c.silent for c in summary.cameras] == [False, False, True]
+    assert "cam3 SILENT" in status.getvalue().splitlines()[-1]
+
+
+def test_a_datagram_queued_across_a_clock_step_is_bounded_by_the_previous_arrival(
+        monkeypatch):
+    """serve over real UDP, no datagram for 1 s, then a burst of datagrams; the wall clock
+    steps 60 s forward while the 21st of them waits in the socket (its kernel stamp from
+    before, every later one's and the thread's clock after). That datagram's wait cannot
+    be told from the two clocks (60 s on the wall clock): it is bounded by the previous
+    datagram's arrival, so no latency of the run exceeds the burst's own length (measured
+    around it on the monotonic clock). Bounded by the run's start instead, it would read
+    the second of silence before the burst (a persistent offset between the stamps and the
+    thread's clock, as in the bench test above, does not tell the two bounds apart: a
+    one-time step does)."""
+    from pslog.live.server import bind_udp, serve
+    from tests._live import frames, rally_session
+
+    rig, det = rally_session(0.4, spurious_rate=0.0, miss_rate=0.0)
+    epoch = time.time_ns() - 10 * NS  # (the frames' capture times: in the past)
+    sent = frames(det, rig, epoch)[:30]
+    data = [encode_detections(d) for d in sent]
+    sock = _SteppedSocket(bind_udp("udp://127.0.0.1:0"), 60 * NS, at_datagram=20)
+    ready, stop = threading.Event(), threading.Event()
+    sink, result = _Collector(stop), {}
+
+    def run() -> None:
+        result["summary"] = serve(rig, "", [sink], method="typeA", candidates=False,
+                                  rehearse_s=None, epoch_ns=epoch, stop=stop, ready=ready,
+                                  sock=sock, status_stream=None)
+
+    server = threading.Thread(target=run)
+    _step_thread_clock(monkeypatch, sock, lambda: server)
+    server.start()
+    try:
+        assert ready.wait(300)
+        time.sleep(1.0)
+        tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        burst = time.monotonic_ns()
+        for b in data:
+            tx.sendto(b, ready.address)  # type: ignore[attr-defined]
+        tx.close()
+        _wait_until(lambda: sink.fuser.counters()["received"] == len(data), "received")
+        took = time.monotonic_ns() - burst
+    finally:
+        stop.set()
+        server.join()
+    summary = result["summary"]
+    assert sock.stepped and summary.counters["received"] == len(data)
+    # (the datagram that waited across the step made a point: its latency is among them)
+    assert any(p.t_capture_ns == sent[20].t_capture_ns for p, _ in sink.points)
+    # (1 ms: the stamps' conversion between the two clocks, microseconds)
+    assert 0 <= summary.latency_ns.min() and summary.latency_ns.max() <= took + 1_000_000
+    assert summary.wait_ns.max() <= took + 1_000_000

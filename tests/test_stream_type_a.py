@@ -152,6 +152,23 @@ def test_noise_estimate_one_point_path_equals_batch(noise_px):
     assert len(np.unique(whole)) > 10  # (checkpoints past the first: medians, not the floor)
 
 
+def test_noise_estimate_long_runs_of_one_point_equal_batch():
+    """A stream's pushes of one point only (the live case), 1,500 of them: NoiseEstimate
+    appends each innovation in place in a buffer whose kept tail (the last window and
+    checkpoint interval) moves to its front when full, several times here: the batch
+    call's bits throughout."""
+    from pslog.fusion.innovation import _TAIL_BUFFER, NOISE_EVERY, NOISE_WINDOW, NoiseEstimate
+
+    rng = np.random.default_rng(5)
+    x = 1.2 * np.hypot(rng.standard_normal(1500), rng.standard_normal(1500))
+    x[rng.random(1500) < 0.1] = np.nan
+    whole = NoiseEstimate().sigmas(x, 0.3)
+    split = NoiseEstimate()
+    assert_array_equal([split.sigmas(x[i:i + 1], 0.3)[0] for i in range(1500)], whole)
+    assert 1350 > 3 * (_TAIL_BUFFER - NOISE_WINDOW - NOISE_EVERY)  # (moved 3 times or more)
+    assert len(np.unique(whole)) > 10
+
+
 def test_far_and_refused_rows_one_per_push_equal_batch_without_a_lens():
     """A lensless rig's far-off pixels (a damaged datagram's 1e300: no ray, as prepare has
     it) and a static ball crossing behind the cameras (past refusals, counted once), one row

@@ -30,6 +30,7 @@ import numpy as np
 from .._jit import kernel
 from ..motion import G as _G
 from ._prepare_kernel import homogeneous as _homogeneous
+from ._prepare_kernel import previous_next
 from ._prepare_kernel import ray as _ray
 from .innovation import KINK_SIGMAS as _KINK_SIGMAS
 
@@ -1148,3 +1149,64 @@ def model_rescale_kernel(cov, sigma, cov_px, gravity, across, per_px2, points, c
         out[5, i] = cov[4, i] * f + w * (d0 * d2)
         out[6, i] = cov[5, i] * f + w * (d1 * d2)
         out[0, i] = math.sqrt(xx + yy + zz)
+
+
+# -- a stream's one new point (pslog.fusion.pseudo.TypeAStream._push_one), in one call ---
+
+@kernel
+def one_point_kernel(depth, max_extrapolation, max_gap_ns, time_ns, camera, uv,
+                     observed_rays, centers, ki, rr, f9, cam, span_tie_ns, min_angle_deg,
+                     ray_dir, obs_jac, jac4, lens, rtki, ns, noise_px, with_cov, ff, fi,
+                     refused, has, predicted, points, flags, innovation, factor, model,
+                     quality, past_rows, past_points, camera64, lens_table, sigma,
+                     innovation_sigmas, no_rows, kinked, decided):
+    """The point of a window's newest row (its last) and the tests that decide it, as
+    :class:`~pslog.fusion.pseudo.TypeAStream` makes them one row at a time: the brackets
+    (:func:`brackets_kernel`), :func:`type_a_kernel` with that one target, and when its
+    point is made, finite and valid and passes the prediction test (the innovation within
+    ``innovation_sigmas σ factor + model``, ``σ`` = ``sigma[0]``, the noise estimate's for
+    the next point), the kink test (:func:`kink_kernel`, each row's previous and next row of
+    its camera from :func:`~pslog.fusion._prepare_kernel.previous_next`): the same calls on
+    the same arrays as one after another (the same bits), without a call from Python for
+    each, nor the arrays between them made in Python.
+
+    The arguments are :func:`type_a_kernel`'s (without ``targets``, ``previous_instant``,
+    ``prev_b``, ``next_b``: made here) and: ``camera64`` (n,) int64 the window's cameras;
+    ``lens_table`` (m, 8) the cameras' lens rows (:func:`kink_kernel`'s ``lens``);
+    ``sigma`` (1,) px; ``no_rows`` (0,) float64 (no bend tables); ``kinked`` (1,) bool,
+    written (False unless tested); ``decided`` (4,) bool, written: the point made is
+    finite, it is good (finite, no invalid flag), it failed the prediction test, it is
+    kinked. Returns the number of points made (0 or 1).
+    """
+    n = time_ns.shape[0]
+    m = centers.shape[0]
+    prev_b = np.empty((m, n), dtype=np.int64)
+    next_b = np.empty((m, n), dtype=np.int64)
+    previous_instant = np.empty(n, dtype=np.int64)
+    brackets_kernel(time_ns, camera, prev_b, next_b, previous_instant)
+    target = np.empty(1, dtype=np.int64)
+    target[0] = n - 1
+    made = type_a_kernel(
+        target, previous_instant, depth, max_extrapolation, max_gap_ns, time_ns, camera,
+        prev_b, next_b, uv, observed_rays, centers, ki, rr, f9, cam, span_tie_ns,
+        min_angle_deg, ray_dir, obs_jac, jac4, lens, rtki, ns, noise_px, with_cov, ff, fi,
+        refused, has, predicted, points, flags, innovation, factor, model, quality,
+        past_rows, past_points)
+    kinked[0] = False
+    decided[0] = decided[1] = decided[2] = decided[3] = False
+    if made:
+        finite = (math.isfinite(points[0, 0]) and math.isfinite(points[0, 1])
+                  and math.isfinite(points[0, 2]))
+        good = finite and flags[0] == 0
+        failed = good and innovation[0] > innovation_sigmas * (sigma[0] * factor[0]) + model[0]
+        if good and not failed:
+            before = np.empty(n, dtype=np.int64)
+            after = np.empty(n, dtype=np.int64)
+            previous_next(camera64, m, before, after)
+            kink_kernel(target, past_rows[0, :, 0], past_rows[0, :, 1], past_rows[0, :, 2],
+                        past_points[0], past_rows[1, :, 0], past_rows[1, :, 1],
+                        past_rows[1, :, 2], past_points[1], predicted, sigma, before, after,
+                        time_ns, uv, camera64, lens_table, max_gap_ns, ns, kinked, no_rows,
+                        no_rows)
+        decided[0], decided[1], decided[2], decided[3] = finite, good, failed, kinked[0]
+    return made

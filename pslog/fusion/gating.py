@@ -2082,6 +2082,7 @@ class StreamGate:
         # the CONTESTED choices ((logged time, camera, u, v)): only before the track first
         # predicted, so a few per session at most
         self.contested: set[tuple] = set()
+        self._one_time = np.zeros(1, np.int64)  # (_chosen's times of a frame of one)
         # the compiled form (pslog.fusion._gate_kernel: the same steps, the same bits, one
         # call per frame), unless this Python's sum() is one it does not reproduce
         self._state = None
@@ -2161,7 +2162,12 @@ class StreamGate:
             xy = self._normalized(cam, uv)
         n = len(uv)
         assert self._state is not None  # (push calls it in the compiled form only)
-        reasons = self._state.push_decide(cam, t, np.full(n, t, np.int64), uv, xy,
+        if n == 1:  # (the usual frame: its one time in an array of the gate's, copied in)
+            times = self._one_time
+            times[0] = t
+        else:
+            times = np.full(n, t, np.int64)
+        reasons = self._state.push_decide(cam, t, times, uv, xy,
                                           self.last[0] - self.history_ns)
         chosen = []
         for k, r in enumerate(reasons):
@@ -2417,33 +2423,51 @@ class StreamDoubt:
     def of(self, time_ns: np.ndarray, camera: np.ndarray, uv: np.ndarray) -> np.ndarray | None:
         """The doubt (pixels² per axis) of chosen rows in logged order, None when none
         is in doubt."""
+        self._read()
+        if not len(time_ns) or not (self.gate.contested or any(self.recent)):
+            return None
+        out = None
+        for i, (t, c) in enumerate(zip(time_ns.tolist(), camera.tolist(), strict=True)):
+            u, v = uv[i].tolist()
+            doubt = self._row(t, c, u, v)
+            if doubt:
+                if out is None:
+                    out = np.zeros(len(time_ns))
+                out[i] = doubt
+        return out
+
+    def of_one(self, t: int, c: int, u: float, v: float) -> float:
+        """:meth:`of` of one chosen row (Python numbers: logged time, camera, pixel): its
+        doubt, 0.0 when not in doubt (the same value, without its (1,) columns)."""
+        self._read()
+        return self._row(t, c, u, v) if self.gate.contested or any(self.recent) else 0.0
+
+    def _read(self) -> None:
+        """The gate's rejections since the last call, the doubt's sources among them noted
+        (per camera, in logged order)."""
         rejected = self.gate.rejected
         if len(rejected) > self.read:
             for t, c, _, u, v, r in rejected[self.read:]:
                 if doubt_source(r, (t, c) in self.several):
                     self.recent[c].append((t, u, v))
             self.read = len(rejected)
+
+    def _row(self, t: int, c: int, u: float, v: float) -> float:
+        """One chosen row's doubt (0.0: none), the sources older than the window forgotten
+        (a camera's choices come in order); a CONTESTED choice is in doubt whatever lies
+        near it."""
+        near = self.recent[c]
+        while near and near[0][0] < t - self.window:
+            near.popleft()
         contested = self.gate.contested
-        if not len(time_ns) or not (contested or any(self.recent)):
-            return None
-        out = None
+        if contested and (t, c, u, v) in contested:
+            contested.discard((t, c, u, v))
+            return doubt_variance(u, v, *self.size[c])
         radius2 = DOUBT_RADIUS_PX * DOUBT_RADIUS_PX
-        for i, (t, c) in enumerate(zip(time_ns.tolist(), camera.tolist(), strict=True)):
-            near = self.recent[c]
-            while near and near[0][0] < t - self.window:  # (a camera's choices come in order)
-                near.popleft()
-            u, v = uv[i].tolist()
-            if contested and (t, c, u, v) in contested:  # (in doubt whatever lies near it)
-                contested.discard((t, c, u, v))
-                if out is None:
-                    out = np.zeros(len(time_ns))
-                out[i] = doubt_variance(u, v, *self.size[c])
-            elif sum(t - self.window <= tj <= t and (u - uj) * (u - uj) + (v - vj) * (v - vj)
-                   <= radius2 for tj, uj, vj in near) >= DOUBT_REJECTIONS:
-                if out is None:
-                    out = np.zeros(len(time_ns))
-                out[i] = doubt_variance(u, v, *self.size[c])
-        return out
+        if sum(t - self.window <= tj <= t and (u - uj) * (u - uj) + (v - vj) * (v - vj)
+               <= radius2 for tj, uj, vj in near) >= DOUBT_REJECTIONS:
+            return doubt_variance(u, v, *self.size[c])
+        return 0.0
 
 
 def gating_key(method: str, options) -> tuple[bool, float]:

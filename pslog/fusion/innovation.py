@@ -55,6 +55,9 @@ RAYLEIGH_MEDIAN = float(np.sqrt(2.0 * np.log(2.0)))
 #: NOISE_EVERY innovations exist, the tests' σ is at least DEFAULT_NOISE_PX.
 NOISE_WINDOW = 256
 NOISE_EVERY = 32  # (a power of two: NoiseEstimate.sigmas clears its low bits)
+#: the buffer NoiseEstimate keeps its last NOISE_WINDOW + NOISE_EVERY innovations in (the
+#: one-point path appends in place; moved to the front when full)
+_TAIL_BUFFER = 2 * (NOISE_WINDOW + NOISE_EVERY)
 assert NOISE_EVERY & (NOISE_EVERY - 1) == 0, "NoiseEstimate.sigmas needs a power of two"
 #: Windows selected at once by :meth:`NoiseEstimate.sigmas` (64 KB blocks).
 _MEDIAN_ROWS = 32
@@ -97,10 +100,23 @@ class NoiseEstimate:
 
     def __init__(self) -> None:
         self._count = 0  # innovations so far
-        # the last NOISE_WINDOW + NOISE_EVERY of them: every window still to be needed
-        self._tail = np.zeros(0)
+        # the last NOISE_WINDOW + NOISE_EVERY of them (every window still to be needed):
+        # _buffer[_lo:_hi] (_tail), appended to in place by the one-point path
+        self._buffer = np.zeros(_TAIL_BUFFER)
+        self._lo = self._hi = 0
         # (checkpoint, median of its window), made once by the one-point path
         self._median: tuple[int, float] | None = None
+
+    @property
+    def _tail(self) -> np.ndarray:
+        """The last NOISE_WINDOW + NOISE_EVERY innovations (all of them before), (<= 288,)."""
+        return self._buffer[self._lo:self._hi]
+
+    @_tail.setter
+    def _tail(self, values: np.ndarray) -> None:
+        k = len(values)
+        self._buffer[:k] = values
+        self._lo, self._hi = 0, k
 
     @property
     def count(self) -> int:
@@ -163,6 +179,18 @@ class NoiseEstimate:
         """:meth:`sigmas` of one point (``value``: its ``r / factor``, NaN: not taken), as a
         (1,) array: the median of its checkpoint, a selection, is made once per checkpoint
         (every NOISE_EVERY innovations) instead of at every point."""
+        return np.array([self.one(value, floor)])
+
+    def one(self, value: float, floor: float) -> float:
+        """:meth:`_one`'s σ as a Python float (a stream's one point: no array made)."""
+        sigma = self.next_sigma(floor)
+        self.take(value)
+        return sigma
+
+    def next_sigma(self, floor: float) -> float:
+        """The σ (pixels) :meth:`sigmas` gives the next point, whatever its value (its
+        checkpoint's, made from the innovations before it), ``floor``: the stated noise
+        (None's 0.5 given as such)."""
         checkpoint = self._count // NOISE_EVERY * NOISE_EVERY
         sigma = max(floor, DEFAULT_NOISE_PX)
         if checkpoint >= NOISE_EVERY:
@@ -175,10 +203,21 @@ class NoiseEstimate:
                 half = len(window) // 2
                 self._median = (checkpoint, float(np.partition(window, half)[half]))
             sigma = max(floor, self._median[1] / RAYLEIGH_MEDIAN)
+        return sigma
+
+    def take(self, value: float) -> None:
+        """One point's innovation ``r / factor`` taken after its σ (NaN: none taken)."""
         if value == value:  # (not NaN: taken)
             self._count += 1
-            self._tail = np.append(self._tail, value)[-(NOISE_WINDOW + NOISE_EVERY):]
-        return np.array([sigma])
+            hi = self._hi
+            if hi == _TAIL_BUFFER:  # (the kept ones to the front, once in a while)
+                keep = NOISE_WINDOW + NOISE_EVERY - 1
+                self._buffer[:keep] = self._buffer[hi - keep:hi].copy()
+                self._lo, hi = 0, keep
+            self._buffer[hi] = value
+            self._hi = hi = hi + 1
+            if hi - self._lo > NOISE_WINDOW + NOISE_EVERY:
+                self._lo = hi - (NOISE_WINDOW + NOISE_EVERY)
 
 
 def failed_predictions(prep, events: np.ndarray, j1: np.ndarray, j2: np.ndarray,

@@ -70,7 +70,7 @@ from .innovation import (
     failed_counts,
     kinked_points,
 )
-from .stereo import KINK_GATE, count_invalid
+from .stereo import KINK_GATE, NOISE_FLOOR_PX, count_invalid
 
 #: Brackets whose lengths differ by less than this are ties (shutter offsets are rounded to ns).
 _SPAN_TIE_NS = 1_000_000
@@ -517,10 +517,9 @@ class TypeAStream:
         self._lens_table = template.lens_rows
         self._no_rows = np.empty(0)  # (kink_kernel without bend_rows' tables)
         # (the kernels of _push_one and push_one, held: no import at each push)
-        from ._prepare_kernel import lensless_rows, previous_next
+        from ._prepare_kernel import lensless_rows
 
         self._kernels = _pseudo_kernel
-        self._previous_next = previous_next
         self._lensless_rows = lensless_rows
         # cameras without lens distortion: their new rows in one compiled pass
         # (_prepare_kernel.lensless_rows; a lens's rows go through numpy as prepare does)
@@ -536,7 +535,7 @@ class TypeAStream:
                          np.empty((2, 1, 3), dtype=np.int64), np.empty((2, 1, 3)),
                          np.empty(1, dtype=bool), np.empty((1, 3)),
                          np.empty(1, dtype=np.int64), np.empty(1), np.empty(1), np.empty(1),
-                         np.zeros(1, dtype=bool))
+                         np.zeros(1, dtype=bool), np.empty(1), np.zeros(4, dtype=bool))
         if not all(self._lensless):
             # a lens's rows take _lens_rows' kernels, which pslog live's warm-up (a lensless
             # rig) does not run: one row of scratch loads (or compiles) them now, not at the
@@ -688,11 +687,12 @@ class TypeAStream:
         """The point of the window's newest row (rows ``lo:end`` of the buffers), as
         :func:`fuse_type_a` makes it with ``events`` that one row, ``seen`` and ``noise``
         the stream's, ``explain=False``: its compiled kernels on the window's columns, and
-        the decisions that follow it (the prediction and kink tests, the counts) on one
+        the decisions that follow it (the prediction and kink tests, in the same compiled
+        call: :func:`~pslog.fusion._pseudo_kernel.one_point_kernel`; the counts) on one
         point's scalars, each the same IEEE operation as the (1,) columns' (the same bits,
         the same Track: tests/test_stream_type_a.py) without a Prepared, an Observations
         and ~60 numpy calls on arrays of one element."""
-        _pseudo_kernel, previous_next = self._kernels, self._previous_next
+        _pseudo_kernel = self._kernels
         buf = self._buffers
         # (the kernels' arguments of a batch run's types: read-only time and camera columns,
         # as Observations holds them, and contiguous direction Jacobians, a copy of the
@@ -703,58 +703,44 @@ class TypeAStream:
         n = end - lo
         e = n - 1
         m = len(self.rig)
-        # (brackets_kernel over the window: what _all_brackets makes of a Prepared)
-        prev_b, next_b = np.empty((m, n), dtype=np.int64), np.empty((m, n), dtype=np.int64)
-        previous_instant = np.empty(n, dtype=np.int64)
-        _pseudo_kernel.brackets_kernel(time_ns, camera, prev_b, next_b, previous_instant)
         cam, ki, rr, rtki, f9, lens = self._tables
         (ff, fi, past_rows, past_points, has, predicted, flags, innovation, factor, model,
-         kinked_out) = self._scratch
+         kinked_out, sigma, decided) = self._scratch
         refused = np.zeros(n, dtype=np.int64)
         points, quality_table = np.empty((1, 3)), np.empty((len(_QUALITY), 1))  # (returned)
-        target = np.array([e], dtype=np.int64)
         noise_px = self._noise_px
         with_cov = noise_px is not None and not _prepare.FINITE_DIFFERENCES
-        made = _pseudo_kernel.type_a_kernel(
-            target, previous_instant, 2 * m, MAX_EXTRAPOLATION,
-            self._max_gap_ns, time_ns, camera, prev_b, next_b, uv_und, buf.rays[lo:end],
-            self._template.centers, ki, rr, f9, cam, _SPAN_TIE_NS, MIN_RAY_ANGLE_DEG,
-            buf.ray_dir[lo:end], np.ascontiguousarray(buf.dir_jac[:, :, lo:end]),
+        # the σ NoiseEstimate.sigmas gives the next point (whatever its innovation: made
+        # from the ones before), for the prediction and kink tests
+        floor = DEFAULT_NOISE_PX if noise_px is None else float(noise_px)
+        sigma[0] = self._noise.next_sigma(floor)
+        # the brackets, type_a_kernel at the newest row and the decisions of fuse_type_a on
+        # its one point (made: 1: finite, good, failed, kinked), or none (made: 0), in one
+        # compiled call (one_point_kernel: the same calls one after another)
+        made = _pseudo_kernel.one_point_kernel(
+            2 * m, MAX_EXTRAPOLATION, self._max_gap_ns, time_ns, camera, uv_und,
+            buf.rays[lo:end], self._template.centers, ki, rr, f9, cam, _SPAN_TIE_NS,
+            MIN_RAY_ANGLE_DEG, buf.ray_dir[lo:end],
+            np.ascontiguousarray(buf.dir_jac[:, :, lo:end]),
             buf.jac_rows[lo:end] if lens else np.zeros((1, 4)), lens, rtki, NS,
             0.0 if self._cov_px is None else float(self._cov_px), with_cov, ff, fi, refused, has,
             predicted, points, flags, innovation, factor, model, quality_table, past_rows,
-            past_points)
-        # the decisions of fuse_type_a on its one point (made: 1), or none (made: 0)
-        keep = good = failed = kinked = False
+            past_points, buf.camera64[lo:end], self._lens_table, sigma, INNOVATION_SIGMAS,
+            self._no_rows, kinked_out, decided)
         bits = int(flags[0]) if made else 0
-        if made:
-            p0, p1, p2 = points[0].tolist()
-            finite = math.isfinite(p0) and math.isfinite(p1) and math.isfinite(p2)
-            good = finite and bits == 0
-            inn, fac = float(innovation[0]), float(factor[0])
-            # NoiseEstimate.sigmas of (innovation / factor,) or (NaN,): its one-point path
-            sigma = self._noise._one(inn / fac if good else math.nan,
-                                     DEFAULT_NOISE_PX if noise_px is None else float(noise_px))
-            sg = float(sigma[0])
-            failed = good and inn > INNOVATION_SIGMAS * (sg * fac) + float(model[0])
-            if good and not failed:
-                camera64 = buf.camera64[lo:end]
-                _pseudo_kernel.kink_kernel(
-                    target, past_rows[0, :, 0], past_rows[0, :, 1], past_rows[0, :, 2],
-                    past_points[0], past_rows[1, :, 0], past_rows[1, :, 1],
-                    past_rows[1, :, 2], past_points[1], predicted, sigma,
-                    *_window_previous_next(camera64, m, previous_next), time_ns, uv_und,
-                    camera64, self._lens_table, self._max_gap_ns, NS, kinked_out,
-                    self._no_rows, self._no_rows)
-                kinked = bool(kinked_out[0])
-            keep = good and not failed and not kinked
-        else:
-            finite = False
+        finite, good, failed, kinked = decided.tolist()
+        if made:  # (NoiseEstimate.sigmas of (innovation / factor,) or (NaN,): its one point)
+            self._noise.take(float(innovation[0]) / float(factor[0]) if good else math.nan)
+        keep = good and not failed and not kinked
         doubted = False
         if keep:  # (rests_on_doubt of the one point)
             doubt = buf.doubt
-            doubted = doubt[lo + e] > 0 or any(
-                r >= 0 and doubt[lo + r] > 0 for r in past_rows[:, 0, :].ravel().tolist())
+            doubted = doubt[lo + e] > 0
+            if not doubted:  # (the rows of its past points: any in doubt)
+                for r in past_rows[:, 0, :].ravel().tolist():
+                    if r >= 0 and doubt[lo + r] > 0:
+                        doubted = True
+                        break
             keep = not doubted
         # Track.dropped: each detection's past refusals once (seen), the invalid point's
         # reasons, the tests' refusals, in fuse_type_a's order
@@ -784,17 +770,6 @@ class TypeAStream:
         return _trusted_track(time_ns[e:].copy(), points, camera[e:].copy(),
                               dict(zip(_QUALITY[:n_columns], quality_table, strict=False)),
                               dropped)
-
-
-def _window_previous_next(camera: np.ndarray, m: int, previous_next
-                          ) -> tuple[np.ndarray, np.ndarray]:
-    """Each window row's previous and next row of its camera (``camera`` (n,) int64; -1:
-    none), (n,) int64 each: :func:`~pslog.fusion.innovation._previous_next` with the rig's
-    ``m`` cameras."""
-    n = len(camera)
-    before, after = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
-    previous_next(camera, m, before, after)
-    return before, after
 
 
 def _trusted_track(time_ns: np.ndarray, points: np.ndarray, camera: np.ndarray,
@@ -1166,12 +1141,11 @@ class MeasuredNoiseStream:
         """``out`` with each point's covariance at its checkpoint's σ (at the session's
         start its own), at least the floor: :func:`type_a_noise`'s arithmetic (one point:
         the same IEEE operations on Python floats)."""
-        if self._noise_px is None or not len(out) or "std_m" not in out.quality:
+        n = len(out.time_ns)  # (len(out), without Track's Python __len__)
+        if self._noise_px is None or not n or "std_m" not in out.quality:
             return without_model_columns(out)
-        from .stereo import NOISE_FLOOR_PX
-
         every = self._every_ns
-        if len(out) == 1:  # (the usual push: one point, no numpy call on (1,) columns)
+        if n == 1:  # (the usual push: one point, no numpy call on (1,) columns)
             t = int(out.time_ns[0])
             sg = self._sigma[t // every * every]
             if sg != sg:
@@ -1180,14 +1154,20 @@ class MeasuredNoiseStream:
             f = sg / self._cov_px
             f = f * f
             q = out.quality
-            xx, yy, zz, xy, xz, yz = (float(q[name][0]) * f for name in _COV_COLUMNS)
+            # (_COV_COLUMNS' order; written out: no generator per point)
+            xx, yy, zz = (float(q["cov_xx_m2"][0]) * f, float(q["cov_yy_m2"][0]) * f,
+                          float(q["cov_zz_m2"][0]) * f)
+            xy, xz, yz = (float(q["cov_xy_m2"][0]) * f, float(q["cov_xz_m2"][0]) * f,
+                          float(q["cov_yz_m2"][0]) * f)
             if _MODEL_COLUMNS[0] in q:  # (with_measured_noise's model term, on floats)
                 c = int(out.camera[0])
                 p = out.position_world[0]
                 d0 = float(p[0]) - float(self._centers[c, 0])
                 d1 = float(p[1]) - float(self._centers[c, 1])
                 d2 = float(p[2]) - float(self._centers[c, 2])
-                gravity, across, per_px2 = (float(q[name][0]) for name in _MODEL_COLUMNS)
+                gravity, across, per_px2 = (float(q["_model_gravity_m2"][0]),
+                                            float(q["_model_across_m2"][0]),
+                                            float(q["_model_m2_per_px2"][0]))
                 noise = (sg * sg) * per_px2
                 w = (gravity + (0.5 * (across - 2.0 * noise) if across > MODEL_GATE * noise
                                 else 0.0)) / (d0 * d0 + d1 * d1 + d2 * d2)

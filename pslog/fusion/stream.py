@@ -205,12 +205,20 @@ class StreamFuser:
         one, gate = self._push_one, self._gate
         if one is not None and len(uv):  # (an empty frame: push's own path, which keeps no key)
             chosen = uv if gate is None else gate.push_frame(time_ns, camera, frame_index, uv)
+            doubts = self._doubts if chosen is not None else None
             doubt = None
-            if self._doubts is not None and chosen is not None:  # (as push: its frame, then)
-                self._doubts.frames(np.full(len(uv), time_ns, np.int64),
-                                    np.full(len(uv), camera, np.int32))
-                doubt = self._doubt_of(np.full(len(chosen), time_ns, np.int64),
-                                       np.full(len(chosen), camera, np.int32), chosen)
+            if chosen is not None and len(chosen) == 1:
+                u, v = chosen[0].tolist()
+            if doubts is not None:  # (as push: its frame, then)
+                if len(uv) > 1:  # (frames notes nothing of a frame of one candidate)
+                    doubts.frames(np.full(len(uv), time_ns, np.int64),
+                                  np.full(len(uv), camera, np.int32))
+                if len(chosen) == 1:  # (its one row's: of's, on Python numbers)
+                    one_doubt = doubts.of_one(time_ns, camera, u, v)
+                    doubt = np.array([one_doubt]) if one_doubt else None
+                else:
+                    doubt = doubts.of(np.full(len(chosen), time_ns, np.int64),
+                                      np.full(len(chosen), camera, np.int32), chosen)
             if chosen is not None and len(chosen) <= 1:
                 if not len(chosen):  # (every candidate rejected: nothing new)
                     return self._settled(final=False)
@@ -220,8 +228,8 @@ class StreamFuser:
                                       f"camera) order of their logged times; got t={time_ns} "
                                       f"ns after t={self._last_logged[0]} ns")
                 self._last_logged = key
-                u, v = chosen[0].tolist()
-                self._tell_doubt(doubt)
+                if self._doubt_sink is not None:  # (_tell_doubt's: None, or in doubt)
+                    self._doubt_sink.next_doubt = doubt
                 return one(time_ns, camera, u, v)
             if chosen is not None:  # (the gate kept several: the rows of push)
                 c = len(chosen)

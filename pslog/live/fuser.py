@@ -71,6 +71,7 @@ _ARRIVALS = 256
 _NAN3 = np.full(3, np.nan)
 _I64_MAX = int(np.iinfo(np.int64).max)
 _NAN33 = np.full((3, 3), np.nan)
+_NAN_ROW = (math.nan, math.nan, math.nan)
 _COV_KEYS = ("cov_xx_m2", "cov_xy_m2", "cov_xz_m2", "cov_yy_m2", "cov_yz_m2", "cov_zz_m2")
 
 
@@ -191,6 +192,9 @@ class CameraLiveState:
     points : int, points whose shutter was this camera's
     lost : int, frames never received (gaps in the sequence)
     last_arrival_ns : int or None, wall clock arrival of its latest datagram
+    last_seen_ns : int or None, the same arrival on the clock the fuser's waits are counted
+        on (:attr:`LiveFuser.monotonic`: the monotonic clock in :func:`~pslog.live.server.
+        serve`; else the wall clock, the same as ``last_arrival_ns``)
     last_capture_ns : int or None, capture time of its latest fused frame
     silent : bool, no datagram for ``silent_after_s`` (set by :meth:`LiveFuser.cameras`)
     """
@@ -202,6 +206,7 @@ class CameraLiveState:
     points: int = 0
     lost: int = 0
     last_arrival_ns: int | None = None
+    last_seen_ns: int | None = None
     last_capture_ns: int | None = None
     silent: bool = True
     _last_sequence: int | None = None
@@ -334,15 +339,17 @@ class Rehearsal:
         self.steps += 1
         self._durations.append(time.perf_counter_ns() - start)
 
-    def plan(self, fuser: LiveFuser, now: int) -> None:
-        """After a datagram of ``fuser`` (handled at wall clock ``now``): when to rehearse for
-        the next one. Each live camera's next frame is due a frame period after its latest
-        fused one; it comes at the earliest with the least delay (arrival less capture) of
-        its latest datagrams; the rehearsal is to end ``lead_s`` before the earliest camera's
-        (it starts :attr:`duration_ns` before that: the longest of the latest rehearsals' wall
-        times, at most 2 ms, so that one rehearsal preempted for long on a busy machine does
-        not move every later one before the datagram it is for, where none would run and
-        the estimate would never be renewed)."""
+    def plan(self, fuser: LiveFuser, now: int, now_seen: int | None = None) -> None:
+        """After a datagram of ``fuser`` (handled at wall clock ``now``; ``now_seen``: the
+        same instant on the fuser's waits' clock, :attr:`LiveFuser.monotonic`, None: ``now``,
+        which a camera's silence is told by): when to rehearse for the next one. Each
+        live camera's next frame is due a frame period after its latest fused one; it comes
+        at the earliest with the least delay (arrival less capture) of its latest datagrams;
+        the rehearsal is to end ``lead_s`` before the earliest camera's (it starts
+        :attr:`duration_ns` before that: the longest of the latest rehearsals' wall times, at
+        most 2 ms, so that one rehearsal preempted for long on a busy machine does not move
+        every later one before the datagram it is for, where none would run and the
+        estimate would never be renewed)."""
         self.duration_ns = min(max(self._durations, default=0), _MAX_REHEARSAL_NS)
         self.due = None
         if not self._frames:  # (a rehearsal failed: none any more)
@@ -350,9 +357,11 @@ class Rehearsal:
         earliest = None
         latest_arrival = 0
         silent = fuser.silent_after_ns
+        seen_now = now if now_seen is None else now_seen
         for c, state in enumerate(fuser._cams):
-            arrival, capture = state.last_arrival_ns, state.last_capture_ns
-            if arrival is None or capture is None or now - arrival > silent:
+            arrival, capture, seen = state.last_arrival_ns, state.last_capture_ns, \
+                state.last_seen_ns
+            if arrival is None or capture is None or seen is None or seen_now - seen > silent:
                 continue
             delays = self._delays[c]
             if state.frames != self._frames_seen[c]:
@@ -393,6 +402,14 @@ class LiveFuser:
         that overtake one another by up to ``hold_s`` are all fused instead of dropped as
         ``reordered``, at the cost of that wait (:meth:`poll` releases frames whose wait
         is over between datagrams)
+    monotonic : callable returning the clock the fuser's waits are counted on, ns (the
+        hold, a camera's silence), or None (default): the wall clock, ``clock``, and each
+        datagram's wall-clock ``arrival_ns``. :func:`~pslog.live.server.serve` gives
+        ``time.monotonic_ns`` and each datagram's arrival on it (:meth:`feed`): a step of
+        the wall clock (NTP, a VM's clock set again) then neither makes a silent camera
+        look live (a step back: held frames waiting for it as long as the step) nor a live
+        one silent (forward); the capture-time checks (``future``, the points' times) stay
+        on the wall clock, the senders' clock
 
     Attributes
     ----------
@@ -405,7 +422,7 @@ class LiveFuser:
     def __init__(self, rig: Rig, method: str = "filter", *, late_s: float = 0.1,
                  options=None, candidates: bool = True, epoch_ns: int | None = None,
                  silent_after_s: float = 1.0, clock=time.time_ns, keep: bool = True,
-                 hold_s: float = 0.0, future_s: float = 5.0) -> None:
+                 hold_s: float = 0.0, future_s: float = 5.0, monotonic=None) -> None:
         from ..fusion import FusionOptions, check_method
         from ..fusion._prepare import default_max_gap_s
         from ..fusion.gating import _clock_model, _true_time_ns
@@ -419,7 +436,8 @@ class LiveFuser:
         if not 0 <= hold_s <= 10:
             raise FusionError(f"hold must be in [0, 10] seconds, got {hold_s!r}")
         self.hold_ns = int(hold_s * NS)
-        # frames waiting (hold_s > 0): heap of (logged ns, camera, order, datagram, arrival)
+        # frames waiting (hold_s > 0): heap of (logged ns, camera, order, datagram, arrival
+        # (wall clock), arrival on the waits' clock)
         self._held: list = []
         self._n_held = 0
         self.rig = rig
@@ -432,6 +450,9 @@ class LiveFuser:
         self.candidates = bool(candidates) and self.options.gating
         self.stream = StreamFuser(rig, method, self.options, candidates=self.candidates)
         self.clock = clock
+        #: the clock of the waits (hold, silence): :meth:`feed`'s ``arrival_mono_ns``,
+        #: :meth:`poll`'s and :meth:`cameras`' ``now_ns`` (None: the wall clock, ``clock``)
+        self.monotonic = monotonic
         self.epoch_ns = int(clock() if epoch_ns is None else epoch_ns)
         self.late_ns = int(late_s * NS)
         self.future_ns = int(future_s * NS)
@@ -452,16 +473,23 @@ class LiveFuser:
         self._fps = [c.fps for c in rig.cameras]
         self._max_gap_ns = int((self.options.max_gap_s or default_max_gap_s(rig)) * NS)
         self._filter = getattr(getattr(self.stream, "incremental", None), "filter", None)
-        self._last_point: tuple[int, np.ndarray] | None = None  # (session ns, position)
+        # (session ns, position: an array, or a list of floats without a filter)
+        self._last_point: tuple[int, np.ndarray | list] | None = None
         self._layouts: dict[tuple, tuple] = {}  # quality keys -> _layout
         self._flushed = False
         #: name of the camera of the latest valid datagram ("" before any)
         self.last_camera = ""
 
     # ---- public ---------------------------------------------------------------------------
-    def feed(self, data: bytes, arrival_ns: int) -> list[LivePoint]:
-        """One received datagram (``arrival_ns``: wall clock); returns the points it made
-        (possibly none). Never raises on bad bytes: they are counted (:meth:`counters`)."""
+    def feed(self, data: bytes, arrival_ns: int,
+             arrival_mono_ns: int | None = None) -> list[LivePoint]:
+        """One received datagram (``arrival_ns``: wall clock; ``arrival_mono_ns``: the same
+        arrival on :attr:`monotonic`'s clock, None: ``arrival_ns`` without one, now on it
+        with one); returns the points it made (possibly none). Never raises on bad bytes:
+        they are counted (:meth:`counters`)."""
+        if arrival_mono_ns is None:
+            arrival_mono_ns = arrival_ns if self.monotonic is None else self.monotonic()
+        seen = int(arrival_mono_ns)
         counts = self._counts
         counts["received"] += 1
         try:
@@ -477,6 +505,7 @@ class LiveFuser:
         self.last_camera = d.camera
         state.datagrams += 1
         state.last_arrival_ns = int(arrival_ns)
+        state.last_seen_ns = seen
         state.silent = False
         reason = self._check(d, cam, state)
         if reason is None and d.t_capture_ns - arrival_ns > self.future_ns:
@@ -516,28 +545,30 @@ class LiveFuser:
             state._seen.discard(state._seen_order.popleft())
         if not self.hold_ns:
             return self._fuse(d, cam, logged, int(arrival_ns))
-        if len(d):
-            heapq.heappush(self._held, (logged, cam, self._n_held, d, int(arrival_ns)))
+        if len(d.uv):
+            heapq.heappush(self._held, (logged, cam, self._n_held, d, int(arrival_ns), seen))
             self._n_held += 1
-            return self._release(int(arrival_ns))
-        return self._fuse(d, cam, logged, int(arrival_ns)) + self._release(int(arrival_ns))
+            return self._release(seen)
+        return self._fuse(d, cam, logged, int(arrival_ns)) + self._release(seen)
 
     def poll(self, now_ns: int) -> list[LivePoint]:
-        """With ``hold_s``: fuse the held frames whose wait is over at ``now_ns`` (wall
-        clock); returns their points. Without: nothing to do."""
+        """With ``hold_s``: fuse the held frames whose wait is over at ``now_ns`` (on
+        :attr:`monotonic`'s clock; without one, the wall clock); returns their points.
+        Without: nothing to do."""
         return self._release(int(now_ns)) if self._held else []
 
     def _release(self, now: int, final: bool = False) -> list[LivePoint]:
         """Fuse the held frames, oldest first, while the oldest one is complete (every
-        other live camera has sent a frame at least as recent) or has waited ``hold_s``."""
+        other live camera has sent a frame at least as recent) or has waited ``hold_s``
+        (``now`` and the arrivals compared: on the waits' clock, :attr:`monotonic`)."""
         held = self._held
         points: list[LivePoint] = []
         while held:
-            logged, cam, _, d, arrival = held[0]
-            if not final and now - arrival < self.hold_ns:
+            logged, cam, _, d, arrival, seen = held[0]
+            if not final and now - seen < self.hold_ns:
                 for c in self._cams:
-                    if c.index == cam or c.last_arrival_ns is None \
-                            or now - c.last_arrival_ns > self.silent_after_ns:
+                    if c.index == cam or c.last_seen_ns is None \
+                            or now - c.last_seen_ns > self.silent_after_ns:
                         continue  # a silent camera is not waited for
                     if c._newest_logged is None or c._newest_logged < logged:
                         return points
@@ -552,7 +583,7 @@ class LiveFuser:
     def _fuse(self, d: DetectionDatagram, cam: int, logged: int, arrival_ns: int):
         """Push one accepted frame into the stream; its points."""
         counts, state = self._counts, self._cams[cam]
-        k = len(d)
+        k = len(d.uv)  # (len(d), without its Python __len__: once per datagram)
         if k:  # from now on the newest: an older frame with candidates cannot be fused
             self._newest = (logged, cam)
             # true_times_ns of the top row, in floats (the same ns; numpy costs more for one)
@@ -582,7 +613,7 @@ class LiveFuser:
         state.last_capture_ns = d.t_capture_ns
         if self.keep:
             self.accepted.append(d)
-        return self._points(track) if track is not None and len(track) else []
+        return self._points(track) if track is not None and len(track.time_ns) else []
 
     def flush(self) -> list[LivePoint]:
         """The points still held (methods that wait for the tolerance, clock corrections);
@@ -606,10 +637,13 @@ class LiveFuser:
         return dict(self._counts)
 
     def cameras(self, now_ns: int | None = None) -> list[CameraLiveState]:
-        """Each camera's state, ``silent`` updated to ``now_ns`` (wall clock; default now)."""
-        now = self.clock() if now_ns is None else int(now_ns)
+        """Each camera's state, ``silent`` updated to ``now_ns`` (on :attr:`monotonic`'s
+        clock; without one, the wall clock; default: now)."""
+        if now_ns is None:
+            now_ns = (self.monotonic or self.clock)()
+        now = int(now_ns)
         for c in self._cams:
-            c.silent = c.last_arrival_ns is None or now - c.last_arrival_ns > self.silent_after_ns
+            c.silent = c.last_seen_ns is None or now - c.last_seen_ns > self.silent_after_ns
         return list(self._cams)
 
     def take(self) -> tuple[list[DetectionDatagram], list[tuple[DetectionDatagram, str]]]:
@@ -622,14 +656,15 @@ class LiveFuser:
     def _check(self, d: DetectionDatagram, cam: int, state: CameraLiveState) -> str | None:
         if (d.sequence, d.t_capture_ns) in state._seen:
             return "duplicate"
-        if len(d) and self._readout[cam]:
+        k = len(d.uv)
+        if k and self._readout[cam]:
             h = self._clock_model[cam][0]
             if not all(0 <= v <= h for v in d.uv[:, 1].tolist()):  # rows: finite (decoded)
                 return "malformed"
         logged = d.t_capture_ns - self.epoch_ns
         if logged < 0:
             return "late"
-        if len(d) and (logged, cam) <= self._newest:
+        if k and (logged, cam) <= self._newest:
             return "late" if self._newest[0] - logged > self.late_ns else "reordered"
         # a frame without candidates fuses nothing (offline fusion never sees it either):
         # in any order it only says that its camera is alive
@@ -644,7 +679,7 @@ class LiveFuser:
 
     def _points(self, track: Track) -> list[LivePoint]:
         now = int(self.clock())
-        n = len(track)
+        n = len(track.time_ns)
         q = track.quality
         names = self._names
         times = track.time_ns.tolist()
@@ -669,7 +704,9 @@ class LiveFuser:
             t, cam = times[i], cams[i]
             p = positions[i]
             row = rows[i]
-            if cov_at is not None:
+            if flt is None:  # (constant velocity: on Python floats, one array of the four)
+                position, cov_w, pred_p, pred_v = self._made(t, p.tolist(), row, layout, now)
+            elif cov_at is not None:
                 xx, xy, xz, yy, yz, zz = cov_at(row)
                 cov = np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
             elif state is not None and state[0] == t and i == n - 1:
@@ -681,11 +718,14 @@ class LiveFuser:
                                 [math.nan, math.nan, sz ** 2]])
             else:
                 cov = _NAN33
+            if flt is not None:
+                position, cov_w = _ro(p), _ro(cov)
+                pred_p, pred_v = self._predicted(t, p, now)
+                pred_p, pred_v = _ro(pred_p), _ro(pred_v)
             flags = 0
             for j, bit in flag_at:
                 if row[j] == 1:
                     flags |= bit
-            pred_p, pred_v = self._predicted(t, p, now)
             arrivals = self._cams[cam]._arrivals
             # the latest frame of the camera at or before the point (sorted: in fused order);
             # usually the frame just fused, its last one
@@ -699,17 +739,47 @@ class LiveFuser:
             point = new(LivePoint)
             point.__dict__.update(
                 method=method, camera=names[cam], camera_index=cam,
-                t_capture_ns=t + epoch, t_emit_ns=now, position_world=_ro(p),
-                cov_world=_ro(cov),
+                t_capture_ns=t + epoch, t_emit_ns=now, position_world=position,
+                cov_world=cov_w,
                 residual_px=row[residual] if residual is not None else math.nan,
                 camera_mask=int(m) if math.isfinite(m) else 1 << cam,
-                predicted_position=_ro(pred_p), predicted_velocity=_ro(pred_v),
+                predicted_position=pred_p, predicted_velocity=pred_v,
                 arrival_ns=arrival, flags=flags, quality=dict(zip(keys, row, strict=True)),
                 epoch_ns=epoch)
             out.append(point)
             self._cams[cam].points += 1
         self._counts["points"] += n
         return out
+
+    def _made(self, t: int, p: list, row: list, layout: tuple, now: int) -> tuple:
+        """A point of a method without a filter: its position, covariance, predicted
+        position and velocity at ``now`` (wall clock), read-only views of one (6, 3) array
+        made from Python floats (``p``: its position; ``row``: its quality row, ``layout``
+        where). :meth:`_predicted`'s constant velocity and the covariance of :meth:`_points`,
+        each the same IEEE operation as on the (3,) arrays: the same bits."""
+        cov_at, std_at = layout[2], layout[3]
+        if cov_at is not None:
+            xx, xy, xz, yy, yz, zz = cov_at(row)
+            c0, c1, c2 = (xx, xy, xz), (xy, yy, yz), (xz, yz, zz)
+        elif std_at is not None:
+            sx, sy, sz = std_at(row)
+            nan = math.nan
+            c0, c1, c2 = (sx ** 2, nan, nan), (nan, sy ** 2, nan), (nan, nan, sz ** 2)
+        else:
+            c0 = c1 = c2 = _NAN_ROW
+        px, py, pz = p
+        last, self._last_point = self._last_point, (t, p)
+        if last is None or not 0 < t - last[0] <= self._max_gap_ns:
+            pred, vel = (px, py, pz), _NAN_ROW
+        else:
+            dt = (t - last[0]) / NS
+            lx, ly, lz = last[1]
+            vx, vy, vz = (px - lx) / dt, (py - ly) / dt, (pz - lz) / dt
+            ahead = (now - self.epoch_ns - t) / NS
+            pred, vel = (px + vx * ahead, py + vy * ahead, pz + vz * ahead), (vx, vy, vz)
+        block = np.array((p, c0, c1, c2, pred, vel))
+        block.flags.writeable = False
+        return block[0], block[1:4], block[4], block[5]
 
     def _predicted(self, t: int, p: np.ndarray, now: int):
         """The state at ``now`` (wall clock): the filter's prediction, else constant velocity

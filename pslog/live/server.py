@@ -108,16 +108,18 @@ def format_status(fuser: LiveFuser, cameras: list[CameraLiveState], now_ns: int,
     """One status line: time served; per camera live or silent (for how long), its datagrams
     (``dg``) and the points of its shutters (``pt``); all datagrams and points; the non-zero
     drop counters. A camera never heard is ``starting`` while ``starting(name)`` says it may
-    still be (its process starting up), else ``silent (never heard)``."""
+    still be (its process starting up), else ``silent (never heard)``. ``now_ns`` and
+    ``started_ns``: on the fuser's waits' clock (:attr:`LiveFuser.monotonic`, the cameras'
+    ``last_seen_ns``)."""
     c = fuser.counters()
     parts = [f"live {(now_ns - started_ns) / NS:6.1f} s"]
     for cam in cameras:
-        if cam.last_arrival_ns is None:
+        if cam.last_seen_ns is None:
             still = starting is not None and starting(cam.name)
             parts.append(f"{cam.name} " + ("starting" if still else "silent (never heard)"))
             continue
         state = ("live" if not cam.silent else
-                 f"SILENT {(now_ns - cam.last_arrival_ns) / NS:.1f} s")
+                 f"SILENT {(now_ns - cam.last_seen_ns) / NS:.1f} s")
         parts.append(f"{cam.name} {state} {cam.datagrams} dg {cam.points} pt")
     parts.append(f"datagrams {c['received']} points {c['points']}")
     drops = [f"{k} {c[k]}" for k in ("duplicate", "reordered", "late", "future", "truncated",
@@ -241,8 +243,11 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
             raise InputError(f"status period must be > 0 seconds, got {status_every_s!r}")
         if duration_s is not None and not duration_s >= 0:
             raise InputError(f"duration must be >= 0 seconds, got {duration_s!r}")
+        # (its waits, the hold and a camera's silence, on the monotonic clock: each
+        # datagram's arrival given on it, arrival_monotonic)
         fuser = LiveFuser(rig, method, late_s=late_s, options=options, candidates=candidates,
-                          epoch_ns=epoch_ns, silent_after_s=silent_after_s, hold_s=hold_s)
+                          epoch_ns=epoch_ns, silent_after_s=silent_after_s, hold_s=hold_s,
+                          monotonic=time.monotonic_ns)
         # the method's kernels loaded now, not behind the first datagrams (fuser.warm_up)
         warm_up(method, candidates=fuser.candidates, options=fuser.options)
         rehearsal = None if rehearse_s is None else Rehearsal(fuser, rehearse_s)
@@ -280,7 +285,6 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
     mono = time.monotonic_ns
     interrupted = False
     clock = time.time_ns
-    started = clock()
     # (latencies on the monotonic clock: the earliest a datagram read in this run can have
     # arrived, then each one's arrival; arrival_monotonic)
     started_mono = floor = mono()
@@ -289,7 +293,7 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
     deadline = None if duration_s is None else started_mono + int(duration_s * NS)
     period = int(status_every_s * NS)
     next_status = started_mono + period
-    was_silent = {c.name: True for c in fuser.cameras(started)}
+    was_silent = {c.name: True for c in fuser.cameras(started_mono)}
     heard: set[str] = set()
     error: BaseException | None = None
     rehearsal_cpu = overlaps = 0
@@ -316,8 +320,8 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
             n_lat += 1
         return out
 
-    def events(now: int) -> None:
-        for cam in fuser.cameras(now):
+    def events(now: int, now_mono: int) -> None:
+        for cam in fuser.cameras(now_mono):
             if cam.silent != was_silent[cam.name]:
                 was_silent[cam.name] = cam.silent
                 if cam.silent:
@@ -346,7 +350,7 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
         arrival = _arrival(ancdata, now)
         floor = arrival_mono = arrival_monotonic(arrival, now, now_mono, floor)
         overlaps += arrival < rehearsed_until
-        points = fuser.feed(data, arrival)
+        points = fuser.feed(data, arrival, arrival_mono)
         if points:  # the points first: recording and viewers after
             out = hand_out(points, now, now_mono, arrival, arrival_mono)
             i = n_cpu % _KEEP_LATENCIES
@@ -357,7 +361,7 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
         if fuser.keep:
             pass_on()
         if rehearsal is not None:  # (the next one's rehearsal planned: after the points)
-            rehearsal.plan(fuser, now)
+            rehearsal.plan(fuser, now, now_mono)
 
     bufsize = max(MAX_DETECTION_BYTES + 1, 65536)  # larger ones are seen whole: oversize
     anc = socket.CMSG_SPACE(16) if timestamps else 0
@@ -419,7 +423,7 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
                 # nothing more in the socket: frames whose wait is over by the clock (while
                 # datagrams come, each one's arrival time releases them: a fuser running
                 # behind reads what is queued before it gives up waiting for it)
-                points = fuser.poll(now)
+                points = fuser.poll(now_mono)
                 if points:
                     hand_out(points, now, now_mono)
                 if fuser.keep:
@@ -429,12 +433,12 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
             # a camera silent or back: looked at between datagrams while one is silent
             if (data is None or now_mono >= next_status
                     or was_silent.get(fuser.last_camera, False)):
-                events(now)
+                events(now, now_mono)
             if now_mono >= next_status:
                 next_status = now_mono + period
-                # (time served on the monotonic clock: started as the wall clock now says)
-                text = format_status(fuser, fuser.cameras(now), now,
-                                     now - (now_mono - started_mono), starting)
+                # (time served and silences on the monotonic clock)
+                text = format_status(fuser, fuser.cameras(now_mono), now_mono, started_mono,
+                                     starting)
                 say(text)
                 counters = fuser.counters()
                 for f in on_status:
@@ -488,7 +492,7 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
         end = clock()
         counters = fuser.counters()
         end_mono = mono()
-        final = format_status(fuser, fuser.cameras(end), end, end - (end_mono - started_mono),
+        final = format_status(fuser, fuser.cameras(end_mono), end_mono, started_mono,
                               starting)
         for ev in on_event:
             with contextlib.suppress(Exception):
@@ -509,7 +513,7 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
     say(final)
     lat = latencies[:min(n_lat, _KEEP_LATENCIES)].copy()
     kept = min(n_cpu, _KEEP_LATENCIES)
-    return LiveSummary(counters=counters, cameras=fuser.cameras(end),
+    return LiveSummary(counters=counters, cameras=fuser.cameras(end_mono),
                        duration_s=(end_mono - started_mono) / NS, interrupted=interrupted,
                        latency_ns=lat, cpu_ns=cpu[:kept].copy(),
                        wait_ns=waits[:kept].copy(), handled_ns=handled[:kept].copy(),
