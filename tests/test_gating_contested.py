@@ -86,8 +86,11 @@ def test_a_static_object_chosen_in_a_cameras_first_frame_against_the_third_is_co
         stream = StreamGate(rig, compiled=compiled)
         streamed(stream, det)
         assert stream.contested == want
-    for method in ("typeA", "nearest"):
-        batch = typea if method == "typeA" else near
+    # the filter leaves the contested choices out (a choice in doubt: "The filter and a
+    # choice in doubt"), streamed as in batch
+    filt = fuse(det, rig, "filter")
+    assert filt.dropped.get("doubt", 0) == len(want)
+    for method, batch in (("typeA", typea), ("nearest", near), ("filter", filt)):
         for form in ("push", "push_frame"):
             fuser = StreamFuser(rig, method, FusionOptions(), candidates=True)
             assert_same_track(Track.concat([*push_frames(fuser, det, form), fuser.flush()]),
