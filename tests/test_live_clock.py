@@ -233,7 +233,12 @@ def test_hold_and_silence_are_not_fooled_by_a_wall_clock_stepped_back(monkeypatc
     # every frame after cam3's last but the last one or two (waiting for the other live
     # camera's next frame when the run stopped)
     assert len(later) >= len(after) - 2 and len(on_time) >= len(later) - 2
-    assert [c.silent for c in summary.cameras] == [False, False, True]
+    # cam3 silent at the end, its last datagram (monotonic) a step's sleep before the
+    # others' (whether cam1 and cam2 still count as live at the end depends on how long
+    # the shutdown took after their last datagram: not asserted)
+    cam1, cam2, cam3 = summary.cameras
+    assert cam3.silent
+    assert cam3.last_seen_ns < min(cam1.last_seen_ns, cam2.last_seen_ns) - 0.3e9
     assert "cam3 SILENT" in status.getvalue().splitlines()[-1]
 
 

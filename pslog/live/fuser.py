@@ -720,7 +720,7 @@ class LiveFuser:
                 cov = _NAN33
             if flt is not None:
                 position, cov_w = _ro(p), _ro(cov)
-                pred_p, pred_v = self._predicted(t, p, now)
+                pred_p, pred_v = self._predicted(p, now)
                 pred_p, pred_v = _ro(pred_p), _ro(pred_v)
             flags = 0
             for j, bit in flag_at:
@@ -755,8 +755,9 @@ class LiveFuser:
         """A point of a method without a filter: its position, covariance, predicted
         position and velocity at ``now`` (wall clock), read-only views of one (6, 3) array
         made from Python floats (``p``: its position; ``row``: its quality row, ``layout``
-        where). :meth:`_predicted`'s constant velocity and the covariance of :meth:`_points`,
-        each the same IEEE operation as on the (3,) arrays: the same bits."""
+        where). The prediction: constant velocity from the last two points (NaN velocity
+        without a recent previous point); the covariance as :meth:`_points` builds a
+        filter's."""
         cov_at, std_at = layout[2], layout[3]
         if cov_at is not None:
             xx, xy, xz, yy, yz, zz = cov_at(row)
@@ -781,17 +782,12 @@ class LiveFuser:
         block.flags.writeable = False
         return block[0], block[1:4], block[4], block[5]
 
-    def _predicted(self, t: int, p: np.ndarray, now: int):
-        """The state at ``now`` (wall clock): the filter's prediction, else constant velocity
-        from the last two points (NaN velocity without a recent previous point)."""
-        session_now = now - self.epoch_ns
-        if self._filter is not None:
-            pred = self._filter.predict(session_now)
-            if pred is not None:
-                return pred[0], pred[1]
-            return np.array(p, dtype=np.float64), _NAN3
-        last, self._last_point = self._last_point, (t, np.array(p, dtype=np.float64))
-        if last is None or not 0 < t - last[0] <= self._max_gap_ns:
-            return np.array(p, dtype=np.float64), _NAN3
-        v = (p - last[1]) / ((t - last[0]) / NS)
-        return p + v * ((session_now - t) / NS), v
+    def _predicted(self, p: np.ndarray, now: int):
+        """The filter's state at ``now`` (wall clock): its predicted position and velocity
+        (``p`` and NaN velocity before it has a state). Methods without a filter predict
+        in :meth:`_made`."""
+        assert self._filter is not None
+        pred = self._filter.predict(now - self.epoch_ns)
+        if pred is not None:
+            return pred[0], pred[1]
+        return np.array(p, dtype=np.float64), _NAN3
