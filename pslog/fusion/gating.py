@@ -1866,15 +1866,16 @@ def doubt_source(reason, several):
 
 def _observation_doubt(detections: Detections, rig: Rig, reason: np.ndarray,
                        observations: Observations, static_s: float) -> np.ndarray | None:
-    """:func:`choice_doubt` of the chosen candidates (``reason`` -1) on the rows of
-    ``observations`` (the chosen ones at their corrected times); None when none is in doubt."""
+    """:func:`choice_doubt` of the chosen candidates (``reason`` < 0), and the whole
+    :func:`doubt_variance` of a :data:`CONTESTED` one, on the rows of ``observations`` (the
+    chosen ones at their corrected times); None when none is in doubt."""
     frame = detections.cand_frame
     several = detections.candidates_per_frame()[frame] >= 2
     still = np.flatnonzero(doubt_source(reason, several))
-    contested = np.flatnonzero(reason[reason < 0] == CONTESTED)
+    chosen = np.flatnonzero(reason < 0)
+    contested = np.flatnonzero(reason[chosen] == CONTESTED)
     if not len(still) and not len(contested):
         return None
-    chosen = np.flatnonzero(reason < 0)
     doubt = choice_doubt(detections.frame_time_ns[frame[chosen]],
                          detections.frame_camera[frame[chosen]], detections.cand_uv[chosen],
                          detections.frame_time_ns[frame[still]],

@@ -179,13 +179,9 @@ class NoiseEstimate:
         """:meth:`sigmas` of one point (``value``: its ``r / factor``, NaN: not taken), as a
         (1,) array: the median of its checkpoint, a selection, is made once per checkpoint
         (every NOISE_EVERY innovations) instead of at every point."""
-        return np.array([self.one(value, floor)])
-
-    def one(self, value: float, floor: float) -> float:
-        """:meth:`_one`'s σ as a Python float (a stream's one point: no array made)."""
         sigma = self.next_sigma(floor)
         self.take(value)
-        return sigma
+        return np.array([sigma])
 
     def next_sigma(self, floor: float) -> float:
         """The σ (pixels) :meth:`sigmas` gives the next point, whatever its value (its
