@@ -875,9 +875,15 @@ def band_cholesky(ab: np.ndarray) -> int:
     (upper banded storage, ``ab[kd + i - j, j] = A[i, j]``): LAPACK's ``dpbtf2`` (the
     unblocked form ``dpbtrf`` runs for a band this narrow), step for step — the row's
     entries beyond the diagonal scaled by the pivot's reciprocal (``dscal``), then the
-    rank-one update of the trailing block one column at a time (``dsyr``: each entry
-    ``a + (-x_c) x_r``, no fused multiply-add), so the same bits as scipy's
-    ``cholesky_banded``. Golub & Van Loan, *Matrix Computations*, 4th ed., §4.3.5.
+    rank-one update of the trailing block (``dsyr``: each entry ``a + (-x_c) x_r``, no
+    fused multiply-add), so the same bits as scipy's ``cholesky_banded``. Golub & Van Loan,
+    *Matrix Computations*, 4th ed., §4.3.5.
+
+    A step updates each entry of its trailing block once, so the order of the updates
+    within a step does not change a bit: they run by diagonal of the band (one stored row,
+    contiguous columns), with fixed trip counts where the whole band of 11 superdiagonals
+    is inside the matrix (every column but the last 11 of a spline problem): 1.4x less
+    time than ``dsyr``'s column order at 90 minutes, the same bits.
 
     Returns
     -------
@@ -887,6 +893,7 @@ def band_cholesky(ab: np.ndarray) -> int:
     kd = ab.shape[0] - 1
     n = ab.shape[1]
     x = np.zeros(max(kd, 1))
+    nx = np.zeros(max(kd, 1))  # -x, as dsyr's alpha times x_c
     for j in range(n):
         ajj = ab[kd, j]
         if not ajj > 0.0:
@@ -895,15 +902,29 @@ def band_cholesky(ab: np.ndarray) -> int:
         ab[kd, j] = ajj
         kn = min(kd, n - j - 1)
         inv = 1.0 / ajj
-        for p in range(kn):
-            v = ab[kd - 1 - p, j + 1 + p] * inv
-            ab[kd - 1 - p, j + 1 + p] = v
-            x[p] = v
-        for c in range(kn):
-            da = -1.0 * x[c]
-            col = j + 1 + c
-            for r in range(c + 1):
-                ab[kd + r - c, col] = ab[kd + r - c, col] + da * x[r]
+        if kd == 11 and kn == 11:  # the spline problems' band, whole: fixed trip counts
+            for p in range(11):
+                v = ab[10 - p, j + 1 + p] * inv
+                ab[10 - p, j + 1 + p] = v
+                x[p] = v
+                nx[p] = -1.0 * v
+            # entry (kd + r - c, j + 1 + c), r <= c, on diagonal d = c - r: row kd - d
+            for d in range(11):
+                row = ab[11 - d]
+                c0 = j + 1 + d
+                for r in range(11 - d):
+                    row[c0 + r] = row[c0 + r] + nx[r + d] * x[r]
+        else:
+            for p in range(kn):
+                v = ab[kd - 1 - p, j + 1 + p] * inv
+                ab[kd - 1 - p, j + 1 + p] = v
+                x[p] = v
+                nx[p] = -1.0 * v
+            for d in range(kn):
+                row = ab[kd - d]
+                c0 = j + 1 + d
+                for r in range(kn - d):
+                    row[c0 + r] = row[c0 + r] + nx[r + d] * x[r]
     return 0
 
 
@@ -914,14 +935,21 @@ def band_solve(U: np.ndarray, b: np.ndarray) -> None:
     ``dtbsv``, step for step — the forward solve ``Uᵀ y = b`` subtracts each row's dot
     product (summed from 0 in order) and divides by the pivot; the back solve ``U x = y``
     divides by the pivot, then subtracts ``x_i`` times column ``i`` from the rows above
-    (``daxpy``): the same bits as scipy's ``cho_solve_banded``."""
+    (``daxpy``): the same bits as scipy's ``cho_solve_banded``. Rows with the whole band
+    of 11 superdiagonals take fixed trip counts (the same operations in the same order:
+    1.7x less time at 90 minutes)."""
     kd = U.shape[0] - 1
     n = U.shape[1]
     for q in range(b.shape[0]):
         x = b[q]
         for i in range(n):
             length = min(i, kd)
-            if length > 0:
+            if kd == 11 and length == 11:
+                dot = 0.0
+                for p in range(11):
+                    dot += x[i - 11 + p] * U[p, i]
+                x[i] -= dot
+            elif length > 0:
                 dot = 0.0
                 for p in range(length):
                     dot += x[i - length + p] * U[kd - length + p, i]
@@ -931,8 +959,12 @@ def band_solve(U: np.ndarray, b: np.ndarray) -> None:
             x[i] /= U[kd, i]
             da = -x[i]
             length = min(i, kd)
-            for p in range(length):
-                x[i - length + p] += da * U[kd - length + p, i]
+            if kd == 11 and length == 11:
+                for p in range(11):
+                    x[i - 11 + p] += da * U[p, i]
+            else:
+                for p in range(length):
+                    x[i - length + p] += da * U[kd - length + p, i]
 
 
 @kernel
