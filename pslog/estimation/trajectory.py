@@ -927,13 +927,21 @@ def _fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions) -> Fit:
                             np.concatenate([np.asarray(b) for b in breaks]) if breaks
                             else np.zeros(0), sigma, spacing, valid_s, consider,
                             options.detector_offset_m)
-    position = np.full((n, 3), np.nan)
-    covariance = np.full((n, 3, 3), np.nan)
     residual = np.full(n, np.nan)
     weight = np.zeros(n)
-    position[problem.rows] = problem.positions(control)
-    covariance[problem.rows] = problem.points.marginal(band)
-    _add_consider(covariance, problem.rows, trajectory, problem.first, problem.N)
+    if len(problem.rows) == n:
+        # every observation in a piece (the rows ascending: all of them, in order): the
+        # points' arrays are the outputs, not copied into NaN-filled ones (a 90-minute
+        # session's covariances are 35 MB, written twice and faulted in page by page)
+        position = problem.positions(control)
+        covariance = problem.points.marginal(band)
+        _add_consider(covariance, slice(None), trajectory, problem.first, problem.N)
+    else:
+        position = np.full((n, 3), np.nan)
+        covariance = np.full((n, 3, 3), np.nan)
+        position[problem.rows] = problem.positions(control)
+        covariance[problem.rows] = problem.points.marginal(band)
+        _add_consider(covariance, problem.rows, trajectory, problem.first, problem.N)
     residual[problem.rows] = np.linalg.norm(r, axis=1)
     weight[problem.rows] = w
     used = np.zeros(n, dtype=bool)
@@ -1112,17 +1120,19 @@ def bias_sensitivity(problem: _Problem, U: np.ndarray, J: np.ndarray, r: np.ndar
     return _normal.solve(factor, rhs.reshape(n3, k)).reshape(-1, 3, k)
 
 
-def _add_consider(cov: np.ndarray, rows: np.ndarray, trajectory: Trajectory,
+def _add_consider(cov: np.ndarray, rows: np.ndarray | slice, trajectory: Trajectory,
                   first: np.ndarray, N: np.ndarray) -> None:
-    """Add the consider parameters' covariance to ``cov[rows]`` (points ``Σ_a N_a c[first +
-    a]``): the detector's common 3-D offset, ``offset_m² I₃`` — a constant shift of every
+    """Add the consider parameters' covariance to ``cov[rows]`` (``rows`` an index array or
+    a slice; points ``Σ_a N_a c[first + a]``): the detector's common 3-D offset,
+    ``offset_m² I₃`` — a constant shift of every
     detection's ball moves the fit by exactly that shift (the B-splines sum to one, the
     prior (2) sees only the path's second and third derivatives, the robust weights the
     same residuals), so its sensitivity is ``I₃`` at every point — and each camera's pixel
     bias, ``S Sᵀ`` (:func:`bias_sensitivity`, :func:`consider_points`)."""
     if trajectory.offset_m > 0:
         diagonal = np.arange(3)
-        cov[rows[:, None], diagonal, diagonal] += trajectory.offset_m**2
+        where = rows if isinstance(rows, slice) else rows[:, None]
+        cov[where, diagonal, diagonal] += trajectory.offset_m**2
     if trajectory.consider is not None:
         S = consider_points(trajectory.consider, first, N)
         cov[rows] += np.einsum("nik,njk->nij", S, S)

@@ -49,12 +49,18 @@ def fuse_smooth(prep: Prepared, rig: Rig, options) -> Track:
             return _empty()
         raise
     if options.rate_hz is None:
-        rows = np.flatnonzero(fit.used)
         # the points with a finite position, gathered once (the covariances of a 90-minute
-        # session are 35 MB: gathered and then filtered, they were copied twice)
-        rows = rows[np.all(np.isfinite(fit.position[rows]), axis=1)]
-        time_ns, camera = obs.time_ns[rows], obs.camera[rows]
-        position, cov, residual = fit.position[rows], fit.covariance[rows], fit.residual_px[rows]
+        # session are 35 MB: gathered and then filtered, they were copied twice); none
+        # gathered when every observation has one (the fit's arrays are the track's)
+        keep = fit.used & np.all(np.isfinite(fit.position), axis=1)
+        if np.all(keep):
+            time_ns, camera = obs.time_ns, obs.camera
+            position, cov, residual = fit.position, fit.covariance, fit.residual_px
+        else:
+            rows = np.flatnonzero(keep)
+            time_ns, camera = obs.time_ns[rows], obs.camera[rows]
+            position, cov = fit.position[rows], fit.covariance[rows]
+            residual = fit.residual_px[rows]
     else:
         time_ns = _grid(fit, options.rate_hz)
         position, cov = fit.trajectory.evaluate(time_ns)
