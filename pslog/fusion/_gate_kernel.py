@@ -642,7 +642,7 @@ def insert_frame(fi, fflag, ct, cf, csup, count, cam, t, k, times, uv, xy, disto
     return fid
 
 
-@kernel
+@kernel(inline=True)
 def choose(a, at, fi, fflag, ct, cf, trk, ist, centers, opt, static, lone, avail, nsup,
            unpointed, front, chosen, epi, run, r_dec, lag, differs, pred, reason):
     """gating._Decider.decide of camera ``a``'s frame at row ``at`` of its kept frames (its
@@ -654,7 +654,8 @@ def choose(a, at, fi, fflag, ct, cf, trk, ist, centers, opt, static, lone, avail
     track (``trk``, ``ist``). ``differs`` (k,) and ``pred`` (4,): scratch. Sets ``reason``
     (k,) (-1 chosen, -2 contested), the track, the frame decided (``fflag[a, at, 0]``) and
     its chosen candidate (``fi[a, at, 4]``, -1 none); returns the time of its last
-    candidate, s."""
+    candidate, s. Inlined into :func:`decide_frame` (its twenty arrays not referenced per
+    call); called alone by ``tests/test_gating_rechoice_lone.py``."""
     m = r_dec.shape[1]
     k = fi[a, at, 3]
     key = fi[a, at, 0]
