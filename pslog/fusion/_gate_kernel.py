@@ -642,6 +642,185 @@ def insert_frame(fi, fflag, ct, cf, csup, count, cam, t, k, times, uv, xy, disto
     return fid
 
 
+@kernel(inline=True)
+def choose(a, at, fi, fflag, ct, cf, trk, ist, centers, opt, static, lone, avail, nsup,
+           unpointed, front, chosen, epi, run, r_dec, lag, differs, pred, reason):
+    """gating._Decider.decide of camera ``a``'s frame at row ``at`` of its kept frames (its
+    ``k = fi[a, at, 3]`` candidates: corrected times ``ct[a, at]``, undistorted pixels and
+    rays ``cf[a, at, :, :5]``), on its columns as :func:`decide_frame` computes them
+    (gating._columns: ``static``, ``lone``, ``avail``, ``nsup``, ``unpointed``, ``front``
+    (k,) float, ``chosen`` (k, 3) the decided points, ``epi`` the epipolar cost, ``run`` the
+    3-D stillness, ``r_dec`` (k, m) the decided support ratio, ``lag`` (k, m) s) and the
+    track (``trk``, ``ist``). ``differs`` (k,) and ``pred`` (4,): scratch. Sets ``reason``
+    (k,) (-1 chosen, -2 contested), the track, the frame decided (``fflag[a, at, 0]``) and
+    its chosen candidate (``fi[a, at, 4]``, -1 none); returns the time of its last
+    candidate, s. Inlined into :func:`decide_frame` (its twenty arrays not referenced per
+    call); called alone by ``tests/test_gating_rechoice_lone.py``."""
+    m = r_dec.shape[1]
+    k = fi[a, at, 3]
+    key = fi[a, at, 0]
+    recent_ns = 1.5 * opt[O_STATIC_S] * _NS
+    verified, tracked = ist[1] != 0, ist[2] != 0
+    n_trk = ist[0]
+    loose_ratio = opt[O_LOOSE]
+    for j in range(k):
+        reason[j] = -1
+    best_row = -1
+    best_n, best_c = 0.0, 0.0
+    # (unverified / untracked: marks in ``differs``, reused: 1 unverified, 2 untracked, 3 both)
+    for j in range(k):
+        differs[j] = 0.0
+    n_unverified = n_untracked = 0
+    t_s_frame = 0.0
+    for i in range(k):
+        t_s = ct[a, at, i] / _NS
+        t_s_frame = t_s
+        rx, ry, rz = cf[a, at, i, 2], cf[a, at, i, 3], cf[a, at, i, 4]
+        if static[i] != 0.0:
+            reason[i] = _MOTION
+            continue
+        if lone[i] == lone[i]:  # gating._Decider.decide: kept where the camera followed it
+            # (gating._picked_there: its newest choice, within 1.5 static_s; from its frame
+            # before, within reach of a ball)
+            there = False
+            h = at - 1
+            while h >= 0 and key - fi[a, h, 0] <= recent_ns:
+                q = fi[a, h, 4]
+                if q >= 0:
+                    du = cf[a, at, i, 0] - cf[a, h, q, 0]
+                    dv = cf[a, at, i, 1] - cf[a, h, q, 1]
+                    d = _sqrt(du * du + dv * dv)
+                    if h == at - 1:
+                        there = d <= lone[i] + opt[O_VMAX] * ((key - fi[a, h, 0]) / _NS)
+                    else:
+                        there = d <= lone[i]
+                    break
+                h -= 1
+            if not there:
+                reason[i] = _MOTION
+                continue
+        if avail[i] != 0 and nsup[i] == 0:
+            has_pred = predict(trk, n_trk, t_s, opt, pred)
+            track_accepts = False
+            if has_pred and math.isfinite(rx):
+                track_accepts = (_ray_miss(pred[0], pred[1], pred[2], centers[a], rx, ry, rz)
+                                 <= (pred[3] if unpointed[i] != 0.0 else opt[O_ALONE]))
+            if not track_accepts:
+                reason[i] = _EPIPOLAR
+                continue
+        if front[i] == 0.0:
+            reason[i] = _MOTION
+            continue
+        strong = nsup[i] >= 2
+        loose = False
+        if not strong and avail[i] >= 2:
+            n_le = 0
+            all_loose = True
+            for b in range(m):
+                r = r_dec[i, b]
+                if r <= 1.0:
+                    n_le += 1
+                if math.isfinite(r) and not r <= loose_ratio:
+                    all_loose = False
+            loose = not (nsup[i] == 1 and n_le >= 2) and all_loose
+        track_cost = 0.0
+        if not strong:
+            has_pred = predict(trk, n_trk, t_s, opt, pred)
+            if has_pred and n_trk > 0 and math.isfinite(chosen[i, 0]):
+                dt = abs(t_s - trk[n_trk - 1, 0])
+                if dt <= opt[O_WINDOW]:
+                    dx = chosen[i, 0] - trk[n_trk - 1, 1]
+                    dy = chosen[i, 1] - trk[n_trk - 1, 2]
+                    dz = chosen[i, 2] - trk[n_trk - 1, 3]
+                    if _sqrt((dx * dx + dy * dy) + dz * dz) > (opt[O_MAX_SPEED] * dt
+                                                               + opt[O_TRACK_M]):
+                        reason[i] = _MOTION
+                        continue
+            if has_pred and math.isfinite(rx):
+                miss = _ray_miss(pred[0], pred[1], pred[2], centers[a], rx, ry, rz)
+                if miss > (2.0 if loose else 1.0) * pred[3]:
+                    reason[i] = _TRACK
+                    continue
+                track_cost = _pymin(math.pow(miss / pred[3], opt[O_TWO]), 4.0)
+            elif avail[i] == 0:
+                if verified:
+                    reason[i] = _EPIPOLAR
+                    continue
+                differs[i] += 1.0  # unverified
+                n_unverified += 1
+            if has_pred:
+                tracked = True
+            elif not tracked:
+                differs[i] += 2.0  # untracked
+                n_untracked += 1
+        # (gating._Decider.decide: a lone candidate's stillness counts as 1)
+        kn, kc = -nsup[i], (epi[i] + track_cost) + (1.0 if lone[i] == lone[i] else run[i])
+        if best_row < 0 or kn < best_n or (kn == best_n and kc < best_c):
+            best_row, best_n, best_c = i, kn, kc
+    if best_row >= 0 and n_untracked > 1 and differs[best_row] >= 2.0 and nsup[best_row] < 2:
+        for i in range(k):
+            if differs[i] >= 2.0 and nsup[i] < 2:
+                reason[i] = _EPIPOLAR
+        best_row = -1
+        for i in range(k):
+            if reason[i] < 0 and not (differs[i] == 1.0 or differs[i] == 3.0):
+                kn, kc = -nsup[i], epi[i] + (1.0 if lone[i] == lone[i] else run[i])
+                if best_row < 0 or kn < best_n or (kn == best_n and kc < best_c):
+                    best_row, best_n, best_c = i, kn, kc
+    if best_row >= 0 and (differs[best_row] == 1.0 or differs[best_row] == 3.0) \
+            and n_unverified > 1:
+        for i in range(k):
+            if differs[i] == 1.0 or differs[i] == 3.0:
+                reason[i] = _EPIPOLAR
+        best_row = -1
+        for i in range(k):
+            if reason[i] < 0 and not (differs[i] == 1.0 or differs[i] == 3.0):
+                best_row = i
+    if best_row >= 0:
+        for i in range(k):
+            if i != best_row and reason[i] < 0:
+                reason[i] = _OUTSCORED
+        if differs[best_row] >= 2.0:  # gating._Decider.decide: untracked and _denied,
+            within = 0  # or a frame of several candidates
+            denied = k >= 2
+            for b in range(m):
+                r = r_dec[best_row, b]
+                if r <= 1.0:
+                    within += 1
+                elif math.isfinite(r):
+                    denied = True
+            if denied or within >= 2:
+                reason[best_row] = _CONTESTED
+        if not (differs[best_row] == 1.0 or differs[best_row] == 3.0):
+            verified = True
+        if math.isfinite(chosen[best_row, 0]):  # _Track.add, with _age
+            n_one, age = 0, 0.0
+            for b in range(m):
+                if r_dec[best_row, b] <= 1.0:
+                    n_one += 1
+                    if n_one == 1:
+                        age = lag[best_row, b]
+            if n_one != 1:
+                age = 0.0
+            trk[n_trk, 0] = ct[a, at, best_row] / _NS
+            trk[n_trk, 1] = chosen[best_row, 0]
+            trk[n_trk, 2] = chosen[best_row, 1]
+            trk[n_trk, 3] = chosen[best_row, 2]
+            trk[n_trk, 4] = age
+            n_trk += 1
+            points = np.int64(opt[O_TRACK_POINTS])
+            if n_trk > 4 * points:
+                for i in range(points):
+                    trk[i] = trk[n_trk - points + i]
+                n_trk = points
+    ist[0] = n_trk
+    ist[1] = 1 if verified else 0
+    ist[2] = 1 if tracked else 0
+    fflag[a, at, 0] = 1
+    fi[a, at, 4] = best_row  # (-1: none chosen)
+    return t_s_frame
+
+
 @kernel
 def decide_frame(fid, a, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k_inv, rot,
                  still_f, lags, long_lags, long_t, opt, work, reason):
@@ -901,164 +1080,9 @@ def decide_frame(fid, a, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k
         else:
             nsup[j] = supported
     # ---- gating._Decider.decide, one frame
-    verified, tracked = ist[1] != 0, ist[2] != 0
-    n_trk = ist[0]
-    loose_ratio = opt[O_LOOSE]
-    for j in range(k):
-        reason[j] = -1
-    best_row = -1
-    best_n, best_c = 0.0, 0.0
-    # (unverified / untracked: marks in ``differs``, reused: 1 unverified, 2 untracked, 3 both)
-    for j in range(k):
-        differs[j] = 0.0
-    n_unverified = n_untracked = 0
-    t_s_frame = 0.0
-    for i in range(k):
-        t_s = ct[a, at, i] / _NS
-        t_s_frame = t_s
-        rx, ry, rz = cf[a, at, i, 2], cf[a, at, i, 3], cf[a, at, i, 4]
-        if static[i] != 0.0:
-            reason[i] = _MOTION
-            continue
-        if lone[i] == lone[i]:  # gating._Decider.decide: kept where the camera followed it
-            # (gating._picked_there: its newest choice, within 1.5 static_s; from its frame
-            # before, within reach of a ball)
-            there = False
-            h = at - 1
-            while h >= 0 and key - fi[a, h, 0] <= recent_ns:
-                q = fi[a, h, 4]
-                if q >= 0:
-                    du = cf[a, at, i, 0] - cf[a, h, q, 0]
-                    dv = cf[a, at, i, 1] - cf[a, h, q, 1]
-                    d = _sqrt(du * du + dv * dv)
-                    if h == at - 1:
-                        there = d <= lone[i] + opt[O_VMAX] * ((key - fi[a, h, 0]) / _NS)
-                    else:
-                        there = d <= lone[i]
-                    break
-                h -= 1
-            if not there:
-                reason[i] = _MOTION
-                continue
-        if avail[i] != 0 and nsup[i] == 0:
-            has_pred = predict(trk, n_trk, t_s, opt, pred)
-            track_accepts = False
-            if has_pred and math.isfinite(rx):
-                track_accepts = (_ray_miss(pred[0], pred[1], pred[2], centers[a], rx, ry, rz)
-                                 <= (pred[3] if unpointed[i] != 0.0 else opt[O_ALONE]))
-            if not track_accepts:
-                reason[i] = _EPIPOLAR
-                continue
-        if front[i] == 0.0:
-            reason[i] = _MOTION
-            continue
-        strong = nsup[i] >= 2
-        loose = False
-        if not strong and avail[i] >= 2:
-            n_le = 0
-            all_loose = True
-            for b in range(m):
-                r = r_dec[i, b]
-                if r <= 1.0:
-                    n_le += 1
-                if math.isfinite(r) and not r <= loose_ratio:
-                    all_loose = False
-            loose = not (nsup[i] == 1 and n_le >= 2) and all_loose
-        track_cost = 0.0
-        if not strong:
-            has_pred = predict(trk, n_trk, t_s, opt, pred)
-            if has_pred and n_trk > 0 and math.isfinite(chosen[i, 0]):
-                dt = abs(t_s - trk[n_trk - 1, 0])
-                if dt <= opt[O_WINDOW]:
-                    dx = chosen[i, 0] - trk[n_trk - 1, 1]
-                    dy = chosen[i, 1] - trk[n_trk - 1, 2]
-                    dz = chosen[i, 2] - trk[n_trk - 1, 3]
-                    if _sqrt((dx * dx + dy * dy) + dz * dz) > (opt[O_MAX_SPEED] * dt
-                                                               + opt[O_TRACK_M]):
-                        reason[i] = _MOTION
-                        continue
-            if has_pred and math.isfinite(rx):
-                miss = _ray_miss(pred[0], pred[1], pred[2], centers[a], rx, ry, rz)
-                if miss > (2.0 if loose else 1.0) * pred[3]:
-                    reason[i] = _TRACK
-                    continue
-                track_cost = _pymin(math.pow(miss / pred[3], opt[O_TWO]), 4.0)
-            elif avail[i] == 0:
-                if verified:
-                    reason[i] = _EPIPOLAR
-                    continue
-                differs[i] += 1.0  # unverified
-                n_unverified += 1
-            if has_pred:
-                tracked = True
-            elif not tracked:
-                differs[i] += 2.0  # untracked
-                n_untracked += 1
-        # (gating._Decider.decide: a lone candidate's stillness counts as 1)
-        kn, kc = -nsup[i], (epi[i] + track_cost) + (1.0 if lone[i] == lone[i] else run[i])
-        if best_row < 0 or kn < best_n or (kn == best_n and kc < best_c):
-            best_row, best_n, best_c = i, kn, kc
-    if best_row >= 0 and n_untracked > 1 and differs[best_row] >= 2.0 and nsup[best_row] < 2:
-        for i in range(k):
-            if differs[i] >= 2.0 and nsup[i] < 2:
-                reason[i] = _EPIPOLAR
-        best_row = -1
-        for i in range(k):
-            if reason[i] < 0 and not (differs[i] == 1.0 or differs[i] == 3.0):
-                kn, kc = -nsup[i], epi[i] + (1.0 if lone[i] == lone[i] else run[i])
-                if best_row < 0 or kn < best_n or (kn == best_n and kc < best_c):
-                    best_row, best_n, best_c = i, kn, kc
-    if best_row >= 0 and (differs[best_row] == 1.0 or differs[best_row] == 3.0) \
-            and n_unverified > 1:
-        for i in range(k):
-            if differs[i] == 1.0 or differs[i] == 3.0:
-                reason[i] = _EPIPOLAR
-        best_row = -1
-        for i in range(k):
-            if reason[i] < 0 and not (differs[i] == 1.0 or differs[i] == 3.0):
-                best_row = i
-    if best_row >= 0:
-        for i in range(k):
-            if i != best_row and reason[i] < 0:
-                reason[i] = _OUTSCORED
-        if differs[best_row] >= 2.0:  # gating._Decider.decide: untracked and _denied,
-            within = 0  # or a frame of several candidates
-            denied = k >= 2
-            for b in range(m):
-                r = r_dec[best_row, b]
-                if r <= 1.0:
-                    within += 1
-                elif math.isfinite(r):
-                    denied = True
-            if denied or within >= 2:
-                reason[best_row] = _CONTESTED
-        if not (differs[best_row] == 1.0 or differs[best_row] == 3.0):
-            verified = True
-        if math.isfinite(chosen[best_row, 0]):  # _Track.add, with _age
-            n_one, age = 0, 0.0
-            for b in range(m):
-                if r_dec[best_row, b] <= 1.0:
-                    n_one += 1
-                    if n_one == 1:
-                        age = lag[best_row, b]
-            if n_one != 1:
-                age = 0.0
-            trk[n_trk, 0] = ct[a, at, best_row] / _NS
-            trk[n_trk, 1] = chosen[best_row, 0]
-            trk[n_trk, 2] = chosen[best_row, 1]
-            trk[n_trk, 3] = chosen[best_row, 2]
-            trk[n_trk, 4] = age
-            n_trk += 1
-            points = np.int64(opt[O_TRACK_POINTS])
-            if n_trk > 4 * points:
-                for i in range(points):
-                    trk[i] = trk[n_trk - points + i]
-                n_trk = points
-    ist[0] = n_trk
-    ist[1] = 1 if verified else 0
-    ist[2] = 1 if tracked else 0
-    fflag[a, at, 0] = 1
-    fi[a, at, 4] = best_row  # (-1: none chosen)
+    t_s_frame = choose(a, at, fi, fflag, ct, cf, trk, ist, centers, opt, static, lone, avail,
+                       nsup, unpointed, front, chosen, epi, run, r_dec, lag, differs, pred,
+                       reason)
     # ---- gating._can_judge, gating._supporting: what later choices may use of it
     recent = 0
     for lg in range(1, n_back + 1):
