@@ -68,17 +68,9 @@ COUNTERS = ("received", "fused", "duplicate", "reordered", "late", "future", *RE
 _SEEN = 4096
 #: Frames remembered per camera to find the arrival time behind a point.
 _ARRIVALS = 256
-_NAN3 = np.full(3, np.nan)
 _I64_MAX = int(np.iinfo(np.int64).max)
-_NAN33 = np.full((3, 3), np.nan)
 _NAN_ROW = (math.nan, math.nan, math.nan)
 _COV_KEYS = ("cov_xx_m2", "cov_xy_m2", "cov_xz_m2", "cov_yy_m2", "cov_yz_m2", "cov_zz_m2")
-
-
-def _ro(a) -> np.ndarray:
-    a = np.array(a, dtype=np.float64)
-    a.setflags(write=False)
-    return a
 
 
 @dataclass(frozen=True, eq=False)
@@ -535,24 +527,10 @@ class LiveFuser:
             # frames lost on the way: gaps in the camera's sequence, whether or not the
             # frame is fused (a frame that comes after a later one is no loss)
             last = state._last_sequence
-            if last is not None and d.sequence < last and state._newest_logged is not None \
-                    and d.t_capture_ns - self.epoch_ns > state._newest_logged:
-                last = None  # a lower sequence with a newer capture time: the sender restarted
-            if last is not None and d.sequence > last + 1 and d.sequence - last - 1 > 10 + (
-                    0 if state._newest_logged is None else 10 * self._fps[cam] * max(
-                        0, d.t_capture_ns - self.epoch_ns - state._newest_logged) / NS):
-                # more frames than the time since could hold (any gap past 10 before a frame
-                # of the camera was fused: forged numbers, never 2**64 lost): renumbered
-                last = None
-            if last is not None and d.sequence > last + 1:
-                gap = d.sequence - last - 1
-                state.lost += gap
-                counts["lost"] += gap
-            elif last is not None and d.sequence < last and state.lost:
-                state.lost -= 1  # it came after all
-                counts["lost"] -= 1
-            if last is None or d.sequence > last:
-                state._last_sequence = d.sequence
+            if last is not None and d.sequence == last + 1:
+                state._last_sequence = d.sequence  # (the usual: the next one, nothing lost)
+            else:
+                self._sequence(d, cam, state, last)
         if reason is not None:
             return self._drop(d, reason)
         # accepted
@@ -571,6 +549,30 @@ class LiveFuser:
             self._n_held += 1
             return self._release(seen)
         return self._fuse(d, cam, logged, int(arrival_ns), seen) + self._release(seen)
+
+    def _sequence(self, d: DetectionDatagram, cam: int, state: CameraLiveState,
+                  last: int | None) -> None:
+        """:meth:`feed`'s count of the frames lost (gaps in the camera's sequence) for a
+        datagram whose sequence is not its camera's latest + 1."""
+        counts = self._counts
+        if last is not None and d.sequence < last and state._newest_logged is not None \
+                and d.t_capture_ns - self.epoch_ns > state._newest_logged:
+            last = None  # a lower sequence with a newer capture time: the sender restarted
+        if last is not None and d.sequence > last + 1 and d.sequence - last - 1 > 10 + (
+                0 if state._newest_logged is None else 10 * self._fps[cam] * max(
+                    0, d.t_capture_ns - self.epoch_ns - state._newest_logged) / NS):
+            # more frames than the time since could hold (any gap past 10 before a frame
+            # of the camera was fused: forged numbers, never 2**64 lost): renumbered
+            last = None
+        if last is not None and d.sequence > last + 1:
+            gap = d.sequence - last - 1
+            state.lost += gap
+            counts["lost"] += gap
+        elif last is not None and d.sequence < last and state.lost:
+            state.lost -= 1  # it came after all
+            counts["lost"] -= 1
+        if last is None or d.sequence > last:
+            state._last_sequence = d.sequence
 
     def poll(self, now_ns: int) -> list[LivePoint]:
         """With ``hold_s``: fuse the held frames whose wait is over at ``now_ns`` (on
@@ -721,6 +723,11 @@ class LiveFuser:
         flt = self._filter
         state = flt.state() if flt is not None and cov_at is None else None
         epoch = self.epoch_ns
+        at_now = None  # (the filter's predicted position and velocity at now, if any)
+        if flt is not None:
+            predicted = flt.predict(now - epoch)
+            if predicted is not None:
+                at_now = predicted[0].tolist(), predicted[1].tolist()
         method = self.method
         new = object.__new__
         out = []
@@ -730,22 +737,26 @@ class LiveFuser:
             row = rows[i]
             if flt is None:  # (constant velocity: on Python floats, one array of the four)
                 position, cov_w, pred_p, pred_v = self._made(t, p.tolist(), row, layout, now)
-            elif cov_at is not None:
-                xx, xy, xz, yy, yz, zz = cov_at(row)
-                cov = np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
-            elif state is not None and state[0] == t and i == n - 1:
-                cov = state[2][:3, :3].copy()  # the filter's own, after this update
-            elif std_at is not None:
-                sx, sy, sz = std_at(row)
-                # (np.diag of the squares, the off-diagonal terms not kept)
-                cov = np.array([[sx ** 2, math.nan, math.nan], [math.nan, sy ** 2, math.nan],
-                                [math.nan, math.nan, sz ** 2]])
-            else:
-                cov = _NAN33
-            if flt is not None:
-                position, cov_w = _ro(p), _ro(cov)
-                pred_p, pred_v = self._predicted(p, now)
-                pred_p, pred_v = _ro(pred_p), _ro(pred_v)
+            else:  # (the filter's: on Python floats, one read-only (6, 3) array of the four)
+                nan = math.nan
+                if cov_at is not None:
+                    xx, xy, xz, yy, yz, zz = cov_at(row)
+                    c0, c1, c2 = (xx, xy, xz), (xy, yy, yz), (xz, yz, zz)
+                elif state is not None and state[0] == t and i == n - 1:
+                    # the filter's own, after this update
+                    c0, c1, c2 = state[2][:3, :3].tolist()
+                elif std_at is not None:
+                    sx, sy, sz = std_at(row)
+                    # (np.diag of the squares, the off-diagonal terms not kept)
+                    c0, c1, c2 = (sx ** 2, nan, nan), (nan, sy ** 2, nan), (nan, nan, sz ** 2)
+                else:
+                    c0 = c1 = c2 = _NAN_ROW
+                pl = p.tolist()
+                # (before the filter has a state: the point, no velocity)
+                pp, pv = at_now if at_now is not None else (pl, _NAN_ROW)
+                block = np.array((pl, c0, c1, c2, pp, pv))
+                block.flags.writeable = False
+                position, cov_w, pred_p, pred_v = block[0], block[1:4], block[4], block[5]
             flags = 0
             for j, bit in flag_at:
                 if row[j] == 1:
@@ -808,13 +819,3 @@ class LiveFuser:
         block = np.array((p, c0, c1, c2, pred, vel))
         block.flags.writeable = False
         return block[0], block[1:4], block[4], block[5]
-
-    def _predicted(self, p: np.ndarray, now: int):
-        """The filter's state at ``now`` (wall clock): its predicted position and velocity
-        (``p`` and NaN velocity before it has a state). Methods without a filter predict
-        in :meth:`_made`."""
-        assert self._filter is not None
-        pred = self._filter.predict(now - self.epoch_ns)
-        if pred is not None:
-            return pred[0], pred[1]
-        return np.array(p, dtype=np.float64), _NAN3
