@@ -41,7 +41,6 @@ kink tests (:mod:`pslog.fusion.innovation`) run on the kernel's outputs.
 from __future__ import annotations
 
 import math
-import operator
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, Literal, NamedTuple, cast, overload
@@ -1055,9 +1054,6 @@ class MeasuredNoiseStream:
         self._camera = np.zeros(256, np.int64)
         self._uv = np.zeros((256, 2))
         self._n = 0
-        # a point's quality keys -> (the ones kept, without _MODEL_COLUMNS, in their order;
-        # their getter): _scaled's one-point path
-        self._kept: dict[tuple, tuple] = {}
         self._sigma: dict[int, float] = {}  # checkpoint ns -> σ (the recent ones)
         self._last_mark = np.iinfo(np.int64).min
         self._latest = math.nan  # the latest checkpoint's estimate (NaN: none yet)
@@ -1179,16 +1175,11 @@ class MeasuredNoiseStream:
                 xy, xz, yz = xy + w * (d0 * d1), xz + w * (d0 * d2), yz + w * (d1 * d2)
             values = np.array([math.sqrt(xx + yy + zz), xx, yy, zz, xy, xz, yz])
             values.flags.writeable = False
-            keys = tuple(q)
-            kept = self._kept.get(keys)
-            if kept is None:
-                names = tuple(k for k in keys if k not in _MODEL_COLUMNS)
-                kept = self._kept[keys] = names, (operator.itemgetter(*names)
-                                                  if len(names) > 1 else None)
-            # (q's columns but the model's, in q's order: a getter's tuple, not a Python
+            # (q's columns but the model's, in q's order: a copy less three, not a Python
             # loop over ~20 keys per point)
-            quality = (dict(zip(kept[0], kept[1](q), strict=True)) if kept[1] is not None
-                       else {k: q[k] for k in kept[0]})
+            quality = q.copy()
+            for k in _MODEL_COLUMNS:
+                quality.pop(k, None)
             quality.update(std_m=values[0:1], cov_xx_m2=values[1:2], cov_yy_m2=values[2:3],
                            cov_zz_m2=values[3:4], cov_xy_m2=values[4:5], cov_xz_m2=values[5:6],
                            cov_yz_m2=values[6:7])
