@@ -1177,7 +1177,7 @@ class MeasuredNoiseStream:
             values.flags.writeable = False
             # (q's columns but the model's, in q's order: a copy less three, not a Python
             # loop over ~20 keys per point)
-            quality = q.copy()
+            quality = dict(q)
             for k in _MODEL_COLUMNS:
                 quality.pop(k, None)
             quality.update(std_m=values[0:1], cov_xx_m2=values[1:2], cov_yy_m2=values[2:3],
