@@ -292,3 +292,130 @@ def test_a_datagram_queued_across_a_clock_step_is_bounded_by_the_previous_arriva
     # (1 ms: the stamps' conversion between the two clocks, microseconds)
     assert 0 <= summary.latency_ns.min() and summary.latency_ns.max() <= took + 1_000_000
     assert summary.wait_ns.max() <= took + 1_000_000
+
+
+@pytest.mark.parametrize("step_s", [60.0, -60.0])
+def test_a_held_frame_reports_its_own_monotonic_arrival_across_a_wall_clock_step(
+        monkeypatch, step_s):
+    """serve with a hold over real UDP: a burst of frames 1 s after the start, the last of
+    them held for the other cameras' next frames; then the fuser host's wall clock (its
+    thread's clock and the kernel's receive stamps) steps ``step_s``, and 0.3 s later the
+    next frames come and release them. Each held frame's point carries the monotonic
+    arrival of its own datagram (LivePoint.arrival_mono_ns): its latency (the point's own,
+    LivePoint.latency_s, and serve's, LiveSummary.latency_ns) is its wait, at least the
+    0.3 s and at most the burst's length. Converted from its wall-clock stamp when the point
+    came out (as before), it was the time since the run's start (stepped forward: the
+    stamp 60 s old, bounded by the start) or none (stepped back), and the point's own
+    latency_s 60 s or negative."""
+    from pslog.live.server import bind_udp, serve
+    from tests._live import frames, rally_session
+
+    rig, det = rally_session(0.4, spurious_rate=0.0, miss_rate=0.0)
+    epoch = time.time_ns() - 120 * NS  # (in the past: a step back makes nothing `future`)
+    sent = frames(det, rig, epoch)
+    cut = sent[len(sent) // 2].t_capture_ns
+    before = [encode_detections(d) for d in sent if d.t_capture_ns < cut]
+    after = [encode_detections(d) for d in sent if d.t_capture_ns >= cut]
+    sock = _SteppedSocket(bind_udp("udp://127.0.0.1:0"), int(step_s * NS))
+    ready, stop, stepped = threading.Event(), threading.Event(), threading.Event()
+    sink, result = _Collector(stepped), {}  # (each point: made after the step or not)
+    start = sink.start
+
+    def started(fuser) -> None:  # (the fuser's wall clock, t_emit_ns: the thread's, stepped)
+        fuser.clock = time.time_ns
+        start(fuser)
+
+    sink.start = started  # type: ignore[method-assign]
+
+    def run() -> None:
+        result["summary"] = serve(rig, "", [sink], method="typeA", candidates=False,
+                                  hold_s=10.0, silent_after_s=5.0, rehearse_s=None,
+                                  epoch_ns=epoch, stop=stop, ready=ready, sock=sock,
+                                  status_stream=None)
+
+    server = threading.Thread(target=run)
+    _step_thread_clock(monkeypatch, sock, lambda: server)
+    server.start()
+    try:
+        assert ready.wait(300)
+        time.sleep(1.0)  # (the run's start well before the burst)
+        tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        burst = time.monotonic_ns()
+        for b in before:
+            tx.sendto(b, ready.address)  # type: ignore[attr-defined]
+        _wait_until(lambda: sink.fuser.counters()["received"] == len(before), "received")
+        held_from = sink.fuser.counters()["points"]
+        stepped.set()
+        sock.at = time.time_ns()  # the step: every later stamp and clock reading moved
+        time.sleep(0.3)
+        for b in after:
+            tx.sendto(b, ready.address)  # type: ignore[attr-defined]
+        tx.close()
+        _wait_until(lambda: sink.fuser.counters()["received"] == len(sent), "received")
+        took = time.monotonic_ns() - burst
+    finally:
+        stop.set()
+        server.join()
+    summary = result["summary"]
+    assert summary.counters["fused"] == len(sent)
+    held = [p for p, late in sink.points if late and p.t_capture_ns < cut]
+    assert len(held) >= 1 and len(sink.points) > held_from  # (the last frames, held)
+    for p in held:
+        assert 0.3 <= p.latency_s <= took / NS
+    lat = summary.latency_ns
+    assert 0 <= lat.min() and lat.max() <= took
+    assert (lat >= 0.3 * NS).sum() >= len(held)
+
+
+def test_serve_keeps_rehearsing_across_a_wall_clock_step(monkeypatch):
+    """serve over real UDP, 40 datagrams paced at their capture times (3 x 30 fps, 11 ms
+    apart), the fuser host's wall clock (its thread's clock and the kernel's receive
+    stamps) stepped 60 s forward while the 6th waits: the rehearsals (planned and waited
+    for on the monotonic clock) go on before the datagrams after the step. Planned on the
+    wall clock, every one after the step was due 60 s in the past (the delays 60 s longer
+    than the least one for 16 datagrams of each camera, more than each sends after it) and
+    none ran."""
+    from pslog.live import fuser as live_fuser
+    from pslog.live.server import bind_udp, serve
+    from tests._live import frames, rally_session
+
+    rig, det = rally_session(0.6, spurious_rate=0.0, miss_rate=0.0)
+    sock = _SteppedSocket(bind_udp("udp://127.0.0.1:0"), 60 * NS, at_datagram=5)
+    ready, stop = threading.Event(), threading.Event()
+    result = {}
+    after: list[bool] = []  # per rehearsal run: after the step
+    step = live_fuser.Rehearsal.step
+
+    def noted(rehearsal) -> None:  # (the rehearsal itself, noted when it ran)
+        step(rehearsal)
+        after.append(sock.stepped)
+
+    monkeypatch.setattr(live_fuser.Rehearsal, "step", noted)
+
+    def run() -> None:
+        result["summary"] = serve(rig, "", [], method="typeA", candidates=False,
+                                  rehearse_s=0.004, stop=stop, ready=ready, sock=sock,
+                                  status_stream=None)
+
+    server = threading.Thread(target=run)
+    _step_thread_clock(monkeypatch, sock, lambda: server)
+    server.start()
+    try:
+        assert ready.wait(300)
+        sent = frames(det, rig, ready.epoch_ns)[:40]  # type: ignore[attr-defined]
+        start = time.monotonic_ns() + 20_000_000
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+            for d in sent:  # (their capture times' spacing, from 20 ms on)
+                due = start + d.t_capture_ns - sent[0].t_capture_ns
+                time.sleep(max(0.0, (due - time.monotonic_ns()) / NS))
+                tx.sendto(encode_detections(d), ready.address)  # type: ignore[attr-defined]
+        _wait_until(lambda: sock.received == len(sent), "received")
+        time.sleep(0.05)
+    finally:
+        stop.set()
+        server.join()
+    summary = result["summary"]
+    assert sock.stepped and summary.counters["fused"] == len(sent)
+    # (one before most of the 34 datagrams after the step: 20-25 at load 9, 8 at load 11,
+    # skipped when the thread woke later than the lead; planned on the wall clock, none)
+    assert summary.rehearsals == len(after) and sum(after) >= 3

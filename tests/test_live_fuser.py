@@ -441,6 +441,46 @@ def test_the_rehearsal_is_due_a_lead_before_the_next_frame_can_come(session):
         assert (rehearsal.due is None) == (k > 0)  # (one camera heard: its own period)
 
 
+@pytest.mark.parametrize("step_s", [60.0, -60.0])
+def test_the_rehearsal_is_planned_on_the_monotonic_clock(session, step_s):
+    """plan() on the fuser's waits' clock (monotonic, as serve gives it): with the fuser's
+    wall clock stepping ``step_s`` after the 5th datagram (its wall-clock arrivals moved;
+    the senders' capture times and the monotonic arrivals not), every rehearsal is due at
+    the instant it is without the step, on the monotonic clock, within a frame period after
+    the datagram it was planned after. Planned on the wall clock, a step forward made every
+    delay after it 60 s longer than the least one: each rehearsal due 60 s in the past (none
+    run) for the next 16 datagrams of each camera."""
+    from pslog.live.fuser import Rehearsal
+
+    rig, det = session
+    sent = frames(det, rig)[:30]
+    mono0 = 5 * NS
+    delays = [3_000_000, 1_000_000, 2_500_000, 4_000_000, 1_500_000, 2_000_000, 1_200_000]
+    arrivals = [mono0 + d.t_capture_ns - EPOCH + delays[i % 7] for i, d in enumerate(sent)]
+
+    def plans(step_ns: int) -> list:
+        now = [mono0]
+        # (the frames captured 120 s before their wall-clock arrival: stepped back 60 s,
+        # none is `future`)
+        fuser = LiveFuser(rig, "typeA", epoch_ns=EPOCH, clock=Clock(), monotonic=lambda: now[0])
+        rehearsal = Rehearsal(fuser, lead_s=0.001)
+        due = []
+        for i, d in enumerate(sent):
+            now[0] = arrivals[i]
+            wall = d.t_capture_ns + 120 * NS + delays[i % 7] + (step_ns if i >= 5 else 0)
+            fuser.feed(encode_detections(d), wall, arrivals[i])
+            rehearsal.plan(fuser, arrivals[i])
+            due.append(rehearsal.due)
+        assert fuser.counters()["fused"] == len(sent)
+        return due
+
+    plain = plans(0)
+    assert plans(int(step_s * NS)) == plain
+    # each due on the monotonic clock, after the datagram it was planned after and within a
+    # frame period of it (the next camera's frame, 1/90 s later, with its least delay)
+    assert all(a < due < a + NS // 30 for a, due in zip(arrivals, plain, strict=True))
+
+
 def test_serve_rehearses_between_paced_datagrams_and_fuses_the_same_points(session):
     """Over real UDP, datagrams sent at their capture times (3 x 30 fps): serve rehearses
     between them (LiveSummary.rehearsals) and the robot gets the points a LiveFuser fed the

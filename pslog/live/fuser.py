@@ -68,17 +68,9 @@ COUNTERS = ("received", "fused", "duplicate", "reordered", "late", "future", *RE
 _SEEN = 4096
 #: Frames remembered per camera to find the arrival time behind a point.
 _ARRIVALS = 256
-_NAN3 = np.full(3, np.nan)
 _I64_MAX = int(np.iinfo(np.int64).max)
-_NAN33 = np.full((3, 3), np.nan)
 _NAN_ROW = (math.nan, math.nan, math.nan)
 _COV_KEYS = ("cov_xx_m2", "cov_xy_m2", "cov_xz_m2", "cov_yy_m2", "cov_yz_m2", "cov_zz_m2")
-
-
-def _ro(a) -> np.ndarray:
-    a = np.array(a, dtype=np.float64)
-    a.setflags(write=False)
-    return a
 
 
 @dataclass(frozen=True, eq=False)
@@ -102,6 +94,10 @@ class LivePoint:
         (:data:`pslog.records.QUALITY_FIELDS`)
     epoch_ns : int, the session clock's zero (wall clock): the point's session time is
         ``t_capture_ns - epoch_ns``
+    arrival_mono_ns, emit_mono_ns : int or None, ``arrival_ns`` and ``t_emit_ns`` on the
+        clock the fuser's waits are counted on (:attr:`LiveFuser.monotonic`: the monotonic
+        clock in :func:`~pslog.live.server.serve`; without one the wall clock, the same
+        values); None (a point made by hand): the wall clock's
     """
 
     method: str
@@ -119,11 +115,17 @@ class LivePoint:
     flags: int = 0
     quality: dict = field(default_factory=dict)
     epoch_ns: int = 0
+    arrival_mono_ns: int | None = None
+    emit_mono_ns: int | None = None
 
     @property
     def latency_s(self) -> float:
-        """Fusion latency: from the datagram's arrival to the point made, seconds."""
-        return (self.t_emit_ns - self.arrival_ns) / NS
+        """Fusion latency: from the datagram's arrival to the point made, seconds, on the
+        fuser's waits' clock (the monotonic clock in :func:`~pslog.live.server.serve`: a
+        step of the wall clock while the frame was held does not enter it)."""
+        if self.arrival_mono_ns is None or self.emit_mono_ns is None:
+            return (self.t_emit_ns - self.arrival_ns) / NS
+        return (self.emit_mono_ns - self.arrival_mono_ns) / NS
 
     @property
     def session_ns(self) -> int:
@@ -213,7 +215,8 @@ class CameraLiveState:
     _newest_logged: int | None = None  # newest logged time received (any frame)
     _seen: set = field(default_factory=set)
     _seen_order: deque = field(default_factory=deque)
-    # (true time of the frame's top row, arrival ns) of the latest frames, for the points
+    # (true time of the frame's top row, arrival ns, the same arrival on the waits' clock)
+    # of the latest frames, for the points
     _arrivals: deque = field(default_factory=lambda: deque(maxlen=_ARRIVALS))
 
 
@@ -302,10 +305,13 @@ class Rehearsal:
         self.lead_ns = int(lead_s * NS)
         self.min_gap_ns = int(min_gap_s * NS)
         self._period = [int(NS / f) for f in fuser._fps]
-        #: per camera, its latest datagrams' delays (arrival - capture), ns
+        #: per camera, its latest datagrams' delays (arrival on the fuser's waits' clock -
+        #: capture, the sender's wall clock: a constant offset between the two clocks plus
+        #: the trip and queue), ns
         self._delays: list[deque] = [deque(maxlen=16) for _ in fuser._fps]
         self._frames_seen = [0] * len(fuser._fps)
-        #: wall clock ns at which to rehearse (None: nothing planned)
+        #: when to rehearse, on the fuser's waits' clock (:attr:`LiveFuser.monotonic`: the
+        #: monotonic clock in serve), ns (None: nothing planned)
         self.due: int | None = None
         #: rehearsals run (each one datagram of the rally)
         self.steps = 0
@@ -339,39 +345,46 @@ class Rehearsal:
         self.steps += 1
         self._durations.append(time.perf_counter_ns() - start)
 
-    def plan(self, fuser: LiveFuser, now: int, now_seen: int | None = None) -> None:
-        """After a datagram of ``fuser`` (handled at wall clock ``now``; ``now_seen``: the
-        same instant on the fuser's waits' clock, :attr:`LiveFuser.monotonic`, None: ``now``,
-        which a camera's silence is told by): when to rehearse for the next one. Each
-        live camera's next frame is due a frame period after its latest fused one; it comes
-        at the earliest with the least delay (arrival less capture) of its latest datagrams;
-        the rehearsal is to end ``lead_s`` before the earliest camera's (it starts
-        :attr:`duration_ns` before that: the longest of the latest rehearsals' wall times, at
-        most 2 ms, so that one rehearsal preempted for long on a busy machine does not move
-        every later one before the datagram it is for, where none would run and the
-        estimate would never be renewed)."""
+    def plan(self, fuser: LiveFuser, now: int) -> None:
+        """After a datagram of ``fuser`` (handled at ``now``, on the fuser's waits' clock,
+        :attr:`LiveFuser.monotonic`: the monotonic clock in serve; without one the wall
+        clock): when to rehearse for the next one, :attr:`due` on that clock. Each live
+        camera's next frame is due a frame period after its latest fused one; it comes at
+        the earliest with the least delay (arrival, on that clock, less capture) of its
+        latest datagrams; the rehearsal is to end ``lead_s`` before the earliest camera's (it
+        starts :attr:`duration_ns` before that: the longest of the latest rehearsals' wall
+        times, at most 2 ms, so that one rehearsal preempted for long on a busy machine does
+        not move every later one before the datagram it is for, where none would run and
+        the estimate would never be renewed). The fuser's wall clock does not enter: a step
+        of it (NTP, a VM's clock set again) neither moves the plan nor stops the rehearsals
+        (on the wall clock, the delays after a step forward were the step longer than the
+        least one for 16 datagrams of each camera: every rehearsal due in the past, none
+        run). A step of the senders' own clock (on the fuser's host, with it) forward makes
+        their delays shorter, the least one the newest: planned as before; backward, their
+        frames are ``late`` (not fused, nothing to plan from) until their times pass the
+        newest fused one."""
         self.duration_ns = min(max(self._durations, default=0), _MAX_REHEARSAL_NS)
         self.due = None
         if not self._frames:  # (a rehearsal failed: none any more)
             return
         earliest = None
-        latest_arrival = 0
+        latest_arrival = None
         silent = fuser.silent_after_ns
-        seen_now = now if now_seen is None else now_seen
         for c, state in enumerate(fuser._cams):
-            arrival, capture, seen = state.last_arrival_ns, state.last_capture_ns, \
-                state.last_seen_ns
-            if arrival is None or capture is None or seen is None or seen_now - seen > silent:
+            capture, seen = state.last_capture_ns, state.last_seen_ns
+            if capture is None or seen is None or now - seen > silent:
                 continue
             delays = self._delays[c]
             if state.frames != self._frames_seen[c]:
                 self._frames_seen[c] = state.frames
-                delays.append(arrival - capture)
-            latest_arrival = max(latest_arrival, arrival)
+                delays.append(seen - capture)
+            if latest_arrival is None or seen > latest_arrival:
+                latest_arrival = seen
             expected = capture + self._period[c] + min(delays)
             if earliest is None or expected < earliest:
                 earliest = expected
-        if earliest is None or earliest - latest_arrival < self.min_gap_ns:
+        if earliest is None or latest_arrival is None \
+                or earliest - latest_arrival < self.min_gap_ns:
             return
         self.due = earliest - self.lead_ns - self.duration_ns
 
@@ -514,24 +527,10 @@ class LiveFuser:
             # frames lost on the way: gaps in the camera's sequence, whether or not the
             # frame is fused (a frame that comes after a later one is no loss)
             last = state._last_sequence
-            if last is not None and d.sequence < last and state._newest_logged is not None \
-                    and d.t_capture_ns - self.epoch_ns > state._newest_logged:
-                last = None  # a lower sequence with a newer capture time: the sender restarted
-            if last is not None and d.sequence > last + 1 and d.sequence - last - 1 > 10 + (
-                    0 if state._newest_logged is None else 10 * self._fps[cam] * max(
-                        0, d.t_capture_ns - self.epoch_ns - state._newest_logged) / NS):
-                # more frames than the time since could hold (any gap past 10 before a frame
-                # of the camera was fused: forged numbers, never 2**64 lost): renumbered
-                last = None
-            if last is not None and d.sequence > last + 1:
-                gap = d.sequence - last - 1
-                state.lost += gap
-                counts["lost"] += gap
-            elif last is not None and d.sequence < last and state.lost:
-                state.lost -= 1  # it came after all
-                counts["lost"] -= 1
-            if last is None or d.sequence > last:
-                state._last_sequence = d.sequence
+            if last is not None and d.sequence == last + 1:
+                state._last_sequence = d.sequence  # (the usual: the next one, nothing lost)
+            else:
+                self._sequence(d, cam, state, last)
         if reason is not None:
             return self._drop(d, reason)
         # accepted
@@ -544,12 +543,36 @@ class LiveFuser:
         if len(state._seen_order) > _SEEN:
             state._seen.discard(state._seen_order.popleft())
         if not self.hold_ns:
-            return self._fuse(d, cam, logged, int(arrival_ns))
+            return self._fuse(d, cam, logged, int(arrival_ns), seen)
         if len(d.uv):
             heapq.heappush(self._held, (logged, cam, self._n_held, d, int(arrival_ns), seen))
             self._n_held += 1
             return self._release(seen)
-        return self._fuse(d, cam, logged, int(arrival_ns)) + self._release(seen)
+        return self._fuse(d, cam, logged, int(arrival_ns), seen) + self._release(seen)
+
+    def _sequence(self, d: DetectionDatagram, cam: int, state: CameraLiveState,
+                  last: int | None) -> None:
+        """:meth:`feed`'s count of the frames lost (gaps in the camera's sequence) for a
+        datagram whose sequence is not its camera's latest + 1."""
+        counts = self._counts
+        if last is not None and d.sequence < last and state._newest_logged is not None \
+                and d.t_capture_ns - self.epoch_ns > state._newest_logged:
+            last = None  # a lower sequence with a newer capture time: the sender restarted
+        if last is not None and d.sequence > last + 1 and d.sequence - last - 1 > 10 + (
+                0 if state._newest_logged is None else 10 * self._fps[cam] * max(
+                    0, d.t_capture_ns - self.epoch_ns - state._newest_logged) / NS):
+            # more frames than the time since could hold (any gap past 10 before a frame
+            # of the camera was fused: forged numbers, never 2**64 lost): renumbered
+            last = None
+        if last is not None and d.sequence > last + 1:
+            gap = d.sequence - last - 1
+            state.lost += gap
+            counts["lost"] += gap
+        elif last is not None and d.sequence < last and state.lost:
+            state.lost -= 1  # it came after all
+            counts["lost"] -= 1
+        if last is None or d.sequence > last:
+            state._last_sequence = d.sequence
 
     def poll(self, now_ns: int) -> list[LivePoint]:
         """With ``hold_s``: fuse the held frames whose wait is over at ``now_ns`` (on
@@ -577,11 +600,13 @@ class LiveFuser:
                 late = self._newest[0] - logged > self.late_ns
                 self._drop(d, "late" if late else "reordered")
                 continue
-            points += self._fuse(d, cam, logged, arrival)
+            points += self._fuse(d, cam, logged, arrival, seen)
         return points
 
-    def _fuse(self, d: DetectionDatagram, cam: int, logged: int, arrival_ns: int):
-        """Push one accepted frame into the stream; its points."""
+    def _fuse(self, d: DetectionDatagram, cam: int, logged: int, arrival_ns: int,
+              seen: int):
+        """Push one accepted frame (arrived at ``arrival_ns``, wall clock, and ``seen``, on
+        the waits' clock) into the stream; its points."""
         counts, state = self._counts, self._cams[cam]
         k = len(d.uv)  # (len(d), without its Python __len__: once per datagram)
         if k:  # from now on the newest: an older frame with candidates cannot be fused
@@ -589,7 +614,7 @@ class LiveFuser:
             # true_times_ns of the top row, in floats (the same ns; numpy costs more for one)
             top = logged if not self._corrected else self._true_time_ns(
                 logged, 0.0, self._clock_model[cam])
-            state._arrivals.append((top, arrival_ns))
+            state._arrivals.append((top, arrival_ns, seen))
         try:
             if k:
                 if k == 1:  # the usual frame: nothing to order (a copy: the stream's own)
@@ -679,6 +704,7 @@ class LiveFuser:
 
     def _points(self, track: Track) -> list[LivePoint]:
         now = int(self.clock())
+        now_seen = now if self.monotonic is None else int(self.monotonic())
         n = len(track.time_ns)
         q = track.quality
         names = self._names
@@ -697,6 +723,11 @@ class LiveFuser:
         flt = self._filter
         state = flt.state() if flt is not None and cov_at is None else None
         epoch = self.epoch_ns
+        at_now = None  # (the filter's predicted position and velocity at now, if any)
+        if flt is not None:
+            predicted = flt.predict(now - epoch)
+            if predicted is not None:
+                at_now = predicted[0].tolist(), predicted[1].tolist()
         method = self.method
         new = object.__new__
         out = []
@@ -706,22 +737,26 @@ class LiveFuser:
             row = rows[i]
             if flt is None:  # (constant velocity: on Python floats, one array of the four)
                 position, cov_w, pred_p, pred_v = self._made(t, p.tolist(), row, layout, now)
-            elif cov_at is not None:
-                xx, xy, xz, yy, yz, zz = cov_at(row)
-                cov = np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
-            elif state is not None and state[0] == t and i == n - 1:
-                cov = state[2][:3, :3].copy()  # the filter's own, after this update
-            elif std_at is not None:
-                sx, sy, sz = std_at(row)
-                # (np.diag of the squares, the off-diagonal terms not kept)
-                cov = np.array([[sx ** 2, math.nan, math.nan], [math.nan, sy ** 2, math.nan],
-                                [math.nan, math.nan, sz ** 2]])
-            else:
-                cov = _NAN33
-            if flt is not None:
-                position, cov_w = _ro(p), _ro(cov)
-                pred_p, pred_v = self._predicted(p, now)
-                pred_p, pred_v = _ro(pred_p), _ro(pred_v)
+            else:  # (the filter's: on Python floats, one read-only (6, 3) array of the four)
+                nan = math.nan
+                if cov_at is not None:
+                    xx, xy, xz, yy, yz, zz = cov_at(row)
+                    c0, c1, c2 = (xx, xy, xz), (xy, yy, yz), (xz, yz, zz)
+                elif state is not None and state[0] == t and i == n - 1:
+                    # the filter's own, after this update
+                    c0, c1, c2 = state[2][:3, :3].tolist()
+                elif std_at is not None:
+                    sx, sy, sz = std_at(row)
+                    # (np.diag of the squares, the off-diagonal terms not kept)
+                    c0, c1, c2 = (sx ** 2, nan, nan), (nan, sy ** 2, nan), (nan, nan, sz ** 2)
+                else:
+                    c0 = c1 = c2 = _NAN_ROW
+                pl = p.tolist()
+                # (before the filter has a state: the point, no velocity)
+                pp, pv = at_now if at_now is not None else (pl, _NAN_ROW)
+                block = np.array((pl, c0, c1, c2, pp, pv))
+                block.flags.writeable = False
+                position, cov_w, pred_p, pred_v = block[0], block[1:4], block[4], block[5]
             flags = 0
             for j, bit in flag_at:
                 if row[j] == 1:
@@ -733,7 +768,10 @@ class LiveFuser:
                 j = len(arrivals) - 1
             else:
                 j = bisect.bisect_right(arrivals, (t, _I64_MAX)) - 1
-            arrival = arrivals[j][1] if j >= 0 else now
+            if j >= 0:
+                _, arrival, seen = arrivals[j]
+            else:
+                arrival, seen = now, now_seen
             m = row[mask] if mask is not None else math.nan
             # a LivePoint of these fields (its frozen __init__ sets them one by one)
             point = new(LivePoint)
@@ -745,7 +783,7 @@ class LiveFuser:
                 camera_mask=int(m) if math.isfinite(m) else 1 << cam,
                 predicted_position=pred_p, predicted_velocity=pred_v,
                 arrival_ns=arrival, flags=flags, quality=dict(zip(keys, row, strict=True)),
-                epoch_ns=epoch)
+                epoch_ns=epoch, arrival_mono_ns=seen, emit_mono_ns=now_seen)
             out.append(point)
             self._cams[cam].points += 1
         self._counts["points"] += n
@@ -781,13 +819,3 @@ class LiveFuser:
         block = np.array((p, c0, c1, c2, pred, vel))
         block.flags.writeable = False
         return block[0], block[1:4], block[4], block[5]
-
-    def _predicted(self, p: np.ndarray, now: int):
-        """The filter's state at ``now`` (wall clock): its predicted position and velocity
-        (``p`` and NaN velocity before it has a state). Methods without a filter predict
-        in :meth:`_made`."""
-        assert self._filter is not None
-        pred = self._filter.predict(now - self.epoch_ns)
-        if pred is not None:
-            return pred[0], pred[1]
-        return np.array(p, dtype=np.float64), _NAN3

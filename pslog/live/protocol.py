@@ -103,6 +103,8 @@ POINT_BYTES = _POINT.size  # 224
 FLAG_PREDICTION, FLAG_JUMP, FLAG_INIT = 1, 2, 4
 _NAN3 = (math.nan,) * 3
 _INF = (math.inf, -math.inf)
+#: one candidate record (u, v, radius, score), after the header
+_ONE = struct.Struct("<4d")
 
 
 class DatagramError(PslogError):
@@ -264,6 +266,18 @@ def decode_detections(data: bytes) -> DetectionDatagram:
         # writer refuses the others, which would end a recording run)
         raise DatagramError("malformed", f"detection datagram of camera {camera!r}: frame "
                                          f"index {frame} is not in 0..{MAX_FRAME_INDEX}")
+    if k == 1:  # (the usual frame: its four numbers by struct, one array of them)
+        u, v, r, s = _ONE.unpack_from(data, DETECTION_HEADER_BYTES)
+        if not (isfinite(u) and isfinite(v) and isfinite(s) and r not in _INF):
+            raise DatagramError("malformed", f"detection datagram of camera {camera!r}: a "
+                                             f"NaN or infinite pixel or score")
+        one = np.array((u, v, r, s))
+        one.flags.writeable = False  # (its views inherit it)
+        d = object.__new__(DetectionDatagram)
+        d.__dict__.update(camera=camera, sequence=seq, frame_index=frame, t_capture_ns=t_cap,
+                          t_sent_ns=t_sent, uv=one[:2].reshape(1, 2), radius=one[2:3],
+                          score=one[3:4])
+        return d
     cand = np.frombuffer(data, dtype="<f8", count=4 * k,
                          offset=DETECTION_HEADER_BYTES).reshape(k, 4)
     # radius may be NaN (unknown); pixels and scores must be numbers (in Python: a few

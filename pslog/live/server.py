@@ -297,26 +297,23 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
     heard: set[str] = set()
     error: BaseException | None = None
     rehearsal_cpu = overlaps = 0
-    rehearsed_until = 0  # (wall clock end of the latest rehearsal)
+    rehearsed_until = 0  # (monotonic end of the latest rehearsal)
 
     def say(text: str) -> None:
         if status_stream is not None:
             with contextlib.suppress(OSError, ValueError):
                 print(text, file=status_stream, flush=True)
 
-    def hand_out(points, now: int, now_mono: int, arrival: int = -1,
-                 arrival_mono: int = 0) -> int:
-        """Every sink given ``points``; their latencies noted (monotonic: the datagram just
-        received, ``arrival`` at ``arrival_mono``, or an earlier one, held, converted with
-        the clocks read together at ``now``, ``now_mono``); returns when (monotonic)."""
+    def hand_out(points) -> int:
+        """Every sink given ``points``; their latencies noted (monotonic: from the arrival
+        of the datagram that made each point, its ``arrival_mono_ns``: the fuser's, as
+        :func:`arrival_monotonic` gave it, a held frame's too); returns when (monotonic)."""
         nonlocal n_lat
         for emit in emitters:
             emit(points)
         out = mono()
         for p in points:
-            a = (arrival_mono if p.arrival_ns == arrival else
-                 arrival_monotonic(p.arrival_ns, now, now_mono, started_mono))
-            latencies[n_lat % _KEEP_LATENCIES] = out - a
+            latencies[n_lat % _KEEP_LATENCIES] = out - p.arrival_mono_ns
             n_lat += 1
         return out
 
@@ -349,10 +346,10 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
         cpu0 = thread_time()
         arrival = _arrival(ancdata, now)
         floor = arrival_mono = arrival_monotonic(arrival, now, now_mono, floor)
-        overlaps += arrival < rehearsed_until
+        overlaps += arrival_mono < rehearsed_until
         points = fuser.feed(data, arrival, arrival_mono)
         if points:  # the points first: recording and viewers after
-            out = hand_out(points, now, now_mono, arrival, arrival_mono)
+            out = hand_out(points)
             i = n_cpu % _KEEP_LATENCIES
             cpu[i] = thread_time() - cpu0
             waits[i] = now_mono - arrival_mono
@@ -361,7 +358,7 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
         if fuser.keep:
             pass_on()
         if rehearsal is not None:  # (the next one's rehearsal planned: after the points)
-            rehearsal.plan(fuser, now, now_mono)
+            rehearsal.plan(fuser, now_mono)
 
     bufsize = max(MAX_DETECTION_BYTES + 1, 65536)  # larger ones are seen whole: oversize
     anc = socket.CMSG_SPACE(16) if timestamps else 0
@@ -399,18 +396,18 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
         recv = sock.recvmsg
         while not stop.is_set():
             if rehearsal is not None and rehearsal.due is not None:
-                due = rehearsal.due
-                wait = (due - clock()) / NS
+                due = rehearsal.due  # (monotonic: Rehearsal.plan)
+                wait = (due - mono()) / NS
                 # a rehearsal due before the next look at the clock: a datagram awaited until
                 # then (to the microsecond: a socket's own timeout counts whole ms), else it,
                 # unless this thread woke up too late for it (by more than its lead: it
                 # would end after the next datagram can come)
                 if wait < poll_s:
                     rehearsal.due = None
-                    if not _readable(sock, wait) and clock() - due <= rehearsal.lead_ns:
+                    if not _readable(sock, wait) and mono() - due <= rehearsal.lead_ns:
                         cpu0 = thread_time()
                         rehearsal.step()
-                        rehearsed_until = clock()
+                        rehearsed_until = mono()
                         rehearsal_cpu += thread_time() - cpu0
             try:
                 data, ancdata, _, _ = recv(bufsize, anc)
@@ -425,7 +422,7 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
                 # behind reads what is queued before it gives up waiting for it)
                 points = fuser.poll(now_mono)
                 if points:
-                    hand_out(points, now, now_mono)
+                    hand_out(points)
                 if fuser.keep:
                     pass_on()
             if collecting:  # (after the points, held ones too: in the wait for the next datagram)
@@ -478,7 +475,7 @@ def serve(rig: Rig, listen, sinks: Sequence[Sink], *, method: str = "filter",
         try:
             points = fuser.flush()
             if points:
-                hand_out(points, clock(), mono())
+                hand_out(points)
             if fuser.keep:
                 pass_on()
         except BaseException as exc:
