@@ -1230,6 +1230,10 @@ class _Decider:
         # one the camera itself was following is a static object's (the ``lone`` candidates)
         self.picked: list[tuple[float, float, int] | None] = [None] * len(rig)
         self.last_frame: list[int | None] = [None] * len(rig)
+        # per camera, until the track first predicts: the candidates it rejected in its
+        # frames of several candidates, (frame time ns, undistorted u, v), for
+        # :func:`_refused_near` (a later choice there is still one line's guess)
+        self.refused: list[list[tuple[int, float, float]]] = [[] for _ in rig.cameras]
 
     def run(self, c: _Candidates, frames, ratio, points, in_front, reason,
             static=None, lag=None) -> None:
@@ -1336,6 +1340,8 @@ class _Decider:
                 if best_key is None or key < best_key:
                     best_key, best_row = key, i
             if best_row < 0:
+                if hi - lo >= 2 and not self.tracked:
+                    self._refused(camera[lo], t_ns[lo], uv, reason, lo, hi)
                 continue
             if len(untracked) > 1 and best_row in untracked and n_support[best_row] < 2:
                 # several candidates that one camera's epipolar line alone judges, before any
@@ -1355,6 +1361,8 @@ class _Decider:
                         if best_key is None or key < best_key:
                             best_key, best_row = key, i
                 if best_row < 0:
+                    if not self.tracked:
+                        self._refused(camera[lo], t_ns[lo], uv, reason, lo, hi)
                     continue
             if best_row in unverified and len(unverified) > 1:
                 # several candidates nothing can tell apart (no other camera near, no track):
@@ -1366,24 +1374,58 @@ class _Decider:
                     if reason[i] < 0 and i not in unverified:
                         best_row = i
                 if best_row < 0:
+                    if not self.tracked:
+                        self._refused(camera[lo], t_ns[lo], uv, reason, lo, hi)
                     continue
             for i in range(lo, hi):
                 if i != best_row and reason[i] < 0:
                     reason[i] = OUTSCORED
-            if best_row in untracked and (hi - lo >= 2 or _denied(rows[best_row])):
+            if best_row in untracked and (hi - lo >= 2 or _denied(rows[best_row]) or _refused_near(
+                    self.refused[camera[lo]], t_ns[lo], uv[best_row], options)):
                 # chosen on one support before the track could predict (the session's start:
                 # nothing else can judge) while another camera denies it (paper3 in
                 # bench_dirty.py --more --first-seed 1200 --misses 0.1: cam3's first frame
                 # holds only the static object, on cam1's line, off cam2's; type A's first
                 # point 4.1 m off), or among other candidates of its frame that the one line
                 # refused (paper2, --first-seed 700: the object beside the refused ball,
-                # type A 310 mm): a guess, in doubt
+                # type A 310 mm), or where its camera refused a candidate of a frame of
+                # several within static_s (paper2@60, --first-seed 1700 --misses 0.1,
+                # rally-1701: the object and the ball refused together at 0.008 s, the
+                # object alone at 0.025 s, the ball missed, chosen on cam1's line: smooth
+                # 0.5-0.8 m off): a guess, in doubt
                 reason[best_row] = CONTESTED
             picked[camera[lo]] = (uv[best_row][0], uv[best_row][1], t_ns[lo])
             self.verified |= best_row not in unverified
+            if hi - lo >= 2 and not self.tracked:
+                self._refused(camera[lo], t_ns[lo], uv, reason, lo, hi)
             if math.isfinite(pts[best_row][0]):
                 track.add(t_s[best_row], np.array(pts[best_row]),
                           _age(rows[best_row], cols.lag[best_row]))
+
+
+    def _refused(self, cam: int, key: int, uv, reason, lo: int, hi: int) -> None:
+        """Note the candidates of camera ``cam``'s frame ``lo:hi`` (of several; frame time
+        ``key`` ns) that were rejected, before the track first predicts
+        (:func:`_refused_near`)."""
+        window = self.options.static_s * NS
+        kept = [r for r in self.refused[cam] if key - r[0] <= window]
+        kept.extend((key, uv[i][0], uv[i][1]) for i in range(lo, hi) if reason[i] >= 0)
+        self.refused[cam] = kept
+
+
+def _refused_near(refused, key: int, uv, options: GatingOptions) -> bool:
+    """Whether a camera rejected, in a frame of several candidates within ``static_s``
+    before its frame at ``key`` ns (``refused``: :attr:`_Decider.refused` of the camera),
+    a candidate within :data:`DOUBT_RADIUS_PX` of a choice at ``uv`` (undistorted): made
+    before the track first predicts, that choice rests on one epipolar line as that
+    rejected candidate did, and whatever stood there is still there
+    (docs/methods.md, "A contested start")."""
+    for t, u, v in refused:
+        if key - t <= options.static_s * NS:
+            du, dv = uv[0] - u, uv[1] - v
+            if du * du + dv * dv <= DOUBT_RADIUS_PX * DOUBT_RADIUS_PX:
+                return True
+    return False
 
 
 def _denied(ratios) -> bool:
@@ -1876,6 +1918,9 @@ def _observation_doubt(detections: Detections, rig: Rig, reason: np.ndarray,
     contested = np.flatnonzero(reason[chosen] == CONTESTED)
     if not len(still) and not len(contested):
         return None
+    # (a contested choice is a source too, counted DOUBT_REJECTIONS times: a later choice
+    # of its camera at its pixel is the same guess; StreamDoubt._row)
+    still = np.concatenate([still, *[chosen[contested]] * DOUBT_REJECTIONS])
     doubt = choice_doubt(detections.frame_time_ns[frame[chosen]],
                          detections.frame_camera[frame[chosen]], detections.cand_uv[chosen],
                          detections.frame_time_ns[frame[still]],
@@ -2463,6 +2508,9 @@ class StreamDoubt:
         contested = self.gate.contested
         if contested and (t, c, u, v) in contested:
             contested.discard((t, c, u, v))
+            # (a source of doubt for its camera's later choices, as DOUBT_REJECTIONS
+            # rejections: _observation_doubt)
+            near.extend([(t, u, v)] * DOUBT_REJECTIONS)
             return doubt_variance(u, v, *self.size[c])
         radius2 = DOUBT_RADIUS_PX * DOUBT_RADIUS_PX
         if sum(t - self.window <= tj <= t and (u - uj) * (u - uj) + (v - vj) * (v - vj)
