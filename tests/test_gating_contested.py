@@ -88,8 +88,11 @@ def test_a_static_object_chosen_in_a_cameras_first_frame_against_the_third_is_co
         assert stream.contested == want
     # the filter leaves the contested choices out (a choice in doubt: "The filter and a
     # choice in doubt"), streamed as in batch
+    # (and the choices in doubt as a contested one's camera chose again at its pixel
+    # within static_s: session 22, tests/test_gating_late_doubt.py)
     filt = fuse(det, rig, "filter")
-    assert filt.dropped.get("doubt", 0) == len(want)
+    doubted = int(np.count_nonzero(g.doubt_px2 > 0))
+    assert filt.dropped.get("doubt", 0) == doubted and doubted >= len(want)
     for method, batch in (("typeA", typea), ("nearest", near), ("filter", filt)):
         for form in ("push", "push_frame"):
             fuser = StreamFuser(rig, method, FusionOptions(), candidates=True)

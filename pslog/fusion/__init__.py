@@ -171,8 +171,12 @@ class Method:
     uses_doubt : bool, it takes the doubt of the gate's choices (:attr:`Prepared.doubt_px2`,
         docs/methods.md "A choice in doubt"): in its covariance (``sync``, ``nearest``,
         ``typeB``, ``linear``), by withholding the points resting on a choice in doubt
-        (``typeA``), or by leaving such a choice out (``filter``); the gate makes it only
-        for a form such a method fuses
+        (``typeA``), or by leaving such a choice out (``filter``, ``smooth``); the gate makes
+        it only for a form such a method fuses
+    doubt : which choices' doubt it takes: True, every one's; ``"start"``, only the
+        contested choices' and their camera's later choices at their pixel (``smooth``:
+        the regular doubt's choices are mostly the ball's own, and its covariance on
+        dirty sessions was calibrated without them; docs/methods.md, "A contested start")
     """
 
     name: str
@@ -185,6 +189,7 @@ class Method:
     streamer: Callable | None = None
     kernels: tuple[str, ...] = ()
     uses_doubt: bool = False
+    doubt: bool | str = True
 
     def suits(self, shared: bool, alone: bool) -> bool:
         """True if a session with (or without) shared and lone instants suits the method."""
@@ -279,7 +284,8 @@ METHODS: dict[str, Method] = {m.name: m for m in (
     Method("smooth", _smooth, False, False, frozenset(),
            "one continuous trajectory fitted to every detection's ray (offline)",
            "continuous-time batch estimation: Furgale et al. 2013; Singer 1970 motion prior",
-           kernels=("pslog.estimation", "pslog.estimation._kernels")),
+           kernels=("pslog.estimation", "pslog.estimation._kernels"), uses_doubt=True,
+           doubt="start"),
     Method("filter", _filter, True, False, frozenset(),
            "causal extended Kalman filter with bounce/kick gating, a point at every detection",
            "Bar-Shalom, Li & Kirubarajan 2001 (EKF, NIS gate); docs/methods.md",

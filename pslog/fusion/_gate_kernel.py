@@ -50,6 +50,8 @@ from .._jit import kernel
 #: rejection codes, as pslog.fusion.gating's (and its CONTESTED choice's)
 _EPIPOLAR, _TRACK, _MOTION, _OUTSCORED = 0, 1, 2, 3
 _CONTESTED = -2
+#: gating.DOUBT_RADIUS_PX squared (undistorted pixels here, as gating._refused_near)
+_DOUBT_RADIUS2 = 5.0 * 5.0
 _NS = 1_000_000_000
 _MIN_DET = 1e-12
 _I64_MIN = int(np.iinfo(np.int64).min)
@@ -789,6 +791,20 @@ def choose(a, at, fi, fflag, ct, cf, trk, ist, centers, opt, static, lone, avail
                     within += 1
                 elif math.isfinite(r):
                     denied = True
+            if not (denied or within >= 2):
+                # (gating._refused_near: a candidate this camera rejected in a frame of
+                # several within static_s, within DOUBT_RADIUS_PX)
+                window = opt[O_STATIC_S] * _NS
+                h = at - 1
+                while not denied and h >= 0 and key - fi[a, h, 0] <= window:
+                    if fi[a, h, 3] >= 2 and fflag[a, h, 0] == 1:
+                        for j in range(fi[a, h, 3]):
+                            if j != fi[a, h, 4]:
+                                du = cf[a, at, best_row, 0] - cf[a, h, j, 0]
+                                dv = cf[a, at, best_row, 1] - cf[a, h, j, 1]
+                                if du * du + dv * dv <= _DOUBT_RADIUS2:
+                                    denied = True
+                    h -= 1
             if denied or within >= 2:
                 reason[best_row] = _CONTESTED
         if not (differs[best_row] == 1.0 or differs[best_row] == 3.0):

@@ -37,8 +37,10 @@ A candidate is accepted when the epipolar gate accepts it (some other camera sup
 and the track and motion gates do not object, or when the track gate alone accepts it
 firmly (its ray within ``track_alone_m`` of the prediction); one nothing can judge is kept
 only in the session's first frames. Before the track first predicts, a choice one epipolar
-line alone made while another camera denies it, or beside candidates that line refused, is
-kept but CONTESTED (:data:`CONTESTED`): in doubt, like a choice beside rejected ones.
+line alone made while another camera denies it, or beside candidates that line refused (in
+its frame, or at its pixel in its camera's frames of the last ``static_s``), is kept but
+CONTESTED (:data:`CONTESTED`): in doubt, like a choice beside rejected ones, and so is its
+camera's later choice at its pixel within ``static_s``.
 A candidate supported by two or more other cameras
 whose rays meet (a point within ``track_m`` of each) is consistent in three views and is
 accepted whatever the track says (that is how the track follows kicks and bounces); rays that
@@ -86,9 +88,10 @@ EPIPOLAR, TRACK, MOTION, OUTSCORED = range(4)
 #: The ``reason`` code of a kept candidate whose choice is CONTESTED (-1: any other kept one):
 #: chosen before the track first predicted, on fewer than two supports whose rays meet,
 #: while another available camera denied it (its carried candidates off the line, or a
-#: second support whose ray misses) or other candidates of its frame were refused: nothing
-#: but one epipolar line judged it (docs/methods.md, "A contested start"). It is in doubt
-#: (:func:`doubt_variance`).
+#: second support whose ray misses) or other candidates of its frame (or, within static_s,
+#: one at its pixel in a frame of several of its camera: :func:`_refused_near`) were
+#: refused: nothing but one epipolar line judged it (docs/methods.md, "A contested
+#: start"). It is in doubt (:func:`doubt_variance`).
 CONTESTED = -2
 REASON_TEXT = {
     "epipolar": "no other camera's detections near that time lie near its epipolar line",
@@ -1230,6 +1233,10 @@ class _Decider:
         # one the camera itself was following is a static object's (the ``lone`` candidates)
         self.picked: list[tuple[float, float, int] | None] = [None] * len(rig)
         self.last_frame: list[int | None] = [None] * len(rig)
+        # per camera, until the track first predicts: the candidates it rejected in its
+        # frames of several candidates, (frame time ns, undistorted u, v), for
+        # :func:`_refused_near` (a later choice there is still one line's guess)
+        self.refused: list[list[tuple[int, float, float]]] = [[] for _ in rig.cameras]
 
     def run(self, c: _Candidates, frames, ratio, points, in_front, reason,
             static=None, lag=None) -> None:
@@ -1336,6 +1343,8 @@ class _Decider:
                 if best_key is None or key < best_key:
                     best_key, best_row = key, i
             if best_row < 0:
+                if hi - lo >= 2 and not self.tracked:
+                    self._refused(camera[lo], t_ns[lo], uv, reason, lo, hi)
                 continue
             if len(untracked) > 1 and best_row in untracked and n_support[best_row] < 2:
                 # several candidates that one camera's epipolar line alone judges, before any
@@ -1355,6 +1364,8 @@ class _Decider:
                         if best_key is None or key < best_key:
                             best_key, best_row = key, i
                 if best_row < 0:
+                    if not self.tracked:
+                        self._refused(camera[lo], t_ns[lo], uv, reason, lo, hi)
                     continue
             if best_row in unverified and len(unverified) > 1:
                 # several candidates nothing can tell apart (no other camera near, no track):
@@ -1366,24 +1377,57 @@ class _Decider:
                     if reason[i] < 0 and i not in unverified:
                         best_row = i
                 if best_row < 0:
+                    if not self.tracked:
+                        self._refused(camera[lo], t_ns[lo], uv, reason, lo, hi)
                     continue
             for i in range(lo, hi):
                 if i != best_row and reason[i] < 0:
                     reason[i] = OUTSCORED
-            if best_row in untracked and (hi - lo >= 2 or _denied(rows[best_row])):
+            if best_row in untracked and (hi - lo >= 2 or _denied(rows[best_row]) or _refused_near(
+                    self.refused[camera[lo]], t_ns[lo], uv[best_row], options)):
                 # chosen on one support before the track could predict (the session's start:
                 # nothing else can judge) while another camera denies it (paper3 in
                 # bench_dirty.py --more --first-seed 1200 --misses 0.1: cam3's first frame
                 # holds only the static object, on cam1's line, off cam2's; type A's first
                 # point 4.1 m off), or among other candidates of its frame that the one line
                 # refused (paper2, --first-seed 700: the object beside the refused ball,
-                # type A 310 mm): a guess, in doubt
+                # type A 310 mm), or where its camera refused a candidate of a frame of
+                # several within static_s (paper2@60, --first-seed 1700 --misses 0.1,
+                # rally-1701: the object and the ball refused together at 0.008 s, the
+                # object alone at 0.025 s, the ball missed, chosen on cam1's line: smooth
+                # 0.5-0.8 m off): a guess, in doubt
                 reason[best_row] = CONTESTED
             picked[camera[lo]] = (uv[best_row][0], uv[best_row][1], t_ns[lo])
             self.verified |= best_row not in unverified
+            if hi - lo >= 2 and not self.tracked:
+                self._refused(camera[lo], t_ns[lo], uv, reason, lo, hi)
             if math.isfinite(pts[best_row][0]):
                 track.add(t_s[best_row], np.array(pts[best_row]),
                           _age(rows[best_row], cols.lag[best_row]))
+
+    def _refused(self, cam: int, key: int, uv, reason, lo: int, hi: int) -> None:
+        """Note the candidates of camera ``cam``'s frame ``lo:hi`` (of several; frame time
+        ``key`` ns) that were rejected, before the track first predicts
+        (:func:`_refused_near`)."""
+        window = self.options.static_s * NS
+        kept = [r for r in self.refused[cam] if key - r[0] <= window]
+        kept.extend((key, uv[i][0], uv[i][1]) for i in range(lo, hi) if reason[i] >= 0)
+        self.refused[cam] = kept
+
+
+def _refused_near(refused, key: int, uv, options: GatingOptions) -> bool:
+    """Whether a camera rejected, in a frame of several candidates within ``static_s``
+    before its frame at ``key`` ns (``refused``: :attr:`_Decider.refused` of the camera),
+    a candidate within :data:`DOUBT_RADIUS_PX` of a choice at ``uv`` (undistorted): made
+    before the track first predicts, that choice rests on one epipolar line as that
+    rejected candidate did, and whatever stood there is still there
+    (docs/methods.md, "A contested start")."""
+    for t, u, v in refused:
+        if key - t <= options.static_s * NS:
+            du, dv = uv[0] - u, uv[1] - v
+            if du * du + dv * dv <= DOUBT_RADIUS_PX * DOUBT_RADIUS_PX:
+                return True
+    return False
 
 
 def _denied(ratios) -> bool:
@@ -1402,7 +1446,7 @@ def _denied(ratios) -> bool:
 
 def gate(detections: Detections, rig: Rig, *, causal: bool = True, wait_s: float = 0.0,
          max_gap_s: float | None = None, options: GatingOptions | None = None,
-         common: Callable[[], tuple] | None = None, doubt: bool = True) -> Gated:
+         common: Callable[[], tuple] | None = None, doubt: bool | str = True) -> Gated:
     """Choose the ball among every frame's candidates (module docstring).
 
     Parameters
@@ -1420,7 +1464,8 @@ def gate(detections: Detections, rig: Rig, *, causal: bool = True, wait_s: float
         part of the work every form shares: several forms gating the same detections
         compute it once); None: computed here
     doubt : make :attr:`Gated.doubt_px2` (False: None, for methods that do not take it:
-        the registry's ``Method.uses_doubt``)
+        the registry's ``Method.uses_doubt``; ``"start"``: only the start's, the contested
+        choices and their camera's later choices at their pixel, ``Method.doubt``)
 
     Returns
     -------
@@ -1779,7 +1824,7 @@ def _stillness_one(key: int, pts, earlier, lags: int, options: GatingOptions,
 
 
 def _result(detections: Detections, rig: Rig, reason: np.ndarray,
-            options: GatingOptions | None = None, doubt: bool = True) -> Gated:
+            options: GatingOptions | None = None, doubt: bool | str = True) -> Gated:
     chosen = reason < 0
     rej = ~chosen
     rows = detections.cand_frame[rej]
@@ -1789,7 +1834,8 @@ def _result(detections: Detections, rig: Rig, reason: np.ndarray,
     observations = timed_observations(_chosen_candidates(detections, chosen), rig)
     return Gated(observations, rejections, chosen, reason,
                  _observation_doubt(detections, rig, reason, observations,
-                                    (options or GatingOptions()).static_s) if doubt else None)
+                                    (options or GatingOptions()).static_s, doubt == "start")
+                 if doubt else None)
 
 
 #: A choice is in doubt when its camera rejected candidates this close to it (recorded
@@ -1865,17 +1911,23 @@ def doubt_source(reason, several):
 
 
 def _observation_doubt(detections: Detections, rig: Rig, reason: np.ndarray,
-                       observations: Observations, static_s: float) -> np.ndarray | None:
+                       observations: Observations, static_s: float,
+                       start: bool = False) -> np.ndarray | None:
     """:func:`choice_doubt` of the chosen candidates (``reason`` < 0), and the whole
     :func:`doubt_variance` of a :data:`CONTESTED` one, on the rows of ``observations`` (the
-    chosen ones at their corrected times); None when none is in doubt."""
+    chosen ones at their corrected times); None when none is in doubt. ``start``: the
+    contested choices' only (no rejection a source: :func:`gate`'s ``doubt="start"``)."""
     frame = detections.cand_frame
     several = detections.candidates_per_frame()[frame] >= 2
-    still = np.flatnonzero(doubt_source(reason, several))
+    still = np.flatnonzero(np.zeros(len(reason), dtype=bool) if start
+                           else doubt_source(reason, several))
     chosen = np.flatnonzero(reason < 0)
     contested = np.flatnonzero(reason[chosen] == CONTESTED)
     if not len(still) and not len(contested):
         return None
+    # (a contested choice is a source too, counted DOUBT_REJECTIONS times: a later choice
+    # of its camera at its pixel is the same guess; StreamDoubt._row)
+    still = np.concatenate([still, *[chosen[contested]] * DOUBT_REJECTIONS])
     doubt = choice_doubt(detections.frame_time_ns[frame[chosen]],
                          detections.frame_camera[frame[chosen]], detections.cand_uv[chosen],
                          detections.frame_time_ns[frame[still]],
@@ -2463,6 +2515,9 @@ class StreamDoubt:
         contested = self.gate.contested
         if contested and (t, c, u, v) in contested:
             contested.discard((t, c, u, v))
+            # (a source of doubt for its camera's later choices, as DOUBT_REJECTIONS
+            # rejections: _observation_doubt)
+            near.extend([(t, u, v)] * DOUBT_REJECTIONS)
             return doubt_variance(u, v, *self.size[c])
         radius2 = DOUBT_RADIUS_PX * DOUBT_RADIUS_PX
         if sum(t - self.window <= tj <= t and (u - uj) * (u - uj) + (v - vj) * (v - vj)
@@ -2481,16 +2536,18 @@ def gating_key(method: str, options) -> tuple[bool, float]:
 
 
 def gate_for(detections: Detections, rig: Rig, method: str, options,
-             common: Callable[[], tuple] | None = None, doubt: bool | None = None) -> Gated:
+             common: Callable[[], tuple] | None = None,
+             doubt: bool | str | None = None) -> Gated:
     """:func:`gate` in the form ``method`` needs (``options``: FusionOptions with
     ``max_gap_s`` set or None; ``common``: as :func:`gate`'s; ``doubt``: make the choices'
     doubt, None: if ``method`` takes it, ``Method.uses_doubt``)."""
     from . import METHODS
 
     causal, wait_s = gating_key(method, options)
+    m = METHODS[method]
     return gate(detections, rig, causal=causal, wait_s=wait_s, max_gap_s=options.max_gap_s,
                 common=common,
-                doubt=METHODS[method].uses_doubt if doubt is None else doubt)
+                doubt=(m.uses_doubt and m.doubt) if doubt is None else doubt)
 
 
 def prepared_for(gated: Gated, rig: Rig) -> Prepared:
@@ -2589,10 +2646,15 @@ def start_fusion(detections: Detections, rig: Rig, methods, options=None, *,
             return value
 
     # (the choices' doubt where a method of the form takes it in its covariance)
-    doubting = {gating_key(m, options) for m in methods if METHODS[m].uses_doubt}
+    # (a form's methods taking different doubts: every choice's, True, wins over "start")
+    doubting: dict[tuple, bool | str] = {}
+    for m in methods:
+        if METHODS[m].uses_doubt:
+            key = gating_key(m, options)
+            doubting[key] = True if doubting.get(key) is True else METHODS[m].doubt
 
     def gated_input(key, method: str) -> tuple[Gated, Prepared | None]:  # once per form
-        gated = gate_for(detections, rig, method, options, common, key in doubting)
+        gated = gate_for(detections, rig, method, options, common, doubting.get(key, False))
         return gated, (prepared_for(gated, rig) if len(rig) >= 2 else None)
 
     def fused(method: str, shared: tuple[Gated, Prepared | None]):

@@ -18,7 +18,8 @@ pieces (never inside a gap the model does not bridge). Per-point quality:
 
 A detection in an end segment of a piece beyond a bounce or kick that fewer than four
 detections of two cameras hold gets no point (its position along the rays is not determined):
-counted in ``Track.dropped["underdetermined_end"]``.
+counted in ``Track.dropped["underdetermined_end"]``. A detection the gate chose in doubt
+(:attr:`Prepared.doubt_px2` > 0) is left out of the fit, counted as ``doubt``.
 
 The fit's search for bounces and kicks runs on two threads; ``PSLOG_SMOOTH_THREADS=1`` forces
 one (the track is the same, bit for bit, on any number).
@@ -29,7 +30,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import FusionError
-from ..records import NS, Track
+from ..records import NS, Observations, Track
 from ..rig import Rig
 from ._prepare import Prepared
 
@@ -40,6 +41,16 @@ def fuse_smooth(prep: Prepared, rig: Rig, options) -> Track:
     from ..estimation import SmoothOptions, fit_trajectory
 
     obs = prep.obs
+    # a choice the gate put in doubt is left out, as the filter leaves it out (with chance
+    # 1/2 metres from the ball, and the fit's covariance cannot say so: docs/methods.md,
+    # "A contested start")
+    n_doubt = 0
+    if prep.doubt_px2 is not None:
+        kept = ~(prep.doubt_px2 > 0)
+        n_doubt = len(obs) - int(np.count_nonzero(kept))
+        if n_doubt:
+            obs = Observations(obs.time_ns[kept], obs.camera[kept], obs.uv[kept],
+                               obs.frame_index[kept])
     try:
         fit = fit_trajectory(obs, rig, SmoothOptions(
             max_gap_s=options.max_gap_s, detector_offset_m=options.detector_offset_m or 0.0,
@@ -84,6 +95,8 @@ def fuse_smooth(prep: Prepared, rig: Rig, options) -> Track:
         quality[f"cov_{name}_m2"] = cov[:, i, j]
     # detections in an end segment beyond a break that too few of them determine
     dropped = {"underdetermined_end": fit.withheld} if fit.withheld else {}
+    if n_doubt:
+        dropped["doubt"] = n_doubt
     return Track("smooth", time_ns, position, camera, quality, dropped=dropped)
 
 
