@@ -94,6 +94,7 @@ def _choose(lone_term: bool = True) -> list[int]:
     state.count[0], state.count[-1] = 2, 2
     state.fi[0, 0] = (BEFORE_NS, BEFORE_NS, 0, 1, 0)
     state.cf[0, 0, 0, :2] = (300.0, 300.0)
+    state.fflag[0, 0, 0] = 1  # (decided, as a real earlier frame is)
     state.fi[0, 1] = (round(TIMES[0] * NS), FRAME_NS, 1, 4, -1)
     state.ct[0, 1, :4] = [round(t * NS) for t in TIMES]
     state.cf[0, 1, :4, :2] = UV

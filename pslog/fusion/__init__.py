@@ -28,7 +28,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
-from typing import cast
+from typing import Literal, cast
 
 import numpy as np
 
@@ -189,7 +189,7 @@ class Method:
     streamer: Callable | None = None
     kernels: tuple[str, ...] = ()
     uses_doubt: bool = False
-    doubt: bool | str = True
+    doubt: Literal[True, "start"] = True
 
     def suits(self, shared: bool, alone: bool) -> bool:
         """True if a session with (or without) shared and lone instants suits the method."""

@@ -1423,7 +1423,7 @@ def _refused_near(refused, key: int, uv, options: GatingOptions) -> bool:
     rejected candidate did, and whatever stood there is still there
     (docs/methods.md, "A contested start")."""
     for t, u, v in refused:
-        if key - t <= options.static_s * NS:
+        if 0 <= key - t <= options.static_s * NS:  # (earlier frames only, as the kernel's)
             du, dv = uv[0] - u, uv[1] - v
             if du * du + dv * dv <= DOUBT_RADIUS_PX * DOUBT_RADIUS_PX:
                 return True

@@ -502,6 +502,9 @@ class LiveFuser:
         they are counted (:meth:`counters`)."""
         if arrival_mono_ns is None:
             arrival_mono_ns = arrival_ns if self.monotonic is None else self.monotonic()
+        elif self.monotonic is None:  # (its waits would compare two clocks)
+            raise FusionError("LiveFuser.feed: arrival_mono_ns given to a fuser made without "
+                              "monotonic= (its waits are on the wall clock)")
         seen = int(arrival_mono_ns)
         counts = self._counts
         counts["received"] += 1
