@@ -12,9 +12,6 @@ metres and pixels.
 
 from __future__ import annotations
 
-import contextlib
-import os
-import sys
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -179,35 +176,10 @@ def _gray(image: np.ndarray) -> np.ndarray:
     return image
 
 
-@contextlib.contextmanager
-def _quiet_native_stderr():
-    """File descriptor 2 (where FFmpeg, inside OpenCV's video reader, writes its own
-    messages: ``[mjpeg @ 0x...] No JPEG data found in image`` for a file that is no video)
-    sent to the null device while the block runs: the command says what went wrong in its
-    one line. ``sys.stderr`` is flushed first (nothing of pslog's own is lost)."""
-    sys.stderr.flush()
-    try:
-        null = os.open(os.devnull, os.O_WRONLY)
-    except OSError:  # (no descriptor left: FFmpeg's lines then stay)
-        yield
-        return
-    try:
-        saved = os.dup(2)
-    except OSError:
-        os.close(null)
-        yield
-        return
-    try:
-        os.dup2(null, 2)
-        yield
-    finally:
-        os.dup2(saved, 2)
-        os.close(saved)
-        os.close(null)
-
-
 def _read_video_frames(path: Path, max_frames: int) -> tuple[list[np.ndarray], list[str]]:
-    with _quiet_native_stderr():
+    from ..outputs import quiet_native_stderr
+
+    with quiet_native_stderr():
         return _read_video_frames_quietly(path, max_frames)
 
 
