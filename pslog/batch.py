@@ -830,35 +830,37 @@ def _csv_value(value) -> str:
 
 def write_summary(rows: list[dict], outdir: str | Path) -> list[Path]:
     """``summary.csv`` (always) and ``summary.parquet`` (with pyarrow, which rerun-sdk
-    brings) in ``outdir``, each written as ``.partial`` and renamed. Rows sorted by session;
-    a cell a session has no value for is empty (CSV) or null (Parquet). Returns the paths
-    written."""
-    from pslog.outputs import replacing
+    brings) in ``outdir``, both or neither (:func:`pslog.outputs.all_or_nothing`: each
+    written as ``.partial``, both renamed once both are complete; a full disk at the second
+    left a new CSV beside the last batch's Parquet). Rows sorted by session; a cell a
+    session has no value for is empty (CSV) or null (Parquet). Returns the paths written."""
+    from pslog.outputs import all_or_nothing, replacing
 
     rows = sorted(rows, key=lambda r: r["session"])
     columns = summary_columns(rows)
     written = []
-    path = Path(outdir) / "summary.csv"
-    with replacing(path, "w", force=True) as f:
-        writer = csv.writer(f, lineterminator="\n")
-        writer.writerow(columns)
-        for row in rows:
-            writer.writerow([_csv_value(row.get(c)) for c in columns])
-    written.append(path)
-    try:
-        import pyarrow as pa
-        import pyarrow.parquet as pq
-    except ImportError:  # pragma: no cover - rerun-sdk depends on pyarrow
-        return written
+    with all_or_nothing():
+        path = Path(outdir) / "summary.csv"
+        with replacing(path, "w", force=True) as f:
+            writer = csv.writer(f, lineterminator="\n")
+            writer.writerow(columns)
+            for row in rows:
+                writer.writerow([_csv_value(row.get(c)) for c in columns])
+        written.append(path)
+        try:
+            import pyarrow as pa
+            import pyarrow.parquet as pq
+        except ImportError:  # pragma: no cover - rerun-sdk depends on pyarrow
+            return written
 
-    def clean(value):
-        return None if isinstance(value, float) and math.isnan(value) else value
+        def clean(value):
+            return None if isinstance(value, float) and math.isnan(value) else value
 
-    table = pa.table({c: [clean(r.get(c)) for r in rows] for c in columns})
-    path = Path(outdir) / "summary.parquet"
-    with replacing(path, "wb", force=True) as f:
-        pq.write_table(table, f)
-    written.append(path)
+        table = pa.table({c: [clean(r.get(c)) for r in rows] for c in columns})
+        path = Path(outdir) / "summary.parquet"
+        with replacing(path, "wb", force=True) as f:
+            pq.write_table(table, f)
+        written.append(path)
     return written
 
 
