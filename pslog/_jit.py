@@ -151,12 +151,35 @@ def _blas_found_by_file(numba_linalg: Any) -> None:
         check()
 
 
+class _BeforeArraymath:
+    """A meta-path finder that finds nothing: a hook on the import of
+    ``numba.np.arraymath`` while :func:`_lazy_blas_probe`'s refresh is under way (``armed``,
+    numba's compiler lock held): it gives ``numba.np.linalg`` the probe as
+    ``ensure_blas`` for arraymath's import. Put at the front of ``sys.meta_path`` once and
+    left there: taking it out again while another thread walks the list to import a
+    module would make that thread skip a finder (the path's: ModuleNotFoundError)."""
+
+    def __init__(self) -> None:
+        self.armed = False
+        self.patched: tuple[Any, Any] | None = None
+
+    def find_spec(self, name: str, path: Any = None, target: Any = None) -> None:
+        if name == "numba.np.arraymath" and self.armed and self.patched is None:
+            import sys
+
+            linalg: Any = sys.modules.get("numba.np.linalg")
+            own = getattr(linalg, "ensure_blas", None)
+            if own is not None:
+                linalg.ensure_blas = functools.partial(_blas_found_by_file, linalg)
+                self.patched = (linalg, own)
+
+
 def _lazy_blas_probe(numba_cpu: Any) -> None:
     """Make numba's first kernel load answer its BLAS question without importing
     :mod:`scipy.linalg` (:func:`_blas_found_by_file`). numba imports its modules, then
     ``numba.np.linalg`` and ``numba.np.arraymath`` in that order, in
     ``CPUContext.load_additional_registries`` (at the first cache load or compile); during
-    that call a hook on the import system (it finds nothing itself) sees ``arraymath``
+    that call a hook on the import system (:class:`_BeforeArraymath`) sees ``arraymath``
     looked for and gives ``numba.np.linalg`` the probe as ``ensure_blas`` for arraymath's
     import; numba's own function is put back when the call returns. Every module is
     imported when and in the order numba imports it. A numba arranged otherwise (no such
@@ -167,32 +190,91 @@ def _lazy_blas_probe(numba_cpu: Any) -> None:
     load = getattr(context, "load_additional_registries", None)
     if load is None or getattr(load, "_pslog_lazy_blas", False):
         return
-
-    class BeforeArraymath:  # a meta-path finder that finds nothing: a hook on one import
-        patched: tuple[Any, Any] | None = None
-
-        def find_spec(self, name: str, path: Any = None, target: Any = None) -> None:
-            linalg: Any = sys.modules.get("numba.np.linalg")
-            own = getattr(linalg, "ensure_blas", None)
-            if name == "numba.np.arraymath" and self.patched is None and own is not None:
-                linalg.ensure_blas = functools.partial(_blas_found_by_file, linalg)
-                self.patched = (linalg, own)
+    hook = _BeforeArraymath()
 
     def load_additional_registries(self: Any) -> Any:
         if "numba.np.arraymath" in sys.modules:
             return load(self)
-        hook = BeforeArraymath()
-        sys.meta_path.insert(0, hook)  # type: ignore[arg-type]
+        if hook not in sys.meta_path:
+            sys.meta_path.insert(0, hook)  # type: ignore[arg-type]
+        hook.armed = True  # (numba's compiler lock held: one refresh at a time)
         try:
             return load(self)
         finally:
-            sys.meta_path.remove(hook)  # type: ignore[arg-type]
+            hook.armed = False
             if hook.patched is not None:
                 linalg, own = hook.patched
                 linalg.ensure_blas = own
+                hook.patched = None
 
     load_additional_registries._pslog_lazy_blas = True  # type: ignore[attr-defined]
     context.load_additional_registries = load_additional_registries
+
+
+#: the packages outside numba and llvmlite that a first ``import numba`` (and its CPU
+#: target's first refresh) imports: :func:`settle_imports` imports them on the calling
+#: thread before pslog starts a thread that imports numba (tests/test_jit_threads.py checks
+#: that the list is complete for the installed numba)
+NUMBA_SHARED_PACKAGES = ("email", "html", "importlib.metadata", "importlib.resources",
+                         "logging", "numpy.polynomial", "numpy.random", "scipy", "scipy._lib",
+                         "yaml")
+
+#: what made numba's first import fail on pslog's preload thread (None: it did not)
+_preload_failure: BaseException | None = None
+
+
+def settle_imports(*modules: str) -> None:
+    """Import, on the calling thread, the packages that threads about to start would
+    otherwise import for the first time at once: those of :data:`NUMBA_SHARED_PACKAGES`
+    and the packages holding ``modules`` or among them (``pslog.estimation`` for
+    ``pslog.estimation._kernels``); a missing one is skipped.
+
+    Python (up to 3.14, CPython issue 83065) locks each module while it is imported,
+    taking a module's lock before its package's: a thread importing ``pkg.mod`` (which
+    imports ``pkg`` first) and another importing ``pkg`` (whose ``__init__`` imports
+    ``pkg.mod``) wait for each other, and the import system ends that with an error in one
+    of them (``_DeadlockError``). numba's first import on pslog's preload thread imports
+    ``importlib.resources`` (llvmlite) while the command's thread imports
+    ``importlib.metadata`` (the MCAP writer), which imports ``importlib.resources.abc``
+    first: the preload's import failed part-way, and the next ``import numba`` made a
+    second numba module without its ``core`` attribute (the submodules stayed imported),
+    so every kernel load then raised ``AttributeError: module 'numba' has no attribute
+    'core'``. With every package imported before the threads start, none is imported by
+    two threads at once (a module's lock is then only ever taken with its package
+    imported: no two threads wait for each other)."""
+    import sys
+
+    for name in (*NUMBA_SHARED_PACKAGES, *modules):
+        if name not in sys.modules:
+            try:
+                spec = importlib.util.find_spec(name)  # (imports its package)
+                if spec is not None and spec.submodule_search_locations is not None:
+                    importlib.import_module(name)  # itself a package
+            except Exception:  # (its importer reports it)
+                pass
+
+
+def _started_numba() -> Any:
+    """``import numba``, or :class:`~pslog.errors.PslogError` saying why it cannot start
+    (one line): numba refuses to start (NUMBA_* variables), or its first import failed
+    part-way on the preload thread, leaving a numba module without its submodules."""
+    import sys
+
+    try:
+        import numba  # imported here: `pslog --help` and the light commands never load LLVM
+    except Exception as exc:  # e.g. NUMBA_NUM_THREADS=0: numba refuses to start
+        from .errors import PslogError
+
+        raise PslogError(f"numba could not start ({type(exc).__name__}: {exc}); check the "
+                         f"NUMBA_* environment variables") from exc
+    if getattr(numba, "core", None) is not sys.modules.get("numba.core"):
+        from .errors import PslogError
+
+        why = _preload_failure
+        raise PslogError("numba could not start: its first import failed part-way"
+                         + (f" ({type(why).__name__}: {why})" if why is not None else "")
+                         + "; run the command again")
+    return numba
 
 
 def kernel(fn: F | None = None, *, inline: bool = False, contract: bool = False) -> Any:
@@ -213,14 +295,7 @@ def kernel(fn: F | None = None, *, inline: bool = False, contract: bool = False)
     the product's bits (a test compares them)."""
     if fn is None:
         return lambda f: kernel(f, inline=inline, contract=contract)
-    try:
-        import numba  # imported here: `pslog --help` and the light commands never load LLVM
-    except Exception as exc:  # e.g. NUMBA_NUM_THREADS=0: numba refuses to start
-        from .errors import PslogError
-
-        raise PslogError(f"numba could not start ({type(exc).__name__}: {exc}); check the "
-                         f"NUMBA_* environment variables") from exc
-
+    numba = _started_numba()
     how: Literal["never", "always"] = "always" if inline else "never"
     import inspect
 
@@ -252,7 +327,11 @@ def preload(*modules: str) -> None:
     second core instead of delaying its first kernel; the kernels themselves are still
     loaded from numba's cache at their first call (only the signatures used).
 
-    A fault is not reported here: the same import in the command raises it as usual.
+    A fault is not reported here: the same import in the command raises it as usual (a
+    first import of numba that failed part-way here: :func:`kernel` says so in one line).
+    The packages that numba's import shares with the rest of the program, and those
+    holding ``modules``, are imported first, on the calling thread (:func:`settle_imports`:
+    two threads importing one package at once can fail).
 
     Parameters
     ----------
@@ -260,19 +339,32 @@ def preload(*modules: str) -> None:
     """
     import threading
 
+    settle_imports(*modules)
+
     def load() -> None:
         import importlib
 
+        global _preload_failure
         try:
             import numba  # noqa: F401 (the point: its import, off the command's thread)
+        except BaseException as exc:  # the command's own import reports it
+            _preload_failure = exc
+            return
+        try:
             from numba.core import cpu
             from numba.core.compiler_lock import global_compiler_lock
             from numba.core.registry import cpu_target
 
             _lazy_blas_probe(cpu)
 
+            # the target context got (made, the first time) before the compiler lock is
+            # taken, as numba does: it makes it under the context's own lock, then takes
+            # the compiler lock (CPUContext.init). Got inside the compiler lock, a thread
+            # making a kernel meanwhile (a kernel module imported) held the one and waited
+            # for the other: a fuse that hung for good
+            context = cpu_target.target_context
             with global_compiler_lock:  # as numba's own cache load refreshes it
-                cpu_target.target_context.refresh()
+                context.refresh()
         except BaseException:  # the command's own import reports it
             return
         for name in modules:

@@ -87,6 +87,14 @@ TASK_LOCK_WAIT_S = 300.0
 #: seconds the next batch's plan waits, in all, for such folders before it leaves them to
 #: their tasks (which wait for them in turn)
 PLAN_LOCK_WAIT_S = 60.0
+#: the list of the failed sessions whose old outputs a batch is removing (in the results
+#: folder, written before the first is removed, removed after the last): a batch stopped
+#: meanwhile leaves it, and the next batch in that folder finishes the removal before it
+#: plans (:func:`finish_discards`)
+DISCARD_NAME = ".pslog-batch-discard.json"
+#: test hook: set, the batch process sends itself SIGINT (a Ctrl-C) once it has removed the
+#: first failed session's old outputs
+INTERRUPT_DISCARD_ENV = "PSLOG_BATCH_TEST_INTERRUPT_DISCARD"
 #: Ray's retries of a task whose worker process died (an exception is never retried: the
 #: task turns every error into a failed row)
 MAX_RETRIES = 3
@@ -256,6 +264,7 @@ def plan_batch(jobs: list[Job], settings: Settings, outdir: str | Path, *, resum
     key = settings.key()
     conflicts: list[str] = []
     deadline = time.monotonic() + PLAN_LOCK_WAIT_S
+    finish_discards(outdir)  # an earlier batch's, cut short
     for job in jobs:
         # an install an interrupted batch committed: finished, then judged (a folder that a
         # stopped batch's worker still holds is left to the session's task, which waits)
@@ -461,6 +470,55 @@ def discard_failed(job: Job, settings: Settings, wait_s: float | None = TASK_LOC
             with contextlib.suppress(OSError, ValueError):
                 settle(job)  # a dead attempt's staging folder
     _remove_empty(_result_folders(job))
+
+
+def discard_all(failed: list[Job], settings: Settings, results: str | Path | None) -> None:
+    """:func:`discard_failed` for each of ``failed``, resumable: the list is written first
+    into the results folder (:data:`DISCARD_NAME`) and removed after the last, so a batch
+    stopped meanwhile (Ctrl-C) leaves the rest to the next batch there
+    (:func:`finish_discards`) instead of keeping some failed sessions' old outputs and
+    ``done.json`` (``--resume`` would take those for complete). ``results`` None: no list
+    (one session, or a caller without a results folder)."""
+    journal = None if results is None or not failed else Path(results) / DISCARD_NAME
+    if journal is not None:
+        try:
+            _write_json(journal, {"settings": asdict(settings),
+                                  "jobs": [asdict(job) for job in failed]})
+        except OSError:  # (a full disk: the removal then goes on without its list)
+            journal = None
+    for i, job in enumerate(failed):
+        discard_failed(job, settings)
+        if i == 0 and os.environ.get(INTERRUPT_DISCARD_ENV):
+            import signal
+
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(1.0)  # (the KeyboardInterrupt is raised here)
+    if journal is not None:
+        journal.unlink(missing_ok=True)
+
+
+def finish_discards(results: str | Path) -> None:
+    """The removal of failed sessions' old outputs that an earlier batch in ``results``
+    began and did not finish (its :data:`DISCARD_NAME` list), finished; a list that cannot
+    be read (cut short by a crash: its sessions' removal had not begun) is dropped."""
+    journal = Path(results) / DISCARD_NAME
+    if not journal.exists():
+        return
+    try:
+        with open(journal, encoding="utf-8") as f:
+            listed = json.load(f)
+        raw = listed["settings"]
+        settings = Settings(steps=tuple(raw["steps"]), methods=tuple(raw["methods"]),
+                            estimate=tuple(raw["estimate"]), frames=str(raw["frames"]))
+        jobs = [Job(str(j["path"]), str(j["session"]), str(j["outdir"]))
+                for j in listed["jobs"]]
+    except (OSError, ValueError, TypeError, KeyError, AttributeError):
+        jobs = []
+    root = Path(results).resolve()
+    for job in jobs:
+        if Path(job.outdir).resolve().is_relative_to(root):  # (never outside the folder)
+            discard_failed(job, settings)
+    journal.unlink(missing_ok=True)
 
 
 def settle_held(jobs: Iterable[Job], wait_s: float) -> None:
@@ -772,35 +830,37 @@ def _csv_value(value) -> str:
 
 def write_summary(rows: list[dict], outdir: str | Path) -> list[Path]:
     """``summary.csv`` (always) and ``summary.parquet`` (with pyarrow, which rerun-sdk
-    brings) in ``outdir``, each written as ``.partial`` and renamed. Rows sorted by session;
-    a cell a session has no value for is empty (CSV) or null (Parquet). Returns the paths
-    written."""
-    from pslog.outputs import replacing
+    brings) in ``outdir``, both or neither (:func:`pslog.outputs.all_or_nothing`: each
+    written as ``.partial``, both renamed once both are complete; a full disk at the second
+    left a new CSV beside the last batch's Parquet). Rows sorted by session; a cell a
+    session has no value for is empty (CSV) or null (Parquet). Returns the paths written."""
+    from pslog.outputs import all_or_nothing, replacing
 
     rows = sorted(rows, key=lambda r: r["session"])
     columns = summary_columns(rows)
     written = []
-    path = Path(outdir) / "summary.csv"
-    with replacing(path, "w", force=True) as f:
-        writer = csv.writer(f, lineterminator="\n")
-        writer.writerow(columns)
-        for row in rows:
-            writer.writerow([_csv_value(row.get(c)) for c in columns])
-    written.append(path)
-    try:
-        import pyarrow as pa
-        import pyarrow.parquet as pq
-    except ImportError:  # pragma: no cover - rerun-sdk depends on pyarrow
-        return written
+    with all_or_nothing():
+        path = Path(outdir) / "summary.csv"
+        with replacing(path, "w", force=True) as f:
+            writer = csv.writer(f, lineterminator="\n")
+            writer.writerow(columns)
+            for row in rows:
+                writer.writerow([_csv_value(row.get(c)) for c in columns])
+        written.append(path)
+        try:
+            import pyarrow as pa
+            import pyarrow.parquet as pq
+        except ImportError:  # pragma: no cover - rerun-sdk depends on pyarrow
+            return written
 
-    def clean(value):
-        return None if isinstance(value, float) and math.isnan(value) else value
+        def clean(value):
+            return None if isinstance(value, float) and math.isnan(value) else value
 
-    table = pa.table({c: [clean(r.get(c)) for r in rows] for c in columns})
-    path = Path(outdir) / "summary.parquet"
-    with replacing(path, "wb", force=True) as f:
-        pq.write_table(table, f)
-    written.append(path)
+        table = pa.table({c: [clean(r.get(c)) for r in rows] for c in columns})
+        path = Path(outdir) / "summary.parquet"
+        with replacing(path, "wb", force=True) as f:
+            pq.write_table(table, f)
+        written.append(path)
     return written
 
 
@@ -1077,20 +1137,23 @@ def _native_stderr(into: io.StringIO):
 
 def run_batch(jobs: list[Job], settings: Settings, *, workers: int | None = None,
               address: str | None = None, progress: Progress | None = None,
-              on_row: Callable[[dict], None] | None = None) -> list[dict]:
+              on_row: Callable[[dict], None] | None = None,
+              results: str | Path | None = None) -> list[dict]:
     """Run :func:`run_task` for every job as a Ray task (1 CPU each; retried up to
     :data:`MAX_RETRIES` times when its worker process dies); the summary rows, in the
     order the sessions finished. Once every task has ended, the sessions that failed lose
     their old outputs (:func:`discard_failed`); an interrupted batch removes none. A task
     lost for good (its worker died every time) is a failed row naming why. A single
     session on the local machine runs in this process, without a cluster (whose start-up
-    would cost more than any gain)."""
+    would cost more than any gain). ``results``: the results folder, where the removal of
+    the failed sessions' outputs keeps its list until done (:func:`discard_all`)."""
     import ray
 
     if len(jobs) == 1 and address is None and not ray.is_initialized():
         # one session: nothing to spread, so no cluster to start (seconds saved); this
         # process runs the task itself, and its death is the batch's (--resume redoes it)
-        row = run_session(jobs[0], settings)
+        row, failed_one = run_task(jobs[0], settings)
+        discard_all([jobs[0]] if failed_one else [], settings, results)
         if progress is not None:
             progress.done, progress.failed = (1, 0) if row["status"] == "ok" else (0, 1)
             progress.update(0, final=True)
@@ -1130,8 +1193,7 @@ def run_batch(jobs: list[Job], settings: Settings, *, workers: int | None = None
     # every task has ended: the failed sessions' old outputs go (none stays beside a failed
     # row). Not before: a batch interrupted meanwhile keeps every old output (its old
     # summary stays), whatever its tasks met while they were being ended
-    for job in failed:
-        discard_failed(job, settings)
+    discard_all(failed, settings, results)
     return rows
 
 

@@ -75,6 +75,34 @@ def same_file(a: str | Path, b: str | Path) -> bool:
         return False
 
 
+@contextmanager
+def quiet_native_stderr() -> Iterator[None]:
+    """File descriptor 2 (where FFmpeg, inside OpenCV's video reader, writes its own
+    messages: ``[mjpeg @ 0x...] No JPEG data found in image``, ``moov atom not found`` for a
+    file that is no video) sent to the null device while the block runs: the command says
+    what went wrong in its own words. ``sys.stderr`` is flushed first (nothing of pslog's
+    own is lost); the whole process's descriptor: for a block no other thread writes in."""
+    sys.stderr.flush()
+    try:
+        null = os.open(os.devnull, os.O_WRONLY)
+    except OSError:  # (no descriptor left: FFmpeg's lines then stay)
+        yield
+        return
+    try:
+        saved = os.dup(2)
+    except OSError:
+        os.close(null)
+        yield
+        return
+    try:
+        os.dup2(null, 2)
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+        os.close(null)
+
+
 def _say_stderr(text: str) -> None:
     print(f"pslog: {text}", file=sys.stderr)
 

@@ -488,3 +488,53 @@ def test_a_failed_session_of_a_batch_then_interrupted_keeps_its_old_outputs(
         assert sorted(now) == ["done.json", "eval.json", "fused.mcap", "synced.mcap"], now
         assert all(now[f] != before["m1"][f] for f in now), now
     assert (out / "summary.csv").read_bytes() == summary
+
+
+def test_a_batch_stopped_while_it_removes_failed_sessions_outputs_leaves_it_to_the_next(
+        cluster, tmp_path, short_tmpdir):
+    """Two sessions fail in a ``--force`` batch (their inputs cut since the last one); a
+    Ctrl-C comes once the batch has removed the first one's old outputs (the test hook
+    sends it): the batch ends (exit 130) with the list of the removals left in the results
+    folder, the second failed session still holding its old outputs and ``done.json``
+    (which ``--resume`` would take for complete). The next batch there finishes the
+    removal before it plans, even one that runs only the good session."""
+    from pslog.batch import DISCARD_NAME, INTERRUPT_DISCARD_ENV
+
+    root = tmp_path / "season"
+    for i in range(3):
+        simulate(root / f"m{i}.mcap", 40 + i)
+    out = tmp_path / "results"
+    steps = ["--do", "fuse", *METHODS, "-o", out]
+    code, _, err = pslog("batch", root / "*.mcap", *steps)  # on the module's cluster
+    assert code == 0, err
+    hour_ago = time.time() - 3600  # (cut recordings, not ones still being written)
+    for name in ("m1", "m2"):
+        path = root / f"{name}.mcap"
+        path.write_bytes(path.read_bytes()[:4000])
+        os.utime(path, (hour_ago, hour_ago))
+    argv = [sys.executable, "-m", "pslog.cli", "batch", str(root / "*.mcap"),
+            *map(str, steps), "--workers", "2", "--force"]
+    proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True,
+                            env={**os.environ, "TMPDIR": short_tmpdir,
+                                 INTERRUPT_DISCARD_ENV: "1"})
+    try:
+        assert proc.wait(timeout=240) == 130, proc.stderr.read()
+        err = proc.stderr.read()
+        assert [line for line in err.splitlines() if line.strip()][-1] == (
+            "pslog batch: interrupted"), err
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.stderr.close()
+    assert (out / DISCARD_NAME).is_file()
+    left = [name for name in ("m1", "m2") if (out / name).exists()]
+    assert len(left) == 1, left  # one removed (its folder too), the other not yet
+    assert sorted(_stamps(out / left[0])) == ["done.json", "fused.mcap"]
+    good = _stamps(out / "m0")  # (made again by the forced batch)
+    # the next batch, of the good session alone, complete: skipped (--resume)
+    code, _, err = pslog("batch", root / "m0.mcap", *steps, "--resume")
+    assert code == 0, err
+    assert not (out / left[0]).exists()  # the removal finished
+    assert not (out / DISCARD_NAME).exists()
+    assert _stamps(out / "m0") == good

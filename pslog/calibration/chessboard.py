@@ -177,6 +177,14 @@ def _gray(image: np.ndarray) -> np.ndarray:
 
 
 def _read_video_frames(path: Path, max_frames: int) -> tuple[list[np.ndarray], list[str]]:
+    from ..outputs import quiet_native_stderr
+
+    with quiet_native_stderr():
+        return _read_video_frames_quietly(path, max_frames)
+
+
+def _read_video_frames_quietly(path: Path, max_frames: int
+                               ) -> tuple[list[np.ndarray], list[str]]:
     capture = cv2.VideoCapture(str(path))
     try:
         if not capture.isOpened():

@@ -168,7 +168,7 @@ def _run_locked(args: argparse.Namespace, settings, jobs, outdir, mode: str,
         show(row)
     if plan.run:
         rows += run_batch(plan.run, settings, workers=args.workers, address=args.address,
-                          progress=progress, on_row=show)
+                          progress=progress, on_row=show, results=outdir)
     written = write_summary(rows, outdir)
     failed = sorted((r for r in rows if r["status"] != "ok"), key=lambda r: r["session"])
     print(f"wrote {', '.join(map(str, written))}")

@@ -172,6 +172,11 @@ class MethodRun:
             return
         # costliest first; ties in the asked order
         self.order = sorted(range(n), key=lambda i: -COST.get(self.methods[i], 1.0))
+        # the packages numba's first import shares with the rest imported here first: the
+        # threads may import numba while another imports one of them (pslog._jit)
+        from .._jit import settle_imports
+
+        settle_imports()
         try:
             for j in range(min(workers, n)):
                 thread = threading.Thread(target=self._worker, name=f"pslog-fuse-{j}",

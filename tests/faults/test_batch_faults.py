@@ -131,3 +131,30 @@ def test_ray_client_without_its_extra(tmp_path, season):
                                             "Ray Client is not installed", "ray[client]"))
     assert_untouched(before, tmp_path)
     assert not (tmp_path / "out").exists()
+
+
+def test_a_summary_that_does_not_fit_leaves_the_old_pair(tmp_path):
+    """The disk fills between the summary's two files (one 4 KiB page left: the new CSV,
+    one page, fits in place of the old; its Parquet, three pages of incompressible errors,
+    does not): both old files stay as they were and no partial is left (before, the new
+    CSV stood beside the last batch's Parquet); the fault is one error naming the file."""
+    import random
+
+    from pslog.batch import summary_row, write_summary
+    from pslog.errors import PslogError
+
+    from ._mounts import fill, small_tmpfs
+
+    r = random.Random(3)
+
+    def rows() -> list[dict]:
+        return [summary_row(f"s{i}.mcap", None, None, None, error=r.randbytes(500).hex())
+                for i in range(3)]
+
+    with small_tmpfs(tmp_path / "disk", "128k") as disk:
+        write_summary(rows(), disk)
+        fill(disk, free=4096)
+        before = fingerprint(disk)
+        with pytest.raises(PslogError, match=r"summary\.parquet"):
+            write_summary(rows(), disk)
+        assert_untouched(before, disk)

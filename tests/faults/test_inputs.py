@@ -283,3 +283,19 @@ def test_an_os_fault_reading_an_input_names_the_path(work):
     # reading /proc/self/mem at offset 0 fails with EIO
     assert_refused(work, 1, ["info", "/proc/self/mem"],
                    contains=("/proc/self/mem", "Input/output error"))
+
+
+def test_a_file_that_is_no_video_given_as_chessboard_images_is_one_line(work):
+    """``--images`` naming a file that is no video (here random bytes named .jpg, which
+    OpenCV hands to FFmpeg as a one-frame MJPEG stream): FFmpeg's own messages on the
+    process's standard error (``[mjpeg @ 0x...] No JPEG data found in image``, twice) came
+    before pslog's line; now its one line alone, and the rig is untouched."""
+    import random
+
+    (work / "noise.jpg").write_bytes(random.Random(1).randbytes(2000))
+    before = fingerprint(work)
+    run = run_pslog("calibrate", "--chessboard", "9x6", "--images", "noise.jpg", "--name",
+                    "cam9", "--width", "640", "--height", "480", "--fps", "90", "--rig",
+                    "rig.toml", cwd=work)
+    assert_one_line_error(run, 1, contains="no frames could be read from video noise.jpg")
+    assert_untouched(before, work)

@@ -172,3 +172,20 @@ def test_demo_on_a_full_disk_says_nothing_was_kept(tmp_path, limit):
         assert "recover" not in line
         assert not (disk / "d").exists()
         assert_untouched(before, disk)
+
+
+def test_a_source_file_that_is_no_video_is_said_in_pslogs_words_alone(tmp_path):
+    """A ``--source`` file that is no video (random bytes named .mp4): FFmpeg's own lines
+    as OpenCV probes it (``[mov,mp4,... @ 0x...] moov atom not found``, on the camera
+    process's standard error) no longer come before pslog's: the camera is reported
+    failed, nothing is written."""
+    import random
+
+    (tmp_path / "noise.mp4").write_bytes(random.Random(2).randbytes(3000))
+    run = run_pslog("record", "--rig", "paper2", "--source", "cam1=noise.mp4", "--source",
+                    "cam2=noise.mp4", "-o", "rec.mcap", cwd=tmp_path, timeout=60)
+    assert run.code == 1, run.stderr
+    assert "not a video OpenCV can read" in run.stderr
+    assert "moov atom" not in run.stderr and " @ 0x" not in run.stderr, run.stderr
+    assert "Traceback" not in run.stderr
+    assert not (tmp_path / "rec.mcap").exists()
