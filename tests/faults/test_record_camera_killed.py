@@ -273,7 +273,9 @@ def _kill_mid_clip(rec: Recording, victim: str, after_s: float) -> tuple[float, 
                 held = True
             time.sleep(0.002)
             read = read_share()
-        if not _alive(pids[victim]):
+        if not _alive(pids[victim]) or (read > 0.6 and not held):
+            # (past 60 % unheld: this process was not scheduled between two looks while the
+            # victim read on — it may have sent its whole clip already: not mid-clip, retried)
             return read, False
         os.kill(pids[victim], signal.SIGKILL)
     finally:
