@@ -12,6 +12,7 @@ import struct
 import sys
 import threading
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -152,6 +153,30 @@ def _step_thread_clock(monkeypatch, sock: _SteppedSocket, server_thread) -> None
     monkeypatch.setattr(time, "time_ns", stepped)
 
 
+@contextmanager
+def _serving(monkeypatch, sock: _SteppedSocket, rig, sinks, stop: threading.Event, **options):
+    """``serve(rig, "", sinks, sock=sock, stop=stop, **options)`` on a thread whose wall
+    clock steps with ``sock`` (:func:`_step_thread_clock`); yields ``(ready, result)`` once
+    it is ready (``ready.address``: where to send; ``result["summary"]``: its summary once
+    it ended), then stops it and waits for it."""
+    from pslog.live.server import serve
+
+    ready, result = threading.Event(), {}
+
+    def run() -> None:
+        result["summary"] = serve(rig, "", sinks, stop=stop, ready=ready, sock=sock, **options)
+
+    server = threading.Thread(target=run)
+    _step_thread_clock(monkeypatch, sock, lambda: server)
+    server.start()
+    try:
+        assert ready.wait(300)
+        yield ready, result
+    finally:
+        stop.set()
+        server.join()
+
+
 def _wait_until(predicate, what: str, timeout_s: float = 60.0) -> None:
     deadline = time.monotonic() + timeout_s  # (a hang guard, not a timing)
     while not predicate():
@@ -188,7 +213,7 @@ def test_hold_and_silence_are_not_fooled_by_a_wall_clock_stepped_back(monkeypatc
     and the run ends with cam3 silent. On the wall clock cam3's last datagram came 60 s
     after the others: it looked live, every later frame waited for it (the 10-s hold) and
     came out only when the run was stopped, cam3 still live."""
-    from pslog.live.server import bind_udp, serve
+    from pslog.live.server import bind_udp
     from tests._live import frames, rally_session
 
     rig, det = rally_session(0.6, spurious_rate=0.0, miss_rate=0.0)
@@ -199,20 +224,11 @@ def test_hold_and_silence_are_not_fooled_by_a_wall_clock_stepped_back(monkeypatc
     before = [b for d, b in sent if d.t_capture_ns < cut]
     after = [b for d, b in sent if d.t_capture_ns >= cut]
     sock = _SteppedSocket(bind_udp("udp://127.0.0.1:0"), -60 * NS)
-    ready, stop = threading.Event(), threading.Event()
-    sink, status, result = _Collector(stop), io.StringIO(), {}
-
-    def run() -> None:
-        result["summary"] = serve(rig, "", [sink], method="typeA", candidates=False,
-                                  hold_s=10.0, silent_after_s=0.3, rehearse_s=None,
-                                  epoch_ns=epoch, stop=stop, ready=ready, sock=sock,
-                                  status_stream=status, status_every_s=60.0)
-
-    server = threading.Thread(target=run)
-    _step_thread_clock(monkeypatch, sock, lambda: server)
-    server.start()
-    try:
-        assert ready.wait(300)
+    stop = threading.Event()
+    sink, status = _Collector(stop), io.StringIO()
+    with _serving(monkeypatch, sock, rig, [sink], stop, method="typeA", candidates=False,
+                  hold_s=10.0, silent_after_s=0.3, rehearse_s=None, epoch_ns=epoch,
+                  status_stream=status, status_every_s=60.0) as (ready, result):
         tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         for b in before:
             tx.sendto(b, ready.address)  # type: ignore[attr-defined]
@@ -223,9 +239,6 @@ def test_hold_and_silence_are_not_fooled_by_a_wall_clock_stepped_back(monkeypatc
             tx.sendto(b, ready.address)  # type: ignore[attr-defined]
         tx.close()
         _wait_until(lambda: sink.fuser.counters()["received"] == len(sent), "received")
-    finally:
-        stop.set()
-        server.join()
     summary = result["summary"]
     assert summary.counters["fused"] == len(sent)
     later = [p for p, stopped in sink.points if p.t_capture_ns >= cut]
@@ -253,7 +266,7 @@ def test_a_datagram_queued_across_a_clock_step_is_bounded_by_the_previous_arriva
     the second of silence before the burst (a persistent offset between the stamps and the
     thread's clock, as in the bench test above, does not tell the two bounds apart: a
     one-time step does)."""
-    from pslog.live.server import bind_udp, serve
+    from pslog.live.server import bind_udp
     from tests._live import frames, rally_session
 
     rig, det = rally_session(0.4, spurious_rate=0.0, miss_rate=0.0)
@@ -261,19 +274,10 @@ def test_a_datagram_queued_across_a_clock_step_is_bounded_by_the_previous_arriva
     sent = frames(det, rig, epoch)[:30]
     data = [encode_detections(d) for d in sent]
     sock = _SteppedSocket(bind_udp("udp://127.0.0.1:0"), 60 * NS, at_datagram=20)
-    ready, stop = threading.Event(), threading.Event()
-    sink, result = _Collector(stop), {}
-
-    def run() -> None:
-        result["summary"] = serve(rig, "", [sink], method="typeA", candidates=False,
-                                  rehearse_s=None, epoch_ns=epoch, stop=stop, ready=ready,
-                                  sock=sock, status_stream=None)
-
-    server = threading.Thread(target=run)
-    _step_thread_clock(monkeypatch, sock, lambda: server)
-    server.start()
-    try:
-        assert ready.wait(300)
+    stop = threading.Event()
+    sink = _Collector(stop)
+    with _serving(monkeypatch, sock, rig, [sink], stop, method="typeA", candidates=False,
+                  rehearse_s=None, epoch_ns=epoch, status_stream=None) as (ready, result):
         time.sleep(1.0)
         tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         burst = time.monotonic_ns()
@@ -282,9 +286,6 @@ def test_a_datagram_queued_across_a_clock_step_is_bounded_by_the_previous_arriva
         tx.close()
         _wait_until(lambda: sink.fuser.counters()["received"] == len(data), "received")
         took = time.monotonic_ns() - burst
-    finally:
-        stop.set()
-        server.join()
     summary = result["summary"]
     assert sock.stepped and summary.counters["received"] == len(data)
     # (the datagram that waited across the step made a point: its latency is among them)
@@ -307,7 +308,7 @@ def test_a_held_frame_reports_its_own_monotonic_arrival_across_a_wall_clock_step
     came out (as before), it was the time since the run's start (stepped forward: the
     stamp 60 s old, bounded by the start) or none (stepped back), and the point's own
     latency_s 60 s or negative."""
-    from pslog.live.server import bind_udp, serve
+    from pslog.live.server import bind_udp
     from tests._live import frames, rally_session
 
     rig, det = rally_session(0.4, spurious_rate=0.0, miss_rate=0.0)
@@ -317,8 +318,8 @@ def test_a_held_frame_reports_its_own_monotonic_arrival_across_a_wall_clock_step
     before = [encode_detections(d) for d in sent if d.t_capture_ns < cut]
     after = [encode_detections(d) for d in sent if d.t_capture_ns >= cut]
     sock = _SteppedSocket(bind_udp("udp://127.0.0.1:0"), int(step_s * NS))
-    ready, stop, stepped = threading.Event(), threading.Event(), threading.Event()
-    sink, result = _Collector(stepped), {}  # (each point: made after the step or not)
+    stop, stepped = threading.Event(), threading.Event()
+    sink = _Collector(stepped)  # (each point: made after the step or not)
     start = sink.start
 
     def started(fuser) -> None:  # (the fuser's wall clock, t_emit_ns: the thread's, stepped)
@@ -326,18 +327,9 @@ def test_a_held_frame_reports_its_own_monotonic_arrival_across_a_wall_clock_step
         start(fuser)
 
     sink.start = started  # type: ignore[method-assign]
-
-    def run() -> None:
-        result["summary"] = serve(rig, "", [sink], method="typeA", candidates=False,
-                                  hold_s=10.0, silent_after_s=5.0, rehearse_s=None,
-                                  epoch_ns=epoch, stop=stop, ready=ready, sock=sock,
-                                  status_stream=None)
-
-    server = threading.Thread(target=run)
-    _step_thread_clock(monkeypatch, sock, lambda: server)
-    server.start()
-    try:
-        assert ready.wait(300)
+    with _serving(monkeypatch, sock, rig, [sink], stop, method="typeA", candidates=False,
+                  hold_s=10.0, silent_after_s=5.0, rehearse_s=None, epoch_ns=epoch,
+                  status_stream=None) as (ready, result):
         time.sleep(1.0)  # (the run's start well before the burst)
         tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         burst = time.monotonic_ns()
@@ -353,9 +345,6 @@ def test_a_held_frame_reports_its_own_monotonic_arrival_across_a_wall_clock_step
         tx.close()
         _wait_until(lambda: sink.fuser.counters()["received"] == len(sent), "received")
         took = time.monotonic_ns() - burst
-    finally:
-        stop.set()
-        server.join()
     summary = result["summary"]
     assert summary.counters["fused"] == len(sent)
     held = [p for p, late in sink.points if late and p.t_capture_ns < cut]
@@ -376,13 +365,11 @@ def test_serve_keeps_rehearsing_across_a_wall_clock_step(monkeypatch):
     than the least one for 16 datagrams of each camera, more than each sends after it) and
     none ran."""
     from pslog.live import fuser as live_fuser
-    from pslog.live.server import bind_udp, serve
+    from pslog.live.server import bind_udp
     from tests._live import frames, rally_session
 
     rig, det = rally_session(0.6, spurious_rate=0.0, miss_rate=0.0)
     sock = _SteppedSocket(bind_udp("udp://127.0.0.1:0"), 60 * NS, at_datagram=5)
-    ready, stop = threading.Event(), threading.Event()
-    result = {}
     after: list[bool] = []  # per rehearsal run: after the step
     step = live_fuser.Rehearsal.step
 
@@ -391,17 +378,8 @@ def test_serve_keeps_rehearsing_across_a_wall_clock_step(monkeypatch):
         after.append(sock.stepped)
 
     monkeypatch.setattr(live_fuser.Rehearsal, "step", noted)
-
-    def run() -> None:
-        result["summary"] = serve(rig, "", [], method="typeA", candidates=False,
-                                  rehearse_s=0.004, stop=stop, ready=ready, sock=sock,
-                                  status_stream=None)
-
-    server = threading.Thread(target=run)
-    _step_thread_clock(monkeypatch, sock, lambda: server)
-    server.start()
-    try:
-        assert ready.wait(300)
+    with _serving(monkeypatch, sock, rig, [], threading.Event(), method="typeA",
+                  candidates=False, rehearse_s=0.004, status_stream=None) as (ready, result):
         sent = frames(det, rig, ready.epoch_ns)[:40]  # type: ignore[attr-defined]
         start = time.monotonic_ns() + 20_000_000
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
@@ -411,9 +389,6 @@ def test_serve_keeps_rehearsing_across_a_wall_clock_step(monkeypatch):
                 tx.sendto(encode_detections(d), ready.address)  # type: ignore[attr-defined]
         _wait_until(lambda: sock.received == len(sent), "received")
         time.sleep(0.05)
-    finally:
-        stop.set()
-        server.join()
     summary = result["summary"]
     assert sock.stepped and summary.counters["fused"] == len(sent)
     # (one before most of the 34 datagrams after the step: 20-25 at load 9, 8 at load 11,
