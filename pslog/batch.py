@@ -1039,7 +1039,7 @@ def ray_cluster(workers: int | None, address: str | None):
                              "include_dashboard": False}
     native = io.StringIO()  # what Ray's C++ core wrote while joining a cluster
     handlers = _signal_handlers()  # the command's, which ray.init replaces with Ray's
-    from pslog.outputs import signals_held
+    from pslog.outputs import native_stderr, signals_held
 
     try:
         # a Ctrl-C while Ray starts is acted on once it has started (then shut down in
@@ -1049,7 +1049,7 @@ def ray_cluster(workers: int | None, address: str | None):
                 # Ray's core logs each failed attempt to join (a wrong token: one warning a
                 # second for ~20 s) on the process's standard error: kept aside, the
                 # reason is then said in the one line below
-                with _native_stderr(native):
+                with native_stderr(native):
                     ray.init(address=address, **quiet)
             else:
                 # a short private folder: Ray's socket paths must fit in 107 bytes
@@ -1113,26 +1113,6 @@ def _shutdown(ray, temp: str | None, handlers: dict) -> None:
         ray.shutdown()
         if temp is not None:
             shutil.rmtree(temp, ignore_errors=True)
-
-
-@contextlib.contextmanager
-def _native_stderr(into: io.StringIO):
-    """File descriptor 2 (where C and C++ code writes, not only ``sys.stderr``) goes to a
-    temporary file while the block runs; its text is then appended to ``into``."""
-    import tempfile
-
-    sys.stderr.flush()
-    saved = os.dup(2)
-    with tempfile.TemporaryFile() as spool:
-        os.dup2(spool.fileno(), 2)
-        try:
-            yield
-        finally:
-            sys.stderr.flush()
-            os.dup2(saved, 2)
-            os.close(saved)
-            spool.seek(0)
-            into.write(spool.read().decode("utf-8", "replace"))
 
 
 def run_batch(jobs: list[Job], settings: Settings, *, workers: int | None = None,

@@ -23,6 +23,7 @@ alone. :func:`replacing` is the one way to write a replacement file.
 from __future__ import annotations
 
 import errno
+import io
 import os
 import stat
 import struct
@@ -76,31 +77,39 @@ def same_file(a: str | Path, b: str | Path) -> bool:
 
 
 @contextmanager
-def quiet_native_stderr() -> Iterator[None]:
-    """File descriptor 2 (where FFmpeg, inside OpenCV's video reader, writes its own
-    messages: ``[mjpeg @ 0x...] No JPEG data found in image``, ``moov atom not found`` for a
-    file that is no video) sent to the null device while the block runs: the command says
-    what went wrong in its own words. ``sys.stderr`` is flushed first (nothing of pslog's
-    own is lost); the whole process's descriptor: for a block no other thread writes in."""
+def native_stderr(into: io.StringIO | None = None) -> Iterator[None]:
+    """File descriptor 2 (where C and C++ code writes, not only ``sys.stderr``: FFmpeg,
+    inside OpenCV's video reader, ``[mjpeg @ 0x...] No JPEG data found in image``, ``moov
+    atom not found`` for a file that is no video) redirected while the block runs: to the
+    null device (``into`` None: the command says what went wrong in its own words), or to a
+    temporary file whose text is then appended to ``into`` (a batch task's captured
+    output). ``sys.stderr`` is flushed first (nothing of pslog's own is lost); the whole
+    process's descriptor: for a block no other thread writes in. With no descriptor left,
+    nothing is redirected."""
+    import tempfile
+
     sys.stderr.flush()
     try:
-        null = os.open(os.devnull, os.O_WRONLY)
-    except OSError:  # (no descriptor left: FFmpeg's lines then stay)
+        target = open(os.devnull, "wb") if into is None else tempfile.TemporaryFile()
+    except OSError:  # (no descriptor left: C's lines then stay)
         yield
         return
-    try:
-        saved = os.dup(2)
-    except OSError:
-        os.close(null)
-        yield
-        return
-    try:
-        os.dup2(null, 2)
-        yield
-    finally:
-        os.dup2(saved, 2)
-        os.close(saved)
-        os.close(null)
+    with target:
+        try:
+            saved = os.dup(2)
+        except OSError:
+            yield
+            return
+        try:
+            os.dup2(target.fileno(), 2)
+            yield
+        finally:
+            sys.stderr.flush()
+            os.dup2(saved, 2)
+            os.close(saved)
+            if into is not None:
+                target.seek(0)
+                into.write(target.read().decode("utf-8", "replace"))
 
 
 def _say_stderr(text: str) -> None:

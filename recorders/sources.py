@@ -31,7 +31,7 @@ import numpy as np
 from pslog.camera import Camera
 from pslog.errors import PslogError
 from pslog.motion import Motion
-from pslog.outputs import quiet_native_stderr
+from pslog.outputs import native_stderr
 from pslog.records import NS
 from pslog.simulation import shutter_times
 
@@ -162,7 +162,7 @@ class _FileSource(FrameSource):
     def __init__(self, spec: FileSpec) -> None:
         if not Path(spec.path).is_file():
             raise SourceError(f"cannot open {spec.describe()}: no such file")
-        with quiet_native_stderr():  # FFmpeg's own lines for a file that is no video
+        with native_stderr():  # FFmpeg's own lines for a file that is no video
             self._cap = cv2.VideoCapture(spec.path)
         if not self._cap.isOpened():
             raise SourceError(f"cannot open {spec.describe()}: not a video OpenCV can read")

@@ -177,9 +177,9 @@ def _gray(image: np.ndarray) -> np.ndarray:
 
 
 def _read_video_frames(path: Path, max_frames: int) -> tuple[list[np.ndarray], list[str]]:
-    from ..outputs import quiet_native_stderr
+    from ..outputs import native_stderr
 
-    with quiet_native_stderr():
+    with native_stderr():
         return _read_video_frames_quietly(path, max_frames)
 
 
