@@ -410,11 +410,15 @@ def test_rrd_pipe_is_drained_after_a_read_error(tmp_path):
 
     partial, out = tmp_path / "out.rrd.partial", tmp_path / "out.rrd"
     pipe = _PipeToFile(partial, out)
-    wrote = threading.Event()
+    wrote, broken_in = threading.Event(), threading.Event()
 
     def rerun_like_writer() -> None:
         with open(pipe.fifo, "wb") as sink:
-            for _ in range(128):
+            sink.write(b"x" * 65536)
+            # the rest only once the pump's descriptor is broken (a fast pump otherwise
+            # drained all of it before the dup2 below on a loaded machine: no read failed)
+            broken_in.wait(60)
+            for _ in range(127):
                 sink.write(b"x" * 65536)
         wrote.set()
 
@@ -429,6 +433,7 @@ def test_rrd_pipe_is_drained_after_a_read_error(tmp_path):
         broken = os.open(os.devnull, os.O_WRONLY)
         os.dup2(broken, pipe.reading)
         os.close(broken)
+        broken_in.set()
         assert wrote.wait(60), "the writer blocked: the pipe is no longer drained"
         assert pipe.join(60)
     finally:
