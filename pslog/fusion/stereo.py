@@ -718,10 +718,16 @@ def stereo_at_common_instants(
 
 def fuse_sync(prep: Prepared, tolerance_s: float = 1e-3, noise_px: float | None = 0.5
               ) -> Track:
-    """``sync``: N-view triangulation of detections captured within ``tolerance_s``.
+    """``sync``: N-view triangulation of detections captured within ``tolerance_s`` (the
+    paper's "synchronized" row of Table 1: "general stereo vision with no time delay").
 
     One point per instant at which at least two cameras saw the ball, unless geometrically
-    invalid (dropped and counted in ``Track.dropped``).
+    invalid (dropped and counted in ``Track.dropped``): the least-squares intersection of
+    their viewing rays (:func:`~pslog.geometry.triangulate_rays`; with two rays, the midpoint
+    of the common perpendicular, the paper's "crossing point" of section 2.2, step 3), every
+    ray parameter positive. ``std_m`` / ``cov_*``: first order at ``noise_px`` per axis on
+    each recorded pixel (``tests/test_fusion_validity.py``, hand-computed on a rectified
+    pair).
     """
     if len(prep.obs) == 0:
         return _empty("sync")
