@@ -94,7 +94,9 @@ pixel lengths by CPython's ``math.hypot``), so the points are bit for bit that f
 Per-point quality (columns of the Track, NaN where not applicable):
 
 - ``std_m``: position standard deviation ``sqrt(trace P_pp)`` after the update, metres (as
-  ``smooth``); ``std_x_m``, ``std_y_m``, ``std_z_m`` per axis;
+  ``smooth``), ``P_pp`` the reported covariance: the mixture's with the turn model in the set
+  (:func:`_combined_point`), plus an unseen jump's while one camera goes on alone
+  (:func:`_unseen_jump`); ``std_x_m``, ``std_y_m``, ``std_z_m`` per axis (its diagonal);
 - ``innovation_px``: distance of the detection from the predicted point's projection, pixels;
 - ``residual_px``: its distance from the updated point's projection, pixels;
 - ``nis``: the normalised innovation squared the gate tested (with the jump's covariance
