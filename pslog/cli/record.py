@@ -49,9 +49,12 @@ code 0 if any camera recorded frames, 1 and no file if none did).
 
 --synthetic renders what each camera sees of a ball (shaded sphere, motion blur over the
 exposure, lens distortion, sensor noise, a lined green field) following --motion under the
-rig's shutter schedule, in real time unless --fast, and stores the ground truth too. The
-summary's frame rate is over the recording itself; its wall time includes starting the
-camera processes (a few seconds).
+rig's shutter schedule, in real time unless --fast, and stores the ground truth too. A rig
+with clock corrections (clock_offset, clock_drift_ppm, readout: a rig from 'pslog sync') is
+rendered with those clock errors, each camera seeing the ball at the true time of its stamp,
+as 'pslog live --synthetic' does; the stored rig corrects them. The summary gives the
+session time the frames span and the wall time the recording took (its frame rate), then the
+wall time including starting the camera processes (a few seconds).
 
 Ball detection: pixels inside an HSV box (OpenCV scales: hue 0..179, saturation and value
 0..255; a hue minimum above the maximum wraps around red), connected components, sub-pixel
