@@ -229,6 +229,13 @@ def test_record_says_when_the_measured_shutter_offsets_are_not_the_rigs(
                "-o", str(tmp_path / "whole.mcap")])
     assert rc == 0
     assert "note:" not in str(capsys.readouterr())
+    # more than half a period later: measured as a negative phase (-8.3 ms), said as the
+    # offset within the frame period a rig takes (25.0 ms; a rig refuses -8.3)
+    rc = main(["record", "--rig", str(two_camera_rig), *sources, "--offset", "cam2=0.025",
+               "-o", str(tmp_path / "later.mcap")])
+    assert rc == 0
+    notes = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("note:")]
+    assert len(notes) == 1 and "cam2 25.0 ms (rig 0.0 ms)" in notes[0], notes
 
 
 def test_offset_note_that_cannot_read_the_session_back_is_not_an_error(tmp_path, capsys):

@@ -230,8 +230,10 @@ def _note_offsets(output, rig) -> None:
               f"({exc}); the recording itself is complete", file=sys.stderr)
         return
     if off:
-        listed = ", ".join(f"{name} {measured * 1e3:.1f} ms (rig {nominal * 1e3:.1f} ms)"
-                           for name, measured, nominal in off)
+        # within the frame period, as a rig's offset is (0 <= offset < period): the measured
+        # phase may come as -13.6 ms, which the rig refuses, for the 19.7 ms to set
+        listed = ", ".join(f"{name} {(measured % rig.camera(name).frame_period) * 1e3:.1f} ms "
+                           f"(rig {nominal * 1e3:.1f} ms)" for name, measured, nominal in off)
         print(f"note: measured shutter offsets differ from the rig's: {listed}; the session "
               f"keeps the rig's offsets (timing '{timing_label(rig)}'); to fuse with the "
               f"measured ones, 'pslog rig show {output} > fixed.toml', set the offsets and "
