@@ -346,8 +346,8 @@ def evaluate(tracks: Track | Mapping[str, Track] | Session,
     if truth is not None and not isinstance(truth, Truth):
         raise InputError(f"evaluate: truth {truth!r:.60}: give a Truth (e.g. session.truth)")
     if truth is None or len(truth) == 0:
-        raise InputError("evaluate: no ground truth (only simulated or synthetic sessions "
-                         "have one)")
+        raise InputError("evaluate: no ground truth (only sessions of 'pslog simulate', 'pslog "
+                         "record --synthetic' and 'pslog demo' have one)")
     if not isinstance(tracks, Mapping):
         raise InputError(f"evaluate: tracks {tracks!r:.60}: give a Track, a mapping of "
                          f"method -> Track or a Session")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 from typing import IO, Literal
 
@@ -51,7 +52,10 @@ def record_synthetic(
 
     Parameters
     ----------
-    rig : cameras and shutter offsets (``timing`` may set the offsets from a preset)
+    rig : cameras and shutter offsets (``timing`` may set the offsets from a preset); a
+        camera with clock corrections (``clock_offset``, ``clock_drift_ppm``, ``readout``)
+        sees the ball at the true times of its stamps
+        (:class:`recorders.live.LoggedClockPosition`)
     motion : a :class:`pslog.motion.Motion` (its ``position`` a module-level function) or
         the name of one of :data:`pslog.motion.MOTIONS`
     duration : seconds (default: the motion's natural duration)
@@ -79,8 +83,17 @@ def record_synthetic(
     options = render or RenderOptions(ball_radius=ball_radius, exposure_s=exposure_s,
                                       noise_sigma=noise_sigma, seed=seed)
     check_exposure(rig, options.exposure_s)  # a shutter open into the next frame is absurd
-    specs = {cam.name: SyntheticSpec(cam, i, motion, options, duration, realtime=not fast)
-             for i, cam in enumerate(rig.cameras)}
+    # a camera whose clock the rig corrects (a rig from 'pslog sync') sees the ball at the
+    # true times of its stamps, as 'pslog live --synthetic' renders it: the stored rig's
+    # corrections then recover the motion (before, the nominal times were rendered and the
+    # stored corrections moved every point off it: 19 mm against 0.7 on a 3 s rally)
+    from .live import LoggedClockPosition
+
+    specs = {}
+    for i, cam in enumerate(rig.cameras):
+        seen = (replace(motion, position=LoggedClockPosition(motion.position, cam))
+                if cam.has_clock_correction else motion)
+        specs[cam.name] = SyntheticSpec(cam, i, seen, options, duration, realtime=not fast)
     metadata = {
         "synthetic_motion": motion.name,
         "synthetic_ball_radius_m": repr(options.ball_radius),

@@ -250,6 +250,31 @@ def test_cli_fix_intrinsics_solves_the_pose_from_floor_points(tmp_path, capsys):
     assert_allclose(got.center_world, camera.center_world, atol=1e-6)
 
 
+def test_cli_keeps_the_clock_sync_estimated_for_the_camera_it_replaces(tmp_path, capsys):
+    """A rig from 'pslog rig show SYNCED.mcap' holds each camera's clock; calibrating a camera
+    again (--force, or --fix-intrinsics) replaces its geometry and keeps its clock, and says
+    so: dropped, 'pslog fuse --rig' lost the sync (3 webcams: typeA 29.8 mm, filter 23.7,
+    against 9.0 and 5.2 with the clocks kept)."""
+    camera = _camera()
+    points_world, uv = _pole_points(camera)
+    csv_path, rig_path = tmp_path / "points.csv", tmp_path / "synced.toml"
+    _write_points(csv_path, points_world, uv)
+    first = builtin_rig("paper3").cameras[0]
+    synced = camera.replace(R=np.eye(3), t=np.zeros(3), clock_offset=0.0066,
+                            clock_drift_ppm=55.0, readout=0.028)
+    save_rig(Rig((first.replace(name="cam0", readout=0.025), synced), "lab"), rig_path)
+    for extra in (["--force", "--width", "640", "--height", "480"], ["--fix-intrinsics"]):
+        assert main(["calibrate", "--points", str(csv_path), "--name", "cam1", "--rig",
+                     str(rig_path), *extra]) == 0
+        out = capsys.readouterr().out
+        assert ("replaced camera 'cam1' (camera 2 of 2) in " in out and "; kept its clock: "
+                "offset +6.6000 ms, drift +55.000 ppm, readout 28.0000 ms" in out), out
+        got = load_rig(rig_path).camera("cam1")
+        assert (got.clock_offset, got.clock_drift_ppm, got.readout) == (0.0066, 55.0, 0.028)
+        assert_allclose(got.center_world, camera.center_world, atol=1e-6)
+        assert load_rig(rig_path).cameras[0].readout == 0.025  # the other camera untouched
+
+
 @pytest.mark.parametrize(("extra", "message"), [
     (["--points", "missing.csv", "--width", "640", "--height", "480"], "points file not found"),
     (["--points", "pts.csv"], "--width and --height are required"),

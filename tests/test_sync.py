@@ -330,3 +330,40 @@ def test_a_blackout_over_the_middle_of_the_session_is_synced_on_the_stretches_bo
     for est in result.cameras[1:]:
         err = est.offset_s - offsets[est.name]
         assert abs(err) < 3 * est.offset_std_s and abs(err) < 0.3e-3, (est, err)
+
+
+def test_cli_table_says_which_parameters_were_kept_and_hints_at_rolling_shutters(
+        tmp_path, cli):
+    """The table marks what was not estimated ('kept': the rig's value; 'ref': the first
+    camera's offset and drift, 0 by definition) instead of a bare '± 0', and while readouts
+    are not estimated, says that most webcams need them: on rolling shutters of 20 ms the
+    readouts then come out many σ above 0 and the residual drops."""
+    path, out = tmp_path / "rs.mcap", tmp_path / "o.mcap"
+    code, _, err = cli("simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "rally",
+                       "--noise-px", "0.3", "--clock-offset", "cam2=4", "--readout", "20",
+                       "-o", path)
+    assert code == 0, err
+    code, offsets_only, err = cli("sync", path, "-o", out)
+    assert code == 0, err
+    rows = {line.split()[0]: line.split() for line in offsets_only.splitlines()
+            if line.startswith("cam")}
+    # camera offset σ drift σ readout σ ...: cam1's offset and drift are the reference
+    assert rows["cam1"][2] == "ref" and rows["cam1"][4] == "ref" and rows["cam1"][6] == "kept"
+    assert rows["cam2"][2] == "±" and rows["cam2"][5] == "kept" and rows["cam2"][7] == "kept"
+    assert "kept at the rig's values (not estimated): drift, readout" in offsets_only
+    assert "--estimate offset,readout" in offsets_only
+    code, with_readout, err = cli("sync", path, "-o", out, "--force", "--estimate",
+                                  "offset,readout")
+    assert code == 0, err
+    assert "not estimated): drift\n" in with_readout
+    assert "--estimate offset,readout" not in with_readout  # no hint once they are estimated
+    rows = {line.split()[0]: line.split() for line in with_readout.splitlines()
+            if line.startswith("cam")}
+    for name in ("cam1", "cam2", "cam3"):  # readout σ shown; many σ above 0, as the hint says
+        readout, sign, std = rows[name][-6:-3]  # then resid px, phase ms, ideal ms
+        assert sign == "±" and float(readout) > 5 * float(std), rows[name]
+
+    def residual(text: str) -> float:
+        return float(text.split("\nresidual ")[1].split(" px")[0])
+
+    assert residual(with_readout) < residual(offsets_only)

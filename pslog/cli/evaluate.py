@@ -69,8 +69,9 @@ def run(args: argparse.Namespace) -> int:
                          allow_nan=False))
     else:
         if truth is None:
-            print(f"{args.session} has no ground truth (only simulated or synthetic sessions "
-                  f"have one): no accuracy; the quality figures without it")
+            print(f"{args.session} has no ground truth (only sessions of 'pslog simulate', "
+                  f"'pslog record --synthetic' and 'pslog demo' have one; 'pslog live "
+                  f"--synthetic' records none): no accuracy; the quality figures without it")
         else:
             print(format_accuracy_table([r for r in rows if r is not None]))
         print()

@@ -49,9 +49,12 @@ code 0 if any camera recorded frames, 1 and no file if none did).
 
 --synthetic renders what each camera sees of a ball (shaded sphere, motion blur over the
 exposure, lens distortion, sensor noise, a lined green field) following --motion under the
-rig's shutter schedule, in real time unless --fast, and stores the ground truth too. The
-summary's frame rate is over the recording itself; its wall time includes starting the
-camera processes (a few seconds).
+rig's shutter schedule, in real time unless --fast, and stores the ground truth too. A rig
+with clock corrections (clock_offset, clock_drift_ppm, readout: a rig from 'pslog sync') is
+rendered with those clock errors, each camera seeing the ball at the true time of its stamp,
+as 'pslog live --synthetic' does; the stored rig corrects them. The summary gives the
+session time the frames span and the wall time the recording took (its frame rate), then the
+wall time including starting the camera processes (a few seconds).
 
 Ball detection: pixels inside an HSV box (OpenCV scales: hue 0..179, saturation and value
 0..255; a hue minimum above the maximum wraps around red), connected components, sub-pixel
@@ -227,8 +230,10 @@ def _note_offsets(output, rig) -> None:
               f"({exc}); the recording itself is complete", file=sys.stderr)
         return
     if off:
-        listed = ", ".join(f"{name} {measured * 1e3:.1f} ms (rig {nominal * 1e3:.1f} ms)"
-                           for name, measured, nominal in off)
+        # within the frame period, as a rig's offset is (0 <= offset < period): the measured
+        # phase may come as -13.6 ms, which the rig refuses, for the 19.7 ms to set
+        listed = ", ".join(f"{name} {(measured % rig.camera(name).frame_period) * 1e3:.1f} ms "
+                           f"(rig {nominal * 1e3:.1f} ms)" for name, measured, nominal in off)
         print(f"note: measured shutter offsets differ from the rig's: {listed}; the session "
               f"keeps the rig's offsets (timing '{timing_label(rig)}'); to fuse with the "
               f"measured ones, 'pslog rig show {output} > fixed.toml', set the offsets and "

@@ -71,15 +71,35 @@ def run(args: argparse.Namespace) -> int:
         return 0
     for note in outcome.notes:
         print(note)
-    print(_table(result, outcome.observations))
+    print(_table(result, outcome.observations, args.estimate))
+    print(_legend(args.estimate))
     print(f"residual {result.residual_px:.3f} px (pixel noise {result.noise_px:.3f} px); "
           f"wrote {args.output}")
     return 0
 
 
-def _table(result, obs) -> str:
+def _legend(estimated) -> str:
+    """What the table's columns are, which parameters were kept, and (readouts not
+    estimated) the hint that most webcams need them: offsets alone left 30-35 mm on a rig of
+    three rolling-shutter webcams whose readouts, estimated, brought it to 3-9 mm."""
+    kept = [name for name in ("offset", "drift", "readout") if name not in estimated]
+    lines = ["offset, drift: each camera's clock against the first camera's (ref), which "
+             "defines the session clock; readout: rolling shutter, top row to bottom row; "
+             "phase: each shutter's phase after sync, relative to the first camera's; ideal: "
+             "the type-A stagger i/(n·fps)"]
+    if kept:
+        lines.append(f"kept at the rig's values (not estimated): {', '.join(kept)}")
+    if "readout" not in estimated:
+        lines.append("most webcams have rolling shutters: try --estimate offset,readout "
+                     "(offset,drift,readout on long sessions); readouts many σ above 0 and a "
+                     "lower residual mean they matter (docs/timing.md)")
+    return "\n".join(lines)
+
+
+def _table(result, obs, estimated=("offset", "drift", "readout")) -> str:
     """Per camera: each estimate ± std, residual, and the achieved shutter phase against the
-    ideal stagger ``i / (n · fps)``."""
+    ideal stagger ``i / (n · fps)``; a parameter not ``estimated`` shows the rig's value and
+    ``kept`` for its σ, the first camera's offset and drift ``ref`` (0 by definition)."""
     import numpy as np
 
     from pslog.records import NS
@@ -101,9 +121,14 @@ def _table(result, obs) -> str:
             if len(top) else float("nan")
         phase0 = phase if phase0 is None else phase0
         rel = (phase - phase0) % period
-        cells.append([cam.name, f"{est.offset_s * 1e3:.4f}", f"± {est.offset_std_s * 1e3:.4f}",
-                      f"{est.drift_ppm:.3f}", f"± {est.drift_std_ppm:.3f}",
-                      f"{est.readout_s * 1e3:.3f}", f"± {est.readout_std_s * 1e3:.3f}",
+        def sigma(name: str, text: str, reference: bool) -> str:
+            return "ref" if reference else (f"± {text}" if name in estimated else "kept")
+
+        cells.append([cam.name, f"{est.offset_s * 1e3:.4f}",
+                      sigma("offset", f"{est.offset_std_s * 1e3:.4f}", i == 0),
+                      f"{est.drift_ppm:.3f}", sigma("drift", f"{est.drift_std_ppm:.3f}", i == 0),
+                      f"{est.readout_s * 1e3:.3f}",
+                      sigma("readout", f"{est.readout_std_s * 1e3:.3f}", False),
                       f"{est.residual_px:.3f}", f"{rel * 1e3:.3f}",
                       f"{i * period / n * 1e3:.3f}"])
     return format_table(("camera", "offset ms", "σ", "drift ppm", "σ", "readout ms", "σ",

@@ -112,6 +112,8 @@ def test_eval_of_a_fused_session_without_truth_reports_what_needs_none(cli, tmp_
     code, out, err = cli("eval", fused)
     assert code == 0, err
     assert "no ground truth" in out and "resid px" in out and "gating" in out
+    # which sessions have one: not a live one, synthetic or not (its recording holds none)
+    assert "'pslog live --synthetic' records none" in out, out
     code, out, err = cli("eval", fused, "--json")
     assert code == 0, err
     result = json.loads(out)
