@@ -27,11 +27,11 @@ from pslog.geometry import _FEW
 LENS = (-0.25, 0.08, 0.001, -0.001, 0.0)
 
 
-def _session(lens, seed=3):
+def _session(lens, seed=3, motion="throw", duration=None):
     rig = apply_timing(builtin_rig("paper3"), "typeA")
     if lens is not None:
         rig = Rig(tuple(c.replace(dist=np.array(lens)) for c in rig.cameras), rig.name)
-    det, _ = simulate(rig, get_motion("throw"),
+    det, _ = simulate(rig, get_motion(motion), duration,
                       options=SimulationOptions(noise_px=0.5, miss_rate=0.2, drop_rate=0.05,
                                                 jitter_s=2e-4, seed=seed))
     obs = det.best()
@@ -63,6 +63,36 @@ def test_nearest_compiled_equals_numpy_forms_bit_for_bit(lens, noise_px):
     if noise_px is not None:  # a covariance, with blind slots (no velocity) among them
         assert np.isfinite(want.quality["std_m"]).all() and "cov_xy_m2" in want.quality
     _same(got, want)
+
+
+@pytest.mark.parametrize("lens", [None, LENS])
+@pytest.mark.parametrize("noise_px", [0.5, None])
+def test_nearest_in_row_blocks_equals_the_whole_arrays(monkeypatch, lens, noise_px):
+    """A long session's nearest track made block by block of rows (fuse_nearest from
+    2 x NEAREST_BLOCK_ROWS detections; here blocks of 64 rows, the least the compiled forms
+    take) has the bits of the whole-array way: points, every quality column (the
+    covariance with the slots' motion, the image-motion breaks and the choices' doubt) and
+    the left-out counts; on dirty sessions with and without lens distortion."""
+    import dataclasses
+
+    from pslog.fusion import stereo
+
+    prep, rig = _session(lens, motion="rally", duration=6.0)  # (bounces, kicks)
+    doubt = np.zeros(len(prep.obs))
+    doubt[5::17] = 4.0  # some detections in doubt (the gate's choices): doubt_covariance
+    prep = dataclasses.replace(prep, doubt_px2=doubt)
+    gap = default_max_gap_s(rig)
+    rows, others = stereo.nearest_rows(prep, int(gap * 1e9))
+    with np.errstate(all="ignore"):
+        whole = fuse_nearest(prep, gap, noise_px)  # (shorter than 2 blocks: whole arrays)
+        monkeypatch.setattr(stereo, "NEAREST_BLOCK_ROWS", _FEW)
+        assert len(rows) >= 4 * _FEW
+        blocked = stereo._nearest_in_blocks(prep, rows, others, gap, noise_px)
+        by_fuse = fuse_nearest(prep, gap, noise_px)
+    assert blocked is not None  # (every block took the compiled forms)
+    assert len(whole.time_ns) > 300
+    _same(blocked, whole)
+    _same(by_fuse, whole)
 
 
 def test_nearest_kernels_python_originals_equal(monkeypatch):

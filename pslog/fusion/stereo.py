@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Mapping
 from typing import NamedTuple, cast
 
@@ -744,6 +745,10 @@ def fuse_nearest(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
     :mod:`._stereo_kernel` (the same bits), else by the numpy forms (a reference)."""
     time_ns, camera = prep.obs.time_ns, prep.obs.camera
     rows, others = nearest_rows(prep, int(max_gap_s * NS), compiled)
+    if compiled and len(rows) >= 2 * NEAREST_BLOCK_ROWS:
+        blocked = _nearest_in_blocks(prep, rows, others, max_gap_s, noise_px)
+        if blocked is not None:
+            return blocked
     # the other cameras' detections are older than the point: the ball moved since; and the
     # noise is the detections' own (docs/methods.md, "nearest's covariance at the true noise")
     if noise_px is None:
@@ -759,6 +764,67 @@ def fuse_nearest(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
     track = Track("nearest", time_ns[keep], points[keep], camera[keep],
                   {k: v[keep] for k, v in quality.items()})
     return with_dropped(track, count_invalid(flags[made]))
+
+
+#: :func:`fuse_nearest` makes the points of a long session (from twice this many detections)
+#: in blocks of at least this many rows: each block's temporaries (rays, normal equations,
+#: Jacobians, slot motions: ~1 kB a row with three cameras) are a few MB, reused from the
+#: heap by the next block and hot in the cache, instead of arrays of hundreds of MB that the
+#: kernel zeroes page by page at their first write (a 90-minute match: ~0.6 of nearest's
+#: 1.5 CPU s); only the kept points' columns are made at full length
+NEAREST_BLOCK_ROWS = 16384
+
+
+def _nearest_in_blocks(prep: Prepared, rows: np.ndarray, others: np.ndarray,
+                       max_gap_s: float, noise_px: float | None) -> Track | None:
+    """:func:`fuse_nearest`'s compiled track, its points made block by block of rows: the
+    same bits, as every column of a point is made from its own row of ``rows`` and the
+    detections' (session-wide) columns by the same operations whatever the rows beside it.
+    The row count of a block does choose a path in :func:`nview_points` (compiled from
+    ``_FEW`` rows: every block has at least :data:`NEAREST_BLOCK_ROWS`) and in
+    :func:`invalid_points` (compiled where each camera has 0 or at least 2 finite points,
+    and where its probes, and :func:`ray_depths`' probes, say the compiled passes give
+    numpy's bits): None, for the whole-array way, when a block would go another way than
+    the whole array."""
+    from ._prepare import ray_depths_compiled, view_flags_compiled
+
+    if not (view_flags_compiled() and ray_depths_compiled()):
+        return None
+    time_ns, camera = prep.obs.time_ns, prep.obs.camera
+    k = len(rows)
+    max_gap_ns = int(max_gap_s * NS)
+    if noise_px is not None:  # (session-wide: causal windows and per-detection columns)
+        recorded = recorded_residuals(prep, max_gap_s)
+        sigma = detection_noise(prep, time_ns, max_gap_s, noise_px)
+        breaks = innovations(prep, max_gap_s, recorded)
+        del recorded
+    n_blocks = k // NEAREST_BLOCK_ROWS
+    bounds = [k * i // n_blocks for i in range(n_blocks + 1)]
+    kept: list[tuple] = []
+    made_flags = []
+    for lo, hi in itertools.pairwise(bounds):
+        block = rows[lo:hi]
+        if noise_px is None:
+            points, quality, flags, used = nview_points(prep, block, None)
+        else:
+            points, quality, flags, used = nview_points(
+                prep, block, sigma[lo:hi],
+                _slot_motion_compiled(prep, block, time_ns[lo:hi], max_gap_ns), True, breaks)
+        finite = finite_rows(points)
+        counts = np.count_nonzero(used & finite[:, None], axis=0)
+        if not np.all((counts == 0) | (counts >= 2)):
+            return None  # (invalid_points' numpy form for this block)
+        made = (others[lo:hi] >= 1) & (quality["n_detections"] >= 2)
+        keep = made & (flags == 0) & np.all(np.isfinite(points), axis=1)
+        made_flags.append(flags[made])
+        kept.append((time_ns[lo:hi][keep], points[keep], camera[lo:hi][keep],
+                     {name: column[keep] for name, column in quality.items()}))
+        del points, quality, flags, used, finite, made, keep
+    names = list(kept[0][3])
+    track = Track("nearest", np.concatenate([p[0] for p in kept]),
+                  np.concatenate([p[1] for p in kept]), np.concatenate([p[2] for p in kept]),
+                  {name: np.concatenate([p[3][name] for p in kept]) for name in names})
+    return with_dropped(track, count_invalid(np.concatenate(made_flags)))
 
 
 def nearest_rows(prep: Prepared, max_gap_ns: int, compiled: bool = True
