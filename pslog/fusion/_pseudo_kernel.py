@@ -999,29 +999,34 @@ def residual_norms_kernel(time_ns, camera, uv, limits, m, max_gap_ns, ns, t_out,
 
 @kernel(inline=True)
 def _select(values, count, k):
-    """The ``k``-th smallest of ``values[:count]`` (finite), reordering them in place
-    (Hoare's selection): the element ``np.sort(values[:count])[k]``."""
+    """The ``k``-th smallest of ``values[:count]`` (finite), reordering them in place: the
+    element ``np.sort(values[:count])[k]``. Quickselect with Lomuto's partition written
+    without a branch on the comparison (each element swapped with the boundary's, which
+    moves by ``t < pivot``: in ``[store, j)`` are only elements not below the pivot, so the
+    swap of two of them changes nothing): a window of ~270 residuals 1.2 µs instead of Hoare's
+    3.5 µs, whose inner loops' exits the branch predictor misses at random data. A selection,
+    no arithmetic: the same element whichever algorithm finds it."""
     lo = 0
     hi = count - 1
     while lo < hi:
-        pivot = values[(lo + hi) // 2]
-        i = lo
-        j = hi
-        while i <= j:
-            while values[i] < pivot:
-                i += 1
-            while values[j] > pivot:
-                j -= 1
-            if i <= j:
-                values[i], values[j] = values[j], values[i]
-                i += 1
-                j -= 1
-        if k <= j:
-            hi = j
-        elif k >= i:
-            lo = i
+        mid = (lo + hi) // 2
+        pivot = values[mid]
+        values[mid] = values[hi]
+        values[hi] = pivot
+        store = lo
+        for j in range(lo, hi):
+            t = values[j]
+            values[j] = values[store]
+            values[store] = t
+            store += t < pivot
+        values[hi] = values[store]
+        values[store] = pivot
+        if k == store:
+            return pivot
+        if k < store:
+            hi = store - 1
         else:
-            break
+            lo = store + 1
     return values[k]
 
 
