@@ -1003,7 +1003,7 @@ def _select(values, count, k):
     element ``np.sort(values[:count])[k]``. Quickselect with Lomuto's partition written
     without a branch on the comparison (each element swapped with the boundary's, which
     moves by ``t < pivot``: in ``[store, j)`` are only elements not below the pivot, so the
-    swap of two of them changes nothing): a window of ~270 residuals 1.2 µs instead of Hoare's
+    swap of two of them changes nothing): 1.2 µs for 270 random values instead of Hoare's
     3.5 µs, whose inner loops' exits the branch predictor misses at random data. A selection,
     no arithmetic: the same element whichever algorithm finds it."""
     lo = 0
