@@ -28,7 +28,7 @@ from pslog.fusion.confirm import (
 )
 from pslog.fusion.stream import StreamFuser
 from pslog.motion import get_motion, rally_motion
-from pslog.records import Track
+from pslog.records import NS, Track
 from pslog.rig import apply_timing, builtin_rig
 from pslog.simulation import SimulationOptions, simulate_labelled
 from pslog.timing import observations as timed_observations
@@ -305,13 +305,17 @@ def test_a_camera_that_never_sees_the_ball_confirms_nothing_and_crashes_nothing(
 
 
 @pytest.mark.parametrize("seed", [0, 1])
-def test_previous_instant_from_type_a_tables_equals_the_binary_search(seed):
-    """confirm's gaps and unbracketed rows, read from type A's tables (each row's previous
-    instant and its camera's previous row), against their definition by binary search and
-    a pass per camera, on sessions with missed detections, dropped frames and shared
-    instants (synchronised cameras) and a camera blind for half a second."""
-    from pslog.fusion import prepare
-    from pslog.fusion.confirm import _previous_instant
+def test_long_gap_pass_from_type_a_tables_equals_the_binary_search(seed):
+    """confirm's first pass (each point's row, the gap since the previous instant and whether
+    the point waits: _pseudo_kernel.long_gap_kernel, from type A's tables: each row's previous
+    instant and its camera's previous row) against its definition by binary search and a pass
+    per camera, every row taken as a point, in order and out of order, on sessions with missed
+    detections, dropped frames and shared instants (synchronised cameras) and a camera blind
+    for half a second."""
+    from pslog.fusion import _pseudo_kernel, prepare
+    from pslog.fusion.confirm import LONG_FACTOR
+    from pslog.fusion.innovation import previous_next_rows
+    from pslog.fusion.pseudo import _all_brackets
 
     for timing, blind in (("typeA", ("cam2", 0.5, 0.5)), ("typeB", ("cam1", 0.3, 0.4))):
         rig = apply_timing(builtin_rig("paper3"), timing)
@@ -321,6 +325,7 @@ def test_previous_instant_from_type_a_tables_equals_the_binary_search(seed):
         prep = prepare(obs, rig)
         time_ns, camera = obs.time_ns, obs.camera
         n, max_gap_ns = len(time_ns), 60_000_000
+        long_ns = LONG_FACTOR * usual_interval_s(rig) * NS
         first = np.searchsorted(time_ns, time_ns, side="left")
         gap = np.where(first > 0, time_ns - time_ns[np.maximum(first - 1, 0)], -1)
         before = np.full(n, -1)
@@ -330,9 +335,18 @@ def test_previous_instant_from_type_a_tables_equals_the_binary_search(seed):
         p = np.maximum(first - 1, 0)
         unbracketed = (first > 0) & (camera[p] != camera) & (
             (before < 0) | (time_ns[p] - time_ns[np.maximum(before, 0)] > max_gap_ns))
-        got_gap, got_unbracketed = _previous_instant(prep, max_gap_ns)
-        assert_array_equal(got_gap, gap)
-        assert_array_equal(got_unbracketed, unbracketed)
+        gap_before = np.where(first > 0, gap[p], -1)
+        long = (gap > long_ns) | unbracketed | (gap_before > long_ns)
+        for order in (np.arange(n), np.arange(n)[::-1].copy()):  # (out of order: bisection)
+            row, got_gap = np.empty(n, np.int64), np.empty(n, np.int64)
+            got_long = np.empty(n, bool)
+            _pseudo_kernel.long_gap_kernel(
+                time_ns, camera, len(rig), _all_brackets(prep)[2], previous_next_rows(prep)[0],
+                time_ns[order], camera[order], max_gap_ns, float(long_ns), row, got_gap,
+                got_long)
+            assert_array_equal(row, order)
+            assert_array_equal(got_gap, gap[order])
+            assert_array_equal(got_long, long[order])
         # (the cases the tables must get right are there: blind spells, shared instants)
-        assert unbracketed.any()
+        assert unbracketed.any() and long.any() and not long.all()
         assert timing == "typeA" or np.any(first != np.arange(n))

@@ -260,3 +260,25 @@ def test_covariance_at_no_noise_is_no_longer_over_confident():
     assert 0.1 < d2.mean() < 2.0, d2.mean()
     assert np.mean(d2 <= 4) > 0.9
     assert d2.max() < 100, d2.max()
+
+
+def test_the_compiled_selection_is_the_sorted_element():
+    """_pseudo_kernel._select (the checkpoints' upper median of type A's measured noise): the
+    element ``np.sort(values[:count])[k]`` for every k, on random, sorted, reversed, tied and
+    all-equal windows of the residuals' sizes (the same element as numpy's partition, so the
+    same bits as the stream's np.sort)."""
+    from pslog.fusion import _pseudo_kernel
+
+    rng = np.random.default_rng(12)
+    windows = [rng.rayleigh(0.5, 90), np.sort(rng.rayleigh(0.5, 64)),
+               np.sort(rng.rayleigh(0.5, 64))[::-1].copy(), np.round(rng.rayleigh(0.5, 101), 1),
+               np.full(17, 0.25), rng.rayleigh(0.5, 2), np.array([0.5]),
+               np.concatenate([np.full(40, 1.0), np.full(40, 0.5), [0.0, 3.0]])]
+    for values in windows:
+        for count in sorted({len(values), max(1, len(values) - 3)}):
+            expected = np.sort(values[:count])
+            for k in range(count):
+                scratch = values.copy()
+                assert _pseudo_kernel._select(scratch, count, k) == expected[k]
+                # (reordered in place, the same values)
+                assert_array_equal(np.sort(scratch[:count]), expected)
