@@ -40,7 +40,9 @@ only in the session's first frames. Before the track first predicts, a choice on
 line alone made while another camera denies it, or beside candidates that line refused (in
 its frame, or at its pixel in its camera's frames of the last ``static_s``), is kept but
 CONTESTED (:data:`CONTESTED`): in doubt, like a choice beside rejected ones, and so is its
-camera's later choice at its pixel within ``static_s``.
+camera's later choice at its pixel within ``static_s``. So is the session's first choice
+when its camera's next two frames refuse what stands at its pixel (:func:`late_doubt`; the
+stream waits for that verdict: :class:`StreamStart`).
 A candidate supported by two or more other cameras
 whose rays meet (a point within ``track_m`` of each) is consistent in three views and is
 accepted whatever the track says (that is how the track follows kicks and bounces); rays that
@@ -1910,6 +1912,58 @@ def doubt_source(reason, several):
     return (reason == MOTION) | ((reason >= 0) & several)
 
 
+def late_doubt(detections: Detections, reason: np.ndarray, static_s: float) -> int:
+    """The session's first choice, when a later verdict puts it in doubt: its candidate
+    row, else -1 (docs/methods.md, "A contested start", "The first choice shown wrong
+    later"). The first choice in (logged time, camera) order, not CONTESTED, whose
+    camera's next two frames with candidates, both within ``static_s`` after it, each
+    refused a candidate within :data:`DOUBT_RADIUS_PX` of it (recorded pixels) in a frame of
+    several candidates, or chose one there CONTESTED: what stood at its pixel was still
+    there and refused as a guess, so the first choice, one line's guess at a time nothing
+    could judge, was one too. A clean camera's frames hold one candidate and no clean
+    session has a contested choice: no clean first choice is so judged. The stream waits for
+    the verdict before fusing (:class:`StreamStart`): the same bits."""
+    chosen = np.flatnonzero(reason < 0)
+    if not len(chosen):
+        return -1
+    f = detections.cand_frame[chosen]
+    t = detections.frame_time_ns[f]
+    at = np.flatnonzero(t == t.min())  # (the earliest; of those, the lowest camera)
+    first = int(chosen[at[np.argmin(detections.frame_camera[f[at]])]])
+    if reason[first] == CONTESTED:
+        return -1
+    f0 = int(detections.cand_frame[first])
+    a, t0 = int(detections.frame_camera[f0]), int(detections.frame_time_ns[f0])
+    u0, v0 = detections.cand_uv[first].tolist()
+    end = t0 + round(static_s * NS)
+    count = detections.candidates_per_frame()
+    later = np.flatnonzero((detections.frame_camera == a) & (detections.frame_time_ns > t0)
+                           & (detections.frame_time_ns <= end) & (count > 0))
+    later = later[np.argsort(detections.frame_time_ns[later], kind="stable")][:2]
+    if len(later) < 2:
+        return -1
+    starts = np.searchsorted(detections.cand_frame, later, side="left").tolist()
+    for fr, lo in zip(later.tolist(), starts, strict=True):
+        refused = False
+        for i in range(lo, lo + int(count[fr])):
+            u, v = detections.cand_uv[i].tolist()
+            r = int(reason[i])
+            if _refusal(r, int(count[fr]) >= 2, u - u0, v - v0):
+                refused = True
+        if not refused:
+            return -1
+    return first
+
+
+def _refusal(reason: int, several: bool, du: float, dv: float) -> bool:
+    """Whether a candidate of a camera's frame (``reason`` its code, ``several``: its frame
+    held more than one) at ``(du, dv)`` recorded pixels from the camera's first choice
+    speaks against that choice (:func:`late_doubt`): refused in a frame of several, or
+    chosen CONTESTED, within :data:`DOUBT_RADIUS_PX`."""
+    return ((reason >= 0 and several) or reason == CONTESTED) and (
+        du * du + dv * dv <= DOUBT_RADIUS_PX * DOUBT_RADIUS_PX)
+
+
 def _observation_doubt(detections: Detections, rig: Rig, reason: np.ndarray,
                        observations: Observations, static_s: float,
                        start: bool = False) -> np.ndarray | None:
@@ -1922,7 +1976,9 @@ def _observation_doubt(detections: Detections, rig: Rig, reason: np.ndarray,
     still = np.flatnonzero(np.zeros(len(reason), dtype=bool) if start
                            else doubt_source(reason, several))
     chosen = np.flatnonzero(reason < 0)
-    contested = np.flatnonzero(reason[chosen] == CONTESTED)
+    # (the session's first choice shown wrong later counts as a contested one: late_doubt)
+    late = late_doubt(detections, reason, static_s)
+    contested = np.flatnonzero((reason[chosen] == CONTESTED) | (chosen == late))
     if not len(still) and not len(contested):
         return None
     # (a contested choice is a source too, counted DOUBT_REJECTIONS times: a later choice
@@ -2457,6 +2513,9 @@ class StreamDoubt:
         self.window = round(gate.options.static_s * NS)
         self.recent: list[deque] = [deque() for _ in gate.rig.cameras]
         self.size = [(float(c.width), float(c.height)) for c in gate.rig.cameras]
+        # the session's first choice when a later verdict put it in doubt ((logged time,
+        # camera, u, v): :class:`StreamStart`), treated as a CONTESTED one
+        self.late: set[tuple] = set()
 
     def frames(self, time_ns, camera) -> None:
         """Note the frames of a push (its rows, each frame's candidates together) before
@@ -2477,7 +2536,7 @@ class StreamDoubt:
         """The doubt (pixels² per axis) of chosen rows in logged order, None when none
         is in doubt."""
         self._read()
-        if not len(time_ns) or not (self.gate.contested or any(self.recent)):
+        if not len(time_ns) or not (self.gate.contested or self.late or any(self.recent)):
             return None
         out = None
         for i, (t, c) in enumerate(zip(time_ns.tolist(), camera.tolist(), strict=True)):
@@ -2493,7 +2552,8 @@ class StreamDoubt:
         """:meth:`of` of one chosen row (Python numbers: logged time, camera, pixel): its
         doubt, 0.0 when not in doubt (the same value, without its (1,) columns)."""
         self._read()
-        return self._row(t, c, u, v) if self.gate.contested or any(self.recent) else 0.0
+        return (self._row(t, c, u, v) if self.gate.contested or self.late or any(self.recent)
+                else 0.0)
 
     def _read(self) -> None:
         """The gate's rejections since the last call, the doubt's sources among them noted
@@ -2512,9 +2572,10 @@ class StreamDoubt:
         near = self.recent[c]
         while near and near[0][0] < t - self.window:
             near.popleft()
-        contested = self.gate.contested
-        if contested and (t, c, u, v) in contested:
+        contested, late = self.gate.contested, self.late
+        if (contested and (t, c, u, v) in contested) or (late and (t, c, u, v) in late):
             contested.discard((t, c, u, v))
+            late.discard((t, c, u, v))
             # (a source of doubt for its camera's later choices, as DOUBT_REJECTIONS
             # rejections: _observation_doubt)
             near.extend([(t, u, v)] * DOUBT_REJECTIONS)
@@ -2524,6 +2585,67 @@ class StreamDoubt:
                <= radius2 for tj, uj, vj in near) >= DOUBT_REJECTIONS:
             return doubt_variance(u, v, *self.size[c])
         return 0.0
+
+
+class StreamStart:
+    """:func:`late_doubt` in a stream: the gate's chosen rows from the session's first
+    choice on are held (not fused) until the verdict on that choice is known — its camera's
+    next two frames with candidates decided, or one of them that does not speak against it
+    (:func:`_refusal`), or every frame within ``static_s`` after it decided — then released
+    together, the choice noted in doubt (:attr:`StreamDoubt.late`) when the verdict says
+    so; from then on rows pass at once. The methods so fuse every row with the doubt the
+    batch gives it, so the stream's points are the batch's, bit for bit; the cost is a
+    latency of at most ``static_s`` on a session's first points (its first choice's camera's
+    next two frame periods, or one on a clean session: its next frame holds one candidate)."""
+
+    def __init__(self, gate: StreamGate, doubts: StreamDoubt) -> None:
+        self.gate, self.doubts = gate, doubts
+        self.window = round(gate.options.static_s * NS)
+        self.first: tuple[int, int, float, float] | None = None  # (time, camera, u, v)
+        self.read = 0  # rows of gate.rejected read
+        self.frames: dict[int, bool] = {}  # the first choice's camera's frames after it
+        self.held: list[tuple] = []  # (time_ns, camera, uv, frame_index) arrays
+        self.done = False
+
+    def rows(self, time_ns, camera, uv, frame_index, final: bool = False):
+        """The gate's chosen rows of a push (``final``: its flush's) -> the rows to fuse
+        now: none while the verdict is open, every held one with these once it is known."""
+        if self.done:
+            return time_ns, camera, uv, frame_index
+        gate = self.gate
+        if self.first is None:
+            if not len(time_ns):  # (no choice yet: nothing to hold)
+                self.read = len(gate.rejected)
+                return time_ns, camera, uv, frame_index
+            self.first = (int(time_ns[0]), int(camera[0]), *uv[0].tolist())
+            self.read = 0  # (rejections before it lie before it: skipped below)
+        t0, a, u0, v0 = self.first
+        end = t0 + self.window
+        frames = self.frames
+        for t, c, _, u, v, r in gate.rejected[self.read:]:
+            if c == a and t0 < t <= end:
+                frames[t] = frames.get(t, False) or _refusal(
+                    r, (t, c) in self.doubts.several, u - u0, v - v0)
+        self.read = len(gate.rejected)
+        contested = gate.contested
+        for t, c, (u, v) in zip(time_ns.tolist(), camera.tolist(), uv.tolist(), strict=True):
+            if c == a and t0 < t <= end:
+                frames[t] = frames.get(t, False) or _refusal(
+                    CONTESTED if (t, c, u, v) in contested else -1, False, u - u0, v - v0)
+        self.held.append((time_ns, camera, uv, frame_index))
+        later = sorted(frames)[:2]
+        known = (final or (later and not frames[later[0]]) or len(later) == 2
+                 or (gate.unreleased[0].t > end if gate.unreleased else gate.last[0] > end))
+        if not known:
+            n = 0
+            return (np.zeros(n, np.int64), np.zeros(n, np.int32), np.zeros((n, 2)),
+                    np.zeros(n, np.int64))
+        if len(later) == 2 and all(frames[t] for t in later) and (
+                self.first not in contested):
+            self.doubts.late.add(self.first)
+        self.done = True
+        held, self.held, self.frames = self.held, [], {}
+        return tuple(np.concatenate(column) for column in zip(*held, strict=True))
 
 
 def gating_key(method: str, options) -> tuple[bool, float]:
@@ -2678,6 +2800,7 @@ __all__ = [
     "Rejections",
     "StreamDoubt",
     "StreamGate",
+    "StreamStart",
     "choice_doubt",
     "epipolar_distance",
     "fuse_detections",

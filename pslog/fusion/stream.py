@@ -11,6 +11,10 @@ session (a method with an incremental form, the registry's ``streamer``, ``filte
 - ``sync``, ``typeB`` and ``linear`` group detections within the tolerance, so a point at
   ``t`` is emitted once a detection later than ``t + tolerance`` arrives, or on :meth:`flush`.
 
+With ``candidates=True``, the gate's rows from the session's first choice on wait until the
+verdict on that choice is known (:class:`pslog.fusion.gating.StreamStart`: its camera's
+next frame, at most ``static_s``), so the session's first points come out together then.
+
 Pushed times are LOGGED times: each detection is corrected by its camera's clock parameters
 (``clock_offset``, ``clock_drift_ppm``, ``readout``) through :func:`pslog.timing.true_times_ns`,
 exactly as :func:`pslog.timing.observations` corrects a whole session, so the stream's points
@@ -134,10 +138,15 @@ class StreamFuser:
         # doubt through its innermost stream's ``next_doubt``
         self._doubts = None
         self._doubt_sink = None
+        # the verdict on the session's first choice, which may come a few frames later
+        # (gating.late_doubt): the gate's rows are held until it is known, then fused
+        # with the doubt it gives (None: no verdict to wait for, or it has come)
+        self._start = None
         if self._gate is not None and METHODS[method].uses_doubt:
-            from .gating import StreamDoubt
+            from .gating import StreamDoubt, StreamStart
 
             self._doubts = StreamDoubt(self._gate)
+            self._start = StreamStart(self._gate, self._doubts)
             sink = self.incremental
             while sink is not None and not hasattr(sink, "next_doubt"):
                 sink = getattr(sink, "inner", None)
@@ -177,11 +186,23 @@ class StreamFuser:
             if self._doubts is not None:  # (its frames of several candidates: valid rows)
                 self._doubts.frames(np.atleast_1d(np.asarray(pushed[0])),
                                     np.atleast_1d(np.asarray(pushed[1])))
+            if self._start is not None:  # (held until the first choice's verdict)
+                time_ns, camera, uv, frame_index = self._started(time_ns, camera, uv,
+                                                                 frame_index)
             return self._push_rows(time_ns, camera, uv, frame_index, self._doubt_of(
                 time_ns, camera, uv))
         time_ns, camera, uv, frame_index = stream_arrays(
             time_ns, camera, uv, frame_index, len(self.rig), "StreamFuser.push")
         return self._push_rows(time_ns, camera, uv, frame_index)
+
+    def _started(self, time_ns, camera, uv, frame_index, final: bool = False):
+        """The gate's rows to fuse now (:class:`~pslog.fusion.gating.StreamStart`): none
+        while the verdict on the session's first choice is open, then every held one."""
+        assert self._start is not None
+        rows = self._start.rows(time_ns, camera, uv, frame_index, final)
+        if self._start.done:
+            self._start = None
+        return rows
 
     def _tell_doubt(self, doubt: np.ndarray | None) -> None:
         """Give the incremental form the doubt of the rows it is about to take (None, or
@@ -203,7 +224,9 @@ class StreamFuser:
         gate's decision at once and the incremental form's one-detection path where they
         apply."""
         one, gate = self._push_one, self._gate
-        if one is not None and len(uv):  # (an empty frame: push's own path, which keeps no key)
+        if one is not None and len(uv) and self._start is None:
+            # (an empty frame: push's own path, which keeps no key; the session's start,
+            # whose rows wait for a verdict: push's too)
             chosen = uv if gate is None else gate.push_frame(time_ns, camera, frame_index, uv)
             doubts = self._doubts if chosen is not None else None
             doubt = None
@@ -277,6 +300,9 @@ class StreamFuser:
         if self._gate is not None:  # the frames the gate still held, then the rest
             gate, self._gate = self._gate, None
             time_ns, camera, uv, frame_index = gate.flush()  # (checked arrays, as push's)
+            if self._start is not None:  # (the rows still held: the verdict now)
+                time_ns, camera, uv, frame_index = self._started(time_ns, camera, uv,
+                                                                 frame_index, final=True)
             early = self._push_rows(time_ns, camera, uv, frame_index,
                                     self._doubt_of(time_ns, camera, uv))
             return Track.concat([early, self.flush()])  # every column and count of both
