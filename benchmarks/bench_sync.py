@@ -65,8 +65,9 @@ def main() -> int:
               f"  (error {err * 1e3:+.4f} ms, {abs(err) / est.offset_std_s:.1f} σ)")
     ok = seconds <= TARGET_S
     print(f"  baseline (smooth at known clocks) {base_s:7.1f} s")
-    print(f"  sync ({','.join(result.estimated)}: {args.estimate}) {seconds:7.1f} s  ({seconds / base_s:.1f}x "
-          f"baseline); target {TARGET_S:g} s: {'met' if ok else 'MISSED'}")
+    print(f"  sync ({args.estimate}: {','.join(result.estimated)}) {seconds:7.1f} s  "
+          f"({seconds / base_s:.1f}x baseline); target {TARGET_S:g} s: "
+          f"{'met' if ok else 'MISSED'}")
     if args.json:
         import json
 

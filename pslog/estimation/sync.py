@@ -293,30 +293,39 @@ def select_clocks(obs: Observations, rig: Rig, search_s: float | None = None,
     (trajectory, bounces' instants and regularized lines marginalised: honest to about 1σ,
     docs/timing.md). A group is kept when W exceeds the χ² quantile at :data:`AUTO_LEVEL`;
     when one is dropped the model without it is fitted (two fits), else the first fit is the
-    result (one fit). A readout the ball's motion does not determine (the widest fit fails
-    with it) is dropped without a figure."""
+    result (one fit). A parameter the ball's motion does not determine (the wide fit fails
+    with it: then offsets and readouts without drifts are tried) is dropped without a figure,
+    its reason the fit's message."""
     options = options or SmoothOptions()
     from scipy.stats import chi2
 
     span = float(obs.time_ns.max() - obs.time_ns.min()) / NS if len(obs) else 0.0
-    wide = ("offset", "drift", "readout") if span >= AUTO_DRIFT_MIN_S else ("offset", "readout")
+    widest = [("offset", "drift", "readout"), ("offset", "readout")]
+    if span < AUTO_DRIFT_MIN_S:
+        widest = widest[1:]
     tests: list[ModelTest] = []
-    try:
-        full = estimate_clocks(obs, rig, wide, search_s, options, regularized)
-    except FusionError as exc:
-        full = None
-        failure = str(exc)
+    full: SyncResult | None = None
+    failure: dict[str, str] = {}  # parameter -> the message of the last wide fit that failed
+    for wide in widest:  # with drifts a long session's wide fit may fail: then without
+        try:
+            full = estimate_clocks(obs, rig, wide, search_s, options, regularized)
+            break
+        except FusionError as exc:
+            failure.update((p, str(exc)) for p in wide if p != "offset")
     keep = ["offset"]
     for p in ("readout", "drift"):
-        if p not in wide:
+        if full is not None and p in full.estimated:
+            pass
+        elif p in failure:
+            tests.append(ModelTest(p, float("nan"), 0, float("nan"), float("nan"), False,
+                                   f"not determined ({failure[p]})"))
+            continue
+        else:
             tests.append(ModelTest(p, float("nan"), 0, float("nan"), float("nan"), False,
                                    f"not tried, the session ({span:.0f} s) is shorter "
                                    f"than {AUTO_DRIFT_MIN_S:.0f} s"))
             continue
-        if full is None:
-            tests.append(ModelTest(p, float("nan"), 0, float("nan"), float("nan"), False,
-                                   f"not determined ({failure})"))
-            continue
+        assert full is not None
         idx = [j for j, (_, q) in enumerate(full.unknowns) if q == p]
         x = np.array([getattr(full.cameras[c], _FIELD[p]) for c, _ in
                       (full.unknowns[j] for j in idx)])
