@@ -450,3 +450,32 @@ def test_cli_auto_keeps_global_shutters_at_offsets_only(tmp_path, cli):
     assert explicit["selection"] is None and explicit["estimated"] == ["offset"]
     assert explicit["cameras"] == report["cameras"]
     print(f"readouts' Wald χ² {readout['wald_chi2']:.2f} on {readout['dof']} dof")
+
+
+def test_auto_drops_readouts_the_motion_cannot_determine_and_keeps_the_offsets():
+    """A ball circling at the cameras' own height stays on one image row (1.8 px spread): a
+    readout is then indistinguishable from an offset, the wide fit fails ('not determined'),
+    and auto gives the offsets alone, with that message as the readouts' reason (an explicit
+    offset,readout fails). Fails if auto lets the wide fit's error through."""
+    from pslog import Camera, look_at
+
+    cams = []
+    for i in range(3):
+        a = 2 * np.pi * i / 3 + 0.4
+        R, t = look_at((1.5 + 4.0 * np.cos(a), 1.0 + 3.6 * np.sin(a), 1.0), (1.5, 1.0, 1.0))
+        cams.append(Camera(f"c{i + 1}", 800, 600, [[700.0, 0, 400.0], [0, 700.0, 300.0],
+                                                   [0, 0, 1]], np.zeros(5), R, t, 30.0, i / 90))
+    rig = Rig(tuple(cams))
+    flat = Motion("flat", 8.0, lambda t: np.stack(
+        [1.5 + 0.8 * np.cos(2.1 * t), 1.0 + 0.6 * np.sin(3.3 * t), 1.0 + 0 * t], axis=1))
+    offsets = {"c2": 3e-3, "c3": -4e-3}
+    detections, _ = simulate(rig, flat, 8.0, SimulationOptions(noise_px=0.3, seed=1,
+                                                               clock_offset_s=offsets))
+    with pytest.raises(FusionError, match="readout is not determined"):
+        estimate_clocks(detections.best(), rig, ("offset", "readout"))
+    result = estimate_clocks(detections.best(), rig, "auto")
+    assert result.estimated == ("offset",)
+    (readout,) = [t for t in result.selection if t.parameter == "readout"]
+    assert not readout.kept and "readout is not determined" in readout.reason
+    for est in result.cameras[1:]:
+        assert abs(est.offset_s - offsets[est.name]) < 4 * est.offset_std_s < 1e-3
