@@ -199,7 +199,7 @@ class SyncOutcome:
 
 
 def sync(session: Session | str | os.PathLike[str],
-         estimate: str | Sequence[str] = ("offset",), *, search_s: float | None = None,
+         estimate: str | Sequence[str] = "auto", *, search_s: float | None = None,
          regularize: Literal["auto", "on", "off"] = "auto") -> SyncOutcome:
     """Estimate every camera's clock from the ball's detections, as ``pslog sync`` does.
 
@@ -212,7 +212,10 @@ def sync(session: Session | str | os.PathLike[str],
     Parameters
     ----------
     session : a :class:`Session` or its path
-    estimate : clock parameters among ``offset``, ``drift``, ``readout``: a name, a
+    estimate : ``"auto"`` (default: offsets, plus readouts and, on sessions of 30 s or more,
+        drifts where a Wald test at the 0.1 % level says the data support them;
+        ``result.selection`` holds the tests, :func:`pslog.estimation.sync.select_clocks`),
+        or clock parameters among ``offset``, ``drift``, ``readout``: a name, a
         comma-separated string (``"offset,drift"``) or a sequence of names
     search_s : scan each offset over ±search_s seconds around the rig's value (default half
         a frame period)
@@ -232,8 +235,10 @@ def sync(session: Session | str | os.PathLike[str],
     except InputError as exc:
         raise InputError(f"{exc} among {', '.join(PARAMETERS)}") from None
     bad = [p for p in wanted_params or () if p not in PARAMETERS]
+    if wanted_params == ["auto"]:
+        bad = []
     if bad or not wanted_params:
-        raise InputError(f"estimate {estimate!r}: name parameters among "
+        raise InputError(f"estimate {estimate!r}: 'auto', or name parameters among "
                          f"{', '.join(PARAMETERS)} (not {', '.join(map(repr, bad))})")
     estimate = wanted_params
     read = _session(session)
@@ -270,7 +275,8 @@ def sync(session: Session | str | os.PathLike[str],
         notes.append(gated_note)
     if len(obs) == 0:
         raise FusionError(f"{read.path} has no detection: nothing to sync on")
-    progress.step(f"estimating {', '.join(estimate)} of {len(rig)} clocks")
+    progress.step(f"choosing the clock model (auto) of {len(rig)} cameras" if estimate == ["auto"]
+                  else f"estimating {', '.join(estimate)} of {len(rig)} clocks")
     try:
         result = estimate_clocks(obs, rig, tuple(estimate), search_s, regularized=reports)
     except FusionError as exc:

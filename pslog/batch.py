@@ -793,7 +793,8 @@ def summary_row(session: str, info: dict | None, sync: dict | None, evaluation: 
         row.update(cameras=" ".join(c["name"] for c in info.get("cameras", [])),
                    duration_s=info.get("duration_s", math.nan), frames=info.get("frames"),
                    detections=info.get("candidates"), truth=info.get("truth"))
-    wanted = {"offset", *estimate}
+    # what sync estimated: named by --estimate, or chosen by auto (sync's "estimated")
+    wanted = {"offset", *estimate, *((sync or {}).get("estimated") or ())}
     for cam in (sync or {}).get("cameras", []):
         for key, column, scale in SYNC_FIGURES:
             if key.split("_")[0] not in wanted:

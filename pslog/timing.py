@@ -199,20 +199,29 @@ def observations(detections: Detections, rig: Rig) -> Observations:
 
 #: Session metadata key (docs/log-format.md) where ``pslog sync`` stores each estimate with
 #: its standard deviation: JSON ``{"cameras": {name: {"clock_offset": [value, std],
-#: "clock_drift_ppm": [value, std], "readout": [value, std]}}}`` (s, ppm, s).
+#: "clock_drift_ppm": [value, std], "readout": [value, std]}}, "estimated": [names],
+#: "selection": [tests] or null}`` (s, ppm, s; ``selection``: ``--estimate auto``'s Wald
+#: tests, as ``pslog sync --json`` prints them).
 CLOCK_STD_KEY = "clock_std"
 CLOCK_KEYS = ("clock_offset", "clock_drift_ppm", "readout")
 
 
-def clock_std_json(rig: Rig, stds) -> str:
+def clock_std_json(rig: Rig, stds, estimated=None, selection=None) -> str:
     """The :data:`CLOCK_STD_KEY` value for ``rig`` (holding the estimates) and ``stds``, one
-    ``(offset_std_s, drift_std_ppm, readout_std_s)`` per camera in rig order."""
+    ``(offset_std_s, drift_std_ppm, readout_std_s)`` per camera in rig order; with
+    ``estimated`` (the parameters estimated) and ``selection`` (``--estimate auto``: its
+    tests, as ``pslog sync --json`` prints them) those too."""
     import json
 
-    return json.dumps({"cameras": {
+    value: dict = {"cameras": {
         cam.name: {key: [float(getattr(cam, key)), float(std)]
                    for key, std in zip(CLOCK_KEYS, row, strict=True)}
-        for cam, row in zip(rig.cameras, stds, strict=True)}})
+        for cam, row in zip(rig.cameras, stds, strict=True)}}
+    if estimated is not None:
+        value["estimated"] = list(estimated)
+    if selection is not None:
+        value["selection"] = selection
+    return json.dumps(value)
 
 
 def read_clock_std(rig: Rig, metadata) -> list[dict[str, float]] | None:

@@ -276,3 +276,17 @@ def test_a_task_whose_command_a_signal_ends_keeps_the_old_outputs(tmp_path, monk
     row = batch.run_session(job, settings)
     assert row["status"] == "failed" and "interrupted" in row["error"], row
     assert _outputs(job) == before
+
+
+def test_the_summary_has_the_readouts_auto_chose_and_only_those():
+    """``--estimate`` left at auto: the summary's readout (and drift) columns follow what
+    ``pslog sync --json`` says it estimated (``estimated``), not the names given."""
+    cam = {"name": "c2", "offset_s": 1e-3, "offset_std_s": 1e-4, "drift_ppm": 0.0,
+           "drift_std_ppm": 0.0, "readout_s": 0.025, "readout_std_s": 0.001}
+    rolling = batch.summary_row("a.mcap", None, {"cameras": [cam], "residual_px": 0.5,
+                                                 "estimated": ["offset", "readout"]}, None)
+    assert rolling["c2_readout_ms"] == 25.0 and rolling["c2_readout_std_ms"] == 1.0
+    assert "c2_drift_ppm" not in rolling
+    still = batch.summary_row("b.mcap", None, {"cameras": [cam], "residual_px": 0.5,
+                                               "estimated": ["offset"]}, None)
+    assert "c2_readout_ms" not in still and still["c2_offset_ms"] == 1.0

@@ -93,7 +93,7 @@ def test_a_command_prints_lines_to_stderr_and_the_same_stdout(tmp_path):
     assert quiet.stdout == loud.stdout and quiet.stderr == ""
     lines = loud.stderr.splitlines()
     assert lines and all(line.startswith("pslog sync: ") for line in lines)
-    assert any("estimating offset of 3 clocks" in line for line in lines)
+    assert any("choosing the clock model (auto) of 3 cameras" in line for line in lines)
 
 
 def test_a_terminal_gets_a_bar_that_is_gone_at_the_end(tmp_path):

@@ -336,14 +336,15 @@ def test_cli_table_says_which_parameters_were_kept_and_hints_at_rolling_shutters
         tmp_path, cli):
     """The table marks what was not estimated ('kept': the rig's value; 'ref': the first
     camera's offset and drift, 0 by definition) instead of a bare '± 0', and while readouts
-    are not estimated, says that most webcams need them: on rolling shutters of 20 ms the
-    readouts then come out many σ above 0 and the residual drops."""
+    are not estimated (``--estimate offset``), says that most webcams need them: on rolling
+    shutters of 20 ms the readouts then come out many σ above 0 and the residual drops; the
+    default (auto) estimates them there and gives no hint."""
     path, out = tmp_path / "rs.mcap", tmp_path / "o.mcap"
     code, _, err = cli("simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "rally",
                        "--noise-px", "0.3", "--clock-offset", "cam2=4", "--readout", "20",
                        "-o", path)
     assert code == 0, err
-    code, offsets_only, err = cli("sync", path, "-o", out)
+    code, offsets_only, err = cli("sync", path, "-o", out, "--estimate", "offset")
     assert code == 0, err
     rows = {line.split()[0]: line.split() for line in offsets_only.splitlines()
             if line.startswith("cam")}
@@ -367,3 +368,114 @@ def test_cli_table_says_which_parameters_were_kept_and_hints_at_rolling_shutters
         return float(text.split("\nresidual ")[1].split(" px")[0])
 
     assert residual(with_readout) < residual(offsets_only)
+    code, auto, err = cli("sync", path, "-o", out, "--force")
+    assert code == 0, err
+    assert "model (--estimate auto): offset, readout" in auto
+    assert "--estimate offset,readout" not in auto
+
+
+def _rolling_session(tmp_path, name: str, readout_s: dict, seed: int):
+    """A 6 s rally seen by three 800 x 600 cameras whose clocks are off by +3 / -4 ms (the
+    rig says 0), with ``readout_s`` rolling shutters, written with its ground truth."""
+    rig = _rig(3)
+    motion, _ = rally(6.0, seed=seed, speed=4.0, kick_every_s=0.7)
+    opts = SimulationOptions(noise_px=0.3, seed=seed, clock_offset_s={"c2": 3e-3, "c3": -4e-3},
+                             readout_s=readout_s)
+    detections, truth = simulate(rig, motion, 6.0, opts)
+    path = tmp_path / f"{name}.mcap"
+    with SessionWriter(path, rig, source="test") as writer:
+        writer.add_detections(detections)
+        writer.add_truth(truth)
+    return path
+
+
+def _sync_fuse_eval(cli, path, *sync_args) -> tuple[dict, float]:
+    """``pslog sync --json`` (with ``sync_args``), then smooth fused and evaluated: the sync
+    report and smooth's mean 3D error in mm."""
+    synced, fused = path.with_suffix(".synced.mcap"), path.with_suffix(".fused.mcap")
+    code, out, err = cli("sync", path, "-o", synced, "--json", "--force", *sync_args)
+    assert code == 0, err
+    report = json.loads(out)
+    code, _, err = cli("fuse", synced, "--method", "smooth", "-o", fused, "--force")
+    assert code == 0, err
+    code, out, err = cli("eval", fused, "--json")
+    assert code == 0, err
+    (smooth,) = [m for m in json.loads(out) if m["method"] == "smooth"]
+    return report, smooth["mean_mm"]
+
+
+def test_cli_auto_estimates_the_readouts_of_rolling_shutters_and_fuses_to_millimetres(
+        tmp_path, cli):
+    """Webcam-like rolling shutters (16-25 ms) and plain ``pslog sync``: auto keeps the
+    readouts (Wald χ² far above the 0.1 % level), and smooth comes within millimetres, where
+    offsets alone leave centimetres. Fails if the rule never keeps readouts (or compares the
+    wrong way)."""
+    path = _rolling_session(tmp_path, "rolling",
+                            {"c1": 22e-3, "c2": 25e-3, "c3": 16e-3}, seed=71)
+    report, auto_mm = _sync_fuse_eval(cli, path)
+    assert report["estimated"] == ["offset", "readout"]
+    (readout,) = [t for t in report["selection"] if t["parameter"] == "readout"]
+    assert readout["kept"] and readout["dof"] == 3
+    assert readout["wald_chi2"] > readout["threshold"] > 16  # χ²₃ at 0.1 %: 16.27
+    (drift,) = [t for t in report["selection"] if t["parameter"] == "drift"]
+    assert not drift["kept"] and "not tried" in drift["reason"]  # 6 s: too short for drifts
+    for cam, true in zip(report["cameras"], (22e-3, 25e-3, 16e-3), strict=True):
+        assert abs(cam["readout_s"] - true) < 4 * cam["readout_std_s"]
+    # the choice is in the synced copy's notes
+    synced = read_session(path.with_suffix(".synced.mcap"))
+    stored = json.loads(synced.metadata["clock_std"])
+    assert stored["estimated"] == ["offset", "readout"]
+    assert stored["selection"] == report["selection"]
+    _, offset_mm = _sync_fuse_eval(cli, path, "--estimate", "offset")
+    assert auto_mm < 3.0 and offset_mm > 3 * auto_mm, (auto_mm, offset_mm)
+    code, out, err = cli("sync", path, "-o", tmp_path / "t.mcap")
+    assert code == 0, err
+    assert "model (--estimate auto): offset, readout" in out
+    assert f"readouts estimated: Wald χ² {readout['wald_chi2']:.1f} on 3 dof >" in out
+    print(f"auto {auto_mm:.2f} mm, offsets only {offset_mm:.2f} mm, readouts' Wald χ² "
+          f"{readout['wald_chi2']:.1f}")
+
+
+def test_cli_auto_keeps_global_shutters_at_offsets_only(tmp_path, cli):
+    """Global shutters: auto tests the readouts and drops them (Wald χ² below the 0.1 %
+    level), so the result is the offsets-only fit's, to the bit. Fails if the rule keeps
+    readouts regardless of the figure."""
+    path = _rolling_session(tmp_path, "global", {}, seed=72)
+    report, _ = _sync_fuse_eval(cli, path)
+    assert report["estimated"] == ["offset"]
+    (readout,) = [t for t in report["selection"] if t["parameter"] == "readout"]
+    assert not readout["kept"] and readout["wald_chi2"] < readout["threshold"]
+    assert all(c["readout_s"] == 0 and c["readout_std_s"] == 0 for c in report["cameras"])
+    explicit, _ = _sync_fuse_eval(cli, path, "--estimate", "offset")
+    assert explicit["selection"] is None and explicit["estimated"] == ["offset"]
+    assert explicit["cameras"] == report["cameras"]
+    print(f"readouts' Wald χ² {readout['wald_chi2']:.2f} on {readout['dof']} dof")
+
+
+def test_auto_drops_readouts_the_motion_cannot_determine_and_keeps_the_offsets():
+    """A ball circling at the cameras' own height stays on one image row (1.8 px spread): a
+    readout is then indistinguishable from an offset, the wide fit fails ('not determined'),
+    and auto gives the offsets alone, with that message as the readouts' reason (an explicit
+    offset,readout fails). Fails if auto lets the wide fit's error through."""
+    from pslog import Camera, look_at
+
+    cams = []
+    for i in range(3):
+        a = 2 * np.pi * i / 3 + 0.4
+        R, t = look_at((1.5 + 4.0 * np.cos(a), 1.0 + 3.6 * np.sin(a), 1.0), (1.5, 1.0, 1.0))
+        cams.append(Camera(f"c{i + 1}", 800, 600, [[700.0, 0, 400.0], [0, 700.0, 300.0],
+                                                   [0, 0, 1]], np.zeros(5), R, t, 30.0, i / 90))
+    rig = Rig(tuple(cams))
+    flat = Motion("flat", 8.0, lambda t: np.stack(
+        [1.5 + 0.8 * np.cos(2.1 * t), 1.0 + 0.6 * np.sin(3.3 * t), 1.0 + 0 * t], axis=1))
+    offsets = {"c2": 3e-3, "c3": -4e-3}
+    detections, _ = simulate(rig, flat, 8.0, SimulationOptions(noise_px=0.3, seed=1,
+                                                               clock_offset_s=offsets))
+    with pytest.raises(FusionError, match="readout is not determined"):
+        estimate_clocks(detections.best(), rig, ("offset", "readout"))
+    result = estimate_clocks(detections.best(), rig, "auto")
+    assert result.estimated == ("offset",)
+    (readout,) = [t for t in result.selection if t.parameter == "readout"]
+    assert not readout.kept and "readout is not determined" in readout.reason
+    for est in result.cameras[1:]:
+        assert abs(est.offset_s - offsets[est.name]) < 4 * est.offset_std_s < 1e-3

@@ -70,8 +70,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_method_option(parser, "fuse: fusion method, repeat or give a comma-separated list for "
                               "several (default: every method each session's timing suits)")
     parser.add_argument("--estimate", type=_estimate, default=(), metavar="LIST",
-                        help="sync: clock parameters to estimate: offset, drift, readout, "
-                             "comma-separated (default: offset)")
+                        help="sync: clock parameters to estimate: auto (readouts and drifts "
+                             "where a test says the data support them), or offset, drift, "
+                             "readout, comma-separated (default: auto, as pslog sync)")
     parser.add_argument("--frames", type=_frames, default=None, metavar="all|none|every:N",
                         help="view: recorded images to include (default: all)")
     where = parser.add_mutually_exclusive_group()

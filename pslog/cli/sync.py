@@ -12,10 +12,13 @@ def _estimate_list(text: str) -> tuple[str, ...]:
     from pslog.estimation.sync import PARAMETERS
 
     names = tuple(dict.fromkeys(p.strip() for p in text.split(",") if p.strip()))
+    if names == ("auto",):
+        return names
     bad = [p for p in names if p not in PARAMETERS]
     if not names or bad:
         raise argparse.ArgumentTypeError(
-            f"{text!r}: name parameters among {', '.join(PARAMETERS)} (comma-separated)")
+            f"{text!r}: 'auto', or name parameters among {', '.join(PARAMETERS)} "
+            f"(comma-separated)")
     return names
 
 
@@ -23,9 +26,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("session", metavar="SESSION.mcap", help="session to synchronise")
     parser.add_argument("-o", "--output", required=True, metavar="SYNCED.mcap",
                         help="output: a copy of the session whose rig holds the estimates")
-    parser.add_argument("--estimate", type=_estimate_list, default=("offset",),
-                        metavar="LIST", help="clock parameters to estimate: offset, drift, "
-                                             "readout, comma-separated (default: offset)")
+    parser.add_argument("--estimate", type=_estimate_list, default=("auto",),
+                        metavar="auto|LIST",
+                        help="clock parameters to estimate: auto (offsets; readouts, and "
+                             "drifts on sessions of 30 s or more, each kept when a Wald "
+                             "chi-square test at the 0.1 %% level says the data support "
+                             "them: the table says which and why), or a comma-separated list "
+                             "of offset, drift, readout, estimated as given (default: auto)")
     # the scan steps by 1 ms: a minute is 1.2e5 costs per camera, 1e308 ms no array at all
     parser.add_argument("--search-ms", type=number_at_most(6e4, "ms", "a minute",
                                                            positive=True),
@@ -58,27 +65,56 @@ def run(args: argparse.Namespace) -> int:
     result = outcome.result
     # the standard deviations beside the estimates they belong to (the viewer shows them)
     stds = [(c.offset_std_s, c.drift_std_ppm, c.readout_std_s) for c in result.cameras]
+    estimated = result.estimated
+    auto = args.estimate == ("auto",)
+    selection = [_test_json(t) for t in result.selection] if auto else None
     progress.step(f"writing {args.output}")
     copy_session(args.session, args.output, rig=result.rig, force=args.force,
                  detections=outcome.detections if outcome.regularized else None,
-                 metadata={CLOCK_STD_KEY: clock_std_json(result.rig, stds)})
+                 metadata={CLOCK_STD_KEY: clock_std_json(result.rig, stds, estimated,
+                                                         selection)})
     if args.json:
         print(json.dumps({"cameras": [
             {"name": c.name, "offset_s": c.offset_s, "offset_std_s": c.offset_std_s,
              "drift_ppm": c.drift_ppm, "drift_std_ppm": c.drift_std_ppm,
              "readout_s": c.readout_s, "readout_std_s": c.readout_std_s}
-            for c in result.cameras], "residual_px": result.residual_px}))
+            for c in result.cameras], "residual_px": result.residual_px,
+            "estimated": list(estimated), "selection": selection}))
         return 0
     for note in outcome.notes:
         print(note)
-    print(_table(result, outcome.observations, args.estimate))
-    print(_legend(args.estimate))
+    print(_table(result, outcome.observations, estimated))
+    if auto:
+        print(_choice(result))
+    print(_legend(estimated, auto))
     print(f"residual {result.residual_px:.3f} px (pixel noise {result.noise_px:.3f} px); "
           f"wrote {args.output}")
     return 0
 
 
-def _legend(estimated) -> str:
+def _test_json(test) -> dict:
+    """One :class:`pslog.estimation.sync.ModelTest` as JSON (NaN figures as null)."""
+    import math
+
+    def number(x: float) -> float | None:
+        return None if math.isnan(x) else float(x)
+
+    return {"parameter": test.parameter, "kept": bool(test.kept),
+            "wald_chi2": number(test.statistic), "dof": test.dof,
+            "threshold": number(test.threshold), "p_value": number(test.p_value),
+            "reason": test.reason}
+
+
+def _choice(result) -> str:
+    """``--estimate auto``: the model chosen and each test's figure."""
+    lines = [f"model (--estimate auto): {', '.join(result.estimated)}"]
+    for t in result.selection:
+        plural = {"readout": "readouts", "drift": "drifts"}[t.parameter]
+        lines.append(f"  {plural} {'estimated' if t.kept else 'not estimated'}: {t.reason}")
+    return "\n".join(lines)
+
+
+def _legend(estimated, auto: bool = False) -> str:
     """What the table's columns are, which parameters were kept, and (readouts not
     estimated) the hint that most webcams need them: offsets alone left 30-35 mm on a rig of
     three rolling-shutter webcams whose readouts, estimated, brought it to 3-9 mm."""
@@ -89,7 +125,7 @@ def _legend(estimated) -> str:
              "the type-A stagger i/(n·fps)"]
     if kept:
         lines.append(f"kept at the rig's values (not estimated): {', '.join(kept)}")
-    if "readout" not in estimated:
+    if "readout" not in estimated and not auto:
         lines.append("most webcams have rolling shutters: try --estimate offset,readout "
                      "(offset,drift,readout on long sessions); readouts many σ above 0 and a "
                      "lower residual mean they matter (docs/timing.md)")

@@ -83,6 +83,13 @@ _N_WINDOWS = 6
 _WINDOW_S = 15.0
 _ITERATIONS = 10
 _ROUNDS = 8
+#: ``estimate="auto"``: a group of parameters (every camera's readout; every drift) is kept
+#: when its Wald statistic exceeds the χ² quantile at this level (0.1 %: a global-shutter
+#: rig keeps readouts in about one session in a thousand).
+AUTO_LEVEL = 1e-3
+#: ``estimate="auto"`` tries drifts on sessions at least this long (seconds): a drift of
+#: d ppm moves a camera by d · 1e-6 · T, below the offsets' σ on shorter ones.
+AUTO_DRIFT_MIN_S = 30.0
 
 
 @dataclass(frozen=True)
@@ -111,14 +118,44 @@ class ClockEstimate:
 
 
 @dataclass(frozen=True)
+class ModelTest:
+    """``estimate="auto"``: the Wald test of one group of clock parameters (every camera's
+    readout, or every drift but camera 1's) against the rig's values.
+
+    Attributes
+    ----------
+    parameter : "readout" or "drift"
+    statistic : Wald χ² = (θ̂ - θ₀)ᵀ Σ⁻¹ (θ̂ - θ₀) over the group (NaN when not fitted)
+    dof : the group's size
+    threshold : the χ² quantile at :data:`AUTO_LEVEL`
+    p_value : P(χ²_dof > statistic) when the rig's values are right
+    kept : estimated in the result (statistic above threshold)
+    reason : why, in words
+    """
+
+    parameter: str
+    statistic: float
+    dof: int
+    threshold: float
+    p_value: float
+    kept: bool
+    reason: str
+
+
+@dataclass(frozen=True)
 class SyncResult:
     """:func:`estimate_clocks`' result: per camera in rig order, the rig holding the estimates,
-    the overall RMS residual (px) and the estimated pixel noise σ (px)."""
+    the overall RMS residual (px) and the estimated pixel noise σ (px); ``estimated`` the
+    parameters estimated, ``selection`` (``estimate="auto"``) the tests that chose them."""
 
     cameras: tuple[ClockEstimate, ...]
     rig: Rig
     residual_px: float
     noise_px: float
+    estimated: tuple[str, ...] = ()
+    selection: tuple[ModelTest, ...] = ()
+    unknowns: tuple[tuple[int, str], ...] = ()
+    covariance: np.ndarray | None = None
 
 
 def estimate_clocks(obs: Observations, rig: Rig, estimate=("offset",),
@@ -132,10 +169,14 @@ def estimate_clocks(obs: Observations, rig: Rig, estimate=("offset",),
     moves that camera's times together, so it is added to the standard deviations (camera
     1's line moves the session clock, hence every other camera's offset and drift).
 
+    ``estimate="auto"`` (or ``("auto",)``) chooses the model (:func:`select_clocks`).
+
     Raises
     ------
     FusionError naming what is missing when the ball is seen too little or does not move.
     """
+    if tuple([estimate] if isinstance(estimate, str) else estimate) == ("auto",):
+        return select_clocks(obs, rig, search_s, options, regularized)
     try:
         return _estimate_clocks(obs, rig, estimate, search_s, options, regularized)
     except np.linalg.LinAlgError:
@@ -236,7 +277,83 @@ def _estimate_clocks(obs: Observations, rig: Rig, estimate, search_s: float | No
         new_cams.append(camera.replace(clock_offset=values["offset"],
                                        clock_drift_ppm=values["drift"], readout=readout))
     return SyncResult(tuple(estimates), Rig(tuple(new_cams), rig.name),
-                      float(np.sqrt(np.mean(norms[inlier] ** 2))), float(sigma))
+                      float(np.sqrt(np.mean(norms[inlier] ** 2))), float(sigma),
+                      estimated=estimate, unknowns=tuple(unknowns), covariance=cov)
+
+
+def select_clocks(obs: Observations, rig: Rig, search_s: float | None = None,
+                  options: SmoothOptions | None = None, regularized=None) -> SyncResult:
+    """``estimate="auto"``: offsets always; readouts, and drifts on sessions of at least
+    :data:`AUTO_DRIFT_MIN_S`, when the data support them.
+
+    The widest model (offset, readout[, drift]) is fitted first; each group of parameters is
+    then tested against the rig's values by the Wald test (Wald 1943; e.g. Seber & Wild,
+    *Nonlinear Regression*, 1989, §5.3): W = (θ̂ - θ₀)ᵀ Σ⁻¹ (θ̂ - θ₀), χ² with the group's size
+    as degrees of freedom when θ₀ is right, Σ the group's block of the estimate's covariance
+    (trajectory, bounces' instants and regularized lines marginalised: honest to about 1σ,
+    docs/timing.md). A group is kept when W exceeds the χ² quantile at :data:`AUTO_LEVEL`;
+    when one is dropped the model without it is fitted (two fits), else the first fit is the
+    result (one fit). A parameter the ball's motion does not determine (the wide fit fails
+    with it: then offsets and readouts without drifts are tried) is dropped without a figure,
+    its reason the fit's message."""
+    options = options or SmoothOptions()
+    from scipy.stats import chi2
+
+    span = float(obs.time_ns.max() - obs.time_ns.min()) / NS if len(obs) else 0.0
+    widest = [("offset", "drift", "readout"), ("offset", "readout")]
+    if span < AUTO_DRIFT_MIN_S:
+        widest = widest[1:]
+    tests: list[ModelTest] = []
+    full: SyncResult | None = None
+    failure: dict[str, str] = {}  # parameter -> the message of the last wide fit that failed
+    for wide in widest:  # with drifts a long session's wide fit may fail: then without
+        try:
+            full = estimate_clocks(obs, rig, wide, search_s, options, regularized)
+            break
+        except FusionError as exc:
+            failure.update((p, str(exc)) for p in wide if p != "offset")
+    keep = ["offset"]
+    for p in ("readout", "drift"):
+        if full is not None and p in full.estimated:
+            pass
+        elif p in failure:
+            tests.append(ModelTest(p, float("nan"), 0, float("nan"), float("nan"), False,
+                                   f"not determined ({failure[p]})"))
+            continue
+        else:
+            tests.append(ModelTest(p, float("nan"), 0, float("nan"), float("nan"), False,
+                                   f"not tried, the session ({span:.0f} s) is shorter "
+                                   f"than {AUTO_DRIFT_MIN_S:.0f} s"))
+            continue
+        assert full is not None
+        idx = [j for j, (_, q) in enumerate(full.unknowns) if q == p]
+        x = np.array([getattr(full.cameras[c], _FIELD[p]) for c, _ in
+                      (full.unknowns[j] for j in idx)])
+        x0 = np.array([float(getattr(rig.cameras[c], _KEY[p])) for c, _ in
+                       (full.unknowns[j] for j in idx)])
+        assert full.covariance is not None
+        cov = full.covariance[np.ix_(idx, idx)]
+        d = x - x0
+        w = float(d @ np.linalg.lstsq(cov, d, rcond=None)[0])
+        k = len(idx)
+        threshold = float(chi2.isf(AUTO_LEVEL, k))
+        kept = w > threshold
+        tests.append(ModelTest(p, w, k, threshold, float(chi2.sf(w, k)), kept,
+                               f"Wald χ² {w:.1f} on {k} dof "
+                               + (">" if kept else "<=")
+                               + f" {threshold:.1f} (the {AUTO_LEVEL * 100:g} % level)"))
+        if kept:
+            keep.append(p)
+    chosen = tuple(p for p in PARAMETERS if p in keep)
+    if full is not None and set(chosen) == set(full.estimated):
+        result = full
+    else:
+        result = estimate_clocks(obs, rig, chosen, search_s, options, regularized)
+    return SyncResult(result.cameras, result.rig, result.residual_px, result.noise_px,
+                      result.estimated, tuple(tests), result.unknowns, result.covariance)
+
+
+_FIELD = {"offset": "offset_s", "drift": "drift_ppm", "readout": "readout_s"}
 
 
 def _solve_joint(obs, rig, unknowns, theta, params, options, regularized=None):
