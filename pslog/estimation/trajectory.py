@@ -203,11 +203,6 @@ _NEXT_LOOSE_ITERATIONS = 1
 _REFINE_ITERATIONS = 2
 #: Gauss–Newton iterations after σ is corrected for the fit's degrees of freedom
 _DOF_ITERATIONS = 2
-#: A break whose nearest other break is further than this many knot spacings keeps the
-#: find's instant: the find's window (``_WINDOW_SPANS`` around the acceleration peak, the
-#: instant within a spacing of it) held no other break, so the refine would solve the same
-#: local problem, only linearised at the fit under the real prior (session 23)
-_ALONE_SPANS = _WINDOW_SPANS + 1
 
 
 @dataclass(frozen=True, eq=False)
@@ -906,8 +901,7 @@ def _fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions) -> Fit:
         control, sigma, min(options.iterations, _REFINE_ITERATIONS) if refine
         else options.iterations)
     if refine:  # each break's time again, at the fit under the real prior
-        breaks = _refine_breaks(problem, control, sigma, r, w, J, spacing, breaks, options,
-                                keep_alone=True)
+        breaks = _refine_breaks(problem, control, sigma, r, w, J, spacing, breaks, options)
         knots = piece_knots(breaks)
         X_old = problem.positions(control)
         problem.set_knots(knots, options.prior)
@@ -1312,24 +1306,17 @@ def _neighbours(centers: np.ndarray, known: np.ndarray) -> np.ndarray:
 
 def _refine_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.ndarray,
                    w: np.ndarray, J: np.ndarray, spacing: float, breaks: list[np.ndarray],
-                   options: SmoothOptions, keep_alone: bool = False) -> list[np.ndarray]:
+                   options: SmoothOptions) -> list[np.ndarray]:
     """Each break's time re-estimated on the problem linearised at the final fit, the
     neighbouring breaks held (the first estimate was linearised at the loose fit): within a
     quarter knot spacing of it (:func:`_breaks.scan_near`: one base, fewer trials), and
     within a knot spacing (:func:`_breaks.scan`) for the breaks whose best first-stage trial
-    was at an end of that quarter spacing (the optimum may lie beyond it).
-
-    ``keep_alone`` (``smooth``, since session 23): a break with no other break within
-    ``_ALONE_SPANS`` knot spacings keeps its instant (the find's local problem around it held
-    no other break: the refine would solve that problem again, only at another
-    linearisation), if the piece still allows it; ``sync`` refines every break (its clocks
-    move the detections, and the breaks with them)."""
+    was at an end of that quarter spacing (the optimum may lie beyond it)."""
     X = problem.positions(control)
     target = _linear_target(J, X, r)
     weight = w / sigma**2
     t_obs = problem.t[problem.rows]
     jobs, wide = [], []
-    held: dict[int, np.ndarray] = {}
     row0 = 0
     for p, known in enumerate(breaks):
         # the piece's rows in time order (the clock estimator moves the times)
@@ -1344,13 +1331,6 @@ def _refine_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.n
         b = np.minimum(known + spacing, last_ok)
         ok = a < b
         limits = np.stack([np.r_[-np.inf, known[:-1]], np.r_[known[1:], np.inf]], axis=1)
-        # a break with no other within reach of the find's window was located on the
-        # local problem the refine would solve (linearised at the loose fit): it stays
-        if keep_alone:
-            alone = (np.minimum(known - limits[:, 0], limits[:, 1] - known)
-                     > _ALONE_SPANS * spacing)
-            held[p] = known[ok & alone]
-            ok &= ~alone
         if np.any(ok):
             # the quarter spacing around each break, inside the whole spacing's bounds
             # (which a break the moved detections no longer allow may lie outside of)
@@ -1381,8 +1361,4 @@ def _refine_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.n
         new = np.sort(tau)
         keep = np.r_[True, np.diff(new) > spacing]  # never two breaks in one span
         out[p] = new[keep]
-    for p, kept in held.items():
-        if len(kept):
-            new = np.sort(np.r_[out[p], kept])
-            out[p] = new[np.r_[True, np.diff(new) > spacing]]
     return out
