@@ -149,8 +149,8 @@ class SmoothOptions:
     break_accel : float, m/s², ``‖p'' - g‖`` above which a span is tested for a break
     break_threshold : float, cost decrease (units of σ²) that keeps a break
     iterations : int, Gauss–Newton iterations per fit; the refit after the breaks'
-        refinement runs this many in all, its last two after σ is corrected for the fit's
-        degrees of freedom
+        refinement runs this many in all (the first of them the refit onto the new knots
+        itself), its last two after σ is corrected for the fit's degrees of freedom
     detector_offset_m : float, standard deviation (metres, per axis) of the detector's
         constant 3-D offset ``δ ~ N(0, σ_δ² I₃)`` of the ball's apparent centre, the same for
         every detection of every camera (a centroid drawn toward the lit side of the ball):
@@ -194,7 +194,8 @@ _END_DETECTIONS = 4
 #: Rounds of break detection (each finds the jumps the previous fit still hides)
 _BREAK_ROUNDS = 3
 #: Gauss–Newton iterations of the first loose fit, of the next rounds' (from the previous
-#: fit, refitted to the new knots), and of the fit under the real prior at which the breaks'
+#: fit, refitted to the new knots: the refit is their one iteration since session 23,
+#: :func:`_refit_linearised`), and of the fit under the real prior at which the breaks'
 #: instants are refined (the session is refitted in full after): more change the fits by
 #: micrometres, not the breaks found (a third loose one, dropped in session 18, changed
 #: the held-out sessions' errors by far less than their seed-to-seed spread)
