@@ -107,3 +107,35 @@ def test_a_detection_that_is_not_finite_gives_no_break_and_no_error(bad):
     near = np.array([[0.005 - H / 4, 0.005 + H / 4]])
     tau, _ = _breaks.scan_near(t, J, z, w, centers, near, limits, H, 5 * H, MotionPrior())
     assert near[0, 0] <= tau[0] <= near[0, 1]
+
+
+@pytest.mark.parametrize("start", [TAU - 0.0009, TAU + 0.0006])
+def test_the_narrow_refinement_finds_a_known_jump_time_from_near_it(start):
+    # the refinement's first search (session 23): a grid of 3 over h/16 either side of the
+    # break, one polishing stage, a last trial at its vertex; within h/32 (1.04 ms) of the
+    # jump the grid's middle trial is its best (further, an end is: flagged)
+    t, J, z, w, _, limits = _case()
+    bounds = np.array([[start - H / 16, start + H / 16]])
+    tau, edge = _breaks.scan_near(t, J, z, w, np.array([start]), bounds, limits, H, 5 * H,
+                                  MotionPrior(), narrow=True)
+    assert abs(tau[0] - TAU) < 2e-5
+    assert edge[0] == 0
+
+
+@pytest.mark.parametrize("side", [-1, 1])
+def test_the_narrow_refinement_flags_a_jump_beyond_h16(side):
+    # the jump 5 ms (0.15 h) beyond the start: outside the narrow bounds (2.1 ms), whose end
+    # nearer the jump must then be the first stage's best (the caller searches the quarter
+    # spacing)
+    t, J, z, w, _, limits = _case()
+    start = TAU - side * 0.15 * H
+    bounds = np.array([[start - H / 16, start + H / 16]])
+    tau, edge = _breaks.scan_near(t, J, z, w, np.array([start]), bounds, limits, H, 5 * H,
+                                  MotionPrior(), narrow=True)
+    assert edge[0] == side
+    assert abs(tau[0] - bounds[0, (side + 1) // 2]) < 1e-3
+    # and the quarter spacing's search from there finds it
+    quarter = np.array([[start - H / 4, start + H / 4]])
+    tau, edge = _breaks.scan_near(t, J, z, w, np.array([start]), quarter, limits, H, 5 * H,
+                                  MotionPrior())
+    assert abs(tau[0] - TAU) < 2e-5 and edge[0] == 0

@@ -94,6 +94,7 @@ from __future__ import annotations
 
 import bisect
 from dataclasses import dataclass, field, replace
+from functools import partial
 
 import numpy as np
 
@@ -149,8 +150,8 @@ class SmoothOptions:
     break_accel : float, m/s², ``‖p'' - g‖`` above which a span is tested for a break
     break_threshold : float, cost decrease (units of σ²) that keeps a break
     iterations : int, Gauss–Newton iterations per fit; the refit after the breaks'
-        refinement runs this many in all, its last two after σ is corrected for the fit's
-        degrees of freedom
+        refinement runs this many in all (the first of them the refit onto the new knots
+        itself), its last two after σ is corrected for the fit's degrees of freedom
     detector_offset_m : float, standard deviation (metres, per axis) of the detector's
         constant 3-D offset ``δ ~ N(0, σ_δ² I₃)`` of the ball's apparent centre, the same for
         every detection of every camera (a centroid drawn toward the lit side of the ball):
@@ -191,10 +192,19 @@ _LOOSE = 10.0
 #: Fewest detections (of at least two cameras) that make an end segment beyond a break
 #: trustworthy: 8 pixel coordinates for its 6 unknowns (:func:`_underdetermined_ends`)
 _END_DETECTIONS = 4
+#: The refinement's searches around each break (:func:`_refine_breaks`), in knot spacings
+#: either side: the first narrow (a grid of 3, one polishing stage, a final trial: 7
+#: trials), the next only for the breaks whose best first-stage trial was at an end of the
+#: last (5 + 6 + 1 trials), then the whole spacing. Session 23: ``1 / 16`` first, where
+#: the quarter's 12 trials were the first search (the find's instants are within 1 ms,
+#: h/32, of the refined ones for 9 breaks in 10; 1 in 10 then needs the quarter; ``1 / 8``
+#: placed the instants less precisely: docs/methods.md)
+_REFINE_STAGES = (1 / 16, 1 / 4)
 #: Rounds of break detection (each finds the jumps the previous fit still hides)
 _BREAK_ROUNDS = 3
 #: Gauss–Newton iterations of the first loose fit, of the next rounds' (from the previous
-#: fit, refitted to the new knots), and of the fit under the real prior at which the breaks'
+#: fit, refitted to the new knots: the refit is their one iteration since session 23,
+#: :func:`_refit_linearised`), and of the fit under the real prior at which the breaks'
 #: instants are refined (the session is refitted in full after): more change the fits by
 #: micrometres, not the breaks found (a third loose one, dropped in session 18, changed
 #: the held-out sessions' errors by far less than their seed-to-seed spread)
@@ -891,8 +901,9 @@ def _fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions) -> Fit:
         knots = piece_knots(breaks)
         X_old = problem.positions(control)
         problem.set_knots(knots, loose)
-        control = _refit_control(problem, X_old)
-        iterations = _NEXT_LOOSE_ITERATIONS
+        # the next Gauss-Newton step, taken on the new knots (:func:`_refit_linearised`)
+        control = _refit_linearised(problem, X_old, r, J, w, sigma)
+        iterations = _NEXT_LOOSE_ITERATIONS - 1
     problem.set_knots(knots, options.prior)  # same knots: the control points stay valid
     refine = any(len(b) for b in breaks)
     # with breaks, this fit is only where their instants are refined: the full fit follows
@@ -904,11 +915,11 @@ def _fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions) -> Fit:
         knots = piece_knots(breaks)
         X_old = problem.positions(control)
         problem.set_knots(knots, options.prior)
-        control = _refit_control(problem, X_old)
-        # the dof-corrected run below continues these iterations: together they are the
-        # ``options.iterations`` of the full fit
+        control = _refit_linearised(problem, X_old, r, J, w, sigma)
+        # the dof-corrected run below continues these iterations (the refit above the first
+        # of them): together they are the ``options.iterations`` of the full fit
         control, sigma, r, w, J = _Solver(problem, options).run(
-            control, sigma, max(options.iterations - _DOF_ITERATIONS, 1))
+            control, sigma, max(options.iterations - _DOF_ITERATIONS, 1) - 1)
 
     # σ corrected for the degrees of freedom the fit absorbs, then the covariance there
     _, dof, _ = _information(problem, control, sigma, r, J, trace=True)
@@ -999,6 +1010,21 @@ def _refit_control(problem: _Problem, X: np.ndarray) -> np.ndarray:
                                          problem.prior_rhs)
     U = _normal.factor(ab, rebuild=lambda: problem.points.normal_onto(
         M, X * [2e6, 1e6, 1e6], problem.prior_ab, problem.prior_rhs)[0])
+    return _normal.solve(U, rhs).reshape(-1, 3)
+
+
+def _refit_linearised(problem: _Problem, X: np.ndarray, r: np.ndarray, J: np.ndarray,
+                      w: np.ndarray, sigma: float) -> np.ndarray:
+    """Control points on new knots after breaks were inserted or moved: the Gauss–Newton
+    step of the fit on the old knots, taken on the new ones — the normal equations of the
+    measurements linearised at the old fit (its positions ``X``, residuals ``r``, Jacobians
+    ``J`` and weights ``w`` at ``σ``) and of the prior, on the new design. It costs what
+    :func:`_refit_control` (the old positions as measurements) costs and is one iteration
+    of the fit that follows (session 23: one factorisation and projection fewer per knot
+    change; :func:`_refit_control` remains ``sync``'s, whose clocks move the design)."""
+    target = _linear_target(J, X, r)
+    ab, rhs = problem.normal(J, target, w / sigma**2)
+    U = _normal.factor(ab, rebuild=lambda: problem.normal(J, target, w / sigma**2)[0])
     return _normal.solve(U, rhs).reshape(-1, 3)
 
 
@@ -1218,9 +1244,9 @@ def _find_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
 
 def _scan_pieces(jobs: list, t_obs: np.ndarray, J: np.ndarray, target: np.ndarray,
                  weight: np.ndarray, spacing: float, options: SmoothOptions,
-                 near: bool = False) -> list:
-    """:func:`_breaks.scan` (``near``: :func:`_breaks.scan_near`) of every piece's
-    candidates in one batched call.
+                 near: bool = False, narrow: bool = False) -> list:
+    """:func:`_breaks.scan` (``near``: :func:`_breaks.scan_near`, with ``narrow`` its
+    narrow form) of every piece's candidates in one batched call.
 
     jobs : list of (piece, rows in time order, centres (C,), bounds (C, 2), limits (C, 2));
     each window is also cut at its piece's first and last detection, so the pieces' rows
@@ -1228,7 +1254,7 @@ def _scan_pieces(jobs: list, t_obs: np.ndarray, J: np.ndarray, target: np.ndarra
     Returns a (tau, gain) per job (``near``: (tau, edge))."""
     if not jobs:
         return []
-    search = _breaks.scan_near if near else _breaks.scan
+    search = partial(_breaks.scan_near, narrow=narrow) if near else _breaks.scan
     order = np.concatenate([here for _, here, *_ in jobs])
     rows: np.ndarray | slice = order
     if len(order) and np.array_equal(order, np.arange(order[0], order[0] + len(order))):
@@ -1237,8 +1263,8 @@ def _scan_pieces(jobs: list, t_obs: np.ndarray, J: np.ndarray, target: np.ndarra
         rows = slice(int(order[0]), int(order[0]) + len(order))
     t = t_obs[rows]
     if np.any(np.diff(t) < 0):  # moved times made pieces overlap: one piece at a time
-        return [_scan_pieces([job], t_obs, J, target, weight, spacing, options, near)[0]
-                for job in jobs] if len(jobs) > 1 else [search(
+        return [_scan_pieces([job], t_obs, J, target, weight, spacing, options, near,
+                             narrow)[0] for job in jobs] if len(jobs) > 1 else [search(
                     t, J[rows], target[rows], weight[rows], jobs[0][2], jobs[0][3],
                     jobs[0][4], spacing, _WINDOW_SPANS * spacing, options.prior)]
     limits = np.concatenate([np.stack([np.maximum(lim[:, 0], t_obs[here[0]]),
@@ -1292,15 +1318,21 @@ def _refine_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.n
                    w: np.ndarray, J: np.ndarray, spacing: float, breaks: list[np.ndarray],
                    options: SmoothOptions) -> list[np.ndarray]:
     """Each break's time re-estimated on the problem linearised at the final fit, the
-    neighbouring breaks held (the first estimate was linearised at the loose fit): within a
-    quarter knot spacing of it (:func:`_breaks.scan_near`: one base, fewer trials), and
-    within a knot spacing (:func:`_breaks.scan`) for the breaks whose best first-stage trial
-    was at an end of that quarter spacing (the optimum may lie beyond it)."""
+    neighbouring breaks held (the first estimate was linearised at the loose fit): within
+    ``_REFINE_STAGES[0]`` spacings of it (:func:`_breaks.scan_near` ``narrow``: one base,
+    3 + 3 + 1 trials), then for the breaks whose best first-stage trial was at an end of
+    that interval (the optimum may lie beyond it) within a quarter knot spacing
+    (:func:`_breaks.scan_near`: 5 + 6 + 1 trials), and for those whose best first-stage
+    trial was at an end of that, within a knot spacing (:func:`_breaks.scan`). Each stage's
+    bounds lie inside the whole spacing's; an end that is the whole spacing's sends no
+    break further."""
     X = problem.positions(control)
     target = _linear_target(J, X, r)
     weight = w / sigma**2
     t_obs = problem.t[problem.rows]
-    jobs, wide = [], []
+    # per piece with breaks: (piece, rows in time order, breaks, whole spacing's bounds,
+    # limits)
+    wide = []
     row0 = 0
     for p, known in enumerate(breaks):
         # the piece's rows in time order (the clock estimator moves the times)
@@ -1316,31 +1348,44 @@ def _refine_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.n
         ok = a < b
         limits = np.stack([np.r_[-np.inf, known[:-1]], np.r_[known[1:], np.inf]], axis=1)
         if np.any(ok):
-            # the quarter spacing around each break, inside the whole spacing's bounds
-            # (which a break the moved detections no longer allow may lie outside of)
-            full = np.stack([a[ok], b[ok]], axis=1)
-            centre = np.clip(known[ok], full[:, 0], full[:, 1])
-            near = np.stack([np.maximum(centre - spacing / 4, full[:, 0]),
-                             np.minimum(centre + spacing / 4, full[:, 1])], axis=1)
-            jobs.append((p, here, centre, near, limits[ok]))
-            wide.append((p, here, known[ok], full, limits[ok]))
-    results = _scan_pieces(jobs, t_obs, J, target, weight, spacing, options, near=True)
-    # the breaks whose first stage peaked at a quarter spacing's end that is not the whole
-    # spacing's: searched again over the whole spacing
-    again, where = [], []
-    for (_, _, _, near, _), (p, here, known, full, limits), (_, edge) in zip(
-            jobs, wide, results, strict=True):
-        redo = (((edge < 0) & (near[:, 0] > full[:, 0]))
-                | ((edge > 0) & (near[:, 1] < full[:, 1])))
-        where.append(np.flatnonzero(redo))
-        if np.any(redo):
-            again.append((p, here, known[redo], full[redo], limits[redo]))
-    redone = iter(_scan_pieces(again, t_obs, J, target, weight, spacing, options))
+            wide.append((p, here, known[ok], np.stack([a[ok], b[ok]], axis=1), limits[ok]))
+    taus = [job[2].copy() for job in wide]  # the breaks, each replaced once searched
+    # which of each job's breaks the next stage searches (all, at first)
+    todo = [np.arange(len(job[2])) for job in wide]
+    for stage in (*_REFINE_STAGES, None):
+        reach = None if stage is None else stage * spacing
+        jobs, at = [], []
+        for k, ((p, here, known, full, limits), idx) in enumerate(zip(wide, todo,
+                                                                      strict=True)):
+            if len(idx) == 0:
+                continue
+            full = full[idx]
+            if reach is None:  # the whole spacing, around the break as the find left it
+                jobs.append((p, here, known[idx], full, limits[idx]))
+            else:
+                # around each break, inside the whole spacing's bounds (which a break the
+                # moved detections no longer allow may lie outside of)
+                centre = np.clip(known[idx], full[:, 0], full[:, 1])
+                jobs.append((p, here, centre,
+                             np.stack([np.maximum(centre - reach, full[:, 0]),
+                                       np.minimum(centre + reach, full[:, 1])], axis=1),
+                             limits[idx]))
+            at.append((k, idx))
+        if not jobs:
+            break
+        results = _scan_pieces(jobs, t_obs, J, target, weight, spacing, options,
+                               near=stage is not None, narrow=stage == _REFINE_STAGES[0])
+        todo = [np.zeros(0, np.int64) for _ in wide]
+        for (k, rows), job, (tau, edge) in zip(at, jobs, results, strict=True):
+            taus[k][rows] = tau
+            if reach is not None:
+                # the first stage peaked at an end that is not the whole spacing's
+                bounds, full = job[3], wide[k][3][rows]
+                redo = (((edge < 0) & (bounds[:, 0] > full[:, 0]))
+                        | ((edge > 0) & (bounds[:, 1] < full[:, 1])))
+                todo[k] = rows[redo]
     out = [np.zeros(0) for _ in breaks]
-    for (p, *_), (tau, _), redo in zip(jobs, results, where, strict=True):
-        if len(redo):
-            tau = tau.copy()
-            tau[redo] = next(redone)[0]
+    for (p, *_), tau in zip(wide, taus, strict=True):
         # a break the moved detections no longer allow (too near a piece's end) is dropped
         new = np.sort(tau)
         keep = np.r_[True, np.diff(new) > spacing]  # never two breaks in one span
