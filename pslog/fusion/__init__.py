@@ -329,7 +329,8 @@ def check_method(method: str) -> str:
 #: shutters share 100 % of their instants, the ``typeB`` preset (two of three synchronised)
 #: 50 %, three staggered rolling-shutter webcams after ``pslog sync`` 0-2.7 % (six sessions,
 #: simulated and rendered; 15-47 chance coincidences of the readout-corrected times), random
-#: offsets with 8-30 ms readouts 0-21 % (14 % with two cameras 0.9 ms apart): docs/methods.md.
+#: offsets with 8-30 ms readouts 0-21 % (14 % with two cameras 0.9 ms apart); held out at 60
+#: fps 0-50 %: staggered rigs under 3 %, a pair within ~1 ms 14 % or more (docs/timing.md).
 SHARED_SHARE_MIN = 0.1
 
 
