@@ -120,8 +120,8 @@ def fuse(session: Session | str | os.PathLike[str] | Detections,
         session's timing suits (:func:`pslog.fusion.default_methods`)
     rig : a corrected rig (same camera names and order) instead of the session's; e.g.
         ``pslog.sync(session).rig``; or, as ``pslog fuse --rig``, a built-in rig's name or a
-        rig file (pslog's TOML or an aniposelib / Pose2Sim / OpenCV calibration: a file
-        without frame rates and offsets takes the session's)
+        rig file (pslog's TOML, its whole rig; or an aniposelib / Pose2Sim / OpenCV
+        calibration, its geometry only: the session's frame rates, offsets and clocks stay)
     options : :class:`pslog.fusion.FusionOptions` (tolerance, max gap, noise, gating); its
         ``detector_offset_m`` None takes the session's default
         (:func:`pslog.fusion.detector_bias_for`: 0 for simulated sessions and bare
@@ -152,7 +152,7 @@ def fuse(session: Session | str | os.PathLike[str] | Detections,
     else:
         read = _session(session)
         if isinstance(rig, (str, os.PathLike)):
-            rig = resolve_rig(os.fspath(rig), timing_from=read.rig)  # a calibration has no timing
+            rig = resolve_rig(os.fspath(rig), timing_from=read.rig)  # a calibration: geometry
         detections, used = read.detections, rig or read.rig
         options = for_session(options or FusionOptions(), read.metadata)
         if rig is not None and rig.names != read.rig.names:

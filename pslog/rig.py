@@ -224,9 +224,12 @@ def resolve_rig(name_or_path: str | Path, timing_from: Rig | None = None) -> Rig
     aniposelib / Pose2Sim / OpenCV calibration: :func:`load_rig`), or a session file (an
     MCAP file: the rig it was recorded, synced or corrected with).
 
-    ``timing_from``: for a file that gives no timing (a foreign calibration has no frame
-    rate or shutter offset), the frame rate, offset and clock keys of the camera of the same
-    name in this rig (e.g. the session's, for ``pslog fuse --rig``) instead of 30 fps and 0.
+    ``timing_from``: for a calibration file (aniposelib, Pose2Sim, OpenCV: geometry only,
+    even one pslog exported with its ``fps`` / ``offset`` / clock keys), the frame rate,
+    offset and clock keys of the camera of the same name in this rig (e.g. the session's,
+    for ``pslog fuse --rig``: its synced clocks stay); a pslog rig TOML or a session file
+    gives its own timing. Without it, a calibration file without timing keys takes 30 fps
+    and offset 0.
     """
     if str(name_or_path) in BUILTIN_RIGS:
         return builtin_rig(str(name_or_path))
@@ -239,7 +242,7 @@ def resolve_rig(name_or_path: str | Path, timing_from: Rig | None = None) -> Rig
 
         return read_session(path).rig
     loaded = load_rig_file(path)
-    if loaded.timed or timing_from is None:
+    if timing_from is None or loaded.format == "pslog":
         return loaded.rig
     cameras = []
     for cam in loaded.rig.cameras:

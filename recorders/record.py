@@ -443,7 +443,9 @@ class _Session:
     def _loop(self, inbox: _Inbox, procs, stop, interrupted: StopRequest,
               t0_ns: int) -> None:
         cams = self.board.cameras
-        last_line = 0.0
+        # a terminal's line at once (it is rewritten in place); a log's first line only after
+        # a period, when it has counts to give (it was a line of zeros at the start: session 23)
+        last_line = 0.0 if self.tty else time.monotonic()
         refresh = _TTY_REFRESH_S if self.tty else _LOG_REFRESH_S
         duration_ns = self.options.duration_ns
         stop_wall: float | None = None

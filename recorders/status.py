@@ -80,11 +80,14 @@ class StatusBoard:
         return sum(c.frames for c in self.cameras)
 
     def line(self) -> str:
-        """One line: per camera ``name state frames fps det drops``."""
+        """One line: per camera ``name frames fps det drops`` while it records (``started,
+        no frame yet`` before its first frame), else its state."""
         now = time.monotonic()
         parts = []
         for c in self.cameras:
-            if c.state in ("recording", "stalled"):
+            if c.state == "recording" and c.frames == 0:  # started: not a rate of 0 fps
+                parts.append(f"{c.name}: started, no frame yet")
+            elif c.state in ("recording", "stalled"):
                 tag = "" if c.state == "recording" else " STALLED"
                 parts.append(f"{c.name}: {c.frames} fr {c.rate(now):4.1f} fps "
                              f"{c.detections} det {c.drops} drop{tag}")

@@ -105,7 +105,7 @@ def test_simulate_with_rig_timing_and_imperfections(tmp_path, cli):
     save_rig(rig, rig_path)
     out = tmp_path / "s.mcap"
     code, _, stderr = cli("simulate", "--rig", rig_path, "--timing", "rig", "--motion",
-                               "throw", "--jitter", "0.0005", "--drop-rate", "0.1",
+                               "throw", "--jitter-ms", "0.5", "--drop-rate", "0.1",
                                "--miss-rate", "0.2", "--noise-px", "0.5", "--seed", "4",
                                "-o", out)
     assert code == 0, stderr
@@ -161,7 +161,7 @@ def test_info_shows_signed_offsets_next_to_the_rigs(tmp_path, cli, timing):
     """Jittered sync/typeB shutters: measured offsets near the rig's (never ~33.3 ms), the
     rig's offsets as they are, the timing label beside them."""
     out = tmp_path / "s.mcap"
-    code, _, stderr = cli("simulate", "--rig", "paper3", "--timing", timing, "--jitter", "0.0005",
+    code, _, stderr = cli("simulate", "--rig", "paper3", "--timing", timing, "--jitter-ms", "0.5",
                           "--seed", "4", "-o", out)
     assert code == 0, stderr
     code, stdout, stderr = cli("info", out, "--json")

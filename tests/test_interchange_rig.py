@@ -439,16 +439,55 @@ def test_foreign_calibration_is_accepted_by_rig_taking_commands(tmp_path, cli, s
 @pytest.mark.parametrize("fmt,name", [("anipose", "calibration.toml"), ("opencv", "c.yml")])
 def test_a_pslog_exported_calibration_keeps_its_timing_as_rig(tmp_path, fmt, name):
     """What docs/interchange.md says: a file pslog exported carries its fps / offset keys,
-    and simulate, record, import and live (resolve_rig without a session) use them; so does
-    fuse --rig (timing_from is only for a file without them)."""
+    and simulate, record, import and live (resolve_rig without a session) use them; fuse
+    --rig (timing_from, the session's rig) takes the geometry only, whatever keys the file
+    has (session 23: a new user's synced clocks were reset by their exported calibration)."""
     rig = apply_timing(builtin_rig("paper3"), "typeA")
     path = tmp_path / name
     path.write_text(rig_to_format(rig, fmt, "m", path.suffix), encoding="utf-8")
-    session_rig = builtin_rig("paper3")  # offsets 0: would be taken if the file had none
-    for resolved in (resolve_rig(path), resolve_rig(path, timing_from=session_rig)):
-        assert [c.offset for c in resolved.cameras] == [c.offset for c in rig.cameras]
-        assert any(c.offset != 0 for c in resolved.cameras)
+    resolved = resolve_rig(path)
+    assert [c.offset for c in resolved.cameras] == [c.offset for c in rig.cameras]
+    assert any(c.offset != 0 for c in resolved.cameras)
+    session_rig = Rig(tuple(c.replace(clock_offset=0.002 * i, readout=0.02)
+                            for i, c in enumerate(builtin_rig("paper3").cameras)))
+    kept = resolve_rig(path, timing_from=session_rig)
+    assert [(c.fps, c.offset, c.clock_offset, c.readout) for c in kept.cameras] == [
+        (c.fps, c.offset, c.clock_offset, c.readout) for c in session_rig.cameras]
     # a genuine foreign file (no timing keys): 30 fps and offset 0
     bare = tmp_path / "Calib.toml"
     bare.write_text(POSE2SIM, encoding="utf-8")
     assert [(c.fps, c.offset) for c in resolve_rig(bare).cameras] == [(30.0, 0.0)] * 2
+
+
+def test_fuse_rig_with_an_exported_calibration_keeps_the_synced_clocks(tmp_path, cli,
+                                                                       sim_session):
+    """``pslog fuse --rig calibration.toml`` on a synced session: the geometry from the
+    calibration (exported by pslog before the sync, with its nominal fps and offsets), the
+    frame rates, offsets and clock model from the session, as ``fuse --rig``'s help says."""
+    from pslog.log import read_session
+    from pslog.rig import save_rig
+
+    # a session whose rig carries a clock model, as `pslog sync` leaves it
+    synced_rig = Rig(tuple(c.replace(clock_offset=0.0015 * i, clock_drift_ppm=20.0 * i,
+                                     readout=0.004)
+                           for i, c in enumerate(sim_session.rig.cameras)))
+    clocks = tmp_path / "synced.toml"
+    save_rig(synced_rig, clocks)
+    synced = tmp_path / "synced.mcap"
+    code, _, err = cli("fuse", sim_session.path, "--rig", clocks, "--method", "typeA",
+                       "-o", synced)
+    assert code == 0, err
+    calibration = tmp_path / "calibration.toml"
+    code, _, err = cli("rig", "export", sim_session.path, "--format", "anipose",
+                       "-o", calibration)
+    assert code == 0, err
+    assert load_rig_file(calibration).timed  # pslog's export writes fps and offset
+    fused = tmp_path / "fused.mcap"
+    code, _, err = cli("fuse", synced, "--rig", calibration, "--method", "typeA",
+                       "-o", fused)
+    assert code == 0, err
+    got = read_session(fused).rig
+    keys = ("fps", "offset", "clock_offset", "clock_drift_ppm", "readout")
+    assert [[getattr(c, k) for k in keys] for c in got.cameras] == [
+        [getattr(c, k) for k in keys] for c in synced_rig.cameras]
+    assert any(c.clock_offset != 0 for c in got.cameras)

@@ -158,7 +158,7 @@ def test_c3d_says_how_many_points_irregular_times_put_on_a_shared_frame(tmp_path
 
     sim, fused_path, path = tmp_path / "j.mcap", tmp_path / "f.mcap", tmp_path / "t.c3d"
     assert cli("simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "throw",
-               "--duration", "3", "--jitter", "0.002", "--seed", "1", "-o", sim)[0] == 0
+               "--duration", "3", "--jitter-ms", "2", "--seed", "1", "-o", sim)[0] == 0
     assert cli("fuse", sim, "--method", "typeA", "--method", "nearest", "-o",
                fused_path)[0] == 0
     session = read_session(fused_path)

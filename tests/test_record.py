@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import cv2
@@ -293,3 +294,23 @@ def test_synthetic_cameras_render_the_clock_errors_their_rig_corrects(tmp_path, 
     accuracy = evaluate(session.tracks["typeA"], session.truth)
     assert accuracy.n_points > 100
     assert accuracy.median_mm < 6.0, accuracy
+
+
+def test_record_outside_a_terminal_prints_no_status_line_of_zeros(tmp_path, capsys):
+    """stderr not a terminal (a log): a status line only once a period has passed, with the
+    counts, never the loop's first line of zeros before any frame (a new user's walkthrough,
+    session 23: '[ 3.1 s] cam1: 0 fr 0.0 fps 0 det 0 drop | ...' as the only line); a camera
+    started without a frame yet says so."""
+    from recorders.status import CameraStatus, StatusBoard
+
+    out = tmp_path / "s.mcap"
+    rc = main(["record", "--synthetic", "--rig", "paper2", "--timing", "sync", "--motion",
+               "spiral", "--duration", "0.3", "--fast", "--no-frames", "-o", str(out)])
+    assert rc == 0
+    err = capsys.readouterr().err
+    assert "18 frames over 0.267 s of session time" in err, err
+    assert not re.search(r" 0 fr +0\.0 fps 0 det", err), err
+    board = StatusBoard([CameraStatus("cam1", "synthetic", state="recording")])
+    assert board.line().endswith("cam1: started, no frame yet")
+    board.cameras[0].add_frame(0, True, 0.0)
+    assert "cam1: 1 fr" in board.line()

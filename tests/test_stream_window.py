@@ -8,6 +8,8 @@ typeB / linear point at t = 0.5587 s)."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from test_fusion_validity import streamed
@@ -57,7 +59,13 @@ def test_unsynchronised_sessions_stream_as_batch_bit_for_bit(name, method):
     rig, obs = _session(fps, timing, seed, until_s)
     batch = fuse(obs, rig, method)
     assert len(batch) > 0
-    assert_same(streamed(rig, method, obs), batch)
+    parts = streamed(rig, method, obs)
+    # the window stream reports no dropped counts (docs/paper.md; a window's refusals are
+    # counted again in the next): the points are the batch's, bit for bit, the counts not
+    # (here typeB / linear's prediction_failed, session 23, on 3cams-60fps-typeB)
+    assert all(not p.dropped for p in parts)
+    assert_same([replace(p, dropped=batch.dropped) if i == 0 else p
+                 for i, p in enumerate(parts)], batch)
 
 
 def test_the_sessions_have_runs_of_several_groups():

@@ -30,8 +30,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--rig", metavar="RIG.toml",
         help="fuse with this corrected rig (same camera names and order; start from 'pslog rig "
              "show SESSION.mcap') instead of the recorded calibration; the output carries it. "
-             "An anipose / Pose2Sim / OpenCV calibration replaces the geometry only; a "
-             "session file gives its rig (e.g. a synced session's)")
+             "An anipose / Pose2Sim / OpenCV calibration replaces the geometry only (its "
+             "fps / offset keys, when pslog exported it, are not used: the session's frame "
+             "rates, offsets and synced clocks stay); a pslog rig TOML or a session file "
+             "gives its whole rig, timing and clocks included (e.g. a synced session's)")
     parser.add_argument("--tolerance-ms", type=nonnegative_float, default=1.0,
                         metavar="MS", help="detections this close in time count as "
                                            "simultaneous, milliseconds, below a third of the "
@@ -116,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
     session = read_session(args.session)
     rig = session.rig
     if args.rig is not None:
-        rig = resolve_rig(args.rig, timing_from=session.rig)  # a calibration has no timing
+        rig = resolve_rig(args.rig, timing_from=session.rig)  # a calibration: geometry
         if rig.names != session.rig.names:
             raise RigError(f"{args.rig}: cameras {', '.join(rig.names)} differ from the "
                            f"session's {', '.join(session.rig.names)} (names and order must "

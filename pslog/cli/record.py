@@ -27,7 +27,8 @@ DESCRIPTION = """\
 Record a session: every camera of the rig is captured in its own process (capture, ball
 detection, JPEG encoding) and one writer stores the frames, the detections, the calibration
 and the timing into an MCAP session. A status line on stderr shows per camera the frames,
-the frame rate, the frames with a ball and the drops; a summary follows at the end.
+the frame rate, the frames with a ball and the drops (rewritten in place on a terminal;
+written every 5 s into a log or pipe, the first after 5 s); a summary follows at the end.
 Ctrl-C, SIGTERM or SIGHUP (a closed terminal), at any moment, stops the cameras and
 finishes the file cleanly: exit code 0 once frames were recorded, 1 (and no file) when
 stopped before any camera delivered a frame. A SIGKILL loses at most the last half second

@@ -86,6 +86,16 @@ def _blackout(text: str):
     return name.strip(), start, duration
 
 
+def _renamed_jitter(text: str) -> float:
+    """``--jitter`` was in seconds: say what it is now called, with the value it meant."""
+    try:
+        meant = f" (--jitter {text} is --jitter-ms {float(text) * 1e3:g})"
+    except ValueError:
+        meant = ""
+    raise argparse.ArgumentTypeError(
+        f"renamed --jitter-ms, in milliseconds as --host-jitter and --clock-offset{meant}")
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from pslog.motion import MOTIONS
     from pslog.rig import TIMING_PRESETS
@@ -101,9 +111,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--noise-px", type=noise_px, default=0.0, metavar="PX",
                         help="Gaussian detection noise per pixel axis, pixels, "
                              "at most 100 (default %(default)s)")
-    parser.add_argument("--jitter", type=nonnegative_float, default=0.0, metavar="S",
+    parser.add_argument("--jitter-ms", type=nonnegative_float, default=0.0, metavar="MS",
                         help="standard deviation of shutter times around the schedule, "
-                             "seconds, below half a frame period (default %(default)s)")
+                             "milliseconds, below half a frame period (default %(default)s)")
+    # the former --jitter S (seconds, beside --host-jitter and --clock-offset in ms): refused
+    # with the value it meant rather than read in another unit
+    parser.add_argument("--jitter", type=_renamed_jitter, default=None, help=argparse.SUPPRESS)
     parser.add_argument("--drop-rate", type=fraction, default=0.0, metavar="F",
                         help="fraction of frames lost entirely (default %(default)s)")
     parser.add_argument("--miss-rate", type=fraction, default=0.0, metavar="F",
@@ -183,7 +196,7 @@ def run(args: argparse.Namespace) -> int:
         readout.update({n: value for n in rig.names} if name is None else {name: value})
     faults: dict[str, dict] = {"clock_offset_s": dict(args.clock_offset),
                                "clock_drift_ppm": dict(args.drift), "readout_s": readout}
-    options = SimulationOptions(noise_px=args.noise_px, jitter_s=args.jitter,
+    options = SimulationOptions(noise_px=args.noise_px, jitter_s=args.jitter_ms / 1e3,
                                 drop_rate=args.drop_rate, miss_rate=args.miss_rate,
                                 seed=args.seed, host_jitter_s=args.host_jitter / 1e3,
                                 spurious_rate=args.spurious,
@@ -193,7 +206,7 @@ def run(args: argparse.Namespace) -> int:
     duration = motion.duration if args.duration is None else args.duration
     # command-line values too large for this rig: exit 2, as argparse's own refusals
     for option, check, value in (
-            ("--jitter", check_jitter, args.jitter),
+            ("--jitter-ms", check_jitter, args.jitter_ms / 1e3),
             ("--host-jitter", lambda r, v: check_jitter(r, v, "host jitter"),
              args.host_jitter / 1e3),
             ("--noise-px", check_noise, args.noise_px),
@@ -229,7 +242,7 @@ def run(args: argparse.Namespace) -> int:
     detections, truth, n_early = drop_before_zero(detections, truth)
     ball, _, _ = drop_before_zero(ball, truth)
     settings = {"motion": motion.name, "duration_s": repr(float(duration)),
-                "noise_px": repr(args.noise_px), "jitter_s": repr(args.jitter),
+                "noise_px": repr(args.noise_px), "jitter_s": repr(args.jitter_ms / 1e3),
                 "drop_rate": repr(args.drop_rate), "miss_rate": repr(args.miss_rate),
                 "seed": str(args.seed)}
     faulted = {k: v for k, v in (

@@ -323,6 +323,17 @@ def check_method(method: str) -> str:
     return method
 
 
+#: Least share of a session's instants (groups of detections within the tolerance) that two
+#: or more cameras share for :func:`default_methods` to pick the methods that need shared
+#: instants (``sync``, ``typeB``, ``linear``). Measured (tolerance 1 ms, 30 fps): synchronised
+#: shutters share 100 % of their instants, the ``typeB`` preset (two of three synchronised)
+#: 50 %, three staggered rolling-shutter webcams after ``pslog sync`` 0-2.7 % (six sessions,
+#: simulated and rendered; 15-47 chance coincidences of the readout-corrected times), random
+#: offsets with 8-30 ms readouts 0-21 % (14 % with two cameras 0.9 ms apart); held out at 60
+#: fps 0-50 %: staggered rigs under 3 %, a pair within ~1 ms 14 % or more (docs/timing.md).
+SHARED_SHARE_MIN = 0.1
+
+
 def default_methods(
     observations: Observations | Detections, rig: Rig, options: FusionOptions | None = None,
 ) -> list[str]:
@@ -331,13 +342,19 @@ def default_methods(
     Stereo (``sync``) needs instants that two cameras share; pseudo stereo and its baseline
     (``typeA``, ``nearest``) need instants that only one camera has (with fully synchronised
     shutters they would only repeat each instant); ``typeB`` and ``linear`` need both.
+    Shared instants count only when they are at least :data:`SHARED_SHARE_MIN` of the
+    session's instants (groups of :func:`~pslog.fusion.stereo.sync_groups`): staggered
+    rolling shutters whose corrected times now and then fall within the tolerance share a
+    few percent, too few for stereo or for ``typeB``'s predictions between them.
     """
     options = options or FusionOptions()
     if isinstance(observations, Detections):
         observations = timed_observations(observations, rig)
     check_tolerance(rig, options.tolerance_s)
     _, n_cameras = sync_groups(observations, len(rig), options.tolerance_s)
-    shared, alone = bool(np.any(n_cameras >= 2)), bool(np.any(n_cameras == 1))
+    shared = bool(len(n_cameras)) and bool(
+        np.count_nonzero(n_cameras >= 2) >= SHARED_SHARE_MIN * len(n_cameras))
+    alone = bool(np.any(n_cameras == 1))
     return [name for name, m in METHODS.items() if m.suits(shared, alone)]
 
 

@@ -237,8 +237,16 @@ def failed_predictions(prep, events: np.ndarray, j1: np.ndarray, j2: np.ndarray,
     (k,) bool, True where the innovation exceeds ``k σ_r + e_model``
     """
     time_ns = prep.obs.time_ns
-    delta_pred = (time_ns[events] - time_ns[j1]) / NS
-    delta_prev = (time_ns[j1] - time_ns[j2]) / NS
+    return contradicted(prep, events, (time_ns[events] - time_ns[j1]) / NS,
+                        (time_ns[j1] - time_ns[j2]) / NS, predicted, innovation_px, noise_px)
+
+
+def contradicted(prep, events: np.ndarray, delta_pred: np.ndarray, delta_prev: np.ndarray,
+                 predicted: np.ndarray, innovation_px: np.ndarray,
+                 noise_px: float | np.ndarray | None) -> np.ndarray:
+    """:func:`failed_predictions`' test with the prediction's intervals given, seconds:
+    ``delta_pred`` from the later past point to the newest detection, ``delta_prev`` between
+    the past points (``typeB`` and ``linear`` predict from stereo points, not detections)."""
     cam = prep.obs.camera[events]
     lens = prep.lens_rows
     focal = np.maximum(lens[:, 0], lens[:, 1])[cam]

@@ -27,6 +27,7 @@ from ._prepare import (
     invalid_points,
     reprojection_px,
 )
+from .innovation import DEFAULT_NOISE_PX, contradicted
 from .stereo import count_invalid, stereo_at_common_instants, with_dropped
 
 
@@ -103,7 +104,15 @@ def fuse_predicted(prep: Prepared, method: str, tolerance_s: float, max_gap_s: f
         }
         stereo_span = q["gap_s"]
     made = np.all(np.isfinite(single_points), axis=1)  # a detection without a usable ray
-    keep = made & (flags == 0)
+    # the single detection contradicts eq. (2)'s prediction (type A's innovation test,
+    # pslog.fusion.innovation): a change of motion inside the extrapolation, or a detection
+    # that is not the ball the stereo points saw; eq. (4) would put the point on its ray
+    # at the prediction's depth, metres off (docs/paper.md, "Type B's prediction test")
+    failed = contradicted(prep, single, (t_single - stereo_ns[k1]) / NS,
+                          (stereo_ns[k1] - stereo_ns[k2]) / NS, predicted, own,
+                          max(DEFAULT_NOISE_PX, noise_px or 0.0))  # the least noise
+    failed &= made & (flags == 0)
+    keep = made & (flags == 0) & ~failed
     single, t_single, single_points, shift = (
         single[keep], t_single[keep], single_points[keep], shift[keep])
     single_quality = {k: v[keep] for k, v in single_quality.items()}
@@ -119,7 +128,9 @@ def fuse_predicted(prep: Prepared, method: str, tolerance_s: float, max_gap_s: f
     track = Track(
         method, time_ns[order], np.concatenate([points, single_points])[order],
         np.concatenate([stereo.camera, obs.camera[single]])[order], quality)
-    return with_dropped(track, stereo.dropped, count_invalid(flags[made]))
+    n_failed = int(np.count_nonzero(failed))
+    return with_dropped(track, stereo.dropped, count_invalid(flags[made]),
+                        {"prediction_failed": n_failed} if n_failed else {})
 
 
 def _type_b_covariance(prep: Prepared, single: np.ndarray, cam: np.ndarray,

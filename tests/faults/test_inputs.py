@@ -150,8 +150,12 @@ def test_a_session_with_far_off_pixels_fuses_without_a_warning(work):
     (["fuse", "s.mcap", "-o", "f.mcap", "--tolerance-ms", "nan"], "--tolerance-ms"),
     (["fuse", "s.mcap", "-o", "f.mcap", "--method", "typeC"], "unknown fusion method"),
     (["eval", "s.mcap", "--method", "typeC"], "unknown fusion method"),
-    (["simulate", "--rig", "paper3", "-o", "x.mcap", "--jitter", "0.02"],
-     ("--jitter", "below half a frame period")),
+    (["simulate", "--rig", "paper3", "-o", "x.mcap", "--jitter-ms", "20"],
+     ("--jitter-ms", "below half a frame period")),
+    # the former --jitter (seconds, beside --host-jitter / --clock-offset in ms) is not read
+    # in another unit: it says its new name and what the value meant (session 23)
+    (["simulate", "--rig", "paper3", "-o", "x.mcap", "--jitter", "0.0005"],
+     ("argument --jitter: renamed --jitter-ms", "--jitter-ms 0.5")),
     (["simulate", "--rig", "paper3", "-o", "x.mcap", "--noise-px", "1e6"], "--noise-px"),
     (["simulate", "--rig", "rig.toml", "-o", "x.mcap", "--duration", "1e9"], "--duration"),
     (["simulate", "--rig", "paper3", "-o", "x.mcap", "--duration", "-1"], "--duration"),
