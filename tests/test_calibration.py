@@ -275,6 +275,27 @@ def test_cli_keeps_the_clock_sync_estimated_for_the_camera_it_replaces(tmp_path,
         assert load_rig(rig_path).cameras[0].readout == 0.025  # the other camera untouched
 
 
+def test_cli_drops_the_clock_of_a_camera_given_a_new_frame_rate(tmp_path, capsys):
+    """A new --fps is a new clock: the estimated readout (28 ms, beyond a 60 fps frame) would
+    make the rig invalid after the solve; the camera is replaced without its clock, and the
+    line says to sync again."""
+    camera = _camera()
+    points_world, uv = _pole_points(camera)
+    csv_path, rig_path = tmp_path / "points.csv", tmp_path / "synced.toml"
+    _write_points(csv_path, points_world, uv)
+    synced = camera.replace(R=np.eye(3), t=np.zeros(3), clock_offset=0.0066,
+                            clock_drift_ppm=55.0, readout=0.028)
+    first = builtin_rig("paper3").cameras[0]
+    save_rig(Rig((first.replace(name="cam0"), synced), "lab"), rig_path)
+    assert main(["calibrate", "--points", str(csv_path), "--name", "cam1", "--rig",
+                 str(rig_path), "--force", "--width", "640", "--height", "480",
+                 "--fps", "60"]) == 0
+    out = capsys.readouterr().out
+    assert "dropped its clock (30 -> 60 fps): run 'pslog sync' again" in out, out
+    got = load_rig(rig_path).camera("cam1")
+    assert (got.fps, got.clock_offset, got.clock_drift_ppm, got.readout) == (60.0, 0.0, 0.0, 0.0)
+
+
 @pytest.mark.parametrize(("extra", "message"), [
     (["--points", "missing.csv", "--width", "640", "--height", "480"], "points file not found"),
     (["--points", "pts.csv"], "--width and --height are required"),

@@ -113,7 +113,13 @@ def run(args: argparse.Namespace) -> int:
         camera = _run_points(args, existing, rig_path, fps, offset)
 
     kept = ""
-    if existing is not None and existing.has_clock_correction:
+    if (existing is not None and existing.has_clock_correction
+            and camera.fps != existing.fps):
+        # a new frame rate is a new clock: the estimated one (its readout within the old
+        # frame period) no longer describes it
+        kept = (f"; dropped its clock ({existing.fps:g} -> {camera.fps:g} fps): run 'pslog "
+                f"sync' again")
+    elif existing is not None and existing.has_clock_correction:
         # a calibration is geometry: the clock 'pslog sync' estimated for this camera (a rig
         # from 'pslog rig show SYNCED.mcap', the README's way to correct a calibration and
         # re-fuse) stays; dropped, a re-fuse lost the sync (3 webcams: typeA 29.8 mm, filter
