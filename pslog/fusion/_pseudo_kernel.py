@@ -1023,6 +1023,21 @@ def _select(values, count, k):
         values[store] = pivot
         if k == store:
             return pivot
+        if store == lo and k > lo:
+            # nothing below the pivot: its equals gathered after it (a window of equal
+            # values, a ball at rest at integer pixels, would otherwise lose one element a
+            # pass: quadratic, 29 µs instead of 0.6 for 270 equal values)
+            e = lo + 1
+            for j in range(lo + 1, hi + 1):
+                t = values[j]
+                if t == pivot:
+                    values[j] = values[e]
+                    values[e] = t
+                    e += 1
+            if k < e:
+                return pivot
+            lo = e
+            continue
         if k < store:
             hi = store - 1
         else:
