@@ -2596,7 +2596,11 @@ class StreamStart:
     so; from then on rows pass at once. The methods so fuse every row with the doubt the
     batch gives it, so the stream's points are the batch's, bit for bit; the cost is a
     latency of at most ``static_s`` on a session's first points (its first choice's camera's
-    next two frame periods, or one on a clean session: its next frame holds one candidate)."""
+    next two frame periods, or one on a clean session: its next frame holds one candidate).
+
+    It reads a frame's verdict from the gate's records after the push that carried the
+    frame: :class:`StreamGate` decides all of a frame's candidates in that one push (a
+    frame is never split across pushes), so a frame read here is complete."""
 
     def __init__(self, gate: StreamGate, doubts: StreamDoubt) -> None:
         self.gate, self.doubts = gate, doubts
