@@ -2598,9 +2598,9 @@ class StreamStart:
     latency of at most ``static_s`` on a session's first points (its first choice's camera's
     next two frame periods, or one on a clean session: its next frame holds one candidate).
 
-    It reads a frame's verdict from the gate's records after the push that carried the
-    frame: :class:`StreamGate` decides all of a frame's candidates in that one push (a
-    frame is never split across pushes), so a frame read here is complete."""
+    It reads a frame's verdict from the gate's records once the frame is decided:
+    :class:`StreamGate` takes a frame's candidates in one push and decides them together
+    (in that push, or a later one when it waits), so a decided frame read here is complete."""
 
     def __init__(self, gate: StreamGate, doubts: StreamDoubt) -> None:
         self.gate, self.doubts = gate, doubts
