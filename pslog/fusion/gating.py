@@ -42,7 +42,9 @@ its frame, or at its pixel in its camera's frames of the last ``static_s``), is 
 CONTESTED (:data:`CONTESTED`): in doubt, like a choice beside rejected ones, and so is its
 camera's later choice at its pixel within ``static_s``. So is the session's first choice
 when its camera's next two frames refuse what stands at its pixel (:func:`late_doubt`; the
-stream waits for that verdict: :class:`StreamStart`).
+stream waits for that verdict: :class:`StreamStart`). Offline (``smooth``), a choice made
+before its camera could judge stillness is in doubt when its camera's next frames refuse
+what stands at its pixel (:func:`unjudged_doubt`).
 A candidate supported by two or more other cameras
 whose rays meet (a point within ``track_m`` of each) is consistent in three views and is
 accepted whatever the track says (that is how the track follows kicks and bounces); rays that
@@ -1955,6 +1957,52 @@ def late_doubt(detections: Detections, reason: np.ndarray, static_s: float) -> i
     return first
 
 
+def unjudged_doubt(detections: Detections, rig: Rig, reason: np.ndarray, chosen: np.ndarray,
+                   static_s: float) -> np.ndarray:
+    """The doubt (:func:`doubt_variance`, else 0) of the chosen candidates ``chosen`` (rows)
+    that the stillness test could not judge, shown wrong by their camera's frames after
+    them: OFFLINE only (``smooth``'s ``doubt="start"``; docs/methods.md, "A static object
+    at the start"). In a camera's first ``static_s`` (fewer than ``0.75 ceil(static_s
+    fps)`` of its frames with candidates in the 1.5 ``static_s`` before, logged times:
+    :func:`_can_judge`) no candidate can be static, so a static object seen by every
+    camera is consistent in three views and passes every gate, and may outscore the ball.
+    Such a choice is in doubt when at least :data:`DOUBT_REJECTIONS` candidates within
+    :data:`DOUBT_RADIUS_PX` of it (recorded pixels) were rejected in frames of several
+    candidates of its camera at logged times in ``[t, t + static_s]``: something stood at
+    its pixel and was refused, as the ball beside it would not be. A clean camera's frames
+    hold one candidate: no clean choice is so judged."""
+    out = np.zeros(len(chosen))
+    if not len(chosen):
+        return out
+    frame = detections.cand_frame
+    count = detections.candidates_per_frame()
+    source = np.flatnonzero((reason >= 0) & (count[frame] >= 2))
+    if not len(source):
+        return out
+    # each camera's frames with candidates: how many lie in the 1.5 static_s before each
+    unjudged_frame = np.zeros(detections.n_frames, dtype=bool)
+    for b, cam in enumerate(rig.cameras):
+        f = np.flatnonzero((detections.frame_camera == b) & (count > 0))
+        if not len(f):
+            continue
+        f = f[np.argsort(detections.frame_time_ns[f], kind="stable")]
+        t = detections.frame_time_ns[f]
+        earlier = np.arange(len(f)) - np.searchsorted(
+            t, t - 1.5 * static_s * NS, side="left")
+        lags = int(np.ceil(static_s * cam.fps))
+        unjudged_frame[f[earlier < 0.75 * lags]] = True
+    rows = np.flatnonzero(unjudged_frame[frame[chosen]])
+    if not len(rows):
+        return out
+    # (choice_doubt on negated times: its sources in [t, t + static_s])
+    c = chosen[rows]
+    out[rows] = choice_doubt(-detections.frame_time_ns[frame[c]], detections.frame_camera[frame[c]],
+                             detections.cand_uv[c], -detections.frame_time_ns[frame[source]],
+                             detections.frame_camera[frame[source]],
+                             detections.cand_uv[source], rig, static_s)
+    return out
+
+
 def _refusal(reason: int, several: bool, du: float, dv: float) -> bool:
     """Whether a candidate of a camera's frame (``reason`` its code, ``several``: its frame
     held more than one) at ``(du, dv)`` recorded pixels from the camera's first choice
@@ -1979,7 +2027,11 @@ def _observation_doubt(detections: Detections, rig: Rig, reason: np.ndarray,
     # (the session's first choice shown wrong later counts as a contested one: late_doubt)
     late = late_doubt(detections, reason, static_s)
     contested = np.flatnonzero((reason[chosen] == CONTESTED) | (chosen == late))
-    if not len(still) and not len(contested):
+    # (offline only, "start": a choice made before its camera could judge stillness,
+    # beside what its next frames refuse: unjudged_doubt)
+    unjudged = (unjudged_doubt(detections, rig, reason, chosen, static_s) if start
+                else np.zeros(len(chosen)))
+    if not len(still) and not len(contested) and not unjudged.any():
         return None
     # (a contested choice is a source too, counted DOUBT_REJECTIONS times: a later choice
     # of its camera at its pixel is the same guess; StreamDoubt._row)
@@ -1994,6 +2046,7 @@ def _observation_doubt(detections: Detections, rig: Rig, reason: np.ndarray,
         cam = detections.frame_camera[frame[chosen[contested]]]
         uv = detections.cand_uv[chosen[contested]]
         doubt[contested] = doubt_variance(uv[:, 0], uv[:, 1], size[cam, 0], size[cam, 1])
+    doubt = np.maximum(doubt, unjudged)
     flagged = np.flatnonzero(doubt)
     if not len(flagged):
         return None
