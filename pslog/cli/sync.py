@@ -117,7 +117,8 @@ def _choice(result) -> str:
 def _legend(estimated, auto: bool = False) -> str:
     """What the table's columns are, which parameters were kept, and (readouts not
     estimated) the hint that most webcams need them: offsets alone left 30-35 mm on a rig of
-    three rolling-shutter webcams whose readouts, estimated, brought it to 5-9 mm (typeA, smooth, filter means)."""
+    three rolling-shutter webcams whose readouts, estimated, brought it to 5-9 mm (typeA,
+    smooth, filter means)."""
     kept = [name for name in ("offset", "drift", "readout") if name not in estimated]
     lines = ["offset, drift: each camera's clock against the first camera's (ref), which "
              "defines the session clock; readout: rolling shutter, top row to bottom row; "
