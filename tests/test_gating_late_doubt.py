@@ -34,20 +34,27 @@ from pslog.rig import Rig, apply_timing, builtin_rig
 from pslog.simulation import SimulationOptions, ball_mask, simulate_labelled
 
 
-def _session():
-    """``bench_dirty.py --more --first-seed 1700 --misses 0.1 --fps 60``'s paper2@60
-    rally-1701 (simulation seed 1401; cam2 sees the object, cam1 blind at 2.1-2.6 s), its
-    first 0.3 s: (rig, detections, truth, which candidates are the ball)."""
+def _rally_start(seed: int, sim_seed: int, seen_by: str, blind: str, blind_at: float):
+    """``bench_dirty.py --more --first-seed SEED --misses 0.1 --fps 60``'s paper2@60 rally
+    (its simulation seed ``sim_seed``; the object seen by ``seen_by``, ``blind`` blind for
+    0.5 s from ``blind_at``), its first 0.3 s: (rig, detections, truth, which candidates are
+    the ball)."""
     base = apply_timing(builtin_rig("paper2"), "typeA")
     rig = Rig(tuple(c.replace(fps=60.0, offset=c.offset * c.fps / 60.0) for c in base.cameras),
               "paper2@60")
-    motion = rally(8.0, seed=1701, speed=4.0 + 1701 % 3, kick_every_s=0.9)[0]
+    motion = rally(8.0, seed=seed, speed=4.0 + seed % 3, kick_every_s=0.9)[0]
     full, truth, ball = simulate_labelled(rig, motion, 8.0, SimulationOptions(
-        noise_px=0.3, seed=1401, miss_rate=0.1, drop_rate=0.05, spurious_rate=0.05,
-        distractors=(("cam2", DISTRACTOR),), blackouts=(("cam1", 2.1, 0.5),)))
+        noise_px=0.3, seed=sim_seed, miss_rate=0.1, drop_rate=0.05, spurious_rate=0.05,
+        distractors=((seen_by, DISTRACTOR),), blackouts=((blind, blind_at, 0.5),)))
     is_ball = ball_mask(full, ball)
     keep = np.isin(full.cand_frame, np.flatnonzero(full.frame_time_ns < 0.3e9))
     return rig, _first(full, 0.3), truth, is_ball[keep]
+
+
+def _session():
+    """rally-1701 (``--first-seed 1700``; simulation seed 1401; cam2 sees the object, cam1
+    blind at 2.1-2.6 s), its first 0.3 s."""
+    return _rally_start(1701, 1401, "cam2", "cam1", 2.1)
 
 
 def test_the_object_alone_where_its_camera_refused_it_with_the_ball_is_contested():
@@ -99,19 +106,9 @@ def test_the_object_alone_where_its_camera_refused_it_with_the_ball_is_contested
 
 
 def _session_1800():
-    """``bench_dirty.py --more --seeds 1 --first-seed 1800 --misses 0.1 --fps 60``'s
-    paper2@60 rally-1800 (simulation seed 1500; cam1 sees the object, cam2 blind at
-    2.0-2.5 s), its first 0.3 s: (rig, detections, truth, which candidates are the ball)."""
-    base = apply_timing(builtin_rig("paper2"), "typeA")
-    rig = Rig(tuple(c.replace(fps=60.0, offset=c.offset * c.fps / 60.0) for c in base.cameras),
-              "paper2@60")
-    motion = rally(8.0, seed=1800, speed=4.0 + 1800 % 3, kick_every_s=0.9)[0]
-    full, truth, ball = simulate_labelled(rig, motion, 8.0, SimulationOptions(
-        noise_px=0.3, seed=1500, miss_rate=0.1, drop_rate=0.05, spurious_rate=0.05,
-        distractors=(("cam1", DISTRACTOR),), blackouts=(("cam2", 2.0, 0.5),)))
-    is_ball = ball_mask(full, ball)
-    keep = np.isin(full.cand_frame, np.flatnonzero(full.frame_time_ns < 0.3e9))
-    return rig, _first(full, 0.3), truth, is_ball[keep]
+    """rally-1800 (``--seeds 1 --first-seed 1800``; simulation seed 1500; cam1 sees the
+    object, cam2 blind at 2.0-2.5 s), its first 0.3 s."""
+    return _rally_start(1800, 1500, "cam1", "cam2", 2.0)
 
 
 def _stream(rig, method: str, compiled: bool) -> StreamFuser:
