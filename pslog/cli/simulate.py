@@ -116,7 +116,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "milliseconds, below half a frame period (default %(default)s)")
     # the former --jitter S (seconds, beside --host-jitter and --clock-offset in ms): refused
     # with the value it meant rather than read in another unit
-    parser.add_argument("--jitter", type=_renamed_jitter, default=None, help=argparse.SUPPRESS)
+    parser.add_argument("--jitter", type=_renamed_jitter, default=None, metavar="S",
+                        help=argparse.SUPPRESS)
     parser.add_argument("--drop-rate", type=fraction, default=0.0, metavar="F",
                         help="fraction of frames lost entirely (default %(default)s)")
     parser.add_argument("--miss-rate", type=fraction, default=0.0, metavar="F",
