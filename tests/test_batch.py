@@ -234,6 +234,20 @@ def test_a_worker_killed_mid_task_is_retried_and_nothing_is_lost(cluster, sessio
             "done.json", "eval.json", "fused.mcap", "synced.mcap"]  # no .partial left
 
 
+def _first_batch(tmp_path: Path, sessions, do: str):
+    """``sessions`` ((seed, duration) each) simulated as ``season/m<i>.mcap`` and batched
+    once with ``--do DO`` and the module's methods into ``results`` (on the module's
+    cluster), which must succeed: (season folder, results folder, the batch's steps)."""
+    root = tmp_path / "season"
+    for i, (seed, duration) in enumerate(sessions):
+        simulate(root / f"m{i}.mcap", seed, duration=duration)
+    out = tmp_path / "results"
+    steps = ["--do", do, *METHODS, "-o", out]
+    code, _, err = pslog("batch", root / "*.mcap", *steps)
+    assert code == 0, err
+    return root, out, steps
+
+
 def _stamps(folder: Path) -> dict[str, tuple[int, int]]:
     return {str(p.relative_to(folder)): (p.stat().st_mtime_ns, p.stat().st_ino)
             for p in sorted(folder.rglob("*")) if p.is_file()}
@@ -380,13 +394,7 @@ def test_a_forced_batch_interrupted_keeps_every_old_output(cluster, tmp_path, sh
     start). The exit code and line say which signal (a SIGTERM was "interrupted",
     exit 130); after Ctrl-C the batch's local cluster is shut down (no process of its group
     is left)."""
-    root = tmp_path / "season"
-    for i in range(2):
-        simulate(root / f"m{i}.mcap", 20 + i)
-    out = tmp_path / "results"
-    steps = ["--do", "sync,fuse,eval", *METHODS, "-o", out]
-    code, _, err = pslog("batch", root / "*.mcap", *steps)  # on the module's cluster
-    assert code == 0, err
+    root, out, steps = _first_batch(tmp_path, [(20, 1.5), (21, 1.5)], "sync,fuse,eval")
     before = _stamps(out)
     summary = (out / "summary.csv").read_bytes()
     argv = [sys.executable, "-m", "pslog.cli", "batch", str(root / "*.mcap"),
@@ -440,13 +448,8 @@ def test_a_failed_session_of_a_batch_then_interrupted_keeps_its_old_outputs(
     removed them as soon as it failed — as it did when a step of a session ended in any
     error while the batch was being interrupted (a cancelled task's worker outlives the
     batch's settling of its folder): a result folder left empty, seen once in the suite."""
-    root = tmp_path / "season"
-    simulate(root / "m0.mcap", 30)
-    simulate(root / "m1.mcap", 31, duration=3.0)  # still running when m0 has failed
-    out = tmp_path / "results"
-    steps = ["--do", "sync,fuse,eval", *METHODS, "-o", out]
-    code, _, err = pslog("batch", root / "*.mcap", *steps)  # on the module's cluster
-    assert code == 0, err
+    # (m1 still running when m0 has failed)
+    root, out, steps = _first_batch(tmp_path, [(30, 1.5), (31, 3.0)], "sync,fuse,eval")
     before = {name: _stamps(out / name) for name in ("m0", "m1")}
     summary = (out / "summary.csv").read_bytes()
     m0 = root / "m0.mcap"
@@ -500,13 +503,7 @@ def test_a_batch_stopped_while_it_removes_failed_sessions_outputs_leaves_it_to_t
     removal before it plans, even one that runs only the good session."""
     from pslog.batch import DISCARD_NAME, INTERRUPT_DISCARD_ENV
 
-    root = tmp_path / "season"
-    for i in range(3):
-        simulate(root / f"m{i}.mcap", 40 + i)
-    out = tmp_path / "results"
-    steps = ["--do", "fuse", *METHODS, "-o", out]
-    code, _, err = pslog("batch", root / "*.mcap", *steps)  # on the module's cluster
-    assert code == 0, err
+    root, out, steps = _first_batch(tmp_path, [(40 + i, 1.5) for i in range(3)], "fuse")
     hour_ago = time.time() - 3600  # (cut recordings, not ones still being written)
     for name in ("m1", "m2"):
         path = root / f"{name}.mcap"
