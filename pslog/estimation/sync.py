@@ -41,7 +41,7 @@ motion) — each estimate's standard deviation says how well the data determined
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import sparse
@@ -314,18 +314,13 @@ def select_clocks(obs: Observations, rig: Rig, search_s: float | None = None,
             failure.update((p, str(exc)) for p in wide if p != "offset")
     keep = ["offset"]
     for p in ("readout", "drift"):
-        if full is not None and p in full.estimated:
-            pass
-        elif p in failure:
+        if full is None or p not in full.estimated:
+            reason = (f"not determined ({failure[p]})" if p in failure else
+                      f"not tried, the session ({span:.0f} s) is shorter than "
+                      f"{AUTO_DRIFT_MIN_S:.0f} s")
             tests.append(ModelTest(p, float("nan"), 0, float("nan"), float("nan"), False,
-                                   f"not determined ({failure[p]})"))
+                                   reason))
             continue
-        else:
-            tests.append(ModelTest(p, float("nan"), 0, float("nan"), float("nan"), False,
-                                   f"not tried, the session ({span:.0f} s) is shorter "
-                                   f"than {AUTO_DRIFT_MIN_S:.0f} s"))
-            continue
-        assert full is not None
         idx = [j for j, (_, q) in enumerate(full.unknowns) if q == p]
         x = np.array([getattr(full.cameras[c], _FIELD[p]) for c, _ in
                       (full.unknowns[j] for j in idx)])
@@ -349,8 +344,7 @@ def select_clocks(obs: Observations, rig: Rig, search_s: float | None = None,
         result = full
     else:
         result = estimate_clocks(obs, rig, chosen, search_s, options, regularized)
-    return SyncResult(result.cameras, result.rig, result.residual_px, result.noise_px,
-                      result.estimated, tuple(tests), result.unknowns, result.covariance)
+    return replace(result, selection=tuple(tests))
 
 
 _FIELD = {"offset": "offset_s", "drift": "drift_ppm", "readout": "readout_s"}
