@@ -759,11 +759,33 @@ def fuse_nearest(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
             prep, rows, detection_noise(prep, time_ns, max_gap_s, noise_px),
             slot_motion(prep, rows, time_ns, max_gap_s, compiled), compiled,
             innovations(prep, max_gap_s, recorded))
+    return _nearest_track([_nearest_kept(time_ns, camera, others, points, quality, flags)])
+
+
+def _nearest_kept(time_ns: np.ndarray, camera: np.ndarray, others: np.ndarray,
+                  points: np.ndarray, quality: dict[str, np.ndarray], flags: np.ndarray
+                  ) -> tuple[tuple, np.ndarray]:
+    """The kept points of some rows of :func:`fuse_nearest` (a point is made where its row has
+    another camera's detection and at least two detections; kept where valid and finite),
+    as (time_ns, points, camera, quality) of the kept, and the validity flags of the made.
+    Every argument: the same rows, (k,) or (k, .)."""
     made = (others >= 1) & (quality["n_detections"] >= 2)
     keep = made & (flags == 0) & np.all(np.isfinite(points), axis=1)
-    track = Track("nearest", time_ns[keep], points[keep], camera[keep],
-                  {k: v[keep] for k, v in quality.items()})
-    return with_dropped(track, count_invalid(flags[made]))
+    return ((time_ns[keep], points[keep], camera[keep],
+             {name: column[keep] for name, column in quality.items()}), flags[made])
+
+
+def _nearest_track(parts: list[tuple[tuple, np.ndarray]]) -> Track:
+    """:func:`fuse_nearest`'s track from :func:`_nearest_kept`'s parts, in row order."""
+    if len(parts) == 1:
+        (time_ns, points, camera, quality), made_flags = parts[0]
+        return with_dropped(Track("nearest", time_ns, points, camera, quality),
+                            count_invalid(made_flags))
+    kept = [part[0] for part in parts]
+    track = Track("nearest", np.concatenate([p[0] for p in kept]),
+                  np.concatenate([p[1] for p in kept]), np.concatenate([p[2] for p in kept]),
+                  {name: np.concatenate([p[3][name] for p in kept]) for name in kept[0][3]})
+    return with_dropped(track, count_invalid(np.concatenate([part[1] for part in parts])))
 
 
 #: :func:`fuse_nearest` makes the points of a long session (from twice this many detections)
@@ -800,8 +822,7 @@ def _nearest_in_blocks(prep: Prepared, rows: np.ndarray, others: np.ndarray,
         del recorded
     n_blocks = k // NEAREST_BLOCK_ROWS
     bounds = [k * i // n_blocks for i in range(n_blocks + 1)]
-    kept: list[tuple] = []
-    made_flags = []
+    parts = []
     for lo, hi in itertools.pairwise(bounds):
         block = rows[lo:hi]
         if noise_px is None:
@@ -814,17 +835,10 @@ def _nearest_in_blocks(prep: Prepared, rows: np.ndarray, others: np.ndarray,
         counts = np.count_nonzero(used & finite[:, None], axis=0)
         if not np.all((counts == 0) | (counts >= 2)):
             return None  # (invalid_points' numpy form for this block)
-        made = (others[lo:hi] >= 1) & (quality["n_detections"] >= 2)
-        keep = made & (flags == 0) & np.all(np.isfinite(points), axis=1)
-        made_flags.append(flags[made])
-        kept.append((time_ns[lo:hi][keep], points[keep], camera[lo:hi][keep],
-                     {name: column[keep] for name, column in quality.items()}))
-        del points, quality, flags, used, finite, made, keep
-    names = list(kept[0][3])
-    track = Track("nearest", np.concatenate([p[0] for p in kept]),
-                  np.concatenate([p[1] for p in kept]), np.concatenate([p[2] for p in kept]),
-                  {name: np.concatenate([p[3][name] for p in kept]) for name in names})
-    return with_dropped(track, count_invalid(np.concatenate(made_flags)))
+        parts.append(_nearest_kept(time_ns[lo:hi], camera[lo:hi], others[lo:hi], points,
+                                   quality, flags))
+        del points, quality, flags, used, finite
+    return _nearest_track(parts)
 
 
 def nearest_rows(prep: Prepared, max_gap_ns: int, compiled: bool = True
