@@ -338,22 +338,36 @@ def detection_noise(prep: Prepared, time_ns: np.ndarray, max_gap_s: float,
     return np.maximum(sigma, min(noise_px, NOISE_FLOOR_PX))
 
 
+#: :func:`refusal_noise` estimates σ from this quantile of the residual norms (the element
+#: ``count // 4`` of a window, sorted), over Rayleigh's at it, ``√(-2 ln 0.75)``: the median's
+#: breakdown (half the residuals) is not enough where a few false detections each spoil up to
+#: four residuals of their camera (a session's first second with 5 of 21 detections false
+#: made the median 127 px, and kept a 2.5 m sync point with a 120 px residual)
+REFUSAL_NOISE_QUANTILE = 0.25
+RAYLEIGH_QUARTILE = float(np.sqrt(-2.0 * np.log(1.0 - REFUSAL_NOISE_QUANTILE)))
+
+
 def refusal_noise(prep: Prepared, time_ns: np.ndarray, max_gap_s: float,
                   noise_px: float | None) -> np.ndarray:
     """The detection noise σ (pixels per axis, (k,)) that ``sync``'s residual test and
     ``typeB`` / ``linear``'s prediction test assume at ``time_ns`` (k,): at least the least
     noise the tests state, ``floor = max(0.5 px, noise_px)`` (0.5 px when None), and the
-    noise the session's detections show, type A's measured noise (the detector's, in
-    recorded pixels; :func:`pslog.fusion.pseudo.measured_noise`) with a bounded reach:
+    noise the session's detections show, from the residuals type A's and ``nearest``'s
+    estimators take (the detector's, in recorded pixels: each detection's residual from the
+    quadratic through its camera's three previous ones, :func:`detection_noise`) and with
+    their windows, robust to false detections for a test:
 
     - a checkpoint ``T`` (a multiple of ``NOISE_EVERY_S`` at or before the point) with
-      ``NOISE_MIN_COUNT`` residuals in ``[T - NOISE_WINDOW_S, T)``: their median over
-      Rayleigh's (:func:`detection_noise`, ``nearest``'s estimator);
-    - else (a session's first second, or after a pause): the root mean square of the
-      residuals in the ``NOISE_WINDOW_S`` before the point once ``NOISE_START_COUNT`` are
-      there, else ``max(floor, NOISE_UNKNOWN_PX)`` (:func:`~pslog.fusion.pseudo.start_noise`:
-      nothing measured yet, and a stated noise is what the user left at the default as often
-      as what the detector does).
+      ``NOISE_MIN_COUNT`` residuals in ``[T - NOISE_WINDOW_S, T)``: their lower quartile
+      over Rayleigh's (:data:`REFUSAL_NOISE_QUANTILE`; the estimators of the covariances take
+      the median);
+    - else (a session's first second, or after a pause): ``NOISE_UNKNOWN_PX`` (2 px: nothing
+      measured yet, and a stated noise is what the user left at the default as often as
+      what the detector does; type A's start). Type A's covariance then takes the root mean
+      square of the few residuals there are, where an outlier's larger σ is the safe side;
+      for a test it is not: 5 false detections among a session's first 21 (with 30 %
+      misses) spoiled 10 of its first 12 residuals, and any estimate of them kept a 2.5 m
+      sync point with a 120 px residual.
 
     Causal, from the detections of the ``NOISE_EVERY_S + NOISE_WINDOW_S`` and three gaps
     before the point (type A's estimator reaches back across a pause to the latest
@@ -361,7 +375,7 @@ def refusal_noise(prep: Prepared, time_ns: np.ndarray, max_gap_s: float,
     real one refused good points in numbers (docs/methods.md, "The N-view residual test");
     a larger one is never undercut."""
     from .innovation import DEFAULT_NOISE_PX
-    from .pseudo import no_detection_limits, residual_norms, start_noise, window_noise
+    from .pseudo import NOISE_UNKNOWN_PX, no_detection_limits, residual_norms
 
     floor = max(DEFAULT_NOISE_PX, 0.0 if noise_px is None else float(noise_px))
     time_ns = np.asarray(time_ns, dtype=np.int64)
@@ -372,13 +386,24 @@ def refusal_noise(prep: Prepared, time_ns: np.ndarray, max_gap_s: float,
                                   no_detection_limits(prep.cameras), max_gap_s)
     every = int(NOISE_EVERY_S * NS)
     marks, inverse = np.unique(time_ns // every * every, return_inverse=True)
-    sigma = window_noise(t_fin, v_fin, marks, NOISE_MIN_COUNT)[inverse]
-    start = np.flatnonzero(np.isnan(sigma))
-    if len(start):
-        order = np.argsort(time_ns[start], kind="stable")  # (start_noise: sorted times)
-        at = start[order]
-        sigma[at] = start_noise(t_fin, v_fin, time_ns[at], floor)
-    return np.maximum(floor, sigma)
+    sigma = _window_quartiles(t_fin, v_fin, marks, NOISE_MIN_COUNT)[inverse]
+    return np.maximum(floor, np.where(np.isnan(sigma), NOISE_UNKNOWN_PX, sigma))
+
+
+def _window_quartiles(t_fin: np.ndarray, v_fin: np.ndarray, ends_ns: np.ndarray,
+                      min_count: int) -> np.ndarray:
+    """σ (k,) at each of the sorted, distinct ``ends_ns`` (k,): the element ``count // 4``
+    of the residual norms ``v_fin`` at ``t_fin`` (sorted) in ``[end - NOISE_WINDOW_S, end)``,
+    sorted, over :data:`RAYLEIGH_QUARTILE`; NaN where fewer than ``min_count`` are there (a
+    selection: the same element whatever rows lie outside the window)."""
+    lo = np.searchsorted(t_fin, ends_ns - int(NOISE_WINDOW_S * NS), side="left")
+    hi = np.searchsorted(t_fin, ends_ns, side="left")
+    out = np.full(len(ends_ns), np.nan)
+    for j in np.flatnonzero(hi - lo >= min_count).tolist():
+        window = v_fin[lo[j]:hi[j]]
+        q = len(window) // 4
+        out[j] = np.partition(window, q)[q]
+    return out / RAYLEIGH_QUARTILE
 
 
 def quadratic_residuals(prep: Prepared, uv: np.ndarray, max_gap_s: float
