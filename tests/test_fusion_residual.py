@@ -107,7 +107,9 @@ def test_the_tests_take_the_detectors_real_noise(real_px):
     options = FusionOptions()  # noise_px 0.5, the default
     tracks = {m: fuse(obs, rig, m, options) for m in ("sync", "typeB", "linear")}
     n_stereo = len(tracks["sync"]) + tracks["sync"].dropped.get(RESIDUAL_FAILED, 0)
-    assert tracks["sync"].dropped.get(RESIDUAL_FAILED, 0) <= 0.002 * n_stereo
+    # (at most the session's first ~0.1 s, before any camera's fourth detection shows the
+    # noise: the stated one there; 2 of 180 at 2 px)
+    assert tracks["sync"].dropped.get(RESIDUAL_FAILED, 0) <= 0.015 * n_stereo
     for m in ("typeB", "linear"):
         assert tracks[m].dropped.get("prediction_failed", 0) <= 0.01 * len(tracks[m]), (
             m, tracks[m].dropped)
@@ -122,3 +124,18 @@ def test_the_tests_take_the_detectors_real_noise(real_px):
     late = obs.time_ns[obs.time_ns > obs.time_ns[0] + 2 * 10**9]
     sigma = refusal_noise(prepare(obs, rig), late, 3.5 / 30, options.noise_px)
     assert np.median(sigma) == pytest.approx(real_px, rel=0.2)
+
+
+def test_the_first_frames_point_is_tested_at_the_stated_noise():
+    """Before any camera's fourth detection nothing shows the noise: the stated one then
+    (2 px there, type A's start for its covariance, kept a 2.1 m sync point whose false
+    detection lay 2.8 px from the ball's epipolar line). The first instant's detection of
+    one camera moved 6 px across the other's epipolar line: refused; unmoved: kept."""
+    rig, obs, _ = _session("paper2", "sync", "throw", 0.3, 4)
+    clean = fuse(obs, rig, "sync")
+    assert clean.time_ns[0] == obs.time_ns[0] and RESIDUAL_FAILED not in clean.dropped
+    first = np.flatnonzero((obs.camera == 1) & (obs.time_ns == obs.time_ns[0]))
+    track = fuse(_moved(obs, first, _across(rig, obs, first, 0, 6.0)), rig, "sync")
+    assert track.dropped.get(RESIDUAL_FAILED) == 1, track.dropped
+    assert track.time_ns[0] > obs.time_ns[0]
+    np.testing.assert_array_equal(track.position_world, clean.position_world[1:])

@@ -361,13 +361,17 @@ def refusal_noise(prep: Prepared, time_ns: np.ndarray, max_gap_s: float,
       ``NOISE_MIN_COUNT`` residuals in ``[T - NOISE_WINDOW_S, T)``: their lower quartile
       over Rayleigh's (:data:`REFUSAL_NOISE_QUANTILE`; the estimators of the covariances take
       the median);
-    - else (a session's first second, or after a pause): ``NOISE_UNKNOWN_PX`` (2 px: nothing
-      measured yet, and a stated noise is what the user left at the default as often as
-      what the detector does; type A's start). Type A's covariance then takes the root mean
-      square of the few residuals there are, where an outlier's larger σ is the safe side;
-      for a test it is not: 5 false detections among a session's first 21 (with 30 %
-      misses) spoiled 10 of its first 12 residuals, and any estimate of them kept a 2.5 m
-      sync point with a 120 px residual.
+    - else (a session's first second, or after a pause): the same quartile of the
+      residuals in the ``NOISE_WINDOW_S`` before the point once ``NOISE_START_COUNT`` are
+      there, at most ``NOISE_UNKNOWN_PX`` (2 px); before that (the first ~0.1 s, each
+      camera's fourth detection making its first residual) the floor alone. Type A's
+      covariance takes the root mean square of those few residuals, unbounded, and 2 px
+      before any, where a larger σ is the safe side; for a test it is not: 5 false
+      detections among a session's first 21 (30 % misses) spoiled 10 of its first 12
+      residuals (a quartile of 87 px kept a 2.5 m sync point with a 120 px residual), and
+      2 px at the first frame kept a 2.1 m point (a static object chosen there, 2.8 px
+      from the ball's epipolar line). The cost: at 2 px of real noise against the stated
+      0.5 px, 2 of 180 good sync points in the first 0.1 s refused.
 
     Causal, from the detections of the ``NOISE_EVERY_S + NOISE_WINDOW_S`` and three gaps
     before the point (type A's estimator reaches back across a pause to the latest
@@ -375,7 +379,7 @@ def refusal_noise(prep: Prepared, time_ns: np.ndarray, max_gap_s: float,
     real one refused good points in numbers (docs/methods.md, "The N-view residual test");
     a larger one is never undercut."""
     from .innovation import DEFAULT_NOISE_PX
-    from .pseudo import NOISE_UNKNOWN_PX, no_detection_limits, residual_norms
+    from .pseudo import NOISE_START_COUNT, NOISE_UNKNOWN_PX, no_detection_limits, residual_norms
 
     floor = max(DEFAULT_NOISE_PX, 0.0 if noise_px is None else float(noise_px))
     time_ns = np.asarray(time_ns, dtype=np.int64)
@@ -387,7 +391,12 @@ def refusal_noise(prep: Prepared, time_ns: np.ndarray, max_gap_s: float,
     every = int(NOISE_EVERY_S * NS)
     marks, inverse = np.unique(time_ns // every * every, return_inverse=True)
     sigma = _window_quartiles(t_fin, v_fin, marks, NOISE_MIN_COUNT)[inverse]
-    return np.maximum(floor, np.where(np.isnan(sigma), NOISE_UNKNOWN_PX, sigma))
+    start = np.flatnonzero(np.isnan(sigma))
+    if len(start):
+        ends, back = np.unique(time_ns[start], return_inverse=True)
+        early = _window_quartiles(t_fin, v_fin, ends, NOISE_START_COUNT)[back]
+        sigma[start] = np.minimum(early, NOISE_UNKNOWN_PX)  # (NaN: none yet: the floor)
+    return np.fmax(floor, sigma)
 
 
 def _window_quartiles(t_fin: np.ndarray, v_fin: np.ndarray, ends_ns: np.ndarray,
