@@ -50,6 +50,12 @@ valid (:func:`invalid_points`), clean / faults: behind a camera that contributed
 (``camera_mask``, and the point's own camera), or outside the image of the camera whose
 detection at the point's time made it (issue 10: 0 wherever the methods are right).
 
+``--timing sync|typeB`` (with ``--more``): every rig's shutters at the preset (a two-camera rig
+synchronised under ``typeB``), for ``--methods sync,typeB,linear``, which need shared instants
+(a session without one of the synchronised cameras gives them an empty track); ``--noise PX``
+(with ``--more``): the detections' real noise (the fusion states its default 0.5 px whatever
+it is); ``--validity`` also counts the points each method's tests refused (``REFUSALS``).
+
 ``--calibration`` (with ``--more``'s rigs and rallies, ``--first-seed`` one or several,
 comma-separated; ``--noise``): whether each method's covariance stays honest with the
 faults: NEES (1 if honest) and the share of the truth inside 2σ (73.9 % if honest), clean
@@ -60,6 +66,8 @@ pooled d² that the single largest point carries (docs/methods.md, "A choice in 
                                      [--methods typeA,smooth,filter] [--more]
                                      [--first-seed 300] [--fps 60,120,240]
     python benchmarks/bench_dirty.py --more --validity [--first-seed 2400] [--fps 60] [--misses 0.1]
+    python benchmarks/bench_dirty.py --more --validity --timing typeB --methods sync,typeB,linear
+                                     [--noise 2]
     python benchmarks/bench_dirty.py --calibration [--first-seed 400,5000] [--seeds 3]
                                      [--noise 0.3] [--methods typeA,nearest,smooth,filter]
 """

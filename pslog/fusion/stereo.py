@@ -763,7 +763,7 @@ def triangulate_groups(prep: Prepared, group: np.ndarray, n_groups: int,
     np.maximum.at(rows, (group, prep.obs.camera), np.arange(len(group)))
     points, quality, flags, used = nview_points(prep, rows, noise_px)
     last = np.r_[np.flatnonzero(np.diff(group)), len(group) - 1]  # last row of each group
-    out = points, quality, prep.obs.time_ns[last], prep.obs.camera[last]
+    out: tuple = (points, quality, prep.obs.time_ns[last], prep.obs.camera[last])
     if with_flags:
         out = (*out, flags)
     return (*out, rows, used) if with_rows else out
