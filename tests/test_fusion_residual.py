@@ -139,3 +139,21 @@ def test_the_first_frames_point_is_tested_at_the_stated_noise():
     assert track.dropped.get(RESIDUAL_FAILED) == 1, track.dropped
     assert track.time_ns[0] > obs.time_ns[0]
     np.testing.assert_array_equal(track.position_world, clean.position_world[1:])
+
+
+@pytest.mark.parametrize("method", ["sync", "typeB", "linear"])
+def test_the_stream_takes_the_batchs_noise(method):
+    """At 3 px of real noise the tests' σ is the measured one, from the residuals of the
+    second before each checkpoint: the stream keeps that history (StreamFuser's reach for
+    sync, typeB and linear) and refuses exactly the batch's points."""
+    from pslog.fusion.stream import StreamFuser
+
+    rig, obs, _ = _session("paper3", "typeB", "rally", 3.0, 11, 4.0)
+    batch = fuse(obs, rig, method)
+    fuser = StreamFuser(rig, method)
+    parts = [fuser.push(obs.time_ns[i], obs.camera[i], obs.uv[i], obs.frame_index[i])
+             for i in range(len(obs))]
+    parts.append(fuser.flush())
+    np.testing.assert_array_equal(np.concatenate([p.time_ns for p in parts]), batch.time_ns)
+    np.testing.assert_array_equal(np.concatenate([p.position_world for p in parts]),
+                                  batch.position_world)
