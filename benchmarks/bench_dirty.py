@@ -50,6 +50,12 @@ valid (:func:`invalid_points`), clean / faults: behind a camera that contributed
 (``camera_mask``, and the point's own camera), or outside the image of the camera whose
 detection at the point's time made it (issue 10: 0 wherever the methods are right).
 
+``--timing sync|typeB`` (with ``--more``): every rig's shutters at the preset (a two-camera rig
+synchronised under ``typeB``), for ``--methods sync,typeB,linear``, which need shared instants
+(a session without one of the synchronised cameras gives them an empty track); ``--noise PX``
+(with ``--more``): the detections' real noise (the fusion states its default 0.5 px whatever
+it is); ``--validity`` also counts the points each method's tests refused (``REFUSALS``).
+
 ``--calibration`` (with ``--more``'s rigs and rallies, ``--first-seed`` one or several,
 comma-separated; ``--noise``): whether each method's covariance stays honest with the
 faults: NEES (1 if honest) and the share of the truth inside 2σ (73.9 % if honest), clean
@@ -60,6 +66,8 @@ pooled d² that the single largest point carries (docs/methods.md, "A choice in 
                                      [--methods typeA,smooth,filter] [--more]
                                      [--first-seed 300] [--fps 60,120,240]
     python benchmarks/bench_dirty.py --more --validity [--first-seed 2400] [--fps 60] [--misses 0.1]
+    python benchmarks/bench_dirty.py --more --validity --timing typeB --methods sync,typeB,linear
+                                     [--noise 2]
     python benchmarks/bench_dirty.py --calibration [--first-seed 400,5000] [--seeds 3]
                                      [--noise 0.3] [--methods typeA,nearest,smooth,filter]
 """
@@ -186,6 +194,11 @@ def measure(rig: Rig, methods, runs, options: FusionOptions):
     return ({k: stats(np.concatenate(v)) for k, v in errors.items()}, ratios, refused)
 
 
+#: The reasons of Track.dropped that --validity's ``refused`` column sums: the points a
+#: method's tests refused as contradicted by the detections (type A's, typeB / linear's
+#: prediction test, sync's N-view residual test), not as geometrically invalid.
+REFUSALS = ("prediction_failed", "kink", "residual_failed")
+
 #: A point this soon after a kick or bounce rests on detections of the motion before it.
 KICK_WINDOW_S = 0.04
 
@@ -228,16 +241,18 @@ def invalid_points(track, rig: Rig) -> tuple[int, int]:
 
 
 def measure_more(rig: Rig, methods, runs, options: FusionOptions, first_seed: int = 300,
-                 misses: float = 0.0) -> dict:
-    """Per method, at TARGET_NOISE: the --more row's figures over the sessions ``runs``
-    (simulation seeds from ``first_seed - 300``; ``misses``: the detector also misses the
-    ball in that fraction of frames and half of it are dropped, clean sessions too)."""
+                 misses: float = 0.0, noise: float = TARGET_NOISE) -> dict:
+    """Per method, at ``noise`` px (TARGET_NOISE unless told): the --more row's figures
+    over the sessions ``runs`` (simulation seeds from ``first_seed - 300``; ``misses``: the
+    detector also misses the ball in that fraction of frames and half of it are dropped,
+    clean sessions too)."""
     from pslog.fusion._prepare import default_max_gap_s
 
     gap = options.max_gap_s or default_max_gap_s(rig)
     out = {m: {"clean": [], "dirty": [], "blackout": [], "ratios": [], "clean5": 0,
                "clean5_kick": 0, "added": 0, "in_blackout": 0, "after_kick": 0,
-               "points": [0, 0], "invalid": [0, 0, 0, 0]} for m in methods}
+               "points": [0, 0], "invalid": [0, 0, 0, 0], "refused": [0, 0]}
+           for m in methods}
     for seed, (label, motion, duration, kicks) in enumerate(runs, start=first_seed - 300):
         span = motion.duration if duration is None else duration
         fault = faults(rig, seed, span)
@@ -249,9 +264,9 @@ def measure_more(rig: Rig, methods, runs, options: FusionOptions, first_seed: in
         tracks = {}
         for kind, extra in kinds.items():
             det, truth, _ = simulate_labelled(rig, motion, duration, SimulationOptions(
-                noise_px=TARGET_NOISE, seed=seed, miss_rate=misses, drop_rate=misses / 2,
+                noise_px=noise, seed=seed, miss_rate=misses, drop_rate=misses / 2,
                 **extra))
-            tracks[kind] = fuse_detections(det, rig, methods, options)[0]
+            tracks[kind] = _fused(det, rig, methods, options)
         for m in methods:
             err = {kind: errors_m(tracks[kind][m], truth) for kind in kinds}
             row = out[m]
@@ -261,6 +276,8 @@ def measure_more(rig: Rig, methods, runs, options: FusionOptions, first_seed: in
                 behind, outside = invalid_points(tracks[kind][m], rig)
                 row["invalid"][2 * i] += behind
                 row["invalid"][2 * i + 1] += outside
+                row["refused"][i] += sum(tracks[kind][m].dropped.get(reason, 0)
+                                         for reason in REFUSALS)
             for kind in ("clean", "dirty", "blackout"):
                 row[kind].append(err[kind][np.isfinite(err[kind])])
             row["ratios"].append((np.nanmean(err["dirty"]) / np.nanmean(err["clean"]), label,
@@ -282,6 +299,25 @@ def measure_more(rig: Rig, methods, runs, options: FusionOptions, first_seed: in
                 if kicks is not None:
                     row["after_kick"] += _after_kick(t_s, kicks)
     return out
+
+
+def _fused(det, rig: Rig, methods, options: FusionOptions) -> dict:
+    """``fuse_detections``' tracks; with ``--timing``, a method that needs shared instants
+    where none are left (the session without one of the synchronised cameras) gets an
+    empty track instead of its error."""
+    from pslog.errors import FusionError
+    from pslog.records import Track
+
+    try:
+        return fuse_detections(det, rig, methods, options)[0]
+    except FusionError:
+        out = {}
+        for m in methods:
+            try:
+                out[m] = fuse_detections(det, rig, [m], options)[0][m]
+            except FusionError:
+                out[m] = Track(m, np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0, np.int32))
+        return out
 
 
 def _data_ratio(tracks, m: str, err: dict, start: float, length: float) -> float:
@@ -324,7 +360,8 @@ def more_table(rig: Rig, methods, figures, validity: bool = False) -> tuple[list
                     f"({f['clean5_kick']} after a kick) / {f['added']} ({f['in_blackout']} in "
                     f"blackout, {f['after_kick']} after a kick) | {f['points'][0]} / "
                     f"{f['points'][1]} |"
-                    + (f" {bad[0]}, {bad[1]} / {bad[2]}, {bad[3]} |" if validity else "")
+                    + (f" {bad[0]}, {bad[1]} / {bad[2]}, {bad[3]} | {f['refused'][0]} / "
+                       f"{f['refused'][1]} |" if validity else "")
                     + ("" if met and valid else " MISSED"))
     return rows, ok
 
@@ -333,9 +370,10 @@ def main_more(args, methods, options: FusionOptions) -> int:
     """--more: the targets on other rigs and motions (0.3 px)."""
     runs = more_sessions(args.seeds, args.duration, args.first_seed)
     rates = [float(x) for x in args.fps.split(",")] if args.fps else [None]
-    print(f"dirty sessions, other rigs and motions, {TARGET_NOISE} px, gating {args.gating}: "
+    print(f"dirty sessions, other rigs and motions, {args.noise:g} px, gating {args.gating}: "
           f"{', '.join(label for label, *_ in runs)} per rig"
           + (f"; cameras at {args.fps} fps" if args.fps else "")
+          + (f"; {args.timing} shutters" if args.timing else "")
           + (f"; the detector also misses {args.misses:g} of the frames and drops "
              f"{args.misses / 2:g}" if args.misses else ""))
     print("mean errors mm pooled over the rig's sessions; ratio faults / clean (pooled, worst "
@@ -345,15 +383,20 @@ def main_more(args, methods, options: FusionOptions) -> int:
           "clean / added by the faults; points: points output, clean / faults")
     print()
     print("| rig | method | clean mean | faults mean | ratio | worst (session) | blackout alone "
-          "| >5cm clean / added | points |" + (" invalid: behind, outside, clean / faults |"
+          "| >5cm clean / added | points |" + (" invalid: behind, outside, clean / faults | "
+                                               "refused clean / faults |"
                                                if args.validity else ""))
-    print("|---|---|---|---|---|---|---|---|---|" + ("---|" if args.validity else ""))
+    print("|---|---|---|---|---|---|---|---|---|" + ("---|---|" if args.validity else ""))
     ok = True
     start = time.perf_counter()
     for rig in (r if fps is None else at_rate(r, fps) for fps in rates
                 for r in rigs() + more_rigs()):
+        if args.timing:  # (typeB needs three cameras: a two-camera rig synchronised)
+            preset = args.timing if len(rig) >= 3 else "sync"
+            rig = Rig(apply_timing(rig, preset).cameras, rig.name)
         rows, met = more_table(rig, methods, measure_more(rig, methods, runs, options,
-                                                          args.first_seed, args.misses),
+                                                          args.first_seed, args.misses,
+                                                          args.noise),
                                args.validity)
         ok &= met
         print("\n".join(rows), flush=True)
@@ -445,7 +488,11 @@ def main() -> int:
     parser.add_argument("--calibration", action="store_true",
                         help="NEES and share in 2σ per method, clean and dirty (--more's rigs)")
     parser.add_argument("--noise", type=float, default=TARGET_NOISE,
-                        help="--calibration: detection noise, px (default 0.3)")
+                        help="--calibration, --more: detection noise, px (default 0.3; the "
+                             "fusion states its default 0.5 whatever it is)")
+    parser.add_argument("--timing", choices=("sync", "typeB"), default=None,
+                        help="--more: every rig's shutters at this preset (sync, typeB, "
+                             "linear need shared instants)")
     parser.add_argument("--fps", default=None,
                         help="--more: comma-separated camera rates to run every rig at "
                              "(e.g. 60,120,240; default: the rigs' own, 30)")

@@ -12,6 +12,8 @@ degrees of freedom ``-2 ln(1 - p)``): a threshold edited without its reason fail
 | ``filter._chi2_quantile(dof)`` | χ² 99.9 % by Wilson–Hilferty (above it, within 2.3 %) |
 | ``evaluation.CHI2_3D_2SIGMA`` | P(χ²₃ <= 4) |
 | ``innovation.RAYLEIGH_MEDIAN`` | median of ‖N(0, I₂)‖ = √(χ²₂ median) |
+| ``innovation.chi2_threshold(dof)`` | χ²_dof at ``1 - exp(-25/2)`` (type A's 5σ; 25 at 2 dof) |
+| ``stereo.RAYLEIGH_QUARTILE`` | lower quartile of ‖N(0, I₂)‖ |
 | ``confirm._HALF_NORMAL_MEDIAN`` | median of \\|N(0, 1)\\| |
 """
 
@@ -70,3 +72,22 @@ def test_the_evaluations_two_sigma_share_and_the_noise_medians():
     assert innovation.RAYLEIGH_MEDIAN == pytest.approx(math.sqrt(stats.chi2.ppf(0.5, 2)),
                                                        rel=1e-14)
     assert confirm._HALF_NORMAL_MEDIAN == pytest.approx(stats.norm.ppf(0.75), rel=1e-14)
+
+
+@pytest.mark.parametrize("dof", range(1, 14))
+def test_the_residual_tests_threshold_is_chi2_at_type_as_level(dof):
+    """``innovation.chi2_threshold`` (the N-view residual test, ``stereo.residual_refused``):
+    the χ² quantile at type A's 5σ level ``exp(-25/2)``, 25 at 2 dof; its closed-form
+    survival function is scipy's."""
+    p = innovation.REFUSAL_PROBABILITY
+    assert p == pytest.approx(stats.chi2.sf(25.0, 2), rel=1e-12)
+    assert innovation.chi2_threshold(dof) == pytest.approx(stats.chi2.isf(p, dof), rel=1e-10)
+    for x in (0.3, 2.0, 7.3, 21.4, 60.0):
+        assert innovation.chi2_survival(x, dof) == pytest.approx(stats.chi2.sf(x, dof),
+                                                                  rel=1e-10)
+
+
+def test_the_refusal_noise_quartile_is_rayleighs():
+    # the lower quartile of ‖N(0, I₂)‖: √(χ²₂ quartile)
+    assert stereo.RAYLEIGH_QUARTILE == pytest.approx(math.sqrt(stats.chi2.ppf(0.25, 2)),
+                                                     rel=1e-14)

@@ -137,7 +137,9 @@ def test_no_output_point_is_behind_or_outside_a_camera_that_made_it(method):
     for seed in (0, 2):
         rig, obs, _ = dirty_session(timing, seed)
         track = fuse(obs, rig, method)
-        assert len(track) > 15
+        # (sync: 13 and 15 since the N-view residual test refuses the outliers' points, 0.46-2.5
+        # m off: tests/test_fusion_residual.py)
+        assert len(track) > 12
         mask = track.quality["camera_mask"].astype(np.int64)
         assert np.all(mask > 0)
         for c, cam in enumerate(rig.cameras):
@@ -335,7 +337,7 @@ def test_stream_equals_batch_exactly_with_misses_drops_outliers_and_a_lens(metho
         rig, obs, _ = dirty_session(timing, seed)
         batch = fuse(obs, rig, method)
         parts = streamed(rig, method, obs)
-        assert len(batch) > 15
+        assert len(batch) > 12  # (sync: the outliers' points refused, as above)
         assert_array_equal(np.concatenate([p.time_ns for p in parts]), batch.time_ns)
         assert_array_equal(np.concatenate([p.camera for p in parts]), batch.camera)
         assert_array_equal(np.concatenate([p.position_world for p in parts]),

@@ -205,7 +205,7 @@ def _gap(options: FusionOptions) -> float:
 
 
 def _sync(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
-    return fuse_sync(prep, options.tolerance_s, options.noise_px)
+    return fuse_sync(prep, options.tolerance_s, options.noise_px, _gap(options))
 
 
 def _nearest(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:

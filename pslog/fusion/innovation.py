@@ -35,6 +35,9 @@ prediction. docs/methods.md, "Type A's prediction test", has the figures.
 
 from __future__ import annotations
 
+import functools
+import math
+
 import numpy as np
 
 from ..motion import G
@@ -46,6 +49,47 @@ INNOVATION_SIGMAS = 5.0
 #: The detection noise assumed when the caller gives none (FusionOptions' default), and the
 #: tests' least σ until NoiseEstimate holds NOISE_EVERY innovations.
 DEFAULT_NOISE_PX = 0.5
+#: The probability, under the model and the right noise, that a test of this module's level
+#: refuses a valid point: a 2D Gaussian innovation beyond INNOVATION_SIGMAS σ, exp(-25/2).
+#: The N-view residual test (:func:`pslog.fusion.stereo.residual_refused`) takes its χ²
+#: threshold at the same level.
+REFUSAL_PROBABILITY = math.exp(-INNOVATION_SIGMAS ** 2 / 2.0)
+
+
+def chi2_survival(x: float, dof: int) -> float:
+    """``P(χ²_dof > x)`` of an integer ``dof >= 1``, in closed form: for an even ``dof = 2m``
+    ``e^{-x/2} Σ_{j<m} (x/2)^j / j!``; for an odd ``dof = 2m + 1``
+    ``erfc(√(x/2)) + √(2x/π) e^{-x/2} Σ_{j=1..m} x^{j-1} / (1·3···(2j-1))``."""
+    if x <= 0.0:
+        return 1.0
+    if dof % 2 == 0:
+        term, total = 1.0, 1.0
+        for j in range(1, dof // 2):
+            term *= 0.5 * x / j
+            total += term
+        return math.exp(-0.5 * x) * total
+    term, total = 1.0, 0.0
+    for j in range(1, (dof - 1) // 2 + 1):
+        total += term
+        term *= x / (2 * j + 1)
+    return math.erfc(math.sqrt(0.5 * x)) + math.sqrt(2.0 * x / math.pi) * math.exp(
+        -0.5 * x) * total
+
+
+@functools.lru_cache(maxsize=64)
+def chi2_threshold(dof: int, p: float = REFUSAL_PROBABILITY) -> float:
+    """The ``x`` with ``P(χ²_dof > x) = p`` (bisection on :func:`chi2_survival`, to 1e-12
+    relative): at :data:`REFUSAL_PROBABILITY` and 2 degrees of freedom, ``25`` (type A's 5σ)."""
+    lo, hi = 0.0, 1.0
+    while chi2_survival(hi, dof) > p:
+        lo, hi = hi, 2.0 * hi
+    while hi - lo > 1e-12 * hi:
+        mid = 0.5 * (lo + hi)
+        if chi2_survival(mid, dof) > p:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
 
 
 #: Median of the norm of a 2D Gaussian of σ per axis, in σ: Rayleigh's median √(2 ln 2).

@@ -27,8 +27,8 @@ from ._prepare import (
     invalid_points,
     reprojection_px,
 )
-from .innovation import DEFAULT_NOISE_PX, contradicted
-from .stereo import count_invalid, stereo_at_common_instants, with_dropped
+from .innovation import contradicted
+from .stereo import count_invalid, refusal_noise, stereo_at_common_instants, with_dropped
 
 
 def fuse_predicted(prep: Prepared, method: str, tolerance_s: float, max_gap_s: float,
@@ -49,7 +49,7 @@ def fuse_predicted(prep: Prepared, method: str, tolerance_s: float, max_gap_s: f
     obs = prep.obs
     if len(obs) == 0:
         return Track(method, np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0, np.int32))
-    stereo, alone = stereo_at_common_instants(prep, tolerance_s, method, noise_px)
+    stereo, alone = stereo_at_common_instants(prep, tolerance_s, method, noise_px, max_gap_s)
     points, stereo_ns = stereo.position_world, stereo.time_ns
     single = np.flatnonzero(alone)  # detections with no simultaneous partner
     t_single = obs.time_ns[single]
@@ -108,9 +108,12 @@ def fuse_predicted(prep: Prepared, method: str, tolerance_s: float, max_gap_s: f
     # pslog.fusion.innovation): a change of motion inside the extrapolation, or a detection
     # that is not the ball the stereo points saw; eq. (4) would put the point on its ray
     # at the prediction's depth, metres off (docs/paper.md, "Type B's prediction test")
+    # (σ: the larger of the least stated noise, max(0.5 px, noise_px), and the detector's
+    # noise the session shows, stereo.refusal_noise: a stated noise below the real one
+    # refused good points in numbers)
     failed = contradicted(prep, single, (t_single - stereo_ns[k1]) / NS,
                           (stereo_ns[k1] - stereo_ns[k2]) / NS, predicted, own,
-                          max(DEFAULT_NOISE_PX, noise_px or 0.0))  # the least noise
+                          refusal_noise(prep, t_single, max_gap_s, noise_px))
     failed &= made & (flags == 0)
     keep = made & (flags == 0) & ~failed
     single, t_single, single_points, shift = (

@@ -338,6 +338,83 @@ def detection_noise(prep: Prepared, time_ns: np.ndarray, max_gap_s: float,
     return np.maximum(sigma, min(noise_px, NOISE_FLOOR_PX))
 
 
+#: :func:`refusal_noise` estimates σ from this quantile of the residual norms (the element
+#: ``count // 4`` of a window, sorted), over Rayleigh's at it, ``√(-2 ln 0.75)``: the median's
+#: breakdown (half the residuals) is not enough where a few false detections each spoil up to
+#: four residuals of their camera (a session's first second with 5 of 21 detections false
+#: made the median 127 px, and kept a 2.5 m sync point with a 120 px residual)
+REFUSAL_NOISE_QUANTILE = 0.25
+RAYLEIGH_QUARTILE = float(np.sqrt(-2.0 * np.log(1.0 - REFUSAL_NOISE_QUANTILE)))
+
+
+def refusal_noise(prep: Prepared, time_ns: np.ndarray, max_gap_s: float,
+                  noise_px: float | None) -> np.ndarray:
+    """The detection noise σ (pixels per axis, (k,)) that ``sync``'s residual test and
+    ``typeB`` / ``linear``'s prediction test assume at ``time_ns`` (k,): at least the least
+    noise the tests state, ``floor = max(0.5 px, noise_px)`` (0.5 px when None), and the
+    noise the session's detections show, from the residuals type A's and ``nearest``'s
+    estimators take (the detector's, in recorded pixels: each detection's residual from the
+    quadratic through its camera's three previous ones, :func:`detection_noise`) and with
+    their windows, robust to false detections for a test:
+
+    - a checkpoint ``T`` (a multiple of ``NOISE_EVERY_S`` at or before the point) with
+      ``NOISE_MIN_COUNT`` residuals in ``[T - NOISE_WINDOW_S, T)``: their lower quartile
+      over Rayleigh's (:data:`REFUSAL_NOISE_QUANTILE`; the estimators of the covariances take
+      the median);
+    - else (a session's first second, or after a pause): the same quartile of the
+      residuals in the ``NOISE_WINDOW_S`` before the point once ``NOISE_START_COUNT`` are
+      there, at most ``NOISE_UNKNOWN_PX`` (2 px); before that (the first ~0.1 s, each
+      camera's fourth detection making its first residual) the floor alone. Type A's
+      covariance takes the root mean square of those few residuals, unbounded, and 2 px
+      before any, where a larger σ is the safe side; for a test it is not: 5 false
+      detections among a session's first 21 (30 % misses) spoiled 10 of its first 12
+      residuals (a quartile of 87 px kept a 2.5 m sync point with a 120 px residual), and
+      2 px at the first frame kept a 2.1 m point (a static object chosen there, 2.8 px
+      from the ball's epipolar line). The cost: at 2 px of real noise against the stated
+      0.5 px, 2 of 180 good sync points in the first 0.1 s refused.
+
+    Causal, from the detections of the ``NOISE_EVERY_S + NOISE_WINDOW_S`` and three gaps
+    before the point (type A's estimator reaches back across a pause to the latest
+    checkpoint that had one; a window stream cannot). A stated noise below the detector's
+    real one refused good points in numbers (docs/methods.md, "The N-view residual test");
+    a larger one is never undercut."""
+    from .innovation import DEFAULT_NOISE_PX
+    from .pseudo import NOISE_START_COUNT, NOISE_UNKNOWN_PX, no_detection_limits, residual_norms
+
+    floor = max(DEFAULT_NOISE_PX, 0.0 if noise_px is None else float(noise_px))
+    time_ns = np.asarray(time_ns, dtype=np.int64)
+    if not len(time_ns):
+        return np.zeros(0)
+    obs = prep.obs
+    t_fin, v_fin = residual_norms(obs.time_ns, obs.camera, obs.uv,
+                                  no_detection_limits(prep.cameras), max_gap_s)
+    every = int(NOISE_EVERY_S * NS)
+    marks, inverse = np.unique(time_ns // every * every, return_inverse=True)
+    sigma = _window_quartiles(t_fin, v_fin, marks, NOISE_MIN_COUNT)[inverse]
+    start = np.flatnonzero(np.isnan(sigma))
+    if len(start):
+        ends, back = np.unique(time_ns[start], return_inverse=True)
+        early = _window_quartiles(t_fin, v_fin, ends, NOISE_START_COUNT)[back]
+        sigma[start] = np.minimum(early, NOISE_UNKNOWN_PX)  # (NaN: none yet: the floor)
+    return np.fmax(floor, sigma)
+
+
+def _window_quartiles(t_fin: np.ndarray, v_fin: np.ndarray, ends_ns: np.ndarray,
+                      min_count: int) -> np.ndarray:
+    """σ (k,) at each of the sorted, distinct ``ends_ns`` (k,): the element ``count // 4``
+    of the residual norms ``v_fin`` at ``t_fin`` (sorted) in ``[end - NOISE_WINDOW_S, end)``,
+    sorted, over :data:`RAYLEIGH_QUARTILE`; NaN where fewer than ``min_count`` are there (a
+    selection: the same element whatever rows lie outside the window)."""
+    lo = np.searchsorted(t_fin, ends_ns - int(NOISE_WINDOW_S * NS), side="left")
+    hi = np.searchsorted(t_fin, ends_ns, side="left")
+    out = np.full(len(ends_ns), np.nan)
+    for j in np.flatnonzero(hi - lo >= min_count).tolist():
+        window = v_fin[lo[j]:hi[j]]
+        q = len(window) // 4
+        out[j] = np.partition(window, q)[q]
+    return out / RAYLEIGH_QUARTILE
+
+
 def quadratic_residuals(prep: Prepared, uv: np.ndarray, max_gap_s: float
                         ) -> tuple[np.ndarray, np.ndarray]:
     """Each detection's residual from the quadratic through its camera's three previous
@@ -672,34 +749,107 @@ def _break_size(motion: list[SlotMotion], used: np.ndarray, noise_px: float | np
 
 
 def triangulate_groups(prep: Prepared, group: np.ndarray, n_groups: int,
-                       noise_px: float | None = 0.5, with_flags: bool = False):
+                       noise_px: float | None = 0.5, with_flags: bool = False,
+                       with_rows: bool = False):
     """N-view least-squares point of each group (one ray per camera; a camera seen twice in a
     group keeps its latest ray). Returns points (g, 3), quality {name: (g,)}
     (:func:`nview_points`), time_ns (g,) of the group's latest observation, camera (g,) of
-    that observation, and with ``with_flags`` the validity flags (g,) of
-    :func:`nview_points`."""
+    that observation, with ``with_flags`` the validity flags (g,) of :func:`nview_points`,
+    and with ``with_rows`` the rows (g, m) and the rays used (g, m)."""
     n_cams = len(prep.centers)
     rows = np.full((n_groups, n_cams), -1, dtype=np.int64)
     # the latest ray of a camera seen twice: the largest row (a fancy assignment with repeated
     # indices has no defined winner in numpy; a maximum has)
     np.maximum.at(rows, (group, prep.obs.camera), np.arange(len(group)))
-    points, quality, flags, _ = nview_points(prep, rows, noise_px)
+    points, quality, flags, used = nview_points(prep, rows, noise_px)
     last = np.r_[np.flatnonzero(np.diff(group)), len(group) - 1]  # last row of each group
-    out = points, quality, prep.obs.time_ns[last], prep.obs.camera[last]
-    return (*out, flags) if with_flags else out
+    out: tuple = (points, quality, prep.obs.time_ns[last], prep.obs.camera[last])
+    if with_flags:
+        out = (*out, flags)
+    return (*out, rows, used) if with_rows else out
+
+
+def residual_refused(prep: Prepared, rows: np.ndarray, used: np.ndarray, points: np.ndarray,
+                     time_ns: np.ndarray, sigma: np.ndarray, max_gap_s: float) -> np.ndarray:
+    """Which N-view points the reprojection residuals of their own detections contradict
+    (docs/methods.md, "The N-view residual test").
+
+    ``n`` rays (``n >= 2``) of a point seen at one instant give ``2n`` pixel coordinates for
+    3 unknowns; under the model (the detections of one ball at one instant, Gaussian noise of
+    ``σ`` per axis in the recorded image) the sum of the squared reprojection residuals
+    ``d² = Σ_c r_c²`` over ``σ²`` is χ² of ``2n - 3`` degrees of freedom (the least-squares
+    ray intersection is not the reprojection error's minimum: its ``d²`` is at least the
+    minimum's, a conservative side of at most ~1.6 for rays at 1:2 depths). The detections
+    taken as simultaneous lie up to the tolerance apart: each slot's image moved by
+    ``e_c = |u̇_c| (t - t_c)`` since its shutter, ``t`` the point's time (its latest
+    detection), ``u̇_c`` from its camera's previous detection within ``max_gap_s``
+    (:func:`slot_motion`'s ``shift``; without one, :data:`UNKNOWN_IMAGE_SPEED_PX_S`). A point
+    is refused when
+
+        ``√d² > σ √χ²_{2n-3}(1 - p) + √(Σ_c e_c²)``,   ``p = exp(-25/2)``
+
+    the level of type A's 5σ innovation test (:data:`~.innovation.REFUSAL_PROBABILITY`; at
+    ``2n - 3 = 2`` exactly ``5 σ``): a detection that is not the ball the others saw (a
+    second orange object chosen in one camera) makes rays that miss by metres, a point
+    anywhere along them. Causal: the point's own detections and their cameras' previous ones.
+
+    Parameters
+    ----------
+    rows, used : (k, m) the detection of each camera slot (-1: none) and the rays used
+    points : (k, 3) the N-view points, metres
+    time_ns : (k,) each point's time (its latest detection's)
+    sigma : (k,) the detections' noise, pixels per axis (:func:`refusal_noise`)
+
+    Returns
+    -------
+    (k,) bool, True where the residuals exceed the bound (False where fewer than two rays)
+    """
+    from .innovation import chi2_threshold
+
+    k, m = rows.shape
+    slots = np.where(used, rows, -1)
+    d2, e2 = np.zeros(k), np.zeros(k)
+    motion = slot_motion(prep, slots, time_ns, max_gap_s)
+    with np.errstate(invalid="ignore"):
+        for c in range(m):
+            on = used[:, c]
+            if not on.any():
+                continue
+            r = reprojection_one(prep, c, points, prep.uv_undistorted[np.maximum(rows[:, c], 0)])
+            d2 += np.where(on & np.isfinite(r), r * r, 0.0)
+            d2[on & ~np.isfinite(r)] = np.inf  # (a point behind a ray's camera: never kept)
+            mo = motion[c]
+            known = mo.rows[:, 1] >= 0
+            shift2 = mo.shift[:, 0] ** 2 + mo.shift[:, 1] ** 2
+            unknown = UNKNOWN_IMAGE_SPEED_PX_S * mo.lag
+            e2 += np.where(on, np.where(known, shift2, unknown * unknown), 0.0)
+    n = used.sum(axis=1)
+    bound = np.full(k, np.inf)
+    for count in np.unique(n[n >= 2]).tolist():
+        at = n == count
+        bound[at] = np.sqrt(chi2_threshold(2 * count - 3))
+    with np.errstate(invalid="ignore"):
+        return (n >= 2) & (np.sqrt(d2) > sigma * bound + np.sqrt(e2))
 
 
 def stereo_at_common_instants(
-    prep: Prepared, tolerance_s: float, method: str, noise_px: float | None = 0.5
+    prep: Prepared, tolerance_s: float, method: str, noise_px: float | None = 0.5,
+    max_gap_s: float | None = None,
 ) -> tuple[Track, np.ndarray]:
     """N-view points of every instant at which at least two cameras saw the ball.
+
+    A point whose detections' reprojection residuals exceed what the noise and the
+    tolerance explain (:func:`residual_refused`, at :func:`refusal_noise`'s σ; ``max_gap_s``:
+    how far back a camera's previous detection gives its image speed, and the noise's
+    residuals reach; None: 3.5 periods of the slowest camera) is dropped and counted in
+    ``Track.dropped`` as ``residual_failed``, like a geometrically invalid one.
 
     Returns
     -------
     track : Track named ``method``, one valid point per such instant, with its quality
     alone : (n,) bool, the detections that had no simultaneous partner
-        (``track.dropped``: the instants whose point was geometrically invalid, whose
-        detections are not ``alone`` either)
+        (``track.dropped``: the instants whose point was geometrically invalid or refused,
+        whose detections are not ``alone`` either)
     """
     group, n_cameras = sync_groups(prep.obs, len(prep.centers), tolerance_s)
     if not np.any(n_cameras >= 2):
@@ -707,18 +857,33 @@ def stereo_at_common_instants(
             f"method {method} needs cameras with a common shutter instant (sync or typeB "
             f"timing), but no two cameras captured within {tolerance_s * 1e3:g} ms of each "
             f"other; methods that suit this session: nearest, typeA")
-    points, quality, time_ns, camera, flags = triangulate_groups(
-        prep, group, len(n_cameras), noise_px, with_flags=True)
+    points, quality, time_ns, camera, flags, rows, used = triangulate_groups(
+        prep, group, len(n_cameras), noise_px, with_flags=True, with_rows=True)
     # made: two usable rays, so an invalid point (exactly parallel rays give none) is counted
     made = (n_cameras >= 2) & (quality["n_detections"] >= 2)
     keep = made & (flags == 0) & np.all(np.isfinite(points), axis=1)
+    if max_gap_s is None:
+        max_gap_s = 3.5 / min(c.fps for c in prep.cameras)  # (_prepare.default_max_gap_s)
+    at = np.flatnonzero(keep)
+    refused = np.zeros(len(keep), dtype=bool)
+    refused[at] = residual_refused(
+        prep, rows[at], used[at], points[at], time_ns[at],
+        refusal_noise(prep, time_ns[at], max_gap_s, noise_px), max_gap_s)
+    keep &= ~refused
+    n_refused = int(np.count_nonzero(refused))
     track = Track(method, time_ns[keep], points[keep], camera[keep],
                   {k: v[keep] for k, v in quality.items()})
-    return with_dropped(track, count_invalid(flags[made])), n_cameras[group] == 1
+    return (with_dropped(track, count_invalid(flags[made]),
+                         {RESIDUAL_FAILED: n_refused} if n_refused else {}),
+            n_cameras[group] == 1)
 
 
-def fuse_sync(prep: Prepared, tolerance_s: float = 1e-3, noise_px: float | None = 0.5
-              ) -> Track:
+#: Track.dropped's reason for an N-view point its detections' residuals contradict.
+RESIDUAL_FAILED = "residual_failed"
+
+
+def fuse_sync(prep: Prepared, tolerance_s: float = 1e-3, noise_px: float | None = 0.5,
+              max_gap_s: float | None = None) -> Track:
     """``sync``: N-view triangulation of detections captured within ``tolerance_s`` (the
     paper's "synchronized" row of Table 1: "general stereo vision with no time delay").
 
@@ -726,13 +891,15 @@ def fuse_sync(prep: Prepared, tolerance_s: float = 1e-3, noise_px: float | None 
     invalid (dropped and counted in ``Track.dropped``): the least-squares intersection of
     their viewing rays (:func:`~pslog.geometry.triangulate_rays`; with two rays, the midpoint
     of the common perpendicular, the paper's "crossing point" of section 2.2, step 3), every
-    ray parameter positive. ``std_m`` / ``cov_*``: first order at ``noise_px`` per axis on
-    each recorded pixel (``tests/test_fusion_validity.py``, hand-computed on a rectified
-    pair).
+    ray parameter positive, and unless its detections' reprojection residuals contradict it
+    (:func:`residual_refused`: a detection that is not the ball the others saw; dropped and
+    counted as ``residual_failed``). ``std_m`` / ``cov_*``: first order at ``noise_px`` per
+    axis on each recorded pixel (``tests/test_fusion_validity.py``, hand-computed on a
+    rectified pair). ``max_gap_s``: :func:`stereo_at_common_instants`'.
     """
     if len(prep.obs) == 0:
         return _empty("sync")
-    return stereo_at_common_instants(prep, tolerance_s, "sync", noise_px)[0]
+    return stereo_at_common_instants(prep, tolerance_s, "sync", noise_px, max_gap_s)[0]
 
 
 def fuse_nearest(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,

@@ -89,10 +89,17 @@ class StreamFuser:
         # each slot's newest detection's residual from its camera's three previous ones for
         # a break (stereo.innovations: four times max_gap_s back; within the noise's reach
         # unless max_gap_s exceeds NOISE_EVERY_S + NOISE_WINDOW_S).
+        # ``sync``, ``typeB`` and ``linear`` test each stereo point (and typeB / linear each
+        # prediction) at the detections' noise (stereo.refusal_noise: nearest's estimator)
+        # at the point's time, a stereo point up to max_gap_s before the point to emit, and
+        # the residual test takes each slot's image speed from its camera's previous
+        # detection (within max_gap_s): max_gap_s more than nearest's noise reach.
         reach_s = self._max_gap_s
         if method == "nearest":
             reach_s = max(NOISE_EVERY_S + NOISE_WINDOW_S + 3 * self._max_gap_s,
                           4 * self._max_gap_s)
+        elif method in ("sync", "typeB", "linear"):
+            reach_s = NOISE_EVERY_S + NOISE_WINDOW_S + 4 * self._max_gap_s
         self._history_ns = int((reach_s + self.options.tolerance_s) * NS) + 1
         self._settle_ns = 0 if self._immediate else int(self.options.tolerance_s * NS)
         self._F = fundamental_matrices(rig.cameras)
