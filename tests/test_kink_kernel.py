@@ -217,23 +217,107 @@ def _turntable(n_cameras: int, noise: float, seed: int):
     return det.best(), rig
 
 
-@pytest.mark.parametrize("n_cameras,noise", [(2, 0.0), (3, 0.3), (4, 1.0)])
-def test_fuse_kinks_equal_reference(monkeypatch, n_cameras, noise):
-    """fuse() on real sessions: the compiled test's flags and dropped counts are the
-    columnar reference's."""
+def _reference_fuse_type_a(prep, max_gap_s, noise_px, events=None, seen=None, noise=None,
+                           explain=True, cov_noise_px=None):
+    """fuse_type_a as it was before its decisions moved into the kernel's loop: the kernel
+    on every target without deciding (each point's prediction, innovation terms and past
+    points in (k,) columns), then the tests on the columns: NoiseEstimate.sigmas, the
+    prediction test and the columnar reference of the kink test (_reference_kinked)."""
     from pslog.fusion import pseudo
+    from pslog.fusion.stereo import count_invalid
+    from pslog.records import Track
+
+    assert events is None and seen is None and noise is None and not explain
+    assert prep.doubt_px2 is None  # (best() detections: no choice in doubt)
+    time_ns, n = prep.obs.time_ns, len(prep.obs)
+    prev_b, next_b, previous_instant = pseudo._all_brackets(prep)
+    cam, ki, rr, rtki, f9, lens = _pseudo_kernel.camera_tables(prep)
+    k = n
+    ff = np.empty((2, 1, len(_pseudo_kernel.FLOATS)))
+    fi = np.empty((2, 1, len(_pseudo_kernel.INTS)), dtype=np.int64)
+    past_rows, past_points = np.empty((2, k, 3), dtype=np.int64), np.empty((2, k, 3))
+    refused, has = np.zeros(n, dtype=np.int64), np.empty(k, dtype=bool)
+    predicted, points = np.empty((k, 3)), np.empty((k, 3))
+    flags = np.empty(k, dtype=np.int64)
+    innov, factor, model = np.empty(k), np.empty(k), np.empty(k)
+    quality_table = np.empty((len(pseudo._QUALITY), k))
+    rows_out = np.empty(k, dtype=np.int64)
+    var_px = float(noise_px if cov_noise_px is None else cov_noise_px)
+    max_gap_ns = int(max_gap_s * NS)
+    args = (np.arange(n), previous_instant, 2 * len(prep.centers), pseudo.MAX_EXTRAPOLATION,
+            max_gap_ns, time_ns, prep.obs.camera, prev_b, next_b, prep.uv_undistorted,
+            prep.observed_rays, prep.centers, ki, rr, f9, cam, pseudo._SPAN_TIE_NS,
+            pseudo.MIN_RAY_ANGLE_DEG, prep.ray_dir, prep.observed_direction_jacobians,
+            pseudo._jacobian_rows(prep) if lens else np.zeros((1, 4)), lens, rtki, NS, var_px,
+            True, ff, fi, refused, has, predicted, points, flags, innov, factor, model,
+            quality_table, past_rows, past_points)
+    made = _pseudo_kernel.type_a_kernel(
+        *args, False, 0.0, np.empty(0), 0, prep.lens_rows, np.empty(0, dtype=np.int64),
+        np.empty(0, dtype=np.int64), np.empty(0), np.empty(0), np.zeros(0, dtype=bool),
+        rows_out, np.zeros(8, dtype=np.int64), np.empty(1))
+    events = rows_out[:made]
+    predicted, points, flags = predicted[:made], points[:made], flags[:made]
+    innov, factor, model = innov[:made], factor[:made], model[:made]
+    finite = np.all(np.isfinite(points), axis=1)
+    good = finite & (flags == 0)
+    with np.errstate(invalid="ignore"):
+        sigma = innovation.NoiseEstimate().sigmas(np.where(good, innov, np.nan) / factor,
+                                                  noise_px)
+        failed = good & (innov > innovation.INNOVATION_SIGMAS * (sigma * factor) + model)
+    # the σ the kernel takes in its loop (deciding) at each point it keeps: the reference's
+    before, after = innovation.previous_next_rows(prep)
+    change, root = np.empty(n), np.empty(n)
+    _pseudo_kernel.bend_rows(time_ns, prep.uv_undistorted, before, after, NS, change, root)
+    kept_rows, sigmas = np.empty(k, dtype=np.int64), np.empty(k)
+    kept = _pseudo_kernel.type_a_kernel(
+        *args[:28], np.zeros(n, dtype=np.int64), np.empty(k, dtype=bool), np.empty((k, 3)),
+        np.empty((k, 3)), np.empty(k, dtype=np.int64), np.empty(k), np.empty(k), np.empty(k),
+        np.empty((len(pseudo._QUALITY), k)), np.empty((2, k, 3), dtype=np.int64),
+        np.empty((2, k, 3)), True, float(noise_px), np.empty(k), 0, prep.lens_rows, before,
+        after, change, root, np.zeros(0, dtype=bool), kept_rows, np.empty(8, dtype=np.int64),
+        sigmas)
+    assert sigmas[:kept].tobytes() == sigma[np.searchsorted(events, kept_rows[:kept])].tobytes()
+    p1, p2 = (SimpleNamespace(row=past_rows[s, :made, 0], prev_row=past_rows[s, :made, 1],
+                              next_row=past_rows[s, :made, 2], points_world=past_points[s, :made])
+              for s in range(2))
+    kinked = good & ~failed & _reference_kinked(prep, events, (p1, p2, predicted), sigma,
+                                                max_gap_ns)
+    keep = good & ~failed & ~kinked
+    dropped = dict(count_invalid(flags[finite]))
+    dropped.update((f"past_{r}", c) for r, c in count_invalid(refused).items())
+    if failed.any():
+        dropped["prediction_failed"] = int(failed.sum())
+    if kinked.any():
+        dropped["kink"] = int(kinked.sum())
+    quality = {name: column[:made][keep] for name, column in zip(pseudo._QUALITY,
+                                                                  quality_table, strict=True)}
+    return Track("typeA", time_ns[events[keep]], points[keep],
+                 prep.obs.camera[events[keep]], quality, dropped), None
+
+
+@pytest.mark.parametrize("n_cameras,noise", [(2, 0.0), (3, 0.3), (4, 1.0)])
+def test_fuse_decisions_equal_columnar_reference(monkeypatch, n_cameras, noise):
+    """fuse() on real sessions: the decisions type A's kernel takes in its loop (the tests'
+    noise estimate, the prediction test, the kink test) keep and drop the points the
+    columnar reference does (the former fuse_type_a: NoiseEstimate.sigmas, the prediction
+    test and the kink test on (k,) columns), with the same counts and the same bits."""
+    import pslog.fusion
 
     obs, rig = _turntable(n_cameras, noise, seed=7)
     compiled = fuse(obs, rig, "typeA")
     calls = []
 
-    def reference(*args):
-        calls.append(len(args[1]))
-        return _reference_kinked(*args)
+    def reference(*args, **kwargs):
+        calls.append(len(args[0].obs))
+        return _reference_fuse_type_a(*args, **kwargs)
 
-    monkeypatch.setattr(pseudo, "kinked_points", reference)
+    monkeypatch.setattr(pslog.fusion, "fuse_type_a", reference)
     columnar = fuse(obs, rig, "typeA")
-    assert calls and sum(calls) > 20
+    assert calls
     assert compiled.dropped == columnar.dropped
+    assert compiled.dropped.get("kink", 0) > 0 and compiled.dropped.get("prediction_failed", 0) > 0
     assert compiled.time_ns.tobytes() == columnar.time_ns.tobytes()
     assert compiled.position_world.tobytes() == columnar.position_world.tobytes()
+    assert compiled.quality.keys() == columnar.quality.keys()
+    for name, column in compiled.quality.items():
+        assert column.tobytes() == columnar.quality[name].tobytes(), name

@@ -14,7 +14,7 @@ from test_stream_gating import assert_same_track, push_frames
 
 from pslog.evaluation import errors_m
 from pslog.fusion import METHODS, FusionOptions, fuse
-from pslog.fusion.pseudo import _KinkPast, rests_on_doubt
+from pslog.fusion._pseudo_kernel import _rests_on_doubt
 from pslog.fusion.stream import StreamFuser
 from pslog.motion import rally_motion
 from pslog.records import Track
@@ -23,8 +23,22 @@ from pslog.simulation import SimulationOptions, simulate_labelled
 
 
 def _past(row, prev_row, next_row):
-    row, prev_row, next_row = (np.array(x, np.int64) for x in (row, prev_row, next_row))
-    return _KinkPast(row, prev_row, next_row, np.zeros((len(row), 3)))
+    return [np.array(x, np.int64) for x in (row, prev_row, next_row)]
+
+
+def rests_on_doubt(doubt_px2, events, past):
+    """Type A's kernel's rule (_pseudo_kernel._rests_on_doubt, compiled and its Python
+    original) for each point: its newest row ``events``, its past points ``past`` (two
+    (rows, prev, next) of k rows), the rows in doubt where ``doubt_px2 > 0``."""
+    doubted = doubt_px2 > 0
+    (r1, p1, n1), (r2, p2, n2) = past
+    out = []
+    for i, e in enumerate(events.tolist()):
+        rows = (e, r1[i], p1[i], n1[i], r2[i], p2[i], n2[i])
+        got = [bool(f(doubted, *rows)) for f in (_rests_on_doubt, _rests_on_doubt.py_func)]
+        assert got[0] == got[1]
+        out.append(got[0])
+    return np.array(out, dtype=bool)
 
 
 def test_a_point_rests_on_doubt_through_its_own_row_its_past_points_or_their_brackets():

@@ -282,3 +282,30 @@ def test_the_compiled_selection_is_the_sorted_element():
                 assert _pseudo_kernel._select(scratch, count, k) == expected[k]
                 # (reordered in place, the same values)
                 assert_array_equal(np.sort(scratch[:count]), expected)
+
+
+def test_the_selection_near_a_hint_is_the_sorted_element_whatever_the_hint():
+    """_pseudo_kernel._select_near (the checkpoints' and the tests' noise medians, looked for
+    first near the previous one): the element ``np.sort(values[:count])[k]`` whatever the
+    hint and band: inside the values, at a tie, beyond them on either side, of zero width,
+    NaN (no band), on random, sorted, tied and all-equal windows; the band a few values."""
+    from pslog.fusion import _pseudo_kernel
+
+    rng = np.random.default_rng(13)
+    windows = [rng.rayleigh(0.5, 256), np.sort(rng.rayleigh(0.5, 64)),
+               np.round(rng.rayleigh(0.5, 101), 1), np.full(17, 0.25), np.array([0.5]),
+               np.concatenate([np.full(40, 1.0), np.full(40, 0.5), [0.0, 3.0]])]
+    for values in windows:
+        count = len(values)
+        expected = np.sort(values)
+        half = count // 2
+        hints = [(expected[half], 0.1 * expected[half]), (expected[half], 0.0),
+                 (expected[0], 0.01), (expected[-1] + 1.0, 0.5), (-1.0, 0.5),
+                 (expected[min(half + 3, count - 1)], 0.05), (np.nan, np.nan)]
+        for hint, width in hints:
+            for k in sorted({0, half, count - 1}):
+                for fn in (_pseudo_kernel._select_near, _pseudo_kernel._select_near.py_func):
+                    scratch, band = values.copy(), np.empty(count)
+                    assert fn(scratch, count, k, hint, width, band) == expected[k], (
+                        hint, width, k)
+                    assert_array_equal(np.sort(scratch), expected)

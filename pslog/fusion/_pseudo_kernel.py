@@ -32,7 +32,12 @@ from ..motion import G as _G
 from ._prepare_kernel import homogeneous as _homogeneous
 from ._prepare_kernel import previous_next
 from ._prepare_kernel import ray as _ray
+from .innovation import DEFAULT_NOISE_PX as _DEFAULT_NOISE_PX
+from .innovation import INNOVATION_SIGMAS as _INNOVATION_SIGMAS
 from .innovation import KINK_SIGMAS as _KINK_SIGMAS
+from .innovation import NOISE_EVERY as _NOISE_EVERY
+from .innovation import NOISE_WINDOW as _NOISE_WINDOW
+from .innovation import RAYLEIGH_MEDIAN as _RAYLEIGH_MEDIAN
 
 #: geometry._PARALLEL_EPS: rays whose cross product is this small (relative) do not cross.
 _PARALLEL_EPS = 1e-12
@@ -342,7 +347,9 @@ def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_n
                   camera, prev_b, next_b, uv, observed_rays, centers, ki, rr, f9, cam,
                   span_tie_ns, min_angle_deg, ray_dir, obs_jac, jac4, lens, rtki, ns,
                   noise_px, with_cov, ff, fi, refused, has, predicted, points, flags,
-                  innovation, factor, model, quality, past_rows, past_points):
+                  innovation, factor, model, quality, past_rows, past_points, decide, floor,
+                  noise_values, noise_count, lens_table, row_before, row_after, bend_change,
+                  bend_root, doubted, rows_out, counts, sigmas):
     """Type A's point at each detection of ``targets`` (k,), sorted global rows.
 
     The two past points: for each target, the latest rows of the 1st, 2nd, ... distinct
@@ -385,7 +392,32 @@ def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_n
     callers that keep no construction; ``past_rows`` (2, k, 3) int64 (row, prev, next) and
     ``past_points`` (2, k, 3) float64 receive each point's two past points either way (what
     the kink test reads), 96 bytes a point instead of the tables' 416 (fresh memory's page
-    faults were a quarter of a session's time).
+    faults were a quarter of a session's time). ``predicted``, and ``flags``,
+    ``innovation``, ``factor``, ``model``, have k places or one (a scratch place), and
+    ``past_rows``, ``past_points`` k places or one (``(2, 1, 3)``). ``rows_out`` (k,): each
+    output place's target row.
+
+    ``decide``: also the decisions :func:`pslog.fusion.pseudo.fuse_type_a` takes on each
+    point made, in the same loop (the outputs' places then hold only the points kept):
+
+    - the tests' noise ``σ`` (:meth:`pslog.fusion.innovation.NoiseEstimate.sigmas`, the same
+      selections): ``max(floor, DEFAULT_NOISE_PX)`` until ``NOISE_EVERY`` innovations are
+      taken, then ``max(floor, m / RAYLEIGH_MEDIAN)``, ``m`` the upper median of the last
+      ``NOISE_WINDOW`` innovations before the latest multiple of ``NOISE_EVERY`` taken before
+      the point; ``noise_values`` (L + k,) holds the estimate's last L innovations
+      (``noise_count`` taken so far) and receives each finite, valid point's
+      ``innovation / factor`` after them;
+    - the prediction test (``innovation > INNOVATION_SIGMAS σ factor + model``), the kink
+      test (:func:`_kinked`; ``row_before``, ``row_after`` (n,) each row's previous and next
+      row of its camera, ``bend_change``, ``bend_root`` :func:`bend_rows`' tables,
+      ``lens_table`` (m, 8)) and
+      whether the point rests on a row in ``doubted`` ((n,) bool, or (0,): none);
+    - ``counts`` (8,) int64, written: the finite points' flags BEHIND, OUTSIDE_VIEW,
+      PARALLEL, then the points failed, kinked, in doubt, the innovations taken in all
+      (``noise_count`` after), the points made; ``sigmas`` (k,) or (1,): each output
+      place's σ (k places: the tests read them; one: a scratch place).
+
+    Returns the number of output places written (the points made; ``decide``: kept).
     """
     m = centers.shape[0]
     slots = np.empty(7, dtype=np.int64)
@@ -399,9 +431,29 @@ def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_n
     r = np.empty(3)
     q = np.empty(3)
     made = 0
+    # (decide: the noise estimate's state, its checkpoint's median made once, bend tables)
+    every = _NOISE_EVERY
+    offset = noise_count - (noise_values.shape[0] - targets.shape[0])  # global index - place
+    taken_n = noise_count
+    median_at = np.int64(-1)
+    median = np.nan  # (the previous checkpoint's median: the next one's hint)
+    window = np.empty(_NOISE_WINDOW)
+    band = np.empty(_NOISE_WINDOW)
+    start_sigma = floor
+    if _DEFAULT_NOISE_PX > start_sigma:  # (max(floor, DEFAULT_NOISE_PX), Python's)
+        start_sigma = _DEFAULT_NOISE_PX
+    tables = bend_change.shape[0] > 0
+    focal_ok = _focal_ok(lens_table)
+    any_doubt = doubted.shape[0] > 0
+    if decide:
+        for j in range(8):
+            counts[j] = 0
     for target in range(targets.shape[0]):
         e = targets[target]
         i = made  # (the point's place in the outputs: the targets with a point, packed)
+        pq = i if predicted.shape[0] > 1 else 0  # (k places, or a scratch place)
+        pl = i if innovation.shape[0] > 1 else 0  # (flags, innovation, factor, model)
+        pr = i if past_rows.shape[1] > 1 else 0
         # (the place in the tables: i, or 0 in tables of one place, a scratch row for
         # callers that keep no construction; past_rows/past_points keep what they need)
         at = i if ff.shape[1] > 1 else 0
@@ -439,11 +491,10 @@ def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_n
         has[target] = second >= 0
         if second < 0:
             continue
-        made += 1
         for pp in range(2):  # the past points' rows (row, bracket) and points, compact
             for j in range(3):
-                past_rows[pp, i, j] = fi[pp, at, j if j == 0 else j + 1]
-                past_points[pp, i, j] = ff[pp, at, 7 + j]
+                past_rows[pp, pr, j] = fi[pp, at, j if j == 0 else j + 1]
+                past_points[pp, pr, j] = ff[pp, at, 7 + j]
         slots[0], slots[1], slots[2], slots[3] = e, fi[0, at, 0], fi[0, at, 2], fi[0, at, 3]
         slots[4], slots[5], slots[6] = fi[1, at, 0], fi[1, at, 2], fi[1, at, 3]
         for s in range(7):
@@ -453,11 +504,11 @@ def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_n
         # eq. (2): linear prediction with the actual capture intervals
         ratio = (t_event - t1) / (t1 - t2)
         for j in range(3):
-            predicted[i, j] = ff[0, at, 7 + j] + ratio * (ff[0, at, 7 + j] - ff[1, at, 7 + j])
+            predicted[pq, j] = ff[0, at, 7 + j] + ratio * (ff[0, at, 7 + j] - ff[1, at, 7 + j])
         # eqs. (3)-(4): nearest point on the newest viewing ray
         d0, d1, d2 = ray_dir[e, 0], ray_dir[e, 1], ray_dir[e, 2]
         for j in range(3):
-            q[j] = predicted[i, j] - centers[c0, j]
+            q[j] = predicted[pq, j] - centers[c0, j]
         k_foot = _dot3(q[0], q[1], q[2], d0, d1, d2) / _dot3(d0, d1, d2, d0, d1, d2)
         pt0 = k_foot * d0 + centers[c0, 0]
         pt1 = k_foot * d1 + centers[c0, 1]
@@ -474,25 +525,25 @@ def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_n
                         break
         if not (k_foot > 0):
             bits |= 1  # eq. (4)'s k: the foot behind the newest camera
-        flags[i] = bits
+        flags[pl] = bits
         res[0], res[1], res[2], res[3] = ff[0, at, 5], ff[0, at, 6], ff[1, at, 5], ff[1, at, 6]
         # the newest detection against the prediction, before eq. (4) moves it onto its ray
-        res[4] = _reprojection(cam, c0, predicted[i, 0], predicted[i, 1], predicted[i, 2],
+        res[4] = _reprojection(cam, c0, predicted[pq, 0], predicted[pq, 1], predicted[pq, 2],
                                uv[e, 0], uv[e, 1])
-        innovation[i] = res[4]
+        innovation[pl] = res[4]
         # the prediction test's terms (innovation.failed_predictions, operation for
         # operation): the noise factor of ρ = δ_pred / δ_prev and the model's bound
         delta_pred = (t_event - t1) / ns
         delta_prev = (t1 - t2) / ns
         rho = delta_pred / delta_prev
-        factor[i] = math.sqrt(1.0 + (1.0 + rho) * (1.0 + rho) + rho * rho)
+        factor[pl] = math.sqrt(1.0 + (1.0 + rho) * (1.0 + rho) + rho * rho)
         distance = q[0] * q[0] + q[1] * q[1]  # (np.linalg.norm's order)
         distance += q[2] * q[2]
         distance = math.sqrt(distance)
         z_axis = q[0] * cam[c0, 15] + q[1] * cam[c0, 16]  # (np.sum's order; R[2]: the axis)
         z_axis += q[2] * cam[c0, 17]
         focal = _max(cam[c0, 0], cam[c0, 4])
-        model[i] = (0.5 * _G * delta_pred * (delta_pred + delta_prev) * focal * distance
+        model[pl] = (0.5 * _G * delta_pred * (delta_pred + delta_prev) * focal * distance
                     / (z_axis * z_axis))
         # slots holding a detection no earlier slot holds
         n_distinct = 1
@@ -511,9 +562,9 @@ def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_n
         quality[0, i] = _max(ff[0, at, 1], ff[1, at, 1])
         # measured before the snap: after it the rays cross by construction
         quality[1, i] = _max(ff[0, at, 4], ff[1, at, 4])
-        shift = (pt0 - predicted[i, 0]) * (pt0 - predicted[i, 0])
-        shift += (pt1 - predicted[i, 1]) * (pt1 - predicted[i, 1])
-        shift += (pt2 - predicted[i, 2]) * (pt2 - predicted[i, 2])
+        shift = (pt0 - predicted[pq, 0]) * (pt0 - predicted[pq, 0])
+        shift += (pt1 - predicted[pq, 1]) * (pt1 - predicted[pq, 1])
+        shift += (pt2 - predicted[pq, 2]) * (pt2 - predicted[pq, 2])
         quality[2, i] = math.sqrt(shift)
         quality[3, i] = _min(ff[0, at, 3], ff[1, at, 3]) * _DEGREES
         worst = res[0]
@@ -551,8 +602,58 @@ def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_n
         e2 = q[2] - along_q * ra2 - bias * ra2 - _G * h
         quality[17, i] = bias * bias
         quality[18, i] = e0 * e0 + e1 * e1 + e2 * e2
-        spread = factor[i] * distance / focal
+        spread = factor[pl] * distance / focal
         quality[19, i] = spread * spread
+        rows_out[i] = e
+        if decide:
+            counts[7] += 1
+            finite = math.isfinite(pt0) and math.isfinite(pt1) and math.isfinite(pt2)
+            if finite:
+                for j in range(3):
+                    if bits & (1 << j):
+                        counts[j] += 1
+            good = finite and bits == 0
+            # the tests' noise (NoiseEstimate.sigmas: its checkpoint's upper median, a
+            # selection, the same element)
+            sigma = start_sigma
+            mark = taken_n // every * every
+            if mark >= every:
+                if mark != median_at:
+                    lo = max(mark - _NOISE_WINDOW, 0) - offset
+                    count = mark - offset - lo
+                    for j in range(count):
+                        window[j] = noise_values[lo + j]
+                    median = _select_near(window, count, count // 2, median, 0.1 * median,
+                                          band)
+                    median_at = mark
+                implied = median / _RAYLEIGH_MEDIAN
+                sigma = floor if floor >= implied else implied  # (np.maximum, no NaN)
+            sigmas[i if sigmas.shape[0] > 1 else 0] = sigma
+            value = innovation[pl] / factor[pl]
+            if good and value == value:  # (taken: after its own σ)
+                noise_values[taken_n - offset] = value
+                taken_n += 1
+            failed = good and innovation[pl] > _INNOVATION_SIGMAS * (sigma * factor[pl]) \
+                + model[pl]
+            kinked = good and not failed and _kinked(
+                e, fi[0, at, 0], fi[0, at, 2], fi[0, at, 3], ff[0, at, 7], ff[0, at, 8],
+                ff[0, at, 9], fi[1, at, 0], fi[1, at, 2], fi[1, at, 3], ff[1, at, 7],
+                ff[1, at, 8], ff[1, at, 9], predicted[pq, 0], predicted[pq, 1],
+                predicted[pq, 2], sigma, row_before, row_after, time_ns, uv, camera,
+                lens_table, max_gap_ns, ns, tables, bend_change, bend_root, focal_ok)
+            keep = good and not failed and not kinked
+            if failed:
+                counts[3] += 1
+            if kinked:
+                counts[4] += 1
+            if keep and any_doubt and _rests_on_doubt(
+                    doubted, e, fi[0, at, 0], fi[0, at, 2], fi[0, at, 3], fi[1, at, 0],
+                    fi[1, at, 2], fi[1, at, 3]):
+                counts[5] += 1
+                keep = False
+            if not keep:
+                continue
+        made += 1
         if not with_cov:
             continue
         # the newest ray's turn: ((rᵀq) I + r qᵀ) G, G its direction's Jacobian
@@ -698,6 +799,8 @@ def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_n
             quality[11 + n, i] = (nl[a, 0] * nl[b, 0] + nl[a, 1] * nl[b, 1]
                                   + r[a] * r[b] * along) * var
         quality[10, i] = math.sqrt(quality[11, i] + quality[12, i] + quality[13, i])
+    if decide:
+        counts[6] = taken_n
     return made
 
 
@@ -853,12 +956,89 @@ def _quiet(held, change, root, sigma, calm):
     return held and calm and change <= _KINK_SIGMAS * (sigma * root)
 
 
+@kernel(inline=True)
+def _kinked(event, row1, prev1, next1, x1, y1, z1, row2, prev2, next2, x2, y2, z2, qx, qy, qz,
+            sg, before, after, time_ns, uv, camera, lens, max_gap_ns, ns, tables, change, root,
+            focal_ok):
+    """One point's kink flag (:func:`kink_kernel`'s per-point test, which
+    :func:`type_a_kernel` also runs in its loop): ``event`` its newest row, ``row``, ``prev``,
+    ``next`` and ``(x, y, z)`` (metres) of ``P_{t-1}`` (1) and ``P_{t-2}`` (2), ``(qx, qy,
+    qz)`` eq. (2)'s prediction, ``sg`` its noise (px), ``tables`` whether ``change`` and
+    ``root`` hold :func:`bend_rows`' tables, ``focal_ok`` (m,) each camera's ``max(fx, fy)
+    >= 0``; the other arguments :func:`kink_kernel`'s."""
+    t_event = time_ns[event]
+    speed = (math.sqrt((x1 - x2) * (x1 - x2) + (y1 - y2) * (y1 - y2) + (z1 - z2) * (z1 - z2))
+             / ((time_ns[row1] - time_ns[row2]) / ns))
+    calm = speed >= 0.0
+    kinked = False
+    for s in range(2):
+        prev = prev1 if s == 0 else prev2
+        nxt = next1 if s == 0 else next2
+        px = x1 if s == 0 else x2
+        py = y1 if s == 0 else y2
+        pz = z1 if s == 0 else z2
+        first = before[prev] if prev >= 0 else -1
+        # a bend at prev: the change lies between prev and next if the triplet after
+        # bends too, or (that one still to come) if the triplet before does not
+        # (_quiet first: most triplets are decided by bend_rows' tables, no divisions)
+        b = max(prev, 0)
+        quiet = _quiet(tables and prev >= 0 and before[b] == first and after[b] == nxt,
+                       change[b] if tables else 0.0, root[b] if tables else 0.0, sg,
+                       calm and focal_ok[camera[b]])
+        if not quiet and _bent(first, prev, nxt, event, t_event, max_gap_ns, px, py, pz,
+                               speed, sg, time_ns, uv, camera, lens, ns):
+            later = after[nxt] if nxt >= 0 else -1
+            if (prev >= 0 and nxt >= 0 and later >= 0 and later <= event
+                    and t_event - time_ns[prev] <= 2 * max_gap_ns):  # the one after: has
+                quiet = _quiet(tables and before[nxt] == prev and after[nxt] == later,
+                               change[nxt] if tables else 0.0,
+                               root[nxt] if tables else 0.0, sg,
+                               calm and focal_ok[camera[nxt]])
+                kinked = kinked or (not quiet and _bend(
+                    prev, nxt, later, px, py, pz, speed, sg, time_ns, uv, camera, lens,
+                    ns))
+            else:
+                zero = before[first] if first >= 0 else -1
+                b = max(first, 0)
+                quiet = _quiet(tables and first >= 0 and before[b] == zero
+                               and after[b] == prev, change[b] if tables else 0.0,
+                               root[b] if tables else 0.0, sg,
+                               calm and focal_ok[camera[b]])
+                kinked = kinked or not (not quiet and _bent(
+                    zero, first, prev, event, t_event, max_gap_ns, px, py, pz, speed, sg,
+                    time_ns, uv, camera, lens, ns))
+    # the newest camera: its last triplet bends at b, the change between b and the
+    # newest detection (or between a and b, if the triplet before bends too); refused
+    # when that interval lies inside eq. (2)'s span, from P_{t-2} on (before it, the
+    # past points are already on the new motion)
+    if not kinked:
+        b = before[event]
+        a = before[b] if b >= 0 else -1
+        h = max(b, 0)
+        quiet = _quiet(tables and b >= 0 and before[h] == a and after[h] == event,
+                       change[h] if tables else 0.0, root[h] if tables else 0.0, sg,
+                       calm and focal_ok[camera[h]])
+        if not quiet and _bent(a, b, event, event, t_event, max_gap_ns, qx, qy, qz,
+                               speed, sg, time_ns, uv, camera, lens, ns):
+            start = time_ns[max(b, 0)]
+            zero = before[a] if a >= 0 else -1
+            h = max(a, 0)
+            quiet = _quiet(tables and a >= 0 and before[h] == zero and after[h] == b,
+                           change[h] if tables else 0.0, root[h] if tables else 0.0, sg,
+                           calm and focal_ok[camera[h]])
+            if not quiet and _bent(zero, a, b, event, t_event, max_gap_ns, qx, qy, qz,
+                                   speed, sg, time_ns, uv, camera, lens, ns):
+                start = time_ns[max(a, 0)]
+            kinked = start >= time_ns[row2]
+    return kinked
+
+
 @kernel
 def kink_kernel(events, rows1, prev1, next1, world1, rows2, prev2, next2, world2, predicted,
                 sigma, before, after, time_ns, uv, camera, lens, max_gap_ns, ns, out,
                 change, root):
     """Type A's kink flags, point by point (:func:`pslog.fusion.innovation.kinked_points`,
-    whose docstring derives the test and names the triplets).
+    whose docstring derives the test and names the triplets; :func:`_kinked` each point's).
 
     events (k,) int64, rows of the newest detections; rows/prev/next (k,) int64 and world
     (k, 3) metres of ``P_{t-1}`` (1) and ``P_{t-2}`` (2); predicted (k, 3) metres; sigma (k,)
@@ -869,80 +1049,39 @@ def kink_kernel(events, rows1, prev1, next1, world1, rows2, prev2, next2, world2
     terms made where it is read, as a stream's one point does).
     """
     tables = change.shape[0] > 0
+    focal_ok = _focal_ok(lens)
+    for i in range(len(events)):
+        out[i] = _kinked(events[i], rows1[i], prev1[i], next1[i], world1[i, 0], world1[i, 1],
+                         world1[i, 2], rows2[i], prev2[i], next2[i], world2[i, 0],
+                         world2[i, 1], world2[i, 2], predicted[i, 0], predicted[i, 1],
+                         predicted[i, 2], sigma[i], before, after, time_ns, uv, camera, lens,
+                         max_gap_ns, ns, tables, change, root, focal_ok)
+
+
+@kernel(inline=True)
+def _rests_on_doubt(doubted, event, row1, prev1, next1, row2, prev2, next2):
+    """Whether a type-A point uses a detection whose gate choice is in doubt (``doubted``
+    (n,) bool; docs/methods.md, "A choice in doubt"): its newest row ``event``, ``P_{t-1}``'s
+    and ``P_{t-2}``'s observed rows and their partners' brackets (``prev``, ``next``; -1 is
+    no row, not the last one)."""
+    doubt = doubted[event]
+    doubt = doubt or (row1 >= 0 and doubted[max(row1, 0)])
+    doubt = doubt or (prev1 >= 0 and doubted[max(prev1, 0)])
+    doubt = doubt or (next1 >= 0 and doubted[max(next1, 0)])
+    doubt = doubt or (row2 >= 0 and doubted[max(row2, 0)])
+    doubt = doubt or (prev2 >= 0 and doubted[max(prev2, 0)])
+    return doubt or (next2 >= 0 and doubted[max(next2, 0)])
+
+
+@kernel(inline=True)
+def _focal_ok(lens):
+    """(m,) bool: each camera's ``max(fx, fy) >= 0`` (:func:`_bend`'s condition), of
+    ``lens`` (m, 8)."""
     m = lens.shape[0]
-    focal_ok = np.empty(m, dtype=np.bool_)  # (_bend's focal >= 0, per camera)
+    focal_ok = np.empty(m, dtype=np.bool_)
     for cam in range(m):
         focal_ok[cam] = _max(lens[cam, 0], lens[cam, 1]) >= 0.0
-    for i in range(len(events)):
-        event = events[i]
-        t_event = time_ns[event]
-        sg = sigma[i]
-        speed = (math.sqrt((world1[i, 0] - world2[i, 0]) * (world1[i, 0] - world2[i, 0])
-                           + (world1[i, 1] - world2[i, 1]) * (world1[i, 1] - world2[i, 1])
-                           + (world1[i, 2] - world2[i, 2]) * (world1[i, 2] - world2[i, 2]))
-                 / ((time_ns[rows1[i]] - time_ns[rows2[i]]) / ns))
-        calm = speed >= 0.0
-        kinked = False
-        for s in range(2):
-            prev = prev1[i] if s == 0 else prev2[i]
-            nxt = next1[i] if s == 0 else next2[i]
-            world = world1 if s == 0 else world2
-            px, py, pz = world[i, 0], world[i, 1], world[i, 2]
-            first = before[prev] if prev >= 0 else -1
-            # a bend at prev: the change lies between prev and next if the triplet after
-            # bends too, or (that one still to come) if the triplet before does not
-            # (_quiet first: most triplets are decided by bend_rows' tables, no divisions)
-            b = max(prev, 0)
-            quiet = _quiet(tables and prev >= 0 and before[b] == first and after[b] == nxt,
-                           change[b] if tables else 0.0, root[b] if tables else 0.0, sg,
-                           calm and focal_ok[camera[b]])
-            if not quiet and _bent(first, prev, nxt, event, t_event, max_gap_ns, px, py, pz,
-                                   speed, sg, time_ns, uv, camera, lens, ns):
-                later = after[nxt] if nxt >= 0 else -1
-                if (prev >= 0 and nxt >= 0 and later >= 0 and later <= event
-                        and t_event - time_ns[prev] <= 2 * max_gap_ns):  # the one after: has
-                    quiet = _quiet(tables and before[nxt] == prev and after[nxt] == later,
-                                   change[nxt] if tables else 0.0,
-                                   root[nxt] if tables else 0.0, sg,
-                                   calm and focal_ok[camera[nxt]])
-                    kinked = kinked or (not quiet and _bend(
-                        prev, nxt, later, px, py, pz, speed, sg, time_ns, uv, camera, lens,
-                        ns))
-                else:
-                    zero = before[first] if first >= 0 else -1
-                    b = max(first, 0)
-                    quiet = _quiet(tables and first >= 0 and before[b] == zero
-                                   and after[b] == prev, change[b] if tables else 0.0,
-                                   root[b] if tables else 0.0, sg,
-                                   calm and focal_ok[camera[b]])
-                    kinked = kinked or not (not quiet and _bent(
-                        zero, first, prev, event, t_event, max_gap_ns, px, py, pz, speed, sg,
-                        time_ns, uv, camera, lens, ns))
-        # the newest camera: its last triplet bends at b, the change between b and the
-        # newest detection (or between a and b, if the triplet before bends too); refused
-        # when that interval lies inside eq. (2)'s span, from P_{t-2} on (before it, the
-        # past points are already on the new motion)
-        if not kinked:
-            b = before[event]
-            a = before[b] if b >= 0 else -1
-            px, py, pz = predicted[i, 0], predicted[i, 1], predicted[i, 2]
-            h = max(b, 0)
-            quiet = _quiet(tables and b >= 0 and before[h] == a and after[h] == event,
-                           change[h] if tables else 0.0, root[h] if tables else 0.0, sg,
-                           calm and focal_ok[camera[h]])
-            if not quiet and _bent(a, b, event, event, t_event, max_gap_ns, px, py, pz,
-                                   speed, sg, time_ns, uv, camera, lens, ns):
-                start = time_ns[max(b, 0)]
-                zero = before[a] if a >= 0 else -1
-                h = max(a, 0)
-                quiet = _quiet(tables and a >= 0 and before[h] == zero and after[h] == b,
-                               change[h] if tables else 0.0, root[h] if tables else 0.0, sg,
-                               calm and focal_ok[camera[h]])
-                if not quiet and _bent(zero, a, b, event, t_event, max_gap_ns, px, py, pz,
-                                       speed, sg, time_ns, uv, camera, lens, ns):
-                    start = time_ns[max(a, 0)]
-                kinked = start >= time_ns[rows2[i]]
-        out[i] = kinked
+    return focal_ok
 
 
 @kernel(inline=True)
@@ -1046,6 +1185,33 @@ def _select(values, count, k):
 
 
 @kernel(inline=True)
+def _select_near(values, count, k, hint, width, scratch):
+    """:func:`_select`'s element (``np.sort(values[:count])[k]``), looked for first among the
+    values within ``[hint - width, hint + width]``: one pass counts the values below that
+    band and copies those in it into ``scratch`` (at least ``count`` places; without a
+    branch on the comparisons); if the k-th lies in the band, it is the band's
+    ``(k - below)``-th (every value below the band is smaller than every value in it, every
+    value above larger), selected among a few; else :func:`_select` of all the values.
+    The same element whatever the hint (NaN: no band, all the values): a sliding window's
+    upper median moves little from one window to the next, so the previous one with a tenth
+    of it either side holds the new one in ~15 % of the values (fewer to select among
+    than the whole window). ``values`` is reordered only where the band does not hold the
+    element."""
+    low = hint - width
+    high = hint + width
+    below = 0
+    m = 0
+    for j in range(count):
+        v = values[j]
+        below += v < low
+        scratch[m] = v
+        m += (v >= low) & (v <= high)
+    if below <= k and k < below + m:
+        return _select(scratch, m, k - below)
+    return _select(values, count, k)
+
+
+@kernel(inline=True)
 def _window_rows(time_ns, n, lo, hi, end, window_ns):
     """The rows ``[lo, hi)`` of the first ``n`` of ``time_ns`` (sorted) in ``[end -
     window_ns, end)``, from the previous window's ``lo, hi`` (the ends come in order: each
@@ -1073,11 +1239,13 @@ def checkpoint_noise_kernel(time_ns, camera, uv, limits, m, max_gap_ns, ns, ever
     v_fin = np.empty(n)
     j = residual_norms_kernel(time_ns, camera, uv, limits, m, max_gap_ns, ns, t_fin, v_fin)
     scratch = np.empty(j)
+    band = np.empty(j)
     lo = 0
     hi = 0
     p = 0
     k = at_ns.shape[0]
     latest = np.nan
+    median = np.nan  # (the previous checkpoint's: the next one's hint)
     previous = np.iinfo(np.int64).min
     for r in range(n):
         mark = time_ns[r] // every_ns * every_ns
@@ -1089,7 +1257,8 @@ def checkpoint_noise_kernel(time_ns, camera, uv, limits, m, max_gap_ns, ns, ever
         if count >= min_count:
             for i in range(count):
                 scratch[i] = v_fin[lo + i]
-            latest = _select(scratch, count, count // 2) / rayleigh
+            median = _select_near(scratch, count, count // 2, median, 0.1 * median, band)
+            latest = median / rayleigh
         while p < k and at_ns[p] // every_ns * every_ns <= mark:
             out[p] = latest
             p += 1
@@ -1259,12 +1428,17 @@ def one_point_kernel(depth, max_extrapolation, max_gap_ns, time_ns, camera, uv,
     brackets_kernel(time_ns, camera, prev_b, next_b, previous_instant)
     target = np.empty(1, dtype=np.int64)
     target[0] = n - 1
+    no_ints = np.empty(0, dtype=np.int64)
     made = type_a_kernel(
         target, previous_instant, depth, max_extrapolation, max_gap_ns, time_ns, camera,
         prev_b, next_b, uv, observed_rays, centers, ki, rr, f9, cam, span_tie_ns,
         min_angle_deg, ray_dir, obs_jac, jac4, lens, rtki, ns, noise_px, with_cov, ff, fi,
         refused, has, predicted, points, flags, innovation, factor, model, quality,
-        past_rows, past_points)
+        past_rows, past_points, has.shape[0] < 0, 0.0, no_rows, np.int64(0), lens_table,
+        no_ints, no_ints, no_rows, no_rows, np.zeros(0, dtype=np.bool_),
+        np.empty(1, dtype=np.int64), np.zeros(8, dtype=np.int64), sigma)
+    # (decide: False from a comparison, not a literal, whose type would be a second
+    # signature of type_a_kernel; the decisions below, on the one point)
     kinked[0] = False
     decided[0] = decided[1] = decided[2] = decided[3] = False
     if made:

@@ -167,6 +167,22 @@ class NoiseEstimate:
         """How many innovations the estimate has taken."""
         return self._count
 
+    @property
+    def tail(self) -> np.ndarray:
+        """The last ``NOISE_WINDOW + NOISE_EVERY`` innovations taken (all of them before),
+        oldest first: every window a later point can still need (a view, not to be
+        written)."""
+        return self._tail
+
+    def advance(self, values: np.ndarray, count: int) -> None:
+        """The estimate after a batch whose innovations were appended elsewhere (type A's
+        kernel, which takes the tests' σ in its loop: the same selections as
+        :meth:`sigmas`): ``values`` holds :attr:`tail` then the new innovations, ``count``
+        the innovations taken in all (:attr:`count` and the new ones)."""
+        end = len(self._tail) + count - self._count
+        self._tail = values[max(0, end - (NOISE_WINDOW + NOISE_EVERY)):end]
+        self._count = count
+
     def sigmas(self, normalised: np.ndarray, noise_px: float | None) -> np.ndarray:
         """Each point's ``σ_t`` (pixels, (k,) float), then its innovation taken.
 
@@ -373,8 +389,11 @@ def kinked_points(prep, events: np.ndarray, past: tuple, noise_px: float | np.nd
 
     Causality: only rows not after the newest detection, and within ``2 max_gap`` of it (the
     rows :class:`~pslog.fusion.pseudo.TypeAStream` keeps), are used, so a stream decides as
-    the batch run does. ``|V|`` is the speed between the two past points, ``Z`` the depth of
-    the past point (of the prediction for the newest camera).
+    the batch run does. (:func:`~pslog.fusion.pseudo.fuse_type_a` runs this test point by
+    point inside type A's kernel, :func:`~pslog.fusion._pseudo_kernel._kinked`, the same
+    arithmetic on the same tables; this columnar entry serves other callers and the
+    tests.) ``|V|`` is the speed between the two past points, ``Z`` the depth of the past
+    point (of the prediction for the newest camera).
 
     Parameters
     ----------

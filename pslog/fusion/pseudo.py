@@ -35,7 +35,11 @@ numba): for each event, the search for its two past points, steps 1-3 for each c
 eqs. (2)-(4), the quality columns and the closed-form covariance, in one loop over the
 events (a vectorised form spent most of its time in numpy's fixed cost per call: ~200 small
 array operations per batch, the whole cost of a stream's single point). The innovation and
-kink tests (:mod:`pslog.fusion.innovation`) run on the kernel's outputs.
+kink tests (:mod:`pslog.fusion.innovation`: the tests' noise estimate, the prediction test,
+the kink test) and the doubt of the gate's choices decide each point in the same loop, which
+writes only the points kept (no (k,) columns of predictions, innovations and past points
+between the kernel and the tests: a call's fresh memory, whose page faults a process whose
+heap glibc trims pays at every call, ~150 bytes a point less; docs/performance.md).
 """
 
 from __future__ import annotations
@@ -43,7 +47,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, Literal, NamedTuple, cast, overload
+from typing import Any, Literal, cast, overload
 
 import numpy as np
 
@@ -61,14 +65,12 @@ from ._prepare import (
     Prepared,
     covariance,
     finite_difference_jacobians,
-    finite_rows,
 )
 from .innovation import (
     DEFAULT_NOISE_PX,
     INNOVATION_SIGMAS,
     NoiseEstimate,
-    failed_counts,
-    kinked_points,
+    previous_next_rows,
 )
 from .stereo import KINK_GATE, NOISE_FLOOR_PX, count_invalid
 
@@ -204,16 +206,6 @@ def _all_brackets(prep: Prepared) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return cache
 
 
-class _KinkPast(NamedTuple):
-    """What :func:`~pslog.fusion.innovation.kinked_points` reads of a past point, k rows:
-    its row, its partner's bracket (prev, next rows; int64) and its point (k, 3), metres."""
-
-    row: np.ndarray
-    prev_row: np.ndarray
-    next_row: np.ndarray
-    points_world: np.ndarray
-
-
 @dataclass(frozen=True, eq=False)
 class TypeAConstruction:
     """How each type-A point was made (for viewers and diagnostics); k output points.
@@ -300,43 +292,60 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
     # (lens: some camera has distortion; else the pixel Jacobians are the identity)
     cam, ki, rr, rtki, f9, lens = _pseudo_kernel.camera_tables(prep)
     # the past points' tables: each target's place, or (no construction kept) one scratch
-    # place, the kink test's columns then in past_rows / past_points (less fresh memory)
+    # place (the decisions below read them in the kernel's loop)
     tables = explain or (noise_px is not None and _prepare.FINITE_DIFFERENCES)
     places = k if tables else 1
     ff = np.empty((2, places, len(_pseudo_kernel.FLOATS)))
     fi = np.empty((2, places, len(_pseudo_kernel.INTS)), dtype=np.int64)
-    past_rows, past_points = np.empty((2, k, 3), dtype=np.int64), np.empty((2, k, 3))
     # past points refused as invalid (each detection once): the points they would have made
     # are missing, or made from earlier instants
     refused = np.zeros(n, dtype=np.int64)
     has = np.empty(k, dtype=bool)
-    predicted, points = np.empty((k, 3)), np.empty((k, 3))
-    flags = np.empty(k, dtype=np.int64)
-    innovation, factor, model = np.empty(k), np.empty(k), np.empty(k)
-    quality_table = np.empty((len(_QUALITY), k))
+    # eq. (2)'s prediction (k places for the construction), and the tests' terms and the
+    # past points' rows and points in one scratch place: the kernel decides each point in
+    # its loop (a call's fresh memory ~150 bytes a point less: fewer page faults)
+    predicted = np.empty((k if explain else 1, 3))
+    flags, innovation = np.empty(1, dtype=np.int64), np.empty(1)
+    factor, model = np.empty(1), np.empty(1)
+    past_rows, past_points = np.empty((2, 1, 3), dtype=np.int64), np.empty((2, 1, 3))
+    points, quality_table = np.empty((k, 3)), np.empty((len(_QUALITY), k))
+    rows_out = np.empty(k, dtype=np.int64)
     with_cov = noise_px is not None and not _prepare.FINITE_DIFFERENCES
     # (the covariance's noise: the stated one unless told)
     var_px = (0.0 if noise_px is None else float(noise_px)) if cov_noise_px is None else float(
         cov_noise_px)
-    made = _pseudo_kernel.type_a_kernel(
+    # the decisions' inputs: the tests' noise estimate (its last innovations, then room for
+    # this call's), each row's previous and next row of its camera and its triplet's bend
+    # terms (innovation.kinked_points' tables), the rows in doubt
+    noise = NoiseEstimate() if noise is None else noise
+    tail = noise.tail
+    noise_values = np.empty(len(tail) + k)
+    noise_values[:len(tail)] = tail
+    before, after = previous_next_rows(prep)
+    change, root = np.empty(n if k else 0), np.empty(n if k else 0)
+    if k:
+        _pseudo_kernel.bend_rows(time_ns, prep.uv_undistorted, before, after, NS, change, root)
+    doubted = (prep.doubt_px2 > 0 if prep.doubt_px2 is not None
+               else np.zeros(0, dtype=bool))
+    counts = np.empty(8, dtype=np.int64)
+    kept = _pseudo_kernel.type_a_kernel(
         targets, previous_instant, 2 * len(prep.centers), MAX_EXTRAPOLATION, max_gap_ns,
         time_ns, obs.camera, prev_b, next_b, prep.uv_undistorted, prep.observed_rays,
         prep.centers, ki, rr, f9, cam, _SPAN_TIE_NS, MIN_RAY_ANGLE_DEG, prep.ray_dir,
         prep.observed_direction_jacobians, _jacobian_rows(prep) if lens else np.zeros((1, 4)),
         lens, rtki, NS, var_px, with_cov, ff, fi,
         refused, has, predicted, points, flags, innovation, factor, model, quality_table,
-        past_rows, past_points)
-    # (the kernel packs the targets with a point first: views, no gather)
-    events = targets if made == k else targets[has]
+        past_rows, past_points, True, DEFAULT_NOISE_PX if noise_px is None else float(noise_px),
+        noise_values, noise.count, prep.lens_rows, before, after, change, root, doubted,
+        rows_out, counts, np.empty(1))
+    noise.advance(noise_values, int(counts[6]))
+    # the points kept (packed by the kernel: views, no gather): neither contradicting eq.
+    # (2)'s prediction nor kinked (innovation.py) nor resting on a choice the gate put in
+    # doubt (docs/methods.md, "A choice in doubt": type A's points)
+    events = rows_out[:kept]
     if tables:
-        p1, p2 = (_from_tables(ff[s, :made], fi[s, :made], None) for s in range(2))
-    # (what the kink test reads of P_{t-1} and P_{t-2}: rows, brackets and points)
-    kink_past = tuple(_KinkPast(past_rows[s, :made, 0], past_rows[s, :made, 1],
-                                past_rows[s, :made, 2], past_points[s, :made])
-                      for s in range(2))
-    predicted, points, flags = predicted[:made], points[:made], flags[:made]
-    innovation, quality_table = innovation[:made], quality_table[:, :made]
-    factor, model = factor[:made], model[:made]
+        p1, p2 = (_from_tables(ff[s, :kept], fi[s, :kept], None) for s in range(2))
+    points, quality_table = points[:kept], quality_table[:, :kept]
     n_columns = len(_QUALITY) if with_cov else 10
     quality = dict(zip(_QUALITY[:n_columns], quality_table, strict=False))
     if noise_px is not None and _prepare.FINITE_DIFFERENCES:
@@ -364,69 +373,30 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
                                       var_px))
             # (eq. (2)'s model terms: the kernel's, which need no Jacobian)
             quality.update(zip(_MODEL_COLUMNS, quality_table[len(_QUALITY) - 3:], strict=True))
-    t_event = np.take(time_ns, events)
-    cams0 = np.take(obs.camera, events)
-    made = finite_rows(points)
-    good = made & (flags == 0)
-    # the tests' detection noise: at least what the earlier points' innovations imply
-    with np.errstate(invalid="ignore"):
-        normalised = np.where(good, innovation, np.nan) / factor
-    sigma = (NoiseEstimate() if noise is None else noise).sigmas(normalised, noise_px)
-    # the newest detection contradicts eq. (2)'s prediction: the motion changed
-    # (innovation.failed_predictions' test, its terms made by the kernel)
-    with np.errstate(invalid="ignore"):
-        failed = good & (innovation > INNOVATION_SIGMAS * (sigma * factor) + model)
-    # a camera saw the motion change inside eq. (1)'s or eq. (2)'s interval (innovation.py)
-    kinked = good & ~failed & kinked_points(prep, events, (*kink_past, predicted), sigma,
-                                            max_gap_ns)
-    keep = good & ~failed & ~kinked
-    # a point resting on a choice the gate put in doubt (its newest detection, or one of
-    # its past points' detections or brackets): withheld (docs/methods.md, "A choice in
-    # doubt": type A's points)
-    doubted = (keep & rests_on_doubt(prep.doubt_px2, events, kink_past)
-               if prep.doubt_px2 is not None else None)
-    if doubted is not None:
-        keep &= ~doubted
     if seen is not None:  # count only the reasons not counted before (each detection once)
         refused, seen[:] = refused & ~seen, seen | refused
-    # (count_invalid's three scans only where some flag is set: a stream's push has none)
-    past = ({f"past_{k}": v for k, v in count_invalid(refused).items()} if refused.any()
-            else {})
-    dropped: dict[str, int] = {}  # (stereo.with_dropped's sum, on the one Track made)
-    invalid = flags[made]
-    for counts in (count_invalid(invalid) if invalid.any() else {}, past,
-                   failed_counts(failed, kinked)):
-        for reason, count in counts.items():
-            dropped[reason] = dropped.get(reason, 0) + count
-    if doubted is not None and doubted.any():
-        dropped[DOUBT] = int(np.count_nonzero(doubted))
-    if np.all(keep):  # (every point kept: the columns as they are)
-        track = Track("typeA", t_event, points, cams0, quality, dropped)
-    else:
-        track = Track("typeA", t_event[keep], points[keep], cams0[keep],
-                      {name: column[keep] for name, column in quality.items()}, dropped)
+    # Track.dropped (stereo.with_dropped's sum, on the one Track made): the made points'
+    # invalid flags, the past points refused (count_invalid's three scans only where some
+    # flag is set: a stream's push has none), the tests' refusals, the points in doubt
+    dropped = {reason: int(c) for reason, c in zip(
+        ("behind_camera", "outside_view", "parallel_rays"), counts[:3].tolist(), strict=True)
+        if c}
+    if refused.any():
+        dropped.update((f"past_{r}", c) for r, c in count_invalid(refused).items())
+    for reason, c in zip(("prediction_failed", "kink", DOUBT), counts[3:6].tolist(),
+                         strict=True):
+        if c:
+            dropped[reason] = c
+    track = Track("typeA", np.take(time_ns, events), points, np.take(obs.camera, events),
+                  quality, dropped)
     if not explain:
         return track, None
-    construction = TypeAConstruction(
-        events[keep], (_select(p1, keep), _select(p2, keep)), predicted[keep], points[keep])
+    construction = TypeAConstruction(events, (p1, p2), predicted[:kept], points)
     return track, construction
 
 
 #: Track.dropped's reason for a point resting on a choice the gate put in doubt.
 DOUBT = "doubt"
-
-
-def rests_on_doubt(doubt_px2: np.ndarray, events: np.ndarray, past) -> np.ndarray:
-    """(k,) bool: whether each point (newest row ``events`` (k,), its past points
-    ``past``: two :class:`_KinkPast` of k rows, rows -1 for none) uses a detection whose
-    doubt (``doubt_px2`` (n,), :func:`pslog.fusion.gating.choice_doubt`) is not 0: its own,
-    ``P_{t-1}``'s and ``P_{t-2}``'s observed detections and their partners' brackets."""
-    doubted = doubt_px2 > 0
-    out = doubted[events]
-    for p in past:
-        for rows in (p.row, p.prev_row, p.next_row):
-            out = out | ((rows >= 0) & doubted[np.where(rows >= 0, rows, 0)])
-    return out
 
 
 #: the kernel's terms of eq. (2)'s model error (``_pseudo_kernel.type_a_kernel``), which
