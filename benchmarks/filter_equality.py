@@ -13,9 +13,19 @@ camera, gated by :func:`pslog.fusion.fuse` as a user's session is). Compared: ti
 cameras, positions, every quality column (NaN equal to NaN) and the withheld counts.
 
     python benchmarks/filter_equality.py [--quick]
+    python benchmarks/filter_equality.py --ref main [--quick]
 
 Prints the number of sessions, points compared, and the largest difference per column
 (0 everywhere when equal); exit 1 on any difference.
+
+``--ref REV``: the filter with its default options under this tree and under a git
+revision's ``pslog``, on the same sessions and each dirty one also as its best-scored
+candidates, ungated (``benchmarks/_equality.py``): the points of
+accepted detections (``rejected`` 0) must be bit-equal, column for column, and the points of
+rejected detections equal but for their standard deviations (session 24: the published
+covariance of a rejected detection's prediction, "Gating, jumps" in docs/methods.md);
+prints how many rejected points changed, how many the new tree withholds (``uncertain``)
+and the largest change of ``std_m``; exit 1 on any other difference.
 
 The reference follows the filter's algorithm: a change of what the filter computes (not
 of how it is computed) is either switched off by ``BASE_OPTIONS`` or ported into
@@ -128,38 +138,129 @@ def compare(new, old, worst: dict) -> bool:
     return same
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="2 rigs, 2 motions")
-    args = parser.parse_args()
-    worst = dict.fromkeys(COLUMNS, 0.0)
-    n_sessions = n_points = n_differ = 0
-    t_new = t_old = 0.0
-    for rig_name, rig in rigs(args.quick):
+def _sessions(quick: bool, outliers: bool = False):
+    """``(key, detections or observations, rig)`` of every session compared; ``outliers``:
+    each dirty session also as its best-scored candidates, ungated (``pslog fuse --gating
+    off``: the filter's own gate rejects the false ones, the points of rejected detections
+    that ``--ref`` compares)."""
+    n = 0
+    for rig_name, rig in rigs(quick):
         distractor = ((rig.names[0], (1.0, 1.5, 0.2)),)
-        for motion_name, motion, seconds in motions(args.quick):
+        for motion_name, motion, seconds in motions(quick):
             for noise in (0.0, 0.3, 1.0):
                 for fault, extra in (("clean", {}),
                                      ("misses/drops", dict(miss_rate=0.2, drop_rate=0.1)),
                                      ("dirty", dict(spurious_rate=0.05,
                                                     distractors=distractor))):
                     detections, _ = simulate(rig, motion, seconds, SimulationOptions(
-                        noise_px=noise, seed=n_sessions, **extra))
-                    data = detections if fault == "dirty" else detections.best()
-                    t0 = time.perf_counter()
-                    # the unseen-jump variance (issue 10, after the compilation) off: the
-                    # comparison is of the compiled step with the one it replaced
-                    new = fused(functools.partial(compiled.fuse_filter, options=BASE_OPTIONS),
-                                data, rig)
-                    t1 = time.perf_counter()
-                    old = fused(_without_doubt(base.fuse_filter), data, rig)
-                    t_new += t1 - t0
-                    t_old += time.perf_counter() - t1
-                    n_sessions += 1
-                    n_points += len(old)
-                    if not compare(new, old, worst):
-                        n_differ += 1
-                        print(f"  DIFFERS: {rig_name}, {motion_name}, {noise} px, {fault}")
+                        noise_px=noise, seed=n, **extra))
+                    n += 1
+                    yield ((rig_name, motion_name, noise, fault),
+                           detections if fault == "dirty" else detections.best(), rig)
+                    if outliers and fault == "dirty":
+                        yield ((rig_name, motion_name, noise, "best candidate, ungated"),
+                               detections.best(), rig)
+
+
+def dump(path: str, quick: bool) -> None:
+    """The default filter's tracks of every session (this interpreter's pslog) to ``path``."""
+    import pickle
+
+    out = {}
+    for key, data, rig in _sessions(quick, outliers=True):
+        track = fuse(data, rig, "filter")
+        out[key] = {"time_ns": track.time_ns.copy(), "camera": track.camera.copy(),
+                    "position": track.position_world.copy(), "dropped": dict(track.dropped),
+                    **{k: np.asarray(v).copy() for k, v in track.quality.items()}}
+    with open(path, "wb") as f:
+        pickle.dump(out, f)
+
+
+#: the columns a rejected detection's point may change in (its published covariance)
+STD_COLUMNS = ("std_m", "std_x_m", "std_y_m", "std_z_m")
+
+
+def compare_ref(old: dict, new: dict) -> int:
+    """Accepted detections' points bit-equal; rejected ones equal but for STD_COLUMNS, or
+    withheld by the new tree (counted ``uncertain``). Returns the exit code."""
+    bad = changed = withheld = rejected = accepted = 0
+    worst = 0.0
+    for key in old:
+        a, b = old[key], new[key]
+        ka = list(zip(a["time_ns"].tolist(), a["camera"].tolist(), strict=True))
+        kb = list(zip(b["time_ns"].tolist(), b["camera"].tolist(), strict=True))
+        rows_b = {k: i for i, k in enumerate(kb)}
+        gone = [i for i, k in enumerate(ka) if k not in rows_b]
+        extra = set(kb) - set(ka)
+        if extra or any(a["rejected"][i] != 1.0 for i in gone):
+            print("  DIFFERS (points added, or an accepted point gone):", key)
+            bad += 1
+            continue
+        more = b["dropped"].get("uncertain", 0) - a["dropped"].get("uncertain", 0)
+        if more != len(gone) or {k: v for k, v in a["dropped"].items() if k != "uncertain"} \
+                != {k: v for k, v in b["dropped"].items() if k != "uncertain"}:
+            print("  DIFFERS (withheld counts):", key, a["dropped"], b["dropped"])
+            bad += 1
+        withheld += len(gone)
+        gone_set = set(gone)
+        keep = np.array([i for i in range(len(ka)) if i not in gone_set], dtype=np.int64)
+        for name in ("time_ns", "camera", "position", *compiled.FILTER_QUALITY):
+            x, y = np.asarray(a[name])[keep], np.asarray(b[name])
+            rej = a["rejected"][keep] == 1.0
+            same = np.array([np.array_equal(x[i], y[i], equal_nan=True) for i in range(len(y))],
+                            dtype=bool)
+            if name in STD_COLUMNS:
+                if not np.all(same[~rej]) or not np.all(y[rej] >= x[rej]):
+                    print("  DIFFERS:", key, name)
+                    bad += 1
+                if name == "std_m":
+                    changed += int(np.count_nonzero(~same[rej]))
+                    if rej.any():
+                        worst = max(worst, float(np.max(y[rej] - x[rej])))
+            elif not np.all(same):
+                print("  DIFFERS:", key, name)
+                bad += 1
+        rejected += int(np.count_nonzero(a["rejected"] == 1.0))
+        accepted += int(np.count_nonzero(a["rejected"] != 1.0))
+    print(f"{len(old)} sessions: {accepted:,} points of accepted detections, "
+          f"{rejected:,} of rejected ones; {bad} differences beyond the rule; rejected points "
+          f"with a larger std: {changed}, now withheld: {withheld}; largest std_m increase "
+          f"{1e3 * worst:.2f} mm")
+    return 1 if bad else 0
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="2 rigs, 2 motions")
+    parser.add_argument("--ref", default=None,
+                        help="compare the default filter with this git revision's instead")
+    parser.add_argument("--dump", help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.dump:
+        dump(args.dump, args.quick)
+        return 0
+    if args.ref:
+        from _equality import dumps
+
+        old, new = dumps(__file__, args.ref, ["--quick"] * args.quick)
+        return compare_ref(old, new)
+    worst = dict.fromkeys(COLUMNS, 0.0)
+    n_sessions = n_points = n_differ = 0
+    t_new = t_old = 0.0
+    for (rig_name, motion_name, noise, fault), data, rig in _sessions(args.quick):
+        t0 = time.perf_counter()
+        # the unseen-jump variances (issue 10, after the compilation) off: the comparison is
+        # of the compiled step with the one it replaced
+        new = fused(functools.partial(compiled.fuse_filter, options=BASE_OPTIONS), data, rig)
+        t1 = time.perf_counter()
+        old = fused(_without_doubt(base.fuse_filter), data, rig)
+        t_new += t1 - t0
+        t_old += time.perf_counter() - t1
+        n_sessions += 1
+        n_points += len(old)
+        if not compare(new, old, worst):
+            n_differ += 1
+            print(f"  DIFFERS: {rig_name}, {motion_name}, {noise} px, {fault}")
     print(f"{n_sessions} sessions, {n_points:,} points: {n_differ} differ "
           f"(compiled {t_new:.1f} s, pure Python {t_old:.1f} s, gating included)")
     print("largest difference per column: " + ", ".join(

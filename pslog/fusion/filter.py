@@ -57,8 +57,9 @@ equations, exactly as implemented, are in ``docs/methods.md`` (section ``filter`
   standard deviation ``jump_speed`` on every axis), placed before one of the last three
   accepted detections (the most likely pair wins); accepted if then inside the gate
   (``jump`` = 1). Otherwise it is rejected (``rejected`` = 1; the point is the
-  prediction). After ``max_rejects`` consecutive rejections, or a time without an accepted
-  detection longer than ``max_gap_s``, the track is lost;
+  prediction, its published covariance with the jumps its gap may hide). After
+  ``max_rejects`` consecutive rejections, or a time without an accepted detection longer
+  than ``max_gap_s``, the track is lost;
 - (re)initialisation: from a short window of the latest detections (at least
   ``init_detections`` of two cameras or more, within ``max_gap_s`` of each other): a
   least-squares fit per model (ballistic, supported: to their viewing rays, refined by
@@ -96,7 +97,9 @@ Per-point quality (columns of the Track, NaN where not applicable):
 - ``std_m``: position standard deviation ``sqrt(trace P_pp)`` after the update, metres (as
   ``smooth``), ``P_pp`` the reported covariance: the mixture's with the turn model in the set
   (:func:`_combined_point`), plus an unseen jump's while one camera goes on alone
-  (:func:`_unseen_jump`); ``std_x_m``, ``std_y_m``, ``std_z_m`` per axis (its diagonal);
+  (:func:`_unseen_jump`), and at a rejected detection (the prediction) the jumps of the gap
+  since the latest accepted one (:func:`_unseen_gap_jump`); ``std_x_m``, ``std_y_m``,
+  ``std_z_m`` per axis (its diagonal);
 - ``innovation_px``: distance of the detection from the predicted point's projection, pixels;
 - ``residual_px``: its distance from the updated point's projection, pixels;
 - ``nis``: the normalised innovation squared the gate tested (with the jump's covariance
@@ -266,8 +269,10 @@ class FilterOptions:
     jump_rate_per_s : float, expected rate ``λ_j`` of velocity jumps (kicks, bounces), 1/s:
         a point's reported covariance adds the variance ``λ_j T σ_j² T² / 3`` along its
         camera's ray of a jump no other camera has seen in the time ``T`` since another
-        camera's latest accepted detection (one camera's pixels do not fix the depth);
-        0: none
+        camera's latest accepted detection (one camera's pixels do not fix the depth), and
+        the point of a rejected detection (the prediction) ``λ_j σ_j² T³ / 3`` on every axis
+        over the time ``T`` since the latest accepted detection (:func:`_unseen_gap_jump`);
+        0: neither
     """
 
     noise_px: float = 0.5
@@ -1037,6 +1042,21 @@ def _unseen_jump(I, cams, O, t, cam, before, px, py, pz, vx, vy, vz):
 
 
 @kernel
+def _unseen_gap_jump(O, gap_s, vx, vy, vz):
+    """The variances (x, y, z) of a prediction published at a rejected detection, ``gap_s``
+    seconds after the track's latest accepted one, with those of the velocity jumps (kicks,
+    bounces) no detection has shown since: jumps a Poisson process of rate ``λ_j``, each
+    ``Δv ~ N(0, σ_j² I)`` (the kick's shape) at an instant ``s`` in the gap, moving the ball
+    by ``Δv (T − s)`` by the detection's time: a compound Poisson process, whose position
+    variance per axis is ``λ_j ∫₀ᵀ σ_j² u² du = λ_j σ_j² T³ / 3`` exactly (any number of
+    jumps; zero mean: no spread of the means). Any direction: the rejected pixel fixes none.
+    The state is unchanged (the term makes the published uncertainty honest; ``max_std_m``
+    then withholds the point: from ``T`` ≈ 26 ms with the defaults)."""
+    a = O[_OUNSEEN] * gap_s * gap_s * gap_s
+    return vx + a, vy + a, vz + a
+
+
+@kernel
 def _reject(S, I, cams, O, N, t, cam, u, v, x, P, inn_ok, inn, gap_s, out):
     """The detection failed the gate: the point is the prediction ``x``; after
     ``max_rejects`` in a row the track restarts from the window. Returns a step result."""
@@ -1055,6 +1075,8 @@ def _reject(S, I, cams, O, N, t, cam, u, v, x, P, inn_ok, inn, gap_s, out):
     I[_ITIME] = t
     px, py, pz, vx, vy, vz = _combined_point(x, P, S[_SXT:_SXT + 7], S[_SPT:_SPT + 49],
                                              S[_SNU])
+    if O[_OUNSEEN] != 0.0:  # the prediction's published covariance: a jump in the gap
+        vx, vy, vz = _unseen_gap_jump(O, gap_s, vx, vy, vz)
     _point(out, px, py, pz, vx, vy, vz, y0, y1, y0, y1, nis, gap_s, 0.0, 1.0, 0.0)
     if I[_IREJ] >= N[_NMAXREJ]:  # lost: restart from the window
         I[_IHAS] = 0
