@@ -1,9 +1,9 @@
 """The break find's cheaper passes (session 24), each the same bits as the form it replaced:
 ``trial_gains`` without the Schur products' exact-zero terms (against every term,
 ``_trial_gains_dense``), the greedy choice of breaks that loops only over candidates with a
-rival nearby (against the loop over all of them), and the acceleration at every span's
+rival nearby (against the loop over all of them), the acceleration at every span's
 midpoint from the second derivative's basis alone (against every derivative's and
-numpy's einsum)."""
+numpy's einsum), and the windows' ``M X₀`` compiled (against numpy's matmul)."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ import pytest
 from numpy.testing import assert_array_equal
 from test_smooth_gains import _scan_windows
 
-from pslog.estimation import _breaks, _kernels
+from pslog.estimation import _breaks, _kernels, _window
 from pslog.estimation.bspline import DEGREE, basis_pieces, clamped_knots
 from pslog.estimation.trajectory import _greedy_breaks
 
@@ -152,3 +152,16 @@ def test_midpoint_acceleration_is_every_derivatives_row_and_einsums_sum():
     want = np.einsum("na,nad->nd", N[:, 2], control[first[:, None] + np.arange(DEGREE + 1)])
     got = _kernels.points_positions(first2, N2, control)
     assert_array_equal(_bits(got), _bits(want))
+
+
+def test_window_products_are_numpys_matmul_on_real_windows():
+    """The break windows' ``M X₀`` (padding included) compiled: numpy's matmul's bits where
+    the probe says so (this build machine: it must), and the base's residuals ``u`` are
+    ``v - M X₀`` either way."""
+    base, *_ = _scan_windows(9)
+    X0 = _kernels.window_positions(base.first, base.N, np.ascontiguousarray(base.x0))
+    want = (base.M @ X0[..., None])[..., 0]
+    got = _window.window_products(base.M, X0)
+    assert _window.products_compiled()
+    assert_array_equal(_bits(got), _bits(want))
+    assert np.any(base.M == 0.0) and np.any(base.u != 0.0)

@@ -186,7 +186,12 @@ class _Base:
         from ._kernels import window_positions
 
         X0 = window_positions(self.first, self.N, np.ascontiguousarray(self.x0))  # (B, W, 3)
-        self.u = v - (self.M @ X0[..., None])[..., 0]  # w Jᵀ (z - J X₀)
+        from ._window import products_compiled, window_products
+
+        # w Jᵀ (z - J X₀): M X₀ compiled where it gives numpy's matmul's bits
+        MX = (window_products(self.M, X0) if products_compiled()
+              else (self.M @ X0[..., None])[..., 0])
+        self.u = v - MX
         self.s_sorted = np.where(inside, s, 1e6)  # times in spacings from the centre, sorted
         self.local, self.spacing = local, spacing
 
