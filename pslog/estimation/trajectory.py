@@ -1248,9 +1248,9 @@ def _greedy_breaks(tau: np.ndarray, gain: np.ndarray, free: np.ndarray, threshol
     are alone: the loop over every one took ~10 ms per 10,000). The same breaks as the
     loop over all of them (``|x - y|`` is monotone in ``y``: the nearest rival decides)."""
     order = np.argsort(-gain)
+    isolated = np.zeros(len(tau), dtype=bool)
     if np.any(np.isnan(gain)) or np.any(np.isnan(tau)):  # (the scan gives none) the loop
-        rival = np.ones(len(tau), dtype=bool)
-        isolated = np.zeros(len(tau), dtype=bool)
+        loop = order
     else:
         rival = (gain > threshold) & free
         where = np.flatnonzero(rival)
@@ -1262,14 +1262,12 @@ def _greedy_breaks(tau: np.ndarray, gain: np.ndarray, free: np.ndarray, threshol
             near = np.abs(sorted_t[1:] - sorted_t[:-1]) <= apart
             alone[1:] &= ~near
             alone[:-1] &= ~near
-        isolated = np.zeros(len(tau), dtype=bool)
         isolated[where[by_time[alone]]] = True
+        loop = order[rival[order] & ~isolated[order]]  # (gains above the threshold, free)
     found: list[float] = []  # in time order: the clustered candidates kept
-    for i in order:
+    for i in loop:
         if gain[i] <= threshold:
             break
-        if isolated[i]:
-            continue
         k = bisect.bisect_left(found, tau[i])
         if free[i] and (k == len(found) or abs(tau[i] - found[k]) > apart) and (
                 k == 0 or abs(tau[i] - found[k - 1]) > apart):
