@@ -186,7 +186,12 @@ class _Base:
         from ._kernels import window_positions
 
         X0 = window_positions(self.first, self.N, np.ascontiguousarray(self.x0))  # (B, W, 3)
-        self.u = v - (self.M @ X0[..., None])[..., 0]  # w Jᵀ (z - J X₀)
+        from ._window import products_compiled, window_products
+
+        # w Jᵀ (z - J X₀): M X₀ compiled where it gives numpy's matmul's bits
+        MX = (window_products(self.M, X0) if products_compiled()
+              else (self.M @ X0[..., None])[..., 0])
+        self.u = v - MX
         self.s_sorted = np.where(inside, s, 1e6)  # times in spacings from the centre, sorted
         self.local, self.spacing = local, spacing
 
@@ -273,7 +278,18 @@ def _new_splines(a: np.ndarray) -> list:
 def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, prior
            ) -> np.ndarray:
     """Cost decrease (B,) of a triple knot at ``tau`` (B,) in window ``which`` (B,) of
-    ``base``, whose uniform knots are ``centre + k·h`` (module docstring).
+    ``base``, whose uniform knots are ``centre + k·h`` (module docstring): ``trial_gains``
+    of :func:`_trial_terms`."""
+    from ._kernels import trial_gains
+
+    return trial_gains(*_trial_terms(base, which, tau, centre, prior))
+
+
+def _trial_terms(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, prior
+                 ) -> tuple:
+    """The arguments of ``trial_gains`` for the trials of :func:`_gains`: the data terms
+    ``Hyy``, ``Hxy``, the prior's ``pyy``, ``pxy``, the windows' inverses, each trial's
+    window, the row and column of its 18 x 18 block, and ``g``.
 
     The per-trial terms are compiled passes (:mod:`pslog.estimation._kernels`:
     ``trial_splines``, ``gains_data``, ``trial_gather`` — the operations of
@@ -287,13 +303,7 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
     changes (``S`` is a difference of nearly equal terms: the base explains most of what
     the break would): they moved by ~1e-9 relative, the breaks' instants and the points by
     far less than their noise (session 18, docs/methods.md)."""
-    from ._kernels import (
-        gains_data,
-        trial_gains,
-        trial_gather,
-        trial_prior_terms,
-        trial_splines,
-    )
+    from ._kernels import gains_data, trial_gather, trial_prior_terms, trial_splines
 
     local, h = base.local, base.spacing
     K = local.K
@@ -334,8 +344,8 @@ def _gains(base: _Base, which: np.ndarray, tau: np.ndarray, centre: np.ndarray, 
     k = 3 * q0 - col0
     if np.any((k < 0) | (k > base.cov.shape[2] - 18)):
         raise AssertionError("trial instant outside the spans its base was solved for")
-    return trial_gains(Hyy, Hxy, pyy, pxy, base.cov, np.ascontiguousarray(which, np.int64),
-                       3 * q0, k, g.reshape(len(tau), 9))
+    return (Hyy, Hxy, pyy, pxy, base.cov, np.ascontiguousarray(which, np.int64), 3 * q0, k,
+            g.reshape(len(tau), 9))
 
 
 def prior_terms_numpy(Nd6: np.ndarray, x0: np.ndarray, fw: np.ndarray, fn: np.ndarray,

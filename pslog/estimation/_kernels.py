@@ -1209,11 +1209,26 @@ def trial_gains(Hyy: np.ndarray, Hxy: np.ndarray, pyy: np.ndarray, pxy: np.ndarr
     ``dgesv``'s choice of pivots) and ``gᵀ y``. The products summed in loop order, not
     BLAS's: the gains equal numpy's form to rounding (~1e-9 relative: ``S`` is a difference
     of nearly equal terms), two numpy products, a batched LAPACK call and three passes
-    fewer. NaN where ``S`` has a NaN or a zero pivot (no gain)."""
+    fewer. NaN where ``S`` has a NaN or a zero pivot (no gain).
+
+    Session 24 (the same bits as :func:`_trial_gains_dense`, the form before): each entry of
+    ``T = Σ H_xy`` and of ``H_xyᵀ T`` is still the sum of its terms from 0 in order, but
+    nine entries are summed side by side in registers (a row of ``T``, or of the product)
+    where each used to wait on its previous addition through memory; and the terms that
+    are exact zeros are not added. ``H_xy``'s blocks (q0, the second and third new
+    B-spline) and (q0 + 5, the first and second) are zero — control point q0's B-spline
+    lives on span j - 1 only and q0 + 5's on span j + 1 only, where those new B-splines
+    vanish, and so do the prior's terms there — so ``s · 0`` and ``0 · t`` are ``±0``, and
+    adding ``±0`` to a sum started at ``+0`` changes no bit (a sum of such terms is never
+    ``-0``). That holds for finite ``s`` and ``t``: a trial whose blocks are not exactly
+    zero, whose ``T`` is not finite, or whose skipped ``Σ`` entries are not finite takes
+    the dense form (``_trial_gains_dense``' loops) instead. Only ``S``'s upper triangle is
+    formed (rows ``i`` of the product against columns ``k >= i`` of the blocks)."""
     B = len(which)
     out = np.empty(B)
     T = np.empty((18, 9))
     S = np.empty((9, 9))
+    Q = np.empty((9, 9))  # Q[i, k] = Σ_r H_xy[r, i] T[r, k], k >= i
     y = np.empty(9)
     for b in range(B):
         Hyb = Hyy[b]
@@ -1225,68 +1240,250 @@ def trial_gains(Hyy: np.ndarray, Hxy: np.ndarray, pyy: np.ndarray, pxy: np.ndarr
                 for c in range(6):
                     Hxb[3 * c + i, 3 * e + i] += pxy[b, c, e]
         w, r0, c0 = which[b], row0[b], col[b]
-        # T = Σ H_xy (18 x 9)
-        for r in range(18):
-            for k in range(9):
-                T[r, k] = 0.0
-            for c in range(18):
-                s_rc = cov[w, r0 + r, c0 + c]
-                for k in range(9):
-                    T[r, k] += s_rc * Hxb[c, k]
-        # S = Hyy - H_xyᵀ T: its upper triangle, mirrored
-        for i in range(9):
-            for k in range(i, 9):
-                acc = 0.0
-                for r in range(18):
-                    acc += Hxb[r, i] * T[r, k]
-                v = (Hyb[i, k] - acc + Hyb[k, i] - acc) / 2 if k > i else Hyb[i, i] - acc
-                S[i, k] = v
-                S[k, i] = v
-        big = 0.0
-        nan = False
-        for i in range(9):
-            a = abs(S[i, i])
-            if a != a:
-                nan = True
-            elif a > big:
-                big = a
-        load = (np.nan if nan else 1e-12 * big) + 1e-300
-        for i in range(9):
-            S[i, i] += load
-            y[i] = g[b, i]
-        # elimination with partial pivoting, then back substitution
-        bad = nan
+        sparse = True
+        for r in range(3):
+            for k in range(3, 9):
+                if Hxb[r, k] != 0.0 or Hxb[15 + r, k - 3] != 0.0:
+                    sparse = False
+        if sparse:
+            sparse = _sparse_products(Hxb, cov[w], r0, c0, T, Q)
+        if not sparse:
+            _dense_products(Hxb, cov[w], r0, c0, T, Q)
+        out[b] = _schur_gain(Hyb, Q, g[b], S, y)
+    return out
+
+
+@kernel(inline=True)
+def _sparse_products(Hxb: np.ndarray, cw: np.ndarray, r0: int, c0: int, T: np.ndarray,
+                     Q: np.ndarray) -> bool:
+    """:func:`trial_gains`' ``T = Σ H_xy`` and ``Q = H_xyᵀ T`` (its upper triangle) without
+    the zero blocks' terms, nine sums side by side; False (T, Q unusable) where ``T`` or a
+    skipped entry of ``Σ`` (``cw`` the window's inverse, rows ``r0..``, columns ``c0..``)
+    is not finite."""
+    total = 0.0
+    for r in range(18):
+        cr = cw[r0 + r]
+        s0 = cr[c0]
+        s1 = cr[c0 + 1]
+        s2 = cr[c0 + 2]
+        # columns of the first new B-spline: rows 0-14 of H_xy; of the second: 3-14; of
+        # the third: 3-17
+        t0 = 0.0 + s0 * Hxb[0, 0]
+        t1 = 0.0 + s0 * Hxb[0, 1]
+        t2 = 0.0 + s0 * Hxb[0, 2]
+        t0 += s1 * Hxb[1, 0]
+        t1 += s1 * Hxb[1, 1]
+        t2 += s1 * Hxb[1, 2]
+        t0 += s2 * Hxb[2, 0]
+        t1 += s2 * Hxb[2, 1]
+        t2 += s2 * Hxb[2, 2]
+        t3 = 0.0
+        t4 = 0.0
+        t5 = 0.0
+        t6 = 0.0
+        t7 = 0.0
+        t8 = 0.0
+        for c in range(3, 15):
+            s = cr[c0 + c]
+            t0 += s * Hxb[c, 0]
+            t1 += s * Hxb[c, 1]
+            t2 += s * Hxb[c, 2]
+            t3 += s * Hxb[c, 3]
+            t4 += s * Hxb[c, 4]
+            t5 += s * Hxb[c, 5]
+            t6 += s * Hxb[c, 6]
+            t7 += s * Hxb[c, 7]
+            t8 += s * Hxb[c, 8]
+        s15 = cr[c0 + 15]
+        s16 = cr[c0 + 16]
+        s17 = cr[c0 + 17]
+        t6 += s15 * Hxb[15, 6]
+        t7 += s15 * Hxb[15, 7]
+        t8 += s15 * Hxb[15, 8]
+        t6 += s16 * Hxb[16, 6]
+        t7 += s16 * Hxb[16, 7]
+        t8 += s16 * Hxb[16, 8]
+        t6 += s17 * Hxb[17, 6]
+        t7 += s17 * Hxb[17, 7]
+        t8 += s17 * Hxb[17, 8]
+        T[r, 0] = t0
+        T[r, 1] = t1
+        T[r, 2] = t2
+        T[r, 3] = t3
+        T[r, 4] = t4
+        T[r, 5] = t5
+        T[r, 6] = t6
+        T[r, 7] = t7
+        T[r, 8] = t8
+        # not finite if any of these is (a sum's overflow only sends a trial to the dense
+        # form)
+        total += (((t0 + t1) + (t2 + t3)) + ((t4 + t5) + (t6 + t7))
+                  + ((t8 + s0) + (s1 + s2)) + ((s15 + s16) + s17))
+    if not abs(total) < np.inf:
+        return False
+    for i in range(3):  # rows 0-14 of H_xy's first three columns, against every column
+        a0 = 0.0
+        a1 = 0.0
+        a2 = 0.0
+        a3 = 0.0
+        a4 = 0.0
+        a5 = 0.0
+        a6 = 0.0
+        a7 = 0.0
+        a8 = 0.0
+        for r in range(15):
+            h = Hxb[r, i]
+            a0 += h * T[r, 0]
+            a1 += h * T[r, 1]
+            a2 += h * T[r, 2]
+            a3 += h * T[r, 3]
+            a4 += h * T[r, 4]
+            a5 += h * T[r, 5]
+            a6 += h * T[r, 6]
+            a7 += h * T[r, 7]
+            a8 += h * T[r, 8]
+        Q[i, 0] = a0
+        Q[i, 1] = a1
+        Q[i, 2] = a2
+        Q[i, 3] = a3
+        Q[i, 4] = a4
+        Q[i, 5] = a5
+        Q[i, 6] = a6
+        Q[i, 7] = a7
+        Q[i, 8] = a8
+    for i in range(3, 6):  # rows 3-14, against columns 3-8
+        a3 = 0.0
+        a4 = 0.0
+        a5 = 0.0
+        a6 = 0.0
+        a7 = 0.0
+        a8 = 0.0
+        for r in range(3, 15):
+            h = Hxb[r, i]
+            a3 += h * T[r, 3]
+            a4 += h * T[r, 4]
+            a5 += h * T[r, 5]
+            a6 += h * T[r, 6]
+            a7 += h * T[r, 7]
+            a8 += h * T[r, 8]
+        Q[i, 3] = a3
+        Q[i, 4] = a4
+        Q[i, 5] = a5
+        Q[i, 6] = a6
+        Q[i, 7] = a7
+        Q[i, 8] = a8
+    for i in range(6, 9):  # rows 3-17, against columns 6-8
+        a6 = 0.0
+        a7 = 0.0
+        a8 = 0.0
+        for r in range(3, 18):
+            h = Hxb[r, i]
+            a6 += h * T[r, 6]
+            a7 += h * T[r, 7]
+            a8 += h * T[r, 8]
+        Q[i, 6] = a6
+        Q[i, 7] = a7
+        Q[i, 8] = a8
+    return True
+
+
+@kernel(inline=True)
+def _dense_products(Hxb: np.ndarray, cw: np.ndarray, r0: int, c0: int, T: np.ndarray,
+                    Q: np.ndarray) -> None:
+    """:func:`trial_gains`' ``T`` and ``Q`` with every term (the form before session 24)."""
+    for r in range(18):
         for k in range(9):
-            p = k
-            best = abs(S[k, k])
-            for i in range(k + 1, 9):
-                if abs(S[i, k]) > best:
-                    best = abs(S[i, k])
-                    p = i
-            if not best > 0.0:
-                bad = True
-                break
-            if p != k:
-                for c in range(9):
-                    S[k, c], S[p, c] = S[p, c], S[k, c]
-                y[k], y[p] = y[p], y[k]
-            for i in range(k + 1, 9):
-                f = S[i, k] / S[k, k]
-                for c in range(k + 1, 9):
-                    S[i, c] -= f * S[k, c]
-                y[i] -= f * y[k]
-        if bad:
-            out[b] = np.nan
-            continue
-        for i in range(8, -1, -1):
-            acc = y[i]
-            for c in range(i + 1, 9):
-                acc -= S[i, c] * y[c]
-            y[i] = acc / S[i, i]
-        gain = 0.0
-        for i in range(9):
-            gain += g[b, i] * y[i]
-        out[b] = gain
+            T[r, k] = 0.0
+        for c in range(18):
+            s_rc = cw[r0 + r, c0 + c]
+            for k in range(9):
+                T[r, k] += s_rc * Hxb[c, k]
+    for i in range(9):
+        for k in range(i, 9):
+            acc = 0.0
+            for r in range(18):
+                acc += Hxb[r, i] * T[r, k]
+            Q[i, k] = acc
+
+
+@kernel(inline=True)
+def _schur_gain(Hyb: np.ndarray, Q: np.ndarray, gb: np.ndarray, S: np.ndarray,
+                y: np.ndarray) -> float:
+    """``S = Hyy - Q`` symmetrised, its diagonal loaded, ``S y = g`` and ``gᵀ y``
+    (:func:`trial_gains`); NaN where ``S`` has a NaN or a zero pivot."""
+    for i in range(9):
+        for k in range(i, 9):
+            acc = Q[i, k]
+            v = (Hyb[i, k] - acc + Hyb[k, i] - acc) / 2 if k > i else Hyb[i, i] - acc
+            S[i, k] = v
+            S[k, i] = v
+    big = 0.0
+    nan = False
+    for i in range(9):
+        a = abs(S[i, i])
+        if a != a:
+            nan = True
+        elif a > big:
+            big = a
+    load = (np.nan if nan else 1e-12 * big) + 1e-300
+    for i in range(9):
+        S[i, i] += load
+        y[i] = gb[i]
+    # elimination with partial pivoting, then back substitution
+    if nan:
+        return np.nan
+    for k in range(9):
+        p = k
+        best = abs(S[k, k])
+        for i in range(k + 1, 9):
+            if abs(S[i, k]) > best:
+                best = abs(S[i, k])
+                p = i
+        if not best > 0.0:
+            return np.nan
+        if p != k:
+            for c in range(9):
+                S[k, c], S[p, c] = S[p, c], S[k, c]
+            y[k], y[p] = y[p], y[k]
+        for i in range(k + 1, 9):
+            f = S[i, k] / S[k, k]
+            for c in range(k + 1, 9):
+                S[i, c] -= f * S[k, c]
+            y[i] -= f * y[k]
+    for i in range(8, -1, -1):
+        acc = y[i]
+        for c in range(i + 1, 9):
+            acc -= S[i, c] * y[c]
+        y[i] = acc / S[i, i]
+    gain = 0.0
+    for i in range(9):
+        gain += gb[i] * y[i]
+    return gain
+
+
+@kernel
+def _trial_gains_dense(Hyy: np.ndarray, Hxy: np.ndarray, pyy: np.ndarray, pxy: np.ndarray,
+                       cov: np.ndarray, which: np.ndarray, row0: np.ndarray, col: np.ndarray,
+                       g: np.ndarray) -> np.ndarray:
+    """:func:`trial_gains` with every term of every product (its form before session 24;
+    the reference its tests compare with, bit for bit)."""
+    B = len(which)
+    out = np.empty(B)
+    T = np.empty((18, 9))
+    S = np.empty((9, 9))
+    Q = np.empty((9, 9))
+    y = np.empty(9)
+    for b in range(B):
+        Hyb = Hyy[b]
+        Hxb = Hxy[b]
+        for i in range(3):
+            for e in range(3):
+                for e2 in range(3):
+                    Hyb[3 * e + i, 3 * e2 + i] += pyy[b, e, e2]
+                for c in range(6):
+                    Hxb[3 * c + i, 3 * e + i] += pxy[b, c, e]
+        _dense_products(Hxb, cov[which[b]], row0[b], col[b], T, Q)
+        out[b] = _schur_gain(Hyb, Q, g[b], S, y)
     return out
 
 

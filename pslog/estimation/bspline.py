@@ -93,17 +93,21 @@ def basis_derivative(knots: np.ndarray, t: np.ndarray, derivative: np.ndarray
 
 
 def basis_pieces(knots: list[np.ndarray], piece: np.ndarray, t: np.ndarray,
-                 n_derivatives: int = 2) -> tuple[np.ndarray, np.ndarray]:
+                 n_derivatives: int = 2, only: int | None = None
+                 ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`basis` of several splines at once: point ``i`` on spline ``piece[i]``.
 
     The knot vectors are laid end to end: a clamped vector's repeated end knots keep every
     point's recurrence inside its own vector, so one pass serves all.
 
+    ``only``: that derivative alone, ``values`` (n, 4) (the same bits as its row of every
+    derivative's, :func:`pslog.estimation._kernels.basis_derivative_in_span`).
+
     Returns
     -------
     first : (n,) int64, index of the first non-zero function, counted over the splines'
         control points laid end to end
-    values : (n, n_derivatives + 1, 4) float64
+    values : (n, n_derivatives + 1, 4) float64 (``only``: (n, 4))
     """
     t = np.asarray(t, dtype=np.float64)
     lengths = np.array([len(k) for k in knots])
@@ -125,7 +129,15 @@ def basis_pieces(knots: list[np.ndarray], piece: np.ndarray, t: np.ndarray,
             bounds[p]:bounds[p + 1]]
         j[rows] = np.searchsorted(knots[p], t[rows], side="right") - 1 + start[p]
     j = np.clip(j, lo, hi)
-    values = _basis_in_span(cat, j, t, n_derivatives)
+    if only is not None:
+        from ._kernels import basis_derivative_in_span
+
+        values = basis_derivative_in_span(np.ascontiguousarray(cat, dtype=np.float64),
+                                          np.ascontiguousarray(j, dtype=np.int64),
+                                          np.ascontiguousarray(t),
+                                          np.full(len(t), only, dtype=np.int64))
+    else:
+        values = _basis_in_span(cat, j, t, n_derivatives)
     return j - start[piece] - DEGREE + offset[piece], values
 
 
