@@ -280,7 +280,8 @@ def _detecting(src, rig_names, row_of: dict, hsv: HsvRange, max_candidates: int,
         n_tasks = 1 if plan is None else len(plan.tasks)
         first = min(_HEAD_TASKS, n_tasks) if two else n_tasks
         with _stop_signals_blocked():
-            pools.append(ProcessPoolExecutor(max_workers=workers,
+            # while this process loads numba it takes a core itself: one worker fewer here
+            pools.append(ProcessPoolExecutor(max_workers=workers - 1 if two else workers,
                                              initializer=_ignore_stop_signals))
             futures = [submit(pools[0], i, compiled and plan is None) for i in range(first)]
         if two and first < n_tasks:
