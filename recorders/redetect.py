@@ -29,7 +29,9 @@ OpenCV and numpy once (about 0.12 s, before the workers are forked: they inherit
   (about 0.5 s of one core, once), then a second pool forked with numba loaded detects the
   rest, the first pool's tasks not started by then included (:func:`_detecting`): no core
   waits for numba, and only what the first pool's workers took meanwhile is detected the
-  dearer way (about 2.5 ms more a frame: 250 frames at load 8-15, ~90 on an idle machine);
+  dearer way (about 2 ms more a frame). The first pool has one worker fewer than the
+  second: this process takes a core meanwhile (with as many, three processes shared two
+  cores: 216 frames of 2,160 went the dearer way at load 8-15, 107-143 with one worker);
 - the tasks shrink towards the end (:func:`_guided`), so the workers finish together;
 - every task is queued at once and the main process copies the session meanwhile
   (``copy_session`` takes the detections as a callable, called once the rest is copied),
@@ -51,6 +53,16 @@ entropy decoding and the bound 3.3-3.4, decoding the ~340 blocks that pass the b
 0.2-0.3, the detector 0.25-0.7 (0.36-0.75 before its pooled mask was labelled from its
 set cells only); returning the results 0.015. A frame it does not take
 (progressive, subsampled, EXIF, damaged, ...) is decoded whole by ``cv2.imdecode``.
+The main process's CPU (session 24, 2,160 frames, 547 MB, load 8-15; process CPU of each
+stage): its imports (numpy, OpenCV, pslog.log) 0.19-0.24 s, numba for the workers 0.45-0.61
+(``import numba`` 0.19-0.22, its typing and target set up at the first kernel's load
+0.17-0.19, the colour table 0.06-0.07, the other kernels 0.02), the copy of the session
+0.30-0.48 (the kernel's write of 547 MB into the page cache and the read of the image
+chunks, 0.2-0.36 of system time; writing the chunks from the file mapped instead: 0.37 s
+in three paired runs, no clear saving; ``copy_file_range`` alone costs as much as reading
+and writing), the summary parsed three times 0.045, the BGR box 0.05, closing the new file
+0.04-0.05, the forks 0.02, the rest (the detections merged and written, the session read)
+0.04: about 0.7 s fixed and 0.15-0.2 ms a frame.
 Otherwise every frame is decoded whole and detected: the decode and detection alone bound
 two cores to about 450 frames/s, before the session is read and written.
 
@@ -280,7 +292,8 @@ def _detecting(src, rig_names, row_of: dict, hsv: HsvRange, max_candidates: int,
         n_tasks = 1 if plan is None else len(plan.tasks)
         first = min(_HEAD_TASKS, n_tasks) if two else n_tasks
         with _stop_signals_blocked():
-            pools.append(ProcessPoolExecutor(max_workers=workers,
+            # while this process loads numba it takes a core itself: one worker fewer here
+            pools.append(ProcessPoolExecutor(max_workers=workers - 1 if two else workers,
                                              initializer=_ignore_stop_signals))
             futures = [submit(pools[0], i, compiled and plan is None) for i in range(first)]
         if two and first < n_tasks:
