@@ -152,46 +152,12 @@ def _n_usable(csup, b, j, n, narrowed):
 
 
 @kernel
-def _carry_frames(t, l0, l1, l2, b, j0, j1, fi, fflag, ct, cf, csup, narrowed, epi, vmax,
-                  half_accel):
-    """gating._support_one's pair rule on camera b's kept frames ``j0``, ``j1``: the best
-    ratio of a plausible pair of their candidates that may support, carried to ``t``, its
-    carried pixel and whether one was found."""
-    best, bu, bv, found = math.inf, math.nan, math.nan, False
-    only0 = narrowed and fflag[b, j0, 1] != 0
-    only1 = narrowed and fflag[b, j1, 1] != 0
-    for q0 in range(fi[b, j0, 3]):
-        if only0 and not csup[b, j0, q0]:
-            continue
-        t0, u0, v0 = ct[b, j0, q0], cf[b, j0, q0, 0], cf[b, j0, q0, 1]
-        for q1 in range(fi[b, j1, 3]):
-            if only1 and not csup[b, j1, q1]:
-                continue
-            t1, u1, v1 = ct[b, j1, q1], cf[b, j1, q1, 0], cf[b, j1, q1, 1]
-            span = (t1 - t0) / _NS
-            if not span > 0:
-                continue
-            w = (t - t0) / _NS / span
-            du, dv = u1 - u0, v1 - v0
-            yu, yv = u0 + w * du, v0 + w * dv
-            if not math.sqrt(du * du + dv * dv) / abs(span) <= vmax:
-                continue
-            tau = epi + half_accel * abs(t - t0) / _NS * abs(t - t1) / _NS
-            d = abs(l0 * yu + l1 * yv + l2)
-            if math.isfinite(d) and d / tau < best:  # argmin: the first
-                best, bu, bv, found = d / tau, yu, yv, True
-    return best, bu, bv, found
-
-
-@kernel
 def support_one(t, l0, l1, l2, b, keys, fi, fflag, ct, cf, csup, right, narrowed, opt):
     """gating._support_one, causal, for one candidate at corrected time ``t`` (its epipolar
     line ``l`` in camera b) over b's kept frames (``keys``: their times): from every
     candidate (``narrowed`` False) or from the candidates that may support (``csup``) of
     frames decided with a rejected one. ``right``: bisect_right (else bisect_left).
-    Returns (ratio, carried u, carried v, found, latest): ratio NaN when no frame is near;
-    ``latest``: where a pair passing over b's latest frame was carried (no plausible pair
-    of the two latest, gating._skip_pairs), the latest frame of that pair, else -1."""
+    Returns (ratio, carried u, carried v, found): ratio NaN when no frame is near."""
     epi, vmax, half_accel = opt[O_EPI], opt[O_VMAX], opt[O_HALF_ACCEL]
     wait, gap = np.int64(opt[O_WAIT]), np.int64(opt[O_GAP])
     target = t + wait
@@ -208,23 +174,30 @@ def support_one(t, l0, l1, l2, b, keys, fi, fflag, ct, cf, csup, right, narrowed
     near0 = i0 >= 0 and abs(t - keys[i0]) <= gap
     near1 = i1 >= 0 and abs(t - keys[i1]) <= gap
     if near0 and near1:
-        best, bu, bv, found = _carry_frames(t, l0, l1, l2, b, i0, i1, fi, fflag, ct, cf, csup,
-                                            narrowed, epi, vmax, half_accel)
-        if not found:  # no plausible pair: one of the two frames passed over as if missed
-            j = i0 - 1
-            while j >= 0 and _n_usable(csup, b, j, fi[b, j, 3],
-                                       narrowed and fflag[b, j, 1] != 0) == 0:
-                j -= 1
-            latest = -1
-            if j >= 0 and abs(t - keys[j]) <= gap:
-                for second in (i0, i1):  # the better (the first on a tie)
-                    rs, us, vs, got = _carry_frames(t, l0, l1, l2, b, j, second, fi, fflag,
-                                                    ct, cf, csup, narrowed, epi, vmax,
-                                                    half_accel)
-                    if got and rs < best:
-                        best, bu, bv, found, latest = rs, us, vs, True, second
-            return best, bu, bv, found, latest
-        return best, bu, bv, found, -1
+        best, bu, bv, found = math.inf, math.nan, math.nan, False
+        only0 = narrowed and fflag[b, i0, 1] != 0
+        only1 = narrowed and fflag[b, i1, 1] != 0
+        for q0 in range(fi[b, i0, 3]):
+            if only0 and not csup[b, i0, q0]:
+                continue
+            t0, u0, v0 = ct[b, i0, q0], cf[b, i0, q0, 0], cf[b, i0, q0, 1]
+            for q1 in range(fi[b, i1, 3]):
+                if only1 and not csup[b, i1, q1]:
+                    continue
+                t1, u1, v1 = ct[b, i1, q1], cf[b, i1, q1, 0], cf[b, i1, q1, 1]
+                span = (t1 - t0) / _NS
+                if not span > 0:
+                    continue
+                w = (t - t0) / _NS / span
+                du, dv = u1 - u0, v1 - v0
+                yu, yv = u0 + w * du, v0 + w * dv
+                if not math.sqrt(du * du + dv * dv) / abs(span) <= vmax:
+                    continue
+                tau = epi + half_accel * abs(t - t0) / _NS * abs(t - t1) / _NS
+                d = abs(l0 * yu + l1 * yv + l2)
+                if math.isfinite(d) and d / tau < best:  # argmin: the first
+                    best, bu, bv, found = d / tau, yu, yv, True
+        return best, bu, bv, found
     if near1:  # a single nearby frame, its candidates as they are
         best, bu, bv, found = math.inf, math.nan, math.nan, False
         only1 = narrowed and fflag[b, i1, 1] != 0
@@ -237,8 +210,8 @@ def support_one(t, l0, l1, l2, b, keys, fi, fflag, ct, cf, csup, right, narrowed
             r = d / tau if math.isfinite(d) else math.inf
             if not found or r < best:
                 best, bu, bv, found = r, u1, v1, True
-        return best, bu, bv, found, -1
-    return math.nan, math.nan, math.nan, False, -1
+        return best, bu, bv, found
+    return math.nan, math.nan, math.nan, False
 
 
 @kernel
@@ -335,39 +308,6 @@ def _bisect(keys, x, right):
 
 
 @kernel
-def _carry_pair(t, l0, l1, l2, first, second, t_all, uv, table, epi, vmax, half_accel):
-    """gating._carry of one candidate (at ``t``, its epipolar line ``l`` in camera b) and
-    b's frames ``first``, ``second`` of its frame table: the best ratio of a plausible pair
-    carried to ``t`` (inf: none) and its carried pixel (numpy's argmin over (q0, q1): the
-    first smallest)."""
-    k_max = table.shape[1]
-    best, bu, bv = math.inf, math.nan, math.nan
-    for q0 in range(k_max):
-        r0 = table[first, q0]
-        if r0 < 0:
-            continue
-        t0, u0, v0 = t_all[r0], uv[r0, 0], uv[r0, 1]
-        for q1 in range(k_max):
-            r1 = table[second, q1]
-            if r1 < 0:
-                continue
-            t1, u1, v1 = t_all[r1], uv[r1, 0], uv[r1, 1]
-            span = (t1 - t0) / _NS
-            if not span > 0:
-                continue
-            du, dv = u1 - u0, v1 - v0
-            if not math.sqrt(du * du + dv * dv) / abs(span) <= vmax:
-                continue
-            w = (t - t0) / _NS / span
-            yu, yv = u0 + w * du, v0 + w * dv
-            tau = epi + half_accel * abs(t - t0) / _NS * abs(t - t1) / _NS
-            d = abs(l0 * yu + l1 * yv + l2)
-            if math.isfinite(d) and d / tau < best:
-                best, bu, bv = d / tau, yu, yv
-    return best, bu, bv
-
-
-@kernel
 def support_all(rows, b, t_all, uv, lines, times, table, causal, right, wait_ns, gap_ns,
                 epi, vmax, half_accel, ratio, carried, used):
     """gating._support's rule for the candidates ``rows`` of one camera a and one other
@@ -379,9 +319,7 @@ def support_all(rows, b, t_all, uv, lines, times, table, causal, right, wait_ns,
     b; ``causal``: b's frames up to ``t + wait_ns`` (``right``: bisect_right, else left),
     else offline (interpolation between the frames around t where both are near);
     ``gap_ns``: frames further than this give no support; ``epi``, ``vmax``,
-    ``half_accel``: GatingOptions' epipolar_px, max_image_speed_px_s, 0.5 accel_px_s2.
-    Where the pair around t holds no plausible pair, a pair that passes over one of its
-    frames (gating._skip_pairs), ``used``'s four slots as the numpy form sets them."""
+    ``half_accel``: GatingOptions' epipolar_px, max_image_speed_px_s, 0.5 accel_px_s2."""
     n_f, k_max = table.shape[0], table.shape[1]
     for i in range(len(rows)):
         r = rows[i]
@@ -399,43 +337,40 @@ def support_all(rows, b, t_all, uv, lines, times, table, causal, right, wait_ns,
         near = False
         # interpolation between the frames around t, else extrapolation from the two
         # latest at or before it (only where no later frame exists)
-        if inext >= 0:
-            first, second = i1, inext
-        else:
-            first, second = i0, i1
-        if (first >= 0 and second >= 0 and abs(t - times[first]) <= gap_ns
-                and abs(t - times[second]) <= gap_ns):
+        for extrapolate in range(2):
+            if extrapolate == 0:
+                first, second = i1, inext
+            else:
+                first, second = i0, i1
+                if inext >= 0:
+                    continue
+            if first < 0 or second < 0:
+                continue
+            if not (abs(t - times[first]) <= gap_ns and abs(t - times[second]) <= gap_ns):
+                continue
             near = True
-            best, bu, bv = _carry_pair(t, l0, l1, l2, first, second, t_all, uv, table, epi,
-                                       vmax, half_accel)
-            if best == math.inf:  # no plausible pair: one of its frames passed over
-                before = i0 - 1 if i0 >= 0 else -1
-                after = inext + 1 if inext >= 0 and inext + 1 < n_f else -1
-                used[r, b, 3] = before if inext < 0 else after
-                for option in range(2):
-                    if inext < 0:
-                        if option == 0:
-                            p0, p1, s0, s3 = before, i0, before, i1
-                        else:
-                            p0, p1, s0, s3 = before, i1, before, i0
-                    elif option == 0:
-                        p0, p1, s0, s3 = i1, after, i0, inext
-                    else:
-                        p0, p1, s0, s3 = i0, inext, i1, after
-                    if not (p0 >= 0 and p1 >= 0 and abs(t - times[p0]) <= gap_ns
-                            and abs(t - times[p1]) <= gap_ns):
+            for q0 in range(k_max):  # numpy's argmin over (q0, q1): the first smallest
+                r0 = table[first, q0]
+                if r0 < 0:
+                    continue
+                t0, u0, v0 = t_all[r0], uv[r0, 0], uv[r0, 1]
+                for q1 in range(k_max):
+                    r1 = table[second, q1]
+                    if r1 < 0:
                         continue
-                    rs, us, vs = _carry_pair(t, l0, l1, l2, p0, p1, t_all, uv, table, epi,
-                                             vmax, half_accel)
-                    if rs < best:  # the best of them (the first on a tie)
-                        best, bu, bv = rs, us, vs
-                        # the pair carried in slots 1 and 2 (its latest alone when
-                        # extrapolating), the others in 0 and 3
-                        used[r, b, 0], used[r, b, 3] = s0, s3
-                        if inext < 0:
-                            used[r, b, 1], used[r, b, 2] = p1, -1
-                        else:
-                            used[r, b, 1], used[r, b, 2] = p0, p1
+                    t1, u1, v1 = t_all[r1], uv[r1, 0], uv[r1, 1]
+                    span = (t1 - t0) / _NS
+                    if not span > 0:
+                        continue
+                    du, dv = u1 - u0, v1 - v0
+                    if not math.sqrt(du * du + dv * dv) / abs(span) <= vmax:
+                        continue
+                    w = (t - t0) / _NS / span
+                    yu, yv = u0 + w * du, v0 + w * dv
+                    tau = epi + half_accel * abs(t - t0) / _NS * abs(t - t1) / _NS
+                    d = abs(l0 * yu + l1 * yv + l2)
+                    if math.isfinite(d) and d / tau < best:
+                        best, bu, bv = d / tau, yu, yv
         # a single nearby frame (the other camera missed the one before): its candidates
         # as they are, allowing the image motion a ball can make since
         if not near and i1 >= 0 and abs(t - times[i1]) <= gap_ns:
@@ -991,12 +926,11 @@ def decide_frame(fid, a, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k
             u, v = cf[a, at, j, 0], cf[a, at, j, 1]
             last = (np.searchsorted(keys, t + wait, side="right") if right
                     else np.searchsorted(keys, t + wait, side="left"))
+            if last - 1 >= 0:
+                lag[j, b] = abs(t - keys[last - 1]) / _NS
             l0, l1, l2 = _line_of(F[a, b], u, v)
-            r, cu, cv, found, skipped = support_one(t, l0, l1, l2, b, keys, fi, fflag, ct,
-                                                    cf, csup, right, False, opt)
-            latest = skipped if skipped >= 0 else last - 1
-            if latest >= 0:
-                lag[j, b] = abs(t - keys[latest]) / _NS
+            r, cu, cv, found = support_one(t, l0, l1, l2, b, keys, fi, fflag, ct, cf, csup,
+                                           right, False, opt)
             r_every[j, b] = r
             if found:
                 c_every[j, b, 0], c_every[j, b, 1] = cu, cv
@@ -1007,8 +941,8 @@ def decide_frame(fid, a, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k
                     narrowed = True
                     break
             if narrowed:
-                r, cu, cv, found, _ = support_one(t, l0, l1, l2, b, keys, fi, fflag, ct,
-                                                  cf, csup, right, True, opt)
+                r, cu, cv, found = support_one(t, l0, l1, l2, b, keys, fi, fflag, ct, cf,
+                                               csup, right, True, opt)
                 differs[j] = 1.0
             r_dec[j, b] = r
             if found:

@@ -371,50 +371,6 @@ def _frame_table(c: _Candidates, n_cams: int):
     return out
 
 
-def _near_pair(t: np.ndarray, times: np.ndarray, first: np.ndarray, second: np.ndarray,
-               max_gap_ns: int) -> np.ndarray:
-    """Where both frames ``first``, ``second`` (positions in a camera's frame table, -1:
-    none) exist and lie within ``max_gap_ns`` of the candidates' times ``t``."""
-    ok = (first >= 0) & (second >= 0)
-    ok &= np.abs(t - times[np.maximum(first, 0)]) <= max_gap_ns
-    ok &= np.abs(t - times[np.maximum(second, 0)]) <= max_gap_ns
-    return ok
-
-
-def _carry(c: _Candidates, t: np.ndarray, lines: np.ndarray, table: np.ndarray,
-           idx: np.ndarray, first: np.ndarray, second: np.ndarray, options: GatingOptions,
-           best: np.ndarray, best_uv: np.ndarray) -> None:
-    """:func:`_support`'s pair rule for its candidates ``idx`` (at times ``t[idx]``, their
-    epipolar ``lines[idx]`` in camera b): every pair of candidates of b's frames
-    ``first[idx]``, ``second[idx]`` (``table``: b's frame table) carried linearly to t;
-    where the best plausible one beats ``best``, it and its carried pixel into ``best``,
-    ``best_uv``."""
-    accel, vmax = options.accel_px_s2, options.max_image_speed_px_s
-    r0 = table[first[idx]]  # (k, K)
-    r1 = table[second[idx]]
-    valid = (r0[:, :, None] >= 0) & (r1[:, None, :] >= 0)
-    y0 = c.uv_und[np.maximum(r0, 0)][:, :, None, :]
-    y1 = c.uv_und[np.maximum(r1, 0)][:, None, :, :]
-    t0 = c.time_ns[np.maximum(r0, 0)][:, :, None]
-    t1 = c.time_ns[np.maximum(r1, 0)][:, None, :]
-    span = (t1 - t0) / NS
-    tt = t[idx][:, None, None]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        w = np.where(span != 0, (tt - t0) / NS / np.where(span != 0, span, 1), 0.0)
-        y = y0 + w[..., None] * (y1 - y0)
-        speed = np.linalg.norm(y1 - y0, axis=-1) / np.abs(span)
-    valid &= (span > 0) & (speed <= vmax)
-    tau = options.epipolar_px + 0.5 * accel * np.abs(tt - t0) / NS * np.abs(tt - t1) / NS
-    ln = lines[idx][:, None, None, :]
-    d = np.abs(ln[..., 0] * y[..., 0] + ln[..., 1] * y[..., 1] + ln[..., 2])
-    r = np.where(valid & np.isfinite(d), d / tau, np.inf).reshape(len(idx), -1)
-    k = np.argmin(r, axis=1)
-    rk = r[np.arange(len(idx)), k]
-    better = rk < best[idx]
-    best[idx[better]] = rk[better]
-    best_uv[idx[better]] = y.reshape(len(idx), -1, 2)[np.arange(len(idx)), k][better]
-
-
 def _support(c: _Candidates, rig: Rig, F: np.ndarray, tables, options: GatingOptions,
              max_gap_ns: int, causal: bool, wait_ns: int, only: np.ndarray | None = None,
              compiled: bool | None = None):
@@ -427,19 +383,15 @@ def _support(c: _Candidates, rig: Rig, F: np.ndarray, tables, options: GatingOpt
     ratio : (C, m) float, best ``d_b / τ_b`` of camera b (NaN: b has no frame near; inf:
         frames but no plausible pair)
     carried : (C, m, 2) undistorted pixel of b's best pair carried to the candidate's time
-    used : (C, m, 4) int, the positions in b's frame table of the frames the rule looked at
-        (-1: none): the frame before the latest at or before the candidate's time, that
-        latest one, the first after, and the frame a pair passed over as if missed looked
-        at beyond them (:func:`_skip_pairs`); where such a pair was carried, its frames
-        are slots 1 and 2 (its latest alone in 1 when extrapolating), the other two in 0
-        and 3 (:func:`_lags` reads slots 1 and 2). This all-candidates support is the
-        decided one (:func:`_support_one`) as long as none of them has been decided with a
-        rejected candidate
+    used : (C, m, 3) int, the positions in b's frame table of the frames the rule looked at
+        (the two latest at or before the candidate's time and the first after; -1: none):
+        this all-candidates support is the decided one (:func:`_support_one`) as long as
+        none of them has been decided with a rejected candidate
     """
     n, m = len(c.camera), len(rig)
     ratio = np.full((n, m), np.nan)
     carried = np.full((n, m, 2), np.nan)
-    used = np.full((n, m, 4), -1, dtype=np.int64)
+    used = np.full((n, m, 3), -1, dtype=np.int64)
     accel, vmax = options.accel_px_s2, options.max_image_speed_px_s
     # loaded (pslog fuse preloads it): the compiled rule, one candidate at a time in this
     # function's order of operations (the same bits, ~10 times faster); a light command
@@ -494,39 +446,39 @@ def _support(c: _Candidates, rig: Rig, F: np.ndarray, tables, options: GatingOpt
             # interpolation between the frames around t, else extrapolation from the two
             # latest at or before it
             for extrapolate, (first, second) in enumerate(((i1, inext), (i0, i1))):
-                ok = _near_pair(t, times, first, second, max_gap_ns)
+                ok = (first >= 0) & (second >= 0)
+                ok &= np.abs(t - times[np.maximum(first, 0)]) <= max_gap_ns
+                ok &= np.abs(t - times[np.maximum(second, 0)]) <= max_gap_ns
                 if extrapolate:  # only where no interpolation was possible
                     ok &= inext < 0
                 idx = np.flatnonzero(ok)
                 if len(idx) == 0:
                     continue
                 near[idx] = True
-                _carry(c, t, lines, table, idx, first, second, options, best, best_uv)
-            # no plausible pair: a pair that passes over one of those frames as if b had
-            # missed the ball there (_skip_pairs; every frame of the table may support)
-            skip = near & np.isinf(best)
-            if skip.any():
-                n_f = len(times)
-                before = np.where(i0 >= 0, i0 - 1, -1)
-                after = np.where((inext >= 0) & (inext + 1 < n_f), inext + 1, -1)
-                extra = np.where(inext < 0, before, after)
-                u_rows = used[rows, b]
-                u_rows[skip, 3] = extra[skip]
-                pairs = (((inext < 0), before, i0, (before, i0, inext, i1)),
-                         ((inext < 0), before, i1, (before, i1, inext, i0)),
-                         ((inext >= 0), i1, after, (i0, i1, after, inext)),
-                         ((inext >= 0), i0, inext, (i1, i0, inext, after)))
-                for where, first, second, slots in pairs:  # the best of them (the first)
-                    ok = skip & where & _near_pair(t, times, first, second, max_gap_ns)
-                    idx = np.flatnonzero(ok)
-                    if len(idx) == 0:
-                        continue
-                    prior = best[idx]
-                    _carry(c, t, lines, table, idx, first, second, options, best, best_uv)
-                    got = idx[best[idx] < prior]
-                    for q, slot in enumerate(slots):
-                        u_rows[got, q] = slot[got]
-                used[rows, b] = u_rows
+                r0 = table[first[idx]]  # (k, K)
+                r1 = table[second[idx]]
+                valid = (r0[:, :, None] >= 0) & (r1[:, None, :] >= 0)
+                y0 = c.uv_und[np.maximum(r0, 0)][:, :, None, :]
+                y1 = c.uv_und[np.maximum(r1, 0)][:, None, :, :]
+                t0 = c.time_ns[np.maximum(r0, 0)][:, :, None]
+                t1 = c.time_ns[np.maximum(r1, 0)][:, None, :]
+                span = (t1 - t0) / NS
+                tt = t[idx][:, None, None]
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    w = np.where(span != 0, (tt - t0) / NS / np.where(span != 0, span, 1), 0.0)
+                    y = y0 + w[..., None] * (y1 - y0)
+                    speed = np.linalg.norm(y1 - y0, axis=-1) / np.abs(span)
+                valid &= (span > 0) & (speed <= vmax)
+                tau = options.epipolar_px + 0.5 * accel * np.abs(tt - t0) / NS * np.abs(
+                    tt - t1) / NS
+                ln = lines[idx][:, None, None, :]
+                d = np.abs(ln[..., 0] * y[..., 0] + ln[..., 1] * y[..., 1] + ln[..., 2])
+                r = np.where(valid & np.isfinite(d), d / tau, np.inf).reshape(len(idx), -1)
+                k = np.argmin(r, axis=1)
+                rk = r[np.arange(len(idx)), k]
+                better = rk < best[idx]
+                best[idx[better]] = rk[better]
+                best_uv[idx[better]] = y.reshape(len(idx), -1, 2)[np.arange(len(idx)), k][better]
             # a single nearby frame (the other camera missed the one before): its candidates
             # as they are, allowing the image motion a ball can make since
             single = ~near & (i1 >= 0)
@@ -566,9 +518,7 @@ def _support_one(t: int, line, keys: list[int], usable, search, wait_ns: int, ca
     ``keys``: b's frame times in frame-table order; ``usable(j)``: the candidates of b's
     frame ``j`` that may support, a list of (corrected time ns, undistorted u, v);
     ``search``: ``bisect_right`` (b's frames at ``t`` + wait count) or ``bisect_left``.
-    Returns (ratio: NaN when b has no usable frame near ``t``, carried (u, v) or None,
-    the pair of b's frames carried when a frame was passed over (:func:`_skip_pairs`), else
-    None).
+    Returns (ratio: NaN when b has no usable frame near ``t``, carried (u, v) or None).
     """
     epi, vmax = options.epipolar_px, options.max_image_speed_px_s
     half_accel = 0.5 * options.accel_px_s2
@@ -591,11 +541,12 @@ def _support_one(t: int, line, keys: list[int], usable, search, wait_ns: int, ca
     def near(j):
         return j >= 0 and abs(t - keys[j]) <= gap_ns
 
-    def carry(first, second):
+    pair = (i1, inext) if inext >= 0 else (i0, i1)
+    if near(pair[0]) and near(pair[1]):
         # carried linearly between the two frames (interpolated or extrapolated)
         best, best_uv = math.inf, None
-        later = usable(second)
-        for t0, u0, v0 in usable(first):
+        later = usable(pair[1])
+        for t0, u0, v0 in usable(pair[0]):
             for t1, u1, v1 in later:
                 span = (t1 - t0) / NS
                 if not span > 0:
@@ -610,31 +561,6 @@ def _support_one(t: int, line, keys: list[int], usable, search, wait_ns: int, ca
                 if math.isfinite(d) and d / tau < best:  # argmin: the first
                     best, best_uv = d / tau, (yu, yv)
         return best, best_uv
-
-    pair = (i1, inext) if inext >= 0 else (i0, i1)
-    if near(pair[0]) and near(pair[1]):
-        best, best_uv = carry(*pair)
-        if best_uv is None:  # no plausible pair: one of its frames passed over as if missed
-            def before(j):
-                j -= 1
-                while j >= 0 and not usable(j):
-                    j -= 1
-                return j
-
-            def after(j):
-                j += 1
-                while j < len(keys) and not usable(j):
-                    j += 1
-                return j if j < len(keys) else -1
-
-            skipped = None
-            for skip in _skip_pairs(i0, i1, inext, before, after):  # the best (the first)
-                if near(skip[0]) and near(skip[1]):
-                    r, uv = carry(*skip)
-                    if uv is not None and r < best:
-                        best, best_uv, skipped = r, uv, skip
-            return best, best_uv, skipped
-        return best, best_uv, None
     if near(i1):  # a single nearby frame (no pair near), its candidates as they are
         best, best_uv = math.inf, None
         for t1, u1, v1 in usable(i1):
@@ -643,28 +569,8 @@ def _support_one(t: int, line, keys: list[int], usable, search, wait_ns: int, ca
             r = d / tau if math.isfinite(d) else math.inf
             if best_uv is None or r < best:
                 best, best_uv = r, (u1, v1)
-        return best, best_uv, None
-    return math.nan, None, None
-
-
-def _skip_pairs(i0: int, i1: int, inext: int, before, after) -> list[tuple[int, int]]:
-    """The pairs of camera b's frames :func:`_support` carries instead when its pair around
-    ``t`` (``(i1, inext)``, or ``(i0, i1)`` without a frame after ``t``) holds no plausible
-    pair (every pair of its candidates faster in the image than ``max_image_speed_px_s``):
-    one of its frames passed over as if b had missed the ball there (a frame where b missed
-    the ball and saw a blob or a static object alone is in its frame table; the same frame
-    empty is not: docs/methods.md, "A false candidate alone in a frame where its camera
-    missed the ball"). Extrapolating: the latest frame passed over, ``(before(i0), i0)``,
-    or the one before it, ``(before(i0), i1)``; interpolating: the frame after ``t``,
-    ``(i1, after(inext))``, or the one before it, ``(i0, inext)``; whichever carries the
-    better pair (the first on a tie: a blob paired with the ball two frames on can be
-    plausible and near the line by chance; -1: none).
-    ``before(j)``, ``after(j)``: b's frame before and after ``j`` that may support (-1:
-    none)."""
-    if inext < 0:
-        first = before(i0) if i0 >= 0 else -1
-        return [(first, i0), (first, i1)]
-    return [(i1, after(inext)), (i0, inext)]
+        return best, best_uv
+    return math.nan, None
 
 
 def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
@@ -1789,9 +1695,9 @@ def _decide_in_order(c: _Candidates, rig: Rig, options: GatingOptions, frames, t
                             continue
                         search = (bisect_right if (not causal or wait_ns > 0 or b < a)
                                   else bisect_left)
-                        r, uv, _ = _support_one(t_i, _line_of(F_lists[a][b], *und_i),
-                                                keys(b), usable_of(b), search, wait_ns,
-                                                causal, max_gap_ns, options)
+                        r, uv = _support_one(t_i, _line_of(F_lists[a][b], *und_i), keys(b),
+                                             usable_of(b), search, wait_ns, causal,
+                                             max_gap_ns, options)
                         ratio[i, b] = r
                         carried[i, b] = uv if uv is not None else (math.nan, math.nan)
                     p, ok, miss = _points_one(a, c.ray_dir[i].tolist(), ratio[i].tolist(),
@@ -2623,13 +2529,11 @@ class StreamGate:
             search = bisect_right if (self.wait_ns > 0 or b < a) else bisect_left
             for j, (t, (u, v)) in enumerate(zip(f.time_ns, f.uv_und.tolist(), strict=True)):
                 latest = search(keys, t + self.wait_ns) - 1
-                line = _line_of(self.F_lists[a][b], u, v)
-                r, uv, skip = _support_one(t, line, keys, every, search, self.wait_ns, True,
-                                           self.max_gap_ns, self.options)
-                if skip is not None:  # the pair carried passed over a frame: its latest
-                    latest = skip[1]
                 if latest >= 0:
                     lag[j, b] = abs(t - keys[latest]) / NS
+                line = _line_of(self.F_lists[a][b], u, v)
+                r, uv = _support_one(t, line, keys, every, search, self.wait_ns, True,
+                                     self.max_gap_ns, self.options)
                 ratio[j, b] = r
                 if uv is not None:
                     carried[j, b] = uv
@@ -2638,8 +2542,8 @@ class StreamGate:
                 last = search(keys, t + self.wait_ns)
                 if any(frames[i].support is not frames[i].every for i in
                        range(bisect_left(keys, t - self.max_gap_ns), last)):
-                    r, uv, _ = _support_one(t, line, keys, usable, search, self.wait_ns,
-                                            True, self.max_gap_ns, self.options)
+                    r, uv = _support_one(t, line, keys, usable, search, self.wait_ns, True,
+                                         self.max_gap_ns, self.options)
                     differs[j] = True
                 decided[0][j, b] = r
                 if uv is not None:
