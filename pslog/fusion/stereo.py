@@ -348,7 +348,7 @@ RAYLEIGH_QUARTILE = float(np.sqrt(-2.0 * np.log(1.0 - REFUSAL_NOISE_QUANTILE)))
 
 
 def refusal_noise(prep: Prepared, time_ns: np.ndarray, max_gap_s: float,
-                  noise_px: float | None) -> np.ndarray:
+                  noise_px: float | None, camera: np.ndarray | None = None) -> np.ndarray:
     """The detection noise σ (pixels per axis, (k,)) that ``sync``'s residual test and
     ``typeB`` / ``linear``'s prediction test assume at ``time_ns`` (k,): at least the least
     noise the tests state, ``floor = max(0.5 px, noise_px)`` (0.5 px when None), and the
@@ -383,20 +383,42 @@ def refusal_noise(prep: Prepared, time_ns: np.ndarray, max_gap_s: float,
 
     floor = max(DEFAULT_NOISE_PX, 0.0 if noise_px is None else float(noise_px))
     time_ns = np.asarray(time_ns, dtype=np.int64)
+    n_cams = len(prep.cameras)
     if not len(time_ns):
-        return np.zeros(0)
+        return np.zeros(0) if camera is not None else np.zeros((0, n_cams))
     obs = prep.obs
-    t_fin, v_fin = residual_norms(obs.time_ns, obs.camera, obs.uv,
-                                  no_detection_limits(prep.cameras), max_gap_s)
+    limits = no_detection_limits(prep.cameras)
     every = int(NOISE_EVERY_S * NS)
     marks, inverse = np.unique(time_ns // every * every, return_inverse=True)
-    sigma = _window_quartiles(t_fin, v_fin, marks, NOISE_MIN_COUNT)[inverse]
-    start = np.flatnonzero(np.isnan(sigma))
-    if len(start):
-        ends, back = np.unique(time_ns[start], return_inverse=True)
-        early = _window_quartiles(t_fin, v_fin, ends, NOISE_START_COUNT)[back]
-        sigma[start] = np.minimum(early, NOISE_UNKNOWN_PX)  # (NaN: none yet: the floor)
-    return np.fmax(floor, sigma)
+    ends, back = np.unique(time_ns, return_inverse=True)
+    # the start's pooled estimate (all cameras' residuals), for a camera with fewer than
+    # NOISE_START_COUNT of its own in the window yet
+    pooled: tuple[np.ndarray, np.ndarray] | None = None
+    sigma = np.full((len(time_ns), n_cams), np.nan)
+    for c in range(n_cams):
+        if camera is not None and not np.any(camera == c):
+            continue
+        own = np.flatnonzero(obs.camera == c)
+        t_fin, v_fin = residual_norms(obs.time_ns[own], obs.camera[own], obs.uv[own], limits,
+                                      max_gap_s)
+        s = _window_quartiles(t_fin, v_fin, marks, NOISE_MIN_COUNT)[inverse]
+        start = np.flatnonzero(np.isnan(s))
+        if len(start):
+            u, b = np.unique(back[start], return_inverse=True)
+            s[start] = np.minimum(_window_quartiles(
+                t_fin, v_fin, ends[u], NOISE_START_COUNT)[b], NOISE_UNKNOWN_PX)
+            none = start[np.isnan(s[start])]
+            if len(none):
+                if pooled is None:
+                    pooled = residual_norms(obs.time_ns, obs.camera, obs.uv, limits, max_gap_s)
+                u, b = np.unique(back[none], return_inverse=True)
+                s[none] = np.minimum(_window_quartiles(  # (NaN: none yet: the floor)
+                    *pooled, ends[u], NOISE_START_COUNT)[b], NOISE_UNKNOWN_PX)
+        sigma[:, c] = s
+    sigma = np.fmax(floor, sigma)
+    if camera is None:
+        return sigma
+    return sigma[np.arange(len(time_ns)), np.asarray(camera, dtype=np.int64)]
 
 
 def _window_quartiles(t_fin: np.ndarray, v_fin: np.ndarray, ends_ns: np.ndarray,
@@ -808,28 +830,66 @@ def residual_refused(prep: Prepared, rows: np.ndarray, used: np.ndarray, points:
 
     k, m = rows.shape
     slots = np.where(used, rows, -1)
-    d2, e2 = np.zeros(k), np.zeros(k)
+    d2, d2w, e2 = np.zeros(k), np.zeros(k), np.zeros(k)
     motion = slot_motion(prep, slots, time_ns, max_gap_s)
+    weighted = _weighted_points(prep, rows, used, points, sigma)
     with np.errstate(invalid="ignore"):
         for c in range(m):
             on = used[:, c]
             if not on.any():
                 continue
-            r = reprojection_one(prep, c, points, prep.uv_undistorted[np.maximum(rows[:, c], 0)])
-            d2 += np.where(on & np.isfinite(r), r * r, 0.0)
-            d2[on & ~np.isfinite(r)] = np.inf  # (a point behind a ray's camera: never kept)
+            uv = prep.uv_undistorted[np.maximum(rows[:, c], 0)]
+            var = sigma[:, c] * sigma[:, c]  # (each camera's own noise: webcams mix)
+            for total, at in ((d2, points), (d2w, weighted)):
+                r = reprojection_one(prep, c, at, uv)
+                total += np.where(on & np.isfinite(r), r * r / var, 0.0)
+                total[on & ~np.isfinite(r)] = np.inf  # (behind a ray's camera: never kept)
             mo = motion[c]
             known = mo.rows[:, 1] >= 0
             shift2 = mo.shift[:, 0] ** 2 + mo.shift[:, 1] ** 2
             unknown = UNKNOWN_IMAGE_SPEED_PX_S * mo.lag
-            e2 += np.where(on, np.where(known, shift2, unknown * unknown), 0.0)
+            e2 += np.where(on, np.where(known, shift2, unknown * unknown) / var, 0.0)
     n = used.sum(axis=1)
     bound = np.full(k, np.inf)
     for count in np.unique(n[n >= 2]).tolist():
         at = n == count
         bound[at] = np.sqrt(chi2_threshold(2 * count - 3))
     with np.errstate(invalid="ignore"):
-        return (n >= 2) & (np.sqrt(d2) > sigma * bound + np.sqrt(e2))
+        return (n >= 2) & (np.sqrt(np.fmin(d2, d2w)) > bound + np.sqrt(e2))
+
+
+def _weighted_points(prep: Prepared, rows: np.ndarray, used: np.ndarray, points: np.ndarray,
+                     sigma: np.ndarray) -> np.ndarray:
+    """The ray intersection (k, 3) weighted as the reprojection error is, for the residual
+    test only: camera ``c``'s squared distance from its ray at ``(f_c / (z_c σ_c))²``
+    (``f_c`` its focal length in pixels, ``z_c`` the depth of the unweighted point
+    ``points`` in it, ``σ_c`` its noise): one Gauss-Newton step, from the unweighted point,
+    towards the minimum of ``Σ_c r_c² / σ_c²`` (the unweighted intersection's ``d²`` over
+    that minimum is ``¼(2 + q² + q⁻²)`` for two views, ``q`` the ratio of the cameras'
+    ``f / (z σ)``: 2.4 at webcams3's worst depths, tens where one camera's noise is 6 times
+    the other's). NaN where a depth is not positive or the system singular."""
+    k, m = rows.shape
+    A = np.zeros((k, 3, 3))
+    b = np.zeros((k, 3))
+    eye = np.eye(3)
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        for c in range(m):
+            on = used[:, c]
+            if not on.any():
+                continue
+            cam = prep.cameras[c]
+            z = (points - prep.centers[c]) @ cam.R[2]
+            f = 0.5 * (cam.K[0, 0] + cam.K[1, 1])
+            w = np.where(on, (f / (z * sigma[:, c])) ** 2, 0.0)
+            d = prep.ray_dir[np.maximum(rows[:, c], 0)]
+            P = eye - d[:, :, None] * d[:, None, :]
+            A += w[:, None, None] * P
+            b += w[:, None] * (P @ prep.centers[c])
+        bad = ~np.all(np.isfinite(A.reshape(k, 9)), axis=1) | (np.linalg.det(A) <= 0.0)
+        A[bad] = eye
+        out = np.linalg.solve(A, b[:, :, None])[:, :, 0]
+    out[bad] = np.nan
+    return out
 
 
 def stereo_at_common_instants(
