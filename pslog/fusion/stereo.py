@@ -349,13 +349,16 @@ RAYLEIGH_QUARTILE = float(np.sqrt(-2.0 * np.log(1.0 - REFUSAL_NOISE_QUANTILE)))
 
 def refusal_noise(prep: Prepared, time_ns: np.ndarray, max_gap_s: float,
                   noise_px: float | None, camera: np.ndarray | None = None) -> np.ndarray:
-    """The detection noise σ (pixels per axis, (k,)) that ``sync``'s residual test and
-    ``typeB`` / ``linear``'s prediction test assume at ``time_ns`` (k,): at least the least
-    noise the tests state, ``floor = max(0.5 px, noise_px)`` (0.5 px when None), and the
-    noise the session's detections show, from the residuals type A's and ``nearest``'s
-    estimators take (the detector's, in recorded pixels: each detection's residual from the
-    quadratic through its camera's three previous ones, :func:`detection_noise`) and with
-    their windows, robust to false detections for a test:
+    """Each camera's detection noise σ_c (pixels per axis, (k, m); with ``camera`` (k,):
+    (k,), each point's camera's) that ``sync``'s residual test and ``typeB`` / ``linear``'s
+    prediction test assume at ``time_ns`` (k,): at least the least noise the tests state,
+    ``floor = max(0.5 px, noise_px)`` (0.5 px when None), and the noise the camera's
+    detections show, from the residuals type A's and ``nearest``'s estimators take (the
+    detector's, in recorded pixels: each detection's residual from the quadratic through its
+    camera's three previous ones, :func:`detection_noise`), each camera's own (one σ pooled
+    over the cameras is the quiet cameras' where webcams mix: one camera 3 px noisier
+    refused 41 % of the good sync points), and with their windows, robust to false
+    detections for a test:
 
     - a checkpoint ``T`` (a multiple of ``NOISE_EVERY_S`` at or before the point) with
       ``NOISE_MIN_COUNT`` residuals in ``[T - NOISE_WINDOW_S, T)``: their lower quartile
@@ -363,8 +366,9 @@ def refusal_noise(prep: Prepared, time_ns: np.ndarray, max_gap_s: float,
       the median);
     - else (a session's first second, or after a pause): the same quartile of the
       residuals in the ``NOISE_WINDOW_S`` before the point once ``NOISE_START_COUNT`` are
-      there, at most ``NOISE_UNKNOWN_PX`` (2 px); before that (the first ~0.1 s, each
-      camera's fourth detection making its first residual) the floor alone. Type A's
+      there, at most ``NOISE_UNKNOWN_PX`` (2 px); before the camera has that many, the same
+      over all cameras' residuals; before that (the first ~0.1 s, each camera's fourth
+      detection making its first residual) the floor alone. Type A's
       covariance takes the root mean square of those few residuals, unbounded, and 2 px
       before any, where a larger σ is the safe side; for a test it is not: 5 false
       detections among a session's first 21 (30 % misses) spoiled 10 of its first 12
@@ -798,20 +802,25 @@ def residual_refused(prep: Prepared, rows: np.ndarray, used: np.ndarray, points:
 
     ``n`` rays (``n >= 2``) of a point seen at one instant give ``2n`` pixel coordinates for
     3 unknowns; under the model (the detections of one ball at one instant, Gaussian noise of
-    ``σ`` per axis in the recorded image) the sum of the squared reprojection residuals
-    ``d² = Σ_c r_c²`` over ``σ²`` is χ² of ``2n - 3`` degrees of freedom (the least-squares
-    ray intersection is not the reprojection error's minimum: its ``d²`` is at least the
-    minimum's, a conservative side of at most ~1.6 for rays at 1:2 depths). The detections
-    taken as simultaneous lie up to the tolerance apart: each slot's image moved by
-    ``e_c = |u̇_c| (t - t_c)`` since its shutter, ``t`` the point's time (its latest
+    ``σ_c`` per axis in camera ``c``'s recorded image: each camera its own, webcams mix) the
+    weighted sum of the squared reprojection residuals ``d² = Σ_c r_c² / σ_c²`` at its
+    minimum is χ² of ``2n - 3`` degrees of freedom. ``d²`` is taken at the better of the
+    least-squares ray intersection ``points`` and one reprojection-weighted step from it
+    (:func:`_weighted_points`): any point's ``d²`` is at least the minimum's, and the
+    unweighted intersection's is up to ``¼(2 + q² + q⁻²)`` times it for two views (``q`` the
+    ratio of the cameras' ``f / (z σ)``), which refuses *more* valid points (2.4 on
+    webcams3: 0.3 % instead of 3.7·10⁻⁶; tens where one camera is 6 times noisier). The
+    detections taken as simultaneous lie up to the tolerance apart: each slot's image moved
+    by ``e_c = |u̇_c| (t - t_c)`` since its shutter, ``t`` the point's time (its latest
     detection), ``u̇_c`` from its camera's previous detection within ``max_gap_s``
     (:func:`slot_motion`'s ``shift``; without one, :data:`UNKNOWN_IMAGE_SPEED_PX_S`). A point
     is refused when
 
-        ``√d² > σ √χ²_{2n-3}(1 - p) + √(Σ_c e_c²)``,   ``p = exp(-25/2)``
+        ``√d² > √χ²_{2n-3}(1 - p) + √(Σ_c e_c² / σ_c²)``,   ``p = exp(-25/2)``
 
-    the level of type A's 5σ innovation test (:data:`~.innovation.REFUSAL_PROBABILITY`; at
-    ``2n - 3 = 2`` exactly ``5 σ``): a detection that is not the ball the others saw (a
+    the level of type A's 5σ innovation test (:data:`~.innovation.REFUSAL_PROBABILITY`;
+    ``2n - 3`` is odd: ``4.63 σ`` for two views, ``5.29 σ`` for three, ``5.75 σ`` for
+    four): a detection that is not the ball the others saw (a
     second orange object chosen in one camera) makes rays that miss by metres, a point
     anywhere along them. Causal: the point's own detections and their cameras' previous ones.
 
@@ -820,7 +829,7 @@ def residual_refused(prep: Prepared, rows: np.ndarray, used: np.ndarray, points:
     rows, used : (k, m) the detection of each camera slot (-1: none) and the rays used
     points : (k, 3) the N-view points, metres
     time_ns : (k,) each point's time (its latest detection's)
-    sigma : (k,) the detections' noise, pixels per axis (:func:`refusal_noise`)
+    sigma : (k, m) each camera's detection noise, pixels per axis (:func:`refusal_noise`)
 
     Returns
     -------
