@@ -164,7 +164,7 @@ def test_each_camera_is_tested_at_its_own_noise():
     cameras (their residuals' lower quartile: the quiet cameras') refused 246 of 600 good
     sync points; each camera at its own σ, at the reprojection-weighted intersection, (almost)
     none, and a detection 70 px off is still refused."""
-    rig, obs, truth = _session("paper3", "sync", "rally", 0.3, 2, 10.0)
+    rig, obs, _ = _session("paper3", "sync", "rally", 0.3, 2, 10.0)
     noisy = obs.camera == 2
     uv = obs.uv.copy()
     uv[noisy] += np.random.default_rng(2).normal(scale=3.0, size=(int(noisy.sum()), 2))
@@ -207,7 +207,7 @@ def test_the_tolerance_motion_allowance_keeps_late_shutters():
     cams = list(rig.cameras)
     cams[1] = cams[1].replace(offset=0.008)
     rig = Rig(tuple(cams), rig.name)
-    detections, truth = simulate(rig, get_motion("fall"), 6.0,
+    detections, _ = simulate(rig, get_motion("fall"), 6.0,
                                  SimulationOptions(noise_px=0.3, seed=3))
     obs = timed_observations(detections, rig)
     track = fuse(obs, rig, "sync", FusionOptions(tolerance_s=0.01))
