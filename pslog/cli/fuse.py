@@ -54,7 +54,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "prediction and kink tests assume (they use the larger of it and "
                              "the noise the session's own innovations imply; sync's residual "
                              "test and typeB's and linear's prediction test the larger of it, "
-                             "0.5 px and the noise the detections show); nearest's "
+                             "0.5 px and the noise each camera's detections show); nearest's "
                              "and typeA's covariance take the noise their detections show "
                              "once a second of them has (at least the smaller of this and "
                              "0.1 px; typeA's first points, before that, at least this and "

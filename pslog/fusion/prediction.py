@@ -109,11 +109,12 @@ def fuse_predicted(prep: Prepared, method: str, tolerance_s: float, max_gap_s: f
     # that is not the ball the stereo points saw; eq. (4) would put the point on its ray
     # at the prediction's depth, metres off (docs/paper.md, "Type B's prediction test")
     # (σ: the larger of the least stated noise, max(0.5 px, noise_px), and the detector's
-    # noise the session shows, stereo.refusal_noise: a stated noise below the real one
-    # refused good points in numbers)
+    # noise the detection's own camera shows, stereo.refusal_noise: a stated noise below
+    # the real one refused good points in numbers)
     failed = contradicted(prep, single, (t_single - stereo_ns[k1]) / NS,
                           (stereo_ns[k1] - stereo_ns[k2]) / NS, predicted, own,
-                          refusal_noise(prep, t_single, max_gap_s, noise_px))
+                          refusal_noise(prep, t_single, max_gap_s, noise_px,
+                                        obs.camera[single]))
     failed &= made & (flags == 0)
     keep = made & (flags == 0) & ~failed
     single, t_single, single_points, shift = (

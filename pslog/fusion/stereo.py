@@ -348,14 +348,17 @@ RAYLEIGH_QUARTILE = float(np.sqrt(-2.0 * np.log(1.0 - REFUSAL_NOISE_QUANTILE)))
 
 
 def refusal_noise(prep: Prepared, time_ns: np.ndarray, max_gap_s: float,
-                  noise_px: float | None) -> np.ndarray:
-    """The detection noise σ (pixels per axis, (k,)) that ``sync``'s residual test and
-    ``typeB`` / ``linear``'s prediction test assume at ``time_ns`` (k,): at least the least
-    noise the tests state, ``floor = max(0.5 px, noise_px)`` (0.5 px when None), and the
-    noise the session's detections show, from the residuals type A's and ``nearest``'s
-    estimators take (the detector's, in recorded pixels: each detection's residual from the
-    quadratic through its camera's three previous ones, :func:`detection_noise`) and with
-    their windows, robust to false detections for a test:
+                  noise_px: float | None, camera: np.ndarray | None = None) -> np.ndarray:
+    """Each camera's detection noise σ_c (pixels per axis, (k, m); with ``camera`` (k,):
+    (k,), each point's camera's) that ``sync``'s residual test and ``typeB`` / ``linear``'s
+    prediction test assume at ``time_ns`` (k,): at least the least noise the tests state,
+    ``floor = max(0.5 px, noise_px)`` (0.5 px when None), and the noise the camera's
+    detections show, from the residuals type A's and ``nearest``'s estimators take (the
+    detector's, in recorded pixels: each detection's residual from the quadratic through its
+    camera's three previous ones, :func:`detection_noise`), each camera's own (one σ pooled
+    over the cameras is the quiet cameras' where webcams mix: one camera 3 px noisier
+    refused 41 % of the good sync points), and with their windows, robust to false
+    detections for a test:
 
     - a checkpoint ``T`` (a multiple of ``NOISE_EVERY_S`` at or before the point) with
       ``NOISE_MIN_COUNT`` residuals in ``[T - NOISE_WINDOW_S, T)``: their lower quartile
@@ -363,8 +366,9 @@ def refusal_noise(prep: Prepared, time_ns: np.ndarray, max_gap_s: float,
       the median);
     - else (a session's first second, or after a pause): the same quartile of the
       residuals in the ``NOISE_WINDOW_S`` before the point once ``NOISE_START_COUNT`` are
-      there, at most ``NOISE_UNKNOWN_PX`` (2 px); before that (the first ~0.1 s, each
-      camera's fourth detection making its first residual) the floor alone. Type A's
+      there, at most ``NOISE_UNKNOWN_PX`` (2 px); before the camera has that many, the same
+      over all cameras' residuals; before that (the first ~0.1 s, each camera's fourth
+      detection making its first residual) the floor alone. Type A's
       covariance takes the root mean square of those few residuals, unbounded, and 2 px
       before any, where a larger σ is the safe side; for a test it is not: 5 false
       detections among a session's first 21 (30 % misses) spoiled 10 of its first 12
@@ -383,20 +387,42 @@ def refusal_noise(prep: Prepared, time_ns: np.ndarray, max_gap_s: float,
 
     floor = max(DEFAULT_NOISE_PX, 0.0 if noise_px is None else float(noise_px))
     time_ns = np.asarray(time_ns, dtype=np.int64)
+    n_cams = len(prep.cameras)
     if not len(time_ns):
-        return np.zeros(0)
+        return np.zeros(0) if camera is not None else np.zeros((0, n_cams))
     obs = prep.obs
-    t_fin, v_fin = residual_norms(obs.time_ns, obs.camera, obs.uv,
-                                  no_detection_limits(prep.cameras), max_gap_s)
+    limits = no_detection_limits(prep.cameras)
     every = int(NOISE_EVERY_S * NS)
     marks, inverse = np.unique(time_ns // every * every, return_inverse=True)
-    sigma = _window_quartiles(t_fin, v_fin, marks, NOISE_MIN_COUNT)[inverse]
-    start = np.flatnonzero(np.isnan(sigma))
-    if len(start):
-        ends, back = np.unique(time_ns[start], return_inverse=True)
-        early = _window_quartiles(t_fin, v_fin, ends, NOISE_START_COUNT)[back]
-        sigma[start] = np.minimum(early, NOISE_UNKNOWN_PX)  # (NaN: none yet: the floor)
-    return np.fmax(floor, sigma)
+    ends, back = np.unique(time_ns, return_inverse=True)
+    # the start's pooled estimate (all cameras' residuals), for a camera with fewer than
+    # NOISE_START_COUNT of its own in the window yet
+    pooled: tuple[np.ndarray, np.ndarray] | None = None
+    sigma = np.full((len(time_ns), n_cams), np.nan)
+    for c in range(n_cams):
+        if camera is not None and not np.any(camera == c):
+            continue
+        own = np.flatnonzero(obs.camera == c)
+        t_fin, v_fin = residual_norms(obs.time_ns[own], obs.camera[own], obs.uv[own], limits,
+                                      max_gap_s)
+        s = _window_quartiles(t_fin, v_fin, marks, NOISE_MIN_COUNT)[inverse]
+        start = np.flatnonzero(np.isnan(s))
+        if len(start):
+            u, b = np.unique(back[start], return_inverse=True)
+            s[start] = np.minimum(_window_quartiles(
+                t_fin, v_fin, ends[u], NOISE_START_COUNT)[b], NOISE_UNKNOWN_PX)
+            none = start[np.isnan(s[start])]
+            if len(none):
+                if pooled is None:
+                    pooled = residual_norms(obs.time_ns, obs.camera, obs.uv, limits, max_gap_s)
+                u, b = np.unique(back[none], return_inverse=True)
+                s[none] = np.minimum(_window_quartiles(  # (NaN: none yet: the floor)
+                    *pooled, ends[u], NOISE_START_COUNT)[b], NOISE_UNKNOWN_PX)
+        sigma[:, c] = s
+    sigma = np.fmax(floor, sigma)
+    if camera is None:
+        return sigma
+    return sigma[np.arange(len(time_ns)), np.asarray(camera, dtype=np.int64)]
 
 
 def _window_quartiles(t_fin: np.ndarray, v_fin: np.ndarray, ends_ns: np.ndarray,
@@ -776,20 +802,25 @@ def residual_refused(prep: Prepared, rows: np.ndarray, used: np.ndarray, points:
 
     ``n`` rays (``n >= 2``) of a point seen at one instant give ``2n`` pixel coordinates for
     3 unknowns; under the model (the detections of one ball at one instant, Gaussian noise of
-    ``σ`` per axis in the recorded image) the sum of the squared reprojection residuals
-    ``d² = Σ_c r_c²`` over ``σ²`` is χ² of ``2n - 3`` degrees of freedom (the least-squares
-    ray intersection is not the reprojection error's minimum: its ``d²`` is at least the
-    minimum's, a conservative side of at most ~1.6 for rays at 1:2 depths). The detections
-    taken as simultaneous lie up to the tolerance apart: each slot's image moved by
-    ``e_c = |u̇_c| (t - t_c)`` since its shutter, ``t`` the point's time (its latest
+    ``σ_c`` per axis in camera ``c``'s recorded image: each camera its own, webcams mix) the
+    weighted sum of the squared reprojection residuals ``d² = Σ_c r_c² / σ_c²`` at its
+    minimum is χ² of ``2n - 3`` degrees of freedom. ``d²`` is taken at the better of the
+    least-squares ray intersection ``points`` and one reprojection-weighted step from it
+    (:func:`_weighted_points`): any point's ``d²`` is at least the minimum's, and the
+    unweighted intersection's is up to ``¼(2 + q² + q⁻²)`` times it for two views (``q`` the
+    ratio of the cameras' ``f / (z σ)``), which refuses *more* valid points (2.4 on
+    webcams3: 0.3 % instead of 3.7·10⁻⁶; tens where one camera is 6 times noisier). The
+    detections taken as simultaneous lie up to the tolerance apart: each slot's image moved
+    by ``e_c = |u̇_c| (t - t_c)`` since its shutter, ``t`` the point's time (its latest
     detection), ``u̇_c`` from its camera's previous detection within ``max_gap_s``
     (:func:`slot_motion`'s ``shift``; without one, :data:`UNKNOWN_IMAGE_SPEED_PX_S`). A point
     is refused when
 
-        ``√d² > σ √χ²_{2n-3}(1 - p) + √(Σ_c e_c²)``,   ``p = exp(-25/2)``
+        ``√d² > √χ²_{2n-3}(1 - p) + √(Σ_c e_c² / σ_c²)``,   ``p = exp(-25/2)``
 
-    the level of type A's 5σ innovation test (:data:`~.innovation.REFUSAL_PROBABILITY`; at
-    ``2n - 3 = 2`` exactly ``5 σ``): a detection that is not the ball the others saw (a
+    the level of type A's 5σ innovation test (:data:`~.innovation.REFUSAL_PROBABILITY`;
+    ``2n - 3`` is odd: ``4.63 σ`` for two views, ``5.29 σ`` for three, ``5.75 σ`` for
+    four): a detection that is not the ball the others saw (a
     second orange object chosen in one camera) makes rays that miss by metres, a point
     anywhere along them. Causal: the point's own detections and their cameras' previous ones.
 
@@ -798,7 +829,7 @@ def residual_refused(prep: Prepared, rows: np.ndarray, used: np.ndarray, points:
     rows, used : (k, m) the detection of each camera slot (-1: none) and the rays used
     points : (k, 3) the N-view points, metres
     time_ns : (k,) each point's time (its latest detection's)
-    sigma : (k,) the detections' noise, pixels per axis (:func:`refusal_noise`)
+    sigma : (k, m) each camera's detection noise, pixels per axis (:func:`refusal_noise`)
 
     Returns
     -------
@@ -808,28 +839,66 @@ def residual_refused(prep: Prepared, rows: np.ndarray, used: np.ndarray, points:
 
     k, m = rows.shape
     slots = np.where(used, rows, -1)
-    d2, e2 = np.zeros(k), np.zeros(k)
+    d2, d2w, e2 = np.zeros(k), np.zeros(k), np.zeros(k)
     motion = slot_motion(prep, slots, time_ns, max_gap_s)
+    weighted = _weighted_points(prep, rows, used, points, sigma)
     with np.errstate(invalid="ignore"):
         for c in range(m):
             on = used[:, c]
             if not on.any():
                 continue
-            r = reprojection_one(prep, c, points, prep.uv_undistorted[np.maximum(rows[:, c], 0)])
-            d2 += np.where(on & np.isfinite(r), r * r, 0.0)
-            d2[on & ~np.isfinite(r)] = np.inf  # (a point behind a ray's camera: never kept)
+            uv = prep.uv_undistorted[np.maximum(rows[:, c], 0)]
+            var = sigma[:, c] * sigma[:, c]  # (each camera's own noise: webcams mix)
+            for total, at in ((d2, points), (d2w, weighted)):
+                r = reprojection_one(prep, c, at, uv)
+                total += np.where(on & np.isfinite(r), r * r / var, 0.0)
+                total[on & ~np.isfinite(r)] = np.inf  # (behind a ray's camera: never kept)
             mo = motion[c]
             known = mo.rows[:, 1] >= 0
             shift2 = mo.shift[:, 0] ** 2 + mo.shift[:, 1] ** 2
             unknown = UNKNOWN_IMAGE_SPEED_PX_S * mo.lag
-            e2 += np.where(on, np.where(known, shift2, unknown * unknown), 0.0)
+            e2 += np.where(on, np.where(known, shift2, unknown * unknown) / var, 0.0)
     n = used.sum(axis=1)
     bound = np.full(k, np.inf)
     for count in np.unique(n[n >= 2]).tolist():
         at = n == count
         bound[at] = np.sqrt(chi2_threshold(2 * count - 3))
     with np.errstate(invalid="ignore"):
-        return (n >= 2) & (np.sqrt(d2) > sigma * bound + np.sqrt(e2))
+        return (n >= 2) & (np.sqrt(np.fmin(d2, d2w)) > bound + np.sqrt(e2))
+
+
+def _weighted_points(prep: Prepared, rows: np.ndarray, used: np.ndarray, points: np.ndarray,
+                     sigma: np.ndarray) -> np.ndarray:
+    """The ray intersection (k, 3) weighted as the reprojection error is, for the residual
+    test only: camera ``c``'s squared distance from its ray at ``(f_c / (z_c σ_c))²``
+    (``f_c`` its focal length in pixels, ``z_c`` the depth of the unweighted point
+    ``points`` in it, ``σ_c`` its noise): one Gauss-Newton step, from the unweighted point,
+    towards the minimum of ``Σ_c r_c² / σ_c²`` (the unweighted intersection's ``d²`` over
+    that minimum is ``¼(2 + q² + q⁻²)`` for two views, ``q`` the ratio of the cameras'
+    ``f / (z σ)``: 2.4 at webcams3's worst depths, tens where one camera's noise is 6 times
+    the other's). NaN where a depth is not positive or the system singular."""
+    k, m = rows.shape
+    A = np.zeros((k, 3, 3))
+    b = np.zeros((k, 3))
+    eye = np.eye(3)
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        for c in range(m):
+            on = used[:, c]
+            if not on.any():
+                continue
+            cam = prep.cameras[c]
+            z = (points - prep.centers[c]) @ cam.R[2]
+            f = 0.5 * (cam.K[0, 0] + cam.K[1, 1])
+            w = np.where(on, (f / (z * sigma[:, c])) ** 2, 0.0)
+            d = prep.ray_dir[np.maximum(rows[:, c], 0)]
+            P = eye - d[:, :, None] * d[:, None, :]
+            A += w[:, None, None] * P
+            b += w[:, None] * (P @ prep.centers[c])
+        bad = ~np.all(np.isfinite(A.reshape(k, 9)), axis=1) | (np.linalg.det(A) <= 0.0)
+        A[bad] = eye
+        out = np.linalg.solve(A, b[:, :, None])[:, :, 0]
+    out[bad] = np.nan
+    return out
 
 
 def stereo_at_common_instants(
