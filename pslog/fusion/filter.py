@@ -1756,6 +1756,9 @@ class BallFilter:
             cams[i] = [*c.r, *c.t, c.fx, c.s, c.cx, c.fy, c.cy, c.k1, c.k2, c.k3, c.p1, c.p2,
                        float(c.distorted), float(c.far)]
         self._cam_table = cams
+        # each camera's centre in the world, -Rᵀ t (point_covariance's rays)
+        self._centres = [tuple((-(np.asarray(c.r).reshape(3, 3).T @ np.asarray(c.t))).tolist())
+                         for c in self._cams]
         self._max_gap_ns = int((options.max_gap_s or default_max_gap_s(rig)) * NS)
         self._var_min, self._var_max = options.min_noise_px ** 2, options.max_noise_px ** 2
         self._q_min = accel_floor(rig, options)
@@ -1939,9 +1942,12 @@ class BallFilter:
         S, I = self._S, self._I
         if not I[_IHAS] or int(I[_ITIME]) != time_ns:
             return None
-        _, P = _combined(S[_SX:_SX + 6], S[_SP:_SP + 36], S[_SXT:_SXT + 7],
-                         S[_SPT:_SPT + 49], S[_SNU])
-        p00, p01, p02, _, _, _, _, p11, p12, _, _, _, _, _, p22 = P[:15].tolist()
+        if S[_SNU]:  # the models' mixture (state()'s)
+            P = _combined(S[_SX:_SX + 6], S[_SP:_SP + 36], S[_SXT:_SXT + 7],
+                          S[_SPT:_SPT + 49], S[_SNU])[1][:15]
+        else:  # the pair alone
+            P = S[_SP:_SP + 15]
+        p00, p01, p02, _, _, _, _, p11, p12, _, _, _, _, _, p22 = P.tolist()
         sx, sy, sz = std_xyz
         vx, vy, vz = sx * sx, sy * sy, sz * sz
         extra = vx + vy + vz - (p00 + p11 + p22)
@@ -1950,12 +1956,10 @@ class BallFilter:
                 a = extra / 3.0
                 p00, p11, p22 = p00 + a, p11 + a, p22 + a
             else:
-                r = self._cam_table[camera].tolist()
                 px, py, pz = position
+                c0, c1, c2 = self._centres[camera]
                 # the ray's direction in the world: the point minus the camera's centre
-                d0 = px + r[0] * r[9] + r[3] * r[10] + r[6] * r[11]
-                d1 = py + r[1] * r[9] + r[4] * r[10] + r[7] * r[11]
-                d2 = pz + r[2] * r[9] + r[5] * r[10] + r[8] * r[11]
+                d0, d1, d2 = px - c0, py - c1, pz - c2
                 n2 = d0 * d0 + d1 * d1 + d2 * d2
                 if n2 > 0.0:
                     a = extra / n2
