@@ -14,6 +14,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from numpy.testing import assert_allclose
 
 from pslog.fusion import FusionOptions, fuse
 from pslog.live.fuser import COUNTERS, LiveFuser, LivePoint
@@ -534,10 +535,10 @@ def test_serve_rehearses_between_paced_datagrams_and_fuses_the_same_points(sessi
 
 
 # ---- over real UDP, recorded: the session re-fused offline gives the live points ----------
-def _serve_session(rig, det, path, method, faults=True, interrupt=False):
+def _serve_session(rig, det, path, method, faults=True, interrupt=False, candidates=True):
     """Send ``det``'s frames (with a duplicate, a reordered and a late frame when
-    ``faults``) over real UDP to serve() recording to ``path``; returns (summary, points
-    received by a robot's socket, epoch)."""
+    ``faults``) over real UDP to serve() recording to ``path`` (``candidates``: serve's);
+    returns (summary, points received by a robot's socket, epoch)."""
     import os
     import signal
     import socket
@@ -585,7 +586,8 @@ def _serve_session(rig, det, path, method, faults=True, interrupt=False):
     before = signal.signal(signal.SIGINT, signal.default_int_handler) if interrupt else None
     try:
         summary = serve(rig, "udp://127.0.0.1:0", sinks, method=method, stop=stop,
-                        ready=ready, status_stream=None, duration_s=60)
+                        ready=ready, status_stream=None, duration_s=60,
+                        candidates=candidates)
     finally:
         if interrupt:
             signal.signal(signal.SIGINT, before)
@@ -594,10 +596,12 @@ def _serve_session(rig, det, path, method, faults=True, interrupt=False):
 
 
 def _robot_socket():
-    """A robot's UDP socket on a free loopback port, reads timing out after 0.3 s."""
+    """A robot's UDP socket on a free loopback port, reads timing out after 0.3 s (its
+    buffer holds a few seconds' points: read once serve has ended)."""
     import socket
 
     rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    rx.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)
     rx.bind(("127.0.0.1", 0))
     rx.settimeout(0.3)
     return rx
@@ -664,6 +668,90 @@ def test_recorded_session_refused_offline_gives_the_live_points(tmp_path, method
                 dropped[reason] = dropped.get(reason, 0) + 1
     assert dropped == {k: c[k] for k in ("duplicate", "reordered", "late")}
     assert main(["info", str(path)]) == 0
+
+
+def test_a_filter_points_datagram_covariance_is_the_published_one(tmp_path):
+    """Issue 10 over real UDP: each point datagram's covariance is the point's published
+    one -- its diagonal the squares of the batch track's ``std_x_m``, ``std_y_m``,
+    ``std_z_m`` (``pslog fuse --gating off`` of the recorded session: the same bits
+    through sqrt; live = batch), its off-diagonal terms the filter's state at the point
+    plus the term the point published, in full: at a rejected detection the jumps its gap
+    may hide (isotropic), for one camera going on alone its unseen jump along that
+    camera's ray. The session makes both matter: each frame's best-scored candidate
+    (false blobs the filter's gate rejects), 30 % misses at 3 x 60 fps (one camera alone
+    for a few frames, its term small enough to publish)."""
+    from pslog.cli import main
+    from pslog.fusion import prepare
+    from pslog.fusion.filter import BallFilter, FilterOptions, fuse_filter
+    from pslog.log.reader import read_session
+    from pslog.timing import observations as timed_observations
+
+    paper3 = apply_timing(builtin_rig("paper3"), "typeA")
+    rig = Rig(tuple(c.replace(fps=60.0, offset=c.offset / 2) for c in paper3.cameras),
+              "paper3@60")
+    rig, det = rally_session(2.0, rig=rig, spurious_rate=0.3, miss_rate=0.3)
+    path, fused = tmp_path / "live.mcap", tmp_path / "fused.mcap"
+    summary, points, epoch = _serve_session(rig, det, path, "filter", faults=False,
+                                            candidates=False)
+    assert len(points) == summary.counters["points"] > 150
+    assert main(["fuse", str(path), "--method", "filter", "--gating", "off",
+                 "-o", str(fused)]) == 0
+    batch = read_session(fused).tracks["filter"]
+    np.testing.assert_array_equal([p.t_capture_ns - epoch for p in points], batch.time_ns)
+    np.testing.assert_array_equal([p.camera_index for p in points], batch.camera)
+    q = batch.quality
+    c = np.array([p.covariance for p in points])  # xx, xy, xz, yy, yz, zz
+    # the diagonal: the batch's columns, to the bit
+    np.testing.assert_array_equal(np.sqrt(c[:, [0, 3, 5]]),
+                                  np.column_stack([q["std_x_m"], q["std_y_m"], q["std_z_m"]]))
+    assert_allclose(np.sqrt(c[:, [0, 3, 5]].sum(axis=1)), q["std_m"], rtol=1e-12)
+    # the term matters here: the same detections without jumps (jump_rate_per_s 0) publish
+    # a smaller std at rejected detections and at one camera going on alone
+    session = read_session(path)
+    prep = prepare(timed_observations(session.detections, session.rig), rig)
+    obs = prep.obs
+    assert prep.doubt_px2 is None
+    assert_allclose(fuse_filter(obs, rig).quality["std_m"], q["std_m"], rtol=0, atol=0)
+    none = fuse_filter(obs, rig, options=FilterOptions(jump_rate_per_s=0.0))
+    # (it withholds fewer: the points the term lifted above max_std_m)
+    assert set(batch.time_ns.tolist()) < set(none.time_ns.tolist())
+    was = none.quality["std_m"][np.searchsorted(none.time_ns, batch.time_ns)]
+    grown = q["std_m"] > was * (1 + 1e-9)
+    rejected = q["rejected"] == 1
+    assert np.count_nonzero(grown & rejected) >= 10 and np.count_nonzero(grown & ~rejected) >= 1
+    # the off-diagonal terms, by hand: the state at the point (a replay of the detections),
+    # plus the published term in full
+    flt = BallFilter(rig)
+    full = {}
+    for t, cam, (u, v) in zip(obs.time_ns.tolist(), obs.camera.tolist(), obs.uv.tolist(),
+                              strict=True):
+        made = flt.push(t, cam, u, v)
+        if made is None:
+            continue
+        if flt.state() is None:  # the rejection that lost the track: no state at hand
+            full[t] = None
+            continue
+        P = flt.state()[2][:3, :3].copy()
+        std = np.array(made[1][1:4])
+        extra = float((std**2).sum() - np.trace(P))
+        if made[1][9] == 1:  # rejected: λ_j σ_j² T³/3 per axis
+            P += extra / 3 * np.eye(3)
+        else:  # one camera alone (else extra is 0): along the camera's ray
+            d = np.array(made[0]) - rig.cameras[cam].center_world
+            P += extra * np.outer(d, d) / (d @ d)
+        full[t] = P
+    checked = 0
+    for p, row in zip(points, c, strict=True):
+        want = full[p.t_capture_ns - epoch]
+        got = row[[0, 1, 2, 1, 3, 4, 2, 4, 5]].reshape(3, 3)
+        if want is None:  # the published variances alone
+            assert np.all(np.isnan(row[[1, 2, 4]]))
+            continue
+        assert np.all(np.linalg.eigvalsh(got) > 0)
+        if np.allclose(np.diag(got), np.diag(want), rtol=1e-9, atol=0):
+            assert_allclose(got, want, rtol=0, atol=1e-9 * np.diag(want).max())
+            checked += 1
+    assert checked >= 0.95 * len(points)
 
 
 def test_sigint_stops_serve_cleanly_with_a_complete_session(tmp_path):

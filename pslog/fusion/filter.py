@@ -1756,6 +1756,9 @@ class BallFilter:
             cams[i] = [*c.r, *c.t, c.fx, c.s, c.cx, c.fy, c.cy, c.k1, c.k2, c.k3, c.p1, c.p2,
                        float(c.distorted), float(c.far)]
         self._cam_table = cams
+        # each camera's centre in the world, -Rᵀ t (point_covariance's rays)
+        self._centres = [tuple((-(np.asarray(c.r).reshape(3, 3).T @ np.asarray(c.t))).tolist())
+                         for c in self._cams]
         self._max_gap_ns = int((options.max_gap_s or default_max_gap_s(rig)) * NS)
         self._var_min, self._var_max = options.min_noise_px ** 2, options.max_noise_px ** 2
         self._q_min = accel_floor(rig, options)
@@ -1889,7 +1892,21 @@ class BallFilter:
         return int(self._I[_ITIME]), x, P.reshape(6, 6)
 
     def predict(self, time_ns: int):
-        """The state predicted to ``time_ns`` (the process model; the state is unchanged).
+        """The state predicted to ``time_ns`` (the process model; the state is unchanged),
+        its covariance with the velocity jumps (kicks, bounces) the gap since the latest
+        accepted detection may hide, as a rejected detection's point publishes them.
+
+        The jumps: a Poisson process of rate ``λ_j`` (``jump_rate_per_s``), each ``Δv ~
+        N(0, σ_j² I)`` (``jump_speed``) at an instant ``s`` in the gap, so by ``time_ns``,
+        ``T`` seconds after the latest accepted detection, the position has moved by
+        ``Σ Δv_k (T − s_k)`` and the velocity by ``Σ Δv_k``: a compound Poisson process,
+        whose covariance per axis is exactly (any number of jumps; zero mean)
+
+            P_pp += λ_j σ_j² T³/3,   P_pv += λ_j σ_j² T²/2,   P_vv += λ_j σ_j² T
+
+        (the position's term is :func:`_unseen_gap_jump`'s: at a rejected detection's time
+        the position block is that point's published covariance). ``T ≤ 0`` (at or before
+        the latest accepted detection) adds nothing.
 
         Returns
         -------
@@ -1900,7 +1917,61 @@ class BallFilter:
         if not self._I[_IHAS]:
             return None
         x, P = _predict(self._S, self._I, self._opts, int(time_ns))
+        a = self._opts[_OUNSEEN]  # λ_j σ_j² / 3
+        gap = (int(time_ns) - int(self._I[_ILAST])) / NS
+        if a != 0.0 and gap > 0.0:  # the jumps the gap may hide (a new array: add in place)
+            P[0:15:7] += a * gap * gap * gap  # the 6 x 6's diagonals, flat: pp
+            P[3:18:7] += 1.5 * a * gap * gap  # pv
+            P[18:33:7] += 1.5 * a * gap * gap  # vp
+            P[21:36:7] += 3.0 * a * gap  # vv
         return x[:3], x[3:], P.reshape(6, 6)
+
+    def point_covariance(self, time_ns: int, camera: int, position, std_xyz,
+                         rejected: bool) -> tuple | None:
+        """The full 3 x 3 covariance of the point just published at ``time_ns`` by
+        ``camera`` (``position``, its ``std_x_m``, ``std_y_m``, ``std_z_m`` and whether its
+        detection was rejected), for :mod:`pslog.live`: its diagonal is the published
+        variances (``std²``: the quality columns, to the bit through ``sqrt``), its
+        correlations those of the state's position covariance plus the term the point
+        published on top of it (in full, where the columns keep only its diagonal): at a
+        rejected detection the gap's jumps (:func:`_unseen_gap_jump`: isotropic, ``Δ I``),
+        else the unseen jump of one camera going on alone (:func:`_unseen_jump`: along the
+        camera's ray ``d``, ``Δ d dᵀ / |d|²``), ``Δ`` the published variance minus the
+        state's. Rows as three tuples of floats; None when the state is not at ``time_ns``
+        (a later detection moved it: the point's correlations are not at hand)."""
+        S, I = self._S, self._I
+        if not I[_IHAS] or int(I[_ITIME]) != time_ns:
+            return None
+        if S[_SNU]:  # the models' mixture (state()'s)
+            P = _combined(S[_SX:_SX + 6], S[_SP:_SP + 36], S[_SXT:_SXT + 7],
+                          S[_SPT:_SPT + 49], S[_SNU])[1][:15]
+        else:  # the pair alone
+            P = S[_SP:_SP + 15]
+        p00, p01, p02, _, _, _, _, p11, p12, _, _, _, _, _, p22 = P.tolist()
+        sx, sy, sz = std_xyz
+        vx, vy, vz = sx * sx, sy * sy, sz * sz
+        extra = vx + vy + vz - (p00 + p11 + p22)
+        if extra > 0.0:
+            if rejected:
+                a = extra / 3.0
+                p00, p11, p22 = p00 + a, p11 + a, p22 + a
+            else:
+                px, py, pz = position
+                c0, c1, c2 = self._centres[camera]
+                # the ray's direction in the world: the point minus the camera's centre
+                d0, d1, d2 = px - c0, py - c1, pz - c2
+                n2 = d0 * d0 + d1 * d1 + d2 * d2
+                if n2 > 0.0:
+                    a = extra / n2
+                    p00, p11, p22 = p00 + a * d0 * d0, p11 + a * d1 * d1, p22 + a * d2 * d2
+                    p01, p02, p12 = p01 + a * d0 * d1, p02 + a * d0 * d2, p12 + a * d1 * d2
+        # the published variances on the diagonal, the correlations above (always a
+        # covariance: a correlation matrix scaled)
+        f0 = sx / math.sqrt(p00) if p00 > 0.0 else 0.0
+        f1 = sy / math.sqrt(p11) if p11 > 0.0 else 0.0
+        f2 = sz / math.sqrt(p22) if p22 > 0.0 else 0.0
+        c01, c02, c12 = p01 * f0 * f1, p02 * f0 * f2, p12 * f1 * f2
+        return (vx, c01, c02), (c01, vy, c12), (c02, c12, vz)
 
     # ---- pieces of the step, for tests (the compiled kernels on lists) ---------------------
     def _turn_predicted(self, x, P, dt):

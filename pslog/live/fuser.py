@@ -84,7 +84,9 @@ class LivePoint:
     t_capture_ns : int, the instant the point describes (true capture time), wall clock ns
     t_emit_ns : int, when the fuser made it, wall clock ns
     position_world : (3,) float64, metres
-    cov_world : (3, 3) float64, m² (NaN when the method has none)
+    cov_world : (3, 3) float64, m² (NaN when the method has none): the point's published
+        one (its method's quality columns; ``filter``: :meth:`~pslog.fusion.filter.BallFilter.
+        point_covariance`, off-diagonal NaN on a push's earlier points)
     residual_px : float, reprojection residual, pixels (NaN unknown)
     camera_mask : int, bit c: camera c's detections made the point
     predicted_position : (3,) metres, predicted_velocity : (3,) m/s, at ``t_emit_ns``
@@ -164,8 +166,8 @@ class LivePoint:
 
 def _layout(keys: tuple) -> tuple:
     """Where a Track's quality row (its columns ``keys`` in order) holds what a LivePoint
-    takes: ``(residual, camera_mask, covariance getter, std getter, [(flag column, bit)])``,
-    indices or None (:meth:`LiveFuser._points`, cached per key tuple)."""
+    takes: ``(residual, camera_mask, covariance getter, std getter, [(flag column, bit)],
+    rejected)``, indices or None (:meth:`LiveFuser._points`, cached per key tuple)."""
     at = {k: j for j, k in enumerate(keys)}
     cov = (operator.itemgetter(*(at[k] for k in _COV_KEYS))
            if all(k in at for k in _COV_KEYS) else None)
@@ -174,7 +176,7 @@ def _layout(keys: tuple) -> tuple:
     flags = [(at[k], bit) for k, bit in (
         ("rejected", FLAG_PREDICTION), ("jump", FLAG_JUMP), ("init", FLAG_INIT)) if k in at]
     return at.get("residual_px", at.get("residual_max_px")), at.get("camera_mask"), cov, std, \
-        flags
+        flags, at.get("rejected")
 
 
 def _num(value) -> float | None:
@@ -722,9 +724,8 @@ class LiveFuser:
         layout = self._layouts.get(keys)
         if layout is None:
             layout = self._layouts[keys] = _layout(keys)
-        residual, mask, cov_at, std_at, flag_at = layout
+        residual, mask, cov_at, std_at, flag_at, rejected = layout
         flt = self._filter
-        state = flt.state() if flt is not None and cov_at is None else None
         epoch = self.epoch_ns
         at_now = None  # (the filter's predicted position and velocity at now, if any)
         if flt is not None:
@@ -742,19 +743,23 @@ class LiveFuser:
                 position, cov_w, pred_p, pred_v = self._made(t, p.tolist(), row, layout, now)
             else:  # (the filter's: on Python floats, one read-only (6, 3) array of the four)
                 nan = math.nan
+                pl = p.tolist()
+                full = None
+                if cov_at is None and std_at is not None and rejected is not None and i == n - 1:
+                    # the published variances (the columns), the correlations of the
+                    # filter's state at this point and of the term the point published
+                    full = flt.point_covariance(t, cam, pl, std_at(row), row[rejected] == 1)
                 if cov_at is not None:
                     xx, xy, xz, yy, yz, zz = cov_at(row)
                     c0, c1, c2 = (xx, xy, xz), (xy, yy, yz), (xz, yz, zz)
-                elif state is not None and state[0] == t and i == n - 1:
-                    # the filter's own, after this update
-                    c0, c1, c2 = state[2][:3, :3].tolist()
+                elif full is not None:
+                    c0, c1, c2 = full
                 elif std_at is not None:
                     sx, sy, sz = std_at(row)
                     # (np.diag of the squares, the off-diagonal terms not kept)
                     c0, c1, c2 = (sx ** 2, nan, nan), (nan, sy ** 2, nan), (nan, nan, sz ** 2)
                 else:
                     c0 = c1 = c2 = _NAN_ROW
-                pl = p.tolist()
                 # (before the filter has a state: the point, no velocity)
                 pp, pv = at_now if at_now is not None else (pl, _NAN_ROW)
                 block = np.array((pl, c0, c1, c2, pp, pv))
