@@ -20,11 +20,14 @@ from pathlib import Path
 
 import numpy as np
 from numpy.testing import assert_allclose
+from test_stream_gating import assert_same_track, push_frames
 
 from pslog.evaluation import _offsets
 from pslog.fusion import FusionOptions
 from pslog.fusion.filter import window_jump_cov
 from pslog.fusion.gating import fuse_detections
+from pslog.fusion.stream import StreamFuser
+from pslog.records import Track
 from pslog.simulation import SimulationOptions, simulate_labelled
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
@@ -97,3 +100,6 @@ def test_a_restart_across_a_kick_is_withheld_not_vouched_for():
     # every start it publishes is within 5 cm, and its std_m says so
     assert np.all(err[init] < 0.05)
     assert np.all(err[init] < 4.0 * track.quality["std_m"][init])
+    # streamed, the same points and counts, bit for bit
+    fuser = StreamFuser(rig, "filter", candidates=True)
+    assert_same_track(Track.concat([*push_frames(fuser, det, "push"), fuser.flush()]), track)
