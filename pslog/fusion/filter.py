@@ -271,8 +271,9 @@ class FilterOptions:
         camera's ray of a jump no other camera has seen in the time ``T`` since another
         camera's latest accepted detection (one camera's pixels do not fix the depth), and
         the point of a rejected detection (the prediction) ``λ_j σ_j² T³ / 3`` on every axis
-        over the time ``T`` since the latest accepted detection (:func:`_unseen_gap_jump`);
-        0: neither
+        over the time ``T`` since the latest accepted detection (:func:`_unseen_gap_jump`),
+        and a (re)start's point the error its window's fit makes of the jumps inside the
+        window (:func:`window_jump_cov`); 0: none of these
     """
 
     noise_px: float = 0.5
