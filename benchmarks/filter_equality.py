@@ -23,7 +23,8 @@ revision's ``pslog``, on the same sessions and each dirty one also as its best-s
 candidates, ungated (``benchmarks/_equality.py``): the points of
 accepted detections (``rejected`` 0) must be bit-equal, column for column, and the points of
 rejected detections equal but for their standard deviations (session 24: the published
-covariance of a rejected detection's prediction, "Gating, jumps" in docs/methods.md);
+covariance of a rejected detection's prediction, "Gating, jumps" in docs/methods.md; and
+the points of (re)starts likewise, the jumps of their window, "Loss and (re)initialisation");
 prints how many rejected points changed, how many the new tree withholds (``uncertain``)
 and the largest change of ``std_m``; exit 1 on any other difference.
 
@@ -176,15 +177,18 @@ def dump(path: str, quick: bool) -> None:
         pickle.dump(out, f)
 
 
-#: the columns a rejected detection's point may change in (its published covariance)
+#: the columns a rejected detection's or a (re)start's point may change in (its published
+#: covariance: the jumps of its gap, of its window)
 STD_COLUMNS = ("std_m", "std_x_m", "std_y_m", "std_z_m")
 
 
 def compare_ref(old: dict, new: dict) -> int:
-    """Accepted detections' points bit-equal; rejected ones equal but for STD_COLUMNS, or
-    withheld by the new tree (counted ``uncertain``). Returns the exit code."""
-    bad = changed = withheld = rejected = accepted = 0
-    worst = 0.0
+    """Accepted detections' points bit-equal but for the (re)starts'; rejected ones and
+    starts equal but for STD_COLUMNS (not smaller), or withheld by the new tree (counted
+    ``uncertain``). Returns the exit code."""
+    bad = changed = withheld = rejected = accepted = starts = starts_changed = 0
+    starts_withheld = 0
+    worst = worst_start = 0.0
     for key in old:
         a, b = old[key], new[key]
         ka = list(zip(a["time_ns"].tolist(), a["camera"].tolist(), strict=True))
@@ -192,7 +196,7 @@ def compare_ref(old: dict, new: dict) -> int:
         rows_b = {k: i for i, k in enumerate(kb)}
         gone = [i for i, k in enumerate(ka) if k not in rows_b]
         extra = set(kb) - set(ka)
-        if extra or any(a["rejected"][i] != 1.0 for i in gone):
+        if extra or any(a["rejected"][i] != 1.0 and a["init"][i] != 1.0 for i in gone):
             print("  DIFFERS (points added, or an accepted point gone):", key)
             bad += 1
             continue
@@ -201,12 +205,14 @@ def compare_ref(old: dict, new: dict) -> int:
                 != {k: v for k, v in b["dropped"].items() if k != "uncertain"}:
             print("  DIFFERS (withheld counts):", key, a["dropped"], b["dropped"])
             bad += 1
-        withheld += len(gone)
+        starts_withheld += sum(1 for i in gone if a["init"][i] == 1.0)
+        withheld += sum(1 for i in gone if a["init"][i] != 1.0)
         gone_set = set(gone)
         keep = np.array([i for i in range(len(ka)) if i not in gone_set], dtype=np.int64)
         for name in ("time_ns", "camera", "position", *compiled.FILTER_QUALITY):
             x, y = np.asarray(a[name])[keep], np.asarray(b[name])
-            rej = a["rejected"][keep] == 1.0
+            rej = (a["rejected"][keep] == 1.0) | (a["init"][keep] == 1.0)
+            ini = a["init"][keep] == 1.0
             same = np.array([np.array_equal(x[i], y[i], equal_nan=True) for i in range(len(y))],
                             dtype=bool)
             if name in STD_COLUMNS:
@@ -214,18 +220,24 @@ def compare_ref(old: dict, new: dict) -> int:
                     print("  DIFFERS:", key, name)
                     bad += 1
                 if name == "std_m":
-                    changed += int(np.count_nonzero(~same[rej]))
-                    if rej.any():
-                        worst = max(worst, float(np.max(y[rej] - x[rej])))
+                    r = rej & ~ini
+                    changed += int(np.count_nonzero(~same[r]))
+                    starts_changed += int(np.count_nonzero(~same[ini]))
+                    if r.any():
+                        worst = max(worst, float(np.max(y[r] - x[r])))
+                    if ini.any():
+                        worst_start = max(worst_start, float(np.max(y[ini] - x[ini])))
             elif not np.all(same):
                 print("  DIFFERS:", key, name)
                 bad += 1
         rejected += int(np.count_nonzero(a["rejected"] == 1.0))
         accepted += int(np.count_nonzero(a["rejected"] != 1.0))
+        starts += int(np.count_nonzero(a["init"] == 1.0))
     print(f"{len(old)} sessions: {accepted:,} points of accepted detections, "
           f"{rejected:,} of rejected ones; {bad} differences beyond the rule; rejected points "
           f"with a larger std: {changed}, now withheld: {withheld}; largest std_m increase "
-          f"{1e3 * worst:.2f} mm")
+          f"{1e3 * worst:.2f} mm; (re)starts {starts:,}, with a larger std: {starts_changed}, "
+          f"now withheld: {starts_withheld}, largest std_m increase {1e3 * worst_start:.2f} mm")
     return 1 if bad else 0
 
 

@@ -271,8 +271,9 @@ class FilterOptions:
         camera's ray of a jump no other camera has seen in the time ``T`` since another
         camera's latest accepted detection (one camera's pixels do not fix the depth), and
         the point of a rejected detection (the prediction) ``λ_j σ_j² T³ / 3`` on every axis
-        over the time ``T`` since the latest accepted detection (:func:`_unseen_gap_jump`);
-        0: neither
+        over the time ``T`` since the latest accepted detection (:func:`_unseen_gap_jump`),
+        and a (re)start's point the error its window's fit makes of the jumps inside the
+        window (:func:`window_jump_cov`); 0: none of these
     """
 
     noise_px: float = 0.5
@@ -2097,12 +2098,35 @@ class BallFilter:
                     self._I[_IAGE] = 0
                     *x, vx, vy, vz = _combined_point(S[_SX:_SX + 6], S[_SP:_SP + 36],
                                                      S[_SXT:_SXT + 7], S[_SPT:_SPT + 49], nu)
+                if self._opts[_OUNSEEN] != 0.0:
+                    # the published covariance: with the jumps the window cannot rule out
+                    qx, qy, qz = self._window_jump_var(window)
+                    vx, vy, vz = vx + qx, vy + qy, vz + qz
                 _point(out, x[0], x[1], x[2], vx, vy, vz, _NAN, _NAN,
                        float(residuals[-1]), 0.0, _NAN, _NAN, 0.0, 0.0, 1.0)
                 return True
             del window[0]
         self._set_window(window)
         return False
+
+    def _window_jump_var(self, window) -> tuple[float, float, float]:
+        """The variances (x, y, z) a start's point gains from the velocity jumps (kicks,
+        bounces) inside its window, which the window's fit assumed away: jumps a Poisson
+        process of rate ``λ_j``, each ``Δv ~ N(0, σ_j² I)`` at an instant ``s`` in the
+        window (:func:`window_jump_cov`, at the state just set: the pixel Jacobians of the
+        fitted path). The state keeps the fit's covariance."""
+        S = self._S
+        t_ref = window[-1][0]
+        tau = np.array([(w[0] - t_ref) / NS for w in window])
+        cam = np.array([w[1] for w in window], dtype=np.int64)
+        uv = np.array([w[2:] for w in window])
+        n = len(window)
+        J, r = np.empty((2 * n, 6)), np.empty(2 * n)
+        theta = np.array(S[_SX:_SX + 6], dtype=np.float64)
+        if not _pixel_rows(self._cam_table, cam, uv, tau, theta, self._g_array, J, r):
+            return 0.0, 0.0, 0.0
+        Q = window_jump_cov(J, tau, 3.0 * float(self._opts[_OUNSEEN]))
+        return float(Q[0, 0]), float(Q[1, 1]), float(Q[2, 2])
 
     def _lost_prediction(self, window):
         """What a lost track says of a restart's window (newest at ``window[-1]``): the pair's
@@ -2374,6 +2398,52 @@ class BallFilter:
             return _WEAK
         return theta.tolist(), cov.ravel().tolist(), residuals
 
+
+
+def window_jump_cov(J, tau, rate_var: float) -> np.ndarray:
+    """The position covariance (3 x 3, m²) of a window fit's error at its newest detection
+    from velocity jumps inside the window. ``J`` (2n x 6): the fit's pixel Jacobian, rows
+    ``2j, 2j + 1`` ``[B_j, τ_j B_j]`` (``B_j`` the pixel's derivative by the position);
+    ``tau`` (n,): the detections' times before the newest (ascending, the newest 0);
+    ``rate_var``: ``λ_j σ_j²`` (m²/s³).
+
+    A jump ``Δv`` at ``s`` (``u = t_n - s``) moves detection ``j``'s pixel by ``B_j Δv (τ_j +
+    u)`` where ``τ_j > -u`` (after the jump), and the state at ``t_n`` by ``(u Δv, Δv)``; the
+    least-squares fit ``θ̂ = G Jᵀ z`` (``G = (JᵀJ)⁻¹``) is then off by ``A(u) Δv``,
+
+        A(u) = G Σ_{τ_j > -u} J_jᵀ B_j (τ_j + u) − [u I; I],
+
+    zero before the window's first detection (the whole window sees the new velocity, a
+    path the fit represents exactly), linear in ``u`` between two detections. Jumps a
+    Poisson process of rate ``λ_j`` with ``Δv ~ N(0, σ_j² I)`` (the kick's shape: the
+    compound Poisson process's second moment, any number of jumps) give
+
+        Q = λ_j σ_j² ∫_0^{-τ_0} A(u) A(u)ᵀ du,
+
+    integrated exactly per interval (``A = A0 + u A1`` there); the position block returned.
+    One detection after the jump (the newest alone, ``u`` < its gap) gives the unseen
+    jump of one camera alone, ``λ_j σ_j² T³/3 · d dᵀ`` along its ray ``d``, less what the
+    fit's other detections pull back."""
+    n = tau.shape[0]
+    G = np.linalg.inv(J.T @ J)
+    B = J[:, :3]
+    # C_j = J_jᵀ B_j (6 x 3) per detection
+    C = np.einsum("jai,jak->jik", J.reshape(n, 2, 6), B.reshape(n, 2, 3))
+    Q = np.zeros((3, 3))
+    eye = np.eye(3)
+    sum_c = np.zeros((6, 3))
+    sum_ct = np.zeros((6, 3))
+    for k in range(n - 1, 0, -1):  # jumps between detections k - 1 and k: k.. see it
+        sum_c += C[k]
+        sum_ct += C[k] * tau[k]
+        ua, ub = -tau[k], -tau[k - 1]
+        if not ub > ua:
+            continue
+        a0 = (G @ sum_ct)[:3]          # position rows of A0 (its [0; I] term is velocity's)
+        a1 = (G @ sum_c)[:3] - eye     # and of A1
+        Q += (a0 @ a0.T * (ub - ua) + (a0 @ a1.T + a1 @ a0.T) * (ub * ub - ua * ua) / 2.0
+              + a1 @ a1.T * (ub ** 3 - ua ** 3) / 3.0)
+    return rate_var * 0.5 * (Q + Q.T)
 
 
 #: A restart's fit takes the lost track's prediction as a prior when the two agree: their
