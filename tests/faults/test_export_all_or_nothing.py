@@ -127,11 +127,12 @@ def test_a_signal_between_outputs_keeps_every_old_one(fused, tmp_path, sig, code
 
 
 def test_a_c3d_the_session_cannot_give_is_refused_before_anything_is_written(tmp_path):
-    """One point (three cameras at one instant): C3D has no frame rate to set. Before,
+    """One point (three cameras at one instant, the pixels of one 3D point: the N-view residual
+    test keeps it): C3D has no frame rate to set. Before,
     the CSV and JSON lines were written first, then the export failed."""
     (tmp_path / "rig.toml").write_text(builtin_rig("paper3").to_toml(), encoding="utf-8")
-    (tmp_path / "d.csv").write_text("camera,time,u,v\ncam1,0.5,395,342\ncam2,0.5,170,271\n"
-                                    "cam3,0.5,276,177\n")
+    (tmp_path / "d.csv").write_text("camera,time,u,v\ncam1,0.5,395.63,339.29\n"
+                                    "cam2,0.5,167.39,270.47\ncam3,0.5,276.71,178.81\n")
     assert main(["import", "--rig", str(tmp_path / "rig.toml"), "--detections",
                  str(tmp_path / "d.csv"), "-o", str(tmp_path / "d.mcap")]) == 0
     assert main(["fuse", str(tmp_path / "d.mcap"), "--method", "sync", "-o",
