@@ -1760,6 +1760,8 @@ class BallFilter:
         # each camera's centre in the world, -Rᵀ t (point_covariance's rays)
         self._centres = [tuple((-(np.asarray(c.r).reshape(3, 3).T @ np.asarray(c.t))).tolist())
                          for c in self._cams]
+        # the latest start's (time, 3 x 3 window_jump_cov position block): point_covariance's
+        self._start_jump: tuple[int, np.ndarray] | None = None
         self._max_gap_ns = int((options.max_gap_s or default_max_gap_s(rig)) * NS)
         self._var_min, self._var_max = options.min_noise_px ** 2, options.max_noise_px ** 2
         self._q_min = accel_floor(rig, options)
@@ -1936,10 +1938,12 @@ class BallFilter:
         correlations those of the state's position covariance plus the term the point
         published on top of it (in full, where the columns keep only its diagonal): at a
         rejected detection the gap's jumps (:func:`_unseen_gap_jump`: isotropic, ``Δ I``),
-        else the unseen jump of one camera going on alone (:func:`_unseen_jump`: along the
-        camera's ray ``d``, ``Δ d dᵀ / |d|²``), ``Δ`` the published variance minus the
-        state's. Rows as three tuples of floats; None when the state is not at ``time_ns``
-        (a later detection moved it: the point's correlations are not at hand)."""
+        at a start's point the jumps its window may hide (:func:`window_jump_cov`'s position
+        block, in full), else the unseen jump of one camera going on alone
+        (:func:`_unseen_jump`: along the camera's ray ``d``, ``Δ d dᵀ / |d|²``), ``Δ`` the
+        published variance minus the state's. Rows as three tuples of floats; None when the
+        state is not at ``time_ns`` (a later detection moved it: the point's correlations are
+        not at hand)."""
         S, I = self._S, self._I
         if not I[_IHAS] or int(I[_ITIME]) != time_ns:
             return None
@@ -1952,7 +1956,13 @@ class BallFilter:
         sx, sy, sz = std_xyz
         vx, vy, vz = sx * sx, sy * sy, sz * sz
         extra = vx + vy + vz - (p00 + p11 + p22)
-        if extra > 0.0:
+        start = self._start_jump
+        if extra > 0.0 and not rejected and start is not None and start[0] == time_ns:
+            # a start's point: the jumps its window may hide (:func:`window_jump_cov`), in full
+            q = start[1]
+            p00, p11, p22 = p00 + q[0, 0], p11 + q[1, 1], p22 + q[2, 2]
+            p01, p02, p12 = p01 + q[0, 1], p02 + q[0, 2], p12 + q[1, 2]
+        elif extra > 0.0:
             if rejected:
                 a = extra / 3.0
                 p00, p11, p22 = p00 + a, p11 + a, p22 + a
@@ -2126,6 +2136,7 @@ class BallFilter:
         if not _pixel_rows(self._cam_table, cam, uv, tau, theta, self._g_array, J, r):
             return 0.0, 0.0, 0.0
         Q = window_jump_cov(J, tau, 3.0 * float(self._opts[_OUNSEEN]))
+        self._start_jump = (int(t_ref), Q[:3, :3].copy())  # (point_covariance's, in full)
         return float(Q[0, 0]), float(Q[1, 1]), float(Q[2, 2])
 
     def _lost_prediction(self, window):
