@@ -860,6 +860,7 @@ def bracket(prep: Prepared, camera: int, time_ns: np.ndarray) -> tuple[np.ndarra
     return prev, nxt
 
 
-def default_max_gap_s(rig: Rig) -> float:
-    """3.5 frame periods of the slowest camera: bridges two missed frames, not more."""
+def default_max_gap_s(rig: Rig | Prepared) -> float:
+    """3.5 frame periods of the slowest camera (of a rig, or of a Prepared session's
+    cameras): bridges two missed frames, not more."""
     return 3.5 / min(c.fps for c in rig.cameras)

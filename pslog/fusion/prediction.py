@@ -27,7 +27,7 @@ from ._prepare import (
     invalid_points,
     reprojection_px,
 )
-from .innovation import contradicted
+from .innovation import contradicted, failed_counts
 from .stereo import count_invalid, refusal_noise, stereo_at_common_instants, with_dropped
 
 
@@ -132,9 +132,8 @@ def fuse_predicted(prep: Prepared, method: str, tolerance_s: float, max_gap_s: f
     track = Track(
         method, time_ns[order], np.concatenate([points, single_points])[order],
         np.concatenate([stereo.camera, obs.camera[single]])[order], quality)
-    n_failed = int(np.count_nonzero(failed))
     return with_dropped(track, stereo.dropped, count_invalid(flags[made]),
-                        {"prediction_failed": n_failed} if n_failed else {})
+                        failed_counts(failed))
 
 
 def _type_b_covariance(prep: Prepared, single: np.ndarray, cam: np.ndarray,

@@ -21,6 +21,7 @@ from ._prepare import (
     camera_mask,
     covariance,
     covariance_columns,
+    default_max_gap_s,
     direction_jacobian,
     finite_difference_jacobians,
     finite_rows,
@@ -932,7 +933,7 @@ def stereo_at_common_instants(
     made = (n_cameras >= 2) & (quality["n_detections"] >= 2)
     keep = made & (flags == 0) & np.all(np.isfinite(points), axis=1)
     if max_gap_s is None:
-        max_gap_s = 3.5 / min(c.fps for c in prep.cameras)  # (_prepare.default_max_gap_s)
+        max_gap_s = default_max_gap_s(prep)
     at = np.flatnonzero(keep)
     refused = np.zeros(len(keep), dtype=bool)
     refused[at] = residual_refused(
