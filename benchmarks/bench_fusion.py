@@ -25,13 +25,14 @@ Issue 12's target: ``typeA`` at least 1,000,000 points/s and at least the faster
 exit status is 1 if it is missed. Speed figures on a shared machine are noisy: compare the
 ratios printed in one run, not figures of separate runs.
 
-``--base REV`` also times ``fuse(..., "typeA")`` under a git revision's ``pslog`` (``git
+``--base REV`` also times ``fuse(..., method)`` for each of ``--methods`` (default
+``typeA``; each on its timing's session, as above) under a git revision's ``pslog`` (``git
 archive``, run in a child process) and this tree's, alternating, ``--rounds`` times each on
-the same session (CPU time of each child, best of ``--repeat``): the paired figure a shared
-machine allows.
+the same sessions (CPU time of each child, best of ``--repeat``): the paired figure a
+shared machine allows.
 
     python benchmarks/bench_fusion.py [--minutes 10] [--repeat 3] [--quick] [--stream 10]
-        [--json out.json] [--compile] [--base REV [--rounds 3]]
+        [--json out.json] [--compile] [--base REV [--rounds 3] [--methods typeA,sync]]
 """
 
 from __future__ import annotations
@@ -152,9 +153,17 @@ def main() -> int:
     parser.add_argument("--base", default=None, metavar="REV",
                         help="also time typeA under this git revision, alternating (paired)")
     parser.add_argument("--rounds", type=int, default=3, help="alternations with --base")
+    parser.add_argument("--methods", default="typeA",
+                        help="with --base: the methods timed, comma-separated (of "
+                             + ", ".join(PAIRED_TIMING) + ")")
     args = parser.parse_args()
     if args.base:
-        paired(args.base, args.minutes if not args.quick else 2.0, args.repeat, args.rounds)
+        methods = args.methods.split(",")
+        unknown = sorted(set(methods) - set(PAIRED_TIMING))
+        if unknown:
+            parser.error(f"--methods: not timed here: {', '.join(unknown)}")
+        paired(args.base, args.minutes if not args.quick else 2.0, args.repeat, args.rounds,
+               methods)
         return 0
     if args.quick:
         args.minutes, args.repeat = 2.0, 2
@@ -271,37 +280,50 @@ def compile_times() -> None:
             print(f"  {label:<24} first call {first:7.2f} s, second {second * 1e3:7.2f} ms")
 
 
+#: the session timing each method is timed on by ``--base`` (the main run's)
+PAIRED_TIMING = {"typeA": "typeA", "nearest": "typeA", "typeB": "typeB", "linear": "typeB",
+                 "sync": "sync"}
+
 _PAIRED_CHILD = """
 import sys, time
 from pslog import SimulationOptions, apply_timing, builtin_rig, get_motion, simulate
 import pslog
 from pslog.fusion import fuse
 minutes, repeat = float(sys.argv[1]), int(sys.argv[2])
-rig = apply_timing(builtin_rig("paper3"), "typeA")
-obs = simulate(rig, get_motion("turntable"), minutes * 60,
-               SimulationOptions(noise_px=0.5, seed=0))[0].best()
-points = len(fuse(obs, rig, "typeA"))
 assert pslog.__file__.startswith(sys.argv[3]), (pslog.__file__, sys.argv[3])
-best = float("inf")
-for _ in range(repeat):
-    start = time.process_time()
-    fuse(obs, rig, "typeA")
-    best = min(best, time.process_time() - start)
-print(best, points)
+sessions = {}
+for pair in sys.argv[4:]:
+    method, timing = pair.split("=")
+    if timing not in sessions:
+        rig = apply_timing(builtin_rig("paper3"), timing)
+        sessions[timing] = rig, simulate(rig, get_motion("turntable"), minutes * 60,
+                                         SimulationOptions(noise_px=0.5, seed=0))[0].best()
+    rig, obs = sessions[timing]
+    points = len(fuse(obs, rig, method))
+    best = float("inf")
+    for _ in range(repeat):
+        start = time.process_time()
+        fuse(obs, rig, method)
+        best = min(best, time.process_time() - start)
+    print(method, best, points)
 """
 
 
-def paired(base: str, minutes: float, repeat: int, rounds: int) -> None:
-    """``fuse(..., "typeA")`` under revision ``base`` and this tree, alternating in child
-    processes on the same session: CPU seconds, best of ``repeat`` per child."""
+def paired(base: str, minutes: float, repeat: int, rounds: int,
+           methods: list[str] | None = None) -> None:
+    """``fuse(..., method)`` for each of ``methods`` (default ``typeA``) under revision
+    ``base`` and this tree, alternating in child processes on the same sessions: CPU
+    seconds, best of ``repeat`` per child and method."""
     import subprocess
     import sys
     import tempfile
     from pathlib import Path
 
+    methods = methods or ["typeA"]
     root = Path(__file__).resolve().parents[1]
-    print(f"typeA fuse(), {minutes:g}-minute session, base {base} against this tree, "
-          f"alternating {rounds} times (CPU time, best of {repeat} per run)")
+    print(f"fuse() with {', '.join(methods)}, {minutes:g}-minute sessions, base {base} "
+          f"against this tree, alternating {rounds} times (CPU time, best of {repeat} per "
+          f"run); load average {', '.join(f'{x:.1f}' for x in os.getloadavg())}")
     with tempfile.TemporaryDirectory() as tmp:
         archive = subprocess.run(["git", "-C", str(root), "archive", base, "pslog"],
                                  check=True, capture_output=True).stdout
@@ -311,20 +333,27 @@ def paired(base: str, minutes: float, repeat: int, rounds: int) -> None:
         base_tree.mkdir()
         empty.mkdir()
         subprocess.run(["tar", "-x", "-C", str(base_tree)], input=archive, check=True)
-        figures: dict[str, list[float]] = {"base": [], "now": []}
+        figures: dict[tuple[str, str], list[float]] = {
+            (label, m): [] for label in ("base", "now") for m in methods}
+        pairs = [f"{m}={PAIRED_TIMING[m]}" for m in methods]
         for _ in range(rounds):
             for label, path in (("base", str(base_tree)), ("now", str(root))):
                 env = dict(os.environ, PYTHONPATH=path)
                 out = subprocess.run([sys.executable, "-c", _PAIRED_CHILD, str(minutes),
-                                      str(repeat), path], env=env, check=True, cwd=empty,
-                                     capture_output=True, text=True).stdout.split()
-                seconds, points = float(out[0]), int(out[1])
-                figures[label].append(points / seconds)
-                print(f"  {label:<5} {seconds * 1e3:8.2f} ms  {points / seconds:>12,.0f} points/s")
-    best_base, best_now = max(figures["base"]), max(figures["now"])
-    print(f"best: base {best_base:,.0f}, now {best_now:,.0f} points/s "
-          f"(x{best_now / best_base:.2f}); median ratio of the rounds "
-          f"x{float(np.median(np.array(figures['now']) / np.array(figures['base']))):.2f}")
+                                      str(repeat), path, *pairs], env=env, check=True,
+                                     cwd=empty, capture_output=True, text=True).stdout
+                for line in out.splitlines():
+                    method, seconds, points = line.split()
+                    rate = int(points) / float(seconds)
+                    figures[label, method].append(rate)
+                    print(f"  {label:<5} {method:<8} {float(seconds) * 1e3:8.2f} ms  "
+                          f"{rate:>12,.0f} points/s")
+    for m in methods:
+        base_rates, now_rates = np.array(figures["base", m]), np.array(figures["now", m])
+        print(f"{m}: best: base {base_rates.max():,.0f}, now {now_rates.max():,.0f} points/s "
+              f"(x{now_rates.max() / base_rates.max():.2f}); median ratio of the rounds "
+              f"x{float(np.median(now_rates / base_rates)):.2f}")
+    print(f"load average at the end {', '.join(f'{x:.1f}' for x in os.getloadavg())}")
 
 
 def stream(seconds: float, repeat: int) -> None:

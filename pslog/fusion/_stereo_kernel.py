@@ -11,7 +11,10 @@ do the same for :func:`~.stereo.nview_points` (and so ``sync``, ``typeB``, ``lin
 ``_FEW`` points and below 8 cameras, where triangulate_rays and ray_angles use their column
 forms. Left to numpy, whose bits a loop need not reproduce: the 3 x 3 solves and
 determinants (LAPACK), the arccos of the ray angle, ``invalid_points``' products (BLAS)
-and ``ray_depths``' einsum. Imported lazily (numba loads them from its cache at the first
+and ``ray_depths``' einsum. :func:`window_quartiles` is :func:`~.stereo.refusal_noise`'s
+windowed selection (``sync``'s residual test and ``typeB`` / ``linear``'s prediction test),
+:func:`residual_norms_cameras` the residuals it selects among, every camera's in one pass.
+Imported lazily (numba loads them from its cache at the first
 use; ``python -m pslog.warm`` compiles them).
 """
 
@@ -24,6 +27,7 @@ import numpy as np
 from .._jit import kernel
 from ._prepare_kernel import direction_jacobian as _direction_jacobian
 from ._prepare_kernel import ray as _ray
+from ._pseudo_kernel import _residual_norm, _select, _window_rows
 
 
 @kernel
@@ -470,3 +474,51 @@ def nview_after(rows, uv, points, dirs, centers, n_rays, cam, lens, rtki, rms_mi
                 _direction_jacobian(rtki, c, uv[r0, 0], uv[r0, 1])
         rms_miss[p] = math.sqrt(sq_sum / n_rays[p])
         smallest_cos[p] = smallest
+
+
+@kernel
+def window_quartiles(time_ns, values, ends, window_ns, min_count, scratch, out):
+    """For each of the sorted, distinct ``ends`` (k,) int64, the element ``count // 4`` (the
+    lower quartile, sorted) of the ``values`` (n,) whose ``time_ns`` (n,) sorted lie in
+    ``[end - window_ns, end)``, into ``out`` (k,); NaN where fewer than ``min_count``
+    (``count``) are there. ``values`` finite, ``scratch`` (n,) float64 (overwritten): each
+    window is copied there and :func:`~._pseudo_kernel._select` reorders the copy. A
+    selection, no arithmetic: the element ``np.partition(window, count // 4)`` gives
+    (:func:`~.stereo._window_quartiles`' numpy form), found in one compiled pass instead of
+    a Python loop of a partition per window."""
+    n = time_ns.shape[0]
+    lo = 0
+    hi = 0
+    for j in range(ends.shape[0]):
+        lo, hi = _window_rows(time_ns, n, lo, hi, ends[j], window_ns)
+        count = hi - lo
+        if count < min_count:
+            out[j] = np.nan
+            continue
+        for i in range(count):
+            scratch[i] = values[lo + i]
+        out[j] = _select(scratch, count, count // 4)
+
+
+@kernel
+def residual_norms_cameras(time_ns, camera, uv, limits, m, max_gap_ns, ns, t_out, v_out,
+                           c_out):
+    """:func:`~._pseudo_kernel.residual_norms_kernel` (the same inlined
+    :func:`~._pseudo_kernel._residual_norm`: the same bits), with each residual's camera
+    into ``c_out`` (n,) int64 as well: a row's residual is made from its camera's rows
+    alone, so one camera's are the rows of ``c_out == c``, the residuals a call on that
+    camera's detections alone gives. Returns how many."""
+    last = np.full((m, 3), -1, dtype=np.int64)  # each camera's three latest rows, newest first
+    gap = max_gap_ns / ns
+    j = 0
+    for r in range(time_ns.shape[0]):
+        c = camera[r]
+        r1, r2, r3 = last[c, 0], last[c, 1], last[c, 2]
+        last[c, 2], last[c, 1], last[c, 0] = r2, r1, r
+        value = _residual_norm(time_ns, camera, uv, limits, r, r1, r2, r3, gap, ns)
+        if value == value:
+            t_out[j] = time_ns[r]
+            v_out[j] = value
+            c_out[j] = c
+            j += 1
+    return j

@@ -109,7 +109,8 @@ def doubt_covariance(prep: Prepared, slot_rows: np.ndarray, jacobians: list[np.n
 
 def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | np.ndarray | None,
                  motion: list[SlotMotion] | None = None, compiled: bool = True,
-                 breaks: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None):
+                 breaks: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+                 residuals_out: list[np.ndarray] | None = None):
     """N-view least-squares point of each row of detections, with its quality and validity.
 
     Parameters
@@ -127,6 +128,9 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | np.ndarray 
     breaks : with ``motion``, every detection's :func:`innovations` ``(ν², ν_r², c)``: the
         covariance then also holds the breaks of the image motion they show (a bounce, a
         kick; :func:`motion_covariance`)
+    residuals_out : a list, or None: given, each camera's reprojection residuals (k,) of
+        the points are appended to it (recorded pixels, :func:`reprojection_one`'s; NaN
+        where the ray is not used or the point is behind the camera)
 
     Returns
     -------
@@ -186,6 +190,8 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | np.ndarray 
     if not compiled:
         residual = [np.where(used[:, c], reprojection_one(prep, c, points, uv[c]), np.nan)
                     for c in range(m)]
+    if residuals_out is not None:
+        residuals_out.extend(residual)
 
     slot_rows = np.where(used, rows, -1)
     if noise_px is None:
@@ -349,7 +355,8 @@ RAYLEIGH_QUARTILE = float(np.sqrt(-2.0 * np.log(1.0 - REFUSAL_NOISE_QUANTILE)))
 
 
 def refusal_noise(prep: Prepared, time_ns: np.ndarray, max_gap_s: float,
-                  noise_px: float | None, camera: np.ndarray | None = None) -> np.ndarray:
+                  noise_px: float | None, camera: np.ndarray | None = None,
+                  compiled: bool = True) -> np.ndarray:
     """Each camera's detection noise σ_c (pixels per axis, (k, m); with ``camera`` (k,):
     (k,), each point's camera's) that ``sync``'s residual test and ``typeB`` / ``linear``'s
     prediction test assume at ``time_ns`` (k,): at least the least noise the tests state,
@@ -382,7 +389,12 @@ def refusal_noise(prep: Prepared, time_ns: np.ndarray, max_gap_s: float,
     before the point (type A's estimator reaches back across a pause to the latest
     checkpoint that had one; a window stream cannot). A stated noise below the detector's
     real one refused good points in numbers (docs/methods.md, "The N-view residual test");
-    a larger one is never undercut."""
+    a larger one is never undercut.
+
+    ``compiled``: the residuals of every camera in one compiled pass, made once per
+    Prepared and ``max_gap_s`` (:func:`_refusal_residuals`), and each window's quartile by
+    :func:`._stereo_kernel.window_quartiles`; else a pass per camera (and one over all) and
+    a numpy partition per window (the reference: the same σ)."""
     from .innovation import DEFAULT_NOISE_PX
     from .pseudo import NOISE_START_COUNT, NOISE_UNKNOWN_PX, no_detection_limits, residual_norms
 
@@ -393,6 +405,8 @@ def refusal_noise(prep: Prepared, time_ns: np.ndarray, max_gap_s: float,
         return np.zeros(0) if camera is not None else np.zeros((0, n_cams))
     obs = prep.obs
     limits = no_detection_limits(prep.cameras)
+    if compiled:
+        t_all, v_all, c_all = _refusal_residuals(prep, max_gap_s)
     every = int(NOISE_EVERY_S * NS)
     marks, inverse = np.unique(time_ns // every * every, return_inverse=True)
     ends, back = np.unique(time_ns, return_inverse=True)
@@ -403,22 +417,27 @@ def refusal_noise(prep: Prepared, time_ns: np.ndarray, max_gap_s: float,
     for c in range(n_cams):
         if camera is not None and not np.any(camera == c):
             continue
-        own = np.flatnonzero(obs.camera == c)
-        t_fin, v_fin = residual_norms(obs.time_ns[own], obs.camera[own], obs.uv[own], limits,
-                                      max_gap_s)
-        s = _window_quartiles(t_fin, v_fin, marks, NOISE_MIN_COUNT)[inverse]
+        if compiled:  # (the rows of one pass over every camera's: the same residuals)
+            mine = c_all == c
+            t_fin, v_fin = t_all[mine], v_all[mine]
+        else:
+            own = np.flatnonzero(obs.camera == c)
+            t_fin, v_fin = residual_norms(obs.time_ns[own], obs.camera[own], obs.uv[own],
+                                          limits, max_gap_s)
+        s = _window_quartiles(t_fin, v_fin, marks, NOISE_MIN_COUNT, compiled)[inverse]
         start = np.flatnonzero(np.isnan(s))
         if len(start):
             u, b = np.unique(back[start], return_inverse=True)
             s[start] = np.minimum(_window_quartiles(
-                t_fin, v_fin, ends[u], NOISE_START_COUNT)[b], NOISE_UNKNOWN_PX)
+                t_fin, v_fin, ends[u], NOISE_START_COUNT, compiled)[b], NOISE_UNKNOWN_PX)
             none = start[np.isnan(s[start])]
             if len(none):
                 if pooled is None:
-                    pooled = residual_norms(obs.time_ns, obs.camera, obs.uv, limits, max_gap_s)
+                    pooled = (t_all, v_all) if compiled else residual_norms(
+                        obs.time_ns, obs.camera, obs.uv, limits, max_gap_s)
                 u, b = np.unique(back[none], return_inverse=True)
                 s[none] = np.minimum(_window_quartiles(  # (NaN: none yet: the floor)
-                    *pooled, ends[u], NOISE_START_COUNT)[b], NOISE_UNKNOWN_PX)
+                    *pooled, ends[u], NOISE_START_COUNT, compiled)[b], NOISE_UNKNOWN_PX)
         sigma[:, c] = s
     sigma = np.fmax(floor, sigma)
     if camera is None:
@@ -426,12 +445,47 @@ def refusal_noise(prep: Prepared, time_ns: np.ndarray, max_gap_s: float,
     return sigma[np.arange(len(time_ns)), np.asarray(camera, dtype=np.int64)]
 
 
+def _refusal_residuals(prep: Prepared, max_gap_s: float
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The times, norms and cameras (j,) of the finite residuals of every detection of
+    ``prep`` (:func:`pslog.fusion.pseudo.residual_norms`' rows, with the camera of each:
+    :func:`._stereo_kernel.residual_norms_cameras`), in row order; made once per Prepared
+    and ``max_gap_s`` (``sync``'s residual test and ``typeB`` / ``linear``'s prediction
+    test both take them; not to be written)."""
+    from . import _stereo_kernel
+    from .pseudo import no_detection_limits
+
+    cache = prep.__dict__.setdefault("_refusal_residuals", {})
+    if max_gap_s not in cache:
+        obs = prep.obs
+        limits = no_detection_limits(prep.cameras)
+        n = len(obs)
+        t_out, v_out, c_out = np.empty(n, np.int64), np.empty(n), np.empty(n, np.int64)
+        j = _stereo_kernel.residual_norms_cameras(
+            _c(obs.time_ns, dtype=np.int64), _c(obs.camera, dtype=np.int64),
+            _c(obs.uv, dtype=np.float64), limits, len(limits), int(max_gap_s * NS), NS,
+            t_out, v_out, c_out)
+        cache[max_gap_s] = (t_out[:j], v_out[:j], c_out[:j])
+    return cache[max_gap_s]
+
+
 def _window_quartiles(t_fin: np.ndarray, v_fin: np.ndarray, ends_ns: np.ndarray,
-                      min_count: int) -> np.ndarray:
+                      min_count: int, compiled: bool = True) -> np.ndarray:
     """σ (k,) at each of the sorted, distinct ``ends_ns`` (k,): the element ``count // 4``
     of the residual norms ``v_fin`` at ``t_fin`` (sorted) in ``[end - NOISE_WINDOW_S, end)``,
-    sorted, over :data:`RAYLEIGH_QUARTILE`; NaN where fewer than ``min_count`` are there (a
-    selection: the same element whatever rows lie outside the window)."""
+    sorted, over :data:`RAYLEIGH_QUARTILE`; NaN where fewer than ``min_count`` (at least 1)
+    are there (a selection: the same element whatever rows lie outside the window).
+    ``compiled``: every window in one pass of :func:`._stereo_kernel.window_quartiles`
+    (the same element), else a partition per window with numpy (the reference)."""
+    if compiled:
+        from . import _stereo_kernel
+
+        out = np.empty(len(ends_ns))
+        _stereo_kernel.window_quartiles(
+            _c(t_fin, dtype=np.int64), _c(v_fin, dtype=np.float64),
+            _c(ends_ns, dtype=np.int64), int(NOISE_WINDOW_S * NS), min_count,
+            np.empty(len(t_fin)), out)
+        return out / RAYLEIGH_QUARTILE
     lo = np.searchsorted(t_fin, ends_ns - int(NOISE_WINDOW_S * NS), side="left")
     hi = np.searchsorted(t_fin, ends_ns, side="left")
     out = np.full(len(ends_ns), np.nan)
@@ -777,18 +831,21 @@ def _break_size(motion: list[SlotMotion], used: np.ndarray, noise_px: float | np
 
 def triangulate_groups(prep: Prepared, group: np.ndarray, n_groups: int,
                        noise_px: float | None = 0.5, with_flags: bool = False,
-                       with_rows: bool = False):
+                       with_rows: bool = False,
+                       residuals_out: list[np.ndarray] | None = None):
     """N-view least-squares point of each group (one ray per camera; a camera seen twice in a
     group keeps its latest ray). Returns points (g, 3), quality {name: (g,)}
     (:func:`nview_points`), time_ns (g,) of the group's latest observation, camera (g,) of
     that observation, with ``with_flags`` the validity flags (g,) of :func:`nview_points`,
-    and with ``with_rows`` the rows (g, m) and the rays used (g, m)."""
+    and with ``with_rows`` the rows (g, m) and the rays used (g, m); ``residuals_out``:
+    :func:`nview_points`'."""
     n_cams = len(prep.centers)
     rows = np.full((n_groups, n_cams), -1, dtype=np.int64)
     # the latest ray of a camera seen twice: the largest row (a fancy assignment with repeated
     # indices has no defined winner in numpy; a maximum has)
     np.maximum.at(rows, (group, prep.obs.camera), np.arange(len(group)))
-    points, quality, flags, used = nview_points(prep, rows, noise_px)
+    points, quality, flags, used = nview_points(prep, rows, noise_px,
+                                                residuals_out=residuals_out)
     last = np.r_[np.flatnonzero(np.diff(group)), len(group) - 1]  # last row of each group
     out: tuple = (points, quality, prep.obs.time_ns[last], prep.obs.camera[last])
     if with_flags:
@@ -797,7 +854,8 @@ def triangulate_groups(prep: Prepared, group: np.ndarray, n_groups: int,
 
 
 def residual_refused(prep: Prepared, rows: np.ndarray, used: np.ndarray, points: np.ndarray,
-                     time_ns: np.ndarray, sigma: np.ndarray, max_gap_s: float) -> np.ndarray:
+                     time_ns: np.ndarray, sigma: np.ndarray, max_gap_s: float,
+                     residuals: list[np.ndarray] | None = None) -> np.ndarray:
     """Which N-view points the reprojection residuals of their own detections contradict
     (docs/methods.md, "The N-view residual test").
 
@@ -831,6 +889,8 @@ def residual_refused(prep: Prepared, rows: np.ndarray, used: np.ndarray, points:
     points : (k, 3) the N-view points, metres
     time_ns : (k,) each point's time (its latest detection's)
     sigma : (k, m) each camera's detection noise, pixels per axis (:func:`refusal_noise`)
+    residuals : each camera's reprojection residuals (k,) of ``points`` where used, if
+        already made (:func:`nview_points`' ``residuals_out``: the same bits), else None
 
     Returns
     -------
@@ -842,18 +902,25 @@ def residual_refused(prep: Prepared, rows: np.ndarray, used: np.ndarray, points:
     slots = np.where(used, rows, -1)
     d2, d2w, e2 = np.zeros(k), np.zeros(k), np.zeros(k)
     motion = slot_motion(prep, slots, time_ns, max_gap_s)
-    weighted = _weighted_points(prep, rows, used, points, sigma)
+
+    def add_r2(total: np.ndarray, r: np.ndarray, on: np.ndarray, var: np.ndarray) -> None:
+        total += np.where(on & np.isfinite(r), r * r / var, 0.0)
+        total[on & ~np.isfinite(r)] = np.inf  # (behind a ray's camera: never kept)
+
+    def add_d2(total: np.ndarray, c: int, at: np.ndarray, uv: np.ndarray, on: np.ndarray,
+               var: np.ndarray) -> None:
+        add_r2(total, reprojection_one(prep, c, at, uv), on, var)
+
     with np.errstate(invalid="ignore"):
         for c in range(m):
             on = used[:, c]
             if not on.any():
                 continue
-            uv = prep.uv_undistorted[np.maximum(rows[:, c], 0)]
             var = sigma[:, c] * sigma[:, c]  # (each camera's own noise: webcams mix)
-            for total, at in ((d2, points), (d2w, weighted)):
-                r = reprojection_one(prep, c, at, uv)
-                total += np.where(on & np.isfinite(r), r * r / var, 0.0)
-                total[on & ~np.isfinite(r)] = np.inf  # (behind a ray's camera: never kept)
+            if residuals is None:
+                add_d2(d2, c, points, prep.uv_undistorted[np.maximum(rows[:, c], 0)], on, var)
+            else:
+                add_r2(d2, residuals[c], on, var)
             mo = motion[c]
             known = mo.rows[:, 1] >= 0
             shift2 = mo.shift[:, 0] ** 2 + mo.shift[:, 1] ** 2
@@ -865,11 +932,29 @@ def residual_refused(prep: Prepared, rows: np.ndarray, used: np.ndarray, points:
         at = n == count
         bound[at] = np.sqrt(chi2_threshold(2 * count - 3))
     with np.errstate(invalid="ignore"):
-        return (n >= 2) & (np.sqrt(np.fmin(d2, d2w)) > bound + np.sqrt(e2))
+        limit = bound + np.sqrt(e2)
+        # the weighted step's d² only where the intersection's own fails: elsewhere
+        # √min(d², d²_w) <= √d² <= the bound already (the same decisions, a few points'
+        # Gauss-Newton steps instead of every point's)
+        doubt = np.flatnonzero((n >= 2) & ~(np.sqrt(d2) <= limit))
+        d2w = d2.copy()
+        if len(doubt):
+            weighted = _weighted_points(prep, rows, used, points, sigma, doubt)
+            d2w[doubt] = 0.0
+            part = d2w[doubt]
+            for c in range(m):
+                on = used[doubt, c]
+                if not on.any():
+                    continue
+                var = sigma[doubt, c] * sigma[doubt, c]
+                add_d2(part, c, weighted, prep.uv_undistorted[np.maximum(rows[doubt, c], 0)],
+                       on, var)
+            d2w[doubt] = part
+        return (n >= 2) & (np.sqrt(np.fmin(d2, d2w)) > limit)
 
 
 def _weighted_points(prep: Prepared, rows: np.ndarray, used: np.ndarray, points: np.ndarray,
-                     sigma: np.ndarray) -> np.ndarray:
+                     sigma: np.ndarray, at: np.ndarray | None = None) -> np.ndarray:
     """The ray intersection (k, 3) weighted as the reprojection error is, for the residual
     test only: camera ``c``'s squared distance from its ray at ``(f_c / (z_c σ_c))²``
     (``f_c`` its focal length in pixels, ``z_c`` the depth of the unweighted point
@@ -877,18 +962,28 @@ def _weighted_points(prep: Prepared, rows: np.ndarray, used: np.ndarray, points:
     towards the minimum of ``Σ_c r_c² / σ_c²`` (the unweighted intersection's ``d²`` over
     that minimum is ``¼(2 + q² + q⁻²)`` for two views, ``q`` the ratio of the cameras'
     ``f / (z σ)``: 2.4 at webcams3's worst depths, tens where one camera's noise is 6 times
-    the other's). NaN where a depth is not positive or the system singular."""
+    the other's). NaN where a depth is not positive or the system singular.
+
+    ``at``: the points of these rows only ((j,) sorted; None: every row), each the bits it
+    has among all the rows: the cameras taken are those any row uses (an unused slot's
+    ray, NaN if its row has none, enters every point's sums with weight 0), and the depths
+    are the whole array's product (a one-row product is another BLAS call, other bits)."""
     k, m = rows.shape
+    cameras = [c for c in range(m) if used[:, c].any()]
+    if at is not None:
+        with np.errstate(invalid="ignore", over="ignore"):
+            depth = {c: ((points - prep.centers[c]) @ prep.cameras[c].R[2])[at]
+                     for c in cameras}
+        rows, used, points, sigma = rows[at], used[at], points[at], sigma[at]
+        k = len(at)
     A = np.zeros((k, 3, 3))
     b = np.zeros((k, 3))
     eye = np.eye(3)
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        for c in range(m):
+        for c in cameras:
             on = used[:, c]
-            if not on.any():
-                continue
             cam = prep.cameras[c]
-            z = (points - prep.centers[c]) @ cam.R[2]
+            z = (points - prep.centers[c]) @ cam.R[2] if at is None else depth[c]
             f = 0.5 * (cam.K[0, 0] + cam.K[1, 1])
             w = np.where(on, (f / (z * sigma[:, c])) ** 2, 0.0)
             d = prep.ray_dir[np.maximum(rows[:, c], 0)]
@@ -927,8 +1022,10 @@ def stereo_at_common_instants(
             f"method {method} needs cameras with a common shutter instant (sync or typeB "
             f"timing), but no two cameras captured within {tolerance_s * 1e3:g} ms of each "
             f"other; methods that suit this session: nearest, typeA")
+    residuals: list[np.ndarray] = []
     points, quality, time_ns, camera, flags, rows, used = triangulate_groups(
-        prep, group, len(n_cameras), noise_px, with_flags=True, with_rows=True)
+        prep, group, len(n_cameras), noise_px, with_flags=True, with_rows=True,
+        residuals_out=residuals)
     # made: two usable rays, so an invalid point (exactly parallel rays give none) is counted
     made = (n_cameras >= 2) & (quality["n_detections"] >= 2)
     keep = made & (flags == 0) & np.all(np.isfinite(points), axis=1)
@@ -938,7 +1035,8 @@ def stereo_at_common_instants(
     refused = np.zeros(len(keep), dtype=bool)
     refused[at] = residual_refused(
         prep, rows[at], used[at], points[at], time_ns[at],
-        refusal_noise(prep, time_ns[at], max_gap_s, noise_px), max_gap_s)
+        refusal_noise(prep, time_ns[at], max_gap_s, noise_px), max_gap_s,
+        [r[at] for r in residuals])
     keep &= ~refused
     n_refused = int(np.count_nonzero(refused))
     track = Track(method, time_ns[keep], points[keep], camera[keep],
