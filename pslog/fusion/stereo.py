@@ -855,7 +855,8 @@ def triangulate_groups(prep: Prepared, group: np.ndarray, n_groups: int,
 
 def residual_refused(prep: Prepared, rows: np.ndarray, used: np.ndarray, points: np.ndarray,
                      time_ns: np.ndarray, sigma: np.ndarray, max_gap_s: float,
-                     residuals: list[np.ndarray] | None = None) -> np.ndarray:
+                     residuals: list[np.ndarray] | None = None, every_step: bool = False
+                     ) -> np.ndarray:
     """Which N-view points the reprojection residuals of their own detections contradict
     (docs/methods.md, "The N-view residual test").
 
@@ -891,6 +892,9 @@ def residual_refused(prep: Prepared, rows: np.ndarray, used: np.ndarray, points:
     sigma : (k, m) each camera's detection noise, pixels per axis (:func:`refusal_noise`)
     residuals : each camera's reprojection residuals (k,) of ``points`` where used, if
         already made (:func:`nview_points`' ``residuals_out``: the same bits), else None
+    every_step : the weighted step's ``d²`` of every point (the reference), not only of
+        those whose own ``d²`` exceeds the bound (the same decisions: ``min(d², d²_w)``
+        cannot exceed it where ``d²`` does not)
 
     Returns
     -------
@@ -936,10 +940,12 @@ def residual_refused(prep: Prepared, rows: np.ndarray, used: np.ndarray, points:
         # the weighted step's d² only where the intersection's own fails: elsewhere
         # √min(d², d²_w) <= √d² <= the bound already (the same decisions, a few points'
         # Gauss-Newton steps instead of every point's)
-        doubt = np.flatnonzero((n >= 2) & ~(np.sqrt(d2) <= limit))
+        doubt = np.arange(k) if every_step else np.flatnonzero((n >= 2)
+                                                               & ~(np.sqrt(d2) <= limit))
         d2w = d2.copy()
         if len(doubt):
-            weighted = _weighted_points(prep, rows, used, points, sigma, doubt)
+            weighted = _weighted_points(prep, rows, used, points, sigma,
+                                        None if every_step else doubt)
             d2w[doubt] = 0.0
             part = d2w[doubt]
             for c in range(m):
