@@ -9,8 +9,11 @@
 - ``stereo.residual_refused``: the reprojection-weighted Gauss-Newton step
   (``_weighted_points``) only for the points whose unweighted ``d²`` exceeds the bound
   (``min(d², d²_w)`` cannot exceed it where ``d²`` does not), and the residuals
-  ``nview_points`` made reused; against every point's step (``every_step=True``) and the
-  residuals made again: the same decisions, each weighted point the bits it has among all.
+  ``nview_points`` made reused, and its sums (``d²``, the tolerance's allowance, the rays
+  used) in one compiled pass (``_stereo_kernel.residual_sums``); against every point's
+  step, the residuals made again and the sums with numpy (``every_step=True``,
+  ``compiled=False``): the same decisions, the sums and each weighted point the bits they
+  have among all.
 """
 
 from __future__ import annotations
@@ -163,7 +166,7 @@ def test_residual_test_with_the_step_where_needed_decides_as_with_every_step(
     alone would refuse and the step keeps (the step's reason), and points refused."""
     rig, obs = _dirty("sync", lens, seed, real_px, damaged=False)
     args, residuals = _test_arguments(rig, obs)
-    want = S.residual_refused(*args, every_step=True)
+    want = S.residual_refused(*args, every_step=True, compiled=False)
     stepped: list[int] = []
     original = S._weighted_points
 
@@ -206,3 +209,42 @@ def test_weighted_points_of_some_rows_have_their_bits_among_all(rig_name):
         assert len(at)
         got = S._weighted_points(prep, rows, used, points, sigma, at)
         assert got.tobytes() == full[at].tobytes(), at[:5]
+
+
+@pytest.mark.parametrize("lens", [None, LENS])
+def test_residual_sums_compiled_equal_numpys(lens):
+    """d², the tolerance's allowance Σ e_c²/σ_c² (slots with and without a previous
+    detection: the image speed measured or the unknown one) and the rays used, compiled
+    and with numpy, bit for bit; from nview_points' residuals and made again; the kernel's
+    Python original the same."""
+    from pslog.fusion.innovation import previous_next_rows
+
+    rig, obs = _dirty("sync", lens, 2)
+    args, residuals = _test_arguments(rig, obs)
+    prep, rows, used, points, time_ns, sigma, gap = args
+    want = S._refusal_sums(*args, None, compiled=False)
+    for given in (None, residuals):
+        got = S._refusal_sums(*args, given)
+        for a, b in zip(got, want, strict=True):
+            assert a.tobytes() == b.tobytes()
+    d2, e2, n = want
+    assert np.isfinite(d2).all() and np.isfinite(e2).sum() > 100 and len(np.unique(n)) >= 2
+    # a used slot without a residual (its point behind that camera): d² infinite
+    behind = [r.copy() for r in residuals]
+    behind[1][np.flatnonzero(used[:, 1])[::9]] = np.nan
+    want_behind = S._refusal_sums(*args, behind, compiled=False)
+    assert np.isinf(want_behind[0]).sum() > 5
+    for a, b in zip(S._refusal_sums(*args, behind), want_behind, strict=True):
+        assert a.tobytes() == b.tobytes()
+    # both branches of the allowance: the shift measured, and the unknown speed's
+    blind = np.array([[r >= 0 and previous_next_rows(prep)[0][r] < 0 for r in row]
+                      for row in np.where(used, rows, -1)])
+    assert blind.any() and (~blind & used).any()
+    k, m = rows.shape
+    out = (np.zeros(k), np.zeros(k), np.empty(k, dtype=np.int64))
+    _stereo_kernel.residual_sums.py_func(
+        rows, used, np.array(residuals), sigma, time_ns, prep.obs.time_ns,
+        prep.uv_undistorted, previous_next_rows(prep)[0], used.any(axis=0),
+        int(gap * NS) / NS, float(NS), S.UNKNOWN_IMAGE_SPEED_PX_S, *out)
+    for a, b in zip(out, want, strict=True):
+        np.testing.assert_array_equal(a, b)

@@ -13,7 +13,8 @@ forms. Left to numpy, whose bits a loop need not reproduce: the 3 x 3 solves and
 determinants (LAPACK), the arccos of the ray angle, ``invalid_points``' products (BLAS)
 and ``ray_depths``' einsum. :func:`window_quartiles` is :func:`~.stereo.refusal_noise`'s
 windowed selection (``sync``'s residual test and ``typeB`` / ``linear``'s prediction test),
-:func:`residual_norms_cameras` the residuals it selects among, every camera's in one pass.
+:func:`residual_norms_cameras` the residuals it selects among, every camera's in one pass;
+:func:`residual_sums` the residual test's sums (:func:`~.stereo.residual_refused`).
 Imported lazily (numba loads them from its cache at the first
 use; ``python -m pslog.warm`` compiles them).
 """
@@ -522,3 +523,57 @@ def residual_norms_cameras(time_ns, camera, uv, limits, m, max_gap_ns, ns, t_out
             c_out[j] = c
             j += 1
     return j
+
+
+@kernel
+def residual_sums(rows, used, residual, sigma, time_ns, t_obs, uv, before, active, max_gap_s,
+                  ns, unknown_speed, d2, e2, n_used):
+    """:func:`pslog.fusion.stereo.residual_refused`'s sums, point by point, operation for
+    operation: ``d2`` (k,) ``Σ_c r_c² / σ_c²`` over the used slots (inf where a used slot's
+    residual is not finite), ``e2`` (k,) ``Σ_c e_c² / σ_c²`` (``e_c`` the slot's image
+    shift over its lag, :func:`slot_motion`'s ``shift``, or ``unknown_speed`` times the lag
+    where the camera has no previous detection within ``max_gap_s``), ``n_used`` (k,) the
+    used slots; in camera order, the cameras ``active`` (m,) bool (those any point uses).
+
+    ``rows`` (k, m) each slot's detection (-1: none; slot c a detection of camera c),
+    ``used`` (k, m) bool, ``residual`` (m, k) the reprojection residuals (recorded pixels;
+    NaN: none), ``sigma`` (k, m) each camera's noise, ``time_ns`` (k,) the points' times,
+    ``t_obs`` (n,) int64 and ``uv`` (n, 2) the detections' times and undistorted pixels,
+    ``before`` (n,) each row's previous row of its camera, ``ns`` float(NS)."""
+    k, m = rows.shape[0], rows.shape[1]
+    for p in range(k):
+        sd = 0.0
+        se = 0.0
+        count = 0
+        for c in range(m):
+            if not active[c]:
+                continue
+            on = used[p, c]
+            if not on:
+                continue  # (its terms: + 0.0)
+            count += 1
+            var = sigma[p, c] * sigma[p, c]
+            r = residual[c, p]
+            if math.isfinite(r):
+                sd += r * r / var
+            else:
+                sd = np.inf
+            # slot_motion's shift and lag of this slot (its arithmetic)
+            row = rows[p, c]
+            r0 = max(row, 0)
+            prev = before[r0] if row >= 0 else -1
+            p0 = max(prev, 0)
+            dt = (t_obs[r0] - t_obs[p0]) / ns
+            ok = row >= 0 and prev >= 0 and dt > 0 and dt <= max_gap_s
+            lg = (time_ns[p] - t_obs[r0]) / ns
+            if ok:
+                s0 = (uv[r0, 0] - uv[p0, 0]) / dt * lg
+                s1 = (uv[r0, 1] - uv[p0, 1]) / dt * lg
+                se += (s0 * s0 + s1 * s1) / var
+            else:
+                lag = lg if row >= 0 else 0.0
+                unknown = unknown_speed * lag
+                se += unknown * unknown / var
+        d2[p] = sd
+        e2[p] = se
+        n_used[p] = count

@@ -408,8 +408,8 @@ def refusal_noise(prep: Prepared, time_ns: np.ndarray, max_gap_s: float,
     if compiled:
         t_all, v_all, c_all = _refusal_residuals(prep, max_gap_s)
     every = int(NOISE_EVERY_S * NS)
-    marks, inverse = np.unique(time_ns // every * every, return_inverse=True)
-    ends, back = np.unique(time_ns, return_inverse=True)
+    marks, inverse = _unique_inverse(time_ns // every * every, compiled)
+    ends, back = _unique_inverse(time_ns, compiled)
     # the start's pooled estimate (all cameras' residuals), for a camera with fewer than
     # NOISE_START_COUNT of its own in the window yet
     pooled: tuple[np.ndarray, np.ndarray] | None = None
@@ -443,6 +443,18 @@ def refusal_noise(prep: Prepared, time_ns: np.ndarray, max_gap_s: float,
     if camera is None:
         return sigma
     return sigma[np.arange(len(time_ns)), np.asarray(camera, dtype=np.int64)]
+
+
+def _unique_inverse(values: np.ndarray, fast: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """``np.unique(values, return_inverse=True)`` of (k,) int64 ``values``; with ``fast``,
+    where they are sorted (the points' times: the usual case), from where they change
+    instead of numpy's sort (the same arrays)."""
+    if fast and len(values) and bool(np.all(values[1:] >= values[:-1])):
+        change = np.empty(len(values), dtype=bool)
+        change[0] = True
+        np.not_equal(values[1:], values[:-1], out=change[1:])
+        return values[change], np.cumsum(change) - 1
+    return np.unique(values, return_inverse=True)
 
 
 def _refusal_residuals(prep: Prepared, max_gap_s: float
@@ -855,8 +867,8 @@ def triangulate_groups(prep: Prepared, group: np.ndarray, n_groups: int,
 
 def residual_refused(prep: Prepared, rows: np.ndarray, used: np.ndarray, points: np.ndarray,
                      time_ns: np.ndarray, sigma: np.ndarray, max_gap_s: float,
-                     residuals: list[np.ndarray] | None = None, every_step: bool = False
-                     ) -> np.ndarray:
+                     residuals: list[np.ndarray] | None = None, every_step: bool = False,
+                     compiled: bool = True) -> np.ndarray:
     """Which N-view points the reprojection residuals of their own detections contradict
     (docs/methods.md, "The N-view residual test").
 
@@ -895,6 +907,9 @@ def residual_refused(prep: Prepared, rows: np.ndarray, used: np.ndarray, points:
     every_step : the weighted step's ``d²`` of every point (the reference), not only of
         those whose own ``d²`` exceeds the bound (the same decisions: ``min(d², d²_w)``
         cannot exceed it where ``d²`` does not)
+    compiled : the sums ``d²``, ``Σ e_c² / σ_c²`` and the rays used point by point in one
+        compiled pass (:func:`._stereo_kernel.residual_sums`, the same operations: the same
+        bits), else with numpy (:func:`slot_motion`'s columns; the reference)
 
     Returns
     -------
@@ -903,34 +918,8 @@ def residual_refused(prep: Prepared, rows: np.ndarray, used: np.ndarray, points:
     from .innovation import chi2_threshold
 
     k, m = rows.shape
-    slots = np.where(used, rows, -1)
-    d2, d2w, e2 = np.zeros(k), np.zeros(k), np.zeros(k)
-    motion = slot_motion(prep, slots, time_ns, max_gap_s)
-
-    def add_r2(total: np.ndarray, r: np.ndarray, on: np.ndarray, var: np.ndarray) -> None:
-        total += np.where(on & np.isfinite(r), r * r / var, 0.0)
-        total[on & ~np.isfinite(r)] = np.inf  # (behind a ray's camera: never kept)
-
-    def add_d2(total: np.ndarray, c: int, at: np.ndarray, uv: np.ndarray, on: np.ndarray,
-               var: np.ndarray) -> None:
-        add_r2(total, reprojection_one(prep, c, at, uv), on, var)
-
-    with np.errstate(invalid="ignore"):
-        for c in range(m):
-            on = used[:, c]
-            if not on.any():
-                continue
-            var = sigma[:, c] * sigma[:, c]  # (each camera's own noise: webcams mix)
-            if residuals is None:
-                add_d2(d2, c, points, prep.uv_undistorted[np.maximum(rows[:, c], 0)], on, var)
-            else:
-                add_r2(d2, residuals[c], on, var)
-            mo = motion[c]
-            known = mo.rows[:, 1] >= 0
-            shift2 = mo.shift[:, 0] ** 2 + mo.shift[:, 1] ** 2
-            unknown = UNKNOWN_IMAGE_SPEED_PX_S * mo.lag
-            e2 += np.where(on, np.where(known, shift2, unknown * unknown) / var, 0.0)
-    n = used.sum(axis=1)
+    d2, e2, n = _refusal_sums(prep, rows, used, points, time_ns, sigma, max_gap_s, residuals,
+                              compiled)
     bound = np.full(k, np.inf)
     for count in np.unique(n[n >= 2]).tolist():
         at = n == count
@@ -953,10 +942,64 @@ def residual_refused(prep: Prepared, rows: np.ndarray, used: np.ndarray, points:
                 if not on.any():
                     continue
                 var = sigma[doubt, c] * sigma[doubt, c]
-                add_d2(part, c, weighted, prep.uv_undistorted[np.maximum(rows[doubt, c], 0)],
-                       on, var)
+                _add_r2(part, reprojection_one(
+                    prep, c, weighted, prep.uv_undistorted[np.maximum(rows[doubt, c], 0)]),
+                    on, var)
             d2w[doubt] = part
         return (n >= 2) & (np.sqrt(np.fmin(d2, d2w)) > limit)
+
+
+def _add_r2(total: np.ndarray, r: np.ndarray, on: np.ndarray, var: np.ndarray) -> None:
+    """``total += r² / var`` where ``on`` and ``r`` finite; inf where ``on`` and not."""
+    total += np.where(on & np.isfinite(r), r * r / var, 0.0)
+    total[on & ~np.isfinite(r)] = np.inf  # (behind a ray's camera: never kept)
+
+
+def _refusal_sums(prep: Prepared, rows: np.ndarray, used: np.ndarray, points: np.ndarray,
+                  time_ns: np.ndarray, sigma: np.ndarray, max_gap_s: float,
+                  residuals: list[np.ndarray] | None, compiled: bool = True
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`residual_refused`'s ``d²`` (k,) of ``points``, ``Σ_c e_c² / σ_c²`` (k,) and
+    rays used (k,) int64 (its arguments'); ``compiled``: by
+    :func:`._stereo_kernel.residual_sums`, else with numpy (the reference: the same bits)."""
+    k, m = rows.shape
+    d2, e2 = np.zeros(k), np.zeros(k)
+    if compiled:
+        from . import _stereo_kernel
+        from .innovation import previous_next_rows
+
+        if residuals is None:
+            with np.errstate(invalid="ignore"):
+                residuals = [np.where(used[:, c], reprojection_one(
+                    prep, c, points, prep.uv_undistorted[np.maximum(rows[:, c], 0)]), np.nan)
+                    for c in range(m)]
+        n = np.empty(k, dtype=np.int64)
+        max_gap_ns = int(max_gap_s * NS)  # (slot_motion's)
+        _stereo_kernel.residual_sums(
+            _c(rows, dtype=np.int64), _c(used, dtype=bool),
+            _c(np.array(residuals, dtype=np.float64).reshape(m, k)),
+            _c(sigma, dtype=np.float64), _c(time_ns, dtype=np.int64),
+            _c(prep.obs.time_ns, dtype=np.int64), _c(prep.uv_undistorted, dtype=np.float64),
+            previous_next_rows(prep)[0], _c(used.any(axis=0)), max_gap_ns / NS, float(NS),
+            UNKNOWN_IMAGE_SPEED_PX_S, d2, e2, n)
+    else:
+        motion = slot_motion(prep, np.where(used, rows, -1), time_ns, max_gap_s, False)
+        with np.errstate(invalid="ignore"):
+            for c in range(m):
+                on = used[:, c]
+                if not on.any():
+                    continue
+                var = sigma[:, c] * sigma[:, c]  # (each camera's own noise: webcams mix)
+                _add_r2(d2, reprojection_one(
+                    prep, c, points, prep.uv_undistorted[np.maximum(rows[:, c], 0)])
+                    if residuals is None else residuals[c], on, var)
+                mo = motion[c]
+                known = mo.rows[:, 1] >= 0
+                shift2 = mo.shift[:, 0] ** 2 + mo.shift[:, 1] ** 2
+                unknown = UNKNOWN_IMAGE_SPEED_PX_S * mo.lag
+                e2 += np.where(on, np.where(known, shift2, unknown * unknown) / var, 0.0)
+        n = used.sum(axis=1)
+    return d2, e2, n
 
 
 def _weighted_points(prep: Prepared, rows: np.ndarray, used: np.ndarray, points: np.ndarray,
