@@ -17,8 +17,9 @@ between this process and a second one, each compiling its own kernels (no kernel
 they share numba's cache on disk), which about halves the wall time:
 
 - this one: simulate, fuse with ``nearest`` and ``typeA`` (the gate's and type A's batch
-  kernels), sync, fuse with ``smooth`` (the trajectory's estimation kernels), then the
-  streaming ``typeA``, one detection a push;
+  kernels), the shared-instant methods' tests (``sync``, ``typeB``, ``linear``: their noise
+  and residual sums, on the same session's rows), sync, fuse with ``smooth`` (the
+  trajectory's estimation kernels), then the streaming ``typeA``, one detection a push;
 - the second: its own simulated session (the same command), the streaming ``filter`` (its
   per-detection step), the filter's state and prediction (``pslog live``), a lens's rays,
   the batch ``filter`` (the loop around the step, the start's window fits; the gate's
@@ -103,21 +104,45 @@ def _commands(steps: list[list[str]]) -> None:
 
 def _first_part() -> None:
     """simulate; fuse with nearest and typeA first (the gate's and type A's batch kernels,
-    which the second part's streams then load), sync, fuse with smooth; the stream of type A
-    one detection a push; the fused-track writer's block encoders."""
+    which the second part's streams then load), the shared-instant tests' kernels, sync,
+    fuse with smooth; the stream of type A one detection a push; the fused-track writer's
+    block encoders."""
     with tempfile.TemporaryDirectory(prefix="pslog-warm-") as tmp:
         session = os.path.join(tmp, "session.mcap")
         synced = os.path.join(tmp, "synced.mcap")
         _commands([[*_SIMULATE, "-o", session],
                    ["fuse", session, "--method", "nearest,typeA",
-                    "-o", os.path.join(tmp, "fused-a.mcap")],
-                   ["sync", session, "-o", synced],
+                    "-o", os.path.join(tmp, "fused-a.mcap")]])
+        _shared_instant_tests(session)
+        _commands([["sync", session, "-o", synced],
                    ["fuse", synced, "--method", "smooth", "-o", os.path.join(tmp, "fused.mcap")]])
         _type_a_stream(session)
         # (here, not in the second part: that one is the longer, warm's critical path)
         from pslog.api import read_session
 
         _track_writer(os.path.join(tmp, "track.mcap"), read_session(session).rig)
+
+
+def _shared_instant_tests(session: str) -> None:
+    """The kernels of ``sync``'s residual test and ``typeB`` / ``linear``'s noise
+    (:func:`pslog.fusion.stereo.refusal_noise`, :func:`~pslog.fusion.stereo.residual_refused`),
+    which no default method runs (the warm session's type A timing has no common instant):
+    called on its ``nearest`` rows (each camera's detection in its own slot, as a common
+    instant's), in the argument types of a fuse."""
+    from pslog.api import read_session
+    from pslog.fusion import prepare, stereo
+    from pslog.fusion._prepare import default_max_gap_s
+    from pslog.records import NS
+
+    data = read_session(session)
+    best = data.detections.best()
+    prep = prepare(best, data.rig)
+    gap = default_max_gap_s(prep)
+    rows, _ = stereo.nearest_rows(prep, int(gap * NS))
+    residuals: list = []
+    points, _, _, used = stereo.nview_points(prep, rows, None, residuals_out=residuals)
+    sigma = stereo.refusal_noise(prep, best.time_ns, gap, 0.5)
+    stereo.residual_refused(prep, rows, used, points, best.time_ns, sigma, gap, residuals)
 
 
 def _type_a_stream(session: str) -> None:

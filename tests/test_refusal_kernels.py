@@ -248,3 +248,45 @@ def test_residual_sums_compiled_equal_numpys(lens):
         int(gap * NS) / NS, float(NS), S.UNKNOWN_IMAGE_SPEED_PX_S, *out)
     for a, b in zip(out, want, strict=True):
         np.testing.assert_array_equal(a, b)
+
+
+_WARMED = """
+import sys
+from pslog.fusion import _stereo_kernel, fuse
+from pslog.log import SessionWriter
+from pslog.motion import rally_motion
+from pslog.rig import apply_timing, builtin_rig
+from pslog.simulation import SimulationOptions, simulate
+from pslog.timing import observations
+from pslog.warm import _shared_instant_tests
+
+kernels = (_stereo_kernel.window_quartiles, _stereo_kernel.residual_norms_cameras,
+           _stereo_kernel.residual_sums)
+rig = apply_timing(builtin_rig("paper3"), "typeA")
+detections, _ = simulate(rig, rally_motion(seed=1, duration=1.0), 1.0,
+                         SimulationOptions(noise_px=0.3, seed=2))
+with SessionWriter(sys.argv[1], rig) as w:
+    w.add_detections(detections)
+_shared_instant_tests(sys.argv[1])
+print(*(len(k.signatures) for k in kernels))
+for timing, methods in (("sync", ("sync",)), ("typeB", ("typeB", "linear"))):
+    rig = apply_timing(builtin_rig("paper3"), timing)
+    detections, _ = simulate(rig, rally_motion(seed=1, duration=1.0), 1.0,
+                             SimulationOptions(noise_px=0.3, seed=2))
+    for method in methods:
+        fuse(observations(detections, rig), rig, method)  # (read-only columns)
+print(*(len(k.signatures) for k in kernels))
+"""
+
+
+def test_warm_compiles_the_tests_kernels_in_the_signatures_fuse_uses(tmp_path):
+    """``python -m pslog.warm`` runs the shared-instant tests on its type-A session's rows
+    (no default method reaches them): each kernel in the one signature that ``sync``,
+    ``typeB`` and ``linear`` then load (none compiled again at a user's first fuse)."""
+    import subprocess
+    import sys
+
+    run = subprocess.run([sys.executable, "-c", _WARMED, str(tmp_path / "s.mcap")],
+                         capture_output=True, text=True, timeout=900)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.split("\n")[:2] == ["1 1 1", "1 1 1"]
