@@ -221,7 +221,7 @@ def test_residual_sums_compiled_equal_numpys(lens):
 
     rig, obs = _dirty("sync", lens, 2)
     args, residuals = _test_arguments(rig, obs)
-    prep, rows, used, points, time_ns, sigma, gap = args
+    prep, rows, used, _, time_ns, sigma, gap = args
     want = S._refusal_sums(*args, None, compiled=False)
     for given in (None, residuals):
         got = S._refusal_sums(*args, given)
@@ -240,7 +240,7 @@ def test_residual_sums_compiled_equal_numpys(lens):
     blind = np.array([[r >= 0 and previous_next_rows(prep)[0][r] < 0 for r in row]
                       for row in np.where(used, rows, -1)])
     assert blind.any() and (~blind & used).any()
-    k, m = rows.shape
+    k = len(rows)
     out = (np.zeros(k), np.zeros(k), np.empty(k, dtype=np.int64))
     _stereo_kernel.residual_sums.py_func(
         rows, used, np.array(residuals), sigma, time_ns, prep.obs.time_ns,

@@ -980,8 +980,8 @@ def _refusal_sums(prep: Prepared, rows: np.ndarray, used: np.ndarray, points: np
             _c(np.array(residuals, dtype=np.float64).reshape(m, k)),
             _c(sigma, dtype=np.float64), _c(time_ns, dtype=np.int64),
             _c(prep.obs.time_ns, dtype=np.int64), _c(prep.uv_undistorted, dtype=np.float64),
-            previous_next_rows(prep)[0], _c(used.any(axis=0)), max_gap_ns / NS, float(NS),
-            UNKNOWN_IMAGE_SPEED_PX_S, d2, e2, n)
+            previous_next_rows(prep)[0], _c(np.asarray(used.any(axis=0))), max_gap_ns / NS,
+            float(NS), UNKNOWN_IMAGE_SPEED_PX_S, d2, e2, n)
     else:
         motion = slot_motion(prep, np.where(used, rows, -1), time_ns, max_gap_s, False)
         with np.errstate(invalid="ignore"):
