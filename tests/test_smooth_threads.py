@@ -3,6 +3,7 @@ same bits as one batch of every candidate, whatever the thread count."""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -113,3 +114,71 @@ def test_pslog_fuse_says_a_bad_thread_count_before_it_fuses(tmp_path, monkeypatc
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and "PSLOG_SMOOTH_THREADS" in err and not out.exists()
     assert main(["fuse", str(SAMPLE), "-o", str(out), "--method", "typeA"]) == 0
+
+
+@pytest.mark.parametrize("blocks, threads, expected", [
+    (1, "2", 1), (2, "2", 1), (3, "2", 1), (4, "2", 2), (9, "2", 2), (4, "1", 1)])
+def test_a_scan_of_few_blocks_stays_on_one_thread(monkeypatch, blocks, threads, expected):
+    # a second thread's start, arena and pool cost about a block's work: a scan of fewer
+    # than _THREAD_BLOCKS blocks (a session of a few minutes) runs them on this thread
+    assert _breaks._THREAD_BLOCKS == 4
+    monkeypatch.setenv("PSLOG_SMOOTH_THREADS", threads)
+    cpus = len(os.sched_getaffinity(0))
+    assert _breaks.scan_threads(blocks) == min(expected, cpus)
+    monkeypatch.setenv("PSLOG_SMOOTH_THREADS", "0")
+    with pytest.raises(PslogError, match="PSLOG_SMOOTH_THREADS"):
+        _breaks.scan_threads(blocks)  # a bad count is an error at any size
+
+
+def test_a_scan_of_few_blocks_starts_no_thread(monkeypatch):
+    # below the threshold every block runs on this thread and no other is started; from it,
+    # one helper thread (PSLOG_SMOOTH_THREADS=2) runs beside this one, which works too
+    import threading
+
+    case = _scan_case(C=40)
+    seen: list[str] = []
+    alive: set[str] = set()
+    block = _breaks._scan_block
+
+    def recording(*args, **kwargs):
+        seen.append(threading.current_thread().name)
+        alive.update(t.name for t in threading.enumerate())
+        return block(*args, **kwargs)
+
+    monkeypatch.setattr(_breaks, "_scan_block", recording)
+    monkeypatch.setenv("PSLOG_SMOOTH_THREADS", "2")
+    monkeypatch.setattr(_breaks, "_BLOCK", 14)  # 3 blocks
+    before = {t.name for t in threading.enumerate()}
+    _breaks.scan(*case)
+    assert seen == [threading.current_thread().name] * 3
+    assert alive == before
+    seen.clear()
+    monkeypatch.setattr(_breaks, "_BLOCK", 10)  # 4 blocks
+    _breaks.scan(*case)
+    assert len(seen) == 4
+    if len(os.sched_getaffinity(0)) > 1:
+        assert set(seen) <= {threading.current_thread().name, "pslog-smooth-scan-1"}
+        assert "pslog-smooth-scan-1" in alive
+    assert {t.name for t in threading.enumerate()} == before  # the helper has ended
+
+
+def test_on_threads_gives_every_result_in_its_place_and_raises_a_jobs_error():
+    import threading
+
+    jobs = [(i, i + 1) for i in range(0, 40, 2)]
+    for threads in (2, 3):
+        assert _breaks.on_threads(lambda a, b: (a, b, a * b), jobs, threads) == [
+            (a, b, a * b) for a, b in jobs]
+    ran: list[int] = []
+
+    def failing(a, b):
+        ran.append(a)
+        if a == 10:
+            raise ValueError("block 10")
+        return a
+
+    before = {t.name for t in threading.enumerate()}
+    with pytest.raises(ValueError, match="block 10"):
+        _breaks.on_threads(failing, jobs, 2)
+    assert {t.name for t in threading.enumerate()} == before  # every helper stopped
+    assert 10 in ran

@@ -45,6 +45,7 @@ the ~10 % whose grid's best was at an end of that.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from functools import cache, lru_cache
 
 import numpy as np
@@ -61,6 +62,11 @@ _BATCH = 2000  # (candidate, τ) pairs per batched solve: bounds memory
 #: candidates per block of the scan: their local problems (two 3m x 3m matrices each) stay
 #: in cache, where a whole session's at once (20,000 windows at 90 minutes) took 500 MB
 _BLOCK = 128
+#: blocks a scan needs before it takes a second thread: a thread's start, its fresh malloc
+#: arena (faulted in page by page: ~2,800 faults in a 2-minute fit's first call) and the
+#: pool's import cost ~5-10 ms of CPU, about a block's work, while a scan of 2 or 3 blocks
+#: (a session of a few minutes) saves at most a block or so of wall time
+_THREAD_BLOCKS = 4
 
 
 def smooth_threads() -> int:
@@ -83,6 +89,61 @@ def smooth_threads() -> int:
     except AttributeError:  # not on Linux
         cpus = os.cpu_count() or 1
     return max(1, min(wanted, cpus))
+
+
+def scan_threads(blocks: int) -> int:
+    """Threads of a scan of ``blocks`` blocks of candidates: :func:`smooth_threads`, at
+    most one per block, and one below ``_THREAD_BLOCKS`` blocks (the same bits on any
+    number: each block's result lands in its own place)."""
+    threads = smooth_threads()  # (a bad PSLOG_SMOOTH_THREADS is an error whatever the size)
+    return 1 if blocks < _THREAD_BLOCKS else min(threads, blocks)
+
+
+def on_threads(fn, jobs: list, threads: int) -> list:
+    """``[fn(*job) for job in jobs]`` on this thread and ``threads - 1`` more, each taking
+    the next job not yet taken; each result in its job's place. The calling thread works
+    too (a pool's workers would leave it waiting): one thread started fewer, and its
+    allocations come from this thread's malloc arena, whose freed memory the fit keeps
+    (:mod:`pslog.estimation._memory`), not from a new thread's fresh one. The first
+    exception of any job is raised once every thread has stopped (none starts a new job
+    after it)."""
+    import threading
+
+    results: list = [None] * len(jobs)
+    errors: list[BaseException] = []
+    lock = threading.Lock()
+    taken: Iterator[int] = iter(range(len(jobs)))
+
+    def work() -> None:
+        while True:
+            with lock:
+                i = None if errors else next(taken, None)
+            if i is None:
+                return
+            try:
+                results[i] = fn(*jobs[i])
+            except BaseException as exc:  # raised below, on the calling thread
+                with lock:
+                    errors.append(exc)
+                return
+
+    helpers = [threading.Thread(target=work, name=f"pslog-smooth-scan-{k + 1}", daemon=True)
+               for k in range(threads - 1)]
+    for helper in helpers:
+        helper.start()
+    try:
+        work()
+    finally:
+        with lock:
+            if not errors:  # (an interrupt of this thread: the helpers take no more jobs)
+                taken = iter(())
+        for helper in helpers:
+            helper.join()
+    if errors:
+        raise errors[0]
+    return results
+
+
 _GAUSS = 1 / np.sqrt(3.0)
 _ACCEL = np.arange(12) < 8  # of the 12 prior nodes: p'' at the Gauss nodes, the jerk at mids
 
@@ -475,14 +536,11 @@ def _scan(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray, centers: n
                            stages)
 
     jobs = [(c0, min(c0 + _BLOCK, C)) for c0 in range(0, C, _BLOCK)]
-    threads = min(smooth_threads(), len(jobs))
+    threads = scan_threads(len(jobs))
     if threads > 1:
-        from concurrent.futures import ThreadPoolExecutor
-
         # the kernels release the GIL and the large numpy operations do too; each block's
         # result lands in its own place, so the output does not depend on the thread count
-        with ThreadPoolExecutor(threads) as pool:
-            parts = list(pool.map(lambda job: block(*job), jobs))
+        parts = on_threads(block, jobs, threads)
     else:
         parts = [block(c0, c1) for c0, c1 in jobs]
     return tuple(np.concatenate([part[i] for part in parts])  # type: ignore[return-value]

@@ -21,8 +21,9 @@ detections of two cameras hold gets no point (its position along the rays is not
 counted in ``Track.dropped["underdetermined_end"]``. A detection the gate chose in doubt
 (:attr:`Prepared.doubt_px2` > 0) is left out of the fit, counted as ``doubt``.
 
-The fit's search for bounces and kicks runs on two threads; ``PSLOG_SMOOTH_THREADS=1`` forces
-one (the track is the same, bit for bit, on any number).
+The fit's search for bounces and kicks runs on two threads where it has at least 4 blocks of
+128 candidates (a session of a few minutes or more; a shorter one's on the calling thread);
+``PSLOG_SMOOTH_THREADS=1`` forces one (the track is the same, bit for bit, on any number).
 """
 
 from __future__ import annotations
