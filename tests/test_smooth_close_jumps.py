@@ -16,7 +16,7 @@ from _rally import rally
 
 from pslog import apply_timing, builtin_rig
 from pslog.estimation import SmoothOptions, fit_trajectory
-from pslog.estimation.trajectory import _free_bounds
+from pslog.estimation.trajectory import _free_bounds, _one_per_span
 from pslog.records import NS, Observations
 from pslog.simulation import SimulationOptions, simulate
 
@@ -55,3 +55,17 @@ def test_free_bounds_leave_out_a_spacing_either_side_of_the_neighbours():
     lo, hi = _free_bounds(a, b, side, 0.1)
     np.testing.assert_allclose(lo, [0.0, 0.0, 1.5])
     np.testing.assert_allclose(hi, [0.4, 1.0, 1.5])  # the last: nothing left (lo == hi)
+
+
+def test_of_two_breaks_refined_into_one_span_the_one_moved_less_stays():
+    # the find added a break at 4.8336 s beside a known one at 4.8676 (the jump at 4.8615);
+    # the refine moved the added one 17 ms onto it, the known one 0.5 ms
+    tau = np.array([4.0184, 4.8502, 4.8671, 4.9609])
+    moved = np.array([0.0, 0.0166, 0.0005, 0.0008])
+    np.testing.assert_array_equal(_one_per_span(tau, moved, 0.034),
+                                  [4.0184, 4.8671, 4.9609])
+    np.testing.assert_array_equal(_one_per_span(tau[::-1], moved[::-1], 0.034),
+                                  [4.0184, 4.8671, 4.9609])
+    # apart: every break, sorted
+    np.testing.assert_array_equal(_one_per_span(tau[[3, 0, 1]], moved[[3, 0, 1]], 0.034),
+                                  tau[[0, 1, 3]])
