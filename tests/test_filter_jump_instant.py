@@ -133,7 +133,7 @@ def test_a_kicked_flight_keeps_its_points_and_publishes_the_instant_after_the_ki
     # at the jump's point (a little: its pixel fixes the position across its ray, and the jump
     # it estimates lies across that ray too) and the points of its next accepted updates
     assert len(grown) >= 3 and t[grown].min() >= jumps[0]
-    assert t[grown].max() <= jumps[0] + (FM._JUMP_RELIN + 0.5) / 30.0
+    assert t[grown].max() <= jumps[0] + (FM._JBUF + 0.5) / 30.0
     k = np.flatnonzero(t > jumps[0])[:2]  # the next two points: 55 and 29 mm off
     err = errors_m(new, truth)[k]
     assert s_new[k[0]] > 1.3 * s_old[k[0]]

@@ -99,7 +99,8 @@ Per-point quality (columns of the Track, NaN where not applicable):
   (:func:`_combined_point`), plus an unseen jump's while one camera goes on alone
   (:func:`_unseen_jump`), at a rejected detection (the prediction) the jumps of the gap
   since the latest accepted one (:func:`_unseen_gap_jump`), and at an accepted jump's point
-  and the next ``_JUMP_RELIN`` accepted ones the error of the jump's unknown instant
+  and the next 10–12 accepted ones (the jump's replay holds ``_JBUF``) the error of the
+  jump's unknown instant
   (:func:`_instant_term`); ``std_x_m``, ``std_y_m``,
   ``std_z_m`` per axis (its diagonal);
 - ``innovation_px``: distance of the detection from the predicted point's projection, pixels;
@@ -141,7 +142,8 @@ _MAX_ERROR_M = 0.05
 #: A jump is looked for before this many accepted detections back (and at the newest one).
 _JUMP_LAG = 2
 #: accepted updates after a jump whose points publish its instant's term
-#: (:func:`_instant_term`); the buffer: the jump's replay and these
+#: (:func:`_instant_term`), at least; the buffer: the jump's replay (its detection and its
+#: lag's, 1 to ``_JUMP_LAG + 1``) and these, so 10 to 12 after a jump
 _JUMP_RELIN = 10
 _JBUF = _JUMP_LAG + 1 + _JUMP_RELIN
 #: A track whose first detections after its start include a rejected one is dropped (no
@@ -272,11 +274,11 @@ class FilterOptions:
         set, the turn model's position and velocity with their covariance) as a prior of
         the window's fit, when the two agree (:func:`_with_prior`); False: the window's fit
         alone (before session 14)
-    jump_instant : bool, an accepted jump's point and the points of the next
-        ``_JUMP_RELIN`` accepted detections publish the error the jump's unknown instant
-        leaves (:func:`_instant_term`: ``ε_p ε_pᵀ Δt_j²/12``, the term ``m (s − Δt_j/2)``
-        relinearised at the jump ``m`` the state estimates, through the filter's gains);
-        the state is unchanged; False: none (before session 25)
+    jump_instant : bool, an accepted jump's point and the points of the next 10–12
+        accepted detections (``_JBUF`` in the jump's replay) publish the error the jump's
+        unknown instant leaves (:func:`_instant_term`: ``ε_p ε_pᵀ Δt_j²/12``, the term
+        ``m (s − Δt_j/2)`` relinearised at the jump ``m`` the state estimates, through the
+        filter's gains); the state is unchanged; False: none (before session 25)
     jump_rate_per_s : float, expected rate ``λ_j`` of velocity jumps (kicks, bounces), 1/s:
         a point's reported covariance adds the variance ``λ_j T σ_j² T² / 3`` along its
         camera's ray of a jump no other camera has seen in the time ``T`` since another
