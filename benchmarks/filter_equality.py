@@ -24,7 +24,9 @@ candidates, ungated (``benchmarks/_equality.py``): the points of
 accepted detections (``rejected`` 0) must be bit-equal, column for column, and the points of
 rejected detections equal but for their standard deviations (session 24: the published
 covariance of a rejected detection's prediction, "Gating, jumps" in docs/methods.md; and
-the points of (re)starts likewise, the jumps of their window, "Loss and (re)initialisation");
+the points of (re)starts likewise, the jumps of their window, "Loss and (re)initialisation";
+and since session 25 an accepted jump's point and the next points of accepted detections,
+its instant, "A jump's instant");
 prints how many rejected points changed, how many the new tree withholds (``uncertain``)
 and the largest change of ``std_m``; exit 1 on any other difference.
 
@@ -69,7 +71,10 @@ BASE_OPTIONS = compiled.FilterOptions(jump_rate_per_s=0.0, start_models=False, a
                                       turn_on_psd=0.3,
                                       supported_drag_per_m=compiled.FilterOptions().drag_per_m,
                                       max_std_m=base.FilterOptions().max_std_m,
-                                      window_noise_prior=False, restart_prior=False)
+                                      window_noise_prior=False, restart_prior=False,
+                                      # (session 25's; a --ref tree's --dump may lack it)
+                                      **({"jump_instant": False} if "jump_instant" in
+                                         compiled.FilterOptions.__dataclass_fields__ else {}))
 
 COLUMNS = ("time_ns", "camera", "position", *compiled.FILTER_QUALITY)
 
@@ -168,27 +173,68 @@ def dump(path: str, quick: bool) -> None:
     import pickle
 
     out = {}
+    default = compiled.FilterOptions
+    every = functools.partial(default, withhold=False)
     for key, data, rig in _sessions(quick, outliers=True):
         track = fuse(data, rig, "filter")
         out[key] = {"time_ns": track.time_ns.copy(), "camera": track.camera.copy(),
                     "position": track.position_world.copy(), "dropped": dict(track.dropped),
                     **{k: np.asarray(v).copy() for k, v in track.quality.items()}}
+        # every point (none withheld: the same state), for the points after a jump
+        compiled.FilterOptions = every
+        try:
+            full = fuse(data, rig, "filter")
+        finally:
+            compiled.FilterOptions = default
+        window = after_jump(full.quality)
+        keys = zip(full.time_ns.tolist(), full.camera.tolist(), strict=True)
+        rows = dict(zip(keys, window.tolist(), strict=True))
+        out[key]["after_jump"] = np.array(
+            [rows[k] for k in zip(track.time_ns.tolist(), track.camera.tolist(), strict=True)],
+            dtype=bool)
     with open(path, "wb") as f:
         pickle.dump(out, f)
 
 
 #: the columns a rejected detection's or a (re)start's point may change in (its published
-#: covariance: the jumps of its gap, of its window)
+#: covariance: the jumps of its gap, of its window), and since session 25 an accepted jump's
+#: point and the points of the accepted detections after it (its instant, ``_instant_term``)
 STD_COLUMNS = ("std_m", "std_x_m", "std_y_m", "std_z_m")
 
 
+#: the detections of a jump's replay and the accepted ones after it (``_JBUF`` since
+#: session 25; a --ref tree's --dump may lack it)
+_JBUF = getattr(compiled, "_JBUF", 13)
+
+
+def after_jump(q: dict) -> np.ndarray:
+    """The points a jump's instant may change (session 25): an accepted jump's point and
+    the next ``_JBUF`` points of accepted detections, within its track (a (re)start ends
+    it), of a track with every point (``withhold=False``: the default withholds a jump's
+    point). Rejected points do not count (their own rule)."""
+    n = len(q["jump"])
+    out = np.zeros(n, dtype=bool)
+    count = -1
+    for i in range(n):
+        if q["init"][i] == 1.0:
+            count = -1
+        elif q["jump"][i] == 1.0:
+            count = 0
+            out[i] = True
+        elif q["rejected"][i] != 1.0 and 0 <= count < _JBUF:
+            count += 1
+            out[i] = True
+    return out
+
+
 def compare_ref(old: dict, new: dict) -> int:
-    """Accepted detections' points bit-equal but for the (re)starts'; rejected ones and
-    starts equal but for STD_COLUMNS (not smaller), or withheld by the new tree (counted
-    ``uncertain``). Returns the exit code."""
+    """Accepted detections' points bit-equal but for the (re)starts' and those after a jump
+    (:func:`after_jump`); rejected ones, starts and those after a jump equal but for
+    STD_COLUMNS (not smaller), or withheld by the new tree (counted ``uncertain``). Returns
+    the exit code."""
     bad = changed = withheld = rejected = accepted = starts = starts_changed = 0
-    starts_withheld = 0
-    worst = worst_start = 0.0
+    starts_withheld = jumps_changed = jumps_withheld = jumps = 0
+    worst = worst_start = worst_jump = 0.0
     for key in old:
         a, b = old[key], new[key]
         ka = list(zip(a["time_ns"].tolist(), a["camera"].tolist(), strict=True))
@@ -196,7 +242,9 @@ def compare_ref(old: dict, new: dict) -> int:
         rows_b = {k: i for i, k in enumerate(kb)}
         gone = [i for i, k in enumerate(ka) if k not in rows_b]
         extra = set(kb) - set(ka)
-        if extra or any(a["rejected"][i] != 1.0 and a["init"][i] != 1.0 for i in gone):
+        aj = a["after_jump"]
+        if extra or any(a["rejected"][i] != 1.0 and a["init"][i] != 1.0 and not aj[i]
+                        for i in gone):
             print("  DIFFERS (points added, or an accepted point gone):", key)
             bad += 1
             continue
@@ -206,13 +254,15 @@ def compare_ref(old: dict, new: dict) -> int:
             print("  DIFFERS (withheld counts):", key, a["dropped"], b["dropped"])
             bad += 1
         starts_withheld += sum(1 for i in gone if a["init"][i] == 1.0)
-        withheld += sum(1 for i in gone if a["init"][i] != 1.0)
+        jumps_withheld += sum(1 for i in gone if aj[i])
+        withheld += sum(1 for i in gone if a["init"][i] != 1.0 and not aj[i])
         gone_set = set(gone)
         keep = np.array([i for i in range(len(ka)) if i not in gone_set], dtype=np.int64)
         for name in ("time_ns", "camera", "position", *compiled.FILTER_QUALITY):
             x, y = np.asarray(a[name])[keep], np.asarray(b[name])
-            rej = (a["rejected"][keep] == 1.0) | (a["init"][keep] == 1.0)
             ini = a["init"][keep] == 1.0
+            jmp = aj[keep]
+            rej = (a["rejected"][keep] == 1.0) | ini | jmp
             same = np.array([np.array_equal(x[i], y[i], equal_nan=True) for i in range(len(y))],
                             dtype=bool)
             if name in STD_COLUMNS:
@@ -220,7 +270,10 @@ def compare_ref(old: dict, new: dict) -> int:
                     print("  DIFFERS:", key, name)
                     bad += 1
                 if name == "std_m":
-                    r = rej & ~ini
+                    r = rej & ~ini & ~jmp
+                    jumps_changed += int(np.count_nonzero(~same[jmp]))
+                    if jmp.any():
+                        worst_jump = max(worst_jump, float(np.max(y[jmp] - x[jmp])))
                     changed += int(np.count_nonzero(~same[r]))
                     starts_changed += int(np.count_nonzero(~same[ini]))
                     if r.any():
@@ -233,11 +286,14 @@ def compare_ref(old: dict, new: dict) -> int:
         rejected += int(np.count_nonzero(a["rejected"] == 1.0))
         accepted += int(np.count_nonzero(a["rejected"] != 1.0))
         starts += int(np.count_nonzero(a["init"] == 1.0))
+        jumps += int(np.count_nonzero(aj))
     print(f"{len(old)} sessions: {accepted:,} points of accepted detections, "
           f"{rejected:,} of rejected ones; {bad} differences beyond the rule; rejected points "
           f"with a larger std: {changed}, now withheld: {withheld}; largest std_m increase "
           f"{1e3 * worst:.2f} mm; (re)starts {starts:,}, with a larger std: {starts_changed}, "
-          f"now withheld: {starts_withheld}, largest std_m increase {1e3 * worst_start:.2f} mm")
+          f"now withheld: {starts_withheld}, largest std_m increase {1e3 * worst_start:.2f} mm; "
+          f"points after a jump {jumps:,}, with a larger std: {jumps_changed}, now withheld: "
+          f"{jumps_withheld}, largest std_m increase {1e3 * worst_jump:.2f} mm")
     return 1 if bad else 0
 
 

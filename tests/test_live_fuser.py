@@ -681,6 +681,7 @@ def test_a_filter_points_datagram_covariance_is_the_published_one(tmp_path):
     (false blobs the filter's gate rejects), 30 % misses at 3 x 60 fps (one camera alone
     for a few frames, its term small enough to publish)."""
     from pslog.cli import main
+    from pslog.fusion import filter as FM
     from pslog.fusion import prepare
     from pslog.fusion.filter import BallFilter, FilterOptions, fuse_filter
     from pslog.log.reader import read_session
@@ -735,6 +736,11 @@ def test_a_filter_points_datagram_covariance_is_the_published_one(tmp_path):
         std = np.array(made[1][1:4])
         extra = float((std**2).sum() - np.trace(P))
         start = flt._start_jump
+        if made[1][9] != 1 and flt._I[FM._IJN] > 0 and int(flt._I[FM._IJTE]) == t:
+            # after an accepted jump: its instant, w ε_p ε_pᵀ in full (_instant_term)
+            e, w = flt._S[FM._SJE:FM._SJE + 3], flt._S[FM._SJE + 3]
+            P += w * np.outer(e, e)
+            extra -= float(w * (e @ e))
         if made[1][9] == 1:  # rejected: λ_j σ_j² T³/3 per axis
             P += extra / 3 * np.eye(3)
         elif start is not None and start[0] == t and extra > 0:  # a start: the jumps its

@@ -97,8 +97,11 @@ Per-point quality (columns of the Track, NaN where not applicable):
 - ``std_m``: position standard deviation ``sqrt(trace P_pp)`` after the update, metres (as
   ``smooth``), ``P_pp`` the reported covariance: the mixture's with the turn model in the set
   (:func:`_combined_point`), plus an unseen jump's while one camera goes on alone
-  (:func:`_unseen_jump`), and at a rejected detection (the prediction) the jumps of the gap
-  since the latest accepted one (:func:`_unseen_gap_jump`); ``std_x_m``, ``std_y_m``,
+  (:func:`_unseen_jump`), at a rejected detection (the prediction) the jumps of the gap
+  since the latest accepted one (:func:`_unseen_gap_jump`), and at an accepted jump's point
+  and the next 10–12 accepted ones (the jump's replay holds ``_JBUF``) the error of the
+  jump's unknown instant
+  (:func:`_instant_term`); ``std_x_m``, ``std_y_m``,
   ``std_z_m`` per axis (its diagonal);
 - ``innovation_px``: distance of the detection from the predicted point's projection, pixels;
 - ``residual_px``: its distance from the updated point's projection, pixels;
@@ -138,6 +141,11 @@ _NAN = float("nan")
 _MAX_ERROR_M = 0.05
 #: A jump is looked for before this many accepted detections back (and at the newest one).
 _JUMP_LAG = 2
+#: accepted updates after a jump whose points publish its instant's term
+#: (:func:`_instant_term`), at least; the buffer: the jump's replay (its detection and its
+#: lag's, 1 to ``_JUMP_LAG + 1``) and these, so 10 to 12 after a jump
+_JUMP_RELIN = 10
+_JBUF = _JUMP_LAG + 1 + _JUMP_RELIN
 #: A track whose first detections after its start include a rejected one is dropped (no
 #: point from it) until this many were accepted.
 _CONFIRM = 2
@@ -266,6 +274,11 @@ class FilterOptions:
         set, the turn model's position and velocity with their covariance) as a prior of
         the window's fit, when the two agree (:func:`_with_prior`); False: the window's fit
         alone (before session 14)
+    jump_instant : bool, an accepted jump's point and the points of the next 10–12
+        accepted detections (``_JBUF`` in the jump's replay) publish the error the jump's
+        unknown instant leaves (:func:`_instant_term`: ``ε_p ε_pᵀ Δt_j²/12``, the term
+        ``m (s − Δt_j/2)`` relinearised at the jump ``m`` the state estimates, through the
+        filter's gains); the state is unchanged; False: none (before session 25)
     jump_rate_per_s : float, expected rate ``λ_j`` of velocity jumps (kicks, bounces), 1/s:
         a point's reported covariance adds the variance ``λ_j T σ_j² T² / 3`` along its
         camera's ray of a jump no other camera has seen in the time ``T`` since another
@@ -315,6 +328,7 @@ class FilterOptions:
     start_models: bool = True
     window_noise_prior: bool = True
     restart_prior: bool = True
+    jump_instant: bool = True
 
     def __post_init__(self) -> None:
         for name in ("noise_px", "accel_psd", "accel_step_var", "gate", "jump_speed",
@@ -393,7 +407,13 @@ _SHX = 110
 _SHP = _SHX + 6 * _HISTORY
 _SHUV = _SHP + 36 * _HISTORY
 _SHSC = _SHUV + 2 * _HISTORY
-_SCAM = _SHSC + _HISTORY  # then 2 per camera, then 2 per window slot
+#: the latest jump's restart state (x, P), its instant's published term at the latest point
+#: (ε_p (3), Δt_j²/12: :func:`_instant_term`), the pixels of its detections (_JBUF x (u, v))
+_SJX = _SHSC + _HISTORY
+_SJP = _SJX + 6
+_SJE = _SJP + 36
+_SJUV = _SJE + 4
+_SCAM = _SJUV + 2 * _JBUF  # then 2 per camera, then 2 per window slot
 #: ``I``: track flag, state time, last accepted time, rejections in a row, updates since the
 #: start, camera of a pending jump, its confirming updates, whether one came from another
 #: camera, the turn model's age, the latest jump's time and camera, history length, window
@@ -403,7 +423,12 @@ _SCAM = _SHSC + _HISTORY  # then 2 per camera, then 2 per window slot
 _IHAS, _ITIME, _ILAST, _IREJ, _ICONF, _IPEND, _ICONFS, _IOTHER, _IAGE = range(9)
 _IJUMPNS, _IJUMPCAM, _IHN, _IWN, _ICAP, _IDROPC, _IDROPU, _IDROPFIRST = range(9, 17)
 _IHT = 17  # _HISTORY x (state time, time, camera)
-_ICAM = _IHT + 3 * _HISTORY  # then 3 per camera, then 2 per window slot
+#: the latest jump's restart time, its detections buffered (0: none), its shape, the time
+#: of the point that published its instant's term; the buffer's (time, camera)
+_IJT0 = _IHT + 3 * _HISTORY
+_IJN, _IJSHAPE, _IJTE = _IJT0 + 1, _IJT0 + 2, _IJT0 + 3
+_IJBUF = _IJT0 + 4
+_ICAM = _IJBUF + 2 * _JBUF  # then 3 per camera, then 2 per window slot
 #: ``O`` (float64 options): k, g (3), gravity's unit vector (3), gate, adapt_rate, σ² bounds,
 #: q bounds, q's rate and target, max_std (inf: none), withhold, confirm_nis, λ, μ₀, turn
 #: model on, λ_t, turn_on_psd, turn_rate_psd, turn_rate_std², restitution, friction, number
@@ -414,7 +439,8 @@ _OSWITCH, _OMU0, _OTURN, _OTSWITCH, _OTON, _OTPSD, _OTVAR, _OREST, _OFRIC = rang
 _ONSHAPES, _OSHAPES = 27, 28
 _OUNSEEN = _OSHAPES + 4 * 3  # λ_j σ_j² / 3: an unseen jump's variance along a ray per T³
 _OKS = _OUNSEEN + 1  # the supported model's drag coefficient (0 by default)
-_OSIZE = _OKS + 1
+_OINSTANT = _OKS + 1  # 1: an accepted jump's instant published (_instant_term)
+_OSIZE = _OINSTANT + 1
 #: ``N`` (int64 options): max gap, window span, init_window, init_detections, max_rejects,
 #: window capacity
 _NMAXGAP, _NSPAN, _NINITWIN, _NINITDET, _NMAXREJ, _NWCAP = range(6)
@@ -827,68 +853,148 @@ def _jumped(x, P, dt, O, shape):
 
 
 @kernel
+def _replay(S, I, cams, O, t, cam, u, v, lag, shape):
+    """One (lag, shape) of :func:`_jump`: the state before the ``lag``-th latest accepted
+    detection (the current state when 0), the jump on its step (:func:`_jumped`), the
+    accepted detections since and this one updated in turn, each within the gate.
+    Returns ``(passed, x, P, innovation of this detection, score, restart time, restart
+    state, its covariance)``, the score the ``Σ NIS + ln det S`` of the history before the
+    lag and of the replay."""
+    n = I[_IHN]
+    start = max(n - _JUMP_LAG, 0)
+    if lag == 0:  # the state before the current detection
+        t0 = I[_ITIME]
+        x = S[_SX:_SX + 6]
+        P = S[_SP:_SP + 36]
+    else:  # restart before the lag-th latest accepted detection
+        h = n - lag
+        t0 = I[_IHT + 3 * h]
+        x = S[_SHX + 6 * h:_SHX + 6 * h + 6]
+        P = S[_SHP + 36 * h:_SHP + 36 * h + 36]
+    ts, xs, Ps = t0, x, P
+    score = 0.0
+    for k in range(start, n - lag):
+        score += S[_SHSC + k]
+    first = True
+    inn = np.empty(_INN_C0 + 12)
+    for d in range(lag + 1):
+        if d < lag:  # the accepted detections since, oldest first
+            h = n - lag + d
+            td, cd = I[_IHT + 3 * h + 1], I[_IHT + 3 * h + 2]
+            ud, vd = S[_SHUV + 2 * h], S[_SHUV + 2 * h + 1]
+        else:
+            td, cd, ud, vd = t, cam, u, v
+        dt = (td - t0) / NS
+        x, P = _predicted(x, P, dt, S[_SMU], O, S[_SQ])
+        if first:  # the jump Δv at an instant uniform in the interval: Δp = Δv s
+            ok, x, P = _jumped(x, P, dt, O, shape)
+            if not ok:
+                return False, x, P, inn, score, ts, xs, Ps
+            first = False
+        ok, inn = _innovation(cams, cd, x, P, 6, ud, vd, S[_SVAR])
+        if not ok or not inn[5] <= O[_OGATE]:
+            return False, x, P, inn, score, ts, xs, Ps
+        score += inn[5] + math.log(inn[6])
+        x, P = _updated(x, P, inn)
+        t0 = td
+    return True, x, P, inn, score, ts, xs, Ps
+
+
+@kernel
 def _jump(S, I, cams, O, t, cam, u, v):
     """A bounce or a kick: a velocity jump (a bounce's, mostly along gravity, then a kick's,
     isotropic; position continuous) at the state before one of the last ``_JUMP_LAG + 1``
     accepted detections (the first detections after a small jump can pass the gate), those
     detections and this one replayed; the (lag, shape) whose replay passes every gate with
     the least ``Σ NIS + ln det S`` over the same detections wins.
+    The winner's restart and detections are kept (``O[_OINSTANT]``, session 25) for the
+    published covariance of its instant (:func:`_instant_term`).
     Returns ``(ok, x, P, innovation of this detection)``; ``ok`` False when none explains
     it. The replay's prediction weights gravity by the ballistic model's probability of
     the current state (the models' mixture), as the step's own prediction does."""
     n = I[_IHN]
-    var = S[_SVAR]
     best_x = np.empty(6)
     best_P = np.empty(36)
     best_inn = np.empty(_INN_C0 + 12)
     found = False
     best_score = math.inf
+    best_lag = best_shape = 0
+    best_t0 = I[_ITIME]
+    best_x0 = S[_SX:_SX + 6]
+    best_P0 = S[_SP:_SP + 36]
     n_lags = min(n, _JUMP_LAG) + 1
-    start = max(n - _JUMP_LAG, 0)
     for lag in range(n_lags):
         for shape in range(int(O[_ONSHAPES])):
-            if lag == 0:  # the state before the current detection
-                t0 = I[_ITIME]
-                x = S[_SX:_SX + 6]
-                P = S[_SP:_SP + 36]
-            else:  # restart before the lag-th latest accepted detection
-                h = n - lag
-                t0 = I[_IHT + 3 * h]
-                x = S[_SHX + 6 * h:_SHX + 6 * h + 6]
-                P = S[_SHP + 36 * h:_SHP + 36 * h + 36]
-            score = 0.0
-            for k in range(start, n - lag):
-                score += S[_SHSC + k]
-            first = True
-            passed = True
-            inn = best_inn
-            for d in range(lag + 1):
-                if d < lag:  # the accepted detections since, oldest first
-                    h = n - lag + d
-                    td, cd = I[_IHT + 3 * h + 1], I[_IHT + 3 * h + 2]
-                    ud, vd = S[_SHUV + 2 * h], S[_SHUV + 2 * h + 1]
-                else:
-                    td, cd, ud, vd = t, cam, u, v
-                dt = (td - t0) / NS
-                x, P = _predicted(x, P, dt, S[_SMU], O, S[_SQ])
-                if first:  # the jump Δv at an instant uniform in the interval: Δp = Δv s
-                    ok, x, P = _jumped(x, P, dt, O, shape)
-                    if not ok:
-                        passed = False
-                        break
-                    first = False
-                ok, inn = _innovation(cams, cd, x, P, 6, ud, vd, var)
-                if not ok or not inn[5] <= O[_OGATE]:
-                    passed = False
-                    break
-                score += inn[5] + math.log(inn[6])
-                x, P = _updated(x, P, inn)
-                t0 = td
+            passed, x, P, inn, score, ts, xs, Ps = _replay(S, I, cams, O, t, cam, u, v, lag,
+                                                           shape)
             if passed and score < best_score:
                 best_x, best_P, best_inn, best_score, found = x, P, inn, score, True
+                best_lag, best_shape, best_t0, best_x0, best_P0 = lag, shape, ts, xs, Ps
+    if found and O[_OINSTANT] != 0.0:
+        # the jump's restart and the detections its replay took, for its instant's spread
+        S[_SJX:_SJX + 6] = best_x0
+        S[_SJP:_SJP + 36] = best_P0
+        I[_IJT0], I[_IJSHAPE] = best_t0, best_shape
+        for d in range(best_lag):
+            h = n - best_lag + d
+            I[_IJBUF + 2 * d], I[_IJBUF + 2 * d + 1] = I[_IHT + 3 * h + 1], I[_IHT + 3 * h + 2]
+            S[_SJUV + 2 * d], S[_SJUV + 2 * d + 1] = S[_SHUV + 2 * h], S[_SHUV + 2 * h + 1]
+        I[_IJBUF + 2 * best_lag], I[_IJBUF + 2 * best_lag + 1] = t, cam
+        S[_SJUV + 2 * best_lag], S[_SJUV + 2 * best_lag + 1] = u, v
+        I[_IJN] = best_lag + 1
     if found:
         I[_IHN] = 0  # a new segment: a later jump is not looked for before it
     return found, best_x, best_P, best_inn
+
+
+@kernel
+def _instant_term(S, I, cams, O, t, x):
+    """The error an accepted jump's unknown instant leaves in the state ``x`` at ``t``
+    (the jump's buffered detections, the latest at ``t``, all updated; session 25): the
+    jump ``Δv`` at an instant ``s`` uniform over its step of ``Δt_j`` moves the ball by
+    ``Δv s``, which the filter takes at ``E[s] = Δt_j/2`` with ``Δv``'s prior (zero mean
+    for a kick): linearised about the jump the state now estimates, ``m = v − v̄`` (``v̄``
+    the restart state's velocity predicted to ``t`` without the jump), the term
+    ``m (s − Δt_j/2)`` of variance ``m mᵀ Δt_j²/12`` that the prior's linearisation (at
+    ``m = μ``) dropped. Its effect on the state at ``t`` through the filter's own gains
+    (a consider covariance: Bar-Shalom et al. 2001, §5.4; Schmidt's): ``ε`` from
+    ``(m, 0)`` on the jump's step, ``ε ← F ε`` each prediction (``ε_p += Δt ε_v``),
+    ``ε ← (I − K H) ε`` each update, along the jump's replay from its restart. Returns
+    ``(ok, ε_p (3), Δt_j²/12)``: the published covariance gains ``ε_p ε_pᵀ Δt_j²/12``."""
+    xb, _ = _predicted(S[_SJX:_SJX + 6], S[_SJP:_SJP + 36], (t - I[_IJT0]) / NS, S[_SMU], O,
+                       S[_SQ])
+    e = np.zeros(6)
+    for i in range(3):
+        e[i] = x[3 + i] - xb[3 + i]
+    t0 = I[_IJT0]
+    x = S[_SJX:_SJX + 6]
+    P = S[_SJP:_SJP + 36]
+    w = 0.0
+    c0, c1 = _INN_C0, _INN_C0 + 6
+    for d in range(I[_IJN]):
+        td, cd = I[_IJBUF + 2 * d], I[_IJBUF + 2 * d + 1]
+        ud, vd = S[_SJUV + 2 * d], S[_SJUV + 2 * d + 1]
+        dt = (td - t0) / NS
+        x, P = _predicted(x, P, dt, S[_SMU], O, S[_SQ])
+        if d == 0:
+            ok, x, P = _jumped(x, P, dt, O, I[_IJSHAPE])
+            if not ok:
+                return False, e[:3], w
+            w = dt * dt / 12.0
+        else:
+            for i in range(3):
+                e[i] += dt * e[3 + i]
+        ok, inn = _innovation(cams, cd, x, P, 6, ud, vd, S[_SVAR])
+        if not ok:
+            return False, e[:3], w
+        hd0 = inn[7] * e[0] + inn[8] * e[1] + inn[9] * e[2]
+        hd1 = inn[10] * e[0] + inn[11] * e[1] + inn[12] * e[2]
+        g0, g1 = inn[2] * hd0 + inn[3] * hd1, inn[3] * hd0 + inn[4] * hd1
+        for i in range(6):
+            e[i] = e[i] - inn[c0 + i] * g0 - inn[c1 + i] * g1
+        x, P = _updated(x, P, inn)
+        t0 = td
+    return True, e[:3], w
 
 
 @kernel
@@ -1236,6 +1342,21 @@ def _push(S, I, cams, O, N, t, cam, u, v, out):
             S[_SXT:_SXT + 7] = xt
             S[_SPT:_SPT + 49] = Pt
         return _reject(S, I, cams, O, N, t, cam, u, v, x, P, inn_ok, inn, gap_s, out)
+    if I[_IJN] > 0 and O[_OINSTANT] != 0.0:  # the latest jump's instant (published)
+        k = I[_IJN]
+        if accepted and k < _JBUF:
+            I[_IJBUF + 2 * k], I[_IJBUF + 2 * k + 1] = t, cam
+            S[_SJUV + 2 * k], S[_SJUV + 2 * k + 1] = u, v
+            I[_IJN] = k + 1
+        elif accepted:
+            I[_IJN] = 0
+        if I[_IJN] > 0:
+            ok, ep, w = _instant_term(S, I, cams, O, t, xn)
+            if ok:
+                v0, v1, v2 = v0 + w * ep[0] * ep[0], v1 + w * ep[1] * ep[1], v2 + w * ep[2] * ep[2]
+                S[_SJE:_SJE + 3] = ep
+                S[_SJE + 3] = w
+                I[_IJTE] = t
     cinn_t, cinn_has = _ICAM + ncam, _ICAM + 2 * ncam
     if accepted:
         h = I[_IHN]
@@ -1817,6 +1938,7 @@ class BallFilter:
             O[_OSHAPES + 4 * i:_OSHAPES + 4 * i + 4] = (float(reflect), *var)
         O[_OUNSEEN] = options.jump_rate_per_s * self._jump_var / 3.0
         O[_OKS] = options.supported_drag_per_m
+        O[_OINSTANT] = float(options.jump_instant)
         self._opts = O
         self._nopts = np.array([self._max_gap_ns, self._init_span_ns, options.init_window,
                                 options.init_detections, options.max_rejects, capacity],
@@ -1880,6 +2002,7 @@ class BallFilter:
         I[_IWN] = 0
         I[_ICAP] = self.options.init_window
         I[_IHN] = 0
+        I[_IJN] = 0
         I[_ICAM:_ICAM + len(self._cams)] = I[_ILAST]
         S[_SMU], S[_SE:_SE + 6] = self._mu0, 0.0
         S[_SNU] = 0.0
@@ -1936,7 +2059,8 @@ class BallFilter:
         detection was rejected), for :mod:`pslog.live`: its diagonal is the published
         variances (``std²``: the quality columns, to the bit through ``sqrt``), its
         correlations those of the state's position covariance plus the term the point
-        published on top of it (in full, where the columns keep only its diagonal): at a
+        published on top of it (in full, where the columns keep only its diagonal): after an
+        accepted jump its instant's term (:func:`_instant_term`, ``w ε_p ε_pᵀ``), at a
         rejected detection the gap's jumps (:func:`_unseen_gap_jump`: isotropic, ``Δ I``),
         at a start's point the jumps its window may hide (:func:`window_jump_cov`'s position
         block, in full), else the unseen jump of one camera going on alone
@@ -1956,6 +2080,12 @@ class BallFilter:
         sx, sy, sz = std_xyz
         vx, vy, vz = sx * sx, sy * sy, sz * sz
         extra = vx + vy + vz - (p00 + p11 + p22)
+        if not rejected and int(I[_IJTE]) == time_ns and I[_IJN] > 0 and S[_SJE + 3] > 0.0:
+            # an accepted jump's instant (:func:`_instant_term`): w ε_p ε_pᵀ, in full
+            e0, e1, e2, w = S[_SJE:_SJE + 4].tolist()
+            p00, p11, p22 = p00 + w * e0 * e0, p11 + w * e1 * e1, p22 + w * e2 * e2
+            p01, p02, p12 = p01 + w * e0 * e1, p02 + w * e0 * e2, p12 + w * e1 * e2
+            extra -= w * (e0 * e0 + e1 * e1 + e2 * e2)
         start = self._start_jump
         if extra > 0.0 and not rejected and start is not None and start[0] == time_ns:
             # a start's point: the jumps its window may hide (:func:`window_jump_cov`), in full

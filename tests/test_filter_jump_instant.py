@@ -1,0 +1,141 @@
+"""``filter``: the published covariance of an accepted jump's unknown instant (issue 10,
+session 25; docs/methods.md "A jump's instant").
+
+A jump ``Δv`` at an instant ``s`` uniform over its step of ``Δt_j`` moves the ball by ``Δv s``;
+the filter takes ``E[s] = Δt_j/2`` with the jump's prior (zero mean for a kick), which drops
+the term ``m (s − Δt_j/2)`` of the jump ``m`` it then estimates. The points after the jump
+publish that term's effect through the filter's gains, ``w ε_p ε_pᵀ`` with ``w = Δt_j²/12``,
+``ε = (m, 0)`` on the jump's step, ``ε ← F ε`` at each prediction and ``(I − K H) ε`` at each
+update. Checked by hand (numpy, the Jacobian by finite differences of the camera's own
+projection), and on a kicked flight: the state and the points are the same, only the
+published standard deviations grow, and only after the kick.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from test_filter import lab_rig
+
+from pslog import NS, Motion
+from pslog.evaluation import errors_m
+from pslog.fusion import filter as FM
+from pslog.fusion.filter import BallFilter, FilterOptions, fuse_filter
+from pslog.motion import G
+from pslog.simulation import SimulationOptions, simulate, true_rig
+from pslog.timing import observations as corrected_observations
+
+
+def _jacobian(camera, p):
+    """``∂(u, v)/∂p`` of the camera's projection, central differences."""
+    J = np.empty((2, 3))
+    for k in range(3):
+        d = np.zeros(3)
+        d[k] = 1e-6
+        J[:, k] = (camera.project((p + d)[None])[0][0] - camera.project((p - d)[None])[0][0]) / 2e-6
+    return J
+
+
+def test_the_instant_term_by_hand():
+    rig = lab_rig(3)
+    flt = BallFilter(rig)
+    S, I, cams, O = flt._S, flt._I, flt._cam_table, flt._opts
+    t0 = 1_000_000_000
+    x0 = np.array([1.2, 0.8, 1.0, 2.0, -1.0, 1.5])
+    P0 = np.diag([1e-5] * 3 + [4e-3] * 3).ravel()
+    S[FM._SMU], S[FM._SQ], S[FM._SVAR] = 0.9, 0.5, 0.3 ** 2
+    S[FM._SJX:FM._SJX + 6], S[FM._SJP:FM._SJP + 36] = x0, P0
+    I[FM._IJT0], I[FM._IJSHAPE] = t0, 2  # a kick
+    times = [t0 + 11_000_000, t0 + 22_000_000, t0 + 36_000_000]
+    kick = np.array([3.0, 4.0, -2.0])
+    # the detections: the kicked ball's pixels (a little off: the updates move the state)
+    for k, (t, c) in enumerate(zip(times, (0, 1, 2), strict=True)):
+        s = (t - t0) / NS
+        p = x0[:3] + x0[3:] * s + kick * (s - 0.004)
+        uv = rig.cameras[c].project(p[None])[0][0] + [0.4, -0.3]
+        I[FM._IJBUF + 2 * k], I[FM._IJBUF + 2 * k + 1] = t, c
+        S[FM._SJUV + 2 * k:FM._SJUV + 2 * k + 2] = uv
+    for n in (1, 2, 3):
+        I[FM._IJN] = n
+        t = times[n - 1]
+        x_now = np.concatenate([x0[:3], x0[3:] + kick + [0.1, 0.2, -0.3]])
+        ok, ep, w = FM._instant_term(S, I, cams, O, t, x_now)
+        assert ok
+        # by hand: m the state's velocity against the restart's prediction without the jump
+        xb, _ = FM._predicted(x0, P0, (t - t0) / NS, 0.9, O, 0.5)
+        m = x_now[3:] - xb[3:]
+        x, P = x0.copy(), P0.reshape(6, 6).copy()
+        tp = t0
+        for k in range(n):
+            dt = (times[k] - tp) / NS
+            x, Pf = FM._predicted(x, P.ravel(), dt, 0.9, O, 0.5)
+            P = Pf.reshape(6, 6)
+            if k == 0:
+                _, x, Pf = FM._jumped(x, P.ravel(), dt, O, 2)
+                P = Pf.reshape(6, 6)
+                eps = np.concatenate([m, np.zeros(3)])
+                w_hand = dt * dt / 12.0
+            else:
+                eps = np.concatenate([eps[:3] + dt * eps[3:], eps[3:]])
+            c = (0, 1, 2)[k]
+            H = np.hstack([_jacobian(rig.cameras[c], x[:3]), np.zeros((2, 3))])
+            Sm = H @ P @ H.T + 0.3 ** 2 * np.eye(2)
+            K = P @ H.T @ np.linalg.inv(Sm)
+            eps = (np.eye(6) - K @ H) @ eps
+            # the state's own update (its mean and covariance) to carry the replay on
+            uv = S[FM._SJUV + 2 * k:FM._SJUV + 2 * k + 2]
+            _, inn = FM._innovation(cams, c, x, P.ravel(), 6, uv[0], uv[1], 0.3 ** 2)
+            x, Pf = FM._updated(x, P.ravel(), inn)
+            P = Pf.reshape(6, 6)
+            tp = times[k]
+        assert w == w_hand
+        np.testing.assert_allclose(ep, eps[:3], rtol=2e-5, atol=1e-9)
+        assert np.linalg.norm(ep) > 0.01 * np.linalg.norm(m)
+
+
+def kicked(kick, at: float, seconds: float = 0.9) -> Motion:
+    """A drag-free flight kicked at ``at`` s by the velocity ``kick``: closed form."""
+    p0, v0 = np.array([0.8, 0.6, 0.9]), np.array([2.0, 0.8, 2.5])
+    g = np.array([0.0, 0.0, -G])
+    pk = p0 + v0 * at + 0.5 * g * at ** 2
+    v1 = v0 + g * at + np.asarray(kick, float)
+
+    def position(times: np.ndarray) -> np.ndarray:
+        t = np.asarray(times, float)[:, None]
+        s = np.maximum(t - at, 0.0)
+        before = p0 + v0 * t + 0.5 * g * t * t
+        after = pk + v1 * s + 0.5 * g * s * s
+        return np.where(t < at, before, after)
+
+    return Motion("kicked", seconds, position, "a flight kicked")
+
+
+def test_a_kicked_flight_keeps_its_points_and_publishes_the_instant_after_the_kick():
+    rig = lab_rig(2)
+    at = 0.515  # between two detections: the instant is uncertain over the step
+    options = SimulationOptions(noise_px=0.3, seed=0)
+    detections, truth = simulate(rig, kicked([-8.0, 2.0, 4.0], at), None, options)
+    obs = corrected_observations(detections, true_rig(rig, options))
+    old = fuse_filter(obs, rig, options=FilterOptions(withhold=False, jump_instant=False))
+    new = fuse_filter(obs, rig, options=FilterOptions(withhold=False))
+    # the state is the same: every point and every column but the standard deviations
+    np.testing.assert_array_equal(new.time_ns, old.time_ns)
+    np.testing.assert_array_equal(new.position_world, old.position_world)
+    for name in ("innovation_px", "residual_px", "nis", "gap_s", "jump", "rejected", "init"):
+        np.testing.assert_array_equal(new.quality[name], old.quality[name])
+    t = new.time_ns / NS
+    jumps = t[new.quality["jump"] > 0]
+    assert len(jumps) == 1 and at < jumps[0] < at + 0.02
+    s_old, s_new = old.quality["std_m"], new.quality["std_m"]
+    before = t < jumps[0]
+    np.testing.assert_array_equal(s_new[before], s_old[before])
+    assert np.all(s_new >= s_old)
+    grown = np.flatnonzero(s_new > s_old * (1 + 1e-9))
+    # at the jump's point (a little: its pixel fixes the position across its ray, and the jump
+    # it estimates lies across that ray too) and the points of its next accepted updates
+    assert len(grown) >= 3 and t[grown].min() >= jumps[0]
+    assert t[grown].max() <= jumps[0] + (FM._JBUF + 0.5) / 30.0
+    k = np.flatnonzero(t > jumps[0])[:2]  # the next two points: 55 and 29 mm off
+    err = errors_m(new, truth)[k]
+    assert s_new[k[0]] > 1.3 * s_old[k[0]]
+    # the second: 1.4 σ off before, within 1.1 σ now
+    assert err[1] > 1.3 * s_old[k[1]] and err[1] < 1.1 * s_new[k[1]]
