@@ -92,3 +92,25 @@ def test_without_a_bound_or_a_covariance_nothing_is_withheld():
     for options in (FusionOptions(), FusionOptions(noise_px=None, max_std_m=MAX_STD_M)):
         track = fuse(obs, rig, "typeA", options)
         assert "uncertain" not in track.dropped
+
+
+def test_fuse_command_withholds_and_records_the_count(tmp_path, cli):
+    """`pslog fuse --type-a-max-std-mm 25.5` gives the bounded batch's points, and the
+    session's left-out counts (what `pslog eval` reports) hold the `uncertain` ones."""
+    from pslog.log import SessionWriter, read_session
+
+    rig = _session()[0]
+    path = tmp_path / "rally.mcap"
+    det, _truth = simulate(rig, rally(4.0, seed=52, speed=5.0, kick_every_s=0.9)[0],
+                           options=SimulationOptions(noise_px=0.3, seed=52))
+    with SessionWriter(path, rig, timing="typeA", source="test") as writer:
+        writer.add_detections(det)
+    out = tmp_path / "fused.mcap"
+    code, _, err = cli("fuse", path, "--method", "typeA", "--noise-px", "0.5",
+                       "--type-a-max-std-mm", "25.5", "-o", out)
+    assert code == 0, err
+    session = read_session(out)
+    batch = fuse(det, rig, "typeA", FusionOptions(max_std_m=0.0255))
+    assert batch.dropped["uncertain"] > 0
+    assert_array_equal(session.tracks["typeA"].time_ns, batch.time_ns)
+    assert session.left_out["typeA"]["uncertain"] == batch.dropped["uncertain"]
