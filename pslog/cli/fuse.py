@@ -85,6 +85,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "detection confirms it (left out as contradicted or "
                              "unconfirmed otherwise); off: every point at once, as `pslog "
                              "live` emits them (default %(default)s)")
+    parser.add_argument("--type-a-max-std-mm", default=None,
+                        type=number_at_most(1e6, "mm", "a kilometre", positive=True),
+                        metavar="MM",
+                        help="typeA: withhold a point whose std_m exceeds this, millimetres, "
+                             "counted as left out (`uncertain`, the filter's rule; 25.5: the "
+                             "filter's bound, 5 cm at 95 %%) (default: none withheld)")
     parser.add_argument("--workers", type=int_in(1, 64), default=None, metavar="N",
                         help="methods fused at once, on threads (the same tracks whatever "
                              "the number; 1..64; 1: one after another, e.g. beside other "
@@ -135,6 +141,8 @@ def run(args: argparse.Namespace) -> int:
                             rate_hz=args.rate, noise_px=args.noise_px,
                             gating=args.gating == "on",
                             confirm_gaps=args.confirm_gaps == "on",
+                            max_std_m=None if args.type_a_max_std_mm is None
+                            else args.type_a_max_std_mm / 1e3,
                             detector_offset_m=None if args.detector_offset_mm is None
                             else args.detector_offset_mm / 1e3,
                             detector_bias_px=args.detector_bias_px)

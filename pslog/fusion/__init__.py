@@ -76,6 +76,12 @@ class FusionOptions:
         the rig's usual one until the next camera's detection confirms it, and drop it when
         that detection contradicts it (:mod:`pslog.fusion.confirm`; a stream outputs it one
         detection later); False: every point at once (``pslog live``: a point per shutter)
+    max_std_m : float or None, typeA: a point whose ``std_m`` exceeds this is withheld
+        (counted in ``Track.dropped`` as ``uncertain``: the filter's rule;
+        ``pslog.fusion.pseudo.MAX_STD_M`` is the filter's default, 5 cm / 1.96, issue 10's
+        "no point beyond 5 cm"); None (the default, session 26: the decision on the points
+        it withholds at a session's start is open): every point (docs/methods.md, "Type A's
+        points after an unseen kick (session 26)")
     detector_offset_m : float or None, smooth only: standard deviation (metres, per axis)
         of the detector's constant 3-D offset of the ball's apparent centre (every camera's
         centroid drawn toward the lit side of the ball), a systematic error that smooth's
@@ -95,6 +101,7 @@ class FusionOptions:
     noise_px: float | None = 0.5
     gating: bool = True
     confirm_gaps: bool = True
+    max_std_m: float | None = None
     detector_offset_m: float | None = None
     detector_bias_px: float | None = None
 
@@ -112,6 +119,8 @@ class FusionOptions:
         if self.detector_bias_px is not None and not 0 <= self.detector_bias_px <= 1e3:
             raise FusionError(f"detector bias must be in [0, 1000] pixels, got "
                               f"{self.detector_bias_px!r}")
+        if self.max_std_m is not None and not self.max_std_m > 0:
+            raise FusionError(f"max std must be > 0 metres, got {self.max_std_m!r}")
         if self.detector_offset_m is not None and not 0 <= self.detector_offset_m <= 1.0:
             raise FusionError(f"detector offset must be in [0, 1] metres, got "
                               f"{self.detector_offset_m!r}")
@@ -214,7 +223,7 @@ def _nearest(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
 
 def _type_a(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
     from .confirm import confirm_batch  # (long-gap points confirmed by the next camera)
-    from .pseudo import covariance_noise_px, type_a_noise
+    from .pseudo import covariance_noise_px, type_a_noise, withhold_uncertain
 
     # the covariance made at the stated noise (what the confirmation's test reads), then
     # rescaled to the session's measured noise (docs/methods.md, "Type A's covariance at
@@ -224,7 +233,8 @@ def _type_a(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
                         cov_noise_px=covariance_noise_px(options.noise_px))[0]
     if options.confirm_gaps:
         track = confirm_batch(prep, track, rig, gap, options.noise_px)
-    return type_a_noise(prep, track, gap, options.noise_px)
+    return withhold_uncertain(type_a_noise(prep, track, gap, options.noise_px),
+                              options.max_std_m)[0]
 
 
 def _type_a_stream(rig: Rig, options: FusionOptions):
@@ -445,18 +455,22 @@ def type_a_explained(prep: Prepared, rig: Rig, options: FusionOptions
                      ) -> tuple[Track, TypeAConstruction]:
     """``typeA``'s track as :func:`fuse` makes it from ``prep`` (the long-gap confirmation
     of :mod:`pslog.fusion.confirm` included when ``options.confirm_gaps``) and the
-    construction of each of its points (the points the confirmation drops left out too)."""
-    from .pseudo import covariance_noise_px, type_a_noise
+    construction of each of its points (the points the confirmation drops, and those
+    withheld as ``uncertain``, left out too)."""
+    from .pseudo import covariance_noise_px, type_a_noise, withhold_uncertain
 
     max_gap_s = options.max_gap_s or default_max_gap_s(rig)
     track, construction = fuse_type_a(prep, max_gap_s, options.noise_px,
                                       cov_noise_px=covariance_noise_px(options.noise_px))
     if not options.confirm_gaps or not len(track):
-        return type_a_noise(prep, track, max_gap_s, options.noise_px), construction
+        out, kept = withhold_uncertain(type_a_noise(prep, track, max_gap_s, options.noise_px),
+                                       options.max_std_m)
+        return out, construction if kept is None else construction.select(kept)
     from .confirm import confirm_batch
 
     confirmed = type_a_noise(prep, confirm_batch(prep, track, rig, max_gap_s,
                                                  options.noise_px), max_gap_s, options.noise_px)
+    confirmed = withhold_uncertain(confirmed, options.max_std_m)[0]
     if len(confirmed) == len(track):
         return confirmed, construction
     # the construction's rows are the track's points, in order; the confirmation only drops

@@ -984,6 +984,29 @@ def with_measured_noise(track: Track, sigma: np.ndarray, cov_noise_px: float,
                           dict(track.dropped))
 
 
+#: ``FusionOptions.max_std_m``'s default: the filter's (issue 10's "no output point further
+#: than 5 cm from the truth" at 95 %: 5 cm / 1.96, ``pslog.fusion.filter.FilterOptions``)
+MAX_STD_M = 0.05 / 1.96
+
+
+def withhold_uncertain(track: Track, max_std_m: float | None) -> tuple[Track, np.ndarray | None]:
+    """``track`` without the points whose ``std_m`` exceeds ``max_std_m`` (their covariance
+    does not vouch for them within 5 cm at 95 %), counted in ``Track.dropped`` as
+    ``uncertain`` (the filter's reason and rule, ``FilterOptions.max_std_m``), and the
+    kept rows (None: every one; ``max_std_m`` None, no covariance or nothing above it)."""
+    std = track.quality.get("std_m")
+    if max_std_m is None or std is None or not len(track):
+        return track, None
+    keep = ~(std > max_std_m)  # (a NaN std_m is kept: no covariance to judge it by)
+    n_out = len(keep) - int(np.count_nonzero(keep))
+    if not n_out:
+        return track, None
+    dropped = dict(track.dropped)
+    dropped["uncertain"] = dropped.get("uncertain", 0) + n_out
+    return _trusted_track(track.time_ns[keep], track.position_world[keep], track.camera[keep],
+                          {k: v[keep] for k, v in track.quality.items()}, dropped), keep
+
+
 def type_a_noise(prep: Prepared, track: Track, max_gap_s: float, noise_px: float | None
                  ) -> Track:
     """``track`` (type A's from ``prep``, made with ``cov_noise_px =``
@@ -1005,7 +1028,8 @@ class MeasuredNoiseStream:
     from the detections of the last ``NOISE_EVERY_S + NOISE_WINDOW_S + 3 max_gap_s`` (its
     window, and each residual's three previous detections), which it keeps; a point takes
     its checkpoint's σ when it is output (a withheld one later: the checkpoints of the
-    points still withheld are kept). The same bits as the batch run."""
+    points still withheld are kept); a point whose ``std_m`` then exceeds ``max_std_m`` is
+    withheld (:func:`withhold_uncertain`). The same bits as the batch run."""
 
     def __init__(self, inner, rig, options) -> None:
         from ._prepare import default_max_gap_s
@@ -1014,6 +1038,7 @@ class MeasuredNoiseStream:
         self.inner = inner
         self._noise_px = options.noise_px
         self._cov_px = covariance_noise_px(options.noise_px)
+        self._max_std = options.max_std_m  # (withhold_uncertain's bound, as the batch's)
         self._max_gap_s = options.max_gap_s or default_max_gap_s(rig)
         self._limits = no_detection_limits(rig.cameras)
         self._centers = np.array([c.center_world for c in rig.cameras])  # (prepare's)
@@ -1154,15 +1179,19 @@ class MeasuredNoiseStream:
                            cov_zz_m2=values[3:4], cov_xy_m2=values[4:5], cov_xz_m2=values[5:6],
                            cov_yz_m2=values[6:7])
             # (out's columns are a Track's already: read-only, shared as they are)
-            return _trusted_track(out.time_ns, out.position_world, out.camera, quality,
-                                  out.dropped, shared=True)
+            track = _trusted_track(out.time_ns, out.position_world, out.camera, quality,
+                                   out.dropped, shared=True)
+            if self._max_std is not None and values[0] > self._max_std:
+                return withhold_uncertain(track, self._max_std)[0]
+            return track
         cache, start = self._sigma, self._start
         sigma = np.array([cache[t // every * every] for t in out.time_ns.tolist()])
         if np.isnan(sigma).any():
             sigma = np.array([start[t] if math.isnan(sg) else sg for t, sg in zip(
                 out.time_ns.tolist(), sigma.tolist(), strict=True)])
         sigma = np.maximum(sigma, min(float(self._noise_px), NOISE_FLOOR_PX))
-        return with_measured_noise(out, sigma, self._cov_px, self._centers)
+        return withhold_uncertain(with_measured_noise(out, sigma, self._cov_px, self._centers),
+                                  self._max_std)[0]
 
     def push(self, time_ns, camera, uv, frame_index) -> Track:
         """The inner stream's push, its points' covariance at the measured noise."""
