@@ -1014,9 +1014,10 @@ def _weighted_points(prep: Prepared, rows: np.ndarray, used: np.ndarray, points:
     the other's). NaN where a depth is not positive or the system singular.
 
     ``at``: the points of these rows only ((j,) sorted; None: every row), each the bits it
-    has among all the rows: the cameras taken are those any row uses (an unused slot's
-    ray, NaN if its row has none, enters every point's sums with weight 0), and the depths
-    are the whole array's product (a one-row product is another BLAS call, other bits)."""
+    has among all the rows: the cameras taken are those any row uses (an unused slot
+    enters a point's sums as ``0 · I``: + 0.0, whatever ray, finite or not, its clipped
+    index would read), and the depths are the whole array's product (a one-row product is
+    another BLAS call, other bits)."""
     k, m = rows.shape
     cameras = [c for c in range(m) if used[:, c].any()]
     if at is not None:
@@ -1035,7 +1036,10 @@ def _weighted_points(prep: Prepared, rows: np.ndarray, used: np.ndarray, points:
             z = (points - prep.centers[c]) @ cam.R[2] if at is None else depth[c]
             f = 0.5 * (cam.K[0, 0] + cam.K[1, 1])
             w = np.where(on, (f / (z * sigma[:, c])) ** 2, 0.0)
-            d = prep.ray_dir[np.maximum(rows[:, c], 0)]
+            # an unused slot's ray: none (zero, P = I, weight 0: + 0.0), not the row the
+            # index -1 is clipped to (row 0's ray, NaN where that detection has none:
+            # 0 · NaN made every point without this camera's ray NaN)
+            d = np.where(on[:, None], prep.ray_dir[np.maximum(rows[:, c], 0)], 0.0)
             P = eye - d[:, :, None] * d[:, None, :]
             A += w[:, None, None] * P
             b += w[:, None] * (P @ prep.centers[c])
