@@ -93,7 +93,7 @@ def test_points_do_not_depend_on_the_first_detection_having_a_ray(tmp_path, cli,
 def test_weighted_points_are_finite_whatever_row_0_holds(damaged):
     """The weighted step of every point of the session above, its first detection (or
     first three) without a ray: no NaN (with the fix undone: every point without that
-    camera's ray, 73 of 149)."""
+    camera's ray, 77 of 149)."""
     rig, obs = _dirty(1)
     uv = obs.uv.copy()
     uv[list(damaged)] = 1e300
