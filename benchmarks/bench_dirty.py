@@ -70,6 +70,7 @@ pooled d² that the single largest point carries (docs/methods.md, "A choice in 
                                      [--noise 2]
     python benchmarks/bench_dirty.py --calibration [--first-seed 400,5000] [--seeds 3]
                                      [--noise 0.3] [--methods typeA,nearest,smooth,filter]
+                                     [--fps 60] [--misses 0.1]
 """
 
 from __future__ import annotations
@@ -410,15 +411,20 @@ def main_calibration(args, methods, options: FusionOptions) -> int:
     from pslog.evaluation import _mahalanobis_sq, _offsets
 
     first_seeds = [int(x) for x in str(args.first_seed).split(",")]
+    rates = [float(x) for x in args.fps.split(",")] if args.fps else [None]
     print(f"covariance calibration, {args.noise:g} px, rallies from seeds "
           f"{', '.join(map(str, first_seeds))} ({args.seeds} each), faults as below; NEES "
           "(1 if honest) / share in 2σ (73.9 % if honest) pooled; worst: the worst "
-          "session's NEES; top: the largest point's share of the pooled d²")
+          "session's NEES; top: the largest point's share of the pooled d²"
+          + (f"; cameras at {args.fps} fps" if args.fps else "")
+          + (f"; the detector also misses {args.misses:g} of the frames and drops "
+             f"{args.misses / 2:g} (clean sessions too)" if args.misses else ""))
     print()
     print("| rig | method | clean NEES / in 2σ | dirty NEES / in 2σ | dirty worst | dirty top |")
     print("|---|---|---|---|---|---|")
     start = time.perf_counter()
-    for rig in rigs() + more_rigs():
+    for rig in (r if fps is None else at_rate(r, fps) for fps in rates
+                for r in rigs() + more_rigs()):
         found: dict[tuple, list] = {(m, k): [] for m in methods for k in ("clean", "dirty")}
         for first in first_seeds:
             runs = more_sessions(args.seeds, args.duration, first)[:args.seeds]
@@ -426,7 +432,8 @@ def main_calibration(args, methods, options: FusionOptions) -> int:
                 span = motion.duration if duration is None else duration
                 for kind, extra in (("clean", {}), ("dirty", faults(rig, seed, span))):
                     det, truth, _ = simulate_labelled(rig, motion, duration, SimulationOptions(
-                        noise_px=args.noise, seed=seed, **extra))
+                        noise_px=args.noise, seed=seed, miss_rate=args.misses,
+                        drop_rate=args.misses / 2, **extra))
                     tracks = fuse_detections(det, rig, methods, options)[0]
                     for m in methods:
                         d2 = _mahalanobis_sq(tracks[m], _offsets(tracks[m], truth))

@@ -347,9 +347,9 @@ class _Problem:
     """The observations, the pieces' knots and the design (basis values) that follow."""
 
     def __init__(self, obs: Observations, rig: Rig, rows_of_piece: list[np.ndarray],
-                 knots: list[np.ndarray], prior: MotionPrior):
+                 knots: list[np.ndarray], prior: MotionPrior, t0_ns: int | None = None):
         self.obs, self.rig, self.prior = obs, rig, prior
-        self.t0_ns = int(obs.time_ns[0])
+        self.t0_ns = int(obs.time_ns[0]) if t0_ns is None else t0_ns
         self.t = (obs.time_ns - self.t0_ns) / NS
         self.rows_of_piece = rows_of_piece
         self.rows = np.concatenate(rows_of_piece)  # observation rows in the fit
@@ -858,7 +858,12 @@ def _fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions) -> Fit:
     if not pieces:
         raise FusionError("smooth: no stretch of the session is seen by two cameras (one "
                           "camera cannot triangulate)")
-    t = (obs.time_ns - obs.time_ns[0]) / NS
+    # seconds since the first usable detection: rows without one (a first detection beyond
+    # the image, NaN) are not in the fit and do not move its time origin (each time's
+    # rounding: the fit's bits, and through the break search's decisions up to 14 mm at a
+    # point, session 26), as if they were not in the session
+    t0_ns = int(obs.time_ns[np.argmax(usable)])
+    t = (obs.time_ns - t0_ns) / NS
     spans = [(t[p[0]], t[p[-1]]) for p in pieces]
     if options.knot_spacing_s is None:
         total = sum(hi - lo for lo, hi in spans)
@@ -886,7 +891,7 @@ def _fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions) -> Fit:
         return out
 
     knots = piece_knots(breaks)
-    problem = _Problem(obs, rig, pieces, knots, loose)
+    problem = _Problem(obs, rig, pieces, knots, loose, t0_ns)
     control = _initial_control(problem, 1.0)
     sigma, iterations = 1.0, min(options.iterations, _LOOSE_ITERATIONS)
     rounds, found = 0, None

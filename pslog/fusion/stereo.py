@@ -1014,9 +1014,10 @@ def _weighted_points(prep: Prepared, rows: np.ndarray, used: np.ndarray, points:
     the other's). NaN where a depth is not positive or the system singular.
 
     ``at``: the points of these rows only ((j,) sorted; None: every row), each the bits it
-    has among all the rows: the cameras taken are those any row uses (an unused slot's
-    ray, NaN if its row has none, enters every point's sums with weight 0), and the depths
-    are the whole array's product (a one-row product is another BLAS call, other bits)."""
+    has among all the rows: the cameras taken are those any row uses (an unused slot
+    enters a point's sums as ``0 · I``: + 0.0, whatever ray, finite or not, its clipped
+    index would read), and the depths are the whole array's product (a one-row product is
+    another BLAS call, other bits)."""
     k, m = rows.shape
     cameras = [c for c in range(m) if used[:, c].any()]
     if at is not None:
@@ -1035,7 +1036,10 @@ def _weighted_points(prep: Prepared, rows: np.ndarray, used: np.ndarray, points:
             z = (points - prep.centers[c]) @ cam.R[2] if at is None else depth[c]
             f = 0.5 * (cam.K[0, 0] + cam.K[1, 1])
             w = np.where(on, (f / (z * sigma[:, c])) ** 2, 0.0)
-            d = prep.ray_dir[np.maximum(rows[:, c], 0)]
+            # an unused slot's ray: none (zero, P = I, weight 0: + 0.0), not the row the
+            # index -1 is clipped to (row 0's ray, NaN where that detection has none:
+            # 0 · NaN made every point without this camera's ray NaN)
+            d = np.where(on[:, None], prep.ray_dir[np.maximum(rows[:, c], 0)], 0.0)
             P = eye - d[:, :, None] * d[:, None, :]
             A += w[:, None, None] * P
             b += w[:, None] * (P @ prep.centers[c])
@@ -1139,11 +1143,69 @@ def fuse_nearest(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
         points, quality, flags, _ = nview_points(prep, rows, None, compiled=compiled)
     else:
         recorded = recorded_residuals(prep, max_gap_s)
-        points, quality, flags, _ = nview_points(
-            prep, rows, detection_noise(prep, time_ns, max_gap_s, noise_px),
-            slot_motion(prep, rows, time_ns, max_gap_s, compiled), compiled,
-            innovations(prep, max_gap_s, recorded))
+        sigma = detection_noise(prep, time_ns, max_gap_s, noise_px)
+        residuals: list[np.ndarray] = []
+        points, quality, flags, used = nview_points(
+            prep, rows, sigma, slot_motion(prep, rows, time_ns, max_gap_s, compiled),
+            compiled, innovations(prep, max_gap_s, recorded), residuals_out=residuals)
+        quality = excess_scaled(prep, rows, used, points, time_ns, sigma, max_gap_s,
+                                residuals, quality, compiled)
     return _nearest_track([_nearest_kept(time_ns, camera, others, points, quality, flags)])
+
+
+def excess_factor(prep: Prepared, rows: np.ndarray, used: np.ndarray, points: np.ndarray,
+                  time_ns: np.ndarray, sigma: np.ndarray, max_gap_s: float,
+                  residuals: list[np.ndarray] | None, compiled: bool = True) -> np.ndarray:
+    """``nearest``'s variance factor (k,) for the points its own detections contradict
+    (docs/methods.md, "nearest's covariance where its detections disagree"): with
+    :func:`residual_refused`'s sums on the point's slots (``d² = Σ_c r_c² / σ²``, the
+    reprojection residuals of the unshifted detections, and ``Σ_c e_c² / σ²``, what the
+    slots' image motion since their shutters explains), where
+
+        ``√d² > √χ²_{2n-3}(1 - p) + √(Σ_c e_c² / σ²)``   (the residual test's bound)
+
+    the factor is ``(√d² - √(Σ_c e_c² / σ²))² / (2n - 3)``: the residual beyond the
+    motion's, per degree of freedom, as the unit variance (the a-posteriori variance factor
+    of least squares: the detections are not one ball at one instant, and the point is
+    located no better than their disagreement); 1 elsewhere. ``sigma`` (k,): each point's
+    noise (:func:`detection_noise`, the same for every camera)."""
+    from .innovation import chi2_threshold
+
+    k, m = rows.shape
+    sig = np.ascontiguousarray(np.broadcast_to(np.asarray(sigma, dtype=np.float64)[:, None],
+                                               (k, m)))
+    d2, e2, n = _refusal_sums(prep, rows, used, points, time_ns, sig, max_gap_s, residuals,
+                              compiled)
+    bound = np.full(k, np.inf)
+    for count in np.unique(n[n >= 2]).tolist():
+        bound[n == count] = np.sqrt(chi2_threshold(2 * count - 3))
+    with np.errstate(invalid="ignore"):
+        excess = np.sqrt(d2) - np.sqrt(e2)
+        over = (n >= 2) & (np.sqrt(d2) > bound + np.sqrt(e2))
+        return np.where(over, excess * excess / np.maximum(2 * n - 3, 1), 1.0)
+
+
+def excess_scaled(prep: Prepared, rows: np.ndarray, used: np.ndarray, points: np.ndarray,
+                  time_ns: np.ndarray, sigma: np.ndarray, max_gap_s: float,
+                  residuals: list[np.ndarray] | None, quality: dict[str, np.ndarray],
+                  compiled: bool = True) -> dict[str, np.ndarray]:
+    """``quality`` with the covariance columns of the points :func:`excess_factor` scales
+    multiplied by it (``std_m`` by its root); the same arrays where it scales none."""
+    f = excess_factor(prep, rows, used, points, time_ns, sigma, max_gap_s, residuals,
+                      compiled)
+    hit = np.flatnonzero(f > 1.0)
+    if not len(hit):
+        return quality
+    out = dict(quality)
+    # (f is infinite only where a used slot has no residual: behind its camera, a point
+    # invalid_points flags and the track leaves out)
+    with np.errstate(invalid="ignore"):
+        for name, column in quality.items():
+            if name == "std_m" or (name.startswith("cov_") and name.endswith("_m2")):
+                column = column.copy()
+                column[hit] *= np.sqrt(f[hit]) if name == "std_m" else f[hit]
+                out[name] = column
+    return out
 
 
 def _nearest_kept(time_ns: np.ndarray, camera: np.ndarray, others: np.ndarray,
@@ -1212,9 +1274,13 @@ def _nearest_in_blocks(prep: Prepared, rows: np.ndarray, others: np.ndarray,
         if noise_px is None:
             points, quality, flags, used = nview_points(prep, block, None)
         else:
+            residuals: list[np.ndarray] = []
             points, quality, flags, used = nview_points(
                 prep, block, sigma[lo:hi],
-                _slot_motion_compiled(prep, block, time_ns[lo:hi], max_gap_ns), True, breaks)
+                _slot_motion_compiled(prep, block, time_ns[lo:hi], max_gap_ns), True, breaks,
+                residuals_out=residuals)
+            quality = excess_scaled(prep, block, used, points, time_ns[lo:hi], sigma[lo:hi],
+                                    max_gap_s, residuals, quality)
         finite = finite_rows(points)
         counts = np.count_nonzero(used & finite[:, None], axis=0)
         if not np.all((counts == 0) | (counts >= 2)):
