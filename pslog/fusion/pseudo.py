@@ -820,7 +820,7 @@ def no_detection_limits(cameras) -> np.ndarray:
 
 
 #: type A's noise at a session's start, before any checkpoint's window holds
-#: ``NOISE_MIN_COUNT`` residuals: the root mean square of the residuals before the point's
+#: ``NOISE_MIN_COUNT`` residuals: Σ r² / (2n - 2) of the n residuals before the point's
 #: own time once this many are there (:func:`measured_noise`)
 NOISE_START_COUNT = 4
 #: ... and before that (a session's first ~0.1 s: each camera's fourth detection makes its
