@@ -309,3 +309,52 @@ def test_the_selection_near_a_hint_is_the_sorted_element_whatever_the_hint():
                     assert fn(scratch, count, k, hint, width, band) == expected[k], (
                         hint, width, k)
                     assert_array_equal(np.sort(scratch), expected)
+
+
+def _start_points(prep, track, max_gap_s):
+    """The residual norms (numpy reference: stereo.recorded_residuals) and which points of
+    ``track`` come before any checkpoint's window holds NOISE_MIN_COUNT of them (the start)."""
+    res, weight = recorded_residuals(prep, max_gap_s)
+    with np.errstate(invalid="ignore"):
+        norm = np.hypot(res[:, 0], res[:, 1]) / np.sqrt(weight)
+    fin = np.isfinite(norm)
+    t_fin, v_fin = prep.obs.time_ns[fin], norm[fin]
+    every, window = int(NOISE_EVERY_S * NS), int(NOISE_WINDOW_S * NS)
+    mark = track.time_ns // every * every
+    counts = np.searchsorted(t_fin, mark) - np.searchsorted(t_fin, mark - window)
+    return t_fin, v_fin, ~np.maximum.accumulate(counts >= NOISE_MIN_COUNT)
+
+
+def test_the_start_takes_the_residuals_squares_over_2n_minus_2():
+    # before any checkpoint has an estimate, a point's σ² is Σ r² / (2n - 2) of the n >= 4
+    # residuals in the second before it (E[σ² / σ̂²] = 1: Σ r² / σ² is a χ² of 2n degrees of
+    # freedom), without a floor at the stated noise (0.3 px of true noise, 0.5 stated);
+    # before the fourth residual max(stated, 2 px). Then the start's points are about honest:
+    # their NEES was 0.36-0.40 with the stated 0.5 px as a floor and Σ r² / 2n (held out:
+    # docs/methods.md, "Type A's covariance at a session's start")
+    from pslog.fusion._prepare import default_max_gap_s
+
+    d2_start, below = [], 0
+    for seed in range(6, 12):
+        rig, obs, truth = _session(0.3, seed=seed, duration=1.0)
+        prep = prepare(obs, rig)
+        gap = default_max_gap_s(rig)
+        track = fuse(obs, rig, "typeA", FusionOptions(confirm_gaps=False))
+        t_fin, v_fin, start = _start_points(prep, track, gap)
+        t = track.time_ns[start]
+        window = int(NOISE_WINDOW_S * NS)
+        lo, hi = np.searchsorted(t_fin, t - window), np.searchsorted(t_fin, t)
+        n = hi - lo
+        squares = np.array([np.sum(v_fin[a:b] ** 2) for a, b in zip(lo, hi, strict=True)])
+        with np.errstate(invalid="ignore", divide="ignore"):
+            want = np.where(n >= 4, np.sqrt(squares / (2 * n - 2)), 2.0)
+        want = np.maximum(want, min(0.5, NOISE_FLOOR_PX))
+        assert_allclose(_sigma(rig, obs, t, 0.5, gap), want, rtol=1e-12)
+        measured = start & np.isin(track.time_ns, t[n >= 4])
+        below += int(np.count_nonzero(want[n >= 4] < 0.5))
+        d2_start.append(_mahalanobis_sq(track, _offsets(track, truth))[measured])
+    d2 = np.concatenate(d2_start)
+    d2 = d2[np.isfinite(d2)]
+    assert len(d2) > 50 and below > 25, (len(d2), below)
+    nees = d2.mean() / 3
+    assert 0.7 < nees < 1.6, nees

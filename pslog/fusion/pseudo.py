@@ -820,7 +820,7 @@ def no_detection_limits(cameras) -> np.ndarray:
 
 
 #: type A's noise at a session's start, before any checkpoint's window holds
-#: ``NOISE_MIN_COUNT`` residuals: the root mean square of the residuals before the point's
+#: ``NOISE_MIN_COUNT`` residuals: Σ r² / (2n - 2) of the n residuals before the point's
 #: own time once this many are there (:func:`measured_noise`)
 NOISE_START_COUNT = 4
 #: ... and before that (a session's first ~0.1 s: each camera's fourth detection makes its
@@ -863,21 +863,30 @@ def window_noise(t_fin: np.ndarray, v_fin: np.ndarray, ends_ns: np.ndarray, min_
 
 def start_noise(t_fin: np.ndarray, v_fin: np.ndarray, at_ns: np.ndarray, noise_px: float
                 ) -> np.ndarray:
-    """σ (k,) of points at ``at_ns`` (k,) sorted before any checkpoint has an estimate: the
-    larger of ``noise_px`` and the root mean square of the residuals (per axis) in the
-    window up to the point's own time once :data:`NOISE_START_COUNT` are there, else the
-    larger of ``noise_px`` and :data:`NOISE_UNKNOWN_PX`. The mean of squares, not the
-    median: of a few residuals the median's ``E[σ² / σ̂²]`` is large (a checkpoint's window
-    holds 16 or more), the mean square's is ``n / (n - 1)`` (an inverse χ² of 2n degrees of
-    freedom), and an outlier makes it larger, not smaller."""
+    """σ (k,) of points at ``at_ns`` (k,) sorted before any checkpoint has an estimate:
+    from the ``n`` residuals (per axis) in the window up to the point's own time once
+    :data:`NOISE_START_COUNT` are there, ``σ̂² = Σ r² / (2n - 2)``, else the larger of
+    ``noise_px`` and :data:`NOISE_UNKNOWN_PX`. The sum of squares, not the median: of a few
+    residuals the median's ``E[σ² / σ̂²]`` is large (a checkpoint's window holds 16 or more),
+    and an outlier makes it larger, not smaller; over ``2n - 2``, not ``2n``: ``Σ r² / σ²``
+    is a χ² of 2n degrees of freedom, whose inverse's mean is ``1 / (2n - 2)``, so
+    ``E[σ² / σ̂²] = 1`` and a point's NEES is 1 on average (over ``2n`` it was
+    ``n / (n - 1)``: 4/3 at the fourth residual). No floor at ``noise_px`` (a checkpoint has
+    none): the stated 0.5 px made the start's points at 0.3 px of true noise NEES 0.36-0.40
+    (docs/methods.md, "Type A's covariance at a session's start")."""
     from . import _pseudo_kernel
     from .stereo import NOISE_WINDOW_S
 
-    est = np.empty(len(at_ns))
-    _pseudo_kernel.window_mean_squares_kernel(t_fin, v_fin, np.ascontiguousarray(at_ns),
-                                              int(NOISE_WINDOW_S * NS), NOISE_START_COUNT, est)
-    return np.where(np.isfinite(est), np.maximum(np.sqrt(est), noise_px),
-                    max(noise_px, NOISE_UNKNOWN_PX))
+    at_ns = np.ascontiguousarray(at_ns)
+    window = int(NOISE_WINDOW_S * NS)
+    est = np.empty(len(at_ns))  # (Σ r² / 2n: the kernel's window [t - window, t))
+    _pseudo_kernel.window_mean_squares_kernel(t_fin, v_fin, at_ns, window, NOISE_START_COUNT,
+                                              est)
+    n = (np.searchsorted(t_fin, at_ns, "left")
+         - np.searchsorted(t_fin, at_ns - window, "left")).astype(np.float64)
+    with np.errstate(invalid="ignore", divide="ignore"):  # (n < NOISE_START_COUNT: NaN)
+        est = est * (n / (n - 1.0))
+    return np.where(np.isfinite(est), np.sqrt(est), max(noise_px, NOISE_UNKNOWN_PX))
 
 
 def measured_noise(time_ns: np.ndarray, camera: np.ndarray, uv: np.ndarray, limits: np.ndarray,
@@ -896,8 +905,8 @@ def measured_noise(time_ns: np.ndarray, camera: np.ndarray, uv: np.ndarray, limi
       if ``NOISE_MIN_COUNT`` are there, else the latest earlier checkpoint's (of any
       detection) that has one (a pause in the detections does not change the detector);
     - a point takes its checkpoint's; before any checkpoint has one (the session's start),
-      :func:`start_noise` (at least ``noise_px``: the root mean square of the residuals
-      before the point once ``NOISE_START_COUNT`` are there, else ``NOISE_UNKNOWN_PX``);
+      :func:`start_noise` (``Σ r² / (2n - 2)`` of the ``n`` residuals before the point
+      once ``NOISE_START_COUNT`` are there, else ``NOISE_UNKNOWN_PX``);
     - at least ``min(noise_px, NOISE_FLOOR_PX)``.
 
     A point uses only detections before its own time: :class:`MeasuredNoiseStream` gives it

@@ -377,7 +377,7 @@ def refusal_noise(prep: Prepared, time_ns: np.ndarray, max_gap_s: float,
       there, at most ``NOISE_UNKNOWN_PX`` (2 px); before the camera has that many, the same
       over all cameras' residuals; before that (the first ~0.1 s, each camera's fourth
       detection making its first residual) the floor alone. Type A's
-      covariance takes the root mean square of those few residuals, unbounded, and 2 px
+      covariance takes their sum of squares over 2n - 2, unbounded, and 2 px
       before any, where a larger σ is the safe side; for a test it is not: 5 false
       detections among a session's first 21 (30 % misses) spoiled 10 of its first 12
       residuals (a quartile of 87 px kept a 2.5 m sync point with a 120 px residual), and
