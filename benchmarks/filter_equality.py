@@ -26,7 +26,8 @@ rejected detections equal but for their standard deviations (session 24: the pub
 covariance of a rejected detection's prediction, "Gating, jumps" in docs/methods.md; and
 the points of (re)starts likewise, the jumps of their window, "Loss and (re)initialisation";
 and since session 25 an accepted jump's point and the next points of accepted detections,
-its instant, "A jump's instant");
+its instant, "A jump's instant": since session 27 those may also grow smaller, or be output
+where the reference withheld them — its replay takes the values in force at each update);
 prints how many rejected points changed, how many the new tree withholds (``uncertain``)
 and the largest change of ``std_m``; exit 1 on any other difference.
 
@@ -230,10 +231,12 @@ def after_jump(q: dict) -> np.ndarray:
 def compare_ref(old: dict, new: dict) -> int:
     """Accepted detections' points bit-equal but for the (re)starts' and those after a jump
     (:func:`after_jump`); rejected ones, starts and those after a jump equal but for
-    STD_COLUMNS (not smaller), or withheld by the new tree (counted ``uncertain``). Returns
-    the exit code."""
+    STD_COLUMNS (not smaller, but for those after a jump: since session 27 their term's
+    replay takes the values in force at each update, which may make it smaller too), or
+    withheld by the new tree (counted ``uncertain``); a point after a jump the old tree
+    withheld may be output by the new one (released). Returns the exit code."""
     bad = changed = withheld = rejected = accepted = starts = starts_changed = 0
-    starts_withheld = jumps_changed = jumps_withheld = jumps = 0
+    starts_withheld = jumps_changed = jumps_withheld = jumps = jumps_smaller = released = 0
     worst = worst_start = worst_jump = 0.0
     for key in old:
         a, b = old[key], new[key]
@@ -243,13 +246,15 @@ def compare_ref(old: dict, new: dict) -> int:
         gone = [i for i, k in enumerate(ka) if k not in rows_b]
         extra = set(kb) - set(ka)
         aj = a["after_jump"]
-        if extra or any(a["rejected"][i] != 1.0 and a["init"][i] != 1.0 and not aj[i]
-                        for i in gone):
+        if any(not b["after_jump"][rows_b[k]] for k in extra) or any(
+                a["rejected"][i] != 1.0 and a["init"][i] != 1.0 and not aj[i] for i in gone):
             print("  DIFFERS (points added, or an accepted point gone):", key)
             bad += 1
             continue
         more = b["dropped"].get("uncertain", 0) - a["dropped"].get("uncertain", 0)
-        if more != len(gone) or {k: v for k, v in a["dropped"].items() if k != "uncertain"} \
+        released += len(extra)
+        if more != len(gone) - len(extra) or {
+                k: v for k, v in a["dropped"].items() if k != "uncertain"} \
                 != {k: v for k, v in b["dropped"].items() if k != "uncertain"}:
             print("  DIFFERS (withheld counts):", key, a["dropped"], b["dropped"])
             bad += 1
@@ -258,20 +263,23 @@ def compare_ref(old: dict, new: dict) -> int:
         withheld += sum(1 for i in gone if a["init"][i] != 1.0 and not aj[i])
         gone_set = set(gone)
         keep = np.array([i for i in range(len(ka)) if i not in gone_set], dtype=np.int64)
+        keep_b = np.array([i for i, k in enumerate(kb) if k not in extra], dtype=np.int64)
         for name in ("time_ns", "camera", "position", *compiled.FILTER_QUALITY):
-            x, y = np.asarray(a[name])[keep], np.asarray(b[name])
+            x, y = np.asarray(a[name])[keep], np.asarray(b[name])[keep_b]
             ini = a["init"][keep] == 1.0
             jmp = aj[keep]
             rej = (a["rejected"][keep] == 1.0) | ini | jmp
             same = np.array([np.array_equal(x[i], y[i], equal_nan=True) for i in range(len(y))],
                             dtype=bool)
             if name in STD_COLUMNS:
-                if not np.all(same[~rej]) or not np.all(y[rej] >= x[rej]):
+                grow = rej & ~jmp
+                if not np.all(same[~rej]) or not np.all(y[grow] >= x[grow]):
                     print("  DIFFERS:", key, name)
                     bad += 1
                 if name == "std_m":
                     r = rej & ~ini & ~jmp
                     jumps_changed += int(np.count_nonzero(~same[jmp]))
+                    jumps_smaller += int(np.count_nonzero(y[jmp] < x[jmp]))
                     if jmp.any():
                         worst_jump = max(worst_jump, float(np.max(y[jmp] - x[jmp])))
                     changed += int(np.count_nonzero(~same[r]))
@@ -292,8 +300,9 @@ def compare_ref(old: dict, new: dict) -> int:
           f"with a larger std: {changed}, now withheld: {withheld}; largest std_m increase "
           f"{1e3 * worst:.2f} mm; (re)starts {starts:,}, with a larger std: {starts_changed}, "
           f"now withheld: {starts_withheld}, largest std_m increase {1e3 * worst_start:.2f} mm; "
-          f"points after a jump {jumps:,}, with a larger std: {jumps_changed}, now withheld: "
-          f"{jumps_withheld}, largest std_m increase {1e3 * worst_jump:.2f} mm")
+          f"points after a jump {jumps:,}, with another std: {jumps_changed} (smaller: "
+          f"{jumps_smaller}), now withheld: {jumps_withheld}, released: {released}, largest "
+          f"std_m increase {1e3 * worst_jump:.2f} mm")
     return 1 if bad else 0
 
 

@@ -42,7 +42,9 @@ def test_the_instant_term_by_hand():
     t0 = 1_000_000_000
     x0 = np.array([1.2, 0.8, 1.0, 2.0, -1.0, 1.5])
     P0 = np.diag([1e-5] * 3 + [4e-3] * 3).ravel()
-    S[FM._SMU], S[FM._SQ], S[FM._SVAR] = 0.9, 0.5, 0.3 ** 2
+    # the (c, q, σ²) each detection's update used (session 27), not the latest ones
+    S[FM._SMU], S[FM._SQ], S[FM._SVAR] = 0.1, 5.0, 1.0 ** 2
+    in_force = [(0.9, 0.5, 0.3 ** 2), (0.6, 2.0, 0.4 ** 2), (0.3, 0.1, 0.5 ** 2)]
     S[FM._SJX:FM._SJX + 6], S[FM._SJP:FM._SJP + 36] = x0, P0
     I[FM._IJT0], I[FM._IJSHAPE] = t0, 2  # a kick
     times = [t0 + 11_000_000, t0 + 22_000_000, t0 + 36_000_000]
@@ -54,6 +56,7 @@ def test_the_instant_term_by_hand():
         uv = rig.cameras[c].project(p[None])[0][0] + [0.4, -0.3]
         I[FM._IJBUF + 2 * k], I[FM._IJBUF + 2 * k + 1] = t, c
         S[FM._SJUV + 2 * k:FM._SJUV + 2 * k + 2] = uv
+        S[FM._SJF + 3 * k:FM._SJF + 3 * k + 3] = in_force[k]
     for n in (1, 2, 3):
         I[FM._IJN] = n
         t = times[n - 1]
@@ -61,13 +64,18 @@ def test_the_instant_term_by_hand():
         ok, ep, w = FM._instant_term(S, I, cams, O, t, x_now)
         assert ok
         # by hand: m the state's velocity against the restart's prediction without the jump
-        xb, _ = FM._predicted(x0, P0, (t - t0) / NS, 0.9, O, 0.5)
+        # (step by step, each with its c)
+        xb, tb = x0, t0
+        for k in range(n):
+            xb, _ = FM._predicted(xb, P0, (times[k] - tb) / NS, in_force[k][0], O, 0.0)
+            tb = times[k]
         m = x_now[3:] - xb[3:]
         x, P = x0.copy(), P0.reshape(6, 6).copy()
         tp = t0
         for k in range(n):
             dt = (times[k] - tp) / NS
-            x, Pf = FM._predicted(x, P.ravel(), dt, 0.9, O, 0.5)
+            ck, qk, vark = in_force[k]
+            x, Pf = FM._predicted(x, P.ravel(), dt, ck, O, qk)
             P = Pf.reshape(6, 6)
             if k == 0:
                 _, x, Pf = FM._jumped(x, P.ravel(), dt, O, 2)
@@ -78,12 +86,12 @@ def test_the_instant_term_by_hand():
                 eps = np.concatenate([eps[:3] + dt * eps[3:], eps[3:]])
             c = (0, 1, 2)[k]
             H = np.hstack([_jacobian(rig.cameras[c], x[:3]), np.zeros((2, 3))])
-            Sm = H @ P @ H.T + 0.3 ** 2 * np.eye(2)
+            Sm = H @ P @ H.T + vark * np.eye(2)
             K = P @ H.T @ np.linalg.inv(Sm)
             eps = (np.eye(6) - K @ H) @ eps
             # the state's own update (its mean and covariance) to carry the replay on
             uv = S[FM._SJUV + 2 * k:FM._SJUV + 2 * k + 2]
-            _, inn = FM._innovation(cams, c, x, P.ravel(), 6, uv[0], uv[1], 0.3 ** 2)
+            _, inn = FM._innovation(cams, c, x, P.ravel(), 6, uv[0], uv[1], vark)
             x, Pf = FM._updated(x, P.ravel(), inn)
             P = Pf.reshape(6, 6)
             tp = times[k]
@@ -139,3 +147,81 @@ def test_a_kicked_flight_keeps_its_points_and_publishes_the_instant_after_the_ki
     assert s_new[k[0]] > 1.3 * s_old[k[0]]
     # the second: 1.4 σ off before, within 1.1 σ now
     assert err[1] > 1.3 * s_old[k[1]] and err[1] < 1.1 * s_new[k[1]]
+
+
+def _streamed(rig, motion, options: FilterOptions, before_push=None):
+    """Every point of ``motion`` pushed one detection at a time: (time, camera, std_xyz,
+    BallFilter.point_covariance, the state's position covariance, the instant's term
+    ``w ε_p ε_pᵀ`` the point published or None) per point; ``before_push(flt, time_ns,
+    camera)`` runs before each push."""
+    sim = SimulationOptions(noise_px=0.3, seed=0)
+    detections, _ = simulate(rig, motion, None, sim)
+    obs = corrected_observations(detections, true_rig(rig, sim))
+    flt = BallFilter(rig, options)
+    S, I = flt._S, flt._I
+    rows = []
+    for t, c, (u, v) in zip(obs.time_ns.tolist(), obs.camera.tolist(), obs.uv.tolist(),
+                            strict=True):
+        if before_push is not None:
+            before_push(flt, t, c)
+        point = flt.push(t, c, u, v)
+        if point is None:
+            continue
+        position, q = point
+        std = np.array(q[1:4])
+        full = flt.point_covariance(t, c, position, std, q[9] == 1.0)
+        term = None
+        if int(I[FM._IJTE]) == t and I[FM._IJN] > 0:
+            ep, w = S[FM._SJE:FM._SJE + 3], S[FM._SJE + 3]
+            term = w * np.outer(ep, ep)
+        rows.append((t, c, std, None if full is None else np.array(full),
+                     flt.state()[2][:3, :3].copy(), term))
+    return rows
+
+
+def test_the_live_full_covariance_is_the_published_one_after_a_jump():
+    """``BallFilter.point_covariance`` (``pslog live``'s ``cov_world``): its diagonal is the
+    published variances at every point, and where a jump's instant is published it holds
+    the term in full (its correlations too): the matrix less the state's own position
+    covariance and the term is what is left of the published variance, the one-camera ray
+    term (rank one, along the ray) or nothing, never a negative part."""
+    rows = _streamed(lab_rig(2), kicked([-8.0, 2.0, 4.0], 0.515),
+                     FilterOptions(withhold=False, max_std_m=None))
+    terms = 0
+    for _t, _c, std, full, P, term in rows:
+        assert full is not None
+        np.testing.assert_array_equal(np.sqrt(np.diag(full)), std)
+        if term is None:
+            continue
+        terms += 1
+        lam = np.linalg.eigvalsh(full - P - term)
+        scale = np.trace(term)
+        assert lam[0] >= -1e-9 * scale and lam[1] <= 1e-9 * scale
+    assert terms >= 3
+
+
+def test_a_second_detection_at_the_same_time_does_not_reuse_the_first_ones_term():
+    """Synchronised cameras (two detections at one time): when the second one's instant
+    term cannot be made (its replay fails: forced here by making the jump's restart rise
+    for a floor bounce, which :func:`_jumped` refuses), its point publishes none, and the
+    live full matrix must not add the first one's (the same time) either."""
+    base = lab_rig(3)
+    rig = type(base)(tuple(c.replace(offset=0.0) for c in base.cameras), "sync3")
+    seen = {}
+
+    def spoil(flt, t, c):
+        S, I = flt._S, flt._I
+        # the first point after the jump's that published a term, its time's next camera
+        if not seen and I[FM._IJN] > 1 and int(I[FM._IJTE]) == t:
+            seen["t"], seen["c"] = t, c
+            I[FM._IJSHAPE] = 0  # a floor bounce, the restart rising: no replay
+            S[FM._SJX + 5] = 5.0
+
+    rows = _streamed(rig, kicked([-8.0, 2.0, 4.0], 0.515),
+                     FilterOptions(withhold=False, max_std_m=None), spoil)
+    assert seen, "no same-time detection after a published term"
+    row = next(r for r in rows if r[0] == seen["t"] and r[1] == seen["c"])
+    _t, _c, std, full, P, term = row
+    np.testing.assert_array_equal(np.sqrt(np.diag(full)), std)
+    np.testing.assert_allclose(full, P, rtol=1e-12, atol=0)
+    assert term is None

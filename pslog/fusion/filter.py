@@ -408,12 +408,14 @@ _SHP = _SHX + 6 * _HISTORY
 _SHUV = _SHP + 36 * _HISTORY
 _SHSC = _SHUV + 2 * _HISTORY
 #: the latest jump's restart state (x, P), its instant's published term at the latest point
-#: (ε_p (3), Δt_j²/12: :func:`_instant_term`), the pixels of its detections (_JBUF x (u, v))
+#: (ε_p (3), Δt_j²/12: :func:`_instant_term`), the pixels of its detections (_JBUF x (u, v)),
+#: the (c, q, σ²) each of those detections' updates used (_JBUF x 3)
 _SJX = _SHSC + _HISTORY
 _SJP = _SJX + 6
 _SJE = _SJP + 36
 _SJUV = _SJE + 4
-_SCAM = _SJUV + 2 * _JBUF  # then 2 per camera, then 2 per window slot
+_SJF = _SJUV + 2 * _JBUF  # per buffered detection the (c, q, σ²) its update used
+_SCAM = _SJF + 3 * _JBUF  # then 2 per camera, then 2 per window slot
 #: ``I``: track flag, state time, last accepted time, rejections in a row, updates since the
 #: start, camera of a pending jump, its confirming updates, whether one came from another
 #: camera, the turn model's age, the latest jump's time and camera, history length, window
@@ -907,8 +909,9 @@ def _jump(S, I, cams, O, t, cam, u, v):
     accepted detections (the first detections after a small jump can pass the gate), those
     detections and this one replayed; the (lag, shape) whose replay passes every gate with
     the least ``Σ NIS + ln det S`` over the same detections wins.
-    The winner's restart and detections are kept (``O[_OINSTANT]``, session 25) for the
-    published covariance of its instant (:func:`_instant_term`).
+    The winner's restart and detections are kept (``O[_OINSTANT]``, session 25), with the
+    ``(c, q, σ²)`` its replay used (session 27), for the published covariance of its instant
+    (:func:`_instant_term`).
     Returns ``(ok, x, P, innovation of this detection)``; ``ok`` False when none explains
     it. The replay's prediction weights gravity by the ballistic model's probability of
     the current state (the models' mixture), as the step's own prediction does."""
@@ -942,6 +945,9 @@ def _jump(S, I, cams, O, t, cam, u, v):
         I[_IJBUF + 2 * best_lag], I[_IJBUF + 2 * best_lag + 1] = t, cam
         S[_SJUV + 2 * best_lag], S[_SJUV + 2 * best_lag + 1] = u, v
         I[_IJN] = best_lag + 1
+        for d in range(best_lag + 1):  # the values the replay used
+            S[_SJF + 3 * d], S[_SJF + 3 * d + 1] = S[_SMU], S[_SQ]
+            S[_SJF + 3 * d + 2] = S[_SVAR]
     if found:
         I[_IHN] = 0  # a new segment: a later jump is not looked for before it
     return found, best_x, best_P, best_inn
@@ -954,15 +960,26 @@ def _instant_term(S, I, cams, O, t, x):
     jump ``Δv`` at an instant ``s`` uniform over its step of ``Δt_j`` moves the ball by
     ``Δv s``, which the filter takes at ``E[s] = Δt_j/2`` with ``Δv``'s prior (zero mean
     for a kick): linearised about the jump the state now estimates, ``m = v − v̄`` (``v̄``
-    the restart state's velocity predicted to ``t`` without the jump), the term
+    the restart state's velocity predicted to ``t`` without the jump, step by step), the term
     ``m (s − Δt_j/2)`` of variance ``m mᵀ Δt_j²/12`` that the prior's linearisation (at
     ``m = μ``) dropped. Its effect on the state at ``t`` through the filter's own gains
     (a consider covariance: Bar-Shalom et al. 2001, §5.4; Schmidt's): ``ε`` from
     ``(m, 0)`` on the jump's step, ``ε ← F ε`` each prediction (``ε_p += Δt ε_v``),
-    ``ε ← (I − K H) ε`` each update, along the jump's replay from its restart. Returns
-    ``(ok, ε_p (3), Δt_j²/12)``: the published covariance gains ``ε_p ε_pᵀ Δt_j²/12``."""
-    xb, _ = _predicted(S[_SJX:_SJX + 6], S[_SJP:_SJP + 36], (t - I[_IJT0]) / NS, S[_SMU], O,
-                       S[_SQ])
+    ``ε ← (I − K H) ε`` each update, along the jump's replay from its restart, each step
+    with the gravity weight ``c``, process noise ``q`` and pixel variance ``σ²`` in force at
+    its update (kept per buffered detection, ``_SJF``: the jump's own replay's for the
+    detections it took, then each later step's own; session 27: before, the latest values
+    for every step). The term is added on top of the jump's prior, which already holds
+    ``μ μᵀ Δt_j²/12`` (a floor bounce's mean, also in ``m``) and ``Σ_j Δt_j²/12``:
+    deliberately (measured, docs/methods.md "A jump's instant"). Returns ``(ok, ε_p (3),
+    Δt_j²/12)``: the published covariance gains ``ε_p ε_pᵀ Δt_j²/12``."""
+    # the restart predicted to t without the jump, each step with the c its update used
+    xb = S[_SJX:_SJX + 6]
+    tb = I[_IJT0]
+    for d in range(I[_IJN]):
+        td = I[_IJBUF + 2 * d]
+        xb, _ = _predicted(xb, S[_SJP:_SJP + 36], (td - tb) / NS, S[_SJF + 3 * d], O, 0.0)
+        tb = td
     e = np.zeros(6)
     for i in range(3):
         e[i] = x[3 + i] - xb[3 + i]
@@ -975,7 +992,10 @@ def _instant_term(S, I, cams, O, t, x):
         td, cd = I[_IJBUF + 2 * d], I[_IJBUF + 2 * d + 1]
         ud, vd = S[_SJUV + 2 * d], S[_SJUV + 2 * d + 1]
         dt = (td - t0) / NS
-        x, P = _predicted(x, P, dt, S[_SMU], O, S[_SQ])
+        # the (c, q, σ²) in force at this detection's update (the jump's replay: those of
+        # the jump's step; later ones: their own steps')
+        cf, qf, vf = S[_SJF + 3 * d], S[_SJF + 3 * d + 1], S[_SJF + 3 * d + 2]
+        x, P = _predicted(x, P, dt, cf, O, qf)
         if d == 0:
             ok, x, P = _jumped(x, P, dt, O, I[_IJSHAPE])
             if not ok:
@@ -984,7 +1004,7 @@ def _instant_term(S, I, cams, O, t, x):
         else:
             for i in range(3):
                 e[i] += dt * e[3 + i]
-        ok, inn = _innovation(cams, cd, x, P, 6, ud, vd, S[_SVAR])
+        ok, inn = _innovation(cams, cd, x, P, 6, ud, vd, vf)
         if not ok:
             return False, e[:3], w
         hd0 = inn[7] * e[0] + inn[8] * e[1] + inn[9] * e[2]
@@ -1347,9 +1367,11 @@ def _push(S, I, cams, O, N, t, cam, u, v, out):
         if accepted and k < _JBUF:
             I[_IJBUF + 2 * k], I[_IJBUF + 2 * k + 1] = t, cam
             S[_SJUV + 2 * k], S[_SJUV + 2 * k + 1] = u, v
+            S[_SJF + 3 * k], S[_SJF + 3 * k + 1], S[_SJF + 3 * k + 2] = c, q, var
             I[_IJN] = k + 1
         elif accepted:
             I[_IJN] = 0
+        I[_IJTE] = -(2 ** 62)  # (this point's term not published yet: no earlier one's kept)
         if I[_IJN] > 0:
             ok, ep, w = _instant_term(S, I, cams, O, t, xn)
             if ok:
@@ -2003,6 +2025,7 @@ class BallFilter:
         I[_ICAP] = self.options.init_window
         I[_IHN] = 0
         I[_IJN] = 0
+        I[_IJTE] = -(2 ** 62)
         I[_ICAM:_ICAM + len(self._cams)] = I[_ILAST]
         S[_SMU], S[_SE:_SE + 6] = self._mu0, 0.0
         S[_SNU] = 0.0
