@@ -237,7 +237,7 @@ def compare_ref(old: dict, new: dict) -> int:
     withheld may be output by the new one (released). Returns the exit code."""
     bad = changed = withheld = rejected = accepted = starts = starts_changed = 0
     starts_withheld = jumps_changed = jumps_withheld = jumps = jumps_smaller = released = 0
-    worst = worst_start = worst_jump = 0.0
+    worst = worst_start = worst_jump = least_jump = 0.0
     for key in old:
         a, b = old[key], new[key]
         ka = list(zip(a["time_ns"].tolist(), a["camera"].tolist(), strict=True))
@@ -282,6 +282,7 @@ def compare_ref(old: dict, new: dict) -> int:
                     jumps_smaller += int(np.count_nonzero(y[jmp] < x[jmp]))
                     if jmp.any():
                         worst_jump = max(worst_jump, float(np.max(y[jmp] - x[jmp])))
+                        least_jump = min(least_jump, float(np.min(y[jmp] - x[jmp])))
                     changed += int(np.count_nonzero(~same[r]))
                     starts_changed += int(np.count_nonzero(~same[ini]))
                     if r.any():
@@ -302,7 +303,7 @@ def compare_ref(old: dict, new: dict) -> int:
           f"now withheld: {starts_withheld}, largest std_m increase {1e3 * worst_start:.2f} mm; "
           f"points after a jump {jumps:,}, with another std: {jumps_changed} (smaller: "
           f"{jumps_smaller}), now withheld: {jumps_withheld}, released: {released}, largest "
-          f"std_m increase {1e3 * worst_jump:.2f} mm")
+          f"std_m increase {1e3 * worst_jump:.2f} mm, decrease {-1e3 * least_jump:.2f} mm")
     return 1 if bad else 0
 
 
