@@ -1,8 +1,9 @@
 """Fusion throughput on one core: every method's figure, with the triangulation peers a user
 would otherwise pick timed in the same run.
 
-Printed, best of ``--repeat`` runs, on a ``--minutes`` session of three 30 fps cameras with
-0.5 px noise (``turntable`` motion):
+Printed, best of ``--repeat`` runs (CPU time of this process, one thread, after one untimed
+warm-up call), on a ``--minutes`` session of three 30 fps cameras with 0.5 px noise
+(``turntable`` motion):
 
 - ``typeA``, ``nearest`` (type-A timing) and ``typeB``, ``linear``, ``sync`` (their timings):
   fused points per second, ``fuse()`` end to end (``prepare`` included: undistortion and the
@@ -11,14 +12,18 @@ Printed, best of ``--repeat`` runs, on a ``--minutes`` session of three 30 fps c
   session (what the peers are timed on: given pixels, rays and cameras);
 - ``smooth``, ``filter`` (type-A timing) and ``sync`` (synchronised timing): detections
   consumed per second (issue 12's figures for the timing and robustness methods);
-- peers, on the same detections: OpenCV's ``cv2.triangulatePoints`` (DLT) on two
-  synchronised views (camera 1 and 2 at the same frames, undistorted pixels, the
-  dehomogenisation included) and, if installed, aniposelib's ``CameraGroup.triangulate``
-  on three synchronised views (``pip install "aniposelib<0.6" numba pandas tqdm toml``:
-  its numba DLT, one thread; later releases need jax; undistortion inside it, as it does).
+- peers: OpenCV's ``cv2.triangulatePoints`` (DLT) on two synchronised views (camera 1 and
+  2 at the same frames, undistorted pixels, the dehomogenisation included) and, if
+  installed, aniposelib's ``CameraGroup.triangulate`` on three synchronised views
+  (undistortion inside it, as it does), on as many instants as ``typeA`` makes points (a
+  synchronised session three times as long: its first instants). They are timed together
+  with ``typeA``: its ``fuse()``, cv2 and aniposelib called in turn, ``--repeat`` rounds
+  after one untimed round, each side's best CPU time (so a busy moment of a loaded machine
+  slows each side alike; ``typeA``'s row and the peers' rows are that run's).
 
-``typeA`` runs compiled kernels (numba, cached on disk): the figures are warm (the first call
-is made before timing). ``--compile`` also prints the first call's time in a fresh process
+``typeA`` runs compiled kernels (numba, cached on disk): the figures are warm (an untimed
+call is made before the timed ones, for every row: the first call in a process also pays
+for fresh memory). ``--compile`` also prints the first call's time in a fresh process
 with an empty numba cache (the compile a new install pays once) and with the cache filled.
 
 Issue 12's target: ``typeA`` at least 1,000,000 points/s and at least the faster peer. The
@@ -57,12 +62,29 @@ TARGET_TYPEA = 1_000_000
 
 
 def best_of(repeat: int, fn) -> tuple[float, object]:
-    best, result = float("inf"), None
+    """Best CPU seconds (this process) of ``repeat`` calls of ``fn`` after one untimed call,
+    and its result."""
+    result = fn()
+    best = float("inf")
     for _ in range(repeat):
-        start = time.perf_counter()
+        start = time.process_time()
         result = fn()
-        best = min(best, time.perf_counter() - start)
+        best = min(best, time.process_time() - start)
     return best, result
+
+
+def alternating(repeat: int, *fns) -> list[float]:
+    """Best CPU seconds (this process) of each of ``fns``, called in turn ``repeat`` times
+    after one untimed round of the same turns (each side warm alike)."""
+    for fn in fns:
+        fn()
+    best = [float("inf")] * len(fns)
+    for _ in range(repeat):
+        for i, fn in enumerate(fns):
+            start = time.process_time()
+            fn()
+            best[i] = min(best[i], time.process_time() - start)
+    return best
 
 
 def session(timing: str, minutes: float):
@@ -93,18 +115,19 @@ def type_a_alone(rig, obs, repeat: int) -> tuple[float, int]:
     best, points = float("inf"), 0
     for _ in range(repeat):
         prep = prepare(obs, rig)
-        start = time.perf_counter()
+        start = time.process_time()
         track = fuse_type_a(prep, default_max_gap_s(rig), FusionOptions().noise_px,
                             explain=False)[0]
-        best = min(best, time.perf_counter() - start)
+        best = min(best, time.process_time() - start)
         points = len(track)
     return best, points
 
 
-def peer_opencv(rig, uv: np.ndarray, repeat: int) -> tuple[float, int]:
-    """Seconds and points of cv2.triangulatePoints (DLT) on two views, undistorted pixels."""
+def peer_opencv(rig, uv: np.ndarray):
+    """cv2.triangulatePoints (DLT) on two views' undistorted pixels: a call to time."""
     import cv2
 
+    cv2.setNumThreads(1)
     cams = rig.cameras[:2]
     ideal = [cam.undistort(uv[i]) for i, cam in enumerate(cams)]
     P = [cam.K @ np.hstack([cam.R, cam.t.reshape(3, 1)]) for cam in cams]
@@ -114,12 +137,11 @@ def peer_opencv(rig, uv: np.ndarray, repeat: int) -> tuple[float, int]:
         X = cv2.triangulatePoints(P[0], P[1], a, b)
         return (X[:3] / X[3]).T
 
-    seconds, points = best_of(repeat, run)
-    return seconds, len(points)
+    return run
 
 
-def peer_aniposelib(rig, uv: np.ndarray, repeat: int) -> tuple[float, int] | None:
-    """Seconds and points of aniposelib's CameraGroup.triangulate on the views, or None."""
+def peer_aniposelib(rig, uv: np.ndarray):
+    """aniposelib's CameraGroup.triangulate on the views: a call to time, or None."""
     try:
         from aniposelib.cameras import Camera as ACamera
         from aniposelib.cameras import CameraGroup
@@ -135,9 +157,7 @@ def peer_aniposelib(rig, uv: np.ndarray, repeat: int) -> tuple[float, int] | Non
         group.triangulate(uv[:, :10], undistort=True, progress=False)  # (numba compiles here)
     except ImportError:  # (aniposelib >= 0.6 imports jax here)
         return None
-    seconds, points = best_of(repeat, lambda: group.triangulate(uv, undistort=True,
-                                                               progress=False))
-    return seconds, len(points)
+    return lambda: group.triangulate(uv, undistort=True, progress=False)
 
 
 def main() -> int:
@@ -178,6 +198,18 @@ def main() -> int:
         print(f"  {stage:<26} {seconds * 1e3:9.1f} ms  {rate:>12,.0f} {unit:<13} {note}")
 
     sessions = {t: session(t, args.minutes) for t in ("typeA", "typeB", "sync")}
+    # the peers' views: as many synchronised instants as type A makes points (a synchronised
+    # session three times as long, its first instants), timed beside type A's fuse()
+    rig_a, obs_a = sessions["typeA"]
+    n_type_a = len(fuse(obs_a, rig_a, "typeA"))
+    rig_s, obs_s = session("sync", 3 * args.minutes + 1 / 60)
+    uv2 = synchronised_views(rig_s, obs_s, (0, 1))[:, :n_type_a]
+    uv3 = synchronised_views(rig_s, obs_s, (0, 1, 2))[:, :n_type_a]
+    peer_runs = {"cv2.triangulatePoints": (peer_opencv(rig_s, uv2), uv2.shape[1], "2 views")}
+    anipose_run = peer_aniposelib(rig_s, uv3)
+    if anipose_run is not None:
+        peer_runs["aniposelib triangulate"] = (anipose_run, uv3.shape[1], "3 views")
+    peer_seconds: dict[str, float] = {}
     for timing, methods in (("typeA", ("typeA", "nearest")),
                             ("typeB", ("typeB", "linear")), ("sync", ("sync",))):
         rig, obs = sessions[timing]
@@ -185,8 +217,14 @@ def main() -> int:
         base_s, _ = best_of(args.repeat, lambda obs=obs, rig=rig: prepare(obs, rig))
         row("baseline (prepare)", timing, base_s, len(obs), "detections/s")
         for method in methods:
-            seconds, track = best_of(args.repeat,
-                                     lambda m=method, obs=obs, rig=rig: fuse(obs, rig, m))
+            if method == "typeA":  # timed in turn with the peers (module docstring)
+                times = alternating(args.repeat, lambda obs=obs, rig=rig: fuse(obs, rig, "typeA"),
+                                    *(run for run, _, _ in peer_runs.values()))
+                seconds, track = times[0], fuse(obs, rig, "typeA")
+                peer_seconds.update(zip(peer_runs, times[1:], strict=True))
+            else:
+                seconds, track = best_of(args.repeat,
+                                         lambda m=method, obs=obs, rig=rig: fuse(obs, rig, m))
             row(method, timing, seconds, len(track), "points/s",
                 f"{seconds / base_s:5.1f}x baseline")
             if method == "sync":
@@ -203,21 +241,14 @@ def main() -> int:
         seconds, _ = best_of(args.repeat, lambda m=method: fuse(obs, rig, m))
         row(method, "typeA", seconds, len(obs), "detections/s")
 
-    rig, obs = sessions["sync"]
-    print("\npeers, on the synchronised session's detections")
+    print("\npeers, on a synchronised session's instants (as many as typeA's points), "
+          "timed in turn with typeA")
     peers = {}
-    uv2 = synchronised_views(rig, obs, (0, 1))
-    seconds, n = peer_opencv(rig, uv2, args.repeat)
-    peers["cv2.triangulatePoints"] = n / seconds
-    row("cv2.triangulatePoints", "sync", seconds, n, "points/s", "2 views")
-    uv3 = synchronised_views(rig, obs, (0, 1, 2))
-    anipose = peer_aniposelib(rig, uv3, args.repeat)
-    if anipose is None:
-        print('  aniposelib                 not usable (pip install "aniposelib<0.6" numba '
-              "pandas tqdm toml)")
-    else:
-        peers["aniposelib"] = anipose[1] / anipose[0]
-        row("aniposelib triangulate", "sync", *anipose, "points/s", "3 views")
+    for name, (_, n, views) in peer_runs.items():
+        peers[name] = n / peer_seconds[name]
+        row(name, "sync", peer_seconds[name], n, "points/s", views)
+    if anipose_run is None:
+        print("  aniposelib                 not usable (pip install '.[bench]')")
 
     type_a = next(r["rate"] for r in rows if r["stage"] == "typeA")
     best_peer = max(peers.values())

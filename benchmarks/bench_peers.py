@@ -27,11 +27,12 @@
      its undistortion and triangulation.
 
 A missing peer (``pip install '.[bench]'``) shows as "peer not installed". Best of
-``--repeat`` runs each, alternating ours and the peer's so that a busy machine slows both.
+``--repeat`` runs each (default 5), alternating ours and the peer's so that a busy machine
+slows both, after one untimed round of that alternation (each side warm alike).
 Type A's figure against an earlier revision's, paired: ``benchmarks/bench_fusion.py --base
 REV`` (the same session, CPU time, alternating child processes).
 
-Run: ``python benchmarks/bench_peers.py [--minutes 2] [--repeat 3] [--quick] [--json F]``
+Run: ``python benchmarks/bench_peers.py [--minutes 2] [--repeat 5] [--quick] [--json F]``
 """
 
 from __future__ import annotations
@@ -60,9 +61,14 @@ def best_of(repeat: int, *fns) -> list[float]:
 
 def best_of_cpu(repeat: int, *fns) -> tuple[list[float], list[float]]:
     """Best wall and best CPU seconds (this process) of each of ``fns``, run alternately
-    ``repeat`` times."""
+    ``repeat`` times after one untimed round of the same alternation (a warm-up for each
+    side alike: the first calls of a side after the others' pay for fresh memory — type A's
+    first timed call in this process used to fault in ~1,200 pages, 1-2 ms of its ~10, the
+    next 0-130 — and the best of 3 then rested on 1 or 2 warm runs)."""
     wall = [float("inf")] * len(fns)
     cpu = [float("inf")] * len(fns)
+    for fn in fns:
+        fn()
     for _ in range(repeat):
         for i, fn in enumerate(fns):
             t, c = time.perf_counter(), time.process_time()
@@ -188,7 +194,7 @@ def triangulation_rows(minutes: float, repeat: int) -> list[dict]:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--minutes", type=float, default=2.0, help="session length")
-    parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--repeat", type=int, default=5)
     parser.add_argument("--quick", action="store_true", help="a 20 s session, one repeat")
     parser.add_argument("--json", type=Path, default=None, help="write the rows as JSON")
     args = parser.parse_args()

@@ -166,7 +166,7 @@ def pseudo_stereo_points(
                                      dtype=np.int64)
     k = len(rows)
     prev_b, next_b, _ = _all_brackets(prep)
-    cam, ki, rr, _, f9, _ = _pseudo_kernel.camera_tables(prep)
+    cam, ki, rr, _, f9, _ = camera_tables(prep)
     ff = np.empty((1, k, len(_pseudo_kernel.FLOATS)))
     fi = np.empty((1, k, len(_pseudo_kernel.INTS)), dtype=np.int64)
     _pseudo_kernel.pseudo_kernel(
@@ -174,6 +174,37 @@ def pseudo_stereo_points(
         prep.uv_undistorted, prep.observed_rays, prep.centers, ki, rr, f9, cam,
         _SPAN_TIE_NS, MIN_RAY_ANGLE_DEG, ff, fi)
     return _from_tables(ff[0], fi[0], None)
+
+
+#: :func:`~pslog.fusion._pseudo_kernel.camera_tables` of the rigs met, keyed by what they are
+#: made of (read by the kernels only, never written: shared by every ``Prepared`` of a rig)
+_CAMERA_TABLES: dict[tuple, tuple] = {}
+
+
+def camera_tables(prep: Prepared) -> tuple:
+    """:func:`~pslog.fusion._pseudo_kernel.camera_tables` of ``prep``, made once per rig
+    geometry (its cameras' K, R, t and lens, ``prep``'s K⁻¹, R, F and view boxes: the
+    tables' every input; ~3 % of a 2-minute type-A ``fuse`` made them again at each call),
+    and cached on ``prep`` as before."""
+    from . import _pseudo_kernel
+
+    cache = prep.__dict__.get("_kernel_tables")
+    if cache is not None:
+        return cache
+    key = (np.asarray(prep.K_inv, np.float64).tobytes(), np.asarray(prep.R, np.float64).tobytes(),
+           np.asarray(prep.F, np.float64).tobytes(),
+           np.asarray(prep.view_box, np.float64).tobytes(),
+           *((np.asarray(c.K, np.float64).tobytes(), np.asarray(c.R, np.float64).tobytes(),
+              np.asarray(c.t, np.float64).tobytes(), np.asarray(c.dist, np.float64).tobytes())
+             for c in prep.cameras))
+    tables = _CAMERA_TABLES.get(key)
+    if tables is None:
+        tables = _pseudo_kernel.camera_tables(prep)
+        if len(_CAMERA_TABLES) > 256:
+            _CAMERA_TABLES.clear()
+        _CAMERA_TABLES[key] = tables
+    prep.__dict__["_kernel_tables"] = tables
+    return tables
 
 
 def _from_tables(ff: np.ndarray, fi: np.ndarray, at: np.ndarray | None) -> PseudoStereoPoints:
@@ -290,7 +321,7 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
     # instants back (steps 1-3), then eqs. (2)-(4), the quality columns and the covariance
     prev_b, next_b, previous_instant = _all_brackets(prep)
     # (lens: some camera has distortion; else the pixel Jacobians are the identity)
-    cam, ki, rr, rtki, f9, lens = _pseudo_kernel.camera_tables(prep)
+    cam, ki, rr, rtki, f9, lens = camera_tables(prep)
     # the past points' tables: each target's place, or (no construction kept) one scratch
     # place (the decisions below read them in the kernel's loop)
     tables = explain or (noise_px is not None and _prepare.FINITE_DIFFERENCES)
@@ -470,7 +501,7 @@ class TypeAStream:
                             np.ascontiguousarray(template._rt_k_inv_cols.T))
         self._shared = {"_columns": template.__dict__["_columns"], "_f_cols": template._f_cols,
                         "_rt_k_inv_cols": template._rt_k_inv_cols,
-                        "_kernel_tables": _pseudo_kernel.camera_tables(template)}
+                        "_kernel_tables": camera_tables(template)}
         # the window's columns: views [lo:hi] of buffers that grow by doubling; a push writes
         # its rows after the window and moves the window to the front when the end is reached
         # (no concatenation of every column at every push). Each row's own-pixel ray, its
