@@ -24,7 +24,7 @@ import pytest
 from test_stream_type_a import assert_same, pushed_one_by_one
 
 from pslog import Rig, SimulationOptions, apply_timing, builtin_rig, get_motion, simulate
-from pslog.fusion import fuse
+from pslog.fusion import FusionOptions, fuse
 from pslog.fusion._prepare import prepare
 from pslog.fusion.stream import StreamFuser
 from pslog.log import SessionWriter, read_session
@@ -123,14 +123,17 @@ def test_a_pixel_beyond_the_lens_fold_over_is_a_missing_detection(tmp_path, cli)
                                                                             "typeA"))
 
 
-@pytest.mark.parametrize("method", METHODS)
-def test_the_stream_leaves_a_detection_without_a_ray_out_as_the_batch(method):
-    """Pushed a detection at a time (``typeA``: its incremental form, the one-row path;
-    ``nearest``: the window's batch run), the session with rows without a ray gives the
-    batch's points of the session without them."""
+@pytest.mark.parametrize("method,confirm", [("nearest", True), ("typeA", True),
+                                            ("typeA", False)])
+def test_the_stream_leaves_a_detection_without_a_ray_out_as_the_batch(method, confirm):
+    """Pushed a detection at a time (``typeA``: its incremental form, through the long-gap
+    confirmation's ``push`` and, without it, the one-row ``push_one``; ``nearest``: the
+    window's batch run), the session with rows without a ray gives the batch's points of
+    the session without them."""
     rig, obs = _session()
     damaged, without = _damaged(obs, [0, 13, 186, 261, 314, len(obs) - 1], 1e300)
     damaged2, _ = _damaged(damaged, [204], np.nan)
     without = without.select(without.time_ns != obs.time_ns[204])
-    assert_same(pushed_one_by_one(StreamFuser(rig, method), damaged2),
-                fuse(without, rig, method))
+    options = FusionOptions(confirm_gaps=confirm)
+    assert_same(pushed_one_by_one(StreamFuser(rig, method, options), damaged2),
+                fuse(without, rig, method, options))

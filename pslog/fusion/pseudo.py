@@ -1233,33 +1233,46 @@ class MeasuredNoiseStream:
                 has[rows] = np.isfinite(xy[:, 0]) & np.isfinite(xy[:, 1])
         return has
 
+    def _one_has_ray(self, camera: int, u: float, v: float) -> bool:
+        """:meth:`_has_ray` of one row (Python scalars; a lensless camera: two comparisons)."""
+        limit = self._limit_list[camera]
+        if not (abs(u) <= limit and abs(v) <= limit):  # (NaN: False)
+            return False
+        return self._lensless[camera] or bool(
+            self._has_ray(np.array([camera]), np.array([[u, v]]))[0])
+
+    def _nothing(self) -> Track:
+        """The inner stream's answer to no row (a row without a ray: as if not pushed)."""
+        return self._scaled(self.inner.push(np.zeros(0, np.int64), np.zeros(0, np.int32),
+                                            np.zeros((0, 2)), np.zeros(0, np.int64)))
+
     def push(self, time_ns, camera, uv, frame_index) -> Track:
         """The inner stream's push, its points' covariance at the measured noise (a row
-        without a ray: as if not pushed)."""
-        camera = np.asarray(camera)
-        uv = np.asarray(uv, np.float64).reshape(-1, 2)
-        if len(time_ns) and camera.min() >= 0 and camera.max() < len(self._cameras):
-            # (a camera out of the rig: the inner stream's error)
-            has = self._has_ray(camera, uv)
-            if not has.all():
-                time_ns, camera, uv = np.asarray(time_ns)[has], camera[has], uv[has]
-                frame_index = np.asarray(frame_index)[has]
+        without a ray: as if not pushed; a camera out of the rig: the inner stream's
+        error)."""
         if len(time_ns) == 1:
             u, v = np.asarray(uv, np.float64).reshape(-1, 2)[0].tolist()
-            self._log_one(int(time_ns[0]), int(camera[0]), u, v)
+            c = int(camera[0])
+            if 0 <= c < len(self._limit_list) and not self._one_has_ray(c, u, v):
+                return self._nothing()
+            self._log_one(int(time_ns[0]), c, u, v)
         elif len(time_ns):
-            self._log(np.asarray(time_ns, np.int64), np.asarray(camera), uv)
+            camera = np.asarray(camera)
+            uv = np.asarray(uv, np.float64).reshape(-1, 2)
+            if camera.min() >= 0 and camera.max() < len(self._limit_list):
+                has = self._has_ray(camera, uv)
+                if not has.all():
+                    time_ns, camera, uv = np.asarray(time_ns)[has], camera[has], uv[has]
+                    frame_index = np.asarray(frame_index)[has]
+            if len(time_ns):
+                self._log(np.asarray(time_ns, np.int64), camera, uv)
         return self._scaled(self.inner.push(time_ns, camera, uv, frame_index))
 
     def _push_one(self, time_ns: int, camera: int, u: float, v: float) -> Track:
-        """The inner stream's ``push_one``, its point's covariance at the measured noise."""
-        limit = self._limit_list[camera]
-        if not (abs(u) <= limit and abs(v) <= limit) or (
-                not self._lensless[camera]
-                and not self._has_ray(np.array([camera]), np.array([[u, v]]))[0]):
-            # (no ray: as if not pushed)
-            return self._scaled(self.inner.push(np.zeros(0, np.int64), np.zeros(0, np.int32),
-                                                np.zeros((0, 2)), np.zeros(0, np.int64)))
+        """The inner stream's ``push_one``, its point's covariance at the measured noise (a
+        row without a ray: as if not pushed)."""
+        if not self._one_has_ray(camera, u, v):
+            return self._nothing()
         self._log_one(time_ns, camera, u, v)
         return self._scaled(self.inner.push_one(time_ns, camera, u, v))
 

@@ -133,11 +133,12 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | np.ndarray 
     residuals_out : a list, or None: given, each camera's reprojection residuals (k,) of
         the points are appended to it (recorded pixels, :func:`reprojection_one`'s; NaN
         where the ray is not used or the point is behind the camera)
-    excess : with ``motion`` and ``noise_px`` (k,), each point's time (k,) and ``max_gap_s``,
-        or None: the detection noise's part of the covariance of the points whose own
+    excess : with ``motion`` and ``noise_px``, each point's time (k,) and ``max_gap_s``, or
+        None: the detection noise's part of the covariance of the points whose own
         detections disagree beyond the noise and the slots' motion is multiplied by
         :func:`excess_factor` (``nearest``; docs/methods.md, "nearest's covariance where its
-        detections disagree"), the motion's, the breaks' and the doubt's terms not
+        detections disagree"; :func:`excess_noise`), the motion's, the breaks' and the
+        doubt's terms as they are
 
     Returns
     -------
@@ -226,7 +227,7 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | np.ndarray 
         if prep.doubt_px2 is not None:
             cov = doubt_covariance(prep, slot_rows, jacobians, cov)
         if excess is not None and motion is not None:
-            noise = np.asarray(noise_px, dtype=np.float64)
+            noise = np.broadcast_to(np.asarray(noise_px, dtype=np.float64), (k,))
             cov = excess_noise(prep, slot_rows, jacobians, motion, used, noise, excess_factor(
                 prep, rows, used, points, excess[0], noise, excess[1], list(residual),
                 compiled), cov)
