@@ -38,10 +38,10 @@ METHODS = ("nearest", "typeA")
 FOLDING = (-0.5, 0.0, 0.0, 0.0, 0.0)
 
 
-def _session(lens: bool = False):
+def _session(lens: bool = False, timing: str = "typeA"):
     """(rig, observations) of a 6 s paper3 rally at 0.5 px of noise with misses, drops and
-    jitter, its times from 2 s on (typeA timing)."""
-    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    jitter, its times from 2 s on (typeA timing, or ``timing``)."""
+    rig = apply_timing(builtin_rig("paper3"), timing)
     if lens:
         rig = Rig(tuple(c.replace(dist=np.array(FOLDING)) for c in rig.cameras), rig.name)
     det, _ = simulate(rig, get_motion("rally"), 6.0,
@@ -63,18 +63,19 @@ def _damaged(obs: Observations, rows: list[int], value) -> tuple[Observations, O
             obs.select(keep))
 
 
-def _fused(tmp_path, cli, name: str, rig, obs: Observations) -> tuple[dict, list[str]]:
+def _fused(tmp_path, cli, name: str, rig, obs: Observations, methods=METHODS,
+           timing: str = "typeA") -> tuple[dict, list[str]]:
     """The tracks ``pslog fuse`` wrote from ``obs`` written as an MCAP, and its lines of
     counts (points, drops)."""
     src, out = tmp_path / f"{name}.mcap", tmp_path / f"{name}_fused.mcap"
-    with SessionWriter(src, rig, timing="typeA", source="test") as writer:
+    with SessionWriter(src, rig, timing=timing, source="test") as writer:
         writer.add_detections(Detections.from_observations(
             [c.name for c in rig.cameras], obs))
-    code, text, err = cli("fuse", src, "--method", ",".join(METHODS), "--gating", "off",
+    code, text, err = cli("fuse", src, "--method", ",".join(methods), "--gating", "off",
                           "-o", out)
     assert code == 0, err
-    lines = [line for line in text.splitlines() if line.split(" ")[0] in METHODS]
-    assert len(lines) == len(METHODS), text
+    lines = [line for line in text.splitlines() if line.split(" ")[0] in methods]
+    assert len(lines) == len(methods), text
     return read_session(out).tracks, lines
 
 
@@ -102,6 +103,24 @@ def test_a_detection_without_a_ray_is_a_missing_one(tmp_path, cli, rows, value):
     assert got_lines == want_lines  # the points and the drops counted
     for method in METHODS:
         assert len(want[method]) > 300
+        _assert_same_bits(got[method], want[method])
+
+
+@pytest.mark.parametrize("rows", [[261], [13, 186, 204], [0]])
+def test_a_partner_without_a_ray_is_missing_for_the_stereo_methods(tmp_path, cli, rows):
+    """typeB timing (cam1 and cam2 share shutters, cam3 between): a detection without a ray
+    beside another camera's at its instant made that one not alone, so ``typeB`` and
+    ``linear`` made no prediction there (one point fewer, row 261), and a group's start
+    ``sync_groups`` chains from; ``sync``, ``typeB`` and ``linear`` now fuse the session
+    without it too (and ``nearest`` and ``typeA`` on this timing)."""
+    methods = ("sync", "typeB", "linear", "nearest", "typeA")
+    rig, obs = _session(timing="typeB")
+    damaged, without = _damaged(obs, rows, 1e300)
+    got, got_lines = _fused(tmp_path, cli, "damaged", rig, damaged, methods, "typeB")
+    want, want_lines = _fused(tmp_path, cli, "without", rig, without, methods, "typeB")
+    assert got_lines == want_lines
+    for method in methods:
+        assert len(want[method]) > 90
         _assert_same_bits(got[method], want[method])
 
 
@@ -137,3 +156,50 @@ def test_the_stream_leaves_a_detection_without_a_ray_out_as_the_batch(method, co
     options = FusionOptions(confirm_gaps=confirm)
     assert_same(pushed_one_by_one(StreamFuser(rig, method, options), damaged2),
                 fuse(without, rig, method, options))
+
+
+def test_type_a_construction_rows_are_the_given_observations():
+    """``explain_type_a`` (the viewer's construction) of a session with rows without a ray:
+    the construction of the session without them, its rows (the newest detection, the past
+    points' own and bracketing detections) those of the observations given."""
+    from pslog.fusion import explain_type_a
+
+    rig, obs = _session()
+    rows = [13, 186, 204]
+    damaged, without = _damaged(obs, rows, 1e300)
+    got, want = explain_type_a(damaged, rig), explain_type_a(without, rig)
+    kept = np.delete(np.arange(len(obs)), rows)  # (row i of ``without`` is row kept[i])
+
+    def given(r):
+        return np.where(r >= 0, kept[np.maximum(r, 0)], r)
+
+    assert len(want.event_row) > 300
+    np.testing.assert_array_equal(got.event_row, given(want.event_row))
+    assert got.points_world.tobytes() == want.points_world.tobytes()
+    for g, w in zip(got.past, want.past, strict=True):
+        for name in ("row", "prev_row", "next_row"):
+            np.testing.assert_array_equal(getattr(g, name), given(getattr(w, name)))
+        assert g.points_world.tobytes() == w.points_world.tobytes()
+    np.testing.assert_array_equal(damaged.time_ns[got.event_row],
+                                  fuse(damaged, rig, "typeA").time_ns)
+
+
+def test_a_group_start_without_a_ray_does_not_take_the_next_cameras_detection(tmp_path, cli):
+    """``sync`` groups detections from the earliest not yet grouped over the tolerance
+    (1 ms). paper3 with cam2 0.8 ms and cam3 1.6 ms after cam1: each instant groups cam1
+    with cam2, cam3 alone. Where cam1's detection has no ray, its group held cam2's alone
+    (one ray: no point) and cam3 stayed alone; without that detection cam2 and cam3 group
+    and make a point. The session with such detections gives the points of the session
+    without them (before: 3 points fewer here)."""
+    rig = apply_timing(builtin_rig("paper3"), "sync")
+    det, _ = simulate(rig, get_motion("rally"), 4.0, SimulationOptions(noise_px=0.3, seed=2))
+    obs = timed_observations(det, rig)
+    shift = np.array([0, 800_000, 1_600_000])[obs.camera]
+    obs = Observations(obs.time_ns + shift, obs.camera, obs.uv, obs.frame_index)
+    rows = list(np.flatnonzero(obs.camera == 0)[[10, 40, 70]])
+    damaged, without = _damaged(obs, rows, np.nan)
+    got, got_lines = _fused(tmp_path, cli, "damaged", rig, damaged, ("sync",), "sync")
+    want, want_lines = _fused(tmp_path, cli, "without", rig, without, ("sync",), "sync")
+    assert got_lines == want_lines
+    assert len(want["sync"]) > 90
+    _assert_same_bits(got["sync"], want["sync"])

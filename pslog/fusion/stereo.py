@@ -1073,7 +1073,7 @@ def _weighted_points(prep: Prepared, rows: np.ndarray, used: np.ndarray, points:
 
 def stereo_at_common_instants(
     prep: Prepared, tolerance_s: float, method: str, noise_px: float | None = 0.5,
-    max_gap_s: float | None = None,
+    max_gap_s: float | None = None, shared: bool | None = None,
 ) -> tuple[Track, np.ndarray]:
     """N-view points of every instant at which at least two cameras saw the ball.
 
@@ -1081,7 +1081,10 @@ def stereo_at_common_instants(
     tolerance explain (:func:`residual_refused`, at :func:`refusal_noise`'s σ; ``max_gap_s``:
     how far back a camera's previous detection gives its image speed, and the noise's
     residuals reach; None: 3.5 periods of the slowest camera) is dropped and counted in
-    ``Track.dropped`` as ``residual_failed``, like a geometrically invalid one.
+    ``Track.dropped`` as ``residual_failed``, like a geometrically invalid one. ``shared``:
+    whether the session has instants two cameras share (None: ``prep``'s; given by the
+    callers that left detections without a ray out, :func:`rays_only_shared`'s, of the
+    session as given: its methods' error is the session's, not the rays').
 
     Returns
     -------
@@ -1091,7 +1094,7 @@ def stereo_at_common_instants(
         whose detections are not ``alone`` either)
     """
     group, n_cameras = sync_groups(prep.obs, len(prep.centers), tolerance_s)
-    if not np.any(n_cameras >= 2):
+    if not (np.any(n_cameras >= 2) if shared is None else shared):
         raise FusionError(
             f"method {method} needs cameras with a common shutter instant (sync or typeB "
             f"timing), but no two cameras captured within {tolerance_s * 1e3:g} ms of each "
@@ -1120,6 +1123,16 @@ def stereo_at_common_instants(
             n_cameras[group] == 1)
 
 
+def rays_only_shared(prep: Prepared, tolerance_s: float) -> tuple[Prepared, bool | None]:
+    """``sync``'s, ``typeB``'s and ``linear``'s session: ``prep`` without its detections
+    that have no ray (:func:`~._prepare.rays_only`: a missing detection), and whether
+    ``prep`` as given has shared instants where any was left out (None: none left out)."""
+    out, kept = rays_only(prep)
+    if kept is None:
+        return prep, None
+    return out, bool(np.any(sync_groups(prep.obs, len(prep.centers), tolerance_s)[1] >= 2))
+
+
 #: Track.dropped's reason for an N-view point its detections' residuals contradict.
 RESIDUAL_FAILED = "residual_failed"
 
@@ -1139,9 +1152,11 @@ def fuse_sync(prep: Prepared, tolerance_s: float = 1e-3, noise_px: float | None 
     axis on each recorded pixel (``tests/test_fusion_validity.py``, hand-computed on a
     rectified pair). ``max_gap_s``: :func:`stereo_at_common_instants`'.
     """
+    prep, shared = rays_only_shared(prep, tolerance_s)  # (no ray: a missing detection)
     if len(prep.obs) == 0:
         return _empty("sync")
-    return stereo_at_common_instants(prep, tolerance_s, "sync", noise_px, max_gap_s)[0]
+    return stereo_at_common_instants(prep, tolerance_s, "sync", noise_px, max_gap_s,
+                                     shared)[0]
 
 
 def fuse_nearest(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
