@@ -10,7 +10,9 @@ noise's residuals and the breaks of the slots after it (positions up to 57 mm an
 up to 0.48 m different on the session below); ``typeA`` lost the points it was a bracket
 of (358 against 359 points) and moved others (26 mm). Both now fuse the session without
 those detections (``_prepare.rays_only``; the stream's ``MeasuredNoiseStream`` leaves them
-out too): the same bits as the session with the rows deleted.
+out too): the same bits as the session with the rows deleted. So do ``sync``, ``typeB`` and
+``linear`` (``stereo.rays_only_shared``): a partner without a ray left typeB / linear's
+detection at its instant without a prediction, and could start a ``sync`` group.
 
 Checked on real files through ``pslog fuse`` (as ``test_first_row_no_ray.py`` does for
 ``sync``, ``typeB``, ``linear`` and ``smooth``), and on the stream pushed a detection at a
@@ -28,7 +30,7 @@ from pslog.fusion import FusionOptions, fuse
 from pslog.fusion._prepare import prepare
 from pslog.fusion.stream import StreamFuser
 from pslog.log import SessionWriter, read_session
-from pslog.records import NS, Detections, Observations
+from pslog.records import NS, Detections, Observations, Track
 from pslog.timing import observations as timed_observations
 
 METHODS = ("nearest", "typeA")
@@ -122,6 +124,21 @@ def test_a_partner_without_a_ray_is_missing_for_the_stereo_methods(tmp_path, cli
     for method in methods:
         assert len(want[method]) > 90
         _assert_same_bits(got[method], want[method])
+
+
+@pytest.mark.parametrize("method", ["sync", "typeB", "linear"])
+def test_the_stereo_methods_stream_leaves_it_out_as_the_batch(method):
+    """typeB timing, rows 261, 13, 186 and 204 without a ray, pushed a detection at a
+    time: the batch's points of the session without them, every quality column the same
+    bits (the counts left out: the window stream does not carry typeB's and linear's
+    ``prediction_failed``, with every detection intact too)."""
+    rig, obs = _session(timing="typeB")
+    rows = [13, 186, 204, 261]
+    damaged, without = _damaged(obs, rows, 1e300)
+    streamed = Track.concat(pushed_one_by_one(StreamFuser(rig, method), damaged))
+    want = fuse(without, rig, method)
+    assert len(want) > 90
+    _assert_same_bits(streamed, want)
 
 
 def test_a_pixel_beyond_the_lens_fold_over_is_a_missing_detection(tmp_path, cli):

@@ -48,7 +48,8 @@ def fuse_predicted(prep: Prepared, method: str, tolerance_s: float, max_gap_s: f
     Quality of a predicted point: ``residual_*_px`` over the stereo detections and the single
     detection against the eq. (2) prediction; ``gap_s``: time from the older stereo point;
     ``std_m`` / ``cov_*``: the stereo points' covariances through eq. (2) (and for typeB the
-    projection onto the ray plus the single detection's own noise).
+    projection onto the ray plus the single detection's own noise). A detection without a
+    ray is a missing one (:func:`~.stereo.rays_only_shared`).
     """
     if method not in ("typeB", "linear"):
         raise ValueError(f"method must be typeB or linear, got {method!r}")

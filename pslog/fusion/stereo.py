@@ -1150,7 +1150,8 @@ def fuse_sync(prep: Prepared, tolerance_s: float = 1e-3, noise_px: float | None 
     (:func:`residual_refused`: a detection that is not the ball the others saw; dropped and
     counted as ``residual_failed``). ``std_m`` / ``cov_*``: first order at ``noise_px`` per
     axis on each recorded pixel (``tests/test_fusion_validity.py``, hand-computed on a
-    rectified pair). ``max_gap_s``: :func:`stereo_at_common_instants`'.
+    rectified pair). ``max_gap_s``: :func:`stereo_at_common_instants`'. A detection without
+    a ray is a missing one (:func:`rays_only_shared`).
     """
     prep, shared = rays_only_shared(prep, tolerance_s)  # (no ray: a missing detection)
     if len(prep.obs) == 0:
