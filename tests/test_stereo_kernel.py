@@ -20,7 +20,7 @@ from pslog import (
     simulate,
 )
 from pslog.fusion import _stereo_kernel, prepare
-from pslog.fusion._prepare import default_max_gap_s
+from pslog.fusion._prepare import default_max_gap_s, rays_only
 from pslog.fusion.stereo import fuse_nearest
 from pslog.geometry import _FEW
 
@@ -82,12 +82,14 @@ def test_nearest_in_row_blocks_equals_the_whole_arrays(monkeypatch, lens, noise_
     doubt[5::17] = 4.0  # some detections in doubt (the gate's choices): doubt_covariance
     prep = dataclasses.replace(prep, doubt_px2=doubt)
     gap = default_max_gap_s(rig)
-    rows, others = stereo.nearest_rows(prep, int(gap * 1e9))
+    # (the rows fuse_nearest makes: of the detections with a ray, as _nearest_in_blocks
+    # gets them; the damaged ones are missing detections)
+    rows, others = stereo.nearest_rows(rays_only(prep)[0], int(gap * 1e9))
     with np.errstate(all="ignore"):
         whole = fuse_nearest(prep, gap, noise_px)  # (shorter than 2 blocks: whole arrays)
         monkeypatch.setattr(stereo, "NEAREST_BLOCK_ROWS", _FEW)
         assert len(rows) >= 4 * _FEW
-        blocked = stereo._nearest_in_blocks(prep, rows, others, gap, noise_px)
+        blocked = stereo._nearest_in_blocks(rays_only(prep)[0], rows, others, gap, noise_px)
         by_fuse = fuse_nearest(prep, gap, noise_px)
     assert blocked is not None  # (every block took the compiled forms)
     assert len(whole.time_ns) > 300

@@ -222,12 +222,14 @@ def _nearest(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
 
 
 def _type_a(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
+    from ._prepare import rays_only
     from .confirm import confirm_batch  # (long-gap points confirmed by the next camera)
     from .pseudo import covariance_noise_px, type_a_noise, withhold_uncertain
 
     # the covariance made at the stated noise (what the confirmation's test reads), then
     # rescaled to the session's measured noise (docs/methods.md, "Type A's covariance at
-    # the measured noise")
+    # the measured noise"); a detection without a ray is a missing one
+    prep = rays_only(prep)[0]
     gap = _gap(options)
     track = fuse_type_a(prep, gap, options.noise_px, explain=False,
                         cov_noise_px=covariance_noise_px(options.noise_px))[0]
@@ -457,11 +459,15 @@ def type_a_explained(prep: Prepared, rig: Rig, options: FusionOptions
     of :mod:`pslog.fusion.confirm` included when ``options.confirm_gaps``) and the
     construction of each of its points (the points the confirmation drops, and those
     withheld as ``uncertain``, left out too)."""
+    from ._prepare import rays_only
     from .pseudo import covariance_noise_px, type_a_noise, withhold_uncertain
 
     max_gap_s = options.max_gap_s or default_max_gap_s(rig)
+    prep, kept_rows = rays_only(prep)  # (as _type_a: a detection without a ray is missing)
     track, construction = fuse_type_a(prep, max_gap_s, options.noise_px,
                                       cov_noise_px=covariance_noise_px(options.noise_px))
+    if kept_rows is not None:  # (the construction's rows: of the observations given)
+        construction = construction.on_rows(kept_rows)
     if not options.confirm_gaps or not len(track):
         out, kept = withhold_uncertain(type_a_noise(prep, track, max_gap_s, options.noise_px),
                                        options.max_std_m)

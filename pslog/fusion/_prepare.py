@@ -267,6 +267,32 @@ def prepare(obs: Observations, rig: Rig, F: np.ndarray | None = None,
     )
 
 
+
+def rays_only(prep: Prepared) -> tuple[Prepared, np.ndarray | None]:
+    """``prep`` without its detections that have no ray (a pixel beyond the image or the
+    lens model's fold-over, NaN: :func:`prepare` gives them NaN undistorted pixels and
+    rays), and the rows kept (None: every row has a ray, ``prep`` itself). Every row keeps
+    its own values and ``t`` is counted from the first row kept: the bits :func:`prepare`
+    gives the session with those detections deleted. What ``nearest`` and ``typeA`` fuse, so
+    that a detection without a ray is exactly a missing one (docs/methods.md, "A detection
+    without a ray")."""
+    ray = prep.ray_dir
+    has = np.isfinite(ray[:, 0]) & np.isfinite(ray[:, 1]) & np.isfinite(ray[:, 2])
+    if has.all():
+        return prep, None
+    rows = np.flatnonzero(has)
+    obs = prep.obs.select(rows)
+    t = (obs.time_ns - (obs.time_ns[0] if len(obs) else 0)) / NS
+    return Prepared(
+        obs=obs, t=t.astype(np.float64), uv_undistorted=prep.uv_undistorted[rows],
+        ray_origin=prep.ray_origin[rows], ray_dir=ray[rows], centers=prep.centers,
+        K_inv=prep.K_inv, R=prep.R, F=prep.F,
+        per_camera=[np.flatnonzero(obs.camera == i) for i in range(len(prep.centers))],
+        cameras=prep.cameras,
+        uv_jacobian=None if prep.uv_jacobian is None else prep.uv_jacobian[rows],
+        view_box=prep.view_box,
+        doubt_px2=None if prep.doubt_px2 is None else prep.doubt_px2[rows]), rows
+
 #: The rigs whose geometry :func:`_checked_geometry` checked (keyed by the cameras' K, R and
 #: t), with their fundamental matrices: a rig is checked and F made once, not per prepare
 _RIG_GEOMETRY: dict[tuple, np.ndarray] = {}

@@ -28,7 +28,13 @@ from ._prepare import (
     reprojection_px,
 )
 from .innovation import contradicted, failed_counts
-from .stereo import count_invalid, refusal_noise, stereo_at_common_instants, with_dropped
+from .stereo import (
+    count_invalid,
+    rays_only_shared,
+    refusal_noise,
+    stereo_at_common_instants,
+    with_dropped,
+)
 
 
 def fuse_predicted(prep: Prepared, method: str, tolerance_s: float, max_gap_s: float,
@@ -42,14 +48,20 @@ def fuse_predicted(prep: Prepared, method: str, tolerance_s: float, max_gap_s: f
     Quality of a predicted point: ``residual_*_px`` over the stereo detections and the single
     detection against the eq. (2) prediction; ``gap_s``: time from the older stereo point;
     ``std_m`` / ``cov_*``: the stereo points' covariances through eq. (2) (and for typeB the
-    projection onto the ray plus the single detection's own noise).
+    projection onto the ray plus the single detection's own noise). A detection without a
+    ray is a missing one (:func:`~.stereo.rays_only_shared`).
     """
     if method not in ("typeB", "linear"):
         raise ValueError(f"method must be typeB or linear, got {method!r}")
+    # a detection without a ray is a missing one: not a partner that leaves another
+    # detection of its instant without a prediction (docs/methods.md, "A detection without
+    # a ray")
+    prep, shared = rays_only_shared(prep, tolerance_s)
     obs = prep.obs
     if len(obs) == 0:
         return Track(method, np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0, np.int32))
-    stereo, alone = stereo_at_common_instants(prep, tolerance_s, method, noise_px, max_gap_s)
+    stereo, alone = stereo_at_common_instants(prep, tolerance_s, method, noise_px, max_gap_s,
+                                              shared)
     points, stereo_ns = stereo.position_world, stereo.time_ns
     single = np.flatnonzero(alone)  # detections with no simultaneous partner
     t_single = obs.time_ns[single]

@@ -46,7 +46,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Literal, cast, overload
 
 import numpy as np
@@ -260,6 +260,19 @@ class TypeAConstruction:
                      for p in self.past)
         return TypeAConstruction(self.event_row[keep], cast(Any, past),
                                  self.predicted_world[keep], self.points_world[keep])
+
+    def on_rows(self, rows: np.ndarray) -> TypeAConstruction:
+        """The construction with every row field (``event_row``, the past points' ``row``,
+        ``prev_row``, ``next_row``) mapped through ``rows`` (the rows of the observations a
+        subset's row ``i`` is: ``rows[i]``; -1 stays -1)."""
+        def mapped(r: np.ndarray) -> np.ndarray:
+            return np.where(r >= 0, rows[np.maximum(r, 0)], r) if len(rows) else r
+
+        past = tuple(replace(p, **{f: mapped(getattr(p, f)) for f in ("row", "prev_row",
+                                                                       "next_row")})
+                     for p in self.past)
+        return TypeAConstruction(mapped(self.event_row), cast(Any, past),
+                                 self.predicted_world, self.points_world)
 
 
 @overload
@@ -1093,6 +1106,12 @@ class MeasuredNoiseStream:
         self._last_mark = np.iinfo(np.int64).min
         self._latest = math.nan  # the latest checkpoint's estimate (NaN: none yet)
         self._start: dict[int, float] = {}  # the session's start: time ns -> σ of its rows
+        # a detection without a ray is a missing one (as the batch's rays_only): such rows
+        # are kept from the inner stream and the noise's history (lensless cameras: beyond
+        # the limits or NaN; a lens's: also where its undistortion folds over)
+        self._cameras = rig.cameras
+        self._lensless = [not np.any(c.dist) for c in rig.cameras]
+        self._limit_list = self._limits.tolist()  # (Python floats: the one-row path's test)
         if hasattr(inner, "push_one"):
             self.push_one = self._push_one
         if hasattr(inner, "flush"):
@@ -1233,17 +1252,58 @@ class MeasuredNoiseStream:
         return withhold_uncertain(with_measured_noise(out, sigma, self._cov_px, self._centers),
                                   self._max_std)[0]
 
+    def _has_ray(self, camera: np.ndarray, uv: np.ndarray) -> np.ndarray:
+        """(n,) bool: the rows :func:`~._prepare.prepare` gives a ray (a finite one)."""
+        limit = self._limits[camera]
+        has = (np.abs(uv[:, 0]) <= limit) & (np.abs(uv[:, 1]) <= limit)
+        for c in sorted(set(camera[has].tolist())):
+            if not self._lensless[c]:
+                rows = np.flatnonzero(has & (camera == c))
+                with np.errstate(all="ignore"):
+                    xy = self._cameras[c].undistort_normalized(uv[rows])
+                has[rows] = np.isfinite(xy[:, 0]) & np.isfinite(xy[:, 1])
+        return has
+
+    def _one_has_ray(self, camera: int, u: float, v: float) -> bool:
+        """:meth:`_has_ray` of one row (Python scalars; a lensless camera: two comparisons)."""
+        limit = self._limit_list[camera]
+        if not (abs(u) <= limit and abs(v) <= limit):  # (NaN: False)
+            return False
+        return self._lensless[camera] or bool(
+            self._has_ray(np.array([camera]), np.array([[u, v]]))[0])
+
+    def _nothing(self) -> Track:
+        """The inner stream's answer to no row (a row without a ray: as if not pushed)."""
+        return self._scaled(self.inner.push(np.zeros(0, np.int64), np.zeros(0, np.int32),
+                                            np.zeros((0, 2)), np.zeros(0, np.int64)))
+
     def push(self, time_ns, camera, uv, frame_index) -> Track:
-        """The inner stream's push, its points' covariance at the measured noise."""
+        """The inner stream's push, its points' covariance at the measured noise (a row
+        without a ray: as if not pushed; a camera out of the rig: the inner stream's
+        error)."""
         if len(time_ns) == 1:
             u, v = np.asarray(uv, np.float64).reshape(-1, 2)[0].tolist()
-            self._log_one(int(time_ns[0]), int(camera[0]), u, v)
+            c = int(camera[0])
+            if 0 <= c < len(self._limit_list) and not self._one_has_ray(c, u, v):
+                return self._nothing()
+            self._log_one(int(time_ns[0]), c, u, v)
         elif len(time_ns):
-            self._log(np.asarray(time_ns, np.int64), np.asarray(camera), uv)
+            camera = np.asarray(camera)
+            uv = np.asarray(uv, np.float64).reshape(-1, 2)
+            if camera.min() >= 0 and camera.max() < len(self._limit_list):
+                has = self._has_ray(camera, uv)
+                if not has.all():
+                    time_ns, camera, uv = np.asarray(time_ns)[has], camera[has], uv[has]
+                    frame_index = np.asarray(frame_index)[has]
+            if len(time_ns):
+                self._log(np.asarray(time_ns, np.int64), camera, uv)
         return self._scaled(self.inner.push(time_ns, camera, uv, frame_index))
 
     def _push_one(self, time_ns: int, camera: int, u: float, v: float) -> Track:
-        """The inner stream's ``push_one``, its point's covariance at the measured noise."""
+        """The inner stream's ``push_one``, its point's covariance at the measured noise (a
+        row without a ray: as if not pushed)."""
+        if not self._one_has_ray(camera, u, v):
+            return self._nothing()
         self._log_one(time_ns, camera, u, v)
         return self._scaled(self.inner.push_one(time_ns, camera, u, v))
 

@@ -28,6 +28,7 @@ from ._prepare import (
     invalid_points,
     latest_row_at_or_before,
     least_squares_pixel_jacobians,
+    rays_only,
     reprojection_one,
 )
 
@@ -110,7 +111,8 @@ def doubt_covariance(prep: Prepared, slot_rows: np.ndarray, jacobians: list[np.n
 def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | np.ndarray | None,
                  motion: list[SlotMotion] | None = None, compiled: bool = True,
                  breaks: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
-                 residuals_out: list[np.ndarray] | None = None):
+                 residuals_out: list[np.ndarray] | None = None,
+                 excess: tuple[np.ndarray, float] | None = None):
     """N-view least-squares point of each row of detections, with its quality and validity.
 
     Parameters
@@ -131,6 +133,12 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | np.ndarray 
     residuals_out : a list, or None: given, each camera's reprojection residuals (k,) of
         the points are appended to it (recorded pixels, :func:`reprojection_one`'s; NaN
         where the ray is not used or the point is behind the camera)
+    excess : with ``motion`` and ``noise_px``, each point's time (k,) and ``max_gap_s``, or
+        None: the detection noise's part of the covariance of the points whose own
+        detections disagree beyond the noise and the slots' motion is multiplied by
+        :func:`excess_factor` (``nearest``; docs/methods.md, "nearest's covariance where its
+        detections disagree"; :func:`excess_noise`), the motion's, the breaks' and the
+        doubt's terms as they are
 
     Returns
     -------
@@ -218,6 +226,11 @@ def nview_points(prep: Prepared, rows: np.ndarray, noise_px: float | np.ndarray 
                                     else pixels_per_metre_sq(prep, points))
         if prep.doubt_px2 is not None:
             cov = doubt_covariance(prep, slot_rows, jacobians, cov)
+        if excess is not None and motion is not None:
+            noise = np.broadcast_to(np.asarray(noise_px, dtype=np.float64), (k,))
+            cov = excess_noise(prep, slot_rows, jacobians, motion, used, noise, excess_factor(
+                prep, rows, used, points, excess[0], noise, excess[1], list(residual),
+                compiled), cov)
     # (k,) columns, each reduction over the m cameras in numpy's order (the same bits)
     times = [prep.obs.time_ns[r[:, c]] for c in range(m)]
     t_max = np.maximum.reduce([np.where(used[:, c], times[c], np.iinfo(np.int64).min)
@@ -771,30 +784,7 @@ def motion_covariance(prep: Prepared, slot_rows: np.ndarray, jacobians: list[np.
             KINK_GATE, KINK_SHARE, out)
         return {"std_m": out[0], **{f"cov_{a}_m2": out[1 + i] for i, a in
                                     enumerate(("xx", "yy", "zz", "xy", "xz", "yz"))}}
-    # no detection is in two slots of a point (a slot's are its camera's), so the weighted
-    # detections of slot s add up to J_s M_s J_sᵀ, M_s = Σ_j w_sj² L_sj L_sjᵀ (2 x 2), given
-    # to covariance as its Cholesky factor C_s (C_s C_sᵀ = M_s): three slots, not nine
-    factors = []
-    for s in range(m):
-        M = np.zeros((2, 2, k))
-        for j in range(3):
-            r = np.where(used[:, s], motion[s].rows[:, j], -1)
-            w2 = np.where(r >= 0, motion[s].quadratic[:, j] ** 2, 0.0)
-            L = prep.pixel_jacobians_t(np.maximum(r, 0))
-            if L is None:
-                M[0, 0] += w2
-                M[1, 1] += w2
-            else:  # L Lᵀ: (a, c) = Σ_b L[a, b] L[c, b]
-                M[0, 0] += w2 * (L[0, 0] * L[0, 0] + L[0, 1] * L[0, 1])
-                M[1, 1] += w2 * (L[1, 0] * L[1, 0] + L[1, 1] * L[1, 1])
-                M[1, 0] += w2 * (L[1, 0] * L[0, 0] + L[1, 1] * L[0, 1])
-        C = np.zeros((2, 2, k))
-        C[0, 0] = np.sqrt(M[0, 0])
-        with np.errstate(invalid="ignore", divide="ignore"):
-            C[1, 0] = np.where(C[0, 0] > 0, M[1, 0] / C[0, 0], 0.0)
-        C[1, 1] = np.sqrt(np.maximum(M[1, 1] - C[1, 0] * C[1, 0], 0.0))
-        factors.append(C)
-    cov = covariance(slot_rows, jacobians, factors, noise_px)
+    cov = covariance(slot_rows, jacobians, _noise_factors(prep, motion, used), noise_px)
     # the unknown shift of a slot without image velocity, independent of every detection's
     # noise and of the other slots': Σ_s (v₀ L_s)² J_s J_sᵀ
     # and the break of the image motion a used slot's newest detection shows:
@@ -817,6 +807,37 @@ def motion_covariance(prep: Prepared, slot_rows: np.ndarray, jacobians: list[np.
         cov = covariance_columns(np.stack([cov[f"cov_{a}_m2"] for a in
                                            ("xx", "yy", "zz", "xy", "xz", "yz")]) + unknown)
     return _with_motion(cov, jacobians, [d.shift + d.accel for d in motion], used)
+
+
+def _noise_factors(prep: Prepared, motion: list[SlotMotion], used: np.ndarray
+                   ) -> list[np.ndarray]:
+    """Each slot's (2, 2, k) Cholesky factor ``C_s`` of ``M_s = Σ_j w_sj² L_sj L_sjᵀ``: the
+    detection noise's part of :func:`motion_covariance` is ``covariance`` of them."""
+    # no detection is in two slots of a point (a slot's are its camera's), so the weighted
+    # detections of slot s add up to J_s M_s J_sᵀ, M_s = Σ_j w_sj² L_sj L_sjᵀ (2 x 2), given
+    # to covariance as its Cholesky factor C_s (C_s C_sᵀ = M_s): three slots, not nine
+    k, m = used.shape
+    factors = []
+    for s in range(m):
+        M = np.zeros((2, 2, k))
+        for j in range(3):
+            r = np.where(used[:, s], motion[s].rows[:, j], -1)
+            w2 = np.where(r >= 0, motion[s].quadratic[:, j] ** 2, 0.0)
+            L = prep.pixel_jacobians_t(np.maximum(r, 0))
+            if L is None:
+                M[0, 0] += w2
+                M[1, 1] += w2
+            else:  # L Lᵀ: (a, c) = Σ_b L[a, b] L[c, b]
+                M[0, 0] += w2 * (L[0, 0] * L[0, 0] + L[0, 1] * L[0, 1])
+                M[1, 1] += w2 * (L[1, 0] * L[1, 0] + L[1, 1] * L[1, 1])
+                M[1, 0] += w2 * (L[1, 0] * L[0, 0] + L[1, 1] * L[0, 1])
+        C = np.zeros((2, 2, k))
+        C[0, 0] = np.sqrt(M[0, 0])
+        with np.errstate(invalid="ignore", divide="ignore"):
+            C[1, 0] = np.where(C[0, 0] > 0, M[1, 0] / C[0, 0], 0.0)
+        C[1, 1] = np.sqrt(np.maximum(M[1, 1] - C[1, 0] * C[1, 0], 0.0))
+        factors.append(C)
+    return factors
 
 
 def _break_size(motion: list[SlotMotion], used: np.ndarray, noise_px: float | np.ndarray,
@@ -1052,7 +1073,7 @@ def _weighted_points(prep: Prepared, rows: np.ndarray, used: np.ndarray, points:
 
 def stereo_at_common_instants(
     prep: Prepared, tolerance_s: float, method: str, noise_px: float | None = 0.5,
-    max_gap_s: float | None = None,
+    max_gap_s: float | None = None, shared: bool | None = None,
 ) -> tuple[Track, np.ndarray]:
     """N-view points of every instant at which at least two cameras saw the ball.
 
@@ -1060,7 +1081,10 @@ def stereo_at_common_instants(
     tolerance explain (:func:`residual_refused`, at :func:`refusal_noise`'s σ; ``max_gap_s``:
     how far back a camera's previous detection gives its image speed, and the noise's
     residuals reach; None: 3.5 periods of the slowest camera) is dropped and counted in
-    ``Track.dropped`` as ``residual_failed``, like a geometrically invalid one.
+    ``Track.dropped`` as ``residual_failed``, like a geometrically invalid one. ``shared``:
+    whether the session has instants two cameras share (None: ``prep``'s; given by the
+    callers that left detections without a ray out, :func:`rays_only_shared`'s, of the
+    session as given: its methods' error is the session's, not the rays').
 
     Returns
     -------
@@ -1070,7 +1094,7 @@ def stereo_at_common_instants(
         whose detections are not ``alone`` either)
     """
     group, n_cameras = sync_groups(prep.obs, len(prep.centers), tolerance_s)
-    if not np.any(n_cameras >= 2):
+    if not (np.any(n_cameras >= 2) if shared is None else shared):
         raise FusionError(
             f"method {method} needs cameras with a common shutter instant (sync or typeB "
             f"timing), but no two cameras captured within {tolerance_s * 1e3:g} ms of each "
@@ -1099,6 +1123,16 @@ def stereo_at_common_instants(
             n_cameras[group] == 1)
 
 
+def rays_only_shared(prep: Prepared, tolerance_s: float) -> tuple[Prepared, bool | None]:
+    """``sync``'s, ``typeB``'s and ``linear``'s session: ``prep`` without its detections
+    that have no ray (:func:`~._prepare.rays_only`: a missing detection), and whether
+    ``prep`` as given has shared instants where any was left out (None: none left out)."""
+    out, kept = rays_only(prep)
+    if kept is None:
+        return prep, None
+    return out, bool(np.any(sync_groups(prep.obs, len(prep.centers), tolerance_s)[1] >= 2))
+
+
 #: Track.dropped's reason for an N-view point its detections' residuals contradict.
 RESIDUAL_FAILED = "residual_failed"
 
@@ -1116,11 +1150,14 @@ def fuse_sync(prep: Prepared, tolerance_s: float = 1e-3, noise_px: float | None 
     (:func:`residual_refused`: a detection that is not the ball the others saw; dropped and
     counted as ``residual_failed``). ``std_m`` / ``cov_*``: first order at ``noise_px`` per
     axis on each recorded pixel (``tests/test_fusion_validity.py``, hand-computed on a
-    rectified pair). ``max_gap_s``: :func:`stereo_at_common_instants`'.
+    rectified pair). ``max_gap_s``: :func:`stereo_at_common_instants`'. A detection without
+    a ray is a missing one (:func:`rays_only_shared`).
     """
+    prep, shared = rays_only_shared(prep, tolerance_s)  # (no ray: a missing detection)
     if len(prep.obs) == 0:
         return _empty("sync")
-    return stereo_at_common_instants(prep, tolerance_s, "sync", noise_px, max_gap_s)[0]
+    return stereo_at_common_instants(prep, tolerance_s, "sync", noise_px, max_gap_s,
+                                     shared)[0]
 
 
 def fuse_nearest(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
@@ -1130,7 +1167,11 @@ def fuse_nearest(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
     invalid points are dropped and counted in ``Track.dropped``. ``noise_px``: the
     detections' noise until the session's own shows (:func:`detection_noise`), and an upper
     bound of its floor; None: no covariance. ``compiled``: the per-point arithmetic by
-    :mod:`._stereo_kernel` (the same bits), else by the numpy forms (a reference)."""
+    :mod:`._stereo_kernel` (the same bits), else by the numpy forms (a reference). A
+    detection without a ray is a missing one (:func:`~._prepare.rays_only`)."""
+    prep = rays_only(prep)[0]
+    if len(prep.obs) == 0:
+        return _empty("nearest")
     time_ns, camera = prep.obs.time_ns, prep.obs.camera
     rows, others = nearest_rows(prep, int(max_gap_s * NS), compiled)
     if compiled and len(rows) >= 2 * NEAREST_BLOCK_ROWS:
@@ -1144,12 +1185,9 @@ def fuse_nearest(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
     else:
         recorded = recorded_residuals(prep, max_gap_s)
         sigma = detection_noise(prep, time_ns, max_gap_s, noise_px)
-        residuals: list[np.ndarray] = []
-        points, quality, flags, used = nview_points(
+        points, quality, flags, _ = nview_points(
             prep, rows, sigma, slot_motion(prep, rows, time_ns, max_gap_s, compiled),
-            compiled, innovations(prep, max_gap_s, recorded), residuals_out=residuals)
-        quality = excess_scaled(prep, rows, used, points, time_ns, sigma, max_gap_s,
-                                residuals, quality, compiled)
+            compiled, innovations(prep, max_gap_s, recorded), excess=(time_ns, max_gap_s))
     return _nearest_track([_nearest_kept(time_ns, camera, others, points, quality, flags)])
 
 
@@ -1185,26 +1223,31 @@ def excess_factor(prep: Prepared, rows: np.ndarray, used: np.ndarray, points: np
         return np.where(over, excess * excess / np.maximum(2 * n - 3, 1), 1.0)
 
 
-def excess_scaled(prep: Prepared, rows: np.ndarray, used: np.ndarray, points: np.ndarray,
-                  time_ns: np.ndarray, sigma: np.ndarray, max_gap_s: float,
-                  residuals: list[np.ndarray] | None, quality: dict[str, np.ndarray],
-                  compiled: bool = True) -> dict[str, np.ndarray]:
-    """``quality`` with the covariance columns of the points :func:`excess_factor` scales
-    multiplied by it (``std_m`` by its root); the same arrays where it scales none."""
-    f = excess_factor(prep, rows, used, points, time_ns, sigma, max_gap_s, residuals,
-                      compiled)
+def excess_noise(prep: Prepared, slot_rows: np.ndarray, jacobians: list[np.ndarray],
+                 motion: list[SlotMotion], used: np.ndarray, noise_px: np.ndarray,
+                 f: np.ndarray, cov: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """``cov`` (:func:`motion_covariance`'s quality columns) with the detection noise's part
+    ``Σ_n = σ² Σ_s J_s M_s J_sᵀ`` of the points where ``f`` (:func:`excess_factor`) > 1
+    taken ``f`` times: ``Σ' = Σ + (f - 1) Σ_n`` (the motion's, the breaks' and the gate's
+    doubt's terms are the model's, not the noise the residual measures); the same arrays
+    where ``f`` scales none. ``noise_px`` (k,), ``slot_rows`` / ``used`` / ``jacobians`` /
+    ``motion`` as :func:`motion_covariance`'s. Elementwise on the scaled points only (the
+    same bits whatever rows are beside them)."""
     hit = np.flatnonzero(f > 1.0)
     if not len(hit):
-        return quality
-    out = dict(quality)
+        return cov
+    part = [SlotMotion(*(np.take(column, hit, axis=0) for column in mo)) for mo in motion]
+    noise = covariance(slot_rows[hit], [J[:, :, hit] for J in jacobians],
+                       _noise_factors(prep, part, used[hit]), noise_px[hit])
+    names = ("cov_xx_m2", "cov_yy_m2", "cov_zz_m2", "cov_xy_m2", "cov_xz_m2", "cov_yz_m2")
     # (f is infinite only where a used slot has no residual: behind its camera, a point
     # invalid_points flags and the track leaves out)
     with np.errstate(invalid="ignore"):
-        for name, column in quality.items():
-            if name == "std_m" or (name.startswith("cov_") and name.endswith("_m2")):
-                column = column.copy()
-                column[hit] *= np.sqrt(f[hit]) if name == "std_m" else f[hit]
-                out[name] = column
+        six = (np.stack([cov[name][hit] for name in names])
+               + (f[hit] - 1.0) * np.stack([noise[name] for name in names]))
+    out = {name: column.copy() for name, column in cov.items()}
+    for name, column in covariance_columns(six).items():
+        out[name][hit] = column
     return out
 
 
@@ -1274,13 +1317,10 @@ def _nearest_in_blocks(prep: Prepared, rows: np.ndarray, others: np.ndarray,
         if noise_px is None:
             points, quality, flags, used = nview_points(prep, block, None)
         else:
-            residuals: list[np.ndarray] = []
             points, quality, flags, used = nview_points(
                 prep, block, sigma[lo:hi],
                 _slot_motion_compiled(prep, block, time_ns[lo:hi], max_gap_ns), True, breaks,
-                residuals_out=residuals)
-            quality = excess_scaled(prep, block, used, points, time_ns[lo:hi], sigma[lo:hi],
-                                    max_gap_s, residuals, quality)
+                excess=(time_ns[lo:hi], max_gap_s))
         finite = finite_rows(points)
         counts = np.count_nonzero(used & finite[:, None], axis=0)
         if not np.all((counts == 0) | (counts >= 2)):
