@@ -1,0 +1,50 @@
+"""Session 27's hostile-input sweep, input validation and messages: each a one-line message
+naming the problem and the value, through the real CLI on real files."""
+
+from __future__ import annotations
+
+import pytest
+
+from pslog.evaluation import QualitySummary, format_quality_table
+
+
+def test_fuse_says_every_type_a_point_was_withheld_by_the_std_bound(tmp_path, sim_session,
+                                                                       cli):
+    """All typeA points above --type-a-max-std-mm: said so with the count and the bound,
+    not "too few detections close enough in time"."""
+    code, out, err = cli("fuse", sim_session.path, "--method", "typeA",
+                         "--type-a-max-std-mm", "1", "-o", tmp_path / "f.mcap")
+    assert code == 1
+    line = next(x for x in out.splitlines() if x.startswith("no point from typeA"))
+    assert "withheld: std above --type-a-max-std-mm 1 mm" in line, line
+    assert int(line.split("all ")[1].split()[0]) > 50, line
+    assert "too few detections" not in out
+    assert not (tmp_path / "f.mcap").exists()
+
+
+def test_fuse_says_the_type_a_bound_is_ignored_when_type_a_does_not_run(tmp_path,
+                                                                          sim_session, cli):
+    code, out, err = cli("fuse", sim_session.path, "--method", "nearest",
+                         "--type-a-max-std-mm", "1", "-o", tmp_path / "f.mcap")
+    assert code == 0, err
+    assert "--type-a-max-std-mm 1 ignored: typeA does not run" in out, out
+
+
+def test_fuse_refuses_a_pixel_noise_no_detector_has(tmp_path, sim_session, cli, capsys):
+    """1e-300 px: every typeA point's std_m was NaN; 1e-8: sync's NEES a 40-digit number."""
+    for value in ("1e-300", "1e-8", "0.0009"):
+        with pytest.raises(SystemExit) as exc:
+            cli("fuse", sim_session.path, "--noise-px", value, "-o", tmp_path / "f.mcap")
+        assert exc.value.code == 2, value
+        err = capsys.readouterr().err
+        assert "--noise-px" in err and repr(value) in err and "at least 0.001" in err, err
+        assert len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "f.mcap").exists()
+
+
+def test_eval_prints_a_huge_nees_as_a_short_number():
+    row = QualitySummary(method="sync", n_points=3, residual_median_px=0.1,
+                         residual_p95_px=0.2, gap_max_ms=0.0, std_median_mm=1e-9,
+                         within_2sigma=0.0, nees=2.5e40)
+    text = format_quality_table([row])
+    assert "2.50e+40" in text and "25000000000" not in text, text
