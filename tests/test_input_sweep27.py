@@ -12,7 +12,7 @@ def test_fuse_says_every_type_a_point_was_withheld_by_the_std_bound(tmp_path, si
                                                                        cli):
     """All typeA points above --type-a-max-std-mm: said so with the count and the bound,
     not "too few detections close enough in time"."""
-    code, out, err = cli("fuse", sim_session.path, "--method", "typeA",
+    code, out, _ = cli("fuse", sim_session.path, "--method", "typeA",
                          "--type-a-max-std-mm", "1", "-o", tmp_path / "f.mcap")
     assert code == 1
     line = next(x for x in out.splitlines() if x.startswith("no point from typeA"))
