@@ -48,3 +48,38 @@ def test_eval_prints_a_huge_nees_as_a_short_number():
                          within_2sigma=0.0, nees=2.5e40)
     text = format_quality_table([row])
     assert "2.50e+40" in text and "25000000000" not in text, text
+
+
+def _opencv_rig(tmp_path, cli):
+    import json
+
+    path = tmp_path / "rig.json"
+    code, _, err = cli("rig", "export", "paper3", "--format", "opencv", "-o", path)
+    assert code == 0, err
+    return path, json.loads(path.read_text())
+
+
+def test_an_opencv_camera_without_its_camera_matrix_is_refused_not_dropped(tmp_path, cli):
+    import json
+
+    path, rig = _opencv_rig(tmp_path, cli)
+    del rig["camera_0"]["camera_matrix"]
+    path.write_text(json.dumps(rig))
+    for args in (("rig", "check", path), ("rig", "import", path, "-o", tmp_path / "r.toml")):
+        code, out, err = cli(*args)
+        assert code == 1, (args, out, err)
+        assert f"{path}: camera_0: missing key camera_matrix" in err, err
+        assert len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "r.toml").exists()
+
+
+def test_an_opencv_image_width_given_as_a_string_is_named(tmp_path, cli):
+    import json
+
+    path, rig = _opencv_rig(tmp_path, cli)
+    rig["camera_1"]["image_width"] = "640"
+    path.write_text(json.dumps(rig))
+    code, out, err = cli("rig", "check", path)
+    assert code == 1, (out, err)
+    assert "camera_1: image_width must be a number of pixels, got '640' (a string)" in err, err
+    assert len(err.strip().splitlines()) == 1, err
