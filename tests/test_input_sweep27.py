@@ -83,3 +83,19 @@ def test_an_opencv_image_width_given_as_a_string_is_named(tmp_path, cli):
     assert code == 1, (out, err)
     assert "camera_1: image_width must be a number of pixels, got '640' (a string)" in err, err
     assert len(err.strip().splitlines()) == 1, err
+
+
+def test_a_session_given_as_a_rig_file_is_named_as_a_session(tmp_path, sim_session, cli):
+    """'rig import s.mcap', 'calibrate --rig s.mcap': "'utf-8' codec can't decode byte 0x89"."""
+    points = tmp_path / "p.csv"
+    points.write_text("u,v,x,y,z\n")
+    before = sim_session.path.read_bytes()
+    for args in (("rig", "import", sim_session.path, "-o", tmp_path / "r.toml"),
+                 ("calibrate", "--points", points, "--name", "cam1", "--rig",
+                  sim_session.path)):
+        code, out, err = cli(*args)
+        assert code == 1, (args, out, err)
+        assert f"{sim_session.path} is a session, not a rig file" in err, err
+        assert "pslog rig show" in err and "codec" not in err, err
+    assert sim_session.path.read_bytes() == before
+    assert not (tmp_path / "r.toml").exists()
