@@ -99,3 +99,45 @@ def test_a_session_given_as_a_rig_file_is_named_as_a_session(tmp_path, sim_sessi
         assert "pslog rig show" in err and "codec" not in err, err
     assert sim_session.path.read_bytes() == before
     assert not (tmp_path / "r.toml").exists()
+
+
+def test_python_dash_m_pslog_runs_the_command():
+    import subprocess
+    import sys
+
+    result = subprocess.run([sys.executable, "-m", "pslog", "--help"], capture_output=True,
+                            text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.startswith("usage: pslog")
+
+
+@pytest.mark.parametrize("option", ["--clock-offset", "--drift"])
+def test_simulate_refuses_a_camera_given_twice(tmp_path, cli, option):
+    code, _, err = cli("simulate", "--rig", "paper3", option, "cam2=4", option, "cam2=8",
+                       "-o", tmp_path / "s.mcap")
+    assert code == 2, err
+    assert f"argument {option}: camera cam2 given twice (4, 8)" in err, err
+    assert not (tmp_path / "s.mcap").exists()
+
+
+def test_sync_says_a_session_is_too_short_for_a_drift(tmp_path, rig3, cli):
+    from pslog.log import SessionWriter
+    from pslog.motion import get_motion
+    from pslog.simulation import SimulationOptions, simulate
+
+    detections, _ = simulate(rig3, get_motion("straight"), 2.0,
+                             SimulationOptions(noise_px=0.3, seed=0))
+    path = tmp_path / "s.mcap"
+    with SessionWriter(path, rig3, timing="typeA", source="test") as writer:
+        writer.add_detections(detections)
+    code, out, err = cli("sync", path, "--estimate", "drift", "-o", tmp_path / "y.mcap")
+    assert code == 1, (out, err)
+    assert "the session (2.0 s) is too short for a drift: it needs at least 30 s" in err, err
+    assert "move more" not in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_info_prints_a_negative_zero_offset_as_zero():
+    from pslog.cli.info import _ms
+
+    assert _ms(-0.0) == "0.000 ms" and _ms(-1e-9) == "0.000 ms"
+    assert _ms(-2e-6) == "-0.002 ms" and _ms(float("nan")) == "-"
