@@ -141,3 +141,56 @@ def test_info_prints_a_negative_zero_offset_as_zero():
 
     assert _ms(-0.0) == "0.000 ms" and _ms(-1e-9) == "0.000 ms"
     assert _ms(-2e-6) == "-0.002 ms" and _ms(float("nan")) == "-"
+
+
+def _points(tmp_path, seed=None):
+    """samples/cam1_points.csv, its pixels moved by 80 px noise when ``seed`` is given."""
+    from pathlib import Path
+
+    import numpy as np
+
+    sample = Path(__file__).resolve().parent.parent / "samples" / "cam1_points.csv"
+    if seed is None:
+        return sample
+    rows = np.loadtxt(sample, delimiter=",", skiprows=1)
+    rows[:, 3:] += np.random.default_rng(seed).normal(0, 80, (len(rows), 2))
+    path = tmp_path / f"bad{seed}.csv"
+    np.savetxt(path, rows, delimiter=",", header="x,y,z,u,v", comments="", fmt="%.3f")
+    return path
+
+
+def test_calibrate_refuses_an_absurd_square_side(tmp_path, cli, capsys):
+    """1e300: a numpy RuntimeWarning and OpenCV's assertion; 1e30: "RMS 32499 px" written."""
+    with pytest.raises(SystemExit) as exc:
+        cli("calibrate", "--chessboard", "9x6", "--square", "1e30", "--images", tmp_path,
+            "--name", "c", "--rig", tmp_path / "r.toml")
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and "argument --square: must be at most 1 m" in err, err
+    assert "Warning" not in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_calibrate_refuses_a_reprojection_rms_beyond_the_bound(tmp_path, cli):
+    rig = tmp_path / "r.toml"
+    code, out, err = cli("calibrate", "--points", _points(tmp_path, seed=0), "--name", "cam1",
+                         "--rig", rig, "--width", "640", "--height", "480")
+    assert code == 1, (out, err)
+    assert "reprojection RMS 75.4 px is beyond 50 px: the calibration failed" in err, err
+    assert not rig.exists()
+
+
+def test_calibrate_names_a_principal_point_outside_the_image(tmp_path, cli):
+    code, out, err = cli("calibrate", "--points", _points(tmp_path), "--name", "cam1",
+                         "--rig", tmp_path / "r.toml", "--width", "100", "--height", "100")
+    assert code == 1, (out, err)
+    assert "principal point (320.2, 239.9) px lies outside the 100x100 image" in err, err
+    assert "must be within" not in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_calibrate_says_a_binary_points_file_is_not_text(tmp_path, cli):
+    points = tmp_path / "p.csv"
+    points.write_bytes(b"\x89MCAP0\r\n\x00\xff" * 10)
+    code, out, err = cli("calibrate", "--points", points, "--name", "cam1",
+                         "--rig", tmp_path / "r.toml", "--width", "640", "--height", "480")
+    assert code == 1, (out, err)
+    assert f"{points}: not a text CSV file (byte 0 is not UTF-8 text)" in err, err
+    assert "codec" not in err, err
