@@ -194,3 +194,60 @@ def test_calibrate_says_a_binary_points_file_is_not_text(tmp_path, cli):
     assert code == 1, (out, err)
     assert f"{points}: not a text CSV file (byte 0 is not UTF-8 text)" in err, err
     assert "codec" not in err, err
+
+
+def _damaged_sample(tmp_path, name, flip=None, cut=None):
+    from pathlib import Path
+
+    data = bytearray((Path(__file__).resolve().parent.parent / "samples" / "throw.mcap")
+                     .read_bytes())
+    if flip is not None:
+        data[flip] ^= 0xFF
+    path = tmp_path / name
+    path.write_bytes(bytes(data[:cut]) if cut is not None else bytes(data))
+    return path
+
+
+@pytest.mark.parametrize("flip", [40, 200, 600])
+def test_recover_rebuilds_a_damaged_session_metadata_from_the_calibration_topics(
+        tmp_path, cli, flip):
+    """One flipped byte in the session metadata record: info said "nothing can be
+    recovered", fuse "run 'pslog recover'", recover "nothing usable can be recovered"; every
+    message and the /calibration topics were intact."""
+    import numpy as np
+
+    from pslog.log import read_session
+
+    original = _damaged_sample(tmp_path, "orig.mcap")
+    broken = _damaged_sample(tmp_path, "broken.mcap", flip=flip)
+    if flip != 40:  # (40, the record's length: info reads the intact summary's copy)
+        code, out, err = cli("info", broken)
+        assert code == 1 and f"run 'pslog recover {broken}" in err, err
+    fixed = tmp_path / "fixed.mcap"
+    code, out, err = cli("recover", broken, "-o", fixed)
+    assert code == 0, err
+    assert "session metadata (rig, cameras) was damaged: rebuilt" in out, out
+    got, want = read_session(fixed), read_session(original)
+    assert got.rig.names == want.rig.names and got.metadata["timing"] == "typeA"
+    for a, b in zip(got.rig.cameras, want.rig.cameras, strict=True):
+        assert (a.width, a.height, a.fps) == (b.width, b.height, b.fps)
+        np.testing.assert_allclose(a.K, b.K, atol=1e-9)
+        np.testing.assert_allclose(a.R, b.R, atol=1e-9)
+        np.testing.assert_allclose(a.t, b.t, atol=1e-9)
+        assert abs(a.offset - b.offset) < 1e-9
+    np.testing.assert_array_equal(got.detections.cand_uv, want.detections.cand_uv)
+    assert len(got.truth.time_ns) == len(want.truth.time_ns)
+    code, out, err = cli("fuse", fixed, "--method", "typeA", "-o", tmp_path / "f.mcap")
+    assert code == 0, err
+
+
+def test_a_file_cut_in_its_set_up_is_said_to_be_beyond_repair_by_every_command(tmp_path, cli):
+    """Cut at 100 bytes: fuse said "run 'pslog recover'", recover "nothing can be"."""
+    cut = _damaged_sample(tmp_path, "cut.mcap", cut=100)
+    for args in (("info", cut), ("fuse", cut, "-o", tmp_path / "f.mcap"),
+                 ("recover", cut, "-o", tmp_path / "r.mcap")):
+        code, out, err = cli(*args)
+        assert code == 1, (args, out, err)
+        assert "beyond repair" in err and "run 'pslog recover" not in err, (args, err)
+        assert len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "f.mcap").exists() and not (tmp_path / "r.mcap").exists()
