@@ -59,8 +59,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "and typeA's covariance take the noise their detections show "
                              "once a second of them has (at least the smaller of this and "
                              "0.1 px; typeA's first points, before that, at least this and "
-                             "2 px); `pslog sync` prints the estimated noise (default "
-                             "%(default)s)")
+                             "2 px); `pslog sync` prints the estimated noise; 0 (noise-free: zero "
+                             "covariances) or at least 0.001 (default %(default)s)")
     parser.add_argument("--detector-offset-mm", type=number_at_most(1000.0, "mm", "a metre"),
                         default=None, metavar="MM",
                         help="smooth: standard deviation per axis of the detector's constant "
