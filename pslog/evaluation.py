@@ -304,6 +304,8 @@ def _cell(value: float, spec: str, unit: str = "") -> str:
         return "-"
     if np.isinf(value):
         return "σ 0"
+    if abs(value) >= 1e7:  # (a near-zero covariance's NEES: 2.6e+40, not 41 digits)
+        return f"{value:.2e}{unit}"
     return f"{value:{spec}}{unit}"
 
 

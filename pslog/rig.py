@@ -184,6 +184,9 @@ def load_rig_file(path: str | Path, fmt: str = "auto", options=None):
         check_input_file(path, "rig file", MAX_RIG_BYTES)
     except InputError as exc:
         raise RigError(str(exc)) from None
+    if _is_session_file(path):  # not "'utf-8' codec can't decode byte 0x89"
+        raise RigError(f"{path} is a session, not a rig file (take its rig with 'pslog rig "
+                       f"show {path} > rig.toml')")
     try:
         # utf-8-sig: a byte-order mark (Windows editors) is accepted and dropped
         text = path.read_text(encoding="utf-8-sig")

@@ -74,7 +74,10 @@ def read_points_csv(path: str | Path, *, with_lines: bool = False):
             rows = list(csv.reader(f))
     except FileNotFoundError:
         raise InputError(f"points file not found: {path}") from None
-    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+    except UnicodeDecodeError as exc:  # (not the codec's own words)
+        raise InputError(f"{path}: not a text CSV file (byte {exc.start} is not UTF-8 text); "
+                         f"expected header x,y,z,u,v") from None
+    except (OSError, csv.Error) as exc:
         raise InputError(f"cannot read points file {path}: {exc}") from None
     numbered = [(i + 1, row) for i, row in enumerate(rows) if any(c.strip() for c in row)]
     if not numbered:
@@ -179,6 +182,12 @@ def calibrate_from_points(
     K0, R0, t0 = decompose_projection_matrix(P)
     _check_in_front(points_world, R0, t0, "the DLT solution")
     K0[0, 1] = 0.0  # OpenCV's model has no skew; the DLT's small skew is noise
+    cx, cy = K0[0, 2], K0[1, 2]
+    if not (0 <= cx < width and 0 <= cy < height):  # (OpenCV's bare assertion otherwise)
+        raise InputError(f"the points' principal point ({cx:.1f}, {cy:.1f}) px lies outside "
+                         f"the {width}x{height} image (its pixels reach u {uv[:, 0].max():.0f},"
+                         f" v {uv[:, 1].max():.0f}): check --width/--height, and that each u,v "
+                         f"belongs to its x,y,z")
 
     flags = cv2.CALIB_USE_INTRINSIC_GUESS
     estimated = DISTORTION_MODELS[model]

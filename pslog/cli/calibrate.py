@@ -22,7 +22,12 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from pslog.cli._common import add_force, declare_files, nonnegative_float, positive_float
+from pslog.cli._common import add_force, declare_files, nonnegative_float
+
+#: Largest reprojection RMS a calibration may have to be written into the rig, pixels: the
+#: points or corners are then tens of pixels off the model on average, no calibration
+#: (a chessboard of 1e30 m squares gave 32499 px).
+MAX_RMS_PX = 50.0
 
 _WORST_SHOWN = 5
 
@@ -67,9 +72,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="with --points: distortion terms to estimate (default "
                              "%(default)s: none below 10 points, k1,k2 below 100, all five from "
                              "100)")
-    parser.add_argument("--square", type=positive_float, default=0.025,
-                        metavar="M", help="chessboard square side, metres "
-                                          "(default %(default)s)")
+    parser.add_argument("--square", type=number_at_most(1.0, "m", "no board's square is "
+                                                                  "larger", positive=True),
+                        default=0.025, metavar="M", help="chessboard square side, metres, at "
+                                                         "most 1 (default %(default)s)")
     parser.add_argument("--images", metavar="DIR_OR_VIDEO",
                         help="with --chessboard: folder of images or a video file")
     parser.add_argument("--max-frames", type=positive_int, default=60,
@@ -108,9 +114,9 @@ def run(args: argparse.Namespace) -> int:
     offset = args.offset if args.offset is not None else (existing.offset if existing else 0.0)
 
     if args.chessboard:
-        camera = _run_chessboard(args, existing, fps, offset)
+        camera, rms_px = _run_chessboard(args, existing, fps, offset)
     else:
-        camera = _run_points(args, existing, rig_path, fps, offset)
+        camera, rms_px = _run_points(args, existing, rig_path, fps, offset)
 
     kept = ""
     if (existing is not None and existing.has_clock_correction
@@ -129,6 +135,11 @@ def run(args: argparse.Namespace) -> int:
                                 readout=existing.readout)
         kept = (f"; kept its clock: offset {existing.clock_offset * 1e3:+.4f} ms, drift "
                 f"{existing.clock_drift_ppm:+.3f} ppm, readout {existing.readout * 1e3:.4f} ms")
+    if not rms_px <= MAX_RMS_PX:  # (NaN too)
+        check = "--square and the images" if args.chessboard else "the points"
+        raise InputError(f"reprojection RMS {rms_px:.4g} px is beyond {MAX_RMS_PX:g} px: the "
+                         f"calibration failed (check {check}); "
+                         + (f"{rig_path} not changed" if rig is not None else "nothing written"))
     new_rig = (Rig((camera,), rig_path.stem) if rig is None else rig.with_camera(camera))
     # the old rig is replaced only by a complete new one (full disk: it stays as it was)
     save_rig(new_rig, rig_path, inputs=_inputs(args))
@@ -184,7 +195,7 @@ def _run_points(args, existing, rig_path: Path, fps: float, offset: float):
     if np.any(~camera.in_image(uv)):
         print(f"  note: {int(np.count_nonzero(~camera.in_image(uv)))} points lie outside the "
               f"{width}x{height} image; check --width/--height")
-    return camera
+    return camera, result.rms_px
 
 
 def _run_chessboard(args, existing, fps: float, offset: float):
@@ -219,7 +230,7 @@ def _run_chessboard(args, existing, fps: float, offset: float):
     else:
         print("  pose: unknown from a chessboard; set to identity R, zero t. Solve it with "
               "--points CSV --fix-intrinsics")
-    return camera
+    return camera, result.rms_px
 
 
 def _print_intrinsics(camera) -> None:

@@ -8,6 +8,7 @@ from ._common import (
     add_force,
     add_method_option,
     declare_files,
+    fuse_noise_px,
     int_in,
     noise_px,
     nonnegative_float,
@@ -48,7 +49,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         default=None, metavar="HZ",
                         help="smooth: points on a regular grid of this rate instead of at "
                              "every detection time")
-    parser.add_argument("--noise-px", type=noise_px, default=0.5, metavar="PX",
+    parser.add_argument("--noise-px", type=fuse_noise_px, default=0.5, metavar="PX",
                         help="the detections' pixel noise (standard deviation per axis) behind "
                              "each point's std_m and covariance, and the least noise typeA's "
                              "prediction and kink tests assume (they use the larger of it and "
@@ -58,8 +59,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "and typeA's covariance take the noise their detections show "
                              "once a second of them has (at least the smaller of this and "
                              "0.1 px; typeA's first points, before that, at least this and "
-                             "2 px); `pslog sync` prints the estimated noise (default "
-                             "%(default)s)")
+                             "2 px); `pslog sync` prints the estimated noise; 0 (noise-free: zero "
+                             "covariances) or at least 0.001 (default %(default)s)")
     parser.add_argument("--detector-offset-mm", type=number_at_most(1000.0, "mm", "a metre"),
                         default=None, metavar="MM",
                         help="smooth: standard deviation per axis of the detector's constant "
@@ -167,6 +168,9 @@ def run(args: argparse.Namespace) -> int:
     # gate's compiled points, pslog.fusion._gate_kernel.points_all)
     preload(*dict.fromkeys(k for m in methods for k in METHODS[m].kernels), "pslog.log._wire",
             *(("pslog.fusion._gate_kernel",) if options.gating else ()))
+    if args.type_a_max_std_mm is not None and "typeA" not in methods:
+        print(f"--type-a-max-std-mm {args.type_a_max_std_mm:g} ignored: typeA does not run "
+              f"(name it with --method typeA)")
     if "smooth" in methods:  # a malformed PSLOG_SMOOTH_THREADS said now, not after gating
         from pslog.estimation._breaks import smooth_threads
 
@@ -185,7 +189,7 @@ def run(args: argparse.Namespace) -> int:
                           background=args.workers is None)
     del detections  # (held by the gating until the last form is gated)
     written: dict[str, tuple[int, dict[str, int], int]] = {}  # points, left out, rejected
-    empty: list[str] = []
+    empty: dict[str, dict[str, int]] = {}  # method: its left-out counts
     early: dict[str, int] = {}
     still: dict[str, int] = {}  # candidates rejected as a still object, by method
     try:
@@ -205,7 +209,7 @@ def run(args: argparse.Namespace) -> int:
                     if options.gating:
                         still[method] = _still_rejections(rejected)
                     if len(track) == 0:
-                        empty.append(method)
+                        empty[method] = dropped
                         continue
                     # a camera whose clock runs behind camera 1's has true times before the
                     # session clock's zero, which a session cannot store: left out, said
@@ -219,16 +223,14 @@ def run(args: argparse.Namespace) -> int:
                         w.add_rejections(method, rejected)
                     written[method] = (len(track), dropped, len(rejected))
                     del track, rejected
-            empty.sort(key=methods.index)
             most = max(still.values(), default=0)
             if most > n_candidates / 2:
                 # by design (docs/methods.md): a still object is not a ball in play
                 print(f"{most} of {n_candidates} candidates rejected as a still object: a "
                       f"ball that stands still (slower than about 20 cm/s) is not tracked; "
                       f"run with --gating off to fuse it anyway")
-            if empty:
-                print(f"no point from {', '.join(empty)}: too few detections close enough "
-                      f"in time")
+            for method in (m for m in methods if m in empty):
+                print(_no_point(method, empty[method], args.type_a_max_std_mm))
             if not written:
                 raise FusionError(f"no fusion method produced a point from the "
                                   f"{n_observations} detections of {args.session}")
@@ -249,6 +251,22 @@ def run(args: argparse.Namespace) -> int:
               + (f" (left out, untrustworthy: {why})" if why else ""))
     print(f"wrote {output}")
     return 0
+
+
+def _no_point(method: str, dropped: dict[str, int], max_std_mm: float | None) -> str:
+    """The line saying why ``method`` gave no point: every point it found left out (by
+    reason, ``uncertain`` naming --type-a-max-std-mm's bound), or none found."""
+    if not dropped:
+        return f"no point from {method}: too few detections close enough in time"
+    total = sum(dropped.values())
+    if set(dropped) == {"uncertain"} and max_std_mm is not None:
+        return (f"no point from {method}: all {total} {method} points withheld: std above "
+                f"--type-a-max-std-mm {max_std_mm:g} mm")
+    why = ", ".join(f"{reason} {n}" for reason, n in dropped.items())
+    bound = (f"; uncertain: std above --type-a-max-std-mm {max_std_mm:g} mm"
+             if "uncertain" in dropped and max_std_mm is not None else "")
+    return (f"no point from {method}: all {total} points left out, untrustworthy: "
+            f"{why}{bound}")
 
 
 #: glibc's mallopt parameter of the most malloc arenas (malloc.h)

@@ -60,7 +60,8 @@ def _pct(value: float) -> str:
 
 
 def _ms(seconds: float) -> str:
-    return "-" if seconds != seconds else f"{seconds * 1e3:.3f} ms"
+    # + 0.0: a -0.0 (or a value rounding to it) prints as 0.000, not -0.000
+    return "-" if seconds != seconds else f"{round(seconds * 1e3, 3) + 0.0:.3f} ms"
 
 
 def _damage(info: dict) -> list[str]:

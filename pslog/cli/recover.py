@@ -23,6 +23,11 @@ def run(args: argparse.Namespace) -> int:
     # the output was checked before run() (declare_files); on any failure
     # recover_session leaves nothing half-written
     report = recover_session(args.session, args.output, force=args.force)
+    if report["rebuilt_metadata"]:
+        print("the session metadata (rig, cameras) was damaged: rebuilt from the cameras' "
+              "calibration and pose messages, frame rates and offsets from the detections' "
+              "times (check it: 'pslog rig show FIXED.mcap')".replace("FIXED.mcap",
+                                                                      str(args.output)))
     if report["was_complete"]:
         print(f"{args.session} was complete; copied {report['messages']} messages to "
               f"{args.output}")

@@ -195,6 +195,14 @@ def run(args: argparse.Namespace) -> int:
     readout = {}
     for name, value in args.readout:  # in order: a later value wins
         readout.update({n: value for n in rig.names} if name is None else {name: value})
+    for option, pairs in (("--clock-offset", args.clock_offset), ("--drift", args.drift)):
+        names = [name for name, _ in pairs]
+        twice = next((n for i, n in enumerate(names) if n in names[:i]), None)
+        if twice is not None:  # (the last one silently won)
+            given = ", ".join(f"{v * 1e3 if option == '--clock-offset' else v:g}"
+                              for n, v in pairs if n == twice)
+            return usage_error("simulate", f"argument {option}: camera {twice} given "
+                                           f"twice ({given}): give each camera once")
     faults: dict[str, dict] = {"clock_offset_s": dict(args.clock_offset),
                                "clock_drift_ppm": dict(args.drift), "readout_s": readout}
     options = SimulationOptions(noise_px=args.noise_px, jitter_s=args.jitter_ms / 1e3,

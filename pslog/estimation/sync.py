@@ -256,7 +256,7 @@ def _estimate_clocks(obs: Observations, rig: Rig, estimate, search_s: float | No
 
     # before the rig takes the values: an undetermined estimate may lie beyond what a rig
     # accepts, and the message is then the estimate's, not a bad rig value's
-    _check_motion(problem, control, unknowns, std, rig, theta)
+    _check_motion(problem, control, unknowns, std, rig, theta, span)
     norms = np.linalg.norm(r, axis=1)
     inlier = w > 0.5
     estimates, new_cams = [], []
@@ -844,10 +844,12 @@ def _check_coverage(obs: Observations, rig: Rig, max_gap_s: float) -> None:
                               f"'s; sync needs at least {MIN_DETECTIONS} shared in time")
 
 
-def _check_motion(problem, control, unknowns, std, rig, theta) -> None:
+def _check_motion(problem, control, unknowns, std, rig, theta, span_s: float) -> None:
     """A one-line :class:`FusionError` when the ball barely moves, or when an estimate is so
     uncertain that the data did not determine it, or lies beyond what a clock can be (a
-    drift beyond ±1000 ppm, an offset beyond a day: ``theta``, the rig's parametrisation)."""
+    drift beyond ±1000 ppm, an offset beyond a day: ``theta``, the rig's parametrisation);
+    an undetermined drift on a session (``span_s``, seconds) shorter than
+    :data:`AUTO_DRIFT_MIN_S` is said to be the session's length, not the ball's motion."""
     speed = np.linalg.norm(problem.velocities(control), axis=1)
     if np.median(speed) < 0.05:
         raise FusionError(f"the ball barely moves (median speed {np.median(speed):.3f} m/s): "
@@ -857,8 +859,12 @@ def _check_motion(problem, control, unknowns, std, rig, theta) -> None:
         limit = {"offset": 0.25 / rig.cameras[c].fps, "drift": 1000.0,
                  "readout": 1 / rig.cameras[c].fps}[p]
         if not (s < limit and abs(value) <= bound[p]):
-            raise FusionError(f"camera {rig.cameras[c].name}: the {p} is not determined by "
-                              f"the ball's motion (estimate {value:.3g}, standard deviation "
-                              f"{s:.3g}); "
+            short = p == "drift" and span_s < AUTO_DRIFT_MIN_S
+            raise FusionError(f"camera {rig.cameras[c].name}: the {p} is not determined "
+                              + ("" if short else "by the ball's motion ")
+                              + f"(estimate {value:.3g}, standard deviation {s:.3g}); "
                               + ("a readout needs the ball to move up or down the image"
-                                 if p == "readout" else "the ball needs to move more"))
+                                 if p == "readout" else
+                                 f"the session ({span_s:.1f} s) is too short for a drift: "
+                                 f"it needs at least {AUTO_DRIFT_MIN_S:.0f} s"
+                                 if short else "the ball needs to move more"))

@@ -388,12 +388,24 @@ def _opencv_cameras(text: str, path: str | Path) -> tuple[list[dict], str]:
     name = name_node.string() if name_node.isString() else ""
     if "camera_matrix" in root.keys():
         return [_opencv_camera(root, None, Path(path).stem, source)], name
-    cameras = [_opencv_camera(root.getNode(key), key, key, source) for key in root.keys()
-               if root.getNode(key).isMap() and "camera_matrix" in root.getNode(key).keys()]
+    cameras = []
+    for key in root.keys():
+        node = root.getNode(key)
+        if not node.isMap():
+            continue
+        if "camera_matrix" in node.keys():
+            cameras.append(_opencv_camera(node, key, key, source))
+        elif set(node.keys()) & _OPENCV_CAMERA_KEYS:  # a camera, not silently dropped
+            raise RigError(f"{source}: {key}: missing key camera_matrix")
     if not cameras:
         raise RigError(f"{source}: missing key camera_matrix (at the top level for one "
                        f"camera, or in one map per camera)")
     return cameras, name
+
+
+#: An OpenCV camera map's keys besides ``camera_matrix``: a map with any of them is a camera.
+_OPENCV_CAMERA_KEYS = frozenset({"image_width", "image_height", "distortion_coefficients",
+                                 "R", "rvec", "T", "tvec", "camera_name"})
 
 
 def _opencv_open(text: str, source: str):
@@ -465,6 +477,11 @@ def _opencv_camera(node, key: str | None, default_name: str, source: str) -> dic
     t_key, t_node = _opencv_node(node, ("T", "tvec"), where)
     size = []
     for size_key, size_node in ((width_key, width), (height_key, height)):
+        if size_node.isString():
+            raise RigError(f"{where}: {size_key} must be a number of pixels, got "
+                           f"{size_node.string()!r} (a string)")
+        if not (size_node.isInt() or size_node.isReal()):
+            raise RigError(f"{where}: {size_key} must be a number of pixels")
         value = size_node.real()
         if not size_node.isInt() and not (math.isfinite(value) and value == round(value)):
             raise RigError(f"{where}: {size_key} must be a whole number of pixels")

@@ -142,12 +142,46 @@ def truncated_error(path) -> LogFormatError:
         return LogFormatError(f"{path}: its closing MCAP magic (the last 8 bytes) is damaged; "
                               f"run 'pslog recover {path} -o FIXED.mcap' to salvage the data")
     recording = still_recording(path)
+    setup = cut_in_setup(path)  # nothing for recover to salvage: say so, not "run recover"
     if recording is not None:
         return LogFormatError(f"{path} is incomplete (truncated): it may still be recording "
-                              f"({recording}); if no recorder is writing it, run 'pslog "
-                              f"recover {path} -o FIXED.mcap' to salvage it")
+                              f"({recording}); if no recorder is writing it, "
+                              + ("it is beyond repair (cut within its session set-up)"
+                                 if setup else
+                                 f"run 'pslog recover {path} -o FIXED.mcap' to salvage it"))
+    if setup:
+        return LogFormatError(f"{path} is truncated within its session set-up (its first "
+                              f"{Path(path).stat().st_size} bytes, before the session "
+                              f"metadata ends): nothing was recorded; the file is beyond "
+                              f"repair")
     return LogFormatError(f"{path} is truncated (the recording did not finish); "
                           f"run 'pslog recover {path} -o FIXED.mcap' to salvage it")
+
+
+def cut_in_setup(path) -> bool:
+    """Whether the file ends before the end of its first Metadata record (pslog writes the
+    session's metadata right after the Header, before any message): a file cut there holds
+    nothing :func:`salvage_file` could make a session of. Reads the first records only."""
+    try:
+        with open(path, "rb") as f:
+            size = os.fstat(f.fileno()).st_size
+            head = f.read(_HEADER_MAX)
+    except OSError:
+        return False
+    if head[:len(MAGIC)] != MAGIC:
+        return False
+    at = len(MAGIC)
+    for _ in range(4):  # Header, then (pslog's) the Metadata record
+        if at + 9 > len(head):
+            return at + 9 > size
+        op = head[at]
+        end = at + 9 + int.from_bytes(head[at + 1:at + 9], "little")
+        if op == OP_METADATA:
+            return end > size
+        if op not in (OP_HEADER, OP_SCHEMA, OP_CHANNEL):
+            return False
+        at = end
+    return False
 
 
 def still_recording(path) -> str | None:

@@ -255,15 +255,32 @@ def _scanned_info(path, size: int, problem: str) -> dict:
     topics: dict[int, int] = {}
     last_ns: dict[int, int] = {}
 
-    def count(cid: int, t: int, _seq: int, _data: bytes) -> None:
+    static: dict[str, bytes] = {}  # what recover rebuilds a lost metadata record from
+    detection_ns: dict[str, tuple[list, list, list]] = {}
+    scan = io.Scan()
+
+    def count(cid: int, t: int, _seq: int, data: bytes) -> None:
         topics[cid] = topics.get(cid, 0) + 1
         last_ns[cid] = max(last_ns.get(cid, t), t)
+        channel = scan.channels.get(cid)
+        if channel is None:
+            return
+        if channel.topic.endswith(("/calibration", "/transform")):
+            static.setdefault(channel.topic, data)
+        elif channel.topic.endswith("/detections"):
+            detection_ns.setdefault(channel.topic, ([], [], []))[0].append(t)
 
-    scan = io.salvage_file(path, count)
+    io.salvage_file(path, count, scan=scan)
     if scan.damaged and not any(name == S.SESSION_METADATA for name, _ in scan.metadata):
-        raise LogFormatError(f"{path}: {problem}, and its session metadata (rig, cameras) is "
-                             f"lost (damaged or cut at byte {scan.damaged[0].start}); nothing "
-                             f"can be recovered")
+        from .recover import _rebuilt_metadata
+
+        where = (f"{path}: {problem}, and its session metadata (rig, cameras) is lost "
+                 f"(damaged or cut at byte {scan.damaged[0].start})")
+        if _rebuilt_metadata(static, detection_ns) is None:
+            raise LogFormatError(f"{where}, with no intact calibration of every camera to "
+                                 f"rebuild it from; the file is beyond repair")
+        raise LogFormatError(f"{where}; run 'pslog recover {path} -o FIXED.mcap': it "
+                             f"rebuilds the rig from the cameras' calibration messages")
     io.session_metadata(scan.metadata, path)
     name = {c: scan.channels[c].topic if c in scan.channels else f"channel {c}" for c in topics}
     named = {name[c]: n for c, n in topics.items()}

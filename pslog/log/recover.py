@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -102,6 +103,7 @@ def recover_session(src, dst, *, force: bool = False) -> dict:
     # they would name messages that were lost)
     kept: dict[str, tuple[list, list, list]] = {}
     table_topics = _TableTopics()
+    static: dict[str, bytes] = {}  # each camera's first calibration and transform message
 
     # dst is checked (never src in any spelling), written as <dst>.partial and moved over
     # dst only when complete; removed on any failure
@@ -136,6 +138,8 @@ def recover_session(src, dst, *, force: bool = False) -> dict:
                 rows[0].append(t)
                 rows[1].append(seq)
                 rows[2].append(data)
+            if topic.endswith(("/calibration", "/transform")):  # the rig, if the metadata
+                static.setdefault(topic, data)                     # record is lost
             topics[topic] = topics.get(topic, 0) + 1
             last_ns[topic] = max(last_ns.get(topic, t), t)
             times[0] = t if times[0] is None else min(times[0], t)
@@ -143,14 +147,22 @@ def recover_session(src, dst, *, force: bool = False) -> dict:
 
         io.salvage_file(src, copy, scan=scan, tolerate_magic=True)
         size = src.stat().st_size
+        rebuilt = None
         try:
             meta = io.session_metadata(scan.metadata, src)  # refuse to "recover" what is not ours
         except LogFormatError:
-            if scan.damaged and not scan.metadata:
+            if not (scan.damaged and not scan.metadata):
+                raise
+            # lost with a damaged part: the rig from the cameras' calibration and pose
+            # messages, their frame rates and offsets from the detections' times
+            rebuilt = _rebuilt_metadata(static, kept)
+            if rebuilt is None:
                 raise LogFormatError(
                     f"{src}: the session metadata (rig, cameras) was in the damaged part at "
-                    f"byte {scan.damaged[0].start}; nothing usable can be recovered") from None
-            raise
+                    f"byte {scan.damaged[0].start}, and no intact calibration of every camera "
+                    f"survived to rebuild it; the file is beyond repair") from None
+            meta = rebuilt
+            scan.metadata.append((S.SESSION_METADATA, rebuilt))
         try:  # records outside chunks have no CRC: a damaged rig shows only when parsed
             Rig.from_toml(meta.get("rig_toml", ""), source="the rig")
         except PslogError as exc:
@@ -170,6 +182,7 @@ def recover_session(src, dst, *, force: bool = False) -> dict:
     return {
         "source": str(src),
         "output": str(dst),
+        "rebuilt_metadata": rebuilt is not None,
         "was_complete": complete and scan.summary is not None,
         "messages": sum(topics.values()),
         "topics": dict(sorted(topics.items())),
@@ -186,6 +199,71 @@ def recover_session(src, dst, *, force: bool = False) -> dict:
                         "only the summary section was damaged; no data lost" if complete
                         else tail + ("; ..." if len(damaged) > 3 else "")),
     }
+
+
+def _rebuilt_metadata(static: dict[str, bytes], kept: dict) -> dict[str, str] | None:
+    """A session metadata record rebuilt from each camera's calibration and transform
+    message (in the file's order: the rig's) and the times of its detection frames (frame
+    rate rounded to 1 mHz; offsets those of a shutter preset when within a twentieth of a
+    period of them), or None when a camera's calibration, pose or two detection frames did
+    not survive."""
+    import numpy as np
+
+    from ..camera import Camera
+    from ..rig import TIMING_PRESETS, apply_timing, timing_label
+    from .info import measure_timing
+
+    names = [parsed[0] for t in static if t.endswith("/calibration")
+             and (parsed := S.parse_camera_topic(t)) is not None]
+    if not names:
+        return None
+    timed = []
+    for name in names:
+        calib_data = static.get(S.calibration_topic(name))
+        pose_data = static.get(S.transform_topic(name))
+        rows = kept.get(S.detections_topic(name))
+        if calib_data is None or pose_data is None or rows is None or len(rows[0]) < 2:
+            return None
+        times = np.sort(np.asarray(rows[0], dtype=np.int64))
+        timed.append((name, calib_data, pose_data, times))
+    ref = int(min(times[0] for *_, times in timed))
+    cameras = []
+    try:
+        for name, calib_data, pose_data, times in timed:
+            calib = S.CameraCalibration.FromString(calib_data)
+            pose = S.FrameTransform.FromString(pose_data)
+            world_from_cam = S.rotation_from_quaternion(
+                [pose.rotation.x, pose.rotation.y, pose.rotation.z, pose.rotation.w])
+            centre = np.array([pose.translation.x, pose.translation.y, pose.translation.z])
+            period, phase = measure_timing(times, ref)
+            if not period > 0:
+                return None
+            R = world_from_cam.T
+            cameras.append(Camera(
+                name=name, width=int(calib.width), height=int(calib.height),
+                K=np.asarray(calib.K, dtype=np.float64).reshape(3, 3),
+                dist=np.asarray(list(calib.D)[:5] + [0.0] * (5 - len(calib.D[:5]))),
+                R=R, t=-R @ centre, fps=round(1.0 / period, 3), offset=phase % period))
+        rig = Rig(tuple(cameras), "recovered")
+        first = cameras[0].offset
+        rig = Rig(tuple(c.replace(offset=(c.offset - first) % (1.0 / c.fps))
+                        for c in cameras), "recovered")
+        for preset in TIMING_PRESETS:
+            snapped = apply_timing(rig, preset)
+            if all(abs(a.offset - b.offset) < 0.05 / a.fps
+                   for a, b in zip(rig.cameras, snapped.cameras, strict=True)):
+                rig = snapped
+                break
+    except (PslogError, ValueError, TypeError):  # a calibration that is no camera
+        return None
+    return {"format": S.FORMAT_NAME, "format_version": S.FORMAT_VERSION,
+            "rig_toml": rig.to_toml(), "timing": timing_label(rig),
+            "source": "pslog recover: session metadata lost; rig rebuilt from the cameras' "
+                      "calibration and pose messages, frame rates and offsets from the "
+                      "detections' times",
+            "creator": RECOVER_LIBRARY,
+            "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
+            "camera_names": ",".join(rig.names)}
 
 
 def _pslog_schema(topic: str) -> io.SchemaRec | None:
