@@ -27,7 +27,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="write one TUM trajectory per method (DIR/<method>.tum) and the "
                              "truth (DIR/truth.tum), for evo_traj / evo_ape: 'timestamp tx ty "
                              "tz qx qy qz qw', session-clock seconds, metres, identity "
-                             "orientation")
+                             "orientation. With --force an earlier export in DIR is replaced "
+                             "as a whole (its <method>.tum the new session lacks removed); "
+                             "other files in DIR are kept")
     parser.add_argument("--jsonl", metavar="TRACKS.jsonl",
                         help="write the fused tracks as JSON lines: one object per point "
                              "(method, time, position, camera, quality)")

@@ -375,6 +375,25 @@ def test_a_killed_force_run_leaves_a_partial_that_the_next_run_removes(inputs, t
     assert out.read_bytes() != b"old output"
 
 
+def test_a_file_pslog_cannot_prove_it_made_is_never_taken_for_a_stale_partial(inputs,
+                                                                              tmp_path):
+    """A user's notes.csv.partial (no MCAP: pslog cannot tell it wrote it) and a complete
+    session named s3.mcap.partial are kept and the write refused, naming them; an output
+    named *.partial (which a later run would take for its stale partial) is refused."""
+    (tmp_path / "notes.csv.partial").write_text("my notes\n")
+    shutil.copyfile(inputs / "fused.mcap", tmp_path / "s3.mcap.partial")
+    before = fingerprint(tmp_path)
+    for args, contains in (
+            (["export", inputs / "fused.mcap", "--csv", tmp_path / "notes.csv"],
+             (f"{tmp_path / 'notes.csv.partial'} exists", "cannot tell it made it")),
+            (["simulate", "--rig", "paper3", "--duration", "0.3", "-o", tmp_path / "s3.mcap"],
+             (f"{tmp_path / 's3.mcap.partial'} exists and is a complete session",)),
+            (["fuse", inputs / "s.mcap", "-o", tmp_path / "new.mcap.partial"],
+             ("ends in .partial", "choose another name"))):
+        assert_one_line_error(run_pslog(*args), 1, contains=contains)
+        assert_untouched(before, tmp_path)
+
+
 def test_stale_partial_that_may_hold_a_recording_is_kept_and_named(inputs, tmp_path):
     out = tmp_path / "s.mcap"
     out.write_bytes(b"old session")
