@@ -525,7 +525,10 @@ def test_a_full_standard_output_is_named_and_the_complete_output_kept(inputs, tm
         pytest.skip("mknod needs root")
     out = tmp_path / "o"
     out.mkdir()
+    # fuse prints as each method's track is written, before its output is complete: it too
+    # runs to its end and keeps it (it used to stop there and leave nothing)
     for args, made in ((["export", inputs / "s.mcap", "--detections", out / "d.csv"], "d.csv"),
+                       (["fuse", inputs / "s.mcap", "-o", out / "f.mcap"], "f.mcap"),
                        (["info", inputs / "s.mcap"], None)):
         with open(full, "w") as stdout:
             proc = subprocess.run([sys.executable, "-m", "pslog.cli", *map(str, args)],
@@ -533,10 +536,16 @@ def test_a_full_standard_output_is_named_and_the_complete_output_kept(inputs, tm
         run = Run(tuple(map(str, args)), proc.returncode, "", proc.stderr)
         assert_one_line_error(run, 1, contains="cannot write to standard output: No space "
                                                "left on device")
-        if made:
+        if made == "d.csv":
             text = (out / made).read_text()
             assert text.count("\n") > 100 and text == (inputs / "det.csv").read_text()
-            assert made not in run.stderr
+        if made == "f.mcap":
+            from pslog.log import read_session
+
+            assert sorted(read_session(out / made).tracks) == ["filter", "nearest", "smooth",
+                                                               "typeA"]
+        if made:  # said to be complete, never blamed
+            assert run.stderr.rstrip().endswith(f"; {out / made} written complete")
 
 
 def test_a_closed_standard_output_is_no_traceback(inputs):
