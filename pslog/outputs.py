@@ -138,6 +138,10 @@ def check_output_path(path: str | Path, force: bool, inputs: Iterable[str | Path
     """
     inputs = [p for p in inputs if p is not None]
     spelled, path = os.fspath(path), Path(path)  # name files as the user wrote them
+    if spelled == "-":
+        # the usual spelling of standard output: never a file named "-" by surprise
+        raise InputError("output '-': pslog writes files, not standard output; give a file "
+                         "name (./- for a file named -)")
     partial = partial_path(path)
     for source in inputs:
         if same_file(path, source):

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import warnings
 from pathlib import Path
 
@@ -81,6 +82,9 @@ def write_tum(session, folder: str | Path, *, force: bool = False) -> dict[str, 
     -------
     dict : name (method or ``truth``) -> number of poses written
     """
+    if os.fspath(folder) == "-":
+        raise InputError("--tum '-': pslog writes a folder of files, not standard output; "
+                         "give a folder name (./- for a folder named -)")
     folder = Path(folder)
     if folder.exists() and not folder.is_dir():
         raise InputError(f"--tum {folder}: a file, not a folder (TUM files are written into "

@@ -394,6 +394,29 @@ def test_a_file_pslog_cannot_prove_it_made_is_never_taken_for_a_stale_partial(in
         assert_untouched(before, tmp_path)
 
 
+@pytest.mark.parametrize("args", [
+    ["export", "{i}/fused.mcap", "--csv", "-"],
+    ["export", "{i}/fused.mcap", "--tum", "-"],
+    ["fuse", "{i}/s.mcap", "--method", "typeA", "-o", "-"],
+    ["simulate", "--rig", "paper3", "--duration", "0.3", "-o", "-"],
+])
+def test_dash_as_an_output_is_refused_not_written_as_a_file_named_dash(args, inputs, tmp_path,
+                                                                      request):
+    """'-' means standard output elsewhere: pslog wrote a file (or folder) named '-'."""
+    argv = [a.format(i=inputs) for a in args]
+    if first_case(request):  # a real process, run in tmp_path
+        run = run_pslog(*argv, cwd=tmp_path)
+    else:  # in this process (tests/faults/_inprocess.py), from tmp_path
+        old = os.getcwd()
+        os.chdir(tmp_path)
+        try:
+            run = run_inprocess(*argv)
+        finally:
+            os.chdir(old)
+    assert_one_line_error(run, 1, contains=("'-'", "not standard output", "./-"))
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_stale_partial_that_may_hold_a_recording_is_kept_and_named(inputs, tmp_path):
     out = tmp_path / "s.mcap"
     out.write_bytes(b"old session")
