@@ -20,7 +20,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
     parser.add_argument("session", metavar="SESSION.mcap", help="session or fused session")
     parser.add_argument("--detections", metavar="DET.csv",
-                        help="write every detection candidate, in the 'pslog import' format")
+                        help="write every detection candidate, in the 'pslog import' format, "
+                             "and every frame without one (u, v empty)")
     parser.add_argument("--csv", metavar="TRACKS.csv",
                         help="write the fused tracks: time,x,y,z,camera,method (+ quality)")
     parser.add_argument("--tum", metavar="DIR",
