@@ -942,7 +942,7 @@ def results_lock(outdir: str | Path):
     from pslog.outputs import write_error
 
     path = Path(outdir) / LOCK_NAME
-    for _attempt in range(3):
+    for _attempt in range(4):  # (the last one after a garbage lock was removed)
         try:
             fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
         except FileExistsError:
@@ -961,8 +961,13 @@ def results_lock(outdir: str | Path):
             continue
         except OSError as exc:
             raise write_error(path, exc) from None
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(f"{os.getpid()}\n")
+        try:
+            with os.fdopen(fd, "w", encoding="utf-8") as f:
+                f.write(f"{os.getpid()}\n")
+        except OSError as exc:  # a full disk: the lock is not taken, and not left behind
+            with contextlib.suppress(OSError):
+                path.unlink()
+            raise write_error(path, exc) from None
         break
     else:
         raise PslogError(f"{path}: cannot take the lock of {outdir} (another batch keeps "

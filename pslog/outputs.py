@@ -7,9 +7,12 @@ sibling ``<name>.partial`` first and move it over the output only once it is com
 
 Partial files left by a killed run (the next run meets them):
 
-- a *derived* output (``simulate``, ``import``, ``fuse``, ``redetect``, ``recover``,
-  ``export``, ``view --save``) can be made again from its inputs, so its stale partial is
-  removed with a one-line notice (:func:`clear_stale_partial`);
+- a *derived* session (``simulate``, ``import``, ``fuse``, ``redetect``, ``recover``)
+  can be made again from its inputs, and its MCAP says it is one, so its stale unfinished
+  partial is removed with a one-line notice (:func:`clear_stale_partial`);
+- any other file of that name (a killed CSV or .rrd export's partial, a complete session,
+  a user's own ``notes.csv.partial``) is never deleted: nothing proves pslog made it, so
+  writing the output is refused, naming the file; an output named ``*.partial`` is refused;
 - a partial that may hold a *recording* (``record --force`` killed while replacing a
   session: the only copy of what the cameras saw) is never deleted: writing over it is
   refused, naming it and how to salvage it.
@@ -135,6 +138,10 @@ def check_output_path(path: str | Path, force: bool, inputs: Iterable[str | Path
     """
     inputs = [p for p in inputs if p is not None]
     spelled, path = os.fspath(path), Path(path)  # name files as the user wrote them
+    if spelled == "-":
+        # the usual spelling of standard output: never a file named "-" by surprise
+        raise InputError("output '-': pslog writes files, not standard output; give a file "
+                         "name (./- for a file named -)")
     partial = partial_path(path)
     for source in inputs:
         if same_file(path, source):
@@ -144,6 +151,11 @@ def check_output_path(path: str | Path, force: bool, inputs: Iterable[str | Path
             # the partial is cleared before, and written over while, making the output
             raise InputError(f"output {spelled} is written via {partial}, which is an input "
                              f"({os.fspath(source)}); choose another name for the output")
+    if path.name.endswith(".partial"):
+        # the name pslog gives a file while writing it: a later run writing the output
+        # without the suffix would take this one for its own stale partial
+        raise InputError(f"output {spelled} ends in .partial, the name pslog gives files "
+                         f"while it writes them; choose another name")
     try:
         st = os.lstat(path)
     except (OSError, ValueError):
@@ -247,19 +259,28 @@ def partial_kind(path: str | Path) -> str:
     Returns
     -------
     ``"empty"`` : nothing written yet (no complete record after the MCAP header)
-    ``"derived"`` : an output made from inputs that still exist: a CSV or .rrd export, an
-        MCAP written by ``pslog recover`` or with the session metadata ``derived = "true"``
-        (``simulate``, ``import``, ``fuse``, ``redetect``)
-    ``"recording"`` : anything else, e.g. a recording; it may be the only copy of its data
+    ``"derived"`` : an unfinished MCAP made from inputs that still exist: written by
+        ``pslog recover`` or with the session metadata ``derived = "true"`` (``simulate``,
+        ``import``, ``fuse``, ``redetect``)
+    ``"complete"`` : a finished MCAP (closing magic in place): no killed run's partial
+    ``"foreign"`` : no MCAP (a CSV or .rrd export's partial, or a user's file of that name:
+        nothing in it proves that pslog wrote it)
+    ``"recording"`` : any other MCAP, e.g. a recording; it may be the only copy of its data
     """
     from .log import _mcapio as io  # the MCAP record layout, read where it is defined
 
     with open(path, "rb") as f:
         head = f.read(_PEEK)
+        if len(head) >= 2 * len(io.MAGIC) and head.startswith(io.MAGIC):
+            f.seek(-len(io.MAGIC), os.SEEK_END)
+            if f.read(len(io.MAGIC)) == io.MAGIC:
+                return "complete"
+    if not head:
+        return "empty"
     if len(head) < len(io.MAGIC):
-        return "empty" if io.MAGIC.startswith(head) or not head else "derived"
+        return "empty" if io.MAGIC.startswith(head) else "foreign"
     if not head.startswith(io.MAGIC):
-        return "derived"  # pslog records only MCAP sessions; this is a CSV or .rrd export
+        return "foreign"  # pslog records only MCAP sessions
     try:
         pos = len(io.MAGIC)
         op, length = struct.unpack_from("<BQ", head, pos)
@@ -308,9 +329,12 @@ def clear_stale_partial(path: str | Path, *, say: Callable[[str], None] | None =
     """Deal with ``<path>.partial`` left by an interrupted run before writing ``path``.
 
     A partial that a running pslog is writing (it holds the file's lock, see
-    :func:`open_locked`) is left alone: :class:`PartialBusyError`. A derived output's (or an
-    empty) partial is removed and ``say`` is told; one that may hold a recording is kept and
-    :class:`PartialRecordingError` says what it is.
+    :func:`open_locked`) is left alone: :class:`PartialBusyError`. Only a file that pslog
+    provably made is removed (``say`` is told): an empty one or an unfinished derived MCAP
+    (:func:`partial_kind`). Any other is kept and refused with a
+    :class:`PartialRecordingError` saying what it is: one that may hold a recording, a
+    complete session, or a file that is no MCAP (a killed CSV or .rrd export's, or a
+    user's own file of that name: nothing shows which, so it is never deleted).
     """
     partial = partial_path(Path(path))
     if not partial.is_file():
@@ -336,6 +360,15 @@ def clear_stale_partial(path: str | Path, *, say: Callable[[str], None] | None =
                 f"{partial} exists: left by an interrupted recording, it may hold the only "
                 f"copy of recorded data; salvage it into a new file with 'pslog recover "
                 f"{partial} -o SAVED.mcap', or move it away, before writing {path}")
+        if kind == "complete":
+            raise PartialRecordingError(
+                f"{partial} exists and is a complete session (not one pslog was writing); "
+                f"rename it or move it away before writing {path}")
+        if kind == "foreign":
+            raise PartialRecordingError(
+                f"{partial} exists (left by an interrupted run, or a file of yours): pslog "
+                f"writes {path} via that name and cannot tell it made it; delete it or move "
+                f"it away before writing {path}")
         try:
             partial.unlink()
         except FileNotFoundError:
@@ -376,6 +409,24 @@ def open_locked(path: str | Path, mode: str = "wb", **open_kwargs) -> IO:
 
 #: the open all_or_nothing blocks' lists of (file, partial, output) written complete
 _STAGED: list[list[tuple[IO, Path, Path]]] = []
+#: the open all_or_nothing blocks' lists of old outputs to remove once all moves are done
+_OBSOLETE: list[list[Path]] = []
+
+
+def remove_when_done(path: Path) -> None:
+    """Remove ``path``, an old output of pslog's that the new outputs make obsolete (an
+    earlier TUM export's ``<method>.tum`` for a method the new one lacks): inside
+    :func:`all_or_nothing` only once every new file is in place (a failed run keeps it),
+    else at once. A file already gone is no error."""
+    if _OBSOLETE:
+        _OBSOLETE[-1].append(Path(path))
+        return
+    try:
+        Path(path).unlink()
+    except FileNotFoundError:
+        pass
+    except OSError as exc:
+        raise write_error(path, exc) from None
 
 
 @contextmanager
@@ -391,13 +442,16 @@ def all_or_nothing() -> Iterator[None]:
         yield
         return
     staged: list[tuple[IO, Path, Path]] = []
+    obsolete: list[Path] = []
     _STAGED.append(staged)
+    _OBSOLETE.append(obsolete)
     moved = 0
     try:
         try:
             yield
         finally:
             _STAGED.remove(staged)
+            _OBSOLETE.remove(obsolete)
         with signals_held():
             for _f, partial, path in staged:
                 try:
@@ -405,6 +459,8 @@ def all_or_nothing() -> Iterator[None]:
                 except OSError as exc:
                     raise write_error(path, exc) from None
                 moved += 1
+            for old in obsolete:  # (remove_when_done)
+                remove_when_done(old)
     except BaseException:
         for _f, partial, _path in staged[moved:]:
             with suppress(OSError):

@@ -138,6 +138,28 @@ def test_a_second_batch_on_the_same_results_folder_fails_and_a_stale_lock_is_tak
     assert not (out / LOCK_NAME).exists()  # released at the end
 
 
+def test_a_full_disk_names_the_lock_and_leaves_none_and_an_empty_lock_is_taken(tmp_path):
+    """On a full results disk the lock file is created but its pid cannot be written: the
+    error named no file and the empty lock stayed, and then refused every later batch on
+    that folder ("another batch keeps taking it")."""
+    from tests.faults._mounts import fill, small_tmpfs
+
+    session(tmp_path / "s" / "a.mcap")
+    with small_tmpfs(tmp_path / "disk", "16m") as disk:
+        out = disk / "res"
+        out.mkdir()
+        fill(disk)
+        run = run_pslog("batch", f"{tmp_path}/s/*.mcap", "--do", "fuse", "-o", out)
+        assert_one_line_error(run, 1, contains=f"cannot write {out / LOCK_NAME}: No space "
+                                               f"left on device")
+        assert list(out.iterdir()) == []
+        (disk / "filler").unlink()
+        (out / LOCK_NAME).write_bytes(b"")  # what a batch killed in that moment leaves
+        run = run_pslog("batch", f"{tmp_path}/s/*.mcap", "--do", "sync", "-o", out)
+        assert run.code == 0, run.stderr
+        assert not (out / LOCK_NAME).exists()
+
+
 def test_each_sessions_line_is_printed_when_it_finishes(tmp_path):
     """The summary cannot be written (a folder in its way): the session's line is out
     already."""

@@ -391,10 +391,18 @@ def test_export_sim_session_round_trips_through_import(sim_session, tmp_path, cl
                           "-o", out)
     assert code == 0, stderr
     a, b = sim_session.detections, read_session(out).detections
-    has = a.candidates_per_frame() > 0  # frames without candidates have no CSV row
-    assert_array_equal(b.frame_time_ns, a.frame_time_ns[has])
-    assert_array_equal(b.frame_index, a.frame_index[has])
+    # frames without candidates (the ball missed) come back too: one row, u and v empty
+    missed = a.candidates_per_frame() == 0
+    assert missed.sum() > 5 and csv_path.read_text().count(",,,") == missed.sum()
+    assert_array_equal(b.frame_time_ns, a.frame_time_ns)
+    assert_array_equal(b.frame_camera, a.frame_camera)
+    assert_array_equal(b.frame_index, a.frame_index)
+    assert_array_equal(b.cand_frame, a.cand_frame)
     assert_array_equal(b.cand_uv, a.cand_uv)
+    assert_array_equal(b.cand_score, a.cand_score)
+    # and the CSV again, byte for byte
+    assert cli("export", out, "--detections", tmp_path / "d2.csv")[0] == 0
+    assert (tmp_path / "d2.csv").read_bytes() == csv_path.read_bytes()
 
 
 def test_export_tracks_csv(sim_session, tmp_path, cli):
@@ -432,6 +440,8 @@ def bad_files(tmp_path, sim_session):
     (tmp_path / "bad.toml").write_text("[[camera]\nname = 'x'\n")
     (tmp_path / "ok.csv").write_text("camera,time,u,v\ncam1,0.1,1,2\n")
     (tmp_path / "badrow.csv").write_text("camera,time,u,v\ncam1,0.1,1,2\ncam1,0.2,abc,2\n")
+    # u and v both empty is a missed frame; one of them alone is a bad value
+    (tmp_path / "halfmiss.csv").write_text("camera,time,u,v\ncam1,0.1,,\ncam1,0.2,,2\n")
     (tmp_path / "nan.csv").write_text("camera,time,u,v\ncam1,0,1,2\ncam1,0,nan,100\n")
     (tmp_path / "inf.csv").write_text("camera,time,u,v\ncam1,0,1,-inf\n")
     (tmp_path / "badscore.csv").write_text("camera,time,u,v,score\ncam1,0,1,2,1.5\n")
@@ -465,6 +475,8 @@ def bad_files(tmp_path, sim_session):
     (["simulate", "--rig", "{d}/bad.toml", "-o", "{d}/x.mcap"], "malformed TOML"),
     (["import", "--rig", "paper3", "--detections", "{d}/badrow.csv", "-o", "{d}/x.mcap"],
      "line 3: bad u value 'abc'"),
+    (["import", "--rig", "paper3", "--detections", "{d}/halfmiss.csv", "-o", "{d}/x.mcap"],
+     "halfmiss.csv: line 3: bad u value ''"),
     (["import", "--rig", "paper3", "--detections", "{d}/nan.csv", "-o", "{d}/x.mcap"],
      "nan.csv: line 3: bad u value 'nan': not a finite number"),
     (["import", "--rig", "paper3", "--detections", "{d}/inf.csv", "-o", "{d}/x.mcap"],

@@ -81,6 +81,29 @@ def test_tum_never_overwrites_without_force_and_replaces_with_it(fused, tmp_path
     assert old.read_text().startswith("#") and not list(folder.glob("*.partial"))
 
 
+def test_tum_force_replaces_an_earlier_export_as_a_whole_and_keeps_other_files(fused,
+                                                                              tmp_path, cli):
+    """An earlier export's smooth.tum, for a method the new session lacks, would sit beside
+    the new files (evo_ape then compares two sessions): refused without --force, removed
+    with it; a .tum of another tool and any other file stay."""
+    folder = tmp_path / "traj"
+    assert cli("export", fused.path, "--tum", folder)[0] == 0
+    assert (folder / "smooth.tum").exists()
+    (folder / "mine.tum").write_text("0 1 2 3 0 0 0 1\n")
+    (folder / "notes.txt").write_text("my notes\n")
+    typea = tmp_path / "typeA.mcap"  # the same session fused by typeA only
+    assert cli("fuse", fused.path, "--method", "typeA", "-o", typea)[0] == 0
+    (folder / "typeA.tum").unlink()
+    (folder / "truth.tum").unlink()  # no file of the new export exists: the old ones say no
+    code, _, err = cli("export", typea, "--tum", folder)
+    assert code == 1 and "earlier export" in err and "smooth.tum" in err and "--force" in err
+    assert (folder / "smooth.tum").exists() and not (folder / "typeA.tum").exists()
+    assert cli("export", typea, "--tum", folder, "--force")[0] == 0
+    assert sorted(p.name for p in folder.iterdir()) == ["mine.tum", "notes.txt", "truth.tum",
+                                                        "typeA.tum"]
+    assert (folder / "mine.tum").read_text() == "0 1 2 3 0 0 0 1\n"
+
+
 def test_jsonl_has_one_object_per_point(fused, tmp_path, cli):
     path = tmp_path / "t.jsonl"
     assert cli("export", fused.path, "--jsonl", path)[0] == 0

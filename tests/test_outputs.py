@@ -236,7 +236,8 @@ def test_partial_kind_tells_derived_outputs_from_recordings(tmp_path, sim_sessio
     assert partial_kind(prefix(sim_session.path, 3_000)) == "recording"  # source "test"
     assert partial_kind(prefix(fused, 30_000)) == "derived"
     assert partial_kind(prefix(sim, 2_000)) == "derived"
-    assert partial_kind(prefix(csv, 100)) == "derived"
+    assert partial_kind(prefix(csv, 100)) == "foreign"  # no proof pslog made it
+    assert partial_kind(prefix(fused, fused.stat().st_size)) == "complete"
     # the writer says which it is (metadata "derived"), whatever the free-text source says
     keep, discard = tmp_path / "keep.mcap", tmp_path / "discard.mcap"
     with SessionWriter(keep, sim_session.rig, source="pslog simulate, then edited") as w:
@@ -296,7 +297,12 @@ def test_save_rig_replaces_a_rig_file_like_every_other_output(tmp_path):
 def test_a_partial_being_written_is_neither_cleared_nor_written_twice(tmp_path):
     """The lock of open_locked (another process in tests/faults/test_writers.py; a second
     open file here, which flock treats alike)."""
-    from pslog.outputs import PartialBusyError, clear_stale_partial, open_locked
+    from pslog.outputs import (
+        PartialBusyError,
+        PartialRecordingError,
+        clear_stale_partial,
+        open_locked,
+    )
 
     partial = tmp_path / "d.csv.partial"
     with open_locked(partial, "w") as f:
@@ -307,7 +313,12 @@ def test_a_partial_being_written_is_neither_cleared_nor_written_twice(tmp_path):
         with pytest.raises(PartialBusyError):
             open_locked(partial)
         assert partial.read_text() == "being written"  # not emptied by the refused open
-    clear_stale_partial(tmp_path / "d.csv", say=lambda _text: None)  # stale now: removed
+    # stale now, but text: nothing proves pslog wrote it (a user's file of that name?): kept
+    with pytest.raises(PartialRecordingError, match="cannot tell it made it"):
+        clear_stale_partial(tmp_path / "d.csv", say=lambda _text: None)
+    assert partial.read_text() == "being written"
+    partial.write_bytes(b"")  # an empty one holds nothing to lose: removed
+    clear_stale_partial(tmp_path / "d.csv", say=lambda _text: None)
     assert not partial.exists()
 
 

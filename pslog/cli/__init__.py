@@ -215,6 +215,16 @@ def _main(argv: list[str] | None) -> int:
             code = int(module.run(args) or 0)
         if sys.stdout is not None:  # a full stdout fails here, not at the interpreter's exit
             sys.stdout.flush()
+        failed = sys.stdout.failed if isinstance(sys.stdout, _GuardedStdout) else None
+        if failed is not None:
+            # the command ran to its end (its outputs complete, kept): only its report is lost
+            import os
+
+            _drop_stdout(real_stdout)
+            made = [p for p in declared_files(args)[1] if os.path.exists(p)]
+            kept = f"; {', '.join(made)} written complete" if made else ""
+            print(f"pslog {name}: error: {failed}{kept}", file=sys.stderr)
+            return 1
         return code
     except PslogError as exc:
         if isinstance(exc, StdoutError):
@@ -350,14 +360,20 @@ class StdoutError(PslogError):
 
 
 class _GuardedStdout:
-    """``sys.stdout`` whose OS faults say that standard output failed (:class:`StdoutError`),
-    so that a full ``> /dev/full`` never blames (or removes) a complete output file;
-    :class:`BrokenPipeError` passes as it is."""
+    """``sys.stdout`` that outlives an OS fault of standard output (a full ``> /dev/full``):
+    the first is noted in :attr:`failed` and everything after it dropped, so that every
+    command runs to its end and keeps its complete outputs (never blamed, never removed half
+    way, whenever it prints); the CLI then exits 1 with that one line.
+    :class:`BrokenPipeError` (the reader went away) passes as it is."""
 
     def __init__(self, stream) -> None:
         self._stream = stream
+        #: ``cannot write to standard output: <reason>`` once a write failed, else None
+        self.failed: str | None = None
 
-    def _guard(self, call, *args):
+    def _guard(self, call, *args, dropped=None):
+        if self.failed is not None:
+            return dropped
         try:
             return call(*args)
         except BrokenPipeError:
@@ -365,10 +381,11 @@ class _GuardedStdout:
         except OSError as exc:
             from pslog.outputs import os_reason
 
-            raise StdoutError(f"cannot write to standard output: {os_reason(exc)}") from None
+            self.failed = f"cannot write to standard output: {os_reason(exc)}"
+            return dropped
 
     def write(self, text: str) -> int:
-        return self._guard(self._stream.write, text)
+        return self._guard(self._stream.write, text, dropped=len(text))
 
     def writelines(self, lines) -> None:
         return self._guard(self._stream.writelines, lines)

@@ -20,14 +20,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
     parser.add_argument("session", metavar="SESSION.mcap", help="session or fused session")
     parser.add_argument("--detections", metavar="DET.csv",
-                        help="write every detection candidate, in the 'pslog import' format")
+                        help="write every detection candidate, in the 'pslog import' format, "
+                             "and every frame without one (u, v empty)")
     parser.add_argument("--csv", metavar="TRACKS.csv",
                         help="write the fused tracks: time,x,y,z,camera,method (+ quality)")
     parser.add_argument("--tum", metavar="DIR",
                         help="write one TUM trajectory per method (DIR/<method>.tum) and the "
                              "truth (DIR/truth.tum), for evo_traj / evo_ape: 'timestamp tx ty "
                              "tz qx qy qz qw', session-clock seconds, metres, identity "
-                             "orientation")
+                             "orientation. With --force an earlier export in DIR is replaced "
+                             "as a whole (its <method>.tum the new session lacks removed); "
+                             "other files in DIR are kept")
     parser.add_argument("--jsonl", metavar="TRACKS.jsonl",
                         help="write the fused tracks as JSON lines: one object per point "
                              "(method, time, position, camera, quality)")

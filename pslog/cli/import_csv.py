@@ -16,7 +16,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "time in seconds on any clock common to the cameras (negative or "
                              "Unix-epoch too: the session records its origin and 'pslog "
                              "export' gives the times back), pixels as detected; rows in any "
-                             "order")
+                             "order; a row with u and v empty: a frame without a detection")
     parser.add_argument("--timing", default="rig", choices=(*TIMING_PRESETS, "rig"),
                         help="set the rig's shutter offsets from a preset (default: 'rig', the "
                              "rig's own offsets); the session's timing label names the preset "

@@ -23,13 +23,14 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import warnings
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
-from ..outputs import check_output_path, replacing, write_error
+from ..errors import InputError, OutputExistsError
+from ..outputs import check_output_path, remove_when_done, replacing, write_error
 
 NS = 1_000_000_000
 #: the TUM file of the ground truth, beside one ``<method>.tum`` per method
@@ -53,6 +54,11 @@ def _tracks(session) -> dict:
 
 # ---- TUM ----------------------------------------------------------------------------------
 
+#: the first line of every TUM file pslog writes (how an earlier export is told apart)
+TUM_HEADER = ("# timestamp tx ty tz qx qy qz qw (pslog: session clock s, world m, "
+              "identity orientation)\n")
+
+
 def tum_files(session, folder: str | Path) -> dict[str, Path]:
     """The files :func:`write_tum` writes: ``name -> path`` (methods, then ``truth``)."""
     folder = Path(folder)
@@ -66,12 +72,19 @@ def write_tum(session, folder: str | Path, *, force: bool = False) -> dict[str, 
     """Write every fused track, and the truth, as TUM trajectories in ``folder``.
 
     ``folder`` is created if missing (its parent must exist). Every file is checked before
-    any is written: with one already there and no ``force``, nothing is written.
+    any is written: with one already there and no ``force``, nothing is written. The folder
+    then holds this export's trajectories only: an earlier export's ``<name>.tum`` (a file
+    that starts with :data:`TUM_HEADER`) for a method this session lacks is refused without
+    ``force`` and removed with it, once the new files are in place; any other file in the
+    folder (one of yours, a ``.tum`` of another tool) is kept as it is.
 
     Returns
     -------
     dict : name (method or ``truth``) -> number of poses written
     """
+    if os.fspath(folder) == "-":
+        raise InputError("--tum '-': pslog writes a folder of files, not standard output; "
+                         "give a folder name (./- for a folder named -)")
     folder = Path(folder)
     if folder.exists() and not folder.is_dir():
         raise InputError(f"--tum {folder}: a file, not a folder (TUM files are written into "
@@ -86,6 +99,12 @@ def write_tum(session, folder: str | Path, *, force: bool = False) -> dict[str, 
             raise write_error(folder, exc) from None
     for path in files.values():  # all checked before any is written
         check_output_path(path, force, [session.path])
+    obsolete = sorted(set(_earlier_tum_export(folder)) - set(files.values()))
+    if obsolete and not force:
+        raise OutputExistsError(f"--tum {folder} holds an earlier export's "
+                                f"{', '.join(p.name for p in obsolete)}, which this session "
+                                f"would not replace; use --force to replace the whole export "
+                                f"(files of other tools in it are kept)")
     counts = {}
     for name, path in files.items():
         if name == "truth":
@@ -94,14 +113,32 @@ def write_tum(session, folder: str | Path, *, force: bool = False) -> dict[str, 
             track = session.tracks[name]
             times, positions = track.time_ns, track.position_world
         counts[name] = _write_tum_file(path, times, positions, force, session.path)
+    for path in obsolete:  # once the new ones are in place (all_or_nothing: after the moves)
+        remove_when_done(path)
     return counts
+
+
+def _earlier_tum_export(folder: Path) -> list[Path]:
+    """The ``*.tum`` files in ``folder`` that a pslog export wrote (they start with
+    :data:`TUM_HEADER`)."""
+    found = []
+    for path in folder.glob("*.tum"):
+        try:
+            if not path.is_file() or path.is_symlink():
+                continue
+            with open(path, "rb") as f:
+                head = f.read(len(TUM_HEADER))
+        except OSError:
+            continue
+        if head == TUM_HEADER.encode():
+            found.append(path)
+    return found
 
 
 def _write_tum_file(path: Path, times: np.ndarray, positions: np.ndarray, force: bool,
                     source) -> int:
     with replacing(path, force=force, inputs=[source]) as f:
-        f.write("# timestamp tx ty tz qx qy qz qw (pslog: session clock s, world m, "
-                "identity orientation)\n")
+        f.write(TUM_HEADER)
         for t, (x, y, z) in zip(times.tolist(), positions.tolist(), strict=True):
             f.write(f"{_seconds(t)} {x!r} {y!r} {z!r} 0 0 0 1\n")
     return len(times)

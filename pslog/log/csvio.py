@@ -14,10 +14,12 @@ Detections CSV (import and export use exactly this format)::
   frame (they must agree on ``frame``); one camera's frame index cannot appear at two
   different times. Without a ``frame`` column, each camera's frames are
   numbered 0, 1, 2, ... in time order.
-- Frames without any candidate cannot be expressed in this format (no row).
+- A frame without any candidate (the ball missed) is one row with ``u`` and ``v`` empty
+  (``cam1,0.011111111,,,1,``): a frame, no candidate.
 
 Export writes all six columns, times as exact decimals with 9 digits and pixels with
-``repr`` precision, so import -> export -> import reproduces every value.
+``repr`` precision, and a row for every frame without a candidate, so export -> import
+reproduces every frame and value (import -> export -> import too).
 
 Times from any clock: a session stores times >= 0 counted from a session start (MCAP log
 times are unsigned, and the timing model's drift term counts from it). CSV times all in
@@ -177,7 +179,7 @@ def read_detections_csv(path, rig: Rig) -> Detections:
     except OSError as exc:
         raise InputError(f"cannot read {path}: {exc.strerror or exc}") from None
     index = {name: i for i, name in enumerate(rig.names)}
-    cams, times, frames, uv, scores, lines = [], [], [], [], [], []
+    cams, times, frames, uv, scores, lines, missed = [], [], [], [], [], [], []
     with handle:
         reader = csv.reader(handle)
         try:
@@ -213,12 +215,16 @@ def read_detections_csv(path, rig: Rig) -> Detections:
                 cams.append(index[name])
                 lines.append(line)
                 times.append(_cell(row, col, "time", path, line))
-                uv.append((_cell(row, col, "u", path, line),
-                           _cell(row, col, "v", path, line)))
+                # u and v both empty: a frame without a candidate (the ball missed)
+                miss = not row[col["u"]].strip() and not row[col["v"]].strip()
+                missed.append(miss)
+                uv.append((np.nan, np.nan) if miss else (_cell(row, col, "u", path, line),
+                                                         _cell(row, col, "v", path, line)))
                 if has_frame:
                     frames.append(_cell(row, col, "frame", path, line))
                 if has_score:
-                    scores.append(_cell(row, col, "score", path, line))
+                    scores.append(np.nan if miss and not row[col["score"]].strip()
+                                  else _cell(row, col, "score", path, line))
         except csv.Error as exc:
             raise InputError(f"{path}: line {line}: {exc}") from None
         except UnicodeDecodeError:
@@ -227,14 +233,15 @@ def read_detections_csv(path, rig: Rig) -> Detections:
                                  np.asarray(uv, np.float64).reshape(-1, 2),
                                  np.asarray(frames, np.int64) if has_frame else None,
                                  np.asarray(scores, np.float64) if has_score else None, path,
-                                 np.asarray(lines, np.int64))
+                                 np.asarray(lines, np.int64), np.asarray(missed, bool))
 
 
 def _detections_from_rows(rig: Rig, cams, times, uv, frames, scores, path,
-                          lines) -> Detections:
+                          lines, missed=None) -> Detections:
     """Group candidate rows into frames: one frame per distinct (camera, time).
 
-    ``lines`` (n,) int64 are the rows' line numbers in the file, for error messages.
+    ``lines`` (n,) int64 are the rows' line numbers in the file, for error messages;
+    ``missed`` (n,) bool marks rows that stand for a frame without a candidate.
     """
     n = len(cams)
     if n == 0:
@@ -262,6 +269,10 @@ def _detections_from_rows(rig: Rig, cams, times, uv, frames, scores, path,
         # np.unique sorts by (camera, time): rank within each camera is the frame number
         starts = np.searchsorted(frame_camera, frame_camera, side="left")
         frame_index = np.arange(len(unique)) - starts
+    if missed is not None and missed.any():  # frames, not candidates
+        keep = ~missed
+        cand_frame, uv = cand_frame[keep], uv[keep]
+        scores = None if scores is None else scores[keep]
     return Detections.from_frames(rig.names, frame_time, frame_camera, frame_index, cand_frame,
                                   uv, None, scores)
 
@@ -290,24 +301,34 @@ def _check_one_time_per_frame(rig: Rig, frame_camera, frame_index, frame_time, c
 
 def write_detections_csv(detections: Detections, path, *, force: bool = False,
                          inputs=(), origin_ns: int = 0) -> int:
-    """Write every candidate as a row (``camera,time,u,v,frame,score``) in time order;
-    returns the number of rows. Times are written on the original clock: ``origin_ns`` (the
+    """Write every candidate as a row (``camera,time,u,v,frame,score``) in time order, and
+    every frame without a candidate as a row with ``u``, ``v`` and ``score`` empty; returns
+    the number of candidates. Times are written on the original clock: ``origin_ns`` (the
     session's clock origin, :func:`session_clock`) is added back exactly. ``path`` may not
     be one of ``inputs`` (the files the detections came from); it appears only when
     complete."""
-    rows = detections.cand_frame
+    n_cand = len(detections.cand_frame)
+    empty = np.flatnonzero(np.bincount(detections.cand_frame,
+                                       minlength=detections.n_frames) == 0)
+    # candidates and empty frames by frame (frames are in time order), candidates of a
+    # frame in their stored order
+    rows = np.concatenate([detections.cand_frame, empty])
+    order = np.argsort(rows, kind="stable")
+    rows = rows[order]
     names = np.asarray(detections.camera_names, dtype=object)[detections.frame_camera[rows]]
     origin = int(origin_ns)
     times = [t + origin for t in detections.frame_time_ns[rows].tolist()]  # Python ints
     frames = detections.frame_index[rows].tolist()
+    cand = order.tolist()  # < n_cand: that candidate; else an empty frame
     u = detections.cand_uv[:, 0].tolist()
     v = detections.cand_uv[:, 1].tolist()
     score = detections.cand_score.tolist()
     with replacing(path, force=force, inputs=inputs) as f:
         f.write(",".join(DETECTION_COLUMNS) + "\n")
-        f.writelines(f"{c},{format_time(t)},{a!r},{b!r},{k},{s!r}\n"
-                     for c, t, a, b, k, s in zip(names, times, u, v, frames, score, strict=True))
-    return len(rows)
+        f.writelines(f"{c},{format_time(t)},{u[i]!r},{v[i]!r},{k},{score[i]!r}\n"
+                     if i < n_cand else f"{c},{format_time(t)},,,{k},\n"
+                     for c, t, k, i in zip(names, times, frames, cand, strict=True))
+    return n_cand
 
 
 def export_tracks_csv(session, path, *, force: bool = False) -> int:

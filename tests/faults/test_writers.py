@@ -375,6 +375,48 @@ def test_a_killed_force_run_leaves_a_partial_that_the_next_run_removes(inputs, t
     assert out.read_bytes() != b"old output"
 
 
+def test_a_file_pslog_cannot_prove_it_made_is_never_taken_for_a_stale_partial(inputs,
+                                                                              tmp_path):
+    """A user's notes.csv.partial (no MCAP: pslog cannot tell it wrote it) and a complete
+    session named s3.mcap.partial are kept and the write refused, naming them; an output
+    named *.partial (which a later run would take for its stale partial) is refused."""
+    (tmp_path / "notes.csv.partial").write_text("my notes\n")
+    shutil.copyfile(inputs / "fused.mcap", tmp_path / "s3.mcap.partial")
+    before = fingerprint(tmp_path)
+    for args, contains in (
+            (["export", inputs / "fused.mcap", "--csv", tmp_path / "notes.csv"],
+             (f"{tmp_path / 'notes.csv.partial'} exists", "cannot tell it made it")),
+            (["simulate", "--rig", "paper3", "--duration", "0.3", "-o", tmp_path / "s3.mcap"],
+             (f"{tmp_path / 's3.mcap.partial'} exists and is a complete session",)),
+            (["fuse", inputs / "s.mcap", "-o", tmp_path / "new.mcap.partial"],
+             ("ends in .partial", "choose another name"))):
+        assert_one_line_error(run_pslog(*args), 1, contains=contains)
+        assert_untouched(before, tmp_path)
+
+
+@pytest.mark.parametrize("args", [
+    ["export", "{i}/fused.mcap", "--csv", "-"],
+    ["export", "{i}/fused.mcap", "--tum", "-"],
+    ["fuse", "{i}/s.mcap", "--method", "typeA", "-o", "-"],
+    ["simulate", "--rig", "paper3", "--duration", "0.3", "-o", "-"],
+])
+def test_dash_as_an_output_is_refused_not_written_as_a_file_named_dash(args, inputs, tmp_path,
+                                                                      request):
+    """'-' means standard output elsewhere: pslog wrote a file (or folder) named '-'."""
+    argv = [a.format(i=inputs) for a in args]
+    if first_case(request):  # a real process, run in tmp_path
+        run = run_pslog(*argv, cwd=tmp_path)
+    else:  # in this process (tests/faults/_inprocess.py), from tmp_path
+        old = os.getcwd()
+        os.chdir(tmp_path)
+        try:
+            run = run_inprocess(*argv)
+        finally:
+            os.chdir(old)
+    assert_one_line_error(run, 1, contains=("'-'", "not standard output", "./-"))
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_stale_partial_that_may_hold_a_recording_is_kept_and_named(inputs, tmp_path):
     out = tmp_path / "s.mcap"
     out.write_bytes(b"old session")
@@ -506,7 +548,10 @@ def test_a_full_standard_output_is_named_and_the_complete_output_kept(inputs, tm
         pytest.skip("mknod needs root")
     out = tmp_path / "o"
     out.mkdir()
+    # fuse prints as each method's track is written, before its output is complete: it too
+    # runs to its end and keeps it (it used to stop there and leave nothing)
     for args, made in ((["export", inputs / "s.mcap", "--detections", out / "d.csv"], "d.csv"),
+                       (["fuse", inputs / "s.mcap", "-o", out / "f.mcap"], "f.mcap"),
                        (["info", inputs / "s.mcap"], None)):
         with open(full, "w") as stdout:
             proc = subprocess.run([sys.executable, "-m", "pslog.cli", *map(str, args)],
@@ -514,10 +559,16 @@ def test_a_full_standard_output_is_named_and_the_complete_output_kept(inputs, tm
         run = Run(tuple(map(str, args)), proc.returncode, "", proc.stderr)
         assert_one_line_error(run, 1, contains="cannot write to standard output: No space "
                                                "left on device")
-        if made:
+        if made == "d.csv":
             text = (out / made).read_text()
             assert text.count("\n") > 100 and text == (inputs / "det.csv").read_text()
-            assert made not in run.stderr
+        if made == "f.mcap":
+            from pslog.log import read_session
+
+            assert sorted(read_session(out / made).tracks) == ["filter", "nearest", "smooth",
+                                                               "typeA"]
+        if made:  # said to be complete, never blamed
+            assert run.stderr.rstrip().endswith(f"; {out / made} written complete")
 
 
 def test_a_closed_standard_output_is_no_traceback(inputs):
