@@ -449,9 +449,11 @@ def test_non_ballistic_motions_are_followed_never_worse_than_type_a(name, limit)
     filt = evaluate(fuse(obs, rig, "filter"), truth).mean_mm
     assert filt < limit * type_a, (filt, type_a)  # measured 0.42, 0.40, 0.49
     # the mutation: the ballistic model alone with the process noise held at accel_psd
-    # (and without the turn model) fails it (measured 1.59, 2.34, 1.92)
+    # (and without the turn model) fails it (measured 1.59, 2.34, 1.92; with its jumps'
+    # covariance their hypotheses' mixture, session 27, the spiral's 1.26: pinned off)
     fixed = evaluate(fuse_filter(obs, rig, options=FilterOptions(
-        accel_adapt_rate=0.0, model_switch_per_s=0.0, turn_switch_per_s=0.0)), truth).mean_mm
+        accel_adapt_rate=0.0, model_switch_per_s=0.0, turn_switch_per_s=0.0,
+        jump_mixture_cov=False)), truth).mean_mm
     assert fixed > 1.3 * type_a, (fixed, type_a)
 
 

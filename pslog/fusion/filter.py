@@ -279,6 +279,12 @@ class FilterOptions:
         unknown instant leaves (:func:`_instant_term`: ``ε_p ε_pᵀ Δt_j²/12``, the term
         ``m (s − Δt_j/2)`` relinearised at the jump ``m`` the state estimates, through the
         filter's gains); the state is unchanged; False: none (before session 25)
+    jump_mixture_cov : bool, an accepted jump's state takes the winning (lag, shape)
+        hypothesis's mean with the mean square error about it of the mixture of every
+        hypothesis that passed, ``Σ w_k (P_k + (x_k − x*)(x_k − x*)ᵀ)``, ``w_k ∝
+        exp(−score_k/2)`` (:func:`_mixture_about`): a narrow shape (a bounce) that wins a
+        kick's one pixel no longer states the narrow shape's covariance; False: the
+        winner's covariance alone (before session 27)
     jump_rate_per_s : float, expected rate ``λ_j`` of velocity jumps (kicks, bounces), 1/s:
         a point's reported covariance adds the variance ``λ_j T σ_j² T² / 3`` along its
         camera's ray of a jump no other camera has seen in the time ``T`` since another
@@ -329,6 +335,7 @@ class FilterOptions:
     window_noise_prior: bool = True
     restart_prior: bool = True
     jump_instant: bool = True
+    jump_mixture_cov: bool = True
 
     def __post_init__(self) -> None:
         for name in ("noise_px", "accel_psd", "accel_step_var", "gate", "jump_speed",
@@ -415,7 +422,9 @@ _SJP = _SJX + 6
 _SJE = _SJP + 36
 _SJUV = _SJE + 4
 _SJF = _SJUV + 2 * _JBUF  # per buffered detection the (c, q, σ²) its update used
-_SCAM = _SJF + 3 * _JBUF  # then 2 per camera, then 2 per window slot
+#: the latest jump's covariance of its hypotheses' mixture about the winner (session 27)
+_SJPM = _SJF + 3 * _JBUF
+_SCAM = _SJPM + 36  # then 2 per camera, then 2 per window slot
 #: ``I``: track flag, state time, last accepted time, rejections in a row, updates since the
 #: start, camera of a pending jump, its confirming updates, whether one came from another
 #: camera, the turn model's age, the latest jump's time and camera, history length, window
@@ -429,7 +438,8 @@ _IHT = 17  # _HISTORY x (state time, time, camera)
 #: of the point that published its instant's term; the buffer's (time, camera)
 _IJT0 = _IHT + 3 * _HISTORY
 _IJN, _IJSHAPE, _IJTE = _IJT0 + 1, _IJT0 + 2, _IJT0 + 3
-_IJBUF = _IJT0 + 4
+_IJLAG = _IJT0 + 4  # the winner's lag: its buffered detection at this index is the jump's
+_IJBUF = _IJT0 + 5
 _ICAM = _IJBUF + 2 * _JBUF  # then 3 per camera, then 2 per window slot
 #: ``O`` (float64 options): k, g (3), gravity's unit vector (3), gate, adapt_rate, σ² bounds,
 #: q bounds, q's rate and target, max_std (inf: none), withhold, confirm_nis, λ, μ₀, turn
@@ -442,7 +452,8 @@ _ONSHAPES, _OSHAPES = 27, 28
 _OUNSEEN = _OSHAPES + 4 * 3  # λ_j σ_j² / 3: an unseen jump's variance along a ray per T³
 _OKS = _OUNSEEN + 1  # the supported model's drag coefficient (0 by default)
 _OINSTANT = _OKS + 1  # 1: an accepted jump's instant published (_instant_term)
-_OSIZE = _OINSTANT + 1
+_OJMIX = _OINSTANT + 1  # 1: a jump's covariance is its hypotheses' mixture's about the winner
+_OSIZE = _OJMIX + 1
 #: ``N`` (int64 options): max gap, window span, init_window, init_detections, max_rejects,
 #: window capacity
 _NMAXGAP, _NSPAN, _NINITWIN, _NINITDET, _NMAXREJ, _NWCAP = range(6)
@@ -926,13 +937,27 @@ def _jump(S, I, cams, O, t, cam, u, v):
     best_x0 = S[_SX:_SX + 6]
     best_P0 = S[_SP:_SP + 36]
     n_lags = min(n, _JUMP_LAG) + 1
+    n_shapes = int(O[_ONSHAPES])
+    hsc = np.empty(n_lags * n_shapes)
+    hx = np.empty((n_lags * n_shapes, 6))
+    hP = np.empty((n_lags * n_shapes, 36))
+    nh = 0
     for lag in range(n_lags):
-        for shape in range(int(O[_ONSHAPES])):
+        for shape in range(n_shapes):
             passed, x, P, inn, score, ts, xs, Ps = _replay(S, I, cams, O, t, cam, u, v, lag,
                                                            shape)
+            if passed:
+                hsc[nh] = score
+                hx[nh] = x
+                hP[nh] = P
+                nh += 1
             if passed and score < best_score:
                 best_x, best_P, best_inn, best_score, found = x, P, inn, score, True
                 best_lag, best_shape, best_t0, best_x0, best_P0 = lag, shape, ts, xs, Ps
+    if found and nh > 1 and O[_OJMIX] != 0.0:
+        # the winner's mean with the mean square error of the hypotheses' mixture about it
+        # (session 27): P* = Σ w_k (P_k + (x_k − x*)(x_k − x*)ᵀ), w_k ∝ exp(−score_k/2)
+        best_P = _mixture_about(hsc[:nh], hx[:nh], hP[:nh], best_x, best_score)
     if found and O[_OINSTANT] != 0.0:
         # the jump's restart and the detections its replay took, for its instant's spread
         S[_SJX:_SJX + 6] = best_x0
@@ -945,12 +970,36 @@ def _jump(S, I, cams, O, t, cam, u, v):
         I[_IJBUF + 2 * best_lag], I[_IJBUF + 2 * best_lag + 1] = t, cam
         S[_SJUV + 2 * best_lag], S[_SJUV + 2 * best_lag + 1] = u, v
         I[_IJN] = best_lag + 1
+        I[_IJLAG] = best_lag
+        S[_SJPM:_SJPM + 36] = best_P
         for d in range(best_lag + 1):  # the values the replay used
             S[_SJF + 3 * d], S[_SJF + 3 * d + 1] = S[_SMU], S[_SQ]
             S[_SJF + 3 * d + 2] = S[_SVAR]
     if found:
         I[_IHN] = 0  # a new segment: a later jump is not looked for before it
     return found, best_x, best_P, best_inn
+
+
+@kernel
+def _mixture_about(sc, hx, hP, x, best):
+    """The mean square error about ``x`` (the winning hypothesis's mean, its score
+    ``best``) of the mixture of a jump's hypotheses that passed: ``Σ w_k (P_k + d_k d_kᵀ)``,
+    ``d_k = x_k − x``, ``w_k = exp(−(score_k − best)/2) / Σ`` (each score the ``Σ NIS + ln
+    det S`` of the same detections: a likelihood's −2 ln up to one constant)."""
+    n = sc.shape[0]
+    w = np.empty(n)
+    total = 0.0
+    for k in range(n):
+        w[k] = math.exp(-0.5 * (sc[k] - best))
+        total += w[k]
+    P = np.zeros(36)
+    for k in range(n):
+        wk = w[k] / total
+        for i in range(6):
+            di = hx[k, i] - x[i]
+            for j in range(6):
+                P[6 * i + j] += wk * (hP[k, 6 * i + j] + di * (hx[k, j] - x[j]))
+    return P
 
 
 @kernel
@@ -1028,6 +1077,8 @@ def _instant_term(S, I, cams, O, t, x):
         for i in range(6):
             e[i] = e[i] - inn[c0 + i] * g0 - inn[c1 + i] * g1
         x, P = _updated(x, P, inn)
+        if d == I[_IJLAG] and O[_OJMIX] != 0.0:  # the jump's covariance as the state took it
+            P = S[_SJPM:_SJPM + 36].copy()
         t0 = td
     return True, e[:3], w
 
@@ -1976,6 +2027,7 @@ class BallFilter:
         O[_OUNSEEN] = options.jump_rate_per_s * self._jump_var / 3.0
         O[_OKS] = options.supported_drag_per_m
         O[_OINSTANT] = float(options.jump_instant)
+        O[_OJMIX] = float(options.jump_mixture_cov)
         self._opts = O
         self._nopts = np.array([self._max_gap_ns, self._init_span_ns, options.init_window,
                                 options.init_detections, options.max_rejects, capacity],
