@@ -224,18 +224,20 @@ def _nearest(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
 def _type_a(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
     from ._prepare import rays_only
     from .confirm import confirm_batch  # (long-gap points confirmed by the next camera)
-    from .pseudo import covariance_noise_px, type_a_noise, withhold_uncertain
+    from .pseudo import _fuse_type_a, covariance_noise_px, type_a_noise, withhold_uncertain
 
     # the covariance made at the stated noise (what the confirmation's test reads), then
     # rescaled to the session's measured noise (docs/methods.md, "Type A's covariance at
-    # the measured noise"); a detection without a ray is a missing one
+    # the measured noise"), in the kernel's quality table when the track is still the one
+    # made here (no copy: docs/performance.md); a detection without a ray is a missing one
     prep = rays_only(prep)[0]
     gap = _gap(options)
-    track = fuse_type_a(prep, gap, options.noise_px, explain=False,
-                        cov_noise_px=covariance_noise_px(options.noise_px))[0]
-    if options.confirm_gaps:
-        track = confirm_batch(prep, track, rig, gap, options.noise_px)
-    return withhold_uncertain(type_a_noise(prep, track, gap, options.noise_px),
+    table: list = []
+    made = _fuse_type_a(prep, gap, options.noise_px, None, None, None, False,
+                        covariance_noise_px(options.noise_px), table)[0]
+    track = confirm_batch(prep, made, rig, gap, options.noise_px) if options.confirm_gaps else made
+    return withhold_uncertain(type_a_noise(prep, track, gap, options.noise_px,
+                                           table[0] if table and track is made else None),
                               options.max_std_m)[0]
 
 

@@ -44,7 +44,8 @@ class Prepared:
     obs : Observations, sorted by (time, camera)
     t : (n,) float64, seconds since the first observation (for ratios of time intervals)
     uv_undistorted : (n, 2) float64, undistorted pixels
-    ray_origin : (n, 3) float64, camera centre of each observation, world metres
+    ray_origin : (n, 3) float64, camera centre of each observation, world metres (made at its
+        first use)
     ray_dir : (n, 3) float64, unit viewing-ray direction, world
     centers : (m, 3) camera centres; K_inv, R : (m, 3, 3) per camera
     F : (m, m, 3, 3), ``F[a, b]`` with ``x_bᵀ F[a, b] x_a = 0`` (undistorted pixels)
@@ -63,7 +64,6 @@ class Prepared:
     obs: Observations
     t: np.ndarray
     uv_undistorted: np.ndarray
-    ray_origin: np.ndarray
     ray_dir: np.ndarray
     centers: np.ndarray
     K_inv: np.ndarray
@@ -117,6 +117,13 @@ class Prepared:
         """:func:`direction_jacobian` of every observation at its own undistorted pixel,
         (3, 2, n), made once (elementwise: a row's entries are those of a call on it alone)."""
         return self._observed[1]
+
+    @cached_property
+    def ray_origin(self) -> np.ndarray:
+        """(n, 3) float64, the camera centre of each observation: made at its first use
+        (type A's kernels read ``centers``: its 24 bytes a row were fresh memory at every
+        call, docs/performance.md)."""
+        return self.centers[self.obs.camera] if len(self.obs) else np.zeros((0, 3))
 
     @cached_property
     def _observed(self) -> tuple[np.ndarray, np.ndarray]:
@@ -258,8 +265,7 @@ def prepare(obs: Observations, rig: Rig, F: np.ndarray | None = None,
         F = checked_F
     t = (obs.time_ns - (obs.time_ns[0] if len(obs) else 0)) / NS
     return Prepared(
-        obs=obs, t=t.astype(np.float64), uv_undistorted=uv_und,
-        ray_origin=centers[obs.camera] if len(obs) else np.zeros((0, 3)), ray_dir=ray_dir,
+        obs=obs, t=t, uv_undistorted=uv_und, ray_dir=ray_dir,  # (t: float64, no copy)
         centers=centers, K_inv=_k_inverses(rig),
         R=np.array([c.R for c in rig.cameras]), F=F, per_camera=per_camera,
         cameras=tuple(rig.cameras), uv_jacobian=jac,
@@ -284,14 +290,15 @@ def rays_only(prep: Prepared) -> tuple[Prepared, np.ndarray | None]:
     obs = prep.obs.select(rows)
     t = (obs.time_ns - (obs.time_ns[0] if len(obs) else 0)) / NS
     return Prepared(
-        obs=obs, t=t.astype(np.float64), uv_undistorted=prep.uv_undistorted[rows],
-        ray_origin=prep.ray_origin[rows], ray_dir=ray[rows], centers=prep.centers,
+        obs=obs, t=t, uv_undistorted=prep.uv_undistorted[rows],
+        ray_dir=ray[rows], centers=prep.centers,
         K_inv=prep.K_inv, R=prep.R, F=prep.F,
         per_camera=[np.flatnonzero(obs.camera == i) for i in range(len(prep.centers))],
         cameras=prep.cameras,
         uv_jacobian=None if prep.uv_jacobian is None else prep.uv_jacobian[rows],
         view_box=prep.view_box,
         doubt_px2=None if prep.doubt_px2 is None else prep.doubt_px2[rows]), rows
+
 
 #: The rigs whose geometry :func:`_checked_geometry` checked (keyed by the cameras' K, R and
 #: t), with their fundamental matrices: a rig is checked and F made once, not per prepare

@@ -322,6 +322,18 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
     not ``noise_px`` (the tests' least noise); the registry's ``typeA`` makes it at
     :func:`covariance_noise_px` and rescales it to the measured noise (:func:`type_a_noise`).
     """
+    return _fuse_type_a(prep, max_gap_s, noise_px, events, seen, noise, explain,
+                        cov_noise_px, None)
+
+
+def _fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None,
+                 events: np.ndarray | None, seen: np.ndarray | None,
+                 noise: NoiseEstimate | None, explain: bool, cov_noise_px: float | None,
+                 table_out: list | None) -> tuple[Track, TypeAConstruction | None]:
+    """:func:`fuse_type_a`; ``table_out`` (a list, or None): the quality table the Track's
+    quality columns are rows of (``_QUALITY``'s order, writeable) appended to it, for
+    :func:`with_measured_noise` to rescale the covariance in place (the registry's
+    ``typeA``: a call's fresh memory ~100 bytes a point less)."""
     from . import _pseudo_kernel
 
     obs = prep.obs
@@ -390,6 +402,8 @@ def fuse_type_a(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
     if tables:
         p1, p2 = (_from_tables(ff[s, :kept], fi[s, :kept], None) for s in range(2))
     points, quality_table = points[:kept], quality_table[:, :kept]
+    if table_out is not None and with_cov:  # (the finite differences' columns: not rows of it)
+        table_out.append(quality_table)
     n_columns = len(_QUALITY) if with_cov else 10
     quality = dict(zip(_QUALITY[:n_columns], quality_table, strict=False))
     if noise_px is not None and _prepare.FINITE_DIFFERENCES:
@@ -617,7 +631,7 @@ class TypeAStream:
         n = len(obs)
         prep = Prepared(
             obs=obs, t=(self._time - self._time[0]) / NS, uv_undistorted=buf.uv_und[window],
-            ray_origin=t.centers[self._camera], ray_dir=buf.ray_dir[window], centers=t.centers,
+            ray_dir=buf.ray_dir[window], centers=t.centers,
             K_inv=t.K_inv, R=t.R, F=t.F,
             per_camera=[np.flatnonzero(self._camera == i) for i in range(len(rig))],
             cameras=t.cameras, uv_jacobian=buf.jac[window], view_box=t.view_box,
@@ -960,7 +974,9 @@ def measured_noise(time_ns: np.ndarray, camera: np.ndarray, uv: np.ndarray, limi
     from .stereo import NOISE_EVERY_S, NOISE_FLOOR_PX, NOISE_MIN_COUNT, NOISE_WINDOW_S
 
     time_ns = np.ascontiguousarray(time_ns)
-    camera = np.ascontiguousarray(camera, dtype=np.int64)
+    camera = np.ascontiguousarray(camera)  # (int32 or int64 as given: indices only)
+    if camera.dtype.type not in (np.int32, np.int64):
+        camera = camera.astype(np.int64)
     uv = np.ascontiguousarray(uv)
     at_ns = np.ascontiguousarray(at_ns, dtype=np.int64)
     sigma = np.empty(len(at_ns))
@@ -974,7 +990,7 @@ def measured_noise(time_ns: np.ndarray, camera: np.ndarray, uv: np.ndarray, limi
         end = int(np.searchsorted(time_ns, at_ns[start[-1]], side="right"))
         fin = residual_norms(time_ns[:end], camera[:end], uv[:end], limits, max_gap_s)
         sigma[start] = start_noise(*fin, at_ns[start], noise_px)
-    return np.maximum(sigma, min(noise_px, NOISE_FLOOR_PX))
+    return np.maximum(sigma, min(noise_px, NOISE_FLOOR_PX), out=sigma)  # (this call's own)
 
 
 def without_model_columns(track: Track) -> Track:
@@ -996,7 +1012,8 @@ MODEL_GATE = KINK_GATE
 
 
 def with_measured_noise(track: Track, sigma: np.ndarray, cov_noise_px: float,
-                        centers: np.ndarray | None = None) -> Track:
+                        centers: np.ndarray | None = None, table: np.ndarray | None = None
+                        ) -> Track:
     """``track`` (type A's, its covariance made at ``cov_noise_px``) with the covariance of
     each point at its own noise ``sigma`` (k,): the columns times ``(σ / cov_noise_px)²``
     (the first-order covariance is the noise's variance times Jacobian products), plus
@@ -1006,7 +1023,13 @@ def with_measured_noise(track: Track, sigma: np.ndarray, cov_noise_px: float,
     gravity's ``|u|²``, ``c = (factor D / f)²``), ``r`` the unit ray from the point's
     camera's centre in ``centers`` (m, 3) to the point
     (:func:`~pslog.fusion._pseudo_kernel.model_rescale_kernel`); ``std_m`` the root of the
-    new diagonal's sum. Points and the other columns are the same arrays."""
+    new diagonal's sum. Points and the other columns are the same arrays.
+
+    ``table``: the quality table ``track``'s columns are rows of (``_fuse_type_a``'s
+    ``table_out``; a Track no one else holds): ``std_m`` and the covariance are rescaled in
+    place, in its rows (the kernel reads each point's six terms before it writes them: the
+    same bits), where a copy of the six columns and seven new ones were fresh memory at every
+    call (~100 bytes a point: page faults where glibc trims the heap; docs/performance.md)."""
     q = track.quality
     if not len(track) or "std_m" not in q:
         return without_model_columns(track)
@@ -1016,16 +1039,22 @@ def with_measured_noise(track: Track, sigma: np.ndarray, cov_noise_px: float,
         # times the ray's products; MeasuredNoiseStream the same operations on floats)
         from . import _pseudo_kernel
 
-        out = np.empty((7, len(track)))
+        if table is not None:  # (rows std_m, the six covariance columns: in place)
+            std = _QUALITY.index("std_m")
+            cov, out = table[std + 1:std + 7], table[std:std + 7]
+            camera = track.camera  # (int32: no int64 copy)
+        else:
+            cov, out = np.stack([q[name] for name in _COV_COLUMNS]), np.empty((7, len(track)))
+            camera = np.ascontiguousarray(track.camera, np.int64)
         _pseudo_kernel.model_rescale_kernel(
-            np.stack([q[name] for name in _COV_COLUMNS]), np.ascontiguousarray(sigma, np.float64),
+            cov, np.ascontiguousarray(sigma, np.float64),
             float(cov_noise_px), *(np.ascontiguousarray(q[name]) for name in _MODEL_COLUMNS),
-            np.ascontiguousarray(track.position_world), np.ascontiguousarray(track.camera,
-                                                                              np.int64),
+            np.ascontiguousarray(track.position_world), camera,
             np.ascontiguousarray(centers, np.float64), MODEL_GATE, out)
-        quality["std_m"] = out[0]
-        for name, column in zip(_COV_COLUMNS, out[1:], strict=True):
-            quality[name] = column
+        if table is None:
+            quality["std_m"] = out[0]
+            for name, column in zip(_COV_COLUMNS, out[1:], strict=True):
+                quality[name] = column
     else:
         factor = sigma / cov_noise_px
         factor = factor * factor
@@ -1060,17 +1089,19 @@ def withhold_uncertain(track: Track, max_std_m: float | None) -> tuple[Track, np
                           {k: v[keep] for k, v in track.quality.items()}, dropped), keep
 
 
-def type_a_noise(prep: Prepared, track: Track, max_gap_s: float, noise_px: float | None
-                 ) -> Track:
+def type_a_noise(prep: Prepared, track: Track, max_gap_s: float, noise_px: float | None,
+                 table: np.ndarray | None = None) -> Track:
     """``track`` (type A's from ``prep``, made with ``cov_noise_px =``
     :func:`covariance_noise_px`) with its covariance at the session's measured noise
-    (:func:`measured_noise` over ``prep``'s detections); unchanged without covariance."""
+    (:func:`measured_noise` over ``prep``'s detections); unchanged without covariance.
+    ``table``: :func:`with_measured_noise`'s (rescaled in place)."""
     if noise_px is None or not len(track) or "std_m" not in track.quality:
         return without_model_columns(track)
     obs = prep.obs
     sigma = measured_noise(obs.time_ns, obs.camera, obs.uv, no_detection_limits(prep.cameras),
                            max_gap_s, track.time_ns, float(noise_px))
-    return with_measured_noise(track, sigma, covariance_noise_px(noise_px), prep.centers)
+    return with_measured_noise(track, sigma, covariance_noise_px(noise_px), prep.centers,
+                               table)
 
 
 class MeasuredNoiseStream:
