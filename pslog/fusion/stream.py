@@ -36,6 +36,7 @@ with no clock correction in the rig a detection is admitted when pushed (no extr
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
 from typing import cast
 
@@ -82,6 +83,8 @@ class StreamFuser:
         check_tolerance(rig, self.options.tolerance_s)
         self._max_gap_s = self.options.max_gap_s or default_max_gap_s(rig)
         self._resolved = replace(self.options, max_gap_s=self._max_gap_s)  # (as fuse's)
+        # the method's batch function, which a window method calls with ``drops`` (Method)
+        self._function = cast(Callable[..., Track], METHODS[method].function)
         # the history a point still to emit reaches back to (the window methods; typeA and
         # filter keep their own): every such point is at or after the newest row less the
         # settling time (which _settled keeps on top), and uses, at most, ``nearest`` the
@@ -395,8 +398,7 @@ class StreamFuser:
             # fuse's method on the window (the options resolved as fuse resolves them), with
             # the dropped points' times: the window re-fuses points already counted
             drops: Drops = []
-            track = METHODS[self.method].function(prepared, self.rig, self._resolved,
-                                                  drops=drops)
+            track = self._function(prepared, self.rig, self._resolved, drops=drops)
             dropped = self._settled_drops(drops, final)
         newest = int(self._time[-1])
         key_t, key_c = self._emitted_until
