@@ -262,8 +262,11 @@ class Track:
     quality : mapping of name -> (n,) float64, per-point quality (see ``QUALITY_FIELDS``),
         NaN where not applicable
     dropped : mapping of reason -> count of the points the method made but dropped as
-        geometrically invalid (``behind_camera``, ``outside_view``, ``parallel_rays``);
-        not kept by :meth:`select` (it describes the whole track)
+        geometrically invalid (``behind_camera``, ``outside_view``, ``parallel_rays``) or
+        refused (``prediction_failed``, ``residual_failed``, ...); not kept by
+        :meth:`select` (it describes the whole track). A stream's Track
+        (:class:`~pslog.fusion.stream.StreamFuser`) counts the points dropped that became
+        settled with its push: :meth:`concat` sums them to the batch's counts
     """
 
     method: str

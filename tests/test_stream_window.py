@@ -8,16 +8,14 @@ typeB / linear point at t = 0.5587 s)."""
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 import pytest
-from test_fusion_validity import streamed
-from test_stream_type_a import assert_same
+from test_stream_type_a import assert_same, pushed_one_by_one
 
 from pslog import Rig, SimulationOptions, apply_timing, builtin_rig, get_motion, look_at, simulate
 from pslog.fusion import fuse
 from pslog.fusion.stereo import sync_groups
+from pslog.fusion.stream import StreamFuser
 
 LENS = np.array([-0.35, 0.15, 0.002, -0.002, -0.03])  # the reviewer's strong lens
 
@@ -59,13 +57,9 @@ def test_unsynchronised_sessions_stream_as_batch_bit_for_bit(name, method):
     rig, obs = _session(fps, timing, seed, until_s)
     batch = fuse(obs, rig, method)
     assert len(batch) > 0
-    parts = streamed(rig, method, obs)
-    # the window stream reports no dropped counts (docs/paper.md; a window's refusals are
-    # counted again in the next): the points are the batch's, bit for bit, the counts not
-    # (here typeB / linear's prediction_failed, session 23, on 3cams-60fps-typeB)
-    assert all(not p.dropped for p in parts)
-    assert_same([replace(p, dropped=batch.dropped) if i == 0 else p
-                 for i, p in enumerate(parts)], batch)
+    # the points, bit for bit, and the dropped counts (session 27: each counted at the push
+    # that settles it; typeB / linear's prediction_failed on 3cams-60fps-typeB)
+    assert_same(pushed_one_by_one(StreamFuser(rig, method), obs), batch)
 
 
 def test_the_sessions_have_runs_of_several_groups():

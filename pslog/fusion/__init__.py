@@ -39,7 +39,7 @@ from ..timing import observations as timed_observations
 from ._prepare import Prepared, default_max_gap_s, prepare
 from .prediction import fuse_predicted
 from .pseudo import PseudoStereoPoints, TypeAConstruction, fuse_type_a, pseudo_stereo_points
-from .stereo import fuse_nearest, fuse_sync, sync_groups
+from .stereo import Drops, fuse_nearest, fuse_sync, sync_groups
 
 #: Longest time span a fusion method may be asked to bridge, seconds (an hour): a longer
 #: one bridges nothing more, and overflows integer nanoseconds for absurd values.
@@ -161,7 +161,11 @@ class Method:
     Attributes
     ----------
     name : str, as on the command line
-    function : ``function(prepared, rig, options) -> Track``; ``options.max_gap_s`` is set
+    function : ``function(prepared, rig, options) -> Track``; ``options.max_gap_s`` is set;
+        a causal method without a ``streamer`` also takes the keyword ``drops`` (a list to
+        which it adds each dropped point's reason, time and camera:
+        :data:`pslog.fusion.stereo.Drops`): its window stream counts the settled ones
+        (:class:`~pslog.fusion.stream.StreamFuser`), so its ``dropped`` equals the batch's
     causal : bool, a point at ``t`` uses no detection after ``t`` (plus the tolerance when
         ``waits_tolerance``): the method can stream (:class:`~pslog.fusion.stream.StreamFuser`);
         False: offline only
@@ -213,12 +217,14 @@ def _gap(options: FusionOptions) -> float:
     return cast(float, options.max_gap_s)
 
 
-def _sync(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
-    return fuse_sync(prep, options.tolerance_s, options.noise_px, _gap(options))
+def _sync(prep: Prepared, rig: Rig, options: FusionOptions, *, drops: Drops | None = None
+          ) -> Track:
+    return fuse_sync(prep, options.tolerance_s, options.noise_px, _gap(options), drops=drops)
 
 
-def _nearest(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
-    return fuse_nearest(prep, _gap(options), options.noise_px)
+def _nearest(prep: Prepared, rig: Rig, options: FusionOptions, *, drops: Drops | None = None
+             ) -> Track:
+    return fuse_nearest(prep, _gap(options), options.noise_px, drops=drops)
 
 
 def _type_a(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
@@ -250,12 +256,16 @@ def _type_a_stream(rig: Rig, options: FusionOptions):
     return MeasuredNoiseStream(inner, rig, options)
 
 
-def _type_b(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
-    return fuse_predicted(prep, "typeB", options.tolerance_s, _gap(options), options.noise_px)
+def _type_b(prep: Prepared, rig: Rig, options: FusionOptions, *, drops: Drops | None = None
+            ) -> Track:
+    return fuse_predicted(prep, "typeB", options.tolerance_s, _gap(options), options.noise_px,
+                          drops=drops)
 
 
-def _linear(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
-    return fuse_predicted(prep, "linear", options.tolerance_s, _gap(options), options.noise_px)
+def _linear(prep: Prepared, rig: Rig, options: FusionOptions, *, drops: Drops | None = None
+            ) -> Track:
+    return fuse_predicted(prep, "linear", options.tolerance_s, _gap(options), options.noise_px,
+                          drops=drops)
 
 
 def _filter(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:

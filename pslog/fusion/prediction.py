@@ -29,7 +29,9 @@ from ._prepare import (
 )
 from .innovation import contradicted, failed_counts
 from .stereo import (
+    Drops,
     count_invalid,
+    note_dropped,
     rays_only_shared,
     refusal_noise,
     stereo_at_common_instants,
@@ -38,7 +40,7 @@ from .stereo import (
 
 
 def fuse_predicted(prep: Prepared, method: str, tolerance_s: float, max_gap_s: float,
-                   noise_px: float | None = 0.5) -> Track:
+                   noise_px: float | None = 0.5, *, drops: Drops | None = None) -> Track:
     """``typeB`` (ray-constrained, eq. (4)) or ``linear`` (eq. (2) only).
 
     Geometrically invalid points are dropped and counted in ``Track.dropped``: stereo points
@@ -49,7 +51,8 @@ def fuse_predicted(prep: Prepared, method: str, tolerance_s: float, max_gap_s: f
     detection against the eq. (2) prediction; ``gap_s``: time from the older stereo point;
     ``std_m`` / ``cov_*``: the stereo points' covariances through eq. (2) (and for typeB the
     projection onto the ray plus the single detection's own noise). A detection without a
-    ray is a missing one (:func:`~.stereo.rays_only_shared`).
+    ray is a missing one (:func:`~.stereo.rays_only_shared`). ``drops``: a list to which
+    each dropped point's reason, time and camera are added (:data:`~.stereo.Drops`).
     """
     if method not in ("typeB", "linear"):
         raise ValueError(f"method must be typeB or linear, got {method!r}")
@@ -61,7 +64,7 @@ def fuse_predicted(prep: Prepared, method: str, tolerance_s: float, max_gap_s: f
     if len(obs) == 0:
         return Track(method, np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0, np.int32))
     stereo, alone = stereo_at_common_instants(prep, tolerance_s, method, noise_px, max_gap_s,
-                                              shared)
+                                              shared, drops=drops)
     points, stereo_ns = stereo.position_world, stereo.time_ns
     single = np.flatnonzero(alone)  # detections with no simultaneous partner
     t_single = obs.time_ns[single]
@@ -129,6 +132,9 @@ def fuse_predicted(prep: Prepared, method: str, tolerance_s: float, max_gap_s: f
                                         obs.camera[single]))
     failed &= made & (flags == 0)
     keep = made & (flags == 0) & ~failed
+    if drops is not None:
+        note_dropped(drops, t_single[made], cam[made], flags[made])
+        note_dropped(drops, t_single, cam, refused=("prediction_failed", failed))
     single, t_single, single_points, shift = (
         single[keep], t_single[keep], single_points[keep], shift[keep])
     single_quality = {k: v[keep] for k, v in single_quality.items()}

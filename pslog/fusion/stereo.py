@@ -1073,7 +1073,8 @@ def _weighted_points(prep: Prepared, rows: np.ndarray, used: np.ndarray, points:
 
 def stereo_at_common_instants(
     prep: Prepared, tolerance_s: float, method: str, noise_px: float | None = 0.5,
-    max_gap_s: float | None = None, shared: bool | None = None,
+    max_gap_s: float | None = None, shared: bool | None = None, *,
+    drops: Drops | None = None,
 ) -> tuple[Track, np.ndarray]:
     """N-view points of every instant at which at least two cameras saw the ball.
 
@@ -1084,7 +1085,8 @@ def stereo_at_common_instants(
     ``Track.dropped`` as ``residual_failed``, like a geometrically invalid one. ``shared``:
     whether the session has instants two cameras share (None: ``prep``'s; given by the
     callers that left detections without a ray out, :func:`rays_only_shared`'s, of the
-    session as given: its methods' error is the session's, not the rays').
+    session as given: its methods' error is the session's, not the rays'). ``drops``: a
+    list to which each dropped point's reason, time and camera are added (:data:`Drops`).
 
     Returns
     -------
@@ -1116,6 +1118,9 @@ def stereo_at_common_instants(
         [r[at] for r in residuals])
     keep &= ~refused
     n_refused = int(np.count_nonzero(refused))
+    if drops is not None:
+        note_dropped(drops, time_ns[made], camera[made], flags[made])
+        note_dropped(drops, time_ns, camera, refused=(RESIDUAL_FAILED, refused))
     track = Track(method, time_ns[keep], points[keep], camera[keep],
                   {k: v[keep] for k, v in quality.items()})
     return (with_dropped(track, count_invalid(flags[made]),
@@ -1138,7 +1143,7 @@ RESIDUAL_FAILED = "residual_failed"
 
 
 def fuse_sync(prep: Prepared, tolerance_s: float = 1e-3, noise_px: float | None = 0.5,
-              max_gap_s: float | None = None) -> Track:
+              max_gap_s: float | None = None, *, drops: Drops | None = None) -> Track:
     """``sync``: N-view triangulation of detections captured within ``tolerance_s`` (the
     paper's "synchronized" row of Table 1: "general stereo vision with no time delay").
 
@@ -1150,32 +1155,33 @@ def fuse_sync(prep: Prepared, tolerance_s: float = 1e-3, noise_px: float | None 
     (:func:`residual_refused`: a detection that is not the ball the others saw; dropped and
     counted as ``residual_failed``). ``std_m`` / ``cov_*``: first order at ``noise_px`` per
     axis on each recorded pixel (``tests/test_fusion_validity.py``, hand-computed on a
-    rectified pair). ``max_gap_s``: :func:`stereo_at_common_instants`'. A detection without
-    a ray is a missing one (:func:`rays_only_shared`).
+    rectified pair). ``max_gap_s``, ``drops``: :func:`stereo_at_common_instants`'. A
+    detection without a ray is a missing one (:func:`rays_only_shared`).
     """
     prep, shared = rays_only_shared(prep, tolerance_s)  # (no ray: a missing detection)
     if len(prep.obs) == 0:
         return _empty("sync")
     return stereo_at_common_instants(prep, tolerance_s, "sync", noise_px, max_gap_s,
-                                     shared)[0]
+                                     shared, drops=drops)[0]
 
 
 def fuse_nearest(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
-                 compiled: bool = True) -> Track:
+                 compiled: bool = True, *, drops: Drops | None = None) -> Track:
     """``nearest``: each detection triangulated with the latest detection of every other camera
     as if they were simultaneous (the paper's "unsynchronized" baseline). Geometrically
     invalid points are dropped and counted in ``Track.dropped``. ``noise_px``: the
     detections' noise until the session's own shows (:func:`detection_noise`), and an upper
     bound of its floor; None: no covariance. ``compiled``: the per-point arithmetic by
     :mod:`._stereo_kernel` (the same bits), else by the numpy forms (a reference). A
-    detection without a ray is a missing one (:func:`~._prepare.rays_only`)."""
+    detection without a ray is a missing one (:func:`~._prepare.rays_only`). ``drops``: as
+    :func:`stereo_at_common_instants`'."""
     prep = rays_only(prep)[0]
     if len(prep.obs) == 0:
         return _empty("nearest")
     time_ns, camera = prep.obs.time_ns, prep.obs.camera
     rows, others = nearest_rows(prep, int(max_gap_s * NS), compiled)
     if compiled and len(rows) >= 2 * NEAREST_BLOCK_ROWS:
-        blocked = _nearest_in_blocks(prep, rows, others, max_gap_s, noise_px)
+        blocked = _nearest_in_blocks(prep, rows, others, max_gap_s, noise_px, drops)
         if blocked is not None:
             return blocked
     # the other cameras' detections are older than the point: the ball moved since; and the
@@ -1188,7 +1194,8 @@ def fuse_nearest(prep: Prepared, max_gap_s: float, noise_px: float | None = 0.5,
         points, quality, flags, _ = nview_points(
             prep, rows, sigma, slot_motion(prep, rows, time_ns, max_gap_s, compiled),
             compiled, innovations(prep, max_gap_s, recorded), excess=(time_ns, max_gap_s))
-    return _nearest_track([_nearest_kept(time_ns, camera, others, points, quality, flags)])
+    return _nearest_track([_nearest_kept(time_ns, camera, others, points, quality, flags,
+                                         drops)])
 
 
 def excess_factor(prep: Prepared, rows: np.ndarray, used: np.ndarray, points: np.ndarray,
@@ -1252,14 +1259,17 @@ def excess_noise(prep: Prepared, slot_rows: np.ndarray, jacobians: list[np.ndarr
 
 
 def _nearest_kept(time_ns: np.ndarray, camera: np.ndarray, others: np.ndarray,
-                  points: np.ndarray, quality: dict[str, np.ndarray], flags: np.ndarray
-                  ) -> tuple[tuple, np.ndarray]:
+                  points: np.ndarray, quality: dict[str, np.ndarray], flags: np.ndarray,
+                  drops: Drops | None = None) -> tuple[tuple, np.ndarray]:
     """The kept points of some rows of :func:`fuse_nearest` (a point is made where its row has
     another camera's detection and at least two detections; kept where valid and finite),
     as (time_ns, points, camera, quality) of the kept, and the validity flags of the made.
-    Every argument: the same rows, (k,) or (k, .)."""
+    Every argument: the same rows, (k,) or (k, .); ``drops``: the dropped ones added
+    (:data:`Drops`)."""
     made = (others >= 1) & (quality["n_detections"] >= 2)
     keep = made & (flags == 0) & np.all(np.isfinite(points), axis=1)
+    if drops is not None:
+        note_dropped(drops, time_ns[made], camera[made], flags[made])
     return ((time_ns[keep], points[keep], camera[keep],
              {name: column[keep] for name, column in quality.items()}), flags[made])
 
@@ -1287,7 +1297,8 @@ NEAREST_BLOCK_ROWS = 16384
 
 
 def _nearest_in_blocks(prep: Prepared, rows: np.ndarray, others: np.ndarray,
-                       max_gap_s: float, noise_px: float | None) -> Track | None:
+                       max_gap_s: float, noise_px: float | None, drops: Drops | None = None
+                       ) -> Track | None:
     """:func:`fuse_nearest`'s compiled track, its points made block by block of rows: the
     same bits, as every column of a point is made from its own row of ``rows`` and the
     detections' (session-wide) columns by the same operations whatever the rows beside it.
@@ -1296,7 +1307,7 @@ def _nearest_in_blocks(prep: Prepared, rows: np.ndarray, others: np.ndarray,
     :func:`invalid_points` (compiled where each camera has 0 or at least 2 finite points,
     and where its probes, and :func:`ray_depths`' probes, say the compiled passes give
     numpy's bits): None, for the whole-array way, when a block would go another way than
-    the whole array."""
+    the whole array (``drops`` then unchanged)."""
     from ._prepare import ray_depths_compiled, view_flags_compiled
 
     if not (view_flags_compiled() and ray_depths_compiled()):
@@ -1312,6 +1323,7 @@ def _nearest_in_blocks(prep: Prepared, rows: np.ndarray, others: np.ndarray,
     n_blocks = k // NEAREST_BLOCK_ROWS
     bounds = [k * i // n_blocks for i in range(n_blocks + 1)]
     parts = []
+    noted: Drops | None = None if drops is None else []
     for lo, hi in itertools.pairwise(bounds):
         block = rows[lo:hi]
         if noise_px is None:
@@ -1326,8 +1338,10 @@ def _nearest_in_blocks(prep: Prepared, rows: np.ndarray, others: np.ndarray,
         if not np.all((counts == 0) | (counts >= 2)):
             return None  # (invalid_points' numpy form for this block)
         parts.append(_nearest_kept(time_ns[lo:hi], camera[lo:hi], others[lo:hi], points,
-                                   quality, flags))
+                                   quality, flags, noted))
         del points, quality, flags, used, finite
+    if drops is not None and noted is not None:
+        drops.extend(noted)
     return _nearest_track(parts)
 
 
@@ -1360,12 +1374,37 @@ def nearest_rows(prep: Prepared, max_gap_ns: int, compiled: bool = True
     return rows, others
 
 
+#: The validity flags' reasons, as ``Track.dropped`` names them.
+_INVALID_REASONS = (("behind_camera", BEHIND), ("outside_view", OUTSIDE_VIEW),
+                    ("parallel_rays", PARALLEL))
+
+
 def count_invalid(flags: np.ndarray) -> dict[str, int]:
     """{reason: number of points} of validity ``flags`` (a point may have several reasons)."""
     return {name: int(np.count_nonzero(flags & bit))
-            for name, bit in (("behind_camera", BEHIND), ("outside_view", OUTSIDE_VIEW),
-                              ("parallel_rays", PARALLEL))
-            if np.any(flags & bit)}
+            for name, bit in _INVALID_REASONS if np.any(flags & bit)}
+
+
+#: The points a method dropped, one entry per reason and call: ``(reason, time_ns (k,),
+#: camera (k,))``, each point under each of its reasons (as ``Track.dropped`` counts it).
+#: The window stream (:class:`~pslog.fusion.stream.StreamFuser`) re-fuses its window at
+#: every push and counts only the drops that became settled, as it emits only such points.
+Drops = list[tuple[str, np.ndarray, np.ndarray]]
+
+
+def note_dropped(drops: Drops, time_ns: np.ndarray, camera: np.ndarray,
+                 flags: np.ndarray | None = None,
+                 refused: tuple[str, np.ndarray] | None = None) -> None:
+    """Add to ``drops`` the points of ``time_ns`` / ``camera`` (k,) that validity ``flags``
+    (k,) make invalid (:func:`count_invalid`'s reasons) or that ``refused`` = ``(reason,
+    (k,) bool)`` refuses."""
+    if flags is not None:
+        for name, bit in _INVALID_REASONS:
+            on = (flags & bit) != 0
+            if np.any(on):
+                drops.append((name, time_ns[on], camera[on]))
+    if refused is not None and np.any(refused[1]):
+        drops.append((refused[0], time_ns[refused[1]], camera[refused[1]]))
 
 
 def with_dropped(track: Track, *counts: Mapping[str, int]) -> Track:

@@ -11,6 +11,14 @@ session (a method with an incremental form, the registry's ``streamer``, ``filte
 - ``sync``, ``typeB`` and ``linear`` group detections within the tolerance, so a point at
   ``t`` is emitted once a detection later than ``t + tolerance`` arrives, or on :meth:`flush`.
 
+Each push's Track also carries the counts of the points the method dropped
+(``Track.dropped``) that became settled with it, so the stream's Tracks joined
+(:meth:`Track.concat <pslog.records.Track.concat>`) count what the batch counts, reason by
+reason: the incremental forms count each dropped point once; the window methods, whose
+window re-fuses points an earlier window already dropped, count only the drops after the
+last counted one and, for ``sync``, ``typeB`` and ``linear``, before the tolerance's wait,
+as they emit points (:data:`pslog.fusion.stereo.Drops`: each drop's time and camera).
+
 With ``candidates=True``, the gate's rows from the session's first choice on wait until the
 verdict on that choice is known (:class:`pslog.fusion.gating.StreamStart`: its camera's
 next frame, at most ``static_s``), so the session's first points come out together then.
@@ -28,6 +36,7 @@ with no clock correction in the rig a detection is admitted when pushed (no extr
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
 from typing import cast
 
@@ -37,10 +46,10 @@ from ..errors import FusionError
 from ..geometry import fundamental_matrices
 from ..records import NS, Observations, Track
 from ..rig import Rig
-from . import METHODS, FusionOptions, causal_methods, check_method, check_tolerance, fuse
+from . import METHODS, FusionOptions, causal_methods, check_method, check_tolerance
 from ._prepare import default_max_gap_s, prepare
 from .gating import _clock_model, _true_time_ns, stream_arrays
-from .stereo import NOISE_EVERY_S, NOISE_WINDOW_S, sync_groups
+from .stereo import NOISE_EVERY_S, NOISE_WINDOW_S, Drops, sync_groups
 
 
 class StreamFuser:
@@ -73,6 +82,9 @@ class StreamFuser:
         self.options = options or FusionOptions()
         check_tolerance(rig, self.options.tolerance_s)
         self._max_gap_s = self.options.max_gap_s or default_max_gap_s(rig)
+        self._resolved = replace(self.options, max_gap_s=self._max_gap_s)  # (as fuse's)
+        # the method's batch function, which a window method calls with ``drops`` (Method)
+        self._function = cast(Callable[..., Track], METHODS[method].function)
         # the history a point still to emit reaches back to (the window methods; typeA and
         # filter keep their own): every such point is at or after the newest row less the
         # settling time (which _settled keeps on top), and uses, at most, ``nearest`` the
@@ -113,6 +125,9 @@ class StreamFuser:
         # rays, pixel Jacobians; each row's own: prepared again, the same bits)
         self._head: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._emitted_until: tuple[int, int] = (np.iinfo(np.int64).min, -1)  # (time, camera)
+        # the window methods' dropped points counted so far: every one at or before this
+        # (time, camera), each counted once, when it became settled (as a point is emitted)
+        self._counted_until: tuple[int, int] = (np.iinfo(np.int64).min, -1)
         # the clock model (pslog.timing), per camera in rig order
         self._clock_model = _clock_model(rig)
         self._corrected = any(c.has_clock_correction for c in rig.cameras)
@@ -372,7 +387,7 @@ class StreamFuser:
                 sync_groups(obs, len(self.rig), self.options.tolerance_s)[1] >= 2):
             # no common instant in the window (yet, or any more: a synchronised camera lost
             # the ball): no point, which on a valid stream is no error, even at the end
-            track = _empty(self.method)
+            track, dropped = _empty(self.method), {}
         else:
             prepared = prepare(obs, self.rig, self._F, head=self._head)
             jac = prepared.uv_jacobian  # (always made by prepare)
@@ -380,13 +395,19 @@ class StreamFuser:
                           else (prepared.uv_undistorted, prepared.ray_dir, jac))
             if np.any(self._doubt > 0):  # (the gate's choices in doubt: as the batch's)
                 prepared = replace(prepared, doubt_px2=self._doubt.copy())
-            track = fuse(obs, self.rig, self.method, self.options, prepared=prepared)
+            # fuse's method on the window (the options resolved as fuse resolves them), with
+            # the dropped points' times: the window re-fuses points already counted
+            drops: Drops = []
+            track = self._function(prepared, self.rig, self._resolved, drops=drops)
+            dropped = self._settled_drops(drops, final)
         newest = int(self._time[-1])
         key_t, key_c = self._emitted_until
         new = (track.time_ns > key_t) | ((track.time_ns == key_t) & (track.camera > key_c))
         if not final and self._settle_ns:
             new &= track.time_ns < newest - self._settle_ns
         out = track.select(new)
+        if dropped:  # (select keeps no counts: the settled drops')
+            out = replace(out, dropped=dropped)
         if len(out):
             self._emitted_until = (int(out.time_ns[-1]), int(out.camera[-1]))
         # keep only the history the next points can reach, cut at the start of a group
@@ -397,6 +418,29 @@ class StreamFuser:
         if self._head is not None:
             self._head = (self._head[0][cut:], self._head[1][cut:], self._head[2][cut:])
         return out
+
+    def _settled_drops(self, drops: Drops, final: bool) -> dict[str, int]:
+        """The counts by reason of the window's dropped points (``drops``: the method's
+        :data:`~pslog.fusion.stereo.Drops` on the window) that became settled with this push,
+        as its points do (after the last counted, and, for the methods that wait for the
+        tolerance, before the newest row less it; every one on ``final``): each drop counted
+        once, at the push that settles it, so the stream's counts summed are the batch's."""
+        key_t, key_c = self._counted_until
+        newest = int(self._time[-1])
+        bound = newest - self._settle_ns
+        counts: dict[str, int] = {}
+        for reason, time_ns, camera in drops:
+            on = (time_ns > key_t) | ((time_ns == key_t) & (camera > key_c))
+            if not final and self._settle_ns:
+                on &= time_ns < bound
+            n = int(np.count_nonzero(on))
+            if n:
+                counts[reason] = counts.get(reason, 0) + n
+        if self._settle_ns:  # (every drop before the bound is settled: counted now)
+            self._counted_until = max(self._counted_until, (bound - 1, np.iinfo(np.int32).max))
+        else:  # (every drop at or before the newest row)
+            self._counted_until = (newest, int(self._camera[-1]))
+        return counts
 
     def _cut_row(self, obs: Observations, reach_ns: int) -> int:
         """First row of the window to keep: the start of the latest sync group starting at
