@@ -657,3 +657,32 @@ def test_cli_detail_range_and_bad_values(long_session, tmp_path, capsys):
         err = capsys.readouterr().err
         assert "--detail" in err and len(err.strip().splitlines()) == 1, err
     assert not (tmp_path / "x.rrd").exists()
+
+
+@pytest.mark.parametrize("how", ["empty", "truncated"])
+def test_undecodable_frames_get_no_crop_and_no_traceback(session, tmp_path, capsys, how):
+    """A stored frame that does not decode (no bytes: OpenCV raised; truncated: no frame)
+    is shown as a frame without an image: no crop, the others cropped as before."""
+    from pslog.log import iter_images
+
+    broken = tmp_path / "broken.mcap"
+    old = read_session(session)
+    bad = set()
+    with SessionWriter(broken, old.rig, timing=old.timing) as w:
+        w.add_detections(old.detections)
+        for k, image in enumerate(iter_images(session)):
+            data = bytes(image.data)
+            if k % 4 == 3:  # (every camera's: the images come camera after camera)
+                data = b"" if how == "empty" else data[:len(data) // 3]
+                bad.add((image.camera, image.frame_index))
+            w.add_image(image.camera, image.frame_index, image.time_ns, data)
+    good_rrd, bad_rrd = tmp_path / "good.rrd", tmp_path / "bad.rrd"
+    assert pslog_main(["view", str(session), "--save", str(good_rrd)]) == 0
+    assert pslog_main(["view", str(broken), "--save", str(bad_rrd)]) == 0
+    assert "Traceback" not in capsys.readouterr().err
+    good, bad_chunks = temporal_chunks(good_rrd), temporal_chunks(bad_rrd)
+    for c, name in enumerate(old.rig.names):
+        crops = batch_column(good[f"/crops/{name}"], "frame")
+        kept = [f for f in crops if (c, f) not in bad]
+        assert 0 < len(kept) < len(crops)
+        assert batch_column(bad_chunks[f"/crops/{name}"], "frame") == kept
