@@ -686,3 +686,26 @@ def test_undecodable_frames_get_no_crop_and_no_traceback(session, tmp_path, caps
         kept = [f for f in crops if (c, f) not in bad]
         assert 0 < len(kept) < len(crops)
         assert batch_column(bad_chunks[f"/crops/{name}"], "frame") == kept
+
+
+def test_a_recorded_pixel_beyond_float32_draws_no_warning(session, tmp_path, capsys):
+    """A recording from before live refused pixels beyond any image (u = 1e300 was fused
+    and recorded): view draws it without numpy's overflow warnings on the terminal."""
+    import warnings
+
+    old = read_session(session)
+    det = old.detections
+    uv = det.cand_uv.copy()
+    uv[::9, 0] = 1e300
+    huge = Detections.from_frames(det.camera_names, det.frame_time_ns, det.frame_camera,
+                                  det.frame_index, det.cand_frame, uv, det.cand_radius,
+                                  det.cand_score)
+    path = tmp_path / "huge.mcap"
+    with SessionWriter(path, old.rig, timing=old.timing) as w:
+        w.add_detections(huge)
+    out = tmp_path / "huge.rrd"
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert pslog_main(["view", str(path), "--save", str(out)]) == 0
+    assert not [str(w.message) for w in caught if issubclass(w.category, RuntimeWarning)]
+    assert "Warning" not in capsys.readouterr().err
