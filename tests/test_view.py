@@ -709,3 +709,37 @@ def test_a_recorded_pixel_beyond_float32_draws_no_warning(session, tmp_path, cap
         assert pslog_main(["view", str(path), "--save", str(out)]) == 0
     assert not [str(w.message) for w in caught if issubclass(w.category, RuntimeWarning)]
     assert "Warning" not in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("sig, code", [("SIGTERM", 143), ("SIGINT", 0)])
+def test_serve_stops_on_sigterm_in_one_line_and_on_ctrl_c_cleanly(session, sig, code):
+    """``view --serve`` serves until Ctrl-C (its normal end: exit 0); SIGTERM stops it like
+    any command: one line, exit 143. Neither prints rerun's "Ctrl-C received. Exiting."
+    (rerun's teardown took SIGTERM for a Ctrl-C and exited 0)."""
+    import signal
+
+    web, grpc = _free_loopback_port(), _free_loopback_port()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "pslog.cli", "view", str(session), "--serve", "--frames", "none",
+         "--web-port", str(web), "--grpc-port", str(grpc)], stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE, text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    try:
+        assert proc.stdout is not None
+        lines = []
+        for line in proc.stdout:  # (blocks until the server is up)
+            lines.append(line)
+            if line.startswith("serving the web viewer"):
+                break
+        proc.send_signal(getattr(signal, sig))
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == code, err
+    assert "Ctrl-C received" not in "".join(lines) + out and not out.strip()
+    final = [line for line in err.replace("\r", "\n").splitlines()
+             if (line.strip() and not line.startswith("pslog view: ")) or "error" in line
+             or "terminated" in line or "interrupted" in line]
+    assert final == (["pslog view: terminated (SIGTERM)"] if code else []), err
