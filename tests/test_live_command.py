@@ -398,6 +398,7 @@ def test_a_pixel_beyond_any_image_is_malformed_and_not_recorded(tmp_path):
     final = [line for line in run.err if line.startswith("live ")][-1]
     assert bad > 2 and f"malformed {bad}" in final, final
     stored = read_session(out).detections
+    assert read_session(out).timing == "typeA"  # (docs/live.md: named from the offsets)
     assert stored.n_frames == det.n_frames - bad
     assert np.abs(stored.cand_uv).max() < 2000
 
@@ -614,3 +615,17 @@ def test_hold_fuses_frames_of_synchronised_shutters_that_overtake_one_another(tm
     offline = read_session(tmp_path / "fused.mcap").tracks["filter"]
     np.testing.assert_array_equal(live.time_ns, offline.time_ns)
     np.testing.assert_allclose(live.position_world, offline.position_world, rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("method, message", [
+    ("foo", "unknown method 'foo' (choose from sync, nearest, typeA"),
+    ("typeA,filter", "one method, got 'typeA,filter' (streaming methods: sync"),
+    ("smooth", "method 'smooth' cannot run live (streaming methods: sync"),
+])
+def test_a_bad_live_method_says_what_is_wrong_in_one_line(method, message, capsys):
+    from pslog.cli import main
+
+    with pytest.raises(SystemExit) as info:
+        main(["live", "--rig", "paper3", "--method", method])
+    err = capsys.readouterr().err
+    assert info.value.code == 2 and message in err and err.count("\n") == 1, err
