@@ -16,6 +16,10 @@ _UNDISTORT_ITERATIONS = 20
 
 #: Largest image side accepted, pixels: beyond any camera sensor (the largest are ~16k).
 MAX_IMAGE_SIZE = 65536
+#: Largest pixel coordinate accepted in a detection (imported or received live), either
+#: sign, pixels: ten times the largest image side (a candidate just outside the image is
+#: a real detection; one beyond this is not a number any detector gives).
+MAX_PIXEL = 10.0 * MAX_IMAGE_SIZE
 #: Highest frame rate accepted, frames per second (high-speed cameras reach ~1e5).
 MAX_FPS = 1e6
 #: Lowest frame rate accepted, frames per second: a frame every 10 s is a time-lapse, not a

@@ -1,8 +1,9 @@
 """Offline re-detection: run the ball detector again over a session's stored frames.
 
-The new session is a stream copy of the old one (frames, calibration, poses, truth, events,
-tracks and metadata kept as stored) with every frame's detections replaced, so it fuses like
-any session.
+The new session is a stream copy of the old one (frames, calibration, poses, truth, events
+and metadata kept as stored) with every frame's detections replaced, so it fuses like any
+session; its fused tracks are dropped (fused from the old detections). A frame without a
+stored image, or whose image does not decode, keeps its old detections.
 
 Where the time goes (1280 x 720 JPEGs of quality 90, about 250 kB each with the renderer's
 sensor noise; ``benchmarks/bench_redetect.py``, CPU time per frame): ``cv2.imdecode`` 3.4 ms
@@ -125,6 +126,8 @@ class RedetectSummary:
     images : frames decoded and re-detected
     kept : frames without a stored image, which keep their old candidates
     before, after : frames with at least one candidate, before and after
+    undecodable : frames whose stored image does not decode (no bytes, truncated, damaged),
+        which keep their old candidates too
     """
 
     output: Path
@@ -133,12 +136,16 @@ class RedetectSummary:
     kept: int
     before: int
     after: int
+    undecodable: int = 0
 
     def text(self) -> str:
         line = (f"re-detected {self.images} frames: {self.before} -> {self.after} frames with "
                 f"a ball candidate; written {self.output}")
         if self.kept:
             line += f"\n{self.kept} frames have no stored image and keep their old detections"
+        if self.undecodable:
+            line += (f"\n{self.undecodable} frames have an image that does not decode (empty, "
+                     f"truncated or damaged JPEG) and keep their old detections")
         return line
 
 
@@ -186,6 +193,8 @@ def redetect_session(src: str | Path, dst: str | Path, hsv: HsvRange | None = No
         for batch_rows, batch_results in batches:
             rows.extend(batch_rows)
             results.extend(batch_results)
+        done["undecodable"] = [row for row, found in zip(rows, results, strict=True)
+                               if found is None]
         done["redone"], done["new"] = _merged(old, rows, results)
         return done["new"]
 
@@ -198,14 +207,22 @@ def redetect_session(src: str | Path, dst: str | Path, hsv: HsvRange | None = No
         copy_session(src, dst, detections=detections, metadata=metadata,
                      checked_chunks=checked, layouts=layout_of, force=force)
     redone, new = done["redone"], done["new"]
-    return RedetectSummary(dst, old.n_frames, int(redone.sum()), int((~redone).sum()),
+    bad = np.zeros(old.n_frames, dtype=bool)
+    bad[done["undecodable"]] = True
+    undecodable = int(np.count_nonzero(bad & ~redone))
+    return RedetectSummary(dst, old.n_frames, int(redone.sum()),
+                           int((~redone).sum()) - undecodable,
                            int(np.count_nonzero(old.candidates_per_frame())),
-                           int(np.count_nonzero(new.candidates_per_frame())))
+                           int(np.count_nonzero(new.candidates_per_frame())), undecodable)
 
 
 def _merged(old: Detections, rows: list, results: list) -> tuple[np.ndarray, Detections]:
     """(re-detected (n_frames,) bool, the new detections): the new candidates of the
-    re-detected frames, the old ones of the others."""
+    re-detected frames, the old ones of the others (a result None: the frame's image does
+    not decode, the frame is not re-detected)."""
+    decoded = [(row, found) for row, found in zip(rows, results, strict=True)
+               if found is not None]
+    rows, results = [row for row, _f in decoded], [found for _r, found in decoded]
     redone = np.zeros(old.n_frames, dtype=bool)
     redone[rows] = True
     cand_frame, cand_uv, cand_radius, cand_score = [], [], [], []
@@ -651,7 +668,9 @@ class _HalfSizeDetector(BallDetector):
 
 class _Redetector:
     """Decodes a stored JPEG frame and detects the ball in it: ``(uv (k, 2), radius (k,),
-    score (k,))`` in full-resolution pixels (an undecodable frame: no candidate).
+    score (k,))`` in full-resolution pixels, or None for a frame that does not decode (no
+    bytes, truncated, damaged, not a JPEG: the frame keeps its old candidates, as one
+    without a stored image does).
 
     Exact (default): the whole frame decoded by ``cv2.imdecode`` and given to
     :class:`BallDetector`: the candidates of the frame the recorder saw; with ``compiled``,
@@ -682,15 +701,21 @@ class _Redetector:
 
             self.screened = ScreenedDecoder(self.detector)
 
-    def __call__(self, blob: bytes | memoryview) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def __call__(self, blob: bytes | memoryview
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         import cv2
 
+        if len(blob) == 0:
+            return None  # (cv2.imdecode raises on no bytes)
         if self.screened is not None:
             found = self.screened.detect(blob)
             if found is not None:
                 return found.uv, found.radius, found.score
-        frame = cv2.imdecode(np.frombuffer(blob, dtype=np.uint8), self.flag)
+        try:
+            frame = cv2.imdecode(np.frombuffer(blob, dtype=np.uint8), self.flag)
+        except cv2.error:
+            frame = None
         if frame is None:
-            return np.zeros((0, 2)), np.zeros(0), np.zeros(0)  # undecodable: no candidate
+            return None  # undecodable (truncated, damaged, not a JPEG): as if not stored
         found = self.detector.detect(frame)
         return found.uv, found.radius, found.score

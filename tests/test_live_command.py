@@ -365,6 +365,44 @@ def test_without_sources_the_fuser_fuses_datagrams_from_elsewhere(tmp_path):
     assert f"datagrams {det.n_frames + 1} " in final and "foreign 1" in final, final
 
 
+def test_a_pixel_beyond_any_image_is_malformed_and_not_recorded(tmp_path):
+    """A detection datagram with u = 1e300 (a sender's garbage, finite) is counted as
+    malformed and dropped: neither fused nor recorded (import's bound, 655360 px)."""
+    import dataclasses
+
+    from _live import frames, rally_session
+
+    from pslog.live.protocol import encode_detections
+    from pslog.log import read_session
+
+    out = tmp_path / "rec.mcap"
+    run = LiveRun("--rig", "paper3", "--timing", "typeA", "--listen", "udp://127.0.0.1:0",
+                  "--duration", "3", "--record", str(out), "--status-every", "0.5",
+                  cwd=tmp_path)
+    port = int(run.wait_err(r"listening for detection datagrams on udp://127\.0\.0\.1:(\d+)")
+               .group(1))
+    rig, det = rally_session(0.5, spurious_rate=0.0, miss_rate=0.0)
+    epoch = time.time_ns()
+    bad = 0
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sender:
+        for i, d in enumerate(frames(det, rig, epoch)):
+            if i % 10 == 5 and len(d.uv):
+                huge = d.uv.copy()
+                huge[0, i % 2] = 1e300 if i % 20 == 5 else -655361.0
+                d = dataclasses.replace(d, uv=huge)
+                bad += 1
+            sender.sendto(encode_detections(d), ("127.0.0.1", port))
+            time.sleep(0.0005)
+    code = run.finish()
+    assert code == 0, "\n".join(run.err)
+    final = [line for line in run.err if line.startswith("live ")][-1]
+    assert bad > 2 and f"malformed {bad}" in final, final
+    stored = read_session(out).detections
+    assert read_session(out).timing == "typeA"  # (docs/live.md: named from the offsets)
+    assert stored.n_frames == det.n_frames - bad
+    assert np.abs(stored.cand_uv).max() < 2000
+
+
 # ---- a rig with clock corrections (after 'pslog sync') -----------------------------------------
 def test_synthetic_cameras_with_clock_errors_are_fused_on_corrected_times(tmp_path):
     """cam2's clock runs 4 ms late and its rolling shutter reads rows over 20 ms: the
@@ -577,3 +615,17 @@ def test_hold_fuses_frames_of_synchronised_shutters_that_overtake_one_another(tm
     offline = read_session(tmp_path / "fused.mcap").tracks["filter"]
     np.testing.assert_array_equal(live.time_ns, offline.time_ns)
     np.testing.assert_allclose(live.position_world, offline.position_world, rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("method, message", [
+    ("foo", "unknown method 'foo' (choose from sync, nearest, typeA"),
+    ("typeA,filter", "one method, got 'typeA,filter' (streaming methods: sync"),
+    ("smooth", "method 'smooth' cannot run live (streaming methods: sync"),
+])
+def test_a_bad_live_method_says_what_is_wrong_in_one_line(method, message, capsys):
+    from pslog.cli import main
+
+    with pytest.raises(SystemExit) as info:
+        main(["live", "--rig", "paper3", "--method", method])
+    err = capsys.readouterr().err
+    assert info.value.code == 2 and message in err and err.count("\n") == 1, err

@@ -122,6 +122,9 @@ GOOD = encode_detections(_det(3))
     (_with(GOOD, 80, struct.pack("<d", math.inf)), "malformed"),     # inf v
     (_with(GOOD, 96, struct.pack("<d", -math.inf)), "malformed"),    # inf score
     (_with(GOOD, 88, struct.pack("<d", math.inf)), "malformed"),     # inf radius
+    (_with(GOOD, 72, struct.pack("<d", 1e300)), "malformed"),        # u beyond any image
+    (_with(GOOD, 80 + 64, struct.pack("<d", -655361.0)), "malformed"),  # v of the third
+    (_with(encode_detections(_det(1)), 72, struct.pack("<d", 655361.0)), "malformed"),  # k=1
     (_with(GOOD, 5, b"\x00"), "malformed"),         # empty name
     (_with(GOOD, 5, b"\x21"), "malformed"),         # name longer than its field
     (_with(GOOD, 5, b"\x02"), "malformed"),         # bytes after the name's length
@@ -138,6 +141,20 @@ def test_the_largest_frame_index_a_session_stores_is_accepted_and_no_larger_one_
     assert decode_detections(_with(GOOD, 16, struct.pack("<q", 2**32 - 1))).frame_index == 2**32 - 1
     with pytest.raises(DatagramError, match=r"frame index 4294967296 is not in 0\.\.4294967295"):
         encode_detections(_det(1, frame_index=2**32))
+
+
+def test_pixels_up_to_import_s_bound_are_accepted():
+    """The bound is ``pslog import``'s (one constant): 655360 px either sign is a pixel."""
+    from pslog.camera import MAX_PIXEL
+
+    assert MAX_PIXEL == 655360
+    for k in (1, 3):
+        data = encode_detections(_det(k))
+        data = _with(data, 72, struct.pack("<2d", MAX_PIXEL, -MAX_PIXEL))
+        assert decode_detections(data).uv[0].tolist() == [MAX_PIXEL, -MAX_PIXEL]
+    with pytest.raises(DatagramError, match=r"pixel \(1e\+300, .*\) is beyond any image "
+                                            r"\(at most 655360 pixels\)"):
+        decode_detections(_with(GOOD, 72, struct.pack("<d", 1e300)))
 
 
 def test_oversize_bound_is_the_largest_valid_datagram():

@@ -489,3 +489,41 @@ def test_fast_is_near_the_exact_detections_and_the_truth(tmp_path, monkeypatch):
     c = read_session(pool).detections
     for name in ("cand_frame", "cand_uv", "cand_radius", "cand_score"):
         assert_array_equal(getattr(c, name), getattr(db, name), err_msg=name)
+
+
+def _broken_images_copy(tmp_path: Path, how: str) -> Path:
+    """The sample with every third stored JPEG broken (``how``: no bytes, its first third
+    only, or zeros after its first 20 bytes), its detections as stored."""
+    session = read_session(SAMPLE)
+    path = tmp_path / f"broken-{how}.mcap"
+    with SessionWriter(path, session.rig, timing=session.timing) as w:
+        w.add_detections(session.detections)
+        for k, image in enumerate(iter_images(SAMPLE)):
+            data = bytes(image.data)
+            if k % 3 == 2:
+                data = {"empty": b"", "truncated": data[:len(data) // 3],
+                        "zeroed": data[:20] + bytes(len(data) - 20)}[how]
+            w.add_image(image.camera, image.frame_index, image.time_ns, data)
+    return path
+
+
+@pytest.mark.parametrize("how", ["empty", "truncated", "zeroed"])
+@pytest.mark.parametrize("fast", [False, True])
+def test_undecodable_images_keep_their_old_detections_and_are_counted(tmp_path, cli, how,
+                                                                       fast):
+    """A stored frame that does not decode (no bytes: OpenCV raised; truncated or zeroed:
+    no frame) is treated as a frame without a stored image: it keeps its old candidates
+    and the note counts it -- no traceback, and no detection silently lost."""
+    src, out = _broken_images_copy(tmp_path, how), tmp_path / "out.mcap"
+    code, text, err = cli("redetect", src, "-o", out, *(["--fast"] if fast else []))
+    assert code == 0 and "Traceback" not in err, err
+    assert "re-detected 90 frames: 135 -> 135 frames with a ball candidate" in text
+    assert ("45 frames have an image that does not decode (empty, truncated or damaged "
+            "JPEG) and keep their old detections") in text
+    old, new = read_session(src).detections, read_session(out).detections
+    broken = [(i.camera, i.frame_index) for k, i in enumerate(iter_images(src)) if k % 3 == 2]
+    for camera, index in broken:
+        row_old = np.flatnonzero((old.frame_camera == camera) & (old.frame_index == index))
+        row_new = np.flatnonzero((new.frame_camera == camera) & (new.frame_index == index))
+        assert_array_equal(new.cand_uv[new.cand_frame == row_new[0]],
+                           old.cand_uv[old.cand_frame == row_old[0]])

@@ -657,3 +657,89 @@ def test_cli_detail_range_and_bad_values(long_session, tmp_path, capsys):
         err = capsys.readouterr().err
         assert "--detail" in err and len(err.strip().splitlines()) == 1, err
     assert not (tmp_path / "x.rrd").exists()
+
+
+@pytest.mark.parametrize("how", ["empty", "truncated"])
+def test_undecodable_frames_get_no_crop_and_no_traceback(session, tmp_path, capsys, how):
+    """A stored frame that does not decode (no bytes: OpenCV raised; truncated: no frame)
+    is shown as a frame without an image: no crop, the others cropped as before."""
+    from pslog.log import iter_images
+
+    broken = tmp_path / "broken.mcap"
+    old = read_session(session)
+    bad = set()
+    with SessionWriter(broken, old.rig, timing=old.timing) as w:
+        w.add_detections(old.detections)
+        for k, image in enumerate(iter_images(session)):
+            data = bytes(image.data)
+            if k % 4 == 3:  # (every camera's: the images come camera after camera)
+                data = b"" if how == "empty" else data[:len(data) // 3]
+                bad.add((image.camera, image.frame_index))
+            w.add_image(image.camera, image.frame_index, image.time_ns, data)
+    good_rrd, bad_rrd = tmp_path / "good.rrd", tmp_path / "bad.rrd"
+    assert pslog_main(["view", str(session), "--save", str(good_rrd)]) == 0
+    assert pslog_main(["view", str(broken), "--save", str(bad_rrd)]) == 0
+    assert "Traceback" not in capsys.readouterr().err
+    good, bad_chunks = temporal_chunks(good_rrd), temporal_chunks(bad_rrd)
+    for c, name in enumerate(old.rig.names):
+        crops = batch_column(good[f"/crops/{name}"], "frame")
+        kept = [f for f in crops if (c, f) not in bad]
+        assert 0 < len(kept) < len(crops)
+        assert batch_column(bad_chunks[f"/crops/{name}"], "frame") == kept
+
+
+def test_a_recorded_pixel_beyond_float32_draws_no_warning(session, tmp_path, capsys):
+    """A recording from before live refused pixels beyond any image (u = 1e300 was fused
+    and recorded): view draws it without numpy's overflow warnings on the terminal."""
+    import warnings
+
+    old = read_session(session)
+    det = old.detections
+    uv = det.cand_uv.copy()
+    uv[::9, 0] = 1e300
+    huge = Detections.from_frames(det.camera_names, det.frame_time_ns, det.frame_camera,
+                                  det.frame_index, det.cand_frame, uv, det.cand_radius,
+                                  det.cand_score)
+    path = tmp_path / "huge.mcap"
+    with SessionWriter(path, old.rig, timing=old.timing) as w:
+        w.add_detections(huge)
+    out = tmp_path / "huge.rrd"
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert pslog_main(["view", str(path), "--save", str(out)]) == 0
+    assert not [str(w.message) for w in caught if issubclass(w.category, RuntimeWarning)]
+    assert "Warning" not in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("sig, code", [("SIGTERM", 143), ("SIGINT", 0)])
+def test_serve_stops_on_sigterm_in_one_line_and_on_ctrl_c_cleanly(session, sig, code):
+    """``view --serve`` serves until Ctrl-C (its normal end: exit 0); SIGTERM stops it like
+    any command: one line, exit 143. Neither prints rerun's "Ctrl-C received. Exiting."
+    (rerun's teardown took SIGTERM for a Ctrl-C and exited 0)."""
+    import signal
+
+    web, grpc = _free_loopback_port(), _free_loopback_port()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "pslog.cli", "view", str(session), "--serve", "--frames", "none",
+         "--web-port", str(web), "--grpc-port", str(grpc)], stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE, text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    try:
+        assert proc.stdout is not None
+        lines = []
+        for line in proc.stdout:  # (blocks until the server is up)
+            lines.append(line)
+            if line.startswith("serving the web viewer"):
+                break
+        proc.send_signal(getattr(signal, sig))
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == code, err
+    assert "Ctrl-C received" not in "".join(lines) + out and not out.strip()
+    final = [line for line in err.replace("\r", "\n").splitlines()
+             if (line.strip() and not line.startswith("pslog view: ")) or "error" in line
+             or "terminated" in line or "interrupted" in line]
+    assert final == (["pslog view: terminated (SIGTERM)"] if code else []), err

@@ -101,8 +101,10 @@ def strips_array(strips: np.ndarray) -> pa.ListArray:
 
 
 def image_space(uv: np.ndarray) -> np.ndarray:
-    """OpenCV pixels (n, 2) -> rerun image coordinates (n, 2) float32 (see PIXEL_CENTER)."""
-    return (np.asarray(uv, dtype=np.float64) + PIXEL_CENTER).astype(np.float32)
+    """OpenCV pixels (n, 2) -> rerun image coordinates (n, 2) float32 (see PIXEL_CENTER);
+    a pixel beyond float32 (a recording made before live refused them) becomes infinite."""
+    with np.errstate(over="ignore"):
+        return (np.asarray(uv, dtype=np.float64) + PIXEL_CENTER).astype(np.float32)
 
 
 def undistorted_bounds(cam: Camera) -> tuple[float, float, float, float]:

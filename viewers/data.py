@@ -325,8 +325,11 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
     if (start is not None or end is not None) and not np.any(
             (frame_times >= window[0]) & (frame_times < window[1])):
         span = (frame_times.max() - first) / NS if len(frame_times) else 0.0
-        raise InputError(f"no frame between --start {start} s and --end {end} s; the session "
-                         f"spans 0 to {span:.3f} s")
+        bounds = " and ".join(([f"--start {start} s"] if start is not None else [])
+                              + ([f"--end {end} s"] if end is not None else []))
+        where = "between" if start is not None and end is not None else (
+            "from" if start is not None else "before")
+        raise InputError(f"no frame {where} {bounds}; the session spans 0 to {span:.3f} s")
     choice = detail if isinstance(detail, DetailChoice) else DetailChoice.parse(detail)
     return ViewData(session, paths, observations, shown, construction, window, notes,
                     {m: rejections[m] for m in shown if m in rejections},

@@ -13,6 +13,8 @@ Entity paths::
 
 from __future__ import annotations
 
+import contextlib
+
 import cv2
 import numpy as np
 import rerun as rr
@@ -77,9 +79,12 @@ class CropLogger:
             self._last[image.camera] = uv
         if uv is None or image.frame_index % self.every:
             return
-        frame = cv2.imdecode(np.frombuffer(image.data, np.uint8), cv2.IMREAD_COLOR)
+        frame = None
+        if len(image.data):  # (OpenCV raises on no bytes)
+            with contextlib.suppress(cv2.error):
+                frame = cv2.imdecode(np.frombuffer(image.data, np.uint8), cv2.IMREAD_COLOR)
         if frame is None:
-            return
+            return  # undecodable (empty, truncated, damaged): as if not stored
         crop, inside = cut(frame, uv, CROP_PX)
         ok, jpeg = cv2.imencode(".jpg", crop, [cv2.IMWRITE_JPEG_QUALITY, _JPEG_QUALITY])
         if ok:

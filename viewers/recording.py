@@ -346,7 +346,8 @@ def _log_rays(rec, data: ViewData, clock: C.Clock) -> int:
     n = 0
     for c, cam in enumerate(rig.cameras):
         rows = np.flatnonzero(inside & (obs.camera == c))
-        strips = np.stack([origin[rows], end_world[rows]], axis=1).astype(np.float32)
+        with np.errstate(over="ignore"):  # (beyond float32: infinite, then no ray)
+            strips = np.stack([origin[rows], end_world[rows]], axis=1).astype(np.float32)
         ok = np.all(np.isfinite(strips), axis=(1, 2))  # a pixel beyond the lens model: no ray
         n += C.send(rec, f"world/rays/{cam.name}", clock, obs.time_ns[rows],
                     obs.frame_index[rows],

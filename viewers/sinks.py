@@ -22,6 +22,8 @@ import errno
 import os
 import socket
 import sys
+import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 from urllib.parse import quote, urlsplit
@@ -196,14 +198,22 @@ class Sink:
         """The address to browse a ``serve`` sink at."""
         return f"http://localhost:{self.web_port}/?url={quote(self.uri or '')}"
 
-    def serve_until_interrupted(self, rec: rr.RecordingStream) -> None:
-        """Keep a ``serve`` sink up until Ctrl-C, then end the stream."""
-        import rerun as rr
-
+    def serve_until_interrupted(self, rec: rr.RecordingStream,
+                                announce: Callable[[], None] | None = None) -> None:
+        """Keep a ``serve`` sink up until Ctrl-C (then end the stream and return: the
+        serving's normal end), or until SIGTERM or SIGHUP, raised on as the command's
+        ``Terminated`` (a KeyboardInterrupt subclass: its one line, exit 143 or 129).
+        (Not ``rr.script_teardown``: it took either for a Ctrl-C, printed "Ctrl-C received.
+        Exiting." on stdout and returned, exit 0.) ``announce`` is called first, inside the
+        wait: a Ctrl-C just after it still ends the serving normally."""
         try:
-            rr.script_teardown(argparse.Namespace(serve=True))  # sleeps until Ctrl-C
-        except KeyboardInterrupt:
-            pass
+            if announce is not None:
+                announce()
+            while True:
+                time.sleep(1)
+        except KeyboardInterrupt as exc:
+            if type(exc) is not KeyboardInterrupt:  # SIGTERM or SIGHUP
+                raise
         finally:
             rec.disconnect()
 

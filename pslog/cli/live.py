@@ -88,7 +88,13 @@ def streaming_method(text: str) -> str:
     """A fusion method that can run live (a causal one)."""
     from pslog.fusion import METHODS, causal_methods
 
-    if text not in METHODS or not METHODS[text].causal:
+    if "," in text:
+        raise argparse.ArgumentTypeError(
+            f"one method, got {text!r} (streaming methods: {', '.join(causal_methods())})")
+    if text not in METHODS:
+        raise argparse.ArgumentTypeError(
+            f"unknown method {text!r} (choose from {', '.join(causal_methods())})")
+    if not METHODS[text].causal:
         raise argparse.ArgumentTypeError(
             f"method {text!r} cannot run live (streaming methods: "
             f"{', '.join(causal_methods())})")

@@ -135,7 +135,9 @@ def add_detector_arguments(parser: argparse.ArgumentParser) -> None:
     from recorders.detect import HsvRange
 
     parser.add_argument("--hsv", metavar="H1,H2,S1,S2,V1,V2", type=hsv_box,
-                        help="ball colour as an HSV box hmin,hmax,smin,smax,vmin,vmax "
+                        help="ball colour as an HSV box hmin,hmax,smin,smax,vmin,vmax, "
+                             "hue 0..179, saturation and value 0..255; hmin > hmax wraps "
+                             "round the hue circle through red (e.g. 170,10,...) "
                              f"(default {HsvRange().text()}, an orange ball)")
     parser.add_argument("--max-candidates", type=positive_int, default=5, metavar="K",
                         help="ball candidates kept per frame, best first "

@@ -8,9 +8,11 @@ from pslog.cli._common import add_force, declare_files
 
 DESCRIPTION = """\
 Re-run ball detection over the JPEG frames stored in a session, with new settings, and
-write a new session: frames, calibration, poses, truth, events, fused tracks and metadata
-are copied as stored; only the detections change. The result fuses like any session.
-Frames recorded without an image (--no-frames) cannot be re-detected.
+write a new session: frames, calibration, poses, truth, events and metadata are copied as
+stored and the detections replaced; fused tracks are dropped (they were fused from the old
+detections: fuse the new session). The result fuses like any session. Frames recorded
+without an image (--no-frames), or whose image does not decode (empty, truncated, damaged),
+keep their old detections; the summary counts them.
 
 By default every frame is decoded whole and the candidates are exactly those the detector
 finds in it. --fast detects in each frame decoded at half its width and height (JPEG's DCT

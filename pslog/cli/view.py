@@ -172,7 +172,7 @@ def run(args: argparse.Namespace) -> int:
     progress.done()
     report(counts)
     if sink.kind == "serve":
-        print(f"serving the web viewer at {sink.web_address} (Ctrl-C to stop)", file=out,
-              flush=True)
-        sink.serve_until_interrupted(rec)
+        sink.serve_until_interrupted(rec, lambda: print(
+            f"serving the web viewer at {sink.web_address} (Ctrl-C to stop)", file=out,
+            flush=True))
     return 0

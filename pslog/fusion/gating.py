@@ -1901,7 +1901,8 @@ def choice_doubt(time_ns: np.ndarray, camera: np.ndarray, uv: np.ndarray,
         j = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n) + np.repeat(lo, n)
         du = uv[c[which], 0] - su[j, 0]
         dv = uv[c[which], 1] - su[j, 1]
-        close = which[du * du + dv * dv <= DOUBT_RADIUS_PX * DOUBT_RADIUS_PX]
+        with np.errstate(over="ignore"):  # (a pixel of 1e300 squared: inf, not close)
+            close = which[du * du + dv * dv <= DOUBT_RADIUS_PX * DOUBT_RADIUS_PX]
         near = c[np.bincount(close, minlength=len(c)) >= DOUBT_REJECTIONS]
         out[near] = doubt_variance(uv[near, 0], uv[near, 1], width[cam], height[cam])
     return out

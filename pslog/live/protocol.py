@@ -63,7 +63,8 @@ is one of :data:`REASONS`:
 - ``oversize``: longer than the largest valid datagram (:data:`MAX_DETECTION_BYTES`);
 - ``malformed``: whole records but not as many as ``k`` says (``k`` too big or too small for
   the length), ``k`` above :data:`MAX_CANDIDATES`, a name that is empty, too long or not
-  UTF-8, or a NaN or infinite pixel or score.
+  UTF-8, a NaN or infinite pixel or score (or an infinite radius), or a pixel beyond any
+  image (:data:`pslog.camera.MAX_PIXEL`, as ``pslog import`` refuses).
 """
 
 from __future__ import annotations
@@ -75,6 +76,7 @@ from math import isfinite
 
 import numpy as np
 
+from ..camera import MAX_PIXEL
 from ..errors import PslogError
 from ..records import MAX_FRAME_INDEX
 
@@ -237,6 +239,11 @@ def _check_start(data: bytes, magic: bytes, what: str) -> None:
                                        f"version {PROTOCOL_VERSION}")
 
 
+def _beyond(camera: str, u: float, v: float) -> str:
+    return (f"detection datagram of camera {camera!r}: pixel ({u:.6g}, {v:.6g}) is beyond "
+            f"any image (at most {MAX_PIXEL:g} pixels)")
+
+
 def decode_detections(data: bytes) -> DetectionDatagram:
     """The :class:`DetectionDatagram` of a received datagram; raises :class:`DatagramError`
     (module docstring) for anything else."""
@@ -271,6 +278,8 @@ def decode_detections(data: bytes) -> DetectionDatagram:
         if not (isfinite(u) and isfinite(v) and isfinite(s) and r not in _INF):
             raise DatagramError("malformed", f"detection datagram of camera {camera!r}: a "
                                              f"NaN or infinite pixel or score")
+        if not (abs(u) <= MAX_PIXEL and abs(v) <= MAX_PIXEL):
+            raise DatagramError("malformed", _beyond(camera, u, v))
         one = np.array((u, v, r, s))
         one.flags.writeable = False  # (its views inherit it)
         d = object.__new__(DetectionDatagram)
@@ -286,6 +295,9 @@ def decode_detections(data: bytes) -> DetectionDatagram:
                for u, v, r, s in cand.tolist()):
         raise DatagramError("malformed", f"detection datagram of camera {camera!r}: a NaN or "
                                          f"infinite pixel or score")
+    for u, v in cand[:, :2].tolist():
+        if not (abs(u) <= MAX_PIXEL and abs(v) <= MAX_PIXEL):
+            raise DatagramError("malformed", _beyond(camera, u, v))
     # the arrays as DetectionDatagram's own checks would make them (float64, C-contiguous,
     # read-only copies), without them: this runs once per datagram in the live fuser
     cols = cand.T.copy()  # (4, k): radius and score contiguous rows

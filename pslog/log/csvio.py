@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..camera import MAX_IMAGE_SIZE
+from ..camera import MAX_PIXEL as _MAX_PIXEL
 from ..errors import InputError
 from ..inputs import check_input_file
 from ..outputs import replacing
@@ -80,10 +80,6 @@ def _time_ns(text: str) -> int:
     if not -(2**63) < ns < 2**63:
         raise _Invalid(f"beyond the range of times (±{float(_MAX_TIME_S):.3g} s)")
     return ns
-
-
-#: Largest pixel coordinate accepted, pixels: ten times the largest image side.
-_MAX_PIXEL = 10.0 * MAX_IMAGE_SIZE
 
 
 def _pixel(text: str) -> float:
