@@ -301,17 +301,20 @@ def test_fuse_decisions_equal_columnar_reference(monkeypatch, n_cameras, noise):
     noise estimate, the prediction test, the kink test) keep and drop the points the
     columnar reference does (the former fuse_type_a: NoiseEstimate.sigmas, the prediction
     test and the kink test on (k,) columns), with the same counts and the same bits."""
-    import pslog.fusion
+    import pslog.fusion.pseudo
 
     obs, rig = _turntable(n_cameras, noise, seed=7)
     compiled = fuse(obs, rig, "typeA")
     calls = []
 
-    def reference(*args, **kwargs):
-        calls.append(len(args[0].obs))
-        return _reference_fuse_type_a(*args, **kwargs)
+    def reference(prep, max_gap_s, noise_px, events, seen, noise, explain, cov_noise_px,
+                  table_out):
+        # (the registry's entry point; no quality table handed out: the copying rescale)
+        calls.append(len(prep.obs))
+        return _reference_fuse_type_a(prep, max_gap_s, noise_px, events, seen, noise,
+                                      explain=explain, cov_noise_px=cov_noise_px)
 
-    monkeypatch.setattr(pslog.fusion, "fuse_type_a", reference)
+    monkeypatch.setattr(pslog.fusion.pseudo, "_fuse_type_a", reference)
     columnar = fuse(obs, rig, "typeA")
     assert calls
     assert compiled.dropped == columnar.dropped

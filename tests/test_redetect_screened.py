@@ -204,10 +204,12 @@ def test_other_jpegs_go_to_opencv(frames):
     for blob in others:
         assert decoder.detect(blob) is None
         decoded = cv2.imdecode(np.frombuffer(blob, np.uint8), cv2.IMREAD_COLOR)
-        uv, _radius, score = redetector(blob)
-        if decoded is None:  # (OpenCV refuses the truncated file: no candidate)
-            assert len(score) == 0
+        found = redetector(blob)
+        if decoded is None:  # (OpenCV refuses the truncated file: not re-detected, the
+            assert found is None  # frame keeps its old candidates)
             continue
+        assert found is not None
+        uv, _radius, score = found
         exact = detector.detect(decoded)
         assert_array_equal(uv, exact.uv)
         assert_array_equal(score, exact.score)
