@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 from test_filter import lab_rig
-from test_filter_jump_instant import kicked
+from test_filter_jump_instant import _jacobian, kicked
 
 from pslog.fusion import filter as FM
 from pslog.fusion.filter import BallFilter, FilterOptions
@@ -82,15 +82,6 @@ def test_a_kick_taken_as_a_bounce_states_the_kicks_spread():
     for hyps, best, _xs, hand, _x, P in narrow:
         np.testing.assert_allclose(P, hand, rtol=1e-9, atol=1e-15)
         assert np.trace(P[:3, :3]) > 1.05 * np.trace(hyps[best][2][:3, :3])
-
-
-def _jacobian(camera, p):
-    J = np.empty((2, 3))
-    for k in range(3):
-        d = np.zeros(3)
-        d[k] = 1e-6
-        J[:, k] = (camera.project((p + d)[None])[0][0] - camera.project((p - d)[None])[0][0]) / 2e-6
-    return J
 
 
 def test_the_instant_terms_replay_takes_the_jumps_mixture_covariance():

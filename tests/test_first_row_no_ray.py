@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from test_no_ray_detection import _fused
 
 from pslog import SimulationOptions, apply_timing, builtin_rig, get_motion, simulate
 from pslog.fusion import stereo as S
@@ -52,18 +53,6 @@ def _write(path, rig, obs: Observations) -> None:
             [c.name for c in rig.cameras], obs))
 
 
-def _fused(tmp_path, cli, name: str, rig, obs: Observations) -> tuple[dict, list[str]]:
-    """The tracks ``pslog fuse`` wrote, and its lines of counts (points, refusals)."""
-    src, out = tmp_path / f"{name}.mcap", tmp_path / f"{name}_fused.mcap"
-    _write(src, rig, obs)
-    code, text, err = cli("fuse", src, "--method", ",".join(METHODS), "--gating", "off",
-                          "-o", out)
-    assert code == 0, err
-    lines = [line for line in text.splitlines() if line.split(" ")[0] in METHODS]
-    assert len(lines) == len(METHODS), text
-    return read_session(out).tracks, lines
-
-
 @pytest.mark.parametrize("damaged,value", [((0,), 1e300), ((0,), np.nan)])
 def test_points_do_not_depend_on_the_first_detection_having_a_ray(tmp_path, cli, damaged,
                                                                   value):
@@ -80,8 +69,8 @@ def test_points_do_not_depend_on_the_first_detection_having_a_ray(tmp_path, cli,
                         np.r_[obs.uv[first][None], uv], np.r_[0, obs.frame_index + 1])
     assert np.isfinite(prepare(lead, rig).ray_dir[0]).all()
 
-    got, got_lines = _fused(tmp_path, cli, "damaged", rig, damaged_obs)
-    want, want_lines = _fused(tmp_path, cli, "lead", rig, lead)
+    got, got_lines = _fused(tmp_path, cli, "damaged", rig, damaged_obs, METHODS, "sync")
+    want, want_lines = _fused(tmp_path, cli, "lead", rig, lead, METHODS, "sync")
     assert got_lines == want_lines  # the points and the refusals counted
     for method in METHODS:
         g, w = got[method], want[method]
