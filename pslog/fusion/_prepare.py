@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import cache, cached_property
-from typing import cast
+from typing import Any, cast
 
 import numpy as np
 
@@ -300,6 +300,26 @@ def rays_only(prep: Prepared) -> tuple[Prepared, np.ndarray | None]:
         doubt_px2=None if prep.doubt_px2 is None else prep.doubt_px2[rows]), rows
 
 
+def array_key(*parts) -> tuple:
+    """A hashable key of arrays (or nested tuples of them) by their float64 bytes: what a
+    per-rig cache (:func:`rig_cached`) is keyed by."""
+    return tuple(array_key(*p) if isinstance(p, tuple) else np.asarray(p, np.float64).tobytes()
+                 for p in parts)
+
+
+def rig_cached(cache: dict, key: tuple, make: Callable[[], Any]) -> Any:
+    """``cache[key]``, made by ``make()`` the first time the key is met (the rigs' caches of
+    derived geometry: a rig's tables made once, not per call; a cache past 256 rigs is
+    emptied)."""
+    value = cache.get(key)
+    if value is None:
+        value = make()
+        if len(cache) > 256:
+            cache.clear()
+        cache[key] = value
+    return value
+
+
 #: The rigs whose geometry :func:`_checked_geometry` checked (keyed by the cameras' K, R and
 #: t), with their fundamental matrices: a rig is checked and F made once, not per prepare
 _RIG_GEOMETRY: dict[tuple, np.ndarray] = {}
@@ -309,16 +329,12 @@ def _checked_geometry(rig: Rig) -> np.ndarray:
     """:func:`~pslog.geometry.fundamental_matrices` of ``rig`` (m, m, 3, 3), a copy of the
     one made when its geometry (K, R, t) was first met and passed
     :func:`~pslog.rig.check_baselines` (which raises, every time, for a rig that fails)."""
-    key = tuple((np.asarray(c.K, np.float64).tobytes(), np.asarray(c.R, np.float64).tobytes(),
-                 np.asarray(c.t, np.float64).tobytes()) for c in rig.cameras)
-    F = _RIG_GEOMETRY.get(key)
-    if F is None:
+    def checked() -> np.ndarray:
         check_baselines(rig)
-        F = fundamental_matrices(rig.cameras)
-        if len(_RIG_GEOMETRY) > 256:
-            _RIG_GEOMETRY.clear()
-        _RIG_GEOMETRY[key] = F
-    return F.copy()
+        return fundamental_matrices(rig.cameras)
+
+    return rig_cached(_RIG_GEOMETRY, array_key(*((c.K, c.R, c.t) for c in rig.cameras)),
+                      checked).copy()
 
 
 #: The cameras' K⁻¹ (m, 3, 3) of the rigs met (keyed by their K), made once: three
@@ -329,14 +345,8 @@ _K_INVERSES: dict[tuple, np.ndarray] = {}
 def _k_inverses(rig: Rig) -> np.ndarray:
     """``np.array([np.linalg.inv(c.K) for c in rig.cameras])``, a copy of the one made when
     these cameras' K were first met (the same bits: the same call on the same matrices)."""
-    key = tuple(np.asarray(c.K, np.float64).tobytes() for c in rig.cameras)
-    K_inv = _K_INVERSES.get(key)
-    if K_inv is None:
-        K_inv = np.array([np.linalg.inv(c.K) for c in rig.cameras])
-        if len(_K_INVERSES) > 256:
-            _K_INVERSES.clear()
-        _K_INVERSES[key] = K_inv
-    return K_inv.copy()
+    return rig_cached(_K_INVERSES, array_key(*(c.K for c in rig.cameras)),
+                      lambda: np.array([np.linalg.inv(c.K) for c in rig.cameras])).copy()
 
 
 def _lensless_rows(rig: Rig, obs: Observations, uv_und: np.ndarray, ray_dir: np.ndarray,

@@ -191,18 +191,9 @@ def camera_tables(prep: Prepared) -> tuple:
     cache = prep.__dict__.get("_kernel_tables")
     if cache is not None:
         return cache
-    key = (np.asarray(prep.K_inv, np.float64).tobytes(), np.asarray(prep.R, np.float64).tobytes(),
-           np.asarray(prep.F, np.float64).tobytes(),
-           np.asarray(prep.view_box, np.float64).tobytes(),
-           *((np.asarray(c.K, np.float64).tobytes(), np.asarray(c.R, np.float64).tobytes(),
-              np.asarray(c.t, np.float64).tobytes(), np.asarray(c.dist, np.float64).tobytes())
-             for c in prep.cameras))
-    tables = _CAMERA_TABLES.get(key)
-    if tables is None:
-        tables = _pseudo_kernel.camera_tables(prep)
-        if len(_CAMERA_TABLES) > 256:
-            _CAMERA_TABLES.clear()
-        _CAMERA_TABLES[key] = tables
+    key = _prepare.array_key(prep.K_inv, prep.R, prep.F, prep.view_box,
+                             *((c.K, c.R, c.t, c.dist) for c in prep.cameras))
+    tables = _prepare.rig_cached(_CAMERA_TABLES, key, lambda: _pseudo_kernel.camera_tables(prep))
     prep.__dict__["_kernel_tables"] = tables
     return tables
 
