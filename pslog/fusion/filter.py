@@ -613,16 +613,7 @@ def _predicted(x, P, dt, c, O, q):
     model's drag weighted by its probability ``c`` (the models' mixture's mean: drag
     ``k_s + c (k - k_s)``, ``k_s`` the supported model's), white-noise acceleration ``q``
     (Bar-Shalom et al. 2001, 6.2.2)."""
-    px, py, pz, vx, vy, vz = x[0], x[1], x[2], x[3], x[4], x[5]
-    # written so that k_s = k gives k exactly (the filter before the drag-free supported model)
-    k = O[_OKS] + c * (O[_OK] - O[_OKS])
-    speed = math.sqrt(vx * vx + vy * vy + vz * vz)
-    gx, gy, gz = c * O[_OG], c * O[_OG + 1], c * O[_OG + 2]
-    ax, ay, az = gx - k * speed * vx, gy - k * speed * vy, gz - k * speed * vz
-    h = 0.5 * dt * dt
-    xn = np.empty(6)
-    xn[0], xn[1], xn[2] = px + vx * dt + ax * h, py + vy * dt + ay * h, pz + vz * dt + az * h
-    xn[3], xn[4], xn[5] = vx + ax * dt, vy + ay * dt, vz + az * dt
+    xn = _predicted_mean(x, dt, c, O)
     adt = abs(dt)
     q3, q2, q1 = q * adt ** 3.0 / 3.0, q * dt * adt / 2.0, q * adt  # 3.0: libm's pow
     dt2 = dt * dt
@@ -1004,8 +995,10 @@ def _mixture_about(sc, hx, hP, x, best):
 
 @kernel
 def _predicted_mean(x, dt, c, O):
-    """:func:`_predicted`'s mean alone (the same operations: the same bits)."""
+    """:func:`_predicted`'s mean (6,): gravity weighted by ``c`` and the drag ``k_s + c (k −
+    k_s)``, constant acceleration over ``dt`` seconds (also the instant term's replay)."""
     px, py, pz, vx, vy, vz = x[0], x[1], x[2], x[3], x[4], x[5]
+    # written so that k_s = k gives k exactly (the filter before the drag-free supported model)
     k = O[_OKS] + c * (O[_OK] - O[_OKS])
     speed = math.sqrt(vx * vx + vy * vy + vz * vz)
     gx, gy, gz = c * O[_OG], c * O[_OG + 1], c * O[_OG + 2]
