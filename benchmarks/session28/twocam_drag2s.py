@@ -12,7 +12,9 @@ the kernel's), the pixel variance and ``μ`` are read, and beside it run
 
 with ``y = z_px − h(x⁻)``, ``S = J P⁻_pp Jᵀ + σ² I``, ``K = P⁻ Hᵀ S⁻¹``; the point published
 is ``p + V_p δk``. ``δk`` starts at 0 with information ``1/σ_k²`` and is kept for the whole
-session. Prints filter/typeA with and without the correction, and the final ``k₀ + δk``.
+session. Prints filter/typeA with and without the correction, the final ``k₀ + δk``, and
+NEES of the points with the filter's published covariance, then widened by ``V_p V_pᵀ / I_k``
+(sessions run at the batch filter's own options only).
 
     PYTHONPATH=. python benchmarks/session28/twocam_drag2s.py --first-seeds 9600 [--sigma-k 0.01]
 """
@@ -26,7 +28,7 @@ sys.path.insert(0, "benchmarks/session28")
 from twocam_per import bd, rig_of
 
 import pslog.fusion as pf
-from pslog.evaluation import errors_m
+from pslog.evaluation import covariances, errors_m
 from pslog.fusion import FusionOptions
 from pslog.fusion import filter as FM
 from pslog.fusion.filter import BallFilter, FilterOptions
@@ -49,7 +51,7 @@ def run(rig, obs, doubt, sigma_k: float, opts: FilterOptions):
     flt = BallFilter(rig, opts)
     V = np.zeros(6)
     dk, info = 0.0, 1.0 / sigma_k ** 2
-    out_t, raw, corr = [], [], []
+    out_t, raw, corr, widen = [], [], [], []
     for t, c, (u, v) in zip(times.tolist(), cams.tolist(), uv.tolist(), strict=True):
         had = flt.time_ns is not None
         if had:
@@ -82,7 +84,8 @@ def run(rig, obs, doubt, sigma_k: float, opts: FilterOptions):
             out_t.append(t)
             raw.append(res[0])
             corr.append(np.asarray(res[0]) + V[:3] * dk)
-    return np.array(out_t, dtype=np.int64), np.array(raw), np.array(corr), dk
+            widen.append(np.outer(V[:3], V[:3]) / info)
+    return np.array(out_t, dtype=np.int64), np.array(raw), np.array(corr), dk, np.array(widen)
 
 
 def main() -> None:
@@ -108,6 +111,7 @@ def main() -> None:
         return orig.function(prep, rig_, options)
 
     ratios = {"raw": [], "corr": []}
+    d2s = {"raw": [], "corr": [], "corr, widened": []}
     pf.METHODS["filter"] = dataclasses.replace(orig, function=_capture)
     try:
         for rig_spec in a.rigs.split(","):
@@ -119,11 +123,16 @@ def main() -> None:
                         det, truth, _ = simulate_labelled(rig, motion, duration, SimulationOptions(noise_px=a.noise, seed=seed, **extra))
                         tr = fuse_detections(det, rig, ["typeA", "filter"], FusionOptions())[0]
                         mA = np.nanmean(errors_m(tr["typeA"], truth))
-                        t, raw, corr, dk = run(rig, captured["obs"], captured["doubt"], a.sigma_k, opts)
+                        t, raw, corr, dk, widen = run(rig, captured["obs"], captured["doubt"], a.sigma_k, opts)
                         P = truth.at(t)
                         eR, eC = np.linalg.norm(raw - P, axis=1), np.linalg.norm(corr - P, axis=1)
                         same = len(t) == len(tr["filter"]) and np.allclose(raw, tr["filter"].position_world)
                         ratios["raw"].append(np.nanmean(eR) / mA)
+                        if same:
+                            C = covariances(tr["filter"])
+                            for name, off, cov in (("raw", raw - P, C), ("corr", corr - P, C), ("corr, widened", corr - P, C + widen)):
+                                ok = np.all(np.isfinite(off), axis=1)
+                                d2s[name].append(np.einsum("ni,ni->n", off[ok], np.linalg.solve(cov[ok], off[ok][..., None])[..., 0]))
                         ratios["corr"].append(np.nanmean(eC) / mA)
                         print(f"{rig_spec:9s} {fs} {label:14s} filter/typeA {ratios['raw'][-1]:.3f} -> {ratios['corr'][-1]:.3f}"
                               f"  k {opts.drag_per_m + dk:.4f} /m  (points as the batch filter's: {same})", flush=True)
@@ -132,6 +141,10 @@ def main() -> None:
     for name, r in ratios.items():
         r = np.array(r)
         print(f"{name:5s}: n {len(r)} gmean {np.exp(np.mean(np.log(r))):.3f} max {r.max():.3f} above 1/2 {int(np.sum(r > .5))}")
+    for name, d in d2s.items():
+        if d:
+            d = np.concatenate(d)
+            print(f"NEES {name}: {d.mean() / 3:.3f}, share in 2 sigma {100 * np.mean(d <= 4):.1f} % ({len(d)} points of the sessions fused at the batch filter's options)")
 
 
 if __name__ == "__main__":
