@@ -189,6 +189,10 @@ _CAUCHY = 3.0
 _WINDOW_SPANS = 5
 #: The first fit's prior is this much looser (σ_a times this)
 _LOOSE = 10.0
+#: A piece's end detection whose residual norm exceeds this many σ contradicts the fit
+#: there (χ²₂'s 1 - 1e-4 quantile, √18.42): a jump the fit did not find
+#: (:func:`_underdetermined_ends`)
+_END_JUMP_SCALED = float(np.sqrt(-2.0 * np.log(1e-4)))
 #: Fewest detections (of at least two cameras) that make an end segment beyond a break
 #: trustworthy: 8 pixel coordinates for its 6 unknowns (:func:`_underdetermined_ends`)
 _END_DETECTIONS = 4
@@ -938,7 +942,7 @@ def _fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions) -> Fit:
     consider = (options.detector_bias_px * bias_sensitivity(problem, U, J, r, sigma)
                 if options.detector_bias_px > 0 else None)
     del U
-    out_rows, valid_s = _underdetermined_ends(problem, breaks)
+    out_rows, valid_s = _underdetermined_ends(problem, breaks, np.linalg.norm(r, axis=1) / sigma)
     trajectory = Trajectory(problem.t0_ns, problem.knots, problem.offset, control, band,
                             np.concatenate([np.asarray(b) for b in breaks]) if breaks
                             else np.zeros(0), sigma, spacing, valid_s, consider,
@@ -969,7 +973,8 @@ def _fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions) -> Fit:
                len(out_rows))
 
 
-def _underdetermined_ends(problem: _Problem, breaks: list[np.ndarray]
+def _underdetermined_ends(problem: _Problem, breaks: list[np.ndarray],
+                          scaled: np.ndarray | None = None
                           ) -> tuple[np.ndarray, np.ndarray]:
     """Observation rows of the end segments the detections do not determine, and the span
     (n_pieces, 2) of each piece that they do (seconds since ``t0_ns``).
@@ -980,10 +985,22 @@ def _underdetermined_ends(problem: _Problem, breaks: list[np.ndarray]
     paths, three fix it with nothing to spare, so one noisy pixel can move the end by metres
     while the covariance, linearised at that fit, stays small. Such a segment (fewer than
     ``_END_DETECTIONS`` detections, or one camera's) gives no point; its detections still
-    weigh in the fit (they pull nothing the rest determines)."""
+    weigh in the fit (they pull nothing the rest determines).
+
+    The same holds where no break was placed because too few detections follow the jump
+    (session 28, issue 10): a kick in the last frames of a piece (the ball then leaves the
+    view, or a blackout starts) leaves one or two detections after it, and a break needs
+    detections of two cameras between it and the piece's end (:func:`_end_limits`), so the
+    fit carries the motion before the kick through them, metres per second off, with the
+    small covariance of a well-determined segment. Their residuals show it: ``scaled``
+    (the rows' residual norms over σ, in ``problem.rows``' order), the run of a piece's
+    last (first) detections each beyond :data:`_END_JUMP_SCALED` (χ²₂'s 1 - 1e-4 quantile)
+    is an end segment beyond an unfound jump; fewer than ``_END_DETECTIONS`` of them give
+    no point either (a longer run is left to the break search)."""
     out = []
     valid = np.empty((len(problem.knots), 2))
     cams = problem.obs.camera
+    start = 0
     for p, rows in enumerate(problem.rows_of_piece):
         t = problem.t[rows]
         lo, hi = float(t.min()), float(t.max())
@@ -999,6 +1016,16 @@ def _underdetermined_ends(problem: _Problem, breaks: list[np.ndarray]
                     or len(np.unique(cams[rows[tail]])) < 2):
                 out.append(rows[tail])
                 hi = float(np.nextafter(b[-1], -np.inf))
+        if scaled is not None:
+            order = np.argsort(t, kind="stable")
+            bad = scaled[start + order] > _END_JUMP_SCALED
+            start += len(rows)
+            for run, at in ((bad[::-1], order[::-1]), (bad, order)):  # the last, the first
+                k = len(run) if run.all() else int(np.argmin(run))
+                if 0 < k < _END_DETECTIONS and k < len(run):
+                    out.append(rows[at[:k]])
+                    edge = float(t[at[k]])  # the nearest detection the fit agrees with
+                    lo, hi = (lo, min(hi, edge)) if run is not bad else (max(lo, edge), hi)
         valid[p] = lo, hi
     rows_out = np.unique(np.concatenate(out)) if out else np.zeros(0, np.int64)
     return rows_out.astype(np.int64), valid
