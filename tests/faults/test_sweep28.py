@@ -30,6 +30,12 @@ def inputs(tmp_path_factory) -> Path:
     (folder / "random.csv").write_bytes(bytes(range(120, 250)))
     (folder / "latin1.toml").write_bytes(b'name = "r\xe9"\n')
     shutil.copyfile(SAMPLE, folder / "big.mcap")  # a session of more than 1 MB
+    # a rotation with an entry of 1e308 (found by the sweep's mutations of rig.toml)
+    rig = builtin_rig("paper3").to_toml()
+    row = "[0.8320502943378437, 0.0, -0.5547001962252291]"
+    assert row in rig
+    (folder / "huge_r.toml").write_text(rig.replace(row, "[1e308, 0.0, -0.5547001962252291]",
+                                                    1), encoding="utf-8")
     return folder
 
 
@@ -58,6 +64,9 @@ def _no_python_words(line: str) -> None:
     (["calibrate", "--points", "{i}/pts.csv", "--name", "cam1", "--rig", "{i}/big.mcap",
       "--width", "640", "--height", "480"],
      ("big.mcap is a session, not a rig file", "pslog rig show")),
+    # was two lines of numpy's "RuntimeWarning: overflow encountered in matmul" first
+    (["import", "--rig", "{i}/huge_r.toml", "--detections", "{i}/det.csv", "-o", "{o}/s.mcap"],
+     ("huge_r.toml: camera 'cam1': R is not a rotation matrix",)),
 ])
 def test_inputs_of_the_wrong_kind_are_named_in_pslogs_words(args, contains, inputs, tmp_path):
     before = fingerprint(inputs, tmp_path)
