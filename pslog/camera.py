@@ -150,7 +150,9 @@ class Camera:
             raise RigError(f"camera {name!r}: K has an entry of {np.abs(K).max():.3g} pixels, "
                            f"beyond any lens (at most {_MAX_K:g})")
         R = _as_array(self.R, (3, 3), "R", name)
-        if not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or abs(np.linalg.det(R) - 1) > 1e-6:
+        # a rotation's entries lie in [-1, 1]: checked first, R @ R.T of 1e308 overflows
+        if (np.abs(R).max() > 1 + 1e-6 or not np.allclose(R @ R.T, np.eye(3), atol=1e-6)
+                or abs(np.linalg.det(R) - 1) > 1e-6):
             raise RigError(f"camera {name!r}: R is not a rotation matrix (to 1e-6)")
         object.__setattr__(self, "K", K)
         object.__setattr__(self, "R", R)

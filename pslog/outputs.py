@@ -10,9 +10,15 @@ Partial files left by a killed run (the next run meets them):
 - a *derived* session (``simulate``, ``import``, ``fuse``, ``redetect``, ``recover``)
   can be made again from its inputs, and its MCAP says it is one, so its stale unfinished
   partial is removed with a one-line notice (:func:`clear_stale_partial`);
-- any other file of that name (a killed CSV or .rrd export's partial, a complete session,
-  a user's own ``notes.csv.partial``) is never deleted: nothing proves pslog made it, so
-  writing the output is refused, naming the file; an output named ``*.partial`` is refused;
+- a partial of :func:`replacing` or the .rrd writer (a CSV, JSON, TUM, Parquet, C3D, rig,
+  ``recover`` or .rrd output: all made again from their inputs) is marked as pslog's by an
+  *owner file* ``<name>.partial.pslog`` naming the partial's device and inode
+  (:func:`claim_partial`): a killed run's partial that is still that very file is removed
+  with a notice, the owner file with it;
+- any other file of that name (a user's own ``notes.csv.partial``, a file put in place of a
+  killed run's partial, a complete session) is never deleted: nothing proves pslog made it,
+  so writing the output is refused, naming the file; an output named ``*.partial`` is
+  refused;
 - a partial that may hold a *recording* (``record --force`` killed while replacing a
   session: the only copy of what the cameras saw) is never deleted: writing over it is
   refused, naming it and how to salvage it.
@@ -306,6 +312,139 @@ def partial_kind(path: str | Path) -> str:
 
 
 
+# ---- owner files: a killed run's partial recognised as pslog's own ----------------------
+
+#: first line of an owner file (:func:`claim_partial`)
+_OWNER_MAGIC = "pslog partial owner 1"
+
+
+def owner_path(partial: Path) -> Path:
+    """The owner file of ``partial`` (:func:`claim_partial`): ``<partial>.pslog``."""
+    return partial.with_name(partial.name + ".pslog")
+
+
+def claim_partial(partial: Path, fd: int) -> None:
+    """Mark ``partial``, open on ``fd`` and locked by this process (:func:`open_locked`), as
+    pslog's own: a small owner file ``<partial>.pslog`` names its device and inode (and,
+    for people, this process and host). A run killed (SIGKILL, power cut) leaves both; the
+    next run writing the same output finds the partial to be the very file a pslog writer
+    created (same device and inode: not a user's file of that name, nor one put in its
+    place: an inode is not reused while the partial holding it exists) and removes both
+    (:func:`clear_stale_partial`). Only for partials of outputs made again from their
+    inputs (never a recording's). An existing file of the owner's name is never written
+    over: then the partial stays unmarked (after a kill, refused as before).
+
+    The owner file appears whole or not at all (written under a temporary name, then linked
+    to its own): a kill at any moment never leaves one that is empty or cut."""
+    import socket
+
+    owner = owner_path(partial)
+    try:
+        st = os.fstat(fd)
+        text = (f"{_OWNER_MAGIC}\nfile {partial.name}\ndevice {st.st_dev}\ninode {st.st_ino}\n"
+                f"pid {os.getpid()}\nhost {socket.gethostname()}\n").encode()
+    except OSError:
+        return
+    cloexec = getattr(os, "O_CLOEXEC", 0)
+    # written under a temporary name, then linked to the owner's name (a kill between the
+    # two may leave the small temporary file, never a cut owner file)
+    temporary = owner.with_name(f"{owner.name}.{os.getpid()}")
+    try:
+        out = os.open(temporary, os.O_WRONLY | os.O_CREAT | os.O_EXCL | cloexec, 0o644)
+    except OSError:
+        return
+    try:
+        os.write(out, text)
+        os.close(out)
+        out = -1
+        os.link(temporary, owner)
+    except OSError:
+        pass
+    finally:
+        if out >= 0:
+            os.close(out)
+        with suppress(OSError):
+            temporary.unlink()
+
+
+def release_partial(partial: Path) -> None:
+    """Remove ``partial``'s owner file once the partial is moved over its output or removed
+    (:func:`claim_partial`); a missing one is no error."""
+    with suppress(OSError):
+        owner_path(partial).unlink()
+
+
+def _owner(partial: Path) -> dict[str, str] | None:
+    """The fields of ``partial``'s owner file if it is one pslog wrote, else None."""
+    try:
+        with open(owner_path(partial), "rb") as f:
+            text = f.read(4096).decode("utf-8")
+    except (OSError, UnicodeDecodeError):
+        return None
+    lines = text.splitlines()
+    if not lines or lines[0] != _OWNER_MAGIC:
+        return None
+    return dict(line.split(" ", 1) for line in lines[1:] if " " in line)
+
+
+def owned_by_pslog(partial: Path) -> dict[str, str] | None:
+    """The owner file's fields if ``partial`` is the very file a pslog writer created and
+    marked (:func:`claim_partial`), else None."""
+    owner = _owner(partial)
+    if owner is None:
+        return None
+    try:
+        st = os.lstat(partial)
+    except OSError:
+        return None
+    if not stat.S_ISREG(st.st_mode):
+        return None
+    if (owner.get("file") != partial.name or owner.get("device") != str(st.st_dev)
+            or owner.get("inode") != str(st.st_ino)):
+        return None
+    return owner
+
+
+def _clear_stale_temporaries(partial: Path) -> None:
+    """Owner files' temporaries (:func:`claim_partial`) of ``partial`` left by runs killed
+    while marking it (``<partial>.pslog.<pid>``, pslog's by their contents, their process
+    gone): removed."""
+    import glob
+
+    owner = owner_path(partial)
+    for name in glob.glob(glob.escape(os.fspath(owner)) + ".*"):
+        temporary = Path(name)
+        pid = temporary.name.rsplit(".", 1)[1]
+        if not pid.isdigit() or _alive(int(pid)):
+            continue
+        try:
+            with open(temporary, "rb") as f:
+                head = f.read(4096).decode("utf-8")
+        except (OSError, UnicodeDecodeError):
+            continue
+        if head.startswith(f"{_OWNER_MAGIC}\nfile {partial.name}\n"):
+            with suppress(OSError):
+                temporary.unlink()
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (OSError, OverflowError):
+        return True  # (another user's process: alive)
+    return True
+
+
+def _clear_stale_owner(partial: Path) -> None:
+    """An owner file of pslog's whose partial is gone (a run killed between moving the
+    partial and removing its owner file, or the partial deleted by hand): it marks nothing,
+    removed (else it would keep the next partial of that name from being marked)."""
+    if _owner(partial) is not None:
+        release_partial(partial)
+
+
 def _try_lock(fd: int) -> bool:
     """Take the exclusive advisory lock of an open file without waiting; False if another
     process holds it (a pslog writing that file now)."""
@@ -337,11 +476,15 @@ def clear_stale_partial(path: str | Path, *, say: Callable[[str], None] | None =
     user's own file of that name: nothing shows which, so it is never deleted).
     """
     partial = partial_path(Path(path))
+    _clear_stale_temporaries(partial)
     if not partial.is_file():
+        if not os.path.lexists(partial):
+            _clear_stale_owner(partial)
         return
     try:
         f = open(partial, "rb")
     except FileNotFoundError:
+        _clear_stale_owner(partial)
         return
     except OSError as exc:
         raise PartialRecordingError(f"{partial} exists (left by an interrupted run) and "
@@ -349,8 +492,9 @@ def clear_stale_partial(path: str | Path, *, say: Callable[[str], None] | None =
     with f:  # the lock is held until the partial is gone (or kept)
         if not _try_lock(f.fileno()):
             raise _busy(partial)
+        owner = owned_by_pslog(partial)
         try:
-            kind = partial_kind(partial)
+            kind = "owned" if owner is not None else partial_kind(partial)
         except OSError as exc:
             raise PartialRecordingError(f"{partial} exists (left by an interrupted run) and "
                                         f"cannot be read: {os_reason(exc)}; move it away"
@@ -375,7 +519,11 @@ def clear_stale_partial(path: str | Path, *, say: Callable[[str], None] | None =
             return
         except OSError as exc:
             raise write_error(partial, exc) from None
-    (say or _say_stderr)(f"removed {partial} left by an interrupted run")
+        if owner is not None:
+            release_partial(partial)
+    by = (f" (process {owner['pid']})" if owner is not None and owner.get("pid", "").isdigit()
+          else "")
+    (say or _say_stderr)(f"removed {partial} left by an interrupted run{by}")
 
 
 # ---- writing ---------------------------------------------------------------------------
@@ -459,12 +607,14 @@ def all_or_nothing() -> Iterator[None]:
                 except OSError as exc:
                     raise write_error(path, exc) from None
                 moved += 1
+                release_partial(partial)
             for old in obsolete:  # (remove_when_done)
                 remove_when_done(old)
     except BaseException:
         for _f, partial, _path in staged[moved:]:
             with suppress(OSError):
                 partial.unlink()
+            release_partial(partial)
         raise
     finally:
         for f, _partial, _path in staged:
@@ -515,6 +665,7 @@ def replacing(path: str | Path, mode: str = "w", *, force: bool = False,
         f = open_locked(partial, mode, **text)
     except OSError as exc:
         raise write_error(path, exc) from None
+    claim_partial(partial, f.fileno())  # (made again from its inputs: a kill's is pslog's)
     staged = _STAGED[-1] if _STAGED else None
     try:
         try:
@@ -526,6 +677,7 @@ def replacing(path: str | Path, mode: str = "w", *, force: bool = False,
                 # moved, or removed below, while the lock is held: another run never sees
                 # a complete-looking partial that it could take for stale
                 partial.replace(path)
+                release_partial(partial)
         except OSError as exc:
             if exc.filename is not None and os.fsdecode(exc.filename) not in (
                     os.fspath(partial), os.fspath(path)):
@@ -534,6 +686,7 @@ def replacing(path: str | Path, mode: str = "w", *, force: bool = False,
     except BaseException:
         with suppress(OSError):
             partial.unlink()
+        release_partial(partial)
         with suppress(OSError):
             f.close()
         raise

@@ -183,10 +183,11 @@ def load_rig_file(path: str | Path, fmt: str = "auto", options=None):
         # a device or FIFO would be read for ever, a huge file whole into memory
         check_input_file(path, "rig file", MAX_RIG_BYTES)
     except InputError as exc:
+        if path.is_file() and _is_session_file(path):  # (a session of more than 1 MB)
+            raise RigError(_session_not_rig(path)) from None
         raise RigError(str(exc)) from None
     if _is_session_file(path):  # not "'utf-8' codec can't decode byte 0x89"
-        raise RigError(f"{path} is a session, not a rig file (take its rig with 'pslog rig "
-                       f"show {path} > rig.toml')")
+        raise RigError(_session_not_rig(path))
     try:
         # utf-8-sig: a byte-order mark (Windows editors) is accepted and dropped
         text = path.read_text(encoding="utf-8-sig")
@@ -194,9 +195,15 @@ def load_rig_file(path: str | Path, fmt: str = "auto", options=None):
         raise RigError(f"rig file not found: {path}") from None
     except OSError as exc:
         raise RigError(f"cannot read rig file {path}: {exc.strerror or exc}") from None
-    except UnicodeDecodeError as exc:
-        raise RigError(f"cannot read rig file {path}: {exc}") from None
+    except UnicodeDecodeError as exc:  # (not the codec's own words)
+        raise RigError(f"cannot read rig file {path}: not a text file (byte {exc.start} is "
+                       f"not UTF-8 text)") from None
     return parse_rig_text(text, path, fmt, options)
+
+
+def _session_not_rig(path: Path) -> str:
+    return (f"{path} is a session, not a rig file (take its rig with 'pslog rig show {path} "
+            f"> rig.toml')")
 
 
 def save_rig(rig: Rig, path: str | Path, inputs=()) -> None:

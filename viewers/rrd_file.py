@@ -26,9 +26,11 @@ import rerun as rr
 from pslog.outputs import (
     WriteError,
     check_output_path,
+    claim_partial,
     open_locked,
     os_reason,
     partial_path,
+    release_partial,
     write_error,
 )
 
@@ -48,9 +50,11 @@ def _rrd_error(path: Path, exc: OSError) -> RrdWriteError:
 
 
 def _remove(path: Path) -> None:
+    """Remove the partial ``path`` and its owner file (:func:`pslog.outputs.claim_partial`)."""
     # a read-only file system refuses even to unlink a file that is not there
     with contextlib.suppress(OSError):
         path.unlink(missing_ok=True)
+    release_partial(path)
 
 
 class _Pump:
@@ -147,6 +151,7 @@ class _PipeToFile(_Pump):
             # locked while open: no other pslog run takes it for a stale partial; closed
             # only after it has been moved over ``path`` or removed (close())
             self._out = open_locked(partial, "wb")
+            claim_partial(partial, self._out.fileno())  # (a kill's partial: pslog's own)
         except BaseException:  # OSError, or PartialBusyError: another run writes it
             os.close(self._spare)
             self.cleanup()
@@ -292,6 +297,7 @@ def rrd_file(rec: rr.RecordingStream, path: str | Path, *, force: bool = False,
             _remove(partial)
             raise
         partial.replace(path)
+        release_partial(partial)
         return
     try:
         pipe = _PipeToFile(partial, path)
@@ -304,6 +310,7 @@ def rrd_file(rec: rr.RecordingStream, path: str | Path, *, force: bool = False,
         if pipe.error is not None:
             raise _rrd_error(path, pipe.error)
         partial.replace(path)
+        release_partial(partial)
     except BaseException:
         _remove(partial)
         raise

@@ -18,7 +18,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, PslogError
 from ._common import (
     IMAGE_SUFFIXES,
     MIN_CHESSBOARD_VIEWS,
@@ -159,9 +159,17 @@ def calibrate_chessboard(
         projected = cv2.projectPoints(board, rvec, tvec, K, dist)[0].reshape(-1, 2)
         view_rms[k] = np.sqrt(np.mean(np.sum((projected - found_corners.reshape(-1, 2)) ** 2,
                                              axis=1)))
-    camera = _make_camera(name, width, height, K, dist.ravel()[:5],
-                          np.eye(3) if R is None else R, np.zeros(3) if t is None else t,
-                          fps, offset)
+    pose = (np.eye(3) if R is None else R, np.zeros(3) if t is None else t)
+    # the user's values (name, size, rate, offset, pose) checked with a plain lens first: a
+    # camera refused below is then OpenCV's solution, not them
+    _make_camera(name, width, height, [[width, 0, width / 2], [0, width, height / 2],
+                                       [0, 0, 1]], np.zeros(5), *pose, fps, offset)
+    try:
+        camera = _make_camera(name, width, height, K, dist.ravel()[:5], *pose, fps, offset)
+    except PslogError as exc:  # no lens at all: too few views, or views too alike
+        raise InputError(f"chessboard calibration from {len(used)} views gave no plausible "
+                         f"lens ({exc}); take more views, the board tilted in different "
+                         f"directions and near the image's corners") from None
     return ChessboardResult(camera, float(rms), tuple(used), tuple(rejected), view_rms)
 
 

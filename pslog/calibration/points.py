@@ -24,6 +24,7 @@ import numpy as np
 
 from ..camera import Camera
 from ..errors import InputError
+from ..inputs import check_input_file
 from ._common import (
     AUTO_FULL_MIN_POINTS,
     AUTO_K1K2_MIN_POINTS,
@@ -69,6 +70,8 @@ def read_points_csv(path: str | Path, *, with_lines: bool = False):
         value (the message names the line).
     """
     path = Path(path)
+    if path.exists():  # a folder, device or FIFO: said in pslog's words (not read for ever)
+        check_input_file(path, "points file")
     try:
         with path.open(newline="", encoding="utf-8-sig") as f:
             rows = list(csv.reader(f))
@@ -77,7 +80,9 @@ def read_points_csv(path: str | Path, *, with_lines: bool = False):
     except UnicodeDecodeError as exc:  # (not the codec's own words)
         raise InputError(f"{path}: not a text CSV file (byte {exc.start} is not UTF-8 text); "
                          f"expected header x,y,z,u,v") from None
-    except (OSError, csv.Error) as exc:
+    except OSError as exc:
+        raise InputError(f"cannot read points file {path}: {exc.strerror or exc}") from None
+    except csv.Error as exc:
         raise InputError(f"cannot read points file {path}: {exc}") from None
     numbered = [(i + 1, row) for i, row in enumerate(rows) if any(c.strip() for c in row)]
     if not numbered:

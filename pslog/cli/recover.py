@@ -28,13 +28,16 @@ def run(args: argparse.Namespace) -> int:
               "calibration and pose messages, frame rates and offsets from the detections' "
               "times (check it: 'pslog rig show FIXED.mcap')".replace("FIXED.mcap",
                                                                       str(args.output)))
+    for d in report["repaired"]:
+        print(f"repaired the record at bytes {d['start']}..{d['end']}: {d['reason']}; kept "
+              f"exactly as the file's index locates it")
     if report["was_complete"]:
         print(f"{args.session} was complete; copied {report['messages']} messages to "
               f"{args.output}")
         return 0
     if report["data_complete"]:
-        print(f"recovered all {report['messages']} messages (only the summary was damaged) "
-              f"into {args.output}")
+        what = "" if report["repaired"] else " (only the summary was damaged)"
+        print(f"recovered all {report['messages']} messages{what} into {args.output}")
         return 0
     # per kind, not "up to the last message": truth is written up front and images reach
     # the file before the detections of the same moment

@@ -34,6 +34,7 @@ MAGIC = b"\x89MCAP0\r\n"
 OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL = 0x01, 0x02, 0x03, 0x04
 OP_MESSAGE, OP_CHUNK, OP_MESSAGE_INDEX, OP_CHUNK_INDEX = 0x05, 0x06, 0x07, 0x08
 OP_ATTACHMENT, OP_STATISTICS, OP_METADATA, OP_DATA_END = 0x09, 0x0B, 0x0C, 0x0F
+OP_METADATA_INDEX = 0x0D
 #: opcodes of the records a summary section holds, and the footer
 _SUMMARY_OPS = frozenset({OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_CHUNK_INDEX, 0x0A,
                           OP_STATISTICS, 0x0D, 0x0E})
@@ -490,6 +491,13 @@ class ChunkIndexRec:
 
 
 @dataclass
+class MetadataIndexRec:
+    offset: int  # of the metadata record
+    length: int  # of the metadata record, opcode and length field included
+    name: str
+
+
+@dataclass
 class Summary:
     """The parts of a summary section recovery and the readers use."""
 
@@ -498,6 +506,9 @@ class Summary:
     channels: dict[int, ChannelRec] = field(default_factory=dict)
     chunks: list[ChunkIndexRec] = field(default_factory=list)
     channel_counts: dict[int, int] = field(default_factory=dict)
+    #: the MetadataIndex records: where each metadata record lies, as the summary (with its
+    #: CRC) states it
+    metadata: list[MetadataIndexRec] = field(default_factory=list)
 
 
 def summary_span(buf) -> tuple[int, int]:
@@ -534,6 +545,10 @@ def read_summary(buf) -> Summary | None:
                 summary.channels[channel.id] = channel
             elif sop == OP_CHUNK_INDEX:
                 summary.chunks.append(_parse_chunk_index(buf, start + body))
+            elif sop == OP_METADATA_INDEX:
+                offset, length = _unpack("<QQ", buf, start + body)
+                name, _ = _string(buf, start + body + 16)
+                summary.metadata.append(MetadataIndexRec(offset, length, name))
             elif sop == OP_STATISTICS:
                 (nmap,) = _unpack("<I", buf, start + body + 42)
                 pos = start + body + 46
@@ -547,6 +562,33 @@ def read_summary(buf) -> Summary | None:
             return None
     summary.chunks.sort(key=lambda c: c.offset)
     return summary
+
+
+def metadata_at(buf, index: MetadataIndexRec, limit: int
+                ) -> tuple[tuple[str, dict[str, str]] | None, str]:
+    """The metadata record a summary's ``index`` points to, checked against it (a metadata
+    record has no CRC; the summary that locates it has one).
+
+    Returns ``(record, "")`` when intact; ``(record, what)`` when only the record's opcode or
+    length field is damaged (``what`` says which): its contents fill the index's span exactly
+    under the index's name, so they are the record's, read exactly; ``(None, what)`` when
+    its contents are damaged (or the index points outside the data section, ``limit``).
+    ``what`` completes "the record is damaged ...", e.g. ``in its contents``."""
+    start, end = index.offset, index.offset + index.length
+    if not (len(MAGIC) <= start and start + 9 <= end <= limit):
+        return None, "where the file's index locates it (outside the data section)"
+    if not _fills(buf, start + 9, end, _SHAPES[OP_METADATA]):
+        return None, "in its contents"
+    record = parse_metadata(buf, start + 9)
+    if record[0] != index.name:
+        return None, "in its contents"
+    op, length = _unpack("<BQ", buf, start)
+    if op != OP_METADATA:
+        return record, "in its opcode (its contents are intact)"
+    if length != index.length - 9:
+        return record, (f"in its length field (it says {length} bytes, the file's index "
+                        f"{index.length - 9}; its contents are intact)")
+    return record, ""
 
 
 def _parse_chunk_index(buf, pos: int) -> ChunkIndexRec:
@@ -598,6 +640,9 @@ class Scan:
     finished: bool = False            # DataEnd or Footer reached
     stop_reason: str = ""
     damaged: list[Damage] = field(default_factory=list)  # salvage walks only
+    #: salvage walks only: records whose header was damaged but whose contents were read
+    #: exactly, located by the intact summary (a metadata record's length field)
+    repaired: list[Damage] = field(default_factory=list)
     summary: Summary | None = None    # salvage walks only: the intact summary, if any
 
 
@@ -764,8 +809,23 @@ def _salvage(buf, on_message, scan: Scan) -> None:
     # "message" met outside a chunk is the uncompressed literal of a damaged chunk's contents
     # (zstd stores JPEG bytes nearly verbatim), which may be cut by a block header
     chunked = bool(indexed) or _has_chunk(buf, limit)
+    metadata = {m.offset: m for m in summary.metadata} if summary is not None else {}
     pos = len(MAGIC)
     while pos < limit:
+        meta_index = metadata.get(pos)
+        if meta_index is not None:
+            # a metadata record the intact summary locates: read from the index's span when
+            # only its header (opcode, length field: no CRC covers them) is damaged
+            record, problem = metadata_at(buf, meta_index, limit)
+            if record is not None:
+                scan.metadata.append(record)
+                if problem:
+                    scan.repaired.append(Damage(pos, pos + meta_index.length,
+                                                f"metadata record {record[0]!r} damaged "
+                                                f"{problem}"))
+                pos += meta_index.length
+                scan.complete_bytes = pos
+                continue
         end = record_plausible(buf, pos, limit, messages=not chunked)
         op = buf[pos]
         if end is None:

@@ -180,7 +180,14 @@ def read_detections_csv(path, rig: Rig) -> Detections:
         reader = csv.reader(handle)
         try:
             header = next(reader, None)
-        except (csv.Error, UnicodeDecodeError) as exc:
+        except UnicodeDecodeError as exc:  # (not the codec's own words)
+            if _is_mcap(path):
+                raise InputError(f"{path} is an MCAP session, not a detections CSV (export "
+                                 f"its detections with 'pslog export {path} --detections "
+                                 f"DET.csv')") from None
+            raise InputError(f"{path}: not a text CSV file (byte {exc.start} is not UTF-8 "
+                             f"text); expected header camera,time,u,v") from None
+        except csv.Error as exc:
             raise InputError(f"{path}: line 1: unreadable header: {exc}") from None
         if header is None:
             raise InputError(f"{path}: empty file (expected header camera,time,u,v)")
@@ -230,6 +237,16 @@ def read_detections_csv(path, rig: Rig) -> Detections:
                                  np.asarray(frames, np.int64) if has_frame else None,
                                  np.asarray(scores, np.float64) if has_score else None, path,
                                  np.asarray(lines, np.int64), np.asarray(missed, bool))
+
+
+def _is_mcap(path: Path) -> bool:
+    from ._mcapio import MAGIC
+
+    try:
+        with open(path, "rb") as f:
+            return f.read(len(MAGIC)) == MAGIC
+    except OSError:
+        return False
 
 
 def _detections_from_rows(rig: Rig, cams, times, uv, frames, scores, path,

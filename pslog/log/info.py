@@ -180,12 +180,13 @@ def session_info(path) -> dict:
     if not complete:
         return _scanned_info(path, size, "its closing MCAP magic (the last 8 bytes) is damaged"
                              if io.tail_magic_damaged(path) else _UNFINISHED)
-    from .reader import DamagedSummaryError, _Finished, _read
+    from .reader import DamagedMetadataError, DamagedSummaryError, _Finished, _read
 
     try:
         f = _Finished(path, header=False)
     except DamagedSummaryError as exc:
-        return _scanned_info(path, size, exc.reason)
+        return _scanned_info(path, size, exc.reason,
+                             metadata_named=isinstance(exc, DamagedMetadataError))
     with f:
         counts = dict(sorted(f.counts.items()))
         damaged = f.check_chunks()
@@ -194,6 +195,11 @@ def session_info(path) -> dict:
         tables = {name: ("ok" if f.table(name) is not None else
                          f"unusable: {f.table_problems.get(name, '?')}")
                   for name in sorted(f.attachments) if name.startswith("pslog/table/")}
+    # read exactly all the same, but damage: readers refuse the file, recover repairs it
+    for start, end, reason in f.metadata_damage:
+        damaged.insert(0, {"start": start, "end": end, "reason": reason, "chunk": False,
+                           "start_ns": None, "end_ns": None, "messages": None,
+                           "label": "damaged record at bytes"})
     header = io.header_damage(path)
     if header is not None:  # nothing pslog reads, but damage all the same: readers refuse it
         start, end, reason = header
@@ -247,7 +253,7 @@ def session_info(path) -> dict:
     }
 
 
-def _scanned_info(path, size: int, problem: str) -> dict:
+def _scanned_info(path, size: int, problem: str, metadata_named: bool = False) -> dict:
     import time
 
     from .recover import describe_damage, salvage_summary
@@ -274,7 +280,8 @@ def _scanned_info(path, size: int, problem: str) -> dict:
     if scan.damaged and not any(name == S.SESSION_METADATA for name, _ in scan.metadata):
         from .recover import _rebuilt_metadata
 
-        where = (f"{path}: {problem}, and its session metadata (rig, cameras) is lost "
+        where = (f"{path}: {problem}" if metadata_named else  # (the problem says where)
+                 f"{path}: {problem}, and its session metadata (rig, cameras) is lost "
                  f"(damaged or cut at byte {scan.damaged[0].start})")
         if _rebuilt_metadata(static, detection_ns) is None:
             raise LogFormatError(f"{where}, with no intact calibration of every camera to "

@@ -140,12 +140,26 @@ _SUMMARY_PARSE_ERRORS = (LogFormatError, McapError, struct.error, UnicodeDecodeE
 
 
 class DamagedSummaryError(LogFormatError):
-    """The summary section or footer of a finished file is damaged (the data may be whole)."""
+    """The summary section or footer of a finished file is damaged (the data may be whole):
+    ``reason`` says where, in pslog's words (never a parser's)."""
 
-    def __init__(self, path, reason: str) -> None:
-        super().__init__(f"{path}: damaged MCAP summary ({reason}); run 'pslog recover {path} "
-                         f"-o FIXED.mcap' to salvage the data")
+    def __init__(self, path, reason: str, todo: str = "it rebuilds the index from the data "
+                                                      "and keeps every intact record") -> None:
+        super().__init__(f"{path}: {reason}; run 'pslog recover {path} -o FIXED.mcap': {todo}")
         self.reason = reason
+
+
+class DamagedMetadataError(DamagedSummaryError):
+    """The session metadata record (rig, cameras: no CRC covers it) is damaged; ``exact``:
+    only its opcode or length field, its contents intact (``pslog recover`` repairs it
+    exactly), else its contents (``pslog recover`` rebuilds the rig from the calibrations)."""
+
+    def __init__(self, path, start: int, end: int, problem: str, exact: bool) -> None:
+        self.start, self.end, self.exact = start, end, exact
+        super().__init__(path, f"its session metadata record (bytes {start}..{end}) is "
+                               f"damaged {problem}",
+                         "it repairs the record exactly" if exact else
+                         "it rebuilds the rig from the cameras' calibration messages")
 
 
 def _pslog_topic(topic: str, cameras: Sequence[str]) -> bool:
@@ -164,7 +178,9 @@ class _Finished:
     """A finished session file opened for seeking: summary, metadata, rig."""
 
     def __init__(self, path, header: bool = True) -> None:
-        # header=False: a damaged Header record is let through (pslog info reports it)
+        # header=False: a damaged Header record, and a metadata record damaged in its
+        # opcode or length field only (its contents intact, read exactly), are let through
+        # (pslog info reports them: metadata_damage)
         path, self.size, complete = io.check_file(path, header)
         self.path = path
         if not complete:
@@ -172,22 +188,45 @@ class _Finished:
         from mcap.reader import SeekingReader
 
         self.file = open(path, "rb")  # closed by close()
+        #: (start, end, what) of a metadata record read exactly despite a damaged header
+        self.metadata_damage: list[tuple[int, int, str]] = []
+        metadata: list[tuple[str, dict[str, str]]] = []
+        start = end = 0
         try:
             # the summary's own CRC first: a damaged index would send reads astray
             with mmap.mmap(self.file.fileno(), 0, access=mmap.ACCESS_READ) as buf:
                 checked = io.read_summary(buf)
                 start, end = io.summary_span(buf)
-            if checked is None:
-                raise LogFormatError(f"summary section or footer, bytes {start}..{end}, fails "
-                                     f"its checks")
+                if checked is None:
+                    raise DamagedSummaryError(
+                        path, f"its summary (the index at the end of the file, bytes "
+                              f"{start}..{end}) is damaged")
+                # each metadata record where the summary locates it, checked against it
+                # (metadata records have no CRC)
+                for index in checked.metadata:
+                    record, problem = io.metadata_at(buf, index, checked.start)
+                    if problem and (record is None or header):
+                        raise DamagedMetadataError(path, index.offset,
+                                                   index.offset + index.length, problem,
+                                                   exact=record is not None)
+                    if problem:
+                        self.metadata_damage.append(
+                            (index.offset, index.offset + index.length,
+                             f"metadata record {index.name!r} damaged {problem}; 'pslog "
+                             f"recover' repairs it exactly"))
+                    if record is not None:
+                        metadata.append(record)
             reader = SeekingReader(self.file)
             summary = reader.get_summary()
-            metadata = [(m.name, m.metadata) for m in reader.iter_metadata()]
-        except _SUMMARY_PARSE_ERRORS as exc:
-            # what our checks and the mcap package raise on bytes they cannot parse; any
-            # other exception is a bug, not damage, and propagates as it is
+        except DamagedSummaryError:
             self.file.close()
-            raise DamagedSummaryError(path, str(exc) or type(exc).__name__) from None
+            raise
+        except _SUMMARY_PARSE_ERRORS:
+            # what the mcap package raises on bytes it cannot parse (a summary without a
+            # CRC); any other exception is a bug, not damage, and propagates as it is
+            self.file.close()
+            raise DamagedSummaryError(path, f"its summary (the index at the end of the file, "
+                                            f"bytes {start}..{end}) does not parse") from None
         if summary is None:
             self.file.close()
             raise LogFormatError(f"{path}: MCAP has no summary section; try 'pslog recover'")

@@ -178,12 +178,14 @@ def recover_session(src, dst, *, force: bool = False) -> dict:
     damaged = [describe_damage(d, scan.channels) for d in scan.damaged]
     discarded = sum(d["end"] - d["start"] for d in damaged)
     complete = scan.finished and not damaged
+    repaired = [{"start": d.start, "end": d.end, "reason": d.reason} for d in scan.repaired]
     tail = "; ".join(f"{d['reason']} at byte {d['start']}" for d in damaged[:3])
     return {
         "source": str(src),
         "output": str(dst),
         "rebuilt_metadata": rebuilt is not None,
-        "was_complete": complete and scan.summary is not None,
+        "was_complete": complete and scan.summary is not None and not repaired,
+        "repaired": repaired,
         "messages": sum(topics.values()),
         "topics": dict(sorted(topics.items())),
         "first_time_ns": times[0],
@@ -311,7 +313,7 @@ def describe_damage(damage: io.Damage, channels: dict) -> dict:
 
 def damage_line(d: dict) -> str:
     """One line for users about a :func:`describe_damage` dict."""
-    what = "damaged chunk at bytes" if d["chunk"] else "unreadable bytes"
+    what = d.get("label") or ("damaged chunk at bytes" if d["chunk"] else "unreadable bytes")
     text = f"{what} {d['start']}..{d['end']}"
     if d["start_ns"] is not None and d["end_ns"] is not None and d["end_ns"] >= d["start_ns"]:
         text += f", t = {d['start_ns'] / NS:.3f} .. {d['end_ns'] / NS:.3f} s"

@@ -134,10 +134,11 @@ def test_ray_client_without_its_extra(tmp_path, season):
 
 
 def test_a_summary_that_does_not_fit_leaves_the_old_pair(tmp_path):
-    """The disk fills between the summary's two files (one 4 KiB page left: the new CSV,
-    one page, fits in place of the old; its Parquet, three pages of incompressible errors,
-    does not): both old files stay as they were and no partial is left (before, the new
-    CSV stood beside the last batch's Parquet); the fault is one error naming the file."""
+    """The disk fills between the summary's two files (two 4 KiB pages left: the new CSV,
+    one page, and its partial's owner file (pslog.outputs.claim_partial), one page, fit in
+    place of the old; its Parquet, three pages of incompressible errors, does not): both
+    old files stay as they were and no partial is left (before, the new CSV stood beside
+    the last batch's Parquet); the fault is one error naming the file."""
     import random
 
     from pslog.batch import summary_row, write_summary
@@ -153,7 +154,7 @@ def test_a_summary_that_does_not_fit_leaves_the_old_pair(tmp_path):
 
     with small_tmpfs(tmp_path / "disk", "128k") as disk:
         write_summary(rows(), disk)
-        fill(disk, free=4096)
+        fill(disk, free=2 * 4096)
         before = fingerprint(disk)
         with pytest.raises(PslogError, match=r"summary\.parquet"):
             write_summary(rows(), disk)
