@@ -97,6 +97,32 @@ def test_nearest_in_row_blocks_equals_the_whole_arrays(monkeypatch, lens, noise_
     _same(by_fuse, whole)
 
 
+def test_nearest_track_holds_no_session_length_buffer_when_few_points_kept(monkeypatch):
+    """nearest writes each block's kept points into columns of the session's row count
+    (one copy; stereo._NearestRows): the track it returns holds those columns only while
+    most rows are kept; with few kept (here a 1 ns gap: no other camera's detection is
+    that close, no point made) its columns are its own, of its length, not views holding
+    the session-length buffers. The points are the same either way (the test above)."""
+    from pslog.fusion import stereo
+
+    prep, rig = _session(None, motion="rally", duration=6.0)
+    monkeypatch.setattr(stereo, "NEAREST_BLOCK_ROWS", _FEW)
+    with np.errstate(all="ignore"):
+        full = fuse_nearest(prep, default_max_gap_s(rig), 0.5)
+        few = fuse_nearest(prep, 1e-9, 0.5)
+    rows = len(rays_only(prep)[0].obs)  # (the detections with a ray: nearest's rows)
+    assert 2 * len(full.time_ns) >= rows > 4 * _FEW
+    assert len(few.time_ns) == 0 and few.dropped == {}
+
+    def held(track):  # rows of the arrays whose memory the track's columns hold
+        return {len(c if c.base is None else c.base)
+                for c in (track.time_ns, track.position_world, track.camera,
+                          *track.quality.values())}
+
+    assert held(few) == {0}
+    assert held(full) == {rows}  # (views of the one buffer: no join copy)
+
+
 def test_nearest_kernels_python_originals_equal(monkeypatch):
     """Each kernel's pure-Python original (``.py_func``) gives the compiled kernel's bits
     (a short session: Python loops), lens distortion on."""
