@@ -77,7 +77,9 @@ velocity change spread over more than a few knot spans (a ball rolling to a stop
 rather than broken. numpy and scipy, with compiled per-point loops
 (:mod:`pslog.estimation._kernels`, numba; the first trajectory's in
 :mod:`pslog.estimation._initial`, the break windows' gathers in
-:mod:`pslog.estimation._window`, the hat matrix's trace in :mod:`pslog.estimation._hat`):
+:mod:`pslog.estimation._window`, the hat matrix's trace in :mod:`pslog.estimation._hat`, a
+Gauss–Newton step's normal equations from the Jacobians in one pass in
+:mod:`pslog.estimation._gauss_newton`):
 the B-spline basis, the projection with its
 residual and Jacobian, each detection's quadratic form and the normal equations summed per
 control point (:class:`pslog.estimation._normal.Points`), the covariance band's Takahashi
