@@ -278,7 +278,7 @@ def _points_normal_into(first: np.ndarray, N: np.ndarray, upper: np.ndarray, v: 
         done += 1
 
 
-@kernel
+@kernel(inline=True)
 def _fold_row(blocks: np.ndarray, rv: np.ndarray, p: int, slot: int, m: int,
               base_ab: np.ndarray, base_rhs: np.ndarray, ab: np.ndarray,
               rhs: np.ndarray) -> None:
@@ -1113,7 +1113,7 @@ def trial_splines(a: np.ndarray, both3: np.ndarray, cube: np.ndarray, s: np.ndar
     return lo, hi, coef, nodes, fn, fw, first, Nd
 
 
-@kernel
+@kernel(inline=True)
 def _reflect_into(c0: float, c1: float, c2: float, c3: float, out: np.ndarray) -> None:
     """Coefficients of ``p(1 - x)`` from those of a cubic ``p(x)`` into ``out`` (4,)
     (:func:`pslog.estimation._breaks._reflect`'s operations)."""

@@ -77,7 +77,9 @@ velocity change spread over more than a few knot spans (a ball rolling to a stop
 rather than broken. numpy and scipy, with compiled per-point loops
 (:mod:`pslog.estimation._kernels`, numba; the first trajectory's in
 :mod:`pslog.estimation._initial`, the break windows' gathers in
-:mod:`pslog.estimation._window`, the hat matrix's trace in :mod:`pslog.estimation._hat`):
+:mod:`pslog.estimation._window`, the hat matrix's trace in :mod:`pslog.estimation._hat`, a
+Gauss–Newton step's normal equations from the Jacobians in one pass in
+:mod:`pslog.estimation._gauss_newton`):
 the B-spline basis, the projection with its
 residual and Jacobian, each detection's quadratic form and the normal equations summed per
 control point (:class:`pslog.estimation._normal.Points`), the covariance band's Takahashi
@@ -465,6 +467,22 @@ class _Problem:
                           np.ascontiguousarray(w, dtype=np.float64))
         return self.points.normal_onto(M, v, self.prior_ab, self.prior_rhs)
 
+    def linearised_normal(self, J: np.ndarray, X: np.ndarray, r: np.ndarray, w: np.ndarray
+                          ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`normal` of the measurements linearised at positions ``X`` (n, 3) with
+        residuals ``r`` (n, 2), ``target = J X - r`` (:func:`_linear_target`): the same
+        values in one compiled pass that forms no target or quadratic form array
+        (:func:`pslog.estimation._gauss_newton.linearised_normal_onto`)."""
+        from ._gauss_newton import linearised_normal_onto
+
+        points = self.points
+        return linearised_normal_onto(
+            points.first, points.N, np.ascontiguousarray(J, dtype=np.float64),
+            np.ascontiguousarray(X, dtype=np.float64), np.ascontiguousarray(r, dtype=np.float64),
+            np.ascontiguousarray(w, dtype=np.float64), points.m,
+            np.ascontiguousarray(self.prior_ab, dtype=np.float64),
+            np.ascontiguousarray(self.prior_rhs, dtype=np.float64))
+
     def data_rows(self, J: np.ndarray, target: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Rows ``E c[start:start+12] - b`` of the linearised reprojection (2 per detection):
@@ -789,11 +807,11 @@ class _Solver:
             sigma = self._scale(r, sigma, dof)
             s = _scaled_norms(r, sigma)
             w = 1 / (1 + s / _CAUCHY**2)  # Cauchy IRLS weight
-            target = _linear_target(J, X, r)  # linearised: J X_new ≈ J X - r
-            ab, rhs = problem.normal(J, target, w / sigma**2)
+            # linearised: J X_new ≈ J X - r (the targets formed where they are summed)
+            ab, rhs = problem.linearised_normal(J, X, r, w / sigma**2)
             # factored in place (the band is this step's own); rebuilt only if a pivot fails
-            U = _normal.factor(ab, rebuild=lambda J=J, target=target, w=w, sigma=sigma:
-                               problem.normal(J, target, w / sigma**2)[0])
+            U = _normal.factor(ab, rebuild=lambda J=J, X=X, r=r, w=w, sigma=sigma:
+                               problem.linearised_normal(J, X, r, w / sigma**2)[0])
             new = _normal.solve(U, rhs).reshape(-1, 3)
             if prior is None:
                 prior = _prior_cost(problem, control)
@@ -1054,9 +1072,8 @@ def _refit_linearised(problem: _Problem, X: np.ndarray, r: np.ndarray, J: np.nda
     :func:`_refit_control` (the old positions as measurements) costs and is one iteration
     of the fit that follows (session 23: one factorisation and projection fewer per knot
     change; :func:`_refit_control` remains ``sync``'s, whose clocks move the design)."""
-    target = _linear_target(J, X, r)
-    ab, rhs = problem.normal(J, target, w / sigma**2)
-    U = _normal.factor(ab, rebuild=lambda: problem.normal(J, target, w / sigma**2)[0])
+    ab, rhs = problem.linearised_normal(J, X, r, w / sigma**2)
+    U = _normal.factor(ab, rebuild=lambda: problem.linearised_normal(J, X, r, w / sigma**2)[0])
     return _normal.solve(U, rhs).reshape(-1, 3)
 
 
@@ -1110,10 +1127,9 @@ def _information_factored(problem: _Problem, control: np.ndarray, sigma: float,
     X = problem.positions(control)
     s = _scaled_norms(r, sigma)
     w = 1 / (1 + s / _CAUCHY**2)
-    target = _linear_target(J, X, r)
-    ab, _ = problem.normal(J, target, w / sigma**2)
+    ab, _ = problem.linearised_normal(J, X, r, w / sigma**2)
     loads: list[float] = []
-    U = _normal.factor(ab, rebuild=lambda: problem.normal(J, target, w / sigma**2)[0],
+    U = _normal.factor(ab, rebuild=lambda: problem.linearised_normal(J, X, r, w / sigma**2)[0],
                        loads=loads)
     band = _normal.covariance_band(U)
     if trace:
