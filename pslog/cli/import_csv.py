@@ -48,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
                        inputs=[args.detections], metadata=metadata) as writer:
         writer.add_detections(detections)
     print(f"wrote {output}: {detections.n_candidates} detections in {detections.n_frames} "
-          f"frames of {len(rig)} cameras ({', '.join(rig.names)})"
+          f"frames of {len(rig)} camera{'s' if len(rig) != 1 else ''} ({', '.join(rig.names)})"
           + (f"; session clock origin {format_time(origin_ns)} s (the CSV's times = session "
              f"times + origin)" if origin_ns else ""))
     return 0

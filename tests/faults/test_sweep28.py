@@ -105,3 +105,16 @@ def test_a_chessboard_calibration_without_a_plausible_lens_says_what_to_do(tmp_p
     assert_one_line_error(run_pslog(*args, "--offset", "5"), 1, contains=(
         "camera 'cam1': offset 5 s must be in [0, 0.0333333 s)",))
     assert not rig.exists()
+
+
+def test_a_one_camera_import_says_one_camera(inputs, tmp_path):
+    """`pslog import` of a one-camera rig says "1 camera", not "1 cameras" (sweep 28)."""
+    from pslog.rig import Rig
+
+    paper3 = builtin_rig("paper3")
+    (tmp_path / "one.toml").write_text(Rig(paper3.cameras[:1], "one").to_toml(),
+                                       encoding="utf-8")
+    done = run_pslog("import", "--rig", str(tmp_path / "one.toml"), "--detections",
+                     str(inputs / "det.csv"), "-o", str(tmp_path / "s.mcap"))
+    assert done.code == 0, done.stderr
+    assert "frames of 1 camera (cam1)" in done.stdout, done.stdout
