@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._jit import kernel
-from ._kernels import _fold_row
+from ._kernels import _add_point, _fold_row, _ring
 
 
 @kernel
@@ -47,15 +47,7 @@ def linearised_normal_onto(first: np.ndarray, N: np.ndarray, J: np.ndarray, X: n
         ab[:, :] = base_ab
         rhs[:] = base_rhs
         return ab, rhs
-    ordered = True
-    for i in range(1, n):
-        if first[i] < first[i - 1]:
-            ordered = False
-            break
-    size = 8 if ordered else m + 3
-    mask = 7 if ordered else -1
-    blocks = np.zeros((size, 4, 6))
-    rv = np.zeros((size, 3))
+    ordered, mask, blocks, rv = _ring(first, m)
     done = 0  # control points below this one are in ab and rhs
     for i in range(n):
         f = first[i]
@@ -83,26 +75,8 @@ def linearised_normal_onto(first: np.ndarray, N: np.ndarray, J: np.ndarray, X: n
         v1 = j01 * wz0 + j11 * wz1
         v2 = j02 * wz0 + j12 * wz1
         # points_normal_onto's sums
-        n0, n1, n2, n3 = N[i, 0], N[i, 1], N[i, 2], N[i, 3]
-        for a in range(4):
-            na = n0 if a == 0 else (n1 if a == 1 else (n2 if a == 2 else n3))
-            row = blocks[(f + a) & mask]
-            for k in range(4 - a):
-                c = a + k
-                nn = na * (n0 if c == 0 else (n1 if c == 1 else (n2 if c == 2 else n3)))
-                blk = row[k]
-                blk[0] += nn * u0
-                blk[1] += nn * u1
-                blk[2] += nn * u2
-                blk[3] += nn * u3
-                blk[4] += nn * u4
-                blk[5] += nn * u5
-        for a in range(4):
-            na = n0 if a == 0 else (n1 if a == 1 else (n2 if a == 2 else n3))
-            rr = rv[(f + a) & mask]
-            rr[0] += na * v0
-            rr[1] += na * v1
-            rr[2] += na * v2
+        _add_point(blocks, rv, f, mask, N[i, 0], N[i, 1], N[i, 2], N[i, 3], u0, u1, u2, u3,
+                   u4, u5, v0, v1, v2)
     while done < m:
         _fold_row(blocks, rv, done, done & mask, m, base_ab, base_rhs, ab, rhs)
         done += 1

@@ -226,23 +226,59 @@ def points_normal_onto(first: np.ndarray, N: np.ndarray, upper: np.ndarray, v: n
 
 
 @kernel(inline=True)
+def _ring(first: np.ndarray, m: int) -> tuple[bool, int, np.ndarray, np.ndarray]:
+    """The sums per control point of :func:`_points_normal_into` and
+    :func:`pslog.estimation._gauss_newton.linearised_normal_onto`, zero: (ordered, mask,
+    blocks (size, 4, 6), rv (size, 3)). Where ``first`` is non-decreasing a ring of 8
+    control points (a control point's slot: its index masked by 7 — a division per term cost
+    more than the sums — folded into the band as the detections move past it), every
+    control point's (m + 3, mask -1: the index itself) otherwise."""
+    ordered = True
+    for i in range(1, len(first)):
+        if first[i] < first[i - 1]:
+            ordered = False
+            break
+    size = 8 if ordered else m + 3
+    mask = 7 if ordered else -1
+    return ordered, mask, np.zeros((size, 4, 6)), np.zeros((size, 3))
+
+
+@kernel(inline=True)
+def _add_point(blocks: np.ndarray, rv: np.ndarray, f: int, mask: int, n0: float, n1: float,
+               n2: float, n3: float, u0: float, u1: float, u2: float, u3: float, u4: float,
+               u5: float, v0: float, v1: float, v2: float) -> None:
+    """One detection's terms added to the sums of :func:`_ring`: its basis values ``n0..n3``
+    (control points ``f..f+3``), the upper triangle ``u0..u5`` of its quadratic form and its
+    ``v0..v2``: ``blocks[f+a][k] += n_a n_{a+k} u``, ``rv[f+a] += n_a v``."""
+    for a in range(4):
+        na = n0 if a == 0 else (n1 if a == 1 else (n2 if a == 2 else n3))
+        row = blocks[(f + a) & mask]
+        for k in range(4 - a):
+            c = a + k
+            nn = na * (n0 if c == 0 else (n1 if c == 1 else (n2 if c == 2 else n3)))
+            blk = row[k]
+            blk[0] += nn * u0
+            blk[1] += nn * u1
+            blk[2] += nn * u2
+            blk[3] += nn * u3
+            blk[4] += nn * u4
+            blk[5] += nn * u5
+    for a in range(4):
+        na = n0 if a == 0 else (n1 if a == 1 else (n2 if a == 2 else n3))
+        rr = rv[(f + a) & mask]
+        rr[0] += na * v0
+        rr[1] += na * v1
+        rr[2] += na * v2
+
+
+@kernel(inline=True)
 def _points_normal_into(first: np.ndarray, N: np.ndarray, upper: np.ndarray, v: np.ndarray,
                         m: int, base_ab: np.ndarray, base_rhs: np.ndarray, ab: np.ndarray,
                         rhs: np.ndarray) -> None:
     """:func:`points_normal` with each band entry and rhs entry written as the base's plus
     its sums (``base_ab`` may be ``ab``: in place)."""
     r = len(first)
-    ordered = True
-    for i in range(1, r):
-        if first[i] < first[i - 1]:
-            ordered = False
-            break
-    size = 8 if ordered else m + 3
-    # a control point's slot: its index modulo 8 in the ring (a mask: a division per term
-    # cost more than the sums), its index when every one is kept
-    mask = 7 if ordered else -1
-    blocks = np.zeros((size, 4, 6))
-    rv = np.zeros((size, 3))
+    ordered, mask, blocks, rv = _ring(first, m)
     done = 0  # control points below this one are in ab and rhs
     for i in range(r):
         f = first[i]
@@ -250,29 +286,9 @@ def _points_normal_into(first: np.ndarray, N: np.ndarray, upper: np.ndarray, v: 
             while done < f:
                 _fold_row(blocks, rv, done, done & mask, m, base_ab, base_rhs, ab, rhs)
                 done += 1
-        n0, n1, n2, n3 = N[i, 0], N[i, 1], N[i, 2], N[i, 3]
-        u0, u1, u2 = upper[i, 0], upper[i, 1], upper[i, 2]
-        u3, u4, u5 = upper[i, 3], upper[i, 4], upper[i, 5]
-        for a in range(4):
-            na = n0 if a == 0 else (n1 if a == 1 else (n2 if a == 2 else n3))
-            row = blocks[(f + a) & mask]
-            for k in range(4 - a):
-                c = a + k
-                nn = na * (n0 if c == 0 else (n1 if c == 1 else (n2 if c == 2 else n3)))
-                blk = row[k]
-                blk[0] += nn * u0
-                blk[1] += nn * u1
-                blk[2] += nn * u2
-                blk[3] += nn * u3
-                blk[4] += nn * u4
-                blk[5] += nn * u5
-        v0, v1, v2 = v[i, 0], v[i, 1], v[i, 2]
-        for a in range(4):
-            na = n0 if a == 0 else (n1 if a == 1 else (n2 if a == 2 else n3))
-            rr = rv[(f + a) & mask]
-            rr[0] += na * v0
-            rr[1] += na * v1
-            rr[2] += na * v2
+        _add_point(blocks, rv, f, mask, N[i, 0], N[i, 1], N[i, 2], N[i, 3],
+                   upper[i, 0], upper[i, 1], upper[i, 2], upper[i, 3], upper[i, 4],
+                   upper[i, 5], v[i, 0], v[i, 1], v[i, 2])
     while done < m:
         _fold_row(blocks, rv, done, done & mask, m, base_ab, base_rhs, ab, rhs)
         done += 1
