@@ -399,7 +399,14 @@ def test_a_pixel_beyond_any_image_is_malformed_and_not_recorded(tmp_path):
     assert bad > 2 and f"malformed {bad}" in final, final
     stored = read_session(out).detections
     assert read_session(out).timing == "typeA"  # (docs/live.md: named from the offsets)
-    assert stored.n_frames == det.n_frames - bad
+    # (a frame the fuser received late or out of order on a loaded machine is kept on
+    # /live/dropped/..., not among the fused frames, and one the loopback lost is not there:
+    # both counted in its line; a malformed datagram's frame is a sequence gap too, 'lost')
+    counts = {reason: int(n) for reason, n in
+              re.findall(r"(\w+) (\d+)", final.split("drops: ")[-1])}
+    others = (sum(n for reason, n in counts.items() if reason not in ("malformed", "lost"))
+              + counts.get("lost", 0) - bad)
+    assert stored.n_frames == det.n_frames - bad - others, final
     assert np.abs(stored.cand_uv).max() < 2000
 
 
