@@ -114,7 +114,8 @@ def run(session: str, repeat: int) -> dict:
     return {"code": str(Path(pslog.__file__).parent), "n": len(obs), "stages": best}
 
 
-def _session(minutes: float, path: Path) -> None:
+def session(minutes: float) -> tuple:
+    """bench_smooth's session of ``minutes``: (observations on the true clocks, true rig)."""
     from pslog import SimulationOptions, apply_timing, builtin_rig, simulate
     from pslog.motion import get_motion
     from pslog.rig import Rig
@@ -126,8 +127,12 @@ def _session(minutes: float, path: Path) -> None:
                rig.name)
     detections, _ = simulate(rig, get_motion("rally"), minutes * 60, SimulationOptions(
         noise_px=0.5, seed=1, clock_offset_s=offsets))
+    return observations(detections, true), true
+
+
+def _session(minutes: float, path: Path) -> None:
     with open(path, "wb") as f:
-        pickle.dump((observations(detections, true), true), f)
+        pickle.dump(session(minutes), f)
 
 
 def main() -> int:

@@ -29,20 +29,12 @@ import numpy as np  # noqa: E402
 def _step_arguments(minutes: float) -> tuple:
     """The first full-size ``_Problem.linearised_normal`` call of a fit: first, N, J, X, r,
     w, m, the prior's band and rhs."""
-    from pslog import SimulationOptions, apply_timing, builtin_rig, simulate
+    from smooth_stages import session  # (bench_smooth's session; this folder is on the path)
+
     from pslog.estimation import trajectory as T
     from pslog.fusion import fuse
-    from pslog.motion import get_motion
-    from pslog.rig import Rig
-    from pslog.timing import observations
 
-    offsets = {"cam2": 2.5e-3, "cam3": -3.5e-3}  # bench_smooth's
-    rig = apply_timing(builtin_rig("paper3"), "typeA")
-    true = Rig(tuple(c.replace(clock_offset=offsets.get(c.name, 0.0)) for c in rig.cameras),
-               rig.name)
-    detections, _ = simulate(rig, get_motion("rally"), minutes * 60, SimulationOptions(
-        noise_px=0.5, seed=1, clock_offset_s=offsets))
-    obs = observations(detections, true)
+    obs, true = session(minutes)
     saved: list = []
     original = T._Problem.linearised_normal
 
