@@ -218,15 +218,9 @@ def save_rig(rig: Rig, path: str | Path, inputs=()) -> None:
 
 def _is_session_file(path: Path) -> bool:
     """Whether ``path`` is a regular file starting with the MCAP magic (a session)."""
-    from .log._mcapio import MAGIC
+    from .log._mcapio import starts_as_mcap
 
-    try:
-        if not path.is_file():
-            return False
-        with open(path, "rb") as f:
-            return f.read(len(MAGIC)) == MAGIC
-    except OSError:
-        return False
+    return starts_as_mcap(path)
 
 
 def resolve_rig(name_or_path: str | Path, timing_from: Rig | None = None) -> Rig:

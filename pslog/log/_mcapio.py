@@ -39,6 +39,19 @@ OP_METADATA_INDEX = 0x0D
 _SUMMARY_OPS = frozenset({OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_CHUNK_INDEX, 0x0A,
                           OP_STATISTICS, 0x0D, 0x0E})
 
+
+def starts_as_mcap(path) -> bool:
+    """Whether ``path`` is a regular file starting with the MCAP magic (a session, perhaps
+    cut or damaged); False for anything unreadable."""
+    try:
+        if not os.path.isfile(path):
+            return False
+        with open(path, "rb") as f:
+            return f.read(len(MAGIC)) == MAGIC
+    except OSError:
+        return False
+
+
 _MESSAGE_HEAD = 22  # channel u16, sequence u32, log_time u64, publish_time u64
 _unpack = struct.unpack_from
 

@@ -181,7 +181,9 @@ def read_detections_csv(path, rig: Rig) -> Detections:
         try:
             header = next(reader, None)
         except UnicodeDecodeError as exc:  # (not the codec's own words)
-            if _is_mcap(path):
+            from ._mcapio import starts_as_mcap
+
+            if starts_as_mcap(path):
                 raise InputError(f"{path} is an MCAP session, not a detections CSV (export "
                                  f"its detections with 'pslog export {path} --detections "
                                  f"DET.csv')") from None
@@ -237,16 +239,6 @@ def read_detections_csv(path, rig: Rig) -> Detections:
                                  np.asarray(frames, np.int64) if has_frame else None,
                                  np.asarray(scores, np.float64) if has_score else None, path,
                                  np.asarray(lines, np.int64), np.asarray(missed, bool))
-
-
-def _is_mcap(path: Path) -> bool:
-    from ._mcapio import MAGIC
-
-    try:
-        with open(path, "rb") as f:
-            return f.read(len(MAGIC)) == MAGIC
-    except OSError:
-        return False
 
 
 def _detections_from_rows(rig: Rig, cams, times, uv, frames, scores, path,
