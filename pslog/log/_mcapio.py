@@ -107,34 +107,59 @@ _KNOWN_OPS = frozenset(range(0x01, 0x10))
 
 def header_damage(path) -> tuple[int, int, str] | None:
     """``(start, end, reason)`` if the Header record after the leading magic is damaged (its
-    opcode, its length, its two strings, or the record after it not a record), else None.
-    A file cut inside its header is truncated, not damaged: None."""
+    opcode, its length, its two strings), else None. A file cut inside its header is
+    truncated, not damaged: None. A Header whose strings fill it exactly is intact even when
+    the byte after it is no record's opcode: that is the next record's damage
+    (:func:`after_header_damage`)."""
+    damage, _end = _check_header(path)
+    return damage
+
+
+def after_header_damage(path) -> tuple[int, int, str] | None:
+    """``(start, end, reason)`` if the record right after an intact Header record (pslog's
+    session metadata record) has no record's opcode, else None. ``end`` is where the
+    record's own length field says it ends (its opcode alone is damaged) or ``start + 1``."""
+    damage, end = _check_header(path)
+    if damage is not None or end is None:
+        return None
+    with open(path, "rb") as f:
+        f.seek(end)
+        head = f.read(9)
+        size = os.fstat(f.fileno()).st_size
+    if len(head) < 9 or head[0] in _KNOWN_OPS:
+        return None
+    (length,) = _unpack("<Q", head, 1)
+    stop = end + 9 + length
+    return end, (stop if stop <= size else end + 1), f"opcode {head[0]:#04x} is no record's"
+
+
+def _check_header(path) -> tuple[tuple[int, int, str] | None, int | None]:
+    """(:func:`header_damage`'s answer, the end of an intact Header record that a byte
+    follows, else None)."""
     start = len(MAGIC)
     with open(path, "rb") as f:
         head = f.read(start + 9 + _HEADER_MAX + 1)
         size = os.fstat(f.fileno()).st_size
     if len(head) < start + 9:
-        return None
+        return None, None
     op, length = _unpack("<BQ", head, start)
     end = start + 9 + length
     if op != OP_HEADER:
-        return start, start + 1, f"opcode {op:#04x}, not a Header"
+        return (start, start + 1, f"opcode {op:#04x}, not a Header"), None
     if end + 1 > size:
         if size > start + 9 + _HEADER_MAX:
-            return start, start + 9, f"length {length} runs past the end of the file"
-        return None  # cut inside the header
+            return (start, start + 9, f"length {length} runs past the end of the file"), None
+        return None, None  # cut inside the header
     if end + 1 > len(head):
-        return start, start + 9, f"length {length} is beyond any Header record"
+        return (start, start + 9, f"length {length} is beyond any Header record"), None
     try:
         _profile, at = _string(head, start + 9)
         _library, at = _string(head, at)
     except (struct.error, UnicodeDecodeError):
-        return start, end, "its strings are unreadable"
+        return (start, end, "its strings are unreadable"), None
     if at != end:
-        return start, end, "its strings do not fill it"
-    if head[end] not in _KNOWN_OPS:
-        return start, end, f"no record follows it (opcode {head[end]:#04x})"
-    return None
+        return (start, end, "its strings do not fill it"), None
+    return None, end
 
 
 def tail_magic_damaged(path) -> bool:

@@ -230,6 +230,14 @@ class _Finished:
         if summary is None:
             self.file.close()
             raise LogFormatError(f"{path}: MCAP has no summary section; try 'pslog recover'")
+        # the record after the Header with no record's opcode: named as itself (the Header
+        # is intact), unless it is a metadata record checked above
+        after = io.after_header_damage(path) if header else None
+        if after is not None and after[0] not in {i.offset for i in checked.metadata}:
+            self.file.close()
+            raise LogFormatError(f"{path}: its record at bytes {after[0]}..{after[1]} (the one "
+                                 f"after the MCAP Header record) is damaged ({after[2]}); run "
+                                 f"'pslog recover {path} -o FIXED.mcap' to salvage the data")
         try:
             self.meta = io.session_metadata(metadata, path)
             self.rig = Rig.from_toml(self.meta.get("rig_toml", ""),

@@ -87,3 +87,59 @@ def test_a_damaged_summary_is_one_line_in_pslogs_words(tmp_path):
         f"{broken}: its summary (the index at the end of the file, bytes {start}..",
         f"run 'pslog recover {broken} -o FIXED.mcap': it rebuilds the index"))
     assert "MCAP summary (" not in line, line
+
+
+def test_a_flipped_metadata_opcode_is_named_as_the_metadata_records_not_the_headers(tmp_path):
+    """A flip of the metadata record's opcode (byte 36, right after the intact Header record)
+    was blamed on the Header by every reader ("its MCAP Header record (bytes 8..36) is damaged
+    (no record follows it (opcode 0xf3))") and listed by ``info`` as two damaged parts (the
+    Header and the record). Now the record is named, once; ``recover`` repairs it exactly."""
+    from pslog.log import read_session
+
+    broken = _flipped(tmp_path, 36)
+    before = fingerprint(tmp_path)
+    for args in (("export", broken, "--detections", tmp_path / "d.csv"),
+                 ("fuse", broken, "-o", tmp_path / "f.mcap")):
+        line = assert_one_line_error(run_pslog(*args), 1, contains=(
+            f"{broken}: its session metadata record ({RECORD}) is damaged in its opcode",
+            "its contents are intact", "it repairs the record exactly"))
+        assert "Header" not in line, line
+    run = run_pslog("info", broken)
+    assert run.code == 1 and "Traceback" not in run.stderr, run.stderr
+    assert "DAMAGED: 1 part(s)" in run.stdout and "Header" not in run.stdout, run.stdout
+    assert f"damaged record at {RECORD} (metadata record 'pslog.session' damaged in its " \
+           f"opcode" in run.stdout, run.stdout
+    assert "1 damaged part (first at byte 36)" in run.stderr, run.stderr
+    assert_untouched(before, tmp_path)
+
+    fixed = tmp_path / "fixed.mcap"
+    run = run_pslog("recover", broken, "-o", fixed)
+    assert run.code == 0 and run.stderr == "", run.stderr
+    assert f"repaired the record at {RECORD}" in run.stdout, run.stdout
+    assert read_session(fixed).metadata == read_session(SAMPLE).metadata
+
+
+def test_a_flipped_opcode_after_the_header_of_another_writers_file_names_that_record(tmp_path):
+    """Another writer's file whose first record after the Header is a Schema: a flip of its
+    opcode names that record (its bytes, by its own length field), not the Header."""
+    from mcap.writer import Writer
+
+    path = tmp_path / "other.mcap"
+    with open(path, "wb") as f:
+        w = Writer(f, use_chunking=False)
+        w.start("", "other")
+        sid = w.register_schema("s", "jsonschema", b"{}")
+        cid = w.register_channel("/t", "json", sid)
+        w.add_message(cid, 1, b"{}", 1)
+        w.finish()
+    data = bytearray(path.read_bytes())
+    header_end = 8 + 9 + int.from_bytes(data[9:17], "little")
+    assert data[header_end] == 0x03  # a Schema record
+    schema_end = header_end + 9 + int.from_bytes(data[header_end + 1:header_end + 9], "little")
+    data[header_end] ^= 0xFF
+    path.write_bytes(bytes(data))
+    line = assert_one_line_error(run_pslog("export", path, "--detections", tmp_path / "d.csv"),
+                                 1, contains=(
+        f"{path}: its record at bytes {header_end}..{schema_end} (the one after the MCAP "
+        f"Header record) is damaged (opcode 0xfc is no record's)", "pslog recover"))
+    assert "MCAP Header record (" not in line, line
