@@ -440,3 +440,51 @@ def test_cli_chessboard_folder_and_video(tmp_path, capsys, board_images):
     assert_array_equal(rig.camera("cam9").R, camera.R)
     assert_array_equal(rig.camera("cam9").t, camera.t)
     assert_allclose(rig.camera("cam9").K[0, 0], 600.0, rtol=0.01)
+
+
+def test_cli_chessboard_skips_unreadable_images_and_names_them(tmp_path, capsys,
+                                                                board_images):
+    """An image file that cannot be decoded (cut short, empty, text named .png) was fatal
+    ("cannot read image X", at the first one): now each is skipped and named, in one warning
+    line, and the camera calibrated from the rest, the same as without them; too few usable
+    views left is one line naming the skipped files too."""
+    folder = tmp_path / "shots"
+    folder.mkdir()
+    for k, image in enumerate(board_images):
+        cv2.imwrite(str(folder / f"view{k:02d}.png"), image)
+    rig_path, clean_rig = tmp_path / "rig.toml", tmp_path / "clean.toml"
+    args = ["calibrate", "--chessboard", "9x6", "--square", "0.025", "--name", "cam9",
+            "--images", str(folder)]
+    assert main([*args, "--rig", str(clean_rig)]) == 0
+    capsys.readouterr()
+    png = (folder / "view00.png").read_bytes()
+    (folder / "a_cut.png").write_bytes(png[:len(png) // 3])
+    (folder / "b_empty.jpg").write_bytes(b"")
+    (folder / "c_text.png").write_text("not an image")
+    assert main([*args, "--rig", str(rig_path)]) == 0
+    captured = capsys.readouterr()
+    n = len(board_images)
+    assert captured.err == (f"pslog calibrate: warning: 3 of {n + 3} image files unreadable, "
+                            f"skipped: a_cut.png (not a decodable image), b_empty.jpg (empty "
+                            f"file), c_text.png (not a decodable image)\n"), captured.err
+    assert f"images: {n} used, 0 rejected (board not found), 3 unreadable (skipped) of " \
+           f"{n + 3}" in captured.out, captured.out
+    assert load_rig(rig_path).camera("cam9") == load_rig(clean_rig).camera("cam9")
+
+    # too few usable views: one line, the skipped files named; the rig untouched
+    for k in range(2, n):
+        (folder / f"view{k:02d}.png").unlink()
+    before = rig_path.read_bytes()
+    assert main([*args, "--rig", str(rig_path), "--force"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(
+        "pslog calibrate: error: 9x6 chessboard found in only 2 of 2 images; need at least 3 "
+        "views; 3 unreadable image file(s) skipped: a_cut.png (not a decodable image), "), err
+    for k in range(2):
+        (folder / f"view{k:02d}.png").unlink()
+    assert main([*args, "--rig", str(rig_path), "--force"]) == 1
+    assert capsys.readouterr().err == (
+        f"pslog calibrate: error: none of the 3 image files in folder {folder} can be read: "
+        f"a_cut.png (not a decodable image), b_empty.jpg (empty file), c_text.png (not a "
+        f"decodable image)\n")
+    assert rig_path.read_bytes() == before

@@ -42,7 +42,8 @@ def parse_pattern(text: str) -> tuple[int, int]:
     return cols, rows
 
 
-def read_calibration_images(path: str | Path, *, max_frames: int = 60
+def read_calibration_images(path: str | Path, *, max_frames: int = 60,
+                            unreadable: list[str] | None = None
                             ) -> tuple[list[np.ndarray], list[str]]:
     """Load calibration images from a folder of images or a video file.
 
@@ -53,6 +54,10 @@ def read_calibration_images(path: str | Path, *, max_frames: int = 60
     max_frames : int
         From a video, at most this many frames, evenly spaced over its length (neighbouring
         frames show nearly the same view and only slow the calibration down).
+    unreadable : list of str, optional
+        Given: an image file of the folder that cannot be read or decoded is skipped and
+        named here (``"x.png (empty file)"``) instead of raising; raises only when no file
+        is left.
 
     Returns
     -------
@@ -72,14 +77,45 @@ def read_calibration_images(path: str | Path, *, max_frames: int = 60
                        if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES)
         if not files:
             raise InputError(f"no image files ({', '.join(IMAGE_SUFFIXES)}) in folder {path}")
-        images = []
+        from ..outputs import native_stderr
+
+        images, labels, skipped = [], [], []
         for file in files:
-            image = cv2.imread(str(file), cv2.IMREAD_GRAYSCALE)
+            with native_stderr():  # libpng's / libjpeg's own words: the reason is said below
+                image = cv2.imread(str(file), cv2.IMREAD_GRAYSCALE)
             if image is None:
-                raise InputError(f"cannot read image {file}")
+                why = _unreadable_reason(file)
+                if unreadable is None:
+                    raise InputError(f"cannot read image {file} ({why})")
+                skipped.append(f"{file.name} ({why})")
+                continue
             images.append(image)
-        return images, [f.name for f in files]
+            labels.append(file.name)
+        if unreadable is not None:
+            unreadable.extend(skipped)
+        if not images:
+            raise InputError(f"none of the {len(files)} image files in folder {path} can be "
+                             f"read: {_listed(skipped)}")
+        return images, labels
     return _read_video_frames(path, max_frames)
+
+
+def _unreadable_reason(file: Path) -> str:
+    """Why OpenCV read no image from ``file``, in pslog's words."""
+    try:
+        with open(file, "rb") as f:
+            head = f.read(1)
+    except OSError as exc:
+        from ..outputs import os_reason
+
+        return f"cannot be opened: {os_reason(exc)}"
+    return "empty file" if not head else "not a decodable image"
+
+
+def _listed(names: Sequence[str], most: int = 5) -> str:
+    """``a, b, c, ... (N more)``."""
+    more = f", ... ({len(names) - most} more)" if len(names) > most else ""
+    return ", ".join(names[:most]) + more
 
 
 def calibrate_chessboard(

@@ -20,6 +20,7 @@ lost), except with ``--fix-intrinsics``, whose purpose is to update that camera'
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from pslog.cli._common import add_force, declare_files, nonnegative_float
@@ -203,24 +204,40 @@ def _run_chessboard(args, existing, fps: float, offset: float):
     from pslog.errors import InputError
 
     pattern = parse_pattern(args.chessboard)
-    images, labels = read_calibration_images(args.images, max_frames=args.max_frames)
+    # an image that cannot be read or decoded is skipped and named, not fatal
+    unreadable: list[str] = []
+    images, labels = read_calibration_images(args.images, max_frames=args.max_frames,
+                                             unreadable=unreadable)
+    skipped = (f"; {len(unreadable)} unreadable image file(s) skipped: "
+               f"{_listed(unreadable)}" if unreadable else "")
     height, width = images[0].shape[:2]
+    for label, image in zip(labels, images, strict=True):
+        if image.shape[:2] != (height, width):
+            raise InputError(f"image {label} is {image.shape[1]}x{image.shape[0]}, "
+                             f"{labels[0]} is {width}x{height}; all images must have the "
+                             f"same size")
     for key, value in (("width", width), ("height", height)):
         given = getattr(args, key)
         if given is not None and given != value:
             raise InputError(f"--{key} {given} differs from the images' {value}")
     pose = {"R": existing.R, "t": existing.t} if existing is not None else {}
-    result = calibrate_chessboard(images, pattern, args.square, name=args.name, fps=fps,
-                                  offset=offset, **pose)
+    try:
+        result = calibrate_chessboard(images, pattern, args.square, name=args.name, fps=fps,
+                                      offset=offset, **pose)
+    except InputError as exc:  # too few usable views: say that some files were unreadable
+        raise InputError(f"{exc}{skipped}") from None
     camera = result.camera
+    if unreadable:
+        print(f"pslog calibrate: warning: {len(unreadable)} of {len(labels) + len(unreadable)} "
+              f"image files unreadable, skipped: {_listed(unreadable)}", file=sys.stderr)
     print(f"{camera.name}: calibrated from a {pattern[0]}x{pattern[1]} chessboard in "
           f"{args.images} ({width}x{height})")
     print(f"  images: {len(result.used)} used, {len(result.rejected)} rejected "
-          f"(board not found) of {len(images)}")
+          f"(board not found)" + (f", {len(unreadable)} unreadable (skipped)"
+                                  if unreadable else "")
+          + f" of {len(images) + len(unreadable)}")
     if result.rejected:
-        shown = [labels[i] for i in result.rejected[:10]]
-        more = f", ... ({len(result.rejected) - 10} more)" if len(result.rejected) > 10 else ""
-        print(f"  rejected: {', '.join(shown)}{more}")
+        print(f"  rejected: {_listed([labels[i] for i in result.rejected])}")
     print(f"  reprojection RMS {result.rms_px:.3f} px")
     worst = sorted(zip(result.view_rms_px, result.used, strict=True), reverse=True)[:3]
     print("  worst views: " + ", ".join(f"{labels[i]} {rms:.3f} px" for rms, i in worst))
@@ -231,6 +248,12 @@ def _run_chessboard(args, existing, fps: float, offset: float):
         print("  pose: unknown from a chessboard; set to identity R, zero t. Solve it with "
               "--points CSV --fix-intrinsics")
     return camera, result.rms_px
+
+
+def _listed(names: list[str], most: int = 10) -> str:
+    """``a, b, c, ... (N more)``."""
+    more = f", ... ({len(names) - most} more)" if len(names) > most else ""
+    return ", ".join(names[:most]) + more
 
 
 def _print_intrinsics(camera) -> None:
