@@ -173,7 +173,7 @@ def factor(ab: np.ndarray, rebuild=None, loads: list[float] | None = None) -> np
         if loads is not None:
             loads.append(float(load))
         return U
-    raise FusionError("smooth: the detections leave the trajectory undetermined "
+    raise FusionError("the detections leave the trajectory undetermined "
                       "(information matrix not positive definite)")
 
 

@@ -362,7 +362,11 @@ def _solve_joint(obs, rig, unknowns, theta, params, options, regularized=None):
     t0 = float(times.min())
     order = np.argsort(times, kind="stable")
     ordered = _observations_at(obs, times, order)
-    fit = fit_trajectory(ordered, rig, options)
+    try:
+        fit = fit_trajectory(ordered, rig, options)
+    except FusionError as exc:  # the fit's words, in sync's context
+        raise FusionError(f"the ball's track, on which the clocks are estimated, cannot be "
+                          f"fitted: {exc}") from None
     pieces = [order[p] for p in fit.pieces]  # rows of ``obs``
     # a margin on each piece: the clocks move the times a little beyond the first fit's ends
     margin = 0.02

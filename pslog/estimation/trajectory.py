@@ -869,8 +869,8 @@ def fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions | None = 
 def _fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions) -> Fit:
     """:func:`fit_trajectory`."""
     if len(rig) < 2:
-        raise FusionError(f"smooth needs at least two cameras (one camera cannot triangulate); "
-                          f"rig has {len(rig)}")
+        raise FusionError(f"a trajectory fit needs at least two cameras (one camera cannot "
+                          f"triangulate); rig has {len(rig)}")
     n = len(obs)
     usable = np.all(np.isfinite(obs.uv), axis=1)
     for i, cam in enumerate(rig.cameras):  # a pixel far off the image is no detection
@@ -878,8 +878,12 @@ def _fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions) -> Fit:
         usable[sel] &= np.all(np.abs(obs.uv[sel]) <= 10 * max(cam.width, cam.height), axis=1)
     pieces = split_pieces(obs, usable, options.max_gap_s)
     if not pieces:
-        raise FusionError("smooth: no stretch of the session is seen by two cameras (one "
-                          "camera cannot triangulate)")
+        # no command's name here: smooth (fusion) and sync (clocks) each say whose fit it is
+        off = n - int(np.count_nonzero(usable))
+        raise FusionError("no stretch of the session is seen by two cameras (one camera "
+                          "cannot triangulate)" + (
+                              f"; {off} of {n} detections lie more than 10 image sizes off "
+                              f"their image and are no detection" if off else ""))
     # seconds since the first usable detection: rows without one (a first detection beyond
     # the image, NaN) are not in the fit and do not move its time origin (each time's
     # rounding: the fit's bits, and through the break search's decisions up to 14 mm at a

@@ -59,7 +59,7 @@ def fuse_smooth(prep: Prepared, rig: Rig, options) -> Track:
     except FusionError as exc:
         if "two cameras" in str(exc):
             return _empty()
-        raise
+        raise FusionError(f"smooth: {exc}") from None  # the fit's words, in fusion's context
     if options.rate_hz is None:
         # the points with a finite position, gathered once (the covariances of a 90-minute
         # session are 35 MB: gathered and then filtered, they were copied twice); none
