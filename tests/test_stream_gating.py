@@ -18,7 +18,7 @@ from pslog.fusion.stream import StreamFuser
 from pslog.motion import get_motion
 from pslog.records import Track
 from pslog.rig import Rig, apply_timing, builtin_rig
-from pslog.simulation import SimulationOptions, simulate_labelled, true_rig
+from pslog.simulation import SimulationOptions, simulate, simulate_labelled, true_rig
 
 
 def push_frames(fuser, det, form: str = "push", best: bool = False):
@@ -327,3 +327,39 @@ def test_push_frame_of_an_empty_frame_is_push_of_no_rows(method):
         else:
             fuser.push_frame(1_010_000_000, 1, np.zeros((0, 2)), 1)
         fuser.push_frame(1_010_000_000, 1, np.array([[600.0, 300.0]]), 1)  # no error
+
+
+@pytest.mark.parametrize("compiled", [False, True])
+def test_a_ball_at_rest_alone_is_kept_until_a_second_candidate_appears(compiled):
+    """The stillness rule's premise is a second object: a ball at rest, the only candidate
+    every camera has had so far, is the ball (session 29: was rejected as `motion` from its
+    first ``static_s`` on, 247 of 270 candidates). From the first frame of several
+    candidates (a false blob at 2 s) the still candidates are a static object's again.
+    The batch gate, the stream gate and the compiled stream gate: the same reasons."""
+    from pslog.fusion.gating import MOTION, StreamGate
+    from pslog.motion import Motion
+
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    here = np.array([1.5, 1.0, 0.8])
+    still = Motion("still", 3.0, lambda t: np.tile(here, (len(t), 1)))
+    det, _ = simulate(rig, still, 3.0, SimulationOptions(noise_px=0.3, seed=1))
+    batch = gate(det, rig)
+    assert len(batch.rejections) == 0  # every candidate chosen
+
+    # one false candidate in cam2's first frame from 2 s
+    f = int(np.flatnonzero((det.frame_camera == 1) & (det.frame_time_ns >= 2_000_000_000))[0])
+    rows = np.r_[np.arange(det.n_candidates), np.flatnonzero(det.cand_frame == f)]
+    rows.sort(kind="stable")
+    uv = det.cand_uv[rows].copy()
+    uv[np.flatnonzero(det.cand_frame[rows] == f)[1]] = (100.0, 100.0)
+    blob = replace(det, cand_frame=det.cand_frame[rows], cand_uv=uv,
+                   cand_radius=det.cand_radius[rows], cand_score=det.cand_score[rows])
+    batch = gate(blob, rig)
+    motion = batch.rejections.frame_time_ns[batch.rejections.reason == MOTION]
+    assert len(motion) > 50 and motion.min() >= det.frame_time_ns[f]
+    stream = StreamGate(rig, compiled=compiled)
+    assert stream.compiled == compiled
+    push_frames(stream, blob)
+    stream.flush()
+    assert_array_equal(stream.rejections.reason, batch.rejections.reason)
+    assert_array_equal(stream.rejections.frame_time_ns, batch.rejections.frame_time_ns)

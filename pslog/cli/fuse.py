@@ -225,10 +225,12 @@ def run(args: argparse.Namespace) -> int:
                     del track, rejected
             most = max(still.values(), default=0)
             if most > n_candidates / 2:
-                # by design (docs/methods.md): a still object is not a ball in play
-                print(f"{most} of {n_candidates} candidates rejected as a still object: a "
-                      f"ball that stands still (slower than about 20 cm/s) is not tracked; "
-                      f"run with --gating off to fuse it anyway")
+                # by design (docs/methods.md, "Stillness"): in a scene of more than one
+                # object a still one is not the ball in play (alone in it, it is tracked)
+                print(f"{most} of {n_candidates} candidates rejected as a still object: in "
+                      f"a scene of several candidates a ball that stands still (slower than "
+                      f"about 20 cm/s) is not told from a static object; run with --gating "
+                      f"off to fuse it anyway")
             for method in (m for m in methods if m in empty):
                 print(_no_point(method, empty[method], args.type_a_max_std_mm))
             if not written:
@@ -319,7 +321,8 @@ def _still_rejections(rejected) -> int:
     """How many of a method's gating rejections (:class:`pslog.fusion.gating.Rejections`)
     are a still object's: rejected for ``motion`` (the gate's reason for a static object as
     for a point behind a camera) in a camera whose such candidates barely move in the image
-    (median step between them under 2 px)."""
+    (median step from each to the nearest of the three before it under 2 px: several still
+    objects seen by one camera alternate in its rows)."""
     import numpy as np
 
     from pslog.fusion.gating import MOTION
@@ -328,6 +331,13 @@ def _still_rejections(rejected) -> int:
     for cam in np.unique(rejected.camera):
         rows = (rejected.camera == cam) & (rejected.reason == MOTION)
         uv = rejected.uv[rows]
-        if len(uv) >= 2 and np.median(np.linalg.norm(np.diff(uv, axis=0), axis=1)) < 2.0:
+        if len(uv) < 2:
+            continue
+        step = np.full(len(uv) - 1, np.inf)
+        for lag in (1, 2, 3):
+            if len(uv) > lag:
+                step[lag - 1:] = np.minimum(step[lag - 1:], np.linalg.norm(
+                    uv[lag:] - uv[:-lag], axis=1))
+        if np.median(step) < 2.0:
             count += len(uv)
     return count

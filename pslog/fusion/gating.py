@@ -1241,6 +1241,11 @@ class _Decider:
         # frames of several candidates, (frame time ns, undistorted u, v), for
         # :func:`_refused_near` (a later choice there is still one line's guess)
         self.refused: list[list[tuple[int, float, float]]] = [[] for _ in rig.cameras]
+        # a frame of several candidates decided so far: the scene holds more than the ball,
+        # so a still candidate may be a second object (a static one); before, every
+        # candidate is the one object seen, and a still one is a ball at rest (the stillness
+        # rule's premise, docs/methods.md "Stillness")
+        self.several = False
 
     def run(self, c: _Candidates, frames, ratio, points, in_front, reason,
             static=None, lag=None) -> None:
@@ -1269,9 +1274,13 @@ class _Decider:
             before = picked[camera[lo]]
             adjacent = before is not None and before[2] == self.last_frame[camera[lo]]
             self.last_frame[camera[lo]] = t_ns[lo]
+            if hi - lo >= 2:
+                self.several = True
             for i in range(lo, hi):
                 track_accepts = False
-                if static[i]:  # a static object, whatever supports it (or no longer does)
+                if static[i] and self.several:  # a static object, whatever supports it (or
+                    # no longer does); a still candidate in a scene of one object so far is
+                    # the ball at rest
                     reason[i] = MOTION
                     continue
                 if lone[i] == lone[i] and not _picked_there(before, adjacent, t_ns[lo], uv[i],
