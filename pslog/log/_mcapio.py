@@ -849,6 +849,7 @@ def _salvage(buf, on_message, scan: Scan) -> None:
     chunked = bool(indexed) or _has_chunk(buf, limit)
     metadata = {m.offset: m for m in summary.metadata} if summary is not None else {}
     pos = len(MAGIC)
+    chunk_end = -1  # the end of the last chunk read whole
     while pos < limit:
         meta_index = metadata.get(pos)
         if meta_index is not None:
@@ -880,9 +881,17 @@ def _salvage(buf, on_message, scan: Scan) -> None:
                 skip(_chunk_damage(buf, pos, nxt, reason, indexed, limit))
             else:
                 nxt = _resync(buf, pos + 1, limit, indexed, chunked)
-                reason = ("file ends inside a record" if _cut_at(buf, pos, nxt, limit)
-                          else "no valid record")
-                skip(Damage(pos, nxt, reason))
+                if pos == chunk_end and _index_opcode_only(buf, pos, nxt):
+                    # the MessageIndex records of the chunk just read, the first one's
+                    # opcode damaged: an index, no message lost with it
+                    skip(Damage(pos, nxt, f"the MessageIndex records of the chunk before, "
+                                          f"the first one damaged in its opcode "
+                                          f"({op:#04x}); that chunk's messages are kept",
+                                counts={}))
+                else:
+                    reason = ("file ends inside a record" if _cut_at(buf, pos, nxt, limit)
+                              else "no valid record")
+                    skip(Damage(pos, nxt, reason))
             pos = nxt
             continue
         if op in (OP_DATA_END, OP_FOOTER):
@@ -918,6 +927,8 @@ def _salvage(buf, on_message, scan: Scan) -> None:
             continue
         if pending:
             _deliver(pending, on_message)
+        if op == OP_CHUNK:
+            chunk_end = end
         pos = end
         scan.complete_bytes = pos
     else:
@@ -961,6 +972,17 @@ def _cut_at(buf, pos: int, nxt: int, limit: int) -> bool:
     if nxt < limit:
         return False
     return pos + 9 > limit or pos + 9 + _unpack("<Q", buf, pos + 1)[0] > limit
+
+
+def _index_opcode_only(buf, pos: int, end: int) -> bool:
+    """Whether ``pos..end`` is MessageIndex records but for the first one's opcode: its
+    fields fill its length exactly and intact MessageIndex records follow it to ``end``."""
+    if pos + 9 > end:
+        return False
+    stop = pos + 9 + _unpack("<Q", buf, pos + 1)[0]
+    if not (stop <= end and _fills(buf, pos + 9, stop, _SHAPES[OP_MESSAGE_INDEX])):
+        return False
+    return message_index_counts(buf, stop, end)[1] == end
 
 
 def _trailing_index_counts(buf, start: int, end: int, limit: int) -> dict[int, int] | None:
