@@ -80,12 +80,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "epipolar, track and motion gates and record every rejected "
                              "candidate in the output; off: take each frame's best-scored "
                              "candidate (default %(default)s)")
-    parser.add_argument("--confirm-gaps", choices=("on", "off"), default="on",
+    parser.add_argument("--confirm-gaps", choices=("on", "off", "all"), default="on",
                         help="typeA: on: a point whose prediction bridged a gap longer than "
                              "the rig's usual one is kept only once the next camera's "
                              "detection confirms it (left out as contradicted or "
-                             "unconfirmed otherwise); off: every point at once, as `pslog "
-                             "live` emits them (default %(default)s)")
+                             "unconfirmed otherwise); all: every point is tested so, a "
+                             "point nothing can check kept unless it bridged a long gap "
+                             "(offline: the points just after an unseen kick left out as "
+                             "contradicted); off: every point at once, as `pslog live` "
+                             "emits them (default %(default)s)")
     parser.add_argument("--type-a-max-std-mm", default=None,
                         type=number_at_most(1e6, "mm", "a kilometre", positive=True),
                         metavar="MM",
@@ -141,7 +144,8 @@ def run(args: argparse.Namespace) -> int:
                             max_gap_s=None if args.max_gap_ms is None else args.max_gap_ms / 1e3,
                             rate_hz=args.rate, noise_px=args.noise_px,
                             gating=args.gating == "on",
-                            confirm_gaps=args.confirm_gaps == "on",
+                            confirm_gaps=args.confirm_gaps != "off",
+                            confirm_every=args.confirm_gaps == "all",
                             max_std_m=None if args.type_a_max_std_mm is None
                             else args.type_a_max_std_mm / 1e3,
                             detector_offset_m=None if args.detector_offset_mm is None

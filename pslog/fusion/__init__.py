@@ -76,6 +76,14 @@ class FusionOptions:
         the rig's usual one until the next camera's detection confirms it, and drop it when
         that detection contradicts it (:mod:`pslog.fusion.confirm`; a stream outputs it one
         detection later); False: every point at once (``pslog live``: a point per shutter)
+    confirm_every : bool, typeA, offline only, with ``confirm_gaps``: every point, not only
+        the long-gap ones, is tested against the next detection of another camera that can
+        check it and dropped as ``contradicted`` when it disagrees (the same test; a point
+        nothing can check is kept unless it bridged a long gap): the points just after an
+        unseen kick, whose depth eq. (2) took from the motion before it (docs/methods.md,
+        "Type A after kicks, confirmed offline (session 29)"). False (the default): the
+        paper's points. A typeA stream refuses it (``FusionError``); ``pslog live`` turns it
+        off with ``confirm_gaps``
     max_std_m : float or None, typeA: a point whose ``std_m`` exceeds this is withheld
         (counted in ``Track.dropped`` as ``uncertain``: the filter's rule;
         ``pslog.fusion.pseudo.MAX_STD_M`` is the filter's default, 5 cm / 1.96, issue 10's
@@ -101,6 +109,7 @@ class FusionOptions:
     noise_px: float | None = 0.5
     gating: bool = True
     confirm_gaps: bool = True
+    confirm_every: bool = False
     max_std_m: float | None = None
     detector_offset_m: float | None = None
     detector_bias_px: float | None = None
@@ -241,7 +250,8 @@ def _type_a(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
     table: list = []
     made = _fuse_type_a(prep, gap, options.noise_px, None, None, None, False,
                         covariance_noise_px(options.noise_px), table)[0]
-    track = confirm_batch(prep, made, rig, gap, options.noise_px) if options.confirm_gaps else made
+    track = (confirm_batch(prep, made, rig, gap, options.noise_px, every=options.confirm_every)
+             if options.confirm_gaps else made)
     return withhold_uncertain(type_a_noise(prep, track, gap, options.noise_px,
                                            table[0] if table and track is made else None),
                               options.max_std_m)[0]
@@ -251,6 +261,9 @@ def _type_a_stream(rig: Rig, options: FusionOptions):
     from .confirm import ConfirmedStream
     from .pseudo import MeasuredNoiseStream, TypeAStream, covariance_noise_px
 
+    if options.confirm_gaps and options.confirm_every:
+        raise FusionError("typeA's confirm_every is offline only (a point may wait for the "
+                          "next camera as long as a stream pauses): fuse the session instead")
     stream = TypeAStream(rig, options, covariance_noise_px(options.noise_px))
     inner = ConfirmedStream(stream, rig, options) if options.confirm_gaps else stream
     return MeasuredNoiseStream(inner, rig, options)
@@ -486,8 +499,9 @@ def type_a_explained(prep: Prepared, rig: Rig, options: FusionOptions
         return out, construction if kept is None else construction.select(kept)
     from .confirm import confirm_batch
 
-    confirmed = type_a_noise(prep, confirm_batch(prep, track, rig, max_gap_s,
-                                                 options.noise_px), max_gap_s, options.noise_px)
+    confirmed = type_a_noise(prep, confirm_batch(prep, track, rig, max_gap_s, options.noise_px,
+                                                 every=options.confirm_every),
+                             max_gap_s, options.noise_px)
     confirmed = withhold_uncertain(confirmed, options.max_std_m)[0]
     if len(confirmed) == len(track):
         return confirmed, construction

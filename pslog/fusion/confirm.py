@@ -213,10 +213,16 @@ def confirm_noise(snap_px: np.ndarray, noise_px: float | None, estimate=None) ->
     return (NoiseEstimate() if estimate is None else estimate).sigmas(values, noise_px)
 
 
-def confirm_batch(prep, track: Track, rig, max_gap_s: float, noise_px: float | None) -> Track:
+def confirm_batch(prep, track: Track, rig, max_gap_s: float, noise_px: float | None,
+                  every: bool = False) -> Track:
     """``track`` (type A's, from ``prep``'s observations) with its long-gap points confirmed,
     contradicted or unconfirmed (module docstring); the dropped ones counted in
-    ``Track.dropped`` (``contradicted``, ``unconfirmed``)."""
+    ``Track.dropped`` (``contradicted``, ``unconfirmed``).
+
+    ``every`` (offline only, ``FusionOptions.confirm_every``): every point is tested the same
+    way, not only the long-gap ones, and dropped when contradicted; a point no other camera
+    can check is kept unless it bridged a long gap (as without ``every``). The long-gap
+    points' decisions are the same bits either way (the test is elementwise)."""
     if not len(track):
         return track
     from . import _pseudo_kernel  # (numba: imported at the first use)
@@ -244,11 +250,12 @@ def confirm_batch(prep, track: Track, rig, max_gap_s: float, noise_px: float | N
     _pseudo_kernel.long_gap_kernel(
         time_ns, camera, len(rig), _all_brackets(prep)[2], previous_next_rows(prep)[0],
         track.time_ns, track.camera, max_gap_ns, float(long_ns), row, gap, long)
-    if not long.any():
+    wait = long | every  # (every: all the points)
+    if not wait.any():
         return track
     # (the tests' noise, a causal median over every point: made only when some point waits)
     sigma = confirm_noise(track.quality["snap_px"], noise_px)
-    e = row[long]
+    e = row[wait]
     # the confirming detection: the first later row of another camera that can check the
     # point (its camera has a row within max_gap_s before the point, both pixels finite),
     # within max_gap_s of the point; the rows are scanned in order, as a stream meets them
@@ -280,18 +287,19 @@ def confirm_batch(prep, track: Track, rig, max_gap_s: float, noise_px: float | N
     nxt_c, prev_c = np.maximum(nxt, 0), np.maximum(prev, 0)
     cam2 = camera[nxt_c]
     q = track.quality
-    idx = np.flatnonzero(long)
+    idx = np.flatnonzero(wait)
     cov = (np.stack([q[k][idx] for k in _COV], axis=1) if all(k in q for k in _COV)
            else None)
     contradicted = residual_test(
         _camera_rows(rig), cam2, track.position_world[idx], cov, time_ns[e],
-        time_ns[prev_c], time_ns[nxt_c], uv[prev_c], uv[nxt_c], gap[long] / NS,
+        time_ns[prev_c], time_ns[nxt_c], uv[prev_c], uv[nxt_c], gap[wait] / NS,
         q["span_s"][idx], sigma[idx], noise_px) & ok
+    unconfirmed = ~ok & long[idx]  # (a point that bridged no long gap: kept unchecked)
     drop = np.zeros(len(track), dtype=bool)
-    drop[idx[~ok]] = True
+    drop[idx[unconfirmed]] = True
     drop[idx[contradicted]] = True
     return _with_drops(track, drop, int(np.count_nonzero(contradicted)),
-                       int(np.count_nonzero(~ok)))
+                       int(np.count_nonzero(unconfirmed)))
 
 
 def _with_drops(track: Track, drop: np.ndarray, contradicted: int, unconfirmed: int) -> Track:
