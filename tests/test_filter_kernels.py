@@ -109,10 +109,11 @@ def test_a_rejected_detection_reports_its_innovation_against_the_prediction():
     # detection's distance from the prediction's projection and its NIS y' S⁻¹ y with
     # S = H P Hᵀ + σ² I (the ballistic model alone, fixed noise, no turn model)
     rig = lab_rig(3)
-    # (no jump rate: predict() is then the process model's prediction the gate uses)
+    # (no jump rate, no drag estimated: predict() is then the process model's prediction the
+    # gate uses; the estimated drag moves the published point, tests/test_filter_drag.py)
     options = FilterOptions(adapt_rate=0.0, accel_adapt_rate=0.0, model_switch_per_s=0.0,
                             turn_switch_per_s=0.0, noise_px=0.4, withhold=False,
-                            jump_rate_per_s=0.0)
+                            jump_rate_per_s=0.0, drag_std_per_m=0.0)
     obs, _ = session(rig, get_motion("throw"), noise_px=0.3, seed=6)
     flt = BallFilter(rig, options)
     bad = 40

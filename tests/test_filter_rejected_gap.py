@@ -45,12 +45,14 @@ def _jump_term(rate: float, speed: float, T: float) -> np.ndarray:
 
 def _hand_filters():
     # the ballistic model alone, fixed noise and process noise; ``ref`` the same without
-    # jumps (jump_rate_per_s 0): its predict is the process model alone
+    # jumps (jump_rate_per_s 0): its predict is the process model alone (the drag not
+    # estimated: its term has its own test, tests/test_filter_drag.py)
     rig = lab_rig(3)
     rate, speed = 2.0, 5.0
     options = FilterOptions(noise_px=0.4, accel_psd=0.3, adapt_rate=0.0, accel_adapt_rate=0.0,
                             model_switch_per_s=0.0, turn_switch_per_s=0.0, max_std_m=None,
-                            withhold=False, jump_rate_per_s=rate, jump_speed=speed)
+                            withhold=False, jump_rate_per_s=rate, jump_speed=speed,
+                            drag_std_per_m=0.0)
     flt = BallFilter(rig, options)
     ref = BallFilter(rig, replace(options, jump_rate_per_s=0.0))
     p0, v0 = np.array([1.2, 0.9, 1.1]), np.array([2.0, -0.7, 1.5])

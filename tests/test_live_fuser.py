@@ -733,6 +733,9 @@ def test_a_filter_points_datagram_covariance_is_the_published_one(tmp_path):
             full[t] = None
             continue
         P = flt.state()[2][:3, :3].copy()
+        if not flt._nu:  # the estimated drag's term V_p V_pᵀ / I_k (session 29), in full
+            V = np.array(flt._V[:3])
+            P += np.outer(V, V) / flt._drag_info
         std = np.array(made[1][1:4])
         extra = float((std**2).sum() - np.trace(P))
         start = flt._start_jump

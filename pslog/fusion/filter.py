@@ -293,6 +293,12 @@ class FilterOptions:
         over the time ``T`` since the latest accepted detection (:func:`_unseen_gap_jump`),
         and a (re)start's point the error its window's fit makes of the jumps inside the
         window (:func:`window_jump_cov`); 0: none of these
+    drag_std_per_m : float, 1/m, prior standard deviation ``σ_k`` of the ballistic model's
+        drag offset ``δk`` from ``drag_per_m``, estimated for the session beside the filter
+        (Friedland's two-stage filter, :func:`_drag_update`): each point published is ``p +
+        V_p δk̂`` with the covariance ``P_pp + V_p V_pᵀ / I_k``; the filter's own state
+        (gating, jumps, ``q``, σ²) is unchanged; 0: the drag not estimated (before session
+        29)
     """
 
     noise_px: float = 0.5
@@ -336,6 +342,7 @@ class FilterOptions:
     restart_prior: bool = True
     jump_instant: bool = True
     jump_mixture_cov: bool = True
+    drag_std_per_m: float = 0.01
 
     def __post_init__(self) -> None:
         for name in ("noise_px", "accel_psd", "accel_step_var", "gate", "jump_speed",
@@ -361,7 +368,7 @@ class FilterOptions:
         if not (math.isfinite(self.turn_on_accel2) and self.turn_on_accel2 > 0):
             raise FusionError(f"filter turn_on_accel2 must be finite and > 0, got "
                               f"{self.turn_on_accel2!r}")
-        for name in ("drag_per_m", "supported_drag_per_m"):
+        for name in ("drag_per_m", "supported_drag_per_m", "drag_std_per_m"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise FusionError(f"filter {name} must be finite and >= 0, got {value!r}")
@@ -424,7 +431,12 @@ _SJUV = _SJE + 4
 _SJF = _SJUV + 2 * _JBUF  # per buffered detection the (c, q, σ²) its update used
 #: the latest jump's covariance of its hypotheses' mixture about the winner (session 27)
 _SJPM = _SJF + 3 * _JBUF
-_SCAM = _SJPM + 36  # then 2 per camera, then 2 per window slot
+#: the drag's two-stage estimate (session 29; :func:`_drag_update`): the state's sensitivity
+#: to the ballistic model's drag ``V = ∂x/∂k`` (6), the drag's offset ``δk̂`` and its
+#: information ``I_k`` (kept for the session)
+_SV = _SJPM + 36
+_SDK, _SIK = _SV + 6, _SV + 7
+_SCAM = _SV + 8  # then 2 per camera, then 2 per window slot
 #: ``I``: track flag, state time, last accepted time, rejections in a row, updates since the
 #: start, camera of a pending jump, its confirming updates, whether one came from another
 #: camera, the turn model's age, the latest jump's time and camera, history length, window
@@ -453,7 +465,8 @@ _OUNSEEN = _OSHAPES + 4 * 3  # λ_j σ_j² / 3: an unseen jump's variance along 
 _OKS = _OUNSEEN + 1  # the supported model's drag coefficient (0 by default)
 _OINSTANT = _OKS + 1  # 1: an accepted jump's instant published (_instant_term)
 _OJMIX = _OINSTANT + 1  # 1: a jump's covariance is its hypotheses' mixture's about the winner
-_OSIZE = _OJMIX + 1
+_ODRAG = _OJMIX + 1  # the drag's prior information 1/σ_k² (0: the drag not estimated)
+_OSIZE = _ODRAG + 1
 #: ``N`` (int64 options): max gap, window span, init_window, init_detections, max_rejects,
 #: window capacity
 _NMAXGAP, _NSPAN, _NINITWIN, _NINITDET, _NMAXREJ, _NWCAP = range(6)
@@ -1011,6 +1024,55 @@ def _predicted_mean(x, dt, c, O):
 
 
 @kernel
+def _drag_predicted(V, x, dt, c):
+    """The state's sensitivity ``V = ∂x/∂k`` (6) to the ballistic model's drag ``k`` after
+    ``dt`` seconds (a new array; session 29): ``V⁻ = F V − c ‖v‖ (v Δt²/2, v Δt)``, ``F``
+    the constant-velocity transition, ``v`` the predicted velocity ``x[3:]``, ``c`` the
+    ballistic model's weight (the mixture's drag is ``k_s + c (k − k_s)``: ``∂/∂k = c``)."""
+    a = c * math.sqrt(x[3] * x[3] + x[4] * x[4] + x[5] * x[5])
+    h = 0.5 * dt * dt
+    Vn = np.empty(6)
+    for i in range(3):
+        Vn[i] = V[i] + dt * V[3 + i] - a * x[3 + i] * h
+        Vn[3 + i] = V[3 + i] - a * x[3 + i] * dt
+    return Vn
+
+
+@kernel
+def _drag_update(S, inn, y0, y1, Vm):
+    """The drag's offset ``δk̂`` and the sensitivity ``V`` after an accepted update
+    (Friedland, "Treatment of bias in recursive filtering", IEEE Trans. AC 14(4), 1969: the
+    two-stage, separate-bias filter; in place in ``S``): with the update's pixel Jacobian
+    ``H`` (``inn``'s h0, h1), ``S⁻¹``, ``PHᵀ`` and the prior innovation ``y`` of the filter
+    run at ``k₀``, ``z = H V⁻_p``,
+
+        I_k ← I_k + zᵀ S⁻¹ z,   δk̂ ← δk̂ + zᵀ S⁻¹ (y − z δk̂) / I_k,   V = V⁻ − K z,
+
+    ``K = PHᵀ S⁻¹`` (for a constant ``δk`` and a linear model: the filter with ``k`` in its
+    state, the state ``x + V δk̂``)."""
+    z0 = inn[7] * Vm[0] + inn[8] * Vm[1] + inn[9] * Vm[2]
+    z1 = inn[10] * Vm[0] + inn[11] * Vm[1] + inn[12] * Vm[2]
+    g0, g1 = inn[2] * z0 + inn[3] * z1, inn[3] * z0 + inn[4] * z1  # S⁻¹ z
+    info = S[_SIK] + z0 * g0 + z1 * g1
+    dk = S[_SDK]
+    S[_SDK] = dk + (g0 * (y0 - z0 * dk) + g1 * (y1 - z1 * dk)) / info
+    S[_SIK] = info
+    c0, c1 = _INN_C0, _INN_C0 + 6
+    for i in range(6):
+        S[_SV + i] = Vm[i] - inn[c0 + i] * g0 - inn[c1 + i] * g1
+
+
+@kernel
+def _drag_point(S, px, py, pz, vx, vy, vz):
+    """A published point and its variances (x, y, z) with the estimated drag: ``p + V_p
+    δk̂`` and ``diag(P_pp) + V_p² / I_k`` (``S``'s current ``V``)."""
+    V0, V1, V2, dk = S[_SV], S[_SV + 1], S[_SV + 2], S[_SDK]
+    w = 1.0 / S[_SIK]
+    return (px + V0 * dk, py + V1 * dk, pz + V2 * dk, vx + V0 * V0 * w, vy + V1 * V1 * w,
+            vz + V2 * V2 * w)
+
+
+@kernel
 def _instant_term(S, I, cams, O, t, x):
     """The error an accepted jump's unknown instant leaves in the state ``x`` at ``t``
     (the jump's buffered detections, the latest at ``t``, all updated; session 25): the
@@ -1261,6 +1323,8 @@ def _reject(S, I, cams, O, N, t, cam, u, v, x, P, inn_ok, inn, gap_s, out):
     I[_ITIME] = t
     px, py, pz, vx, vy, vz = _combined_point(x, P, S[_SXT:_SXT + 7], S[_SPT:_SPT + 49],
                                              S[_SNU])
+    if O[_ODRAG] != 0.0:  # the estimated drag (V: the prediction's, set by the caller)
+        px, py, pz, vx, vy, vz = _drag_point(S, px, py, pz, vx, vy, vz)
     if O[_OUNSEEN] != 0.0:  # the prediction's published covariance: a jump in the gap
         vx, vy, vz = _unseen_gap_jump(O, gap_s, vx, vy, vz)
     _point(out, px, py, pz, vx, vy, vz, y0, y1, y0, y1, nis, gap_s, 0.0, 1.0, 0.0)
@@ -1347,6 +1411,9 @@ def _push(S, I, cams, O, N, t, cam, u, v, out):
             xt, Pt = _turn_predicted(xt, Pt, dt, q, O[_OTPSD])
         x, P = _predicted(xg, Pg, dt, c, O, q)
         inn_ok, inn = _innovation(cams, cam, x, P, 6, u, v, var)
+    # the drag estimated (session 29) while the pair alone is in the set: V⁻ at the prior
+    drag = O[_ODRAG] != 0.0 and not nu
+    Vm = _drag_predicted(S[_SV:_SV + 6], x, dt, c) if drag else np.zeros(6)
     if inn_ok and not solo:
         # the mixture's innovation (the process noise's whiteness statistic)
         prior_y0, prior_y1 = inn[0], inn[1]
@@ -1404,6 +1471,7 @@ def _push(S, I, cams, O, N, t, cam, u, v, out):
         if inn_ok:
             found, xn, Pn, inn_j = _jump(S, I, cams, O, t, cam, u, v)
         if not found:  # rejected: the point is the prediction
+            S[_SV:_SV + 6] = Vm
             return _reject(S, I, cams, O, N, t, cam, u, v, x, P, inn_ok, inn, gap_s, out)
         inn = inn_j
         xo0, xo1, xo2, v0, v1, v2, nis = xn[0], xn[1], xn[2], Pn[0], Pn[7], Pn[14], inn[5]
@@ -1420,7 +1488,16 @@ def _push(S, I, cams, O, N, t, cam, u, v, out):
         if nu:
             S[_SXT:_SXT + 7] = xt
             S[_SPT:_SPT + 49] = Pt
+        S[_SV:_SV + 6] = Vm
         return _reject(S, I, cams, O, N, t, cam, u, v, x, P, inn_ok, inn, gap_s, out)
+    if accepted and drag:  # δk̂ from this update (the prior innovation, before the mixing)
+        _drag_update(S, inn, prior_y0, prior_y1, Vm)
+        c0, c1, c2, w0, w1, w2 = _drag_point(S, xo0, xo1, xo2, v0, v1, v2)
+        ok, qu, qv, _, _, _, _, _, _ = _project(cams, cam, c0, c1, c2)
+        if ok:  # (the point moved by millimetres: never behind the camera in practice)
+            xo0, xo1, xo2, v0, v1, v2, pu, pv = c0, c1, c2, w0, w1, w2, qu, qv
+    else:  # a jump, or the turn model in the set: a new segment (δk̂ is kept)
+        S[_SV:_SV + 6] = 0.0
     if I[_IJN] > 0 and O[_OINSTANT] != 0.0:  # the latest jump's instant (published)
         k = I[_IJN]
         if accepted and k < _JBUF:
@@ -1893,6 +1970,13 @@ def _predict(S, I, O, t):
     p = _pmin(O[_OSWITCH] * abs(dt), 0.5)
     c = mu * (1.0 - p) + (1.0 - mu) * p
     x, P = _predicted(S[_SX:_SX + 6], S[_SP:_SP + 36], dt, c, O, q)
+    if O[_ODRAG] != 0.0 and not nu:  # the estimated drag: x + V δk̂, P + V Vᵀ / I_k
+        V = _drag_predicted(S[_SV:_SV + 6], x, dt, c)
+        dk, w = S[_SDK], 1.0 / S[_SIK]
+        for i in range(6):
+            x[i] += V[i] * dk
+            for j in range(6):
+                P[6 * i + j] += V[i] * V[j] * w
     if nu:
         pt = _pmin(O[_OTSWITCH] * abs(dt), 0.5)
         nu = nu * (1.0 - pt) + (1.0 - nu) * pt
@@ -2021,6 +2105,8 @@ class BallFilter:
         O[_OKS] = options.supported_drag_per_m
         O[_OINSTANT] = float(options.jump_instant)
         O[_OJMIX] = float(options.jump_mixture_cov)
+        sk = options.drag_std_per_m
+        O[_ODRAG] = 1.0 / (sk * sk) if sk > 0.0 else 0.0
         self._opts = O
         self._nopts = np.array([self._max_gap_ns, self._init_span_ns, options.init_window,
                                 options.init_detections, options.max_rejects, capacity],
@@ -2031,6 +2117,7 @@ class BallFilter:
         self._S[_SMU], self._S[_SQ] = self._mu0, self._q_min
         self._S[_SVAR] = options.noise_px ** 2
         self._S[_SALPHA] = options.noise_prior_weight
+        self._S[_SIK] = O[_ODRAG]  # δk̂ = 0 with the prior's information
         self._I[_IPEND], self._I[_IJUMPNS], self._I[_IJUMPCAM] = -1, -(2**62), -1
         self._I[_ICAP] = options.init_window
         self._I[_ICAM:_ICAM + n_cams] = -(2**62)  # last accepted detection per camera
@@ -2048,6 +2135,9 @@ class BallFilter:
     _xt = _state_vector(_SXT, 7, "the turn model's mean (position, velocity, ω)")
     _Pt = _state_vector(_SPT, 49, "the turn model's covariance (7 x 7 flat)")
     _e = _state_vector(_SE, 6, "the ballistic model's mean minus the supported one's")
+    _V = _state_vector(_SV, 6, "the state's sensitivity to the drag, ∂x/∂k (m, m/s per 1/m)")
+    _dk = _state_scalar(_SDK, "the estimated drag's offset δk̂ from drag_per_m, 1/m")
+    _drag_info = _state_scalar(_SIK, "the information I_k of δk̂, (1/m)⁻²")
 
     def __getattr__(self, name):
         # a filter made by __new__ (tests of the turn model's pieces) gets its state arrays
@@ -2089,6 +2179,7 @@ class BallFilter:
         I[_ICAM:_ICAM + len(self._cams)] = I[_ILAST]
         S[_SMU], S[_SE:_SE + 6] = self._mu0, 0.0
         S[_SNU] = 0.0
+        S[_SV:_SV + 6] = 0.0  # a (re)start: a new segment (δk̂ is kept)
 
     def state(self):
         """``(time_ns, x (6,), P (6, 6))`` of the current track (the mixture of the motion
@@ -2162,6 +2253,12 @@ class BallFilter:
         p00, p01, p02, _, _, _, _, p11, p12, _, _, _, _, _, p22 = P.tolist()
         sx, sy, sz = std_xyz
         vx, vy, vz = sx * sx, sy * sy, sz * sz
+        if self._opts[_ODRAG] != 0.0 and not S[_SNU]:
+            # the estimated drag's term V_p V_pᵀ / I_k (:func:`_drag_point`), in full
+            e0, e1, e2 = S[_SV:_SV + 3].tolist()
+            w = 1.0 / float(S[_SIK])
+            p00, p11, p22 = p00 + w * e0 * e0, p11 + w * e1 * e1, p22 + w * e2 * e2
+            p01, p02, p12 = p01 + w * e0 * e1, p02 + w * e0 * e2, p12 + w * e1 * e2
         extra = vx + vy + vz - (p00 + p11 + p22)
         if not rejected and int(I[_IJTE]) == time_ns and I[_IJN] > 0 and S[_SJE + 3] > 0.0:
             # an accepted jump's instant (:func:`_instant_term`): w ε_p ε_pᵀ, in full
