@@ -73,3 +73,33 @@ def test_gate_preload_loads_the_batch_gates_kernels_in_their_signatures():
                          text=True, timeout=900)
     assert run.returncode == 0, run.stderr
     assert run.stdout.splitlines() == ["1 1 1 1", "1 1 1 1"]
+
+
+_FILTER_PRELOAD = """
+from pslog.fusion import FusionOptions, fuse
+from pslog.fusion import filter as filter_module
+from pslog.motion import rally_motion
+from pslog.rig import apply_timing, builtin_rig
+from pslog.simulation import SimulationOptions, simulate
+from pslog.timing import observations
+
+names = ("_run", "_window_fit", "_turn_window_fit", "_pixel_rows", "_combined_point",
+         "_point", "_withheld", "_lengths")
+filter_module._preload()  # as pslog fuse's preload thread runs it (its errors unseen there)
+print(*(len(getattr(filter_module, k).signatures) for k in names))
+rig = apply_timing(builtin_rig("paper3"), "typeA")
+detections, _ = simulate(rig, rally_motion(seed=1, duration=3.0), 3.0,
+                         SimulationOptions(noise_px=0.3, seed=2))
+fuse(observations(detections, rig), rig, "filter", FusionOptions())  # the batch filter
+print(*(len(getattr(filter_module, k).signatures) for k in names))
+"""
+
+
+def test_filter_preload_loads_the_batch_filters_kernels_in_their_signatures():
+    # the filter's kernels that Python calls, loaded on pslog fuse's preload thread: a
+    # signature that does not match the batch filter's arguments would compile one no run
+    # uses (and leave the real one's load on the filter's way)
+    run = subprocess.run([sys.executable, "-c", _FILTER_PRELOAD], capture_output=True,
+                         text=True, timeout=900)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.splitlines() == ["1 1 1 1 1 1 1 1", "1 1 1 1 1 1 1 1"]

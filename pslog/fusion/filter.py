@@ -3057,3 +3057,31 @@ def fuse_filter(obs: Observations, rig: Rig, max_gap_s: float | None = None,
 
         options = replace(options, max_gap_s=max_gap_s)
     return _track(BallFilter(rig, options), obs.time_ns, obs.camera, obs.uv, doubt)
+
+
+def _preload() -> None:
+    """The batch filter's kernels loaded from numba's cache (or compiled) now, in the
+    signatures :func:`_track` and its window fits call them with (read-only detection
+    columns; C-contiguous float64 and int64 arrays; Python floats and ints): called by
+    :func:`pslog._jit.preload` on its thread while ``pslog fuse`` reads its session, so that
+    the filter's first calls do not pay the eight loads (~0.3 s of wall on a busy machine,
+    where the compiler lock makes a load wait; the loads of the window fits bring in
+    scipy's LAPACK bindings). Nothing runs: ``compile`` of a signature only loads it
+    (tests/test_kernel_signatures.py: a filter run afterwards adds no signature)."""
+    from numba import types
+
+    f8, i8 = types.float64, types.int64
+
+    def a(dtype, ndim: int, readonly: bool = False):
+        return types.Array(dtype, ndim, "C", readonly=readonly)
+
+    v, m, iv = a(f8, 1), a(f8, 2), a(i8, 1)
+    _run.compile((v, iv, m, v, iv, a(i8, 1, True), a(i8, 1, True), a(f8, 2, True), i8, m,
+                  iv, i8))
+    _window_fit.compile((m, iv, m, v, m, m, v, f8, f8, f8, f8, f8, f8, v, m, v))
+    _turn_window_fit.compile((m, iv, m, v, v, f8, f8, f8, f8, f8, v, m, v, f8))
+    _pixel_rows.compile((m, iv, m, v, v, v, m, v))
+    _combined_point.compile((v, v, v, v, f8))
+    _point.compile((v, *(f8,) * 15))
+    _withheld.compile((iv, v, f8))
+    _lengths.compile((m, m))
