@@ -290,6 +290,12 @@ class FilterOptions:
         their likelihoods of the detection and the prior ``1 − exp(−λ_j Δt)``, about the
         no-jump mean, along its camera's ray (:func:`_surprise_term`): a large NIS makes
         the jump likely; the state is unchanged; False: none (before session 29)
+    hold_nis : float or None, the batch form (:func:`fuse_filter`, ``pslog fuse``) only: a
+        plain update's output point whose NIS exceeds this waits for the next detection of
+        another camera, and is withheld (``held``) if that detection made a jump placed
+        before it (the jump's lag reaches back to it), was rejected, or the track was lost
+        first (or no such detection came); the streaming form has no hold (its points
+        leave at their detection). None (the default): no hold (session 29)
     jump_rate_per_s : float, expected rate ``λ_j`` of velocity jumps (kicks, bounces), 1/s:
         a point's reported covariance adds the variance ``λ_j T σ_j² T² / 3`` along its
         camera's ray of a jump no other camera has seen in the time ``T`` since another
@@ -342,6 +348,7 @@ class FilterOptions:
     jump_instant: bool = True
     jump_mixture_cov: bool = True
     surprise_cov: bool = True
+    hold_nis: float | None = None
 
     def __post_init__(self) -> None:
         for name in ("noise_px", "accel_psd", "accel_step_var", "gate", "jump_speed",
@@ -380,6 +387,10 @@ class FilterOptions:
         if not (math.isfinite(self.init_span_s) and self.init_span_s > 0):
             raise FusionError(f"filter init_span_s must be finite and > 0, got "
                               f"{self.init_span_s!r}")
+        if self.hold_nis is not None and not (math.isfinite(self.hold_nis)
+                                              and self.hold_nis >= 0):
+            raise FusionError(f"filter hold_nis must be finite and >= 0, got "
+                              f"{self.hold_nis!r}")
         if self.max_rejects < 1:
             raise FusionError(f"filter max_rejects must be >= 1, got {self.max_rejects}")
 
@@ -460,7 +471,10 @@ _OKS = _OUNSEEN + 1  # the supported model's drag coefficient (0 by default)
 _OINSTANT = _OKS + 1  # 1: an accepted jump's instant published (_instant_term)
 _OJMIX = _OINSTANT + 1  # 1: a jump's covariance is its hypotheses' mixture's about the winner
 _OSURPRISE = _OJMIX + 1  # λ_j of a plain update's jump/no-jump mixture (0: none; session 29)
-_OSIZE = _OSURPRISE + 1
+_OHOLD = _OSURPRISE + 1  # the batch's hold for the next camera: its NIS (inf: none; session 29)
+_OSIZE = _OHOLD + 1
+#: the batch's held points at most at once (a camera alone past them: the later ones output)
+_HOLD_MAX = 8
 #: ``N`` (int64 options): max gap, window span, init_window, init_detections, max_rejects,
 #: window capacity
 _NMAXGAP, _NSPAN, _NINITWIN, _NINITDET, _NMAXREJ, _NWCAP = range(6)
@@ -1736,21 +1750,69 @@ def _step(S, I, cams, O, N, t, cam, u, v, out):
 
 
 @kernel
+def _held(I, O, out, cam, pr, pc, pb, pn, index):
+    """The batch's held points (rows ``pr[:pn]``, cameras ``pc``, accepted detections of
+    their own camera since ``pb``) against the point of camera ``cam`` just made (``out``):
+    the first point of another camera releases a held one, or withdraws it (its ``index``
+    made negative, ``-1 - index``) when it made a jump placed before the held detection (the
+    winner's lag reaches back to it; every jump when the lag is not kept) or was rejected.
+    Returns the number still held (compacted in place)."""
+    jump, rejected = out[13] == 1.0, out[14] == 1.0
+    lag = I[_IJLAG] if O[_OINSTANT] != 0.0 else _JBUF
+    m = 0
+    for k in range(pn):
+        if pc[k] != cam:
+            if rejected or (jump and lag >= pb[k] + 1):
+                index[pr[k]] = -1 - index[pr[k]]
+            continue
+        if not rejected:
+            pb[k] += 1
+        pr[m], pc[m], pb[m] = pr[k], pc[k], pb[k]
+        m += 1
+    return m
+
+
+@kernel
 def _run(S, I, cams, O, N, times, cameras, uv, start, rows, index, n_out):
     """The batch loop: detections ``start:`` into the state, the points into ``rows`` (one
-    row per point) and their detection's index into ``index``, from row ``n_out``.
+    row per point) and their detection's index into ``index``, from row ``n_out``; with
+    ``hold_nis`` a held point later withdrawn keeps its row, its index ``-1 - index``
+    (:func:`_held`; the points held at a window fit — the track lost — or at the end are
+    withdrawn).
     Returns ``(next detection, rows filled, status)``: status ``_NONE`` at the end, else a
     window fit is needed for detection ``next`` (Python), which continues after it."""
     out = np.empty(_OUT_COLS)
+    hold = O[_OHOLD]
+    pr = np.empty(_HOLD_MAX, dtype=np.int64)
+    pc = np.empty(_HOLD_MAX, dtype=np.int64)
+    pb = np.empty(_HOLD_MAX, dtype=np.int64)
+    pn = 0
     for i in range(start, times.shape[0]):
-        status = _step(S, I, cams, O, N, times[i], cameras[i], uv[i, 0], uv[i, 1], out)
+        cam = cameras[i]
+        status = _push(S, I, cams, O, N, times[i], cam, uv[i, 0], uv[i, 1], out)
+        if pn and status == _POINT:
+            pn = _held(I, O, out, cam, pr, pc, pb, pn, index)
+        elif pn and status != _NONE:  # a window fit: the track was lost
+            for k in range(pn):
+                index[pr[k]] = -1 - index[pr[k]]
+            pn = 0
+        if status == _POINT and _withheld(I, O, out[3]):  # as _step
+            status = _NONE
         if status == _POINT:
             rows[n_out] = out
             index[n_out] = i
+            if (out[11] > hold and out[13] == 0.0 and out[14] == 0.0 and out[15] == 0.0
+                    and pn < _HOLD_MAX):
+                pr[pn], pc[pn], pb[pn] = n_out, cam, 0
+                pn += 1
             n_out += 1
         elif status != _NONE:
+            for k in range(pn):  # (a fit: no point of this track is confirmed now)
+                index[pr[k]] = -1 - index[pr[k]]
             rows[n_out] = out
             return i, n_out, status
+    for k in range(pn):  # never confirmed
+        index[pr[k]] = -1 - index[pr[k]]
     return times.shape[0], n_out, _NONE
 
 
@@ -2123,6 +2185,7 @@ class BallFilter:
         O[_OINSTANT] = float(options.jump_instant)
         O[_OJMIX] = float(options.jump_mixture_cov)
         O[_OSURPRISE] = options.jump_rate_per_s if options.surprise_cov else 0.0
+        O[_OHOLD] = math.inf if options.hold_nis is None else options.hold_nis
         self._opts = O
         self._nopts = np.array([self._max_gap_ns, self._init_span_ns, options.init_window,
                                 options.init_detections, options.max_rejects, capacity],
@@ -2977,6 +3040,8 @@ def _one_point(time_ns: int, camera: int, o: list, dropped: dict) -> Track:
 
 #: Track.dropped's reason for a detection left out as a choice the gate put in doubt.
 DOUBT = "doubt"
+#: ``Track.dropped``'s reason for a point the batch held for the next camera and withdrew
+HELD = "held"
 
 
 def _track(flt: BallFilter, time_ns, camera, uv, doubt: np.ndarray | None = None) -> Track:
@@ -3021,6 +3086,11 @@ def _track(flt: BallFilter, time_ns, camera, uv, doubt: np.ndarray | None = None
             n_out += 1
         i += 1
     rows, index = rows[:n_out], index[:n_out]
+    n_held = int(np.count_nonzero(index < 0))
+    if n_held:  # the batch's hold for the next camera (hold_nis): withdrawn points
+        keep = index >= 0
+        rows, index = rows[keep], index[keep]
+        n_out = len(index)
     # one row per quality column: each column a contiguous array, read-only as Track keeps
     # it (made here as Track's checks would leave it: no check, no copy)
     q = np.empty((len(FILTER_QUALITY), n_out))
@@ -3046,6 +3116,8 @@ def _track(flt: BallFilter, time_ns, camera, uv, doubt: np.ndarray | None = None
                if n > before.get(k, 0)}
     if n_doubt:
         dropped[DOUBT] = n_doubt
+    if n_held:
+        dropped[HELD] = n_held
     return Track._of_frozen("filter", time, position, cams,
                             dict(zip(FILTER_QUALITY, q, strict=True)), dropped)
 
