@@ -27,7 +27,9 @@ covariance of a rejected detection's prediction, "Gating, jumps" in docs/methods
 the points of (re)starts likewise, the jumps of their window, "Loss and (re)initialisation";
 and since session 25 an accepted jump's point and the next points of accepted detections,
 its instant, "A jump's instant": since session 27 those may also grow smaller, or be output
-where the reference withheld them — its replay takes the values in force at each update);
+where the reference withheld them — its replay takes the values in force at each update;
+and since session 29 every plain accepted update's point, its doubt on "no jump": "A plain
+update's doubt");
 prints how many rejected points changed, how many the new tree withholds (``uncertain``)
 and the largest change of ``std_m``; exit 1 on any other difference.
 
@@ -75,7 +77,8 @@ BASE_OPTIONS = compiled.FilterOptions(jump_rate_per_s=0.0, start_models=False, a
                                       window_noise_prior=False, restart_prior=False,
                                       # (session 25's, 27's and 29's; a --ref tree's --dump
                                       # may lack them)
-                                      **{k: False for k in ("jump_instant", "jump_mixture_cov")
+                                      **{k: False for k in ("jump_instant", "jump_mixture_cov",
+                                                            "surprise_cov")
                                          if k in compiled.FilterOptions.__dataclass_fields__},
                                       **{k: 0.0 for k in ("drag_std_per_m",)
                                          if k in compiled.FilterOptions.__dataclass_fields__})
@@ -231,16 +234,19 @@ def after_jump(q: dict) -> np.ndarray:
     return out
 
 
-def compare_ref(old: dict, new: dict) -> int:
+def compare_ref(old: dict, new: dict, plain: bool = True) -> int:
     """Accepted detections' points bit-equal but for the (re)starts' and those after a jump
     (:func:`after_jump`); rejected ones, starts and those after a jump equal but for
     STD_COLUMNS (not smaller, but for those after a jump: since session 27 their term's
     replay takes the values in force at each update, which may make it smaller too), or
     withheld by the new tree (counted ``uncertain``); a point after a jump the old tree
-    withheld may be output by the new one (released). Returns the exit code."""
+    withheld may be output by the new one (released); with ``plain`` (session 29) the points
+    of plain accepted updates as rejected ones (not smaller, or withheld). Returns the exit
+    code."""
     bad = changed = withheld = rejected = accepted = starts = starts_changed = 0
     starts_withheld = jumps_changed = jumps_withheld = jumps = jumps_smaller = released = 0
-    worst = worst_start = worst_jump = least_jump = 0.0
+    worst = worst_start = worst_jump = least_jump = worst_plain = 0.0
+    plain_changed = plain_withheld = 0
     for key in old:
         a, b = old[key], new[key]
         ka = list(zip(a["time_ns"].tolist(), a["camera"].tolist(), strict=True))
@@ -249,8 +255,11 @@ def compare_ref(old: dict, new: dict) -> int:
         gone = [i for i, k in enumerate(ka) if k not in rows_b]
         extra = set(kb) - set(ka)
         aj = a["after_jump"]
+        # since session 29 a plain accepted update's point may grow (and be withheld)
+        plain_a = (a["jump"] != 1.0) & (a["rejected"] != 1.0) & (a["init"] != 1.0) & ~aj
         if any(not b["after_jump"][rows_b[k]] for k in extra) or any(
-                a["rejected"][i] != 1.0 and a["init"][i] != 1.0 and not aj[i] for i in gone):
+                a["rejected"][i] != 1.0 and a["init"][i] != 1.0 and not aj[i] and not (
+                    plain and plain_a[i]) for i in gone):
             print("  DIFFERS (points added, or an accepted point gone):", key)
             bad += 1
             continue
@@ -263,7 +272,9 @@ def compare_ref(old: dict, new: dict) -> int:
             bad += 1
         starts_withheld += sum(1 for i in gone if a["init"][i] == 1.0)
         jumps_withheld += sum(1 for i in gone if aj[i])
-        withheld += sum(1 for i in gone if a["init"][i] != 1.0 and not aj[i])
+        withheld += sum(1 for i in gone if a["init"][i] != 1.0 and not aj[i]
+                        and not plain_a[i])
+        plain_withheld += sum(1 for i in gone if plain_a[i])
         gone_set = set(gone)
         keep = np.array([i for i in range(len(ka)) if i not in gone_set], dtype=np.int64)
         keep_b = np.array([i for i, k in enumerate(kb) if k not in extra], dtype=np.int64)
@@ -271,7 +282,8 @@ def compare_ref(old: dict, new: dict) -> int:
             x, y = np.asarray(a[name])[keep], np.asarray(b[name])[keep_b]
             ini = a["init"][keep] == 1.0
             jmp = aj[keep]
-            rej = (a["rejected"][keep] == 1.0) | ini | jmp
+            pl = plain_a[keep] if plain else np.zeros(len(keep), dtype=bool)
+            rej = (a["rejected"][keep] == 1.0) | ini | jmp | pl
             same = np.array([np.array_equal(x[i], y[i], equal_nan=True) for i in range(len(y))],
                             dtype=bool)
             if name in STD_COLUMNS:
@@ -280,7 +292,10 @@ def compare_ref(old: dict, new: dict) -> int:
                     print("  DIFFERS:", key, name)
                     bad += 1
                 if name == "std_m":
-                    r = rej & ~ini & ~jmp
+                    r = rej & ~ini & ~jmp & ~pl
+                    plain_changed += int(np.count_nonzero(~same[pl]))
+                    if pl.any():
+                        worst_plain = max(worst_plain, float(np.max(y[pl] - x[pl])))
                     jumps_changed += int(np.count_nonzero(~same[jmp]))
                     jumps_smaller += int(np.count_nonzero(y[jmp] < x[jmp]))
                     if jmp.any():
@@ -306,7 +321,9 @@ def compare_ref(old: dict, new: dict) -> int:
           f"now withheld: {starts_withheld}, largest std_m increase {1e3 * worst_start:.2f} mm; "
           f"points after a jump {jumps:,}, with another std: {jumps_changed} (smaller: "
           f"{jumps_smaller}), now withheld: {jumps_withheld}, released: {released}, largest "
-          f"std_m increase {1e3 * worst_jump:.2f} mm, decrease {-1e3 * least_jump:.2f} mm")
+          f"std_m increase {1e3 * worst_jump:.2f} mm, decrease {-1e3 * least_jump:.2f} mm; "
+          f"plain updates' points with a larger std: {plain_changed}, now withheld: "
+          f"{plain_withheld}, largest std_m increase {1e3 * worst_plain:.2f} mm")
     return 1 if bad else 0
 
 

@@ -111,7 +111,10 @@ def test_one_predict_and_update_step_equals_the_hand_computation():
     # the drag not estimated (its own step by hand: tests/test_filter_drag.py)
     options = FilterOptions(noise_px=0.4, accel_psd=0.3, drag_per_m=0.02, adapt_rate=0.0,
                             model_switch_per_s=0.0, turn_switch_per_s=0.0, max_std_m=None,
-                            drag_std_per_m=0.0)
+                            drag_std_per_m=0.0,
+                            # the step's own std_m (a plain update's doubt on "no jump", its
+                            # published term: test_filter_surprise.py)
+                            surprise_cov=False)
     flt = BallFilter(rig, options)
     rng = np.random.default_rng(3)
     A = rng.normal(size=(6, 6))
@@ -285,7 +288,8 @@ def test_one_step_of_the_turn_model_in_the_imm_equals_the_hand_computation():
     cam = rig.cameras[0]
     options = FilterOptions(noise_px=0.4, accel_psd=0.3, drag_per_m=0.02, adapt_rate=0.0,
                             accel_adapt_rate=0.0, model_switch_per_s=0.0,
-                            turn_switch_per_s=2.0, turn_rate_psd=0.7, withhold=False)
+                            turn_switch_per_s=2.0, turn_rate_psd=0.7, withhold=False,
+                            surprise_cov=False)  # (test_filter_surprise.py)
     flt = BallFilter(rig, options)
     rng = np.random.default_rng(6)
     A, B = rng.normal(size=(7, 7)), rng.normal(size=(6, 6))

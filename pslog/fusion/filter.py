@@ -285,6 +285,17 @@ class FilterOptions:
         exp(−score_k/2)`` (:func:`_mixture_about`): a narrow shape (a bounce) that wins a
         kick's one pixel no longer states the narrow shape's covariance; False: the
         winner's covariance alone (before session 27)
+    surprise_cov : bool, a plain (not jump) accepted update's point publishes the mixture of
+        "no jump" and "a jump (each shape) in the step before this detection", weighted by
+        their likelihoods of the detection and the prior ``1 − exp(−λ_j Δt)``, about the
+        no-jump mean, along its camera's ray (:func:`_surprise_term`): a large NIS makes
+        the jump likely; the state is unchanged; False: none (before session 29)
+    hold_nis : float or None, the batch form (:func:`fuse_filter`, ``pslog fuse``) only: a
+        plain update's output point whose NIS exceeds this waits for the next detection of
+        another camera, and is withheld (``held``) if that detection made a jump placed
+        before it (the jump's lag reaches back to it), was rejected, or the track was lost
+        first (or no such detection came); the streaming form has no hold (its points
+        leave at their detection). None (the default): no hold (session 29)
     jump_rate_per_s : float, expected rate ``λ_j`` of velocity jumps (kicks, bounces), 1/s:
         a point's reported covariance adds the variance ``λ_j T σ_j² T² / 3`` along its
         camera's ray of a jump no other camera has seen in the time ``T`` since another
@@ -343,6 +354,8 @@ class FilterOptions:
     jump_instant: bool = True
     jump_mixture_cov: bool = True
     drag_std_per_m: float = 0.01
+    surprise_cov: bool = True
+    hold_nis: float | None = None
 
     def __post_init__(self) -> None:
         for name in ("noise_px", "accel_psd", "accel_step_var", "gate", "jump_speed",
@@ -381,6 +394,10 @@ class FilterOptions:
         if not (math.isfinite(self.init_span_s) and self.init_span_s > 0):
             raise FusionError(f"filter init_span_s must be finite and > 0, got "
                               f"{self.init_span_s!r}")
+        if self.hold_nis is not None and not (math.isfinite(self.hold_nis)
+                                              and self.hold_nis >= 0):
+            raise FusionError(f"filter hold_nis must be finite and >= 0, got "
+                              f"{self.hold_nis!r}")
         if self.max_rejects < 1:
             raise FusionError(f"filter max_rejects must be >= 1, got {self.max_rejects}")
 
@@ -466,7 +483,11 @@ _OKS = _OUNSEEN + 1  # the supported model's drag coefficient (0 by default)
 _OINSTANT = _OKS + 1  # 1: an accepted jump's instant published (_instant_term)
 _OJMIX = _OINSTANT + 1  # 1: a jump's covariance is its hypotheses' mixture's about the winner
 _ODRAG = _OJMIX + 1  # the drag's prior information 1/σ_k² (0: the drag not estimated)
-_OSIZE = _ODRAG + 1
+_OSURPRISE = _ODRAG + 1  # λ_j of a plain update's jump/no-jump mixture (0: none; session 29)
+_OHOLD = _OSURPRISE + 1  # the batch's hold for the next camera: its NIS (inf: none; session 29)
+_OSIZE = _OHOLD + 1
+#: the batch's held points at most at once (a camera alone past them: the later ones output)
+_HOLD_MAX = 8
 #: ``N`` (int64 options): max gap, window span, init_window, init_detections, max_rejects,
 #: window capacity
 _NMAXGAP, _NSPAN, _NINITWIN, _NINITDET, _NMAXREJ, _NWCAP = range(6)
@@ -1290,6 +1311,97 @@ def _unseen_jump(I, cams, O, t, cam, before, px, py, pz, vx, vy, vz):
 
 
 @kernel
+def _surprise_term(cams, O, cam, x, P, inn, dt, var, px, py, pz, vx, vy, vz):
+    """The variance along camera ``cam``'s ray at the point ``(px, py, pz)`` of a plain
+    update's doubt (session 29): the mixture of "no jump" (the update made) and "a jump of
+    shape ``s`` in the ``dt`` s before this detection" (:func:`_jumped`, every shape the
+    jump search tries), weighted by the detection's likelihood under each, ``N(y_s; 0,
+    S_s)`` (``y_s = y − H (x_s⁻ − x⁻)``, ``S_s = H P_s⁻ Hᵀ + σ² I``: one linearisation,
+    ``H`` the update's, ``σ²`` = ``var``), and the prior ``π = 1 − exp(−λ_j dt)`` (a jump
+    in the step, shared equally by the shapes, as the search's choice assumes), about the
+    no-jump mean (the state's and the point's): ``P* − P₀⁺ = Σ_s w_s (P_s⁺ − P₀⁺ + d_s
+    d_sᵀ)``, ``d_s = x_s⁺ − x₀⁺`` (the session 27 mixture, :func:`_mixture_about`); the
+    no-jump weight ``w₀ ∝ (1 − π) N(y; 0, S)``, ``w_s ∝ π/n N(y_s; 0, S_s)``, ``Σ w = 1``
+    (docs/methods.md, "A plain update's doubt"). A jump's likelihood
+    grows with the NIS of the no-jump update: a large NIS says the model "no jump" is in
+    doubt. Published along the ray ``r̂`` alone (``r̂ᵀ (·) r̂``: across it the pixel fixes
+    the point under every hypothesis). ``x``, ``P`` the pair's prediction (6, 36), ``inn``
+    its innovation (:func:`_innovation`). Returns the point's variances (x, y, z) with it
+    (unchanged when ``dt <= 0``)."""
+    lam = O[_OSURPRISE]
+    if not dt > 0.0:
+        return vx, vy, vz
+    prior = -math.expm1(-lam * dt)
+    y0, y1, i00, i01, i11, nis, det = inn[0], inn[1], inn[2], inn[3], inn[4], inn[5], inn[6]
+    c0, c1 = _INN_C0, _INN_C0 + 6
+    # the ray's unit direction in the world (Rᵀ of the point in the camera's frame)
+    r = cams[cam]
+    xc = r[0] * px + r[1] * py + r[2] * pz + r[9]
+    yc = r[3] * px + r[4] * py + r[5] * pz + r[10]
+    zc = r[6] * px + r[7] * py + r[8] * pz + r[11]
+    d0 = r[0] * xc + r[3] * yc + r[6] * zc
+    d1 = r[1] * xc + r[4] * yc + r[7] * zc
+    d2 = r[2] * xc + r[5] * yc + r[8] * zc
+    n = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    if not n > 0.0:
+        return vx, vy, vz
+    d0, d1, d2 = d0 / n, d1 / n, d2 / n
+    # no jump: the update made, K₀ = PHᵀ S⁻¹ (position rows), its along-ray pieces
+    rc0 = d0 * inn[c0] + d1 * inn[c0 + 1] + d2 * inn[c0 + 2]  # r̂ᵀ PHᵀ
+    rc1 = d0 * inn[c1] + d1 * inn[c1 + 1] + d2 * inn[c1 + 2]
+    rk0, rk1 = rc0 * i00 + rc1 * i01, rc0 * i01 + rc1 * i11  # r̂ᵀ K₀
+    rP0 = -(rk0 * rc0 + rk1 * rc1)  # r̂ᵀ (P₀⁺ − P⁻) r̂
+    rx0 = rk0 * y0 + rk1 * y1  # r̂ᵀ (x₀⁺ − x⁻)
+    h0, h1, h2, h3, h4, h5 = inn[7], inn[8], inn[9], inn[10], inn[11], inn[12]
+    # r̂ᵀ P⁻ r̂
+    rPr = (d0 * (P[0] * d0 + P[1] * d1 + P[2] * d2) + d1 * (P[6] * d0 + P[7] * d1 + P[8] * d2)
+           + d2 * (P[12] * d0 + P[13] * d1 + P[14] * d2))
+    total = (1.0 - prior)  # the weights' sum, the no-jump likelihood's factor 1
+    acc = 0.0
+    ns = int(O[_ONSHAPES])
+    for shape in range(ns):
+        ok, xs, Ps = _jumped(x, P, dt, O, shape)
+        if not ok:
+            continue
+        # the shape's prediction: its mean shift, H's rows applied to it, PHᵀ, S
+        dx0, dx1, dx2 = xs[0] - x[0], xs[1] - x[1], xs[2] - x[2]
+        e0 = y0 - (h0 * dx0 + h1 * dx1 + h2 * dx2)
+        e1 = y1 - (h3 * dx0 + h4 * dx1 + h5 * dx2)
+        # P_s⁻ Hᵀ (position rows; H has no velocity columns)
+        ca0 = Ps[0] * h0 + Ps[1] * h1 + Ps[2] * h2
+        ca1 = Ps[6] * h0 + Ps[7] * h1 + Ps[8] * h2
+        ca2 = Ps[12] * h0 + Ps[13] * h1 + Ps[14] * h2
+        cb0 = Ps[0] * h3 + Ps[1] * h4 + Ps[2] * h5
+        cb1 = Ps[6] * h3 + Ps[7] * h4 + Ps[8] * h5
+        cb2 = Ps[12] * h3 + Ps[13] * h4 + Ps[14] * h5
+        t00 = h0 * ca0 + h1 * ca1 + h2 * ca2 + var
+        t01 = h0 * cb0 + h1 * cb1 + h2 * cb2
+        t11 = h3 * cb0 + h4 * cb1 + h5 * cb2 + var
+        dj = t00 * t11 - t01 * t01
+        if not dj > 0.0:
+            continue
+        j00, j01, j11 = t11 / dj, -t01 / dj, t00 / dj
+        nis_s = e0 * (j00 * e0 + j01 * e1) + e1 * (j01 * e0 + j11 * e1)
+        # likelihood ratio to no jump: exp(−(NIS_s − NIS)/2) sqrt(det S / det S_s)
+        lr = math.exp(-0.5 * (nis_s - nis)) * math.sqrt(det / dj)
+        ws = prior / ns * lr
+        if not ws > 0.0:
+            continue
+        rca = d0 * ca0 + d1 * ca1 + d2 * ca2
+        rcb = d0 * cb0 + d1 * cb1 + d2 * cb2
+        ka, kb = rca * j00 + rcb * j01, rca * j01 + rcb * j11  # r̂ᵀ K_s
+        rPs = (d0 * (Ps[0] * d0 + Ps[1] * d1 + Ps[2] * d2)
+               + d1 * (Ps[6] * d0 + Ps[7] * d1 + Ps[8] * d2)
+               + d2 * (Ps[12] * d0 + Ps[13] * d1 + Ps[14] * d2)
+               - rPr - (ka * rca + kb * rcb))  # r̂ᵀ (P_s⁺ − P⁻) r̂
+        ds = d0 * dx0 + d1 * dx1 + d2 * dx2 + ka * e0 + kb * e1 - rx0  # r̂ᵀ d_s
+        acc += ws * (rPs - rP0 + ds * ds)
+        total += ws
+    a = acc / total
+    return vx + a * d0 * d0, vy + a * d1 * d1, vz + a * d2 * d2
+
+
+@kernel
 def _unseen_gap_jump(O, gap_s, vx, vy, vz):
     """The variances (x, y, z) of a prediction published at a rejected detection, ``gap_s``
     seconds after the track's latest accepted one, with those of the velocity jumps (kicks,
@@ -1591,6 +1703,9 @@ def _push(S, I, cams, O, N, t, cam, u, v, out):
     _window_append(I, S, N, ncam, t, cam, u, v, N[_NINITWIN])
     if O[_OUNSEEN] != 0.0:
         v0, v1, v2 = _unseen_jump(I, cams, O, t, cam, before, xo0, xo1, xo2, v0, v1, v2)
+    if O[_OSURPRISE] != 0.0 and accepted and not solo:  # a plain update's doubt (session 29)
+        v0, v1, v2 = _surprise_term(cams, O, cam, x, P, inn, dt, var, xo0, xo1, xo2, v0, v1,
+                                    v2)
     _point(out, xo0, xo1, xo2, v0, v1, v2, inn[0], inn[1], u - pu, v - pv, nis, gap_s, jump,
            0.0, 0.0)
     return _POINT
@@ -1712,21 +1827,69 @@ def _step(S, I, cams, O, N, t, cam, u, v, out):
 
 
 @kernel
+def _held(I, O, out, cam, pr, pc, pb, pn, index):
+    """The batch's held points (rows ``pr[:pn]``, cameras ``pc``, accepted detections of
+    their own camera since ``pb``) against the point of camera ``cam`` just made (``out``):
+    the first point of another camera releases a held one, or withdraws it (its ``index``
+    made negative, ``-1 - index``) when it made a jump placed before the held detection (the
+    winner's lag reaches back to it; every jump when the lag is not kept) or was rejected.
+    Returns the number still held (compacted in place)."""
+    jump, rejected = out[13] == 1.0, out[14] == 1.0
+    lag = I[_IJLAG] if O[_OINSTANT] != 0.0 else _JBUF
+    m = 0
+    for k in range(pn):
+        if pc[k] != cam:
+            if rejected or (jump and lag >= pb[k] + 1):
+                index[pr[k]] = -1 - index[pr[k]]
+            continue
+        if not rejected:
+            pb[k] += 1
+        pr[m], pc[m], pb[m] = pr[k], pc[k], pb[k]
+        m += 1
+    return m
+
+
+@kernel
 def _run(S, I, cams, O, N, times, cameras, uv, start, rows, index, n_out):
     """The batch loop: detections ``start:`` into the state, the points into ``rows`` (one
-    row per point) and their detection's index into ``index``, from row ``n_out``.
+    row per point) and their detection's index into ``index``, from row ``n_out``; with
+    ``hold_nis`` a held point later withdrawn keeps its row, its index ``-1 - index``
+    (:func:`_held`; the points held at a window fit — the track lost — or at the end are
+    withdrawn).
     Returns ``(next detection, rows filled, status)``: status ``_NONE`` at the end, else a
     window fit is needed for detection ``next`` (Python), which continues after it."""
     out = np.empty(_OUT_COLS)
+    hold = O[_OHOLD]
+    pr = np.empty(_HOLD_MAX, dtype=np.int64)
+    pc = np.empty(_HOLD_MAX, dtype=np.int64)
+    pb = np.empty(_HOLD_MAX, dtype=np.int64)
+    pn = 0
     for i in range(start, times.shape[0]):
-        status = _step(S, I, cams, O, N, times[i], cameras[i], uv[i, 0], uv[i, 1], out)
+        cam = cameras[i]
+        status = _push(S, I, cams, O, N, times[i], cam, uv[i, 0], uv[i, 1], out)
+        if pn and status == _POINT:
+            pn = _held(I, O, out, cam, pr, pc, pb, pn, index)
+        elif pn and status != _NONE:  # a window fit: the track was lost
+            for k in range(pn):
+                index[pr[k]] = -1 - index[pr[k]]
+            pn = 0
+        if status == _POINT and _withheld(I, O, out[3]):  # as _step
+            status = _NONE
         if status == _POINT:
             rows[n_out] = out
             index[n_out] = i
+            if (out[11] > hold and out[13] == 0.0 and out[14] == 0.0 and out[15] == 0.0
+                    and pn < _HOLD_MAX):
+                pr[pn], pc[pn], pb[pn] = n_out, cam, 0
+                pn += 1
             n_out += 1
         elif status != _NONE:
+            for k in range(pn):  # (a fit: no point of this track is confirmed now)
+                index[pr[k]] = -1 - index[pr[k]]
             rows[n_out] = out
             return i, n_out, status
+    for k in range(pn):  # never confirmed
+        index[pr[k]] = -1 - index[pr[k]]
     return times.shape[0], n_out, _NONE
 
 
@@ -2107,6 +2270,8 @@ class BallFilter:
         O[_OJMIX] = float(options.jump_mixture_cov)
         sk = options.drag_std_per_m
         O[_ODRAG] = 1.0 / (sk * sk) if sk > 0.0 else 0.0
+        O[_OSURPRISE] = options.jump_rate_per_s if options.surprise_cov else 0.0
+        O[_OHOLD] = math.inf if options.hold_nis is None else options.hold_nis
         self._opts = O
         self._nopts = np.array([self._max_gap_ns, self._init_span_ns, options.init_window,
                                 options.init_detections, options.max_rejects, capacity],
@@ -2238,8 +2403,9 @@ class BallFilter:
         rejected detection the gap's jumps (:func:`_unseen_gap_jump`: isotropic, ``Δ I``),
         at a start's point the jumps its window may hide (:func:`window_jump_cov`'s position
         block, in full), else the unseen jump of one camera going on alone
-        (:func:`_unseen_jump`: along the camera's ray ``d``, ``Δ d dᵀ / |d|²``), ``Δ`` the
-        published variance minus the state's. Rows as three tuples of floats; None when the
+        (:func:`_unseen_jump`) and a plain update's doubt (:func:`_surprise_term`), both
+        along the camera's ray ``d``, ``Δ d dᵀ / |d|²``, ``Δ`` the published variance minus
+        the state's. Rows as three tuples of floats; None when the
         state is not at ``time_ns`` (a later detection moved it: the point's correlations are
         not at hand)."""
         S, I = self._S, self._I
@@ -2971,6 +3137,8 @@ def _one_point(time_ns: int, camera: int, o: list, dropped: dict) -> Track:
 
 #: Track.dropped's reason for a detection left out as a choice the gate put in doubt.
 DOUBT = "doubt"
+#: ``Track.dropped``'s reason for a point the batch held for the next camera and withdrew
+HELD = "held"
 
 
 def _track(flt: BallFilter, time_ns, camera, uv, doubt: np.ndarray | None = None) -> Track:
@@ -3015,6 +3183,11 @@ def _track(flt: BallFilter, time_ns, camera, uv, doubt: np.ndarray | None = None
             n_out += 1
         i += 1
     rows, index = rows[:n_out], index[:n_out]
+    n_held = int(np.count_nonzero(index < 0))
+    if n_held:  # the batch's hold for the next camera (hold_nis): withdrawn points
+        keep = index >= 0
+        rows, index = rows[keep], index[keep]
+        n_out = len(index)
     # one row per quality column: each column a contiguous array, read-only as Track keeps
     # it (made here as Track's checks would leave it: no check, no copy)
     q = np.empty((len(FILTER_QUALITY), n_out))
@@ -3040,6 +3213,8 @@ def _track(flt: BallFilter, time_ns, camera, uv, doubt: np.ndarray | None = None
                if n > before.get(k, 0)}
     if n_doubt:
         dropped[DOUBT] = n_doubt
+    if n_held:
+        dropped[HELD] = n_held
     return Track._of_frozen("filter", time, position, cams,
                             dict(zip(FILTER_QUALITY, q, strict=True)), dropped)
 
