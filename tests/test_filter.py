@@ -658,19 +658,25 @@ def test_one_camera_alone_makes_no_point():
 
 def test_std_is_honest_and_quality_columns_are_complete():
     rig = lab_rig(3)
-    motion, _ = rally(5.0, seed=9, speed=5.0)
-    obs, truth = session(rig, motion, 5.0, noise_px=0.5, seed=9)
-    track = fuse(obs, rig, "filter")
-    assert list(track.quality) == list(FILTER_QUALITY)
-    err, std = errors_m(track, truth), track.quality["std_m"]
+    err, std, tracks = [], [], []
+    for seed in (9, 10, 11):  # pooled over three sessions: one draw's ratio moves by ±0.15
+        motion, _ = rally(5.0, seed=seed, speed=5.0)
+        obs, truth = session(rig, motion, 5.0, noise_px=0.5, seed=seed)
+        track = fuse(obs, rig, "filter")
+        assert list(track.quality) == list(FILTER_QUALITY)
+        err.append(errors_m(track, truth))
+        std.append(track.quality["std_m"])
+        tracks.append(track)
+    err, std = np.concatenate(err), np.concatenate(std)
     # std_m = sqrt(trace Σ) is the RMS of the 3-D error the filter expects; for a Gaussian
     # error ‖e‖/std_m has median sqrt(χ²₃ median / 3) = 0.89 and is below 2 for 99 %
-    # (measured: RMS ratio 0.800, median 0.71, 100 % inside 2 std_m; before session 29's
-    # estimated drag, whose V_p V_pᵀ / I_k widens std_m as it cuts the error, 0.837, 0.73,
-    # 99.7 %)
+    # (measured, pooled: RMS ratio 0.946, median 0.79, 98.2 % inside 2 std_m; per session
+    # 0.78 / 0.96 / 1.04 — seed 9 alone was 0.837 before session 29's estimated drag and a
+    # plain update's doubt term, each of which widens std_m)
     assert 0.8 < np.sqrt(np.mean(err**2) / np.mean(std**2)) < 1.4
     assert 0.6 < np.median(err / std) < 1.1
     assert np.mean(err <= 2 * std) > 0.95
+    track = tracks[0]
     ok = track.quality["rejected"] == 0
     assert 0.3 < np.median(track.quality["residual_px"][ok]) < 0.8
     assert np.nanmedian(track.quality["innovation_px"][ok]) > np.median(

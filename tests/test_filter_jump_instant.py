@@ -188,20 +188,27 @@ def test_the_live_full_covariance_is_the_published_one_after_a_jump():
     published variances at every point, and where a jump's instant is published it holds
     the term in full (its correlations too): the matrix less the state's own position
     covariance and the term is what is left of the published variance, the one-camera ray
-    term (rank one, along the ray) or nothing, never a negative part."""
-    rows = _streamed(lab_rig(2), kicked([-8.0, 2.0, 4.0], 0.515),
-                     FilterOptions(withhold=False, max_std_m=None))
-    terms = 0
-    for _t, _c, std, full, P, term in rows:
-        assert full is not None
-        np.testing.assert_array_equal(np.sqrt(np.diag(full)), std)
-        if term is None:
-            continue
-        terms += 1
-        lam = np.linalg.eigvalsh(full - P - term)
-        scale = np.trace(term)
-        assert lam[0] >= -1e-9 * scale and lam[1] <= 1e-9 * scale
-    assert terms >= 3
+    term (rank one, along the ray) or nothing, never a negative part (the estimated drag's
+    ``V_p V_pᵀ / I_k`` and a plain update's doubt, each a further rank-one part, off; with
+    them on, the diagonal is still the published one and what is left still no negative
+    part)."""
+    motion = kicked([-8.0, 2.0, 4.0], 0.515)
+    for extra in (False, True):
+        options = (FilterOptions(withhold=False, max_std_m=None) if extra else
+                   FilterOptions(withhold=False, max_std_m=None, drag_std_per_m=0.0,
+                                 surprise_cov=False))
+        terms = 0
+        for _t, _c, std, full, P, term in _streamed(lab_rig(2), motion, options):
+            assert full is not None
+            np.testing.assert_array_equal(np.sqrt(np.diag(full)), std)
+            if term is None:
+                continue
+            terms += 1
+            lam = np.linalg.eigvalsh(full - P - term)
+            scale = np.trace(term)
+            assert lam[0] >= -1e-9 * scale
+            assert extra or lam[1] <= 1e-9 * scale
+        assert terms >= 3
 
 
 def test_a_second_detection_at_the_same_time_does_not_reuse_the_first_ones_term():
