@@ -635,12 +635,87 @@ def type_a_kernel(targets, previous_instant, depth, max_extrapolation, max_gap_n
                 taken_n += 1
             failed = good and innovation[pl] > _INNOVATION_SIGMAS * (sigma * factor[pl]) \
                 + model[pl]
-            kinked = good and not failed and _kinked(
-                e, fi[0, at, 0], fi[0, at, 2], fi[0, at, 3], ff[0, at, 7], ff[0, at, 8],
-                ff[0, at, 9], fi[1, at, 0], fi[1, at, 2], fi[1, at, 3], ff[1, at, 7],
-                ff[1, at, 8], ff[1, at, 9], predicted[pq, 0], predicted[pq, 1],
-                predicted[pq, 2], sigma, row_before, row_after, time_ns, uv, camera,
-                lens_table, max_gap_ns, ns, tables, bend_change, bend_root, focal_ok)
+            # the kink test (:func:`_kinked`, the same test, operation for operation),
+            # written out here rather than inlined: numba binds an inlined helper's array
+            # arguments to new variables and, across the helper's branches, kept their
+            # reference counts (atomic calls; 62 more call sites in this kernel inlined:
+            # 1.2x its time on bench_peers' session); the kernel's own arrays take none.
+            # test_kink_kernel's fuse decisions against the columnar reference hold the two
+            # forms together (the past points' part: the newest camera's part decides no
+            # point of its sessions differently, in _kinked as here).
+            kinked = False
+            if good and not failed:
+                row1, prev1, next1 = fi[0, at, 0], fi[0, at, 2], fi[0, at, 3]
+                row2, prev2, next2 = fi[1, at, 0], fi[1, at, 2], fi[1, at, 3]
+                x1, y1, z1 = ff[0, at, 7], ff[0, at, 8], ff[0, at, 9]
+                x2, y2, z2 = ff[1, at, 7], ff[1, at, 8], ff[1, at, 9]
+                speed = (math.sqrt((x1 - x2) * (x1 - x2) + (y1 - y2) * (y1 - y2)
+                                   + (z1 - z2) * (z1 - z2))
+                         / ((time_ns[row1] - time_ns[row2]) / ns))
+                calm = speed >= 0.0
+                for s in range(2):
+                    prev = prev1 if s == 0 else prev2
+                    nxt = next1 if s == 0 else next2
+                    px = x1 if s == 0 else x2
+                    py = y1 if s == 0 else y2
+                    pz = z1 if s == 0 else z2
+                    zero = row_before[prev] if prev >= 0 else -1  # (_kinked's ``first``)
+                    mid = max(prev, 0)
+                    quiet = _quiet(tables and prev >= 0 and row_before[mid] == zero
+                                   and row_after[mid] == nxt,
+                                   bend_change[mid] if tables else 0.0,
+                                   bend_root[mid] if tables else 0.0, sigma,
+                                   calm and focal_ok[camera[mid]])
+                    if not quiet and _bent(zero, prev, nxt, e, t_event, max_gap_ns, px, py, pz,
+                                           speed, sigma, time_ns, uv, camera, lens_table, ns):
+                        later = row_after[nxt] if nxt >= 0 else -1
+                        if (prev >= 0 and nxt >= 0 and later >= 0 and later <= e
+                                and t_event - time_ns[prev] <= 2 * max_gap_ns):
+                            quiet = _quiet(tables and row_before[nxt] == prev
+                                           and row_after[nxt] == later,
+                                           bend_change[nxt] if tables else 0.0,
+                                           bend_root[nxt] if tables else 0.0, sigma,
+                                           calm and focal_ok[camera[nxt]])
+                            kinked = kinked or (not quiet and _bend(
+                                prev, nxt, later, px, py, pz, speed, sigma, time_ns, uv, camera,
+                                lens_table, ns))
+                        else:
+                            earlier = row_before[zero] if zero >= 0 else -1
+                            mid = max(zero, 0)
+                            quiet = _quiet(tables and zero >= 0 and row_before[mid] == earlier
+                                           and row_after[mid] == prev,
+                                           bend_change[mid] if tables else 0.0,
+                                           bend_root[mid] if tables else 0.0, sigma,
+                                           calm and focal_ok[camera[mid]])
+                            kinked = kinked or not (not quiet and _bent(
+                                earlier, zero, prev, e, t_event, max_gap_ns, px, py, pz, speed,
+                                sigma, time_ns, uv, camera, lens_table, ns))
+                if not kinked:  # the newest camera
+                    mid = row_before[e]
+                    zero = row_before[mid] if mid >= 0 else -1
+                    hold = max(mid, 0)
+                    quiet = _quiet(tables and mid >= 0 and row_before[hold] == zero
+                                   and row_after[hold] == e,
+                                   bend_change[hold] if tables else 0.0,
+                                   bend_root[hold] if tables else 0.0, sigma,
+                                   calm and focal_ok[camera[hold]])
+                    if not quiet and _bent(zero, mid, e, e, t_event, max_gap_ns,
+                                           predicted[pq, 0], predicted[pq, 1], predicted[pq, 2],
+                                           speed, sigma, time_ns, uv, camera, lens_table, ns):
+                        start = time_ns[hold]
+                        earlier = row_before[zero] if zero >= 0 else -1
+                        hold = max(zero, 0)
+                        quiet = _quiet(tables and zero >= 0 and row_before[hold] == earlier
+                                       and row_after[hold] == mid,
+                                       bend_change[hold] if tables else 0.0,
+                                       bend_root[hold] if tables else 0.0, sigma,
+                                       calm and focal_ok[camera[hold]])
+                        if not quiet and _bent(earlier, zero, mid, e, t_event, max_gap_ns,
+                                               predicted[pq, 0], predicted[pq, 1],
+                                               predicted[pq, 2], speed, sigma, time_ns, uv,
+                                               camera, lens_table, ns):
+                            start = time_ns[hold]
+                        kinked = start >= time_ns[row2]
             keep = good and not failed and not kinked
             if failed:
                 counts[3] += 1
@@ -961,7 +1036,9 @@ def _kinked(event, row1, prev1, next1, x1, y1, z1, row2, prev2, next2, x2, y2, z
             sg, before, after, time_ns, uv, camera, lens, max_gap_ns, ns, tables, change, root,
             focal_ok):
     """One point's kink flag (:func:`kink_kernel`'s per-point test, which
-    :func:`type_a_kernel` also runs in its loop): ``event`` its newest row, ``row``, ``prev``,
+    :func:`type_a_kernel` writes out in its loop, operation for operation: inlined there,
+    its array arguments' reference counts were a sixth of that kernel's time): ``event`` its
+    newest row, ``row``, ``prev``,
     ``next`` and ``(x, y, z)`` (metres) of ``P_{t-1}`` (1) and ``P_{t-2}`` (2), ``(qx, qy,
     qz)`` eq. (2)'s prediction, ``sg`` its noise (px), ``tables`` whether ``change`` and
     ``root`` hold :func:`bend_rows`' tables, ``focal_ok`` (m,) each camera's ``max(fx, fy)
@@ -1085,29 +1162,40 @@ def _focal_ok(lens):
 
 
 @kernel(inline=True)
-def _residual_norm(time_ns, camera, uv, limits, r, r1, r2, r3, gap, ns):
-    """Row ``r``'s residual from the quadratic through rows ``r1, r2, r3`` (its camera's
-    three previous, newest first; ``r3 < 0``: fewer), per axis's σ; NaN where the intervals
-    are not all in ``(0, gap]`` s or a pixel is NaN or beyond its camera's ``limits``
-    (prepare's "no detection")."""
-    if r3 < 0:
+def _residual_norm(t0, t1, t2, t3, u0, v0, u1, v1, u2, v2, u3, v3, lim, gap, ns):
+    """A row's residual (recorded pixel ``u0, v0`` at ``t0`` ns) from the quadratic through
+    its camera's three previous rows (``u1, v1`` at ``t1`` the newest, then 2 and 3), per
+    axis's σ; NaN where the intervals are not all in ``(0, gap]`` s or a pixel is NaN or
+    beyond its camera's bound ``lim`` (prepare's "no detection"). Scalars, not the arrays and
+    rows: inlined, an array argument's reference is kept across the early returns (atomic
+    counts at every row: the residuals' pass took 2.1x as long)."""
+    if not (abs(u0) <= lim and abs(v0) <= lim and abs(u1) <= lim and abs(v1) <= lim
+            and abs(u2) <= lim and abs(v2) <= lim and abs(u3) <= lim and abs(v3) <= lim):
         return np.nan
-    lim = limits[camera[r]]
-    for q in (r, r1, r2, r3):
-        if not (abs(uv[q, 0]) <= lim and abs(uv[q, 1]) <= lim):
-            return np.nan
-    a = (time_ns[r] - time_ns[r1]) / ns
-    b = (time_ns[r1] - time_ns[r2]) / ns
-    cc = (time_ns[r2] - time_ns[r3]) / ns
+    a = (t0 - t1) / ns
+    b = (t1 - t2) / ns
+    cc = (t2 - t3) / ns
     if not (a > 0 and b > 0 and cc > 0 and a <= gap and b <= gap and cc <= gap):
         return np.nan
     l1 = (a + b) * (a + b + cc) / (b * (b + cc))
     l2 = -a * (a + b + cc) / (b * cc)
     l3 = a * (a + b) / ((b + cc) * cc)
-    e0 = uv[r, 0] - (l1 * uv[r1, 0] + l2 * uv[r2, 0] + l3 * uv[r3, 0])
-    e1 = uv[r, 1] - (l1 * uv[r1, 1] + l2 * uv[r2, 1] + l3 * uv[r3, 1])
+    e0 = u0 - (l1 * u1 + l2 * u2 + l3 * u3)
+    e1 = v0 - (l1 * v1 + l2 * v2 + l3 * v3)
     w = 1 + l1 * l1 + l2 * l2 + l3 * l3
     return math.sqrt(e0 * e0 + e1 * e1) / math.sqrt(w)
+
+
+@kernel(inline=True)
+def _row_residual(time_ns, uv, limits, c, r, r1, r2, r3, gap, ns):
+    """:func:`_residual_norm` of row ``r`` (camera ``c``) and its camera's three previous
+    rows ``r1, r2, r3`` (``r3 < 0``: fewer, NaN), read from the arrays in one straight block
+    (no branch: numba then drops the references it takes; a missing row reads row -1, not
+    used)."""
+    value = _residual_norm(time_ns[r], time_ns[r1], time_ns[r2], time_ns[r3], uv[r, 0],
+                           uv[r, 1], uv[r1, 0], uv[r1, 1], uv[r2, 0], uv[r2, 1], uv[r3, 0],
+                           uv[r3, 1], limits[c], gap, ns)
+    return value if r3 >= 0 else np.nan
 
 
 @kernel
@@ -1128,7 +1216,7 @@ def residual_norms_kernel(time_ns, camera, uv, limits, m, max_gap_ns, ns, t_out,
         c = camera[r]
         r1, r2, r3 = last[c, 0], last[c, 1], last[c, 2]
         last[c, 2], last[c, 1], last[c, 0] = r2, r1, r
-        value = _residual_norm(time_ns, camera, uv, limits, r, r1, r2, r3, gap, ns)
+        value = _row_residual(time_ns, uv, limits, c, r, r1, r2, r3, gap, ns)
         if value == value:
             t_out[j] = time_ns[r]
             v_out[j] = value

@@ -28,7 +28,7 @@ import numpy as np
 from .._jit import kernel
 from ._prepare_kernel import direction_jacobian as _direction_jacobian
 from ._prepare_kernel import ray as _ray
-from ._pseudo_kernel import _residual_norm, _select, _window_rows
+from ._pseudo_kernel import _row_residual, _select, _window_rows
 
 
 @kernel
@@ -505,7 +505,7 @@ def window_quartiles(time_ns, values, ends, window_ns, min_count, scratch, out):
 def residual_norms_cameras(time_ns, camera, uv, limits, m, max_gap_ns, ns, t_out, v_out,
                            c_out):
     """:func:`~._pseudo_kernel.residual_norms_kernel` (the same inlined
-    :func:`~._pseudo_kernel._residual_norm`: the same bits), with each residual's camera
+    :func:`~._pseudo_kernel._row_residual`: the same bits), with each residual's camera
     into ``c_out`` (n,) int64 as well: a row's residual is made from its camera's rows
     alone, so one camera's are the rows of ``c_out == c``, the residuals a call on that
     camera's detections alone gives. Returns how many."""
@@ -516,7 +516,7 @@ def residual_norms_cameras(time_ns, camera, uv, limits, m, max_gap_ns, ns, t_out
         c = camera[r]
         r1, r2, r3 = last[c, 0], last[c, 1], last[c, 2]
         last[c, 2], last[c, 1], last[c, 0] = r2, r1, r
-        value = _residual_norm(time_ns, camera, uv, limits, r, r1, r2, r3, gap, ns)
+        value = _row_residual(time_ns, uv, limits, c, r, r1, r2, r3, gap, ns)
         if value == value:
             t_out[j] = time_ns[r]
             v_out[j] = value
