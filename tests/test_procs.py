@@ -69,4 +69,7 @@ def test_blocked_time_is_the_sleep_not_the_work():
     done = subprocess.run([sys.executable, "-c", code, str(Path(__file__).parent)],
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
-    assert 0.59 <= float(done.stdout) < 0.8
+    # the sleep, within the accounting's own error: under CI's load one run read 0.584 s
+    # (the scheduler's run/wait clocks against CLOCK_BOOTTIME); the computation counted
+    # would read >= 1.2 s, the sleep missed ~0
+    assert 0.5 <= float(done.stdout) < 0.8
