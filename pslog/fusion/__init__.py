@@ -123,6 +123,9 @@ class FusionOptions:
         if self.rate_hz is not None and not 1e-3 <= self.rate_hz <= 1e6:
             # (below a point per 1000 s the grid's step overflows to inf ns near 1e-300)
             raise FusionError(f"rate must be in [0.001, 1e6] Hz, got {self.rate_hz!r}")
+        if self.confirm_every and not self.confirm_gaps:
+            raise FusionError("typeA's confirm_every needs confirm_gaps (it confirms every "
+                              "point as confirm_gaps confirms the long-gap ones)")
         if self.noise_px is not None and not 0 <= self.noise_px <= 1e3:
             raise FusionError(f"pixel noise must be in [0, 1000] pixels, got {self.noise_px!r}")
         if self.detector_bias_px is not None and not 0 <= self.detector_bias_px <= 1e3:

@@ -290,8 +290,8 @@ class FilterOptions:
         their likelihoods of the detection and the prior ``1 − exp(−λ_j Δt)``, about the
         no-jump mean, along its camera's ray (:func:`_surprise_term`): a large NIS makes
         the jump likely; the state is unchanged; False: none (before session 29)
-    hold_nis : float or None, the batch form (:func:`fuse_filter`, ``pslog fuse``) only: a
-        plain update's output point whose NIS exceeds this waits for the next detection of
+    hold_nis : float or None, :func:`fuse_filter` given these options only (the stream
+        does not hold; ``pslog fuse`` fuses with the defaults): a plain update's output point whose NIS exceeds this waits for the next detection of
         another camera, and is withheld (``held``) if that detection made a jump placed
         before it (the jump's lag reaches back to it), was rejected, or the track was lost
         first (or no such detection came); the streaming form has no hold (its points
@@ -385,6 +385,10 @@ class FilterOptions:
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise FusionError(f"filter {name} must be finite and >= 0, got {value!r}")
+        if self.drag_std_per_m != 0 and not 1e-9 <= self.drag_std_per_m <= 1e3:
+            # (its prior information 1/σ_k² must be a finite number above 0)
+            raise FusionError(f"filter drag_std_per_m must be 0 (not estimated) or in "
+                              f"[1e-9, 1000] 1/m, got {self.drag_std_per_m!r}")
         if self.init_detections < 3 or self.init_window < self.init_detections:
             raise FusionError("filter init_detections must be >= 3 and init_window >= it, got "
                               f"{self.init_detections} and {self.init_window}")
@@ -394,8 +398,8 @@ class FilterOptions:
         if not (math.isfinite(self.init_span_s) and self.init_span_s > 0):
             raise FusionError(f"filter init_span_s must be finite and > 0, got "
                               f"{self.init_span_s!r}")
-        if self.hold_nis is not None and not (math.isfinite(self.hold_nis)
-                                              and self.hold_nis >= 0):
+        if self.hold_nis is not None and (isinstance(self.hold_nis, bool) or not (
+                math.isfinite(self.hold_nis) and self.hold_nis >= 0)):
             raise FusionError(f"filter hold_nis must be finite and >= 0, got "
                               f"{self.hold_nis!r}")
         if self.max_rejects < 1:
@@ -3060,7 +3064,10 @@ class FilterStream:
     :class:`BallFilter` (``predict`` to "now")."""
 
     def __init__(self, rig: Rig, options) -> None:
-        self.filter = BallFilter(rig, FilterOptions(max_gap_s=options.max_gap_s))
+        # (no hold: a held point waits for detections of a later push, which the batch
+        # loop's hold, kept within one call, would withdraw at each push's end)
+        self.filter = BallFilter(rig, FilterOptions(max_gap_s=options.max_gap_s,
+                                                    hold_nis=None))
         # the gate's doubt of the rows of the next push (StreamFuser sets it; None: none): a
         # choice in doubt is left out, as the batch leaves it out (:func:`fuse_filter`)
         self.next_doubt: np.ndarray | None = None
