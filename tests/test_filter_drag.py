@@ -10,6 +10,7 @@ from numpy.testing import assert_allclose
 from test_filter import lab_rig, session
 
 from pslog import NS, SimulationOptions, simulate
+from pslog.errors import FusionError
 from pslog.estimation.projection import project_with_jacobian
 from pslog.evaluation import errors_m
 from pslog.fusion.filter import FILTER_QUALITY, BallFilter, FilterOptions, fuse_filter
@@ -148,3 +149,17 @@ def test_the_drag_of_a_rally_is_found_within_its_stated_uncertainty(drag):
         flt.push(t, c, u, v)
     k, sd = FilterOptions().drag_per_m + flt._dk, flt._drag_info ** -0.5
     assert sd < 0.003 and abs(k - drag) < min(3.0 * sd, 0.002), (k, sd)
+
+
+def test_the_drag_prior_and_the_hold_are_validated():
+    """σ_k is 0 (not estimated) or a width whose information 1/σ_k² is a finite number above
+    0 (1e-200 raised ZeroDivisionError in BallFilter; 1e200 turned the estimate off
+    silently); hold_nis a NIS, not a flag."""
+    for bad in (1e-200, 1e200, -0.01, float("nan"), float("inf")):
+        with pytest.raises(FusionError, match="drag_std_per_m"):
+            FilterOptions(drag_std_per_m=bad)
+    for bad in (True, -1.0, float("nan")):
+        with pytest.raises(FusionError, match="hold_nis"):
+            FilterOptions(hold_nis=bad)
+    assert FilterOptions(drag_std_per_m=0.0).drag_std_per_m == 0.0
+    assert FilterOptions(hold_nis=2.0).hold_nis == 2.0

@@ -93,3 +93,10 @@ def test_fuse_confirm_gaps_all_is_the_option(tmp_path, cli):
     assert_array_equal(track.time_ns, every.time_ns)
     assert_array_equal(track.position_world, every.position_world)
     assert len(every) < len(fuse(det, rig, "typeA"))
+
+
+def test_confirm_every_needs_confirm_gaps():
+    """Every point confirmed as the long-gap ones are: without confirm_gaps it would be
+    ignored, so it is refused (one line)."""
+    with pytest.raises(FusionError, match="confirm_every needs confirm_gaps"):
+        FusionOptions(confirm_gaps=False, confirm_every=True)

@@ -291,9 +291,10 @@ class FilterOptions:
         no-jump mean, along its camera's ray (:func:`_surprise_term`): a large NIS makes
         the jump likely; the state is unchanged; False: none (before session 29)
     hold_nis : float or None, :func:`fuse_filter` given these options only (the stream
-        does not hold; ``pslog fuse`` fuses with the defaults): a plain update's output point whose NIS exceeds this waits for the next detection of
-        another camera, and is withheld (``held``) if that detection made a jump placed
-        before it (the jump's lag reaches back to it), was rejected, or the track was lost
+        does not hold; ``pslog fuse`` fuses with the defaults): a plain update's output
+        point whose NIS exceeds this waits for the next detection of another camera,
+        and is withheld (``held``) if that detection made a jump placed before it (the
+        jump's lag reaches back to it), was rejected, or the track was lost
         first (or no such detection came); the streaming form has no hold (its points
         leave at their detection). None (the default): no hold (session 29)
     jump_rate_per_s : float, expected rate ``λ_j`` of velocity jumps (kicks, bounces), 1/s:
