@@ -12,6 +12,8 @@ import numpy as np
 
 sys.path.insert(0, "benchmarks")
 sys.path.insert(0, "tests")
+sys.path.insert(0, "benchmarks/session29")
+from _capture import cap, orig
 from bench_dirty import at_rate, faults, more_rigs, more_sessions, rigs
 
 from pslog.evaluation import errors_m
@@ -21,16 +23,6 @@ from pslog.fusion.gating import fuse_detections
 from pslog.simulation import SimulationOptions, simulate_labelled
 
 THETAS = (0.0, 2.0, 4.61)
-cap = {}
-orig = FM.fuse_filter
-
-
-def capture(obs, rig, max_gap_s=None, options=None, doubt=None):
-    cap["a"] = (obs, rig, max_gap_s, options, doubt)
-    return orig(obs, rig, max_gap_s, options, doubt)
-
-
-FM.fuse_filter = capture
 
 
 def main():

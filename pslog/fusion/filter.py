@@ -1275,6 +1275,18 @@ def _withheld(I, O, std):
     return False
 
 
+@kernel(inline=True)
+def _ray_direction(r, px, py, pz):
+    """The direction in the world (not unit) of the ray from camera row ``r`` (the
+    filter's camera table) to the world point ``(px, py, pz)``: ``Rᵀ`` of the point in the
+    camera's frame, ``Rᵀ (R p + t)``."""
+    xc = r[0] * px + r[1] * py + r[2] * pz + r[9]
+    yc = r[3] * px + r[4] * py + r[5] * pz + r[10]
+    zc = r[6] * px + r[7] * py + r[8] * pz + r[11]
+    return (r[0] * xc + r[3] * yc + r[6] * zc, r[1] * xc + r[4] * yc + r[7] * zc,
+            r[2] * xc + r[5] * yc + r[8] * zc)
+
+
 @kernel
 def _unseen_jump(I, cams, O, t, cam, before, px, py, pz, vx, vy, vz):
     """The point's variances (x, y, z) with those of a velocity jump no other camera has
@@ -1301,14 +1313,7 @@ def _unseen_jump(I, cams, O, t, cam, before, px, py, pz, vx, vy, vz):
         return vx, vy, vz
     dt = (t - other) / NS
     a = O[_OUNSEEN] * dt * dt * dt
-    r = cams[cam]
-    xc = r[0] * px + r[1] * py + r[2] * pz + r[9]
-    yc = r[3] * px + r[4] * py + r[5] * pz + r[10]
-    zc = r[6] * px + r[7] * py + r[8] * pz + r[11]
-    # the ray's direction in the world: Rᵀ of the point in the camera's frame
-    d0 = r[0] * xc + r[3] * yc + r[6] * zc
-    d1 = r[1] * xc + r[4] * yc + r[7] * zc
-    d2 = r[2] * xc + r[5] * yc + r[8] * zc
+    d0, d1, d2 = _ray_direction(cams[cam], px, py, pz)
     n2 = d0 * d0 + d1 * d1 + d2 * d2
     if not n2 > 0.0:
         return vx, vy, vz
@@ -1339,14 +1344,8 @@ def _surprise_term(cams, O, cam, x, P, inn, dt, var, px, py, pz, vx, vy, vz):
     prior = -math.expm1(-lam * dt)
     y0, y1, i00, i01, i11, nis, det = inn[0], inn[1], inn[2], inn[3], inn[4], inn[5], inn[6]
     c0, c1 = _INN_C0, _INN_C0 + 6
-    # the ray's unit direction in the world (Rᵀ of the point in the camera's frame)
-    r = cams[cam]
-    xc = r[0] * px + r[1] * py + r[2] * pz + r[9]
-    yc = r[3] * px + r[4] * py + r[5] * pz + r[10]
-    zc = r[6] * px + r[7] * py + r[8] * pz + r[11]
-    d0 = r[0] * xc + r[3] * yc + r[6] * zc
-    d1 = r[1] * xc + r[4] * yc + r[7] * zc
-    d2 = r[2] * xc + r[5] * yc + r[8] * zc
+    # the ray's unit direction in the world
+    d0, d1, d2 = _ray_direction(cams[cam], px, py, pz)
     n = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
     if not n > 0.0:
         return vx, vy, vz
