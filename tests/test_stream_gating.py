@@ -363,3 +363,46 @@ def test_a_ball_at_rest_alone_is_kept_until_a_second_candidate_appears(compiled)
     stream.flush()
     assert_array_equal(stream.rejections.reason, batch.rejections.reason)
     assert_array_equal(stream.rejections.frame_time_ns, batch.rejections.frame_time_ns)
+
+
+def test_offline_a_static_object_alone_before_the_ball_enters_is_rejected():
+    """The stillness rule's premise offline is the whole session's (session 29): an object
+    standing still at (1.0, 1.5, 0.2) m, seen by cam1 and cam2 from the start, alone until
+    the ball (a rally, blacked out in every camera for its first second) enters at 1 s. The
+    causal gate takes it for a ball at rest until the ball's first frame beside it (it
+    cannot know better: every candidate it has seen is the one object); the offline gate
+    knows a second object comes, so rejects it as static from its first ``static_s``, and
+    ``smooth`` makes no point on it. A still ball alone stays fused offline too."""
+    from pslog.fusion.gating import MOTION, fuse_detections
+
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    obj = np.array([1.0, 1.5, 0.2])
+    motion, _ = rally(4.0, seed=701, speed=5.0, kick_every_s=0.9)
+    det, _, _ = simulate_labelled(rig, motion, 4.0, SimulationOptions(
+        noise_px=0.3, seed=701, distractors=(("cam1", obj), ("cam2", obj)),
+        blackouts=tuple((name, 0.0, 1.0) for name in rig.names)))
+    enter_ns = 1_000_000_000
+    before = det.frame_time_ns[det.cand_frame] < enter_ns
+    n_before = int(before.sum())  # the object's candidates (two cameras, 1 s)
+
+    def motion_before(gated) -> int:
+        r = gated.rejections
+        return int(np.count_nonzero((r.reason == MOTION) & (r.frame_time_ns < enter_ns)))
+
+    assert motion_before(gate(det, rig)) == 0  # causal: the one object seen, kept
+    offline = motion_before(gate(det, rig, causal=False))
+    # (47 of 60: all but each camera's first static_s, as main did before the premise)
+    assert n_before == 60 and offline >= 40, (offline, n_before)
+    tracks, _ = fuse_detections(det, rig, ["smooth", "nearest"])
+    on = {m: int(np.count_nonzero(np.linalg.norm(t.position_world - obj, axis=1) < 0.15))
+          for m, t in tracks.items()}
+    assert on["smooth"] <= 15, on  # 13, its first 0.2 s (59 with the causal premise)
+    assert on["nearest"] >= 50, on  # causal: its points until the ball enters (59)
+
+    # a ball at rest alone: every candidate chosen offline as well
+    from pslog.motion import Motion
+
+    here = np.array([1.5, 1.0, 0.8])
+    still = Motion("still", 3.0, lambda t: np.tile(here, (len(t), 1)))
+    alone, _ = simulate(rig, still, 3.0, SimulationOptions(noise_px=0.3, seed=1))
+    assert len(gate(alone, rig, causal=False).rejections) == 0

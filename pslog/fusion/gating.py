@@ -1599,6 +1599,12 @@ def _decide_in_order(c: _Candidates, rig: Rig, options: GatingOptions, frames, t
     static, stillness, lone = still
     starts, ends, order = frames
     decider = _Decider(rig, options)
+    if not causal:
+        # offline, the stillness rule's premise is the whole session's: a frame of several
+        # candidates anywhere (before or after) says the scene holds more than the ball, so
+        # a static object seen alone before the ball enters is one from the first frame
+        # (docs/methods.md "Stillness"); the causal form learns it as the frames come
+        decider.several = bool(np.any(ends - starts >= 2))
     m = len(rig)
     # candidates whose all-candidates support used a frame with several candidates
     several = [table[:, 1] >= 0 if table.shape[1] > 1 else np.zeros(len(table), dtype=bool)
