@@ -134,13 +134,12 @@ def test_compiled_stream_gate_applies_the_long_stillness_test():
     optical axis (test_gating_paired_static) is still in cam1's image, its support by cam2
     holding in every frame; beyond LONG_STILL static_s that stillness is longer than a ball
     in flight can keep across this ray, and both forms call it static ('motion') frame for
-    frame, none before the window (a false candidate in the first frame: the rule's premise,
-    a second object; test_gating_paired_static.with_blob)."""
-    from test_gating_paired_static import _toward, with_blob
+    frame, none before the window."""
+    from test_gating_paired_static import _toward
 
     rig = apply_timing(builtin_rig("paper2"), "typeA")
-    det, _ = with_blob(simulate(rig, _toward(rig, 1, 2.0, 0.0),
-                                options=SimulationOptions(noise_px=0.3, seed=1))[0])
+    det, _ = simulate(rig, _toward(rig, 1, 2.0, 0.0),
+                      options=SimulationOptions(noise_px=0.3, seed=1))
     rejected = assert_same_stream(det, rig)
     motion_t = rejected.frame_time_ns[rejected.reason == gating.MOTION] / 1e9
     assert len(motion_t) >= 10

@@ -75,7 +75,10 @@ def test_a_stream_refuses_it_and_live_turns_it_off():
     rig = apply_timing(builtin_rig("paper3"), "typeA")
     with pytest.raises(FusionError, match="offline only"):
         StreamFuser(rig, "typeA", EVERY)
-    StreamFuser(rig, "typeA", FusionOptions(confirm_gaps=False, confirm_every=True))
+    from pslog.live.fuser import LiveFuser
+
+    options = LiveFuser(rig, "typeA", options=EVERY).options
+    assert not options.confirm_gaps and not options.confirm_every
 
 
 def test_fuse_confirm_gaps_all_is_the_option(tmp_path, cli):

@@ -229,12 +229,11 @@ def run(args: argparse.Namespace) -> int:
                     del track, rejected
             most = max(still.values(), default=0)
             if most > n_candidates / 2:
-                # by design (docs/methods.md, "Stillness"): in a scene of more than one
-                # object a still one is not the ball in play (alone in it, it is tracked)
-                print(f"{most} of {n_candidates} candidates rejected as a still object: in "
-                      f"a scene of several candidates a ball that stands still (slower than "
-                      f"about 20 cm/s) is not told from a static object; run with --gating "
-                      f"off to fuse it anyway")
+                # by design (docs/methods.md, "Stillness"): a still object is not the ball
+                # in play (offline, smooth fuses it in a session of one candidate a frame)
+                print(f"{most} of {n_candidates} candidates rejected as a still object: a "
+                      f"ball that stands still (slower than about 20 cm/s) is not told from "
+                      f"a static object; run with --gating off to fuse it anyway")
             for method in (m for m in methods if m in empty):
                 print(_no_point(method, empty[method], args.type_a_max_std_mm))
             if not written:

@@ -82,8 +82,8 @@ class FusionOptions:
         nothing can check is kept unless it bridged a long gap): the points just after an
         unseen kick, whose depth eq. (2) took from the motion before it (docs/methods.md,
         "Type A after kicks, confirmed offline (session 29)"). False (the default): the
-        paper's points. A typeA stream refuses it (``FusionError``); ``pslog live`` turns it
-        off with ``confirm_gaps``
+        paper's points. Without ``confirm_gaps`` it is refused (``FusionError``), as a
+        typeA stream refuses it; ``pslog live`` turns both off
     max_std_m : float or None, typeA: a point whose ``std_m`` exceeds this is withheld
         (counted in ``Track.dropped`` as ``uncertain``: the filter's rule;
         ``pslog.fusion.pseudo.MAX_STD_M`` is the filter's default, 5 cm / 1.96, issue 10's

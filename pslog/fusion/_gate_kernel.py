@@ -36,7 +36,7 @@ camera's frames in (key, push) order at rows ``0 .. count[c]-1``):
 - ``ct`` (m, H, K) int64 corrected times; ``cf`` (m, H, K, 8) float64: undistorted u, v,
   unit ray x, y, z, the all-candidates 3D point x, y, z; ``csup`` (m, H, K) int8: may support;
 - ``trk`` (4 P + 1, 5) float64: the track's points (time s, x, y, z, age s), ``ist`` int64:
-  [points in the track, verified, tracked, a frame of several candidates decided].
+  [points in the track, verified, tracked, next push id].
 """
 
 from __future__ import annotations
@@ -674,13 +674,11 @@ def choose(a, at, fi, fflag, ct, cf, trk, ist, centers, opt, static, lone, avail
         differs[j] = 0.0
     n_unverified = n_untracked = 0
     t_s_frame = 0.0
-    if k >= 2:  # gating._Decider.several: a frame of several candidates decided so far
-        ist[3] = 1
     for i in range(k):
         t_s = ct[a, at, i] / _NS
         t_s_frame = t_s
         rx, ry, rz = cf[a, at, i, 2], cf[a, at, i, 3], cf[a, at, i, 4]
-        if static[i] != 0.0 and ist[3] != 0:
+        if static[i] != 0.0:
             reason[i] = _MOTION
             continue
         if lone[i] == lone[i]:  # gating._Decider.decide: kept where the camera followed it
@@ -1200,7 +1198,7 @@ class GateState:
         self.csup = np.zeros((m, frames, candidates), np.int8)
         self.count = np.zeros(m + 1, np.int64)  # frames per camera, then the next push id
         self.trk = np.zeros((4 * int(options.track_points) + 1, 5))
-        self.ist = np.zeros(4, np.int64)
+        self.ist = np.zeros(3, np.int64)
         self.F = np.ascontiguousarray(F, dtype=np.float64)
         centers, k_inv, rot = constants
         self.centers = np.array(centers, dtype=np.float64)

@@ -459,7 +459,8 @@ class LiveFuser:
         self.method = method
         # (a point per shutter at once: typeA's long-gap points are not held for the next
         # camera's confirmation, pslog.fusion.confirm)
-        self.options = replace(options or FusionOptions(), confirm_gaps=False)
+        self.options = replace(options or FusionOptions(), confirm_gaps=False,
+                               confirm_every=False)
         # without gating a frame's candidates cannot be told apart: its best one alone, as
         # fuse() does with gating off
         self.candidates = bool(candidates) and self.options.gating
