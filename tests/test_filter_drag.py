@@ -36,13 +36,16 @@ def _step(cam, x, P, dt, q, k, offset):
 
 def test_two_updates_of_the_estimated_drag_equal_the_hand_computation():
     # the filter (ballistic alone, fixed noise) runs at its k₀ unchanged; beside it, by hand:
-    # V⁻ = F V − ‖v⁻‖ (v⁻ Δt²/2, v⁻ Δt), z = H V⁻, I_k += zᵀ S⁻¹ z, δk̂ += zᵀ S⁻¹ (y − z δk̂) / I_k,
-    # V = V⁻ − K z; the point published p + V_p δk̂, its covariance P_pp + V_p V_pᵀ / I_k
+    # V⁻ = F V − ‖v⁻‖ (v⁻ Δt²/2, v⁻ Δt), the drag's random walk since its latest update
+    # I_k ← I_k / (1 + I_k q_k Δt) (q_k = σ_k² / T_k; none before the first), z = H V⁻,
+    # I_k += zᵀ S⁻¹ z, δk̂ += zᵀ S⁻¹ (y − z δk̂) / I_k, V = V⁻ − K z; the point published
+    # p + V_p δk̂, its covariance P_pp + V_p V_pᵀ / I_k
     rig = lab_rig(3)
-    k0, sigma_k = 0.02, 0.01
+    # T_k short enough that the walk over one step (11 ms) halves I_k: q_k I_k Δt ≈ 1.1
+    k0, sigma_k, drift_s = 0.02, 0.01, 0.01
     options = FilterOptions(noise_px=0.4, accel_psd=0.3, drag_per_m=k0, adapt_rate=0.0,
                             model_switch_per_s=0.0, turn_switch_per_s=0.0, max_std_m=None,
-                            withhold=False, drag_std_per_m=sigma_k,
+                            withhold=False, drag_std_per_m=sigma_k, drag_drift_s=drift_s,
                             # the published covariance's own terms here (a plain update's
                             # doubt on "no jump": test_filter_surprise.py)
                             surprise_cov=False)
@@ -72,6 +75,8 @@ def test_two_updates_of_the_estimated_drag_equal_the_hand_computation():
         assert_allclose(np.r_[p_hat, v_hat], x_pred + Vm * dk, rtol=0, atol=1e-12)
         assert_allclose(P_hat, P_pred + jumps + np.outer(Vm, Vm) / info, rtol=1e-9,
                         atol=1e-15)
+        if t - step_ns > t0:  # (the first update: no drag update before it)
+            info = info / (1.0 + info * sigma_k**2 / drift_s * dt)
         zk = H @ Vm
         Si = np.linalg.inv(S)
         info = info + zk @ Si @ zk
@@ -102,6 +107,7 @@ def test_two_updates_of_the_estimated_drag_equal_the_hand_computation():
     # the offsets were chosen so that the drag moves: δk̂ and the points' shift are not 0
     # (the mutation "δk̂ frozen at 0" fails the δk̂ and point assertions above)
     assert abs(dk) > 5e-5 and np.linalg.norm(V[:3] * dk) > 1e-9
+    # (the mutation "q_k term removed" fails the I_k assertion of the second update)
 
 
 def test_the_sensitivity_restarts_at_a_jump_and_the_drag_is_kept_for_the_session():
@@ -161,5 +167,9 @@ def test_the_drag_prior_and_the_hold_are_validated():
     for bad in (True, -1.0, float("nan")):
         with pytest.raises(FusionError, match="hold_nis"):
             FilterOptions(hold_nis=bad)
+    for bad in (0.0, -1.0, float("nan"), float("inf"), True):
+        with pytest.raises(FusionError, match="drag_drift_s"):
+            FilterOptions(drag_drift_s=bad)
     assert FilterOptions(drag_std_per_m=0.0).drag_std_per_m == 0.0
+    assert FilterOptions(drag_drift_s=None).drag_drift_s is None
     assert FilterOptions(hold_nis=2.0).hold_nis == 2.0

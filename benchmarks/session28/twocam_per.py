@@ -33,14 +33,15 @@ from pslog.simulation import SimulationOptions, simulate_labelled  # noqa: E402
 
 
 def variants_of(spec: str) -> list[tuple[str, dict]]:
-    """``name:key=value;key=value|name2:...`` (values Python literals or arithmetic)."""
+    """``name:key=value;key=value|name2:...`` (values Python literals or arithmetic, or None)."""
     out = []
     for part in spec.split("|"):
         name, _, kvs = part.partition(":")
         over = {}
         for kv in filter(None, kvs.split(";")):
             key, value = kv.split("=")
-            over[key] = float(eval(value, {}))  # a number, e.g. 1/200000
+            number = eval(value, {})  # a number, e.g. 1/200000, or None
+            over[key] = None if number is None else float(number)
         out.append((name, over))
     return out
 

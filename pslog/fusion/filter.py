@@ -311,6 +311,11 @@ class FilterOptions:
         V_p δk̂`` with the covariance ``P_pp + V_p V_pᵀ / I_k``; the filter's own state
         (gating, jumps, ``q``, σ²) is unchanged; 0: the drag not estimated (before session
         29)
+    drag_drift_s : float or None, seconds ``T_k`` over which the drag offset ``δk`` may
+        drift by ``σ_k`` (``drag_std_per_m``): a random walk of spectral density ``q_k =
+        σ_k² / T_k``, so that ``I_k ← I_k / (1 + I_k q_k Δt)`` before each drag update
+        (``Δt`` since the latest); its information stays bounded (a ball may be changed, wet
+        or scuffed within a session); None: no drift (before session 29's review)
     """
 
     noise_px: float = 0.5
@@ -355,6 +360,7 @@ class FilterOptions:
     jump_instant: bool = True
     jump_mixture_cov: bool = True
     drag_std_per_m: float = 0.01
+    drag_drift_s: float | None = 600.0
     surprise_cov: bool = True
     hold_nis: float | None = None
 
@@ -390,6 +396,11 @@ class FilterOptions:
             # (its prior information 1/σ_k² must be a finite number above 0)
             raise FusionError(f"filter drag_std_per_m must be 0 (not estimated) or in "
                               f"[1e-9, 1000] 1/m, got {self.drag_std_per_m!r}")
+        if self.drag_drift_s is not None and not (
+                not isinstance(self.drag_drift_s, bool)
+                and math.isfinite(self.drag_drift_s) and self.drag_drift_s > 0):
+            raise FusionError(f"filter drag_drift_s must be None (no drift) or finite and > 0 "
+                              f"s, got {self.drag_drift_s!r}")
         if self.init_detections < 3 or self.init_window < self.init_detections:
             raise FusionError("filter init_detections must be >= 3 and init_window >= it, got "
                               f"{self.init_detections} and {self.init_window}")
@@ -474,7 +485,9 @@ _IJT0 = _IHT + 3 * _HISTORY
 _IJN, _IJSHAPE, _IJTE = _IJT0 + 1, _IJT0 + 2, _IJT0 + 3
 _IJLAG = _IJT0 + 4  # the winner's lag: its buffered detection at this index is the jump's
 _IJBUF = _IJT0 + 5
-_ICAM = _IJBUF + 2 * _JBUF  # then 3 per camera, then 2 per window slot
+#: the time of the drag's latest update (its random walk's start; -2**62: none yet)
+_IDRAGT = _IJBUF + 2 * _JBUF
+_ICAM = _IDRAGT + 1  # then 3 per camera, then 2 per window slot
 #: ``O`` (float64 options): k, g (3), gravity's unit vector (3), gate, adapt_rate, σ² bounds,
 #: q bounds, q's rate and target, max_std (inf: none), withhold, confirm_nis, λ, μ₀, turn
 #: model on, λ_t, turn_on_psd, turn_rate_psd, turn_rate_std², restitution, friction, number
@@ -490,7 +503,8 @@ _OJMIX = _OINSTANT + 1  # 1: a jump's covariance is its hypotheses' mixture's ab
 _ODRAG = _OJMIX + 1  # the drag's prior information 1/σ_k² (0: the drag not estimated)
 _OSURPRISE = _ODRAG + 1  # λ_j of a plain update's jump/no-jump mixture (0: none; session 29)
 _OHOLD = _OSURPRISE + 1  # the batch's hold for the next camera: its NIS (inf: none; session 29)
-_OSIZE = _OHOLD + 1
+_ODRAGQ = _OHOLD + 1  # the drag's random walk q_k = σ_k² / T_k, (1/m)²/s (0: none)
+_OSIZE = _ODRAGQ + 1
 #: the batch's held points at most at once (a camera alone past them: the later ones output)
 _HOLD_MAX = 8
 #: ``N`` (int64 options): max gap, window span, init_window, init_detections, max_rejects,
@@ -1089,6 +1103,19 @@ def _drag_update(S, inn, y0, y1, Vm):
 
 
 @kernel
+def _drag_forget(S, I, O, t):
+    """The drag's random walk since its latest update (in place; session 29, the review):
+    ``1/I_k ← 1/I_k + q_k Δt``, ``q_k = σ_k² / T_k`` (``O[_ODRAGQ]``), ``Δt`` the time since
+    the latest drag update (none before the first); ``I[_IDRAGT] ← t``."""
+    last = I[_IDRAGT]
+    q = O[_ODRAGQ]
+    if q > 0.0 and last > -(2 ** 61) and t > last:
+        info = S[_SIK]
+        S[_SIK] = info / (1.0 + info * q * ((t - last) / NS))
+    I[_IDRAGT] = t
+
+
+@kernel
 def _drag_point(S, px, py, pz, vx, vy, vz):
     """A published point and its variances (x, y, z) with the estimated drag: ``p + V_p
     δk̂`` and ``diag(P_pp) + V_p² / I_k`` (``S``'s current ``V``)."""
@@ -1607,6 +1634,7 @@ def _push(S, I, cams, O, N, t, cam, u, v, out):
         S[_SV:_SV + 6] = Vm
         return _reject(S, I, cams, O, N, t, cam, u, v, x, P, inn_ok, inn, gap_s, out)
     if accepted and drag:  # δk̂ from this update (the prior innovation, before the mixing)
+        _drag_forget(S, I, O, t)
         _drag_update(S, inn, prior_y0, prior_y1, Vm)
         c0, c1, c2, w0, w1, w2 = _drag_point(S, xo0, xo1, xo2, v0, v1, v2)
         ok, qu, qv, _, _, _, _, _, _ = _project(cams, cam, c0, c1, c2)
@@ -2276,6 +2304,8 @@ class BallFilter:
         O[_ODRAG] = 1.0 / (sk * sk) if sk > 0.0 else 0.0
         O[_OSURPRISE] = options.jump_rate_per_s if options.surprise_cov else 0.0
         O[_OHOLD] = math.inf if options.hold_nis is None else options.hold_nis
+        O[_ODRAGQ] = (sk * sk / options.drag_drift_s
+                      if sk > 0.0 and options.drag_drift_s is not None else 0.0)
         self._opts = O
         self._nopts = np.array([self._max_gap_ns, self._init_span_ns, options.init_window,
                                 options.init_detections, options.max_rejects, capacity],
@@ -2289,6 +2319,7 @@ class BallFilter:
         self._S[_SIK] = O[_ODRAG]  # δk̂ = 0 with the prior's information
         self._I[_IPEND], self._I[_IJUMPNS], self._I[_IJUMPCAM] = -1, -(2**62), -1
         self._I[_ICAP] = options.init_window
+        self._I[_IDRAGT] = -(2**62)  # no drag update yet
         self._I[_ICAM:_ICAM + n_cams] = -(2**62)  # last accepted detection per camera
         self._out = np.empty(_OUT_COLS)
         self._rays: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
