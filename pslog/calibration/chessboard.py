@@ -95,7 +95,7 @@ def read_calibration_images(path: str | Path, *, max_frames: int = 60,
             unreadable.extend(skipped)
         if not images:
             raise InputError(f"none of the {len(files)} image files in folder {path} can be "
-                             f"read: {_listed(skipped)}")
+                             f"read: {listed(skipped)}")
         return images, labels
     return _read_video_frames(path, max_frames)
 
@@ -112,8 +112,8 @@ def _unreadable_reason(file: Path) -> str:
     return "empty file" if not head else "not a decodable image"
 
 
-def _listed(names: Sequence[str], most: int = 5) -> str:
-    """``a, b, c, ... (N more)``."""
+def listed(names: Sequence[str], most: int = 5) -> str:
+    """``a, b, c, ... (N more)``: at most ``most`` names (a message's list of files)."""
     more = f", ... ({len(names) - most} more)" if len(names) > most else ""
     return ", ".join(names[:most]) + more
 

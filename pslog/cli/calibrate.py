@@ -201,6 +201,7 @@ def _run_points(args, existing, rig_path: Path, fps: float, offset: float):
 
 def _run_chessboard(args, existing, fps: float, offset: float):
     from pslog.calibration import calibrate_chessboard, parse_pattern, read_calibration_images
+    from pslog.calibration.chessboard import listed
     from pslog.errors import InputError
 
     pattern = parse_pattern(args.chessboard)
@@ -209,7 +210,7 @@ def _run_chessboard(args, existing, fps: float, offset: float):
     images, labels = read_calibration_images(args.images, max_frames=args.max_frames,
                                              unreadable=unreadable)
     skipped = (f"; {len(unreadable)} unreadable image file(s) skipped: "
-               f"{_listed(unreadable)}" if unreadable else "")
+               f"{listed(unreadable, 10)}" if unreadable else "")
     height, width = images[0].shape[:2]
     for label, image in zip(labels, images, strict=True):
         if image.shape[:2] != (height, width):
@@ -229,7 +230,7 @@ def _run_chessboard(args, existing, fps: float, offset: float):
     camera = result.camera
     if unreadable:
         print(f"pslog calibrate: warning: {len(unreadable)} of {len(labels) + len(unreadable)} "
-              f"image files unreadable, skipped: {_listed(unreadable)}", file=sys.stderr)
+              f"image files unreadable, skipped: {listed(unreadable, 10)}", file=sys.stderr)
     print(f"{camera.name}: calibrated from a {pattern[0]}x{pattern[1]} chessboard in "
           f"{args.images} ({width}x{height})")
     print(f"  images: {len(result.used)} used, {len(result.rejected)} rejected "
@@ -237,7 +238,7 @@ def _run_chessboard(args, existing, fps: float, offset: float):
                                   if unreadable else "")
           + f" of {len(images) + len(unreadable)}")
     if result.rejected:
-        print(f"  rejected: {_listed([labels[i] for i in result.rejected])}")
+        print(f"  rejected: {listed([labels[i] for i in result.rejected], 10)}")
     print(f"  reprojection RMS {result.rms_px:.3f} px")
     worst = sorted(zip(result.view_rms_px, result.used, strict=True), reverse=True)[:3]
     print("  worst views: " + ", ".join(f"{labels[i]} {rms:.3f} px" for rms, i in worst))
@@ -248,12 +249,6 @@ def _run_chessboard(args, existing, fps: float, offset: float):
         print("  pose: unknown from a chessboard; set to identity R, zero t. Solve it with "
               "--points CSV --fix-intrinsics")
     return camera, result.rms_px
-
-
-def _listed(names: list[str], most: int = 10) -> str:
-    """``a, b, c, ... (N more)``."""
-    more = f", ... ({len(names) - most} more)" if len(names) > most else ""
-    return ", ".join(names[:most]) + more
 
 
 def _print_intrinsics(camera) -> None:
