@@ -20,15 +20,11 @@ import numpy as np
 sys.path.insert(0, "benchmarks")
 sys.path.insert(0, "tests")
 sys.path.insert(0, "benchmarks/session29")
-from _capture import cap, orig
-from bench_dirty import at_rate, faults, more_rigs, more_sessions, rigs
+from _capture import dirty_sessions, orig
 
 from pslog.evaluation import errors_m
-from pslog.fusion import FusionOptions
 from pslog.fusion import filter as FM
-from pslog.fusion.gating import fuse_detections
 from pslog.records import Track
-from pslog.simulation import SimulationOptions, simulate_labelled
 
 
 def stream(obs, rig, gap, opts, doubt):
@@ -55,25 +51,18 @@ def run():
     misses, out = float(sys.argv[4]), sys.argv[5]
     res = []
     t0 = time.time()
-    for fps in fpss:
-        for base in rigs() + more_rigs():
-            rig = at_rate(base, fps)
-            for seed, (label, motion, duration, _) in enumerate(more_sessions(nseeds, 8.0, first), start=first - 300):
-                span = motion.duration if duration is None else duration
-                det, truth, _ = simulate_labelled(rig, motion, duration, SimulationOptions(
-                    noise_px=0.3, seed=seed, miss_rate=misses, drop_rate=misses / 2, **faults(rig, seed, span)))
-                fuse_detections(det, rig, ["filter"], FusionOptions())
-                obs, r, gap, opts, doubt = cap["a"]
-                default = orig(obs, r, gap, opts, doubt)
-                a = stream(obs, r, gap, opts, doubt)
-                tns = a[:, 0].astype(np.int64)
-                tr = Track("filter", tns, a[:, 2:5].copy(), a[:, 1].astype(np.int32))
-                res.append(dict(rig=rig.name, fps=fps, label=label, t=tns / 1e9, camera=a[:, 1],
-                                err=errors_m(tr, truth), nis=a[:, 5], jump=a[:, 6], rejected=a[:, 7],
-                                init=a[:, 8], lag=a[:, 9], out=np.isin(tns, default.time_ns)))
-            print(f"{rig.name} {time.time() - t0:.0f} s", flush=True)
-            with open(out, "wb") as f:
-                pickle.dump(res, f)
+    for fps, rig, label, truth, (obs, r, gap, opts, doubt) in dirty_sessions(
+            first, nseeds, fpss, misses):
+        default = orig(obs, r, gap, opts, doubt)
+        a = stream(obs, r, gap, opts, doubt)
+        tns = a[:, 0].astype(np.int64)
+        tr = Track("filter", tns, a[:, 2:5].copy(), a[:, 1].astype(np.int32))
+        res.append(dict(rig=rig.name, fps=fps, label=label, t=tns / 1e9, camera=a[:, 1],
+                        err=errors_m(tr, truth), nis=a[:, 5], jump=a[:, 6], rejected=a[:, 7],
+                        init=a[:, 8], lag=a[:, 9], out=np.isin(tns, default.time_ns)))
+        print(f"{rig.name} {time.time() - t0:.0f} s", flush=True)
+        with open(out, "wb") as f:
+            pickle.dump(res, f)
 
 
 def verdicts(r, lagged):

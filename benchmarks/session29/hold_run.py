@@ -13,14 +13,10 @@ import numpy as np
 sys.path.insert(0, "benchmarks")
 sys.path.insert(0, "tests")
 sys.path.insert(0, "benchmarks/session29")
-from _capture import cap, orig
-from bench_dirty import at_rate, faults, more_rigs, more_sessions, rigs
+from _capture import dirty_sessions, orig
 
 from pslog.evaluation import errors_m
-from pslog.fusion import FusionOptions
 from pslog.fusion import filter as FM
-from pslog.fusion.gating import fuse_detections
-from pslog.simulation import SimulationOptions, simulate_labelled
 
 THETAS = (0.0, 2.0, 4.61)
 
@@ -31,24 +27,17 @@ def main():
     misses = float(sys.argv[4])
     tot = {th: np.zeros(4, dtype=np.int64) for th in (None, *THETAS)}
     t0 = time.time()
-    for fps in fpss:
-        for base in rigs() + more_rigs():
-            rig = at_rate(base, fps)
-            for seed, (_label, motion, duration, _) in enumerate(more_sessions(nseeds, 8.0, first), start=first - 300):
-                span = motion.duration if duration is None else duration
-                det, truth, _ = simulate_labelled(rig, motion, duration, SimulationOptions(
-                    noise_px=0.3, seed=seed, miss_rate=misses, drop_rate=misses / 2, **faults(rig, seed, span)))
-                fuse_detections(det, rig, ["filter"], FusionOptions())
-                obs, r, gap, opts, doubt = cap["a"]
-                opts = opts or FM.FilterOptions()
-                base_tr = orig(obs, r, gap, opts, doubt)
-                err0 = errors_m(base_tr, truth)
-                for th in (None, *THETAS):
-                    tr = orig(obs, r, gap, replace(opts, hold_nis=th), doubt)
-                    err = errors_m(tr, truth)
-                    gone = ~np.isin(base_tr.time_ns, tr.time_ns)
-                    assert np.all(np.isin(tr.time_ns, base_tr.time_ns))
-                    tot[th] += (len(tr), int(np.sum(err > 0.05)), int(np.sum(gone & (err0 <= 0.05))), int(tr.dropped.get("held", 0)))
+    for fps, _rig, _label, truth, (obs, r, gap, opts, doubt) in dirty_sessions(
+            first, nseeds, fpss, misses):
+        opts = opts or FM.FilterOptions()
+        base_tr = orig(obs, r, gap, opts, doubt)
+        err0 = errors_m(base_tr, truth)
+        for th in (None, *THETAS):
+            tr = orig(obs, r, gap, replace(opts, hold_nis=th), doubt)
+            err = errors_m(tr, truth)
+            gone = ~np.isin(base_tr.time_ns, tr.time_ns)
+            assert np.all(np.isin(tr.time_ns, base_tr.time_ns))
+            tot[th] += (len(tr), int(np.sum(err > 0.05)), int(np.sum(gone & (err0 <= 0.05))), int(tr.dropped.get("held", 0)))
         print(f"{fps:g} fps {time.time() - t0:.0f} s", flush=True)
     for th, (n, far, good, held) in tot.items():
         print(f"hold_nis {th}: points {n}, far {far}, good withdrawn {good}, held count {held}")

@@ -18,14 +18,10 @@ import numpy as np
 sys.path.insert(0, "benchmarks")
 sys.path.insert(0, "tests")
 sys.path.insert(0, "benchmarks/session29")
-from _capture import cap, orig
-from bench_dirty import at_rate, faults, more_rigs, more_sessions, rigs
+from _capture import dirty_sessions, orig
 
 from pslog.evaluation import errors_m
-from pslog.fusion import FusionOptions
 from pslog.fusion import filter as FM
-from pslog.fusion.gating import fuse_detections
-from pslog.simulation import SimulationOptions, simulate_labelled
 
 
 def main():
@@ -34,33 +30,26 @@ def main():
     misses, out = float(sys.argv[4]), sys.argv[5]
     rows = []
     t0 = time.time()
-    for fps in fpss:
-        for base in rigs() + more_rigs():
-            rig = at_rate(base, fps)
-            for seed, (label, motion, duration, _) in enumerate(more_sessions(nseeds, 8.0, first), start=first - 300):
-                span = motion.duration if duration is None else duration
-                det, truth, _ = simulate_labelled(rig, motion, duration, SimulationOptions(
-                    noise_px=0.3, seed=seed, miss_rate=misses, drop_rate=misses / 2, **faults(rig, seed, span)))
-                fuse_detections(det, rig, ["filter"], FusionOptions())
-                obs, r, gap, opts, doubt = cap["a"]
-                opts = opts or FM.FilterOptions()
-                tr = {}
-                for cov in (False, True):
-                    for hold in (False, True):
-                        tr[cov, hold] = orig(obs, r, gap, replace(opts, surprise_cov=cov, withhold=hold), doubt)
-                a, b = tr[False, False], tr[True, False]
-                assert np.array_equal(a.time_ns, b.time_ns) and np.array_equal(a.position_world, b.position_world)
-                err = errors_m(a, truth)
-                q = a.quality
-                out_a = np.isin(a.time_ns, tr[False, True].time_ns)
-                out_b = np.isin(a.time_ns, tr[True, True].time_ns)
-                rows.append(dict(rig=rig.name, fps=fps, label=label, misses=misses, t=a.time_ns / 1e9, camera=a.camera,
-                                 err=err, std_a=q["std_m"], std_b=b.quality["std_m"], nis=q["nis"],
-                                 jump=q["jump"], rejected=q["rejected"], init=q["init"], gap=q["gap_s"],
-                                 out_a=out_a, out_b=out_b))
-            print(f"{rig.name} {time.time() - t0:.0f} s", flush=True)
-            with open(out, "wb") as f:
-                pickle.dump(rows, f)
+    for fps, rig, label, truth, (obs, r, gap, opts, doubt) in dirty_sessions(
+            first, nseeds, fpss, misses):
+        opts = opts or FM.FilterOptions()
+        tr = {}
+        for cov in (False, True):
+            for hold in (False, True):
+                tr[cov, hold] = orig(obs, r, gap, replace(opts, surprise_cov=cov, withhold=hold), doubt)
+        a, b = tr[False, False], tr[True, False]
+        assert np.array_equal(a.time_ns, b.time_ns) and np.array_equal(a.position_world, b.position_world)
+        err = errors_m(a, truth)
+        q = a.quality
+        out_a = np.isin(a.time_ns, tr[False, True].time_ns)
+        out_b = np.isin(a.time_ns, tr[True, True].time_ns)
+        rows.append(dict(rig=rig.name, fps=fps, label=label, misses=misses, t=a.time_ns / 1e9, camera=a.camera,
+                         err=err, std_a=q["std_m"], std_b=b.quality["std_m"], nis=q["nis"],
+                         jump=q["jump"], rejected=q["rejected"], init=q["init"], gap=q["gap_s"],
+                         out_a=out_a, out_b=out_b))
+        print(f"{rig.name} {time.time() - t0:.0f} s", flush=True)
+        with open(out, "wb") as f:
+            pickle.dump(rows, f)
 
 
 if __name__ == "__main__":
