@@ -90,13 +90,19 @@ def check_file(path, header: bool = True) -> tuple[Path, int, bool]:
     # ``complete``: the closing magic written by a finished writer
     complete = tail == MAGIC
     if header:
-        damage = header_damage(path)
+        damage, _after = header_records_damage(path)
         if damage is not None:
-            start, end, reason = damage
-            raise LogFormatError(f"{path}: its MCAP Header record (bytes {start}..{end}) is "
-                                 f"damaged ({reason}); run 'pslog recover {path} -o "
-                                 f"FIXED.mcap' to salvage the data")
+            raise header_error(path, damage)
     return path, size, complete
+
+
+def header_error(path, damage: tuple[int, int, str]) -> LogFormatError:
+    """The one-line error of a damaged Header record (``damage`` as
+    :func:`header_records_damage` gives it)."""
+    start, end, reason = damage
+    return LogFormatError(f"{path}: its MCAP Header record (bytes {start}..{end}) is damaged "
+                          f"({reason}); run 'pslog recover {path} -o FIXED.mcap' to salvage "
+                          f"the data")
 
 
 #: longest Header record examined, bytes (pslog's are tens of bytes: two short strings)
@@ -105,40 +111,19 @@ _HEADER_MAX = 1 << 16
 _KNOWN_OPS = frozenset(range(0x01, 0x10))
 
 
-def header_damage(path) -> tuple[int, int, str] | None:
-    """``(start, end, reason)`` if the Header record after the leading magic is damaged (its
-    opcode, its length, its two strings), else None. A file cut inside its header is
-    truncated, not damaged: None. A Header whose strings fill it exactly is intact even when
-    the byte after it is no record's opcode: that is the next record's damage
-    (:func:`after_header_damage`)."""
-    damage, _end = _check_header(path)
-    return damage
-
-
-def after_header_damage(path) -> tuple[int, int, str] | None:
-    """``(start, end, reason)`` if the record right after an intact Header record (pslog's
-    session metadata record) has no record's opcode, else None. ``end`` is where the
-    record's own length field says it ends (its opcode alone is damaged) or ``start + 1``."""
-    damage, end = _check_header(path)
-    if damage is not None or end is None:
-        return None
-    with open(path, "rb") as f:
-        f.seek(end)
-        head = f.read(9)
-        size = os.fstat(f.fileno()).st_size
-    if len(head) < 9 or head[0] in _KNOWN_OPS:
-        return None
-    (length,) = _unpack("<Q", head, 1)
-    stop = end + 9 + length
-    return end, (stop if stop <= size else end + 1), f"opcode {head[0]:#04x} is no record's"
-
-
-def _check_header(path) -> tuple[tuple[int, int, str] | None, int | None]:
-    """(:func:`header_damage`'s answer, the end of an intact Header record that a byte
-    follows, else None)."""
+def header_records_damage(path) -> tuple[tuple[int, int, str] | None,
+                                          tuple[int, int, str] | None]:
+    """``(header, after)``, each ``(start, end, reason)`` or None, from one read of the
+    file's head. ``header``: the Header record after the leading magic is damaged (its
+    opcode, its length, its two strings); a file cut inside its header is truncated, not
+    damaged: None. ``after``: the record right after an intact Header record (pslog's
+    session metadata record) has no record's opcode (a Header whose strings fill it exactly
+    is intact even then: that is the next record's damage); ``end`` is where that record's
+    own length field says it ends (its opcode alone is damaged) or ``start + 1``."""
     start = len(MAGIC)
     with open(path, "rb") as f:
-        head = f.read(start + 9 + _HEADER_MAX + 1)
+        # the longest Header examined, one byte past it, and the next record's 9-byte head
+        head = f.read(start + 9 + _HEADER_MAX + 9)
         size = os.fstat(f.fileno()).st_size
     if len(head) < start + 9:
         return None, None
@@ -150,16 +135,23 @@ def _check_header(path) -> tuple[tuple[int, int, str] | None, int | None]:
         if size > start + 9 + _HEADER_MAX:
             return (start, start + 9, f"length {length} runs past the end of the file"), None
         return None, None  # cut inside the header
-    if end + 1 > len(head):
+    if end > start + 9 + _HEADER_MAX:
         return (start, start + 9, f"length {length} is beyond any Header record"), None
-    try:
-        _profile, at = _string(head, start + 9)
-        _library, at = _string(head, at)
+    try:  # (within the bytes a Header may take and one more, as before the next record's)
+        own = head[:start + 9 + _HEADER_MAX + 1]
+        _profile, at = _string(own, start + 9)
+        _library, at = _string(own, at)
     except (struct.error, UnicodeDecodeError):
         return (start, end, "its strings are unreadable"), None
     if at != end:
         return (start, end, "its strings do not fill it"), None
-    return None, end
+    nxt = head[end:end + 9]
+    if len(nxt) < 9 or nxt[0] in _KNOWN_OPS:
+        return None, None
+    (length,) = _unpack("<Q", nxt, 1)
+    stop = end + 9 + length
+    return None, (end, (stop if stop <= size else end + 1), f"opcode {nxt[0]:#04x} is no "
+                                                               f"record's")
 
 
 def tail_magic_damaged(path) -> bool:

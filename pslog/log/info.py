@@ -200,12 +200,12 @@ def session_info(path) -> dict:
         damaged.insert(0, {"start": start, "end": end, "reason": reason, "chunk": False,
                            "start_ns": None, "end_ns": None, "messages": None,
                            "label": "damaged record at bytes"})
-    after = io.after_header_damage(path)  # a metadata record's is in f.metadata_damage
+    header, after = io.header_records_damage(path)  # (one read of the file's head)
+    # the record after the Header: a metadata record's damage is in f.metadata_damage
     if after is not None and after[0] not in {d["start"] for d in damaged}:
         damaged.insert(0, {"start": after[0], "end": after[1], "reason": after[2],
                            "chunk": False, "start_ns": None, "end_ns": None, "messages": None,
                            "label": "damaged record at bytes"})
-    header = io.header_damage(path)
     if header is not None:  # nothing pslog reads, but damage all the same: readers refuse it
         start, end, reason = header
         damaged.insert(0, {"start": start, "end": end, "reason": f"MCAP Header record: {reason}",

@@ -181,8 +181,13 @@ class _Finished:
         # header=False: a damaged Header record, and a metadata record damaged in its
         # opcode or length field only (its contents intact, read exactly), are let through
         # (pslog info reports them: metadata_damage)
-        path, self.size, complete = io.check_file(path, header)
+        path, self.size, complete = io.check_file(path, header=False)
         self.path = path
+        # the Header record and the record after it, from one read (the latter is reported
+        # after the summary's damage, below)
+        damage, after = io.header_records_damage(path) if header else (None, None)
+        if damage is not None:
+            raise io.header_error(path, damage)
         if not complete:
             raise io.truncated_error(path)
         from mcap.reader import SeekingReader
@@ -232,7 +237,6 @@ class _Finished:
             raise LogFormatError(f"{path}: MCAP has no summary section; try 'pslog recover'")
         # the record after the Header with no record's opcode: named as itself (the Header
         # is intact), unless it is a metadata record checked above
-        after = io.after_header_damage(path) if header else None
         if after is not None and after[0] not in {i.offset for i in checked.metadata}:
             self.file.close()
             raise LogFormatError(f"{path}: its record at bytes {after[0]}..{after[1]} (the one "
