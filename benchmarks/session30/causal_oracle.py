@@ -184,6 +184,16 @@ def main():
             e = {m: np.nanmean(np.linalg.norm(_offsets(x, truth), axis=1))
                  for m, x in (("typeA", tracks["typeA"]), ("filter", tracks["filter"]),
                               ("oracle", tr))}
+            # the summed error by time since the latest jump: within 67 ms of it, beyond
+            kk = np.asarray(kicks, float)
+            for m, x in (("filter", tracks["filter"]), ("oracle", tr)):
+                err = np.linalg.norm(_offsets(x, truth), axis=1)
+                ts = np.asarray(x.time_ns) / 1e9
+                last = np.searchsorted(kk, ts, side="right") - 1
+                since = np.where(last >= 0, ts - kk[np.maximum(last, 0)], np.inf)
+                ok = np.isfinite(err)
+                e[m + "_near"] = float(err[ok & (since < 0.067)].sum())
+                e[m + "_far"] = float(err[ok & (since >= 0.067)].sum())
             rows.append(e)
             print(f"{fs} {label:12s} typeA {1e3 * e['typeA']:.2f} mm  filter/A {e['filter'] / e['typeA']:.3f}  "
                   f"oracle/A {e['oracle'] / e['typeA']:.3f}  filter/oracle {e['filter'] / e['oracle']:.3f}", flush=True)
@@ -193,6 +203,10 @@ def main():
     print(f"\n{len(rows)} sessions: filter/typeA gmean {np.exp(np.log(f).mean()):.3f} max {f.max():.3f} "
           f">1/2 {int((f > 0.5).sum())}; oracle/typeA gmean {np.exp(np.log(o).mean()):.3f} "
           f"max {o.max():.3f} >1/2 {int((o > 0.5).sum())}")
+    near = sum(r["filter_near"] - r["oracle_near"] for r in rows)
+    far = sum(r["filter_far"] - r["oracle_far"] for r in rows)
+    print(f"summed error filter - oracle: within 67 ms of a jump {near:.3f} m, beyond {far:.3f} m "
+          f"({100 * near / (near + far):.0f} % within)")
 
 
 if __name__ == "__main__":
