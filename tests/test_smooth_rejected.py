@@ -6,10 +6,12 @@ the ball had just left that view, the gate kept the frame's only candidate (a sp
 126 px from the ball) and the Cauchy-robust fit gave it almost no weight, but the output row
 said nothing. The row now carries ``rejected`` = 1 (its residual beyond χ²₂'s 1 - 1e-4
 quantile of the fit's noise σ, :attr:`pslog.estimation.Fit.rejected`), which ``pslog eval``
-counts; its point stays, the trajectory's, as the filter's point at a detection its gate
-rejected is its prediction, and ``gap_s`` runs across it. Fails with the rule removed (run:
-no row flagged; the benchmark's count of points outside their camera's image 1), with the
-bound halved or doubled, with ``gap_s`` over every fitted detection."""
+counts and ``pslog view`` draws among the camera's rejected candidates; its point stays, the
+trajectory's, as the filter's point at a detection its gate rejected is its prediction, and
+``gap_s`` runs across it. Fails with the rule removed (run: no row flagged; the benchmark's
+count of points outside their camera's image 1), with the bound halved or doubled, with
+``gap_s`` over every fitted detection, without the viewer's rule (the blob drawn as lab2's
+detection)."""
 
 from __future__ import annotations
 
@@ -21,6 +23,7 @@ import numpy as np
 import pytest
 from _rally import rally
 from _rigs import lab3_rig
+from _rrd import batch_column, capture_times, temporal_chunks
 from numpy.testing import assert_array_equal
 
 from pslog.fusion import FusionOptions, fuse
@@ -85,6 +88,22 @@ def test_fuse_marks_the_spurious_blob_the_fit_rejected(tmp_path, cli):
     code, out, err = cli("eval", tmp_path / "f.mcap", "--json")
     assert code == 0, err
     assert json.loads(out)[0]["rejected_detections"] == 1
+    # and the viewer draws it among lab2's rejected candidates, not its detections
+    code, _, err = cli("view", tmp_path / "f.mcap", "--method", "smooth", "--frames", "none",
+                       "--start", "1.0", "--end", "1.2", "--save", tmp_path / "v.rrd")
+    assert code == 0, err
+    chunks = temporal_chunks(tmp_path / "v.rrd")
+    image = "/world/cameras/lab2/image"
+    frame = (detections.frame_camera == 1) & (detections.frame_time_ns == t[row])
+    (f,) = np.flatnonzero(frame)
+    blob = detections.cand_uv[detections.cand_frame == f]
+    assert len(blob) == 1  # the frame's only candidate
+    for kind, has_it in (("rejected", True), ("detections", False)):
+        batches = chunks[f"{image}/{kind}"]
+        at = capture_times(batches) == t[row]
+        points = [p for p, here in zip(batch_column(batches, "Points2D:positions"), at,
+                                       strict=True) if here]
+        assert len(points) == 1 and len(points[0]) == int(has_it), (kind, points)
 
 
 @pytest.mark.parametrize("shift_px", [1.5, 40.0])
