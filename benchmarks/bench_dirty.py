@@ -48,7 +48,8 @@ shutter staggering), the rig named ``<rig>@<fps>``.
 ``--validity`` (with ``--more``): every row also counts the points that are not geometrically
 valid (:func:`invalid_points`), clean / faults: behind a camera that contributed to them
 (``camera_mask``, and the point's own camera), or outside the image of the camera whose
-detection at the point's time made it (issue 10: 0 wherever the methods are right).
+detection at the point's time made it (issue 10: 0 wherever the methods are right); a point
+whose own detection the method rejected (``rejected`` = 1: filter, smooth) is no camera's.
 
 ``--timing sync|typeB`` (with ``--more``): every rig's shutters at the preset (a two-camera rig
 synchronised under ``typeB``), for ``--methods sync,typeB,linear``, which need shared instants
@@ -224,14 +225,18 @@ def invalid_points(track, rig: Rig) -> tuple[int, int]:
     camera), and the points in front of their own camera, whose detection at the point's
     time made them, but outside its image by more than EDGE_PX. A contributing camera whose
     detection lies at another time may rightly not see the point there (the ball left its
-    view since), so only its depth is checked."""
+    view since), so only its depth is checked. A point whose own detection the method
+    rejected (``rejected`` = 1: filter's prediction, smooth's trajectory) was not made by
+    it: its camera did not see the ball there, and is not checked."""
     n = len(track)
     mask = track.quality.get("camera_mask")
     bits = (np.zeros(n, np.int64) if mask is None
             else np.nan_to_num(mask).astype(np.int64))
+    flag = track.quality.get("rejected")
+    seen = np.ones(n, bool) if flag is None else ~(flag == 1)
     behind, outside = np.zeros(n, bool), np.zeros(n, bool)
     for c, cam in enumerate(rig.cameras):
-        own = track.camera == c
+        own = (track.camera == c) & seen
         rows = own | ((bits >> c) & 1 == 1)
         if not rows.any():
             continue

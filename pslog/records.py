@@ -49,8 +49,10 @@ QUALITY_FIELDS = {
     "nis": "normalised innovation squared the filter's gate tested (chi-square, 2 degrees of "
            "freedom when the filter is right)",
     "jump": "1 where the filter accepted a velocity jump (bounce, kick) at this detection",
-    "rejected": "1 where the detection failed the filter's gate and the point is the "
-                "prediction",
+    "rejected": "1 where the method rejected the point's detection, and the point is not "
+                "its: filter, the detection failed the gate and the point is the "
+                "prediction; smooth, its residual is beyond χ²₂'s 1 - 1e-4 quantile of the "
+                "fit's noise and the point is the trajectory's (the other detections')",
     "init": "1 where the filter's track was (re)initialised at this detection",
     **{f"cov_{a}_m2": f"position covariance entry {a}, square metres"
        for a in ("xx", "yy", "zz", "xy", "xz", "yz")},

@@ -15,6 +15,7 @@ degrees of freedom ``-2 ln(1 - p)``): a threshold edited without its reason fail
 | ``innovation.chi2_threshold(dof)`` | χ²_dof at ``1 - exp(-25/2)`` (type A's 5σ; 25 at 2 dof) |
 | ``stereo.RAYLEIGH_QUARTILE`` | lower quartile of ‖N(0, I₂)‖ |
 | ``confirm._HALF_NORMAL_MEDIAN`` | median of \\|N(0, 1)\\| |
+| ``trajectory._END_JUMP_SCALED`` (``Fit.rejected``) | √(χ²₂ 99.99 %), in σ of the residual norm |
 """
 
 from __future__ import annotations
@@ -91,3 +92,12 @@ def test_the_refusal_noise_quartile_is_rayleighs():
     # the lower quartile of ‖N(0, I₂)‖: √(χ²₂ quartile)
     assert stereo.RAYLEIGH_QUARTILE == pytest.approx(math.sqrt(stats.chi2.ppf(0.25, 2)),
                                                      rel=1e-14)
+
+
+def test_smooths_rejection_bound_is_its_quantile():
+    """``smooth``'s fit rejects a detection beyond √(χ²₂'s 1 - 1e-4 quantile) σ (the filter's
+    gate's level)."""
+    from pslog.estimation import trajectory as T
+
+    assert T._END_JUMP_SCALED ** 2 == pytest.approx(stats.chi2.ppf(1 - 1e-4, 2), rel=1e-9)
+    assert T._END_JUMP_SCALED ** 2 == pytest.approx(F.FilterOptions().gate, abs=0.05)

@@ -6,7 +6,9 @@ Entity paths mirror the transform tree (world z up, metres):
 ``world``                                   ViewCoordinates RIGHT_HAND_Z_UP (static)
 ``world/cameras/<cam>``                     Transform3D camera -> world (static)
 ``world/cameras/<cam>/image``               Pinhole (static), EncodedImage per frame
-``.../image/detections``, ``/rejected``     best and other candidates, Points2D per frame
+``.../image/detections``, ``/rejected``     the chosen and the other candidates (rejected
+                                            by the gate, or by the first shown track's
+                                            method: ``rejected`` = 1), Points2D per frame
 ``.../image/epipolar/<other>``              epipolar line of ``<other>``'s latest detection
 ``.../image/typeA/...``                     Figure 2: bracket, interpolated, snap, snapped,
                                             epipolar line of the observed point

@@ -1,6 +1,6 @@
 """pslog eval: accuracy of a session's fused tracks against its ground truth, and what their
-per-point quality, the gating's rejections and the points left out say (without ground truth:
-those alone)."""
+per-point quality, the gating's rejections, the points left out and the detections each
+method rejected say (without ground truth: those alone)."""
 
 from __future__ import annotations
 
@@ -21,6 +21,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     import json
+
+    import numpy as np
 
     from pslog import progress
     from pslog.errors import InputError
@@ -54,6 +56,10 @@ def run(args: argparse.Namespace) -> int:
                                   if m in session.rejections},
                                  session.detections, session.ball_truth)
     left_out = session.left_out  # points the methods did not vouch for
+    # detections a method's own test rejected (filter's gate, smooth's fit): each keeps its
+    # point (the prediction, the trajectory's), flagged ``rejected``
+    rejected = {m: int(np.count_nonzero(session.tracks[m].quality["rejected"] == 1))
+                for m in methods if "rejected" in session.tracks[m].quality}
     if args.json:
         # NaN (a summary a track has no column for, or no truth) and ±inf (a zero
         # covariance's NEES) are null: strict JSON has neither
@@ -64,7 +70,9 @@ def run(args: argparse.Namespace) -> int:
                            "quality": q.as_dict(),
                            **({"gating": gated[q.method].as_dict()}
                               if q.method in gated else {}),
-                           "left_out": left_out.get(q.method, {})}
+                           "left_out": left_out.get(q.method, {}),
+                           **({"rejected_detections": rejected[q.method]}
+                              if q.method in rejected else {})}
                           for r, q in zip(rows, quality, strict=True)]), indent=2,
                          allow_nan=False))
     else:
@@ -87,6 +95,12 @@ def run(args: argparse.Namespace) -> int:
             print("points left out (invalid or untrustworthy), by reason:")
             for m in shown:
                 print(f"{m:<9} " + ", ".join(f"{r} {n}" for r, n in left_out[m].items()))
+        if any(rejected.values()):
+            print()
+            print("detections the method rejected (each point kept, flagged rejected: "
+                  "filter's the prediction, smooth's the trajectory):")
+            for m, n in rejected.items():
+                print(f"{m:<9} {n} of {len(session.tracks[m])} points")
     return 0
 
 

@@ -191,8 +191,9 @@ _CAUCHY = 3.0
 _WINDOW_SPANS = 5
 #: The first fit's prior is this much looser (σ_a times this)
 _LOOSE = 10.0
-#: A piece's end detection whose residual norm exceeds this many σ contradicts the fit
-#: there (χ²₂'s 1 - 1e-4 quantile, √18.42): a jump the fit did not find
+#: A detection whose residual norm exceeds this many σ contradicts the fit (χ²₂'s 1 - 1e-4
+#: quantile, √18.42, the level of the filter's gate): the fit has rejected it
+#: (:attr:`Fit.rejected`), and at a piece's end a run of them is a jump the fit did not find
 #: (:func:`_underdetermined_ends`)
 _END_JUMP_SCALED = float(np.sqrt(-2.0 * np.log(1e-4)))
 #: Fewest detections (of at least two cameras) that make an end segment beyond a break
@@ -334,7 +335,8 @@ class Fit:
         ``used``)
     covariance : (n, 3, 3) float64, m², its marginal covariance
     residual_px : (n,) float64, reprojection residual of each observation, pixels
-    weight : (n,) float64, final robust weight of each observation (0: rejected)
+    weight : (n,) float64, final robust weight of each observation (0: not in the fit;
+        :attr:`rejected` says which the fit rejected)
     pieces : list of (n_p,) int64, the observation rows of each fitted piece
     withheld : int, observations inside a piece left without a point: an end segment beyond
         a break that fewer than ``_END_DETECTIONS`` detections of two cameras hold
@@ -348,6 +350,17 @@ class Fit:
     weight: np.ndarray
     pieces: list = field(default_factory=list)
     withheld: int = 0
+
+    @property
+    def rejected(self) -> np.ndarray:
+        """(n,) bool, the ``used`` observations the fit has rejected: residual norm beyond
+        :data:`_END_JUMP_SCALED` σ (``trajectory.noise_px``), χ²₂'s 1 - 1e-4 quantile, which
+        a detection of the fitted ball exceeds with probability 1e-4 (its Cauchy weight
+        below 0.33, and its pull on the fit falling as it lies further). The trajectory there
+        is the other detections' and the motion model's."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return self.used & (self.residual_px / self.trajectory.noise_px
+                                > _END_JUMP_SCALED)
 
 
 class _Problem:

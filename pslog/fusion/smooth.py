@@ -10,11 +10,20 @@ pieces (never inside a gap the model does not bridge). Per-point quality:
 - ``std_x_m``, ``std_y_m``, ``std_z_m``: per axis, metres; ``cov_xx_m2`` ... ``cov_yz_m2``:
   the full 3 x 3 covariance (m²);
 - ``residual_px``: the detection's reprojection residual, pixels (NaN on grid points);
+- ``rejected``: 1 where the fit rejected the point's detection (:attr:`Fit.rejected`: its
+  residual beyond χ²₂'s 1 - 1e-4 quantile of the fit's noise σ, the filter's gate's level),
+  0 at the others, NaN on grid points. The point stays, the trajectory's at that time as at
+  every detection (the fit gave the detection a weight below 0.33: the point is the other
+  detections' and the motion model's), as the filter's point at a detection its gate
+  rejected is its prediction; the detection's camera did not see the ball there (a spurious
+  blob kept where the ball was out of its view: docs/methods.md, "``smooth``'s rejected
+  detections");
 - ``gap_s``: the largest time gap bridged: the longest interval between consecutive fitted
-  detections (any camera) that touches the point (at a detection, the longer of the
-  intervals before and after it; on a grid point, the interval around it): how far the
-  motion model carries the trajectory there, as the other methods' ``gap_s`` says how far
-  they interpolate or extrapolate.
+  detections (any camera; not those the fit rejected) that touches the point (at a
+  detection, the longer of the intervals before and after it; on a grid point and at a
+  rejected detection, the interval around it): how far the motion model carries the
+  trajectory there, as the other methods' ``gap_s`` says how far they interpolate or
+  extrapolate (the filter's: since its last accepted detection).
 
 A detection in an end segment of a piece beyond a bounce or kick that fewer than four
 detections of two cameras hold gets no point (its position along the rays is not determined):
@@ -65,6 +74,7 @@ def fuse_smooth(prep: Prepared, rig: Rig, options) -> Track:
         # session are 35 MB: gathered and then filtered, they were copied twice); none
         # gathered when every observation has one (the fit's arrays are the track's)
         keep = fit.used & np.all(np.isfinite(fit.position), axis=1)
+        rejected = fit.rejected
         if np.all(keep):
             time_ns, camera = obs.time_ns, obs.camera
             position, cov, residual = fit.position, fit.covariance, fit.residual_px
@@ -72,7 +82,8 @@ def fuse_smooth(prep: Prepared, rig: Rig, options) -> Track:
             rows = np.flatnonzero(keep)
             time_ns, camera = obs.time_ns[rows], obs.camera[rows]
             position, cov = fit.position[rows], fit.covariance[rows]
-            residual = fit.residual_px[rows]
+            residual, rejected = fit.residual_px[rows], rejected[rows]
+        flag = rejected.astype(np.float64)
     else:
         time_ns = _grid(fit, options.rate_hz)
         position, cov = fit.trajectory.evaluate(time_ns)
@@ -85,11 +96,13 @@ def fuse_smooth(prep: Prepared, rig: Rig, options) -> Track:
         keep = np.all(np.isfinite(position), axis=1)
         time_ns, camera, position = time_ns[keep], camera[keep], position[keep]
         cov, residual = cov[keep], residual[keep]
-    gap = _bridged(obs.time_ns[fit.used], time_ns)
+        flag = np.full(len(time_ns), np.nan)  # a grid point is no detection
+    # a rejected detection holds nothing of the trajectory: the gap runs across it
+    gap = _bridged(obs.time_ns[fit.used & ~fit.rejected], time_ns)
     var = np.einsum("nii->ni", cov)
     quality = {"std_m": np.sqrt(var.sum(axis=1)), "std_x_m": np.sqrt(var[:, 0]),
                "std_y_m": np.sqrt(var[:, 1]), "std_z_m": np.sqrt(var[:, 2]),
-               "residual_px": residual, "gap_s": gap}
+               "residual_px": residual, "rejected": flag, "gap_s": gap}
     # the full covariance, as the paper's methods give it (eval's 2σ share and NEES use it)
     for name, (i, j) in (("xx", (0, 0)), ("yy", (1, 1)), ("zz", (2, 2)), ("xy", (0, 1)),
                          ("xz", (0, 2)), ("yz", (1, 2))):
