@@ -1,0 +1,157 @@
+"""Session 30's walkthrough and hostile-input sweep through the real CLI: an output spelled
+as a folder without a name, an output folder that is a file, a folder as a video source, a
+full disk before the demo's first byte, absurd values in a points file, and smooth's options
+given to a fuse where smooth does not run."""
+
+from __future__ import annotations
+
+import contextlib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pslog.rig import builtin_rig
+
+from ._mounts import fill, small_tmpfs
+from .promises import assert_one_line_error, assert_untouched, fingerprint, run_pslog
+
+
+@pytest.fixture(scope="module")
+def inputs(tmp_path_factory) -> Path:
+    folder = tmp_path_factory.mktemp("sweep30")
+    (folder / "rig.toml").write_text(builtin_rig("paper3").to_toml(), encoding="utf-8")
+    cam = builtin_rig("paper3").cameras[0]
+    points = np.random.default_rng(0).uniform([0, 0, 0], [3, 2, 2], (40, 3))
+    uv, _ = cam.project(points)
+    (folder / "pts.csv").write_text("x,y,z,u,v\n" + "".join(
+        f"{x!r},{y!r},{z!r},{u!r},{v!r}\n" for (x, y, z), (u, v) in zip(
+            points.tolist(), uv.tolist(), strict=True)), encoding="utf-8")
+    done = run_pslog("simulate", "--rig", "paper3", "--timing", "typeA", "--duration", "0.5",
+                     "-o", folder / "s.mcap")
+    assert done.code == 0, done.stderr
+    done = run_pslog("export", folder / "s.mcap", "--detections", folder / "det.csv")
+    assert done.code == 0, done.stderr
+    done = run_pslog("fuse", folder / "s.mcap", "--method", "typeA", "-o",
+                     folder / "fused.mcap")
+    assert done.code == 0, done.stderr
+    (folder / "afile").write_text("not a folder\n", encoding="utf-8")
+    (folder / "clips").mkdir()
+    return folder
+
+
+#: every writer, its output given as {o}
+WRITERS = {
+    "simulate": ["simulate", "--rig", "rig.toml", "--duration", "0.3", "-o", "{o}"],
+    "import": ["import", "--rig", "rig.toml", "--detections", "det.csv", "-o", "{o}"],
+    "export --csv": ["export", "s.mcap", "--detections", "{o}"],
+    "fuse": ["fuse", "s.mcap", "--method", "typeA", "-o", "{o}"],
+    "recover": ["recover", "s.mcap", "-o", "{o}"],
+    "view --save": ["view", "s.mcap", "--save", "{o}"],
+    "rig export": ["rig", "export", "rig.toml", "--format", "anipose", "-o", "{o}"],
+    "calibrate": ["calibrate", "--points", "pts.csv", "--name", "cam9", "--width", "640",
+                  "--height", "480", "--rig", "{o}"],
+    "record": ["record", "--synthetic", "--rig", "rig.toml", "--fast", "-o", "{o}"],
+    "live --record": ["live", "--rig", "rig.toml", "--listen", "udp://127.0.0.1:0",
+                      "--duration", "1", "--record", "{o}"],
+}
+
+
+@pytest.mark.parametrize("writer, spelling", [(w, ".") for w in WRITERS] + [
+    ("simulate", "/"), ("fuse", "/")])  # ('/' takes the path '.' takes)
+def test_an_output_spelled_as_a_folder_without_a_name_is_refused_in_one_line(
+        writer, spelling, inputs):
+    """Was a traceback ending in "ValueError: PosixPath('.') has an empty name" (the
+    output's .partial was named before the output was found to be a folder)."""
+    before = fingerprint(inputs)
+    args = [a.format(o=spelling) for a in WRITERS[writer]]
+    assert_one_line_error(run_pslog(*args, cwd=inputs), 1,
+                          contains=f"{spelling} is a folder; give a file name")
+    assert_untouched(before, inputs)
+
+
+@pytest.mark.parametrize("args, contains", [
+    # was "output folder does not exist: .../afile" (it exists: a file)
+    (["simulate", "--rig", "rig.toml", "-o", "afile/x.mcap"],
+     "output folder afile is a regular file, not a folder"),
+    (["export", "s.mcap", "--detections", "afile/x.csv"],
+     "output folder afile is a regular file, not a folder"),
+    (["export", "fused.mcap", "--tum", "afile/traj"],
+     "--tum afile/traj: afile is a regular file, not a folder"),
+    (["simulate", "--rig", "rig.toml", "-o", "nowhere/x.mcap"],
+     "output folder does not exist: nowhere"),
+])
+def test_an_output_folder_that_is_a_file_is_named_as_a_file(args, contains, inputs):
+    before = fingerprint(inputs)
+    assert_one_line_error(run_pslog(*args, cwd=inputs), 1, contains=contains)
+    assert_untouched(before, inputs)
+
+
+@pytest.mark.parametrize("command", ["record", "live"])
+def test_a_folder_given_as_a_video_source_is_named_a_folder(command, inputs, tmp_path):
+    """Was "camera 'cam1': video file not found: clips" for a folder that exists."""
+    before = fingerprint(inputs)
+    out = (["-o", tmp_path / "s.mcap"] if command == "record" else
+           ["--listen", "udp://127.0.0.1:0", "--duration", "1"])
+    assert_one_line_error(run_pslog(
+        command, "--rig", "rig.toml", "--source", "cam1=clips", *out, cwd=inputs), 1,
+        contains="camera 'cam1': clips is a folder, not a video file")
+    assert_one_line_error(run_pslog(
+        command, "--rig", "rig.toml", "--source", "cam1=missing.mp4", *out, cwd=inputs), 1,
+        contains="camera 'cam1': video file not found: missing.mp4")
+    assert_untouched(before, inputs)
+    assert not (tmp_path / "s.mcap").exists()
+
+
+@pytest.mark.parametrize("command", ["demo", "record"])
+def test_a_disk_full_before_the_first_byte_says_cannot_write_once(command, inputs, tmp_path):
+    """The demo on a disk already full said "cannot write d/session.mcap: cannot write
+    d/session.mcap: No space left on device; nothing was recorded; stopped the cameras; ..."
+    (the recorder's whole message taken for the OS's reason)."""
+    with contextlib.ExitStack() as stack:
+        disk = stack.enter_context(small_tmpfs(tmp_path / "disk", "64k"))
+        fill(disk)
+        before = fingerprint(disk)
+        args = (["demo", "--out", disk / "d", "--duration", "0.3"] if command == "demo" else
+                ["record", "--synthetic", "--rig", "rig.toml", "--fast", "--duration", "0.3",
+                 "-o", disk / "s.mcap"])
+        line = assert_one_line_error(run_pslog(*args, cwd=inputs, timeout=120), 1,
+                                     contains="No space left on device")
+        assert line.count("cannot write") == 1, line
+        assert ": No space left on device; " in line, line
+        assert_untouched(before, disk)
+
+
+@pytest.mark.parametrize("row, contains", [
+    # was "the 41 points are coplanar (off-plane spread 3.3e-300 of their extent)"
+    ("1e300,1,1,300,200", "x 1e300 is beyond any surveyed point (at most 1e+06 m from"),
+    ("1,1,-2e6,300,200", "z -2e6 is beyond any surveyed point"),
+    ("1,1,1,1e7,200", "u 1e7 is beyond any image (at most 655360 pixels)"),
+    ("1,1,1,300,-7e5", "v -7e5 is beyond any image"),
+])
+def test_calibrate_names_a_point_value_beyond_any_survey_or_image(row, contains, inputs,
+                                                                  tmp_path):
+    points = tmp_path / "pts.csv"
+    points.write_text((inputs / "pts.csv").read_text(encoding="utf-8") + row + "\n",
+                      encoding="utf-8")
+    before = fingerprint(inputs, tmp_path)
+    assert_one_line_error(run_pslog(
+        "calibrate", "--points", points, "--name", "cam1", "--width", "640", "--height", "480",
+        "--rig", tmp_path / "r.toml"), 1, contains=(f"pts.csv:42: {contains}",))
+    assert_untouched(before, inputs, tmp_path)
+
+
+def test_fuse_says_smooths_options_are_ignored_when_smooth_does_not_run(inputs, tmp_path):
+    """--rate, --detector-offset-mm and --detector-bias-px are smooth's: given to a fuse
+    that does not run smooth they were ignored without a word (--type-a-max-std-mm says so)."""
+    done = run_pslog("fuse", inputs / "s.mcap", "--method", "typeA", "--rate", "90",
+                     "--detector-offset-mm", "0", "--detector-bias-px", "1", "-o",
+                     tmp_path / "a.mcap")
+    assert done.code == 0 and not done.stderr, done.stderr
+    assert ("--rate 90, --detector-offset-mm 0, --detector-bias-px 1 ignored: smooth does "
+            "not run (name it with --method smooth)") in done.stdout.splitlines(), done.stdout
+    done = run_pslog("fuse", inputs / "s.mcap", "--method", "typeA,smooth", "--rate", "90",
+                     "-o", tmp_path / "b.mcap")
+    assert done.code == 0 and "ignored" not in done.stdout, done.stdout
+    done = run_pslog("fuse", inputs / "s.mcap", "--method", "typeA", "-o", tmp_path / "c.mcap")
+    assert done.code == 0 and "ignored" not in done.stdout, done.stdout
