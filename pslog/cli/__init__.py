@@ -221,7 +221,9 @@ def _main(argv: list[str] | None) -> int:
             import os
 
             _drop_stdout(real_stdout)
-            made = [p for p in declared_files(args)[1] if os.path.exists(p)]
+            _, outputs, updates = declared_files(args)
+            # (and a file the command updated in place: calibrate's rig)
+            made = [p for p in outputs + updates if os.path.exists(p)]
             kept = f"; {', '.join(made)} written complete" if made else ""
             print(f"pslog {name}: error: {failed}{kept}", file=sys.stderr)
             return 1

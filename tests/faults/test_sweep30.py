@@ -155,3 +155,43 @@ def test_fuse_says_smooths_options_are_ignored_when_smooth_does_not_run(inputs, 
     assert done.code == 0 and "ignored" not in done.stdout, done.stdout
     done = run_pslog("fuse", inputs / "s.mcap", "--method", "typeA", "-o", tmp_path / "c.mcap")
     assert done.code == 0 and "ignored" not in done.stdout, done.stdout
+
+
+def test_calibrate_into_a_full_standard_output_says_its_rig_was_written(inputs, tmp_path):
+    """calibrate updates its --rig in place (an "update", not an "output" of the command
+    line): with standard output full it said "cannot write to standard output" alone, the rig
+    written all the same; now "...; r.toml written complete", as every other writer says.
+    A calibrate that fails keeps its one line about the failure."""
+    import os
+    import stat
+    import subprocess
+    import sys
+
+    from .promises import Run
+
+    full = tmp_path / "full"
+    try:
+        os.mknod(full, 0o666 | stat.S_IFCHR, os.makedev(1, 7))  # our own /dev/full
+    except PermissionError:
+        pytest.skip("mknod needs root")
+    rig = tmp_path / "r.toml"
+    for points, ends in (("pts.csv", f"No space left on device; {rig} written complete"),
+                         ("rig.toml", "got name = \"paper3\")")):
+        args = ["calibrate", "--points", inputs / points, "--name", "cam9", "--width", "640",
+                "--height", "480", "--rig", rig, "--force"]
+        with open(full, "w") as stdout:
+            proc = subprocess.run([sys.executable, "-m", "pslog.cli", *map(str, args)],
+                                  stdout=stdout, stderr=subprocess.PIPE, text=True, timeout=60)
+        line = assert_one_line_error(Run(tuple(map(str, args)), proc.returncode, "",
+                                         proc.stderr), 1)
+        assert line.endswith(ends), line
+    assert "cam9" in rig.read_text(encoding="utf-8")
+
+
+def test_import_of_one_row_says_one_detection_in_one_frame(inputs, tmp_path):
+    """Was "wrote s.mcap: 1 detections in 1 frames of 3 cameras"."""
+    (tmp_path / "one.csv").write_text("camera,time,u,v\ncam1,0.5,320,240\n", encoding="utf-8")
+    done = run_pslog("import", "--rig", inputs / "rig.toml", "--detections",
+                     tmp_path / "one.csv", "-o", tmp_path / "s.mcap")
+    assert done.code == 0, done.stderr
+    assert ": 1 detection in 1 frame of 3 cameras (cam1, cam2, cam3)" in done.stdout, done.stdout
