@@ -195,3 +195,35 @@ def test_import_of_one_row_says_one_detection_in_one_frame(inputs, tmp_path):
                      tmp_path / "one.csv", "-o", tmp_path / "s.mcap")
     assert done.code == 0, done.stderr
     assert ": 1 detection in 1 frame of 3 cameras (cam1, cam2, cam3)" in done.stdout, done.stdout
+
+
+def test_import_refuses_a_candidate_repeated_in_the_csv(inputs, tmp_path):
+    """A CSV appended to itself was imported as two candidates per frame (the ball's
+    candidate twice, at one pixel): typeA then left 22 of a session's 105 points out as in
+    doubt. Now refused, naming the first repeat; distinct candidates of one frame, and a
+    frame given twice as missed (u, v empty), stay accepted."""
+    rows = (inputs / "det.csv").read_text(encoding="utf-8").splitlines()
+    header, body = rows[0], rows[1:]
+    doubled = tmp_path / "doubled.csv"
+    doubled.write_text("\n".join([header, *body, *body]) + "\n", encoding="utf-8")
+    cam, t, u, v = body[0].split(",")[:4]
+    before = fingerprint(inputs, tmp_path)
+    assert_one_line_error(run_pslog(
+        "import", "--rig", inputs / "rig.toml", "--detections", doubled, "-o",
+        tmp_path / "s.mcap"), 1, contains=(
+        f"doubled.csv: lines 2 and {len(body) + 2} are the same candidate (camera {cam} at "
+        f"{t} s, pixel ({float(u):g}, {float(v):g})): rows repeated",))
+    assert_untouched(before, inputs, tmp_path)
+    # two more candidates, 0.5 px away in u and in v, and a missed frame given twice:
+    # accepted
+    fields = body[0].split(",")
+    beside = ",".join([*fields[:2], repr(float(u) + 0.5), *fields[3:]])
+    below = ",".join([*fields[:3], repr(float(v) + 0.5), *fields[4:]])
+    missed = f"{cam},{float(t) + 5:.9f},,,999,"
+    fine = tmp_path / "fine.csv"
+    fine.write_text("\n".join([header, *body, beside, below, missed, missed]) + "\n",
+                    encoding="utf-8")
+    done = run_pslog("import", "--rig", inputs / "rig.toml", "--detections", fine, "-o",
+                     tmp_path / "s.mcap")
+    assert done.code == 0, done.stderr
+    assert f"{len(body) + 2} detections in {len(body) + 1} frames" in done.stdout, done.stdout
