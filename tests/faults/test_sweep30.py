@@ -227,3 +227,21 @@ def test_import_refuses_a_candidate_repeated_in_the_csv(inputs, tmp_path):
                      tmp_path / "s.mcap")
     assert done.code == 0, done.stderr
     assert f"{len(body) + 2} detections in {len(body) + 1} frames" in done.stdout, done.stdout
+
+
+@pytest.mark.parametrize("blackout, starts", [("cam2=100:1", "100"), ("cam1=1e308:1", "1e+308"),
+                                              ("cam3=0.5:1", "0.5")])
+def test_simulate_refuses_a_blackout_that_starts_after_the_session(blackout, starts, tmp_path):
+    """Was accepted: a session that hid nothing, yet said "candidate faults: blackouts" and
+    kept the blackout in its metadata. The session here lasts 0.5 s (a blackout from 0.5 s
+    on would begin at its end)."""
+    before = fingerprint(tmp_path)
+    assert_one_line_error(run_pslog(
+        "simulate", "--rig", "paper3", "--duration", "0.5", "--blackout", blackout, "-o",
+        tmp_path / "s.mcap"), 2, contains=(
+        f"argument --blackout: camera {blackout.split('=')[0]}'s blackout starts at {starts} "
+        f"s, not before the session ends (0.5 s): it would hide nothing",))
+    assert_untouched(before, tmp_path)
+    done = run_pslog("simulate", "--rig", "paper3", "--duration", "0.5", "--blackout",
+                     "cam3=0.49:1", "-o", tmp_path / "s.mcap")
+    assert done.code == 0, done.stderr
