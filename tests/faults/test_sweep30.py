@@ -245,3 +245,22 @@ def test_simulate_refuses_a_blackout_that_starts_after_the_session(blackout, sta
     done = run_pslog("simulate", "--rig", "paper3", "--duration", "0.5", "--blackout",
                      "cam3=0.49:1", "-o", tmp_path / "s.mcap")
     assert done.code == 0, done.stderr
+
+
+@pytest.mark.parametrize("name, text, contains", [
+    ("cams.yml", "%YAML:1.0\n---\ncam: [1, 2\n", "line 3: Missing , between the elements"),
+    ("cams.xml", '<?xml version="1.0"?>\n<opencv_storage>\n<a>1</b>\n',
+     "line 3: Mismatched closing tag"),
+    ("det.csv", None, "line 1: Only collections as YAML streams are supported"),
+])
+def test_a_malformed_opencv_file_is_named_with_its_line_and_reason(name, text, contains,
+                                                                   inputs, tmp_path):
+    """Was "malformed OpenCV FileStorage file: parse" (OpenCV's function name alone)."""
+    path = inputs / name if text is None else tmp_path / name
+    if text is not None:
+        path.write_text(text, encoding="utf-8")
+    before = fingerprint(inputs, tmp_path)
+    assert_one_line_error(run_pslog("rig", "import", path, "--format", "opencv", "-o",
+                                    tmp_path / "r.toml"), 1,
+                          contains=f"{name}: malformed OpenCV FileStorage file: {contains}")
+    assert_untouched(before, inputs, tmp_path)
