@@ -222,8 +222,11 @@ def _main(argv: list[str] | None) -> int:
 
             _drop_stdout(real_stdout)
             _, outputs, updates = declared_files(args)
-            # (and a file the command updated in place: calibrate's rig)
-            made = [p for p in outputs + updates if os.path.exists(p)]
+            # (and a file the command updated in place: calibrate's rig; the folders and
+            # files of its own a command names, `kept_outputs`: --tum's folder, batch's summary)
+            kept_outputs = getattr(module, "kept_outputs", None)
+            own = kept_outputs(args) if kept_outputs is not None else []
+            made = [p for p in outputs + updates + own if os.path.exists(p)]
             kept = f"; {', '.join(made)} written complete" if made else ""
             print(f"pslog {name}: error: {failed}{kept}", file=sys.stderr)
             return 1

@@ -157,11 +157,8 @@ def test_fuse_says_smooths_options_are_ignored_when_smooth_does_not_run(inputs, 
     assert done.code == 0 and "ignored" not in done.stdout, done.stdout
 
 
-def test_calibrate_into_a_full_standard_output_says_its_rig_was_written(inputs, tmp_path):
-    """calibrate updates its --rig in place (an "update", not an "output" of the command
-    line): with standard output full it said "cannot write to standard output" alone, the rig
-    written all the same; now "...; r.toml written complete", as every other writer says.
-    A calibrate that fails keeps its one line about the failure."""
+def _into_full_stdout(args, tmp_path, cwd=None) -> str:
+    """``pslog ARGS`` with standard output a full device of our own: its one error line."""
     import os
     import stat
     import subprocess
@@ -170,22 +167,52 @@ def test_calibrate_into_a_full_standard_output_says_its_rig_was_written(inputs, 
     from .promises import Run
 
     full = tmp_path / "full"
-    try:
-        os.mknod(full, 0o666 | stat.S_IFCHR, os.makedev(1, 7))  # our own /dev/full
-    except PermissionError:
-        pytest.skip("mknod needs root")
+    if not full.exists():
+        try:
+            os.mknod(full, 0o666 | stat.S_IFCHR, os.makedev(1, 7))  # our own /dev/full
+        except PermissionError:
+            pytest.skip("mknod needs root")
+    with open(full, "w") as stdout:
+        proc = subprocess.run([sys.executable, "-m", "pslog.cli", *map(str, args)], cwd=cwd,
+                              stdout=stdout, stderr=subprocess.PIPE, text=True, timeout=120)
+    return assert_one_line_error(Run(tuple(map(str, args)), proc.returncode, "", proc.stderr),
+                                 1)
+
+
+def test_calibrate_into_a_full_standard_output_says_its_rig_was_written(inputs, tmp_path):
+    """calibrate updates its --rig in place (an "update", not an "output" of the command
+    line): with standard output full it said "cannot write to standard output" alone, the rig
+    written all the same; now "...; r.toml written complete", as every other writer says.
+    A calibrate that fails keeps its one line about the failure."""
     rig = tmp_path / "r.toml"
     for points, ends in (("pts.csv", f"No space left on device; {rig} written complete"),
                          ("rig.toml", "got name = \"paper3\")")):
-        args = ["calibrate", "--points", inputs / points, "--name", "cam9", "--width", "640",
-                "--height", "480", "--rig", rig, "--force"]
-        with open(full, "w") as stdout:
-            proc = subprocess.run([sys.executable, "-m", "pslog.cli", *map(str, args)],
-                                  stdout=stdout, stderr=subprocess.PIPE, text=True, timeout=60)
-        line = assert_one_line_error(Run(tuple(map(str, args)), proc.returncode, "",
-                                         proc.stderr), 1)
+        line = _into_full_stdout(["calibrate", "--points", inputs / points, "--name", "cam9",
+                                  "--width", "640", "--height", "480", "--rig", rig, "--force"],
+                                 tmp_path)
         assert line.endswith(ends), line
     assert "cam9" in rig.read_text(encoding="utf-8")
+
+
+@pytest.mark.parametrize("command", ["export --tum", "demo", "batch"])
+def test_a_full_standard_output_names_the_folders_a_command_wrote(command, inputs, tmp_path):
+    """export --tum, demo and batch write folders (and batch its summary tables), which the
+    line for a full standard output did not name ("cannot write to standard output: No space
+    left on device" alone): now "...; traj/ written complete", as for a file."""
+    if command == "export --tum":
+        args, made = ["export", inputs / "fused.mcap", "--tum", tmp_path / "traj"], [
+            f"{tmp_path / 'traj'}/"]
+    elif command == "demo":
+        args, made = ["demo", "--out", tmp_path / "d", "--duration", "0.3"], [
+            f"{tmp_path / 'd'}/"]
+    else:
+        args = ["batch", inputs / "s.mcap", "--do", "fuse", "-o", tmp_path / "b", "--workers",
+                "1"]
+        made = [f"{tmp_path / 'b' / 'summary.csv'}", f"{tmp_path / 'b' / 'summary.parquet'}"]
+    line = _into_full_stdout(args, tmp_path, cwd=inputs)
+    assert line.endswith(f"No space left on device; {', '.join(made)} written complete"), line
+    for path in made:
+        assert Path(path).exists(), path
 
 
 def test_import_of_one_row_says_one_detection_in_one_frame(inputs, tmp_path):
