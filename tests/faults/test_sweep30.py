@@ -291,3 +291,19 @@ def test_a_malformed_opencv_file_is_named_with_its_line_and_reason(name, text, c
                                     tmp_path / "r.toml"), 1,
                           contains=f"{name}: malformed OpenCV FileStorage file: {contains}")
     assert_untouched(before, inputs, tmp_path)
+
+
+def test_view_to_a_full_standard_output_is_one_line_when_it_fuses_on_the_fly(inputs,
+                                                                            tmp_path):
+    """view --stdout of a session without tracks printed its note "fused on the fly: typeA"
+    on stderr before the write failed: two lines. The notes now follow a complete write."""
+    line = _into_full_stdout(["view", inputs / "s.mcap", "--stdout"], tmp_path)
+    assert line.endswith("cannot write to standard output: No space left on device"), line
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-m", "pslog.cli", "view", inputs / "s.mcap",
+                           "--stdout"], capture_output=True, timeout=120)
+    assert done.returncode == 0 and done.stdout[:4] == b"RRF2", done.stdout[:4]
+    lines = done.stderr.decode().splitlines()
+    assert lines[0] == "fused on the fly: typeA" and lines[1].startswith("logged "), lines
