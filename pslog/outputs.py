@@ -148,6 +148,9 @@ def check_output_path(path: str | Path, force: bool, inputs: Iterable[str | Path
         # the usual spelling of standard output: never a file named "-" by surprise
         raise InputError("output '-': pslog writes files, not standard output; give a file "
                          "name (./- for a file named -)")
+    if not path.name:
+        # '.', '/', '': a folder by its spelling (and no name to give a .partial)
+        raise InputError(f"{spelled} is a folder; give a file name")
     partial = partial_path(path)
     for source in inputs:
         if same_file(path, source):
@@ -187,6 +190,9 @@ def check_output_path(path: str | Path, force: bool, inputs: Iterable[str | Path
                                    f"output")
     folder = path.parent
     if not folder.is_dir():
+        if folder.exists():
+            raise InputError(f"output folder {folder} is {file_kind(os.stat(folder).st_mode)}, "
+                             f"not a folder")
         raise InputError(f"output folder does not exist: {folder}")
     # fail before any long computation rather than after it; access() reports a read-only
     # file system (EROFS) even to root

@@ -200,8 +200,9 @@ def _record(rig: Rig, sources: Mapping[str, object], output: Path, options: Work
         writer = SessionWriter(output, rig, force=force, timing=timing or timing_label(rig),
                                source=source or "record", metadata=meta)
     except _WRITE_ERRORS as exc:  # an unwritable folder, a full disk: nothing recorded yet
-        raise RecordWriteError(f"cannot write {output}: {_reason(exc, output)}; nothing was "
-                               f"recorded") from None
+        reason = _reason(exc, output)
+        raise RecordWriteError(f"cannot write {output}: {reason}; nothing was recorded",
+                               reason) from None
     # with --force over an old session the writer writes <output>.partial, moved over the
     # old session only once complete
     target = writer.target

@@ -4,6 +4,10 @@ cameras without genlock fused with the nominal timing, after sync and with the t
 from __future__ import annotations
 
 import json
+import re
+from pathlib import Path
+
+import pytest
 
 from pslog.paper import BEYOND_OFFSETS_S, PAPER_TABLE1
 
@@ -56,3 +60,17 @@ def test_beyond_is_for_table1_only(cli):
     code, out, err = cli("paper", "table2", "--beyond")
     assert code == 2 and out == ""
     assert len(err.strip().splitlines()) == 1 and "--beyond" in err and "table1" in err
+
+
+@pytest.mark.parametrize("table", ["table1", "table2"])
+def test_docs_paper_md_shows_what_the_command_prints(table, cli):
+    """docs/paper.md's copy of each table is the command's output (session 30: its Table 2
+    still showed type A's 876 points and 274.5 mm² after the command gave 897 and 272.7)."""
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "paper.md").read_text(
+        encoding="utf-8")
+    title = "Table 1:" if table == "table1" else "Table 2:"
+    blocks = re.findall(r"```\n(" + re.escape(title) + r".*?)```", doc, re.S)
+    assert len(blocks) == 1, blocks
+    code, out, _ = cli("paper", table)
+    assert code == 0
+    assert blocks[0] == out, f"docs/paper.md:\n{blocks[0]}\npslog paper {table}:\n{out}"

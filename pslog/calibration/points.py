@@ -22,7 +22,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from ..camera import Camera
+from ..camera import MAX_PIXEL, Camera
 from ..errors import InputError
 from ..inputs import check_input_file
 from ._common import (
@@ -39,6 +39,12 @@ from ._common import (
 )
 
 _POINT_COLUMNS = ("x", "y", "z", "u", "v")
+#: Largest magnitude of each column: a surveyed point 1000 km from the origin, or a pixel
+#: beyond any image, is a typo (the cameras' own bound, camera.py)
+_MAX_WORLD_M = 1e6
+_MAX_VALUE = (_MAX_WORLD_M,) * 3 + (MAX_PIXEL,) * 2
+_BEYOND = (f"any surveyed point (at most {_MAX_WORLD_M:g} m from the origin)",) * 3 + (
+    f"any image (at most {MAX_PIXEL:g} pixels)",) * 2
 _LM_CRITERIA = (cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 200, 1e-15)
 _DIST_FLAGS = {"k1": cv2.CALIB_FIX_K1, "k2": cv2.CALIB_FIX_K2, "k3": cv2.CALIB_FIX_K3}
 
@@ -108,6 +114,9 @@ def read_points_csv(path: str | Path, *, with_lines: bool = False):
                                  f"{text!r}") from None
             if not np.isfinite(value):
                 raise InputError(f"{path}:{line}: {_POINT_COLUMNS[j]} is not finite: {text!r}")
+            if abs(value) > _MAX_VALUE[j]:  # (else "coplanar" or a failed solve, not the cell)
+                raise InputError(f"{path}:{line}: {_POINT_COLUMNS[j]} {text} is beyond "
+                                 f"{_BEYOND[j]}")
             values[k, j] = value
         lines[k] = line
     points_world, uv = np.ascontiguousarray(values[:, :3]), np.ascontiguousarray(values[:, 3:])

@@ -221,7 +221,12 @@ def _main(argv: list[str] | None) -> int:
             import os
 
             _drop_stdout(real_stdout)
-            made = [p for p in declared_files(args)[1] if os.path.exists(p)]
+            _, outputs, updates = declared_files(args)
+            # (and a file the command updated in place: calibrate's rig; the folders and
+            # files of its own a command names, `kept_outputs`: --tum's folder, batch's summary)
+            kept_outputs = getattr(module, "kept_outputs", None)
+            own = kept_outputs(args) if kept_outputs is not None else []
+            made = [p for p in outputs + updates + own if os.path.exists(p)]
             kept = f"; {', '.join(made)} written complete" if made else ""
             print(f"pslog {name}: error: {failed}{kept}", file=sys.stderr)
             return 1

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 
 from ._common import add_force, add_method_option, checked_by, int_in
 
@@ -90,6 +91,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "steps completed (and whose input has not changed since); redo "
                              "the others")
     add_force(parser)
+
+
+def kept_outputs(args: argparse.Namespace) -> list[str]:
+    """What a run that completed wrote besides the sessions' results: the summary tables."""
+    from pslog.batch import SUMMARY_NAMES
+
+    return [os.path.join(args.outdir, name) for name in SUMMARY_NAMES]
 
 
 def run(args: argparse.Namespace) -> int:

@@ -8,6 +8,7 @@ ground truth beside the paper's Table 1, and saves a rerun recording to browse i
 from __future__ import annotations
 
 import argparse
+import os
 import time
 from pathlib import Path
 
@@ -56,10 +57,17 @@ def _output_folder(out: str | None, force: bool) -> tuple[Path, bool]:
 INTERRUPTED = 130
 
 
+def kept_outputs(args: argparse.Namespace) -> list[str]:
+    """What a run that completed wrote: its folder (--out, or the new demo-output/...)."""
+    folder = getattr(args, "folder", None)
+    return [os.path.join(folder, "")] if folder is not None else []
+
+
 def run(args: argparse.Namespace) -> int:
     from recorders.record import RecordWriteError
 
     folder, created = _output_folder(args.out, args.force)
+    args.folder = folder  # (for kept_outputs)
     before = set(folder.iterdir())
     try:
         code = _run(args, folder)

@@ -4,6 +4,7 @@ TUM trajectories (evo), JSON lines, Parquet or C3D (docs/interchange.md)."""
 from __future__ import annotations
 
 import argparse
+import os
 
 from ._common import add_force, declare_files
 
@@ -43,6 +44,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_force(parser)
     declare_files(parser, inputs=("session",),
                   outputs=("detections", "csv", "jsonl", "parquet", "c3d"))
+
+
+def kept_outputs(args: argparse.Namespace) -> list[str]:
+    """What a run that completed wrote besides its declared files: the --tum folder."""
+    return [os.path.join(args.tum, "")] if args.tum else []
 
 
 def run(args: argparse.Namespace) -> int:

@@ -175,6 +175,12 @@ def run(args: argparse.Namespace) -> int:
     if args.type_a_max_std_mm is not None and "typeA" not in methods:
         print(f"--type-a-max-std-mm {args.type_a_max_std_mm:g} ignored: typeA does not run "
               f"(name it with --method typeA)")
+    smooth_only = [f"--{name} {value:g}" for name, value in (
+        ("rate", args.rate), ("detector-offset-mm", args.detector_offset_mm),
+        ("detector-bias-px", args.detector_bias_px or None)) if value is not None]
+    if smooth_only and "smooth" not in methods:  # as silent, they would seem to have worked
+        print(f"{', '.join(smooth_only)} ignored: smooth does not run (name it with --method "
+              f"smooth)")
     if "smooth" in methods:  # a malformed PSLOG_SMOOTH_THREADS said now, not after gating
         from pslog.estimation._breaks import smooth_threads
 

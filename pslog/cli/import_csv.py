@@ -47,8 +47,10 @@ def run(args: argparse.Namespace) -> int:
                        source=f"pslog import {args.detections}", on_error="discard",
                        inputs=[args.detections], metadata=metadata) as writer:
         writer.add_detections(detections)
-    print(f"wrote {output}: {detections.n_candidates} detections in {detections.n_frames} "
-          f"frames of {len(rig)} camera{'s' if len(rig) != 1 else ''} ({', '.join(rig.names)})"
+    n, frames = detections.n_candidates, detections.n_frames
+    print(f"wrote {output}: {n} detection{'s' if n != 1 else ''} in {frames} "
+          f"frame{'s' if frames != 1 else ''} of {len(rig)} camera{'s' if len(rig) != 1 else ''} "
+          f"({', '.join(rig.names)})"
           + (f"; session clock origin {format_time(origin_ns)} s (the CSV's times = session "
              f"times + origin)" if origin_ns else ""))
     return 0

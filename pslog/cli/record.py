@@ -247,6 +247,7 @@ def parse_sources(rig, sources: list[str], offsets: list[str]) -> dict:
     """``NAME=SPEC`` strings (and ``NAME=SECONDS`` offsets) -> camera name -> source spec."""
     from pathlib import Path
 
+    from pslog.inputs import special_file
     from recorders.sources import DeviceSpec, FileSpec
 
     offset_of: dict[str, float] = {}
@@ -277,7 +278,9 @@ def parse_sources(rig, sources: list[str], offsets: list[str]) -> dict:
                     raise MalformedSource(f"camera {name!r}: offset given both with @ and --offset")
                 path, offset = video, _seconds(at, text, name)
             if not Path(path).is_file():
-                raise InputError(f"camera {name!r}: video file not found: {path}")
+                kind = special_file(path) or ("a folder" if Path(path).is_dir() else None)
+                raise InputError(f"camera {name!r}: {path} is {kind}, not a video file" if kind
+                                 else f"camera {name!r}: video file not found: {path}")
             specs[name] = FileSpec(path, cam.width, cam.height, offset)
     for name in offset_of:
         if not isinstance(specs.get(name), FileSpec):

@@ -239,6 +239,11 @@ def run(args: argparse.Namespace) -> int:
             check_candidate_faults(rig, SimulationOptions(**{key: getattr(options, key)}))
         except InputError as exc:
             return usage_error("simulate", f"argument {option}: {exc}")
+    for name, start, _ in args.blackout:  # (else a session said to have blackouts, none in it)
+        if start >= duration:
+            return usage_error("simulate", f"argument --blackout: camera {name}'s blackout "
+                                           f"starts at {start:g} s, not before the session "
+                                           f"ends ({duration:g} s): it would hide nothing")
     # the session's rig holds the nominal clock (zeros): the faults are for 'pslog sync'
     # to find; their true values are kept in the metadata to score it
     from pslog import progress

@@ -146,8 +146,9 @@ def run(args: argparse.Namespace) -> int:
     data = load_view_data(args.sessions, methods=args.methods, start=args.start, end=args.end,
                           detail=detail)
     out = sys.stderr if args.stdout else sys.stdout
-    for note in data.notes:
-        print(note, file=out)
+    if not args.stdout:  # (on stderr, a note before a failed write would make two lines)
+        for note in data.notes:
+            print(note, file=out)
     rec = new_stream()
     progress.step("logging to rerun")
 
@@ -158,6 +159,8 @@ def run(args: argparse.Namespace) -> int:
     if args.stdout:  # through a pipe pslog copies: a failed write is one line, not a hang
         with rrd_stdout(rec):
             counts = log_view(rec, data, args.frames)
+        for note in data.notes:
+            print(note, file=out)
         report(counts)
         return 0
     if sink is None:

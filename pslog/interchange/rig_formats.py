@@ -40,6 +40,7 @@ TOML is always in metres: ``units`` given for one is refused.
 from __future__ import annotations
 
 import math
+import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -420,7 +421,11 @@ def _opencv_open(text: str, source: str):
     try:
         opened = storage.open(text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
     except cv2.error as exc:
-        reason = " ".join(str(exc.err or exc).split())
+        # OpenCV's words: "... parse in function '(3): Missing , between the elements'"
+        # (the line and why; the bare exc.err, e.g. "parse", says neither)
+        found = re.search(r"\((\d+)\): (.+?)'?\s*$", str(exc))
+        reason = (f"line {found.group(1)}: {found.group(2)}" if found else
+                  " ".join(str(exc.err or exc).split()))
         raise RigError(f"{source}: malformed OpenCV FileStorage file: {reason}") from None
     finally:
         cv2.utils.logging.setLogLevel(level)

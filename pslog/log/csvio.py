@@ -12,7 +12,8 @@ Detections CSV (import and export use exactly this format)::
   confidence in [0, 1] (optional, default 1).
 - Rows may come in any order. Rows with the same camera and time are the candidates of one
   frame (they must agree on ``frame``); one camera's frame index cannot appear at two
-  different times. Without a ``frame`` column, each camera's frames are
+  different times. A candidate given twice (camera, time, u, v equal: a file appended to
+  itself) is refused. Without a ``frame`` column, each camera's frames are
   numbered 0, 1, 2, ... in time order.
 - A frame without any candidate (the ball missed) is one row with ``u`` and ``v`` empty
   (``cam1,0.011111111,,,1,``): a frame, no candidate.
@@ -274,12 +275,40 @@ def _detections_from_rows(rig: Rig, cams, times, uv, frames, scores, path,
         # np.unique sorts by (camera, time): rank within each camera is the frame number
         starts = np.searchsorted(frame_camera, frame_camera, side="left")
         frame_index = np.arange(len(unique)) - starts
+    _check_no_repeated_candidate(rig, cams, times, uv, lines, path, missed, cand_frame)
     if missed is not None and missed.any():  # frames, not candidates
         keep = ~missed
         cand_frame, uv = cand_frame[keep], uv[keep]
         scores = None if scores is None else scores[keep]
     return Detections.from_frames(rig.names, frame_time, frame_camera, frame_index, cand_frame,
                                   uv, None, scores)
+
+
+def _check_no_repeated_candidate(rig: Rig, cams, times, uv, lines, path, missed,
+                                 cand_frame) -> None:
+    """InputError if one candidate (camera, time, u, v: to the bit) has two rows: a
+    detector gives a frame's candidates at distinct pixels, so a repeated row is a file
+    appended to itself, which would be fused as two candidates of one frame. Only the rows
+    of frames with several rows are compared (most frames have one)."""
+    rows = np.flatnonzero(~missed) if missed is not None else np.arange(len(cams))
+    rows = rows[np.bincount(cand_frame[rows])[cand_frame[rows]] > 1]
+    if len(rows) < 2:
+        return
+    keys = np.stack([cand_frame[rows].astype(np.int64),
+                     *np.ascontiguousarray(uv[rows]).view(np.int64).T], axis=1)
+    order = np.lexsort(keys.T[::-1])
+    same = np.flatnonzero((keys[order[1:]] == keys[order[:-1]]).all(axis=1))
+    if not len(same):
+        return
+    # of several repeats, the one whose second row comes first in the file
+    pairs = [sorted((int(lines[rows[order[k]]]), int(lines[rows[order[k + 1]]])))
+             for k in same]
+    first, second = min(pairs, key=lambda pair: (pair[1], pair[0]))
+    row = rows[int(np.flatnonzero(lines[rows] == first)[0])]
+    raise InputError(f"{path}: lines {first} and {second} are the same candidate (camera "
+                     f"{rig.names[cams[row]]} at {format_time(times[row])} s, pixel "
+                     f"({uv[row, 0]:g}, {uv[row, 1]:g})): rows repeated, as in a file appended "
+                     f"to itself; remove the repeats")
 
 
 def _check_one_time_per_frame(rig: Rig, frame_camera, frame_index, frame_time, cand_frame,

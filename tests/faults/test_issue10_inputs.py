@@ -50,9 +50,11 @@ def test_a_distractor_absurdly_far_away_is_refused_without_warnings(tmp_path, po
     assert not list(tmp_path.iterdir())
 
 
-@pytest.mark.parametrize("blackout", ["cam1=0:1e308", "cam1=1e308:1", "cam2=0.2:1e300"])
+@pytest.mark.parametrize("blackout", ["cam1=0:1e308", "cam2=0.2:1e300"])
 def test_a_blackout_longer_than_any_session_works(cli, tmp_path, blackout):
-    """round(inf ns) raised OverflowError (a traceback) for a blackout of 1e308 s."""
+    """round(inf ns) raised OverflowError (a traceback) for a blackout of 1e308 s. (One
+    that starts at 1e308 s is refused since session 30: it would hide nothing,
+    tests/faults/test_sweep30.py.)"""
     session = tmp_path / "s.mcap"
     code, _, err = cli("simulate", *SHORT, "--blackout", blackout, "-o", session)
     assert code == 0, err

@@ -117,4 +117,4 @@ def test_a_one_camera_import_says_one_camera(inputs, tmp_path):
     done = run_pslog("import", "--rig", str(tmp_path / "one.toml"), "--detections",
                      str(inputs / "det.csv"), "-o", str(tmp_path / "s.mcap"))
     assert done.code == 0, done.stderr
-    assert "frames of 1 camera (cam1)" in done.stdout, done.stdout
+    assert "1 detection in 1 frame of 1 camera (cam1)" in done.stdout, done.stdout
