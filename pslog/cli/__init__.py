@@ -101,6 +101,24 @@ class _Parser(argparse.ArgumentParser):
     def error(self, message: str):
         self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
 
+    def _print_message(self, message, file=None):
+        # argparse's own swallows a write's OSError: --help or --version into a full
+        # standard output then said nothing and exited 0
+        if not message:
+            return
+        file = sys.stderr if file is None else file
+        try:
+            file.write(message)
+            file.flush()
+        except OSError as err:
+            if file is sys.stderr:  # nowhere left to say it
+                return
+            _drop_stdout(file)
+            if isinstance(err, BrokenPipeError):  # the reader went away: nobody to tell
+                self.exit(1)
+            self.exit(1, f"{self.prog}: error: cannot write to standard output: "
+                         f"{err.strerror or err}\n")
+
 
 def _top_parser(commands: dict[str, tuple[str, str]]) -> argparse.ArgumentParser:
     from pslog import package_version

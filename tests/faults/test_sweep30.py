@@ -307,3 +307,14 @@ def test_view_to_a_full_standard_output_is_one_line_when_it_fuses_on_the_fly(inp
     assert done.returncode == 0 and done.stdout[:4] == b"RRF2", done.stdout[:4]
     lines = done.stderr.decode().splitlines()
     assert lines[0] == "fused on the fly: typeA" and lines[1].startswith("logged "), lines
+
+
+@pytest.mark.parametrize("args", [["--help"], ["--version"], ["fuse", "--help"]])
+def test_help_into_a_full_standard_output_is_one_line_and_exit_1(args, tmp_path):
+    """``pslog --help`` (``--version``, a command's ``--help``) into a full standard output
+    said nothing and exited 0 (argparse swallows its write's OSError): now one line, exit 1;
+    into a pipe whose reader took it all, exit 0 and the text as before."""
+    line = _into_full_stdout(args, tmp_path)
+    assert line.endswith("error: cannot write to standard output: No space left on device"), line
+    done = run_pslog(*args)
+    assert done.code == 0 and done.stdout.startswith(("usage: pslog", "pslog ")), done
