@@ -56,9 +56,10 @@ def main():
             extra = faults(rig, seed, span) if kind == "faults" else {}
             det, truth, _ = simulate_labelled(rig, motion, duration, SimulationOptions(
                 noise_px=0.3, seed=seed, miss_rate=misses, drop_rate=misses / 2, **extra))
-            fuse_detections(det, rig, ["filter"], FusionOptions())
+            # (the hold off: the filter as before session 30, the reference of every θ)
+            fuse_detections(det, rig, ["filter"], FusionOptions(filter_hold_nis=None))
             obs, r, gap, opts, doubt = cap["a"]
-            opts = opts or FM.FilterOptions()
+            opts = replace(opts or FM.FilterOptions(), hold_nis=None)
             base_tr = orig(obs, r, gap, opts, doubt)
             err0 = errors_m(base_tr, truth)
             n_sessions += 1
