@@ -29,7 +29,8 @@ and since session 25 an accepted jump's point and the next points of accepted de
 its instant, "A jump's instant": since session 27 those may also grow smaller, or be output
 where the reference withheld them — its replay takes the values in force at each update;
 and since session 29 every plain accepted update's point, its doubt on "no jump": "A plain
-update's doubt");
+update's doubt"; since session 30 a point held for the next camera may be withdrawn, counted
+``held``: "A point held for the next camera");
 prints how many rejected points changed, how many the new tree withholds (``uncertain``)
 and the largest change of ``std_m``; exit 1 on any other difference.
 
@@ -246,7 +247,7 @@ def compare_ref(old: dict, new: dict, plain: bool = True) -> int:
     bad = changed = withheld = rejected = accepted = starts = starts_changed = 0
     starts_withheld = jumps_changed = jumps_withheld = jumps = jumps_smaller = released = 0
     worst = worst_start = worst_jump = least_jump = worst_plain = 0.0
-    plain_changed = plain_withheld = 0
+    plain_changed = plain_withheld = held = 0
     for key in old:
         a, b = old[key], new[key]
         ka = list(zip(a["time_ns"].tolist(), a["camera"].tolist(), strict=True))
@@ -263,11 +264,15 @@ def compare_ref(old: dict, new: dict, plain: bool = True) -> int:
             print("  DIFFERS (points added, or an accepted point gone):", key)
             bad += 1
             continue
+        # since session 30 a plain update's point may be held for the next camera and
+        # withdrawn (counted ``held``: hold_nis, the default)
         more = b["dropped"].get("uncertain", 0) - a["dropped"].get("uncertain", 0)
+        held_more = b["dropped"].get("held", 0) - a["dropped"].get("held", 0)
+        held += held_more
         released += len(extra)
-        if more != len(gone) - len(extra) or {
-                k: v for k, v in a["dropped"].items() if k != "uncertain"} \
-                != {k: v for k, v in b["dropped"].items() if k != "uncertain"}:
+        if more + held_more != len(gone) - len(extra) or {
+                k: v for k, v in a["dropped"].items() if k not in ("uncertain", "held")} \
+                != {k: v for k, v in b["dropped"].items() if k not in ("uncertain", "held")}:
             print("  DIFFERS (withheld counts):", key, a["dropped"], b["dropped"])
             bad += 1
         starts_withheld += sum(1 for i in gone if a["init"][i] == 1.0)
@@ -323,7 +328,8 @@ def compare_ref(old: dict, new: dict, plain: bool = True) -> int:
           f"{jumps_smaller}), now withheld: {jumps_withheld}, released: {released}, largest "
           f"std_m increase {1e3 * worst_jump:.2f} mm, decrease {-1e3 * least_jump:.2f} mm; "
           f"plain updates' points with a larger std: {plain_changed}, now withheld: "
-          f"{plain_withheld}, largest std_m increase {1e3 * worst_plain:.2f} mm")
+          f"{plain_withheld}, largest std_m increase {1e3 * worst_plain:.2f} mm; withdrawn "
+          f"as held for the next camera (of those withheld): {held}")
     return 1 if bad else 0
 
 

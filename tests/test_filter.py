@@ -456,10 +456,11 @@ def test_non_ballistic_motions_are_followed_never_worse_than_type_a(name, limit)
     assert filt < limit * type_a, (filt, type_a)  # measured 0.42, 0.40, 0.49
     # the mutation: the ballistic model alone with the process noise held at accel_psd
     # (and without the turn model) fails it (measured 1.59, 2.34, 1.92; with its jumps'
-    # covariance their hypotheses' mixture, session 27, the spiral's 1.26: pinned off)
+    # covariance their hypotheses' mixture, session 27, the spiral's 1.26: pinned off; with
+    # the hold for the next camera, session 30, the spiral's 1.23: pinned off)
     fixed = evaluate(fuse_filter(obs, rig, options=FilterOptions(
         accel_adapt_rate=0.0, model_switch_per_s=0.0, turn_switch_per_s=0.0,
-        jump_mixture_cov=False)), truth).mean_mm
+        jump_mixture_cov=False, hold_nis=None)), truth).mean_mm
     assert fixed > 1.3 * type_a, (fixed, type_a)
 
 
@@ -570,7 +571,7 @@ def test_no_output_point_of_a_kicked_rally_is_further_than_5_cm(seed):
     err = errors_m(track, truth)
     assert np.all(np.isfinite(err)) and err.max() < 0.05, err.max()  # measured 15, 17 mm
     assert 0 < track.dropped["unconfirmed"] < 0.1 * len(track)
-    assert set(track.dropped) <= {"unconfirmed", "uncertain"}
+    assert set(track.dropped) <= {"unconfirmed", "uncertain", "held"}
     # the mutation: every point output (withhold off) has points 165 and 220 mm off
     every = fuse_filter(obs, rig, options=FilterOptions(withhold=False))
     assert errors_m(every, truth).max() > 0.05
@@ -625,8 +626,12 @@ def test_an_outlier_is_rejected_and_the_track_goes_on():
     assert track.quality["innovation_px"][row] > 50
     assert np.sum(track.quality["rejected"]) == 1
     assert errors_m(track, truth)[row] < 0.01  # the point is the prediction
-    # a few points later the tracks agree again
-    assert_allclose(track.position_world[row + 10:], clean.position_world[row + 10:], atol=2e-3)
+    # a few points later the tracks agree again (at the detections both output: the hold for
+    # the next camera may withdraw another point in one of them)
+    later = track.time_ns > track.time_ns[row + 10]
+    both, a, b = np.intersect1d(track.time_ns[later], clean.time_ns, return_indices=True)
+    assert len(both) >= 0.95 * np.count_nonzero(later)
+    assert_allclose(track.position_world[later][a], clean.position_world[b], atol=2e-3)
 
 
 def test_a_gap_longer_than_max_gap_restarts_the_track_from_a_window():
@@ -756,8 +761,11 @@ def test_streaming_equals_batch_exactly_with_misses_drops_and_outliers(clock, tu
         for k, n in p.dropped.items():
             dropped[k] = dropped.get(k, 0) + n
     assert dropped == batch.dropped and sum(dropped.values()) > 0
-    if not clock:  # no correction: each point comes out with its own detection
-        assert all(len(p) <= 1 for p in parts) and len(parts[-1]) == 0
+    if not clock:  # no correction: each point comes out with its own detection or, held for
+        # the next camera (session 30), with a later one's, the one that decides it
+        own = [np.count_nonzero(p.time_ns == logged.time_ns[i]) for i, p in enumerate(parts[:-1])]
+        assert all(np.all(p.time_ns <= logged.time_ns[i]) for i, p in enumerate(parts[:-1]))
+        assert 0 < len(batch) - sum(own) < 0.5 * len(batch)  # (some left late)
 
 
 def test_the_stream_exposes_the_filter_for_prediction_to_now():

@@ -1,5 +1,6 @@
 """``filter``: the batch's hold for the next camera (``FilterOptions.hold_nis``; issue 10,
-session 29; docs/methods.md "A point held for the next camera").
+session 29; θ = 2 by default since session 30; docs/methods.md "A point held for the next
+camera"; the stream's: tests/test_filter_hold_stream.py).
 
 A plain update's output point whose NIS exceeds ``hold_nis`` waits for the next detection of
 another camera: withdrawn (``Track.dropped["held"]``) if that detection made a jump placed
@@ -74,14 +75,14 @@ def test_the_batch_withdraws_what_the_rule_says_and_nothing_else(ncam, misses, s
                                 spurious_rate=spurious)
     detections, _ = simulate(rig, motion, None, options)
     obs = corrected_observations(detections, true_rig(rig, options))
-    default = fuse_filter(obs, rig)
+    default = fuse_filter(obs, rig, options=FilterOptions(hold_nis=None))
     rows = {k: i for i, k in enumerate(zip(default.time_ns.tolist(), default.camera.tolist(),
                                             strict=True))}
     for theta in (0.0, 2.0, 4.61):
         held = fuse_filter(obs, rig, options=FilterOptions(hold_nis=theta))
         gone = _points(default) - _points(held)
         assert _points(held) <= _points(default)
-        assert gone == _withdrawn_by_rule(obs, rig, FilterOptions(), theta)
+        assert gone == _withdrawn_by_rule(obs, rig, FilterOptions(hold_nis=None), theta)
         assert held.dropped.get("held", 0) == len(gone)
         # every point output is the default's, to the bit
         keep = [rows[k] for k in zip(held.time_ns.tolist(), held.camera.tolist(), strict=True)]
@@ -90,10 +91,10 @@ def test_the_batch_withdraws_what_the_rule_says_and_nothing_else(ncam, misses, s
             np.testing.assert_array_equal(col, default.quality[name][keep])
         if theta == 0.0:
             assert gone  # the rally's kicks withdraw some
-    # off: the default's points and counts
-    off = fuse_filter(obs, rig, options=FilterOptions(hold_nis=None))
-    np.testing.assert_array_equal(off.position_world, default.position_world)
-    assert off.dropped == default.dropped
+    # the default (session 30): θ = 2
+    np.testing.assert_array_equal(fuse_filter(obs, rig).position_world,
+                                  fuse_filter(obs, rig, options=FilterOptions(
+                                      hold_nis=2.0)).position_world)
 
 
 def test_the_first_point_after_a_kick_along_a_ray_is_withdrawn():
@@ -107,7 +108,7 @@ def test_the_first_point_after_a_kick_along_a_ray_is_withdrawn():
     motion = kicked(8.0 * toward / np.linalg.norm(toward), at)
     detections, truth = simulate(rig, motion, None, options)
     obs = corrected_observations(detections, true_rig(rig, options))
-    default = fuse_filter(obs, rig)
+    default = fuse_filter(obs, rig, options=FilterOptions(hold_nis=None))
     held = fuse_filter(obs, rig, options=FilterOptions(hold_nis=0.0))
     err0, err = errors_m(default, truth), errors_m(held, truth)
     first = np.flatnonzero(default.time_ns / 1e9 > at)[0]

@@ -73,9 +73,10 @@ def test_points_equal_offline_fusion(session, method, candidates):
     rig, det = session
     fuser = LiveFuser(rig, method, candidates=candidates, epoch_ns=EPOCH)
     points = _run(fuser, datagrams(det, rig))
-    # (live outputs typeA's long-gap points at once: pslog.fusion.confirm off)
-    _assert_same(points, fuse(det, rig, method, FusionOptions(gating=candidates,
-                                                             confirm_gaps=False)))
+    # (live outputs typeA's long-gap points at once: pslog.fusion.confirm off; the filter's
+    # at their detection: no hold for the next camera)
+    _assert_same(points, fuse(det, rig, method, FusionOptions(
+        gating=candidates, confirm_gaps=False, filter_hold_nis=None)))
     c = fuser.counters()
     assert c["received"] == c["fused"] == det.n_frames and c["points"] == len(points)
     assert sum(c[k] for k in COUNTERS if k not in ("received", "fused", "points")) == 0
@@ -696,7 +697,7 @@ def test_a_filter_points_datagram_covariance_is_the_published_one(tmp_path):
                                             candidates=False)
     assert len(points) == summary.counters["points"] > 150
     assert main(["fuse", str(path), "--method", "filter", "--gating", "off",
-                 "-o", str(fused)]) == 0
+                 "--filter-hold", "off", "-o", str(fused)]) == 0
     batch = read_session(fused).tracks["filter"]
     np.testing.assert_array_equal([p.t_capture_ns - epoch for p in points], batch.time_ns)
     np.testing.assert_array_equal([p.camera_index for p in points], batch.camera)
@@ -712,8 +713,10 @@ def test_a_filter_points_datagram_covariance_is_the_published_one(tmp_path):
     prep = prepare(timed_observations(session.detections, session.rig), rig)
     obs = prep.obs
     assert prep.doubt_px2 is None
-    assert_allclose(fuse_filter(obs, rig).quality["std_m"], q["std_m"], rtol=0, atol=0)
-    none = fuse_filter(obs, rig, options=FilterOptions(jump_rate_per_s=0.0))
+    live = FilterOptions(hold_nis=None)  # (live's: no hold for the next camera)
+    assert_allclose(fuse_filter(obs, rig, options=live).quality["std_m"], q["std_m"], rtol=0,
+                    atol=0)
+    none = fuse_filter(obs, rig, options=FilterOptions(jump_rate_per_s=0.0, hold_nis=None))
     # (it withholds fewer: the points the term lifted above max_std_m)
     assert set(batch.time_ns.tolist()) < set(none.time_ns.tolist())
     was = none.quality["std_m"][np.searchsorted(none.time_ns, batch.time_ns)]

@@ -36,5 +36,6 @@ def dirty_sessions(first: int, nseeds: int, fpss, misses: float):
                 det, truth, _ = simulate_labelled(rig, motion, duration, SimulationOptions(
                     noise_px=0.3, seed=seed, miss_rate=misses, drop_rate=misses / 2,
                     **faults(rig, seed, span)))
-                fuse_detections(det, rig, ["filter"], FusionOptions())
+                # (the hold for the next camera off: session 29's default; session 30's is on)
+                fuse_detections(det, rig, ["filter"], FusionOptions(filter_hold_nis=None))
                 yield fps, rig, label, truth, cap["a"]

@@ -89,6 +89,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(offline: the points just after an unseen kick left out as "
                              "contradicted); off: every point at once, as `pslog live` "
                              "emits them (default %(default)s)")
+    parser.add_argument("--filter-hold", choices=("on", "off"), default="on",
+                        help="filter: on: a point whose detection surprised the filter (NIS "
+                             "above 2) waits for the next camera's detection and is left "
+                             "out (held) when that detection places a jump before it; off: "
+                             "every point at its detection, as `pslog live` emits them "
+                             "(default %(default)s)")
     parser.add_argument("--type-a-max-std-mm", default=None,
                         type=number_at_most(1e6, "mm", "a kilometre", positive=True),
                         metavar="MM",
@@ -111,6 +117,7 @@ def run(args: argparse.Namespace) -> int:
     from pslog._jit import preload
     from pslog.errors import FusionError, RigError
     from pslog.fusion import (
+        FILTER_HOLD_NIS,
         METHODS,
         FusionOptions,
         check_method,
@@ -146,6 +153,8 @@ def run(args: argparse.Namespace) -> int:
                             gating=args.gating == "on",
                             confirm_gaps=args.confirm_gaps != "off",
                             confirm_every=args.confirm_gaps == "all",
+                            filter_hold_nis=FILTER_HOLD_NIS if args.filter_hold == "on"
+                            else None,
                             max_std_m=None if args.type_a_max_std_mm is None
                             else args.type_a_max_std_mm / 1e3,
                             detector_offset_m=None if args.detector_offset_mm is None

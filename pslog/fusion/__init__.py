@@ -41,6 +41,12 @@ from .prediction import fuse_predicted
 from .pseudo import PseudoStereoPoints, TypeAConstruction, fuse_type_a, pseudo_stereo_points
 from .stereo import Drops, fuse_nearest, fuse_sync, sync_groups
 
+#: The filter's hold for the next camera by default (``FilterOptions.hold_nis``,
+#: ``FusionOptions.filter_hold_nis``): a plain update's point whose NIS exceeds χ²₂'s mean
+#: (its 1 − 1/e quantile) waits for the next camera's detection (docs/methods.md, "A point
+#: held for the next camera"; session 30)
+FILTER_HOLD_NIS = 2.0
+
 #: Longest time span a fusion method may be asked to bridge, seconds (an hour): a longer
 #: one bridges nothing more, and overflows integer nanoseconds for absurd values.
 MAX_GAP_S = 3600.0
@@ -101,6 +107,11 @@ class FusionOptions:
         axis) of each camera's own constant bias, independent between cameras, through the
         fit's sensitivity to it (:func:`pslog.estimation.trajectory.bias_sensitivity`).
         None: 0
+    filter_hold_nis : float or None, filter: its hold for the next camera
+        (:attr:`pslog.fusion.filter.FilterOptions.hold_nis`, batch and stream alike: a
+        stream emits a held point when the detection that decides it arrives, one stagger
+        later); default :data:`FILTER_HOLD_NIS` (session 30); None: no hold, a point at its
+        own detection (``pslog live`` turns it off)
     """
 
     tolerance_s: float = 1e-3
@@ -113,6 +124,7 @@ class FusionOptions:
     max_std_m: float | None = None
     detector_offset_m: float | None = None
     detector_bias_px: float | None = None
+    filter_hold_nis: float | None = FILTER_HOLD_NIS
 
     def __post_init__(self) -> None:
         if not self.tolerance_s >= 0:
@@ -131,6 +143,11 @@ class FusionOptions:
         if self.detector_bias_px is not None and not 0 <= self.detector_bias_px <= 1e3:
             raise FusionError(f"detector bias must be in [0, 1000] pixels, got "
                               f"{self.detector_bias_px!r}")
+        if self.filter_hold_nis is not None and (
+                isinstance(self.filter_hold_nis, bool)
+                or not 0 <= self.filter_hold_nis < float("inf")):
+            raise FusionError(f"filter hold NIS must be finite and >= 0, got "
+                              f"{self.filter_hold_nis!r}")
         if self.max_std_m is not None and not self.max_std_m > 0:
             raise FusionError(f"max std must be > 0 metres, got {self.max_std_m!r}")
         if self.detector_offset_m is not None and not 0 <= self.detector_offset_m <= 1.0:
@@ -285,9 +302,10 @@ def _linear(prep: Prepared, rig: Rig, options: FusionOptions, *, drops: Drops | 
 
 
 def _filter(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
-    from .filter import fuse_filter
+    from .filter import FilterOptions, fuse_filter
 
-    return fuse_filter(prep.obs, rig, options.max_gap_s, doubt=prep.doubt_px2)
+    return fuse_filter(prep.obs, rig, options.max_gap_s,
+                       FilterOptions(hold_nis=options.filter_hold_nis), doubt=prep.doubt_px2)
 
 
 def _filter_stream(rig: Rig, options: FusionOptions):

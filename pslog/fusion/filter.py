@@ -127,6 +127,7 @@ from ..errors import FusionError
 from ..motion import Ball, G
 from ..records import NS, Observations, Track
 from ..rig import Rig
+from . import FILTER_HOLD_NIS
 
 #: Quality columns of a ``filter`` track, in order (module docstring).
 FILTER_QUALITY = ("std_m", "std_x_m", "std_y_m", "std_z_m", "innovation_px", "residual_px",
@@ -256,7 +257,8 @@ class FilterOptions:
     turn_rate_psd : float, spectral density of the turn rate's random walk, rad²/s³
     turn_rate_std : float, standard deviation of the turn rate when the model joins, rad/s
     withhold : bool, withhold unconfirmed and uncertain points (counted in
-        ``Track.dropped``); False: a point at every detection of a live track
+        ``Track.dropped``); False: a point at every detection of a live track (none held
+        either: ``hold_nis``)
     supported_drag_per_m : float, ``k_s`` of the supported model's quadratic drag, 1/m (0: a
         ball held, rolling or guided, whose support's forces dwarf the air's; the ballistic
         model keeps ``drag_per_m``); ``drag_per_m`` gives the filter before session 8
@@ -290,13 +292,15 @@ class FilterOptions:
         their likelihoods of the detection and the prior ``1 − exp(−λ_j Δt)``, about the
         no-jump mean, along its camera's ray (:func:`_surprise_term`): a large NIS makes
         the jump likely; the state is unchanged; False: none (before session 29)
-    hold_nis : float or None, :func:`fuse_filter` given these options only (the stream
-        does not hold; ``pslog fuse`` fuses with the defaults): a plain update's output
-        point whose NIS exceeds this waits for the next detection of another camera,
-        and is withheld (``held``) if that detection made a jump placed before it (the
-        jump's lag reaches back to it), was rejected, or the track was lost
-        first (or no such detection came); the streaming form has no hold (its points
-        leave at their detection). None (the default): no hold (session 29)
+    hold_nis : float or None, a plain update's output point whose NIS exceeds this waits
+        for the next detection of another camera, and is withheld (``held``) if that
+        detection made a jump placed before it (the jump's lag reaches back to it), was
+        rejected, or the track was lost first (or no such detection came: the session's
+        end); :func:`fuse_filter` and the stream (:class:`FilterStream`, whose held points
+        wait across pushes and leave when decided) alike; :meth:`BallFilter.push` does not
+        hold (its point leaves at its detection). Default 2 (:data:`pslog.fusion.
+        FILTER_HOLD_NIS`, χ²₂'s mean; session 30); None: no hold (``pslog live``); none
+        either with ``withhold`` False
     jump_rate_per_s : float, expected rate ``λ_j`` of velocity jumps (kicks, bounces), 1/s:
         a point's reported covariance adds the variance ``λ_j T σ_j² T² / 3`` along its
         camera's ray of a jump no other camera has seen in the time ``T`` since another
@@ -362,7 +366,7 @@ class FilterOptions:
     drag_std_per_m: float = 0.01
     drag_drift_s: float | None = 600.0
     surprise_cov: bool = True
-    hold_nis: float | None = None
+    hold_nis: float | None = FILTER_HOLD_NIS
 
     def __post_init__(self) -> None:
         for name in ("noise_px", "accel_psd", "accel_step_var", "gate", "jump_speed",
@@ -502,10 +506,10 @@ _OINSTANT = _OKS + 1  # 1: an accepted jump's instant published (_instant_term)
 _OJMIX = _OINSTANT + 1  # 1: a jump's covariance is its hypotheses' mixture's about the winner
 _ODRAG = _OJMIX + 1  # the drag's prior information 1/σ_k² (0: the drag not estimated)
 _OSURPRISE = _ODRAG + 1  # λ_j of a plain update's jump/no-jump mixture (0: none; session 29)
-_OHOLD = _OSURPRISE + 1  # the batch's hold for the next camera: its NIS (inf: none; session 29)
+_OHOLD = _OSURPRISE + 1  # the hold for the next camera: its NIS (inf: none; sessions 29, 30)
 _ODRAGQ = _OHOLD + 1  # the drag's random walk q_k = σ_k² / T_k, (1/m)²/s (0: none)
 _OSIZE = _ODRAGQ + 1
-#: the batch's held points at most at once (a camera alone past them: the later ones output)
+#: the held points at most at once (a camera alone past them: the later ones output)
 _HOLD_MAX = 8
 #: ``N`` (int64 options): max gap, window span, init_window, init_detections, max_rejects,
 #: window capacity
@@ -1860,7 +1864,7 @@ def _step(S, I, cams, O, N, t, cam, u, v, out):
 
 @kernel
 def _held(I, O, out, cam, pr, pc, pb, pn, index):
-    """The batch's held points (rows ``pr[:pn]``, cameras ``pc``, accepted detections of
+    """The held points (rows ``pr[:pn]``, cameras ``pc``, accepted detections of
     their own camera since ``pb``) against the point of camera ``cam`` just made (``out``):
     the first point of another camera releases a held one, or withdraws it (its ``index``
     made negative, ``-1 - index``) when it made a jump placed before the held detection (the
@@ -1882,20 +1886,19 @@ def _held(I, O, out, cam, pr, pc, pb, pn, index):
 
 
 @kernel
-def _run(S, I, cams, O, N, times, cameras, uv, start, rows, index, n_out):
+def _run(S, I, cams, O, N, times, cameras, uv, start, rows, index, n_out, pr, pc, pb, pn):
     """The batch loop: detections ``start:`` into the state, the points into ``rows`` (one
     row per point) and their detection's index into ``index``, from row ``n_out``; with
     ``hold_nis`` a held point later withdrawn keeps its row, its index ``-1 - index``
-    (:func:`_held`; the points held at a window fit — the track lost — or at the end are
-    withdrawn).
-    Returns ``(next detection, rows filled, status)``: status ``_NONE`` at the end, else a
-    window fit is needed for detection ``next`` (Python), which continues after it."""
+    (:func:`_held`; the points held at a window fit — the track lost — are withdrawn).
+    The points still held, ``pn`` of them (rows ``pr``, cameras ``pc``, accepted
+    detections of their camera since ``pb``: ``_HOLD_MAX`` each), are the caller's, kept
+    across calls (:class:`_Hold`): the end of the detections decides nothing.
+    Returns ``(next detection, rows filled, status, points held)``: status ``_NONE`` at the
+    end, else a window fit is needed for detection ``next`` (Python), which continues after
+    it."""
     out = np.empty(_OUT_COLS)
     hold = O[_OHOLD]
-    pr = np.empty(_HOLD_MAX, dtype=np.int64)
-    pc = np.empty(_HOLD_MAX, dtype=np.int64)
-    pb = np.empty(_HOLD_MAX, dtype=np.int64)
-    pn = 0
     for i in range(start, times.shape[0]):
         cam = cameras[i]
         status = _push(S, I, cams, O, N, times[i], cam, uv[i, 0], uv[i, 1], out)
@@ -1915,14 +1918,82 @@ def _run(S, I, cams, O, N, times, cameras, uv, start, rows, index, n_out):
                 pr[pn], pc[pn], pb[pn] = n_out, cam, 0
                 pn += 1
             n_out += 1
-        elif status != _NONE:
-            for k in range(pn):  # (a fit: no point of this track is confirmed now)
-                index[pr[k]] = -1 - index[pr[k]]
+        elif status != _NONE:  # (a fit: pn is 0, every held point withdrawn above)
             rows[n_out] = out
-            return i, n_out, status
-    for k in range(pn):  # never confirmed
-        index[pr[k]] = -1 - index[pr[k]]
-    return times.shape[0], n_out, _NONE
+            return i, n_out, status, pn
+    return times.shape[0], n_out, _NONE, pn
+
+
+@kernel
+def _step_held(S, I, cams, O, N, t, cam, u, v, out, P, R, T):
+    """:func:`_run`'s step for one detection (``t``, ``cam``, ``u``, ``v``: the stream's
+    one-detection path with ``hold_nis``), with the points waiting from earlier pushes
+    (``H`` = [held, waiting, leaving, withdrawn]: the held ones ``pr``, ``pc``, ``pb``
+    (:func:`_held`) among the ``H[1]`` waiting rows ``rows``, ``time``, ``camera``): the
+    held ones decided by this detection's point, the point (unless withheld) waiting
+    behind them or held too, and the rows no held one precedes any more, the withdrawn
+    left out (counted in ``H[3]``), moved to ``emit``, ``etime``, ``ecam`` (``H[2]`` of
+    them); ``index`` (capacity) is scratch. The arrays hold one row more than waits.
+    Returns ``(status, leaving, withdrawn, waiting, own)``, ``own`` True when the one row
+    leaving is this detection's point; on a window fit (``_FIT``, ``_FIT_OR_POINT``) only
+    the held points are decided (withdrawn: the track lost), their rows' ``index`` negative, and
+    Python goes on (:meth:`FilterStream._held_fit`). The arrays are packed in three (the
+    fewer a compiled call's arguments, the cheaper the call): ``P`` = (H, pr, pc, pb),
+    ``R`` = (rows, emit), ``T`` = (time, camera, index, etime, ecam) (:class:`_Hold`)."""
+    M = _HOLD_MAX
+    H, pr, pc, pb = P[0:4], P[4:4 + M], P[4 + M:4 + 2 * M], P[4 + 2 * M:4 + 3 * M]
+    rows, emit = R[0], R[1]
+    time, camera, index, etime, ecam = T[0], T[1], T[2], T[3], T[4]
+    pn, k = H[0], H[1]
+    for j in range(k):
+        index[j] = j
+    status = _push(S, I, cams, O, N, t, cam, u, v, out)
+    if pn and status == _POINT:
+        pn = _held(I, O, out, cam, pr, pc, pb, pn, index)
+    elif pn and status != _NONE:  # a window fit: the track was lost
+        for j in range(pn):
+            index[pr[j]] = -1 - index[pr[j]]
+        pn = 0
+    H[0] = pn
+    if status != _POINT and status != _NONE:
+        return status, 0, 0, k, False
+    if status == _POINT and _withheld(I, O, out[3]):
+        status = _NONE
+    if status == _POINT:
+        rows[k] = out
+        time[k], camera[k], index[k] = t, cam, k
+        if (out[11] > O[_OHOLD] and out[13] == 0.0 and out[14] == 0.0 and out[15] == 0.0
+                and pn < _HOLD_MAX):
+            pr[pn], pc[pn], pb[pn] = k, cam, 0
+            pn += 1
+        k += 1
+    first = k
+    for j in range(pn):
+        first = min(first, pr[j])
+    n_emit = n_gone = 0
+    for j in range(first):
+        if index[j] < 0:
+            n_gone += 1
+        else:
+            emit[n_emit] = rows[j]
+            etime[n_emit], ecam[n_emit] = time[j], camera[j]
+            n_emit += 1
+    m = 0
+    for j in range(first, k):
+        if index[j] < 0:
+            n_gone += 1
+            continue
+        for h in range(pn):
+            if pr[h] == j:
+                pr[h] = m
+        if m != j:
+            rows[m] = rows[j]
+            time[m], camera[m] = time[j], camera[j]
+        m += 1
+    H[0], H[1], H[2], H[3] = pn, m, n_emit, n_gone
+    # (one point leaving, this detection's own: the caller takes it from ``out``)
+    own = n_emit == 1 and status == _POINT and first == k and m == 0
+    return status, n_emit, n_gone, m, own
 
 
 # ---- the start's window fit (compiled: a start attempt runs it up to 2 x 5 times) -------------
@@ -2303,7 +2374,9 @@ class BallFilter:
         sk = options.drag_std_per_m
         O[_ODRAG] = 1.0 / (sk * sk) if sk > 0.0 else 0.0
         O[_OSURPRISE] = options.jump_rate_per_s if options.surprise_cov else 0.0
-        O[_OHOLD] = math.inf if options.hold_nis is None else options.hold_nis
+        # (withhold off: a point at every detection of a live track, none held either)
+        O[_OHOLD] = (math.inf if options.hold_nis is None or not options.withhold
+                     else options.hold_nis)
         O[_ODRAGQ] = (sk * sk / options.drag_drift_s
                       if sk > 0.0 and options.drag_drift_s is not None else 0.0)
         self._opts = O
@@ -2516,7 +2589,9 @@ class BallFilter:
         -------
         None when no point is made (no track yet, an unusable pixel, or a point withheld:
         counted in :attr:`dropped`); else ``(position (x, y, z), quality)`` with ``quality``
-        a tuple in the order of :data:`FILTER_QUALITY`.
+        a tuple in the order of :data:`FILTER_QUALITY`. The point leaves at its detection:
+        no hold for the next camera here (``hold_nis``: :class:`FilterStream` and
+        :func:`fuse_filter` hold).
         """
         out = self._out
         status = _step(self._S, self._I, self._cam_table, self._opts, self._nopts,
@@ -3092,13 +3167,20 @@ def _chi2_quantile(dof: int, z: float = 3.09) -> float:
 class FilterStream:
     """The streaming form for :class:`~pslog.fusion.stream.StreamFuser`: detections (true
     times, (time, camera) order) in, the Track of their points out; :attr:`filter` is the
-    :class:`BallFilter` (``predict`` to "now")."""
+    :class:`BallFilter` (``predict`` to "now").
+
+    With ``hold_nis`` (``FusionOptions.filter_hold_nis``) a held point stays pending across
+    pushes (:class:`_Hold`) until the detection that decides it arrives, and every later
+    point waits behind it, so the points leave in the batch's order; :meth:`flush` decides
+    what is still pending as the batch decides it at the session's end (withdrawn): every
+    push's and the flush's Tracks joined are :func:`fuse_filter`'s, for any chunking."""
 
     def __init__(self, rig: Rig, options) -> None:
-        # (no hold: a held point waits for detections of a later push, which the batch
-        # loop's hold, kept within one call, would withdraw at each push's end)
+        hold_nis = options.filter_hold_nis
         self.filter = BallFilter(rig, FilterOptions(max_gap_s=options.max_gap_s,
-                                                    hold_nis=None))
+                                                    hold_nis=hold_nis))
+        # the points held for the next camera and those behind them (None: no hold)
+        self._hold = None if hold_nis is None else _Hold()
         # the gate's doubt of the rows of the next push (StreamFuser sets it; None: none): a
         # choice in doubt is left out, as the batch leaves it out (:func:`fuse_filter`)
         self.next_doubt: np.ndarray | None = None
@@ -3109,7 +3191,16 @@ class FilterStream:
 
     def push(self, time_ns, camera, uv, frame_index=None) -> Track:
         doubt, self.next_doubt = self.next_doubt, None
-        return _track(self.filter, time_ns, camera, uv, doubt)
+        return _track(self.filter, time_ns, camera, uv, doubt, self._hold, final=False)
+
+    def flush(self) -> Track:
+        """The points still held or waiting behind a held one (end of stream): the held ones
+        withdrawn (``held``), as the batch withdraws them at the end of its detections."""
+        hold = self._hold
+        if hold is None or not hold.k:
+            return self._none
+        return _track(self.filter, np.zeros(0, np.int64), np.zeros(0, np.int64),
+                      np.zeros((0, 2)), None, hold, final=True)
 
     def push_one(self, time_ns: int, camera: int, u: float, v: float) -> Track:
         """One detection (Python int, int, float, float; checked by the caller): the Track
@@ -3124,6 +3215,8 @@ class FilterStream:
                                         {DOUBT: 1})
         I, out = flt._I, flt._out
         dropped = int(I[_IDROPC]), int(I[_IDROPU])
+        if self._hold is not None:
+            return self._held_one(time_ns, camera, u, v, dropped)
         status = _step(flt._S, I, flt._cam_table, flt._opts, flt._nopts, time_ns, camera, u,
                        v, out)
         point = status == _POINT or (status != _NONE and flt._fitted(status, out))
@@ -3138,6 +3231,141 @@ class FilterStream:
             time, position, camera_, quality = _NO_POINT
             return Track._of_frozen("filter", time, position, camera_, dict(quality), counts)
         return _one_point(time_ns, camera, out.tolist(), counts)
+
+    def _held_one(self, time_ns: int, camera: int, u: float, v: float,
+                  dropped: tuple[int, int]) -> Track:
+        """:meth:`push_one` with the hold (:func:`_step_held`): the points that leave with
+        this detection (the held ones it released, and the points behind them; its own
+        unless held), the withdrawn ones counted (``held``)."""
+        flt, hold = self.filter, self._hold
+        assert hold is not None
+        I, out = flt._I, flt._out
+        status, n_emit, n_gone, k, own = _step_held(
+            flt._S, I, flt._cam_table, flt._opts, flt._nopts, time_ns, camera, u, v, out,
+            hold.P, hold.R, hold.T)
+        if k + 2 > hold.capacity:  # (room for the next one's row)
+            hold.grow()
+        if status != _POINT and status != _NONE:  # (a window fit: the rare path)
+            return self._held_fit(time_ns, camera, status, dropped)
+        counts: dict[str, int] = {}
+        if dropped != (int(I[_IDROPC]), int(I[_IDROPU])):  # a point withheld (counted)
+            before = dict(zip(("unconfirmed", "uncertain"), dropped, strict=True))
+            counts = {c: n - before[c] for c, n in flt.dropped.items() if n > before[c]}
+        if n_gone:
+            counts[HELD] = n_gone
+        if own:  # (as without the hold)
+            return _one_point(time_ns, camera, out.tolist(), counts)
+        if n_emit == 1:
+            return _one_point(int(hold.etime[0]), int(hold.ecam[0]), hold.emit[0].tolist(),
+                              counts)
+        if n_emit:
+            return _rows_track(hold.emit[:n_emit].copy(), hold.etime[:n_emit].copy(),
+                               hold.ecam[:n_emit].copy(), 0, counts)
+        if not counts:
+            return self._none
+        time, position, camera_, quality = _NO_POINT
+        return Track._of_frozen("filter", time, position, camera_, dict(quality), counts)
+
+    def _held_fit(self, time_ns: int, camera: int, status: int,
+                  dropped: tuple[int, int]) -> Track:
+        """:meth:`_held_one`'s window fit: the held points withdrawn (the kernel's
+        ``index``), the fit's point (if any) behind the waiting rows, then as a push."""
+        flt, hold = self.filter, self._hold
+        assert hold is not None
+        out = flt._out
+        point = flt._fitted(status, out)
+        k = hold.k
+        rows, time, cams = (np.concatenate([a, b]) for a, b in zip(
+            hold.waiting(), (out[None, :] if point else np.zeros((0, _OUT_COLS)),
+                             np.array([time_ns] * point, np.int64),
+                             np.array([camera] * point, np.int64)), strict=True))
+        index = np.concatenate([hold.index[:k], np.arange(k, k + point, dtype=np.int64)])
+        before = dict(zip(("unconfirmed", "uncertain"), dropped, strict=True))
+        counts = {c: n - before[c] for c, n in flt.dropped.items() if n > before[c]}
+        return _rows_track(*hold.settle(rows, time, cams, index, final=False), counts)
+
+
+class _Hold:
+    """The points a streaming filter holds for the next camera (``hold_nis``), kept across
+    pushes: the held ones' rows ``pr[:n]`` (among the waiting rows), cameras ``pc`` and
+    accepted detections of their camera since ``pb`` (:func:`_held`), and the output rows
+    from the first held one on (the first :attr:`k` of :attr:`rows`, (capacity,
+    _OUT_COLS); their detections' :attr:`time` and :attr:`camera`), which leave in order
+    once no held point precedes them. ``H``: [held, waiting, leaving, withdrawn] of the
+    one-detection step (:func:`_step_held`, whose ``emit`` rows are those leaving)."""
+
+    def __init__(self) -> None:
+        m = _HOLD_MAX
+        # (packed for :func:`_step_held`: P = (H, pr, pc, pb), R = (rows, emit), T = (time,
+        # camera, index, etime, ecam); the names below are views)
+        self.P = np.zeros(4 + 3 * m, np.int64)
+        self.H, self.pr = self.P[0:4], self.P[4:4 + m]
+        self.pc, self.pb = self.P[4 + m:4 + 2 * m], self.P[4 + 2 * m:]
+        self.capacity = 0
+        self.R: np.ndarray = np.empty((2, 0, _OUT_COLS))
+        self.T: np.ndarray = np.empty((5, 0), np.int64)
+        self.rows: np.ndarray = self.R[0]
+        self.time: np.ndarray = self.T[0]
+        self.grow(16)
+
+    @property
+    def n(self) -> int:
+        """The points held."""
+        return int(self.H[0])
+
+    @n.setter
+    def n(self, value: int) -> None:
+        self.H[0] = value
+
+    @property
+    def k(self) -> int:
+        """The rows waiting (the held ones and those behind them)."""
+        return int(self.H[1])
+
+    def grow(self, capacity: int | None = None) -> None:
+        """Room for ``capacity`` rows (None: twice the present), the waiting ones kept."""
+        k = self.k if self.capacity else 0
+        capacity = capacity or 2 * self.capacity
+        R, T = np.empty((2, capacity, _OUT_COLS)), np.empty((5, capacity), np.int64)
+        if k:
+            R[0, :k], T[:2, :k] = self.R[0, :k], self.T[:2, :k]
+        self.R, self.T = R, T
+        self.capacity = capacity
+        self.rows, self.emit = R[0], R[1]
+        self.time, self.camera, self.index, self.etime, self.ecam = T[0], T[1], T[2], T[3], T[4]
+
+    def waiting(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The waiting rows (k, _OUT_COLS), their detections' times and cameras (k,)."""
+        k = self.k
+        return self.rows[:k], self.time[:k], self.camera[:k]
+
+    def settle(self, rows: np.ndarray, time: np.ndarray, camera: np.ndarray,
+               index: np.ndarray, final: bool
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+        """The rows (n, _OUT_COLS) of a push (the waiting ones first), their detections'
+        ``time`` and ``camera`` (n,) and ``index`` (n,: negative for a withdrawn one): those
+        before the first still held leave (``final``: every one, the held ones withdrawn),
+        the rest wait. Returns ``(rows, time, camera, withdrawn)`` of those leaving."""
+        if final:
+            for k in range(self.n):
+                index[self.pr[k]] = -1 - index[self.pr[k]]
+            self.n = 0
+        n = self.n
+        withdrawn = index < 0
+        n_held = int(np.count_nonzero(withdrawn))
+        first = int(self.pr[:n].min()) if n else len(index)
+        wait = first + np.flatnonzero(~withdrawn[first:])
+        # (a held row is never withdrawn: its new place among those waiting)
+        self.pr[:n] = np.searchsorted(wait, self.pr[:n])
+        if len(wait) + 2 > self.capacity:
+            self.grow(2 * (len(wait) + 2))
+        k = len(wait)
+        self.rows[:k], self.time[:k], self.camera[:k] = rows[wait], time[wait], camera[wait]
+        self.H[1] = k
+        keep = ~withdrawn[:first]
+        if n_held or first < len(index):
+            rows, time, camera = rows[:first][keep], time[:first][keep], camera[:first][keep]
+        return rows, time, camera, n_held
 
 
 def _frozen_empty() -> tuple:
@@ -3179,12 +3407,16 @@ DOUBT = "doubt"
 HELD = "held"
 
 
-def _track(flt: BallFilter, time_ns, camera, uv, doubt: np.ndarray | None = None) -> Track:
+def _track(flt: BallFilter, time_ns, camera, uv, doubt: np.ndarray | None = None,
+           hold: _Hold | None = None, final: bool = True) -> Track:
     """The Track of the points of detections pushed into ``flt``: one compiled loop
     (:func:`_run`) over them, back in Python only for a window fit. ``doubt`` (n,) the
     gate's doubt of each detection (:func:`pslog.fusion.gating.choice_doubt`; None: none):
     a detection in doubt is left out, counted in ``dropped`` as ``doubt`` (docs/methods.md,
-    "The filter and a choice in doubt")."""
+    "The filter and a choice in doubt"). ``hold``: the points held for the next camera
+    (``hold_nis``) and those waiting behind them, kept across calls (the stream's; None: a
+    new one, the batch's); ``final`` False leaves those still held waiting in it, True
+    withdraws them (the end of the session)."""
     times = np.ascontiguousarray(time_ns, dtype=np.int64).reshape(-1)
     cameras = np.ascontiguousarray(camera, dtype=np.int64).reshape(-1)
     uv = np.ascontiguousarray(np.asarray(uv, dtype=np.float64).reshape(-1, 2))
@@ -3201,6 +3433,14 @@ def _track(flt: BallFilter, time_ns, camera, uv, doubt: np.ndarray | None = None
             times, cameras = np.ascontiguousarray(times[keep]), np.ascontiguousarray(
                 cameras[keep])
             uv = np.ascontiguousarray(uv[keep])
+    if hold is None:  # (the batch's: every point decided at its end)
+        hold, final = _Hold(), True
+    waiting = hold.k
+    if waiting:  # the rows still waiting from earlier pushes, first (their detections done)
+        w_rows, w_time, w_camera = hold.waiting()
+        times = np.concatenate([w_time, times])
+        cameras = np.concatenate([w_camera, cameras])
+        uv = np.concatenate([np.zeros((waiting, 2)), uv])
     # (read-only views, whoever's the arrays: _run is given one type of them, so one
     # compiled signature serves fuse, the stream and the library's callers, and pslog.warm
     # compiles it)
@@ -3210,22 +3450,38 @@ def _track(flt: BallFilter, time_ns, camera, uv, doubt: np.ndarray | None = None
     before = flt.dropped
     rows = np.empty((n, _OUT_COLS))
     index = np.empty(n, dtype=np.int64)
-    i = n_out = 0
+    if waiting:
+        rows[:waiting] = w_rows
+        index[:waiting] = np.arange(waiting)
+    i = n_out = waiting
+    pn = hold.n
     args = (flt._S, flt._I, flt._cam_table, flt._opts, flt._nopts, times, cameras, uv)
     while i < n:
-        i, n_out, status = _run(*args, i, rows, index, n_out)
+        i, n_out, status, pn = _run(*args, i, rows, index, n_out, hold.pr, hold.pc, hold.pb,
+                                    pn)
         if status == _NONE:
             break
         if flt._fitted(status, rows[n_out]):  # the rare path: a window fit
             index[n_out] = i
             n_out += 1
         i += 1
+    hold.n = pn
     rows, index = rows[:n_out], index[:n_out]
-    n_held = int(np.count_nonzero(index < 0))
-    if n_held:  # the batch's hold for the next camera (hold_nis): withdrawn points
-        keep = index >= 0
-        rows, index = rows[keep], index[keep]
-        n_out = len(index)
+    time = times[np.abs(index) - (index < 0)]  # (a withdrawn one's -1 - i: i)
+    rows, time, cams, n_held = hold.settle(rows, time, cameras[np.abs(index) - (index < 0)],
+                                           index, final)
+    dropped = {k: n - before.get(k, 0) for k, n in flt.dropped.items()
+               if n > before.get(k, 0)}
+    if n_doubt:
+        dropped[DOUBT] = n_doubt
+    return _rows_track(rows, time, cams, n_held, dropped)
+
+
+def _rows_track(rows: np.ndarray, time: np.ndarray, camera: np.ndarray, n_held: int,
+                dropped: dict[str, int]) -> Track:
+    """The Track of the filter's output ``rows`` (n, _OUT_COLS), their detections' ``time``
+    and ``camera`` (n,), with ``dropped`` and ``n_held`` points withdrawn (``held``)."""
+    n_out = len(rows)
     # one row per quality column: each column a contiguous array, read-only as Track keeps
     # it (made here as Track's checks would leave it: no check, no copy)
     q = np.empty((len(FILTER_QUALITY), n_out))
@@ -3243,16 +3499,12 @@ def _track(flt: BallFilter, time_ns, camera, uv, doubt: np.ndarray | None = None
         init = rows[:, 15] == 1.0
         q[5, init] = rows[init, 9]
     q[6:] = rows[:, 11:16].T
-    time, position = times[index], np.ascontiguousarray(rows[:, :3])
-    cams = cameras[index].astype(np.int32)
+    time, position = np.array(time, np.int64), np.ascontiguousarray(rows[:, :3])
+    cams = camera.astype(np.int32)
     for c in (time, position, cams, q):
         c.setflags(write=False)
-    dropped = {k: n - before.get(k, 0) for k, n in flt.dropped.items()
-               if n > before.get(k, 0)}
-    if n_doubt:
-        dropped[DOUBT] = n_doubt
     if n_held:
-        dropped[HELD] = n_held
+        dropped = {**dropped, HELD: n_held}
     return Track._of_frozen("filter", time, position, cams,
                             dict(zip(FILTER_QUALITY, q, strict=True)), dropped)
 
@@ -3290,7 +3542,7 @@ def _preload() -> None:
 
     v, m, iv = a(f8, 1), a(f8, 2), a(i8, 1)
     _run.compile((v, iv, m, v, iv, a(i8, 1, True), a(i8, 1, True), a(f8, 2, True), i8, m,
-                  iv, i8))
+                  iv, i8, iv, iv, iv, i8))
     _window_fit.compile((m, iv, m, v, m, m, v, f8, f8, f8, f8, f8, f8, v, m, v))
     _turn_window_fit.compile((m, iv, m, v, v, f8, f8, f8, f8, f8, v, m, v, f8))
     _pixel_rows.compile((m, iv, m, v, v, v, m, v))

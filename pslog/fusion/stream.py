@@ -368,13 +368,13 @@ class StreamFuser:
             ends = final and hasattr(self.incremental, "flush")  # (points it still holds)
             if f == len(self._time):  # nothing new (a frame the gate or the queue holds)
                 if ends:
-                    return Track.concat([cast(Track, self._nothing), self.incremental.flush()])
+                    return _joined(cast(Track, self._nothing), self.incremental.flush())
                 return cast(Track, self._nothing)  # set whenever incremental is
             self._tell_doubt(self._doubt[f:])
             out = self.incremental.push(self._time[f:], self._camera[f:], self._uv[f:],
                                         self._frame[f:])
             if ends:
-                out = Track.concat([out, self.incremental.flush()])
+                out = _joined(out, self.incremental.flush())
             self._time, self._camera = self._time[-1:], self._camera[-1:]
             self._uv, self._frame = self._uv[-1:], self._frame[-1:]
             self._doubt = self._doubt[-1:]
@@ -505,6 +505,20 @@ def _one_detection(time_ns, camera, uv, frame_index, n_cameras: int
     if not (0 <= c < n_cameras and -2**63 <= t < 2**63):
         return None
     return t, c, u, v
+
+
+def _joined(first: Track, last: Track) -> Track:
+    """``first`` then ``last`` (:meth:`Track.concat`), ``first``'s columns kept when
+    ``last`` has no point (concat keeps the quality columns of parts with points only: a
+    push's empty Track keeps them all)."""
+    if len(last):
+        return Track.concat([first, last])
+    if not last.dropped:
+        return first
+    dropped = dict(first.dropped)
+    for k, n in last.dropped.items():
+        dropped[k] = dropped.get(k, 0) + n
+    return replace(first, dropped=dropped)
 
 
 def _empty(method: str) -> Track:
