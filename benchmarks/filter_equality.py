@@ -76,10 +76,10 @@ BASE_OPTIONS = compiled.FilterOptions(jump_rate_per_s=0.0, start_models=False, a
                                       supported_drag_per_m=compiled.FilterOptions().drag_per_m,
                                       max_std_m=base.FilterOptions().max_std_m,
                                       window_noise_prior=False, restart_prior=False,
-                                      # (session 25's, 27's and 29's; a --ref tree's --dump
+                                      # (session 25's, 27's, 29's and 30's; a --ref tree's --dump
                                       # may lack them)
                                       **{k: False for k in ("jump_instant", "jump_mixture_cov",
-                                                            "surprise_cov")
+                                                            "surprise_cov", "iterate_update")
                                          if k in compiled.FilterOptions.__dataclass_fields__},
                                       **{k: 0.0 for k in ("drag_std_per_m",)
                                          if k in compiled.FilterOptions.__dataclass_fields__})

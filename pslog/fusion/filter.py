@@ -287,6 +287,10 @@ class FilterOptions:
         exp(−score_k/2)`` (:func:`_mixture_about`): a narrow shape (a bounce) that wins a
         kick's one pixel no longer states the narrow shape's covariance; False: the
         winner's covariance alone (before session 27)
+    iterate_update : bool, an accepted update whose first (extended Kalman) step leaves its
+        own point more than ``3 σ`` (the pixel noise's) off the pixel the linearisation
+        predicted is iterated to the posterior's mode (Gauss-Newton, :func:`_iterated`;
+        the gate's NIS is still the prior's); False: one step (before session 30)
     surprise_cov : bool, a plain (not jump) accepted update's point publishes the mixture of
         "no jump" and "a jump (each shape) in the step before this detection", weighted by
         their likelihoods of the detection and the prior ``1 − exp(−λ_j Δt)``, about the
@@ -366,6 +370,7 @@ class FilterOptions:
     drag_std_per_m: float = 0.01
     drag_drift_s: float | None = 600.0
     surprise_cov: bool = True
+    iterate_update: bool = True
     hold_nis: float | None = FILTER_HOLD_NIS
 
     def __post_init__(self) -> None:
@@ -508,7 +513,8 @@ _ODRAG = _OJMIX + 1  # the drag's prior information 1/σ_k² (0: the drag not es
 _OSURPRISE = _ODRAG + 1  # λ_j of a plain update's jump/no-jump mixture (0: none; session 29)
 _OHOLD = _OSURPRISE + 1  # the hold for the next camera: its NIS (inf: none; sessions 29, 30)
 _ODRAGQ = _OHOLD + 1  # the drag's random walk q_k = σ_k² / T_k, (1/m)²/s (0: none)
-_OSIZE = _ODRAGQ + 1
+_OITER = _ODRAGQ + 1  # 1: an update far from its linearisation iterated (session 30)
+_OSIZE = _OITER + 1
 #: the held points at most at once (a camera alone past them: the later ones output)
 _HOLD_MAX = 8
 #: ``N`` (int64 options): max gap, window span, init_window, init_detections, max_rejects,
@@ -661,6 +667,78 @@ def _updated(x, P, inn):
             value = P[row + j] - (ki0 * inn[c0 + j] + ki1 * inn[c1 + j])
             Pn[row + j] = value
             Pn[n * j + i] = value
+    return xn, Pn
+
+
+#: the iterated update (session 30): it runs when the first step's own point reprojects more
+#: than this many σ (the pixel noise's) off the pixel its linearisation predicted
+_ITER_SIGMAS = 3.0
+#: the iterated update's most Gauss-Newton steps after the first
+_ITER_MAX = 10
+#: the iterated update stops when a step moves the position less than this, metres
+_ITER_TOL_M = 1e-7
+
+
+@kernel
+def _iterated(cams, cam, x, P, inn, u, v, var, O):
+    """The update of ``(x, P)`` (``n`` states, position first) by pixel ``(u, v)`` of
+    camera ``cam``, ``inn`` its innovation at ``x`` (:func:`_innovation`), pixel variance
+    ``var``: the Kalman step (:func:`_updated`), iterated when it is far from linear
+    (session 30; ``O[_OITER]``). Linearised at a prior hundreds of pixels from the
+    detection, the step is not the posterior's mode: its point's reprojection error ``r =
+    z − π(x⁺)`` differs from the linear prediction ``σ² S⁻¹ y``. When by more than
+    ``_ITER_SIGMAS σ``, the iterated extended Kalman update (Bell & Cathey, "The iterated
+    Kalman filter update as a Gauss-Newton method", IEEE Trans. AC 38(2), 1993):
+
+        x_{i+1} = x⁻ + K_i (z − h(x_i) − H_i (x⁻ − x_i)),   P_{i+1} = P⁻ − K_i H_i P⁻,
+
+    ``K_i`` from ``H_i`` at ``x_i``, each step kept while it lowers the posterior's cost
+    ``(x − x⁻)ᵀ P⁻⁻¹ (x − x⁻) + ‖z − h(x)‖²/σ²`` (the prior term ``y'ᵀ S_i⁻¹ y' −
+    σ² ‖S_i⁻¹ y'‖²`` for ``x − x⁻ = K_i y'``: no inverse), at most ``_ITER_MAX`` steps,
+    until a step moves the position less than ``_ITER_TOL_M`` (that step kept: ``P⁺``
+    from ``H`` at the mode). Otherwise (and when a point is behind the camera) the first
+    step, bit for bit. Returns ``(x⁺, P⁺)`` (new arrays)."""
+    xn, Pn = _updated(x, P, inn)
+    if O[_OITER] == 0.0:
+        return xn, Pn
+    ok, pu, pv, _, _, _, _, _, _ = _project(cams, cam, xn[0], xn[1], xn[2])
+    if not ok:
+        return xn, Pn
+    y0, y1, i00, i01, i11 = inn[0], inn[1], inn[2], inn[3], inn[4]
+    a0, a1 = i00 * y0 + i01 * y1, i01 * y0 + i11 * y1  # S⁻¹ y
+    r0, r1 = u - pu, v - pv
+    l0, l1 = r0 - var * a0, r1 - var * a1  # the linearisation's error at x⁺
+    if not l0 * l0 + l1 * l1 > _ITER_SIGMAS * _ITER_SIGMAS * var:
+        return xn, Pn
+    n = x.shape[0]
+    best = y0 * a0 + y1 * a1 - var * (a0 * a0 + a1 * a1) + (r0 * r0 + r1 * r1) / var
+    xi = xn
+    for _ in range(_ITER_MAX):
+        ok, ii = _innovation(cams, cam, xi, P, n, u, v, var)
+        if not ok:
+            break
+        # z − h(x_i) − H_i (x⁻ − x_i): the innovation at x⁻ of the linearisation at x_i
+        d0, d1, d2 = x[0] - xi[0], x[1] - xi[1], x[2] - xi[2]
+        y0 = ii[0] - (ii[7] * d0 + ii[8] * d1 + ii[9] * d2)
+        y1 = ii[1] - (ii[10] * d0 + ii[11] * d1 + ii[12] * d2)
+        ii[0], ii[1] = y0, y1
+        xj, Pj = _updated(x, P, ii)
+        ok, pu, pv, _, _, _, _, _, _ = _project(cams, cam, xj[0], xj[1], xj[2])
+        if not ok:
+            break
+        a0, a1 = ii[2] * y0 + ii[3] * y1, ii[3] * y0 + ii[4] * y1
+        r0, r1 = u - pu, v - pv
+        cost = y0 * a0 + y1 * a1 - var * (a0 * a0 + a1 * a1) + (r0 * r0 + r1 * r1) / var
+        s0, s1, s2 = xj[0] - xi[0], xj[1] - xi[1], xj[2] - xi[2]
+        done = s0 * s0 + s1 * s1 + s2 * s2 < _ITER_TOL_M * _ITER_TOL_M
+        if not (cost < best or done):  # a step that does not descend: the last one kept
+            break
+        # (converged: its covariance from the H at the mode, though rounding may have made
+        # the cost a hair higher)
+        best, xn, Pn = cost, xj, Pj
+        xi = xj
+        if done:
+            break
     return xn, Pn
 
 
@@ -1582,18 +1660,18 @@ def _push(S, I, cams, O, N, t, cam, u, v, out):
         accepted = nis_min <= gate
     nu_post = nu
     if accepted and solo:
-        xt, Pt = _updated(xt, Pt, inn)
+        xt, Pt = _iterated(cams, cam, xt, Pt, inn, u, v, var, O)
         xn, Pn, nis = xt[:6], _block6(Pt), inn[5]
         sy0, sy1, s00, s01, s11 = inn[0], inn[1], inn[2], inn[3], inn[4]
         xo0, xo1, xo2 = xt[0], xt[1], xt[2]
         v0, v1, v2 = Pt[0], Pt[8], Pt[16]
     elif accepted:
-        xn, Pn = _updated(x, P, inn)
+        xn, Pn = _iterated(cams, cam, x, P, inn, u, v, var, O)
         nis = inn[5]
         sy0, sy1, s00, s01, s11 = inn[0], inn[1], inn[2], inn[3], inn[4]
         if nu:
             nu_post = S[_SNUPOST]
-            xt, Pt = _updated(xt, Pt, inn_t)
+            xt, Pt = _iterated(cams, cam, xt, Pt, inn_t, u, v, var, O)
             # the mixture's innovation and S⁻¹ (the models' weighted by ν⁺); for the noise
             # update an approximation: the mixture's posterior residual is σ² Σ ν_j S_j⁻¹ y_j
             # plus the spread of the models' means, equal to this when one model holds
@@ -2379,6 +2457,7 @@ class BallFilter:
                      else options.hold_nis)
         O[_ODRAGQ] = (sk * sk / options.drag_drift_s
                       if sk > 0.0 and options.drag_drift_s is not None else 0.0)
+        O[_OITER] = float(options.iterate_update)
         self._opts = O
         self._nopts = np.array([self._max_gap_ns, self._init_span_ns, options.init_window,
                                 options.init_detections, options.max_rejects, capacity],
