@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from pslog.errors import PslogError
-from pslog.fusion import fuse
+from pslog.fusion import FusionOptions, fuse
 from pslog.live.protocol import (
     DetectionDatagram,
     decode_point,
@@ -26,6 +26,9 @@ from pslog.live.server import serve
 from pslog.live.sinks import JsonlSink, RecordSink, UdpSink
 from pslog.records import NS
 from tests._live import rally_session, subset
+
+#: offline fusion as live fuses: every point at its detection (no hold for the next camera)
+LIVE_AS_FUSED = FusionOptions(filter_hold_nis=None)
 
 #: a run that has not ended by then has hung
 HANG_S = 30.0
@@ -165,7 +168,7 @@ def test_bad_datagram_is_counted_dropped_and_fusion_goes_on(session, kind):
     assert not any(c[k] for k in others), c
     assert c["fused"] == keep.sum() and c["lost"] == 0
     assert f"{counter} {expected}" in result["status"].getvalue()
-    offline = fuse(subset(det, keep), rig, "filter")
+    offline = fuse(subset(det, keep), rig, "filter", LIVE_AS_FUSED)
     got = receiver.points
     assert len(got) == len(offline) == c["points"] > 0
     np.testing.assert_array_equal([p.t_capture_ns - result["epoch"] for p in got],
@@ -326,7 +329,7 @@ def test_with_a_hold_overtaken_frames_are_fused_over_real_udp(session):
             time.sleep(0.0005)
     c = result["summary"].counters
     assert c["reordered"] == c["late"] == 0 and c["fused"] == det.n_frames
-    offline = fuse(det, rig, "filter")
+    offline = fuse(det, rig, "filter", LIVE_AS_FUSED)
     got = receiver.points
     assert len(got) == len(offline)
     np.testing.assert_array_equal([p.t_capture_ns - result["epoch"] for p in got],
