@@ -168,3 +168,31 @@ def test_a_large_residual_the_linearisation_predicts_is_not_iterated():
     assert q["jump"] == 0.0 and q["rejected"] == 0.0
     assert q["residual_px"] > 3.0  # beyond 3 σ, but the linear model's own prediction
     assert out[0] == out[1]
+
+
+@pytest.mark.parametrize(("along", "iterated"), [(0.275, False), (0.325, True)])
+def test_the_trigger_is_three_sigma_of_the_linearisations_error(along, iterated):
+    """Camera 1's detection of :func:`_prior`'s state moved ``along`` camera 0's ray: the one
+    step leaves its point 1.12 px (2.8 σ at σ = 0.4 px) or 1.55 px (3.9 σ) off its own
+    detection, where the linear model predicts 0.02 px: the first is the one step bit for bit,
+    the second iterated to the mode (residual below 0.1 px). ``_ITER_SIGMAS`` 2.5 or 4 fails
+    one of the two."""
+    rig = lab_rig(3)
+    cam = rig.cameras[1]
+    p_true, x0, P0 = _prior(rig, along=along)
+    z = cam.project(p_true[None])[0][0]
+    out = []
+    for iterate in (False, True):
+        flt = BallFilter(rig, FilterOptions(**OPTIONS, iterate_update=iterate))
+        flt.set_state(T0, x0[:3], x0[3:], P0)
+        point, quality = flt.push(T1, 1, *z)
+        out.append((point, dict(zip(FILTER_QUALITY, quality, strict=True)), flt.state()))
+    r1 = out[0][1]["residual_px"]
+    assert (3.5 < r1 / 0.4 < 4.0) if iterated else (2.5 < r1 / 0.4 < 3.0)
+    assert out[0][1]["nis"] < 1.0 and out[0][1]["rejected"] == 0.0
+    if iterated:
+        assert out[1][1]["residual_px"] < 0.1
+    else:
+        assert out[0][0] == out[1][0] and out[0][1] == out[1][1]
+        assert out[0][2][1].tolist() == out[1][2][1].tolist()
+        assert out[0][2][2].tolist() == out[1][2][2].tolist()
