@@ -134,3 +134,65 @@ def test_an_update_near_its_prior_is_the_one_step_update_bit_for_bit():
         flt.set_state(T0, x0[:3], x0[3:], P0)
         out.append((flt.push(T1, 1, *z), flt.state()[1].tolist(), flt.state()[2].tolist()))
     assert out[0] == out[1]
+
+
+def test_a_large_residual_the_linearisation_predicts_is_not_iterated():
+    """The trigger is the linearisation's error ``‖r − σ² S⁻¹ y‖``, not the residual ``r``
+    itself: a settled state (its prediction ±0.1 mm, far below a pixel) meets a detection
+    3.5 σ off (NIS ≈ 12, accepted): the one step leaves its point about 3.5 σ off its own
+    detection, as the linear model predicts it (``r ≈ σ² S⁻¹ y``), so nothing is iterated:
+    the one-step update bit for bit. (A trigger on ``r`` alone, or on ``r + σ² S⁻¹ y``,
+    iterates here.)"""
+    rig = lab_rig(3)
+    cam = rig.cameras[1]
+    p_true = np.array([1.4, 1.1, 1.2])
+    v = np.array([1.5, -2.0, 1.0])
+    dt = (T1 - T0) / NS
+    options = {**OPTIONS, "noise_px": 1.0, "accel_psd": 1e-4}
+    # the prediction moved across the camera's ray so that it projects 3.5 px from z
+    z = cam.project(p_true[None])[0][0]
+    across = np.cross(p_true + np.asarray(cam.R).T @ np.asarray(cam.t), [0.0, 0.0, 1.0])
+    across /= np.linalg.norm(across)
+    px_per_m = np.linalg.norm(cam.project((p_true + 1e-4 * across)[None])[0][0] - z) / 1e-4
+    off = 3.5 / px_per_m * across
+    x0 = np.concatenate([p_true + off - v * dt - 0.5 * np.array([0.0, 0.0, -G]) * dt * dt, v])
+    P0 = np.diag([1e-4**2] * 3 + [1e-3**2] * 3)
+    out = []
+    for iterate in (False, True):
+        flt = BallFilter(rig, FilterOptions(**options, iterate_update=iterate))
+        flt.set_state(T0, x0[:3], x0[3:], P0)
+        point, quality = flt.push(T1, 1, *z)
+        out.append((point, quality, flt.state()[1].tolist(), flt.state()[2].tolist()))
+    q = dict(zip(FILTER_QUALITY, out[0][1], strict=True))
+    assert 3.2 < q["innovation_px"] < 3.8 and 9.0 < q["nis"] < 18.4
+    assert q["jump"] == 0.0 and q["rejected"] == 0.0
+    assert q["residual_px"] > 3.0  # beyond 3 σ, but the linear model's own prediction
+    assert out[0] == out[1]
+
+
+@pytest.mark.parametrize(("along", "iterated"), [(0.275, False), (0.325, True)])
+def test_the_trigger_is_three_sigma_of_the_linearisations_error(along, iterated):
+    """Camera 1's detection of :func:`_prior`'s state moved ``along`` camera 0's ray: the one
+    step leaves its point 1.12 px (2.8 σ at σ = 0.4 px) or 1.55 px (3.9 σ) off its own
+    detection, where the linear model predicts 0.02 px: the first is the one step bit for bit,
+    the second iterated to the mode (residual below 0.1 px). ``_ITER_SIGMAS`` 2.5 or 4 fails
+    one of the two."""
+    rig = lab_rig(3)
+    cam = rig.cameras[1]
+    p_true, x0, P0 = _prior(rig, along=along)
+    z = cam.project(p_true[None])[0][0]
+    out = []
+    for iterate in (False, True):
+        flt = BallFilter(rig, FilterOptions(**OPTIONS, iterate_update=iterate))
+        flt.set_state(T0, x0[:3], x0[3:], P0)
+        point, quality = flt.push(T1, 1, *z)
+        out.append((point, dict(zip(FILTER_QUALITY, quality, strict=True)), flt.state()))
+    r1 = out[0][1]["residual_px"]
+    assert (3.5 < r1 / 0.4 < 4.0) if iterated else (2.5 < r1 / 0.4 < 3.0)
+    assert out[0][1]["nis"] < 1.0 and out[0][1]["rejected"] == 0.0
+    if iterated:
+        assert out[1][1]["residual_px"] < 0.1
+    else:
+        assert out[0][0] == out[1][0] and out[0][1] == out[1][1]
+        assert out[0][2][1].tolist() == out[1][2][1].tolist()
+        assert out[0][2][2].tolist() == out[1][2][2].tolist()

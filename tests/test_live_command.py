@@ -615,8 +615,8 @@ def test_hold_fuses_frames_of_synchronised_shutters_that_overtake_one_another(tm
     received = int(re.search(r"datagrams (\d+) ", final).group(1))
     reordered = sum(int(n) for n in re.findall(r"reordered (\d+)", final))
     assert received > 60 and reordered <= 0.1 * received, final
-    code, _, err = cli("fuse", tmp_path / "s.mcap", "--method", "filter", "-o",
-                       tmp_path / "fused.mcap")
+    code, _, err = cli("fuse", tmp_path / "s.mcap", "--method", "filter", "--filter-hold",
+                       "off", "-o", tmp_path / "fused.mcap")
     assert code == 0, err
     live = read_session(tmp_path / "s.mcap").tracks["filter"]
     offline = read_session(tmp_path / "fused.mcap").tracks["filter"]
