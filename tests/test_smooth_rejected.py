@@ -139,3 +139,40 @@ def test_an_outlier_is_rejected_and_its_point_is_the_trajectorys(shift_px):
     grid = fuse(moved, rig, "smooth", FusionOptions(gating=False, rate_hz=200.0))
     assert len(grid) > 300 and np.all(np.isnan(grid.quality["rejected"]))
     assert grid.quality["gap_s"].max() >= gap[k] - 1e-12
+
+
+def test_the_viewer_draws_a_method_rejection_with_gating_off(tmp_path, cli):
+    """Fused with ``--gating off`` (no gate's rejections stored), a detection smooth's fit
+    rejected is drawn among its camera's rejected candidates all the same (it was drawn as a
+    detection: only a gated track's method rejections were looked for)."""
+    rig, detections, truth, _ = _issue_session()
+    session = tmp_path / "s.mcap"
+    with SessionWriter(session, rig, timing="custom", source="test") as writer:
+        writer.add_detections(detections)
+        writer.add_truth(truth)
+    code, _, err = cli("fuse", session, "--method", "smooth", "--gating", "off", "-o",
+                       tmp_path / "f.mcap")
+    assert code == 0, err
+    track = read_session(tmp_path / "f.mcap").tracks["smooth"]
+    rows = np.flatnonzero(track.quality["rejected"] == 1)
+    assert len(rows) >= 1
+    row = rows[0]
+    t0 = track.time_ns[row] / NS
+    start, end = f"{max(t0 - 0.05, 0.0):.6f}", f"{t0 + 0.05:.6f}"
+    code, _, err = cli("view", tmp_path / "f.mcap", "--method", "smooth", "--frames", "none",
+                       "--start", start, "--end", end, "--save", tmp_path / "v.rrd")
+    assert code == 0, err
+    chunks = temporal_chunks(tmp_path / "v.rrd")
+    cam = int(track.camera[row])
+    image = f"/world/cameras/{rig.cameras[cam].name}/image"
+    # every candidate of that frame drawn as rejected (the best-scored one, which the fit
+    # rejected, too), none as the camera's detection
+    (f,) = np.flatnonzero((detections.frame_camera == cam)
+                          & (detections.frame_time_ns == track.time_ns[row]))
+    n_cand = int(np.count_nonzero(detections.cand_frame == f))
+    for kind, drawn in (("rejected", n_cand), ("detections", 0)):
+        batches = chunks[f"{image}/{kind}"]
+        at = capture_times(batches) == track.time_ns[row]
+        points = [p for p, here in zip(batch_column(batches, "Points2D:positions"), at,
+                                       strict=True) if here]
+        assert len(points) == 1 and len(points[0]) == drawn, (kind, points)

@@ -27,10 +27,9 @@ def log_detections(rec, data: ViewData, clock: C.Clock) -> int:
     rejected_mask = gated_rejections(data)
     if rejected_mask is not None:  # the gating's choice, as stored with the shown track
         is_best = ~rejected_mask
-        counts = np.bincount(det.cand_frame, minlength=det.n_frames)
-        # and the chosen detections that track's method rejected itself (filter's gate,
-        # smooth's fit: ``rejected`` = 1): drawn as rejected too
-        is_best &= ~method_rejections(data, is_best)
+    # and the chosen detections the shown track's method rejected itself (filter's gate,
+    # smooth's fit: ``rejected`` = 1): drawn as rejected too, with gating on or off
+    is_best &= ~method_rejections(data, is_best)
     frame_in = data.in_window(det.frame_time_ns)
     n = 0
     for c, name in enumerate(det.camera_names):
@@ -69,24 +68,29 @@ def gated_rejections(data: ViewData):
 
 def method_rejections(data: ViewData, chosen: np.ndarray) -> np.ndarray:
     """(C,) bool over the session's candidates: of the ``chosen`` ones, those whose point in
-    the first shown track stored with its rejections is flagged ``rejected`` (the method
-    rejected the detection: the filter's gate, smooth's fit); its rows matched to the
-    frames by camera and (corrected) capture time through ``data.observations``."""
+    the shown track (the first stored with its rejections, else the first shown) is flagged
+    ``rejected`` (the method rejected the detection: the filter's gate, smooth's fit); its
+    rows matched to the frames by camera and (corrected) capture time through
+    ``data.observations``."""
     det = data.session.detections
     out = np.zeros(det.n_candidates, dtype=bool)
-    track = data.tracks.get(next(iter(data.rejections)))
+    name = next(iter(data.rejections or data.tracks), None)
+    track = None if name is None else data.tracks.get(name)
     flag = None if track is None else track.quality.get("rejected")
     if flag is None or not np.any(flag == 1):
         return out
     obs = data.observations
     rows = set(zip(track.camera[flag == 1].tolist(), track.time_ns[flag == 1].tolist(),
                    strict=True))
-    frames = {(c, f) for c, t, f in zip(obs.camera.tolist(), obs.time_ns.tolist(),
-                                       obs.frame_index.tolist(), strict=True) if (c, t) in rows}
+    near = np.flatnonzero(np.isin(obs.time_ns, track.time_ns[flag == 1]))  # (a few rows)
+    n_cams = max(len(det.camera_names), 1)
+    keys = [f * n_cams + c for c, t, f in zip(obs.camera[near].tolist(),
+                                              obs.time_ns[near].tolist(),
+                                              obs.frame_index[near].tolist(), strict=True)
+            if (c, t) in rows]
     cand = det.cand_frame
-    hit = np.array([k in frames for k in zip(det.frame_camera[cand].tolist(),
-                                             det.frame_index[cand].tolist(), strict=True)],
-                   dtype=bool)
+    hit = np.isin(det.frame_index[cand].astype(np.int64) * n_cams + det.frame_camera[cand],
+                  np.asarray(keys, dtype=np.int64))
     return hit & chosen
 
 

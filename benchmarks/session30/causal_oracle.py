@@ -1,23 +1,22 @@
 # ruff: noqa: E501
-"""Issue 10 (session 30): what any causal method could reach on two cameras at 30 fps — a
-clairvoyant extended Kalman filter told the rally's true model (gravity, the quadratic drag
-``k`` = 0.015 /m the tests' rallies are integrated with, ``tests/_rally.py``) and the true
-instants of every kick and bounce, against ``typeA`` and the ``filter`` on the same detections.
+"""Issue 10 (session 30): two cameras at 30 fps — an extended Kalman filter told the rally's
+true model (gravity, the quadratic drag ``k`` = 0.015 /m the tests' rallies are integrated
+with, ``tests/_rally.py``) and the true instants of every kick and bounce, against ``typeA``
+and the ``filter`` on the same detections.
 
 The oracle (per detection, at its corrected capture time, on the gated observations
 ``pslog fuse`` prepares): state ``(p, v)``; prediction by RK4 of ``a = -k |v| v - g ẑ`` in
 steps of at most 1 ms, its Jacobian by central differences; no process noise (the model is
 the truth's; 1e-12 m²/s³ kept for conditioning). At a true jump instant the position carries
 on, the velocity becomes a new draw: mean 0, per-axis standard deviation ``--sigma-jump``
-(6 m/s, the filter's σ_j) — the jump's *size* unknown, its *instant* known. Measurement: the
+(6 m/s, the filter's σ_j) — the jump's instant known, its new velocity not at all (not even
+a floor bounce's reflection, which these rallies make deterministic: so this is no bound on
+every causal method; docs/methods.md says what the bounce rule adds). Measurement: the
 detection's distorted pixel, ``h(p)`` the camera's projection, its Jacobian by differences,
-``R = σ_px² I`` (0.3 px, the simulation's). Start: the first two-camera pair triangulated
-(diffuse velocity). Output: the posterior mean at every detection whose position standard
-deviation ``sqrt(trace P_pp)`` is at most the filter's ``max_std_m`` (5 cm / 1.96; the filter
-withholds the others too: the first ray after an unseen jump over a long gap). For a linear-Gaussian
-model with known jump instants this is the minimum-mean-square causal estimator; the EKF's
-linearisation is tight at these noises (sub-millimetre steps). So ``oracle / typeA`` per
-session bounds what a causal method that must *detect* the jumps can reach.
+``R = σ_px² I`` (0.3 px, the simulation's), iterated EKF updates. Start: the latest
+two-camera pair triangulated (diffuse velocity). Output: the posterior mean at every
+detection whose position standard deviation ``sqrt(trace P_pp)`` is at most the filter's
+``max_std_m`` (5 cm / 1.96; the filter withholds the others too).
 
     PYTHONPATH=. python benchmarks/session30/causal_oracle.py --first-seeds 19000,19200
 """

@@ -91,9 +91,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "emits them (default %(default)s)")
     parser.add_argument("--filter-hold", choices=("on", "off"), default="on",
                         help="filter: on: a point whose detection surprised the filter (NIS "
-                             "above 2) waits for the next camera's detection and is left "
-                             "out (held) when that detection places a jump before it; off: "
-                             "every point at its detection, as `pslog live` emits them "
+                             "above 2) waits for another camera's next detection and is left "
+                             "out (held) when that detection places a jump before it, is "
+                             "rejected, or the track is lost first (or the session ends); "
+                             "off: every point at its detection, as `pslog live` emits them "
                              "(default %(default)s)")
     parser.add_argument("--type-a-max-std-mm", default=None,
                         type=number_at_most(1e6, "mm", "a kilometre", positive=True),
