@@ -3322,9 +3322,9 @@ class FilterStream:
         status, n_emit, n_gone, k, own = _step_held(
             flt._S, I, flt._cam_table, flt._opts, flt._nopts, time_ns, camera, u, v, out,
             hold.P, hold.R, hold.T)
-        if k + 2 > hold.capacity:  # (room for the next one's row)
-            hold.grow()
         if status != _POINT and status != _NONE:  # (a window fit: the rare path)
+            if k + 2 > hold.capacity:  # (room for the next one's row)
+                hold.grow()
             return self._held_fit(time_ns, camera, status, dropped)
         counts: dict[str, int] = {}
         if dropped != (int(I[_IDROPC]), int(I[_IDROPU])):  # a point withheld (counted)
@@ -3333,17 +3333,23 @@ class FilterStream:
         if n_gone:
             counts[HELD] = n_gone
         if own:  # (as without the hold)
-            return _one_point(time_ns, camera, out.tolist(), counts)
-        if n_emit == 1:
-            return _one_point(int(hold.etime[0]), int(hold.ecam[0]), hold.emit[0].tolist(),
-                              counts)
-        if n_emit:
-            return _rows_track(hold.emit[:n_emit].copy(), hold.etime[:n_emit].copy(),
-                               hold.ecam[:n_emit].copy(), 0, counts)
-        if not counts:
-            return self._none
-        time, position, camera_, quality = _NO_POINT
-        return Track._of_frozen("filter", time, position, camera_, dict(quality), counts)
+            track = _one_point(time_ns, camera, out.tolist(), counts)
+        elif n_emit == 1:
+            track = _one_point(int(hold.etime[0]), int(hold.ecam[0]),
+                               hold.emit[0].tolist(), counts)
+        elif n_emit:
+            track = _rows_track(hold.emit[:n_emit].copy(), hold.etime[:n_emit].copy(),
+                                hold.ecam[:n_emit].copy(), 0, counts)
+        elif not counts:
+            track = self._none
+        else:
+            time, position, camera_, quality = _NO_POINT
+            track = Track._of_frozen("filter", time, position, camera_, dict(quality), counts)
+        # (room for the next one's row: grown after the rows leaving were read, as grow
+        # copies only the waiting ones)
+        if k + 2 > hold.capacity:
+            hold.grow()
+        return track
 
     def _held_fit(self, time_ns: int, camera: int, status: int,
                   dropped: tuple[int, int]) -> Track:
