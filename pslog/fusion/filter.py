@@ -1964,6 +1964,23 @@ def _held(I, O, out, cam, pr, pc, pb, pn, index):
 
 
 @kernel
+def _push_held(S, I, cams, O, N, t, cam, u, v, out, pr, pc, pb, pn, index):
+    """:func:`_push` of one detection with the hold's ``pn`` points waiting (rows ``pr``,
+    cameras ``pc``, accepted detections of their camera since ``pb``): a point decides them
+    (:func:`_held`), a window fit (the track lost) withdraws them all (``index`` ``-1 -
+    index``). Returns ``(status, points still held)``; the batch's loop and the stream's
+    one-detection step alike."""
+    status = _push(S, I, cams, O, N, t, cam, u, v, out)
+    if pn and status == _POINT:
+        pn = _held(I, O, out, cam, pr, pc, pb, pn, index)
+    elif pn and status != _NONE:  # a window fit: the track was lost
+        for k in range(pn):
+            index[pr[k]] = -1 - index[pr[k]]
+        pn = 0
+    return status, pn
+
+
+@kernel
 def _run(S, I, cams, O, N, times, cameras, uv, start, rows, index, n_out, pr, pc, pb, pn):
     """The batch loop: detections ``start:`` into the state, the points into ``rows`` (one
     row per point) and their detection's index into ``index``, from row ``n_out``; with
@@ -1979,13 +1996,8 @@ def _run(S, I, cams, O, N, times, cameras, uv, start, rows, index, n_out, pr, pc
     hold = O[_OHOLD]
     for i in range(start, times.shape[0]):
         cam = cameras[i]
-        status = _push(S, I, cams, O, N, times[i], cam, uv[i, 0], uv[i, 1], out)
-        if pn and status == _POINT:
-            pn = _held(I, O, out, cam, pr, pc, pb, pn, index)
-        elif pn and status != _NONE:  # a window fit: the track was lost
-            for k in range(pn):
-                index[pr[k]] = -1 - index[pr[k]]
-            pn = 0
+        status, pn = _push_held(S, I, cams, O, N, times[i], cam, uv[i, 0], uv[i, 1], out,
+                                pr, pc, pb, pn, index)
         if status == _POINT and _withheld(I, O, out[3]):  # as _step
             status = _NONE
         if status == _POINT:
@@ -2025,13 +2037,7 @@ def _step_held(S, I, cams, O, N, t, cam, u, v, out, P, R, T):
     pn, k = H[0], H[1]
     for j in range(k):
         index[j] = j
-    status = _push(S, I, cams, O, N, t, cam, u, v, out)
-    if pn and status == _POINT:
-        pn = _held(I, O, out, cam, pr, pc, pb, pn, index)
-    elif pn and status != _NONE:  # a window fit: the track was lost
-        for j in range(pn):
-            index[pr[j]] = -1 - index[pr[j]]
-        pn = 0
+    status, pn = _push_held(S, I, cams, O, N, t, cam, u, v, out, pr, pc, pb, pn, index)
     H[0] = pn
     if status != _POINT and status != _NONE:
         return status, 0, 0, k, False
