@@ -22,11 +22,12 @@ def capture(obs, rig, max_gap_s=None, options=None, doubt=None):
 FM.fuse_filter = capture
 
 
-def dirty_sessions(first: int, nseeds: int, fpss, misses: float):
+def dirty_sessions(first: int, nseeds: int, fpss, misses: float, with_faults: bool = True):
     """bench_dirty ``--more``'s sessions (its five rigs at each rate of ``fpss``, its
-    faults, 0.3 px, the detector missing ``misses`` of the frames and dropping half as
-    many), each fused as ``pslog fuse`` does: yields ``(fps, rig, label, truth, (obs, rig,
-    max_gap_s, options, doubt))``, the filter's captured inputs."""
+    faults unless ``with_faults`` is False, 0.3 px, the detector missing ``misses`` of the
+    frames and dropping half as many), each fused as ``pslog fuse`` does: yields ``(fps,
+    rig, label, truth, (obs, rig, max_gap_s, options, doubt))``, the filter's captured
+    inputs."""
     for fps in fpss:
         for base in rigs() + more_rigs():
             rig = at_rate(base, fps)
@@ -35,7 +36,7 @@ def dirty_sessions(first: int, nseeds: int, fpss, misses: float):
                 span = motion.duration if duration is None else duration
                 det, truth, _ = simulate_labelled(rig, motion, duration, SimulationOptions(
                     noise_px=0.3, seed=seed, miss_rate=misses, drop_rate=misses / 2,
-                    **faults(rig, seed, span)))
+                    **(faults(rig, seed, span) if with_faults else {})))
                 # (the hold for the next camera off: session 29's default; session 30's is on)
                 fuse_detections(det, rig, ["filter"], FusionOptions(filter_hold_nis=None))
                 yield fps, rig, label, truth, cap["a"]

@@ -15,29 +15,16 @@ from dataclasses import replace
 import numpy as np
 
 sys.path.insert(0, "benchmarks")
+sys.path.insert(0, "benchmarks/session29")
 sys.path.insert(0, "tests")
-from bench_dirty import at_rate, faults, more_rigs, more_sessions, rigs
+from _capture import dirty_sessions, orig  # (importing it wraps fuse_filter)
 
 from pslog.evaluation import errors_m, mahalanobis_sq
-from pslog.fusion import FusionOptions
 from pslog.fusion import filter as FM
-from pslog.fusion.gating import fuse_detections
-from pslog.simulation import SimulationOptions, simulate_labelled
 
 #: χ²₂ quantiles p -> θ = -2 ln(1 - p); 1 - 1/e gives θ = 2 (session 29's θ, χ²₂'s mean)
 QUANTILES = (0.5, 1 - math.exp(-1), 0.75, 0.9, 0.95)
 THETAS = tuple(round(-2 * math.log(1 - p), 3) for p in QUANTILES)
-
-cap: dict = {}
-orig = FM.fuse_filter
-
-
-def capture(obs, rig, max_gap_s=None, options=None, doubt=None):
-    cap["a"] = (obs, rig, max_gap_s, options, doubt)
-    return orig(obs, rig, max_gap_s, options, doubt)
-
-
-FM.fuse_filter = capture
 
 
 def main():
@@ -48,38 +35,34 @@ def main():
            for th in keys}
     n_sessions = 0
     t0 = time.time()
-    for base in rigs() + more_rigs():
-        rig = at_rate(base, fps)
-        for seed, (_label, motion, duration, _) in enumerate(
-                more_sessions(nseeds, 8.0, first), start=first - 300):
-            span = motion.duration if duration is None else duration
-            extra = faults(rig, seed, span) if kind == "faults" else {}
-            det, truth, _ = simulate_labelled(rig, motion, duration, SimulationOptions(
-                noise_px=0.3, seed=seed, miss_rate=misses, drop_rate=misses / 2, **extra))
-            # (the hold off: the filter as before session 30, the reference of every θ)
-            fuse_detections(det, rig, ["filter"], FusionOptions(filter_hold_nis=None))
-            obs, r, gap, opts, doubt = cap["a"]
-            opts = replace(opts or FM.FilterOptions(), hold_nis=None)
-            base_tr = orig(obs, r, gap, opts, doubt)
-            err0 = errors_m(base_tr, truth)
-            n_sessions += 1
-            for th in keys:
-                tr = base_tr if th is None else orig(obs, r, gap, replace(opts, hold_nis=th), doubt)
-                err = errors_m(tr, truth)
-                ok = np.isfinite(err)
-                kept = np.isin(base_tr.time_ns * 8 + base_tr.camera, tr.time_ns * 8 + tr.camera)
-                d2 = mahalanobis_sq(tr, truth)
-                t = tot[th]
-                t["n"] += int(ok.sum())
-                t["far"] += int(np.sum(err[ok] > 0.05))
-                t["far_removed"] += int(np.sum(~kept & (err0 > 0.05)))
-                t["good_withdrawn"] += int(np.sum(~kept & (err0 <= 0.05)))
-                t["sum_err"] += float(np.sum(err[ok]))
-                d2 = d2[np.isfinite(d2)]
-                t["sum_d2"] += float(np.sum(d2))
-                t["n_d2"] += len(d2)
-                t["in2"] += int(np.sum(d2 <= 4.0))
-        print(f"# {rig.name} {time.time() - t0:.0f} s", flush=True)
+    last = None
+    for _fps, rig, _label, truth, (obs, r, gap, opts, doubt) in dirty_sessions(
+            first, nseeds, [fps], misses, with_faults=kind == "faults"):
+        if last is not None and rig.name != last:
+            print(f"# {last} {time.time() - t0:.0f} s", flush=True)
+        last = rig.name
+        # (the hold off, the filter as before session 30: the reference of every θ)
+        opts = replace(opts or FM.FilterOptions(), hold_nis=None)
+        base_tr = orig(obs, r, gap, opts, doubt)
+        err0 = errors_m(base_tr, truth)
+        n_sessions += 1
+        for th in keys:
+            tr = base_tr if th is None else orig(obs, r, gap, replace(opts, hold_nis=th), doubt)
+            err = errors_m(tr, truth)
+            ok = np.isfinite(err)
+            kept = np.isin(base_tr.time_ns * 8 + base_tr.camera, tr.time_ns * 8 + tr.camera)
+            d2 = mahalanobis_sq(tr, truth)
+            t = tot[th]
+            t["n"] += int(ok.sum())
+            t["far"] += int(np.sum(err[ok] > 0.05))
+            t["far_removed"] += int(np.sum(~kept & (err0 > 0.05)))
+            t["good_withdrawn"] += int(np.sum(~kept & (err0 <= 0.05)))
+            t["sum_err"] += float(np.sum(err[ok]))
+            d2 = d2[np.isfinite(d2)]
+            t["sum_d2"] += float(np.sum(d2))
+            t["n_d2"] += len(d2)
+            t["in2"] += int(np.sum(d2 <= 4.0))
+    print(f"# {last} {time.time() - t0:.0f} s", flush=True)
     print(f"set first={first} nseeds={nseeds} fps={fps:g} misses={misses} {kind}: {n_sessions} sessions")
     for th in keys:
         t = tot[th]
