@@ -1964,6 +1964,15 @@ def _held(I, O, out, cam, pr, pc, pb, pn, index):
 
 
 @kernel
+def _to_hold(O, out, pn):
+    """Whether the output point ``out`` waits for the next camera (``hold_nis``): a plain
+    update's (no jump, not rejected, no start) whose NIS exceeds ``O[_OHOLD]``, while fewer
+    than ``_HOLD_MAX`` points are held (``pn``)."""
+    return (out[11] > O[_OHOLD] and out[13] == 0.0 and out[14] == 0.0 and out[15] == 0.0
+            and pn < _HOLD_MAX)
+
+
+@kernel
 def _push_held(S, I, cams, O, N, t, cam, u, v, out, pr, pc, pb, pn, index):
     """:func:`_push` of one detection with the hold's ``pn`` points waiting (rows ``pr``,
     cameras ``pc``, accepted detections of their camera since ``pb``): a point decides them
@@ -1993,7 +2002,6 @@ def _run(S, I, cams, O, N, times, cameras, uv, start, rows, index, n_out, pr, pc
     end, else a window fit is needed for detection ``next`` (Python), which continues after
     it."""
     out = np.empty(_OUT_COLS)
-    hold = O[_OHOLD]
     for i in range(start, times.shape[0]):
         cam = cameras[i]
         status, pn = _push_held(S, I, cams, O, N, times[i], cam, uv[i, 0], uv[i, 1], out,
@@ -2003,8 +2011,7 @@ def _run(S, I, cams, O, N, times, cameras, uv, start, rows, index, n_out, pr, pc
         if status == _POINT:
             rows[n_out] = out
             index[n_out] = i
-            if (out[11] > hold and out[13] == 0.0 and out[14] == 0.0 and out[15] == 0.0
-                    and pn < _HOLD_MAX):
+            if _to_hold(O, out, pn):
                 pr[pn], pc[pn], pb[pn] = n_out, cam, 0
                 pn += 1
             n_out += 1
@@ -2046,8 +2053,7 @@ def _step_held(S, I, cams, O, N, t, cam, u, v, out, P, R, T):
     if status == _POINT:
         rows[k] = out
         time[k], camera[k], index[k] = t, cam, k
-        if (out[11] > O[_OHOLD] and out[13] == 0.0 and out[14] == 0.0 and out[15] == 0.0
-                and pn < _HOLD_MAX):
+        if _to_hold(O, out, pn):
             pr[pn], pc[pn], pb[pn] = k, cam, 0
             pn += 1
         k += 1
@@ -3306,8 +3312,7 @@ class FilterStream:
                        v, out)
         point = status == _POINT or (status != _NONE and flt._fitted(status, out))
         if dropped != (int(I[_IDROPC]), int(I[_IDROPU])):  # a point withheld (counted)
-            before = dict(zip(("unconfirmed", "uncertain"), dropped, strict=True))
-            counts = {k: n - before[k] for k, n in flt.dropped.items() if n > before[k]}
+            counts = _withheld_since(flt, dropped)
         elif not point:
             return self._none
         else:
@@ -3334,8 +3339,7 @@ class FilterStream:
             return self._held_fit(time_ns, camera, status, dropped)
         counts: dict[str, int] = {}
         if dropped != (int(I[_IDROPC]), int(I[_IDROPU])):  # a point withheld (counted)
-            before = dict(zip(("unconfirmed", "uncertain"), dropped, strict=True))
-            counts = {c: n - before[c] for c, n in flt.dropped.items() if n > before[c]}
+            counts = _withheld_since(flt, dropped)
         if n_gone:
             counts[HELD] = n_gone
         if own:  # (as without the hold)
@@ -3371,9 +3375,15 @@ class FilterStream:
                              np.array([time_ns] * point, np.int64),
                              np.array([camera] * point, np.int64)), strict=True))
         index = np.concatenate([hold.index[:k], np.arange(k, k + point, dtype=np.int64)])
-        before = dict(zip(("unconfirmed", "uncertain"), dropped, strict=True))
-        counts = {c: n - before[c] for c, n in flt.dropped.items() if n > before[c]}
-        return _rows_track(*hold.settle(rows, time, cams, index, final=False), counts)
+        return _rows_track(*hold.settle(rows, time, cams, index, final=False),
+                           _withheld_since(flt, dropped))
+
+
+def _withheld_since(flt: BallFilter, dropped: tuple[int, int]) -> dict[str, int]:
+    """The points ``flt`` withheld since its counts were ``dropped`` (unconfirmed,
+    uncertain), by reason."""
+    before = dict(zip(("unconfirmed", "uncertain"), dropped, strict=True))
+    return {k: n - before[k] for k, n in flt.dropped.items() if n > before[k]}
 
 
 class _Hold:
@@ -3558,9 +3568,8 @@ def _track(flt: BallFilter, time_ns, camera, uv, doubt: np.ndarray | None = None
         i += 1
     hold.n = pn
     rows, index = rows[:n_out], index[:n_out]
-    time = times[np.abs(index) - (index < 0)]  # (a withdrawn one's -1 - i: i)
-    rows, time, cams, n_held = hold.settle(rows, time, cameras[np.abs(index) - (index < 0)],
-                                           index, final)
+    source = np.abs(index) - (index < 0)  # each row's detection (a withdrawn one's -1 - i: i)
+    rows, time, cams, n_held = hold.settle(rows, times[source], cameras[source], index, final)
     dropped = {k: n - before.get(k, 0) for k, n in flt.dropped.items()
                if n > before.get(k, 0)}
     if n_doubt:
