@@ -69,12 +69,13 @@ def fuse_smooth(prep: Prepared, rig: Rig, options) -> Track:
         if "two cameras" in str(exc):
             return _empty()
         raise FusionError(f"smooth: {exc}") from None  # the fit's words, in fusion's context
+    rejected_all = fit.rejected  # (n,) the detections the fit rejected (Fit.rejected)
     if options.rate_hz is None:
         # the points with a finite position, gathered once (the covariances of a 90-minute
         # session are 35 MB: gathered and then filtered, they were copied twice); none
         # gathered when every observation has one (the fit's arrays are the track's)
         keep = fit.used & np.all(np.isfinite(fit.position), axis=1)
-        rejected = fit.rejected
+        rejected = rejected_all
         if np.all(keep):
             time_ns, camera = obs.time_ns, obs.camera
             position, cov, residual = fit.position, fit.covariance, fit.residual_px
@@ -98,7 +99,7 @@ def fuse_smooth(prep: Prepared, rig: Rig, options) -> Track:
         cov, residual = cov[keep], residual[keep]
         flag = np.full(len(time_ns), np.nan)  # a grid point is no detection
     # a rejected detection holds nothing of the trajectory: the gap runs across it
-    gap = _bridged(obs.time_ns[fit.used & ~fit.rejected], time_ns)
+    gap = _bridged(obs.time_ns[fit.used & ~rejected_all], time_ns)
     var = np.einsum("nii->ni", cov)
     quality = {"std_m": np.sqrt(var.sum(axis=1)), "std_x_m": np.sqrt(var[:, 0]),
                "std_y_m": np.sqrt(var[:, 1]), "std_z_m": np.sqrt(var[:, 2]),
