@@ -125,6 +125,12 @@ def _say_stderr(text: str) -> None:
     print(f"pslog: {text}", file=sys.stderr)
 
 
+def not_a_folder(path: str | Path) -> str:
+    """``"PATH is a regular file, not a folder"`` (its kind, :func:`pslog.inputs.file_kind`):
+    the words for an output's folder that exists as something else."""
+    return f"{path} is {file_kind(os.stat(path).st_mode)}, not a folder"
+
+
 def check_output_path(path: str | Path, force: bool, inputs: Iterable[str | Path] = (), *,
                       say: Callable[[str], None] | None = None) -> Path:
     """``path`` as a :class:`~pathlib.Path` if a file may be written there.
@@ -191,8 +197,7 @@ def check_output_path(path: str | Path, force: bool, inputs: Iterable[str | Path
     folder = path.parent
     if not folder.is_dir():
         if folder.exists():
-            raise InputError(f"output folder {folder} is {file_kind(os.stat(folder).st_mode)}, "
-                             f"not a folder")
+            raise InputError(f"output folder {not_a_folder(folder)}")
         raise InputError(f"output folder does not exist: {folder}")
     # fail before any long computation rather than after it; access() reports a read-only
     # file system (EROFS) even to root

@@ -30,8 +30,13 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError, OutputExistsError
-from ..inputs import file_kind
-from ..outputs import check_output_path, remove_when_done, replacing, write_error
+from ..outputs import (
+    check_output_path,
+    not_a_folder,
+    remove_when_done,
+    replacing,
+    write_error,
+)
 
 NS = 1_000_000_000
 #: the TUM file of the ground truth, beside one ``<method>.tum`` per method
@@ -94,8 +99,7 @@ def write_tum(session, folder: str | Path, *, force: bool = False) -> dict[str, 
     if not folder.exists():
         if not folder.parent.is_dir():
             if folder.parent.exists():
-                raise InputError(f"--tum {folder}: {folder.parent} is "
-                                 f"{file_kind(os.stat(folder.parent).st_mode)}, not a folder")
+                raise InputError(f"--tum {folder}: {not_a_folder(folder.parent)}")
             raise InputError(f"--tum {folder}: folder {folder.parent} does not exist")
         try:
             folder.mkdir()
