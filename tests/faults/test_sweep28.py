@@ -11,6 +11,7 @@ import pytest
 
 from pslog.rig import builtin_rig
 
+from ._inputs import write_points_csv
 from .promises import assert_one_line_error, assert_untouched, fingerprint, run_pslog
 
 SAMPLE = Path(__file__).resolve().parents[2] / "samples" / "throw.mcap"
@@ -20,12 +21,7 @@ SAMPLE = Path(__file__).resolve().parents[2] / "samples" / "throw.mcap"
 def inputs(tmp_path_factory) -> Path:
     folder = tmp_path_factory.mktemp("sweep28")
     (folder / "rig.toml").write_text(builtin_rig("paper3").to_toml(), encoding="utf-8")
-    cam = builtin_rig("paper3").cameras[0]
-    points = np.random.default_rng(0).uniform([0, 0, 0], [3, 2, 2], (40, 3))
-    uv, _ = cam.project(points)
-    (folder / "pts.csv").write_text("x,y,z,u,v\n" + "".join(
-        f"{x!r},{y!r},{z!r},{u!r},{v!r}\n" for (x, y, z), (u, v) in zip(
-            points.tolist(), uv.tolist(), strict=True)))
+    write_points_csv(folder / "pts.csv")
     (folder / "det.csv").write_text("camera,time,u,v\ncam1,0,1,1\n")
     (folder / "random.csv").write_bytes(bytes(range(120, 250)))
     (folder / "latin1.toml").write_bytes(b'name = "r\xe9"\n')

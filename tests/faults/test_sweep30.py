@@ -8,11 +8,11 @@ from __future__ import annotations
 import contextlib
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from pslog.rig import builtin_rig
 
+from ._inputs import write_points_csv
 from ._mounts import fill, small_tmpfs
 from .promises import assert_one_line_error, assert_untouched, fingerprint, run_pslog
 
@@ -21,12 +21,7 @@ from .promises import assert_one_line_error, assert_untouched, fingerprint, run_
 def inputs(tmp_path_factory) -> Path:
     folder = tmp_path_factory.mktemp("sweep30")
     (folder / "rig.toml").write_text(builtin_rig("paper3").to_toml(), encoding="utf-8")
-    cam = builtin_rig("paper3").cameras[0]
-    points = np.random.default_rng(0).uniform([0, 0, 0], [3, 2, 2], (40, 3))
-    uv, _ = cam.project(points)
-    (folder / "pts.csv").write_text("x,y,z,u,v\n" + "".join(
-        f"{x!r},{y!r},{z!r},{u!r},{v!r}\n" for (x, y, z), (u, v) in zip(
-            points.tolist(), uv.tolist(), strict=True)), encoding="utf-8")
+    write_points_csv(folder / "pts.csv")
     done = run_pslog("simulate", "--rig", "paper3", "--timing", "typeA", "--duration", "0.5",
                      "-o", folder / "s.mcap")
     assert done.code == 0, done.stderr

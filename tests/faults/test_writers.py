@@ -32,6 +32,7 @@ from pslog.cli import main
 from pslog.rig import builtin_rig
 
 from ._inprocess import first_case, run_inprocess
+from ._inputs import write_points_csv
 from ._mounts import CAP_DAC_OVERRIDE, drop_capability, fill, read_only, small_tmpfs
 from .promises import Run, assert_one_line_error, assert_untouched, fingerprint, run_pslog
 
@@ -52,22 +53,12 @@ def inputs():
                      "-o", str(folder / "fused.mcap")]) == 0
         assert main(["export", str(folder / "s.mcap"), "--detections",
                      str(folder / "det.csv")]) == 0
-        _points_csv(folder / "pts.csv")
+        write_points_csv(folder / "pts.csv")
         for f in folder.iterdir():
             f.chmod(0o644)
         yield folder
     finally:
         shutil.rmtree(folder, ignore_errors=True)
-
-
-def _points_csv(path: Path) -> None:
-    """Exact 3D-2D correspondences of paper3's cam1 (what 'calibrate --points' reads)."""
-    cam = builtin_rig("paper3").cameras[0]
-    points = np.random.default_rng(0).uniform([0, 0, 0], [3, 2, 2], (40, 3))
-    uv, _ = cam.project(points)
-    path.write_text("x,y,z,u,v\n" + "".join(
-        f"{x!r},{y!r},{z!r},{u!r},{v!r}\n" for (x, y, z), (u, v) in zip(
-            points.tolist(), uv.tolist(), strict=True)))
 
 
 # ---- the writers ------------------------------------------------------------------------
