@@ -82,6 +82,9 @@ BASE_OPTIONS = compiled.FilterOptions(jump_rate_per_s=0.0, start_models=False, a
                                                             "surprise_cov", "iterate_update")
                                          if k in compiled.FilterOptions.__dataclass_fields__},
                                       **{k: 0.0 for k in ("drag_std_per_m",)
+                                         if k in compiled.FilterOptions.__dataclass_fields__},
+                                      # (session 31's predicted floor contact)
+                                      **{k: None for k in ("floor_m",)
                                          if k in compiled.FilterOptions.__dataclass_fields__})
 
 COLUMNS = ("time_ns", "camera", "position", *compiled.FILTER_QUALITY)

@@ -124,7 +124,7 @@ import numpy as np
 
 from .._jit import kernel
 from ..errors import FusionError
-from ..motion import Ball, G
+from ..motion import BALL_RADIUS, Ball, G
 from ..records import NS, Observations, Track
 from ..rig import Rig
 from . import FILTER_HOLD_NIS
@@ -155,6 +155,10 @@ _BOUNCE_SIDE = 0.05
 #: A floor bounce's velocity about its expected reflection: standard deviations along
 #: gravity and across, m/s.
 _REFLECT_ALONG, _REFLECT_SIDE = 1.0, 0.6
+#: A predicted floor contact (``floor_m``) reflects the velocity only when the mean falls
+#: onto the floor faster than this, m/s: slower, the ball rolls or rests on it (the threshold
+#: of :func:`pslog.motion.bouncing`), so a ball on the floor does not bounce forever.
+_BOUNCE_MIN_SPEED = 0.05
 #: The process noise's adaptation statistic is clipped to this (an outlier moves q little).
 _R_CLIP = 4.0
 #: The ballistic model's probability at a track's start (its window is fitted ballistically).
@@ -204,6 +208,20 @@ class FilterOptions:
     restitution, bounce_friction : float, a floor bounce's expected reflection: the velocity
         along gravity times ``-restitution``, the rest times ``1 - bounce_friction`` (a golf
         ball on a floor)
+    floor_m : float or None, height of the ball's centre at a floor contact, metres, along
+        ``−ĝ`` (the world's z when gravity is along −z): the plane ``−ĝ·p = floor_m``; the
+        default, a golf ball's radius, is for a world whose ``z = 0`` is the floor. When a
+        prediction's mean path crosses it falling faster than 0.05 m/s, the prediction
+        stops at the contact, reflects the velocity (``restitution``, ``bounce_friction``)
+        and goes on; the covariance through the hybrid system's saltation matrix plus the
+        reflection's uncertainty (Kong, Payne, Council & Johnson, Automatica 131, 2021;
+        :func:`_bounced`; session 31). None: no predicted contact (before session 31): a
+        bounce is only found by the jump search
+    restitution_std, bounce_friction_std : float, standard deviations of a predicted floor
+        contact's ``restitution`` and ``bounce_friction`` (process noise of the reflection:
+        ``σ_e² v_d² ĝĝᵀ + σ_f² v_h v_hᵀ`` on the velocity); 0.1 each: a golf ball's
+        restitution on hard floors spans about 0.6–0.85 with speed and surface, and the
+        horizontal speed kept 0.8–1.0 with spin
     noise_prior_weight : float, shape ``α₀`` of the pixel variance's inverse-gamma prior
         ``IG(α₀, α₀ noise_px²)`` (so ``β/α = 1/E[σ⁻²] = noise_px²``, the variance the
         filter uses; with ``α₀ <= 1`` the prior has no mean): the prior counts as ``α₀``
@@ -340,6 +358,9 @@ class FilterOptions:
     bounce_shape: bool = True
     restitution: float = 0.7
     bounce_friction: float = 0.1
+    floor_m: float | None = BALL_RADIUS
+    restitution_std: float = 0.1
+    bounce_friction_std: float = 0.1
     max_rejects: int = 3
     init_detections: int = 4
     init_window: int = 8
@@ -423,6 +444,15 @@ class FilterOptions:
                 math.isfinite(self.hold_nis) and self.hold_nis >= 0)):
             raise FusionError(f"filter hold_nis must be finite and >= 0, got "
                               f"{self.hold_nis!r}")
+        if self.floor_m is not None and (isinstance(self.floor_m, bool) or not isinstance(
+                self.floor_m, (int, float)) or not math.isfinite(self.floor_m)):
+            raise FusionError(f"filter floor_m must be None (no floor) or a finite height in "
+                              f"metres, got {self.floor_m!r}")
+        for name in ("restitution", "bounce_friction", "restitution_std",
+                     "bounce_friction_std"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and 0.0 <= value <= 1.0):
+                raise FusionError(f"filter {name} must be in [0, 1], got {value!r}")
         if self.max_rejects < 1:
             raise FusionError(f"filter max_rejects must be >= 1, got {self.max_rejects}")
 
@@ -514,7 +544,10 @@ _OSURPRISE = _ODRAG + 1  # λ_j of a plain update's jump/no-jump mixture (0: non
 _OHOLD = _OSURPRISE + 1  # the hold for the next camera: its NIS (inf: none; sessions 29, 30)
 _ODRAGQ = _OHOLD + 1  # the drag's random walk q_k = σ_k² / T_k, (1/m)²/s (0: none)
 _OITER = _ODRAGQ + 1  # 1: an update far from its linearisation iterated (session 30)
-_OSIZE = _OITER + 1
+#: the floor's height ``floor_m`` (NaN: no predicted contact), the variances of the
+#: restitution and of the friction at a predicted contact (session 31)
+_OFLOOR, _OESTD2, _OFSTD2 = _OITER + 1, _OITER + 2, _OITER + 3
+_OSIZE = _OFSTD2 + 1
 #: the held points at most at once (a camera alone past them: the later ones output)
 _HOLD_MAX = 8
 #: ``N`` (int64 options): max gap, window span, init_window, init_detections, max_rejects,
@@ -747,8 +780,23 @@ def _predicted(x, P, dt, c, O, q):
     """Mean and covariance after ``dt`` seconds (new arrays), gravity and the ballistic
     model's drag weighted by its probability ``c`` (the models' mixture's mean: drag
     ``k_s + c (k - k_s)``, ``k_s`` the supported model's), white-noise acceleration ``q``
-    (Bar-Shalom et al. 2001, 6.2.2)."""
-    xn = _predicted_mean(x, dt, c, O)
+    (Bar-Shalom et al. 2001, 6.2.2). When the mean path crosses the floor (``O[_OFLOOR]``,
+    :func:`_contact`), the step is split at the contact instant ``s``: predicted to it, reset
+    by :func:`_bounced` (the reflection, the saltation matrix), predicted over ``dt - s``
+    (session 31)."""
+    s = _contact(x, dt, c, O)
+    if s < 0.0:
+        return _predicted_mean(x, dt, c, O), _cov_predicted(P, dt, q)
+    xc, Pc = _predicted_mean(x, s, c, O), _cov_predicted(P, s, q)
+    xb, Pb = _bounced(xc, Pc, c, O)
+    rest = dt - s
+    return _predicted_mean(xb, rest, c, O), _cov_predicted(Pb, rest, q)
+
+
+@kernel
+def _cov_predicted(P, dt, q):
+    """``F P Fᵀ + Q`` over ``dt`` seconds (a new array): ``F = [[I, Δt I], [0, I]]``, ``Q``
+    the white-noise acceleration's of density ``q`` (Bar-Shalom et al. 2001, 6.2.2)."""
     adt = abs(dt)
     q3, q2, q1 = q * adt ** 3.0 / 3.0, q * dt * adt / 2.0, q * adt  # 3.0: libm's pow
     dt2 = dt * dt
@@ -765,7 +813,118 @@ def _predicted(x, P, dt, c, O, q):
         Pn[ri + 3 + i] += q2
         Pn[vi + i] += q2
         Pn[vi + 3 + i] += q1
-    return xn, Pn
+    return Pn
+
+
+@kernel
+def _acceleration(v0, v1, v2, c, O):
+    """The models' mixture's acceleration ``c g − (k_s + c (k − k_s)) ‖v‖ v`` at velocity
+    ``v`` (:func:`_predicted_mean`'s, the same operations)."""
+    k = O[_OKS] + c * (O[_OK] - O[_OKS])
+    speed = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+    gx, gy, gz = c * O[_OG], c * O[_OG + 1], c * O[_OG + 2]
+    return gx - k * speed * v0, gy - k * speed * v1, gz - k * speed * v2
+
+
+@kernel
+def _contact(x, dt, c, O):
+    """The instant ``s`` in ``[0, dt]`` (seconds) at which the mean path of
+    :func:`_predicted_mean` (constant acceleration ``a``) reaches the floor ``h(p) = −ĝ·p =
+    floor_m`` from above, falling faster than ``_BOUNCE_MIN_SPEED`` there; −1 when it does
+    not (no floor, ``dt <= 0``, the mean already below the floor, not reaching it, or
+    slower: a ball rolling or at rest). ``s`` is the least root of ``h₀ − floor + w s +
+    a_h s²/2 = 0`` (``w = −ĝ·v``, ``a_h = −ĝ·a``; the quadratic's stable form)."""
+    floor = O[_OFLOOR]
+    if not (dt > 0.0) or floor != floor:
+        return -1.0
+    d0, d1, d2 = O[_ODOWN], O[_ODOWN + 1], O[_ODOWN + 2]
+    h0 = -(x[0] * d0 + x[1] * d1 + x[2] * d2) - floor
+    if not h0 >= 0.0:
+        return -1.0
+    w = -(x[3] * d0 + x[4] * d1 + x[5] * d2)
+    a0, a1, a2 = _acceleration(x[3], x[4], x[5], c, O)
+    ah = -(a0 * d0 + a1 * d1 + a2 * d2)
+    if not h0 + w * dt + 0.5 * ah * dt * dt < 0.0:
+        return -1.0
+    A, B, C = 0.5 * ah, w, h0
+    s = dt
+    if A == 0.0:
+        if B < 0.0:
+            s = -C / B
+    else:
+        disc = B * B - 4.0 * A * C
+        root = math.sqrt(disc) if disc > 0.0 else 0.0
+        qq = -0.5 * (B + (root if B >= 0.0 else -root))
+        for r in (qq / A, C / qq if qq != 0.0 else math.inf):
+            if 0.0 <= r < s:
+                s = r
+    # the speed towards the floor at the contact
+    if not -(w + ah * s) > _BOUNCE_MIN_SPEED:
+        return -1.0
+    return s
+
+
+@kernel
+def _bounced(x, P, c, O):
+    """The state just after a floor contact from ``(x, P)`` just before it (new arrays;
+    session 31). The reset ``R``: position kept, velocity ``v⁺ = D v⁻``, ``D = (1 − f)(I −
+    ĝĝᵀ) − e ĝĝᵀ`` (``e`` ``restitution``, ``f`` ``bounce_friction``). The covariance
+    through the saltation matrix of the hybrid system (Kong, Payne, Council & Johnson, "The
+    Salted Kalman Filter: Kalman filtering on hybrid dynamical systems", Automatica 131,
+    2021, eq. (7)): ``Ξ = D_xR + (f⁺ − D_xR f⁻) D_xg / (D_tg + D_xg f⁻)`` with the guard
+    ``g(x) = −ĝ·p − floor`` (``D_xg = (−ĝᵀ, 0)``, ``D_tg = 0``), ``f = (v, a(v))`` the
+    flow (the mixture's acceleration, :func:`_acceleration`), so with ``v_d = ĝ·v⁻ > 0``
+    ``Ξ = [[I + (v⁺ − v⁻) ĝᵀ / v_d, 0], [(a⁺ − D a⁻) ĝᵀ / v_d, D]]``; then ``P⁺ = Ξ P Ξᵀ
+    + Q_b``, ``Q_b`` the reflection's uncertainty on the velocity: ``σ_e² v_d² ĝĝᵀ + σ_f²
+    v_h v_hᵀ`` (``v_h = v⁻ − v_d ĝ``; ``∂v⁺/∂e = −v_d ĝ``, ``∂v⁺/∂f = −v_h``)."""
+    d = O[_ODOWN:_ODOWN + 3]
+    e, f = O[_OREST], O[_OFRIC]
+    vm = x[3:6]
+    vd = vm[0] * d[0] + vm[1] * d[1] + vm[2] * d[2]
+    vh = np.empty(3)
+    vp = np.empty(3)
+    for i in range(3):
+        vh[i] = vm[i] - vd * d[i]
+        vp[i] = (1.0 - f) * vh[i] - e * vd * d[i]
+    am = np.empty(3)
+    am[0], am[1], am[2] = _acceleration(vm[0], vm[1], vm[2], c, O)
+    ap = np.empty(3)
+    ap[0], ap[1], ap[2] = _acceleration(vp[0], vp[1], vp[2], c, O)
+    ad = am[0] * d[0] + am[1] * d[1] + am[2] * d[2]
+    da = np.empty(3)  # a⁺ − D a⁻
+    for i in range(3):
+        da[i] = ap[i] - ((1.0 - f) * (am[i] - ad * d[i]) - e * ad * d[i])
+    X = np.zeros((6, 6))
+    for i in range(3):
+        for j in range(3):
+            X[i, j] = (1.0 if i == j else 0.0) + (vp[i] - vm[i]) * d[j] / vd
+            X[3 + i, j] = da[i] * d[j] / vd
+            X[3 + i, 3 + j] = (1.0 - f) * ((1.0 if i == j else 0.0) - d[i] * d[j]) \
+                - e * d[i] * d[j]
+    A = np.zeros((6, 6))  # Ξ P (loops: no BLAS, a fixed order of operations)
+    for i in range(6):
+        for j in range(6):
+            acc = 0.0
+            for k in range(6):
+                acc += X[i, k] * P[6 * k + j]
+            A[i, j] = acc
+    Pp = np.empty(36)
+    for i in range(6):
+        for j in range(6):
+            acc = 0.0
+            for k in range(6):
+                acc += A[i, k] * X[j, k]
+            Pp[6 * i + j] = acc
+    se2, sf2 = O[_OESTD2], O[_OFSTD2]
+    for i in range(3):
+        for j in range(3):
+            Pp[6 * (3 + i) + 3 + j] += se2 * vd * vd * d[i] * d[j] + sf2 * vh[i] * vh[j]
+    for i in range(6):  # (exactly symmetric)
+        for j in range(i):
+            Pp[6 * i + j] = Pp[6 * j + i] = 0.5 * (Pp[6 * i + j] + Pp[6 * j + i])
+    xn = x.copy()
+    xn[3], xn[4], xn[5] = vp[0], vp[1], vp[2]
+    return xn, Pp
 
 
 @kernel
@@ -1146,6 +1305,21 @@ def _predicted_mean(x, dt, c, O):
 
 
 @kernel
+def _hybrid_mean(x, dt, c, O):
+    """:func:`_predicted`'s mean alone (6,), its floor contact included."""
+    s = _contact(x, dt, c, O)
+    if s < 0.0:
+        return _predicted_mean(x, dt, c, O)
+    xb = _predicted_mean(x, s, c, O)
+    d = O[_ODOWN:_ODOWN + 3]
+    e, f = O[_OREST], O[_OFRIC]
+    vd = xb[3] * d[0] + xb[4] * d[1] + xb[5] * d[2]
+    for i in range(3):  # (the reset of _bounced, the same operations)
+        xb[3 + i] = (1.0 - f) * (xb[3 + i] - vd * d[i]) - e * vd * d[i]
+    return _predicted_mean(xb, dt - s, c, O)
+
+
+@kernel
 def _drag_predicted(V, x, dt, c):
     """The state's sensitivity ``V = ∂x/∂k`` (6) to the ballistic model's drag ``k`` after
     ``dt`` seconds (a new array; session 29): ``V⁻ = F V − c ‖v‖ (v Δt²/2, v Δt)``, ``F``
@@ -1232,7 +1406,7 @@ def _instant_term(S, I, cams, O, t, x):
     tb = I[_IJT0]
     for d in range(I[_IJN]):
         td = I[_IJBUF + 2 * d]
-        xb = _predicted_mean(xb, (td - tb) / NS, S[_SJF + 3 * d], O)
+        xb = _hybrid_mean(xb, (td - tb) / NS, S[_SJF + 3 * d], O)
         tb = td
     e = np.zeros(6)
     for i in range(3):
@@ -1636,6 +1810,13 @@ def _push(S, I, cams, O, N, t, cam, u, v, out):
             xt, Pt = _turn_predicted(xt, Pt, dt, q, O[_OTPSD])
         x, P = _predicted(xg, Pg, dt, c, O, q)
         inn_ok, inn = _innovation(cams, cam, x, P, 6, u, v, var)
+        if _contact(xg, dt, c, O) >= 0.0:
+            # a predicted floor contact (session 31): the models start together after it,
+            # as after a jump (the difference e, gravity's since the contact alone; the
+            # drag's sensitivity V anew)
+            S[_SE:_SE + 6] = 0.0
+            e[:] = 0.0
+            S[_SV:_SV + 6] = 0.0
     # the drag estimated (session 29) while the pair alone is in the set: V⁻ at the prior
     drag = O[_ODRAG] != 0.0 and not nu
     Vm = _drag_predicted(S[_SV:_SV + 6], x, dt, c) if drag else np.zeros(6)
@@ -2326,7 +2507,9 @@ def _predict(S, I, O, t):
     p = _pmin(O[_OSWITCH] * abs(dt), 0.5)
     c = mu * (1.0 - p) + (1.0 - mu) * p
     x, P = _predicted(S[_SX:_SX + 6], S[_SP:_SP + 36], dt, c, O, q)
-    if O[_ODRAG] != 0.0 and not nu:  # the estimated drag: x + V δk̂, P + V Vᵀ / I_k
+    if O[_ODRAG] != 0.0 and not nu and _contact(S[_SX:_SX + 6], dt, c, O) < 0.0:
+        # the estimated drag: x + V δk̂, P + V Vᵀ / I_k (none across a floor contact: V
+        # starts anew there, as the step's)
         V = _drag_predicted(S[_SV:_SV + 6], x, dt, c)
         dk, w = S[_SDK], 1.0 / S[_SIK]
         for i in range(6):
@@ -2470,6 +2653,9 @@ class BallFilter:
         O[_ODRAGQ] = (sk * sk / options.drag_drift_s
                       if sk > 0.0 and options.drag_drift_s is not None else 0.0)
         O[_OITER] = float(options.iterate_update)
+        O[_OFLOOR] = math.nan if options.floor_m is None else float(options.floor_m)
+        O[_OESTD2] = options.restitution_std ** 2
+        O[_OFSTD2] = options.bounce_friction_std ** 2
         self._opts = O
         self._nopts = np.array([self._max_gap_ns, self._init_span_ns, options.init_window,
                                 options.init_detections, options.max_rejects, capacity],
