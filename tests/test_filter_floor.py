@@ -52,7 +52,7 @@ def test_the_contact_instant_and_the_reflection_equal_the_hand_computation():
     r = dt - s
     expect = [0.3 + vx * s + vx_p * r, 0.2, BALL_RADIUS + vz_p * r - 0.5 * G * r * r,
               vx_p, 0.0, vz_p - G * r]
-    xn, P = _predicted(x, np.eye(6).ravel() * 1e-4, dt, 1.0, O, 0.0)
+    xn, _ = _predicted(x, np.eye(6).ravel() * 1e-4, dt, 1.0, O, 0.0)
     assert_allclose(xn, expect, rtol=0, atol=1e-12)
     assert_allclose(_hybrid_mean(x, dt, 1.0, O), expect, rtol=0, atol=1e-12)
     # a step ending before the contact, the floor off, or a ball rising: no contact

@@ -12,6 +12,12 @@ equations, exactly as implemented, are in ``docs/methods.md`` (section ``filter`
   acceleration of spectral density ``q`` (Bar-Shalom, Li & Kirubarajan, *Estimation with
   Applications to Tracking and Navigation*, 2001, section 6.2.2): the drag's Jacobian term,
   ``k ‖v‖ Δt``, is below 1e-3 at a rally's speeds and frame rates and is left to ``q``;
+- a floor contact predicted (session 31, ``floor_m``): a step whose mean path reaches the
+  floor (the ball's centre at ``floor_m``) falling faster than 0.05 m/s is split at the
+  contact; the velocity is reflected there (``restitution``, ``bounce_friction``) and the
+  covariance goes through the hybrid system's saltation matrix (Kong, Payne, Council &
+  Johnson, "The Salted Kalman Filter", Automatica 131, 2021) plus the reflection's
+  uncertainty (:func:`_bounced`);
 - two motion models mixed by an interacting multiple model (Blom & Bar-Shalom 1988;
   Bar-Shalom et al. section 11.6): ballistic (the above) and *supported* (without gravity
   and, by default, without air drag, ``supported_drag_per_m``: a ball rolling on the floor,
@@ -1796,6 +1802,7 @@ def _push(S, I, cams, O, N, t, cam, u, v, out):
     Pt = S[_SPT:_SPT + 49]
     prior_y0 = prior_y1 = 0.0
     inn_t = np.empty(0)
+    bounced = False
     if solo:
         xt, Pt = _turn_predicted(xt, Pt, dt, q, O[_OTPSD])
         x, P = xt[:6], _block6(Pt)
@@ -1814,6 +1821,7 @@ def _push(S, I, cams, O, N, t, cam, u, v, out):
             # a predicted floor contact (session 31): the models start together after it,
             # as after a jump (the difference e, gravity's since the contact alone; the
             # drag's sensitivity V anew)
+            bounced = True
             S[_SE:_SE + 6] = 0.0
             e[:] = 0.0
             S[_SV:_SV + 6] = 0.0
@@ -1953,7 +1961,10 @@ def _push(S, I, cams, O, N, t, cam, u, v, out):
             S[_SCAM + 2 * cam], S[_SCAM + 2 * cam + 1] = prior_y0, prior_y1
         if O[_OADAPT] != 0.0:  # pixel noise: variational Bayes (Särkkä & Nummenmaa 2009)
             _noise_update(S, O, sy0, sy1, s00, s01, s11)
-        if nis > O[_OCONFNIS]:  # a surprising update: confirmed like a jump
+        if nis > O[_OCONFNIS] or bounced:
+            # a surprising update, or the first after a predicted floor contact (a kick at
+            # the contact is as likely as a jump: one camera's pixel does not tell it from
+            # the bounce): confirmed like a jump
             I[_IPEND], I[_ICONFS], I[_IOTHER] = cam, 0, 0
         elif I[_IPEND] >= 0:
             I[_ICONFS] += 1
