@@ -163,6 +163,12 @@ def test_a_throws_bounce_is_predicted_not_searched():
     assert np.mean(e_on) < np.mean(e_off)
     withheld = fuse(obs, rig, "filter")
     assert np.all(errors_m(withheld, truth) < 0.05)
+    # the first update after the predicted contact is confirmed like a jump's (a kick at the
+    # contact would pass the gate with the bounced prediction): the first two detections
+    # after it, of one camera each, are withheld until another camera agrees
+    after = obs.time_ns[obs.time_ns > bounce_ns][:2]
+    assert not np.any(np.isin(after, withheld.time_ns))
+    assert withheld.dropped["unconfirmed"] >= 2
 
 
 def test_streaming_equals_batch_exactly_through_bounces():

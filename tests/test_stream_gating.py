@@ -97,10 +97,10 @@ LENS = np.array([-0.25, 0.08, 0.001, -0.001, 0.0])
 DISTRACTOR = (1.0, 1.5, 0.2)  # on the floor, seen by every camera of paper3
 
 
-def dirty(method: str, clocks: bool, lens: bool = True):
+def dirty(method: str, clocks: bool, lens: bool = True, rally_seed: int = 7):
     """(rig, detections): spurious blobs in 5 % of frames, a static distractor, a half-second
     blackout, 30 % misses, 10 % drops, a strong lens (with ``clocks``: offsets and rolling
-    shutters too)."""
+    shutters too); the rally of seed ``rally_seed``."""
     from pslog.fusion import METHODS
 
     timing = "typeB" if "shared" in METHODS[method].needs else "typeA"
@@ -112,8 +112,8 @@ def dirty(method: str, clocks: bool, lens: bool = True):
     options = SimulationOptions(noise_px=0.3, seed=5, miss_rate=0.3, drop_rate=0.1,
                                 spurious_rate=0.05, distractors=(("cam2", DISTRACTOR),),
                                 blackouts=(("cam3", 1.0, 0.5),), **faults)
-    det, _, _ = simulate_labelled(rig, rally(3.0, seed=7, speed=4.0, kick_every_s=0.9)[0], 3.0,
-                                  options)
+    det, _, _ = simulate_labelled(rig, rally(3.0, seed=rally_seed, speed=4.0,
+                                             kick_every_s=0.9)[0], 3.0, options)
     return true_rig(rig, options), det
 
 
