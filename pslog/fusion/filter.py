@@ -790,7 +790,12 @@ def _predicted(x, P, dt, c, O, q):
     :func:`_contact`), the step is split at the contact instant ``s``: predicted to it, reset
     by :func:`_bounced` (the reflection, the saltation matrix), predicted over ``dt - s``
     (session 31)."""
-    s = _contact(x, dt, c, O)
+    return _predicted_at(x, P, dt, c, O, q, _contact(x, dt, c, O))
+
+
+@kernel
+def _predicted_at(x, P, dt, c, O, q, s):
+    """:func:`_predicted` with its floor contact's instant ``s`` given (−1: none)."""
     if s < 0.0:
         return _predicted_mean(x, dt, c, O), _cov_predicted(P, dt, q)
     xc, Pc = _predicted_mean(x, s, c, O), _cov_predicted(P, s, q)
@@ -1815,9 +1820,10 @@ def _push(S, I, cams, O, N, t, cam, u, v, out):
         if nu:
             nu, xg, Pg, xt, Pt = _turn_mixed(nu, xg, Pg, xt, Pt, dt, O[_OTSWITCH])
             xt, Pt = _turn_predicted(xt, Pt, dt, q, O[_OTPSD])
-        x, P = _predicted(xg, Pg, dt, c, O, q)
+        contact = _contact(xg, dt, c, O)
+        x, P = _predicted_at(xg, Pg, dt, c, O, q, contact)
         inn_ok, inn = _innovation(cams, cam, x, P, 6, u, v, var)
-        if _contact(xg, dt, c, O) >= 0.0:
+        if contact >= 0.0:
             # a predicted floor contact (session 31): the models start together after it,
             # as after a jump (the difference e, gravity's since the contact alone; the
             # drag's sensitivity V anew)
