@@ -76,7 +76,8 @@ equations, exactly as implemented, are in ``docs/methods.md`` (section ``filter`
   above) grows by the next detections until its fit passes (``init_span_s``).
 
 - withheld points (counted in ``Track.dropped`` by reason, the state updated all the same):
-  ``unconfirmed``, from a jump (or an update of NIS above ``confirm_nis``) until two more
+  ``unconfirmed``, from a jump (or an update of NIS above ``confirm_nis``, or the first
+  update after a predicted floor contact) until two more
   accepted updates, one at least from another camera, confirm it (one camera's pixel does
   not fix the new velocity along its rays); ``uncertain``, ``std_m`` above ``max_std_m``.
 
@@ -221,8 +222,10 @@ class FilterOptions:
         stops at the contact, reflects the velocity (``restitution``, ``bounce_friction``)
         and goes on; the covariance through the hybrid system's saltation matrix plus the
         reflection's uncertainty (Kong, Payne, Council & Johnson, Automatica 131, 2021;
-        :func:`_bounced`; session 31). None: no predicted contact (before session 31): a
-        bounce is only found by the jump search
+        :func:`_bounced`; session 31); the first update after a contact is confirmed
+        like a jump's (``unconfirmed``: a kick at the contact passes the gate with the
+        bounced prediction). None: no predicted contact (before session 31): a bounce is
+        only found by the jump search
     restitution_std, bounce_friction_std : float, standard deviations of a predicted floor
         contact's ``restitution`` and ``bounce_friction`` (process noise of the reflection:
         ``σ_e² v_d² ĝĝᵀ + σ_f² v_h v_hᵀ`` on the velocity); 0.1 each: a golf ball's
