@@ -83,8 +83,9 @@ BASE_OPTIONS = compiled.FilterOptions(jump_rate_per_s=0.0, start_models=False, a
                                          if k in compiled.FilterOptions.__dataclass_fields__},
                                       **{k: 0.0 for k in ("drag_std_per_m",)
                                          if k in compiled.FilterOptions.__dataclass_fields__},
-                                      # (session 31's predicted floor contact)
-                                      **{k: None for k in ("floor_m",)
+                                      # (session 31's predicted floor contact; session
+                                      # 30's hold for the next camera)
+                                      **{k: None for k in ("floor_m", "hold_nis")
                                          if k in compiled.FilterOptions.__dataclass_fields__})
 
 COLUMNS = ("time_ns", "camera", "position", *compiled.FILTER_QUALITY)
@@ -112,9 +113,16 @@ def motions(quick: bool):
 
 def fused(fuse_filter, observations, rig):
     """The filter's track of ``observations`` (Detections are gated as ``fuse`` gates them)
-    with ``fuse_filter`` as the module's."""
+    with ``fuse_filter(obs, rig, max_gap_s, doubt=...)`` as the module's. ``fuse`` passes
+    its own FilterOptions (its ``hold_nis``, since session 30) as the fourth argument: it is
+    dropped here, each side brings its own options (without that, the compiled side got
+    ``options`` twice and the pure-Python side took them for ``doubt``: a TypeError)."""
+
+    def without_options(obs, rig, max_gap_s=None, options=None, doubt=None):
+        return fuse_filter(obs, rig, max_gap_s, doubt=doubt)
+
     saved = compiled.fuse_filter
-    compiled.fuse_filter = fuse_filter  # fuse() imports it from the module at each call
+    compiled.fuse_filter = without_options  # fuse() imports it from the module at each call
     try:
         return fuse(observations, rig, "filter")
     finally:
