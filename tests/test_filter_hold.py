@@ -4,8 +4,10 @@ camera"; the stream's: tests/test_filter_hold_stream.py).
 
 A plain update's output point whose NIS exceeds ``hold_nis`` waits for the next detection of
 another camera: withdrawn (``Track.dropped["held"]``) if that detection made a jump placed
-before it (the jump's lag reaches back to it), was rejected, or the track was lost first
-(or none came); else output. Checked against the rule written out in Python over every point
+before it (the jump's lag reaches back to it) or that may be (since session 31, the jump's
+hypotheses reaching back to it carry a posterior probability of at least ``hold_jump_p``:
+tests/test_filter_hold_jump.py), was rejected, or the track was lost first (or none came);
+else output. Checked against the rule written out in Python over every point
 of the same detections streamed (``withhold=False``, each jump's lag read), and on a flight
 kicked along a camera's ray, whose first point after the kick is 8.6 cm off.
 """
@@ -40,17 +42,22 @@ def _withdrawn_by_rule(obs, rig, options, theta):
             continue
         q = p[1]
         lag = int(flt._I[FM._IJLAG]) if q[8] == 1.0 else -1
-        rows.append((t, c, q[6], q[8], q[9], q[10], lag, shown is not None))
+        # (session 31) each lag's posterior probability at a jump
+        w = flt._S[FM._SJLW:FM._SJLW + FM._HISTORY].copy()
+        rows.append((t, c, q[6], q[8], q[9], q[10], (lag, w), shown is not None))
+    p_min = 2.0 if options.hold_jump_p is None else options.hold_jump_p
     gone = set()
     for i, (t, c, nis, jump, rej, init, _, shown) in enumerate(rows):
         if not shown or not nis > theta or jump or rej or init:
             continue
         verdict, between = True, 0  # withdrawn unless another camera's point releases it
-        for _t2, c2, _, jump2, rej2, init2, lag2, _ in rows[i + 1:]:
+        for _t2, c2, _, jump2, rej2, init2, (lag2, w2), _ in rows[i + 1:]:
             if init2:
                 break
             if c2 != c:
-                verdict = bool(rej2) or bool(jump2 and lag2 >= between + 1)
+                # withdrawn by a jump placed before it, or that may be (hold_jump_p)
+                verdict = bool(rej2) or bool(jump2 and (
+                    lag2 >= between + 1 or w2[between + 1:].sum() >= p_min))
                 break
             between += not rej2
         if verdict:

@@ -332,6 +332,14 @@ class FilterOptions:
         hold (its point leaves at its detection). Default 2 (:data:`pslog.fusion.
         FILTER_HOLD_NIS`, χ²₂'s mean; session 30); None: no hold (``pslog live``); none
         either with ``withhold`` False
+    hold_jump_p : float or None, a held point (``hold_nis``) is also withheld when the next
+        camera's detection made a jump whose hypotheses placing it before the held
+        detection (their lags reaching back to it) carry at least this posterior
+        probability among those that passed (weights ``∝ exp(−score/2)``, as the jump's
+        mixture, ``jump_mixture_cov``), even when the winner placed it after: a kick along
+        the held camera's ray leaves its pixel unmoved, so the winner's lag is often the
+        later one (session 31). Default 0.05; None: the winner's lag alone (before session
+        31)
     jump_rate_per_s : float, expected rate ``λ_j`` of velocity jumps (kicks, bounces), 1/s:
         a point's reported covariance adds the variance ``λ_j T σ_j² T² / 3`` along its
         camera's ray of a jump no other camera has seen in the time ``T`` since another
@@ -402,6 +410,7 @@ class FilterOptions:
     surprise_cov: bool = True
     iterate_update: bool = True
     hold_nis: float | None = FILTER_HOLD_NIS
+    hold_jump_p: float | None = 0.05
 
     def __post_init__(self) -> None:
         for name in ("noise_px", "accel_psd", "accel_step_var", "gate", "jump_speed",
@@ -453,6 +462,10 @@ class FilterOptions:
                 math.isfinite(self.hold_nis) and self.hold_nis >= 0)):
             raise FusionError(f"filter hold_nis must be finite and >= 0, got "
                               f"{self.hold_nis!r}")
+        if self.hold_jump_p is not None and (isinstance(self.hold_jump_p, bool) or not (
+                isinstance(self.hold_jump_p, (int, float)) and 0 <= self.hold_jump_p <= 1)):
+            raise FusionError(f"filter hold_jump_p must be None (the winner's lag alone) or a "
+                              f"probability in [0, 1], got {self.hold_jump_p!r}")
         if self.floor_m is not None and (isinstance(self.floor_m, bool) or not isinstance(
                 self.floor_m, (int, float)) or not math.isfinite(self.floor_m)):
             raise FusionError(f"filter floor_m must be None (no floor) or a finite height in "
@@ -515,7 +528,11 @@ _SJPM = _SJF + 3 * _JBUF
 #: the drag's two-stage estimate (session 29; :func:`_drag_update`): the state's sensitivity
 #: to the ballistic model's drag ``V = ∂x/∂k`` (6), the drag's offset ``δk̂`` and its
 #: information ``I_k`` (kept for the session)
-_SV = _SJPM + 36
+_SJLW = _SJPM + 36
+#: the latest jump's posterior probability per lag (_HISTORY): the weights ``w_k`` of the
+#: hypotheses that passed, summed per lag (session 31: a held point withdrawn when the jump
+#: may lie before it, ``hold_jump_p``)
+_SV = _SJLW + _HISTORY
 _SDK, _SIK = _SV + 6, _SV + 7
 _SCAM = _SV + 8  # then 2 per camera, then 2 per window slot
 #: ``I``: track flag, state time, last accepted time, rejections in a row, updates since the
@@ -556,7 +573,10 @@ _OITER = _ODRAGQ + 1  # 1: an update far from its linearisation iterated (sessio
 #: the floor's height ``floor_m`` (NaN: no predicted contact), the variances of the
 #: restitution and of the friction at a predicted contact (session 31)
 _OFLOOR, _OESTD2, _OFSTD2 = _OITER + 1, _OITER + 2, _OITER + 3
-_OSIZE = _OFSTD2 + 1
+#: the hold's withdrawal at a jump whose hypotheses placing it before the held detection
+#: carry this posterior probability or more (2: never; session 31)
+_OHOLDP = _OFSTD2 + 1
+_OSIZE = _OHOLDP + 1
 #: the held points at most at once (a camera alone past them: the later ones output)
 _HOLD_MAX = 8
 #: ``N`` (int64 options): max gap, window span, init_window, init_detections, max_rejects,
@@ -1238,6 +1258,7 @@ def _jump(S, I, cams, O, t, cam, u, v):
     n_lags = min(n, _JUMP_LAG) + 1
     n_shapes = int(O[_ONSHAPES])
     hsc = np.empty(n_lags * n_shapes)
+    hlag = np.empty(n_lags * n_shapes, dtype=np.int64)
     hx = np.empty((n_lags * n_shapes, 6))
     hP = np.empty((n_lags * n_shapes, 36))
     nh = 0
@@ -1246,6 +1267,7 @@ def _jump(S, I, cams, O, t, cam, u, v):
             passed, x, P, inn, score, ts, xs, Ps = _replay(S, I, cams, O, t, cam, u, v, lag,
                                                            shape)
             if passed:
+                hlag[nh] = lag
                 hsc[nh] = score
                 hx[nh] = x
                 hP[nh] = P
@@ -1257,6 +1279,16 @@ def _jump(S, I, cams, O, t, cam, u, v):
         # the winner's mean with the mean square error of the hypotheses' mixture about it
         # (session 27): P* = Σ w_k (P_k + (x_k − x*)(x_k − x*)ᵀ), w_k ∝ exp(−score_k/2)
         best_P = _mixture_about(hsc[:nh], hx[:nh], hP[:nh], best_x, best_score)
+    if found:
+        # each lag's posterior probability among the hypotheses that passed (the mixture's
+        # weights, w_k ∝ exp(−score_k/2), summed per lag; session 31)
+        total = 0.0
+        for k in range(_HISTORY):
+            S[_SJLW + k] = 0.0
+        for k in range(nh):
+            total += math.exp(-0.5 * (hsc[k] - best_score))
+        for k in range(nh):
+            S[_SJLW + hlag[k]] += math.exp(-0.5 * (hsc[k] - best_score)) / total
     if found and O[_OINSTANT] != 0.0:
         # the jump's restart and the detections its replay took, for its instant's spread
         S[_SJX:_SJX + 6] = best_x0
@@ -2142,19 +2174,26 @@ def _step(S, I, cams, O, N, t, cam, u, v, out):
 
 
 @kernel
-def _held(I, O, out, cam, pr, pc, pb, pn, index):
+def _held(S, I, O, out, cam, pr, pc, pb, pn, index):
     """The held points (rows ``pr[:pn]``, cameras ``pc``, accepted detections of
     their own camera since ``pb``) against the point of camera ``cam`` just made (``out``):
     the first point of another camera releases a held one, or withdraws it (its ``index``
     made negative, ``-1 - index``) when it made a jump placed before the held detection (the
-    winner's lag reaches back to it; every jump when the lag is not kept) or was rejected.
+    winner's lag reaches back to it; every jump when the lag is not kept), or a jump whose
+    hypotheses placing it before the held detection carry a posterior probability of at
+    least ``O[_OHOLDP]`` (``hold_jump_p``, session 31: the held camera's pixel does not see
+    a kick along its ray, so the winner's lag may be the wrong one), or was rejected.
     Returns the number still held (compacted in place)."""
     jump, rejected = out[13] == 1.0, out[14] == 1.0
     lag = I[_IJLAG] if O[_OINSTANT] != 0.0 else _JBUF
     m = 0
     for k in range(pn):
         if pc[k] != cam:
-            if rejected or (jump and lag >= pb[k] + 1):
+            before = 0.0
+            if jump:
+                for j in range(pb[k] + 1, _HISTORY):
+                    before += S[_SJLW + j]
+            if rejected or (jump and (lag >= pb[k] + 1 or before >= O[_OHOLDP])):
                 index[pr[k]] = -1 - index[pr[k]]
             continue
         if not rejected:
@@ -2182,7 +2221,7 @@ def _push_held(S, I, cams, O, N, t, cam, u, v, out, pr, pc, pb, pn, index):
     one-detection step alike."""
     status = _push(S, I, cams, O, N, t, cam, u, v, out)
     if pn and status == _POINT:
-        pn = _held(I, O, out, cam, pr, pc, pb, pn, index)
+        pn = _held(S, I, O, out, cam, pr, pc, pb, pn, index)
     elif pn and status != _NONE:  # a window fit: the track was lost
         for k in range(pn):
             index[pr[k]] = -1 - index[pr[k]]
@@ -2676,6 +2715,7 @@ class BallFilter:
         O[_OFLOOR] = math.nan if options.floor_m is None else float(options.floor_m)
         O[_OESTD2] = options.restitution_std ** 2
         O[_OFSTD2] = options.bounce_friction_std ** 2
+        O[_OHOLDP] = 2.0 if options.hold_jump_p is None else options.hold_jump_p
         self._opts = O
         self._nopts = np.array([self._max_gap_ns, self._init_span_ns, options.init_window,
                                 options.init_detections, options.max_rejects, capacity],
