@@ -374,6 +374,14 @@ class FilterOptions:
     hold_nis: float | None = FILTER_HOLD_NIS
 
     def __post_init__(self) -> None:
+        # the switches: True or False only (a numpy bool too); a string such as "no" or a
+        # None was taken as truthy or falsy silently
+        for name in ("bounce_shape", "withhold", "start_models", "window_noise_prior",
+                     "restart_prior", "jump_instant", "jump_mixture_cov", "surprise_cov",
+                     "iterate_update"):
+            value = getattr(self, name)
+            if not isinstance(value, bool | np.bool_):
+                raise FusionError(f"filter {name} must be True or False, got {value!r}")
         for name in ("noise_px", "accel_psd", "accel_step_var", "gate", "jump_speed",
                      "noise_prior_weight"):
             value = getattr(self, name)
