@@ -299,9 +299,12 @@ def plan_batch(jobs: list[Job], settings: Settings, outdir: str | Path, *, resum
 # --------------------------------------------------------------------------- the task
 
 
-def _command(argv: list[str]) -> str:
+def _command(argv: list[str], implicit: bool = False) -> str:
     """Run ``pslog ARGV`` in this process, as typed by a user; its standard output, or
-    :class:`StepFailed` with its one-line error."""
+    :class:`StepFailed` with its one-line error. ``implicit``: a command the batch runs
+    for its own needs (``info`` for the summary, ``eval`` when --do has fuse but not eval),
+    not a step the user named: its error line is said as the batch's (``pslog batch:
+    error: ...``), not as a command the user never typed."""
     from pslog.cli import main
 
     out, err = io.StringIO(), io.StringIO()
@@ -322,8 +325,11 @@ def _command(argv: list[str]) -> str:
                 os.environ["PSLOG_PROGRESS"] = shown
     if code != 0:
         lines = [line for line in err.getvalue().splitlines() if line.strip()]
-        raise (StepInterrupted if code > 128 else StepFailed)(
-            lines[-1] if lines else f"pslog {argv[0]} exited with code {code}")
+        line = lines[-1] if lines else f"pslog {argv[0]} exited with code {code}"
+        own = f"pslog {argv[0]}: "
+        if implicit and line.startswith(own):
+            line = "pslog batch: " + line[len(own):]
+        raise (StepInterrupted if code > 128 else StepFailed)(line)
     return out.getvalue()
 
 
@@ -568,7 +574,7 @@ def _run_staged(job: Job, settings: Settings, staging: Path, start: float
             raise StepFailed(f"pslog batch: error: cannot write {outdir}: "
                              f"{os_reason(exc)}") from None
         out = {s: str(staging / OUTPUT_NAMES[s]) for s in settings.steps}
-        info = json.loads(_command(["info", job.path, "--json"]))
+        info = json.loads(_command(["info", job.path, "--json"], implicit=True))
         current = job.path
         if "redetect" in settings.steps:
             _command(["redetect", current, "-o", out["redetect"], "--workers", "1", "--force"])
@@ -587,7 +593,8 @@ def _run_staged(job: Job, settings: Settings, staging: Path, start: float
             current = out["fuse"]
         if "eval" in settings.steps or "fuse" in settings.steps:
             # the summary's points and rates come from eval's figures, asked for or not
-            evaluation = json.loads(_command(["eval", current, "--json"]))
+            evaluation = json.loads(_command(["eval", current, "--json"],
+                                             implicit="eval" not in settings.steps))
             if "eval" in settings.steps:
                 _write_json(Path(out["eval"]), evaluation)
         if "view" in settings.steps:

@@ -173,7 +173,7 @@ def test_summary_equals_the_commands_by_hand_and_the_bad_session_fails(cluster, 
     code, _, err = pslog("batch", f"{sessions}/**/*.mcap", "--do", "sync,fuse,eval",
                               *METHODS, "-o", out)
     assert code == 1  # one session failed
-    assert "1 of 5 sessions failed (first: day2/bad.mcap: pslog info: error:" in err
+    assert "1 of 5 sessions failed (first: day2/bad.mcap: pslog batch: error:" in err
     assert "Traceback" not in err
     rows = {r["session"]: r for r in read_summary_csv(out / "summary.csv")}
     assert list(rows) == ["day1/a.mcap", "day1/b.mcap", "day2/bad.mcap", "day2/c.mcap",
