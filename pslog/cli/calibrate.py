@@ -42,8 +42,8 @@ class BadOption(InputError):
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from pslog.camera import MAX_FPS
-    from pslog.cli._common import camera_name, chessboard, number_at_most, positive_int
+    from pslog.camera import MAX_FPS, MAX_IMAGE_SIZE
+    from pslog.cli._common import camera_name, chessboard, int_in, number_at_most, positive_int
     parser.epilog = ("examples:\n"
                      "  pslog calibrate --points pts.csv --name cam1 --width 640 --height 480 "
                      "--rig rig.toml\n"
@@ -61,10 +61,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="camera name in the rig")
     parser.add_argument("--rig", required=True, metavar="RIG.toml",
                         help="rig file to add the camera to (created if missing)")
-    parser.add_argument("--width", type=positive_int, metavar="PX", help="image width, pixels "
-                        "(required for a new camera with --points; checked against the images "
-                        "with --chessboard)")
-    parser.add_argument("--height", type=positive_int, metavar="PX", help="image height, "
+    # (at most a camera's largest side: 99999999 was refused by the camera, exit 1)
+    size = int_in(1, MAX_IMAGE_SIZE)
+    parser.add_argument("--width", type=size, metavar="PX", help="image width, pixels, at most "
+                        f"{MAX_IMAGE_SIZE} (required for a new camera with --points; checked "
+                        "against the images with --chessboard)")
+    parser.add_argument("--height", type=size, metavar="PX", help="image height, "
                         "pixels (as --width)")
     parser.add_argument("--fps", type=number_at_most(MAX_FPS, "fps", "beyond any camera",
                                                      positive=True),

@@ -48,8 +48,12 @@ CALIBRATE = ["calibrate", "--points", "pts.csv", "--width", "640", "--height", "
      "--images goes with --chessboard"),
     (["calibrate", "--chessboard", "9x6", "--images", "shots", "--fix-intrinsics", "--name",
       "new", "--rig", "rig.toml"], "--fix-intrinsics goes with --points"),
+    # was exit 1 from the camera's check ("width 99999999 pixels is beyond any camera")
+    (["calibrate", "--points", "pts.csv", "--name", "new", "--rig", "rig.toml", "--width",
+      "99999999", "--height", "480"], "argument --width: must be in 1..65536"),
 ], ids=["offset", "offset-at-fps", "fps-against-rig", "fps-fix-intrinsics",
-        "width-against-rig", "no-size", "no-images", "images-alone", "fix-chessboard"])
+        "width-against-rig", "no-size", "no-images", "images-alone", "fix-chessboard",
+        "width-huge"])
 def test_every_bad_calibrate_value_exits_2_in_one_line(work, args, contains):
     line = assert_refused(work, 2, args, contains)
     assert line.startswith("pslog calibrate: error: ") and "--help" in line, line
