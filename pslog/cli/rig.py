@@ -193,16 +193,21 @@ def _described_format(path: str) -> str:
 
 
 def _import(args: argparse.Namespace) -> int:
-    from pslog.errors import RigError
-    from pslog.interchange.rig_formats import ImportOptions
+    from pslog.interchange.rig_formats import ImportOptions, TimingOptionError
     from pslog.outputs import replacing
     from pslog.rig import apply_timing, load_rig_file
 
+    from ._common import usage_error
+
     offsets = dict(args.offset)
-    if args.timing and offsets:
-        raise RigError("give --timing or --offset, not both")
-    loaded = load_rig_file(args.file, args.format,
-                           ImportOptions(units=args.units, fps=args.fps, offsets=offsets))
+    if args.timing and offsets:  # (bad command lines: exit 2, as argparse's own)
+        return usage_error("rig import", "give --timing or --offset, not both")
+    try:
+        loaded = load_rig_file(args.file, args.format,
+                               ImportOptions(units=args.units, fps=args.fps, offsets=offsets))
+    except TimingOptionError as exc:  # an --offset or --fps that does not fit the file
+        option = "--offset" if offsets else "--fps"
+        return usage_error("rig import", f"argument {option}: {exc}")
     rig = apply_timing(loaded.rig, args.timing) if args.timing else loaded.rig
     with replacing(args.output, force=args.force, inputs=[args.file]) as f:
         f.write(rig.to_toml())

@@ -78,3 +78,18 @@ def test_rig_export_refuses_a_name_of_another_format(work, fmt, name, contains):
     line = assert_refused(work, 2, ["rig", "export", "paper3", "--format", fmt, "-o", name],
                           (f"-o {name}: ", contains))
     assert line.startswith("pslog rig export: error: "), line
+
+
+@pytest.mark.parametrize("args, contains", [
+    # were exit 1 ("rig.toml: camera 'cam1': offset 5 s must be in [0, 0.0333333 s)"), where
+    # simulate's --readout / --clock-offset against the rig exit 2
+    (["--offset", "cam1=5"], ("argument --offset: rig.toml: camera 'cam1': offset 5 s",
+                              "the frame period at 30 fps")),
+    (["--fps", "60", "--offset", "cam1=0.02"], ("argument --offset", "at 60 fps")),
+    (["--offset", "cam9=0.001"], ("argument --offset", "unknown camera(s) cam9")),
+    (["--timing", "typeA", "--offset", "cam1=0.001"], "give --timing or --offset, not both"),
+], ids=["offset", "offset-at-fps", "offset-unknown-camera", "offset-and-timing"])
+def test_rig_import_options_that_do_not_fit_the_file_exit_2(work, args, contains):
+    line = assert_refused(work, 2, ["rig", "import", "rig.toml", *args, "-o", "new.toml"],
+                          contains)
+    assert line.startswith("pslog rig import: error: "), line
