@@ -299,12 +299,9 @@ def plan_batch(jobs: list[Job], settings: Settings, outdir: str | Path, *, resum
 # --------------------------------------------------------------------------- the task
 
 
-def _command(argv: list[str], implicit: bool = False) -> str:
+def _command(argv: list[str]) -> str:
     """Run ``pslog ARGV`` in this process, as typed by a user; its standard output, or
-    :class:`StepFailed` with its one-line error. ``implicit``: a command the batch runs
-    for its own needs (``info`` for the summary, ``eval`` when --do has fuse but not eval),
-    not a step the user named: its error line is said as the batch's (``pslog batch:
-    error: ...``), not as a command the user never typed."""
+    :class:`StepFailed` with its one-line error."""
     from pslog.cli import main
 
     out, err = io.StringIO(), io.StringIO()
@@ -325,12 +322,23 @@ def _command(argv: list[str], implicit: bool = False) -> str:
                 os.environ["PSLOG_PROGRESS"] = shown
     if code != 0:
         lines = [line for line in err.getvalue().splitlines() if line.strip()]
-        line = lines[-1] if lines else f"pslog {argv[0]} exited with code {code}"
-        own = f"pslog {argv[0]}: "
-        if implicit and line.startswith(own):
-            line = "pslog batch: " + line[len(own):]
-        raise (StepInterrupted if code > 128 else StepFailed)(line)
+        raise (StepInterrupted if code > 128 else StepFailed)(
+            lines[-1] if lines else f"pslog {argv[0]} exited with code {code}")
     return out.getvalue()
+
+
+def _implicit(argv: list[str]) -> str:
+    """:func:`_command` for a command the batch runs for its own needs (``info`` for the
+    summary, ``eval`` when --do has fuse but not eval), not a step the user named: its
+    error line is said as the batch's (``pslog batch: error: ...``), not as a command the
+    user never typed (was ``pslog info: error: ...`` in a batch of --do fuse)."""
+    try:
+        return _command(argv)
+    except StepFailed as exc:
+        own, line = f"pslog {argv[0]}: ", str(exc)
+        if not line.startswith(own):
+            raise
+        raise type(exc)("pslog batch: " + line[len(own):]) from None
 
 
 def _kill_once(marker: str) -> None:
@@ -574,7 +582,7 @@ def _run_staged(job: Job, settings: Settings, staging: Path, start: float
             raise StepFailed(f"pslog batch: error: cannot write {outdir}: "
                              f"{os_reason(exc)}") from None
         out = {s: str(staging / OUTPUT_NAMES[s]) for s in settings.steps}
-        info = json.loads(_command(["info", job.path, "--json"], implicit=True))
+        info = json.loads(_implicit(["info", job.path, "--json"]))
         current = job.path
         if "redetect" in settings.steps:
             _command(["redetect", current, "-o", out["redetect"], "--workers", "1", "--force"])
@@ -593,8 +601,8 @@ def _run_staged(job: Job, settings: Settings, staging: Path, start: float
             current = out["fuse"]
         if "eval" in settings.steps or "fuse" in settings.steps:
             # the summary's points and rates come from eval's figures, asked for or not
-            evaluation = json.loads(_command(["eval", current, "--json"],
-                                             implicit="eval" not in settings.steps))
+            evaluate = _command if "eval" in settings.steps else _implicit
+            evaluation = json.loads(evaluate(["eval", current, "--json"]))
             if "eval" in settings.steps:
                 _write_json(Path(out["eval"]), evaluation)
         if "view" in settings.steps:
