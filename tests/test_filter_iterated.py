@@ -202,11 +202,19 @@ SWITCHES = ("bounce_shape", "withhold", "start_models", "window_noise_prior", "r
             "jump_instant", "jump_mixture_cov", "surprise_cov", "iterate_update")
 
 
-@pytest.mark.parametrize("name", SWITCHES)
+def _switches() -> list[str]:
+    from dataclasses import fields
+
+    found = [f.name for f in fields(FilterOptions) if f.type in ("bool", bool)]
+    assert set(SWITCHES) <= set(found), found  # (the nine of session 31, and any newer)
+    return found
+
+
+@pytest.mark.parametrize("name", _switches())
 def test_every_switch_of_the_filter_is_true_or_false(name):
-    """The filter's switches are checked as its numbers are (FilterOptions.__post_init__):
-    "no" was taken as True and None as False, silently; a numpy bool (from an array of
-    settings) is a bool."""
+    """The filter's switches (every field annotated bool) are checked as its numbers are
+    (FilterOptions.__post_init__): "no" was taken as True and None as False, silently; a
+    numpy bool (from an array of settings) is a bool."""
     from pslog.errors import FusionError
 
     for bad in ("no", None, 0, 1.0):

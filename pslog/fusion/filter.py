@@ -374,11 +374,11 @@ class FilterOptions:
     hold_nis: float | None = FILTER_HOLD_NIS
 
     def __post_init__(self) -> None:
-        # the switches: True or False only (a numpy bool too); a string such as "no" or a
-        # None was taken as truthy or falsy silently
-        for name in ("bounce_shape", "withhold", "start_models", "window_noise_prior",
-                     "restart_prior", "jump_instant", "jump_mixture_cov", "surprise_cov",
-                     "iterate_update"):
+        from dataclasses import fields
+
+        # the switches (every field annotated bool, a new one too): True or False only (a
+        # numpy bool too); a string such as "no" or a None was taken as truthy or falsy
+        for name in (f.name for f in fields(self) if f.type in ("bool", bool)):
             value = getattr(self, name)
             if not isinstance(value, bool | np.bool_):
                 raise FusionError(f"filter {name} must be True or False, got {value!r}")
