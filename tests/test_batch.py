@@ -105,8 +105,9 @@ def by_hand(session: Path, folder: Path) -> tuple[dict, str]:
     fuse, eval), as strings as in summary.csv, without the runtime; and the fused file."""
     folder.mkdir(parents=True)
     code, info, err = pslog("info", session, "--json")
-    if code != 0:
-        return {"status": "failed", "error": err.strip()}, ""
+    if code != 0:  # (info is the batch's own reading of the session: said as the batch's)
+        return {"status": "failed", "error": err.strip().replace("pslog info: ", "pslog batch: ",
+                                                                 1)}, ""
     info = json.loads(info)
     code, sync, err = pslog("sync", session, "-o", folder / "synced.mcap", "--json")
     assert code == 0, err
