@@ -327,6 +327,20 @@ def _command(argv: list[str]) -> str:
     return out.getvalue()
 
 
+def _implicit(argv: list[str]) -> str:
+    """:func:`_command` for a command the batch runs for its own needs (``info`` for the
+    summary, ``eval`` when --do has fuse but not eval), not a step the user named: its
+    error line is said as the batch's (``pslog batch: error: ...``), not as a command the
+    user never typed (was ``pslog info: error: ...`` in a batch of --do fuse)."""
+    try:
+        return _command(argv)
+    except StepFailed as exc:
+        own, line = f"pslog {argv[0]}: ", str(exc)
+        if not line.startswith(own):
+            raise
+        raise type(exc)("pslog batch: " + line[len(own):]) from None
+
+
 def _kill_once(marker: str) -> None:
     """The test hook of :data:`KILL_ONCE_ENV`: the worker dies as by the OOM killer."""
     import signal
@@ -568,7 +582,7 @@ def _run_staged(job: Job, settings: Settings, staging: Path, start: float
             raise StepFailed(f"pslog batch: error: cannot write {outdir}: "
                              f"{os_reason(exc)}") from None
         out = {s: str(staging / OUTPUT_NAMES[s]) for s in settings.steps}
-        info = json.loads(_command(["info", job.path, "--json"]))
+        info = json.loads(_implicit(["info", job.path, "--json"]))
         current = job.path
         if "redetect" in settings.steps:
             _command(["redetect", current, "-o", out["redetect"], "--workers", "1", "--force"])
@@ -587,7 +601,8 @@ def _run_staged(job: Job, settings: Settings, staging: Path, start: float
             current = out["fuse"]
         if "eval" in settings.steps or "fuse" in settings.steps:
             # the summary's points and rates come from eval's figures, asked for or not
-            evaluation = json.loads(_command(["eval", current, "--json"]))
+            evaluate = _command if "eval" in settings.steps else _implicit
+            evaluation = json.loads(evaluate(["eval", current, "--json"]))
             if "eval" in settings.steps:
                 _write_json(Path(out["eval"]), evaluation)
         if "view" in settings.steps:

@@ -318,7 +318,10 @@ class Track:
     def concat(cls, parts: Sequence[Track]) -> Track:
         """One method's consecutive tracks (the outputs of a stream) as one: every column
         joined in order, ``dropped`` counts summed (empty parts' included), a quality column
-        missing from a part NaN there. InputError on parts of different methods."""
+        missing from a part NaN there. The quality columns are every part's, empty parts'
+        too: parts that are all empty join to an empty track with the same columns (empty
+        float64), so a writer downstream sees the same schema as with points. InputError on
+        parts of different methods."""
         parts = list(parts)
         if not parts:
             raise InputError("no tracks to join")
@@ -330,12 +333,13 @@ class Track:
             for k, n in p.dropped.items():
                 dropped[k] = dropped.get(k, 0) + n
         full = [p for p in parts if len(p)]
-        keys = list(dict.fromkeys(k for p in full for k in p.quality))
-        quality = {k: np.concatenate([p.quality.get(k, np.full(len(p), np.nan)) for p in full])
-                   for k in keys}
+        # (the columns of empty parts too: all-empty parts kept no column before session 31)
+        keys = list(dict.fromkeys(k for p in parts for k in p.quality))
         if not full:
             return cls(method, np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0, np.int32),
-                       dropped=dropped)
+                       {k: np.zeros(0) for k in keys}, dropped=dropped)
+        quality = {k: np.concatenate([p.quality.get(k, np.full(len(p), np.nan)) for p in full])
+                   for k in keys}
         return cls(method, np.concatenate([p.time_ns for p in full]),
                    np.concatenate([p.position_world for p in full]),
                    np.concatenate([p.camera for p in full]), quality, dropped=dropped)

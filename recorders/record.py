@@ -119,6 +119,7 @@ def record(
     truth: Truth | None = None,
     status: IO[str] | Literal["stderr"] | None = "stderr",
     stop_request: StopRequest | None = None,
+    prefix: str = "",
 ) -> RecordSummary:
     """Record every camera of ``rig`` from its source into the session ``output``.
 
@@ -137,6 +138,9 @@ def record(
     truth : ground truth to store (synthetic sessions)
     status : stream for the live status line, messages and summary (default: the current
         ``sys.stderr``; None: silent)
+    prefix : put before the status line, each message and the summary's first line (``pslog
+        record: ``, as every command's lines on stderr start); the summary's per-camera table
+        below it is indented
     stop_request : the recording stops cleanly once this is set, also when it was set
         before the call. A caller that routes SIGINT and SIGTERM to it
         (:meth:`StopRequest.install`) before its own slow start-up passes it here; None:
@@ -186,14 +190,15 @@ def record(
         stop_signal, restore = stop_request, _nothing
     try:
         return _record(rig, sources, output, options, meta, timing=timing, source=source,
-                       truth=truth, force=force, status=status, stop_signal=stop_signal)
+                       truth=truth, force=force, status=status, stop_signal=stop_signal,
+                       prefix=prefix)
     finally:
         restore()
 
 
 def _record(rig: Rig, sources: Mapping[str, object], output: Path, options: WorkerOptions,
             meta: dict[str, str], *, timing, source, truth, force, status,
-            stop_signal: StopRequest) -> RecordSummary:
+            stop_signal: StopRequest, prefix: str = "") -> RecordSummary:
     from pslog.log import SessionWriter
 
     try:  # a writer that fails to start removes what it began
@@ -207,7 +212,7 @@ def _record(rig: Rig, sources: Mapping[str, object], output: Path, options: Work
     # old session only once complete
     target = writer.target
     existed = target != output
-    session = _Session(rig, sources, options, writer, status, stop_signal)
+    session = _Session(rig, sources, options, writer, status, stop_signal, prefix)
     try:
         if truth is not None:
             session.write(writer.add_truth, truth)
@@ -300,8 +305,10 @@ class _Session:
     """The parent side of one recording."""
 
     def __init__(self, rig: Rig, sources: Mapping[str, object], options: WorkerOptions,
-                 writer, status: IO[str] | None, stop_signal: StopRequest | None = None) -> None:
+                 writer, status: IO[str] | None, stop_signal: StopRequest | None = None,
+                 prefix: str = "") -> None:
         self.rig = rig
+        self.prefix = prefix  # before each line this session writes to ``status``
         self.stop_signal = stop_signal or StopRequest()
         self.write_error: BaseException | None = None  # the first failed write
         self.specs = [sources[name] for name in rig.names]
@@ -329,17 +336,17 @@ class _Session:
         if self._line_shown and self.tty:
             self.status.write("\r\033[K")
             self._line_shown = False
-        self.status.write(text + "\n")
+        self.status.write(self.prefix + text + "\n")
         self.status.flush()
 
     def _show_line(self) -> None:
         if self.status is None:
             return
         if self.tty:
-            self.status.write("\r\033[K" + self.board.line())
+            self.status.write("\r\033[K" + self.prefix + self.board.line())
             self._line_shown = True
         else:
-            self.status.write(self.board.line() + "\n")
+            self.status.write(self.prefix + self.board.line() + "\n")
         self.status.flush()
 
     def _event(self, time_ns: int, text: str, camera: int | None, level: str = "info") -> None:
@@ -419,7 +426,7 @@ class _Session:
                 head = f"nothing recorded to {self.writer.path}: no camera delivered a frame"
             else:
                 head = f"recorded: {self.writer.path}"
-            self.status.write(f"{head}\n{summary_text}\n")
+            self.status.write(f"{self.prefix}{head}\n{summary_text}\n")
             self.status.flush()
         return RecordSummary(Path(self.writer.path), tuple(self.board.cameras),
                              time.monotonic() - wall0, interrupted.is_set(),

@@ -46,6 +46,7 @@ def record_synthetic(
     render: RenderOptions | None = None,
     status: IO[str] | Literal["stderr"] | None = "stderr",
     stop_request: StopRequest | None = None,
+    prefix: str = "",
 ) -> RecordSummary:
     """Render what every camera of ``rig`` sees of a ball following ``motion`` and record it
     (detections, frames, ground truth) into the session ``output``.
@@ -64,7 +65,7 @@ def record_synthetic(
         keeps the rig's offsets (the metadata names the matching preset, else ``custom``)
     ball_radius, exposure_s, noise_sigma, seed : rendering (see :class:`RenderOptions`);
         ``render`` overrides them all when given
-    frames, jpeg_quality, hsv, max_candidates, force, status, stop_request : as
+    frames, jpeg_quality, hsv, max_candidates, force, status, stop_request, prefix : as
         :func:`recorders.record`
 
     Returns
@@ -106,4 +107,4 @@ def record_synthetic(
                   force=force, timing=timing or timing_label(rig),
                   source=f"record --synthetic motion={motion.name}", metadata=metadata,
                   truth=synthetic_truth(rig, motion, duration), status=status,
-                  stop_request=stop_request)
+                  stop_request=stop_request, prefix=prefix)

@@ -105,8 +105,9 @@ def by_hand(session: Path, folder: Path) -> tuple[dict, str]:
     fuse, eval), as strings as in summary.csv, without the runtime; and the fused file."""
     folder.mkdir(parents=True)
     code, info, err = pslog("info", session, "--json")
-    if code != 0:
-        return {"status": "failed", "error": err.strip()}, ""
+    if code != 0:  # (info is the batch's own reading of the session: said as the batch's)
+        return {"status": "failed", "error": err.strip().replace("pslog info: ", "pslog batch: ",
+                                                                 1)}, ""
     info = json.loads(info)
     code, sync, err = pslog("sync", session, "-o", folder / "synced.mcap", "--json")
     assert code == 0, err
@@ -173,7 +174,7 @@ def test_summary_equals_the_commands_by_hand_and_the_bad_session_fails(cluster, 
     code, _, err = pslog("batch", f"{sessions}/**/*.mcap", "--do", "sync,fuse,eval",
                               *METHODS, "-o", out)
     assert code == 1  # one session failed
-    assert "1 of 5 sessions failed (first: day2/bad.mcap: pslog info: error:" in err
+    assert "1 of 5 sessions failed (first: day2/bad.mcap: pslog batch: error:" in err
     assert "Traceback" not in err
     rows = {r["session"]: r for r in read_summary_csv(out / "summary.csv")}
     assert list(rows) == ["day1/a.mcap", "day1/b.mcap", "day2/bad.mcap", "day2/c.mcap",

@@ -224,6 +224,23 @@ def test_a_failed_nested_session_leaves_no_empty_folders(tmp_path):
     assert sorted(p.name for p in out.iterdir()) == ["summary.csv", "summary.parquet"]
 
 
+def test_a_session_that_cannot_be_read_is_said_as_the_batchs_error(tmp_path):
+    """The batch reads each session with ``pslog info`` for its summary, a command the user
+    never typed: its failure is said as the batch's, naming the session the user gave
+    (was "pslog info: error: ..." for a batch of --do fuse; session 30's walkthrough)."""
+    bad = session(tmp_path / "s" / "bad.mcap")
+    cut(bad)
+    out = tmp_path / "res"
+    code, stdout, err = pslog("batch", f"{tmp_path}/s/*.mcap", "--do", "fuse", "-o", out)
+    assert code == 1
+    said = (f"pslog batch: error: {bad}: the recording did not finish; run 'pslog recover "
+            f"{bad} -o FIXED.mcap' to salvage it")
+    assert f"failed bad.mcap: {said}" in stdout.splitlines(), stdout
+    assert f"(first: bad.mcap: {said}); see {out / 'summary.csv'}" in err, err
+    assert read_summary_csv(out / "summary.csv")[0]["error"] == said
+    assert "pslog info" not in stdout + err
+
+
 def _done_once(tmp_path: Path) -> tuple[Job, Settings, dict]:
     """A one-session batch done in this process: its job, settings and its outputs'
     (inode, bytes) by name."""

@@ -196,3 +196,30 @@ def test_the_trigger_is_three_sigma_of_the_linearisations_error(along, iterated)
         assert out[0][0] == out[1][0] and out[0][1] == out[1][1]
         assert out[0][2][1].tolist() == out[1][2][1].tolist()
         assert out[0][2][2].tolist() == out[1][2][2].tolist()
+
+
+SWITCHES = ("bounce_shape", "withhold", "start_models", "window_noise_prior", "restart_prior",
+            "jump_instant", "jump_mixture_cov", "surprise_cov", "iterate_update")
+
+
+def _switches() -> list[str]:
+    from dataclasses import fields
+
+    found = [f.name for f in fields(FilterOptions) if f.type in ("bool", bool)]
+    assert set(SWITCHES) <= set(found), found  # (the nine of session 31, and any newer)
+    return found
+
+
+@pytest.mark.parametrize("name", _switches())
+def test_every_switch_of_the_filter_is_true_or_false(name):
+    """The filter's switches (every field annotated bool) are checked as its numbers are
+    (FilterOptions.__post_init__): "no" was taken as True and None as False, silently; a
+    numpy bool (from an array of settings) is a bool."""
+    from pslog.errors import FusionError
+
+    for bad in ("no", None, 0, 1.0):
+        with pytest.raises(FusionError, match=rf"filter {name} must be True or False, got "
+                                              rf"{bad!r}"):
+            FilterOptions(**{name: bad})
+    for good in (True, False, np.bool_(False)):
+        assert getattr(FilterOptions(**{name: good}), name) == good

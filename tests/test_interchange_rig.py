@@ -359,7 +359,7 @@ def test_rig_import_and_export_commands(tmp_path, cli):
         back = load_rig(tmp_path / name, options=ImportOptions(units="mm"))
         _assert_rigs_close(rig, back)
     code, _, err = cli("rig", "export", out, "--format", "opencv", "-o", tmp_path / "o.txt")
-    assert code == 1 and ".yml" in err and not (tmp_path / "o.txt").exists()
+    assert code == 2 and ".yml" in err and not (tmp_path / "o.txt").exists()
 
 
 @pytest.mark.parametrize("fmt,name", [("anipose", "calibration.toml"), ("opencv", "c.yml")])

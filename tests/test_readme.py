@@ -250,3 +250,20 @@ def test_readme_examples_run_in_order_and_their_outputs_are_git_ignored(tmp_path
     check = subprocess.run(["git", "-C", str(ROOT), "check-ignore", "--no-index", "--",
                             *samples], capture_output=True, text=True)
     assert check.stdout == "", f"tracked samples hidden by .gitignore: {check.stdout}"
+
+
+def test_reliability_counts_the_fault_cases_there_are():
+    """README's "Reliability" gives the number of fault cases of ``tests/faults/`` and a
+    table of them by kind: the number is what pytest collects there and the table's rows add
+    up to it (it was kept by hand; a new fault test now says when it is out of step)."""
+    text = README.read_text(encoding="utf-8")
+    section = text[text.index("## Reliability"):].split("\n## ", 1)[0]
+    stated = int(re.search(r"\((\d+) cases, all passing", section).group(1))
+    rows = [int(m.group(1)) for m in re.finditer(r"^\|[^\n]*\| (\d+) \|$", section, re.M)]
+    run = subprocess.run([sys.executable, "-m", "pytest", "--collect-only", "-q", "-p",
+                          "no:cacheprovider", str(ROOT / "tests" / "faults")],
+                         capture_output=True, text=True, cwd=ROOT, timeout=300)
+    assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-2000:]
+    collected = sum(int(m.group(1)) for m in re.finditer(r"^tests/faults/\S+\.py: (\d+)$",
+                                                         run.stdout, re.M))
+    assert collected == stated == sum(rows), (collected, stated, rows)

@@ -221,7 +221,7 @@ def test_record_says_when_the_measured_shutter_offsets_are_not_the_rigs(
     assert rc == 0
     captured = capsys.readouterr()
     assert "note:" not in captured.out  # stdout stays for data; messages go to stderr
-    notes = [ln for ln in captured.err.splitlines() if ln.startswith("note:")]
+    notes = [ln for ln in captured.err.splitlines() if ln.startswith("pslog record: note:")]
     assert len(notes) == 1, notes
     assert "cam2 11.1 ms (rig 0.0 ms)" in notes[0] and "'sync'" in notes[0]
     assert "cam1 " not in notes[0]
@@ -235,7 +235,8 @@ def test_record_says_when_the_measured_shutter_offsets_are_not_the_rigs(
     rc = main(["record", "--rig", str(two_camera_rig), *sources, "--offset", "cam2=0.025",
                "-o", str(tmp_path / "later.mcap")])
     assert rc == 0
-    notes = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("note:")]
+    notes = [ln for ln in capsys.readouterr().err.splitlines()
+             if ln.startswith("pslog record: note:")]
     assert len(notes) == 1 and "cam2 25.0 ms (rig 0.0 ms)" in notes[0], notes
 
 
@@ -247,7 +248,8 @@ def test_offset_note_that_cannot_read_the_session_back_is_not_an_error(tmp_path,
     broken.write_bytes(b"not an MCAP file")
     _note_offsets(broken, builtin_rig("paper2"))  # no exception
     err = capsys.readouterr().err
-    assert err.startswith("note: the recorded shutter offsets could not be compared"), err
+    assert err.startswith("pslog record: note: the recorded shutter offsets could not be "
+                          "compared"), err
     assert str(broken) in err and len(err.splitlines()) == 1
 
 
@@ -314,3 +316,23 @@ def test_record_outside_a_terminal_prints_no_status_line_of_zeros(tmp_path, caps
     assert board.line().endswith("cam1: started, no frame yet")
     board.cameras[0].add_frame(0, True, 0.0)
     assert "cam1: 1 fr" in board.line()
+
+
+def test_every_line_record_writes_to_stderr_names_the_command(tmp_path, capsys, monkeypatch):
+    """The recorder's status lines, messages and summary start with ``pslog record: `` as
+    every command's lines on stderr do (they had no prefix: session 30's walkthrough); only
+    the summary's per-camera table below its first line is indented."""
+    import recorders.record
+
+    monkeypatch.setattr(recorders.record, "_LOG_REFRESH_S", 0.1)  # status lines into a log
+    out = tmp_path / "s.mcap"
+    rc = main(["record", "--synthetic", "--rig", "paper2", "--timing", "sync", "--motion",
+               "spiral", "--duration", "0.5", "--no-frames", "-o", str(out)])
+    assert rc == 0
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    status = [ln for ln in lines if ln.startswith("pslog record: [")]
+    assert status and all(" fr " in ln or "no frame yet" in ln for ln in status), lines
+    assert f"pslog record: recorded: {out}" in lines, lines
+    table = [ln for ln in lines if not ln.startswith("pslog record: ")]
+    assert len(table) == 3 and all(ln.startswith("  ") for ln in table), lines
+    assert [ln.split()[0] for ln in table] == ["cam1", "cam2", "total"], lines

@@ -167,6 +167,46 @@ def test_track_validation_and_select():
         Track("typeA", [1, 2], np.zeros((2, 2)), [0, 1])
 
 
+def test_concat_of_empty_parts_keeps_their_quality_columns():
+    """Parts that are all empty (a stream that made no point yet) join to an empty track with
+    every part's quality columns, empty float64: a writer downstream sees the schema a track
+    with points has. Before session 31 the join of empty parts had no quality column."""
+    empty = Track("filter", [], np.zeros((0, 3)), [], {"std_m": [], "snap_px": []},
+                  dropped={"held": 2})
+    other = Track("filter", [], np.zeros((0, 3)), [], {"ray_miss_m": []})
+    joined = Track.concat([empty, other, empty])
+    assert list(joined.quality) == ["std_m", "snap_px", "ray_miss_m"]
+    for column in joined.quality.values():
+        assert column.dtype == np.float64 and column.shape == (0,)
+    assert len(joined) == 0 and joined.dropped == {"held": 4}
+    # with points, an empty part's column is NaN over the points (as a column missing from
+    # a part with points always was)
+    full = Track("filter", [5], [[1.0, 2.0, 3.0]], [1], {"std_m": [0.01]})
+    joined = Track.concat([other, full])
+    assert_array_equal(joined.quality["std_m"], [0.01])
+    assert_array_equal(joined.quality["ray_miss_m"], [np.nan])
+
+
+@pytest.mark.parametrize("method", ["filter", "typeA"])
+def test_a_stream_without_points_joins_to_the_batchs_columns(method):
+    """A real stream pushed too few detections to make a point: its parts joined have the
+    quality columns of the batch's (empty) track of the same detections."""
+    from test_fusion_validity import dirty_session
+
+    from pslog.fusion import fuse
+    from pslog.fusion.stream import StreamFuser
+
+    rig, every = dirty_session("typeA", 0)[:2]
+    obs = every.select(np.arange(2))
+    fuser = StreamFuser(rig, method)
+    parts = [fuser.push(obs.time_ns[i], obs.camera[i], obs.uv[i], obs.frame_index[i])
+             for i in range(len(obs))]
+    parts.append(fuser.flush())
+    batch = fuse(obs, rig, method)
+    assert len(batch) == 0 and batch.quality  # (the case: no point, but columns)
+    assert set(Track.concat(parts).quality) == set(batch.quality)
+
+
 # ---- Truth --------------------------------------------------------------------------------
 
 def test_truth_validation():

@@ -89,16 +89,22 @@ def test_a_fit_on_one_thread_is_the_fit_on_two_bit_for_bit(monkeypatch):
 
 
 @pytest.mark.parametrize("text, expected", [("1", 1), ("2", 2), ("", 2), (" 1 ", 1),
-                                            ("64", None)])
+                                            ("64", 64), ("000000000001", 1),
+                                            ("1000000", 10**6), ("9" * 5000, float("inf"))],
+                         ids=["1", "2", "unset", "spaces", "64", "zeros-1", "million",
+                              "5000-digits"])
 def test_the_thread_count_comes_from_the_environment(monkeypatch, text, expected):
+    """No upper bound to refuse: a count above the CPUs this process may use is taken as
+    that many (the rule of the docstring, README and fuse --help), however many digits (5000
+    of them were refused as 'no whole number': int() parses at most 4300)."""
     import os
 
     monkeypatch.setenv("PSLOG_SMOOTH_THREADS", text)
     cpus = len(os.sched_getaffinity(0))
-    assert _breaks.smooth_threads() == (min(expected, cpus) if expected else min(64, cpus))
+    assert _breaks.smooth_threads() == min(expected, cpus)
 
 
-@pytest.mark.parametrize("text", ["two", "0", "-3", "1.5"])
+@pytest.mark.parametrize("text", ["two", "0", "-3", "1.5", "0" * 20, "1e3"])
 def test_a_thread_count_that_is_no_whole_number_from_1_is_a_clear_error(monkeypatch, text):
     monkeypatch.setenv("PSLOG_SMOOTH_THREADS", text)
     with pytest.raises(PslogError, match=rf"PSLOG_SMOOTH_THREADS.*'{text}'"):

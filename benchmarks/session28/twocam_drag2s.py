@@ -101,7 +101,8 @@ def main() -> None:
     over = {}
     for kv in filter(None, a.options.split(";")):
         key, value = kv.split("=")
-        over[key] = float(eval(value, {}))
+        number = eval(value, {})  # a number, or True/False for a switch (kept a bool)
+        over[key] = number if isinstance(number, bool) else float(number)
     opts = FilterOptions(max_gap_s=FusionOptions().max_gap_s, **over)
     orig = pf.METHODS["filter"]
     captured = {}

@@ -40,8 +40,9 @@ def variants_of(spec: str) -> list[tuple[str, dict]]:
         over = {}
         for kv in filter(None, kvs.split(";")):
             key, value = kv.split("=")
-            number = eval(value, {})  # a number, e.g. 1/200000, or None
-            over[key] = None if number is None else float(number)
+            number = eval(value, {})  # a number, e.g. 1/200000, True/False, or None
+            # (a switch stays a bool: FilterOptions refuses 0.0 for True/False)
+            over[key] = number if number is None or isinstance(number, bool) else float(number)
         out.append((name, over))
     return out
 

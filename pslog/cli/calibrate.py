@@ -24,6 +24,7 @@ import sys
 from pathlib import Path
 
 from pslog.cli._common import add_force, declare_files, nonnegative_float
+from pslog.errors import InputError
 
 #: Largest reprojection RMS a calibration may have to be written into the rig, pixels: the
 #: points or corners are then tens of pixels off the model on average, no calibration
@@ -33,9 +34,16 @@ MAX_RMS_PX = 50.0
 _WORST_SHOWN = 5
 
 
+class BadOption(InputError):
+    """A command-line value that is bad in itself, with another option, or against the rig or
+    the images (``--offset`` beyond the frame period, ``--width`` other than the images'):
+    exit 2 with argparse's one line, as every other command reports a bad value
+    (:func:`pslog.cli._common.usage_error`), not exit 1 (a fault of the input files)."""
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from pslog.camera import MAX_FPS
-    from pslog.cli._common import camera_name, chessboard, number_at_most, positive_int
+    from pslog.camera import MAX_FPS, MAX_IMAGE_SIZE
+    from pslog.cli._common import camera_name, chessboard, int_in, number_at_most, positive_int
     parser.epilog = ("examples:\n"
                      "  pslog calibrate --points pts.csv --name cam1 --width 640 --height 480 "
                      "--rig rig.toml\n"
@@ -53,10 +61,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="camera name in the rig")
     parser.add_argument("--rig", required=True, metavar="RIG.toml",
                         help="rig file to add the camera to (created if missing)")
-    parser.add_argument("--width", type=positive_int, metavar="PX", help="image width, pixels "
-                        "(required for a new camera with --points; checked against the images "
-                        "with --chessboard)")
-    parser.add_argument("--height", type=positive_int, metavar="PX", help="image height, "
+    # (at most a camera's largest side: 99999999 was refused by the camera, exit 1)
+    size = int_in(1, MAX_IMAGE_SIZE)
+    parser.add_argument("--width", type=size, metavar="PX", help="image width, pixels, at most "
+                        f"{MAX_IMAGE_SIZE} (required for a new camera with --points; checked "
+                        "against the images with --chessboard)")
+    parser.add_argument("--height", type=size, metavar="PX", help="image height, "
                         "pixels (as --width)")
     parser.add_argument("--fps", type=number_at_most(MAX_FPS, "fps", "beyond any camera",
                                                      positive=True),
@@ -88,7 +98,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pslog.errors import InputError, OutputExistsError
+    from pslog.cli._common import usage_error
+
+    try:
+        return _run(args)
+    except BadOption as exc:  # raised before anything is written
+        return usage_error("calibrate", str(exc))
+
+
+def _run(args: argparse.Namespace) -> int:
+    from pslog.errors import OutputExistsError
     from pslog.rig import BUILTIN_RIGS, Rig, load_rig, save_rig
 
     rig_path = Path(args.rig)
@@ -99,20 +118,17 @@ def run(args: argparse.Namespace) -> int:
     existing = rig.camera(args.name) if rig is not None and args.name in rig.names else None
 
     if args.fix_intrinsics and args.chessboard:
-        raise InputError("--fix-intrinsics goes with --points (a chessboard gives intrinsics)")
+        raise BadOption("--fix-intrinsics goes with --points (a chessboard gives intrinsics)")
     if args.chessboard and not args.images:
-        raise InputError("--chessboard needs --images DIR_OR_VIDEO")
+        raise BadOption("--chessboard needs --images DIR_OR_VIDEO")
     if args.images and not args.chessboard:
-        raise InputError("--images goes with --chessboard")
+        raise BadOption("--images goes with --chessboard")
+    fps = args.fps if args.fps is not None else (existing.fps if existing else 30.0)
+    offset = args.offset if args.offset is not None else (existing.offset if existing else 0.0)
+    _check_offset(args, existing, rig_path, fps, offset)
     if existing is not None and not args.fix_intrinsics and not args.force:
         raise OutputExistsError(f"camera {args.name!r} is already in {rig_path}; use --force "
                                 f"to replace its calibration")
-    for key in ("width", "height", "max_frames"):
-        value = getattr(args, key)
-        if value is not None and value <= 0:
-            raise InputError(f"--{key.replace('_', '-')} must be a positive integer, got {value}")
-    fps = args.fps if args.fps is not None else (existing.fps if existing else 30.0)
-    offset = args.offset if args.offset is not None else (existing.offset if existing else 0.0)
 
     if args.chessboard:
         camera, rms_px = _run_chessboard(args, existing, fps, offset)
@@ -150,6 +166,21 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _check_offset(args, existing, rig_path: Path, fps: float, offset: float) -> None:
+    """The shutter offset within the frame period (``0 <= offset < 1 / fps``, as a rig's
+    camera has it), said before the calibration runs: the --offset given, or the rig's kept
+    for this camera at a new --fps."""
+    period = 1.0 / fps
+    if offset < period:
+        return
+    if args.offset is not None:
+        raise BadOption(f"argument --offset: {offset:g} s must be below the frame period, "
+                        f"{period:.6g} s at {fps:g} fps")
+    raise BadOption(f"argument --fps: the offset of camera {args.name!r} in {rig_path}, "
+                    f"{existing.offset:g} s, is beyond the frame period at {fps:g} fps "
+                    f"({period:.6g} s); give --offset too")
+
+
 def _inputs(args) -> list[str]:
     return [p for p in (args.points, args.images) if p]
 
@@ -158,7 +189,6 @@ def _run_points(args, existing, rig_path: Path, fps: float, offset: float):
     import numpy as np
 
     from pslog.calibration import calibrate_from_points, read_points_csv
-    from pslog.errors import InputError
 
     points_world, uv, lines = read_points_csv(args.points, with_lines=True)
     if args.fix_intrinsics:
@@ -169,15 +199,16 @@ def _run_points(args, existing, rig_path: Path, fps: float, offset: float):
         for key in ("width", "height"):
             value = getattr(args, key)
             if value is not None and value != getattr(existing, key):
-                raise InputError(f"--{key} {value} differs from camera {args.name!r}'s "
-                                 f"{getattr(existing, key)} in the rig (its K is for that size)")
+                raise BadOption(f"--{key} {value} differs from the {key} of camera "
+                                f"{args.name!r} in the rig, {getattr(existing, key)} (its K "
+                                f"is for that size)")
         width, height, K, dist = existing.width, existing.height, existing.K, existing.dist
     else:
         width = args.width if args.width is not None else (existing.width if existing else None)
         height = (args.height if args.height is not None
                   else (existing.height if existing else None))
         if width is None or height is None:
-            raise InputError("--width and --height are required for a new camera")
+            raise BadOption("--width and --height are required for a new camera")
         K = dist = None
     result = calibrate_from_points(points_world, uv, width, height, name=args.name, fps=fps,
                                    offset=offset, K=K, dist=dist, model=args.model)
@@ -202,7 +233,6 @@ def _run_points(args, existing, rig_path: Path, fps: float, offset: float):
 def _run_chessboard(args, existing, fps: float, offset: float):
     from pslog.calibration import calibrate_chessboard, parse_pattern, read_calibration_images
     from pslog.calibration.chessboard import listed
-    from pslog.errors import InputError
 
     pattern = parse_pattern(args.chessboard)
     # an image that cannot be read or decoded is skipped and named, not fatal
@@ -220,7 +250,7 @@ def _run_chessboard(args, existing, fps: float, offset: float):
     for key, value in (("width", width), ("height", height)):
         given = getattr(args, key)
         if given is not None and given != value:
-            raise InputError(f"--{key} {given} differs from the images' {value}")
+            raise BadOption(f"--{key} {given} differs from the images' {value}")
     pose = {"R": existing.R, "t": existing.t} if existing is not None else {}
     try:
         result = calibrate_chessboard(images, pattern, args.square, name=args.name, fps=fps,

@@ -106,7 +106,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="methods fused at once, on threads (the same tracks whatever "
                              "the number; 1..64; 1: one after another, e.g. beside other "
                              "work) (default: the usable cores, at most one per method; "
-                             "smooth's own threads: PSLOG_SMOOTH_THREADS, default 2)")
+                             "smooth's own threads: PSLOG_SMOOTH_THREADS, default 2, at "
+                             "most the CPUs the process may use)")
     add_force(parser)
     declare_files(parser, inputs=("session", "rig"), outputs=("output",))
 

@@ -71,6 +71,10 @@ examples:
 
 _SOURCE = re.compile(r"^([^=]+)=(.+)$")
 
+#: before each line the command writes to stderr (the recorder's status line, messages and
+#: summary, the notes after it), as every command's lines start
+PREFIX = "pslog record: "
+
 
 class MalformedSource(InputError):
     """A ``--source``/``--offset`` value that is malformed in itself (exit 2, as argparse
@@ -182,7 +186,7 @@ def _run(args: argparse.Namespace, stop) -> int:
             frames=not args.no_frames, jpeg_quality=args.jpeg_quality, seed=args.seed,
             force=args.force, timing=args.timing, hsv=hsv, max_candidates=args.max_candidates,
             ball_radius=args.ball_radius, exposure_s=args.exposure, noise_sigma=args.noise,
-            stop_request=stop)
+            stop_request=stop, prefix=PREFIX)
     else:
         if not args.source:
             return usage_error("record", "give a --source NAME=SPEC for every camera of the "
@@ -203,7 +207,7 @@ def _run(args: argparse.Namespace, stop) -> int:
                          frames=not args.no_frames, jpeg_quality=args.jpeg_quality, hsv=hsv,
                          max_candidates=args.max_candidates, force=args.force,
                          timing=args.timing, source="record " + " ".join(args.source),
-                         stop_request=stop)
+                         stop_request=stop, prefix=PREFIX)
     if summary.n_frames == 0 and summary.interrupted:
         raise InputError(f"stopped before any camera delivered a frame; nothing was written "
                          f"to {output}")
@@ -229,7 +233,7 @@ def _note_offsets(output, rig) -> None:
     try:
         off = offset_disagreements(read_session(output).detections, rig)
     except PslogError as exc:
-        print(f"note: the recorded shutter offsets could not be compared with the rig's "
+        print(f"{PREFIX}note: the recorded shutter offsets could not be compared with the rig's "
               f"({exc}); the recording itself is complete", file=sys.stderr)
         return
     if off:
@@ -237,8 +241,8 @@ def _note_offsets(output, rig) -> None:
         # phase may come as -13.6 ms, which the rig refuses, for the 19.7 ms to set
         listed = ", ".join(f"{name} {(measured % rig.camera(name).frame_period) * 1e3:.1f} ms "
                            f"(rig {nominal * 1e3:.1f} ms)" for name, measured, nominal in off)
-        print(f"note: measured shutter offsets differ from the rig's: {listed}; the session "
-              f"keeps the rig's offsets (timing '{timing_label(rig)}'); to fuse with the "
+        print(f"{PREFIX}note: measured shutter offsets differ from the rig's: {listed}; the "
+              f"session keeps the rig's offsets (timing '{timing_label(rig)}'); to fuse with the "
               f"measured ones, 'pslog rig show {output} > fixed.toml', set the offsets and "
               f"'pslog fuse {output} --rig fixed.toml'", file=sys.stderr)
 

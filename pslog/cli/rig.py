@@ -108,7 +108,8 @@ def _add_export(actions) -> None:
     exp.add_argument("--units", default="m", choices=tuple(UNITS),
                      help="unit of the translations written (default: m)")
     exp.add_argument("-o", "--output", required=True, metavar="CALIBRATION.toml",
-                     help="the file to write (opencv: named .yml, .yaml, .xml or .json)")
+                     help="the file to write: anipose and pose2sim named .toml, opencv .yml, "
+                          ".yaml, .xml or .json")
     add_force(exp)
     declare_files(exp, inputs=("rig",), outputs=("output",))
 
@@ -192,16 +193,21 @@ def _described_format(path: str) -> str:
 
 
 def _import(args: argparse.Namespace) -> int:
-    from pslog.errors import RigError
-    from pslog.interchange.rig_formats import ImportOptions
+    from pslog.interchange.rig_formats import ImportOptions, TimingOptionError
     from pslog.outputs import replacing
     from pslog.rig import apply_timing, load_rig_file
 
+    from ._common import usage_error
+
     offsets = dict(args.offset)
-    if args.timing and offsets:
-        raise RigError("give --timing or --offset, not both")
-    loaded = load_rig_file(args.file, args.format,
-                           ImportOptions(units=args.units, fps=args.fps, offsets=offsets))
+    if args.timing and offsets:  # (bad command lines: exit 2, as argparse's own)
+        return usage_error("rig import", "give --timing or --offset, not both")
+    try:
+        loaded = load_rig_file(args.file, args.format,
+                               ImportOptions(units=args.units, fps=args.fps, offsets=offsets))
+    except TimingOptionError as exc:  # an --offset or --fps that does not fit the file
+        option = "--offset" if offsets else "--fps"
+        return usage_error("rig import", f"argument {option}: {exc}")
     rig = apply_timing(loaded.rig, args.timing) if args.timing else loaded.rig
     with replacing(args.output, force=args.force, inputs=[args.file]) as f:
         f.write(rig.to_toml())
@@ -212,17 +218,32 @@ def _import(args: argparse.Namespace) -> int:
     return 0
 
 
+#: what each TOML export format is called in an error (Pose2Sim reads the ``*.toml`` files of
+#: its calibration folder; aniposelib and anipose a ``calibration.toml``)
+_FORMAT_NAMES = {"anipose": "an aniposelib calibration", "pose2sim": "a Pose2Sim calibration"}
+
+
 def _export(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from pslog.errors import InputError
     from pslog.interchange.rig_formats import OPENCV_SUFFIXES, rig_to_format
     from pslog.outputs import replacing
 
+    from ._common import usage_error
+
+    # -o's name says the format, and a mismatch is a bad command line (exit 2), never a file
+    # of one format under another's name: a Pose2Sim calibration named c.yml was written as
+    # TOML, which Pose2Sim (it reads its calibration folder's *.toml) never finds and pslog
+    # read back as OpenCV YAML ("malformed OpenCV FileStorage file")
     suffix = Path(args.output).suffix.lower()
     if args.format == "opencv" and suffix not in OPENCV_SUFFIXES:
-        raise InputError(f"-o {args.output}: an OpenCV FileStorage file is named "
-                         f"{', '.join(OPENCV_SUFFIXES)} (YAML, XML or JSON)")
+        return usage_error("rig export", f"-o {args.output}: an OpenCV FileStorage file is "
+                                         f"named {', '.join(OPENCV_SUFFIXES)} (YAML, XML or "
+                                         f"JSON)")
+    if args.format != "opencv" and suffix != ".toml":
+        return usage_error("rig export", f"-o {args.output}: {_FORMAT_NAMES[args.format]} is "
+                                         f"TOML, named .toml (for YAML, XML or JSON: --format "
+                                         f"opencv)")
     rig = _resolve(args.rig)
     text = rig_to_format(rig, args.format, args.units, suffix)
     with replacing(args.output, force=args.force, inputs=[args.rig]) as f:

@@ -76,8 +76,11 @@ def smooth_threads() -> int:
     import os
 
     text = os.environ.get("PSLOG_SMOOTH_THREADS", "").strip()
+    # (a count of more digits than int() parses, 4300, is a whole number all the same:
+    # clamped to the CPUs as any large count is)
+    huge = text.isascii() and text.isdigit() and len(text.lstrip("0")) > 9
     try:
-        wanted = int(text) if text else 2
+        wanted = 2 if not text else 2**31 if huge else int(text)
     except ValueError:
         wanted = 0
     if wanted < 1:

@@ -413,6 +413,14 @@ class FilterOptions:
     hold_jump_p: float | None = 0.05
 
     def __post_init__(self) -> None:
+        from dataclasses import fields
+
+        # the switches (every field annotated bool, a new one too): True or False only (a
+        # numpy bool too); a string such as "no" or a None was taken as truthy or falsy
+        for name in (f.name for f in fields(self) if f.type in ("bool", bool)):
+            value = getattr(self, name)
+            if not isinstance(value, bool | np.bool_):
+                raise FusionError(f"filter {name} must be True or False, got {value!r}")
         for name in ("noise_px", "accel_psd", "accel_step_var", "gate", "jump_speed",
                      "noise_prior_weight"):
             value = getattr(self, name)

@@ -508,9 +508,9 @@ def _one_detection(time_ns, camera, uv, frame_index, n_cameras: int
 
 
 def _joined(first: Track, last: Track) -> Track:
-    """``first`` then ``last`` (:meth:`Track.concat`), ``first``'s columns kept when
-    ``last`` has no point (concat keeps the quality columns of parts with points only: a
-    push's empty Track keeps them all)."""
+    """``first`` then ``last`` (:meth:`Track.concat`), ``first`` itself (its columns, and
+    ``last``'s dropped counts added) when ``last`` has no point: concat would add the
+    columns of an empty ``last`` that ``first`` lacks, NaN over ``first``'s points."""
     if len(last):
         return Track.concat([first, last])
     if not last.dropped:

@@ -77,6 +77,12 @@ _DIST_NAMES = "k1, k2, p1, p2, k3"
 _NOT_CAMERAS = ("metadata", "capture_volume", "charuco", "checkerboard")
 
 
+class TimingOptionError(RigError):
+    """A frame rate or shutter offset of :class:`ImportOptions` that does not fit the file
+    (an offset beyond the frame period, a camera it does not have): on the command line
+    (``rig import --offset``/``--fps``) a bad value, exit 2, as ``simulate``'s are."""
+
+
 @dataclass(frozen=True)
 class ImportOptions:
     """What a foreign calibration does not say.
@@ -276,8 +282,8 @@ def _with_timing(rig: Rig, options: ImportOptions, source: str) -> Rig:
     """``rig`` with the frame rate and offsets of ``options`` applied."""
     unknown = sorted(set(options.offsets) - set(rig.names))
     if unknown:
-        raise RigError(f"{source}: --offset for unknown camera(s) {', '.join(unknown)} (rig "
-                       f"has {', '.join(rig.names)})")
+        raise TimingOptionError(f"{source}: --offset for unknown camera(s) "
+                                f"{', '.join(unknown)} (rig has {', '.join(rig.names)})")
     if options.fps is None and not options.offsets:
         return rig
     cameras = []
@@ -292,7 +298,7 @@ def _with_timing(rig: Rig, options: ImportOptions, source: str) -> Rig:
         try:
             cameras.append(cam.replace(**changes))
         except RigError as exc:
-            raise RigError(f"{source}: {exc}") from None
+            raise TimingOptionError(f"{source}: {exc}") from None
     return Rig(tuple(cameras), rig.name)
 
 

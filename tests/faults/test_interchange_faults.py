@@ -103,7 +103,6 @@ def test_malformed_calibration_given_as_rig_to_fuse_is_refused(work):
 
 @pytest.mark.parametrize("args, why", [
     (["rig", "import", "cal.toml", "-o", "old.toml"], ("old.toml", "--force")),
-    (["rig", "export", "paper3", "--format", "opencv", "-o", "new.txt"], (".yml",)),
     (["export", "f.mcap", "--jsonl", "old.jsonl"], ("old.jsonl", "--force")),
     (["export", "f.mcap", "--tum", "traj"], ("typeA.tum", "--force")),
     (["export", "f.mcap", "--tum", "old.jsonl"], ("old.jsonl", "not a folder")),

@@ -200,7 +200,8 @@ def _assert_survived(rec: Recording, victim: str, context: str) -> None:
     # (killed before the others said "ready": they are still opening; after they all ended —
     # a fast machine, the kill at the end of the victim's clip — nothing else is recording)
     others_done = all("[done]" in line for name, line in summary.items() if name != victim)
-    assert died in ([f"error: {victim}: camera process died (exit code -9){tail}"] for tail in (
+    said = f"pslog record: error: {victim}: camera process died (exit code -9)"
+    assert died in ([f"{said}{tail}"] for tail in (
         "; the other cameras keep recording", "; the other cameras are still opening",
         *([""] if others_done else []))), f"{context}\n{err}"
     assert "[failed]" in summary[victim], err

@@ -78,7 +78,8 @@ def test_a_chessboard_calibration_without_a_plausible_lens_says_what_to_do(tmp_p
     lens: OpenCV returns a distortion of 2e3. Was one line naming that coefficient alone
     ("camera 'cam1': dist has an entry of 2.12e+03: beyond any lens"); now it says that the
     views gave no plausible lens and what views to take. A wrong --offset is still named
-    as such (the user's value, checked apart from OpenCV's solution)."""
+    as such (the user's value, checked apart from OpenCV's solution; since session 31
+    before it, a bad command-line value: exit 2)."""
     import cv2
 
     images = tmp_path / "views"
@@ -98,8 +99,8 @@ def test_a_chessboard_calibration_without_a_plausible_lens_says_what_to_do(tmp_p
     assert_one_line_error(run_pslog(*args), 1, contains=(
         "chessboard calibration from 4 views gave no plausible lens",
         "take more views, the board tilted in different directions"))
-    assert_one_line_error(run_pslog(*args, "--offset", "5"), 1, contains=(
-        "camera 'cam1': offset 5 s must be in [0, 0.0333333 s)",))
+    assert_one_line_error(run_pslog(*args, "--offset", "5"), 2, contains=(
+        "argument --offset: 5 s must be below the frame period, 0.0333333 s at 30 fps",))
     assert not rig.exists()
 
 
