@@ -21,7 +21,9 @@ unseen kick and the blackout's extrapolation are told apart.
 ``--max-std-mm``: typeA fused with ``FusionOptions.max_std_m`` (withholding); ``--clean``:
 list the clean sessions' far points too; ``--no-fresh``: without session 31's wait for the
 points resting on a re-acquisition (``pslog.fusion.confirm.FRESH_ROWS`` off: as before). Prints one line per far point and a summary:
-points, far (clean / added), good (<= 5 cm) points, mean error.
+points, far (clean / added), good (<= 5 cm) points, mean error, and the points output that
+waited for the next camera's confirmation (one detection's latency in a stream) without and
+with the session-31 rule (``FRESH_ROWS``).
 """
 from __future__ import annotations
 
@@ -70,9 +72,35 @@ def _in_view(rig, truth, cam, t_ns):
     return bool(front[0] and rig.cameras[cam].in_image(uv)[0])
 
 
+def _waits(prep, rig, track, gap):
+    """(points output that waited for the next camera without the session-31 rule, with
+    it): the latency's cost (a waiting point comes one detection later)."""
+    from pslog.fusion import _pseudo_kernel
+    from pslog.fusion._prepare import rays_only
+    from pslog.fusion.confirm import LONG_FACTOR, usual_interval_s
+    from pslog.fusion.innovation import previous_next_rows
+    from pslog.fusion.pseudo import _all_brackets
+    from pslog.records import NS
+
+    if not len(track):
+        return 0, 0
+    prep = rays_only(prep)[0]
+    out = []
+    for fresh in (False, True):
+        k = len(track)
+        row, g, long = np.empty(k, np.int64), np.empty(k, np.int64), np.empty(k, bool)
+        _pseudo_kernel.long_gap_kernel(
+            prep.obs.time_ns, prep.obs.camera, len(rig), _all_brackets(prep)[2],
+            previous_next_rows(prep)[0], track.time_ns, track.camera, int(gap * NS),
+            float(LONG_FACTOR * usual_interval_s(rig) * NS), fresh, row, g, long)
+        out.append(int(np.count_nonzero(long)))
+    return out[0], out[1]
+
+
 def run(rig, runs, first, options, misses, show_clean):
     gap = options.max_gap_s or default_max_gap_s(rig)
-    tot = {"points": [0, 0], "far": [0, 0], "added": 0, "err": [[], []]}
+    tot = {"points": [0, 0], "far": [0, 0], "added": 0, "err": [[], []],
+           "waits": [[0, 0], [0, 0]]}
     for seed, (label, motion, duration, kicks) in enumerate(runs, start=first - 300):
         span = motion.duration if duration is None else duration
         fault = faults(rig, seed, span)
@@ -87,6 +115,9 @@ def run(rig, runs, first, options, misses, show_clean):
             obs = gated.observations
             err = errors_m(track, truth)
             tot["points"][i] += len(track)
+            waits = _waits(prep, rig, track, gap)
+            tot["waits"][i][0] += waits[0]
+            tot["waits"][i][1] += waits[1]
             tot["err"][i].append(err[np.isfinite(err)])
             far = np.flatnonzero(err > FAR)
             tot["far"][i] += len(far)
@@ -150,7 +181,10 @@ def main():
             mean = [1e3 * float(np.concatenate(e).mean()) for e in tot["err"]]
             summary.append(f"{first} {rig.name}: points clean/faults {tot['points'][0]}/{tot['points'][1]}, "
                            f">5cm clean {tot['far'][0]}, faults {tot['far'][1]} (added {tot['added']}), "
-                           f"mean mm {mean[0]:.3f}/{mean[1]:.3f}")
+                           f"mean mm {mean[0]:.3f}/{mean[1]:.3f}, points that waited clean "
+                           f"{tot['waits'][0][0]} -> {tot['waits'][0][1]}, faults "
+                           f"{tot['waits'][1][0]} -> {tot['waits'][1][1]} (without -> with "
+                           f"FRESH_ROWS)")
     print("\n".join(summary))
 
 
