@@ -336,17 +336,26 @@ def test_long_gap_pass_from_type_a_tables_equals_the_binary_search(seed):
         unbracketed = (first > 0) & (camera[p] != camera) & (
             (before < 0) | (time_ns[p] - time_ns[np.maximum(before, 0)] > max_gap_ns))
         gap_before = np.where(first > 0, gap[p], -1)
-        long = (gap > long_ns) | unbracketed | (gap_before > long_ns)
-        for order in (np.arange(n), np.arange(n)[::-1].copy()):  # (out of order: bisection)
-            row, got_gap = np.empty(n, np.int64), np.empty(n, np.int64)
-            got_long = np.empty(n, bool)
-            _pseudo_kernel.long_gap_kernel(
-                time_ns, camera, len(rig), _all_brackets(prep)[2], previous_next_rows(prep)[0],
-                time_ns[order], camera[order], max_gap_ns, float(long_ns), row, got_gap,
-                got_long)
-            assert_array_equal(row, order)
-            assert_array_equal(got_gap, gap[order])
-            assert_array_equal(got_long, long[order])
-        # (the cases the tables must get right are there: blind spells, shared instants)
+        # a row its camera's first after a spell of max_gap_ns without one (or its first)
+        fresh_row = (before < 0) | (time_ns - time_ns[np.maximum(before, 0)] > max_gap_ns)
+        pp = np.maximum(first[p] - 1, 0)
+        fresh = (first > 0) & (fresh_row[p] | ((first[p] > 0) & fresh_row[pp]))
+        for fresh_rows in (False, True):
+            long = (gap > long_ns) | unbracketed | (gap_before > long_ns)
+            if fresh_rows:
+                long |= fresh
+            for order in (np.arange(n), np.arange(n)[::-1].copy()):  # (out of order)
+                row, got_gap = np.empty(n, np.int64), np.empty(n, np.int64)
+                got_long = np.empty(n, bool)
+                _pseudo_kernel.long_gap_kernel(
+                    time_ns, camera, len(rig), _all_brackets(prep)[2],
+                    previous_next_rows(prep)[0], time_ns[order], camera[order], max_gap_ns,
+                    float(long_ns), fresh_rows, row, got_gap, got_long)
+                assert_array_equal(row, order)
+                assert_array_equal(got_gap, gap[order])
+                assert_array_equal(got_long, long[order])
+        # (the cases the tables must get right are there: blind spells, shared instants,
+        # rows resting on a re-acquisition that no other rule makes wait)
         assert unbracketed.any() and long.any() and not long.all()
+        assert np.any(fresh & ~((gap > long_ns) | unbracketed | (gap_before > long_ns)))
         assert timing == "typeA" or np.any(first != np.arange(n))

@@ -82,7 +82,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "candidate (default %(default)s)")
     parser.add_argument("--confirm-gaps", choices=("on", "off", "all"), default="on",
                         help="typeA: on: a point whose prediction bridged a gap longer than "
-                             "the rig's usual one is kept only once the next camera's "
+                             "the rig's usual one, or rests on a camera's first detection "
+                             "after a spell without one, is kept only once the next camera's "
                              "detection confirms it (left out as contradicted or "
                              "unconfirmed otherwise); all: every point is tested so, a "
                              "point nothing can check kept unless it bridged a long gap "

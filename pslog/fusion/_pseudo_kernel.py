@@ -1396,8 +1396,16 @@ def window_mean_squares_kernel(time_ns, values, ends, window_ns, min_count, out)
 
 
 @kernel
+def _fresh(r, time_ns, own_before, max_gap_ns):
+    """Row ``r`` is its camera's first after a spell of more than ``max_gap_ns`` without a
+    row (or its first at all): ``own_before`` (n,) each row's previous row of its camera."""
+    own = own_before[r]
+    return own < 0 or time_ns[r] - time_ns[own] > max_gap_ns
+
+
+@kernel
 def long_gap_kernel(time_ns, camera, m, previous, own_before, t_points, cam_points,
-                    max_gap_ns, long_ns, row, gap, long):
+                    max_gap_ns, long_ns, fresh_rows, row, gap, long):
     """:func:`pslog.fusion.confirm.confirm_batch`'s first pass, point by point: each point's
     row (its time's first row, ``np.searchsorted(time_ns, t, "left")``, then up to ``m`` rows
     on until its camera's) into ``row`` (k,), the time since the previous instant (``gap``
@@ -1406,8 +1414,11 @@ def long_gap_kernel(time_ns, camera, m, previous, own_before, t_points, cam_poin
     confirmation (``long`` (k,)): that gap, or the previous instant's own, above
     ``long_ns``, or the previous instant's row of another camera while the point's camera
     has no row within ``max_gap_ns`` before it (``own_before`` (n,): each row's previous row
-    of its camera, -1 none). The numpy form's comparisons, without its (n,) and (k,)
-    temporaries: the same rows and decisions."""
+    of its camera, -1 none), or (``fresh_rows``, :data:`pslog.fusion.confirm.FRESH_ROWS`)
+    the previous instant's row or its own previous instant's row is its camera's first
+    after more than ``max_gap_ns`` without one (:func:`_fresh`: a re-acquisition). The numpy
+    form's comparisons, without its (n,) and (k,) temporaries: the same rows and
+    decisions."""
     n = time_ns.shape[0]
     lo = 0
     for i in range(t_points.shape[0]):
@@ -1439,13 +1450,20 @@ def long_gap_kernel(time_ns, camera, m, previous, own_before, t_points, cam_poin
         gap[i] = g
         unbracketed = False
         gap_before = np.int64(-1)
+        fresh = False
         if p >= 0:
             own = own_before[e]
             unbracketed = (camera[p] != camera[e]) and (
                 own < 0 or time_ns[p] - time_ns[max(own, 0)] > max_gap_ns)
             pp = previous[p]
             gap_before = time_ns[p] - time_ns[pp] if pp >= 0 else np.int64(-1)
-        long[i] = (g > long_ns) or unbracketed or (gap_before > long_ns)
+            # the two previous instants' rows (eq. (2)'s past points): either one its
+            # camera's first row after a spell of max_gap_ns without one (a re-acquisition,
+            # the gate's choice with no track of its own camera behind it)
+            if fresh_rows:
+                fresh = _fresh(p, time_ns, own_before, max_gap_ns) or (
+                    pp >= 0 and _fresh(pp, time_ns, own_before, max_gap_ns))
+        long[i] = (g > long_ns) or unbracketed or (gap_before > long_ns) or fresh
 
 
 @kernel

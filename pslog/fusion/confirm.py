@@ -51,8 +51,15 @@ spell), or whose previous instant itself followed the one before it by more than
 (session 17: eq. (2)'s ``P_{t-2}`` lies further back than usual, a camera blind between
 the two past points; a kick inside that span makes the past velocity neither the motion
 before nor after it, and the newest detection sees the error along its ray: ``lab4``,
-``bench_dirty.py --more --first-seed 2000``, 51 mm), wait: the others are output at once,
-as before. Causal: a point's decision uses
+``bench_dirty.py --more --first-seed 2000``, 51 mm), or whose two previous instants' rows
+(eq. (2)'s ``P_{t-1}`` and ``P_{t-2}``, as a rule) include one that is its camera's first
+after a spell of more than ``max_gap_s`` without one (session 31, :data:`FRESH_ROWS`: a
+re-acquisition, the camera blind or the ball out of its view before; the gate chose it with
+no track of that camera behind it, on the other cameras' epipolar lines and the 3D track,
+whose allowances of 8 px and 8 cm let a spurious blob a dozen pixels from where the ball is
+but is not seen through: ``lab3``, ``bench_dirty.py --more --first-seed 16200``, ``straight``,
+132 mm at ``std_m`` 5.1 mm; ``lab4``, ``--first-seed 16300``, two points 63-127 mm), wait:
+the others are output at once, as before. Causal: a point's decision uses
 the detections up to the confirming one, so :class:`ConfirmedStream` (``StreamFuser``'s
 ``typeA``) decides as the batch run does, bit for bit (every step elementwise), and outputs
 a withheld point with the confirming detection's push. docs/methods.md, "Type A across a
@@ -73,6 +80,9 @@ from ..records import NS, Track
 LONG_FACTOR = 1.5
 #: The test's threshold in standard deviations (module docstring: why 4, not 5).
 CONFIRM_SIGMAS = 4.0
+#: A point also waits when one of its two previous instants' rows is its camera's first
+#: after a spell of ``max_gap_s`` without one (module docstring, session 31).
+FRESH_ROWS = True
 #: ``1 + (1 + ρ)² + ρ²`` at ``ρ = 2`` (eq. (2)'s largest extrapolation): the point's
 #: projection noise in σ² when no covariance is made.
 _NO_COV_FACTOR2 = 14.0
@@ -249,7 +259,7 @@ def confirm_batch(prep, track: Track, rig, max_gap_s: float, noise_px: float | N
     long = np.empty(points, dtype=bool)
     _pseudo_kernel.long_gap_kernel(
         time_ns, camera, len(rig), _all_brackets(prep)[2], previous_next_rows(prep)[0],
-        track.time_ns, track.camera, max_gap_ns, float(long_ns), row, gap, long)
+        track.time_ns, track.camera, max_gap_ns, float(long_ns), FRESH_ROWS, row, gap, long)
     wait = long | every  # (every: all the points)
     if not wait.any():
         return track
@@ -351,6 +361,9 @@ class ConfirmedStream:
         # (time, camera) of the newest row, and of the last row before the newest instant
         self._latest: tuple[int, int] | None = None
         self._previous_row: tuple[int, int] | None = None
+        # whether each of those rows, and the last row of the instant before the previous
+        # one, was its camera's first after a spell of max_gap_s without one (FRESH_ROWS)
+        self._latest_fresh = self._previous_fresh = self._before_fresh = False
         # the points not yet output, in row order: [one-row Track, status ("wait",
         # "confirmed", "contradicted", "unconfirmed"), (time, camera, gap ns, the last row
         # of each camera then) of a withheld one]
@@ -395,7 +408,10 @@ class ConfirmedStream:
                 own = self._last[c]
                 unbracketed = previous is not None and previous[1] != c and (
                     own is None or previous[0] - own[0] > self._max_gap_ns)
-                if gap > self._long_ns or unbracketed or self._gap_before > self._long_ns:
+                fresh = FRESH_ROWS and previous is not None and (self._previous_fresh
+                                                                 or self._before_fresh)
+                if (gap > self._long_ns or unbracketed or self._gap_before > self._long_ns
+                        or fresh):
                     queue.append([out.select([i]), "wait",
                                   (t, c, gap, list(self._last), sigma[i])])
                 else:
@@ -413,6 +429,8 @@ class ConfirmedStream:
     def _record(self, t: int, c: int, uv: np.ndarray) -> None:
         """A row seen: the last row of its camera, and of the session (the previous
         instant's row of the rows at later times)."""
+        own = self._last[c]
+        self._latest_fresh = own is None or t - own[0] > self._max_gap_ns
         self._last[c] = (t, uv)
         self._latest = (t, c)
 
@@ -428,6 +446,9 @@ class ConfirmedStream:
             self._gap_before = newest - before if before != _NONE else -1
             before, newest = newest, t
             self._previous_row = self._latest
+            # (the previous instant's row's freshness, and its own previous instant's)
+            self._before_fresh = self._previous_fresh and self._latest is not None
+            self._previous_fresh = self._latest_fresh and self._latest is not None
         self._newest = (newest, before)
         return t - before if before != _NONE else -1
 
