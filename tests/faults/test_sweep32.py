@@ -1,0 +1,21 @@
+"""Session 32's hostile-input sweep through the real CLI: an output spelled as a folder
+(``-o out.mcap/``) was written as the file ``out.mcap`` (pathlib drops the trailing ``/``;
+``open()`` refuses such a name), by every writer."""
+
+from __future__ import annotations
+
+import pytest
+
+from .promises import assert_one_line_error, assert_untouched, fingerprint, run_pslog
+from .test_sweep30 import WRITERS, inputs  # noqa: F401 (the fixture)
+
+
+@pytest.mark.parametrize("writer, spelling", [
+    ("fuse", "out.mcap/"), ("simulate", "out.mcap/."), ("view --save", "out.rrd/"),
+    ("export --csv", "out.csv/"), ("rig export", "new.toml/"), ("recover", "sub/..")])
+def test_an_output_spelled_as_a_folder_is_refused(writer, spelling, inputs):  # noqa: F811
+    before = fingerprint(inputs)
+    args = [a.format(o=spelling) for a in WRITERS[writer]]
+    assert_one_line_error(run_pslog(*args, cwd=inputs), 1,
+                          contains=f"{spelling} is spelled as a folder; give a file name")
+    assert_untouched(before, inputs)
