@@ -62,6 +62,10 @@ def run(args: argparse.Namespace) -> int:
     from pslog.errors import InputError
     from pslog.log import read_session
 
+    from ._common import usage_error
+
+    if args.tum is not None and not args.tum.strip():  # (was "nothing to export", exit 1)
+        return usage_error("export", "argument --tum: empty folder name")
     track_options = (args.csv, args.tum, args.jsonl, args.parquet, args.c3d)
     if not args.detections and not any(track_options):
         raise InputError("nothing to export: give --detections DET.csv and/or the tracks as "
@@ -69,8 +73,6 @@ def run(args: argparse.Namespace) -> int:
     # a file's name says its format, and a mismatch is a bad command line (exit 2), never a
     # file of one format under another's name: '--parquet t.csv' wrote Parquet under a CSV's
     # name (and '--c3d t.csv' then replaced it), as 'rig export -o' and 'view --save' refuse
-    from ._common import usage_error
-
     for option, path in (("--detections", args.detections), ("--csv", args.csv),
                          ("--jsonl", args.jsonl), ("--parquet", args.parquet),
                          ("--c3d", args.c3d)):

@@ -1,6 +1,7 @@
 """Session 32's hostile-input sweep through the real CLI: an output spelled as a folder
 (``-o out.mcap/``) was written as the file ``out.mcap`` (pathlib drops the trailing ``/``;
-``open()`` refuses such a name), by every writer."""
+``open()`` refuses such a name), by every writer; ``export --tum ''`` was "nothing to
+export" (exit 1), not a usage error."""
 
 from __future__ import annotations
 
@@ -18,4 +19,16 @@ def test_an_output_spelled_as_a_folder_is_refused(writer, spelling, inputs):  # 
     args = [a.format(o=spelling) for a in WRITERS[writer]]
     assert_one_line_error(run_pslog(*args, cwd=inputs), 1,
                           contains=f"{spelling} is spelled as a folder; give a file name")
+    assert_untouched(before, inputs)
+
+
+@pytest.mark.parametrize("value", ["", " "])
+def test_an_empty_tum_folder_is_a_usage_error(value, inputs):  # noqa: F811
+    """``export --tum ''`` said "nothing to export" (exit 1): an empty name is a malformed
+    command line, as ``--csv ''`` is."""
+    before = fingerprint(inputs)
+    line = assert_one_line_error(run_pslog("export", "fused.mcap", "--tum", value,
+                                           cwd=inputs), 2,
+                                 contains="argument --tum: empty folder name")
+    assert line.startswith("pslog export: error: "), line
     assert_untouched(before, inputs)
