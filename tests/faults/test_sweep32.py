@@ -1,7 +1,8 @@
 """Session 32's hostile-input sweep through the real CLI: an output spelled as a folder
 (``-o out.mcap/``) was written as the file ``out.mcap`` (pathlib drops the trailing ``/``;
 ``open()`` refuses such a name), by every writer; ``export --tum ''`` was "nothing to
-export" (exit 1), not a usage error."""
+export" (exit 1), not a usage error; ``calibrate --rig new.yml`` wrote TOML under an OpenCV
+name."""
 
 from __future__ import annotations
 
@@ -31,4 +32,18 @@ def test_an_empty_tum_folder_is_a_usage_error(value, inputs):  # noqa: F811
                                            cwd=inputs), 2,
                                  contains="argument --tum: empty folder name")
     assert line.startswith("pslog export: error: "), line
+    assert_untouched(before, inputs)
+
+
+@pytest.mark.parametrize("name", ["new.yml", "new.json", "new"])
+def test_calibrate_refuses_a_new_rig_named_for_another_format(name, inputs):  # noqa: F811
+    """``calibrate --rig new.yml`` wrote pslog's TOML under an OpenCV name, which pslog then
+    read as OpenCV ("malformed OpenCV FileStorage file"): a new rig file is named .toml
+    (exit 2, nothing written), as ``rig export -o`` refuses the mismatch."""
+    before = fingerprint(inputs)
+    line = assert_one_line_error(run_pslog(
+        "calibrate", "--points", "pts.csv", "--width", "640", "--height", "480", "--name",
+        "cam9", "--rig", name, cwd=inputs), 2,
+        contains=f"--rig {name}: calibrate writes a pslog rig, TOML, named .toml")
+    assert line.startswith("pslog calibrate: error: "), line
     assert_untouched(before, inputs)
