@@ -141,8 +141,8 @@ def check_output_path(path: str | Path, force: bool, inputs: Iterable[str | Path
 
     Raises
     ------
-    InputError : ``path`` is a folder, its folder does not exist, or it or its ``.partial``
-        is one of ``inputs``
+    InputError : ``path`` is a folder or spelled as one (``out.mcap/``), its folder does
+        not exist, or it or its ``.partial`` is one of ``inputs``
     OutputExistsError : ``path`` exists and ``force`` is false
     WriteError : the folder is not writable (read-only file system, permissions)
     PartialRecordingError : ``<path>.partial`` may hold an interrupted recording
@@ -157,6 +157,10 @@ def check_output_path(path: str | Path, force: bool, inputs: Iterable[str | Path
     if not path.name:
         # '.', '/', '': a folder by its spelling (and no name to give a .partial)
         raise InputError(f"{spelled} is a folder; give a file name")
+    if os.path.basename(spelled) in ("", ".", ".."):
+        # 'out.mcap/', 'out.mcap/.': a folder's spelling, which open() refuses (EISDIR);
+        # pathlib drops the trailing '/', so a file out.mcap was written (session 32)
+        raise InputError(f"{spelled} is spelled as a folder; give a file name")
     partial = partial_path(path)
     for source in inputs:
         if same_file(path, source):

@@ -34,6 +34,21 @@ DEFAULT_METHOD = "typeA"
 UNBOUNDED_NS = np.iinfo(np.int64).max // 4
 
 
+class ViewOptionError(InputError):
+    """A view option's value that does not fit the sessions read (a method neither stored
+    nor fusable, a window holding no frame): ``pslog view`` reports it as a command-line
+    error (exit 2, ``usage_error``), as ``fuse``/``eval`` report an unknown ``--method``.
+
+    Attributes
+    ----------
+    option : the option's name (``--method``, ``--start``, ``--end`` or ``--start/--end``)
+    """
+
+    def __init__(self, option: str, message: str):
+        super().__init__(message)
+        self.option = option
+
+
 @dataclass(frozen=True)
 class FramesChoice:
     """Which recorded images to show: ``every`` = 0 for none, 1 for all, N for every N-th
@@ -239,8 +254,9 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
 
     Raises
     ------
-    LogFormatError for unreadable files, InputError for a bad window, an unknown method or
-    sessions of different rigs, FusionError when fusing fails.
+    LogFormatError for unreadable files, InputError for a bad window or sessions of
+    different rigs (:class:`ViewOptionError`, an InputError, for an unknown method or a
+    window holding no frame: checked before any fusing), FusionError when fusing fails.
     """
     paths = ((Path(session_paths),) if isinstance(session_paths, (str, Path))
              else tuple(Path(p) for p in session_paths))
@@ -278,7 +294,31 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
     unknown = [m for m in missing if m not in METHODS]
     if unknown:
         have = sorted(set(tracks) | set(METHODS))
-        raise InputError(f"unknown method {unknown[0]!r} (stored or fusable: {', '.join(have)})")
+        raise ViewOptionError("--method", f"unknown method {unknown[0]!r} (stored or fusable: "
+                                          f"{', '.join(have)})")
+    # the window checked before any track is fused on the fly (its error comes out at once)
+    first = int(session.detections.frame_time_ns.min()) if session.detections.n_frames else 0
+    lo = -np.inf if start is None else float(start)
+    hi = np.inf if end is None else float(end)
+    if not (np.isfinite(lo) or start is None) or not (np.isfinite(hi) or end is None):
+        raise InputError(f"start and end must be finite seconds, got {start!r}, {end!r}")
+    if lo >= hi:
+        raise InputError(f"start ({start} s) must be before end ({end} s)")
+    # (beyond UNBOUNDED_NS from the session's start, a bound is no bound: 1e308 s is inf ns)
+    window = (first + round(min(lo * NS, UNBOUNDED_NS)) if start is not None
+              else -UNBOUNDED_NS,
+              first + round(min(hi * NS, UNBOUNDED_NS)) if end is not None else UNBOUNDED_NS)
+    frame_times = session.detections.frame_time_ns
+    if (start is not None or end is not None) and not np.any(
+            (frame_times >= window[0]) & (frame_times < window[1])):
+        span = (frame_times.max() - first) / NS if len(frame_times) else 0.0
+        bounds = " and ".join(([f"--start {start} s"] if start is not None else [])
+                              + ([f"--end {end} s"] if end is not None else []))
+        where = "between" if start is not None and end is not None else (
+            "from" if start is not None else "before")
+        option = "/".join(o for o, v in (("--start", start), ("--end", end)) if v is not None)
+        raise ViewOptionError(option, f"no frame {where} {bounds}; the session spans 0 to "
+                                      f"{span:.3f} s")
     construction = construction_obs = None
     if missing:
         # as 'pslog fuse' does: each frame's ball chosen among its candidates (gating)
@@ -310,26 +350,6 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
         construction_obs = _type_a_observations(session)
         construction = explain_type_a(construction_obs, session.rig)
 
-    first = int(session.detections.frame_time_ns.min()) if session.detections.n_frames else 0
-    lo = -np.inf if start is None else float(start)
-    hi = np.inf if end is None else float(end)
-    if not (np.isfinite(lo) or start is None) or not (np.isfinite(hi) or end is None):
-        raise InputError(f"start and end must be finite seconds, got {start!r}, {end!r}")
-    if lo >= hi:
-        raise InputError(f"start ({start} s) must be before end ({end} s)")
-    # (beyond UNBOUNDED_NS from the session's start, a bound is no bound: 1e308 s is inf ns)
-    window = (first + round(min(lo * NS, UNBOUNDED_NS)) if start is not None
-              else -UNBOUNDED_NS,
-              first + round(min(hi * NS, UNBOUNDED_NS)) if end is not None else UNBOUNDED_NS)
-    frame_times = session.detections.frame_time_ns
-    if (start is not None or end is not None) and not np.any(
-            (frame_times >= window[0]) & (frame_times < window[1])):
-        span = (frame_times.max() - first) / NS if len(frame_times) else 0.0
-        bounds = " and ".join(([f"--start {start} s"] if start is not None else [])
-                              + ([f"--end {end} s"] if end is not None else []))
-        where = "between" if start is not None and end is not None else (
-            "from" if start is not None else "before")
-        raise InputError(f"no frame {where} {bounds}; the session spans 0 to {span:.3f} s")
     choice = detail if isinstance(detail, DetailChoice) else DetailChoice.parse(detail)
     return ViewData(session, paths, observations, shown, construction, window, notes,
                     {m: rejections[m] for m in shown if m in rejections},

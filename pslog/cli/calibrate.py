@@ -114,6 +114,12 @@ def _run(args: argparse.Namespace) -> int:
     if not rig_path.exists() and str(args.rig) in BUILTIN_RIGS:
         raise InputError(f"--rig {args.rig}: calibrate writes a rig file; give a path such as "
                          f"rig.toml (built-in rigs cannot be changed)")
+    if not rig_path.exists() and rig_path.suffix.lower() != ".toml":
+        # a new rig file is pslog's TOML: under another name ('--rig cams.yml') pslog itself
+        # then read it as OpenCV ("malformed OpenCV FileStorage file"; session 32), the
+        # mismatch 'rig export -o' refuses
+        raise BadOption(f"--rig {args.rig}: calibrate writes a pslog rig, TOML, named .toml "
+                        f"(other tools' formats: 'pslog rig export')")
     rig = load_rig(rig_path, "pslog") if rig_path.exists() else None  # rewritten as pslog's
     existing = rig.camera(args.name) if rig is not None and args.name in rig.names else None
 

@@ -46,6 +46,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                   outputs=("detections", "csv", "jsonl", "parquet", "c3d"))
 
 
+#: each file option's format and the suffixes its file may have (lower case)
+_SUFFIXES = {"--detections": ("a CSV file", (".csv",)), "--csv": ("a CSV file", (".csv",)),
+             "--jsonl": ("a JSON Lines file", (".jsonl", ".ndjson")),
+             "--parquet": ("a Parquet file", (".parquet", ".pq")),
+             "--c3d": ("a C3D file", (".c3d",))}
+
+
 def kept_outputs(args: argparse.Namespace) -> list[str]:
     """What a run that completed wrote besides its declared files: the --tum folder."""
     return [os.path.join(args.tum, "")] if args.tum else []
@@ -55,10 +62,24 @@ def run(args: argparse.Namespace) -> int:
     from pslog.errors import InputError
     from pslog.log import read_session
 
+    from ._common import usage_error
+
+    if args.tum is not None and not args.tum.strip():  # (was "nothing to export", exit 1)
+        return usage_error("export", "argument --tum: empty folder name")
     track_options = (args.csv, args.tum, args.jsonl, args.parquet, args.c3d)
     if not args.detections and not any(track_options):
         raise InputError("nothing to export: give --detections DET.csv and/or the tracks as "
                          "--csv, --tum, --jsonl, --parquet or --c3d")
+    # a file's name says its format, and a mismatch is a bad command line (exit 2), never a
+    # file of one format under another's name: '--parquet t.csv' wrote Parquet under a CSV's
+    # name (and '--c3d t.csv' then replaced it), as 'rig export -o' and 'view --save' refuse
+    for option, path in (("--detections", args.detections), ("--csv", args.csv),
+                         ("--jsonl", args.jsonl), ("--parquet", args.parquet),
+                         ("--c3d", args.c3d)):
+        kind, suffixes = _SUFFIXES[option]
+        if path and os.path.splitext(path)[1].lower() not in suffixes:
+            return usage_error("export", f"{option} {path}: {kind} is named "
+                                         f"{' or '.join(suffixes)}")
     # the file outputs were checked before run() (declare_files): never the session, never
     # existing without --force; --tum's folder is checked by its writer, all files first
     session = read_session(args.session)
@@ -73,7 +94,6 @@ def run(args: argparse.Namespace) -> int:
     # error or a signal none is, and the old files stay); the lines after the moves
     import contextlib
     import io
-    import os
 
     from pslog.outputs import all_or_nothing
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from ._common import (
     add_force,
@@ -128,6 +129,11 @@ def run(args: argparse.Namespace) -> int:
     sink = None
     if args.save:
         check_output(args.save, args.force, inputs=args.sessions)
+        # (after check_output: an input or a folder named is said as such, exit 1) rerun
+        # writes its own format whatever the name: a recording is named .rrd, never written
+        # under another format's name (``--save out.txt`` wrote one), as 'rig export' -o
+        if Path(args.save).suffix.lower() != ".rrd":
+            return usage_error("view", f"--save {args.save}: a rerun recording is named .rrd")
     elif args.stdout:
         if sys.stdout is None:  # closed when Python started (``>&-``): said before reading
             raise PslogError("cannot write to standard output: it is closed")
@@ -143,8 +149,14 @@ def run(args: argparse.Namespace) -> int:
 
     # read and fuse before any sink starts, so errors come out before a viewer does
     progress.update(total=2, what="reading the sessions (fusing what is not stored)")
-    data = load_view_data(args.sessions, methods=args.methods, start=args.start, end=args.end,
-                          detail=detail)
+    from viewers.data import ViewOptionError
+
+    try:
+        data = load_view_data(args.sessions, methods=args.methods, start=args.start,
+                              end=args.end, detail=detail)
+    except ViewOptionError as exc:  # a value that does not fit the sessions: as fuse's
+        message = str(exc) if exc.option in str(exc) else f"argument {exc.option}: {exc}"
+        return usage_error("view", message)
     out = sys.stderr if args.stdout else sys.stdout
     if not args.stdout:  # (on stderr, a note before a failed write would make two lines)
         for note in data.notes:

@@ -861,7 +861,9 @@ def _cov_predicted(P, dt, q):
 @kernel
 def _acceleration(v0, v1, v2, c, O):
     """The models' mixture's acceleration ``c g − (k_s + c (k − k_s)) ‖v‖ v`` at velocity
-    ``v`` (:func:`_predicted_mean`'s, the same operations)."""
+    ``v`` (m/s², three floats; :func:`_predicted_mean`'s, :func:`_contact`'s and
+    :func:`_bounced`'s)."""
+    # written so that k_s = k gives k exactly (the filter before the drag-free supported model)
     k = O[_OKS] + c * (O[_OK] - O[_OKS])
     speed = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
     gx, gy, gz = c * O[_OG], c * O[_OG + 1], c * O[_OG + 2]
@@ -907,6 +909,23 @@ def _contact(x, dt, c, O):
 
 
 @kernel
+def _reflected(vm, O):
+    """The floor's reset of the velocity ``vm`` (3, m/s, just before a contact): ``v_d =
+    ĝ·v⁻`` (float), ``v_h = v⁻ − v_d ĝ`` and ``v⁺ = (1 − f) v_h − e v_d ĝ`` (new (3,)
+    arrays; ``e`` ``restitution``, ``f`` ``bounce_friction``): :func:`_bounced`'s and
+    :func:`_hybrid_mean`'s."""
+    d = O[_ODOWN:_ODOWN + 3]
+    e, f = O[_OREST], O[_OFRIC]
+    vd = vm[0] * d[0] + vm[1] * d[1] + vm[2] * d[2]
+    vh = np.empty(3)
+    vp = np.empty(3)
+    for i in range(3):
+        vh[i] = vm[i] - vd * d[i]
+        vp[i] = (1.0 - f) * vh[i] - e * vd * d[i]
+    return vd, vh, vp
+
+
+@kernel
 def _bounced(x, P, c, O):
     """The state just after a floor contact from ``(x, P)`` just before it (new arrays;
     session 31). The reset ``R``: position kept, velocity ``v⁺ = D v⁻``, ``D = (1 − f)(I −
@@ -922,12 +941,7 @@ def _bounced(x, P, c, O):
     d = O[_ODOWN:_ODOWN + 3]
     e, f = O[_OREST], O[_OFRIC]
     vm = x[3:6]
-    vd = vm[0] * d[0] + vm[1] * d[1] + vm[2] * d[2]
-    vh = np.empty(3)
-    vp = np.empty(3)
-    for i in range(3):
-        vh[i] = vm[i] - vd * d[i]
-        vp[i] = (1.0 - f) * vh[i] - e * vd * d[i]
+    vd, vh, vp = _reflected(vm, O)
     am = np.empty(3)
     am[0], am[1], am[2] = _acceleration(vm[0], vm[1], vm[2], c, O)
     ap = np.empty(3)
@@ -1346,11 +1360,7 @@ def _predicted_mean(x, dt, c, O):
     """:func:`_predicted`'s mean (6,): gravity weighted by ``c`` and the drag ``k_s + c (k −
     k_s)``, constant acceleration over ``dt`` seconds (also the instant term's replay)."""
     px, py, pz, vx, vy, vz = x[0], x[1], x[2], x[3], x[4], x[5]
-    # written so that k_s = k gives k exactly (the filter before the drag-free supported model)
-    k = O[_OKS] + c * (O[_OK] - O[_OKS])
-    speed = math.sqrt(vx * vx + vy * vy + vz * vz)
-    gx, gy, gz = c * O[_OG], c * O[_OG + 1], c * O[_OG + 2]
-    ax, ay, az = gx - k * speed * vx, gy - k * speed * vy, gz - k * speed * vz
+    ax, ay, az = _acceleration(vx, vy, vz, c, O)
     h = 0.5 * dt * dt
     xn = np.empty(6)
     xn[0], xn[1], xn[2] = px + vx * dt + ax * h, py + vy * dt + ay * h, pz + vz * dt + az * h
@@ -1365,11 +1375,7 @@ def _hybrid_mean(x, dt, c, O):
     if s < 0.0:
         return _predicted_mean(x, dt, c, O)
     xb = _predicted_mean(x, s, c, O)
-    d = O[_ODOWN:_ODOWN + 3]
-    e, f = O[_OREST], O[_OFRIC]
-    vd = xb[3] * d[0] + xb[4] * d[1] + xb[5] * d[2]
-    for i in range(3):  # (the reset of _bounced, the same operations)
-        xb[3 + i] = (1.0 - f) * (xb[3 + i] - vd * d[i]) - e * vd * d[i]
+    xb[3:6] = _reflected(xb[3:6], O)[2]  # (_bounced's reset, its covariance not needed)
     return _predicted_mean(xb, dt - s, c, O)
 
 
@@ -2573,8 +2579,10 @@ def _predict(S, I, O, t):
     mu = S[_SMU]
     p = _pmin(O[_OSWITCH] * abs(dt), 0.5)
     c = mu * (1.0 - p) + (1.0 - mu) * p
-    x, P = _predicted(S[_SX:_SX + 6], S[_SP:_SP + 36], dt, c, O, q)
-    if O[_ODRAG] != 0.0 and not nu and _contact(S[_SX:_SX + 6], dt, c, O) < 0.0:
+    xs = S[_SX:_SX + 6]
+    contact = _contact(xs, dt, c, O)  # (once: _push's order)
+    x, P = _predicted_at(xs, S[_SP:_SP + 36], dt, c, O, q, contact)
+    if O[_ODRAG] != 0.0 and not nu and contact < 0.0:
         # the estimated drag: x + V δk̂, P + V Vᵀ / I_k (none across a floor contact: V
         # starts anew there, as the step's)
         V = _drag_predicted(S[_SV:_SV + 6], x, dt, c)

@@ -113,6 +113,36 @@ def test_exports_never_overwrite_or_write_what_they_cannot(work, args, why, requ
     assert_refused_here(work, 1, args, why, real=first_case(request))
 
 
+@pytest.mark.parametrize("args, why", [
+    # each was written (exit 0) under the other format's name; '--c3d t.csv' then replaced
+    # the Parquet '--parquet t.csv' had written
+    (["--parquet", "t.csv"], "--parquet t.csv: a Parquet file is named .parquet or .pq"),
+    (["--c3d", "t.csv"], "--c3d t.csv: a C3D file is named .c3d"),
+    (["--csv", "t.parquet"], "--csv t.parquet: a CSV file is named .csv"),
+    (["--jsonl", "t.json"], "--jsonl t.json: a JSON Lines file is named .jsonl or .ndjson"),
+    (["--detections", "d.txt"], "--detections d.txt: a CSV file is named .csv"),
+    # one bad name among good ones: nothing written
+    (["--csv", "t.csv", "--jsonl", "t.jsonl", "--c3d", "t"], "--c3d t: a C3D file"),
+], ids=["parquet-as-csv", "c3d-as-csv", "csv-as-parquet", "jsonl-as-json", "detections-txt",
+        "one-bad-of-three"])
+def test_export_refuses_a_name_of_another_format(work, args, why, request):
+    """Session 32: as ``rig export -o`` and ``view --save``, a file named for another format
+    is a bad command-line value (exit 2), refused before anything is read or written."""
+    line = assert_refused_here(work, 2, ["export", "f.mcap", *args], why,
+                               real=first_case(request))
+    assert line.startswith("pslog export: error: "), line
+
+
+def test_export_takes_each_format_s_other_suffixes(work):
+    from pslog.cli import main
+
+    names = ["T.CSV", "t.ndjson", "t.pq", "t.C3D"]
+    assert main(["export", str(work / "f.mcap"), "--csv", str(work / names[0]), "--jsonl",
+                 str(work / names[1]), "--parquet", str(work / names[2]), "--c3d",
+                 str(work / names[3])]) == 0
+    assert all((work / n).stat().st_size > 0 for n in names)
+
+
 def test_parquet_without_pyarrow_is_one_line(work):
     """pyarrow shadowed by a package that fails to import, as when it is not installed."""
     shadow = work.parent / "shadow"

@@ -264,3 +264,46 @@ def test_malformed_values_are_usage_errors(tmp_path, session, values, contains):
             code = exc.code
     assert_one_line_error(Run(args, code, "", err.getvalue()), 2, contains=contains)
     assert_untouched(before, tmp_path)
+
+
+@pytest.mark.parametrize("name", ["out.txt", "out.mcap", "out", "out.rrd.bak"])
+def test_save_under_another_format_s_name_is_refused(tmp_path, session, name):
+    """``--save out.txt`` wrote a rerun recording under a text file's name (session 32): a
+    recording is named .rrd, any other name is a bad command-line value (exit 2, as ``rig
+    export -o`` named for another format), nothing written."""
+    before = fingerprint(tmp_path)
+    run = run_pslog("view", session, "--save", tmp_path / name, "--frames", "none",
+                    env=HEADLESS)
+    line = assert_one_line_error(run, 2, contains=(f"--save {tmp_path / name}",
+                                                   "a rerun recording is named .rrd"))
+    assert line.startswith("pslog view: error: "), line
+    assert_untouched(before, tmp_path)
+
+
+def test_save_named_rrd_in_capitals_is_written(tmp_path, session):
+    out = tmp_path / "OUT.RRD"
+    run = run_pslog("view", session, "--save", out, "--frames", "none", env=HEADLESS)
+    assert run.code == 0, run.stderr
+    assert out.stat().st_size > 0
+
+
+@pytest.mark.parametrize(("values", "contains"), [
+    (("--start", "100"), ("no frame from --start 100.0 s", "the session spans 0 to")),
+    (("--end", "0"), ("no frame before --end 0.0 s",)),
+    (("--start", "50", "--end", "60"), ("no frame between --start 50.0 s and --end 60.0 s",)),
+    (("--method", "bogus"), ("argument --method: unknown method 'bogus'", "stored or fusable",
+                             "typeA")),
+    (("--method", "typeA,bogus"), ("argument --method: unknown method 'bogus'",)),
+], ids=["start past the end", "end at the start", "window past the end", "unknown method",
+        "one unknown method"])
+def test_values_that_do_not_fit_the_session_are_usage_errors(tmp_path, session, values,
+                                                             contains):
+    """Exit 2 as ``fuse``/``eval`` give an unknown ``--method`` and ``simulate`` a
+    ``--blackout`` past the session's end (these exited 1, session 32), one line, said
+    before any track is fused on the fly (the window was checked after), nothing written."""
+    before = fingerprint(tmp_path)
+    run = run_pslog("view", session, *values, "--save", tmp_path / "out.rrd", env=HEADLESS)
+    line = assert_one_line_error(run, 2, contains=contains)
+    assert line.startswith("pslog view: error: ") and line.endswith(
+        "(see 'pslog view --help')"), line
+    assert_untouched(before, tmp_path)
