@@ -161,6 +161,9 @@ def main():
     ap.add_argument("--clean", action="store_true")
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--rigs", default=None, help="comma-separated rig names (default all)")
+    ap.add_argument("--wait-sigmas", default=None,
+                    help="confirm.WAIT_SIGMAS (session 32: a point whose innovation exceeds "
+                         "it waits; 'off': the rule off, as before)")
     ap.add_argument("--no-fresh", action="store_true",
                     help="confirm.FRESH_ROWS off: the points resting on a re-acquisition "
                          "output at once (before session 31)")
@@ -169,6 +172,10 @@ def main():
         import pslog.fusion.confirm as confirm
 
         confirm.FRESH_ROWS = False
+    if a.wait_sigmas is not None:
+        import pslog.fusion.confirm as confirm
+
+        confirm.WAIT_SIGMAS = None if a.wait_sigmas == "off" else float(a.wait_sigmas)
     options = FusionOptions(max_std_m=None if a.max_std_mm is None else a.max_std_mm / 1e3)
     summary = []
     for first in (int(x) for x in a.first.split(",")):

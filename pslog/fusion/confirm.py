@@ -83,6 +83,10 @@ CONFIRM_SIGMAS = 4.0
 #: A point also waits when one of its two previous instants' rows is its camera's first
 #: after a spell of ``max_gap_s`` without one (module docstring, session 31).
 FRESH_ROWS = True
+#: A point also waits when its innovation across the newest ray, eq. (2)'s gravity taken
+#: out, exceeds this many standard deviations: ``|u|² > WAIT_SIGMAS² σ² c`` (module
+#: docstring, session 32; None: the rule off, as before).
+WAIT_SIGMAS: float | None = 3.0
 #: ``1 + (1 + ρ)² + ρ²`` at ``ρ = 2`` (eq. (2)'s largest extrapolation): the point's
 #: projection noise in σ² when no covariance is made.
 _NO_COV_FACTOR2 = 14.0
@@ -223,6 +227,33 @@ def confirm_noise(snap_px: np.ndarray, noise_px: float | None, estimate=None) ->
     return (NoiseEstimate() if estimate is None else estimate).sigmas(values, noise_px)
 
 
+#: type A's kernel's columns the innovation rule reads (:data:`pslog.fusion.pseudo.
+#: _MODEL_COLUMNS`): the innovation's across-ray offset less gravity's, m², and its noise's
+#: metres² per pixel² ``c = (factor D / f)²``
+_ACROSS, _PER_PX2 = "_model_across_m2", "_model_m2_per_px2"
+
+
+def innovation_waits(across_m2: np.ndarray, per_px2: np.ndarray, sigma: np.ndarray
+                     ) -> np.ndarray:
+    """Which points wait for their innovation (module docstring, session 32), elementwise
+    (the same bits for one point as for many): ``|u|² > WAIT_SIGMAS² σ² c``.
+
+    Parameters
+    ----------
+    across_m2 : (k,) float, ``|u|²``, the prediction's offset across the newest ray less
+        gravity's there, m² (type A's kernel's ``_model_across_m2``)
+    per_px2 : (k,) float, ``c = (factor D / f)²``, m² per pixel² (``_model_m2_per_px2``)
+    sigma : (k,) float, the detection noise per axis, pixels (:func:`confirm_noise`)
+
+    Returns
+    -------
+    (k,) bool (NaN: False)
+    """
+    k = math.inf if WAIT_SIGMAS is None else float(WAIT_SIGMAS)  # (None: no point waits)
+    k2 = k * k
+    return across_m2 > k2 * (sigma * sigma) * per_px2
+
+
 def confirm_batch(prep, track: Track, rig, max_gap_s: float, noise_px: float | None,
                   every: bool = False) -> Track:
     """``track`` (type A's, from ``prep``'s observations) with its long-gap points confirmed,
@@ -260,11 +291,20 @@ def confirm_batch(prep, track: Track, rig, max_gap_s: float, noise_px: float | N
     _pseudo_kernel.long_gap_kernel(
         time_ns, camera, len(rig), _all_brackets(prep)[2], previous_next_rows(prep)[0],
         track.time_ns, track.camera, max_gap_ns, float(long_ns), FRESH_ROWS, row, gap, long)
+    q = track.quality
+    sigma = None
+    kick = None
+    if WAIT_SIGMAS is not None and _ACROSS in q:
+        # (session 32: a large innovation across the newest ray, gravity's part out, waits)
+        sigma = confirm_noise(q["snap_px"], noise_px)
+        kick = innovation_waits(q[_ACROSS], q[_PER_PX2], sigma)
+        long = long | kick
     wait = long | every  # (every: all the points)
     if not wait.any():
         return track
     # (the tests' noise, a causal median over every point: made only when some point waits)
-    sigma = confirm_noise(track.quality["snap_px"], noise_px)
+    if sigma is None:
+        sigma = confirm_noise(q["snap_px"], noise_px)
     e = row[wait]
     # the confirming detection: the first later row of another camera that can check the
     # point (its camera has a row within max_gap_s before the point, both pixels finite),
@@ -296,7 +336,6 @@ def confirm_batch(prep, track: Track, rig, max_gap_s: float, noise_px: float | N
     ok = nxt >= 0
     nxt_c, prev_c = np.maximum(nxt, 0), np.maximum(prev, 0)
     cam2 = camera[nxt_c]
-    q = track.quality
     idx = np.flatnonzero(wait)
     cov = (np.stack([q[k][idx] for k in _COV], axis=1) if all(k in q for k in _COV)
            else None)
@@ -304,7 +343,8 @@ def confirm_batch(prep, track: Track, rig, max_gap_s: float, noise_px: float | N
         _camera_rows(rig), cam2, track.position_world[idx], cov, time_ns[e],
         time_ns[prev_c], time_ns[nxt_c], uv[prev_c], uv[nxt_c], gap[wait] / NS,
         q["span_s"][idx], sigma[idx], noise_px) & ok
-    unconfirmed = ~ok & long[idx]  # (a point that bridged no long gap: kept unchecked)
+    # (a point that neither bridged a long gap nor waits for its innovation: kept unchecked)
+    unconfirmed = ~ok & long[idx]
     drop = np.zeros(len(track), dtype=bool)
     drop[idx[unconfirmed]] = True
     drop[idx[contradicted]] = True
@@ -410,8 +450,13 @@ class ConfirmedStream:
                     own is None or previous[0] - own[0] > self._max_gap_ns)
                 fresh = FRESH_ROWS and previous is not None and (self._previous_fresh
                                                                  or self._before_fresh)
+                kick = False
+                if WAIT_SIGMAS is not None and _ACROSS in out.quality:
+                    kick = bool(innovation_waits(out.quality[_ACROSS][i:i + 1],
+                                                 out.quality[_PER_PX2][i:i + 1],
+                                                 np.array([sigma[i]]))[0])
                 if (gap > self._long_ns or unbracketed or self._gap_before > self._long_ns
-                        or fresh):
+                        or fresh or kick):
                     queue.append([out.select([i]), "wait",
                                   (t, c, gap, list(self._last), sigma[i])])
                 else:
