@@ -452,9 +452,11 @@ class ConfirmedStream:
                                                                  or self._before_fresh)
                 kick = False
                 if WAIT_SIGMAS is not None and _ACROSS in out.quality:
-                    kick = bool(innovation_waits(out.quality[_ACROSS][i:i + 1],
-                                                 out.quality[_PER_PX2][i:i + 1],
-                                                 np.array([sigma[i]]))[0])
+                    # (innovation_waits' operations on Python floats: the same IEEE
+                    # products and comparison as the batch's elementwise ones, no (1,) arrays)
+                    k = float(WAIT_SIGMAS)
+                    kick = float(out.quality[_ACROSS][i]) > (k * k) * (
+                        sigma[i] * sigma[i]) * float(out.quality[_PER_PX2][i])
                 if (gap > self._long_ns or unbracketed or self._gap_before > self._long_ns
                         or fresh or kick):
                     queue.append([out.select([i]), "wait",
