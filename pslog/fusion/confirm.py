@@ -58,8 +58,27 @@ re-acquisition, the camera blind or the ball out of its view before; the gate ch
 no track of that camera behind it, on the other cameras' epipolar lines and the 3D track,
 whose allowances of 8 px and 8 cm let a spurious blob a dozen pixels from where the ball is
 but is not seen through: ``lab3``, ``bench_dirty.py --more --first-seed 16200``, ``straight``,
-132 mm at ``std_m`` 5.1 mm; ``lab4``, ``--first-seed 16300``, two points 63-127 mm), wait:
-the others are output at once, as before. Causal: a point's decision uses
+132 mm at ``std_m`` 5.1 mm; ``lab4``, ``--first-seed 16300``, two points 63-127 mm), wait;
+and (session 32, :data:`WAIT_SIGMAS`) points whose innovation across the newest ray, the
+part gravity explains taken out, is large though below the prediction test's refusal
+(:mod:`pslog.fusion.innovation`: ``r > 5 σ_r + e_model``) — a two-level test, a validation
+gate and a confirmation, as trackers use: type A's kernel keeps for each point ``|u|²``, the
+offset of eq. (2)'s ``P̂_t`` across the newest ray less gravity's ``h (g - (rᵀg) r)``
+(``h = ½ δ_pred (δ_pred + δ_prev)``: eq. (2)'s exact error under gravity alone), and
+``c = (factor D / f)²`` (metres² per pixel² of that offset's noise: the innovation's
+``σ_r = σ factor`` pixels at distance ``D``, focal ``f``); under the model ``|u|² / (σ² c)``
+is a χ² of two degrees of freedom, and the point waits when
+
+    |u|² > WAIT_SIGMAS² σ² c,    WAIT_SIGMAS = 3
+
+(``σ``: :func:`confirm_noise`, the confirmation's own; a valid point waits with probability
+``exp(-9/2) ≈ 1.1 %`` at the right ``σ``, fewer at a stated noise above the real one). A
+kick whose velocity change lies partly across the newest ray shows there below the
+refusal's 5 σ while its part along the ray puts the point centimetres off (the tests' rally
+300, paper3, 10 ms after a kick: 56.5 mm at 3-5 σ); one along the ray shows nowhere until
+the next camera, which only waiting every point (``every``) catches. Such a point that no
+camera can check is dropped (``unconfirmed``), as a long-gap point is. The others are
+output at once, as before. Causal: a point's decision uses
 the detections up to the confirming one, so :class:`ConfirmedStream` (``StreamFuser``'s
 ``typeA``) decides as the batch run does, bit for bit (every step elementwise), and outputs
 a withheld point with the confirming detection's push. docs/methods.md, "Type A across a
