@@ -3,7 +3,8 @@
 several levels, on bench_dirty ``--more``'s sessions (five rigs x 4 rallies, the library's
 rally, ``straight``, ``turntable``; 0.3 px), clean and with the faults. Per level and kind:
 points, far (> 5 cm; "added": far with the faults where the clean session's point at that
-detection is within 5 cm), good points (<= 5 cm with the rule off) withdrawn, the points that
+detection is within 5 cm), good points (<= 5 cm with the rule off) withdrawn (and how many
+of those were > 2 cm off), the points that
 wait for the next camera (long gap, re-acquisition or innovation: one detection's latency in
 a stream; % of the points made), mean error, refused counts (contradicted, unconfirmed).
 
@@ -82,7 +83,7 @@ def main():
     if a.every:
         variants.append(("every", None, True))
     names = [v[0] for v in variants]
-    tot = {(nm, kind): dict(points=0, far=0, added=0, withdrawn=0, good=0, made=0, waits=0,
+    tot = {(nm, kind): dict(points=0, far=0, added=0, withdrawn=0, withdrawn_2cm=0, good=0, made=0, waits=0,
                             err=[], contradicted=0, unconfirmed=0)
            for nm in names for kind in ("clean", "dirty")}
     for first in (int(x) for x in a.first.split(",")):
@@ -111,9 +112,11 @@ def main():
                         d["contradicted"] += tr.dropped.get("contradicted", 0)
                         d["unconfirmed"] += tr.dropped.get("unconfirmed", 0)
                         if ref_good is None:
-                            ref_good = keys[~far]
+                            ref_good, ref_err = keys[~far], err[~far]
                         d["good"] += len(ref_good)
-                        d["withdrawn"] += int(np.count_nonzero(~np.isin(ref_good, keys)))
+                        out = ~np.isin(ref_good, keys)
+                        d["withdrawn"] += int(np.count_nonzero(out))
+                        d["withdrawn_2cm"] += int(np.count_nonzero(out & (ref_err > 0.02)))
                         if kind == "clean":
                             d.setdefault("clean_far", []).append(set(keys[far].tolist()))
                         else:
@@ -130,7 +133,7 @@ def main():
             mean = 1e3 * float(np.concatenate(d["err"]).mean())
             w = f"{d['waits']} ({100 * d['waits'] / max(d['made'], 1):.2f} %)" if d["made"] else "every"
             print(f"{kind:5s} {nm:7s} points {d['points']:6d} far {d['far']:3d} added {d['added']:2d} "
-                  f"good withdrawn {d['withdrawn']:3d} ({100 * d['withdrawn'] / d['good']:.3f} %) "
+                  f"good withdrawn {d['withdrawn']:3d} ({100 * d['withdrawn'] / d['good']:.3f} %; > 2 cm {d['withdrawn_2cm']}) "
                   f"waits {w} mean {mean:.3f} mm contradicted {d['contradicted']} "
                   f"unconfirmed {d['unconfirmed']}")
 

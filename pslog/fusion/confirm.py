@@ -252,7 +252,7 @@ def confirm_noise(snap_px: np.ndarray, noise_px: float | None, estimate=None) ->
 _ACROSS, _PER_PX2 = "_model_across_m2", "_model_m2_per_px2"
 
 
-def innovation_waits(across_m2: np.ndarray, per_px2: np.ndarray, sigma: np.ndarray
+def innovation_waits(across_m2: np.ndarray, per_px2: np.ndarray, sigma: np.ndarray | float
                      ) -> np.ndarray:
     """Which points wait for their innovation (module docstring, session 32), elementwise
     (the same bits for one point as for many): ``|u|² > WAIT_SIGMAS² σ² c``.
@@ -262,7 +262,9 @@ def innovation_waits(across_m2: np.ndarray, per_px2: np.ndarray, sigma: np.ndarr
     across_m2 : (k,) float, ``|u|²``, the prediction's offset across the newest ray less
         gravity's there, m² (type A's kernel's ``_model_across_m2``)
     per_px2 : (k,) float, ``c = (factor D / f)²``, m² per pixel² (``_model_m2_per_px2``)
-    sigma : (k,) float, the detection noise per axis, pixels (:func:`confirm_noise`)
+    sigma : (k,) float or float, the detection noise per axis, pixels
+        (:func:`confirm_noise`; the products are monotone in it, so a point that does not
+        wait at a σ waits at no smaller one)
 
     Returns
     -------
@@ -314,10 +316,16 @@ def confirm_batch(prep, track: Track, rig, max_gap_s: float, noise_px: float | N
     sigma = None
     kick = None
     if WAIT_SIGMAS is not None and _ACROSS in q:
-        # (session 32: a large innovation across the newest ray, gravity's part out, waits)
-        sigma = confirm_noise(q["snap_px"], noise_px)
-        kick = innovation_waits(q[_ACROSS], q[_PER_PX2], sigma)
-        long = long | kick
+        # (session 32: a large innovation across the newest ray, gravity's part out, waits;
+        # σ is at least the stated noise's floor, so no point waits unless one would at the
+        # floor: the σ, a causal median over every point, made only then)
+        from .innovation import DEFAULT_NOISE_PX
+
+        floor = DEFAULT_NOISE_PX if noise_px is None else float(noise_px)
+        if np.any(innovation_waits(q[_ACROSS], q[_PER_PX2], floor)):
+            sigma = confirm_noise(q["snap_px"], noise_px)
+            kick = innovation_waits(q[_ACROSS], q[_PER_PX2], sigma)
+            long = long | kick
     wait = long | every  # (every: all the points)
     if not wait.any():
         return track
