@@ -18,7 +18,9 @@ unseen kick and the blackout's extrapolation are told apart.
     PYTHONPATH=. python benchmarks/session31/typea_far.py FIRST[,FIRST..] [--fps 60]
         [--misses 0.1] [--max-std-mm 25.5] [--clean] [--rigs lab4,paper2] [--no-fresh]
 
-``--max-std-mm``: typeA fused with ``FusionOptions.max_std_m`` (withholding); ``--clean``:
+``--wait-sigmas K|off`` (session 32): ``pslog.fusion.confirm.WAIT_SIGMAS`` (the points made
+with an innovation above K σ wait; the waits counted below leave them out:
+``benchmarks/session32/kick_sweep.py`` counts them). ``--max-std-mm``: typeA fused with ``FusionOptions.max_std_m`` (withholding); ``--clean``:
 list the clean sessions' far points too; ``--no-fresh``: without session 31's wait for the
 points resting on a re-acquisition (``pslog.fusion.confirm.FRESH_ROWS`` off: as before). Prints one line per far point and a summary:
 points, far (clean / added), good (<= 5 cm) points, mean error, and the points output that
