@@ -18,7 +18,9 @@ unseen kick and the blackout's extrapolation are told apart.
     PYTHONPATH=. python benchmarks/session31/typea_far.py FIRST[,FIRST..] [--fps 60]
         [--misses 0.1] [--max-std-mm 25.5] [--clean] [--rigs lab4,paper2] [--no-fresh]
 
-``--max-std-mm``: typeA fused with ``FusionOptions.max_std_m`` (withholding); ``--clean``:
+``--wait-sigmas K|off`` (session 32): ``pslog.fusion.confirm.WAIT_SIGMAS`` (the points made
+with an innovation above K σ wait; the waits counted below leave them out:
+``benchmarks/session32/kick_sweep.py`` counts them). ``--max-std-mm``: typeA fused with ``FusionOptions.max_std_m`` (withholding); ``--clean``:
 list the clean sessions' far points too; ``--no-fresh``: without session 31's wait for the
 points resting on a re-acquisition (``pslog.fusion.confirm.FRESH_ROWS`` off: as before). Prints one line per far point and a summary:
 points, far (clean / added), good (<= 5 cm) points, mean error, and the points output that
@@ -161,6 +163,9 @@ def main():
     ap.add_argument("--clean", action="store_true")
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--rigs", default=None, help="comma-separated rig names (default all)")
+    ap.add_argument("--wait-sigmas", default=None,
+                    help="confirm.WAIT_SIGMAS (session 32: a point whose innovation exceeds "
+                         "it waits; 'off': the rule off, as before)")
     ap.add_argument("--no-fresh", action="store_true",
                     help="confirm.FRESH_ROWS off: the points resting on a re-acquisition "
                          "output at once (before session 31)")
@@ -169,6 +174,10 @@ def main():
         import pslog.fusion.confirm as confirm
 
         confirm.FRESH_ROWS = False
+    if a.wait_sigmas is not None:
+        import pslog.fusion.confirm as confirm
+
+        confirm.WAIT_SIGMAS = None if a.wait_sigmas == "off" else float(a.wait_sigmas)
     options = FusionOptions(max_std_m=None if a.max_std_mm is None else a.max_std_mm / 1e3)
     summary = []
     for first in (int(x) for x in a.first.split(",")):

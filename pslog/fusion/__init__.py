@@ -80,8 +80,10 @@ class FusionOptions:
         gates of :mod:`pslog.fusion.gating` (True), or take the best-scored one (False)
     confirm_gaps : bool, typeA: withhold a point whose prediction bridged a gap longer than
         the rig's usual one, or that rests on a camera's first detection after more than
-        ``max_gap_s`` without one (a re-acquisition: ``confirm.FRESH_ROWS``), until the
-        next camera's detection confirms it, and drop it when
+        ``max_gap_s`` without one (a re-acquisition: ``confirm.FRESH_ROWS``), or whose
+        innovation across the newest ray exceeds 3 σ (below the refusal's 5: a kick partly
+        seen, ``confirm.WAIT_SIGMAS``), until the next camera's detection confirms it, and
+        drop it when
         that detection contradicts it (:mod:`pslog.fusion.confirm`; a stream outputs it one
         detection later); False: every point at once (``pslog live``: a point per shutter)
     confirm_every : bool, typeA, offline only, with ``confirm_gaps``: every point, not only

@@ -58,8 +58,27 @@ re-acquisition, the camera blind or the ball out of its view before; the gate ch
 no track of that camera behind it, on the other cameras' epipolar lines and the 3D track,
 whose allowances of 8 px and 8 cm let a spurious blob a dozen pixels from where the ball is
 but is not seen through: ``lab3``, ``bench_dirty.py --more --first-seed 16200``, ``straight``,
-132 mm at ``std_m`` 5.1 mm; ``lab4``, ``--first-seed 16300``, two points 63-127 mm), wait:
-the others are output at once, as before. Causal: a point's decision uses
+132 mm at ``std_m`` 5.1 mm; ``lab4``, ``--first-seed 16300``, two points 63-127 mm), wait;
+and (session 32, :data:`WAIT_SIGMAS`) points whose innovation across the newest ray, the
+part gravity explains taken out, is large though below the prediction test's refusal
+(:mod:`pslog.fusion.innovation`: ``r > 5 σ_r + e_model``) — a two-level test, a validation
+gate and a confirmation, as trackers use: type A's kernel keeps for each point ``|u|²``, the
+offset of eq. (2)'s ``P̂_t`` across the newest ray less gravity's ``h (g - (rᵀg) r)``
+(``h = ½ δ_pred (δ_pred + δ_prev)``: eq. (2)'s exact error under gravity alone), and
+``c = (factor D / f)²`` (metres² per pixel² of that offset's noise: the innovation's
+``σ_r = σ factor`` pixels at distance ``D``, focal ``f``); under the model ``|u|² / (σ² c)``
+is a χ² of two degrees of freedom, and the point waits when
+
+    |u|² > WAIT_SIGMAS² σ² c,    WAIT_SIGMAS = 3
+
+(``σ``: :func:`confirm_noise`, the confirmation's own; a valid point waits with probability
+``exp(-9/2) ≈ 1.1 %`` at the right ``σ``, fewer at a stated noise above the real one). A
+kick whose velocity change lies partly across the newest ray shows there below the
+refusal's 5 σ while its part along the ray puts the point centimetres off (the tests' rally
+300, paper3, 10 ms after a kick: 56.5 mm at 3-5 σ); one along the ray shows nowhere until
+the next camera, which only waiting every point (``every``) catches. Such a point that no
+camera can check is dropped (``unconfirmed``), as a long-gap point is. The others are
+output at once, as before. Causal: a point's decision uses
 the detections up to the confirming one, so :class:`ConfirmedStream` (``StreamFuser``'s
 ``typeA``) decides as the batch run does, bit for bit (every step elementwise), and outputs
 a withheld point with the confirming detection's push. docs/methods.md, "Type A across a
@@ -83,6 +102,10 @@ CONFIRM_SIGMAS = 4.0
 #: A point also waits when one of its two previous instants' rows is its camera's first
 #: after a spell of ``max_gap_s`` without one (module docstring, session 31).
 FRESH_ROWS = True
+#: A point also waits when its innovation across the newest ray, eq. (2)'s gravity taken
+#: out, exceeds this many standard deviations: ``|u|² > WAIT_SIGMAS² σ² c`` (module
+#: docstring, session 32; None: the rule off, as before).
+WAIT_SIGMAS: float | None = 3.0
 #: ``1 + (1 + ρ)² + ρ²`` at ``ρ = 2`` (eq. (2)'s largest extrapolation): the point's
 #: projection noise in σ² when no covariance is made.
 _NO_COV_FACTOR2 = 14.0
@@ -223,6 +246,35 @@ def confirm_noise(snap_px: np.ndarray, noise_px: float | None, estimate=None) ->
     return (NoiseEstimate() if estimate is None else estimate).sigmas(values, noise_px)
 
 
+#: type A's kernel's columns the innovation rule reads (:data:`pslog.fusion.pseudo.
+#: _MODEL_COLUMNS`): the innovation's across-ray offset less gravity's, m², and its noise's
+#: metres² per pixel² ``c = (factor D / f)²``
+_ACROSS, _PER_PX2 = "_model_across_m2", "_model_m2_per_px2"
+
+
+def innovation_waits(across_m2: np.ndarray, per_px2: np.ndarray, sigma: np.ndarray | float
+                     ) -> np.ndarray:
+    """Which points wait for their innovation (module docstring, session 32), elementwise
+    (the same bits for one point as for many): ``|u|² > WAIT_SIGMAS² σ² c``.
+
+    Parameters
+    ----------
+    across_m2 : (k,) float, ``|u|²``, the prediction's offset across the newest ray less
+        gravity's there, m² (type A's kernel's ``_model_across_m2``)
+    per_px2 : (k,) float, ``c = (factor D / f)²``, m² per pixel² (``_model_m2_per_px2``)
+    sigma : (k,) float or float, the detection noise per axis, pixels
+        (:func:`confirm_noise`; the products are monotone in it, so a point that does not
+        wait at a σ waits at no smaller one)
+
+    Returns
+    -------
+    (k,) bool (NaN: False)
+    """
+    k = math.inf if WAIT_SIGMAS is None else float(WAIT_SIGMAS)  # (None: no point waits)
+    k2 = k * k
+    return across_m2 > k2 * (sigma * sigma) * per_px2
+
+
 def confirm_batch(prep, track: Track, rig, max_gap_s: float, noise_px: float | None,
                   every: bool = False) -> Track:
     """``track`` (type A's, from ``prep``'s observations) with its long-gap points confirmed,
@@ -260,11 +312,26 @@ def confirm_batch(prep, track: Track, rig, max_gap_s: float, noise_px: float | N
     _pseudo_kernel.long_gap_kernel(
         time_ns, camera, len(rig), _all_brackets(prep)[2], previous_next_rows(prep)[0],
         track.time_ns, track.camera, max_gap_ns, float(long_ns), FRESH_ROWS, row, gap, long)
+    q = track.quality
+    sigma = None
+    kick = None
+    if WAIT_SIGMAS is not None and _ACROSS in q:
+        # (session 32: a large innovation across the newest ray, gravity's part out, waits;
+        # σ is at least the stated noise's floor, so no point waits unless one would at the
+        # floor: the σ, a causal median over every point, made only then)
+        from .innovation import DEFAULT_NOISE_PX
+
+        floor = DEFAULT_NOISE_PX if noise_px is None else float(noise_px)
+        if np.any(innovation_waits(q[_ACROSS], q[_PER_PX2], floor)):
+            sigma = confirm_noise(q["snap_px"], noise_px)
+            kick = innovation_waits(q[_ACROSS], q[_PER_PX2], sigma)
+            long = long | kick
     wait = long | every  # (every: all the points)
     if not wait.any():
         return track
     # (the tests' noise, a causal median over every point: made only when some point waits)
-    sigma = confirm_noise(track.quality["snap_px"], noise_px)
+    if sigma is None:
+        sigma = confirm_noise(q["snap_px"], noise_px)
     e = row[wait]
     # the confirming detection: the first later row of another camera that can check the
     # point (its camera has a row within max_gap_s before the point, both pixels finite),
@@ -296,7 +363,6 @@ def confirm_batch(prep, track: Track, rig, max_gap_s: float, noise_px: float | N
     ok = nxt >= 0
     nxt_c, prev_c = np.maximum(nxt, 0), np.maximum(prev, 0)
     cam2 = camera[nxt_c]
-    q = track.quality
     idx = np.flatnonzero(wait)
     cov = (np.stack([q[k][idx] for k in _COV], axis=1) if all(k in q for k in _COV)
            else None)
@@ -304,7 +370,8 @@ def confirm_batch(prep, track: Track, rig, max_gap_s: float, noise_px: float | N
         _camera_rows(rig), cam2, track.position_world[idx], cov, time_ns[e],
         time_ns[prev_c], time_ns[nxt_c], uv[prev_c], uv[nxt_c], gap[wait] / NS,
         q["span_s"][idx], sigma[idx], noise_px) & ok
-    unconfirmed = ~ok & long[idx]  # (a point that bridged no long gap: kept unchecked)
+    # (a point that neither bridged a long gap nor waits for its innovation: kept unchecked)
+    unconfirmed = ~ok & long[idx]
     drop = np.zeros(len(track), dtype=bool)
     drop[idx[unconfirmed]] = True
     drop[idx[contradicted]] = True
@@ -410,8 +477,15 @@ class ConfirmedStream:
                     own is None or previous[0] - own[0] > self._max_gap_ns)
                 fresh = FRESH_ROWS and previous is not None and (self._previous_fresh
                                                                  or self._before_fresh)
+                kick = False
+                if WAIT_SIGMAS is not None and _ACROSS in out.quality:
+                    # (innovation_waits' operations on Python floats: the same IEEE
+                    # products and comparison as the batch's elementwise ones, no (1,) arrays)
+                    k = float(WAIT_SIGMAS)
+                    kick = float(out.quality[_ACROSS][i]) > (k * k) * (
+                        sigma[i] * sigma[i]) * float(out.quality[_PER_PX2][i])
                 if (gap > self._long_ns or unbracketed or self._gap_before > self._long_ns
-                        or fresh):
+                        or fresh or kick):
                     queue.append([out.select([i]), "wait",
                                   (t, c, gap, list(self._last), sigma[i])])
                 else:

@@ -31,6 +31,12 @@ changed inside the prediction's interval — which is what it is for. It is the 
 test a Kalman filter applies to each measurement (Bar-Shalom, Li and Kirubarajan, *Estimation
 with Applications to Tracking and Navigation*, 2001, ch. 5.4), applied to eq. (2)'s
 prediction. docs/methods.md, "Type A's prediction test", has the figures.
+
+Below the refusal, a second level (session 32): a point whose innovation across the newest
+ray, gravity's part taken out, exceeds 3 standard deviations is not refused but waits for the
+next camera's confirmation (:data:`pslog.fusion.confirm.WAIT_SIGMAS`,
+:func:`pslog.fusion.confirm.innovation_waits`; docs/methods.md, "A point with a large
+innovation waits").
 """
 
 from __future__ import annotations
