@@ -145,6 +145,30 @@ def test_every_writing_command_declares_its_files(command):
         assert "rig" in files["inputs"], command
 
 
+@pytest.mark.parametrize("command", list(COMMANDS))
+def test_every_session_output_is_declared_a_session(command):
+    """An option whose file is an MCAP session (metavar ``*.mcap``) is declared one
+    (``declare_files(sessions=...)``), so a name for another format is refused (exit 2)."""
+    from pslog.cli._common import FILES_KEY
+
+    parser = _parser(command)
+    files = parser.get_default(FILES_KEY) or {}
+    writes = set(files.get("outputs", ())) | set(files.get("updates", ()))
+    mcap = {a.dest for a in parser._actions
+            if a.dest in writes and str(a.metavar or "").lower().endswith(".mcap")}
+    assert mcap == set(files.get("sessions", ())), command
+
+
+@pytest.mark.parametrize("name", ["out", "OUT.MCAP", "take.v2", ".csv", "s.mcap.bak"])
+def test_a_session_name_for_no_other_format_is_written(tmp_path, cli, name):
+    """Only a suffix that names another format is refused: none, .mcap in any case, or one
+    pslog does not know (a version, a backup) is the user's choice."""
+    code, _, err = cli("simulate", "--rig", "paper3", "--duration", "0.2", "-o",
+                         tmp_path / name)
+    assert code == 0 and (tmp_path / name).is_file(), err
+    assert cli("info", tmp_path / name)[0] == 0
+
+
 def test_a_new_command_gets_the_output_rule_for_free(tmp_path, monkeypatch, cli):
     """A command that only declares its files, and then writes naively, cannot replace its
     input or overwrite without --force: the dispatcher checks before run()."""

@@ -234,11 +234,14 @@ def _main(argv: list[str] | None) -> int:
     if early is not None:  # a process-wide setting of the command, before any thread starts
         early()  # (the progress line's: pslog fuse's malloc arena)
 
-    from ._common import empty_file_option
+    from ._common import empty_file_option, misnamed_session
 
     empty = empty_file_option(parser, args)
     if empty is not None:
         parser.error(f"argument {empty}: empty file name")
+    misnamed = misnamed_session(parser, args)
+    if misnamed is not None:  # ('-o sim.csv': an MCAP that 'pslog import sim.csv' misreads)
+        parser.error(misnamed)
 
     from pslog.outputs import describe_os_error
 

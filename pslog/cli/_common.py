@@ -23,7 +23,7 @@ FILES_KEY = "_pslog_files"
 
 
 def declare_files(parser: argparse.ArgumentParser, *, inputs=(), outputs=(),
-                  updates=()) -> None:
+                  updates=(), sessions=()) -> None:
     """Declare which options of a command name files it reads and writes.
 
     The dispatcher (:func:`pslog.cli.main`) checks every declared output before ``run``:
@@ -40,10 +40,14 @@ def declare_files(parser: argparse.ArgumentParser, *, inputs=(), outputs=(),
     outputs : dests of files the command writes (``"output"``, ``"save"``, ``"csv"``)
     updates : dests of files changed in place (``calibrate --rig``): checked as outputs,
         except that they may exist without ``--force``
+    sessions : those of ``outputs`` that are MCAP sessions: a name whose suffix names
+        another format (``-o sim.csv``) is a usage error, exit 2 (:func:`misnamed_session`)
     """
-    files = dict(parser.get_default(FILES_KEY) or {"inputs": (), "outputs": (), "updates": ()})
-    for key, more in (("inputs", inputs), ("outputs", outputs), ("updates", updates)):
-        files[key] = (*files[key], *more)
+    files = dict(parser.get_default(FILES_KEY) or {"inputs": (), "outputs": (), "updates": (),
+                                                   "sessions": ()})
+    for key, more in (("inputs", inputs), ("outputs", outputs), ("updates", updates),
+                      ("sessions", sessions)):
+        files[key] = (*files.get(key, ()), *more)
     parser.set_defaults(**{FILES_KEY: files})
 
 
@@ -60,6 +64,50 @@ def empty_file_option(parser: argparse.ArgumentParser, args: argparse.Namespace)
         values = [value] if isinstance(value, str | Path) else list(value or ())
         if any(v is not None and str(v).strip() == "" for v in values):
             return "/".join(action.option_strings) or str(action.metavar or action.dest)
+    return None
+
+
+#: suffixes (lower case) of the formats pslog reads or writes other than MCAP, and what
+#: each names: an MCAP session under one of them is taken for that format later (``pslog
+#: import sim.csv`` reads a CSV, ``--rig s.yml`` OpenCV, ``--source cam1=s.mp4`` a video) or
+#: by the user's other tools. A name without a suffix, with ``.mcap`` or with any other
+#: (``take.v2``, ``s.bak``) is left to the user.
+OTHER_FORMATS = {
+    **dict.fromkeys((".csv", ".tsv"), "a CSV file"),
+    **dict.fromkeys((".jsonl", ".ndjson"), "a JSON Lines file"),
+    **dict.fromkeys((".parquet", ".pq"), "a Parquet file"),
+    ".c3d": "a C3D file", ".tum": "a TUM trajectory", ".rrd": "a rerun recording",
+    ".toml": "a rig or calibration TOML",
+    **dict.fromkeys((".yml", ".yaml", ".xml"), "an OpenCV FileStorage file"),
+    ".json": "a JSON file", ".txt": "a text file",
+    **dict.fromkeys((".mp4", ".avi", ".mkv", ".mov", ".m4v", ".webm"), "a video"),
+    # (calibrate's IMAGE_SUFFIXES, pslog.calibration._common: not imported here, cv2-free)
+    **dict.fromkeys((".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm",
+                     ".webp"), "an image"),
+}
+
+
+def misnamed_session(parser: argparse.ArgumentParser, args: argparse.Namespace) -> str | None:
+    """The usage error for an MCAP session output (``declare_files(sessions=...)``) named
+    for another format (:data:`OTHER_FORMATS`, any case), if any on this command line:
+    ``argument -o/--output: sim.csv names a CSV file; pslog simulate writes an MCAP
+    session: name it .mcap``. Checked before any file is (a command line's fault, exit 2,
+    nothing read or written), as ``view --save`` and ``export`` refuse theirs."""
+    import os
+
+    files = getattr(args, FILES_KEY, None) or {}
+    dests = set(files.get("sessions", ()))
+    for action in parser._actions:
+        value = getattr(args, action.dest, None) if action.dest in dests else None
+        if not isinstance(value, str | Path):
+            continue
+        # the last component's suffix as written: 'out.csv/' is a folder's spelling, said
+        # by the output checks; '.csv' alone is a hidden file's name, no suffix
+        suffix = os.path.splitext(os.path.basename(os.fspath(value)))[1].lower()
+        if suffix in OTHER_FORMATS:
+            option = "/".join(action.option_strings) or str(action.metavar or action.dest)
+            return (f"argument {option}: {os.fspath(value)} names {OTHER_FORMATS[suffix]}; "
+                    f"{parser.prog} writes an MCAP session: name it .mcap")
     return None
 
 

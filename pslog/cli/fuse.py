@@ -110,7 +110,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "smooth's own threads: PSLOG_SMOOTH_THREADS, default 2, at "
                              "most the CPUs the process may use)")
     add_force(parser)
-    declare_files(parser, inputs=("session", "rig"), outputs=("output",))
+    declare_files(parser, inputs=("session", "rig"), outputs=("output",),
+                  sessions=("output",))
 
 
 def run(args: argparse.Namespace) -> int:

@@ -24,7 +24,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("-o", "--output", required=True, metavar="SESSION.mcap",
                         help="session file to write")
     add_force(parser)
-    declare_files(parser, inputs=("rig", "detections"), outputs=("output",))
+    declare_files(parser, inputs=("rig", "detections"), outputs=("output",),
+                  sessions=("output",))
 
 
 def run(args: argparse.Namespace) -> int:

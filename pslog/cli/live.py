@@ -169,7 +169,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_force(parser)
     from .record import video_files
 
-    declare_files(parser, inputs=("rig", video_files), outputs=("record",))
+    declare_files(parser, inputs=("rig", video_files), outputs=("record",),
+                  sessions=("record",))
 
 
 def run(args: argparse.Namespace) -> int:

@@ -131,7 +131,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="JPEG quality of stored frames, 1..100 (default %(default)s)")
     add_detector_arguments(parser)
     add_force(parser)
-    declare_files(parser, inputs=("rig", video_files), outputs=("output",))
+    declare_files(parser, inputs=("rig", video_files), outputs=("output",),
+                  sessions=("output",))
 
 
 def add_detector_arguments(parser: argparse.ArgumentParser) -> None:

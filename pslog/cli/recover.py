@@ -13,7 +13,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("-o", "--output", required=True, metavar="FIXED.mcap",
                         help="new session with every complete record of the damaged one")
     add_force(parser)
-    declare_files(parser, inputs=("session",), outputs=("output",))
+    declare_files(parser, inputs=("session",), outputs=("output",),
+                  sessions=("output",))
 
 
 def run(args: argparse.Namespace) -> int:

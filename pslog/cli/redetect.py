@@ -46,7 +46,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="detect in frames decoded at half size: 10-20%% less CPU, "
                              "centroids 0.14-0.27 px RMS from the exact ones")
     add_force(parser)
-    declare_files(parser, inputs=("session",), outputs=("output",))
+    declare_files(parser, inputs=("session",), outputs=("output",),
+                  sessions=("output",))
 
 
 def run(args: argparse.Namespace) -> int:

@@ -46,7 +46,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true",
                         help="print one JSON object: cameras (rig order) and residual_px")
     add_force(parser)
-    declare_files(parser, inputs=("session",), outputs=("output",))
+    declare_files(parser, inputs=("session",), outputs=("output",),
+                  sessions=("output",))
 
 
 def run(args: argparse.Namespace) -> int:

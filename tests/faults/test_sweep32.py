@@ -2,7 +2,7 @@
 (``-o out.mcap/``) was written as the file ``out.mcap`` (pathlib drops the trailing ``/``;
 ``open()`` refuses such a name), by every writer; ``export --tum ''`` was "nothing to
 export" (exit 1), not a usage error; ``calibrate --rig new.yml`` wrote TOML under an OpenCV
-name."""
+name; every MCAP writer wrote its session under any name (``simulate -o sim.csv``)."""
 
 from __future__ import annotations
 
@@ -46,4 +46,41 @@ def test_calibrate_refuses_a_new_rig_named_for_another_format(name, inputs):  # 
         "cam9", "--rig", name, cwd=inputs), 2,
         contains=f"--rig {name}: calibrate writes a pslog rig, TOML, named .toml")
     assert line.startswith("pslog calibrate: error: "), line
+    assert_untouched(before, inputs)
+
+
+#: every writer of an MCAP session, its output given as {o} (WRITERS' and sync, redetect)
+SESSION_WRITERS = {**{w: WRITERS[w] for w in ("simulate", "import", "fuse", "recover",
+                                              "record", "live --record")},
+                   "sync": ["sync", "s.mcap", "-o", "{o}"],
+                   "redetect": ["redetect", "s.mcap", "-o", "{o}"]}
+
+
+@pytest.mark.parametrize("writer, name, kind", [
+    ("simulate", "sim.csv", "a CSV file"), ("import", "s.JSONL", "a JSON Lines file"),
+    ("fuse", "fused.rrd", "a rerun recording"), ("recover", "fixed.yml", "an OpenCV FileStorage"),
+    ("record", "take.mp4", "a video"), ("live --record", "live.toml", "a rig or calibration"),
+    ("sync", "synced.parquet", "a Parquet file"), ("redetect", "again.txt", "a text file")])
+def test_a_session_named_for_another_format_is_refused(writer, name, kind, inputs):  # noqa: F811
+    """``pslog simulate -o sim.csv`` wrote an MCAP under a CSV's name (exit 0), which ``pslog
+    import sim.csv`` then misread: every MCAP writer refuses a name whose suffix names another
+    format (exit 2, one line, before anything is read or written), as ``view --save`` and
+    ``export`` refuse theirs."""
+    before = fingerprint(inputs)
+    args = [a.format(o=name) for a in SESSION_WRITERS[writer]]
+    option = "--record" if writer == "live --record" else "-o/--output"
+    line = assert_one_line_error(run_pslog(*args, cwd=inputs), 2, contains=(
+        f"argument {option}: {name} names {kind}",
+        f"pslog {writer.split()[0]} writes an MCAP session: name it .mcap"))
+    assert line.startswith(f"pslog {writer.split()[0]}: error: "), line
+    assert_untouched(before, inputs)
+
+
+def test_a_session_never_replaces_a_file_of_another_format(inputs):  # noqa: F811
+    """``fuse s.mcap -o det.csv --force`` replaced the detections CSV with an MCAP (exit 0):
+    refused by its name, --force or not, the CSV kept."""
+    before = fingerprint(inputs)
+    assert_one_line_error(run_pslog("fuse", "s.mcap", "--method", "typeA", "-o", "det.csv",
+                                    "--force", cwd=inputs), 2,
+                          contains="argument -o/--output: det.csv names a CSV file")
     assert_untouched(before, inputs)
