@@ -234,18 +234,15 @@ def _main(argv: list[str] | None) -> int:
     if early is not None:  # a process-wide setting of the command, before any thread starts
         early()  # (the progress line's: pslog fuse's malloc arena)
 
-    from ._common import empty_file_option, misnamed_session
+    from ._common import empty_file_option
 
     empty = empty_file_option(parser, args)
     if empty is not None:
         parser.error(f"argument {empty}: empty file name")
-    misnamed = misnamed_session(parser, args)
-    if misnamed is not None:  # ('-o sim.csv': an MCAP that 'pslog import sim.csv' misreads)
-        parser.error(misnamed)
 
     from pslog.outputs import describe_os_error
 
-    from ._common import check_declared_files, declared_files
+    from ._common import check_declared_files, declared_files, misnamed_session
 
     _ignore_file_size_signal()
 
@@ -260,6 +257,12 @@ def _main(argv: list[str] | None) -> int:
         _release_sigint()  # only now: a KeyboardInterrupt in a C extension's import (numpy,
         # cv2, while add_arguments loads them) surfaces as an ImportError traceback
         check_declared_files(args, say=say)
+        # ('-o sim.csv': an MCAP that 'pslog import sim.csv' misreads) after the file checks,
+        # as view --save and export check their names: an input, a folder or an existing
+        # file named is said as such first (exit 1)
+        misnamed = misnamed_session(parser, args)
+        if misnamed is not None:
+            parser.error(misnamed)
         if name in PROGRESS_COMMANDS:
             from pslog.progress import command_progress
 

@@ -91,8 +91,10 @@ def misnamed_session(parser: argparse.ArgumentParser, args: argparse.Namespace) 
     """The usage error for an MCAP session output (``declare_files(sessions=...)``) named
     for another format (:data:`OTHER_FORMATS`, any case), if any on this command line:
     ``argument -o/--output: sim.csv names a CSV file; pslog simulate writes an MCAP
-    session: name it .mcap``. Checked before any file is (a command line's fault, exit 2,
-    nothing read or written), as ``view --save`` and ``export`` refuse theirs."""
+    session: name it .mcap``. Checked by the dispatcher after the output checks of
+    :func:`check_declared_files` (an output that is an input, a folder, or exists without
+    ``--force`` is said as such first, exit 1) and before ``run`` (nothing read or written),
+    as ``view --save`` and ``export`` check their names."""
     import os
 
     files = getattr(args, FILES_KEY, None) or {}
