@@ -193,6 +193,8 @@ def _described_format(path: str) -> str:
 
 
 def _import(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
     from pslog.interchange.rig_formats import ImportOptions, TimingOptionError
     from pslog.outputs import replacing
     from pslog.rig import apply_timing, load_rig_file
@@ -202,6 +204,12 @@ def _import(args: argparse.Namespace) -> int:
     offsets = dict(args.offset)
     if args.timing and offsets:  # (bad command lines: exit 2, as argparse's own)
         return usage_error("rig import", "give --timing or --offset, not both")
+    # a pslog rig is TOML: under an OpenCV name ('-o cams.yml') pslog itself would read it
+    # back as OpenCV FileStorage and refuse it (calibrate --rig's and rig export's rule)
+    if Path(args.output).suffix.lower() != ".toml":
+        return usage_error("rig import", f"-o {args.output}: a pslog rig is TOML, named .toml "
+                                         f"(for an OpenCV file: pslog rig export --format "
+                                         f"opencv)")
     try:
         loaded = load_rig_file(args.file, args.format,
                                ImportOptions(units=args.units, fps=args.fps, offsets=offsets))

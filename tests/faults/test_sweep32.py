@@ -49,6 +49,19 @@ def test_calibrate_refuses_a_new_rig_named_for_another_format(name, inputs):  # 
     assert_untouched(before, inputs)
 
 
+
+@pytest.mark.parametrize("name", ["cams.yml", "cams.json", "cams"])
+def test_rig_import_refuses_a_rig_named_for_another_format(name, inputs):  # noqa: F811
+    """``rig import -o cams.yml`` wrote pslog's TOML under an OpenCV name, which pslog then
+    read back as OpenCV FileStorage and refused: the rig written is named .toml (exit 2,
+    nothing read or written), as ``calibrate --rig`` and ``rig export -o``."""
+    before = fingerprint(inputs)
+    line = assert_one_line_error(run_pslog("rig", "import", "rig.toml", "-o", name,
+                                           cwd=inputs), 2,
+                                 contains=f"-o {name}: a pslog rig is TOML, named .toml")
+    assert line.startswith("pslog rig import: error: "), line
+    assert_untouched(before, inputs)
+
 #: every writer of an MCAP session, its output given as {o} (WRITERS' and sync, redetect)
 SESSION_WRITERS = {**{w: WRITERS[w] for w in ("simulate", "import", "fuse", "recover",
                                               "record", "live --record")},
