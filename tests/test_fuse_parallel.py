@@ -380,6 +380,20 @@ def test_a_stopped_command_ends_without_the_shutdown_while_a_kernel_runs(code, n
     assert proc.stdout == ("before\n" if ends_there else "before\nafter\n"), proc.stdout
 
 
+
+def test_a_stopped_command_without_a_stdout_still_ends_without_the_shutdown():
+    """Started with its standard output closed ('>&-': ``sys.stdout`` is None), the same
+    exit: no traceback from the flush, the signal's code."""
+    import os
+    import subprocess
+    import sys
+
+    proc = subprocess.run([sys.executable, "-c", _NATIVE_EXIT, "143", "pslog-fuse-0"],
+                          stderr=subprocess.PIPE, text=True, timeout=60,
+                          preexec_fn=lambda: os.close(1))
+    assert proc.returncode == 143, proc.stderr
+    assert proc.stderr == "", proc.stderr
+
 _ARENAS = """
 import ctypes, os, sys
 from pslog.cli import main

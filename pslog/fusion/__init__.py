@@ -82,10 +82,10 @@ class FusionOptions:
         the rig's usual one, or that rests on a camera's first detection after more than
         ``max_gap_s`` without one (a re-acquisition: ``confirm.FRESH_ROWS``), or whose
         innovation across the newest ray exceeds 3 σ (below the refusal's 5: a kick partly
-        seen, ``confirm.WAIT_SIGMAS``), until the next camera's detection confirms it, and
-        drop it when
-        that detection contradicts it (:mod:`pslog.fusion.confirm`; a stream outputs it one
-        detection later); False: every point at once (``pslog live``: a point per shutter)
+        seen, ``confirm.WAIT_SIGMAS``; with ``noise_px`` set), until the next camera's
+        detection confirms it, and drop it when that detection contradicts it
+        (:mod:`pslog.fusion.confirm`; a stream outputs it one detection later); False: every
+        point at once (``pslog live``: a point per shutter)
     confirm_every : bool, typeA, offline only, with ``confirm_gaps``: every point, not only
         the long-gap ones, is tested against the next detection of another camera that can
         check it and dropped as ``contradicted`` when it disagrees (the same test; a point

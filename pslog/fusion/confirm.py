@@ -63,8 +63,9 @@ and (session 32, :data:`WAIT_SIGMAS`) points whose innovation across the newest 
 part gravity explains taken out, is large though below the prediction test's refusal
 (:mod:`pslog.fusion.innovation`: ``r > 5 σ_r + e_model``) — a two-level test, a validation
 gate and a confirmation, as trackers use: type A's kernel keeps for each point ``|u|²``, the
-offset of eq. (2)'s ``P̂_t`` across the newest ray less gravity's ``h (g - (rᵀg) r)``
-(``h = ½ δ_pred (δ_pred + δ_prev)``: eq. (2)'s exact error under gravity alone), and
+offset ``q⊥`` of eq. (2)'s ``P̂_t`` across the newest ray plus ``h (g - (rᵀg) r)`` (gravity's
+offset ``-h g⊥`` taken out; ``h = ½ δ_pred (δ_pred + δ_prev)``: eq. (2)'s exact error under
+gravity alone), and
 ``c = (factor D / f)²`` (metres² per pixel² of that offset's noise: the innovation's
 ``σ_r = σ factor`` pixels at distance ``D``, focal ``f``); under the model ``|u|² / (σ² c)``
 is a χ² of two degrees of freedom, and the point waits when
@@ -77,7 +78,9 @@ kick whose velocity change lies partly across the newest ray shows there below t
 refusal's 5 σ while its part along the ray puts the point centimetres off (the tests' rally
 300, paper3, 10 ms after a kick: 56.5 mm at 3-5 σ); one along the ray shows nowhere until
 the next camera, which only waiting every point (``every``) catches. Such a point that no
-camera can check is dropped (``unconfirmed``), as a long-gap point is. The others are
+camera can check is dropped (``unconfirmed``), as a long-gap point is.
+(The columns are made with the covariance: with ``FusionOptions.noise_px`` None, type A's
+throughput form, no point waits for its innovation.) The others are
 output at once, as before. Causal: a point's decision uses
 the detections up to the confirming one, so :class:`ConfirmedStream` (``StreamFuser``'s
 ``typeA``) decides as the batch run does, bit for bit (every step elementwise), and outputs
@@ -252,23 +255,24 @@ def confirm_noise(snap_px: np.ndarray, noise_px: float | None, estimate=None) ->
 _ACROSS, _PER_PX2 = "_model_across_m2", "_model_m2_per_px2"
 
 
-def innovation_waits(across_m2: np.ndarray, per_px2: np.ndarray, sigma: np.ndarray | float
-                     ) -> np.ndarray:
+def innovation_waits(across_m2: np.ndarray | float, per_px2: np.ndarray | float,
+                     sigma: np.ndarray | float) -> np.ndarray | bool:
     """Which points wait for their innovation (module docstring, session 32), elementwise
     (the same bits for one point as for many): ``|u|² > WAIT_SIGMAS² σ² c``.
 
     Parameters
     ----------
-    across_m2 : (k,) float, ``|u|²``, the prediction's offset across the newest ray less
-        gravity's there, m² (type A's kernel's ``_model_across_m2``)
-    per_px2 : (k,) float, ``c = (factor D / f)²``, m² per pixel² (``_model_m2_per_px2``)
+    across_m2 : (k,) float or float, ``|u|²``, the prediction's offset across the newest
+        ray with gravity's part taken out, m² (type A's kernel's ``_model_across_m2``)
+    per_px2 : (k,) float or float, ``c = (factor D / f)²``, m² per pixel²
+        (``_model_m2_per_px2``)
     sigma : (k,) float or float, the detection noise per axis, pixels
         (:func:`confirm_noise`; the products are monotone in it, so a point that does not
         wait at a σ waits at no smaller one)
 
     Returns
     -------
-    (k,) bool (NaN: False)
+    (k,) bool (NaN: False); a bool for floats (:class:`ConfirmedStream`'s one point)
     """
     k = math.inf if WAIT_SIGMAS is None else float(WAIT_SIGMAS)  # (None: no point waits)
     k2 = k * k
@@ -277,13 +281,14 @@ def innovation_waits(across_m2: np.ndarray, per_px2: np.ndarray, sigma: np.ndarr
 
 def confirm_batch(prep, track: Track, rig, max_gap_s: float, noise_px: float | None,
                   every: bool = False) -> Track:
-    """``track`` (type A's, from ``prep``'s observations) with its long-gap points confirmed,
-    contradicted or unconfirmed (module docstring); the dropped ones counted in
-    ``Track.dropped`` (``contradicted``, ``unconfirmed``).
+    """``track`` (type A's, from ``prep``'s observations) with its waiting points (long gaps,
+    re-acquisitions, a large innovation: module docstring) confirmed, contradicted or
+    unconfirmed; the dropped ones counted in ``Track.dropped`` (``contradicted``,
+    ``unconfirmed``).
 
     ``every`` (offline only, ``FusionOptions.confirm_every``): every point is tested the same
-    way, not only the long-gap ones, and dropped when contradicted; a point no other camera
-    can check is kept unless it bridged a long gap (as without ``every``). The long-gap
+    way, not only the waiting ones, and dropped when contradicted; a point no other camera
+    can check is kept unless it was a waiting one (as without ``every``). The long-gap
     points' decisions are the same bits either way (the test is elementwise)."""
     if not len(track):
         return track
@@ -394,7 +399,8 @@ def _with_drops(track: Track, drop: np.ndarray, contradicted: int, unconfirmed: 
 
 class ConfirmedStream:
     """:class:`~pslog.fusion.pseudo.TypeAStream` with :func:`confirm_batch`'s decisions,
-    causally: a long-gap point is held until the first later detection of another camera
+    causally: a waiting point (a long gap, a re-acquisition, a large innovation: the module
+    docstring) is held until the first later detection of another camera
     that can check it (a detection of that camera within ``max_gap_s`` before the point)
     (output with that push when confirmed), or dropped when that detection contradicts it,
     when a detection beyond ``max_gap_s`` arrives first, or at :meth:`flush`. The same points
@@ -479,11 +485,11 @@ class ConfirmedStream:
                                                                  or self._before_fresh)
                 kick = False
                 if WAIT_SIGMAS is not None and _ACROSS in out.quality:
-                    # (innovation_waits' operations on Python floats: the same IEEE
-                    # products and comparison as the batch's elementwise ones, no (1,) arrays)
-                    k = float(WAIT_SIGMAS)
-                    kick = float(out.quality[_ACROSS][i]) > (k * k) * (
-                        sigma[i] * sigma[i]) * float(out.quality[_PER_PX2][i])
+                    # (innovation_waits on Python floats: the same IEEE products and
+                    # comparison as the batch's elementwise ones, no (1,) arrays)
+                    kick = bool(innovation_waits(float(out.quality[_ACROSS][i]),
+                                                 float(out.quality[_PER_PX2][i]),
+                                                 float(sigma[i])))
                 if (gap > self._long_ns or unbracketed or self._gap_before > self._long_ns
                         or fresh or kick):
                     queue.append([out.select([i]), "wait",
