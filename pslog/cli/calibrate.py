@@ -112,8 +112,9 @@ def _run(args: argparse.Namespace) -> int:
 
     rig_path = Path(args.rig)
     if not rig_path.exists() and str(args.rig) in BUILTIN_RIGS:
-        raise InputError(f"--rig {args.rig}: calibrate writes a rig file; give a path such as "
-                         f"rig.toml (built-in rigs cannot be changed)")
+        # (a bad command-line value, exit 2, as a new rig file named for another format)
+        raise BadOption(f"--rig {args.rig}: calibrate writes a rig file; give a path such as "
+                        f"rig.toml (built-in rigs cannot be changed)")
     if not rig_path.exists() and rig_path.suffix.lower() != ".toml":
         # a new rig file is pslog's TOML: under another name ('--rig cams.yml') pslog itself
         # then read it as OpenCV ("malformed OpenCV FileStorage file"; session 32), the

@@ -35,6 +35,18 @@ def test_an_empty_tum_folder_is_a_usage_error(value, inputs):  # noqa: F811
     assert_untouched(before, inputs)
 
 
+def test_calibrate_refuses_a_builtin_rig_as_a_usage_error(inputs):  # noqa: F811
+    """``calibrate --rig paper3`` (a built-in name, no such file) is a bad command-line value,
+    exit 2 as a new rig named for another format (was 1), nothing written."""
+    before = fingerprint(inputs)
+    line = assert_one_line_error(run_pslog(
+        "calibrate", "--points", "pts.csv", "--width", "640", "--height", "480", "--name",
+        "cam9", "--rig", "paper3", cwd=inputs), 2,
+        contains="--rig paper3: calibrate writes a rig file")
+    assert line.startswith("pslog calibrate: error: "), line
+    assert_untouched(before, inputs)
+
+
 @pytest.mark.parametrize("name", ["new.yml", "new.json", "new"])
 def test_calibrate_refuses_a_new_rig_named_for_another_format(name, inputs):  # noqa: F811
     """``calibrate --rig new.yml`` wrote pslog's TOML under an OpenCV name, which pslog then
