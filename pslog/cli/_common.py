@@ -67,24 +67,72 @@ def empty_file_option(parser: argparse.ArgumentParser, args: argparse.Namespace)
     return None
 
 
-#: suffixes (lower case) of the formats pslog reads or writes other than MCAP, and what
-#: each names: an MCAP session under one of them is taken for that format later (``pslog
-#: import sim.csv`` reads a CSV, ``--rig s.yml`` OpenCV, ``--source cam1=s.mp4`` a video) or
-#: by the user's other tools. A name without a suffix, with ``.mcap`` or with any other
-#: (``take.v2``, ``s.bak``) is left to the user.
-OTHER_FORMATS = {
-    **dict.fromkeys((".csv", ".tsv"), "a CSV file"),
-    **dict.fromkeys((".jsonl", ".ndjson"), "a JSON Lines file"),
-    **dict.fromkeys((".parquet", ".pq"), "a Parquet file"),
-    ".c3d": "a C3D file", ".tum": "a TUM trajectory", ".rrd": "a rerun recording",
-    ".toml": "a rig or calibration TOML",
-    **dict.fromkeys((".yml", ".yaml", ".xml"), "an OpenCV FileStorage file"),
-    ".json": "a JSON file", ".txt": "a text file",
-    **dict.fromkeys((".mp4", ".avi", ".mkv", ".mov", ".m4v", ".webm"), "a video"),
-    # (calibrate's IMAGE_SUFFIXES, pslog.calibration._common: not imported here, cv2-free)
-    **dict.fromkeys((".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm",
-                     ".webp"), "an image"),
+#: every file format pslog reads or writes, by the name its code calls it: what a message
+#: calls a file of it, the suffixes (lower case) a file pslog writes in it may be named with,
+#: and the suffixes it also goes by (recognised, never written: a tab-separated ``.tsv`` is a
+#: CSV file to a user, but pslog writes commas). The one table behind every output-name
+#: check: ``export``'s files, ``view --save``, ``rig export``/``rig import -o``, ``calibrate
+#: --rig`` (:func:`misnamed`) and an MCAP session named for another format
+#: (:data:`OTHER_FORMATS`). Where the core keeps its own list (``OPENCV_SUFFIXES``,
+#: ``IMAGE_SUFFIXES``: cv2 and numpy, not imported here, so that ``--help`` stays fast) a test
+#: holds them equal (tests/faults/test_sweep33.py).
+FORMATS: dict[str, tuple[str, tuple[str, ...], tuple[str, ...]]] = {
+    "mcap": ("an MCAP session", (".mcap",), ()),
+    "csv": ("a CSV file", (".csv",), (".tsv",)),
+    "jsonl": ("a JSON Lines file", (".jsonl", ".ndjson"), ()),
+    "parquet": ("a Parquet file", (".parquet", ".pq"), ()),
+    "c3d": ("a C3D file", (".c3d",), ()),
+    "tum": ("a TUM trajectory", (".tum",), ()),
+    "rrd": ("a rerun recording", (".rrd",), ()),
+    "toml": ("a rig or calibration TOML", (".toml",), ()),
+    # (.json: a JSON file to the user and to OTHER_FORMATS, OpenCV's too when rig export
+    # writes it: listed first, its name wins in OTHER_FORMATS)
+    "json": ("a JSON file", (".json",), ()),
+    "opencv": ("an OpenCV FileStorage file", (".yml", ".yaml", ".xml", ".json"), ()),
+    "text": ("a text file", (".txt",), ()),
+    "video": ("a video", (".mp4", ".avi", ".mkv", ".mov", ".m4v", ".webm"), ()),
+    "image": ("an image", (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm",
+                           ".webp"), ()),
 }
+
+#: suffix -> what it names, for every format but MCAP: an MCAP session under one of them is
+#: taken for that format later (``pslog import sim.csv`` reads a CSV, ``--rig s.yml``
+#: OpenCV, ``--source cam1=s.mp4`` a video) or by the user's other tools. A name without a
+#: suffix, with ``.mcap`` or with any other (``take.v2``, ``s.bak``) is left to the user.
+OTHER_FORMATS: dict[str, str] = {}
+for _fmt, (_kind, _written, _also) in FORMATS.items():
+    if _fmt != "mcap":
+        for _suffix in _written + _also:
+            OTHER_FORMATS.setdefault(_suffix, _kind)
+
+
+#: what a message calls the rig file pslog writes (``rig import -o``, ``calibrate --rig``)
+PSLOG_RIG = "a pslog rig (TOML)"
+
+
+def _either(suffixes: tuple[str, ...]) -> str:
+    """``.csv``; ``.parquet or .pq``; ``.yml, .yaml, .xml or .json``."""
+    return suffixes[0] if len(suffixes) == 1 else f"{', '.join(suffixes[:-1])} or {suffixes[-1]}"
+
+
+def misnamed(option: str, path: str | Path, fmt: str, subject: str | None = None,
+             hint: str | None = None) -> str | None:
+    """The error for an output ``path`` given as ``option`` that pslog writes in format
+    ``fmt`` (a key of :data:`FORMATS`) under a name without one of its suffixes (any case),
+    else None: ``--csv t.parquet: a CSV file is named .csv``. ``subject`` names the file
+    when the format's own name says too little (``a pslog rig (TOML)``), ``hint`` follows
+    in parentheses. A file's name says its format to the user's other tools and to pslog
+    itself (``--rig s.yml`` is read as OpenCV), so a mismatch is a bad command line (the
+    callers' exit 2), never a file of one format under another's name."""
+    import os
+
+    kind, written, _also = FORMATS[fmt]
+    # the last component's suffix as written ('t.CSV' is a CSV file; '.csv' alone is a
+    # hidden file's name, no suffix)
+    if os.path.splitext(os.path.basename(os.fspath(path)))[1].lower() in written:
+        return None
+    return (f"{option} {os.fspath(path)}: {subject or kind} is named {_either(written)}"
+            + (f" ({hint})" if hint else ""))
 
 
 def misnamed_session(parser: argparse.ArgumentParser, args: argparse.Namespace) -> str | None:

@@ -23,7 +23,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from pslog.cli._common import add_force, declare_files, nonnegative_float
+from pslog.cli._common import PSLOG_RIG, add_force, declare_files, misnamed, nonnegative_float
 from pslog.errors import InputError
 
 #: Largest reprojection RMS a calibration may have to be written into the rig, pixels: the
@@ -115,12 +115,14 @@ def _run(args: argparse.Namespace) -> int:
         # (a bad command-line value, exit 2, as a new rig file named for another format)
         raise BadOption(f"--rig {args.rig}: calibrate writes a rig file; give a path such as "
                         f"rig.toml (built-in rigs cannot be changed)")
-    if not rig_path.exists() and rig_path.suffix.lower() != ".toml":
-        # a new rig file is pslog's TOML: under another name ('--rig cams.yml') pslog itself
-        # then read it as OpenCV ("malformed OpenCV FileStorage file"; session 32), the
-        # mismatch 'rig export -o' refuses
-        raise BadOption(f"--rig {args.rig}: calibrate writes a pslog rig, TOML, named .toml "
-                        f"(other tools' formats: 'pslog rig export')")
+    # a new rig file is pslog's TOML: under another name ('--rig cams.yml') pslog itself
+    # then read it as OpenCV ("malformed OpenCV FileStorage file"; session 32), the
+    # mismatch 'rig export -o' refuses
+    wrong = None if rig_path.exists() else misnamed(
+        "--rig", args.rig, "toml", PSLOG_RIG,
+        "calibrate writes one; other tools' formats: 'pslog rig export'")
+    if wrong:
+        raise BadOption(wrong)
     rig = load_rig(rig_path, "pslog") if rig_path.exists() else None  # rewritten as pslog's
     existing = rig.camera(args.name) if rig is not None and args.name in rig.names else None
 

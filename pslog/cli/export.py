@@ -46,11 +46,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                   outputs=("detections", "csv", "jsonl", "parquet", "c3d"))
 
 
-#: each file option's format and the suffixes its file may have (lower case)
-_SUFFIXES = {"--detections": ("a CSV file", (".csv",)), "--csv": ("a CSV file", (".csv",)),
-             "--jsonl": ("a JSON Lines file", (".jsonl", ".ndjson")),
-             "--parquet": ("a Parquet file", (".parquet", ".pq")),
-             "--c3d": ("a C3D file", (".c3d",))}
+#: each file option's format (a key of ``_common.FORMATS``: its suffixes)
+_FORMAT_OF = {"--detections": "csv", "--csv": "csv", "--jsonl": "jsonl",
+              "--parquet": "parquet", "--c3d": "c3d"}
 
 
 def kept_outputs(args: argparse.Namespace) -> list[str]:
@@ -62,7 +60,7 @@ def run(args: argparse.Namespace) -> int:
     from pslog.errors import InputError
     from pslog.log import read_session
 
-    from ._common import usage_error
+    from ._common import misnamed, usage_error
 
     if args.tum is not None and not args.tum.strip():  # (was "nothing to export", exit 1)
         return usage_error("export", "argument --tum: empty folder name")
@@ -76,10 +74,9 @@ def run(args: argparse.Namespace) -> int:
     for option, path in (("--detections", args.detections), ("--csv", args.csv),
                          ("--jsonl", args.jsonl), ("--parquet", args.parquet),
                          ("--c3d", args.c3d)):
-        kind, suffixes = _SUFFIXES[option]
-        if path and os.path.splitext(path)[1].lower() not in suffixes:
-            return usage_error("export", f"{option} {path}: {kind} is named "
-                                         f"{' or '.join(suffixes)}")
+        wrong = misnamed(option, path, _FORMAT_OF[option]) if path else None
+        if wrong:
+            return usage_error("export", wrong)
     # the file outputs were checked before run() (declare_files): never the session, never
     # existing without --force; --tum's folder is checked by its writer, all files first
     session = read_session(args.session)

@@ -193,23 +193,22 @@ def _described_format(path: str) -> str:
 
 
 def _import(args: argparse.Namespace) -> int:
-    from pathlib import Path
 
     from pslog.interchange.rig_formats import ImportOptions, TimingOptionError
     from pslog.outputs import replacing
     from pslog.rig import apply_timing, load_rig_file
 
-    from ._common import usage_error
+    from ._common import PSLOG_RIG, misnamed, usage_error
 
     offsets = dict(args.offset)
     if args.timing and offsets:  # (bad command lines: exit 2, as argparse's own)
         return usage_error("rig import", "give --timing or --offset, not both")
     # a pslog rig is TOML: under an OpenCV name ('-o cams.yml') pslog itself would read it
     # back as OpenCV FileStorage and refuse it (calibrate --rig's and rig export's rule)
-    if Path(args.output).suffix.lower() != ".toml":
-        return usage_error("rig import", f"-o {args.output}: a pslog rig is TOML, named .toml "
-                                         f"(for an OpenCV file: pslog rig export --format "
-                                         f"opencv)")
+    wrong = misnamed("-o", args.output, "toml", PSLOG_RIG,
+                     "for an OpenCV file: pslog rig export --format opencv")
+    if wrong:
+        return usage_error("rig import", wrong)
     try:
         loaded = load_rig_file(args.file, args.format,
                                ImportOptions(units=args.units, fps=args.fps, offsets=offsets))
@@ -228,30 +227,30 @@ def _import(args: argparse.Namespace) -> int:
 
 #: what each TOML export format is called in an error (Pose2Sim reads the ``*.toml`` files of
 #: its calibration folder; aniposelib and anipose a ``calibration.toml``)
-_FORMAT_NAMES = {"anipose": "an aniposelib calibration", "pose2sim": "a Pose2Sim calibration"}
+_FORMAT_NAMES = {"anipose": "an aniposelib calibration (TOML)",
+                 "pose2sim": "a Pose2Sim calibration (TOML)"}
 
 
 def _export(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from pslog.interchange.rig_formats import OPENCV_SUFFIXES, rig_to_format
+    from pslog.interchange.rig_formats import rig_to_format
     from pslog.outputs import replacing
 
-    from ._common import usage_error
+    from ._common import misnamed, usage_error
 
     # -o's name says the format, and a mismatch is a bad command line (exit 2), never a file
     # of one format under another's name: a Pose2Sim calibration named c.yml was written as
     # TOML, which Pose2Sim (it reads its calibration folder's *.toml) never finds and pslog
     # read back as OpenCV YAML ("malformed OpenCV FileStorage file")
+    if args.format == "opencv":
+        wrong = misnamed("-o", args.output, "opencv", hint="YAML, XML or JSON")
+    else:
+        wrong = misnamed("-o", args.output, "toml", _FORMAT_NAMES[args.format],
+                         "for YAML, XML or JSON: --format opencv")
+    if wrong:
+        return usage_error("rig export", wrong)
     suffix = Path(args.output).suffix.lower()
-    if args.format == "opencv" and suffix not in OPENCV_SUFFIXES:
-        return usage_error("rig export", f"-o {args.output}: an OpenCV FileStorage file is "
-                                         f"named {', '.join(OPENCV_SUFFIXES)} (YAML, XML or "
-                                         f"JSON)")
-    if args.format != "opencv" and suffix != ".toml":
-        return usage_error("rig export", f"-o {args.output}: {_FORMAT_NAMES[args.format]} is "
-                                         f"TOML, named .toml (for YAML, XML or JSON: --format "
-                                         f"opencv)")
     rig = _resolve(args.rig)
     text = rig_to_format(rig, args.format, args.units, suffix)
     with replacing(args.output, force=args.force, inputs=[args.rig]) as f:

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
 from ._common import (
     add_force,
@@ -23,6 +22,7 @@ from ._common import (
     check_output,
     declare_files,
     installed_command,
+    misnamed,
     nonnegative_float,
     positive_float,
     usage_error,
@@ -132,8 +132,9 @@ def run(args: argparse.Namespace) -> int:
         # (after check_output: an input or a folder named is said as such, exit 1) rerun
         # writes its own format whatever the name: a recording is named .rrd, never written
         # under another format's name (``--save out.txt`` wrote one), as 'rig export' -o
-        if Path(args.save).suffix.lower() != ".rrd":
-            return usage_error("view", f"--save {args.save}: a rerun recording is named .rrd")
+        wrong = misnamed("--save", args.save, "rrd")
+        if wrong:
+            return usage_error("view", wrong)
     elif args.stdout:
         if sys.stdout is None:  # closed when Python started (``>&-``): said before reading
             raise PslogError("cannot write to standard output: it is closed")

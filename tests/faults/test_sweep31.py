@@ -67,10 +67,10 @@ def test_a_missing_file_is_still_a_fault_of_calibrate(work):
 
 @pytest.mark.parametrize("fmt, name, contains", [
     # was written as TOML: Pose2Sim never finds it (it reads *.toml), pslog read it as OpenCV
-    ("pose2sim", "Calib.yml", "a Pose2Sim calibration is TOML, named .toml"),
-    ("pose2sim", "Calib.yaml", "a Pose2Sim calibration is TOML, named .toml"),
-    ("anipose", "calibration.json", "an aniposelib calibration is TOML, named .toml"),
-    ("anipose", "calibration", "an aniposelib calibration is TOML, named .toml"),
+    ("pose2sim", "Calib.yml", "a Pose2Sim calibration (TOML) is named .toml"),
+    ("pose2sim", "Calib.yaml", "a Pose2Sim calibration (TOML) is named .toml"),
+    ("anipose", "calibration.json", "an aniposelib calibration (TOML) is named .toml"),
+    ("anipose", "calibration", "an aniposelib calibration (TOML) is named .toml"),
     ("opencv", "cameras.toml", "an OpenCV FileStorage file is named .yml"),
     ("opencv", "new.txt", "an OpenCV FileStorage file is named .yml"),  # (was exit 1)
 ])

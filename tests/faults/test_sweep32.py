@@ -56,7 +56,7 @@ def test_calibrate_refuses_a_new_rig_named_for_another_format(name, inputs):  # 
     line = assert_one_line_error(run_pslog(
         "calibrate", "--points", "pts.csv", "--width", "640", "--height", "480", "--name",
         "cam9", "--rig", name, cwd=inputs), 2,
-        contains=f"--rig {name}: calibrate writes a pslog rig, TOML, named .toml")
+        contains=f"--rig {name}: a pslog rig (TOML) is named .toml (calibrate writes one")
     assert line.startswith("pslog calibrate: error: "), line
     assert_untouched(before, inputs)
 
@@ -70,7 +70,7 @@ def test_rig_import_refuses_a_rig_named_for_another_format(name, inputs):  # noq
     before = fingerprint(inputs)
     line = assert_one_line_error(run_pslog("rig", "import", "rig.toml", "-o", name,
                                            cwd=inputs), 2,
-                                 contains=f"-o {name}: a pslog rig is TOML, named .toml")
+                                 contains=f"-o {name}: a pslog rig (TOML) is named .toml")
     assert line.startswith("pslog rig import: error: "), line
     assert_untouched(before, inputs)
 
