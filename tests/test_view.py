@@ -659,6 +659,27 @@ def test_cli_detail_range_and_bad_values(long_session, tmp_path, capsys):
     assert not (tmp_path / "x.rrd").exists()
 
 
+@pytest.mark.parametrize("args, said", [
+    (["--detail", "20:30"], True),  # past the session's end (12 s)
+    (["--detail", "4:6", "--start", "8"], True),  # outside the shown window
+    (["--detail", "4:6"], False),
+    (["--detail", "20:30", "--thin-every", "1"], False),  # nothing thinned: nothing to say
+])
+def test_cli_detail_range_holding_no_frame_is_said(long_session, tmp_path, capsys, args, said):
+    """A full-detail range that holds no frame shown is no error (every track is there)
+    but the user meant to see frames in full: one line says why none is."""
+    out = tmp_path / "x.rrd"
+    assert pslog_main(["view", str(long_session), *args, "--save", str(out)]) == 0
+    printed = capsys.readouterr().out
+    note = [line for line in printed.splitlines() if "full-detail range" in line]
+    if said:
+        assert len(note) == 1 and "holds no frame shown (the session spans 0 to 11.9" in (
+            note[0]), printed
+        assert "thinned to one in 10" in note[0]
+    else:
+        assert not note, printed
+
+
 @pytest.mark.parametrize("how", ["empty", "truncated"])
 def test_undecodable_frames_get_no_crop_and_no_traceback(session, tmp_path, capsys, how):
     """A stored frame that does not decode (no bytes: OpenCV raised; truncated: no frame)

@@ -351,9 +351,21 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
         construction = explain_type_a(construction_obs, session.rig)
 
     choice = detail if isinstance(detail, DetailChoice) else DetailChoice.parse(detail)
+    detail_ns = choice.range_ns(first, window)
+    if choice.length_s is not None and choice.every > 1 and not np.any(
+            (frame_times >= max(detail_ns[0], window[0]))
+            & (frame_times < min(detail_ns[1], window[1]))):
+        # a full-detail range past the session's end (or outside --start/--end) is no error
+        # (the tracks are all there), but the user meant to see some frames in full: say why
+        # none is
+        span = (frame_times.max() - first) / NS if len(frame_times) else 0.0
+        lo_s, hi_s = (detail_ns[0] - first) / NS, (detail_ns[1] - first) / NS
+        notes.append(f"the full-detail range {lo_s:g} to {hi_s:g} s holds no frame shown "
+                     f"(the session spans 0 to {span:.3f} s): every frame's overlays are "
+                     f"thinned to one in {choice.every}")
     return ViewData(session, paths, observations, shown, construction, window, notes,
                     {m: rejections[m] for m in shown if m in rejections},
-                    detail_ns=choice.range_ns(first, window), every=choice.every,
+                    detail_ns=detail_ns, every=choice.every,
                     construction_observations=construction_obs)
 
 
