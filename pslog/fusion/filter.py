@@ -259,6 +259,11 @@ class FilterOptions:
     accel_adapt_rate : float, step ``η`` of ``q``'s adaptation (0: ``q`` fixed at
         the floor)
     accel_adapt_target : float, the value ``r₀`` of the whiteness statistic ``q`` settles at
+    accel_adapt_threshold : float, ``h`` of ``q``'s change detector (session 33): the one-sided
+        CUSUM ``g ← clip(g + r − r₀, 0, h + ln(q_max/q_min)/η)`` of the whiteness statistic
+        ``r`` and ``q = q_min exp(η max(0, g − h))``: ``q`` stays at its floor until the
+        innovations' lag is significant (0: ``log q`` the random walk before session 33,
+        ``q ← q exp(η (r − r₀))``)
     model_switch_per_s : float, rate ``λ`` of switches between the ballistic model and the
         supported one (no gravity: a ball rolling, carried, on a string), 1/s; the models
         are mixed by an interacting multiple model (0: the ballistic model alone)
@@ -392,6 +397,7 @@ class FilterOptions:
     accel_adapt_rate: float = 0.5
     model_switch_per_s: float = 0.5
     accel_adapt_target: float = 0.4
+    accel_adapt_threshold: float = 6.0
     max_std_m: float | None = _MAX_ERROR_M / 1.96
     turn_switch_per_s: float = 0.5
     turn_on_psd: float | None = None
@@ -457,6 +463,10 @@ class FilterOptions:
                 and math.isfinite(self.drag_drift_s) and self.drag_drift_s > 0):
             raise FusionError(f"filter drag_drift_s must be None (no drift) or finite and > 0 "
                               f"s, got {self.drag_drift_s!r}")
+        if isinstance(self.accel_adapt_threshold, bool) or not (
+                math.isfinite(self.accel_adapt_threshold) and self.accel_adapt_threshold >= 0):
+            raise FusionError(f"filter accel_adapt_threshold must be finite and >= 0, got "
+                              f"{self.accel_adapt_threshold!r}")
         if self.init_detections < 3 or self.init_window < self.init_detections:
             raise FusionError("filter init_detections must be >= 3 and init_window >= it, got "
                               f"{self.init_detections} and {self.init_window}")
@@ -542,7 +552,10 @@ _SJLW = _SJPM + 36
 #: may lie before it, ``hold_jump_p``)
 _SV = _SJLW + _HISTORY
 _SDK, _SIK = _SV + 6, _SV + 7
-_SCAM = _SV + 8  # then 2 per camera, then 2 per window slot
+#: q's change detector (session 33): the one-sided CUSUM ``g`` of the whiteness statistic
+#: ``r − r₀`` (``q = q_min exp(η max(0, g − h))``; unused when ``h`` = 0)
+_SQG = _SV + 8
+_SCAM = _SV + 9  # then 2 per camera, then 2 per window slot
 #: ``I``: track flag, state time, last accepted time, rejections in a row, updates since the
 #: start, camera of a pending jump, its confirming updates, whether one came from another
 #: camera, the turn model's age, the latest jump's time and camera, history length, window
@@ -584,7 +597,10 @@ _OFLOOR, _OESTD2, _OFSTD2 = _OITER + 1, _OITER + 2, _OITER + 3
 #: the hold's withdrawal at a jump whose hypotheses placing it before the held detection
 #: carry this posterior probability or more (2: never; session 31)
 _OHOLDP = _OFSTD2 + 1
-_OSIZE = _OHOLDP + 1
+#: q's change detector's threshold ``h`` (0: the random walk before session 33) and the
+#: CUSUM's cap ``h + ln(q_max / q_min) / η`` (session 33)
+_OQDEAD, _OQGMAX = _OHOLDP + 1, _OHOLDP + 2
+_OSIZE = _OHOLDP + 3
 #: the held points at most at once (a camera alone past them: the later ones output)
 _HOLD_MAX = 8
 #: ``N`` (int64 options): max gap, window span, init_window, init_detections, max_rejects,
@@ -2009,8 +2025,17 @@ def _push(S, I, cams, O, N, t, cam, u, v, out):
                 py0, py1 = S[_SCAM + 2 * cam], S[_SCAM + 2 * cam + 1]
                 r = py0 * (inn[2] * y0 + inn[3] * y1) + py1 * (inn[3] * y0 + inn[4] * y1)
                 r = _pmin(_pmax(r, -_R_CLIP), _R_CLIP)
-                qn = S[_SQ] * math.exp(O[_OQRATE] * (r - O[_OQTARGET]))
-                S[_SQ] = _pmin(_pmax(qn, O[_OQMIN]), O[_OQMAX])
+                if O[_OQDEAD] == 0.0:  # log q a random walk reflected at the floor
+                    qn = S[_SQ] * math.exp(O[_OQRATE] * (r - O[_OQTARGET]))
+                    S[_SQ] = _pmin(_pmax(qn, O[_OQMIN]), O[_OQMAX])
+                else:
+                    # a change detector (Page's one-sided CUSUM, Basseville & Nikiforov 1993
+                    # §2.2): g sums r − r₀ (reflected at 0); q leaves its floor only once g
+                    # passes h, so that white innovations (E[r] = 0 < r₀) keep it there
+                    g = _pmin(_pmax(S[_SQG] + (r - O[_OQTARGET]), 0.0), O[_OQGMAX])
+                    S[_SQG] = g
+                    qn = O[_OQMIN] * math.exp(O[_OQRATE] * _pmax(g - O[_OQDEAD], 0.0))
+                    S[_SQ] = _pmin(qn, O[_OQMAX])
             I[cinn_has + cam] = 1
             I[cinn_t + cam] = t
             S[_SCAM + 2 * cam], S[_SCAM + 2 * cam + 1] = prior_y0, prior_y1
@@ -2732,6 +2757,10 @@ class BallFilter:
         O[_OESTD2] = options.restitution_std ** 2
         O[_OFSTD2] = options.bounce_friction_std ** 2
         O[_OHOLDP] = 2.0 if options.hold_jump_p is None else options.hold_jump_p
+        O[_OQDEAD] = options.accel_adapt_threshold
+        O[_OQGMAX] = (options.accel_adapt_threshold
+                      + (math.log(self._q_max / self._q_min) / options.accel_adapt_rate
+                         if options.accel_adapt_rate > 0.0 else 0.0))
         self._opts = O
         self._nopts = np.array([self._max_gap_ns, self._init_span_ns, options.init_window,
                                 options.init_detections, options.max_rejects, capacity],
@@ -2754,6 +2783,7 @@ class BallFilter:
     _mu = _state_scalar(_SMU, "probability of the ballistic model (else supported)")
     _nu = _state_scalar(_SNU, "probability of the turn model (0: not in the model set)")
     _q = _state_scalar(_SQ, "the adapted process noise's spectral density, m²/s³")
+    _q_cusum = _state_scalar(_SQG, "q's change detector's CUSUM g (accel_adapt_threshold)")
     _var = _state_scalar(_SVAR, "the adapted pixel variance, px²")
     _alpha = _state_scalar(_SALPHA, "the pixel variance's inverse-gamma shape α (σ² = β/α)")
     _x = _state_vector(_SX, 6, "the pair's mean (position, velocity)")
