@@ -47,8 +47,10 @@ equations, exactly as implemented, are in ``docs/methods.md`` (section ``filter`
   least-squares update); the process noise ``q`` adapts to the motion: a consistent
   filter's innovations are white, a lagging one's consecutive innovations of a camera
   agree, so ``q`` grows with their product (a spiral, a straight line without gravity, a
-  turntable) and shrinks back to its floor on a flight (``accel_step_var`` times the
-  rig's detections per second: the same velocity variance per detection interval,
+  turntable) once their one-sided CUSUM passes a threshold (a change detector, session 33:
+  white innovations leave it at its floor) and returns to its floor on a flight
+  (``accel_step_var`` times the rig's detections per second: the same velocity variance
+  per detection interval,
   :func:`accel_floor`; or ``accel_psd``);
 - measurement: the detection's *distorted* pixel, ``z = π_c(p) + w``, ``w ~ N(0, σ² I)``,
   through camera ``c``'s projection with its lens model; ``H = [∂π_c/∂p, 0]`` (2 x 6).
