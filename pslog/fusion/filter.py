@@ -623,6 +623,17 @@ _INN_C0 = 13  # innovation array: y0 y1 i00 i01 i11 nis det h0 (3) h1 (3) c0 (n)
 
 
 @kernel
+def _q_walk(S, O):
+    """The ``q`` the model set's tests compare with ``turn_on_psd`` (session 33): with q's
+    change detector (``h`` > 0) the random walk's ``min(q_min exp(η g), q_max)`` (its
+    CUSUM ``g`` is that walk's ``ln(q / q_min) / η``), so that the turn model joins and leaves
+    as it did; the process noise itself is ``S[_SQ]``, held at its floor below ``h``."""
+    if O[_OQDEAD] == 0.0:
+        return S[_SQ]
+    return _pmin(O[_OQMIN] * math.exp(O[_OQRATE] * S[_SQG]), O[_OQMAX])
+
+
+@kernel
 def _pmin(a, b):
     """Python's ``min(a, b)`` (``a`` unless ``b < a``; NaN as Python orders it)."""
     return b if b < a else a
@@ -1850,13 +1861,14 @@ def _push(S, I, cams, O, N, t, cam, u, v, out):
     xg = S[_SX:_SX + 6]
     Pg = S[_SP:_SP + 36]
     nu = S[_SNU]
-    if nu == 1.0 and S[_SQ] >= O[_OTON]:
+    q_walk = _q_walk(S, O)
+    if nu == 1.0 and q_walk >= O[_OTON]:
         # an acceleration the turn model lacks (q grew): the pair rejoins at its state
         nu = 1.0 - _TURN_START
         S[_SMU] = O[_OMU0]
         S[_SE:_SE + 6] = 0.0
         I[_IAGE] = 0
-    elif not nu and O[_OTURN] != 0.0 and (S[_SQ] >= O[_OTON] or not I[_ICONF]):
+    elif not nu and O[_OTURN] != 0.0 and (q_walk >= O[_OTON] or not I[_ICONF]):
         # at a track's start, or an acceleration the pair lacks (q grew): the turn model
         # joins at the pair's state, its turn rate unknown (0 ± turn_rate_std)
         nu = _TURN_START
@@ -2060,7 +2072,7 @@ def _push(S, I, cams, O, N, t, cam, u, v, out):
             # its turn rate has settled and unless q says an acceleration is missing
             I[_IAGE] += 1
             w = xt[6]
-            if I[_IAGE] >= _TURN_MIN_UPDATES and S[_SQ] < O[_OTON]:
+            if I[_IAGE] >= _TURN_MIN_UPDATES and _q_walk(S, O) < O[_OTON]:
                 if nu_post < _TURN_OFF or w * w < _TURN_SIGNIFICANT ** 2 * Pt[48]:
                     nu_post = 0.0
                 elif nu_post > 1.0 - _TURN_OFF and not solo:
