@@ -154,6 +154,8 @@ def _q_at_floor_share(motion, threshold, seed):
 def test_q_stays_at_its_floor_on_a_flight_and_still_rises_on_a_lag():
     # a drag-free flight the ballistic model fits ("fall"): the random walk (h = 0) spends
     # a good part of it above the floor; the change detector (the default h) nearly none
+    # (measured, seeds 3, 4: at the floor after 50 % and 46 % of the detections, q up to
+    # 10.6 and 9.5 q_min, against 100 %, 100 %; the spiral: q up to 242 and 12.7 q_min)
     for seed in (3, 4):
         share_walk, _ = _q_at_floor_share("fall", 0.0, seed)
         share_cusum, _ = _q_at_floor_share("fall", FilterOptions().accel_adapt_threshold, seed)
