@@ -93,7 +93,9 @@ BASE_OPTIONS = compiled.FilterOptions(jump_rate_per_s=0.0, start_models=False, a
                                       **{k: False for k in ("jump_instant", "jump_mixture_cov",
                                                             "surprise_cov", "iterate_update")
                                          if k in compiled.FilterOptions.__dataclass_fields__},
-                                      **{k: 0.0 for k in ("drag_std_per_m",)
+                                      # (session 33's change detector: 0, the base's walk)
+                                      **{k: 0.0 for k in ("drag_std_per_m",
+                                                          "accel_adapt_threshold")
                                          if k in compiled.FilterOptions.__dataclass_fields__},
                                       # (session 31's predicted floor contact; session
                                       # 30's hold for the next camera)

@@ -546,9 +546,11 @@ def test_a_ball_swung_then_released_is_followed_by_the_turn_model_then_the_balli
     t, nus, mus = obs.time_ns / NS, np.array(nus), np.array(mus)
     assert np.all(nus[(t > 0.4) & (t < 1.0)] == 1.0)  # the turn model alone
     flight = t > 1.2
-    # the ballistic model takes the flight (μ 0.98-1.0; one detection dips to 0.85 since the
-    # floor of q is per detection interval, session 11: a smaller S sharpens the likelihoods)
-    assert np.all(nus[flight] < 0.1) and np.all(mus[flight] > 0.8), (nus[flight], mus[flight])
+    # the ballistic model takes the flight (μ 0.98-1.0; one detection dips since the floor
+    # of q is per detection interval, session 11: a smaller S sharpens the likelihoods; at
+    # 1.32 s: 0.81 with q's random walk, 0.76 with its change detector, session 33, which
+    # keeps q at its floor there, the flight's mean error 1.98 -> 1.94 mm)
+    assert np.all(nus[flight] < 0.1) and np.all(mus[flight] > 0.7), (nus[flight], mus[flight])
     assert np.median(mus[flight]) > 0.95, mus[flight]
     type_a = fuse(obs, rig, "typeA")
     err_a = errors_m(type_a, truth)

@@ -47,8 +47,10 @@ equations, exactly as implemented, are in ``docs/methods.md`` (section ``filter`
   least-squares update); the process noise ``q`` adapts to the motion: a consistent
   filter's innovations are white, a lagging one's consecutive innovations of a camera
   agree, so ``q`` grows with their product (a spiral, a straight line without gravity, a
-  turntable) and shrinks back to its floor on a flight (``accel_step_var`` times the
-  rig's detections per second: the same velocity variance per detection interval,
+  turntable) once their one-sided CUSUM passes a threshold (a change detector, session 33:
+  white innovations leave it at its floor) and returns to its floor on a flight
+  (``accel_step_var`` times the rig's detections per second: the same velocity variance
+  per detection interval,
   :func:`accel_floor`; or ``accel_psd``);
 - measurement: the detection's *distorted* pixel, ``z = π_c(p) + w``, ``w ~ N(0, σ² I)``,
   through camera ``c``'s projection with its lens model; ``H = [∂π_c/∂p, 0]`` (2 x 6).
@@ -259,6 +261,11 @@ class FilterOptions:
     accel_adapt_rate : float, step ``η`` of ``q``'s adaptation (0: ``q`` fixed at
         the floor)
     accel_adapt_target : float, the value ``r₀`` of the whiteness statistic ``q`` settles at
+    accel_adapt_threshold : float, ``h`` of ``q``'s change detector (session 33): the one-sided
+        CUSUM ``g ← clip(g + r − r₀, 0, h + ln(q_max/q_min)/η)`` of the whiteness statistic
+        ``r`` and ``q = q_min exp(η max(0, g − h))``: ``q`` stays at its floor until the
+        innovations' lag is significant (0: ``log q`` the random walk before session 33,
+        ``q ← q exp(η (r − r₀))``)
     model_switch_per_s : float, rate ``λ`` of switches between the ballistic model and the
         supported one (no gravity: a ball rolling, carried, on a string), 1/s; the models
         are mixed by an interacting multiple model (0: the ballistic model alone)
@@ -392,6 +399,7 @@ class FilterOptions:
     accel_adapt_rate: float = 0.5
     model_switch_per_s: float = 0.5
     accel_adapt_target: float = 0.4
+    accel_adapt_threshold: float = 6.0
     max_std_m: float | None = _MAX_ERROR_M / 1.96
     turn_switch_per_s: float = 0.5
     turn_on_psd: float | None = None
@@ -457,6 +465,10 @@ class FilterOptions:
                 and math.isfinite(self.drag_drift_s) and self.drag_drift_s > 0):
             raise FusionError(f"filter drag_drift_s must be None (no drift) or finite and > 0 "
                               f"s, got {self.drag_drift_s!r}")
+        if isinstance(self.accel_adapt_threshold, bool) or not (
+                math.isfinite(self.accel_adapt_threshold) and self.accel_adapt_threshold >= 0):
+            raise FusionError(f"filter accel_adapt_threshold must be finite and >= 0, got "
+                              f"{self.accel_adapt_threshold!r}")
         if self.init_detections < 3 or self.init_window < self.init_detections:
             raise FusionError("filter init_detections must be >= 3 and init_window >= it, got "
                               f"{self.init_detections} and {self.init_window}")
@@ -542,7 +554,10 @@ _SJLW = _SJPM + 36
 #: may lie before it, ``hold_jump_p``)
 _SV = _SJLW + _HISTORY
 _SDK, _SIK = _SV + 6, _SV + 7
-_SCAM = _SV + 8  # then 2 per camera, then 2 per window slot
+#: q's change detector (session 33): the one-sided CUSUM ``g`` of the whiteness statistic
+#: ``r − r₀`` (``q = q_min exp(η max(0, g − h))``; unused when ``h`` = 0)
+_SQG = _SV + 8
+_SCAM = _SV + 9  # then 2 per camera, then 2 per window slot
 #: ``I``: track flag, state time, last accepted time, rejections in a row, updates since the
 #: start, camera of a pending jump, its confirming updates, whether one came from another
 #: camera, the turn model's age, the latest jump's time and camera, history length, window
@@ -584,7 +599,10 @@ _OFLOOR, _OESTD2, _OFSTD2 = _OITER + 1, _OITER + 2, _OITER + 3
 #: the hold's withdrawal at a jump whose hypotheses placing it before the held detection
 #: carry this posterior probability or more (2: never; session 31)
 _OHOLDP = _OFSTD2 + 1
-_OSIZE = _OHOLDP + 1
+#: q's change detector's threshold ``h`` (0: the random walk before session 33) and the
+#: CUSUM's cap ``h + ln(q_max / q_min) / η`` (session 33)
+_OQDEAD, _OQGMAX = _OHOLDP + 1, _OHOLDP + 2
+_OSIZE = _OHOLDP + 3
 #: the held points at most at once (a camera alone past them: the later ones output)
 _HOLD_MAX = 8
 #: ``N`` (int64 options): max gap, window span, init_window, init_detections, max_rejects,
@@ -602,6 +620,17 @@ _OUT_COLS = 16
 #: with a point in ``out`` for when it finds no start
 _NONE, _POINT, _FIT, _FIT_OR_POINT = 0, 1, 2, 3
 _INN_C0 = 13  # innovation array: y0 y1 i00 i01 i11 nis det h0 (3) h1 (3) c0 (n) c1 (n)
+
+
+@kernel
+def _q_walk(S, O):
+    """The ``q`` the model set's tests compare with ``turn_on_psd`` (session 33): with q's
+    change detector (``h`` > 0) the random walk's ``min(q_min exp(η g), q_max)`` (its
+    CUSUM ``g`` is that walk's ``ln(q / q_min) / η``), so that the turn model joins and leaves
+    as it did; the process noise itself is ``S[_SQ]``, held at its floor below ``h``."""
+    if O[_OQDEAD] == 0.0:
+        return S[_SQ]
+    return _pmin(O[_OQMIN] * math.exp(O[_OQRATE] * S[_SQG]), O[_OQMAX])
 
 
 @kernel
@@ -1832,13 +1861,14 @@ def _push(S, I, cams, O, N, t, cam, u, v, out):
     xg = S[_SX:_SX + 6]
     Pg = S[_SP:_SP + 36]
     nu = S[_SNU]
-    if nu == 1.0 and S[_SQ] >= O[_OTON]:
+    q_walk = _q_walk(S, O)
+    if nu == 1.0 and q_walk >= O[_OTON]:
         # an acceleration the turn model lacks (q grew): the pair rejoins at its state
         nu = 1.0 - _TURN_START
         S[_SMU] = O[_OMU0]
         S[_SE:_SE + 6] = 0.0
         I[_IAGE] = 0
-    elif not nu and O[_OTURN] != 0.0 and (S[_SQ] >= O[_OTON] or not I[_ICONF]):
+    elif not nu and O[_OTURN] != 0.0 and (q_walk >= O[_OTON] or not I[_ICONF]):
         # at a track's start, or an acceleration the pair lacks (q grew): the turn model
         # joins at the pair's state, its turn rate unknown (0 ± turn_rate_std)
         nu = _TURN_START
@@ -2009,8 +2039,17 @@ def _push(S, I, cams, O, N, t, cam, u, v, out):
                 py0, py1 = S[_SCAM + 2 * cam], S[_SCAM + 2 * cam + 1]
                 r = py0 * (inn[2] * y0 + inn[3] * y1) + py1 * (inn[3] * y0 + inn[4] * y1)
                 r = _pmin(_pmax(r, -_R_CLIP), _R_CLIP)
-                qn = S[_SQ] * math.exp(O[_OQRATE] * (r - O[_OQTARGET]))
-                S[_SQ] = _pmin(_pmax(qn, O[_OQMIN]), O[_OQMAX])
+                if O[_OQDEAD] == 0.0:  # log q a random walk reflected at the floor
+                    qn = S[_SQ] * math.exp(O[_OQRATE] * (r - O[_OQTARGET]))
+                    S[_SQ] = _pmin(_pmax(qn, O[_OQMIN]), O[_OQMAX])
+                else:
+                    # a change detector (Page's one-sided CUSUM, Basseville & Nikiforov 1993
+                    # §2.2): g sums r − r₀ (reflected at 0); q leaves its floor only once g
+                    # passes h, so that white innovations (E[r] = 0 < r₀) keep it there
+                    g = _pmin(_pmax(S[_SQG] + (r - O[_OQTARGET]), 0.0), O[_OQGMAX])
+                    S[_SQG] = g
+                    qn = O[_OQMIN] * math.exp(O[_OQRATE] * _pmax(g - O[_OQDEAD], 0.0))
+                    S[_SQ] = _pmin(qn, O[_OQMAX])
             I[cinn_has + cam] = 1
             I[cinn_t + cam] = t
             S[_SCAM + 2 * cam], S[_SCAM + 2 * cam + 1] = prior_y0, prior_y1
@@ -2033,7 +2072,7 @@ def _push(S, I, cams, O, N, t, cam, u, v, out):
             # its turn rate has settled and unless q says an acceleration is missing
             I[_IAGE] += 1
             w = xt[6]
-            if I[_IAGE] >= _TURN_MIN_UPDATES and S[_SQ] < O[_OTON]:
+            if I[_IAGE] >= _TURN_MIN_UPDATES and _q_walk(S, O) < O[_OTON]:
                 if nu_post < _TURN_OFF or w * w < _TURN_SIGNIFICANT ** 2 * Pt[48]:
                     nu_post = 0.0
                 elif nu_post > 1.0 - _TURN_OFF and not solo:
@@ -2732,6 +2771,10 @@ class BallFilter:
         O[_OESTD2] = options.restitution_std ** 2
         O[_OFSTD2] = options.bounce_friction_std ** 2
         O[_OHOLDP] = 2.0 if options.hold_jump_p is None else options.hold_jump_p
+        O[_OQDEAD] = options.accel_adapt_threshold
+        O[_OQGMAX] = (options.accel_adapt_threshold
+                      + (math.log(self._q_max / self._q_min) / options.accel_adapt_rate
+                         if options.accel_adapt_rate > 0.0 else 0.0))
         self._opts = O
         self._nopts = np.array([self._max_gap_ns, self._init_span_ns, options.init_window,
                                 options.init_detections, options.max_rejects, capacity],
@@ -2754,6 +2797,7 @@ class BallFilter:
     _mu = _state_scalar(_SMU, "probability of the ballistic model (else supported)")
     _nu = _state_scalar(_SNU, "probability of the turn model (0: not in the model set)")
     _q = _state_scalar(_SQ, "the adapted process noise's spectral density, m²/s³")
+    _q_cusum = _state_scalar(_SQG, "q's change detector's CUSUM g (accel_adapt_threshold)")
     _var = _state_scalar(_SVAR, "the adapted pixel variance, px²")
     _alpha = _state_scalar(_SALPHA, "the pixel variance's inverse-gamma shape α (σ² = β/α)")
     _x = _state_vector(_SX, 6, "the pair's mean (position, velocity)")
