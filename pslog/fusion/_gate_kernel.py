@@ -728,16 +728,15 @@ def choose(a, at, fi, fflag, ct, cf, trk, ist, centers, opt, static, lone, avail
         track_cost = 0.0
         if not strong:
             has_pred = predict(trk, n_trk, t_s, opt, pred)
-            if has_pred and n_trk > 0 and math.isfinite(chosen[i, 0]):
+            if (has_pred or tracked) and n_trk > 0 and math.isfinite(chosen[i, 0]):
                 dt = abs(t_s - trk[n_trk - 1, 0])
-                if dt <= opt[O_WINDOW]:
-                    dx = chosen[i, 0] - trk[n_trk - 1, 1]
-                    dy = chosen[i, 1] - trk[n_trk - 1, 2]
-                    dz = chosen[i, 2] - trk[n_trk - 1, 3]
-                    if _sqrt((dx * dx + dy * dy) + dz * dz) > (opt[O_MAX_SPEED] * dt
-                                                               + opt[O_TRACK_M]):
-                        reason[i] = _MOTION
-                        continue
+                dx = chosen[i, 0] - trk[n_trk - 1, 1]
+                dy = chosen[i, 1] - trk[n_trk - 1, 2]
+                dz = chosen[i, 2] - trk[n_trk - 1, 3]
+                if _sqrt((dx * dx + dy * dy) + dz * dz) > (opt[O_MAX_SPEED] * dt
+                                                           + opt[O_TRACK_M]):
+                    reason[i] = _MOTION
+                    continue
             if has_pred and math.isfinite(rx):
                 miss = _ray_miss(pred[0], pred[1], pred[2], centers[a], rx, ry, rz)
                 if miss > (2.0 if loose else 1.0) * pred[3]:

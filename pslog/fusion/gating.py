@@ -1329,9 +1329,10 @@ class _Decider:
                     last = track.last()
                     # (the reach from the newest point once the track can predict: before,
                     # a first point may be a guess, and a guess must not veto the ball)
-                    if pred and last is not None and math.isfinite(pts[i][0]):
+                    if (pred or self.tracked) and last is not None and math.isfinite(
+                            pts[i][0]):
                         dt = abs(t_s[i] - last[0])
-                        if dt <= options.track_window_s and _distance(pts[i], last[1]) > (
+                        if _distance(pts[i], last[1]) > (
                                 options.max_speed_m_s * dt + options.track_m):
                             reason[i] = MOTION
                             continue
