@@ -101,7 +101,7 @@ def _choose(lone_term: bool = True) -> list[int]:
     state.cf[0, 1, :4, 2:5] = rays
     for i, t in enumerate(TRACK_S):
         state.trk[i] = (t, *_ball(t), 0.0)
-    state.ist[:] = (len(TRACK_S), 0, 0)  # (points, verified, tracked: neither yet)
+    state.ist[:] = (len(TRACK_S), 0, 0, 0)  # (points, verified, tracked, vouched: none yet)
     reason = np.zeros(4, np.int64)
     gk.choose(0, 1, state.fi, state.fflag, state.ct, state.cf, state.trk, state.ist,
               state.centers, state.opt, np.zeros(4),

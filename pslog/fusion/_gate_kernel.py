@@ -663,6 +663,7 @@ def choose(a, at, fi, fflag, ct, cf, trk, ist, centers, opt, static, lone, avail
     key = fi[a, at, 0]
     recent_ns = 1.5 * opt[O_STATIC_S] * _NS
     verified, tracked = ist[1] != 0, ist[2] != 0
+    vouched = ist[3] != 0  # gating._Decider.vouched
     n_trk = ist[0]
     loose_ratio = opt[O_LOOSE]
     for j in range(k):
@@ -728,16 +729,15 @@ def choose(a, at, fi, fflag, ct, cf, trk, ist, centers, opt, static, lone, avail
         track_cost = 0.0
         if not strong:
             has_pred = predict(trk, n_trk, t_s, opt, pred)
-            if has_pred and n_trk > 0 and math.isfinite(chosen[i, 0]):
+            if (has_pred or vouched) and n_trk > 0 and math.isfinite(chosen[i, 0]):
                 dt = abs(t_s - trk[n_trk - 1, 0])
-                if dt <= opt[O_WINDOW]:
-                    dx = chosen[i, 0] - trk[n_trk - 1, 1]
-                    dy = chosen[i, 1] - trk[n_trk - 1, 2]
-                    dz = chosen[i, 2] - trk[n_trk - 1, 3]
-                    if _sqrt((dx * dx + dy * dy) + dz * dz) > (opt[O_MAX_SPEED] * dt
-                                                               + opt[O_TRACK_M]):
-                        reason[i] = _MOTION
-                        continue
+                dx = chosen[i, 0] - trk[n_trk - 1, 1]
+                dy = chosen[i, 1] - trk[n_trk - 1, 2]
+                dz = chosen[i, 2] - trk[n_trk - 1, 3]
+                if _sqrt((dx * dx + dy * dy) + dz * dz) > (opt[O_MAX_SPEED] * dt
+                                                           + opt[O_TRACK_M]):
+                    reason[i] = _MOTION
+                    continue
             if has_pred and math.isfinite(rx):
                 miss = _ray_miss(pred[0], pred[1], pred[2], centers[a], rx, ry, rz)
                 if miss > (2.0 if loose else 1.0) * pred[3]:
@@ -810,6 +810,10 @@ def choose(a, at, fi, fflag, ct, cf, trk, ist, centers, opt, static, lone, avail
         if not (differs[best_row] == 1.0 or differs[best_row] == 3.0):
             verified = True
         if math.isfinite(chosen[best_row, 0]):  # _Track.add, with _age
+            # (gating._Decider.vouched: predicted at its time, before it joins, or two
+            # supports)
+            vouched = nsup[best_row] >= 2 or predict(trk, n_trk, ct[a, at, best_row] / _NS,
+                                                     opt, pred)
             n_one, age = 0, 0.0
             for b in range(m):
                 if r_dec[best_row, b] <= 1.0:
@@ -832,6 +836,7 @@ def choose(a, at, fi, fflag, ct, cf, trk, ist, centers, opt, static, lone, avail
     ist[0] = n_trk
     ist[1] = 1 if verified else 0
     ist[2] = 1 if tracked else 0
+    ist[3] = 1 if vouched else 0
     fflag[a, at, 0] = 1
     fi[a, at, 4] = best_row  # (-1: none chosen)
     return t_s_frame
@@ -1198,7 +1203,7 @@ class GateState:
         self.csup = np.zeros((m, frames, candidates), np.int8)
         self.count = np.zeros(m + 1, np.int64)  # frames per camera, then the next push id
         self.trk = np.zeros((4 * int(options.track_points) + 1, 5))
-        self.ist = np.zeros(3, np.int64)
+        self.ist = np.zeros(4, np.int64)
         self.F = np.ascontiguousarray(F, dtype=np.float64)
         centers, k_inv, rot = constants
         self.centers = np.array(centers, dtype=np.float64)

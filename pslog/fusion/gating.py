@@ -1231,6 +1231,11 @@ class _Decider:
         # the track has predicted (three points in its window) for a candidate one camera
         # alone supports: from then on several such candidates are told apart by their cost
         self.tracked = False
+        # the track's newest point was accepted where the track predicted, or on two
+        # supports whose rays meet: not a lone pair's guess, so the ball's reach from it
+        # holds after the track stops predicting (docs/methods.md, "A lone pair after the
+        # track is lost")
+        self.vouched = False
         self.centers = [cam.center_world.tolist() for cam in rig.cameras]
         # per camera: its newest choice, (undistorted u, v, its frame's time ns), None
         # before any, and its newest decided frame's time ns: a still pixel that is not the
@@ -1327,11 +1332,13 @@ class _Decider:
                     if pred is None:  # at the candidate's own time (a rolling shutter's row)
                         pred = preds[t_ns[i]] = track.predict(t_s[i]) or False
                     last = track.last()
-                    # (the reach from the newest point once the track can predict: before,
-                    # a first point may be a guess, and a guess must not veto the ball)
-                    if pred and last is not None and math.isfinite(pts[i][0]):
+                    # (the reach from the newest point once the track can predict, or from
+                    # a vouched newest point at any time since: else a first point may be a
+                    # guess, and a guess must not veto the ball)
+                    if (pred or self.vouched) and last is not None and math.isfinite(
+                            pts[i][0]):
                         dt = abs(t_s[i] - last[0])
-                        if dt <= options.track_window_s and _distance(pts[i], last[1]) > (
+                        if _distance(pts[i], last[1]) > (
                                 options.max_speed_m_s * dt + options.track_m):
                             reason[i] = MOTION
                             continue
@@ -1416,6 +1423,8 @@ class _Decider:
             if hi - lo >= 2 and not self.tracked:
                 self._refused(camera[lo], t_ns[lo], uv, reason, lo, hi)
             if math.isfinite(pts[best_row][0]):
+                # (a candidate one camera supports had its prediction made above)
+                self.vouched = n_support[best_row] >= 2 or bool(preds.get(t_ns[best_row]))
                 track.add(t_s[best_row], np.array(pts[best_row]),
                           _age(rows[best_row], cols.lag[best_row]))
 
@@ -1680,6 +1689,7 @@ def _decide_in_order(c: _Candidates, rig: Rig, options: GatingOptions, frames, t
             decider.verified = True
             # (two supports whose rays meet: points of age 0, _age)
             decider.track.extend(c.time_ns[rows] / NS, points[rows], np.zeros(len(rows)))
+            decider.vouched = decider.vouched or len(rows) > 0
             # each camera's choice in its newest frame of the run (_Decider.picked)
             seen: set[int] = set()
             for k in range(e - 1, s - 1, -1):
