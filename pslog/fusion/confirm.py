@@ -288,8 +288,8 @@ def sides_test(rows: np.ndarray, time_ns: np.ndarray, camera: np.ndarray, uv: np
         if nc == 0:
             continue
         j = np.searchsorted(rows_c, e, side="right")  # rows_c[j]: c's first after the row
-        at = lambda i: rows_c[np.clip(i, 0, nc - 1)]  # noqa: E731
-        p1, p2, n1, n2 = at(j - 1), at(j - 2), at(j), at(j + 1)
+        # c's two latest rows up to the point's and two first after it (clipped: masked below)
+        p2, p1, n1, n2 = (rows_c[np.clip(j + d, 0, nc - 1)] for d in (-2, -1, 0, 1))
         can = ((camera[e] != c) & (j >= 1) & (j < nc) & (t - time_ns[p1] <= max_gap_ns)
                & (time_ns[n1] - t <= max_gap_ns) & finite[p1] & finite[n1])
         full = (can & (j >= 2) & (j + 1 < nc) & finite[p2] & finite[n2]
@@ -498,9 +498,10 @@ def confirm_batch(prep, track: Track, rig, max_gap_s: float, noise_px: float | N
         time_ns[prev_c], time_ns[nxt_c], uv[prev_c], uv[nxt_c], gap[wait] / NS,
         q["span_s"][idx], sigma[idx], noise_px) & ok
     if sides:
-        contradicted = (contradicted if SIDES_AND_FIRST else False) | sides_test(_camera_rows(rig), time_ns, camera, uv, e,
-                                  track.position_world[idx], cov, gap[wait] / NS,
-                                  q["span_s"][idx], sigma[idx], noise_px, max_gap_ns)[0]
+        side = sides_test(_camera_rows(rig), time_ns, camera, uv, e, track.position_world[idx],
+                          cov, gap[wait] / NS, q["span_s"][idx], sigma[idx], noise_px,
+                          max_gap_ns)[0]
+        contradicted = (contradicted | side) if SIDES_AND_FIRST else side
     # (a point that neither bridged a long gap nor waits for its innovation: kept unchecked)
     unconfirmed = ~ok & long[idx]
     drop = np.zeros(len(track), dtype=bool)
