@@ -115,6 +115,9 @@ SIDES_NEARER = True
 #: With :func:`sides_test`, a point the first confirming camera's interpolation contradicts
 #: (``confirm_every``'s test) is dropped too.
 SIDES_AND_FIRST = True
+#: :func:`sides_test` also drops a point that a camera's reference shows further than this
+#: from where that camera sees the ball, metres, beyond the reference's noise (None: off).
+SIDES_PROVEN_M: float | None = 0.0255
 #: ``1 + (1 + ρ)² + ρ²`` at ``ρ = 2`` (eq. (2)'s largest extrapolation): the point's
 #: projection noise in σ² when no covariance is made.
 _NO_COV_FACTOR2 = 14.0
@@ -338,6 +341,18 @@ def sides_test(rows: np.ndarray, time_ns: np.ndarray, camera: np.ndarray, uv: np
         b = np.where(jump, np.where(before, n2, p1), n1)
         verdict = residual_test(rows, np.full(k, c), point, cov, t, time_ns[a], time_ns[b],
                                 uv[a], uv[b], gap_s, span_s, sigma, noise_px)
+        if SIDES_PROVEN_M is not None:
+            # the distance the camera proves: the residual less the reference's own noise
+            # and model bound (not the point's covariance: type A's is overconfident just
+            # after a kick), over the pixels per metre across its ray
+            with np.errstate(invalid="ignore", divide="ignore"):
+                ta, tb = time_ns[a].astype(np.float64), time_ns[b].astype(np.float64)
+                w = (tt - ta) / (tb - ta)
+                ref = (1 - w)[:, None] * uv[a] + w[:, None] * uv[b]
+                excess = (np.hypot(u - ref[:, 0], v - ref[:, 1])
+                          - CONFIRM_SIGMAS * sigma * np.sqrt((1 - w) ** 2 + w ** 2)
+                          - 0.5 * G * np.abs((tt - ta) * (tt - tb)) / NS ** 2 * per_m)
+                verdict = verdict | (excess > SIDES_PROVEN_M * per_m)
         bad |= (verdict | (wrong if SIDES_NEARER else False)) & can
         checked |= can
     return bad, checked
