@@ -99,3 +99,24 @@ def test_fuse_confirm_gaps_kicks_is_the_option(tmp_path, cli):
     sides = fuse(det, rig, "typeA", SIDES)
     assert_array_equal(track.time_ns, sides.time_ns)
     assert_array_equal(track.position_world, sides.position_world)
+
+
+def test_a_distance_a_camera_proves_leaves_out_what_the_point_covariance_hides(monkeypatch):
+    """paper2 (two cameras), the library's rally, 30 fps, misses 0.1 (session 33's dev seed
+    37400): a point the residual test passes (its own covariance, overconfident just after
+    a kick, widens the bound) that the other camera's side reference shows more than
+    ``SIDES_PROVEN_M`` off, beyond that reference's noise."""
+    import pslog.fusion.confirm as confirm
+    from pslog.motion import rally_motion
+    from pslog.simulation import simulate_labelled
+
+    rig = apply_timing(builtin_rig("paper2"), "typeA")
+    det, truth, _ = simulate_labelled(rig, rally_motion(5 + 37400 - 300, 8.0), 8.0,
+                                      SimulationOptions(noise_px=0.3, seed=37103,
+                                                        miss_rate=0.1, drop_rate=0.05))
+    sides = fuse(det, rig, "typeA", SIDES)
+    assert np.all(errors_m(sides, truth) <= 0.05)
+    monkeypatch.setattr(confirm, "SIDES_PROVEN_M", None)
+    without = fuse(det, rig, "typeA", SIDES)
+    assert np.count_nonzero(errors_m(without, truth) > 0.05) == 1
+    assert len(without) - len(sides) == 2  # the far point and one within 5 cm

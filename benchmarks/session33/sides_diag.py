@@ -24,7 +24,6 @@ from farpoints import jumps  # noqa: E402
 import pslog.fusion.confirm as confirm  # noqa: E402
 from pslog.evaluation import errors_m  # noqa: E402
 from pslog.fusion import FusionOptions, fuse  # noqa: E402
-from pslog.records import NS  # noqa: E402
 from pslog.simulation import SimulationOptions, simulate_labelled  # noqa: E402
 
 CAPTURED = []

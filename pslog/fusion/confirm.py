@@ -260,7 +260,17 @@ def sides_test(rows: np.ndarray, time_ns: np.ndarray, camera: np.ndarray, uv: np
     jump shown (or without ``p2``/``n2``), the interpolation, as :func:`residual_test`.
     The residual test is :func:`residual_test`'s with that pair (its noise
     ``σ² ((1 - w)² + w²)`` and model bound ``½ g |(t - t_A)(t - t_B)|`` hold for an
-    extrapolation too).
+    extrapolation too). Two more ways a camera contradicts the point:
+
+    - (:data:`SIDES_NEARER`) a jump shown, the two lines apart at ``t`` by more than
+      ``4 σ √((1 - a_f)² + a_f² + (1 - a_b)² + a_b²)`` plus both lines' model bounds, and the
+      point's projection nearer the other side's line than its own side's (the point follows
+      the motion on the wrong side of the jump: eq. (2)'s depth from before a kick);
+    - (:data:`SIDES_PROVEN_M`) the residual against the chosen line, less that line's own
+      ``4 σ √((1 - w)² + w²)`` and model bound, exceeds ``SIDES_PROVEN_M f D / Z²`` pixels:
+      the camera shows the point further than ``SIDES_PROVEN_M`` from the ball whatever its
+      covariance says (type A's is overconfident just after a kick: error / ``std_m`` 3.9 at
+      the median of its far points, session 28).
 
     Parameters
     ----------
