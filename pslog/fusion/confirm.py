@@ -86,6 +86,11 @@ the detections up to the confirming one, so :class:`ConfirmedStream` (``StreamFu
 ``typeA``) decides as the batch run does, bit for bit (every step elementwise), and outputs
 a withheld point with the confirming detection's push. docs/methods.md, "Type A across a
 long gap", has the figures.
+
+Offline only (``FusionOptions.confirm_every``, ``confirm_sides``): every point tested, and
+with ``confirm_sides`` against every other camera on the point's side of a velocity jump
+that camera's track shows (:func:`sides_test`; docs/methods.md, "Type A after kicks: the
+side of the kick (session 33)").
 """
 
 from __future__ import annotations
