@@ -83,6 +83,10 @@ def test_a_stream_refuses_it_and_it_needs_confirm_every():
         StreamFuser(rig, "typeA", SIDES)
     with pytest.raises(FusionError, match="confirm_sides needs confirm_every"):
         FusionOptions(confirm_sides=True)
+    from pslog.live.fuser import LiveFuser
+
+    options = LiveFuser(rig, "typeA", options=SIDES).options  # (live: a point at once)
+    assert not (options.confirm_gaps or options.confirm_every or options.confirm_sides)
 
 
 def test_fuse_confirm_gaps_kicks_is_the_option(tmp_path, cli):
@@ -120,3 +124,16 @@ def test_a_distance_a_camera_proves_leaves_out_what_the_point_covariance_hides(m
     without = fuse(det, rig, "typeA", SIDES)
     assert np.count_nonzero(errors_m(without, truth) > 0.05) == 1
     assert len(without) - len(sides) == 2  # the far point and one within 5 cm
+
+
+def test_type_a_explained_makes_the_same_points():
+    from pslog.fusion import type_a_explained
+    from pslog.fusion._prepare import prepare
+
+    rig, det, _truth, _ = _session()
+    obs = det.best()
+    explained = type_a_explained(prepare(obs, rig), rig, SIDES)[0]
+    plain = fuse(obs, rig, "typeA", SIDES)
+    assert_array_equal(explained.time_ns, plain.time_ns)
+    assert_array_equal(explained.position_world, plain.position_world)
+    assert len(plain) < len(fuse(obs, rig, "typeA", EVERY))
