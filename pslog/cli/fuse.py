@@ -80,7 +80,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "epipolar, track and motion gates and record every rejected "
                              "candidate in the output; off: take each frame's best-scored "
                              "candidate (default %(default)s)")
-    parser.add_argument("--confirm-gaps", choices=("on", "off", "all"), default="on",
+    parser.add_argument("--confirm-gaps", choices=("on", "off", "all", "kicks"),
+                        default="on",
                         help="typeA: on: a point whose prediction bridged a gap longer than "
                              "the rig's usual one, or rests on a camera's first detection "
                              "after a spell without one, is kept only once the next camera's "
@@ -88,7 +89,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "unconfirmed otherwise); all: every point is tested so, a "
                              "point nothing can check kept unless it bridged a long gap "
                              "(offline: the points just after an unseen kick left out as "
-                             "contradicted); off: every point at once, as `pslog live` "
+                             "contradicted); kicks: as all, each point tested against every "
+                             "other camera's track on the point's side of a kick that track "
+                             "shows (offline); off: every point at once, as `pslog live` "
                              "emits them (default %(default)s)")
     parser.add_argument("--filter-hold", choices=("on", "off"), default="on",
                         help="filter: on: a point whose detection surprised the filter (NIS "
@@ -156,7 +159,8 @@ def run(args: argparse.Namespace) -> int:
                             rate_hz=args.rate, noise_px=args.noise_px,
                             gating=args.gating == "on",
                             confirm_gaps=args.confirm_gaps != "off",
-                            confirm_every=args.confirm_gaps == "all",
+                            confirm_every=args.confirm_gaps in ("all", "kicks"),
+                            confirm_sides=args.confirm_gaps == "kicks",
                             filter_hold_nis=FILTER_HOLD_NIS if args.filter_hold == "on"
                             else None,
                             max_std_m=None if args.type_a_max_std_mm is None

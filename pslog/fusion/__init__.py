@@ -94,6 +94,11 @@ class FusionOptions:
         "Type A after kicks, confirmed offline (session 29)"). False (the default): the
         paper's points. Without ``confirm_gaps`` it is refused (``FusionError``), as a
         typeA stream refuses it; ``pslog live`` turns both off
+    confirm_sides : bool, typeA, offline only, with ``confirm_every``: each point is tested
+        against every other camera that can check it, each camera's 2D track taken on the
+        point's side of a velocity jump the track shows (eq. (1)'s interpolation across a
+        kick is no check: ``confirm.sides_test``; docs/methods.md, "Type A after kicks: the
+        side of the kick (session 33)"). False (the default): ``confirm_every``'s test
     max_std_m : float or None, typeA: a point whose ``std_m`` exceeds this is withheld
         (counted in ``Track.dropped`` as ``uncertain``: the filter's rule;
         ``pslog.fusion.pseudo.MAX_STD_M`` is the filter's default, 5 cm / 1.96, issue 10's
@@ -125,6 +130,7 @@ class FusionOptions:
     gating: bool = True
     confirm_gaps: bool = True
     confirm_every: bool = False
+    confirm_sides: bool = False
     max_std_m: float | None = None
     detector_offset_m: float | None = None
     detector_bias_px: float | None = None
@@ -139,6 +145,9 @@ class FusionOptions:
         if self.rate_hz is not None and not 1e-3 <= self.rate_hz <= 1e6:
             # (below a point per 1000 s the grid's step overflows to inf ns near 1e-300)
             raise FusionError(f"rate must be in [0.001, 1e6] Hz, got {self.rate_hz!r}")
+        if self.confirm_sides and not self.confirm_every:
+            raise FusionError("typeA's confirm_sides needs confirm_every (it is the test "
+                              "every point takes)")
         if self.confirm_every and not self.confirm_gaps:
             raise FusionError("typeA's confirm_every needs confirm_gaps (it confirms every "
                               "point as confirm_gaps confirms the long-gap ones)")
@@ -274,7 +283,8 @@ def _type_a(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
     table: list = []
     made = _fuse_type_a(prep, gap, options.noise_px, None, None, None, False,
                         covariance_noise_px(options.noise_px), table)[0]
-    track = (confirm_batch(prep, made, rig, gap, options.noise_px, every=options.confirm_every)
+    track = (confirm_batch(prep, made, rig, gap, options.noise_px, every=options.confirm_every,
+                           sides=options.confirm_sides)
              if options.confirm_gaps else made)
     return withhold_uncertain(type_a_noise(prep, track, gap, options.noise_px,
                                            table[0] if table and track is made else None),
@@ -525,7 +535,8 @@ def type_a_explained(prep: Prepared, rig: Rig, options: FusionOptions
     from .confirm import confirm_batch
 
     confirmed = type_a_noise(prep, confirm_batch(prep, track, rig, max_gap_s, options.noise_px,
-                                                 every=options.confirm_every),
+                                                 every=options.confirm_every,
+                                                 sides=options.confirm_sides),
                              max_gap_s, options.noise_px)
     confirmed = withhold_uncertain(confirmed, options.max_std_m)[0]
     if len(confirmed) == len(track):

@@ -86,6 +86,11 @@ the detections up to the confirming one, so :class:`ConfirmedStream` (``StreamFu
 ``typeA``) decides as the batch run does, bit for bit (every step elementwise), and outputs
 a withheld point with the confirming detection's push. docs/methods.md, "Type A across a
 long gap", has the figures.
+
+Offline only (``FusionOptions.confirm_every``, ``confirm_sides``): every point tested, and
+with ``confirm_sides`` against every other camera on the point's side of a velocity jump
+that camera's track shows (:func:`sides_test`; docs/methods.md, "Type A after kicks: the
+side of the kick (session 33)").
 """
 
 from __future__ import annotations
@@ -109,6 +114,15 @@ FRESH_ROWS = True
 #: out, exceeds this many standard deviations: ``|u|² > WAIT_SIGMAS² σ² c`` (module
 #: docstring, session 32; None: the rule off, as before).
 WAIT_SIGMAS: float | None = 3.0
+#: :func:`sides_test` also drops a point nearer the other side's motion than its own side's
+#: (False: the residual test against its own side only).
+SIDES_NEARER = True
+#: With :func:`sides_test`, a point the first confirming camera's interpolation contradicts
+#: (``confirm_every``'s test) is dropped too.
+SIDES_AND_FIRST = True
+#: :func:`sides_test` also drops a point that a camera's reference shows further than this
+#: from where that camera sees the ball, metres, beyond the reference's noise (None: off).
+SIDES_PROVEN_M: float | None = 0.0255
 #: ``1 + (1 + ρ)² + ρ²`` at ``ρ = 2`` (eq. (2)'s largest extrapolation): the point's
 #: projection noise in σ² when no covariance is made.
 _NO_COV_FACTOR2 = 14.0
@@ -161,7 +175,8 @@ def residual_test(rows: np.ndarray, cam: np.ndarray, point: np.ndarray, cov: np.
     point : (k, 3) float, ``P'_t``, world metres
     cov : (k, 6) float or None, its covariance xx, yy, zz, xy, xz, yz, m²
     t_ns, prev_ns, next_ns : (k,) int, the point's time and the confirming camera's
-        detections before and after it, ns
+        detections before and after it, ns (or, :func:`sides_test`, two of its detections on
+        one side of it, in time order: the line through them extrapolated to ``t``)
     uv_prev, uv_next : (k, 2) float, their undistorted pixels
     gap_s : (k,) float, the gap the point bridged (newest minus previous detection), s
     span_s : (k,) float, the point's ``span_s``, s
@@ -222,8 +237,140 @@ def residual_test(rows: np.ndarray, cam: np.ndarray, point: np.ndarray, cov: np.
             sigma_r[lost] = np.sqrt(interp[lost] + sigma[lost] * sigma[lost] * _NO_COV_FACTOR2)
         dist = np.sqrt(x * x + y * y + z * z)
         per_m = np.maximum(fx, fy) * dist / (z * z)
-        model = 0.5 * G * (d_prev * d_next + gap_s * span_s) * per_m
+        # (|d_prev d_next|: the same bits for an interpolation, whose product is >= 0; an
+        # extrapolation's pair, :func:`sides_test`, has one of them negative)
+        model = 0.5 * G * (np.abs(d_prev * d_next) + gap_s * span_s) * per_m
         return res > CONFIRM_SIGMAS * sigma_r + model
+
+
+def sides_test(rows: np.ndarray, time_ns: np.ndarray, camera: np.ndarray, uv: np.ndarray,
+               e: np.ndarray, point: np.ndarray, cov: np.ndarray | None, gap_s: np.ndarray,
+               span_s: np.ndarray, sigma: np.ndarray, noise_px: float | None,
+               max_gap_ns: int) -> tuple[np.ndarray, np.ndarray]:
+    """The kick-aware test of k points against *every* other camera (offline,
+    ``FusionOptions.confirm_sides``; docs/methods.md, "Type A after kicks: the side of the
+    kick (session 33)"), elementwise.
+
+    For each other camera ``c`` whose detections ``p1`` (its latest up to the point's row)
+    and ``n1`` (its first after it) lie within ``max_gap_s`` of the point's time ``t``,
+    with ``p2`` and ``n2`` its detections before ``p1`` and after ``n1``: ``f(s)``, the
+    line through ``p2, p1`` (forward), and ``b(s)``, through ``n1, n2`` (backward). A velocity
+    jump inside ``[p1, n1]`` shows as ``f(t_n1)`` missing ``u_n1`` by more than
+    ``4 σ √((1 - w)² + w² + 1) + ½ g (t_n1 - t_p1)(t_n1 - t_p2) f D / Z²`` (``w`` the
+    extrapolation's weight); then eq. (1)'s interpolation across ``[p1, n1]`` crosses the
+    jump and is no check, and the point is tested against the side of the jump it lies on:
+    the jump's instant ``s*`` where ``f`` and ``b`` meet (least squares of
+    ``D(s) = f(s) - b(s) = D0 + D1 (s - t)``: ``s* - t = -D0·D1 / |D1|²``), the backward
+    line ``b(t)`` when ``s* < t`` (``D0·D1 > 0``), else the forward ``f(t)``. Without a
+    jump shown (or without ``p2``/``n2``), the interpolation, as :func:`residual_test`.
+    The residual test is :func:`residual_test`'s with that pair (its noise
+    ``σ² ((1 - w)² + w²)`` and model bound ``½ g |(t - t_A)(t - t_B)|`` hold for an
+    extrapolation too). Two more ways a camera contradicts the point:
+
+    - (:data:`SIDES_NEARER`) a jump shown, the two lines apart at ``t`` by more than
+      ``4 σ √((1 - a_f)² + a_f² + (1 - a_b)² + a_b²)`` plus both lines' model bounds, and the
+      point's projection nearer the other side's line than its own side's (the point follows
+      the motion on the wrong side of the jump: eq. (2)'s depth from before a kick);
+    - (:data:`SIDES_PROVEN_M`) the residual against the chosen line, less that line's own
+      ``4 σ √((1 - w)² + w²)`` and model bound, exceeds ``SIDES_PROVEN_M f D / Z²`` pixels:
+      the camera shows the point further than ``SIDES_PROVEN_M`` from the ball whatever its
+      covariance says (type A's is overconfident just after a kick: error / ``std_m`` 3.9 at
+      the median of its far points, session 28).
+
+    Parameters
+    ----------
+    rows : (m, 17) float, :func:`_camera_rows`
+    time_ns, camera : (n,) the observations' times (ns) and cameras, (time, camera) order
+    uv : (n, 2) float, their undistorted pixels
+    e : (k,) int, each point's row
+    point, cov, gap_s, span_s, sigma, noise_px : as :func:`residual_test`
+    max_gap_ns : int, ``max_gap_s`` in ns
+
+    Returns
+    -------
+    (contradicted (k,) bool: by any camera; checked (k,) bool: some camera could check)
+    """
+    k = len(e)
+    m = len(rows)
+    t = time_ns[e]
+    finite = np.all(np.isfinite(uv), axis=1)
+    bad = np.zeros(k, dtype=bool)
+    checked = np.zeros(k, dtype=bool)
+    x, y, z = (rows[:, 5 + 3 * i][None, :] * point[:, 0:1]
+               + rows[:, 6 + 3 * i][None, :] * point[:, 1:2]
+               + rows[:, 7 + 3 * i][None, :] * point[:, 2:3] + rows[:, 14 + i][None, :]
+               for i in range(3))
+    for c in range(m):
+        rows_c = np.flatnonzero(camera == c)
+        nc = len(rows_c)
+        if nc == 0:
+            continue
+        j = np.searchsorted(rows_c, e, side="right")  # rows_c[j]: c's first after the row
+        # c's two latest rows up to the point's and two first after it (clipped: masked below)
+        p2, p1, n1, n2 = (rows_c[np.clip(j + d, 0, nc - 1)] for d in (-2, -1, 0, 1))
+        can = ((camera[e] != c) & (j >= 1) & (j < nc) & (t - time_ns[p1] <= max_gap_ns)
+               & (time_ns[n1] - t <= max_gap_ns) & finite[p1] & finite[n1])
+        full = (can & (j >= 2) & (j + 1 < nc) & finite[p2] & finite[n2]
+                & (time_ns[p1] - time_ns[p2] <= max_gap_ns)
+                & (time_ns[n2] - time_ns[n1] <= max_gap_ns))
+        tp2, tp1 = time_ns[p2].astype(np.float64), time_ns[p1].astype(np.float64)
+        tn1, tn2 = time_ns[n1].astype(np.float64), time_ns[n2].astype(np.float64)
+        tt = t.astype(np.float64)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            # the forward line's miss at n1: a jump inside [p1, n1] (or [p2, p1])
+            wf = (tn1 - tp2) / (tp1 - tp2)
+            miss = np.hypot((1 - wf) * uv[p2, 0] + wf * uv[p1, 0] - uv[n1, 0],
+                            (1 - wf) * uv[p2, 1] + wf * uv[p1, 1] - uv[n1, 1])
+            zc = z[:, c]
+            dist = np.sqrt(x[:, c] ** 2 + y[:, c] ** 2 + zc ** 2)
+            per_m = np.maximum(rows[c, 0], rows[c, 3]) * dist / (zc * zc)
+            bound = (CONFIRM_SIGMAS * sigma * np.sqrt((1 - wf) ** 2 + wf ** 2 + 1)
+                     + 0.5 * G * (tn1 - tp1) * (tn1 - tp2) / NS ** 2 * per_m)
+            jump = full & (miss > bound)
+            # the side: D(s) = f(s) - b(s) = D0 + D1 (s - t), f through p2, p1 and b through
+            # n1, n2 (pixels, pixels per ns)
+            vf = (uv[p1] - uv[p2]) / (tp1 - tp2)[:, None]
+            vb = (uv[n2] - uv[n1]) / (tn2 - tn1)[:, None]
+            d0 = (uv[p1] + vf * (tt - tp1)[:, None]) - (uv[n1] + vb * (tt - tn1)[:, None])
+            before = np.sum(d0 * (vf - vb), axis=1) > 0  # s* < t: the point after the jump
+            # the wrong side: the point's projection nearer the other side's line than its
+            # own side's, the two lines apart at t by more than their noise and model bound
+            # (a likelihood ratio of the two motions; the point's own covariance, which
+            # type A's model term inflates just after a kick, enters neither distance)
+            fx, sk, cx, fy, cy = (rows[c, i] for i in range(5))
+            u = (fx * x[:, c] + sk * y[:, c]) / zc + cx
+            v = fy * y[:, c] / zc + cy
+            ft = uv[p1] + vf * (tt - tp1)[:, None]
+            bt = uv[n1] + vb * (tt - tn1)[:, None]
+            to_f = np.hypot(u - ft[:, 0], v - ft[:, 1])
+            to_b = np.hypot(u - bt[:, 0], v - bt[:, 1])
+            af = (tt - tp2) / (tp1 - tp2)
+            ab = (tt - tn1) / (tn2 - tn1)
+            sep_bound = (CONFIRM_SIGMAS * sigma * np.sqrt((1 - af) ** 2 + af ** 2
+                                                          + (1 - ab) ** 2 + ab ** 2)
+                         + 0.5 * G * ((tt - tp1) * (tt - tp2) + (tn1 - tt) * (tn2 - tt))
+                         / NS ** 2 * per_m)
+            wrong = (jump & (np.hypot(*(ft - bt).T) > sep_bound)
+                     & np.where(before, to_b > to_f, to_f > to_b))
+        a = np.where(jump, np.where(before, n1, p2), p1)
+        b = np.where(jump, np.where(before, n2, p1), n1)
+        verdict = residual_test(rows, np.full(k, c), point, cov, t, time_ns[a], time_ns[b],
+                                uv[a], uv[b], gap_s, span_s, sigma, noise_px)
+        if SIDES_PROVEN_M is not None:
+            # the distance the camera proves: the residual less the reference's own noise
+            # and model bound (not the point's covariance: type A's is overconfident just
+            # after a kick), over the pixels per metre across its ray
+            with np.errstate(invalid="ignore", divide="ignore"):
+                ta, tb = time_ns[a].astype(np.float64), time_ns[b].astype(np.float64)
+                w = (tt - ta) / (tb - ta)
+                ref = (1 - w)[:, None] * uv[a] + w[:, None] * uv[b]
+                excess = (np.hypot(u - ref[:, 0], v - ref[:, 1])
+                          - CONFIRM_SIGMAS * sigma * np.sqrt((1 - w) ** 2 + w ** 2)
+                          - 0.5 * G * np.abs((tt - ta) * (tt - tb)) / NS ** 2 * per_m)
+                verdict = verdict | (excess > SIDES_PROVEN_M * per_m)
+        bad |= (verdict | (wrong if SIDES_NEARER else False)) & can
+        checked |= can
+    return bad, checked
 
 
 #: Median of |N(0, 1)|: a half-normal's median, in σ.
@@ -280,7 +427,7 @@ def innovation_waits(across_m2: np.ndarray | float, per_px2: np.ndarray | float,
 
 
 def confirm_batch(prep, track: Track, rig, max_gap_s: float, noise_px: float | None,
-                  every: bool = False) -> Track:
+                  every: bool = False, sides: bool = False) -> Track:
     """``track`` (type A's, from ``prep``'s observations) with its waiting points (long gaps,
     re-acquisitions, a large innovation: module docstring) confirmed, contradicted or
     unconfirmed; the dropped ones counted in ``Track.dropped`` (``contradicted``,
@@ -289,7 +436,12 @@ def confirm_batch(prep, track: Track, rig, max_gap_s: float, noise_px: float | N
     ``every`` (offline only, ``FusionOptions.confirm_every``): every point is tested the same
     way, not only the waiting ones, and dropped when contradicted; a point no other camera
     can check is kept unless it was a waiting one (as without ``every``). The long-gap
-    points' decisions are the same bits either way (the test is elementwise)."""
+    points' decisions are the same bits either way (the test is elementwise).
+
+    ``sides`` (with ``every``; ``FusionOptions.confirm_sides``): the test is
+    :func:`sides_test`'s, against every other camera that can check the point, each on the
+    point's side of a velocity jump its track shows, instead of the first confirming
+    camera's interpolation (the waiting points' too); unconfirmed points as before."""
     if not len(track):
         return track
     from . import _pseudo_kernel  # (numba: imported at the first use)
@@ -375,6 +527,11 @@ def confirm_batch(prep, track: Track, rig, max_gap_s: float, noise_px: float | N
         _camera_rows(rig), cam2, track.position_world[idx], cov, time_ns[e],
         time_ns[prev_c], time_ns[nxt_c], uv[prev_c], uv[nxt_c], gap[wait] / NS,
         q["span_s"][idx], sigma[idx], noise_px) & ok
+    if sides:
+        side = sides_test(_camera_rows(rig), time_ns, camera, uv, e, track.position_world[idx],
+                          cov, gap[wait] / NS, q["span_s"][idx], sigma[idx], noise_px,
+                          max_gap_ns)[0]
+        contradicted = (contradicted | side) if SIDES_AND_FIRST else side
     # (a point that neither bridged a long gap nor waits for its innovation: kept unchecked)
     unconfirmed = ~ok & long[idx]
     drop = np.zeros(len(track), dtype=bool)

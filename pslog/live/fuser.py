@@ -461,7 +461,8 @@ class LiveFuser:
         # camera's confirmation, pslog.fusion.confirm, nor the filter's surprising ones,
         # FusionOptions.filter_hold_nis)
         self.options = replace(options or FusionOptions(), confirm_gaps=False,
-                               confirm_every=False, filter_hold_nis=None)
+                               confirm_every=False, confirm_sides=False,
+                               filter_hold_nis=None)
         # without gating a frame's candidates cannot be told apart: its best one alone, as
         # fuse() does with gating off
         self.candidates = bool(candidates) and self.options.gating
