@@ -85,10 +85,12 @@ def test_q_follows_the_product_of_a_cameras_consecutive_innovations(lag_m):
 # a lag (r > r₀ in a row) lifts it once g passes h, as the random walk above did from 0.
 
 H_TEST, G_START = 2.0, 3.0  # g starts 1 above h: q = q_min e^0.5
+CAP_BELOW = 0.3  # the cap's case: g starts this far below its cap
 
 
-@pytest.mark.parametrize("pattern", [(1, 1, 1, 1), (1, -4, 1, 1)])
-def test_q_change_detector_by_hand(pattern):
+@pytest.mark.parametrize("pattern, cap", [((1, 1, 1, 1), False), ((1, -4, 1, 1), False),
+                                          ((3, 3, 3, 3), True)])
+def test_q_change_detector_by_hand(pattern, cap):
     rig = builtin_rig("paper3")
     cam = rig.cameras[1]
     options = FilterOptions(noise_px=SIGMA, accel_psd=Q_FLOOR, drag_per_m=0.0, adapt_rate=0.0,
@@ -99,10 +101,13 @@ def test_q_change_detector_by_hand(pattern):
     x0 = np.array([1.5, 1.0, 1.2, 2.0, -0.5, 1.0])
     t = [1 * NS + k * 11_111_111 for k in range(len(pattern) + 1)]
     flt.set_state(t[0], x0[:3], x0[3:], P0)
-    q_start = Q_FLOOR * math.exp(0.5 * (G_START - H_TEST))
-    flt._q, flt._q_cusum = q_start, G_START
     g_max = H_TEST + math.log(100.0 / Q_FLOOR) / 0.5
-    x, P, q, g = x0, P0, q_start, G_START
+    # (cap: g starts just below its cap h + ln(q_max / q_min) / η, so that the lag takes it
+    # there and q to q_max exactly; a cap without h, or none, leaves the hand computation)
+    g_start = g_max - CAP_BELOW if cap else G_START
+    q_start = Q_FLOOR * math.exp(0.5 * (g_start - H_TEST))
+    flt._q, flt._q_cusum = q_start, g_start
+    x, P, q, g = x0, P0, q_start, g_start
     previous, seen = None, []
     for k, sign in enumerate(pattern, start=1):
         dt = (t[k] - t[k - 1]) / NS
@@ -121,7 +126,9 @@ def test_q_change_detector_by_hand(pattern):
         np.testing.assert_allclose(P_f, P, rtol=1e-9, atol=1e-15)
         assert flt._q_cusum == pytest.approx(g, rel=1e-12, abs=1e-15)
         assert flt._q == pytest.approx(q, rel=1e-12)
-    if pattern[1] < 0:
+    if cap:
+        assert seen[-1][1] == g_max and seen[-1][2] == 100.0, seen
+    elif pattern[1] < 0:
         # the reversals (r −2.5, −2.4) take g down to 0 (reflected: −2.3 clipped) and q to
         # its floor at once; the lag after them (r 0.65) starts g from 0, so q stays at
         # its floor until g passes h again (the walk reflected at h would lift it)
@@ -132,15 +139,16 @@ def test_q_change_detector_by_hand(pattern):
         assert all(r > 0.4 for r, _, _ in seen) and seen[-1][2] > q_start
 
 
-def _q_at_floor_share(motion, threshold, seed):
+def _q_at_floor_share(motion, threshold, seed, **options):
     """The share of a session's detections after which q is at its floor, and the largest
-    q / q_min (``paper3`` at 60 fps, 0.3 px, the filter's defaults but the threshold)."""
+    q / q_min (``paper3`` at 60 fps, 0.3 px, the filter's defaults but the threshold and
+    ``options``)."""
     from test_filter import session
     from test_filter_rates import rig_at
 
     rig = rig_at(builtin_rig("paper3"), 60.0, 60.0, 60.0)
     obs, _ = session(rig, get_motion(motion), None, noise_px=0.3, seed=seed)
-    flt = BallFilter(rig, FilterOptions(accel_adapt_threshold=threshold))
+    flt = BallFilter(rig, FilterOptions(accel_adapt_threshold=threshold, **options))
     qs = []
     for t, c, (u, v) in zip(obs.time_ns.tolist(), obs.camera.tolist(), obs.uv.tolist(),
                             strict=True):
@@ -160,9 +168,13 @@ def test_q_stays_at_its_floor_on_a_flight_and_still_rises_on_a_lag():
         share_walk, _ = _q_at_floor_share("fall", 0.0, seed)
         share_cusum, _ = _q_at_floor_share("fall", FilterOptions().accel_adapt_threshold, seed)
         assert share_cusum >= 0.9 and share_cusum > share_walk + 0.1, (share_walk, share_cusum)
-    # a helix at 3 m/s (14 m/s² no model has): the detector fires and q rises
-    _, top = _q_at_floor_share("spiral", FilterOptions().accel_adapt_threshold, 3)
-    assert top > 10.0, top
+    # a helix at 3 m/s (14 m/s² centripetal) followed by the ballistic model alone (the
+    # supported and turn models off: with them, seed 4's spiral never lifts q, the turn
+    # model following the circle): a lag on every seed, the detector fires and q rises
+    for seed in (3, 4):
+        _, top = _q_at_floor_share("spiral", FilterOptions().accel_adapt_threshold, seed,
+                                   model_switch_per_s=0.0, turn_switch_per_s=0.0)
+        assert top > 10.0, (seed, top)
 
 
 def test_the_turn_model_joins_on_the_walks_q_not_the_detectors():

@@ -6,9 +6,10 @@ them). At 7.611 s a spurious blob in ``cam2``'s frame lies on ``cam1``'s epipola
 through the ball at 7.633 s: the pair makes a point 2.1 m from the track's newest point
 (7.489 s, 0.122 s earlier), out of a ball's reach (15 m/s), but the track held fewer than
 three points in its window, so no test judged it: chosen, and ``smooth``'s last piece bent
-through it, 7 points 0.16-2.6 m off that the clean session does not have. Since the track
-first predicted, its newest point is no first guess: the reach now holds at any time since
-it. Tests on the session cut to its last 1.2 s (the same choice there)."""
+through it, 7 points 0.16-2.6 m off that the clean session does not have. The track's newest
+point (7.489 s) was accepted where the track predicted (vouched): no first guess, so the
+reach from it now holds at any time since. Tests on the session cut to its last 1.2 s (the
+same choice there)."""
 
 from __future__ import annotations
 

@@ -30,6 +30,17 @@ def test_fuse_says_the_type_a_bound_is_ignored_when_type_a_does_not_run(tmp_path
     assert "--type-a-max-std-mm 1 ignored: typeA does not run" in out, out
 
 
+@pytest.mark.parametrize("value, said", [("kicks", True), ("all", True), ("on", False),
+                                         ("off", False)])
+def test_fuse_says_confirm_gaps_is_ignored_when_type_a_does_not_run(tmp_path, sim_session,
+                                                                     cli, value, said):
+    """(session 33's review) ``--confirm-gaps kicks`` without typeA ran without a word."""
+    code, out, err = cli("fuse", sim_session.path, "--method", "nearest", "--confirm-gaps",
+                         value, "-o", tmp_path / "f.mcap")
+    assert code == 0, err
+    assert (f"--confirm-gaps {value} ignored: typeA does not run" in out) == said, out
+
+
 def test_fuse_refuses_a_pixel_noise_no_detector_has(tmp_path, sim_session, cli, capsys):
     """1e-300 px: every typeA point's std_m was NaN; 1e-8: sync's NEES a 40-digit number."""
     for value in ("1e-300", "1e-8", "0.0009"):

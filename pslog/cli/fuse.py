@@ -192,6 +192,9 @@ def run(args: argparse.Namespace) -> int:
     if args.type_a_max_std_mm is not None and "typeA" not in methods:
         print(f"--type-a-max-std-mm {args.type_a_max_std_mm:g} ignored: typeA does not run "
               f"(name it with --method typeA)")
+    if args.confirm_gaps in ("all", "kicks") and "typeA" not in methods:  # (on: the default)
+        print(f"--confirm-gaps {args.confirm_gaps} ignored: typeA does not run (name it with "
+              f"--method typeA)")
     smooth_only = [f"--{name} {value:g}" for name, value in (
         ("rate", args.rate), ("detector-offset-mm", args.detector_offset_mm),
         ("detector-bias-px", args.detector_bias_px or None)) if value is not None]
