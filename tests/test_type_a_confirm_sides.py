@@ -137,3 +137,35 @@ def test_type_a_explained_makes_the_same_points():
     assert_array_equal(explained.time_ns, plain.time_ns)
     assert_array_equal(explained.position_world, plain.position_world)
     assert len(plain) < len(fuse(obs, rig, "typeA", EVERY))
+
+
+def test_an_extrapolations_gravity_bound_by_hand():
+    """``residual_test`` on a pair on one side of the point (``sides_test``'s reference:
+    the line through two detections, both before the point, extrapolated): the model bound
+    is ``½ g |d_prev d_next|`` (the linear extrapolant's exact error under gravity), where
+    ``d_next`` is negative, and the reference's noise ``σ² ((1 − w)² + w²)`` with ``w`` = 2.
+    Hand-computed on a camera at the origin looking along z (the session 33 review: the
+    ``abs`` was untested; without it the bound shrinks and a point inside it is refused)."""
+    from pslog.fusion.confirm import _NO_COV_FACTOR2, CONFIRM_SIGMAS, residual_test
+    from pslog.motion import G
+    from pslog.records import NS
+
+    f, cx, cy = 800.0, 320.0, 240.0
+    rows = np.array([[f, 0.0, cx, f, cy, 1, 0, 0, 0, 1, 0, 0, 0, 1, 0.0, 0.0, 0.0]])
+    point = np.array([0.1, 0.2, 4.0])
+    u0, v0 = f * 0.1 / 4.0 + cx, f * 0.2 / 4.0 + cy  # (340, 280)
+    t = 10 * NS
+    prev_ns, next_ns = t - 20_000_000, t - 10_000_000  # both before: d_next = -0.01 s
+    sigma = 0.5
+    w = 0.02 / (0.02 - 0.01)  # 2: an extrapolation
+    sigma_r = sigma * np.sqrt((1 - w) ** 2 + w ** 2 + _NO_COV_FACTOR2)  # no covariance
+    per_m = f * np.linalg.norm(point) / 16.0
+    model = 0.5 * G * abs(0.02 * -0.01) * per_m  # 0.197 px
+    bound = CONFIRM_SIGMAS * sigma_r + model
+    offsets = np.array([bound - 0.01, CONFIRM_SIGMAS * sigma_r, bound + 0.01])
+    k = len(offsets)
+    uv = np.column_stack([u0 + offsets, np.full(k, v0)])  # the line constant: u_i = uv
+    got = residual_test(rows, np.zeros(k, np.int64), np.tile(point, (k, 1)), None,
+                        np.full(k, t), np.full(k, prev_ns), np.full(k, next_ns), uv, uv,
+                        np.zeros(k), np.zeros(k), np.full(k, sigma), None)
+    assert got.tolist() == [False, False, True]
