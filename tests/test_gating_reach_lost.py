@@ -111,3 +111,37 @@ def test_a_lone_pairs_point_does_not_veto_the_reacquired_ball():
     g = gate(det, rig=base, causal=False)
     assert (g.reason[back] < 0).all(), g.reason[back]
     assert_same_stream(det, base)
+
+
+def test_a_run_of_two_support_points_vouches_for_the_newest():
+    """The gate takes a run of frames whose one candidate has two supports without
+    deciding each (``_decide_in_order``'s fast path): their points join the track, and the
+    newest is vouched, as the kernel's ``choose`` vouches a point on two supports (the
+    session 33 review: the path's ``vouched`` was untested). paper3 rally-38600 clean, all
+    three cameras on the ball until ``cam2`` and ``cam3`` go blind at 4.2 s; 0.14 s later
+    a blob in ``cam2``'s frame on ``cam1``'s ray through the ball, 2.9 m beyond it (the pair's
+    point 2.76 m from the ball at 4.2 s, out of its reach): refused in both forms, the
+    stream gate's two forms equal. (Without the path's vouch the causal gate keeps it.)"""
+    rig = apply_timing(builtin_rig("paper3"), "typeA")
+    motion = rally(8.0, seed=38600, speed=4.0 + 38600 % 3, kick_every_s=0.9)[0]
+    full, truth, _ = simulate_labelled(rig, motion, 8.0, SimulationOptions(
+        noise_px=0.3, seed=38300, blackouts=(("cam2", 4.199, 1.0), ("cam3", 4.199, 1.0))))
+    t = full.frame_time_ns / 1e9
+    f_blob = np.flatnonzero((full.frame_camera == 1) & (t >= 4.33))[0]  # 4.344 s
+    f_ball = np.flatnonzero((full.frame_camera == 0) & (t <= t[f_blob]))[-1]  # 4.333 s
+    ball = truth.position_world[np.searchsorted(truth.time_ns, full.frame_time_ns[f_ball])]
+    ray = ball - rig.cameras[0].center_world
+    point = ball - 2.9 * ray / np.linalg.norm(ray)
+    uv = rig.cameras[1].project(point[None])[0][0]
+    assert 0 < uv[0] < 640 and 0 < uv[1] < 480, uv
+    at_blackout = truth.position_world[np.searchsorted(truth.time_ns, 4_200_000_000)]
+    assert np.linalg.norm(point - at_blackout) > 15.0 * (t[f_blob] - 4.2) + 0.3
+    row = int(np.searchsorted(full.cand_frame, f_blob))
+    det = Detections(full.camera_names, full.frame_time_ns, full.frame_camera,
+                     full.frame_index, np.insert(full.cand_frame, row, f_blob),
+                     np.insert(full.cand_uv, row, uv, axis=0),
+                     np.insert(full.cand_radius, row, np.median(full.cand_radius)),
+                     np.insert(full.cand_score, row, 1.0))
+    for causal in (False, True):
+        assert gate(det, rig, causal=causal).reason[row] == MOTION, causal
+    assert_same_stream(det, rig)
