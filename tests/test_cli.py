@@ -195,11 +195,11 @@ def test_fuse_names_the_timing_a_method_needs_and_the_methods_that_suit(tmp_path
     assert code == 1 and err.count("\n") == 1
     assert "method typeB needs cameras with a common shutter instant (sync or typeB timing)" \
         in err
-    assert "methods that suit this session: nearest, typeA" in err
+    assert "methods that suit this session: nearest, typeA, smooth, filter" in err
     assert not (tmp_path / "f.mcap").exists()
     code, _, err = cli("view", sim_session.path, "--method", "linear", "--save",
                        tmp_path / "v.rrd")
-    assert code == 1 and "methods that suit this session: nearest, typeA" in err
+    assert code == 1 and "methods that suit this session: nearest, typeA, smooth, filter" in err
     code, out, _ = cli("fuse", sim_session.path, "--method", "typeA", "--method", "nearest",
                        "-o", tmp_path / "f.mcap")
     assert code == 0 and "typeA" in out and "nearest" in out

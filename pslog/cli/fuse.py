@@ -259,7 +259,8 @@ def run(args: argparse.Namespace) -> int:
                 # in play (offline, smooth fuses it in a session of one candidate a frame)
                 print(f"{most} of {n_candidates} candidates rejected as a still object: a "
                       f"ball that stands still (slower than about 20 cm/s) is not told from "
-                      f"a static object; run with --gating off to fuse it anyway")
+                      f"a static object (nor from a second orange object in view): if they "
+                      f"are the ball, run with --gating off to fuse them")
             for method in (m for m in methods if m in empty):
                 print(_no_point(method, empty[method], args.type_a_max_std_mm))
             if not written:

@@ -1097,10 +1097,15 @@ def stereo_at_common_instants(
     """
     group, n_cameras = sync_groups(prep.obs, len(prep.centers), tolerance_s)
     if not (np.any(n_cameras >= 2) if shared is None else shared):
+        from . import METHODS  # (the registry: fusion imports this module)
+
+        # no shared instant, and every detection alone: what the registry says suits that
+        # (was a hard-coded "nearest, typeA", which left out smooth and filter)
+        suit = [name for name, m in METHODS.items() if m.suits(False, True)]
         raise FusionError(
             f"method {method} needs cameras with a common shutter instant (sync or typeB "
             f"timing), but no two cameras captured within {tolerance_s * 1e3:g} ms of each "
-            f"other; methods that suit this session: nearest, typeA")
+            f"other; methods that suit this session: {', '.join(suit)}")
     residuals: list[np.ndarray] = []
     points, quality, time_ns, camera, flags, rows, used = triangulate_groups(
         prep, group, len(n_cameras), noise_px, with_flags=True, with_rows=True,
