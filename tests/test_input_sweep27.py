@@ -41,6 +41,18 @@ def test_fuse_says_confirm_gaps_is_ignored_when_type_a_does_not_run(tmp_path, si
     assert (f"--confirm-gaps {value} ignored: typeA does not run" in out) == said, out
 
 
+def test_fuse_says_filter_hold_off_is_ignored_when_the_filter_does_not_run(tmp_path,
+                                                                          sim_session, cli):
+    """(session 33's walkthrough) ``--method typeA --filter-hold off`` ran without a word."""
+    code, out, err = cli("fuse", sim_session.path, "--method", "typeA", "--filter-hold", "off",
+                         "-o", tmp_path / "f.mcap")
+    assert code == 0, err
+    assert "--filter-hold off ignored: filter does not run" in out, out
+    code, out, err = cli("fuse", sim_session.path, "--method", "typeA,filter", "--filter-hold",
+                         "off", "-o", tmp_path / "g.mcap")
+    assert code == 0 and "ignored" not in out, out
+
+
 def test_fuse_refuses_a_pixel_noise_no_detector_has(tmp_path, sim_session, cli, capsys):
     """1e-300 px: every typeA point's std_m was NaN; 1e-8: sync's NEES a 40-digit number."""
     for value in ("1e-300", "1e-8", "0.0009"):

@@ -86,8 +86,9 @@ def run(args: argparse.Namespace) -> int:
         print(format_quality_table(quality))
         if gated:
             print()
-            print("gating (candidates rejected; correct: not the ball; ball lost: the ball "
-                  "rejected; false kept: not the ball yet kept)")
+            print("gating (candidates rejected; detections: frames whose every candidate "
+                  "was rejected; correct: not the ball; ball lost: the ball rejected; false "
+                  "kept: not the ball yet kept)")
             print(format_rejection_table(list(gated.values())))
         shown = [m for m in methods if left_out.get(m)]
         if shown:

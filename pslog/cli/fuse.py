@@ -195,6 +195,8 @@ def run(args: argparse.Namespace) -> int:
     if args.confirm_gaps in ("all", "kicks") and "typeA" not in methods:  # (on: the default)
         print(f"--confirm-gaps {args.confirm_gaps} ignored: typeA does not run (name it with "
               f"--method typeA)")
+    if args.filter_hold == "off" and "filter" not in methods:  # (on: the default)
+        print("--filter-hold off ignored: filter does not run (name it with --method filter)")
     smooth_only = [f"--{name} {value:g}" for name, value in (
         ("rate", args.rate), ("detector-offset-mm", args.detector_offset_mm),
         ("detector-bias-px", args.detector_bias_px or None)) if value is not None]

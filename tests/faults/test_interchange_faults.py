@@ -123,8 +123,10 @@ def test_exports_never_overwrite_or_write_what_they_cannot(work, args, why, requ
     (["--detections", "d.txt"], "--detections d.txt: a CSV file is named .csv"),
     # one bad name among good ones: nothing written
     (["--csv", "t.csv", "--jsonl", "t.jsonl", "--c3d", "t"], "--c3d t: a C3D file"),
+    # a new --tum folder named as a file (session 33: 'traj.tum/' was made, typeA.tum inside)
+    (["--tum", "traj.tum"], "--tum traj.tum: a folder, one TUM file per method inside"),
 ], ids=["parquet-as-csv", "c3d-as-csv", "csv-as-parquet", "jsonl-as-json", "detections-txt",
-        "one-bad-of-three"])
+        "one-bad-of-three", "tum-folder-as-file"])
 def test_export_refuses_a_name_of_another_format(work, args, why, request):
     """Session 32: as ``rig export -o`` and ``view --save``, a file named for another format
     is a bad command-line value (exit 2), refused before anything is read or written."""
