@@ -273,3 +273,25 @@ def test_a_file_cut_in_its_set_up_is_said_to_be_beyond_repair_by_every_command(t
         assert "beyond repair" in err and "run 'pslog recover" not in err, (args, err)
         assert len(err.strip().splitlines()) == 1, err
     assert not (tmp_path / "f.mcap").exists() and not (tmp_path / "r.mcap").exists()
+
+
+def test_fuse_says_a_calibrations_timing_keys_are_not_applied(tmp_path, sim_session, cli):
+    """(session 33's walkthrough) ``fuse --rig cal.toml`` with a pslog-exported aniposelib
+    calibration takes its geometry only: its fps/offset/clock keys, when they differ from
+    the session's, were left out without a word (documented in --help only)."""
+    code, _, err = cli("rig", "export", sim_session.path, "--format", "anipose", "-o",
+                       tmp_path / "cal.toml")
+    assert code == 0, err
+    code, out, err = cli("fuse", sim_session.path, "--rig", tmp_path / "cal.toml", "-o",
+                         tmp_path / "a.mcap")
+    assert code == 0 and "not applied" not in out, out  # the same timing: nothing to say
+    text = (tmp_path / "cal.toml").read_text()
+    first = text.index("offset = ")
+    end = text.index("\n", first)
+    (tmp_path / "other.toml").write_text(text[:first] + "offset = 0.005" + text[end:])
+    code, out, err = cli("fuse", sim_session.path, "--rig", tmp_path / "other.toml", "-o",
+                         tmp_path / "b.mcap")
+    assert code == 0, err
+    line = next(x for x in out.splitlines() if "not applied" in x)
+    assert "its fps/offset/clock keys are not applied to cam1:" in line, line
+    assert "pslog rig import" in line, line

@@ -149,6 +149,12 @@ def run(args: argparse.Namespace) -> int:
             raise RigError(f"{args.rig}: cameras {', '.join(rig.names)} differ from the "
                            f"session's {', '.join(session.rig.names)} (names and order must "
                            f"match)")
+        unused = _timing_not_applied(args.rig, rig)
+        if unused:  # (documented in --help; said, as the other options fuse ignores)
+            print(f"--rig {args.rig}: its fps/offset/clock keys are not applied to "
+                  f"{', '.join(unused)}: a calibration gives the geometry, the session's timing "
+                  f"stays (for the file's: 'pslog rig import {args.rig} -o rig.toml', then "
+                  f"--rig rig.toml)")
     check_baselines(rig, args.session if args.rig is None else args.rig)
     try:
         check_tolerance(rig, args.tolerance_ms / 1e3)
@@ -373,3 +379,23 @@ def _still_rejections(rejected) -> int:
         if np.median(step) < 2.0:
             count += len(uv)
     return count
+
+
+def _timing_not_applied(path: str, rig) -> list[str]:
+    """The cameras whose timing keys (``fps``, ``offset``, the clock's) a calibration file
+    (aniposelib, Pose2Sim, OpenCV: :func:`pslog.rig.resolve_rig` takes its geometry only)
+    holds and ``rig``, the one fused with, does not: a pslog-exported calibration of another
+    session's clocks (session 33's walkthrough: 30.1 mm fused, 8.7 with the synced rig)."""
+    from pathlib import Path
+
+    from pslog.rig import _CLOCK_KEYS, BUILTIN_RIGS, _is_session_file, load_rig_file
+
+    file = Path(path)
+    if str(path) in BUILTIN_RIGS or not file.is_file() or _is_session_file(file):
+        return []
+    loaded = load_rig_file(file)  # (read once already: the same file, no error now)
+    if loaded.format == "pslog" or not loaded.timed:
+        return []
+    keys = ("fps", "offset", *_CLOCK_KEYS)
+    return [cam.name for cam in loaded.rig.cameras if cam.name in rig.names and any(
+        getattr(cam, k) != getattr(rig.camera(cam.name), k) for k in keys)]
