@@ -223,7 +223,8 @@ def _is_session_file(path: Path) -> bool:
     return starts_as_mcap(path)
 
 
-def resolve_rig(name_or_path: str | Path, timing_from: Rig | None = None) -> Rig:
+def resolve_rig(name_or_path: str | Path, timing_from: Rig | None = None,
+                not_applied: list[str] | None = None) -> Rig:
     """A built-in rig by name (``paper3``, ``paper2``), a rig file (pslog's TOML, or an
     aniposelib / Pose2Sim / OpenCV calibration: :func:`load_rig`), or a session file (an
     MCAP file: the rig it was recorded, synced or corrected with).
@@ -234,6 +235,10 @@ def resolve_rig(name_or_path: str | Path, timing_from: Rig | None = None) -> Rig
     for ``pslog fuse --rig``: its synced clocks stay); a pslog rig TOML or a session file
     gives its own timing. Without it, a calibration file without timing keys takes 30 fps
     and offset 0.
+
+    ``not_applied``: a list that receives the names of the cameras whose timing keys the
+    calibration file holds (a pslog-exported one: ``fps`` and ``offset`` on every camera)
+    and ``timing_from``'s replaced with other values (``pslog fuse --rig`` says so).
     """
     if str(name_or_path) in BUILTIN_RIGS:
         return builtin_rig(str(name_or_path))
@@ -252,8 +257,11 @@ def resolve_rig(name_or_path: str | Path, timing_from: Rig | None = None) -> Rig
     for cam in loaded.rig.cameras:
         if cam.name in timing_from.names:
             source = timing_from.camera(cam.name)
-            cam = cam.replace(**{key: getattr(source, key) for key in (
-                "fps", "offset", *_CLOCK_KEYS)})
+            timing = {key: getattr(source, key) for key in ("fps", "offset", *_CLOCK_KEYS)}
+            if not_applied is not None and loaded.timed and any(
+                    getattr(cam, key) != value for key, value in timing.items()):
+                not_applied.append(cam.name)
+            cam = cam.replace(**timing)
         cameras.append(cam)
     try:
         return Rig(tuple(cameras), loaded.rig.name)

@@ -144,12 +144,12 @@ def run(args: argparse.Namespace) -> int:
     session = read_session(args.session)
     rig = session.rig
     if args.rig is not None:
-        rig = resolve_rig(args.rig, timing_from=session.rig)  # a calibration: geometry
+        unused: list[str] = []  # (a calibration's cameras whose timing keys it replaced)
+        rig = resolve_rig(args.rig, timing_from=session.rig, not_applied=unused)
         if rig.names != session.rig.names:
             raise RigError(f"{args.rig}: cameras {', '.join(rig.names)} differ from the "
                            f"session's {', '.join(session.rig.names)} (names and order must "
                            f"match)")
-        unused = _timing_not_applied(args.rig, rig)
         if unused:  # (documented in --help; said, as the other options fuse ignores)
             print(f"--rig {args.rig}: its fps/offset/clock keys are not applied to "
                   f"{', '.join(unused)}: a calibration gives the geometry, the session's timing "
@@ -379,23 +379,3 @@ def _still_rejections(rejected) -> int:
         if np.median(step) < 2.0:
             count += len(uv)
     return count
-
-
-def _timing_not_applied(path: str, rig) -> list[str]:
-    """The cameras whose timing keys (``fps``, ``offset``, the clock's) a calibration file
-    (aniposelib, Pose2Sim, OpenCV: :func:`pslog.rig.resolve_rig` takes its geometry only)
-    holds and ``rig``, the one fused with, does not: a pslog-exported calibration of another
-    session's clocks (session 33's walkthrough: 30.1 mm fused, 8.7 with the synced rig)."""
-    from pathlib import Path
-
-    from pslog.rig import _CLOCK_KEYS, BUILTIN_RIGS, _is_session_file, load_rig_file
-
-    file = Path(path)
-    if str(path) in BUILTIN_RIGS or not file.is_file() or _is_session_file(file):
-        return []
-    loaded = load_rig_file(file)  # (read once already: the same file, no error now)
-    if loaded.format == "pslog" or not loaded.timed:
-        return []
-    keys = ("fps", "offset", *_CLOCK_KEYS)
-    return [cam.name for cam in loaded.rig.cameras if cam.name in rig.names and any(
-        getattr(cam, k) != getattr(rig.camera(cam.name), k) for k in keys)]
