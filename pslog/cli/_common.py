@@ -110,6 +110,15 @@ for _fmt, (_kind, _written, _also) in FORMATS.items():
 PSLOG_RIG = "a pslog rig (TOML)"
 
 
+def written_suffix(path: str | Path) -> str:
+    """The suffix of ``path``'s last component as written, lower case (``t.CSV``: ``.csv``;
+    ``.csv`` alone is a hidden file's name, no suffix; ``out.csv/`` a folder's spelling, its
+    trailing separator kept: no suffix)."""
+    import os
+
+    return os.path.splitext(os.path.basename(os.fspath(path)))[1].lower()
+
+
 def _either(suffixes: tuple[str, ...]) -> str:
     """``.csv``; ``.parquet or .pq``; ``.yml, .yaml, .xml or .json``."""
     return suffixes[0] if len(suffixes) == 1 else f"{', '.join(suffixes[:-1])} or {suffixes[-1]}"
@@ -127,9 +136,7 @@ def misnamed(option: str, path: str | Path, fmt: str, subject: str | None = None
     import os
 
     kind, written, _also = FORMATS[fmt]
-    # the last component's suffix as written ('t.CSV' is a CSV file; '.csv' alone is a
-    # hidden file's name, no suffix)
-    if os.path.splitext(os.path.basename(os.fspath(path)))[1].lower() in written:
+    if written_suffix(path) in written:
         return None
     return (f"{option} {os.fspath(path)}: {subject or kind} is named {_either(written)}"
             + (f" ({hint})" if hint else ""))
@@ -151,9 +158,8 @@ def misnamed_session(parser: argparse.ArgumentParser, args: argparse.Namespace) 
         value = getattr(args, action.dest, None) if action.dest in dests else None
         if not isinstance(value, str | Path):
             continue
-        # the last component's suffix as written: 'out.csv/' is a folder's spelling, said
-        # by the output checks; '.csv' alone is a hidden file's name, no suffix
-        suffix = os.path.splitext(os.path.basename(os.fspath(value)))[1].lower()
+        # ('out.csv/' is a folder's spelling, said by the output checks)
+        suffix = written_suffix(value)
         if suffix in OTHER_FORMATS:
             option = "/".join(action.option_strings) or str(action.metavar or action.dest)
             return (f"argument {option}: {os.fspath(value)} names {OTHER_FORMATS[suffix]}; "

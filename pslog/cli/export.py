@@ -60,12 +60,12 @@ def run(args: argparse.Namespace) -> int:
     from pslog.errors import InputError
     from pslog.log import read_session
 
-    from ._common import OTHER_FORMATS, misnamed, usage_error
+    from ._common import OTHER_FORMATS, misnamed, usage_error, written_suffix
 
     if args.tum is not None and not args.tum.strip():  # (was "nothing to export", exit 1)
         return usage_error("export", "argument --tum: empty folder name")
-    if args.tum and not os.path.exists(args.tum) and os.path.splitext(
-            os.path.basename(os.path.normpath(args.tum)))[1].lower() in OTHER_FORMATS:
+    if args.tum and not os.path.exists(args.tum) and written_suffix(
+            os.path.normpath(args.tum)) in OTHER_FORMATS:
         # a new folder named as a file ('--tum traj.tum' made a folder traj.tum/ holding
         # typeA.tum...: the session 33 walkthrough); an existing path is said as it is
         return usage_error("export", f"--tum {args.tum}: a folder, one TUM file per method "

@@ -193,7 +193,6 @@ def _described_format(path: str) -> str:
 
 
 def _import(args: argparse.Namespace) -> int:
-
     from pslog.interchange.rig_formats import ImportOptions, TimingOptionError
     from pslog.outputs import replacing
     from pslog.rig import apply_timing, load_rig_file
