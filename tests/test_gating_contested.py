@@ -22,15 +22,16 @@ from pslog.rig import apply_timing, builtin_rig
 from pslog.simulation import SimulationOptions, ball_mask, simulate_labelled
 
 
-def _first(det: Detections, seconds: float) -> Detections:
-    """``det``'s frames before ``seconds``."""
-    frames = np.flatnonzero(det.frame_time_ns < seconds * 1e9)
+def frames_between(det: Detections, lo: float, hi: float) -> tuple[Detections, np.ndarray]:
+    """``det``'s frames in ``[lo, hi)`` seconds, and which of its candidates they keep
+    ((n_candidates,) bool: a mask of ``det``'s candidate rows, for their labels)."""
+    frames = np.flatnonzero((det.frame_time_ns >= lo * 1e9) & (det.frame_time_ns < hi * 1e9))
     keep = np.isin(det.cand_frame, frames)
     index = np.full(det.n_frames, -1)
     index[frames] = np.arange(len(frames))
     return Detections(det.camera_names, det.frame_time_ns[frames], det.frame_camera[frames],
                       det.frame_index[frames], index[det.cand_frame[keep]], det.cand_uv[keep],
-                      det.cand_radius[keep], det.cand_score[keep])
+                      det.cand_radius[keep], det.cand_score[keep]), keep
 
 
 def _contested(g, det) -> set:
@@ -54,8 +55,8 @@ def test_a_static_object_chosen_in_a_cameras_first_frame_against_the_third_is_co
         noise_px=0.3, seed=902, miss_rate=0.1, drop_rate=0.05, spurious_rate=0.05,
         distractors=(("cam3", DISTRACTOR),), blackouts=(("cam1", 0.5, 0.5),)))
     is_ball = ball_mask(full, ball)
-    keep = np.isin(full.cand_frame, np.flatnonzero(full.frame_time_ns < 0.4e9))
-    det, is_ball = _first(full, 0.4), is_ball[keep]
+    det, keep = frames_between(full, -np.inf, 0.4)
+    is_ball = is_ball[keep]
     g = gate(det, rig)
     at = det.frame_time_ns[det.cand_frame] == det.frame_time_ns[det.frame_camera == 2].min()
     # cam3's first frame: the object alone, chosen, contested

@@ -17,6 +17,7 @@ import numpy as np
 from _rally import rally
 from test_gate_kernel import assert_same_stream
 from test_gating import DISTRACTOR
+from test_gating_contested import frames_between
 
 from pslog import apply_timing, builtin_rig
 from pslog.evaluation import errors_m
@@ -26,17 +27,6 @@ from pslog.records import Detections
 from pslog.simulation import SimulationOptions, ball_mask, simulate_labelled
 
 BLOB_S = 7.6111  # the blob's frame, cam2 (index 1)
-
-
-def _window(det: Detections, lo: float, hi: float) -> Detections:
-    """``det``'s frames in ``[lo, hi)`` seconds."""
-    frames = np.flatnonzero((det.frame_time_ns >= lo * 1e9) & (det.frame_time_ns < hi * 1e9))
-    keep = np.isin(det.cand_frame, frames)
-    index = np.full(det.n_frames, -1)
-    index[frames] = np.arange(len(frames))
-    return Detections(det.camera_names, det.frame_time_ns[frames], det.frame_camera[frames],
-                      det.frame_index[frames], index[det.cand_frame[keep]], det.cand_uv[keep],
-                      det.cand_radius[keep], det.cand_score[keep])
 
 
 def _session():
@@ -49,9 +39,7 @@ def _session():
         noise_px=0.3, seed=38300, miss_rate=0.1, drop_rate=0.05, spurious_rate=0.05,
         distractors=(("cam3", DISTRACTOR),), blackouts=(("cam2", 2.0, 0.5),)))
     is_ball = ball_mask(full, ball)
-    det = _window(full, 6.8, 8.0)
-    keep = np.isin(full.cand_frame, np.flatnonzero((full.frame_time_ns >= 6.8e9)
-                                                   & (full.frame_time_ns < 8.0e9)))
+    det, keep = frames_between(full, 6.8, 8.0)
     return rig, det, truth, is_ball[keep]
 
 
@@ -102,9 +90,8 @@ def test_a_lone_pairs_point_does_not_veto_the_reacquired_ball():
         noise_px=0.3, seed=38500, spurious_rate=0.05,
         distractors=(("cam1", DISTRACTOR),), blackouts=(("cam2", 2.0, 0.5),)))
     is_ball = ball_mask(full, ball)
-    keep = np.isin(full.cand_frame, np.flatnonzero((full.frame_time_ns >= 1.5e9)
-                                                   & (full.frame_time_ns < 3.0e9)))
-    det, is_ball = _window(full, 1.5, 3.0), is_ball[keep]
+    det, keep = frames_between(full, 1.5, 3.0)
+    is_ball = is_ball[keep]
     t = det.frame_time_ns[det.cand_frame] / 1e9
     back = is_ball & (t > 2.51) & (t < 2.66)
     assert back.sum() == 9

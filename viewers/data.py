@@ -309,9 +309,9 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
               else -UNBOUNDED_NS,
               first + round(min(hi * NS, UNBOUNDED_NS)) if end is not None else UNBOUNDED_NS)
     frame_times = session.detections.frame_time_ns
+    span = (frame_times.max() - first) / NS if len(frame_times) else 0.0  # s, for messages
     if (start is not None or end is not None) and not np.any(
             (frame_times >= window[0]) & (frame_times < window[1])):
-        span = (frame_times.max() - first) / NS if len(frame_times) else 0.0
         bounds = " and ".join(([f"--start {start} s"] if start is not None else [])
                               + ([f"--end {end} s"] if end is not None else []))
         where = "between" if start is not None and end is not None else (
@@ -358,7 +358,6 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
         # a full-detail range past the session's end (or outside --start/--end) is no error
         # (the tracks are all there), but the user meant to see some frames in full: say why
         # none is
-        span = (frame_times.max() - first) / NS if len(frame_times) else 0.0
         lo_s, hi_s = (detail_ns[0] - first) / NS, (detail_ns[1] - first) / NS
         notes.append(f"the full-detail range {lo_s:g} to {hi_s:g} s holds no frame shown "
                      f"(the session spans 0 to {span:.3f} s): every frame's overlays are "
