@@ -13,7 +13,7 @@ import numpy as np
 from _rally import rally
 from test_gate_kernel import streamed
 from test_gating import DISTRACTOR
-from test_gating_contested import _contested, _first
+from test_gating_contested import _contested, frames_between
 from test_stream_gating import assert_same_track, push_frames
 
 from pslog.evaluation import errors_m
@@ -47,8 +47,8 @@ def _rally_start(seed: int, sim_seed: int, seen_by: str, blind: str, blind_at: f
         noise_px=0.3, seed=sim_seed, miss_rate=0.1, drop_rate=0.05, spurious_rate=0.05,
         distractors=((seen_by, DISTRACTOR),), blackouts=((blind, blind_at, 0.5),)))
     is_ball = ball_mask(full, ball)
-    keep = np.isin(full.cand_frame, np.flatnonzero(full.frame_time_ns < 0.3e9))
-    return rig, _first(full, 0.3), truth, is_ball[keep]
+    det, keep = frames_between(full, -np.inf, 0.3)
+    return rig, det, truth, is_ball[keep]
 
 
 def _session():
