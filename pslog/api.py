@@ -109,7 +109,8 @@ def _names(value: object, what: str) -> list[str] | None:
 def fuse(session: Session | str | os.PathLike[str] | Detections,
          methods: str | Sequence[str] | None = None, *,
          rig: Rig | str | os.PathLike[str] | None = None,
-         options: FusionOptions | None = None) -> FuseResult:
+         options: FusionOptions | None = None,
+         clock_uncertainty: bool = True) -> FuseResult:
     """Fuse a session's detections into one 3D track per method, as ``pslog fuse`` does.
 
     Parameters
@@ -126,6 +127,10 @@ def fuse(session: Session | str | os.PathLike[str] | Detections,
         ``detector_offset_m`` None takes the session's default
         (:func:`pslog.fusion.detector_bias_for`: 0 for simulated sessions and bare
         detections, 0.5 mm per axis for detections found in images)
+    clock_uncertainty : a session synced by ``pslog sync`` (and ``options.clock_covariance``
+        None): every point's covariance gains the uncertainty of the clocks it estimated
+        and the rig still holds (:mod:`pslog.fusion.clock`), as ``pslog fuse
+        --clock-uncertainty on``; False: the clocks taken as exact
 
     Returns
     -------
@@ -154,7 +159,8 @@ def fuse(session: Session | str | os.PathLike[str] | Detections,
         if isinstance(rig, (str, os.PathLike)):
             rig = resolve_rig(os.fspath(rig), timing_from=read.rig)  # a calibration: geometry
         detections, used = read.detections, rig or read.rig
-        options = for_session(options or FusionOptions(), read.metadata)
+        options = for_session(options or FusionOptions(), read.metadata,
+                              used if clock_uncertainty else None)
         if rig is not None and rig.names != read.rig.names:
             from .errors import RigError
 

@@ -200,17 +200,22 @@ def observations(detections: Detections, rig: Rig) -> Observations:
 #: Session metadata key (docs/log-format.md) where ``pslog sync`` stores each estimate with
 #: its standard deviation: JSON ``{"cameras": {name: {"clock_offset": [value, std],
 #: "clock_drift_ppm": [value, std], "readout": [value, std]}}, "estimated": [names],
-#: "selection": [tests] or null}`` (s, ppm, s; ``selection``: ``--estimate auto``'s Wald
-#: tests, as ``pslog sync --json`` prints them).
+#: "selection": [tests] or null, "covariance": {"parameters": [[name, key], ...],
+#: "matrix": [[...], ...]}}`` (s, ppm, s; ``selection``: ``--estimate auto``'s Wald
+#: tests, as ``pslog sync --json`` prints them; ``covariance``: the estimates' joint
+#: covariance, the offsets' correlations included, in the units of each key; written since
+#: session 34, older sessions have the standard deviations alone).
 CLOCK_STD_KEY = "clock_std"
 CLOCK_KEYS = ("clock_offset", "clock_drift_ppm", "readout")
 
 
-def clock_std_json(rig: Rig, stds, estimated=None, selection=None) -> str:
+def clock_std_json(rig: Rig, stds, estimated=None, selection=None, covariance=None) -> str:
     """The :data:`CLOCK_STD_KEY` value for ``rig`` (holding the estimates) and ``stds``, one
     ``(offset_std_s, drift_std_ppm, readout_std_s)`` per camera in rig order; with
-    ``estimated`` (the parameters estimated) and ``selection`` (``--estimate auto``: its
-    tests, as ``pslog sync --json`` prints them) those too."""
+    ``estimated`` (the parameters estimated), ``selection`` (``--estimate auto``: its
+    tests, as ``pslog sync --json`` prints them) and ``covariance`` (``(parameters,
+    matrix)``: ``(camera index, key)`` pairs, key one of :data:`CLOCK_KEYS`, and their
+    joint covariance) those too."""
     import json
 
     value: dict = {"cameras": {
@@ -221,6 +226,11 @@ def clock_std_json(rig: Rig, stds, estimated=None, selection=None) -> str:
         value["estimated"] = list(estimated)
     if selection is not None:
         value["selection"] = selection
+    if covariance is not None:
+        parameters, matrix = covariance
+        value["covariance"] = {
+            "parameters": [[rig.cameras[c].name, key] for c, key in parameters],
+            "matrix": np.asarray(matrix, dtype=np.float64).tolist()}
     return json.dumps(value)
 
 
@@ -243,6 +253,90 @@ def read_clock_std(rig: Rig, metadata) -> list[dict[str, float]] | None:
                         if key in stored and float(stored[key][0]) == getattr(cam, key)})
         return out
     except (ValueError, TypeError, KeyError, IndexError, AttributeError):
+        return None
+
+
+@dataclass(frozen=True)
+class ClockCovariance:
+    """The joint covariance of a rig's estimated clock parameters (``pslog sync``'s, read
+    from a session by :func:`read_clock_covariance`): what the fused points' consider
+    covariance takes (:mod:`pslog.fusion.clock`).
+
+    Attributes
+    ----------
+    camera : (k,) int64, rig index of each parameter's camera
+    parameter : (k,) int64, which parameter: index into :data:`CLOCK_KEYS` (0
+        ``clock_offset`` s, 1 ``clock_drift_ppm`` ppm, 2 ``readout`` s)
+    matrix : (k, k) float64, their covariance in those units (symmetric, finite, positive
+        semi-definite)
+    """
+
+    camera: np.ndarray
+    parameter: np.ndarray
+    matrix: np.ndarray
+
+    def __post_init__(self) -> None:
+        camera = np.asarray(self.camera, dtype=np.int64).reshape(-1)
+        parameter = np.asarray(self.parameter, dtype=np.int64).reshape(-1)
+        matrix = np.asarray(self.matrix, dtype=np.float64)
+        k = len(camera)
+        if len(parameter) != k or matrix.shape != (k, k):
+            raise InputError(f"clock covariance: {k} cameras, {len(parameter)} parameters "
+                             f"and a {matrix.shape} matrix do not match")
+        if np.any(parameter < 0) or np.any(parameter >= len(CLOCK_KEYS)) or np.any(camera < 0):
+            raise InputError(f"clock covariance: parameters {parameter.tolist()} of cameras "
+                             f"{camera.tolist()}: a parameter is 0, 1 or 2 of a rig camera")
+        if not np.all(np.isfinite(matrix)) or not np.allclose(matrix, matrix.T, rtol=1e-9,
+                                                               atol=0.0):
+            raise InputError("clock covariance: the matrix must be finite and symmetric")
+        if k and np.linalg.eigvalsh(matrix).min() < -1e-9 * max(np.abs(matrix).max(), 1e-300):
+            raise InputError("clock covariance: the matrix is not positive semi-definite")
+        object.__setattr__(self, "camera", camera)
+        object.__setattr__(self, "parameter", parameter)
+        object.__setattr__(self, "matrix", (matrix + matrix.T) / 2)
+
+    def __len__(self) -> int:
+        return len(self.camera)
+
+    def factor(self) -> np.ndarray:
+        """``L`` (k, m) with ``L Lᵀ`` = :attr:`matrix` and m <= k its positive eigenvalues'
+        count (a semi-definite matrix's square root: a parameter of zero variance, or two
+        perfectly correlated, need no column)."""
+        values, vectors = np.linalg.eigh(self.matrix)
+        keep = values > 1e-12 * max(float(values.max(initial=0.0)), 1e-300)
+        return vectors[:, keep] * np.sqrt(values[keep])
+
+
+def read_clock_covariance(rig: Rig, metadata) -> ClockCovariance | None:
+    """The covariance of ``rig``'s clock parameters that ``pslog sync`` estimated, from the
+    session's metadata (:data:`CLOCK_STD_KEY`): the parameters of non-zero standard deviation
+    whose stored value is still the rig's (as :func:`read_clock_std`), with their stored
+    joint covariance, or, for a session synced before it was stored, the standard deviations
+    alone (independent). None when there is none (no key, a malformed one, nothing
+    estimated, or every estimate since replaced)."""
+    import json
+
+    stds = read_clock_std(rig, metadata)
+    if stds is None:
+        return None
+    params = [(c, CLOCK_KEYS.index(key)) for c, row in enumerate(stds)
+              for key in CLOCK_KEYS if row.get(key, 0.0) > 0]
+    if not params:
+        return None
+    variance = np.diag([stds[c][CLOCK_KEYS[p]] ** 2 for c, p in params])
+    try:
+        stored = json.loads(metadata.get(CLOCK_STD_KEY))["covariance"]
+        names = [(rig.names.index(name), CLOCK_KEYS.index(key))
+                 for name, key in stored["parameters"]]
+        matrix = np.asarray(stored["matrix"], dtype=np.float64)
+        where = [names.index(p) for p in params]
+        variance = matrix[np.ix_(where, where)]
+    except (ValueError, TypeError, KeyError, IndexError, AttributeError):
+        pass  # (none stored, or not for these parameters: the standard deviations alone)
+    try:
+        return ClockCovariance(np.array([c for c, _ in params]),
+                               np.array([p for _, p in params]), variance)
+    except InputError:
         return None
 
 

@@ -17,7 +17,7 @@ from pslog.motion import Motion, rally_motion
 from pslog.records import NS, Detections, Truth
 from pslog.rig import Rig
 from pslog.simulation import SimulationOptions, simulate, true_rig
-from pslog.timing import read_clock_std
+from pslog.timing import read_clock_covariance, read_clock_std
 
 
 def _with_offsets(rig: Rig, offsets: dict[str, float]) -> Rig:
@@ -140,6 +140,17 @@ def test_cli_json_table_and_the_synced_copy(tmp_path, cli):
     moved = Rig(tuple(c.replace(clock_offset=c.clock_offset + 1e-4) if c.name == "c2" else c
                       for c in synced.rig.cameras))
     assert "clock_offset" not in read_clock_std(moved, synced.metadata)[1]
+    # the joint covariance is stored too (the offsets' correlation: both against camera 1)
+    # and read back for the parameters the rig still holds
+    joint = read_clock_covariance(synced.rig, synced.metadata)
+    assert joint is not None
+    assert joint.camera.tolist() == [1, 2] and joint.parameter.tolist() == [0, 0]
+    assert_allclose(np.sqrt(np.diag(joint.matrix)),
+                    [c["offset_std_s"] for c in report["cameras"][1:]], rtol=1e-12)
+    assert joint.matrix[0, 1] != 0
+    moved_joint = read_clock_covariance(moved, synced.metadata)
+    assert moved_joint.camera.tolist() == [2]
+    assert_allclose(moved_joint.matrix, joint.matrix[1:, 1:], rtol=0)
     # the host jitter was regularized away (auto): the copy holds the regularized stamps
     assert not np.array_equal(synced.detections.frame_time_ns, detections.frame_time_ns)
     code, out, err = cli("sync", path, "-o", out_path, "--force", "--regularize", "off")

@@ -75,6 +75,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "constant detection bias, independent between cameras, "
                              "propagated through the fit into std_m and the covariance "
                              "(default %(default)s)")
+    parser.add_argument("--clock-uncertainty", choices=("on", "off"), default="on",
+                        help="on: a session from `pslog sync` adds the uncertainty of the "
+                             "clocks it estimated to every point's std_m and covariance (the "
+                             "points' sensitivity to each camera's offset, drift and readout; "
+                             "the points do not move; a clock --rig replaced takes none); "
+                             "off: the pixel noise alone, the clocks taken as exact "
+                             "(default %(default)s)")
     parser.add_argument("--gating", choices=("on", "off"), default="on",
                         help="on: choose each frame's ball among its candidates by the "
                              "epipolar, track and motion gates and record every rejected "
@@ -174,7 +181,12 @@ def run(args: argparse.Namespace) -> int:
                             detector_offset_m=None if args.detector_offset_mm is None
                             else args.detector_offset_mm / 1e3,
                             detector_bias_px=args.detector_bias_px)
-    options = for_session(options, session.metadata)  # the detector's default offset
+    # the detector's default offset, and the synced clocks' covariance
+    options = for_session(options, session.metadata,
+                          rig if args.clock_uncertainty == "on" else None)
+    if options.clock_covariance is not None:
+        print(f"std_m includes the uncertainty of the {len(options.clock_covariance)} clock "
+              f"estimates of pslog sync (--clock-uncertainty off: the pixel noise alone)")
     observations = timed_observations(session.detections, rig)  # the rig's clock model
     if len(observations) == 0:
         raise FusionError(f"{args.session} has no detection to fuse")

@@ -72,8 +72,8 @@ def run(args: argparse.Namespace) -> int:
     progress.step(f"writing {args.output}")
     copy_session(args.session, args.output, rig=result.rig, force=args.force,
                  detections=outcome.detections if outcome.regularized else None,
-                 metadata={CLOCK_STD_KEY: clock_std_json(result.rig, stds, estimated,
-                                                         selection)})
+                 metadata={CLOCK_STD_KEY: clock_std_json(
+                     result.rig, stds, estimated, selection, _covariance(result))})
     if args.json:
         print(json.dumps({"cameras": [
             {"name": c.name, "offset_s": c.offset_s, "offset_std_s": c.offset_std_s,
@@ -91,6 +91,16 @@ def run(args: argparse.Namespace) -> int:
     print(f"residual {result.residual_px:.3f} px (pixel noise {result.noise_px:.3f} px); "
           f"wrote {args.output}")
     return 0
+
+
+def _covariance(result) -> tuple | None:
+    """The estimates' joint covariance as :func:`pslog.timing.clock_std_json` stores it:
+    ``((camera index, rig key), ...)`` and the matrix (None when nothing was estimated)."""
+    from pslog.estimation.sync import RIG_KEY
+
+    if result.covariance is None or not len(result.unknowns):
+        return None
+    return [(c, RIG_KEY[p]) for c, p in result.unknowns], result.covariance
 
 
 def _test_json(test) -> dict:

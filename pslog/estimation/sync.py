@@ -50,7 +50,7 @@ from ..camera import MAX_CLOCK_DRIFT_PPM, MAX_CLOCK_OFFSET_S
 from ..errors import FusionError
 from ..records import NS, Observations
 from ..rig import Rig
-from ..timing import camera_parameters
+from ..timing import CLOCK_KEYS, ClockCovariance, camera_parameters
 from . import _normal
 from .bspline import DEGREE, basis
 from .trajectory import (
@@ -69,7 +69,8 @@ from .trajectory import (
 )
 
 PARAMETERS = ("offset", "drift", "readout")
-_KEY = {"offset": "clock_offset", "drift": "clock_drift_ppm", "readout": "readout"}
+#: Each parameter's rig camera key (:data:`pslog.timing.CLOCK_KEYS`).
+RIG_KEY = {"offset": "clock_offset", "drift": "clock_drift_ppm", "readout": "readout"}
 #: Fewest detections a camera needs (with camera 1's in the same stretches) to be synced.
 MIN_DETECTIONS = 30
 #: The coarse scan fits at most this long a stretch of the session, seconds.
@@ -157,6 +158,20 @@ class SyncResult:
     unknowns: tuple[tuple[int, str], ...] = ()
     covariance: np.ndarray | None = None
 
+    def clock_covariance(self) -> ClockCovariance | None:
+        """The estimates' joint covariance as :class:`pslog.timing.ClockCovariance` (what
+        :attr:`pslog.fusion.FusionOptions.clock_covariance` takes), the parameters of zero
+        variance left out; None when nothing was estimated."""
+        if self.covariance is None or not len(self.unknowns):
+            return None
+        keep = [j for j in range(len(self.unknowns)) if self.covariance[j, j] > 0]
+        if not keep:
+            return None
+        return ClockCovariance(
+            np.array([self.unknowns[j][0] for j in keep]),
+            np.array([CLOCK_KEYS.index(RIG_KEY[self.unknowns[j][1]]) for j in keep]),
+            self.covariance[np.ix_(keep, keep)])
+
 
 def estimate_clocks(obs: Observations, rig: Rig, estimate=("offset",),
                     search_s: float | None = None, options: SmoothOptions | None = None,
@@ -207,7 +222,7 @@ def _estimate_clocks(obs: Observations, rig: Rig, estimate, search_s: float | No
     obs = _windows(obs)
     logged = obs.time_ns / NS
     params = _Clocks(rig, unknowns, 0.5 * float(logged.min() + logged.max()))
-    theta = params.to_internal(np.array([float(getattr(rig.cameras[c], _KEY[p]))
+    theta = params.to_internal(np.array([float(getattr(rig.cameras[c], RIG_KEY[p]))
                                          for c, p in unknowns]))
     if "offset" in estimate:
         theta = _scan_offsets(obs, rig, unknowns, theta, params, search_s, options)
@@ -261,7 +276,7 @@ def _estimate_clocks(obs: Observations, rig: Rig, estimate, search_s: float | No
     inlier = w > 0.5
     estimates, new_cams = [], []
     for c, camera in enumerate(rig.cameras):
-        values = {p: float(getattr(camera, _KEY[p])) for p in PARAMETERS}
+        values = {p: float(getattr(camera, RIG_KEY[p])) for p in PARAMETERS}
         stds = dict.fromkeys(PARAMETERS, 0.0)
         for j, (cj, p) in enumerate(unknowns):
             if cj == c:
@@ -324,7 +339,7 @@ def select_clocks(obs: Observations, rig: Rig, search_s: float | None = None,
         idx = [j for j, (_, q) in enumerate(full.unknowns) if q == p]
         x = np.array([getattr(full.cameras[c], _FIELD[p]) for c, _ in
                       (full.unknowns[j] for j in idx)])
-        x0 = np.array([float(getattr(rig.cameras[c], _KEY[p])) for c, _ in
+        x0 = np.array([float(getattr(rig.cameras[c], RIG_KEY[p])) for c, _ in
                        (full.unknowns[j] for j in idx)])
         assert full.covariance is not None
         cov = full.covariance[np.ix_(idx, idx)]

@@ -35,6 +35,7 @@ import numpy as np
 from ..errors import FusionError
 from ..records import Detections, Observations, Track
 from ..rig import Rig
+from ..timing import ClockCovariance
 from ..timing import observations as timed_observations
 from ._prepare import Prepared, default_max_gap_s, prepare
 from .prediction import fuse_predicted
@@ -121,6 +122,11 @@ class FusionOptions:
         stream emits a held point when the detection that decides it arrives, one stagger
         later); default :data:`FILTER_HOLD_NIS` (session 30); None: no hold, a point at its
         own detection (``pslog live`` turns it off)
+    clock_covariance : :class:`pslog.timing.ClockCovariance` or None, the covariance of the
+        rig's clock estimates (``pslog sync``'s, read from a synced session by
+        :func:`for_session`): every point's covariance gains its consider covariance, the
+        points' sensitivity to the clocks (:mod:`pslog.fusion.clock`; the points do not
+        move; offline only: a stream refuses it). None: the clocks are taken as exact
     """
 
     tolerance_s: float = 1e-3
@@ -135,6 +141,7 @@ class FusionOptions:
     detector_offset_m: float | None = None
     detector_bias_px: float | None = None
     filter_hold_nis: float | None = FILTER_HOLD_NIS
+    clock_covariance: ClockCovariance | None = None
 
     def __post_init__(self) -> None:
         if not self.tolerance_s >= 0:
@@ -188,12 +195,21 @@ def detector_bias_for(metadata) -> float:
     return 0.0 if simulated else DETECTOR_OFFSET_M
 
 
-def for_session(options: FusionOptions, metadata) -> FusionOptions:
-    """``options`` with the session's default detector offset (:func:`detector_bias_for`)
-    when it is None."""
-    if options.detector_offset_m is not None:
-        return options
-    return replace(options, detector_offset_m=detector_bias_for(metadata))
+def for_session(options: FusionOptions, metadata, rig: Rig | None = None) -> FusionOptions:
+    """``options`` with the session's defaults where they are None: the detector offset
+    (:func:`detector_bias_for`) and, given the ``rig`` fused with, the covariance of its
+    clocks that ``pslog sync`` stored in the metadata (:func:`pslog.timing.
+    read_clock_covariance`: the estimates the rig still holds; none for a session never
+    synced)."""
+    if options.detector_offset_m is None:
+        options = replace(options, detector_offset_m=detector_bias_for(metadata))
+    if rig is not None and options.clock_covariance is None:
+        from ..timing import read_clock_covariance
+
+        clock = read_clock_covariance(rig, metadata or {})
+        if clock is not None:
+            options = replace(options, clock_covariance=clock)
+    return options
 
 
 @dataclass(frozen=True)
@@ -470,7 +486,12 @@ def fuse(
     check_tolerance(rig, options.tolerance_s)
     prep = prepared if prepared is not None else prepare(observations, rig)
     resolved = replace(options, max_gap_s=options.max_gap_s or default_max_gap_s(rig))
-    return METHODS[method].function(prep, rig, resolved)
+    track = METHODS[method].function(prep, rig, resolved)
+    if options.clock_covariance is not None:  # the clocks' consider covariance
+        from .clock import with_clock_covariance
+
+        track = with_clock_covariance(track, method, prep, rig, resolved)
+    return track
 
 
 def fuse_all(

@@ -80,6 +80,9 @@ class StreamFuser:
                               f"{', '.join(causal_methods())}")
         self._immediate = not METHODS[method].waits_tolerance
         self.options = options or FusionOptions()
+        if self.options.clock_covariance is not None:
+            raise FusionError("the clocks' consider covariance (clock_covariance) is offline "
+                              "only (pslog.fusion.clock): fuse the session instead")
         check_tolerance(rig, self.options.tolerance_s)
         self._max_gap_s = self.options.max_gap_s or default_max_gap_s(rig)
         self._resolved = replace(self.options, max_gap_s=self._max_gap_s)  # (as fuse's)

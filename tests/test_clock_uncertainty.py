@@ -1,0 +1,263 @@
+"""The clocks' consider covariance (pslog/fusion/clock.py): a clock error acts as the pixel
+error it predicts, the numeric sensitivity's rules, and ``pslog sync`` -> ``pslog fuse``
+(``--clock-uncertainty``) on real sessions."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from _rally import rally
+from numpy.testing import assert_allclose
+from test_estimation import _rig
+
+from pslog.errors import FusionError, InputError
+from pslog.fusion import METHODS, FusionOptions, fuse, prepare
+from pslog.fusion._prepare import default_max_gap_s
+from pslog.fusion.clock import (
+    add_covariance,
+    clock_sensitivity,
+    image_velocity,
+    pixel_errors,
+)
+from pslog.fusion.stream import StreamFuser
+from pslog.log import read_session
+from pslog.records import NS, Observations, Track
+from pslog.rig import Rig
+from pslog.simulation import SimulationOptions, simulate
+from pslog.timing import CLOCK_STD_KEY, ClockCovariance, observations, read_clock_covariance
+
+
+def _obs(times_s, cameras, uv) -> Observations:
+    return Observations.from_unsorted(np.round(np.asarray(times_s) * NS).astype(np.int64),
+                                      cameras, np.asarray(uv, dtype=np.float64))
+
+
+def test_image_velocity_by_hand():
+    # camera 0: four detections, the last after a gap beyond max_gap (0.1 s) and one lone
+    # detection of camera 1
+    t = [0.0, 1 / 30, 3 / 30, 8 / 30, 0.05]
+    uv = [[100, 50], [103, 49], [112, 45], [200, 10], [7, 7]]
+    obs = _obs(t, [0, 0, 0, 0, 1], uv)
+    per_camera = [np.flatnonzero(obs.camera == c) for c in (0, 1)]
+    v = image_velocity(obs, per_camera, 0.1)
+    rows = per_camera[0]
+    assert_allclose(v[rows[0]], [3 * 30, -1 * 30])  # forward: the first
+    assert_allclose(v[rows[1]], np.array([12, -5]) / (3 / 30))  # central over both sides
+    assert_allclose(v[rows[2]], np.array([9, -4]) / (2 / 30))  # backward: next 5/30 s away
+    assert_allclose(v[rows[3]], [0, 0])  # alone within max_gap
+    assert_allclose(v[per_camera[1]], [[0, 0]])
+
+
+def test_pixel_errors_by_hand_with_correlated_parameters():
+    # camera 1's offset (σ 2 ms) and readout (σ 4 ms), correlated 0.5; camera 0 untouched
+    rig = _rig(2)
+    height = rig.cameras[1].height
+    obs = _obs([0.0, 0.01, 1 / 30 + 0.01, 2 / 30 + 0.01], [0, 1, 1, 1],
+               [[10, 10], [100, 150], [110, 180], [125, 200]])
+    sigma = np.array([2e-3, 4e-3])
+    cov = np.outer(sigma, sigma) * np.array([[1, 0.5], [0.5, 1]])
+    clock = ClockCovariance([1, 1], [0, 2], cov)
+    per_camera = [np.flatnonzero(obs.camera == c) for c in (0, 1)]
+    b = pixel_errors(obs, per_camera, rig, clock, 0.2)
+    velocity = image_velocity(obs, per_camera, 0.2)
+    for i in range(len(obs)):
+        a = np.array([1.0, obs.uv[i, 1] / height]) * (obs.camera[i] == 1)
+        # Σ_j b_ij b_ijᵀ = ż żᵀ (aᵀ Σ a): the clock's time error as pixels
+        assert_allclose(b[i] @ b[i].T, np.outer(velocity[i], velocity[i]) * (a @ cov @ a),
+                        rtol=1e-12, atol=1e-18)
+    assert np.all(b[obs.camera == 0] == 0)
+    # each column is -ż times a time: the pixel error points against the image velocity
+    row = int(np.flatnonzero(obs.camera == 1)[1])
+    for j in range(b.shape[2]):
+        assert abs(abs(np.dot(b[row, :, j], velocity[row]))
+                   - np.linalg.norm(b[row, :, j]) * np.linalg.norm(velocity[row])) < 1e-9
+    with pytest.raises(FusionError, match="camera 5 is not in the rig"):
+        pixel_errors(obs, per_camera, rig, ClockCovariance([5], [0], [[1e-6]]), 0.2)
+
+
+@pytest.mark.parametrize(("method", "median", "p90"), [
+    ("typeA", 0.01, 0.05), ("nearest", 0.01, 0.08), ("smooth", 0.08, 0.4),
+    ("filter", 0.3, None)])
+def test_a_clock_error_moves_the_points_as_the_sensitivity_predicts(method, median, p90):
+    # camera c2's clock is 0.2 ms off: the same detections placed 0.2 ms early. The truth at
+    # the stated times is a session whose c2 shutter really was 0.2 ms earlier (the rig's
+    # phase moved); the points' difference is the clock error's effect, which the
+    # sensitivity predicts as -S δ/σ (δ = estimate - truth = -0.2 ms)
+    rig = _rig(3, distortion=True)
+    motion, _ = rally(4.0, seed=3, speed=4.0, kick_every_s=0.9)
+    delta, sigma = 0.2e-3, 2e-3
+    faulted, _ = simulate(rig, motion, 4.0,
+                          SimulationOptions(seed=1, clock_offset_s={"c2": delta}))
+    moved = Rig(tuple(c.replace(offset=c.offset - delta) if c.name == "c2" else c
+                      for c in rig.cameras))
+    exact, _ = simulate(moved, motion, 4.0, SimulationOptions(seed=1))
+    options = replace(FusionOptions(), max_gap_s=default_max_gap_s(rig))
+    obs = observations(faulted, rig)
+    prep = prepare(obs, rig)
+    track = fuse(obs, rig, method, options, prepared=prep)
+    reference = fuse(observations(exact, moved), moved, method, options)
+    clock = ClockCovariance([1], [0], [[sigma**2]])
+    S = clock_sensitivity(
+        track, lambda o: METHODS[method].function(prepare(o, rig), rig, options), obs,
+        pixel_errors(obs, prep.per_camera, rig, clock, options.max_gap_s))
+    keys = track.time_ns * 256 + track.camera
+    both, i, j = np.intersect1d(keys, reference.time_ns * 256 + reference.camera,
+                                return_indices=True)
+    assert len(both) > 0.95 * len(track)
+    moved_by = track.position_world[i] - reference.position_world[j]
+    predicted = S[i, :, 0] * (-delta) / sigma
+    assert np.median(np.linalg.norm(predicted, axis=1)) > 0.1e-3  # a real effect
+    deviation = (np.linalg.norm(moved_by - predicted, axis=1)
+                 / np.linalg.norm(predicted, axis=1))
+    assert np.median(deviation) < median
+    if p90 is not None:
+        assert np.percentile(deviation, 90) < p90
+
+
+def _linear_run(A: np.ndarray, times: np.ndarray, *, flip_at=None, drop_when=None):
+    """A hand-made estimator: points ``A @ pixels`` at ``times`` (camera 0), with a decision
+    that moves point 0 by 1 m once pixel 0's u passes ``flip_at``, and point 1 left out when
+    ``drop_when(obs)``."""
+    def run(obs: Observations) -> Track:
+        p = (A @ obs.uv.ravel()).reshape(-1, 3)
+        if flip_at is not None and obs.uv[0, 0] > flip_at:
+            p[0] += 1.0
+        keep = np.ones(len(p), dtype=bool)
+        if drop_when is not None and drop_when(obs):
+            keep[1] = False
+        return Track("x", times[keep], p[keep], np.zeros(keep.sum(), np.int32))
+    return run
+
+
+def test_clock_sensitivity_rules_on_a_hand_made_estimator():
+    rng = np.random.default_rng(4)
+    obs = _obs([0.0, 0.1, 0.2], [0, 0, 0], [[10, 20], [30, 40], [50, 60]])
+    A = rng.normal(size=(9, 6))
+    times = obs.time_ns.copy()
+    errors = rng.normal(size=(3, 2, 2))  # two clock directions, pixels per σ
+    base = _linear_run(A, times)(obs)
+    S = clock_sensitivity(base, _linear_run(A, times), obs, errors)
+    for j in range(2):  # linear: exactly A times the column
+        assert_allclose(S[:, :, j], (A @ errors[:, :, j].ravel()).reshape(-1, 3), rtol=1e-6)
+    # a decision flipped by the +step (pixel 0 sits just below its threshold): the -step's
+    # side is taken for that point, the others keep the central difference
+    step = 1e-2 / np.max(np.abs(errors[:, :, 0]))
+    flip_at = 10 + 0.5 * step * abs(errors[0, 0, 0])
+    run = _linear_run(A, times, flip_at=flip_at)
+    S_flip = clock_sensitivity(run(obs), run, obs, errors[:, :, :1])
+    assert_allclose(S_flip[:, :, 0], S[:, :, 0], rtol=1e-6)
+    # a point one perturbed run (either) does not make takes the other side's difference
+    for drop_when in (lambda o: o.uv[1, 1] > 40, lambda o: o.uv[1, 1] < 40):
+        run = _linear_run(A, times, drop_when=drop_when)
+        S_drop = clock_sensitivity(run(obs), run, obs, errors[:, :, :1])
+        assert_allclose(S_drop[:, :, 0], S[:, :, 0], rtol=1e-6)
+    # none made it: no sensitivity known, 0
+    run = _linear_run(A, times, drop_when=lambda o: o.uv[1, 1] != 40)
+    assert np.all(clock_sensitivity(run(obs), run, obs, errors[:, :, :1])[1] == 0)
+
+
+def test_add_covariance_adds_s_st_to_each_form_of_covariance():
+    S = np.array([[[1.0, 0.0], [2.0, 1.0], [0.0, 3.0]]]) * 1e-3  # one point, two columns
+    added = S[0] @ S[0].T
+    cov = np.diag([4.0, 9.0, 1.0]) * 1e-6
+    full = Track("a", [0], [[0, 0, 0]], [0], {
+        **{f"cov_{k}_m2": [cov[i, j]] for k, (i, j) in {
+            "xx": (0, 0), "yy": (1, 1), "zz": (2, 2), "xy": (0, 1), "xz": (0, 2),
+            "yz": (1, 2)}.items()},
+        "std_m": [np.sqrt(np.trace(cov))]})
+    out = add_covariance(full, S)
+    assert_allclose(out.quality["cov_xy_m2"], [added[0, 1]])
+    assert_allclose(out.quality["cov_yz_m2"], [added[1, 2]])
+    assert_allclose(out.quality["cov_zz_m2"], [cov[2, 2] + added[2, 2]])
+    assert_allclose(out.quality["std_m"], [np.sqrt(np.trace(cov + added))])
+    axes = Track("f", [0], [[0, 0, 0]], [0], {"std_x_m": [2e-3], "std_y_m": [3e-3],
+                                               "std_z_m": [1e-3], "std_m": [np.sqrt(14e-6)]})
+    out = add_covariance(axes, S)
+    assert_allclose(out.quality["std_y_m"], [np.sqrt(9e-6 + added[1, 1])])
+    assert_allclose(out.quality["std_m"], [np.sqrt(14e-6 + np.trace(added))])
+    assert np.array_equal(out.position_world, axes.position_world)
+
+
+def test_clock_covariance_is_checked():
+    with pytest.raises(InputError, match="symmetric"):
+        ClockCovariance([1, 2], [0, 0], [[1e-6, 1e-7], [0.0, 1e-6]])
+    with pytest.raises(InputError, match="positive semi-definite"):
+        ClockCovariance([1, 2], [0, 0], [[1e-6, 2e-6], [2e-6, 1e-6]])
+    with pytest.raises(InputError, match="do not match"):
+        ClockCovariance([1], [0, 2], [[1e-6]])
+    with pytest.raises(InputError, match="a parameter is 0, 1 or 2"):
+        ClockCovariance([1], [3], [[1e-6]])
+    # a semi-definite matrix: the square root has a column per positive eigenvalue
+    L = ClockCovariance([1, 2], [0, 0], [[1e-6, 1e-6], [1e-6, 1e-6]]).factor()
+    assert L.shape == (2, 1) and np.allclose(L @ L.T, 1e-6)
+
+
+def test_a_session_synced_before_the_covariance_was_stored_takes_the_stds():
+    rig = _rig(3)
+    stds = {"c1": {"clock_offset": [0.0, 0.0], "clock_drift_ppm": [0.0, 0.0],
+                   "readout": [0.0, 3e-3]},
+            "c2": {"clock_offset": [0.0, 2e-3], "clock_drift_ppm": [0.0, 0.0],
+                   "readout": [0.0, 0.0]},
+            "c3": {"clock_offset": [0.5, 2e-3], "clock_drift_ppm": [0.0, 0.0],
+                   "readout": [0.0, 0.0]}}  # (c3's offset since replaced: 0.5 != 0)
+    clock = read_clock_covariance(rig, {CLOCK_STD_KEY: json.dumps({"cameras": stds})})
+    assert clock.camera.tolist() == [0, 1] and clock.parameter.tolist() == [2, 0]
+    assert_allclose(clock.matrix, np.diag([9e-6, 4e-6]))
+    assert read_clock_covariance(rig, {CLOCK_STD_KEY: "{not json"}) is None
+    assert read_clock_covariance(rig, {}) is None
+
+
+def test_a_stream_refuses_the_consider_covariance():
+    with pytest.raises(FusionError, match="offline only"):
+        StreamFuser(_rig(3), "typeA",
+                    FusionOptions(clock_covariance=ClockCovariance([1], [0], [[1e-6]])))
+
+
+def test_sync_then_fuse_widens_std_with_the_clocks_and_leaves_the_points(tmp_path, cli):
+    # the paper's rig, rolling shutters of 25 ms and offsets estimated (σ of 2-4 ms): with
+    # the clocks taken as exact the covariance is too small (NEES 2-3), with them near 1
+    path = tmp_path / "faulted.mcap"
+    code, _, err = cli("simulate", "--rig", "paper3", "--timing", "typeA", "--motion",
+                       "rally", "--duration", "6", "--noise-px", "0.3", "--readout", "25",
+                       "--clock-offset", "cam2=7", "--clock-offset", "cam3=-4", "--seed",
+                       "13", "-o", path)
+    assert code == 0, err
+    synced = tmp_path / "synced.mcap"
+    code, _, err = cli("sync", path, "-o", synced, "--estimate", "offset,readout")
+    assert code == 0, err
+    on, off = tmp_path / "on.mcap", tmp_path / "off.mcap"
+    code, out, err = cli("fuse", synced, "-o", on, "--method", "typeA,smooth,filter")
+    assert code == 0, err
+    assert "std_m includes the uncertainty of the 5 clock estimates of pslog sync" in out
+    code, out, err = cli("fuse", synced, "-o", off, "--method", "typeA,smooth,filter",
+                         "--clock-uncertainty", "off")
+    assert code == 0, err
+    assert "std_m includes" not in out
+    with_clocks, without = read_session(on).tracks, read_session(off).tracks
+    nees = {}
+    for label, path_ in (("on", on), ("off", off)):
+        code, out, err = cli("eval", path_, "--json")
+        assert code == 0, err
+        nees[label] = {r["method"]: r["quality"]["nees"] for r in json.loads(out)}
+    for method in ("typeA", "smooth", "filter"):
+        a, b = with_clocks[method], without[method]
+        assert np.array_equal(a.position_world, b.position_world)
+        assert np.array_equal(a.time_ns, b.time_ns)
+        assert np.all(a.quality["std_m"] >= b.quality["std_m"])
+        # (typeA's own std is the largest: its extrapolation's; the clocks add least)
+        assert np.median(a.quality["std_m"] / b.quality["std_m"]) > (
+            1.02 if method == "typeA" else 1.2)
+        assert 0.6 < nees["on"][method] < 1.3, (method, nees)
+    assert nees["off"]["smooth"] > 2 and nees["off"]["filter"] > 1.5, nees
+    # a rig whose clocks replace the synced ones takes no clock uncertainty
+    rig_file = tmp_path / "rig.toml"
+    code, out, err = cli("rig", "show", path)
+    assert code == 0, err
+    rig_file.write_text(out)
+    code, out, err = cli("fuse", synced, "-o", tmp_path / "other.mcap", "--method",
+                         "typeA", "--rig", rig_file)
+    assert code == 0, err
+    assert "std_m includes" not in out
