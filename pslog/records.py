@@ -37,8 +37,9 @@ QUALITY_FIELDS = {
              "simultaneous), seconds",
     "span_s": "the point's time minus the earliest capture time it uses, seconds",
     "std_m": "position standard deviation, sqrt(trace of the covariance), metres (first order "
-             "from the detections' pixel noise; not the motion model's error, but nearest's "
-             "includes the ball's motion between the shutters it pairs)",
+             "from the detections' pixel noise and, in a session from pslog sync, the "
+             "uncertainty of its clock estimates; not the motion model's error, but "
+             "nearest's includes the ball's motion between the shutters it pairs)",
     "std_x_m": "position standard deviation along x, metres (smooth, filter)",
     "std_y_m": "position standard deviation along y, metres (smooth, filter)",
     "std_z_m": "position standard deviation along z, metres (smooth, filter)",

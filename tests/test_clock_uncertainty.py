@@ -21,6 +21,7 @@ from pslog.fusion.clock import (
     clock_sensitivity,
     image_velocity,
     pixel_errors,
+    with_clock_covariance,
 )
 from pslog.fusion.stream import StreamFuser
 from pslog.log import read_session
@@ -261,3 +262,35 @@ def test_sync_then_fuse_widens_std_with_the_clocks_and_leaves_the_points(tmp_pat
                          "typeA", "--rig", rig_file)
     assert code == 0, err
     assert "std_m includes" not in out
+
+
+def test_smooth_adds_the_clocks_through_its_own_sensitivity_as_a_rerun_measures_it():
+    # smooth's consider columns come from the fit's implicit-function sensitivity
+    # (pixel_sensitivity); re-running the fit with the pixels moved (what the other methods
+    # do) measures the same response: the two agree to the numeric difference's noise
+    rig = _rig(3, distortion=True)
+    motion, _ = rally(4.0, seed=3, speed=4.0, kick_every_s=0.9)
+    detections, _ = simulate(rig, motion, 4.0, SimulationOptions(
+        seed=1, noise_px=0.3, readout_s={"c1": 0.02, "c2": 0.02, "c3": 0.02}))
+    sigma = np.array([2e-3, 2.5e-3, 3e-3, 3e-3])
+    cov = np.outer(sigma, sigma) * (0.7 * np.eye(4) + 0.3)  # correlated 0.3
+    clock = ClockCovariance([1, 2, 1, 0], [0, 0, 2, 2], cov)
+    options = replace(FusionOptions(clock_covariance=clock), max_gap_s=default_max_gap_s(rig))
+    obs = observations(detections, rig)
+    prep = prepare(obs, rig)
+    plain = METHODS["smooth"].function(prep, rig, replace(options, clock_covariance=None))
+    own = fuse(obs, rig, "smooth", options, prepared=prep)
+    rerun = with_clock_covariance(plain, "smooth", prep, rig, options)
+    assert np.array_equal(own.position_world, plain.position_world)
+    added_own = own.quality["std_m"] ** 2 - plain.quality["std_m"] ** 2
+    added_rerun = rerun.quality["std_m"] ** 2 - plain.quality["std_m"] ** 2
+    ratio = np.sqrt(added_own / added_rerun)
+    assert np.median(plain.quality["std_m"]) < 0.5 * np.median(own.quality["std_m"])
+    assert abs(np.median(ratio) - 1) < 0.03
+    assert np.percentile(ratio, 10) > 0.92 and np.percentile(ratio, 90) < 1.06
+    # the full covariance too, not only its trace: the xy and zz entries
+    for key in ("cov_xy_m2", "cov_zz_m2"):
+        gained = own.quality[key] - plain.quality[key]
+        measured = rerun.quality[key] - plain.quality[key]
+        scale = np.median(np.abs(measured)) + np.median(added_rerun) * 0.01
+        assert np.median(np.abs(gained - measured)) < 0.1 * scale, key

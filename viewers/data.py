@@ -330,7 +330,8 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
         rest = [m for m in missing if m != "typeA" or "typeA" not in tracks]
         if rest:
             tracks.update(fuse_all(session.detections, session.rig, rest,
-                                   for_session(FusionOptions(), session.metadata)))
+                                   for_session(FusionOptions(), session.metadata,
+                                               session.rig)))
         notes.append(f"fused on the fly: {', '.join(missing)}")
         empty = [m for m in missing if not len(tracks[m])]
         if empty:
@@ -386,9 +387,18 @@ def _type_a_with_construction(session: Session
     observations both rest on."""
     from pslog.fusion import check_tolerance, type_a_explained
 
-    rig, options = session.rig, FusionOptions()
+    rig = session.rig
+    options = for_session(FusionOptions(), session.metadata, rig)
     check_tolerance(rig, options.tolerance_s)
     obs = _type_a_observations(session)
     # (with the long-gap confirmation, as pslog fuse: the points it drops are not shown)
-    track, construction = type_a_explained(prepare(obs, rig), rig, options)
+    prep = prepare(obs, rig)
+    track, construction = type_a_explained(prep, rig, options)
+    if options.clock_covariance is not None and len(track):
+        # (as pslog fuse: the synced clocks' uncertainty in the covariance; points unchanged)
+        from pslog.fusion._prepare import default_max_gap_s
+        from pslog.fusion.clock import with_clock_covariance
+
+        track = with_clock_covariance(track, "typeA", prep, rig, replace(
+            options, max_gap_s=options.max_gap_s or default_max_gap_s(rig)))
     return track, construction, obs

@@ -139,7 +139,7 @@ def _run(args: argparse.Namespace, folder: Path) -> int:
               f"typeB timing), not type A; the paper's table below has them")
     # (as pslog fuse: smooth's detector offset for detections found in images)
     tracks = fuse_all(session.detections, session.rig, methods,
-                      for_session(FusionOptions(), session.metadata))
+                      for_session(FusionOptions(), session.metadata, session.rig))
     copy_session(session_path, fused_path, tracks=list(tracks.values()), force=args.force)
 
     print(f"3/4 accuracy against ground truth ({fused_path}):\n")

@@ -242,10 +242,12 @@ class Trajectory:
     valid_s : (n_pieces, 2) float64 or None, seconds since ``t0_ns``: the part of each piece
         the detections determine (an end segment beyond a break that too few detections
         hold is left out, :func:`_underdetermined_ends`); None: every piece whole
-    consider : (m, 3, 2·cameras) float64 or None, metres: the control points' sensitivity
-        to each camera's detector bias (per image axis) times its standard deviation
-        (:func:`bias_sensitivity`); the covariance of a point ``p = Σ N_a c_a`` gains
-        ``S Sᵀ``, ``S = Σ N_a consider_a`` (:func:`consider_points`). None: no bias term
+    consider : (m, 3, k) float64 or None, metres: the control points' sensitivity to each
+        consider parameter times its standard deviation: each camera's detector bias (per
+        image axis, 2·cameras columns, :func:`bias_sensitivity`), then the columns of
+        ``fit_trajectory``'s ``consider_px`` (the clocks', :func:`pixel_sensitivity`); the
+        covariance of a point ``p = Σ N_a c_a`` gains ``S Sᵀ``, ``S = Σ N_a consider_a``
+        (:func:`consider_points`). None: no such term
     offset_m : float, metres, the standard deviation per axis of the detector's common 3-D
         offset: every point's covariance gains ``offset_m² I₃`` (its sensitivity is ``I₃``,
         :func:`_add_consider`)
@@ -863,7 +865,8 @@ class _Solver:
         return max(dof * 1.4826 * float(median), self.options.min_noise_px)
 
 
-def fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions | None = None) -> Fit:
+def fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions | None = None, *,
+                   consider_px: np.ndarray | None = None) -> Fit:
     """Fit one continuous trajectory to every observation's ray (module docstring).
 
     Parameters
@@ -871,6 +874,11 @@ def fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions | None = 
     obs : Observations, sorted by (time, camera), times already corrected to true capture times
     rig : Rig, with at least two cameras
     options : SmoothOptions
+    consider_px : (n, 2, k) float64 or None, pixels: the error one standard deviation of
+        each of ``k`` independent consider parameters puts on each observation's pixel (e.g.
+        the clocks', :func:`pslog.fusion.clock.pixel_errors`): the covariance gains their
+        ``S Sᵀ`` through the fit's sensitivity (:func:`pixel_sensitivity`); the points do
+        not move
 
     Returns
     -------
@@ -879,11 +887,16 @@ def fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions | None = 
     from ._memory import kept
 
     with kept():  # the iterations' large temporaries reused, not faulted in again
-        return _fit_trajectory(obs, rig, options or SmoothOptions())
+        return _fit_trajectory(obs, rig, options or SmoothOptions(), consider_px)
 
 
-def _fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions) -> Fit:
+def _fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions,
+                    consider_px: np.ndarray | None = None) -> Fit:
     """:func:`fit_trajectory`."""
+    if consider_px is not None and (np.ndim(consider_px) != 3 or len(consider_px) != len(obs)
+                                    or np.shape(consider_px)[1] != 2):
+        raise FusionError(f"consider_px must be (n, 2, k) for {len(obs)} observations, got "
+                          f"shape {np.shape(consider_px)}")
     if len(rig) < 2:
         raise FusionError(f"a trajectory fit needs at least two cameras (one camera cannot "
                           f"triangulate); rig has {len(rig)}")
@@ -979,6 +992,10 @@ def _fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions) -> Fit:
     band *= variance_factor(r, w, sigma, p_eff)  # in place: the band is this fit's own
     consider = (options.detector_bias_px * bias_sensitivity(problem, U, J, r, sigma)
                 if options.detector_bias_px > 0 else None)
+    if consider_px is not None and consider_px.shape[2]:
+        shifted = pixel_sensitivity(problem, U, J, r, sigma,
+                                    np.asarray(consider_px, np.float64)[problem.rows])
+        consider = shifted if consider is None else np.concatenate([consider, shifted], axis=2)
     del U
     out_rows, valid_s = _underdetermined_ends(problem, breaks, np.linalg.norm(r, axis=1) / sigma)
     trajectory = Trajectory(problem.t0_ns, problem.knots, problem.offset, control, band,
@@ -1188,12 +1205,49 @@ def bias_sensitivity(problem: _Problem, U: np.ndarray, J: np.ndarray, r: np.ndar
     a 0.3 px session.) One right-hand side per camera and axis, two banded solves per camera;
     ``U`` (the factor of ``H``) serves if ``H_ψ`` is not positive definite (residuals beyond
     ``c σ`` make ``W_i`` indefinite along them)."""
-    first, N = problem.first, problem.N
+    N = problem.N
     camera = np.asarray(problem.obs.camera[problem.rows], np.int64)
-    n3, k = U.shape[1], 2 * len(problem.rig)
+    k = 2 * len(problem.rig)
+    # W_i J_i / σ² (n, 2, 3): the Cauchy cost's Hessian in r_i times ∂r/∂X; row (n, 4, 3):
+    # the unknown of (control point a, coord d)
+    WJ, factor, row, n3 = _consider_system(problem, U, J, r, sigma)
+    rhs = np.zeros(n3 * k)
+    for a in range(2):  # column 2c + a: Σ_{i∈c} N_i ⊗ (J_iᵀ W_i e_a) / σ²
+        value = N[:, :, None] * WJ[:, a, None, :]  # (n, 4, 3); W symmetric
+        rhs += np.bincount((row * k + (2 * camera + a)[:, None, None]).ravel(), value.ravel(),
+                           minlength=n3 * k)
+    return _normal.solve(factor, rhs.reshape(n3, k)).reshape(-1, 3, k)
+
+
+def pixel_sensitivity(problem: _Problem, U: np.ndarray, J: np.ndarray, r: np.ndarray,
+                      sigma: float, shifts: np.ndarray) -> np.ndarray:
+    """``∂ĉ/∂β`` (m, 3, k): how the fitted control points move per unit of each of ``k``
+    consider parameters ``β_j`` that add ``shifts[i, :, j] β_j`` pixels to detection ``i``
+    (``shifts``: (n, 2, k), the problem's rows) — :func:`bias_sensitivity`'s implicit
+    function theorem with any per-detection shift: ``Δĉ_j = H_ψ⁻¹ Σ_i (N_i ⊗ J_iᵀ W_i
+    shifts_ij) / σ²``, ``W_i`` the Cauchy cost's Hessian in the residual and ``H_ψ`` its
+    normal matrix (there; ``U`` where ``H_ψ`` is not positive definite). The clocks' columns
+    (:func:`pslog.fusion.clock.pixel_errors`): a clock error is the pixel error it makes at
+    the stated times."""
+    WJ, factor, row, n3 = _consider_system(problem, U, J, r, sigma)
+    g = np.einsum("naj,nak->njk", WJ, shifts)  # (n, 3, k): J_iᵀ W_i shifts_i / σ²
+    k = shifts.shape[2]
+    rhs = np.zeros((n3, k))
+    flat = row.ravel()
+    for j in range(k):
+        rhs[:, j] = np.bincount(flat, (problem.N[:, :, None] * g[:, None, :, j]).ravel(),
+                                minlength=n3)
+    return _normal.solve(factor, rhs).reshape(-1, 3, k)
+
+
+def _consider_system(problem: _Problem, U: np.ndarray, J: np.ndarray, r: np.ndarray,
+                     sigma: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """What :func:`pixel_sensitivity` solves with: ``W_i J_i / σ²`` (n, 2, 3), the factor of
+    ``H_ψ`` (or ``U``), each detection's unknowns' rows (n, 4, 3) and their count."""
+    first = problem.first
+    n3 = U.shape[1]
     s = np.sum(r * r, axis=1) / sigma**2
     w = 1 / (1 + s / _CAUCHY**2)
-    # W_i J_i / σ² (n, 2, 3): the Cauchy cost's Hessian in r_i times ∂r/∂X
     W = (w[:, None, None] * np.eye(2)
          - (2 * w * w / (_CAUCHY * sigma) ** 2)[:, None, None] * r[:, :, None] * r[:, None, :])
     WJ = np.einsum("nab,nbj->naj", W, J) / sigma**2
@@ -1205,13 +1259,8 @@ def bias_sensitivity(problem: _Problem, U: np.ndarray, J: np.ndarray, r: np.ndar
     except FusionError:
         factor = U
     row = 3 * (np.asarray(first, np.int64)[:, None, None] + np.arange(4)[None, :, None]) \
-        + np.arange(3)[None, None, :]  # (n, 4, 3): the unknown of (control point a, coord d)
-    rhs = np.zeros(n3 * k)
-    for a in range(2):  # column 2c + a: Σ_{i∈c} N_i ⊗ (J_iᵀ W_i e_a) / σ²
-        value = N[:, :, None] * WJ[:, a, None, :]  # (n, 4, 3); W symmetric
-        rhs += np.bincount((row * k + (2 * camera + a)[:, None, None]).ravel(), value.ravel(),
-                           minlength=n3 * k)
-    return _normal.solve(factor, rhs.reshape(n3, k)).reshape(-1, 3, k)
+        + np.arange(3)[None, None, :]
+    return WJ, factor, row, n3
 
 
 def _add_consider(cov: np.ndarray, rows: np.ndarray | slice, trajectory: Trajectory,

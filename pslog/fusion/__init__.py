@@ -248,6 +248,9 @@ class Method:
         contested choices' and their camera's later choices at their pixel (``smooth``:
         the regular doubt's choices are mostly the ball's own, and its covariance on
         dirty sessions was calibrated without them; docs/methods.md, "A contested start")
+    own_clock_consider : its function adds ``options.clock_covariance``'s consider
+        covariance itself (``smooth``: through the fit's sensitivity); False: :func:`fuse`
+        adds it by re-running the method (:func:`pslog.fusion.clock.with_clock_covariance`)
     """
 
     name: str
@@ -261,6 +264,7 @@ class Method:
     kernels: tuple[str, ...] = ()
     uses_doubt: bool = False
     doubt: Literal[True, "start"] = True
+    own_clock_consider: bool = False
 
     def suits(self, shared: bool, alone: bool) -> bool:
         """True if a session with (or without) shared and lone instants suits the method."""
@@ -373,7 +377,7 @@ METHODS: dict[str, Method] = {m.name: m for m in (
            "one continuous trajectory fitted to every detection's ray (offline)",
            "continuous-time batch estimation: Furgale et al. 2013; Singer 1970 motion prior",
            kernels=("pslog.estimation", "pslog.estimation._kernels"), uses_doubt=True,
-           doubt="start"),
+           doubt="start", own_clock_consider=True),
     Method("filter", _filter, True, False, frozenset(),
            "causal extended Kalman filter with bounce/kick gating, a point at every detection",
            "Bar-Shalom, Li & Kirubarajan 2001 (EKF, NIS gate); docs/methods.md",
@@ -487,7 +491,7 @@ def fuse(
     prep = prepared if prepared is not None else prepare(observations, rig)
     resolved = replace(options, max_gap_s=options.max_gap_s or default_max_gap_s(rig))
     track = METHODS[method].function(prep, rig, resolved)
-    if options.clock_covariance is not None:  # the clocks' consider covariance
+    if options.clock_covariance is not None and not METHODS[method].own_clock_consider:
         from .clock import with_clock_covariance
 
         track = with_clock_covariance(track, method, prep, rig, resolved)

@@ -61,10 +61,19 @@ def fuse_smooth(prep: Prepared, rig: Rig, options) -> Track:
         if n_doubt:
             obs = Observations(obs.time_ns[kept], obs.camera[kept], obs.uv[kept],
                                obs.frame_index[kept])
+    # the clocks' consider covariance through the fit's own sensitivity (exact, where the
+    # other methods re-run: pslog.fusion.clock)
+    consider_px = None
+    if options.clock_covariance is not None:
+        from .clock import pixel_errors
+
+        consider_px = pixel_errors(obs, [np.flatnonzero(obs.camera == c)
+                                         for c in range(len(rig))],
+                                   rig, options.clock_covariance, options.max_gap_s)
     try:
         fit = fit_trajectory(obs, rig, SmoothOptions(
             max_gap_s=options.max_gap_s, detector_offset_m=options.detector_offset_m or 0.0,
-            detector_bias_px=options.detector_bias_px or 0.0))
+            detector_bias_px=options.detector_bias_px or 0.0), consider_px=consider_px)
     except FusionError as exc:
         if "two cameras" in str(exc):
             return _empty()
