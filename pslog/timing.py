@@ -323,21 +323,23 @@ def read_clock_covariance(rig: Rig, metadata) -> ClockCovariance | None:
               for key in CLOCK_KEYS if row.get(key, 0.0) > 0]
     if not params:
         return None
-    variance = np.diag([stds[c][CLOCK_KEYS[p]] ** 2 for c, p in params])
+    choices = [np.diag([stds[c][CLOCK_KEYS[p]] ** 2 for c, p in params])]
     try:
         stored = json.loads(metadata.get(CLOCK_STD_KEY))["covariance"]
         names = [(rig.names.index(name), CLOCK_KEYS.index(key))
                  for name, key in stored["parameters"]]
         matrix = np.asarray(stored["matrix"], dtype=np.float64)
         where = [names.index(p) for p in params]
-        variance = matrix[np.ix_(where, where)]
+        choices.insert(0, matrix[np.ix_(where, where)])
     except (ValueError, TypeError, KeyError, IndexError, AttributeError):
         pass  # (none stored, or not for these parameters: the standard deviations alone)
-    try:
-        return ClockCovariance(np.array([c for c, _ in params]),
-                               np.array([p for _, p in params]), variance)
-    except InputError:
-        return None
+    for variance in choices:  # (a stored matrix no covariance is: the stds alone)
+        try:
+            return ClockCovariance(np.array([c for c, _ in params]),
+                                   np.array([p for _, p in params]), variance)
+        except InputError:
+            continue
+    return None
 
 
 @dataclass(frozen=True)

@@ -208,6 +208,19 @@ def test_a_session_synced_before_the_covariance_was_stored_takes_the_stds():
     assert clock.camera.tolist() == [0, 1] and clock.parameter.tolist() == [2, 0]
     assert_allclose(clock.matrix, np.diag([9e-6, 4e-6]))
     assert read_clock_covariance(rig, {CLOCK_STD_KEY: "{not json"}) is None
+    # a stored matrix that is no covariance (here: not symmetric, and one with NaN) is
+    # not used: the standard deviations alone
+    for matrix in ([[9e-6, 1e-6], [0.0, 4e-6]], [[float("nan"), 0.0], [0.0, 4e-6]]):
+        bad = {"cameras": stds, "covariance": {"parameters": [["c1", "readout"],
+                                                               ["c2", "clock_offset"]],
+                                               "matrix": matrix}}
+        clock = read_clock_covariance(rig, {CLOCK_STD_KEY: json.dumps(bad)})
+        assert_allclose(clock.matrix, np.diag([9e-6, 4e-6]))
+    good = {"cameras": stds, "covariance": {"parameters": [["c2", "clock_offset"],
+                                                            ["c1", "readout"]],
+                                            "matrix": [[4e-6, 1e-6], [1e-6, 9e-6]]}}
+    clock = read_clock_covariance(rig, {CLOCK_STD_KEY: json.dumps(good)})
+    assert_allclose(clock.matrix, [[9e-6, 1e-6], [1e-6, 4e-6]])  # in the rig's order
     assert read_clock_covariance(rig, {}) is None
 
 
