@@ -289,7 +289,10 @@ class ClockCovariance:
         if not np.all(np.isfinite(matrix)) or not np.allclose(matrix, matrix.T, rtol=1e-9,
                                                                atol=0.0):
             raise InputError("clock covariance: the matrix must be finite and symmetric")
-        if k and np.linalg.eigvalsh(matrix).min() < -1e-9 * max(np.abs(matrix).max(), 1e-300):
+        # (judged on the correlations: the units (s², ppm², s·ppm) are ~1e10 apart, so a
+        # tolerance relative to the largest entry would pass an indefinite offsets' block)
+        if k and (np.any(np.diag(matrix) < 0)
+                  or np.linalg.eigvalsh(_correlation(matrix)[0]).min() < -1e-9):
             raise InputError("clock covariance: the matrix is not positive semi-definite")
         object.__setattr__(self, "camera", camera)
         object.__setattr__(self, "parameter", parameter)
@@ -301,10 +304,25 @@ class ClockCovariance:
     def factor(self) -> np.ndarray:
         """``L`` (k, m) with ``L Lᵀ`` = :attr:`matrix` and m <= k its positive eigenvalues'
         count (a semi-definite matrix's square root: a parameter of zero variance, or two
-        perfectly correlated, need no column)."""
-        values, vectors = np.linalg.eigh(self.matrix)
+        perfectly correlated, need no column).
+
+        The eigen-decomposition is of the correlation matrix, scaled back: the parameters'
+        units differ by ~1e10 in variance (an offset's σ of 0.1 ms is 1e-8 s², a short
+        session's drift σ of 100 ppm 1e4 ppm²), and a cut-off relative to the largest
+        eigenvalue of the raw matrix dropped the offsets' columns whole (and eigh's absolute
+        error, eps times the largest, blurred what it kept)."""
+        corr, scale = _correlation(self.matrix)
+        values, vectors = np.linalg.eigh(corr)
         keep = values > 1e-12 * max(float(values.max(initial=0.0)), 1e-300)
-        return vectors[:, keep] * np.sqrt(values[keep])
+        return scale[:, None] * vectors[:, keep] * np.sqrt(values[keep])
+
+
+def _correlation(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(C, d)`` with ``matrix = d C d`` (``d`` (k,) the standard deviations, 1 where a
+    variance is not positive, so that such a row stays as it is)."""
+    variance = np.diag(matrix)
+    scale = np.where(variance > 0, np.sqrt(np.abs(variance)), 1.0)
+    return matrix / np.outer(scale, scale), scale
 
 
 def read_clock_covariance(rig: Rig, metadata) -> ClockCovariance | None:

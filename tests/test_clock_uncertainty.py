@@ -307,3 +307,21 @@ def test_smooth_adds_the_clocks_through_its_own_sensitivity_as_a_rerun_measures_
         measured = rerun.quality[key] - plain.quality[key]
         scale = np.median(np.abs(measured)) + np.median(added_rerun) * 0.01
         assert np.median(np.abs(gained - measured)) < 0.1 * scale, key
+
+
+def test_the_square_root_keeps_a_sharp_offset_beside_a_broad_drift():
+    # units ~1e10 apart in variance (s² against ppm²): a short session's drift σ of 100-300
+    # ppm beside offsets' σ of 0.1-0.7 ms (pslog sync --estimate offset,drift of a 4-s
+    # global-shutter session: 0.74 ms, 297 ppm, correlated -0.87). The square root must give
+    # back every variance and correlation, the offsets' included
+    for so, sd, rho in ((1e-4, 100.0, 0.0), (2e-5, 20.0, 0.9), (7.4e-4, 296.5, -0.869)):
+        M = np.array([[so * so, rho * so * sd], [rho * so * sd, sd * sd]])
+        L = ClockCovariance([1, 1], [0, 1], M).factor()
+        d = np.sqrt(np.diag(M))
+        assert_allclose((L @ L.T) / np.outer(d, d), M / np.outer(d, d), atol=1e-9)
+    # and an offsets' block that is not positive semi-definite is refused, whatever a drift's
+    # variance beside it
+    bad = np.diag([1e-8, 1e-8, 1e4])
+    bad[0, 1] = bad[1, 0] = 2e-8
+    with pytest.raises(InputError, match="positive semi-definite"):
+        ClockCovariance([1, 2, 1], [0, 0, 1], bad)
