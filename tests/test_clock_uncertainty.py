@@ -325,3 +325,27 @@ def test_the_square_root_keeps_a_sharp_offset_beside_a_broad_drift():
     bad[0, 1] = bad[1, 0] = 2e-8
     with pytest.raises(InputError, match="positive semi-definite"):
         ClockCovariance([1, 2, 1], [0, 0, 1], bad)
+
+
+def test_a_near_zero_correlation_rounded_unevenly_is_still_symmetric():
+    # pslog sync's T Σ Tᵀ (RS combined 2 min own4, seed 97303): an entry of correlation
+    # 4.7e-6 and its transpose differed by 1.8e-9 of themselves, symmetric to 1e-14 of
+    # σ_i σ_j. It must be taken (refused, a fuse read no clock covariance and said nothing)
+    rig = _rig(3)
+    d = np.array([1e-3, 30.0, 2e-3])  # s, ppm, s
+    corr = np.array([[1.0, -0.6, 4.7e-6], [-0.6, 1.0, 0.2], [4.7e-6, 0.2, 1.0]])
+    M = corr * np.outer(d, d)
+    M[0, 2] *= 1 + 1.8e-9
+    clock = ClockCovariance([1, 1, 2], [0, 1, 0], M)
+    assert np.array_equal(clock.matrix, clock.matrix.T)
+    stds = {"c1": {}, "c2": {"clock_offset": [0.0, d[0]], "clock_drift_ppm": [0.0, d[1]]},
+            "c3": {"clock_offset": [0.0, d[2]]}}
+    stored = {"cameras": stds, "covariance": {
+        "parameters": [["c2", "clock_offset"], ["c2", "clock_drift_ppm"], ["c3", "clock_offset"]],
+        "matrix": M.tolist()}}
+    read = read_clock_covariance(rig, {CLOCK_STD_KEY: json.dumps(stored)})
+    assert read is not None and read.matrix[0, 2] != 0
+    # an asymmetry that is one, of correlations, is still refused
+    M[0, 2] += 1e-6 * d[0] * d[2]
+    with pytest.raises(InputError, match="symmetric"):
+        ClockCovariance([1, 1, 2], [0, 1, 0], M)

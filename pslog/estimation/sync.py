@@ -264,6 +264,7 @@ def _estimate_clocks(obs: Observations, rig: Rig, estimate, search_s: float | No
             K = cov_t @ S[:n_t, n_t:]
             cov = cov_t + K @ _nuisance_covariance(rig, regularized) @ K.T
         cov = T @ cov[:q, :q] @ T.T
+        cov = (cov + cov.T) / 2  # (exactly symmetric: the products leave ~1e-14 of σ_i σ_j)
     else:
         cov = np.zeros((0, 0))
     theta = params.to_external(theta)
