@@ -256,7 +256,7 @@ def read_clock_std(rig: Rig, metadata) -> list[dict[str, float]] | None:
         return None
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class ClockCovariance:
     """The joint covariance of a rig's estimated clock parameters (``pslog sync``'s, read
     from a session by :func:`read_clock_covariance`): what the fused points' consider
@@ -304,6 +304,18 @@ class ClockCovariance:
 
     def __len__(self) -> int:
         return len(self.camera)
+
+    def __eq__(self, other: object) -> bool:
+        # by value, as FusionOptions (frozen, hashable) compares and hashes its fields: the
+        # dataclass's own compared arrays (ValueError) and could not hash them (TypeError)
+        if not isinstance(other, ClockCovariance):
+            return NotImplemented
+        return (np.array_equal(self.camera, other.camera)
+                and np.array_equal(self.parameter, other.parameter)
+                and np.array_equal(self.matrix, other.matrix))
+
+    def __hash__(self) -> int:
+        return hash((self.camera.tobytes(), self.parameter.tobytes(), self.matrix.tobytes()))
 
     def factor(self) -> np.ndarray:
         """``L`` (k, m) with ``L Lᵀ`` = :attr:`matrix` and m <= k its positive eigenvalues'

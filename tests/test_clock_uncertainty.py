@@ -349,3 +349,15 @@ def test_a_near_zero_correlation_rounded_unevenly_is_still_symmetric():
     M[0, 2] += 1e-6 * d[0] * d[2]
     with pytest.raises(InputError, match="symmetric"):
         ClockCovariance([1, 1, 2], [0, 1, 0], M)
+
+
+def test_options_with_a_clock_covariance_compare_and_hash_by_value():
+    # FusionOptions is frozen and hashable (pslog.live.fuser keys its warm-up by it): with a
+    # ClockCovariance the dataclass's own __eq__ compared arrays (ValueError) and hashing
+    # failed (TypeError)
+    def make(var):
+        return FusionOptions(clock_covariance=ClockCovariance([1, 2], [0, 0],
+                                                              np.diag([1e-6, var])))
+    a, b, c = make(1e-6), make(1e-6), make(2e-6)
+    assert a == b and hash(a) == hash(b) and a != c and a != FusionOptions()
+    assert len({a, b, c}) == 2
