@@ -361,3 +361,32 @@ def test_options_with_a_clock_covariance_compare_and_hash_by_value():
     a, b, c = make(1e-6), make(1e-6), make(2e-6)
     assert a == b and hash(a) == hash(b) and a != c and a != FusionOptions()
     assert len({a, b, c}) == 2
+
+
+
+@pytest.mark.parametrize("pixel", [np.nan, 1e5])
+def test_a_detection_without_a_pixel_leaves_the_clocks_consider_as_it_was(pixel):
+    # a NaN pixel, or one far beyond the image (docs/methods.md, "A detection without a
+    # ray"): no data to any method. Its NaN had made every column NaN (smooth's std_m NaN at
+    # every point; the other methods' columns skipped, the clocks' share gone) and 1e5 px
+    # gave its neighbours image velocities of ~1e6 px/s (std_m of metres)
+    rig = _rig(3, distortion=True)
+    motion, _ = rally(4.0, seed=3, speed=4.0, kick_every_s=0.9)
+    detections, _ = simulate(rig, motion, 4.0, SimulationOptions(seed=2, noise_px=0.3))
+    obs = observations(detections, rig)
+    clock = ClockCovariance([1, 2, 2], [0, 0, 2], np.diag([2e-3, 3e-3, 4e-3]) ** 2)
+    options = FusionOptions(clock_covariance=clock)
+    row = int(np.flatnonzero(obs.camera == 1)[40])
+    uv = obs.uv.copy()
+    uv[row] = pixel
+    broken = Observations(obs.time_ns, obs.camera, uv, obs.frame_index)
+    for method in ("smooth", "typeA"):
+        clean = fuse(obs, rig, method, options)
+        plain = fuse(broken, rig, method, replace(options, clock_covariance=None))
+        out = fuse(broken, rig, method, options)
+        assert np.all(np.isfinite(out.quality["std_m"])), method
+        added = out.quality["std_m"] ** 2 - plain.quality["std_m"] ** 2
+        assert np.median(np.sqrt(added)) > 0.3 * np.median(
+            np.sqrt(clean.quality["std_m"] ** 2 - fuse(obs, rig, method, replace(
+                options, clock_covariance=None)).quality["std_m"] ** 2)), method
+        assert out.quality["std_m"].max() < 2 * clean.quality["std_m"].max(), method

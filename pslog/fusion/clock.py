@@ -57,16 +57,19 @@ STEP_PX = 1e-2
 _FLIP_RATIO = 0.5
 
 
-def image_velocity(obs: Observations, per_camera: list[np.ndarray], max_gap_s: float
-                   ) -> np.ndarray:
+def image_velocity(obs: Observations, per_camera: list[np.ndarray], max_gap_s: float,
+                   usable: np.ndarray | None = None) -> np.ndarray:
     """Each detection's image velocity in its own camera, pixels per second (n, 2): the
     central difference of the camera's neighbouring detections (one side where the other
     is further than ``max_gap_s`` or absent; 0 where both are).
 
-    ``obs``: (n,) rows; ``per_camera``: each camera's rows, in time order."""
+    ``obs``: (n,) rows; ``per_camera``: each camera's rows, in time order; ``usable``: (n,)
+    bool, the rows with a pixel (others are no neighbour and have velocity 0; None: all)."""
     velocity = np.zeros((len(obs), 2))
     t = obs.time_ns.astype(np.float64) / NS
     for rows in per_camera:
+        if usable is not None:
+            rows = rows[usable[rows]]
         if len(rows) < 2:
             continue
         uv, tc = obs.uv[rows], t[rows]
@@ -102,11 +105,19 @@ def pixel_errors(obs: Observations, per_camera: list[np.ndarray], rig: Rig,
         raise FusionError(f"clock covariance: camera {int(clock.camera.max())} is not in "
                           f"the rig of {len(rig)} cameras")
     height = np.array([c.height for c in rig.cameras], dtype=np.float64)[obs.camera]
+    # a detection without a pixel (NaN, or far beyond the image: no detection to any
+    # method, as pslog.estimation.trajectory's fit) moves nothing and is no neighbour: its
+    # NaN had made every column NaN (smooth's std NaN everywhere, the others' columns
+    # skipped), and a pixel 1e5 px off gave its neighbours velocities of 1e6 px/s
+    extent = 10 * np.array([max(c.width, c.height) for c in rig.cameras],
+                           dtype=np.float64)[obs.camera]
+    usable = np.all(np.isfinite(obs.uv), axis=1) & np.all(
+        np.abs(np.nan_to_num(obs.uv, nan=np.inf)) <= extent[:, None], axis=1)
     a = clock_jacobian(obs.time_ns.astype(np.float64) / NS, obs.uv[:, 1], height)  # (n, 3)
-    dt = np.where(obs.camera[:, None] == clock.camera[None, :],
+    dt = np.where((obs.camera[:, None] == clock.camera[None, :]) & usable[:, None],
                   a[:, clock.parameter], 0.0)  # (n, k): seconds per unit of each parameter
     dt_sigma = dt @ clock.factor()  # (n, m): seconds per standard deviation of each column
-    velocity = image_velocity(obs, per_camera, max_gap_s)
+    velocity = image_velocity(obs, per_camera, max_gap_s, usable)
     return -velocity[:, :, None] * dt_sigma[:, None, :]
 
 
