@@ -390,3 +390,18 @@ def test_a_detection_without_a_pixel_leaves_the_clocks_consider_as_it_was(pixel)
             np.sqrt(clean.quality["std_m"] ** 2 - fuse(obs, rig, method, replace(
                 options, clock_covariance=None)).quality["std_m"] ** 2)), method
         assert out.quality["std_m"].max() < 2 * clean.quality["std_m"].max(), method
+
+
+def test_pixel_errors_of_a_drift_grow_with_the_session_time():
+    # the drift's derivative is 1e-6 * t seconds per ppm (pslog.timing: drift * 1e-6 *
+    # logged): 20 ppm of σ at t = 100 s is 2 ms, at 1000 s 20 ms, against the offset's t-free 1 s
+    rig = _rig(2)
+    t0 = np.array([0.0, 1 / 30, 2 / 30])
+    times = np.r_[t0 + 100.0, t0 + 1000.0]
+    obs = _obs(times, [1] * 6, [[100 + 3 * k, 200 - k] for k in range(6)])
+    per_camera = [np.flatnonzero(obs.camera == c) for c in (0, 1)]
+    b = pixel_errors(obs, per_camera, rig, ClockCovariance([1], [1], [[20.0**2]]), 0.2)
+    velocity = image_velocity(obs, per_camera, 0.2)
+    t = obs.time_ns / NS
+    assert_allclose(np.abs(b[:, :, 0]), np.abs(velocity) * (1e-6 * t * 20.0)[:, None],
+                    rtol=1e-9)
