@@ -405,3 +405,25 @@ def test_pixel_errors_of_a_drift_grow_with_the_session_time():
     t = obs.time_ns / NS
     assert_allclose(np.abs(b[:, :, 0]), np.abs(velocity) * (1e-6 * t * 20.0)[:, None],
                     rtol=1e-9)
+
+
+def test_smooth_with_choices_in_doubt_takes_the_clocks_on_the_rows_it_fits():
+    # smooth leaves a doubted choice out (docs/methods.md, "A contested start"): its clock
+    # columns must be those of the rows it fits (consider_px[problem.rows] of the kept
+    # observations), and agree with the re-run, which keeps the doubt in every run
+    rig = _rig(3, distortion=True)
+    motion, _ = rally(4.0, seed=3, speed=4.0, kick_every_s=0.9)
+    detections, _ = simulate(rig, motion, 4.0, SimulationOptions(seed=5, noise_px=0.3))
+    clock = ClockCovariance([1, 2], [0, 0], np.diag([2e-3, 3e-3]) ** 2)
+    options = replace(FusionOptions(clock_covariance=clock), max_gap_s=default_max_gap_s(rig))
+    obs = observations(detections, rig)
+    doubt = np.zeros(len(obs))
+    doubt[np.arange(7, len(obs), 37)] = 4.0  # a choice in doubt every 37 rows
+    prep = replace(prepare(obs, rig), doubt_px2=doubt)
+    plain = METHODS["smooth"].function(prep, rig, replace(options, clock_covariance=None))
+    own = fuse(obs, rig, "smooth", options, prepared=prep)
+    rerun = with_clock_covariance(plain, "smooth", prep, rig, options)
+    assert np.array_equal(own.position_world, plain.position_world)
+    ratio = np.sqrt((own.quality["std_m"] ** 2 - plain.quality["std_m"] ** 2)
+                    / (rerun.quality["std_m"] ** 2 - plain.quality["std_m"] ** 2))
+    assert abs(np.median(ratio) - 1) < 0.05
