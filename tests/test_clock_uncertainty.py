@@ -363,7 +363,6 @@ def test_options_with_a_clock_covariance_compare_and_hash_by_value():
     assert len({a, b, c}) == 2
 
 
-
 @pytest.mark.parametrize("pixel", [np.nan, 1e5])
 def test_a_detection_without_a_pixel_leaves_the_clocks_consider_as_it_was(pixel):
     # a NaN pixel, or one far beyond the image (docs/methods.md, "A detection without a
