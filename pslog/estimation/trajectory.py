@@ -304,8 +304,9 @@ class Trajectory:
     def sensitivity(self, time_ns: np.ndarray) -> np.ndarray:
         """``S(t)`` (n, 3, k), metres: how the position at each time moves per standard
         deviation of each consider parameter — the detector's 3-D offset (3 columns,
-        ``offset_m I₃``, when ``offset_m`` > 0), then each camera's pixel bias per axis (2
-        per camera, when ``consider`` is set); NaN outside every piece. The position
+        ``offset_m I₃``, when ``offset_m`` > 0), then the columns of ``consider`` when it is
+        set (each camera's pixel bias per axis, 2 per camera, then the clocks' columns of
+        ``fit_trajectory``'s ``consider_px``); NaN outside every piece. The position
         covariance holds ``S Sᵀ`` beside the white noise's."""
         time_ns = np.asarray(time_ns, dtype=np.int64)
         k = (3 if self.offset_m > 0 else 0) + (

@@ -29,7 +29,8 @@ threshold's scale; a point whose two one-sided differences disagree (a decision 
 by the step) takes the smaller, and a point a perturbed run did not make takes the other
 side's. ``ż`` comes from the camera's own detections (a central difference of its
 neighbours within the method's max gap; one side at a track's end; 0 for a lone
-detection): at 0.3 px noise and 30 fps, about 6 px/s of noise on a ball moving hundreds.
+detection; a detection without a pixel, NaN or beyond ten times the image, is no neighbour
+and moves nothing): at 0.3 px noise and 30 fps, about 6 px/s of noise on a ball moving hundreds.
 
 The covariance columns gain ``S Sᵀ`` (``cov_*_m2``; the per-axis ``std_*_m`` its diagonal;
 ``std_m`` the square root of the trace); the points, their decisions and their other
