@@ -426,3 +426,32 @@ def test_smooth_with_choices_in_doubt_takes_the_clocks_on_the_rows_it_fits():
     ratio = np.sqrt((own.quality["std_m"] ** 2 - plain.quality["std_m"] ** 2)
                     / (rerun.quality["std_m"] ** 2 - plain.quality["std_m"] ** 2))
     assert abs(np.median(ratio) - 1) < 0.05
+
+
+def test_a_damaged_clock_std_never_stops_a_fuse(tmp_path, cli):
+    # pslog fuse on a synced session whose clock_std metadata was damaged: not JSON, NaN in
+    # the matrix, a list for the cameras, a matrix of the wrong size. Each fuses (exit 0),
+    # with the clocks' uncertainty where the stds survive and without it where they do not
+    from pslog.log.copy import copy_session
+
+    path, synced = tmp_path / "s.mcap", tmp_path / "synced.mcap"
+    code, _, err = cli("simulate", "--rig", "paper3", "--timing", "typeA", "--motion",
+                       "rally", "--duration", "3", "--noise-px", "0.3", "--clock-offset",
+                       "cam2=5", "--seed", "97500", "-o", path)
+    assert code == 0, err
+    code, _, err = cli("sync", path, "-o", synced, "--estimate", "offset")
+    assert code == 0, err
+    stored = json.loads(read_session(synced).metadata[CLOCK_STD_KEY])
+    nan_matrix = json.loads(json.dumps(stored))
+    nan_matrix["covariance"]["matrix"][0][0] = float("nan")
+    wrong_size = json.loads(json.dumps(stored))
+    wrong_size["covariance"]["matrix"] = [[1.0]]
+    for label, text, said in (("not json", "{oops", False),
+                              ("nan", json.dumps(nan_matrix), True),
+                              ("list", json.dumps({"cameras": [1, 2]}), False),
+                              ("size", json.dumps(wrong_size), True)):
+        damaged, out_path = tmp_path / f"{label}.mcap", tmp_path / f"{label}-fused.mcap"
+        copy_session(synced, damaged, metadata={CLOCK_STD_KEY: text})
+        code, out, err = cli("fuse", damaged, "-o", out_path, "--method", "typeA,smooth")
+        assert code == 0, (label, err)
+        assert ("std_m includes the uncertainty" in out) == said, (label, out)
