@@ -33,12 +33,12 @@ from bench_sync_auto import cases, make_rig
 from bench_timing_accuracy import _nominal, _regularize_auto, motion_named
 
 from pslog import SimulationOptions, simulate
-from pslog.simulation import true_rig
-from pslog.timing import CLOCK_KEYS
 from pslog.errors import PslogError
 from pslog.estimation.sync import estimate_clocks
 from pslog.evaluation import errors_m, mahalanobis_sq
 from pslog.fusion import FusionOptions, fuse_all
+from pslog.simulation import true_rig
+from pslog.timing import CLOCK_KEYS
 
 METHODS = ("typeA", "smooth", "filter")
 

@@ -455,3 +455,22 @@ def test_a_damaged_clock_std_never_stops_a_fuse(tmp_path, cli):
         code, out, err = cli("fuse", damaged, "-o", out_path, "--method", "typeA,smooth")
         assert code == 0, (label, err)
         assert ("std_m includes the uncertainty" in out) == said, (label, out)
+
+
+def test_a_choice_in_doubt_is_no_neighbour_of_the_image_velocity():
+    # camera 1's middle detection is a choice the gate put in doubt, 80 px off the ball's
+    # line: the rows beside it take their velocity from the rows beyond it, not from it
+    rig = _rig(2)
+    t = np.arange(5) / 30
+    uv = np.stack([100 + 300 * t, 200 + 150 * t], axis=1)
+    uv[2] += 80.0
+    obs = _obs(t + 0.01, [1] * 5, uv)
+    per_camera = [np.zeros(0, np.int64), np.arange(5)]
+    clock = ClockCovariance([1], [0], [[4e-6]])
+    doubtful = np.zeros(5, dtype=bool)
+    doubtful[2] = True
+    b = pixel_errors(obs, per_camera, rig, clock, 0.2, doubtful)
+    assert_allclose(b[[0, 1, 3, 4], :, 0], np.tile([-300 * 2e-3, -150 * 2e-3], (4, 1)))
+    assert np.all(b[2] == 0)
+    plain = pixel_errors(obs, per_camera, rig, clock, 0.2)
+    assert not np.allclose(plain[1, :, 0], b[1, :, 0])  # (without it, the blob's velocity)

@@ -93,7 +93,8 @@ def image_velocity(obs: Observations, per_camera: list[np.ndarray], max_gap_s: f
 
 
 def pixel_errors(obs: Observations, per_camera: list[np.ndarray], rig: Rig,
-                 clock: ClockCovariance, max_gap_s: float) -> np.ndarray:
+                 clock: ClockCovariance, max_gap_s: float,
+                 doubtful: np.ndarray | None = None) -> np.ndarray:
     """The pixel error one standard deviation of each clock direction puts on each detection,
     ``b_i = -ż_i a_iᵀ L`` (n, 2, m): ``L`` (k, m) the square root of Σ_θ
     (:meth:`ClockCovariance.factor`), so that the points' consider covariance is ``S Sᵀ`` with
@@ -101,7 +102,11 @@ def pixel_errors(obs: Observations, per_camera: list[np.ndarray], rig: Rig,
 
     ``a_i``: :func:`pslog.timing.clock_jacobian` at the detection's time (on the session
     clock: the logged time, to a part in 1e4 for the drift's derivative) and row; 0 for
-    the parameters of the other cameras."""
+    the parameters of the other cameras. ``doubtful``: (n,) bool, the gate's choices in
+    doubt (:attr:`Prepared.doubt_px2` > 0): no neighbour of the image velocity (a wrong
+    choice would widen its neighbours' covariance; smooth leaves them out of its fit) and
+    no velocity of their own (each method leaves such a choice out or withholds its
+    point)."""
     if np.any(clock.camera >= len(rig)):
         raise FusionError(f"clock covariance: camera {int(clock.camera.max())} is not in "
                           f"the rig of {len(rig)} cameras")
@@ -118,7 +123,8 @@ def pixel_errors(obs: Observations, per_camera: list[np.ndarray], rig: Rig,
     dt = np.where((obs.camera[:, None] == clock.camera[None, :]) & usable[:, None],
                   a[:, clock.parameter], 0.0)  # (n, k): seconds per unit of each parameter
     dt_sigma = dt @ clock.factor()  # (n, m): seconds per standard deviation of each column
-    velocity = image_velocity(obs, per_camera, max_gap_s, usable)
+    velocity = image_velocity(obs, per_camera, max_gap_s,
+                              usable if doubtful is None else usable & ~doubtful)
     return -velocity[:, :, None] * dt_sigma[:, None, :]
 
 
@@ -226,7 +232,8 @@ def with_clock_covariance(track: Track, method: str, prep, rig: Rig, options) ->
     if not len(track) or not len(clock):
         return track
     obs = prep.obs
-    errors = pixel_errors(obs, prep.per_camera, rig, clock, options.max_gap_s)
+    errors = pixel_errors(obs, prep.per_camera, rig, clock, options.max_gap_s,
+                          None if prep.doubt_px2 is None else prep.doubt_px2 > 0)
     plain = replace(options, clock_covariance=None)
     function = METHODS[method].function
 
