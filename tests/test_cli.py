@@ -313,3 +313,33 @@ def test_rig_check_lists_the_clock_keys_a_synced_rig_holds(tmp_path, cli):
         "m; clock_offset -0.3400 ms, clock_drift_ppm -12.500 ppm, readout 20.000 ms")
     code, out, _ = cli("rig", "check", "paper3")
     assert code == 0 and "clock_" not in out and "readout" not in out
+
+
+def test_every_json_output_is_one_document_and_its_notes_go_to_stderr(tmp_path, cli):
+    """``--json`` is read by programs (``pslog batch`` parses it): standard output holds one
+    JSON document and nothing else, whatever the run had to say. ``sync --json`` dropped its
+    notes (host stamps regularized, frames left out: session 33's walkthrough); they are now
+    on stderr, one line each, as the text report prints them."""
+    import json
+
+    session, synced = tmp_path / "s.mcap", tmp_path / "y.mcap"
+    code, _, err = cli("simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "throw",
+                       "--clock-offset", "cam2=3", "--host-jitter", "1", "--noise-px", "0.5",
+                       "--distractor", "1.5,1,0.1", "--seed", "7", "-o", session)
+    assert code == 0, err
+    code, text, _ = cli("sync", session, "-o", synced)
+    assert code == 0
+    notes = [line for line in text.splitlines() if "host stamps regularized" in line]
+    assert len(notes) == 3  # one per camera in the text report
+    code, out, err = cli("sync", session, "-o", synced, "--force", "--json")
+    assert code == 0, err
+    assert set(json.loads(out)) >= {"cameras", "residual_px", "estimated"}
+    assert [line for line in err.splitlines() if "host stamps regularized" in line] == [
+        f"pslog sync: {note}" for note in notes]
+    code, _, err = cli("fuse", synced, "--method", "typeA", "-o", tmp_path / "f.mcap")
+    assert code == 0, err
+    for argv in (("info", session, "--json"), ("eval", tmp_path / "f.mcap", "--json"),
+                 ("paper", "table1", "--json")):
+        code, out, err = cli(*argv)
+        assert code == 0, (argv, err)
+        json.loads(out)  # the whole of stdout: one document

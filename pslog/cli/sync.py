@@ -44,7 +44,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "index first: on, off, or auto (when a camera's jitter is above "
                              "0.2 ms) (default: auto)")
     parser.add_argument("--json", action="store_true",
-                        help="print one JSON object: cameras (rig order) and residual_px")
+                        help="print one JSON object: cameras (rig order) and residual_px "
+                             "(the notes, e.g. host stamps regularized, on stderr)")
     add_force(parser)
     declare_files(parser, inputs=("session",), outputs=("output",),
                   sessions=("output",))
@@ -52,6 +53,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     import json
+    import sys
 
     from pslog import progress
     from pslog.api import sync
@@ -75,6 +77,10 @@ def run(args: argparse.Namespace) -> int:
                  metadata={CLOCK_STD_KEY: clock_std_json(result.rig, stds, estimated,
                                                          selection)})
     if args.json:
+        # standard output is one JSON document (pslog batch parses it): the notes, what a
+        # user should know of the run, on stderr (they were dropped: session 33)
+        for note in outcome.notes:
+            print(f"pslog sync: {note}", file=sys.stderr)
         print(json.dumps({"cameras": [
             {"name": c.name, "offset_s": c.offset_s, "offset_std_s": c.offset_std_s,
              "drift_ppm": c.drift_ppm, "drift_std_ppm": c.drift_std_ppm,
