@@ -126,14 +126,14 @@ def _legend(estimated, auto: bool = False, rig=None) -> str:
     estimated) the hint that most webcams need them: offsets alone left 30-35 mm on a rig of
     three rolling-shutter webcams whose readouts, estimated, brought it to 5-9 mm (typeA,
     smooth, filter means). The ``ideal`` column is explained only where the table has it
-    (:func:`_shared_rate`); where it has not, the legend says why."""
+    (:func:`_differing_rates`); where it has not, the legend says why."""
     kept = [name for name in ("offset", "drift", "readout") if name not in estimated]
     columns = ("offset, drift: each camera's clock against the first camera's (ref), which "
                "defines the session clock; readout: rolling shutter, top row to bottom row; "
                "rig: the shutter offset the rig plans, relative to the first camera's; phase: "
                "each shutter's phase after sync, relative to the first camera's (near rig when "
                "the shutters keep the plan)")
-    rates = None if rig is None else _shared_rate(rig)
+    rates = None if rig is None else _differing_rates(rig)
     if rig is None or rates is None:
         columns += ("; ideal: the type-A stagger i/(n·fps), shutters evenly spread over a "
                     "frame (what typeA timing plans; other timings plan otherwise)")
@@ -150,7 +150,7 @@ def _legend(estimated, auto: bool = False, rig=None) -> str:
     return "\n".join(lines)
 
 
-def _shared_rate(rig) -> str | None:
+def _differing_rates(rig) -> str | None:
     """None when every camera of ``rig`` has one frame rate (the type-A stagger
     ``i / (n · fps)`` is then defined), else the rates, e.g. ``"30, 60 fps"``: with two
     rates, shutters evenly spread within one camera's period are not within another's, and
@@ -174,7 +174,7 @@ def _table(result, obs, estimated=("offset", "drift", "readout")) -> str:
     rig = result.rig
     p = camera_parameters(rig)
     n = len(rig)
-    ideal = _shared_rate(rig) is None
+    ideal = _differing_rates(rig) is None
     cells = []
     phase0 = None
     for i, (cam, est) in enumerate(zip(rig.cameras, result.cameras, strict=True)):
