@@ -289,3 +289,57 @@ def test_rig_check_notes_two_cameras_at_one_centre(tmp_path, cli):
     code, out, _ = cli("rig", "check", rig)
     assert code == 0 and "a valid rig 'same' of 2 cameras" in out
     assert "note:" in out and "same centre" in out and "fuse and sync refuse" in out
+
+
+def test_rig_check_lists_the_clock_keys_a_synced_rig_holds(tmp_path, cli):
+    """A rig carrying ``pslog sync``'s clocks read exactly as its unsynced original in ``rig
+    check`` (session 33's walkthrough): each non-zero clock key is listed on its camera's
+    line, in the rig file's key names, and a camera without any shows none."""
+    from pslog.rig import Rig, builtin_rig
+
+    paper3 = builtin_rig("paper3")
+    c1, c2, c3 = paper3.cameras
+    synced = Rig((c1.replace(readout=0.0125), c2.replace(clock_offset=0.0021966),
+                  c3.replace(clock_offset=-3.4e-4, clock_drift_ppm=-12.5, readout=0.02)),
+                 "synced")
+    path = tmp_path / "synced.toml"
+    path.write_text(synced.to_toml())
+    code, out, _ = cli("rig", "check", path)
+    assert code == 0
+    lines = {line.split(":")[0].strip(): line for line in out.splitlines()[1:]}
+    assert lines["cam1"].endswith("m; readout 12.500 ms"), lines["cam1"]
+    assert lines["cam2"].endswith("m; clock_offset +2.1966 ms"), lines["cam2"]
+    assert lines["cam3"].endswith(
+        "m; clock_offset -0.3400 ms, clock_drift_ppm -12.500 ppm, readout 20.000 ms")
+    code, out, _ = cli("rig", "check", "paper3")
+    assert code == 0 and "clock_" not in out and "readout" not in out
+
+
+def test_every_json_output_is_one_document_and_its_notes_go_to_stderr(tmp_path, cli):
+    """``--json`` is read by programs (``pslog batch`` parses it): standard output holds one
+    JSON document and nothing else, whatever the run had to say. ``sync --json`` dropped its
+    notes (host stamps regularized, frames left out: session 33's walkthrough); they are now
+    on stderr, one line each, as the text report prints them."""
+    import json
+
+    session, synced = tmp_path / "s.mcap", tmp_path / "y.mcap"
+    code, _, err = cli("simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "throw",
+                       "--clock-offset", "cam2=3", "--host-jitter", "1", "--noise-px", "0.5",
+                       "--distractor", "1.5,1,0.1", "--seed", "7", "-o", session)
+    assert code == 0, err
+    code, text, _ = cli("sync", session, "-o", synced)
+    assert code == 0
+    notes = [line for line in text.splitlines() if "host stamps regularized" in line]
+    assert len(notes) == 3  # one per camera in the text report
+    code, out, err = cli("sync", session, "-o", synced, "--force", "--json")
+    assert code == 0, err
+    assert set(json.loads(out)) >= {"cameras", "residual_px", "estimated"}
+    assert [line for line in err.splitlines() if "host stamps regularized" in line] == [
+        f"pslog sync: {note}" for note in notes]
+    code, _, err = cli("fuse", synced, "--method", "typeA", "-o", tmp_path / "f.mcap")
+    assert code == 0, err
+    for argv in (("info", session, "--json"), ("eval", tmp_path / "f.mcap", "--json"),
+                 ("paper", "table1", "--json")):
+        code, out, err = cli(*argv)
+        assert code == 0, (argv, err)
+        json.loads(out)  # the whole of stdout: one document

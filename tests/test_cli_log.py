@@ -599,3 +599,43 @@ def test_import_time_errors_speak_seconds_and_name_file_and_line(tmp_path, cli, 
                           "-o", tmp_path / "s.mcap")
     assert code == 1 and f"det.csv: line 3: bad time value '{time}': {why}" in stderr
     assert " ns" not in stderr and not (tmp_path / "s.mcap").exists()
+
+
+def test_info_detection_rate_leaves_a_static_distractors_candidates_out(tmp_path, cli):
+    """A second orange object in view is a candidate in every frame: 'detected' read 100 %
+    though the ball was missed in half the frames (session 33's walkthrough). 'any cand.'
+    still says that (frames with a candidate), 'moving' leaves the still candidate out and
+    reads the ball's rate (against the simulation's ball labels, to a frame), and each
+    still spot is named at the distractor's pixel; a clean session has no spot."""
+    path = tmp_path / "d.mcap"
+    code, _, err = cli("simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "throw",
+                       "--miss-rate", "0.5", "--distractor", "0.5,0.3,0.1", "--distractor",
+                       "cam2=2.5,1.5,0.2", "--noise-px", "0.5", "--seed", "3", "-o", path)
+    assert code == 0, err
+    session = read_session(path)
+    ball = session.ball_truth
+    code, stdout, err = cli("info", path, "--json")
+    assert code == 0, err
+    cameras = json.loads(stdout)["cameras"]
+    for i, (row, cam) in enumerate(zip(cameras, session.rig.cameras, strict=True)):
+        frames = int(np.count_nonzero(session.detections.frame_camera == i))
+        seen = len(np.unique(ball.cand_frame[ball.frame_camera[ball.cand_frame] == i]))
+        assert row["detection_rate"] == 1.0  # every frame has the distractor
+        assert 0.3 < seen / frames < 0.7
+        assert abs(row["moving_rate"] * frames - seen) <= 1, (row, seen)
+        points = [(0.5, 0.3, 0.1)] + ([(2.5, 1.5, 0.2)] if cam.name == "cam2" else [])
+        assert len(row["static_spots"]) == len(points)
+        for spot in row["static_spots"]:
+            assert spot["share"] == 1.0
+            uv, _ = cam.project(np.array(points))
+            assert np.min(np.hypot(*(uv - [spot["u"], spot["v"]]).T)) < 1.0, (spot, uv)
+    code, text, _ = cli("info", path)
+    assert "any cand." in text and "moving" in text and "detected" not in text
+    assert text.count("a candidate that does not move, at (") == 4
+    clean = tmp_path / "c.mcap"
+    code, _, err = cli("simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "throw",
+                       "--miss-rate", "0.5", "--seed", "3", "-o", clean)
+    assert code == 0, err
+    code, stdout, _ = cli("info", clean, "--json")
+    for row in json.loads(stdout)["cameras"]:
+        assert row["static_spots"] == [] and row["moving_rate"] == row["detection_rate"] < 0.7

@@ -372,7 +372,7 @@ def test_cli_table_says_which_parameters_were_kept_and_hints_at_rolling_shutters
     rows = {line.split()[0]: line.split() for line in with_readout.splitlines()
             if line.startswith("cam")}
     for name in ("cam1", "cam2", "cam3"):  # readout σ shown; many σ above 0, as the hint says
-        readout, sign, std = rows[name][-6:-3]  # then resid px, phase ms, ideal ms
+        readout, sign, std = rows[name][-7:-4]  # then resid px, rig, phase, ideal ms
         assert sign == "±" and float(readout) > 5 * float(std), rows[name]
 
     def residual(text: str) -> float:
@@ -490,3 +490,59 @@ def test_auto_drops_readouts_the_motion_cannot_determine_and_keeps_the_offsets()
     assert not readout.kept and "readout is not determined" in readout.reason
     for est in result.cameras[1:]:
         assert abs(est.offset_s - offsets[est.name]) < 4 * est.offset_std_s < 1e-3
+
+
+def _sync_rows(out: str) -> tuple[list[str], dict[str, list[str]]]:
+    """The table's header and its rows by camera name, split on whitespace (the σ columns
+    are ``± x`` or one word: the last columns are counted from the end)."""
+    lines = out.splitlines()
+    header = lines[0].split("  ")
+    return [h.strip() for h in header if h.strip()], {
+        line.split()[0]: line.split() for line in lines[2:] if line.startswith("cam")}
+
+
+@pytest.mark.parametrize("layout", ["mixed rates", "typeB"])
+def test_sync_table_shows_the_rigs_plan_and_an_ideal_stagger_only_where_one_exists(
+        tmp_path, cli, layout):
+    """The 'ideal ms' column printed i/(n·fps_i) for every rig (session 33's walkthrough):
+    on a rig whose cameras run at 30 and 60 fps no stagger spreads the shutters evenly, and
+    the column read 11.111 ms for a 60 fps camera whose period is 16.667 ms. It is shown only
+    when the cameras share one rate (the legend says why it is absent otherwise), and the
+    'rig ms' column shows the layout the rig plans (offset relative to the first camera's,
+    within the period), which the measured phase follows within the offsets' error."""
+    from pslog.rig import apply_timing, builtin_rig
+
+    paper3 = builtin_rig("paper3")
+    if layout == "typeB":
+        rig = apply_timing(paper3, "typeB")
+        planned = [0.0, 50.0 / 3, 0.0]
+    else:
+        c1, c2, c3 = apply_timing(paper3, "typeA").cameras
+        rig = Rig((c1, c2, c3.replace(fps=60.0, offset=0.004)), "mixed")
+        planned = [0.0, 100.0 / 9, 4.0]
+    rig_path, path = tmp_path / "rig.toml", tmp_path / "s.mcap"
+    rig_path.write_text(rig.to_toml())
+    code, _, err = cli("simulate", "--rig", rig_path, "--motion", "throw", "--clock-offset",
+                       "cam2=3", "--noise-px", "0.3", "--seed", "5", "-o", path)
+    assert code == 0, err
+    code, out, err = cli("sync", path, "-o", tmp_path / "o.mcap", "--estimate", "offset")
+    assert code == 0, err
+    header, rows = _sync_rows(out)
+    assert header[-3:-1] == ["rig ms", "phase ms"] or header[-2:] == ["rig ms", "phase ms"]
+    shown = header[-1] == "ideal ms"
+    tail = 3 if shown else 2
+    for (name, row), plan in zip(rows.items(), planned, strict=True):
+        rig_ms, phase_ms = (float(v) for v in row[-tail:][:2])
+        assert rig_ms == pytest.approx(plan, abs=1e-3), name
+        period_ms = 1e3 / rig.camera(name).fps  # (both within the period: a circular miss)
+        miss = (phase_ms - rig_ms + period_ms / 2) % period_ms - period_ms / 2
+        assert abs(miss) < 1.5, (name, row)  # the offsets' error, ~0.5 ms
+    if layout == "typeB":
+        assert shown
+        ideal = [float(rows[c][-1]) for c in ("cam1", "cam2", "cam3")]
+        assert ideal == pytest.approx([0.0, 100.0 / 9, 200.0 / 9], abs=1e-3)
+        assert "ideal: the type-A stagger i/(n·fps)" in out and "no ideal column" not in out
+    else:
+        assert not shown and "ideal" not in header[-1]
+        assert "no ideal column: the cameras' frame rates differ (30, 60 fps)" in out
+        assert "ideal: the type-A" not in out

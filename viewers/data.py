@@ -36,8 +36,10 @@ UNBOUNDED_NS = np.iinfo(np.int64).max // 4
 
 class ViewOptionError(InputError):
     """A view option's value that does not fit the sessions read (a method neither stored
-    nor fusable, a window holding no frame): ``pslog view`` reports it as a command-line
+    nor known, a window holding no frame): ``pslog view`` reports it as a command-line
     error (exit 2, ``usage_error``), as ``fuse``/``eval`` report an unknown ``--method``.
+    (A known method the session's timing cannot support is a fault of the data, not of
+    the command line: :class:`pslog.errors.FusionError`, exit 1, as ``fuse`` gives.)
 
     Attributes
     ----------
@@ -294,7 +296,7 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
     unknown = [m for m in missing if m not in METHODS]
     if unknown:
         have = sorted(set(tracks) | set(METHODS))
-        raise ViewOptionError("--method", f"unknown method {unknown[0]!r} (stored or fusable: "
+        raise ViewOptionError("--method", f"unknown method {unknown[0]!r} (stored or known: "
                                           f"{', '.join(have)})")
     # the window checked before any track is fused on the fly (its error comes out at once)
     first = int(session.detections.frame_time_ns.min()) if session.detections.n_frames else 0

@@ -99,14 +99,26 @@ def _text(info: dict) -> list[str]:
     ]
     from pslog.tables import format_table
 
+    # 'detected' read 100 % on a session whose ball was missed in half the frames: a static
+    # distractor is a candidate in every frame (session 33). The frames with any candidate,
+    # with one that moves, and the candidates per frame say what is known without truth.
     table = format_table(
         ("camera", "frames", "fps measured", "nominal", "offset measured",
-         f"rig ({info['timing']})", "detected", "images"),
+         f"rig ({info['timing']})", "any cand.", "moving", "cand/frame", "images"),
         [(c["name"], f"{c['frames']}", _fps(c["fps_measured"], c["frames"]),
           f"{c['fps_nominal']:g}",
           _ms(c["offset_measured_s"]), _ms(c["offset_nominal_s"]),
-          _pct(c["detection_rate"]), f"{c['images']}") for c in info["cameras"]])
+          _pct(c["detection_rate"]), _pct(c["moving_rate"]),
+          "-" if c["candidates_per_frame"] != c["candidates_per_frame"]
+          else f"{c['candidates_per_frame']:.2f}", f"{c['images']}") for c in info["cameras"]])
     lines += ["  " + line for line in table.splitlines()]
+    lines.append("  (any cand.: frames with at least one candidate; moving: with one off every "
+                 "static spot, the ball's detection rate when nothing else moves)")
+    for c in info["cameras"]:
+        for spot in c["static_spots"]:
+            lines.append(f"  {c['name']}: a candidate that does not move, at ({spot['u']:.1f}, "
+                         f"{spot['v']:.1f}) px in {spot['share']:.1%} of its frames (a static "
+                         f"object, or the ball at rest): not counted as moving")
     if info["clock_corrected"]:
         lines.append("  clock model (true = logged + offset + drift * logged + readout * v / "
                      "height; applied when fusing):")

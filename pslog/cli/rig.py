@@ -260,14 +260,28 @@ def _export(args: argparse.Namespace) -> int:
 
 
 def describe_cameras(rig) -> list[str]:
-    """One line per camera: size, rate, shutter offset, centre in the world."""
+    """One line per camera: size, rate, shutter offset, centre in the world, and the clock
+    keys the rig holds (``clock_offset``, ``clock_drift_ppm``, ``readout``: what ``pslog
+    sync`` estimated) when non-zero, so a synced rig is seen to carry its clocks (a
+    walkthrough found a synced rig described exactly as its unsynced original, session 33).
+    """
     lines = []
     for cam in rig.cameras:
         x, y, z = cam.center_world
         lines.append(f"{cam.name}: {cam.width}x{cam.height} px, {cam.fps:g} fps, offset "
                      f"{cam.offset * 1e3:.3f} ms, f {cam.K[0, 0]:.1f} px, centre "
-                     f"({x:.3f}, {y:.3f}, {z:.3f}) m")
+                     f"({x:.3f}, {y:.3f}, {z:.3f}) m{_clock_keys(cam)}")
     return lines
+
+
+def _clock_keys(cam) -> str:
+    """``"; clock_offset 2.1966 ms, readout 10.000 ms"`` (the keys' TOML names, the values in
+    ms / ppm as ``pslog sync`` prints them), or ``""`` when the camera has none."""
+    shown = [(key, text) for key, value, text in (
+        ("clock_offset", cam.clock_offset, f"{cam.clock_offset * 1e3:+.4f} ms"),
+        ("clock_drift_ppm", cam.clock_drift_ppm, f"{cam.clock_drift_ppm:+.3f} ppm"),
+        ("readout", cam.readout, f"{cam.readout * 1e3:.3f} ms")) if value != 0]
+    return "; " + ", ".join(f"{key} {text}" for key, text in shown) if shown else ""
 
 
 def _list() -> int:

@@ -44,7 +44,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "index first: on, off, or auto (when a camera's jitter is above "
                              "0.2 ms) (default: auto)")
     parser.add_argument("--json", action="store_true",
-                        help="print one JSON object: cameras (rig order) and residual_px")
+                        help="print one JSON object: cameras (rig order) and residual_px "
+                             "(the notes, e.g. host stamps regularized, on stderr)")
     add_force(parser)
     declare_files(parser, inputs=("session",), outputs=("output",),
                   sessions=("output",))
@@ -52,6 +53,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     import json
+    import sys
 
     from pslog import progress
     from pslog.api import sync
@@ -75,6 +77,10 @@ def run(args: argparse.Namespace) -> int:
                  metadata={CLOCK_STD_KEY: clock_std_json(
                      result.rig, stds, estimated, selection, _covariance(result))})
     if args.json:
+        # standard output is one JSON document (pslog batch parses it): the notes, what a
+        # user should know of the run, on stderr (they were dropped: session 33)
+        for note in outcome.notes:
+            print(f"pslog sync: {note}", file=sys.stderr)
         print(json.dumps({"cameras": [
             {"name": c.name, "offset_s": c.offset_s, "offset_std_s": c.offset_std_s,
              "drift_ppm": c.drift_ppm, "drift_std_ppm": c.drift_std_ppm,
@@ -87,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
     print(_table(result, outcome.observations, estimated))
     if auto:
         print(_choice(result))
-    print(_legend(estimated, auto))
+    print(_legend(estimated, auto, result.rig))
     print(f"residual {result.residual_px:.3f} px (pixel noise {result.noise_px:.3f} px); "
           f"wrote {args.output}")
     return 0
@@ -125,16 +131,26 @@ def _choice(result) -> str:
     return "\n".join(lines)
 
 
-def _legend(estimated, auto: bool = False) -> str:
+def _legend(estimated, auto: bool = False, rig=None) -> str:
     """What the table's columns are, which parameters were kept, and (readouts not
     estimated) the hint that most webcams need them: offsets alone left 30-35 mm on a rig of
     three rolling-shutter webcams whose readouts, estimated, brought it to 5-9 mm (typeA,
-    smooth, filter means)."""
+    smooth, filter means). The ``ideal`` column is explained only where the table has it
+    (:func:`_differing_rates`); where it has not, the legend says why."""
     kept = [name for name in ("offset", "drift", "readout") if name not in estimated]
-    lines = ["offset, drift: each camera's clock against the first camera's (ref), which "
-             "defines the session clock; readout: rolling shutter, top row to bottom row; "
-             "phase: each shutter's phase after sync, relative to the first camera's; ideal: "
-             "the type-A stagger i/(n·fps)"]
+    columns = ("offset, drift: each camera's clock against the first camera's (ref), which "
+               "defines the session clock; readout: rolling shutter, top row to bottom row; "
+               "rig: the shutter offset the rig plans, relative to the first camera's; phase: "
+               "each shutter's phase after sync, relative to the first camera's (near rig when "
+               "the shutters keep the plan)")
+    rates = None if rig is None else _differing_rates(rig)
+    if rig is None or rates is None:
+        columns += ("; ideal: the type-A stagger i/(n·fps), shutters evenly spread over a "
+                    "frame (what typeA timing plans; other timings plan otherwise)")
+    else:
+        columns += f"; no ideal column: the cameras' frame rates differ ({rates}), so no " \
+                   f"stagger spreads their shutters evenly"
+    lines = [columns]
     if kept:
         lines.append(f"kept at the rig's values (not estimated): {', '.join(kept)}")
     if "readout" not in estimated and not auto:
@@ -144,10 +160,21 @@ def _legend(estimated, auto: bool = False) -> str:
     return "\n".join(lines)
 
 
+def _differing_rates(rig) -> str | None:
+    """None when every camera of ``rig`` has one frame rate (the type-A stagger
+    ``i / (n · fps)`` is then defined), else the rates, e.g. ``"30, 60 fps"``: with two
+    rates, shutters evenly spread within one camera's period are not within another's, and
+    ``i / (n · fps_i)`` compares each camera against a stagger no layout can have."""
+    rates = list(dict.fromkeys(cam.fps for cam in rig.cameras))
+    return None if len(rates) == 1 else f"{', '.join(f'{r:g}' for r in rates)} fps"
+
+
 def _table(result, obs, estimated=("offset", "drift", "readout")) -> str:
-    """Per camera: each estimate ± std, residual, and the achieved shutter phase against the
-    ideal stagger ``i / (n · fps)``; a parameter not ``estimated`` shows the rig's value and
-    ``kept`` for its σ, the first camera's offset and drift ``ref`` (0 by definition)."""
+    """Per camera: each estimate ± std, residual, the rig's planned shutter offset and the
+    achieved shutter phase (both relative to the first camera's, within the camera's frame
+    period), and, when the cameras share one frame rate, the ideal type-A stagger
+    ``i / (n · fps)``; a parameter not ``estimated`` shows the rig's value and ``kept`` for
+    its σ, the first camera's offset and drift ``ref`` (0 by definition)."""
     import numpy as np
 
     from pslog.records import NS
@@ -157,6 +184,7 @@ def _table(result, obs, estimated=("offset", "drift", "readout")) -> str:
     rig = result.rig
     p = camera_parameters(rig)
     n = len(rig)
+    ideal = _differing_rates(rig) is None
     cells = []
     phase0 = None
     for i, (cam, est) in enumerate(zip(rig.cameras, result.cameras, strict=True)):
@@ -169,6 +197,8 @@ def _table(result, obs, estimated=("offset", "drift", "readout")) -> str:
             if len(top) else float("nan")
         phase0 = phase if phase0 is None else phase0
         rel = (phase - phase0) % period
+        # the plan, as phase is measured: against the first camera, within this period
+        planned = (cam.offset - rig.cameras[0].offset) % period
         def sigma(name: str, text: str, reference: bool) -> str:
             return "ref" if reference else (f"± {text}" if name in estimated else "kept")
 
@@ -177,7 +207,8 @@ def _table(result, obs, estimated=("offset", "drift", "readout")) -> str:
                       f"{est.drift_ppm:.3f}", sigma("drift", f"{est.drift_std_ppm:.3f}", i == 0),
                       f"{est.readout_s * 1e3:.3f}",
                       sigma("readout", f"{est.readout_std_s * 1e3:.3f}", False),
-                      f"{est.residual_px:.3f}", f"{rel * 1e3:.3f}",
-                      f"{i * period / n * 1e3:.3f}"])
+                      f"{est.residual_px:.3f}", f"{planned * 1e3:.3f}", f"{rel * 1e3:.3f}"]
+                     + ([f"{i * period / n * 1e3:.3f}"] if ideal else []))
     return format_table(("camera", "offset ms", "σ", "drift ppm", "σ", "readout ms", "σ",
-                         "resid px", "phase ms", "ideal ms"), cells)
+                         "resid px", "rig ms", "phase ms") + (("ideal ms",) if ideal else ()),
+                        cells)

@@ -156,12 +156,94 @@ def offset_disagreements(detections: Detections, rig) -> list[tuple[str, float, 
             and abs(row["offset_measured_s"] - offset) > OFFSET_NOTE_S]
 
 
+#: a spot holding a candidate in at least this share of a camera's frames is static
+STATIC_SHARE = 0.5
+#: ... and in at least this many of them (a few frames prove nothing)
+STATIC_MIN_FRAMES = 10
+#: grid cell of the spot search, pixels: a static candidate lies within 1.5 cells (6 px) of
+#: its spot, far beyond a detector's jitter on a still object (well below a pixel)
+STATIC_CELL_PX = 4.0
+#: most static spots looked for per camera
+STATIC_MOST_SPOTS = 4
+_FRAME_BITS = 22  # a camera's frame rank in a key: 4 M frames (39 h at 30 fps)
+_CELL_LIMIT = 1 << 19  # a cell index in a key, clipped: +-2 M px (4 px cells)
+
+
+def static_candidates(detections: Detections) -> tuple[list[list[dict]], np.ndarray]:
+    """Candidates that stay at one pixel spot through a camera's session, per camera.
+
+    A second orange object in view (a static distractor) is a candidate in every frame, so
+    the share of frames with a candidate reads 100 % though the ball was missed in half of
+    them. Per camera, the grid cell (``STATIC_CELL_PX`` px) whose 3 x 3 neighbourhood holds a
+    candidate in the most frames is a static spot when those frames (counted exactly on the
+    neighbourhood's candidates) are at least ``STATIC_SHARE`` of the camera's frames and
+    ``STATIC_MIN_FRAMES``; its candidates are static, and the search repeats on the rest, up
+    to ``STATIC_MOST_SPOTS`` spots (0.8 s for 970,000 candidates of a 90-minute match). A
+    ball at rest for half the session is one too: the figure says a candidate did not move,
+    not what it was.
+
+    Returns
+    -------
+    spots : per camera, a list of ``{"u", "v", "share"}``: the spot's median pixel
+        (distorted, as detected) and the share of the camera's frames with a candidate there
+    static : (C,) bool, the candidates at a spot
+    """
+    static = np.zeros(detections.n_candidates, dtype=bool)
+    spots: list[list[dict]] = [[] for _ in detections.camera_names]
+    if not detections.n_candidates:
+        return spots, static
+    offsets = [(dx, dy) for dx in (-1, 0, 1) for dy in (-1, 0, 1)]
+    cand_camera = detections.frame_camera[detections.cand_frame]
+    for i in range(len(detections.camera_names)):
+        frames = np.flatnonzero(detections.frame_camera == i)
+        need = max(STATIC_MIN_FRAMES, STATIC_SHARE * len(frames))
+        rows = np.flatnonzero((cand_camera == i) & np.all(np.isfinite(detections.cand_uv), 1))
+        rank = np.searchsorted(frames, detections.cand_frame[rows])  # frame of the camera
+        if len(frames) >= 1 << _FRAME_BITS:  # (a frame rank must fit its key)
+            continue
+        # cells shifted to [1, 2^20 - 2]: with their neighbours, 20 bits each, non-negative
+        cells = np.clip(np.floor(detections.cand_uv[rows] / STATIC_CELL_PX),
+                        1 - _CELL_LIMIT, _CELL_LIMIT - 2).astype(np.int64) + _CELL_LIMIT
+        keys = (cells[:, 0] << 21) | cells[:, 1]  # one int64 per cell (21 bits per axis)
+        left = np.ones(len(rows), dtype=bool)
+        for _ in range(STATIC_MOST_SPOTS):
+            if np.count_nonzero(left) < need:
+                break
+            # frames per cell (one per frame however many candidates it has there), then per
+            # 3 x 3 neighbourhood: a sum of its cells' counts (a still object's jitter across
+            # a cell border splits its frames, never repeats them; the spot's share is then
+            # counted exactly on its candidates)
+            pairs = np.unique((keys[left] << _FRAME_BITS) | rank[left])
+            cell_keys, n = np.unique(pairs >> _FRAME_BITS, return_counts=True)
+            around = np.zeros(len(cell_keys), dtype=np.int64)
+            for dx, dy in offsets:
+                near = cell_keys + ((dx << 21) + dy)
+                at = np.minimum(np.searchsorted(cell_keys, near), len(cell_keys) - 1)
+                around += np.where(cell_keys[at] == near, n[at], 0)
+            if around.max() < need:
+                break
+            best = cell_keys[np.argmax(around)]
+            centre = np.array([best >> 21, best & ((1 << 21) - 1)])
+            member = left & np.all(np.abs(cells - centre) <= 1, axis=1)
+            share = len(np.unique(rank[member])) / len(frames)
+            if share * len(frames) < need:  # (frames counted twice in the sum)
+                break
+            uv = detections.cand_uv[rows[member]]
+            spots[i].append({"u": float(np.median(uv[:, 0])), "v": float(np.median(uv[:, 1])),
+                             "share": share})
+            static[rows[member]] = True
+            left &= ~member
+    return spots, static
+
+
 def session_info(path) -> dict:
     """Summary of a session file as a JSON-able dict.
 
     On a finished file: ``cameras`` (per camera: name, frames, fps nominal/measured, shutter
     offset as the rig states it and as measured on times corrected by the rig's clock model
-    (see :func:`timing_table`), detection rate,
+    (see :func:`timing_table`), ``detection_rate`` (share of frames with at least one
+    candidate), ``candidates_per_frame``, ``static_spots`` and ``moving_rate`` (share of
+    frames with a candidate off every static spot: :func:`static_candidates`),
     images, the timing model's ``clock_offset_s``, ``clock_drift_ppm``, ``readout_s``),
     ``clock_corrected`` (any of those non-zero), ``clock_origin_ns`` (the session clock's
     origin on the original clock, 0 if none), ``topics`` (message counts), ``duration_s``,
@@ -215,7 +297,16 @@ def session_info(path) -> dict:
     times = det.frame_time_ns
     # measured on the times the rig's clock model corrects (as fusion sees them)
     cameras = timing_table(det, [cam.offset for cam in rig.cameras], rig)
-    for row, cam in zip(cameras, rig.cameras, strict=True):
+    spots, static = static_candidates(det)
+    # frames with a candidate that moves: the ball's detection rate, a static distractor's
+    # candidate (in every frame) left out
+    moving = np.zeros(det.n_frames, dtype=bool)
+    moving[det.cand_frame[~static]] = True
+    for i, (row, cam) in enumerate(zip(cameras, rig.cameras, strict=True)):
+        row["static_spots"] = spots[i]
+        n = row["frames"]
+        row["moving_rate"] = (float(np.mean(moving[det.frame_camera == i])) if n
+                              else float("nan"))
         row["fps_nominal"] = cam.fps
         row["offset_nominal_s"] = cam.offset  # as the rig states it
         row["images"] = counts.get(S.image_topic(cam.name), 0)

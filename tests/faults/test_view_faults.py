@@ -291,7 +291,7 @@ def test_save_named_rrd_in_capitals_is_written(tmp_path, session):
     (("--start", "100"), ("no frame from --start 100.0 s", "the session spans 0 to")),
     (("--end", "0"), ("no frame before --end 0.0 s",)),
     (("--start", "50", "--end", "60"), ("no frame between --start 50.0 s and --end 60.0 s",)),
-    (("--method", "bogus"), ("argument --method: unknown method 'bogus'", "stored or fusable",
+    (("--method", "bogus"), ("argument --method: unknown method 'bogus'", "stored or known",
                              "typeA")),
     (("--method", "typeA,bogus"), ("argument --method: unknown method 'bogus'",)),
 ], ids=["start past the end", "end at the start", "window past the end", "unknown method",
@@ -306,4 +306,21 @@ def test_values_that_do_not_fit_the_session_are_usage_errors(tmp_path, session, 
     line = assert_one_line_error(run, 2, contains=contains)
     assert line.startswith("pslog view: error: ") and line.endswith(
         "(see 'pslog view --help')"), line
+    assert_untouched(before, tmp_path)
+
+
+def test_a_known_method_the_sessions_timing_cannot_support_is_a_fault_of_the_data(
+        tmp_path, session):
+    """``--method typeB`` on type-A shutters (the sample: no two cameras within 1 ms) names a
+    method that exists: the data cannot support it, which is exit 1 as ``pslog fuse`` gives
+    (README said exit 2 for any method not stored nor fusable: session 33's walkthrough
+    found the command and the README disagreeing), one line naming the method, what it
+    needs and the methods that suit, before any track is fused, nothing written."""
+    before = fingerprint(tmp_path)
+    run = run_pslog("view", session, "--method", "typeA,typeB", "--save",
+                    tmp_path / "out.rrd", env=HEADLESS)
+    line = assert_one_line_error(run, 1, contains=(
+        "method typeB needs cameras with a common shutter instant",
+        "methods that suit this session: nearest, typeA, smooth, filter"))
+    assert line.startswith("pslog view: error: ") and "--help" not in line, line
     assert_untouched(before, tmp_path)
