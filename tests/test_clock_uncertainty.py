@@ -245,7 +245,9 @@ def test_sync_then_fuse_widens_std_with_the_clocks_and_leaves_the_points(tmp_pat
     on, off = tmp_path / "on.mcap", tmp_path / "off.mcap"
     code, out, err = cli("fuse", synced, "-o", on, "--method", "typeA,smooth,filter")
     assert code == 0, err
-    assert "std_m includes the uncertainty of the 5 clock estimates of pslog sync" in out
+    assert ("std_m includes the uncertainty of the 5 clock estimates of pslog sync (offset: "
+            "cam2, cam3; readout: cam1, cam2, cam3; --clock-uncertainty off: the pixel noise "
+            "alone)") in out, out
     code, out, err = cli("fuse", synced, "-o", off, "--method", "typeA,smooth,filter",
                          "--clock-uncertainty", "off")
     assert code == 0, err
@@ -471,8 +473,9 @@ def test_a_damaged_clock_std_never_stops_a_fuse(tmp_path, cli):
                     "holds the pixel noise alone") in out, (label, out)
         elif "std" in label:
             assert ("std_m includes the uncertainty of the 1 clock estimates of pslog sync "
-                    "(--clock-uncertainty off: the pixel noise alone); 1 other damaged in "
-                    "the session's metadata (clock_std): none for it") in out, (label, out)
+                    "(offset: cam3; --clock-uncertainty off: the pixel noise alone); 1 other "
+                    "damaged in the session's metadata (clock_std): none for it") in out, (
+                        label, out)
         else:
             assert "metadata (clock_std)" not in out, (label, out)
         assert damaged.read_bytes() == before
@@ -510,8 +513,8 @@ def test_fuse_says_when_the_clocks_uncertainty_is_not_applied(tmp_path, cli):
                          "--rig", rig_file)
     assert code == 0, err
     assert ("std_m includes the uncertainty of the 1 clock estimates of pslog sync "
-            f"(--clock-uncertainty off: the pixel noise alone); --rig {rig_file} replaced 1 "
-            "other: none for it") in out, out
+            "(offset: cam2; --clock-uncertainty off: the pixel noise alone); "
+            f"--rig {rig_file} replaced 1 other: none for it") in out, out
 
 
 def test_a_choice_in_doubt_is_no_neighbour_of_the_image_velocity():

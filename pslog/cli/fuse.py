@@ -399,6 +399,8 @@ def _say_clock_uncertainty(args: argparse.Namespace, session, applied) -> None:
     session never synced; every synced clock replaced by ``--rig``; the session's
     ``clock_std`` metadata damaged). A fuse never stops for it: the clocks' part is
     informative, and without it ``std_m`` is the pixel noise's, as with ``off``."""
+    import numpy as np
+
     from pslog.timing import CLOCK_STD_KEY, read_clock_covariance, read_clock_std
 
     metadata = session.metadata or {}
@@ -409,8 +411,13 @@ def _say_clock_uncertainty(args: argparse.Namespace, session, applied) -> None:
     fix = "run 'pslog sync' again to restore it"
     if applied is not None:
         replaced = 0 if synced is None else len(synced) - len(applied)
+        names = session.rig.names  # (which ones: a user knows the cameras, not a count)
+        which = "; ".join(
+            f"{label}: {', '.join(names[c] for c in applied.camera[applied.parameter == p])}"
+            for p, label in enumerate(("offset", "drift", "readout"))
+            if np.any(applied.parameter == p))
         print(f"std_m includes the uncertainty of the {len(applied)} clock estimates of "
-              f"pslog sync (--clock-uncertainty off: the pixel noise alone)"
+              f"pslog sync ({which}; --clock-uncertainty off: the pixel noise alone)"
               + (f"; --rig {args.rig} replaced {replaced} other"
                  + ("s: none for them" if replaced > 1 else ": none for it")
                  if replaced > 0 else "")
