@@ -81,8 +81,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "points' sensitivity to each camera's offset, drift and readout; "
                              "the points do not move; a clock --rig replaced takes none); "
                              "off: the pixel noise alone, the clocks taken as exact "
-                             "(default on; a line says when it is not applied: a session "
-                             "never synced, every clock replaced by --rig, damaged metadata)")
+                             "(default on; a line says when it is not applied: on given "
+                             "for a session never synced, every clock replaced by --rig, "
+                             "damaged metadata)")
     parser.add_argument("--gating", choices=("on", "off"), default="on",
                         help="on: choose each frame's ball among its candidates by the "
                              "epipolar, track and motion gates and record every rejected "
