@@ -245,7 +245,9 @@ def test_sync_then_fuse_widens_std_with_the_clocks_and_leaves_the_points(tmp_pat
     on, off = tmp_path / "on.mcap", tmp_path / "off.mcap"
     code, out, err = cli("fuse", synced, "-o", on, "--method", "typeA,smooth,filter")
     assert code == 0, err
-    assert "std_m includes the uncertainty of the 5 clock estimates of pslog sync" in out
+    assert ("std_m includes the uncertainty of the 5 clock estimates of pslog sync (offset: "
+            "cam2, cam3; readout: cam1, cam2, cam3; --clock-uncertainty off: the pixel noise "
+            "alone)") in out, out
     code, out, err = cli("fuse", synced, "-o", off, "--method", "typeA,smooth,filter",
                          "--clock-uncertainty", "off")
     assert code == 0, err
@@ -275,6 +277,8 @@ def test_sync_then_fuse_widens_std_with_the_clocks_and_leaves_the_points(tmp_pat
                          "typeA", "--rig", rig_file)
     assert code == 0, err
     assert "std_m includes" not in out
+    assert f"--rig {rig_file} replaces every clock parameter pslog sync estimated (5): std_m " \
+           "holds the pixel noise alone" in out, out
 
 
 def test_smooth_adds_the_clocks_through_its_own_sensitivity_as_a_rerun_measures_it():
@@ -446,15 +450,71 @@ def test_a_damaged_clock_std_never_stops_a_fuse(tmp_path, cli):
     nan_matrix["covariance"]["matrix"][0][0] = float("nan")
     wrong_size = json.loads(json.dumps(stored))
     wrong_size["covariance"]["matrix"] = [[1.0]]
+    nan_std = json.loads(json.dumps(stored))
+    nan_std["cameras"]["cam2"]["clock_offset"][1] = float("nan")
+    negative_std = json.loads(json.dumps(stored))
+    negative_std["cameras"]["cam2"]["clock_offset"][1] *= -1
     for label, text, said in (("not json", "{oops", False),
                               ("nan", json.dumps(nan_matrix), True),
                               ("list", json.dumps({"cameras": [1, 2]}), False),
-                              ("size", json.dumps(wrong_size), True)):
+                              ("size", json.dumps(wrong_size), True),
+                              ("nan std", json.dumps(nan_std), True),
+                              ("negative std", json.dumps(negative_std), True)):
         damaged, out_path = tmp_path / f"{label}.mcap", tmp_path / f"{label}-fused.mcap"
         copy_session(synced, damaged, metadata={CLOCK_STD_KEY: text})
+        before = damaged.read_bytes()
         code, out, err = cli("fuse", damaged, "-o", out_path, "--method", "typeA,smooth")
         assert code == 0, (label, err)
         assert ("std_m includes the uncertainty" in out) == said, (label, out)
+        # where stds are lost, one line says so (silently, std_m would look calibrated):
+        # all of them, or one of the two offsets (the other's applied)
+        if not said:
+            assert (f"{damaged}: its clock estimates' metadata (clock_std) is damaged: std_m "
+                    "holds the pixel noise alone") in out, (label, out)
+        elif "std" in label:
+            assert ("std_m includes the uncertainty of the 1 clock estimates of pslog sync "
+                    "(offset: cam3; --clock-uncertainty off: the pixel noise alone); 1 other "
+                    "damaged in the session's metadata (clock_std): none for it") in out, (
+                        label, out)
+        else:
+            assert "metadata (clock_std)" not in out, (label, out)
+        assert damaged.read_bytes() == before
+
+
+def test_fuse_says_when_the_clocks_uncertainty_is_not_applied(tmp_path, cli):
+    # asked for on a session never synced: one line, exit 0, the input untouched; by default
+    # silent; a --rig that replaces one synced clock: the line counts it
+    path, synced = tmp_path / "s.mcap", tmp_path / "synced.mcap"
+    code, _, err = cli("simulate", "--rig", "paper3", "--timing", "typeA", "--motion",
+                       "rally", "--duration", "3", "--noise-px", "0.3", "--clock-offset",
+                       "cam2=5", "--seed", "97501", "-o", path)
+    assert code == 0, err
+    before = path.read_bytes()
+    code, out, err = cli("fuse", path, "-o", tmp_path / "on.mcap", "--method", "typeA",
+                         "--clock-uncertainty", "on")
+    assert code == 0 and err == "", err
+    assert (f"--clock-uncertainty on ignored: {path} holds no clock estimates (never synced: "
+            "'pslog sync' estimates them); std_m holds the pixel noise alone") in out, out
+    assert path.read_bytes() == before
+    code, out, err = cli("fuse", path, "-o", tmp_path / "default.mcap", "--method", "typeA")
+    assert code == 0, err
+    assert "std_m" not in out, out
+    code, _, err = cli("sync", path, "-o", synced, "--estimate", "offset")
+    assert code == 0, err
+    code, out, err = cli("rig", "show", synced)
+    assert code == 0, err
+    rig = read_session(synced).rig
+    moved = f"clock_offset = {rig.cameras[2].clock_offset!r}"
+    assert moved in out
+    rig_file = tmp_path / "rig.toml"
+    other = rig.cameras[2].clock_offset + 1e-4
+    rig_file.write_text(out.replace(moved, f"clock_offset = {other!r}"))
+    code, out, err = cli("fuse", synced, "-o", tmp_path / "partial.mcap", "--method", "typeA",
+                         "--rig", rig_file)
+    assert code == 0, err
+    assert ("std_m includes the uncertainty of the 1 clock estimates of pslog sync "
+            "(offset: cam2; --clock-uncertainty off: the pixel noise alone); "
+            f"--rig {rig_file} replaced 1 other: none for it") in out, out
 
 
 def test_a_choice_in_doubt_is_no_neighbour_of_the_image_velocity():

@@ -95,7 +95,7 @@ def test_too_little_shared_motion_is_one_line_naming_what_is_missing():
         estimate_clocks(detections.best(), rig)
 
 
-def test_cli_json_table_and_the_synced_copy(tmp_path, cli):
+def test_cli_json_table_and_the_synced_copy(tmp_path, cli, capsys):
     rig = _rig(3)
     motion, _ = rally(5.0, seed=81, speed=4.0, kick_every_s=0.7)
     opts = SimulationOptions(noise_px=0.3, seed=81, clock_offset_s={"c2": 3e-3, "c3": -4e-3},
@@ -116,6 +116,13 @@ def test_cli_json_table_and_the_synced_copy(tmp_path, cli):
     assert code == 0, err
     report = json.loads(out)  # exactly one JSON object
     assert [c["name"] for c in report["cameras"]] == ["c1", "c2", "c3"]
+    # --help names every key the object has (it named two of four)
+    with pytest.raises(SystemExit) as stop:
+        cli("sync", "--help")
+    assert stop.value.code == 0
+    help_text = " ".join(capsys.readouterr().out.split())
+    assert set(report) == {"cameras", "residual_px", "estimated", "selection"}
+    assert all(key in help_text for key in report), help_text
     keys = {"name", "offset_s", "offset_std_s", "drift_ppm", "drift_std_ppm", "readout_s",
             "readout_std_s"}
     assert all(set(c) == keys for c in report["cameras"])

@@ -75,13 +75,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "constant detection bias, independent between cameras, "
                              "propagated through the fit into std_m and the covariance "
                              "(default %(default)s)")
-    parser.add_argument("--clock-uncertainty", choices=("on", "off"), default="on",
+    parser.add_argument("--clock-uncertainty", choices=("on", "off"), default=None,
                         help="on: a session from `pslog sync` adds the uncertainty of the "
                              "clocks it estimated to every point's std_m and covariance (the "
                              "points' sensitivity to each camera's offset, drift and readout; "
                              "the points do not move; a clock --rig replaced takes none); "
                              "off: the pixel noise alone, the clocks taken as exact "
-                             "(default %(default)s)")
+                             "(default on; a line says when it is not applied: on given "
+                             "for a session never synced, every clock replaced by --rig, "
+                             "damaged metadata)")
     parser.add_argument("--gating", choices=("on", "off"), default="on",
                         help="on: choose each frame's ball among its candidates by the "
                              "epipolar, track and motion gates and record every rejected "
@@ -183,10 +185,9 @@ def run(args: argparse.Namespace) -> int:
                             detector_bias_px=args.detector_bias_px)
     # the detector's default offset, and the synced clocks' covariance
     options = for_session(options, session.metadata,
-                          rig if args.clock_uncertainty == "on" else None)
-    if options.clock_covariance is not None:
-        print(f"std_m includes the uncertainty of the {len(options.clock_covariance)} clock "
-              f"estimates of pslog sync (--clock-uncertainty off: the pixel noise alone)")
+                          rig if args.clock_uncertainty != "off" else None)
+    if args.clock_uncertainty != "off":
+        _say_clock_uncertainty(args, session, options.clock_covariance)
     observations = timed_observations(session.detections, rig)  # the rig's clock model
     if len(observations) == 0:
         raise FusionError(f"{args.session} has no detection to fuse")
@@ -391,3 +392,48 @@ def _still_rejections(rejected) -> int:
         if np.median(step) < 2.0:
             count += len(uv)
     return count
+
+
+def _say_clock_uncertainty(args: argparse.Namespace, session, applied) -> None:
+    """One line on whether every point's ``std_m`` holds the clocks' uncertainty: the count of
+    estimates it holds, or why it holds none where a user could expect them (asked for on a
+    session never synced; every synced clock replaced by ``--rig``; the session's
+    ``clock_std`` metadata damaged). A fuse never stops for it: the clocks' part is
+    informative, and without it ``std_m`` is the pixel noise's, as with ``off``."""
+    import numpy as np
+
+    from pslog.timing import CLOCK_STD_KEY, read_clock_covariance, read_clock_std
+
+    metadata = session.metadata or {}
+    synced = read_clock_covariance(session.rig, metadata)  # (the session's own clocks)
+    stds = read_clock_std(session.rig, metadata)
+    damaged = (stds is None and bool(metadata.get(CLOCK_STD_KEY))) or (
+        stds is not None and sum(not v >= 0 for row in stds for v in row.values()))
+    fix = "run 'pslog sync' again to restore it"
+    if applied is not None:
+        replaced = 0 if synced is None else len(synced) - len(applied)
+        names = session.rig.names  # (which ones: a user knows the cameras, not a count)
+        which = "; ".join(
+            f"{label}: {', '.join(names[c] for c in applied.camera[applied.parameter == p])}"
+            for p, label in enumerate(("offset", "drift", "readout"))
+            if np.any(applied.parameter == p))
+        print(f"std_m includes the uncertainty of the {len(applied)} clock estimates of "
+              f"pslog sync ({which}; --clock-uncertainty off: the pixel noise alone)"
+              + (f"; --rig {args.rig} replaced {replaced} other"
+                 + ("s: none for them" if replaced > 1 else ": none for it")
+                 if replaced > 0 else "")
+              + (f"; {damaged} other{'s' if damaged > 1 else ''} damaged in the session's "
+                 f"metadata ({CLOCK_STD_KEY}): none for {'them' if damaged > 1 else 'it'} "
+                 f"({fix})" if damaged else ""))
+        return
+    alone = "std_m holds the pixel noise alone, the clocks taken as exact"
+    if damaged:
+        print(f"{args.session}: its clock estimates' metadata ({CLOCK_STD_KEY}) is "
+              f"damaged: {alone} ({fix})")
+    elif not metadata.get(CLOCK_STD_KEY):
+        if args.clock_uncertainty == "on":  # (asked for explicitly; silent by default)
+            print(f"--clock-uncertainty on ignored: {args.session} holds no clock estimates "
+                  f"(never synced: 'pslog sync' estimates them); {alone}")
+    elif args.rig is not None and synced is not None:
+        print(f"--rig {args.rig} replaces every clock parameter pslog sync estimated "
+              f"({len(synced)}): {alone} (the rig's)")

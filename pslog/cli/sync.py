@@ -44,8 +44,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "index first: on, off, or auto (when a camera's jitter is above "
                              "0.2 ms) (default: auto)")
     parser.add_argument("--json", action="store_true",
-                        help="print one JSON object: cameras (rig order) and residual_px "
-                             "(the notes, e.g. host stamps regularized, on stderr)")
+                        help="print one JSON object instead of the table: cameras (rig "
+                             "order: each estimate and its standard deviation), residual_px, "
+                             "estimated (the parameters) and selection (--estimate auto: each "
+                             "test's statistic and verdict; else null); the notes (e.g. host "
+                             "stamps regularized) on stderr")
     add_force(parser)
     declare_files(parser, inputs=("session",), outputs=("output",),
                   sessions=("output",))
