@@ -439,6 +439,26 @@ def format_rejection_table(rows: list[RejectionCounts]) -> str:
     return format_table(header, cells, left={0, len(header) - 1})
 
 
+#: What each reason a method leaves a point out for means (``Track.dropped``'s keys; ``pslog
+#: eval`` prints the ones a session has; docs/methods.md and docs/paper.md tell each in full)
+LEFT_OUT_TEXT = {
+    "behind_camera": "the point lies behind a camera that made it",
+    "outside_view": "outside the view of a camera the rig says saw it",
+    "parallel_rays": "its rays nearly parallel: its depth undetermined",
+    "residual_failed": "a detection's residual its noise cannot explain (a false one "
+                       "paired with the ball)",
+    "prediction_failed": "the prediction far from the newest ray (the innovation test)",
+    "kink": "typeA: the motion bends between the points it extrapolates (a bounce or kick)",
+    "contradicted": "typeA: the next camera's detection contradicts it",
+    "unconfirmed": "not confirmed in time (typeA: no next camera's detection; filter: after "
+                   "a jump or a surprise, two more updates, one from another camera)",
+    "held": "filter: held for the next camera, whose detection placed a jump before it",
+    "uncertain": "its std_m above the bound (filter: 25.5 mm, 5 cm at 95 %; typeA: "
+                 "--type-a-max-std-mm)",
+    "doubt": "rests on a candidate the gate chose in doubt",
+    "underdetermined_end": "smooth: an end beyond a kick that too few detections hold",
+}
+
 #: Where ``pslog fuse`` keeps the points each method left out, by reason (``Track.dropped``):
 #: the metadata key of each track's channel; files fused before kept every method's counts
 #: under this key of the session metadata (:attr:`pslog.log.Session.left_out` reads both).

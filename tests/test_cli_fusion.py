@@ -230,3 +230,26 @@ def test_points_before_the_session_clocks_zero_are_left_out_saying_so(tmp_path, 
     assert "before the session clock's zero" in out and "smooth point" in out
     track = read_session(fused).tracks["smooth"]
     assert len(track) > 0 and track.time_ns.min() >= 0
+
+
+def test_eval_says_what_each_left_out_reason_means(tmp_path, cli):
+    # a dirty session: every method leaves points out; eval's legend names each reason it
+    # shows (the reasons are the methods' own Track.dropped keys)
+    from pslog.evaluation import LEFT_OUT_TEXT
+
+    session, fused = tmp_path / "dirty.mcap", tmp_path / "fused.mcap"
+    code, _, err = cli("simulate", "--rig", "paper3", "--timing", "typeA", "--motion",
+                       "rally", "--duration", "5", "--noise-px", "0.5", "--miss-rate", "0.2",
+                       "--spurious", "0.05", "--seed", "5", "-o", session)
+    assert code == 0, err
+    code, _, err = cli("fuse", session, "-o", fused, "--method", "nearest,typeA,smooth,filter")
+    assert code == 0, err
+    code, out, err = cli("eval", fused)
+    assert code == 0, err
+    block = out.split("points left out (invalid or untrustworthy), by reason:\n")[1]
+    lines = block.split("\n\n")[0].splitlines()
+    counts = [line for line in lines if not line.startswith("  ")]
+    reasons = {part.rsplit(" ", 1)[0] for line in counts for part in line[10:].split(", ")}
+    assert reasons and reasons <= set(LEFT_OUT_TEXT), reasons - set(LEFT_OUT_TEXT)
+    assert sorted(line for line in lines if line.startswith("  ")) == sorted(
+        f"  {reason}: {LEFT_OUT_TEXT[reason]}" for reason in reasons)

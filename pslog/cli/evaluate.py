@@ -96,6 +96,12 @@ def run(args: argparse.Namespace) -> int:
             print("points left out (invalid or untrustworthy), by reason:")
             for m in shown:
                 print(f"{m:<9} " + ", ".join(f"{r} {n}" for r, n in left_out[m].items()))
+            from pslog.evaluation import LEFT_OUT_TEXT
+
+            reasons = dict.fromkeys(r for m in shown for r in left_out[m])
+            for r in reasons:
+                if r in LEFT_OUT_TEXT:
+                    print(f"  {r}: {LEFT_OUT_TEXT[r]}")
         if any(rejected.values()):
             print()
             print("detections the method rejected (each point kept, flagged rejected: "

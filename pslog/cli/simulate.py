@@ -296,7 +296,8 @@ def run(args: argparse.Namespace) -> int:
           + (f" ({ball.n_candidates} of the ball; candidate faults: "
              f"{', '.join(candidate_faults)})" if candidate_faults else "")
           + f", {len(truth)} truth points"
-          + (f" ({n_early} frames logged before t = 0 dropped)" if n_early else "")
+          + (f" ({n_early} frame{'' if n_early == 1 else 's'} logged before t = 0 dropped)"
+             if n_early else "")
           + (f"; clock faults ({', '.join(faulted)}) kept as {TRUTH_CLOCK_KEY!r} in the "
              f"metadata, the rig holds the nominal clock: run 'pslog sync'" if faulted else ""))
     return 0
