@@ -432,17 +432,23 @@ def test_smooth_with_choices_in_doubt_takes_the_clocks_on_the_rows_it_fits():
     assert abs(np.median(ratio) - 1) < 0.05
 
 
+def _simulated_3s(tmp_path, cli, seed: int):
+    """A 3-s paper3 rally, camera cam2's clock 5 ms off, written by ``pslog simulate``."""
+    path = tmp_path / "s.mcap"
+    code, _, err = cli("simulate", "--rig", "paper3", "--timing", "typeA", "--motion",
+                       "rally", "--duration", "3", "--noise-px", "0.3", "--clock-offset",
+                       "cam2=5", "--seed", str(seed), "-o", path)
+    assert code == 0, err
+    return path
+
+
 def test_a_damaged_clock_std_never_stops_a_fuse(tmp_path, cli):
     # pslog fuse on a synced session whose clock_std metadata was damaged: not JSON, NaN in
     # the matrix, a list for the cameras, a matrix of the wrong size. Each fuses (exit 0),
     # with the clocks' uncertainty where the stds survive and without it where they do not
     from pslog.log.copy import copy_session
 
-    path, synced = tmp_path / "s.mcap", tmp_path / "synced.mcap"
-    code, _, err = cli("simulate", "--rig", "paper3", "--timing", "typeA", "--motion",
-                       "rally", "--duration", "3", "--noise-px", "0.3", "--clock-offset",
-                       "cam2=5", "--seed", "97500", "-o", path)
-    assert code == 0, err
+    path, synced = _simulated_3s(tmp_path, cli, 97500), tmp_path / "synced.mcap"
     code, _, err = cli("sync", path, "-o", synced, "--estimate", "offset")
     assert code == 0, err
     stored = json.loads(read_session(synced).metadata[CLOCK_STD_KEY])
@@ -484,11 +490,7 @@ def test_a_damaged_clock_std_never_stops_a_fuse(tmp_path, cli):
 def test_fuse_says_when_the_clocks_uncertainty_is_not_applied(tmp_path, cli):
     # asked for on a session never synced: one line, exit 0, the input untouched; by default
     # silent; a --rig that replaces one synced clock: the line counts it
-    path, synced = tmp_path / "s.mcap", tmp_path / "synced.mcap"
-    code, _, err = cli("simulate", "--rig", "paper3", "--timing", "typeA", "--motion",
-                       "rally", "--duration", "3", "--noise-px", "0.3", "--clock-offset",
-                       "cam2=5", "--seed", "97501", "-o", path)
-    assert code == 0, err
+    path, synced = _simulated_3s(tmp_path, cli, 97501), tmp_path / "synced.mcap"
     before = path.read_bytes()
     code, out, err = cli("fuse", path, "-o", tmp_path / "on.mcap", "--method", "typeA",
                          "--clock-uncertainty", "on")
