@@ -536,3 +536,4 @@ def test_a_choice_in_doubt_is_no_neighbour_of_the_image_velocity():
     assert np.all(b[2] == 0)
     plain = pixel_errors(obs, per_camera, rig, clock, 0.2)
     assert not np.allclose(plain[1, :, 0], b[1, :, 0])  # (without it, the blob's velocity)
+

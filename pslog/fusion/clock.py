@@ -229,8 +229,8 @@ def with_clock_covariance(track: Track, method: str, prep, rig: Rig, options) ->
     from ._prepare import prepare
 
     clock: ClockCovariance = options.clock_covariance
-    if not len(track) or not len(clock):
-        return track
+    if not len(track) or not len(clock) or "std_m" not in track.quality:
+        return track  # (nothing to add to: noise_px None makes no covariance)
     obs = prep.obs
     errors = pixel_errors(obs, prep.per_camera, rig, clock, options.max_gap_s,
                           None if prep.doubt_px2 is None else prep.doubt_px2 > 0)
