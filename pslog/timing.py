@@ -209,13 +209,14 @@ CLOCK_STD_KEY = "clock_std"
 CLOCK_KEYS = ("clock_offset", "clock_drift_ppm", "readout")
 
 
-def clock_std_json(rig: Rig, stds, estimated=None, selection=None, covariance=None) -> str:
+def clock_std_json(rig: Rig, stds, estimated=None, selection=None,
+                   covariance: ClockCovariance | None = None) -> str:
     """The :data:`CLOCK_STD_KEY` value for ``rig`` (holding the estimates) and ``stds``, one
     ``(offset_std_s, drift_std_ppm, readout_std_s)`` per camera in rig order; with
     ``estimated`` (the parameters estimated), ``selection`` (``--estimate auto``: its
-    tests, as ``pslog sync --json`` prints them) and ``covariance`` (``(parameters,
-    matrix)``: ``(camera index, key)`` pairs, key one of :data:`CLOCK_KEYS`, and their
-    joint covariance) those too."""
+    tests, as ``pslog sync --json`` prints them) and ``covariance`` (a
+    :class:`ClockCovariance`: the estimates' joint covariance,
+    :meth:`pslog.estimation.sync.SyncResult.clock_covariance`) those too."""
     import json
 
     value: dict = {"cameras": {
@@ -227,10 +228,11 @@ def clock_std_json(rig: Rig, stds, estimated=None, selection=None, covariance=No
     if selection is not None:
         value["selection"] = selection
     if covariance is not None:
-        parameters, matrix = covariance
         value["covariance"] = {
-            "parameters": [[rig.cameras[c].name, key] for c, key in parameters],
-            "matrix": np.asarray(matrix, dtype=np.float64).tolist()}
+            "parameters": [[rig.cameras[c].name, CLOCK_KEYS[p]]
+                           for c, p in zip(covariance.camera, covariance.parameter,
+                                           strict=True)],
+            "matrix": covariance.matrix.tolist()}
     return json.dumps(value)
 
 

@@ -78,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
     copy_session(args.session, args.output, rig=result.rig, force=args.force,
                  detections=outcome.detections if outcome.regularized else None,
                  metadata={CLOCK_STD_KEY: clock_std_json(
-                     result.rig, stds, estimated, selection, _covariance(result))})
+                     result.rig, stds, estimated, selection, result.clock_covariance())})
     if args.json:
         # standard output is one JSON document (pslog batch parses it): the notes, what a
         # user should know of the run, on stderr (they were dropped: session 33)
@@ -100,16 +100,6 @@ def run(args: argparse.Namespace) -> int:
     print(f"residual {result.residual_px:.3f} px (pixel noise {result.noise_px:.3f} px); "
           f"wrote {args.output}")
     return 0
-
-
-def _covariance(result) -> tuple | None:
-    """The estimates' joint covariance as :func:`pslog.timing.clock_std_json` stores it:
-    ``((camera index, rig key), ...)`` and the matrix (None when nothing was estimated)."""
-    from pslog.estimation.sync import RIG_KEY
-
-    if result.covariance is None or not len(result.unknowns):
-        return None
-    return [(c, RIG_KEY[p]) for c, p in result.unknowns], result.covariance
 
 
 def _test_json(test) -> dict:

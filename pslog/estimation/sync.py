@@ -47,7 +47,7 @@ import numpy as np
 from scipy import sparse
 
 from ..camera import MAX_CLOCK_DRIFT_PPM, MAX_CLOCK_OFFSET_S
-from ..errors import FusionError
+from ..errors import FusionError, InputError
 from ..records import NS, Observations
 from ..rig import Rig
 from ..timing import CLOCK_KEYS, ClockCovariance, camera_parameters
@@ -161,16 +161,20 @@ class SyncResult:
     def clock_covariance(self) -> ClockCovariance | None:
         """The estimates' joint covariance as :class:`pslog.timing.ClockCovariance` (what
         :attr:`pslog.fusion.FusionOptions.clock_covariance` takes), the parameters of zero
-        variance left out; None when nothing was estimated."""
+        variance left out; None when nothing was estimated (or the matrix is no covariance:
+        it is informative, ``pslog sync`` stores it and must not fail for it)."""
         if self.covariance is None or not len(self.unknowns):
             return None
         keep = [j for j in range(len(self.unknowns)) if self.covariance[j, j] > 0]
         if not keep:
             return None
-        return ClockCovariance(
-            np.array([self.unknowns[j][0] for j in keep]),
-            np.array([CLOCK_KEYS.index(RIG_KEY[self.unknowns[j][1]]) for j in keep]),
-            self.covariance[np.ix_(keep, keep)])
+        try:
+            return ClockCovariance(
+                np.array([self.unknowns[j][0] for j in keep]),
+                np.array([CLOCK_KEYS.index(RIG_KEY[self.unknowns[j][1]]) for j in keep]),
+                self.covariance[np.ix_(keep, keep)])
+        except InputError:
+            return None
 
 
 def estimate_clocks(obs: Observations, rig: Rig, estimate=("offset",),
