@@ -29,10 +29,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
-from bench_sync_auto import cases, make_rig
-from bench_timing_accuracy import _nominal, _regularize_auto, motion_named
+from bench_sync_auto import cases, simulate_case
+from bench_timing_accuracy import _nominal, _regularize_auto
 
-from pslog import SimulationOptions, simulate
 from pslog.errors import PslogError
 from pslog.estimation.sync import estimate_clocks
 from pslog.evaluation import errors_m, mahalanobis_sq
@@ -44,14 +43,7 @@ METHODS = ("typeA", "smooth", "filter")
 
 
 def run(case, seed: int, lab_rig: str | None, estimate, spurious: float) -> dict | str:
-    rig = make_rig(case.rig, lab_rig)
-    opts = SimulationOptions(
-        noise_px=case.noise_px, seed=seed, host_jitter_s=case.jitter_ms / 1e3,
-        clock_offset_s={k: v / 1e3 for k, v in case.offset_ms.items()},
-        clock_drift_ppm=dict(case.drift_ppm),
-        readout_s={k: v / 1e3 for k, v in case.readout_ms.items()},
-        spurious_rate=spurious)
-    detections, truth = simulate(rig, motion_named(case.motion), case.duration, opts)
+    rig, opts, detections, truth = simulate_case(case, seed, lab_rig, spurious)
     regular, reports = _regularize_auto(detections)
     try:
         result = estimate_clocks(regular.best(), _nominal(rig), estimate, regularized=reports)

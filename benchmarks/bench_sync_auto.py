@@ -117,14 +117,22 @@ def _accuracy(detections, rig, truth) -> dict:
     return {m: evaluate(tracks[m], truth).mean_mm for m in METHODS}
 
 
-def run(case: Case, seed: int, lab_rig: str | None) -> list[str]:
+def simulate_case(case: Case, seed: int, lab_rig: str | None, spurious: float = 0.0):
+    """``(rig, options, detections, truth)`` of one seed of ``case`` (its clock faults as
+    :class:`SimulationOptions`; ``spurious``: the share of frames given a false candidate)."""
     rig = make_rig(case.rig, lab_rig)
     opts = SimulationOptions(
         noise_px=case.noise_px, seed=seed, host_jitter_s=case.jitter_ms / 1e3,
         clock_offset_s={k: v / 1e3 for k, v in case.offset_ms.items()},
         clock_drift_ppm=dict(case.drift_ppm),
-        readout_s={k: v / 1e3 for k, v in case.readout_ms.items()})
+        readout_s={k: v / 1e3 for k, v in case.readout_ms.items()},
+        spurious_rate=spurious)
     detections, truth = simulate(rig, motion_named(case.motion), case.duration, opts)
+    return rig, opts, detections, truth
+
+
+def run(case: Case, seed: int, lab_rig: str | None) -> list[str]:
+    rig, _, detections, truth = simulate_case(case, seed, lab_rig)
     nominal = _nominal(rig)
     regular, reports = _regularize_auto(detections)
     obs = regular.best()
