@@ -1243,8 +1243,9 @@ def pixel_sensitivity(problem: _Problem, U: np.ndarray, J: np.ndarray, r: np.nda
 
 def _consider_system(problem: _Problem, U: np.ndarray, J: np.ndarray, r: np.ndarray,
                      sigma: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-    """What :func:`pixel_sensitivity` solves with: ``W_i J_i / σ²`` (n, 2, 3), the factor of
-    ``H_ψ`` (or ``U``), each detection's unknowns' rows (n, 4, 3) and their count."""
+    """What :func:`pixel_sensitivity` and :func:`bias_sensitivity` solve with: ``W_i J_i /
+    σ²`` (n, 2, 3), the factor of ``H_ψ`` (or ``U``), each detection's unknowns' rows
+    (n, 4, 3) and their count."""
     first = problem.first
     n3 = U.shape[1]
     s = np.sum(r * r, axis=1) / sigma**2
