@@ -6,7 +6,8 @@ orange object always visible to one camera, one camera missing the ball for half
 the mean error of ``smooth`` and ``filter`` grows at most 20 %, of ``typeA`` at most 50 %,
 against the clean session; no output point further than 5 cm from the truth. The clean and
 outlier sessions share every ball detection (the faults draw from their own random stream),
-so the ratio measures the faults alone. Both are fused with the default (gating on);
+so the ratio measures the faults alone. Both are fused with ``pslog fuse``'s defaults (gating
+on; typeA's ``--confirm-gaps kicks``, ``--confirm-gaps on`` the causal form a stream has);
 ``--gating off`` shows what best-score picking gives instead. The ratios are shown at every
 noise level; the targets are the issue's at 0.3 px (at 0 px the clean errors are the
 methods' own model errors, a fraction of a millimetre, and any change is a large ratio).
@@ -95,7 +96,7 @@ from _rigs import ring_rig  # noqa: E402
 
 from pslog import Rig, apply_timing, builtin_rig  # noqa: E402
 from pslog.evaluation import errors_m  # noqa: E402
-from pslog.fusion import METHODS, FusionOptions  # noqa: E402
+from pslog.fusion import CONFIRM_GAPS, METHODS, FusionOptions  # noqa: E402
 from pslog.fusion.gating import fuse_detections  # noqa: E402
 from pslog.motion import get_motion, rally_motion  # noqa: E402
 from pslog.simulation import SimulationOptions, simulate_labelled  # noqa: E402
@@ -508,6 +509,9 @@ def main() -> int:
     parser.add_argument("--fps", default=None,
                         help="--more: comma-separated camera rates to run every rig at "
                              "(e.g. 60,120,240; default: the rigs' own, 30)")
+    parser.add_argument("--confirm-gaps", choices=tuple(CONFIRM_GAPS), default="kicks",
+                        help="typeA's confirmation, as pslog fuse's option (default "
+                             "%(default)s, pslog fuse's; on: the causal form, as a stream)")
     parser.add_argument("--misses", type=float, default=0.0,
                         help="--more: the detector also misses the ball in this fraction of "
                              "frames, and half of it are dropped (clean sessions too; "
@@ -516,7 +520,9 @@ def main() -> int:
     json_rows = []
     n_seeds, duration = (1, 4.0) if args.quick else (args.seeds, args.duration)
     methods = [m for m in args.methods.split(",") if m in METHODS]
-    options = FusionOptions(gating=args.gating == "on")
+    options = FusionOptions(gating=args.gating == "on", **dict(zip(
+        ("confirm_gaps", "confirm_every", "confirm_sides"), CONFIRM_GAPS[args.confirm_gaps],
+        strict=True)))
     if args.calibration:
         return main_calibration(args, [m for m in (
             args.methods if args.methods != "typeA,smooth,filter"

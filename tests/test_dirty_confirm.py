@@ -269,17 +269,19 @@ def test_missed_detections_try_the_next_camera_and_the_stream_agrees(rig_name, s
 def test_explain_type_a_and_the_viewer_leave_out_the_points_fuse_drops(tmp_path):
     """The construction (explain_type_a, the viewer's rays and epipolar lines) is of the
     points `pslog fuse` outputs: the paper3 kick point, contradicted, is in neither (the
-    viewer fused typeA on the fly without the confirmation: 2 more points shown)."""
-    from pslog.fusion import FusionOptions, explain_type_a
+    viewer fused typeA on the fly without the confirmation: 2 more points shown); with
+    ``pslog fuse``'s offline defaults (every point confirmed, session 35) as without."""
+    from pslog.fusion import FusionOptions, explain_type_a, for_session
     from pslog.fusion.gating import gate_for
     from pslog.log import SessionWriter, read_session
     from viewers.data import _type_a_with_construction
 
     rig, det, _truth, _at = _session("paper3")
-    track = fuse(det, rig, "typeA")
+    offline = for_session(FusionOptions(), {})
+    track = fuse(det, rig, "typeA", offline)
     assert track.dropped.get("contradicted", 0) >= 1
     obs = gate_for(det, rig, "typeA", FusionOptions()).observations
-    construction = explain_type_a(det, rig)
+    construction = explain_type_a(det, rig, offline)
     assert_array_equal(obs.time_ns[construction.event_row], track.time_ns)
     assert_array_equal(construction.points_world, track.position_world)
     path = tmp_path / "dirty.mcap"

@@ -17,7 +17,7 @@ import pytest
 from mcap.reader import make_reader
 
 from pslog.cli import main
-from pslog.fusion import FusionOptions
+from pslog.fusion import FusionOptions, for_session
 from pslog.fusion.gating import fuse_detections
 from pslog.log import copy_session, read_session
 from pslog.log._schemas import LEFT_OUT_KEY
@@ -49,7 +49,7 @@ def test_left_out_counts_go_with_each_track(rally, tmp_path, capsys):
     assert main(["fuse", str(rally), "--method", "typeA,filter,nearest", "-o", str(out)]) == 0
     s = read_session(rally)
     tracks, _ = fuse_detections(s.detections, s.rig, ["typeA", "filter", "nearest"],
-                                FusionOptions())
+                                for_session(FusionOptions(), s.metadata))  # (pslog fuse's)
     expected = {m: dict(t.dropped) for m, t in tracks.items() if t.dropped}
     assert expected.get("typeA"), "the session should make typeA leave points out"
     channels, session_meta = _channels_and_session_meta(out)

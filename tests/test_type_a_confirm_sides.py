@@ -1,6 +1,6 @@
 """Type A after kicks, each point tested on its side of the kick (``FusionOptions.
 confirm_sides``, ``pslog fuse --confirm-gaps kicks``; docs/methods.md, "Type A after kicks:
-the side of the kick (session 33)"). On the dev session of session 33 (paper3, rally seed
+the side of the kick (session 33)"; the default offline since session 35). On the dev session of session 33 (paper3, rally seed
 37001, 0.3 px, clean) ``confirm_every`` keeps a point 79 mm off 18 ms after a kick: the
 camera that confirms it has its previous detection before the kick and its next after, so
 eq. (1)'s interpolation across the kick is no check; the side test leaves it out."""
@@ -89,20 +89,77 @@ def test_a_stream_refuses_it_and_it_needs_confirm_every():
     assert not (options.confirm_gaps or options.confirm_every or options.confirm_sides)
 
 
-def test_fuse_confirm_gaps_kicks_is_the_option(tmp_path, cli):
+def test_kicks_is_the_offline_default_and_on_the_causal_form(tmp_path, cli):
+    """``pslog fuse`` and :func:`pslog.fuse` confirm every point on its side of a kick by
+    default (session 35: ``for_session`` turns ``confirm_every`` and ``confirm_sides`` on);
+    ``--confirm-gaps on`` is the causal form, bare :func:`pslog.fusion.fuse`'s default."""
+    import pslog
+    from pslog.fusion import for_session
     from pslog.log import SessionWriter, read_session
 
     rig, det, _truth, _ = _session()
     path = tmp_path / "rally.mcap"
     with SessionWriter(path, rig, timing="typeA", source="test") as writer:
         writer.add_detections(det)
-    out = tmp_path / "fused.mcap"
-    code, _, err = cli("fuse", path, "--method", "typeA", "--confirm-gaps", "kicks", "-o", out)
-    assert code == 0, err
-    track = read_session(out).tracks["typeA"]
     sides = fuse(det, rig, "typeA", SIDES)
-    assert_array_equal(track.time_ns, sides.time_ns)
-    assert_array_equal(track.position_world, sides.position_world)
+    causal = fuse(det, rig, "typeA")
+    assert len(sides) < len(causal)
+    for args, expected in (((), sides), (("--confirm-gaps", "kicks"), sides),
+                           (("--confirm-gaps", "on"), causal)):
+        out = tmp_path / f"fused{len(args)}{args[-1] if args else ''}.mcap"
+        code, stdout, err = cli("fuse", path, "--method", "typeA", *args, "-o", out)
+        assert code == 0, err
+        track = read_session(out).tracks["typeA"]
+        assert_array_equal(track.time_ns, expected.time_ns)
+        assert_array_equal(track.position_world, expected.position_world)
+        assert "ignored" not in stdout
+    api = pslog.fuse(path, methods=["typeA"])["typeA"]
+    assert_array_equal(api.time_ns, sides.time_ns)
+    # the session's default: on with confirm_gaps, an explicit choice kept
+    options = for_session(FusionOptions(), {})
+    assert options.confirm_every and options.confirm_sides
+    options = for_session(FusionOptions(confirm_gaps=False), {})
+    assert options.confirm_every is False and options.confirm_sides is False
+    options = for_session(FusionOptions(confirm_every=True, confirm_sides=False), {})
+    assert options.confirm_every and options.confirm_sides is False
+    # named for a run without typeA: said
+    code, stdout, err = cli("fuse", path, "--method", "nearest", "--confirm-gaps", "kicks",
+                            "-o", tmp_path / "nearest.mcap")
+    assert code == 0, err
+    assert "--confirm-gaps kicks ignored: typeA does not run" in stdout
+
+
+def test_the_compiled_test_decides_as_the_numpy_one(monkeypatch):
+    """``confirm._sides_compiled`` (the kernel ``pslog fuse`` runs) against
+    ``confirm.sides_test`` (numpy, the test's statement) on every call of dirty sessions:
+    a distorting rig, spurious blobs and the static object, misses and drops, 0.3 and
+    1 px, with and without a covariance: the same decisions, bit for bit."""
+    import pslog.fusion.confirm as confirm
+    from _rigs import ring_rig
+    from pslog.motion import rally_motion
+
+    calls = []
+    compiled = confirm._sides_compiled
+
+    def both(*args):
+        got = compiled(*args)
+        calls.append((got, confirm.sides_test(*args)))
+        return got
+
+    monkeypatch.setattr(confirm, "_sides_compiled", both)
+    for rig, noise, misses in ((apply_timing(builtin_rig("paper3"), "typeA"), 0.3, 0.0),
+                               (ring_rig(4, "lab4"), 1.0, 0.2)):
+        det = simulate(rig, rally_motion(7, 6.0), 6.0, SimulationOptions(
+            noise_px=noise, seed=44, miss_rate=misses, drop_rate=misses / 2,
+            spurious_rate=0.05))[0]
+        fuse(det, rig, "typeA", SIDES)
+        fuse(det.best(), rig, "typeA", FusionOptions(confirm_every=True, confirm_sides=True,
+                                                     noise_px=None))
+    assert len(calls) == 4
+    assert sum(int(np.count_nonzero(numpy[0])) for _, numpy in calls) > 20
+    for (bad, checked), (bad_np, checked_np) in calls:
+        assert_array_equal(bad, bad_np)
+        assert_array_equal(checked, checked_np)
 
 
 def test_a_distance_a_camera_proves_leaves_out_what_the_point_covariance_hides(monkeypatch):

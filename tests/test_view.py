@@ -20,7 +20,7 @@ from rerun.chunk import RrdReader
 
 from pslog.cli import main as pslog_main
 from pslog.errors import InputError, OutputExistsError
-from pslog.fusion import explain_type_a, fuse_all
+from pslog.fusion import FusionOptions, explain_type_a, for_session, fuse_all
 from pslog.log import SessionWriter, copy_session, read_session
 from pslog.motion import get_motion
 from pslog.records import NS, Detections
@@ -28,6 +28,10 @@ from pslog.rig import apply_timing, builtin_rig
 from pslog.simulation import SimulationOptions, simulate
 from viewers import FramesChoice, build_recording, load_view_data, save_rrd
 from viewers._columns import PIXEL_CENTER, line_polylines
+
+#: the options the viewer fuses a recorded session with (pslog fuse's offline defaults:
+#: typeA confirmed on each camera's side of a kick)
+OFFLINE = for_session(FusionOptions(), {})
 
 DURATION_S = 1.0
 
@@ -102,7 +106,7 @@ def test_rrd_verifies_and_holds_every_entity(session, rrd):
     assert "/plots/ray_miss_mm/typeA" in chunks
     # each point's uncertainty: a sphere of radius 2 std_m
     sigma = chunks["/world/tracks/typeA/uncertainty"]
-    track = fuse_all(s.detections, s.rig, ["typeA"])["typeA"]
+    track = fuse_all(s.detections, s.rig, ["typeA"], OFFLINE)["typeA"]
     at = {int(t): r for t, r in zip(capture_times(sigma), batch_column(sigma, "Points3D:radii"),
                                     strict=True)}
     expected_radii = np.minimum(2 * track.quality["std_m"], 1.0)
@@ -115,7 +119,7 @@ def test_rrd_verifies_and_holds_every_entity(session, rrd):
     assert RrdReader(path).blueprints(), "the default blueprint is in the file"
 
     det, obs = s.detections, s.detections.best()
-    track = fuse_all(det, s.rig, ["typeA"])["typeA"]  # fused as the viewer does (gating)
+    track = fuse_all(det, s.rig, ["typeA"], OFFLINE)["typeA"]  # fused as the viewer does (gating)
     for i, c in enumerate(names):
         frames = det.frame_camera == i
         image = f"/world/cameras/{c}/image"
@@ -151,7 +155,7 @@ def test_images_are_passed_through_unchanged(session, rrd):
 
 def test_rays_end_at_the_type_a_points(session, rrd):
     s = read_session(session)
-    track = fuse_all(s.detections, s.rig, ["typeA"])["typeA"]
+    track = fuse_all(s.detections, s.rig, ["typeA"], OFFLINE)["typeA"]
     chunks = temporal_chunks(rrd[0])
     cam = s.rig.cameras[0]
     rays = chunks["/world/rays/cam1"]
@@ -173,7 +177,7 @@ def _distance_to_polyline(point: np.ndarray, strip: np.ndarray) -> float:
 
 def test_figure2_snapped_points_lie_on_the_drawn_epipolar_lines(session, rrd):
     s = read_session(session)
-    construction = explain_type_a(s.detections, s.rig)
+    construction = explain_type_a(s.detections, s.rig, OFFLINE)
     chunks = temporal_chunks(rrd[0])
     base = "/world/cameras/cam2/image/typeA"  # the distorting camera
     snapped = batch_column(chunks[f"{base}/snapped"], "Points2D:positions")
@@ -227,7 +231,7 @@ def test_window_frames_and_buffered_recording(session, tmp_path):
 
 def test_fused_copies_add_tracks_and_rename_duplicates(session, tmp_path):
     s = read_session(session)
-    tracks = fuse_all(s.detections, s.rig, ["typeA", "nearest"])
+    tracks = fuse_all(s.detections, s.rig, ["typeA", "nearest"], OFFLINE)
     fused = tmp_path / "fused.mcap"
     copy_session(session, fused, tracks=list(tracks.values()))
     data = load_view_data([session, fused])
@@ -572,14 +576,14 @@ def test_type_a_fused_on_the_fly_is_fuse_all_and_explain_type_a(long_session):
     fuse_all and explain_type_a each computing them."""
     data = load_view_data(long_session)
     s = read_session(long_session)
-    want = fuse_all(s.detections, s.rig, ["typeA"])["typeA"]
+    want = fuse_all(s.detections, s.rig, ["typeA"], OFFLINE)["typeA"]
     got = data.tracks["typeA"]
     np.testing.assert_array_equal(got.time_ns, want.time_ns)
     np.testing.assert_array_equal(got.position_world, want.position_world)
     assert got.quality.keys() == want.quality.keys()
     for key in want.quality:
         np.testing.assert_array_equal(got.quality[key], want.quality[key])
-    con = explain_type_a(s.detections, s.rig)
+    con = explain_type_a(s.detections, s.rig, OFFLINE)
     np.testing.assert_array_equal(data.construction.event_row, con.event_row)
     np.testing.assert_array_equal(data.construction.points_world, con.points_world)
     np.testing.assert_array_equal(data.construction.predicted_world, con.predicted_world)

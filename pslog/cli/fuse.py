@@ -89,19 +89,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "epipolar, track and motion gates and record every rejected "
                              "candidate in the output; off: take each frame's best-scored "
                              "candidate (default %(default)s)")
-    parser.add_argument("--confirm-gaps", choices=("on", "off", "all", "kicks"),
-                        default="on",
-                        help="typeA: on: a point whose prediction bridged a gap longer than "
-                             "the rig's usual one, or rests on a camera's first detection "
-                             "after a spell without one, is kept only once the next camera's "
-                             "detection confirms it (left out as contradicted or "
-                             "unconfirmed otherwise); all: every point is tested so, a "
-                             "point nothing can check kept unless it bridged a long gap "
-                             "(offline: the points just after an unseen kick left out as "
-                             "contradicted); kicks: as all, each point tested against every "
-                             "other camera's track on the point's side of a kick that track "
-                             "shows (offline); off: every point at once, as `pslog live` "
-                             "emits them (default %(default)s)")
+    parser.add_argument("--confirm-gaps", choices=("kicks", "all", "on", "off"),  # CONFIRM_GAPS
+                        default=None,
+                        help="typeA: kicks (the default): every point is tested against "
+                             "every other camera's track around it, on the point's side of a "
+                             "kick that track shows, and left out as contradicted when the "
+                             "camera shows it elsewhere (offline: the points just after an "
+                             "unseen kick, whose depth the paper's prediction took from the "
+                             "motion before it); all: every point tested against the next "
+                             "camera's interpolated track only; on: only a point whose "
+                             "prediction bridged a gap longer than the rig's usual one, or "
+                             "rests on a camera's first detection after a spell without one, "
+                             "waits for the next camera's detection to confirm it (left out "
+                             "as contradicted or unconfirmed otherwise: as a stream does); "
+                             "off: every point at once, the paper's points, as `pslog live` "
+                             "emits them")
     parser.add_argument("--filter-hold", choices=("on", "off"), default="on",
                         help="filter: on: a point whose detection surprised the filter (NIS "
                              "above 2) waits for another camera's next detection and is left "
@@ -133,6 +135,7 @@ def run(args: argparse.Namespace) -> int:
     from pslog._jit import preload
     from pslog.errors import FusionError, RigError
     from pslog.fusion import (
+        CONFIRM_GAPS,
         FILTER_HOLD_NIS,
         METHODS,
         FusionOptions,
@@ -173,9 +176,9 @@ def run(args: argparse.Namespace) -> int:
                             max_gap_s=None if args.max_gap_ms is None else args.max_gap_ms / 1e3,
                             rate_hz=args.rate, noise_px=args.noise_px,
                             gating=args.gating == "on",
-                            confirm_gaps=args.confirm_gaps != "off",
-                            confirm_every=args.confirm_gaps in ("all", "kicks"),
-                            confirm_sides=args.confirm_gaps == "kicks",
+                            **dict(zip(("confirm_gaps", "confirm_every", "confirm_sides"),
+                                       CONFIRM_GAPS[args.confirm_gaps or "kicks"],
+                                       strict=True)),
                             filter_hold_nis=FILTER_HOLD_NIS if args.filter_hold == "on"
                             else None,
                             max_std_m=None if args.type_a_max_std_mm is None
@@ -211,7 +214,7 @@ def run(args: argparse.Namespace) -> int:
     if args.type_a_max_std_mm is not None and "typeA" not in methods:
         print(f"--type-a-max-std-mm {args.type_a_max_std_mm:g} ignored: typeA does not run "
               f"(name it with --method typeA)")
-    if args.confirm_gaps in ("all", "kicks") and "typeA" not in methods:  # (on: the default)
+    if args.confirm_gaps is not None and "typeA" not in methods:
         print(f"--confirm-gaps {args.confirm_gaps} ignored: typeA does not run (name it with "
               f"--method typeA)")
     if args.filter_hold == "off" and "filter" not in methods:  # (on: the default)

@@ -52,6 +52,11 @@ FILTER_HOLD_NIS = 2.0
 #: one bridges nothing more, and overflows integer nanoseconds for absurd values.
 MAX_GAP_S = 3600.0
 
+#: ``pslog fuse --confirm-gaps``'s choices, the first the default offline: typeA's
+#: (``confirm_gaps``, ``confirm_every``, ``confirm_sides``) (:class:`FusionOptions`)
+CONFIRM_GAPS = {"kicks": (True, True, True), "all": (True, True, False),
+                "on": (True, False, False), "off": (False, False, False)}
+
 
 @dataclass(frozen=True)
 class FusionOptions:
@@ -87,19 +92,23 @@ class FusionOptions:
         detection confirms it, and drop it when that detection contradicts it
         (:mod:`pslog.fusion.confirm`; a stream outputs it one detection later); False: every
         point at once (``pslog live``: a point per shutter)
-    confirm_every : bool, typeA, offline only, with ``confirm_gaps``: every point, not only
-        the long-gap ones, is tested against the next detection of another camera that can
-        check it and dropped as ``contradicted`` when it disagrees (the same test; a point
-        nothing can check is kept unless it bridged a long gap): the points just after an
-        unseen kick, whose depth eq. (2) took from the motion before it (docs/methods.md,
-        "Type A after kicks, confirmed offline (session 29)"). False (the default): the
-        paper's points. Without ``confirm_gaps`` it is refused (``FusionError``), as a
-        typeA stream refuses it; ``pslog live`` turns both off
-    confirm_sides : bool, typeA, offline only, with ``confirm_every``: each point is tested
-        against every other camera that can check it, each camera's 2D track taken on the
-        point's side of a velocity jump the track shows (eq. (1)'s interpolation across a
-        kick is no check: ``confirm.sides_test``; docs/methods.md, "Type A after kicks: the
-        side of the kick (session 33)"). False (the default): ``confirm_every``'s test
+    confirm_every : bool or None, typeA, offline only, with ``confirm_gaps``: every point,
+        not only the long-gap ones, is tested against the next detection of another camera
+        that can check it and dropped as ``contradicted`` when it disagrees (the same test; a
+        point nothing can check is kept unless it bridged a long gap): the points just after
+        an unseen kick, whose depth eq. (2) took from the motion before it (docs/methods.md,
+        "Type A after kicks, confirmed offline (session 29)"). False: the paper's points.
+        None (the default): the session's default — on for a recorded session fused offline
+        (:func:`for_session`: ``pslog fuse``, :func:`pslog.fuse`, ``pslog view``, ``demo``,
+        ``batch``; session 35), off for bare detections (:func:`fuse`) and in a stream.
+        True without ``confirm_gaps`` is refused (``FusionError``), as a typeA stream
+        refuses True; ``pslog live`` turns both off
+    confirm_sides : bool or None, typeA, offline only, with ``confirm_every``: each point is
+        tested against every other camera that can check it, each camera's 2D track taken on
+        the point's side of a velocity jump the track shows (eq. (1)'s interpolation across
+        a kick is no check: ``confirm.sides_test``; docs/methods.md, "Type A after kicks: the
+        side of the kick (session 33)"). False: ``confirm_every``'s test. None (the
+        default): as ``confirm_every`` (:func:`for_session` turns both on)
     max_std_m : float or None, typeA: a point whose ``std_m`` exceeds this is withheld
         (counted in ``Track.dropped`` as ``uncertain``: the filter's rule;
         ``pslog.fusion.pseudo.MAX_STD_M`` is the filter's default, 5 cm / 1.96, issue 10's
@@ -135,8 +144,8 @@ class FusionOptions:
     noise_px: float | None = 0.5
     gating: bool = True
     confirm_gaps: bool = True
-    confirm_every: bool = False
-    confirm_sides: bool = False
+    confirm_every: bool | None = None
+    confirm_sides: bool | None = None
     max_std_m: float | None = None
     detector_offset_m: float | None = None
     detector_bias_px: float | None = None
@@ -197,12 +206,21 @@ def detector_bias_for(metadata) -> float:
 
 def for_session(options: FusionOptions, metadata, rig: Rig | None = None) -> FusionOptions:
     """``options`` with the session's defaults where they are None: the detector offset
-    (:func:`detector_bias_for`) and, given the ``rig`` fused with, the covariance of its
+    (:func:`detector_bias_for`), typeA's offline confirmation of every point on each
+    camera's side of a kick (``confirm_every`` and ``confirm_sides`` on, with
+    ``confirm_gaps``) and, given the ``rig`` fused with, the covariance of its
     clocks that ``pslog sync`` stored in the metadata (:func:`pslog.timing.
     read_clock_covariance`: the estimates the rig still holds; none for a session never
     synced)."""
     if options.detector_offset_m is None:
         options = replace(options, detector_offset_m=detector_bias_for(metadata))
+    if options.confirm_every is None or options.confirm_sides is None:
+        # typeA's offline confirmation of every point, on each camera's side of a kick
+        # (session 35: the points just after an unseen kick; a stream cannot wait for it)
+        every = options.confirm_gaps if options.confirm_every is None else options.confirm_every
+        options = replace(options, confirm_every=every,
+                          confirm_sides=every if options.confirm_sides is None
+                          else options.confirm_sides)
     if rig is not None and options.clock_covariance is None:
         from ..timing import read_clock_covariance
 
@@ -303,8 +321,8 @@ def _type_a(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
     table: list = []
     made = _fuse_type_a(prep, gap, options.noise_px, None, None, None, False,
                         covariance_noise_px(options.noise_px), table)[0]
-    track = (confirm_batch(prep, made, rig, gap, options.noise_px, every=options.confirm_every,
-                           sides=options.confirm_sides)
+    track = (confirm_batch(prep, made, rig, gap, options.noise_px,
+                           every=bool(options.confirm_every), sides=bool(options.confirm_sides))
              if options.confirm_gaps else made)
     return withhold_uncertain(type_a_noise(prep, track, gap, options.noise_px,
                                            table[0] if table and track is made else None),
@@ -560,8 +578,8 @@ def type_a_explained(prep: Prepared, rig: Rig, options: FusionOptions
     from .confirm import confirm_batch
 
     confirmed = type_a_noise(prep, confirm_batch(prep, track, rig, max_gap_s, options.noise_px,
-                                                 every=options.confirm_every,
-                                                 sides=options.confirm_sides),
+                                                 every=bool(options.confirm_every),
+                                                 sides=bool(options.confirm_sides)),
                              max_gap_s, options.noise_px)
     confirmed = withhold_uncertain(confirmed, options.max_std_m)[0]
     if len(confirmed) == len(track):

@@ -373,6 +373,36 @@ def sides_test(rows: np.ndarray, time_ns: np.ndarray, camera: np.ndarray, uv: np
     return bad, checked
 
 
+def _sides_compiled(rows: np.ndarray, time_ns: np.ndarray, camera: np.ndarray,
+                    uv: np.ndarray, e: np.ndarray, point: np.ndarray, cov: np.ndarray | None,
+                    gap_s: np.ndarray, span_s: np.ndarray, sigma: np.ndarray,
+                    noise_px: float | None, max_gap_ns: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`sides_test`, the same decisions, by the compiled kernel
+    (:func:`pslog.fusion._confirm_kernel.sides_kernel`: a loop over points and cameras
+    instead of ~100 column operations per camera); the module's switches read now."""
+    from ._confirm_kernel import sides_kernel  # (numba: imported at the first use)
+
+    k, m = len(e), len(rows)
+    camera = np.asarray(camera)
+    by_camera = np.argsort(camera, kind="stable").astype(np.int64)  # each camera's rows, in order
+    starts = np.zeros(m + 1, dtype=np.int64)
+    np.cumsum(np.bincount(camera, minlength=m)[:m], out=starts[1:])
+    bad = np.empty(k, dtype=np.bool_)
+    checked = np.empty(k, dtype=np.bool_)
+    sides_kernel(np.ascontiguousarray(rows, dtype=np.float64),
+                 np.ascontiguousarray(time_ns, dtype=np.int64), camera.astype(np.int64),
+                 np.ascontiguousarray(uv, dtype=np.float64), np.asarray(e, dtype=np.int64),
+                 np.ascontiguousarray(point, dtype=np.float64), cov is not None,
+                 np.zeros((k, 6)) if cov is None else np.ascontiguousarray(cov, np.float64),
+                 np.ascontiguousarray(gap_s, dtype=np.float64),
+                 np.ascontiguousarray(span_s, dtype=np.float64),
+                 np.ascontiguousarray(sigma, dtype=np.float64),
+                 0.0 if noise_px is None else float(noise_px), int(max_gap_ns), by_camera,
+                 starts, float(CONFIRM_SIGMAS), bool(SIDES_NEARER),
+                 np.nan if SIDES_PROVEN_M is None else float(SIDES_PROVEN_M), bad, checked)
+    return bad, checked
+
+
 #: Median of |N(0, 1)|: a half-normal's median, in σ.
 _HALF_NORMAL_MEDIAN = 0.6744897501960817
 
@@ -528,9 +558,9 @@ def confirm_batch(prep, track: Track, rig, max_gap_s: float, noise_px: float | N
         time_ns[prev_c], time_ns[nxt_c], uv[prev_c], uv[nxt_c], gap[wait] / NS,
         q["span_s"][idx], sigma[idx], noise_px) & ok
     if sides:
-        side = sides_test(_camera_rows(rig), time_ns, camera, uv, e, track.position_world[idx],
-                          cov, gap[wait] / NS, q["span_s"][idx], sigma[idx], noise_px,
-                          max_gap_ns)[0]
+        side = _sides_compiled(_camera_rows(rig), time_ns, camera, uv, e,
+                               track.position_world[idx], cov, gap[wait] / NS,
+                               q["span_s"][idx], sigma[idx], noise_px, max_gap_ns)[0]
         contradicted = (contradicted | side) if SIDES_AND_FIRST else side
     # (a point that neither bridged a long gap nor waits for its innovation: kept unchecked)
     unconfirmed = ~ok & long[idx]
