@@ -1,7 +1,7 @@
 """Type A after kicks, each point tested on its side of the kick (``FusionOptions.
-confirm_sides``, ``pslog fuse --confirm-gaps kicks``; docs/methods.md, "Type A after kicks:
-the side of the kick (session 33)"; the default offline since session 35). On the dev session of session 33 (paper3, rally seed
-37001, 0.3 px, clean) ``confirm_every`` keeps a point 79 mm off 18 ms after a kick: the
+confirm_sides``, ``pslog fuse --confirm-gaps kicks``, the default offline since session 35;
+docs/methods.md, "Type A after kicks: the side of the kick (session 33)"). On the dev
+session of session 33 (paper3, rally seed 37001, 0.3 px, clean) ``confirm_every`` keeps a point 79 mm off 18 ms after a kick: the
 camera that confirms it has its previous detection before the kick and its next after, so
 eq. (1)'s interpolation across the kick is no check; the side test leaves it out."""
 
@@ -132,10 +132,11 @@ def test_kicks_is_the_offline_default_and_on_the_causal_form(tmp_path, cli):
 def test_the_compiled_test_decides_as_the_numpy_one(monkeypatch):
     """``confirm._sides_compiled`` (the kernel ``pslog fuse`` runs) against
     ``confirm.sides_test`` (numpy, the test's statement) on every call of dirty sessions:
-    a distorting rig, spurious blobs and the static object, misses and drops, 0.3 and
-    1 px, with and without a covariance: the same decisions, bit for bit."""
-    import pslog.fusion.confirm as confirm
+    paper3 at 0.3 px, and a distorting 4-camera ring at 1 px with misses and drops, both
+    with spurious blobs (gated, and best-scored without a covariance): the same decisions, bit for bit."""
     from _rigs import ring_rig
+
+    import pslog.fusion.confirm as confirm
     from pslog.motion import rally_motion
 
     calls = []
