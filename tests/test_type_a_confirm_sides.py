@@ -1,9 +1,10 @@
 """Type A after kicks, each point tested on its side of the kick (``FusionOptions.
 confirm_sides``, ``pslog fuse --confirm-gaps kicks``, the default offline since session 35;
 docs/methods.md, "Type A after kicks: the side of the kick (session 33)"). On the dev
-session of session 33 (paper3, rally seed 37001, 0.3 px, clean) ``confirm_every`` keeps a point 79 mm off 18 ms after a kick: the
-camera that confirms it has its previous detection before the kick and its next after, so
-eq. (1)'s interpolation across the kick is no check; the side test leaves it out."""
+session of session 33 (paper3, rally seed 37001, 0.3 px, clean) ``confirm_every`` keeps a
+point 79 mm off 18 ms after a kick: the camera that confirms it has its previous detection
+before the kick and its next after, so eq. (1)'s interpolation across the kick is no check;
+the side test leaves it out."""
 
 from __future__ import annotations
 
@@ -133,7 +134,8 @@ def test_the_compiled_test_decides_as_the_numpy_one(monkeypatch):
     """``confirm._sides_compiled`` (the kernel ``pslog fuse`` runs) against
     ``confirm.sides_test`` (numpy, the test's statement) on every call of dirty sessions:
     paper3 at 0.3 px, and a distorting 4-camera ring at 1 px with misses and drops, both
-    with spurious blobs (gated, and best-scored without a covariance): the same decisions, bit for bit."""
+    with spurious blobs (gated, and best-scored without a covariance): the same decisions,
+    bit for bit."""
     from _rigs import ring_rig
 
     import pslog.fusion.confirm as confirm
