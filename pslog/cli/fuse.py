@@ -172,13 +172,13 @@ def run(args: argparse.Namespace) -> int:
         check_tolerance(rig, args.tolerance_ms / 1e3)
     except FusionError as exc:
         return usage_error("fuse", f"argument --tolerance-ms: {exc}")
+    confirm = CONFIRM_GAPS[args.confirm_gaps or "kicks"]  # (None: not given; said if unused)
     options = FusionOptions(tolerance_s=args.tolerance_ms / 1e3,
                             max_gap_s=None if args.max_gap_ms is None else args.max_gap_ms / 1e3,
                             rate_hz=args.rate, noise_px=args.noise_px,
                             gating=args.gating == "on",
-                            **dict(zip(("confirm_gaps", "confirm_every", "confirm_sides"),
-                                       CONFIRM_GAPS[args.confirm_gaps or "kicks"],
-                                       strict=True)),
+                            confirm_gaps=confirm[0], confirm_every=confirm[1],
+                            confirm_sides=confirm[2],
                             filter_hold_nis=FILTER_HOLD_NIS if args.filter_hold == "on"
                             else None,
                             max_std_m=None if args.type_a_max_std_mm is None
