@@ -35,7 +35,7 @@ _src = textwrap.dedent(inspect.getsource(confirm.sides_test)).replace(
 _ns = dict(vars(confirm))
 _ns["CAP"] = CAP
 exec(compile(_src, confirm.__file__, "exec"), _ns)
-confirm.sides_test = _ns["sides_test"]
+confirm._sides_compiled = _ns["sides_test"]  # (the numpy statement, instrumented: the same decisions)
 
 
 def main():
