@@ -126,7 +126,10 @@ def fuse(session: Session | str | os.PathLike[str] | Detections,
     options : :class:`pslog.fusion.FusionOptions` (tolerance, max gap, noise, gating); its
         ``detector_offset_m`` None takes the session's default
         (:func:`pslog.fusion.detector_bias_for`: 0 for simulated sessions and bare
-        detections, 0.5 mm per axis for detections found in images)
+        detections, 0.5 mm per axis for detections found in images); its
+        ``confirm_every`` and ``confirm_sides`` None turn typeA's offline confirmation on
+        (:func:`pslog.fusion.offline_confirmation`: every point checked on each other
+        camera's side of a kick), for bare detections too
     clock_uncertainty : a session synced by ``pslog sync`` (and ``options.clock_covariance``
         None): every point's covariance gains the uncertainty of the clocks it estimated
         and the rig still holds (:mod:`pslog.fusion.clock`), as ``pslog fuse
@@ -143,7 +146,13 @@ def fuse(session: Session | str | os.PathLike[str] | Detections,
     pslog.errors.RigError : a rig whose cameras differ from the session's, or a bad rig file
     """
     from . import progress
-    from .fusion import FusionOptions, check_method, default_methods, for_session
+    from .fusion import (
+        FusionOptions,
+        check_method,
+        default_methods,
+        for_session,
+        offline_confirmation,
+    )
     from .fusion.gating import fuse_detections
     from .rig import Rig, check_baselines, resolve_rig
 
@@ -169,7 +178,8 @@ def fuse(session: Session | str | os.PathLike[str] | Detections,
     if not isinstance(used, Rig):
         raise InputError(f"rig {used!r}: give a Rig, a built-in rig's name or a rig file")
     check_baselines(used, "rig")
-    options = options or FusionOptions()
+    # (bare detections: typeA's offline confirmation as for a session, pslog fuse's)
+    options = offline_confirmation(options or FusionOptions())
     if detections.n_frames == 0:
         raise FusionError("the session has no detection to fuse")
     chosen = ([check_method(m) for m in names] if names is not None

@@ -116,6 +116,8 @@ def test_kicks_is_the_offline_default_and_on_the_causal_form(tmp_path, cli):
         assert "ignored" not in stdout
     api = pslog.fuse(path, methods=["typeA"])["typeA"]
     assert_array_equal(api.time_ns, sides.time_ns)
+    bare = pslog.fuse(det, methods=["typeA"], rig=rig)["typeA"]  # (bare detections: as well)
+    assert_array_equal(bare.time_ns, sides.time_ns)
     # the session's default: on with confirm_gaps, an explicit choice kept
     options = for_session(FusionOptions(), {})
     assert options.confirm_every and options.confirm_sides

@@ -108,6 +108,7 @@ def test_without_a_bound_or_a_covariance_nothing_is_withheld():
 def test_fuse_command_withholds_and_records_the_count(tmp_path, cli):
     """`pslog fuse --type-a-max-std-mm 25.5` gives the bounded batch's points, and the
     session's left-out counts (what `pslog eval` reports) hold the `uncertain` ones."""
+    from pslog.fusion import offline_confirmation  # (pslog fuse's default)
     from pslog.log import SessionWriter, read_session
 
     rig = _session()[0]
@@ -121,7 +122,7 @@ def test_fuse_command_withholds_and_records_the_count(tmp_path, cli):
                        "--type-a-max-std-mm", "25.5", "-o", out)
     assert code == 0, err
     session = read_session(out)
-    batch = fuse(det, rig, "typeA", FusionOptions(max_std_m=0.0255))
+    batch = fuse(det, rig, "typeA", offline_confirmation(FusionOptions(max_std_m=0.0255)))
     assert batch.dropped["uncertain"] > 0
     assert_array_equal(session.tracks["typeA"].time_ns, batch.time_ns)
     assert session.left_out["typeA"]["uncertain"] == batch.dropped["uncertain"]

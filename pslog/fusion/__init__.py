@@ -98,9 +98,10 @@ class FusionOptions:
         point nothing can check is kept unless it bridged a long gap): the points just after
         an unseen kick, whose depth eq. (2) took from the motion before it (docs/methods.md,
         "Type A after kicks, confirmed offline (session 29)"). False: the paper's points.
-        None (the default): the session's default — on for a recorded session fused offline
-        (:func:`for_session`: ``pslog fuse``, :func:`pslog.fuse`, ``pslog view``, ``demo``,
-        ``batch``; session 35), off for bare detections (:func:`fuse`) and in a stream.
+        None (the default): on where the session's defaults are applied offline
+        (:func:`offline_confirmation`, by :func:`for_session`: ``pslog fuse``,
+        :func:`pslog.fuse`, ``pslog view``, ``demo``, ``batch``; session 35), off in this
+        module's :func:`fuse` and :func:`fuse_all` (the paper's causal form) and in a stream.
         True without ``confirm_gaps`` is refused (``FusionError``), as a typeA stream
         refuses True; ``pslog live`` turns both off
     confirm_sides : bool or None, typeA, offline only, with ``confirm_every``: each point is
@@ -204,23 +205,29 @@ def detector_bias_for(metadata) -> float:
     return 0.0 if simulated else DETECTOR_OFFSET_M
 
 
+def offline_confirmation(options: FusionOptions) -> FusionOptions:
+    """``options`` with typeA's offline confirmation where ``confirm_every`` and
+    ``confirm_sides`` are None: every point confirmed on each camera's side of a kick, with
+    ``confirm_gaps`` (session 35: the points just after an unseen kick; a stream cannot wait
+    for it), as ``pslog fuse`` runs it; an explicit choice kept."""
+    if options.confirm_every is not None and options.confirm_sides is not None:
+        return options
+    every = options.confirm_gaps if options.confirm_every is None else options.confirm_every
+    return replace(options, confirm_every=every,
+                   confirm_sides=every if options.confirm_sides is None
+                   else options.confirm_sides)
+
+
 def for_session(options: FusionOptions, metadata, rig: Rig | None = None) -> FusionOptions:
     """``options`` with the session's defaults where they are None: the detector offset
     (:func:`detector_bias_for`), typeA's offline confirmation of every point on each
-    camera's side of a kick (``confirm_every`` and ``confirm_sides`` on, with
-    ``confirm_gaps``) and, given the ``rig`` fused with, the covariance of its
-    clocks that ``pslog sync`` stored in the metadata (:func:`pslog.timing.
-    read_clock_covariance`: the estimates the rig still holds; none for a session never
-    synced)."""
+    camera's side of a kick (:func:`offline_confirmation`) and, given the ``rig`` fused
+    with, the covariance of its clocks that ``pslog sync`` stored in the metadata
+    (:func:`pslog.timing.read_clock_covariance`: the estimates the rig still holds; none
+    for a session never synced)."""
     if options.detector_offset_m is None:
         options = replace(options, detector_offset_m=detector_bias_for(metadata))
-    if options.confirm_every is None or options.confirm_sides is None:
-        # typeA's offline confirmation of every point, on each camera's side of a kick
-        # (session 35: the points just after an unseen kick; a stream cannot wait for it)
-        every = options.confirm_gaps if options.confirm_every is None else options.confirm_every
-        options = replace(options, confirm_every=every,
-                          confirm_sides=every if options.confirm_sides is None
-                          else options.confirm_sides)
+    options = offline_confirmation(options)
     if rig is not None and options.clock_covariance is None:
         from ..timing import read_clock_covariance
 
@@ -594,6 +601,6 @@ def type_a_explained(prep: Prepared, rig: Rig, options: FusionOptions
 __all__ = [
     "DETECTOR_OFFSET_M", "METHODS", "FusionOptions", "Method", "Prepared", "PseudoStereoPoints",
     "TypeAConstruction", "causal_methods", "check_method", "check_tolerance", "default_methods",
-    "detector_bias_for", "explain_type_a", "for_session", "fuse", "fuse_all", "prepare",
-    "pseudo_stereo_points",
+    "detector_bias_for", "explain_type_a", "for_session", "fuse", "fuse_all",
+    "offline_confirmation", "prepare", "pseudo_stereo_points",
 ]
