@@ -101,8 +101,9 @@ def run(args: argparse.Namespace) -> int:
             from pslog.evaluation import LEFT_OUT_TEXT, NOT_SCORED_TEXT
 
             print()
-            print("points left out (invalid or untrustworthy), and points written but not "
-                  "scored, by reason:")
+            print("points left out (invalid or untrustworthy)"
+                  + (", and points written but not scored" * any(unscored.values()))
+                  + ", by reason:")
             for m in shown:
                 left = ", ".join(f"{r} {n}" for r, n in left_out.get(m, {}).items())
                 skipped = ", ".join(f"{r} {n}" for r, n in unscored[m].items())
