@@ -38,8 +38,8 @@ _PLOT_TITLES = {
     # the frames the ball was detected in: a candidate off every static spot (recording.py)
     "detection_rate": "ball detection rate (%, last 0.5 s)",
 }
-#: the live view's rate: the frames with any candidate over the last second (live.py)
-_LIVE_RATE_TITLE = "detection rate (% of frames with a candidate, last 1 s)"
+#: the live view's rate: over the last second (live.py; its static spots: of the last 2 s)
+_LIVE_RATE_TITLE = "ball detection rate (%, last 1 s)"
 # 2D overlays live in image space: kept out of the 3D view so it stays readable
 _OVERLAYS = ("detections", "rejected", "epipolar", "typeA")
 
