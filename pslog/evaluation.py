@@ -459,6 +459,42 @@ LEFT_OUT_TEXT = {
     "underdetermined_end": "smooth: an end beyond a kick that too few detections hold",
 }
 
+#: Why ``pslog eval`` could not score a point a method wrote (:func:`unscored_counts`'s
+#: keys): its accuracy table counts the points it scored, these account for the rest
+NOT_SCORED_TEXT = {
+    "outside_truth": "outside the truth's time span: no truth to interpolate at its time "
+                     "(e.g. a time 'pslog sync' has not corrected: a rolling shutter reads "
+                     "the ball's row after its frame's time)",
+    "truth_gap": "the truth not finite at its time (a gap in it)",
+    "not_finite": "its position not finite",
+}
+
+
+def unscored_counts(track: Track, truth: Truth | None) -> dict[str, int]:
+    """``{reason: count}`` of the points of ``track`` that cannot be scored against
+    ``truth`` (:data:`NOT_SCORED_TEXT`'s reasons, only those with a count); empty without
+    truth. With :func:`evaluate`'s ``n_points`` they sum to ``len(track)``.
+
+    Parameters
+    ----------
+    track : Track, n points
+    truth : Truth or None
+    """
+    if truth is None or len(track) == 0:
+        return {}
+    if len(truth) == 0:
+        return {"outside_truth": len(track)}
+    t = track.time_ns
+    outside = (t < truth.time_ns[0]) | (t > truth.time_ns[-1])
+    inside = ~outside
+    gap = np.zeros(len(track), bool)
+    gap[inside] = ~np.isfinite(truth.at(t[inside])).all(axis=1)
+    bad = ~np.isfinite(track.position_world).all(axis=1) & inside & ~gap
+    counts = {"outside_truth": int(outside.sum()), "truth_gap": int(gap.sum()),
+              "not_finite": int(bad.sum())}
+    return {k: n for k, n in counts.items() if n}
+
+
 #: Where ``pslog fuse`` keeps the points each method left out, by reason (``Track.dropped``):
 #: the metadata key of each track's channel; files fused before kept every method's counts
 #: under this key of the session metadata (:attr:`pslog.log.Session.left_out` reads both).

@@ -101,7 +101,7 @@ class StatusBoard:
         for c in self.cameras:
             pct = 100.0 * c.detections / c.frames if c.frames else 0.0
             line = (f"  {c.name:<8} {c.frames:6d} frames  {c.fps_recorded():5.1f} fps  "
-                    f"{c.detections:6d} with ball ({pct:5.1f} %)  {c.drops:4d} dropped  "
+                    f"{c.detections:6d} with a candidate ({pct:5.1f} %)  {c.drops:4d} dropped  "
                     f"[{c.state}]")
             if c.message:
                 line += f"  {c.message}"

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+import re
 
 import numpy as np
 import pytest
@@ -235,7 +236,7 @@ def test_points_before_the_session_clocks_zero_are_left_out_saying_so(tmp_path, 
 def test_eval_says_what_each_left_out_reason_means(tmp_path, cli):
     # a dirty session: every method leaves points out; eval's legend names each reason it
     # shows (the reasons are the methods' own Track.dropped keys)
-    from pslog.evaluation import LEFT_OUT_TEXT
+    from pslog.evaluation import LEFT_OUT_TEXT, NOT_SCORED_TEXT
 
     session, fused = tmp_path / "dirty.mcap", tmp_path / "fused.mcap"
     code, _, err = cli("simulate", "--rig", "paper3", "--timing", "typeA", "--motion",
@@ -246,10 +247,73 @@ def test_eval_says_what_each_left_out_reason_means(tmp_path, cli):
     assert code == 0, err
     code, out, err = cli("eval", fused)
     assert code == 0, err
-    block = out.split("points left out (invalid or untrustworthy), by reason:\n")[1]
+    # (", and points written but not scored" when a method wrote a point eval cannot score)
+    block = re.split(r"points left out \(invalid or untrustworthy\)(?:, and points written "
+                     r"but not scored)?, by reason:\n", out)[1]
     lines = block.split("\n\n")[0].splitlines()
     counts = [line for line in lines if not line.startswith("  ")]
-    reasons = {part.rsplit(" ", 1)[0] for line in counts for part in line[10:].split(", ")}
+    # (a method's points eval could not score follow its left-out ones: "; not scored: ...")
+    reasons = {part.rsplit(" ", 1)[0] for line in counts
+               for part in line[10:].split("; not scored: ")[0].split(", ")}
     assert reasons and reasons <= set(LEFT_OUT_TEXT), reasons - set(LEFT_OUT_TEXT)
+    unscored = {part.rsplit(" ", 1)[0] for line in counts if "; not scored: " in line
+                for part in line.split("; not scored: ")[1].split(", ")}
+    assert unscored <= set(NOT_SCORED_TEXT), unscored - set(NOT_SCORED_TEXT)
     assert sorted(line for line in lines if line.startswith("  ")) == sorted(
-        f"  {reason}: {LEFT_OUT_TEXT[reason]}" for reason in reasons)
+        [f"  {reason}: {LEFT_OUT_TEXT[reason]}" for reason in reasons]
+        + [f"  {reason}: {NOT_SCORED_TEXT[reason]}" for reason in unscored])
+
+
+def test_eval_accounts_for_every_point_the_fuse_wrote(tmp_path, cli):
+    """A rolling shutter the rig does not know of (no `pslog sync`): camera 1 reads the
+    ball's row milliseconds after its frame's time, so `smooth`'s point at the first
+    detection's time lies before the truth's first sample, where eval cannot interpolate
+    the truth. Eval scores the rest and names that point with its reason: the points it
+    scored and those it could not add up to what the fuse said it wrote."""
+    from pslog.evaluation import NOT_SCORED_TEXT, unscored_counts
+    from pslog.records import Truth
+
+    session, fused = tmp_path / "rolling.mcap", tmp_path / "fused.mcap"
+    code, _, err = cli("simulate", "--rig", "paper3", "--timing", "typeA", "--motion",
+                       "throw", "--readout", "10", "--seed", "13", "-o", session)
+    assert code == 0, err
+    code, out, err = cli("fuse", session, "-o", fused)
+    assert code == 0, err
+    written = {line.split()[0]: int(line.split()[1]) for line in out.splitlines()
+               if line.split()[2:3] == ["points"]}
+    fused_session = read_session(fused)
+    tracks, truth = fused_session.tracks, fused_session.truth
+    assert written == {m: len(t) for m, t in tracks.items()}
+    code, out, err = cli("eval", fused, "--json")
+    assert code == 0, err
+    report = {r["method"]: r for r in json.loads(out)}
+    for method, n in written.items():
+        assert report[method]["n_points"] + sum(report[method]["not_scored"].values()) == n
+    smooth = tracks["smooth"]
+    before = int(np.count_nonzero(smooth.time_ns < truth.time_ns[0]))
+    assert before >= 1 and report["smooth"]["not_scored"] == {"outside_truth": before}
+    assert report["smooth"]["n_points"] == len(smooth) - before
+
+    code, out, err = cli("eval", fused)
+    assert code == 0, err
+    block = out.split("points left out (invalid or untrustworthy), and points written but "
+                      "not scored, by reason:\n")[1].split("\n\n")[0]
+    assert f"smooth    not scored: outside_truth {before}" in block.splitlines()
+    assert f"  outside_truth: {NOT_SCORED_TEXT['outside_truth']}" in block.splitlines()
+
+    # the other reasons, on the same track: a gap in the truth, a point not finite
+    position = truth.position_world.copy()
+    inside = np.flatnonzero(smooth.time_ns >= truth.time_ns[0])
+    sample = np.searchsorted(truth.time_ns, smooth.time_ns[inside[5]])
+    position[sample] = np.nan  # the truth's gap: the points interpolated from this sample
+    gapped = Truth(truth.time_ns, position)
+    gap = int(np.count_nonzero(~np.isfinite(gapped.at(smooth.time_ns[inside])).all(axis=1)))
+    assert 1 <= gap <= 2
+    assert unscored_counts(smooth, gapped) == {"outside_truth": before, "truth_gap": gap}
+    assert unscored_counts(smooth, None) == {}
+    from dataclasses import replace
+
+    position = smooth.position_world.copy()
+    position[inside[-1]] = np.nan
+    assert unscored_counts(replace(smooth, position_world=position), truth) == {
+        "outside_truth": before, "not_finite": 1}

@@ -509,3 +509,44 @@ def test_a_live_run_shows_in_foxglove_and_rerun_as_it_is_recorded(tmp_path):
     stored = [t for t, _ in recorded["/tracks/filter"]]
     np.testing.assert_array_equal(shown, stored)  # session times, every point
     assert sinks[2].counters()["dropped_points"] == 0
+
+
+def test_live_detection_rate_counts_the_ball_not_a_static_distractor(rig, tmp_path):
+    """The live view's rolling rate counted the frames with any candidate: a second orange
+    object in view read 100 % though the ball was missed in half the frames. It counts the
+    frames with a candidate off every static spot of the camera's last 2 s: once the spot is
+    seen in 10 frames, the plotted rate is the ball's (against the simulation's labels)."""
+    from pslog.simulation import simulate_labelled
+
+    det, _truth, ball = simulate_labelled(rig, get_motion("throw"), 1.5, SimulationOptions(
+        noise_px=0.5, miss_rate=0.5, distractors=(("cam1", (0.5, 0.3, 0.1)),), seed=3))
+    rec = rr.RecordingStream("pslog")
+    path = tmp_path / "live.rrd"
+    rec.save(path)
+    sink = RerunLiveSink(None, rig, recording=rec)
+    bounds = np.searchsorted(det.cand_frame, np.arange(det.n_frames + 1))
+    for i in range(det.n_frames):
+        t = T0 + int(det.frame_time_ns[i])
+        sink.detections(DetectionDatagram(
+            camera=rig.names[det.frame_camera[i]], sequence=int(det.frame_index[i]),
+            frame_index=int(det.frame_index[i]), t_capture_ns=t, t_sent_ns=t + 1000,
+            uv=det.cand_uv[bounds[i]:bounds[i + 1]],
+            radius=det.cand_radius[bounds[i]:bounds[i + 1]],
+            score=det.cand_score[bounds[i]:bounds[i + 1]]))
+    sink.close()
+    rec.flush()
+    assert sink.error is None
+    rows = np.flatnonzero(det.frame_camera == 0)
+    assert (det.candidates_per_frame()[rows] > 0).all()  # the distractor in every frame
+    seen = ball.candidates_per_frame()[rows] > 0  # the frames the ball was detected in
+    assert 0.3 < seen.mean() < 0.7
+    temporal, _ = rrd_chunks(path, unfinished=True)
+    rate = np.array([v[0] for v in batch_column(temporal["/plots/detection_rate/cam1"],
+                                                "Scalars:scalars")])
+    window = round(rig.cameras[0].fps)  # the last second
+    expected = np.array([100.0 * seen[max(0, i + 1 - window):i + 1].mean()
+                         for i in range(len(rows))])
+    settled = 10 - 1 + window  # the spot static from its 10th frame, then a whole window
+    assert len(rate) == len(rows) > settled + 5
+    np.testing.assert_allclose(rate[settled:], expected[settled:])
+    assert rate[:settled].max() == 100.0  # before: the distractor's frames counted

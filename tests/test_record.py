@@ -311,6 +311,9 @@ def test_record_outside_a_terminal_prints_no_status_line_of_zeros(tmp_path, caps
     assert rc == 0
     err = capsys.readouterr().err
     assert "18 frames over 0.267 s of session time" in err, err
+    # frames with a candidate: the recorder cannot tell the ball from a static orange object
+    # ('pslog info' can: its "moving" rate), so it does not say "with ball"
+    assert re.search(r"cam1 +9 frames .* 9 with a candidate \(100\.0 %\)", err), err
     assert not re.search(r" 0 fr +0\.0 fps 0 det", err), err
     board = StatusBoard([CameraStatus("cam1", "synthetic", state="recording")])
     assert board.line().endswith("cam1: started, no frame yet")

@@ -35,8 +35,11 @@ _PLOT_TITLES = {
     "ray_shift_mm": "shift onto ray, eq. 4 (mm)",
     "std_mm": "position std (mm)",
     "residual_px": "reprojection residual (px)",
-    "detection_rate": "detection rate (%, last 0.5 s)",
+    # the frames the ball was detected in: a candidate off every static spot (recording.py)
+    "detection_rate": "ball detection rate (%, last 0.5 s)",
 }
+#: the live view's rate: over the last second (live.py; its static spots: of the last 2 s)
+_LIVE_RATE_TITLE = "ball detection rate (%, last 1 s)"
 # 2D overlays live in image space: kept out of the 3D view so it stays readable
 _OVERLAYS = ("detections", "rejected", "epipolar", "typeA")
 
@@ -169,7 +172,8 @@ def build_blueprint(camera_names: Sequence[str], methods: Sequence[str], *, has_
     # a rate lies in 0-100 %: a fixed axis shows a full rate as full, not as a line on a
     # 99-101 axis, and a drop at its true size
     axes = {"detection_rate": rrb.ScalarAxis(range=(0.0, 105.0), zoom_lock=True)}
-    series = {p: rrb.TimeSeriesView(origin=f"/plots/{p}", name=_PLOT_TITLES.get(p, p),
+    titles = _PLOT_TITLES if recorded else {**_PLOT_TITLES, "detection_rate": _LIVE_RATE_TITLE}
+    series = {p: rrb.TimeSeriesView(origin=f"/plots/{p}", name=titles.get(p, p),
                                     axis_y=axes.get(p))
               for p in plots}
     legend = rrb.TextDocumentView(origin="/legend", name="legend")

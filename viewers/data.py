@@ -9,6 +9,7 @@ from __future__ import annotations
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -180,6 +181,18 @@ class ViewData:
         """The session's first frame time, int ns (0 without frames)."""
         t = self.session.detections.frame_time_ns
         return int(t.min()) if len(t) else 0
+
+    @cached_property
+    def ball_frames(self) -> tuple[list[list[dict]], np.ndarray]:
+        """``(spots, moving)``: per camera the static spots of
+        :func:`pslog.log.info.static_candidates` (a second orange object in view, a
+        candidate in every frame; or the ball at rest) and (F,) bool, the frames with a
+        candidate off every spot (:func:`pslog.log.info.moving_frames`): the frames the
+        ball was detected in, as ``pslog info``'s "moving" rate counts them."""
+        from pslog.log.info import moving_frames, static_candidates
+
+        spots, static = static_candidates(self.session.detections)
+        return spots, moving_frames(self.session.detections, static)
 
     @property
     def bucket_ns(self) -> tuple[int, int]:

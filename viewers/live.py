@@ -18,7 +18,8 @@ What the rerun view shows (the recorded view's entity paths, colours and layout,
 - the rig: each camera's pose and pinhole (``world/cameras/<cam>``, its image plane);
 - each camera's detections as they arrive, on its image plane
   (``world/cameras/<cam>/image/detections``) and as viewing rays to the floor
-  (``world/rays/<cam>``), and the detection rate of the last second (``plots/detection_rate``);
+  (``world/rays/<cam>``), and the ball's detection rate of the last second
+  (``plots/detection_rate``: the frames with a candidate off every static spot);
 - each fused point in its method's colour with a trail of the last half second
   (``world/tracks/<method>``, ``.../trail``), a translucent sphere of radius 2σ when the point
   has a covariance (``.../uncertainty``), the state predicted to the emit time (``.../predicted``
@@ -85,6 +86,37 @@ _TRAIL_GAP_NS = int(0.1 * NS)  # no trail segment across a gap longer than this
 _RAY_FALLBACK_M = 5.0  # rays that do not reach the floor are drawn this long
 _VELOCITY_ARROW_S = 0.1  # the predicted velocity is drawn as the move over this time
 _END = object()  # the queue's end marker
+#: the live detection rate leaves out a candidate that stays within this many pixels of
+#: candidates of most of the camera's last frames (pslog info's static spots: a second orange
+#: object in view): the window, seconds; the spot's reach, px (1.5 of info's 4 px cells)
+STATIC_WINDOW_S = 2.0
+STATIC_REACH_PX = 6.0
+
+
+def moving_candidate(uv: np.ndarray, recent: Sequence[np.ndarray]) -> bool:
+    """True when a frame's candidates ``uv`` (k, 2), distorted pixels, hold one off every
+    static spot of the camera's ``recent`` frames (each (k_i, 2), this frame's among them):
+    a candidate is static when candidates of at least ``pslog.log.info.STATIC_SHARE`` of
+    those frames, and ``STATIC_MIN_FRAMES`` of them, lie within :data:`STATIC_REACH_PX` of
+    it — the live form of :func:`pslog.log.info.moving_frames` (a ball at rest is static
+    too). A candidate without a pixel (not finite) counts as moving, as there."""
+    from pslog.log.info import STATIC_MIN_FRAMES, STATIC_SHARE
+
+    uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+    if not len(uv):
+        return False
+    need = max(STATIC_MIN_FRAMES, STATIC_SHARE * len(recent))
+    if len(recent) < need:
+        return True
+    frames = [np.asarray(f, dtype=np.float64).reshape(-1, 2) for f in recent]
+    other = np.concatenate(frames)
+    frame = np.repeat(np.arange(len(frames)), [len(f) for f in frames])  # (m,), ascending
+    close = np.hypot(*(uv[:, None, :] - other[None, :, :]).transpose(2, 0, 1)) <= STATIC_REACH_PX
+    for row in close:  # (one row per candidate of the frame: a few)
+        near = frame[row]  # the frames with a candidate near it, ascending, repeats adjacent
+        if np.count_nonzero(np.diff(near, prepend=-1)) < need:
+            return True
+    return False
 
 
 def _finite(values) -> np.ndarray | None:
@@ -299,6 +331,9 @@ class RerunLiveSink(_QueuedSink):
         self._last: dict[str, tuple[int, np.ndarray]] = {}  # method -> latest (time, point)
         self._frame: dict[str, int] = {}  # camera -> latest frame index
         self._hits = [collections.deque(maxlen=max(1, round(cam.fps))) for cam in rig.cameras]
+        # each camera's last frames' candidates, for the static spots the rate leaves out
+        self._recent = [collections.deque(maxlen=max(1, round(STATIC_WINDOW_S * cam.fps)))
+                        for cam in rig.cameras]
         self._clock: C.Clock | None = None
         self._legend = ""
         if recording is None:
@@ -444,8 +479,11 @@ class RerunLiveSink(_QueuedSink):
                            origin + k[:, None] * direction], axis=1).astype(np.float32)
         strips = strips[np.all(np.isfinite(strips), axis=(1, 2))]
         self.rec.log(f"world/rays/{cam.name}", rr.LineStrips3D.from_fields(strips=strips))
+        # the frames the ball was detected in: a candidate off every static spot (a second
+        # orange object in view, a candidate in every frame, does not read 100 %)
+        self._recent[c].append(uv)
         hits = self._hits[c]
-        hits.append(len(uv) > 0)
+        hits.append(moving_candidate(uv, self._recent[c]))
         self.rec.log(f"plots/detection_rate/{cam.name}",
                      rr.Scalars(100.0 * sum(hits) / len(hits)))
         return True

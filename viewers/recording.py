@@ -20,7 +20,8 @@ Entity paths mirror the transform tree (world z up, metres):
 ``plots/error_mm/<method>``                 distance to truth, mm
 ``plots/<quality>/<method>``                snap_px, ray_miss_mm, ray_shift_mm, std_mm;
                                             residual_px (smooth)
-``plots/detection_rate/<cam>``              % of frames with a detection, last 0.5 s
+``plots/detection_rate/<cam>``              % of frames the ball was detected in (a
+                                            candidate off every static spot), last 0.5 s
 ``events``, ``legend``                      session notes (TextLog), colour legend
 ``timing``                                  each camera's clock model (TextDocument)
 ``summary``                                 clocks and each method's accuracy (panels.py)
@@ -281,6 +282,13 @@ def _legend(data: ViewData, colors) -> str:
     lines = [f"**Tracks**: {', '.join(tracks)}", "",
              f"**Cameras** (rays, detections, epipolar lines, detection rate): "
              f"{', '.join(cameras)}; {name(C.REJECTED_COLOR)}: rejected candidates"]
+    spots = [f"{n} at ({s['u']:.0f}, {s['v']:.0f}) px"
+             for n, cam_spots in zip(data.session.rig.names, data.ball_frames[0], strict=True)
+             for s in cam_spots]
+    lines += ["", f"**Detection rate**: the share of each camera's frames (last "
+              f"{_RATE_WINDOW_S:g} s) with a candidate that moves: the ball's" + (
+                  f"; a candidate that does not move, left out: {', '.join(spots)} (a static "
+                  "object, or the ball at rest)" if spots else "")]
     for method, rej in list(data.rejections.items())[:1]:
         reasons = ", ".join(f"{k} {v}" for k, v in rej.counts().items() if v) or "none"
         lines += ["", f"**Gating** ({method}): {len(rej)} candidates rejected (grey points "
@@ -426,7 +434,10 @@ def _log_plots(rec, data: ViewData, clock: C.Clock, quality: dict[str, tuple[str
             n += C.send(rec, f"plots/{plot}/{method}", clock, track.time_ns[ok], frames[ok],
                         rr.Scalars.columns(scalars=values[ok]))
     det = data.session.detections
-    detected = det.candidates_per_frame() > 0
+    # the frames the ball was detected in (at most one per frame): a candidate off every
+    # static spot, so a second orange object in view, a candidate in every frame, does not
+    # read 100 % while the ball is missed (pslog info's "moving" rate)
+    detected = data.ball_frames[1]
     inside = data.in_window(det.frame_time_ns)
     for c, cam in enumerate(data.session.rig.cameras):
         rows = np.flatnonzero(det.frame_camera == c)

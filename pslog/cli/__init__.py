@@ -79,7 +79,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "rig": ("rig", "list, show, check rigs; import/export anipose, Pose2Sim, OpenCV files"),
     "fuse": ("fuse", "fuse a session's detections into 3D tracks"),
     "sync": ("sync", "estimate every camera's clock from the ball's detections"),
-    "eval": ("evaluate", "accuracy of fused tracks against ground truth"),
+    "eval": ("evaluate", "fused tracks: accuracy against ground truth, quality, points left out"),
     "paper": ("paper", "reproduce the paper's Tables 1 and 2"),
     "redetect": ("redetect", "re-run ball detection over a session's recorded frames"),
     "recover": ("recover", "salvage the complete records of a damaged session"),

@@ -32,6 +32,7 @@ def run(args: argparse.Namespace) -> int:
         format_accuracy_table,
         format_quality_table,
         format_rejection_table,
+        unscored_counts,
     )
     from pslog.log import read_session
 
@@ -56,6 +57,10 @@ def run(args: argparse.Namespace) -> int:
                                   if m in session.rejections},
                                  session.detections, session.ball_truth)
     left_out = session.left_out  # points the methods did not vouch for
+    # points a method wrote that the truth cannot score (outside its time span: a rolling
+    # shutter's ball row read after the frame's time; a gap in it): the accuracy table's
+    # counts and these add up to the points the fuse wrote
+    unscored = {m: unscored_counts(session.tracks[m], truth) for m in methods}
     # detections a method's own test rejected (filter's gate, smooth's fit): each keeps its
     # point (the prediction, the trajectory's), flagged ``rejected``
     rejected = {m: int(np.count_nonzero(session.tracks[m].quality["rejected"] == 1))
@@ -71,6 +76,7 @@ def run(args: argparse.Namespace) -> int:
                            **({"gating": gated[q.method].as_dict()}
                               if q.method in gated else {}),
                            "left_out": left_out.get(q.method, {}),
+                           "not_scored": unscored[q.method],
                            **({"rejected_detections": rejected[q.method]}
                               if q.method in rejected else {})}
                           for r, q in zip(rows, quality, strict=True)]), indent=2,
@@ -90,18 +96,25 @@ def run(args: argparse.Namespace) -> int:
                   "was rejected; correct: not the ball; ball lost: the ball rejected; false "
                   "kept: not the ball yet kept)")
             print(format_rejection_table(list(gated.values())))
-        shown = [m for m in methods if left_out.get(m)]
+        shown = [m for m in methods if left_out.get(m) or unscored[m]]
         if shown:
-            print()
-            print("points left out (invalid or untrustworthy), by reason:")
-            for m in shown:
-                print(f"{m:<9} " + ", ".join(f"{r} {n}" for r, n in left_out[m].items()))
-            from pslog.evaluation import LEFT_OUT_TEXT
+            from pslog.evaluation import LEFT_OUT_TEXT, NOT_SCORED_TEXT
 
-            reasons = dict.fromkeys(r for m in shown for r in left_out[m])
+            print()
+            print("points left out (invalid or untrustworthy)"
+                  + (", and points written but not scored" * any(unscored.values()))
+                  + ", by reason:")
+            for m in shown:
+                left = ", ".join(f"{r} {n}" for r, n in left_out.get(m, {}).items())
+                skipped = ", ".join(f"{r} {n}" for r, n in unscored[m].items())
+                print(f"{m:<9} " + "; ".join(
+                    [left] * bool(left) + [f"not scored: {skipped}"] * bool(skipped)))
+            texts = {**LEFT_OUT_TEXT, **NOT_SCORED_TEXT}
+            reasons = dict.fromkeys(r for m in shown
+                                    for r in (*left_out.get(m, {}), *unscored[m]))
             for r in reasons:
-                if r in LEFT_OUT_TEXT:
-                    print(f"  {r}: {LEFT_OUT_TEXT[r]}")
+                if r in texts:
+                    print(f"  {r}: {texts[r]}")
         if any(rejected.values()):
             print()
             print("detections the method rejected (each point kept, flagged rejected: "

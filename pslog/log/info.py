@@ -236,6 +236,18 @@ def static_candidates(detections: Detections) -> tuple[list[list[dict]], np.ndar
     return spots, static
 
 
+def moving_frames(detections: Detections, static: np.ndarray | None = None) -> np.ndarray:
+    """(F,) bool: the frames with a candidate off every static spot — the ball's detection
+    rate, a static distractor's candidate (in every frame) left out (``pslog info``'s
+    "moving", the viewer's detection rate). ``static``: :func:`static_candidates`' mask of
+    the candidates (C,), found when not given."""
+    if static is None:
+        static = static_candidates(detections)[1]
+    moving = np.zeros(detections.n_frames, dtype=bool)
+    moving[detections.cand_frame[~static]] = True
+    return moving
+
+
 def session_info(path) -> dict:
     """Summary of a session file as a JSON-able dict.
 
@@ -298,10 +310,7 @@ def session_info(path) -> dict:
     # measured on the times the rig's clock model corrects (as fusion sees them)
     cameras = timing_table(det, [cam.offset for cam in rig.cameras], rig)
     spots, static = static_candidates(det)
-    # frames with a candidate that moves: the ball's detection rate, a static distractor's
-    # candidate (in every frame) left out
-    moving = np.zeros(det.n_frames, dtype=bool)
-    moving[det.cand_frame[~static]] = True
+    moving = moving_frames(det, static)
     for i, (row, cam) in enumerate(zip(cameras, rig.cameras, strict=True)):
         row["static_spots"] = spots[i]
         n = row["frames"]
