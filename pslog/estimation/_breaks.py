@@ -505,6 +505,27 @@ def scan_near(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray,
     return tau, edge
 
 
+def gain_at(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray,
+            centers: np.ndarray, bounds: np.ndarray, limits: np.ndarray, spacing: float,
+            half_width: float, prior) -> tuple[np.ndarray, np.ndarray]:
+    """The gain of a break at each of ``centers`` itself (one trial on :func:`scan_near`'s
+    base, no search; ``bounds`` must be ``[centre, centre]``): what a break already located
+    there saves on the problem linearised at a fit (``smooth``'s confirmation of its
+    refined breaks at the fit under the real prior,
+    :func:`pslog.estimation.trajectory._confirmed_breaks`).
+
+    Returns
+    -------
+    tau : (C,) s, ``centers``; gain : (C,) cost without the break minus cost with it (σ²
+    units)
+    """
+    if np.any(bounds != centers[:, None]):
+        raise ValueError("gain_at: bounds must be [centre, centre]")
+    tau, gain, _ = _scan(t, J, z, w, centers, bounds, limits, spacing, half_width, prior,
+                         True, (1, 0))
+    return tau, gain
+
+
 def _scan(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray, centers: np.ndarray,
           bounds: np.ndarray, limits: np.ndarray, spacing: float, half_width: float, prior,
           near: bool, stages: tuple[int, int] = (_GRID, _POLISH)
@@ -612,6 +633,8 @@ def _scan_block(t: np.ndarray, J: np.ndarray, z: np.ndarray, w: np.ndarray,
 
     a, b = bounds[:, 0], bounds[:, 1]
     P, polish = stages
+    if P == 1:  # one trial, at the bounds' lower end (:func:`gain_at`: no search)
+        return a.copy(), gains(rows, a), np.zeros(C, np.int64)
     grid = a[:, None] + (b - a)[:, None] * np.linspace(0, 1, P)[None, :]
     gain = gains(np.repeat(rows, P), grid.ravel()).reshape(C, P)
     k = np.argmax(gain, axis=1)
