@@ -97,11 +97,13 @@ class FusionOptions:
         that can check it and dropped as ``contradicted`` when it disagrees (the same test; a
         point nothing can check is kept unless it bridged a long gap): the points just after
         an unseen kick, whose depth eq. (2) took from the motion before it (docs/methods.md,
-        "Type A after kicks, confirmed offline (session 29)"). False: the paper's points.
+        "Type A after kicks, confirmed offline (session 29)"). False: only the long-gap
+        points wait (the causal form; the paper's points with ``confirm_gaps`` False too).
         None (the default): on where the session's defaults are applied offline
         (:func:`offline_confirmation`, by :func:`for_session`: ``pslog fuse``,
         :func:`pslog.fuse`, ``pslog view``, ``demo``, ``batch``; session 35), off in this
-        module's :func:`fuse` and :func:`fuse_all` (the paper's causal form) and in a stream.
+        module's :func:`fuse`, :func:`fuse_all` and :func:`explain_type_a` (the causal form)
+        and in a stream.
         True without ``confirm_gaps`` is refused (``FusionError``), as a typeA stream
         refuses True; ``pslog live`` turns both off
     confirm_sides : bool or None, typeA, offline only, with ``confirm_every``: each point is
