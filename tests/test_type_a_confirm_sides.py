@@ -299,3 +299,29 @@ def test_the_compiled_test_decides_as_the_numpy_one_on_any_input(monkeypatch):
         n_points += len(results[0])
     assert all(changed.values()), changed
     assert 0 < n_bad < n_points
+
+
+def test_confirm_every_alone_is_the_same_test_offline_as_bare(tmp_path):
+    """(session 35's review) ``FusionOptions(confirm_every=True)`` is ``--confirm-gaps all``
+    (every point against the next camera's interpolation) in :func:`pslog.fusion.fuse`, as
+    it was in every entry before session 35; :func:`pslog.fuse` of the session made it
+    ``kicks`` (``confirm_sides`` None read as ``confirm_every``): the same options, other
+    points. An explicit ``confirm_every`` leaves ``confirm_sides`` None off everywhere."""
+    import pslog
+    from pslog.fusion import for_session
+    from pslog.log import SessionWriter
+
+    rig, det, _truth, _ = _session()
+    path = tmp_path / "rally.mcap"
+    with SessionWriter(path, rig, timing="typeA", source="test") as writer:
+        writer.add_detections(det)
+    every = FusionOptions(confirm_every=True)
+    bare = fuse(det, rig, "typeA", every)
+    assert len(bare) > len(fuse(det, rig, "typeA", SIDES))
+    for got in (pslog.fuse(path, methods=["typeA"], options=every)["typeA"],
+                pslog.fuse(det, methods=["typeA"], rig=rig, options=every)["typeA"]):
+        assert_array_equal(got.time_ns, bare.time_ns)
+        assert_array_equal(got.position_world, bare.position_world)
+    assert for_session(every, {}).confirm_sides is False
+    assert for_session(FusionOptions(confirm_every=False), {}).confirm_sides is False
+    assert for_session(FusionOptions(), {}).confirm_sides is True

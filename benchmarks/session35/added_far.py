@@ -42,7 +42,7 @@ def main():
         f = faults(rig, seed, span)
         tr = {}
         for kind, extra in (("clean", {}), ("dirty", f)):
-            det, truth, labels = simulate_labelled(rig, motion, duration, SimulationOptions(noise_px=0.3, seed=seed, **extra))
+            det, truth, _labels = simulate_labelled(rig, motion, duration, SimulationOptions(noise_px=0.3, seed=seed, **extra))
             tr[kind] = fuse_detections(det, rig, ["typeA"], opt, workers=1)[0]["typeA"]
             err = errors_m(tr[kind], truth)
             tr[kind + "_err"] = err

@@ -111,7 +111,8 @@ class FusionOptions:
         the point's side of a velocity jump the track shows (eq. (1)'s interpolation across
         a kick is no check: ``confirm.sides_test``; docs/methods.md, "Type A after kicks: the
         side of the kick (session 33)"). False: ``confirm_every``'s test. None (the
-        default): as ``confirm_every`` (:func:`for_session` turns both on)
+        default): on where :func:`for_session` turns ``confirm_every`` on from None, off
+        otherwise (``confirm_every=True`` alone: ``--confirm-gaps all`` everywhere)
     max_std_m : float or None, typeA: a point whose ``std_m`` exceeds this is withheld
         (counted in ``Track.dropped`` as ``uncertain``: the filter's rule;
         ``pslog.fusion.pseudo.MAX_STD_M`` is the filter's default, 5 cm / 1.96, issue 10's
@@ -211,13 +212,16 @@ def offline_confirmation(options: FusionOptions) -> FusionOptions:
     """``options`` with typeA's offline confirmation where ``confirm_every`` and
     ``confirm_sides`` are None: every point confirmed on each camera's side of a kick, with
     ``confirm_gaps`` (session 35: the points just after an unseen kick; a stream cannot wait
-    for it), as ``pslog fuse`` runs it; an explicit choice kept."""
+    for it), as ``pslog fuse`` runs it; an explicit choice kept (``confirm_every`` given
+    alone: its own test, ``confirm_sides`` off, as in :func:`fuse` and before session 35)."""
     if options.confirm_every is not None and options.confirm_sides is not None:
         return options
-    every = options.confirm_gaps if options.confirm_every is None else options.confirm_every
-    return replace(options, confirm_every=every,
-                   confirm_sides=every if options.confirm_sides is None
-                   else options.confirm_sides)
+    if options.confirm_every is None:
+        every = options.confirm_gaps
+        sides = every if options.confirm_sides is None else options.confirm_sides
+    else:
+        every, sides = options.confirm_every, bool(options.confirm_sides)
+    return replace(options, confirm_every=every, confirm_sides=sides)
 
 
 def for_session(options: FusionOptions, metadata, rig: Rig | None = None) -> FusionOptions:
