@@ -325,3 +325,34 @@ def test_confirm_every_alone_is_the_same_test_offline_as_bare(tmp_path):
     assert for_session(every, {}).confirm_sides is False
     assert for_session(FusionOptions(confirm_every=False), {}).confirm_sides is False
     assert for_session(FusionOptions(), {}).confirm_sides is True
+
+
+def test_pslog_fuse_preloads_the_compiled_test_in_the_signature_it_runs():
+    """(session 35's review) The kick test is ``pslog fuse``'s default but its kernel module
+    was not among typeA's preloaded kernels: its cache load (~20 ms) fell on type A's way.
+    Now preloaded, in the signature a session's call uses (no other one loaded after)."""
+    import pslog.fusion.confirm as confirm
+    from pslog.fusion import METHODS
+    from pslog.fusion._confirm_kernel import _preload, sides_kernel
+
+    assert "pslog.fusion._confirm_kernel" in METHODS["typeA"].kernels
+    _preload()
+    loaded = list(sides_kernel.signatures)
+    assert len(loaded) >= 1
+    calls = []
+    compiled = confirm._sides_compiled
+
+    def spy(*args):
+        calls.append(args)
+        return compiled(*args)
+
+    rig, det, _truth, _ = _session()
+    try:
+        confirm._sides_compiled = spy
+        fuse(det, rig, "typeA", SIDES)
+        fuse(det.best(), rig, "typeA", FusionOptions(confirm_every=True, confirm_sides=True,
+                                                     noise_px=None))
+    finally:
+        confirm._sides_compiled = compiled
+    assert len(calls) == 2
+    assert list(sides_kernel.signatures) == loaded
