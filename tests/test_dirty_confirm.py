@@ -365,3 +365,30 @@ def test_long_gap_pass_from_type_a_tables_equals_the_binary_search(seed):
         assert unbracketed.any() and long.any() and not long.all()
         assert np.any(fresh & ~((gap > long_ns) | unbracketed | (gap_before > long_ns)))
         assert timing == "typeA" or np.any(first != np.arange(n))
+
+
+def test_the_viewer_explains_the_type_a_track_pslog_fuse_recorded(tmp_path):
+    """(session 35's review) A session holding ``pslog fuse``'s typeA track: the viewer
+    explained it with bare ``FusionOptions()`` (the causal form), so the points the default
+    offline confirmation left out as contradicted (on each camera's side of a kick) still
+    had their rays and epipolar lines drawn; now with the session's offline defaults."""
+    from pslog.cli import main
+    from pslog.log import SessionWriter, read_session
+    from viewers.data import load_view_data
+
+    rig, det, _truth, _at = _session("paper3")
+    path = tmp_path / "dirty.mcap"
+    with SessionWriter(path, rig, timing="typeA", source="test") as writer:
+        writer.add_detections(det)
+    fused = tmp_path / "fused.mcap"
+    assert main(["fuse", str(path), "--method", "typeA", "-o", str(fused)]) == 0
+    track = read_session(fused).tracks["typeA"]
+    causal = fuse(det, rig, "typeA")
+    assert len(track) < len(causal), "the default offline leaves out more than the causal"
+    data = load_view_data(fused)
+    assert "fused on the fly" not in " ".join(data.notes)
+    shown = data.tracks["typeA"]
+    assert_array_equal(shown.time_ns, track.time_ns)
+    obs = data.construction_observations
+    assert_array_equal(obs.time_ns[data.construction.event_row], track.time_ns)
+    assert_array_equal(data.construction.points_world, track.position_world)

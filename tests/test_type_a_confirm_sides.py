@@ -231,3 +231,128 @@ def test_an_extrapolations_gravity_bound_by_hand():
                         np.full(k, t), np.full(k, prev_ns), np.full(k, next_ns), uv, uv,
                         np.zeros(k), np.zeros(k), np.full(k, sigma), None)
     assert got.tolist() == [False, False, True]
+
+
+def _random_call(rng, rows: np.ndarray) -> tuple:
+    """Random arguments of ``sides_test``: n observations of a random subset of the cameras
+    (some times repeated, some pixels NaN or inf), k points on some of their rows, a
+    covariance absent, finite (up to metres), partly NaN or indefinite, the stated noise
+    None, 0 or not."""
+    m = len(rows)
+    n = int(rng.integers(0, 50))
+    k = int(rng.integers(0, n + 1)) if n else 0
+    step = rng.integers(1, 20_000_000, n)
+    step[rng.random(n) < 0.1] = 0
+    time_ns = np.cumsum(step).astype(np.int64)
+    camera = rng.choice(rng.choice(m, int(rng.integers(1, m + 1)), replace=False), n)
+    uv = rng.normal(500.0, 200.0, (n, 2))
+    uv[rng.random((n, 2)) < rng.choice([0.0, 0.05, 0.3])] = np.nan
+    if n and rng.random() < 0.3:
+        uv[rng.integers(0, n)] = np.inf
+    e = np.sort(rng.choice(n, k, replace=False)) if k else np.zeros(0, dtype=np.int64)
+    point = rng.normal([0.0, 0.0, 0.5], [3.0, 2.0, 0.5], (k, 3))
+    kind = rng.integers(0, 4)
+    cov = None if kind == 0 else np.abs(rng.normal(0.0, 10 ** rng.uniform(-6, 0.5), (k, 6)))
+    if kind == 2:
+        cov[rng.random(k) < 0.3] = np.nan
+    elif kind == 3:
+        cov[:, 3:] = rng.normal(0.0, 1e-3, (k, 3))
+    gap_s, span_s = np.abs(rng.normal(0.01, 0.01, k)), np.abs(rng.normal(0.03, 0.02, k))
+    sigma = np.abs(rng.normal(0.5, 0.3, k))
+    noise = [None, 0.0, 0.3, 1.0][int(rng.integers(0, 4))]
+    max_gap_ns = int(rng.choice([10_000_000, 40_000_000, 3_600 * 10**9]))
+    return (rows, time_ns, camera, uv, e, point, cov, gap_s, span_s, sigma, noise, max_gap_ns)
+
+
+def test_the_compiled_test_decides_as_the_numpy_one_on_any_input(monkeypatch):
+    """(session 35's review) ``confirm._sides_compiled`` against ``confirm.sides_test`` on
+    random inputs the sessions above never make: no point, one camera, a camera without
+    rows, repeated times, NaN and infinite pixels, a NaN or indefinite covariance, the stated
+    noise None or 0, the module's switches changed (``SIDES_NEARER`` off, ``SIDES_PROVEN_M``
+    None or 0, ``CONFIRM_SIGMAS`` 2): the same decisions, bit for bit, and each switch
+    reaching the kernel (it changes some decision)."""
+    import pslog.fusion.confirm as confirm
+
+    rows = confirm._camera_rows(apply_timing(builtin_rig("paper3"), "typeA"))
+    rng = np.random.default_rng(45035)
+    changed = dict.fromkeys(("nearer", "proven", "sigmas"), False)
+    n_bad = n_points = 0
+    for _ in range(400):
+        args = _random_call(rng, rows)
+        nearer, proven, sigmas = (bool(rng.random() < 0.7), [None, 0.0255, 0.0][
+            int(rng.integers(0, 3))], float(rng.choice([4.0, 2.0])))
+        results = []
+        for switches in ((nearer, proven, sigmas), (not nearer, proven, sigmas),
+                         (nearer, None if proven is not None else 0.0255, sigmas),
+                         (nearer, proven, 6.0 - sigmas)):
+            for name, value in zip(("SIDES_NEARER", "SIDES_PROVEN_M", "CONFIRM_SIGMAS"),
+                                   switches, strict=True):
+                monkeypatch.setattr(confirm, name, value)
+            bad, checked = confirm._sides_compiled(*args)
+            bad_np, checked_np = confirm.sides_test(*args)
+            assert_array_equal(bad, bad_np)
+            assert_array_equal(checked, checked_np)
+            results.append(bad_np)
+        for key, other in zip(changed, results[1:], strict=True):
+            changed[key] |= not np.array_equal(results[0], other)
+        n_bad += int(np.count_nonzero(results[0]))
+        n_points += len(results[0])
+    assert all(changed.values()), changed
+    assert 0 < n_bad < n_points
+
+
+def test_confirm_every_alone_is_the_same_test_offline_as_bare(tmp_path):
+    """(session 35's review) ``FusionOptions(confirm_every=True)`` is ``--confirm-gaps all``
+    (every point against the next camera's interpolation) in :func:`pslog.fusion.fuse`, as
+    it was in every entry before session 35; :func:`pslog.fuse` of the session made it
+    ``kicks`` (``confirm_sides`` None read as ``confirm_every``): the same options, other
+    points. An explicit ``confirm_every`` leaves ``confirm_sides`` None off everywhere."""
+    import pslog
+    from pslog.fusion import for_session
+    from pslog.log import SessionWriter
+
+    rig, det, _truth, _ = _session()
+    path = tmp_path / "rally.mcap"
+    with SessionWriter(path, rig, timing="typeA", source="test") as writer:
+        writer.add_detections(det)
+    every = FusionOptions(confirm_every=True)
+    bare = fuse(det, rig, "typeA", every)
+    assert len(bare) > len(fuse(det, rig, "typeA", SIDES))
+    for got in (pslog.fuse(path, methods=["typeA"], options=every)["typeA"],
+                pslog.fuse(det, methods=["typeA"], rig=rig, options=every)["typeA"]):
+        assert_array_equal(got.time_ns, bare.time_ns)
+        assert_array_equal(got.position_world, bare.position_world)
+    assert for_session(every, {}).confirm_sides is False
+    assert for_session(FusionOptions(confirm_every=False), {}).confirm_sides is False
+    assert for_session(FusionOptions(), {}).confirm_sides is True
+
+
+def test_pslog_fuse_preloads_the_compiled_test_in_the_signature_it_runs():
+    """(session 35's review) The kick test is ``pslog fuse``'s default but its kernel module
+    was not among typeA's preloaded kernels: its cache load (~20 ms) fell on type A's way.
+    Now preloaded, in the signature a session's call uses (no other one loaded after)."""
+    import pslog.fusion.confirm as confirm
+    from pslog.fusion import METHODS
+    from pslog.fusion._confirm_kernel import _preload, sides_kernel
+
+    assert "pslog.fusion._confirm_kernel" in METHODS["typeA"].kernels
+    _preload()
+    loaded = list(sides_kernel.signatures)
+    assert len(loaded) >= 1
+    calls = []
+    compiled = confirm._sides_compiled
+
+    def spy(*args):
+        calls.append(args)
+        return compiled(*args)
+
+    rig, det, _truth, _ = _session()
+    try:
+        confirm._sides_compiled = spy
+        fuse(det, rig, "typeA", SIDES)
+        fuse(det.best(), rig, "typeA", FusionOptions(confirm_every=True, confirm_sides=True,
+                                                     noise_px=None))
+    finally:
+        confirm._sides_compiled = compiled
+    assert len(calls) == 2
+    assert list(sides_kernel.signatures) == loaded

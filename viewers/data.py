@@ -364,7 +364,10 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
     if (construction is None and "typeA" in shown and len(session.rig) >= 2
             and len(observations)):
         construction_obs = _type_a_observations(session)
-        construction = explain_type_a(construction_obs, session.rig)
+        # (a stored track: as pslog fuse made it by default, the offline confirmation on)
+        construction = explain_type_a(construction_obs, session.rig,
+                                      for_session(FusionOptions(), session.metadata,
+                                                  session.rig))
 
     choice = detail if isinstance(detail, DetailChoice) else DetailChoice.parse(detail)
     detail_ns = choice.range_ns(first, window)

@@ -97,11 +97,13 @@ class FusionOptions:
         that can check it and dropped as ``contradicted`` when it disagrees (the same test; a
         point nothing can check is kept unless it bridged a long gap): the points just after
         an unseen kick, whose depth eq. (2) took from the motion before it (docs/methods.md,
-        "Type A after kicks, confirmed offline (session 29)"). False: the paper's points.
+        "Type A after kicks, confirmed offline (session 29)"). False: only the long-gap
+        points wait (the causal form; the paper's points with ``confirm_gaps`` False too).
         None (the default): on where the session's defaults are applied offline
         (:func:`offline_confirmation`, by :func:`for_session`: ``pslog fuse``,
         :func:`pslog.fuse`, ``pslog view``, ``demo``, ``batch``; session 35), off in this
-        module's :func:`fuse` and :func:`fuse_all` (the paper's causal form) and in a stream.
+        module's :func:`fuse`, :func:`fuse_all` and :func:`explain_type_a` (the causal form)
+        and in a stream.
         True without ``confirm_gaps`` is refused (``FusionError``), as a typeA stream
         refuses True; ``pslog live`` turns both off
     confirm_sides : bool or None, typeA, offline only, with ``confirm_every``: each point is
@@ -109,7 +111,8 @@ class FusionOptions:
         the point's side of a velocity jump the track shows (eq. (1)'s interpolation across
         a kick is no check: ``confirm.sides_test``; docs/methods.md, "Type A after kicks: the
         side of the kick (session 33)"). False: ``confirm_every``'s test. None (the
-        default): as ``confirm_every`` (:func:`for_session` turns both on)
+        default): on where :func:`for_session` turns ``confirm_every`` on from None, off
+        otherwise (``confirm_every=True`` alone: ``--confirm-gaps all`` everywhere)
     max_std_m : float or None, typeA: a point whose ``std_m`` exceeds this is withheld
         (counted in ``Track.dropped`` as ``uncertain``: the filter's rule;
         ``pslog.fusion.pseudo.MAX_STD_M`` is the filter's default, 5 cm / 1.96, issue 10's
@@ -209,13 +212,16 @@ def offline_confirmation(options: FusionOptions) -> FusionOptions:
     """``options`` with typeA's offline confirmation where ``confirm_every`` and
     ``confirm_sides`` are None: every point confirmed on each camera's side of a kick, with
     ``confirm_gaps`` (session 35: the points just after an unseen kick; a stream cannot wait
-    for it), as ``pslog fuse`` runs it; an explicit choice kept."""
+    for it), as ``pslog fuse`` runs it; an explicit choice kept (``confirm_every`` given
+    alone: its own test, ``confirm_sides`` off, as in :func:`fuse` and before session 35)."""
     if options.confirm_every is not None and options.confirm_sides is not None:
         return options
-    every = options.confirm_gaps if options.confirm_every is None else options.confirm_every
-    return replace(options, confirm_every=every,
-                   confirm_sides=every if options.confirm_sides is None
-                   else options.confirm_sides)
+    if options.confirm_every is None:
+        every = options.confirm_gaps
+        sides = every if options.confirm_sides is None else options.confirm_sides
+    else:
+        every, sides = options.confirm_every, bool(options.confirm_sides)
+    return replace(options, confirm_every=every, confirm_sides=sides)
 
 
 def for_session(options: FusionOptions, metadata, rig: Rig | None = None) -> FusionOptions:
@@ -391,7 +397,8 @@ METHODS: dict[str, Method] = {m.name: m for m in (
     Method("typeA", _type_a, True, False, frozenset({"alone"}),
            "pseudo stereo at every detection (paper section 2.2, eqs. 1-4)",
            f"{_PAPER}, section 2.2", streamer=_type_a_stream,
-           kernels=("pslog.fusion._pseudo_kernel",), uses_doubt=True),
+           kernels=("pslog.fusion._pseudo_kernel", "pslog.fusion._confirm_kernel"),
+           uses_doubt=True),
     Method("typeB", _type_b, True, True, frozenset({"shared", "alone"}),
            "stereo at common instants + ray-constrained prediction (paper section 2.3)",
            f"{_PAPER}, section 2.3", uses_doubt=True),

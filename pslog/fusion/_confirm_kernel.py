@@ -186,3 +186,18 @@ def sides_kernel(rows, time_ns, camera, uv, e, point, has_cov, cov, gap_s, span_
             if verdict or (nearer and wrong):
                 bad[i] = True
             checked[i] = True
+
+
+def _preload() -> None:
+    """:func:`sides_kernel` (and :func:`_residual`) loaded from numba's cache (or compiled)
+    now, in the signature of :func:`pslog.fusion.confirm._sides_compiled`'s call: called by
+    :func:`pslog._jit.preload` on its thread while ``pslog fuse`` reads its session, so that
+    type A's offline confirmation (the default) does not pay the load (~20 ms) on its way
+    (the observations' times are read-only: another signature than a writable array's)."""
+    time_ns = np.zeros(0, dtype=np.int64)
+    time_ns.flags.writeable = False
+    sides_kernel(np.zeros((1, 17)), time_ns, np.zeros(0, dtype=np.int64),
+                 np.zeros((0, 2)), np.zeros(0, dtype=np.int64), np.zeros((0, 3)), False,
+                 np.zeros((0, 6)), np.zeros(0), np.zeros(0), np.zeros(0), 0.0, 0,
+                 np.zeros(0, dtype=np.int64), np.zeros(2, dtype=np.int64), 4.0, True, np.nan,
+                 np.empty(0, dtype=np.bool_), np.empty(0, dtype=np.bool_))
