@@ -768,3 +768,29 @@ def test_serve_stops_on_sigterm_in_one_line_and_on_ctrl_c_cleanly(session, sig, 
              if (line.strip() and not line.startswith("pslog view: ")) or "error" in line
              or "terminated" in line or "interrupted" in line]
     assert final == (["pslog view: terminated (SIGTERM)"] if code else []), err
+
+
+def test_type_a_points_in_doubt_left_out_of_the_view_as_by_pslog_fuse(tmp_path, cli):
+    """A dirty session (false candidates, a static distractor): `pslog fuse` leaves out the
+    typeA points resting on a choice the gate made in doubt (``doubt``). The viewer's typeA
+    fused on the fly, the Figure 2 construction of a stored track and ``explain_type_a``
+    lost that doubt (they prepared the gate's observations without it): 626 points shown
+    and 626 constructions where `pslog fuse` wrote 605 (session 35's walk, rally 45001)."""
+    session, fused = tmp_path / "dirty.mcap", tmp_path / "fused.mcap"
+    code, _, err = cli("simulate", "--rig", "paper3", "--timing", "typeA", "--motion",
+                       "rally", "--noise-px", "0.3", "--spurious", "0.1", "--distractor",
+                       "1,1,0.1", "--miss-rate", "0.05", "--seed", "45001", "-o", session)
+    assert code == 0, err
+    code, _, err = cli("fuse", session, "--method", "typeA", "-o", fused)
+    assert code == 0, err
+    out = read_session(fused)
+    stored = out.tracks["typeA"]
+    assert out.left_out["typeA"].get("doubt", 0) > 0, out.left_out
+    s = read_session(session)
+    on_the_fly = load_view_data(session, methods=["typeA"])
+    np.testing.assert_array_equal(on_the_fly.tracks["typeA"].time_ns, stored.time_ns)
+    assert len(on_the_fly.construction.event_row) == len(stored)
+    from_stored = load_view_data([session, fused], methods=["typeA"])
+    assert len(from_stored.construction.event_row) == len(stored)
+    con = explain_type_a(s.detections, s.rig, OFFLINE)
+    np.testing.assert_array_equal(con.points_world, stored.position_world)

@@ -18,11 +18,12 @@ from pslog.errors import InputError
 from pslog.fusion import (
     METHODS,
     FusionOptions,
+    Prepared,
     TypeAConstruction,
-    explain_type_a,
     for_session,
     fuse_all,
     prepare,
+    type_a_explained,
 )
 from pslog.log import Session, read_session
 from pslog.records import NS, Observations, Track
@@ -363,11 +364,12 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
 
     if (construction is None and "typeA" in shown and len(session.rig) >= 2
             and len(observations)):
-        construction_obs = _type_a_observations(session)
-        # (a stored track: as pslog fuse made it by default, the offline confirmation on)
-        construction = explain_type_a(construction_obs, session.rig,
-                                      for_session(FusionOptions(), session.metadata,
-                                                  session.rig))
+        construction_obs, prep = _type_a_prepared(session)
+        # (a stored track: as pslog fuse made it by default, the offline confirmation on,
+        # the points resting on a choice the gate made in doubt left out)
+        construction = type_a_explained(prep, session.rig,
+                                        for_session(FusionOptions(), session.metadata,
+                                                    session.rig))[1]
 
     choice = detail if isinstance(detail, DetailChoice) else DetailChoice.parse(detail)
     detail_ns = choice.range_ns(first, window)
@@ -387,14 +389,19 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
                     construction_observations=construction_obs)
 
 
-def _type_a_observations(session: Session) -> Observations:
+def _type_a_prepared(session: Session) -> tuple[Observations, Prepared]:
     """The observations type A fuses from the session's detections (gated, default
-    options), which its construction's rows index."""
-    from pslog.fusion.gating import gate_for
+    options), which its construction's rows index, and their preparation with the doubt
+    of the gate's choices (as :func:`pslog.fusion.fuse`: a point resting on one in doubt
+    is left out)."""
+    from pslog.fusion.gating import gate_for, prepared_for
 
     options = FusionOptions()
-    return (gate_for(session.detections, session.rig, "typeA", options).observations
-            if options.gating else timed_observations(session.detections, session.rig))
+    if options.gating:
+        gated = gate_for(session.detections, session.rig, "typeA", options)
+        return gated.observations, prepared_for(gated, session.rig)
+    obs = timed_observations(session.detections, session.rig)
+    return obs, prepare(obs, session.rig)
 
 
 def _type_a_with_construction(session: Session
@@ -403,14 +410,13 @@ def _type_a_with_construction(session: Session
     fuses it (gated, default options), its construction as
     :func:`pslog.fusion.explain_type_a` explains it, from one gating and one pass, and the
     observations both rest on."""
-    from pslog.fusion import check_tolerance, type_a_explained
+    from pslog.fusion import check_tolerance
 
     rig = session.rig
     options = for_session(FusionOptions(), session.metadata, rig)
     check_tolerance(rig, options.tolerance_s)
-    obs = _type_a_observations(session)
     # (with the long-gap confirmation, as pslog fuse: the points it drops are not shown)
-    prep = prepare(obs, rig)
+    obs, prep = _type_a_prepared(session)
     track, construction = type_a_explained(prep, rig, options)
     if options.clock_covariance is not None and len(track):
         # (as pslog fuse: the synced clocks' uncertainty in the covariance; points unchanged)

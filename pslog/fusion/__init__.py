@@ -560,13 +560,16 @@ def explain_type_a(
 ) -> TypeAConstruction:
     """The paper's Figure 2 construction behind every type-A point (see TypeAConstruction)."""
     options = options or FusionOptions()
-    if isinstance(observations, Detections):  # as fuse() chooses them for typeA
-        from .gating import gate_for
+    if isinstance(observations, Detections) and options.gating and len(rig) >= 2:
+        # as fuse() chooses them for typeA, with the doubt of the gate's choices (the points
+        # resting on one in doubt are left out: not explained)
+        from .gating import gate_for, prepared_for
 
-        observations = (gate_for(observations, rig, "typeA", options).observations
-                        if options.gating and len(rig) >= 2
-                        else timed_observations(observations, rig))
-    prep = prepare(observations, rig)
+        prep = prepared_for(gate_for(observations, rig, "typeA", options), rig)
+    else:
+        if isinstance(observations, Detections):
+            observations = timed_observations(observations, rig)
+        prep = prepare(observations, rig)
     return type_a_explained(prep, rig, options)[1]
 
 
