@@ -449,7 +449,9 @@ LEFT_OUT_TEXT = {
                        "paired with the ball)",
     "prediction_failed": "the prediction far from the newest ray (the innovation test)",
     "kink": "typeA: the motion bends between the points it extrapolates (a bounce or kick)",
-    "contradicted": "typeA: the next camera's detection contradicts it",
+    "contradicted": "typeA: another camera's detections place the ball elsewhere (--confirm-gaps "
+                    "kicks, the default: that camera's track around it, on its side of a kick "
+                    "the track shows; all, on: the next camera's detection)",
     "unconfirmed": "not confirmed in time (typeA: no next camera's detection; filter: after "
                    "a jump or a surprise, two more updates, one from another camera)",
     "held": "filter: held for the next camera, whose detection placed a jump before it",

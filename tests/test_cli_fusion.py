@@ -317,3 +317,22 @@ def test_eval_accounts_for_every_point_the_fuse_wrote(tmp_path, cli):
     position[inside[-1]] = np.nan
     assert unscored_counts(replace(smooth, position_world=position), truth) == {
         "outside_truth": before, "not_finite": 1}
+
+
+def test_eval_says_what_contradicted_means_under_the_default_kick_test(tmp_path, cli):
+    """`pslog fuse`'s default typeA confirmation (--confirm-gaps kicks, session 35) leaves a
+    point out as contradicted when another camera's track around it, on its side of a kick,
+    shows the ball elsewhere; eval's legend said only the older test's 'the next camera's
+    detection contradicts it', which a new user of the default could not match."""
+    session, fused = tmp_path / "rally.mcap", tmp_path / "fused.mcap"
+    code, _, err = cli("simulate", "--rig", "paper3", "--timing", "typeA", "--motion",
+                       "rally", "--noise-px", "0.3", "--seed", "45003", "-o", session)
+    assert code == 0, err
+    code, out, err = cli("fuse", session, "--method", "typeA", "-o", fused)
+    assert code == 0, err
+    assert "contradicted" in out, out
+    code, out, err = cli("eval", fused)
+    assert code == 0, err
+    legend = [line for line in out.splitlines() if line.startswith("  contradicted: ")]
+    assert len(legend) == 1, out
+    assert "kicks, the default" in legend[0] and "kick the track shows" in legend[0], legend
