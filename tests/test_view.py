@@ -794,3 +794,32 @@ def test_type_a_points_in_doubt_left_out_of_the_view_as_by_pslog_fuse(tmp_path, 
     assert len(from_stored.construction.event_row) == len(stored)
     con = explain_type_a(s.detections, s.rig, OFFLINE)
     np.testing.assert_array_equal(con.points_world, stored.position_world)
+
+
+def test_view_accuracy_names_the_points_the_truth_cannot_score(tmp_path, cli):
+    """A rolling shutter no `pslog sync` corrected: smooth's first point lies before the
+    truth's first sample. pslog eval names it (not scored: outside_truth); the viewer's
+    accuracy panel counted the scored points alone, fewer than the fuse wrote, unexplained.
+    Now it names the rest as eval does, so scored + not scored = the points written."""
+    from pslog.evaluation import evaluate, unscored_counts
+    from viewers.panels import accuracy_text
+
+    session, fused = tmp_path / "rolling.mcap", tmp_path / "fused.mcap"
+    code, _, err = cli("simulate", "--rig", "paper3", "--timing", "typeA", "--motion",
+                       "rally", "--duration", "3", "--readout", "20", "--noise-px", "0.3",
+                       "--seed", "45002", "-o", session)
+    assert code == 0, err
+    code, _, err = cli("fuse", session, "--method", "smooth,typeA", "-o", fused)
+    assert code == 0, err
+    data = load_view_data([session, fused])
+    truth = data.session.truth
+    text = accuracy_text(data)
+    smooth = data.tracks["smooth"]
+    unscored = unscored_counts(smooth, truth)
+    assert unscored.get("outside_truth", 0) > 0, unscored
+    n = evaluate(smooth, truth).n_points
+    assert n + sum(unscored.values()) == len(smooth)
+    assert f"| smooth | {n} |" in text
+    assert f"smooth outside_truth {unscored['outside_truth']} of {len(smooth)}" in text, text
+    assert "outside the truth's time span" in text
+    assert not unscored_counts(data.tracks["typeA"], truth) and "typeA outside" not in text

@@ -20,7 +20,7 @@ import numpy as np
 import rerun as rr
 
 from pslog.errors import InputError
-from pslog.evaluation import evaluate
+from pslog.evaluation import NOT_SCORED_TEXT, evaluate, unscored_counts
 from pslog.log import Image
 
 from . import _columns as C
@@ -139,8 +139,16 @@ def accuracy_text(data: ViewData) -> str:
     lines = ["**Accuracy** against the ground truth (3D error, mm)", "",
              "| method | points | rate Hz | median | p95 | RMS | max |",
              "|---|---:|---:|---:|---:|---:|---:|"]
+    notes: list[str] = []
+    reasons: dict[str, None] = {}
     for method, track in data.tracks.items():
         track = track.select(data.in_window(track.time_ns))
+        # (as pslog eval: the points the truth cannot score named, so the counts add up)
+        unscored = unscored_counts(track, truth)
+        if unscored:
+            notes.append(f"{method} " + ", ".join(f"{r} {n}" for r, n in unscored.items())
+                         + f" of {len(track)}")
+            reasons.update(dict.fromkeys(unscored))
         try:
             a = evaluate(track, truth)
         except InputError:
@@ -148,6 +156,10 @@ def accuracy_text(data: ViewData) -> str:
             continue
         lines.append(f"| {method} | {a.n_points} | {a.rate_hz:.1f} | {a.median_mm:.1f} | "
                      f"{a.p95_mm:.1f} | {a.rms_mm:.1f} | {a.max_mm:.1f} |")
+    if notes:
+        lines += ["", "points: those scored; not scored (as `pslog eval` counts them): "
+                  + "; ".join(notes) + " (" + "; ".join(f"{r}: {NOT_SCORED_TEXT[r]}"
+                                                        for r in reasons) + ")"]
     return "\n".join(lines)
 
 
