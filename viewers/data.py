@@ -365,11 +365,17 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
     if (construction is None and "typeA" in shown and len(session.rig) >= 2
             and len(observations)):
         construction_obs, prep = _type_a_prepared(session)
-        # (a stored track: as pslog fuse made it by default, the offline confirmation on,
-        # the points resting on a choice the gate made in doubt left out)
-        construction = type_a_explained(prep, session.rig,
-                                        for_session(FusionOptions(), session.metadata,
-                                                    session.rig))[1]
+        # (a stored track: as pslog fuse made it, the points resting on a choice the gate
+        # made in doubt left out; every paper point explained, then those the track holds
+        # kept: the file does not say which --confirm-gaps left the others out)
+        every = type_a_explained(prep, session.rig, replace(
+            for_session(FusionOptions(), session.metadata, session.rig),
+            confirm_gaps=False, confirm_every=False, confirm_sides=False))[1]
+        stored = shown["typeA"]
+        rows = every.event_row
+        construction = every.select(np.isin(
+            construction_obs.time_ns[rows] * 256 + construction_obs.camera[rows],
+            stored.time_ns * 256 + stored.camera))
 
     choice = detail if isinstance(detail, DetailChoice) else DetailChoice.parse(detail)
     detail_ns = choice.range_ns(first, window)
