@@ -336,3 +336,15 @@ def test_eval_says_what_contradicted_means_under_the_default_kick_test(tmp_path,
     legend = [line for line in out.splitlines() if line.startswith("  contradicted: ")]
     assert len(legend) == 1, out
     assert "kicks, the default" in legend[0] and "kick the track shows" in legend[0], legend
+
+
+def test_eval_help_text_names_not_scored(capsys):
+    """A new user compares eval's points with the fuse's: the help says they are the
+    scored ones, and where the rest are listed."""
+    from pslog.cli import main
+
+    with pytest.raises(SystemExit) as exit_info:
+        main(["eval", "--help"])
+    assert exit_info.value.code == 0
+    text = " ".join(capsys.readouterr().out.split())
+    assert "the points the truth can score" in text and "not scored" in text, text

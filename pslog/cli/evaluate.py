@@ -12,8 +12,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
     parser.add_argument("session", metavar="FUSED.mcap",
                         help="fused session (from 'pslog fuse'); with ground truth (simulated "
-                             "or synthetic sessions) the accuracy too, else the quality figures "
-                             "alone")
+                             "or synthetic sessions) the accuracy too, over the points the truth "
+                             "can score (the others, e.g. outside the truth's time span, "
+                             "listed as not scored with the points each method left out), "
+                             "else the quality figures alone")
     add_method_option(parser, "only this method's track (repeat, or a comma-separated list, "
                               "for several; default: every track)")
     parser.add_argument("--json", action="store_true", help="print JSON for scripts")
