@@ -115,6 +115,11 @@ def _test_json(test) -> dict:
             "reason": test.reason}
 
 
+#: ``--estimate auto``: a readout test above this level (below the 0.1 % that estimates
+#: readouts) is said as suggestive (the conventional 5 %)
+SUGGESTIVE_LEVEL = 0.05
+
+
 def _choice(result) -> str:
     """``--estimate auto``: the model chosen and each test's figure."""
     lines = [f"model (--estimate auto): {', '.join(result.estimated)}"]
@@ -129,17 +134,11 @@ def _choice(result) -> str:
 
             level = float(chi2.isf(SUGGESTIVE_LEVEL, t.dof))
             lines.append(f"    (above {level:.1f}, the {SUGGESTIVE_LEVEL * 100:g} % level: "
-                         f"rolling shutters this session shows only weakly; a readout left "
-                         f"out delays every "
-                         f"point by about the readout times the ball's mean row over the "
-                         f"image height: if the cameras have rolling shutters, give their "
-                         f"readouts in the rig or run --estimate offset,readout)")
+                         "rolling shutters this session shows only weakly; a readout left "
+                         "out delays every point by about the readout times the ball's mean "
+                         "row over the image height: if the cameras have rolling shutters, "
+                         "give their readouts in the rig or run --estimate offset,readout)")
     return "\n".join(lines)
-
-
-#: ``--estimate auto``: a readout test above this level (below the 0.1 % that estimates
-#: readouts) is said as suggestive (the conventional 5 %)
-SUGGESTIVE_LEVEL = 0.05
 
 
 def _legend(estimated, auto: bool = False, rig=None) -> str:

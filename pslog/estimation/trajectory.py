@@ -1530,6 +1530,24 @@ def _refine_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: np.n
     return out
 
 
+def _pieces_with_breaks(problem: _Problem, t_obs: np.ndarray, breaks: list[np.ndarray]):
+    """Per piece with breaks, for the searches of its breaks on the fitted rows ``t_obs``
+    (``problem.t[problem.rows]``): ``(piece, its rows in time order (the clock estimator
+    moves the times), its breaks, the first and last instants a break may take
+    (:func:`_end_limits`), each break's limits (C, 2): its neighbours, ±inf at the ends)``."""
+    cameras = problem.obs.camera[problem.rows]
+    row0 = 0
+    for p, known in enumerate(breaks):
+        n = len(problem.rows_of_piece[p])
+        here = row0 + np.argsort(t_obs[row0:row0 + n], kind="stable")
+        row0 += n
+        if len(known) == 0:
+            continue
+        first_ok, last_ok = _end_limits(t_obs[here], cameras[here])
+        limits = np.stack([np.r_[-np.inf, known[:-1]], np.r_[known[1:], np.inf]], axis=1)
+        yield p, here, known, first_ok, last_ok, limits
+
+
 def _refine_pass(problem: _Problem, control: np.ndarray, sigma: float, r: np.ndarray,
                  w: np.ndarray, J: np.ndarray, spacing: float, breaks: list[np.ndarray],
                  options: SmoothOptions, only: list[np.ndarray] | None,
@@ -1545,21 +1563,12 @@ def _refine_pass(problem: _Problem, control: np.ndarray, sigma: float, r: np.nda
     # per piece with breaks to search: (piece, rows in time order, breaks, whole spacing's
     # bounds, limits); per piece with breaks: (piece, its breaks, which are searched)
     wide, kept = [], []
-    row0 = 0
-    for p, known in enumerate(breaks):
-        # the piece's rows in time order (the clock estimator moves the times)
-        here = row0 + np.argsort(t_obs[row0:row0 + len(problem.rows_of_piece[p])],
-                                 kind="stable")
-        row0 += len(problem.rows_of_piece[p])
-        t = t_obs[here]
-        if len(known) == 0:
-            continue
-        first_ok, last_ok = _end_limits(t, problem.obs.camera[problem.rows][here])
+    for p, here, known, first_ok, last_ok, limits in _pieces_with_breaks(problem, t_obs,
+                                                                         breaks):
         a = np.maximum(known - spacing, first_ok)
         b = np.minimum(known + spacing, last_ok)
         ok = a < b
         search = ok if only is None else ok & only[p]
-        limits = np.stack([np.r_[-np.inf, known[:-1]], np.r_[known[1:], np.inf]], axis=1)
         kept.append((p, known[ok], search[ok]))
         if np.any(search):
             wide.append((p, here, known[search], np.stack([a[search], b[search]], axis=1),
@@ -1634,18 +1643,11 @@ def _confirmed_breaks(problem: _Problem, control: np.ndarray, sigma: float, r: n
     target = _linear_target(J, X, r)
     t_obs = problem.t[problem.rows]
     jobs, ok_of = [], {}
-    row0 = 0
-    for p, known in enumerate(breaks):
-        here = row0 + np.argsort(t_obs[row0:row0 + len(problem.rows_of_piece[p])],
-                                 kind="stable")
-        row0 += len(problem.rows_of_piece[p])
-        if len(known) == 0:
-            continue
-        first_ok, last_ok = _end_limits(t_obs[here], problem.obs.camera[problem.rows][here])
+    for p, here, known, first_ok, last_ok, limits in _pieces_with_breaks(problem, t_obs,
+                                                                         breaks):
         ok = (known >= first_ok) & (known <= last_ok)
         if not np.any(ok):
             continue
-        limits = np.stack([np.r_[-np.inf, known[:-1]], np.r_[known[1:], np.inf]], axis=1)
         jobs.append((p, here, known[ok], np.stack([known[ok], known[ok]], axis=1),
                      limits[ok]))
         ok_of[p] = ok

@@ -22,11 +22,10 @@ import numpy as np
 from .._jit import kernel
 from ..motion import G as _G
 from ..records import NS as _NS
+from .confirm import _NO_COV_FACTOR2  # (the one value: the cache stamp covers confirm.py)
 
 #: ``NS ** 2`` as numpy makes it from ``NS`` (an int) in a float expression
 _NS2 = float(_NS ** 2)
-#: confirm._NO_COV_FACTOR2 (``1 + (1 + ρ)² + ρ²`` at ``ρ = 2``)
-_NO_COV_FACTOR2 = 14.0
 
 
 @kernel
