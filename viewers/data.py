@@ -22,8 +22,8 @@ from pslog.fusion import (
     TypeAConstruction,
     for_session,
     fuse_all,
-    prepare,
     type_a_explained,
+    type_a_prepared,
 )
 from pslog.log import Session, read_session
 from pslog.records import NS, Observations, Track
@@ -396,18 +396,10 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
 
 
 def _type_a_prepared(session: Session) -> tuple[Observations, Prepared]:
-    """The observations type A fuses from the session's detections (gated, default
-    options), which its construction's rows index, and their preparation with the doubt
-    of the gate's choices (as :func:`pslog.fusion.fuse`: a point resting on one in doubt
-    is left out)."""
-    from pslog.fusion.gating import gate_for, prepared_for
-
-    options = FusionOptions()
-    if options.gating:
-        gated = gate_for(session.detections, session.rig, "typeA", options)
-        return gated.observations, prepared_for(gated, session.rig)
-    obs = timed_observations(session.detections, session.rig)
-    return obs, prepare(obs, session.rig)
+    """The observations type A fuses from the session's detections (default options),
+    which its construction's rows index, and their preparation with the gate's doubt
+    (:func:`pslog.fusion.type_a_prepared`)."""
+    return type_a_prepared(session.detections, session.rig)
 
 
 def _type_a_with_construction(session: Session

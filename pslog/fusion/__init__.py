@@ -560,17 +560,27 @@ def explain_type_a(
 ) -> TypeAConstruction:
     """The paper's Figure 2 construction behind every type-A point (see TypeAConstruction)."""
     options = options or FusionOptions()
-    if isinstance(observations, Detections) and options.gating and len(rig) >= 2:
-        # as fuse() chooses them for typeA, with the doubt of the gate's choices (the points
-        # resting on one in doubt are left out: not explained)
-        from .gating import gate_for, prepared_for
-
-        prep = prepared_for(gate_for(observations, rig, "typeA", options), rig)
+    if isinstance(observations, Detections):
+        prep = type_a_prepared(observations, rig, options)[1]
     else:
-        if isinstance(observations, Detections):
-            observations = timed_observations(observations, rig)
         prep = prepare(observations, rig)
     return type_a_explained(prep, rig, options)[1]
+
+
+def type_a_prepared(detections: Detections, rig: Rig, options: FusionOptions | None = None
+                    ) -> tuple[Observations, Prepared]:
+    """The observations type A fuses from ``detections`` as :func:`fuse` chooses them
+    (gated with ``options.gating`` and two cameras or more, else the timed best candidates;
+    the rows a construction's ``event_row`` indexes) and their preparation, with the doubt
+    of the gate's choices (the points resting on one in doubt are left out)."""
+    options = options or FusionOptions()
+    if options.gating and len(rig) >= 2:
+        from .gating import gate_for, prepared_for
+
+        gated = gate_for(detections, rig, "typeA", options)
+        return gated.observations, prepared_for(gated, rig)
+    observations = timed_observations(detections, rig)
+    return observations, prepare(observations, rig)
 
 
 def type_a_explained(prep: Prepared, rig: Rig, options: FusionOptions
@@ -612,5 +622,5 @@ __all__ = [
     "DETECTOR_OFFSET_M", "METHODS", "FusionOptions", "Method", "Prepared", "PseudoStereoPoints",
     "TypeAConstruction", "causal_methods", "check_method", "check_tolerance", "default_methods",
     "detector_bias_for", "explain_type_a", "for_session", "fuse", "fuse_all",
-    "offline_confirmation", "prepare", "pseudo_stereo_points",
+    "offline_confirmation", "prepare", "pseudo_stereo_points", "type_a_prepared",
 ]
