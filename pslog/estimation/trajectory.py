@@ -196,6 +196,9 @@ _LOOSE = 10.0
 #: (:attr:`Fit.rejected`), and at a piece's end a run of them is a jump the fit did not find
 #: (:func:`_underdetermined_ends`)
 _END_JUMP_SCALED = float(np.sqrt(-2.0 * np.log(1e-4)))
+#: Rounds of the deletion test (:func:`_left_out`): each leaves out the detections the fit
+#: bent to most, the next tests the fit made without them
+_DELETION_ROUNDS = 3
 #: Fewest detections (of at least two cameras) that make an end segment beyond a break
 #: trustworthy: 8 pixel coordinates for its 6 unknowns (:func:`_underdetermined_ends`)
 _END_DETECTIONS = 4
@@ -343,6 +346,9 @@ class Fit:
     pieces : list of (n_p,) int64, the observation rows of each fitted piece
     withheld : int, observations inside a piece left without a point: an end segment beyond
         a break that fewer than ``_END_DETECTIONS`` detections of two cameras hold
+    excluded : (n,) bool or None, the observations the deletion test left out of the fit
+        (:func:`deletion_gain`, :func:`_left_out`): weight 0, their point the trajectory's
+        made without them, their residual against it; :attr:`rejected` holds them too
     """
 
     trajectory: Trajectory
@@ -353,17 +359,21 @@ class Fit:
     weight: np.ndarray
     pieces: list = field(default_factory=list)
     withheld: int = 0
+    excluded: np.ndarray | None = None
 
     @property
     def rejected(self) -> np.ndarray:
         """(n,) bool, the ``used`` observations the fit has rejected: residual norm beyond
         :data:`_END_JUMP_SCALED` σ (``trajectory.noise_px``), χ²₂'s 1 - 1e-4 quantile, which
         a detection of the fitted ball exceeds with probability 1e-4 (its Cauchy weight
-        below 0.33, and its pull on the fit falling as it lies further). The trajectory there
-        is the other detections' and the motion model's."""
+        below 0.33, and its pull on the fit falling as it lies further), or left out of the
+        fit by the deletion test (:attr:`excluded`: the fit had bent to it). The trajectory
+        there is the other detections' and the motion model's."""
         with np.errstate(divide="ignore", invalid="ignore"):
-            return self.used & (self.residual_px / self.trajectory.noise_px
-                                > _END_JUMP_SCALED)
+            beyond = self.residual_px / self.trajectory.noise_px > _END_JUMP_SCALED
+        if self.excluded is not None:
+            beyond |= self.excluded
+        return self.used & beyond
 
 
 class _Problem:
@@ -985,15 +995,49 @@ def _fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions,
         control, sigma, r, w, J = _Solver(problem, options).run(
             control, sigma, max(options.iterations - _DOF_ITERATIONS, 1) - 1)
 
-    # σ corrected for the degrees of freedom the fit absorbs, then the covariance there
-    _, dof, _ = _information(problem, control, sigma, r, J, trace=True)
-    control, sigma, r, w, J = _Solver(problem, options).run(control, sigma,
-                                                            _DOF_ITERATIONS, dof)
-    band, _, p_eff, U = _information_factored(problem, control, sigma, r, J, trace=True)
-    # the covariance at the noise the residuals show (the M-estimator's sandwich,
-    # :func:`variance_factor`); the robust scale σ above still weighs the fit: the points
-    # do not move
-    band *= variance_factor(r, w, sigma, p_eff)  # in place: the band is this fit's own
+    # σ corrected for the degrees of freedom the fit absorbs, then the covariance there;
+    # then each detection's deletion test (:func:`deletion_gain`): a detection the fit bent
+    # to, which leaving out lowers the fit's cost beyond the level, leaves the fit, and the
+    # fit is made again without it (:func:`_left_out`; docs/methods.md, "A spurious blob
+    # the fit bends to")
+    left_out = np.zeros(0, np.int64)
+    for round_ in range(_DELETION_ROUNDS + 1):
+        _, dof, _ = _information(problem, control, sigma, r, J, trace=True)
+        control, sigma, r, w, J = _Solver(problem, options).run(control, sigma,
+                                                                _DOF_ITERATIONS, dof)
+        band, _, p_eff, U = _information_factored(problem, control, sigma, r, J, trace=True)
+        # the covariance at the noise the residuals show (the M-estimator's sandwich,
+        # :func:`variance_factor`); the robust scale σ above still weighs the fit: the
+        # points do not move
+        k_var = variance_factor(r, w, sigma, p_eff)
+        band *= k_var  # in place: the band is this fit's own
+        cov_rows = problem.points.marginal(band)
+        # (σ at its floor: noise-free detections, whose residuals are the model's own error
+        # at a kick it did not find, not noise that a level of σ can sort into outliers)
+        if round_ == _DELETION_ROUNDS or sigma <= options.min_noise_px:
+            break
+        out = _left_out(problem.t[problem.rows],
+                        deletion_gain(J, cov_rows, r, w, sigma, k_var),
+                        _WINDOW_SPANS * spacing, _inside(problem))
+        if not len(out):
+            break
+        left_out = np.union1d(left_out, problem.rows[out])
+        kept_rows = [rows[~np.isin(rows, left_out)] for rows in pieces]
+        problem = _Problem(obs, rig, kept_rows, knots, options.prior, t0_ns)
+        control, sigma, r, w, J = _Solver(problem, options).run(control, sigma,
+                                                                _REFINE_ITERATIONS)
+        # a break the left-out detection made (the search ran with it) must pay its way
+        # without it (:func:`_confirmed_breaks`)
+        if any(len(b) for b in breaks):
+            kept = _confirmed_breaks(problem, control, sigma, r, w, J, spacing, breaks,
+                                     options)
+            if sum(len(b) for b in kept) < sum(len(b) for b in breaks):
+                breaks = kept
+                knots = piece_knots(breaks)
+                X_old = problem.positions(control)
+                problem.set_knots(knots, options.prior)
+                control = _refit_linearised(problem, X_old, r, J, w, sigma)
+                _, r, J = problem.project_control(control)
     consider = (options.detector_bias_px * bias_sensitivity(problem, U, J, r, sigma)
                 if options.detector_bias_px > 0 else None)
     if consider_px is not None and consider_px.shape[2]:
@@ -1013,23 +1057,94 @@ def _fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions,
         # points' arrays are the outputs, not copied into NaN-filled ones (a 90-minute
         # session's covariances are 35 MB, written twice and faulted in page by page)
         position = problem.positions(control)
-        covariance = problem.points.marginal(band)
+        covariance = cov_rows
         _add_consider(covariance, slice(None), trajectory, problem.first, problem.N)
     else:
         position = np.full((n, 3), np.nan)
         covariance = np.full((n, 3, 3), np.nan)
         position[problem.rows] = problem.positions(control)
-        covariance[problem.rows] = problem.points.marginal(band)
+        covariance[problem.rows] = cov_rows
         _add_consider(covariance, problem.rows, trajectory, problem.first, problem.N)
+    del cov_rows
     residual[problem.rows] = np.linalg.norm(r, axis=1)
     weight[problem.rows] = w
     used = np.zeros(n, dtype=bool)
     used[problem.rows] = True
+    excluded = np.zeros(n, dtype=bool)
+    if len(left_out):
+        # a detection left out keeps its row: the trajectory there (the others' and the
+        # prior's), its residual against it (its deleted residual), weight 0
+        position[left_out], covariance[left_out] = trajectory.evaluate(obs.time_ns[left_out])
+        for c, cam in enumerate(rig.cameras):
+            rows = left_out[obs.camera[left_out] == c]
+            if len(rows):
+                uv, _ = cam.project(position[rows])
+                residual[rows] = np.linalg.norm(uv - obs.uv[rows], axis=1)
+        used[left_out] = np.all(np.isfinite(position[left_out]), axis=1)
+        excluded[left_out] = True
     used[out_rows] = False
     position[out_rows] = np.nan
     covariance[out_rows] = np.nan
     return Fit(trajectory, used, position, covariance, residual, weight, pieces,
-               len(out_rows))
+               len(out_rows), excluded)
+
+
+def _inside(problem: _Problem) -> np.ndarray:
+    """(n_fit,) bool, in ``problem.rows``' order: the fitted detections strictly inside their
+    piece's time span, which detections on both sides hold. A piece's first or last
+    detection is the end of what the piece covers: the others only extrapolate to it, and
+    left out it would take the end of the piece (and its point) with it."""
+    out = []
+    for rows in problem.rows_of_piece:
+        t = problem.t[rows]
+        out.append((t > t.min()) & (t < t.max()))
+    return np.concatenate(out)
+
+
+def _left_out(t: np.ndarray, gain: np.ndarray, window_s: float, inside: np.ndarray
+              ) -> np.ndarray:
+    """Indices (into ``t``) of the detections to leave out of the fit: those ``inside`` their
+    piece (:func:`_inside`) whose deletion gain (:func:`deletion_gain`) exceeds
+    :data:`_END_JUMP_SCALED` ² (χ²₂'s 1 - 1e-4 quantile, the level of the fit's other tests),
+    taken largest first, none within ``window_s`` of one already taken. A detection the fit
+    bends to also spoils its neighbours' fit, and raises their gains: the largest is the one
+    to leave out first, the others' gains are measured again at the fit without it."""
+    over = np.flatnonzero((gain > _END_JUMP_SCALED**2) & inside)
+    if not len(over):
+        return over
+    order = np.argsort(-gain[over], kind="stable")
+    chosen: list[int] = []
+    for k in over[order]:
+        if all(abs(t[k] - t[c]) > window_s for c in chosen):
+            chosen.append(int(k))
+    return np.sort(np.asarray(chosen, np.int64))
+
+
+def deletion_gain(J: np.ndarray, cov_X: np.ndarray, r: np.ndarray, w: np.ndarray,
+                  sigma: float, scale: float = 1.0) -> np.ndarray:
+    """(n,) ``T_i``: how much the cost of the fit's weighted least-squares problem (its last
+    reweighted step: each detection at its robust weight ``w_i``, the prior) falls when
+    detection ``i`` leaves it and the rest are fitted again, in units of ``σ²``:
+
+        T_i = w_i r_iᵀ (I - A_i)⁻¹ r_i / σ²,   A_i = w_i J_i Σ_X,i J_iᵀ / σ²
+
+    (the deletion formula of least squares: Cook & Weisberg, *Residuals and Influence in
+    Regression*, 1982, §2.2, for a 2-D observation; ``A_i`` the detection's 2 x 2 block of
+    the hat matrix, ``Σ_X,i = cov_X_i / scale`` the position's covariance ``H⁻¹`` with the
+    detection in it). A detection the fit agrees with (``w ≈ 1``) has ``T_i`` its deleted,
+    studentized residual squared — its residual against the fit made without it, over that
+    residual's standard deviation — χ²₂ when the fit is right. One the robust weights
+    already discount cannot exceed ``c² = 9`` by its residual alone (``w s = s / (1 + s / c²)
+    < c²``): it only can through its leverage, the fit bending to follow it (``A_i`` near
+    ``I``), which the deleted residual sees and the plain one hides."""
+    JS = np.einsum("nai,nij->naj", J, cov_X)
+    P = np.einsum("naj,nbj->nab", JS, J) * (w / (scale * sigma**2))[:, None, None]
+    a, d = 1.0 - P[:, 0, 0], 1.0 - P[:, 1, 1]
+    b = -0.5 * (P[:, 0, 1] + P[:, 1, 0])  # (symmetric up to rounding)
+    x, y = r[:, 0], r[:, 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        quad = (d * x * x - 2 * b * x * y + a * y * y) / (a * d - b * b)
+    return w * quad / sigma**2
 
 
 def _underdetermined_ends(problem: _Problem, breaks: list[np.ndarray],

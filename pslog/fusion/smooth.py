@@ -11,8 +11,10 @@ pieces (never inside a gap the model does not bridge). Per-point quality:
   the full 3 x 3 covariance (m²);
 - ``residual_px``: the detection's reprojection residual, pixels (NaN on grid points);
 - ``rejected``: 1 where the fit rejected the point's detection (:attr:`Fit.rejected`: its
-  residual beyond χ²₂'s 1 - 1e-4 quantile of the fit's noise σ, the filter's gate's level),
-  0 at the others, NaN on grid points. The point stays, the trajectory's at that time as at
+  residual beyond χ²₂'s 1 - 1e-4 quantile of the fit's noise σ, the filter's gate's level,
+  or left out of the fit by the deletion test: leaving it out lowered the fit's cost
+  beyond that level, the fit had bent to it; the residual is then against the fit without
+  it), 0 at the others, NaN on grid points. The point stays, the trajectory's at that time as at
   every detection (the fit gave the detection a weight below 0.33: the point is the other
   detections' and the motion model's), as the filter's point at a detection its gate
   rejected is its prediction; the detection's camera did not see the ball there (a spurious
