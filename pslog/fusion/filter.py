@@ -266,6 +266,10 @@ class FilterOptions:
         ``r`` and ``q = q_min exp(η max(0, g − h))``: ``q`` stays at its floor until the
         innovations' lag is significant (0: ``log q`` the random walk before session 33,
         ``q ← q exp(η (r − r₀))``)
+    chained_jump_restart : bool, a third velocity jump found before the first is confirmed
+        is taken for a motion model that fails, not for a third kick: the track restarts
+        from its window since the previous jump, each model fitted (the turn model at the
+        start's prior), ``q`` kept (session 36; False: the jump accepted, as before)
     model_switch_per_s : float, rate ``λ`` of switches between the ballistic model and the
         supported one (no gravity: a ball rolling, carried, on a string), 1/s; the models
         are mixed by an interacting multiple model (0: the ballistic model alone)
@@ -400,6 +404,7 @@ class FilterOptions:
     model_switch_per_s: float = 0.5
     accel_adapt_target: float = 0.4
     accel_adapt_threshold: float = 6.0
+    chained_jump_restart: bool = True
     max_std_m: float | None = _MAX_ERROR_M / 1.96
     turn_switch_per_s: float = 0.5
     turn_on_psd: float | None = None
@@ -575,7 +580,9 @@ _IJLAG = _IJT0 + 4  # the winner's lag: its buffered detection at this index is 
 _IJBUF = _IJT0 + 5
 #: the time of the drag's latest update (its random walk's start; -2**62: none yet)
 _IDRAGT = _IJBUF + 2 * _JBUF
-_ICAM = _IDRAGT + 1  # then 3 per camera, then 2 per window slot
+#: the jumps accepted since the latest confirmation (or start): a chain of them (session 36)
+_ICHAIN = _IDRAGT + 1
+_ICAM = _IDRAGT + 2  # then 3 per camera, then 2 per window slot
 #: ``O`` (float64 options): k, g (3), gravity's unit vector (3), gate, adapt_rate, σ² bounds,
 #: q bounds, q's rate and target, max_std (inf: none), withhold, confirm_nis, λ, μ₀, turn
 #: model on, λ_t, turn_on_psd, turn_rate_psd, turn_rate_std², restitution, friction, number
@@ -602,7 +609,10 @@ _OHOLDP = _OFSTD2 + 1
 #: q's change detector's threshold ``h`` (0: the random walk before session 33) and the
 #: CUSUM's cap ``h + ln(q_max / q_min) / η`` (session 33)
 _OQDEAD, _OQGMAX = _OHOLDP + 1, _OHOLDP + 2
-_OSIZE = _OHOLDP + 3
+#: 1: a third jump found before the first is confirmed restarts the track from its window
+#: (session 36, ``chained_jump_restart``)
+_OCHAIN = _OHOLDP + 3
+_OSIZE = _OHOLDP + 4
 #: the held points at most at once (a camera alone past them: the later ones output)
 _HOLD_MAX = 8
 #: ``N`` (int64 options): max gap, window span, init_window, init_detections, max_rejects,
@@ -1972,6 +1982,31 @@ def _push(S, I, cams, O, N, t, cam, u, v, out):
         if not found:  # rejected: the point is the prediction
             S[_SV:_SV + 6] = Vm
             return _reject(S, I, cams, O, N, t, cam, u, v, x, P, inn_ok, inn, gap_s, out)
+        if O[_OCHAIN] != 0.0 and I[_IPEND] >= 0 and I[_ICHAIN] >= 2:
+            # a third jump before the first is confirmed: one camera's jump fixes the
+            # velocity only across its ray, a second (another camera's) may fix the rest,
+            # but jumps that keep following each other say the motion model fails (a turn,
+            # an acceleration the pair lacks), not that the ball is kicked every frame; and
+            # each jump forgets the innovations q's whiteness statistic compares, so q could
+            # never rise. The track restarts from its window, each model fitted (session
+            # 36), the turn model at the start's prior (0 ± turn_rate_std: the lost set's
+            # turn rate is what the jumps kept from being learned)
+            I[_IHAS] = 0
+            S[_SNU] = 0.0
+            # the window starts at the previous jump's detection: what came before it is
+            # another segment (a kick the second jump corrects: a fit across it is wrong)
+            wt, wf = _ICAM + 3 * ncam, _SCAM + 2 * ncam
+            n = I[_IWN]
+            drop = 0
+            while drop < n and I[wt + 2 * drop] < I[_IJUMPNS]:
+                drop += 1
+            for k in range(n - drop):
+                j = k + drop
+                I[wt + 2 * k], I[wt + 2 * k + 1] = I[wt + 2 * j], I[wt + 2 * j + 1]
+                S[wf + 2 * k], S[wf + 2 * k + 1] = S[wf + 2 * j], S[wf + 2 * j + 1]
+            I[_IWN] = n - drop
+            _window_append(I, S, N, ncam, t, cam, u, v, N[_NINITWIN])
+            return _FIT if _window_trim(I, S, N, ncam) else _NONE
         inn = inn_j
         xo0, xo1, xo2, v0, v1, v2, nis = xn[0], xn[1], xn[2], Pn[0], Pn[7], Pn[14], inn[5]
         jump = 1.0
@@ -2066,6 +2101,7 @@ def _push(S, I, cams, O, N, t, cam, u, v, out):
                 I[_IOTHER] = 1
             if I[_ICONFS] >= _CONFIRM_UPDATES and I[_IOTHER]:
                 I[_IPEND] = -1
+                I[_ICHAIN] = 0
         if nu_post:
             # the model set adapts (variable-structure IMM): the turn model leaves when it
             # is unlikely, or its turn rate is not told from 0 (the supported model), once
@@ -2081,6 +2117,7 @@ def _push(S, I, cams, O, N, t, cam, u, v, out):
                     xn, Pn = xt[:6], _block6(Pt)
     else:
         I[_IJUMPNS], I[_IJUMPCAM] = t, cam
+        I[_ICHAIN] += 1
         for k in range(ncam):  # a new segment
             I[cinn_has + k] = 0
         I[_IPEND], I[_ICONFS], I[_IOTHER] = cam, 0, 0
@@ -2772,6 +2809,7 @@ class BallFilter:
         O[_OFSTD2] = options.bounce_friction_std ** 2
         O[_OHOLDP] = 2.0 if options.hold_jump_p is None else options.hold_jump_p
         O[_OQDEAD] = options.accel_adapt_threshold
+        O[_OCHAIN] = float(options.chained_jump_restart)
         O[_OQGMAX] = (options.accel_adapt_threshold
                       + (math.log(self._q_max / self._q_min) / options.accel_adapt_rate
                          if options.accel_adapt_rate > 0.0 else 0.0))
@@ -2841,6 +2879,7 @@ class BallFilter:
         S[_SP:_SP + 36] = np.asarray(covariance, dtype=np.float64).ravel()
         I[_IREJ] = I[_ICONF] = 0
         I[_IPEND] = -1
+        I[_ICHAIN] = 0
         I[_IWN] = 0
         I[_ICAP] = self.options.init_window
         I[_IHN] = 0
