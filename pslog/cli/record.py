@@ -252,7 +252,7 @@ def parse_sources(rig, sources: list[str], offsets: list[str]) -> dict:
     """``NAME=SPEC`` strings (and ``NAME=SECONDS`` offsets) -> camera name -> source spec."""
     from pathlib import Path
 
-    from pslog.inputs import special_file
+    from pslog.inputs import not_there, special_file
     from recorders.sources import DeviceSpec, FileSpec
 
     offset_of: dict[str, float] = {}
@@ -284,7 +284,9 @@ def parse_sources(rig, sources: list[str], offsets: list[str]) -> dict:
                 path, offset = video, _seconds(at, text, name)
             if not Path(path).is_file():
                 kind = special_file(path) or ("a folder" if Path(path).is_dir() else None)
+                why = not_there(path)
                 raise InputError(f"camera {name!r}: {path} is {kind}, not a video file" if kind
+                                 else f"camera {name!r}: {why}" if why
                                  else f"camera {name!r}: video file not found: {path}")
             specs[name] = FileSpec(path, cam.width, cam.height, offset)
     for name in offset_of:

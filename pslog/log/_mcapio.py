@@ -69,7 +69,9 @@ def check_file(path, header: bool = True) -> tuple[Path, int, bool]:
     """
     path = Path(path)
     if not path.exists():
-        raise LogFormatError(f"no such file: {path}")
+        from ..inputs import not_there
+
+        raise LogFormatError(not_there(path) or f"no such file: {path}")
     if not path.is_file():
         raise LogFormatError(f"not a file: {path}")
     tail = b""

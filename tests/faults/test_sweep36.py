@@ -1,6 +1,8 @@
 """Session 36's hostile-input sweep through the real CLI: values and paths no earlier sweep
 tried. ``view --detail 1e300`` (or ``A:B`` with a bound that large) was a traceback (its
-nanoseconds, 1e309, a float infinity no int holds)."""
+nanoseconds, 1e309, a float infinity no int holds). A loop of symbolic links given as an
+input was "no such file" (``Path.exists`` is False for it), and so was a link whose target
+is gone: the user looks for a file that is there; each is now named for what it is."""
 
 from __future__ import annotations
 
@@ -8,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from .promises import assert_untouched, fingerprint, run_pslog
+from .promises import assert_one_line_error, assert_untouched, fingerprint, run_pslog
 
 
 @pytest.fixture(scope="module")
@@ -17,6 +19,9 @@ def inputs(tmp_path_factory) -> Path:
     done = run_pslog("simulate", "--rig", "paper3", "--timing", "typeA", "--duration", "0.5",
                      "--seed", "48036", "-o", folder / "s.mcap")
     assert done.code == 0, done.stderr
+    (folder / "loop1").symlink_to("loop2")
+    (folder / "loop2").symlink_to("loop1")
+    (folder / "gone.mcap").symlink_to("moved-away.mcap")
     return folder
 
 
@@ -34,4 +39,34 @@ def test_a_detail_range_beyond_any_clock_is_everything_from_its_start(detail, no
         assert note in run.stdout, run.stdout
     else:
         assert "full-detail range" not in run.stdout, run.stdout
+    assert_untouched(before, inputs)
+
+
+#: every kind of input, given as {p}
+READERS = {
+    "info": ["info", "{p}"],
+    "fuse": ["fuse", "{p}", "-o", "out.mcap"],
+    "recover": ["recover", "{p}", "-o", "out.mcap"],
+    "view": ["view", "{p}", "--save", "out.rrd"],
+    "rig show": ["rig", "show", "{p}"],
+    "simulate --rig": ["simulate", "--rig", "{p}", "-o", "out.mcap"],
+    "import --detections": ["import", "--rig", "paper3", "--detections", "{p}", "-o",
+                            "out.mcap"],
+    "calibrate --points": ["calibrate", "--points", "{p}", "--name", "cam9", "--width", "640",
+                           "--height", "480", "--rig", "out.toml"],
+    "calibrate --images": ["calibrate", "--chessboard", "9x6", "--square", "0.025",
+                           "--images", "{p}", "--name", "cam9", "--rig", "out.toml"],
+    "record --source": ["record", "--rig", "paper3", "--source", "cam1={p}", "-o", "out.mcap"],
+}
+
+
+@pytest.mark.parametrize("link, says", [
+    ("loop1", "loop1: a loop of symbolic links"),
+    ("gone.mcap", "gone.mcap is a symbolic link to moved-away.mcap, which does not exist")])
+@pytest.mark.parametrize("reader", list(READERS))
+def test_a_link_that_leads_nowhere_is_named_for_what_it_is(reader, link, says, inputs):
+    before = fingerprint(inputs)
+    args = [a.format(p=link) for a in READERS[reader]]
+    line = assert_one_line_error(run_pslog(*args, cwd=inputs), 1, contains=says)
+    assert "no such file" not in line and "not found" not in line, line
     assert_untouched(before, inputs)
