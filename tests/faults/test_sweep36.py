@@ -2,10 +2,15 @@
 tried. ``view --detail 1e300`` (or ``A:B`` with a bound that large) was a traceback (its
 nanoseconds, 1e309, a float infinity no int holds). A loop of symbolic links given as an
 input was "no such file" (``Path.exists`` is False for it), and so was a link whose target
-is gone: the user looks for a file that is there; each is now named for what it is."""
+is gone: the user looks for a file that is there; each is now named for what it is. The
+commands messages suggest (``run 'pslog recover P -o FIXED.mcap'``, ``open it with: rerun
+P``) held a path with a space or a ``$`` unquoted: pasted into a shell, two arguments."""
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -70,3 +75,34 @@ def test_a_link_that_leads_nowhere_is_named_for_what_it_is(reader, link, says, i
     line = assert_one_line_error(run_pslog(*args, cwd=inputs), 1, contains=says)
     assert "no such file" not in line and "not found" not in line, line
     assert_untouched(before, inputs)
+
+
+def _words(command: str, cwd: Path) -> list[str]:
+    """The arguments bash makes of ``command`` (as a user pasting it would run it)."""
+    run = subprocess.run(["bash", "-c", f'set -- {command}; printf "%s\\n" "$@"'], cwd=cwd,
+                         capture_output=True, text=True, timeout=30)
+    assert run.returncode == 0, run.stderr
+    return run.stdout.splitlines()
+
+
+def test_the_recover_command_a_message_suggests_can_be_pasted_into_a_shell(inputs, tmp_path):
+    name = "my $match \u00fc.mcap"
+    data = (inputs / "s.mcap").read_bytes()
+    (tmp_path / name).write_bytes(data[:len(data) - 3000])  # cut short, as by a crash
+    line = assert_one_line_error(run_pslog("info", name, cwd=tmp_path), 1)
+    command = line.split("run '", 1)[1].split("'", 1)[0]
+    assert _words(command, tmp_path) == ["pslog", "recover", name, "-o", "FIXED.mcap"], line
+    # and run as pasted, it salvages the file
+    env = {**os.environ, "PSLOG_PY": sys.executable}
+    done = subprocess.run(["bash", "-c", f'pslog() {{ "$PSLOG_PY" -m pslog.cli "$@"; }}; '
+                           f"{command}"], cwd=tmp_path, env=env, capture_output=True,
+                          text=True, timeout=120)
+    assert done.returncode == 0 and (tmp_path / "FIXED.mcap").stat().st_size > 0, done.stderr
+
+
+def test_the_rerun_command_view_suggests_can_be_pasted_into_a_shell(inputs, tmp_path):
+    name = "my view \u00fc.rrd"
+    run = run_pslog("view", inputs / "s.mcap", "--save", name, cwd=tmp_path)
+    assert run.code == 0, run.stderr
+    line = next(x for x in run.stdout.splitlines() if "open it with: " in x)
+    assert _words(line.split("open it with: ", 1)[1], tmp_path)[1:] == [name], line
