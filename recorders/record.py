@@ -844,7 +844,7 @@ def _camera_body(cam: int, spec, options: WorkerOptions, start, stop, t0,
                 send(("stopped", cam, str(exc)))
                 return
             if item is None:
-                reason = "end of source"
+                reason = source.end_reason()
                 break
             index, time_ns, frame = item
             if options.duration_ns is not None and time_ns >= options.duration_ns:

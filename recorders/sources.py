@@ -62,6 +62,10 @@ class FrameSource:
     def close(self) -> None:
         pass
 
+    def end_reason(self) -> str:
+        """Why :meth:`read` returned None, in the recording's summary."""
+        return "end of source"
+
 
 # ---- live camera ------------------------------------------------------------------------
 @dataclass(frozen=True)
@@ -201,6 +205,22 @@ class _FileSource(FrameSource):
 
     def close(self) -> None:
         self._cap.release()
+
+    def end_reason(self) -> str:
+        """"end of source", or, when the file's header declares more frames than were
+        decoded (a file cut short by a full disk or a crash, damaged in its middle: the
+        decoder stops at the first frame it cannot read, exactly as at the end), how many
+        were read of how many declared: the recording would otherwise say "0 dropped" and
+        end as if the file were whole. A count within one frame of the declared one is the
+        end (some containers round their duration)."""
+        try:
+            declared = int(self._cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0)
+        except (cv2.error, ValueError, OverflowError):
+            declared = 0
+        if declared > self._index + 1:
+            return (f"end of source after {self._index} of the {declared} frames its header "
+                    f"declares: the rest could not be decoded (file cut short or damaged)")
+        return "end of source"
 
 
 # ---- synthetic ----------------------------------------------------------------------------

@@ -106,3 +106,37 @@ def test_the_rerun_command_view_suggests_can_be_pasted_into_a_shell(inputs, tmp_
     assert run.code == 0, run.stderr
     line = next(x for x in run.stdout.splitlines() if "open it with: " in x)
     assert _words(line.split("open it with: ", 1)[1], tmp_path)[1:] == [name], line
+
+
+def _clip(path: Path, frames: int = 60) -> None:
+    """An MJPEG AVI of ``frames`` 640x480 frames of an orange ball crossing a green field."""
+    import cv2
+    import numpy as np
+
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 30, (640, 480))
+    for i in range(frames):
+        image = np.full((480, 640, 3), (40, 120, 40), np.uint8)
+        cv2.circle(image, (100 + 4 * i, 200), 10, (0, 128, 255), -1)
+        writer.write(image)
+    writer.release()
+
+
+@pytest.mark.parametrize("command", ["record", "live"])
+def test_a_video_source_cut_short_is_said_not_ended_as_if_whole(command, tmp_path):
+    """A video file cut short (a full disk or a crash while it was written): the decoder
+    stops at its first unreadable frame exactly as at the end, and the recording said
+    "0 dropped ... end of source" with half the frames; it says how many of the frames the
+    file declares were read, and a whole file still ends plainly."""
+    _clip(tmp_path / "whole.avi")
+    _clip(tmp_path / "cut.avi")
+    size = (tmp_path / "cut.avi").stat().st_size
+    with open(tmp_path / "cut.avi", "r+b") as f:
+        f.truncate(size // 2)
+    args = ["--rig", "paper2", "--source", "cam1=whole.avi", "--source", "cam2=cut.avi"]
+    args += ["-o", "rec.mcap"] if command == "record" else ["--duration", "3"]
+    run = run_pslog(command, *args, cwd=tmp_path, timeout=120)
+    assert run.code == 0 and "Traceback" not in run.stderr, run.stderr
+    said = [line for line in run.stderr.splitlines() if "frames its header declares" in line]
+    assert said and all("cam2" in line and "of the 60 frames" in line for line in said), \
+        run.stderr
+    assert not any("cam1" in line for line in said), run.stderr
