@@ -21,9 +21,17 @@ Session clock: integer nanoseconds since the session start ``t0_ns``, a reading 
 
 from __future__ import annotations
 
+import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
+
+# FFmpeg's own lines as OpenCV decodes a damaged or cut file ("[mjpeg @ 0x...] overread 2",
+# "bad vlc") went to the terminal among the recording's status lines: the source's end
+# reason says it in pslog's words (_FileSource.end_reason). Read by OpenCV once, when its
+# FFmpeg backend starts: set before cv2 opens any video, inherited by the camera processes;
+# a level the user set is kept. -8: AV_LOG_QUIET.
+os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
 
 import cv2
 import numpy as np
