@@ -24,6 +24,8 @@ def inputs(tmp_path_factory) -> Path:
     done = run_pslog("simulate", "--rig", "paper3", "--timing", "typeA", "--duration", "0.5",
                      "--seed", "48036", "-o", folder / "s.mcap")
     assert done.code == 0, done.stderr
+    done = run_pslog("fuse", "s.mcap", "--method", "typeA", "-o", "fused.mcap", cwd=folder)
+    assert done.code == 0, done.stderr
     (folder / "loop1").symlink_to("loop2")
     (folder / "loop2").symlink_to("loop1")
     (folder / "gone.mcap").symlink_to("moved-away.mcap")
@@ -143,3 +145,16 @@ def test_a_video_source_cut_short_is_said_not_ended_as_if_whole(command, tmp_pat
     assert not any("cam1" in line for line in said), run.stderr
     # and in pslog's words alone: not FFmpeg's ("[mjpeg @ 0x...] overread 2")
     assert " @ 0x" not in run.stderr and "overread" not in run.stderr, run.stderr
+
+
+@pytest.mark.parametrize("link, says", [
+    ("loop1", "--tum loop1 is a loop of symbolic links"),
+    ("gone.mcap", "--tum gone.mcap is a symbolic link to moved-away.mcap, which does not "
+                  "exist")])
+def test_a_tum_folder_that_is_a_link_leading_nowhere_is_named(link, says, inputs):
+    """``export --tum LINK`` said "cannot write LINK: File exists" (mkdir on the link)."""
+    before = fingerprint(inputs)
+    line = assert_one_line_error(run_pslog("export", "fused.mcap", "--tum", link, cwd=inputs),
+                                 1, contains=says)
+    assert "File exists" not in line, line
+    assert_untouched(before, inputs)
