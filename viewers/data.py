@@ -285,6 +285,14 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
              else tuple(Path(p) for p in session_paths))
     if not paths:
         raise InputError("no session file given")
+    from pslog.outputs import same_file
+
+    for i, path in enumerate(paths):  # (its tracks would be shown twice, renamed)
+        for earlier in paths[:i]:
+            if same_file(path, earlier):
+                spelled = "" if str(path) == str(earlier) else f" (as {earlier} and {path})"
+                raise InputError(f"{path} is given twice{spelled}: give each session file "
+                                 f"once")
     session = read_session(paths[0])
     tracks: dict[str, Track] = dict(session.tracks)
     rejections = dict(session.rejections)

@@ -29,6 +29,7 @@ def inputs(tmp_path_factory) -> Path:
     (folder / "loop1").symlink_to("loop2")
     (folder / "loop2").symlink_to("loop1")
     (folder / "gone.mcap").symlink_to("moved-away.mcap")
+    (folder / "link.mcap").symlink_to("fused.mcap")
     return folder
 
 
@@ -157,4 +158,18 @@ def test_a_tum_folder_that_is_a_link_leading_nowhere_is_named(link, says, inputs
     line = assert_one_line_error(run_pslog("export", "fused.mcap", "--tum", link, cwd=inputs),
                                  1, contains=says)
     assert "File exists" not in line, line
+    assert_untouched(before, inputs)
+
+
+@pytest.mark.parametrize("second", ["fused.mcap", "./fused.mcap", "link.mcap"])
+def test_view_refuses_a_session_file_given_twice(second, inputs, tmp_path):
+    """``view fused.mcap fused.mcap`` showed every track twice (``typeA`` and
+    ``typeA_fused``) without a word of why; ``batch`` takes a file once however often given."""
+    before = fingerprint(inputs)
+    run = run_pslog("view", "fused.mcap", second, "--save", tmp_path / "v.rrd", cwd=inputs)
+    line = assert_one_line_error(run, 1, contains=(f"{Path(second)} is given twice",
+                                                   "give each session file once"))
+    if second == "link.mcap":
+        assert "(as fused.mcap and link.mcap)" in line, line
+    assert not (tmp_path / "v.rrd").exists()
     assert_untouched(before, inputs)
