@@ -173,3 +173,17 @@ def test_view_refuses_a_session_file_given_twice(second, inputs, tmp_path):
         assert "(as fused.mcap and link.mcap)" in line, line
     assert not (tmp_path / "v.rrd").exists()
     assert_untouched(before, inputs)
+
+
+@pytest.mark.parametrize("command", ["record", "live"])
+def test_a_device_index_beyond_a_c_int_is_a_usage_error(command, tmp_path):
+    """``--source cam1=99999999999999999999`` was the camera's failure in OpenCV's words, a
+    several-line "Overload resolution failed" (VideoCapture takes a C int), and the others
+    recorded on."""
+    args = ["--rig", "paper2", "--source", "cam1=99999999999999999999", "--source", "cam2=0"]
+    args += ["-o", "rec.mcap"] if command == "record" else ["--duration", "1"]
+    line = assert_one_line_error(run_pslog(command, *args, cwd=tmp_path, timeout=60), 2,
+                                 contains=("device index 99999999999999999999 is beyond any "
+                                           "camera (at most 2147483647)"))
+    assert "Overload" not in line, line
+    assert not (tmp_path / "rec.mcap").exists()
