@@ -187,3 +187,25 @@ def test_a_device_index_beyond_a_c_int_is_a_usage_error(command, tmp_path):
                                            "camera (at most 2147483647)"))
     assert "Overload" not in line, line
     assert not (tmp_path / "rec.mcap").exists()
+
+
+def test_fuse_says_a_rig_that_changes_the_frame_rate(inputs, tmp_path):
+    """``fuse --rig`` with a rig of another recording (60 fps for a 30-fps session) fused
+    without a word, its tracks changed (the frame periods set the fusion's timing)."""
+    from pslog.rig import builtin_rig
+
+    text = builtin_rig("paper3").to_toml()
+    (tmp_path / "same.toml").write_text(text, encoding="utf-8")
+    (tmp_path / "fast.toml").write_text(text.replace("fps = 30.0", "fps = 60.0", 1),
+                                        encoding="utf-8")
+    before = fingerprint(inputs)
+    for rig, said in (("same.toml", None), ("fast.toml", "cam1 (30 -> 60 fps)")):
+        run = run_pslog("fuse", inputs / "s.mcap", "--method", "nearest", "--rig", rig, "-o",
+                        f"{rig}.mcap", cwd=tmp_path)
+        assert run.code == 0, run.stderr
+        notes = [x for x in run.stdout.splitlines() if "changes the frame rate" in x]
+        if said is None:
+            assert not notes, run.stdout
+        else:
+            assert len(notes) == 1 and said in notes[0] and "cam2" not in notes[0], run.stdout
+    assert_untouched(before, inputs)
