@@ -28,3 +28,20 @@ class FusionError(PslogError):
 
 class OutputExistsError(PslogError):
     """An output file exists and ``--force`` was not given."""
+
+
+_PLAIN = frozenset("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789@%+=:,./-_")
+
+
+def shell_word(path: object) -> str:
+    """``path`` as one word of a command a message suggests (``run 'pslog recover P -o
+    FIXED.mcap'``), for a user to paste into a POSIX shell: unchanged if it holds only
+    characters no shell reads specially (non-ASCII letters too), else in double quotes
+    with ``"``, ``$``, backquote and backslash escaped (``"my match.mcap"``: a path with a
+    space, pasted unquoted, is two arguments).
+    """
+    text = str(path)
+    if text and all(c in _PLAIN or (ord(c) > 127 and c.isprintable()) for c in text):
+        return text
+    escaped = "".join("\\" + c if c in '"$`\\' else c for c in text)
+    return f'"{escaped}"'

@@ -8,6 +8,7 @@ both with one line naming the path and what it is.
 
 from __future__ import annotations
 
+import errno
 import os
 import stat
 from pathlib import Path
@@ -27,6 +28,32 @@ def file_kind(mode: int) -> str:
         if test(mode):
             return words
     return "not a regular file"
+
+
+def not_there(path: str | Path) -> str | None:
+    """Why ``path`` cannot be opened although something may be named so, or None if it can
+    be examined or is simply missing (``Path.exists`` is False for both a missing file and
+    a loop of symbolic links: "no such file" for a loop, or for a link whose target is gone,
+    sends the user looking for a file that is there).
+
+    Returns
+    -------
+    ``"cannot read P: a loop of symbolic links"``, ``"P is a symbolic link to T, which does
+    not exist"``, ``"cannot read P: REASON"`` (another OS error), or None
+    """
+    try:
+        os.stat(path)
+    except FileNotFoundError:
+        if os.path.islink(path):
+            return f"{path} is a symbolic link to {os.readlink(path)}, which does not exist"
+        return None
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            return f"cannot read {path}: a loop of symbolic links"
+        return f"cannot read {path}: {exc.strerror or exc}"
+    except ValueError:  # a NUL byte in the name: nothing can be named so
+        return None
+    return None
 
 
 def special_file(path: str | Path) -> str | None:
@@ -59,9 +86,12 @@ def check_input_file(path: str | Path, what: str = "", max_bytes: int | None = N
     try:
         st = os.stat(path)
     except FileNotFoundError:
-        raise InputError(f"{label}not found: {path}" if what else f"no such file: {path}"
+        raise InputError(not_there(path) or (f"{label}not found: {path}" if what else
+                                             f"no such file: {path}")) from None
+    except OSError as exc:
+        raise InputError(not_there(path) or f"cannot read {label}{path}: {exc.strerror or exc}"
                          ) from None
-    except (OSError, ValueError) as exc:
+    except ValueError as exc:
         reason = getattr(exc, "strerror", None) or str(exc)
         raise InputError(f"cannot read {label}{path}: {reason}") from None
     if stat.S_ISDIR(st.st_mode):

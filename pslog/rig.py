@@ -244,6 +244,10 @@ def resolve_rig(name_or_path: str | Path, timing_from: Rig | None = None,
         return builtin_rig(str(name_or_path))
     path = Path(name_or_path)
     if not path.exists():
+        from .inputs import not_there
+
+        if (why := not_there(path)) is not None:
+            raise RigError(f"no rig {str(name_or_path)!r}: {why}")
         raise RigError(f"no rig {str(name_or_path)!r}: not a file and not a built-in rig "
                        f"({', '.join(BUILTIN_RIGS)})")
     if _is_session_file(path):  # a session's rig (e.g. a synced one's), as `pslog rig show`

@@ -145,7 +145,7 @@ def sender_main(name: str, spec, options: SenderOptions, address: tuple[str, int
                 reason, code = "", EXIT_FAILED
                 break
             if item is None:
-                reason = "end of source"
+                reason = source.end_reason()
                 break
             index, time_ns, frame = item
             if options.duration_ns is not None and time_ns >= options.duration_ns:

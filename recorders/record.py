@@ -39,7 +39,7 @@ from typing import IO, Literal
 
 import numpy as np
 
-from pslog.errors import InputError, PslogError, RigError
+from pslog.errors import InputError, PslogError, RigError, shell_word
 from pslog.outputs import WriteError, check_output_path, write_error
 from pslog.records import NS, Truth
 from pslog.rig import Rig, timing_label
@@ -234,7 +234,7 @@ def _record(rig: Rig, sources: Mapping[str, object], output: Path, options: Work
     if session.write_error is not None:
         reason = _reason(session.write_error, output)
         kept = (f"what was written before is in {target}, unfinished (salvage it with: "
-                f"pslog recover {target} -o fixed.mcap)" if target.exists() else
+                f"pslog recover {shell_word(target)} -o fixed.mcap)" if target.exists() else
                 "nothing was kept")
         if existed:
             kept += f"; the old {output} is untouched"
@@ -844,7 +844,7 @@ def _camera_body(cam: int, spec, options: WorkerOptions, start, stop, t0,
                 send(("stopped", cam, str(exc)))
                 return
             if item is None:
-                reason = "end of source"
+                reason = source.end_reason()
                 break
             index, time_ns, frame = item
             if options.duration_ns is not None and time_ns >= options.duration_ns:

@@ -21,9 +21,17 @@ Session clock: integer nanoseconds since the session start ``t0_ns``, a reading 
 
 from __future__ import annotations
 
+import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
+
+# FFmpeg's own lines as OpenCV decodes a damaged or cut file ("[mjpeg @ 0x...] overread 2",
+# "bad vlc") went to the terminal among the recording's status lines: the source's end
+# reason says it in pslog's words (_FileSource.end_reason). Read by OpenCV once, when its
+# FFmpeg backend starts: set before cv2 opens any video, inherited by the camera processes;
+# a level the user set is kept. -8: AV_LOG_QUIET.
+os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
 
 import cv2
 import numpy as np
@@ -61,6 +69,10 @@ class FrameSource:
 
     def close(self) -> None:
         pass
+
+    def end_reason(self) -> str:
+        """Why :meth:`read` returned None, in the recording's summary."""
+        return "end of source"
 
 
 # ---- live camera ------------------------------------------------------------------------
@@ -201,6 +213,22 @@ class _FileSource(FrameSource):
 
     def close(self) -> None:
         self._cap.release()
+
+    def end_reason(self) -> str:
+        """"end of source", or, when the file's header declares more frames than were
+        decoded (a file cut short by a full disk or a crash, damaged in its middle: the
+        decoder stops at the first frame it cannot read, exactly as at the end), how many
+        were read of how many declared: the recording would otherwise say "0 dropped" and
+        end as if the file were whole. A count within one frame of the declared one is the
+        end (some containers round their duration)."""
+        try:
+            declared = int(self._cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0)
+        except (cv2.error, ValueError, OverflowError):
+            declared = 0
+        if declared > self._index + 1:
+            return (f"end of source after {self._index} of the {declared} frames its header "
+                    f"declares: the rest could not be decoded (file cut short or damaged)")
+        return "end of source"
 
 
 # ---- synthetic ----------------------------------------------------------------------------

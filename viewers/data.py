@@ -135,9 +135,16 @@ class DetailChoice:
         first frame time and the shown window."""
         if self.length_s is None:
             return -UNBOUNDED_NS, UNBOUNDED_NS
-        lo = first_ns + round(self.start_s * NS) if self.start_s is not None else (
-            max(window_ns[0], first_ns))
-        return lo, lo + round(self.length_s * NS)
+        lo = min(first_ns + _ns_within_bounds(self.start_s), UNBOUNDED_NS) if (
+            self.start_s is not None) else max(window_ns[0], first_ns)
+        return lo, min(lo + _ns_within_bounds(self.length_s), UNBOUNDED_NS)
+
+
+def _ns_within_bounds(seconds: float) -> int:
+    """``seconds`` (finite, >= 0) as int ns, at most :data:`UNBOUNDED_NS`: a --detail of
+    1e300 s is everything from its start (its ns, 1e309, is a float infinity that no int
+    holds)."""
+    return UNBOUNDED_NS if seconds * NS >= UNBOUNDED_NS else round(seconds * NS)
 
 
 @dataclass(frozen=True, eq=False)
@@ -278,6 +285,14 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
              else tuple(Path(p) for p in session_paths))
     if not paths:
         raise InputError("no session file given")
+    from pslog.outputs import same_file
+
+    for i, path in enumerate(paths):  # (its tracks would be shown twice, renamed)
+        for earlier in paths[:i]:
+            if same_file(path, earlier):
+                spelled = "" if str(path) == str(earlier) else f" (as {earlier} and {path})"
+                raise InputError(f"{path} is given twice{spelled}: give each session file "
+                                 f"once")
     session = read_session(paths[0])
     tracks: dict[str, Track] = dict(session.tracks)
     rejections = dict(session.rejections)
@@ -385,7 +400,8 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
         # a full-detail range past the session's end (or outside --start/--end) is no error
         # (the tracks are all there), but the user meant to see some frames in full: say why
         # none is
-        lo_s, hi_s = (detail_ns[0] - first) / NS, (detail_ns[1] - first) / NS
+        lo_s = choice.start_s if choice.start_s is not None else (detail_ns[0] - first) / NS
+        hi_s = lo_s + choice.length_s  # the seconds given (detail_ns is bounded)
         notes.append(f"the full-detail range {lo_s:g} to {hi_s:g} s holds no frame shown "
                      f"(the session spans 0 to {span:.3f} s): every frame's overlays are "
                      f"thinned to one in {choice.every}")

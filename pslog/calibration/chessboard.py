@@ -71,7 +71,9 @@ def read_calibration_images(path: str | Path, *, max_frames: int = 60,
     """
     path = Path(path)
     if not path.exists():
-        raise InputError(f"calibration images not found: {path}")
+        from ..inputs import not_there
+
+        raise InputError(not_there(path) or f"calibration images not found: {path}")
     if path.is_dir():
         files = sorted(p for p in path.iterdir()
                        if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES)

@@ -24,7 +24,7 @@ import numpy as np
 
 from ..camera import MAX_PIXEL, Camera
 from ..errors import InputError
-from ..inputs import check_input_file
+from ..inputs import check_input_file, not_there
 from ._common import (
     AUTO_FULL_MIN_POINTS,
     AUTO_K1K2_MIN_POINTS,
@@ -82,12 +82,13 @@ def read_points_csv(path: str | Path, *, with_lines: bool = False):
         with path.open(newline="", encoding="utf-8-sig") as f:
             rows = list(csv.reader(f))
     except FileNotFoundError:
-        raise InputError(f"points file not found: {path}") from None
+        raise InputError(not_there(path) or f"points file not found: {path}") from None
     except UnicodeDecodeError as exc:  # (not the codec's own words)
         raise InputError(f"{path}: not a text CSV file (byte {exc.start} is not UTF-8 text); "
                          f"expected header x,y,z,u,v") from None
     except OSError as exc:
-        raise InputError(f"cannot read points file {path}: {exc.strerror or exc}") from None
+        raise InputError(not_there(path) or f"cannot read points file {path}: "
+                                            f"{exc.strerror or exc}") from None
     except csv.Error as exc:
         raise InputError(f"cannot read points file {path}: {exc}") from None
     numbered = [(i + 1, row) for i, row in enumerate(rows) if any(c.strip() for c in row)]

@@ -12,6 +12,8 @@ import os
 import time
 from pathlib import Path
 
+from pslog.errors import shell_word
+
 from ._common import installed_command, seconds_at_most
 
 
@@ -157,6 +159,7 @@ def _run(args: argparse.Namespace, folder: Path) -> int:
     rrd_path = folder / "demo.rrd"
     save_rrd([fused_path], rrd_path, force=args.force)
     print(f"\n4/4 saved the rerun recording {rrd_path}; open it with\n"
-          f"      {installed_command('rerun')} {rrd_path}\n"
-          f"    or in a browser:  {installed_command('pslog')} view {fused_path} --serve")
+          f"      {shell_word(installed_command('rerun'))} {shell_word(rrd_path)}\n"
+          f"    or in a browser:  {shell_word(installed_command('pslog'))} view "
+          f"{shell_word(fused_path)} --serve")
     return 0

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 
 from ._common import (
     add_force,
@@ -34,7 +35,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
              "An anipose / Pose2Sim / OpenCV calibration replaces the geometry only (its "
              "fps / offset keys, when pslog exported it, are not used: the session's frame "
              "rates, offsets and synced clocks stay); a pslog rig TOML or a session file "
-             "gives its whole rig, timing and clocks included (e.g. a synced session's)")
+             "gives its whole rig, timing and clocks included (e.g. a synced session's; a "
+             "frame rate other than the session's rig's is said in a note)")
     parser.add_argument("--tolerance-ms", type=nonnegative_float, default=1.0,
                         metavar="MS", help="detections this close in time count as "
                                            "simultaneous, milliseconds, below a third of the "
@@ -167,6 +169,7 @@ def run(args: argparse.Namespace) -> int:
                   f"{', '.join(unused)}: a calibration gives the geometry, the session's timing "
                   f"stays (for the file's: 'pslog rig import {args.rig} -o rig.toml', then "
                   f"--rig rig.toml)")
+        _say_other_frame_rates(args.rig, rig, session)
     check_baselines(rig, args.session if args.rig is None else args.rig)
     try:
         check_tolerance(rig, args.tolerance_ms / 1e3)
@@ -440,3 +443,19 @@ def _say_clock_uncertainty(args: argparse.Namespace, session, applied) -> None:
     elif args.rig is not None and synced is not None:
         print(f"--rig {args.rig} replaces every clock parameter pslog sync estimated "
               f"({len(synced)}): {alone} (the rig's)")
+
+
+def _say_other_frame_rates(name, rig, session) -> None:
+    """Say (stdout, one line) the cameras whose frame rate a ``--rig`` changes from the
+    session's rig (the one it was recorded, simulated or imported with): a rig of another
+    recording, or an fps mistyped, was fused without a word (the frame periods set type A's,
+    the filter's and the gating's timing). A note, not an error: the change may be meant.
+    (The session's rig, not a rate measured from its frames: with frames dropped and
+    jittered stamps a measurement is no proof.)"""
+    changed = [f"{new.name} ({old.fps:g} -> {new.fps:g} fps)"
+               for old, new in zip(session.rig.cameras, rig.cameras, strict=True)
+               if not math.isclose(old.fps, new.fps, rel_tol=1e-9)]
+    if changed:
+        print(f"note: --rig {name} changes the frame rate of {', '.join(changed)} from the "
+              f"session's rig: a rig of another recording? The frame periods set the fusion's "
+              f"timing")

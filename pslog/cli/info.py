@@ -11,7 +11,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pslog.errors import LogFormatError
+    from pslog.errors import LogFormatError, shell_word
     from pslog.log import session_info
 
     info = session_info(args.session)
@@ -21,7 +21,7 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(_jsonable(info), indent=2, allow_nan=False))
     else:
         print("\n".join(_text(info)))
-    recover = f"run 'pslog recover {args.session} -o FIXED.mcap'"
+    recover = f"run 'pslog recover {shell_word(args.session)} -o FIXED.mcap'"
     if info["truncated"] and info["still_recording"]:
         raise LogFormatError(f"{args.session} is incomplete: it may still be recording "
                              f"(modified {info['age_s']:.0f} s ago); if no recorder is "

@@ -248,11 +248,16 @@ def _note_offsets(output, rig) -> None:
               f"'pslog fuse {output} --rig fixed.toml'", file=sys.stderr)
 
 
+#: largest device index a --source takes: OpenCV's VideoCapture takes a C int (a larger one
+#: was OpenCV's own several-line "Overload resolution failed" as the camera's failure)
+MAX_DEVICE_INDEX = 2**31 - 1
+
+
 def parse_sources(rig, sources: list[str], offsets: list[str]) -> dict:
     """``NAME=SPEC`` strings (and ``NAME=SECONDS`` offsets) -> camera name -> source spec."""
     from pathlib import Path
 
-    from pslog.inputs import special_file
+    from pslog.inputs import not_there, special_file
     from recorders.sources import DeviceSpec, FileSpec
 
     offset_of: dict[str, float] = {}
@@ -274,6 +279,9 @@ def parse_sources(rig, sources: list[str], offsets: list[str]) -> dict:
             raise MalformedSource(f"camera {name!r} has two --source options")
         if _is_device(spec):  # a device index or a V4L2 path
             device = spec if spec.startswith("/dev/") else int(spec)
+            if isinstance(device, int) and device > MAX_DEVICE_INDEX:  # OpenCV's C int
+                raise MalformedSource(f"camera {name!r}: device index {device} is beyond any "
+                                      f"camera (at most {MAX_DEVICE_INDEX}) in {text!r}")
             specs[name] = DeviceSpec(device, cam.width, cam.height, cam.fps)
         else:
             path, offset = spec, offset_of.get(name, 0.0)
@@ -284,7 +292,9 @@ def parse_sources(rig, sources: list[str], offsets: list[str]) -> dict:
                 path, offset = video, _seconds(at, text, name)
             if not Path(path).is_file():
                 kind = special_file(path) or ("a folder" if Path(path).is_dir() else None)
+                why = not_there(path)
                 raise InputError(f"camera {name!r}: {path} is {kind}, not a video file" if kind
+                                 else f"camera {name!r}: {why}" if why
                                  else f"camera {name!r}: video file not found: {path}")
             specs[name] = FileSpec(path, cam.width, cam.height, offset)
     for name in offset_of:

@@ -16,6 +16,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from pslog.errors import shell_word
+
 from ._common import (
     add_force,
     add_method_option,
@@ -180,7 +182,8 @@ def run(args: argparse.Namespace) -> int:
         with rrd_file(rec, args.save, force=args.force, inputs=args.sessions) as path:
             counts = log_view(rec, data, args.frames)
         report(counts)
-        print(f"wrote {path}; open it with: {installed_command('rerun')} {path}", file=out)
+        rerun = shell_word(installed_command("rerun"))
+        print(f"wrote {path}; open it with: {rerun} {shell_word(path)}", file=out)
         return 0
     sink.start(rec)
     counts = log_view(rec, data, args.frames)

@@ -21,6 +21,7 @@ existing file is replaced only with ``force`` and only by a complete one.
 
 from __future__ import annotations
 
+import errno
 import json
 import math
 import os
@@ -97,6 +98,15 @@ def write_tum(session, folder: str | Path, *, force: bool = False) -> dict[str, 
                          f"a folder, one per method)")
     files = tum_files(session, folder)
     if not folder.exists():
+        if folder.is_symlink():  # a loop, or a link whose target is gone: not "File exists"
+            try:
+                os.stat(folder)
+                what = f"a symbolic link to {os.readlink(folder)}, which does not exist"
+            except OSError as exc:
+                what = ("a loop of symbolic links" if exc.errno == errno.ELOOP else
+                        f"a symbolic link to {os.readlink(folder)}, which does not exist")
+            raise InputError(f"--tum {folder} is {what}; give the folder's real name or "
+                             f"another name")
         if not folder.parent.is_dir():
             if folder.parent.exists():
                 raise InputError(f"--tum {folder}: {not_a_folder(folder.parent)}")

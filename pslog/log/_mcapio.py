@@ -25,7 +25,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..errors import LogFormatError
+from ..errors import LogFormatError, shell_word
 from . import _schemas as S
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -69,7 +69,9 @@ def check_file(path, header: bool = True) -> tuple[Path, int, bool]:
     """
     path = Path(path)
     if not path.exists():
-        raise LogFormatError(f"no such file: {path}")
+        from ..inputs import not_there
+
+        raise LogFormatError(not_there(path) or f"no such file: {path}")
     if not path.is_file():
         raise LogFormatError(f"not a file: {path}")
     tail = b""
@@ -85,7 +87,8 @@ def check_file(path, header: bool = True) -> tuple[Path, int, bool]:
     if head != MAGIC:
         if _magic_damaged(path):
             raise LogFormatError(f"{path}: the MCAP magic (bytes 0..7) is damaged; run "
-                                 f"'pslog recover {path} -o FIXED.mcap' to salvage the data")
+                                 f"'pslog recover {shell_word(path)}"
+                                 f" -o FIXED.mcap' to salvage the data")
         raise LogFormatError(f"not an MCAP file: {path}")
     # ``complete``: the closing magic written by a finished writer
     complete = tail == MAGIC
@@ -101,7 +104,8 @@ def header_error(path, damage: tuple[int, int, str]) -> LogFormatError:
     :func:`header_records_damage` gives it)."""
     start, end, reason = damage
     return LogFormatError(f"{path}: its MCAP Header record (bytes {start}..{end}) is damaged "
-                          f"({reason}); run 'pslog recover {path} -o FIXED.mcap' to salvage "
+                          f"({reason}); run 'pslog recover {shell_word(path)}"
+                          f" -o FIXED.mcap' to salvage "
                           f"the data")
 
 
@@ -171,7 +175,8 @@ def tail_magic_damaged(path) -> bool:
 def truncated_error(path) -> LogFormatError:
     if tail_magic_damaged(path):
         return LogFormatError(f"{path}: its closing MCAP magic (the last 8 bytes) is damaged; "
-                              f"run 'pslog recover {path} -o FIXED.mcap' to salvage the data")
+                              f"run 'pslog recover {shell_word(path)}"
+                              f" -o FIXED.mcap' to salvage the data")
     recording = still_recording(path)
     setup = cut_in_setup(path)  # nothing for recover to salvage: say so, not "run recover"
     if recording is not None:
@@ -179,14 +184,15 @@ def truncated_error(path) -> LogFormatError:
                               f"({recording}); if no recorder is writing it, "
                               + ("it is beyond repair (cut within its session set-up)"
                                  if setup else
-                                 f"run 'pslog recover {path} -o FIXED.mcap' to salvage it"))
+                                 f"run 'pslog recover {shell_word(path)}"
+                                 f" -o FIXED.mcap' to salvage it"))
     if setup:
         return LogFormatError(f"{path} is truncated within its session set-up (its first "
                               f"{Path(path).stat().st_size} bytes, before the session "
                               f"metadata ends): nothing was recorded; the file is beyond "
                               f"repair")
     return LogFormatError(f"{path} is truncated (the recording did not finish); "
-                          f"run 'pslog recover {path} -o FIXED.mcap' to salvage it")
+                          f"run 'pslog recover {shell_word(path)} -o FIXED.mcap' to salvage it")
 
 
 def cut_in_setup(path) -> bool:
@@ -460,7 +466,8 @@ def check_framing(records: bytes) -> None:
 def damaged_error(path, offset: int, reason: str) -> LogFormatError:
     """The one line every reader gives on a damaged record."""
     return LogFormatError(f"{path}: damaged data at byte {offset} ({reason}); run "
-                          f"'pslog recover {path} -o FIXED.mcap' to salvage the intact data")
+                          f"'pslog recover {shell_word(path)}"
+                          f" -o FIXED.mcap' to salvage the intact data")
 
 
 def walk_records(buf, start: int = 0) -> Iterator[tuple[int, int, int]]:

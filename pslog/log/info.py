@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import LogFormatError
+from ..errors import LogFormatError, shell_word
 from ..records import NS, Detections
 from . import _mcapio as io
 from . import _schemas as S
@@ -353,7 +353,7 @@ def session_info(path) -> dict:
         "damaged": damaged,
         "hint": (f"{len(damaged)} damaged "
                  f"{'chunk(s)' if all(d['chunk'] for d in damaged) else 'part(s)'}; run "
-                 f"'pslog recover {path} -o FIXED.mcap' to salvage every intact one"
+                 f"'pslog recover {shell_word(path)} -o FIXED.mcap' to salvage every intact one"
                  if damaged else ""),
     }
 
@@ -391,7 +391,7 @@ def _scanned_info(path, size: int, problem: str, metadata_named: bool = False) -
         if _rebuilt_metadata(static, detection_ns) is None:
             raise LogFormatError(f"{where}, with no intact calibration of every camera to "
                                  f"rebuild it from; the file is beyond repair")
-        raise LogFormatError(f"{where}; run 'pslog recover {path} -o FIXED.mcap': it "
+        raise LogFormatError(f"{where}; run 'pslog recover {shell_word(path)} -o FIXED.mcap': it "
                              f"rebuilds the rig from the cameras' calibration messages")
     io.session_metadata(scan.metadata, path)
     name = {c: scan.channels[c].topic if c in scan.channels else f"channel {c}" for c in topics}
@@ -401,7 +401,7 @@ def _scanned_info(path, size: int, problem: str, metadata_named: bool = False) -
     # a finished file (closing magic written) is not being recorded, whatever its age
     recording = (problem == _UNFINISHED and (age < RECENT_S or path.name.endswith(".partial")))
     damaged = [describe_damage(d, scan.channels) for d in scan.damaged]
-    recover = f"run 'pslog recover {path} -o FIXED.mcap' to salvage the intact records"
+    recover = f"run 'pslog recover {shell_word(path)} -o FIXED.mcap' to salvage the intact records"
     return {
         "path": str(path),
         "truncated": True,

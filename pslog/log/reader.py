@@ -29,7 +29,7 @@ from typing import cast
 import numpy as np
 from mcap.exceptions import McapError
 
-from ..errors import InputError, LogFormatError
+from ..errors import InputError, LogFormatError, shell_word
 from ..records import Detections, Track, Truth
 from ..rig import Rig
 from . import _mcapio as io
@@ -145,7 +145,8 @@ class DamagedSummaryError(LogFormatError):
 
     def __init__(self, path, reason: str, todo: str = "it rebuilds the index from the data "
                                                       "and keeps every intact record") -> None:
-        super().__init__(f"{path}: {reason}; run 'pslog recover {path} -o FIXED.mcap': {todo}")
+        super().__init__(f"{path}: {reason}; run 'pslog recover {shell_word(path)}"
+                         f" -o FIXED.mcap': {todo}")
         self.reason = reason
 
 
@@ -241,7 +242,8 @@ class _Finished:
             self.file.close()
             raise LogFormatError(f"{path}: its record at bytes {after[0]}..{after[1]} (the one "
                                  f"after the MCAP Header record) is damaged ({after[2]}); run "
-                                 f"'pslog recover {path} -o FIXED.mcap' to salvage the data")
+                                 f"'pslog recover {shell_word(path)}"
+                                 f" -o FIXED.mcap' to salvage the data")
         try:
             self.meta = io.session_metadata(metadata, path)
             self.rig = Rig.from_toml(self.meta.get("rig_toml", ""),
