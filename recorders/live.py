@@ -102,7 +102,7 @@ def sender_main(name: str, spec, options: SenderOptions, address: tuple[str, int
     from pslog.live.protocol import DetectionDatagram, encode_detections
 
     from .detect import BallDetector
-    from .sources import SourceError
+    from .sources import SourceError, end_reason
 
     cv2.setNumThreads(1)  # one process per camera already uses the cores
     with contextlib.suppress(AttributeError):
@@ -145,7 +145,7 @@ def sender_main(name: str, spec, options: SenderOptions, address: tuple[str, int
                 reason, code = "", EXIT_FAILED
                 break
             if item is None:
-                reason = source.end_reason()
+                reason = end_reason(source)
                 break
             index, time_ns, frame = item
             if options.duration_ns is not None and time_ns >= options.duration_ns:

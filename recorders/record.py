@@ -813,7 +813,7 @@ def _camera_body(cam: int, spec, options: WorkerOptions, start, stop, t0,
                  send: Callable[..., bool], parent_gone: Callable[[], bool]) -> None:
     import cv2
 
-    from .sources import SourceError
+    from .sources import SourceError, end_reason
 
     try:
         source = spec.open()
@@ -844,7 +844,7 @@ def _camera_body(cam: int, spec, options: WorkerOptions, start, stop, t0,
                 send(("stopped", cam, str(exc)))
                 return
             if item is None:
-                reason = source.end_reason()
+                reason = end_reason(source)
                 break
             index, time_ns, frame = item
             if options.duration_ns is not None and time_ns >= options.duration_ns:

@@ -231,6 +231,14 @@ class _FileSource(FrameSource):
         return "end of source"
 
 
+def end_reason(source) -> str:
+    """Why ``source.read()`` returned None, for the recording's summary: its
+    :meth:`FrameSource.end_reason` when it has one (a source passed to ``record`` or ``live``
+    need only read, set its start and close), else "end of source"."""
+    method = getattr(source, "end_reason", None)
+    return method() if callable(method) else "end of source"
+
+
 # ---- synthetic ----------------------------------------------------------------------------
 @dataclass(frozen=True)
 class SyntheticSpec:
