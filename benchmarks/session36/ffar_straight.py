@@ -1,4 +1,4 @@
-# ruff: noqa: E501, E402
+# ruff: noqa: E501
 """Session 36 (ffar36): where `paper2`'s `straight` (bench_dirty --more --first-seed 48300,
 30 fps) loses accuracy to its faults: the filter's mean error clean, with each fault alone and
 all faults, and the excess error by time (the blackout's span, after it, elsewhere).
@@ -45,8 +45,8 @@ for name, extra in (("clean", {}), ("distractors", {"distractors": f["distractor
     tr = fuse_detections(det, rig, ["filter"], FusionOptions(), workers=1)[0]["filter"]
     res[name] = (tr, errors_m(tr, truth) * 1e3)
 (tc, ec), (td, ed) = res["clean"], res["distractors"]
-kc = dict(zip(zip(tc.time_ns.tolist(), tc.camera.tolist()), ec))
-kd = dict(zip(zip(td.time_ns.tolist(), td.camera.tolist()), ed))
+kc = dict(zip(zip(tc.time_ns.tolist(), tc.camera.tolist(), strict=True), ec, strict=True))
+kd = dict(zip(zip(td.time_ns.tolist(), td.camera.tolist(), strict=True), ed, strict=True))
 common = sorted(set(kc) & set(kd))
 print(f"distractor alone: dropped {dict(td.dropped)} (clean {dict(tc.dropped)}); points clean {len(kc)}, "
       f"with it {len(kd)}, common {len(common)}: mean there clean {np.mean([kc[c] for c in common]):.2f} with {np.mean([kd[c] for c in common]):.2f};"
