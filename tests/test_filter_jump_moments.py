@@ -25,8 +25,10 @@ P0 = np.diag([1e-6, 2e-6, 3e-6, 0.01, 0.02, 0.03]) + 1e-7
 X0 = np.array([1.0, 0.5, 1.2, 2.0, -1.0, -3.0])  # falling at 3 m/s
 
 
-def _shapes():
-    flt = F.BallFilter(builtin_rig("paper3"))
+def _shapes(**options):
+    # the floor unknown: the floor bounce tried wherever the ball falls (a known floor,
+    # session 36: only within its reach, tests/test_filter_floor.py; X0 is 1.2 m above it)
+    flt = F.BallFilter(builtin_rig("paper3"), F.FilterOptions(**{"floor_m": None, **options}))
     O = flt._opts
     assert int(O[F._ONSHAPES]) == 3
     return O
@@ -63,6 +65,10 @@ def test_a_floor_bounce_a_jump_along_gravity_and_a_kick_by_hand():
     # no floor bounce of a rising ball
     rising = X0 * [1, 1, 1, 1, 1, -1]
     assert not F._jumped(rising, P0.ravel(), DT, O, 0)[0]
+    # nor, the floor known (the default), of a ball 1.2 m above it; the other shapes as above
+    O = _shapes(floor_m=F.FilterOptions().floor_m)
+    assert not F._jumped(X0, P0.ravel(), DT, O, 0)[0]
+    assert F._jumped(X0, P0.ravel(), DT, O, 1)[0] and F._jumped(X0, P0.ravel(), DT, O, 2)[0]
 
 
 @pytest.mark.parametrize("shape", [0, 2])

@@ -50,6 +50,10 @@ def _by_hand(rig, O, cam, x, P, uv, var, dt):
             vd = x[3:] @ down
             if not vd > 0:
                 continue
+            floor = O[FM._OFLOOR]  # a known floor: only within its reach (session 36)
+            h = -(x[:3] @ down) - floor
+            if floor == floor and h > 0 and h * h > O[FM._OGATE] * (down @ P[:3, :3] @ down):
+                continue
             mu = -(1 + O[FM._OREST]) * vd * down - O[FM._OFRIC] * (x[3:] - vd * down)
         xs = x + np.concatenate([mu * dt / 2, mu])
         Ps = P.copy()
@@ -70,9 +74,16 @@ def _by_hand(rig, O, cam, x, P, uv, var, dt):
 
 def test_the_plain_updates_doubt_by_hand():
     rig = lab_rig(3)
-    flt = BallFilter(rig, FilterOptions())
+    # the floor unknown: falling, the floor bounce is tried too; the default floor: 1 m
+    # above it, out of its reach, not (session 36)
+    for options in (FilterOptions(floor_m=None), FilterOptions()):
+        _the_plain_updates_doubt_by_hand(rig, options)
+
+
+def _the_plain_updates_doubt_by_hand(rig, options):
+    flt = BallFilter(rig, options)
     O, cams = flt._opts, flt._cam_table
-    x = np.array([1.2, 0.8, 1.0, 2.0, -1.0, -1.5])  # falling: the floor bounce is tried too
+    x = np.array([1.2, 0.8, 1.0, 2.0, -1.0, -1.5])
     P = np.diag([4e-6] * 3 + [4e-3] * 3)
     P[0, 3] = P[3, 0] = 1e-5
     var, dt, cam = 0.3 ** 2, 0.011, 1

@@ -226,8 +226,10 @@ class FilterOptions:
         reflection's uncertainty (Kong, Payne, Council & Johnson, Automatica 131, 2021;
         :func:`_bounced`; session 31); the first update after a contact is confirmed
         like a jump's (``unconfirmed``: a kick at the contact passes the gate with the
-        bounced prediction). None: no predicted contact (before session 31): a bounce is
-        only found by the jump search
+        bounced prediction); the jump search's floor bounce is tried only within the
+        floor's reach (the step's end predicted at most ``sqrt(gate)`` standard deviations
+        above it; session 36). None: no predicted contact (before session 31): a bounce is
+        only found by the jump search, whose floor bounce is tried wherever the ball falls
     restitution_std, bounce_friction_std : float, standard deviations of a predicted floor
         contact's ``restitution`` and ``bounce_friction`` (process noise of the reflection:
         ``σ_e² v_d² ĝĝᵀ + σ_f² v_h v_hᵀ`` on the velocity); 0.1 each: a golf ball's
@@ -1217,7 +1219,11 @@ def _jumped(x, P, dt, O, shape):
     uniform over the last ``dt`` (``Δp = Δv s``, ``E[s] = dt/2``, ``E[s²] = dt²/3``,
     ``Var s = dt²/12``); shape ``shape`` of ``O``'s (reflect, σ² (3)): ``μ = 0``, or for a
     floor bounce ``μ = −(1 + e) v_d ĝ − f (v − v_d ĝ)`` with ``v_d = v·ĝ`` (``ĝ`` gravity's
-    unit vector; ``ok`` False when the ball is not falling: no floor bounce then)."""
+    unit vector; ``ok`` False when the ball is not falling, or with a known floor
+    ``O[_OFLOOR]`` out of its reach: the height ``h`` above it at the step's end, predicted
+    without a bounce (a falling ball's lowest in the step), beyond the gate's quantile of
+    its spread, ``h² > γ ĝᵀP_ppĝ`` (session 36: a kick in mid-air taken for a floor bounce,
+    whose velocity spread is a tenth of a kick's, was confirmed 15 σ off))."""
     base = _OSHAPES + 4 * shape
     x = x.copy()
     P = P.copy()
@@ -1226,6 +1232,17 @@ def _jumped(x, P, dt, O, shape):
         vd = x[3] * d0 + x[4] * d1 + x[5] * d2
         if not vd > 0:
             return False, x, P
+        floor = O[_OFLOOR]
+        if floor == floor:  # a known floor (session 36): the bounce needs it within reach
+            # the height above the floor at the step's end, predicted without a bounce
+            # (falling: the step's lowest), against the gate's quantile of its spread
+            h = -(x[0] * d0 + x[1] * d1 + x[2] * d2) - floor
+            var_h = 0.0
+            for i in range(3):
+                for j in range(3):
+                    var_h += O[_ODOWN + i] * P[6 * i + j] * O[_ODOWN + j]
+            if h > 0.0 and h * h > O[_OGATE] * var_h:
+                return False, x, P
         e, f = O[_OREST], O[_OFRIC]
         mu = np.empty(3)
         for i in range(3):
