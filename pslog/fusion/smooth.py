@@ -30,7 +30,9 @@ pieces (never inside a gap the model does not bridge). Per-point quality:
 A detection in an end segment of a piece beyond a bounce or kick that fewer than four
 detections of two cameras hold gets no point (its position along the rays is not determined):
 counted in ``Track.dropped["underdetermined_end"]``. A detection the gate chose in doubt
-(:attr:`Prepared.doubt_px2` > 0) is left out of the fit, counted as ``doubt``.
+(:attr:`Prepared.doubt_px2` > 0) is left out of the fit, counted as ``doubt``, unless the fit
+made without the session's choices in doubt predicts it (:func:`_confirmed`): then it is
+fitted as any other (docs/methods.md, "`smooth`'s start in doubt, confirmed by the fit").
 
 The fit's search for bounces and kicks runs on two threads where it has at least 4 blocks of
 128 candidates (a session of a few minutes or more; a shorter one's on the calling thread);
@@ -50,36 +52,29 @@ from ._prepare import Prepared
 def fuse_smooth(prep: Prepared, rig: Rig, options) -> Track:
     """The ``smooth`` track of prepared observations (``options``: FusionOptions with
     ``max_gap_s`` set). An empty track when no stretch is seen by two cameras."""
-    from ..estimation import SmoothOptions, fit_trajectory
-
     obs = prep.obs
     # a choice the gate put in doubt is left out, as the filter leaves it out (with chance
     # 1/2 metres from the ball, and the fit's covariance cannot say so: docs/methods.md,
-    # "A contested start")
+    # "A contested start"), unless the fit made without it predicts it (`_confirmed`)
+    doubted = None if prep.doubt_px2 is None else prep.doubt_px2 > 0
+    if doubted is not None and not np.any(doubted):
+        doubted = None
     n_doubt = 0
-    if prep.doubt_px2 is not None:
-        kept = ~(prep.doubt_px2 > 0)
+    if doubted is None:
+        fit = _fit(obs, rig, options)
+    else:
+        kept = ~doubted
+        fit = _fit(obs.select(kept), rig, options)
+        if fit is not None:
+            rows = np.flatnonzero(doubted)
+            confirmed = rows[_confirmed(fit.trajectory, obs, rows, rig)]
+            if len(confirmed):
+                kept[confirmed] = True
+                fit = _fit(obs.select(kept), rig, options)
         n_doubt = len(obs) - int(np.count_nonzero(kept))
-        if n_doubt:
-            obs = Observations(obs.time_ns[kept], obs.camera[kept], obs.uv[kept],
-                               obs.frame_index[kept])
-    # the clocks' consider covariance through the fit's own sensitivity (exact, where the
-    # other methods re-run: pslog.fusion.clock)
-    consider_px = None
-    if options.clock_covariance is not None:
-        from .clock import pixel_errors
-
-        consider_px = pixel_errors(obs, [np.flatnonzero(obs.camera == c)
-                                         for c in range(len(rig))],
-                                   rig, options.clock_covariance, options.max_gap_s)
-    try:
-        fit = fit_trajectory(obs, rig, SmoothOptions(
-            max_gap_s=options.max_gap_s, detector_offset_m=options.detector_offset_m or 0.0,
-            detector_bias_px=options.detector_bias_px or 0.0), consider_px=consider_px)
-    except FusionError as exc:
-        if "two cameras" in str(exc):
-            return _empty()
-        raise FusionError(f"smooth: {exc}") from None  # the fit's words, in fusion's context
+        obs = obs.select(kept)
+    if fit is None:
+        return _empty()
     rejected_all = fit.rejected  # (n,) the detections the fit rejected (Fit.rejected)
     if options.rate_hz is None:
         # the points with a finite position, gathered once (the covariances of a 90-minute
@@ -124,6 +119,58 @@ def fuse_smooth(prep: Prepared, rig: Rig, options) -> Track:
     if n_doubt:
         dropped["doubt"] = n_doubt
     return Track("smooth", time_ns, position, camera, quality, dropped=dropped)
+
+
+def _fit(obs: Observations, rig: Rig, options):
+    """:func:`~pslog.estimation.fit_trajectory` of ``obs`` under ``options`` (FusionOptions),
+    with the clocks' consider covariance; None when no stretch is seen by two cameras."""
+    from ..estimation import SmoothOptions, fit_trajectory
+
+    # the clocks' consider covariance through the fit's own sensitivity (exact, where the
+    # other methods re-run: pslog.fusion.clock)
+    consider_px = None
+    if options.clock_covariance is not None:
+        from .clock import pixel_errors
+
+        consider_px = pixel_errors(obs, [np.flatnonzero(obs.camera == c)
+                                         for c in range(len(rig))],
+                                   rig, options.clock_covariance, options.max_gap_s)
+    try:
+        return fit_trajectory(obs, rig, SmoothOptions(
+            max_gap_s=options.max_gap_s, detector_offset_m=options.detector_offset_m or 0.0,
+            detector_bias_px=options.detector_bias_px or 0.0), consider_px=consider_px)
+    except FusionError as exc:
+        if "two cameras" in str(exc):
+            return None
+        raise FusionError(f"smooth: {exc}") from None  # the fit's words, in fusion's context
+
+
+def _confirmed(trajectory, obs: Observations, rows: np.ndarray, rig: Rig) -> np.ndarray:
+    """(len(rows),) bool: the detections ``rows`` of ``obs`` (choices in doubt, left out of
+    the fit that made ``trajectory``) that this fit predicts: the squared distance of the
+    detection from the trajectory's pixel at its time, in the metric of that prediction's
+    covariance (the fit's, projected) plus the fit's pixel noise σ² per axis, at most
+    χ²₂'s 1 - 1e-4 quantile (18.42, the level at which the fit rejects its own detections,
+    :attr:`~pslog.estimation.Fit.rejected`). The gate could judge such a choice by one
+    epipolar line alone; the whole trajectory made without it tells the ball from what
+    stood beside it. A time outside the fitted pieces predicts nothing."""
+    from ..estimation.projection import project_with_jacobian
+    from ..estimation.trajectory import _END_JUMP_SCALED
+
+    position, cov = trajectory.evaluate(obs.time_ns[rows])
+    sigma2 = trajectory.noise_px ** 2
+    out = np.zeros(len(rows), dtype=bool)
+    for c, cam in enumerate(rig.cameras):
+        sel = np.flatnonzero((obs.camera[rows] == c) & np.all(np.isfinite(position), axis=1))
+        if not len(sel):
+            continue
+        uv, J = project_with_jacobian(cam, position[sel])
+        S = np.einsum("nij,njk,nlk->nil", J, cov[sel], J) + sigma2 * np.eye(2)
+        r = obs.uv[rows[sel]] - uv
+        with np.errstate(invalid="ignore"):
+            d2 = np.einsum("ni,ni->n", r, np.linalg.solve(S, r[..., None])[..., 0])
+        out[sel] = d2 <= _END_JUMP_SCALED ** 2  # NaN (behind the camera): not predicted
+    return out
 
 
 def _bridged(fitted_ns: np.ndarray, time_ns: np.ndarray) -> np.ndarray:
