@@ -38,10 +38,14 @@ def shell_word(path: object) -> str:
     FIXED.mcap'``), for a user to paste into a POSIX shell: unchanged if it holds only
     characters no shell reads specially (non-ASCII letters too), else in double quotes
     with ``"``, ``$``, backquote and backslash escaped (``"my match.mcap"``: a path with a
-    space, pasted unquoted, is two arguments).
+    space, pasted unquoted, is two arguments), and each ``!`` outside them, escaped
+    (``"my"\\!"x.mcap"``): an interactive bash (or zsh) expands ``!`` inside double quotes
+    from its history ("event not found"), and a backslash there would stay in the path
+    (review, session 36).
     """
     text = str(path)
     if text and all(c in _PLAIN or (ord(c) > 127 and c.isprintable()) for c in text):
         return text
-    escaped = "".join("\\" + c if c in '"$`\\' else c for c in text)
+    escaped = "".join("\\" + c if c in '"$`\\' else '"\\!"' if c == "!" else c
+                      for c in text)
     return f'"{escaped}"'

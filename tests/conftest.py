@@ -14,6 +14,16 @@ import pytest
 from pslog.records import Detections, Truth
 from pslog.rig import Rig, apply_timing, builtin_rig
 
+# every command a test starts runs this tree's code, from whatever folder it starts in: the
+# repository's root first on the children's PYTHONPATH, the entries given made absolute (a
+# relative one, `PYTHONPATH=.`, read from a test's tmp_path found no pslog there, and the
+# child imported the installed one: another worktree's code, whose passing or failing said
+# nothing of this tree's; review, session 36)
+_ROOT = Path(__file__).resolve().parents[1]
+os.environ["PYTHONPATH"] = os.pathsep.join(dict.fromkeys(
+    [str(_ROOT)] + [str(Path(p).resolve()) for p in
+                    os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]))
+
 # a command that runs longer than the progress period (5 s, on a loaded machine) would add a
 # progress line to the standard error other tests read; tests/test_progress.py turns it on
 os.environ.setdefault("PSLOG_PROGRESS", "off")

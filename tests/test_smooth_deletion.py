@@ -159,3 +159,45 @@ def test_what_is_left_out_and_when():
     assert_array_equal(_left_out(t, gain, 0.5, inside), [2, 4])
     assert_array_equal(_left_out(t, gain, 0.05, inside), [1, 2, 4])
     assert_array_equal(_left_out(t, gain, 0.05, np.ones(6, bool)), [0, 1, 2, 4])
+
+
+def test_the_fits_gains_are_its_own_cost_drops():
+    """The gains as ``_fit_trajectory`` forms them — the points' marginals of the band
+    ``H⁻¹`` scaled by the variance factor, divided by it again, each detection's Jacobian
+    with respect to its point — against brute force on the fit's own problem: the cost of
+    its last reweighted step (the measurements linearised at the fit, the Cauchy weights
+    fixed, the prior) minimised with the detection's weight set to 0. A Σ_X that is not the
+    point's marginal of that step's ``H⁻¹`` (the scale not taken out, a band of another
+    step), or a hat block that is not ``w J Σ_X Jᵀ / σ²``, fails."""
+    from pslog.estimation import _normal
+    from pslog.estimation import trajectory as tr
+
+    rig, detections, _ = _wide3_rally()
+    obs = detections.best()
+    options = tr.SmoothOptions()
+    fit = tr.fit_trajectory(obs, rig, options)
+    traj = fit.trajectory
+    problem = tr._Problem(obs, rig, fit.pieces, traj.knots, options.prior, traj.t0_ns)
+    control, sigma, r, w, J = tr._Solver(problem, options).run(traj.control.copy(),
+                                                               traj.noise_px, 30)
+    band, _, p_eff, _ = tr._information_factored(problem, control, sigma, r, J, trace=True)
+    k_var = tr.variance_factor(r, w, sigma, p_eff)
+    assert k_var > 1.05  # (a scale left in would show)
+    band *= k_var
+    X = problem.positions(control)
+
+    def solve(weight):
+        ab, rhs = problem.linearised_normal(J, X, r, weight / sigma**2)
+        U = _normal.factor(ab, rebuild=lambda: problem.linearised_normal(
+            J, X, r, weight / sigma**2)[0])
+        c = _normal.solve(U, rhs).reshape(-1, 3)
+        res = np.einsum("naj,nj->na", J, problem.positions(c) - X) + r
+        return (np.sum(weight * np.sum(res**2, axis=1)) / sigma**2
+                + tr._prior_cost(problem, c)), res
+
+    cost, res = solve(w)  # (the step's own minimum: r there, not the iterate's)
+    gain = tr.deletion_gain(J, problem.points.marginal(band), res, w, sigma, k_var)
+    rows = np.r_[np.argsort(-gain)[:4], np.arange(3, len(w), len(w) // 6)]
+    drop = [cost - solve(np.where(np.arange(len(w)) == i, 0.0, w))[0] for i in rows]
+    assert_allclose(gain[rows], drop, rtol=1e-5)
+    assert np.max(gain[rows]) > 3  # (not only rows the fit barely sees)

@@ -48,6 +48,9 @@ def run_pslog(*args, cwd=None, timeout: float = HANG_S, env=None, preexec_fn=Non
 
     argv = [str(a) for a in args]
     full_env = {**os.environ, **(env or {})}
+    if env and "PYTHONPATH" in env:  # (before this tree's: tests/conftest.py), not instead
+        full_env["PYTHONPATH"] = os.pathsep.join(
+            p for p in (env["PYTHONPATH"], os.environ.get("PYTHONPATH")) if p)
     full_env.pop("PYTHONWARNINGS", None)
     proc = subprocess.Popen([sys.executable, "-m", "pslog.cli", *argv], cwd=cwd, env=full_env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,

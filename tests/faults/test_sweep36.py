@@ -80,16 +80,22 @@ def test_a_link_that_leads_nowhere_is_named_for_what_it_is(reader, link, says, i
     assert_untouched(before, inputs)
 
 
+def _pasted(line: str, cwd: Path, env=None) -> subprocess.CompletedProcess:
+    """``line`` run as a user pasting it runs it: read by bash as a line of input, with its
+    history expansion on (an interactive shell's: ``!`` in double quotes is expanded)."""
+    return subprocess.run(["bash"], input=f"set -o history -H\n{line}\n", cwd=cwd, env=env,
+                          capture_output=True, text=True, timeout=120)
+
+
 def _words(command: str, cwd: Path) -> list[str]:
     """The arguments bash makes of ``command`` (as a user pasting it would run it)."""
-    run = subprocess.run(["bash", "-c", f'set -- {command}; printf "%s\\n" "$@"'], cwd=cwd,
-                         capture_output=True, text=True, timeout=30)
-    assert run.returncode == 0, run.stderr
+    run = _pasted(f'set -- {command}; printf "%s\\n" "$@"', cwd)
+    assert run.returncode == 0 and not run.stderr, run.stderr
     return run.stdout.splitlines()
 
 
 def test_the_recover_command_a_message_suggests_can_be_pasted_into_a_shell(inputs, tmp_path):
-    name = "my $match \u00fc.mcap"
+    name = "my $match!x \u00fc.mcap"
     data = (inputs / "s.mcap").read_bytes()
     (tmp_path / name).write_bytes(data[:len(data) - 3000])  # cut short, as by a crash
     line = assert_one_line_error(run_pslog("info", name, cwd=tmp_path), 1)
@@ -97,14 +103,12 @@ def test_the_recover_command_a_message_suggests_can_be_pasted_into_a_shell(input
     assert _words(command, tmp_path) == ["pslog", "recover", name, "-o", "FIXED.mcap"], line
     # and run as pasted, it salvages the file
     env = {**os.environ, "PSLOG_PY": sys.executable}
-    done = subprocess.run(["bash", "-c", f'pslog() {{ "$PSLOG_PY" -m pslog.cli "$@"; }}; '
-                           f"{command}"], cwd=tmp_path, env=env, capture_output=True,
-                          text=True, timeout=120)
+    done = _pasted(f'pslog() {{ "$PSLOG_PY" -m pslog.cli "$@"; }}; {command}', tmp_path, env)
     assert done.returncode == 0 and (tmp_path / "FIXED.mcap").stat().st_size > 0, done.stderr
 
 
 def test_the_rerun_command_view_suggests_can_be_pasted_into_a_shell(inputs, tmp_path):
-    name = "my view \u00fc.rrd"
+    name = "my view!x \u00fc.rrd"
     run = run_pslog("view", inputs / "s.mcap", "--save", name, cwd=tmp_path)
     assert run.code == 0, run.stderr
     line = next(x for x in run.stdout.splitlines() if "open it with: " in x)
