@@ -66,6 +66,26 @@ def gated_rejections(data: ViewData):
         det.cand_uv[:, 0].tolist(), det.cand_uv[:, 1].tolist(), strict=True)], dtype=bool)
 
 
+def overlay_track(data: ViewData) -> str | None:
+    """The shown track whose gating and own rejections the images draw (grey points): the
+    first stored with its rejections, else the first shown; None when none is shown."""
+    return next(iter(data.rejections or data.tracks), None)
+
+
+def flagged_rejected(data: ViewData) -> dict[str, int]:
+    """Shown track -> how many of its points in the window are flagged ``rejected`` (its
+    method rejected the detection: the filter's gate, smooth's fit; ``pslog eval``'s
+    'detections the method rejected'); tracks with none left out."""
+    out = {}
+    for name, track in data.tracks.items():
+        flag = track.quality.get("rejected")
+        if flag is not None:
+            n = int(np.count_nonzero((flag == 1) & data.in_window(track.time_ns)))
+            if n:
+                out[name] = n
+    return out
+
+
 def method_rejections(data: ViewData, chosen: np.ndarray) -> np.ndarray:
     """(C,) bool over the session's candidates: of the ``chosen`` ones, those whose point in
     the shown track (the first stored with its rejections, else the first shown) is flagged
@@ -74,7 +94,7 @@ def method_rejections(data: ViewData, chosen: np.ndarray) -> np.ndarray:
     ``data.observations``."""
     det = data.session.detections
     out = np.zeros(det.n_candidates, dtype=bool)
-    name = next(iter(data.rejections or data.tracks), None)
+    name = overlay_track(data)
     track = None if name is None else data.tracks.get(name)
     flag = None if track is None else track.quality.get("rejected")
     if flag is None or not np.any(flag == 1):

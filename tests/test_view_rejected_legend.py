@@ -1,0 +1,63 @@
+"""The viewer's legend counts the detections each shown method rejected itself (smooth's fit,
+the filter's gate: points kept, flagged ``rejected``), as ``pslog eval`` does: the images
+draw only one track's in grey, and a track whose are not drawn is named with the command
+that draws them (session 36's walk: smooth's rejections were invisible beside the filter's,
+the legend silent)."""
+
+from __future__ import annotations
+
+import shlex
+import subprocess
+
+import numpy as np
+
+from pslog.cli import main
+from pslog.log import read_session
+
+
+def _rrd_legend_and_grey(rrd):
+    from rerun.chunk import RrdReader
+
+    legend, grey = "", 0
+    for chunk in RrdReader(rrd).stream():
+        batch = chunk.to_record_batch()
+        if chunk.entity_path == "/legend":
+            legend += " ".join(str(v) for v in batch.to_pylist())
+        if not chunk.is_static and chunk.entity_path.endswith("/image/rejected"):
+            col = batch.column("Points2D:positions").to_pylist()
+            grey += sum(len(p or []) for p in col)
+    return legend, grey
+
+
+def test_legend_counts_each_methods_own_rejections_and_names_how_to_draw_them(tmp_path):
+    from viewers import save_rrd
+
+    session, fused = tmp_path / "my session.mcap", tmp_path / "fused.mcap"
+    assert main(["simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "rally",
+                 "--duration", "3", "--noise-px", "0.5", "--spurious", "0.3",
+                 "--spurious-radius", "20", "--seed", "48012", "-o", str(session)]) == 0
+    assert main(["fuse", str(session), "--method", "filter", "--method", "smooth",
+                 "-o", str(fused)]) == 0
+    stored = read_session(fused)
+    flagged = {m: int(np.count_nonzero(t.quality["rejected"] == 1))
+               for m, t in stored.tracks.items()}
+    assert flagged["filter"] == 0 and flagged["smooth"] > 0  # the case: smooth's not drawn
+
+    rrd = tmp_path / "both.rrd"
+    save_rrd([session, fused], rrd, methods=["filter", "smooth"], frames="none")
+    legend, grey = _rrd_legend_and_grey(rrd)
+    assert "Rejected by the method" in legend and "filter none" in legend
+    assert f"not drawn: smooth {flagged['smooth']} " in legend
+    assert grey == len(stored.rejections["filter"])  # the filter's gating alone
+
+    # the command the legend names, pasted into a shell, draws smooth's in grey
+    command = legend.split("`pslog view ", 1)[1].split("`", 1)[0]
+    words = subprocess.run(["bash", "-c", f"printf '%s\\n' {command}"], capture_output=True,
+                           text=True, check=True).stdout.splitlines()
+    assert words == [str(session), str(fused), "--method", "smooth"], shlex.join(words)
+    rrd2 = tmp_path / "smooth.rrd"
+    assert main(["view", *words, "--frames", "none", "--save", str(rrd2)]) == 0
+    legend2, grey2 = _rrd_legend_and_grey(rrd2)
+    assert grey2 == len(stored.rejections["smooth"]) + flagged["smooth"]
+    assert f"smooth {flagged['smooth']}, grey in the images too" in legend2
+    assert "not drawn" not in legend2
