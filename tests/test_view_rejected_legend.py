@@ -1,11 +1,12 @@
-"""The viewer's legend counts the detections each shown method rejected itself (smooth's fit,
-the filter's gate: points kept, flagged ``rejected``), as ``pslog eval`` does: the images
-draw only one track's in grey, and a track whose are not drawn is named with the command
-that draws them (session 36's walk: smooth's rejections were invisible beside the filter's,
-the legend silent)."""
+"""pslog fuse's summary and the viewer's legend count the detections each method rejected
+itself (smooth's fit, the filter's gate: points kept, flagged ``rejected``), as ``pslog
+eval`` does; the images draw only one track's in grey, and a track whose are not drawn is
+named with the command that draws them (session 36's walk: smooth's rejections were
+invisible beside the filter's, the legend and fuse's summary silent)."""
 
 from __future__ import annotations
 
+import json
 import shlex
 import subprocess
 
@@ -29,19 +30,31 @@ def _rrd_legend_and_grey(rrd):
     return legend, grey
 
 
-def test_legend_counts_each_methods_own_rejections_and_names_how_to_draw_them(tmp_path):
+def test_fuse_eval_and_view_count_each_methods_own_rejections_alike(tmp_path, capsys):
     from viewers import save_rrd
 
     session, fused = tmp_path / "my session.mcap", tmp_path / "fused.mcap"
     assert main(["simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "rally",
                  "--duration", "3", "--noise-px", "0.5", "--spurious", "0.3",
                  "--spurious-radius", "20", "--seed", "48012", "-o", str(session)]) == 0
+    capsys.readouterr()
     assert main(["fuse", str(session), "--method", "filter", "--method", "smooth",
                  "-o", str(fused)]) == 0
+    fuse_out = capsys.readouterr().out
     stored = read_session(fused)
     flagged = {m: int(np.count_nonzero(t.quality["rejected"] == 1))
                for m, t in stored.tracks.items()}
     assert flagged["filter"] == 0 and flagged["smooth"] > 0  # the case: smooth's not drawn
+    # fuse's summary counts them as eval does (eval --json: rejected_detections)
+    assert main(["eval", str(fused), "--json"]) == 0
+    evaluated = {r["method"]: r.get("rejected_detections", 0)
+                 for r in json.loads(capsys.readouterr().out)}
+    assert evaluated == flagged
+    smooth_line = next(line for line in fuse_out.splitlines() if line.startswith("smooth "))
+    assert smooth_line.endswith(f"; {flagged['smooth']} flagged rejected (its fit rejected "
+                                f"their detections, the points kept)"), smooth_line
+    filter_line = next(line for line in fuse_out.splitlines() if line.startswith("filter "))
+    assert "flagged rejected" not in filter_line, filter_line
 
     rrd = tmp_path / "both.rrd"
     save_rrd([session, fused], rrd, methods=["filter", "smooth"], frames="none")
