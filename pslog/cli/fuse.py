@@ -245,7 +245,7 @@ def run(args: argparse.Namespace) -> int:
     fusing = start_fusion(detections, rig, methods, options, workers=args.workers,
                           background=args.workers is None)
     del detections  # (held by the gating until the last form is gated)
-    written: dict[str, tuple[int, dict[str, int], int, int]] = {}  # points, left out, rejected, flagged
+    written: dict[str, tuple[int, dict[str, int], int, int]] = {}  # points, left out, gated, flag
     empty: dict[str, dict[str, int]] = {}  # method: its left-out counts
     early: dict[str, int] = {}
     still: dict[str, int] = {}  # candidates rejected as a still object, by method
