@@ -135,7 +135,7 @@ def run(args: argparse.Namespace) -> int:
 
     from pslog import progress
     from pslog._jit import preload
-    from pslog.errors import FusionError, RigError
+    from pslog.errors import FusionError, RigError, shell_word
     from pslog.fusion import (
         CONFIRM_GAPS,
         FILTER_HOLD_NIS,
@@ -167,8 +167,8 @@ def run(args: argparse.Namespace) -> int:
         if unused:  # (documented in --help; said, as the other options fuse ignores)
             print(f"--rig {args.rig}: its fps/offset/clock keys are not applied to "
                   f"{', '.join(unused)}: a calibration gives the geometry, the session's timing "
-                  f"stays (for the file's: 'pslog rig import {args.rig} -o rig.toml', then "
-                  f"--rig rig.toml)")
+                  f"stays (for the file's: 'pslog rig import {shell_word(args.rig)} -o "
+                  f"rig.toml', then --rig rig.toml)")
         _say_other_frame_rates(args.rig, rig, session)
     check_baselines(rig, args.session if args.rig is None else args.rig)
     try:
