@@ -276,3 +276,27 @@ def test_records_note_on_measured_offsets_suggests_commands_that_paste(tmp_path)
         "pslog", "rig", "show", name], line
     assert _words(_suggested(line, "pslog fuse "), tmp_path) == [
         "pslog", "fuse", name, "--rig", "fixed.toml"], line
+
+
+def test_the_rig_import_commands_a_calibration_file_suggests_can_be_pasted(tmp_path):
+    """calibrate --rig given an anipose or OpenCV calibration ('convert it with 'pslog rig
+    import P -o rig.toml''), rig import of a metres file with --units mm ('... --units m
+    -o rig.toml'): the path with a space was two arguments."""
+    from pslog.interchange.rig_formats import rig_to_format
+    from pslog.rig import builtin_rig
+
+    points = Path(__file__).resolve().parents[2] / "samples" / "cam1_points.csv"
+    for fmt, name in (("anipose", "my cal.toml"), ("opencv", "my cal.yml")):
+        (tmp_path / name).write_text(rig_to_format(builtin_rig("paper3"), fmt, "m",
+                                                   Path(name).suffix), encoding="utf-8")
+        before = fingerprint(tmp_path)
+        line = assert_one_line_error(run_pslog(
+            "calibrate", "--points", points, "--name", "cam1", "--width", "640", "--height",
+            "480", "--rig", name, cwd=tmp_path), 1)
+        assert _words(_suggested(line, "pslog rig import "), tmp_path) == [
+            "pslog", "rig", "import", name, "-o", "rig.toml"], line
+        assert_untouched(before, tmp_path)
+        line = assert_one_line_error(run_pslog("rig", "import", name, "--units", "mm", "-o",
+                                               "r.toml", cwd=tmp_path), 1)
+        assert _words(_suggested(line, "pslog rig import "), tmp_path) == [
+            "pslog", "rig", "import", name, "--units", "m", "-o", "rig.toml"], line
