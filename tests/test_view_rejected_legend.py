@@ -69,8 +69,13 @@ def test_fuse_eval_and_view_count_each_methods_own_rejections_alike(tmp_path, ca
                            text=True, check=True).stdout.splitlines()
     assert words == [str(session), str(fused), "--method", "smooth"], shlex.join(words)
     rrd2 = tmp_path / "smooth.rrd"
+    capsys.readouterr()
     assert main(["view", *words, "--frames", "none", "--save", str(rrd2)]) == 0
     legend2, grey2 = _rrd_legend_and_grey(rrd2)
     assert grey2 == len(stored.rejections["smooth"]) + flagged["smooth"]
+    # view's summary counts the candidates it drew, kept and grey (not the frames)
+    n_candidates = read_session(session).detections.n_candidates
+    assert (f"logged {n_candidates - grey2} detections, {grey2} rejected candidates, "
+            in capsys.readouterr().out)
     assert f"smooth {flagged['smooth']}, grey in the images too" in legend2
     assert "not drawn" not in legend2

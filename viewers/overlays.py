@@ -18,10 +18,14 @@ from . import _columns as C
 from .data import ViewData
 
 
-def log_detections(rec, data: ViewData, clock: C.Clock) -> int:
+def log_detections(rec, data: ViewData, clock: C.Clock) -> tuple[int, int]:
+    """Log each camera's candidates, frame by frame: the chosen ones (``detections``) and
+    the rejected ones, grey (the gating's and the shown track's method's own). Returns how
+    many of each were drawn (the candidates, as ``pslog info`` and ``pslog eval`` count
+    them; not the frames)."""
     det = data.session.detections
     if det.n_frames == 0:
-        return 0
+        return 0, 0
     counts = det.candidates_per_frame()
     is_best = det.best_mask()
     rejected_mask = gated_rejections(data)
@@ -31,7 +35,7 @@ def log_detections(rec, data: ViewData, clock: C.Clock) -> int:
     # smooth's fit: ``rejected`` = 1): drawn as rejected too, with gating on or off
     is_best &= ~method_rejections(data, is_best)
     frame_in = data.in_window(det.frame_time_ns)
-    n = 0
+    n_kept = n_rejected = 0
     for c, name in enumerate(det.camera_names):
         frames = np.flatnonzero(frame_in & (det.frame_camera == c))
         if len(frames) == 0:
@@ -41,14 +45,16 @@ def log_detections(rec, data: ViewData, clock: C.Clock) -> int:
         best = keep & is_best
         kept = np.bincount(det.cand_frame[best], minlength=det.n_frames)[frames]
         # every frame gets a row, an empty one when nothing was detected (clears the point)
-        n += C.send(rec, f"{C.image_path(name)}/detections", clock, t, f,
-                    rr.Points2D.columns(positions=C.image_space(det.cand_uv[best]))
-                    .partition(kept))
+        C.send(rec, f"{C.image_path(name)}/detections", clock, t, f,
+               rr.Points2D.columns(positions=C.image_space(det.cand_uv[best]))
+               .partition(kept))
         rejected = keep & ~is_best
         C.send(rec, f"{C.image_path(name)}/rejected", clock, t, f,
                rr.Points2D.columns(positions=C.image_space(det.cand_uv[rejected]))
                .partition(counts[frames] - kept))
-    return n
+        n_kept += int(np.count_nonzero(best))
+        n_rejected += int(np.count_nonzero(rejected))
+    return n_kept, n_rejected
 
 
 def gated_rejections(data: ViewData):

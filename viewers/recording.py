@@ -159,7 +159,7 @@ def log_view(rec: rr.RecordingStream, data: ViewData, frames: FramesChoice) -> d
         uv_undistorted[rows] = cam.undistort(obs.uv[rows])
     # per-frame overlays beyond the detail range: one frame in data.every (DetailChoice)
     thin = data.thinned()
-    counts["detections"] = log_detections(rec, data, clock)
+    counts["detections"], counts["rejected_candidates"] = log_detections(rec, data, clock)
     counts["rays"] = _log_rays(rec, thin, clock)
     counts["epipolar_lines"] = log_epipolar(rec, thin, clock, uv_undistorted)
     counts["track_points"] = _log_tracks(rec, data, clock, colors)
