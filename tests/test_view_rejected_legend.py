@@ -50,6 +50,13 @@ def test_fuse_eval_and_view_count_each_methods_own_rejections_alike(tmp_path, ca
     evaluated = {r["method"]: r.get("rejected_detections", 0)
                  for r in json.loads(capsys.readouterr().out)}
     assert evaluated == flagged
+    # and its text says why smooth flags one (the deletion test's case named), not filter's
+    assert main(["eval", str(fused)]) == 0
+    text = capsys.readouterr().out
+    assert f"smooth    {flagged['smooth']} of {len(stored.tracks['smooth'])} points" in text
+    why = next(line for line in text.splitlines() if line.startswith("  smooth: its fit"))
+    assert "beyond 4.3 σ of the fit's noise" in why and "the fit bent to it" in why, why
+    assert "  filter: its gate" not in text
     smooth_line = next(line for line in fuse_out.splitlines() if line.startswith("smooth "))
     assert smooth_line.endswith(f"; {flagged['smooth']} flagged rejected (its fit rejected "
                                 f"their detections, the points kept)"), smooth_line
