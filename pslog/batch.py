@@ -35,7 +35,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from pslog.errors import InputError, PslogError
+from pslog.errors import InputError, PslogError, shell_word
 
 #: every step, in the order a session goes through them
 STEPS = ("redetect", "sync", "fuse", "eval", "view")
@@ -216,6 +216,14 @@ def find_sessions(patterns: Iterable[str], outdir: str | Path,
         if skipped is not None:
             skipped += [p for p in earlier if p not in skipped]
         found = [p for p in found if p not in earlier]
+        if not found and not matched and os.path.isdir(pattern):
+            # a folder is no pattern of its files: say which pattern is (quoted, as pasted)
+            inside = os.path.join(glob.escape(pattern), "**", "*.mcap")
+            n = len([p for p in glob.glob(inside, recursive=True) if os.path.isfile(p)])
+            suggested = shell_word(inside)
+            raise InputError(f"{pattern} is a folder, not a session file: give its sessions "
+                             f"as the quoted pattern {suggested} ({n} .mcap file"
+                             f"{'' if n == 1 else 's'} there and in its subfolders)")
         if not found:
             raise InputError(f"no session file matches {pattern!r}"
                              + (f" (every match lies inside an earlier batch's results, e.g. "

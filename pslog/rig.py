@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from .camera import Camera, look_at
-from .errors import InputError, RigError
+from .errors import InputError, RigError, shell_word
 
 TIMING_PRESETS = ("sync", "typeA", "typeB")
 #: Most cameras a rig may have (fusion computes geometry for every pair).
@@ -202,8 +202,8 @@ def load_rig_file(path: str | Path, fmt: str = "auto", options=None):
 
 
 def _session_not_rig(path: Path) -> str:
-    return (f"{path} is a session, not a rig file (take its rig with 'pslog rig show {path} "
-            f"> rig.toml')")
+    return (f"{path} is a session, not a rig file (take its rig with 'pslog rig show "
+            f"{shell_word(path)} > rig.toml')")
 
 
 def save_rig(rig: Rig, path: str | Path, inputs=()) -> None:

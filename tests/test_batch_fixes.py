@@ -329,3 +329,26 @@ def test_the_summary_has_the_readouts_auto_chose_and_only_those():
     still = batch.summary_row("b.mcap", None, {"cameras": [cam], "residual_px": 0.5,
                                                "estimated": ["offset"]}, None)
     assert "c2_readout_ms" not in still and still["c2_offset_ms"] == 1.0
+
+
+def test_a_folder_given_as_the_pattern_names_the_pattern_that_works(tmp_path):
+    """A new user's 'pslog batch "my sessions" ...' (a folder, as other tools take): said
+    'no session file matches', as if the folder held none. The message names the quoted
+    pattern of its sessions, and that pattern, pasted into a shell, runs the batch."""
+    folder = tmp_path / "my sessions"
+    session(folder / "a.mcap")
+    session(folder / "day 2" / "b.mcap")
+    run = run_pslog("batch", folder, "--do", "fuse", "-o", tmp_path / "out")
+    line = assert_one_line_error(run, 1, contains=("is a folder, not a session file",
+                                                   "2 .mcap files"))
+    suggested = line.split("the quoted pattern ", 1)[1].split(" (", 1)[0]
+    # the pattern as bash reads it when pasted: one word, not expanded by the shell
+    words = subprocess.run(["bash", "-c", f'printf "%s\\n" {suggested}'], capture_output=True,
+                           text=True, check=True).stdout.splitlines()
+    assert words == [f"{folder}/**/*.mcap"]
+    jobs = find_sessions(words, tmp_path / "out")
+    assert sorted(j.session for j in jobs) == ["a.mcap", "day 2/b.mcap"]
+    # a folder holding no session says so too (not a pattern that would match nothing)
+    (tmp_path / "empty").mkdir()
+    run = run_pslog("batch", tmp_path / "empty", "--do", "fuse", "-o", tmp_path / "out2")
+    assert_one_line_error(run, 1, contains=("is a folder", "0 .mcap files"))

@@ -18,10 +18,14 @@ from . import _columns as C
 from .data import ViewData
 
 
-def log_detections(rec, data: ViewData, clock: C.Clock) -> int:
+def log_detections(rec, data: ViewData, clock: C.Clock) -> tuple[int, int]:
+    """Log each camera's candidates, frame by frame: the chosen ones (``detections``) and
+    the rejected ones, grey (the gating's and the shown track's method's own). Returns how
+    many of each were drawn (the candidates, as ``pslog info`` and ``pslog eval`` count
+    them; not the frames)."""
     det = data.session.detections
     if det.n_frames == 0:
-        return 0
+        return 0, 0
     counts = det.candidates_per_frame()
     is_best = det.best_mask()
     rejected_mask = gated_rejections(data)
@@ -31,7 +35,7 @@ def log_detections(rec, data: ViewData, clock: C.Clock) -> int:
     # smooth's fit: ``rejected`` = 1): drawn as rejected too, with gating on or off
     is_best &= ~method_rejections(data, is_best)
     frame_in = data.in_window(det.frame_time_ns)
-    n = 0
+    n_kept = n_rejected = 0
     for c, name in enumerate(det.camera_names):
         frames = np.flatnonzero(frame_in & (det.frame_camera == c))
         if len(frames) == 0:
@@ -41,14 +45,16 @@ def log_detections(rec, data: ViewData, clock: C.Clock) -> int:
         best = keep & is_best
         kept = np.bincount(det.cand_frame[best], minlength=det.n_frames)[frames]
         # every frame gets a row, an empty one when nothing was detected (clears the point)
-        n += C.send(rec, f"{C.image_path(name)}/detections", clock, t, f,
-                    rr.Points2D.columns(positions=C.image_space(det.cand_uv[best]))
-                    .partition(kept))
+        C.send(rec, f"{C.image_path(name)}/detections", clock, t, f,
+               rr.Points2D.columns(positions=C.image_space(det.cand_uv[best]))
+               .partition(kept))
         rejected = keep & ~is_best
         C.send(rec, f"{C.image_path(name)}/rejected", clock, t, f,
                rr.Points2D.columns(positions=C.image_space(det.cand_uv[rejected]))
                .partition(counts[frames] - kept))
-    return n
+        n_kept += int(np.count_nonzero(best))
+        n_rejected += int(np.count_nonzero(rejected))
+    return n_kept, n_rejected
 
 
 def gated_rejections(data: ViewData):
@@ -66,6 +72,26 @@ def gated_rejections(data: ViewData):
         det.cand_uv[:, 0].tolist(), det.cand_uv[:, 1].tolist(), strict=True)], dtype=bool)
 
 
+def overlay_track(data: ViewData) -> str | None:
+    """The shown track whose gating and own rejections the images draw (grey points): the
+    first stored with its rejections, else the first shown; None when none is shown."""
+    return next(iter(data.rejections or data.tracks), None)
+
+
+def flagged_rejected(data: ViewData) -> dict[str, int]:
+    """Shown track -> how many of its points in the window are flagged ``rejected`` (its
+    method rejected the detection: the filter's gate, smooth's fit; ``pslog eval``'s
+    'detections the method rejected'); tracks with none left out."""
+    out = {}
+    for name, track in data.tracks.items():
+        flag = track.quality.get("rejected")
+        if flag is not None:
+            n = int(np.count_nonzero((flag == 1) & data.in_window(track.time_ns)))
+            if n:
+                out[name] = n
+    return out
+
+
 def method_rejections(data: ViewData, chosen: np.ndarray) -> np.ndarray:
     """(C,) bool over the session's candidates: of the ``chosen`` ones, those whose point in
     the shown track (the first stored with its rejections, else the first shown) is flagged
@@ -74,7 +100,7 @@ def method_rejections(data: ViewData, chosen: np.ndarray) -> np.ndarray:
     ``data.observations``."""
     det = data.session.detections
     out = np.zeros(det.n_candidates, dtype=bool)
-    name = next(iter(data.rejections or data.tracks), None)
+    name = overlay_track(data)
     track = None if name is None else data.tracks.get(name)
     flag = None if track is None else track.quality.get("rejected")
     if flag is None or not np.any(flag == 1):

@@ -40,7 +40,7 @@ import numpy as np
 import rerun as rr
 
 from pslog import palette
-from pslog.errors import PslogError
+from pslog.errors import PslogError, shell_word
 from pslog.log import iter_images
 from pslog.motion import BALL_RADIUS
 from pslog.outputs import check_output_path
@@ -50,7 +50,13 @@ from . import _columns as C
 from ._columns import camera_path, image_path
 from .blueprint import build_blueprint, default_eye, quality_plots
 from .data import UNBOUNDED_NS, DetailChoice, FramesChoice, ViewData, load_view_data
-from .overlays import log_construction, log_detections, log_epipolar
+from .overlays import (
+    flagged_rejected,
+    log_construction,
+    log_detections,
+    log_epipolar,
+    overlay_track,
+)
 from .panels import CropLogger, log_summary
 from .rrd_file import rrd_file
 
@@ -153,7 +159,7 @@ def log_view(rec: rr.RecordingStream, data: ViewData, frames: FramesChoice) -> d
         uv_undistorted[rows] = cam.undistort(obs.uv[rows])
     # per-frame overlays beyond the detail range: one frame in data.every (DetailChoice)
     thin = data.thinned()
-    counts["detections"] = log_detections(rec, data, clock)
+    counts["detections"], counts["rejected_candidates"] = log_detections(rec, data, clock)
     counts["rays"] = _log_rays(rec, thin, clock)
     counts["epipolar_lines"] = log_epipolar(rec, thin, clock, uv_undistorted)
     counts["track_points"] = _log_tracks(rec, data, clock, colors)
@@ -293,6 +299,23 @@ def _legend(data: ViewData, colors) -> str:
         reasons = ", ".join(f"{k} {v}" for k, v in rej.counts().items() if v) or "none"
         lines += ["", f"**Gating** ({method}): {len(rej)} candidates rejected (grey points "
                   f"in the images; {reasons})"]
+    # the detections a method rejected itself (its points kept, flagged rejected): the
+    # images draw the overlay track's in grey too; another track's are named, not drawn
+    flagged = flagged_rejected(data)
+    if flagged:
+        drawn = overlay_track(data)
+        n = flagged.get(drawn, 0) if drawn is not None else 0
+        text = (f"**Rejected by the method** (points kept, flagged rejected: the filter's "
+                f"gate, smooth's fit): {drawn} {n}, grey in the images too" if n else
+                f"**Rejected by the method** (points kept, flagged rejected: the filter's "
+                f"gate, smooth's fit): {drawn} none")
+        others = [f"{m} {k}" for m, k in flagged.items() if m != drawn]
+        if others:
+            files = " ".join(shell_word(p) for p in data.paths)
+            text += (f"; not drawn: {', '.join(others)} (the images show {drawn}'s; "
+                     f"`pslog view {files} --method "
+                     f"{next(m for m in flagged if m != drawn)}` draws that track's)")
+        lines += ["", text]
     if data.construction is not None:
         lines += ["", f"**Figure 2** (typeA, drawn on the partner camera's image): "
                   f"{name(palette.CONSTRUCTION_COLOR)}, the partner's two detections around "

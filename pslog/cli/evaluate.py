@@ -123,7 +123,21 @@ def run(args: argparse.Namespace) -> int:
                   "filter's the prediction, smooth's the trajectory):")
             for m, n in rejected.items():
                 print(f"{m:<9} {n} of {len(session.tracks[m])} points")
+            for m in (m for m in REJECTED_TEXT if rejected.get(m)):
+                print(f"  {m}: {REJECTED_TEXT[m]}")
     return 0
+
+
+#: Why a method flags a detection rejected (its point kept), said under eval's counts
+REJECTED_TEXT = {
+    "filter": "its gate: the detection outside the innovation gate (NIS beyond 18.4, χ²₂'s "
+              "1 - 1e-4 quantile), even with a bounce or kick before it; the point is the "
+              "prediction",
+    "smooth": "its fit: the detection's residual beyond 4.3 σ of the fit's noise (χ²₂'s "
+              "1 - 1e-4 quantile), or the fit bent to it (leaving it out lowered the fit's "
+              "cost beyond that level: a blob near the ball's ray), the fit made without it; "
+              "the point is the trajectory's",
+}
 
 
 def _rate(track) -> float | None:

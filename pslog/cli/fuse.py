@@ -135,7 +135,7 @@ def run(args: argparse.Namespace) -> int:
 
     from pslog import progress
     from pslog._jit import preload
-    from pslog.errors import FusionError, RigError
+    from pslog.errors import FusionError, RigError, shell_word
     from pslog.fusion import (
         CONFIRM_GAPS,
         FILTER_HOLD_NIS,
@@ -167,8 +167,8 @@ def run(args: argparse.Namespace) -> int:
         if unused:  # (documented in --help; said, as the other options fuse ignores)
             print(f"--rig {args.rig}: its fps/offset/clock keys are not applied to "
                   f"{', '.join(unused)}: a calibration gives the geometry, the session's timing "
-                  f"stays (for the file's: 'pslog rig import {args.rig} -o rig.toml', then "
-                  f"--rig rig.toml)")
+                  f"stays (for the file's: 'pslog rig import {shell_word(args.rig)} -o "
+                  f"rig.toml', then --rig rig.toml)")
         _say_other_frame_rates(args.rig, rig, session)
     check_baselines(rig, args.session if args.rig is None else args.rig)
     try:
@@ -245,7 +245,7 @@ def run(args: argparse.Namespace) -> int:
     fusing = start_fusion(detections, rig, methods, options, workers=args.workers,
                           background=args.workers is None)
     del detections  # (held by the gating until the last form is gated)
-    written: dict[str, tuple[int, dict[str, int], int]] = {}  # points, left out, rejected
+    written: dict[str, tuple[int, dict[str, int], int, int]] = {}  # points, left out, gated, flag
     empty: dict[str, dict[str, int]] = {}  # method: its left-out counts
     early: dict[str, int] = {}
     still: dict[str, int] = {}  # candidates rejected as a still object, by method
@@ -278,7 +278,11 @@ def run(args: argparse.Namespace) -> int:
                     w.add_track(track, left_out=dropped, last=True)
                     if options.gating:
                         w.add_rejections(method, rejected)
-                    written[method] = (len(track), dropped, len(rejected))
+                    # points kept whose detection the method rejected itself (smooth's fit,
+                    # the filter's gate: flagged rejected), as pslog eval and view count them
+                    flag = track.quality.get("rejected")
+                    n_flagged = 0 if flag is None else int(np.count_nonzero(flag == 1))
+                    written[method] = (len(track), dropped, len(rejected), n_flagged)
                     del track, rejected
             most = max(still.values(), default=0)
             if most > n_candidates / 2:
@@ -302,12 +306,16 @@ def run(args: argparse.Namespace) -> int:
         fusing.stop()  # no method starts after a failure or an interrupt
         raise
     for method in (m for m in methods if m in written):
-        n_points, dropped, n_rejected = written[method]
+        n_points, dropped, n_rejected, n_flagged = written[method]
         why = ", ".join(f"{reason} {n}" for reason, n in dropped.items())
         rejected_text = (f"  {n_rejected:>6d} candidates rejected by gating"
                          if options.gating else "")
+        what = {"smooth": "fit", "filter": "gate"}.get(method, "method")
         print(f"{method:<8} {n_points:>7d} points{rejected_text}"
-              + (f" (left out, untrustworthy: {why})" if why else ""))
+              + (f" (left out, untrustworthy: {why})" if why else "")
+              + (f"; {n_flagged} flagged rejected (its {what} rejected "
+                 + ("their detections, the points kept)" if n_flagged > 1 else
+                    "its detection, the point kept)") if n_flagged else ""))
     print(f"wrote {output}")
     return 0
 

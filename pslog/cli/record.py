@@ -21,7 +21,7 @@ from pslog.cli._common import (
     seed,
     usage_error,
 )
-from pslog.errors import InputError
+from pslog.errors import InputError, shell_word
 
 DESCRIPTION = """\
 Record a session: every camera of the rig is captured in its own process (capture, ball
@@ -244,8 +244,9 @@ def _note_offsets(output, rig) -> None:
                            f"(rig {nominal * 1e3:.1f} ms)" for name, measured, nominal in off)
         print(f"{PREFIX}note: measured shutter offsets differ from the rig's: {listed}; the "
               f"session keeps the rig's offsets (timing '{timing_label(rig)}'); to fuse with the "
-              f"measured ones, 'pslog rig show {output} > fixed.toml', set the offsets and "
-              f"'pslog fuse {output} --rig fixed.toml'", file=sys.stderr)
+              f"measured ones, 'pslog rig show {shell_word(output)} > fixed.toml', set the "
+              f"offsets and 'pslog fuse {shell_word(output)} --rig fixed.toml'",
+              file=sys.stderr)
 
 
 #: largest device index a --source takes: OpenCV's VideoCapture takes a C int (a larger one

@@ -49,7 +49,7 @@ from typing import Any
 import numpy as np
 
 from ..camera import Camera
-from ..errors import RigError
+from ..errors import RigError, shell_word
 from ..rig import Rig
 
 #: formats a rig file may be in (``pslog`` is pslog's own TOML, pslog/rig.py)
@@ -181,10 +181,10 @@ def parse_rig_text(text: str, path: str | Path, fmt: str = "auto",
             found = "pslog"  # malformed: pslog's own parser says how
         if found != "pslog":
             raise RigError(f"{source}: an {found} calibration, not a pslog rig TOML (convert "
-                           f"it with 'pslog rig import {source} -o rig.toml')")
+                           f"it with 'pslog rig import {shell_word(source)} -o rig.toml')")
     elif fmt == "pslog":
         raise RigError(f"{source}: an OpenCV FileStorage file, not a pslog rig TOML (convert "
-                       f"it with 'pslog rig import {source} -o rig.toml')")
+                       f"it with 'pslog rig import {shell_word(source)} -o rig.toml')")
     if detected == "pslog":
         if options.units is not None:
             # pslog's own rig TOML is in metres by definition: a unit given for it is a
@@ -275,7 +275,8 @@ def _check_not_metres(rig: Rig, source: str) -> None:
         raise RigError(
             f"{source}: read as millimetres its cameras are a median {from_origin * 1e3:.4g} "
             f"mm from the world origin and {apart * 1e3:.4g} mm apart: its translations look "
-            f"like metres; convert it with 'pslog rig import {source} --units m -o rig.toml'")
+            f"like metres; convert it with 'pslog rig import {shell_word(source)} --units m "
+            f"-o rig.toml'")
 
 
 def _with_timing(rig: Rig, options: ImportOptions, source: str) -> Rig:

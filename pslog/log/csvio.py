@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from ..camera import MAX_PIXEL as _MAX_PIXEL
-from ..errors import InputError
+from ..errors import InputError, shell_word
 from ..inputs import check_input_file
 from ..outputs import replacing
 from ..records import MAX_FRAME_INDEX, NS, Detections
@@ -186,8 +186,8 @@ def read_detections_csv(path, rig: Rig) -> Detections:
 
             if starts_as_mcap(path):
                 raise InputError(f"{path} is an MCAP session, not a detections CSV (export "
-                                 f"its detections with 'pslog export {path} --detections "
-                                 f"DET.csv')") from None
+                                 f"its detections with 'pslog export {shell_word(path)} "
+                                 f"--detections DET.csv')") from None
             raise InputError(f"{path}: not a text CSV file (byte {exc.start} is not UTF-8 "
                              f"text); expected header camera,time,u,v") from None
         except csv.Error as exc:

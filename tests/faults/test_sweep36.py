@@ -213,3 +213,94 @@ def test_fuse_says_a_rig_that_changes_the_frame_rate(inputs, tmp_path):
         else:
             assert len(notes) == 1 and said in notes[0] and "cam2" not in notes[0], run.stdout
     assert_untouched(before, inputs)
+
+
+def _suggested(line: str, start: str) -> str:
+    """The command in quotes that ``line`` suggests, from ``start`` (``'pslog ...'``) to its
+    closing quote, a shell redirection ``> FILE`` at its end cut off."""
+    command = line.split(f"'{start}", 1)[1].split("'", 1)[0]
+    return start + command.split(" > ", 1)[0]
+
+
+def test_the_other_commands_messages_suggest_can_be_pasted_into_a_shell(inputs, tmp_path):
+    """Four more messages held a path unquoted in the command they suggest (the walk of
+    session 36): import given a session ('pslog export P --detections DET.csv'), a rig
+    reader given a session ('pslog rig show P > rig.toml'), fuse --rig with a calibration
+    whose timing keys fuse does not apply ('pslog rig import P -o rig.toml') and record's
+    note on measured offsets ('pslog rig show P > fixed.toml', 'pslog fuse P --rig
+    fixed.toml'): pasted, a path with a space was two arguments."""
+    name = "my $match \u00fc.mcap"
+    (tmp_path / name).write_bytes((inputs / "s.mcap").read_bytes())
+    line = assert_one_line_error(run_pslog("import", "--rig", "paper3", "--detections", name,
+                                           "-o", "x.mcap", cwd=tmp_path), 1)
+    assert _words(_suggested(line, "pslog export "), tmp_path) == [
+        "pslog", "export", name, "--detections", "DET.csv"], line
+    line = assert_one_line_error(run_pslog("rig", "import", name, "-o", "r.toml",
+                                           cwd=tmp_path), 1)
+    assert _words(_suggested(line, "pslog rig show "), tmp_path) == [
+        "pslog", "rig", "show", name], line
+
+    # a calibration (anipose) whose offset is not the session's: its keys are not applied
+    cal = "my cal.toml"
+    done = run_pslog("rig", "export", name, "--format", "anipose", "-o", cal, cwd=tmp_path)
+    assert done.code == 0, done.stderr
+    text = (tmp_path / cal).read_text()
+    first = text.index("offset = ")
+    (tmp_path / cal).write_text(text[:first] + "offset = 0.005"
+                                + text[text.index("\n", first):])
+    done = run_pslog("fuse", name, "--rig", cal, "--method", "typeA", "-o", "f.mcap",
+                     cwd=tmp_path)
+    assert done.code == 0, done.stderr
+    line = next(x for x in done.stdout.splitlines() if "not applied" in x)
+    assert _words(_suggested(line, "pslog rig import "), tmp_path) == [
+        "pslog", "rig", "import", cal, "-o", "rig.toml"], line
+
+
+def test_records_note_on_measured_offsets_suggests_commands_that_paste(tmp_path):
+    import cv2
+    import numpy as np
+
+    writer = cv2.VideoWriter(str(tmp_path / "clip.avi"), cv2.VideoWriter_fourcc(*"MJPG"), 30,
+                             (640, 480))
+    for i in range(20):  # an orange ball crossing the image
+        image = np.full((480, 640, 3), 40, np.uint8)
+        cv2.circle(image, (100 + 20 * i, 240), 12, (0, 128, 255), -1)
+        writer.write(image)
+    writer.release()
+    rig = run_pslog("rig", "show", "paper3", "--timing", "typeA", cwd=tmp_path)
+    (tmp_path / "rig.toml").write_text(rig.stdout)
+    name = "my rec.mcap"
+    done = run_pslog("record", "--rig", "rig.toml", *(f"--source=cam{i}=clip.avi"
+                                                      for i in (1, 2, 3)),
+                     "-o", name, cwd=tmp_path)
+    assert done.code == 0, done.stderr
+    # three copies of one video: every shutter offset measured 0, the rig's type A differs
+    line = next(x for x in done.stderr.splitlines() if "measured shutter offsets" in x)
+    assert _words(_suggested(line, "pslog rig show "), tmp_path) == [
+        "pslog", "rig", "show", name], line
+    assert _words(_suggested(line, "pslog fuse "), tmp_path) == [
+        "pslog", "fuse", name, "--rig", "fixed.toml"], line
+
+
+def test_the_rig_import_commands_a_calibration_file_suggests_can_be_pasted(tmp_path):
+    """calibrate --rig given an anipose or OpenCV calibration ('convert it with 'pslog rig
+    import P -o rig.toml''), rig import of a metres file with --units mm ('... --units m
+    -o rig.toml'): the path with a space was two arguments."""
+    from pslog.interchange.rig_formats import rig_to_format
+    from pslog.rig import builtin_rig
+
+    points = Path(__file__).resolve().parents[2] / "samples" / "cam1_points.csv"
+    for fmt, name in (("anipose", "my cal.toml"), ("opencv", "my cal.yml")):
+        (tmp_path / name).write_text(rig_to_format(builtin_rig("paper3"), fmt, "m",
+                                                   Path(name).suffix), encoding="utf-8")
+        before = fingerprint(tmp_path)
+        line = assert_one_line_error(run_pslog(
+            "calibrate", "--points", points, "--name", "cam1", "--width", "640", "--height",
+            "480", "--rig", name, cwd=tmp_path), 1)
+        assert _words(_suggested(line, "pslog rig import "), tmp_path) == [
+            "pslog", "rig", "import", name, "-o", "rig.toml"], line
+        assert_untouched(before, tmp_path)
+        line = assert_one_line_error(run_pslog("rig", "import", name, "--units", "mm", "-o",
+                                               "r.toml", cwd=tmp_path), 1)
+        assert _words(_suggested(line, "pslog rig import "), tmp_path) == [
+            "pslog", "rig", "import", name, "--units", "m", "-o", "rig.toml"], line
