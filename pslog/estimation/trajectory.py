@@ -64,7 +64,10 @@ detections of two cameras between it and a piece's end (a segment's velocity is 
 free along a ray), and an end segment that fewer than four detections of two cameras hold
 gives no point: its 6 unknowns (position, velocity) are not determined by 2–3 pixels, and
 the linearised covariance there would not say so (``Fit.withheld``;
-``Track.dropped["underdetermined_end"]``).
+``Track.dropped["underdetermined_end"]``). A piece's first or last detection whose deleted
+residual (the fit made again without it, :func:`end_statistic`) is beyond χ²₂'s 1 - 1e-4
+quantile ends the piece before it, its row without a point, counted there too: the fit
+extrapolates an end to whatever detection is there, a spurious one included.
 
 Why knots every three detection intervals: 8 pixel coordinates per 3 unknowns keep the pixel
 noise estimable from the residuals, and a cubic spline with knots that close represents
@@ -196,6 +199,9 @@ _LOOSE = 10.0
 #: (:attr:`Fit.rejected`), and at a piece's end a run of them is a jump the fit did not find
 #: (:func:`_underdetermined_ends`)
 _END_JUMP_SCALED = float(np.sqrt(-2.0 * np.log(1e-4)))
+#: A piece's end detection whose one-step deletion gain exceeds χ²₂'s 1 - 1e-2 quantile is
+#: tested by the fit made without it (:func:`_ends_refitted`)
+_END_SCREEN = float(-2.0 * np.log(1e-2))
 #: Rounds of the deletion test (:func:`_left_out`): each leaves out the detections the fit
 #: bent to most, the next tests the fit made without them
 _DELETION_ROUNDS = 3
@@ -345,7 +351,9 @@ class Fit:
         :attr:`rejected` says which the fit rejected)
     pieces : list of (n_p,) int64, the observation rows of each fitted piece
     withheld : int, observations inside a piece left without a point: an end segment beyond
-        a break that fewer than ``_END_DETECTIONS`` detections of two cameras hold
+        a break that fewer than ``_END_DETECTIONS`` detections of two cameras hold, or an
+        end detection the fit made without it contradicts (:func:`end_statistic`: the
+        piece ends at the detection before it)
     excluded : (n,) bool or None, the observations the deletion test left out of the fit
         (:func:`deletion_gain`, :func:`_left_out`): weight 0, their point the trajectory's
         made without them, their residual against it; :attr:`rejected` holds them too
@@ -1001,6 +1009,7 @@ def _fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions,
     # fit is made again without it (:func:`_left_out`; docs/methods.md, "A spurious blob
     # the fit bends to")
     left_out = np.zeros(0, np.int64)
+    end_out = np.zeros(0, np.int64)
     for round_ in range(_DELETION_ROUNDS + 1):
         _, dof, _ = _information(problem, control, sigma, r, J, trace=True)
         control, sigma, r, w, J = _Solver(problem, options).run(control, sigma,
@@ -1016,13 +1025,24 @@ def _fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions,
         # at a kick it did not find, not noise that a level of σ can sort into outliers)
         if round_ == _DELETION_ROUNDS or sigma <= options.min_noise_px:
             break
-        out = _left_out(problem.t[problem.rows],
-                        deletion_gain(J, cov_rows, r, w, sigma, k_var),
-                        _WINDOW_SPANS * spacing, _inside(problem))
+        inside = _inside(problem)
+        gain = deletion_gain(J, cov_rows, r, w, sigma, k_var)
+        testable = _end_testable(problem)
+        out = _left_out(problem.t[problem.rows], gain, _WINDOW_SPANS * spacing,
+                        inside | testable)
+        if not len(out):
+            # an end whose one-step gain is near the level: the robust weights of its
+            # neighbours change without it, which the one-step formula keeps fixed
+            out = _ends_refitted(problem, options, control, sigma, breaks, spacing,
+                                 np.flatnonzero(testable & (gain > _END_SCREEN)))
         if not len(out):
             break
-        left_out = np.union1d(left_out, problem.rows[out])
-        kept_rows = [rows[~np.isin(rows, left_out)] for rows in pieces]
+        # an end detection the fit bent to ends the piece at the detection before it: its
+        # row gets no point (the fit carried there only follows it), as an end beyond a jump
+        end_out = np.union1d(end_out, problem.rows[out[~inside[out]]])
+        left_out = np.union1d(left_out, problem.rows[out[inside[out]]])
+        kept_rows = [rows[~np.isin(rows, left_out) & ~np.isin(rows, end_out)]
+                     for rows in pieces]
         problem = _Problem(obs, rig, kept_rows, knots, options.prior, t0_ns)
         control, sigma, r, w, J = _Solver(problem, options).run(control, sigma,
                                                                 _REFINE_ITERATIONS)
@@ -1082,6 +1102,7 @@ def _fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions,
                 residual[rows] = np.linalg.norm(uv - obs.uv[rows], axis=1)
         used[left_out] = np.all(np.isfinite(position[left_out]), axis=1)
         excluded[left_out] = True
+    out_rows = np.union1d(out_rows, end_out).astype(np.int64)
     used[out_rows] = False
     position[out_rows] = np.nan
     covariance[out_rows] = np.nan
@@ -1098,6 +1119,78 @@ def _inside(problem: _Problem) -> np.ndarray:
     for rows in problem.rows_of_piece:
         t = problem.t[rows]
         out.append((t > t.min()) & (t < t.max()))
+    return np.concatenate(out)
+
+
+def _ends_refitted(problem: _Problem, options: SmoothOptions, control: np.ndarray,
+                   sigma: float, breaks: list[np.ndarray], spacing: float,
+                   candidates: np.ndarray) -> np.ndarray:
+    """Indices (into ``problem.rows``) of the ``candidates`` (end detections) whose deleted
+    residual statistic (:func:`end_statistic`) exceeds :data:`_END_JUMP_SCALED` ² (χ²₂'s
+    1 - 1e-4 quantile, the level of the fit's other tests)."""
+    stats = [end_statistic(problem, options, control, sigma, breaks, spacing, int(k))
+             for k in candidates]
+    return np.asarray([int(k) for k, s in zip(candidates, stats, strict=True)
+                       if s > _END_JUMP_SCALED**2], np.int64)
+
+
+def end_statistic(problem: _Problem, options: SmoothOptions, control: np.ndarray,
+                  sigma: float, breaks: list[np.ndarray], spacing: float, k: int) -> float:
+    """The deleted residual statistic of fitted detection ``k`` (index into
+    ``problem.rows``), made by fitting the session again without it (from ``control``,
+    ``_REFINE_ITERATIONS`` Gauss-Newton steps: its neighbours' robust weights change then —
+    a detection of the ball the fit rejected while it followed a spurious end returns —
+    which the one-step :func:`deletion_gain` keeps fixed):
+
+        d = uv_k - π(X̂(t_k)),   T = dᵀ (σ² I + J Σ Jᵀ)⁻¹ d
+
+    ``X̂(t_k)`` and ``Σ`` the position that fit predicts at the detection's time and its
+    covariance (at the noise its residuals show, :func:`variance_factor`), ``J = ∂π/∂X``
+    there, σ its noise: χ²₂ when the detection is of the fitted ball. NaN when the fit does
+    not reach the detection's time or the point is behind its camera."""
+    obs = problem.obs
+    row = problem.rows[k]
+    kept = [rows[rows != row] for rows in problem.rows_of_piece]
+    trial = _Problem(obs, problem.rig, kept, problem.knots, options.prior, problem.t0_ns)
+    c, s_, r, w, J = _Solver(trial, options).run(control, sigma, _REFINE_ITERATIONS)
+    band, _, p_eff, _ = _information_factored(trial, c, s_, r, J, trace=True)
+    band *= variance_factor(r, w, s_, p_eff)
+    traj = Trajectory(trial.t0_ns, trial.knots, trial.offset, c, band,
+                      np.concatenate([np.asarray(b) for b in breaks]) if breaks
+                      else np.zeros(0), s_, spacing)
+    X, cov = traj.evaluate(obs.time_ns[row:row + 1])
+    cam = problem.rig.cameras[int(obs.camera[row])]
+    uv, front = cam.project(X) if np.all(np.isfinite(X)) else (X[:, :2], [False])
+    if not front[0]:
+        return float("nan")
+    # ∂π/∂X by central differences (a micrometre: the projection's curvature is negligible)
+    h = 1e-6
+    Jc = np.stack([(cam.project(X + h * e[None])[0][0] - cam.project(X - h * e[None])[0][0])
+                   / (2 * h) for e in np.eye(3)], axis=1)
+    d = obs.uv[row] - uv[0]
+    S = s_**2 * np.eye(2) + Jc @ cov[0] @ Jc.T
+    return float(d @ np.linalg.solve(S, d))
+
+
+def _end_testable(problem: _Problem) -> np.ndarray:
+    """(n_fit,) bool, in ``problem.rows``' order: a piece's first and last detections whose
+    deletion test may end the piece before them (:func:`_left_out`; the piece then ends at
+    the detection next to it, and the row gets no point): only where the piece keeps at
+    least ``2 * _END_DETECTIONS`` detections of two cameras without it.
+
+    The fit extrapolates a piece's end to whatever its last (first) detection is: a spurious
+    blob there (a static distractor the gate chose where only one other camera still sees
+    the ball, session 36) takes the end with it, metres off, with a residual near zero; its
+    deleted residual (against the fit made without it) is the test's."""
+    out = []
+    cams = problem.obs.camera
+    for rows in problem.rows_of_piece:
+        t = problem.t[rows]
+        ends = (t == t.min()) | (t == t.max())
+        ok = (len(rows) - 1 >= 2 * _END_DETECTIONS
+              and len(np.unique(cams[rows[~(t == t.max())]])) >= 2
+              and len(np.unique(cams[rows[~(t == t.min())]])) >= 2)
+        out.append(ends & ok)
     return np.concatenate(out)
 
 

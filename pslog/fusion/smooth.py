@@ -28,8 +28,11 @@ pieces (never inside a gap the model does not bridge). Per-point quality:
   extrapolate (the filter's: since its last accepted detection).
 
 A detection in an end segment of a piece beyond a bounce or kick that fewer than four
-detections of two cameras hold gets no point (its position along the rays is not determined):
-counted in ``Track.dropped["underdetermined_end"]``. A detection the gate chose in doubt
+detections of two cameras hold gets no point (its position along the rays is not determined),
+nor does a piece's first or last detection that the fit made without it contradicts (its
+deleted residual beyond χ²₂'s 1 - 1e-4 quantile: the piece ends at the detection next to it,
+:func:`pslog.estimation.trajectory.end_statistic`): counted in
+``Track.dropped["underdetermined_end"]``. A detection the gate chose in doubt
 (:attr:`Prepared.doubt_px2` > 0) is left out of the fit, counted as ``doubt``, unless the fit
 made without the session's choices in doubt predicts it (:func:`_confirmed`): then it is
 fitted as any other (docs/methods.md, "`smooth`'s start in doubt, confirmed by the fit").
