@@ -85,11 +85,11 @@ def test_the_end_statistic_is_chi2_on_clean_ends(monkeypatch):
         last["gain"] = gain
         return real_left_out(t, gain, window_s, inside)
 
-    def refitted(problem, options, control, sigma, breaks, spacing, candidates):
+    def refitted(problem, options, control, sigma, k_var, spacing, candidates):
         for k in np.flatnonzero(T._end_testable(problem)):
-            seen.append((T.end_statistic(problem, options, control, sigma, breaks, spacing,
+            seen.append((T.end_statistic(problem, options, control, sigma, k_var, spacing,
                                          int(k)), last["gain"][k]))
-        out = real_refitted(problem, options, control, sigma, breaks, spacing, candidates)
+        out = real_refitted(problem, options, control, sigma, k_var, spacing, candidates)
         assert len(out) == 0
         return out
 

@@ -1033,7 +1033,7 @@ def _fit_trajectory(obs: Observations, rig: Rig, options: SmoothOptions,
         if not len(out):
             # an end whose one-step gain is near the level: the robust weights of its
             # neighbours change without it, which the one-step formula keeps fixed
-            out = _ends_refitted(problem, options, control, sigma, breaks, spacing,
+            out = _ends_refitted(problem, options, control, sigma, k_var, spacing,
                                  np.flatnonzero(testable & (gain > _END_SCREEN)))
         if not len(out):
             break
@@ -1123,41 +1123,55 @@ def _inside(problem: _Problem) -> np.ndarray:
 
 
 def _ends_refitted(problem: _Problem, options: SmoothOptions, control: np.ndarray,
-                   sigma: float, breaks: list[np.ndarray], spacing: float,
-                   candidates: np.ndarray) -> np.ndarray:
+                   sigma: float, k_var: float, spacing: float, candidates: np.ndarray
+                   ) -> np.ndarray:
     """Indices (into ``problem.rows``) of the ``candidates`` (end detections) whose deleted
     residual statistic (:func:`end_statistic`) exceeds :data:`_END_JUMP_SCALED` ² (χ²₂'s
     1 - 1e-4 quantile, the level of the fit's other tests)."""
-    stats = [end_statistic(problem, options, control, sigma, breaks, spacing, int(k))
+    stats = [end_statistic(problem, options, control, sigma, k_var, spacing, int(k))
              for k in candidates]
     return np.asarray([int(k) for k, s in zip(candidates, stats, strict=True)
                        if s > _END_JUMP_SCALED**2], np.int64)
 
 
+class _FixedScaleSolver(_Solver):
+    """The fit's solver at a given noise σ (not re-estimated from the residuals): the
+    refit of one piece (:func:`end_statistic`), whose few residuals would estimate σ
+    poorly, at the session's σ, which leaving one detection out does not move."""
+
+    def _scale(self, r: np.ndarray, sigma: float, dof: float) -> float:
+        return sigma
+
+
 def end_statistic(problem: _Problem, options: SmoothOptions, control: np.ndarray,
-                  sigma: float, breaks: list[np.ndarray], spacing: float, k: int) -> float:
+                  sigma: float, k_var: float, spacing: float, k: int) -> float:
     """The deleted residual statistic of fitted detection ``k`` (index into
-    ``problem.rows``), made by fitting the session again without it (from ``control``,
-    ``_REFINE_ITERATIONS`` Gauss-Newton steps: its neighbours' robust weights change then —
-    a detection of the ball the fit rejected while it followed a spurious end returns —
-    which the one-step :func:`deletion_gain` keeps fixed):
+    ``problem.rows``), made by fitting its piece again without it (from ``control``,
+    ``_REFINE_ITERATIONS`` Gauss-Newton steps at the session's noise σ: the neighbours'
+    robust weights change then — a detection of the ball the fit rejected while it
+    followed a spurious end returns — which the one-step :func:`deletion_gain` keeps
+    fixed; the pieces share nothing but σ, so the other pieces' fit is unchanged):
 
         d = uv_k - π(X̂(t_k)),   T = dᵀ (σ² I + J Σ Jᵀ)⁻¹ d
 
     ``X̂(t_k)`` and ``Σ`` the position that fit predicts at the detection's time and its
-    covariance (at the noise its residuals show, :func:`variance_factor`), ``J = ∂π/∂X``
-    there, σ its noise: χ²₂ when the detection is of the fitted ball. NaN when the fit does
-    not reach the detection's time or the point is behind its camera."""
+    covariance (times the session fit's :func:`variance_factor` ``k_var``), ``J = ∂π/∂X``
+    there: χ²₂ when the detection is of the fitted ball. NaN when the fit does not reach
+    the detection's time or the point is behind its camera."""
     obs = problem.obs
     row = problem.rows[k]
-    kept = [rows[rows != row] for rows in problem.rows_of_piece]
-    trial = _Problem(obs, problem.rig, kept, problem.knots, options.prior, problem.t0_ns)
-    c, s_, r, w, J = _Solver(trial, options).run(control, sigma, _REFINE_ITERATIONS)
-    band, _, p_eff, _ = _information_factored(trial, c, s_, r, J, trace=True)
-    band *= variance_factor(r, w, s_, p_eff)
-    traj = Trajectory(trial.t0_ns, trial.knots, trial.offset, c, band,
-                      np.concatenate([np.asarray(b) for b in breaks]) if breaks
-                      else np.zeros(0), s_, spacing)
+    p = int(problem._piece_of_row[k])
+    rows = problem.rows_of_piece[p]
+    knots = problem.knots[p]
+    first = int(problem.offset[p])
+    trial = _Problem(obs, problem.rig, [rows[rows != row]], [knots], options.prior,
+                     problem.t0_ns)
+    c, _, r, _w, J = _FixedScaleSolver(trial, options).run(
+        control[first:first + n_control(knots)], sigma, _REFINE_ITERATIONS)
+    band, _, _, _ = _information_factored(trial, c, sigma, r, J, trace=False)
+    band *= k_var
+    traj = Trajectory(trial.t0_ns, trial.knots, trial.offset, c, band, np.zeros(0), sigma,
+                      spacing)
     X, cov = traj.evaluate(obs.time_ns[row:row + 1])
     cam = problem.rig.cameras[int(obs.camera[row])]
     uv, front = cam.project(X) if np.all(np.isfinite(X)) else (X[:, :2], [False])
@@ -1168,7 +1182,7 @@ def end_statistic(problem: _Problem, options: SmoothOptions, control: np.ndarray
     Jc = np.stack([(cam.project(X + h * e[None])[0][0] - cam.project(X - h * e[None])[0][0])
                    / (2 * h) for e in np.eye(3)], axis=1)
     d = obs.uv[row] - uv[0]
-    S = s_**2 * np.eye(2) + Jc @ cov[0] @ Jc.T
+    S = sigma**2 * np.eye(2) + Jc @ cov[0] @ Jc.T
     return float(d @ np.linalg.solve(S, d))
 
 
