@@ -175,7 +175,8 @@ def redetect_session(src: str | Path, dst: str | Path, hsv: HsvRange | None = No
         raise InputError(f"{src} has no stored frames, nothing to re-detect (sessions from "
                          f"'pslog simulate', 'pslog import' or 'record --no-frames' hold "
                          f"detections only); record one with frames, e.g. 'pslog record "
-                         f"--synthetic --rig paper3 --fast -o s.mcap', or use samples/throw.mcap")
+                         f"--synthetic --rig paper3 --fast -o with_frames.mcap', or use "
+                         f"samples/throw.mcap")
     old = session.detections
     hsv = hsv or HsvRange()
     row_of = {(int(c), int(i)): r for r, (c, i) in

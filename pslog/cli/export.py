@@ -125,7 +125,7 @@ def _export_detections(session, path: str, force: bool) -> None:
 
     n = write_detections_csv(session.detections, path, force=force, inputs=[session.path],
                              origin_ns=session_clock_origin(session.metadata, session.path))
-    print(f"wrote {path}: {n} detections")
+    print(f"wrote {path}: {n} detection{'s' if n != 1 else ''}")
 
 
 def _export_tracks(session, path: str, force: bool) -> None:

@@ -29,6 +29,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from pslog.errors import InputError
     from pslog.log import SessionWriter
     from pslog.log.csvio import (
         CLOCK_ORIGIN_KEY,
@@ -42,7 +43,10 @@ def run(args: argparse.Namespace) -> int:
     rig = resolve_rig(args.rig)
     if args.timing != "rig":
         rig = apply_timing(rig, args.timing)
-    detections, origin_ns = session_clock(read_detections_csv(args.detections, rig))
+    try:
+        detections, origin_ns = session_clock(read_detections_csv(args.detections, rig))
+    except InputError as exc:  # (session_clock judges the times, not the file: name it)
+        raise InputError(f"{args.detections}: {exc}") from None
     metadata = {CLOCK_ORIGIN_KEY: str(origin_ns)} if origin_ns else {}
     with SessionWriter(output, rig, force=args.force, timing=timing_label(rig),
                        source=f"pslog import {args.detections}", on_error="discard",

@@ -304,3 +304,34 @@ def test_the_rig_import_commands_a_calibration_file_suggests_can_be_pasted(tmp_p
                                                "r.toml", cwd=tmp_path), 1)
         assert _words(_suggested(line, "pslog rig import "), tmp_path) == [
             "pslog", "rig", "import", name, "--units", "m", "-o", "rig.toml"], line
+
+
+# ---- the sweep's leftovers, fixed by the lead (session 36) --------------------------------
+def test_import_names_the_csv_whose_times_span_too_long(tmp_path):
+    """``session_clock`` judges the times, not the file: the one-line error named no file."""
+    (tmp_path / "far times.csv").write_text("camera,time,u,v\ncam1,-5e9,1,2\ncam1,5e9,1,2\n")
+    done = run_pslog("import", "--detections", "far times.csv", "--rig", "paper2", "-o",
+                     "s.mcap", cwd=tmp_path)
+    assert_one_line_error(done, contains=("far times.csv: times span", "9.22e+09 s"))
+    assert not (tmp_path / "s.mcap").exists()
+
+
+def test_export_counts_one_detection_in_the_singular(tmp_path):
+    (tmp_path / "one.csv").write_text("camera,time,u,v\ncam1,0.1,1,2\n")
+    done = run_pslog("import", "--detections", "one.csv", "--rig", "paper2", "-o", "one.mcap",
+                     cwd=tmp_path)
+    assert done.code == 0, done.stderr
+    done = run_pslog("export", "one.mcap", "--detections", "out.csv", cwd=tmp_path)
+    assert done.code == 0, done.stderr
+    assert "wrote out.csv: 1 detection\n" in done.stdout, done.stdout
+
+
+def test_redetect_never_suggests_its_own_input_as_the_new_recording(tmp_path):
+    """A session without frames: the suggested ``record ... -o NAME`` must not be the
+    session given (pasted, it would be refused, or with --force replace the input)."""
+    (tmp_path / "one.csv").write_text("camera,time,u,v\ncam1,0.1,1,2\n")
+    assert run_pslog("import", "--detections", "one.csv", "--rig", "paper2", "-o", "s.mcap",
+                     cwd=tmp_path).code == 0
+    done = run_pslog("redetect", "s.mcap", "-o", "again.mcap", cwd=tmp_path)
+    line = assert_one_line_error(done, contains="no stored frames")
+    assert "-o s.mcap" not in line and "-o with_frames.mcap" in line, line
