@@ -154,6 +154,13 @@ def main(argv: list[str] | None = None) -> int:
 #: Daemon threads whose work runs outside the GIL (numba kernels compiled ``nogil``, numba's
 #: compiler and cache loads): pslog.fusion._parallel's workers and pslog._jit's preload.
 _NATIVE_THREADS = ("pslog-fuse-", "pslog-preload")
+#: The session writer's pool threads (``concurrent.futures``, not daemons: the interpreter's
+#: shutdown joins them). A SIGTERM or Ctrl-C raised in the main thread while it submitted
+#: to such a pool can leave the pool's semaphore lock held (an exception raised by a signal
+#: handler between a ``with`` block's ``__enter__`` and its body), and the worker, ending its
+#: task, then waits for that lock forever while the shutdown joins it: ``pslog fuse`` said
+#: "terminated (SIGTERM)" and never exited (session 36, once in a CI run).
+_POOL_THREADS = ("pslog-encode", "pslog-zstd")
 
 
 def _before_exit(code: int | None) -> None:
@@ -167,7 +174,8 @@ def _before_exit(code: int | None) -> None:
     whose objects live on.
 
     A command that failed or was stopped (``code`` not 0: an error, Ctrl-C, SIGTERM) while
-    one of its :data:`_NATIVE_THREADS` still runs ends here, with ``os._exit(code)`` once
+    one of its :data:`_NATIVE_THREADS` still runs (or, stopped by a signal, one of its
+    :data:`_POOL_THREADS`) ends here, with ``os._exit(code)`` once
     its stdout and stderr are flushed: the interpreter's shutdown frees the objects such a
     thread's kernel is still reading and writing outside the GIL, and the process died of
     SIGSEGV instead of exiting 143 (``pslog fuse`` sent SIGTERM within 50 ms of its methods
@@ -183,7 +191,9 @@ def _before_exit(code: int | None) -> None:
         return
     import threading
 
-    if not any(thread.daemon and thread.is_alive() and thread.name.startswith(_NATIVE_THREADS)
+    signalled = code > 128  # (Ctrl-C 130, SIGTERM 143, SIGHUP 129: raised by a handler)
+    if not any(thread.is_alive() and (thread.daemon and thread.name.startswith(_NATIVE_THREADS)
+                                      or signalled and thread.name.startswith(_POOL_THREADS))
                for thread in threading.enumerate()):
         return
     import os
