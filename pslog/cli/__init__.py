@@ -192,8 +192,9 @@ def _before_exit(code: int | None) -> None:
     import threading
 
     signalled = code > 128  # (Ctrl-C 130, SIGTERM 143, SIGHUP 129: raised by a handler)
-    if not any(thread.is_alive() and (thread.daemon and thread.name.startswith(_NATIVE_THREADS)
-                                      or signalled and thread.name.startswith(_POOL_THREADS))
+    if not any(thread.is_alive()
+               and ((thread.daemon and thread.name.startswith(_NATIVE_THREADS))
+                    or (signalled and thread.name.startswith(_POOL_THREADS)))
                for thread in threading.enumerate()):
         return
     import os
