@@ -1172,18 +1172,36 @@ def end_statistic(problem: _Problem, options: SmoothOptions, control: np.ndarray
     band *= k_var
     traj = Trajectory(trial.t0_ns, trial.knots, trial.offset, c, band, np.zeros(0), sigma,
                       spacing)
-    X, cov = traj.evaluate(obs.time_ns[row:row + 1])
-    cam = problem.rig.cameras[int(obs.camera[row])]
-    uv, front = cam.project(X) if np.all(np.isfinite(X)) else (X[:, :2], [False])
-    if not front[0]:
-        return float("nan")
-    # ∂π/∂X by central differences (a micrometre: the projection's curvature is negligible)
-    h = 1e-6
-    Jc = np.stack([(cam.project(X + h * e[None])[0][0] - cam.project(X - h * e[None])[0][0])
-                   / (2 * h) for e in np.eye(3)], axis=1)
-    d = obs.uv[row] - uv[0]
-    S = sigma**2 * np.eye(2) + Jc @ cov[0] @ Jc.T
-    return float(d @ np.linalg.solve(S, d))
+    return float(predicted_d2(traj, obs, np.array([row]), problem.rig)[0])
+
+
+def predicted_d2(trajectory: Trajectory, obs: Observations, rows: np.ndarray, rig: Rig
+                 ) -> np.ndarray:
+    """(len(rows),) the squared distance of each detection ``rows`` of ``obs`` from
+    ``trajectory``'s pixel at its time, in the metric of that prediction:
+
+        d = uv - π(X̂(t)),   d² = dᵀ (σ² I + J Σ Jᵀ)⁻¹ d
+
+    ``X̂(t)``, ``Σ`` the trajectory's position and covariance there, ``J = ∂π/∂X``
+    (:func:`~pslog.estimation.projection.project_with_jacobian`), σ its ``noise_px``: χ²₂
+    for a detection of the fitted ball the fit did not use. NaN outside the pieces or
+    behind the camera. The end test's statistic (:func:`end_statistic`) and ``smooth``'s
+    confirmation of a choice in doubt (``pslog.fusion.smooth._confirmed``)."""
+    from .projection import project_with_jacobian
+
+    position, cov = trajectory.evaluate(obs.time_ns[rows])
+    out = np.full(len(rows), np.nan)
+    for c, cam in enumerate(rig.cameras):
+        sel = np.flatnonzero((obs.camera[rows] == c) & np.all(np.isfinite(position), axis=1))
+        if not len(sel):
+            continue
+        uv, J = project_with_jacobian(cam, position[sel])
+        S = (np.einsum("nij,njk,nlk->nil", J, cov[sel], J)
+             + trajectory.noise_px ** 2 * np.eye(2))
+        r = obs.uv[rows[sel]] - uv
+        with np.errstate(invalid="ignore"):
+            out[sel] = np.einsum("ni,ni->n", r, np.linalg.solve(S, r[..., None])[..., 0])
+    return out
 
 
 def _end_testable(problem: _Problem) -> np.ndarray:

@@ -157,23 +157,10 @@ def _confirmed(trajectory, obs: Observations, rows: np.ndarray, rig: Rig) -> np.
     :attr:`~pslog.estimation.Fit.rejected`). The gate could judge such a choice by one
     epipolar line alone; the whole trajectory made without it tells the ball from what
     stood beside it. A time outside the fitted pieces predicts nothing."""
-    from ..estimation.projection import project_with_jacobian
-    from ..estimation.trajectory import _END_JUMP_SCALED
+    from ..estimation.trajectory import _END_JUMP_SCALED, predicted_d2
 
-    position, cov = trajectory.evaluate(obs.time_ns[rows])
-    sigma2 = trajectory.noise_px ** 2
-    out = np.zeros(len(rows), dtype=bool)
-    for c, cam in enumerate(rig.cameras):
-        sel = np.flatnonzero((obs.camera[rows] == c) & np.all(np.isfinite(position), axis=1))
-        if not len(sel):
-            continue
-        uv, J = project_with_jacobian(cam, position[sel])
-        S = np.einsum("nij,njk,nlk->nil", J, cov[sel], J) + sigma2 * np.eye(2)
-        r = obs.uv[rows[sel]] - uv
-        with np.errstate(invalid="ignore"):
-            d2 = np.einsum("ni,ni->n", r, np.linalg.solve(S, r[..., None])[..., 0])
-        out[sel] = d2 <= _END_JUMP_SCALED ** 2  # NaN (behind the camera): not predicted
-    return out
+    with np.errstate(invalid="ignore"):  # (NaN: outside the pieces, behind the camera)
+        return predicted_d2(trajectory, obs, rows, rig) <= _END_JUMP_SCALED ** 2
 
 
 def _bridged(fitted_ns: np.ndarray, time_ns: np.ndarray) -> np.ndarray:
