@@ -91,14 +91,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "epipolar, track and motion gates and record every rejected "
                              "candidate in the output; off: take each frame's best-scored "
                              "candidate (default %(default)s)")
-    parser.add_argument("--confirm-gaps", choices=("kicks", "all", "on", "off"),  # CONFIRM_GAPS
+    parser.add_argument("--confirm-gaps",  # CONFIRM_GAPS
+                        choices=("kicks", "breaks", "all", "on", "off"),
                         default=None,
                         help="typeA: kicks (the default): every point is tested against "
                              "every other camera's track around it, on the point's side of a "
                              "kick that track shows, and left out as contradicted when the "
                              "camera shows it elsewhere (offline: the points just after an "
                              "unseen kick, whose depth the paper's prediction took from the "
-                             "motion before it); all: every point tested against the next "
+                             "motion before it); breaks: kicks, and a point whose "
+                             "construction spans a velocity break of smooth's fit of the "
+                             "session is replaced by type A's point from the detections after "
+                             "it (time reversed) when that one spans none, else left out "
+                             "(break); all: every point tested against the next "
                              "camera's interpolated track only; on: only a point whose "
                              "prediction bridged a gap longer than the rig's usual one, or "
                              "rests on a camera's first detection after a spell without one, "
@@ -181,7 +186,7 @@ def run(args: argparse.Namespace) -> int:
                             rate_hz=args.rate, noise_px=args.noise_px,
                             gating=args.gating == "on",
                             confirm_gaps=confirm[0], confirm_every=confirm[1],
-                            confirm_sides=confirm[2],
+                            confirm_sides=confirm[2], confirm_breaks=confirm[3],
                             filter_hold_nis=FILTER_HOLD_NIS if args.filter_hold == "on"
                             else None,
                             max_std_m=None if args.type_a_max_std_mm is None

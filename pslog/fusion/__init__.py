@@ -53,9 +53,11 @@ FILTER_HOLD_NIS = 2.0
 MAX_GAP_S = 3600.0
 
 #: ``pslog fuse --confirm-gaps``'s choices, the first the default offline: typeA's
-#: (``confirm_gaps``, ``confirm_every``, ``confirm_sides``) (:class:`FusionOptions`)
-CONFIRM_GAPS = {"kicks": (True, True, True), "all": (True, True, False),
-                "on": (True, False, False), "off": (False, False, False)}
+#: (``confirm_gaps``, ``confirm_every``, ``confirm_sides``, ``confirm_breaks``)
+#: (:class:`FusionOptions`)
+CONFIRM_GAPS = {"kicks": (True, True, True, False), "breaks": (True, True, True, True),
+                "all": (True, True, False, False), "on": (True, False, False, False),
+                "off": (False, False, False, False)}
 
 
 @dataclass(frozen=True)
@@ -113,6 +115,14 @@ class FusionOptions:
         side of the kick (session 33)"). False: ``confirm_every``'s test. None (the
         default): on where :func:`for_session` turns ``confirm_every`` on from None, off
         otherwise (``confirm_every=True`` alone: ``--confirm-gaps all`` everywhere)
+    confirm_breaks : bool, typeA, offline only, with ``confirm_sides``: a point whose
+        construction spans a velocity break of ``smooth``'s fit of the same observations is
+        replaced by type A's point on the same detection made from the time-reversed
+        observations (the backward pass) when that construction spans no break, and
+        withheld (``break`` in ``Track.dropped``) otherwise; the other points unchanged, to
+        the bit (:mod:`pslog.fusion.breaks`; ``pslog fuse --confirm-gaps breaks``;
+        docs/methods.md, "Type A across a break: the backward pass (session 37)"). Default
+        False
     max_std_m : float or None, typeA: a point whose ``std_m`` exceeds this is withheld
         (counted in ``Track.dropped`` as ``uncertain``: the filter's rule;
         ``pslog.fusion.pseudo.MAX_STD_M`` is the filter's default, 5 cm / 1.96, issue 10's
@@ -150,6 +160,7 @@ class FusionOptions:
     confirm_gaps: bool = True
     confirm_every: bool | None = None
     confirm_sides: bool | None = None
+    confirm_breaks: bool = False
     max_std_m: float | None = None
     detector_offset_m: float | None = None
     detector_bias_px: float | None = None
@@ -168,6 +179,9 @@ class FusionOptions:
         if self.confirm_sides and not self.confirm_every:
             raise FusionError("typeA's confirm_sides needs confirm_every (it is the test "
                               "every point takes)")
+        if self.confirm_breaks and self.confirm_sides is False:
+            raise FusionError("typeA's confirm_breaks needs confirm_sides (it replaces the "
+                              "points the kick test keeps)")
         if self.confirm_every and not self.confirm_gaps:
             raise FusionError("typeA's confirm_every needs confirm_gaps (it confirms every "
                               "point as confirm_gaps confirms the long-gap ones)")
@@ -337,15 +351,24 @@ def _type_a(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
     track = (confirm_batch(prep, made, rig, gap, options.noise_px,
                            every=bool(options.confirm_every), sides=bool(options.confirm_sides))
              if options.confirm_gaps else made)
-    return withhold_uncertain(type_a_noise(prep, track, gap, options.noise_px,
-                                           table[0] if table and track is made else None),
-                              options.max_std_m)[0]
+    track = withhold_uncertain(type_a_noise(prep, track, gap, options.noise_px,
+                                            table[0] if table and track is made else None),
+                               options.max_std_m)[0]
+    if options.confirm_breaks:
+        from .breaks import across_breaks
+
+        track = across_breaks(prep, track, rig, options, _type_a)
+    return track
 
 
 def _type_a_stream(rig: Rig, options: FusionOptions):
     from .confirm import ConfirmedStream
     from .pseudo import MeasuredNoiseStream, TypeAStream, covariance_noise_px
 
+    if options.confirm_breaks:
+        raise FusionError("typeA's confirm_breaks is offline only (a point may wait for the "
+                          "detections after it as long as the ball flies): fuse the session "
+                          "instead")
     if options.confirm_gaps and options.confirm_every:
         raise FusionError("typeA's confirm_every is offline only (a point may wait for the "
                           "next camera as long as a stream pauses): fuse the session instead")

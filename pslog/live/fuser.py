@@ -462,6 +462,7 @@ class LiveFuser:
         # FusionOptions.filter_hold_nis)
         self.options = replace(options or FusionOptions(), confirm_gaps=False,
                                confirm_every=False, confirm_sides=False,
+                               confirm_breaks=False,
                                filter_hold_nis=None)
         # without gating a frame's candidates cannot be told apart: its best one alone, as
         # fuse() does with gating off
