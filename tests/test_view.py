@@ -825,14 +825,16 @@ def test_view_accuracy_names_the_points_the_truth_cannot_score(tmp_path, cli):
     assert not unscored_counts(data.tracks["typeA"], truth) and "typeA outside" not in text
 
 
-@pytest.mark.parametrize("confirm", ["off", "all", "kicks"])
+@pytest.mark.parametrize("confirm", ["off", "all", "kicks", "breaks"])
 def test_a_stored_type_a_track_is_explained_whatever_its_confirm_gaps(tmp_path, cli, confirm):
     """The viewer explained a stored typeA track with the offline default (--confirm-gaps
     kicks), which the file does not record: a track fused with --confirm-gaps off showed
     its points the kick test leaves out (contradicted) without their Figure 2
     construction (walk: paper3 rally dirty 45001 synced, 610 points, 605 constructions;
     here seed 45003, only off fails without the fix). Every
-    paper point is explained, those the track holds shown: one construction per point."""
+    paper point is explained, those the track holds shown: one construction per point
+    (--confirm-gaps breaks, session 37: per point the track holds from the paper's forward
+    construction; one made from the detections after it, span_s < 0, has none)."""
     session, fused = tmp_path / "rally.mcap", tmp_path / "fused.mcap"
     code, _, err = cli("simulate", "--rig", "paper3", "--timing", "typeA", "--motion",
                        "rally", "--noise-px", "0.3", "--seed", "45003", "-o", session)
@@ -844,5 +846,9 @@ def test_a_stored_type_a_track_is_explained_whatever_its_confirm_gaps(tmp_path, 
     data = load_view_data([session, fused], methods=["typeA"])
     track, con = data.tracks["typeA"], data.construction
     obs = data.construction_observations
+    if confirm == "breaks":  # (a point from the detections after it: no forward one)
+        backward = track.quality["span_s"] < 0
+        assert backward.any()
+        track = track.select(~backward)
     np.testing.assert_array_equal(obs.time_ns[con.event_row], track.time_ns)
     np.testing.assert_array_equal(con.points_world, track.position_world)

@@ -388,9 +388,12 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
             confirm_gaps=False, confirm_every=False, confirm_sides=False))[1]
         stored = shown["typeA"]
         rows = every.event_row
+        # (a point made from the detections after it, --confirm-gaps breaks: span_s < 0,
+        # has no forward construction: not explained by the one it replaced)
+        forward = ~(stored.quality["span_s"] < 0) if "span_s" in stored.quality else slice(None)
         construction = every.select(np.isin(
             construction_obs.time_ns[rows] * 256 + construction_obs.camera[rows],
-            stored.time_ns * 256 + stored.camera))
+            stored.time_ns[forward] * 256 + stored.camera[forward]))
 
     choice = detail if isinstance(detail, DetailChoice) else DetailChoice.parse(detail)
     detail_ns = choice.range_ns(first, window)
