@@ -521,7 +521,8 @@ def main() -> int:
     n_seeds, duration = (1, 4.0) if args.quick else (args.seeds, args.duration)
     methods = [m for m in args.methods.split(",") if m in METHODS]
     options = FusionOptions(gating=args.gating == "on", **dict(zip(
-        ("confirm_gaps", "confirm_every", "confirm_sides"), CONFIRM_GAPS[args.confirm_gaps],
+        ("confirm_gaps", "confirm_every", "confirm_sides", "confirm_breaks"),
+        CONFIRM_GAPS[args.confirm_gaps],
         strict=True)))
     if args.calibration:
         return main_calibration(args, [m for m in (

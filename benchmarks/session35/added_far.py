@@ -33,8 +33,8 @@ def main():
     ap.add_argument("--confirm-gaps", default="kicks")
     ap.add_argument("--seeds", type=int, default=3)
     a = ap.parse_args()
-    g, e, s = CONFIRM_GAPS[a.confirm_gaps]
-    opt = FusionOptions(confirm_gaps=g, confirm_every=e, confirm_sides=s)
+    g, e, s, b = CONFIRM_GAPS[a.confirm_gaps]
+    opt = FusionOptions(confirm_gaps=g, confirm_every=e, confirm_sides=s, confirm_breaks=b)
     rig = next(r for r in rigs() + more_rigs() if r.name == a.rig)
     for seed, (label, motion, duration, _k) in enumerate(more_sessions(a.seeds, 8.0, a.first), start=a.first - 300):
         span = motion.duration if duration is None else duration
