@@ -116,8 +116,8 @@ def _test_json(test) -> dict:
             "shared_dof": test.shared_dof, "shared_threshold": number(test.shared_threshold)}
 
 
-#: ``--estimate auto``: a readout test above this level (below the 0.1 % that estimates
-#: readouts) is said as suggestive (the conventional 5 %)
+#: ``--estimate auto``: a readout test whose p-value is below this level (above the 0.1 %
+#: that estimates readouts) is said as suggestive (the conventional 5 %)
 SUGGESTIVE_LEVEL = 0.05
 
 
