@@ -229,7 +229,8 @@ def sync(session: Session | str | os.PathLike[str],
     ----------
     session : a :class:`Session` or its path
     estimate : ``"auto"`` (default: offsets, plus readouts and, on sessions of 30 s or more,
-        drifts where a Wald test at the 0.1 % level says the data support them;
+        drifts where a Wald test at the 0.1 % level says the data support them (readouts
+        per camera and, for cameras of one model, one shared, each at half the level);
         ``result.selection`` holds the tests, :func:`pslog.estimation.sync.select_clocks`),
         or clock parameters among ``offset``, ``drift``, ``readout``: a name, a
         comma-separated string (``"offset,drift"``) or a sequence of names

@@ -112,11 +112,12 @@ def _test_json(test) -> dict:
     return {"parameter": test.parameter, "kept": bool(test.kept),
             "wald_chi2": number(test.statistic), "dof": test.dof,
             "threshold": number(test.threshold), "p_value": number(test.p_value),
-            "reason": test.reason}
+            "reason": test.reason, "shared_wald_chi2": number(test.shared_statistic),
+            "shared_dof": test.shared_dof, "shared_threshold": number(test.shared_threshold)}
 
 
-#: ``--estimate auto``: a readout test above this level (below the 0.1 % that estimates
-#: readouts) is said as suggestive (the conventional 5 %)
+#: ``--estimate auto``: a readout test whose p-value is below this level (above the 0.1 %
+#: that estimates readouts) is said as suggestive (the conventional 5 %)
 SUGGESTIVE_LEVEL = 0.05
 
 
@@ -130,13 +131,11 @@ def _choice(result) -> str:
             # (session 35: a readout every camera shares, the ball in a band of rows,
             # shows weakly; unestimated, it delays every point by the readout times the
             # ball's mean row over the height: 8 ms on paper3 left smooth's track ~6 ms late)
-            from scipy.stats import chi2
-
-            level = float(chi2.isf(SUGGESTIVE_LEVEL, t.dof))
-            lines.append(f"    (above {level:.1f}, the {SUGGESTIVE_LEVEL * 100:g} % level: "
-                         "rolling shutters this session shows only weakly; a readout left "
-                         "out delays every point by about the readout times the ball's mean "
-                         "row over the image height: if the cameras have rolling shutters, "
+            lines.append(f"    (p = {t.p_value:.2g}, below the "
+                         f"{SUGGESTIVE_LEVEL * 100:g} % level: rolling shutters this "
+                         "session shows only weakly; a readout left out delays every "
+                         "point by about the readout times the ball's mean row over the "
+                         "image height: if the cameras have rolling shutters, "
                          "give their readouts in the rig or run --estimate offset,readout)")
     return "\n".join(lines)
 

@@ -86,7 +86,9 @@ _ITERATIONS = 10
 _ROUNDS = 8
 #: ``estimate="auto"``: a group of parameters (every camera's readout; every drift) is kept
 #: when its Wald statistic exceeds the χ² quantile at this level (0.1 %: a global-shutter
-#: rig keeps readouts in about one session in a thousand).
+#: rig keeps readouts in about one session in a thousand); readouts of a rig with two
+#: cameras of one model are tested twice (one readout per model; per camera), each test at
+#: half of it.
 AUTO_LEVEL = 1e-3
 #: ``estimate="auto"`` tries drifts on sessions at least this long (seconds): a drift of
 #: d ppm moves a camera by d · 1e-6 · T, below the offsets' σ on shorter ones.
@@ -121,17 +123,26 @@ class ClockEstimate:
 @dataclass(frozen=True)
 class ModelTest:
     """``estimate="auto"``: the Wald test of one group of clock parameters (every camera's
-    readout, or every drift but camera 1's) against the rig's values.
+    readout, or every drift but camera 1's) against the rig's values; for readouts also the
+    nested test of one readout shared by the cameras of each model (:func:`camera_models`).
 
     Attributes
     ----------
     parameter : "readout" or "drift"
     statistic : Wald χ² = (θ̂ - θ₀)ᵀ Σ⁻¹ (θ̂ - θ₀) over the group (NaN when not fitted)
     dof : the group's size
-    threshold : the χ² quantile at :data:`AUTO_LEVEL`
-    p_value : P(χ²_dof > statistic) when the rig's values are right
-    kept : estimated in the result (statistic above threshold)
+    threshold : the χ² quantile the statistic is compared with: at :data:`AUTO_LEVEL`, or
+        at half of it when the shared test is made too (Bonferroni)
+    p_value : the probability of a figure this large when the rig's values are right:
+        P(χ²_dof > statistic), or with the shared test ``min(1, 2 min(p, p_shared))``;
+        the group is kept when it is below :data:`AUTO_LEVEL`
+    kept : estimated in the result
     reason : why, in words
+    shared_statistic : readouts: the Wald χ² of "one readout per camera model" against the
+        rig's values, ``dᵀΣ⁻¹G (GᵀΣ⁻¹G)⁻¹ GᵀΣ⁻¹d`` (``G`` camera -> model); NaN when not
+        made (drifts; or every camera a model of its own: it would be the same test)
+    shared_dof : the models' count (0 when not made)
+    shared_threshold : the χ² quantile at half of :data:`AUTO_LEVEL` (NaN when not made)
     """
 
     parameter: str
@@ -141,6 +152,9 @@ class ModelTest:
     p_value: float
     kept: bool
     reason: str
+    shared_statistic: float = float("nan")
+    shared_dof: int = 0
+    shared_threshold: float = float("nan")
 
 
 @dataclass(frozen=True)
@@ -311,8 +325,12 @@ def select_clocks(obs: Observations, rig: Rig, search_s: float | None = None,
     *Nonlinear Regression*, 1989, §5.3): W = (θ̂ - θ₀)ᵀ Σ⁻¹ (θ̂ - θ₀), χ² with the group's size
     as degrees of freedom when θ₀ is right, Σ the group's block of the estimate's covariance
     (trajectory, bounces' instants and regularized lines marginalised: honest to about 1σ,
-    docs/timing.md). A group is kept when W exceeds the χ² quantile at :data:`AUTO_LEVEL`;
-    when one is dropped the model without it is fitted (two fits), else the first fit is the
+    docs/timing.md). A group is kept when W exceeds the χ² quantile at :data:`AUTO_LEVEL`.
+    Readouts of a rig with cameras of one model (:func:`camera_models`) are tested first as
+    the nested hypothesis of one readout per model (identical webcams; g dof for g models,
+    where the per-camera test has one per camera: more power for a readout they share) and
+    per camera, each at half the level (Bonferroni); kept if either rejects, estimated per
+    camera. When one is dropped the model without it is fitted (two fits), else the first fit is the
     result (one fit). A parameter the ball's motion does not determine (the wide fit fails
     with it: then offsets and readouts without drifts are tried) is dropped without a figure,
     its reason the fit's message."""
@@ -351,12 +369,37 @@ def select_clocks(obs: Observations, rig: Rig, search_s: float | None = None,
         d = x - x0
         w = float(d @ np.linalg.lstsq(cov, d, rcond=None)[0])
         k = len(idx)
-        threshold = float(chi2.isf(AUTO_LEVEL, k))
-        kept = w > threshold
-        tests.append(ModelTest(p, w, k, threshold, float(chi2.sf(w, k)), kept,
-                               f"Wald χ² {w:.1f} on {k} dof "
-                               + (">" if kept else "<=")
-                               + f" {threshold:.1f} (the {AUTO_LEVEL * 100:g} % level)"))
+        models = camera_models(rig, [full.unknowns[j][0] for j in idx]) if p == "readout" \
+            else np.arange(k)
+        g = int(models.max()) + 1 if k else 0
+        if g >= k:  # drifts, or no two cameras of one model: the one test at the level
+            threshold = float(chi2.isf(AUTO_LEVEL, k))
+            p_value = float(chi2.sf(w, k))
+            kept = w > threshold
+            tests.append(ModelTest(p, w, k, threshold, p_value, kept,
+                                   f"Wald χ² {w:.1f} on {k} dof "
+                                   + (">" if kept else "<=")
+                                   + f" {threshold:.1f} (the {AUTO_LEVEL * 100:g} % level)"))
+        else:
+            # the nested hypothesis first: one readout per camera model (identical webcams
+            # share theirs), g dof where the per-camera test has k; each test at half the
+            # level (Bonferroni: a global-shutter rig keeps readouts at most at the level)
+            G = (models[:, None] == np.arange(g)[None, :]).astype(np.float64)
+            b = G.T @ np.linalg.lstsq(cov, d, rcond=None)[0]
+            ws = float(b @ np.linalg.lstsq(G.T @ np.linalg.lstsq(cov, G, rcond=None)[0], b,
+                                           rcond=None)[0])
+            threshold = float(chi2.isf(AUTO_LEVEL / 2, k))
+            shared_threshold = float(chi2.isf(AUTO_LEVEL / 2, g))
+            p_value = min(1.0, 2 * min(float(chi2.sf(w, k)), float(chi2.sf(ws, g))))
+            kept = w > threshold or ws > shared_threshold
+            n_models = "one model" if g == 1 else f"{g} models"
+            tests.append(ModelTest(
+                p, w, k, threshold, p_value, kept,
+                f"one readout per camera model ({n_models}): Wald χ² {ws:.1f} on {g} dof "
+                + (">" if ws > shared_threshold else "<=") + f" {shared_threshold:.1f}; "
+                f"per camera: χ² {w:.1f} on {k} dof " + (">" if w > threshold else "<=")
+                + f" {threshold:.1f} (each at half the {AUTO_LEVEL * 100:g} % level)",
+                ws, g, shared_threshold))
         if kept:
             keep.append(p)
     chosen = tuple(p for p in PARAMETERS if p in keep)
@@ -368,6 +411,17 @@ def select_clocks(obs: Observations, rig: Rig, search_s: float | None = None,
 
 
 _FIELD = {"offset": "offset_s", "drift": "drift_ppm", "readout": "readout_s"}
+
+
+def camera_models(rig: Rig, cameras) -> np.ndarray:
+    """Each of ``cameras`` (rig indices) numbered by its model as far as the rig can tell,
+    its image size and frame rate, in order of first appearance (n,): cameras of one model
+    (identical webcams) share their sensor's rolling-shutter readout, the nested hypothesis
+    ``estimate="auto"`` tests first."""
+    keys = [(rig.cameras[c].width, rig.cameras[c].height, float(rig.cameras[c].fps))
+            for c in cameras]
+    order = list(dict.fromkeys(keys))
+    return np.array([order.index(key) for key in keys], dtype=np.int64)
 
 
 def _solve_joint(obs, rig, unknowns, theta, params, options, regularized=None):
