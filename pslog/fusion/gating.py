@@ -62,6 +62,7 @@ tolerance) and from its own earlier decisions, so a causal method fed by it stay
 
 from __future__ import annotations
 
+import functools
 import math
 import sys
 import threading
@@ -1864,7 +1865,8 @@ def _result(detections: Detections, rig: Rig, reason: np.ndarray,
     observations = timed_observations(_chosen_candidates(detections, chosen), rig)
     return Gated(observations, rejections, chosen, reason,
                  _observation_doubt(detections, rig, reason, observations,
-                                    (options or GatingOptions()).static_s, doubt == "start")
+                                    (options or GatingOptions()).static_s, doubt == "start",
+                                    (options or GatingOptions()).epipolar_px)
                  if doubt else None)
 
 
@@ -2031,7 +2033,7 @@ def unjudged_doubt(detections: Detections, rig: Rig, reason: np.ndarray, chosen:
 
 
 def unmoved(t: int, u: float, v: float, own: tuple, earlier, lags: int,
-            static_s: float) -> bool:
+            static_s: float, partner: Callable[[], bool] | None = None) -> bool:
     """Whether a choice of a camera (LOGGED frame time ``t`` ns, recorded pixel ``(u, v)``;
     ``own``: the recorded pixels of every candidate of its frame, ``((u, v), ...)``) made
     before its camera could judge stillness stood still where a candidate beside it moved
@@ -2042,8 +2044,11 @@ def unmoved(t: int, u: float, v: float, own: tuple, earlier, lags: int,
     yet), at least one, every one of them holds a candidate within :data:`DOUBT_RADIUS_PX`
     of ``(u, v)`` (it stood there in every frame available), and its own frame holds
     another candidate that did not (one of those frames holds none within
-    :data:`DOUBT_RADIUS_PX` of it: it moved, or came). A clean camera's frames hold one
-    candidate: never. Python numbers, the same operations in the batch
+    :data:`DOUBT_RADIUS_PX` of it: it moved, or came), or another that stood too while
+    ``partner()`` says another camera holds a still candidate on its epipolar line
+    (:func:`_still_partner`: a still point in space beside another still candidate, a
+    static object or a ball at rest, chosen between two still things). A clean camera's
+    frames hold one candidate: never. Python numbers, the same operations in the batch
     (:func:`unmoved_doubt`) and the stream (:class:`StreamDoubt`)."""
     if len(own) < 2:
         return False
@@ -2057,7 +2062,44 @@ def unmoved(t: int, u: float, v: float, own: tuple, earlier, lags: int,
         return all(any((x - xj) * (x - xj) + (y - yj) * (y - yj) <= radius2 for xj, yj in px)
                    for px in recent)
 
-    return stood(u, v) and any(not stood(x, y) for x, y in own if (x, y) != (u, v))
+    if not stood(u, v):
+        return False
+    if any(not stood(x, y) for x, y in own if (x, y) != (u, v)):
+        return True
+    return partner is not None and partner()
+
+
+def _still_partner(t: int, a: int, u: float, v: float, frames_of, rig: Rig, F_lists,
+                   static_s: float, epipolar_px: float) -> bool:
+    """Whether another camera ``b`` holds, in its newest frame with candidates before
+    camera ``a``'s at LOGGED time ``t`` ((time, camera) order: the stream has it), a
+    candidate that stood within :data:`DOUBT_RADIUS_PX` of a candidate of each of its
+    other frames within 1.5 ``static_s`` before (at least one) and lies within
+    ``epipolar_px`` of the epipolar line of ``(u, v)`` (recorded pixels, undistorted here):
+    with it, a still point in space (:func:`unmoved`). ``frames_of(b)``: camera ``b``'s
+    frames with candidates, ``(time ns, pixels)`` in time order (older or newer ones are
+    skipped). Python numbers: the same bits in the batch and the stream."""
+    span = 1.5 * static_s * NS
+    radius2 = DOUBT_RADIUS_PX * DOUBT_RADIUS_PX
+    ua, va = _pixel_geometry(rig.cameras[a], np.array([[u, v]]))[0][0].tolist()
+    for b in range(len(rig.cameras)):
+        if b == a:
+            continue
+        frames = [e for e in frames_of(b) if t - span <= e[0] and (e[0] < t or (
+            e[0] == t and b < a))]
+        if len(frames) < 2:
+            continue
+        la, lb, lc = _line_of(F_lists[a][b], ua, va)
+        if math.isnan(la):
+            continue
+        for x, y in frames[-1][1]:
+            if not all(any((x - xj) * (x - xj) + (y - yj) * (y - yj) <= radius2
+                           for xj, yj in px) for _, px in frames[:-1]):
+                continue
+            xu, yu = _pixel_geometry(rig.cameras[b], np.array([[x, y]]))[0][0].tolist()
+            if abs(la * xu + lb * yu + lc) <= epipolar_px:
+                return True
+    return False
 
 
 def _frame_pixels(detections: Detections, lo: int, n: int) -> tuple:
@@ -2067,7 +2109,7 @@ def _frame_pixels(detections: Detections, lo: int, n: int) -> tuple:
 
 
 def unmoved_doubt(detections: Detections, rig: Rig, reason: np.ndarray, chosen: np.ndarray,
-                  static_s: float) -> np.ndarray:
+                  static_s: float, epipolar_px: float) -> np.ndarray:
     """The doubt (:func:`doubt_variance`, else 0) of the chosen candidates ``chosen`` (rows)
     that stood still beside a candidate that moved while their camera could not judge
     stillness (:func:`unmoved`): CAUSAL (their camera's frames up to their own). In a
@@ -2083,6 +2125,21 @@ def unmoved_doubt(detections: Detections, rig: Rig, reason: np.ndarray, chosen: 
     count = detections.candidates_per_frame()
     start = np.searchsorted(frame, np.arange(detections.n_frames), side="left")
     span = 1.5 * static_s * NS
+    F_lists = fundamental_matrices(rig.cameras).tolist()
+    # each camera's frames with candidates in time order (rows, times)
+    order = []
+    for b in range(len(rig.cameras)):
+        f = np.flatnonzero((detections.frame_camera == b) & (count > 0))
+        f = f[np.argsort(detections.frame_time_ns[f], kind="stable")]
+        order.append((f, detections.frame_time_ns[f]))
+
+    def frames_near(b: int, t: int) -> list:
+        f, tb = order[b]
+        lo = int(np.searchsorted(tb, t - span, side="left"))
+        hi = int(np.searchsorted(tb, t, side="right"))
+        return [(int(tb[i]), _frame_pixels(detections, int(start[f[i]]), int(count[f[i]])))
+                for i in range(lo, hi)]
+
     for b, cam in enumerate(rig.cameras):
         f = np.flatnonzero((detections.frame_camera == b) & (count > 0))
         if not len(f):
@@ -2107,9 +2164,13 @@ def unmoved_doubt(detections: Detections, rig: Rig, reason: np.ndarray, chosen: 
             u, v = detections.cand_uv[chosen[k]].tolist()
             px = [_frame_pixels(detections, int(start[fr]), int(count[fr]))
                   for fr in f[int(first[i]):i + 1].tolist()]
-            if unmoved(int(t[i]), u, v, px[-1],
+            ti = int(t[i])
+            partner = functools.partial(
+                _still_partner, ti, b, u, v, functools.partial(frames_near, t=ti), rig,
+                F_lists, static_s, epipolar_px)
+            if unmoved(ti, u, v, px[-1],
                        list(zip(t[int(first[i]):i].tolist(), px[:-1], strict=True)), lags,
-                       static_s):
+                       static_s, partner):
                 out[k] = doubt_variance(u, v, float(cam.width), float(cam.height))
     return out
 
@@ -2125,7 +2186,7 @@ def _refusal(reason: int, several: bool, du: float, dv: float) -> bool:
 
 def _observation_doubt(detections: Detections, rig: Rig, reason: np.ndarray,
                        observations: Observations, static_s: float,
-                       start: bool = False) -> np.ndarray | None:
+                       start: bool = False, epipolar_px: float = 8.0) -> np.ndarray | None:
     """:func:`choice_doubt` of the chosen candidates (``reason`` < 0), and the whole
     :func:`doubt_variance` of a :data:`CONTESTED` one, on the rows of ``observations`` (the
     chosen ones at their corrected times); None when none is in doubt. ``start``: the
@@ -2142,7 +2203,7 @@ def _observation_doubt(detections: Detections, rig: Rig, reason: np.ndarray,
     # what its next frames refuse, unjudged_doubt; causal, one that has not moved in its
     # camera's frames so far, unmoved_doubt)
     unjudged = (unjudged_doubt(detections, rig, reason, chosen, static_s) if start
-                else unmoved_doubt(detections, rig, reason, chosen, static_s))
+                else unmoved_doubt(detections, rig, reason, chosen, static_s, epipolar_px))
     if not len(still) and not len(contested) and not unjudged.any():
         return None
     # (a contested choice is a source too, counted DOUBT_REJECTIONS times: a later choice
@@ -2688,6 +2749,7 @@ class StreamDoubt:
         self.seen: list[deque] = [deque() for _ in gate.rig.cameras]
         self.newest_several: float = -math.inf
         self.lags = [math.ceil(gate.options.static_s * c.fps) for c in gate.rig.cameras]
+        self.F_lists = fundamental_matrices(gate.rig.cameras).tolist()
 
     def frames(self, time_ns, camera) -> None:
         """Note the frames of a push (its rows, each frame's candidates together) before
@@ -2790,8 +2852,12 @@ class StreamDoubt:
         if self.newest_several >= t:
             seen = self.seen[c]
             own = next((e[1] for e in reversed(seen) if e[0] == t), ())
-            if len(own) >= 2 and unmoved(t, u, v, own, seen, self.lags[c],
-                                         self.gate.options.static_s):
+            options = self.gate.options
+            if len(own) >= 2 and unmoved(
+                    t, u, v, own, seen, self.lags[c], options.static_s,
+                    lambda: _still_partner(t, c, u, v, lambda b: self.seen[b], self.gate.rig,
+                                           self.F_lists, options.static_s,
+                                           options.epipolar_px)):
                 return doubt_variance(u, v, *self.size[c])
         return 0.0
 
