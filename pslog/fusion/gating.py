@@ -2780,12 +2780,12 @@ class StreamDoubt:
             j = i + 1
             while j < n and t[j] == t[i] and c[j] == c[i]:
                 j += 1
-            self.seen_frame(t[i], c[i], tuple(tuple(x) for x in p[i:j]))
+            self.seen_frame(t[i], c[i], p[i:j])
             i = j
 
-    def seen_frame(self, t: int, c: int, pixels: tuple) -> None:
+    def seen_frame(self, t: int, c: int, pixels: list) -> None:
         """Note one frame with candidates (logged time, camera, its candidates' recorded
-        pixels as tuples), forgetting what no choice can look back to."""
+        pixels, ``[[u, v], ...]``), forgetting what no choice can look back to."""
         seen = self.seen[c]
         seen.append((t, pixels))
         if len(pixels) >= 2:
@@ -2850,7 +2850,18 @@ class StreamDoubt:
         # (still beside a candidate that moved, while its camera could not judge
         # stillness: unmoved_doubt; only in a frame of several)
         if self.newest_several >= t:
+            # (the camera's frames before the choices to come: a later choice is not
+            # earlier, and looks back 1.5 static_s at most)
             seen = self.seen[c]
+            while seen and seen[0][0] < t - self.span:
+                seen.popleft()
+            after = 0  # (its own frame and any pushed after it)
+            for e in reversed(seen):
+                if e[0] < t:
+                    break
+                after += 1
+            if len(seen) - after >= 0.75 * self.lags[c]:  # (the test judges: the usual)
+                return 0.0
             own = next((e[1] for e in reversed(seen) if e[0] == t), ())
             options = self.gate.options
             if len(own) >= 2 and unmoved(

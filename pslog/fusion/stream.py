@@ -264,7 +264,7 @@ class StreamFuser:
                 if len(uv) > 1:  # (frames notes nothing of a frame of one candidate)
                     doubts.frames(np.full(len(uv), time_ns, np.int64),
                                   np.full(len(uv), camera, np.int32))
-                doubts.seen_frame(time_ns, camera, tuple(tuple(x) for x in uv.tolist()))
+                doubts.seen_frame(time_ns, camera, uv.tolist())
                 if len(chosen) == 1:  # (its one row's: of's, on Python numbers)
                     one_doubt = doubts.of_one(time_ns, camera, u, v)
                     doubt = np.array([one_doubt]) if one_doubt else None
