@@ -1866,7 +1866,7 @@ def _result(detections: Detections, rig: Rig, reason: np.ndarray,
     return Gated(observations, rejections, chosen, reason,
                  _observation_doubt(detections, rig, reason, observations,
                                     (options or GatingOptions()).static_s, doubt == "start",
-                                    (options or GatingOptions()).epipolar_px)
+                                    options)
                  if doubt else None)
 
 
@@ -2032,41 +2032,52 @@ def unjudged_doubt(detections: Detections, rig: Rig, reason: np.ndarray, chosen:
     return out
 
 
-def unmoved(t: int, u: float, v: float, own: tuple, earlier, lags: int,
-            static_s: float, partner: Callable[[], bool] | None = None) -> bool:
+def unmoved(t: int, u: float, v: float, own, earlier, lags: int, static_s: float,
+            speed_px_s: float, partner: Callable[[], bool] | None = None) -> bool:
     """Whether a choice of a camera (LOGGED frame time ``t`` ns, recorded pixel ``(u, v)``;
-    ``own``: the recorded pixels of every candidate of its frame, ``((u, v), ...)``) made
-    before its camera could judge stillness stood still where a candidate beside it moved
-    (docs/methods.md, "An unmoved choice at the start"). ``earlier``: its camera's frames
-    with candidates, ``(time ns, pixels)`` each (any not before ``t`` are skipped); those
-    within 1.5 ``static_s`` before it are the frames the stillness test looks at. True when
-    they are fewer than ``0.75 lags`` (:func:`_can_judge`'s count: the test cannot judge
-    yet), at least one, every one of them holds a candidate within :data:`DOUBT_RADIUS_PX`
-    of ``(u, v)`` (it stood there in every frame available), and its own frame holds
-    another candidate that did not (one of those frames holds none within
-    :data:`DOUBT_RADIUS_PX` of it: it moved, or came), or another that stood too while
-    ``partner()`` says another camera holds a still candidate on its epipolar line
-    (:func:`_still_partner`: a still point in space beside another still candidate, a
-    static object or a ball at rest, chosen between two still things). A clean camera's
-    frames hold one candidate: never. Python numbers, the same operations in the batch
-    (:func:`unmoved_doubt`) and the stream (:class:`StreamDoubt`)."""
+    ``own``: the recorded pixels of every candidate of its frame, ``[(u, v), ...]``) made
+    before its camera could judge stillness stood still beside a candidate that moved as a
+    ball does, or beside another still one (docs/methods.md, "An unmoved choice at the
+    start"). ``earlier``: its camera's frames with candidates, ``(time ns, pixels)`` each in
+    time order (any not before ``t`` are skipped); those within 1.5 ``static_s`` before it
+    are the frames the stillness test looks at. True when they are fewer than ``0.75 lags``
+    (:func:`_can_judge`'s count: the test cannot judge yet), at least one, every one of them
+    holds a candidate within :data:`DOUBT_RADIUS_PX` of ``(u, v)`` (it stood there in every
+    frame available), and its own frame holds another candidate that
+    - moved (one of those frames holds none within :data:`DOUBT_RADIUS_PX` of it) within a
+      ball's reach, ``speed_px_s`` times the time since, of a candidate of the newest of
+      them (a ball in flight; a blob that comes from nowhere is not), or
+    - stood too, while ``partner()`` says another camera holds a still candidate on the
+      choice's epipolar line (:func:`_still_partner`: a still point in space chosen between
+      two still things, a static object or a ball at rest).
+    A clean camera's frames hold one candidate: never. Python numbers, the same operations
+    in the batch (:func:`unmoved_doubt`) and the stream (:class:`StreamDoubt`)."""
     if len(own) < 2:
         return False
     span = 1.5 * static_s * NS
-    recent = [e[1] for e in earlier if t - span <= e[0] < t]
+    recent = [e for e in earlier if t - span <= e[0] < t]
     if not recent or len(recent) >= 0.75 * lags:
         return False
     radius2 = DOUBT_RADIUS_PX * DOUBT_RADIUS_PX
 
     def stood(x: float, y: float) -> bool:
         return all(any((x - xj) * (x - xj) + (y - yj) * (y - yj) <= radius2 for xj, yj in px)
-                   for px in recent)
+                   for _, px in recent)
 
     if not stood(u, v):
         return False
-    if any(not stood(x, y) for x, y in own if (x, y) != (u, v)):
-        return True
-    return partner is not None and partner()
+    reach = speed_px_s * ((t - recent[-1][0]) / NS)
+    reach2 = reach * reach
+    still_too = False
+    for x, y in own:
+        if x == u and y == v:
+            continue
+        if stood(x, y):
+            still_too = True
+        elif any((x - xj) * (x - xj) + (y - yj) * (y - yj) <= reach2
+                 for xj, yj in recent[-1][1]):
+            return True
+    return still_too and partner is not None and partner()
 
 
 def _still_partner(t: int, a: int, u: float, v: float, frames_of, rig: Rig, F_lists,
@@ -2109,7 +2120,7 @@ def _frame_pixels(detections: Detections, lo: int, n: int) -> tuple:
 
 
 def unmoved_doubt(detections: Detections, rig: Rig, reason: np.ndarray, chosen: np.ndarray,
-                  static_s: float, epipolar_px: float) -> np.ndarray:
+                  options: GatingOptions) -> np.ndarray:
     """The doubt (:func:`doubt_variance`, else 0) of the chosen candidates ``chosen`` (rows)
     that stood still beside a candidate that moved while their camera could not judge
     stillness (:func:`unmoved`): CAUSAL (their camera's frames up to their own). In a
@@ -2121,6 +2132,8 @@ def unmoved_doubt(detections: Detections, rig: Rig, reason: np.ndarray, chosen: 
     out = np.zeros(len(chosen))
     if not len(chosen):
         return out
+    static_s, epipolar_px = options.static_s, options.epipolar_px
+    speed_px_s = options.max_image_speed_px_s
     frame = detections.cand_frame
     count = detections.candidates_per_frame()
     start = np.searchsorted(frame, np.arange(detections.n_frames), side="left")
@@ -2170,7 +2183,7 @@ def unmoved_doubt(detections: Detections, rig: Rig, reason: np.ndarray, chosen: 
                 F_lists, static_s, epipolar_px)
             if unmoved(ti, u, v, px[-1],
                        list(zip(t[int(first[i]):i].tolist(), px[:-1], strict=True)), lags,
-                       static_s, partner):
+                       static_s, speed_px_s, partner):
                 out[k] = doubt_variance(u, v, float(cam.width), float(cam.height))
     return out
 
@@ -2186,7 +2199,8 @@ def _refusal(reason: int, several: bool, du: float, dv: float) -> bool:
 
 def _observation_doubt(detections: Detections, rig: Rig, reason: np.ndarray,
                        observations: Observations, static_s: float,
-                       start: bool = False, epipolar_px: float = 8.0) -> np.ndarray | None:
+                       start: bool = False,
+                       options: GatingOptions | None = None) -> np.ndarray | None:
     """:func:`choice_doubt` of the chosen candidates (``reason`` < 0), and the whole
     :func:`doubt_variance` of a :data:`CONTESTED` one, on the rows of ``observations`` (the
     chosen ones at their corrected times); None when none is in doubt. ``start``: the
@@ -2203,7 +2217,8 @@ def _observation_doubt(detections: Detections, rig: Rig, reason: np.ndarray,
     # what its next frames refuse, unjudged_doubt; causal, one that has not moved in its
     # camera's frames so far, unmoved_doubt)
     unjudged = (unjudged_doubt(detections, rig, reason, chosen, static_s) if start
-                else unmoved_doubt(detections, rig, reason, chosen, static_s, epipolar_px))
+                else unmoved_doubt(detections, rig, reason, chosen,
+                                   options or GatingOptions(static_s=static_s)))
     if not len(still) and not len(contested) and not unjudged.any():
         return None
     # (a contested choice is a source too, counted DOUBT_REJECTIONS times: a later choice
@@ -2866,9 +2881,9 @@ class StreamDoubt:
             options = self.gate.options
             if len(own) >= 2 and unmoved(
                     t, u, v, own, seen, self.lags[c], options.static_s,
-                    lambda: _still_partner(t, c, u, v, lambda b: self.seen[b], self.gate.rig,
-                                           self.F_lists, options.static_s,
-                                           options.epipolar_px)):
+                    options.max_image_speed_px_s, lambda: _still_partner(
+                        t, c, u, v, lambda b: self.seen[b], self.gate.rig, self.F_lists,
+                        options.static_s, options.epipolar_px)):
                 return doubt_variance(u, v, *self.size[c])
         return 0.0
 
