@@ -14,11 +14,11 @@ import numpy as np
 sys.path.insert(0, "benchmarks/session35")
 sys.path.insert(0, "benchmarks")
 sys.path.insert(0, "tests")
-import smooth_straight as s35  # noqa: E402
+import smooth_straight as s35
 
-from pslog.fusion.gating import REASONS, gate  # noqa: E402
-from pslog.records import NS  # noqa: E402
-from pslog.simulation import SimulationOptions, ball_mask, simulate_labelled  # noqa: E402
+from pslog.fusion.gating import REASONS, gate
+from pslog.records import NS
+from pslog.simulation import SimulationOptions, ball_mask, simulate_labelled
 
 
 def main() -> None:
