@@ -62,6 +62,7 @@ tolerance) and from its own earlier decisions, so a causal method fed by it stay
 
 from __future__ import annotations
 
+import functools
 import math
 import sys
 import threading
@@ -1864,7 +1865,8 @@ def _result(detections: Detections, rig: Rig, reason: np.ndarray,
     observations = timed_observations(_chosen_candidates(detections, chosen), rig)
     return Gated(observations, rejections, chosen, reason,
                  _observation_doubt(detections, rig, reason, observations,
-                                    (options or GatingOptions()).static_s, doubt == "start")
+                                    (options or GatingOptions()).static_s, doubt == "start",
+                                    options)
                  if doubt else None)
 
 
@@ -2030,6 +2032,162 @@ def unjudged_doubt(detections: Detections, rig: Rig, reason: np.ndarray, chosen:
     return out
 
 
+def unmoved(t: int, u: float, v: float, own, earlier, lags: int, static_s: float,
+            speed_px_s: float, partner: Callable[[], bool] | None = None) -> bool:
+    """Whether a choice of a camera (LOGGED frame time ``t`` ns, recorded pixel ``(u, v)``;
+    ``own``: the recorded pixels of every candidate of its frame, ``[(u, v), ...]``) made
+    before its camera could judge stillness stood still beside a candidate that moved as a
+    ball does, or beside another still one (docs/methods.md, "An unmoved choice at the
+    start"). ``earlier``: its camera's frames with candidates, ``(time ns, pixels)`` each in
+    time order (any not before ``t`` are skipped); those within 1.5 ``static_s`` before it
+    are the frames the stillness test looks at. True when they are fewer than ``0.75 lags``
+    (:func:`_can_judge`'s count: the test cannot judge yet), at least one, every one of them
+    holds a candidate within :data:`DOUBT_RADIUS_PX` of ``(u, v)`` (it stood there in every
+    frame available), and its own frame holds another candidate that
+    - moved (one of those frames holds none within :data:`DOUBT_RADIUS_PX` of it) within a
+      ball's reach, ``speed_px_s`` times the time since, of a candidate of the newest of
+      them (a ball in flight; a blob that comes from nowhere is not), or
+    - stood too, while ``partner()`` says another camera holds a still candidate on the
+      choice's epipolar line (:func:`_still_partner`: a still point in space chosen between
+      two still things, a static object or a ball at rest).
+    A clean camera's frames hold one candidate: never. Python numbers, the same operations
+    in the batch (:func:`unmoved_doubt`) and the stream (:class:`StreamDoubt`)."""
+    if len(own) < 2:
+        return False
+    span = 1.5 * static_s * NS
+    recent = [e for e in earlier if t - span <= e[0] < t]
+    if not recent or len(recent) >= 0.75 * lags:
+        return False
+    radius2 = DOUBT_RADIUS_PX * DOUBT_RADIUS_PX
+
+    def stood(x: float, y: float) -> bool:
+        return all(any((x - xj) * (x - xj) + (y - yj) * (y - yj) <= radius2 for xj, yj in px)
+                   for _, px in recent)
+
+    if not stood(u, v):
+        return False
+    reach = speed_px_s * ((t - recent[-1][0]) / NS)
+    reach2 = reach * reach
+    still_too = False
+    for x, y in own:
+        if x == u and y == v:
+            continue
+        if stood(x, y):
+            still_too = True
+        elif any((x - xj) * (x - xj) + (y - yj) * (y - yj) <= reach2
+                 for xj, yj in recent[-1][1]):
+            return True
+    return still_too and partner is not None and partner()
+
+
+def _still_partner(t: int, a: int, u: float, v: float, frames_of, rig: Rig, F_lists,
+                   static_s: float, epipolar_px: float) -> bool:
+    """Whether another camera ``b`` holds, in its newest frame with candidates before
+    camera ``a``'s at LOGGED time ``t`` ((time, camera) order: the stream has it), a
+    candidate that stood within :data:`DOUBT_RADIUS_PX` of a candidate of each of its
+    other frames within 1.5 ``static_s`` before (at least one) and lies within
+    ``epipolar_px`` of the epipolar line of ``(u, v)`` (recorded pixels, undistorted here):
+    with it, a still point in space (:func:`unmoved`). ``frames_of(b)``: camera ``b``'s
+    frames with candidates, ``(time ns, pixels)`` in time order (older or newer ones are
+    skipped). Python numbers: the same bits in the batch and the stream."""
+    span = 1.5 * static_s * NS
+    radius2 = DOUBT_RADIUS_PX * DOUBT_RADIUS_PX
+    ua, va = _pixel_geometry(rig.cameras[a], np.array([[u, v]]))[0][0].tolist()
+    for b in range(len(rig.cameras)):
+        if b == a:
+            continue
+        frames = [e for e in frames_of(b) if t - span <= e[0] and (e[0] < t or (
+            e[0] == t and b < a))]
+        if len(frames) < 2:
+            continue
+        la, lb, lc = _line_of(F_lists[a][b], ua, va)
+        if math.isnan(la):
+            continue
+        for x, y in frames[-1][1]:
+            if not all(any((x - xj) * (x - xj) + (y - yj) * (y - yj) <= radius2
+                           for xj, yj in px) for _, px in frames[:-1]):
+                continue
+            xu, yu = _pixel_geometry(rig.cameras[b], np.array([[x, y]]))[0][0].tolist()
+            if abs(la * xu + lb * yu + lc) <= epipolar_px:
+                return True
+    return False
+
+
+def _frame_pixels(detections: Detections, lo: int, n: int) -> tuple:
+    """The recorded pixels of a frame's ``n`` candidates from row ``lo``, ``((u, v), ...)``
+    (Python floats, as :class:`StreamDoubt` keeps them)."""
+    return tuple(tuple(x) for x in detections.cand_uv[lo:lo + n].tolist())
+
+
+def unmoved_doubt(detections: Detections, rig: Rig, reason: np.ndarray, chosen: np.ndarray,
+                  options: GatingOptions) -> np.ndarray:
+    """The doubt (:func:`doubt_variance`, else 0) of the chosen candidates ``chosen`` (rows)
+    that stood still beside a candidate that moved while their camera could not judge
+    stillness (:func:`unmoved`): CAUSAL (their camera's frames up to their own). In a
+    camera's first ``static_s`` a static object seen by every camera passes every gate and
+    may be chosen over the ball with nothing rejected near it yet; a candidate that stood
+    at its pixel in every frame so far is such an object or a ball at rest, which the
+    stillness test rejects once it can judge anyway (docs/methods.md, "An unmoved choice
+    at the start"). Only frames of several candidates: no clean choice is so judged."""
+    out = np.zeros(len(chosen))
+    if not len(chosen):
+        return out
+    static_s, epipolar_px = options.static_s, options.epipolar_px
+    speed_px_s = options.max_image_speed_px_s
+    frame = detections.cand_frame
+    count = detections.candidates_per_frame()
+    start = np.searchsorted(frame, np.arange(detections.n_frames), side="left")
+    span = 1.5 * static_s * NS
+    F_lists = fundamental_matrices(rig.cameras).tolist()
+    # each camera's frames with candidates in time order (rows, times)
+    order = []
+    for b in range(len(rig.cameras)):
+        f = np.flatnonzero((detections.frame_camera == b) & (count > 0))
+        f = f[np.argsort(detections.frame_time_ns[f], kind="stable")]
+        order.append((f, detections.frame_time_ns[f]))
+
+    def frames_near(b: int, t: int) -> list:
+        f, tb = order[b]
+        lo = int(np.searchsorted(tb, t - span, side="left"))
+        hi = int(np.searchsorted(tb, t, side="right"))
+        return [(int(tb[i]), _frame_pixels(detections, int(start[f[i]]), int(count[f[i]])))
+                for i in range(lo, hi)]
+
+    for b, cam in enumerate(rig.cameras):
+        f = np.flatnonzero((detections.frame_camera == b) & (count > 0))
+        if not len(f):
+            continue
+        f = f[np.argsort(detections.frame_time_ns[f], kind="stable")]
+        t = detections.frame_time_ns[f]
+        first = np.searchsorted(t, t - span, side="left")
+        lags = int(np.ceil(static_s * cam.fps))
+        # (frames the test cannot judge, with an earlier frame: few, the camera's first
+        # static_s and the frames after a spell without candidates)
+        maybe = np.flatnonzero((np.arange(len(f)) - first < 0.75 * lags)
+                               & (np.arange(len(f)) > first))
+        if not len(maybe):
+            continue
+        rows = np.flatnonzero(np.isin(frame[chosen], f[maybe[count[f[maybe]] >= 2]]))
+        if not len(rows):
+            continue
+        at = np.zeros(detections.n_frames, dtype=np.int64)
+        at[f] = np.arange(len(f))
+        for k in rows.tolist():
+            i = int(at[frame[chosen[k]]])
+            u, v = detections.cand_uv[chosen[k]].tolist()
+            px = [_frame_pixels(detections, int(start[fr]), int(count[fr]))
+                  for fr in f[int(first[i]):i + 1].tolist()]
+            ti = int(t[i])
+            partner = functools.partial(
+                _still_partner, ti, b, u, v, functools.partial(frames_near, t=ti), rig,
+                F_lists, static_s, epipolar_px)
+            if unmoved(ti, u, v, px[-1],
+                       list(zip(t[int(first[i]):i].tolist(), px[:-1], strict=True)), lags,
+                       static_s, speed_px_s, partner):
+                out[k] = doubt_variance(u, v, float(cam.width), float(cam.height))
+    return out
+
+
 def _refusal(reason: int, several: bool, du: float, dv: float) -> bool:
     """Whether a candidate of a camera's frame (``reason`` its code, ``several``: its frame
     held more than one) at ``(du, dv)`` recorded pixels from the camera's first choice
@@ -2041,7 +2199,8 @@ def _refusal(reason: int, several: bool, du: float, dv: float) -> bool:
 
 def _observation_doubt(detections: Detections, rig: Rig, reason: np.ndarray,
                        observations: Observations, static_s: float,
-                       start: bool = False) -> np.ndarray | None:
+                       start: bool = False,
+                       options: GatingOptions | None = None) -> np.ndarray | None:
     """:func:`choice_doubt` of the chosen candidates (``reason`` < 0), and the whole
     :func:`doubt_variance` of a :data:`CONTESTED` one, on the rows of ``observations`` (the
     chosen ones at their corrected times); None when none is in doubt. ``start``: the
@@ -2054,10 +2213,12 @@ def _observation_doubt(detections: Detections, rig: Rig, reason: np.ndarray,
     # (the session's first choice shown wrong later counts as a contested one: late_doubt)
     late = late_doubt(detections, reason, static_s)
     contested = np.flatnonzero((reason[chosen] == CONTESTED) | (chosen == late))
-    # (offline only, "start": a choice made before its camera could judge stillness,
-    # beside what its next frames refuse: unjudged_doubt)
+    # (a choice made before its camera could judge stillness: offline, "start", beside
+    # what its next frames refuse, unjudged_doubt; causal, one that has not moved in its
+    # camera's frames so far, unmoved_doubt)
     unjudged = (unjudged_doubt(detections, rig, reason, chosen, static_s) if start
-                else np.zeros(len(chosen)))
+                else unmoved_doubt(detections, rig, reason, chosen,
+                                   options or GatingOptions(static_s=static_s)))
     if not len(still) and not len(contested) and not unjudged.any():
         return None
     # (a contested choice is a source too, counted DOUBT_REJECTIONS times: a later choice
@@ -2596,6 +2757,14 @@ class StreamDoubt:
         # the session's first choice when a later verdict put it in doubt ((logged time,
         # camera, u, v): :class:`StreamStart`), treated as a CONTESTED one
         self.late: set[tuple] = set()
+        # each camera's frames with candidates ((logged time, pixels)) over the 1.5
+        # static_s the stillness test looks at (:func:`unmoved`), the newest frame of
+        # several of any camera, and each camera's stillness lags
+        self.span = 1.5 * gate.options.static_s * NS
+        self.seen: list[deque] = [deque() for _ in gate.rig.cameras]
+        self.newest_several: float = -math.inf
+        self.lags = [math.ceil(gate.options.static_s * c.fps) for c in gate.rig.cameras]
+        self.F_lists = fundamental_matrices(gate.rig.cameras).tolist()
 
     def frames(self, time_ns, camera) -> None:
         """Note the frames of a push (its rows, each frame's candidates together) before
@@ -2608,15 +2777,44 @@ class StreamDoubt:
             if a == b and a not in self.several:
                 self.several.add(a)
                 self.pushed.append(a)
+                self.newest_several = max(self.newest_several, a[0])
         old = keys[-1][0] - self.gate.history_ns
         while self.pushed and self.pushed[0][0] < old:
             self.several.discard(self.pushed.popleft())
+
+    def seen_frames(self, time_ns, camera, uv) -> None:
+        """Note the frames of a push with their candidates' pixels (rows in (time, camera)
+        order, each frame's candidates together; :func:`unmoved`), before the gate decides
+        them."""
+        n = len(time_ns)
+        if not n:
+            return
+        t, c, p = time_ns.tolist(), camera.tolist(), uv.tolist()
+        i = 0
+        while i < n:
+            j = i + 1
+            while j < n and t[j] == t[i] and c[j] == c[i]:
+                j += 1
+            self.seen_frame(t[i], c[i], p[i:j])
+            i = j
+
+    def seen_frame(self, t: int, c: int, pixels: list) -> None:
+        """Note one frame with candidates (logged time, camera, its candidates' recorded
+        pixels, ``[[u, v], ...]``), forgetting what no choice can look back to."""
+        seen = self.seen[c]
+        seen.append((t, pixels))
+        if len(pixels) >= 2:
+            self.newest_several = max(self.newest_several, t)
+        old = t - self.gate.history_ns - self.span
+        while seen and seen[0][0] < old:
+            seen.popleft()
 
     def of(self, time_ns: np.ndarray, camera: np.ndarray, uv: np.ndarray) -> np.ndarray | None:
         """The doubt (pixels² per axis) of chosen rows in logged order, None when none
         is in doubt."""
         self._read()
-        if not len(time_ns) or not (self.gate.contested or self.late or any(self.recent)):
+        if not len(time_ns) or not (self.gate.contested or self.late or any(self.recent)
+                                    or self.newest_several >= int(time_ns.min())):
             return None
         out = None
         for i, (t, c) in enumerate(zip(time_ns.tolist(), camera.tolist(), strict=True)):
@@ -2633,7 +2831,7 @@ class StreamDoubt:
         doubt, 0.0 when not in doubt (the same value, without its (1,) columns)."""
         self._read()
         return (self._row(t, c, u, v) if self.gate.contested or self.late or any(self.recent)
-                else 0.0)
+                or self.newest_several >= t else 0.0)
 
     def _read(self) -> None:
         """The gate's rejections since the last call, the doubt's sources among them noted
@@ -2664,6 +2862,29 @@ class StreamDoubt:
         if sum(t - self.window <= tj <= t and (u - uj) * (u - uj) + (v - vj) * (v - vj)
                <= radius2 for tj, uj, vj in near) >= DOUBT_REJECTIONS:
             return doubt_variance(u, v, *self.size[c])
+        # (still beside a candidate that moved, while its camera could not judge
+        # stillness: unmoved_doubt; only in a frame of several)
+        if self.newest_several >= t:
+            # (the camera's frames before the choices to come: a later choice is not
+            # earlier, and looks back 1.5 static_s at most)
+            seen = self.seen[c]
+            while seen and seen[0][0] < t - self.span:
+                seen.popleft()
+            after = 0  # (its own frame and any pushed after it)
+            for e in reversed(seen):
+                if e[0] < t:
+                    break
+                after += 1
+            if len(seen) - after >= 0.75 * self.lags[c]:  # (the test judges: the usual)
+                return 0.0
+            own = next((e[1] for e in reversed(seen) if e[0] == t), ())
+            options = self.gate.options
+            if len(own) >= 2 and unmoved(
+                    t, u, v, own, seen, self.lags[c], options.static_s,
+                    options.max_image_speed_px_s, lambda: _still_partner(
+                        t, c, u, v, lambda b: self.seen[b], self.gate.rig, self.F_lists,
+                        options.static_s, options.epipolar_px)):
+                return doubt_variance(u, v, *self.size[c])
         return 0.0
 
 

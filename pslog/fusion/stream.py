@@ -206,11 +206,14 @@ class StreamFuser:
             self._last_logged = one[:2]
             return self._one(*one)
         if self._gate is not None:  # the chosen candidates, in logged order
-            pushed = (time_ns, camera)
+            pushed = (time_ns, camera, uv)
             time_ns, camera, uv, frame_index = self._gate.push(time_ns, camera, uv, frame_index)
             if self._doubts is not None:  # (its frames of several candidates: valid rows)
-                self._doubts.frames(np.atleast_1d(np.asarray(pushed[0])),
-                                    np.atleast_1d(np.asarray(pushed[1])))
+                t_pushed = np.atleast_1d(np.asarray(pushed[0]))
+                c_pushed = np.atleast_1d(np.asarray(pushed[1]))
+                self._doubts.frames(t_pushed, c_pushed)
+                self._doubts.seen_frames(t_pushed, c_pushed,
+                                         np.asarray(pushed[2], np.float64).reshape(-1, 2))
             if self._start is not None:  # (held until the first choice's verdict)
                 time_ns, camera, uv, frame_index = self._started(time_ns, camera, uv,
                                                                  frame_index)
@@ -261,6 +264,7 @@ class StreamFuser:
                 if len(uv) > 1:  # (frames notes nothing of a frame of one candidate)
                     doubts.frames(np.full(len(uv), time_ns, np.int64),
                                   np.full(len(uv), camera, np.int32))
+                doubts.seen_frame(time_ns, camera, uv.tolist())
                 if len(chosen) == 1:  # (its one row's: of's, on Python numbers)
                     one_doubt = doubts.of_one(time_ns, camera, u, v)
                     doubt = np.array([one_doubt]) if one_doubt else None
