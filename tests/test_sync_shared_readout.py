@@ -134,3 +134,46 @@ def test_camera_models_group_cameras_by_image_size_and_frame_rate():
     two = Rig((c1, c2.replace(width=1280, height=720), c3))
     assert camera_models(two, [0, 1, 2]).tolist() == [0, 1, 0]
     assert camera_models(two, [1, 2]).tolist() == [0, 1]
+
+
+def test_the_shared_statistic_of_two_models_is_the_drop_in_the_wald_distance(tmp_path, cli):
+    """Two camera models (paper3 with cam3 given a 1280 × 720 sensor: cam1 and cam2 one
+    model, cam3 its own; readouts 10 ms on every camera, seed 54402): ``G`` has two columns
+    and ``W_s`` is on 2 dof. Against an independent form of the statistic, the drop of the
+    Σ⁻¹ distance from the rig's readouts when the readouts may be any ``Gβ``,
+    ``W_s = dᵀΣ⁻¹d − min_β (d − Gβ)ᵀΣ⁻¹(d − Gβ)``, read from the synced copy's own estimates
+    and covariance (W 40.9, W_s 40.7). Fails if ``G`` groups the cameras otherwise (cam1
+    with cam3: W_s 38.5), or as one model or as three (no shared test: ``W``)."""
+    from pslog.log import SessionWriter
+    from pslog.motion import rally_motion
+    from pslog.simulation import SimulationOptions, simulate
+
+    base = apply_timing(builtin_rig("paper3"), "typeA")
+    c1, c2, c3 = base.cameras
+    rig = Rig((c1, c2, c3.replace(width=1280, height=720)), base.name)
+    assert camera_models(rig, [0, 1, 2]).tolist() == [0, 0, 1]
+    det = simulate(rig, rally_motion(54402, 8.0), 8.0, SimulationOptions(
+        noise_px=0.3, seed=54402, clock_offset_s={"cam2": 5e-3, "cam3": -7e-3},
+        readout_s={name: 10e-3 for name in rig.names}))[0]
+    path = tmp_path / "two.mcap"
+    with SessionWriter(path, rig, timing="typeA", source="test") as writer:
+        writer.add_detections(det)
+    synced = tmp_path / "synced.mcap"
+    report = _sync_json(cli, path, synced)
+    (readout,) = [t for t in report["selection"] if t["parameter"] == "readout"]
+    assert readout["kept"] and readout["dof"] == 3 and readout["shared_dof"] == 2
+    assert readout["shared_threshold"] == chi2.isf(AUTO_LEVEL / 2, 2)
+    stored = json.loads(read_session(synced).metadata["clock_std"])
+    names = stored["covariance"]["parameters"]
+    idx = [i for i, (_, key) in enumerate(names) if key == "readout"]
+    assert [names[i][0] for i in idx] == list(rig.names)
+    cov = np.array(stored["covariance"]["matrix"])[np.ix_(idx, idx)]
+    d = np.array([stored["cameras"][names[i][0]]["readout"][0] for i in idx])
+    inv = np.linalg.inv(cov)
+    G = np.array([[1.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    beta = np.linalg.lstsq(np.linalg.cholesky(inv).T @ G, np.linalg.cholesky(inv).T @ d,
+                           rcond=None)[0]
+    r = d - G @ beta
+    shared = d @ inv @ d - r @ inv @ r
+    assert abs(readout["shared_wald_chi2"] - shared) < 1e-6 * shared, (readout, shared)
+    assert readout["shared_wald_chi2"] < readout["wald_chi2"] * (1 - 1e-9)

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
+from functools import partial
 from typing import Literal, cast
 
 import numpy as np
@@ -334,7 +335,10 @@ def _nearest(prep: Prepared, rig: Rig, options: FusionOptions, *, drops: Drops |
     return fuse_nearest(prep, _gap(options), options.noise_px, drops=drops)
 
 
-def _type_a(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
+def _type_a(prep: Prepared, rig: Rig, options: FusionOptions, *,
+            breaks_ns: np.ndarray | None = None) -> Track:
+    """Type A's offline track (``breaks_ns``: ``confirm_breaks``' breaks of the session's
+    fit, given; None: fitted here, :func:`pslog.fusion.breaks.fit_breaks_ns`)."""
     from ._prepare import rays_only
     from .confirm import confirm_batch  # (long-gap points confirmed by the next camera)
     from .pseudo import _fuse_type_a, covariance_noise_px, type_a_noise, withhold_uncertain
@@ -357,7 +361,7 @@ def _type_a(prep: Prepared, rig: Rig, options: FusionOptions) -> Track:
     if options.confirm_breaks:
         from .breaks import across_breaks
 
-        track = across_breaks(prep, track, rig, options, _type_a)
+        track = across_breaks(prep, track, rig, options, _type_a, breaks_ns)
     return track
 
 
@@ -545,11 +549,20 @@ def fuse(
     check_tolerance(rig, options.tolerance_s)
     prep = prepared if prepared is not None else prepare(observations, rig)
     resolved = replace(options, max_gap_s=options.max_gap_s or default_max_gap_s(rig))
-    track = METHODS[method].function(prep, rig, resolved)
+    function = METHODS[method].function
+    if method == "typeA" and resolved.confirm_breaks and options.clock_covariance is not None:
+        # the breaks of the session's fit are a decision, taken as it was in the clocks'
+        # perturbed runs (pslog.fusion.clock): fitted once, not once per run (2 m + 1 fits
+        # of smooth for m clock directions otherwise)
+        from ._prepare import rays_only
+        from .breaks import fit_breaks_ns
+
+        function = partial(_type_a, breaks_ns=fit_breaks_ns(rays_only(prep)[0], rig, resolved))
+    track = function(prep, rig, resolved)
     if options.clock_covariance is not None and not METHODS[method].own_clock_consider:
         from .clock import with_clock_covariance
 
-        track = with_clock_covariance(track, method, prep, rig, resolved)
+        track = with_clock_covariance(track, method, prep, rig, resolved, function)
     return track
 
 

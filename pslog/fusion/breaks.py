@@ -75,17 +75,19 @@ def spans_break(breaks_ns: np.ndarray, start_ns: np.ndarray, end_ns: np.ndarray,
 
 
 def across_breaks(prep: Prepared, track: Track, rig: Rig, options,
-                  type_a: Callable[[Prepared, Rig, Any], Track]) -> Track:
+                  type_a: Callable[[Prepared, Rig, Any], Track],
+                  breaks_ns: np.ndarray | None = None) -> Track:
     """``track`` (type A's from ``prep`` under ``options``, FusionOptions with ``max_gap_s``
     set) with each point spanning a break of the session's fit replaced by the backward
     pass's point on its detection, or withheld (``break``) when that one spans a break too or
     is missing (the module's rule). ``type_a(prep, rig, options)`` makes a type A track (the
     backward pass: ``options`` with ``confirm_breaks`` off). A replaced point takes every
     column of the backward point, its ``span_s`` negated (the point's time minus the latest
-    capture it uses). The other points are ``track``'s rows, unchanged."""
+    capture it uses). The other points are ``track``'s rows, unchanged. ``breaks_ns``: the
+    fit's breaks (:func:`fit_breaks_ns` of ``prep``), given; None: fitted here."""
     if not len(track) or "span_s" not in track.quality:
         return track
-    breaks = fit_breaks_ns(prep, rig, options)
+    breaks = fit_breaks_ns(prep, rig, options) if breaks_ns is None else breaks_ns
     t = track.time_ns
     span = np.round(track.quality["span_s"] * 1e9).astype(np.int64)
     spanning = spans_break(breaks, t - span, t, forward=True)

@@ -212,7 +212,8 @@ def add_covariance(track: Track, S: np.ndarray) -> Track:
                  track.dropped)
 
 
-def with_clock_covariance(track: Track, method: str, prep, rig: Rig, options) -> Track:
+def with_clock_covariance(track: Track, method: str, prep, rig: Rig, options,
+                          function=None) -> Track:
     """``track`` (``method``'s, made from ``prep`` with ``options``, ``max_gap_s`` resolved)
     with the consider covariance of ``options.clock_covariance`` added (module docstring).
 
@@ -224,6 +225,8 @@ def with_clock_covariance(track: Track, method: str, prep, rig: Rig, options) ->
         in the perturbed runs)
     rig : Rig
     options : FusionOptions with ``clock_covariance`` set and ``max_gap_s`` resolved
+    function : ``(prep, rig, options) -> Track``, the method as it made ``track`` (None: the
+        registry's, ``METHODS[method].function``)
     """
     from . import METHODS
     from ._prepare import prepare
@@ -235,7 +238,7 @@ def with_clock_covariance(track: Track, method: str, prep, rig: Rig, options) ->
     errors = pixel_errors(obs, prep.per_camera, rig, clock, options.max_gap_s,
                           None if prep.doubt_px2 is None else prep.doubt_px2 > 0)
     plain = replace(options, clock_covariance=None)
-    function = METHODS[method].function
+    function = function or METHODS[method].function
 
     def run(moved: Observations) -> Track:
         again = prepare(moved, rig)
