@@ -126,7 +126,12 @@ def _choice(result) -> str:
     lines = [f"model (--estimate auto): {', '.join(result.estimated)}"]
     for t in result.selection:
         plural = {"readout": "readouts", "drift": "drifts"}[t.parameter]
-        lines.append(f"  {plural} {'estimated' if t.kept else 'not estimated'}: {t.reason}")
+        # (the nested test of one readout per camera model beside the per-camera one:
+        # either calls for readouts, which are then estimated one per camera, the table's)
+        what = ("estimated, one per camera (a test above its threshold calls for them)"
+                if t.kept and t.parameter == "readout" and t.shared_dof else
+                "estimated" if t.kept else "not estimated")
+        lines.append(f"  {plural} {what}: {t.reason}")
         if t.parameter == "readout" and not t.kept and t.p_value < SUGGESTIVE_LEVEL:
             # (session 35: a readout every camera shares, the ball in a band of rows,
             # shows weakly; unestimated, it delays every point by the readout times the
