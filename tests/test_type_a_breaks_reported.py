@@ -3,7 +3,8 @@ from the detections after them (the backward pass's, ``span_s`` < 0) are counted
 ``pslog fuse``'s summary line, ``pslog eval`` (text and ``--json``) and the viewer's legend
 (which draws no Figure 2 for them). Before, only the withheld points (``break``) were said:
 a session whose every spanning point was replaced read as the default's, 15 replaced points
-of a rally unmentioned anywhere but in ``span_s``'s sign."""
+of a rally unmentioned anywhere but in ``span_s``'s sign. And the start's doubt (session 37's
+unmoved choice) explained by ``pslog eval`` and counted alike by fuse, eval and export."""
 
 from __future__ import annotations
 
@@ -64,3 +65,45 @@ def test_fuse_eval_and_view_count_the_points_from_the_detections_after_them(tmp_
     code, out, err = cli("eval", default)
     assert code == 0 and "made from the detections after" not in out, out
     assert "backward_points" not in json.loads(cli("eval", default, "--json")[1])[0]
+
+
+def test_the_starts_doubt_is_explained_and_counted_alike(tmp_path, cli):
+    """Session 36's walkthrough on a new seed (paper3 spiral, an object every camera sees at
+    (1, 2, 0.1)): the points left out as ``doubt`` (the start's unmoved choice beside the
+    moving ball) are the same counts in ``pslog fuse``'s lines and ``pslog eval --json``,
+    the exported CSV holds the points fuse wrote, and eval's text says what a doubt at the
+    start is (before: "rests on a candidate the gate chose in doubt", no word of the start's
+    still candidate, the case session 37 added)."""
+    import csv
+    import re
+
+    session = tmp_path / "spiral.mcap"
+    code, _, err = cli("simulate", "--rig", "paper3", "--timing", "typeA", "--motion",
+                       "spiral", "--noise-px", "0.3", "--distractor", "1,2,0.1", "--seed",
+                       SEED + 2, "-o", session)
+    assert code == 0, err
+    fused = tmp_path / "fused.mcap"
+    code, out, err = cli("fuse", session, "-o", fused)
+    assert code == 0, err
+    said = {m.group(1): (int(m.group(2)), dict((r, int(n)) for r, n in re.findall(
+                r"(\w+) (\d+)", m.group(3) or "")))
+            for m in re.finditer(r"^(\w+) +(\d+) points +\d+ candidates rejected by gating"
+                                 r"(?: \(left out, untrustworthy: ([^)]*)\))?", out, re.M)}
+    assert sum(left.get("doubt", 0) for _, left in said.values()) > 0, out
+    code, text, err = cli("eval", fused, "--json")
+    assert code == 0, err
+    reports = {r["method"]: r for r in json.loads(text)}
+    assert set(reports) == set(said)
+    for method, (points, left) in said.items():
+        assert reports[method]["left_out"] == left, (method, reports[method]["left_out"])
+        unscored = sum(reports[method]["not_scored"].values())
+        assert reports[method]["n_points"] + unscored == points
+    code, text, err = cli("eval", fused)
+    assert code == 0, err
+    assert ("at a session's start, before its camera can judge stillness, a candidate that "
+            "has not moved beside one that has") in text, text
+    rows = tmp_path / "tracks.csv"
+    assert cli("export", fused, "--csv", rows)[0] == 0
+    with open(rows, newline="") as f:
+        methods = [r["method"] for r in csv.DictReader(f)]
+    assert {m: methods.count(m) for m in said} == {m: p for m, (p, _) in said.items()}
