@@ -107,3 +107,4 @@ def test_the_starts_doubt_is_explained_and_counted_alike(tmp_path, cli):
     with open(rows, newline="") as f:
         methods = [r["method"] for r in csv.DictReader(f)]
     assert {m: methods.count(m) for m in said} == {m: p for m, (p, _) in said.items()}
+
