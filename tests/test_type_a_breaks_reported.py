@@ -4,7 +4,8 @@ from the detections after them (the backward pass's, ``span_s`` < 0) are counted
 (which draws no Figure 2 for them). Before, only the withheld points (``break``) were said:
 a session whose every spanning point was replaced read as the default's, 15 replaced points
 of a rally unmentioned anywhere but in ``span_s``'s sign. And the start's doubt (session 37's
-unmoved choice) explained by ``pslog eval`` and counted alike by fuse, eval and export."""
+unmoved choice) explained by ``pslog eval`` and counted alike by fuse, eval, export and the
+viewer's summary panel (before: not shown there)."""
 
 from __future__ import annotations
 
@@ -17,11 +18,11 @@ from pslog.log import read_session
 SEED = 55001  # (session 37's walk: a paper3 rally, type-A shutters, 0.3 px)
 
 
-def _legend(rrd) -> str:
+def _legend(rrd, entity: str = "/legend") -> str:
     from rerun.chunk import RrdReader
 
     return " ".join(" ".join(str(v) for v in chunk.to_record_batch().to_pylist())
-                    for chunk in RrdReader(rrd).stream() if chunk.entity_path == "/legend")
+                    for chunk in RrdReader(rrd).stream() if chunk.entity_path == entity)
 
 
 def test_fuse_eval_and_view_count_the_points_from_the_detections_after_them(tmp_path, cli):
@@ -102,6 +103,20 @@ def test_the_starts_doubt_is_explained_and_counted_alike(tmp_path, cli):
     assert code == 0, err
     assert ("at a session's start, before its camera can judge stillness, a candidate that "
             "has not moved beside one that has") in text, text
+    # the viewer's summary panel, stored tracks and tracks fused on the fly alike
+    from viewers import save_rrd
+
+    counts = [f"{m} " + ", ".join(f"{r} {n}" for r, n in sorted(left.items()))
+              for m, (_, left) in said.items() if left]
+    rrd = tmp_path / "view.rrd"
+    head = ("left out over the whole session (as `pslog fuse` and `pslog eval` count them; "
+            "`pslog eval` says why): ")
+    for methods in (None, list(said)):  # the stored tracks, then fused on the fly
+        save_rrd([session, fused] if methods is None else [session], rrd, frames="none",
+                 methods=methods, force=True)
+        text = _legend(rrd, "/summary")
+        shown = text[text.index(head) + len(head):].split("\\n")[0].split("; ")
+        assert sorted(shown) == sorted(counts), (shown, counts)
     rows = tmp_path / "tracks.csv"
     assert cli("export", fused, "--csv", rows)[0] == 0
     with open(rows, newline="") as f:
