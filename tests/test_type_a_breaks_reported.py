@@ -10,6 +10,7 @@ viewer's summary panel (before: not shown there)."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 
@@ -123,3 +124,57 @@ def test_the_starts_doubt_is_explained_and_counted_alike(tmp_path, cli):
         methods = [r["method"] for r in csv.DictReader(f)]
     assert {m: methods.count(m) for m in said} == {m: p for m, (p, _) in said.items()}
 
+
+
+def test_a_break_without_a_backward_point_is_explained(tmp_path, cli):
+    """The walk's dirty rally (seed 55001: 8 ms readouts, clock offsets, blobs, an object every
+    camera sees, misses, a blackout), synced: ``--confirm-gaps breaks`` withholds one point,
+    at 7.66 s of 8, whose construction spans a break of smooth's fit and for which the
+    backward pass made no point (too few detections after it). eval said "and so does the
+    one from the detections after it": there was none. It now names both cases; the count is
+    fuse's."""
+    import pslog
+    import pslog.fusion.breaks as breaks
+    from pslog.fusion import FusionOptions
+
+    session = tmp_path / "lab.mcap"
+    code, _, err = cli("simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "rally",
+                       "--noise-px", "0.3", "--clock-offset", "cam2=7.3", "--clock-offset",
+                       "cam3=-12", "--readout", "8", "--spurious", "0.1", "--distractor",
+                       "1.0,0.5,0.0", "--miss-rate", "0.05", "--blackout", "cam2=1.0:0.3",
+                       "--seed", SEED, "-o", session)
+    assert code == 0, err
+    synced, fused = tmp_path / "synced.mcap", tmp_path / "fused.mcap"
+    assert cli("sync", session, "-o", synced)[0] == 0
+    code, out, err = cli("fuse", synced, "--method", "typeA", "--confirm-gaps", "breaks",
+                         "-o", fused)
+    assert code == 0 and "break 1)" in out, out
+    # the withheld point has no backward point: the rule's second case, not the first
+    seen = []
+    across = breaks.across_breaks
+
+    def spy(prep, track, rig, options, type_a):
+        out = across(prep, track, rig, options, type_a)
+        kept = set(zip(out.time_ns.tolist(), out.camera.tolist(), strict=True))
+        gone = [(t, c) for t, c in zip(track.time_ns.tolist(), track.camera.tolist(),
+                                       strict=True) if (t, c) not in kept]
+        rprep, t0 = breaks.reversed_prepared(prep, rig)
+        back = type_a(rprep, rig, replace(options, confirm_breaks=False))
+        seen.extend(bool(np.any((t0 - back.time_ns == t) & (back.camera == c)))
+                    for t, c in gone)
+        return out
+
+    breaks.across_breaks = spy
+    try:
+        pslog.fuse(read_session(synced), "typeA", options=FusionOptions(
+            confirm_every=True, confirm_sides=True, confirm_breaks=True),
+            clock_uncertainty=False)
+    finally:
+        breaks.across_breaks = across
+    assert seen == [False]
+    code, out, err = cli("eval", fused)
+    assert code == 0, err
+    assert ("break: typeA (--confirm-gaps breaks): its construction spans a velocity break "
+            "of smooth's fit, and type A's point from the detections after it spans one too "
+            "or was not made") in out, out
+    assert json.loads(cli("eval", fused, "--json")[1])[0]["left_out"]["break"] == 1
