@@ -153,8 +153,8 @@ def test_a_break_without_a_backward_point_is_explained(tmp_path, cli):
     seen = []
     across = breaks.across_breaks
 
-    def spy(prep, track, rig, options, type_a):
-        out = across(prep, track, rig, options, type_a)
+    def spy(prep, track, rig, options, type_a, *given):  # (given: the breaks, if fitted)
+        out = across(prep, track, rig, options, type_a, *given)
         kept = set(zip(out.time_ns.tolist(), out.camera.tolist(), strict=True))
         gone = [(t, c) for t, c in zip(track.time_ns.tolist(), track.camera.tolist(),
                                        strict=True) if (t, c) not in kept]
