@@ -453,13 +453,20 @@ LEFT_OUT_TEXT = {
                     "kicks, the default: that camera's track around it, on its side of a kick "
                     "the track shows; all, on: the next camera's detection)",
     "break": "typeA (--confirm-gaps breaks): its construction spans a velocity break of "
-             "smooth's fit, and so does the one from the detections after it",
+             "smooth's fit, and type A's point from the detections after it spans one too or "
+             "was not made (its own tests left it out, or too few detections follow: near "
+             "the session's end)",
     "unconfirmed": "not confirmed in time (typeA: no next camera's detection; filter: after "
                    "a jump or a surprise, two more updates, one from another camera)",
     "held": "filter: held for the next camera, whose detection placed a jump before it",
     "uncertain": "its std_m above the bound (filter: 25.5 mm, 5 cm at 95 %; typeA: "
                  "--type-a-max-std-mm)",
-    "doubt": "rests on a candidate the gate chose in doubt",
+    "doubt": "rests on a candidate the gate chose in doubt: one it could not tell from "
+             "another (rejected candidates beside it, another camera denying it, or, at a "
+             "session's start, before its camera can judge stillness, a candidate that has "
+             "not moved beside one that has, or beside another still one a second camera "
+             "sees too: a static object or the ball at rest; docs/methods.md, \"A choice in "
+             "doubt\", \"An unmoved choice at the start\")",
     "underdetermined_end": "smooth: an end beyond a kick that too few detections hold",
 }
 

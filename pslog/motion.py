@@ -302,6 +302,24 @@ MOTIONS: dict[str, Motion] = {
 }
 
 
+def at_rest_first(motion: Motion, rest_s: float) -> Motion:
+    """``motion`` after the ball lay still at its start point for ``rest_s`` seconds (a ball
+    on the floor before its first kick, ``rally``'s start): ``position(t)`` is
+    ``motion.position(max(t - rest_s, 0))``; the duration grows by ``rest_s``."""
+    rest = float(rest_s)
+    if not np.isfinite(rest) or rest < 0:
+        raise InputError(f"rest must be >= 0 seconds, got {rest_s!r}")
+    if rest == 0:
+        return motion
+    base = motion.position
+
+    def position(t: np.ndarray) -> np.ndarray:
+        return base(np.maximum(np.asarray(t, dtype=np.float64) - rest, 0.0))
+
+    return Motion(motion.name, motion.duration + rest, position,
+                  f"{motion.description}, after {rest:g} s at rest")
+
+
 def get_motion(name: str) -> Motion:
     try:
         return MOTIONS[name]

@@ -512,6 +512,9 @@ def test_bad_input_is_one_line_and_exit_1(bad_files, cli, args, message):
     assert message in stderr
     assert stderr.startswith(f"pslog {args[0]}: error: ")
     assert stderr.count("\n") == 1 and "Traceback" not in stderr
+    if args[0] == "import":  # (the walk of session 37: "rest.csv: rest.csv: line 2: ...")
+        csv = args[args.index("--detections") + 1].format(d=bad_files)
+        assert stderr.count(csv) <= 1, stderr
     assert (bad_files / "exists.mcap").read_text() == "keep"
     assert not (bad_files / "x.mcap").exists()
 

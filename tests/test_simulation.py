@@ -433,3 +433,39 @@ def test_candidate_faults_refuse_cameras_and_points_out_of_the_rig():
     with pytest.raises(InputError, match="not in the view of any camera"):
         simulate(rig, get_motion("spiral"), None,
                  SimulationOptions(distractors=((None, (1.5, 1.0, 10.0)),)))
+
+
+def test_simulate_rest_lays_the_ball_still_before_its_motion(tmp_path, cli, capsys):
+    """``pslog simulate --rest S`` (session 37's walk: a robot-soccer ball lies still before
+    it is kicked, and no motion started at rest): the truth stands at the motion's start for
+    S seconds, then follows the motion shifted by S; the session lasts S longer; its source
+    says so; 0 leaves the motion as it is; a bad value is exit 2."""
+    from pslog.log import read_session
+    from pslog.motion import at_rest_first
+
+    rally = get_motion("rally")
+    path = tmp_path / "rest.mcap"
+    code, _out, err = cli("simulate", "--rig", "paper3", "--timing", "typeA", "--motion",
+                         "rally", "--duration", "2", "--rest", "0.4", "--distractor",
+                         "1,2,0.1", "--noise-px", "0.3", "--seed", 55010, "-o", path)
+    assert code == 0, err
+    session = read_session(path)
+    t = session.truth.time_ns / NS
+    assert 2.35 < t.max() <= 2.4
+    still = t <= 0.4
+    assert still.sum() >= 11
+    assert_allclose(session.truth.position_world[still],
+                    np.repeat(rally.position(np.zeros(1)), still.sum(), 0), atol=1e-12)
+    assert_allclose(session.truth.position_world[~still], rally.position(t[~still] - 0.4),
+                    atol=1e-12)
+    assert session.metadata["simulate.rest_s"] == "0.4"
+    assert at_rest_first(rally, 0.0) is rally
+    assert at_rest_first(rally, 0.5).duration == rally.duration + 0.5
+    for bad in ("-1", "nan", "1e9"):  # (argparse's refusals exit, usage_error's return)
+        try:
+            code, _, err = cli("simulate", "--rig", "paper3", "--rest", bad, "-o",
+                               tmp_path / "bad.mcap")
+        except SystemExit as exc:
+            code, err = exc.code, capsys.readouterr().err
+        assert code == 2 and "--rest" in err and err.count("\n") == 1, (bad, err)
+    assert not (tmp_path / "bad.mcap").exists()

@@ -578,3 +578,35 @@ def test_sync_table_shows_the_rigs_plan_and_an_ideal_stagger_only_where_one_exis
         assert not shown and "ideal" not in header[-1]
         assert "no ideal column: the cameras' frame rates differ (30, 60 fps)" in out
         assert "ideal: the type-A" not in out
+
+
+def test_a_synced_copy_synced_again_is_not_told_its_readouts_are_left_out(tmp_path, cli):
+    """Syncing a synced copy tests readouts against the rig's (the first sync's estimates,
+    kept when the test is below its level). Where its p-value was below 5 %, the note said
+    "a readout left out delays every point ... give their readouts in the rig": the rig
+    held them. It now names the readouts kept, and its suggestion, pasted, estimates them
+    again. (The walk's session: paper3 rally, 8 ms readouts, clock offsets, blobs, an object
+    every camera sees, misses, a blackout; seed 55001.)"""
+    session = tmp_path / "lab.mcap"
+    code, _, err = cli("simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "rally",
+                       "--noise-px", "0.3", "--clock-offset", "cam2=7.3", "--clock-offset",
+                       "cam3=-12", "--readout", "8", "--spurious", "0.1", "--distractor",
+                       "1.0,0.5,0.0", "--miss-rate", "0.05", "--blackout", "cam2=1.0:0.3",
+                       "--seed", 55001, "-o", session)
+    assert code == 0, err
+    once = tmp_path / "once.mcap"
+    assert cli("sync", session, "-o", once)[0] == 0
+    held = {c.name: c.readout for c in read_session(once).rig.cameras}
+    assert all(r > 0.004 for r in held.values()), held
+    code, out, err = cli("sync", once, "-o", tmp_path / "twice.mcap")
+    assert code == 0, err
+    assert "readouts not estimated" in out, out
+    assert ("below the 5 % level: the data suggest readouts other than the rig's, kept (cam1 "
+            f"{held['cam1'] * 1e3:.3f} ms, cam2 {held['cam2'] * 1e3:.3f} ms, cam3 "
+            f"{held['cam3'] * 1e3:.3f} ms): --estimate offset,readout estimates them again)"
+            ) in out, out
+    assert "a readout left out delays" not in out
+    code, out, err = cli("sync", once, "--estimate", "offset,readout", "-o",
+                         tmp_path / "again.mcap", "--json")
+    assert code == 0, err
+    assert json.loads(out)["estimated"] == ["offset", "readout"]

@@ -72,7 +72,10 @@ def test_cli_auto_keeps_a_readout_every_camera_shares_that_the_per_camera_test_m
     code, out, err = cli("sync", path, "-o", tmp_path / "t.mcap")
     assert code == 0, err
     assert "model (--estimate auto): offset, readout" in out
-    assert (f"readouts estimated: one readout per camera model (one model): Wald χ² "
+    # (what is estimated said before the tests: one readout per camera, the table's; the
+    # session-37 wording, "readouts estimated: one readout per camera model", read as one)
+    assert (f"readouts estimated, one per camera (a test above its threshold calls for them): "
+            f"one readout per camera model (one model): Wald χ² "
             f"{readout['shared_wald_chi2']:.1f} on 1 dof > 12.1; per camera: χ² "
             f"{readout['wald_chi2']:.1f} on 3 dof <= 17.7") in out, out
     print(f"one readout χ² {readout['shared_wald_chi2']:.1f}, per camera "

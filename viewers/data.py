@@ -257,6 +257,13 @@ def _safe_name(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]", "_", text)
 
 
+def _with_left_out(track: Track, left_out) -> Track:
+    """A stored ``track`` with its method's left-out counts (the session's ``left_out``,
+    what ``pslog fuse`` wrote and ``pslog eval`` lists) as its ``dropped``, as a track fused
+    on the fly has them: the summary panel counts them alike."""
+    return replace(track, dropped=dict(left_out)) if left_out and not track.dropped else track
+
+
 def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
                    methods: str | Sequence[str] | None = None, start: float | None = None,
                    end: float | None = None, detail: str | DetailChoice = "all") -> ViewData:
@@ -294,7 +301,8 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
                 raise InputError(f"{path} is given twice{spelled}: give each session file "
                                  f"once")
     session = read_session(paths[0])
-    tracks: dict[str, Track] = dict(session.tracks)
+    tracks: dict[str, Track] = {m: _with_left_out(t, session.left_out.get(m))
+                                for m, t in session.tracks.items()}
     rejections = dict(session.rejections)
     notes: list[str] = []
     for path in paths[1:]:
@@ -314,7 +322,7 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
                 name = new
             elif name in other.rejections:
                 rejections[name] = other.rejections[name]
-            tracks[name] = track
+            tracks[name] = _with_left_out(track, other.left_out.get(track.method))
 
     observations = timed_observations(session.detections, session.rig)
     wanted = parse_methods(methods)

@@ -156,6 +156,14 @@ def accuracy_text(data: ViewData) -> str:
             continue
         lines.append(f"| {method} | {a.n_points} | {a.rate_hz:.1f} | {a.median_mm:.1f} | "
                      f"{a.p95_mm:.1f} | {a.rms_mm:.1f} | {a.max_mm:.1f} |")
+    # the points each method made but left out (invalid or untrustworthy: e.g. doubt, the
+    # gate's choice in doubt, the start's unmoved one among them), over the whole session,
+    # as pslog fuse says and pslog eval lists them
+    left = [f"{m} " + ", ".join(f"{r} {n}" for r, n in sorted(t.dropped.items()) if n)
+            for m, t in data.tracks.items() if any(t.dropped.values())]
+    if left:
+        lines += ["", "left out over the whole session (as `pslog fuse` and `pslog eval` "
+                  "count them; `pslog eval` says why): " + "; ".join(left)]
     if notes:
         lines += ["", "points: those scored; not scored (as `pslog eval` counts them): "
                   + "; ".join(notes) + " (" + "; ".join(f"{r}: {NOT_SCORED_TEXT[r]}"

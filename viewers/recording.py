@@ -324,6 +324,15 @@ def _legend(data: ViewData, colors) -> str:
                   f"In 3D: {name(palette.CONSTRUCTION_COLOR)}, P(t-1), P(t-2) and the "
                   f"prediction P^(t) (eq. 2); {name(palette.SNAP_COLOR)}, its move onto the "
                   "ray (eq. 4). Hover a point for its label."]
+        # (a stored typeA track of --confirm-gaps breaks: its points made from the
+        # detections after them, span_s < 0, have no Figure 2: pslog fuse and eval count them)
+        span = data.tracks["typeA"].quality.get("span_s") if "typeA" in data.tracks else None
+        n_backward = 0 if span is None else int(np.count_nonzero(span < 0))
+        if n_backward:
+            lines[-1] += (f" {n_backward} typeA point{'s' if n_backward > 1 else ''} made "
+                          f"from the detections after {'them' if n_backward > 1 else 'it'} "
+                          "(--confirm-gaps breaks: span_s < 0, as pslog eval counts them) "
+                          f"{'have' if n_backward > 1 else 'has'} none.")
     return "\n".join(lines)
 
 

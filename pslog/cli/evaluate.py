@@ -67,6 +67,10 @@ def run(args: argparse.Namespace) -> int:
     # point (the prediction, the trajectory's), flagged ``rejected``
     rejected = {m: int(np.count_nonzero(session.tracks[m].quality["rejected"] == 1))
                 for m in methods if "rejected" in session.tracks[m].quality}
+    # type A's points made from the detections after them (--confirm-gaps breaks: the
+    # paper's construction spanned a break of smooth's fit; span_s < 0), scored with the rest
+    backward = {m: n for m in methods if "span_s" in session.tracks[m].quality
+                and (n := int(np.count_nonzero(session.tracks[m].quality["span_s"] < 0)))}
     if args.json:
         # NaN (a summary a track has no column for, or no truth) and ±inf (a zero
         # covariance's NEES) are null: strict JSON has neither
@@ -80,7 +84,9 @@ def run(args: argparse.Namespace) -> int:
                            "left_out": left_out.get(q.method, {}),
                            "not_scored": unscored[q.method],
                            **({"rejected_detections": rejected[q.method]}
-                              if q.method in rejected else {})}
+                              if q.method in rejected else {}),
+                           **({"backward_points": backward[q.method]}
+                              if q.method in backward else {})}
                           for r, q in zip(rows, quality, strict=True)]), indent=2,
                          allow_nan=False))
     else:
@@ -125,6 +131,15 @@ def run(args: argparse.Namespace) -> int:
                 print(f"{m:<9} {n} of {len(session.tracks[m])} points")
             for m in (m for m in REJECTED_TEXT if rejected.get(m)):
                 print(f"  {m}: {REJECTED_TEXT[m]}")
+        if backward:
+            print()
+            print("points made from the detections after them (--confirm-gaps breaks: the "
+                  "paper's construction, from the detections before, spanned a velocity "
+                  "break of smooth's fit; type A's point from the time-reversed detections "
+                  "replaced it; span_s < 0; in the tables with the rest, no Figure 2 in pslog "
+                  "view):")
+            for m, n in backward.items():
+                print(f"{m:<9} {n} of {len(session.tracks[m])} points")
     return 0
 
 

@@ -250,7 +250,8 @@ def run(args: argparse.Namespace) -> int:
     fusing = start_fusion(detections, rig, methods, options, workers=args.workers,
                           background=args.workers is None)
     del detections  # (held by the gating until the last form is gated)
-    written: dict[str, tuple[int, dict[str, int], int, int]] = {}  # points, left out, gated, flag
+    # points, left out, gated, flagged, made from the detections after them
+    written: dict[str, tuple[int, dict[str, int], int, int, int]] = {}
     empty: dict[str, dict[str, int]] = {}  # method: its left-out counts
     early: dict[str, int] = {}
     still: dict[str, int] = {}  # candidates rejected as a still object, by method
@@ -287,7 +288,12 @@ def run(args: argparse.Namespace) -> int:
                     # the filter's gate: flagged rejected), as pslog eval and view count them
                     flag = track.quality.get("rejected")
                     n_flagged = 0 if flag is None else int(np.count_nonzero(flag == 1))
-                    written[method] = (len(track), dropped, len(rejected), n_flagged)
+                    # type A's points from the detections after them (--confirm-gaps
+                    # breaks: span_s < 0), as pslog eval counts them
+                    span = track.quality.get("span_s")
+                    n_backward = 0 if span is None else int(np.count_nonzero(span < 0))
+                    written[method] = (len(track), dropped, len(rejected), n_flagged,
+                                       n_backward)
                     del track, rejected
             most = max(still.values(), default=0)
             if most > n_candidates / 2:
@@ -311,7 +317,7 @@ def run(args: argparse.Namespace) -> int:
         fusing.stop()  # no method starts after a failure or an interrupt
         raise
     for method in (m for m in methods if m in written):
-        n_points, dropped, n_rejected, n_flagged = written[method]
+        n_points, dropped, n_rejected, n_flagged, n_backward = written[method]
         why = ", ".join(f"{reason} {n}" for reason, n in dropped.items())
         rejected_text = (f"  {n_rejected:>6d} candidates rejected by gating"
                          if options.gating else "")
@@ -320,7 +326,12 @@ def run(args: argparse.Namespace) -> int:
               + (f" (left out, untrustworthy: {why})" if why else "")
               + (f"; {n_flagged} flagged rejected (its {what} rejected "
                  + ("their detections, the points kept)" if n_flagged > 1 else
-                    "its detection, the point kept)") if n_flagged else ""))
+                    "its detection, the point kept)") if n_flagged else "")
+              + (f"; {n_backward} {'points' if n_backward > 1 else 'point'} made from the "
+                 "detections after "
+                 + ("them" if n_backward > 1 else "it")
+                 + " (--confirm-gaps breaks: the paper's construction spanned a velocity "
+                 "break of smooth's fit; span_s < 0)" if n_backward else ""))
     print(f"wrote {output}")
     return 0
 

@@ -43,8 +43,9 @@ def run(args: argparse.Namespace) -> int:
     rig = resolve_rig(args.rig)
     if args.timing != "rig":
         rig = apply_timing(rig, args.timing)
+    read = read_detections_csv(args.detections, rig)  # (its errors name the file)
     try:
-        detections, origin_ns = session_clock(read_detections_csv(args.detections, rig))
+        detections, origin_ns = session_clock(read)
     except InputError as exc:  # (session_clock judges the times, not the file: name it)
         raise InputError(f"{args.detections}: {exc}") from None
     metadata = {CLOCK_ORIGIN_KEY: str(origin_ns)} if origin_ns else {}

@@ -108,6 +108,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="ball motion (default %(default)s)")
     parser.add_argument("--duration", type=positive_float, default=None, metavar="S",
                         help="seconds of motion (default: the motion's natural duration)")
+    parser.add_argument("--rest", type=nonnegative_float, default=0.0, metavar="S",
+                        help="seconds the ball lies still at the motion's start before it "
+                             "moves, added before --duration's (rally: on the floor before "
+                             "its first kick; default %(default)s)")
     parser.add_argument("--noise-px", type=noise_px, default=0.0, metavar="PX",
                         help="Gaussian detection noise per pixel axis, pixels, "
                              "at most 100 (default %(default)s)")
@@ -172,7 +176,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from pslog.errors import InputError
     from pslog.log import SessionWriter
-    from pslog.motion import get_motion
+    from pslog.motion import at_rest_first, get_motion
     from pslog.records import NS
     from pslog.rig import Rig, apply_timing, resolve_rig, timing_label
     from pslog.simulation import (
@@ -214,13 +218,19 @@ def run(args: argparse.Namespace) -> int:
                                 distractors=tuple(args.distractor),
                                 blackouts=tuple(args.blackout), **faults)
     duration = motion.duration if args.duration is None else args.duration
+    if args.rest:  # (the ball still first: the session longer by as much)
+        try:
+            motion = at_rest_first(motion, args.rest)
+        except InputError as exc:
+            return usage_error("simulate", f"argument --rest: {exc}")
+        duration += args.rest
     # command-line values too large for this rig: exit 2, as argparse's own refusals
     for option, check, value in (
             ("--jitter-ms", check_jitter, args.jitter_ms / 1e3),
             ("--host-jitter", lambda r, v: check_jitter(r, v, "host jitter"),
              args.host_jitter / 1e3),
             ("--noise-px", check_noise, args.noise_px),
-            ("--duration", check_duration, duration)):
+            ("--duration" + ("/--rest" if args.rest else ""), check_duration, duration)):
         try:
             check(rig, value)
         except InputError as exc:
@@ -266,6 +276,8 @@ def run(args: argparse.Namespace) -> int:
     candidate_faults = {k: v for k, v in (
         ("spurious", args.spurious), ("distractors", args.distractor),
         ("blackouts", args.blackout)) if v}
+    if args.rest:
+        settings["rest_s"] = repr(args.rest)
     if args.spurious:
         settings["spurious_rate"] = repr(args.spurious)
         settings["spurious_radius_px"] = repr(args.spurious_radius)

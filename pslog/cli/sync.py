@@ -126,8 +126,21 @@ def _choice(result) -> str:
     lines = [f"model (--estimate auto): {', '.join(result.estimated)}"]
     for t in result.selection:
         plural = {"readout": "readouts", "drift": "drifts"}[t.parameter]
-        lines.append(f"  {plural} {'estimated' if t.kept else 'not estimated'}: {t.reason}")
-        if t.parameter == "readout" and not t.kept and t.p_value < SUGGESTIVE_LEVEL:
+        # (the nested test of one readout per camera model beside the per-camera one:
+        # either calls for readouts, which are then estimated one per camera, the table's)
+        what = ("estimated, one per camera (a test above its threshold calls for them)"
+                if t.kept and t.parameter == "readout" and t.shared_dof else
+                "estimated" if t.kept else "not estimated")
+        lines.append(f"  {plural} {what}: {t.reason}")
+        held = [(c.name, float(c.readout)) for c in result.rig.cameras if c.readout]
+        if t.parameter == "readout" and not t.kept and t.p_value < SUGGESTIVE_LEVEL and held:
+            # (a rig that holds readouts, e.g. a synced copy synced again: the test is of
+            # readouts other than those, kept, not of rolling shutters left out)
+            lines.append(f"    (p = {t.p_value:.2g}, below the {SUGGESTIVE_LEVEL * 100:g} % "
+                         "level: the data suggest readouts other than the rig's, kept ("
+                         + ", ".join(f"{n} {r * 1e3:.3f} ms" for n, r in held)
+                         + "): --estimate offset,readout estimates them again)")
+        elif t.parameter == "readout" and not t.kept and t.p_value < SUGGESTIVE_LEVEL:
             # (session 35: a readout every camera shares, the ball in a band of rows,
             # shows weakly; unestimated, it delays every point by the readout times the
             # ball's mean row over the height: 8 ms on paper3 left smooth's track ~6 ms late)
