@@ -89,7 +89,7 @@ def test_the_starts_doubt_is_explained_and_counted_alike(tmp_path, cli):
     assert code == 0, err
     said = {m.group(1): (int(m.group(2)), dict((r, int(n)) for r, n in re.findall(
                 r"(\w+) (\d+)", m.group(3) or "")))
-            for m in re.finditer(r"^(\w+) +(\d+) points +\d+ candidates rejected by gating"
+            for m in re.finditer(r"^(\w+) +(\d+) points +\d+ candidates? rejected by gating"
                                  r"(?: \(left out, untrustworthy: ([^)]*)\))?", out, re.M)}
     assert sum(left.get("doubt", 0) for _, left in said.values()) > 0, out
     code, text, err = cli("eval", fused, "--json")

@@ -319,8 +319,8 @@ def run(args: argparse.Namespace) -> int:
     for method in (m for m in methods if m in written):
         n_points, dropped, n_rejected, n_flagged, n_backward = written[method]
         why = ", ".join(f"{reason} {n}" for reason, n in dropped.items())
-        rejected_text = (f"  {n_rejected:>6d} candidates rejected by gating"
-                         if options.gating else "")
+        rejected_text = (f"  {n_rejected:>6d} candidate{'' if n_rejected == 1 else 's'} "
+                         "rejected by gating" if options.gating else "")
         what = {"smooth": "fit", "filter": "gate"}.get(method, "method")
         print(f"{method:<8} {n_points:>7d} points{rejected_text}"
               + (f" (left out, untrustworthy: {why})" if why else "")
