@@ -94,6 +94,10 @@ def test_cli_auto_ties_a_readout_every_camera_shares_and_lands_closer(tmp_path, 
                           "offset,readout=shared")
     assert explicit["shared_readout"] and explicit["selection"] is None
     assert explicit["cameras"] == auto["cameras"]
+    code, out, err = cli("sync", path, "-o", tmp_path / "ex2.mcap", "--force", "--estimate",
+                         "offset,readout=shared")
+    assert code == 0, err
+    assert "readouts: one per camera model (readout=shared)" in out, out
     code, out, err = cli("sync", path, "-o", tmp_path / "t.mcap", "--force")
     assert code == 0, err
     assert "model (--estimate auto): offset, readout (one readout per camera model)" in out
