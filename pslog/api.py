@@ -230,10 +230,14 @@ def sync(session: Session | str | os.PathLike[str],
     session : a :class:`Session` or its path
     estimate : ``"auto"`` (default: offsets, plus readouts and, on sessions of 30 s or more,
         drifts where a Wald test at the 0.1 % level says the data support them (readouts
-        per camera and, for cameras of one model, one shared, each at half the level);
+        per camera and, for cameras of one model, one shared, each at half the level; a
+        shared one kept is estimated one per model unless the cameras' estimates differ at
+        5 %);
         ``result.selection`` holds the tests, :func:`pslog.estimation.sync.select_clocks`),
         or clock parameters among ``offset``, ``drift``, ``readout``: a name, a
-        comma-separated string (``"offset,drift"``) or a sequence of names
+        comma-separated string (``"offset,drift"``) or a sequence of names;
+        ``readout=shared`` instead of ``readout``: one readout per camera model (same image
+        size and frame rate), every camera of a model taking it
     search_s : scan each offset over ±search_s seconds around the rig's value (default half
         a frame period)
     regularize : ``auto``, ``on`` or ``off``
@@ -243,7 +247,7 @@ def sync(session: Session | str | os.PathLike[str],
     pslog.errors.FusionError : no detection, or the estimate failed (with the likely cause)
     """
     from . import progress
-    from .estimation.sync import PARAMETERS, estimate_clocks
+    from .estimation.sync import PARAMETERS, SHARED_READOUT, estimate_clocks
     from .rig import check_baselines
     from .timing import REGULARIZE_AUTO_JITTER_S, regularize_detections, regularize_times
 
@@ -251,9 +255,11 @@ def sync(session: Session | str | os.PathLike[str],
         wanted_params = _names(estimate, "estimate")
     except InputError as exc:
         raise InputError(f"{exc} among {', '.join(PARAMETERS)}") from None
-    bad = [p for p in wanted_params or () if p not in PARAMETERS]
+    bad = [p for p in wanted_params or () if p not in (*PARAMETERS, SHARED_READOUT)]
     if wanted_params == ["auto"]:
         bad = []
+    if {"readout", SHARED_READOUT} <= set(wanted_params or ()):
+        bad = [SHARED_READOUT]  # one readout per model, or one per camera: not both
     if bad or not wanted_params:
         raise InputError(f"estimate {estimate!r}: 'auto', or name parameters among "
                          f"{', '.join(PARAMETERS)} (not {', '.join(map(repr, bad))})")

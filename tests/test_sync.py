@@ -121,7 +121,8 @@ def test_cli_json_table_and_the_synced_copy(tmp_path, cli, capsys):
         cli("sync", "--help")
     assert stop.value.code == 0
     help_text = " ".join(capsys.readouterr().out.split())
-    assert set(report) == {"cameras", "residual_px", "estimated", "selection"}
+    assert set(report) == {"cameras", "residual_px", "estimated", "shared_readout",
+                           "selection"}
     assert all(key in help_text for key in report), help_text
     keys = {"name", "offset_s", "offset_std_s", "drift_ppm", "drift_std_ppm", "readout_s",
             "readout_std_s"}

@@ -83,15 +83,18 @@ def test_cli_auto_keeps_a_readout_every_camera_shares_that_the_per_camera_test_m
 
 
 def test_the_shared_statistic_is_the_wald_statistic_of_one_readout(tmp_path, cli):
-    """The figures against the synced copy's own estimates and covariance (``clock_std``):
-    the per-camera statistic is dᵀΣ⁻¹d over the three readouts, the shared one the squared
-    GLS estimate of one readout over its variance, (1ᵀΣ⁻¹d)² / 1ᵀΣ⁻¹1 — an independent form
-    of dᵀΣ⁻¹G(GᵀΣ⁻¹G)⁻¹GᵀΣ⁻¹d for one model. Fails if the shared statistic leaves out the
-    readouts' correlations or weighs the cameras otherwise."""
+    """The figures against the per-camera fit's own estimates and covariance (the
+    ``clock_std`` of ``--estimate offset,readout``, auto's wide fit: auto itself then ties
+    the readouts, tests/test_sync_tied_readout.py): the per-camera statistic is dᵀΣ⁻¹d over
+    the three readouts, the shared one the squared GLS estimate of one readout over its
+    variance, (1ᵀΣ⁻¹d)² / 1ᵀΣ⁻¹1 — an independent form of dᵀΣ⁻¹G(GᵀΣ⁻¹G)⁻¹GᵀΣ⁻¹d for one
+    model. Fails if the shared statistic leaves out the readouts' correlations or weighs the
+    cameras otherwise."""
     path = tmp_path / "shared.mcap"
     _simulate(cli, path, KEEP_SEED, 6)
-    synced = tmp_path / "auto.mcap"
-    report = _sync_json(cli, path, synced)
+    report = _sync_json(cli, path, tmp_path / "auto.mcap")
+    synced = tmp_path / "wide.mcap"
+    _sync_json(cli, path, synced, "--estimate", "offset,readout")
     (readout,) = [t for t in report["selection"] if t["parameter"] == "readout"]
     stored = json.loads(read_session(synced).metadata["clock_std"])
     names = stored["covariance"]["parameters"]

@@ -9,16 +9,17 @@ from ._common import add_force, declare_files, number_at_most
 
 
 def _estimate_list(text: str) -> tuple[str, ...]:
-    from pslog.estimation.sync import PARAMETERS
+    from pslog.estimation.sync import PARAMETERS, SHARED_READOUT
 
     names = tuple(dict.fromkeys(p.strip() for p in text.split(",") if p.strip()))
     if names == ("auto",):
         return names
-    bad = [p for p in names if p not in PARAMETERS]
-    if not names or bad:
+    bad = [p for p in names if p not in (*PARAMETERS, SHARED_READOUT)]
+    if not names or bad or {"readout", SHARED_READOUT} <= set(names):
         raise argparse.ArgumentTypeError(
             f"{text!r}: 'auto', or name parameters among {', '.join(PARAMETERS)} "
-            f"(comma-separated)")
+            f"(comma-separated; {SHARED_READOUT} instead of readout: one readout per "
+            f"camera model)")
     return names
 
 
@@ -31,8 +32,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="clock parameters to estimate: auto (offsets; readouts, and "
                              "drifts on sessions of 30 s or more, each kept when a Wald "
                              "chi-square test at the 0.1 %% level says the data support "
-                             "them: the table says which and why), or a comma-separated list "
-                             "of offset, drift, readout, estimated as given (default: auto)")
+                             "them: the table says which and why; readouts one per camera "
+                             "model when its cameras' do not differ), or a comma-separated "
+                             "list of offset, drift, readout, estimated as given; "
+                             "readout=shared instead of readout estimates one readout per "
+                             "camera model (same image size and frame rate) (default: auto)")
     # the scan steps by 1 ms: a minute is 1.2e5 costs per camera, 1e308 ms no array at all
     parser.add_argument("--search-ms", type=number_at_most(6e4, "ms", "a minute",
                                                            positive=True),
@@ -46,7 +50,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true",
                         help="print one JSON object instead of the table: cameras (rig "
                              "order: each estimate and its standard deviation), residual_px, "
-                             "estimated (the parameters) and selection (--estimate auto: each "
+                             "estimated (the parameters), shared_readout (one readout per "
+                             "camera model) and selection (--estimate auto: each "
                              "test's statistic and verdict; else null); the notes (e.g. host "
                              "stamps regularized) on stderr")
     add_force(parser)
@@ -89,13 +94,17 @@ def run(args: argparse.Namespace) -> int:
              "drift_ppm": c.drift_ppm, "drift_std_ppm": c.drift_std_ppm,
              "readout_s": c.readout_s, "readout_std_s": c.readout_std_s}
             for c in result.cameras], "residual_px": result.residual_px,
-            "estimated": list(estimated), "selection": selection}))
+            "estimated": list(estimated), "shared_readout": result.shared_readout,
+            "selection": selection}))
         return 0
     for note in outcome.notes:
         print(note)
     print(_table(result, outcome.observations, estimated))
     if auto:
         print(_choice(result))
+    elif result.shared_readout:
+        print("readouts: one per camera model (readout=shared): its cameras share the "
+              "value and its standard deviation")
     print(_legend(estimated, auto, result.rig))
     print(f"residual {result.residual_px:.3f} px (pixel noise {result.noise_px:.3f} px); "
           f"wrote {args.output}")
@@ -113,7 +122,9 @@ def _test_json(test) -> dict:
             "wald_chi2": number(test.statistic), "dof": test.dof,
             "threshold": number(test.threshold), "p_value": number(test.p_value),
             "reason": test.reason, "shared_wald_chi2": number(test.shared_statistic),
-            "shared_dof": test.shared_dof, "shared_threshold": number(test.shared_threshold)}
+            "shared_dof": test.shared_dof, "shared_threshold": number(test.shared_threshold),
+            "equal_wald_chi2": number(test.equal_statistic), "equal_dof": test.equal_dof,
+            "equal_threshold": number(test.equal_threshold), "tied": bool(test.tied)}
 
 
 #: ``--estimate auto``: a readout test whose p-value is below this level (above the 0.1 %
@@ -123,7 +134,8 @@ SUGGESTIVE_LEVEL = 0.05
 
 def _choice(result) -> str:
     """``--estimate auto``: the model chosen and each test's figure."""
-    lines = [f"model (--estimate auto): {', '.join(result.estimated)}"]
+    lines = [f"model (--estimate auto): {', '.join(result.estimated)}"
+             + (" (one readout per camera model)" if result.shared_readout else "")]
     for t in result.selection:
         plural = {"readout": "readouts", "drift": "drifts"}[t.parameter]
         # (the nested test of one readout per camera model beside the per-camera one:

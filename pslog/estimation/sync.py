@@ -69,6 +69,9 @@ from .trajectory import (
 )
 
 PARAMETERS = ("offset", "drift", "readout")
+#: In an ``estimate`` list instead of ``readout``: one readout per camera model
+#: (:func:`camera_models`), every camera of a model taking its value.
+SHARED_READOUT = "readout=shared"
 #: Each parameter's rig camera key (:data:`pslog.timing.CLOCK_KEYS`).
 RIG_KEY = {"offset": "clock_offset", "drift": "clock_drift_ppm", "readout": "readout"}
 #: Fewest detections a camera needs (with camera 1's in the same stretches) to be synced.
@@ -90,6 +93,13 @@ _ROUNDS = 8
 #: cameras of one model are tested twice (one readout per model; per camera), each test at
 #: half of it.
 AUTO_LEVEL = 1e-3
+#: ``estimate="auto"``: readouts the nested test keeps are estimated one per camera model
+#: unless the Wald test of equal readouts within each model rejects at this level (5 %, not
+#: :data:`AUTO_LEVEL`: a wrong tie is a wrong model — a rolling camera tied to global ones
+#: of its size — and cost smooth 1-3 mm and a NEES of 2.7-5.6 where a missed one costs the
+#: per-camera estimate's spread; at 0.1 % 13 of 50 held-out sessions with readouts that
+#: differ within a model were tied, at 5 % 3; docs/timing.md)
+TIE_LEVEL = 0.05
 #: ``estimate="auto"`` tries drifts on sessions at least this long (seconds): a drift of
 #: d ppm moves a camera by d · 1e-6 · T, below the offsets' σ on shorter ones.
 AUTO_DRIFT_MIN_S = 30.0
@@ -145,6 +155,13 @@ class ModelTest:
         made (drifts; or every camera a model of its own: it would be the same test)
     shared_dof : the models' count (0 when not made)
     shared_threshold : the χ² quantile at half of :data:`AUTO_LEVEL` (NaN when not made)
+    equal_statistic : readouts kept by the nested test: the Wald χ² of equal readouts within
+        each model, ``(Aθ̂)ᵀ(AΣAᵀ)⁻¹(Aθ̂)`` (``A``: each camera's readout minus its model's
+        first camera's); NaN when not made
+    equal_dof : k - g (0 when not made)
+    equal_threshold : the χ² quantile at :data:`TIE_LEVEL` (NaN when not made)
+    tied : the readouts estimated one per camera model (:data:`SHARED_READOUT`): the nested
+        test rejected the rig's values and the equality test did not reject
     """
 
     parameter: str
@@ -157,13 +174,21 @@ class ModelTest:
     shared_statistic: float = float("nan")
     shared_dof: int = 0
     shared_threshold: float = float("nan")
+    equal_statistic: float = float("nan")
+    equal_dof: int = 0
+    equal_threshold: float = float("nan")
+    tied: bool = False
 
 
 @dataclass(frozen=True)
 class SyncResult:
     """:func:`estimate_clocks`' result: per camera in rig order, the rig holding the estimates,
     the overall RMS residual (px) and the estimated pixel noise σ (px); ``estimated`` the
-    parameters estimated, ``selection`` (``estimate="auto"``) the tests that chose them."""
+    parameters estimated, ``selection`` (``estimate="auto"``) the tests that chose them;
+    ``unknowns`` (camera, parameter) per row of ``covariance`` (rig's parametrisation);
+    ``shared_readout``: one readout estimated per camera model (:data:`SHARED_READOUT`),
+    each camera holding its model's value and ``covariance`` its rows (identical within a
+    model: singular, positive semi-definite)."""
 
     cameras: tuple[ClockEstimate, ...]
     rig: Rig
@@ -173,6 +198,7 @@ class SyncResult:
     selection: tuple[ModelTest, ...] = ()
     unknowns: tuple[tuple[int, str], ...] = ()
     covariance: np.ndarray | None = None
+    shared_readout: bool = False
 
     def clock_covariance(self) -> ClockCovariance | None:
         """The estimates' joint covariance as :class:`pslog.timing.ClockCovariance` (what
@@ -204,7 +230,8 @@ def estimate_clocks(obs: Observations, rig: Rig, estimate=("offset",),
     moves that camera's times together, so it is added to the standard deviations (camera
     1's line moves the session clock, hence every other camera's offset and drift).
 
-    ``estimate="auto"`` (or ``("auto",)``) chooses the model (:func:`select_clocks`).
+    ``estimate="auto"`` (or ``("auto",)``) chooses the model (:func:`select_clocks`);
+    :data:`SHARED_READOUT` in the list estimates one readout per camera model.
 
     Raises
     ------
@@ -225,7 +252,9 @@ def estimate_clocks(obs: Observations, rig: Rig, estimate=("offset",),
 def _estimate_clocks(obs: Observations, rig: Rig, estimate, search_s: float | None,
                      options: SmoothOptions | None, regularized) -> SyncResult:
     options = options or SmoothOptions()
-    estimate = tuple(p for p in PARAMETERS if p in set(estimate))
+    shared = SHARED_READOUT in set(estimate)
+    estimate = tuple(p for p in PARAMETERS
+                     if p in set(estimate) or (p == "readout" and shared))
     if len(rig) < 2:
         raise FusionError(f"sync needs at least two cameras (one camera cannot triangulate); "
                           f"rig has {len(rig)}")
@@ -241,15 +270,24 @@ def _estimate_clocks(obs: Observations, rig: Rig, estimate, search_s: float | No
 
     obs = _windows(obs)
     logged = obs.time_ns / NS
-    params = _Clocks(rig, unknowns, 0.5 * float(logged.min() + logged.max()))
+    tie = None
+    if shared:  # one readout per camera model: the readouts' unknowns numbered by model
+        readouts = [j for j, (_, p) in enumerate(unknowns) if p == "readout"]
+        models = camera_models(rig, [unknowns[j][0] for j in readouts])
+        key = [("own", j) for j in range(len(unknowns))]
+        for j, g in zip(readouts, models, strict=True):
+            key[j] = ("model", int(g))
+        first = list(dict.fromkeys(key))
+        tie = np.array([first.index(k) for k in key])
+    params = _Clocks(rig, unknowns, 0.5 * float(logged.min() + logged.max()), tie)
     theta = params.to_internal(np.array([float(getattr(rig.cameras[c], RIG_KEY[p]))
                                          for c, p in unknowns]))
     if "offset" in estimate:
-        theta = _scan_offsets(obs, rig, unknowns, theta, params, search_s, options)
+        theta = _scan_offsets(obs, rig, params.reduced, theta, params, search_s, options)
 
     # rounds: the bounces are found (and their instants fixed) at the clocks of the round
     # before, then the clocks and the trajectory solved jointly, until the clocks settle
-    scale = _scale_of(unknowns)
+    scale = _scale_of(params.reduced)
     previous_step = None
     for _ in range(_ROUNDS):
         before = theta
@@ -258,8 +296,8 @@ def _estimate_clocks(obs: Observations, rig: Rig, estimate, search_s: float | No
         step = (theta - before) * scale
         if np.max(np.abs(step), initial=0.0) < 2e-6:
             break  # the clocks no longer move the breaks: converged
-        std_now = np.sqrt(np.maximum(np.diag(np.linalg.inv(S[:n_t, :n_t]))[:len(unknowns)],
-                                     0.0))
+        std_now = np.sqrt(np.maximum(
+            np.diag(np.linalg.inv(S[:n_t, :n_t]))[:len(params.reduced)], 0.0))
         if np.all(np.abs(theta - before) < 0.05 * std_now):
             break  # further rounds would move the clocks by a negligible part of their σ
         if previous_step is not None:
@@ -273,9 +311,10 @@ def _estimate_clocks(obs: Observations, rig: Rig, estimate, search_s: float | No
                 continue
         previous_step = step
     cam = obs.camera[problem.rows]
-    q = len(unknowns)
+    q = len(params.reduced)
     # the clocks' covariance with the trajectory and the breaks' instants marginalised, in
-    # the rig's parametrisation
+    # the rig's parametrisation (T: every unknown's; a tied readout's rows are one, so the
+    # matrix is then singular: the cameras' readouts are one parameter)
     T = params.to_external_matrix()
     if q:
         cov_t = np.linalg.inv(S[:n_t, :n_t])
@@ -286,7 +325,7 @@ def _estimate_clocks(obs: Observations, rig: Rig, estimate, search_s: float | No
         cov = T @ cov[:q, :q] @ T.T
         cov = (cov + cov.T) / 2  # (exactly symmetric: the products leave ~1e-14 of σ_i σ_j)
     else:
-        cov = np.zeros((0, 0))
+        cov = np.zeros((len(unknowns), len(unknowns)))
     theta = params.to_external(theta)
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
 
@@ -314,7 +353,8 @@ def _estimate_clocks(obs: Observations, rig: Rig, estimate, search_s: float | No
                                        clock_drift_ppm=values["drift"], readout=readout))
     return SyncResult(tuple(estimates), Rig(tuple(new_cams), rig.name),
                       float(np.sqrt(np.mean(norms[inlier] ** 2))), float(sigma),
-                      estimated=estimate, unknowns=tuple(unknowns), covariance=cov)
+                      estimated=estimate, unknowns=tuple(unknowns), covariance=cov,
+                      shared_readout=bool(shared and "readout" in estimate))
 
 
 def select_clocks(obs: Observations, rig: Rig, search_s: float | None = None,
@@ -331,11 +371,15 @@ def select_clocks(obs: Observations, rig: Rig, search_s: float | None = None,
     Readouts of a rig with cameras of one model (:func:`camera_models`) are tested first as
     the nested hypothesis of one readout per model (identical webcams; g dof for g models,
     where the per-camera test has one per camera: more power for a readout they share) and
-    per camera, each at half the level (Bonferroni); kept if either rejects, estimated per
-    camera. When one is dropped the model without it is fitted (two fits), else the first fit is the
-    result (one fit). A parameter the ball's motion does not determine (the wide fit fails
-    with it: then offsets and readouts without drifts are tried) is dropped without a figure,
-    its reason the fit's message."""
+    per camera, each at half the level (Bonferroni); kept if either rejects. Readouts the
+    nested test keeps are estimated one per model (:data:`SHARED_READOUT`: one parameter the
+    data determine where the per-camera ones correlate with the offsets) unless the Wald test
+    of equal readouts within each model (k - g dof, at :data:`TIE_LEVEL`) rejects; else per
+    camera.
+    When one is dropped, or the readouts are tied, the model chosen is fitted (two fits),
+    else the first fit is the result (one fit). A parameter the ball's motion does not
+    determine (the wide fit fails with it: then offsets and readouts without drifts are
+    tried) is dropped without a figure, its reason the fit's message."""
     options = options or SmoothOptions()
     from scipy.stats import chi2
 
@@ -395,20 +439,48 @@ def select_clocks(obs: Observations, rig: Rig, search_s: float | None = None,
             p_value = min(1.0, 2 * min(float(chi2.sf(w, k)), float(chi2.sf(ws, g))))
             kept = w > threshold or ws > shared_threshold
             n_models = "one model" if g == 1 else f"{g} models"
-            tests.append(ModelTest(
-                p, w, k, threshold, p_value, kept,
-                f"one readout per camera model ({n_models}): Wald χ² {ws:.1f} on {g} dof "
-                + (">" if ws > shared_threshold else "<=") + f" {shared_threshold:.1f}; "
-                f"per camera: χ² {w:.1f} on {k} dof " + (">" if w > threshold else "<=")
-                + f" {threshold:.1f} (each at half the {AUTO_LEVEL * 100:g} % level)",
-                ws, g, shared_threshold))
+            reason = (f"one readout per camera model ({n_models}): Wald χ² {ws:.1f} on {g} "
+                      "dof " + (">" if ws > shared_threshold else "<=")
+                      + f" {shared_threshold:.1f}; per camera: χ² {w:.1f} on {k} dof "
+                      + (">" if w > threshold else "<=") + f" {threshold:.1f} (each at "
+                      f"half the {AUTO_LEVEL * 100:g} % level)")
+            equal = equal_threshold = float("nan")
+            tie = False
+            if kept and ws > shared_threshold:
+                # the model's readouts kept: estimated as one per model (a parameter the
+                # data determine where k free ones correlate with the offsets) unless the
+                # cameras of a model differ: the Wald test of equal readouts within each
+                # model, (Aθ̂)ᵀ(AΣAᵀ)⁻¹(Aθ̂) on k - g dof (A: each camera's readout minus
+                # its model's first camera's), at TIE_LEVEL
+                A = np.zeros((k - g, k))
+                row = 0
+                for c in range(k):
+                    first = int(np.flatnonzero(models == models[c])[0])
+                    if first != c:
+                        A[row, c], A[row, first] = 1.0, -1.0
+                        row += 1
+                e = A @ x
+                equal = float(e @ np.linalg.lstsq(A @ cov @ A.T, e, rcond=None)[0])
+                equal_threshold = float(chi2.isf(TIE_LEVEL, k - g))
+                tie = not equal > equal_threshold
+                reason += (f"; equal within each model: χ² {equal:.1f} on {k - g} dof "
+                           + ("<=" if tie else ">") + f" {equal_threshold:.1f} (the "
+                           f"{TIE_LEVEL * 100:g} % level): "
+                           + ("one readout per model" if tie else "per camera"))
+            tests.append(ModelTest(p, w, k, threshold, p_value, kept, reason, ws, g,
+                                   shared_threshold, equal,
+                                   k - g if np.isfinite(equal) else 0, equal_threshold,
+                                   tie))
         if kept:
             keep.append(p)
     chosen = tuple(p for p in PARAMETERS if p in keep)
-    if full is not None and set(chosen) == set(full.estimated):
+    tied = any(t.tied for t in tests)
+    if full is not None and set(chosen) == set(full.estimated) and not tied:
         result = full
     else:
-        result = estimate_clocks(obs, rig, chosen, search_s, options, regularized)
+        result = estimate_clocks(obs, rig, tuple(SHARED_READOUT if tied and p == "readout"
+                                                 else p for p in chosen),
+                                 search_s, options, regularized)
     return replace(result, selection=tuple(tests))
 
 
@@ -481,9 +553,11 @@ def _solve_joint(obs, rig, unknowns, theta, params, options, regularized=None):
     jac = params.jacobian(logged_s[rows], obs.uv[rows, 1], cam)
     for j, (c, p) in enumerate(unknowns):
         dt_dtheta[:, j] = np.where(cam == c, jac[:, PARAMETERS.index(p)], 0.0)
+    dt_dtheta = dt_dtheta @ params.M  # a tied parameter moves each of its cameras' times
+    estimated = params.reduced
     for _ in range(_ITERATIONS):
         control, theta, sigma, r, w, J, S, moved = _joint_step(
-            problem, solver, obs, unknowns, theta, params, control, sigma, dt_dtheta, t0)
+            problem, solver, obs, estimated, theta, params, control, sigma, dt_dtheta, t0)
         if any(len(b) for b in breaks):
             # the bounces' instants follow the clocks (they are on the session clock, which
             # the clocks map the detections onto)
@@ -508,7 +582,7 @@ def _solve_joint(obs, rig, unknowns, theta, params, options, regularized=None):
     # σ corrected for the degrees of freedom the fit absorbs; the covariance there
     _, dof, _ = _information(problem, control, sigma, r, J)
     control, theta, sigma, r, w, J, S, _ = _joint_step(
-        problem, solver, obs, unknowns, theta, params, control, sigma,
+        problem, solver, obs, estimated, theta, params, control, sigma,
         np.c_[dt_dtheta, extra], t0, dof, break_cols, n_extra=extra.shape[1])
     # the covariance's pixel noise: the RMS of the inlying residuals corrected for the degrees
     # of freedom the fit absorbs (the median-based σ that weighs the solve is robust but
@@ -522,7 +596,7 @@ def _solve_joint(obs, rig, unknowns, theta, params, options, regularized=None):
                         options.min_noise_px)
         S = S * (sigma / sigma_cov) ** 2
         sigma = sigma_cov
-    return problem, control, theta, sigma, r, w, S, len(unknowns) + len(break_cols)
+    return problem, control, theta, sigma, r, w, S, len(estimated) + len(break_cols)
 
 
 def _nuisance_covariance(rig, regularized) -> np.ndarray:
@@ -601,13 +675,24 @@ class _Clocks:
     strongly correlated and Gauss–Newton crawls along their valley; here they are nearly
     independent. ``o'_c = o_c + d_c · 1e-6 · ℓ_m + (r_c - r_1) / 2`` (camera 1's ``o'`` is 0)."""
 
-    def __init__(self, rig: Rig, unknowns, l_mid: float):
+    def __init__(self, rig: Rig, unknowns, l_mid: float, tie=None):
         p = camera_parameters(rig)
         self.height = p["height"]
         self.unknowns, self.l_mid = list(unknowns), l_mid
         self.base = self._internal(np.stack([p["clock_offset"], p["clock_drift_ppm"],
                                              p["readout"]], axis=1))
         self.index = [(c, PARAMETERS.index(name)) for c, name in self.unknowns]
+        # tied parameters (one readout per camera model): ``tie`` (q,) numbers each unknown
+        # by the estimated parameter it takes, in order of first appearance (None: its own);
+        # ``M`` (q, m) expands the m estimated to the q unknowns (0/1: readouts are the same
+        # internally and in the rig's parametrisation, so a tie is one in either)
+        q = len(self.unknowns)
+        tie = np.arange(q) if tie is None else np.asarray(tie, dtype=np.int64)
+        self.M = (tie[:, None] == np.arange(int(tie.max(initial=-1)) + 1)[None, :]
+                  ).astype(np.float64)
+        #: the estimated parameters, each named by its first unknown
+        self.reduced = [self.unknowns[int(np.flatnonzero(self.M[:, j])[0])]
+                        for j in range(self.M.shape[1])]
 
     def _internal(self, ext: np.ndarray) -> np.ndarray:
         o, d, r = ext.T
@@ -619,27 +704,31 @@ class _Clocks:
 
     def _full(self, theta: np.ndarray) -> np.ndarray:
         inn = self.base.copy()
-        for (c, k), value in zip(self.index, theta, strict=True):
+        for (c, k), value in zip(self.index, self.M @ theta, strict=True):
             inn[c, k] = value
         return inn
 
     def to_internal(self, theta_ext: np.ndarray) -> np.ndarray:
+        """The estimated parameters (m,) from every unknown's value in the rig's
+        parametrisation (q,) (a tied one: the mean of its unknowns')."""
         ext = self._external(self.base)
         for (c, k), value in zip(self.index, theta_ext, strict=True):
             ext[c, k] = value
         inn = self._internal(ext)
-        return np.array([inn[c, k] for c, k in self.index])
+        full = np.array([inn[c, k] for c, k in self.index])
+        return (self.M.T @ full) / np.maximum(self.M.sum(axis=0), 1.0)
 
     def to_external(self, theta: np.ndarray) -> np.ndarray:
+        """Every unknown's value (q,) in the rig's parametrisation from the estimated (m,)."""
         ext = self._external(self._full(theta))
         return np.array([ext[c, k] for c, k in self.index])
 
     def to_external_matrix(self) -> np.ndarray:
-        """``∂θ_rig / ∂θ`` (the map is affine)."""
-        q = len(self.index)
-        zero = self.to_external(np.zeros(q))
-        return np.stack([self.to_external(np.eye(q)[j]) - zero for j in range(q)], axis=1) \
-            if q else np.zeros((0, 0))
+        """``∂θ_rig / ∂θ`` (q, m) (the map is affine)."""
+        q, m = self.M.shape
+        zero = self.to_external(np.zeros(m))
+        return np.stack([self.to_external(np.eye(m)[j]) - zero for j in range(m)], axis=1) \
+            if m else np.zeros((q, 0))
 
     def times(self, obs: Observations, theta: np.ndarray) -> np.ndarray:
         """Capture times τ (s) of every observation on the estimator's clock."""
