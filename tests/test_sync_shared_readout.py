@@ -148,7 +148,7 @@ def test_the_shared_statistic_of_two_models_is_the_drop_in_the_wald_distance(tmp
     and ``W_s`` is on 2 dof. Against an independent form of the statistic, the drop of the
     Σ⁻¹ distance from the rig's readouts when the readouts may be any ``Gβ``,
     ``W_s = dᵀΣ⁻¹d − min_β (d − Gβ)ᵀΣ⁻¹(d − Gβ)``, read from the synced copy's own estimates
-    and covariance (W 40.9, W_s 40.7). Fails if ``G`` groups the cameras otherwise (cam1
+    and covariance (W 40.9, W_s 40.7) — ``--estimate offset,readout``'s, auto's wide fit. Fails if ``G`` groups the cameras otherwise (cam1
     with cam3: W_s 38.5), or as one model or as three (no shared test: ``W``)."""
     from pslog.log import SessionWriter
     from pslog.motion import rally_motion
@@ -164,8 +164,11 @@ def test_the_shared_statistic_of_two_models_is_the_drop_in_the_wald_distance(tmp
     path = tmp_path / "two.mcap"
     with SessionWriter(path, rig, timing="typeA", source="test") as writer:
         writer.add_detections(det)
-    synced = tmp_path / "synced.mcap"
-    report = _sync_json(cli, path, synced)
+    report = _sync_json(cli, path, tmp_path / "auto.mcap")
+    # (the per-camera fit's estimates and covariance: auto's wide fit; auto itself may then
+    # tie the readouts of a model, whose stored covariance is singular)
+    synced = tmp_path / "wide.mcap"
+    _sync_json(cli, path, synced, "--estimate", "offset,readout")
     (readout,) = [t for t in report["selection"] if t["parameter"] == "readout"]
     assert readout["kept"] and readout["dof"] == 3 and readout["shared_dof"] == 2
     assert readout["shared_threshold"] == chi2.isf(AUTO_LEVEL / 2, 2)
