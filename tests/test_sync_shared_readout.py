@@ -147,9 +147,10 @@ def test_the_shared_statistic_of_two_models_is_the_drop_in_the_wald_distance(tmp
     model, cam3 its own; readouts 10 ms on every camera, seed 54402): ``G`` has two columns
     and ``W_s`` is on 2 dof. Against an independent form of the statistic, the drop of the
     Σ⁻¹ distance from the rig's readouts when the readouts may be any ``Gβ``,
-    ``W_s = dᵀΣ⁻¹d − min_β (d − Gβ)ᵀΣ⁻¹(d − Gβ)``, read from the synced copy's own estimates
-    and covariance (W 40.9, W_s 40.7) — ``--estimate offset,readout``'s, auto's wide fit. Fails if ``G`` groups the cameras otherwise (cam1
-    with cam3: W_s 38.5), or as one model or as three (no shared test: ``W``)."""
+    ``W_s = dᵀΣ⁻¹d − min_β (d − Gβ)ᵀΣ⁻¹(d − Gβ)``, read from the estimates and covariance of
+    ``--estimate offset,readout``'s synced copy, auto's wide fit (W 40.9, W_s 40.7). Fails if
+    ``G`` groups the cameras otherwise (cam1 with cam3: W_s 38.5), or as one model or as
+    three (no shared test: ``W``)."""
     from pslog.log import SessionWriter
     from pslog.motion import rally_motion
     from pslog.simulation import SimulationOptions, simulate
