@@ -27,6 +27,17 @@ from pslog.simulation import SimulationOptions, ball_mask, simulate_labelled
 OBJECT = (1.0, 2.0, 0.1)
 
 
+def _assert_streams_equal_batch(rig, det, tracks) -> None:
+    """Every causal method's stream (compiled and Python gate; per detection and per frame)
+    gives the batch's track, bit for bit."""
+    for method in ("typeA", "nearest", "filter"):
+        for compiled in (True, False):
+            for form in ("push", "push_frame"):
+                fuser = _stream(rig, method, compiled)
+                out = Track.concat([*push_frames(fuser, det, form), fuser.flush()])
+                assert_same_track(out, tracks[method])
+
+
 def _walkthrough(timing: str, distractor: bool = True):
     """The walkthrough's session (the CLI's simulation, 0 px noise, seed 48001), the
     paper's cameras at ``timing``: (rig, detections, truth, which candidates are the ball)."""
@@ -68,12 +79,7 @@ def test_the_object_chosen_unmoved_before_the_stillness_test_can_judge_is_in_dou
     # without the rule cam1's point at 33 ms, 2.18 m off, had d2 166,233
     d2 = mahalanobis_sq(near, truth)
     assert np.all(d2[start] < 14.2)
-    for method in ("typeA", "nearest", "filter"):
-        for compiled in (True, False):
-            for form in ("push", "push_frame"):
-                fuser = _stream(rig, method, compiled)
-                out = Track.concat([*push_frames(fuser, det, form), fuser.flush()])
-                assert_same_track(out, tracks[method])
+    _assert_streams_equal_batch(rig, det, tracks)
 
 
 def test_a_clean_start_has_no_unmoved_choice():
@@ -118,12 +124,7 @@ def test_a_still_point_chosen_between_two_still_candidates_is_in_doubt():
     for m in ("typeA", "filter"):
         e = errors_m(tracks[m], truth)
         assert len(e) >= 40 and np.nanmax(e) < 0.05, m
-    for method in ("typeA", "nearest", "filter"):
-        for compiled in (True, False):
-            for form in ("push", "push_frame"):
-                fuser = _stream(rig, method, compiled)
-                out = Track.concat([*push_frames(fuser, det, form), fuser.flush()])
-                assert_same_track(out, tracks[method])
+    _assert_streams_equal_batch(rig, det, tracks)
 
 
 def test_a_slow_ball_beside_a_blob_from_nowhere_is_not_in_doubt():
