@@ -549,11 +549,8 @@ def _solve_joint(obs, rig, unknowns, theta, params, options, regularized=None):
     control, sigma, r, w, J = solver.run(control, fit.trajectory.noise_px, 3)
     rows = problem.rows
     cam = obs.camera[rows]
-    dt_dtheta = np.zeros((len(rows), len(unknowns)))
-    jac = params.jacobian(logged_s[rows], obs.uv[rows, 1], cam)
-    for j, (c, p) in enumerate(unknowns):
-        dt_dtheta[:, j] = np.where(cam == c, jac[:, PARAMETERS.index(p)], 0.0)
-    dt_dtheta = dt_dtheta @ params.M  # a tied parameter moves each of its cameras' times
+    # (a tied parameter moves each of its cameras' times: M)
+    dt_dtheta = params.times_jacobian(logged_s[rows], obs.uv[rows, 1], cam) @ params.M
     estimated = params.reduced
     for _ in range(_ITERATIONS):
         control, theta, sigma, r, w, J, S, moved = _joint_step(
@@ -682,6 +679,14 @@ class _Clocks:
         self.base = self._internal(np.stack([p["clock_offset"], p["clock_drift_ppm"],
                                              p["readout"]], axis=1))
         self.index = [(c, PARAMETERS.index(name)) for c, name in self.unknowns]
+        # the cameras whose offset the rig fixes while a drift or a readout is estimated
+        # (``estimate`` without offset): their ``o'`` follows those (the rig's offset
+        # ``o_c`` is what stays), else a readout or a drift would move the camera's offset
+        # unseen (a fit of the readouts alone, the rig's offsets right, was tens of ms off)
+        offsets = {c for c, k in self.index if k == 0}
+        self.offset = p["clock_offset"]
+        self.follow = ([c for c in range(1, len(self.base)) if c not in offsets]
+                       if any(k != 0 for _, k in self.index) else [])
         # tied parameters (one readout per camera model): ``tie`` (q,) numbers each unknown
         # by the estimated parameter it takes, in order of first appearance (None: its own);
         # ``M`` (q, m) expands the m estimated to the q unknowns (0/1: readouts are the same
@@ -706,6 +711,9 @@ class _Clocks:
         inn = self.base.copy()
         for (c, k), value in zip(self.index, self.M @ theta, strict=True):
             inn[c, k] = value
+        for c in self.follow:
+            inn[c, 0] = (self.offset[c] + inn[c, 1] * 1e-6 * self.l_mid
+                         + (inn[c, 2] - inn[0, 2]) / 2)
         return inn
 
     def to_internal(self, theta_ext: np.ndarray) -> np.ndarray:
@@ -742,6 +750,27 @@ class _Clocks:
         """``∂τ/∂(o', d, r)`` (n, 3)."""
         return np.stack([np.ones_like(logged_s), 1e-6 * (logged_s - self.l_mid),
                          v / self.height[cam] - 0.5], axis=1)
+
+    def times_jacobian(self, logged_s: np.ndarray, v: np.ndarray, cam: np.ndarray
+                       ) -> np.ndarray:
+        """``∂τ/∂θ`` (n, q) of every unknown (before a tie's ``M``): each moves its own
+        camera's times (:meth:`jacobian`), and through ``o'`` a camera's whose offset the
+        rig fixes (:attr:`follow`: its drift by ``1e-6 ℓ_m``, its readout by 1/2, camera
+        1's readout every such camera's by -1/2)."""
+        jac = self.jacobian(logged_s, v, cam)
+        out = np.zeros((len(cam), len(self.index)))
+        follows = np.isin(cam, self.follow)
+        for j, (c, k) in enumerate(self.index):
+            out[:, j] = np.where(cam == c, jac[:, k], 0.0)
+            if not self.follow:
+                continue
+            if k == 1 and c in self.follow:
+                out[:, j] += np.where(cam == c, 1e-6 * self.l_mid, 0.0)
+            elif k == 2 and c in self.follow:
+                out[:, j] += np.where(cam == c, 0.5, 0.0)
+            elif k == 2 and c == 0:
+                out[:, j] -= np.where(follows, 0.5, 0.0)
+        return out
 
 
 def _windows(obs: Observations) -> Observations:
