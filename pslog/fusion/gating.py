@@ -1986,6 +1986,17 @@ def late_doubt(detections: Detections, reason: np.ndarray, static_s: float) -> i
     return first
 
 
+def _camera_frames(detections: Detections, count: np.ndarray, n_cameras: int) -> list:
+    """Each camera's frames with candidates in time order: ``[(frames (k,) int64, their
+    LOGGED times (k,) int64 ns), ...]`` in rig order (``count``: candidates per frame)."""
+    out = []
+    for b in range(n_cameras):
+        f = np.flatnonzero((detections.frame_camera == b) & (count > 0))
+        f = f[np.argsort(detections.frame_time_ns[f], kind="stable")]
+        out.append((f, detections.frame_time_ns[f]))
+    return out
+
+
 def unjudged_doubt(detections: Detections, rig: Rig, reason: np.ndarray, chosen: np.ndarray,
                    static_s: float) -> np.ndarray:
     """The doubt (:func:`doubt_variance`, else 0) of the chosen candidates ``chosen`` (rows)
@@ -2010,12 +2021,10 @@ def unjudged_doubt(detections: Detections, rig: Rig, reason: np.ndarray, chosen:
         return out
     # each camera's frames with candidates: how many lie in the 1.5 static_s before each
     unjudged_frame = np.zeros(detections.n_frames, dtype=bool)
-    for b, cam in enumerate(rig.cameras):
-        f = np.flatnonzero((detections.frame_camera == b) & (count > 0))
+    for cam, (f, t) in zip(rig.cameras, _camera_frames(detections, count, len(rig)),
+                           strict=True):
         if not len(f):
             continue
-        f = f[np.argsort(detections.frame_time_ns[f], kind="stable")]
-        t = detections.frame_time_ns[f]
         earlier = np.arange(len(f)) - np.searchsorted(
             t, t - 1.5 * static_s * NS, side="left")
         lags = int(np.ceil(static_s * cam.fps))
@@ -2140,11 +2149,7 @@ def unmoved_doubt(detections: Detections, rig: Rig, reason: np.ndarray, chosen: 
     span = 1.5 * static_s * NS
     F_lists = fundamental_matrices(rig.cameras).tolist()
     # each camera's frames with candidates in time order (rows, times)
-    order = []
-    for b in range(len(rig.cameras)):
-        f = np.flatnonzero((detections.frame_camera == b) & (count > 0))
-        f = f[np.argsort(detections.frame_time_ns[f], kind="stable")]
-        order.append((f, detections.frame_time_ns[f]))
+    order = _camera_frames(detections, count, len(rig))
 
     def frames_near(b: int, t: int) -> list:
         f, tb = order[b]
@@ -2154,11 +2159,9 @@ def unmoved_doubt(detections: Detections, rig: Rig, reason: np.ndarray, chosen: 
                 for i in range(lo, hi)]
 
     for b, cam in enumerate(rig.cameras):
-        f = np.flatnonzero((detections.frame_camera == b) & (count > 0))
+        f, t = order[b]
         if not len(f):
             continue
-        f = f[np.argsort(detections.frame_time_ns[f], kind="stable")]
-        t = detections.frame_time_ns[f]
         first = np.searchsorted(t, t - span, side="left")
         lags = int(np.ceil(static_s * cam.fps))
         # (frames the test cannot judge, with an earlier frame: few, the camera's first
