@@ -348,6 +348,23 @@ class Track:
                    np.concatenate([p.camera for p in full]), quality, dropped=dropped)
 
 
+def point_keys(time_ns: np.ndarray, camera: np.ndarray) -> np.ndarray:
+    """(n,) int64: each point's (or detection's) time and camera keyed as one integer
+    (times < 2**55 ns, cameras < 256)."""
+    return np.asarray(time_ns, dtype=np.int64) * 256 + np.asarray(camera, dtype=np.int64)
+
+
+def matching_rows(keys: np.ndarray, other: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For each of ``keys`` (n,) the row of ``other`` (m,) with the same key (``other``'s
+    keys unique; :func:`point_keys`) and whether there is one: ``(rows (n,) int64, found
+    (n,) bool)``, ``rows`` meaningful where ``found``."""
+    if not len(other):
+        return np.zeros(len(keys), dtype=np.int64), np.zeros(len(keys), dtype=bool)
+    order = np.argsort(other, kind="stable")
+    at = np.minimum(np.searchsorted(other[order], keys), len(other) - 1)
+    return order[at], other[order][at] == keys
+
+
 @dataclass(frozen=True, eq=False)
 class Truth:
     """Ground-truth ball positions of a simulated session.

@@ -34,7 +34,7 @@ from typing import Literal, cast
 import numpy as np
 
 from ..errors import FusionError
-from ..records import Detections, Observations, Track
+from ..records import Detections, Observations, Track, point_keys
 from ..rig import Rig
 from ..timing import ClockCovariance
 from ..timing import observations as timed_observations
@@ -648,9 +648,9 @@ def type_a_explained(prep: Prepared, rig: Rig, options: FusionOptions
     if len(confirmed) == len(track):
         return confirmed, construction
     # the construction's rows are the track's points, in order; the confirmation only drops
-    # (a point: its time and camera, keyed as one int64: times < 2**55 ns, cameras < 256)
-    kept = np.isin(track.time_ns * 256 + track.camera, confirmed.time_ns * 256
-                   + confirmed.camera)
+    # (a point: its time and camera, keyed as one int64)
+    kept = np.isin(point_keys(track.time_ns, track.camera),
+                   point_keys(confirmed.time_ns, confirmed.camera))
     return confirmed, construction.select(kept)
 
 

@@ -24,7 +24,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from ..records import Observations, Track
+from ..records import Observations, Track, matching_rows, point_keys
 from ..rig import Rig
 from ._prepare import Prepared, prepare
 
@@ -96,16 +96,8 @@ def across_breaks(prep: Prepared, track: Track, rig: Rig, options,
     rprep, t0 = reversed_prepared(prep, rig)
     back = type_a(rprep, rig, replace(options, confirm_breaks=False))
     tb = t0 - back.time_ns  # each backward point's time, forward
-    # the backward point on each forward point's detection (time and camera keyed as one
-    # int64: times < 2**55 ns, cameras < 256)
-    key_b = tb * 256 + back.camera
-    order = np.argsort(key_b, kind="stable")
-    key = t * 256 + track.camera
-    pos = np.minimum(np.searchsorted(key_b[order], key), max(len(back) - 1, 0))
-    has = np.zeros(len(t), bool)
-    if len(back):
-        has = key_b[order][pos] == key
-    idx = order[pos] if len(back) else pos
+    # the backward point on each forward point's detection (its time and camera)
+    idx, has = matching_rows(point_keys(t, track.camera), point_keys(tb, back.camera))
     span_b = (np.round(back.quality["span_s"] * 1e9).astype(np.int64) if len(back)
               else np.zeros(0, np.int64))
     b_spans = np.ones(len(t), bool)

@@ -45,7 +45,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..errors import FusionError
-from ..records import NS, Observations, Track
+from ..records import NS, Observations, Track, matching_rows, point_keys
 from ..rig import Rig
 from ..timing import ClockCovariance, clock_jacobian
 
@@ -129,22 +129,16 @@ def pixel_errors(obs: Observations, per_camera: list[np.ndarray], rig: Rig,
 
 
 def _keys(track: Track) -> np.ndarray:
-    """One int64 per point, its time and camera (times < 2**55 ns, cameras < 256)."""
-    return track.time_ns * 256 + track.camera
+    """One int64 per point, its time and camera (:func:`pslog.records.point_keys`)."""
+    return point_keys(track.time_ns, track.camera)
 
 
 def _matched(keys: np.ndarray, track: Track) -> tuple[np.ndarray, np.ndarray]:
     """Positions of ``track`` at the points ``keys`` (n, 3; NaN where it has none) and which
     it has (n,) bool."""
-    other = _keys(track)
-    order = np.argsort(other, kind="stable")
-    at = np.searchsorted(other[order], keys)
-    at = np.minimum(at, max(len(other) - 1, 0))
-    found = (len(other) > 0) & (other[order][at] == keys) if len(other) else \
-        np.zeros(len(keys), dtype=bool)
+    rows, found = matching_rows(keys, _keys(track))
     position = np.full((len(keys), 3), np.nan)
-    if len(other):
-        position[found] = track.position_world[order][at[found]]
+    position[found] = track.position_world[rows[found]]
     return position, found
 
 
