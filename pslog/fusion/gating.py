@@ -2041,6 +2041,16 @@ def unjudged_doubt(detections: Detections, rig: Rig, reason: np.ndarray, chosen:
     return out
 
 
+def _stood(x: float, y: float, frames) -> bool:
+    """Whether every one of ``frames`` (``(time ns, pixels)``, pixels ``[(u, v), ...]``)
+    holds a candidate within :data:`DOUBT_RADIUS_PX` of ``(x, y)`` (recorded pixels):
+    it stood there (:func:`unmoved`, :func:`_still_partner`; Python numbers, the same bits
+    in the batch and the stream)."""
+    radius2 = DOUBT_RADIUS_PX * DOUBT_RADIUS_PX
+    return all(any((x - xj) * (x - xj) + (y - yj) * (y - yj) <= radius2 for xj, yj in px)
+               for _, px in frames)
+
+
 def unmoved(t: int, u: float, v: float, own, earlier, lags: int, static_s: float,
             speed_px_s: float, partner: Callable[[], bool] | None = None) -> bool:
     """Whether a choice of a camera (LOGGED frame time ``t`` ns, recorded pixel ``(u, v)``;
@@ -2067,13 +2077,7 @@ def unmoved(t: int, u: float, v: float, own, earlier, lags: int, static_s: float
     recent = [e for e in earlier if t - span <= e[0] < t]
     if not recent or len(recent) >= 0.75 * lags:
         return False
-    radius2 = DOUBT_RADIUS_PX * DOUBT_RADIUS_PX
-
-    def stood(x: float, y: float) -> bool:
-        return all(any((x - xj) * (x - xj) + (y - yj) * (y - yj) <= radius2 for xj, yj in px)
-                   for _, px in recent)
-
-    if not stood(u, v):
+    if not _stood(u, v, recent):
         return False
     reach = speed_px_s * ((t - recent[-1][0]) / NS)
     reach2 = reach * reach
@@ -2081,7 +2085,7 @@ def unmoved(t: int, u: float, v: float, own, earlier, lags: int, static_s: float
     for x, y in own:
         if x == u and y == v:
             continue
-        if stood(x, y):
+        if _stood(x, y, recent):
             still_too = True
         elif any((x - xj) * (x - xj) + (y - yj) * (y - yj) <= reach2
                  for xj, yj in recent[-1][1]):
@@ -2100,7 +2104,6 @@ def _still_partner(t: int, a: int, u: float, v: float, frames_of, rig: Rig, F_li
     frames with candidates, ``(time ns, pixels)`` in time order (older or newer ones are
     skipped). Python numbers: the same bits in the batch and the stream."""
     span = 1.5 * static_s * NS
-    radius2 = DOUBT_RADIUS_PX * DOUBT_RADIUS_PX
     ua, va = _pixel_geometry(rig.cameras[a], np.array([[u, v]]))[0][0].tolist()
     for b in range(len(rig.cameras)):
         if b == a:
@@ -2113,8 +2116,7 @@ def _still_partner(t: int, a: int, u: float, v: float, frames_of, rig: Rig, F_li
         if math.isnan(la):
             continue
         for x, y in frames[-1][1]:
-            if not all(any((x - xj) * (x - xj) + (y - yj) * (y - yj) <= radius2
-                           for xj, yj in px) for _, px in frames[:-1]):
+            if not _stood(x, y, frames[:-1]):
                 continue
             xu, yu = _pixel_geometry(rig.cameras[b], np.array([[x, y]]))[0][0].tolist()
             if abs(la * xu + lb * yu + lc) <= epipolar_px:
