@@ -42,7 +42,8 @@ METHODS = ["typeA", "smooth", "filter"]
 SEEDS = 3
 NS = 1e9
 #: bench_dirty's options: pslog fuse's defaults (typeA's ``--confirm-gaps kicks``)
-OPTIONS = FusionOptions(**dict(zip(("confirm_gaps", "confirm_every", "confirm_sides"),
+OPTIONS = FusionOptions(**dict(zip(("confirm_gaps", "confirm_every", "confirm_sides",
+                                    "confirm_breaks"),
                                    CONFIRM_GAPS["kicks"], strict=True)))
 
 _fit = E.fit_trajectory
