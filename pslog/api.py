@@ -286,6 +286,11 @@ def sync(session: Session | str | os.PathLike[str],
         notes.append("synced before: estimated again from the clock model recorded before "
                      "its first sync (that sync's estimates are this data's, not known "
                      "values)")
+    elif _synced_without_prior(read.metadata):
+        notes.append("synced before by a pslog that did not record the clock model it "
+                     "started from (before session 38): the copy's clock estimates are "
+                     "taken as the rig's values, those not estimated again kept without "
+                     "their uncertainty; sync the original session to estimate them again")
     reports: dict = {}
     if regularize != "off":
         progress.step("checking host timestamps")
@@ -327,6 +332,21 @@ def sync(session: Session | str | os.PathLike[str],
                           f"several candidates and a false one the gating kept (a "
                           f"reflection, a second ball) may be the cause") from None
     return SyncOutcome(result.rig, result, detections, obs, reports, tuple(notes), rig)
+
+
+def _synced_without_prior(metadata) -> bool:
+    """Whether the session is a copy ``pslog sync`` wrote before it recorded the clock model
+    it started from (a ``clock_std`` with estimates and no ``prior``:
+    :func:`pslog.timing.recorded_clocks` cannot put that model back)."""
+    import json
+
+    from .timing import CLOCK_STD_KEY
+
+    try:
+        stored = json.loads(metadata.get(CLOCK_STD_KEY) or "{}")
+        return bool(stored.get("estimated")) and "prior" not in stored
+    except (ValueError, AttributeError):
+        return False
 
 
 def _ball_candidates(detections: Detections, rig: Rig):

@@ -82,3 +82,26 @@ def test_a_rig_value_changed_since_the_sync_is_kept(tmp_path):
     stored = json.loads(read_session(tmp_path / "again.mcap").metadata["clock_std"])
     assert {n: v["readout"] for n, v in stored["prior"].items()} == readouts
     np.testing.assert_array_less(0.004, list(readouts.values()))
+
+
+def test_a_copy_synced_without_its_prior_says_what_it_holds(tmp_path):
+    """A copy synced before session 38 holds no ``prior``: its estimates cannot be undone,
+    and the sync says so (and how to estimate them again) instead of holding them as known
+    in silence. Such a copy made here: session 38's copy with the ``prior`` removed."""
+    from pslog.log import copy_session
+
+    raw = tmp_path / "raw.mcap"
+    _pslog("simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "rally",
+           "--duration", "8", "--noise-px", "0.3", "--clock-offset", "cam2=5",
+           "--readout", "12", "--seed", 38103, "-o", raw)
+    once = tmp_path / "once.mcap"
+    _pslog("sync", raw, "-o", once)
+    stored = json.loads(read_session(once).metadata["clock_std"])
+    del stored["prior"]
+    old = tmp_path / "old.mcap"
+    copy_session(once, old, metadata={"clock_std": json.dumps(stored)})
+    out = _pslog("sync", old, "-o", tmp_path / "again.mcap")
+    assert "synced before by a pslog that did not record the clock model it started " \
+           "from" in out, out
+    assert "synced before: estimated again" not in out
+    assert "synced before" not in _pslog("sync", raw, "-o", tmp_path / "fresh.mcap")
