@@ -204,6 +204,9 @@ class SyncOutcome:
         at its logged time: what the estimator fitted
     regularized : camera name -> :class:`pslog.timing.RegularizeReport`
     notes : what was done that a user should know (regularized stamps, rejected candidates)
+    prior : the rig whose clock model the estimate started from and tested against: the
+        session's, or, for a copy synced before, the one recorded before its first sync
+        (:func:`pslog.timing.recorded_clocks`); None: the session's rig
     """
 
     rig: Rig
@@ -212,6 +215,7 @@ class SyncOutcome:
     observations: Observations
     regularized: dict = field(default_factory=dict)
     notes: tuple[str, ...] = ()
+    prior: Rig | None = None
 
 
 def sync(session: Session | str | os.PathLike[str],
@@ -249,7 +253,12 @@ def sync(session: Session | str | os.PathLike[str],
     from . import progress
     from .estimation.sync import PARAMETERS, SHARED_READOUT, estimate_clocks
     from .rig import check_baselines
-    from .timing import REGULARIZE_AUTO_JITTER_S, regularize_detections, regularize_times
+    from .timing import (
+        REGULARIZE_AUTO_JITTER_S,
+        recorded_clocks,
+        regularize_detections,
+        regularize_times,
+    )
 
     try:
         wanted_params = _names(estimate, "estimate")
@@ -267,10 +276,21 @@ def sync(session: Session | str | os.PathLike[str],
     read = _session(session)
     if regularize not in ("auto", "on", "off"):
         raise InputError(f"regularize {regularize!r}: auto, on or off")
-    rig = read.rig
+    # a synced copy synced again: from the clock model recorded before its first sync (its
+    # estimates are this data's, not known values: docs/timing.md, "Syncing a synced copy")
+    rig, resynced = recorded_clocks(read.rig, read.metadata)
     check_baselines(rig, str(read.path))
     detections = read.detections
     notes: list[str] = []
+    if resynced:
+        notes.append("synced before: estimated again from the clock model recorded before "
+                     "its first sync (that sync's estimates are this data's, not known "
+                     "values)")
+    elif _synced_without_prior(read.metadata):
+        notes.append("synced before by a pslog that did not record the clock model it "
+                     "started from (before session 38): the copy's clock estimates are "
+                     "taken as the rig's values, those not estimated again kept without "
+                     "their uncertainty; sync the original session to estimate them again")
     reports: dict = {}
     if regularize != "off":
         progress.step("checking host timestamps")
@@ -311,7 +331,22 @@ def sync(session: Session | str | os.PathLike[str],
         raise FusionError(f"{exc}; note: {several} of {detections.n_frames} frames hold "
                           f"several candidates and a false one the gating kept (a "
                           f"reflection, a second ball) may be the cause") from None
-    return SyncOutcome(result.rig, result, detections, obs, reports, tuple(notes))
+    return SyncOutcome(result.rig, result, detections, obs, reports, tuple(notes), rig)
+
+
+def _synced_without_prior(metadata) -> bool:
+    """Whether the session is a copy ``pslog sync`` wrote before it recorded the clock model
+    it started from (a ``clock_std`` with estimates and no ``prior``:
+    :func:`pslog.timing.recorded_clocks` cannot put that model back)."""
+    import json
+
+    from .timing import CLOCK_STD_KEY
+
+    try:
+        stored = json.loads(metadata.get(CLOCK_STD_KEY) or "{}")
+        return bool(stored.get("estimated")) and "prior" not in stored
+    except (ValueError, AttributeError):
+        return False
 
 
 def _ball_candidates(detections: Detections, rig: Rig):

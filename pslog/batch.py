@@ -807,8 +807,8 @@ def summary_row(session: str, info: dict | None, sync: dict | None, evaluation: 
     ``detections`` candidates, ``runtime_s`` wall-clock s of the whole task), then per
     camera ``<camera>_offset_ms`` and ``_offset_std_ms`` (and the drift's and readout's when
     ``estimate`` names them) of ``pslog sync``, then per
-    method ``<method>_n_points``, ``_rate_hz`` and the errors against ground truth in mm
-    (NaN without truth)."""
+    method ``<method>_n_points``, the points it left out (:func:`left_out_columns`),
+    ``_rate_hz`` and the errors against ground truth in mm (NaN without truth)."""
     row: dict = {"session": session, "status": "failed" if error else "ok", "error": error,
                  "cameras": "", "duration_s": math.nan, "frames": None, "detections": None,
                  "truth": None, "runtime_s": runtime_s}
@@ -830,7 +830,18 @@ def summary_row(session: str, info: dict | None, sync: dict | None, evaluation: 
         for key in EVAL_FIGURES:
             value = method.get(key, method.get("quality", {}).get(key))
             row[f"{method['method']}_{key}"] = math.nan if value is None else value
+            if key == "n_points":  # beside them, the points it left out (fuse's counts)
+                row.update(left_out_columns(method["method"], method.get("left_out") or {}))
     return row
+
+
+def left_out_columns(method: str, left_out: dict[str, int]) -> dict:
+    """The summary's left-out columns of ``method`` from its ``{reason: count}``
+    (``Track.dropped``, as ``pslog eval --json`` gives it in ``left_out``):
+    ``<method>_left_out``, their total, and ``<method>_left_out_reasons``, the counts by
+    reason in ``pslog fuse``'s words (``"contradicted 3, unconfirmed 2"``; empty: none)."""
+    return {f"{method}_left_out": int(sum(left_out.values())),
+            f"{method}_left_out_reasons": ", ".join(f"{r} {n}" for r, n in left_out.items())}
 
 
 # --------------------------------------------------------------------------- the summary

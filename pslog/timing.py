@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import InputError
+from .errors import InputError, PslogError
 from .records import NS, Detections, Observations
 from .rig import Rig
 
@@ -210,13 +210,15 @@ CLOCK_KEYS = ("clock_offset", "clock_drift_ppm", "readout")
 
 
 def clock_std_json(rig: Rig, stds, estimated=None, selection=None,
-                   covariance: ClockCovariance | None = None) -> str:
+                   covariance: ClockCovariance | None = None, prior: Rig | None = None) -> str:
     """The :data:`CLOCK_STD_KEY` value for ``rig`` (holding the estimates) and ``stds``, one
     ``(offset_std_s, drift_std_ppm, readout_std_s)`` per camera in rig order; with
     ``estimated`` (the parameters estimated), ``selection`` (``--estimate auto``: its
-    tests, as ``pslog sync --json`` prints them) and ``covariance`` (a
+    tests, as ``pslog sync --json`` prints them), ``covariance`` (a
     :class:`ClockCovariance`: the estimates' joint covariance,
-    :meth:`pslog.estimation.sync.SyncResult.clock_covariance`) those too."""
+    :meth:`pslog.estimation.sync.SyncResult.clock_covariance`) and ``prior`` (the rig whose
+    clock model the sync started from and tested against: the recorded one,
+    :func:`recorded_clocks`) those too."""
     import json
 
     value: dict = {"cameras": {
@@ -227,6 +229,9 @@ def clock_std_json(rig: Rig, stds, estimated=None, selection=None,
         value["estimated"] = list(estimated)
     if selection is not None:
         value["selection"] = selection
+    if prior is not None:
+        value["prior"] = {cam.name: {key: float(getattr(cam, key)) for key in CLOCK_KEYS}
+                          for cam in prior.cameras}
     if covariance is not None:
         value["covariance"] = {
             "parameters": [[rig.cameras[c].name, CLOCK_KEYS[p]]
@@ -234,6 +239,42 @@ def clock_std_json(rig: Rig, stds, estimated=None, selection=None,
                                            strict=True)],
             "matrix": covariance.matrix.tolist()}
     return json.dumps(value)
+
+
+def recorded_clocks(rig: Rig, metadata) -> tuple[Rig, bool]:
+    """``rig`` with the clock model it had before ``pslog sync`` estimated it: each clock
+    parameter whose value is still the one a sync stored (:data:`CLOCK_STD_KEY`) takes the
+    value that sync started from (its ``prior``, written since session 38, carried from sync
+    to sync); a value changed since (a rig edited by hand) stays. And whether any was
+    replaced. ``rig`` itself (False) for a session never synced, synced before session 38,
+    or whose metadata is malformed (it is informative only).
+
+    A synced copy synced again starts here: the first sync's estimates are the same data's,
+    so holding them as the rig's known values (tested against, kept exact where a test does
+    not reject) dropped their uncertainty (session 38: the readouts of a tied sync kept with
+    σ 0, smooth's NEES 1.35 -> 3.41, paper3, seed 57310); from the recorded model the second
+    sync is the first one (docs/timing.md, "Syncing a synced copy")."""
+    import json
+
+    text = metadata.get(CLOCK_STD_KEY)
+    if not text:
+        return rig, False
+    try:
+        stored = json.loads(text)
+        prior, cams = stored["prior"], stored["cameras"]
+        new, changed = [], False
+        for cam in rig.cameras:
+            values = {}
+            for key in CLOCK_KEYS:
+                held = cams.get(cam.name, {}).get(key)
+                if held is not None and float(held[0]) == getattr(cam, key) \
+                        and cam.name in prior:
+                    values[key] = float(prior[cam.name][key])
+            changed |= any(values[k] != getattr(cam, k) for k in values)
+            new.append(cam.replace(**values) if values else cam)
+        return (Rig(tuple(new), rig.name), True) if changed else (rig, False)
+    except (ValueError, TypeError, KeyError, IndexError, AttributeError, PslogError):
+        return rig, False
 
 
 def read_clock_std(rig: Rig, metadata) -> list[dict[str, float]] | None:

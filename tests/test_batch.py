@@ -125,6 +125,9 @@ def by_hand(session: Path, folder: Path) -> tuple[dict, str]:
     row["sync_residual_px"] = repr(sync["residual_px"])
     for m in json.loads(evaluation):
         row[f"{m['method']}_n_points"] = str(m["n_points"])
+        row[f"{m['method']}_left_out"] = str(sum(m["left_out"].values()))
+        row[f"{m['method']}_left_out_reasons"] = ", ".join(f"{r} {n}" for r, n
+                                                           in m["left_out"].items())
         row[f"{m['method']}_rate_hz"] = repr(m["rate_hz"])
         for key in ("mean_mm", "median_mm", "p95_mm", "max_mm", "rms_mm"):
             # errors against ground truth, where there is one
@@ -363,6 +366,63 @@ def test_redetect_and_view_steps_on_a_recorded_session(cluster, tmp_path):
     row = read_summary_csv(out / "summary.csv")[0]
     # no eval asked: no eval.json, but the summary has the points all the same
     assert row["status"] == "ok" and int(row["typeA_n_points"]) > 0
+
+
+def _reasons(text: str) -> dict[str, int]:
+    """``"kink 4, unconfirmed 2"`` as ``{"kink": 4, "unconfirmed": 2}`` (``""``: none)."""
+    return {r: int(n) for r, n in (part.rsplit(" ", 1) for part in text.split(", ") if part)}
+
+
+def _fuse_left_out(line: str) -> dict[str, int]:
+    """From one method's line of ``pslog fuse``'s output, the points it left out by
+    reason."""
+    _, _, why = line.partition("(left out, untrustworthy: ")
+    return _reasons(why.split(")")[0])
+
+
+def test_the_summary_counts_each_methods_left_out_points_as_fuse_does(tmp_path,
+                                                                      short_tmpdir):
+    """``pslog batch`` as a process (its own local Ray cluster) over three dirty sessions
+    (false candidates, kicks: type A and the filter leave points out): each method's
+    ``_left_out`` and ``_left_out_reasons`` columns are what ``pslog fuse``, run by hand as
+    a process on the same session, prints."""
+    root = tmp_path / "season"
+    root.mkdir()
+    for i, seed in enumerate((21, 22, 23)):
+        code, _, err = pslog("simulate", "--rig", "paper3", "--timing", "typeA", "--motion",
+                             "rally", "--duration", "1.2", "--noise-px", "0.3", "--spurious",
+                             "0.1", "--seed", seed, "-o", root / f"m{i}.mcap")
+        assert code == 0, err
+    methods = ["--method", "typeA", "--method", "filter"]
+    out = tmp_path / "results"
+    env = {**os.environ, "TMPDIR": short_tmpdir}
+    done = subprocess.run([sys.executable, "-m", "pslog.cli", "batch", str(root / "*.mcap"),
+                           "--do", "fuse", *methods, "-o", str(out), "--workers", "2"],
+                          capture_output=True, text=True, env=env, timeout=300)
+    assert done.returncode == 0, done.stderr
+    rows = {r["session"]: r for r in read_summary_csv(out / "summary.csv")}
+    assert list(rows) == ["m0.mcap", "m1.mcap", "m2.mcap"]
+    header = list(rows["m0.mcap"])
+    # beside each method's points, in the order of the columns
+    assert header.index("typeA_left_out") == header.index("typeA_n_points") + 1
+    assert header.index("typeA_left_out_reasons") == header.index("typeA_left_out") + 1
+    total = 0
+    for name, row in rows.items():
+        fused = subprocess.run([sys.executable, "-m", "pslog.cli", "fuse", str(root / name),
+                                "-o", str(tmp_path / f"hand-{name}"), *methods],
+                               capture_output=True, text=True, timeout=300)
+        assert fused.returncode == 0, fused.stderr
+        lines = {line.split()[0]: line for line in fused.stdout.splitlines()}
+        for method in ("typeA", "filter"):
+            why = _fuse_left_out(lines[method])
+            assert row[f"{method}_left_out"] == str(sum(why.values())), (name, lines[method])
+            assert _reasons(row[f"{method}_left_out_reasons"]) == why, (name, lines[method])
+            total += sum(why.values())
+    assert total > 0  # (the sessions do leave points out: the columns are not all 0)
+    import pyarrow.parquet as pq
+
+    table = {r["session"]: r for r in pq.read_table(out / "summary.parquet").to_pylist()}
+    assert table["m0.mcap"]["typeA_left_out"] == int(rows["m0.mcap"]["typeA_left_out"])
 
 
 def test_ray_is_imported_by_a_running_batch_alone():

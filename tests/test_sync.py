@@ -581,13 +581,16 @@ def test_sync_table_shows_the_rigs_plan_and_an_ideal_stagger_only_where_one_exis
         assert "ideal: the type-A" not in out
 
 
-def test_a_synced_copy_synced_again_is_not_told_its_readouts_are_left_out(tmp_path, cli):
-    """Syncing a synced copy tests readouts against the rig's (the first sync's estimates,
-    kept when the test is below its level). Where its p-value was below 5 %, the note said
-    "a readout left out delays every point ... give their readouts in the rig": the rig
-    held them. It now names the readouts kept, and its suggestion, pasted, estimates them
-    again. (The walk's session: paper3 rally, 8 ms readouts, clock offsets, blobs, an object
-    every camera sees, misses, a blackout; seed 55001.)"""
+def test_a_rig_holding_readouts_is_not_told_its_readouts_are_left_out(tmp_path, cli):
+    """Syncing a session whose rig holds readouts (the user's: a rig file with a first
+    sync's estimates, imported with the detections) tests readouts against the rig's, kept
+    when the test is below its level. Where its p-value was below 5 %, the note said "a
+    readout left out delays every point ... give their readouts in the rig": the rig held
+    them. It now names the readouts kept, and its suggestion, pasted, estimates them again.
+    (The walk's session: paper3 rally, 8 ms readouts, clock offsets, blobs, an object every
+    camera sees, misses, a blackout; seed 55001. Session 37 met it syncing the synced copy
+    itself, which since session 38 starts from the clock model recorded before its first
+    sync: tests/test_sync_twice.py.)"""
     session = tmp_path / "lab.mcap"
     code, _, err = cli("simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "rally",
                        "--noise-px", "0.3", "--clock-offset", "cam2=7.3", "--clock-offset",
@@ -601,6 +604,14 @@ def test_a_synced_copy_synced_again_is_not_told_its_readouts_are_left_out(tmp_pa
     assert cli("sync", session, "--estimate", "offset,readout", "-o", once)[0] == 0
     held = {c.name: c.readout for c in read_session(once).rig.cameras}
     assert all(r > 0.004 for r in held.values()), held
+    code, rig_toml, err = cli("rig", "show", once)
+    assert code == 0, err
+    (tmp_path / "rig.toml").write_text(rig_toml)
+    assert cli("export", once, "--detections", tmp_path / "det.csv")[0] == 0
+    once = tmp_path / "held.mcap"  # the same detections, the rig's readouts the user's
+    code, _, err = cli("import", "--rig", tmp_path / "rig.toml", "--detections",
+                       tmp_path / "det.csv", "-o", once)
+    assert code == 0, err
     code, out, err = cli("sync", once, "-o", tmp_path / "twice.mcap")
     assert code == 0, err
     assert "readouts not estimated" in out, out

@@ -178,3 +178,45 @@ def test_a_break_without_a_backward_point_is_explained(tmp_path, cli):
             "of smooth's fit, and type A's point from the detections after it spans one too "
             "or was not made") in out, out
     assert json.loads(cli("eval", fused, "--json")[1])[0]["left_out"]["break"] == 1
+
+
+def _pslog(*argv) -> str:
+    """``pslog ARGV`` as a process; its standard output (exit 0 asserted)."""
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-m", "pslog.cli", *map(str, argv)],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    return done.stdout
+
+
+def test_breaks_that_change_nothing_say_so_with_gating_on_and_off(tmp_path):
+    """``--confirm-gaps breaks`` on a motion without a kick (``straight``) replaces and
+    withholds nothing: ``pslog fuse`` says so in one line, with the gate and without it
+    (session 37's walk, ``--gating off``: its line then read as the default's, the option
+    seemingly ignored), and the track is the default's to the bit. On a rally with kicks the
+    line is not printed (points were replaced, and said)."""
+    from pslog.cli.fuse import NO_BREAK_SPANNED
+
+    straight = tmp_path / "straight.mcap"
+    _pslog("simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "straight",
+           "--noise-px", "0.3", "--seed", 57304, "-o", straight)
+    for gating in ("on", "off"):
+        fused = tmp_path / f"straight-{gating}.mcap"
+        out = _pslog("fuse", straight, "--method", "typeA", "--confirm-gaps", "breaks",
+                     "--gating", gating, "-o", fused)
+        assert NO_BREAK_SPANNED in out.splitlines(), out
+        default = tmp_path / f"kicks-{gating}.mcap"
+        out = _pslog("fuse", straight, "--method", "typeA", "--gating", gating, "-o", default)
+        assert NO_BREAK_SPANNED not in out  # (the default has no break rule to report)
+        a, b = read_session(fused).tracks["typeA"], read_session(default).tracks["typeA"]
+        np.testing.assert_array_equal(a.position_world, b.position_world)
+    rally = tmp_path / "rally.mcap"
+    _pslog("simulate", "--rig", "paper3", "--timing", "typeA", "--motion", "rally",
+           "--noise-px", "0.3", "--seed", SEED, "-o", rally)
+    for gating in ("on", "off"):
+        out = _pslog("fuse", rally, "--method", "typeA", "--confirm-gaps", "breaks",
+                     "--gating", gating, "-o", tmp_path / f"rally-{gating}.mcap")
+        assert "made from the detections after them" in out, out
+        assert NO_BREAK_SPANNED not in out

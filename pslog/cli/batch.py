@@ -15,9 +15,10 @@ processes by default (--workers, default the core count), on an existing Ray clu
 view); the outputs of a session go to OUTDIR/<its path below the pattern's folder>/
 (redetected.mcap, synced.mcap, fused.mcap, eval.json, view.rrd), and OUTDIR/summary.csv and
 summary.parquet hold one row per session (cameras, duration, detections, per method points,
-rate and errors against truth, clock offsets, runtime, status and the one-line error of a
-failed session). A failed session does not stop the others; the exit code is 1 if any
-failed. --resume skips the sessions a stopped batch completed.
+the points left out with their reasons as pslog fuse counts them, rate and errors against
+truth, clock offsets, runtime, status and the one-line error of a failed session). A failed
+session does not stop the others; the exit code is 1 if any failed. --resume skips the
+sessions a stopped batch completed.
 """
 
 #: most local worker processes (a typo like 1000 would start a thousand Python processes)

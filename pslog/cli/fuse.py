@@ -332,8 +332,22 @@ def run(args: argparse.Namespace) -> int:
                  + ("them" if n_backward > 1 else "it")
                  + " (--confirm-gaps breaks: the paper's construction spanned a velocity "
                  "break of smooth's fit; span_s < 0)" if n_backward else ""))
+    if options.confirm_breaks and "typeA" in written:
+        _, dropped, _, _, n_backward = written["typeA"]
+        if not n_backward and not dropped.get("break"):
+            # the option asked for and nothing to show for it: said, not left to be guessed
+            # from a line like the default's (session 37's walk: --gating off)
+            print(NO_BREAK_SPANNED)
     print(f"wrote {output}")
     return 0
+
+
+#: ``--confirm-gaps breaks`` when no type A point spanned a velocity break of the session's
+#: fit (none replaced, none withheld): the fit found no break, or each lies where no point's
+#: construction reaches across it (the kink test left those out)
+NO_BREAK_SPANNED = ("typeA: --confirm-gaps breaks changed no point: none spanned a velocity "
+                    "break of smooth's fit (it found none, or none that a point's "
+                    "construction reaches across): every point is the paper's")
 
 
 def _no_point(method: str, dropped: dict[str, int], max_std_mm: float | None) -> str:

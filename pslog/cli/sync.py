@@ -83,7 +83,8 @@ def run(args: argparse.Namespace) -> int:
     copy_session(args.session, args.output, rig=result.rig, force=args.force,
                  detections=outcome.detections if outcome.regularized else None,
                  metadata={CLOCK_STD_KEY: clock_std_json(
-                     result.rig, stds, estimated, selection, result.clock_covariance())})
+                     result.rig, stds, estimated, selection, result.clock_covariance(),
+                     prior=outcome.prior)})
     if args.json:
         # standard output is one JSON document (pslog batch parses it): the notes, what a
         # user should know of the run, on stderr (they were dropped: session 33)
