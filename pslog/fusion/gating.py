@@ -692,7 +692,7 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
             valid = prev[:, None, :] >= 0
             d = np.where(valid & np.isfinite(d), d, np.inf).min(axis=2)
             with np.errstate(invalid="ignore"):
-                # a still pixel there whose own point rested on support too (the support held)
+                # a still pixel there whose own support held too (its point, or _held's)
                 near = valid & (d_px <= own[:, :, None])
             held += recent[:, None] & np.any(
                 near & _lagged(p_finite, lag, finite[0])[:, None, :], axis=2)
@@ -744,7 +744,7 @@ def _still_pair(d_px, tol, tol_prev, valid):
 def _still_alone(run_px, held, lags: int):
     """The image test's verdict (:func:`_static`; arrays elementwise or floats): still
     across its ray in every one of the ``lags`` frames (``run_px``), and its support not
-    continuous there: held (a still pixel whose own point rested on support) in fewer
+    continuous there: held (a still pixel whose own support held: :func:`_held`) in fewer
     than all but one of them (``held``). A static object seen by one camera is supported
     only while the ball crosses its epipolar line in the other (a slow crossing lasted
     4-6 of 8 frames in ``bench_dirty.py --more``); a ball moving along its camera's ray
