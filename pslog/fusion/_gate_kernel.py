@@ -33,8 +33,9 @@ camera's frames in (key, push) order at rows ``0 .. count[c]-1``):
   push id, number of candidates;
 - ``fflag`` (m, H, 2) int8: decided, support narrowed (decided with a rejected candidate:
   only its chosen and outscored candidates still support, :func:`gating._supporting`);
-- ``ct`` (m, H, K) int64 corrected times; ``cf`` (m, H, K, 8) float64: undistorted u, v,
-  unit ray x, y, z, the all-candidates 3D point x, y, z; ``csup`` (m, H, K) int8: may support;
+- ``ct`` (m, H, K) int64 corrected times; ``cf`` (m, H, K, 9) float64: undistorted u, v,
+  unit ray x, y, z, the all-candidates 3D point x, y, z, whether its support held (1.0, else
+  0.0; NaN until decided: gating._held); ``csup`` (m, H, K) int8: may support;
 - ``trk`` (4 P + 1, 5) float64: the track's points (time s, x, y, z, age s), ``ist`` int64:
   [points in the track, verified, tracked, next push id].
 """
@@ -280,6 +281,34 @@ def points_one(a, ray, ratio, carried, centers, k_inv, rot, rays):
 
 
 @kernel
+def held_one(a, ray, ratio, carried, miss, track_m, centers, k_inv, rot, rays, r_one):
+    """gating._held_one of a candidate of camera ``a`` without a point (``ray`` (3,), its
+    ``ratio`` (m,) and ``carried`` (m, 2) rows, its all-supports point's ``miss``; ``rays``
+    (m + 1, 6) and ``r_one`` (m,) scratch): two or more supports whose rays missed (more than
+    ``track_m``), one of which alone makes a point with its ray within ``track_m``."""
+    m = len(ratio)
+    if not miss > track_m:
+        return False
+    n_sup = 0
+    for b in range(m):
+        if ratio[b] <= 1.0:
+            n_sup += 1
+    if n_sup < 2:
+        return False
+    for b in range(m):
+        if not ratio[b] <= 1.0:
+            continue
+        for q in range(m):
+            r_one[q] = math.inf
+        r_one[b] = ratio[b]
+        ok, _x, _y, _z, _front, miss_one = points_one(a, ray, r_one, carried, centers, k_inv,
+                                                      rot, rays)
+        if ok and miss_one <= track_m:
+            return True
+    return False
+
+
+@kernel
 def points_all(camera, ray_dir, ratio, carried, centers, k_inv, rot, points, in_front, miss):
     """gating._points of every candidate: :func:`points_one` of each row (``camera`` (C,),
     ``ray_dir`` (C, 3), ``ratio`` (C, m), ``carried`` (C, m, 2)), written into ``points``
@@ -397,7 +426,8 @@ def static_camera(times, table, points, uv, finite, paired, dz, lags, long_lags,
     rows, -1 padding), every earlier frame's candidates counting: sets ``static`` and
     ``stillness`` of its candidates, one candidate at a time with _stillness_one's floats
     (the same decisions, the same stillness). ``points`` (C, 3), ``uv`` (C, 2) undistorted
-    pixels, ``finite`` (C,) whether each has a point, ``paired`` (C,) its point rests on one
+    pixels, ``finite`` (C,) whether each one's support held (gating._held: has a point, or
+    one of its supports whose rays missed makes one), ``paired`` (C,) its point rests on one
     other camera (the image tests), ``dz`` (C,) its ray's world z; ``lags`` and
     ``long_lags``: frames of the 3D / image test and of the long image test; ``recent_ns``,
     ``recent_long_ns``: how far back those frames may lie (1.5 static_s, 1.5 LONG_STILL
@@ -627,7 +657,7 @@ def insert_frame(fi, fflag, ct, cf, csup, count, cam, t, k, times, uv, xy, disto
         else:  # Camera.normalized_from_pixels
             y = (v - k_[1, 2]) / k_[1, 1]
             x = ((u - k_[0, 2]) - k_[0, 1] * y) / k_[0, 0]
-        for q in range(8):
+        for q in range(9):
             cf[cam, at, j, q] = math.nan
         if not (ok and math.isfinite(x) and math.isfinite(y)):
             continue
@@ -854,7 +884,7 @@ def decide_frame(fid, a, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k
     ``lags``, ``long_lags`` (m,): per camera, the stillness test's frames and the long image
     test's (``ceil(LONG_STILL static_s fps)``); ``long_t`` (m,) s: ``long_lags / fps``
     (gating._still_long's ``T``). ``work``: float64 scratch of at least
-    (k (7 m + 18) + 6 (m + 1) + 4) values. Stores the chosen candidate (-1 none) in
+    (k (7 m + 18) + 6 (m + 1) + 4 + m) values. Stores the chosen candidate (-1 none) in
     ``fi[a, at, 4]`` (gating._Decider.picked: the next frame of the camera reads it)."""
     m = len(lags)
     at = count[a] - 1
@@ -913,6 +943,8 @@ def decide_frame(fid, a, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k
     rays = work[off:off + 6 * (m + 1)].reshape((m + 1, 6))
     off += 6 * (m + 1)
     pred = work[off:off + 4]
+    off += 4
+    r_one = work[off:off + m]  # one support's ratio row (gating._held_one)
     r_every[:] = math.nan
     c_every[:] = math.nan
     r_dec[:] = math.nan
@@ -958,9 +990,14 @@ def decide_frame(fid, a, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k
         ray = cf[a, at, j, 2:5]
         ok_p, x, y, z, ok, miss = points_one(a, ray, r_every[j], c_every[j], centers, k_inv,
                                              rot, rays)
-        if not (ok_p and not miss > track_m):
+        kept = ok_p and not miss > track_m
+        if not kept:
             x = y = z = math.nan
         cf[a, at, j, 5], cf[a, at, j, 6], cf[a, at, j, 7] = x, y, z
+        # whether its support held (the later frames' image test)
+        hold = kept or held_one(a, ray, r_every[j], c_every[j], miss, track_m, centers, k_inv,
+                                rot, rays, r_one)
+        cf[a, at, j, 8] = 1.0 if hold else 0.0
         if differs[j] != 0.0:
             ok_p, x, y, z, ok, miss = points_one(a, ray, r_dec[j], c_dec[j], centers, k_inv,
                                                  rot, rays)
@@ -1028,7 +1065,7 @@ def decide_frame(fid, a, fi, fflag, ct, cf, csup, count, trk, ist, F, centers, k
                         best_px = d
                     px, py, pz = cf[a, h, q, 5], cf[a, h, q, 6], cf[a, h, q, 7]
                     finite = px == px and py == py and pz == pz
-                    if d <= own_tol[j] and finite:
+                    if d <= own_tol[j] and cf[a, h, q, 8] == 1.0:  # (its support held)
                         supported = True
                     # gating._still_pair: the smaller of the two candidates' tolerances
                     pair = tol[j]
@@ -1199,7 +1236,7 @@ class GateState:
         self.fi = np.zeros((m, frames, 5), np.int64)
         self.fflag = np.zeros((m, frames, 2), np.int8)
         self.ct = np.zeros((m, frames, candidates), np.int64)
-        self.cf = np.full((m, frames, candidates, 8), np.nan)
+        self.cf = np.full((m, frames, candidates, 9), np.nan)
         self.csup = np.zeros((m, frames, candidates), np.int8)
         self.count = np.zeros(m + 1, np.int64)  # frames per camera, then the next push id
         self.trk = np.zeros((4 * int(options.track_points) + 1, 5))
@@ -1232,7 +1269,7 @@ class GateState:
 
     def _work_size(self, k: int) -> int:
         m = self.m
-        return k * (7 * m + 19) + 6 * (m + 1) + 8
+        return k * (7 * m + 19) + 6 * (m + 1) + 8 + m
 
     @property
     def frames(self) -> int:
@@ -1248,7 +1285,7 @@ class GateState:
         new: dict[str, np.ndarray] = {"fi": np.zeros((m, frames, 5), np.int64),
                                       "fflag": np.zeros((m, frames, 2), np.int8),
                                       "ct": np.zeros((m, frames, candidates), np.int64),
-                                      "cf": np.full((m, frames, candidates, 8), np.nan),
+                                      "cf": np.full((m, frames, candidates, 9), np.nan),
                                       "csup": np.zeros((m, frames, candidates), np.int8)}
         for name, a in new.items():
             old = getattr(self, name)

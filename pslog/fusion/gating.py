@@ -576,7 +576,8 @@ def _support_one(t: int, line, keys: list[int], usable, search, wait_ns: int, ca
 
 def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
             points: np.ndarray, paired: np.ndarray | None = None,
-            compiled: bool | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            compiled: bool | None = None,
+            held: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Which candidates stood still in space: each one's 3D point (its ray crossed with its
     support's) within ``static_m`` of a candidate's point in each of its camera's earlier
     frames; or, for a candidate whose point rests on one other camera (``paired``), its
@@ -606,12 +607,15 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
         (:meth:`_Decider.decide`: a ball arriving at a static object's pixel)
 
     ``compiled``: by :func:`pslog.fusion._gate_kernel.static_camera` (the same values);
-    None: where that module is loaded.
+    None: where that module is loaded. ``held`` (C,) bool: whether each candidate's support
+    held (:func:`_held`; None: whether it has a point), what the image test's continuity
+    (:func:`_still_alone`) counts of the earlier frames' still pixels.
     """
     static = np.zeros(len(c.camera), dtype=bool)
     stillness = np.zeros(len(c.camera))
     lone = np.full(len(c.camera), np.nan)
-    finite = np.isfinite(points).all(axis=-1)  # (C,) whether each candidate has a point
+    # (C,) whether each candidate's support held (by default: whether it has a point)
+    finite = np.isfinite(points).all(axis=-1) if held is None else np.asarray(held, dtype=bool)
     if compiled is None:
         compiled = _kernels_ready()
     if compiled and len(c.camera):
@@ -688,7 +692,7 @@ def _static(c: _Candidates, tables, rig: Rig, options: GatingOptions,
             valid = prev[:, None, :] >= 0
             d = np.where(valid & np.isfinite(d), d, np.inf).min(axis=2)
             with np.errstate(invalid="ignore"):
-                # a still pixel there whose own point rested on support too (the support held)
+                # a still pixel there whose own support held too (its point, or _held's)
                 near = valid & (d_px <= own[:, :, None])
             held += recent[:, None] & np.any(
                 near & _lagged(p_finite, lag, finite[0])[:, None, :], axis=2)
@@ -740,7 +744,7 @@ def _still_pair(d_px, tol, tol_prev, valid):
 def _still_alone(run_px, held, lags: int):
     """The image test's verdict (:func:`_static`; arrays elementwise or floats): still
     across its ray in every one of the ``lags`` frames (``run_px``), and its support not
-    continuous there: held (a still pixel whose own point rested on support) in fewer
+    continuous there: held (a still pixel whose own support held: :func:`_held`) in fewer
     than all but one of them (``held``). A static object seen by one camera is supported
     only while the ball crosses its epipolar line in the other (a slow crossing lasted
     4-6 of 8 frames in ``bench_dirty.py --more``); a ball moving along its camera's ray
@@ -792,6 +796,57 @@ def _paired(ratio: np.ndarray) -> np.ndarray:
     (C, m)."""
     with np.errstate(invalid="ignore"):
         return np.count_nonzero(ratio <= 1.0, axis=1) == 1
+
+
+def _held(c: _Candidates, rig: Rig, ratio: np.ndarray, carried: np.ndarray,
+          points: np.ndarray, miss: np.ndarray, options: GatingOptions,
+          constants=None) -> np.ndarray:
+    """(C,) bool: whether each candidate's support held, what :func:`_still_alone` counts
+    of the earlier frames (:func:`_static`): it has a point (``points`` (C, 3), NaN where
+    its rays missed), or two or more supports' rays missed (``miss`` (C,) > ``track_m``)
+    but one of them alone makes a point with its ray (within ``track_m``): two supports
+    whose rays miss count as one ("The decision"), and that one held. A ball flying along
+    its camera's ray, supported by its partner in every frame, lost that continuity in the
+    frames where a blind camera's last ball or a blob, carried near its line, added a second
+    support whose ray missed, and was taken for a static object (``bench_dirty.py --more
+    --first-seed 52200``, ``paper3`` ``straight``: 8 of ``cam1``'s ball detections
+    rejected as ``motion``). ``ratio`` (C, m), ``carried`` (C, m, 2): the support
+    :func:`_points` took; each single-support point by :func:`_points` too (the bits of
+    :func:`_held_one`)."""
+    held = np.isfinite(points).all(axis=-1)
+    with np.errstate(invalid="ignore"):
+        rows = np.flatnonzero((np.count_nonzero(ratio <= 1.0, axis=1) >= 2)
+                              & (miss > options.track_m))
+    if len(rows):
+        sub = _Candidates(c.camera[rows], c.time_ns[rows], c.uv_und[rows], c.ray_dir[rows],
+                          c.frame[rows])
+        for b in range(ratio.shape[1]):
+            alone = np.full((len(rows), ratio.shape[1]), np.inf)
+            alone[:, b] = ratio[rows, b]  # (a ratio above 1, or NaN: no point)
+            p, _, m = _points(sub, rig, alone, carried[rows], constants)
+            with np.errstate(invalid="ignore"):
+                held[rows] |= np.isfinite(p).all(axis=-1) & (m <= options.track_m)
+    return held
+
+
+def _held_one(camera: int, ray_dir, ratio_row, carried_row, miss: float, point_ok: bool,
+              options: GatingOptions, constants) -> bool:
+    """:func:`_held` of one candidate on floats (the same bits): ``ray_dir`` (3,), its
+    ``ratio`` (m,) and ``carried`` (m, 2) rows as lists, its all-supports point's ``miss``
+    (:func:`_points_one`) and whether that point was kept (``point_ok``)."""
+    if point_ok:
+        return True
+    if not (sum(1 for r in ratio_row if r <= 1.0) >= 2 and miss > options.track_m):
+        return False
+    for b, r in enumerate(ratio_row):
+        if not r <= 1.0:
+            continue
+        alone = [math.inf] * len(ratio_row)
+        alone[b] = r
+        p, _, m = _points_one(camera, ray_dir, alone, carried_row, constants)
+        if p is not None and m <= options.track_m:
+            return True
+    return False
 
 
 def _rig_constants(rig: Rig):
@@ -1532,7 +1587,9 @@ def _decided(c: _Candidates, rig: Rig, options: GatingOptions, causal: bool, wai
     points, in_front, miss = _points(c, rig, ratio, carried, constants)
     points[miss > options.track_m] = np.nan  # rays that do not meet: no point to track
     static, stillness, lone = _static(c, tables, rig, options, points, _paired(ratio),
-                                      compiled=compiled)
+                                      compiled=compiled,
+                                      held=_held(c, rig, ratio, carried, points, miss,
+                                                 options, constants))
     # frames in (time, camera) order of their best candidate; candidates contiguous per frame
     starts = np.flatnonzero(np.r_[True, c.frame[1:] != c.frame[:-1]])
     ends = np.r_[starts[1:], n]
@@ -1772,7 +1829,8 @@ def _stillness_one(key: int, pts, earlier, lags: int, options: GatingOptions,
                    uvs=None, paired=None, cam=None, dz=None):
     """:func:`_static`'s rule for one frame on floats (the same bits): ``pts`` its
     candidates' points (k, 3) as lists, ``earlier`` (frame time ns, points, undistorted
-    pixels) of its camera's frames before it, newest first (``lags`` of them for the 3D
+    pixels, whether each one's support held (:func:`_held`; None: whether it has a point))
+    of its camera's frames before it, newest first (``lags`` of them for the 3D
     test and the image test; up to ``ceil(LONG_STILL static_s fps)`` for the long image
     test); ``uvs`` the frame's undistorted pixels (k, 2), ``paired`` (k,) bool (its point
     rests on one other camera), ``cam`` its Camera (the image tests; None: the 3D test
@@ -1791,7 +1849,7 @@ def _stillness_one(key: int, pts, earlier, lags: int, options: GatingOptions,
     # the candidates still across their ray in every frame so far (only they can pass the
     # long test, which asks for every one of its frames)
     alive = [t == t for t in tols]  # (an image test: not NaN)
-    for n, (prev_key, prev_points, *prev_uvs) in enumerate(earlier, start=1):
+    for n, (prev_key, prev_points, prev_uvs, prev_held) in enumerate(earlier, start=1):
         if n > lags and not any(alive):
             break  # (the long image test's frames: nothing left to test)
         recent = key - prev_key <= 1.5 * options.static_s * NS
@@ -1807,13 +1865,14 @@ def _stillness_one(key: int, pts, earlier, lags: int, options: GatingOptions,
             still_long = False
             if owns[j] == owns[j]:  # (an image test: not NaN)
                 u, v = uvs[j]
-                for (pu, pv), (px, py, pz) in zip(prev_uvs[0], prev_points, strict=True):
+                for i, ((pu, pv), (px, py, pz)) in enumerate(zip(prev_uvs, prev_points,
+                                                                 strict=True)):
                     du, dv = u - pu, v - pv
                     d = _sqrt(du * du + dv * dv)
                     if d < best_px:
                         best_px = d
                     finite = px == px and py == py and pz == pz
-                    if d <= owns[j] and finite:
+                    if d <= owns[j] and (finite if prev_held is None else prev_held[i]):
                         supported = True
                     # _still_pair: the smaller of the two candidates' tolerances
                     pair = tols[j]
@@ -2274,8 +2333,8 @@ class _Frame:
     gate computed of them once (corrected times, undistorted pixels, rays; once decided,
     their 3D points and rejection reasons)."""
 
-    __slots__ = ("camera", "every", "index", "key", "latest", "points", "ray_dir", "reason",
-                 "support", "t", "time_ns", "uv", "uv_und")
+    __slots__ = ("camera", "every", "held", "index", "key", "latest", "points", "ray_dir",
+                 "reason", "support", "t", "time_ns", "uv", "uv_und")
 
     def __init__(self, t: int, camera: int, index: int, uv: np.ndarray, time_ns: list[int],
                  uv_und: np.ndarray, ray_dir: np.ndarray) -> None:
@@ -2286,6 +2345,7 @@ class _Frame:
         self.latest = max(time_ns)  # (a rolling shutter's lowest row: when it is ready)
         self.reason: np.ndarray | None = None
         self.points: list | None = None
+        self.held: list[bool] = []  # per candidate, once decided: its support held (_held)
         # the candidates that may support another camera's choice, (t, u, v): every one
         # until the frame is decided, then the chosen one if any (:func:`_support_one`)
         self.every = [(t, u, v) for t, (u, v) in zip(time_ns, uv_und.tolist(), strict=True)]
@@ -2661,12 +2721,14 @@ class StreamGate:
                         f.ray_dir, np.zeros(k, np.int64))
         # the points of the all-candidates support (what the stillness compares, as
         # gate()'s _static) and of the decided support (what the choice uses)
-        f.points, chosen, front = [], [], []
+        f.points, chosen, front, f.held = [], [], [], []
         for j, (ray, r_row, c_row) in enumerate(zip(f.ray_dir.tolist(), every[0].tolist(),
                                                     every[1].tolist(), strict=True)):
             p, ok, miss = _points_one(a, ray, r_row, c_row, self.constants)
-            f.points.append(p if p is not None and not miss > o.track_m  # as gate()
-                            else (math.nan, math.nan, math.nan))
+            pointed = p is not None and not miss > o.track_m  # as gate()
+            f.points.append(p if pointed else (math.nan, math.nan, math.nan))
+            # whether its support held (_held), for the later frames' image test
+            f.held.append(_held_one(a, ray, r_row, c_row, miss, pointed, o, self.constants))
             if differs[j]:
                 p, ok, miss = _points_one(a, ray, decided[0][j].tolist(),
                                           decided[1][j].tolist(), self.constants)
@@ -2682,7 +2744,7 @@ class StreamGate:
         long_lags = int(np.ceil(LONG_STILL * o.static_s * self.rig.cameras[a].fps))
         still = _stillness_one(f.key, f.points,
                                [(frames[at - lag].key, frames[at - lag].points,
-                                 frames[at - lag].uv_und.tolist())
+                                 frames[at - lag].uv_und.tolist(), frames[at - lag].held)
                                 for lag in range(1, min(long_lags, at) + 1)], lags, o,
                                f.uv_und.tolist(), _paired(every[0]).tolist(),
                                self.rig.cameras[a], f.ray_dir[:, 2])
