@@ -209,7 +209,8 @@ def run(args: argparse.Namespace) -> int:
     if args.methods:
         methods = [check_method(m) for m in dict.fromkeys(args.methods)]
     else:  # every method this timing suits
-        methods = default_methods(observations, rig, options)
+        # (from the candidates: each frame's ball as the methods will choose it)
+        methods = default_methods(session.detections, rig, options)
         skipped = [m for m in METHODS if m not in methods]
         if skipped:
             print(f"not run on this timing: {', '.join(skipped)} (name them with --method "
