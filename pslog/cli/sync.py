@@ -139,8 +139,13 @@ def _choice(result) -> str:
     for t in result.selection:
         plural = {"readout": "readouts", "drift": "drifts"}[t.parameter]
         # (the nested test of one readout per camera model beside the per-camera one:
-        # either calls for readouts, which are then estimated one per camera, the table's)
-        what = ("estimated, one per camera (a test above its threshold calls for them)"
+        # either calls for readouts, which are then estimated one per camera, or one per
+        # model when the test of equal readouts within each model does not reject (tied);
+        # walk38: a tied choice read "one per camera ...: one readout per model")
+        what = ("estimated, one per camera model (a test above its threshold calls for them, "
+                "and a model's cameras do not differ)"
+                if t.kept and t.parameter == "readout" and t.shared_dof and t.tied else
+                "estimated, one per camera (a test above its threshold calls for them)"
                 if t.kept and t.parameter == "readout" and t.shared_dof else
                 "estimated" if t.kept else "not estimated")
         lines.append(f"  {plural} {what}: {t.reason}")
