@@ -26,7 +26,7 @@ from pslog.fusion import (
     type_a_prepared,
 )
 from pslog.log import Session, read_session
-from pslog.records import NS, Observations, Track
+from pslog.records import NS, Detections, Observations, Track
 from pslog.timing import observations as timed_observations
 
 #: The method fused on the fly when a session has no stored track (it shows the paper's
@@ -155,7 +155,10 @@ class ViewData:
     ----------
     session : the first session file, read without images
     paths : the session files, first one first
-    observations : the best candidate of every frame (fusion input), sorted by (time, camera)
+    observations : each frame's detection, sorted by (time, camera): the candidate the
+        gating of the first shown track stored with its rejections chose
+        (:func:`chosen_observations`; a frame whose every candidate it rejected: none), else
+        the best-scored one (fusion input without gating)
     tracks : display name -> Track, in display order
     construction : type-A construction behind the ``typeA`` track, or None
     window_ns : (lo, hi), int nanoseconds on the session clock; rows outside are left out
@@ -416,10 +419,41 @@ def load_view_data(session_paths: str | Path | Sequence[str | Path], *,
         notes.append(f"the full-detail range {lo_s:g} to {hi_s:g} s holds no frame shown "
                      f"(the session spans 0 to {span:.3f} s): every frame's overlays are "
                      f"thinned to one in {choice.every}")
+    shown_rejections = {m: rejections[m] for m in shown if m in rejections}
+    if shown_rejections:
+        # each frame's detection as the gating of the track whose rejections the images draw
+        # chose it (its ray, epipolar lines, crop; the tracks' points matched to it), not the
+        # best-scored candidate: walk38, a static orange object outscored the ball, and 370
+        # of a webcam's 599 rays were drawn to the object, the ball's point beside them
+        observations = chosen_observations(session, next(iter(shown_rejections.values())))
     return ViewData(session, paths, observations, shown, construction, window, notes,
-                    {m: rejections[m] for m in shown if m in rejections},
-                    detail_ns=detail_ns, every=choice.every,
+                    shown_rejections, detail_ns=detail_ns, every=choice.every,
                     construction_observations=construction_obs)
+
+
+def rejected_candidates(detections: Detections, rejections) -> np.ndarray:
+    """(C,) bool over ``detections``' candidates: those ``rejections`` (a
+    :class:`pslog.fusion.gating.Rejections` stored with a track) holds, by camera, frame
+    and pixel."""
+    keys = set(zip(rejections.camera.tolist(), rejections.frame_index.tolist(),
+                   rejections.uv[:, 0].tolist(), rejections.uv[:, 1].tolist(), strict=True))
+    rows = detections.cand_frame
+    return np.array([k in keys for k in zip(
+        detections.frame_camera[rows].tolist(), detections.frame_index[rows].tolist(),
+        detections.cand_uv[:, 0].tolist(), detections.cand_uv[:, 1].tolist(), strict=True)],
+        dtype=bool)
+
+
+def chosen_observations(session: Session, rejections) -> Observations:
+    """The session's observations as a gating chose them: each frame's candidate that
+    ``rejections`` does not hold (a frame whose every candidate it holds: none), at its
+    corrected time, sorted by (time, camera) (:func:`pslog.timing.observations`)."""
+    det = session.detections
+    chosen = ~rejected_candidates(det, rejections)
+    kept = Detections(det.camera_names, det.frame_time_ns, det.frame_camera, det.frame_index,
+                      det.cand_frame[chosen], det.cand_uv[chosen], det.cand_radius[chosen],
+                      det.cand_score[chosen])
+    return timed_observations(kept, session.rig)
 
 
 def _type_a_prepared(session: Session) -> tuple[Observations, Prepared]:
